@@ -1,0 +1,41 @@
+"""Exception types of zbuf_occlude: one base class, one subclass per cause.
+
+Every error message names the offending file or value and says what to do.
+The CLI prints ``ZbufOccludeError`` messages on one line and exits non-zero;
+any other exception is a bug in zbuf_occlude.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "ZbufOccludeError",
+    "MeshLoadError",
+    "InvalidInputError",
+    "CameraError",
+    "BackendUnavailable",
+    "OutputError",
+]
+
+
+class ZbufOccludeError(Exception):
+    """Base class of every error raised on purpose by zbuf_occlude."""
+
+
+class MeshLoadError(ZbufOccludeError):
+    """A mesh file is missing, unreadable, of unknown format, empty or non-finite."""
+
+
+class InvalidInputError(ZbufOccludeError, ValueError):
+    """An argument has the wrong shape, dtype, range or contains NaN/inf."""
+
+
+class CameraError(ZbufOccludeError, ValueError):
+    """A camera is ill-posed: inside the object, degenerate pose, bad intrinsics."""
+
+
+class BackendUnavailable(ZbufOccludeError, RuntimeError):
+    """No OpenGL context (EGL, OSMesa) or an optional library (pyrender, Embree) is missing."""
+
+
+class OutputError(ZbufOccludeError, OSError):
+    """An output path cannot be written (unwritable folder, disk full)."""
