@@ -1,0 +1,57 @@
+"""zbuf_occlude: real-like occluded point clouds from meshes.
+
+Pipeline: mesh → samples → camera → render → visibility → output.  Reproduces and extends
+Sryamkin, Msallam, Klestov, "A method to create real-like point clouds for 3D object
+classification" (2023) with headless z-buffer hidden surface removal (HSR), validated
+against an exact geometric oracle.
+
+>>> import zbuf_occlude as zo
+>>> mesh = zo.load_mesh(path)                                # centred, max extent 1
+>>> points, face_index = zo.sample_surface(mesh, count=100_000, seed=0)
+>>> camera = zo.camera_on_sphere(elevation_deg=30.0, azimuth_deg=45.0, radius=4.0)
+>>> mask = zo.visible_mask(mesh, points, camera, method="zbuffer", resolution=1024, face_index=face_index)
+"""
+
+from .cameras import DEFAULT_RADIUS, Camera, camera_on_sphere, cameras_from_schedule, view_schedule
+from .errors import (
+    BackendUnavailable,
+    CameraError,
+    InvalidInputError,
+    MeshLoadError,
+    OutputError,
+    ZbufOccludeError,
+)
+from .mesh import load_mesh, normalize_mesh
+from .render import ModernGLRenderer, context_info, render_depth
+from .sampling import points_from_barycentric, sample_faces, sample_surface
+from .visibility import available_methods, register, visible_mask
+from .visibility.zbuffer import Scene
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "__version__",
+    "load_mesh",
+    "normalize_mesh",
+    "sample_surface",
+    "sample_faces",
+    "points_from_barycentric",
+    "Camera",
+    "camera_on_sphere",
+    "view_schedule",
+    "cameras_from_schedule",
+    "DEFAULT_RADIUS",
+    "ModernGLRenderer",
+    "render_depth",
+    "context_info",
+    "Scene",
+    "visible_mask",
+    "available_methods",
+    "register",
+    "ZbufOccludeError",
+    "MeshLoadError",
+    "InvalidInputError",
+    "CameraError",
+    "BackendUnavailable",
+    "OutputError",
+]

@@ -1,0 +1,30 @@
+"""Rendering: the only package that touches OpenGL.
+
+``context`` makes GL contexts (EGL, then OSMesa); ``moderngl_backend`` renders depth and
+face-index buffers and runs the visibility compute shaders; ``pyrender_backend`` renders
+depth independently for cross-checks.
+"""
+
+from .context import context_info, create_context, shared_context
+from .moderngl_backend import DepthRender, ModernGLRenderer, PointBuffer
+
+__all__ = ["create_context", "shared_context", "context_info", "ModernGLRenderer", "DepthRender", "PointBuffer", "render_depth"]
+
+
+def render_depth(mesh, camera, backend: str = "moderngl"):
+    """Linear depth ``(H, W) float32`` (object units, 0 = background, row 0 at the top).
+
+    ``backend``: ``"moderngl"`` (cached renderer of the mesh) or ``"pyrender"``.
+    """
+    if backend == "moderngl":
+        from ..visibility.zbuffer import renderer_for
+
+        return renderer_for(mesh).render(camera).depth
+    if backend == "pyrender":
+        from .pyrender_backend import PyrenderRenderer
+
+        with PyrenderRenderer(mesh) as renderer:
+            return renderer.render_depth(camera)
+    from ..errors import InvalidInputError
+
+    raise InvalidInputError(f"unknown render backend {backend!r}; use 'moderngl' or 'pyrender'")

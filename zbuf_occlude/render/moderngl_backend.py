@@ -1,0 +1,289 @@
+"""moderngl renderer: one mesh uploaded once, rendered and tested from many poses.
+
+Rasterisation writes one RG32F target per pose (linear depth, face index) with a 32-bit
+float depth buffer.  Visibility runs in compute shaders over the uploaded points and reads
+the target as a texture, so only one bit per point comes back to the CPU.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import moderngl
+import numpy as np
+import trimesh
+from numpy.typing import NDArray
+
+from ..cameras import Camera
+from ..errors import InvalidInputError
+from .context import shared_context
+from .shaders import load_shader
+
+__all__ = ["DepthRender", "PointBuffer", "ModernGLRenderer", "MAX_FACES"]
+
+log = logging.getLogger(__name__)
+
+#: Face indices travel as float32 in the render target: exact below 2^24.
+MAX_FACES = 2**24
+_GROUP_SIZE = 256  # local_size_x of the compute shaders
+
+
+@dataclass(frozen=True)
+class DepthRender:
+    """A rendered pose.
+
+    Attributes
+    ----------
+    depth : (H, W) float32
+        Linear depth along the optical axis, object units; 0 where nothing was drawn.
+        Row 0 is the top of the image (OpenCV convention, as ``Camera.K``).
+    face_index : (H, W) int64
+        Row of ``mesh.faces`` seen at each pixel centre; −1 for background.
+    camera : Camera
+    """
+
+    depth: NDArray[np.float32]
+    face_index: NDArray[np.int64]
+    camera: Camera
+
+    @property
+    def mask(self) -> NDArray[np.bool_]:
+        """(H, W) bool: pixels covered by the mesh."""
+        return self.face_index >= 0
+
+
+class PointBuffer:
+    """Points uploaded to the GPU once, for tests from many poses.
+
+    Made by :meth:`ModernGLRenderer.upload_points`; release with :meth:`release`.
+    """
+
+    def __init__(self, ctx: moderngl.Context, points: NDArray[np.float64], face_index: NDArray[np.int64] | None):
+        self.n_points = len(points)
+        padded = np.zeros((max(self.n_points, 1), 4), dtype=np.float32)
+        padded[: self.n_points, :3] = points
+        faces = np.full(max(self.n_points, 1), -1, dtype=np.int32)
+        if face_index is not None:
+            faces[: self.n_points] = face_index
+        self.has_face_index = face_index is not None
+        self.points = ctx.buffer(padded.tobytes())
+        self.faces = ctx.buffer(faces.tobytes())
+        # visible bits, then uncertain bits (see shaders/common.glsl)
+        self.visible_bits = ctx.buffer(reserve=2 * 4 * max(math.ceil(self.n_points / 32), 1))
+
+    def release(self) -> None:
+        for buf in (self.points, self.faces, self.visible_bits):
+            buf.release()
+
+
+class ModernGLRenderer:
+    """Headless OpenGL renderer of one mesh (moderngl, EGL or OSMesa).
+
+    The mesh is uploaded once (vertex/index buffers for rasterisation, a triangle storage
+    buffer for the exact tests); render targets are cached per resolution.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        World frame (normally from :func:`zbuf_occlude.load_mesh`).
+    context : moderngl.Context, optional
+        Default: the process's shared context (:func:`zbuf_occlude.render.context.shared_context`).
+    edge_pass : bool
+        After the fill pass, draw every triangle's edges as lines into the same targets so
+        that sub-pixel (sliver) faces, common in ModelNet, appear in the face-index buffer.
+
+    Raises
+    ------
+    InvalidInputError
+        Empty mesh, or more than 2^24 faces.
+    BackendUnavailable
+        No OpenGL 4.3 context can be created.
+    """
+
+    def __init__(self, mesh: trimesh.Trimesh, *, context: moderngl.Context | None = None, edge_pass: bool = True):
+        self.edge_pass = edge_pass
+        faces = np.asarray(mesh.faces)
+        if len(faces) == 0:
+            raise InvalidInputError("cannot render a mesh with no faces")
+        if len(faces) >= MAX_FACES:
+            raise InvalidInputError(f"mesh has {len(faces)} faces; the renderer supports fewer than {MAX_FACES}")
+        self.n_faces = len(faces)
+        self.ctx = context or shared_context()
+        with self.ctx:
+            self._vbo = self.ctx.buffer(np.asarray(mesh.vertices, dtype=np.float32).tobytes())
+            self._ibo = self.ctx.buffer(faces.astype(np.uint32).tobytes())
+            self._triangles = self.ctx.buffer(np.asarray(mesh.triangles, dtype=np.float32).tobytes())
+            self._program = self.ctx.program(vertex_shader=load_shader("mesh.vert"), fragment_shader=load_shader("mesh.frag"))
+            self._vao = self.ctx.vertex_array(self._program, [(self._vbo, "3f", "in_position")], index_buffer=self._ibo)
+            self._compute = {
+                "candidates": self.ctx.compute_shader(load_shader("visibility_candidates.comp")),
+                "tolerance": self.ctx.compute_shader(load_shader("visibility_tolerance.comp")),
+            }
+        self._max_groups = int(self.ctx.info["GL_MAX_COMPUTE_WORK_GROUP_COUNT"][0])
+        self._targets: dict[tuple[int, int], tuple[moderngl.Framebuffer, moderngl.Texture, moderngl.Texture]] = {}
+        self._released = False
+
+    # -- rasterisation -------------------------------------------------------------
+    def _target(self, size: tuple[int, int]):
+        if size not in self._targets:
+            color = self.ctx.texture(size, 2, dtype="f4")
+            color.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            depth = self.ctx.depth_texture(size)
+            self._targets[size] = (self.ctx.framebuffer([color], depth), color, depth)
+        return self._targets[size]
+
+    def _draw(self, camera: Camera) -> moderngl.Texture:
+        fbo, color, _ = self._target(camera.resolution)
+        fbo.use()
+        fbo.clear(0.0, -1.0, 0.0, 0.0, depth=1.0)
+        self.ctx.enable(moderngl.DEPTH_TEST)
+        self.ctx.disable(moderngl.CULL_FACE)  # meshes are triangle soup: two-sided
+        self._program["view_matrix"].write(camera.view_matrix.T.astype(np.float32).tobytes())
+        self._program["projection_matrix"].write(camera.projection_matrix.T.astype(np.float32).tobytes())
+        self._vao.render(moderngl.TRIANGLES)
+        if self.edge_pass:
+            # Faces thinner than a pixel cover no pixel centre and vanish from the fill
+            # pass; drawn as lines (same gl_PrimitiveID) every face marks the pixels it
+            # crosses, so it can still be a candidate occluder.
+            self.ctx.depth_func = "<="
+            self.ctx.wireframe = True
+            self._vao.render(moderngl.TRIANGLES)
+            self.ctx.wireframe = False
+            self.ctx.depth_func = "<"
+        return color
+
+    def render(self, camera: Camera) -> DepthRender:
+        """Rasterise one pose and read back linear depth and face index.
+
+        Returns
+        -------
+        DepthRender
+            ``depth (H, W) float32`` and ``face_index (H, W) int64``, row 0 at the top.
+        """
+        with self.ctx:
+            color = self._draw(camera)
+            raw = np.frombuffer(color.read(), dtype=np.float32).reshape(camera.height, camera.width, 2)
+        raw = raw[::-1]  # OpenGL rows start at the bottom
+        return DepthRender(depth=raw[..., 0].copy(), face_index=raw[..., 1].astype(np.int64), camera=camera)
+
+    # -- visibility ------------------------------------------------------------------
+    def upload_points(self, points: NDArray[np.floating], face_index: NDArray[np.integer] | None = None) -> PointBuffer:
+        """Upload ``points (N, 3)`` (world frame) and their optional ``face_index (N,)``."""
+        with self.ctx:
+            return PointBuffer(self.ctx, np.asarray(points, dtype=np.float64), face_index)
+
+    def visible(
+        self,
+        camera: Camera,
+        points: PointBuffer,
+        *,
+        rule: str = "candidates",
+        neighborhood: int = 1,
+        tolerance: float = 1e-5,
+        edge_epsilon: float = 1e-5,
+        depth_tolerance: float = 0.0,
+        slope_scale: float = 0.0,
+        max_slope: float = 10.0,
+    ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+        """Render ``camera`` and decide each uploaded point's visibility on the GPU.
+
+        Parameters
+        ----------
+        camera : Camera
+        points : PointBuffer
+            From :meth:`upload_points`.
+        rule : {"candidates", "tolerance"}
+            ``"candidates"``: exact segment tests against the faces seen in the
+            ``(2·neighborhood + 1)²`` pixels around the point's projection (``tolerance``
+            and ``edge_epsilon`` apply).  ``"tolerance"``: the point's linear depth must
+            not exceed the nearest pixel's by more than ``depth_tolerance + slope_scale ·
+            pixel_footprint · min(tan θ, max_slope)`` object units.
+        neighborhood : int
+            Pixel radius r of the candidate window, 0 ≤ r ≤ 4.
+        tolerance : float
+            Object units: an intersection closer than this to the point is its own surface.
+            Default 1e-5: float32 rounding of points and vertices is ~3e-8 per coordinate,
+            magnified up to ~100× at grazing incidence.
+        edge_epsilon : float
+            Barycentric widening of each triangle so segments cannot slip through shared
+            edges (float32).
+        depth_tolerance, slope_scale, max_slope : float
+            The ``"tolerance"`` rule's constants (object units, pixels, dimensionless).
+
+        Returns
+        -------
+        visible : (N,) bool
+        uncertain : (N,) bool
+            ``"candidates"`` rule only: points called visible although their own face is
+            nowhere in the window (sub-pixel faces, rays through cracks).  The image holds
+            no evidence for them; :mod:`zbuf_occlude.visibility.zbuffer` decides them exactly.
+            Always False without a face index.
+        """
+        if not 0 <= neighborhood <= 4:
+            raise InvalidInputError(f"neighborhood must be in [0, 4] pixels, got {neighborhood}")
+        if rule not in self._compute:
+            raise InvalidInputError(f"unknown z-buffer rule {rule!r}; use 'candidates' or 'tolerance'")
+        n = points.n_points
+        if n == 0:
+            return np.zeros(0, dtype=bool), np.zeros(0, dtype=bool)
+        shader = self._compute[rule]
+        uniforms = {
+            "view_projection": (camera.projection_matrix @ camera.view_matrix).T.astype(np.float32).tobytes(),
+            "eye": tuple(float(v) for v in camera.eye),
+            "depth_row": tuple(float(v) for v in -camera.view_matrix[2]),
+            "resolution": camera.resolution,
+            "n_points": n,
+            "neighborhood": int(neighborhood),
+            "tolerance": float(tolerance),
+            "edge_epsilon": float(edge_epsilon),
+            "depth_tolerance": float(depth_tolerance),
+            "slope_scale": float(slope_scale),
+            "max_slope": float(max_slope),
+            "focal_px": float(camera.focal_px),
+            "depth_and_face": 0,
+        }
+        with self.ctx:
+            color = self._draw(camera)
+            self.ctx.memory_barrier()
+            for name, value in uniforms.items():
+                if name in shader:  # the GLSL compiler drops unused uniforms
+                    if isinstance(value, bytes):
+                        shader[name].write(value)
+                    else:
+                        shader[name].value = value
+            color.use(location=0)
+            points.points.bind_to_storage_buffer(0)
+            points.faces.bind_to_storage_buffer(1)
+            self._triangles.bind_to_storage_buffer(2)
+            points.visible_bits.bind_to_storage_buffer(3)
+            points.visible_bits.clear()
+            per_dispatch = self._max_groups * _GROUP_SIZE
+            for offset in range(0, n, per_dispatch):
+                shader["point_offset"].value = offset
+                shader.run(group_x=math.ceil(min(per_dispatch, n - offset) / _GROUP_SIZE))
+            self.ctx.memory_barrier()
+            words = np.frombuffer(points.visible_bits.read(), dtype=np.uint32).reshape(2, -1)
+        bits = np.unpackbits(words.view(np.uint8), axis=1, bitorder="little")[:, :n].astype(bool)
+        return bits[0], bits[1]
+
+    # -- lifetime ------------------------------------------------------------------------
+    def release(self) -> None:
+        """Free every GL object of this renderer (the context stays)."""
+        if self._released:
+            return
+        self._released = True
+        with self.ctx:
+            for fbo, color, depth in self._targets.values():
+                fbo.release()
+                color.release()
+                depth.release()
+            for obj in (self._vao, self._program, self._vbo, self._ibo, self._triangles, *self._compute.values()):
+                obj.release()
+
+    def __enter__(self) -> ModernGLRenderer:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()

@@ -1,0 +1,254 @@
+"""Image-space hidden surface removal: the z-buffer methods.
+
+``zbuffer`` (default)
+    Rasterise depth and face index; for each point, the faces kept in a small pixel window
+    around its projection are the only ones that can hide it, and each gets an exact
+    segment–triangle test (compute shader).  Points whose own face is nowhere in the window
+    (sub-pixel faces, rays through cracks of triangle soup) carry no evidence in the image
+    and are decided exactly with Embree on the CPU (``resolve="embree"``, default), or kept
+    visible (``resolve="none"``, GPU only).
+``zbuffer-tolerance``
+    The classic depth test: visible iff the point's linear depth is within a slope-scaled
+    tolerance (object units) of the depth at its pixel, as in shadow mapping
+    (Williams 1978; slope-scaled bias as in OpenGL's ``glPolygonOffset``).
+
+Both keep the mesh on the GPU across calls: :func:`renderer_for` caches one renderer per
+mesh (a few meshes, least recently used), and :class:`Scene` also keeps the points uploaded.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections import OrderedDict
+
+import numpy as np
+import trimesh
+from numpy.typing import NDArray
+
+from ..cameras import Camera
+from ..render.moderngl_backend import ModernGLRenderer, PointBuffer
+from .registry import check_face_index, check_points, register
+
+__all__ = ["Scene", "renderer_for", "zbuffer_visible", "zbuffer_tolerance_visible", "DEFAULT_RESOLUTION"]
+
+#: Default image size, pixels (square).
+DEFAULT_RESOLUTION = 1024
+#: Meshes whose renderers stay cached by :func:`renderer_for`.
+RENDERER_CACHE_SIZE = 4
+#: Default constants of ``zbuffer-tolerance``: a constant part in object units and a slope
+#: term in pixel footprints (the depth change across ``slope_scale`` pixels of a surface
+#: seen at angle θ), clamped at ``max_slope`` = tan θ near grazing incidence.
+DEFAULT_DEPTH_TOLERANCE = 1e-3
+DEFAULT_SLOPE_SCALE = 1.5
+DEFAULT_MAX_SLOPE = 10.0
+
+_renderers: OrderedDict[tuple[int, int], tuple[trimesh.Trimesh, ModernGLRenderer]] = OrderedDict()
+
+
+def renderer_for(mesh: trimesh.Trimesh) -> ModernGLRenderer:
+    """The cached :class:`ModernGLRenderer` of ``mesh`` in this process (made on first use).
+
+    Keyed on the mesh object and the process id; the cache holds a reference to the mesh,
+    so an entry cannot be confused with a later object at the same address.  Do not modify
+    a mesh's vertices or faces in place after it was rendered.
+    """
+    key = (os.getpid(), id(mesh))
+    hit = _renderers.get(key)
+    if hit is not None and hit[0] is mesh:
+        _renderers.move_to_end(key)
+        return hit[1]
+    renderer = ModernGLRenderer(mesh)
+    _renderers[key] = (mesh, renderer)
+    while len(_renderers) > RENDERER_CACHE_SIZE:
+        (pid, _), (_, old) = _renderers.popitem(last=False)
+        if pid == os.getpid():
+            old.release()
+    return renderer
+
+
+def _at_resolution(camera: Camera, resolution: int | tuple[int, int] | None) -> Camera:
+    if resolution is None:
+        return camera
+    width, height = (resolution, resolution) if np.isscalar(resolution) else resolution
+    if (width, height) == camera.resolution:
+        return camera
+    return dataclasses.replace(camera, width=int(width), height=int(height))
+
+
+def _resolve_uncertain(
+    mesh: trimesh.Trimesh,
+    points: NDArray[np.float64],
+    face_index: NDArray[np.int64] | None,
+    camera: Camera,
+    visible: NDArray[np.bool_],
+    uncertain: NDArray[np.bool_],
+    resolve: str,
+    tolerance: float,
+) -> NDArray[np.bool_]:
+    if resolve == "none" or not uncertain.any():
+        return visible
+    if resolve != "embree":
+        raise ValueError(f"resolve must be 'embree' or 'none', got {resolve!r}")
+    from .oracle import occluded_embree  # deferred: only needed when points are uncertain
+
+    idx = np.flatnonzero(uncertain)
+    fi = None if face_index is None else face_index[idx]
+    out = visible.copy()
+    out[idx] = ~occluded_embree(mesh, points[idx], camera.eye, face_index=fi, tolerance=tolerance)
+    return out
+
+
+class Scene:
+    """One mesh and one point set on the GPU, tested from many cameras.
+
+    Holds the (cached, shared) renderer of the mesh and the points uploaded once; use it
+    for many poses of one object (the render farm does).  ``visible_mask`` with the z-buffer
+    methods builds a throw-away Scene per call (the mesh stays cached, the points are
+    re-uploaded).
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        World frame.
+    points : (N, 3) float
+        Points on the surface, world frame.
+    face_index : (N,) int, optional
+        Face of each point (recommended: exact own-face exclusion and ``resolve``).
+
+    Raises
+    ------
+    InvalidInputError
+        Bad points or face index.
+    BackendUnavailable
+        No OpenGL 4.3 context.
+    """
+
+    def __init__(
+        self,
+        mesh: trimesh.Trimesh,
+        points: NDArray[np.floating],
+        face_index: NDArray[np.integer] | None = None,
+    ):
+        self.mesh = mesh
+        self.points = check_points(points)
+        self.face_index = check_face_index(face_index, len(self.points), len(mesh.faces))
+        self.renderer = renderer_for(mesh)
+        self._buffer: PointBuffer | None = self.renderer.upload_points(self.points, self.face_index)
+
+    def visible(
+        self,
+        camera: Camera,
+        *,
+        resolution: int | tuple[int, int] | None = None,
+        neighborhood: int = 1,
+        tolerance: float = 1e-5,
+        resolve: str = "embree",
+    ) -> NDArray[np.bool_]:
+        """``zbuffer`` visibility of the points from ``camera``; see the module docstring.
+
+        Parameters
+        ----------
+        camera : Camera
+        resolution : int or (width, height), optional
+            Overrides the camera's image size.
+        neighborhood : int
+            Candidate window radius r in pixels: (2r + 1)² pixels, 0 ≤ r ≤ 4.
+        tolerance : float
+            Object units: intersections closer than this to the point are its own surface
+            (float32 on the GPU; 1e-5 of the object's size).
+        resolve : {"embree", "none"}
+            How points without evidence in the image are decided.
+
+        Returns
+        -------
+        visible : (N,) bool
+        """
+        camera = _at_resolution(camera, resolution)
+        visible, uncertain = self.renderer.visible(
+            camera, self._buffer, rule="candidates", neighborhood=neighborhood, tolerance=tolerance
+        )
+        return _resolve_uncertain(self.mesh, self.points, self.face_index, camera, visible, uncertain, resolve, tolerance)
+
+    def visible_tolerance(
+        self,
+        camera: Camera,
+        *,
+        resolution: int | tuple[int, int] | None = None,
+        depth_tolerance: float = DEFAULT_DEPTH_TOLERANCE,
+        slope_scale: float = DEFAULT_SLOPE_SCALE,
+        max_slope: float = DEFAULT_MAX_SLOPE,
+    ) -> NDArray[np.bool_]:
+        """``zbuffer-tolerance`` visibility: a point is visible iff its linear depth is at
+        most the depth at its pixel plus ``depth_tolerance + slope_scale · pixel_footprint ·
+        min(tan θ, max_slope)`` (object units; θ from the point's face normal, so the slope
+        term needs ``face_index``).
+
+        Returns
+        -------
+        visible : (N,) bool
+        """
+        camera = _at_resolution(camera, resolution)
+        visible, _ = self.renderer.visible(
+            camera,
+            self._buffer,
+            rule="tolerance",
+            depth_tolerance=depth_tolerance,
+            slope_scale=slope_scale,
+            max_slope=max_slope,
+        )
+        return visible
+
+    def release(self) -> None:
+        """Free the uploaded points (the mesh's renderer stays cached)."""
+        if self._buffer is not None:
+            with self.renderer.ctx:
+                self._buffer.release()
+            self._buffer = None
+
+    def __enter__(self) -> Scene:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+@register("zbuffer")
+def zbuffer_visible(
+    mesh: trimesh.Trimesh,
+    points: NDArray[np.float64],
+    camera: Camera,
+    *,
+    face_index: NDArray[np.int64] | None = None,
+    resolution: int | tuple[int, int] | None = DEFAULT_RESOLUTION,
+    neighborhood: int = 1,
+    tolerance: float = 1e-5,
+    resolve: str = "embree",
+    **_ignored,
+) -> NDArray[np.bool_]:
+    """Default image-space HSR: id-buffer candidates + exact tests; see :meth:`Scene.visible`.
+
+    Unrelated keywords are ignored so one option set can drive several methods.
+    """
+    with Scene(mesh, points, face_index) as scene:
+        return scene.visible(camera, resolution=resolution, neighborhood=neighborhood, tolerance=tolerance, resolve=resolve)
+
+
+@register("zbuffer-tolerance")
+def zbuffer_tolerance_visible(
+    mesh: trimesh.Trimesh,
+    points: NDArray[np.float64],
+    camera: Camera,
+    *,
+    face_index: NDArray[np.int64] | None = None,
+    resolution: int | tuple[int, int] | None = DEFAULT_RESOLUTION,
+    depth_tolerance: float = DEFAULT_DEPTH_TOLERANCE,
+    slope_scale: float = DEFAULT_SLOPE_SCALE,
+    max_slope: float = DEFAULT_MAX_SLOPE,
+    **_ignored,
+) -> NDArray[np.bool_]:
+    """Depth-test image-space HSR with a slope-scaled tolerance; see :meth:`Scene.visible_tolerance`."""
+    with Scene(mesh, points, face_index) as scene:
+        return scene.visible_tolerance(
+            camera, resolution=resolution, depth_tolerance=depth_tolerance, slope_scale=slope_scale, max_slope=max_slope
+        )
