@@ -90,9 +90,6 @@ class ModernGLRenderer:
         World frame (normally from :func:`zbuf_occlude.load_mesh`).
     context : moderngl.Context, optional
         Default: the process's shared context (:func:`zbuf_occlude.render.context.shared_context`).
-    edge_pass : bool
-        After the fill pass, draw every triangle's edges as lines into the same targets so
-        that sub-pixel (sliver) faces, common in ModelNet, appear in the face-index buffer.
 
     Raises
     ------
@@ -102,8 +99,7 @@ class ModernGLRenderer:
         No OpenGL 4.3 context can be created.
     """
 
-    def __init__(self, mesh: trimesh.Trimesh, *, context: moderngl.Context | None = None, edge_pass: bool = True):
-        self.edge_pass = edge_pass
+    def __init__(self, mesh: trimesh.Trimesh, *, context: moderngl.Context | None = None):
         faces = np.asarray(mesh.faces)
         if len(faces) == 0:
             raise InvalidInputError("cannot render a mesh with no faces")
@@ -143,15 +139,6 @@ class ModernGLRenderer:
         self._program["view_matrix"].write(camera.view_matrix.T.astype(np.float32).tobytes())
         self._program["projection_matrix"].write(camera.projection_matrix.T.astype(np.float32).tobytes())
         self._vao.render(moderngl.TRIANGLES)
-        if self.edge_pass:
-            # Faces thinner than a pixel cover no pixel centre and vanish from the fill
-            # pass; drawn as lines (same gl_PrimitiveID) every face marks the pixels it
-            # crosses, so it can still be a candidate occluder.
-            self.ctx.depth_func = "<="
-            self.ctx.wireframe = True
-            self._vao.render(moderngl.TRIANGLES)
-            self.ctx.wireframe = False
-            self.ctx.depth_func = "<"
         return color
 
     def render(self, camera: Camera) -> DepthRender:

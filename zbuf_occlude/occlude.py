@@ -1,0 +1,181 @@
+"""Occluded samples of one object from many poses: the unit of work of ``generate`` and the farm.
+
+Per object (Sryamkin et al. 2023, §3.4 and §4.3): sample a dense cloud once, decide its
+visibility from every pose, and draw ``samples_per_view`` fixed-size samples per pose from
+the visible points.  Every random draw has its own generator derived from
+``(seed, object_key, pose_index, sample_index)`` with :class:`numpy.random.SeedSequence`,
+so results are identical whatever the order, the worker count or the sharding.
+"""
+
+from __future__ import annotations
+
+import logging
+import zlib
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import trimesh
+from numpy.typing import NDArray
+
+from .cameras import DEFAULT_RADIUS, Camera, camera_on_sphere
+from .errors import InvalidInputError
+from .io import OccludedCloud
+from .sampling import sample_surface
+from .visibility.registry import visible_mask
+from .visibility.zbuffer import Scene
+
+__all__ = ["object_key", "derive_rng", "draw_sample", "DenseCloud", "dense_cloud", "occlude_object", "class_of"]
+
+log = logging.getLogger(__name__)
+
+#: Default dense cloud size per object (points on the whole surface before HSR).
+DEFAULT_DENSE_POINTS = 100_000
+#: Stream tags keep the dense-sampling and the per-sample generators independent.
+_DENSE_STREAM, _DRAW_STREAM = 0, 1
+
+
+def object_key(name: str) -> int:
+    """A stable 32-bit key of an object's name (CRC-32), for seeding."""
+    return zlib.crc32(name.encode("utf-8"))
+
+
+def derive_rng(seed: int, *keys: int) -> np.random.Generator:
+    """An independent generator for ``(seed, *keys)`` (``numpy.random.SeedSequence``)."""
+    return np.random.default_rng(np.random.SeedSequence([int(seed), *(int(k) for k in keys)]))
+
+
+def class_of(path: str | Path) -> str:
+    """Class name of a mesh in a ModelNet-style tree: ``<class>/<split>/<name>.off`` or
+    ``<class>/<name>.off``."""
+    path = Path(path)
+    parent = path.parent
+    if parent.name in ("train", "test") and parent.parent.name:
+        return parent.parent.name
+    return parent.name
+
+
+def draw_sample(
+    visible_index: NDArray[np.int64], n_points: int, rng: np.random.Generator
+) -> tuple[NDArray[np.int64], int]:
+    """Draw ``n_points`` indices without replacement from ``visible_index``.
+
+    If fewer are visible, all of them are taken once and the rest are repeats drawn
+    uniformly at random (PointNet-style padding); the caller sees that from the returned
+    count of visible points.
+
+    Returns
+    -------
+    chosen : (n_points,) int64
+        Indices into the dense cloud (empty if nothing is visible).
+    n_visible : int
+    """
+    n_visible = len(visible_index)
+    if n_visible == 0:
+        return np.zeros(0, dtype=np.int64), 0
+    if n_visible >= n_points:
+        return rng.choice(visible_index, size=n_points, replace=False), n_visible
+    extra = rng.choice(visible_index, size=n_points - n_visible, replace=True)
+    return rng.permutation(np.concatenate([visible_index, extra])), n_visible
+
+
+@dataclass
+class DenseCloud:
+    """The per-object dense cloud (sampled once, reused for every pose, paper §3.4)."""
+
+    points: NDArray[np.float64]
+    face_index: NDArray[np.int64]
+
+
+def dense_cloud(
+    mesh: trimesh.Trimesh, key: int, *, seed: int = 0, count: int | None = DEFAULT_DENSE_POINTS, density: float | None = None
+) -> DenseCloud:
+    """Sample the object's dense cloud with the generator of ``(seed, key)``.
+
+    ``count`` points area-weighted, or ``density`` points per unit area (Algorithm 1).
+    """
+    rng = derive_rng(seed, key, _DENSE_STREAM)
+    if density is not None:
+        points, face_index = sample_surface(mesh, density=density, seed=rng)
+    else:
+        points, face_index = sample_surface(mesh, count=count, seed=rng)
+    return DenseCloud(points, face_index)
+
+
+def occlude_object(
+    mesh: trimesh.Trimesh,
+    poses: Sequence[tuple[float, float]],
+    *,
+    key: int,
+    n_points: int = 2048,
+    samples_per_view: int = 10,
+    seed: int = 0,
+    dense: DenseCloud | None = None,
+    method: str = "zbuffer",
+    resolution: int = 1024,
+    radius: float = DEFAULT_RADIUS,
+    label: int = -1,
+    class_name: str = "",
+    source: str = "",
+    **method_options,
+) -> Iterator[tuple[int, NDArray[np.bool_], list[OccludedCloud]]]:
+    """Yield ``(pose_index, visible (M,) bool, clouds)`` for each pose of one object.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        Normalised (max extent 1), world frame.
+    poses : sequence of (elevation_deg, azimuth_deg)
+    key : int
+        The object's seed key (:func:`object_key` of a stable name).
+    n_points, samples_per_view : int
+        Points per sample and samples drawn per pose.
+    dense : DenseCloud, optional
+        Default: :func:`dense_cloud` ``(mesh, key, seed=seed)``.
+    method : str
+        Visibility method; image-space methods keep the points on the GPU across poses.
+    resolution, radius : camera image size (pixels) and distance (object units).
+
+    Raises
+    ------
+    InvalidInputError
+        ``n_points < 1`` or ``samples_per_view < 0``.
+    """
+    if n_points < 1 or samples_per_view < 0:
+        raise InvalidInputError(f"need n_points >= 1 and samples_per_view >= 0, got {n_points}, {samples_per_view}")
+    dense = dense or dense_cloud(mesh, key, seed=seed)
+    scene = Scene(mesh, dense.points, dense.face_index) if method == "zbuffer" else None
+    try:
+        for pose_index, (el, az) in enumerate(poses):
+            camera: Camera = camera_on_sphere(el, az, radius, resolution=resolution)
+            if scene is not None:
+                visible = scene.visible(camera, **method_options)
+            else:
+                visible = visible_mask(mesh, dense.points, camera, method, face_index=dense.face_index, resolution=resolution, **method_options)
+            visible_index = np.flatnonzero(visible)
+            clouds = []
+            for sample_index in range(samples_per_view):
+                rng = derive_rng(seed, key, _DRAW_STREAM, pose_index, sample_index)
+                chosen, n_visible = draw_sample(visible_index, n_points, rng)
+                if n_visible == 0:
+                    log.warning("%s: nothing visible from el=%g az=%g; no sample", source or "mesh", el, az)
+                    break
+                clouds.append(
+                    OccludedCloud(
+                        points=dense.points[chosen].astype(np.float32),
+                        face_index=dense.face_index[chosen],
+                        elevation_deg=float(el),
+                        azimuth_deg=float(az),
+                        radius=float(radius),
+                        label=label,
+                        class_name=class_name,
+                        source=source,
+                        sample_index=sample_index,
+                        n_visible=n_visible,
+                    )
+                )
+            yield pose_index, visible, clouds
+    finally:
+        if scene is not None:
+            scene.release()
