@@ -75,12 +75,14 @@ def _progress(iterable, **kwargs):
 
 
 # -- generate ------------------------------------------------------------------------------
-def _write_clouds(fmt: str, folder: Path, name: str, clouds) -> list[Path]:
+def _write_clouds(fmt: str, folder: Path, name: str, pose_index: int, clouds) -> list[Path]:
     stem = Path(name).name
     written = []
     for c in clouds:
-        base = folder / f"{stem}_el{c.elevation_deg:+06.1f}_az{c.azimuth_deg:05.1f}_s{c.sample_index:02d}"
-        written.append(write_npz(base.with_suffix(".npz"), c) if fmt == "npz" else write_ply(base.with_suffix(".ply"), c))
+        # e.g. chair_0001_v007_el+030_az045_s03.npz: the pose index keeps names unique,
+        # the angles (rounded to whole degrees) keep them readable.
+        base = f"{stem}_v{pose_index:03d}_el{c.elevation_deg:+04.0f}_az{c.azimuth_deg:03.0f}_s{c.sample_index:02d}"
+        written.append(write_npz(folder / f"{base}.npz", c) if fmt == "npz" else write_ply(folder / f"{base}.ply", c))
     return written
 
 
@@ -104,7 +106,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
             cls = class_of(path)
             dense = dense_cloud(mesh, object_key(name), seed=args.seed, count=args.dense_points)
             parts = []
-            for _, _, clouds in occlude_object(
+            for pose_index, _, clouds in occlude_object(
                 mesh, poses, key=object_key(name), n_points=args.points, samples_per_view=args.samples_per_view,
                 seed=args.seed, dense=dense, method=args.method, resolution=args.resolution, radius=args.radius,
                 label=labels[cls], class_name=cls, source=str(path),
@@ -112,7 +114,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
                 if args.format == "h5":
                     parts.extend(clouds)
                 else:
-                    n_written += len(_write_clouds(args.format, out / name, name, clouds))
+                    n_written += len(_write_clouds(args.format, out / name, name, pose_index, clouds))
             if args.format == "h5":
                 write_h5(out / ".parts" / (name.replace("/", "__") + ".h5"), parts, shape_names=class_names)
                 n_written += len(parts)
