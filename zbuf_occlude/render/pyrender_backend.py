@@ -8,6 +8,9 @@ renderer does the same (``with ctx``), so both can live in one process, with two
   default EGL display, which invalidates every other EGL context of the process, ours
   included.  So one offscreen renderer per process is made and never deleted; it is resized
   per camera.
+* pyrender's depth-only pass enables back-face culling whatever ``SKIP_CULL_FACES`` says
+  (``Renderer._bind_and_draw_primitive``, 0.1.45); ModelNet faces have no consistent
+  winding, so the mesh is handed over with every face in both windings.
 * pyrender renders into a 4× multisampled framebuffer; the resolved depth is one sample's,
   up to ~0.4 px from the pixel centre, so its depth differs from ours by the surface's depth
   slope times that offset (~1e-3 object units at 4 units distance).
@@ -70,8 +73,10 @@ class PyrenderRenderer:
         self._pyrender = _import_pyrender()
         pr = self._pyrender
         self._scene = pr.Scene(bg_color=np.zeros(4), ambient_light=np.ones(3))
+        faces = np.asarray(mesh.faces)
+        two_sided = trimesh.Trimesh(mesh.vertices, np.vstack([faces, faces[:, ::-1]]), process=False)
         # smooth=False: a soup mesh must not have its vertices merged or normals averaged.
-        self._scene.add(pr.Mesh.from_trimesh(mesh, smooth=False))
+        self._scene.add(pr.Mesh.from_trimesh(two_sided, smooth=False))
         self._camera_node = None
 
     def render_depth(self, camera: Camera) -> NDArray[np.float32]:

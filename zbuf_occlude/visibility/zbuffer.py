@@ -38,10 +38,12 @@ DEFAULT_RESOLUTION = 1024
 RENDERER_CACHE_SIZE = 4
 #: Default constants of ``zbuffer-tolerance``: a constant part in object units and a slope
 #: term in pixel footprints (the depth change across ``slope_scale`` pixels of a surface
-#: seen at angle θ), clamped at ``max_slope`` = tan θ near grazing incidence.
+#: seen at angle θ), clamped at ``max_slope`` = tan θ near grazing incidence.  Chosen by a
+#: grid search on three shipped meshes × 10 poses at 1024² (mean agreement 95.6 %, the best
+#: constant-only tolerance 94.9 %); a larger slope term exposes the far side of thin parts.
 DEFAULT_DEPTH_TOLERANCE = 1e-3
-DEFAULT_SLOPE_SCALE = 1.5
-DEFAULT_MAX_SLOPE = 10.0
+DEFAULT_SLOPE_SCALE = 1.0
+DEFAULT_MAX_SLOPE = 4.0
 
 _renderers: OrderedDict[tuple[int, int], tuple[trimesh.Trimesh, ModernGLRenderer]] = OrderedDict()
 

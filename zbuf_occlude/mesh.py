@@ -1,0 +1,481 @@
+"""Load meshes from disk, drop degenerate faces and normalise them to the unit box.
+
+trimesh does the parsing; this module adds what the pipeline needs on top:
+errors that name the file and the cause, removal of degenerate faces (ModelNet has
+them), and the normalisation of Sryamkin et al. 2023, §4.1 (centre the axis-aligned
+bounding box on the origin, scale uniformly to a maximum extent of 1).
+
+Provenance is stored on every mesh this module returns, in
+``mesh.metadata["zbuf_occlude"]``:
+
+``source`` : str or None
+    The file the mesh was loaded from.
+``n_degenerate_faces_dropped`` : int
+    Faces removed because they repeat a vertex index or have (numerically) zero area.
+``n_unreferenced_vertices_dropped`` : int
+    Vertices removed because no kept face uses them.
+``center`` : list of 3 float, ``scale`` : float
+    The normalisation that was applied, in the source file's units:
+    ``normalised = (original - center) * scale``.  Identity (``[0, 0, 0]``, ``1.0``)
+    when the mesh was not normalised.
+
+ModelNet quirks handled (all verified on real files with trimesh 5.2): the malformed
+header ``OFF3514 3546 0`` (counts on the ``OFF`` line), CRLF line endings, triangle
+soup with duplicated vertices (kept as is: meshes need not be watertight or
+manifold), polygons with more than three vertices (fan-triangulated by trimesh) and
+zero-area faces.
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+from os import PathLike
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import trimesh
+from numpy.typing import NDArray
+
+from .errors import InvalidInputError, MeshLoadError, ZbufOccludeError
+
+__all__ = [
+    "SUPPORTED_EXTENSIONS",
+    "DEGENERATE_AREA_RTOL",
+    "METADATA_KEY",
+    "load_mesh",
+    "normalize_mesh",
+    "clean_mesh",
+    "degenerate_faces",
+]
+
+log = logging.getLogger(__name__)
+
+#: File extensions load_mesh accepts (lower case), mapped to trimesh's file type.
+SUPPORTED_EXTENSIONS: dict[str, str] = {
+    ".off": "off",
+    ".obj": "obj",
+    ".ply": "ply",
+    ".stl": "stl",
+    ".glb": "glb",
+}
+
+#: A face whose area is at most this times the squared maximum extent of the mesh is
+#: degenerate.  1e-14 is about 50 float64 epsilons: it catches faces that are exactly
+#: flat but whose cross product rounding left at ~1e-16 (ModelNet has such faces at
+#: 4e-21), while a triangle 1e-7 of the object on a side is still kept.
+DEGENERATE_AREA_RTOL = 1e-14
+
+#: Longest prefix before "OFF" on the header line (COFF, NOFF, STOFF, 4OFF, CNOFF ...).
+_OFF_HEADER_MAX_PREFIX = 4
+
+#: Key of this package's provenance dictionary in ``trimesh.Trimesh.metadata``.
+METADATA_KEY = "zbuf_occlude"
+
+
+class _NotOff(ValueError):
+    """The file does not start with an OFF header."""
+
+
+class _NotMesh(ValueError):
+    """The file parsed but holds no triangle mesh."""
+
+
+def _referenced_extent(
+    vertices: NDArray[np.float64], faces: NDArray[np.int64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(3,) min and max corner of the vertices used by ``faces``."""
+    used = vertices[np.unique(faces)]
+    return used.min(axis=0), used.max(axis=0)
+
+
+def _face_areas(vertices: NDArray[np.float64], faces: NDArray[np.int64]) -> NDArray[np.float64]:
+    v0 = vertices[faces[:, 0]]
+    cross = np.cross(vertices[faces[:, 1]] - v0, vertices[faces[:, 2]] - v0)
+    return 0.5 * np.sqrt(np.einsum("ij,ij->i", cross, cross))
+
+
+def _degenerate_mask(
+    vertices: NDArray[np.float64], faces: NDArray[np.int64], max_extent: float, area_rtol: float
+) -> NDArray[np.bool_]:
+    repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
+    return repeated | (_face_areas(vertices, faces) <= area_rtol * max_extent**2)
+
+
+def _check(
+    vertices: NDArray[np.float64],
+    faces: NDArray[np.int64],
+    *,
+    what: str,
+    error: type[ZbufOccludeError],
+    area_rtol: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """Validate a mesh; return its referenced bounds and degenerate-face mask.
+
+    Raises ``error`` with a message starting with ``what`` (the file or "mesh").
+    """
+    if len(vertices) == 0 and len(faces) == 0:
+        raise error(f"{what}: empty mesh (no vertices, no faces)")
+    if len(faces) == 0:
+        raise error(f"{what}: mesh has {len(vertices)} vertices but no faces; a point cloud is not a mesh")
+    if faces.ndim != 2 or faces.shape[1] != 3:
+        raise error(f"{what}: faces must be (F, 3) triangles, got shape {faces.shape}")
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise error(
+            f"{what}: face indices span [{faces.min()}, {faces.max()}] but there are only {len(vertices)} vertices"
+        )
+    bad = ~np.isfinite(vertices).all(axis=1)
+    if bad.any():
+        raise error(
+            f"{what}: {int(bad.sum())} of {len(vertices)} vertices are NaN or inf "
+            f"(first at index {int(np.argmax(bad))}); fix or re-export the mesh"
+        )
+    lo, hi = _referenced_extent(vertices, faces)
+    max_extent = float((hi - lo).max())
+    if max_extent == 0.0:
+        raise error(f"{what}: all vertices coincide at {lo.tolist()} (zero extent); nothing to normalise or sample")
+    degenerate = _degenerate_mask(vertices, faces, max_extent, area_rtol)
+    if degenerate.all():
+        raise error(
+            f"{what}: all {len(faces)} faces are degenerate (repeated vertex index or zero area); "
+            "the mesh has no surface"
+        )
+    return lo, hi, degenerate
+
+
+def _provenance(mesh: trimesh.Trimesh) -> dict[str, Any]:
+    """A fresh copy of the mesh's provenance dictionary, with defaults for missing keys."""
+    old = dict(mesh.metadata.get(METADATA_KEY, {}))
+    return {
+        "source": old.get("source"),
+        "n_degenerate_faces_dropped": int(old.get("n_degenerate_faces_dropped", 0)),
+        "n_unreferenced_vertices_dropped": int(old.get("n_unreferenced_vertices_dropped", 0)),
+        "center": list(old.get("center", [0.0, 0.0, 0.0])),
+        "scale": float(old.get("scale", 1.0)),
+    }
+
+
+def _drop_faces(
+    vertices: NDArray[np.float64], faces: NDArray[np.int64], keep: NDArray[np.bool_]
+) -> tuple[NDArray[np.float64], NDArray[np.int64], int]:
+    """Keep ``faces[keep]`` in their order and only the vertices they use, in their order."""
+    faces = faces[keep]
+    used = np.zeros(len(vertices), dtype=bool)
+    used[faces.ravel()] = True
+    remap = np.cumsum(used) - 1
+    return vertices[used], remap[faces].astype(np.int64), int(len(vertices) - used.sum())
+
+
+def _normalised(
+    vertices: NDArray[np.float64], lo: NDArray[np.float64], hi: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    # Sryamkin et al. 2023, §4.1: centre of the axis-aligned bounding box to the origin,
+    # then one uniform scale so that the largest side is 1 (aspect ratio preserved).
+    center = (lo + hi) / 2.0
+    scale = 1.0 / float((hi - lo).max())
+    return (vertices - center) * scale, center, scale
+
+
+def _as_arrays(mesh: trimesh.Trimesh) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    if not isinstance(mesh, trimesh.Trimesh):
+        raise InvalidInputError(f"expected a trimesh.Trimesh, got {type(mesh).__name__}")
+    vertices = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
+    faces = np.asarray(mesh.faces, dtype=np.int64)
+    if faces.size == 0:
+        faces = faces.reshape(0, 3)
+    return vertices, faces
+
+
+def _make(
+    vertices: NDArray[np.float64], faces: NDArray[np.int64], metadata: dict[str, Any], provenance: dict[str, Any]
+) -> trimesh.Trimesh:
+    # process=False: merging duplicated vertices would change ModelNet's triangle soup,
+    # and faces must stay in file order so that face_index means the same everywhere.
+    out = trimesh.Trimesh(vertices=vertices, faces=faces, process=False, validate=False)
+    out.metadata.update({k: v for k, v in metadata.items() if k != METADATA_KEY})
+    out.metadata[METADATA_KEY] = provenance
+    return out
+
+
+def _check_rtol(area_rtol: float) -> None:
+    if not (np.isfinite(area_rtol) and area_rtol >= 0.0):
+        raise InvalidInputError(f"area_rtol must be finite and >= 0, got {area_rtol}")
+
+
+def degenerate_faces(mesh: trimesh.Trimesh, *, area_rtol: float = DEGENERATE_AREA_RTOL) -> NDArray[np.bool_]:
+    """Which faces are degenerate.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+    area_rtol : float
+        A face with area ``<= area_rtol * max_extent**2`` is degenerate, where
+        ``max_extent`` is the largest side of the bounding box of the referenced
+        vertices (default :data:`DEGENERATE_AREA_RTOL`, scale invariant).
+
+    Returns
+    -------
+    degenerate : (F,) bool
+        True for faces that repeat a vertex index or have (numerically) zero area.
+        All True when every vertex coincides (zero extent); empty for a mesh without faces.
+
+    Raises
+    ------
+    InvalidInputError
+        If ``mesh`` is not a Trimesh, has face indices out of range or NaN/inf
+        vertices, or ``area_rtol`` is negative or not finite.
+    """
+    _check_rtol(area_rtol)
+    vertices, faces = _as_arrays(mesh)
+    if len(faces) == 0:
+        return np.zeros(0, dtype=bool)
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise InvalidInputError(f"mesh face indices span [{faces.min()}, {faces.max()}] for {len(vertices)} vertices")
+    if not np.isfinite(vertices).all():
+        raise InvalidInputError("mesh has NaN or inf vertices; degeneracy is undefined")
+    lo, hi = _referenced_extent(vertices, faces)
+    return _degenerate_mask(vertices, faces, float((hi - lo).max()), area_rtol)
+
+
+def clean_mesh(mesh: trimesh.Trimesh, *, area_rtol: float = DEGENERATE_AREA_RTOL) -> trimesh.Trimesh:
+    """A copy of ``mesh`` without degenerate faces and unreferenced vertices.
+
+    The kept faces and vertices stay in their order; duplicated vertices are *not*
+    merged and the mesh need not be watertight.  The numbers of dropped faces and
+    vertices are added to ``metadata["zbuf_occlude"]`` (see the module docstring).
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+    area_rtol : float
+        See :func:`degenerate_faces`.
+
+    Returns
+    -------
+    mesh : trimesh.Trimesh
+        New mesh; vertices (V', 3) float64, faces (F', 3) int64.
+
+    Raises
+    ------
+    InvalidInputError
+        If the mesh is empty, has no faces, has NaN/inf vertices, face indices out of
+        range, zero extent, or only degenerate faces; or ``area_rtol`` is negative
+        or not finite.
+    """
+    _check_rtol(area_rtol)
+    vertices, faces = _as_arrays(mesh)
+    _, _, degenerate = _check(vertices, faces, what="mesh", error=InvalidInputError, area_rtol=area_rtol)
+    vertices, faces, n_unref = _drop_faces(vertices, faces, ~degenerate)
+    prov = _provenance(mesh)
+    prov["n_degenerate_faces_dropped"] += int(degenerate.sum())
+    prov["n_unreferenced_vertices_dropped"] += n_unref
+    return _make(vertices, faces, mesh.metadata, prov)
+
+
+def normalize_mesh(mesh: trimesh.Trimesh, *, area_rtol: float = DEGENERATE_AREA_RTOL) -> trimesh.Trimesh:
+    """A copy of ``mesh`` centred and scaled to the unit box (Sryamkin et al. 2023, §4.1).
+
+    The centre of the axis-aligned bounding box of the referenced vertices moves to the
+    origin and one uniform scale makes the largest side 1.  Faces and vertices are
+    kept as they are (use :func:`clean_mesh` to drop degenerate faces); unreferenced
+    vertices are transformed too but do not count for the bounding box.
+
+    ``metadata["zbuf_occlude"]["center"]`` and ``["scale"]`` are composed with any
+    earlier normalisation, so they always map back to the source file's units:
+    ``normalised = (original - center) * scale``.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+    area_rtol : float
+        Only used for the check that not every face is degenerate; see
+        :func:`degenerate_faces`.
+
+    Returns
+    -------
+    mesh : trimesh.Trimesh
+        New mesh; vertices (V, 3) float64 with bounding box centre 0 and max extent 1.
+
+    Raises
+    ------
+    InvalidInputError
+        Same checks as :func:`clean_mesh`.
+    """
+    _check_rtol(area_rtol)
+    vertices, faces = _as_arrays(mesh)
+    lo, hi, _ = _check(vertices, faces, what="mesh", error=InvalidInputError, area_rtol=area_rtol)
+    new_vertices, center, scale = _normalised(vertices, lo, hi)
+    prov = _provenance(mesh)
+    # Compose with the earlier map x1 = (x0 - c0) * s0:  x2 = (x1 - c1) * s1
+    # = (x0 - (c0 + c1 / s0)) * (s0 * s1).
+    old_center, old_scale = np.asarray(prov["center"], dtype=np.float64), prov["scale"]
+    prov["center"] = (old_center + center / old_scale).tolist()
+    prov["scale"] = old_scale * scale
+    return _make(new_vertices, faces, mesh.metadata, prov)
+
+
+def _fan_triangulate_off(text: str) -> str | None:
+    """OFF text with every polygon of more than 4 corners replaced by a triangle fan.
+
+    Returns None when there is no such polygon or the structure cannot be read (the
+    caller then reports trimesh's own error).
+    """
+    lines = [line.split("#", 1)[0].strip() for line in text.splitlines()]
+    lines = [line for line in lines if line]
+    try:
+        head = lines[0]
+        end = head.upper().index("OFF") + len("OFF")
+        # ModelNet40 puts the counts on the OFF line ("OFF3514 3546 0")
+        counts, body = (head[end:].split(), lines[1:]) if head[end:].strip() else (lines[1].split(), lines[2:])
+        n_vertices, n_faces = int(counts[0]), int(counts[1])
+        faces, n_fanned = [], 0
+        for line in body[n_vertices : n_vertices + n_faces]:
+            tokens = line.split()
+            corners = tokens[1 : 1 + int(tokens[0])]
+            if len(corners) > 4:
+                n_fanned += 1
+                # the same fan trimesh builds: (c0, ci, ci+1)
+                faces.extend(f"3 {corners[0]} {a} {b}" for a, b in zip(corners[1:-1], corners[2:]))
+            else:
+                faces.append(" ".join([str(len(corners)), *corners]))
+    except (IndexError, ValueError):
+        return None
+    if n_fanned == 0:
+        return None
+    return "\n".join([head[:end], f"{n_vertices} {len(faces)} 0", *body[:n_vertices], *faces]) + "\n"
+
+
+def _read(path: Path, file_type: str) -> trimesh.Trimesh:
+    """Parse ``path`` with trimesh into one Trimesh; scenes are flattened with transforms."""
+    if file_type != "off":
+        return _to_mesh(trimesh.load_scene(str(path), file_type=file_type, process=False))
+    raw = path.read_bytes()
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        # trimesh decodes non-UTF-8 text with the optional charset_normalizer and fails
+        # with ModuleNotFoundError without it.  OFF is ASCII numbers, so Latin-1 (which
+        # decodes any byte) is a safe fallback.
+        text = raw.decode("latin-1")
+        raw = text.encode("utf-8")
+    # trimesh splits at the first "OFF" anywhere in the text, so garbage would fail
+    # later with an unrelated message.  The header may carry a prefix (COFF, NOFF, ...)
+    # and, in ModelNet40, the counts on the same line ("OFF3514 3546 0"), which trimesh
+    # parses correctly.
+    lines = (line.strip() for line in text.splitlines())
+    first = next((line for line in lines if line and not line.startswith("#")), "")
+    if "OFF" not in first[: _OFF_HEADER_MAX_PREFIX + len("OFF")].upper():
+        raise _NotOff(f"no OFF header, first line is {first[:40]!r}" if first else "file is empty")
+    try:
+        return _to_mesh(trimesh.load_scene(io.BytesIO(raw), file_type="off", process=False))
+    except Exception:
+        # trimesh 5.2 fails (TypeError from numpy string multiply) when polygons of more
+        # than 4 corners are mixed with triangles or quads: it fans them while the
+        # indices are still strings.  Fan them here, as trimesh would, and retry once.
+        fixed = _fan_triangulate_off(text)
+        if fixed is None:
+            raise
+        return _to_mesh(trimesh.load_scene(io.BytesIO(fixed.encode("utf-8")), file_type="off", process=False))
+
+
+def _to_mesh(scene: trimesh.Scene) -> trimesh.Trimesh:
+    # Scene.to_mesh() concatenates every Trimesh of a scene (GLB) with its node
+    # transform baked in, and drops points and paths.  process=False at load keeps
+    # vertex and face order as in the file (no merging of ModelNet's duplicated vertices).
+    mesh = scene.to_mesh()
+    if len(mesh.faces) == 0:
+        n_points = sum(len(g.vertices) for g in scene.geometry.values() if isinstance(g, trimesh.PointCloud))
+        if n_points:
+            raise _NotMesh(f"holds a point cloud of {n_points} points and no faces; a point cloud is not a mesh")
+    return mesh
+
+
+def load_mesh(
+    path: str | PathLike[str], *, normalize: bool = True, area_rtol: float = DEGENERATE_AREA_RTOL
+) -> trimesh.Trimesh:
+    """Load a triangle mesh from OFF, OBJ, PLY, STL or GLB, cleaned and normalised.
+
+    Steps: parse with trimesh (polygons are fan-triangulated, scenes flattened with
+    their transforms), check, drop degenerate faces and unreferenced vertices
+    (:func:`clean_mesh`), then, if ``normalize``, centre and scale to the unit box as
+    in Sryamkin et al. 2023, §4.1 (:func:`normalize_mesh`).  Duplicated vertices are
+    kept and the mesh need not be watertight or manifold.  GLB files are read as
+    stored: glTF is y-up and no axis conversion is done.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        Mesh file; the format comes from the extension (case-insensitive), see
+        :data:`SUPPORTED_EXTENSIONS`.
+    normalize : bool
+        Centre the bounding box on the origin and scale the max extent to 1.
+    area_rtol : float
+        Relative area below which a face is degenerate; see :func:`degenerate_faces`.
+
+    Returns
+    -------
+    mesh : trimesh.Trimesh
+        vertices (V, 3) float64, faces (F, 3) int64, in file order minus dropped ones.
+        ``mesh.metadata["zbuf_occlude"]`` holds the provenance (module docstring).
+
+    Raises
+    ------
+    MeshLoadError
+        With the file name and cause: missing file, a directory, unsupported
+        extension, unreadable or unparsable content, no vertices or no faces,
+        NaN/inf vertices, face indices out of range, zero extent (all vertices
+        coincide) or only degenerate faces.
+    InvalidInputError
+        If ``area_rtol`` is negative or not finite.
+    """
+    _check_rtol(area_rtol)
+    path = Path(path)
+    if not path.exists():
+        raise MeshLoadError(f"{path}: no such file")
+    if path.is_dir():
+        raise MeshLoadError(f"{path}: is a directory, expected a mesh file")
+    suffix = path.suffix.lower()
+    if suffix not in SUPPORTED_EXTENSIONS:
+        raise MeshLoadError(
+            f"{path}: unsupported extension {path.suffix!r}; use one of {', '.join(SUPPORTED_EXTENSIONS)}"
+        )
+    file_type = SUPPORTED_EXTENSIONS[suffix]
+    try:
+        loaded = _read(path, file_type)
+    except OSError as exc:
+        raise MeshLoadError(f"{path}: cannot read file ({exc.strerror or exc})") from exc
+    except MemoryError:
+        raise
+    except _NotOff as exc:
+        raise MeshLoadError(f"{path}: not an OFF file ({exc})") from exc
+    except _NotMesh as exc:
+        raise MeshLoadError(f"{path}: {exc}") from exc
+    except Exception as exc:  # trimesh raises a zoo of types (ValueError, IndexError, NameError, KeyError, ...)
+        raise MeshLoadError(
+            f"{path}: cannot parse as {file_type.upper()} ({type(exc).__name__}: {exc})"
+        ) from exc
+
+    if not isinstance(loaded, trimesh.Trimesh):
+        raise MeshLoadError(f"{path}: trimesh returned a {type(loaded).__name__}, not a triangle mesh")
+    vertices, faces = _as_arrays(loaded)
+    _, _, degenerate = _check(vertices, faces, what=str(path), error=MeshLoadError, area_rtol=area_rtol)
+    n_degenerate = int(degenerate.sum())
+    if n_degenerate:
+        log.debug("%s: dropping %d degenerate faces of %d", path, n_degenerate, len(faces))
+    vertices, faces, n_unref = _drop_faces(vertices, faces, ~degenerate)
+    prov = {
+        "source": str(path),
+        "n_degenerate_faces_dropped": n_degenerate,
+        "n_unreferenced_vertices_dropped": n_unref,
+        "center": [0.0, 0.0, 0.0],
+        "scale": 1.0,
+    }
+    if normalize:
+        # Dropping degenerate faces never empties the mesh (checked above), so the
+        # bounds of the kept vertices are finite and, being a superset of a
+        # non-degenerate face, of positive extent.
+        lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+        vertices, center, scale = _normalised(vertices, lo, hi)
+        prov["center"], prov["scale"] = center.tolist(), scale
+    return _make(vertices, faces, loaded.metadata, prov)
