@@ -1,0 +1,89 @@
+"""Writers and readers: formats, atomicity, clear errors."""
+
+from __future__ import annotations
+
+import errno
+import os
+
+import numpy as np
+import pytest
+import trimesh
+
+from zbuf_occlude.errors import OutputError
+from zbuf_occlude.io import OccludedCloud, atomic_path, read_h5, read_npz, write_h5, write_npz, write_ply
+
+
+def _cloud(n=64, seed=0, **kw):
+    rng = np.random.default_rng(seed)
+    base = dict(
+        points=rng.uniform(-0.5, 0.5, (n, 3)).astype(np.float32), face_index=rng.integers(0, 100, n),
+        elevation_deg=30.0, azimuth_deg=45.0, radius=4.0, label=2, class_name="chair", source="a/chair.off",
+        sample_index=1, n_visible=n + 5,
+    )  # fmt: skip
+    return OccludedCloud(**{**base, **kw})
+
+
+def test_npz_round_trip(tmp_path):
+    c = _cloud()
+    back = read_npz(write_npz(tmp_path / "x.npz", c))
+    assert np.array_equal(back.points, c.points) and back.points.dtype == np.float32
+    assert np.array_equal(back.face_index, c.face_index)
+    assert (back.elevation_deg, back.azimuth_deg, back.radius, back.label, back.class_name) == (30.0, 45.0, 4.0, 2, "chair")
+    assert not back.padded and _cloud(n_visible=10).padded
+
+
+def test_ply_opens_in_trimesh_with_the_points(tmp_path):
+    c = _cloud()
+    pc = trimesh.load(write_ply(tmp_path / "x.ply", c))
+    assert np.allclose(pc.vertices, c.points)
+    assert "elevation_deg 30.000000" in (tmp_path / "x.ply").read_bytes()[:600].decode("ascii", "replace")
+
+
+def test_h5_has_pointnets_layout(tmp_path):
+    clouds = [_cloud(seed=i, label=i % 2) for i in range(5)]
+    d = read_h5(write_h5(tmp_path / "x.h5", clouds, shape_names=["bed", "chair"]))
+    assert d["data"].shape == (5, 64, 3) and d["data"].dtype == np.float32
+    assert d["label"].tolist() == [0, 1, 0, 1, 0]
+    assert d["elevation_deg"].shape == (5,) and d["azimuth_deg"].shape == (5,)
+    assert list(d["shape_names"]) == ["bed", "chair"] and d["source"][0] == "a/chair.off"
+
+
+def test_h5_refuses_mixed_sizes(tmp_path):
+    with pytest.raises(OutputError, match="sizes"):
+        write_h5(tmp_path / "x.h5", [_cloud(10), _cloud(20)])
+
+
+def test_a_failed_write_leaves_neither_target_nor_temporary(tmp_path):
+    target = tmp_path / "x.npz"
+    with pytest.raises(RuntimeError):
+        with atomic_path(target) as tmp:
+            tmp.write_bytes(b"partial")
+            raise RuntimeError("killed mid-write")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_existing_file_survives_a_failed_rewrite(tmp_path):
+    target = write_npz(tmp_path / "x.npz", _cloud())
+    before = target.read_bytes()
+    with pytest.raises(RuntimeError):
+        with atomic_path(target) as tmp:
+            tmp.write_bytes(b"junk")
+            raise RuntimeError
+    assert target.read_bytes() == before
+
+
+def test_disk_full_is_a_clear_error(tmp_path, monkeypatch):
+    def full(*a, **k):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "replace", full)
+    with pytest.raises(OutputError, match="disk full"):
+        write_npz(tmp_path / "x.npz", _cloud())
+    assert not any(p.name.endswith(".tmp") for p in tmp_path.iterdir())
+
+
+def test_unwritable_output_folder_is_a_clear_error(tmp_path):
+    blocker = tmp_path / "not_a_folder"
+    blocker.write_text("")
+    with pytest.raises(OutputError, match="cannot write"):
+        write_npz(blocker / "x.npz", _cloud())
