@@ -1,0 +1,381 @@
+"""Tests of zbuf_occlude.visibility.oracle, the exact hidden-surface-removal ground truth.
+
+Meshes are built with trimesh directly (loaded with ``process=False`` and normalised here),
+so these tests do not depend on zbuf_occlude.mesh / sampling.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
+
+from zbuf_occlude.cameras import camera_on_sphere
+from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
+from zbuf_occlude.visibility import oracle, registry
+from zbuf_occlude.visibility.oracle import (
+    occluded_embree,
+    occluded_numpy,
+    segment_hits_triangles,
+    triangle_planes,
+)
+
+DATA = Path(__file__).parents[1].parent / "shared" / "data" / "modelnet_subset"
+SMALL_MESHES = [
+    "ModelNet40/monitor/test/monitor_0466.off",  # 138 faces
+    "ModelNet10/sofa/test/sofa_0681.off",  # 232 faces
+    "release_unknown/chair/train/chair_0002.off",  # 96 faces
+    "ModelNet40/bathtub/train/bathtub_0002.off",  # 664 faces
+]
+LARGE_MESH = "ModelNet10/sofa/train/sofa_0001.off"  # 27 438 faces
+POSES = [(0.0, 0.0), (30.0, 45.0), (-60.0, 200.0), (90.0, 0.0), (10.0, 300.0)]
+RADIUS = 4.0
+TOL = registry.DEFAULT_SELF_HIT_TOLERANCE
+
+
+def load_normalised(relpath: str) -> trimesh.Trimesh:
+    """A ModelNet mesh centred at its bounding-box centre, scaled to maximum extent 1."""
+    path = DATA / relpath
+    if not path.is_file():
+        pytest.skip(f"shared data not available: {path}")
+    mesh = trimesh.load(path, process=False, force="mesh")
+    mesh.apply_translation(-(mesh.bounds[0] + mesh.bounds[1]) / 2.0)
+    mesh.apply_scale(1.0 / mesh.extents.max())
+    return mesh
+
+
+def both_occluded(tri_or_mesh, points, eye, **kw) -> tuple[np.ndarray, np.ndarray]:
+    tri = tri_or_mesh.triangles if isinstance(tri_or_mesh, trimesh.Trimesh) else tri_or_mesh
+    return occluded_numpy(tri, points, eye, **kw), occluded_embree(tri_or_mesh, points, eye, **kw)
+
+
+# -- real meshes: numpy == Embree ----------------------------------------------------------
+@pytest.mark.parametrize("relpath", SMALL_MESHES)
+def test_numpy_and_embree_agree_exactly_on_real_meshes(relpath):
+    mesh = load_normalised(relpath)
+    points, face_index = trimesh.sample.sample_surface(mesh, 3000, seed=7)
+    hidden_fractions = []
+    for el, az in POSES:
+        cam = camera_on_sphere(el, az, RADIUS)
+        np_occ, em_occ = both_occluded(mesh, points, cam.eye, face_index=face_index)
+        assert np.array_equal(np_occ, em_occ), f"{relpath} el={el} az={az}: {(np_occ != em_occ).sum()} differ"
+        hidden_fractions.append(np_occ.mean())
+    # Without face_index only the tolerance protects a point from its own face.
+    cam = camera_on_sphere(*POSES[1], RADIUS)
+    np_occ, em_occ = both_occluded(mesh, points, cam.eye)
+    assert np.array_equal(np_occ, em_occ)
+    # Not vacuous: each view hides some points and shows others.
+    assert all(0.05 < f < 0.95 for f in hidden_fractions), hidden_fractions
+
+
+def test_registered_methods_agree_and_apply_the_frustum():
+    mesh = load_normalised(SMALL_MESHES[0])
+    points, face_index = trimesh.sample.sample_surface(mesh, 2000, seed=3)
+    # A narrow field of view: part of the object is outside the image.
+    cam = camera_on_sphere(20.0, 60.0, RADIUS, yfov_deg=8.0, resolution=64)
+    in_view = cam.in_frustum(points)
+    assert 0 < in_view.sum() < len(points)
+    # Options meant for other methods (resolution) are accepted and ignored.
+    vis = registry.visible_mask(mesh, points, cam, "oracle", face_index=face_index, resolution=512)
+    vis_np = registry.visible_mask(mesh, points, cam, "oracle-numpy", face_index=face_index, resolution=512)
+    assert vis.dtype == bool and vis.shape == (len(points),)
+    assert np.array_equal(vis, vis_np)
+    assert not vis[~in_view].any()
+    occluded = occluded_numpy(mesh.triangles, points[in_view], cam.eye, face_index=face_index[in_view])
+    assert np.array_equal(vis[in_view], ~occluded)
+
+
+def test_cull_drops_no_occluder():
+    """The image-plane cull of occluded_numpy equals brute force over all N x F pairs."""
+    mesh = load_normalised(SMALL_MESHES[0])
+    points, face_index = trimesh.sample.sample_surface(mesh, 1500, seed=11)
+    faces = np.arange(len(mesh.faces))
+    for el, az in POSES[:3]:
+        eye = camera_on_sphere(el, az, RADIUS).eye
+        hit, dist = segment_hits_triangles(points[:, None, :], eye, mesh.triangles[None])
+        brute = (hit & (dist > TOL) & (faces[None] != face_index[:, None])).any(axis=1)
+        culled = occluded_numpy(mesh.triangles, points, eye, face_index=face_index)
+        unculled = occluded_numpy(mesh.triangles, points, eye, face_index=face_index, cull=False, chunk_size=1000)
+        small_chunks = occluded_numpy(mesh.triangles, points, eye, face_index=face_index, chunk_size=97)
+        for got in (culled, unculled, small_chunks):
+            assert np.array_equal(got, brute)
+    # An eye inside the mesh's bounding box: faces straddle the image plane.
+    eye = np.array([0.05, -0.02, 0.03])
+    hit, dist = segment_hits_triangles(points[:, None, :], eye, mesh.triangles[None])
+    brute = (hit & (dist > TOL) & (faces[None] != face_index[:, None])).any(axis=1)
+    assert np.array_equal(occluded_numpy(mesh.triangles, points, eye, face_index=face_index), brute)
+    assert np.array_equal(occluded_embree(mesh, points, eye, face_index=face_index), brute)
+
+
+def test_large_mesh_embree_disagreement_is_tiny(record_property):
+    mesh = load_normalised(LARGE_MESH)
+    n = 10_000
+    points, face_index = trimesh.sample.sample_surface(mesh, n, seed=5)
+    disagreements = 0
+    for el, az in POSES[:2]:
+        eye = camera_on_sphere(el, az, RADIUS).eye
+        np_occ, em_occ = both_occluded(mesh, points, eye, face_index=face_index)
+        disagreements += int((np_occ != em_occ).sum())
+    record_property("embree_numpy_disagreements", disagreements)
+    print(f"{LARGE_MESH}: {disagreements} disagreements in {2 * n} (point, view) pairs")
+    assert disagreements <= 1e-4 * 2 * n
+
+
+# -- hand-made cases -----------------------------------------------------------------------
+# A square occluder in the plane z = 0, x, y in [-1, 1], split along its diagonal y = x.
+# Dyadic coordinates keep every product and quotient of the kernel exact.
+QUAD = np.array(
+    [
+        [[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0]],
+        [[-1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]],
+    ]
+)
+# The same square as a fan of four triangles around a centre vertex shared by all of them.
+_CORNERS = np.array([[1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0], [-1.0, -1.0, 0.0]])
+FAN = np.stack([np.stack([np.zeros(3), _CORNERS[i], _CORNERS[(i + 1) % 4]]) for i in range(4)])
+EYE_ABOVE = np.array([0.0, 0.0, 4.0])
+
+
+def test_quad_hides_behind_shows_front_and_beside():
+    points = np.array(
+        [
+            [0.25, -0.5, -1.0],  # behind the quad
+            [0.25, -0.5, 1.0],  # in front of it
+            [3.0, 0.0, -1.0],  # beside it: the segment to the eye passes outside
+            [0.5, 0.5, -4.0],  # exactly under the shared diagonal: meets it at (0.25, 0.25, 0)
+        ]
+    )
+    expected = np.array([True, False, False, True])
+    np_occ, em_occ = both_occluded(QUAD, points, EYE_ABOVE)
+    assert np.array_equal(np_occ, expected)
+    assert np.array_equal(em_occ, expected)
+
+
+def test_vertex_and_edges_shared_by_a_fan_do_not_leak():
+    points = np.array(
+        [
+            [0.0, 0.0, -2.0],  # seen through the centre vertex, shared by four triangles
+            [0.5, 0.0, -4.0],  # through (0.25, 0, 0), inside one triangle
+            [0.5, 0.5, -4.0],  # through (0.25, 0.25, 0), on an edge shared by two
+            [-0.5, 0.5, -4.0],  # through (-0.25, 0.25, 0), on another shared edge
+        ]
+    )
+    for occ in both_occluded(FAN, points, EYE_ABOVE):
+        assert occ.all()
+
+
+def test_shared_edge_counts_for_both_triangles():
+    """Inclusive bounds: a segment through the shared diagonal hits both triangles."""
+    hit, dist = segment_hits_triangles(np.array([0.5, 0.5, -4.0]), EYE_ABOVE, QUAD)
+    assert hit.tolist() == [True, True]
+    np.testing.assert_allclose(dist, math.dist((0.5, 0.5, -4.0), (0.25, 0.25, 0.0)), rtol=1e-15)
+    # A segment parallel to the plane never hits, even lying in it.
+    hit, dist = segment_hits_triangles(np.array([-2.0, 0.0, 0.0]), np.array([2.0, 0.0, 0.0]), QUAD)
+    assert not hit.any() and np.isinf(dist).all()
+
+
+def test_kernel_broadcasts_and_measures_distance():
+    rng = np.random.default_rng(0)
+    p = rng.normal(size=(4, 1, 3))
+    tri = rng.normal(size=(1, 5, 3, 3))
+    eye = np.array([0.0, 0.0, 5.0])
+    hit, dist = segment_hits_triangles(p, eye, tri)
+    assert hit.shape == dist.shape == (4, 5)
+    planes = triangle_planes(tri)
+    hit2, dist2 = segment_hits_triangles(p, eye, planes)
+    assert np.array_equal(hit, hit2) and np.array_equal(dist, dist2)
+    # Each hit lies on its triangle's plane, at the reported distance along the segment.
+    i, j = np.nonzero(hit)
+    x = p[i, 0] + (eye - p[i, 0]) * (dist[i, j] / np.linalg.norm(eye - p[i, 0], axis=1))[:, None]
+    n = planes.normal[0, j]
+    np.testing.assert_allclose(((x - tri[0, j, 0]) * n).sum(axis=1), 0.0, atol=1e-12)
+
+
+def test_coplanar_duplicate_face_does_not_hide_its_twin():
+    """Own-surface trap: a point on a face with a coplanar duplicate stays visible."""
+    tri = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    triangles = np.stack([tri, tri[::-1]])  # the twin has the opposite winding
+    mesh = trimesh.Trimesh(vertices=triangles.reshape(-1, 3), faces=np.arange(6).reshape(2, 3), process=False)
+    points, face_index = trimesh.sample.sample_surface(mesh, 500, seed=2)
+    for eye in ([0.3, 0.2, 3.0], [0.3, 0.2, -3.0], [2.0, 1.5, 0.7]):
+        for fi in (face_index, None):
+            np_occ, em_occ = both_occluded(mesh, points, np.array(eye), face_index=fi)
+            assert not np_occ.any()
+            assert not em_occ.any()
+
+
+def test_points_on_a_lone_triangle_are_visible_from_any_pose():
+    """Self-hit trap: nothing but the point's own face lies on its segment to the eye."""
+    triangle = np.array([[[-0.4, -0.3, 0.1], [0.5, -0.2, -0.05], [0.0, 0.45, 0.02]]])
+    mesh = trimesh.Trimesh(vertices=triangle[0], faces=[[0, 1, 2]], process=False)
+    points, face_index = trimesh.sample.sample_surface(mesh, 400, seed=4)
+    for el in (-80.0, -30.0, 0.5, 10.0, 45.0, 89.0):
+        for az in (0.0, 100.0, 250.0):
+            cam = camera_on_sphere(el, az, RADIUS)
+            assert registry.visible_mask(mesh, points, cam, "oracle", face_index=face_index).all()
+            assert registry.visible_mask(mesh, points, cam, "oracle-numpy").all()
+            assert not occluded_embree(triangle, points, cam.eye).any()
+
+
+def test_grazing_crease_next_to_the_own_face_is_not_missed():
+    """Regression: a sightline grazing its own face crosses the adjacent face 2.6e-7 from
+    their shared edge, 1.4e-4 from the point; float32 rays pass on the own face's side."""
+    mesh = trimesh.creation.icosphere(subdivisions=3)
+    mesh.apply_scale(1.0 / mesh.extents.max())
+    points, face_index = trimesh.sample.sample_surface(mesh, 3000, seed=0)
+    eye = camera_on_sphere(23.4375, 94.75, RADIUS).eye
+    np_occ, em_occ = both_occluded(mesh, points, eye, face_index=face_index)
+    assert np_occ[2478]
+    assert np.array_equal(np_occ, em_occ)
+
+
+# -- properties ----------------------------------------------------------------------------
+unit = st.floats(-1.0, 1.0, allow_nan=False)
+point3 = st.tuples(unit, unit, unit).map(np.array)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.filter_too_much])
+@given(
+    a=point3,
+    b=point3,
+    c=point3,
+    weights=st.tuples(*[st.floats(0.05, 1.0)] * 3),
+    eye_dir=point3,
+    eye_dist=st.floats(2.0, 6.0),
+    behind=st.floats(1e-3, 1.0),
+    front=st.floats(1e-3, 0.999),
+)
+def test_point_behind_a_triangle_is_hidden_and_in_front_visible(a, b, c, weights, eye_dir, eye_dist, behind, front):
+    tri = np.stack([a, b, c])
+    normal = np.cross(b - a, c - a)
+    area = np.linalg.norm(normal) / 2.0
+    edges = np.linalg.norm(tri - np.roll(tri, 1, axis=0), axis=1)
+    assume(area > 0.05 and area > 0.05 * edges.max() ** 2)  # no slivers
+    assume(np.linalg.norm(eye_dir) > 0.1)
+    w = np.array(weights) / sum(weights)
+    x = w @ tri  # inside, at least ~0.05 / 3 of the way from each edge
+    eye = eye_dir / np.linalg.norm(eye_dir) * eye_dist
+    to_eye = eye - x
+    dist_to_eye = np.linalg.norm(to_eye)
+    d = to_eye / dist_to_eye
+    assume(abs(d @ normal) / np.linalg.norm(normal) > 0.1)  # grazing: ill-conditioned crossing
+    hidden_point = x - behind * d  # the segment to the eye crosses the triangle at x
+    shown_point = x + front * dist_to_eye * d  # between the triangle and the eye
+    points = np.stack([hidden_point, shown_point])
+    for occ in both_occluded(tri[None], points, eye):
+        assert occ.tolist() == [True, False]
+
+
+@settings(max_examples=15, deadline=None)
+@given(
+    el=st.floats(-90.0, 90.0),
+    az=st.floats(0.0, 360.0),
+    seed=st.integers(0, 2**31 - 1),
+)
+def test_convex_sphere_shows_its_near_cap(el, az, seed):
+    """A closed convex mesh from afar: visible == front-facing, and ~(1 - r/d)/2 of the area.
+
+    From distance d a sphere of radius r shows the cap of area fraction (1 - r/d) / 2.
+    """
+    mesh = trimesh.creation.icosphere(subdivisions=3)
+    mesh.apply_scale(1.0 / mesh.extents.max())
+    r = 0.5
+    n = 3000
+    points, face_index = trimesh.sample.sample_surface(mesh, n, seed=seed)
+    cam = camera_on_sphere(el, az, RADIUS)
+    visible = registry.visible_mask(mesh, points, cam, "oracle", face_index=face_index)
+
+    # Convexity: exactly the points on faces whose outer side faces the eye are visible
+    # (points within ~1e-3 of an edge skipped: there the tolerance can decide).
+    front = np.einsum("ij,ij->i", cam.eye - mesh.triangles[:, 0], mesh.face_normals) > 0
+    bary = trimesh.triangles.points_to_barycentric(mesh.triangles[face_index], points)
+    interior = bary.min(axis=1) > 1e-3
+    assert np.array_equal(visible[interior], front[face_index][interior])
+
+    # Area-uniform samples: visible count is Binomial(n, p) with p the front-facing area.
+    p = mesh.area_faces[front].sum() / mesh.area
+    assert abs(visible.mean() - p) <= 4.0 * math.sqrt(p * (1.0 - p) / n) + 2.0 / n
+    # The polyhedron's front-facing area is the sphere's cap up to discretisation (1280 faces).
+    discretisation_slack = 0.015
+    assert abs(p - (1.0 - r / RADIUS) / 2.0) <= discretisation_slack
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), el=st.floats(-90.0, 90.0), az=st.floats(0.0, 360.0))
+def test_random_convex_hull_visible_iff_front_facing(seed, el, az):
+    rng = np.random.default_rng(seed)
+    hull = trimesh.convex.convex_hull(rng.normal(size=(40, 3)))
+    hull.apply_translation(-(hull.bounds[0] + hull.bounds[1]) / 2.0)
+    hull.apply_scale(1.0 / hull.extents.max())
+    points, face_index = trimesh.sample.sample_surface(hull, 1000, seed=seed)
+    cam = camera_on_sphere(el, az, RADIUS)
+    front = np.einsum("ij,ij->i", cam.eye - hull.triangles[:, 0], hull.face_normals) > 0
+    bary = trimesh.triangles.points_to_barycentric(hull.triangles[face_index], points)
+    interior = bary.min(axis=1) > 1e-3
+    for occ in both_occluded(hull, points, cam.eye, face_index=face_index):
+        assert np.array_equal(~occ[interior], front[face_index][interior])
+
+
+# -- determinism, caching, errors ----------------------------------------------------------
+def test_same_inputs_give_the_same_mask():
+    mesh = load_normalised(SMALL_MESHES[3])
+    points, face_index = trimesh.sample.sample_surface(mesh, 2000, seed=9)
+    cam = camera_on_sphere(35.0, 120.0, RADIUS)
+    first = registry.visible_mask(mesh, points, cam, "oracle", face_index=face_index)
+    again = registry.visible_mask(mesh, points, cam, "oracle", face_index=face_index)
+    fresh_mesh = registry.visible_mask(mesh.copy(), points.copy(), cam, "oracle", face_index=face_index.copy())
+    numpy_twice = [registry.visible_mask(mesh, points, cam, "oracle-numpy", face_index=face_index) for _ in range(2)]
+    assert first.tobytes() == again.tobytes() == fresh_mesh.tobytes()
+    assert numpy_twice[0].tobytes() == numpy_twice[1].tobytes() == first.tobytes()
+
+
+def test_embree_scene_is_built_once_per_mesh(monkeypatch):
+    builds = []
+    real = oracle._EmbreeScene
+
+    def counting(*args, **kwargs):
+        builds.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(oracle, "_EmbreeScene", counting)
+    mesh = trimesh.creation.box()
+    points, face_index = trimesh.sample.sample_surface(mesh, 200, seed=1)
+    for el, az in POSES:
+        occluded_embree(mesh, points, camera_on_sphere(el, az, RADIUS).eye, face_index=face_index)
+    assert len(builds) == 1
+    # Editing the mesh invalidates its scene: results follow the new geometry.
+    eye = camera_on_sphere(0.0, 0.0, RADIUS).eye
+    before = occluded_embree(mesh, points, eye, face_index=face_index)
+    mesh.vertices = mesh.vertices + [0.0, 0.3, 0.0]
+    after = occluded_embree(mesh, points, eye, face_index=face_index)
+    assert len(builds) == 2
+    assert np.array_equal(after, occluded_numpy(mesh.triangles, points, eye, face_index=face_index))
+    assert not np.array_equal(after, before)
+
+
+def test_bad_inputs_raise_invalid_input():
+    pts = np.zeros((3, 3))
+    with pytest.raises(InvalidInputError):
+        occluded_numpy(QUAD, pts, EYE_ABOVE, tolerance=-1.0)
+    with pytest.raises(InvalidInputError):
+        occluded_numpy(QUAD[:, :2], pts, EYE_ABOVE)
+    with pytest.raises(InvalidInputError):
+        occluded_embree(QUAD, np.zeros((3, 2)), EYE_ABOVE)
+    with pytest.raises(InvalidInputError):
+        occluded_embree(QUAD, pts, [0.0, np.nan, 1.0])
+    with pytest.raises(InvalidInputError):
+        occluded_numpy(QUAD, pts, EYE_ABOVE, face_index=[0, 1, 2])
+    with pytest.raises(InvalidInputError):
+        occluded_numpy(QUAD, pts, EYE_ABOVE, chunk_size=0)
+
+
+def test_missing_embree_raises_backend_unavailable(monkeypatch):
+    monkeypatch.setitem(sys.modules, "embreex", None)  # makes `import embreex` fail
+    with pytest.raises(BackendUnavailable, match="pip install embreex"):
+        occluded_embree(QUAD, np.zeros((1, 3)), EYE_ABOVE)
