@@ -1,0 +1,196 @@
+"""The comparison engine (zbuf_occlude.compare) and the elevation profile (zbuf_occlude.profile)."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+import zbuf_occlude as zo
+from zbuf_occlude import compare as cmp
+from zbuf_occlude import profile as prof
+from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
+
+MODELNET = Path(__file__).parents[1].parent / "shared" / "data" / "modelnet_subset"
+TINY = MODELNET / "ModelNet40" / "bathtub" / "train" / "bathtub_0002.off"  # 664 faces
+
+
+def _tiny_path() -> Path:
+    if not TINY.is_file():
+        pytest.skip(f"real ModelNet mesh not found at {TINY}")
+    return TINY
+
+
+def _gl_or_skip() -> None:
+    try:
+        mesh = trimesh.creation.box()
+        zo.visible_mask(mesh, np.zeros((1, 3)) + 0.5, zo.camera_on_sphere(30, 30), "zbuffer", resolution=64)
+    except BackendUnavailable as exc:
+        pytest.skip(str(exc))
+
+
+# -----------------------------------------------------------------------------------------
+# Metrics
+# -----------------------------------------------------------------------------------------
+def test_agreement_rates_add_up() -> None:
+    ref = np.array([True, True, False, False, True])
+    pred = np.array([True, False, True, False, True])
+    a = cmp.agreement(pred, ref)
+    assert a.accuracy == pytest.approx(0.6)
+    assert a.false_visible_rate == pytest.approx(0.2)
+    assert a.false_hidden_rate == pytest.approx(0.2)
+    assert a.iou == pytest.approx(2 / 4)
+    assert a.accuracy + a.false_visible_rate + a.false_hidden_rate == pytest.approx(1.0)
+    assert cmp.agreement(np.zeros(3, bool), np.zeros(3, bool)).iou == 1.0
+    assert math.isnan(cmp.agreement(np.zeros(0, bool), np.zeros(0, bool)).accuracy)
+    with pytest.raises(InvalidInputError):
+        cmp.agreement(np.zeros(2, bool), np.zeros(3, bool))
+
+
+def test_chamfer_distance() -> None:
+    a = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    assert cmp.chamfer_distance(a, a) == 0.0
+    b = a + [0.0, 0.5, 0.0]
+    assert cmp.chamfer_distance(a, b) == pytest.approx(0.5)
+    assert cmp.chamfer_distance(np.zeros((0, 3)), np.zeros((0, 3))) == 0.0
+    assert math.isnan(cmp.chamfer_distance(a, np.zeros((0, 3))))
+
+
+def test_parsers() -> None:
+    assert cmp.parse_int_list("1000,10k, 50K") == [1000, 10000, 50000]
+    assert cmp.parse_methods("oracle, og32,oracle") == ["oracle", "og32"]
+    with pytest.raises(InvalidInputError):
+        cmp.parse_methods("oracle,no-such-method")
+    with pytest.raises(InvalidInputError):
+        cmp.parse_int_list("10,abc")
+    with pytest.raises(InvalidInputError):
+        cmp.parse_int_list("0")
+
+
+# -----------------------------------------------------------------------------------------
+# End to end on a tiny input
+# -----------------------------------------------------------------------------------------
+def test_compare_end_to_end_on_tiny_input(tmp_path: Path) -> None:
+    _gl_or_skip()
+    path = _tiny_path()
+    out = tmp_path / "cmp"
+    report = cmp.run_compare(
+        [path, tmp_path / "missing.off"],
+        "zbuffer,oracle,paper-exact,paper-pruned,paper-vertex,og32,og64,naive-zbuffer",
+        "200,400",
+        "30:45,-40:200",
+        256,
+        out,
+        0,
+        resolution_sweep="128,256",
+        grid_sweep="16,32",
+        memory=True,
+        progress=False,
+    )
+    assert report == out / "report.md"
+    for name in ("results.csv", "report.md", "time_vs_points.png", "agreement_vs_resolution.png", "agreement_vs_grid.png"):
+        assert (out / name).is_file(), name
+    rows = cmp.read_csv(out / "results.csv")
+    ok = [r for r in rows if not r["error"]]
+    # 2 counts × 2 views × 8 methods, plus sweeps at 200 points: 2 views × (2 res × 2 z-buffer methods + 2 grids).
+    assert len(ok) == 2 * 2 * 8 + 2 * (4 + 2)
+    exact = [r for r in ok if r["method"] in ("paper-exact", "zbuffer", "oracle", "paper-pruned") and not r["sweep"]]
+    assert all(r["accuracy"] == 1.0 and r["chamfer"] == 0.0 for r in exact)
+    failures = [r for r in rows if r["error"]]
+    assert [r["mesh"] for r in failures] == ["missing"]  # reported, not fatal
+    text = report.read_text()
+    assert "| paper-exact |" in text and "missing" in text and "agreement_vs_grid.png" in text
+    assert any(r["peak_mib"] != "" for r in ok)
+
+
+def test_failing_method_is_reported_not_fatal(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    path = _tiny_path()
+
+    def boom(*args, **kwargs):
+        raise RuntimeError("kaboom")
+
+    from zbuf_occlude.visibility import registry
+
+    monkeypatch.setitem(registry._METHODS, "paper-vertex", boom)
+    rows = cmp.compare([path], ["oracle", "paper-vertex", "og32"], [300], "10:20", 128, 0, progress=False)
+    by_method = {r["method"]: r for r in rows}
+    assert "kaboom" in by_method["paper-vertex"]["error"]
+    assert by_method["og32"]["error"] == "" and by_method["og32"]["accuracy"] > 0.8
+
+
+def test_method_budget_skips_larger_counts(tmp_path: Path) -> None:
+    path = _tiny_path()
+    rows = cmp.compare([path], ["oracle", "paper-exact"], [100, 200], "10:20", 128, 0, method_budget_s=0.0, progress=False)
+    exact = {r["n_points"]: r for r in rows if r["method"] == "paper-exact"}
+    assert exact[100]["error"] == ""
+    assert exact[200]["error"].startswith("skipped")
+
+
+def test_tables_1a_1b_render() -> None:
+    path = _tiny_path()
+    rows = cmp.compare(
+        [path], ["oracle", "paper-exact", "paper-pruned", "og32", "og64"], [300], "20:30", 128, 0, progress=False
+    )
+    t1a = cmp.table_1a(rows)
+    assert "bathtub_0002 (664)" in t1a and "≈55 %" in t1a
+    t1b = cmp.table_1b(rows, methods=("og32", "og64"))
+    assert "og32 (s) / reduction / accuracy" in t1b and "bathtub_0002" in t1b
+
+
+def test_cli_parsers_wire_handlers(tmp_path: Path) -> None:
+    parser = argparse.ArgumentParser(prog="zbuf-occlude")
+    sub = parser.add_subparsers(dest="command")
+    cmp.add_compare_parser(sub)
+    prof.add_profile_parser(sub)
+    args = parser.parse_args(["compare", "a.off", "--methods", "oracle,og32", "--points", "100", "--out", str(tmp_path)])
+    assert args.func is cmp._cli_compare and args.methods == "oracle,og32"
+    args = parser.parse_args(["elevation-profile", "a.off", "--points", "500", "--azimuths", "2"])
+    assert args.func is prof._cli_profile and args.azimuths == 2
+
+
+def test_cli_compare_handler_runs(tmp_path: Path) -> None:
+    path = _tiny_path()
+    parser = argparse.ArgumentParser()
+    cmp.add_compare_parser(parser.add_subparsers())
+    args = parser.parse_args(
+        [
+            "compare", str(path), "--methods", "oracle,og32", "--points", "150", "--views", "0:0",
+            "--resolution", "128", "--out", str(tmp_path / "o"), "--no-progress",
+        ]
+    )  # fmt: skip
+    assert args.func(args) == 0
+    with open(tmp_path / "o" / "results.csv") as fh:
+        assert len(list(csv.DictReader(fh))) == 2
+
+
+# -----------------------------------------------------------------------------------------
+# Fig. 12
+# -----------------------------------------------------------------------------------------
+def test_projected_areas_of_a_cube_seen_from_above() -> None:
+    cube = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    points, fi = zo.sample_surface(cube, count=20000, seed=0)
+    camera = zo.camera_on_sphere(90.0, 0.0)
+    visible = zo.visible_mask(cube, points, camera, "oracle", face_index=fi)
+    areas = prof.projected_areas(cube, fi, visible)
+    # Only the top face (area 1, normal +z) is visible from straight above, at this distance.
+    assert areas["xy"] == pytest.approx(1.0, rel=0.03)
+    assert areas["yz"] == pytest.approx(0.0, abs=1e-9)
+    assert areas["xz"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_elevation_profile_writes_png_and_csv(tmp_path: Path) -> None:
+    path = _tiny_path()
+    png = prof.elevation_profile(
+        path, tmp_path / "fig12", method="oracle", points=1500, elevations=(-90, 0, 90), azimuths=2, progress=False
+    )
+    assert png == tmp_path / "fig12" / "elevation_profile.png"
+    assert png.is_file() and png.with_suffix(".csv").is_file()
+    with open(png.with_suffix(".csv")) as fh:
+        rows = list(csv.DictReader(fh))
+    assert [float(r["elevation_deg"]) for r in rows] == [-90.0, 0.0, 90.0]
+    assert all(0.0 < float(r["area_visible"]) < float(r["surface_area"]) for r in rows)
