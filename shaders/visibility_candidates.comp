@@ -2,15 +2,18 @@
 // Default z-buffer HSR ("zbuffer"): the faces the rasteriser kept in a (2r+1)^2 pixel
 // neighbourhood of the point's projection are the only faces that can hide it; each
 // distinct one (other than the point's own face) gets an exact segment test.
-// If no candidate hits and the point's own face appears nowhere in the window, the image
-// holds no evidence that its surface is the one in front (sub-pixel sliver faces, rays
-// through cracks of triangle soup): the point is flagged uncertain.
+// If no candidate hits and the centre pixel does not show the point's own face, the image
+// holds no direct evidence that its surface is the one in front (sub-pixel sliver faces,
+// rays through cracks of triangle soup): the point is flagged uncertain.  (Measured: asking
+// for the own face anywhere in the window sends fewer points to the CPU but lets more
+// hidden points through; the centre pixel gives the better agreement at the same speed.)
+// NEIGHBORHOOD (r) is defined by the loader at compile time: constant loop bounds let
+// the compiler unroll the window, which llvmpipe needs to be fast.
 //#include common.glsl
 
-uniform int neighborhood;      // r, pixels
 uniform float tolerance;       // self-hit distance, object units
 uniform float edge_epsilon;    // barycentric widening
-const int MAX_CANDIDATES = 81; // (2r+1)^2 for r <= 4
+const int WINDOW = (2 * NEIGHBORHOOD + 1) * (2 * NEIGHBORHOOD + 1);
 
 void main() {
     uint i = gl_GlobalInvocationID.x + point_offset;
@@ -21,14 +24,16 @@ void main() {
     if (!reproject(p, window, ndc_z)) return;
     ivec2 pixel = ivec2(floor(window));
     int own = point_face[i];
-    int tested[MAX_CANDIDATES];
+    // The centre pixel first: for a hidden point it is the likeliest occluder.
+    int centre = int(texelFetch(depth_and_face, pixel, 0).g);
+    if (centre >= 0 && centre != own && segment_hits_face(p, centre, tolerance, edge_epsilon)) return;
+    int tested[WINDOW];
     int n_tested = 0;
-    bool own_seen = false;
-    for (int dy = -neighborhood; dy <= neighborhood; ++dy) {
-        for (int dx = -neighborhood; dx <= neighborhood; ++dx) {
+    tested[n_tested++] = centre;
+    for (int dy = -NEIGHBORHOOD; dy <= NEIGHBORHOOD; ++dy) {
+        for (int dx = -NEIGHBORHOOD; dx <= NEIGHBORHOOD; ++dx) {
             ivec2 q = clamp(pixel + ivec2(dx, dy), ivec2(0), resolution - 1);
             int face = int(texelFetch(depth_and_face, q, 0).g);
-            own_seen = own_seen || (face == own);
             if (face < 0 || face == own) continue;
             bool seen = false;
             for (int k = 0; k < n_tested; ++k) seen = seen || (tested[k] == face);
@@ -38,5 +43,5 @@ void main() {
         }
     }
     mark_visible(i);
-    if (own >= 0 && !own_seen) mark_uncertain(i);
+    if (own >= 0 && centre != own) mark_uncertain(i);
 }

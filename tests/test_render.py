@@ -83,9 +83,12 @@ def test_pyrender_and_moderngl_depth_maps_agree(sample_mesh_files):
             theirs = pr.render_depth(cam)
         both = (ours > 0) & (theirs > 0)
         assert ((ours > 0) ^ (theirs > 0)).mean() < 0.01, path
-        diff = np.abs(ours - theirs)[both]
-        # pyrender's 4x MSAA resolves depth from a sub-sample (~0.4 px off centre)
-        assert np.median(diff) < 5e-3 and np.quantile(diff, 0.9) < 2e-2, (path, np.median(diff))
+        # pyrender's 4x MSAA resolves depth from a sub-sample up to ~0.4 px off the pixel
+        # centre: allow half a pixel's depth change (from our own map's gradient)
+        gy, gx = np.gradient(ours.astype(np.float64))
+        allowed = 0.5 * (np.abs(gx) + np.abs(gy)) + 1e-4
+        within = (np.abs(ours - theirs) <= allowed)[both]
+        assert within.mean() > 0.95, (path, within.mean())
     # moderngl keeps working after pyrender made its own EGL context current
     assert (renderer_for(mesh).render(cam).depth == ours).all()
 

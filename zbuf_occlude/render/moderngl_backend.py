@@ -54,19 +54,46 @@ class DepthRender:
         return self.face_index >= 0
 
 
+def canonical_faces(triangles: NDArray[np.floating]) -> NDArray[np.int64]:
+    """For each face, the lowest index of the faces with exactly the same three vertex
+    positions (any order); ModelNet meshes duplicate many faces.
+
+    Parameters
+    ----------
+    triangles : (F, 3, 3) float
+        World frame; compared after rounding to float32, the precision the GPU sees.
+
+    Returns
+    -------
+    canonical : (F,) int64
+        ``canonical[f] <= f``, equal for faces of one group.
+    """
+    tri = np.ascontiguousarray(triangles, dtype=np.float32)
+    vertex = tri.view(np.dtype((np.void, 12))).reshape(len(tri), 3)  # a vertex as 12 raw bytes
+    key = np.ascontiguousarray(np.sort(vertex, axis=1)).view(np.dtype((np.void, 36))).ravel()
+    _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+    return first[inverse.ravel()].astype(np.int64)
+
+
 class PointBuffer:
     """Points uploaded to the GPU once, for tests from many poses.
 
     Made by :meth:`ModernGLRenderer.upload_points`; release with :meth:`release`.
     """
 
-    def __init__(self, ctx: moderngl.Context, points: NDArray[np.float64], face_index: NDArray[np.int64] | None):
+    def __init__(
+        self,
+        ctx: moderngl.Context,
+        points: NDArray[np.float64],
+        face_index: NDArray[np.int64] | None,
+        canonical: NDArray[np.int64],
+    ):
         self.n_points = len(points)
         padded = np.zeros((max(self.n_points, 1), 4), dtype=np.float32)
         padded[: self.n_points, :3] = points
         faces = np.full(max(self.n_points, 1), -1, dtype=np.int32)
         if face_index is not None:
-            faces[: self.n_points] = face_index
+            faces[: self.n_points] = canonical[face_index]  # the id the image holds for that face
         self.has_face_index = face_index is not None
         self.points = ctx.buffer(padded.tobytes())
         self.faces = ctx.buffer(faces.tobytes())
@@ -107,16 +134,20 @@ class ModernGLRenderer:
             raise InvalidInputError(f"mesh has {len(faces)} faces; the renderer supports fewer than {MAX_FACES}")
         self.n_faces = len(faces)
         self.ctx = context or shared_context()
+        triangles = np.asarray(mesh.triangles)
+        #: (F,) int64: each face's group of identical faces, named by its lowest index.
+        self.canonical = canonical_faces(triangles)
+        drawn = np.flatnonzero(self.canonical == np.arange(self.n_faces))
         with self.ctx:
             self._vbo = self.ctx.buffer(np.asarray(mesh.vertices, dtype=np.float32).tobytes())
-            self._ibo = self.ctx.buffer(faces.astype(np.uint32).tobytes())
-            self._triangles = self.ctx.buffer(np.asarray(mesh.triangles, dtype=np.float32).tobytes())
+            # Draw one face per group: duplicates add raster work and, since either copy may
+            # win the depth test, would hide the point's own face from the candidate window.
+            self._ibo = self.ctx.buffer(faces[drawn].astype(np.uint32).tobytes())
+            self._draw_faces = self.ctx.buffer(drawn.astype(np.int32).tobytes())
+            self._triangles = self.ctx.buffer(triangles.astype(np.float32).tobytes())
             self._program = self.ctx.program(vertex_shader=load_shader("mesh.vert"), fragment_shader=load_shader("mesh.frag"))
             self._vao = self.ctx.vertex_array(self._program, [(self._vbo, "3f", "in_position")], index_buffer=self._ibo)
-            self._compute = {
-                "candidates": self.ctx.compute_shader(load_shader("visibility_candidates.comp")),
-                "tolerance": self.ctx.compute_shader(load_shader("visibility_tolerance.comp")),
-            }
+            self._compute: dict[tuple[str, int], moderngl.ComputeShader] = {}
         self._max_groups = int(self.ctx.info["GL_MAX_COMPUTE_WORK_GROUP_COUNT"][0])
         self._targets: dict[tuple[int, int], tuple[moderngl.Framebuffer, moderngl.Texture, moderngl.Texture]] = {}
         self._released = False
@@ -138,8 +169,19 @@ class ModernGLRenderer:
         self.ctx.disable(moderngl.CULL_FACE)  # meshes are triangle soup: two-sided
         self._program["view_matrix"].write(camera.view_matrix.T.astype(np.float32).tobytes())
         self._program["projection_matrix"].write(camera.projection_matrix.T.astype(np.float32).tobytes())
+        self._draw_faces.bind_to_storage_buffer(4)
         self._vao.render(moderngl.TRIANGLES)
         return color
+
+    def _shader(self, rule: str, neighborhood: int) -> moderngl.ComputeShader:
+        key = (rule, neighborhood if rule == "candidates" else 0)
+        if key not in self._compute:
+            if rule == "candidates":
+                source = load_shader("visibility_candidates.comp", (("NEIGHBORHOOD", neighborhood),))
+            else:
+                source = load_shader("visibility_tolerance.comp")
+            self._compute[key] = self.ctx.compute_shader(source)
+        return self._compute[key]
 
     def render(self, camera: Camera) -> DepthRender:
         """Rasterise one pose and read back linear depth and face index.
@@ -159,7 +201,7 @@ class ModernGLRenderer:
     def upload_points(self, points: NDArray[np.floating], face_index: NDArray[np.integer] | None = None) -> PointBuffer:
         """Upload ``points (N, 3)`` (world frame) and their optional ``face_index (N,)``."""
         with self.ctx:
-            return PointBuffer(self.ctx, np.asarray(points, dtype=np.float64), face_index)
+            return PointBuffer(self.ctx, np.asarray(points, dtype=np.float64), face_index, self.canonical)
 
     def visible(
         self,
@@ -210,19 +252,17 @@ class ModernGLRenderer:
         """
         if not 0 <= neighborhood <= 4:
             raise InvalidInputError(f"neighborhood must be in [0, 4] pixels, got {neighborhood}")
-        if rule not in self._compute:
+        if rule not in ("candidates", "tolerance"):
             raise InvalidInputError(f"unknown z-buffer rule {rule!r}; use 'candidates' or 'tolerance'")
         n = points.n_points
         if n == 0:
             return np.zeros(0, dtype=bool), np.zeros(0, dtype=bool)
-        shader = self._compute[rule]
         uniforms = {
             "view_projection": (camera.projection_matrix @ camera.view_matrix).T.astype(np.float32).tobytes(),
             "eye": tuple(float(v) for v in camera.eye),
             "depth_row": tuple(float(v) for v in -camera.view_matrix[2]),
             "resolution": camera.resolution,
             "n_points": n,
-            "neighborhood": int(neighborhood),
             "tolerance": float(tolerance),
             "edge_epsilon": float(edge_epsilon),
             "depth_tolerance": float(depth_tolerance),
@@ -232,6 +272,7 @@ class ModernGLRenderer:
             "depth_and_face": 0,
         }
         with self.ctx:
+            shader = self._shader(rule, int(neighborhood))
             color = self._draw(camera)
             self.ctx.memory_barrier()
             for name, value in uniforms.items():
@@ -266,7 +307,7 @@ class ModernGLRenderer:
                 fbo.release()
                 color.release()
                 depth.release()
-            for obj in (self._vao, self._program, self._vbo, self._ibo, self._triangles, *self._compute.values()):
+            for obj in (self._vao, self._program, self._vbo, self._ibo, self._draw_faces, self._triangles, *self._compute.values()):
                 obj.release()
 
     def __enter__(self) -> ModernGLRenderer:

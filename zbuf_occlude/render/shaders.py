@@ -25,8 +25,9 @@ def shader_dirs() -> list[Path]:
 
 
 @functools.lru_cache(maxsize=None)
-def load_shader(name: str) -> str:
-    """The GLSL source of ``shaders/NAME`` with its ``//#include`` lines expanded.
+def load_shader(name: str, defines: tuple[tuple[str, int | float], ...] = ()) -> str:
+    """The GLSL source of ``shaders/NAME`` with its ``//#include`` lines expanded and
+    ``#define KEY VALUE`` lines for ``defines`` inserted after ``#version``.
 
     Raises
     ------
@@ -36,6 +37,9 @@ def load_shader(name: str) -> str:
     for folder in shader_dirs():
         path = folder / name
         if path.is_file():
-            text = path.read_text(encoding="utf-8")
-            return _INCLUDE.sub(lambda m: load_shader(m.group(1)), text)
+            text = _INCLUDE.sub(lambda m: load_shader(m.group(1)), path.read_text(encoding="utf-8"))
+            if defines:
+                version, _, body = text.partition("\n")
+                text = "\n".join([version, *(f"#define {k} {v}" for k, v in defines), body])
+            return text
     raise BackendUnavailable(f"shader {name!r} not found in {[str(d) for d in shader_dirs()] or 'any folder'}; reinstall zbuf-occlude")

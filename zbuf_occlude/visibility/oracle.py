@@ -17,9 +17,9 @@ two triangles is never let through); a segment parallel to a face's plane never 
 Condition (b) is decided in float64 by the kernel of :func:`segment_hits_triangles` (the
 paper's Eq. 1-10), one (point, face) pair at a time and always with the same arithmetic, so
 the two implementations below can differ only if one of them never tests a pair that
-occludes.  "Exact" means: decided in float64 with inclusive bounds; a segment passing
-within ~1e-16 (relative) of an edge shared by two faces can in principle be judged outside
-both, since the paper's edge tests are not watertight.
+occludes.  "Exact" means: decided in float64 with inclusive bounds, each triangle's edge
+planes moved out by 1e-12 of its coordinate scale so that a segment through an edge shared
+by two faces cannot round to outside both (the paper's edge tests alone are not watertight).
 
 Implementations
 ---------------
@@ -93,6 +93,9 @@ _EMBREE_MAX_CASTS = 64
 #: below this get the faces around their own face tested exactly after the Embree pass
 #: (see occluded_embree); 2 × 5e-6, some 50 times float32's noise at the sphere's radius.
 _EMBREE_CREASE_BAND = 1e-5
+#: Outward shift of each triangle's edge planes, relative to its coordinate scale: far above
+#: float64 rounding (~1e-16) and far below any mesh feature, it makes shared edges watertight.
+_EDGE_SLACK = 1e-12
 #: Relative widening of the image-plane boxes that cull (point, face) pairs before the
 #: exact test, so that float64 rounding (~1e-16) never drops a pair it would accept.
 _CULL_SLACK = 1e-9
@@ -201,6 +204,11 @@ def triangle_planes(triangles: ArrayLike) -> TrianglePlanes:
         [_dot3(edge_normals[..., 0, :], a), _dot3(edge_normals[..., 1, :], b), _dot3(edge_normals[..., 2, :], c)],
         axis=-1,
     )
+    # Watertightness: move each edge plane outwards by _EDGE_SLACK times the triangle's
+    # coordinate scale, so a segment through an edge shared by two faces, whose
+    # intersection point rounds (~1e-16 relative) to just outside both, still hits one.
+    scale = 1.0 + np.abs(tri).max(axis=(-2, -1))
+    edge_offsets = edge_offsets - _EDGE_SLACK * scale[..., None] * np.sqrt(_dot3(edge_normals, edge_normals))
     return TrianglePlanes(tri, normal, _dot3(normal, a), edge_normals, edge_offsets)
 
 
