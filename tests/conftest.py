@@ -14,13 +14,13 @@ from pathlib import Path
 
 import pytest
 
+from zbuf_occlude.mesh import SUPPORTED_EXTENSIONS
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 #: Real ModelNet meshes, next to (not inside) the repository.
 MODELNET_SUBSET = REPO_ROOT.parent / "shared" / "data" / "modelnet_subset"
 #: Sample meshes shipped in the repository.
 SAMPLE_MESHES = REPO_ROOT / "data" / "samples"
-#: Extensions of the sample meshes that load_mesh reads.
-MESH_EXTENSIONS = (".off", ".obj", ".ply", ".stl", ".glb")
 
 
 def _modelnet_off_files() -> list[Path]:
@@ -65,7 +65,7 @@ def sample_meshes_dir() -> Path:
 @pytest.fixture(scope="session")
 def sample_mesh_files(sample_meshes_dir: Path) -> list[Path]:
     """Every mesh file in ``data/samples/`` that load_mesh can read, sorted."""
-    files = sorted(p for p in sample_meshes_dir.rglob("*") if p.suffix.lower() in MESH_EXTENSIONS)
+    files = sorted(p for p in sample_meshes_dir.rglob("*") if p.suffix.lower() in SUPPORTED_EXTENSIONS)
     if not files:
         pytest.skip(f"no mesh files in {sample_meshes_dir}")
     return files

@@ -26,6 +26,8 @@ from .render import ModernGLRenderer, context_info, render_depth
 from .sampling import points_from_barycentric, sample_faces, sample_surface
 from .visibility import available_methods, register, visible_mask
 from .visibility.zbuffer import Scene
+from .dataset import OccludedDataset
+from .farm import merge_farm, run_farm
 
 __version__ = "0.1.0"
 
@@ -54,4 +56,7 @@ __all__ = [
     "CameraError",
     "BackendUnavailable",
     "OutputError",
+    "OccludedDataset",
+    "run_farm",
+    "merge_farm",
 ]

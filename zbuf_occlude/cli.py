@@ -20,44 +20,18 @@ from . import __version__
 from .cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
 from .errors import InvalidInputError, ZbufOccludeError
 from .io import FORMATS, atomic_path, write_h5, write_npz, write_ply
-from .mesh import load_mesh
+from .mesh import find_meshes, load_mesh
 from .metrics import agreement
 from .occlude import DEFAULT_DENSE_POINTS, class_of, dense_cloud, object_key, occlude_object
 from .sampling import sample_surface
 from .visibility.registry import available_methods, visible_mask
 
-__all__ = ["main", "build_parser", "find_meshes", "SAMPLE_MESHES"]
+__all__ = ["main", "build_parser", "SAMPLE_MESHES"]
 
 log = logging.getLogger("zbuf_occlude")
 
-#: Extensions searched for in folders.
-MESH_EXTENSIONS = (".off", ".obj", ".ply", ".stl", ".glb")
 #: Real ModelNet meshes shipped with a checkout (see data/samples/SOURCE.md).
 SAMPLE_MESHES = Path(__file__).resolve().parents[1] / "data" / "samples"
-
-
-def find_meshes(paths: Sequence[str | Path]) -> list[tuple[Path, str]]:
-    """Mesh files under ``paths`` (files, or folders searched recursively), sorted, each with a
-    unique name: its path relative to the folder given, without the suffix.
-
-    Raises
-    ------
-    InvalidInputError
-        A path does not exist, or nothing was found.
-    """
-    found: list[tuple[Path, str]] = []
-    for raw in paths:
-        path = Path(raw)
-        if path.is_dir():
-            for f in sorted(p for p in path.rglob("*") if p.suffix.lower() in MESH_EXTENSIONS and p.is_file()):
-                found.append((f, f.relative_to(path).with_suffix("").as_posix()))
-        elif path.is_file():
-            found.append((path, path.stem))
-        else:
-            raise InvalidInputError(f"no such file or folder: {path}")
-    if not found:
-        raise InvalidInputError(f"no mesh files ({', '.join(MESH_EXTENSIONS)}) under {', '.join(map(str, paths))}")
-    return found
 
 
 def _default_paths(paths: list[str]) -> list[str]:
@@ -256,22 +230,14 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--gl", help="egl | osmesa | an order such as osmesa,egl (default: $ZBUF_OCCLUDE_GL or egl,osmesa)")
     i.set_defaults(func=cmd_info)
 
-    for module in ("compare", "profile", "farm"):
-        _add_plugin_parsers(module, sub)
+    # Subcommands whose options live beside their engines.
+    from .compare import add_compare_parser
+    from .farm import add_farm_merge_parser, add_farm_parser
+    from .profile import add_profile_parser
+
+    for add in (add_compare_parser, add_profile_parser, add_farm_parser, add_farm_merge_parser):
+        add(sub)
     return parser
-
-
-def _add_plugin_parsers(module: str, sub) -> None:
-    # Subcommands whose options live beside their engine (compare, elevation-profile, farm).
-    import importlib
-
-    try:  # TEMP until the engines land
-        mod = importlib.import_module(f"zbuf_occlude.{module}")
-    except ModuleNotFoundError:
-        return
-    for name in dir(mod):
-        if name.startswith("add_") and name.endswith("_parser"):
-            getattr(mod, name)(sub)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

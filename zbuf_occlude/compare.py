@@ -35,7 +35,7 @@ import os
 import time
 import tracemalloc
 from collections import defaultdict
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 
 from .cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
 from .errors import InvalidInputError, OutputError, ZbufOccludeError
-from .mesh import load_mesh
+from .mesh import find_meshes, load_mesh
 from .sampling import sample_surface
 from .visibility import available_methods, visible_mask
 
@@ -387,6 +387,9 @@ def compare(
     options = method_options or {}
     rows: list[dict[str, Any]] = []
     per_view = len(methods) + 1
+    # folders are searched recursively, as by `generate` and `validate`; a file that does
+    # not load is reported in the table like any other failure
+    paths = [f for p in paths for f in ([m for m, _ in find_meshes([p])] if Path(p).is_dir() else [p])]
     total = len(paths) * sum(len(poses) * (per_view + (len(sweeps) if n == sweep_n else 0)) for n in counts)
     bar = tqdm(total=total, desc="compare", unit="call", disable=not progress)
     for path in paths:
@@ -883,7 +886,7 @@ def add_compare_parser(subparsers: Any) -> argparse.ArgumentParser:
             "results.csv, report.md and PNG plots into --out."
         ),
     )
-    p.add_argument("paths", nargs="+", help="mesh files (.off, .obj, .ply, .stl, .glb)")
+    p.add_argument("paths", nargs="+", help="mesh files (.off, .obj, .ply, .stl, .glb) or folders (searched recursively)")
     p.add_argument("--methods", default=",".join(DEFAULT_METHODS), help="comma-separated methods (default: %(default)s)")
     p.add_argument("--points", default=",".join(str(n) for n in DEFAULT_POINTS), help="point counts (default: %(default)s)")
     p.add_argument("--views", default=DEFAULT_VIEWS, help="pose schedule: grid25, paper100, fibonacci:N or EL:AZ,... (default: %(default)s)")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import functools
 import os
 import tempfile
 from collections.abc import Iterator, Sequence
@@ -77,6 +78,13 @@ class OccludedCloud:
         return self.n_visible < len(self.points)
 
 
+@functools.lru_cache(maxsize=1)
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 def _raise_output_error(path: Path, exc: OSError) -> None:
     if exc.errno == errno.ENOSPC:
         raise OutputError(f"disk full while writing {path}; free space and run again (finished files are kept)") from exc
@@ -99,6 +107,9 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
         os.close(fd)
+        # mkstemp makes 0600 files; outputs are meant to be shared, so give them the mode a
+        # plain open() would (0666 less the umask)
+        os.chmod(tmp, 0o666 & ~_umask())
     except OSError as exc:
         _raise_output_error(path, exc)
     tmp_path = Path(tmp)

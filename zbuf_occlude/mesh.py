@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import io
 import logging
+from collections.abc import Sequence
 from os import PathLike
 from pathlib import Path
 from typing import Any
@@ -42,6 +43,7 @@ from .errors import InvalidInputError, MeshLoadError, ZbufOccludeError
 
 __all__ = [
     "SUPPORTED_EXTENSIONS",
+    "find_meshes",
     "DEGENERATE_AREA_RTOL",
     "METADATA_KEY",
     "load_mesh",
@@ -479,3 +481,27 @@ def load_mesh(
         vertices, center, scale = _normalised(vertices, lo, hi)
         prov["center"], prov["scale"] = center.tolist(), scale
     return _make(vertices, faces, loaded.metadata, prov)
+
+
+def find_meshes(paths: Sequence[str | Path]) -> list[tuple[Path, str]]:
+    """Mesh files under ``paths`` (files, or folders searched recursively), sorted, each with a
+    unique name: its path relative to the folder given, without the suffix.
+
+    Raises
+    ------
+    InvalidInputError
+        A path does not exist, or nothing was found.
+    """
+    found: list[tuple[Path, str]] = []
+    for raw in paths:
+        path = Path(raw)
+        if path.is_dir():
+            for f in sorted(p for p in path.rglob("*") if p.suffix.lower() in SUPPORTED_EXTENSIONS and p.is_file()):
+                found.append((f, f.relative_to(path).with_suffix("").as_posix()))
+        elif path.is_file():
+            found.append((path, path.stem))
+        else:
+            raise InvalidInputError(f"no such file or folder: {path}")
+    if not found:
+        raise InvalidInputError(f"no mesh files ({', '.join(SUPPORTED_EXTENSIONS)}) under {', '.join(map(str, paths))}")
+    return found

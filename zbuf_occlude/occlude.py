@@ -9,8 +9,8 @@ so results are identical whatever the order, the worker count or the sharding.
 
 from __future__ import annotations
 
+import hashlib
 import logging
-import zlib
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,7 +26,7 @@ from .sampling import sample_surface
 from .visibility.registry import visible_mask
 from .visibility.zbuffer import Scene
 
-__all__ = ["object_key", "derive_rng", "draw_sample", "DenseCloud", "dense_cloud", "occlude_object", "class_of"]
+__all__ = ["object_key", "derive_rng", "sample_rng", "draw_sample", "DenseCloud", "dense_cloud", "occlude_object", "class_of"]
 
 log = logging.getLogger(__name__)
 
@@ -37,13 +37,25 @@ _DENSE_STREAM, _DRAW_STREAM = 0, 1
 
 
 def object_key(name: str) -> int:
-    """A stable 32-bit key of an object's name (CRC-32), for seeding."""
-    return zlib.crc32(name.encode("utf-8"))
+    """A stable 64-bit key of an object's name (BLAKE2b), for seeding.
+
+    64 bits make a collision between two objects' seeds negligible even over all of
+    ShapeNet (~5e-12 for 1e4 objects; a 32-bit CRC would give ~1 %).
+    """
+    return int.from_bytes(hashlib.blake2b(name.encode("utf-8"), digest_size=8).digest(), "little")
 
 
 def derive_rng(seed: int, *keys: int) -> np.random.Generator:
     """An independent generator for ``(seed, *keys)`` (``numpy.random.SeedSequence``)."""
     return np.random.default_rng(np.random.SeedSequence([int(seed), *(int(k) for k in keys)]))
+
+
+def sample_rng(seed: int, key: int, pose_index: int, sample_index: int) -> np.random.Generator:
+    """The generator of one sample's draw: ``(seed, key, pose_index, sample_index)``.
+
+    Readers of compact data sets call it to redraw exactly the samples the farm drew.
+    """
+    return derive_rng(seed, key, _DRAW_STREAM, pose_index, sample_index)
 
 
 def class_of(path: str | Path) -> str:
@@ -156,7 +168,7 @@ def occlude_object(
             visible_index = np.flatnonzero(visible)
             clouds = []
             for sample_index in range(samples_per_view):
-                rng = derive_rng(seed, key, _DRAW_STREAM, pose_index, sample_index)
+                rng = sample_rng(seed, key, pose_index, sample_index)
                 chosen, n_visible = draw_sample(visible_index, n_points, rng)
                 if n_visible == 0:
                     log.warning("%s: nothing visible from el=%g az=%g; no sample", source or "mesh", el, az)

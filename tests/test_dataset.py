@@ -1,0 +1,164 @@
+"""OccludedDataset: the reader of farm data sets, both storage modes, filters, loaders."""
+
+from __future__ import annotations
+
+import collections.abc
+import json
+import pickle
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from zbuf_occlude import OccludedDataset
+from zbuf_occlude.dataset import MANIFEST_FILE, reconstruct_samples, samples_per_pose, unpack_visible
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.farm import FarmParams, run_farm
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+MODELNET_SUBSET = REPO_ROOT.parent / "shared" / "data" / "modelnet_subset"
+MESHES = [
+    ("ModelNet10/sofa/test/sofa_0681.off", "sofa", "test"),
+    ("release_unknown/chair/train/chair_0002.off", "chair", "train"),
+    ("ModelNet40/monitor/test/monitor_0466.off", "monitor", "test"),
+]
+POSES = [(-30.0, 0.0), (0.0, 90.0), (30.0, 180.0), (60.0, 270.0)]
+PARAMS = FarmParams(
+    views=",".join(f"{el}:{az}" for el, az in POSES), samples_per_view=2, n_points=96, dense_points=1536, resolution=96
+)
+
+pytestmark = pytest.mark.skipif(not MODELNET_SUBSET.is_dir(), reason=f"real ModelNet meshes not found at {MODELNET_SUBSET}")
+
+
+@pytest.fixture(scope="module")
+def datasets(tmp_path_factory) -> dict[str, Path]:
+    root = tmp_path_factory.mktemp("meshes")
+    for rel, cls, split in MESHES:
+        target = root / cls / split / Path(rel).name
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.symlink_to(MODELNET_SUBSET / rel)
+    out = {}
+    for storage in ("dense", "compact"):
+        out[storage] = tmp_path_factory.mktemp(storage)
+        params = FarmParams(**{**PARAMS.to_dict(), "storage": storage})
+        run_farm(root, out[storage], params=params, progress=False)
+    return out
+
+
+@pytest.fixture(scope="module", params=["dense", "compact"])
+def dataset(request, datasets) -> OccludedDataset:
+    return OccludedDataset(datasets[request.param])
+
+
+def test_items_are_points_label_metadata(dataset):
+    n_samples = len(MESHES) * len(POSES) * PARAMS.samples_per_view
+    assert len(dataset) == n_samples
+    assert isinstance(dataset, collections.abc.Sequence)
+    points, label, meta = dataset[0]
+    assert points.shape == (PARAMS.n_points, 3) and points.dtype == np.float32
+    assert isinstance(label, int) and dataset.shape_names[label] == meta["class_name"]
+    for key in ("class_name", "split", "object_index", "pose_index", "sample_index", "elevation_deg", "azimuth_deg", "n_visible", "padded"):
+        assert key in meta
+    assert (meta["elevation_deg"], meta["azimuth_deg"]) == POSES[meta["pose_index"]]
+    assert np.array_equal(dataset[-1][0], dataset[len(dataset) - 1][0])
+    with pytest.raises(IndexError):
+        dataset[len(dataset)]
+    with pytest.raises(TypeError):
+        dataset[1:3]
+    assert sum(1 for _ in dataset) == len(dataset)
+    assert np.array_equal(dataset.labels, [dataset[i][1] for i in range(len(dataset))])
+    data, labels = dataset.to_arrays()
+    assert data.shape == (len(dataset), PARAMS.n_points, 3)
+    assert np.array_equal(data[5], dataset[5][0]) and np.array_equal(labels, dataset.labels)
+
+
+def test_both_storage_modes_give_the_same_items(datasets):
+    dense, compact = OccludedDataset(datasets["dense"]), OccludedDataset(datasets["compact"])
+    assert len(dense) == len(compact)
+    for i in range(len(dense)):
+        (a, la, ma), (b, lb, mb) = dense[i], compact[i]
+        assert np.array_equal(a, b) and la == lb and ma == mb
+
+
+def test_compact_samples_come_from_visible_points(datasets):
+    import h5py
+
+    shard = sorted((datasets["compact"] / "shards").glob("*.h5"))[0]
+    with h5py.File(shard, "r") as f:
+        dense_points, bits, n_visible = f["dense_points"][()], f["visible_bits"][()], f["n_visible"][()]
+        key, seed = int(f.attrs["key"]), int(f.attrs["seed"])
+    for pose in range(len(POSES)):
+        visible = unpack_visible(bits[pose], len(dense_points))
+        assert visible.sum() == n_visible[pose]
+        samples = reconstruct_samples(dense_points, visible, seed=seed, key=key, pose_index=pose, n_points=PARAMS.n_points, sample_indices=[0, 1])
+        visible_set = {tuple(p) for p in dense_points[visible]}
+        assert all(tuple(p) in visible_set for p in samples.reshape(-1, 3))
+        assert not np.array_equal(samples[0], samples[1])
+    assert list(samples_per_pose(np.array([0, 5, 1]), 3)) == [0, 3, 3]
+
+
+def test_filters(datasets):
+    path = datasets["dense"]
+    spv = PARAMS.samples_per_view
+    assert len(OccludedDataset(path, split="train")) == len(POSES) * spv
+    assert {m["split"] for m in map(OccludedDataset(path, split="test").metadata, range(2 * len(POSES) * spv))} == {"test"}
+    assert len(OccludedDataset(path, classes=["sofa", "monitor"])) == 2 * len(POSES) * spv
+    assert len(OccludedDataset(path, classes="chair")) == len(POSES) * spv
+    ds = OccludedDataset(path, elevation_deg=0.0)
+    assert len(ds) == len(MESHES) * spv and all(ds.metadata(i)["azimuth_deg"] == 90.0 for i in range(len(ds)))
+    assert len(OccludedDataset(path, elevation_deg=[-30, 60])) == len(MESHES) * 2 * spv
+    assert len(OccludedDataset(path, elevation_deg=lambda el: el > 0, azimuth_deg=[270.0])) == len(MESHES) * spv
+    assert len(OccludedDataset(path, azimuth_deg=45.0)) == 0
+    ds = OccludedDataset(path, split="test", classes=["chair"])
+    assert len(ds) == 0 and ds.to_arrays()[0].shape == (0, PARAMS.n_points, 3)
+    # labels stay the data set's, whatever the filter
+    names = (path / "shape_names.txt").read_text().splitlines()
+    assert set(OccludedDataset(path, classes="sofa").labels) == {names.index("sofa")}
+
+
+def test_errors(datasets, tmp_path):
+    with pytest.raises(InvalidInputError, match="not a finished farm data set"):
+        OccludedDataset(tmp_path)
+    with pytest.raises(InvalidInputError, match="unknown classes"):
+        OccludedDataset(datasets["dense"], classes=["car"])
+    with pytest.raises(InvalidInputError, match="unknown split"):
+        OccludedDataset(datasets["dense"], split="val")
+    with pytest.raises(InvalidInputError, match="elevation_deg"):
+        OccludedDataset(datasets["dense"], elevation_deg=float("nan"))
+
+
+def test_pickles_for_loader_workers(dataset):
+    dataset[3]  # opens files / fills caches, which must not travel
+    clone = pickle.loads(pickle.dumps(dataset))
+    for i in (0, 3, len(dataset) - 1):
+        a, b = dataset[i], clone[i]
+        assert np.array_equal(a[0], b[0]) and a[1:] == b[1:]
+    dataset.close()
+    assert dataset[3][1] == clone[3][1]
+
+
+def test_torch_dataloader(datasets):
+    torch = pytest.importorskip("torch")
+    from torch.utils.data import DataLoader
+
+    ds = OccludedDataset(datasets["compact"], split="test")
+    batches = list(DataLoader(ds, batch_size=4, shuffle=False, num_workers=0))
+    points, labels, meta = batches[0]
+    assert points.shape == (4, PARAMS.n_points, 3) and points.dtype == torch.float32
+    assert labels.dtype == torch.int64 and len(meta["class_name"]) == 4
+    assert sum(len(b[1]) for b in batches) == len(ds)
+
+
+def test_failed_objects_are_not_served(datasets, tmp_path):
+    # a manifest line with status "failed" (as the farm writes for a bad mesh) is skipped
+    import shutil
+
+    copy = tmp_path / "copy"
+    shutil.copytree(datasets["dense"], copy)
+    lines = (copy / MANIFEST_FILE).read_text().splitlines()
+    rec = json.loads(lines[0])
+    rec.update(status="failed", error="MeshLoadError: test", shards=[])
+    (copy / MANIFEST_FILE).write_text("\n".join([json.dumps(rec), *lines[1:]]) + "\n")
+    ds = OccludedDataset(copy)
+    assert len(ds) == (len(MESHES) - 1) * len(POSES) * PARAMS.samples_per_view
+    assert rec["name"] not in {ds.metadata(i)["name"] for i in range(len(ds))}

@@ -1,0 +1,368 @@
+"""The render farm: layout, determinism (workers, shards, selection, Dask), resume, failures.
+
+Runs on a few small real ModelNet meshes with few poses and points, so the whole file takes
+well under a minute on a 2-core machine with Mesa llvmpipe.
+"""
+
+from __future__ import annotations
+
+import argparse
+import errno
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from zbuf_occlude.dataset import CARD_FILE, MANIFEST_FILE, SHAPE_NAMES_FILE, OccludedDataset
+from zbuf_occlude.errors import InvalidInputError, OutputError
+from zbuf_occlude.farm import (
+    FarmObject,
+    FarmParams,
+    add_farm_merge_parser,
+    add_farm_parser,
+    discover_objects,
+    merge_farm,
+    parse_shard,
+    run_farm,
+    select_shard,
+)
+from zbuf_occlude.occlude import object_key
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+MODELNET_SUBSET = REPO_ROOT.parent / "shared" / "data" / "modelnet_subset"
+#: The smallest real meshes (96–664 faces), as (path in the subset, class, split).
+SMALL_MESHES = [
+    ("ModelNet10/sofa/test/sofa_0681.off", "sofa", "test"),
+    ("ModelNet40/monitor/test/monitor_0466.off", "monitor", "test"),
+    ("release_unknown/chair/train/chair_0002.off", "chair", "train"),
+    ("raw_single_source/stool/train/stool_0002.off", "stool", "train"),
+    ("ModelNet40/bathtub/train/bathtub_0002.off", "bathtub", "train"),
+]
+#: Few poses, points and pixels: enough to exercise every code path quickly.
+PARAMS = FarmParams(views="0:0,40:90,-40:200,85:300", samples_per_view=2, n_points=128, dense_points=2048, resolution=96)
+
+pytestmark = pytest.mark.skipif(not MODELNET_SUBSET.is_dir(), reason=f"real ModelNet meshes not found at {MODELNET_SUBSET}")
+
+
+def make_tree(root: Path, meshes=SMALL_MESHES) -> Path:
+    """A ModelNet-style tree ROOT/<class>/<split>/<name>.off of symlinks to the real meshes."""
+    for rel, cls, split in meshes:
+        target = root / cls / split / Path(rel).name
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.symlink_to(MODELNET_SUBSET / rel)
+    return root
+
+
+def shard_arrays(out: Path) -> dict[str, dict[str, np.ndarray]]:
+    """Every dataset of every shard, keyed by the object's name (not its index)."""
+    result = {}
+    for shard in sorted((out / "shards").glob("*.h5")):
+        with h5py.File(shard, "r") as f:
+            result[str(f.attrs["name"])] = {k: f[k][()] for k in f if k != "object_index"}
+    return result
+
+
+def assert_same_samples(a: Path, b: Path) -> None:
+    sa, sb = shard_arrays(a), shard_arrays(b)
+    assert sa.keys() == sb.keys()
+    for name in sa:
+        assert sa[name].keys() == sb[name].keys()
+        for key in sa[name]:
+            assert np.array_equal(sa[name][key], sb[name][key]), (name, key)
+            assert sa[name][key].dtype == sb[name][key].dtype
+
+
+@pytest.fixture(scope="module")
+def tree(tmp_path_factory) -> Path:
+    return make_tree(tmp_path_factory.mktemp("meshes"))
+
+
+@pytest.fixture(scope="module")
+def dense_run(tree, tmp_path_factory):
+    out = tmp_path_factory.mktemp("dense")
+    summary = run_farm(tree, out, params=PARAMS, progress=False, command="test dense")
+    return out, summary
+
+
+# -- inputs ------------------------------------------------------------------------------
+def test_discover_tree_labels_splits_and_keys(tree):
+    objects = discover_objects(tree)
+    assert [o.name for o in objects] == sorted(o.name for o in objects)
+    assert {(o.class_name, o.split) for o in objects} == {(c, s) for _, c, s in SMALL_MESHES}
+    shape_names = sorted({c for _, c, _ in SMALL_MESHES})
+    assert all(o.label == shape_names.index(o.class_name) for o in objects)
+    assert [o.index for o in objects] == list(range(len(objects)))
+    chair = next(o for o in objects if o.class_name == "chair")
+    assert chair.name == "chair/train/chair_0002" and chair.key == object_key("chair/train/chair_0002")
+
+    # the key (and so every sample) does not depend on the selection
+    subset = discover_objects(tree, classes="chair,sofa", splits=["train"])
+    assert [o.name for o in subset] == ["chair/train/chair_0002"]
+    assert subset[0].key == chair.key
+    assert len(discover_objects(tree, per_class=1, splits="test")) == 2
+    with pytest.raises(InvalidInputError, match="not found"):
+        discover_objects(tree, classes=["car"])
+    with pytest.raises(InvalidInputError, match="no such"):
+        discover_objects(tree / "missing")
+
+
+def test_discover_flat_folder_and_list_file(tmp_path):
+    flat = tmp_path / "flat"
+    flat.mkdir()
+    for rel, _, _ in SMALL_MESHES[:3]:
+        (flat / Path(rel).name).symlink_to(MODELNET_SUBSET / rel)
+    objects = discover_objects(flat)
+    assert {o.class_name for o in objects} == {"sofa", "monitor", "chair"}  # from <class>_<NNNN>
+    assert {o.split for o in objects} == {"train"}
+
+    listing = tmp_path / "list.txt"
+    listing.write_text(
+        "# path label [split]\n"
+        f"{MODELNET_SUBSET / SMALL_MESHES[0][0]} couch test\n"
+        f"flat/{Path(SMALL_MESHES[2][0]).name}   seat\n\n"
+    )
+    objects = discover_objects(listing)
+    # sorted by name: the absolute path ("/...") before "flat/..."
+    assert [(o.class_name, o.split, o.label) for o in objects] == [("couch", "test", 0), ("seat", "train", 1)]
+    assert objects[1].name == "flat/chair_0002" and Path(objects[1].source).is_file()
+    bad = tmp_path / "bad.txt"
+    bad.write_text("just_a_path\n")
+    with pytest.raises(InvalidInputError, match="bad.txt:1"):
+        discover_objects(bad)
+
+
+def test_shards_partition_the_plan(tree):
+    objects = discover_objects(tree)
+    parts = [select_shard(objects, i, 3) for i in range(3)]
+    assert sorted(o.index for p in parts for o in p) == list(range(len(objects)))
+    assert parse_shard("2/16") == (2, 16)
+    for bad in ("16/16", "a/b", "3"):
+        with pytest.raises(InvalidInputError):
+            parse_shard(bad)
+
+
+# -- output layout ----------------------------------------------------------------------------
+def test_dense_layout_counts_labels_manifest_card(dense_run):
+    out, summary = dense_run
+    assert summary.finished and summary.failed == 0 and summary.done == len(SMALL_MESHES)
+    shape_names = (out / SHAPE_NAMES_FILE).read_text().splitlines()
+    assert shape_names == sorted({c for _, c, _ in SMALL_MESHES})
+    manifest = [json.loads(line) for line in (out / MANIFEST_FILE).read_text().splitlines()]
+    assert len(manifest) == len(SMALL_MESHES)
+    total = 0
+    for rec in manifest:
+        assert rec["status"] == "ok" and rec["error"] is None
+        for key in ("source", "class_name", "split", "shards", "n_visible", "seed", "key", "time_s", "renderer"):
+            assert key in rec
+        assert len(rec["n_visible"]) == len(PARAMS.poses) and min(rec["n_visible"]) > 0
+        assert rec["key"] == object_key(rec["name"]) and rec["seed"] == PARAMS.seed
+        with h5py.File(out / rec["shards"][0], "r") as f:
+            b = len(PARAMS.poses) * PARAMS.samples_per_view
+            assert f["data"].shape == (b, PARAMS.n_points, 3) and f["data"].dtype == np.float32
+            assert f["label"].shape == (b,) and f["label"].dtype.kind == "i"
+            assert set(f["label"][()]) == {shape_names.index(rec["class_name"])} == {rec["label"]}
+            for key in ("elevation_deg", "azimuth_deg", "object_index", "sample_index", "pose_index", "n_visible"):
+                assert f[key].shape == (b,)
+            assert set(f["object_index"][()]) == {rec["object_index"]}
+            assert np.array_equal(f["sample_index"][()], np.tile(np.arange(PARAMS.samples_per_view), len(PARAMS.poses)))
+            poses = np.asarray(PARAMS.poses)[f["pose_index"][()]]
+            assert np.array_equal(f["elevation_deg"][()], poses[:, 0]) and np.array_equal(f["azimuth_deg"][()], poses[:, 1])
+            assert np.abs(f["data"][()]).max() <= 0.5 + 1e-6  # normalised: max extent 1, centred
+        total += rec["n_samples"]
+    assert total == summary.samples == len(SMALL_MESHES) * len(PARAMS.poses) * PARAMS.samples_per_view
+    for split in ("train", "test"):
+        listed = (out / f"{split}_files.txt").read_text().split()
+        assert listed == [r["shards"][0] for r in manifest if r["split"] == split]
+    card = json.loads((out / CARD_FILE).read_text())
+    assert card["version"] and card["commands"] == ["test dense"] and card["params"]["n_points"] == PARAMS.n_points
+    assert card["poses"] == [list(p) for p in PARAMS.poses] and card["n_samples"] == total
+    assert "FAILED" not in summary.format() and "samples/MB" in summary.format()
+    assert not list(out.rglob(".*.tmp"))
+
+
+# -- determinism ------------------------------------------------------------------------------
+def test_worker_count_does_not_change_a_bit(tree, dense_run, tmp_path):
+    summary = run_farm(tree, tmp_path / "w2", params=PARAMS, workers=2, progress=False)
+    assert summary.workers == "2 processes" and summary.done == len(SMALL_MESHES)
+    assert_same_samples(dense_run[0], tmp_path / "w2")
+
+
+def test_shards_then_merge_equal_one_run(tree, dense_run, tmp_path):
+    for i in range(2):
+        s = run_farm(tree, tmp_path / f"task{i}", params=PARAMS, shard=(i, 2), progress=False)
+        assert not s.finished and not (tmp_path / f"task{i}" / CARD_FILE).exists()
+    with pytest.raises(InvalidInputError, match="no result yet"):
+        merge_farm([tmp_path / "task0"], tmp_path / "partial", progress=False)
+    merged = merge_farm([tmp_path / "task0", tmp_path / "task1"], tmp_path / "merged", progress=False)
+    assert merged.finished and merged.done == len(SMALL_MESHES)
+    assert_same_samples(dense_run[0], tmp_path / "merged")
+    a = json.loads((dense_run[0] / CARD_FILE).read_text())
+    b = json.loads((tmp_path / "merged" / CARD_FILE).read_text())
+    assert (a["params_digest"], a["plan_digest"], a["n_samples"]) == (b["params_digest"], b["plan_digest"], b["n_samples"])
+
+    # tasks sharing one --out (a shared file system), merged in place
+    for i in (1, 0):
+        run_farm(tree, tmp_path / "shared", params=PARAMS, shard=(i, 2), progress=False)
+    merge_farm([tmp_path / "shared"], progress=False)
+    assert_same_samples(dense_run[0], tmp_path / "shared")
+    assert OccludedDataset(tmp_path / "shared").to_arrays()[0].shape[0] == dense_run[1].samples
+
+
+def test_selection_does_not_change_an_objects_samples(tree, dense_run, tmp_path):
+    run_farm(tree, tmp_path / "sel", params=PARAMS, classes=["stool", "sofa"], progress=False)
+    full, sel = shard_arrays(dense_run[0]), shard_arrays(tmp_path / "sel")
+    assert set(sel) == {"sofa/test/sofa_0681", "stool/train/stool_0002"}
+    for name, arrays in sel.items():
+        assert np.array_equal(arrays["data"], full[name]["data"])
+
+
+def test_dask_local_cluster_gives_the_same_data_set(tree, dense_run, tmp_path):
+    pytest.importorskip("distributed")
+    summary = run_farm(tree, tmp_path / "dask", params=PARAMS, dask_local=2, progress=False)
+    assert summary.workers.startswith("dask") and summary.done == len(SMALL_MESHES)
+    assert_same_samples(dense_run[0], tmp_path / "dask")
+
+
+def test_compact_reconstructs_the_dense_output_exactly(tree, dense_run, tmp_path):
+    params = FarmParams(**{**PARAMS.to_dict(), "storage": "compact"})
+    summary = run_farm(tree, tmp_path / "compact", params=params, progress=False)
+    assert summary.samples == dense_run[1].samples
+    dense_ds, compact_ds = OccludedDataset(dense_run[0]), OccludedDataset(tmp_path / "compact")
+    assert compact_ds.storage == "compact" and len(compact_ds) == len(dense_ds)
+    (a, la), (b, lb) = dense_ds.to_arrays(), compact_ds.to_arrays()
+    assert a.dtype == b.dtype == np.float32
+    assert np.array_equal(a, b) and np.array_equal(la, lb)
+    for i in (0, len(dense_ds) // 2, len(dense_ds) - 1):
+        assert np.array_equal(dense_ds[i][0], compact_ds[i][0]) and dense_ds[i][2] == compact_ds[i][2]
+
+
+# -- resume, failures, errors ---------------------------------------------------------------
+def test_sigkill_mid_run_then_resume_loses_and_repeats_nothing(tree, tmp_path):
+    out = tmp_path / "killed"
+    params = FarmParams(**{**PARAMS.to_dict(), "views": "fibonacci:24"})
+    script = textwrap.dedent(
+        f"""
+        from zbuf_occlude.farm import FarmParams, run_farm
+        run_farm({str(tree)!r}, {str(out)!r}, params=FarmParams(**{params.to_dict()!r}), progress=False)
+        """
+    )
+    proc = subprocess.Popen([sys.executable, "-c", script], cwd=REPO_ROOT)
+    deadline = time.monotonic() + 120
+    try:
+        while not list((out / "records").glob("*.json")):
+            assert proc.poll() is None, "the farm ended before it could be killed"
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    before = {p.name: p.stat().st_mtime_ns for p in (out / "records").glob("*.json")}
+    assert 0 < len(before) < len(SMALL_MESHES)
+    assert not (out / CARD_FILE).exists()
+
+    summary = run_farm(tree, out, params=params, progress=False)
+    assert summary.finished and summary.done == len(SMALL_MESHES) and summary.resumed == len(before)
+    after = {p.name: p.stat().st_mtime_ns for p in (out / "records").glob("*.json")}
+    assert all(after[name] == mtime for name, mtime in before.items())  # not redone
+    assert not list(out.rglob(".*.tmp"))
+
+    clean = run_farm(tree, tmp_path / "clean", params=params, progress=False)
+    assert clean.samples == summary.samples
+    assert_same_samples(out, tmp_path / "clean")  # nothing missing, nothing twice
+    again = run_farm(tree, out, params=params, progress=False)
+    assert again.resumed == len(SMALL_MESHES) and again.views == 0
+
+
+def test_other_parameters_need_overwrite(tree, dense_run, tmp_path):
+    out = tmp_path / "ow"
+    small = FarmParams(**{**PARAMS.to_dict(), "views": "0:0"})
+    run_farm(tree, out, params=small, classes=["chair"], progress=False)
+    with pytest.raises(InvalidInputError, match="other parameters"):
+        run_farm(tree, out, params=PARAMS, classes=["chair"], progress=False)
+    with pytest.raises(InvalidInputError, match="other objects"):
+        run_farm(tree, out, params=small, progress=False)
+    summary = run_farm(tree, out, params=PARAMS, classes=["chair"], overwrite=True, progress=False)
+    assert summary.resumed == 0 and summary.samples == len(PARAMS.poses) * PARAMS.samples_per_view
+
+
+def test_corrupt_mesh_is_recorded_and_skipped(tmp_path):
+    root = make_tree(tmp_path / "meshes", SMALL_MESHES[:2])
+    bad = root / "chair" / "train" / "chair_0999.off"
+    bad.parent.mkdir(parents=True)
+    bad.write_text("OFF\n3 1 0\n0 0 0\n1 nan 0\n")
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers()
+    add_farm_parser(sub)
+    add_farm_merge_parser(sub)
+    p = PARAMS
+    args = parser.parse_args(
+        ["farm", str(root), "--out", str(tmp_path / "out"), "--views", p.views, "--samples-per-view", str(p.samples_per_view),
+         "--points", str(p.n_points), "--dense-points", str(p.dense_points), "--resolution", str(p.resolution), "--no-progress"]
+    )  # fmt: skip
+    assert args.func(args) == 1  # exit status: something failed
+    manifest = [json.loads(line) for line in (tmp_path / "out" / MANIFEST_FILE).read_text().splitlines()]
+    by_name = {r["name"]: r for r in manifest}
+    assert by_name["chair/train/chair_0999"]["status"] == "failed"
+    assert "MeshLoadError" in by_name["chair/train/chair_0999"]["error"]
+    assert sum(r["status"] == "ok" for r in manifest) == 2
+    ds = OccludedDataset(tmp_path / "out")
+    assert {ds.metadata(i)["class_name"] for i in range(len(ds))} == {"sofa", "monitor"}
+    assert "chair_0002" not in (tmp_path / "out" / "train_files.txt").read_text()
+    args = parser.parse_args(["farm-merge", str(tmp_path / "out"), "--no-progress"])
+    assert args.func(args) == 1
+
+
+def test_unwritable_output_folder(tree, tmp_path):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    with pytest.raises(OutputError, match="cannot create the output folder"):
+        run_farm(tree, blocker / "out", params=PARAMS, progress=False)
+
+
+@pytest.mark.parametrize("error", [OSError(errno.ENOSPC, "No space left on device"), OSError("file write failed: No space left on device")])
+def test_disk_full_is_a_clear_error_and_leaves_no_partial_files(tree, tmp_path, monkeypatch, error):
+    def full(*args, **kwargs):
+        raise error
+
+    monkeypatch.setattr(h5py, "File", full)
+    with pytest.raises(OutputError, match="disk full"):
+        run_farm(tree, tmp_path / "full", params=PARAMS, classes=["chair"], progress=False)
+    assert not list((tmp_path / "full").rglob("*.h5")) and not list((tmp_path / "full").rglob(".*.tmp"))
+
+
+def test_cli_options_parse():
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers()
+    add_farm_parser(sub)
+    add_farm_merge_parser(sub)
+    args = parser.parse_args(
+        ["farm", "ROOT", "--out", "DS", "--classes", "chair,sofa", "--per-class", "5", "--splits", "train",
+         "--views", "grid25", "--samples-per-view", "3", "--points", "1024", "--density", "2000", "--resolution", "256",
+         "--seed", "7", "--workers", "4", "--shard", "1/4", "--dask-local", "2", "--storage", "compact", "--overwrite"]
+    )  # fmt: skip
+    assert (args.per_class, args.density, args.dense_points, args.shard, args.dask_local, args.storage) == (
+        5, 2000.0, None, "1/4", 2, "compact"
+    )
+    with pytest.raises(SystemExit):
+        parser.parse_args(["farm", "ROOT", "--out", "DS", "--density", "1", "--dense-points", "5"])
+    with pytest.raises(SystemExit):
+        parser.parse_args(["farm", "ROOT", "--out", "DS", "--scheduler", "tcp://h:1", "--dask-local", "2"])
+    args = parser.parse_args(["farm-merge", "A", "B", "--out", "C"])
+    assert args.inputs == ["A", "B"] and args.out == "C"
+
+
+def test_ready_plan_of_repeated_meshes(tmp_path):
+    # the benchmark's way to repeat a few real meshes as distinct objects (distinct keys)
+    src = str(MODELNET_SUBSET / SMALL_MESHES[2][0])
+    objects = [FarmObject(i, f"rep{i}/chair_0002", src, "chair", "train", 0) for i in range(2)]
+    summary = run_farm(objects, tmp_path / "rep", params=PARAMS, progress=False)
+    arrays = shard_arrays(tmp_path / "rep")
+    assert summary.done == 2 and not np.array_equal(arrays["rep0/chair_0002"]["data"], arrays["rep1/chair_0002"]["data"])

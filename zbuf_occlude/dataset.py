@@ -1,0 +1,429 @@
+"""Read the data sets that :func:`zbuf_occlude.farm.run_farm` writes: :class:`OccludedDataset`.
+
+Layout of a data set folder (``format_version`` 1; the farm writes it, this module owns it)::
+
+    DATASET/
+      dataset_card.json      parameters, poses, tool version, command line, GL renderer
+      shape_names.txt        one class name per line; line i is label i (PointNet)
+      train_files.txt        shards of the train split, paths relative to DATASET (PointNet)
+      test_files.txt         ... of the test split
+      manifest.jsonl         one JSON object per line and object: source, class, split, status,
+                             error, shards, visible-point counts per pose, seed, key, time
+      shards/<split>_<object_index:06d>.h5
+                             one shard per object (the unit a resumed run never redoes)
+      records/, tasks/, plan.json
+                             the farm's journal (resume, sharded runs, farm-merge)
+
+Two storage modes, chosen with ``--storage``:
+
+``dense``
+    PointNet's HDF5 layout: ``data (B, n, 3) float32``, ``label (B,) int64``,
+    ``elevation_deg (B,)`` and ``azimuth_deg (B,)`` float64 (degrees), ``object_index``,
+    ``pose_index``, ``sample_index``, ``n_visible`` ``(B,) int64``.  Any PointNet-style
+    loader reads it as is.
+``compact``
+    The object's dense cloud once, ``dense_points (M, 3) float32``, and per pose a
+    visibility bitmask ``visible_bits (P, ceil(M / 8)) uint8`` (:func:`numpy.packbits`),
+    plus ``n_visible``, ``elevation_deg``, ``azimuth_deg`` ``(P,)``.  The samples are
+    redrawn by the reader from the deterministic generators of
+    :func:`zbuf_occlude.occlude.sample_rng` with :func:`zbuf_occlude.occlude.draw_sample`,
+    bit-identical to what ``dense`` stores (the dense cloud is float32 in both modes
+    before indexing, so indexing commutes with the cast).
+
+Row order inside a shard, and sample order of the reader: pose-major, then sample index.
+A pose from which nothing is visible has no samples (:func:`zbuf_occlude.occlude.occlude_object`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections import OrderedDict
+from collections.abc import Callable, Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import InvalidInputError
+from .occlude import draw_sample, sample_rng
+
+__all__ = [
+    "OccludedDataset",
+    "reconstruct_samples",
+    "unpack_visible",
+    "samples_per_pose",
+    "file_list_name",
+    "FORMAT_VERSION",
+    "CARD_FILE",
+    "MANIFEST_FILE",
+    "SHAPE_NAMES_FILE",
+    "SHARD_DIR",
+    "STORAGE_MODES",
+    "SPLITS",
+]
+
+#: Version of the folder layout above; the reader refuses newer ones.
+FORMAT_VERSION = 1
+CARD_FILE = "dataset_card.json"
+MANIFEST_FILE = "manifest.jsonl"
+SHAPE_NAMES_FILE = "shape_names.txt"
+SHARD_DIR = "shards"
+#: Storage modes (module docstring).
+STORAGE_MODES = ("dense", "compact")
+#: Splits with a file list of their own (ModelNet's).
+SPLITS = ("train", "test")
+#: Objects whose compact arrays (dense cloud and bitmasks, ~1 MB each) the reader keeps.
+DEFAULT_OBJECT_CACHE = 8
+#: HDF5 files the reader keeps open (dense storage), least recently used closed first.
+DEFAULT_OPEN_FILES = 16
+#: Degrees: a pose matches a requested elevation/azimuth within this (poses are stored
+#: as the exact floats of the schedule, so this only absorbs decimal round trips).
+POSE_MATCH_ATOL_DEG = 1e-6
+
+PoseFilter = float | Iterable[float] | Callable[[float], bool] | None
+
+
+def file_list_name(split: str) -> str:
+    """PointNet's name of a split's shard list, e.g. ``train_files.txt``."""
+    return f"{split}_files.txt"
+
+
+def samples_per_pose(n_visible: NDArray[np.integer], samples_per_view: int) -> NDArray[np.int64]:
+    """``(P,) int64``: samples stored per pose (none where nothing is visible)."""
+    return np.where(np.asarray(n_visible) > 0, int(samples_per_view), 0).astype(np.int64)
+
+
+def unpack_visible(bits: NDArray[np.uint8], n_dense: int) -> NDArray[np.bool_]:
+    """Undo :func:`numpy.packbits` of one visibility mask.
+
+    Returns
+    -------
+    visible : (n_dense,) bool
+    """
+    return np.unpackbits(np.asarray(bits, dtype=np.uint8), count=int(n_dense)).astype(bool)
+
+
+def reconstruct_samples(
+    dense_points: NDArray[np.float32],
+    visible: NDArray[np.bool_],
+    *,
+    seed: int,
+    key: int,
+    pose_index: int,
+    n_points: int,
+    sample_indices: Iterable[int],
+) -> NDArray[np.float32]:
+    """Redraw samples of one pose from the dense cloud and the pose's visibility mask.
+
+    Uses the generator of ``(seed, key, draw stream, pose_index, sample_index)`` and
+    :func:`~zbuf_occlude.occlude.draw_sample`, exactly as
+    :func:`~zbuf_occlude.occlude.occlude_object` does, so the result is bit-identical to
+    the ``data`` a dense-storage run writes.
+
+    Parameters
+    ----------
+    dense_points : (M, 3) float32
+        The object's dense cloud, already cast to float32.
+    visible : (M,) bool
+    seed, key : int
+        Global seed and the object's key (manifest fields ``seed``, ``key``).
+    pose_index, n_points : int
+    sample_indices : iterable of int
+
+    Returns
+    -------
+    samples : (S, n_points, 3) float32
+        ``S = len(sample_indices)``; ``(0, n_points, 3)`` if nothing is visible.
+    """
+    visible_index = np.flatnonzero(visible)
+    indices = list(sample_indices)
+    if len(visible_index) == 0:
+        return np.zeros((0, n_points, 3), dtype=np.float32)
+    out = np.empty((len(indices), n_points, 3), dtype=np.float32)
+    for row, sample_index in enumerate(indices):
+        rng = sample_rng(seed, key, pose_index, sample_index)
+        chosen, _ = draw_sample(visible_index, n_points, rng)
+        out[row] = dense_points[chosen]
+    return out
+
+
+def _pose_mask(values: NDArray[np.float64], spec: PoseFilter, name: str) -> NDArray[np.bool_]:
+    if spec is None:
+        return np.ones(len(values), dtype=bool)
+    if callable(spec):
+        return np.array([bool(spec(float(v))) for v in values], dtype=bool)
+    wanted = np.atleast_1d(np.asarray(spec, dtype=np.float64))
+    if wanted.ndim != 1 or not np.all(np.isfinite(wanted)):
+        raise InvalidInputError(f"{name} must be a number, a sequence of numbers or a predicate, got {spec!r}")
+    return np.isclose(values[:, None], wanted[None, :], rtol=0.0, atol=POSE_MATCH_ATOL_DEG).any(axis=1)
+
+
+def _as_name_set(spec: str | Iterable[str] | None) -> set[str] | None:
+    if spec is None:
+        return None
+    if isinstance(spec, str):
+        return {s.strip() for s in spec.split(",") if s.strip()}
+    return {str(s) for s in spec}
+
+
+class OccludedDataset(Sequence):
+    """Occluded samples of a farm data set, as a sequence of ``(points, label, metadata)``.
+
+    Works for both storage modes (module docstring) and with
+    ``torch.utils.data.DataLoader`` (torch is not needed otherwise): items are numpy
+    arrays, ints and dicts of scalars and strings, which the default collate turns into
+    tensors and lists; open files are per process, so loader workers open their own.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        The data set folder (``--out`` of the farm).
+    split : str or sequence of str, optional
+        ``"train"``, ``"test"`` (or both, the default).
+    classes : str or sequence of str, optional
+        Class names to keep (comma-separated string or a sequence).  Labels keep their
+        data-set-wide values (line numbers of ``shape_names.txt``).
+    elevation_deg, azimuth_deg : float, sequence of float or callable, optional
+        Keep poses whose elevation (azimuth), degrees, equals one of the values (within
+        1e-6°) or satisfies the predicate, e.g. ``elevation_deg=lambda el: el >= 0``
+        (Sryamkin et al. 2023, Table 3A trains and tests on different elevations).
+    object_cache : int
+        Compact storage: objects whose dense cloud and bitmasks stay in memory.
+
+    Attributes
+    ----------
+    card : dict
+        The data set card (parameters, poses, version, command line).
+    shape_names : list of str
+        Class name of each label.
+    storage : {"dense", "compact"}
+    n_points : int
+        Points per sample.
+
+    Raises
+    ------
+    InvalidInputError
+        Not a finished farm data set, a newer format, an unknown split or class name.
+
+    Examples
+    --------
+    >>> ds = OccludedDataset("modelnet_occluded", split="train", elevation_deg=[0, 10, 20])
+    >>> points, label, meta = ds[0]          # (2048, 3) float32, int, dict
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        split: str | Sequence[str] | None = None,
+        classes: str | Sequence[str] | None = None,
+        elevation_deg: PoseFilter = None,
+        azimuth_deg: PoseFilter = None,
+        *,
+        object_cache: int = DEFAULT_OBJECT_CACHE,
+    ):
+        self.root = Path(path)
+        card_path = self.root / CARD_FILE
+        if not card_path.is_file():
+            raise InvalidInputError(
+                f"{self.root} is not a finished farm data set (no {CARD_FILE}); let `zbuf-occlude farm` finish, "
+                "or run `zbuf-occlude farm-merge` after sharded runs"
+            )
+        self.card: dict[str, Any] = json.loads(card_path.read_text(encoding="utf-8"))
+        version = int(self.card.get("format_version", 0))
+        if version > FORMAT_VERSION:
+            raise InvalidInputError(
+                f"{self.root} has data set format {version}; this zbuf_occlude reads up to {FORMAT_VERSION}: upgrade it"
+            )
+        self.storage: str = self.card["storage"]
+        params = self.card["params"]
+        self.n_points: int = int(params["n_points"])
+        self._samples_per_view = int(params["samples_per_view"])
+        self._seed = int(params["seed"])
+        self.shape_names: list[str] = (self.root / SHAPE_NAMES_FILE).read_text(encoding="utf-8").splitlines()
+        poses = np.asarray(self.card["poses"], dtype=np.float64).reshape(-1, 2)
+        self._elevation, self._azimuth = poses[:, 0], poses[:, 1]
+        pose_keep = _pose_mask(self._elevation, elevation_deg, "elevation_deg") & _pose_mask(
+            self._azimuth, azimuth_deg, "azimuth_deg"
+        )
+
+        splits = _as_name_set(split)
+        wanted_classes = _as_name_set(classes)
+        if wanted_classes is not None and (unknown := wanted_classes - set(self.shape_names)):
+            raise InvalidInputError(f"unknown classes {sorted(unknown)} in {self.root}; it has {self.shape_names}")
+        known_splits = set(self.card.get("splits", SPLITS))
+        if splits is not None and (unknown := splits - known_splits):
+            raise InvalidInputError(f"unknown split(s) {sorted(unknown)} in {self.root}; it has {sorted(known_splits)}")
+
+        self._objects: list[dict[str, Any]] = []
+        obj_rows, poses_rows, sample_rows, shard_rows = [], [], [], []
+        with open(self.root / MANIFEST_FILE, encoding="utf-8") as fh:
+            for line in fh:
+                if not line.strip():
+                    continue
+                rec = json.loads(line)
+                if rec.get("status") != "ok":
+                    continue
+                if splits is not None and rec["split"] not in splits:
+                    continue
+                if wanted_classes is not None and rec["class_name"] not in wanted_classes:
+                    continue
+                spp = samples_per_pose(np.asarray(rec["n_visible"], dtype=np.int64), self._samples_per_view)
+                pose = np.repeat(np.arange(len(spp)), spp)
+                starts = np.cumsum(spp) - spp
+                sample = np.arange(len(pose)) - np.repeat(starts, spp)
+                keep = pose_keep[pose]
+                obj_rows.append(np.full(int(keep.sum()), len(self._objects), dtype=np.int64))
+                poses_rows.append(pose[keep])
+                sample_rows.append(sample[keep])
+                shard_rows.append(np.flatnonzero(keep))
+                self._objects.append(rec)
+
+        def cat(parts: list[NDArray[np.int64]]) -> NDArray[np.int64]:
+            return np.concatenate(parts).astype(np.int64) if parts else np.zeros(0, dtype=np.int64)
+
+        self._obj, self._pose, self._sample, self._row = cat(obj_rows), cat(poses_rows), cat(sample_rows), cat(shard_rows)
+        self._object_cache_size = max(1, int(object_cache))
+        self._reset_handles()
+
+    # -- per-process state (DataLoader workers and pickling) ---------------------------
+    def _reset_handles(self) -> None:
+        self._pid = os.getpid()
+        self._files: OrderedDict[Path, Any] = OrderedDict()
+        self._compact: OrderedDict[int, tuple[NDArray[np.float32], NDArray[np.uint8]]] = OrderedDict()
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_files"], state["_compact"] = OrderedDict(), OrderedDict()
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._reset_handles()
+
+    def _file(self, path: Path):
+        import h5py
+
+        if self._pid != os.getpid():  # forked: the parent's HDF5 handles are not ours
+            self._reset_handles()
+        f = self._files.get(path)
+        if f is None:
+            f = self._files[path] = h5py.File(path, "r")
+            while len(self._files) > DEFAULT_OPEN_FILES:
+                self._files.popitem(last=False)[1].close()
+        else:
+            self._files.move_to_end(path)
+        return f
+
+    def _compact_arrays(self, obj: int) -> tuple[NDArray[np.float32], NDArray[np.uint8]]:
+        hit = self._compact.get(obj)
+        if hit is not None and self._pid == os.getpid():
+            self._compact.move_to_end(obj)
+            return hit
+        f = self._file(self.root / self._objects[obj]["shards"][0])
+        arrays = (f["dense_points"][()], f["visible_bits"][()])
+        self._compact[obj] = arrays
+        while len(self._compact) > self._object_cache_size:
+            self._compact.popitem(last=False)
+        return arrays
+
+    def close(self) -> None:
+        """Close the open shard files (reopened on the next access)."""
+        for f in self._files.values():
+            f.close()
+        self._reset_handles()
+
+    # -- sequence protocol -----------------------------------------------------------
+    def __len__(self) -> int:
+        return len(self._obj)
+
+    def _points(self, i: int) -> NDArray[np.float32]:
+        obj = int(self._obj[i])
+        rec = self._objects[obj]
+        if self.storage == "dense":
+            f = self._file(self.root / rec["shards"][0])
+            return f["data"][int(self._row[i])]
+        dense_points, bits = self._compact_arrays(obj)
+        pose = int(self._pose[i])
+        visible = unpack_visible(bits[pose], len(dense_points))
+        return reconstruct_samples(
+            dense_points, visible, seed=self._seed, key=int(rec["key"]), pose_index=pose,
+            n_points=self.n_points, sample_indices=[int(self._sample[i])],
+        )[0]  # fmt: skip
+
+    def metadata(self, i: int) -> dict[str, Any]:
+        """The metadata of sample ``i`` (the third item of ``self[i]``) without its points."""
+        i = self._check_index(i)
+        rec = self._objects[int(self._obj[i])]
+        pose = int(self._pose[i])
+        n_visible = int(rec["n_visible"][pose])
+        return {
+            "class_name": rec["class_name"],
+            "split": rec["split"],
+            "name": rec["name"],
+            "source": rec["source"],
+            "object_index": int(rec["object_index"]),
+            "pose_index": pose,
+            "sample_index": int(self._sample[i]),
+            "elevation_deg": float(self._elevation[pose]),
+            "azimuth_deg": float(self._azimuth[pose]),
+            "n_visible": n_visible,
+            "padded": n_visible < self.n_points,
+        }
+
+    def _check_index(self, i: int) -> int:
+        if isinstance(i, (bool, np.bool_)) or not isinstance(i, (int, np.integer)):
+            raise TypeError(f"OccludedDataset indices must be integers, got {type(i).__name__}")
+        n = len(self)
+        if not -n <= i < n:
+            raise IndexError(f"index {i} out of range for {n} samples")
+        return int(i) % n
+
+    def __getitem__(self, i: int) -> tuple[NDArray[np.float32], int, dict[str, Any]]:
+        """``(points (n, 3) float32, label int, metadata dict)`` of sample ``i``."""
+        i = self._check_index(i)
+        rec = self._objects[int(self._obj[i])]
+        return self._points(i), int(rec["label"]), self.metadata(i)
+
+    def to_arrays(self) -> tuple[NDArray[np.float32], NDArray[np.int64]]:
+        """Every selected sample in memory, in this sequence's order.
+
+        Returns
+        -------
+        data : (B, n, 3) float32
+        label : (B,) int64
+        """
+        data = np.empty((len(self), self.n_points, 3), dtype=np.float32)
+        labels = np.empty(len(self), dtype=np.int64)
+        bounds = np.flatnonzero(np.diff(self._obj, prepend=-1, append=-1))
+        for start, stop in zip(bounds[:-1], bounds[1:]):
+            obj = int(self._obj[start])
+            rec = self._objects[obj]
+            labels[start:stop] = int(rec["label"])
+            if self.storage == "dense":
+                rows = self._row[start:stop]
+                data[start:stop] = self._file(self.root / rec["shards"][0])["data"][()][rows]
+                continue
+            dense_points, bits = self._compact_arrays(obj)
+            pose_rows = self._pose[start:stop]
+            for pose in np.unique(pose_rows):
+                sel = np.flatnonzero(pose_rows == pose) + start
+                data[sel] = reconstruct_samples(
+                    dense_points, unpack_visible(bits[pose], len(dense_points)), seed=self._seed,
+                    key=int(rec["key"]), pose_index=int(pose), n_points=self.n_points,
+                    sample_indices=self._sample[sel].tolist(),
+                )  # fmt: skip
+        return data, labels
+
+    @property
+    def labels(self) -> NDArray[np.int64]:
+        """``(len(self),) int64``: the label of every sample (no points are read)."""
+        per_object = np.array([int(r["label"]) for r in self._objects], dtype=np.int64)
+        return per_object[self._obj] if len(self._objects) else np.zeros(0, dtype=np.int64)
+
+    def __repr__(self) -> str:
+        return (
+            f"OccludedDataset({str(self.root)!r}, storage={self.storage!r}, samples={len(self)}, "
+            f"objects={len(self._objects)}, n_points={self.n_points}, classes={len(self.shape_names)})"
+        )
