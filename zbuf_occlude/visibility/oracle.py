@@ -102,6 +102,9 @@ _CULL_SLACK = 1e-9
 #: Faces reaching this close (relative to the scene's size) to the eye's image plane are
 #: not projected for the cull but tested against every point.
 _CULL_MIN_DEPTH = 1e-6
+#: Up to this many rays that Embree could not settle are decided one by one against the
+#: faces whose bounding boxes meet their segment; more go through the image-plane cull.
+_FEW_FALLBACK_RAYS = 64
 #: Embree scenes kept alive for meshes that are still alive (most recently used first).
 _SCENE_CACHE_SIZE = 8
 
@@ -590,6 +593,9 @@ class _EmbreeScene:
         order = np.argsort(corner_vertex, kind="stable")
         self.vertex_faces = order // 3
         self.vertex_start = np.searchsorted(corner_vertex[order], np.arange(corner_vertex.max(initial=-1) + 2))
+        # Per-face bounding boxes, for deciding a few fallback rays without a full cull.
+        self.face_lo = self.planes.vertices.min(axis=-2)
+        self.face_hi = self.planes.vertices.max(axis=-2)
         self.scene = None
         if self.n_faces:
             # Robust mode: watertight ray/triangle tests (no leaks through shared edges).
@@ -827,9 +833,19 @@ def occluded_embree(
     if fallback.any():
         idx = np.flatnonzero(fallback)
         counters["exact_fallback"] = len(idx)
-        occluded[idx] = _occluded_core(
-            scene.planes, pts[idx], e, fi[idx] if fi is not None else None, tol, DEFAULT_PAIRS_PER_CHUNK
-        )
+        if len(idx) <= _FEW_FALLBACK_RAYS:
+            # A few rays: faces whose bounding box meets the segment's are the only
+            # candidates; cheaper than the image-plane cull, which projects every face.
+            for k in idx:
+                lo, hi = np.minimum(pts[k], e) - tol, np.maximum(pts[k], e) + tol
+                g = np.flatnonzero(np.all((scene.face_lo <= hi) & (scene.face_hi >= lo), axis=1))
+                kk = np.full(len(g), k)
+                hit = _pair_occludes(pts[kk], seg[kk], seg_len[kk], scene.planes, g, None if fi is None else fi[kk], tol)
+                occluded[k] = bool(hit.any())
+        else:
+            occluded[idx] = _occluded_core(
+                scene.planes, pts[idx], e, fi[idx] if fi is not None else None, tol, DEFAULT_PAIRS_PER_CHUNK
+            )
     log.debug("occluded_embree: %s", counters)
     if stats is not None:
         stats.update(counters)
