@@ -419,8 +419,8 @@ def report(results: list[dict[str, Any]], throughput: dict[str, Any] | None, arg
         "",
         "### Agreement with the Embree oracle (pooled over poses, % of all points) and peak memory",
         "",
-        "`sent to Embree`: points the compute shader flags uncertain (their own face is nowhere in the "
-        "3×3 pixel window: sub-pixel faces), decided by Embree in `zbuffer`, called visible in `GPU only`. "
+        "`sent to Embree`: points the compute shader flags uncertain (the centre pixel does not show "
+        "their own face: sub-pixel faces, cracks), decided by Embree in `zbuffer`, called visible in `GPU only`. "
         "Peak RSS, MiB: the process's peak resident set during that method's calls (mesh, points and "
         "GL buffers included); `setup` = load + sample + `Scene` build.",
         "",

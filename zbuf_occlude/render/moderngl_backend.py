@@ -245,8 +245,8 @@ class ModernGLRenderer:
         -------
         visible : (N,) bool
         uncertain : (N,) bool
-            ``"candidates"`` rule only: points called visible although their own face is
-            nowhere in the window (sub-pixel faces, rays through cracks).  The image holds
+            ``"candidates"`` rule only: points called visible although the centre pixel
+            does not show their own face (sub-pixel faces, rays through cracks).  The image holds
             no evidence for them; :mod:`zbuf_occlude.visibility.zbuffer` decides them exactly.
             Always False without a face index.
         """

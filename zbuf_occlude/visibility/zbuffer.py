@@ -3,8 +3,8 @@
 ``zbuffer`` (default)
     Rasterise depth and face index; for each point, the faces kept in a small pixel window
     around its projection are the only ones that can hide it, and each gets an exact
-    segment–triangle test (compute shader).  Points whose own face is nowhere in the window
-    (sub-pixel faces, rays through cracks of triangle soup) carry no evidence in the image
+    segment–triangle test (compute shader).  Points whose own face is not the one the centre
+    pixel shows (sub-pixel faces, rays through cracks of triangle soup) carry no evidence in the image
     and are decided exactly with Embree on the CPU (``resolve="embree"``, default), or kept
     visible (``resolve="none"``, GPU only).
 ``zbuffer-tolerance``
