@@ -37,21 +37,6 @@ def _gl_or_skip() -> None:
 # -----------------------------------------------------------------------------------------
 # Metrics
 # -----------------------------------------------------------------------------------------
-def test_agreement_rates_add_up() -> None:
-    ref = np.array([True, True, False, False, True])
-    pred = np.array([True, False, True, False, True])
-    a = cmp.agreement(pred, ref)
-    assert a.accuracy == pytest.approx(0.6)
-    assert a.false_visible_rate == pytest.approx(0.2)
-    assert a.false_hidden_rate == pytest.approx(0.2)
-    assert a.iou == pytest.approx(2 / 4)
-    assert a.accuracy + a.false_visible_rate + a.false_hidden_rate == pytest.approx(1.0)
-    assert cmp.agreement(np.zeros(3, bool), np.zeros(3, bool)).iou == 1.0
-    assert math.isnan(cmp.agreement(np.zeros(0, bool), np.zeros(0, bool)).accuracy)
-    with pytest.raises(InvalidInputError):
-        cmp.agreement(np.zeros(2, bool), np.zeros(3, bool))
-
-
 def test_chamfer_distance() -> None:
     a = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
     assert cmp.chamfer_distance(a, a) == 0.0

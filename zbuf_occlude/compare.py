@@ -36,7 +36,6 @@ import time
 import tracemalloc
 from collections import defaultdict
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -46,12 +45,11 @@ from numpy.typing import NDArray
 from .cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
 from .errors import InvalidInputError, OutputError, ZbufOccludeError
 from .mesh import find_meshes, load_mesh
+from .metrics import agreement
 from .sampling import sample_surface
 from .visibility import available_methods, visible_mask
 
 __all__ = [
-    "Agreement",
-    "agreement",
     "chamfer_distance",
     "parse_methods",
     "parse_int_list",
@@ -139,48 +137,6 @@ RESULT_FIELDS = (
 # =========================================================================================
 # Metrics
 # =========================================================================================
-@dataclass(frozen=True)
-class Agreement:
-    """Agreement of one visibility mask with the reference (see the module docstring)."""
-
-    accuracy: float
-    false_visible_rate: float
-    false_hidden_rate: float
-    iou: float
-
-
-def agreement(predicted: NDArray[np.bool_], reference: NDArray[np.bool_]) -> Agreement:
-    """Score a visibility mask against the reference mask.
-
-    Parameters
-    ----------
-    predicted, reference : (N,) bool
-
-    Returns
-    -------
-    Agreement
-        Rates are fractions of all N points; ``iou`` of the visible sets (1.0 when both
-        are empty); all NaN when N is 0.
-
-    Raises
-    ------
-    InvalidInputError
-        When the shapes differ.
-    """
-    p = np.asarray(predicted, dtype=bool)
-    r = np.asarray(reference, dtype=bool)
-    if p.shape != r.shape or p.ndim != 1:
-        raise InvalidInputError(f"masks must be (N,) of equal length, got {p.shape} and {r.shape}")
-    n = len(p)
-    if n == 0:
-        return Agreement(math.nan, math.nan, math.nan, math.nan)
-    fv = int(np.count_nonzero(p & ~r))
-    fh = int(np.count_nonzero(~p & r))
-    union = int(np.count_nonzero(p | r))
-    inter = int(np.count_nonzero(p & r))
-    return Agreement(1.0 - (fv + fh) / n, fv / n, fh / n, inter / union if union else 1.0)
-
-
 def chamfer_distance(a: NDArray[np.floating], b: NDArray[np.floating]) -> float:
     """Symmetric Chamfer distance: ``(mean_a d(a, B) + mean_b d(b, A)) / 2``.
 
@@ -278,10 +234,10 @@ def _score(row: dict[str, Any], mask: NDArray[np.bool_], ref: NDArray[np.bool_],
     row.update(
         n_visible=int(mask.sum()),
         n_reference_visible=int(ref.sum()),
-        accuracy=a.accuracy,
-        false_visible_rate=a.false_visible_rate,
-        false_hidden_rate=a.false_hidden_rate,
-        iou=a.iou,
+        accuracy=a["accuracy"],
+        false_visible_rate=a["false_visible"],
+        false_hidden_rate=a["false_hidden"],
+        iou=a["iou"],
         chamfer=chamfer_distance(points[mask], points[ref]),
     )
 

@@ -26,7 +26,8 @@ def agreement(predicted: NDArray[np.bool_], truth: NDArray[np.bool_]) -> dict[st
     dict
         ``n`` points, ``accuracy``, ``false_visible`` (hidden points called visible),
         ``false_hidden`` (visible points called hidden), ``iou`` of the visible sets (1.0 if
-        both are empty), ``visible_fraction`` and ``truth_visible_fraction``.
+        both are empty), ``visible_fraction`` and ``truth_visible_fraction``; every rate is
+        NaN when N is 0.
 
     Raises
     ------
@@ -37,7 +38,11 @@ def agreement(predicted: NDArray[np.bool_], truth: NDArray[np.bool_]) -> dict[st
     t = np.asarray(truth, dtype=bool)
     if p.shape != t.shape or p.ndim != 1:
         raise InvalidInputError(f"masks must be (N,) of equal length, got {p.shape} and {t.shape}")
-    n = max(len(t), 1)
+    if len(t) == 0:
+        nan = float("nan")
+        return {"n": 0.0, "accuracy": nan, "false_visible": nan, "false_hidden": nan, "iou": nan,
+                "visible_fraction": nan, "truth_visible_fraction": nan}  # fmt: skip
+    n = len(t)
     fv = int(np.count_nonzero(p & ~t))
     fh = int(np.count_nonzero(~p & t))
     union = int(np.count_nonzero(p | t))
