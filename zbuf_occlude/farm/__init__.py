@@ -1,0 +1,51 @@
+"""The render farm: whole occluded data sets, headless, parallel, deterministic, resumable.
+
+One object is the unit of work (Sryamkin et al. 2023, §3.4, §4.3): load and normalise the
+mesh once, sample its dense cloud once, decide visibility from every pose with the points
+kept on the GPU (:class:`~zbuf_occlude.visibility.zbuffer.Scene`), and draw
+``samples_per_view`` samples per pose (:func:`~zbuf_occlude.occlude.occlude_object`).
+Each object's result is one shard, written atomically, then a small record; a run that
+is killed and started again skips every object whose record and shard are there.
+
+Determinism: every random draw comes from :func:`~zbuf_occlude.occlude.derive_rng` of the
+global seed and the object's key, :func:`~zbuf_occlude.occlude.object_key` of its path
+relative to the input root without the suffix (the name ``zbuf-occlude generate`` uses),
+so an object's samples do not depend on the worker count, the executor, ``--shard``,
+``--classes`` or ``--per-class``.  They do depend on the OpenGL implementation (the GL
+renderer is recorded per object).
+
+Executors: in-process (``workers=1``), a process pool started with ``spawn`` (one GL
+context per worker process, never inherited across ``fork``), or Dask distributed
+(``scheduler="tcp://HOST:PORT"`` or ``dask_local=N``).  Beyond one machine, ``shard=(I, N)``
+runs the I-th of N deterministic partitions (a SLURM array or Kubernetes indexed job) and
+:func:`merge_farm` joins the outputs.  The folder layout is in :mod:`zbuf_occlude.dataset`.
+
+Modules: ``inputs`` (discovering objects, shards), ``config`` (parameters, constants,
+journal paths), ``worker`` (one object), ``journal`` (records, manifest, card, summary),
+``run`` (executors, :func:`run_farm`, :func:`merge_farm`), ``cli`` (the subcommands).
+"""
+
+from .cli import add_farm_merge_parser, add_farm_parser
+from .config import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION, PAPER_SAMPLES_PER_MB, FarmParams, shard_path
+from .inputs import FarmObject, discover_objects, parse_shard, select_shard
+from .journal import FarmSummary
+from .run import merge_farm, run_farm
+from .worker import process_object
+
+__all__ = [
+    "FarmObject",
+    "FarmParams",
+    "FarmSummary",
+    "discover_objects",
+    "process_object",
+    "shard_path",
+    "select_shard",
+    "parse_shard",
+    "run_farm",
+    "merge_farm",
+    "add_farm_parser",
+    "add_farm_merge_parser",
+    "DEFAULT_FARM_DENSE_POINTS",
+    "DEFAULT_FARM_RESOLUTION",
+    "PAPER_SAMPLES_PER_MB",
+]

@@ -1,0 +1,126 @@
+"""The ``farm`` and ``farm-merge`` subcommands (called from :mod:`zbuf_occlude.cli`)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import shlex
+import sys
+
+
+from ..cameras import DEFAULT_RADIUS
+from ..dataset import (
+    STORAGE_MODES,
+)
+from ..errors import InvalidInputError
+from .config import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION, DEFAULT_N_POINTS, DEFAULT_SAMPLES_PER_VIEW, DEFAULT_VIEWS, FarmParams
+from .inputs import parse_shard
+from .run import merge_farm, run_farm
+
+log = logging.getLogger(__name__)
+
+
+# -- command line (called from zbuf_occlude.cli) -------------------------------------------------
+def _farm_command(args: argparse.Namespace) -> int:
+    if args.density is not None and args.dense_points is not None:
+        raise InvalidInputError("give either --density or --dense-points, not both")
+    params = FarmParams(
+        views=args.views,
+        samples_per_view=args.samples_per_view,
+        n_points=args.points,
+        dense_points=args.dense_points if args.dense_points is not None else DEFAULT_FARM_DENSE_POINTS,
+        density=args.density,
+        resolution=args.resolution,
+        seed=args.seed,
+        radius=args.radius,
+        storage=args.storage,
+    )
+    summary = run_farm(
+        args.root,
+        args.out,
+        params=params,
+        classes=args.classes,
+        per_class=args.per_class,
+        splits=args.splits,
+        workers=args.workers,
+        shard=parse_shard(args.shard) if args.shard else (0, 1),
+        scheduler=args.scheduler,
+        dask_local=args.dask_local,
+        overwrite=args.overwrite,
+        progress=not args.no_progress,
+        command=shlex.join(["zbuf-occlude", *sys.argv[1:]]) if sys.argv else None,
+    )
+    print(summary.format())
+    return 1 if summary.failed else 0
+
+
+def _merge_command(args: argparse.Namespace) -> int:
+    summary = merge_farm(args.inputs, args.out, progress=not args.no_progress)
+    print(summary.format())
+    return 1 if summary.failed else 0
+
+
+def add_farm_parser(subparsers) -> argparse.ArgumentParser:
+    """Add the ``farm`` subcommand to an ``argparse`` subparsers object (``func`` → exit status)."""
+    p = subparsers.add_parser(
+        "farm",
+        help="build a whole occluded data set (parallel, resumable, sharded, Dask)",
+        description="Render every mesh of ROOT from every pose and write a PointNet-style HDF5 data set to --out. "
+        "Run the same command again to resume; objects already finished are skipped.",
+    )
+    p.add_argument(
+        "root", help="ModelNet-style tree ROOT/<class>/<split>/<name>.off, a flat folder, or a list file 'PATH LABEL [SPLIT]'"
+    )
+    p.add_argument("--out", required=True, help="data set folder")
+    sel = p.add_argument_group("selection")
+    sel.add_argument("--classes", help="comma-separated class names (default: all)")
+    sel.add_argument("--per-class", type=int, help="first K meshes (by name) of each class and split")
+    sel.add_argument("--splits", default="train,test", help="comma-separated splits (default: train,test)")
+    r = p.add_argument_group("rendering")
+    r.add_argument("--views", default=DEFAULT_VIEWS, help="paper100 | grid25 | fibonacci:N | EL:AZ,... (default: paper100)")
+    r.add_argument(
+        "--samples-per-view", type=int, default=DEFAULT_SAMPLES_PER_VIEW, help="random draws per pose (default: 10)"
+    )
+    r.add_argument("--points", type=int, default=DEFAULT_N_POINTS, help="points per sample (default: 2048)")
+    dense = r.add_mutually_exclusive_group()
+    dense.add_argument(
+        "--dense-points", type=int, help=f"dense cloud per mesh, sampled once (default: {DEFAULT_FARM_DENSE_POINTS})"
+    )
+    dense.add_argument("--density", type=float, help="dense cloud as points per unit area of the normalised mesh")
+    r.add_argument(
+        "--resolution", type=int, default=DEFAULT_FARM_RESOLUTION, help=f"z-buffer size, pixels (default: {DEFAULT_FARM_RESOLUTION})"
+    )
+    r.add_argument(
+        "--radius", type=float, default=DEFAULT_RADIUS, help=f"camera distance, object units (default: {DEFAULT_RADIUS})"
+    )
+    r.add_argument("--seed", type=int, default=0, help="global seed (default: 0)")
+    r.add_argument(
+        "--storage", choices=STORAGE_MODES, default="dense", help="dense: PointNet HDF5; compact: dense cloud + visibility bits"
+    )
+    ex = p.add_argument_group("execution")
+    ex.add_argument("--workers", type=int, default=1, help="worker processes on this machine (default: 1)")
+    ex.add_argument(
+        "--shard", help="I/N: render the I-th of N partitions (SLURM array, Kubernetes indexed job); then farm-merge"
+    )
+    dask = ex.add_mutually_exclusive_group()
+    dask.add_argument("--scheduler", help="Dask scheduler address tcp://HOST:PORT (out must be on a shared file system)")
+    dask.add_argument("--dask-local", type=int, metavar="N", help="run on a local Dask cluster of N worker processes")
+    ex.add_argument("--overwrite", action="store_true", help="start over instead of resuming")
+    ex.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_farm_command)
+    return p
+
+
+def add_farm_merge_parser(subparsers) -> argparse.ArgumentParser:
+    """Add the ``farm-merge`` subcommand (``func`` → exit status)."""
+    p = subparsers.add_parser(
+        "farm-merge",
+        help="join the outputs of `farm --shard I/N` tasks into one data set",
+        description="Check that every object of the plan has a result, copy shards from other task folders, "
+        "and write the manifest, file lists and data set card.",
+    )
+    p.add_argument("inputs", nargs="+", help="task output folders (one folder if all tasks shared --out)")
+    p.add_argument("--out", help="data set folder (default: the first input)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_merge_command)
+    return p

@@ -1,0 +1,222 @@
+"""Farm inputs: discover the objects of a tree, a flat folder or a list file; shard them."""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+
+from ..dataset import (
+    SPLITS,
+)
+from ..errors import InvalidInputError
+from ..mesh import SUPPORTED_EXTENSIONS
+from ..occlude import object_key
+
+log = logging.getLogger(__name__)
+
+#: Split of an object whose path names none (flat folder, list file without a split column).
+DEFAULT_SPLIT = "train"
+_MESH_SUFFIXES = tuple(SUPPORTED_EXTENSIONS)
+
+
+# -- inputs ------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class FarmObject:
+    """One mesh of the farm's plan.
+
+    Attributes
+    ----------
+    index : int
+        Position in the plan (``object_index`` in the shards); shards and records are named by it.
+    name : str
+        Path relative to the input root (or as written in the list file), POSIX, without
+        suffix; the seed key is :func:`~zbuf_occlude.occlude.object_key` ``(name)``.
+    source : str
+        The mesh file.
+    class_name, split : str
+    label : int
+        Line of ``shape_names.txt``.
+    """
+
+    index: int
+    name: str
+    source: str
+    class_name: str
+    split: str
+    label: int
+
+    @property
+    def key(self) -> int:
+        """Seed key of the object (CRC-32 of ``name``)."""
+        return object_key(self.name)
+
+
+def _natural_key(text: str) -> list:
+    # "chair_2" < "chair_10"; integer labels of a list file sort numerically.
+    return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", text)]
+
+
+def _class_and_split(rel: Path) -> tuple[str, str]:
+    parent = rel.parent
+    if parent.name in SPLITS and parent.parent.name:
+        return parent.parent.name, parent.name
+    if parent.name:
+        return parent.name, DEFAULT_SPLIT
+    # flat folder: ModelNet file names are <class>_<NNNN>
+    return re.sub(r"_\d+$", "", rel.stem) or rel.stem, DEFAULT_SPLIT
+
+
+def _scan_tree(root: Path) -> list[tuple[str, str, str, str]]:
+    found = []
+    for path in root.rglob("*"):
+        if path.suffix.lower() not in _MESH_SUFFIXES or not path.is_file():
+            continue
+        rel = path.relative_to(root)
+        if any(part.startswith(".") for part in rel.parts):
+            continue  # hidden folders and temporary files
+        class_name, split = _class_and_split(rel)
+        found.append((rel.with_suffix("").as_posix(), str(path), class_name, split))
+    return found
+
+
+def _read_list_file(list_file: Path) -> list[tuple[str, str, str, str]]:
+    found = []
+    base = list_file.parent
+    for lineno, raw in enumerate(list_file.read_text(encoding="utf-8").splitlines(), start=1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        tokens = line.rsplit(maxsplit=2)
+        if len(tokens) == 3 and tokens[2] in SPLITS:
+            path_text, label, split = tokens
+        else:
+            tokens = line.rsplit(maxsplit=1)
+            if len(tokens) != 2:
+                raise InvalidInputError(f"{list_file}:{lineno}: expected 'PATH LABEL [train|test]', got {raw!r}")
+            (path_text, label), split = tokens, DEFAULT_SPLIT
+        path = Path(path_text)
+        name = path.with_suffix("").as_posix()
+        found.append((name, str(path if path.is_absolute() else base / path), label, split))
+    return found
+
+
+def discover_objects(
+    source: str | os.PathLike,
+    *,
+    classes: Sequence[str] | str | None = None,
+    per_class: int | None = None,
+    splits: Sequence[str] | str = SPLITS,
+) -> list[FarmObject]:
+    """The farm's plan: meshes under ``source``, filtered, labelled and numbered.
+
+    Parameters
+    ----------
+    source : str or PathLike
+        A ModelNet-style tree ``ROOT/<class>/<split>/<name>.off`` (nested deeper is fine:
+        the class and split are the two folders above the file), a folder of class
+        folders ``ROOT/<class>/<name>.off``, a flat folder ``ROOT/<class>_<NNNN>.off``, or
+        a list file with one ``PATH LABEL [SPLIT]`` per line (paths relative to the list
+        file; ``#`` starts a comment; ``LABEL`` is a class name).  Any extension of
+        :data:`zbuf_occlude.mesh.SUPPORTED_EXTENSIONS`.  Objects without a split are in
+        ``train``.
+    classes : sequence of str or comma-separated str, optional
+        Keep these classes only.
+    per_class : int, optional
+        Keep the first K objects (by name, natural order) of each class and split.
+    splits : sequence of str or comma-separated str
+        Keep these splits.
+
+    Returns
+    -------
+    objects : list of FarmObject
+        Sorted by name; ``index`` is the position, ``label`` the position of the class in
+        the sorted (natural order) list of kept classes.
+
+    Raises
+    ------
+    InvalidInputError
+        ``source`` missing, nothing found, an unknown class, or ``per_class < 1``.
+    """
+    source = Path(source).absolute()  # the manifest's source paths must not depend on the working folder
+    if source.is_dir():
+        found = _scan_tree(source)
+    elif source.is_file():
+        found = _read_list_file(source)
+    else:
+        raise InvalidInputError(f"no such mesh folder or list file: {source}")
+    if not found:
+        raise InvalidInputError(f"no mesh files ({', '.join(_MESH_SUFFIXES)}) under {source}")
+    if classes is not None:
+        wanted = set(_split_names(classes))
+        unknown = wanted - {f[2] for f in found}
+        if unknown:
+            have = sorted({f[2] for f in found}, key=_natural_key)
+            raise InvalidInputError(f"classes {sorted(unknown)} not found under {source}; it has {have}")
+        found = [f for f in found if f[2] in wanted]
+    split_set = set(_split_names(splits))
+    found = [f for f in found if f[3] in split_set]
+    found.sort(key=lambda f: _natural_key(f[0]))
+    if per_class is not None:
+        if per_class < 1:
+            raise InvalidInputError(f"--per-class must be >= 1, got {per_class}")
+        taken: dict[tuple[str, str], int] = {}
+        kept = []
+        for f in found:
+            n = taken.get((f[2], f[3]), 0)
+            if n < per_class:
+                kept.append(f)
+                taken[(f[2], f[3])] = n + 1
+        found = kept
+    if not found:
+        raise InvalidInputError(f"no meshes left under {source} after the class/split selection")
+    names = [f[0] for f in found]
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})[:5]
+        raise InvalidInputError(f"mesh names must be unique (they seed the samples); repeated: {dup}")
+    shape_names = sorted({f[2] for f in found}, key=_natural_key)
+    labels = {c: i for i, c in enumerate(shape_names)}
+    objects = [FarmObject(i, name, src, cls, split, labels[cls]) for i, (name, src, cls, split) in enumerate(found)]
+    keys: dict[int, str] = {}
+    for o in objects:
+        if o.key in keys:
+            log.warning(
+                "objects %s and %s share the seed key %d (CRC-32 collision): their draws are correlated",
+                keys[o.key], o.name, o.key,
+            )  # fmt: skip
+        keys[o.key] = o.name
+    return objects
+
+
+def _split_names(spec: Sequence[str] | str) -> list[str]:
+    if isinstance(spec, str):
+        return [s.strip() for s in spec.split(",") if s.strip()]
+    return [str(s) for s in spec]
+
+
+def parse_shard(text: str) -> tuple[int, int]:
+    """``"I/N"`` → ``(I, N)`` with ``0 <= I < N``.
+
+    Raises
+    ------
+    InvalidInputError
+        Malformed or out of range.
+    """
+    m = re.fullmatch(r"\s*(\d+)\s*/\s*(\d+)\s*", text)
+    if not m or not 0 <= int(m.group(1)) < int(m.group(2)):
+        raise InvalidInputError(
+            f"--shard must be I/N with 0 <= I < N (e.g. 3/16 for ${{SLURM_ARRAY_TASK_ID}}/16), got {text!r}"
+        )
+    return int(m.group(1)), int(m.group(2))
+
+
+def select_shard(objects: Sequence[FarmObject], index: int, count: int) -> list[FarmObject]:
+    """The ``index``-th of ``count`` deterministic partitions (object ``i`` goes to task ``i mod count``;
+    round robin spreads classes and mesh sizes evenly)."""
+    if not 0 <= index < count:
+        raise InvalidInputError(f"shard index must satisfy 0 <= I < N, got {index}/{count}")
+    return [o for o in objects if o.index % count == index]

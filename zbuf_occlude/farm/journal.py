@@ -1,0 +1,188 @@
+"""The farm's journal, manifest, file lists and data-set card, and the run summary."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+
+from ..dataset import (
+    CARD_FILE,
+    FORMAT_VERSION,
+    MANIFEST_FILE,
+    SHAPE_NAMES_FILE,
+    SHARD_DIR,
+    SPLITS,
+    file_list_name,
+)
+from ..errors import InvalidInputError
+from ..io import atomic_path
+from .config import BYTES_PER_MB, FarmParams, PAPER_SAMPLES_PER_MB, RECORD_DIR, _plan_digest, _record_path, shard_path
+from .inputs import FarmObject
+from .worker import _base_record, _version, _write_json
+
+log = logging.getLogger(__name__)
+
+
+# -- journal, manifest, card -------------------------------------------------------------------
+def _read_json(path: Path) -> Any | None:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+
+
+def _finished(out: Path, obj: FarmObject, digest: str) -> dict[str, Any] | None:
+    """The record of ``obj`` if it finished (ok, same parameters, shard present and whole)."""
+    rec = _read_json(_record_path(out, obj.index))
+    if not rec or rec.get("params_digest") != digest or rec.get("name") != obj.name or rec.get("status") != "ok":
+        return None
+    for rel in rec["shards"]:
+        shard = out / rel
+        if not shard.is_file() or shard.stat().st_size != rec["bytes"]:
+            return None
+    return rec
+
+
+def _remove_stale_temps(out: Path, objects: Sequence[FarmObject], everything: bool) -> None:
+    # atomic_path leaves ".<name>.<random>.tmp" behind when a run is SIGKILLed mid-write;
+    # a sharded task removes only its own, other tasks may be writing theirs right now
+    names = None if everything else {Path(shard_path(o)).name for o in objects} | {f"{o.index:06d}.json" for o in objects}
+    for folder in (out / SHARD_DIR, out / RECORD_DIR, out):
+        if not folder.is_dir():
+            continue
+        for tmp in folder.glob(".*.tmp"):
+            target = tmp.name[1:].rsplit(".", 2)[0]
+            if names is None or target in names:
+                tmp.unlink(missing_ok=True)
+
+
+def _plan_doc(objects: Sequence[FarmObject], params: FarmParams, source: str) -> dict[str, Any]:
+    return {
+        "format_version": FORMAT_VERSION,
+        "params": params.to_dict(),
+        "params_digest": params.digest(),
+        "plan_digest": _plan_digest(objects),
+        "source": source,
+        "objects": [dataclasses.asdict(o) for o in objects],
+    }
+
+
+def _objects_of(plan: dict[str, Any]) -> list[FarmObject]:
+    return [FarmObject(**o) for o in plan["objects"]]
+
+
+def _shape_names(objects: Sequence[FarmObject]) -> list[str]:
+    names: dict[int, str] = {}
+    for o in objects:
+        if names.setdefault(o.label, o.class_name) != o.class_name:
+            raise InvalidInputError(f"label {o.label} is used by classes {names[o.label]!r} and {o.class_name!r}")
+    return [names.get(i, f"unused_{i}") for i in range(max(names) + 1)] if names else []
+
+
+def _manifest_lines(objects: Sequence[FarmObject], params: FarmParams, records: dict[int, dict[str, Any]]) -> str:
+    return "".join(json.dumps(records.get(o.index) or _base_record(o, params), sort_keys=True) + "\n" for o in objects)
+
+
+def _write_text(path: Path, text: str) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
+def _folder_bytes(out: Path) -> int:
+    return sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
+
+
+def _finalize(out: Path, plan: dict[str, Any], records: dict[int, dict[str, Any]], commands: list[str]) -> None:
+    """Write manifest, shape names, file lists and (last: it marks the data set finished) the card."""
+    objects = _objects_of(plan)
+    params = FarmParams(**plan["params"])
+    _write_text(out / MANIFEST_FILE, _manifest_lines(objects, params, records))
+    shape_names = _shape_names(objects)
+    _write_text(out / SHAPE_NAMES_FILE, "".join(f"{n}\n" for n in shape_names))
+    splits = sorted({o.split for o in objects}, key=lambda s: (s not in SPLITS, s))
+    for split in splits:
+        ok_in_split = [o for o in objects if o.split == split and records[o.index]["status"] == "ok"]
+        shards = [s for o in ok_in_split for s in records[o.index]["shards"]]
+        _write_text(out / file_list_name(split), "".join(f"{s}\n" for s in shards))
+    ok = [r for r in records.values() if r["status"] == "ok"]
+    card = {
+        "format_version": FORMAT_VERSION,
+        "tool": "zbuf_occlude",
+        "version": _version(),
+        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "commands": commands,
+        "source": plan["source"],
+        "storage": params.storage,
+        "params": params.to_dict(),
+        "params_digest": plan["params_digest"],
+        "plan_digest": plan["plan_digest"],
+        "poses": [list(p) for p in params.poses],
+        "splits": splits,
+        "shape_names": shape_names,
+        "n_objects": len(objects),
+        "n_objects_ok": len(ok),
+        "n_objects_failed": len(objects) - len(ok),
+        "n_samples": int(sum(r["n_samples"] for r in ok)),
+        "shard_bytes": int(sum(r["bytes"] for r in ok)),
+        "renderers": sorted({r["renderer"] for r in ok if r.get("renderer")}),
+        "seed_derivation": "numpy SeedSequence([seed, blake2b64(name), stream, pose_index, sample_index]), "
+        "zbuf_occlude.occlude.derive_rng; stream 0 = dense cloud, 1 = sample draws",
+        "reference": "Sryamkin, Msallam, Klestov 2023, "
+        "A method to create real-like point clouds for 3D object classification",
+    }
+    _write_json(out / CARD_FILE, card)
+
+
+# -- summary -------------------------------------------------------------------------------------
+@dataclass
+class FarmSummary:
+    """What a farm run (or merge) did; :meth:`format` is the one-screen report the CLI prints."""
+
+    out: str
+    objects: int
+    done: int
+    failed: int
+    resumed: int
+    samples: int
+    bytes: int
+    wall_s: float
+    views: int
+    storage: str
+    finished: bool
+    workers: str = "1 process"
+    peak_rss_mb: float = 0.0
+    failures: list[tuple[str, str]] = field(default_factory=list)
+
+    @property
+    def samples_per_mb(self) -> float:
+        return self.samples / (self.bytes / BYTES_PER_MB) if self.bytes else 0.0
+
+    @property
+    def views_per_s(self) -> float:
+        return self.views / self.wall_s if self.wall_s > 0 else 0.0
+
+    def format(self) -> str:
+        """Multi-line human summary."""
+        lines = [
+            f"zbuf-occlude farm: {self.out}  "
+            f"({'finished' if self.finished else 'this task done; run farm-merge when all tasks are'})",
+            f"  objects   {self.done} done ({self.resumed} from an earlier run), {self.failed} failed, "
+            f"{self.objects} planned",
+            f"  samples   {self.samples:,}  ({self.storage} storage)",
+            f"  bytes     {self.bytes:,} ({self.bytes / BYTES_PER_MB:.1f} MB)  ->  {self.samples_per_mb:,.1f} samples/MB "
+            f"(paper, Table 2: {PAPER_SAMPLES_PER_MB})",
+            f"  wall      {self.wall_s:.1f} s, {self.views} views rendered, {self.views_per_s:.1f} views/s, "
+            f"{self.workers}, peak RSS per worker {self.peak_rss_mb:.0f} MB",
+        ]
+        for name, error in self.failures[:10]:
+            lines.append(f"  FAILED    {name}: {error}")
+        if len(self.failures) > 10:
+            lines.append(f"  ... and {len(self.failures) - 10} more failures (see {MANIFEST_FILE})")
+        return "\n".join(lines)

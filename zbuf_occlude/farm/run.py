@@ -1,0 +1,409 @@
+"""Executors (in-process, process pool, Dask) and the farm itself: run_farm, merge_farm."""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import multiprocessing
+import os
+import shlex
+import shutil
+import socket
+import sys
+import time
+from collections.abc import Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+
+from ..dataset import (
+    CARD_FILE,
+    MANIFEST_FILE,
+    SHAPE_NAMES_FILE,
+    SHARD_DIR,
+    SPLITS,
+    file_list_name,
+)
+from ..errors import BackendUnavailable, InvalidInputError, OutputError
+from ..io import atomic_path
+from .config import FarmParams, MANIFEST_INTERVAL_S, PLAN_FILE, RECORD_DIR, TASK_DIR, _record_path, shard_path
+from .inputs import FarmObject, discover_objects, select_shard
+from .journal import FarmSummary, _finalize, _finished, _folder_bytes, _manifest_lines, _objects_of, _plan_doc, _read_json, _remove_stale_temps, _write_text
+from .worker import _version, _write_json, process_object
+
+log = logging.getLogger(__name__)
+
+
+# -- executors -----------------------------------------------------------------------------
+def _serial(todo: Sequence[FarmObject], params: FarmParams, out: Path) -> Iterator[dict[str, Any]]:
+    for obj in todo:
+        yield process_object(obj, params, out)
+
+
+def _pool(todo: Sequence[FarmObject], params: FarmParams, out: Path, workers: int) -> Iterator[dict[str, Any]]:
+    # spawn: a forked child would inherit the parent's GL state; each worker makes its own context
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        pending = {pool.submit(process_object, obj, params, str(out)) for obj in todo}
+        try:
+            while pending:
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in finished:
+                    yield fut.result()
+        finally:
+            for fut in pending:
+                fut.cancel()
+
+
+def _dask(
+    todo: Sequence[FarmObject], params: FarmParams, out: Path, scheduler: str | None, dask_local: int | None
+) -> Iterator[dict[str, Any]]:
+    try:
+        from dask.distributed import Client, LocalCluster, as_completed
+    except ImportError as exc:
+        raise BackendUnavailable("the Dask executor needs dask.distributed: pip install 'zbuf-occlude[dask]'") from exc
+    with contextlib.ExitStack() as stack:
+        if scheduler:
+            try:
+                client = stack.enter_context(Client(scheduler))
+            except (OSError, TimeoutError) as exc:
+                raise BackendUnavailable(f"cannot reach the Dask scheduler {scheduler}: {exc}") from exc
+        else:
+            # one thread per worker process: each process owns one GL context
+            cluster = stack.enter_context(
+                LocalCluster(n_workers=dask_local, threads_per_worker=1, processes=True, dashboard_address=None)
+            )
+            client = stack.enter_context(Client(cluster))
+        # a fresh token per run: a long-lived scheduler may still know the keys of an earlier run
+        token = f"{params.digest()}-{os.getpid()}-{time.time_ns()}"
+        futures = [
+            client.submit(process_object, obj, params, str(out), key=f"zbuf-farm-{token}-{obj.index}", pure=False)
+            for obj in todo
+        ]
+        try:
+            for fut in as_completed(futures):
+                yield fut.result()
+        finally:
+            client.cancel(futures)
+
+
+# -- the farm ----------------------------------------------------------------------------------
+def _prepare_out(out: Path) -> None:
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create the output folder {out}: {exc.strerror or exc}; choose a writable --out") from exc
+    if not os.access(out, os.W_OK | os.X_OK):
+        raise OutputError(f"the output folder {out} is not writable; choose a writable --out")
+
+
+def _wipe(out: Path, objects: Sequence[FarmObject] | None) -> None:
+    """``--overwrite``: remove the farm's own files (all, or those of ``objects`` for a sharded task)."""
+    if objects is None:
+        for name in (SHARD_DIR, RECORD_DIR, TASK_DIR):
+            shutil.rmtree(out / name, ignore_errors=True)
+        for name in (PLAN_FILE, CARD_FILE, MANIFEST_FILE, SHAPE_NAMES_FILE, *(file_list_name(s) for s in SPLITS)):
+            (out / name).unlink(missing_ok=True)
+        return
+    (out / CARD_FILE).unlink(missing_ok=True)
+    for o in objects:
+        _record_path(out, o.index).unlink(missing_ok=True)
+        (out / shard_path(o)).unlink(missing_ok=True)
+
+
+def _check_compatible(out: Path, plan: dict[str, Any]) -> None:
+    old = _read_json(out / PLAN_FILE)
+    if old is None:
+        if (out / PLAN_FILE).exists():
+            raise OutputError(f"{out / PLAN_FILE} is unreadable; use --overwrite to start over")
+        return
+    if old.get("params_digest") != plan["params_digest"]:
+        diff = {k: (old["params"].get(k), v) for k, v in plan["params"].items() if old["params"].get(k) != v}
+        raise InvalidInputError(
+            f"{out} holds a farm run with other parameters {diff} (old, new); use --overwrite to start over or another --out"
+        )
+    if old.get("plan_digest") != plan["plan_digest"]:
+        raise InvalidInputError(
+            f"{out} holds a farm run over other objects ({len(old['objects'])} vs {len(plan['objects'])}: --classes, "
+            "--per-class, --splits or the input changed); use --overwrite or another --out"
+        )
+
+
+def _estimate_bytes(params: FarmParams) -> int:
+    poses = len(params.poses)
+    dense = params.dense_points or 0
+    if params.storage == "compact":
+        return dense * 12 + poses * (dense + 7) // 8
+    return poses * params.samples_per_view * params.n_points * 12
+
+
+def run_farm(
+    source: str | os.PathLike | Sequence[FarmObject],
+    out: str | os.PathLike,
+    *,
+    params: FarmParams | None = None,
+    classes: Sequence[str] | str | None = None,
+    per_class: int | None = None,
+    splits: Sequence[str] | str = SPLITS,
+    workers: int = 1,
+    shard: tuple[int, int] = (0, 1),
+    scheduler: str | None = None,
+    dask_local: int | None = None,
+    overwrite: bool = False,
+    progress: bool = True,
+    command: str | None = None,
+) -> FarmSummary:
+    """Build (or resume) an occluded data set from many meshes.
+
+    Parameters
+    ----------
+    source : str, PathLike or sequence of FarmObject
+        Mesh tree, flat folder or list file (:func:`discover_objects`), or a ready plan.
+    out : str or PathLike
+        Data set folder (layout: :mod:`zbuf_occlude.dataset`).
+    params : FarmParams, optional
+        What to render; default :class:`FarmParams` ``()`` (paper100, 10 samples of 2048
+        points per pose, 32768 dense points, 512² z-buffer, seed 0, dense storage).
+    classes, per_class, splits
+        Selection, see :func:`discover_objects` (ignored for a ready plan).
+    workers : int
+        Processes rendering in parallel on this machine (``spawn``ed, one GL context each).
+    shard : (I, N)
+        Render only the I-th of N partitions (:func:`select_shard`); with N > 1 the data
+        set is completed by :func:`merge_farm` once every task has finished.
+    scheduler : str, optional
+        Dask scheduler address (``tcp://HOST:PORT``); workers must see ``out`` at the same
+        path (shared file system) and have zbuf_occlude installed.
+    dask_local : int, optional
+        Start a local Dask cluster of this many single-threaded worker processes.
+    overwrite : bool
+        Start over: remove this run's earlier results (all of them, or this task's objects).
+    progress : bool
+        Show a tqdm bar (objects, views/s, ETA) on stderr.
+    command : str, optional
+        Command line for the data set card (default: this process's ``sys.argv``).
+
+    Returns
+    -------
+    FarmSummary
+
+    Raises
+    ------
+    InvalidInputError
+        Bad parameters or selection; ``out`` holds a run with other parameters.
+    OutputError
+        ``out`` cannot be created or written, or the disk is full (finished objects are kept).
+    BackendUnavailable
+        No OpenGL 4.3 context, or Dask requested but not installed or unreachable.
+    """
+    t0 = time.perf_counter()
+    params = params or FarmParams()
+    if workers < 1:
+        raise InvalidInputError(f"--workers must be >= 1, got {workers}")
+    if scheduler and dask_local:
+        raise InvalidInputError("give either --scheduler or --dask-local, not both")
+    if dask_local is not None and dask_local < 1:
+        raise InvalidInputError(f"--dask-local must be >= 1, got {dask_local}")
+    task, n_tasks = shard
+    if isinstance(source, (str, os.PathLike)):
+        source_text = str(Path(source).resolve())
+        objects = discover_objects(source, classes=classes, per_class=per_class, splits=splits)
+    else:
+        objects, source_text = list(source), "<objects given by the caller>"
+        if [o.index for o in objects] != list(range(len(objects))):
+            raise InvalidInputError("a ready plan must number its objects 0, 1, 2, ... in order")
+    mine = select_shard(objects, task, n_tasks)
+    out = Path(out)
+    _prepare_out(out)
+    plan = _plan_doc(objects, params, source_text)
+    if overwrite:
+        _wipe(out, None if n_tasks == 1 else mine)
+    else:
+        _check_compatible(out, plan)
+    _write_json(out / PLAN_FILE, plan)
+    command = command or shlex.join(sys.argv)
+    _write_json(
+        out / TASK_DIR / f"task-{task}-of-{n_tasks}.json",
+        {"shard": [task, n_tasks], "command": command, "version": _version(), "host": socket.gethostname(),
+         "started": datetime.now(timezone.utc).isoformat(timespec="seconds"), "objects": [o.index for o in mine]},
+    )  # fmt: skip
+    _remove_stale_temps(out, mine, everything=n_tasks == 1)
+
+    digest = params.digest()
+    records: dict[int, dict[str, Any]] = {}
+    for o in mine:
+        rec = _finished(out, o, digest)
+        if rec is not None:
+            records[o.index] = rec
+    resumed = len(records)
+    todo = [o for o in mine if o.index not in records]
+    if todo:
+        need, free = _estimate_bytes(params) * len(todo), shutil.disk_usage(out).free
+        if need > free:
+            log.warning("about %.0f MB still to write to %s but only %.0f MB free", need / 1e6, out, free / 1e6)
+    log.info("%d objects in this task, %d finished earlier, %d to render", len(mine), resumed, len(todo))
+
+    out = out.resolve()  # workers (Dask: possibly on other machines) may not share our working folder
+    if scheduler or dask_local:
+        records_iter = _dask(todo, params, out, scheduler, dask_local)
+        workers_text = f"dask {scheduler or f'LocalCluster({dask_local})'}"
+    elif workers > 1 and len(todo) > 1:
+        records_iter = _pool(todo, params, out, min(workers, len(todo)))
+        workers_text = f"{min(workers, len(todo))} processes"
+    else:
+        records_iter = _serial(todo, params, out)
+        workers_text = "1 process"
+
+    manifest = out / (MANIFEST_FILE if n_tasks == 1 else f"{TASK_DIR}/manifest-{task}-of-{n_tasks}.jsonl")
+    views = 0
+    peak = 0.0
+    last_manifest = time.monotonic()
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=len(mine), initial=resumed, unit="obj", desc="farm", disable=not progress or None, dynamic_ncols=True)
+    t_render = time.perf_counter()
+    try:
+        for rec in records_iter:
+            records[rec["object_index"]] = rec
+            peak = max(peak, rec.get("peak_rss_mb", 0.0))
+            if rec["status"] == "ok":
+                views += len(rec["n_visible"])
+            n_failed = sum(r["status"] != "ok" for r in records.values())
+            bar.update(1)
+            rate = views / max(time.perf_counter() - t_render, 1e-9)
+            bar.set_postfix(views_s=f"{rate:.1f}", failed=n_failed, refresh=False)
+            if time.monotonic() - last_manifest > MANIFEST_INTERVAL_S:
+                _write_text(manifest, _manifest_lines(mine, params, records))
+                last_manifest = time.monotonic()
+    finally:
+        bar.close()
+        with contextlib.suppress(OutputError):  # a full disk must not hide the original error
+            _write_text(manifest, _manifest_lines(mine, params, records))
+
+    finished = False
+    if n_tasks == 1:
+        _finalize(out, plan, records, [command])
+        finished = True
+    else:
+        log.info("task %d/%d done; run `zbuf-occlude farm-merge %s` when all %d tasks are", task, n_tasks, out, n_tasks)
+    ok = [r for r in records.values() if r["status"] == "ok"]
+    return FarmSummary(
+        out=str(out),
+        objects=len(mine),
+        done=len(ok),
+        failed=len(records) - len(ok),
+        resumed=resumed,
+        samples=int(sum(r["n_samples"] for r in ok)),
+        bytes=_folder_bytes(out) if finished else int(sum(r["bytes"] for r in ok)),
+        wall_s=time.perf_counter() - t0,
+        views=views,
+        storage=params.storage,
+        finished=finished,
+        workers=workers_text,
+        peak_rss_mb=peak,
+        failures=[(r["name"], r["error"]) for r in records.values() if r["status"] != "ok"],
+    )
+
+
+def merge_farm(
+    inputs: Sequence[str | os.PathLike], out: str | os.PathLike | None = None, *, progress: bool = True
+) -> FarmSummary:
+    """Join the outputs of ``--shard I/N`` tasks into one finished data set.
+
+    Parameters
+    ----------
+    inputs : sequence of str or PathLike
+        Task output folders (the same folder for tasks that shared one ``--out``).
+    out : str or PathLike, optional
+        The data set folder (default: the first input).  Shards of other inputs are
+        copied in (atomically); a merge can be rerun.
+    progress : bool
+        tqdm bar over copied shards.
+
+    Raises
+    ------
+    InvalidInputError
+        An input is not a farm output, inputs disagree on parameters or plan, or objects
+        have no result yet (the message names them: rerun their tasks).
+    OutputError
+        ``out`` cannot be written.
+    """
+    t0 = time.perf_counter()
+    if not inputs:
+        raise InvalidInputError("farm-merge needs at least one task output folder")
+    folders = [Path(p) for p in inputs]
+    out = Path(out) if out is not None else folders[0]
+    plans = []
+    for folder in folders:
+        plan = _read_json(folder / PLAN_FILE)
+        if plan is None:
+            raise InvalidInputError(f"{folder} is not a farm output (no readable {PLAN_FILE})")
+        plans.append(plan)
+    for folder, plan in zip(folders[1:], plans[1:]):
+        if (plan["params_digest"], plan["plan_digest"]) != (plans[0]["params_digest"], plans[0]["plan_digest"]):
+            raise InvalidInputError(f"{folder} was made with other parameters or objects than {folders[0]}; cannot merge")
+    plan = plans[0]
+    _prepare_out(out)
+    if out.resolve() not in {f.resolve() for f in folders}:
+        _check_compatible(out, plan)
+    _write_json(out / PLAN_FILE, plan)
+    objects = _objects_of(plan)
+    digest = plan["params_digest"]
+    records: dict[int, dict[str, Any]] = {}
+    failed: dict[int, dict[str, Any]] = {}
+    commands: list[str] = []
+    from tqdm.auto import tqdm
+
+    for folder in folders:
+        for task_file in sorted((folder / TASK_DIR).glob("task-*.json")):
+            doc = _read_json(task_file)
+            if doc and doc.get("command") not in commands:
+                commands.append(doc["command"])
+            if doc and folder.resolve() != out.resolve():
+                _write_json(out / TASK_DIR / task_file.name, doc)
+        for o in tqdm(objects, desc=f"merge {folder.name}", unit="obj", disable=not progress or None, leave=False):
+            if o.index in records:
+                continue
+            rec = _finished(folder, o, digest)
+            if rec is None:
+                other = _read_json(_record_path(folder, o.index))
+                if other and other.get("params_digest") == digest and other.get("status") == "failed":
+                    failed[o.index] = other
+                continue
+            if folder.resolve() != out.resolve():
+                for rel in rec["shards"]:
+                    with atomic_path(out / rel) as tmp:
+                        shutil.copyfile(folder / rel, tmp)
+                _write_json(_record_path(out, o.index), rec)
+            records[o.index] = rec
+    for index, rec in failed.items():
+        if index not in records:
+            records[index] = rec
+            _write_json(_record_path(out, index), rec)
+    missing = [o for o in objects if o.index not in records]
+    if missing:
+        names = ", ".join(f"{o.index}:{o.name}" for o in missing[:5])
+        raise InvalidInputError(
+            f"{len(missing)} of {len(objects)} objects have no result yet ({names}{', ...' if len(missing) > 5 else ''}); "
+            "rerun the tasks that own them (object i belongs to task i mod N), then merge again"
+        )
+    commands.append(shlex.join(sys.argv))
+    _finalize(out, plan, records, commands)
+    ok = [r for r in records.values() if r["status"] == "ok"]
+    return FarmSummary(
+        out=str(out),
+        objects=len(objects),
+        done=len(ok),
+        failed=len(objects) - len(ok),
+        resumed=len(ok),
+        samples=int(sum(r["n_samples"] for r in ok)),
+        bytes=_folder_bytes(out),
+        wall_s=time.perf_counter() - t0,
+        views=0,
+        storage=plan["params"]["storage"],
+        finished=True,
+        workers="merge",
+        failures=[(r["name"], r["error"]) for r in records.values() if r["status"] != "ok"],
+    )
