@@ -61,7 +61,7 @@ from .oracle import (
     TrianglePlanes,
     _inside_triangle,
     _segment_plane,
-    triangle_planes,
+    mesh_planes,
 )
 from .registry import DEFAULT_SELF_HIT_TOLERANCE, check_face_index, check_points, register
 
@@ -352,21 +352,6 @@ def occluded_by_faces(
 # =========================================================================================
 # Face keys for §3.6's exclusion rules
 # =========================================================================================
-#: Meshes whose face planes :func:`_mesh_planes` keeps (most recently used).
-_PLANES_CACHE_SIZE = 8
-
-
-@functools.lru_cache(maxsize=_PLANES_CACHE_SIZE)
-def _planes_of(triangles_bytes: bytes) -> TrianglePlanes:
-    return triangle_planes(np.frombuffer(triangles_bytes, dtype=np.float64).reshape(-1, 3, 3))
-
-
-def _mesh_planes(mesh: trimesh.Trimesh) -> TrianglePlanes:
-    # Keyed on the triangles' bytes, so many cameras of one mesh share the planes and an
-    # edited mesh can never meet a stale entry.
-    return _planes_of(np.ascontiguousarray(mesh.triangles, dtype=np.float64).tobytes())
-
-
 def plane_distance(planes: TrianglePlanes, eye: ArrayLike) -> NDArray[np.float64]:
     """Distance from ``eye`` to each face's plane: §3.6's first exclusion rule.
 
@@ -547,7 +532,7 @@ def paper_exact_visible(
     _log_ignored("paper-exact", _ignored)
     pts = check_points(points)
     fi = check_face_index(face_index, len(pts), len(mesh.faces))
-    planes = _mesh_planes(mesh)
+    planes = mesh_planes(mesh)
     if face_order == "mesh":
         order = None
     elif face_order == "near-first":
@@ -628,7 +613,7 @@ def paper_pruned_visible(
     pts = check_points(points)
     fi = check_face_index(face_index, len(pts), len(mesh.faces))
     rules = _parse_rules(prune)
-    planes = _mesh_planes(mesh)
+    planes = mesh_planes(mesh)
     eye = np.asarray(camera.eye, dtype=np.float64)
     key = face_keys(mesh, planes, eye, rules, pts if fi is not None else None, fi)
 
@@ -763,7 +748,7 @@ def surviving_faces(
     used, corner_of = np.unique(faces.ravel(), return_inverse=True)
     unique_xyz, xyz_of = np.unique(vertices[used], axis=0, return_inverse=True)
     occluded_xyz = occluded_by_faces(
-        _mesh_planes(tested),
+        mesh_planes(tested),
         unique_xyz,
         camera.eye,
         tolerance=tolerance,
@@ -965,7 +950,7 @@ def og_visible(
     visible = camera.in_frustum(pts)
     if len(pts) == 0:
         return visible
-    planes = _mesh_planes(mesh)
+    planes = mesh_planes(mesh)
     eye = np.asarray(camera.eye, dtype=np.float64)
     key = face_keys(mesh, planes, eye, rules, pts if fi is not None else None, fi)
     # Only cells holding an in-frustum point need a test.

@@ -45,9 +45,6 @@ from __future__ import annotations
 
 import logging
 import math
-import threading
-import weakref
-from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
@@ -58,11 +55,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..cameras import Camera
 from ..errors import BackendUnavailable, InvalidInputError
+from ..mesh_cache import MeshCache
 from .registry import DEFAULT_SELF_HIT_TOLERANCE, check_face_index, check_points, register
 
 __all__ = [
     "TrianglePlanes",
     "triangle_planes",
+    "mesh_planes",
     "segment_hits_triangles",
     "occluded_numpy",
     "occluded_embree",
@@ -105,7 +104,7 @@ _CULL_MIN_DEPTH = 1e-6
 #: Up to this many rays that Embree could not settle are decided one by one against the
 #: faces whose bounding boxes meet their segment; more go through the image-plane cull.
 _FEW_FALLBACK_RAYS = 64
-#: Embree scenes kept alive for meshes that are still alive (most recently used first).
+#: Meshes whose planes and Embree scenes stay cached (least recently used evicted).
 _SCENE_CACHE_SIZE = 8
 
 
@@ -568,7 +567,9 @@ def occluded_numpy(
 class _EmbreeScene:
     """An Embree BVH of one mesh plus its float64 planes (for re-deciding Embree's hits)."""
 
-    def __init__(self, vertices: NDArray[np.float64], faces: NDArray[np.int64]) -> None:
+    def __init__(
+        self, vertices: NDArray[np.float64], faces: NDArray[np.int64], planes: TrianglePlanes | None = None
+    ) -> None:
         try:
             from embreex import rtcore_scene
             from embreex.mesh_construction import TriangleMesh
@@ -580,7 +581,7 @@ class _EmbreeScene:
         vertices = np.asarray(vertices, dtype=np.float64)
         faces = np.asarray(faces, dtype=np.int64)
         self.n_faces = len(faces)
-        self.planes = triangle_planes(vertices[faces])
+        self.planes = triangle_planes(vertices[faces]) if planes is None else planes
         used = vertices[faces].reshape(-1, 3)
         # Float32 is most precise near 0, so the BVH is built around the bounding-box centre.
         self.centre = (used.min(axis=0) + used.max(axis=0)) / 2.0 if len(used) else np.zeros(3)
@@ -628,36 +629,26 @@ class _EmbreeScene:
         return out["primID"].astype(np.int64), out["tfar"].astype(np.float64)
 
 
-_SCENE_CACHE: OrderedDict[int, tuple[weakref.ref, int, _EmbreeScene]] = OrderedDict()
-# Re-entrant: a mesh collected by the cyclic GC while the lock is held runs _forget.
-_SCENE_CACHE_LOCK = threading.RLock()
+#: Face planes of the meshes in use (:func:`mesh_planes`).
+_planes_cache: MeshCache[TrianglePlanes] = MeshCache(lambda mesh: triangle_planes(mesh.triangles), _SCENE_CACHE_SIZE)
+# _EmbreeScene is looked up at build time (tests count the builds by patching it).
+_scenes: MeshCache[_EmbreeScene] = MeshCache(
+    lambda mesh: _EmbreeScene(mesh.vertices, mesh.faces, planes=mesh_planes(mesh)), _SCENE_CACHE_SIZE
+)
+
+
+def mesh_planes(mesh: trimesh.Trimesh) -> TrianglePlanes:
+    """The :func:`triangle_planes` of ``mesh``, cached per mesh object (rebuilt after edits).
+
+    Shared by the oracles and the paper's object-space methods, so that many cameras of
+    one mesh compute the planes once.
+    """
+    return _planes_cache(mesh)
 
 
 def _scene_for(mesh: trimesh.Trimesh) -> _EmbreeScene:
-    """The cached Embree scene of ``mesh``, rebuilt if the mesh's vertices or faces changed.
-
-    Keyed on the object (``id`` + a weak reference, since ``Trimesh.__hash__`` is its content
-    hash and changes under edits); an entry dies with its mesh.
-    """
-    key, content = id(mesh), hash(mesh)
-    with _SCENE_CACHE_LOCK:
-        entry = _SCENE_CACHE.get(key)
-        if entry is not None and entry[0]() is mesh and entry[1] == content:
-            _SCENE_CACHE.move_to_end(key)
-            return entry[2]
-    scene = _EmbreeScene(mesh.vertices, mesh.faces)
-
-    def _forget(ref: weakref.ref, key: int = key) -> None:
-        with _SCENE_CACHE_LOCK:
-            if key in _SCENE_CACHE and _SCENE_CACHE[key][0] is ref:
-                del _SCENE_CACHE[key]
-
-    with _SCENE_CACHE_LOCK:
-        _SCENE_CACHE[key] = (weakref.ref(mesh, _forget), content, scene)
-        _SCENE_CACHE.move_to_end(key)
-        while len(_SCENE_CACHE) > _SCENE_CACHE_SIZE:
-            _SCENE_CACHE.popitem(last=False)
-    return scene
+    """The cached Embree scene of ``mesh`` (:class:`~zbuf_occlude.mesh_cache.MeshCache`)."""
+    return _scenes(mesh)
 
 
 def _embree_scene(mesh: trimesh.Trimesh | ArrayLike) -> _EmbreeScene:
@@ -941,4 +932,4 @@ def oracle_numpy_visible(
     ignored options as :func:`oracle_visible`; raises :class:`InvalidInputError` on bad input.
     """
     _log_ignored("oracle-numpy", _ignored)
-    return _visible(occluded_numpy, mesh.triangles, points, camera, face_index, len(mesh.faces), tolerance)
+    return _visible(occluded_numpy, mesh_planes(mesh), points, camera, face_index, len(mesh.faces), tolerance)

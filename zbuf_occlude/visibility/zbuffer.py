@@ -19,14 +19,13 @@ mesh (a few meshes, least recently used), and :class:`Scene` also keeps the poin
 from __future__ import annotations
 
 import dataclasses
-import os
-from collections import OrderedDict
 
 import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
 from ..cameras import Camera
+from ..mesh_cache import MeshCache
 from ..render.moderngl_backend import ModernGLRenderer, PointBuffer
 from .registry import check_face_index, check_points, register
 
@@ -45,28 +44,17 @@ DEFAULT_DEPTH_TOLERANCE = 1e-3
 DEFAULT_SLOPE_SCALE = 1.0
 DEFAULT_MAX_SLOPE = 4.0
 
-_renderers: OrderedDict[tuple[int, int], tuple[trimesh.Trimesh, ModernGLRenderer]] = OrderedDict()
+_renderers: MeshCache[ModernGLRenderer] = MeshCache(ModernGLRenderer, RENDERER_CACHE_SIZE, release=ModernGLRenderer.release)
 
 
 def renderer_for(mesh: trimesh.Trimesh) -> ModernGLRenderer:
     """The cached :class:`ModernGLRenderer` of ``mesh`` in this process (made on first use).
 
-    Keyed on the mesh object and the process id; the cache holds a reference to the mesh,
-    so an entry cannot be confused with a later object at the same address.  Do not modify
-    a mesh's vertices or faces in place after it was rendered.
+    One entry per live mesh object (:class:`~zbuf_occlude.mesh_cache.MeshCache`); a mesh
+    whose vertices or faces changed gets a new renderer, and evicted renderers release
+    their GL objects.
     """
-    key = (os.getpid(), id(mesh))
-    hit = _renderers.get(key)
-    if hit is not None and hit[0] is mesh:
-        _renderers.move_to_end(key)
-        return hit[1]
-    renderer = ModernGLRenderer(mesh)
-    _renderers[key] = (mesh, renderer)
-    while len(_renderers) > RENDERER_CACHE_SIZE:
-        (pid, _), (_, old) = _renderers.popitem(last=False)
-        if pid == os.getpid():
-            old.release()
-    return renderer
+    return _renderers(mesh)
 
 
 def _at_resolution(camera: Camera, resolution: int | tuple[int, int] | None) -> Camera:

@@ -1,0 +1,51 @@
+"""The per-mesh cache behind the renderer, planes and Embree caches."""
+
+from __future__ import annotations
+
+import gc
+
+import trimesh
+
+from zbuf_occlude.mesh_cache import MeshCache
+
+
+def _counting_cache(size=2):
+    built, released = [], []
+
+    def build(mesh):
+        built.append(id(mesh))
+        return object()
+
+    return MeshCache(build, size, release=released.append), built, released
+
+
+def test_one_build_per_mesh_and_rebuild_after_an_edit():
+    cache, built, released = _counting_cache()
+    mesh = trimesh.creation.box()
+    first = cache(mesh)
+    assert cache(mesh) is first and len(built) == 1
+    mesh.vertices = mesh.vertices * 2.0
+    second = cache(mesh)
+    assert second is not first and len(built) == 2 and released == [first]
+
+
+def test_least_recently_used_is_evicted_and_released():
+    cache, built, released = _counting_cache(size=2)
+    a, b, c = (trimesh.creation.box() for _ in range(3))
+    va = cache(a)
+    cache(b)
+    cache(a)  # a is now the most recent
+    vb = cache(b)
+    cache(c)  # evicts the least recent: a
+    assert released == [va]
+    assert cache(b) is vb and len(built) == 3
+
+
+def test_entries_of_collected_meshes_are_dropped():
+    cache, built, released = _counting_cache(size=4)
+    mesh = trimesh.creation.box()
+    value = cache(mesh)
+    del mesh
+    gc.collect()
+    cache(trimesh.creation.icosphere())
+    assert released == [value]
