@@ -63,7 +63,14 @@ from .oracle import (
     _segment_plane,
     mesh_planes,
 )
-from .registry import DEFAULT_SELF_HIT_TOLERANCE, check_face_index, check_points, register
+from .registry import (
+    DEFAULT_SELF_HIT_TOLERANCE,
+    check_face_index,
+    check_points,
+    log_ignored,
+    register,
+    visible_in_frustum,
+)
 
 __all__ = [
     "BACKENDS",
@@ -455,22 +462,6 @@ def _parse_rules(prune: str | tuple[str, ...] | list[str]) -> tuple[str, ...]:
     return rules
 
 
-def _frustum_then(
-    points: NDArray[np.float64], camera: Camera, decide: Any
-) -> NDArray[np.bool_]:
-    """``in_frustum & ~decide(index of in-frustum points)``: only those need a test."""
-    visible = camera.in_frustum(points)
-    idx = np.flatnonzero(visible)
-    if len(idx):
-        visible[idx[decide(idx)]] = False
-    return visible
-
-
-def _log_ignored(method: str, options: dict[str, Any]) -> None:
-    if options:
-        log.debug("visibility method %r ignores options %s", method, sorted(options))
-
-
 # =========================================================================================
 # §3.5: exact
 # =========================================================================================
@@ -529,7 +520,7 @@ def paper_exact_visible(
     BackendUnavailable
         ``backend="numba"`` without numba.
     """
-    _log_ignored("paper-exact", _ignored)
+    log_ignored("paper-exact", _ignored)
     pts = check_points(points)
     fi = check_face_index(face_index, len(pts), len(mesh.faces))
     planes = mesh_planes(mesh)
@@ -552,7 +543,7 @@ def paper_exact_visible(
             pairs_per_chunk=pairs_per_chunk,
         )
 
-    return _frustum_then(pts, camera, decide)
+    return visible_in_frustum(pts, camera, decide)
 
 
 # =========================================================================================
@@ -609,7 +600,7 @@ def paper_pruned_visible(
     BackendUnavailable
         ``backend="numba"`` without numba.
     """
-    _log_ignored("paper-pruned", _ignored)
+    log_ignored("paper-pruned", _ignored)
     pts = check_points(points)
     fi = check_face_index(face_index, len(pts), len(mesh.faces))
     rules = _parse_rules(prune)
@@ -630,7 +621,7 @@ def paper_pruned_visible(
             pairs_per_chunk=pairs_per_chunk,
         )
 
-    return _frustum_then(pts, camera, decide)
+    return visible_in_frustum(pts, camera, decide)
 
 
 @register("paper-pruned-plane")
@@ -799,7 +790,7 @@ def paper_vertex_visible(
     InvalidInputError, BackendUnavailable
         As :func:`surviving_faces`.
     """
-    _log_ignored("paper-vertex", _ignored)
+    log_ignored("paper-vertex", _ignored)
     pts = check_points(points)
     fi = check_face_index(face_index, len(pts), len(mesh.faces))
     if fi is None:
@@ -942,7 +933,7 @@ def og_visible(
     BackendUnavailable
         ``backend="numba"`` without numba.
     """
-    _log_ignored("og", _ignored)
+    log_ignored("og", _ignored)
     pts = check_points(points)
     fi = check_face_index(face_index, len(pts), len(mesh.faces))
     rules = _parse_rules(prune)

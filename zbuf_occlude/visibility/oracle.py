@@ -56,7 +56,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..cameras import Camera
 from ..errors import BackendUnavailable, InvalidInputError
 from ..mesh_cache import MeshCache
-from .registry import DEFAULT_SELF_HIT_TOLERANCE, check_face_index, check_points, register
+from .registry import DEFAULT_SELF_HIT_TOLERANCE, check_face_index, check_points, log_ignored, register, visible_in_frustum
 
 __all__ = [
     "TrianglePlanes",
@@ -857,18 +857,13 @@ def _visible(
 ) -> NDArray[np.bool_]:
     pts = check_points(points)
     fi = check_face_index(face_index, len(pts), n_faces)
-    visible = camera.in_frustum(pts)
-    idx = np.flatnonzero(visible)  # only points in the frustum need the occlusion test
-    occluded = occluded_fn(
-        occluders, pts[idx], camera.eye, face_index=None if fi is None else fi[idx], tolerance=tolerance
+    return visible_in_frustum(
+        pts,
+        camera,
+        lambda idx: occluded_fn(
+            occluders, pts[idx], camera.eye, face_index=None if fi is None else fi[idx], tolerance=tolerance
+        ),
     )
-    visible[idx[occluded]] = False
-    return visible
-
-
-def _log_ignored(method: str, options: dict[str, Any]) -> None:
-    if options:
-        log.debug("visibility method %r ignores options %s", method, sorted(options))
 
 
 @register("oracle")
@@ -912,7 +907,7 @@ def oracle_visible(
     InvalidInputError
         On bad ``points``, ``face_index`` or ``tolerance``.
     """
-    _log_ignored("oracle", _ignored)
+    log_ignored("oracle", _ignored)
     return _visible(occluded_embree, mesh, points, camera, face_index, len(mesh.faces), tolerance)
 
 
@@ -931,5 +926,5 @@ def oracle_numpy_visible(
     O(N·F); meant for small meshes and for checking ``"oracle"``.  Parameters, returns and
     ignored options as :func:`oracle_visible`; raises :class:`InvalidInputError` on bad input.
     """
-    _log_ignored("oracle-numpy", _ignored)
+    log_ignored("oracle-numpy", _ignored)
     return _visible(occluded_numpy, mesh_planes(mesh), points, camera, face_index, len(mesh.faces), tolerance)

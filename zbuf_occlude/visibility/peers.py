@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from ..cameras import Camera
 from ..errors import BackendUnavailable
-from .registry import check_face_index, check_points, register
+from .registry import check_face_index, check_points, register, visible_in_frustum
 from .zbuffer import DEFAULT_RESOLUTION, Scene
 
 __all__ = [
@@ -210,15 +210,13 @@ def open3d_raycast_visible(
         o3d.core.Tensor(np.asarray(mesh.vertices, dtype=np.float32)),
         o3d.core.Tensor(np.asarray(mesh.faces, dtype=np.uint32)),
     )
-    visible = camera.in_frustum(pts)
-    idx = np.flatnonzero(visible)
-    if len(idx) == 0:
-        return visible
-    seg = camera.eye - pts[idx]
-    length = np.linalg.norm(seg, axis=1, keepdims=True)
-    origin = pts[idx] + float(raycast_start_offset) * seg / length
-    # Direction e - origin un-normalised: t in [0, 1] spans exactly origin → camera.
-    rays = np.hstack([origin, camera.eye - origin]).astype(np.float32)
-    hit = scene.test_occlusions(o3d.core.Tensor(rays), tnear=0.0, tfar=1.0).numpy().astype(bool)
-    visible[idx[hit]] = False
-    return visible
+
+    def occluded(idx: NDArray[np.int64]) -> NDArray[np.bool_]:
+        seg = camera.eye - pts[idx]
+        length = np.linalg.norm(seg, axis=1, keepdims=True)
+        origin = pts[idx] + float(raycast_start_offset) * seg / length
+        # Direction e - origin un-normalised: t in [0, 1] spans exactly origin → camera.
+        rays = np.hstack([origin, camera.eye - origin]).astype(np.float32)
+        return scene.test_occlusions(o3d.core.Tensor(rays), tnear=0.0, tfar=1.0).numpy().astype(bool)
+
+    return visible_in_frustum(pts, camera, occluded)

@@ -7,6 +7,7 @@ function and one decorator line; :func:`visible_mask` needs no edit.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 
 import numpy as np
@@ -16,7 +17,17 @@ from numpy.typing import NDArray
 from ..cameras import Camera
 from ..errors import InvalidInputError
 
-__all__ = ["register", "available_methods", "get_method", "check_points", "check_face_index"]
+__all__ = [
+    "register",
+    "available_methods",
+    "get_method",
+    "check_points",
+    "check_face_index",
+    "visible_in_frustum",
+    "log_ignored",
+]
+
+log = logging.getLogger(__name__)
 
 VisibilityMethod = Callable[..., NDArray[np.bool_]]
 _METHODS: dict[str, VisibilityMethod] = {}
@@ -76,6 +87,29 @@ def check_face_index(face_index: NDArray[np.integer] | None, n_points: int, n_fa
     if n_points and (fi.min() < 0 or fi.max() >= n_faces):
         raise InvalidInputError(f"face_index out of range [0, {n_faces})")
     return fi
+
+
+def visible_in_frustum(
+    points: NDArray[np.float64], camera: Camera, occluded: Callable[[NDArray[np.int64]], NDArray[np.bool_]]
+) -> NDArray[np.bool_]:
+    """``camera.in_frustum(points) & ~occluded``, asking ``occluded(idx)`` only about the
+    in-frustum points ``idx`` (the object-space methods' common frame).
+
+    Returns
+    -------
+    visible : (N,) bool
+    """
+    visible = camera.in_frustum(points)
+    idx = np.flatnonzero(visible)
+    if len(idx):
+        visible[idx[occluded(idx)]] = False
+    return visible
+
+
+def log_ignored(method: str, options: dict) -> None:
+    """Debug-log the options a method accepted but does not use (``**_ignored``)."""
+    if options:
+        log.debug("visibility method %r ignores options %s", method, sorted(options))
 
 
 def visible_mask(
