@@ -7,7 +7,6 @@ one line and the exit status is non-zero; any other exception is a bug and shows
 from __future__ import annotations
 
 import argparse
-import csv
 import logging
 import sys
 import time
@@ -19,7 +18,7 @@ import numpy as np
 from . import __version__
 from .cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
 from .errors import InvalidInputError, ZbufOccludeError
-from .io import FORMATS, atomic_path, write_h5, write_npz, write_ply
+from .io import FORMATS, atomic_path, write_csv, write_h5, write_npz, write_ply, write_text
 from .mesh import find_meshes, load_mesh
 from .metrics import agreement
 from .occlude import DEFAULT_DENSE_POINTS, class_of, dense_cloud, object_key, occlude_object
@@ -92,8 +91,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
             if args.format == "h5":
                 write_h5(out / ".parts" / (name.replace("/", "__") + ".h5"), parts, shape_names=class_names)
                 n_written += len(parts)
-            with atomic_path(marker) as tmp:
-                tmp.write_text(f"{path}\n")
+            write_text(marker, f"{path}\n")
         except ZbufOccludeError as exc:
             failed.append((str(path), str(exc)))
             log.error("skipped %s: %s", path, exc)
@@ -174,10 +172,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
                 f"median {np.median([r['ms'] for r in rows if r['method'] == method]):.1f} ms/view"
             )
     if args.csv and rows:
-        with atomic_path(args.csv) as tmp, open(tmp, "w", newline="") as fh:
-            writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
-            writer.writeheader()
-            writer.writerows(rows)
+        write_csv(args.csv, rows)
     return 1 if failed else 0
 
 

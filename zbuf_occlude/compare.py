@@ -44,6 +44,7 @@ from numpy.typing import NDArray
 
 from .cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
 from .errors import InvalidInputError, OutputError, ZbufOccludeError
+from . import io
 from .mesh import find_meshes, load_mesh
 from .metrics import agreement
 from .sampling import sample_surface
@@ -425,18 +426,7 @@ def compare(
 # =========================================================================================
 def write_csv(rows: Sequence[dict[str, Any]], path: str | os.PathLike) -> Path:
     """Write rows with the columns of :data:`RESULT_FIELDS` (atomically) and return the path."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    try:
-        with open(tmp, "w", newline="") as fh:
-            writer = csv.DictWriter(fh, fieldnames=RESULT_FIELDS, extrasaction="ignore")
-            writer.writeheader()
-            for row in rows:
-                writer.writerow({k: _fmt_csv(row.get(k, "")) for k in RESULT_FIELDS})
-        os.replace(tmp, path)
-    except OSError as exc:
-        raise OutputError(f"cannot write {path}: {exc}") from None
-    return path
+    return io.write_csv(path, [{k: _fmt_csv(row.get(k, "")) for k in RESULT_FIELDS} for row in rows], RESULT_FIELDS)
 
 
 def _fmt_csv(value: Any) -> Any:
@@ -648,12 +638,7 @@ def write_results(
         raise OutputError(f"cannot create output folder {out}: {exc}") from None
     write_csv(rows, out / "results.csv")
     plots = _plots(rows, out)
-    report = out / report_name
-    try:
-        report.write_text(_markdown_report(rows, plots, title, command))
-    except OSError as exc:
-        raise OutputError(f"cannot write {report}: {exc}") from None
-    return report
+    return io.write_text(out / report_name, _markdown_report(rows, plots, title, command))
 
 
 # =========================================================================================

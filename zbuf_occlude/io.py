@@ -25,6 +25,8 @@ from .errors import OutputError
 __all__ = [
     "OccludedCloud",
     "atomic_path",
+    "write_text",
+    "write_csv",
     "write_npz",
     "read_npz",
     "write_ply",
@@ -124,6 +126,28 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     except BaseException:
         tmp_path.unlink(missing_ok=True)
         raise
+
+
+def write_text(path: str | os.PathLike, text: str) -> Path:
+    """Write UTF-8 ``text`` to ``path`` atomically (:func:`atomic_path`)."""
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return path
+
+
+def write_csv(path: str | os.PathLike, rows: Sequence[dict], fieldnames: Sequence[str] | None = None) -> Path:
+    """Write dict rows as CSV atomically; columns ``fieldnames`` (default: the first row's keys),
+    keys outside them are left out."""
+    import csv
+
+    path = Path(path)
+    fields = list(fieldnames) if fieldnames is not None else list(rows[0]) if rows else []
+    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
+        writer = csv.DictWriter(fh, fieldnames=fields, extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows(rows)
+    return path
 
 
 def write_npz(path: str | os.PathLike, cloud: OccludedCloud) -> Path:

@@ -20,7 +20,6 @@ surface, weighted by ``|n · e_k|`` of its face, and the estimate is averaged ov
 from __future__ import annotations
 
 import argparse
-import csv
 import logging
 import os
 from collections.abc import Sequence
@@ -33,6 +32,7 @@ from numpy.typing import NDArray
 
 from .cameras import DEFAULT_RADIUS, camera_on_sphere
 from .errors import InvalidInputError, OutputError
+from .io import write_csv
 from .mesh import load_mesh
 from .sampling import sample_surface
 from .visibility import visible_mask
@@ -161,15 +161,6 @@ def profile_table(
     return rows
 
 
-def _write_csv(rows: list[dict[str, float]], path: Path) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-    os.replace(tmp, path)
-
-
 def _plot(rows: list[dict[str, float]], path: Path, title: str) -> None:
     import matplotlib
 
@@ -270,7 +261,7 @@ def elevation_profile(
         progress=progress,
     )
     try:
-        _write_csv(rows, out.with_suffix(".csv"))
+        write_csv(out.with_suffix(".csv"), rows)
         _plot(rows, out, f"Projected visible area vs elevation: {Path(mesh_path).stem} ({method}, {points} points)")
     except OSError as exc:
         raise OutputError(f"cannot write {out}: {exc}") from None

@@ -22,7 +22,7 @@ from ..dataset import (
     file_list_name,
 )
 from ..errors import InvalidInputError
-from ..io import atomic_path
+from ..io import write_text
 from .config import BYTES_PER_MB, FarmParams, PAPER_SAMPLES_PER_MB, RECORD_DIR, _plan_digest, _record_path, shard_path
 from .inputs import FarmObject
 from .worker import _base_record, _version, _write_json
@@ -90,9 +90,6 @@ def _manifest_lines(objects: Sequence[FarmObject], params: FarmParams, records: 
     return "".join(json.dumps(records.get(o.index) or _base_record(o, params), sort_keys=True) + "\n" for o in objects)
 
 
-def _write_text(path: Path, text: str) -> None:
-    with atomic_path(path) as tmp:
-        tmp.write_text(text, encoding="utf-8")
 
 
 def _folder_bytes(out: Path) -> int:
@@ -103,14 +100,14 @@ def _finalize(out: Path, plan: dict[str, Any], records: dict[int, dict[str, Any]
     """Write manifest, shape names, file lists and (last: it marks the data set finished) the card."""
     objects = _objects_of(plan)
     params = FarmParams(**plan["params"])
-    _write_text(out / MANIFEST_FILE, _manifest_lines(objects, params, records))
+    write_text(out / MANIFEST_FILE, _manifest_lines(objects, params, records))
     shape_names = _shape_names(objects)
-    _write_text(out / SHAPE_NAMES_FILE, "".join(f"{n}\n" for n in shape_names))
+    write_text(out / SHAPE_NAMES_FILE, "".join(f"{n}\n" for n in shape_names))
     splits = sorted({o.split for o in objects}, key=lambda s: (s not in SPLITS, s))
     for split in splits:
         ok_in_split = [o for o in objects if o.split == split and records[o.index]["status"] == "ok"]
         shards = [s for o in ok_in_split for s in records[o.index]["shards"]]
-        _write_text(out / file_list_name(split), "".join(f"{s}\n" for s in shards))
+        write_text(out / file_list_name(split), "".join(f"{s}\n" for s in shards))
     ok = [r for r in records.values() if r["status"] == "ok"]
     card = {
         "format_version": FORMAT_VERSION,

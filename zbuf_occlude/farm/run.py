@@ -27,10 +27,10 @@ from ..dataset import (
     file_list_name,
 )
 from ..errors import BackendUnavailable, InvalidInputError, OutputError
-from ..io import atomic_path
+from ..io import atomic_path, write_text
 from .config import FarmParams, MANIFEST_INTERVAL_S, PLAN_FILE, RECORD_DIR, TASK_DIR, _record_path, shard_path
 from .inputs import FarmObject, discover_objects, select_shard
-from .journal import FarmSummary, _finalize, _finished, _folder_bytes, _manifest_lines, _objects_of, _plan_doc, _read_json, _remove_stale_temps, _write_text
+from .journal import FarmSummary, _finalize, _finished, _folder_bytes, _manifest_lines, _objects_of, _plan_doc, _read_json, _remove_stale_temps
 from .worker import _version, _write_json, process_object
 
 log = logging.getLogger(__name__)
@@ -275,12 +275,12 @@ def run_farm(
             rate = views / max(time.perf_counter() - t_render, 1e-9)
             bar.set_postfix(views_s=f"{rate:.1f}", failed=n_failed, refresh=False)
             if time.monotonic() - last_manifest > MANIFEST_INTERVAL_S:
-                _write_text(manifest, _manifest_lines(mine, params, records))
+                write_text(manifest, _manifest_lines(mine, params, records))
                 last_manifest = time.monotonic()
     finally:
         bar.close()
         with contextlib.suppress(OutputError):  # a full disk must not hide the original error
-            _write_text(manifest, _manifest_lines(mine, params, records))
+            write_text(manifest, _manifest_lines(mine, params, records))
 
     finished = False
     if n_tasks == 1:

@@ -21,7 +21,7 @@ import numpy as np
 from ..dataset import (
     FORMAT_VERSION,
 )
-from ..io import atomic_path
+from ..io import atomic_path, write_text
 from ..mesh import load_mesh
 from ..occlude import dense_cloud, occlude_object
 from .config import COMPACT_GZIP_LEVEL, FarmParams, _FATAL, _GL_LOCK, _record_path, shard_path
@@ -38,8 +38,7 @@ def _version() -> str:
 
 
 def _write_json(path: Path, obj: Any) -> None:
-    with atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(obj, indent=1, sort_keys=True) + "\n", encoding="utf-8")
+    write_text(path, json.dumps(obj, indent=1, sort_keys=True) + "\n")
 
 
 def _write_h5(path: Path, fill: Callable[[Any], None]) -> int:
