@@ -372,3 +372,12 @@ def test_degenerate_area_tolerance_is_relative() -> None:
         mesh = _mesh((np.array(sliver) * scale).tolist(), [[0, 1, 2]])
         assert degenerate_faces(mesh, area_rtol=1e-8)[0]
         assert not degenerate_faces(mesh, area_rtol=1e-9)[0]
+
+
+def test_class_and_split_of_modelnet_layouts():
+    from zbuf_occlude.mesh import class_and_split
+
+    assert class_and_split("root/chair/train/chair_0001.off")[0] == "chair"
+    assert class_and_split("root/chair/chair_0001.off")[0] == "chair"
+    assert class_and_split("root/chair/test/chair_0890.off") == ("chair", "test")
+    assert class_and_split("chair_0042.off") == ("chair", "train")

@@ -7,7 +7,7 @@ import pytest
 
 import zbuf_occlude as zo
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.occlude import class_of, derive_rng, draw_sample, object_key, occlude_object
+from zbuf_occlude.occlude import derive_rng, draw_sample, object_key, occlude_object
 
 
 def test_draw_sample_is_without_replacement_when_enough_are_visible():
@@ -21,11 +21,6 @@ def test_draw_sample_pads_with_repeats_when_too_few_are_visible():
     chosen, n_visible = draw_sample(visible, 25, derive_rng(0, 1))
     assert n_visible == 10 and len(chosen) == 25 and set(chosen.tolist()) == set(range(10))
     assert draw_sample(np.zeros(0, dtype=np.int64), 5, derive_rng(0))[0].size == 0
-
-
-def test_class_of_modelnet_layouts(tmp_path):
-    assert class_of("root/chair/train/chair_0001.off") == "chair"
-    assert class_of("root/chair/chair_0001.off") == "chair"
 
 
 @pytest.fixture(scope="module")

@@ -19,9 +19,9 @@ from . import __version__
 from .cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
 from .errors import InvalidInputError, ZbufOccludeError
 from .io import FORMATS, atomic_path, write_csv, write_h5, write_npz, write_ply, write_text
-from .mesh import find_meshes, load_mesh
+from .mesh import class_and_split, find_meshes, load_mesh
 from .metrics import agreement
-from .occlude import DEFAULT_DENSE_POINTS, class_of, dense_cloud, object_key, occlude_object
+from .occlude import DEFAULT_DENSE_POINTS, dense_cloud, object_key, occlude_object
 from .sampling import sample_surface
 from .visibility.registry import available_methods, visible_mask
 
@@ -63,7 +63,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
     meshes = find_meshes(_default_paths(args.paths))
     poses = view_schedule(args.views)
     out = Path(args.out)
-    class_names = sorted({class_of(p) for p, _ in meshes})
+    class_names = sorted({class_and_split(p)[0] for p, _ in meshes})
     labels = {c: i for i, c in enumerate(class_names)}
     done_dir = out / ".done"
     failed: list[tuple[str, str]] = []
@@ -76,7 +76,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
             continue  # finished in an earlier run
         try:
             mesh = load_mesh(path)
-            cls = class_of(path)
+            cls, _ = class_and_split(path)
             dense = dense_cloud(mesh, object_key(name), seed=args.seed, count=args.dense_points)
             parts = []
             for pose_index, _, clouds in occlude_object(

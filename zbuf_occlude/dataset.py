@@ -47,6 +47,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import InvalidInputError
+from .mesh import SPLITS
 from .occlude import draw_sample, sample_rng
 
 __all__ = [
@@ -73,7 +74,6 @@ SHARD_DIR = "shards"
 #: Storage modes (module docstring).
 STORAGE_MODES = ("dense", "compact")
 #: Splits with a file list of their own (ModelNet's).
-SPLITS = ("train", "test")
 #: Objects whose compact arrays (dense cloud and bitmasks, ~1 MB each) the reader keeps.
 DEFAULT_OBJECT_CACHE = 8
 #: HDF5 files the reader keeps open (dense storage), least recently used closed first.

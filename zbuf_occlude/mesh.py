@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import io
 import logging
+import re
 from collections.abc import Sequence
 from os import PathLike
 from pathlib import Path
@@ -44,6 +45,9 @@ from .errors import InvalidInputError, MeshLoadError, ZbufOccludeError
 __all__ = [
     "SUPPORTED_EXTENSIONS",
     "find_meshes",
+    "class_and_split",
+    "SPLITS",
+    "DEFAULT_SPLIT",
     "DEGENERATE_AREA_RTOL",
     "METADATA_KEY",
     "load_mesh",
@@ -505,3 +509,25 @@ def find_meshes(paths: Sequence[str | Path]) -> list[tuple[Path, str]]:
     if not found:
         raise InvalidInputError(f"no mesh files ({', '.join(SUPPORTED_EXTENSIONS)}) under {', '.join(map(str, paths))}")
     return found
+
+
+#: ModelNet's split folders.
+SPLITS = ("train", "test")
+#: Split of a mesh whose path names none (flat folder, list file without a split column).
+DEFAULT_SPLIT = "train"
+
+
+def class_and_split(path: str | Path) -> tuple[str, str]:
+    """Class and split of a mesh from its path, ModelNet's layout.
+
+    ``.../<class>/<split>/<name>.off`` (split ``train`` or ``test``), else
+    ``.../<class>/<name>.off`` (split :data:`DEFAULT_SPLIT`), else, for a bare file name
+    ``<class>_<NNNN>.off`` (a flat folder), the name without its number.
+    """
+    path = Path(path)
+    parent = path.parent
+    if parent.name in SPLITS and parent.parent.name:
+        return parent.parent.name, parent.name
+    if parent.name:
+        return parent.name, DEFAULT_SPLIT
+    return re.sub(r"_\d+$", "", path.stem) or path.stem, DEFAULT_SPLIT

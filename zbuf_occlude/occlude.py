@@ -13,7 +13,6 @@ import hashlib
 import logging
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import trimesh
@@ -26,7 +25,7 @@ from .sampling import sample_surface
 from .visibility.registry import visible_mask
 from .visibility.zbuffer import Scene
 
-__all__ = ["object_key", "derive_rng", "sample_rng", "draw_sample", "DenseCloud", "dense_cloud", "occlude_object", "class_of"]
+__all__ = ["object_key", "derive_rng", "sample_rng", "draw_sample", "DenseCloud", "dense_cloud", "occlude_object"]
 
 log = logging.getLogger(__name__)
 
@@ -56,16 +55,6 @@ def sample_rng(seed: int, key: int, pose_index: int, sample_index: int) -> np.ra
     Readers of compact data sets call it to redraw exactly the samples the farm drew.
     """
     return derive_rng(seed, key, _DRAW_STREAM, pose_index, sample_index)
-
-
-def class_of(path: str | Path) -> str:
-    """Class name of a mesh in a ModelNet-style tree: ``<class>/<split>/<name>.off`` or
-    ``<class>/<name>.off``."""
-    path = Path(path)
-    parent = path.parent
-    if parent.name in ("train", "test") and parent.parent.name:
-        return parent.parent.name
-    return parent.name
 
 
 def draw_sample(

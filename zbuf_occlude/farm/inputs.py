@@ -10,18 +10,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 
-from ..dataset import (
-    SPLITS,
-)
 from ..errors import InvalidInputError
-from ..mesh import SUPPORTED_EXTENSIONS
+from ..mesh import DEFAULT_SPLIT, SPLITS, SUPPORTED_EXTENSIONS, class_and_split
 from ..occlude import object_key
 
 log = logging.getLogger(__name__)
-
-#: Split of an object whose path names none (flat folder, list file without a split column).
-DEFAULT_SPLIT = "train"
-_MESH_SUFFIXES = tuple(SUPPORTED_EXTENSIONS)
 
 
 # -- inputs ------------------------------------------------------------------------------
@@ -52,7 +45,7 @@ class FarmObject:
 
     @property
     def key(self) -> int:
-        """Seed key of the object (CRC-32 of ``name``)."""
+        """Seed key of the object (:func:`~zbuf_occlude.occlude.object_key` of ``name``)."""
         return object_key(self.name)
 
 
@@ -61,25 +54,15 @@ def _natural_key(text: str) -> list:
     return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", text)]
 
 
-def _class_and_split(rel: Path) -> tuple[str, str]:
-    parent = rel.parent
-    if parent.name in SPLITS and parent.parent.name:
-        return parent.parent.name, parent.name
-    if parent.name:
-        return parent.name, DEFAULT_SPLIT
-    # flat folder: ModelNet file names are <class>_<NNNN>
-    return re.sub(r"_\d+$", "", rel.stem) or rel.stem, DEFAULT_SPLIT
-
-
 def _scan_tree(root: Path) -> list[tuple[str, str, str, str]]:
     found = []
     for path in root.rglob("*"):
-        if path.suffix.lower() not in _MESH_SUFFIXES or not path.is_file():
+        if path.suffix.lower() not in SUPPORTED_EXTENSIONS or not path.is_file():
             continue
         rel = path.relative_to(root)
         if any(part.startswith(".") for part in rel.parts):
             continue  # hidden folders and temporary files
-        class_name, split = _class_and_split(rel)
+        class_name, split = class_and_split(rel)
         found.append((rel.with_suffix("").as_posix(), str(path), class_name, split))
     return found
 
@@ -150,7 +133,7 @@ def discover_objects(
     else:
         raise InvalidInputError(f"no such mesh folder or list file: {source}")
     if not found:
-        raise InvalidInputError(f"no mesh files ({', '.join(_MESH_SUFFIXES)}) under {source}")
+        raise InvalidInputError(f"no mesh files ({', '.join(tuple(SUPPORTED_EXTENSIONS))}) under {source}")
     if classes is not None:
         wanted = set(_split_names(classes))
         unknown = wanted - {f[2] for f in found}
@@ -185,7 +168,7 @@ def discover_objects(
     for o in objects:
         if o.key in keys:
             log.warning(
-                "objects %s and %s share the seed key %d (CRC-32 collision): their draws are correlated",
+                "objects %s and %s share the seed key %d (hash collision): their draws are correlated",
                 keys[o.key], o.name, o.key,
             )  # fmt: skip
         keys[o.key] = o.name
