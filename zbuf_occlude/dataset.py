@@ -26,7 +26,7 @@ Two storage modes, chosen with ``--storage``:
     visibility bitmask ``visible_bits (P, ceil(M / 8)) uint8`` (:func:`numpy.packbits`),
     plus ``n_visible``, ``elevation_deg``, ``azimuth_deg`` ``(P,)``.  The samples are
     redrawn by the reader from the deterministic generators of
-    :func:`zbuf_occlude.occlude.sample_rng` with :func:`zbuf_occlude.occlude.draw_sample`,
+    :func:`zbuf_occlude.occlude.pose_samples`,
     bit-identical to what ``dense`` stores (the dense cloud is float32 in both modes
     before indexing, so indexing commutes with the cast).
 
@@ -48,7 +48,7 @@ from numpy.typing import NDArray
 
 from .errors import InvalidInputError
 from .mesh import SPLITS
-from .occlude import draw_sample, sample_rng
+from .occlude import pose_samples
 
 __all__ = [
     "OccludedDataset",
@@ -117,9 +117,8 @@ def reconstruct_samples(
 ) -> NDArray[np.float32]:
     """Redraw samples of one pose from the dense cloud and the pose's visibility mask.
 
-    Uses the generator of ``(seed, key, draw stream, pose_index, sample_index)`` and
-    :func:`~zbuf_occlude.occlude.draw_sample`, exactly as
-    :func:`~zbuf_occlude.occlude.occlude_object` does, so the result is bit-identical to
+    :func:`~zbuf_occlude.occlude.pose_samples`, the draw
+    :func:`~zbuf_occlude.occlude.occlude_object` makes, so the result is bit-identical to
     the ``data`` a dense-storage run writes.
 
     Parameters
@@ -137,16 +136,12 @@ def reconstruct_samples(
     samples : (S, n_points, 3) float32
         ``S = len(sample_indices)``; ``(0, n_points, 3)`` if nothing is visible.
     """
-    visible_index = np.flatnonzero(visible)
-    indices = list(sample_indices)
-    if len(visible_index) == 0:
+    chosen = pose_samples(
+        np.flatnonzero(visible), n_points, seed=seed, key=key, pose_index=pose_index, sample_indices=sample_indices
+    )
+    if not chosen:
         return np.zeros((0, n_points, 3), dtype=np.float32)
-    out = np.empty((len(indices), n_points, 3), dtype=np.float32)
-    for row, sample_index in enumerate(indices):
-        rng = sample_rng(seed, key, pose_index, sample_index)
-        chosen, _ = draw_sample(visible_index, n_points, rng)
-        out[row] = dense_points[chosen]
-    return out
+    return np.stack([dense_points[c] for c in chosen]).astype(np.float32, copy=False)
 
 
 def _pose_mask(values: NDArray[np.float64], spec: PoseFilter, name: str) -> NDArray[np.bool_]:

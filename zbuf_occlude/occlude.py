@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,7 +25,7 @@ from .sampling import sample_surface
 from .visibility.registry import visible_mask
 from .visibility.zbuffer import Scene
 
-__all__ = ["object_key", "derive_rng", "sample_rng", "draw_sample", "DenseCloud", "dense_cloud", "occlude_object"]
+__all__ = ["object_key", "derive_rng", "sample_rng", "draw_sample", "pose_samples", "DenseCloud", "dense_cloud", "occlude_object"]
 
 log = logging.getLogger(__name__)
 
@@ -79,6 +79,31 @@ def draw_sample(
         return rng.choice(visible_index, size=n_points, replace=False), n_visible
     extra = rng.choice(visible_index, size=n_points - n_visible, replace=True)
     return rng.permutation(np.concatenate([visible_index, extra])), n_visible
+
+
+def pose_samples(
+    visible_index: NDArray[np.int64],
+    n_points: int,
+    *,
+    seed: int,
+    key: int,
+    pose_index: int,
+    sample_indices: Iterable[int],
+) -> list[NDArray[np.int64]]:
+    """The samples of one pose: for each sample index, ``n_points`` indices into the dense
+    cloud, drawn by :func:`draw_sample` with :func:`sample_rng`.
+
+    The one place samples are drawn, for the writers and for readers that rebuild samples
+    from stored visibility masks, so both give the same bytes.
+
+    Returns
+    -------
+    chosen : list of (n_points,) int64
+        One per sample index; empty if nothing is visible.
+    """
+    if len(visible_index) == 0:
+        return []
+    return [draw_sample(visible_index, n_points, sample_rng(seed, key, pose_index, s))[0] for s in sample_indices]
 
 
 @dataclass
@@ -155,27 +180,26 @@ def occlude_object(
             else:
                 visible = visible_mask(mesh, dense.points, camera, method, face_index=dense.face_index, resolution=resolution, **method_options)
             visible_index = np.flatnonzero(visible)
-            clouds = []
-            for sample_index in range(samples_per_view):
-                rng = sample_rng(seed, key, pose_index, sample_index)
-                chosen, n_visible = draw_sample(visible_index, n_points, rng)
-                if n_visible == 0:
-                    log.warning("%s: nothing visible from el=%g az=%g; no sample", source or "mesh", el, az)
-                    break
-                clouds.append(
-                    OccludedCloud(
-                        points=dense.points[chosen].astype(np.float32),
-                        face_index=dense.face_index[chosen],
-                        elevation_deg=float(el),
-                        azimuth_deg=float(az),
-                        radius=float(radius),
-                        label=label,
-                        class_name=class_name,
-                        source=source,
-                        sample_index=sample_index,
-                        n_visible=n_visible,
-                    )
+            if len(visible_index) == 0 and samples_per_view:
+                log.warning("%s: nothing visible from el=%g az=%g; no sample", source or "mesh", el, az)
+            chosen = pose_samples(
+                visible_index, n_points, seed=seed, key=key, pose_index=pose_index, sample_indices=range(samples_per_view)
+            )
+            clouds = [
+                OccludedCloud(
+                    points=dense.points[c].astype(np.float32),
+                    face_index=dense.face_index[c],
+                    elevation_deg=float(el),
+                    azimuth_deg=float(az),
+                    radius=float(radius),
+                    label=label,
+                    class_name=class_name,
+                    source=source,
+                    sample_index=sample_index,
+                    n_visible=len(visible_index),
                 )
+                for sample_index, c in enumerate(chosen)
+            ]
             yield pose_index, visible, clouds
     finally:
         if scene is not None:
