@@ -87,3 +87,14 @@ def test_unwritable_output_folder_is_a_clear_error(tmp_path):
     blocker.write_text("")
     with pytest.raises(OutputError, match="cannot write"):
         write_npz(blocker / "x.npz", _cloud())
+
+
+def test_h5_clouds_round_trip(tmp_path):
+    from zbuf_occlude.io import read_h5_clouds
+
+    clouds = [_cloud(seed=i, label=i, sample_index=i) for i in range(3)]
+    back = read_h5_clouds(write_h5(tmp_path / "x.h5", clouds))
+    assert len(back) == 3
+    for a, b in zip(clouds, back):
+        assert np.array_equal(a.points, b.points) and np.array_equal(a.face_index, b.face_index)
+        assert (a.label, a.sample_index, a.source, a.n_visible) == (b.label, b.sample_index, b.source, b.n_visible)

@@ -18,7 +18,7 @@ import numpy as np
 from . import __version__
 from .cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
 from .errors import InvalidInputError, ZbufOccludeError
-from .io import FORMATS, atomic_path, write_csv, write_h5, write_npz, write_ply, write_text
+from .io import FORMATS, read_h5_clouds, write_csv, write_h5, write_npz, write_ply, write_text
 from .mesh import class_and_split, find_meshes, load_mesh
 from .metrics import agreement
 from .occlude import DEFAULT_DENSE_POINTS, dense_cloud, object_key, occlude_object
@@ -71,7 +71,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     bar = _progress(meshes, desc="meshes", unit="mesh")
     for path, name in bar:
-        marker = done_dir / (name.replace("/", "__") + ".done")
+        marker = done_dir / f"{_flat(name)}.done"
         if marker.exists() and not args.overwrite:
             continue  # finished in an earlier run
         try:
@@ -89,7 +89,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
                 else:
                     n_written += len(_write_clouds(args.format, out / name, name, pose_index, clouds))
             if args.format == "h5":
-                write_h5(out / ".parts" / (name.replace("/", "__") + ".h5"), parts, shape_names=class_names)
+                write_h5(out / ".parts" / f"{_flat(name)}.h5", parts, shape_names=class_names)
                 n_written += len(parts)
             write_text(marker, f"{path}\n")
         except ZbufOccludeError as exc:
@@ -105,26 +105,16 @@ def cmd_generate(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
+def _flat(name: str) -> str:
+    # one file per mesh in .done/ and .parts/: the mesh's relative name, flattened
+    return name.replace("/", "__")
+
+
 def _merge_h5_parts(out: Path, meshes, class_names) -> None:
-    from .io import read_h5
-
-    parts = [out / ".parts" / (name.replace("/", "__") + ".h5") for _, name in meshes]
-    parts = [p for p in parts if p.exists()]
-    if not parts:
-        return
-    import h5py
-
-    arrays = [read_h5(p) for p in parts]
-    keys = [k for k in arrays[0] if k != "shape_names"]
-    with atomic_path(out / "occluded.h5") as tmp:
-        with h5py.File(tmp, "w") as f:
-            for k in keys:
-                data = np.concatenate([a[k] for a in arrays])
-                if data.dtype.kind in "UO":
-                    f.create_dataset(k, data=data.astype(object), dtype=h5py.string_dtype("utf-8"))
-                else:
-                    f.create_dataset(k, data=data)
-            f.attrs["shape_names"] = list(class_names)
+    parts = [out / ".parts" / f"{_flat(name)}.h5" for _, name in meshes]
+    clouds = [c for p in parts if p.exists() for c in read_h5_clouds(p)]
+    if clouds:
+        write_h5(out / "occluded.h5", clouds, shape_names=class_names)
 
 
 # -- validate ----------------------------------------------------------------------------------

@@ -32,6 +32,7 @@ __all__ = [
     "write_ply",
     "write_h5",
     "read_h5",
+    "read_h5_clouds",
     "FORMATS",
 ]
 
@@ -269,3 +270,23 @@ def read_h5(path: str | os.PathLike) -> dict[str, np.ndarray]:
             out[key] = ds.asstr()[()] if ds.dtype.kind == "O" else ds[()]
         out["shape_names"] = np.asarray(list(f.attrs.get("shape_names", [])), dtype=str)
     return out
+
+
+def read_h5_clouds(path: str | os.PathLike) -> list[OccludedCloud]:
+    """The clouds of a file written by :func:`write_h5`, in order (its inverse)."""
+    d = read_h5(path)
+    return [
+        OccludedCloud(
+            points=d["data"][i],
+            face_index=d["face_index"][i].astype(np.int64),
+            elevation_deg=float(d["elevation_deg"][i]),
+            azimuth_deg=float(d["azimuth_deg"][i]),
+            radius=float(d["radius"][i]),
+            label=int(d["label"][i]),
+            class_name=str(d["class_name"][i]),
+            source=str(d["source"][i]),
+            sample_index=int(d["sample_index"][i]),
+            n_visible=int(d["n_visible"][i]),
+        )
+        for i in range(len(d["data"]))
+    ]
