@@ -19,13 +19,12 @@ uniform uint point_offset;         // first point of this dispatch (dispatch siz
 
 // Window coordinates (pixels, origin bottom-left) of a world point; false if outside the
 // frustum (behind the camera, outside the image or the clip planes).
-bool reproject(vec3 p, out vec2 window, out float ndc_z) {
+bool reproject(vec3 p, out vec2 window) {
     vec4 clip = view_projection * vec4(p, 1.0);
     if (clip.w <= 0.0) return false;
     vec3 ndc = clip.xyz / clip.w;
     if (any(lessThan(ndc, vec3(-1.0))) || any(greaterThanEqual(ndc, vec3(1.0)))) return false;
     window = (ndc.xy * 0.5 + 0.5) * vec2(resolution);
-    ndc_z = ndc.z;
     return true;
 }
 

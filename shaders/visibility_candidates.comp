@@ -20,8 +20,7 @@ void main() {
     if (i >= n_points) return;
     vec3 p = points[i].xyz;
     vec2 window;
-    float ndc_z;
-    if (!reproject(p, window, ndc_z)) return;
+    if (!reproject(p, window)) return;
     ivec2 pixel = ivec2(floor(window));
     int own = point_face[i];
     // The centre pixel first: for a hidden point it is the likeliest occluder.

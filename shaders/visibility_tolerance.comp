@@ -16,8 +16,7 @@ void main() {
     if (i >= n_points) return;
     vec3 p = points[i].xyz;
     vec2 window;
-    float ndc_z;
-    if (!reproject(p, window, ndc_z)) return;
+    if (!reproject(p, window)) return;
     vec2 texel = texelFetch(depth_and_face, ivec2(floor(window)), 0).rg;
     if (texel.g < 0.0) { mark_visible(i); return; }  // silhouette: nothing drawn in front
     int own = point_face[i];

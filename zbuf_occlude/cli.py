@@ -23,7 +23,7 @@ from .mesh import class_and_split, find_meshes, load_mesh
 from .metrics import agreement
 from .occlude import DEFAULT_DENSE_POINTS, dense_cloud, object_key, occlude_object
 from .sampling import sample_surface
-from .visibility.registry import available_methods, visible_mask
+from .visibility.registry import available_methods, get_method, visible_mask
 
 __all__ = ["main", "build_parser", "SAMPLE_MESHES"]
 
@@ -123,8 +123,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
     poses = view_schedule(args.views)
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     for m in methods:
-        if m not in available_methods():
-            raise InvalidInputError(f"unknown method {m!r}; available: {', '.join(available_methods())}")
+        get_method(m)  # unknown names fail here, before any work
     rows: list[dict] = []
     failed = 0
     header = f"{'mesh':32s} {'el':>6s} {'az':>6s} {'method':18s} {'agree%':>8s} {'f-vis%':>7s} {'f-hid%':>7s} {'ms':>8s} {'oracle ms':>9s}"
