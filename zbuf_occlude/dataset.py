@@ -63,6 +63,7 @@ __all__ = [
     "SHARD_DIR",
     "STORAGE_MODES",
     "SPLITS",
+    "name_set",
 ]
 
 #: Version of the folder layout above; the reader refuses newer ones.
@@ -155,7 +156,8 @@ def _pose_mask(values: NDArray[np.float64], spec: PoseFilter, name: str) -> NDAr
     return np.isclose(values[:, None], wanted[None, :], rtol=0.0, atol=POSE_MATCH_ATOL_DEG).any(axis=1)
 
 
-def _as_name_set(spec: str | Iterable[str] | None) -> set[str] | None:
+def name_set(spec: str | Iterable[str] | None) -> set[str] | None:
+    """Names from a comma-separated string or a sequence (``None`` stays ``None``)."""
     if spec is None:
         return None
     if isinstance(spec, str):
@@ -243,8 +245,8 @@ class OccludedDataset(Sequence):
             self._azimuth, azimuth_deg, "azimuth_deg"
         )
 
-        splits = _as_name_set(split)
-        wanted_classes = _as_name_set(classes)
+        splits = name_set(split)
+        wanted_classes = name_set(classes)
         if wanted_classes is not None and (unknown := wanted_classes - set(self.shape_names)):
             raise InvalidInputError(f"unknown classes {sorted(unknown)} in {self.root}; it has {self.shape_names}")
         known_splits = set(self.card.get("splits", SPLITS))

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 
+from ..dataset import name_set
 from ..errors import InvalidInputError
 from ..mesh import DEFAULT_SPLIT, SPLITS, SUPPORTED_EXTENSIONS, class_and_split
 from ..occlude import object_key
@@ -135,13 +136,13 @@ def discover_objects(
     if not found:
         raise InvalidInputError(f"no mesh files ({', '.join(tuple(SUPPORTED_EXTENSIONS))}) under {source}")
     if classes is not None:
-        wanted = set(_split_names(classes))
+        wanted = name_set(classes)
         unknown = wanted - {f[2] for f in found}
         if unknown:
             have = sorted({f[2] for f in found}, key=_natural_key)
             raise InvalidInputError(f"classes {sorted(unknown)} not found under {source}; it has {have}")
         found = [f for f in found if f[2] in wanted]
-    split_set = set(_split_names(splits))
+    split_set = name_set(splits)
     found = [f for f in found if f[3] in split_set]
     found.sort(key=lambda f: _natural_key(f[0]))
     if per_class is not None:
@@ -173,12 +174,6 @@ def discover_objects(
             )  # fmt: skip
         keys[o.key] = o.name
     return objects
-
-
-def _split_names(spec: Sequence[str] | str) -> list[str]:
-    if isinstance(spec, str):
-        return [s.strip() for s in spec.split(",") if s.strip()]
-    return [str(s) for s in spec]
 
 
 def parse_shard(text: str) -> tuple[int, int]:
