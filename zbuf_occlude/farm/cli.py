@@ -7,13 +7,19 @@ import logging
 import shlex
 import sys
 
-
 from ..cameras import DEFAULT_RADIUS
 from ..dataset import (
     STORAGE_MODES,
 )
 from ..errors import InvalidInputError
-from .config import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION, DEFAULT_N_POINTS, DEFAULT_SAMPLES_PER_VIEW, DEFAULT_VIEWS, FarmParams
+from .config import (
+    DEFAULT_FARM_DENSE_POINTS,
+    DEFAULT_FARM_RESOLUTION,
+    DEFAULT_N_POINTS,
+    DEFAULT_SAMPLES_PER_VIEW,
+    DEFAULT_VIEWS,
+    FarmParams,
+)
 from .inputs import parse_shard
 from .run import merge_farm, run_farm
 

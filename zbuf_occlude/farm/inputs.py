@@ -9,7 +9,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-
 from ..dataset import name_set
 from ..errors import InvalidInputError
 from ..mesh import DEFAULT_SPLIT, SPLITS, SUPPORTED_EXTENSIONS, class_and_split

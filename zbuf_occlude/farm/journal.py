@@ -11,7 +11,6 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-
 from ..dataset import (
     CARD_FILE,
     FORMAT_VERSION,

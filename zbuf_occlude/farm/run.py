@@ -17,7 +17,6 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-
 from ..dataset import (
     CARD_FILE,
     MANIFEST_FILE,
@@ -30,7 +29,17 @@ from ..errors import BackendUnavailable, InvalidInputError, OutputError
 from ..io import atomic_path, write_text
 from .config import FarmParams, MANIFEST_INTERVAL_S, PLAN_FILE, RECORD_DIR, TASK_DIR, _record_path, shard_path
 from .inputs import FarmObject, discover_objects, select_shard
-from .journal import FarmSummary, _finalize, _finished, _folder_bytes, _manifest_lines, _objects_of, _plan_doc, _read_json, _remove_stale_temps
+from .journal import (
+    FarmSummary,
+    _finalize,
+    _finished,
+    _folder_bytes,
+    _manifest_lines,
+    _objects_of,
+    _plan_doc,
+    _read_json,
+    _remove_stale_temps,
+)
 from .worker import _version, _write_json, process_object
 
 log = logging.getLogger(__name__)
