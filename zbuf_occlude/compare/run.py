@@ -23,6 +23,7 @@ from ..mesh import find_meshes, load_mesh
 from ..metrics import agreement
 from ..sampling import sample_surface
 from ..visibility import available_methods, visible_mask
+from ..visibility.registry import method_info
 from .results import RESULT_FIELDS
 
 __all__ = [
@@ -63,10 +64,12 @@ DEFAULT_REFERENCE = "oracle"
 RESOLUTION_SWEEP = (128, 256, 512, 1024, 2048)
 #: Occupancy-grid sizes of the agreement-vs-grid sweep, cells per axis.
 GRID_SWEEP = (16, 32, 64, 128)
-#: Methods with a ``resolution`` option, swept over :data:`RESOLUTION_SWEEP`.
-IMAGE_SPACE_METHODS = ("zbuffer", "zbuffer-tolerance", "naive-zbuffer")
+#: Methods with a ``resolution`` option, swept over :data:`RESOLUTION_SWEEP` (the built-in
+#: methods declaring ``takes_resolution``; the run asks :func:`method_info`, so methods
+#: registered later are swept too).
+IMAGE_SPACE_METHODS = tuple(m for m in available_methods() if method_info(m).takes_resolution)
 #: Methods with a ``grid`` option (or a grid in their name), swept over :data:`GRID_SWEEP`.
-GRID_METHODS = ("og",) + tuple(f"og{g}" for g in GRID_SWEEP)
+GRID_METHODS = tuple(m for m in available_methods() if method_info(m).takes_grid or method_info(m).grid_of)
 #: Bytes per mebibyte, for the ``peak_mib`` column.
 _MIB = float(1 << 20)
 
@@ -175,10 +178,12 @@ def _sweep_jobs(
 ) -> list[tuple[str, str, int, dict]]:
     jobs = []
     for m in methods:
-        if m in IMAGE_SPACE_METHODS:
+        if method_info(m).takes_resolution:
             jobs += [(m, "resolution", r, {"resolution": r}) for r in resolution_sweep]
-    if any(m in GRID_METHODS for m in methods):
-        jobs += [("og", "grid", g, {"grid": g}) for g in grid_sweep]
+    # A name that fixes the grid (og32) sweeps the method whose grid it fixes (og).
+    grid_methods = [m if method_info(m).takes_grid else method_info(m).grid_of for m in methods]
+    for m in dict.fromkeys(g for g in grid_methods if g):
+        jobs += [(m, "grid", g, {"grid": g}) for g in grid_sweep]
     return jobs
 
 

@@ -71,7 +71,7 @@ __all__ = [
 # =========================================================================================
 # §3.5: exact
 # =========================================================================================
-@register("paper-exact")
+@register("paper-exact", exact=True)
 def paper_exact_visible(
     mesh: trimesh.Trimesh,
     points: NDArray[np.floating],
@@ -230,7 +230,7 @@ def paper_pruned_visible(
     return visible_in_frustum(pts, camera, decide)
 
 
-@register("paper-pruned-plane")
+@register("paper-pruned-plane", exact=True)
 def paper_pruned_plane_visible(
     mesh: trimesh.Trimesh, points: NDArray[np.floating], camera: Camera, **options: Any
 ) -> NDArray[np.bool_]:

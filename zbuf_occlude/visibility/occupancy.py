@@ -81,7 +81,7 @@ def occupancy_grid(
     return corner + (cells + 0.5) * cell_size, cell_of.astype(np.int64), cell_size
 
 
-@register("og")
+@register("og", takes_grid=True)
 def og_visible(
     mesh: trimesh.Trimesh,
     points: NDArray[np.floating],
@@ -223,5 +223,5 @@ def _og_fixed(size: int) -> Any:
 
 
 for _size in OG_GRIDS:
-    register(f"og{_size}")(_og_fixed(_size))
+    register(f"og{_size}", grid_of="og")(_og_fixed(_size))
 del _size

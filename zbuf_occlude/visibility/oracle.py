@@ -91,7 +91,7 @@ def _visible(
     )
 
 
-@register("oracle")
+@register("oracle", exact=True)
 def oracle_visible(
     mesh: trimesh.Trimesh,
     points: NDArray[np.floating],
@@ -136,7 +136,7 @@ def oracle_visible(
     return _visible(occluded_embree, mesh, points, camera, face_index, len(mesh.faces), tolerance)
 
 
-@register("oracle-numpy")
+@register("oracle-numpy", exact=True)
 def oracle_numpy_visible(
     mesh: trimesh.Trimesh,
     points: NDArray[np.floating],

@@ -53,7 +53,7 @@ HPR_RADIUS_FACTOR = 100.0
 RAYCAST_START_OFFSET = 1e-4
 
 
-@register("naive-zbuffer")
+@register("naive-zbuffer", takes_resolution=True, gpu=True)
 def naive_zbuffer_visible(
     mesh: trimesh.Trimesh,
     points: NDArray[np.float64],
@@ -111,7 +111,7 @@ def import_open3d() -> Any:
     return open3d
 
 
-@register("open3d-hpr")
+@register("open3d-hpr", extra="open3d")
 def open3d_hpr_visible(
     mesh: trimesh.Trimesh,
     points: NDArray[np.floating],
@@ -162,7 +162,7 @@ def open3d_hpr_visible(
     return visible & camera.in_frustum(pts)
 
 
-@register("open3d-raycast")
+@register("open3d-raycast", extra="open3d")
 def open3d_raycast_visible(
     mesh: trimesh.Trimesh,
     points: NDArray[np.floating],

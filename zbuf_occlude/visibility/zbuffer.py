@@ -203,7 +203,7 @@ class Scene:
         self.release()
 
 
-@register("zbuffer")
+@register("zbuffer", takes_resolution=True, gpu=True, session=Scene)
 def zbuffer_visible(
     mesh: trimesh.Trimesh,
     points: NDArray[np.float64],
@@ -224,7 +224,7 @@ def zbuffer_visible(
         return scene.visible(camera, resolution=resolution, neighborhood=neighborhood, tolerance=tolerance, resolve=resolve)
 
 
-@register("zbuffer-tolerance")
+@register("zbuffer-tolerance", takes_resolution=True, gpu=True)
 def zbuffer_tolerance_visible(
     mesh: trimesh.Trimesh,
     points: NDArray[np.float64],
