@@ -19,6 +19,7 @@ import trimesh
 from numpy.typing import NDArray
 
 from .cameras import DEFAULT_RADIUS, Camera, camera_on_sphere
+from .defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION
 from .errors import InvalidInputError
 from .io import OccludedCloud
 from .sampling import sample_surface
@@ -137,8 +138,8 @@ def occlude_object(
     samples_per_view: int = 10,
     seed: int = 0,
     dense: DenseCloud | None = None,
-    method: str = "zbuffer",
-    resolution: int = 1024,
+    method: str = DEFAULT_METHOD,
+    resolution: int = DEFAULT_RESOLUTION,
     radius: float = DEFAULT_RADIUS,
     label: int = -1,
     class_name: str = "",

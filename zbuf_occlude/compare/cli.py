@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from ..defaults import DEFAULT_RESOLUTION
 from .report import write_results
 from .run import DEFAULT_METHODS, DEFAULT_POINTS, DEFAULT_REFERENCE, DEFAULT_VIEWS, compare, parse_int_list, parse_methods
 
@@ -19,7 +20,7 @@ def run_compare(
     methods: str | Sequence[str] = DEFAULT_METHODS,
     points: str | Sequence[int] = DEFAULT_POINTS,
     views: str = DEFAULT_VIEWS,
-    resolution: int = 1024,
+    resolution: int = DEFAULT_RESOLUTION,
     out: str | os.PathLike = "compare_out",
     seed: int = 0,
     *,
@@ -135,7 +136,7 @@ def add_compare_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--methods", default=",".join(DEFAULT_METHODS), help="comma-separated methods (default: %(default)s)")
     p.add_argument("--points", default=",".join(str(n) for n in DEFAULT_POINTS), help="point counts (default: %(default)s)")
     p.add_argument("--views", default=DEFAULT_VIEWS, help="pose schedule: grid25, paper100, fibonacci:N or EL:AZ,... (default: %(default)s)")
-    p.add_argument("--resolution", type=int, default=1024, help="z-buffer resolution in pixels (default: %(default)s)")
+    p.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION, help="z-buffer resolution in pixels (default: %(default)s)")
     p.add_argument("--out", default="compare_out", help="output folder (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="sampling seed (default: %(default)s)")
     p.add_argument("--reference", default=DEFAULT_REFERENCE, help="method that defines the truth (default: %(default)s)")

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
+from ..defaults import DEFAULT_RESOLUTION
 from ..errors import InvalidInputError, ZbufOccludeError
 from ..mesh import find_meshes, load_mesh
 from ..metrics import agreement
@@ -192,7 +193,7 @@ def compare(
     methods: Sequence[str] = DEFAULT_METHODS,
     points: Sequence[int] = DEFAULT_POINTS,
     views: str | Sequence[tuple[float, float]] = DEFAULT_VIEWS,
-    resolution: int = 1024,
+    resolution: int = DEFAULT_RESOLUTION,
     seed: int = 0,
     *,
     reference: str = DEFAULT_REFERENCE,

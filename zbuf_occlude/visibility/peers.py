@@ -30,7 +30,8 @@ from numpy.typing import NDArray
 from ..cameras import Camera
 from ..errors import BackendUnavailable
 from .registry import check_face_index, check_points, register, visible_in_frustum
-from .zbuffer import DEFAULT_RESOLUTION, Scene
+from ..defaults import DEFAULT_RESOLUTION
+from .zbuffer import Scene
 
 __all__ = [
     "HPR_RADIUS_FACTOR",

@@ -21,6 +21,7 @@ import trimesh
 from numpy.typing import NDArray
 
 from ..cameras import Camera
+from ..defaults import DEFAULT_METHOD, DEFAULT_SELF_HIT_TOLERANCE
 from ..errors import InvalidInputError, RegistryError
 
 __all__ = [
@@ -34,6 +35,7 @@ __all__ = [
     "check_face_index",
     "visible_in_frustum",
     "log_ignored",
+    "DEFAULT_SELF_HIT_TOLERANCE",
 ]
 
 log = logging.getLogger(__name__)
@@ -42,11 +44,6 @@ VisibilityMethod = Callable[..., NDArray[np.bool_]]
 _METHODS: dict[str, VisibilityMethod] = {}
 _INFO: dict[str, MethodInfo] = {}
 
-#: Distance from a point, object units, within which a face meeting the point→camera
-#: segment does not count as an occluder.  It absorbs the point's own surface (coplanar
-#: duplicate faces, edges shared with neighbours) and float rounding; 1e-6 of the object's
-#: maximum extent is far below any feature ModelNet or ShapeNet models have.
-DEFAULT_SELF_HIT_TOLERANCE = 1e-6
 
 
 class PoseSession(Protocol):
@@ -197,7 +194,7 @@ def visible_mask(
     mesh: trimesh.Trimesh,
     points: NDArray[np.floating],
     camera: Camera,
-    method: str = "zbuffer",
+    method: str = DEFAULT_METHOD,
     *,
     face_index: NDArray[np.integer] | None = None,
     **options,

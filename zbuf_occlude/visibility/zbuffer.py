@@ -25,24 +25,21 @@ import trimesh
 from numpy.typing import NDArray
 
 from ..cameras import Camera
+from ..defaults import (  # noqa: F401 - DEFAULT_RESOLUTION etc. are re-exported from here
+    DEFAULT_DEPTH_TOLERANCE,
+    DEFAULT_GPU_TOLERANCE,
+    DEFAULT_MAX_SLOPE,
+    DEFAULT_RESOLUTION,
+    DEFAULT_SLOPE_SCALE,
+)
 from ..mesh_cache import MeshCache
 from ..render.moderngl_backend import ModernGLRenderer, PointBuffer
 from .registry import check_face_index, check_points, register
 
 __all__ = ["Scene", "renderer_for", "zbuffer_visible", "zbuffer_tolerance_visible", "DEFAULT_RESOLUTION"]
 
-#: Default image size, pixels (square).
-DEFAULT_RESOLUTION = 1024
 #: Meshes whose renderers stay cached by :func:`renderer_for`.
 RENDERER_CACHE_SIZE = 4
-#: Default constants of ``zbuffer-tolerance``: a constant part in object units and a slope
-#: term in pixel footprints (the depth change across ``slope_scale`` pixels of a surface
-#: seen at angle θ), clamped at ``max_slope`` = tan θ near grazing incidence.  Chosen by a
-#: grid search on three shipped meshes × 10 poses at 1024² (mean agreement 95.6 %, the best
-#: constant-only tolerance 94.9 %); a larger slope term exposes the far side of thin parts.
-DEFAULT_DEPTH_TOLERANCE = 1e-3
-DEFAULT_SLOPE_SCALE = 1.0
-DEFAULT_MAX_SLOPE = 4.0
 
 _renderers: MeshCache[ModernGLRenderer] = MeshCache(ModernGLRenderer, RENDERER_CACHE_SIZE, release=ModernGLRenderer.release)
 
@@ -132,7 +129,7 @@ class Scene:
         *,
         resolution: int | tuple[int, int] | None = None,
         neighborhood: int = 1,
-        tolerance: float = 1e-5,
+        tolerance: float = DEFAULT_GPU_TOLERANCE,
         resolve: str = "embree",
     ) -> NDArray[np.bool_]:
         """``zbuffer`` visibility of the points from ``camera``; see the module docstring.
@@ -212,7 +209,7 @@ def zbuffer_visible(
     face_index: NDArray[np.int64] | None = None,
     resolution: int | tuple[int, int] | None = DEFAULT_RESOLUTION,
     neighborhood: int = 1,
-    tolerance: float = 1e-5,
+    tolerance: float = DEFAULT_GPU_TOLERANCE,
     resolve: str = "embree",
     **_ignored,
 ) -> NDArray[np.bool_]:
