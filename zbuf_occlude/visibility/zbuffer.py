@@ -32,6 +32,7 @@ from ..defaults import (  # noqa: F401 - DEFAULT_RESOLUTION etc. are re-exported
     DEFAULT_RESOLUTION,
     DEFAULT_SLOPE_SCALE,
 )
+from ..errors import InvalidInputError
 from ..mesh_cache import MeshCache
 from ..render.moderngl_backend import ModernGLRenderer, PointBuffer
 from .registry import check_face_index, check_points, register
@@ -73,10 +74,10 @@ def _resolve_uncertain(
     resolve: str,
     tolerance: float,
 ) -> NDArray[np.bool_]:
+    if resolve not in ("embree", "none"):
+        raise InvalidInputError(f"resolve must be 'embree' or 'none', got {resolve!r}")
     if resolve == "none" or not uncertain.any():
         return visible
-    if resolve != "embree":
-        raise ValueError(f"resolve must be 'embree' or 'none', got {resolve!r}")
     from .oracle import occluded_embree  # deferred: only needed when points are uncertain
 
     idx = np.flatnonzero(uncertain)
