@@ -14,7 +14,7 @@ from zbuf_occlude.occlude import occlude_object
 from zbuf_occlude.render.moderngl_backend import ModernGLRenderer
 from zbuf_occlude.visibility.peers import naive_zbuffer_visible
 from zbuf_occlude.visibility.registry import visible_mask
-from zbuf_occlude.visibility.zbuffer import Scene, zbuffer_tolerance_visible, zbuffer_visible
+from zbuf_occlude.visibility.zbuffer import ResidentPoints, zbuffer_tolerance_visible, zbuffer_visible
 
 
 def _default(fn, name):
@@ -37,10 +37,10 @@ def test_method_default() -> None:
 
 def test_gpu_constants_agree_between_backend_and_methods() -> None:
     """The renderer's own defaults are the methods' (max_slope was 10 there, 4 in zbuffer)."""
-    for fn in (ModernGLRenderer.visible, Scene.visible, zbuffer_visible):
+    for fn in (ModernGLRenderer.visible, ResidentPoints.visible, zbuffer_visible):
         assert _default(fn, "tolerance") == defaults.DEFAULT_GPU_TOLERANCE
-    for fn in (ModernGLRenderer.visible, Scene.visible_tolerance, zbuffer_tolerance_visible):
+    for fn in (ModernGLRenderer.visible, ResidentPoints.visible_tolerance, zbuffer_tolerance_visible):
         assert _default(fn, "max_slope") == defaults.DEFAULT_MAX_SLOPE == 4.0
-    for fn in (Scene.visible_tolerance, zbuffer_tolerance_visible):
+    for fn in (ResidentPoints.visible_tolerance, zbuffer_tolerance_visible):
         assert _default(fn, "depth_tolerance") == defaults.DEFAULT_DEPTH_TOLERANCE
         assert _default(fn, "slope_scale") == defaults.DEFAULT_SLOPE_SCALE

@@ -218,7 +218,7 @@ def build_parser() -> argparse.ArgumentParser:
     # Subcommands whose options live beside their engines.
     from .compare import add_compare_parser
     from .farm import add_farm_merge_parser, add_farm_parser
-    from .profile import add_profile_parser
+    from .elevation_profile import add_profile_parser
 
     for add in (add_compare_parser, add_profile_parser, add_farm_parser, add_farm_merge_parser):
         add(sub)

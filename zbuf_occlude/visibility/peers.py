@@ -31,7 +31,7 @@ from ..cameras import Camera
 from ..errors import BackendUnavailable
 from .registry import check_face_index, check_points, register, visible_in_frustum
 from ..defaults import DEFAULT_RESOLUTION
-from .zbuffer import Scene
+from .zbuffer import ResidentPoints
 
 __all__ = [
     "HPR_RADIUS_FACTOR",
@@ -66,7 +66,7 @@ def naive_zbuffer_visible(
 ) -> NDArray[np.bool_]:
     """Plain z-buffer depth test, zero tolerance (the rule of ``mesh_to_sdf``'s ``Scan.is_visible``).
 
-    :meth:`zbuf_occlude.visibility.zbuffer.Scene.visible_tolerance` with
+    :meth:`zbuf_occlude.visibility.zbuffer.ResidentPoints.visible_tolerance` with
     ``depth_tolerance=0`` and ``slope_scale=0``: visible iff the point's linear depth is at
     most the rendered depth at its pixel.  Points on surfaces seen at a slant lose to their
     own face's rasterised depth about half the time (the "shadow acne" of shadow maps),
@@ -96,7 +96,7 @@ def naive_zbuffer_visible(
     BackendUnavailable
         No OpenGL 4.3 context.
     """
-    with Scene(mesh, points, face_index) as scene:
+    with ResidentPoints(mesh, points, face_index) as scene:
         return scene.visible_tolerance(camera, resolution=resolution, depth_tolerance=0.0, slope_scale=0.0)
 
 
