@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__
+from ._version import __version__
 from .cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
 from .defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION
 from .errors import InvalidInputError, ZbufOccludeError
