@@ -153,3 +153,20 @@ def oracle_numpy_visible(
     """
     log_ignored("oracle-numpy", _ignored)
     return _visible(occluded_numpy, mesh_planes(mesh), points, camera, face_index, len(mesh.faces), tolerance)
+
+
+# Names this module had before the split (private then), so that code written against the
+# single-module oracle keeps importing while the branches merge; use the new homes.
+from .oracle_embree import _EmbreeScene, _embree_scene, _scene_for  # noqa: E402,F401
+from .oracle_numpy import occluded_unchecked as _occluded_core  # noqa: E402,F401
+from .segment_triangle import (  # noqa: E402,F401
+    boundary_times_cos as _boundary_times_cos,
+    check_eye as _check_eye,
+    check_tolerance as _check_tolerance,
+    cross as _cross,
+    dot3 as _dot3,
+    inside_triangle as _inside_triangle,
+    near_own_surface as _near_own_surface,
+    pair_occludes as _pair_occludes,
+    segment_plane as _segment_plane,
+)

@@ -40,6 +40,7 @@ from .registry import check_face_index, check_points, register
 
 __all__ = ["ResidentPoints", "Scene", "renderer_for", "zbuffer_visible", "zbuffer_tolerance_visible", "DEFAULT_RESOLUTION"]
 
+
 def _at_resolution(camera: Camera, resolution: int | tuple[int, int] | None) -> Camera:
     if resolution is None:
         return camera
@@ -184,7 +185,6 @@ class ResidentPoints:
 
     def __exit__(self, *exc) -> None:
         self.release()
-
 
 
 class Scene(ResidentPoints):
