@@ -13,7 +13,7 @@ import trimesh
 
 import zbuf_occlude as zo
 from zbuf_occlude import compare as cmp
-from zbuf_occlude import profile as prof
+from zbuf_occlude import elevation_profile as prof
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 
 MODELNET = Path(__file__).parents[1].parent / "shared" / "data" / "modelnet_subset"

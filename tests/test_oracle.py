@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 from zbuf_occlude.cameras import camera_on_sphere
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
-from zbuf_occlude.visibility import oracle, registry
+from zbuf_occlude.visibility import oracle_embree as oracle, registry  # _EmbreeScene lives in oracle_embree
 from zbuf_occlude.visibility.oracle import (
     occluded_embree,
     occluded_numpy,

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 import zbuf_occlude as zo
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.metrics import agreement
-from zbuf_occlude.visibility.zbuffer import Scene
+from zbuf_occlude.visibility.zbuffer import ResidentPoints as Scene
 
 #: Issue 3's bar: z-buffer vs oracle agreement at 1024² over the grid25 poses, per pose.
 MIN_AGREEMENT = 0.995

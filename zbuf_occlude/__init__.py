@@ -12,6 +12,7 @@ against an exact geometric oracle.
 >>> mask = zo.visible_mask(mesh, points, camera, method="zbuffer", resolution=1024, face_index=face_index)
 """
 
+from ._version import __version__
 from .cameras import DEFAULT_RADIUS, Camera, camera_on_sphere, cameras_from_schedule, view_schedule
 from .errors import (
     BackendUnavailable,
@@ -19,17 +20,16 @@ from .errors import (
     InvalidInputError,
     MeshLoadError,
     OutputError,
+    RegistryError,
     ZbufOccludeError,
 )
 from .mesh import load_mesh, normalize_mesh
 from .render import ModernGLRenderer, context_info, render_depth
 from .sampling import points_from_barycentric, sample_faces, sample_surface
-from .visibility import available_methods, register, visible_mask
-from .visibility.zbuffer import Scene
+from .visibility import MethodInfo, available_methods, method_info, register, visible_mask
+from .visibility.zbuffer import ResidentPoints, Scene  # Scene: deprecated alias of ResidentPoints
 from .dataset import OccludedDataset
 from .farm import merge_farm, run_farm
-
-__version__ = "0.1.0"
 
 __all__ = [
     "__version__",
@@ -46,9 +46,12 @@ __all__ = [
     "ModernGLRenderer",
     "render_depth",
     "context_info",
+    "ResidentPoints",
     "Scene",
     "visible_mask",
     "available_methods",
+    "method_info",
+    "MethodInfo",
     "register",
     "ZbufOccludeError",
     "MeshLoadError",
@@ -56,7 +59,22 @@ __all__ = [
     "CameraError",
     "BackendUnavailable",
     "OutputError",
+    "RegistryError",
     "OccludedDataset",
     "run_farm",
     "merge_farm",
 ]
+
+
+def __getattr__(name: str):
+    # ``zbuf_occlude.profile`` was renamed ``elevation_profile`` (it shadowed the standard
+    # library's ``profile``); the old name keeps working, with a warning, for one release.
+    if name == "profile":
+        import importlib
+        import warnings
+
+        warnings.warn(
+            "zbuf_occlude.profile is deprecated, use zbuf_occlude.elevation_profile", DeprecationWarning, stacklevel=2
+        )
+        return importlib.import_module(".elevation_profile", __name__)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from .defaults import DEFAULT_RESOLUTION
 from .errors import CameraError, InvalidInputError
 
 __all__ = [
@@ -204,7 +205,7 @@ def camera_on_sphere(
     azimuth_deg: float,
     radius: float = DEFAULT_RADIUS,
     *,
-    resolution: int | tuple[int, int] = 1024,
+    resolution: int | tuple[int, int] = DEFAULT_RESOLUTION,
     yfov_deg: float | None = None,
     bounding_radius: float = UNIT_BOX_BOUNDING_RADIUS,
 ) -> Camera:
@@ -332,7 +333,7 @@ def view_schedule(spec: str) -> list[tuple[float, float]]:
 
 
 def cameras_from_schedule(
-    spec: str, radius: float = DEFAULT_RADIUS, *, resolution: int | tuple[int, int] = 1024
+    spec: str, radius: float = DEFAULT_RADIUS, *, resolution: int | tuple[int, int] = DEFAULT_RESOLUTION
 ) -> list[Camera]:
     """One :func:`camera_on_sphere` per pose of :func:`view_schedule` ``(spec)``."""
     return [camera_on_sphere(el, az, radius, resolution=resolution) for el, az in view_schedule(spec)]

@@ -15,8 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__
+from ._version import __version__
 from .cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
+from .defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION
 from .errors import InvalidInputError, ZbufOccludeError
 from .io import FORMATS, read_h5_clouds, write_csv, write_h5, write_npz, write_ply, write_text
 from .mesh import class_and_split, find_meshes, load_mesh
@@ -182,7 +183,7 @@ def _add_common(p: argparse.ArgumentParser, *, points: int) -> None:
     p.add_argument("paths", nargs="*", metavar="PATH", help="mesh files or folders (recursive); default: the shipped sample meshes")
     p.add_argument("--views", default="grid25", help="paper100 | grid25 | fibonacci:N | EL:AZ,EL:AZ,... (degrees)")
     p.add_argument("--points", type=int, default=points, help="points per sample (generate) or sampled per mesh (validate)")
-    p.add_argument("--resolution", type=int, default=1024, help="z-buffer image size, pixels")
+    p.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION, help="z-buffer image size, pixels")
     p.add_argument("--radius", type=float, default=DEFAULT_RADIUS, help="camera distance, object units (object max extent is 1)")
     p.add_argument("--seed", type=int, default=0)
 
@@ -200,13 +201,13 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--samples-per-view", type=int, default=10, help="random draws per pose")
     g.add_argument("--dense-points", type=int, default=DEFAULT_DENSE_POINTS, help="dense cloud per mesh, drawn from per pose")
     g.add_argument("--format", choices=FORMATS, default="npz")
-    g.add_argument("--method", default="zbuffer", help="visibility method (see `zbuf-occlude info`)")
+    g.add_argument("--method", default=DEFAULT_METHOD, help="visibility method (see `zbuf-occlude info`)")
     g.add_argument("--overwrite", action="store_true", help="redo meshes finished by an earlier run")
     g.set_defaults(func=cmd_generate)
 
     v = sub.add_parser("validate", help="agreement of visibility methods with the exact oracle, per mesh and pose")
     _add_common(v, points=100_000)
-    v.add_argument("--methods", default="zbuffer", help="comma-separated methods to score")
+    v.add_argument("--methods", default=DEFAULT_METHOD, help="comma-separated methods to score")
     v.add_argument("--csv", help="also write the rows to this CSV file")
     v.set_defaults(func=cmd_validate)
 
@@ -217,7 +218,7 @@ def build_parser() -> argparse.ArgumentParser:
     # Subcommands whose options live beside their engines.
     from .compare import add_compare_parser
     from .farm import add_farm_merge_parser, add_farm_parser
-    from .profile import add_profile_parser
+    from .elevation_profile import add_profile_parser
 
     for add in (add_compare_parser, add_profile_parser, add_farm_parser, add_farm_merge_parser):
         add(sub)

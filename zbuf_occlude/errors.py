@@ -14,6 +14,7 @@ __all__ = [
     "CameraError",
     "BackendUnavailable",
     "OutputError",
+    "RegistryError",
 ]
 
 
@@ -39,3 +40,7 @@ class BackendUnavailable(ZbufOccludeError, RuntimeError):
 
 class OutputError(ZbufOccludeError, OSError):
     """An output path cannot be written (unwritable folder, disk full)."""
+
+
+class RegistryError(ZbufOccludeError, RuntimeError):
+    """A visibility method registered twice under one name, or with an unknown capability (a bug in a plugin)."""

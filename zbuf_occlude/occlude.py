@@ -19,11 +19,11 @@ import trimesh
 from numpy.typing import NDArray
 
 from .cameras import DEFAULT_RADIUS, Camera, camera_on_sphere
+from .defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION
 from .errors import InvalidInputError
 from .io import OccludedCloud
 from .sampling import sample_surface
-from .visibility.registry import visible_mask
-from .visibility.zbuffer import Scene
+from .visibility.registry import method_info, visible_mask
 
 __all__ = ["object_key", "derive_rng", "sample_rng", "draw_sample", "pose_samples", "DenseCloud", "dense_cloud", "occlude_object"]
 
@@ -138,8 +138,8 @@ def occlude_object(
     samples_per_view: int = 10,
     seed: int = 0,
     dense: DenseCloud | None = None,
-    method: str = "zbuffer",
-    resolution: int = 1024,
+    method: str = DEFAULT_METHOD,
+    resolution: int = DEFAULT_RESOLUTION,
     radius: float = DEFAULT_RADIUS,
     label: int = -1,
     class_name: str = "",
@@ -171,7 +171,8 @@ def occlude_object(
     if n_points < 1 or samples_per_view < 0:
         raise InvalidInputError(f"need n_points >= 1 and samples_per_view >= 0, got {n_points}, {samples_per_view}")
     dense = dense or dense_cloud(mesh, key, seed=seed)
-    scene = Scene(mesh, dense.points, dense.face_index) if method == "zbuffer" else None
+    session = method_info(method).session
+    scene = session(mesh, dense.points, dense.face_index) if session is not None else None
     try:
         for pose_index, (el, az) in enumerate(poses):
             camera: Camera = camera_on_sphere(el, az, radius, resolution=resolution)

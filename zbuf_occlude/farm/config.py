@@ -20,6 +20,7 @@ from ..dataset import (
     SHARD_DIR,
     STORAGE_MODES,
 )
+from ..defaults import DEFAULT_METHOD
 from ..errors import BackendUnavailable, InvalidInputError, OutputError
 
 if TYPE_CHECKING:  # annotations only: inputs imports nothing from here
@@ -91,7 +92,7 @@ class FarmParams:
     seed: int = 0
     radius: float = DEFAULT_RADIUS
     storage: str = "dense"
-    method: str = "zbuffer"
+    method: str = DEFAULT_METHOD
 
     def __post_init__(self) -> None:
         if self.storage not in STORAGE_MODES:

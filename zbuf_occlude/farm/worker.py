@@ -24,6 +24,7 @@ from ..dataset import (
 from ..io import atomic_path, write_text
 from ..mesh import load_mesh
 from ..occlude import dense_cloud, occlude_object
+from .._version import __version__
 from .config import COMPACT_GZIP_LEVEL, FarmParams, _FATAL, _GL_LOCK, _record_path, shard_path
 from .inputs import FarmObject
 
@@ -32,8 +33,6 @@ log = logging.getLogger(__name__)
 
 # -- the unit of work --------------------------------------------------------------------------
 def _version() -> str:
-    from .. import __version__  # deferred: the package imports this module while it initialises
-
     return __version__
 
 

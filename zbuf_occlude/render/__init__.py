@@ -7,8 +7,9 @@ depth independently for cross-checks.
 
 from .context import context_info, create_context, shared_context
 from .moderngl_backend import DepthRender, ModernGLRenderer, PointBuffer
+from .renderer_cache import renderer_for
 
-__all__ = ["create_context", "shared_context", "context_info", "ModernGLRenderer", "DepthRender", "PointBuffer", "render_depth"]
+__all__ = ["create_context", "shared_context", "context_info", "ModernGLRenderer", "DepthRender", "PointBuffer", "render_depth", "renderer_for"]
 
 
 def render_depth(mesh, camera, backend: str = "moderngl"):
@@ -17,8 +18,6 @@ def render_depth(mesh, camera, backend: str = "moderngl"):
     ``backend``: ``"moderngl"`` (cached renderer of the mesh) or ``"pyrender"``.
     """
     if backend == "moderngl":
-        from ..visibility.zbuffer import renderer_for
-
         return renderer_for(mesh).render(camera).depth
     if backend == "pyrender":
         from .pyrender_backend import PyrenderRenderer

@@ -17,6 +17,7 @@ import trimesh
 from numpy.typing import NDArray
 
 from ..cameras import Camera
+from ..defaults import DEFAULT_GPU_TOLERANCE, DEFAULT_MAX_SLOPE
 from ..errors import InvalidInputError
 from .context import shared_context
 from .shaders import load_shader
@@ -210,11 +211,11 @@ class ModernGLRenderer:
         *,
         rule: str = "candidates",
         neighborhood: int = 1,
-        tolerance: float = 1e-5,
+        tolerance: float = DEFAULT_GPU_TOLERANCE,
         edge_epsilon: float = 1e-5,
         depth_tolerance: float = 0.0,
         slope_scale: float = 0.0,
-        max_slope: float = 10.0,
+        max_slope: float = DEFAULT_MAX_SLOPE,
     ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
         """Render ``camera`` and decide each uploaded point's visibility on the GPU.
 

@@ -30,7 +30,8 @@ from numpy.typing import NDArray
 from ..cameras import Camera
 from ..errors import BackendUnavailable
 from .registry import check_face_index, check_points, register, visible_in_frustum
-from .zbuffer import DEFAULT_RESOLUTION, Scene
+from ..defaults import DEFAULT_RESOLUTION
+from .zbuffer import ResidentPoints
 
 __all__ = [
     "HPR_RADIUS_FACTOR",
@@ -53,7 +54,7 @@ HPR_RADIUS_FACTOR = 100.0
 RAYCAST_START_OFFSET = 1e-4
 
 
-@register("naive-zbuffer")
+@register("naive-zbuffer", takes_resolution=True, gpu=True)
 def naive_zbuffer_visible(
     mesh: trimesh.Trimesh,
     points: NDArray[np.float64],
@@ -65,7 +66,7 @@ def naive_zbuffer_visible(
 ) -> NDArray[np.bool_]:
     """Plain z-buffer depth test, zero tolerance (the rule of ``mesh_to_sdf``'s ``Scan.is_visible``).
 
-    :meth:`zbuf_occlude.visibility.zbuffer.Scene.visible_tolerance` with
+    :meth:`zbuf_occlude.visibility.zbuffer.ResidentPoints.visible_tolerance` with
     ``depth_tolerance=0`` and ``slope_scale=0``: visible iff the point's linear depth is at
     most the rendered depth at its pixel.  Points on surfaces seen at a slant lose to their
     own face's rasterised depth about half the time (the "shadow acne" of shadow maps),
@@ -95,7 +96,7 @@ def naive_zbuffer_visible(
     BackendUnavailable
         No OpenGL 4.3 context.
     """
-    with Scene(mesh, points, face_index) as scene:
+    with ResidentPoints(mesh, points, face_index) as scene:
         return scene.visible_tolerance(camera, resolution=resolution, depth_tolerance=0.0, slope_scale=0.0)
 
 
@@ -111,7 +112,7 @@ def import_open3d() -> Any:
     return open3d
 
 
-@register("open3d-hpr")
+@register("open3d-hpr", extra="open3d")
 def open3d_hpr_visible(
     mesh: trimesh.Trimesh,
     points: NDArray[np.floating],
@@ -162,7 +163,7 @@ def open3d_hpr_visible(
     return visible & camera.in_frustum(pts)
 
 
-@register("open3d-raycast")
+@register("open3d-raycast", extra="open3d")
 def open3d_raycast_visible(
     mesh: trimesh.Trimesh,
     points: NDArray[np.floating],

@@ -1,52 +1,124 @@
 """The registry of hidden-surface-removal (HSR) methods behind :func:`visible_mask`.
 
 A method is a function ``fn(mesh, points, camera, *, face_index=None, **options) -> (N,) bool``
-registered under one or more names with :func:`register`.  Adding a method is one new
-function and one decorator line; :func:`visible_mask` needs no edit.
+registered under one or more names with :func:`register`, which also declares what the
+method can do (:class:`MethodInfo`: takes ``resolution``, takes ``grid``, keeps points on
+the GPU across poses, needs an optional extra, exact...).  Callers ask
+:func:`method_info` instead of testing method names, so adding a method is one new
+function and one decorator line; :func:`visible_mask`, ``occlude_object`` and ``compare``
+need no edit.
 """
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Protocol
 
 import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
 from ..cameras import Camera
-from ..errors import InvalidInputError
+from ..defaults import DEFAULT_METHOD, DEFAULT_SELF_HIT_TOLERANCE
+from ..errors import InvalidInputError, RegistryError
 
 __all__ = [
     "register",
     "available_methods",
     "get_method",
+    "method_info",
+    "MethodInfo",
+    "PoseSession",
     "check_points",
     "check_face_index",
     "visible_in_frustum",
     "log_ignored",
+    "DEFAULT_SELF_HIT_TOLERANCE",
 ]
 
 log = logging.getLogger(__name__)
 
 VisibilityMethod = Callable[..., NDArray[np.bool_]]
 _METHODS: dict[str, VisibilityMethod] = {}
-
-#: Distance from a point, object units, within which a face meeting the point→camera
-#: segment does not count as an occluder.  It absorbs the point's own surface (coplanar
-#: duplicate faces, edges shared with neighbours) and float rounding; 1e-6 of the object's
-#: maximum extent is far below any feature ModelNet or ShapeNet models have.
-DEFAULT_SELF_HIT_TOLERANCE = 1e-6
+_INFO: dict[str, MethodInfo] = {}
 
 
-def register(*names: str) -> Callable[[VisibilityMethod], VisibilityMethod]:
-    """Decorator: register an HSR method under ``names`` (the first is canonical)."""
+
+class PoseSession(Protocol):
+    """Points kept resident (e.g. on the GPU) and tested from many cameras; see :attr:`MethodInfo.session`."""
+
+    def visible(self, camera: Camera, **options: Any) -> NDArray[np.bool_]: ...
+
+    def release(self) -> None: ...
+
+
+@dataclass(frozen=True)
+class MethodInfo:
+    """What a registered method can do, declared once in its :func:`register` line.
+
+    Attributes
+    ----------
+    name : str
+        The canonical name (first name given to :func:`register`).
+    function : callable
+        ``fn(mesh, points, camera, *, face_index=None, **options) -> (N,) bool``.
+    takes_resolution : bool
+        Image space: honours a ``resolution`` option (pixels), and its answer depends on it.
+    takes_grid : bool
+        Honours a ``grid`` option (occupancy-grid cells per axis).
+    grid_of : str or None
+        For a name that fixes the grid (``"og32"``): the method whose ``grid`` it fixes.
+    session : callable or None
+        ``session(mesh, points, face_index) -> PoseSession`` keeping the points resident
+        across poses (uploaded to the GPU once); ``session(...).visible(camera, **options)``
+        must equal the method's answer for that camera.  ``None``: call the method per pose.
+    extra : str or None
+        The ``pip install 'zbuf-occlude[EXTRA]'`` extra the method needs, if any.
+    exact : bool
+        Decides the oracle's definition (Eq. 1-10 in float64, every occluder tested), not an
+        approximation of it: the answer of ``"oracle-numpy"`` (``"oracle"`` up to Embree's
+        documented float32 residue).
+    gpu : bool
+        Needs an OpenGL 4.3 context.
+    """
+
+    name: str
+    function: VisibilityMethod
+    takes_resolution: bool = False
+    takes_grid: bool = False
+    grid_of: str | None = None
+    session: Callable[..., PoseSession] | None = None
+    extra: str | None = None
+    exact: bool = False
+    gpu: bool = False
+
+
+def register(*names: str, **capabilities: Any) -> Callable[[VisibilityMethod], VisibilityMethod]:
+    """Decorator: register an HSR method under ``names`` (the first is canonical).
+
+    ``capabilities`` are the fields of :class:`MethodInfo` other than ``name`` and
+    ``function`` (``takes_resolution=True``, ``session=...``); unknown ones are an error.
+
+    Raises
+    ------
+    RegistryError
+        A name already registered to another function, or an unknown capability.
+    """
+    fields = set(MethodInfo.__dataclass_fields__) - {"name", "function"}
+    unknown = sorted(set(capabilities) - fields)
+    if unknown:
+        raise RegistryError(f"unknown method capabilities {unknown}; known: {sorted(fields)}")
 
     def deco(fn: VisibilityMethod) -> VisibilityMethod:
         for name in names:
             if name in _METHODS and _METHODS[name] is not fn:
-                raise RuntimeError(f"visibility method {name!r} registered twice")
+                raise RegistryError(f"visibility method {name!r} registered twice")
+        info = MethodInfo(name=names[0], function=fn, **capabilities)
+        for name in names:
             _METHODS[name] = fn
+            _INFO[name] = info
         return fn
 
     return deco
@@ -65,6 +137,14 @@ def get_method(name: str) -> VisibilityMethod:
         raise InvalidInputError(
             f"unknown visibility method {name!r}; available: {', '.join(available_methods())}"
         ) from None
+
+
+def method_info(name: str) -> MethodInfo:
+    """What method ``name`` can do (:class:`MethodInfo`); :class:`InvalidInputError` if unknown."""
+    fn = get_method(name)
+    info = _INFO.get(name)
+    # A function put in _METHODS by hand (tests do) declares nothing.
+    return info if info is not None and info.function is fn else MethodInfo(name=name, function=fn)
 
 
 def check_points(points: NDArray[np.floating]) -> NDArray[np.float64]:
@@ -116,7 +196,7 @@ def visible_mask(
     mesh: trimesh.Trimesh,
     points: NDArray[np.floating],
     camera: Camera,
-    method: str = "zbuffer",
+    method: str = DEFAULT_METHOD,
     *,
     face_index: NDArray[np.integer] | None = None,
     **options,

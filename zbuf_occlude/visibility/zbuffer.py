@@ -13,48 +13,32 @@
     (Williams 1978; slope-scaled bias as in OpenGL's ``glPolygonOffset``).
 
 Both keep the mesh on the GPU across calls: :func:`renderer_for` caches one renderer per
-mesh (a few meshes, least recently used), and :class:`Scene` also keeps the points uploaded.
+mesh (a few meshes, least recently used), and :class:`ResidentPoints` also keeps the points uploaded.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import warnings
 
 import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
 from ..cameras import Camera
-from ..mesh_cache import MeshCache
-from ..render.moderngl_backend import ModernGLRenderer, PointBuffer
+from ..defaults import (  # noqa: F401 - DEFAULT_RESOLUTION etc. are re-exported from here
+    DEFAULT_DEPTH_TOLERANCE,
+    DEFAULT_GPU_TOLERANCE,
+    DEFAULT_MAX_SLOPE,
+    DEFAULT_RESOLUTION,
+    DEFAULT_SLOPE_SCALE,
+)
+from ..errors import InvalidInputError
+from ..render.moderngl_backend import PointBuffer
+from ..render.renderer_cache import RENDERER_CACHE_SIZE, renderer_for  # noqa: F401 - re-exported
 from .registry import check_face_index, check_points, register
 
-__all__ = ["Scene", "renderer_for", "zbuffer_visible", "zbuffer_tolerance_visible", "DEFAULT_RESOLUTION"]
-
-#: Default image size, pixels (square).
-DEFAULT_RESOLUTION = 1024
-#: Meshes whose renderers stay cached by :func:`renderer_for`.
-RENDERER_CACHE_SIZE = 4
-#: Default constants of ``zbuffer-tolerance``: a constant part in object units and a slope
-#: term in pixel footprints (the depth change across ``slope_scale`` pixels of a surface
-#: seen at angle θ), clamped at ``max_slope`` = tan θ near grazing incidence.  Chosen by a
-#: grid search on three shipped meshes × 10 poses at 1024² (mean agreement 95.6 %, the best
-#: constant-only tolerance 94.9 %); a larger slope term exposes the far side of thin parts.
-DEFAULT_DEPTH_TOLERANCE = 1e-3
-DEFAULT_SLOPE_SCALE = 1.0
-DEFAULT_MAX_SLOPE = 4.0
-
-_renderers: MeshCache[ModernGLRenderer] = MeshCache(ModernGLRenderer, RENDERER_CACHE_SIZE, release=ModernGLRenderer.release)
-
-
-def renderer_for(mesh: trimesh.Trimesh) -> ModernGLRenderer:
-    """The cached :class:`ModernGLRenderer` of ``mesh`` in this process (made on first use).
-
-    One entry per live mesh object (:class:`~zbuf_occlude.mesh_cache.MeshCache`); a mesh
-    whose vertices or faces changed gets a new renderer, and evicted renderers release
-    their GL objects.
-    """
-    return _renderers(mesh)
+__all__ = ["ResidentPoints", "Scene", "renderer_for", "zbuffer_visible", "zbuffer_tolerance_visible", "DEFAULT_RESOLUTION"]
 
 
 def _at_resolution(camera: Camera, resolution: int | tuple[int, int] | None) -> Camera:
@@ -76,10 +60,10 @@ def _resolve_uncertain(
     resolve: str,
     tolerance: float,
 ) -> NDArray[np.bool_]:
+    if resolve not in ("embree", "none"):
+        raise InvalidInputError(f"resolve must be 'embree' or 'none', got {resolve!r}")
     if resolve == "none" or not uncertain.any():
         return visible
-    if resolve != "embree":
-        raise ValueError(f"resolve must be 'embree' or 'none', got {resolve!r}")
     from .oracle import occluded_embree  # deferred: only needed when points are uncertain
 
     idx = np.flatnonzero(uncertain)
@@ -89,12 +73,12 @@ def _resolve_uncertain(
     return out
 
 
-class Scene:
+class ResidentPoints:
     """One mesh and one point set on the GPU, tested from many cameras.
 
     Holds the (cached, shared) renderer of the mesh and the points uploaded once; use it
     for many poses of one object (the render farm does).  ``visible_mask`` with the z-buffer
-    methods builds a throw-away Scene per call (the mesh stays cached, the points are
+    methods builds a throw-away ResidentPoints per call (the mesh stays cached, the points are
     re-uploaded).
 
     Parameters
@@ -132,7 +116,7 @@ class Scene:
         *,
         resolution: int | tuple[int, int] | None = None,
         neighborhood: int = 1,
-        tolerance: float = 1e-5,
+        tolerance: float = DEFAULT_GPU_TOLERANCE,
         resolve: str = "embree",
     ) -> NDArray[np.bool_]:
         """``zbuffer`` visibility of the points from ``camera``; see the module docstring.
@@ -196,14 +180,27 @@ class Scene:
                 self._buffer.release()
             self._buffer = None
 
-    def __enter__(self) -> Scene:
+    def __enter__(self) -> ResidentPoints:
         return self
 
     def __exit__(self, *exc) -> None:
         self.release()
 
 
-@register("zbuffer")
+class Scene(ResidentPoints):
+    """Deprecated alias of :class:`ResidentPoints` (``zo.Scene`` clashed with ``trimesh.Scene``
+    and ``pyrender.Scene``); removed in the next release."""
+
+    def __init__(self, *args, **kwargs):
+        warnings.warn(
+            "zbuf_occlude.Scene is deprecated, use zbuf_occlude.ResidentPoints (same arguments)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        super().__init__(*args, **kwargs)
+
+
+@register("zbuffer", takes_resolution=True, gpu=True, session=ResidentPoints)
 def zbuffer_visible(
     mesh: trimesh.Trimesh,
     points: NDArray[np.float64],
@@ -212,19 +209,19 @@ def zbuffer_visible(
     face_index: NDArray[np.int64] | None = None,
     resolution: int | tuple[int, int] | None = DEFAULT_RESOLUTION,
     neighborhood: int = 1,
-    tolerance: float = 1e-5,
+    tolerance: float = DEFAULT_GPU_TOLERANCE,
     resolve: str = "embree",
     **_ignored,
 ) -> NDArray[np.bool_]:
-    """Default image-space HSR: id-buffer candidates + exact tests; see :meth:`Scene.visible`.
+    """Default image-space HSR: id-buffer candidates + exact tests; see :meth:`ResidentPoints.visible`.
 
     Unrelated keywords are ignored so one option set can drive several methods.
     """
-    with Scene(mesh, points, face_index) as scene:
+    with ResidentPoints(mesh, points, face_index) as scene:
         return scene.visible(camera, resolution=resolution, neighborhood=neighborhood, tolerance=tolerance, resolve=resolve)
 
 
-@register("zbuffer-tolerance")
+@register("zbuffer-tolerance", takes_resolution=True, gpu=True)
 def zbuffer_tolerance_visible(
     mesh: trimesh.Trimesh,
     points: NDArray[np.float64],
@@ -237,8 +234,8 @@ def zbuffer_tolerance_visible(
     max_slope: float = DEFAULT_MAX_SLOPE,
     **_ignored,
 ) -> NDArray[np.bool_]:
-    """Depth-test image-space HSR with a slope-scaled tolerance; see :meth:`Scene.visible_tolerance`."""
-    with Scene(mesh, points, face_index) as scene:
+    """Depth-test image-space HSR with a slope-scaled tolerance; see :meth:`ResidentPoints.visible_tolerance`."""
+    with ResidentPoints(mesh, points, face_index) as scene:
         return scene.visible_tolerance(
             camera, resolution=resolution, depth_tolerance=depth_tolerance, slope_scale=slope_scale, max_slope=max_slope
         )

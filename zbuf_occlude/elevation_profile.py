@@ -31,6 +31,7 @@ import trimesh
 from numpy.typing import NDArray
 
 from .cameras import DEFAULT_RADIUS, camera_on_sphere
+from .defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION
 from .errors import InvalidInputError, OutputError
 from .io import write_csv
 from .mesh import load_mesh
@@ -95,11 +96,11 @@ def projected_areas(
 def profile_table(
     mesh: trimesh.Trimesh,
     *,
-    method: str = "zbuffer",
+    method: str = DEFAULT_METHOD,
     points: int = DEFAULT_PROFILE_POINTS,
     elevations: Sequence[float] = DEFAULT_ELEVATIONS,
     azimuths: int = DEFAULT_AZIMUTHS,
-    resolution: int = 1024,
+    resolution: int = DEFAULT_RESOLUTION,
     radius: float = DEFAULT_RADIUS,
     seed: int = 0,
     progress: bool = True,
@@ -187,11 +188,11 @@ def elevation_profile(
     mesh_path: str | os.PathLike,
     out: str | os.PathLike = "elevation_profile.png",
     *,
-    method: str = "zbuffer",
+    method: str = DEFAULT_METHOD,
     points: int = DEFAULT_PROFILE_POINTS,
     elevations: Sequence[float] = DEFAULT_ELEVATIONS,
     azimuths: int = DEFAULT_AZIMUTHS,
-    resolution: int = 1024,
+    resolution: int = DEFAULT_RESOLUTION,
     seed: int = 0,
     progress: bool = True,
 ) -> Path:
@@ -300,11 +301,11 @@ def add_profile_parser(subparsers: Any) -> argparse.ArgumentParser:
     )
     p.add_argument("mesh", help="mesh file (.off, .obj, .ply, .stl, .glb)")
     p.add_argument("--out", default="elevation_profile.png", help="PNG path or folder (default: %(default)s)")
-    p.add_argument("--method", default="zbuffer", help="HSR method (default: %(default)s)")
+    p.add_argument("--method", default=DEFAULT_METHOD, help="HSR method (default: %(default)s)")
     p.add_argument("--points", type=int, default=DEFAULT_PROFILE_POINTS, help="surface samples (default: %(default)s)")
     p.add_argument("--elevations", default="", help="comma-separated degrees (default: -90..90 step 10)")
     p.add_argument("--azimuths", type=int, default=DEFAULT_AZIMUTHS, help="azimuths averaged per elevation (default: %(default)s)")
-    p.add_argument("--resolution", type=int, default=1024, help="image size in pixels (default: %(default)s)")
+    p.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION, help="image size in pixels (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="sampling seed (default: %(default)s)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cli_profile)

@@ -1,0 +1,54 @@
+"""Every error raised on purpose belongs to the ZbufOccludeError family."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+import trimesh
+
+import zbuf_occlude as zo
+from zbuf_occlude import errors
+
+PACKAGE = Path(zo.__file__).parent
+#: Modules whose raises are checked here (the visibility methods and the comparison).
+CHECKED = [PACKAGE / "visibility", PACKAGE / "compare"]
+BUILTIN_ERRORS = {"ValueError", "RuntimeError", "TypeError", "KeyError", "Exception", "AssertionError", "OSError"}
+
+
+def test_every_error_type_is_in_the_family() -> None:
+    for name in errors.__all__:
+        assert issubclass(getattr(errors, name), errors.ZbufOccludeError), name
+        assert getattr(zo, name, getattr(errors, name)) is getattr(errors, name)
+
+
+def _builtin_raises(tree: ast.AST) -> list[int]:
+    return [
+        node.lineno
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Raise)
+        and isinstance(node.exc, ast.Call)
+        and isinstance(node.exc.func, ast.Name)
+        and node.exc.func.id in BUILTIN_ERRORS
+    ]
+
+
+def test_no_builtin_exception_is_raised_by_the_methods() -> None:
+    offenders = [
+        f"{path.relative_to(PACKAGE)}:{line}"
+        for root in CHECKED
+        for path in sorted(root.rglob("*.py"))
+        for line in _builtin_raises(ast.parse(path.read_text(encoding="utf-8")))
+    ]
+    assert not offenders, offenders
+    assert _builtin_raises(ast.parse("raise ValueError('x')")) == [1]
+
+
+def test_bad_resolve_is_an_invalid_input_even_without_uncertain_points() -> None:
+    mesh = trimesh.creation.box()
+    points, face_index = trimesh.sample.sample_surface(mesh, 50, seed=0)
+    camera = zo.camera_on_sphere(20.0, 30.0, 4.0, resolution=64)
+    with pytest.raises(errors.InvalidInputError, match="resolve must be"):
+        zo.visible_mask(mesh, points, camera, "zbuffer", face_index=face_index, resolve="bogus")
+    assert issubclass(errors.InvalidInputError, ValueError)  # callers catching ValueError still do

@@ -1,0 +1,112 @@
+"""The method registry declares capabilities; nothing outside it tests method names."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+import zbuf_occlude
+from zbuf_occlude.compare.run import _sweep_jobs
+from zbuf_occlude.errors import InvalidInputError, RegistryError, ZbufOccludeError
+from zbuf_occlude.occlude import object_key, occlude_object
+from zbuf_occlude.visibility import registry
+from zbuf_occlude.visibility.registry import available_methods, method_info, register
+
+PACKAGE = Path(zbuf_occlude.__file__).parent
+
+
+@pytest.fixture
+def scratch_registry(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Methods registered in a test vanish afterwards."""
+    monkeypatch.setattr(registry, "_METHODS", dict(registry._METHODS))
+    monkeypatch.setattr(registry, "_INFO", dict(registry._INFO))
+
+
+def _everything_visible(mesh, points, camera, *, face_index=None, **options):
+    return np.ones(len(points), dtype=bool)
+
+
+def test_builtin_capabilities() -> None:
+    image_space = {m for m in available_methods() if method_info(m).takes_resolution}
+    assert image_space == {"zbuffer", "zbuffer-tolerance", "naive-zbuffer"}
+    assert {m for m in available_methods() if method_info(m).takes_grid} == {"og"}
+    assert {m for m in available_methods() if method_info(m).grid_of == "og"} == {"og16", "og32", "og64", "og128"}
+    assert {m for m in available_methods() if method_info(m).session is not None} == {"zbuffer"}
+    assert {m for m in available_methods() if method_info(m).extra} == {"open3d-hpr", "open3d-raycast"}
+    assert {"oracle", "oracle-numpy", "paper-exact", "paper-pruned-plane"} <= {
+        m for m in available_methods() if method_info(m).exact
+    }
+    assert not method_info("paper-pruned").exact and not method_info("og32").exact
+    with pytest.raises(InvalidInputError, match="no-such-method"):
+        method_info("no-such-method")
+
+
+def test_registry_errors_are_ours(scratch_registry: None) -> None:
+    register("x-test")(_everything_visible)
+    with pytest.raises(RegistryError, match="registered twice"):
+        register("x-test")(lambda *a, **k: None)
+    with pytest.raises(RegistryError, match="unknown method capabilities"):
+        register("y-test", takes_colour=True)
+    assert issubclass(RegistryError, ZbufOccludeError) and issubclass(RegistryError, RuntimeError)
+
+
+def test_a_new_method_is_one_function_and_one_register(scratch_registry: None) -> None:
+    """A method declaring ``session`` is run resident by occlude_object; one declaring
+    ``takes_resolution`` is swept by compare; no other edit."""
+    sessions: list[int] = []
+
+    class CountingSession:
+        def __init__(self, mesh, points, face_index):
+            sessions.append(len(points))
+            self.n, self.calls, self.released = len(points), 0, False
+
+        def visible(self, camera, **options):
+            self.calls += 1
+            return np.ones(self.n, dtype=bool)
+
+        def release(self):
+            self.released = True
+
+    register("x-resident", takes_resolution=True, session=CountingSession)(_everything_visible)
+    mesh = trimesh.creation.box()
+    poses = [(0.0, 0.0), (30.0, 90.0), (-45.0, 200.0)]
+    out = list(occlude_object(mesh, poses, key=object_key("box"), n_points=8, samples_per_view=1, method="x-resident"))
+    assert len(out) == 3 and all(v.all() for _, v, _ in out)
+    assert len(sessions) == 1  # points uploaded once for all poses
+    jobs = _sweep_jobs(["x-resident", "oracle"], [64, 128], [8])
+    assert [(m, s, p) for m, s, p, _ in jobs] == [("x-resident", "resolution", 64), ("x-resident", "resolution", 128)]
+    assert [(m, p) for m, s, p, _ in _sweep_jobs(["og32", "og64"], [], [8, 16])] == [("og", 8), ("og", 16)]
+
+
+def _compared_names(tree: ast.AST, names: set[str]) -> list[tuple[int, str]]:
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Compare):
+            for part in [node.left, *node.comparators]:
+                consts = part.elts if isinstance(part, (ast.Tuple, ast.List, ast.Set)) else [part]
+                for c in consts:
+                    if isinstance(c, ast.Constant) and c.value in names:
+                        found.append((node.lineno, c.value))
+    return found
+
+
+def test_no_module_special_cases_a_method_name() -> None:
+    """``if method == "zbuffer"`` / ``m in ("og", ...)`` outside the methods' own modules is
+    what the capabilities replace."""
+    names = set(available_methods())
+    offenders = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if path.parent.name == "visibility":
+            continue  # a method's own module may name itself
+        for line, name in _compared_names(ast.parse(path.read_text(encoding="utf-8")), names):
+            offenders.append(f"{path.relative_to(PACKAGE)}:{line} compares with {name!r}")
+    assert not offenders, "\n".join(offenders)
+
+
+def test_name_check_sees_a_comparison() -> None:
+    tree = ast.parse('if method == "zbuffer":\n    pass\nif m in ("og", "x"):\n    pass\n')
+    assert _compared_names(tree, {"zbuffer", "og"}) == [(1, "zbuffer"), (3, "og")]
