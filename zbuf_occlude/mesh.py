@@ -49,6 +49,7 @@ __all__ = [
     "SPLITS",
     "DEFAULT_SPLIT",
     "DEGENERATE_AREA_RTOL",
+    "MAX_ABS_COORDINATE",
     "METADATA_KEY",
     "load_mesh",
     "normalize_mesh",
@@ -73,6 +74,11 @@ SUPPORTED_EXTENSIONS: dict[str, str] = {
 #: 4e-21), while a triangle 1e-7 of the object on a side is still kept.
 DEGENERATE_AREA_RTOL = 1e-14
 
+#: Largest vertex coordinate magnitude accepted: float32's maximum (~3.4e38).  The GPU
+#: methods work in float32, and beyond it areas and squared extents overflow float64 too
+#: (1e200 squared); such files are corrupt or in absurd units.
+MAX_ABS_COORDINATE = float(np.finfo(np.float32).max)
+
 #: Longest prefix before "OFF" on the header line (COFF, NOFF, STOFF, 4OFF, CNOFF ...).
 _OFF_HEADER_MAX_PREFIX = 4
 
@@ -86,6 +92,10 @@ class _NotOff(ValueError):
 
 class _NotMesh(ValueError):
     """The file parsed but holds no triangle mesh."""
+
+
+class _Malformed(ValueError):
+    """The file's structure contradicts itself (counts declared vs found, cut lines)."""
 
 
 def _referenced_extent(
@@ -107,6 +117,25 @@ def _degenerate_mask(
 ) -> NDArray[np.bool_]:
     repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
     return repeated | (_face_areas(vertices, faces) <= area_rtol * max_extent**2)
+
+
+def _check_coordinates(vertices: NDArray[np.float64], *, what: str, error: type[ZbufOccludeError]) -> None:
+    """Raise ``error`` on NaN/inf vertices or coordinates beyond :data:`MAX_ABS_COORDINATE`."""
+    bad = ~np.isfinite(vertices).all(axis=1)
+    if bad.any():
+        raise error(
+            f"{what}: {int(bad.sum())} of {len(vertices)} vertices are NaN or inf "
+            f"(first at index {int(np.argmax(bad))}); fix or re-export the mesh"
+        )
+    if len(vertices):
+        magnitude = np.abs(vertices).max(axis=1)
+        if magnitude.max() > MAX_ABS_COORDINATE:
+            first = int(np.argmax(magnitude > MAX_ABS_COORDINATE))
+            raise error(
+                f"{what}: vertex coordinates reach {magnitude.max():.3g} (first at index {first}), beyond the "
+                f"float32 range (+-{MAX_ABS_COORDINATE:.3g}) the renderer works in; the file is corrupt or in "
+                "absurd units: rescale it"
+            )
 
 
 def _check(
@@ -131,12 +160,7 @@ def _check(
         raise error(
             f"{what}: face indices span [{faces.min()}, {faces.max()}] but there are only {len(vertices)} vertices"
         )
-    bad = ~np.isfinite(vertices).all(axis=1)
-    if bad.any():
-        raise error(
-            f"{what}: {int(bad.sum())} of {len(vertices)} vertices are NaN or inf "
-            f"(first at index {int(np.argmax(bad))}); fix or re-export the mesh"
-        )
+    _check_coordinates(vertices, what=what, error=error)
     lo, hi = _referenced_extent(vertices, faces)
     max_extent = float((hi - lo).max())
     if max_extent == 0.0:
@@ -238,8 +262,7 @@ def degenerate_faces(mesh: trimesh.Trimesh, *, area_rtol: float = DEGENERATE_ARE
         return np.zeros(0, dtype=bool)
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise InvalidInputError(f"mesh face indices span [{faces.min()}, {faces.max()}] for {len(vertices)} vertices")
-    if not np.isfinite(vertices).all():
-        raise InvalidInputError("mesh has NaN or inf vertices; degeneracy is undefined")
+    _check_coordinates(vertices, what="mesh", error=InvalidInputError)
     lo, hi = _referenced_extent(vertices, faces)
     return _degenerate_mask(vertices, faces, float((hi - lo).max()), area_rtol)
 
@@ -321,20 +344,112 @@ def normalize_mesh(mesh: trimesh.Trimesh, *, area_rtol: float = DEGENERATE_AREA_
     return _make(new_vertices, faces, mesh.metadata, prov)
 
 
+def _off_layout(text: str) -> tuple[str, int, int, list[str]]:
+    """Header keyword, declared vertex and face counts, and the data lines of OFF text.
+
+    Comments (``#`` to the end of the line) and blank lines are dropped.  The counts may
+    follow the keyword on its own line (ModelNet40's ``OFF3514 3546 0``).
+
+    Raises
+    ------
+    _Malformed
+        No count line, or counts that are not non-negative integers.
+    """
+    lines = [line.split("#", 1)[0].strip() for line in text.splitlines()]
+    lines = [line for line in lines if line]
+    head = lines[0] if lines else ""
+    end = head.upper().find("OFF")
+    if end < 0:
+        raise _NotOff(f"no OFF header, first line is {head[:40]!r}" if head else "file is empty")
+    end += len("OFF")
+    if head[end:].strip():
+        counts, body = head[end:].split(), lines[1:]
+    elif len(lines) > 1:
+        counts, body = lines[1].split(), lines[2:]
+    else:
+        raise _Malformed("the OFF header has no vertex and face counts")
+    try:
+        n_vertices, n_faces = int(counts[0]), int(counts[1])
+    except (IndexError, ValueError):
+        raise _Malformed(f"the OFF count line must be 'VERTICES FACES [EDGES]', got {' '.join(counts)[:60]!r}") from None
+    if n_vertices < 0 or n_faces < 0:
+        raise _Malformed(f"the OFF header declares negative counts ({n_vertices} vertices, {n_faces} faces)")
+    return head[:end], n_vertices, n_faces, body
+
+
+def _off_line_problem(body: list[str], index: int, n_vertices: int) -> str | None:
+    """Why data line ``index`` of an OFF body is malformed, or None if it is fine."""
+    tokens = body[index].split()
+    if index < n_vertices:
+        if len(tokens) < 3:
+            return f"vertex {index} has {len(tokens)} coordinates, expected 3"
+        return None
+    face = index - n_vertices
+    try:
+        n_corners = int(tokens[0])
+    except ValueError:
+        return f"face {face} starts with {tokens[0]!r}, expected its corner count"
+    if len(tokens) < 1 + n_corners:
+        return f"face {face} lists {len(tokens) - 1} of its {n_corners} corners"
+    return None
+
+
+def _check_off_counts(text: str) -> tuple[int, int]:
+    """Compare the vertex and face counts an OFF file declares with what it holds.
+
+    trimesh reads the first ``V`` and ``F`` data lines whatever is there, so a file cut
+    short in its face list loads as part of the object.  Only the last vertex and face
+    lines are inspected (truncation cuts at the end; a full scan is done when trimesh
+    fails, by :func:`_off_first_problem`).
+
+    Returns
+    -------
+    n_vertices, n_faces : int
+        The declared counts.
+
+    Raises
+    ------
+    _Malformed
+        With both numbers, when the file holds fewer vertices or faces than declared or
+        its last line is cut.
+    """
+    _, n_vertices, n_faces, body = _off_layout(text)
+    if len(body) < n_vertices:
+        raise _Malformed(
+            f"declares {n_vertices:,} vertices and {n_faces:,} faces but holds only {len(body):,} vertices "
+            "and no faces; the file is cut short"
+        )
+    found = len(body) - n_vertices
+    if found < n_faces:
+        raise _Malformed(f"declares {n_faces:,} faces but holds {found:,}; the file is cut short")
+    for index in (n_vertices - 1, n_vertices + n_faces - 1):
+        problem = _off_line_problem(body, index, n_vertices) if index >= 0 else None
+        if problem:
+            raise _Malformed(f"{problem} (declared {n_vertices:,} vertices, {n_faces:,} faces); the file is cut short")
+    return n_vertices, n_faces
+
+
+def _off_first_problem(text: str) -> str | None:
+    """The first malformed vertex or face line of OFF text, described; None if none is."""
+    try:
+        _, n_vertices, n_faces, body = _off_layout(text)
+    except ValueError as exc:
+        return str(exc)
+    for index in range(min(len(body), n_vertices + n_faces)):
+        problem = _off_line_problem(body, index, n_vertices)
+        if problem:
+            return problem
+    return None
+
+
 def _fan_triangulate_off(text: str) -> str | None:
     """OFF text with every polygon of more than 4 corners replaced by a triangle fan.
 
     Returns None when there is no such polygon or the structure cannot be read (the
     caller then reports trimesh's own error).
     """
-    lines = [line.split("#", 1)[0].strip() for line in text.splitlines()]
-    lines = [line for line in lines if line]
     try:
-        head = lines[0]
-        end = head.upper().index("OFF") + len("OFF")
-        # ModelNet40 puts the counts on the OFF line ("OFF3514 3546 0")
-        counts, body = (head[end:].split(), lines[1:]) if head[end:].strip() else (lines[1].split(), lines[2:])
-        n_vertices, n_faces = int(counts[0]), int(counts[1])
+        keyword, n_vertices, n_faces, body = _off_layout(text)
         faces, n_fanned = [], 0
         for line in body[n_vertices : n_vertices + n_faces]:
             tokens = line.split()
@@ -349,11 +464,33 @@ def _fan_triangulate_off(text: str) -> str | None:
         return None
     if n_fanned == 0:
         return None
-    return "\n".join([head[:end], f"{n_vertices} {len(faces)} 0", *body[:n_vertices], *faces]) + "\n"
+    return "\n".join([keyword, f"{n_vertices} {len(faces)} 0", *body[:n_vertices], *faces]) + "\n"
+
+
+def _utf8_ply_header(raw: bytes) -> bytes:
+    """PLY bytes whose header is valid UTF-8.
+
+    trimesh decodes the header as strict UTF-8, so a Latin-1 ``comment`` line (exporters
+    write the author's name or a path there) fails with UnicodeDecodeError.  Header
+    keywords are ASCII, so decoding it as Latin-1 (which decodes any byte) and encoding
+    as UTF-8 changes only the comments; the body, binary or text, is kept byte for byte.
+    """
+    end = raw.find(b"end_header")
+    if end < 0:
+        return raw  # trimesh reports the missing header
+    header = raw[:end]
+    try:
+        header.decode("utf-8")
+    except UnicodeDecodeError:
+        return header.decode("latin-1").encode("utf-8") + raw[end:]
+    return raw
 
 
 def _read(path: Path, file_type: str) -> trimesh.Trimesh:
     """Parse ``path`` with trimesh into one Trimesh; scenes are flattened with transforms."""
+    if file_type == "ply":
+        raw = _utf8_ply_header(path.read_bytes())
+        return _to_mesh(trimesh.load_scene(io.BytesIO(raw), file_type="ply", process=False))
     if file_type != "off":
         return _to_mesh(trimesh.load_scene(str(path), file_type=file_type, process=False))
     raw = path.read_bytes()
@@ -373,9 +510,14 @@ def _read(path: Path, file_type: str) -> trimesh.Trimesh:
     first = next((line for line in lines if line and not line.startswith("#")), "")
     if "OFF" not in first[: _OFF_HEADER_MAX_PREFIX + len("OFF")].upper():
         raise _NotOff(f"no OFF header, first line is {first[:40]!r}" if first else "file is empty")
+    _, n_faces = _check_off_counts(text)
     try:
-        return _to_mesh(trimesh.load_scene(io.BytesIO(raw), file_type="off", process=False))
+        mesh = _to_mesh(trimesh.load_scene(io.BytesIO(raw), file_type="off", process=False))
     except Exception:
+        # A malformed line in the middle (trimesh says "inhomogeneous shape"): name it.
+        problem = _off_first_problem(text)
+        if problem:
+            raise _Malformed(problem) from None
         # trimesh 5.2 fails (TypeError from numpy string multiply) when polygons of more
         # than 4 corners are mixed with triangles or quads: it fans them while the
         # indices are still strings.  Fan them here, as trimesh would, and retry once.
@@ -383,6 +525,14 @@ def _read(path: Path, file_type: str) -> trimesh.Trimesh:
         if fixed is None:
             raise
         return _to_mesh(trimesh.load_scene(io.BytesIO(fixed.encode("utf-8")), file_type="off", process=False))
+    if len(mesh.faces) < n_faces:
+        # Every polygon gives at least one triangle: trimesh dropped malformed face lines.
+        problem = _off_first_problem(text)
+        raise _Malformed(
+            (problem or f"declares {n_faces:,} faces but only {len(mesh.faces):,} could be read")
+            + f" ({len(mesh.faces):,} of {n_faces:,} faces read)"
+        )
+    return mesh
 
 
 def _to_mesh(scene: trimesh.Scene) -> trimesh.Trimesh:
@@ -457,6 +607,8 @@ def load_mesh(
         raise MeshLoadError(f"{path}: not an OFF file ({exc})") from exc
     except _NotMesh as exc:
         raise MeshLoadError(f"{path}: {exc}") from exc
+    except _Malformed as exc:
+        raise MeshLoadError(f"{path}: cannot parse as {file_type.upper()}: {exc}") from exc
     except Exception as exc:  # trimesh raises a zoo of types (ValueError, IndexError, NameError, KeyError, ...)
         raise MeshLoadError(
             f"{path}: cannot parse as {file_type.upper()} ({type(exc).__name__}: {exc})"

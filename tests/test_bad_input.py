@@ -1,0 +1,214 @@
+"""Bad input, library level (issue 9): every malformed file, option or environment gives
+one of our errors naming the file, option or value and the cause; nothing is lost silently.
+
+Sections: files (the corpus of broken meshes), options (seed, resolution, memory),
+discovery (unreadable folders, non-UTF-8 names).  Every test builds its inputs here or
+uses the shipped ``data/samples`` meshes, so it runs in a fresh clone.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from zbuf_occlude.errors import InvalidInputError, MeshLoadError, ZbufOccludeError
+from zbuf_occlude.mesh import load_mesh
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+#: A shipped ModelNet chair: OFF, 2,382 vertices and 2,234 faces (data/samples/SOURCE.md).
+CHAIR = REPO_ROOT / "data" / "samples" / "chair" / "train" / "chair_0001.off"
+
+#: A tetrahedron: 4 vertices, 4 faces, as OFF data lines.
+TETRA_VERTICES = ["0 0 0", "1 0 0", "0 1 0", "0 0 1"]
+TETRA_FACES = ["3 0 2 1", "3 0 1 3", "3 0 3 2", "3 1 2 3"]
+
+
+def tetra_off(header: str = "OFF\n4 4 0", *, newline: str = "\n", comment: bytes = b"") -> bytes:
+    body = newline.join([*TETRA_VERTICES, *TETRA_FACES]) + newline
+    return header.replace("\n", newline).encode() + newline.encode() + comment + body.encode()
+
+
+def assert_names(error: BaseException, *parts: str) -> None:
+    """The message names every part (the file, the numbers, the cause)."""
+    message = str(error)
+    for part in parts:
+        assert part in message, f"{part!r} not in {message!r}"
+
+
+# -- files: the corpus ---------------------------------------------------------------------
+#: name -> (content, regex of the cause the message must give).
+BAD_FILES = {
+    "empty.off": (b"", "empty"),
+    "blank_lines.off": (b"\n\n  \n", "empty"),
+    "comment_only.off": (b"# nothing here\n", "empty"),
+    "no_header.off": (b"4 4 0\n" + "\n".join(TETRA_VERTICES + TETRA_FACES).encode() + b"\n", "no OFF header"),
+    "header_only.off": (b"OFF\n", "no vertex and face counts"),
+    "counts_not_numbers.off": (b"OFF\nfour four 0\n0 0 0\n", "count line"),
+    "counts_missing_faces.off": (b"OFF\n4\n0 0 0\n", "count line"),
+    "negative_counts.off": (b"OFF\n-4 4 0\n0 0 0\n", "negative"),
+    "truncated_vertices.off": (b"OFF\n4 4 0\n0 0 0\n1 0 0\n", "declares 4 vertices and 4 faces but holds only 2 vertices"),
+    "truncated_faces.off": (tetra_off()[: -len("3 1 2 3\n3 0 3 2\n")] , "declares 4 faces but holds 2"),
+    "cut_mid_face.off": (tetra_off()[: -len(" 3\n")] + b"\n", "face 3 lists 2 of its 3 corners"),
+    "cut_mid_vertex.off": (b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1\n3 0 1 2\n", "vertex 2 has 2 coordinates"),
+    "short_face_inside.off": (
+        b"OFF\n4 4 0\n" + "\n".join(TETRA_VERTICES).encode() + b"\n3 0 2 1\n3 0 1\n3 0 3 2\n3 1 2 3\n",
+        "face 1 lists 2 of its 3 corners",
+    ),
+    "binary_garbage.off": (bytes(range(256)) * 4, "not an OFF file"),
+    "binary_garbage.ply": (bytes(range(256)) * 4, "cannot parse as PLY"),
+    "binary_garbage.stl": (b"\x00" * 80 + b"\xff\xff\xff\x7f", "cannot parse as STL|empty"),
+    "obj_named_off.off": (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "not an OFF file"),
+    "off_named_ply.ply": (tetra_off(), "cannot parse as PLY"),
+    "wrong_extension.txt": (tetra_off(), "unsupported extension '.txt'"),
+    "no_extension": (tetra_off(), "unsupported extension ''"),
+    "nan_vertex.off": (b"OFF\n3 1 0\n0 0 0\nnan 0 0\n0 1 0\n3 0 1 2\n", "1 of 3 vertices are NaN or inf"),
+    "inf_vertex.obj": (b"v 0 0 0\nv 1 inf 0\nv 0 1 0\nf 1 2 3\n", "NaN or inf"),
+    "zero_extent.off": (b"OFF\n3 1 0\n1 1 1\n1 1 1\n1 1 1\n3 0 1 2\n", "coincide"),
+    "all_degenerate.off": (b"OFF\n3 2 0\n0 0 0\n1 0 0\n2 0 0\n3 0 1 2\n3 0 0 1\n", "all 2 faces are degenerate"),
+    "repeated_index.off": (b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 0 1\n", "all 1 faces are degenerate"),
+    "no_faces.off": (b"OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n", "no faces"),
+    "index_out_of_range.off": (b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n", "outside the range"),
+    "huge_coordinates.off": (
+        b"OFF\n4 4 0\n0 0 0\n1e200 0 0\n0 1e200 0\n0 0 1e200\n" + "\n".join(TETRA_FACES).encode() + b"\n",
+        r"1e\+200.*float32",
+    ),
+    "overflowing_coordinates.obj": (b"v 0 0 0\nv 1e309 0 0\nv 0 1 0\nf 1 2 3\n", "NaN or inf"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(BAD_FILES))
+def test_bad_file_is_a_mesh_load_error_naming_file_and_cause(tmp_path: Path, name: str) -> None:
+    content, cause = BAD_FILES[name]
+    path = tmp_path / name
+    path.write_bytes(content)
+    with pytest.raises(MeshLoadError) as info:
+        load_mesh(path)
+    assert_names(info.value, str(path))
+    assert re.search(cause, str(info.value)), f"{cause!r} not in {info.value}"
+
+
+def test_missing_file_and_folder_name_the_path(tmp_path: Path) -> None:
+    with pytest.raises(MeshLoadError, match=re.escape(str(tmp_path / "nope.off")) + ": no such file"):
+        load_mesh(tmp_path / "nope.off")
+    with pytest.raises(MeshLoadError, match="is a directory"):
+        load_mesh(tmp_path)
+
+
+# -- defect 8: non-UTF-8 comments ------------------------------------------------------------
+LATIN1 = "comment by Ren\xe9 M\xfcller, caf\xe9".encode("latin-1")
+
+NON_UTF8_TWINS = {
+    # (file with a Latin-1 comment, the same file without it)
+    "off": (b"OFF\n# " + LATIN1 + b"\n4 4 0\n", b"OFF\n4 4 0\n"),
+    "obj": (b"# " + LATIN1 + b"\n", b""),
+    "ply": (
+        b"ply\nformat ascii 1.0\ncomment " + LATIN1 + b"\n",
+        b"ply\nformat ascii 1.0\n",
+    ),
+}
+
+
+def _twin_body(ext: str) -> bytes:
+    if ext == "off":
+        return ("\n".join(TETRA_VERTICES + TETRA_FACES) + "\n").encode()
+    if ext == "obj":
+        faces = [" ".join(str(int(i) + 1) for i in f.split()[1:]) for f in TETRA_FACES]
+        return ("\n".join([f"v {v}" for v in TETRA_VERTICES] + [f"f {f}" for f in faces]) + "\n").encode()
+    header = (
+        "element vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+        "element face 4\nproperty list uchar int vertex_indices\nend_header\n"
+    )
+    return (header + "\n".join(TETRA_VERTICES + TETRA_FACES) + "\n").encode()
+
+
+@pytest.mark.parametrize("ext", sorted(NON_UTF8_TWINS))
+def test_non_utf8_comment_loads_like_its_clean_twin(tmp_path: Path, ext: str) -> None:
+    latin, clean = NON_UTF8_TWINS[ext]
+    dirty_path, clean_path = tmp_path / f"latin1.{ext}", tmp_path / f"clean.{ext}"
+    dirty_path.write_bytes(latin + _twin_body(ext))
+    clean_path.write_bytes(clean + _twin_body(ext))
+    with pytest.raises(UnicodeDecodeError):
+        dirty_path.read_bytes().decode("utf-8")  # the test file really is not UTF-8
+    dirty, twin = load_mesh(dirty_path), load_mesh(clean_path)
+    assert len(twin.faces) == 4
+    np.testing.assert_array_equal(dirty.faces, twin.faces)
+    np.testing.assert_array_equal(dirty.vertices, twin.vertices)
+
+
+def test_binary_ply_with_latin1_comment_keeps_its_body(tmp_path: Path) -> None:
+    mesh = trimesh.creation.icosphere(subdivisions=1)
+    raw = trimesh.exchange.ply.export_ply(mesh, encoding="binary")
+    raw = raw.replace(b"format binary_little_endian 1.0\n", b"format binary_little_endian 1.0\ncomment " + LATIN1 + b"\n", 1)
+    path = tmp_path / "binary.ply"
+    path.write_bytes(raw)
+    loaded = load_mesh(path, normalize=False)
+    np.testing.assert_array_equal(loaded.faces, mesh.faces)
+    np.testing.assert_allclose(loaded.vertices, mesh.vertices, rtol=1e-6)
+
+
+# -- defect 10: OFF files cut short ------------------------------------------------------------
+def _cut(path: Path, fraction: float, out: Path) -> Path:
+    raw = path.read_bytes()
+    out.write_bytes(raw[: int(len(raw) * fraction)])
+    return out
+
+
+def test_off_cut_in_its_face_list_names_both_counts(tmp_path: Path) -> None:
+    path = _cut(CHAIR, 0.9, tmp_path / "chair_90.off")
+    lines = [line for line in path.read_text().splitlines() if line.strip()]
+    n_vertices, n_faces = (int(t) for t in lines[1].split()[:2])
+    assert (n_vertices, n_faces) == (2382, 2234)
+    complete = [line for line in lines[2 + n_vertices :] if len(line.split()) == 4]
+    found = len(lines) - 2 - n_vertices  # face lines present, the last one possibly cut
+    with pytest.raises(MeshLoadError) as info:
+        load_mesh(path)
+    assert_names(info.value, str(path), "cut short")
+    if found < n_faces:
+        assert_names(info.value, f"declares {n_faces:,} faces but holds {found:,}")
+    assert len(complete) < n_faces
+
+
+def test_off_cut_in_half_names_the_vertex_count_not_numpy(tmp_path: Path) -> None:
+    path = _cut(CHAIR, 0.5, tmp_path / "chair_50.off")
+    with pytest.raises(MeshLoadError) as info:
+        load_mesh(path)
+    assert_names(info.value, str(path), "declares 2,382 vertices and 2,234 faces but holds only", "cut short")
+    assert "inhomogeneous" not in str(info.value)
+
+
+@pytest.mark.parametrize(
+    "header, newline",
+    [("OFF\n4 4 0", "\n"), ("OFF4 4 0", "\n"), ("OFF 4 4 0", "\n"), ("OFF\n4 4 0", "\r\n"), ("OFF4 4 0", "\r\n")],
+    ids=["plain", "modelnet40-header", "header-with-space", "crlf", "modelnet40-crlf"],
+)
+def test_modelnet_header_quirks_still_load(tmp_path: Path, header: str, newline: str) -> None:
+    path = tmp_path / "quirk.off"
+    path.write_bytes(tetra_off(header, newline=newline))
+    assert len(load_mesh(path).faces) == 4
+
+
+def test_polygons_count_as_one_declared_face_each(tmp_path: Path) -> None:
+    # A quad and a pentagon are 2 declared faces that become 1 + 2 + 3 triangles.
+    path = tmp_path / "polygons.off"
+    path.write_bytes(
+        b"OFF\n6 3 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n0.5 1.5 0\n0 0 1\n3 0 1 5\n4 0 1 2 3\n5 0 1 2 4 3\n"
+    )
+    assert len(load_mesh(path).faces) == 1 + 2 + 3
+
+
+def test_charset_normalizer_is_a_declared_dependency() -> None:
+    # trimesh decodes non-UTF-8 OBJ text with it (trimesh.util.decode_text); without it
+    # an OBJ with a Latin-1 comment fails with ModuleNotFoundError.
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10
+        text = (REPO_ROOT / "pyproject.toml").read_text()
+        assert re.search(r'^\s*"charset-normalizer[<>=!~ ]', text, flags=re.M)
+        return
+    project = tomllib.loads((REPO_ROOT / "pyproject.toml").read_text())["project"]
+    assert any(re.match(r"charset[-_]normalizer\b", d) for d in project["dependencies"])
+    import charset_normalizer  # noqa: F401  (installed, as declared)
