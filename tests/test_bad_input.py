@@ -212,3 +212,36 @@ def test_charset_normalizer_is_a_declared_dependency() -> None:
     project = tomllib.loads((REPO_ROOT / "pyproject.toml").read_text())["project"]
     assert any(re.match(r"charset[-_]normalizer\b", d) for d in project["dependencies"])
     import charset_normalizer  # noqa: F401  (installed, as declared)
+
+
+# -- options: seeds (defect 6) ------------------------------------------------------------------
+@pytest.mark.parametrize("seed", [-1, -(2**70), 1.5, "0", True])
+def test_bad_seed_is_our_error_naming_the_seed(seed) -> None:
+    import zbuf_occlude as zo
+
+    mesh = trimesh.creation.box()
+    with pytest.raises(InvalidInputError, match="seed") as info:
+        zo.sample_surface(mesh, 10, seed=seed)
+    assert isinstance(info.value, ValueError)  # callers catching ValueError keep working
+    assert repr(seed) in str(info.value) or str(seed) in str(info.value)
+
+
+def test_bad_seed_in_the_seed_derivation_of_generate_and_farm() -> None:
+    from zbuf_occlude.occlude import dense_cloud, derive_rng
+
+    with pytest.raises(InvalidInputError, match="seed must be a non-negative integer, got -1"):
+        derive_rng(-1, 7)
+    with pytest.raises(InvalidInputError, match="-1"):
+        dense_cloud(trimesh.creation.box(), 7, seed=-1, count=10)
+
+
+def test_check_seed_names_the_option_and_accepts_good_seeds() -> None:
+    from zbuf_occlude.sampling import check_seed
+
+    with pytest.raises(InvalidInputError, match="^--seed must be a non-negative integer, got -3$"):
+        check_seed(-3, name="--seed")
+    rng = np.random.default_rng(0)
+    assert check_seed(rng) is rng
+    assert check_seed(None) is None
+    assert check_seed(np.int64(5)) == 5 and type(check_seed(np.int64(5))) is int
+    assert check_seed(2**64) == 2**64  # SeedSequence takes big ints

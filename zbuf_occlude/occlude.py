@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from .cameras import DEFAULT_RADIUS, Camera, camera_on_sphere
 from .errors import InvalidInputError
 from .io import OccludedCloud
-from .sampling import sample_surface
+from .sampling import check_seed, sample_surface
 from .visibility.registry import visible_mask
 from .visibility.zbuffer import Scene
 
@@ -45,8 +45,13 @@ def object_key(name: str) -> int:
 
 
 def derive_rng(seed: int, *keys: int) -> np.random.Generator:
-    """An independent generator for ``(seed, *keys)`` (``numpy.random.SeedSequence``)."""
-    return np.random.default_rng(np.random.SeedSequence([int(seed), *(int(k) for k in keys)]))
+    """An independent generator for ``(seed, *keys)`` (``numpy.random.SeedSequence``).
+
+    Raises InvalidInputError (:func:`~zbuf_occlude.sampling.check_seed`) for a negative seed.
+    """
+    if seed is None or isinstance(seed, np.random.Generator):
+        raise InvalidInputError(f"seed must be a non-negative integer here (it is mixed with keys), got {seed!r}")
+    return np.random.default_rng(np.random.SeedSequence([check_seed(seed), *(int(k) for k in keys)]))
 
 
 def sample_rng(seed: int, key: int, pose_index: int, sample_index: int) -> np.random.Generator:

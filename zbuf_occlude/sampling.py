@@ -35,6 +35,7 @@ __all__ = [
     "points_from_barycentric",
     "sample_surface",
     "triangles_of",
+    "check_seed",
     "SeedLike",
 ]
 
@@ -106,6 +107,40 @@ def _check_count(count: object) -> int:
     return int(count)
 
 
+def check_seed(seed: object, *, name: str = "seed") -> SeedLike:
+    """Validate a seed before any work: a non-negative int, None or a numpy Generator.
+
+    numpy rejects negative seeds deep inside ``default_rng``/``SeedSequence`` with a bare
+    ValueError; this names the argument (``name``, e.g. ``"--seed"`` for the CLI) and value.
+
+    Parameters
+    ----------
+    seed : object
+        What to check.
+    name : str
+        The argument or option named in the message.
+
+    Returns
+    -------
+    seed : int, numpy.random.Generator or None
+        ``seed`` itself, a numpy integer turned into an int.
+
+    Raises
+    ------
+    InvalidInputError
+        If ``seed`` is negative, a bool, or not an integer, None or Generator.
+    """
+    if seed is None or isinstance(seed, np.random.Generator):
+        return seed
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, numbers.Integral):
+        raise InvalidInputError(
+            f"{name} must be a non-negative integer (or None, or a numpy Generator), got {seed!r}"
+        )
+    if seed < 0:
+        raise InvalidInputError(f"{name} must be a non-negative integer, got {seed}")
+    return int(seed)
+
+
 def _check_density(density: object) -> float:
     if isinstance(density, (bool, np.bool_)) or not isinstance(density, numbers.Real):
         raise InvalidInputError(f"density must be a real number of points per unit area, got {density!r}")
@@ -142,7 +177,7 @@ def sample_faces(
         order.
     seed : int, numpy.random.Generator or None
         Source of randomness; ``numpy.random.default_rng(seed)``.  The same int gives
-        the same bytes.  A Generator is advanced.
+        the same bytes.  A Generator is advanced.  Checked by :func:`check_seed`.
 
     Returns
     -------
@@ -154,10 +189,12 @@ def sample_faces(
     Raises
     ------
     InvalidInputError
-        If both or neither of ``count`` and ``density`` are given, ``count < 0``,
+        If ``seed`` is negative or not an integer/Generator/None, both or neither of
+        ``count`` and ``density`` are given, ``count < 0``,
         ``density`` is not finite and > 0, the mesh has NaN/inf coordinates or zero
         total area, or ``density`` is so large that the point count overflows.
     """
+    seed = check_seed(seed)
     if (count is None) == (density is None):
         raise InvalidInputError(
             f"give exactly one of count (points) and density (points per unit area), got count={count!r}, "
