@@ -245,3 +245,46 @@ def test_check_seed_names_the_option_and_accepts_good_seeds() -> None:
     assert check_seed(None) is None
     assert check_seed(np.int64(5)) == 5 and type(check_seed(np.int64(5))) is int
     assert check_seed(2**64) == 2**64  # SeedSequence takes big ints
+
+
+# -- options: resolution beyond the GL's limits (defect 6) ----------------------------------------
+@pytest.fixture(scope="module")
+def gl_context():
+    from zbuf_occlude.render.context import shared_context
+
+    return shared_context()
+
+
+def test_resolution_beyond_the_gl_maximum_names_the_maximum(gl_context) -> None:
+    import zbuf_occlude as zo
+    from zbuf_occlude.cameras import camera_on_sphere
+    from zbuf_occlude.render.context import max_image_size
+
+    limit = max_image_size(gl_context)
+    assert limit == min(gl_context.info["GL_MAX_TEXTURE_SIZE"], gl_context.info["GL_MAX_RENDERBUFFER_SIZE"])
+    mesh = load_mesh(CHAIR)
+    points, face_index = zo.sample_surface(mesh, 100, seed=0)
+    for resolution in (limit + 1, 100_000):
+        camera = camera_on_sphere(30, 45, 3.0, resolution=resolution)
+        with pytest.raises(InvalidInputError) as info:
+            zo.visible_mask(mesh, points, camera, "zbuffer", face_index=face_index, resolution=resolution)
+        assert_names(info.value, f"maximum image size of {limit} pixels", str(resolution))
+        assert "framebuffer" not in str(info.value)
+
+
+@pytest.mark.parametrize("resolution", [0, -5, (64, 0), 2.5, True, (1, 2, 3)])
+def test_check_image_size_rejects_non_positive_sizes(gl_context, resolution) -> None:
+    from zbuf_occlude.render.context import check_image_size
+
+    with pytest.raises(InvalidInputError, match=r"^--resolution must be a positive number of pixels"):
+        check_image_size(resolution, ctx=gl_context, name="--resolution")
+
+
+def test_check_image_size_names_the_option(gl_context) -> None:
+    from zbuf_occlude.render.context import check_image_size, max_image_size
+
+    limit = max_image_size(gl_context)
+    assert check_image_size(limit, ctx=gl_context) == (limit, limit)
+    assert check_image_size((limit, 1), ctx=gl_context) == (limit, 1)
+    with pytest.raises(InvalidInputError, match=rf"^--resolution {limit + 1} is larger .* use --resolution <= {limit}$"):
+        check_image_size(limit + 1, ctx=gl_context, name="--resolution")

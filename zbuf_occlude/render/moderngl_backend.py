@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from ..cameras import Camera
 from ..errors import InvalidInputError
-from .context import shared_context
+from .context import check_image_size, shared_context
 from .shaders import load_shader
 
 __all__ = ["DepthRender", "PointBuffer", "ModernGLRenderer", "MAX_FACES"]
@@ -121,7 +121,8 @@ class ModernGLRenderer:
     Raises
     ------
     InvalidInputError
-        Empty mesh, or more than 2^24 faces.
+        Empty mesh, or more than 2^24 faces; a camera larger than the GL's maximum
+        image size (:func:`~zbuf_occlude.render.context.max_image_size`) when rendering.
     BackendUnavailable
         No OpenGL 4.3 context can be created.
     """
@@ -155,6 +156,8 @@ class ModernGLRenderer:
     # -- rasterisation -------------------------------------------------------------
     def _target(self, size: tuple[int, int]):
         if size not in self._targets:
+            # moderngl would fail with "framebuffer is not complete" beyond the GL's limits.
+            check_image_size(size, ctx=self.ctx)
             color = self.ctx.texture(size, 2, dtype="f4")
             color.filter = (moderngl.NEAREST, moderngl.NEAREST)
             depth = self.ctx.depth_texture(size)
