@@ -288,3 +288,99 @@ def test_check_image_size_names_the_option(gl_context) -> None:
     assert check_image_size((limit, 1), ctx=gl_context) == (limit, 1)
     with pytest.raises(InvalidInputError, match=rf"^--resolution {limit + 1} is larger .* use --resolution <= {limit}$"):
         check_image_size(limit + 1, ctx=gl_context, name="--resolution")
+
+
+# -- options: memory (defect 7) -----------------------------------------------------------------
+def test_a_billion_points_is_refused_naming_option_estimate_and_memory() -> None:
+    from zbuf_occlude.resources import InsufficientMemoryError, check_memory, estimate_job_memory, format_bytes
+
+    estimate = estimate_job_memory(points=10**9, samples_per_view=10, dense_points=100_000, resolution=1024)
+    available = 16 * 2**30
+    with pytest.raises(InsufficientMemoryError) as info:
+        check_memory(estimate, available=available)
+    assert isinstance(info.value, ZbufOccludeError) and isinstance(info.value, ValueError)
+    assert_names(info.value, "--points", "1,000,000,000", format_bytes(estimate.total), format_bytes(available))
+    assert str(info.value).startswith("--points needs about")
+    # Nowhere near 1 TB of memory here, whatever the machine: the real check refuses too.
+    with pytest.raises(InsufficientMemoryError, match="--points"):
+        check_memory(estimate_job_memory(points=10**12, samples_per_view=10))
+
+
+def test_memory_estimate_is_linear_in_each_option_and_sums() -> None:
+    from zbuf_occlude.resources import (
+        BYTES_PER_DENSE_POINT,
+        BYTES_PER_FACE,
+        BYTES_PER_PIXEL,
+        estimate_job_memory,
+    )
+
+    one = estimate_job_memory(points=2048, samples_per_view=10, dense_points=100_000, resolution=512, faces=1000)
+    two = estimate_job_memory(points=4096, samples_per_view=10, dense_points=200_000, resolution=(1024, 512), faces=2000)
+    for part in ("--points", "--dense-points", "--resolution", "mesh faces"):
+        assert two.parts[part] == 2 * one.parts[part] > 0
+    assert one.total == sum(one.parts.values())
+    assert one.parts["--dense-points"] == 100_000 * BYTES_PER_DENSE_POINT
+    assert one.parts["--resolution"] == 512 * 512 * BYTES_PER_PIXEL
+    assert one.parts["mesh faces"] == 1000 * BYTES_PER_FACE
+    held = estimate_job_memory(points=2048, samples_per_view=10, samples_held=250)
+    assert held.parts["--points"] > one.parts["--points"]
+    workers = estimate_job_memory(points=2048, dense_points=100_000, workers=4)
+    assert workers.parts["--dense-points"] == 4 * 100_000 * BYTES_PER_DENSE_POINT and workers.parts["--workers"] > 0
+    with pytest.raises(InvalidInputError):
+        estimate_job_memory(points=-1)
+
+
+def test_sampling_refuses_before_allocating(monkeypatch) -> None:
+    import tracemalloc
+
+    import zbuf_occlude as zo
+    from zbuf_occlude import resources
+    from zbuf_occlude.resources import InsufficientMemoryError
+
+    monkeypatch.setattr(resources, "available_memory", lambda: (2**20, "test budget"))
+    monkeypatch.setattr(resources, "MIN_CHECKED_BYTES", 0)
+    mesh = trimesh.creation.box()
+    tracemalloc.start()
+    try:
+        with pytest.raises(InsufficientMemoryError, match=r"count=1,000,000 needs about 130 MiB.*1 MiB available \(test budget\)"):
+            zo.sample_surface(mesh, 10**6, seed=0)
+        with pytest.raises(InsufficientMemoryError, match="density"):
+            zo.sample_surface(mesh, density=1e6, seed=0)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 2**20  # refused before the arrays were made
+    assert len(zo.sample_surface(mesh, 1000, seed=0)[0]) == 1000  # small jobs are not checked
+
+
+@pytest.mark.parametrize("version", ["v1", "v2"])
+def test_cgroup_limit_is_the_memory_available(tmp_path: Path, version: str) -> None:
+    from zbuf_occlude.resources import _cgroup_room
+
+    proc = tmp_path / "cgroup"
+    if version == "v2":
+        proc.write_text("0::/job\n")
+        level = tmp_path / "job"
+        level.mkdir()
+        (level / "memory.max").write_text(f"{8 * 2**30}\n")
+        (level / "memory.current").write_text(f"{3 * 2**30}\n")
+        (level / "memory.stat").write_text(f"anon 1\ninactive_file {2**30}\n")
+        (tmp_path / "memory.max").write_text("max\n")  # the root has no limit
+    else:
+        proc.write_text("4:memory:/job\n3:cpuset:/\n")
+        level = tmp_path / "memory" / "job"
+        level.mkdir(parents=True)
+        (level / "memory.limit_in_bytes").write_text(f"{8 * 2**30}\n")
+        (level / "memory.usage_in_bytes").write_text(f"{3 * 2**30}\n")
+        (level / "memory.stat").write_text(f"total_inactive_file {2**30}\n")
+        (tmp_path / "memory" / "memory.limit_in_bytes").write_text("9223372036854771712\n")
+    assert _cgroup_room(tmp_path, proc) == 6 * 2**30  # limit - usage + reclaimable cache
+
+
+def test_available_memory_is_known_here_and_plausible() -> None:
+    from zbuf_occlude.resources import available_memory
+
+    found = available_memory()
+    assert found is not None
+    n_bytes, source = found
+    assert 0 < n_bytes < 2**50 and source

@@ -29,6 +29,7 @@ import trimesh
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import InvalidInputError
+from .resources import BYTES_PER_DENSE_POINT, check_memory
 
 __all__ = [
     "sample_faces",
@@ -193,6 +194,9 @@ def sample_faces(
         ``count`` and ``density`` are given, ``count < 0``,
         ``density`` is not finite and > 0, the mesh has NaN/inf coordinates or zero
         total area, or ``density`` is so large that the point count overflows.
+    InsufficientMemoryError
+        (an InvalidInputError) The points would not fit in the memory available
+        (:func:`zbuf_occlude.resources.check_memory`).
     """
     seed = check_seed(seed)
     if (count is None) == (density is None):
@@ -215,6 +219,7 @@ def sample_faces(
     rng = np.random.default_rng(seed)
 
     if count is not None:
+        check_memory(count * BYTES_PER_DENSE_POINT, option=f"count={count:,}", hint="sample fewer points")
         # Inverse-CDF draw of faces: u in [0, total) falls in face f when
         # cumulative[f-1] <= u < cumulative[f]; zero-area faces span an empty interval.
         u = rng.random(count) * total
@@ -228,6 +233,11 @@ def sample_faces(
             total_expected = expected.sum()
         if not np.isfinite(total_expected):
             raise InvalidInputError(f"density {density} is too large: the expected point count overflows")
+        check_memory(
+            int(total_expected) * BYTES_PER_DENSE_POINT,
+            option=f"density={density:g} ({int(total_expected):,} points expected)",
+            hint="lower the density",
+        )
         # Algorithm 1: stochastic rounding keeps the expected count of every face exact.
         whole = np.floor(expected)
         per_face = whole.astype(np.int64) + (rng.random(len(areas)) < expected - whole)
