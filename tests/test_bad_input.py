@@ -384,3 +384,159 @@ def test_available_memory_is_known_here_and_plausible() -> None:
     assert found is not None
     n_bytes, source = found
     assert 0 < n_bytes < 2**50 and source
+
+
+# -- discovery: non-UTF-8 names (defect 4), unreadable folders (defect 12) -------------------------
+def _tree(root: Path, names: list[str | bytes]) -> None:
+    """Copies of the tetrahedron at the given relative paths (bytes for raw file names)."""
+    for name in names:
+        raw = (name if isinstance(name, bytes) else name.encode()).split(b"/")
+        folder = Path(root, *(part.decode("utf-8", "surrogateescape") for part in raw[:-1]))
+        folder.mkdir(parents=True, exist_ok=True)
+        with open(Path(folder).joinpath(raw[-1].decode("utf-8", "surrogateescape")), "wb") as f:
+            f.write(tetra_off())
+
+
+LATIN1_NAME = b"chair/train/caf\xe9_0002.off"
+
+
+def test_non_utf8_file_name_is_reported_and_the_others_are_found(tmp_path: Path) -> None:
+    from zbuf_occlude.mesh import find_meshes, scan_meshes
+
+    _tree(tmp_path, ["chair/train/chair_0001.off", LATIN1_NAME, "chair/test/chair_0003.off"])
+    scan = scan_meshes([tmp_path])
+    assert [name for _, name in scan.meshes] == ["chair/test/chair_0003", "chair/train/chair_0001"]
+    assert len(scan.skipped) == 1
+    skipped = scan.skipped[0]
+    assert skipped.path.endswith("caf\\xe9_0002.off") and "not valid UTF-8" in skipped.reason
+    str(skipped).encode("utf-8")  # printable: the report itself cannot fail
+    assert find_meshes([tmp_path]) == scan.meshes
+    for path, _ in scan.meshes:  # and the rest loads
+        assert len(load_mesh(path).faces) == 4
+
+
+def test_non_utf8_name_given_as_a_file_is_reported(tmp_path: Path) -> None:
+    from zbuf_occlude.mesh import scan_meshes
+
+    _tree(tmp_path, [b"caf\xe9.off", "ok.off"])
+    bad = tmp_path / b"caf\xe9.off".decode("utf-8", "surrogateescape")
+    scan = scan_meshes([bad, tmp_path / "ok.off"])
+    assert [name for _, name in scan.meshes] == ["ok"] and len(scan.skipped) == 1
+    with pytest.raises(InvalidInputError, match=r"no mesh files .*skipped 1: .*caf\\xe9.off: file name is not valid UTF-8"):
+        scan_meshes([bad])
+
+
+def test_farm_discovery_reports_non_utf8_names_and_plans_the_rest(tmp_path: Path) -> None:
+    from zbuf_occlude.farm.inputs import discover_objects, scan_objects
+
+    _tree(tmp_path, ["chair/train/chair_0001.off", LATIN1_NAME, "table/train/table_0001.off"])
+    scan = scan_objects(tmp_path)
+    assert [o.name for o in scan.objects] == ["chair/train/chair_0001", "table/train/table_0001"]
+    assert [o.key for o in scan.objects]  # object keys encode every planned name
+    assert len(scan.skipped) == 1 and "caf\\xe9_0002.off" in str(scan.skipped[0])
+    assert discover_objects(tmp_path) == scan.objects
+
+
+def test_farm_list_file_with_a_non_utf8_line(tmp_path: Path) -> None:
+    from zbuf_occlude.farm.inputs import scan_objects
+
+    _tree(tmp_path, ["a.off", "b.off"])
+    listing = tmp_path / "list.txt"
+    listing.write_bytes(b"a.off chair\ncaf\xe9.off chair\nb.off table\n")
+    scan = scan_objects(listing)
+    assert [o.name for o in scan.objects] == ["a", "b"]
+    assert [str(s) for s in scan.skipped] == [f"{listing}:2: line is not valid UTF-8; re-save the list as UTF-8"]
+
+
+def test_object_key_of_a_non_utf8_name_keys_on_its_bytes() -> None:
+    from zbuf_occlude.occlude import object_key
+
+    name = b"caf\xe9_0002".decode("utf-8", "surrogateescape")
+    assert object_key(name) != object_key("caf\xe9_0002")  # Latin-1 bytes, not the UTF-8 é
+    import hashlib
+
+    for valid in ("chair/train/chair_0001", "caf\xe9_0002", "\u6905\u5b50"):  # keys of valid names are unchanged
+        digest = hashlib.blake2b(valid.encode("utf-8"), digest_size=8).digest()
+        assert object_key(valid) == int.from_bytes(digest, "little")
+
+
+@pytest.fixture
+def unreadable(monkeypatch):
+    """chmod 000 really blocks reading, also as root: os.scandir (which os.walk and
+    pathlib use) raises PermissionError on a folder without read permission, as the
+    kernel does for other users.  Yields a function that makes a folder unreadable."""
+    import os
+
+    real_scandir = os.scandir
+    made: list[Path] = []
+
+    def scandir(path="."):
+        if made and os.stat(path).st_mode & 0o444 == 0:
+            raise PermissionError(13, "Permission denied", os.fspath(path))
+        return real_scandir(path)
+
+    monkeypatch.setattr(os, "scandir", scandir)
+
+    def make(folder: Path) -> Path:
+        folder.chmod(0)
+        made.append(folder)
+        return folder
+
+    yield make
+    for folder in made:
+        folder.chmod(0o755)
+
+
+def test_unreadable_class_folder_is_reported_not_silently_lost(tmp_path: Path, unreadable) -> None:
+    from zbuf_occlude.mesh import find_meshes, scan_meshes
+
+    _tree(tmp_path, ["chair/train/chair_0001.off", "table/train/table_0001.off", "table/test/table_0002.off"])
+    unreadable(tmp_path / "table")
+    scan = scan_meshes([tmp_path])
+    assert [name for _, name in scan.meshes] == ["chair/train/chair_0001"]
+    assert [str(s) for s in scan.skipped] == [f"{tmp_path / 'table'}: cannot read folder (Permission denied)"]
+    assert find_meshes([tmp_path]) == scan.meshes
+
+
+def test_unreadable_root_folder_says_so(tmp_path: Path, unreadable) -> None:
+    from zbuf_occlude.mesh import scan_meshes
+
+    _tree(tmp_path, ["data/chair_0001.off"])
+    unreadable(tmp_path / "data")
+    with pytest.raises(InvalidInputError, match=r"no mesh files .*skipped 1: .*data: cannot read folder \(Permission denied\)"):
+        scan_meshes([tmp_path / "data"])
+
+
+def test_farm_discovery_reports_unreadable_folders_but_not_hidden_ones(tmp_path: Path, unreadable) -> None:
+    from zbuf_occlude.farm.inputs import scan_objects
+
+    _tree(tmp_path, ["chair/train/chair_0001.off", "table/train/table_0001.off", ".cache/x/chair_0009.off"])
+    unreadable(tmp_path / "table" / "train")
+    unreadable(tmp_path / ".cache")  # hidden: never searched, so never reported
+    scan = scan_objects(tmp_path)
+    assert [o.name for o in scan.objects] == ["chair/train/chair_0001"]
+    assert [s.path for s in scan.skipped] == [str(tmp_path / "table" / "train")]
+    assert "Permission denied" in scan.skipped[0].reason
+
+
+def test_generate_and_farm_entry_points_survive_a_non_utf8_name(tmp_path: Path) -> None:
+    # What `generate DIR` and `farm DIR` do first: find the meshes and key each name.
+    from zbuf_occlude.farm.inputs import discover_objects
+    from zbuf_occlude.mesh import find_meshes
+    from zbuf_occlude.occlude import object_key
+
+    _tree(tmp_path, ["chair/train/chair_0001.off", LATIN1_NAME])
+    meshes = find_meshes([tmp_path])
+    assert [name for _, name in meshes] == ["chair/train/chair_0001"]
+    assert all(object_key(name) >= 0 for _, name in meshes)
+    assert [o.name for o in discover_objects(tmp_path) if o.key >= 0] == ["chair/train/chair_0001"]
+
+
+def test_find_meshes_warns_about_an_unreadable_folder(tmp_path: Path, unreadable, caplog) -> None:
+    from zbuf_occlude.mesh import find_meshes
+
+    _tree(tmp_path, ["chair/chair_0001.off", "table/table_0001.off"])
+    unreadable(tmp_path / "table")
+    with caplog.at_level("WARNING"):
+        assert [name for _, name in find_meshes([tmp_path])] == ["chair/chair_0001"]
+    assert f"{tmp_path / 'table'}: cannot read folder (Permission denied)" in caplog.text

@@ -41,7 +41,9 @@ def object_key(name: str) -> int:
     64 bits make a collision between two objects' seeds negligible even over all of
     ShapeNet (~5e-12 for 1e4 objects; a 32-bit CRC would give ~1 %).
     """
-    return int.from_bytes(hashlib.blake2b(name.encode("utf-8"), digest_size=8).digest(), "little")
+    # surrogateescape: a name from a non-UTF-8 file name (PEP 383) keys on its original
+    # bytes; valid UTF-8 names give the same bytes, and so the same keys, as before.
+    return int.from_bytes(hashlib.blake2b(name.encode("utf-8", "surrogateescape"), digest_size=8).digest(), "little")
 
 
 def derive_rng(seed: int, *keys: int) -> np.random.Generator:
