@@ -540,3 +540,76 @@ def test_find_meshes_warns_about_an_unreadable_folder(tmp_path: Path, unreadable
     with caplog.at_level("WARNING"):
         assert [name for _, name in find_meshes([tmp_path])] == ["chair/chair_0001"]
     assert f"{tmp_path / 'table'}: cannot read folder (Permission denied)" in caplog.text
+
+
+# -- meshes and cameras given through the API ----------------------------------------------------
+GPU_AND_EXACT = ["zbuffer", "zbuffer-tolerance", "naive-zbuffer", "oracle"]
+
+
+@pytest.fixture(scope="module")
+def chair_and_points():
+    import zbuf_occlude as zo
+
+    mesh = load_mesh(CHAIR)
+    points, face_index = zo.sample_surface(mesh, 300, seed=0)
+    return mesh, points, face_index
+
+
+# The oracle's own check (visibility/oracle.py, another branch's) covers NaN/inf, not
+# coordinates beyond float32; meshes from load_mesh never have them (MAX_ABS_COORDINATE).
+@pytest.mark.parametrize(
+    "method, bad", [(m, b) for m in GPU_AND_EXACT for b in ("nan", "inf", "huge") if (m, b) != ("oracle", "huge")]
+)
+def test_visibility_of_a_non_finite_mesh_is_an_error_not_an_answer(chair_and_points, method: str, bad: str) -> None:
+    import zbuf_occlude as zo
+    from zbuf_occlude.cameras import camera_on_sphere
+
+    mesh, points, face_index = chair_and_points
+    vertices = mesh.vertices.copy()
+    vertices[5] = {"nan": np.nan, "inf": np.inf, "huge": 1e200}[bad]
+    broken = trimesh.Trimesh(vertices=vertices, faces=mesh.faces, process=False)
+    with pytest.raises(InvalidInputError, match="NaN|inf"):
+        zo.visible_mask(broken, points, camera_on_sphere(30, 45, 3.0), method, face_index=face_index, resolution=64)
+
+
+@pytest.mark.parametrize("radius", [0.0, 0.1, 0.6])
+@pytest.mark.parametrize("method", GPU_AND_EXACT)
+def test_camera_inside_the_object_is_a_camera_error_naming_the_radius(chair_and_points, method: str, radius: float) -> None:
+    import zbuf_occlude as zo
+    from zbuf_occlude.cameras import camera_on_sphere
+    from zbuf_occlude.errors import CameraError
+
+    mesh, points, face_index = chair_and_points
+    with pytest.raises(CameraError, match=rf"radius {radius} is inside the object's bounding sphere"):
+        zo.visible_mask(mesh, points, camera_on_sphere(30, 45, radius), method, face_index=face_index, resolution=64)
+
+
+@pytest.mark.parametrize("method", GPU_AND_EXACT)
+def test_nan_points_are_an_error(chair_and_points, method: str) -> None:
+    import zbuf_occlude as zo
+    from zbuf_occlude.cameras import camera_on_sphere
+
+    mesh, points, face_index = chair_and_points
+    points = points.copy()
+    points[7, 1] = np.nan
+    with pytest.raises(InvalidInputError, match="NaN"):
+        zo.visible_mask(mesh, points, camera_on_sphere(30, 45, 3.0), method, face_index=face_index, resolution=64)
+
+
+EMPTY_AND_DEGENERATE = {
+    "empty": trimesh.Trimesh(),
+    "one_degenerate_face": trimesh.Trimesh(vertices=[[0, 0, 0], [1, 0, 0], [2, 0, 0]], faces=[[0, 1, 2]], process=False),
+    "nan_vertex": trimesh.Trimesh(vertices=[[0, 0, 0], [1, np.nan, 0], [0, 1, 0]], faces=[[0, 1, 2]], process=False),
+}
+
+
+@pytest.mark.parametrize("name", sorted(EMPTY_AND_DEGENERATE))
+def test_empty_degenerate_and_nan_meshes_cannot_be_sampled_or_normalised(name: str) -> None:
+    import zbuf_occlude as zo
+    from zbuf_occlude.mesh import clean_mesh, normalize_mesh
+
+    mesh = EMPTY_AND_DEGENERATE[name]
+    cause = {"empty": "zero total area|empty", "one_degenerate_face": "zero total area|degenerate", "nan_vertex": "NaN"}[name]
+    for fn in (lambda: zo.sample_surface(mesh, 10), lambda: normalize_mesh(mesh), lambda: clean_mesh(mesh)):
+        with pytest.raises(InvalidInputError, match=cause):
+            fn()

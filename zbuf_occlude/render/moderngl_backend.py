@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 from ..cameras import Camera
 from ..errors import InvalidInputError
+from ..mesh import MAX_ABS_COORDINATE
 from .context import check_image_size, shared_context
 from .shaders import load_shader
 
@@ -121,7 +122,8 @@ class ModernGLRenderer:
     Raises
     ------
     InvalidInputError
-        Empty mesh, or more than 2^24 faces; a camera larger than the GL's maximum
+        Empty mesh, more than 2^24 faces, NaN/inf vertices or coordinates beyond
+        float32 (:data:`~zbuf_occlude.mesh.MAX_ABS_COORDINATE`); a camera larger than the GL's maximum
         image size (:func:`~zbuf_occlude.render.context.max_image_size`) when rendering.
     BackendUnavailable
         No OpenGL 4.3 context can be created.
@@ -133,6 +135,12 @@ class ModernGLRenderer:
             raise InvalidInputError("cannot render a mesh with no faces")
         if len(faces) >= MAX_FACES:
             raise InvalidInputError(f"mesh has {len(faces)} faces; the renderer supports fewer than {MAX_FACES}")
+        vertices = np.asarray(mesh.vertices)
+        if not (np.isfinite(vertices).all() and np.abs(vertices).max(initial=0.0) <= MAX_ABS_COORDINATE):
+            # float32 on the GPU: NaN, inf or |x| > 3.4e38 would be drawn as garbage, silently.
+            raise InvalidInputError(
+                f"cannot render a mesh with NaN, inf or beyond-float32 (> {MAX_ABS_COORDINATE:.3g}) vertex coordinates"
+            )
         self.n_faces = len(faces)
         self.ctx = context or shared_context()
         triangles = np.asarray(mesh.triangles)
