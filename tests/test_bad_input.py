@@ -180,6 +180,28 @@ def test_off_cut_in_half_names_the_vertex_count_not_numpy(tmp_path: Path) -> Non
     assert "inhomogeneous" not in str(info.value)
 
 
+@pytest.mark.parametrize("fmt", ["ply-ascii", "ply-binary", "stl-binary"])
+def test_ply_and_stl_cut_short_are_errors_naming_the_counts(tmp_path: Path, fmt: str) -> None:
+    mesh = load_mesh(CHAIR)
+    if fmt == "stl-binary":
+        raw, suffix = trimesh.exchange.stl.export_stl(mesh), ".stl"
+    else:
+        raw, suffix = trimesh.exchange.ply.export_ply(mesh, encoding=fmt.split("-")[1]), ".ply"
+    whole = tmp_path / f"whole{suffix}"
+    whole.write_bytes(raw)
+    assert len(load_mesh(whole).faces) == 2234
+    for fraction in (0.9, 0.5):
+        path = tmp_path / f"cut{suffix}"
+        path.write_bytes(raw[: int(len(raw) * fraction)])
+        with pytest.raises(MeshLoadError) as info:
+            load_mesh(path)
+        assert_names(info.value, str(path))
+        if fmt == "ply-binary":
+            assert "unexpected length" in str(info.value)  # trimesh's own check
+        else:
+            assert_names(info.value, "2,234", "cut short")
+
+
 @pytest.mark.parametrize(
     "header, newline",
     [("OFF\n4 4 0", "\n"), ("OFF4 4 0", "\n"), ("OFF 4 4 0", "\n"), ("OFF\n4 4 0", "\r\n"), ("OFF4 4 0", "\r\n")],

@@ -19,6 +19,10 @@ Provenance is stored on every mesh this module returns, in
     ``normalised = (original - center) * scale``.  Identity (``[0, 0, 0]``, ``1.0``)
     when the mesh was not normalised.
 
+Files cut short are errors, not partial meshes: OFF and PLY declare their vertex and
+face counts and binary STL its triangle count, and fewer found than declared raises
+:class:`~zbuf_occlude.errors.MeshLoadError` with both numbers (OBJ declares nothing).
+
 ModelNet quirks handled (all verified on real files with trimesh 5.2): the malformed
 header ``OFF3514 3546 0`` (counts on the ``OFF`` line), CRLF line endings, triangle
 soup with duplicated vertices (kept as is: meshes need not be watertight or
@@ -493,11 +497,55 @@ def _utf8_ply_header(raw: bytes) -> bytes:
     return raw
 
 
+def _check_ply_counts(raw: bytes, mesh: trimesh.Trimesh) -> None:
+    """Raise _Malformed when a PLY holds fewer vertices or faces than its header declares.
+
+    trimesh reads an ASCII PLY cut short in its face list without complaint (1,551 of a
+    chair's 2,234 faces).  Polygons become one or more triangles, so fewer faces than
+    declared means lines are missing.
+    """
+    header = raw[: raw.find(b"end_header")].decode("utf-8", "replace")
+    declared = {m.group(1): int(m.group(2)) for m in re.finditer(r"^element\s+(vertex|face)\s+(\d+)", header, re.M)}
+    n_vertices, n_faces = declared.get("vertex"), declared.get("face")
+    if (n_vertices is not None and len(mesh.vertices) < n_vertices) or (n_faces is not None and len(mesh.faces) < n_faces):
+        raise _Malformed(
+            f"declares {n_vertices or 0:,} vertices and {n_faces or 0:,} faces but holds {len(mesh.vertices):,} "
+            f"vertices and {len(mesh.faces):,} faces; the file is cut short"
+        )
+
+
+#: Binary STL: 80-byte header, uint32 triangle count, then 50 bytes per triangle.
+_STL_HEADER_BYTES, _STL_TRIANGLE_BYTES = 84, 50
+
+
+def _check_binary_stl_length(raw: bytes) -> None:
+    """Raise _Malformed when a binary STL is shorter than its triangle count says.
+
+    ASCII STL starts with ``solid``; a binary file that does is judged by its length.
+    """
+    if len(raw) < _STL_HEADER_BYTES:
+        return  # trimesh reports it (empty or not an STL)
+    n_triangles = int.from_bytes(raw[80:84], "little")
+    expected = _STL_HEADER_BYTES + _STL_TRIANGLE_BYTES * n_triangles
+    if raw[:5].lower() == b"solid" and b"facet" in raw[:1024]:
+        return  # ASCII
+    if len(raw) < expected:
+        found = (len(raw) - _STL_HEADER_BYTES) // _STL_TRIANGLE_BYTES
+        raise _Malformed(
+            f"binary STL declares {n_triangles:,} triangles ({expected:,} bytes) but holds {found:,} "
+            f"({len(raw):,} bytes); the file is cut short"
+        )
+
+
 def _read(path: Path, file_type: str) -> trimesh.Trimesh:
     """Parse ``path`` with trimesh into one Trimesh; scenes are flattened with transforms."""
     if file_type == "ply":
         raw = _utf8_ply_header(path.read_bytes())
-        return _to_mesh(trimesh.load_scene(io.BytesIO(raw), file_type="ply", process=False))
+        mesh = _to_mesh(trimesh.load_scene(io.BytesIO(raw), file_type="ply", process=False))
+        _check_ply_counts(raw, mesh)
+        return mesh
+    if file_type == "stl":
+        _check_binary_stl_length(path.read_bytes())
     if file_type != "off":
         return _to_mesh(trimesh.load_scene(str(path), file_type=file_type, process=False))
     raw = path.read_bytes()
