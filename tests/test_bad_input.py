@@ -635,3 +635,14 @@ def test_empty_degenerate_and_nan_meshes_cannot_be_sampled_or_normalised(name: s
     for fn in (lambda: zo.sample_surface(mesh, 10), lambda: normalize_mesh(mesh), lambda: clean_mesh(mesh)):
         with pytest.raises(InvalidInputError, match=cause):
             fn()
+
+
+def test_farm_list_file_in_a_non_utf8_folder_is_reported(tmp_path: Path) -> None:
+    from zbuf_occlude.farm.inputs import scan_objects
+
+    folder = tmp_path / b"caf\xe9".decode("utf-8", "surrogateescape")
+    _tree(folder, ["a.off"])
+    listing = folder / "list.txt"
+    listing.write_text("a.off chair\n")
+    with pytest.raises(InvalidInputError, match=r"no mesh files .*skipped 1: .*caf\\xe9/a.off: file name is not valid UTF-8"):
+        scan_objects(listing)

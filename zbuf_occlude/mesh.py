@@ -56,6 +56,7 @@ __all__ = [
     "MeshScan",
     "SkippedInput",
     "printable_path",
+    "non_utf8_reason",
     "class_and_split",
     "SPLITS",
     "DEFAULT_SPLIT",
@@ -727,7 +728,8 @@ def printable_path(path: str | PathLike[str]) -> str:
     return os.fsencode(path).decode("utf-8", "backslashreplace")
 
 
-def _utf8_problem(path: str | PathLike[str]) -> str | None:
+def non_utf8_reason(path: str | PathLike[str]) -> str | None:
+    """Why ``path`` cannot be used (its name is not valid UTF-8), or None if it can."""
     # Python decodes undecodable file-name bytes to lone surrogates (PEP 383); names
     # seed the samples and are written into JSON, HDF5 and PLY headers, all UTF-8.
     try:
@@ -781,7 +783,7 @@ def walk_mesh_files(root: str | PathLike[str], *, skip_hidden: bool = False) -> 
             path = Path(folder, name)
             if path.suffix.lower() not in SUPPORTED_EXTENSIONS or not path.is_file():
                 continue
-            problem = _utf8_problem(path)
+            problem = non_utf8_reason(path)
             if problem:
                 skipped.append(SkippedInput(printable_path(path), problem))
             else:
@@ -819,7 +821,7 @@ def scan_meshes(paths: Sequence[str | PathLike[str]]) -> MeshScan:
             skipped.extend(missed)
             found.extend((f, f.relative_to(path).with_suffix("").as_posix()) for f in files)
         elif path.is_file():
-            problem = _utf8_problem(path)
+            problem = non_utf8_reason(path)
             if problem:
                 skipped.append(SkippedInput(printable_path(path), problem))
                 log.warning("skipped %s", skipped[-1])

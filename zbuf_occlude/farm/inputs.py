@@ -18,6 +18,7 @@ from ..mesh import (
     SUPPORTED_EXTENSIONS,
     SkippedInput,
     class_and_split,
+    non_utf8_reason,
     printable_path,
     walk_mesh_files,
 )
@@ -97,7 +98,13 @@ def _read_list_file(list_file: Path) -> tuple[list[tuple[str, str, str, str]], l
             (path_text, label), split = tokens, DEFAULT_SPLIT
         path = Path(path_text)
         name = path.with_suffix("").as_posix()
-        found.append((name, str(path if path.is_absolute() else base / path), label, split))
+        source = path if path.is_absolute() else base / path
+        problem = non_utf8_reason(source)
+        if problem:  # the list file's folder: the names are written into the shards
+            skipped.append(SkippedInput(printable_path(source), problem))
+            log.warning("skipped %s", skipped[-1])
+            continue
+        found.append((name, str(source), label, split))
     return found, skipped
 
 
