@@ -646,3 +646,22 @@ def test_farm_list_file_in_a_non_utf8_folder_is_reported(tmp_path: Path) -> None
     listing.write_text("a.off chair\n")
     with pytest.raises(InvalidInputError, match=r"no mesh files .*skipped 1: .*caf\\xe9/a.off: file name is not valid UTF-8"):
         scan_objects(listing)
+
+
+@pytest.mark.parametrize("ext", ["off", "ply", "obj"])
+def test_unreadable_mesh_file_names_file_and_cause(tmp_path: Path, monkeypatch, ext: str) -> None:
+    import builtins
+
+    path = tmp_path / f"locked.{ext}"
+    path.write_bytes(NON_UTF8_TWINS[ext][1] + _twin_body(ext))
+    assert len(load_mesh(path).faces) == 4
+    # chmod 000 does not stop root: make every way of opening this file fail as it would.
+    real_open, real_read_bytes = builtins.open, Path.read_bytes
+
+    def denied(*_args, **_kwargs):
+        raise PermissionError(13, "Permission denied", str(path))
+
+    monkeypatch.setattr(builtins, "open", lambda f, *a, **k: denied() if str(f) == str(path) else real_open(f, *a, **k))
+    monkeypatch.setattr(Path, "read_bytes", lambda self: denied() if self == path else real_read_bytes(self))
+    with pytest.raises(MeshLoadError, match=re.escape(str(path)) + r": cannot read file \(Permission denied\)"):
+        load_mesh(path)
