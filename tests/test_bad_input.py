@@ -423,7 +423,7 @@ LATIN1_NAME = b"chair/train/caf\xe9_0002.off"
 
 
 def test_non_utf8_file_name_is_reported_and_the_others_are_found(tmp_path: Path) -> None:
-    from zbuf_occlude.mesh import find_meshes, scan_meshes
+    from zbuf_occlude.discovery import find_meshes, scan_meshes
 
     _tree(tmp_path, ["chair/train/chair_0001.off", LATIN1_NAME, "chair/test/chair_0003.off"])
     scan = scan_meshes([tmp_path])
@@ -438,7 +438,7 @@ def test_non_utf8_file_name_is_reported_and_the_others_are_found(tmp_path: Path)
 
 
 def test_non_utf8_name_given_as_a_file_is_reported(tmp_path: Path) -> None:
-    from zbuf_occlude.mesh import scan_meshes
+    from zbuf_occlude.discovery import scan_meshes
 
     _tree(tmp_path, [b"caf\xe9.off", "ok.off"])
     bad = tmp_path / b"caf\xe9.off".decode("utf-8", "surrogateescape")
@@ -510,7 +510,7 @@ def unreadable(monkeypatch):
 
 
 def test_unreadable_class_folder_is_reported_not_silently_lost(tmp_path: Path, unreadable) -> None:
-    from zbuf_occlude.mesh import find_meshes, scan_meshes
+    from zbuf_occlude.discovery import find_meshes, scan_meshes
 
     _tree(tmp_path, ["chair/train/chair_0001.off", "table/train/table_0001.off", "table/test/table_0002.off"])
     unreadable(tmp_path / "table")
@@ -521,7 +521,7 @@ def test_unreadable_class_folder_is_reported_not_silently_lost(tmp_path: Path, u
 
 
 def test_unreadable_root_folder_says_so(tmp_path: Path, unreadable) -> None:
-    from zbuf_occlude.mesh import scan_meshes
+    from zbuf_occlude.discovery import scan_meshes
 
     _tree(tmp_path, ["data/chair_0001.off"])
     unreadable(tmp_path / "data")

@@ -12,16 +12,16 @@ from typing import NamedTuple
 
 from ..dataset import name_set
 from ..errors import InvalidInputError
-from ..mesh import (
+from ..discovery import (
     DEFAULT_SPLIT,
     SPLITS,
-    SUPPORTED_EXTENSIONS,
     SkippedInput,
     class_and_split,
     non_utf8_reason,
     printable_path,
     walk_mesh_files,
 )
+from ..mesh_formats import SUPPORTED_EXTENSIONS
 from ..occlude import object_key
 
 log = logging.getLogger(__name__)
@@ -163,7 +163,7 @@ def scan_objects(
         ``objects``: sorted by name; ``index`` is the position, ``label`` the position of
         the class in the sorted (natural order) list of kept classes.  ``skipped``:
         folders that could not be read, files whose path is not UTF-8 and list lines
-        that are not UTF-8 (:class:`~zbuf_occlude.mesh.SkippedInput`, each logged as a
+        that are not UTF-8 (:class:`~zbuf_occlude.discovery.SkippedInput`, each logged as a
         warning), whatever the class filter.
 
     Raises
