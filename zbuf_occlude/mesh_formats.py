@@ -32,6 +32,7 @@ SUPPORTED_EXTENSIONS: dict[str, str] = {
 #: Longest prefix before "OFF" on the header line (COFF, NOFF, STOFF, 4OFF, CNOFF ...).
 _OFF_HEADER_MAX_PREFIX = 4
 
+
 class _NotOff(ValueError):
     """The file does not start with an OFF header."""
 
