@@ -665,3 +665,24 @@ def test_unreadable_mesh_file_names_file_and_cause(tmp_path: Path, monkeypatch, 
     monkeypatch.setattr(Path, "read_bytes", lambda self: denied() if self == path else real_read_bytes(self))
     with pytest.raises(MeshLoadError, match=re.escape(str(path)) + r": cannot read file \(Permission denied\)"):
         load_mesh(path)
+
+
+def test_occlude_object_refuses_a_job_that_cannot_fit_before_allocating(monkeypatch) -> None:
+    import tracemalloc
+
+    from zbuf_occlude import resources
+    from zbuf_occlude.occlude import occlude_object
+    from zbuf_occlude.resources import InsufficientMemoryError
+
+    monkeypatch.setattr(resources, "available_memory", lambda: (8 * 2**30, "test budget"))
+    mesh = load_mesh(CHAIR)
+    tracemalloc.start()
+    try:
+        with pytest.raises(InsufficientMemoryError, match=r"^--points needs about .*--points 1,000,000,000.*8 GiB available"):
+            next(occlude_object(mesh, [(30.0, 45.0)], key=1, n_points=10**9, samples_per_view=10))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 2**20
+    with pytest.raises(InsufficientMemoryError, match=r"--resolution"):
+        next(occlude_object(mesh, [(30.0, 45.0)], key=1, n_points=16, samples_per_view=1, resolution=(40_000, 40_000)))

@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from .cameras import DEFAULT_RADIUS, Camera, camera_on_sphere
 from .errors import InvalidInputError
 from .io import OccludedCloud
+from .resources import check_memory, estimate_job_memory
 from .sampling import check_seed, sample_surface
 from .visibility.registry import visible_mask
 from .visibility.zbuffer import Scene
@@ -174,9 +175,20 @@ def occlude_object(
     ------
     InvalidInputError
         ``n_points < 1`` or ``samples_per_view < 0``.
+    InsufficientMemoryError
+        (an InvalidInputError) The object's job would not fit in the memory available
+        (:func:`zbuf_occlude.resources.check_memory`), checked before any allocation.
     """
     if n_points < 1 or samples_per_view < 0:
         raise InvalidInputError(f"need n_points >= 1 and samples_per_view >= 0, got {n_points}, {samples_per_view}")
+    # Refuse before allocating what cannot fit (the OOM killer gives no message).
+    check_memory(
+        estimate_job_memory(
+            points=int(n_points), samples_per_view=int(samples_per_view),
+            dense_points=len(dense.points) if dense is not None else DEFAULT_DENSE_POINTS,
+            resolution=resolution, faces=len(mesh.faces),
+        )
+    )  # fmt: skip
     dense = dense or dense_cloud(mesh, key, seed=seed)
     scene = Scene(mesh, dense.points, dense.face_index) if method == "zbuffer" else None
     try:

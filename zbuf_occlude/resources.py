@@ -16,6 +16,7 @@ nothing is refused.
 from __future__ import annotations
 
 import logging
+import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -152,13 +153,17 @@ def estimate_job_memory(
     InvalidInputError
         A negative count.
     """
-    width, height = (resolution, resolution) if isinstance(resolution, int) else resolution
+    width, height = (resolution, resolution) if isinstance(resolution, numbers.Integral) else tuple(resolution)
     held = samples_per_view if samples_held is None else samples_held
     counts = {"points": points, "samples_per_view": samples_per_view, "samples_held": held,
-              "dense_points": dense_points, "resolution": max(width, height), "faces": faces, "workers": workers}  # fmt: skip
-    bad = {k: v for k, v in counts.items() if not isinstance(v, int) or isinstance(v, bool) or v < 0}
+              "dense_points": dense_points, "width": width, "height": height, "faces": faces, "workers": workers}  # fmt: skip
+    bad = {k: v for k, v in counts.items() if not isinstance(v, numbers.Integral) or isinstance(v, bool) or v < 0}
     if bad or workers < 1:
         raise InvalidInputError(f"memory estimate needs non-negative integer sizes and workers >= 1, got {bad or counts}")
+    points, samples_per_view, held, dense_points, width, height, faces, workers = (
+        int(v) for v in (points, samples_per_view, held, dense_points, width, height, faces, workers)
+    )
+    resolution = width if width == height else (width, height)
     per_worker = {
         "--points": points * (BYTES_PER_SAMPLE_POINT + BYTES_PER_HELD_SAMPLE_POINT * max(held, 1 if samples_per_view else 0)),
         "--dense-points": dense_points * BYTES_PER_DENSE_POINT,
