@@ -19,6 +19,10 @@ Provenance is stored on every mesh this module returns, in
     ``normalised = (original - center) * scale``.  Identity (``[0, 0, 0]``, ``1.0``)
     when the mesh was not normalised.
 
+Files cut short are errors, not partial meshes (:mod:`zbuf_occlude.mesh_formats`).
+The discovery of mesh files lives in :mod:`zbuf_occlude.discovery`; its names are
+re-exported here (``find_meshes``, ``scan_meshes``, ``class_and_split``, ...).
+
 ModelNet quirks handled (all verified on real files with trimesh 5.2): the malformed
 header ``OFF3514 3546 0`` (counts on the ``OFF`` line), CRLF line endings, triangle
 soup with duplicated vertices (kept as is: meshes need not be watertight or
@@ -28,10 +32,7 @@ zero-area faces.
 
 from __future__ import annotations
 
-import io
 import logging
-import re
-from collections.abc import Sequence
 from os import PathLike
 from pathlib import Path
 from typing import Any
@@ -40,15 +41,35 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
+from .discovery import (
+    DEFAULT_SPLIT,
+    SPLITS,
+    MeshScan,
+    SkippedInput,
+    class_and_split,
+    find_meshes,
+    non_utf8_reason,
+    printable_path,
+    scan_meshes,
+    walk_mesh_files,
+)
 from .errors import InvalidInputError, MeshLoadError, ZbufOccludeError
+from .mesh_formats import SUPPORTED_EXTENSIONS, read_trimesh
 
 __all__ = [
     "SUPPORTED_EXTENSIONS",
     "find_meshes",
+    "scan_meshes",
+    "walk_mesh_files",
+    "MeshScan",
+    "SkippedInput",
+    "printable_path",
+    "non_utf8_reason",
     "class_and_split",
     "SPLITS",
     "DEFAULT_SPLIT",
     "DEGENERATE_AREA_RTOL",
+    "MAX_ABS_COORDINATE",
     "METADATA_KEY",
     "load_mesh",
     "normalize_mesh",
@@ -58,34 +79,19 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-#: File extensions load_mesh accepts (lower case), mapped to trimesh's file type.
-SUPPORTED_EXTENSIONS: dict[str, str] = {
-    ".off": "off",
-    ".obj": "obj",
-    ".ply": "ply",
-    ".stl": "stl",
-    ".glb": "glb",
-}
-
 #: A face whose area is at most this times the squared maximum extent of the mesh is
 #: degenerate.  1e-14 is about 50 float64 epsilons: it catches faces that are exactly
 #: flat but whose cross product rounding left at ~1e-16 (ModelNet has such faces at
 #: 4e-21), while a triangle 1e-7 of the object on a side is still kept.
 DEGENERATE_AREA_RTOL = 1e-14
 
-#: Longest prefix before "OFF" on the header line (COFF, NOFF, STOFF, 4OFF, CNOFF ...).
-_OFF_HEADER_MAX_PREFIX = 4
+#: Largest vertex coordinate magnitude accepted: float32's maximum (~3.4e38).  The GPU
+#: methods work in float32, and beyond it areas and squared extents overflow float64 too
+#: (1e200 squared); such files are corrupt or in absurd units.
+MAX_ABS_COORDINATE = float(np.finfo(np.float32).max)
 
 #: Key of this package's provenance dictionary in ``trimesh.Trimesh.metadata``.
 METADATA_KEY = "zbuf_occlude"
-
-
-class _NotOff(ValueError):
-    """The file does not start with an OFF header."""
-
-
-class _NotMesh(ValueError):
-    """The file parsed but holds no triangle mesh."""
 
 
 def _referenced_extent(
@@ -107,6 +113,25 @@ def _degenerate_mask(
 ) -> NDArray[np.bool_]:
     repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
     return repeated | (_face_areas(vertices, faces) <= area_rtol * max_extent**2)
+
+
+def _check_coordinates(vertices: NDArray[np.float64], *, what: str, error: type[ZbufOccludeError]) -> None:
+    """Raise ``error`` on NaN/inf vertices or coordinates beyond :data:`MAX_ABS_COORDINATE`."""
+    bad = ~np.isfinite(vertices).all(axis=1)
+    if bad.any():
+        raise error(
+            f"{what}: {int(bad.sum())} of {len(vertices)} vertices are NaN or inf "
+            f"(first at index {int(np.argmax(bad))}); fix or re-export the mesh"
+        )
+    if len(vertices):
+        magnitude = np.abs(vertices).max(axis=1)
+        if magnitude.max() > MAX_ABS_COORDINATE:
+            first = int(np.argmax(magnitude > MAX_ABS_COORDINATE))
+            raise error(
+                f"{what}: vertex coordinates reach {magnitude.max():.3g} (first at index {first}), beyond the "
+                f"float32 range (+-{MAX_ABS_COORDINATE:.3g}) the renderer works in; the file is corrupt or in "
+                "absurd units: rescale it"
+            )
 
 
 def _check(
@@ -131,12 +156,7 @@ def _check(
         raise error(
             f"{what}: face indices span [{faces.min()}, {faces.max()}] but there are only {len(vertices)} vertices"
         )
-    bad = ~np.isfinite(vertices).all(axis=1)
-    if bad.any():
-        raise error(
-            f"{what}: {int(bad.sum())} of {len(vertices)} vertices are NaN or inf "
-            f"(first at index {int(np.argmax(bad))}); fix or re-export the mesh"
-        )
+    _check_coordinates(vertices, what=what, error=error)
     lo, hi = _referenced_extent(vertices, faces)
     max_extent = float((hi - lo).max())
     if max_extent == 0.0:
@@ -238,8 +258,7 @@ def degenerate_faces(mesh: trimesh.Trimesh, *, area_rtol: float = DEGENERATE_ARE
         return np.zeros(0, dtype=bool)
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise InvalidInputError(f"mesh face indices span [{faces.min()}, {faces.max()}] for {len(vertices)} vertices")
-    if not np.isfinite(vertices).all():
-        raise InvalidInputError("mesh has NaN or inf vertices; degeneracy is undefined")
+    _check_coordinates(vertices, what="mesh", error=InvalidInputError)
     lo, hi = _referenced_extent(vertices, faces)
     return _degenerate_mask(vertices, faces, float((hi - lo).max()), area_rtol)
 
@@ -321,82 +340,6 @@ def normalize_mesh(mesh: trimesh.Trimesh, *, area_rtol: float = DEGENERATE_AREA_
     return _make(new_vertices, faces, mesh.metadata, prov)
 
 
-def _fan_triangulate_off(text: str) -> str | None:
-    """OFF text with every polygon of more than 4 corners replaced by a triangle fan.
-
-    Returns None when there is no such polygon or the structure cannot be read (the
-    caller then reports trimesh's own error).
-    """
-    lines = [line.split("#", 1)[0].strip() for line in text.splitlines()]
-    lines = [line for line in lines if line]
-    try:
-        head = lines[0]
-        end = head.upper().index("OFF") + len("OFF")
-        # ModelNet40 puts the counts on the OFF line ("OFF3514 3546 0")
-        counts, body = (head[end:].split(), lines[1:]) if head[end:].strip() else (lines[1].split(), lines[2:])
-        n_vertices, n_faces = int(counts[0]), int(counts[1])
-        faces, n_fanned = [], 0
-        for line in body[n_vertices : n_vertices + n_faces]:
-            tokens = line.split()
-            corners = tokens[1 : 1 + int(tokens[0])]
-            if len(corners) > 4:
-                n_fanned += 1
-                # the same fan trimesh builds: (c0, ci, ci+1)
-                faces.extend(f"3 {corners[0]} {a} {b}" for a, b in zip(corners[1:-1], corners[2:]))
-            else:
-                faces.append(" ".join([str(len(corners)), *corners]))
-    except (IndexError, ValueError):
-        return None
-    if n_fanned == 0:
-        return None
-    return "\n".join([head[:end], f"{n_vertices} {len(faces)} 0", *body[:n_vertices], *faces]) + "\n"
-
-
-def _read(path: Path, file_type: str) -> trimesh.Trimesh:
-    """Parse ``path`` with trimesh into one Trimesh; scenes are flattened with transforms."""
-    if file_type != "off":
-        return _to_mesh(trimesh.load_scene(str(path), file_type=file_type, process=False))
-    raw = path.read_bytes()
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError:
-        # trimesh decodes non-UTF-8 text with the optional charset_normalizer and fails
-        # with ModuleNotFoundError without it.  OFF is ASCII numbers, so Latin-1 (which
-        # decodes any byte) is a safe fallback.
-        text = raw.decode("latin-1")
-        raw = text.encode("utf-8")
-    # trimesh splits at the first "OFF" anywhere in the text, so garbage would fail
-    # later with an unrelated message.  The header may carry a prefix (COFF, NOFF, ...)
-    # and, in ModelNet40, the counts on the same line ("OFF3514 3546 0"), which trimesh
-    # parses correctly.
-    lines = (line.strip() for line in text.splitlines())
-    first = next((line for line in lines if line and not line.startswith("#")), "")
-    if "OFF" not in first[: _OFF_HEADER_MAX_PREFIX + len("OFF")].upper():
-        raise _NotOff(f"no OFF header, first line is {first[:40]!r}" if first else "file is empty")
-    try:
-        return _to_mesh(trimesh.load_scene(io.BytesIO(raw), file_type="off", process=False))
-    except Exception:
-        # trimesh 5.2 fails (TypeError from numpy string multiply) when polygons of more
-        # than 4 corners are mixed with triangles or quads: it fans them while the
-        # indices are still strings.  Fan them here, as trimesh would, and retry once.
-        fixed = _fan_triangulate_off(text)
-        if fixed is None:
-            raise
-        return _to_mesh(trimesh.load_scene(io.BytesIO(fixed.encode("utf-8")), file_type="off", process=False))
-
-
-def _to_mesh(scene: trimesh.Scene) -> trimesh.Trimesh:
-    # Scene.to_mesh() concatenates every Trimesh of a scene (GLB) with its node
-    # transform baked in, and drops points and paths.  process=False at load keeps
-    # vertex and face order as in the file (no merging of ModelNet's duplicated vertices).
-    mesh = scene.to_mesh()
-    if len(mesh.faces) == 0:
-        n_points = sum(len(g.vertices) for g in scene.geometry.values() if isinstance(g, trimesh.PointCloud))
-        if n_points:
-            raise _NotMesh(f"holds a point cloud of {n_points} points and no faces; a point cloud is not a mesh")
-    return mesh
-
-
 def load_mesh(
     path: str | PathLike[str], *, normalize: bool = True, area_rtol: float = DEGENERATE_AREA_RTOL
 ) -> trimesh.Trimesh:
@@ -448,15 +391,11 @@ def load_mesh(
         )
     file_type = SUPPORTED_EXTENSIONS[suffix]
     try:
-        loaded = _read(path, file_type)
+        loaded = read_trimesh(path, file_type)
     except OSError as exc:
         raise MeshLoadError(f"{path}: cannot read file ({exc.strerror or exc})") from exc
-    except MemoryError:
+    except (MemoryError, MeshLoadError):
         raise
-    except _NotOff as exc:
-        raise MeshLoadError(f"{path}: not an OFF file ({exc})") from exc
-    except _NotMesh as exc:
-        raise MeshLoadError(f"{path}: {exc}") from exc
     except Exception as exc:  # trimesh raises a zoo of types (ValueError, IndexError, NameError, KeyError, ...)
         raise MeshLoadError(
             f"{path}: cannot parse as {file_type.upper()} ({type(exc).__name__}: {exc})"
@@ -485,49 +424,3 @@ def load_mesh(
         vertices, center, scale = _normalised(vertices, lo, hi)
         prov["center"], prov["scale"] = center.tolist(), scale
     return _make(vertices, faces, loaded.metadata, prov)
-
-
-def find_meshes(paths: Sequence[str | Path]) -> list[tuple[Path, str]]:
-    """Mesh files under ``paths`` (files, or folders searched recursively), sorted, each with a
-    unique name: its path relative to the folder given, without the suffix.
-
-    Raises
-    ------
-    InvalidInputError
-        A path does not exist, or nothing was found.
-    """
-    found: list[tuple[Path, str]] = []
-    for raw in paths:
-        path = Path(raw)
-        if path.is_dir():
-            for f in sorted(p for p in path.rglob("*") if p.suffix.lower() in SUPPORTED_EXTENSIONS and p.is_file()):
-                found.append((f, f.relative_to(path).with_suffix("").as_posix()))
-        elif path.is_file():
-            found.append((path, path.stem))
-        else:
-            raise InvalidInputError(f"no such file or folder: {path}")
-    if not found:
-        raise InvalidInputError(f"no mesh files ({', '.join(SUPPORTED_EXTENSIONS)}) under {', '.join(map(str, paths))}")
-    return found
-
-
-#: ModelNet's split folders.
-SPLITS = ("train", "test")
-#: Split of a mesh whose path names none (flat folder, list file without a split column).
-DEFAULT_SPLIT = "train"
-
-
-def class_and_split(path: str | Path) -> tuple[str, str]:
-    """Class and split of a mesh from its path, ModelNet's layout.
-
-    ``.../<class>/<split>/<name>.off`` (split ``train`` or ``test``), else
-    ``.../<class>/<name>.off`` (split :data:`DEFAULT_SPLIT`), else, for a bare file name
-    ``<class>_<NNNN>.off`` (a flat folder), the name without its number.
-    """
-    path = Path(path)
-    parent = path.parent
-    if parent.name in SPLITS and parent.parent.name:
-        return parent.parent.name, parent.name
-    if parent.name:
-        return parent.name, DEFAULT_SPLIT
-    return re.sub(r"_\d+$", "", path.stem) or path.stem, DEFAULT_SPLIT

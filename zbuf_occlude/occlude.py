@@ -22,7 +22,8 @@ from .cameras import DEFAULT_RADIUS, Camera, camera_on_sphere
 from .defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION
 from .errors import InvalidInputError
 from .io import OccludedCloud
-from .sampling import sample_surface
+from .resources import check_memory, estimate_job_memory
+from .sampling import check_seed, sample_surface
 from .visibility.registry import method_info, visible_mask
 
 __all__ = ["object_key", "derive_rng", "sample_rng", "draw_sample", "pose_samples", "DenseCloud", "dense_cloud", "occlude_object"]
@@ -41,12 +42,19 @@ def object_key(name: str) -> int:
     64 bits make a collision between two objects' seeds negligible even over all of
     ShapeNet (~5e-12 for 1e4 objects; a 32-bit CRC would give ~1 %).
     """
-    return int.from_bytes(hashlib.blake2b(name.encode("utf-8"), digest_size=8).digest(), "little")
+    # surrogateescape: a name from a non-UTF-8 file name (PEP 383) keys on its original
+    # bytes; valid UTF-8 names give the same bytes, and so the same keys, as before.
+    return int.from_bytes(hashlib.blake2b(name.encode("utf-8", "surrogateescape"), digest_size=8).digest(), "little")
 
 
 def derive_rng(seed: int, *keys: int) -> np.random.Generator:
-    """An independent generator for ``(seed, *keys)`` (``numpy.random.SeedSequence``)."""
-    return np.random.default_rng(np.random.SeedSequence([int(seed), *(int(k) for k in keys)]))
+    """An independent generator for ``(seed, *keys)`` (``numpy.random.SeedSequence``).
+
+    Raises InvalidInputError (:func:`~zbuf_occlude.sampling.check_seed`) for a negative seed.
+    """
+    if seed is None or isinstance(seed, np.random.Generator):
+        raise InvalidInputError(f"seed must be a non-negative integer here (it is mixed with keys), got {seed!r}")
+    return np.random.default_rng(np.random.SeedSequence([check_seed(seed), *(int(k) for k in keys)]))
 
 
 def sample_rng(seed: int, key: int, pose_index: int, sample_index: int) -> np.random.Generator:
@@ -167,9 +175,20 @@ def occlude_object(
     ------
     InvalidInputError
         ``n_points < 1`` or ``samples_per_view < 0``.
+    InsufficientMemoryError
+        (an InvalidInputError) The object's job would not fit in the memory available
+        (:func:`zbuf_occlude.resources.check_memory`), checked before any allocation.
     """
     if n_points < 1 or samples_per_view < 0:
         raise InvalidInputError(f"need n_points >= 1 and samples_per_view >= 0, got {n_points}, {samples_per_view}")
+    # Refuse before allocating what cannot fit (the OOM killer gives no message).
+    check_memory(
+        estimate_job_memory(
+            points=int(n_points), samples_per_view=int(samples_per_view),
+            dense_points=len(dense.points) if dense is not None else DEFAULT_DENSE_POINTS,
+            resolution=resolution, faces=len(mesh.faces),
+        )
+    )  # fmt: skip
     dense = dense or dense_cloud(mesh, key, seed=seed)
     session = method_info(method).session
     scene = session(mesh, dense.points, dense.face_index) if session is not None else None

@@ -29,12 +29,14 @@ import trimesh
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import InvalidInputError
+from .resources import BYTES_PER_DENSE_POINT, check_memory
 
 __all__ = [
     "sample_faces",
     "points_from_barycentric",
     "sample_surface",
     "triangles_of",
+    "check_seed",
     "SeedLike",
 ]
 
@@ -106,6 +108,40 @@ def _check_count(count: object) -> int:
     return int(count)
 
 
+def check_seed(seed: object, *, name: str = "seed") -> SeedLike:
+    """Validate a seed before any work: a non-negative int, None or a numpy Generator.
+
+    numpy rejects negative seeds deep inside ``default_rng``/``SeedSequence`` with a bare
+    ValueError; this names the argument (``name``, e.g. ``"--seed"`` for the CLI) and value.
+
+    Parameters
+    ----------
+    seed : object
+        What to check.
+    name : str
+        The argument or option named in the message.
+
+    Returns
+    -------
+    seed : int, numpy.random.Generator or None
+        ``seed`` itself, a numpy integer turned into an int.
+
+    Raises
+    ------
+    InvalidInputError
+        If ``seed`` is negative, a bool, or not an integer, None or Generator.
+    """
+    if seed is None or isinstance(seed, np.random.Generator):
+        return seed
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, numbers.Integral):
+        raise InvalidInputError(
+            f"{name} must be a non-negative integer (or None, or a numpy Generator), got {seed!r}"
+        )
+    if seed < 0:
+        raise InvalidInputError(f"{name} must be a non-negative integer, got {seed}")
+    return int(seed)
+
+
 def _check_density(density: object) -> float:
     if isinstance(density, (bool, np.bool_)) or not isinstance(density, numbers.Real):
         raise InvalidInputError(f"density must be a real number of points per unit area, got {density!r}")
@@ -142,7 +178,7 @@ def sample_faces(
         order.
     seed : int, numpy.random.Generator or None
         Source of randomness; ``numpy.random.default_rng(seed)``.  The same int gives
-        the same bytes.  A Generator is advanced.
+        the same bytes.  A Generator is advanced.  Checked by :func:`check_seed`.
 
     Returns
     -------
@@ -154,10 +190,15 @@ def sample_faces(
     Raises
     ------
     InvalidInputError
-        If both or neither of ``count`` and ``density`` are given, ``count < 0``,
+        If ``seed`` is negative or not an integer/Generator/None, both or neither of
+        ``count`` and ``density`` are given, ``count < 0``,
         ``density`` is not finite and > 0, the mesh has NaN/inf coordinates or zero
         total area, or ``density`` is so large that the point count overflows.
+    InsufficientMemoryError
+        (an InvalidInputError) The points would not fit in the memory available
+        (:func:`zbuf_occlude.resources.check_memory`).
     """
+    seed = check_seed(seed)
     if (count is None) == (density is None):
         raise InvalidInputError(
             f"give exactly one of count (points) and density (points per unit area), got count={count!r}, "
@@ -178,6 +219,7 @@ def sample_faces(
     rng = np.random.default_rng(seed)
 
     if count is not None:
+        check_memory(count * BYTES_PER_DENSE_POINT, option=f"count={count:,}", hint="sample fewer points")
         # Inverse-CDF draw of faces: u in [0, total) falls in face f when
         # cumulative[f-1] <= u < cumulative[f]; zero-area faces span an empty interval.
         u = rng.random(count) * total
@@ -191,6 +233,11 @@ def sample_faces(
             total_expected = expected.sum()
         if not np.isfinite(total_expected):
             raise InvalidInputError(f"density {density} is too large: the expected point count overflows")
+        check_memory(
+            int(total_expected) * BYTES_PER_DENSE_POINT,
+            option=f"density={density:g} ({int(total_expected):,} points expected)",
+            hint="lower the density",
+        )
         # Algorithm 1: stochastic rounding keeps the expected count of every face exact.
         whole = np.floor(expected)
         per_face = whole.astype(np.int64) + (rng.random(len(areas)) < expected - whole)

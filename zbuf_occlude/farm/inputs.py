@@ -8,10 +8,20 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 from ..dataset import name_set
 from ..errors import InvalidInputError
-from ..mesh import DEFAULT_SPLIT, SPLITS, SUPPORTED_EXTENSIONS, class_and_split
+from ..discovery import (
+    DEFAULT_SPLIT,
+    SPLITS,
+    SkippedInput,
+    class_and_split,
+    non_utf8_reason,
+    printable_path,
+    walk_mesh_files,
+)
+from ..mesh_formats import SUPPORTED_EXTENSIONS
 from ..occlude import object_key
 
 log = logging.getLogger(__name__)
@@ -54,23 +64,27 @@ def _natural_key(text: str) -> list:
     return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", text)]
 
 
-def _scan_tree(root: Path) -> list[tuple[str, str, str, str]]:
+def _scan_tree(root: Path) -> tuple[list[tuple[str, str, str, str]], list[SkippedInput]]:
+    # Hidden folders and temporary files are left out, not reported.
+    files, skipped = walk_mesh_files(root, skip_hidden=True)
     found = []
-    for path in root.rglob("*"):
-        if path.suffix.lower() not in SUPPORTED_EXTENSIONS or not path.is_file():
-            continue
+    for path in files:
         rel = path.relative_to(root)
-        if any(part.startswith(".") for part in rel.parts):
-            continue  # hidden folders and temporary files
         class_name, split = class_and_split(rel)
         found.append((rel.with_suffix("").as_posix(), str(path), class_name, split))
-    return found
+    return found, skipped
 
 
-def _read_list_file(list_file: Path) -> list[tuple[str, str, str, str]]:
-    found = []
+def _read_list_file(list_file: Path) -> tuple[list[tuple[str, str, str, str]], list[SkippedInput]]:
+    found, skipped = [], []
     base = list_file.parent
-    for lineno, raw in enumerate(list_file.read_text(encoding="utf-8").splitlines(), start=1):
+    for lineno, raw_bytes in enumerate(list_file.read_bytes().splitlines(), start=1):
+        try:
+            raw = raw_bytes.decode("utf-8")
+        except UnicodeDecodeError:
+            skipped.append(SkippedInput(f"{printable_path(list_file)}:{lineno}", "line is not valid UTF-8; re-save the list as UTF-8"))
+            log.warning("skipped %s", skipped[-1])
+            continue
         line = raw.split("#", 1)[0].strip()
         if not line:
             continue
@@ -84,8 +98,24 @@ def _read_list_file(list_file: Path) -> list[tuple[str, str, str, str]]:
             (path_text, label), split = tokens, DEFAULT_SPLIT
         path = Path(path_text)
         name = path.with_suffix("").as_posix()
-        found.append((name, str(path if path.is_absolute() else base / path), label, split))
-    return found
+        source = path if path.is_absolute() else base / path
+        problem = non_utf8_reason(source)
+        if problem:  # the list file's folder: the names are written into the shards
+            skipped.append(SkippedInput(printable_path(source), problem))
+            log.warning("skipped %s", skipped[-1])
+            continue
+        found.append((name, str(source), label, split))
+    return found, skipped
+
+
+class ObjectScan(NamedTuple):
+    """What :func:`scan_objects` found."""
+
+    #: The farm's plan, as :func:`discover_objects` returns it.
+    objects: list[FarmObject]
+    #: Unreadable folders, files with non-UTF-8 names, undecodable list lines: not in
+    #: the plan.  A run that must not lose inputs silently exits non-zero when not empty.
+    skipped: list[SkippedInput]
 
 
 def discover_objects(
@@ -95,7 +125,20 @@ def discover_objects(
     per_class: int | None = None,
     splits: Sequence[str] | str = SPLITS,
 ) -> list[FarmObject]:
-    """The farm's plan: meshes under ``source``, filtered, labelled and numbered.
+    """The farm's plan: :func:`scan_objects` without the list of skipped inputs (they are
+    logged as warnings)."""
+    return scan_objects(source, classes=classes, per_class=per_class, splits=splits).objects
+
+
+def scan_objects(
+    source: str | os.PathLike,
+    *,
+    classes: Sequence[str] | str | None = None,
+    per_class: int | None = None,
+    splits: Sequence[str] | str = SPLITS,
+) -> ObjectScan:
+    """The farm's plan: meshes under ``source``, filtered, labelled and numbered, and the
+    inputs that had to be skipped.
 
     Parameters
     ----------
@@ -116,9 +159,12 @@ def discover_objects(
 
     Returns
     -------
-    objects : list of FarmObject
-        Sorted by name; ``index`` is the position, ``label`` the position of the class in
-        the sorted (natural order) list of kept classes.
+    ObjectScan
+        ``objects``: sorted by name; ``index`` is the position, ``label`` the position of
+        the class in the sorted (natural order) list of kept classes.  ``skipped``:
+        folders that could not be read, files whose path is not UTF-8 and list lines
+        that are not UTF-8 (:class:`~zbuf_occlude.discovery.SkippedInput`, each logged as a
+        warning), whatever the class filter.
 
     Raises
     ------
@@ -127,13 +173,16 @@ def discover_objects(
     """
     source = Path(source).absolute()  # the manifest's source paths must not depend on the working folder
     if source.is_dir():
-        found = _scan_tree(source)
+        found, skipped = _scan_tree(source)
     elif source.is_file():
-        found = _read_list_file(source)
+        found, skipped = _read_list_file(source)
     else:
-        raise InvalidInputError(f"no such mesh folder or list file: {source}")
+        raise InvalidInputError(f"no such mesh folder or list file: {printable_path(source)}")
     if not found:
-        raise InvalidInputError(f"no mesh files ({', '.join(tuple(SUPPORTED_EXTENSIONS))}) under {source}")
+        missed = f"; skipped {len(skipped)}: " + "; ".join(map(str, skipped[:3])) if skipped else ""
+        raise InvalidInputError(
+            f"no mesh files ({', '.join(tuple(SUPPORTED_EXTENSIONS))}) under {printable_path(source)}{missed}"
+        )
     if classes is not None:
         wanted = name_set(classes)
         unknown = wanted - {f[2] for f in found}
@@ -172,7 +221,7 @@ def discover_objects(
                 keys[o.key], o.name, o.key,
             )  # fmt: skip
         keys[o.key] = o.name
-    return objects
+    return ObjectScan(objects, skipped)
 
 
 def parse_shard(text: str) -> tuple[int, int]:

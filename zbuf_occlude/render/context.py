@@ -16,10 +16,19 @@ import os
 import threading
 
 import moderngl
+import numpy as np
 
-from ..errors import BackendUnavailable
+from ..errors import BackendUnavailable, InvalidInputError
 
-__all__ = ["create_context", "shared_context", "context_info", "GL_BACKENDS", "REQUIRED_GL_VERSION"]
+__all__ = [
+    "create_context",
+    "shared_context",
+    "context_info",
+    "max_image_size",
+    "check_image_size",
+    "GL_BACKENDS",
+    "REQUIRED_GL_VERSION",
+]
 
 log = logging.getLogger(__name__)
 
@@ -191,3 +200,80 @@ def context_info(ctx: moderngl.Context | None = None) -> dict[str, str]:
         "renderer": ctx.info["GL_RENDERER"],
         "version": ctx.info["GL_VERSION"],
     }
+
+
+#: The GL limits that bound a render target's width and height (it is a texture, drawn
+#: through a viewport; some drivers also cap renderbuffers lower).
+_IMAGE_SIZE_LIMITS = ("GL_MAX_TEXTURE_SIZE", "GL_MAX_RENDERBUFFER_SIZE", "GL_MAX_VIEWPORT_DIMS")
+
+
+def max_image_size(ctx: moderngl.Context | None = None) -> int:
+    """Largest width and height, in pixels, of an image this context can render.
+
+    The smallest of ``GL_MAX_TEXTURE_SIZE``, ``GL_MAX_RENDERBUFFER_SIZE`` and
+    ``GL_MAX_VIEWPORT_DIMS`` (16384 on Mesa llvmpipe; 32768 on recent NVIDIA drivers).
+
+    Parameters
+    ----------
+    ctx : moderngl.Context, optional
+        Default: the shared context (:func:`shared_context`), created if needed.
+
+    Raises
+    ------
+    BackendUnavailable
+        No OpenGL context can be created.
+    """
+    ctx = ctx or shared_context()
+    sizes = []
+    for name in _IMAGE_SIZE_LIMITS:
+        value = ctx.info[name]
+        sizes.extend(value if isinstance(value, tuple) else (value,))
+    return int(min(sizes))
+
+
+def check_image_size(
+    resolution: int | tuple[int, int], *, ctx: moderngl.Context | None = None, name: str = "resolution"
+) -> tuple[int, int]:
+    """Validate an image size against the GL's limits, before any allocation.
+
+    Without this check a too-large size fails inside moderngl with "framebuffer is not
+    complete".  Call it up front with ``name="--resolution"`` to name the option.
+
+    Parameters
+    ----------
+    resolution : int or (width, height)
+        Pixels.
+    ctx : moderngl.Context, optional
+        Default: the shared context.
+    name : str
+        The argument or option named in the message.
+
+    Returns
+    -------
+    size : (width, height) int
+
+    Raises
+    ------
+    InvalidInputError
+        Not positive integers, or larger than :func:`max_image_size` (the message gives
+        the maximum and the renderer).
+    BackendUnavailable
+        No OpenGL context can be created.
+    """
+    if isinstance(resolution, (int, np.integer)):
+        size: tuple = (resolution, resolution)
+    else:
+        try:
+            size = tuple(resolution)
+        except TypeError:
+            size = ()
+    if len(size) != 2 or any(isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1 for v in size):
+        raise InvalidInputError(f"{name} must be a positive number of pixels (or width, height), got {resolution!r}")
+    ctx = ctx or shared_context()
+    limit = max_image_size(ctx)
+    if max(size) > limit:
+        raise InvalidInputError(
+            f"{name} {resolution!r} is larger than this OpenGL's maximum image size of {limit} pixels "
+            f"({ctx.info['GL_RENDERER']}: min of {', '.join(_IMAGE_SIZE_LIMITS)}); use {name} <= {limit}"
+        )
+    return int(size[0]), int(size[1])

@@ -19,7 +19,8 @@ from numpy.typing import NDArray
 from ..cameras import Camera
 from ..defaults import DEFAULT_GPU_TOLERANCE, DEFAULT_MAX_SLOPE
 from ..errors import InvalidInputError
-from .context import shared_context
+from ..mesh import MAX_ABS_COORDINATE
+from .context import check_image_size, shared_context
 from .shaders import load_shader
 
 __all__ = ["DepthRender", "PointBuffer", "ModernGLRenderer", "MAX_FACES"]
@@ -122,7 +123,9 @@ class ModernGLRenderer:
     Raises
     ------
     InvalidInputError
-        Empty mesh, or more than 2^24 faces.
+        Empty mesh, more than 2^24 faces, NaN/inf vertices or coordinates beyond
+        float32 (:data:`~zbuf_occlude.mesh.MAX_ABS_COORDINATE`); a camera larger than the GL's maximum
+        image size (:func:`~zbuf_occlude.render.context.max_image_size`) when rendering.
     BackendUnavailable
         No OpenGL 4.3 context can be created.
     """
@@ -133,6 +136,12 @@ class ModernGLRenderer:
             raise InvalidInputError("cannot render a mesh with no faces")
         if len(faces) >= MAX_FACES:
             raise InvalidInputError(f"mesh has {len(faces)} faces; the renderer supports fewer than {MAX_FACES}")
+        vertices = np.asarray(mesh.vertices)
+        if not (np.isfinite(vertices).all() and np.abs(vertices).max(initial=0.0) <= MAX_ABS_COORDINATE):
+            # float32 on the GPU: NaN, inf or |x| > 3.4e38 would be drawn as garbage, silently.
+            raise InvalidInputError(
+                f"cannot render a mesh with NaN, inf or beyond-float32 (> {MAX_ABS_COORDINATE:.3g}) vertex coordinates"
+            )
         self.n_faces = len(faces)
         self.ctx = context or shared_context()
         triangles = np.asarray(mesh.triangles)
@@ -156,6 +165,8 @@ class ModernGLRenderer:
     # -- rasterisation -------------------------------------------------------------
     def _target(self, size: tuple[int, int]):
         if size not in self._targets:
+            # moderngl would fail with "framebuffer is not complete" beyond the GL's limits.
+            check_image_size(size, ctx=self.ctx)
             color = self.ctx.texture(size, 2, dtype="f4")
             color.filter = (moderngl.NEAREST, moderngl.NEAREST)
             depth = self.ctx.depth_texture(size)
