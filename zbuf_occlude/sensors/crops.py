@@ -1,0 +1,222 @@
+"""LiDAR-like object crops: one object on the ground, scanned from a sensor placed at random.
+
+This is the per-object step a data-set farm calls (``farm --sensor``): for sample ``k`` of an
+object, draw the sensor placement from :class:`CropDistributions`, scan the object (plus any
+occluders) with :func:`zbuf_occlude.sensors.scan`, keep the object's returns (external
+occlusion included, as real data sets were segmented from street scans), and return them
+both in metres (sensor frame) and as a fixed-size :class:`zbuf_occlude.io.OccludedCloud` in the
+object's normalised mesh frame, the farm's HDF5 layout.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+from numpy.typing import NDArray
+
+from ..errors import InvalidInputError
+from ..io import OccludedCloud
+from ..mesh import load_mesh
+from ..occlude import derive_rng, draw_sample, object_key
+from .depth_camera import DepthCamera
+from .lidar import Lidar
+from .scan import Scan, scan
+from .scene import ScanScene, SceneObject, sensor_pose
+
+__all__ = ["CropDistributions", "CropSample", "draw_placement", "object_crop", "lidar_object_samples"]
+
+log = logging.getLogger(__name__)
+
+_CROP_STREAM = 0x5C4E  # keeps crop draws apart from the farm's other streams of one seed
+
+
+def _interval(name: str, value) -> tuple[float, float]:
+    lo, hi = (float(value), float(value)) if np.isscalar(value) else (float(value[0]), float(value[1]))
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
+        raise InvalidInputError(f"{name} must be a number or an interval lo <= hi, got {value!r}")
+    return lo, hi
+
+
+@dataclass(frozen=True)
+class CropDistributions:
+    """Per-sample sensor placement, every quantity drawn independently and uniformly.
+
+    Parameters
+    ----------
+    distance_m : (lo, hi)
+        Horizontal distance from the sensor to the object's footprint centre, metres.
+        Default 5–25 m, the range where an HDL-32E returns more than a few dozen points
+        from a car.
+    height_m : (lo, hi)
+        Sensor height above the ground, metres (car roofs: 1.6–2.0 m).
+    azimuth_deg : (lo, hi)
+        Direction of the object seen from the sensor, degrees (sensor frame).
+    yaw_deg : (lo, hi)
+        The object's heading about +z, degrees.
+    size_m : (lo, hi) or float
+        The object's largest dimension, metres.
+    """
+
+    distance_m: tuple[float, float] = (5.0, 25.0)
+    height_m: tuple[float, float] = (1.6, 2.0)
+    azimuth_deg: tuple[float, float] = (0.0, 360.0)
+    yaw_deg: tuple[float, float] = (0.0, 360.0)
+    size_m: tuple[float, float] | float = 4.5
+
+    def __post_init__(self) -> None:
+        for name in ("distance_m", "height_m", "azimuth_deg", "yaw_deg", "size_m"):
+            object.__setattr__(self, name, _interval(name, getattr(self, name)))
+        if self.distance_m[0] <= 0 or self.size_m[0] <= 0 or self.height_m[0] < 0:
+            raise InvalidInputError(f"distance_m and size_m must be > 0 and height_m >= 0 metres, got {self}")
+
+
+def draw_placement(dist: CropDistributions, rng: np.random.Generator) -> dict[str, float]:
+    """One placement ``{distance_m, height_m, azimuth_deg, yaw_deg, size_m}`` (five uniform draws, in that order)."""
+    return {name: float(rng.uniform(*getattr(dist, name))) for name in ("distance_m", "height_m", "azimuth_deg", "yaw_deg", "size_m")}
+
+
+@dataclass
+class CropSample:
+    """One object crop.
+
+    Attributes
+    ----------
+    scan : Scan
+        The object's returns only, sensor frame (metres, z up, sensor at the origin).
+    placement : dict
+        The drawn ``distance_m, height_m, azimuth_deg, yaw_deg, size_m``.
+    local_points : (N, 3) float64
+        The same returns in the object's mesh frame (as loaded: normalised for mesh files).
+    sensor_local : (3,) float64
+        The sensor centre in that frame.
+    """
+
+    scan: Scan
+    placement: dict
+    local_points: NDArray[np.float64]
+    sensor_local: NDArray[np.float64]
+
+
+def object_crop(
+    mesh,
+    sensor: Lidar | DepthCamera,
+    placement: dict,
+    *,
+    seed: int = 0,
+    occluders: tuple[SceneObject, ...] = (),
+    class_name: str = "",
+    backend: str = "embree",
+    sector_margin_deg: float = 5.0,
+) -> CropSample:
+    """Scan one object placed per ``placement`` (see :func:`draw_placement`) and crop its returns.
+
+    The sensor stands at the origin, ``height_m`` above the ground; the object's footprint
+    centre is ``distance_m`` away in direction ``azimuth_deg``.  A LiDAR fires only in the
+    object's azimuth sector (± ``sector_margin_deg``), which gives the same returns faster.
+
+    Raises
+    ------
+    InvalidInputError, MeshLoadError
+        Bad placement or mesh.
+    """
+    az = math.radians(placement["azimuth_deg"])
+    d = placement["distance_m"]
+    obj = SceneObject(mesh, class_name, (d * math.cos(az), d * math.sin(az)), placement["yaw_deg"], placement["size_m"])
+    scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=max(2.0 * d, 20.0))
+    pose = sensor_pose([0.0, 0.0, placement["height_m"]])
+    sector = None
+    if isinstance(sensor, Lidar) and not occluders:
+        half = math.degrees(math.asin(min(1.0, 0.75 * placement["size_m"] / d))) + sector_margin_deg
+        if half < 180.0:
+            sector = (placement["azimuth_deg"] - half, placement["azimuth_deg"] + half)
+    full = scan(scene, sensor, pose, seed=seed, azimuth_range_deg=sector, backend=backend)
+    crop = full.crop(1)
+    to_world = scene.build().local_to_world[1]
+    world = crop.points.astype(np.float64) + pose[:3, 3]  # sensor axes = world axes here (yaw 0)
+    inverse = np.linalg.inv(to_world[:3, :3])
+    local = (world - to_world[:3, 3]) @ inverse.T
+    return CropSample(crop, dict(placement), local, inverse @ (pose[:3, 3] - to_world[:3, 3]))
+
+
+def lidar_object_samples(
+    mesh: trimesh.Trimesh | str,
+    sensor: Lidar | DepthCamera,
+    *,
+    name: str,
+    n_samples: int,
+    n_points: int = 2048,
+    seed: int = 0,
+    distributions: CropDistributions = CropDistributions(),
+    class_name: str = "",
+    label: int = -1,
+    backend: str = "embree",
+) -> list[OccludedCloud]:
+    """The farm's per-object function for ``--sensor``: ``n_samples`` LiDAR crops of one mesh.
+
+    Sample ``k`` draws its placement and its sensor noise from
+    ``derive_rng(seed, object_key(name), stream, k)``, so every sample is reproducible alone.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh or path
+        A normalised mesh (:func:`zbuf_occlude.load_mesh`) or its file.
+    sensor : Lidar or DepthCamera
+    name : str
+        The object's stable name (seeds, ``source``).
+    n_samples, n_points : int
+        Crops per object and points per crop (fewer returns are padded with repeats, more
+        are subsampled, as :func:`zbuf_occlude.occlude.draw_sample`).
+    distributions : CropDistributions
+
+    Returns
+    -------
+    list of OccludedCloud
+        ``points (n_points, 3) float32`` in the normalised mesh frame; ``face_index`` into the
+        mesh; ``elevation_deg, azimuth_deg, radius``: the sensor seen from the object's bounding
+        box centre (degrees, degrees, mesh units); ``n_visible``: the returns;
+        ``extra``: the placement (metres, degrees), ``n_returns``, ``sensor``, the per-point
+        ``ring``.  Samples with no return are left out (logged).
+
+    Raises
+    ------
+    InvalidInputError
+        ``n_samples`` or ``n_points`` below 1.
+    """
+    if int(n_samples) < 1 or int(n_points) < 1:
+        raise InvalidInputError(f"n_samples and n_points must be >= 1, got {n_samples}, {n_points}")
+    if not isinstance(mesh, trimesh.Trimesh):
+        mesh = load_mesh(mesh)
+    key = object_key(name)
+    out = []
+    for k in range(int(n_samples)):
+        rng = derive_rng(seed, key, _CROP_STREAM, k)
+        placement = draw_placement(distributions, rng)
+        crop = object_crop(mesh, sensor, placement, seed=int(rng.integers(2**63)), class_name=class_name, backend=backend)
+        n = len(crop.scan)
+        if n == 0:
+            log.info("%s sample %d: no return at %.1f m", name, k, placement["distance_m"])
+            continue
+        chosen, _ = draw_sample(np.arange(n), int(n_points), rng)
+        # Sensor seen from the object's bounding-box centre, in the mesh frame.
+        sensor_local = crop.sensor_local - np.asarray(mesh.bounds, dtype=np.float64).mean(axis=0)
+        r = float(np.linalg.norm(sensor_local))
+        out.append(
+            OccludedCloud(
+                points=crop.local_points[chosen].astype(np.float32),
+                face_index=crop.scan.face_index[chosen].astype(np.int64),
+                elevation_deg=math.degrees(math.asin(sensor_local[2] / r)),
+                azimuth_deg=math.degrees(math.atan2(sensor_local[1], sensor_local[0])) % 360.0,
+                radius=r,
+                label=label,
+                class_name=class_name,
+                source=name,
+                sample_index=k,
+                n_visible=n,
+                extra={**placement, "n_returns": n, "sensor": sensor.name, "ring": None if crop.scan.ring is None else crop.scan.ring[chosen]},
+            )
+        )
+    return out
