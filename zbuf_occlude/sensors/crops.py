@@ -59,6 +59,8 @@ class CropDistributions:
         The object's heading about +z, degrees.
     size_m : (lo, hi) or float
         The object's largest dimension, metres.
+    extents_m : (3,) float, optional
+        Instead of ``size_m``: stretch the mesh to these extents (x, y, z), metres.
     """
 
     distance_m: tuple[float, float] = (5.0, 25.0)
@@ -66,6 +68,7 @@ class CropDistributions:
     azimuth_deg: tuple[float, float] = (0.0, 360.0)
     yaw_deg: tuple[float, float] = (0.0, 360.0)
     size_m: tuple[float, float] | float = 4.5
+    extents_m: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
         for name in ("distance_m", "height_m", "azimuth_deg", "yaw_deg", "size_m"):
@@ -76,7 +79,11 @@ class CropDistributions:
 
 def draw_placement(dist: CropDistributions, rng: np.random.Generator) -> dict[str, float]:
     """One placement ``{distance_m, height_m, azimuth_deg, yaw_deg, size_m}`` (five uniform draws, in that order)."""
-    return {name: float(rng.uniform(*getattr(dist, name))) for name in ("distance_m", "height_m", "azimuth_deg", "yaw_deg", "size_m")}
+    out = {name: float(rng.uniform(*getattr(dist, name))) for name in ("distance_m", "height_m", "azimuth_deg", "yaw_deg", "size_m")}
+    if dist.extents_m is not None:
+        out["extents_m"] = tuple(float(v) for v in dist.extents_m)
+        out["size_m"] = max(out["extents_m"])
+    return out
 
 
 @dataclass
@@ -93,12 +100,16 @@ class CropSample:
         The same returns in the object's mesh frame (as loaded: normalised for mesh files).
     sensor_local : (3,) float64
         The sensor centre in that frame.
+    full : Scan
+        Every return of the sweep (ground included; only the object's sector for a LiDAR
+        without occluders), in the frame asked for.
     """
 
     scan: Scan
     placement: dict
     local_points: NDArray[np.float64]
     sensor_local: NDArray[np.float64]
+    full: Scan
 
 
 def object_crop(
@@ -111,6 +122,7 @@ def object_crop(
     class_name: str = "",
     backend: str = "embree",
     sector_margin_deg: float = 5.0,
+    frame: str = "sensor",
 ) -> CropSample:
     """Scan one object placed per ``placement`` (see :func:`draw_placement`) and crop its returns.
 
@@ -125,7 +137,8 @@ def object_crop(
     """
     az = math.radians(placement["azimuth_deg"])
     d = placement["distance_m"]
-    obj = SceneObject(mesh, class_name, (d * math.cos(az), d * math.sin(az)), placement["yaw_deg"], placement["size_m"])
+    size = placement.get("extents_m") or placement["size_m"]
+    obj = SceneObject(mesh, class_name, (d * math.cos(az), d * math.sin(az)), placement["yaw_deg"], size)
     scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=max(2.0 * d, 20.0))
     pose = sensor_pose([0.0, 0.0, placement["height_m"]])
     sector = None
@@ -133,13 +146,13 @@ def object_crop(
         half = math.degrees(math.asin(min(1.0, 0.75 * placement["size_m"] / d))) + sector_margin_deg
         if half < 180.0:
             sector = (placement["azimuth_deg"] - half, placement["azimuth_deg"] + half)
-    full = scan(scene, sensor, pose, seed=seed, azimuth_range_deg=sector, backend=backend)
+    full = scan(scene, sensor, pose, seed=seed, azimuth_range_deg=sector, backend=backend, frame=frame)
     crop = full.crop(1)
     to_world = scene.build().local_to_world[1]
-    world = crop.points.astype(np.float64) + pose[:3, 3]  # sensor axes = world axes here (yaw 0)
+    world = crop.points.astype(np.float64) + (pose[:3, 3] if frame == "sensor" else 0.0)  # sensor axes = world axes (yaw 0)
     inverse = np.linalg.inv(to_world[:3, :3])
     local = (world - to_world[:3, 3]) @ inverse.T
-    return CropSample(crop, dict(placement), local, inverse @ (pose[:3, 3] - to_world[:3, 3]))
+    return CropSample(crop, dict(placement), local, inverse @ (pose[:3, 3] - to_world[:3, 3]), full)
 
 
 def lidar_object_samples(

@@ -82,8 +82,9 @@ class SceneObject:
         at which the object stands.
     yaw_deg : float
         Turn about +z, degrees.
-    size_m : float, optional
-        Largest dimension after scaling, metres.  Default: a mesh file keeps its normalised
+    size_m : float or (3,) float, optional
+        Largest dimension after scaling, metres; or the three extents (x, y, z in the mesh's
+        z-up frame, before the yaw), metres, for a non-uniform scale.  Default: a mesh file keeps its normalised
         size (max extent 1 m); a primitive or a given mesh keeps its own size in metres.
     up : {"z", "y"}
         The mesh's up axis; "y" meshes (glTF) are turned to z-up first.
@@ -113,11 +114,20 @@ class SceneObject:
             raise InvalidInputError(f"object {self.class_name or self.mesh!r}: up must be 'z' or 'y', got {self.up!r}")
         rot_up = np.eye(3) if self.up == "z" else np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])
         size = self.size_m
-        if size is not None and not (math.isfinite(float(size)) and float(size) > 0):
-            raise InvalidInputError(f"object {self.class_name or self.mesh!r}: size_m must be > 0 metres, got {size!r}")
         v = vertices @ rot_up.T
-        extent = float(np.ptp(v, axis=0).max())
-        scale = float(size) / extent if size is not None else 1.0
+        if size is None:
+            scale = np.ones(3)
+        else:
+            size_arr = np.asarray(size, dtype=np.float64).reshape(-1)
+            if size_arr.shape not in ((1,), (3,)) or not np.all(np.isfinite(size_arr)) or np.any(size_arr <= 0):
+                raise InvalidInputError(f"object {self.class_name or self.mesh!r}: size_m must be one or three sizes > 0 metres, got {size!r}")
+            extents = np.ptp(v, axis=0)
+            if len(size_arr) == 1:
+                scale = np.full(3, size_arr[0] / extents.max())
+            else:
+                if np.any(extents <= 0):
+                    raise InvalidInputError(f"object {self.class_name or self.mesh!r}: a flat mesh cannot take three extents {size!r}")
+                scale = size_arr / extents
         pos = np.asarray(self.position_m, dtype=np.float64).reshape(-1)
         if pos.shape not in ((2,), (3,)) or not np.all(np.isfinite(pos)):
             raise InvalidInputError(f"object {self.class_name or self.mesh!r}: position_m must be 2 or 3 finite metres, got {self.position_m!r}")
@@ -126,7 +136,7 @@ class SceneObject:
         lo, hi = v.min(axis=0) * scale, v.max(axis=0) * scale
         centre = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]])  # footprint centre, bottom
         m = np.eye(4)
-        m[:3, :3] = yaw @ (scale * rot_up)
+        m[:3, :3] = yaw @ (scale[:, None] * rot_up)
         m[:3, 3] = -(yaw @ centre) + np.array([pos[0], pos[1], pos[2] if len(pos) == 3 else 0.0])
         return local, m
 
