@@ -20,6 +20,13 @@ __all__ = ["add_scan_parser", "add_realism_parser", "add_parser", "sensor_from_n
 log = logging.getLogger(__name__)
 
 
+#: Unit primitives ``scan`` takes instead of a mesh file (stretch them with ``--extents``).
+PRIMITIVES = {
+    "cylinder": {"cylinder": {"radius_m": 0.5, "height_m": 1.0, "sections": 48}},
+    "box": {"box_m": [1.0, 1.0, 1.0]},
+}
+
+
 def parse_interval(text: str, option: str) -> tuple[float, float]:
     """``"10"`` → (10, 10); ``"5:25"`` → (5, 25) (a uniform draw per sample)."""
     try:
@@ -79,7 +86,15 @@ def cmd_scan(args: argparse.Namespace) -> int:
     else:
         if not isinstance(sensor, Lidar):
             raise InvalidInputError("scan of a mesh file places a LiDAR; use a scene file for depth cameras")
-        extents = tuple(float(v) for v in args.extents.split(",")) if args.extents else None
+        try:
+            extents = tuple(float(v) for v in args.extents.split(",")) if args.extents else None
+        except ValueError:
+            raise InvalidInputError(f"--extents must be X,Y,Z in metres, got {args.extents!r}") from None
+        mesh = PRIMITIVES.get(str(src)) if not src.exists() else None
+        if mesh is None:
+            from ..mesh import load_mesh
+
+            mesh = load_mesh(src)  # once, not per sample
         dist = CropDistributions(
             distance_m=parse_interval(args.distance, "--distance"), height_m=parse_interval(args.height, "--height"),
             azimuth_deg=parse_interval(args.azimuth, "--azimuth"), yaw_deg=parse_interval(args.yaw, "--yaw"),
@@ -88,7 +103,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
         for k in range(args.samples):
             rng = derive_rng(args.seed, object_key(src.name), k)
             placement = draw_placement(dist, rng)
-            crop = object_crop(str(src), sensor, placement, seed=int(rng.integers(2**63)), backend=args.backend, frame=args.frame)
+            crop = object_crop(mesh, sensor, placement, seed=int(rng.integers(2**63)), backend=args.backend, frame=args.frame)
             s = crop.scan if args.crop else crop.full
             s.meta.update(placement)
             stem = f"{src.stem}_{sensor.name}_s{k:03d}"
@@ -101,7 +116,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
 def add_scan_parser(sub) -> argparse.ArgumentParser:
     """Add ``scan`` to the subparsers ``sub``."""
     p = sub.add_parser("scan", help="LiDAR / depth-camera scan of a mesh on the ground, or of a scene file")
-    p.add_argument("mesh_or_scene", metavar="MESH_OR_SCENE", help="mesh file (stood on the ground) or scene .json/.yaml")
+    p.add_argument("mesh_or_scene", metavar="MESH_OR_SCENE", help="mesh file (stood on the ground), 'cylinder' or 'box' (unit primitives), or a scene .json/.yaml")
     p.add_argument("--sensor", default="hdl32e", help="vlp16 | hdl32e | hdl64e | os1-64 | kinect-v1 | sensor .json")
     p.add_argument("--distance", default="10", help="horizontal sensor-object distance, metres (N or LO:HI, uniform per sample)")
     p.add_argument("--height", default="1.8", help="sensor height above the ground, metres (N or LO:HI)")

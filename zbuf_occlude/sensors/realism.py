@@ -198,8 +198,8 @@ def compare_sets(generated: list[ObjectCloud], real: list[ObjectCloud], *, ring_
     rows = [
         {"metric": "clouds", "generated": g["clouds"], "real": r["clouds"], "difference": "", "target": "", "met": ""},
         {"metric": "median range, m", "generated": g["median_range_m"], "real": r["median_range_m"], "difference": g["median_range_m"] - r["median_range_m"], "target": "", "met": ""},
-        {"metric": "median ring spacing, deg", "generated": g["median_ring_spacing_deg"], "real": r["median_ring_spacing_deg"], "difference": ds, "target": "|diff| <= 0.05", "met": abs(ds) <= 0.05},
-        {"metric": "count-vs-range exponent b (count ∝ r^b)", "generated": g["count_exponent"], "real": r["count_exponent"], "difference": db, "target": "|diff| <= 0.2", "met": abs(db) <= 0.2},
+        {"metric": "median ring spacing, deg", "generated": g["median_ring_spacing_deg"], "real": r["median_ring_spacing_deg"], "difference": ds, "target": "abs(diff) <= 0.05", "met": abs(ds) <= 0.05},
+        {"metric": "count-vs-range exponent b (count ∝ r^b)", "generated": g["count_exponent"], "real": r["count_exponent"], "difference": db, "target": "abs(diff) <= 0.2", "met": abs(db) <= 0.2},
         {"metric": "exponent standard error", "generated": g["count_exponent_se"], "real": r["count_exponent_se"], "difference": "", "target": "", "met": ""},
         {"metric": f"count / real fit at matched range (n={g['count_ratio_n']})", "generated": ratio, "real": 1.0, "difference": "", "target": "1/1.5 <= ratio <= 1.5", "met": (1 / 1.5 <= ratio <= 1.5) if math.isfinite(ratio) else ""},
         {"metric": "median points per cloud", "generated": g["median_points"], "real": r["median_points"], "difference": "", "target": "", "met": ""},
