@@ -167,6 +167,9 @@ def test_depth_camera_axial_noise_and_quantisation():
     # Incidence is small over the image; compare with σ(z, θ) per pixel.
     sigma = S.nguyen_axial_sigma_m(z, s.incidence_deg)
     assert abs(((depth - z) / sigma).std() - 1.0) < 0.05
+    # Nguyen et al. 2012, Eq. 2 at z = 2 m, small incidence: 1.2 mm + 1.9 mm · 1.6² = 6.06 mm
+    assert S.nguyen_axial_sigma_m(2.0, 0.0) == pytest.approx(0.006064, abs=1e-9)
+    assert abs((depth - z).std() / 0.006064 - 1.0) < 0.05
     q = S.DepthCamera.preset("kinect-v1", noise="none")
     sq = S.scan(wall(z, 3.0, 3.0), q, S.look_at_pose([0, 0, 0], [1, 0, 0]), seed=2)
     levels = np.unique(np.round(sq.points[:, 2], 5))
