@@ -219,15 +219,27 @@ def test_occluder_removes_exactly_the_returns_it_shadows():
     assert keys(t_both, 2) == shadow  # the occluder's own returns (nothing stands in front of it)
 
 
-def test_scene_spec_file_equals_builder(tmp_path, sample_meshes):
+def _spec_writers():
+    writers = [("json", json.dumps)]
+    try:
+        import yaml
+
+        writers.append(("yaml", yaml.safe_dump))
+    except ImportError:  # the 'yaml' extra is not installed: JSON only
+        pass
+    return writers
+
+
+@pytest.mark.parametrize("suffix, dump", _spec_writers())
+def test_scene_spec_file_equals_builder(tmp_path, sample_meshes, suffix, dump):
     spec = {
         "ground": {"z_m": 0.0, "half_extent_m": 40.0},
         "objects": [{"mesh": str(sample_meshes[0]), "class": "x", "position_m": [10, 0], "yaw_deg": 30, "size_m": 4.5}],
         "occluders": [{"mesh": {"box_m": [0.5, 2.0, 1.0]}, "position_m": [6, 0.5]}],
         "sensor": {"height_m": 1.7},
     }
-    (tmp_path / "s.json").write_text(json.dumps(spec))
-    from_file = S.load_scene(tmp_path / "s.json")
+    (tmp_path / f"s.{suffix}").write_text(dump(spec))
+    from_file = S.load_scene(tmp_path / f"s.{suffix}")
     built = (S.ScanScene(ground_half_extent_m=40.0, sensor_height_m=1.7)
              .add(str(sample_meshes[0]), class_name="x", position_m=(10, 0), yaw_deg=30, size_m=4.5)
              .add_occluder({"box_m": [0.5, 2.0, 1.0]}, position_m=(6, 0.5)))  # fmt: skip

@@ -28,6 +28,7 @@ from .visibility import available_methods, register, visible_mask
 from .visibility.zbuffer import Scene
 from .dataset import OccludedDataset
 from .farm import merge_farm, run_farm
+from .sensors import DepthCamera, Lidar, Scan, ScanScene, SceneObject, load_scene, look_at_pose, scan
 
 __version__ = "0.1.0"
 
@@ -59,4 +60,5 @@ __all__ = [
     "OccludedDataset",
     "run_farm",
     "merge_farm",
+    "Lidar", "DepthCamera", "ScanScene", "SceneObject", "load_scene", "look_at_pose", "Scan", "scan",
 ]
