@@ -56,3 +56,17 @@ def test_distribution_errors():
         CropDistributions(size_m=0.0)
     p = draw_placement(CropDistributions(extents_m=(1.8, 4.5, 1.5)), np.random.default_rng(0))
     assert p["size_m"] == 4.5 and p["extents_m"] == (1.8, 4.5, 1.5)
+
+
+def test_pose_is_measured_from_the_box_centre_of_an_uncentred_mesh():
+    import trimesh
+
+    box = trimesh.creation.box(extents=(1.0, 0.4, 0.3))
+    box.apply_translation((5.0, -2.0, 3.0))  # far from the origin of its own frame
+    (c,) = lidar_object_samples(box, zo.Lidar.preset("vlp16", range_noise_m=0.0), name="box", n_samples=1, n_points=64,
+                                distributions=CropDistributions(distance_m=8.0, height_m=1.8, size_m=4.5, yaw_deg=0.0, azimuth_deg=0.0))  # fmt: skip
+    scale = 4.5
+    expected = np.array([-8.0, 0.0, 1.8 - 0.3 * scale / 2]) / scale  # sensor minus box centre, mesh units
+    assert c.radius == pytest.approx(np.linalg.norm(expected), rel=1e-9)
+    assert c.azimuth_deg == pytest.approx(180.0) and c.elevation_deg == pytest.approx(math.degrees(math.atan2(expected[2], 8.0 / scale)))
+    assert np.all(np.abs(c.points - box.bounds.mean(axis=0)) <= np.array([0.5, 0.2, 0.15]) + 1e-5)
