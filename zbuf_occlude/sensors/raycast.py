@@ -23,6 +23,7 @@ import trimesh
 from numpy.typing import NDArray
 
 from ..errors import BackendUnavailable
+from ..mesh_cache import MeshCache
 
 __all__ = ["ray_triangle_f64", "cast_embree", "cast_zbuffer", "BACKENDS"]
 
@@ -83,15 +84,16 @@ def _exact_distance(mesh: trimesh.Trimesh, origin, directions, face):
     return t
 
 
-def _intersector(mesh: trimesh.Trimesh):
-    cache = mesh.__dict__.setdefault("_zbuf_occlude_rays", {})
-    if "embree" not in cache:
-        try:
-            from trimesh.ray.ray_pyembree import RayMeshIntersector
-        except ImportError as exc:  # embreex missing
-            raise BackendUnavailable(f"the 'embree' scan backend needs embreex: pip install embreex ({exc})") from None
-        cache["embree"] = RayMeshIntersector(mesh)
-    return cache["embree"]
+def _build_intersector(mesh: trimesh.Trimesh):
+    try:
+        from trimesh.ray.ray_pyembree import RayMeshIntersector
+    except ImportError as exc:  # embreex missing
+        raise BackendUnavailable(f"the 'embree' scan backend needs embreex: pip install embreex ({exc})") from None
+    return RayMeshIntersector(mesh)
+
+
+#: Embree BVHs of the scenes in use, rebuilt after a mesh edit (:class:`~zbuf_occlude.mesh_cache.MeshCache`).
+_intersector = MeshCache(_build_intersector, 4)
 
 
 def cast_embree(mesh: trimesh.Trimesh, origin: NDArray[np.float64], directions: NDArray[np.float64]) -> tuple[NDArray[np.int64], NDArray[np.float64]]:

@@ -33,7 +33,7 @@ from .scene import GROUND_ID
 
 __all__ = [
     "ObjectCloud", "read_object_clouds", "cloud_stats", "ring_spacings_deg", "fit_count_exponent",
-    "compare_sets", "realism_report", "RING_GAP_DEG",
+    "compare_sets", "markdown_table", "realism_report", "RING_GAP_DEG",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)

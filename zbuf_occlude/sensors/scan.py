@@ -9,9 +9,8 @@ default (LiDAR: x forward, z up; camera: OpenCV), like real scans.
 
 from __future__ import annotations
 
-import math
 import os
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np

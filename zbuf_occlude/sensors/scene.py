@@ -302,21 +302,22 @@ def load_scene(path: str | Path) -> ScanScene:
         raise InvalidInputError(f"{path}: no such scene file")
     text = path.read_text(encoding="utf-8")
     suffix = path.suffix.lower()
-    try:
-        if suffix == ".json":
+    if suffix == ".json":
+        try:
             spec = json.loads(text)
-        elif suffix in (".yaml", ".yml"):
-            try:
-                import yaml
-            except ImportError:
-                raise InvalidInputError(f"{path}: YAML scenes need PyYAML: pip install 'zbuf-occlude[yaml]'") from None
+        except ValueError as exc:
+            raise InvalidInputError(f"{path}: cannot parse scene JSON ({exc})") from exc
+    elif suffix in (".yaml", ".yml"):
+        try:
+            import yaml
+        except ImportError:
+            raise InvalidInputError(f"{path}: YAML scenes need PyYAML: pip install 'zbuf-occlude[yaml]'") from None
+        try:
             spec = yaml.safe_load(text)
-        else:
-            raise InvalidInputError(f"{path}: unknown scene format {path.suffix!r}; use .json, .yaml or .yml")
-    except (ValueError, Exception) as exc:  # json.JSONDecodeError, yaml.YAMLError
-        if isinstance(exc, InvalidInputError):
-            raise
-        raise InvalidInputError(f"{path}: cannot parse scene ({exc})") from exc
+        except yaml.YAMLError as exc:
+            raise InvalidInputError(f"{path}: cannot parse scene YAML ({exc})") from exc
+    else:
+        raise InvalidInputError(f"{path}: unknown scene format {path.suffix!r}; use .json, .yaml or .yml")
     try:
         return ScanScene.from_dict(spec, base_dir=path.parent)
     except MeshLoadError:
