@@ -272,3 +272,18 @@ def test_npz_and_ply_roundtrip(tmp_path):
     assert np.allclose(np.asarray(cloud.vertices), s.points)
     # world frame: range is the distance to the sensor position
     assert np.allclose(np.linalg.norm(s.points - s.sensor_position, axis=1), s.range_m, rtol=1e-5)
+
+
+def test_zbuffer_rechecks_widened_gpu_hits_in_float64():
+    """Rays 1e-5 m below a triangle's edge: the GPU's widened float32 test (1e-5 in barycentrics)
+    accepts the triangle; the float64 re-check must send them on to the wall behind."""
+    tri = np.array([[5.0, -1.0, -1.0], [5.0, 1.0, -1.0], [5.0, 0.0, 1.0]])
+    wall_v = np.array([[10.0, -20, -20], [10.0, 20, -20], [10.0, 20, 20], [10.0, -20, 20]])
+    mesh = trimesh.Trimesh(np.vstack([tri, wall_v]), [[0, 1, 2], [3, 4, 5], [3, 5, 6]], process=False)
+    y = np.linspace(-0.5, 0.5, 201)
+    d = np.column_stack([np.full_like(y, 5.0), y, np.full_like(y, -1.0 - 1e-5)])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    f_z, t_z, n_fallback = cast_zbuffer(mesh, np.zeros(3), d, resolution=512)
+    f_e, t_e = cast_embree(mesh, np.zeros(3), d)
+    assert np.all(f_e >= 1) and np.array_equal(f_z, f_e)
+    assert np.allclose(t_z, t_e, atol=1e-6) and n_fallback > 0

@@ -8,9 +8,10 @@ face (Möller–Trumbore), so that the backends differ only in *which* face they
 * :func:`cast_zbuffer`: the scene is rasterised from the ray origin with moderngl (one
   perspective view for rays inside a cone, else the six faces of a cube map) into face-id
   images; each ray's candidates are the faces seen in the ``(2r+1)²`` pixels around its
-  projection, and its hit is the nearest exact float64 hit among them, as the z-buffer
-  visibility method decides points (:mod:`zbuf_occlude.visibility.zbuffer`).  Rays whose window
-  shows faces but none of them is hit (sub-pixel faces, cracks) are decided by Embree.
+  projection, tested exactly on the GPU (``shaders/scan_candidates.comp``), as the z-buffer
+  visibility method decides points (:mod:`zbuf_occlude.visibility.zbuffer`); the distance on
+  the chosen face is recomputed in float64.  Rays whose window shows faces but none of them
+  is hit (sub-pixel faces, cracks) are decided by Embree.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from ..errors import BackendUnavailable
+from ..errors import BackendUnavailable, InvalidInputError
 from ..mesh_cache import MeshCache
 
 __all__ = ["ray_triangle_f64", "cast_embree", "cast_zbuffer", "BACKENDS"]
@@ -157,6 +158,73 @@ def _views(origin, directions, resolution, znear, zfar):
     return cams, (2 * axis + sign).astype(np.int64)
 
 
+#: Barycentric widening of the float32 candidate test on the GPU (a ray through an edge shared by
+#: two faces must hit one); the chosen face is re-checked in float64 with :data:`RECHECK_EPSILON`.
+GPU_EDGE_EPSILON = 1e-5
+#: A GPU hit whose float64 barycentrics fall outside the face by more than this goes to Embree.
+RECHECK_EPSILON = 1e-6
+_GROUP_SIZE = 256  # local_size_x of shaders/scan_candidates.comp
+
+
+def _build_renderer(mesh: trimesh.Trimesh):
+    from ..render.moderngl_backend import ModernGLRenderer
+
+    return ModernGLRenderer(mesh)
+
+
+def _release_renderer(renderer) -> None:
+    renderer.release()
+
+
+#: GL renderers of the scenes in use (mesh uploaded once for many scans).
+_renderers = MeshCache(_build_renderer, 2, release=_release_renderer)
+_programs: dict[tuple[int, int], object] = {}  # (id(ctx), neighborhood) -> compute shader
+
+
+def _gpu_candidates(renderer, cam, origin, directions, neighborhood: int, znear: float) -> NDArray[np.int64]:
+    """Per ray: the face hit first among its window's candidates, −1 (no face seen) or −2
+    (faces seen, none hit), decided by ``shaders/scan_candidates.comp``."""
+    from ..render.shaders import load_shader
+
+    ctx = renderer.ctx
+    n = len(directions)
+    with ctx:
+        key = (id(ctx), int(neighborhood))
+        if key not in _programs:
+            _programs[key] = ctx.compute_shader(load_shader("scan_candidates.comp", (("NEIGHBORHOOD", int(neighborhood)),)))
+        shader = _programs[key]
+        color = renderer._draw(cam)  # RG32F (linear depth, face id) of this view
+        ctx.memory_barrier()
+        rays = np.zeros((n, 4), dtype=np.float32)
+        rays[:, :3] = directions
+        ray_buf = ctx.buffer(rays.tobytes())
+        out_buf = ctx.buffer(reserve=4 * n)
+        uniforms = {
+            "view_projection": (cam.projection_matrix @ cam.view_matrix).T.astype(np.float32).tobytes(),
+            "origin": tuple(float(v) for v in origin), "resolution": cam.resolution, "n_rays": n,
+            "znear": float(znear), "edge_epsilon": GPU_EDGE_EPSILON, "depth_and_face": 0,
+        }  # fmt: skip
+        for name, value in uniforms.items():
+            if name in shader:
+                if isinstance(value, bytes):
+                    shader[name].write(value)
+                else:
+                    shader[name].value = value
+        color.use(location=0)
+        ray_buf.bind_to_storage_buffer(0)
+        out_buf.bind_to_storage_buffer(1)
+        renderer._triangles.bind_to_storage_buffer(2)
+        per_dispatch = int(ctx.info["GL_MAX_COMPUTE_WORK_GROUP_COUNT"][0]) * _GROUP_SIZE
+        for offset in range(0, n, per_dispatch):
+            shader["ray_offset"].value = offset
+            shader.run(group_x=math.ceil(min(per_dispatch, n - offset) / _GROUP_SIZE))
+        ctx.memory_barrier()
+        face = np.frombuffer(out_buf.read(), dtype=np.int32).astype(np.int64)
+        ray_buf.release()
+        out_buf.release()
+    return face
+
+
 def cast_zbuffer(
     mesh: trimesh.Trimesh,
     origin: NDArray[np.float64],
@@ -169,6 +237,12 @@ def cast_zbuffer(
 ) -> tuple[NDArray[np.int64], NDArray[np.float64], int]:
     """First hit of each ray from one origin, from rasterised face-id images (module docstring).
 
+    The views are rasterised and each ray's candidates tested on the GPU
+    (``shaders/scan_candidates.comp``, float32); the distance on the chosen face is then
+    recomputed in float64, and a ray goes to Embree when its window showed faces but none was
+    hit, or when the float64 test puts the chosen face's hit outside it by more than
+    :data:`RECHECK_EPSILON`.
+
     Parameters
     ----------
     mesh, origin, directions
@@ -176,7 +250,7 @@ def cast_zbuffer(
     resolution : int
         Pixels per side of each view (cube-map face: 90° field of view).
     neighborhood : int
-        Candidate window radius r, pixels (window ``(2r+1)²``).
+        Candidate window radius r, pixels (window ``(2r+1)²``), 0 ≤ r ≤ 4.
     znear, zfar : float
         Clip planes, metres; nothing nearer than ``znear`` is hit.
 
@@ -185,15 +259,17 @@ def cast_zbuffer(
     face, t
         As :func:`cast_embree`; ``face`` is the lowest index of a group of identical faces.
     n_fallback : int
-        Rays decided by Embree because their window held faces but none was hit.
+        Rays decided by Embree.
 
     Raises
     ------
     BackendUnavailable
         No OpenGL 4.3 context.
+    InvalidInputError
+        ``neighborhood`` outside [0, 4].
     """
-    from ..render.moderngl_backend import ModernGLRenderer
-
+    if not 0 <= int(neighborhood) <= 4:
+        raise InvalidInputError(f"neighborhood must be in [0, 4] pixels, got {neighborhood}")
     origin = np.asarray(origin, dtype=np.float64)
     directions = np.asarray(directions, dtype=np.float64)
     n = len(directions)
@@ -201,35 +277,22 @@ def cast_zbuffer(
     t_hit = np.full(n, np.inf)
     if n == 0:
         return face, t_hit, 0
-    triangles = np.asarray(mesh.triangles, dtype=np.float64)
+    renderer = _renderers(mesh)
     cams, view = _views(origin, directions, int(resolution), float(znear), float(zfar))
-    r = int(neighborhood)
-    offsets = np.array([(dy, dx) for dy in range(-r, r + 1) for dx in range(-r, r + 1)])
-    fallback = np.zeros(n, bool)
-    with ModernGLRenderer(mesh) as renderer:
-        for k, cam in enumerate(cams):
-            rays = np.flatnonzero(view == k)
-            if len(rays) == 0:
-                continue
-            ids = renderer.render(cam).face_index  # (H, W), row 0 at the top (OpenCV)
-            uv, _ = cam.project(origin + directions[rays])
-            col = np.clip(np.floor(uv[:, 0]).astype(np.int64), 0, cam.width - 1)
-            row = np.clip(np.floor(uv[:, 1]).astype(np.int64), 0, cam.height - 1)
-            rr = np.clip(row[:, None] + offsets[:, 0], 0, cam.height - 1)
-            cc = np.clip(col[:, None] + offsets[:, 1], 0, cam.width - 1)
-            cand = ids[rr, cc]  # (n_k, C)
-            seen = cand >= 0
-            t, inside = ray_triangle_f64(origin, directions[rays][:, None, :], triangles[np.maximum(cand, 0)])
-            t = np.where(seen & inside & (t >= znear), t, np.inf)
-            best = np.argmin(t, axis=1)
-            tb = t[np.arange(len(rays)), best]
-            got = np.isfinite(tb)
-            face[rays[got]] = cand[np.arange(len(rays)), best][got]
-            t_hit[rays[got]] = tb[got]
-            fallback[rays[~got & seen.any(axis=1)]] = True
+    for k, cam in enumerate(cams):
+        rays = np.flatnonzero(view == k)
+        if len(rays):
+            face[rays] = _gpu_candidates(renderer, cam, origin, directions[rays], int(neighborhood), float(znear))
+    fallback = face == -2
+    got = np.flatnonzero(face >= 0)
+    tri = np.asarray(mesh.triangles, dtype=np.float64)[face[got]]
+    t, inside = ray_triangle_f64(origin, directions[got], tri, edge_epsilon=RECHECK_EPSILON)
+    t_hit[got] = t
+    fallback[got[~inside]] = True
     n_fallback = int(fallback.sum())
     if n_fallback:
         f, t = cast_embree(mesh, origin, directions[fallback])
         face[fallback], t_hit[fallback] = f, t
         log.debug("zbuffer scan: %d of %d rays decided by Embree", n_fallback, n)
+    face[face < 0] = -1
     return face, t_hit, n_fallback
