@@ -93,10 +93,13 @@ def test_wall_gives_analytic_rings(name):
     assert np.all(s.object_id == 1)
 
 
-def test_range_limits():
-    lidar = S.Lidar.preset("hdl32e", range_noise_m=0.0, max_range_m=10.5)
+def test_range_limits_apply_to_measured_values():
+    lidar = S.Lidar.preset("hdl32e", range_noise_m=0.2, max_range_m=10.5)
     s = S.scan(wall(10.0, 5.0, 5.0), lidar, np.zeros(3))
     assert len(s) > 0 and s.range_m.max() <= 10.5
+    cam = S.DepthCamera.preset("kinect-v1", max_depth_m=2.0, noise=0.05)
+    c = S.scan(wall(2.0, 3.0, 3.0), cam, S.look_at_pose([0, 0, 0], [1, 0, 0]), seed=0)
+    assert 1000 < len(c) < 0.7 * 640 * 480 and c.points[:, 2].max() <= 2.0
 
 
 # -- Embree vs z-buffer --------------------------------------------------------------------------

@@ -291,15 +291,16 @@ def scan(
     rng = np.random.default_rng(seed)
     gauss = rng.standard_normal(len(hit))  # drawn for every hit, so filters do not shift streams
     lost = rng.random(len(hit)) < sensor.dropout
+    # Limits apply to what the sensor measures (noise and quantisation included).
     if isinstance(sensor, Lidar):
-        keep = (t >= sensor.min_range_m) & (t <= sensor.max_range_m) & ~lost
         measured = t + sensor.range_noise_m * gauss
+        keep = (measured >= sensor.min_range_m) & (measured <= sensor.max_range_m) & ~lost
     else:
         cos_axis = d_s[:, 2]  # depth = t · cos(angle to the optical axis)
         depth = t * cos_axis
-        keep = (depth >= sensor.min_depth_m) & (depth <= sensor.max_depth_m) & (incidence <= sensor.max_incidence_deg) & ~lost
         depth_measured = sensor.quantize(depth + sensor.sigma_m(depth, incidence) * gauss)
         measured = depth_measured / cos_axis
+        keep = (depth_measured >= sensor.min_depth_m) & (depth_measured <= sensor.max_depth_m) & (incidence <= sensor.max_incidence_deg) & ~lost
     keep &= measured > 0
     sel = np.flatnonzero(keep)
     points = d_s[sel] * measured[sel, None]
