@@ -74,11 +74,31 @@ def test_report_files_and_cli(tmp_path):
     assert main(["scan", "box", "--distance", "5:2", "--out", str(tmp_path / "x")]) == 2
 
 
-@pytest.mark.parametrize("cls", [c for c in ("Car", "Trunk") if (LIDARNET / c).is_dir()])
-def test_lidarnet_matches_the_hdl32e(cls):
-    """Extra coverage with ../shared: the real scans' rings are the HDL-32E table's."""
-    clouds = read_object_clouds(LIDARNET / cls)
+def _synthetic_lidarnet(folder: Path) -> Path:
+    """An HDL-32E scan of a car-sized box written as LiDARNet v2 CSVs (y up, 5 units per metre)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    for k, d in enumerate((6.0, 9.0)):
+        scene = S.ScanScene().add({"box_m": [4.5, 1.8, 1.5]}, position_m=(d, 0.0))
+        p = S.scan(scene, S.Lidar.preset("hdl32e"), seed=k).crop(1).points.astype(np.float64)
+        origin = np.column_stack([p[:, 0], p[:, 2], -p[:, 1]]) * 5.0
+        rel = origin - (origin.min(0) + origin.max(0)) / 2
+        rows = [",".join([*(f"{v:.6g}" for v in (*o, *r)), "car", "1"]) for o, r in zip(origin, rel)]
+        (folder / f"car{k}.csv").write_text("origin_x,origin_y,origin_z,relative_x,relative_y,relative_z,object,complexity\n" + "\n".join(rows) + "\n")
+    return folder
+
+
+@pytest.mark.parametrize("cls", ["synthetic", *(c for c in ("Car", "Trunk") if (LIDARNET / c).is_dir())])
+def test_lidarnet_rings_are_the_hdl32e_table(cls, tmp_path):
+    """LiDARNet CSVs are read in the sensor frame (z up, metres) and their rings are the HDL-32E
+    table's; ``synthetic`` (always run) checks the reader on a simulated scan written in that
+    format, the real classes (with ../shared) check the data."""
+    folder = _synthetic_lidarnet(tmp_path / "Car") if cls == "synthetic" else LIDARNET / cls
+    clouds = read_object_clouds(folder)
     spacing = np.concatenate([ring_spacings_deg(c.points_m) for c in clouds])
-    assert abs(np.median(spacing) - 1.33) < 0.01
     table = np.diff(S.Lidar.preset("hdl32e").elevations_deg)
     assert abs(np.median(spacing) - np.median(table)) < 0.01
+    if cls == "synthetic":
+        assert len(clouds) == 2
+        for c, d in zip(sorted(clouds, key=lambda c: c.source), (6.0, 9.0)):
+            assert abs(np.percentile(c.points_m[:, 0], 1) - (d - 2.25)) < 0.05  # the box's near face, metres
+            assert abs(np.percentile(c.points_m[:, 2], 99) - (1.5 - 1.8)) < 0.05  # its top, below the sensor
