@@ -125,7 +125,7 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--azimuth", default="0", help="direction of the object from the sensor, degrees (N or LO:HI)")
     p.add_argument("--yaw", default="0", help="the object's heading, degrees (N or LO:HI)")
     p.add_argument("--samples", type=int, default=1, help="scans, each with its own draws")
-    p.add_argument("--crop", action="store_true", help="write only the object's returns (not the ground)")
+    p.add_argument("--crop", action="store_true", help="write only the object's returns; default: the object and the ground in the object's azimuth sector (±5°)")
     p.add_argument("--frame", choices=("sensor", "world"), default="sensor")
     p.add_argument("--format", choices=("npz", "ply", "both"), default="npz")
     p.add_argument("--backend", choices=("embree", "zbuffer"), default="embree")
