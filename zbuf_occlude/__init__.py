@@ -30,6 +30,7 @@ from .visibility import MethodInfo, available_methods, method_info, register, vi
 from .visibility.zbuffer import ResidentPoints, Scene  # Scene: deprecated alias of ResidentPoints
 from .dataset import OccludedDataset
 from .farm import merge_farm, run_farm
+from .sensors import DepthCamera, Lidar, Scan, ScanScene, SceneObject, load_scene, look_at_pose, scan
 
 __all__ = [
     "__version__",
@@ -63,6 +64,7 @@ __all__ = [
     "OccludedDataset",
     "run_farm",
     "merge_farm",
+    "Lidar", "DepthCamera", "ScanScene", "SceneObject", "load_scene", "look_at_pose", "Scan", "scan",
 ]
 
 

@@ -222,6 +222,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     for add in (add_compare_parser, add_profile_parser, add_farm_parser, add_farm_merge_parser):
         add(sub)
+    from .sensors.cli import add_realism_parser, add_scan_parser
+    add_scan_parser(sub), add_realism_parser(sub)
     return parser
 
 

@@ -1,0 +1,19 @@
+"""Sensor scans of mesh scenes: spinning LiDARs and depth cameras (issue 12).
+
+>>> import zbuf_occlude as zo
+>>> scene = zo.ScanScene().add("car.off", class_name="car", position_m=(10, 0), size_m=4.5)
+>>> s = zo.scan(scene, zo.Lidar.preset("hdl32e"), seed=0)     # sensor 1.8 m above the origin
+>>> car = s.crop(1)                                             # the car's returns, occluded
+"""
+
+from .depth_camera import DEPTH_CAMERA_PRESETS, DepthCamera, depth_camera_preset, nguyen_axial_sigma_m
+from .lidar import LIDAR_PRESETS, Lidar, beam_directions, lidar_preset
+from .scan import FRAMES, Scan, look_at_pose, read_scan_npz, scan
+from .scene import GROUND_ID, ScanScene, SceneObject, load_scene, sensor_pose
+
+__all__ = [
+    "Lidar", "LIDAR_PRESETS", "lidar_preset", "beam_directions",
+    "DepthCamera", "DEPTH_CAMERA_PRESETS", "depth_camera_preset", "nguyen_axial_sigma_m",
+    "ScanScene", "SceneObject", "load_scene", "sensor_pose", "GROUND_ID",
+    "Scan", "scan", "look_at_pose", "read_scan_npz", "FRAMES",
+]  # fmt: skip

@@ -1,0 +1,162 @@
+"""``zbuf-occlude scan`` and ``zbuf-occlude realism``: options beside their engines.
+
+``cli.build_parser`` calls :func:`add_scan_parser` and :func:`add_realism_parser`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InvalidInputError
+from ..occlude import derive_rng, object_key
+
+__all__ = ["add_scan_parser", "add_realism_parser", "add_parser", "sensor_from_name", "parse_interval"]
+
+log = logging.getLogger(__name__)
+
+
+#: Unit primitives ``scan`` takes instead of a mesh file (stretch them with ``--extents``).
+PRIMITIVES = {
+    "cylinder": {"cylinder": {"radius_m": 0.5, "height_m": 1.0, "sections": 48}},
+    "box": {"box_m": [1.0, 1.0, 1.0]},
+}
+
+
+def parse_interval(text: str, option: str) -> tuple[float, float]:
+    """``"10"`` → (10, 10); ``"5:25"`` → (5, 25) (a uniform draw per sample)."""
+    try:
+        parts = [float(v) for v in str(text).split(":")]
+    except ValueError:
+        raise InvalidInputError(f"{option} must be a number or LO:HI, got {text!r}") from None
+    if len(parts) == 1:
+        parts *= 2
+    if len(parts) != 2 or not parts[0] <= parts[1]:
+        raise InvalidInputError(f"{option} must be a number or LO:HI with LO <= HI, got {text!r}")
+    return parts[0], parts[1]
+
+
+def sensor_from_name(name: str):
+    """A :class:`Lidar` or :class:`DepthCamera` preset, or a sensor from a JSON file of its fields."""
+    from .depth_camera import DEPTH_CAMERA_PRESETS, DepthCamera
+    from .lidar import LIDAR_PRESETS, Lidar
+
+    key = name.lower()
+    if key in LIDAR_PRESETS:
+        return LIDAR_PRESETS[key]
+    if key in DEPTH_CAMERA_PRESETS:
+        return DEPTH_CAMERA_PRESETS[key]
+    path = Path(name)
+    if path.suffix.lower() == ".json" and path.is_file():
+        try:
+            spec = json.loads(path.read_text(encoding="utf-8"))
+            kind = spec.pop("kind", "lidar")
+            return Lidar(**spec) if kind == "lidar" else DepthCamera(**spec)
+        except (ValueError, TypeError) as exc:
+            raise InvalidInputError(f"{path}: bad sensor file ({exc})") from exc
+    raise InvalidInputError(f"unknown sensor {name!r}; use one of {sorted(LIDAR_PRESETS) + sorted(DEPTH_CAMERA_PRESETS)} or a .json file")
+
+
+def cmd_scan(args: argparse.Namespace) -> int:
+    from .crops import CropDistributions, draw_placement, object_crop
+    from .lidar import Lidar
+    from .scan import look_at_pose, scan
+    from .scene import load_scene
+
+    sensor = sensor_from_name(args.sensor)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    formats = ("npz", "ply") if args.format == "both" else (args.format,)
+    src = Path(args.mesh_or_scene)
+    written = []
+    if src.suffix.lower() in (".json", ".yaml", ".yml"):
+        scene = load_scene(src)
+        if isinstance(sensor, Lidar):
+            pose = scene.default_sensor_pose()
+        else:  # a camera looks at the first object from the sensor position
+            target = scene.build().local_to_world[1][:3, 3] if scene.objects else np.array([1.0, 0.0, scene.ground_z_m])
+            pose = look_at_pose(scene.default_sensor_pose()[:3, 3], target + [0, 0, 0.5])
+        for k in range(args.samples):
+            s = scan(scene, sensor, pose, seed=args.seed + k, backend=args.backend, frame=args.frame)
+            written += [getattr(s, f"to_{fmt}")(out / f"{src.stem}_{sensor.name}_s{k:03d}.{fmt}") for fmt in formats]
+    else:
+        if not isinstance(sensor, Lidar):
+            raise InvalidInputError("scan of a mesh file places a LiDAR; use a scene file for depth cameras")
+        try:
+            extents = tuple(float(v) for v in args.extents.split(",")) if args.extents else None
+        except ValueError:
+            raise InvalidInputError(f"--extents must be X,Y,Z in metres, got {args.extents!r}") from None
+        mesh = PRIMITIVES.get(str(src)) if not src.exists() else None
+        if mesh is None:
+            from ..mesh import load_mesh
+
+            mesh = load_mesh(src)  # once, not per sample
+        dist = CropDistributions(
+            distance_m=parse_interval(args.distance, "--distance"), height_m=parse_interval(args.height, "--height"),
+            azimuth_deg=parse_interval(args.azimuth, "--azimuth"), yaw_deg=parse_interval(args.yaw, "--yaw"),
+            size_m=parse_interval(args.size, "--size"), extents_m=extents,
+        )  # fmt: skip
+        for k in range(args.samples):
+            rng = derive_rng(args.seed, object_key(src.name), k)
+            placement = draw_placement(dist, rng)
+            crop = object_crop(mesh, sensor, placement, seed=int(rng.integers(2**63)), backend=args.backend, frame=args.frame)
+            s = crop.scan if args.crop else crop.full
+            s.meta.update(placement)
+            stem = f"{src.stem}_{sensor.name}_s{k:03d}"
+            written += [getattr(s, f"to_{fmt}")(out / f"{stem}.{fmt}") for fmt in formats]
+            log.info("%s: %d returns at %.2f m", stem, len(s), placement["distance_m"])
+    print(f"wrote {len(written)} files to {out}")
+    return 0
+
+
+def add_scan_parser(sub) -> argparse.ArgumentParser:
+    """Add ``scan`` to the subparsers ``sub``."""
+    p = sub.add_parser("scan", help="LiDAR / depth-camera scan of a mesh on the ground, or of a scene file")
+    p.add_argument("mesh_or_scene", metavar="MESH_OR_SCENE", help="mesh file (stood on the ground), 'cylinder' or 'box' (unit primitives), or a scene .json/.yaml")
+    p.add_argument("--sensor", default="hdl32e", help="vlp16 | hdl32e | hdl64e | os1-64 | kinect-v1 | sensor .json")
+    p.add_argument("--distance", default="10", help="horizontal sensor-object distance, metres (N or LO:HI, uniform per sample)")
+    p.add_argument("--height", default="1.8", help="sensor height above the ground, metres (N or LO:HI)")
+    p.add_argument("--size", default="4.5", help="the object's largest dimension, metres (N or LO:HI)")
+    p.add_argument("--extents", help="X,Y,Z: stretch the mesh to these extents, metres (instead of --size)")
+    p.add_argument("--azimuth", default="0", help="direction of the object from the sensor, degrees (N or LO:HI)")
+    p.add_argument("--yaw", default="0", help="the object's heading, degrees (N or LO:HI)")
+    p.add_argument("--samples", type=int, default=1, help="scans, each with its own draws")
+    p.add_argument("--crop", action="store_true", help="write only the object's returns; default: the object and the ground in the object's azimuth sector (±5°)")
+    p.add_argument("--frame", choices=("sensor", "world"), default="sensor")
+    p.add_argument("--format", choices=("npz", "ply", "both"), default="npz")
+    p.add_argument("--backend", choices=("embree", "zbuffer"), default="embree")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", required=True, help="output folder")
+    p.set_defaults(func=cmd_scan)
+    return p
+
+
+def cmd_realism(args: argparse.Namespace) -> int:
+    from .realism import markdown_table, realism_report
+
+    rows = realism_report(args.generated, args.real, args.out, min_points=args.min_points, figure=not args.no_figure)
+    print(markdown_table(rows), end="")
+    print(f"wrote {Path(args.out) / 'realism.md'}, realism.csv" + ("" if args.no_figure else ", realism.png"))
+    return 0
+
+
+def add_realism_parser(sub) -> argparse.ArgumentParser:
+    """Add ``realism`` to the subparsers ``sub``."""
+    p = sub.add_parser("realism", help="ring spacing, count-vs-range exponent, spacing, extent: generated vs real clouds")
+    p.add_argument("generated", metavar="GENERATED", help="scan .npz files or a folder of them (or LiDARNet CSVs)")
+    p.add_argument("real", metavar="REAL", help="LiDARNet v2 CSV folder (or scan .npz)")
+    p.add_argument("--out", default="realism", help="folder for realism.md, realism.csv, realism.png")
+    p.add_argument("--min-points", type=int, default=1, help="ignore clouds with fewer points")
+    p.add_argument("--no-figure", action="store_true")
+    p.set_defaults(func=cmd_realism)
+    return p
+
+
+def add_parser(sub) -> None:
+    """Add both subcommands."""
+    add_scan_parser(sub)
+    add_realism_parser(sub)

@@ -1,0 +1,287 @@
+"""LiDAR-like object crops: one object on the ground, scanned from a sensor placed at random.
+
+This is the per-object step a data-set farm calls (``farm --sensor``): for sample ``k`` of an
+object, draw the sensor placement from :class:`CropDistributions`, scan the object (plus any
+occluders) with :func:`zbuf_occlude.sensors.scan`, keep the object's returns (external
+occlusion included, as real data sets were segmented from street scans), and return them
+both in metres (sensor frame) and as a fixed-size :class:`zbuf_occlude.io.OccludedCloud` in the
+object's normalised mesh frame, the farm's HDF5 layout.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+from numpy.typing import NDArray
+
+from ..errors import InvalidInputError
+from ..io import OccludedCloud
+from ..mesh import load_mesh
+from ..occlude import derive_rng, draw_sample, object_key
+from .depth_camera import DepthCamera
+from .lidar import Lidar
+from .scan import Scan, scan
+from .scene import ScanScene, SceneObject, sensor_pose
+
+__all__ = ["CropDistributions", "CropSample", "draw_placement", "object_crop", "lidar_object_samples", "farm_datasets"]
+
+log = logging.getLogger(__name__)
+
+_CROP_STREAM = 0x5C4E  # keeps crop draws apart from the farm's other streams of one seed
+
+
+def _interval(name: str, value) -> tuple[float, float]:
+    lo, hi = (float(value), float(value)) if np.isscalar(value) else (float(value[0]), float(value[1]))
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
+        raise InvalidInputError(f"{name} must be a number or an interval lo <= hi, got {value!r}")
+    return lo, hi
+
+
+@dataclass(frozen=True)
+class CropDistributions:
+    """Per-sample sensor placement, every quantity drawn independently and uniformly.
+
+    Parameters
+    ----------
+    distance_m : (lo, hi)
+        Horizontal distance from the sensor to the object's footprint centre, metres.
+        Default 5–25 m, the range where an HDL-32E returns more than a few dozen points
+        from a car.
+    height_m : (lo, hi)
+        Sensor height above the ground, metres (car roofs: 1.6–2.0 m).
+    azimuth_deg : (lo, hi)
+        Direction of the object seen from the sensor, degrees (sensor frame).
+    yaw_deg : (lo, hi)
+        The object's heading about +z, degrees.
+    size_m : (lo, hi) or float
+        The object's largest dimension, metres.
+    extents_m : (3,) float, optional
+        Instead of ``size_m``: stretch the mesh to these extents (x, y, z), metres.
+    """
+
+    distance_m: tuple[float, float] = (5.0, 25.0)
+    height_m: tuple[float, float] = (1.6, 2.0)
+    azimuth_deg: tuple[float, float] = (0.0, 360.0)
+    yaw_deg: tuple[float, float] = (0.0, 360.0)
+    size_m: tuple[float, float] | float = 4.5
+    extents_m: tuple[float, float, float] | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("distance_m", "height_m", "azimuth_deg", "yaw_deg", "size_m"):
+            object.__setattr__(self, name, _interval(name, getattr(self, name)))
+        if self.distance_m[0] <= 0 or self.size_m[0] <= 0 or self.height_m[0] < 0:
+            raise InvalidInputError(f"distance_m and size_m must be > 0 and height_m >= 0 metres, got {self}")
+
+
+def draw_placement(dist: CropDistributions, rng: np.random.Generator) -> dict[str, float]:
+    """One placement ``{distance_m, height_m, azimuth_deg, yaw_deg, size_m}`` (five uniform draws, in that order)."""
+    out = {name: float(rng.uniform(*getattr(dist, name))) for name in ("distance_m", "height_m", "azimuth_deg", "yaw_deg", "size_m")}
+    if dist.extents_m is not None:
+        out["extents_m"] = tuple(float(v) for v in dist.extents_m)
+        out["size_m"] = max(out["extents_m"])
+    return out
+
+
+@dataclass
+class CropSample:
+    """One object crop.
+
+    Attributes
+    ----------
+    scan : Scan
+        The object's returns only, sensor frame (metres, z up, sensor at the origin).
+    placement : dict
+        The drawn ``distance_m, height_m, azimuth_deg, yaw_deg, size_m``.
+    local_points : (N, 3) float64
+        The same returns in the object's mesh frame (as loaded: normalised for mesh files).
+    sensor_local : (3,) float64
+        The sensor centre in that frame.
+    full : Scan
+        Every return of the sweep (ground included; only the object's sector for a LiDAR
+        without occluders), in the frame asked for.
+    """
+
+    scan: Scan
+    placement: dict
+    local_points: NDArray[np.float64]
+    sensor_local: NDArray[np.float64]
+    full: Scan
+
+
+def object_crop(
+    mesh,
+    sensor: Lidar | DepthCamera,
+    placement: dict,
+    *,
+    seed: int = 0,
+    occluders: tuple[SceneObject, ...] = (),
+    class_name: str = "",
+    backend: str = "embree",
+    sector_margin_deg: float = 5.0,
+    frame: str = "sensor",
+) -> CropSample:
+    """Scan one object placed per ``placement`` (see :func:`draw_placement`) and crop its returns.
+
+    The sensor stands at the origin, ``height_m`` above the ground; the object's footprint
+    centre is ``distance_m`` away in direction ``azimuth_deg``.  A LiDAR fires only in the
+    object's azimuth sector (± ``sector_margin_deg``), which gives the same returns faster.
+
+    Raises
+    ------
+    InvalidInputError, MeshLoadError
+        Bad placement or mesh.
+    """
+    az = math.radians(placement["azimuth_deg"])
+    d = placement["distance_m"]
+    size = placement.get("extents_m") or placement["size_m"]
+    obj = SceneObject(mesh, class_name, (d * math.cos(az), d * math.sin(az)), placement["yaw_deg"], size)
+    scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=max(2.0 * d, 20.0))
+    pose = sensor_pose([0.0, 0.0, placement["height_m"]])
+    sector = None
+    if isinstance(sensor, Lidar) and not occluders:
+        half = math.degrees(math.asin(min(1.0, 0.75 * placement["size_m"] / d))) + sector_margin_deg
+        if half < 180.0:
+            sector = (placement["azimuth_deg"] - half, placement["azimuth_deg"] + half)
+    full = scan(scene, sensor, pose, seed=seed, azimuth_range_deg=sector, backend=backend, frame=frame)
+    crop = full.crop(1)
+    to_world = scene.build().local_to_world[1]
+    world = crop.points.astype(np.float64) + (pose[:3, 3] if frame == "sensor" else 0.0)  # sensor axes = world axes (yaw 0)
+    inverse = np.linalg.inv(to_world[:3, :3])
+    local = (world - to_world[:3, 3]) @ inverse.T
+    return CropSample(crop, dict(placement), local, inverse @ (pose[:3, 3] - to_world[:3, 3]), full)
+
+
+def lidar_object_samples(
+    mesh: trimesh.Trimesh | str,
+    sensor: Lidar | DepthCamera,
+    *,
+    name: str,
+    n_samples: int,
+    n_points: int = 2048,
+    seed: int = 0,
+    distributions: CropDistributions = CropDistributions(),
+    class_name: str = "",
+    label: int = -1,
+    backend: str = "embree",
+) -> list[OccludedCloud]:
+    """The farm's per-object function for ``--sensor``: ``n_samples`` LiDAR crops of one mesh.
+
+    Sample ``k`` draws its placement and its sensor noise from
+    ``derive_rng(seed, object_key(name), stream, k)``, so every sample is reproducible alone.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh or path
+        A normalised mesh (:func:`zbuf_occlude.load_mesh`) or its file.
+    sensor : Lidar or DepthCamera
+    name : str
+        The object's stable name (seeds, ``source``).
+    n_samples, n_points : int
+        Crops per object and points per crop (fewer returns are padded with repeats, more
+        are subsampled, as :func:`zbuf_occlude.occlude.draw_sample`).
+    distributions : CropDistributions
+
+    Returns
+    -------
+    list of OccludedCloud
+        ``points (n_points, 3) float32`` in the normalised mesh frame; ``face_index`` into the
+        mesh; ``elevation_deg, azimuth_deg, radius``: the sensor seen from the object's bounding
+        box centre (degrees, degrees, mesh units); ``n_visible``: the returns;
+        ``extra``: the placement (metres, degrees), ``n_returns``, ``sensor``, the per-point
+        ``ring``.  Samples with no return are left out (logged).
+
+    Raises
+    ------
+    InvalidInputError
+        ``n_samples`` or ``n_points`` below 1.
+    """
+    if int(n_samples) < 1 or int(n_points) < 1:
+        raise InvalidInputError(f"n_samples and n_points must be >= 1, got {n_samples}, {n_points}")
+    if not isinstance(mesh, trimesh.Trimesh):
+        mesh = load_mesh(mesh)
+    key = object_key(name)
+    out = []
+    for k in range(int(n_samples)):
+        rng = derive_rng(seed, key, _CROP_STREAM, k)
+        placement = draw_placement(distributions, rng)
+        crop = object_crop(mesh, sensor, placement, seed=int(rng.integers(2**63)), class_name=class_name, backend=backend)
+        n = len(crop.scan)
+        if n == 0:
+            log.info("%s sample %d: no return at %.1f m", name, k, placement["distance_m"])
+            continue
+        chosen, _ = draw_sample(np.arange(n), int(n_points), rng)
+        # Sensor seen from the object's bounding-box centre, in the mesh frame.
+        sensor_local = crop.sensor_local - np.asarray(mesh.bounds, dtype=np.float64).mean(axis=0)
+        r = float(np.linalg.norm(sensor_local))
+        out.append(
+            OccludedCloud(
+                points=crop.local_points[chosen].astype(np.float32),
+                face_index=crop.scan.face_index[chosen].astype(np.int64),
+                elevation_deg=math.degrees(math.asin(sensor_local[2] / r)),
+                azimuth_deg=math.degrees(math.atan2(sensor_local[1], sensor_local[0])) % 360.0,
+                radius=r,
+                label=label,
+                class_name=class_name,
+                source=name,
+                sample_index=k,
+                n_visible=n,
+                extra={**placement, "n_returns": n, "sensor": sensor.name, "ring": None if crop.scan.ring is None else crop.scan.ring[chosen]},
+            )
+        )
+    return out
+
+
+def farm_datasets(
+    mesh: trimesh.Trimesh | str,
+    sensor: Lidar | DepthCamera,
+    *,
+    name: str,
+    label: int,
+    object_index: int,
+    n_samples: int,
+    n_points: int = 2048,
+    seed: int = 0,
+    distributions: CropDistributions = CropDistributions(),
+    backend: str = "embree",
+) -> dict[str, np.ndarray]:
+    """What the farm writes for one object with ``--sensor``: the datasets of a dense shard.
+
+    Each LiDAR sample is its own "pose" (its placement is drawn per sample), so
+    ``pose_index`` is the sample number and ``sample_index`` is 0; samples without a return
+    are left out (their ``n_visible`` would be 0, as for an empty pose).
+
+    Returns
+    -------
+    dict of str → ndarray, B = samples with returns
+        The dense layout: ``data (B, n_points, 3) float32`` (normalised mesh frame), ``label``,
+        ``object_index``, ``pose_index``, ``sample_index`` (int64), ``elevation_deg``,
+        ``azimuth_deg`` (the sensor seen from the object, degrees), ``n_visible`` (returns);
+        and the placement: ``radius`` (mesh units), ``distance_m``, ``sensor_height_m``,
+        ``object_azimuth_deg``, ``yaw_deg``, ``size_m`` (float64), ``ring (B, n_points) int16``.
+    """
+    clouds = lidar_object_samples(mesh, sensor, name=name, n_samples=n_samples, n_points=n_points, seed=seed,
+                                  distributions=distributions, label=label, backend=backend)  # fmt: skip
+    b = len(clouds)
+    f64 = lambda values: np.asarray(values, dtype=np.float64).reshape(b)  # noqa: E731
+    return {
+        "data": np.stack([c.points for c in clouds]) if b else np.zeros((0, n_points, 3), np.float32),
+        "label": np.full(b, label, dtype=np.int64),
+        "object_index": np.full(b, object_index, dtype=np.int64),
+        "pose_index": np.array([c.sample_index for c in clouds], dtype=np.int64),
+        "sample_index": np.zeros(b, dtype=np.int64),
+        "elevation_deg": f64([c.elevation_deg for c in clouds]),
+        "azimuth_deg": f64([c.azimuth_deg for c in clouds]),
+        "n_visible": np.array([c.n_visible for c in clouds], dtype=np.int64),
+        "radius": f64([c.radius for c in clouds]),
+        "distance_m": f64([c.extra["distance_m"] for c in clouds]),
+        "sensor_height_m": f64([c.extra["height_m"] for c in clouds]),
+        "object_azimuth_deg": f64([c.extra["azimuth_deg"] for c in clouds]),
+        "yaw_deg": f64([c.extra["yaw_deg"] for c in clouds]),
+        "size_m": f64([c.extra["size_m"] for c in clouds]),
+        "ring": (np.stack([c.extra["ring"] for c in clouds]).astype(np.int16) if b and clouds[0].extra["ring"] is not None
+                 else np.zeros((b, n_points), np.int16)),
+    }  # fmt: skip

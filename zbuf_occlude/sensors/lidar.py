@@ -1,0 +1,216 @@
+"""Spinning LiDAR sensors: beam tables, azimuth sampling, range limits, noise and dropout.
+
+Sensor frame (right-handed, metres): x forward (azimuth 0°), y left (azimuth +90°), z up
+(elevation +90°).  A beam with elevation ``e`` and azimuth ``a`` points along
+``(cos e cos a, cos e sin a, sin e)``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..errors import InvalidInputError
+
+__all__ = ["Lidar", "LIDAR_PRESETS", "lidar_preset", "beam_directions"]
+
+
+def _check_positive(name: str, value: float, *, allow_zero: bool = False) -> float:
+    v = float(value)
+    if not math.isfinite(v) or v < 0.0 or (v == 0.0 and not allow_zero):
+        raise InvalidInputError(f"{name} must be a finite number {'>=' if allow_zero else '>'} 0, got {value!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class Lidar:
+    """A spinning multi-beam LiDAR.
+
+    Parameters
+    ----------
+    name : str
+        Preset or user name (metadata).
+    elevations_deg : (B,) float
+        Elevation of each beam (ring), degrees above the sensor's xy plane.  Ring ``k`` is
+        ``elevations_deg[k]``; the order is kept (need not be sorted).
+    rotation_hz : float
+        Spin rate, revolutions per second.
+    firing_rate_hz : float
+        Firing cycles per second (every beam fires once per cycle).  The azimuth step is
+        ``360 · rotation_hz / firing_rate_hz`` degrees.
+    min_range_m, max_range_m : float
+        Returns nearer or farther than these are dropped, metres.
+    range_noise_m : float
+        Standard deviation σ of the Gaussian range error along the beam, metres.
+    dropout : float
+        Probability in [0, 1) that a return is lost (independent per return).
+    beam_divergence_deg : float
+        Full-angle beam divergence, degrees; metadata only: every return is the centre
+        ray's first hit (the footprint is not integrated).
+    azimuth_offset_deg : float
+        Azimuth of the first firing of a revolution, degrees.
+    source : str
+        Data sheet the numbers come from.
+
+    Raises
+    ------
+    InvalidInputError
+        Empty or non-finite beam table, elevations outside (−90°, 90°), non-positive rates,
+        ``min_range_m >= max_range_m``, negative noise, dropout outside [0, 1).
+    """
+
+    name: str
+    elevations_deg: tuple[float, ...]
+    rotation_hz: float = 10.0
+    firing_rate_hz: float = 18_000.0
+    min_range_m: float = 1.0
+    max_range_m: float = 100.0
+    range_noise_m: float = 0.02
+    dropout: float = 0.0
+    beam_divergence_deg: float = 0.0
+    azimuth_offset_deg: float = 0.0
+    source: str = ""
+    _elev: NDArray[np.float64] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        elev = np.asarray(self.elevations_deg, dtype=np.float64).reshape(-1)
+        if elev.size == 0 or not np.all(np.isfinite(elev)) or np.any(np.abs(elev) >= 90.0):
+            raise InvalidInputError(f"lidar {self.name!r}: elevations_deg must be finite, non-empty, inside (-90, 90) degrees")
+        object.__setattr__(self, "elevations_deg", tuple(float(e) for e in elev))
+        object.__setattr__(self, "_elev", elev)
+        for name in ("rotation_hz", "firing_rate_hz", "max_range_m"):
+            _check_positive(f"lidar {self.name!r} {name}", getattr(self, name))
+        _check_positive(f"lidar {self.name!r} min_range_m", self.min_range_m, allow_zero=True)
+        _check_positive(f"lidar {self.name!r} range_noise_m", self.range_noise_m, allow_zero=True)
+        _check_positive(f"lidar {self.name!r} beam_divergence_deg", self.beam_divergence_deg, allow_zero=True)
+        if self.min_range_m >= self.max_range_m:
+            raise InvalidInputError(f"lidar {self.name!r}: need min_range_m < max_range_m, got {self.min_range_m} >= {self.max_range_m}")
+        if not 0.0 <= float(self.dropout) < 1.0:
+            raise InvalidInputError(f"lidar {self.name!r}: dropout must lie in [0, 1), got {self.dropout!r}")
+        if self.firing_rate_hz < self.rotation_hz:
+            raise InvalidInputError(f"lidar {self.name!r}: firing_rate_hz {self.firing_rate_hz} below rotation_hz {self.rotation_hz}")
+
+    @property
+    def n_beams(self) -> int:
+        """Number of beams (rings)."""
+        return len(self.elevations_deg)
+
+    @property
+    def azimuth_step_deg(self) -> float:
+        """Azimuth between consecutive firings, degrees: ``360 · rotation_hz / firing_rate_hz``."""
+        return 360.0 * self.rotation_hz / self.firing_rate_hz
+
+    @property
+    def n_azimuths(self) -> int:
+        """Firings per revolution (``round(firing_rate_hz / rotation_hz)``)."""
+        return int(round(self.firing_rate_hz / self.rotation_hz))
+
+    @property
+    def azimuths_deg(self) -> NDArray[np.float64]:
+        """(A,) float64: azimuth of every firing of one revolution, degrees in [offset, offset + 360)."""
+        return self.azimuth_offset_deg + np.arange(self.n_azimuths) * (360.0 / self.n_azimuths)
+
+    @classmethod
+    def preset(cls, name: str, **changes) -> Lidar:
+        """The named preset with optional field changes (:func:`lidar_preset`)."""
+        return lidar_preset(name, **changes)
+
+    def with_(self, **changes) -> Lidar:
+        """A copy with some fields changed (``lidar.with_(rotation_hz=20)``)."""
+        return replace(self, **changes)
+
+    def rays(self, azimuth_range_deg: tuple[float, float] | None = None) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64]]:
+        """Unit beam directions of one revolution, sensor frame.
+
+        Parameters
+        ----------
+        azimuth_range_deg : (lo, hi), optional
+            Keep only firings with azimuth in ``[lo, hi]`` degrees (wrapped to the revolution),
+            e.g. the sector an object covers; default: all.
+
+        Returns
+        -------
+        directions : (B·A', 3) float64
+            Unit vectors, sensor frame, ring-major (all azimuths of ring 0 first).
+        ring : (B·A',) int64
+            Beam index into ``elevations_deg``.
+        azimuth_deg : (B·A',) float64
+        """
+        az = self.azimuths_deg
+        if azimuth_range_deg is not None:
+            lo, hi = (float(v) for v in azimuth_range_deg)
+            if hi - lo < 360.0:
+                az = az[np.mod(az - lo, 360.0) <= np.mod(hi - lo, 360.0)]
+        ring = np.repeat(np.arange(self.n_beams, dtype=np.int64), len(az))
+        azimuth = np.tile(az, self.n_beams)
+        return beam_directions(self._elev[ring], azimuth), ring, azimuth
+
+
+def beam_directions(elevation_deg: ArrayLike, azimuth_deg: ArrayLike) -> NDArray[np.float64]:
+    """(N, 3) float64 unit vectors ``(cos e cos a, cos e sin a, sin e)``, sensor frame."""
+    e = np.radians(np.asarray(elevation_deg, dtype=np.float64))
+    a = np.radians(np.asarray(azimuth_deg, dtype=np.float64))
+    return np.stack([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)], axis=-1)
+
+
+# -- presets ------------------------------------------------------------------------------------
+# HDL-32E user's manual (Velodyne 63-9113 Rev. D), Appendix "Laser firing sequence / vertical
+# angles": 32 lasers from -30.67° to +10.67°, listed to 0.01° (spacing 1.33° or 1.34°).
+_HDL32E = (
+    -30.67, -29.33, -28.00, -26.67, -25.33, -24.00, -22.67, -21.33, -20.00, -18.67, -17.33,
+    -16.00, -14.67, -13.33, -12.00, -10.67, -9.33, -8.00, -6.67, -5.33, -4.00, -2.67, -1.33,
+    0.00, 1.33, 2.67, 4.00, 5.33, 6.67, 8.00, 9.33, 10.67,
+)  # fmt: skip
+# HDL-64E S2 data sheet / manual (63-HDL64ES2): 26.8° vertical FOV, +2° to -24.8°; upper block
+# of 32 lasers at ~1/3° spacing (+2.0° to -8.33°), lower block of 32 at ~1/2° (-8.83° to -24.33°
+# here, i.e. the nominal spacing; the per-unit calibration file differs by up to ~0.2°).
+_HDL64E = tuple(np.round(np.concatenate([2.0 - np.arange(32) / 3.0, -8.83 - 0.5 * np.arange(32)]), 4))
+
+LIDAR_PRESETS: dict[str, Lidar] = {
+    # VLP-16 data sheet (Velodyne 63-9229 Rev-C) and manual: 16 channels, ±15° at 2°,
+    # 5–20 Hz, firing cycle 55.296 µs (18 084 Hz; 0.2° at 10 Hz), range 100 m, accuracy ±3 cm.
+    "vlp16": Lidar(
+        "vlp16", tuple(float(e) for e in range(-15, 16, 2)), rotation_hz=10.0, firing_rate_hz=1.0 / 55.296e-6,
+        min_range_m=0.5, max_range_m=100.0, range_noise_m=0.03, beam_divergence_deg=0.172,
+        source="Velodyne VLP-16 data sheet 63-9229 Rev-C; VLP-16 user manual 63-9243 Rev. D (firing 55.296 us)",
+    ),
+    # HDL-32E data sheet (97-0038 Rev. M) and manual: 32 lasers +10.67° to -30.67°, 5–20 Hz,
+    # firing cycle 46.08 µs (21 701 Hz; 0.166° at 10 Hz), 80–100 m range, accuracy < 2 cm.
+    "hdl32e": Lidar(
+        "hdl32e", _HDL32E, rotation_hz=10.0, firing_rate_hz=1.0 / 46.08e-6,
+        min_range_m=1.0, max_range_m=100.0, range_noise_m=0.02, beam_divergence_deg=0.16,
+        source="Velodyne HDL-32E data sheet 97-0038 Rev. M; HDL-32E user manual 63-9113 Rev. D (firing 46.08 us)",
+    ),
+    # HDL-64E S2 data sheet: 64 lasers, +2° to -24.8°, 5–15 Hz, azimuth resolution 0.09°
+    # (40 kHz firing at 10 Hz), 120 m, accuracy < 2 cm (1σ).
+    "hdl64e": Lidar(
+        "hdl64e", _HDL64E, rotation_hz=10.0, firing_rate_hz=40_000.0,
+        min_range_m=0.9, max_range_m=120.0, range_noise_m=0.02,
+        source="Velodyne HDL-64E S2 data sheet 97-0038 Rev. J; HDL-64E S2 user manual 63-HDL64ES2",
+    ),
+    # Ouster OS1-64 (Gen 1) data sheet: 64 channels over 33.2° (+16.6° to -16.6°, uniform),
+    # 1024 columns at 10 Hz (10 240 firings/s), 0.8–120 m, precision ±3 cm (1σ, 1–20 m).
+    "os1-64": Lidar(
+        "os1-64", tuple(np.round(np.linspace(16.6, -16.6, 64), 4)), rotation_hz=10.0, firing_rate_hz=10_240.0,
+        min_range_m=0.8, max_range_m=120.0, range_noise_m=0.03, beam_divergence_deg=0.13,
+        source="Ouster OS1-64 hardware user guide / data sheet (Gen 1, rev. 2019)",
+    ),
+}  # fmt: skip
+
+
+def lidar_preset(name: str, **changes) -> Lidar:
+    """The preset ``name`` (see :data:`LIDAR_PRESETS`), with optional field changes.
+
+    Raises
+    ------
+    InvalidInputError
+        Unknown name.
+    """
+    key = str(name).lower()
+    if key not in LIDAR_PRESETS:
+        raise InvalidInputError(f"unknown lidar preset {name!r}; choose one of {sorted(LIDAR_PRESETS)}")
+    lidar = LIDAR_PRESETS[key]
+    return replace(lidar, **changes) if changes else lidar

@@ -1,0 +1,327 @@
+"""Scans of scenes by LiDARs and depth cameras: :func:`scan` → :class:`Scan`.
+
+A scan casts the sensor's rays from its pose into the scene's triangles (Embree, or the
+moderngl z-buffer with exact candidate tests: :mod:`.raycast`), then applies the sensor model:
+range or depth limits, grazing-incidence loss (cameras), Gaussian range or axial noise,
+depth quantisation (cameras) and independent dropout.  Points are in the sensor frame by
+default (LiDAR: x forward, z up; camera: OpenCV), like real scans.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import trimesh
+from numpy.typing import ArrayLike, NDArray
+
+from ..errors import InvalidInputError
+from ..io import atomic_path
+from .depth_camera import DepthCamera
+from .lidar import Lidar
+from .raycast import BACKENDS, cast_embree, cast_zbuffer
+from .scene import BuiltScene, ScanScene, SceneObject
+
+__all__ = ["Scan", "scan", "look_at_pose", "read_scan_npz", "FRAMES"]
+
+#: Frames a scan's points can be given in.
+FRAMES = ("sensor", "world")
+
+
+@dataclass
+class Scan:
+    """One scan: the returns of one sensor sweep (or frame).
+
+    Attributes
+    ----------
+    points : (N, 3) float32
+        Return positions (noise included), metres, in ``frame``.
+    ring : (N,) int32 or None
+        LiDAR beam index (row of ``Lidar.elevations_deg``); None for cameras.
+    pixel : (N, 2) int32 or None
+        Camera pixel ``(u, v)`` (column, row); None for LiDARs.
+    range_m : (N,) float32
+        Measured distance from the sensor centre, metres (noise included).
+    face_index : (N,) int64
+        Row of the face hit in its object's own mesh (as loaded; the ground's quad: 0 or 1).
+    object_id : (N,) int32
+        Scene object hit (0: ground; objects, then occluders, from 1).
+    normal : (N, 3) float32
+        Unit normal of the face hit, facing the sensor, in ``frame``.
+    incidence_deg : (N,) float32
+        Angle between the ray and that normal, degrees in [0, 90].
+    frame : {"sensor", "world"}
+    sensor_position : (3,) float64
+        Sensor centre in ``frame`` (zeros in the sensor frame).
+    sensor_to_world : (4, 4) float64
+    sensor : str
+        Sensor name.
+    """
+
+    points: NDArray[np.float32]
+    ring: NDArray[np.int32] | None
+    pixel: NDArray[np.int32] | None
+    range_m: NDArray[np.float32]
+    face_index: NDArray[np.int64]
+    object_id: NDArray[np.int32]
+    normal: NDArray[np.float32]
+    incidence_deg: NDArray[np.float32]
+    frame: str = "sensor"
+    sensor_position: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    sensor_to_world: NDArray[np.float64] = field(default_factory=lambda: np.eye(4))
+    sensor: str = ""
+    meta: dict = field(default_factory=dict)
+
+    _PER_POINT = ("points", "ring", "pixel", "range_m", "face_index", "object_id", "normal", "incidence_deg")
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    def select(self, mask: ArrayLike) -> Scan:
+        """The returns where ``mask`` (bool or index array) holds."""
+        changes = {k: (None if getattr(self, k) is None else getattr(self, k)[mask]) for k in self._PER_POINT}
+        return replace(self, **changes, meta=dict(self.meta))
+
+    def crop(self, object_id: int) -> Scan:
+        """The returns of one scene object (occlusion by every other object included)."""
+        return self.select(self.object_id == int(object_id))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The NPZ content: every present per-point field, ``sensor_position``, ``sensor_to_world``,
+        ``frame`` and ``sensor`` (0-d strings)."""
+        out = {k: getattr(self, k) for k in self._PER_POINT if getattr(self, k) is not None}
+        out.update(sensor_position=np.asarray(self.sensor_position, np.float64), sensor_to_world=self.sensor_to_world,
+                   frame=np.array(self.frame), sensor=np.array(self.sensor))  # fmt: skip
+        return out
+
+    def to_npz(self, path: str | os.PathLike) -> Path:
+        """Write :meth:`arrays` to ``path`` (atomic, uncompressed)."""
+        path = Path(path)
+        with atomic_path(path) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, **self.arrays())
+        return path
+
+    def to_ply(self, path: str | os.PathLike) -> Path:
+        """Write binary little-endian PLY: x y z, nx ny nz (float32), range_m, incidence_deg
+        (float32), ring or u v (int32), face_index, object_id (int32); the sensor position
+        and frame in header comments.  Readable by Open3D, trimesh, CloudCompare."""
+        cols = [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4"),
+                ("range_m", "<f4"), ("incidence_deg", "<f4")]  # fmt: skip
+        cols += [("ring", "<i4")] if self.ring is not None else [("u", "<i4"), ("v", "<i4")] if self.pixel is not None else []
+        cols += [("face_index", "<i4"), ("object_id", "<i4")]
+        rows = np.empty(len(self), dtype=cols)
+        rows["x"], rows["y"], rows["z"] = self.points.T
+        rows["nx"], rows["ny"], rows["nz"] = self.normal.T
+        rows["range_m"], rows["incidence_deg"] = self.range_m, self.incidence_deg
+        if self.ring is not None:
+            rows["ring"] = self.ring
+        elif self.pixel is not None:
+            rows["u"], rows["v"] = self.pixel.T
+        rows["face_index"], rows["object_id"] = self.face_index, self.object_id
+        kind = {"<f4": "float", "<i4": "int"}
+        header = ["ply", "format binary_little_endian 1.0", f"comment zbuf_occlude scan sensor {self.sensor or '-'} frame {self.frame}",
+                  "comment sensor_position " + " ".join(f"{v:.9g}" for v in self.sensor_position), f"element vertex {len(self)}"]  # fmt: skip
+        header += [f"property {kind[t]} {name}" for name, t in cols] + ["end_header"]
+        path = Path(path)
+        with atomic_path(path) as tmp:
+            with open(tmp, "wb") as fh:
+                fh.write(("\n".join(header) + "\n").encode("ascii"))
+                fh.write(rows.tobytes())
+        return path
+
+
+def read_scan_npz(path: str | os.PathLike) -> Scan:
+    """Read a scan written by :meth:`Scan.to_npz`.
+
+    Raises
+    ------
+    InvalidInputError
+        Missing file or keys.
+    """
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            d = {k: z[k] for k in z.files}
+    except (OSError, ValueError) as exc:
+        raise InvalidInputError(f"{path}: cannot read scan NPZ ({exc})") from exc
+    missing = {"points", "range_m", "face_index", "object_id", "normal", "incidence_deg", "sensor_position"} - set(d)
+    if missing:
+        raise InvalidInputError(f"{path}: not a scan NPZ, missing keys {sorted(missing)}")
+    return Scan(
+        d["points"], d.get("ring"), d.get("pixel"), d["range_m"], d["face_index"], d["object_id"], d["normal"],
+        d["incidence_deg"], str(d.get("frame", "sensor")), d["sensor_position"], d.get("sensor_to_world", np.eye(4)), str(d.get("sensor", "")),
+    )  # fmt: skip
+
+
+def look_at_pose(eye: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> NDArray[np.float64]:
+    """(4, 4) float64 camera → world transform of an OpenCV camera (x right, y down, z forward)
+    at ``eye`` looking at ``target`` (world frame, metres).
+
+    Raises
+    ------
+    InvalidInputError
+        ``eye == target`` or ``up`` parallel to the view direction.
+    """
+    eye, target, up = (np.asarray(v, dtype=np.float64).reshape(3) for v in (eye, target, up))
+    z = target - eye
+    if np.linalg.norm(z) == 0:
+        raise InvalidInputError("look_at_pose: eye and target coincide")
+    z /= np.linalg.norm(z)
+    x = np.cross(z, -up)
+    if np.linalg.norm(x) < 1e-9:
+        raise InvalidInputError(f"look_at_pose: up {up} is parallel to the view direction")
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    m = np.eye(4)
+    m[:3, :3] = np.column_stack([x, y, z])
+    m[:3, 3] = eye
+    return m
+
+
+def _as_pose(pose) -> NDArray[np.float64]:
+    m = np.asarray(pose, dtype=np.float64)
+    if m.shape == (3,):
+        out = np.eye(4)
+        out[:3, 3] = m
+        m = out
+    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+        raise InvalidInputError(f"sensor pose must be a (4, 4) sensor → world matrix or a (3,) position, got shape {m.shape}")
+    r = m[:3, :3]
+    if not np.allclose(r @ r.T, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
+        raise InvalidInputError("sensor pose rotation must be orthonormal and right-handed (no scale)")
+    return m
+
+
+def _built(scene) -> BuiltScene:
+    if isinstance(scene, ScanScene):
+        return scene.build()
+    if isinstance(scene, trimesh.Trimesh):
+        # A bare mesh: metres, world frame as given, object id 1, no ground.
+        f = len(scene.faces)
+        return BuiltScene(scene, np.ones(f, np.int32), np.arange(f, dtype=np.int64), [SceneObject(scene)], [np.eye(4), np.eye(4)], [None, scene])
+    if isinstance(scene, BuiltScene):
+        return scene
+    raise InvalidInputError(f"scan needs a ScanScene or a trimesh.Trimesh, got {type(scene).__name__}")
+
+
+def scan(
+    scene: ScanScene | trimesh.Trimesh,
+    sensor: Lidar | DepthCamera,
+    pose: ArrayLike | None = None,
+    *,
+    seed: int = 0,
+    backend: str = "embree",
+    frame: str = "sensor",
+    azimuth_range_deg: tuple[float, float] | None = None,
+    resolution: int = 2048,
+    neighborhood: int = 1,
+) -> Scan:
+    """Scan ``scene`` with ``sensor`` at ``pose``.
+
+    Parameters
+    ----------
+    scene : ScanScene or trimesh.Trimesh
+        A mesh is taken as one object (id 1) in metres, world frame, with no ground.
+    sensor : Lidar or DepthCamera
+    pose : (4, 4) or (3,) float, optional
+        Sensor → world transform (LiDAR frame: x forward, z up; camera frame: OpenCV, see
+        :func:`look_at_pose`), or just the position; default ``scene.default_sensor_pose()``.
+    seed : int
+        Seeds noise and dropout (``numpy.random.default_rng(seed)``); same seed, same bytes.
+    backend : {"embree", "zbuffer"}
+        Ray casting (:mod:`.raycast`); "embree" is the reference.
+    frame : {"sensor", "world"}
+        Frame of ``points``, ``normal`` and ``sensor_position``.
+    azimuth_range_deg : (lo, hi), optional
+        LiDAR only: fire only in this azimuth sector (degrees, sensor frame), to save time.
+    resolution, neighborhood : int
+        "zbuffer" backend: view size in pixels and candidate window radius.
+
+    Returns
+    -------
+    Scan
+
+    Raises
+    ------
+    InvalidInputError
+        Bad pose, frame, backend or scene.
+    BackendUnavailable
+        Embree or OpenGL missing for the chosen backend.
+    """
+    if backend not in BACKENDS:
+        raise InvalidInputError(f"unknown scan backend {backend!r}; use one of {BACKENDS}")
+    if frame not in FRAMES:
+        raise InvalidInputError(f"unknown frame {frame!r}; use one of {FRAMES}")
+    built = _built(scene)
+    if pose is None:
+        if not isinstance(scene, ScanScene):
+            raise InvalidInputError("scan of a bare mesh needs a sensor pose")
+        pose = scene.default_sensor_pose()
+    m = _as_pose(pose)
+    rot, origin = m[:3, :3], m[:3, 3]
+    if isinstance(sensor, Lidar):
+        d_sensor, ring, _ = sensor.rays(azimuth_range_deg)
+        pixel = None
+        near, far = sensor.min_range_m, sensor.max_range_m
+    elif isinstance(sensor, DepthCamera):
+        d_cam, pixel = sensor.rays()
+        d_sensor = d_cam / np.linalg.norm(d_cam, axis=1, keepdims=True)
+        ring = None
+        near, far = sensor.min_depth_m, sensor.max_depth_m / float(d_sensor[:, 2].min())
+    else:
+        raise InvalidInputError(f"sensor must be a Lidar or a DepthCamera, got {type(sensor).__name__}")
+    d_world = d_sensor @ rot.T
+    meta: dict = {"backend": backend, "n_rays": len(d_world)}
+    if backend == "embree":
+        face, t = cast_embree(built.mesh, origin, d_world)
+    else:
+        face, t, n_fallback = cast_zbuffer(built.mesh, origin, d_world, resolution=resolution, neighborhood=neighborhood,
+                                           znear=max(min(0.05, near * 0.5), 1e-3), zfar=far * 1.5 + 1.0)  # fmt: skip
+        meta["n_fallback"] = n_fallback
+    hit = np.flatnonzero(face >= 0)
+    face, t, d_s, d_w = face[hit], t[hit], d_sensor[hit], d_world[hit]
+    tri = np.asarray(built.mesh.triangles, dtype=np.float64)[face]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    cos_in = np.einsum("ij,ij->i", normal, d_w)
+    normal[cos_in > 0] *= -1.0  # face the sensor
+    incidence = np.degrees(np.arccos(np.clip(np.abs(cos_in), 0.0, 1.0)))
+    rng = np.random.default_rng(seed)
+    gauss = rng.standard_normal(len(hit))  # drawn for every hit, so filters do not shift streams
+    lost = rng.random(len(hit)) < sensor.dropout
+    # Limits apply to what the sensor measures (noise and quantisation included).
+    if isinstance(sensor, Lidar):
+        measured = t + sensor.range_noise_m * gauss
+        keep = (measured >= sensor.min_range_m) & (measured <= sensor.max_range_m) & ~lost
+    else:
+        cos_axis = d_s[:, 2]  # depth = t · cos(angle to the optical axis)
+        depth = t * cos_axis
+        depth_measured = sensor.quantize(depth + sensor.sigma_m(depth, incidence) * gauss)
+        measured = depth_measured / cos_axis
+        keep = (depth_measured >= sensor.min_depth_m) & (depth_measured <= sensor.max_depth_m) & (incidence <= sensor.max_incidence_deg) & ~lost
+    keep &= measured > 0
+    sel = np.flatnonzero(keep)
+    points = d_s[sel] * measured[sel, None]
+    normal_out = normal[sel] @ rot  # world → sensor
+    sensor_position = np.zeros(3)
+    if frame == "world":
+        points = points @ rot.T + origin
+        normal_out = normal[sel]
+        sensor_position = origin.copy()
+    return Scan(
+        points=points.astype(np.float32),
+        ring=None if ring is None else ring[hit][sel].astype(np.int32),
+        pixel=None if pixel is None else pixel[hit][sel].astype(np.int32),
+        range_m=measured[sel].astype(np.float32),
+        face_index=built.face_local[face[sel]],
+        object_id=built.face_object[face[sel]],
+        normal=normal_out.astype(np.float32),
+        incidence_deg=incidence[sel].astype(np.float32),
+        frame=frame,
+        sensor_position=sensor_position,
+        sensor_to_world=m,
+        sensor=getattr(sensor, "name", ""),
+        meta=meta,
+    )

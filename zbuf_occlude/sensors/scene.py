@@ -1,0 +1,328 @@
+"""Scenes for sensor scans: objects on a ground plane, occluders, and where the sensor stands.
+
+World frame: right-handed, metres, z up; the ground is the plane ``z = ground_z_m``.
+A scene is built in Python (:class:`ScanScene`, :class:`SceneObject`) or read from a JSON/YAML
+file with the same fields (:func:`load_scene`)::
+
+    {"ground": {"z_m": 0.0, "half_extent_m": 80.0},
+     "objects": [{"mesh": "car.off", "class": "car", "position_m": [10, 0], "yaw_deg": 30,
+                  "size_m": 4.5}],
+     "occluders": [{"mesh": {"box_m": [0.5, 2.0, 1.0]}, "position_m": [6, 0.5]}],
+     "sensor": {"height_m": 1.8}}
+
+``mesh`` is a file path (relative paths are relative to the spec file), or a primitive:
+``{"box_m": [x, y, z]}`` or ``{"cylinder": {"radius_m": r, "height_m": h}}``.  A mesh file is
+normalised (:func:`zbuf_occlude.load_mesh`: centred, max extent 1) and scaled so that its
+largest dimension is ``size_m``; a primitive keeps its metric size unless ``size_m`` is given.
+Every object then stands on the ground (its lowest vertex at ``ground_z_m``), its bounding
+box centred on ``position_m`` (x, y; a third value is added to the standing height), turned
+by ``yaw_deg`` about +z.  Object ids: 0 is the ground, objects and occluders are numbered
+from 1 in the order given (objects first).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import trimesh
+from numpy.typing import NDArray
+
+from ..errors import InvalidInputError, MeshLoadError
+from ..mesh import load_mesh
+
+__all__ = ["SceneObject", "ScanScene", "BuiltScene", "load_scene", "GROUND_ID", "sensor_pose"]
+
+#: ``object_id`` of the ground plane's returns.
+GROUND_ID = 0
+
+
+def sensor_pose(position_m, yaw_deg: float = 0.0) -> NDArray[np.float64]:
+    """(4, 4) float64 sensor → world transform: a translation and a turn about +z (degrees)."""
+    p = np.asarray(position_m, dtype=np.float64).reshape(3)
+    if not np.all(np.isfinite(p)) or not math.isfinite(yaw_deg):
+        raise InvalidInputError(f"sensor position {position_m!r} and yaw {yaw_deg!r} must be finite")
+    c, s = math.cos(math.radians(yaw_deg)), math.sin(math.radians(yaw_deg))
+    m = np.eye(4)
+    m[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
+    m[:3, 3] = p
+    return m
+
+
+def _primitive(spec: dict) -> trimesh.Trimesh:
+    if "box_m" in spec:
+        extents = np.asarray(spec["box_m"], dtype=np.float64)
+        if extents.shape != (3,) or np.any(~np.isfinite(extents)) or np.any(extents <= 0):
+            raise InvalidInputError(f"box_m must be 3 positive sizes in metres, got {spec['box_m']!r}")
+        return trimesh.creation.box(extents=extents)
+    if "cylinder" in spec:
+        c = spec["cylinder"]
+        r, h = float(c.get("radius_m", 0)), float(c.get("height_m", 0))
+        if not (r > 0 and h > 0 and math.isfinite(r) and math.isfinite(h)):
+            raise InvalidInputError(f"cylinder needs radius_m > 0 and height_m > 0, got {c!r}")
+        return trimesh.creation.cylinder(radius=r, height=h, sections=int(c.get("sections", 48)))
+    raise InvalidInputError(f"unknown primitive {spec!r}; use {{'box_m': [x, y, z]}} or {{'cylinder': {{'radius_m': r, 'height_m': h}}}}")
+
+
+@dataclass
+class SceneObject:
+    """One object of a scene.
+
+    Parameters
+    ----------
+    mesh : str, Path, dict or trimesh.Trimesh
+        Mesh file, primitive spec (module docstring) or a mesh in metres.
+    class_name : str
+    position_m : (2,) or (3,) float
+        Bounding-box centre on the ground (x, y), metres; an optional z is added to the height
+        at which the object stands.
+    yaw_deg : float
+        Turn about +z, degrees.
+    size_m : float or (3,) float, optional
+        Largest dimension after scaling, metres; or the three extents (x, y, z in the mesh's
+        z-up frame, before the yaw), metres, for a non-uniform scale.  Default: a mesh file keeps its normalised
+        size (max extent 1 m); a primitive or a given mesh keeps its own size in metres.
+    up : {"z", "y"}
+        The mesh's up axis; "y" meshes (glTF) are turned to z-up first.
+    """
+
+    mesh: Any
+    class_name: str = ""
+    position_m: tuple[float, ...] = (0.0, 0.0)
+    yaw_deg: float = 0.0
+    size_m: float | None = None
+    up: str = "z"
+
+    def build(self, base: Path | None = None) -> tuple[trimesh.Trimesh, NDArray[np.float64]]:
+        """The object's mesh in its local frame (as loaded) and its (4, 4) local → world transform,
+        with the ground at z = 0."""
+        if isinstance(self.mesh, trimesh.Trimesh):
+            local = self.mesh
+        elif isinstance(self.mesh, dict):
+            local = _primitive(self.mesh)
+        else:
+            path = Path(self.mesh)
+            if base is not None and not path.is_absolute():
+                path = base / path
+            local = load_mesh(path)
+        vertices = np.asarray(local.vertices, dtype=np.float64)
+        if self.up not in ("z", "y"):
+            raise InvalidInputError(f"object {self.class_name or self.mesh!r}: up must be 'z' or 'y', got {self.up!r}")
+        rot_up = np.eye(3) if self.up == "z" else np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])
+        size = self.size_m
+        v = vertices @ rot_up.T
+        if size is None:
+            scale = np.ones(3)
+        else:
+            size_arr = np.asarray(size, dtype=np.float64).reshape(-1)
+            if size_arr.shape not in ((1,), (3,)) or not np.all(np.isfinite(size_arr)) or np.any(size_arr <= 0):
+                raise InvalidInputError(f"object {self.class_name or self.mesh!r}: size_m must be one or three sizes > 0 metres, got {size!r}")
+            extents = np.ptp(v, axis=0)
+            if len(size_arr) == 1:
+                scale = np.full(3, size_arr[0] / extents.max())
+            else:
+                if np.any(extents <= 0):
+                    raise InvalidInputError(f"object {self.class_name or self.mesh!r}: a flat mesh cannot take three extents {size!r}")
+                scale = size_arr / extents
+        pos = np.asarray(self.position_m, dtype=np.float64).reshape(-1)
+        if pos.shape not in ((2,), (3,)) or not np.all(np.isfinite(pos)):
+            raise InvalidInputError(f"object {self.class_name or self.mesh!r}: position_m must be 2 or 3 finite metres, got {self.position_m!r}")
+        c, s = math.cos(math.radians(self.yaw_deg)), math.sin(math.radians(self.yaw_deg))
+        yaw = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        lo, hi = v.min(axis=0) * scale, v.max(axis=0) * scale
+        centre = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]])  # footprint centre, bottom
+        m = np.eye(4)
+        m[:3, :3] = yaw @ (scale[:, None] * rot_up)
+        m[:3, 3] = -(yaw @ centre) + np.array([pos[0], pos[1], pos[2] if len(pos) == 3 else 0.0])
+        return local, m
+
+
+@dataclass
+class BuiltScene:
+    """A scene flattened into one triangle mesh (world frame, metres).
+
+    Attributes
+    ----------
+    mesh : trimesh.Trimesh
+        All faces; ``process=False`` so the face order is as listed.
+    face_object : (F,) int32
+        Object id of each face (0: ground).
+    face_local : (F,) int64
+        Row of each face in its object's own mesh (as loaded; the ground: 0 or 1).
+    objects : list[SceneObject]
+        ``objects[i - 1]`` has id ``i``.
+    local_to_world : list of (4, 4) float64
+        Per object id (index 0: identity for the ground).
+    """
+
+    mesh: trimesh.Trimesh
+    face_object: NDArray[np.int32]
+    face_local: NDArray[np.int64]
+    objects: list[SceneObject]
+    local_to_world: list[NDArray[np.float64]]
+    local_meshes: list[trimesh.Trimesh | None]
+
+
+@dataclass
+class ScanScene:
+    """Objects on a ground plane (module docstring).
+
+    Parameters
+    ----------
+    objects : list of SceneObject
+        The targets (crops are made of these).
+    occluders : list of SceneObject
+        Other objects; they occlude and return points like any object.
+    ground : bool
+        Add the ground plane ``z = ground_z_m``, a square of side ``2 · ground_half_extent_m``
+        centred on the origin.
+    sensor_height_m : float, optional
+        Height of the sensor above the ground, for :meth:`default_sensor_pose`.
+    sensor_position_m : (2,) float
+        Sensor (x, y), metres; default the origin.
+    """
+
+    objects: list[SceneObject] = field(default_factory=list)
+    occluders: list[SceneObject] = field(default_factory=list)
+    ground: bool = True
+    ground_z_m: float = 0.0
+    ground_half_extent_m: float = 80.0
+    sensor_height_m: float = 1.8
+    sensor_position_m: tuple[float, float] = (0.0, 0.0)
+    base_dir: Path | None = None
+    _built: BuiltScene | None = field(default=None, init=False, repr=False, compare=False)
+
+    def add(self, mesh, **kwargs) -> ScanScene:
+        """Append a target object (``SceneObject(mesh, **kwargs)``); returns self for chaining."""
+        self.objects.append(SceneObject(mesh, **kwargs))
+        self._built = None
+        return self
+
+    def add_occluder(self, mesh, **kwargs) -> ScanScene:
+        """Append an occluder; returns self."""
+        self.occluders.append(SceneObject(mesh, **kwargs))
+        self._built = None
+        return self
+
+    def default_sensor_pose(self) -> NDArray[np.float64]:
+        """(4, 4) sensor → world: at ``sensor_position_m``, ``sensor_height_m`` above the ground, yaw 0."""
+        x, y = (float(v) for v in self.sensor_position_m)
+        return sensor_pose([x, y, self.ground_z_m + float(self.sensor_height_m)])
+
+    def build(self) -> BuiltScene:
+        """Flatten into one mesh (cached until :meth:`add`)."""
+        if self._built is not None:
+            return self._built
+        vertices, faces, face_object, face_local = [], [], [], []
+        transforms: list[NDArray[np.float64]] = [np.eye(4)]
+        locals_: list[trimesh.Trimesh | None] = [None]
+        n_vertices = 0
+        if self.ground:
+            h = float(self.ground_half_extent_m)
+            if not (math.isfinite(h) and h > 0):
+                raise InvalidInputError(f"ground_half_extent_m must be > 0 metres, got {self.ground_half_extent_m!r}")
+            g = np.array([[-h, -h, 0.0], [h, -h, 0.0], [h, h, 0.0], [-h, h, 0.0]]) + [0.0, 0.0, self.ground_z_m]
+            vertices.append(g)
+            faces.append(np.array([[0, 1, 2], [0, 2, 3]]))
+            face_object.append(np.zeros(2, np.int32))
+            face_local.append(np.arange(2))
+            n_vertices = 4
+        for oid, obj in enumerate([*self.objects, *self.occluders], start=1):
+            local, m = obj.build(self.base_dir)
+            m = m.copy()
+            m[2, 3] += self.ground_z_m
+            v = np.asarray(local.vertices, dtype=np.float64) @ m[:3, :3].T + m[:3, 3]
+            f = np.asarray(local.faces, dtype=np.int64)
+            vertices.append(v)
+            faces.append(f + n_vertices)
+            face_object.append(np.full(len(f), oid, np.int32))
+            face_local.append(np.arange(len(f)))
+            transforms.append(m)
+            locals_.append(local)
+            n_vertices += len(v)
+        if not faces:
+            raise InvalidInputError("the scene is empty: no ground and no objects")
+        mesh = trimesh.Trimesh(np.concatenate(vertices), np.concatenate(faces), process=False, validate=False)
+        self._built = BuiltScene(
+            mesh, np.concatenate(face_object), np.concatenate(face_local).astype(np.int64),
+            [*self.objects, *self.occluders], transforms, locals_,
+        )  # fmt: skip
+        return self._built
+
+    # -- files ---------------------------------------------------------------------------------
+    @classmethod
+    def from_dict(cls, spec: dict, base_dir: Path | None = None) -> ScanScene:
+        """A scene from the JSON/YAML structure of the module docstring.
+
+        Raises
+        ------
+        InvalidInputError
+            Unknown keys or bad values (the message names them).
+        """
+        if not isinstance(spec, dict):
+            raise InvalidInputError(f"a scene spec must be a mapping, got {type(spec).__name__}")
+        unknown = set(spec) - {"ground", "objects", "occluders", "sensor"}
+        if unknown:
+            raise InvalidInputError(f"unknown scene keys {sorted(unknown)}; use ground, objects, occluders, sensor")
+
+        def obj(d: dict) -> SceneObject:
+            allowed = {"mesh", "class", "position_m", "yaw_deg", "size_m", "up"}
+            if not isinstance(d, dict) or "mesh" not in d or set(d) - allowed:
+                raise InvalidInputError(f"scene object {d!r}: needs 'mesh', allows {sorted(allowed)}")
+            return SceneObject(d["mesh"], d.get("class", ""), tuple(d.get("position_m", (0.0, 0.0))), float(d.get("yaw_deg", 0.0)), d.get("size_m"), d.get("up", "z"))
+
+        ground = spec.get("ground", {})
+        sensor = spec.get("sensor", {})
+        return cls(
+            objects=[obj(d) for d in spec.get("objects", [])],
+            occluders=[obj(d) for d in spec.get("occluders", [])],
+            ground=ground is not False and ground is not None,
+            ground_z_m=float((ground or {}).get("z_m", 0.0)) if isinstance(ground, dict) else 0.0,
+            ground_half_extent_m=float(ground.get("half_extent_m", 80.0)) if isinstance(ground, dict) else 80.0,
+            sensor_height_m=float(sensor.get("height_m", 1.8)),
+            sensor_position_m=tuple(sensor.get("position_m", (0.0, 0.0))),
+            base_dir=base_dir,
+        )
+
+
+def load_scene(path: str | Path) -> ScanScene:
+    """Read a scene spec from ``.json``, ``.yaml`` or ``.yml`` (module docstring).
+
+    Raises
+    ------
+    InvalidInputError
+        Missing or unparsable file, unknown format, bad fields.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InvalidInputError(f"{path}: no such scene file")
+    text = path.read_text(encoding="utf-8")
+    suffix = path.suffix.lower()
+    if suffix == ".json":
+        try:
+            spec = json.loads(text)
+        except ValueError as exc:
+            raise InvalidInputError(f"{path}: cannot parse scene JSON ({exc})") from exc
+    elif suffix in (".yaml", ".yml"):
+        try:
+            import yaml
+        except ImportError:
+            raise InvalidInputError(f"{path}: YAML scenes need PyYAML: pip install 'zbuf-occlude[yaml]'") from None
+        try:
+            spec = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            raise InvalidInputError(f"{path}: cannot parse scene YAML ({exc})") from exc
+    else:
+        raise InvalidInputError(f"{path}: unknown scene format {path.suffix!r}; use .json, .yaml or .yml")
+    try:
+        return ScanScene.from_dict(spec, base_dir=path.parent)
+    except MeshLoadError:
+        raise
+    except (TypeError, ValueError) as exc:
+        if isinstance(exc, InvalidInputError):
+            raise InvalidInputError(f"{path}: {exc}") from exc
+        raise InvalidInputError(f"{path}: bad scene field ({exc})") from exc
