@@ -11,7 +11,10 @@ from __future__ import annotations
 import contextlib
 import errno
 import functools
+import hashlib
 import os
+import re
+import socket
 import tempfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
@@ -25,6 +28,10 @@ from .errors import OutputError
 __all__ = [
     "OccludedCloud",
     "atomic_path",
+    "TempOwner",
+    "temp_owner",
+    "temp_is_orphan",
+    "file_sha256",
     "write_text",
     "write_csv",
     "write_npz",
@@ -96,9 +103,85 @@ def _raise_output_error(path: Path, exc: OSError) -> None:
     raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from exc
 
 
+@functools.lru_cache(maxsize=1)
+def _host_tag() -> str:
+    # 8 hex digits of the host name: temp names stay short and free of the dots host names hold
+    return hashlib.blake2b(socket.gethostname().encode("utf-8", "surrogateescape"), digest_size=4).hexdigest()
+
+
+#: ``.<target>.<pid>-<host tag>-<random>.tmp``: the temporary files of :func:`atomic_path`.
+_TEMP_RE = re.compile(r"^\.(?P<target>.+)\.(?P<pid>\d+)-(?P<host>[0-9a-f]{8})-[^.]*\.tmp$")
+#: Temporary files of older versions, ``.<target>.<random>.tmp`` (no owner recorded).
+_LEGACY_TEMP_RE = re.compile(r"^\.(?P<target>.+)\.[^.]+\.tmp$")
+
+
+@dataclass(frozen=True)
+class TempOwner:
+    """Who wrote a temporary file of :func:`atomic_path` (parsed from its name).
+
+    Attributes
+    ----------
+    target : str
+        Name of the file it was going to become.
+    pid : int or None
+        Process id of the writer (``None``: a temp of an older version, owner unknown).
+    host_tag : str or None
+        Hash of the writer's host name (``None`` as above).
+    """
+
+    target: str
+    pid: int | None
+    host_tag: str | None
+
+
+def temp_owner(name: str) -> TempOwner | None:
+    """Parse a temporary file name of :func:`atomic_path`; ``None`` if it is not one."""
+    m = _TEMP_RE.match(name)
+    if m:
+        return TempOwner(m["target"], int(m["pid"]), m["host"])
+    m = _LEGACY_TEMP_RE.match(name)
+    return TempOwner(m["target"], None, None) if m else None
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's live process
+        return True
+    return True
+
+
+def temp_is_orphan(owner: TempOwner) -> bool:
+    """True if the process that wrote a temporary file is gone.
+
+    Only a process on this host can be checked; a temp of another host is never an
+    orphan here (its writer may be alive on a shared file system).  Temps of older
+    versions record no owner and count as orphans: call this only while holding the
+    data set's lock.
+    """
+    if owner.pid is None:
+        return True
+    return owner.host_tag == _host_tag() and not _pid_alive(owner.pid)
+
+
+def file_sha256(path: str | os.PathLike, *, chunk_bytes: int = 1 << 20) -> str:
+    """Hex SHA-256 of a file's bytes, read in ``chunk_bytes`` pieces."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while block := fh.read(chunk_bytes):
+            h.update(block)
+    return h.hexdigest()
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success fsync and rename it to ``path``.
+
+    The temporary name, ``.<name>.<pid>-<host tag>-<random>.tmp``, is unique per process and
+    records its writer (:func:`temp_owner`), so a cleanup removes only the temps of dead
+    processes (:func:`temp_is_orphan`).
 
     Raises
     ------
@@ -108,7 +191,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     path = Path(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}-{_host_tag()}-", suffix=".tmp", dir=path.parent)
         os.close(fd)
         # mkstemp makes 0600 files; outputs are meant to be shared, so give them the mode a
         # plain open() would (0666 less the umask)

@@ -21,7 +21,7 @@ from ..dataset import (
     file_list_name,
 )
 from ..errors import InvalidInputError
-from ..io import write_text
+from ..io import temp_is_orphan, temp_owner, write_text
 from .config import BYTES_PER_MB, FarmParams, PAPER_SAMPLES_PER_MB, RECORD_DIR, _plan_digest, _record_path, shard_path
 from .inputs import FarmObject
 from .worker import _base_record, _version, _write_json
@@ -49,17 +49,27 @@ def _finished(out: Path, obj: FarmObject, digest: str) -> dict[str, Any] | None:
     return rec
 
 
-def _remove_stale_temps(out: Path, objects: Sequence[FarmObject], everything: bool) -> None:
-    # atomic_path leaves ".<name>.<random>.tmp" behind when a run is SIGKILLed mid-write;
-    # a sharded task removes only its own, other tasks may be writing theirs right now
+def remove_stale_temps(out: Path, objects: Sequence[FarmObject], everything: bool) -> int:
+    """Remove the temporary files that dead writers left in ``out``; return how many.
+
+    :func:`~zbuf_occlude.io.atomic_path` leaves ``.<name>.<pid>-<host>-<random>.tmp`` behind
+    when a run is SIGKILLed mid-write.  Only temps of dead processes on this host go
+    (:func:`~zbuf_occlude.io.temp_is_orphan`), and a sharded task (``everything=False``)
+    touches only those of its own objects: other tasks may be writing theirs right now.
+    Call it while holding the lock (:func:`~zbuf_occlude.farm.lock.farm_lock`).
+    """
     names = None if everything else {Path(shard_path(o)).name for o in objects} | {f"{o.index:06d}.json" for o in objects}
+    removed = 0
     for folder in (out / SHARD_DIR, out / RECORD_DIR, out):
         if not folder.is_dir():
             continue
         for tmp in folder.glob(".*.tmp"):
-            target = tmp.name[1:].rsplit(".", 2)[0]
-            if names is None or target in names:
-                tmp.unlink(missing_ok=True)
+            owner = temp_owner(tmp.name)
+            if owner is None or (names is not None and owner.target not in names) or not temp_is_orphan(owner):
+                continue
+            tmp.unlink(missing_ok=True)
+            removed += 1
+    return removed
 
 
 def _plan_doc(objects: Sequence[FarmObject], params: FarmParams, source: str) -> dict[str, Any]:

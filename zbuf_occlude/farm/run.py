@@ -29,6 +29,7 @@ from ..errors import BackendUnavailable, InvalidInputError, OutputError
 from ..io import atomic_path, write_text
 from .config import FarmParams, MANIFEST_INTERVAL_S, PLAN_FILE, RECORD_DIR, TASK_DIR, _record_path, shard_path
 from .inputs import FarmObject, discover_objects, select_shard
+from .lock import farm_lock
 from .journal import (
     FarmSummary,
     _finalize,
@@ -38,7 +39,7 @@ from .journal import (
     _objects_of,
     _plan_doc,
     _read_json,
-    _remove_stale_temps,
+    remove_stale_temps,
 )
 from .worker import _version, _write_json, process_object
 
@@ -226,19 +227,46 @@ def run_farm(
     mine = select_shard(objects, task, n_tasks)
     out = Path(out)
     _prepare_out(out)
+    with farm_lock(out, shard):
+        return _run_locked(
+            out, objects, mine, params, source_text, shard=shard, workers=workers, scheduler=scheduler,
+            dask_local=dask_local, overwrite=overwrite, progress=progress, command=command, t0=t0,
+        )  # fmt: skip
+
+
+def _run_locked(
+    out: Path,
+    objects: list[FarmObject],
+    mine: list[FarmObject],
+    params: FarmParams,
+    source_text: str,
+    *,
+    shard: tuple[int, int],
+    workers: int,
+    scheduler: str | None,
+    dask_local: int | None,
+    overwrite: bool,
+    progress: bool,
+    command: str | None,
+    t0: float,
+) -> FarmSummary:
+    """:func:`run_farm` once the lock of ``out`` (or of this task) is held."""
+    task, n_tasks = shard
     plan = _plan_doc(objects, params, source_text)
     if overwrite:
         _wipe(out, None if n_tasks == 1 else mine)
     else:
         _check_compatible(out, plan)
-    _write_json(out / PLAN_FILE, plan)
+    if n_tasks == 1 or _read_json(out / PLAN_FILE) != plan:
+        # tasks of one array share plan.json; it is written once, the same for all (checked above)
+        _write_json(out / PLAN_FILE, plan)
     command = command or shlex.join(sys.argv)
     _write_json(
         out / TASK_DIR / f"task-{task}-of-{n_tasks}.json",
         {"shard": [task, n_tasks], "command": command, "version": _version(), "host": socket.gethostname(),
          "started": datetime.now(timezone.utc).isoformat(timespec="seconds"), "objects": [o.index for o in mine]},
     )  # fmt: skip
-    _remove_stale_temps(out, mine, everything=n_tasks == 1)
+    remove_stale_temps(out, mine, everything=n_tasks == 1)
 
     digest = params.digest()
     records: dict[int, dict[str, Any]] = {}
@@ -355,6 +383,12 @@ def merge_farm(
             raise InvalidInputError(f"{folder} was made with other parameters or objects than {folders[0]}; cannot merge")
     plan = plans[0]
     _prepare_out(out)
+    with farm_lock(out):
+        return _merge_locked(folders, out, plan, progress=progress, t0=t0)
+
+
+def _merge_locked(folders: list[Path], out: Path, plan: dict[str, Any], *, progress: bool, t0: float) -> FarmSummary:
+    """:func:`merge_farm` once the data-set lock of ``out`` is held."""
     if out.resolve() not in {f.resolve() for f in folders}:
         _check_compatible(out, plan)
     _write_json(out / PLAN_FILE, plan)
