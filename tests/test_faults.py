@@ -168,3 +168,31 @@ def test_shard_tasks_run_at_once_but_not_beside_a_whole_run(tree, tmp_path):
             run_farm(tree, out, params=PARAMS, shard=(0, 2), progress=False)
     run_farm(tree, out, params=PARAMS, shard=(0, 2), progress=False)
     assert not task_lock_path(out, (0, 2)).exists()
+
+
+# -- defect 9: a shard overwritten in place with the same size ------------------------------------
+def test_a_shard_changed_in_place_is_caught_by_the_reader_and_redone_by_resume(tree, tmp_path):
+    import h5py
+    import numpy as np
+
+    from zbuf_occlude.dataset import ShardChecksumError
+
+    out = tmp_path / "ds"
+    run_farm(tree, out, params=PARAMS, progress=False)
+    before, _ = OccludedDataset(out).to_arrays()
+    shard = out / "shards" / "test_000001.h5"
+    size = shard.stat().st_size
+    with h5py.File(shard, "r+") as f:  # what the issue did: same size, other bytes
+        f["data"][0] = np.float32(3.4e38)
+    assert shard.stat().st_size == size
+
+    ds = OccludedDataset(out)
+    with pytest.raises(ShardChecksumError, match=r"shards/test_000001\.h5 was changed"):
+        ds.to_arrays()
+    with pytest.raises(ShardChecksumError, match="test_000001"):
+        [ds[i] for i in range(len(ds))]
+
+    summary = run_farm(tree, out, params=PARAMS, progress=False)
+    assert summary.resumed == len(MESHES) - 1 and summary.done == len(MESHES)  # only the changed one redone
+    after, _ = OccludedDataset(out).to_arrays()
+    assert np.array_equal(before, after) and np.abs(after).max() <= 1.0

@@ -52,6 +52,7 @@ from .occlude import pose_samples
 
 __all__ = [
     "OccludedDataset",
+    "ShardChecksumError",
     "reconstruct_samples",
     "unpack_visible",
     "samples_per_pose",
@@ -82,6 +83,10 @@ DEFAULT_OPEN_FILES = 16
 #: Degrees: a pose matches a requested elevation/azimuth within this (poses are stored
 #: as the exact floats of the schedule, so this only absorbs decimal round trips).
 POSE_MATCH_ATOL_DEG = 1e-6
+
+class ShardChecksumError(InvalidInputError):
+    """A shard's bytes differ from the SHA-256 the farm recorded for it in the manifest."""
+
 
 PoseFilter = float | Iterable[float] | Callable[[float], bool] | None
 
@@ -254,6 +259,8 @@ class OccludedDataset(Sequence):
             raise InvalidInputError(f"unknown split(s) {sorted(unknown)} in {self.root}; it has {sorted(known_splits)}")
 
         self._objects: list[dict[str, Any]] = []
+        self._digests: dict[Path, str] = {}  # shard → SHA-256 recorded by the farm
+        self._verified: set[Path] = set()
         obj_rows, poses_rows, sample_rows, shard_rows = [], [], [], []
         with open(self.root / MANIFEST_FILE, encoding="utf-8") as fh:
             for line in fh:
@@ -276,6 +283,8 @@ class OccludedDataset(Sequence):
                 sample_rows.append(sample[keep])
                 shard_rows.append(np.flatnonzero(keep))
                 self._objects.append(rec)
+                for rel, digest in zip(rec["shards"], rec.get("sha256") or ()):
+                    self._digests[self.root / rel] = digest
 
         def cat(parts: list[NDArray[np.int64]]) -> NDArray[np.int64]:
             return np.concatenate(parts).astype(np.int64) if parts else np.zeros(0, dtype=np.int64)
@@ -306,12 +315,31 @@ class OccludedDataset(Sequence):
             self._reset_handles()
         f = self._files.get(path)
         if f is None:
+            self._verify(path)
             f = self._files[path] = h5py.File(path, "r")
             while len(self._files) > DEFAULT_OPEN_FILES:
                 self._files.popitem(last=False)[1].close()
         else:
             self._files.move_to_end(path)
         return f
+
+    def _verify(self, path: Path) -> None:
+        """Check a shard against its SHA-256 in the manifest, once per process."""
+        digest = self._digests.get(path)
+        if digest is None or path in self._verified:
+            return
+        from .io import file_sha256
+
+        try:
+            actual = file_sha256(path)
+        except OSError as exc:
+            raise InvalidInputError(f"cannot read the shard {path}: {exc.strerror or exc}") from exc
+        if actual != digest:
+            raise ShardChecksumError(
+                f"the shard {path} was changed after the farm wrote it (SHA-256 {actual[:12]}…, the manifest "
+                f"records {digest[:12]}…); run the same farm command again to redo that object"
+            )
+        self._verified.add(path)
 
     def _compact_arrays(self, obj: int) -> tuple[NDArray[np.float32], NDArray[np.uint8]]:
         hit = self._compact.get(obj)

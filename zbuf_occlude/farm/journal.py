@@ -21,7 +21,7 @@ from ..dataset import (
     file_list_name,
 )
 from ..errors import InvalidInputError
-from ..io import temp_is_orphan, temp_owner, write_text
+from ..io import file_sha256, temp_is_orphan, temp_owner, write_text
 from .config import BYTES_PER_MB, FarmParams, PAPER_SAMPLES_PER_MB, RECORD_DIR, _plan_digest, _record_path, shard_path
 from .inputs import FarmObject
 from .worker import _base_record, _version, _write_json
@@ -42,9 +42,16 @@ def _finished(out: Path, obj: FarmObject, digest: str) -> dict[str, Any] | None:
     rec = _read_json(_record_path(out, obj.index))
     if not rec or rec.get("params_digest") != digest or rec.get("name") != obj.name or rec.get("status") != "ok":
         return None
-    for rel in rec["shards"]:
-        shard = out / rel
-        if not shard.is_file() or shard.stat().st_size != rec["bytes"]:
+    sizes_ok = all((out / rel).is_file() for rel in rec["shards"]) and sum(
+        (out / rel).stat().st_size for rel in rec["shards"]
+    ) == rec["bytes"]
+    if not sizes_ok:
+        return None
+    # a shard rewritten in place keeps its size: compare the bytes (records of older
+    # versions carry no digest and are trusted on their size)
+    for rel, digest in zip(rec["shards"], rec.get("sha256") or ()):
+        if file_sha256(out / rel) != digest:
+            log.warning("%s does not match its SHA-256 in %s: redoing %s", out / rel, _record_path(out, obj.index), obj.name)
             return None
     return rec
 

@@ -21,7 +21,7 @@ import numpy as np
 from ..dataset import (
     FORMAT_VERSION,
 )
-from ..io import atomic_path, write_text
+from ..io import atomic_path, file_sha256, write_text
 from ..mesh import load_mesh
 from ..occlude import dense_cloud, occlude_object
 from .config import COMPACT_GZIP_LEVEL, FarmParams, _FATAL, _GL_LOCK, _record_path, shard_path
@@ -41,7 +41,8 @@ def _write_json(path: Path, obj: Any) -> None:
     write_text(path, json.dumps(obj, indent=1, sort_keys=True) + "\n")
 
 
-def _write_h5(path: Path, fill: Callable[[Any], None]) -> int:
+def _write_h5(path: Path, fill: Callable[[Any], None]) -> tuple[int, str]:
+    """Write an HDF5 file atomically; return its size in bytes and its SHA-256 (hex)."""
     import h5py
 
     with atomic_path(path) as tmp:
@@ -53,7 +54,9 @@ def _write_h5(path: Path, fill: Callable[[Any], None]) -> int:
             if exc.errno is None and "No space left" in str(exc):
                 raise OSError(errno.ENOSPC, str(exc)) from exc
             raise
-    return path.stat().st_size
+        # hashed before the rename: the digest is of the bytes this process wrote
+        digest = file_sha256(tmp)
+    return path.stat().st_size, digest
 
 
 def _attrs(f, obj: FarmObject, params: FarmParams) -> None:
@@ -150,9 +153,10 @@ def _render(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
             _attrs(f, obj, params)
             f.attrs["n_dense"] = n_dense
 
-    n_bytes = _write_h5(path, fill)
+    n_bytes, sha256 = _write_h5(path, fill)
     return {
         "shards": [shard_path(obj)],
+        "sha256": [sha256],
         "n_visible": n_visible.tolist(),
         "n_samples": b,
         "n_padded_poses": int(np.count_nonzero((n_visible > 0) & (n_visible < params.n_points))),
@@ -176,6 +180,7 @@ def _base_record(obj: FarmObject, params: FarmParams) -> dict[str, Any]:
         "status": "pending",
         "error": None,
         "shards": [],
+        "sha256": [],
         "n_visible": [],
         "n_samples": 0,
         "bytes": 0,
