@@ -196,3 +196,55 @@ def test_a_shard_changed_in_place_is_caught_by_the_reader_and_redone_by_resume(t
     assert summary.resumed == len(MESHES) - 1 and summary.done == len(MESHES)  # only the changed one redone
     after, _ = OccludedDataset(out).to_arrays()
     assert np.array_equal(before, after) and np.abs(after).max() <= 1.0
+
+
+# -- defect 5: orphaned workers --------------------------------------------------------------------
+def _children(pid: int) -> set[int]:
+    kids: set[int] = set()
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            kids |= {int(k) for k in (task / "children").read_text().split()}
+        except OSError:
+            pass
+    return kids
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state not in ("Z", "X")  # a zombie has exited; only its parent's reaping is left
+
+
+VIEWS_LONG = "fibonacci:600"
+
+
+def _start_pool_farm(tree: Path, out: Path, cwd: Path) -> tuple[subprocess.Popen, set[int]]:
+    """A farm with --workers 2 on many poses (about 10 s on one core), once both workers are rendering."""
+    proc = subprocess.Popen(
+        _cli("farm", str(tree), "--out", str(out), "--workers", "2", *CLI_PARAMS[:1], VIEWS_LONG, *CLI_PARAMS[2:]),
+        env=_env(), cwd=cwd, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    _wait_for(lambda: len(_children(proc.pid)) >= 3, proc)  # two workers and the resource tracker
+    time.sleep(3)  # let them load and render
+    assert proc.poll() is None
+    return proc, _children(proc.pid)
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="needs Linux /proc to find the workers")
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+def test_workers_do_not_outlive_a_killed_parent(tree, tmp_path, sig):
+    out = tmp_path / "ds"
+    proc, workers = _start_pool_farm(tree, out, tmp_path)
+    assert workers and all(_alive(w) for w in workers)
+    proc.send_signal(sig)
+    rc = proc.wait(timeout=60)
+    _wait_for(lambda: not any(_alive(w) for w in workers), timeout_s=10)  # within seconds
+    if sig == signal.SIGTERM:  # handled like Ctrl-C: a clean, resumable stop
+        assert rc == 143, proc.stderr.read()
+        assert "interrupted; run the same command again to resume" in proc.stderr.read()
+        assert not (out / LOCK_FILE).exists()
+        summary = run_farm(tree, out, params=FarmParams(**{**PARAMS.to_dict(), "views": VIEWS_LONG}), progress=False)
+        assert summary.finished and summary.done == len(MESHES) and summary.failed == 0
+        assert not list(out.rglob(".*.tmp"))

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import signal
 import sys
 import time
 from collections.abc import Sequence
@@ -234,9 +235,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ZbufOccludeError as exc:
         print(f"zbuf-occlude: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
+        # 130 after Ctrl-C (SIGINT), 143 after SIGTERM (farm.lifecycle.Terminated): 128 + the signal
         print("zbuf-occlude: interrupted; run the same command again to resume", file=sys.stderr)
-        return 130
+        return 128 + getattr(exc, "signum", signal.SIGINT)
 
 
 if __name__ == "__main__":

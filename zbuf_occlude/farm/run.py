@@ -29,6 +29,7 @@ from ..errors import BackendUnavailable, InvalidInputError, OutputError
 from ..io import atomic_path, write_text
 from .config import FarmParams, MANIFEST_INTERVAL_S, PLAN_FILE, RECORD_DIR, TASK_DIR, _record_path, shard_path
 from .inputs import FarmObject, discover_objects, select_shard
+from .lifecycle import die_with_parent, sigterm_as_interrupt
 from .lock import farm_lock
 from .journal import (
     FarmSummary,
@@ -53,18 +54,32 @@ def _serial(todo: Sequence[FarmObject], params: FarmParams, out: Path) -> Iterat
 
 
 def _pool(todo: Sequence[FarmObject], params: FarmParams, out: Path, workers: int) -> Iterator[dict[str, Any]]:
-    # spawn: a forked child would inherit the parent's GL state; each worker makes its own context
+    # spawn: a forked child would inherit the parent's GL state; each worker makes its own context.
+    # die_with_parent: a SIGKILLed parent must not leave workers rendering on (lifecycle.py).
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=die_with_parent, initargs=(os.getpid(),))
+    try:
         pending = {pool.submit(process_object, obj, params, str(out)) for obj in todo}
-        try:
-            while pending:
-                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for fut in finished:
-                    yield fut.result()
-        finally:
-            for fut in pending:
-                fut.cancel()
+        while pending:
+            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in finished:
+                yield fut.result()
+    except BaseException:
+        # interrupted (Ctrl-C, SIGTERM), a fatal error, or the consumer stopped: stop the
+        # workers now instead of letting them finish their objects; their temps are removed
+        # by the next run and their objects redone
+        _stop_workers(pool)
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _stop_workers(pool: ProcessPoolExecutor) -> None:
+    # ProcessPoolExecutor has no public way to stop running workers before Python 3.14
+    # (terminate_workers); _processes is the pid → Process map it keeps.
+    for proc in list(getattr(pool, "_processes", {}).values()):
+        with contextlib.suppress(Exception):
+            proc.terminate()
 
 
 def _dask(
@@ -227,7 +242,7 @@ def run_farm(
     mine = select_shard(objects, task, n_tasks)
     out = Path(out)
     _prepare_out(out)
-    with farm_lock(out, shard):
+    with sigterm_as_interrupt(), farm_lock(out, shard):
         return _run_locked(
             out, objects, mine, params, source_text, shard=shard, workers=workers, scheduler=scheduler,
             dask_local=dask_local, overwrite=overwrite, progress=progress, command=command, t0=t0,
@@ -316,6 +331,7 @@ def _run_locked(
                 last_manifest = time.monotonic()
     finally:
         bar.close()
+        records_iter.close()  # an interrupt in this loop stops the pool's workers now, not at garbage collection
         with contextlib.suppress(OutputError):  # a full disk must not hide the original error
             write_text(manifest, _manifest_lines(mine, params, records))
 
