@@ -75,6 +75,8 @@ SHAPE_NAMES_FILE = "shape_names.txt"
 SHARD_DIR = "shards"
 #: Storage modes (module docstring).
 STORAGE_MODES = ("dense", "compact")
+#: ``generate``'s one-file-per-sample formats: not data sets this reader reads.
+SAMPLE_FILE_FORMATS = ("npz", "ply")
 #: Splits with a file list of their own (ModelNet's).
 #: Objects whose compact arrays (dense cloud and bitmasks, ~1 MB each) the reader keeps.
 DEFAULT_OBJECT_CACHE = 8
@@ -83,6 +85,16 @@ DEFAULT_OPEN_FILES = 16
 #: Degrees: a pose matches a requested elevation/azimuth within this (poses are stored
 #: as the exact floats of the schedule, so this only absorbs decimal round trips).
 POSE_MATCH_ATOL_DEG = 1e-6
+
+def _read_json_file(path: Path) -> Any:
+    """A JSON file of the data set; a damaged one raises an error naming it."""
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InvalidInputError(f"cannot read {path}: {exc}") from exc
+    except ValueError as exc:
+        raise InvalidInputError(f"{path} is damaged (not JSON: {exc}); rerun the farm command to rewrite it") from None
+
 
 class ShardChecksumError(InvalidInputError):
     """A shard's bytes differ from the SHA-256 the farm recorded for it in the manifest."""
@@ -232,13 +244,22 @@ class OccludedDataset(Sequence):
                 f"{self.root} is not a finished farm data set (no {CARD_FILE}); let `zbuf-occlude farm` finish, "
                 "or run `zbuf-occlude farm-merge` after sharded runs"
             )
-        self.card: dict[str, Any] = json.loads(card_path.read_text(encoding="utf-8"))
+        self.card: dict[str, Any] = _read_json_file(card_path)
+        if not isinstance(self.card, dict) or not {"storage", "params", "poses"} <= self.card.keys():
+            raise InvalidInputError(f"{card_path} is not a data set card (storage, params, poses missing); rerun the farm command")
         version = int(self.card.get("format_version", 0))
         if version > FORMAT_VERSION:
             raise InvalidInputError(
                 f"{self.root} has data set format {version}; this zbuf_occlude reads up to {FORMAT_VERSION}: upgrade it"
             )
         self.storage: str = self.card["storage"]
+        if self.storage in SAMPLE_FILE_FORMATS:
+            raise InvalidInputError(
+                f"{self.root} was written by `generate --format {self.storage}`: one file per sample, read them with "
+                f"zbuf_occlude.io.read_{self.storage if self.storage == 'npz' else 'ply (Open3D, trimesh)'}"
+            )
+        if self.storage not in (*STORAGE_MODES, "h5"):
+            raise InvalidInputError(f"{card_path}: unknown storage {self.storage!r}; this zbuf_occlude reads {STORAGE_MODES}")
         params = self.card["params"]
         self.n_points: int = int(params["n_points"])
         self._samples_per_view = int(params["samples_per_view"])
@@ -262,29 +283,41 @@ class OccludedDataset(Sequence):
         self._digests: dict[Path, str] = {}  # shard → SHA-256 recorded by the farm
         self._verified: set[Path] = set()
         obj_rows, poses_rows, sample_rows, shard_rows = [], [], [], []
-        with open(self.root / MANIFEST_FILE, encoding="utf-8") as fh:
-            for line in fh:
-                if not line.strip():
-                    continue
+        manifest_path = self.root / MANIFEST_FILE
+        try:
+            manifest_text = manifest_path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise InvalidInputError(f"cannot read the manifest {manifest_path}: {exc}; rerun the farm command") from exc
+        for lineno, line in enumerate(manifest_text.splitlines(), start=1):
+            if not line.strip():
+                continue
+            try:
                 rec = json.loads(line)
-                if rec.get("status") != "ok":
-                    continue
-                if splits is not None and rec["split"] not in splits:
-                    continue
-                if wanted_classes is not None and rec["class_name"] not in wanted_classes:
-                    continue
-                spp = samples_per_pose(np.asarray(rec["n_visible"], dtype=np.int64), self._samples_per_view)
-                pose = np.repeat(np.arange(len(spp)), spp)
-                starts = np.cumsum(spp) - spp
-                sample = np.arange(len(pose)) - np.repeat(starts, spp)
-                keep = pose_keep[pose]
-                obj_rows.append(np.full(int(keep.sum()), len(self._objects), dtype=np.int64))
-                poses_rows.append(pose[keep])
-                sample_rows.append(sample[keep])
-                shard_rows.append(np.flatnonzero(keep))
-                self._objects.append(rec)
-                for rel, digest in zip(rec["shards"], rec.get("sha256") or ()):
-                    self._digests[self.root / rel] = digest
+                if not isinstance(rec, dict):
+                    raise ValueError("not a JSON object")
+            except ValueError as exc:
+                raise InvalidInputError(
+                    f"{manifest_path}:{lineno} is not a manifest record ({exc}); the file is damaged: rerun "
+                    "the farm command (it rewrites the manifest from the records)"
+                ) from None
+            if rec.get("status") != "ok":
+                continue
+            if splits is not None and rec["split"] not in splits:
+                continue
+            if wanted_classes is not None and rec["class_name"] not in wanted_classes:
+                continue
+            spp = samples_per_pose(np.asarray(rec["n_visible"], dtype=np.int64), self._samples_per_view)
+            pose = np.repeat(np.arange(len(spp)), spp)
+            starts = np.cumsum(spp) - spp
+            sample = np.arange(len(pose)) - np.repeat(starts, spp)
+            keep = pose_keep[pose]
+            obj_rows.append(np.full(int(keep.sum()), len(self._objects), dtype=np.int64))
+            poses_rows.append(pose[keep])
+            sample_rows.append(sample[keep])
+            shard_rows.append(np.flatnonzero(keep))
+            self._objects.append(rec)
+            for rel, digest in zip(rec["shards"], rec.get("sha256") or ()):
+                self._digests[self.root / rel] = digest
 
         def cat(parts: list[NDArray[np.int64]]) -> NDArray[np.int64]:
             return np.concatenate(parts).astype(np.int64) if parts else np.zeros(0, dtype=np.int64)
@@ -366,7 +399,7 @@ class OccludedDataset(Sequence):
     def _points(self, i: int) -> NDArray[np.float32]:
         obj = int(self._obj[i])
         rec = self._objects[obj]
-        if self.storage == "dense":
+        if self.storage != "compact":
             f = self._file(self.root / rec["shards"][0])
             return f["data"][int(self._row[i])]
         dense_points, bits = self._compact_arrays(obj)
@@ -426,7 +459,7 @@ class OccludedDataset(Sequence):
             obj = int(self._obj[start])
             rec = self._objects[obj]
             labels[start:stop] = int(rec["label"])
-            if self.storage == "dense":
+            if self.storage != "compact":
                 rows = self._row[start:stop]
                 data[start:stop] = self._file(self.root / rec["shards"][0])["data"][()][rows]
                 continue

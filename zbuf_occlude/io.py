@@ -16,12 +16,13 @@ import os
 import re
 import socket
 import tempfile
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from .errors import OutputError
 
@@ -307,39 +308,81 @@ def write_ply(path: str | os.PathLike, cloud: OccludedCloud) -> Path:
     return path
 
 
-def write_h5(path: str | os.PathLike, clouds: Sequence[OccludedCloud], *, shape_names: Sequence[str] = ()) -> Path:
+def write_h5(
+    path: str | os.PathLike,
+    clouds: Sequence[OccludedCloud],
+    *,
+    shape_names: Sequence[str] = (),
+    columns: Mapping[str, ArrayLike] | None = None,
+    attrs: Mapping[str, Any] | None = None,
+    provenance: bool = True,
+    n_points: int | None = None,
+) -> Path:
     """Write clouds of equal size ``n`` to one ``.h5`` file in PointNet's layout.
 
-    Datasets: ``data (B, n, 3) float32``, ``label (B,) int64``, ``face_index (B, n) int32``,
-    ``elevation_deg (B,)``, ``azimuth_deg (B,)``, ``radius (B,)`` float64,
-    ``sample_index (B,)``, ``n_visible (B,)`` int64, ``source (B,)`` and ``class_name (B,)``
-    UTF-8 strings; attribute ``shape_names`` (index → class name).
+    The one HDF5 writer of zbuf_occlude: ``generate --format h5`` and the farm's dense
+    shards both come from here (schema in :mod:`zbuf_occlude.layout`).
+
+    Datasets, one row per cloud: ``data (B, n, 3) float32``, ``label (B,) int64``,
+    ``elevation_deg (B,)``, ``azimuth_deg (B,)`` float64 (degrees), ``sample_index (B,)``,
+    ``n_visible (B,)`` int64; with ``provenance`` also ``face_index (B, n) int32``,
+    ``radius (B,) float64``, ``source (B,)`` and ``class_name (B,)`` UTF-8 strings.
+
+    Parameters
+    ----------
+    columns : mapping of name to (B,) array, optional
+        More per-row datasets (the farm's ``object_index``, ``pose_index``), stored as int64.
+    attrs : mapping, optional
+        File attributes (besides ``shape_names``, written when given).
+    provenance : bool
+        Write the per-point and per-row provenance datasets above (the farm's dense shards
+        leave them out: the manifest holds the source and class, and ``face_index`` would
+        add a third to the size).
+    n_points : int, optional
+        ``n`` when ``clouds`` is empty.
 
     Raises
     ------
     OutputError
-        Clouds of different sizes, or the file cannot be written.
+        Clouds of different sizes, or the file cannot be written (disk full included).
     """
     import h5py
 
     sizes = {len(c.points) for c in clouds}
     if len(sizes) > 1:
         raise OutputError(f"cannot write clouds of sizes {sorted(sizes)} into one HDF5 file: use one --points value")
-    n = sizes.pop() if sizes else 0
+    n = sizes.pop() if sizes else int(n_points or 0)
     text = h5py.string_dtype("utf-8")
     path = Path(path)
     with atomic_path(path) as tmp:
-        with h5py.File(tmp, "w") as f:
-            f.create_dataset("data", data=np.asarray([c.points for c in clouds], dtype=np.float32).reshape(-1, n, 3))
-            f.create_dataset("label", data=np.asarray([c.label for c in clouds], dtype=np.int64))
-            f.create_dataset("face_index", data=np.asarray([c.face_index for c in clouds], dtype=np.int32).reshape(-1, n))
-            for key in ("elevation_deg", "azimuth_deg", "radius"):
-                f.create_dataset(key, data=np.asarray([getattr(c, key) for c in clouds], dtype=np.float64))
-            for key in ("sample_index", "n_visible"):
-                f.create_dataset(key, data=np.asarray([getattr(c, key) for c in clouds], dtype=np.int64))
-            f.create_dataset("source", data=[c.source for c in clouds], dtype=text)
-            f.create_dataset("class_name", data=[c.class_name for c in clouds], dtype=text)
-            f.attrs["shape_names"] = list(shape_names)
+        try:
+            with h5py.File(tmp, "w") as f:
+
+                def put(key: str, data, dtype=None) -> None:
+                    # no modification times: the same inputs give the same bytes
+                    f.create_dataset(key, data=data, dtype=dtype, track_times=False)
+
+                put("data", np.asarray([c.points for c in clouds], dtype=np.float32).reshape(-1, n, 3))
+                put("label", np.asarray([c.label for c in clouds], dtype=np.int64))
+                put("elevation_deg", np.asarray([c.elevation_deg for c in clouds], dtype=np.float64))
+                put("azimuth_deg", np.asarray([c.azimuth_deg for c in clouds], dtype=np.float64))
+                for key, values in (columns or {}).items():
+                    put(key, np.asarray(values, dtype=np.int64).reshape(len(clouds)))
+                put("sample_index", np.asarray([c.sample_index for c in clouds], dtype=np.int64))
+                put("n_visible", np.asarray([c.n_visible for c in clouds], dtype=np.int64))
+                if provenance:
+                    put("face_index", np.asarray([c.face_index for c in clouds], dtype=np.int32).reshape(-1, n))
+                    put("radius", np.asarray([c.radius for c in clouds], dtype=np.float64))
+                    put("source", [c.source for c in clouds], text)
+                    put("class_name", [c.class_name for c in clouds], text)
+                if shape_names or provenance:
+                    f.attrs["shape_names"] = list(shape_names)
+                f.attrs.update(dict(attrs or {}))
+        except OSError as exc:
+            # HDF5 reports a full disk in its message, not always in errno
+            if exc.errno is None and "No space left" in str(exc):
+                raise OSError(errno.ENOSPC, str(exc)) from exc
+            raise
     return path
 
 

@@ -22,24 +22,24 @@ from ..dataset import (
 )
 from ..errors import InvalidInputError
 from ..io import file_sha256, temp_is_orphan, temp_owner, write_text
-from .config import BYTES_PER_MB, FarmParams, PAPER_SAMPLES_PER_MB, RECORD_DIR, _plan_digest, _record_path, shard_path
+from .config import BYTES_PER_MB, FarmParams, PAPER_SAMPLES_PER_MB, RECORD_DIR, plan_digest, record_path, shard_path
 from .inputs import FarmObject
-from .worker import _base_record, _version, _write_json
+from .worker import base_record, package_version, write_json
 
 log = logging.getLogger(__name__)
 
 
 # -- journal, manifest, card -------------------------------------------------------------------
-def _read_json(path: Path) -> Any | None:
+def read_json(path: Path) -> Any | None:
     try:
         return json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
 
 
-def _finished(out: Path, obj: FarmObject, digest: str) -> dict[str, Any] | None:
+def finished_record(out: Path, obj: FarmObject, digest: str) -> dict[str, Any] | None:
     """The record of ``obj`` if it finished (ok, same parameters, shard present and whole)."""
-    rec = _read_json(_record_path(out, obj.index))
+    rec = read_json(record_path(out, obj.index))
     if not rec or rec.get("params_digest") != digest or rec.get("name") != obj.name or rec.get("status") != "ok":
         return None
     sizes_ok = all((out / rel).is_file() for rel in rec["shards"]) and sum(
@@ -51,7 +51,7 @@ def _finished(out: Path, obj: FarmObject, digest: str) -> dict[str, Any] | None:
     # versions carry no digest and are trusted on their size)
     for rel, digest in zip(rec["shards"], rec.get("sha256") or ()):
         if file_sha256(out / rel) != digest:
-            log.warning("%s does not match its SHA-256 in %s: redoing %s", out / rel, _record_path(out, obj.index), obj.name)
+            log.warning("%s does not match its SHA-256 in %s: redoing %s", out / rel, record_path(out, obj.index), obj.name)
             return None
     return rec
 
@@ -79,18 +79,18 @@ def remove_stale_temps(out: Path, objects: Sequence[FarmObject], everything: boo
     return removed
 
 
-def _plan_doc(objects: Sequence[FarmObject], params: FarmParams, source: str) -> dict[str, Any]:
+def plan_doc(objects: Sequence[FarmObject], params: FarmParams, source: str) -> dict[str, Any]:
     return {
         "format_version": FORMAT_VERSION,
         "params": params.to_dict(),
         "params_digest": params.digest(),
-        "plan_digest": _plan_digest(objects),
+        "plan_digest": plan_digest(objects),
         "source": source,
         "objects": [dataclasses.asdict(o) for o in objects],
     }
 
 
-def _objects_of(plan: dict[str, Any]) -> list[FarmObject]:
+def objects_of(plan: dict[str, Any]) -> list[FarmObject]:
     return [FarmObject(**o) for o in plan["objects"]]
 
 
@@ -102,21 +102,21 @@ def _shape_names(objects: Sequence[FarmObject]) -> list[str]:
     return [names.get(i, f"unused_{i}") for i in range(max(names) + 1)] if names else []
 
 
-def _manifest_lines(objects: Sequence[FarmObject], params: FarmParams, records: dict[int, dict[str, Any]]) -> str:
-    return "".join(json.dumps(records.get(o.index) or _base_record(o, params), sort_keys=True) + "\n" for o in objects)
+def manifest_lines(objects: Sequence[FarmObject], params: FarmParams, records: dict[int, dict[str, Any]]) -> str:
+    return "".join(json.dumps(records.get(o.index) or base_record(o, params), sort_keys=True) + "\n" for o in objects)
 
 
 
 
-def _folder_bytes(out: Path) -> int:
+def folder_bytes(out: Path) -> int:
     return sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
 
 
-def _finalize(out: Path, plan: dict[str, Any], records: dict[int, dict[str, Any]], commands: list[str]) -> None:
+def finalize(out: Path, plan: dict[str, Any], records: dict[int, dict[str, Any]], commands: list[str]) -> None:
     """Write manifest, shape names, file lists and (last: it marks the data set finished) the card."""
-    objects = _objects_of(plan)
+    objects = objects_of(plan)
     params = FarmParams(**plan["params"])
-    write_text(out / MANIFEST_FILE, _manifest_lines(objects, params, records))
+    write_text(out / MANIFEST_FILE, manifest_lines(objects, params, records))
     shape_names = _shape_names(objects)
     write_text(out / SHAPE_NAMES_FILE, "".join(f"{n}\n" for n in shape_names))
     splits = sorted({o.split for o in objects}, key=lambda s: (s not in SPLITS, s))
@@ -128,7 +128,7 @@ def _finalize(out: Path, plan: dict[str, Any], records: dict[int, dict[str, Any]
     card = {
         "format_version": FORMAT_VERSION,
         "tool": "zbuf_occlude",
-        "version": _version(),
+        "version": package_version(),
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "commands": commands,
         "source": plan["source"],
@@ -150,7 +150,7 @@ def _finalize(out: Path, plan: dict[str, Any], records: dict[int, dict[str, Any]
         "reference": "Sryamkin, Msallam, Klestov 2023, "
         "A method to create real-like point clouds for 3D object classification",
     }
-    _write_json(out / CARD_FILE, card)
+    write_json(out / CARD_FILE, card)
 
 
 # -- summary -------------------------------------------------------------------------------------
