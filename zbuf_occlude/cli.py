@@ -22,7 +22,6 @@ from .errors import InvalidInputError, ZbufOccludeError
 from .io import FORMATS, write_csv
 from .mesh import find_meshes, load_mesh
 from .metrics import agreement
-from .occlude import DEFAULT_DENSE_POINTS
 from .sampling import sample_surface
 from .visibility.registry import available_methods, get_method, visible_mask
 
@@ -168,12 +167,17 @@ def build_parser() -> argparse.ArgumentParser:
     g = sub.add_parser("generate", help="occluded point clouds from meshes")
     _add_common(g, points=2048)
     g.add_argument("--out", required=True, help="output folder")
-    g.add_argument("--samples-per-view", type=int, default=10, help="random draws per pose")
-    g.add_argument("--dense-points", type=int, default=DEFAULT_DENSE_POINTS, help="dense cloud per mesh, drawn from per pose")
-    g.add_argument("--format", choices=FORMATS, default="npz")
-    g.add_argument("--method", default="zbuffer", help="visibility method (see `zbuf-occlude info`)")
-    g.add_argument("--overwrite", action="store_true", help="redo meshes finished by an earlier run")
-    g.set_defaults(func=cmd_generate)
+    g.add_argument("--samples-per-view", type=int, help="random draws per pose (default: 10)")
+    g.add_argument("--dense-points", type=int, help="dense cloud per mesh, drawn from per pose (default: 100000)")
+    g.add_argument("--format", choices=FORMATS, help="npz or ply: one file per sample; h5: PointNet's layout (default: npz)")
+    g.add_argument("--method", help="visibility method (see `zbuf-occlude info`; default: zbuffer)")
+    g.add_argument("--overwrite", action="store_true", help="start over (needed to change options in an existing --out)")
+    from .farm.generate import GENERATE_DEFAULTS as gd  # generate's defaults live beside its engine
+
+    g.set_defaults(
+        func=cmd_generate, views=gd.views, points=gd.n_points, resolution=gd.resolution,
+        samples_per_view=gd.samples_per_view, dense_points=gd.dense_points, format=gd.storage, method=gd.method,
+    )  # fmt: skip
 
     v = sub.add_parser("validate", help="agreement of visibility methods with the exact oracle, per mesh and pose")
     _add_common(v, points=100_000)

@@ -1,37 +1,7 @@
 """Read the data sets that :func:`zbuf_occlude.farm.run_farm` writes: :class:`OccludedDataset`.
 
-Layout of a data set folder (``format_version`` 1; the farm writes it, this module owns it)::
-
-    DATASET/
-      dataset_card.json      parameters, poses, tool version, command line, GL renderer
-      shape_names.txt        one class name per line; line i is label i (PointNet)
-      train_files.txt        shards of the train split, paths relative to DATASET (PointNet)
-      test_files.txt         ... of the test split
-      manifest.jsonl         one JSON object per line and object: source, class, split, status,
-                             error, shards, visible-point counts per pose, seed, key, time
-      shards/<split>_<object_index:06d>.h5
-                             one shard per object (the unit a resumed run never redoes)
-      records/, tasks/, plan.json
-                             the farm's journal (resume, sharded runs, farm-merge)
-
-Two storage modes, chosen with ``--storage``:
-
-``dense``
-    PointNet's HDF5 layout: ``data (B, n, 3) float32``, ``label (B,) int64``,
-    ``elevation_deg (B,)`` and ``azimuth_deg (B,)`` float64 (degrees), ``object_index``,
-    ``pose_index``, ``sample_index``, ``n_visible`` ``(B,) int64``.  Any PointNet-style
-    loader reads it as is.
-``compact``
-    The object's dense cloud once, ``dense_points (M, 3) float32``, and per pose a
-    visibility bitmask ``visible_bits (P, ceil(M / 8)) uint8`` (:func:`numpy.packbits`),
-    plus ``n_visible``, ``elevation_deg``, ``azimuth_deg`` ``(P,)``.  The samples are
-    redrawn by the reader from the deterministic generators of
-    :func:`zbuf_occlude.occlude.pose_samples`,
-    bit-identical to what ``dense`` stores (the dense cloud is float32 in both modes
-    before indexing, so indexing commutes with the cast).
-
-Row order inside a shard, and sample order of the reader: pose-major, then sample index.
-A pose from which nothing is visible has no samples (:func:`zbuf_occlude.occlude.occlude_object`).
+The folder layout, the storage modes and the shard schemas are in :mod:`zbuf_occlude.layout`;
+this module reads them (both storage modes, and ``generate --format h5`` folders).
 """
 
 from __future__ import annotations
@@ -47,6 +17,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import InvalidInputError
+from .layout import (
+    CARD_FILE,
+    FORMAT_VERSION,
+    MANIFEST_FILE,
+    SAMPLE_FILE_FORMATS,
+    SHAPE_NAMES_FILE,
+    SHARD_DIR,
+    STORAGE_MODES,
+    file_list_name,
+)
 from .mesh import SPLITS
 from .occlude import pose_samples
 
@@ -67,17 +47,6 @@ __all__ = [
     "name_set",
 ]
 
-#: Version of the folder layout above; the reader refuses newer ones.
-FORMAT_VERSION = 1
-CARD_FILE = "dataset_card.json"
-MANIFEST_FILE = "manifest.jsonl"
-SHAPE_NAMES_FILE = "shape_names.txt"
-SHARD_DIR = "shards"
-#: Storage modes (module docstring).
-STORAGE_MODES = ("dense", "compact")
-#: ``generate``'s one-file-per-sample formats: not data sets this reader reads.
-SAMPLE_FILE_FORMATS = ("npz", "ply")
-#: Splits with a file list of their own (ModelNet's).
 #: Objects whose compact arrays (dense cloud and bitmasks, ~1 MB each) the reader keeps.
 DEFAULT_OBJECT_CACHE = 8
 #: HDF5 files the reader keeps open (dense storage), least recently used closed first.
@@ -101,11 +70,6 @@ class ShardChecksumError(InvalidInputError):
 
 
 PoseFilter = float | Iterable[float] | Callable[[float], bool] | None
-
-
-def file_list_name(split: str) -> str:
-    """PointNet's name of a split's shard list, e.g. ``train_files.txt``."""
-    return f"{split}_files.txt"
 
 
 def samples_per_pose(n_visible: NDArray[np.integer], samples_per_view: int) -> NDArray[np.int64]:

@@ -8,10 +8,8 @@ import shlex
 import sys
 
 from ..cameras import DEFAULT_RADIUS
-from ..dataset import (
-    STORAGE_MODES,
-)
 from ..errors import InvalidInputError
+from ..layout import STORAGE_MODES
 from .config import (
     DEFAULT_FARM_DENSE_POINTS,
     DEFAULT_FARM_RESOLUTION,

@@ -16,12 +16,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..cameras import DEFAULT_RADIUS, view_schedule
-from ..dataset import (
-    SHARD_DIR,
-    SAMPLE_FILE_FORMATS,
-    STORAGE_MODES,
-)
 from ..errors import BackendUnavailable, InvalidInputError, OutputError
+from ..layout import GENERATE_STORAGES, STORAGE_MODES, record_name, sample_file_name, shard_name
 
 if TYPE_CHECKING:  # annotations only: inputs imports nothing from here
     from .inputs import FarmObject
@@ -50,11 +46,6 @@ BYTES_PER_MB = 1e6
 MANIFEST_INTERVAL_S = 10.0
 #: gzip level of the compact visibility bitmasks (level 4 is within a few % of 9, much faster).
 COMPACT_GZIP_LEVEL = 4
-#: Names of the farm's journal inside the output folder.
-RECORD_DIR, TASK_DIR, PLAN_FILE = "records", "tasks", "plan.json"
-#: ``generate``'s storages besides the farm's (:data:`~zbuf_occlude.dataset.STORAGE_MODES`):
-#: one file per sample, or one HDF5 part per object (merged into ``occluded.h5``).
-GENERATE_STORAGES = ("h5", *SAMPLE_FILE_FORMATS)
 #: Errors that stop the whole run instead of failing one object: nothing else would work.
 FATAL_ERRORS = (OutputError, BackendUnavailable)
 
@@ -145,17 +136,15 @@ def plan_digest(objects: Sequence[FarmObject]) -> str:
 
 def shard_path(obj: FarmObject) -> str:
     """The shard of ``obj`` relative to the data set folder."""
-    return f"{SHARD_DIR}/{obj.split}_{obj.index:06d}.h5"
+    return shard_name(obj.split, obj.index)
 
 
 def sample_file_path(name: str, pose_index: int, cloud, fmt: str) -> str:
     """``generate``'s file of one sample relative to ``--out``, e.g.
     ``chair/train/chair_0001/chair_0001_v007_el+030_az045_s03.npz``: the pose index keeps
     names unique, the angles (whole degrees) keep them readable."""
-    stem = name.rsplit("/", 1)[-1]
-    base = f"{stem}_v{pose_index:03d}_el{cloud.elevation_deg:+04.0f}_az{cloud.azimuth_deg:03.0f}_s{cloud.sample_index:02d}"
-    return f"{name}/{base}.{fmt}"
+    return sample_file_name(name, pose_index, cloud.elevation_deg, cloud.azimuth_deg, cloud.sample_index, fmt)
 
 
 def record_path(out: Path, index: int) -> Path:
-    return out / RECORD_DIR / f"{index:06d}.json"
+    return out / record_name(index)

@@ -25,7 +25,9 @@ import numpy as np
 from ..errors import InvalidInputError
 from ..io import OccludedCloud, read_h5, write_h5
 from ..mesh import class_and_split, find_meshes
-from .config import GENERATE_STORAGES, FarmParams
+from ..occlude import DEFAULT_DENSE_POINTS
+from ..layout import GENERATE_STORAGES, MERGED_H5_FILE
+from .config import FarmParams, record_path
 from .inputs import FarmObject
 from .journal import FarmSummary, read_json
 from .run import run_farm
@@ -34,12 +36,10 @@ __all__ = ["generate", "objects_from_paths", "MERGED_H5_FILE", "GENERATE_DEFAULT
 
 log = logging.getLogger(__name__)
 
-#: ``generate --format h5``'s joined file.
-MERGED_H5_FILE = "occluded.h5"
 #: ``generate``'s defaults, smaller poses and larger images than the farm's (one machine, a few meshes):
 #: the 5×5 grid of poses, 2048-point samples, 10 per pose, 100,000 dense points, a 1024² z-buffer.
 GENERATE_DEFAULTS = FarmParams(
-    views="grid25", samples_per_view=10, n_points=2048, dense_points=100_000, resolution=1024, storage="npz"
+    views="grid25", samples_per_view=10, n_points=2048, dense_points=DEFAULT_DENSE_POINTS, resolution=1024, storage="npz"
 )
 
 
@@ -77,7 +77,7 @@ def _merge_h5(out: Path, objects: Sequence[FarmObject]) -> Path | None:
     """Join the per-object parts of the finished objects into ``OUT/occluded.h5``."""
     parts = []
     for o in objects:
-        rec = read_json(out / "records" / f"{o.index:06d}.json")
+        rec = read_json(record_path(out, o.index))
         if rec and rec.get("status") == "ok":
             parts.extend(out / rel for rel in rec["shards"])
     if not parts:

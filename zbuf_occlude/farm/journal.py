@@ -11,18 +11,11 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from ..dataset import (
-    CARD_FILE,
-    FORMAT_VERSION,
-    MANIFEST_FILE,
-    SHAPE_NAMES_FILE,
-    SHARD_DIR,
-    SPLITS,
-    file_list_name,
-)
 from ..errors import InvalidInputError
 from ..io import file_sha256, temp_is_orphan, temp_owner, write_text
-from .config import BYTES_PER_MB, FarmParams, PAPER_SAMPLES_PER_MB, RECORD_DIR, plan_digest, record_path, shard_path
+from ..layout import CARD_FILE, FORMAT_VERSION, MANIFEST_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, file_list_name
+from ..mesh import SPLITS
+from .config import BYTES_PER_MB, PAPER_SAMPLES_PER_MB, FarmParams, plan_digest, record_path, shard_path
 from .inputs import FarmObject
 from .worker import base_record, package_version, write_json
 

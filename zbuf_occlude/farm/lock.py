@@ -29,14 +29,12 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from ..errors import OutputError
-from .config import TASK_DIR
+from ..layout import LOCK_FILE, TASK_DIR, task_lock_name
 
 __all__ = ["DatasetBusy", "LOCK_FILE", "farm_lock", "lock_holder", "task_lock_path"]
 
 log = logging.getLogger(__name__)
 
-#: The data-set lock, in the data set folder.
-LOCK_FILE = ".zbuf_occlude.lock"
 #: Seconds an acquire keeps trying: long enough for filelock to break a dead owner's lock
 #: (checked on each try) or for a concurrent peek to end, short enough to refuse at once.
 ACQUIRE_TIMEOUT_S = 2.0
@@ -49,7 +47,7 @@ class DatasetBusy(OutputError):
 
 def task_lock_path(out: Path, shard: tuple[int, int]) -> Path:
     """The lock of ``--shard I/N`` task ``shard`` in data set ``out``."""
-    return out / TASK_DIR / f"lock-{shard[0]}-of-{shard[1]}.lock"
+    return out / task_lock_name(*shard)
 
 
 def lock_holder(path: Path) -> str:

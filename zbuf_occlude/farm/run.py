@@ -17,17 +17,11 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from ..dataset import (
-    CARD_FILE,
-    MANIFEST_FILE,
-    SHAPE_NAMES_FILE,
-    SHARD_DIR,
-    SPLITS,
-    file_list_name,
-)
 from ..errors import BackendUnavailable, InvalidInputError, OutputError
 from ..io import atomic_path, write_text
-from .config import OPTION_NAMES, FarmParams, MANIFEST_INTERVAL_S, PLAN_FILE, RECORD_DIR, TASK_DIR, record_path, shard_path
+from ..layout import CARD_FILE, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, TASK_DIR, file_list_name
+from ..mesh import SPLITS
+from .config import MANIFEST_INTERVAL_S, OPTION_NAMES, FarmParams, record_path, shard_path
 from .inputs import FarmObject, discover_objects, select_shard
 from .checks import check_before_work, prepare_out
 from .lifecycle import die_with_parent, sigterm_as_interrupt

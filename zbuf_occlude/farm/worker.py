@@ -17,13 +17,11 @@ from typing import Any
 
 import numpy as np
 
-from ..dataset import (
-    FORMAT_VERSION,
-)
 from ..io import OccludedCloud, atomic_path, file_sha256, write_h5, write_npz, write_ply, write_text
+from ..layout import FORMAT_VERSION, SAMPLE_FILE_FORMATS
 from ..mesh import load_mesh
 from ..occlude import dense_cloud, occlude_object
-from .config import COMPACT_GZIP_LEVEL, SAMPLE_FILE_FORMATS, FarmParams, FATAL_ERRORS, GL_LOCK, record_path, sample_file_path, shard_path
+from .config import COMPACT_GZIP_LEVEL, FATAL_ERRORS, GL_LOCK, FarmParams, record_path, sample_file_path, shard_path
 from .inputs import FarmObject
 
 log = logging.getLogger(__name__)
