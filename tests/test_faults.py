@@ -155,6 +155,9 @@ def test_shard_tasks_run_at_once_but_not_beside_a_whole_run(tree, tmp_path):
         assert holder.stdout.readline().strip() == "held"
         summary = run_farm(tree, out, params=PARAMS, shard=(1, 2), progress=False)  # runs beside task 0
         assert summary.done == len(MESHES[1::2]) and not summary.finished
+        # only farm-merge writes the data-set-wide files
+        assert not (out / MANIFEST_FILE).exists() and not (out / CARD_FILE).exists()
+        assert not (out / "train_files.txt").exists() and not (out / "shape_names.txt").exists()
         with pytest.raises(DatasetBusy, match=f"task 0/2.*pid {holder.pid}"):
             run_farm(tree, out, params=PARAMS, progress=False)
         with pytest.raises(DatasetBusy, match=f"task 0/2.*pid {holder.pid}"):

@@ -21,11 +21,9 @@ from ..errors import BackendUnavailable, InvalidInputError, OutputError
 from ..io import atomic_path, write_text
 from ..layout import CARD_FILE, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, TASK_DIR, file_list_name
 from ..mesh import SPLITS
+from .checks import check_before_work, prepare_out
 from .config import MANIFEST_INTERVAL_S, OPTION_NAMES, FarmParams, record_path, shard_path
 from .inputs import FarmObject, discover_objects, select_shard
-from .checks import check_before_work, prepare_out
-from .lifecycle import die_with_parent, sigterm_as_interrupt
-from .lock import farm_lock
 from .journal import (
     FarmSummary,
     finalize,
@@ -37,7 +35,9 @@ from .journal import (
     read_json,
     remove_stale_temps,
 )
-from .worker import package_version, write_json, process_object
+from .lifecycle import die_with_parent, sigterm_as_interrupt
+from .lock import farm_lock
+from .worker import package_version, process_object, write_json
 
 log = logging.getLogger(__name__)
 
