@@ -251,3 +251,16 @@ def test_workers_do_not_outlive_a_killed_parent(tree, tmp_path, sig):
         summary = run_farm(tree, out, params=FarmParams(**{**PARAMS.to_dict(), "views": VIEWS_LONG}), progress=False)
         assert summary.finished and summary.done == len(MESHES) and summary.failed == 0
         assert not list(out.rglob(".*.tmp"))
+
+
+# -- skipped inputs are recorded and end the run with status 1 (defect 12's slot in the farm) ----
+def test_skipped_inputs_are_recorded_in_the_card_and_give_status_1(tree, tmp_path):
+    from zbuf_occlude.farm import discover_objects
+
+    out = tmp_path / "ds"
+    summary = run_farm(discover_objects(tree), out, params=PARAMS, progress=False, skipped=[("in/locked", "permission denied")])
+    assert summary.done == len(MESHES) and summary.exit_status == 1
+    assert "SKIPPED   in/locked: permission denied" in summary.format()
+    card = json.loads((out / CARD_FILE).read_text())
+    assert card["skipped_inputs"] == [{"path": "in/locked", "reason": "permission denied"}]
+    assert run_farm(discover_objects(tree), out, params=PARAMS, progress=False).exit_status == 0

@@ -75,7 +75,9 @@ def cmd_generate(args: argparse.Namespace) -> int:
     source = {o.name: o.source for o in objects}
     for name, err in summary.failures:
         print(f"FAILED {source.get(name, name)}: {err}", file=sys.stderr)
-    return 1 if summary.failed else 0
+    for path, reason in summary.skipped:
+        print(f"SKIPPED {path}: {reason}", file=sys.stderr)
+    return summary.exit_status
 
 
 # -- validate ----------------------------------------------------------------------------------

@@ -56,7 +56,9 @@ def check_gl(resolution: int) -> None:
         env = os.environ.get("ZBUF_OCCLUDE_GL")
         where = f" (ZBUF_OCCLUDE_GL={env!r}; unset it or use egl, osmesa or an order such as osmesa,egl)" if env else ""
         raise BackendUnavailable(f"{exc}{where}") from exc
-    # TODO(badinput): use the GL max-size check of render/context.py once it lands, so the limit is queried in one place
+    # TODO(badinput): replace the three lines below by
+    #   render.context.check_image_size(resolution, ctx=ctx, name="--resolution")
+    # (it takes the smallest of the texture, renderbuffer and viewport limits), so the limit is queried in one place
     limit = int(ctx.info.get("GL_MAX_RENDERBUFFER_SIZE", 0) or 0)
     if limit and resolution > limit:
         raise InvalidInputError(f"--resolution {resolution} is larger than this OpenGL can render ({limit} pixels, GL_MAX_RENDERBUFFER_SIZE)")
@@ -84,7 +86,10 @@ def check_before_work(params: FarmParams, out: str | os.PathLike, *, gl: bool = 
         camera_on_sphere(0.0, 0.0, params.radius, resolution=params.resolution)
     except CameraError as exc:
         raise InvalidInputError(f"--radius {params.radius}: {exc}") from None
-    # TODO(badinput): zbuf_occlude.resources memory estimate (points, dense points, resolution) goes here
+    # TODO(badinput): sampling.check_seed(params.seed, name="--seed") (FarmParams checks >= 0 meanwhile) and
+    #   resources.check_memory(resources.estimate_job_memory(points=params.n_points,
+    #       samples_per_view=params.samples_per_view, dense_points=params.dense_points or 0,
+    #       resolution=params.resolution, workers=workers)) go here, before any mesh is loaded
     prepare_out(Path(out))
     if gl:
         check_gl(params.resolution)

@@ -55,7 +55,7 @@ def _farm_command(args: argparse.Namespace) -> int:
         command=shlex.join(["zbuf-occlude", *sys.argv[1:]]) if sys.argv else None,
     )
     print(summary.format())
-    return 1 if summary.failed else 0
+    return summary.exit_status
 
 
 def _merge_command(args: argparse.Namespace) -> int:

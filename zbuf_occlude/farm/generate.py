@@ -146,10 +146,13 @@ def generate(
     if params.storage not in GENERATE_STORAGES:
         raise InvalidInputError(f"generate writes one of {GENERATE_STORAGES}, not {params.storage!r}")
     objects = objects_from_paths(paths)
+    # TODO(badinput): take discovery.scan_meshes(paths).skipped here and pass it as skipped=
+    skipped: list[tuple[str, str]] = []
     out = Path(out)
     summary = run_farm(
         objects, out, params=params, workers=1, overwrite=overwrite, progress=progress, command=command,
         source_text=", ".join(str(Path(p).resolve()) for p in paths),
         on_finished=(lambda folder: _merge_h5(folder, objects)) if params.storage == "h5" else None,
+        skipped=skipped,
     )  # fmt: skip
     return summary, objects

@@ -105,8 +105,18 @@ def folder_bytes(out: Path) -> int:
     return sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
 
 
-def finalize(out: Path, plan: dict[str, Any], records: dict[int, dict[str, Any]], commands: list[str]) -> None:
-    """Write manifest, shape names, file lists and (last: it marks the data set finished) the card."""
+def finalize(
+    out: Path,
+    plan: dict[str, Any],
+    records: dict[int, dict[str, Any]],
+    commands: list[str],
+    skipped: Sequence[tuple[str, str]] = (),
+) -> None:
+    """Write manifest, shape names, file lists and (last: it marks the data set finished) the card.
+
+    ``skipped``: ``(path, reason)`` of inputs discovery could not take (unreadable folders,
+    names that are not UTF-8), recorded in the card as ``skipped_inputs``.
+    """
     objects = objects_of(plan)
     params = FarmParams(**plan["params"])
     write_text(out / MANIFEST_FILE, manifest_lines(objects, params, records))
@@ -135,6 +145,7 @@ def finalize(out: Path, plan: dict[str, Any], records: dict[int, dict[str, Any]]
         "n_objects": len(objects),
         "n_objects_ok": len(ok),
         "n_objects_failed": len(objects) - len(ok),
+        "skipped_inputs": [{"path": p, "reason": r} for p, r in skipped],
         "n_samples": int(sum(r["n_samples"] for r in ok)),
         "shard_bytes": int(sum(r["bytes"] for r in ok)),
         "renderers": sorted({r["renderer"] for r in ok if r.get("renderer")}),
@@ -165,6 +176,13 @@ class FarmSummary:
     workers: str = "1 process"
     peak_rss_mb: float = 0.0
     failures: list[tuple[str, str]] = field(default_factory=list)
+    #: ``(path, reason)`` of inputs that could not even be planned (unreadable folder, non-UTF-8 name).
+    skipped: list[tuple[str, str]] = field(default_factory=list)
+
+    @property
+    def exit_status(self) -> int:
+        """0 if every input was done, 1 if some failed or were skipped (the CLI's status)."""
+        return 1 if self.failed or self.skipped else 0
 
     @property
     def samples_per_mb(self) -> float:
@@ -189,6 +207,8 @@ class FarmSummary:
         ]
         for name, error in self.failures[:10]:
             lines.append(f"  FAILED    {name}: {error}")
+        for path, reason in self.skipped[:10]:
+            lines.append(f"  SKIPPED   {path}: {reason}")
         if len(self.failures) > 10:
             lines.append(f"  ... and {len(self.failures) - 10} more failures (see {MANIFEST_FILE})")
         return "\n".join(lines)

@@ -177,6 +177,7 @@ def run_farm(
     command: str | None = None,
     source_text: str | None = None,
     on_finished: Callable[[Path], Any] | None = None,
+    skipped: Sequence[tuple[str, str]] = (),
 ) -> FarmSummary:
     """Build (or resume) an occluded data set from many meshes.
 
@@ -212,6 +213,9 @@ def run_farm(
     on_finished : callable, optional
         Called with the data set folder, still under the lock, once an unsharded run has
         written its card (``generate --format h5`` joins its parts there).
+    skipped : sequence of (path, reason)
+        Inputs the caller's discovery could not take (a ready plan); recorded in the card
+        and the summary, so the run ends with status 1.
 
     Returns
     -------
@@ -239,6 +243,7 @@ def run_farm(
     check_before_work(params, out, gl=not (scheduler or dask_local))
     if isinstance(source, (str, os.PathLike)):
         source_text = source_text or str(Path(source).resolve())
+        # TODO(badinput): objects, found_skipped = scan_objects(...) once discovery reports what it skipped
         objects = discover_objects(source, classes=classes, per_class=per_class, splits=splits)
     else:
         objects, source_text = list(source), source_text or "<objects given by the caller>"
@@ -251,7 +256,7 @@ def run_farm(
         return _run_locked(
             out, objects, mine, params, source_text, shard=shard, workers=workers, scheduler=scheduler,
             dask_local=dask_local, overwrite=overwrite, progress=progress, command=command, t0=t0,
-            on_finished=on_finished,
+            on_finished=on_finished, skipped=[(str(p), str(r)) for p, r in skipped],
         )  # fmt: skip
 
 
@@ -271,6 +276,7 @@ def _run_locked(
     command: str | None,
     t0: float,
     on_finished: Callable[[Path], Any] | None = None,
+    skipped: list[tuple[str, str]] | None = None,
 ) -> FarmSummary:
     """:func:`run_farm` once the lock of ``out`` (or of this task) is held."""
     task, n_tasks = shard
@@ -344,7 +350,7 @@ def _run_locked(
 
     finished = False
     if n_tasks == 1:
-        finalize(out, plan, records, [command])
+        finalize(out, plan, records, [command], skipped or ())
         finished = True
         if on_finished is not None:
             on_finished(out)
@@ -366,6 +372,7 @@ def _run_locked(
         workers=workers_text,
         peak_rss_mb=peak,
         failures=[(r["name"], r["error"]) for r in records.values() if r["status"] != "ok"],
+        skipped=list(skipped or ()),
     )
 
 
