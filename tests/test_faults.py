@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from zbuf_occlude.dataset import CARD_FILE, MANIFEST_FILE, OccludedDataset
-from zbuf_occlude.farm import FarmParams, run_farm
+from zbuf_occlude.farm import FarmParams, merge_farm, run_farm
 from zbuf_occlude.farm.lock import LOCK_FILE, DatasetBusy, farm_lock, task_lock_path
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -162,6 +162,8 @@ def test_shard_tasks_run_at_once_but_not_beside_a_whole_run(tree, tmp_path):
             run_farm(tree, out, params=PARAMS, progress=False)
         with pytest.raises(DatasetBusy, match=f"task 0/2.*pid {holder.pid}"):
             run_farm(tree, out, params=PARAMS, shard=(0, 2), progress=False)
+        with pytest.raises(DatasetBusy, match=f"task 0/2.*pid {holder.pid}"):
+            merge_farm([out])  # a merge waits for every task
     finally:
         holder.kill()
         holder.wait()

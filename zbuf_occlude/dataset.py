@@ -183,7 +183,11 @@ class OccludedDataset(Sequence):
     Raises
     ------
     InvalidInputError
-        Not a finished farm data set, a newer format, an unknown split or class name.
+        Not a finished farm data set, a newer format, a damaged card or manifest (the
+        message names the file and line), an unknown split or class name.
+    ShardChecksumError
+        On access: a shard's bytes differ from the SHA-256 in the manifest (it names the
+        shard; rerunning the farm command redoes that object).
 
     Examples
     --------
