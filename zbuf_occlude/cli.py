@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import signal
 import sys
 import time
 from collections.abc import Sequence
@@ -19,10 +20,9 @@ from ._version import __version__
 from .cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
 from .defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION
 from .errors import InvalidInputError, ZbufOccludeError
-from .io import FORMATS, read_h5_clouds, write_csv, write_h5, write_npz, write_ply, write_text
-from .mesh import class_and_split, find_meshes, load_mesh
+from .io import FORMATS, write_csv
+from .mesh import find_meshes, load_mesh
 from .metrics import agreement
-from .occlude import DEFAULT_DENSE_POINTS, dense_cloud, object_key, occlude_object
 from .sampling import sample_surface
 from .visibility.registry import available_methods, get_method, visible_mask
 
@@ -49,79 +49,51 @@ def _progress(iterable, **kwargs):
 
 
 # -- generate ------------------------------------------------------------------------------
-def _write_clouds(fmt: str, folder: Path, name: str, pose_index: int, clouds) -> list[Path]:
-    stem = Path(name).name
-    written = []
-    for c in clouds:
-        # e.g. chair_0001_v007_el+030_az045_s03.npz: the pose index keeps names unique,
-        # the angles (rounded to whole degrees) keep them readable.
-        base = f"{stem}_v{pose_index:03d}_el{c.elevation_deg:+04.0f}_az{c.azimuth_deg:03.0f}_s{c.sample_index:02d}"
-        written.append(write_npz(folder / f"{base}.npz", c) if fmt == "npz" else write_ply(folder / f"{base}.ply", c))
-    return written
-
-
 def cmd_generate(args: argparse.Namespace) -> int:
-    meshes = find_meshes(_default_paths(args.paths))
-    poses = view_schedule(args.views)
-    out = Path(args.out)
-    class_names = sorted({class_and_split(p)[0] for p, _ in meshes})
-    labels = {c: i for i, c in enumerate(class_names)}
-    done_dir = out / ".done"
-    failed: list[tuple[str, str]] = []
-    n_written = 0
+    """``generate`` runs on the farm's engine (:mod:`zbuf_occlude.farm.generate`)."""
+    import shlex
+
+    from .farm import FarmParams
+    from .farm.checks import check_before_work
+    from .farm.generate import generate
+
+    params = FarmParams(
+        views=args.views, samples_per_view=args.samples_per_view, n_points=args.points, dense_points=args.dense_points,
+        resolution=args.resolution, seed=args.seed, radius=args.radius, storage=args.format, method=args.method,
+    )  # fmt: skip
+    paths = _default_paths(args.paths)
+    check_before_work(params, args.out)  # options, --out and the GL, before any mesh is looked at
     t0 = time.perf_counter()
-    bar = _progress(meshes, desc="meshes", unit="mesh")
-    for path, name in bar:
-        marker = done_dir / f"{_flat(name)}.done"
-        if marker.exists() and not args.overwrite:
-            continue  # finished in an earlier run
-        try:
-            mesh = load_mesh(path)
-            cls, _ = class_and_split(path)
-            dense = dense_cloud(mesh, object_key(name), seed=args.seed, count=args.dense_points)
-            parts = []
-            for pose_index, _, clouds in occlude_object(
-                mesh, poses, key=object_key(name), n_points=args.points, samples_per_view=args.samples_per_view,
-                seed=args.seed, dense=dense, method=args.method, resolution=args.resolution, radius=args.radius,
-                label=labels[cls], class_name=cls, source=str(path),
-            ):  # fmt: skip
-                if args.format == "h5":
-                    parts.extend(clouds)
-                else:
-                    n_written += len(_write_clouds(args.format, out / name, name, pose_index, clouds))
-            if args.format == "h5":
-                write_h5(out / ".parts" / f"{_flat(name)}.h5", parts, shape_names=class_names)
-                n_written += len(parts)
-            write_text(marker, f"{path}\n")
-        except ZbufOccludeError as exc:
-            failed.append((str(path), str(exc)))
-            log.error("skipped %s: %s", path, exc)
-        bar.set_postfix(samples=n_written, failed=len(failed))
-    if args.format == "h5":
-        _merge_h5_parts(out, meshes, class_names)
+    summary, objects = generate(
+        paths, args.out, params=params, overwrite=args.overwrite, progress=True,
+        command=shlex.join(["zbuf-occlude", *sys.argv[1:]]) if sys.argv else None,
+    )  # fmt: skip
     elapsed = time.perf_counter() - t0
-    print(f"{len(meshes) - len(failed)} meshes done, {len(failed)} failed, {n_written} samples written in {elapsed:.1f} s -> {out}")
-    for path, err in failed:
-        print(f"FAILED {path}: {err}", file=sys.stderr)
-    return 1 if failed else 0
-
-
-def _flat(name: str) -> str:
-    # one file per mesh in .done/ and .parts/: the mesh's relative name, flattened
-    return name.replace("/", "__")
-
-
-def _merge_h5_parts(out: Path, meshes, class_names) -> None:
-    parts = [out / ".parts" / f"{_flat(name)}.h5" for _, name in meshes]
-    clouds = [c for p in parts if p.exists() for c in read_h5_clouds(p)]
-    if clouds:
-        write_h5(out / "occluded.h5", clouds, shape_names=class_names)
+    print(
+        f"{summary.done} meshes done, {summary.failed} failed, {summary.samples} samples "
+        f"({summary.resumed} meshes from an earlier run) in {elapsed:.1f} s -> {args.out}"
+    )
+    source = {o.name: o.source for o in objects}
+    for name, err in summary.failures:
+        print(f"FAILED {source.get(name, name)}: {err}", file=sys.stderr)
+    for path, reason in summary.skipped:
+        print(f"SKIPPED {path}: {reason}", file=sys.stderr)
+    return summary.exit_status
 
 
 # -- validate ----------------------------------------------------------------------------------
+def _check_at_least(args: argparse.Namespace, **lowest: int) -> None:
+    """Usage errors name the option: ``--points must be an integer >= 1, got 0``."""
+    for name, low in lowest.items():
+        value = getattr(args, name)
+        if value < low:
+            raise InvalidInputError(f"--{name.replace('_', '-')} must be an integer >= {low}, got {value}")
+
+
 def cmd_validate(args: argparse.Namespace) -> int:
-    meshes = find_meshes(_default_paths(args.paths))
+    _check_at_least(args, points=1, resolution=1, seed=0)
     poses = view_schedule(args.views)
+    meshes = find_meshes(_default_paths(args.paths))
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     for m in methods:
         get_method(m)  # unknown names fail here, before any work
@@ -198,12 +170,17 @@ def build_parser() -> argparse.ArgumentParser:
     g = sub.add_parser("generate", help="occluded point clouds from meshes")
     _add_common(g, points=2048)
     g.add_argument("--out", required=True, help="output folder")
-    g.add_argument("--samples-per-view", type=int, default=10, help="random draws per pose")
-    g.add_argument("--dense-points", type=int, default=DEFAULT_DENSE_POINTS, help="dense cloud per mesh, drawn from per pose")
-    g.add_argument("--format", choices=FORMATS, default="npz")
-    g.add_argument("--method", default=DEFAULT_METHOD, help="visibility method (see `zbuf-occlude info`)")
-    g.add_argument("--overwrite", action="store_true", help="redo meshes finished by an earlier run")
-    g.set_defaults(func=cmd_generate)
+    g.add_argument("--samples-per-view", type=int, help="random draws per pose (default: 10)")
+    g.add_argument("--dense-points", type=int, help="dense cloud per mesh, drawn from per pose (default: 100000)")
+    g.add_argument("--format", choices=FORMATS, help="npz or ply: one file per sample; h5: PointNet's layout (default: npz)")
+    g.add_argument("--method", help="visibility method (see `zbuf-occlude info`; default: zbuffer)")
+    g.add_argument("--overwrite", action="store_true", help="start over (needed to change options in an existing --out)")
+    from .farm.generate import GENERATE_DEFAULTS as gd  # generate's defaults live beside its engine
+
+    g.set_defaults(
+        func=cmd_generate, views=gd.views, points=gd.n_points, resolution=gd.resolution,
+        samples_per_view=gd.samples_per_view, dense_points=gd.dense_points, format=gd.storage, method=gd.method,
+    )  # fmt: skip
 
     v = sub.add_parser("validate", help="agreement of visibility methods with the exact oracle, per mesh and pose")
     _add_common(v, points=100_000)
@@ -237,9 +214,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ZbufOccludeError as exc:
         print(f"zbuf-occlude: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
+        # 130 after Ctrl-C (SIGINT), 143 after SIGTERM (farm.lifecycle.Terminated): 128 + the signal
         print("zbuf-occlude: interrupted; run the same command again to resume", file=sys.stderr)
-        return 130
+        return 128 + getattr(exc, "signum", signal.SIGINT)
 
 
 if __name__ == "__main__":

@@ -1,37 +1,7 @@
 """Read the data sets that :func:`zbuf_occlude.farm.run_farm` writes: :class:`OccludedDataset`.
 
-Layout of a data set folder (``format_version`` 1; the farm writes it, this module owns it)::
-
-    DATASET/
-      dataset_card.json      parameters, poses, tool version, command line, GL renderer
-      shape_names.txt        one class name per line; line i is label i (PointNet)
-      train_files.txt        shards of the train split, paths relative to DATASET (PointNet)
-      test_files.txt         ... of the test split
-      manifest.jsonl         one JSON object per line and object: source, class, split, status,
-                             error, shards, visible-point counts per pose, seed, key, time
-      shards/<split>_<object_index:06d>.h5
-                             one shard per object (the unit a resumed run never redoes)
-      records/, tasks/, plan.json
-                             the farm's journal (resume, sharded runs, farm-merge)
-
-Two storage modes, chosen with ``--storage``:
-
-``dense``
-    PointNet's HDF5 layout: ``data (B, n, 3) float32``, ``label (B,) int64``,
-    ``elevation_deg (B,)`` and ``azimuth_deg (B,)`` float64 (degrees), ``object_index``,
-    ``pose_index``, ``sample_index``, ``n_visible`` ``(B,) int64``.  Any PointNet-style
-    loader reads it as is.
-``compact``
-    The object's dense cloud once, ``dense_points (M, 3) float32``, and per pose a
-    visibility bitmask ``visible_bits (P, ceil(M / 8)) uint8`` (:func:`numpy.packbits`),
-    plus ``n_visible``, ``elevation_deg``, ``azimuth_deg`` ``(P,)``.  The samples are
-    redrawn by the reader from the deterministic generators of
-    :func:`zbuf_occlude.occlude.pose_samples`,
-    bit-identical to what ``dense`` stores (the dense cloud is float32 in both modes
-    before indexing, so indexing commutes with the cast).
-
-Row order inside a shard, and sample order of the reader: pose-major, then sample index.
-A pose from which nothing is visible has no samples (:func:`zbuf_occlude.occlude.occlude_object`).
+The folder layout, the storage modes and the shard schemas are in :mod:`zbuf_occlude.layout`;
+this module reads them (both storage modes, and ``generate --format h5`` folders).
 """
 
 from __future__ import annotations
@@ -47,11 +17,22 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import InvalidInputError
+from .layout import (
+    CARD_FILE,
+    FORMAT_VERSION,
+    MANIFEST_FILE,
+    SAMPLE_FILE_FORMATS,
+    SHAPE_NAMES_FILE,
+    SHARD_DIR,
+    STORAGE_MODES,
+    file_list_name,
+)
 from .mesh import SPLITS
 from .occlude import pose_samples
 
 __all__ = [
     "OccludedDataset",
+    "ShardChecksumError",
     "reconstruct_samples",
     "unpack_visible",
     "samples_per_pose",
@@ -66,15 +47,6 @@ __all__ = [
     "name_set",
 ]
 
-#: Version of the folder layout above; the reader refuses newer ones.
-FORMAT_VERSION = 1
-CARD_FILE = "dataset_card.json"
-MANIFEST_FILE = "manifest.jsonl"
-SHAPE_NAMES_FILE = "shape_names.txt"
-SHARD_DIR = "shards"
-#: Storage modes (module docstring).
-STORAGE_MODES = ("dense", "compact")
-#: Splits with a file list of their own (ModelNet's).
 #: Objects whose compact arrays (dense cloud and bitmasks, ~1 MB each) the reader keeps.
 DEFAULT_OBJECT_CACHE = 8
 #: HDF5 files the reader keeps open (dense storage), least recently used closed first.
@@ -83,12 +55,21 @@ DEFAULT_OPEN_FILES = 16
 #: as the exact floats of the schedule, so this only absorbs decimal round trips).
 POSE_MATCH_ATOL_DEG = 1e-6
 
+def _read_json_file(path: Path) -> Any:
+    """A JSON file of the data set; a damaged one raises an error naming it."""
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InvalidInputError(f"cannot read {path}: {exc}") from exc
+    except ValueError as exc:
+        raise InvalidInputError(f"{path} is damaged (not JSON: {exc}); rerun the farm command to rewrite it") from None
+
+
+class ShardChecksumError(InvalidInputError):
+    """A shard's bytes differ from the SHA-256 the farm recorded for it in the manifest."""
+
+
 PoseFilter = float | Iterable[float] | Callable[[float], bool] | None
-
-
-def file_list_name(split: str) -> str:
-    """PointNet's name of a split's shard list, e.g. ``train_files.txt``."""
-    return f"{split}_files.txt"
 
 
 def samples_per_pose(n_visible: NDArray[np.integer], samples_per_view: int) -> NDArray[np.int64]:
@@ -202,7 +183,11 @@ class OccludedDataset(Sequence):
     Raises
     ------
     InvalidInputError
-        Not a finished farm data set, a newer format, an unknown split or class name.
+        Not a finished farm data set, a newer format, a damaged card or manifest (the
+        message names the file and line), an unknown split or class name.
+    ShardChecksumError
+        On access: a shard's bytes differ from the SHA-256 in the manifest (it names the
+        shard; rerunning the farm command redoes that object).
 
     Examples
     --------
@@ -227,13 +212,22 @@ class OccludedDataset(Sequence):
                 f"{self.root} is not a finished farm data set (no {CARD_FILE}); let `zbuf-occlude farm` finish, "
                 "or run `zbuf-occlude farm-merge` after sharded runs"
             )
-        self.card: dict[str, Any] = json.loads(card_path.read_text(encoding="utf-8"))
+        self.card: dict[str, Any] = _read_json_file(card_path)
+        if not isinstance(self.card, dict) or not {"storage", "params", "poses"} <= self.card.keys():
+            raise InvalidInputError(f"{card_path} is not a data set card (storage, params, poses missing); rerun the farm command")
         version = int(self.card.get("format_version", 0))
         if version > FORMAT_VERSION:
             raise InvalidInputError(
                 f"{self.root} has data set format {version}; this zbuf_occlude reads up to {FORMAT_VERSION}: upgrade it"
             )
         self.storage: str = self.card["storage"]
+        if self.storage in SAMPLE_FILE_FORMATS:
+            raise InvalidInputError(
+                f"{self.root} was written by `generate --format {self.storage}`: one file per sample, read them with "
+                f"zbuf_occlude.io.read_{self.storage if self.storage == 'npz' else 'ply (Open3D, trimesh)'}"
+            )
+        if self.storage not in (*STORAGE_MODES, "h5"):
+            raise InvalidInputError(f"{card_path}: unknown storage {self.storage!r}; this zbuf_occlude reads {STORAGE_MODES}")
         params = self.card["params"]
         self.n_points: int = int(params["n_points"])
         self._samples_per_view = int(params["samples_per_view"])
@@ -254,28 +248,44 @@ class OccludedDataset(Sequence):
             raise InvalidInputError(f"unknown split(s) {sorted(unknown)} in {self.root}; it has {sorted(known_splits)}")
 
         self._objects: list[dict[str, Any]] = []
+        self._digests: dict[Path, str] = {}  # shard → SHA-256 recorded by the farm
+        self._verified: set[Path] = set()
         obj_rows, poses_rows, sample_rows, shard_rows = [], [], [], []
-        with open(self.root / MANIFEST_FILE, encoding="utf-8") as fh:
-            for line in fh:
-                if not line.strip():
-                    continue
+        manifest_path = self.root / MANIFEST_FILE
+        try:
+            manifest_text = manifest_path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise InvalidInputError(f"cannot read the manifest {manifest_path}: {exc}; rerun the farm command") from exc
+        for lineno, line in enumerate(manifest_text.splitlines(), start=1):
+            if not line.strip():
+                continue
+            try:
                 rec = json.loads(line)
-                if rec.get("status") != "ok":
-                    continue
-                if splits is not None and rec["split"] not in splits:
-                    continue
-                if wanted_classes is not None and rec["class_name"] not in wanted_classes:
-                    continue
-                spp = samples_per_pose(np.asarray(rec["n_visible"], dtype=np.int64), self._samples_per_view)
-                pose = np.repeat(np.arange(len(spp)), spp)
-                starts = np.cumsum(spp) - spp
-                sample = np.arange(len(pose)) - np.repeat(starts, spp)
-                keep = pose_keep[pose]
-                obj_rows.append(np.full(int(keep.sum()), len(self._objects), dtype=np.int64))
-                poses_rows.append(pose[keep])
-                sample_rows.append(sample[keep])
-                shard_rows.append(np.flatnonzero(keep))
-                self._objects.append(rec)
+                if not isinstance(rec, dict):
+                    raise ValueError("not a JSON object")
+            except ValueError as exc:
+                raise InvalidInputError(
+                    f"{manifest_path}:{lineno} is not a manifest record ({exc}); the file is damaged: rerun "
+                    "the farm command (it rewrites the manifest from the records)"
+                ) from None
+            if rec.get("status") != "ok":
+                continue
+            if splits is not None and rec["split"] not in splits:
+                continue
+            if wanted_classes is not None and rec["class_name"] not in wanted_classes:
+                continue
+            spp = samples_per_pose(np.asarray(rec["n_visible"], dtype=np.int64), self._samples_per_view)
+            pose = np.repeat(np.arange(len(spp)), spp)
+            starts = np.cumsum(spp) - spp
+            sample = np.arange(len(pose)) - np.repeat(starts, spp)
+            keep = pose_keep[pose]
+            obj_rows.append(np.full(int(keep.sum()), len(self._objects), dtype=np.int64))
+            poses_rows.append(pose[keep])
+            sample_rows.append(sample[keep])
+            shard_rows.append(np.flatnonzero(keep))
+            self._objects.append(rec)
+            for rel, digest in zip(rec["shards"], rec.get("sha256") or ()):
+                self._digests[self.root / rel] = digest
 
         def cat(parts: list[NDArray[np.int64]]) -> NDArray[np.int64]:
             return np.concatenate(parts).astype(np.int64) if parts else np.zeros(0, dtype=np.int64)
@@ -306,12 +316,31 @@ class OccludedDataset(Sequence):
             self._reset_handles()
         f = self._files.get(path)
         if f is None:
+            self._verify(path)
             f = self._files[path] = h5py.File(path, "r")
             while len(self._files) > DEFAULT_OPEN_FILES:
                 self._files.popitem(last=False)[1].close()
         else:
             self._files.move_to_end(path)
         return f
+
+    def _verify(self, path: Path) -> None:
+        """Check a shard against its SHA-256 in the manifest, once per process."""
+        digest = self._digests.get(path)
+        if digest is None or path in self._verified:
+            return
+        from .io import file_sha256
+
+        try:
+            actual = file_sha256(path)
+        except OSError as exc:
+            raise InvalidInputError(f"cannot read the shard {path}: {exc.strerror or exc}") from exc
+        if actual != digest:
+            raise ShardChecksumError(
+                f"the shard {path} was changed after the farm wrote it (SHA-256 {actual[:12]}…, the manifest "
+                f"records {digest[:12]}…); run the same farm command again to redo that object"
+            )
+        self._verified.add(path)
 
     def _compact_arrays(self, obj: int) -> tuple[NDArray[np.float32], NDArray[np.uint8]]:
         hit = self._compact.get(obj)
@@ -338,7 +367,7 @@ class OccludedDataset(Sequence):
     def _points(self, i: int) -> NDArray[np.float32]:
         obj = int(self._obj[i])
         rec = self._objects[obj]
-        if self.storage == "dense":
+        if self.storage != "compact":
             f = self._file(self.root / rec["shards"][0])
             return f["data"][int(self._row[i])]
         dense_points, bits = self._compact_arrays(obj)
@@ -398,7 +427,7 @@ class OccludedDataset(Sequence):
             obj = int(self._obj[start])
             rec = self._objects[obj]
             labels[start:stop] = int(rec["label"])
-            if self.storage == "dense":
+            if self.storage != "compact":
                 rows = self._row[start:stop]
                 data[start:stop] = self._file(self.root / rec["shards"][0])["data"][()][rows]
                 continue

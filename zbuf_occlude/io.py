@@ -11,20 +11,28 @@ from __future__ import annotations
 import contextlib
 import errno
 import functools
+import hashlib
 import os
+import re
+import socket
 import tempfile
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from .errors import OutputError
 
 __all__ = [
     "OccludedCloud",
     "atomic_path",
+    "TempOwner",
+    "temp_owner",
+    "temp_is_orphan",
+    "file_sha256",
     "write_text",
     "write_csv",
     "write_npz",
@@ -96,9 +104,85 @@ def _raise_output_error(path: Path, exc: OSError) -> None:
     raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from exc
 
 
+@functools.lru_cache(maxsize=1)
+def _host_tag() -> str:
+    # 8 hex digits of the host name: temp names stay short and free of the dots host names hold
+    return hashlib.blake2b(socket.gethostname().encode("utf-8", "surrogateescape"), digest_size=4).hexdigest()
+
+
+#: ``.<target>.<pid>-<host tag>-<random>.tmp``: the temporary files of :func:`atomic_path`.
+_TEMP_RE = re.compile(r"^\.(?P<target>.+)\.(?P<pid>\d+)-(?P<host>[0-9a-f]{8})-[^.]*\.tmp$")
+#: Temporary files of older versions, ``.<target>.<random>.tmp`` (no owner recorded).
+_LEGACY_TEMP_RE = re.compile(r"^\.(?P<target>.+)\.[^.]+\.tmp$")
+
+
+@dataclass(frozen=True)
+class TempOwner:
+    """Who wrote a temporary file of :func:`atomic_path` (parsed from its name).
+
+    Attributes
+    ----------
+    target : str
+        Name of the file it was going to become.
+    pid : int or None
+        Process id of the writer (``None``: a temp of an older version, owner unknown).
+    host_tag : str or None
+        Hash of the writer's host name (``None`` as above).
+    """
+
+    target: str
+    pid: int | None
+    host_tag: str | None
+
+
+def temp_owner(name: str) -> TempOwner | None:
+    """Parse a temporary file name of :func:`atomic_path`; ``None`` if it is not one."""
+    m = _TEMP_RE.match(name)
+    if m:
+        return TempOwner(m["target"], int(m["pid"]), m["host"])
+    m = _LEGACY_TEMP_RE.match(name)
+    return TempOwner(m["target"], None, None) if m else None
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's live process
+        return True
+    return True
+
+
+def temp_is_orphan(owner: TempOwner) -> bool:
+    """True if the process that wrote a temporary file is gone.
+
+    Only a process on this host can be checked; a temp of another host is never an
+    orphan here (its writer may be alive on a shared file system).  Temps of older
+    versions record no owner and count as orphans: call this only while holding the
+    data set's lock.
+    """
+    if owner.pid is None:
+        return True
+    return owner.host_tag == _host_tag() and not _pid_alive(owner.pid)
+
+
+def file_sha256(path: str | os.PathLike, *, chunk_bytes: int = 1 << 20) -> str:
+    """Hex SHA-256 of a file's bytes, read in ``chunk_bytes`` pieces."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while block := fh.read(chunk_bytes):
+            h.update(block)
+    return h.hexdigest()
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success fsync and rename it to ``path``.
+
+    The temporary name, ``.<name>.<pid>-<host tag>-<random>.tmp``, is unique per process and
+    records its writer (:func:`temp_owner`), so a cleanup removes only the temps of dead
+    processes (:func:`temp_is_orphan`).
 
     Raises
     ------
@@ -108,7 +192,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     path = Path(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}-{_host_tag()}-", suffix=".tmp", dir=path.parent)
         os.close(fd)
         # mkstemp makes 0600 files; outputs are meant to be shared, so give them the mode a
         # plain open() would (0666 less the umask)
@@ -224,39 +308,81 @@ def write_ply(path: str | os.PathLike, cloud: OccludedCloud) -> Path:
     return path
 
 
-def write_h5(path: str | os.PathLike, clouds: Sequence[OccludedCloud], *, shape_names: Sequence[str] = ()) -> Path:
+def write_h5(
+    path: str | os.PathLike,
+    clouds: Sequence[OccludedCloud],
+    *,
+    shape_names: Sequence[str] = (),
+    columns: Mapping[str, ArrayLike] | None = None,
+    attrs: Mapping[str, Any] | None = None,
+    provenance: bool = True,
+    n_points: int | None = None,
+) -> Path:
     """Write clouds of equal size ``n`` to one ``.h5`` file in PointNet's layout.
 
-    Datasets: ``data (B, n, 3) float32``, ``label (B,) int64``, ``face_index (B, n) int32``,
-    ``elevation_deg (B,)``, ``azimuth_deg (B,)``, ``radius (B,)`` float64,
-    ``sample_index (B,)``, ``n_visible (B,)`` int64, ``source (B,)`` and ``class_name (B,)``
-    UTF-8 strings; attribute ``shape_names`` (index → class name).
+    The one HDF5 writer of zbuf_occlude: ``generate --format h5`` and the farm's dense
+    shards both come from here (schema in :mod:`zbuf_occlude.layout`).
+
+    Datasets, one row per cloud: ``data (B, n, 3) float32``, ``label (B,) int64``,
+    ``elevation_deg (B,)``, ``azimuth_deg (B,)`` float64 (degrees), ``sample_index (B,)``,
+    ``n_visible (B,)`` int64; with ``provenance`` also ``face_index (B, n) int32``,
+    ``radius (B,) float64``, ``source (B,)`` and ``class_name (B,)`` UTF-8 strings.
+
+    Parameters
+    ----------
+    columns : mapping of name to (B,) array, optional
+        More per-row datasets (the farm's ``object_index``, ``pose_index``), stored as int64.
+    attrs : mapping, optional
+        File attributes (besides ``shape_names``, written when given).
+    provenance : bool
+        Write the per-point and per-row provenance datasets above (the farm's dense shards
+        leave them out: the manifest holds the source and class, and ``face_index`` would
+        add a third to the size).
+    n_points : int, optional
+        ``n`` when ``clouds`` is empty.
 
     Raises
     ------
     OutputError
-        Clouds of different sizes, or the file cannot be written.
+        Clouds of different sizes, or the file cannot be written (disk full included).
     """
     import h5py
 
     sizes = {len(c.points) for c in clouds}
     if len(sizes) > 1:
         raise OutputError(f"cannot write clouds of sizes {sorted(sizes)} into one HDF5 file: use one --points value")
-    n = sizes.pop() if sizes else 0
+    n = sizes.pop() if sizes else int(n_points or 0)
     text = h5py.string_dtype("utf-8")
     path = Path(path)
     with atomic_path(path) as tmp:
-        with h5py.File(tmp, "w") as f:
-            f.create_dataset("data", data=np.asarray([c.points for c in clouds], dtype=np.float32).reshape(-1, n, 3))
-            f.create_dataset("label", data=np.asarray([c.label for c in clouds], dtype=np.int64))
-            f.create_dataset("face_index", data=np.asarray([c.face_index for c in clouds], dtype=np.int32).reshape(-1, n))
-            for key in ("elevation_deg", "azimuth_deg", "radius"):
-                f.create_dataset(key, data=np.asarray([getattr(c, key) for c in clouds], dtype=np.float64))
-            for key in ("sample_index", "n_visible"):
-                f.create_dataset(key, data=np.asarray([getattr(c, key) for c in clouds], dtype=np.int64))
-            f.create_dataset("source", data=[c.source for c in clouds], dtype=text)
-            f.create_dataset("class_name", data=[c.class_name for c in clouds], dtype=text)
-            f.attrs["shape_names"] = list(shape_names)
+        try:
+            with h5py.File(tmp, "w") as f:
+
+                def put(key: str, data, dtype=None) -> None:
+                    # no modification times: the same inputs give the same bytes
+                    f.create_dataset(key, data=data, dtype=dtype, track_times=False)
+
+                put("data", np.asarray([c.points for c in clouds], dtype=np.float32).reshape(-1, n, 3))
+                put("label", np.asarray([c.label for c in clouds], dtype=np.int64))
+                put("elevation_deg", np.asarray([c.elevation_deg for c in clouds], dtype=np.float64))
+                put("azimuth_deg", np.asarray([c.azimuth_deg for c in clouds], dtype=np.float64))
+                for key, values in (columns or {}).items():
+                    put(key, np.asarray(values, dtype=np.int64).reshape(len(clouds)))
+                put("sample_index", np.asarray([c.sample_index for c in clouds], dtype=np.int64))
+                put("n_visible", np.asarray([c.n_visible for c in clouds], dtype=np.int64))
+                if provenance:
+                    put("face_index", np.asarray([c.face_index for c in clouds], dtype=np.int32).reshape(-1, n))
+                    put("radius", np.asarray([c.radius for c in clouds], dtype=np.float64))
+                    put("source", [c.source for c in clouds], text)
+                    put("class_name", [c.class_name for c in clouds], text)
+                if shape_names or provenance:
+                    f.attrs["shape_names"] = list(shape_names)
+                f.attrs.update(dict(attrs or {}))
+        except OSError as exc:
+            # HDF5 reports a full disk in its message, not always in errno
+            if exc.errno is None and "No space left" in str(exc):
+                raise OSError(errno.ENOSPC, str(exc)) from exc
+            raise
     return path
 
 

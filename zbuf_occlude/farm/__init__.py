@@ -18,17 +18,27 @@ Executors: in-process (``workers=1``), a process pool started with ``spawn`` (on
 context per worker process, never inherited across ``fork``), or Dask distributed
 (``scheduler="tcp://HOST:PORT"`` or ``dask_local=N``).  Beyond one machine, ``shard=(I, N)``
 runs the I-th of N deterministic partitions (a SLURM array or Kubernetes indexed job) and
-:func:`merge_farm` joins the outputs.  The folder layout is in :mod:`zbuf_occlude.dataset`.
+:func:`merge_farm` joins the outputs.  The folder layout is in :mod:`zbuf_occlude.layout`.
+
+Safety: one writer per data set (``lock``: :func:`farm_lock`, a ``--shard`` task locks only
+its own part), a SHA-256 of every file in its record (checked on resume and by the reader),
+workers that die with their parent and SIGTERM handled like Ctrl-C (``lifecycle``), and every
+option checked before any mesh is loaded (``checks``).  ``zbuf-occlude generate`` is this
+engine with one worker, its own defaults and npz/ply/h5 writers (``generate``).
 
 Modules: ``inputs`` (discovering objects, shards), ``config`` (parameters, constants,
-journal paths), ``worker`` (one object), ``journal`` (records, manifest, card, summary),
-``run`` (executors, :func:`run_farm`, :func:`merge_farm`), ``cli`` (the subcommands).
+journal paths), ``checks`` (up-front checks), ``worker`` (one object), ``journal`` (records,
+manifest, card, summary), ``lock``, ``lifecycle``, ``run`` (executors, :func:`run_farm`,
+:func:`merge_farm`), ``generate``, ``cli`` (the subcommands).
 """
 
 from .cli import add_farm_merge_parser, add_farm_parser
 from .config import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION, PAPER_SAMPLES_PER_MB, FarmParams, shard_path
 from .inputs import FarmObject, discover_objects, parse_shard, select_shard
+from .generate import GENERATE_DEFAULTS, generate, objects_from_paths
 from .journal import FarmSummary
+from .lifecycle import Terminated
+from .lock import DatasetBusy, farm_lock
 from .run import merge_farm, run_farm
 from .worker import process_object
 
@@ -36,6 +46,12 @@ __all__ = [
     "FarmObject",
     "FarmParams",
     "FarmSummary",
+    "DatasetBusy",
+    "Terminated",
+    "farm_lock",
+    "generate",
+    "objects_from_paths",
+    "GENERATE_DEFAULTS",
     "discover_objects",
     "process_object",
     "shard_path",

@@ -8,10 +8,8 @@ import shlex
 import sys
 
 from ..cameras import DEFAULT_RADIUS
-from ..dataset import (
-    STORAGE_MODES,
-)
 from ..errors import InvalidInputError
+from ..layout import STORAGE_MODES
 from .config import (
     DEFAULT_FARM_DENSE_POINTS,
     DEFAULT_FARM_RESOLUTION,
@@ -57,7 +55,7 @@ def _farm_command(args: argparse.Namespace) -> int:
         command=shlex.join(["zbuf-occlude", *sys.argv[1:]]) if sys.argv else None,
     )
     print(summary.format())
-    return 1 if summary.failed else 0
+    return summary.exit_status
 
 
 def _merge_command(args: argparse.Namespace) -> int:

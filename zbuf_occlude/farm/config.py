@@ -16,12 +16,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..cameras import DEFAULT_RADIUS, view_schedule
-from ..dataset import (
-    SHARD_DIR,
-    STORAGE_MODES,
-)
 from ..defaults import DEFAULT_METHOD
 from ..errors import BackendUnavailable, InvalidInputError, OutputError
+from ..layout import GENERATE_STORAGES, STORAGE_MODES, record_name, sample_file_name, shard_name
 
 if TYPE_CHECKING:  # annotations only: inputs imports nothing from here
     from .inputs import FarmObject
@@ -50,12 +47,17 @@ BYTES_PER_MB = 1e6
 MANIFEST_INTERVAL_S = 10.0
 #: gzip level of the compact visibility bitmasks (level 4 is within a few % of 9, much faster).
 COMPACT_GZIP_LEVEL = 4
-#: Names of the farm's journal inside the output folder.
-RECORD_DIR, TASK_DIR, PLAN_FILE = "records", "tasks", "plan.json"
 #: Errors that stop the whole run instead of failing one object: nothing else would work.
-_FATAL = (OutputError, BackendUnavailable)
+FATAL_ERRORS = (OutputError, BackendUnavailable)
 
-_GL_LOCK = threading.Lock()  # one GL context per process: threads of a Dask worker take turns
+#: Command-line option of each parameter, for messages (``storage`` is ``--format`` in ``generate``).
+OPTION_NAMES = {
+    "views": "--views", "samples_per_view": "--samples-per-view", "n_points": "--points",
+    "dense_points": "--dense-points", "density": "--density", "resolution": "--resolution", "seed": "--seed",
+    "radius": "--radius", "storage": "--storage/--format", "method": "--method",
+}  # fmt: skip
+
+GL_LOCK = threading.Lock()  # one GL context per process: threads of a Dask worker take turns
 
 
 # -- parameters ----------------------------------------------------------------------------
@@ -95,19 +97,21 @@ class FarmParams:
     method: str = DEFAULT_METHOD
 
     def __post_init__(self) -> None:
-        if self.storage not in STORAGE_MODES:
-            raise InvalidInputError(f"storage must be one of {STORAGE_MODES}, got {self.storage!r}")
-        if self.samples_per_view < 1 or self.n_points < 1 or self.resolution < 1:
-            raise InvalidInputError(
-                "need samples_per_view, n_points and resolution >= 1, got "
-                f"{self.samples_per_view}, {self.n_points}, {self.resolution}"
-            )
+        # messages name the command-line options (OPTION_NAMES), not the fields
+        if self.storage not in (*STORAGE_MODES, *GENERATE_STORAGES):
+            raise InvalidInputError(f"--storage must be one of {STORAGE_MODES}, got {self.storage!r}")
+        for field, lowest in (("samples_per_view", 1), ("n_points", 1), ("resolution", 1), ("seed", 0)):
+            value = getattr(self, field)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lowest:
+                raise InvalidInputError(f"{OPTION_NAMES[field]} must be an integer >= {lowest}, got {value!r}")
+        if not (isinstance(self.radius, (int, float, np.floating)) and np.isfinite(self.radius)):
+            raise InvalidInputError(f"--radius must be a finite number of object units, got {self.radius!r}")
         if self.density is not None:
             if not (np.isfinite(self.density) and self.density > 0):
-                raise InvalidInputError(f"density must be > 0 points per unit area, got {self.density}")
+                raise InvalidInputError(f"--density must be > 0 points per unit area, got {self.density}")
             object.__setattr__(self, "dense_points", None)
         elif self.dense_points is None or self.dense_points < 1:
-            raise InvalidInputError(f"dense_points must be >= 1, got {self.dense_points}")
+            raise InvalidInputError(f"--dense-points must be >= 1, got {self.dense_points}")
         view_schedule(self.views)  # raises InvalidInputError on a bad spec
 
     @functools.cached_property
@@ -127,14 +131,21 @@ def _digest(obj: Any) -> str:
     return hashlib.sha256(json.dumps(obj, sort_keys=True).encode()).hexdigest()[:16]
 
 
-def _plan_digest(objects: Sequence[FarmObject]) -> str:
+def plan_digest(objects: Sequence[FarmObject]) -> str:
     return _digest([[o.index, o.name, o.class_name, o.split, o.label] for o in objects])
 
 
 def shard_path(obj: FarmObject) -> str:
     """The shard of ``obj`` relative to the data set folder."""
-    return f"{SHARD_DIR}/{obj.split}_{obj.index:06d}.h5"
+    return shard_name(obj.split, obj.index)
 
 
-def _record_path(out: Path, index: int) -> Path:
-    return out / RECORD_DIR / f"{index:06d}.json"
+def sample_file_path(name: str, pose_index: int, cloud, fmt: str) -> str:
+    """``generate``'s file of one sample relative to ``--out``, e.g.
+    ``chair/train/chair_0001/chair_0001_v007_el+030_az045_s03.npz``: the pose index keeps
+    names unique, the angles (whole degrees) keep them readable."""
+    return sample_file_name(name, pose_index, cloud.elevation_deg, cloud.azimuth_deg, cloud.sample_index, fmt)
+
+
+def record_path(out: Path, index: int) -> Path:
+    return out / record_name(index)

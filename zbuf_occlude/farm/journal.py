@@ -11,69 +11,79 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from ..dataset import (
-    CARD_FILE,
-    FORMAT_VERSION,
-    MANIFEST_FILE,
-    SHAPE_NAMES_FILE,
-    SHARD_DIR,
-    SPLITS,
-    file_list_name,
-)
 from ..errors import InvalidInputError
-from ..io import write_text
-from .config import BYTES_PER_MB, FarmParams, PAPER_SAMPLES_PER_MB, RECORD_DIR, _plan_digest, _record_path, shard_path
+from ..io import file_sha256, temp_is_orphan, temp_owner, write_text
+from ..layout import CARD_FILE, FORMAT_VERSION, MANIFEST_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, file_list_name
+from ..mesh import SPLITS
+from .config import BYTES_PER_MB, PAPER_SAMPLES_PER_MB, FarmParams, plan_digest, record_path, shard_path
 from .inputs import FarmObject
-from .worker import _base_record, _version, _write_json
+from .worker import base_record, package_version, write_json
 
 log = logging.getLogger(__name__)
 
 
 # -- journal, manifest, card -------------------------------------------------------------------
-def _read_json(path: Path) -> Any | None:
+def read_json(path: Path) -> Any | None:
     try:
         return json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
 
 
-def _finished(out: Path, obj: FarmObject, digest: str) -> dict[str, Any] | None:
+def finished_record(out: Path, obj: FarmObject, digest: str) -> dict[str, Any] | None:
     """The record of ``obj`` if it finished (ok, same parameters, shard present and whole)."""
-    rec = _read_json(_record_path(out, obj.index))
+    rec = read_json(record_path(out, obj.index))
     if not rec or rec.get("params_digest") != digest or rec.get("name") != obj.name or rec.get("status") != "ok":
         return None
-    for rel in rec["shards"]:
-        shard = out / rel
-        if not shard.is_file() or shard.stat().st_size != rec["bytes"]:
+    sizes_ok = all((out / rel).is_file() for rel in rec["shards"]) and sum(
+        (out / rel).stat().st_size for rel in rec["shards"]
+    ) == rec["bytes"]
+    if not sizes_ok:
+        return None
+    # a shard rewritten in place keeps its size: compare the bytes (records of older
+    # versions carry no digest and are trusted on their size)
+    for rel, digest in zip(rec["shards"], rec.get("sha256") or ()):
+        if file_sha256(out / rel) != digest:
+            log.warning("%s does not match its SHA-256 in %s: redoing %s", out / rel, record_path(out, obj.index), obj.name)
             return None
     return rec
 
 
-def _remove_stale_temps(out: Path, objects: Sequence[FarmObject], everything: bool) -> None:
-    # atomic_path leaves ".<name>.<random>.tmp" behind when a run is SIGKILLed mid-write;
-    # a sharded task removes only its own, other tasks may be writing theirs right now
+def remove_stale_temps(out: Path, objects: Sequence[FarmObject], everything: bool) -> int:
+    """Remove the temporary files that dead writers left in ``out``; return how many.
+
+    :func:`~zbuf_occlude.io.atomic_path` leaves ``.<name>.<pid>-<host>-<random>.tmp`` behind
+    when a run is SIGKILLed mid-write.  Only temps of dead processes on this host go
+    (:func:`~zbuf_occlude.io.temp_is_orphan`), and a sharded task (``everything=False``)
+    touches only those of its own objects: other tasks may be writing theirs right now.
+    Call it while holding the lock (:func:`~zbuf_occlude.farm.lock.farm_lock`).
+    """
     names = None if everything else {Path(shard_path(o)).name for o in objects} | {f"{o.index:06d}.json" for o in objects}
+    removed = 0
     for folder in (out / SHARD_DIR, out / RECORD_DIR, out):
         if not folder.is_dir():
             continue
         for tmp in folder.glob(".*.tmp"):
-            target = tmp.name[1:].rsplit(".", 2)[0]
-            if names is None or target in names:
-                tmp.unlink(missing_ok=True)
+            owner = temp_owner(tmp.name)
+            if owner is None or (names is not None and owner.target not in names) or not temp_is_orphan(owner):
+                continue
+            tmp.unlink(missing_ok=True)
+            removed += 1
+    return removed
 
 
-def _plan_doc(objects: Sequence[FarmObject], params: FarmParams, source: str) -> dict[str, Any]:
+def plan_doc(objects: Sequence[FarmObject], params: FarmParams, source: str) -> dict[str, Any]:
     return {
         "format_version": FORMAT_VERSION,
         "params": params.to_dict(),
         "params_digest": params.digest(),
-        "plan_digest": _plan_digest(objects),
+        "plan_digest": plan_digest(objects),
         "source": source,
         "objects": [dataclasses.asdict(o) for o in objects],
     }
 
 
-def _objects_of(plan: dict[str, Any]) -> list[FarmObject]:
+def objects_of(plan: dict[str, Any]) -> list[FarmObject]:
     return [FarmObject(**o) for o in plan["objects"]]
 
 
@@ -85,21 +95,31 @@ def _shape_names(objects: Sequence[FarmObject]) -> list[str]:
     return [names.get(i, f"unused_{i}") for i in range(max(names) + 1)] if names else []
 
 
-def _manifest_lines(objects: Sequence[FarmObject], params: FarmParams, records: dict[int, dict[str, Any]]) -> str:
-    return "".join(json.dumps(records.get(o.index) or _base_record(o, params), sort_keys=True) + "\n" for o in objects)
+def manifest_lines(objects: Sequence[FarmObject], params: FarmParams, records: dict[int, dict[str, Any]]) -> str:
+    return "".join(json.dumps(records.get(o.index) or base_record(o, params), sort_keys=True) + "\n" for o in objects)
 
 
 
 
-def _folder_bytes(out: Path) -> int:
+def folder_bytes(out: Path) -> int:
     return sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
 
 
-def _finalize(out: Path, plan: dict[str, Any], records: dict[int, dict[str, Any]], commands: list[str]) -> None:
-    """Write manifest, shape names, file lists and (last: it marks the data set finished) the card."""
-    objects = _objects_of(plan)
+def finalize(
+    out: Path,
+    plan: dict[str, Any],
+    records: dict[int, dict[str, Any]],
+    commands: list[str],
+    skipped: Sequence[tuple[str, str]] = (),
+) -> None:
+    """Write manifest, shape names, file lists and (last: it marks the data set finished) the card.
+
+    ``skipped``: ``(path, reason)`` of inputs discovery could not take (unreadable folders,
+    names that are not UTF-8), recorded in the card as ``skipped_inputs``.
+    """
+    objects = objects_of(plan)
     params = FarmParams(**plan["params"])
-    write_text(out / MANIFEST_FILE, _manifest_lines(objects, params, records))
+    write_text(out / MANIFEST_FILE, manifest_lines(objects, params, records))
     shape_names = _shape_names(objects)
     write_text(out / SHAPE_NAMES_FILE, "".join(f"{n}\n" for n in shape_names))
     splits = sorted({o.split for o in objects}, key=lambda s: (s not in SPLITS, s))
@@ -111,7 +131,7 @@ def _finalize(out: Path, plan: dict[str, Any], records: dict[int, dict[str, Any]
     card = {
         "format_version": FORMAT_VERSION,
         "tool": "zbuf_occlude",
-        "version": _version(),
+        "version": package_version(),
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "commands": commands,
         "source": plan["source"],
@@ -125,6 +145,7 @@ def _finalize(out: Path, plan: dict[str, Any], records: dict[int, dict[str, Any]
         "n_objects": len(objects),
         "n_objects_ok": len(ok),
         "n_objects_failed": len(objects) - len(ok),
+        "skipped_inputs": [{"path": p, "reason": r} for p, r in skipped],
         "n_samples": int(sum(r["n_samples"] for r in ok)),
         "shard_bytes": int(sum(r["bytes"] for r in ok)),
         "renderers": sorted({r["renderer"] for r in ok if r.get("renderer")}),
@@ -133,7 +154,7 @@ def _finalize(out: Path, plan: dict[str, Any], records: dict[int, dict[str, Any]
         "reference": "Sryamkin, Msallam, Klestov 2023, "
         "A method to create real-like point clouds for 3D object classification",
     }
-    _write_json(out / CARD_FILE, card)
+    write_json(out / CARD_FILE, card)
 
 
 # -- summary -------------------------------------------------------------------------------------
@@ -155,6 +176,13 @@ class FarmSummary:
     workers: str = "1 process"
     peak_rss_mb: float = 0.0
     failures: list[tuple[str, str]] = field(default_factory=list)
+    #: ``(path, reason)`` of inputs that could not even be planned (unreadable folder, non-UTF-8 name).
+    skipped: list[tuple[str, str]] = field(default_factory=list)
+
+    @property
+    def exit_status(self) -> int:
+        """0 if every input was done, 1 if some failed or were skipped (the CLI's status)."""
+        return 1 if self.failed or self.skipped else 0
 
     @property
     def samples_per_mb(self) -> float:
@@ -179,6 +207,8 @@ class FarmSummary:
         ]
         for name, error in self.failures[:10]:
             lines.append(f"  FAILED    {name}: {error}")
+        for path, reason in self.skipped[:10]:
+            lines.append(f"  SKIPPED   {path}: {reason}")
         if len(self.failures) > 10:
             lines.append(f"  ... and {len(self.failures) - 10} more failures (see {MANIFEST_FILE})")
         return "\n".join(lines)

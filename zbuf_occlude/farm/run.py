@@ -11,36 +11,33 @@ import shutil
 import socket
 import sys
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from ..dataset import (
-    CARD_FILE,
-    MANIFEST_FILE,
-    SHAPE_NAMES_FILE,
-    SHARD_DIR,
-    SPLITS,
-    file_list_name,
-)
 from ..errors import BackendUnavailable, InvalidInputError, OutputError
 from ..io import atomic_path, write_text
-from .config import FarmParams, MANIFEST_INTERVAL_S, PLAN_FILE, RECORD_DIR, TASK_DIR, _record_path, shard_path
+from ..layout import CARD_FILE, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, TASK_DIR, file_list_name
+from ..mesh import SPLITS
+from .checks import check_before_work, prepare_out
+from .config import MANIFEST_INTERVAL_S, OPTION_NAMES, FarmParams, record_path, shard_path
 from .inputs import FarmObject, discover_objects, select_shard
 from .journal import (
     FarmSummary,
-    _finalize,
-    _finished,
-    _folder_bytes,
-    _manifest_lines,
-    _objects_of,
-    _plan_doc,
-    _read_json,
-    _remove_stale_temps,
+    finalize,
+    finished_record,
+    folder_bytes,
+    manifest_lines,
+    objects_of,
+    plan_doc,
+    read_json,
+    remove_stale_temps,
 )
-from .worker import _version, _write_json, process_object
+from .lifecycle import die_with_parent, sigterm_as_interrupt
+from .lock import farm_lock
+from .worker import package_version, process_object, write_json
 
 log = logging.getLogger(__name__)
 
@@ -52,18 +49,32 @@ def _serial(todo: Sequence[FarmObject], params: FarmParams, out: Path) -> Iterat
 
 
 def _pool(todo: Sequence[FarmObject], params: FarmParams, out: Path, workers: int) -> Iterator[dict[str, Any]]:
-    # spawn: a forked child would inherit the parent's GL state; each worker makes its own context
+    # spawn: a forked child would inherit the parent's GL state; each worker makes its own context.
+    # die_with_parent: a SIGKILLed parent must not leave workers rendering on (lifecycle.py).
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=die_with_parent, initargs=(os.getpid(),))
+    try:
         pending = {pool.submit(process_object, obj, params, str(out)) for obj in todo}
-        try:
-            while pending:
-                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for fut in finished:
-                    yield fut.result()
-        finally:
-            for fut in pending:
-                fut.cancel()
+        while pending:
+            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in finished:
+                yield fut.result()
+    except BaseException:
+        # interrupted (Ctrl-C, SIGTERM), a fatal error, or the consumer stopped: stop the
+        # workers now instead of letting them finish their objects; their temps are removed
+        # by the next run and their objects redone
+        _stop_workers(pool)
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _stop_workers(pool: ProcessPoolExecutor) -> None:
+    # ProcessPoolExecutor has no public way to stop running workers before Python 3.14
+    # (terminate_workers); _processes is the pid → Process map it keeps.
+    for proc in list(getattr(pool, "_processes", {}).values()):
+        with contextlib.suppress(Exception):
+            proc.terminate()
 
 
 def _dask(
@@ -99,17 +110,13 @@ def _dask(
 
 
 # -- the farm ----------------------------------------------------------------------------------
-def _prepare_out(out: Path) -> None:
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"cannot create the output folder {out}: {exc.strerror or exc}; choose a writable --out") from exc
-    if not os.access(out, os.W_OK | os.X_OK):
-        raise OutputError(f"the output folder {out} is not writable; choose a writable --out")
-
-
 def _wipe(out: Path, objects: Sequence[FarmObject] | None) -> None:
     """``--overwrite``: remove the farm's own files (all, or those of ``objects`` for a sharded task)."""
+    for o in objects if objects is not None else objects_of(read_json(out / PLAN_FILE) or {"objects": []}):
+        rec = read_json(record_path(out, o.index))  # generate's npz/ply live outside shards/
+        for rel in (rec or {}).get("shards") or ():
+            if ".." not in Path(rel).parts:
+                (out / rel).unlink(missing_ok=True)
     if objects is None:
         for name in (SHARD_DIR, RECORD_DIR, TASK_DIR):
             shutil.rmtree(out / name, ignore_errors=True)
@@ -118,20 +125,25 @@ def _wipe(out: Path, objects: Sequence[FarmObject] | None) -> None:
         return
     (out / CARD_FILE).unlink(missing_ok=True)
     for o in objects:
-        _record_path(out, o.index).unlink(missing_ok=True)
+        record_path(out, o.index).unlink(missing_ok=True)
         (out / shard_path(o)).unlink(missing_ok=True)
 
 
 def _check_compatible(out: Path, plan: dict[str, Any]) -> None:
-    old = _read_json(out / PLAN_FILE)
+    old = read_json(out / PLAN_FILE)
     if old is None:
         if (out / PLAN_FILE).exists():
             raise OutputError(f"{out / PLAN_FILE} is unreadable; use --overwrite to start over")
         return
     if old.get("params_digest") != plan["params_digest"]:
-        diff = {k: (old["params"].get(k), v) for k, v in plan["params"].items() if old["params"].get(k) != v}
+        diff = ", ".join(
+            f"{OPTION_NAMES.get(k, k)} {old['params'].get(k)!r} -> {v!r}"
+            for k, v in plan["params"].items()
+            if old["params"].get(k) != v
+        )
         raise InvalidInputError(
-            f"{out} holds a farm run with other parameters {diff} (old, new); use --overwrite to start over or another --out"
+            f"{out} holds a run made with other parameters ({diff}; earlier -> now); use --overwrite to start over, "
+            "or another --out"
         )
     if old.get("plan_digest") != plan["plan_digest"]:
         raise InvalidInputError(
@@ -163,6 +175,9 @@ def run_farm(
     overwrite: bool = False,
     progress: bool = True,
     command: str | None = None,
+    source_text: str | None = None,
+    on_finished: Callable[[Path], Any] | None = None,
+    skipped: Sequence[tuple[str, str]] = (),
 ) -> FarmSummary:
     """Build (or resume) an occluded data set from many meshes.
 
@@ -193,6 +208,14 @@ def run_farm(
         Show a tqdm bar (objects, views/s, ETA) on stderr.
     command : str, optional
         Command line for the data set card (default: this process's ``sys.argv``).
+    source_text : str, optional
+        What the card names as the source of a ready plan.
+    on_finished : callable, optional
+        Called with the data set folder, still under the lock, once an unsharded run has
+        written its card (``generate --format h5`` joins its parts there).
+    skipped : sequence of (path, reason)
+        Inputs the caller's discovery could not take (a ready plan); recorded in the card
+        and the summary, so the run ends with status 1.
 
     Returns
     -------
@@ -216,34 +239,67 @@ def run_farm(
     if dask_local is not None and dask_local < 1:
         raise InvalidInputError(f"--dask-local must be >= 1, got {dask_local}")
     task, n_tasks = shard
+    # before any mesh is found or loaded; the GL is checked here only when we render here
+    check_before_work(params, out, gl=not (scheduler or dask_local))
     if isinstance(source, (str, os.PathLike)):
-        source_text = str(Path(source).resolve())
+        source_text = source_text or str(Path(source).resolve())
+        # TODO(badinput): objects, found_skipped = scan_objects(...) once discovery reports what it skipped
         objects = discover_objects(source, classes=classes, per_class=per_class, splits=splits)
     else:
-        objects, source_text = list(source), "<objects given by the caller>"
+        objects, source_text = list(source), source_text or "<objects given by the caller>"
         if [o.index for o in objects] != list(range(len(objects))):
             raise InvalidInputError("a ready plan must number its objects 0, 1, 2, ... in order")
     mine = select_shard(objects, task, n_tasks)
     out = Path(out)
-    _prepare_out(out)
-    plan = _plan_doc(objects, params, source_text)
+    prepare_out(out)
+    with sigterm_as_interrupt(), farm_lock(out, shard):
+        return _run_locked(
+            out, objects, mine, params, source_text, shard=shard, workers=workers, scheduler=scheduler,
+            dask_local=dask_local, overwrite=overwrite, progress=progress, command=command, t0=t0,
+            on_finished=on_finished, skipped=[(str(p), str(r)) for p, r in skipped],
+        )  # fmt: skip
+
+
+def _run_locked(
+    out: Path,
+    objects: list[FarmObject],
+    mine: list[FarmObject],
+    params: FarmParams,
+    source_text: str,
+    *,
+    shard: tuple[int, int],
+    workers: int,
+    scheduler: str | None,
+    dask_local: int | None,
+    overwrite: bool,
+    progress: bool,
+    command: str | None,
+    t0: float,
+    on_finished: Callable[[Path], Any] | None = None,
+    skipped: list[tuple[str, str]] | None = None,
+) -> FarmSummary:
+    """:func:`run_farm` once the lock of ``out`` (or of this task) is held."""
+    task, n_tasks = shard
+    plan = plan_doc(objects, params, source_text)
     if overwrite:
         _wipe(out, None if n_tasks == 1 else mine)
     else:
         _check_compatible(out, plan)
-    _write_json(out / PLAN_FILE, plan)
+    if n_tasks == 1 or read_json(out / PLAN_FILE) != plan:
+        # tasks of one array share plan.json; it is written once, the same for all (checked above)
+        write_json(out / PLAN_FILE, plan)
     command = command or shlex.join(sys.argv)
-    _write_json(
+    write_json(
         out / TASK_DIR / f"task-{task}-of-{n_tasks}.json",
-        {"shard": [task, n_tasks], "command": command, "version": _version(), "host": socket.gethostname(),
+        {"shard": [task, n_tasks], "command": command, "version": package_version(), "host": socket.gethostname(),
          "started": datetime.now(timezone.utc).isoformat(timespec="seconds"), "objects": [o.index for o in mine]},
     )  # fmt: skip
-    _remove_stale_temps(out, mine, everything=n_tasks == 1)
+    remove_stale_temps(out, mine, everything=n_tasks == 1)
 
     digest = params.digest()
     records: dict[int, dict[str, Any]] = {}
     for o in mine:
-        rec = _finished(out, o, digest)
+        rec = finished_record(out, o, digest)
         if rec is not None:
             records[o.index] = rec
     resumed = len(records)
@@ -284,17 +340,20 @@ def run_farm(
             rate = views / max(time.perf_counter() - t_render, 1e-9)
             bar.set_postfix(views_s=f"{rate:.1f}", failed=n_failed, refresh=False)
             if time.monotonic() - last_manifest > MANIFEST_INTERVAL_S:
-                write_text(manifest, _manifest_lines(mine, params, records))
+                write_text(manifest, manifest_lines(mine, params, records))
                 last_manifest = time.monotonic()
     finally:
         bar.close()
+        records_iter.close()  # an interrupt in this loop stops the pool's workers now, not at garbage collection
         with contextlib.suppress(OutputError):  # a full disk must not hide the original error
-            write_text(manifest, _manifest_lines(mine, params, records))
+            write_text(manifest, manifest_lines(mine, params, records))
 
     finished = False
     if n_tasks == 1:
-        _finalize(out, plan, records, [command])
+        finalize(out, plan, records, [command], skipped or ())
         finished = True
+        if on_finished is not None:
+            on_finished(out)
     else:
         log.info("task %d/%d done; run `zbuf-occlude farm-merge %s` when all %d tasks are", task, n_tasks, out, n_tasks)
     ok = [r for r in records.values() if r["status"] == "ok"]
@@ -305,7 +364,7 @@ def run_farm(
         failed=len(records) - len(ok),
         resumed=resumed,
         samples=int(sum(r["n_samples"] for r in ok)),
-        bytes=_folder_bytes(out) if finished else int(sum(r["bytes"] for r in ok)),
+        bytes=folder_bytes(out) if finished else int(sum(r["bytes"] for r in ok)),
         wall_s=time.perf_counter() - t0,
         views=views,
         storage=params.storage,
@@ -313,6 +372,7 @@ def run_farm(
         workers=workers_text,
         peak_rss_mb=peak,
         failures=[(r["name"], r["error"]) for r in records.values() if r["status"] != "ok"],
+        skipped=list(skipped or ()),
     )
 
 
@@ -346,7 +406,7 @@ def merge_farm(
     out = Path(out) if out is not None else folders[0]
     plans = []
     for folder in folders:
-        plan = _read_json(folder / PLAN_FILE)
+        plan = read_json(folder / PLAN_FILE)
         if plan is None:
             raise InvalidInputError(f"{folder} is not a farm output (no readable {PLAN_FILE})")
         plans.append(plan)
@@ -354,11 +414,17 @@ def merge_farm(
         if (plan["params_digest"], plan["plan_digest"]) != (plans[0]["params_digest"], plans[0]["plan_digest"]):
             raise InvalidInputError(f"{folder} was made with other parameters or objects than {folders[0]}; cannot merge")
     plan = plans[0]
-    _prepare_out(out)
+    prepare_out(out)
+    with farm_lock(out):
+        return _merge_locked(folders, out, plan, progress=progress, t0=t0)
+
+
+def _merge_locked(folders: list[Path], out: Path, plan: dict[str, Any], *, progress: bool, t0: float) -> FarmSummary:
+    """:func:`merge_farm` once the data-set lock of ``out`` is held."""
     if out.resolve() not in {f.resolve() for f in folders}:
         _check_compatible(out, plan)
-    _write_json(out / PLAN_FILE, plan)
-    objects = _objects_of(plan)
+    write_json(out / PLAN_FILE, plan)
+    objects = objects_of(plan)
     digest = plan["params_digest"]
     records: dict[int, dict[str, Any]] = {}
     failed: dict[int, dict[str, Any]] = {}
@@ -367,17 +433,17 @@ def merge_farm(
 
     for folder in folders:
         for task_file in sorted((folder / TASK_DIR).glob("task-*.json")):
-            doc = _read_json(task_file)
+            doc = read_json(task_file)
             if doc and doc.get("command") not in commands:
                 commands.append(doc["command"])
             if doc and folder.resolve() != out.resolve():
-                _write_json(out / TASK_DIR / task_file.name, doc)
+                write_json(out / TASK_DIR / task_file.name, doc)
         for o in tqdm(objects, desc=f"merge {folder.name}", unit="obj", disable=not progress or None, leave=False):
             if o.index in records:
                 continue
-            rec = _finished(folder, o, digest)
+            rec = finished_record(folder, o, digest)
             if rec is None:
-                other = _read_json(_record_path(folder, o.index))
+                other = read_json(record_path(folder, o.index))
                 if other and other.get("params_digest") == digest and other.get("status") == "failed":
                     failed[o.index] = other
                 continue
@@ -385,12 +451,12 @@ def merge_farm(
                 for rel in rec["shards"]:
                     with atomic_path(out / rel) as tmp:
                         shutil.copyfile(folder / rel, tmp)
-                _write_json(_record_path(out, o.index), rec)
+                write_json(record_path(out, o.index), rec)
             records[o.index] = rec
     for index, rec in failed.items():
         if index not in records:
             records[index] = rec
-            _write_json(_record_path(out, index), rec)
+            write_json(record_path(out, index), rec)
     missing = [o for o in objects if o.index not in records]
     if missing:
         names = ", ".join(f"{o.index}:{o.name}" for o in missing[:5])
@@ -399,7 +465,7 @@ def merge_farm(
             "rerun the tasks that own them (object i belongs to task i mod N), then merge again"
         )
     commands.append(shlex.join(sys.argv))
-    _finalize(out, plan, records, commands)
+    finalize(out, plan, records, commands)
     ok = [r for r in records.values() if r["status"] == "ok"]
     return FarmSummary(
         out=str(out),
@@ -408,7 +474,7 @@ def merge_farm(
         failed=len(objects) - len(ok),
         resumed=len(ok),
         samples=int(sum(r["n_samples"] for r in ok)),
-        bytes=_folder_bytes(out),
+        bytes=folder_bytes(out),
         wall_s=time.perf_counter() - t0,
         views=0,
         storage=plan["params"]["storage"],

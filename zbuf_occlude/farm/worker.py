@@ -11,68 +11,48 @@ import resource
 import socket
 import sys
 import time
-from collections.abc import Callable
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..dataset import (
-    FORMAT_VERSION,
-)
-from ..io import atomic_path, write_text
+from ..io import OccludedCloud, atomic_path, file_sha256, write_h5, write_npz, write_ply, write_text
+from ..layout import FORMAT_VERSION, SAMPLE_FILE_FORMATS
 from ..mesh import load_mesh
 from ..occlude import dense_cloud, occlude_object
 from .._version import __version__
-from .config import COMPACT_GZIP_LEVEL, FarmParams, _FATAL, _GL_LOCK, _record_path, shard_path
+from .config import COMPACT_GZIP_LEVEL, FATAL_ERRORS, GL_LOCK, FarmParams, record_path, sample_file_path, shard_path
 from .inputs import FarmObject
 
 log = logging.getLogger(__name__)
 
 
 # -- the unit of work --------------------------------------------------------------------------
-def _version() -> str:
+def package_version() -> str:
     return __version__
 
 
-def _write_json(path: Path, obj: Any) -> None:
+def write_json(path: Path, obj: Any) -> None:
     write_text(path, json.dumps(obj, indent=1, sort_keys=True) + "\n")
 
 
-def _write_h5(path: Path, fill: Callable[[Any], None]) -> int:
-    import h5py
-
-    with atomic_path(path) as tmp:
-        try:
-            with h5py.File(tmp, "w") as f:
-                fill(f)
-        except OSError as exc:
-            # HDF5 reports a full disk in its message, not always in errno
-            if exc.errno is None and "No space left" in str(exc):
-                raise OSError(errno.ENOSPC, str(exc)) from exc
-            raise
-    return path.stat().st_size
-
-
-def _attrs(f, obj: FarmObject, params: FarmParams) -> None:
-    f.attrs.update(
-        {
-            "format_version": FORMAT_VERSION,
-            "storage": params.storage,
-            "object_index": obj.index,
-            "name": obj.name,
-            "class_name": obj.class_name,
-            "split": obj.split,
-            "label": obj.label,
-            "key": obj.key,
-            "seed": params.seed,
-            "n_points": params.n_points,
-            "samples_per_view": params.samples_per_view,
-            "params_digest": params.digest(),
-            "zbuf_occlude_version": _version(),
-        }
-    )
+def _attrs(obj: FarmObject, params: FarmParams) -> dict[str, Any]:
+    return {
+        "format_version": FORMAT_VERSION,
+        "storage": params.storage,
+        "object_index": obj.index,
+        "name": obj.name,
+        "class_name": obj.class_name,
+        "split": obj.split,
+        "label": obj.label,
+        "key": obj.key,
+        "seed": params.seed,
+        "n_points": params.n_points,
+        "samples_per_view": params.samples_per_view,
+        "params_digest": params.digest(),
+        "zbuf_occlude_version": package_version(),
+    }
 
 
 @functools.lru_cache(maxsize=1)
@@ -102,30 +82,32 @@ def _render(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
         source=obj.source,
     )  # fmt: skip
     n_visible = np.zeros(len(poses), dtype=np.int64)
-    path = out / shard_path(obj)
-    if params.storage == "dense":
-        rows: list[tuple[int, int, np.ndarray]] = []
+    if params.storage in SAMPLE_FILE_FORMATS:
+        # generate's npz/ply: one file per sample under DATASET/<name>/
+        written: list[str] = []
         for pose_index, visible, clouds in occlude_object(mesh, poses, samples_per_view=params.samples_per_view, **common):
             n_visible[pose_index] = int(visible.sum())
-            rows.extend((pose_index, c.sample_index, c.points) for c in clouds)
-        b = len(rows)
-
-        def fill(f) -> None:
-            pose_index = np.array([r[0] for r in rows], dtype=np.int64)
-            el_az = np.asarray(poses, dtype=np.float64).reshape(-1, 2)
-            f.create_dataset(
-                "data", data=np.stack([r[2] for r in rows]) if rows else np.zeros((0, params.n_points, 3), np.float32),
-                dtype=np.float32, track_times=False,
-            )  # fmt: skip
-            f.create_dataset("label", data=np.full(b, obj.label, dtype=np.int64), track_times=False)
-            f.create_dataset("elevation_deg", data=el_az[pose_index, 0], dtype=np.float64, track_times=False)
-            f.create_dataset("azimuth_deg", data=el_az[pose_index, 1], dtype=np.float64, track_times=False)
-            f.create_dataset("object_index", data=np.full(b, obj.index, dtype=np.int64), track_times=False)
-            f.create_dataset("pose_index", data=pose_index, track_times=False)
-            f.create_dataset("sample_index", data=np.array([r[1] for r in rows], dtype=np.int64), track_times=False)
-            f.create_dataset("n_visible", data=n_visible[pose_index], track_times=False)
-            _attrs(f, obj, params)
-
+            for c in clouds:
+                rel = sample_file_path(obj.name, pose_index, c, params.storage)
+                (write_npz if params.storage == "npz" else write_ply)(out / rel, c)
+                written.append(rel)
+        files = written
+        b = len(written)
+    elif params.storage in ("dense", "h5"):
+        clouds_all: list[OccludedCloud] = []
+        pose_of: list[int] = []
+        for pose_index, visible, clouds in occlude_object(mesh, poses, samples_per_view=params.samples_per_view, **common):
+            n_visible[pose_index] = int(visible.sum())
+            clouds_all.extend(clouds)
+            pose_of.extend([pose_index] * len(clouds))
+        b = len(clouds_all)
+        # dense (farm): PointNet's columns only; h5 (generate): with face_index, radius, source, class
+        write_h5(
+            out / shard_path(obj), clouds_all, n_points=params.n_points, provenance=params.storage == "h5",
+            columns={"object_index": np.full(b, obj.index, dtype=np.int64), "pose_index": np.asarray(pose_of, np.int64)},
+            attrs=_attrs(obj, params),
+        )  # fmt: skip
+        files = [shard_path(obj)]
     else:
         n_dense = len(dense.points)
         bits = np.zeros((len(poses), (n_dense + 7) // 8), dtype=np.uint8)
@@ -134,34 +116,48 @@ def _render(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
             n_visible[pose_index] = int(visible.sum())
             bits[pose_index] = np.packbits(visible)
         b = int(np.count_nonzero(n_visible) * params.samples_per_view)
+        _write_compact(out / shard_path(obj), dense.points, bits, n_visible, poses, _attrs(obj, params))
+        files = [shard_path(obj)]
 
-        def fill(f) -> None:
-            el_az = np.asarray(poses, dtype=np.float64).reshape(-1, 2)
-            f.create_dataset("dense_points", data=dense.points.astype(np.float32), track_times=False)
-            f.create_dataset(
-                "visible_bits", data=bits, chunks=bits.shape if bits.size else None,
-                compression="gzip" if bits.size else None,
-                compression_opts=COMPACT_GZIP_LEVEL if bits.size else None, track_times=False,
-            )  # fmt: skip
-            f.create_dataset("n_visible", data=n_visible, track_times=False)
-            f.create_dataset("elevation_deg", data=el_az[:, 0], track_times=False)
-            f.create_dataset("azimuth_deg", data=el_az[:, 1], track_times=False)
-            _attrs(f, obj, params)
-            f.attrs["n_dense"] = n_dense
-
-    n_bytes = _write_h5(path, fill)
+    # hashed right after writing, under the data set's lock: nobody else writes these files
     return {
-        "shards": [shard_path(obj)],
+        "shards": files,
+        "sha256": [file_sha256(out / rel) for rel in files],
         "n_visible": n_visible.tolist(),
         "n_samples": b,
         "n_padded_poses": int(np.count_nonzero((n_visible > 0) & (n_visible < params.n_points))),
         "n_dense": int(len(dense.points)),
         "n_faces": int(len(mesh.faces)),
-        "bytes": int(n_bytes),
+        "bytes": int(sum((out / rel).stat().st_size for rel in files)),
     }
 
 
-def _base_record(obj: FarmObject, params: FarmParams) -> dict[str, Any]:
+def _write_compact(path: Path, dense_points, bits, n_visible, poses, attrs: dict[str, Any]) -> None:
+    """The compact shard: dense cloud once, visibility bits per pose (layout: :mod:`zbuf_occlude.layout`)."""
+    import h5py
+
+    el_az = np.asarray(poses, dtype=np.float64).reshape(-1, 2)
+    with atomic_path(path) as tmp:
+        try:
+            with h5py.File(tmp, "w") as f:
+                f.create_dataset("dense_points", data=dense_points.astype(np.float32), track_times=False)
+                f.create_dataset(
+                    "visible_bits", data=bits, chunks=bits.shape if bits.size else None,
+                    compression="gzip" if bits.size else None,
+                    compression_opts=COMPACT_GZIP_LEVEL if bits.size else None, track_times=False,
+                )  # fmt: skip
+                f.create_dataset("n_visible", data=n_visible, track_times=False)
+                f.create_dataset("elevation_deg", data=el_az[:, 0], track_times=False)
+                f.create_dataset("azimuth_deg", data=el_az[:, 1], track_times=False)
+                f.attrs.update(attrs)
+                f.attrs["n_dense"] = len(dense_points)
+        except OSError as exc:
+            if exc.errno is None and "No space left" in str(exc):  # HDF5 puts it in the message only
+                raise OSError(errno.ENOSPC, str(exc)) from exc
+            raise
+
+
+def base_record(obj: FarmObject, params: FarmParams) -> dict[str, Any]:
     return {
         "object_index": obj.index,
         "name": obj.name,
@@ -175,6 +171,7 @@ def _base_record(obj: FarmObject, params: FarmParams) -> dict[str, Any]:
         "status": "pending",
         "error": None,
         "shards": [],
+        "sha256": [],
         "n_visible": [],
         "n_samples": 0,
         "bytes": 0,
@@ -195,13 +192,13 @@ def process_object(obj: FarmObject, params: FarmParams, out: str | os.PathLike) 
         No OpenGL context: fatal, no object could be rendered.
     """
     out = Path(out)
-    record = _base_record(obj, params)
+    record = base_record(obj, params)
     t0 = time.perf_counter()
     try:
-        with _GL_LOCK:
+        with GL_LOCK:
             record.update(_render(obj, params, out))
         record["status"] = "ok"
-    except _FATAL:
+    except FATAL_ERRORS:
         raise
     except Exception as exc:  # a bad mesh must not stop a farm of thousands; the manifest keeps why
         record.update(status="failed", error=f"{type(exc).__name__}: {exc}")
@@ -215,5 +212,5 @@ def process_object(obj: FarmObject, params: FarmParams, out: str | os.PathLike) 
         pid=os.getpid(),
         peak_rss_mb=round(_peak_rss_mb(), 1),
     )
-    _write_json(_record_path(out, obj.index), record)
+    write_json(record_path(out, obj.index), record)
     return record

@@ -1,0 +1,268 @@
+"""Faults around the farm (issue 9): two writers on one data set, tampered shards, killed parents.
+
+Real subprocesses and signals, small shipped meshes (``data/samples``), few poses and points.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from zbuf_occlude.dataset import CARD_FILE, MANIFEST_FILE, OccludedDataset
+from zbuf_occlude.farm import FarmParams, merge_farm, run_farm
+from zbuf_occlude.farm.lock import LOCK_FILE, DatasetBusy, farm_lock, task_lock_path
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+#: The three smallest shipped meshes (96–400 faces).
+MESHES = ("sofa/test/sofa_0681.off", "stool/train/stool_0002.off", "monitor/train/monitor_0001.off")
+PARAMS = FarmParams(views="0:0,40:90,-40:200", samples_per_view=2, n_points=64, dense_points=1024, resolution=64)
+CLI_PARAMS = ["--views", "fibonacci:40", "--samples-per-view", "2", "--points", "64", "--dense-points", "1024",
+              "--resolution", "64", "--no-progress"]  # fmt: skip
+
+
+@pytest.fixture
+def tree(tmp_path, sample_meshes_dir) -> Path:
+    root = tmp_path / "in"
+    for rel in MESHES:
+        dst = root / rel
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(sample_meshes_dir / rel, dst)
+    return root
+
+
+def _env() -> dict[str, str]:
+    return {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
+
+
+def _cli(*args: str) -> list[str]:
+    return [sys.executable, "-m", "zbuf_occlude", *args]
+
+
+def _wait_for(predicate, proc: subprocess.Popen | None = None, timeout_s: float = 120.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not predicate():
+        assert proc is None or proc.poll() is None, "the process ended before the condition held"
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.01)
+
+
+def _dead_pid() -> int:
+    proc = subprocess.Popen([sys.executable, "-c", "pass"])
+    proc.wait()
+    return proc.pid
+
+
+def _host() -> str:
+    from filelock._identity import host_name  # what filelock writes into its lock files
+
+    return host_name()
+
+
+# -- defect 1: two farms on one --out ---------------------------------------------------------------
+def test_second_farm_on_the_same_out_refuses_and_names_the_holder(tree, tmp_path):
+    """The issue's scenario: pause the first run mid-write, run a second to the end, resume the first."""
+    out = tmp_path / "ds"
+    first = subprocess.Popen(_cli("farm", str(tree), "--out", str(out), *CLI_PARAMS), env=_env(), cwd=tmp_path)
+    try:
+        _wait_for(lambda: list((out / "records").glob("*.json")), first)
+        first.send_signal(signal.SIGSTOP)
+        second = subprocess.run(
+            _cli("farm", str(tree), "--out", str(out), *CLI_PARAMS), env=_env(), cwd=tmp_path,
+            capture_output=True, text=True, timeout=300,
+        )  # fmt: skip
+        assert second.returncode == 2, second.stderr
+        assert f"pid {first.pid} on host {socket.gethostname()} since 20" in second.stderr
+        assert "Traceback" not in second.stderr
+    finally:
+        first.send_signal(signal.SIGCONT)
+    assert first.wait(timeout=300) == 0
+    card = json.loads((out / CARD_FILE).read_text())
+    assert card["n_objects_ok"] == len(MESHES)
+    lines = [json.loads(line) for line in (out / MANIFEST_FILE).read_text().splitlines()]
+    assert [r["status"] for r in lines] == ["ok"] * len(MESHES)
+    assert len(OccludedDataset(out)) == card["n_samples"] > 0
+    assert not (out / LOCK_FILE).exists()  # released at the end
+
+
+def test_a_lock_left_by_a_dead_process_is_taken_over(tree, tmp_path):
+    out = tmp_path / "ds"
+    out.mkdir()
+    (out / LOCK_FILE).write_text(f"{_dead_pid()}\n{_host()}\n")
+    summary = run_farm(tree, out, params=PARAMS, progress=False)
+    assert summary.finished and summary.done == len(MESHES)
+    assert not (out / LOCK_FILE).exists()
+
+
+def test_a_lock_of_another_host_is_never_broken(tree, tmp_path):
+    out = tmp_path / "ds"
+    out.mkdir()
+    (out / LOCK_FILE).write_text("4242\nnode17.cluster\n")
+    with pytest.raises(DatasetBusy, match=r"pid 4242 on host node17\.cluster since .*delete .*\.zbuf_occlude\.lock"):
+        run_farm(tree, out, params=PARAMS, progress=False)
+    assert (out / LOCK_FILE).exists() and not (out / "records").exists()  # nothing written
+
+
+def test_stale_temp_cleanup_spares_temps_of_live_processes(tree, tmp_path):
+    out = tmp_path / "ds"
+    run_farm(tree, out, params=PARAMS, progress=False)
+    from zbuf_occlude.io import _host_tag
+
+    alive = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        live_tmp = out / "shards" / f".train_000001.h5.{alive.pid}-{_host_tag()}-abcd1234.tmp"
+        dead_tmp = out / "shards" / f".train_000001.h5.{_dead_pid()}-{_host_tag()}-efgh5678.tmp"
+        legacy_tmp = out / "records" / ".000001.json.k2j3h4.tmp"
+        for tmp in (live_tmp, dead_tmp, legacy_tmp):
+            tmp.write_bytes(b"partial")
+        run_farm(tree, out, params=PARAMS, progress=False)
+        assert live_tmp.exists()  # another process may be writing it right now
+        assert not dead_tmp.exists() and not legacy_tmp.exists()
+    finally:
+        alive.kill()
+        alive.wait()
+
+
+def test_temp_names_are_unique_per_process_and_name_their_writer(tmp_path):
+    from zbuf_occlude.io import atomic_path, temp_owner
+
+    with atomic_path(tmp_path / "a.h5") as t1, atomic_path(tmp_path / "a.h5") as t2:
+        assert t1 != t2
+        owner = temp_owner(t1.name)
+        assert owner is not None and owner.target == "a.h5" and owner.pid == os.getpid()
+        t1.write_bytes(b"1")
+        t2.write_bytes(b"2")
+
+
+def test_shard_tasks_run_at_once_but_not_beside_a_whole_run(tree, tmp_path):
+    out = tmp_path / "ds"
+    out.mkdir()
+    # a live task 0/2 holds its lock (another process of the same array)
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys, time; from zbuf_occlude.farm.lock import farm_lock; "
+         f"cm = farm_lock({str(out)!r}, (0, 2)); cm.__enter__(); print('held', flush=True); time.sleep(60)"],
+        env=_env(), stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        summary = run_farm(tree, out, params=PARAMS, shard=(1, 2), progress=False)  # runs beside task 0
+        assert summary.done == len(MESHES[1::2]) and not summary.finished
+        # only farm-merge writes the data-set-wide files
+        assert not (out / MANIFEST_FILE).exists() and not (out / CARD_FILE).exists()
+        assert not (out / "train_files.txt").exists() and not (out / "shape_names.txt").exists()
+        with pytest.raises(DatasetBusy, match=f"task 0/2.*pid {holder.pid}"):
+            run_farm(tree, out, params=PARAMS, progress=False)
+        with pytest.raises(DatasetBusy, match=f"task 0/2.*pid {holder.pid}"):
+            run_farm(tree, out, params=PARAMS, shard=(0, 2), progress=False)
+        with pytest.raises(DatasetBusy, match=f"task 0/2.*pid {holder.pid}"):
+            merge_farm([out])  # a merge waits for every task
+    finally:
+        holder.kill()
+        holder.wait()
+    assert task_lock_path(out, (0, 2)).exists()  # left by the killed holder, broken by the next run
+    with farm_lock(out):  # a whole-data-set holder keeps tasks out
+        with pytest.raises(DatasetBusy, match="the data set"):
+            run_farm(tree, out, params=PARAMS, shard=(0, 2), progress=False)
+    run_farm(tree, out, params=PARAMS, shard=(0, 2), progress=False)
+    assert not task_lock_path(out, (0, 2)).exists()
+
+
+# -- defect 9: a shard overwritten in place with the same size ------------------------------------
+def test_a_shard_changed_in_place_is_caught_by_the_reader_and_redone_by_resume(tree, tmp_path):
+    import h5py
+    import numpy as np
+
+    from zbuf_occlude.dataset import ShardChecksumError
+
+    out = tmp_path / "ds"
+    run_farm(tree, out, params=PARAMS, progress=False)
+    before, _ = OccludedDataset(out).to_arrays()
+    shard = out / "shards" / "test_000001.h5"
+    size = shard.stat().st_size
+    with h5py.File(shard, "r+") as f:  # what the issue did: same size, other bytes
+        f["data"][0] = np.float32(3.4e38)
+    assert shard.stat().st_size == size
+
+    ds = OccludedDataset(out)
+    with pytest.raises(ShardChecksumError, match=r"shards/test_000001\.h5 was changed"):
+        ds.to_arrays()
+    with pytest.raises(ShardChecksumError, match="test_000001"):
+        [ds[i] for i in range(len(ds))]
+
+    summary = run_farm(tree, out, params=PARAMS, progress=False)
+    assert summary.resumed == len(MESHES) - 1 and summary.done == len(MESHES)  # only the changed one redone
+    after, _ = OccludedDataset(out).to_arrays()
+    assert np.array_equal(before, after) and np.abs(after).max() <= 1.0
+
+
+# -- defect 5: orphaned workers --------------------------------------------------------------------
+def _children(pid: int) -> set[int]:
+    kids: set[int] = set()
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            kids |= {int(k) for k in (task / "children").read_text().split()}
+        except OSError:
+            pass
+    return kids
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state not in ("Z", "X")  # a zombie has exited; only its parent's reaping is left
+
+
+VIEWS_LONG = "fibonacci:600"
+
+
+def _start_pool_farm(tree: Path, out: Path, cwd: Path) -> tuple[subprocess.Popen, set[int]]:
+    """A farm with --workers 2 on many poses (about 10 s on one core), once both workers are rendering."""
+    proc = subprocess.Popen(
+        _cli("farm", str(tree), "--out", str(out), "--workers", "2", *CLI_PARAMS[:1], VIEWS_LONG, *CLI_PARAMS[2:]),
+        env=_env(), cwd=cwd, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    _wait_for(lambda: len(_children(proc.pid)) >= 3, proc)  # two workers and the resource tracker
+    time.sleep(3)  # let them load and render
+    assert proc.poll() is None
+    return proc, _children(proc.pid)
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="needs Linux /proc to find the workers")
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+def test_workers_do_not_outlive_a_killed_parent(tree, tmp_path, sig):
+    out = tmp_path / "ds"
+    proc, workers = _start_pool_farm(tree, out, tmp_path)
+    assert workers and all(_alive(w) for w in workers)
+    proc.send_signal(sig)
+    rc = proc.wait(timeout=60)
+    _wait_for(lambda: not any(_alive(w) for w in workers), timeout_s=10)  # within seconds
+    if sig == signal.SIGTERM:  # handled like Ctrl-C: a clean, resumable stop
+        assert rc == 143, proc.stderr.read()
+        assert "interrupted; run the same command again to resume" in proc.stderr.read()
+        assert not (out / LOCK_FILE).exists()
+        summary = run_farm(tree, out, params=FarmParams(**{**PARAMS.to_dict(), "views": VIEWS_LONG}), progress=False)
+        assert summary.finished and summary.done == len(MESHES) and summary.failed == 0
+        assert not list(out.rglob(".*.tmp"))
+
+
+# -- skipped inputs are recorded and end the run with status 1 (defect 12's slot in the farm) ----
+def test_skipped_inputs_are_recorded_in_the_card_and_give_status_1(tree, tmp_path):
+    from zbuf_occlude.farm import discover_objects
+
+    out = tmp_path / "ds"
+    summary = run_farm(discover_objects(tree), out, params=PARAMS, progress=False, skipped=[("in/locked", "permission denied")])
+    assert summary.done == len(MESHES) and summary.exit_status == 1
+    assert "SKIPPED   in/locked: permission denied" in summary.format()
+    card = json.loads((out / CARD_FILE).read_text())
+    assert card["skipped_inputs"] == [{"path": "in/locked", "reason": "permission denied"}]
+    assert run_farm(discover_objects(tree), out, params=PARAMS, progress=False).exit_status == 0

@@ -1,0 +1,158 @@
+"""``zbuf-occlude generate`` on the farm's engine: one worker, small defaults, npz/ply/h5 writers.
+
+``generate`` and :func:`~zbuf_occlude.farm.run_farm` share everything but their defaults and
+writers: the objects' identity keys (the path relative to the folder given, without suffix),
+the recorded parameters (``plan.json``; other parameters are refused unless ``overwrite``),
+the lock on ``--out``, the per-object records with SHA-256 of every file, resume, the
+manifest and card, and the failure records.  Per object the worker writes
+
+* ``npz`` / ``ply``: one file per sample, ``OUT/<name>/<stem>_vPPP_el±EEE_azAAA_sSS.<fmt>``;
+* ``h5``: one PointNet-layout part per object, ``OUT/shards/<split>_<index>.h5`` (with
+  ``face_index``, ``radius``, ``source``, ``class_name``), joined at the end into
+  ``OUT/occluded.h5``.  The parts stay: they are what a rerun resumes from (and
+  :class:`~zbuf_occlude.dataset.OccludedDataset` reads the folder like a farm data set).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InvalidInputError
+from ..io import OccludedCloud, read_h5, write_h5
+from ..mesh import class_and_split, find_meshes
+from ..occlude import DEFAULT_DENSE_POINTS
+from ..layout import GENERATE_STORAGES, MERGED_H5_FILE
+from .config import FarmParams, record_path
+from .inputs import FarmObject
+from .journal import FarmSummary, read_json
+from .run import run_farm
+
+__all__ = ["generate", "objects_from_paths", "MERGED_H5_FILE", "GENERATE_DEFAULTS"]
+
+log = logging.getLogger(__name__)
+
+#: ``generate``'s defaults, smaller poses and larger images than the farm's (one machine, a few meshes):
+#: the 5×5 grid of poses, 2048-point samples, 10 per pose, 100,000 dense points, a 1024² z-buffer.
+GENERATE_DEFAULTS = FarmParams(
+    views="grid25", samples_per_view=10, n_points=2048, dense_points=DEFAULT_DENSE_POINTS, resolution=1024, storage="npz"
+)
+
+
+def objects_from_paths(paths: Sequence[str | os.PathLike]) -> list[FarmObject]:
+    """The plan of ``generate``: mesh files and folders (searched recursively), numbered.
+
+    Each object's name is its path relative to the folder given (a file given alone: its
+    stem), without the suffix; class and split come from the path
+    (:func:`~zbuf_occlude.mesh.class_and_split`); labels number the sorted class names.
+
+    Raises
+    ------
+    InvalidInputError
+        A path is missing, nothing was found, or two files have one name
+        (``chair_0001.off`` and ``chair_0001.obj``): the name seeds the samples and names the
+        outputs, so one would overwrite the other.
+    """
+    found = find_meshes(paths)
+    by_name: dict[str, list[Path]] = {}
+    for path, name in found:
+        by_name.setdefault(name, []).append(path)
+    clashes = {n: p for n, p in by_name.items() if len(p) > 1}
+    if clashes:
+        text = "; ".join(f"{' and '.join(map(str, p))} are both {n!r}" for n, p in sorted(clashes.items())[:5])
+        raise InvalidInputError(
+            f"mesh names must be unique (the name seeds the samples and names the output files): {text}; "
+            "rename or move one of each"
+        )
+    meta = [(path, name, *class_and_split(path)) for path, name in found]
+    labels = {c: i for i, c in enumerate(sorted({m[2] for m in meta}))}
+    return [FarmObject(i, name, str(path), cls, split, labels[cls]) for i, (path, name, cls, split) in enumerate(meta)]
+
+
+def _merge_h5(out: Path, objects: Sequence[FarmObject]) -> Path | None:
+    """Join the per-object parts of the finished objects into ``OUT/occluded.h5``."""
+    parts = []
+    for o in objects:
+        rec = read_json(record_path(out, o.index))
+        if rec and rec.get("status") == "ok":
+            parts.extend(out / rel for rel in rec["shards"])
+    if not parts:
+        return None
+    clouds: list[OccludedCloud] = []
+    columns: dict[str, list[np.ndarray]] = {"object_index": [], "pose_index": []}
+    n_points = 0
+    for part in parts:
+        d = read_h5(part)
+        n_points = d["data"].shape[1]
+        for key in columns:
+            columns[key].append(d[key])
+        clouds.extend(
+            OccludedCloud(
+                points=d["data"][i], face_index=d["face_index"][i], elevation_deg=float(d["elevation_deg"][i]),
+                azimuth_deg=float(d["azimuth_deg"][i]), radius=float(d["radius"][i]), label=int(d["label"][i]),
+                class_name=str(d["class_name"][i]), source=str(d["source"][i]),
+                sample_index=int(d["sample_index"][i]), n_visible=int(d["n_visible"][i]),
+            )  # fmt: skip
+            for i in range(len(d["data"]))
+        )
+    shape_names = sorted({o.class_name for o in objects})  # label i is the i-th (objects_from_paths)
+    return write_h5(
+        out / MERGED_H5_FILE, clouds, shape_names=shape_names, n_points=n_points,
+        columns={k: np.concatenate(v) for k, v in columns.items()},
+    )  # fmt: skip
+
+
+def generate(
+    paths: Sequence[str | os.PathLike],
+    out: str | os.PathLike,
+    *,
+    params: FarmParams = GENERATE_DEFAULTS,
+    overwrite: bool = False,
+    progress: bool = True,
+    command: str | None = None,
+) -> tuple[FarmSummary, list[FarmObject]]:
+    """Occluded samples of a few meshes into ``out`` (``zbuf-occlude generate``).
+
+    Parameters
+    ----------
+    paths : sequence of str or PathLike
+        Mesh files and folders (:func:`objects_from_paths`).
+    out : str or PathLike
+        Output folder.
+    params : FarmParams
+        ``params.storage`` is the format: ``"npz"``, ``"ply"`` or ``"h5"``.
+    overwrite : bool
+        Start over instead of resuming (needed when ``out`` holds other parameters).
+    progress : bool
+        tqdm bar on stderr.
+
+    Returns
+    -------
+    summary : FarmSummary
+    objects : list of FarmObject
+        The plan (names, sources), to report failures by file.
+
+    Raises
+    ------
+    InvalidInputError
+        Bad paths, clashing names, or ``out`` holds a run with other parameters.
+    OutputError, BackendUnavailable
+        As :func:`~zbuf_occlude.farm.run_farm` (the lock held by another run included).
+    """
+    if params.storage not in GENERATE_STORAGES:
+        raise InvalidInputError(f"generate writes one of {GENERATE_STORAGES}, not {params.storage!r}")
+    objects = objects_from_paths(paths)
+    # TODO(badinput): take discovery.scan_meshes(paths).skipped here and pass it as skipped=
+    skipped: list[tuple[str, str]] = []
+    out = Path(out)
+    summary = run_farm(
+        objects, out, params=params, workers=1, overwrite=overwrite, progress=progress, command=command,
+        source_text=", ".join(str(Path(p).resolve()) for p in paths),
+        on_finished=(lambda folder: _merge_h5(folder, objects)) if params.storage == "h5" else None,
+        skipped=skipped,
+    )  # fmt: skip
+    return summary, objects

@@ -1,0 +1,130 @@
+"""One writer per data set: the lock a farm run, a ``--shard`` task or a merge holds on ``--out``.
+
+The lock is :class:`filelock.SoftFileLock`, a file created with ``O_CREAT | O_EXCL`` that holds
+the owner's pid, host name and process start token.  Unlike ``flock``/``fcntl`` locks it works
+on the network file systems clusters share (NFS, Lustre, GPFS), where advisory locks may be
+missing or local to one node.  filelock removes a lock whose owner is a dead process on the
+same host (a run killed with SIGKILL); a lock of another host is never broken automatically
+(its owner may be alive there): the error names the host, pid and start time, and says which
+file to delete once that process is known to be gone.
+
+Scopes (:func:`farm_lock`):
+
+* a whole run (``--shard 0/1``), ``farm-merge`` and ``generate`` hold the data-set lock
+  ``DATASET/.zbuf_occlude.lock`` and refuse while any task lock is held;
+* a ``--shard I/N`` task holds only ``DATASET/tasks/lock-I-of-N.lock``, so the tasks of one
+  SLURM array run at once, and refuses while the data-set lock is held.
+
+Each side takes its own lock first and then looks at the other's, so of two runs that start
+at the same instant at least one sees the other.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+from collections.abc import Iterator
+from datetime import datetime, timezone
+from pathlib import Path
+
+from ..errors import OutputError
+from ..layout import LOCK_FILE, TASK_DIR, task_lock_name
+
+__all__ = ["DatasetBusy", "LOCK_FILE", "farm_lock", "lock_holder", "task_lock_path"]
+
+log = logging.getLogger(__name__)
+
+#: Seconds an acquire keeps trying: long enough for filelock to break a dead owner's lock
+#: (checked on each try) or for a concurrent peek to end, short enough to refuse at once.
+ACQUIRE_TIMEOUT_S = 2.0
+POLL_INTERVAL_S = 0.05
+
+
+class DatasetBusy(OutputError):
+    """Another live process holds the lock of this data set (or of this shard)."""
+
+
+def task_lock_path(out: Path, shard: tuple[int, int]) -> Path:
+    """The lock of ``--shard I/N`` task ``shard`` in data set ``out``."""
+    return out / task_lock_name(*shard)
+
+
+def lock_holder(path: Path) -> str:
+    """``pid P on host H since T`` of the process holding lock file ``path`` (what it says)."""
+    try:
+        lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
+        since = datetime.fromtimestamp(path.stat().st_mtime, timezone.utc).isoformat(timespec="seconds")
+    except OSError:
+        return "a process that has just released it"
+    pid = lines[0] if lines else "?"
+    host = lines[1] if len(lines) > 1 else "?"
+    return f"pid {pid} on host {host} since {since}"
+
+
+def _acquire(path: Path, what: str, timeout: float = ACQUIRE_TIMEOUT_S):
+    from filelock import SoftFileLock, Timeout
+
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create {path.parent}: {exc.strerror or exc}; choose a writable --out") from exc
+    lock = SoftFileLock(str(path), timeout=timeout, poll_interval=POLL_INTERVAL_S, is_singleton=False, thread_local=False)
+    try:
+        lock.acquire()
+    except Timeout:
+        raise DatasetBusy(
+            f"{what} is being written by {lock_holder(path)} (lock file {path}); wait for it to finish, "
+            f"or, if that process is gone (another host cannot be checked from here), delete {path} and run again"
+        ) from None
+    except OSError as exc:
+        raise OutputError(f"cannot create the lock file {path}: {exc.strerror or exc}; choose a writable --out") from exc
+    return lock
+
+
+def _refuse_if_held(path: Path, what: str) -> None:
+    # taking and dropping the lock at once also breaks it if its owner died
+    if path.exists():
+        _acquire(path, what).release()
+
+
+@contextlib.contextmanager
+def farm_lock(out: str | os.PathLike, shard: tuple[int, int] = (0, 1)) -> Iterator[Path]:
+    """Hold the lock of data set ``out`` (or of one ``--shard I/N`` task) for the ``with`` block.
+
+    Parameters
+    ----------
+    out : str or PathLike
+        The data set folder (must exist).
+    shard : (I, N)
+        ``(0, 1)``: the whole data set (a run, a merge); else the lock of task ``I`` of ``N``.
+
+    Yields
+    ------
+    path : Path
+        The lock file held.
+
+    Raises
+    ------
+    DatasetBusy
+        A live process holds this lock, the data-set lock (for a task) or a task lock (for
+        the whole data set); the message names its pid, host and start time.
+    OutputError
+        The lock file cannot be created.
+    """
+    out = Path(out)
+    dataset_path = out / LOCK_FILE
+    whole = shard[1] == 1
+    if whole:
+        lock = _acquire(dataset_path, f"the data set {out}")
+    else:
+        lock = _acquire(task_lock_path(out, shard), f"task {shard[0]}/{shard[1]} of {out}")
+    try:
+        if whole:
+            for task in sorted((out / TASK_DIR).glob("lock-*.lock")):
+                _refuse_if_held(task, f"the data set {out} (task {task.stem[5:].replace('-of-', '/')})")
+        else:
+            _refuse_if_held(dataset_path, f"the data set {out}")
+        yield Path(lock.lock_file)
+    finally:
+        lock.release()
