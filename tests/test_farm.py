@@ -1,7 +1,8 @@
 """The render farm: layout, determinism (workers, shards, selection, Dask), resume, failures.
 
-Runs on a few small real ModelNet meshes with few poses and points, so the whole file takes
-well under a minute on a 2-core machine with Mesa llvmpipe.
+Runs on the shipped real ModelNet meshes (``data/samples``, so a fresh clone runs it all)
+with few poses and points, so the whole file takes well under a minute on a 2-core
+machine with Mesa llvmpipe.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from conftest import SAMPLE_MESHES
 
 from zbuf_occlude.dataset import CARD_FILE, MANIFEST_FILE, SHAPE_NAMES_FILE, OccludedDataset
 from zbuf_occlude.errors import InvalidInputError, OutputError
@@ -36,27 +38,23 @@ from zbuf_occlude.farm import (
 from zbuf_occlude.occlude import object_key
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-MODELNET_SUBSET = REPO_ROOT.parent / "shared" / "data" / "modelnet_subset"
-#: The smallest real meshes (96–664 faces), as (path in the subset, class, split).
+#: Shipped real meshes (224–7608 faces), as (path under data/samples, class, split).
 SMALL_MESHES = [
-    ("ModelNet10/sofa/test/sofa_0681.off", "sofa", "test"),
-    ("ModelNet40/monitor/test/monitor_0466.off", "monitor", "test"),
-    ("release_unknown/chair/train/chair_0002.off", "chair", "train"),
-    ("raw_single_source/stool/train/stool_0002.off", "stool", "train"),
-    ("ModelNet40/bathtub/train/bathtub_0002.off", "bathtub", "train"),
+    ("sofa/test/sofa_0681.off", "sofa", "test"),
+    ("monitor/train/monitor_0001.off", "monitor", "train"),
+    ("chair/train/chair_0001.off", "chair", "train"),
+    ("stool/train/stool_0002.off", "stool", "train"),
+    ("desk/test/desk_0201.off", "desk", "test"),
 ]
 #: Few poses, points and pixels: enough to exercise every code path quickly.
 PARAMS = FarmParams(views="0:0,40:90,-40:200,85:300", samples_per_view=2, n_points=128, dense_points=2048, resolution=96)
-
-pytestmark = pytest.mark.skipif(not MODELNET_SUBSET.is_dir(), reason=f"real ModelNet meshes not found at {MODELNET_SUBSET}")
-
 
 def make_tree(root: Path, meshes=SMALL_MESHES) -> Path:
     """A ModelNet-style tree ROOT/<class>/<split>/<name>.off of symlinks to the real meshes."""
     for rel, cls, split in meshes:
         target = root / cls / split / Path(rel).name
         target.parent.mkdir(parents=True, exist_ok=True)
-        target.symlink_to(MODELNET_SUBSET / rel)
+        target.symlink_to(SAMPLE_MESHES / rel)
     return root
 
 
@@ -100,11 +98,11 @@ def test_discover_tree_labels_splits_and_keys(tree):
     assert all(o.label == shape_names.index(o.class_name) for o in objects)
     assert [o.index for o in objects] == list(range(len(objects)))
     chair = next(o for o in objects if o.class_name == "chair")
-    assert chair.name == "chair/train/chair_0002" and chair.key == object_key("chair/train/chair_0002")
+    assert chair.name == "chair/train/chair_0001" and chair.key == object_key("chair/train/chair_0001")
 
     # the key (and so every sample) does not depend on the selection
     subset = discover_objects(tree, classes="chair,sofa", splits=["train"])
-    assert [o.name for o in subset] == ["chair/train/chair_0002"]
+    assert [o.name for o in subset] == ["chair/train/chair_0001"]
     assert subset[0].key == chair.key
     assert len(discover_objects(tree, per_class=1, splits="test")) == 2
     with pytest.raises(InvalidInputError, match="not found"):
@@ -117,7 +115,7 @@ def test_discover_flat_folder_and_list_file(tmp_path):
     flat = tmp_path / "flat"
     flat.mkdir()
     for rel, _, _ in SMALL_MESHES[:3]:
-        (flat / Path(rel).name).symlink_to(MODELNET_SUBSET / rel)
+        (flat / Path(rel).name).symlink_to(SAMPLE_MESHES / rel)
     objects = discover_objects(flat)
     assert {o.class_name for o in objects} == {"sofa", "monitor", "chair"}  # from <class>_<NNNN>
     assert {o.split for o in objects} == {"train"}
@@ -125,13 +123,13 @@ def test_discover_flat_folder_and_list_file(tmp_path):
     listing = tmp_path / "list.txt"
     listing.write_text(
         "# path label [split]\n"
-        f"{MODELNET_SUBSET / SMALL_MESHES[0][0]} couch test\n"
+        f"{SAMPLE_MESHES / SMALL_MESHES[0][0]} couch test\n"
         f"flat/{Path(SMALL_MESHES[2][0]).name}   seat\n\n"
     )
     objects = discover_objects(listing)
     # sorted by name: the absolute path ("/...") before "flat/..."
     assert [(o.class_name, o.split, o.label) for o in objects] == [("couch", "test", 0), ("seat", "train", 1)]
-    assert objects[1].name == "flat/chair_0002" and Path(objects[1].source).is_file()
+    assert objects[1].name == "flat/chair_0001" and Path(objects[1].source).is_file()
     bad = tmp_path / "bad.txt"
     bad.write_text("just_a_path\n")
     with pytest.raises(InvalidInputError, match="bad.txt:1"):
@@ -314,7 +312,7 @@ def test_corrupt_mesh_is_recorded_and_skipped(tmp_path):
     assert sum(r["status"] == "ok" for r in manifest) == 2
     ds = OccludedDataset(tmp_path / "out")
     assert {ds.metadata(i)["class_name"] for i in range(len(ds))} == {"sofa", "monitor"}
-    assert "chair_0002" not in (tmp_path / "out" / "train_files.txt").read_text()
+    assert "chair_0999" not in (tmp_path / "out" / "train_files.txt").read_text()
     args = parser.parse_args(["farm-merge", str(tmp_path / "out"), "--no-progress"])
     assert args.func(args) == 1
 
@@ -360,8 +358,8 @@ def test_cli_options_parse():
 
 def test_ready_plan_of_repeated_meshes(tmp_path):
     # the benchmark's way to repeat a few real meshes as distinct objects (distinct keys)
-    src = str(MODELNET_SUBSET / SMALL_MESHES[2][0])
-    objects = [FarmObject(i, f"rep{i}/chair_0002", src, "chair", "train", 0) for i in range(2)]
+    src = str(SAMPLE_MESHES / SMALL_MESHES[2][0])
+    objects = [FarmObject(i, f"rep{i}/chair_0001", src, "chair", "train", 0) for i in range(2)]
     summary = run_farm(objects, tmp_path / "rep", params=PARAMS, progress=False)
     arrays = shard_arrays(tmp_path / "rep")
-    assert summary.done == 2 and not np.array_equal(arrays["rep0/chair_0002"]["data"], arrays["rep1/chair_0002"]["data"])
+    assert summary.done == 2 and not np.array_equal(arrays["rep0/chair_0001"]["data"], arrays["rep1/chair_0001"]["data"])
