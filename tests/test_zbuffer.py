@@ -48,12 +48,8 @@ def _assert_sweep(scores, path, minimum):
 
 @pytest.mark.slow
 def test_zbuffer_agrees_with_the_oracle_on_real_modelnet_meshes(modelnet_off_file):
+    # the 27 meshes of ../shared when present, else the 8 shipped ones (conftest)
     _assert_sweep(_sweep(modelnet_off_file), modelnet_off_file, MIN_AGREEMENT)
-
-
-def test_zbuffer_agrees_with_the_oracle_on_the_shipped_meshes(sample_mesh_files):
-    for path in sample_mesh_files:
-        _assert_sweep(_sweep(path), path, MIN_AGREEMENT)
 
 
 def test_zbuffer_tolerance_is_a_weaker_but_sane_baseline(sample_mesh_files):
