@@ -35,7 +35,13 @@ from zbuf_occlude.farm import (
     run_farm,
     select_shard,
 )
-from zbuf_occlude.occlude import object_key
+from zbuf_occlude.cameras import camera_on_sphere
+from zbuf_occlude.cli import main as cli_main
+from zbuf_occlude.dataset import unpack_visible
+from zbuf_occlude.mesh import load_mesh
+from zbuf_occlude.occlude import dense_cloud, object_key, pose_samples
+from zbuf_occlude.visibility.registry import visible_mask
+from zbuf_occlude.visibility.zbuffer import Scene
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 #: Shipped real meshes (224–7608 faces), as (path under data/samples, class, split).
@@ -87,6 +93,29 @@ def dense_run(tree, tmp_path_factory):
     out = tmp_path_factory.mktemp("dense")
     summary = run_farm(tree, out, params=PARAMS, progress=False, command="test dense")
     return out, summary
+
+
+@pytest.fixture(scope="module")
+def compact_run(tree, tmp_path_factory):
+    out = tmp_path_factory.mktemp("compact")
+    summary = run_farm(tree, out, params=FarmParams(**{**PARAMS.to_dict(), "storage": "compact"}), progress=False)
+    return out, summary
+
+
+def _manifest(out: Path) -> list[dict]:
+    return [json.loads(line) for line in (out / MANIFEST_FILE).read_text().splitlines()]
+
+
+def _expected_object(rec: dict, params: FarmParams):
+    """What a shard must hold, rebuilt from the public pieces: the dense cloud of the
+    object's *name* key and its ``zbuffer`` visibility from every pose."""
+    mesh = load_mesh(rec["source"])
+    dense = dense_cloud(mesh, object_key(rec["name"]), seed=params.seed, count=params.dense_points)
+    with Scene(mesh, dense.points, dense.face_index) as scene:
+        visible = [
+            scene.visible(camera_on_sphere(el, az, params.radius, resolution=params.resolution)) for el, az in params.poses
+        ]
+    return mesh, dense, visible
 
 
 # -- inputs ------------------------------------------------------------------------------
@@ -228,17 +257,115 @@ def test_dask_local_cluster_gives_the_same_data_set(tree, dense_run, tmp_path):
     assert_same_samples(dense_run[0], tmp_path / "dask")
 
 
-def test_compact_reconstructs_the_dense_output_exactly(tree, dense_run, tmp_path):
-    params = FarmParams(**{**PARAMS.to_dict(), "storage": "compact"})
-    summary = run_farm(tree, tmp_path / "compact", params=params, progress=False)
+def test_dask_scheduler_address_gives_the_same_data_set(tree, dense_run, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        address = cluster.scheduler_address
+        summary = run_farm(tree, tmp_path / "sched", params=PARAMS, scheduler=address, progress=False)
+    assert summary.workers == f"dask {address}" and summary.done == len(SMALL_MESHES)
+    assert_same_samples(dense_run[0], tmp_path / "sched")
+
+
+def test_unreachable_dask_scheduler_is_a_clear_error(tree, tmp_path, capsys):
+    dask = pytest.importorskip("dask")
+    pytest.importorskip("distributed")
+    # nothing listens on port 1; a short connect timeout keeps the test quick
+    with dask.config.set({"distributed.comm.timeouts.connect": "2s"}):
+        status = cli_main(["farm", str(tree), "--out", str(tmp_path / "x"), "--views", "0:0", "--points", "16",
+                           "--dense-points", "256", "--scheduler", "tcp://127.0.0.1:1", "--no-progress"])  # fmt: skip
+    assert status == 2
+    err = capsys.readouterr().err
+    assert "cannot reach the Dask scheduler tcp://127.0.0.1:1" in err and "Traceback" not in err
+    assert not list((tmp_path / "x").rglob("*.h5"))
+
+
+def test_compact_reconstructs_the_dense_output_exactly(compact_run, dense_run):
+    summary = compact_run[1]
     assert summary.samples == dense_run[1].samples
-    dense_ds, compact_ds = OccludedDataset(dense_run[0]), OccludedDataset(tmp_path / "compact")
+    dense_ds, compact_ds = OccludedDataset(dense_run[0]), OccludedDataset(compact_run[0])
     assert compact_ds.storage == "compact" and len(compact_ds) == len(dense_ds)
     (a, la), (b, lb) = dense_ds.to_arrays(), compact_ds.to_arrays()
     assert a.dtype == b.dtype == np.float32
     assert np.array_equal(a, b) and np.array_equal(la, lb)
     for i in (0, len(dense_ds) // 2, len(dense_ds) - 1):
         assert np.array_equal(dense_ds[i][0], compact_ds[i][0]) and dense_ds[i][2] == compact_ds[i][2]
+
+
+# -- content: the samples are the named object's occluded points -----------------------------
+def test_dense_shards_hold_occluded_samples_of_the_named_objects_dense_cloud(dense_run):
+    # Every row is exactly the draw of (seed, object_key(name), pose, sample) from the
+    # visible points of the dense cloud of object_key(name); and the oracle agrees that
+    # the points are visible (a generator without occlusion samples ~half hidden points).
+    out = dense_run[0]
+    hidden = total = 0
+    for rec in _manifest(out):
+        mesh, dense, visible = _expected_object(rec, PARAMS)
+        assert rec["n_visible"] == [int(v.sum()) for v in visible]
+        with h5py.File(out / rec["shards"][0], "r") as f:
+            data, pose_index, sample_index = f["data"][()], f["pose_index"][()], f["sample_index"][()]
+            assert int(f.attrs["key"]) == object_key(rec["name"])
+        for row in range(len(data)):
+            pose, s = int(pose_index[row]), int(sample_index[row])
+            [chosen] = pose_samples(
+                np.flatnonzero(visible[pose]), PARAMS.n_points, seed=PARAMS.seed, key=object_key(rec["name"]),
+                pose_index=pose, sample_indices=[s],
+            )  # fmt: skip
+            assert np.array_equal(data[row], dense.points[chosen].astype(np.float32)), (rec["name"], row)
+            camera = camera_on_sphere(*PARAMS.poses[pose], PARAMS.radius)
+            truth = visible_mask(mesh, dense.points[chosen], camera, "oracle", face_index=dense.face_index[chosen])
+            hidden += int((~truth).sum())
+            total += len(chosen)
+    # measured: 12 of the 5 x 4 x 2 x 128 = 5120 sampled points (0.23 %) hidden by the oracle
+    # (the z-buffer at 96² px); a generator without occlusion: ~50 %
+    assert hidden <= 0.01 * total, (hidden, total)
+
+
+def test_compact_shards_hold_the_named_dense_cloud_and_its_visibility_bits(compact_run):
+    # the documented layout: dense_points of the object's name key, and per pose the
+    # visibility mask packed by numpy.packbits (big bit order: point 0 is bit 7 of byte 0)
+    out = compact_run[0]
+    for rec in _manifest(out):
+        _, dense, visible = _expected_object(rec, PARAMS)
+        with h5py.File(out / rec["shards"][0], "r") as f:
+            assert np.array_equal(f["dense_points"][()], dense.points.astype(np.float32)), rec["name"]
+            bits, n_visible = f["visible_bits"][()], f["n_visible"][()]
+            assert int(f.attrs["n_dense"]) == len(dense.points)
+        for pose, vis in enumerate(visible):
+            assert np.array_equal(np.unpackbits(bits[pose], count=len(vis)).astype(bool), vis), (rec["name"], pose)
+            assert np.array_equal(unpack_visible(bits[pose], len(vis)), vis)
+            assert bits[pose][0] >> 7 == vis[0]
+            assert n_visible[pose] == vis.sum() == rec["n_visible"][pose]
+
+
+def test_padded_poses_through_the_farm_and_the_reader(tree, tmp_path):
+    # more points per sample than the dense cloud has visible: every sample is padded
+    params = FarmParams(**{**PARAMS.to_dict(), "n_points": 600, "dense_points": 800, "samples_per_view": 2})
+    runs = {}
+    for storage in ("dense", "compact"):
+        p = FarmParams(**{**params.to_dict(), "storage": storage})
+        summary = run_farm(tree, tmp_path / storage, params=p, classes="sofa,stool", progress=False)
+        assert summary.done == 2
+        runs[storage] = OccludedDataset(tmp_path / storage)
+    for rec in _manifest(tmp_path / "dense"):
+        assert rec["n_padded_poses"] == len(params.poses) and 0 < max(rec["n_visible"]) < 600
+    dense_ds, compact_ds = runs["dense"], runs["compact"]
+    assert len(dense_ds) == len(compact_ds) == 2 * len(params.poses) * 2
+    by_name = {}
+    for rec in _manifest(tmp_path / "dense"):
+        _, dense, visible = _expected_object(rec, params)
+        by_name[rec["name"]] = (dense.points.astype(np.float32), visible)
+    for i in range(len(dense_ds)):
+        (a, label, meta), (b, _, meta_b) = dense_ds[i], compact_ds[i]
+        assert np.array_equal(a, b) and meta == meta_b
+        assert meta["padded"] and meta["n_visible"] < 600
+        points, visible = by_name[meta["name"]]
+        vis = visible[meta["pose_index"]]
+        assert meta["n_visible"] == vis.sum()
+        # every visible point once, then repeats of visible points, in random order
+        rows = {p.tobytes() for p in a}
+        assert rows == {p.tobytes() for p in points[vis]}
+        assert not np.array_equal(a[: meta["n_visible"]], points[vis])
+    assert np.array_equal(dense_ds.to_arrays()[0], compact_ds.to_arrays()[0])
 
 
 # -- resume, failures, errors ---------------------------------------------------------------
