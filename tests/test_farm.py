@@ -462,25 +462,40 @@ def test_disk_full_is_a_clear_error_and_leaves_no_partial_files(tree, tmp_path, 
     assert not list((tmp_path / "full").rglob("*.h5")) and not list((tmp_path / "full").rglob(".*.tmp"))
 
 
-def test_cli_options_parse():
-    parser = argparse.ArgumentParser()
-    sub = parser.add_subparsers()
-    add_farm_parser(sub)
-    add_farm_merge_parser(sub)
-    args = parser.parse_args(
-        ["farm", "ROOT", "--out", "DS", "--classes", "chair,sofa", "--per-class", "5", "--splits", "train",
-         "--views", "grid25", "--samples-per-view", "3", "--points", "1024", "--density", "2000", "--resolution", "256",
-         "--seed", "7", "--workers", "4", "--shard", "1/4", "--dask-local", "2", "--storage", "compact", "--overwrite"]
-    )  # fmt: skip
-    assert (args.per_class, args.density, args.dense_points, args.shard, args.dask_local, args.storage) == (
-        5, 2000.0, None, "1/4", 2, "compact"
-    )
-    with pytest.raises(SystemExit):
-        parser.parse_args(["farm", "ROOT", "--out", "DS", "--density", "1", "--dense-points", "5"])
-    with pytest.raises(SystemExit):
-        parser.parse_args(["farm", "ROOT", "--out", "DS", "--scheduler", "tcp://h:1", "--dask-local", "2"])
-    args = parser.parse_args(["farm-merge", "A", "B", "--out", "C"])
-    assert args.inputs == ["A", "B"] and args.out == "C"
+def test_cli_farm_and_farm_merge_run_with_their_options(tree, tmp_path):
+    # the options reach run_farm: selection, rendering, storage, seed, shards, merge
+    base = ["--classes", "chair,sofa,stool", "--per-class", "1", "--splits", "train", "--views", "0:0,40:90",
+            "--samples-per-view", "3", "--points", "64", "--density", "2000", "--resolution", "64",
+            "--storage", "compact", "--no-progress"]  # fmt: skip
+    common = [*base, "--seed", "7"]
+    for i in range(2):
+        assert cli_main(["farm", str(tree), "--out", str(tmp_path / f"t{i}"), "--shard", f"{i}/2", *common]) == 0
+    assert not (tmp_path / "t0" / CARD_FILE).exists()  # a shard is not a finished data set
+    assert cli_main(["farm-merge", str(tmp_path / "t0"), str(tmp_path / "t1"), "--out", str(tmp_path / "m"), "--no-progress"]) == 0
+    ds = OccludedDataset(tmp_path / "m")
+    card = json.loads((tmp_path / "m" / CARD_FILE).read_text())
+    assert ds.storage == "compact" and ds.n_points == 64
+    assert card["params"]["seed"] == 7 and card["params"]["density"] == 2000.0 and card["params"]["dense_points"] is None
+    assert card["params"]["resolution"] == 64 and card["poses"] == [[0.0, 0.0], [40.0, 90.0]]
+    names = {ds.metadata(i)["name"] for i in range(len(ds))}
+    assert names == {"chair/train/chair_0001", "stool/train/stool_0002"}  # sofa is in test only
+    assert len(ds) == 2 * 2 * 3
+    manifest = _manifest(tmp_path / "m")
+    for rec in manifest:  # --density 2000: about 2000 points per unit area of the normalised mesh
+        area = load_mesh(rec["source"]).area
+        with h5py.File(tmp_path / "m" / rec["shards"][0], "r") as f:
+            assert abs(int(f.attrs["n_dense"]) - 2000 * area) < 5 * np.sqrt(2000 * area) + 1
+    # --seed 7 and the same object in a seed-0 run: other samples
+    assert cli_main(["farm", str(tree), "--out", str(tmp_path / "s0"), *base]) == 0
+    other = OccludedDataset(tmp_path / "s0", classes="chair")
+    assert not np.array_equal(other[0][0], OccludedDataset(tmp_path / "m", classes="chair")[0][0])
+    # usage errors exit 2 before any work
+    for bad in (["--density", "1", "--dense-points", "5"], ["--scheduler", "tcp://h:1", "--dask-local", "2"]):
+        with pytest.raises(SystemExit) as exc:
+            cli_main(["farm", str(tree), "--out", str(tmp_path / "bad"), *bad])
+        assert exc.value.code == 2
+    assert cli_main(["farm", str(tree), "--out", str(tmp_path / "bad"), "--shard", "2/2", "--no-progress"]) == 2
+    assert not (tmp_path / "bad").exists() or not list((tmp_path / "bad").rglob("*.h5"))
 
 
 def test_ready_plan_of_repeated_meshes(tmp_path):
