@@ -25,6 +25,7 @@ import trimesh
 from numpy.typing import NDArray
 
 from ..cameras import Camera
+from ..errors import InvalidInputError
 from ..mesh_cache import MeshCache
 from ..render.moderngl_backend import ModernGLRenderer, PointBuffer
 from .registry import check_face_index, check_points, register
@@ -76,10 +77,10 @@ def _resolve_uncertain(
     resolve: str,
     tolerance: float,
 ) -> NDArray[np.bool_]:
+    if resolve not in ("embree", "none"):
+        raise InvalidInputError(f"resolve must be 'embree' or 'none', got {resolve!r}")
     if resolve == "none" or not uncertain.any():
         return visible
-    if resolve != "embree":
-        raise ValueError(f"resolve must be 'embree' or 'none', got {resolve!r}")
     from .oracle import occluded_embree  # deferred: only needed when points are uncertain
 
     idx = np.flatnonzero(uncertain)
