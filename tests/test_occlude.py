@@ -238,3 +238,26 @@ def test_a_closed_convex_mesh_shows_its_front_faces(el, az):
             idx = _dense_indices(_SPHERE_DENSE, cloud)
             assert visible[idx].all()
             assert np.count_nonzero((facing < -1e-6)[idx] & decided[idx]) <= allowed, method  # hidden points never appear
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1), key=st.integers(0, 2**64 - 1), pose=st.integers(0, 10_000),
+    n_visible=st.integers(1, 400), n_points=st.integers(1, 300),
+)  # fmt: skip
+def test_same_seed_same_bytes(seed, key, pose, n_visible, n_points):
+    # the draw is a pure function of (seed, key, pose, sample): same inputs, same bytes;
+    # and it always holds n_points visible indices, each visible one at least once if padded
+    visible = np.arange(n_visible) * 3
+    a = pose_samples(visible, n_points, seed=seed, key=key, pose_index=pose, sample_indices=[0, 1])
+    b = pose_samples(visible, n_points, seed=seed, key=key, pose_index=pose, sample_indices=[0, 1])
+    assert all(x.tobytes() == y.tobytes() for x, y in zip(a, b))
+    for chosen in a:
+        assert len(chosen) == n_points and np.isin(chosen, visible).all()
+        if n_visible < n_points:
+            assert set(chosen.tolist()) == set(visible.tolist())
+        else:
+            assert len(np.unique(chosen)) == n_points
+    dense_a = dense_cloud(_SPHERE, key, seed=seed, count=50)
+    dense_b = dense_cloud(_SPHERE, key, seed=seed, count=50)
+    assert dense_a.points.tobytes() == dense_b.points.tobytes()

@@ -13,8 +13,12 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.metrics import agreement
 from zbuf_occlude.visibility.zbuffer import Scene
 
-#: Issue 3's bar: z-buffer vs oracle agreement at 1024² over the grid25 poses, per pose.
-MIN_AGREEMENT = 0.995
+#: z-buffer vs oracle agreement at 1024² over the grid25 poses, 20k points per mesh.
+#: Measured (Mesa llvmpipe): worst pose 0.99730 (bathtub_0003) over the 27 meshes of
+#: ../shared, 0.99850 (chair_0001) over the 8 shipped ones; worst per-mesh mean 0.99932
+#: (airplane_0001), 0.99965 shipped.  Bars: 1.5x the measured worst error rates.
+MIN_AGREEMENT = 0.9960
+MIN_MEAN_AGREEMENT = 0.9990
 POINTS_PER_MESH = 20_000
 
 
@@ -36,10 +40,11 @@ def _sweep(path, method="zbuffer", **options):
     return scores
 
 
-def _assert_sweep(scores, path, minimum):
+def _assert_sweep(scores, path, minimum, minimum_mean=MIN_MEAN_AGREEMENT):
     (el, az), worst = min(scores, key=lambda s: s[1]["accuracy"])
     mean = np.mean([s[1]["accuracy"] for s in scores])
     print(f"{path.name}: mean {mean:.5f}, worst {worst['accuracy']:.5f} at el={el} az={az}")
+    assert mean >= minimum_mean, f"{path}: mean agreement {mean:.4%} over grid25"
     assert worst["accuracy"] >= minimum, (
         f"{path}: worst pose el={el} az={az}: agreement {worst['accuracy']:.4%} "
         f"(false visible {worst['false_visible']:.3%}, false hidden {worst['false_hidden']:.3%})"
