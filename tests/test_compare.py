@@ -115,15 +115,36 @@ def test_method_budget_skips_larger_counts(tmp_path: Path) -> None:
     assert exact[200]["error"].startswith("skipped")
 
 
-def test_tables_1a_1b_render() -> None:
+def _cells(table: str, mesh: str) -> list[str]:
+    [line] = [l for l in table.splitlines() if l.startswith(f"| {mesh} ")]
+    return [c.strip() for c in line.strip("|").split("|")]
+
+
+def test_tables_1a_1b_hold_the_measured_values() -> None:
     path = _tiny_path()
     rows = cmp.compare(
-        [path], ["oracle", "paper-exact", "paper-pruned", "og32", "og64"], [300], "20:30", 128, 0, progress=False
+        [path], ["oracle", "paper-exact", "paper-pruned", "og32", "og64"], [300], "20:30,-10:200", 128, 0, progress=False
     )
-    t1a = cmp.table_1a(rows)
-    assert f"{path.stem} ({len(zo.load_mesh(path).faces)})" in t1a and "≈55 %" in t1a
-    t1b = cmp.table_1b(rows, methods=("og32", "og64"))
-    assert "og32 (s) / reduction / accuracy" in t1b and path.stem in t1b
+    by = {m: [r for r in rows if r["method"] == m] for m in ("paper-exact", "paper-pruned", "og32", "og64")}
+    mean = {m: {k: np.mean([r[k] for r in rs]) for k in ("time_s", "accuracy", "false_hidden_rate")} for m, rs in by.items()}
+    n_faces = len(zo.load_mesh(path).faces)
+    cells = _cells(cmp.table_1a(rows), path.stem)
+    # mesh (faces) | points | views | exact (s) | pruned (s) | reduction | paper | accuracy | false hidden
+    assert cells[0] == f"{path.stem} ({n_faces})" and cells[1] == "300" and cells[2] == "2"
+    exact_s, pruned_s = float(cells[3]), float(cells[4])
+    assert exact_s == pytest.approx(mean["paper-exact"]["time_s"], rel=5e-3)  # printed with 3 significant digits
+    assert pruned_s == pytest.approx(mean["paper-pruned"]["time_s"], rel=5e-3)  # printed with 3 significant digits
+    reduction = 100.0 * (1.0 - mean["paper-pruned"]["time_s"] / mean["paper-exact"]["time_s"])
+    assert float(cells[5].rstrip(" %")) == pytest.approx(reduction, abs=0.051)
+    assert float(cells[7]) == pytest.approx(mean["paper-pruned"]["accuracy"], abs=5e-5)
+    assert float(cells[8]) == pytest.approx(mean["paper-pruned"]["false_hidden_rate"], abs=5e-5)
+    cells = _cells(cmp.table_1b(rows, methods=("og32", "og64")), path.stem)
+    for cell, method in zip(cells[4:6], ("og32", "og64")):
+        seconds, red, acc = (c.strip() for c in cell.split("/"))
+        assert float(seconds) == pytest.approx(mean[method]["time_s"], rel=5e-3)  # printed with 3 significant digits
+        expected = 100.0 * (1.0 - mean[method]["time_s"] / mean["paper-exact"]["time_s"])
+        assert float(red.rstrip(" %")) == pytest.approx(expected, abs=0.051)
+        assert float(acc) == pytest.approx(mean[method]["accuracy"], abs=5e-5)
 
 
 def test_cli_main_runs_compare_and_elevation_profile(tmp_path: Path) -> None:
