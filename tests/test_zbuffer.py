@@ -217,7 +217,7 @@ def test_a_larger_neighborhood_finds_more_occluders(chair_scene):
     visible = [scene.visible(camera, neighborhood=r, resolve="none") for r in range(5)]
     for r in range(4):
         assert not (visible[r + 1] & ~visible[r]).any(), r
-    assert visible[0].sum() > visible[1].sum() + 1000 and visible[3].sum() > visible[4].sum()
+    assert visible[0].sum() > visible[1].sum() + 1000 and visible[1].sum() > visible[4].sum() + 100
     truth = zo.visible_mask(mesh, points, camera, "oracle", face_index=face_index)
     assert np.mean(scene.visible(camera, neighborhood=0) == truth) < np.mean(scene.visible(camera) == truth)
     for bad in (-1, 5):
