@@ -1,15 +1,20 @@
 """Shared fixtures: where the test meshes live.
 
-* Real ModelNet meshes (research-only, not shipped): ``../shared/data/modelnet_subset``
-  next to the repository root.  See its SOURCE.md for what the files exercise.
-* The repository's own sample meshes, shipped with the project: ``data/samples/``.
+* The repository's own sample meshes, shipped with the project: ``data/samples/`` (8 real
+  ModelNet meshes, byte-identical copies of files of the subset below; ``MANIFEST.csv``
+  maps each to its path there).  A fresh clone runs every test on these and on procedural
+  meshes built in the tests.
+* The larger real ModelNet subset (research-only, not shipped): ``../shared/data/modelnet_subset``
+  next to the repository root.  When present it is extra coverage: the sweeps run over
+  its 27 meshes instead of the 8 shipped ones.  Nothing skips when it is absent.
 
-Tests that need either are skipped, with the reason, when the folder is absent.
-A test that takes an argument named ``modelnet_off_file`` runs once per real mesh.
+A test that takes an argument named ``modelnet_off_file`` runs once per real mesh (the
+subset's when present, else the shipped ones).
 """
 
 from __future__ import annotations
 
+import csv
 from pathlib import Path
 
 import pytest
@@ -23,49 +28,80 @@ MODELNET_SUBSET = REPO_ROOT.parent / "shared" / "data" / "modelnet_subset"
 SAMPLE_MESHES = REPO_ROOT / "data" / "samples"
 
 
-def _modelnet_off_files() -> list[Path]:
-    return sorted(MODELNET_SUBSET.rglob("*.off")) if MODELNET_SUBSET.is_dir() else []
+def _sample_files() -> list[Path]:
+    if not SAMPLE_MESHES.is_dir():
+        return []
+    return sorted(p for p in SAMPLE_MESHES.rglob("*") if p.suffix.lower() in SUPPORTED_EXTENSIONS)
+
+
+def _shipped_by_subset_path() -> dict[str, Path]:
+    """``{path in the subset: shipped copy}`` from ``data/samples/MANIFEST.csv``."""
+    manifest = SAMPLE_MESHES / "MANIFEST.csv"
+    if not manifest.is_file():
+        return {}
+    out = {}
+    with open(manifest, newline="", encoding="utf-8") as fh:
+        for row in csv.DictReader(fh):
+            rel = Path(row["relpath"])
+            shipped = SAMPLE_MESHES / row["class"] / row["split"] / rel.name
+            if shipped.is_file():
+                out[rel.as_posix()] = shipped
+    return out
+
+
+def shared_available() -> bool:
+    """Whether the larger real subset ``../shared/data/modelnet_subset`` is present."""
+    return MODELNET_SUBSET.is_dir() and any(MODELNET_SUBSET.rglob("*.off"))
+
+
+def real_mesh_files() -> list[Path]:
+    """The real meshes the sweeps run over: the subset's ``.off`` files, else the shipped ones."""
+    if shared_available():
+        return sorted(MODELNET_SUBSET.rglob("*.off"))
+    return _sample_files()
+
+
+def real_mesh(relpath: str, substitute: str | None = None) -> Path:
+    """A real mesh by its path in the subset, wherever it is.
+
+    The subset's file when present; else its shipped copy (same bytes); else the shipped
+    copy of ``substitute`` (a subset path of a shipped mesh with the property the test
+    needs).  Never skips: a missing file is a broken checkout.
+    """
+    if (MODELNET_SUBSET / relpath).is_file():
+        return MODELNET_SUBSET / relpath
+    shipped = _shipped_by_subset_path()
+    for rel in (relpath, substitute):
+        if rel is not None and rel in shipped:
+            return shipped[rel]
+    raise FileNotFoundError(f"{relpath} is neither in {MODELNET_SUBSET} nor shipped in {SAMPLE_MESHES} (substitute {substitute})")
 
 
 def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
     # Parametrise at collection time so that each real mesh is its own test case.
     if "modelnet_off_file" in metafunc.fixturenames:
-        files = _modelnet_off_files()
-        params = [pytest.param(p, id=p.relative_to(MODELNET_SUBSET).as_posix()) for p in files] or [
-            pytest.param(None, marks=pytest.mark.skip(reason=f"no .off files under {MODELNET_SUBSET}"))
-        ]
+        root = MODELNET_SUBSET if shared_available() else SAMPLE_MESHES
+        tag = "shared" if shared_available() else "samples"
+        params = [pytest.param(p, id=f"{tag}/{p.relative_to(root).as_posix()}") for p in real_mesh_files()]
         metafunc.parametrize("modelnet_off_file", params)
 
 
 @pytest.fixture(scope="session")
-def shared_data() -> Path:
-    """Path to the real ModelNet subset; skips the test when it is absent."""
-    if not MODELNET_SUBSET.is_dir():
-        pytest.skip(f"real ModelNet meshes not found at {MODELNET_SUBSET}")
-    return MODELNET_SUBSET
-
-
-@pytest.fixture(scope="session")
-def modelnet_off_files(shared_data: Path) -> list[Path]:
-    """All ``.off`` files of the real ModelNet subset, sorted."""
-    files = _modelnet_off_files()
-    if not files:
-        pytest.skip(f"no .off files under {shared_data}")
-    return files
+def modelnet_off_files() -> list[Path]:
+    """All real meshes (the subset's ``.off`` files if present, else the shipped ones), sorted."""
+    return real_mesh_files()
 
 
 @pytest.fixture(scope="session")
 def sample_meshes_dir() -> Path:
-    """The repository's shipped sample meshes (``data/samples/``); skips when absent."""
-    if not SAMPLE_MESHES.is_dir():
-        pytest.skip(f"no sample meshes shipped yet at {SAMPLE_MESHES}")
+    """The repository's shipped sample meshes (``data/samples/``)."""
+    assert SAMPLE_MESHES.is_dir(), f"the shipped sample meshes are missing: {SAMPLE_MESHES}"
     return SAMPLE_MESHES
 
 
 @pytest.fixture(scope="session")
 def sample_mesh_files(sample_meshes_dir: Path) -> list[Path]:
     """Every mesh file in ``data/samples/`` that load_mesh can read, sorted."""
-    files = sorted(p for p in sample_meshes_dir.rglob("*") if p.suffix.lower() in SUPPORTED_EXTENSIONS)
-    if not files:
-        pytest.skip(f"no mesh files in {sample_meshes_dir}")
+    files = _sample_files()
+    assert files, f"no mesh files in {sample_meshes_dir}"
     return files

@@ -10,19 +10,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from conftest import real_mesh
 
 import zbuf_occlude as zo
 from zbuf_occlude import compare as cmp
 from zbuf_occlude import elevation_profile as prof
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 
-MODELNET = Path(__file__).parents[1].parent / "shared" / "data" / "modelnet_subset"
-TINY = MODELNET / "ModelNet40" / "bathtub" / "train" / "bathtub_0002.off"  # 664 faces
+#: A tiny real mesh: bathtub_0002 (664 faces) from ../shared, else the shipped sofa_0681 (224).
+TINY = real_mesh("ModelNet40/bathtub/train/bathtub_0002.off", substitute="ModelNet10/sofa/test/sofa_0681.off")
 
 
 def _tiny_path() -> Path:
-    if not TINY.is_file():
-        pytest.skip(f"real ModelNet mesh not found at {TINY}")
     return TINY
 
 
@@ -116,26 +115,55 @@ def test_method_budget_skips_larger_counts(tmp_path: Path) -> None:
     assert exact[200]["error"].startswith("skipped")
 
 
-def test_tables_1a_1b_render() -> None:
+def _cells(table: str, mesh: str) -> list[str]:
+    [line] = [l for l in table.splitlines() if l.startswith(f"| {mesh} ")]
+    return [c.strip() for c in line.strip("|").split("|")]
+
+
+def test_tables_1a_1b_hold_the_measured_values() -> None:
     path = _tiny_path()
     rows = cmp.compare(
-        [path], ["oracle", "paper-exact", "paper-pruned", "og32", "og64"], [300], "20:30", 128, 0, progress=False
+        [path], ["oracle", "paper-exact", "paper-pruned", "og32", "og64"], [300], "20:30,-10:200", 128, 0, progress=False
     )
-    t1a = cmp.table_1a(rows)
-    assert "bathtub_0002 (664)" in t1a and "≈55 %" in t1a
-    t1b = cmp.table_1b(rows, methods=("og32", "og64"))
-    assert "og32 (s) / reduction / accuracy" in t1b and "bathtub_0002" in t1b
+    by = {m: [r for r in rows if r["method"] == m] for m in ("paper-exact", "paper-pruned", "og32", "og64")}
+    mean = {m: {k: np.mean([r[k] for r in rs]) for k in ("time_s", "accuracy", "false_hidden_rate")} for m, rs in by.items()}
+    n_faces = len(zo.load_mesh(path).faces)
+    cells = _cells(cmp.table_1a(rows), path.stem)
+    # mesh (faces) | points | views | exact (s) | pruned (s) | reduction | paper | accuracy | false hidden
+    assert cells[0] == f"{path.stem} ({n_faces})" and cells[1] == "300" and cells[2] == "2"
+    exact_s, pruned_s = float(cells[3]), float(cells[4])
+    assert exact_s == pytest.approx(mean["paper-exact"]["time_s"], rel=5e-3)  # printed with 3 significant digits
+    assert pruned_s == pytest.approx(mean["paper-pruned"]["time_s"], rel=5e-3)  # printed with 3 significant digits
+    reduction = 100.0 * (1.0 - mean["paper-pruned"]["time_s"] / mean["paper-exact"]["time_s"])
+    assert float(cells[5].rstrip(" %")) == pytest.approx(reduction, abs=0.051)
+    assert float(cells[7]) == pytest.approx(mean["paper-pruned"]["accuracy"], abs=5e-5)
+    assert float(cells[8]) == pytest.approx(mean["paper-pruned"]["false_hidden_rate"], abs=5e-5)
+    cells = _cells(cmp.table_1b(rows, methods=("og32", "og64")), path.stem)
+    for cell, method in zip(cells[4:6], ("og32", "og64")):
+        seconds, red, acc = (c.strip() for c in cell.split("/"))
+        assert float(seconds) == pytest.approx(mean[method]["time_s"], rel=5e-3)  # printed with 3 significant digits
+        expected = 100.0 * (1.0 - mean[method]["time_s"] / mean["paper-exact"]["time_s"])
+        assert float(red.rstrip(" %")) == pytest.approx(expected, abs=0.051)
+        assert float(acc) == pytest.approx(mean[method]["accuracy"], abs=5e-5)
 
 
-def test_cli_parsers_wire_handlers(tmp_path: Path) -> None:
-    parser = argparse.ArgumentParser(prog="zbuf-occlude")
-    sub = parser.add_subparsers(dest="command")
-    cmp.add_compare_parser(sub)
-    prof.add_profile_parser(sub)
-    args = parser.parse_args(["compare", "a.off", "--methods", "oracle,og32", "--points", "100", "--out", str(tmp_path)])
-    assert args.func is cmp._cli_compare and args.methods == "oracle,og32"
-    args = parser.parse_args(["elevation-profile", "a.off", "--points", "500", "--azimuths", "2"])
-    assert args.func is prof._cli_profile and args.azimuths == 2
+def test_cli_main_runs_compare_and_elevation_profile(tmp_path: Path) -> None:
+    from zbuf_occlude.cli import main
+
+    path = _tiny_path()
+    assert main(["compare", str(path), "--methods", "oracle,og32", "--points", "120", "--views", "0:0,45:90",
+                 "--resolution", "96", "--out", str(tmp_path / "c"), "--no-progress"]) == 0  # fmt: skip
+    with open(tmp_path / "c" / "results.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert {r["method"] for r in rows} == {"oracle", "og32"} and all(r["error"] == "" for r in rows)
+    by_method = {r["method"]: r for r in rows}
+    assert float(by_method["oracle"]["accuracy"]) == 1.0 and 0.8 < float(by_method["og32"]["accuracy"]) <= 1.0
+    assert main(["elevation-profile", str(path), "--method", "oracle", "--points", "400", "--elevations=-90,90",
+                 "--azimuths", "2", "--out", str(tmp_path / "p"), "--no-progress"]) == 0  # fmt: skip
+    with open(tmp_path / "p" / "elevation_profile.csv") as fh:
+        assert [float(r["elevation_deg"]) for r in csv.DictReader(fh)] == [-90.0, 90.0]
+    # a bad option value is a usage error (2), not a traceback
+    assert main(["compare", str(path), "--methods", "oracle,no-such-method", "--out", str(tmp_path / "x"), "--no-progress"]) == 2
 
 
 def test_cli_compare_handler_runs(tmp_path: Path) -> None:

@@ -1,7 +1,8 @@
 """The render farm: layout, determinism (workers, shards, selection, Dask), resume, failures.
 
-Runs on a few small real ModelNet meshes with few poses and points, so the whole file takes
-well under a minute on a 2-core machine with Mesa llvmpipe.
+Runs on the shipped real ModelNet meshes (``data/samples``, so a fresh clone runs it all)
+with few poses and points, so the whole file takes well under a minute on a 2-core
+machine with Mesa llvmpipe.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from conftest import SAMPLE_MESHES
 
 from zbuf_occlude.dataset import CARD_FILE, MANIFEST_FILE, SHAPE_NAMES_FILE, OccludedDataset
 from zbuf_occlude.errors import InvalidInputError, OutputError
@@ -33,30 +35,32 @@ from zbuf_occlude.farm import (
     run_farm,
     select_shard,
 )
-from zbuf_occlude.occlude import object_key
+from zbuf_occlude.cameras import camera_on_sphere
+from zbuf_occlude.cli import main as cli_main
+from zbuf_occlude.dataset import unpack_visible
+from zbuf_occlude.mesh import load_mesh
+from zbuf_occlude.occlude import dense_cloud, object_key, pose_samples
+from zbuf_occlude.visibility.registry import visible_mask
+from zbuf_occlude.visibility.zbuffer import Scene
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-MODELNET_SUBSET = REPO_ROOT.parent / "shared" / "data" / "modelnet_subset"
-#: The smallest real meshes (96–664 faces), as (path in the subset, class, split).
+#: Shipped real meshes (224–7608 faces), as (path under data/samples, class, split).
 SMALL_MESHES = [
-    ("ModelNet10/sofa/test/sofa_0681.off", "sofa", "test"),
-    ("ModelNet40/monitor/test/monitor_0466.off", "monitor", "test"),
-    ("release_unknown/chair/train/chair_0002.off", "chair", "train"),
-    ("raw_single_source/stool/train/stool_0002.off", "stool", "train"),
-    ("ModelNet40/bathtub/train/bathtub_0002.off", "bathtub", "train"),
+    ("sofa/test/sofa_0681.off", "sofa", "test"),
+    ("monitor/train/monitor_0001.off", "monitor", "train"),
+    ("chair/train/chair_0001.off", "chair", "train"),
+    ("stool/train/stool_0002.off", "stool", "train"),
+    ("desk/test/desk_0201.off", "desk", "test"),
 ]
 #: Few poses, points and pixels: enough to exercise every code path quickly.
 PARAMS = FarmParams(views="0:0,40:90,-40:200,85:300", samples_per_view=2, n_points=128, dense_points=2048, resolution=96)
-
-pytestmark = pytest.mark.skipif(not MODELNET_SUBSET.is_dir(), reason=f"real ModelNet meshes not found at {MODELNET_SUBSET}")
-
 
 def make_tree(root: Path, meshes=SMALL_MESHES) -> Path:
     """A ModelNet-style tree ROOT/<class>/<split>/<name>.off of symlinks to the real meshes."""
     for rel, cls, split in meshes:
         target = root / cls / split / Path(rel).name
         target.parent.mkdir(parents=True, exist_ok=True)
-        target.symlink_to(MODELNET_SUBSET / rel)
+        target.symlink_to(SAMPLE_MESHES / rel)
     return root
 
 
@@ -91,6 +95,29 @@ def dense_run(tree, tmp_path_factory):
     return out, summary
 
 
+@pytest.fixture(scope="module")
+def compact_run(tree, tmp_path_factory):
+    out = tmp_path_factory.mktemp("compact")
+    summary = run_farm(tree, out, params=FarmParams(**{**PARAMS.to_dict(), "storage": "compact"}), progress=False)
+    return out, summary
+
+
+def _manifest(out: Path) -> list[dict]:
+    return [json.loads(line) for line in (out / MANIFEST_FILE).read_text().splitlines()]
+
+
+def _expected_object(rec: dict, params: FarmParams):
+    """What a shard must hold, rebuilt from the public pieces: the dense cloud of the
+    object's *name* key and its ``zbuffer`` visibility from every pose."""
+    mesh = load_mesh(rec["source"])
+    dense = dense_cloud(mesh, object_key(rec["name"]), seed=params.seed, count=params.dense_points)
+    with Scene(mesh, dense.points, dense.face_index) as scene:
+        visible = [
+            scene.visible(camera_on_sphere(el, az, params.radius, resolution=params.resolution)) for el, az in params.poses
+        ]
+    return mesh, dense, visible
+
+
 # -- inputs ------------------------------------------------------------------------------
 def test_discover_tree_labels_splits_and_keys(tree):
     objects = discover_objects(tree)
@@ -100,11 +127,11 @@ def test_discover_tree_labels_splits_and_keys(tree):
     assert all(o.label == shape_names.index(o.class_name) for o in objects)
     assert [o.index for o in objects] == list(range(len(objects)))
     chair = next(o for o in objects if o.class_name == "chair")
-    assert chair.name == "chair/train/chair_0002" and chair.key == object_key("chair/train/chair_0002")
+    assert chair.name == "chair/train/chair_0001" and chair.key == object_key("chair/train/chair_0001")
 
     # the key (and so every sample) does not depend on the selection
     subset = discover_objects(tree, classes="chair,sofa", splits=["train"])
-    assert [o.name for o in subset] == ["chair/train/chair_0002"]
+    assert [o.name for o in subset] == ["chair/train/chair_0001"]
     assert subset[0].key == chair.key
     assert len(discover_objects(tree, per_class=1, splits="test")) == 2
     with pytest.raises(InvalidInputError, match="not found"):
@@ -117,7 +144,7 @@ def test_discover_flat_folder_and_list_file(tmp_path):
     flat = tmp_path / "flat"
     flat.mkdir()
     for rel, _, _ in SMALL_MESHES[:3]:
-        (flat / Path(rel).name).symlink_to(MODELNET_SUBSET / rel)
+        (flat / Path(rel).name).symlink_to(SAMPLE_MESHES / rel)
     objects = discover_objects(flat)
     assert {o.class_name for o in objects} == {"sofa", "monitor", "chair"}  # from <class>_<NNNN>
     assert {o.split for o in objects} == {"train"}
@@ -125,13 +152,13 @@ def test_discover_flat_folder_and_list_file(tmp_path):
     listing = tmp_path / "list.txt"
     listing.write_text(
         "# path label [split]\n"
-        f"{MODELNET_SUBSET / SMALL_MESHES[0][0]} couch test\n"
+        f"{SAMPLE_MESHES / SMALL_MESHES[0][0]} couch test\n"
         f"flat/{Path(SMALL_MESHES[2][0]).name}   seat\n\n"
     )
     objects = discover_objects(listing)
     # sorted by name: the absolute path ("/...") before "flat/..."
     assert [(o.class_name, o.split, o.label) for o in objects] == [("couch", "test", 0), ("seat", "train", 1)]
-    assert objects[1].name == "flat/chair_0002" and Path(objects[1].source).is_file()
+    assert objects[1].name == "flat/chair_0001" and Path(objects[1].source).is_file()
     bad = tmp_path / "bad.txt"
     bad.write_text("just_a_path\n")
     with pytest.raises(InvalidInputError, match="bad.txt:1"):
@@ -230,17 +257,115 @@ def test_dask_local_cluster_gives_the_same_data_set(tree, dense_run, tmp_path):
     assert_same_samples(dense_run[0], tmp_path / "dask")
 
 
-def test_compact_reconstructs_the_dense_output_exactly(tree, dense_run, tmp_path):
-    params = FarmParams(**{**PARAMS.to_dict(), "storage": "compact"})
-    summary = run_farm(tree, tmp_path / "compact", params=params, progress=False)
+def test_dask_scheduler_address_gives_the_same_data_set(tree, dense_run, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        address = cluster.scheduler_address
+        summary = run_farm(tree, tmp_path / "sched", params=PARAMS, scheduler=address, progress=False)
+    assert summary.workers == f"dask {address}" and summary.done == len(SMALL_MESHES)
+    assert_same_samples(dense_run[0], tmp_path / "sched")
+
+
+def test_unreachable_dask_scheduler_is_a_clear_error(tree, tmp_path, capsys):
+    dask = pytest.importorskip("dask")
+    pytest.importorskip("distributed")
+    # nothing listens on port 1; a short connect timeout keeps the test quick
+    with dask.config.set({"distributed.comm.timeouts.connect": "2s"}):
+        status = cli_main(["farm", str(tree), "--out", str(tmp_path / "x"), "--views", "0:0", "--points", "16",
+                           "--dense-points", "256", "--scheduler", "tcp://127.0.0.1:1", "--no-progress"])  # fmt: skip
+    assert status == 2
+    err = capsys.readouterr().err
+    assert "cannot reach the Dask scheduler tcp://127.0.0.1:1" in err and "Traceback" not in err
+    assert not list((tmp_path / "x").rglob("*.h5"))
+
+
+def test_compact_reconstructs_the_dense_output_exactly(compact_run, dense_run):
+    summary = compact_run[1]
     assert summary.samples == dense_run[1].samples
-    dense_ds, compact_ds = OccludedDataset(dense_run[0]), OccludedDataset(tmp_path / "compact")
+    dense_ds, compact_ds = OccludedDataset(dense_run[0]), OccludedDataset(compact_run[0])
     assert compact_ds.storage == "compact" and len(compact_ds) == len(dense_ds)
     (a, la), (b, lb) = dense_ds.to_arrays(), compact_ds.to_arrays()
     assert a.dtype == b.dtype == np.float32
     assert np.array_equal(a, b) and np.array_equal(la, lb)
     for i in (0, len(dense_ds) // 2, len(dense_ds) - 1):
         assert np.array_equal(dense_ds[i][0], compact_ds[i][0]) and dense_ds[i][2] == compact_ds[i][2]
+
+
+# -- content: the samples are the named object's occluded points -----------------------------
+def test_dense_shards_hold_occluded_samples_of_the_named_objects_dense_cloud(dense_run):
+    # Every row is exactly the draw of (seed, object_key(name), pose, sample) from the
+    # visible points of the dense cloud of object_key(name); and the oracle agrees that
+    # the points are visible (a generator without occlusion samples ~half hidden points).
+    out = dense_run[0]
+    hidden = total = 0
+    for rec in _manifest(out):
+        mesh, dense, visible = _expected_object(rec, PARAMS)
+        assert rec["n_visible"] == [int(v.sum()) for v in visible]
+        with h5py.File(out / rec["shards"][0], "r") as f:
+            data, pose_index, sample_index = f["data"][()], f["pose_index"][()], f["sample_index"][()]
+            assert int(f.attrs["key"]) == object_key(rec["name"])
+        for row in range(len(data)):
+            pose, s = int(pose_index[row]), int(sample_index[row])
+            [chosen] = pose_samples(
+                np.flatnonzero(visible[pose]), PARAMS.n_points, seed=PARAMS.seed, key=object_key(rec["name"]),
+                pose_index=pose, sample_indices=[s],
+            )  # fmt: skip
+            assert np.array_equal(data[row], dense.points[chosen].astype(np.float32)), (rec["name"], row)
+            camera = camera_on_sphere(*PARAMS.poses[pose], PARAMS.radius)
+            truth = visible_mask(mesh, dense.points[chosen], camera, "oracle", face_index=dense.face_index[chosen])
+            hidden += int((~truth).sum())
+            total += len(chosen)
+    # measured: 12 of the 5 x 4 x 2 x 128 = 5120 sampled points (0.23 %) hidden by the oracle
+    # (the z-buffer at 96² px); a generator without occlusion: ~50 %
+    assert hidden <= 0.01 * total, (hidden, total)
+
+
+def test_compact_shards_hold_the_named_dense_cloud_and_its_visibility_bits(compact_run):
+    # the documented layout: dense_points of the object's name key, and per pose the
+    # visibility mask packed by numpy.packbits (big bit order: point 0 is bit 7 of byte 0)
+    out = compact_run[0]
+    for rec in _manifest(out):
+        _, dense, visible = _expected_object(rec, PARAMS)
+        with h5py.File(out / rec["shards"][0], "r") as f:
+            assert np.array_equal(f["dense_points"][()], dense.points.astype(np.float32)), rec["name"]
+            bits, n_visible = f["visible_bits"][()], f["n_visible"][()]
+            assert int(f.attrs["n_dense"]) == len(dense.points)
+        for pose, vis in enumerate(visible):
+            assert np.array_equal(np.unpackbits(bits[pose], count=len(vis)).astype(bool), vis), (rec["name"], pose)
+            assert np.array_equal(unpack_visible(bits[pose], len(vis)), vis)
+            assert bits[pose][0] >> 7 == vis[0]
+            assert n_visible[pose] == vis.sum() == rec["n_visible"][pose]
+
+
+def test_padded_poses_through_the_farm_and_the_reader(tree, tmp_path):
+    # more points per sample than the dense cloud has visible: every sample is padded
+    params = FarmParams(**{**PARAMS.to_dict(), "n_points": 600, "dense_points": 800, "samples_per_view": 2})
+    runs = {}
+    for storage in ("dense", "compact"):
+        p = FarmParams(**{**params.to_dict(), "storage": storage})
+        summary = run_farm(tree, tmp_path / storage, params=p, classes="sofa,stool", progress=False)
+        assert summary.done == 2
+        runs[storage] = OccludedDataset(tmp_path / storage)
+    for rec in _manifest(tmp_path / "dense"):
+        assert rec["n_padded_poses"] == len(params.poses) and 0 < max(rec["n_visible"]) < 600
+    dense_ds, compact_ds = runs["dense"], runs["compact"]
+    assert len(dense_ds) == len(compact_ds) == 2 * len(params.poses) * 2
+    by_name = {}
+    for rec in _manifest(tmp_path / "dense"):
+        _, dense, visible = _expected_object(rec, params)
+        by_name[rec["name"]] = (dense.points.astype(np.float32), visible)
+    for i in range(len(dense_ds)):
+        (a, label, meta), (b, _, meta_b) = dense_ds[i], compact_ds[i]
+        assert np.array_equal(a, b) and meta == meta_b
+        assert meta["padded"] and meta["n_visible"] < 600
+        points, visible = by_name[meta["name"]]
+        vis = visible[meta["pose_index"]]
+        assert meta["n_visible"] == vis.sum()
+        # every visible point once, then repeats of visible points, in random order
+        rows = {p.tobytes() for p in a}
+        assert rows == {p.tobytes() for p in points[vis]}
+        assert not np.array_equal(a[: meta["n_visible"]], points[vis])
+    assert np.array_equal(dense_ds.to_arrays()[0], compact_ds.to_arrays()[0])
 
 
 # -- resume, failures, errors ---------------------------------------------------------------
@@ -314,7 +439,7 @@ def test_corrupt_mesh_is_recorded_and_skipped(tmp_path):
     assert sum(r["status"] == "ok" for r in manifest) == 2
     ds = OccludedDataset(tmp_path / "out")
     assert {ds.metadata(i)["class_name"] for i in range(len(ds))} == {"sofa", "monitor"}
-    assert "chair_0002" not in (tmp_path / "out" / "train_files.txt").read_text()
+    assert "chair_0999" not in (tmp_path / "out" / "train_files.txt").read_text()
     args = parser.parse_args(["farm-merge", str(tmp_path / "out"), "--no-progress"])
     assert args.func(args) == 1
 
@@ -337,31 +462,46 @@ def test_disk_full_is_a_clear_error_and_leaves_no_partial_files(tree, tmp_path, 
     assert not list((tmp_path / "full").rglob("*.h5")) and not list((tmp_path / "full").rglob(".*.tmp"))
 
 
-def test_cli_options_parse():
-    parser = argparse.ArgumentParser()
-    sub = parser.add_subparsers()
-    add_farm_parser(sub)
-    add_farm_merge_parser(sub)
-    args = parser.parse_args(
-        ["farm", "ROOT", "--out", "DS", "--classes", "chair,sofa", "--per-class", "5", "--splits", "train",
-         "--views", "grid25", "--samples-per-view", "3", "--points", "1024", "--density", "2000", "--resolution", "256",
-         "--seed", "7", "--workers", "4", "--shard", "1/4", "--dask-local", "2", "--storage", "compact", "--overwrite"]
-    )  # fmt: skip
-    assert (args.per_class, args.density, args.dense_points, args.shard, args.dask_local, args.storage) == (
-        5, 2000.0, None, "1/4", 2, "compact"
-    )
-    with pytest.raises(SystemExit):
-        parser.parse_args(["farm", "ROOT", "--out", "DS", "--density", "1", "--dense-points", "5"])
-    with pytest.raises(SystemExit):
-        parser.parse_args(["farm", "ROOT", "--out", "DS", "--scheduler", "tcp://h:1", "--dask-local", "2"])
-    args = parser.parse_args(["farm-merge", "A", "B", "--out", "C"])
-    assert args.inputs == ["A", "B"] and args.out == "C"
+def test_cli_farm_and_farm_merge_run_with_their_options(tree, tmp_path):
+    # the options reach run_farm: selection, rendering, storage, seed, shards, merge
+    base = ["--classes", "chair,sofa,stool", "--per-class", "1", "--splits", "train", "--views", "0:0,40:90",
+            "--samples-per-view", "3", "--points", "64", "--density", "2000", "--resolution", "64",
+            "--storage", "compact", "--no-progress"]  # fmt: skip
+    common = [*base, "--seed", "7"]
+    for i in range(2):
+        assert cli_main(["farm", str(tree), "--out", str(tmp_path / f"t{i}"), "--shard", f"{i}/2", *common]) == 0
+    assert not (tmp_path / "t0" / CARD_FILE).exists()  # a shard is not a finished data set
+    assert cli_main(["farm-merge", str(tmp_path / "t0"), str(tmp_path / "t1"), "--out", str(tmp_path / "m"), "--no-progress"]) == 0
+    ds = OccludedDataset(tmp_path / "m")
+    card = json.loads((tmp_path / "m" / CARD_FILE).read_text())
+    assert ds.storage == "compact" and ds.n_points == 64
+    assert card["params"]["seed"] == 7 and card["params"]["density"] == 2000.0 and card["params"]["dense_points"] is None
+    assert card["params"]["resolution"] == 64 and card["poses"] == [[0.0, 0.0], [40.0, 90.0]]
+    names = {ds.metadata(i)["name"] for i in range(len(ds))}
+    assert names == {"chair/train/chair_0001", "stool/train/stool_0002"}  # sofa is in test only
+    assert len(ds) == 2 * 2 * 3
+    manifest = _manifest(tmp_path / "m")
+    for rec in manifest:  # --density 2000: about 2000 points per unit area of the normalised mesh
+        area = load_mesh(rec["source"]).area
+        with h5py.File(tmp_path / "m" / rec["shards"][0], "r") as f:
+            assert abs(int(f.attrs["n_dense"]) - 2000 * area) < 5 * np.sqrt(2000 * area) + 1
+    # --seed 7 and the same object in a seed-0 run: other samples
+    assert cli_main(["farm", str(tree), "--out", str(tmp_path / "s0"), *base]) == 0
+    other = OccludedDataset(tmp_path / "s0", classes="chair")
+    assert not np.array_equal(other[0][0], OccludedDataset(tmp_path / "m", classes="chair")[0][0])
+    # usage errors exit 2 before any work
+    for bad in (["--density", "1", "--dense-points", "5"], ["--scheduler", "tcp://h:1", "--dask-local", "2"]):
+        with pytest.raises(SystemExit) as exc:
+            cli_main(["farm", str(tree), "--out", str(tmp_path / "bad"), *bad])
+        assert exc.value.code == 2
+    assert cli_main(["farm", str(tree), "--out", str(tmp_path / "bad"), "--shard", "2/2", "--no-progress"]) == 2
+    assert not (tmp_path / "bad").exists() or not list((tmp_path / "bad").rglob("*.h5"))
 
 
 def test_ready_plan_of_repeated_meshes(tmp_path):
     # the benchmark's way to repeat a few real meshes as distinct objects (distinct keys)
-    src = str(MODELNET_SUBSET / SMALL_MESHES[2][0])
-    objects = [FarmObject(i, f"rep{i}/chair_0002", src, "chair", "train", 0) for i in range(2)]
+    src = str(SAMPLE_MESHES / SMALL_MESHES[2][0])
+    objects = [FarmObject(i, f"rep{i}/chair_0001", src, "chair", "train", 0) for i in range(2)]
     summary = run_farm(objects, tmp_path / "rep", params=PARAMS, progress=False)
     arrays = shard_arrays(tmp_path / "rep")
-    assert summary.done == 2 and not np.array_equal(arrays["rep0/chair_0002"]["data"], arrays["rep1/chair_0002"]["data"])
+    assert summary.done == 2 and not np.array_equal(arrays["rep0/chair_0001"]["data"], arrays["rep1/chair_0001"]["data"])

@@ -20,31 +20,29 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from conftest import real_mesh
 
 import zbuf_occlude as zo
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 from zbuf_occlude.visibility import object_space as osp
 from zbuf_occlude.visibility.oracle import occluded_numpy, triangle_planes
 
-MODELNET = Path(__file__).parents[1].parent / "shared" / "data" / "modelnet_subset"
-#: Small real meshes (faces): quick enough for the O(N·F) methods in CI.
+#: Small real meshes (faces): quick enough for the O(N·F) methods in CI.  Each is
+#: (path in the subset, shipped substitute when the subset is absent); see conftest.
 SMALL = (
-    "ModelNet40/bathtub/train/bathtub_0002.off",  # 664
-    "release_unknown/chair/train/chair_0001.off",  # 2234
-    "ModelNet40/bed/train/bed_0003.off",  # 2440
+    ("ModelNet40/bathtub/train/bathtub_0002.off", "ModelNet10/sofa/test/sofa_0681.off"),  # 664 (224)
+    ("release_unknown/chair/train/chair_0001.off", None),  # 2234, shipped
+    ("ModelNet40/bed/train/bed_0003.off", "release_unknown/bed/train/bed_0001.off"),  # 2440 (1807)
 )
 POSES = ((30.0, 45.0), (-40.0, 200.0), (85.0, 10.0))
 N_POINTS = 1500
 
 
-def _real(name: str) -> trimesh.Trimesh:
-    path = MODELNET / name
-    if not path.is_file():
-        pytest.skip(f"real ModelNet mesh not found at {path}")
-    return zo.load_mesh(path)
+def _real(name: tuple[str, str | None]) -> trimesh.Trimesh:
+    return zo.load_mesh(real_mesh(*name))
 
 
-@pytest.fixture(scope="module", params=SMALL, ids=lambda s: Path(s).stem)
+@pytest.fixture(scope="module", params=SMALL, ids=lambda s: Path(s[0]).stem)
 def real_case(request: pytest.FixtureRequest):
     mesh = _real(request.param)
     points, face_index = zo.sample_surface(mesh, count=N_POINTS, seed=1)
@@ -208,15 +206,40 @@ def test_paper_vertex_within_measured_bound(real_case) -> None:
 
 
 def test_paper_vertex_subdivision_keeps_more_faces() -> None:
+    # A 1 x 1 ground of two triangles whose shared corner (0.5, 0.5, 0) is hidden, seen from
+    # above, by a small plate: without subdivision one occluded corner deletes both faces,
+    # the whole ground; split to 0.05 only the sub-faces around the shadow go.
+    ground = trimesh.Trimesh([[-0.5, -0.5, 0], [0.5, -0.5, 0], [0.5, 0.5, 0], [-0.5, 0.5, 0]], [[0, 1, 2], [0, 2, 3]], process=False)
+    plate = trimesh.creation.box(extents=(0.2, 0.2, 0.02))
+    plate.apply_translation((0.4, 0.4, 0.2))
+    mesh = trimesh.util.concatenate([ground, plate])
+    camera = zo.camera_on_sphere(90.0, 0.0)
+    tested, survived, parent = osp.surviving_faces(mesh, camera)
+    assert tested is mesh and np.array_equal(parent, np.arange(len(mesh.faces)))
+    assert not survived[:2].any()  # the ground is gone
+    tested, survived, parent = osp.surviving_faces(mesh, camera, max_edge=0.05)
+    assert len(tested.faces) > len(mesh.faces) and parent.max() == len(mesh.faces) - 1
+    assert np.sqrt(tested.area_faces.max() * 2) <= 0.05 + 1e-12  # right triangles, legs <= max_edge
+    kept = tested.area_faces[survived & (parent < 2)].sum()
+    # measured: 0.965 of the ground kept; the exact visible fraction is 0.969, and the kept
+    # sub-faces are all truly visible (the method errs only towards hidden here)
+    assert 0.93 < kept <= 0.975
+    centroids = tested.triangles_center[survived & (parent < 2)]
+    assert not occluded_numpy(tested.triangles[parent >= 2], centroids, camera.eye).any()
+
+
+def test_paper_vertex_subdivision_is_closer_to_the_oracle_on_a_real_mesh() -> None:
+    # measured (800 points, POSES): agreement gains +0.05 .. +0.16 per pose with
+    # max_edge=0.25 (bathtub_0002: 0.749/0.812/0.880 -> 0.879/0.953/0.931; sofa_0681:
+    # 0.907/0.904/0.795 -> 0.979/0.974/0.951)
     mesh = _real(SMALL[0])
     points, fi = zo.sample_surface(mesh, count=800, seed=1)
-    plain = np.mean(_agreement(mesh, points, fi, "paper-vertex"))
-    split = np.mean(_agreement(mesh, points, fi, "paper-vertex", max_edge=0.25))
-    assert split >= plain - 0.01
-    tested, survived, parent = osp.surviving_faces(mesh, zo.camera_on_sphere(30.0, 45.0), max_edge=0.25)
-    assert len(tested.faces) > len(mesh.faces)
-    assert survived.shape == parent.shape == (len(tested.faces),)
-    assert parent.max() < len(mesh.faces)
+    for el, az in POSES:
+        camera = zo.camera_on_sphere(el, az)
+        ref = zo.visible_mask(mesh, points, camera, "oracle", face_index=fi)
+        plain = zo.visible_mask(mesh, points, camera, "paper-vertex", face_index=fi)
+        split = zo.visible_mask(mesh, points, camera, "paper-vertex", face_index=fi, max_edge=0.25)
+        assert np.mean(split == ref) >= np.mean(plain == ref) + 0.03, (el, az)
 
 
 def test_paper_vertex_without_face_index_locates_points() -> None:
@@ -278,10 +301,12 @@ def _open3d_or_skip() -> None:
         pytest.skip(str(exc))
 
 
-def test_open3d_raycast_agrees_with_oracle(real_case) -> None:
-    _open3d_or_skip()
-    mesh, points, fi = real_case
-    assert min(_agreement(mesh, points, fi, "open3d-raycast")) >= 0.99
+def test_open3d_raycast_agrees_with_oracle() -> None:
+    _open3d_or_skip()  # one skip for the missing extra, not one per mesh
+    for name in SMALL:
+        mesh = _real(name)
+        points, fi = zo.sample_surface(mesh, count=N_POINTS, seed=1)
+        assert min(_agreement(mesh, points, fi, "open3d-raycast")) >= 0.99, name
 
 
 def test_open3d_hpr_runs() -> None:
