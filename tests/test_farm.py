@@ -41,7 +41,7 @@ from zbuf_occlude.dataset import unpack_visible
 from zbuf_occlude.mesh import load_mesh
 from zbuf_occlude.occlude import dense_cloud, object_key, pose_samples
 from zbuf_occlude.visibility.registry import visible_mask
-from zbuf_occlude.visibility.zbuffer import Scene
+from zbuf_occlude.visibility.zbuffer import ResidentPoints
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 #: Shipped real meshes (224–7608 faces), as (path under data/samples, class, split).
@@ -111,7 +111,7 @@ def _expected_object(rec: dict, params: FarmParams):
     object's *name* key and its ``zbuffer`` visibility from every pose."""
     mesh = load_mesh(rec["source"])
     dense = dense_cloud(mesh, object_key(rec["name"]), seed=params.seed, count=params.dense_points)
-    with Scene(mesh, dense.points, dense.face_index) as scene:
+    with ResidentPoints(mesh, dense.points, dense.face_index) as scene:
         visible = [
             scene.visible(camera_on_sphere(el, az, params.radius, resolution=params.resolution)) for el, az in params.poses
         ]
