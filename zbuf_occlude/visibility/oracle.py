@@ -56,6 +56,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..cameras import Camera
 from ..errors import BackendUnavailable, InvalidInputError
 from ..mesh_cache import MeshCache
+from .definition import hide_edge_on
 from .registry import DEFAULT_SELF_HIT_TOLERANCE, check_face_index, check_points, log_ignored, register, visible_in_frustum
 
 __all__ = [
@@ -854,16 +855,19 @@ def _visible(
     face_index: NDArray[np.integer] | None,
     n_faces: int,
     tolerance: float,
+    planes: TrianglePlanes,
 ) -> NDArray[np.bool_]:
     pts = check_points(points)
     fi = check_face_index(face_index, len(pts), n_faces)
-    return visible_in_frustum(
+    visible = visible_in_frustum(
         pts,
         camera,
         lambda idx: occluded_fn(
             occluders, pts[idx], camera.eye, face_index=None if fi is None else fi[idx], tolerance=tolerance
         ),
     )
+    # Rule (b) of visibility.definition: own face seen edge-on (issue 11).
+    return hide_edge_on(visible, planes, pts, camera.eye, fi, tolerance)
 
 
 @register("oracle")
@@ -908,7 +912,7 @@ def oracle_visible(
         On bad ``points``, ``face_index`` or ``tolerance``.
     """
     log_ignored("oracle", _ignored)
-    return _visible(occluded_embree, mesh, points, camera, face_index, len(mesh.faces), tolerance)
+    return _visible(occluded_embree, mesh, points, camera, face_index, len(mesh.faces), tolerance, mesh_planes(mesh))
 
 
 @register("oracle-numpy")
@@ -927,4 +931,4 @@ def oracle_numpy_visible(
     ignored options as :func:`oracle_visible`; raises :class:`InvalidInputError` on bad input.
     """
     log_ignored("oracle-numpy", _ignored)
-    return _visible(occluded_numpy, mesh_planes(mesh), points, camera, face_index, len(mesh.faces), tolerance)
+    return _visible(occluded_numpy, mesh_planes(mesh), points, camera, face_index, len(mesh.faces), tolerance, mesh_planes(mesh))
