@@ -36,7 +36,11 @@ __all__ = ["TOLERANCE", "EDGE_ON_DEGREES", "EDGE_ON_SIN", "edge_on_own", "edge_o
 #: The one self-hit tolerance of every method, object units (meshes normalised to extent 1).
 TOLERANCE = DEFAULT_SELF_HIT_TOLERANCE
 #: A point whose own face is seen within this angle of edge-on is not visible, degrees.
-EDGE_ON_DEGREES = 0.1
+#: Small enough that no real face is hit by chance (a 1280-face icosphere from the equator
+#: has faces at 0.004° from edge-on), large enough to decide faces seen *exactly* edge-on
+#: (a shelf at elevation 0, where float64 leaves |cos| ~ 1e-17 of rounding noise) the
+#: same way in every method.
+EDGE_ON_DEGREES = 1e-4
 #: ``sin(EDGE_ON_DEGREES)``: the bound on ``|cos(normal, sightline)|`` (float64).
 EDGE_ON_SIN = math.sin(math.radians(EDGE_ON_DEGREES))
 

@@ -27,6 +27,8 @@ from numpy.typing import NDArray
 from ..cameras import Camera
 from ..mesh_cache import MeshCache
 from ..render.moderngl_backend import ModernGLRenderer, PointBuffer
+from .definition import TOLERANCE, hide_edge_on
+from .oracle import mesh_planes
 from .registry import check_face_index, check_points, register
 
 __all__ = ["Scene", "renderer_for", "zbuffer_visible", "zbuffer_tolerance_visible", "DEFAULT_RESOLUTION"]
@@ -158,7 +160,11 @@ class Scene:
         visible, uncertain = self.renderer.visible(
             camera, self._buffer, rule="candidates", neighborhood=neighborhood, tolerance=tolerance
         )
-        return _resolve_uncertain(self.mesh, self.points, self.face_index, camera, visible, uncertain, resolve, tolerance)
+        # The CPU decides with the one tolerance of every method (visibility.definition);
+        # ``tolerance`` is the GPU's float32 band.
+        visible = _resolve_uncertain(self.mesh, self.points, self.face_index, camera, visible, uncertain, resolve, TOLERANCE)
+        # Rule (b) of the definition: points on a face seen edge-on are not visible.
+        return hide_edge_on(visible, mesh_planes(self.mesh), self.points, camera.eye, self.face_index)
 
     def visible_tolerance(
         self,
