@@ -85,7 +85,13 @@ def _own_and_edge_on(planes, points, eye, faces, tolerance) -> NDArray[np.bool_]
     return near & edge_on_own(n, points, eye)
 
 
-def edge_on_any(planes, points: NDArray[np.float64], eye: NDArray[np.float64], tolerance: float = TOLERANCE) -> NDArray[np.bool_]:
+def edge_on_any(
+    planes,
+    points: NDArray[np.float64],
+    eye: NDArray[np.float64],
+    tolerance: float = TOLERANCE,
+    order: NDArray[np.int64] | None = None,
+) -> NDArray[np.bool_]:
     """(N,) bool: rule (b) without ``face_index``: some face containing the point (plane
     within ``tolerance``, closed triangle containing its projection) is seen edge-on.
 
@@ -97,6 +103,8 @@ def edge_on_any(planes, points: NDArray[np.float64], eye: NDArray[np.float64], t
     eye : (3,) float64
     tolerance : float
         Object units.
+    order : (N,) int, optional
+        ``argsort(points[:, 0])`` if the caller has it (many views of one point set).
 
     Notes
     -----
@@ -117,7 +125,8 @@ def edge_on_any(planes, points: NDArray[np.float64], eye: NDArray[np.float64], t
         return out
     lo = planes.vertices[cand].min(axis=1) - 2.0 * tolerance
     hi = planes.vertices[cand].max(axis=1) + 2.0 * tolerance
-    order = np.argsort(points[:, 0], kind="stable")
+    if order is None:
+        order = np.argsort(points[:, 0], kind="stable")
     xs = points[order, 0]
     first = np.searchsorted(xs, lo[:, 0], side="left")
     count = np.searchsorted(xs, hi[:, 0], side="right") - first
