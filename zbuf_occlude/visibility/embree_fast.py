@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 from ..cameras import Camera
 from ..errors import BackendUnavailable
 from ..mesh_cache import MeshCache
+from ..render.exact_backend import morton_order
 from .definition import EDGE_ON_SIN, TOLERANCE, edge_on_any, edge_on_own
 from .oracle import mesh_planes, occluded_embree
 from .registry import check_face_index, check_points, log_ignored, register
@@ -183,9 +184,12 @@ class FastScene:
         self.face_index = check_face_index(face_index, len(self.points), len(mesh.faces))
         self.threads = int(threads or DEFAULT_THREADS)
         self._scene = _scenes(mesh)
-        self._p32 = (self.points - self._scene.centre).astype(np.float32)
+        # Rays in Z-order (Morton) of their points: neighbours traverse the same BVH nodes.
+        self._order = morton_order(self.points)
+        self._p32 = (self.points[self._order] - self._scene.centre).astype(np.float32)
+        self._sorted_points = self.points[self._order]
         self._pp = np.einsum("ij,ij->i", self._p32, self._p32)
-        self._n32 = None if self.face_index is None else self._scene.unit_normals[self.face_index]
+        self._n32 = None if self.face_index is None else self._scene.unit_normals[self.face_index[self._order]]
         # Points sorted by x, for rule (b) without face_index (definition.edge_on_any).
         self._x_order = np.argsort(self.points[:, 0], kind="stable") if self.face_index is None else None
         #: Fraction of the points the last call re-decided in float64.
@@ -206,7 +210,7 @@ class FastScene:
         status, org1, len1, org2, len2, dirs = _prepare(self._p32[lo:hi], self._pp[lo:hi], normals, eye_c, frame, cam, consts)
         border = np.flatnonzero(status & 4)
         if len(border):  # within a hair of the frustum's border: Camera.in_frustum decides
-            inside = camera.in_frustum(self.points[lo + border])
+            inside = camera.in_frustum(self._sorted_points[lo + border])
             status[border[~inside]] = 0
         hit = np.asarray(sc.scene.run(org1, dirs, dists=len1, query="OCCLUDED")) >= 0  # -1: nothing hit
         inside = (status & 1).astype(bool)
@@ -232,9 +236,11 @@ class FastScene:
             parts = list(_executor(self.threads).map(lambda b: self._chunk(b[0], b[1], camera, eye_c), bounds))
         else:
             parts = [self._chunk(lo, hi, camera, eye_c) for lo, hi in bounds]
-        visible = np.concatenate([v for v, _, _ in parts]) if parts else np.zeros(0, dtype=bool)
-        tie = np.concatenate([t for _, t, _ in parts]) if parts else np.zeros(0, dtype=bool)
-        edge = np.concatenate([e for _, _, e in parts]) if parts else np.zeros(0, dtype=bool)
+        visible, tie, edge = (np.zeros(n, dtype=bool) for _ in range(3))
+        if parts:  # back to the caller's order
+            visible[self._order] = np.concatenate([v for v, _, _ in parts])
+            tie[self._order] = np.concatenate([t for _, t, _ in parts])
+            edge[self._order] = np.concatenate([e for _, _, e in parts])
         idx = np.flatnonzero(tie)
         self.last_cpu_fraction = len(idx) / max(n, 1)
         if len(idx):
