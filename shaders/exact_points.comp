@@ -49,7 +49,8 @@ double OFF64(int f) { return planes[16 * f + 3]; }
 dvec3 EN64(int f, int k) { int o = 16 * f + 4 + 3 * k; return dvec3(planes[o], planes[o + 1], planes[o + 2]); }
 double EO64(int f, int k) { return planes[16 * f + 13 + k]; }
 
-bool near_boundary(double lhs, double rhs) { return abs(lhs - rhs) <= REL * (abs(lhs) + abs(rhs)); }
+// Equal zeros are exact (no rounding can separate them); anything else this close may be.
+bool near_boundary(double lhs, double rhs) { return abs(lhs - rhs) < REL * (abs(lhs) + abs(rhs)); }
 
 // Closed-triangle test of a point x of (or near) face f's plane: 1 inside, 0 outside, 2 too close to call.
 int inside64(int f, dvec3 x) {
@@ -84,6 +85,7 @@ int pair64(dvec3 p, dvec3 seg, double seg_len, int f, double tol) {
 // definition.edge_on_own: face f seen within the edge-on angle from p.
 int edge_on64(dvec3 p, dvec3 seg, double seg_len, int f, double esin) {
     dvec3 n = N64(f);
+    if (n == dvec3(0.0)) return MISS;  // degenerate faces are never edge-on (0 < 0 fails)
     precise double lhs = abs(dot3(n, seg));
     precise double rhs = esin * sqrt(dot3(n, n)) * seg_len;
     if (near_boundary(lhs, rhs)) return TIE;

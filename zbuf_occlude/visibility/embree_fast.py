@@ -35,7 +35,8 @@ from ..errors import BackendUnavailable
 from ..mesh_cache import MeshCache
 from ..render.exact_backend import morton_order
 from .definition import EDGE_ON_SIN, TOLERANCE, edge_on_any, edge_on_own
-from .oracle import mesh_planes, occluded_embree
+from .oracle import _pair_occludes, mesh_planes, occluded_embree
+from .oracle import _scene_for as _oracle_scene
 from .registry import check_face_index, check_points, log_ignored, register
 
 __all__ = ["FastScene", "embree_fast_visible", "DEFAULT_THREADS"]
@@ -89,11 +90,11 @@ def _executor(threads: int) -> ThreadPoolExecutor:
     return _pool
 
 
-def _prepare_py(p, pp, normals, eye, frame, cam, consts):
+def _prepare_py(p, pp, normals, boundary, eye, frame, cam, consts):
     """Per point of a chunk: frustum status and the two rays (see :class:`FastScene`).
 
     Returns ``status`` (uint8 bits: 1 in frustum, 2 exact needed, 4 frustum border,
-    8 maybe edge-on), pass-1 origins and lengths, pass-2 origins and lengths (0: no ray),
+    8 maybe edge-on, 16 closer to its face's boundary than pass 2's start: a crease), pass-1 origins and lengths, pass-2 origins and lengths (0: no ray),
     unit directions (float32, mesh-centred frame).
     """
     n = len(p)
@@ -132,6 +133,8 @@ def _prepare_py(p, pp, normals, eye, frame, cam, consts):
                 st |= 8
         start = min(start_rel * radius / max(cos, 1e-30), max_start * radius)
         band = band_rel * radius / max(cos, 1e-30)
+        if has_normals and boundary[i] < band:
+            st |= 16
         b = x * dx + y * dy + z * dz
         disc = b * b - (pp[i] - radius * radius)
         far = min(-b + np.sqrt(max(disc, 0.0)), length)
@@ -190,6 +193,15 @@ class FastScene:
         self._sorted_points = self.points[self._order]
         self._pp = np.einsum("ij,ij->i", self._p32, self._p32)
         self._n32 = None if self.face_index is None else self._scene.unit_normals[self.face_index[self._order]]
+        # Distance of each point to its face's boundary (float32; for the crease pass).
+        self._boundary = None
+        if self.face_index is not None:
+            pl = mesh_planes(mesh)
+            fs = self.face_index[self._order]
+            en, eo = pl.edge_normals[fs], pl.edge_offsets[fs]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                dist = (np.einsum("ijk,ik->ij", en, self._sorted_points) - eo) / np.sqrt(np.einsum("ijk,ijk->ij", en, en))
+            self._boundary = np.nan_to_num(np.abs(dist).min(axis=1), nan=0.0).astype(np.float32)
         # Points sorted by x, for rule (b) without face_index (definition.edge_on_any).
         self._x_order = np.argsort(self.points[:, 0], kind="stable") if self.face_index is None else None
         #: Fraction of the points the last call re-decided in float64.
@@ -207,7 +219,10 @@ class FastScene:
              1e-3 + 1e-5 * max(camera.width, camera.height)], dtype=np.float32)
         consts = np.array([sc.radius, _START, _MAX_START, _BAND_LO, EDGE_ON_SIN + 1e-3], dtype=np.float32)
         normals = self._n32[lo:hi] if self._n32 is not None else np.zeros((0, 3), dtype=np.float32)
-        status, org1, len1, org2, len2, dirs = _prepare(self._p32[lo:hi], self._pp[lo:hi], normals, eye_c, frame, cam, consts)
+        boundary = self._boundary[lo:hi] if self._boundary is not None else np.zeros(0, dtype=np.float32)
+        status, org1, len1, org2, len2, dirs = _prepare(
+            self._p32[lo:hi], self._pp[lo:hi], normals, boundary, eye_c, frame, cam, consts
+        )
         border = np.flatnonzero(status & 4)
         if len(border):  # within a hair of the frustum's border: Camera.in_frustum decides
             inside = camera.in_frustum(self._sorted_points[lo + border])
@@ -220,7 +235,7 @@ class FastScene:
         if len(idx):
             near = np.asarray(sc.scene.run(org2[idx], dirs[idx], dists=len2[idx], query="OCCLUDED")) >= 0
             tie[idx[near]] = True
-        return visible, tie, (status & 8) != 0
+        return visible, tie, status
 
     def visible(self, camera: Camera, *, tolerance: float = TOLERANCE) -> NDArray[np.bool_]:
         """Visibility of the points from ``camera`` (see the module docstring).
@@ -236,11 +251,25 @@ class FastScene:
             parts = list(_executor(self.threads).map(lambda b: self._chunk(b[0], b[1], camera, eye_c), bounds))
         else:
             parts = [self._chunk(lo, hi, camera, eye_c) for lo, hi in bounds]
-        visible, tie, edge = (np.zeros(n, dtype=bool) for _ in range(3))
+        visible, tie = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+        status = np.zeros(n, dtype=np.uint8)
         if parts:  # back to the caller's order
             visible[self._order] = np.concatenate([v for v, _, _ in parts])
             tie[self._order] = np.concatenate([t for _, t, _ in parts])
-            edge[self._order] = np.concatenate([e for _, _, e in parts])
+            status[self._order] = np.concatenate([st for _, _, st in parts])
+        edge = (status & 8) != 0
+        crease = np.flatnonzero(visible & ~tie & ((status & 16) != 0))
+        if len(crease):
+            # Within pass 2's start of its face's boundary, the point may be hidden by a
+            # neighbouring face closer than that start: test the faces around its own
+            # face exactly (as the oracle's crease pass does).
+            scene = _oracle_scene(self.mesh)
+            k, g = scene.faces_around(self.face_index[crease])
+            kc = crease[k]
+            seg = camera.eye - self.points[kc]
+            seg_len = np.sqrt(np.einsum("ij,ij->i", seg, seg))
+            hit = _pair_occludes(self.points[kc], seg, seg_len, scene.planes, g, self.face_index[kc], tolerance)
+            visible[kc[hit]] = False
         idx = np.flatnonzero(tie)
         self.last_cpu_fraction = len(idx) / max(n, 1)
         if len(idx):
