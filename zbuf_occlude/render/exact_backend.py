@@ -65,7 +65,7 @@ def morton_order(points: NDArray[np.float64], bits: int = 10) -> NDArray[np.int6
     for bit in range(bits):
         for axis in range(3):
             code |= ((q[:, axis] >> bit) & 1) << (3 * bit + axis)
-    return np.argsort(code, kind="stable")
+    return np.argsort(code)  # equal codes: any order of theirs is as coherent
 
 
 class ExactPoints:

@@ -73,10 +73,14 @@ class _Scene:
             vertices=np.ascontiguousarray(vertices - self.centre, dtype=np.float32),
             indices=np.ascontiguousarray(mesh.faces, dtype=np.int32),
         )
-        normals = mesh_planes(mesh).normal
+        planes = mesh_planes(mesh)
         with np.errstate(invalid="ignore", divide="ignore"):
-            unit = normals / np.sqrt((normals**2).sum(axis=1))[:, None]
+            unit = planes.normal / np.sqrt((planes.normal**2).sum(axis=1))[:, None]
+            # Edge planes scaled to unit normals: (F, 3, 4) = (m_k / |m_k|, offset_k / |m_k|).
+            scale = 1.0 / np.sqrt((planes.edge_normals**2).sum(axis=2))
+            edge = np.concatenate([planes.edge_normals * scale[..., None], (planes.edge_offsets * scale)[..., None]], axis=2)
         self.unit_normals = np.nan_to_num(unit).astype(np.float32)
+        self.edge_planes = np.nan_to_num(edge)  # degenerate faces: distance 0 (always a crease)
 
 
 _scenes: MeshCache[_Scene] = MeshCache(_Scene, 8)
@@ -150,12 +154,42 @@ def _prepare_py(p, pp, normals, boundary, eye, frame, cam, consts):
     return status, org1, len1, org2, len2, dirs
 
 
+def _setup_py(points, order, face_index, centre, unit_normals, edge_planes):
+    """Sorted points (float64), float32 copies relative to ``centre``, their squared norms,
+    and with ``face_index`` their faces' unit normals and distances to the faces' edges."""
+    n = len(order)
+    sorted_points = np.empty((n, 3), dtype=np.float64)
+    p32 = np.empty((n, 3), dtype=np.float32)
+    pp = np.empty(n, dtype=np.float32)
+    has_faces = len(face_index) == len(points) and n > 0
+    m = n if has_faces else 0
+    n32 = np.empty((m, 3), dtype=np.float32)
+    boundary = np.empty(m, dtype=np.float32)
+    for i in range(n):
+        k = order[i]
+        x, y, z = points[k, 0], points[k, 1], points[k, 2]
+        sorted_points[i, 0], sorted_points[i, 1], sorted_points[i, 2] = x, y, z
+        a, b, c = np.float32(x - centre[0]), np.float32(y - centre[1]), np.float32(z - centre[2])
+        p32[i, 0], p32[i, 1], p32[i, 2] = a, b, c
+        pp[i] = a * a + b * b + c * c
+        if has_faces:
+            f = face_index[k]
+            n32[i, 0], n32[i, 1], n32[i, 2] = unit_normals[f, 0], unit_normals[f, 1], unit_normals[f, 2]
+            best = np.inf
+            for e in range(3):
+                d = abs(edge_planes[f, e, 0] * x + edge_planes[f, e, 1] * y + edge_planes[f, e, 2] * z - edge_planes[f, e, 3])
+                best = min(best, d)
+            boundary[i] = best
+    return sorted_points, p32, pp, n32, boundary
+
+
 try:
     import numba
 
     _prepare = numba.njit(cache=True, nogil=True)(_prepare_py)
+    _setup = numba.njit(cache=True, nogil=True)(_setup_py)
 except ImportError:  # pragma: no cover - numba is the 'fast' extra
-    _prepare = _prepare_py
+    _prepare, _setup = _prepare_py, _setup_py
 
 
 class FastScene:
@@ -189,19 +223,14 @@ class FastScene:
         self._scene = _scenes(mesh)
         # Rays in Z-order (Morton) of their points: neighbours traverse the same BVH nodes.
         self._order = morton_order(self.points)
-        self._p32 = (self.points[self._order] - self._scene.centre).astype(np.float32)
-        self._sorted_points = self.points[self._order]
-        self._pp = np.einsum("ij,ij->i", self._p32, self._p32)
-        self._n32 = None if self.face_index is None else self._scene.unit_normals[self.face_index[self._order]]
-        # Distance of each point to its face's boundary (float32; for the crease pass).
-        self._boundary = None
-        if self.face_index is not None:
-            pl = mesh_planes(mesh)
-            fs = self.face_index[self._order]
-            en, eo = pl.edge_normals[fs], pl.edge_offsets[fs]
-            with np.errstate(invalid="ignore", divide="ignore"):
-                dist = (np.einsum("ijk,ik->ij", en, self._sorted_points) - eo) / np.sqrt(np.einsum("ijk,ijk->ij", en, en))
-            self._boundary = np.nan_to_num(np.abs(dist).min(axis=1), nan=0.0).astype(np.float32)
+        sc = self._scene
+        fi = self.face_index if self.face_index is not None else np.zeros(0, dtype=np.int64)
+        self._sorted_points, self._p32, self._pp, n32, boundary = _setup(
+            self.points, self._order, fi, sc.centre, sc.unit_normals, sc.edge_planes
+        )
+        # Unit normals of the points' faces, and distances to their faces' boundaries.
+        self._n32 = n32 if self.face_index is not None else None
+        self._boundary = boundary if self.face_index is not None else None
         # Points sorted by x, for rule (b) without face_index (definition.edge_on_any).
         self._x_order = np.argsort(self.points[:, 0], kind="stable") if self.face_index is None else None
         #: Fraction of the points the last call re-decided in float64.
