@@ -115,6 +115,8 @@ def main(argv: list[str] | None = None) -> int:
             if hasattr(scene, "release"):
                 scene.release()
             rows.append((name, len(mesh.faces), label, agree / total, fv / total, cpu / total))
+            print(f"  {name} | {label} | agreement {agree / total:.4%} | false-visible {fv / total:.4%} "
+                  f"| CPU-settled {cpu / total:.3%}", file=sys.stderr, flush=True)
         print(f"{name}: {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
 
     labels = list(dict.fromkeys(r[2] for r in rows))
