@@ -183,13 +183,67 @@ def _setup_py(points, order, face_index, centre, unit_normals, edge_planes):
     return sorted_points, p32, pp, n32, boundary
 
 
+def _prepare_np(p, pp, normals, boundary, eye, frame, cam, consts):
+    """:func:`_prepare_py` vectorised with numpy (used without numba)."""
+    n = len(p)
+    f, width, height, znear, zfar, margin = (np.float32(v) for v in cam)
+    radius, start_rel, max_start, band_rel, edge_cos = (np.float32(v) for v in consts)
+    x, y, z = p[:, 0], p[:, 1], p[:, 2]
+    depth = frame[2, 0] * x + frame[2, 1] * y + frame[2, 2] * z + frame[2, 3]
+    dm = np.float32(1e-5) * np.abs(depth)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = (frame[0, 0] * x + frame[0, 1] * y + frame[0, 2] * z + frame[0, 3]) * f / depth + np.float32(0.5) * width
+        v = (frame[1, 0] * x + frame[1, 1] * y + frame[1, 2] * z + frame[1, 3]) * f / depth + np.float32(0.5) * height
+    inside = (depth >= znear - dm) & (depth <= zfar + dm)
+    inside &= (u >= -margin) & (u < width + margin) & (v >= -margin) & (v < height + margin)
+    border = (depth < znear + dm) | (depth > zfar - dm) | (u < margin) | (u >= width - margin) | (v < margin) | (v >= height - margin)
+    d = eye - p
+    length = np.sqrt(np.einsum("ij,ij->i", d, d))
+    dirs = (d / length[:, None]).astype(np.float32)
+    if len(normals) == n and n > 0:
+        cos = np.abs(np.einsum("ij,ij->i", normals, dirs))
+    else:
+        cos = np.ones(n, dtype=np.float32)
+    tiny = np.float32(1e-30)
+    start = np.minimum(start_rel * radius / np.maximum(cos, tiny), max_start * radius)
+    band = band_rel * radius / np.maximum(cos, tiny)
+    b = np.einsum("ij,ij->i", p, dirs)
+    far = np.minimum(-b + np.sqrt(np.maximum(b * b - (pp - radius * radius), 0)), length)
+    ok = inside & (start < far)
+    two = ok & (band < start)
+    status = inside.astype(np.uint8)
+    status |= np.where(inside & border, 4, 0).astype(np.uint8)
+    if len(normals) == n and n > 0:
+        status |= np.where(inside & (cos < edge_cos), 8, 0).astype(np.uint8)
+        status |= np.where(inside & (boundary < band), 16, 0).astype(np.uint8)
+    status |= np.where(inside & ~ok & (band < far), 2, 0).astype(np.uint8)
+    org1 = np.where(ok[:, None], p + dirs * start[:, None], p).astype(np.float32)
+    len1 = np.where(ok, far - start, 0).astype(np.float32)
+    org2 = np.where(two[:, None], p + dirs * band[:, None], p).astype(np.float32)
+    len2 = np.where(two, start - band, 0).astype(np.float32)
+    return status, org1, len1, org2, len2, dirs
+
+
+def _setup_np(points, order, face_index, centre, unit_normals, edge_planes):
+    """:func:`_setup_py` vectorised with numpy (used without numba)."""
+    sorted_points = points[order]
+    p32 = (sorted_points - centre).astype(np.float32)
+    pp = np.einsum("ij,ij->i", p32, p32)
+    if len(face_index) != len(points) or len(points) == 0:
+        return sorted_points, p32, pp, np.empty((0, 3), np.float32), np.empty(0, np.float32)
+    f = face_index[order]
+    e = edge_planes[f]
+    dist = np.abs(np.einsum("ijk,ik->ij", e[..., :3], sorted_points) - e[..., 3])
+    return sorted_points, p32, pp, unit_normals[f], dist.min(axis=1).astype(np.float32)
+
+
 try:
     import numba
 
     _prepare = numba.njit(cache=True, nogil=True)(_prepare_py)
     _setup = numba.njit(cache=True, nogil=True)(_setup_py)
 except ImportError:  # pragma: no cover - numba is the 'fast' extra
-    _prepare, _setup = _prepare_py, _setup_py
+    _prepare, _setup = _prepare_np, _setup_np
 
 
 class FastScene:
