@@ -51,7 +51,8 @@ def exact_face_groups(triangles: NDArray[np.float64]) -> NDArray[np.int64]:
 
 
 def morton_order(points: NDArray[np.float64], bits: int = 10) -> NDArray[np.int64]:
-    """(N,) permutation sorting ``points`` along a Z-order (Morton) curve of their bounding box.
+    """(N,) permutation sorting ``points`` along a Z-order (Morton) curve of their bounding box
+    (``bits`` <= 10 per axis: 30-bit codes).
 
     Neighbours in space project to neighbouring pixels from any camera, so in this order the
     invocations of one SIMD batch test the same tile's faces (divergence costs the batch the
@@ -60,11 +61,15 @@ def morton_order(points: NDArray[np.float64], bits: int = 10) -> NDArray[np.int6
     if len(points) == 0:
         return np.zeros(0, dtype=np.int64)
     lo, hi = points.min(axis=0), points.max(axis=0)
-    q = ((points - lo) / np.maximum(hi - lo, 1e-30) * ((1 << bits) - 1)).astype(np.int64)
-    code = np.zeros(len(points), dtype=np.int64)
-    for bit in range(bits):
-        for axis in range(3):
-            code |= ((q[:, axis] >> bit) & 1) << (3 * bit + axis)
+    q = ((points - lo) / np.maximum(hi - lo, 1e-30) * ((1 << bits) - 1)).astype(np.uint32)
+    code = np.zeros(len(points), dtype=np.uint32)
+    for axis in range(3):  # spread 10 bits to every third bit ("part1by2"), then interleave
+        x = q[:, axis]
+        x = (x | (x << 16)) & np.uint32(0x030000FF)
+        x = (x | (x << 8)) & np.uint32(0x0300F00F)
+        x = (x | (x << 4)) & np.uint32(0x030C30C3)
+        x = (x | (x << 2)) & np.uint32(0x09249249)
+        code |= x << np.uint32(axis)
     return np.argsort(code)  # equal codes: any order of theirs is as coherent
 
 
