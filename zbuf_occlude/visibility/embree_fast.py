@@ -237,13 +237,49 @@ def _setup_np(points, order, face_index, centre, unit_normals, edge_planes):
     return sorted_points, p32, pp, unit_normals[f], dist.min(axis=1).astype(np.float32)
 
 
+def _crease_py(idx, points, face_index, eye, normal, offset, edge_normals, edge_offsets,
+               corner_vertex, vertex_start, vertex_faces, tolerance):
+    """(K,) bool: point ``idx[k]`` is hidden by a face sharing a vertex with its own face;
+    the oracle's ``_pair_occludes`` arithmetic, pair by pair, stopping at the first hit."""
+    out = np.zeros(len(idx), dtype=np.bool_)
+    for j in range(len(idx)):
+        k = idx[j]
+        own = face_index[k]
+        px, py, pz = points[k, 0], points[k, 1], points[k, 2]
+        sx, sy, sz = eye[0] - px, eye[1] - py, eye[2] - pz
+        seg_len = np.sqrt(sx * sx + sy * sy + sz * sz)
+        for c in range(3):
+            v = corner_vertex[own, c]
+            for q in range(vertex_start[v], vertex_start[v + 1]):
+                g = vertex_faces[q]
+                if g == own:
+                    continue
+                t = (offset[g] - (normal[g, 0] * px + normal[g, 1] * py + normal[g, 2] * pz)) / (
+                    normal[g, 0] * sx + normal[g, 1] * sy + normal[g, 2] * sz)
+                if not (t >= 0.0 and t <= 1.0 and t * seg_len > tolerance):
+                    continue
+                x, y, z = px + t * sx, py + t * sy, pz + t * sz
+                inside = True
+                for e in range(3):
+                    if not (x * edge_normals[g, e, 0] + y * edge_normals[g, e, 1] + z * edge_normals[g, e, 2] >= edge_offsets[g, e]):
+                        inside = False
+                if inside:
+                    out[j] = True
+                    break
+            if out[j]:
+                break
+    return out
+
+
 try:
     import numba
 
     _prepare = numba.njit(cache=True, nogil=True)(_prepare_py)
     _setup = numba.njit(cache=True, nogil=True)(_setup_py)
+    _crease = numba.njit(cache=True, nogil=True, error_model="numpy")(_crease_py)
 except ImportError:  # pragma: no cover - numba is the 'fast' extra
     _prepare, _setup = _prepare_np, _setup_np
+    _crease = None
 
 
 class FastScene:
@@ -347,12 +383,21 @@ class FastScene:
             # neighbouring face closer than that start: test the faces around its own
             # face exactly (as the oracle's crease pass does).
             scene = _oracle_scene(self.mesh)
-            k, g = scene.faces_around(self.face_index[crease])
-            kc = crease[k]
-            seg = camera.eye - self.points[kc]
-            seg_len = np.sqrt(np.einsum("ij,ij->i", seg, seg))
-            hit = _pair_occludes(self.points[kc], seg, seg_len, scene.planes, g, self.face_index[kc], tolerance)
-            visible[kc[hit]] = False
+            if _crease is not None:
+                pl = scene.planes
+                hidden = _crease(
+                    crease, self.points, self.face_index, np.asarray(camera.eye, dtype=np.float64), pl.normal,
+                    pl.offset, pl.edge_normals, pl.edge_offsets, scene.corner_vertex, scene.vertex_start,
+                    scene.vertex_faces, float(tolerance),
+                )
+                visible[crease[hidden]] = False
+            else:
+                k, g = scene.faces_around(self.face_index[crease])
+                kc = crease[k]
+                seg = camera.eye - self.points[kc]
+                seg_len = np.sqrt(np.einsum("ij,ij->i", seg, seg))
+                hit = _pair_occludes(self.points[kc], seg, seg_len, scene.planes, g, self.face_index[kc], tolerance)
+                visible[kc[hit]] = False
         idx = np.flatnonzero(tie)
         self.last_cpu_fraction = len(idx) / max(n, 1)
         if len(idx):
