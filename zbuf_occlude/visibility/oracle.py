@@ -20,6 +20,9 @@ the two implementations below can differ only if one of them never tests a pair 
 occludes.  "Exact" means: decided in float64 with inclusive bounds, each triangle's edge
 planes moved out by 1e-12 of its coordinate scale so that a segment through an edge shared
 by two faces cannot round to outside both (the paper's edge tests alone are not watertight).
+The registered methods also apply the edge-on rule of :mod:`~zbuf_occlude.visibility.definition`
+(a point whose own face is seen within 1e-4 degrees of edge-on is not visible), with one
+float64 function shared by both, so they agree bit for bit there too.
 
 Implementations
 ---------------
