@@ -29,6 +29,7 @@ Usage::
 
     .venv/bin/python benchmarks/bench_visibility.py                  # the full run, ~10 min
     .venv/bin/python benchmarks/bench_visibility.py --sizes small --points 10000 --poses 2
+    .venv/bin/python benchmarks/bench_visibility.py --peers          # issue 11's peer table
 
 The report (Markdown) goes to stdout, progress to stderr.
 """
@@ -513,6 +514,13 @@ def _python_name() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    if argv is None:
+        argv = sys.argv[1:]
+    if "--peers" in argv:  # issue 11's peer table (benchmarks/bench_visibility_peers.py)
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from bench_visibility_peers import main as peers_main
+
+        return peers_main([a for a in argv if a != "--peers"])
     parser = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0], formatter_class=argparse.RawTextHelpFormatter
     )

@@ -41,7 +41,7 @@ from zbuf_occlude.dataset import unpack_visible
 from zbuf_occlude.mesh import load_mesh
 from zbuf_occlude.occlude import dense_cloud, object_key, pose_samples
 from zbuf_occlude.visibility.registry import visible_mask
-from zbuf_occlude.visibility.zbuffer import ResidentPoints
+from zbuf_occlude.visibility.registry import method_info
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 #: Shipped real meshes (224–7608 faces), as (path under data/samples, class, split).
@@ -108,10 +108,10 @@ def _manifest(out: Path) -> list[dict]:
 
 def _expected_object(rec: dict, params: FarmParams):
     """What a shard must hold, rebuilt from the public pieces: the dense cloud of the
-    object's *name* key and its ``zbuffer`` visibility from every pose."""
+    object's *name* key and its visibility by the farm's method from every pose."""
     mesh = load_mesh(rec["source"])
     dense = dense_cloud(mesh, object_key(rec["name"]), seed=params.seed, count=params.dense_points)
-    with ResidentPoints(mesh, dense.points, dense.face_index) as scene:
+    with method_info(params.method).session(mesh, dense.points, dense.face_index) as scene:
         visible = [
             scene.visible(camera_on_sphere(el, az, params.radius, resolution=params.resolution)) for el, az in params.poses
         ]

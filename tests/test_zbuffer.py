@@ -81,7 +81,7 @@ def test_points_outside_the_frustum_are_not_visible():
     mesh = trimesh.creation.box([0.5, 0.5, 0.5])
     points, face_index = zo.sample_surface(mesh, count=2000, seed=0)
     narrow = zo.camera_on_sphere(0.0, 0.0, 4.0, resolution=256, yfov_deg=2.0)  # sees only the middle
-    mask = zo.visible_mask(mesh, points, narrow, face_index=face_index, resolution=None)
+    mask = zo.visible_mask(mesh, points, narrow, "zbuffer", face_index=face_index, resolution=None)
     assert mask.any() and not mask[~narrow.in_frustum(points)].any()
 
 
@@ -90,7 +90,7 @@ def test_without_a_face_index_it_still_agrees(sample_mesh_files):
     points, face_index = zo.sample_surface(mesh, count=10_000, seed=0)
     cam = zo.camera_on_sphere(30.0, 45.0)
     truth = zo.visible_mask(mesh, points, cam, "oracle", face_index=face_index)
-    assert agreement(zo.visible_mask(mesh, points, cam), truth)["accuracy"] > 0.98
+    assert agreement(zo.visible_mask(mesh, points, cam, "zbuffer"), truth)["accuracy"] > 0.98
 
 
 def _icosphere():
@@ -109,7 +109,7 @@ def test_a_convex_closed_mesh_shows_the_cap_fraction_of_its_area(el, az, radius)
         _SPHERE = _icosphere()
     sphere, points, face_index = _SPHERE
     cam = zo.camera_on_sphere(el, az, radius, resolution=512)
-    visible = zo.visible_mask(sphere, points, cam, face_index=face_index, resolution=512).mean()
+    visible = zo.visible_mask(sphere, points, cam, "zbuffer", face_index=face_index, resolution=512).mean()
     expected = (1 - 0.5 / radius) / 2  # a sphere of radius r seen from distance d shows (1 - r/d)/2
     n = len(points)
     # 5 binomial sigmas + the icosphere's discretisation
@@ -141,7 +141,7 @@ def test_a_point_behind_an_occluding_quad_is_hidden(el, az, size, gap, u, v):
     points = np.array([behind, beside, through])
     face_index = np.array([2, 3, on_quad_face])
     assert abs(np.dot(through - centre, view_dir)) < 1e-12  # the premise: in the quad's plane
-    mask = zo.visible_mask(mesh, points, cam, face_index=face_index, resolution=256)
+    mask = zo.visible_mask(mesh, points, cam, "zbuffer", face_index=face_index, resolution=256)
     oracle = zo.visible_mask(mesh, points, cam, "oracle", face_index=face_index)
     assert not mask[0] and not oracle[0]  # behind the quad: hidden
     assert mask[1] and oracle[1]  # beside it: visible
@@ -202,7 +202,7 @@ def test_resolve_none_keeps_the_gpu_answer_for_uncertain_points(chair_scene):
         assert extra.sum() > 50
         assert np.mean(truth[extra]) < 0.05  # the added ones are (nearly all) false visible
         assert np.mean(exact == truth) > np.mean(gpu == truth)
-        assert np.array_equal(zo.visible_mask(mesh, points, camera, face_index=face_index, resolution=512, resolve="none"), gpu)
+        assert np.array_equal(zo.visible_mask(mesh, points, camera, "zbuffer", face_index=face_index, resolution=512, resolve="none"), gpu)
     with pytest.raises(InvalidInputError, match="resolve"):
         scene.visible(camera, resolve="cuda")
 
@@ -252,7 +252,7 @@ def test_duplicate_faces_are_drawn_once_under_the_lowest_index(chair_scene):
     assert np.array_equal(vis_a, vis_b) and np.array_equal(unc_a, unc_b)
     assert unc_a.mean() < 0.15  # measured 8.9 % uncertain
     truth = zo.visible_mask(doubled, points, camera, "oracle", face_index=face_index + n_faces)
-    assert np.mean(zo.visible_mask(doubled, points, camera, face_index=face_index + n_faces) == truth) > 0.999
+    assert np.mean(zo.visible_mask(doubled, points, camera, "zbuffer", face_index=face_index + n_faces) == truth) > 0.999
 
 
 def test_the_face_limit_is_a_clear_error(monkeypatch):
@@ -262,6 +262,6 @@ def test_the_face_limit_is_a_clear_error(monkeypatch):
     box = trimesh.creation.box()  # 12 faces: one too many for the lowered limit
     points, face_index = zo.sample_surface(box, count=10, seed=0)
     with pytest.raises(InvalidInputError, match="12 faces"):
-        zo.visible_mask(box, points, zo.camera_on_sphere(30.0, 45.0), face_index=face_index, resolution=64)
+        zo.visible_mask(box, points, zo.camera_on_sphere(30.0, 45.0), "zbuffer", face_index=face_index, resolution=64)
     monkeypatch.setattr(moderngl_backend, "MAX_FACES", 13)
-    assert zo.visible_mask(box, points, zo.camera_on_sphere(30.0, 45.0), face_index=face_index, resolution=64).any()
+    assert zo.visible_mask(box, points, zo.camera_on_sphere(30.0, 45.0), "zbuffer", face_index=face_index, resolution=64).any()

@@ -15,9 +15,10 @@ __all__ = [
     "DEFAULT_MAX_SLOPE",
 ]
 
-#: The visibility method used when none is named: the z-buffer with exact candidate tests
-#: (:mod:`zbuf_occlude.visibility.zbuffer`).
-DEFAULT_METHOD = "zbuffer"
+#: The visibility method used when none is named: ``auto`` picks, per machine, the exact
+#: GPU method (``zbuffer-exact``) on a hardware renderer or the threaded Embree method
+#: (``embree-fast``) on a software one (:mod:`zbuf_occlude.visibility.auto`, issue 11).
+DEFAULT_METHOD = "auto"
 
 #: Image size of cameras and z-buffers, pixels (square), for the API, ``generate``,
 #: ``validate``, ``compare`` and ``elevation-profile`` (the farm has its own, smaller

@@ -20,6 +20,9 @@ the two implementations below can differ only if one of them never tests a pair 
 occludes.  "Exact" means: decided in float64 with inclusive bounds, each triangle's edge
 planes moved out by 1e-12 of its coordinate scale so that a segment through an edge shared
 by two faces cannot round to outside both (the paper's edge tests alone are not watertight).
+The registered methods also apply the edge-on rule of :mod:`~zbuf_occlude.visibility.definition`
+(a point whose own face is seen within 1e-4 degrees of edge-on is not visible), with one
+float64 function shared by both, so they agree bit for bit there too.
 
 Implementations
 ---------------
@@ -55,6 +58,7 @@ from numpy.typing import NDArray
 from ..cameras import Camera
 from .oracle_embree import occluded_embree
 from .oracle_numpy import DEFAULT_PAIRS_PER_CHUNK, occluded_numpy
+from .definition import hide_edge_on
 from .registry import DEFAULT_SELF_HIT_TOLERANCE, check_face_index, check_points, log_ignored, register, visible_in_frustum
 from .segment_triangle import TrianglePlanes, mesh_planes, segment_hits_triangles, triangle_planes
 
@@ -79,16 +83,19 @@ def _visible(
     face_index: NDArray[np.integer] | None,
     n_faces: int,
     tolerance: float,
+    planes: TrianglePlanes,
 ) -> NDArray[np.bool_]:
     pts = check_points(points)
     fi = check_face_index(face_index, len(pts), n_faces)
-    return visible_in_frustum(
+    visible = visible_in_frustum(
         pts,
         camera,
         lambda idx: occluded_fn(
             occluders, pts[idx], camera.eye, face_index=None if fi is None else fi[idx], tolerance=tolerance
         ),
     )
+    # Rule (b) of visibility.definition: own face seen edge-on (issue 11).
+    return hide_edge_on(visible, planes, pts, camera.eye, fi, tolerance)
 
 
 @register("oracle", exact=True)
@@ -133,7 +140,7 @@ def oracle_visible(
         On bad ``points``, ``face_index`` or ``tolerance``.
     """
     log_ignored("oracle", _ignored)
-    return _visible(occluded_embree, mesh, points, camera, face_index, len(mesh.faces), tolerance)
+    return _visible(occluded_embree, mesh, points, camera, face_index, len(mesh.faces), tolerance, mesh_planes(mesh))
 
 
 @register("oracle-numpy", exact=True)
@@ -152,7 +159,7 @@ def oracle_numpy_visible(
     ignored options as :func:`oracle_visible`; raises :class:`InvalidInputError` on bad input.
     """
     log_ignored("oracle-numpy", _ignored)
-    return _visible(occluded_numpy, mesh_planes(mesh), points, camera, face_index, len(mesh.faces), tolerance)
+    return _visible(occluded_numpy, mesh_planes(mesh), points, camera, face_index, len(mesh.faces), tolerance, mesh_planes(mesh))
 
 
 # Names this module had before the split (private then), so that code written against the

@@ -7,6 +7,13 @@ the GPU across poses, needs an optional extra, exact...).  Callers ask
 :func:`method_info` instead of testing method names, so adding a method is one new
 function and one decorator line; :func:`visible_mask`, ``occlude_object`` and ``compare``
 need no edit.
+
+The definition every exact method decides (stated in full in
+:mod:`zbuf_occlude.visibility.definition`): a point is visible iff it is in the frustum, its
+own face (``face_index``, or every face containing it) is not seen within 1e-4 degrees of
+edge-on, and no other face meets the segment to the camera centre farther than 1e-6 object
+units from it.  ``oracle``, ``oracle-numpy``, ``zbuffer-exact``, ``embree-fast`` and
+``auto`` implement it; ``zbuffer`` and the paper's and peers' methods approximate it.
 """
 
 from __future__ import annotations
@@ -212,8 +219,11 @@ def visible_mask(
     camera : Camera
         The pose and intrinsics; points outside its frustum are not visible.
     method : str
-        One of :func:`available_methods`: ``"zbuffer"`` (default, GPU, exact candidates
-        from a triangle-id buffer), ``"zbuffer-tolerance"`` (depth test with a slope-scaled
+        One of :func:`available_methods`: ``"auto"`` (default: ``"zbuffer-exact"`` or
+        ``"embree-fast"``, whichever is faster on this machine, both exact),
+        ``"zbuffer-exact"`` (GPU, complete candidate set from screen tiles),
+        ``"embree-fast"`` (threaded float32 Embree, float64 near-ties),
+        ``"zbuffer"`` (GPU, candidates from a triangle-id buffer, CPU fallback), ``"zbuffer-tolerance"`` (depth test with a slope-scaled
         tolerance), ``"oracle"`` (exact, Embree), ``"oracle-numpy"`` (exact, the paper's
         Eq. 1-10), and the paper's object-space methods.
     face_index : (N,) int, optional

@@ -36,6 +36,8 @@ from ..defaults import (  # noqa: F401 - DEFAULT_RESOLUTION etc. are re-exported
 from ..errors import InvalidInputError
 from ..render.moderngl_backend import PointBuffer
 from ..render.renderer_cache import RENDERER_CACHE_SIZE, renderer_for  # noqa: F401 - re-exported
+from .definition import TOLERANCE, hide_edge_on
+from .segment_triangle import mesh_planes
 from .registry import check_face_index, check_points, register
 
 __all__ = ["ResidentPoints", "Scene", "renderer_for", "zbuffer_visible", "zbuffer_tolerance_visible", "DEFAULT_RESOLUTION"]
@@ -64,7 +66,7 @@ def _resolve_uncertain(
         raise InvalidInputError(f"resolve must be 'embree' or 'none', got {resolve!r}")
     if resolve == "none" or not uncertain.any():
         return visible
-    from .oracle import occluded_embree  # deferred: only needed when points are uncertain
+    from .oracle_embree import occluded_embree  # deferred: only needed when points are uncertain
 
     idx = np.flatnonzero(uncertain)
     fi = None if face_index is None else face_index[idx]
@@ -142,7 +144,11 @@ class ResidentPoints:
         visible, uncertain = self.renderer.visible(
             camera, self._buffer, rule="candidates", neighborhood=neighborhood, tolerance=tolerance
         )
-        return _resolve_uncertain(self.mesh, self.points, self.face_index, camera, visible, uncertain, resolve, tolerance)
+        # The CPU decides with the one tolerance of every method (visibility.definition);
+        # ``tolerance`` is the GPU's float32 band.
+        visible = _resolve_uncertain(self.mesh, self.points, self.face_index, camera, visible, uncertain, resolve, TOLERANCE)
+        # Rule (b) of the definition: points on a face seen edge-on are not visible.
+        return hide_edge_on(visible, mesh_planes(self.mesh), self.points, camera.eye, self.face_index)
 
     def visible_tolerance(
         self,

@@ -1,0 +1,275 @@
+"""GPU side of ``zbuffer-exact``: faces binned into screen tiles, every point decided exactly.
+
+Per view, three compute passes (``shaders/exact_bin.comp``, ``shaders/exact_points.comp``):
+
+1. *count*: each distinct face adds 1 to every tile (``tile × tile`` pixels) its projected
+   bounding box overlaps, grown by ``margin`` pixels; faces reaching behind the near plane
+   go to a global list instead;
+2. the CPU reads the counts (one int per tile) and writes the list starts (a prefix sum);
+   *fill* writes the face ids;
+3. *points*: each point tests every face of its tile (and the global list): float32 with an
+   error bound, float64 for pairs inside the bound (the oracle's arithmetic).  Two bits per
+   point come back: visible, and "cpu" (a float64 result within 1e-12 of a boundary, or a
+   point on the frustum's border), which the caller decides on the CPU.
+
+A face that meets the segment from a point to the camera contains the point's projection,
+so it is in the point's tile: the candidate set is complete by construction, however thin
+the face (no pixel centre needs to sample it).
+"""
+
+from __future__ import annotations
+
+import math
+
+import moderngl
+import numpy as np
+from numpy.typing import NDArray
+
+from ..cameras import Camera
+from ..errors import InvalidInputError
+from .shaders import load_shader
+
+__all__ = ["ExactMesh", "ExactPoints", "exact_face_groups", "DEFAULT_TILE", "BIN_MARGIN_PX"]
+
+#: Tile side in pixels: a point tests the faces binned into its tile.
+DEFAULT_TILE = 8
+#: Growth of each face's projected box, pixels (float32 projection error is ~1e-3 px at 1024²).
+BIN_MARGIN_PX = 0.01
+#: Points this close to the image border (pixels, plus 1e-5 of the image size) are left to the CPU.
+FRUSTUM_MARGIN_PX = 1e-3
+_GROUP = 256
+_EPS32 = 2.0**-24
+
+
+def exact_face_groups(triangles: NDArray[np.float64]) -> NDArray[np.int64]:
+    """(F,) int64: for each face, the lowest index of the faces with bit-identical float64
+    vertices in the same order (their float64 tests give the same bits, so one is tested)."""
+    tri = np.ascontiguousarray(triangles, dtype=np.float64).reshape(len(triangles), 9)
+    key = tri.view(np.dtype((np.void, 72))).ravel()
+    _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+    return first[inverse.ravel()].astype(np.int64)
+
+
+def morton_order(points: NDArray[np.float64], bits: int = 10) -> NDArray[np.int64]:
+    """(N,) permutation sorting ``points`` along a Z-order (Morton) curve of their bounding box
+    (``bits`` <= 10 per axis: 30-bit codes).
+
+    Neighbours in space project to neighbouring pixels from any camera, so in this order the
+    invocations of one SIMD batch test the same tile's faces (divergence costs the batch the
+    longest list of its lanes).
+    """
+    if len(points) == 0:
+        return np.zeros(0, dtype=np.int64)
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    q = ((points - lo) / np.maximum(hi - lo, 1e-30) * ((1 << bits) - 1)).astype(np.uint32)
+    code = np.zeros(len(points), dtype=np.uint32)
+    for axis in range(3):  # spread 10 bits to every third bit ("part1by2"), then interleave
+        x = q[:, axis]
+        x = (x | (x << 16)) & np.uint32(0x030000FF)
+        x = (x | (x << 8)) & np.uint32(0x0300F00F)
+        x = (x | (x << 4)) & np.uint32(0x030C30C3)
+        x = (x | (x << 2)) & np.uint32(0x09249249)
+        code |= x << np.uint32(axis)
+    return np.argsort(code)  # equal codes: any order of theirs is as coherent
+
+
+class ExactPoints:
+    """Points uploaded for :class:`ExactMesh` (float32 and float64 copies, own-face ids),
+    stored in :func:`morton_order`; results are returned in the caller's order."""
+
+    def __init__(self, ctx: moderngl.Context, points: NDArray[np.float64], own: NDArray[np.int64] | None):
+        self.order = morton_order(points)
+        points = points[self.order]
+        own = None if own is None else own[self.order]
+        self.n_points = len(points)
+        n = max(self.n_points, 1)
+        p32 = np.zeros((n, 4), dtype=np.float32)
+        p32[: self.n_points, :3] = points
+        p64 = np.zeros((n, 3), dtype=np.float64)
+        p64[: self.n_points] = points
+        faces = np.full(n, -1, dtype=np.int32)
+        if own is not None:
+            faces[: self.n_points] = own
+        self.coord_max = float(np.abs(points).max(initial=0.0))
+        self.points32 = ctx.buffer(p32.tobytes())
+        self.points64 = ctx.buffer(p64.tobytes())
+        self.faces = ctx.buffer(faces.tobytes())
+        self.bits = ctx.buffer(reserve=2 * 4 * max(math.ceil(self.n_points / 32), 1))
+
+    def release(self) -> None:
+        for buf in (self.points32, self.points64, self.faces, self.bits):
+            buf.release()
+
+
+class ExactMesh:
+    """One mesh on the GPU for ``zbuffer-exact``.
+
+    Parameters
+    ----------
+    ctx : moderngl.Context
+        Needs OpenGL 4.3 with float64 in shaders (GLSL 4.00).
+    triangles : (F, 3, 3) float64
+        World frame.
+    planes : (F, 16) float64
+        Per face: normal (3), offset, edge normals (3 × 3), edge offsets (3), as the oracle's
+        ``TrianglePlanes`` (the GPU re-decides ties with them).
+    """
+
+    def __init__(self, ctx: moderngl.Context, triangles: NDArray[np.float64], planes: NDArray[np.float64]):
+        tri = np.asarray(triangles, dtype=np.float64)
+        if len(tri) == 0:
+            raise InvalidInputError("cannot test visibility against a mesh with no faces")
+        self.ctx = ctx
+        self.n_faces = len(tri)
+        #: (F,) the representative of each face's group of bit-identical faces.
+        self.group = exact_face_groups(tri)
+        binned = np.flatnonzero(self.group == np.arange(self.n_faces)).astype(np.int32)
+        self.n_bin_faces = len(binned)
+        self.coord_max = float(np.abs(tri).max())
+        with ctx:
+            self._triangles = ctx.buffer(tri.astype(np.float32).tobytes())
+            self._planes = ctx.buffer(np.ascontiguousarray(planes, dtype=np.float64).tobytes())
+            self._bin_faces = ctx.buffer(binned.tobytes())
+            self._global = ctx.buffer(reserve=4 * (self.n_bin_faces + 1))
+            self._params = ctx.buffer(reserve=8 * 8)
+            self._count = self._starts = self._list = None
+            self._n_tiles = -1
+            self._list_capacity = 0
+            self._bin_count = ctx.compute_shader(load_shader("exact_bin.comp", (("BIN_FILL", 0),)))
+            self._bin_fill = ctx.compute_shader(load_shader("exact_bin.comp", (("BIN_FILL", 1),)))
+            self._points = ctx.compute_shader(load_shader("exact_points.comp"))
+        self._max_groups = int(ctx.info["GL_MAX_COMPUTE_WORK_GROUP_COUNT"][0])
+        self.last_stats: dict[str, int] = {}
+
+    def upload_points(self, points: NDArray[np.float64], face_index: NDArray[np.int64] | None) -> ExactPoints:
+        """Upload ``points (N, 3)`` world frame and their optional own faces."""
+        own = None if face_index is None else self.group[face_index]
+        with self.ctx:
+            return ExactPoints(self.ctx, np.asarray(points, dtype=np.float64), own)
+
+    def _tile_buffers(self, n_tiles: int) -> None:
+        if n_tiles != self._n_tiles:
+            for buf in (self._count, self._starts):
+                if buf is not None:
+                    buf.release()
+            self._count = self.ctx.buffer(reserve=4 * (n_tiles + 1))
+            self._starts = self.ctx.buffer(reserve=4 * (n_tiles + 1))
+            self._n_tiles = n_tiles
+
+    def _run(self, shader: moderngl.ComputeShader, n: int, offset_name: str) -> None:
+        per = self._max_groups * _GROUP
+        for offset in range(0, n, per):
+            shader[offset_name].value = offset
+            shader.run(group_x=math.ceil(min(per, n - offset) / _GROUP))
+
+    @staticmethod
+    def _set(shader: moderngl.ComputeShader, uniforms: dict) -> None:
+        for name, value in uniforms.items():
+            if name in shader:  # the compiler drops unused uniforms
+                if isinstance(value, bytes):
+                    shader[name].write(value)
+                else:
+                    shader[name].value = value
+
+    def visible(
+        self,
+        camera: Camera,
+        points: ExactPoints,
+        *,
+        tolerance: float,
+        edge_sin: float,
+        tile: int = DEFAULT_TILE,
+    ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+        """Decide every uploaded point from ``camera``.
+
+        Returns
+        -------
+        visible : (N,) bool
+            The GPU's decision (meaningless where ``cpu``).
+        cpu : (N,) bool
+            Points the GPU leaves to the CPU (float64 near-ties, frustum border).
+        """
+        if int(tile) < 1:
+            raise InvalidInputError(f"tile must be >= 1 pixel, got {tile!r}")
+        n = points.n_points
+        if n == 0:
+            return np.zeros(0, dtype=bool), np.zeros(0, dtype=bool)
+        width, height = camera.resolution
+        tiles = (math.ceil(width / tile), math.ceil(height / tile))
+        n_tiles = tiles[0] * tiles[1]
+        vp = (camera.projection_matrix @ camera.view_matrix).T.astype(np.float32).tobytes()
+        eye = np.asarray(camera.eye, dtype=np.float64)
+        scale = max(self.coord_max, points.coord_max)
+        uniforms = {
+            "view_projection": vp,
+            "resolution": (width, height),
+            "tile": int(tile),
+            "tiles": tiles,
+            "n_bin_faces": self.n_bin_faces,
+            "near_w": float(0.5 * camera.znear),
+            "margin": float(BIN_MARGIN_PX + 1e-5 * max(width, height)),
+            "depth_row": tuple(float(v) for v in -camera.view_matrix[2]),
+            "n_points": n,
+            "eye": tuple(float(v) for v in eye),
+            "tolerance": float(tolerance),
+            "edge_sin": float(edge_sin),
+            "coord_err": float(8.0 * _EPS32 * scale),
+            "dir_err": float(8.0 * _EPS32 * (scale + float(np.abs(eye).max()))),
+            "depth_range": (float(camera.znear), float(camera.zfar)),
+            "frustum_margin": float(FRUSTUM_MARGIN_PX + 1e-5 * max(width, height)),
+        }
+        with self.ctx:
+            self._tile_buffers(n_tiles)
+            self._count.clear()
+            self._global.write(np.zeros(1, dtype=np.uint32).tobytes())
+            self._params.write(np.array([*eye, tolerance, edge_sin], dtype=np.float64).tobytes())
+            self._triangles.bind_to_storage_buffer(2)
+            self._count.bind_to_storage_buffer(6)
+            self._global.bind_to_storage_buffer(8)
+            self._bin_faces.bind_to_storage_buffer(10)
+            self._set(self._bin_count, uniforms)
+            self._run(self._bin_count, self.n_bin_faces, "face_offset")
+            self.ctx.memory_barrier()
+            counts = np.frombuffer(self._count.read(), dtype=np.uint32)[:n_tiles].astype(np.int64)
+            starts = np.zeros(n_tiles + 1, dtype=np.int64)
+            np.cumsum(counts, out=starts[1:])
+            total = int(starts[-1])
+            if total > 2**31:
+                raise InvalidInputError(f"{total} (tile, face) entries: use a larger tile than {tile} px")
+            if total > self._list_capacity:
+                if self._list is not None:
+                    self._list.release()
+                self._list_capacity = max(int(total * 1.5), 1024)
+                self._list = self.ctx.buffer(reserve=8 * self._list_capacity)
+            self._starts.write(starts.astype(np.uint32).tobytes())
+            self._count.write(starts.astype(np.uint32).tobytes())  # write cursors
+            self._list.bind_to_storage_buffer(7)
+            self._set(self._bin_fill, uniforms)
+            self._run(self._bin_fill, self.n_bin_faces, "face_offset")
+            self.ctx.memory_barrier()
+            points.points32.bind_to_storage_buffer(0)
+            points.faces.bind_to_storage_buffer(1)
+            points.bits.bind_to_storage_buffer(3)
+            self._planes.bind_to_storage_buffer(4)
+            points.points64.bind_to_storage_buffer(5)
+            self._starts.bind_to_storage_buffer(6)
+            self._params.bind_to_storage_buffer(9)
+            points.bits.clear()
+            self._set(self._points, uniforms)
+            self._run(self._points, n, "point_offset")
+            self.ctx.memory_barrier()
+            words = np.frombuffer(points.bits.read(), dtype=np.uint32).reshape(2, -1)
+            n_global = int(np.frombuffer(self._global.read(4), dtype=np.uint32)[0])
+        self.last_stats = {"tiles": n_tiles, "entries": total, "global_faces": n_global, "max_per_tile": int(counts.max(initial=0))}
+        bits = np.unpackbits(words.view(np.uint8), axis=1, bitorder="little")[:, :n].astype(bool)
+        out = np.empty_like(bits)
+        out[:, points.order] = bits
+        return out[0], out[1]
+
+    def release(self) -> None:
+        """Free the GL objects of this mesh."""
+        with self.ctx:
+            for obj in (self._triangles, self._planes, self._bin_faces, self._global, self._params,
+                        self._count, self._starts, self._list, self._bin_count, self._bin_fill, self._points):
+                if obj is not None:
+                    obj.release()

@@ -1,0 +1,146 @@
+"""``auto`` (the default method): the fastest exact method on this machine.
+
+Both candidates decide the same definition (:mod:`~zbuf_occlude.visibility.definition`):
+``zbuffer-exact`` on the GPU (:mod:`~zbuf_occlude.visibility.gpu_exact`) and ``embree-fast``
+on the CPU's threads (:mod:`~zbuf_occlude.visibility.embree_fast`).  :func:`choose_method`
+picks once per process:
+
+* ``$ZBUF_OCCLUDE_AUTO`` names one of them (or ``calibrate``): that wins;
+* only one of OpenGL 4.3 / ``embreex`` is available: that one;
+* the OpenGL renderer is a software rasteriser (llvmpipe, softpipe, swrast, SwiftShader,
+  lavapipe): ``embree-fast``, since the "GPU" runs on the same cores, where Embree is
+  measured several times faster (README, "Measured results");
+* a hardware renderer: a short calibration (:func:`calibrate`, ~1 s) times both on a
+  built-in problem and keeps the faster.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import os
+import time
+
+import numpy as np
+import trimesh
+from numpy.typing import NDArray
+
+from ..cameras import Camera, camera_on_sphere
+from ..errors import BackendUnavailable, InvalidInputError
+from .registry import get_method, register
+
+__all__ = ["choose_method", "calibrate", "make_scene", "auto_visible", "SOFTWARE_RENDERERS", "AUTO_ENV"]
+
+log = logging.getLogger(__name__)
+
+#: Environment variable that forces ``auto``'s choice.
+AUTO_ENV = "ZBUF_OCCLUDE_AUTO"
+#: Substrings of ``GL_RENDERER`` (lower case) naming a rasteriser that runs on the CPU.
+SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "lavapipe", "software")
+_CANDIDATES = ("zbuffer-exact", "embree-fast")
+
+
+def _gl_renderer() -> str | None:
+    try:
+        from ..render.context import shared_context
+
+        return str(shared_context().info["GL_RENDERER"])
+    except BackendUnavailable:
+        return None
+
+
+def _has_embree() -> bool:
+    try:
+        import embreex  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def calibrate(n_points: int = 50_000, views: int = 2) -> dict[str, float]:
+    """Median seconds per view of each candidate on a built-in problem (a subdivided
+    icosphere inside a box, ``n_points`` points, ``views`` views after one warm-up).
+
+    Returns
+    -------
+    seconds : dict
+        Method name → seconds per view, for the candidates that run here.
+    """
+    from .embree_fast import FastScene
+    from .gpu_exact import ExactScene
+
+    mesh = trimesh.util.concatenate([trimesh.creation.icosphere(subdivisions=4, radius=0.3), trimesh.creation.box([0.9, 0.9, 0.9])])
+    points, face_index = trimesh.sample.sample_surface(mesh, n_points, seed=0)
+    cameras = [camera_on_sphere(el, az) for el, az in ((20.0, 10.0), (-30.0, 100.0), (50.0, 220.0))[: views + 1]]
+    out: dict[str, float] = {}
+    for name, make in (("zbuffer-exact", ExactScene), ("embree-fast", FastScene)):
+        try:
+            scene = make(mesh, points, face_index)
+            scene.visible(cameras[0])
+            times = []
+            for cam in cameras[1:]:
+                t = time.perf_counter()
+                scene.visible(cam)
+                times.append(time.perf_counter() - t)
+            out[name] = float(np.median(times))
+        except BackendUnavailable as exc:
+            log.debug("auto: %s unavailable: %s", name, exc)
+    return out
+
+
+@functools.lru_cache(maxsize=1)
+def choose_method() -> str:
+    """The method ``auto`` runs in this process (decided once; see the module docstring).
+
+    Raises
+    ------
+    InvalidInputError
+        ``$ZBUF_OCCLUDE_AUTO`` names something else than a candidate or ``calibrate``.
+    BackendUnavailable
+        Neither OpenGL 4.3 nor Embree is available.
+    """
+    forced = os.environ.get(AUTO_ENV, "").strip()
+    if forced and forced not in (*_CANDIDATES, "calibrate"):
+        raise InvalidInputError(f"${AUTO_ENV}={forced!r}: use one of {', '.join(_CANDIDATES)} or 'calibrate'")
+    if forced in _CANDIDATES:
+        return forced
+    renderer = _gl_renderer()
+    embree = _has_embree()
+    if renderer is None and not embree:
+        raise BackendUnavailable("method 'auto' needs OpenGL 4.3 or embreex; use method='oracle-numpy'")
+    if renderer is None:
+        return "embree-fast"
+    if not embree:
+        return "zbuffer-exact"
+    if forced != "calibrate" and any(s in renderer.lower() for s in SOFTWARE_RENDERERS):
+        log.info("auto: software OpenGL renderer %r shares the CPU: embree-fast", renderer)
+        return "embree-fast"
+    seconds = calibrate()
+    choice = min(seconds, key=seconds.get) if seconds else "embree-fast"
+    log.info("auto: renderer %r, calibration %s: %s", renderer, seconds, choice)
+    return choice
+
+
+def make_scene(mesh: trimesh.Trimesh, points, face_index=None):
+    """A scene of :func:`choose_method`'s method for many views of one point set
+    (``scene.visible(camera)``; release with ``scene.release()`` where it has one)."""
+    if choose_method() == "zbuffer-exact":
+        from .gpu_exact import ExactScene
+
+        return ExactScene(mesh, points, face_index)
+    from .embree_fast import FastScene
+
+    return FastScene(mesh, points, face_index)
+
+
+@register("auto", session=make_scene)
+def auto_visible(
+    mesh: trimesh.Trimesh,
+    points: NDArray[np.float64],
+    camera: Camera,
+    *,
+    face_index: NDArray[np.int64] | None = None,
+    **options,
+) -> NDArray[np.bool_]:
+    """The default HSR method: :func:`choose_method`'s, with the same options."""
+    return get_method(choose_method())(mesh, points, camera, face_index=face_index, **options)

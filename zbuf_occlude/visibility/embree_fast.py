@@ -1,0 +1,442 @@
+"""``embree-fast``: multi-threaded float32 ray casting with float64 re-checks of near-ties.
+
+The CPU path of ``auto`` (:mod:`~zbuf_occlude.visibility.auto`).  Per view, the points are
+split into chunks cast on a thread pool (``embreex`` releases the GIL inside ``run``, and
+numpy does for the per-chunk arithmetic), each chunk in two Embree ``OCCLUDED`` queries
+from the point towards the camera, clipped to the mesh's bounding sphere:
+
+1. from ``start`` to the sphere: a hit is an occluder farther than ``start`` from the point
+   (float32: only a hit grazing an unshared edge can be false);
+2. for the points pass 1 left visible, the band from ``band_lo`` to ``start``: a hit there
+   may be the point's own surface (float32 rounding at grazing angles, a crease at its
+   face's edge) or a true occluder close to it, a *near-tie*, and the point is decided by
+   the exact oracle (:func:`~zbuf_occlude.visibility.oracle.occluded_embree`, float64).
+
+With ``face_index``, ``start`` and ``band_lo`` grow as the point's face turns edge-on
+(float32 puts the own plane up to ``ulp / cos`` away), so pass 1 never meets the own face.
+Rule (b) of :mod:`~zbuf_occlude.visibility.definition` (edge-on faces) is then applied
+exactly.  What float32 can still get wrong: an occluder closer than ``band_lo`` (a few
+float32 ulps of the scene's size over ``cos``) that is not the own face, and edge grazes
+in pass 1; measured agreement with the oracle is in README's tables.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import trimesh
+from numpy.typing import NDArray
+
+from ..cameras import Camera
+from ..errors import BackendUnavailable
+from ..mesh_cache import MeshCache
+from ..render.exact_backend import morton_order
+from .definition import EDGE_ON_SIN, TOLERANCE, edge_on_any, edge_on_own
+from .oracle_embree import _scene_for as _oracle_scene
+from .oracle_embree import occluded_embree
+from .segment_triangle import mesh_planes
+from .segment_triangle import pair_occludes as _pair_occludes
+from .registry import check_face_index, check_points, log_ignored, register
+
+__all__ = ["FastScene", "embree_fast_visible", "DEFAULT_THREADS"]
+
+log = logging.getLogger(__name__)
+
+#: Threads per view (default: the CPUs this process may run on).
+DEFAULT_THREADS = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+#: Pass 1 starts this far from the point (relative to the bounding sphere's radius), over
+#: ``cos`` of the point's face (capped by ``_MAX_START``); without face_index, ``cos = 1``.
+_START = 1e-4
+_MAX_START = 2e-2
+#: Pass 2 starts this far from the point (relative, over ``cos``): float32 rounding of the
+#: point and the own face (a few ulps of the radius) stays below it.
+_BAND_LO = 2e-6
+#: Rays per chunk of the thread pool.
+_CHUNK = 65536
+
+
+class _Scene:
+    def __init__(self, mesh: trimesh.Trimesh):
+        try:
+            from embreex import rtcore_scene
+            from embreex.mesh_construction import TriangleMesh
+        except ImportError as exc:
+            raise BackendUnavailable(f"'embree-fast' needs Embree: pip install embreex ({exc})") from None
+        vertices = np.asarray(mesh.vertices, dtype=np.float64)
+        used = vertices[np.asarray(mesh.faces)].reshape(-1, 3)
+        self.centre = (used.min(axis=0) + used.max(axis=0)) / 2.0
+        self.radius = float(np.sqrt(((used - self.centre) ** 2).sum(axis=1)).max()) * (1.0 + 1e-3)
+        self.scene = rtcore_scene.EmbreeScene(robust=True)
+        TriangleMesh(
+            scene=self.scene,
+            vertices=np.ascontiguousarray(vertices - self.centre, dtype=np.float32),
+            indices=np.ascontiguousarray(mesh.faces, dtype=np.int32),
+        )
+        planes = mesh_planes(mesh)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            unit = planes.normal / np.sqrt((planes.normal**2).sum(axis=1))[:, None]
+            # Edge planes scaled to unit normals: (F, 3, 4) = (m_k / |m_k|, offset_k / |m_k|).
+            scale = 1.0 / np.sqrt((planes.edge_normals**2).sum(axis=2))
+            edge = np.concatenate([planes.edge_normals * scale[..., None], (planes.edge_offsets * scale)[..., None]], axis=2)
+        self.unit_normals = np.nan_to_num(unit).astype(np.float32)
+        self.edge_planes = np.nan_to_num(edge)  # degenerate faces: distance 0 (always a crease)
+
+
+_scenes: MeshCache[_Scene] = MeshCache(_Scene, 8)
+_pool: ThreadPoolExecutor | None = None
+
+
+def _executor(threads: int) -> ThreadPoolExecutor:
+    global _pool
+    if _pool is None or _pool._max_workers != threads:  # noqa: SLF001 - resize on demand
+        _pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="embree-fast")
+    return _pool
+
+
+def _prepare_py(p, pp, normals, boundary, eye, frame, cam, consts):
+    """Per point of a chunk: frustum status and the two rays (see :class:`FastScene`).
+
+    Returns ``status`` (uint8 bits: 1 in frustum, 2 exact needed, 4 frustum border,
+    8 maybe edge-on, 16 closer to its face's boundary than pass 2's start: a crease), pass-1 origins and lengths, pass-2 origins and lengths (0: no ray),
+    unit directions (float32, mesh-centred frame).
+    """
+    n = len(p)
+    status = np.zeros(n, dtype=np.uint8)
+    org1 = np.empty((n, 3), dtype=np.float32)
+    org2 = np.empty((n, 3), dtype=np.float32)
+    dirs = np.empty((n, 3), dtype=np.float32)
+    len1 = np.zeros(n, dtype=np.float32)
+    len2 = np.zeros(n, dtype=np.float32)
+    f, width, height, znear, zfar, margin = cam[0], cam[1], cam[2], cam[3], cam[4], cam[5]
+    radius, start_rel, max_start, band_rel, edge_cos = consts[0], consts[1], consts[2], consts[3], consts[4]
+    has_normals = len(normals) == n and n > 0
+    for i in range(n):
+        x, y, z = p[i, 0], p[i, 1], p[i, 2]
+        org1[i, 0], org1[i, 1], org1[i, 2] = x, y, z
+        dirs[i, 0], dirs[i, 1], dirs[i, 2] = 1.0, 0.0, 0.0
+        depth = frame[2, 0] * x + frame[2, 1] * y + frame[2, 2] * z + frame[2, 3]
+        dm = 1e-5 * abs(depth)
+        if depth < znear - dm or depth > zfar + dm:
+            continue
+        u = (frame[0, 0] * x + frame[0, 1] * y + frame[0, 2] * z + frame[0, 3]) * f / depth + 0.5 * width
+        v = (frame[1, 0] * x + frame[1, 1] * y + frame[1, 2] * z + frame[1, 3]) * f / depth + 0.5 * height
+        if u < -margin or u >= width + margin or v < -margin or v >= height + margin:
+            continue
+        st = 1
+        if depth < znear + dm or depth > zfar - dm or u < margin or u >= width - margin or v < margin or v >= height - margin:
+            st |= 4
+        dx, dy, dz = eye[0] - x, eye[1] - y, eye[2] - z
+        length = np.sqrt(dx * dx + dy * dy + dz * dz)
+        dx, dy, dz = dx / length, dy / length, dz / length
+        dirs[i, 0], dirs[i, 1], dirs[i, 2] = dx, dy, dz
+        cos = 1.0
+        if has_normals:
+            cos = abs(normals[i, 0] * dx + normals[i, 1] * dy + normals[i, 2] * dz)
+            if cos < edge_cos:
+                st |= 8
+        start = min(start_rel * radius / max(cos, 1e-30), max_start * radius)
+        band = band_rel * radius / max(cos, 1e-30)
+        if has_normals and boundary[i] < band:
+            st |= 16
+        b = x * dx + y * dy + z * dz
+        disc = b * b - (pp[i] - radius * radius)
+        far = min(-b + np.sqrt(max(disc, 0.0)), length)
+        if start < far:
+            org1[i, 0], org1[i, 1], org1[i, 2] = x + dx * start, y + dy * start, z + dz * start
+            len1[i] = far - start
+            if band < start:
+                org2[i, 0], org2[i, 1], org2[i, 2] = x + dx * band, y + dy * band, z + dz * band
+                len2[i] = start - band
+        elif band < far:
+            st |= 2
+        status[i] = st
+    return status, org1, len1, org2, len2, dirs
+
+
+def _setup_py(points, order, face_index, centre, unit_normals, edge_planes):
+    """Sorted points (float64), float32 copies relative to ``centre``, their squared norms,
+    and with ``face_index`` their faces' unit normals and distances to the faces' edges."""
+    n = len(order)
+    sorted_points = np.empty((n, 3), dtype=np.float64)
+    p32 = np.empty((n, 3), dtype=np.float32)
+    pp = np.empty(n, dtype=np.float32)
+    has_faces = len(face_index) == len(points) and n > 0
+    m = n if has_faces else 0
+    n32 = np.empty((m, 3), dtype=np.float32)
+    boundary = np.empty(m, dtype=np.float32)
+    for i in range(n):
+        k = order[i]
+        x, y, z = points[k, 0], points[k, 1], points[k, 2]
+        sorted_points[i, 0], sorted_points[i, 1], sorted_points[i, 2] = x, y, z
+        a, b, c = np.float32(x - centre[0]), np.float32(y - centre[1]), np.float32(z - centre[2])
+        p32[i, 0], p32[i, 1], p32[i, 2] = a, b, c
+        pp[i] = a * a + b * b + c * c
+        if has_faces:
+            f = face_index[k]
+            n32[i, 0], n32[i, 1], n32[i, 2] = unit_normals[f, 0], unit_normals[f, 1], unit_normals[f, 2]
+            best = np.inf
+            for e in range(3):
+                d = abs(edge_planes[f, e, 0] * x + edge_planes[f, e, 1] * y + edge_planes[f, e, 2] * z - edge_planes[f, e, 3])
+                best = min(best, d)
+            boundary[i] = best
+    return sorted_points, p32, pp, n32, boundary
+
+
+def _prepare_np(p, pp, normals, boundary, eye, frame, cam, consts):
+    """:func:`_prepare_py` vectorised with numpy (used without numba)."""
+    n = len(p)
+    f, width, height, znear, zfar, margin = (np.float32(v) for v in cam)
+    radius, start_rel, max_start, band_rel, edge_cos = (np.float32(v) for v in consts)
+    x, y, z = p[:, 0], p[:, 1], p[:, 2]
+    depth = frame[2, 0] * x + frame[2, 1] * y + frame[2, 2] * z + frame[2, 3]
+    dm = np.float32(1e-5) * np.abs(depth)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = (frame[0, 0] * x + frame[0, 1] * y + frame[0, 2] * z + frame[0, 3]) * f / depth + np.float32(0.5) * width
+        v = (frame[1, 0] * x + frame[1, 1] * y + frame[1, 2] * z + frame[1, 3]) * f / depth + np.float32(0.5) * height
+    inside = (depth >= znear - dm) & (depth <= zfar + dm)
+    inside &= (u >= -margin) & (u < width + margin) & (v >= -margin) & (v < height + margin)
+    border = (depth < znear + dm) | (depth > zfar - dm) | (u < margin) | (u >= width - margin) | (v < margin) | (v >= height - margin)
+    d = eye - p
+    length = np.sqrt(np.einsum("ij,ij->i", d, d))
+    dirs = (d / length[:, None]).astype(np.float32)
+    if len(normals) == n and n > 0:
+        cos = np.abs(np.einsum("ij,ij->i", normals, dirs))
+    else:
+        cos = np.ones(n, dtype=np.float32)
+    tiny = np.float32(1e-30)
+    start = np.minimum(start_rel * radius / np.maximum(cos, tiny), max_start * radius)
+    band = band_rel * radius / np.maximum(cos, tiny)
+    b = np.einsum("ij,ij->i", p, dirs)
+    far = np.minimum(-b + np.sqrt(np.maximum(b * b - (pp - radius * radius), 0)), length)
+    ok = inside & (start < far)
+    two = ok & (band < start)
+    status = inside.astype(np.uint8)
+    status |= np.where(inside & border, 4, 0).astype(np.uint8)
+    if len(normals) == n and n > 0:
+        status |= np.where(inside & (cos < edge_cos), 8, 0).astype(np.uint8)
+        status |= np.where(inside & (boundary < band), 16, 0).astype(np.uint8)
+    status |= np.where(inside & ~ok & (band < far), 2, 0).astype(np.uint8)
+    org1 = np.where(ok[:, None], p + dirs * start[:, None], p).astype(np.float32)
+    len1 = np.where(ok, far - start, 0).astype(np.float32)
+    org2 = np.where(two[:, None], p + dirs * band[:, None], p).astype(np.float32)
+    len2 = np.where(two, start - band, 0).astype(np.float32)
+    return status, org1, len1, org2, len2, dirs
+
+
+def _setup_np(points, order, face_index, centre, unit_normals, edge_planes):
+    """:func:`_setup_py` vectorised with numpy (used without numba)."""
+    sorted_points = points[order]
+    p32 = (sorted_points - centre).astype(np.float32)
+    pp = np.einsum("ij,ij->i", p32, p32)
+    if len(face_index) != len(points) or len(points) == 0:
+        return sorted_points, p32, pp, np.empty((0, 3), np.float32), np.empty(0, np.float32)
+    f = face_index[order]
+    e = edge_planes[f]
+    dist = np.abs(np.einsum("ijk,ik->ij", e[..., :3], sorted_points) - e[..., 3])
+    return sorted_points, p32, pp, unit_normals[f], dist.min(axis=1).astype(np.float32)
+
+
+def _crease_py(idx, points, face_index, eye, normal, offset, edge_normals, edge_offsets,
+               corner_vertex, vertex_start, vertex_faces, tolerance):
+    """(K,) bool: point ``idx[k]`` is hidden by a face sharing a vertex with its own face;
+    the oracle's ``_pair_occludes`` arithmetic, pair by pair, stopping at the first hit."""
+    out = np.zeros(len(idx), dtype=np.bool_)
+    for j in range(len(idx)):
+        k = idx[j]
+        own = face_index[k]
+        px, py, pz = points[k, 0], points[k, 1], points[k, 2]
+        sx, sy, sz = eye[0] - px, eye[1] - py, eye[2] - pz
+        seg_len = np.sqrt(sx * sx + sy * sy + sz * sz)
+        for c in range(3):
+            v = corner_vertex[own, c]
+            for q in range(vertex_start[v], vertex_start[v + 1]):
+                g = vertex_faces[q]
+                if g == own:
+                    continue
+                t = (offset[g] - (normal[g, 0] * px + normal[g, 1] * py + normal[g, 2] * pz)) / (
+                    normal[g, 0] * sx + normal[g, 1] * sy + normal[g, 2] * sz)
+                if not (t >= 0.0 and t <= 1.0 and t * seg_len > tolerance):
+                    continue
+                x, y, z = px + t * sx, py + t * sy, pz + t * sz
+                inside = True
+                for e in range(3):
+                    if not (x * edge_normals[g, e, 0] + y * edge_normals[g, e, 1] + z * edge_normals[g, e, 2] >= edge_offsets[g, e]):
+                        inside = False
+                if inside:
+                    out[j] = True
+                    break
+            if out[j]:
+                break
+    return out
+
+
+try:
+    import numba
+
+    _prepare = numba.njit(cache=True, nogil=True)(_prepare_py)
+    _setup = numba.njit(cache=True, nogil=True)(_setup_py)
+    _crease = numba.njit(cache=True, nogil=True, error_model="numpy")(_crease_py)
+except ImportError:  # pragma: no cover - numba is the 'fast' extra
+    _prepare, _setup = _prepare_np, _setup_np
+    _crease = None
+
+
+class FastScene:
+    """One mesh and one point set for ``embree-fast``, tested from many cameras.
+
+    Set-up is cheap: float32 copies of the points relative to the mesh's centre (and their
+    faces' unit normals with ``face_index``); the Embree BVH is cached per mesh.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+    points : (N, 3) float
+        World frame.
+    face_index : (N,) int, optional
+    threads : int, optional
+        Default :data:`DEFAULT_THREADS`.
+
+    Raises
+    ------
+    BackendUnavailable
+        Without ``embreex``.
+    InvalidInputError
+        Bad points or face index.
+    """
+
+    def __init__(self, mesh: trimesh.Trimesh, points, face_index=None, *, threads: int | None = None):
+        self.mesh = mesh
+        self.points = check_points(points)
+        self.face_index = check_face_index(face_index, len(self.points), len(mesh.faces))
+        self.threads = int(threads or DEFAULT_THREADS)
+        self._scene = _scenes(mesh)
+        # Rays in Z-order (Morton) of their points: neighbours traverse the same BVH nodes.
+        self._order = morton_order(self.points)
+        sc = self._scene
+        fi = self.face_index if self.face_index is not None else np.zeros(0, dtype=np.int64)
+        self._sorted_points, self._p32, self._pp, n32, boundary = _setup(
+            self.points, self._order, fi, sc.centre, sc.unit_normals, sc.edge_planes
+        )
+        # Unit normals of the points' faces, and distances to their faces' boundaries.
+        self._n32 = n32 if self.face_index is not None else None
+        self._boundary = boundary if self.face_index is not None else None
+        # Points sorted by x, for rule (b) without face_index (definition.edge_on_any).
+        self._x_order = np.argsort(self.points[:, 0], kind="stable") if self.face_index is None else None
+        #: Fraction of the points the last call re-decided in float64.
+        self.last_cpu_fraction = 0.0
+
+    def _chunk(self, lo: int, hi: int, camera: Camera, eye_c: NDArray[np.float32]) -> tuple[NDArray, NDArray, NDArray]:
+        """(in frustum and not occluded by pass 1, near-tie, maybe edge-on) for points ``lo:hi``."""
+        sc = self._scene
+        rt = camera.extrinsics  # world -> OpenCV camera frame
+        frame = np.empty((3, 4), dtype=np.float32)
+        frame[:, :3] = rt[:, :3]
+        frame[:, 3] = rt[:, :3] @ sc.centre + rt[:, 3]
+        cam = np.array(
+            [camera.focal_px, camera.width, camera.height, camera.znear, camera.zfar,
+             1e-3 + 1e-5 * max(camera.width, camera.height)], dtype=np.float32)
+        consts = np.array([sc.radius, _START, _MAX_START, _BAND_LO, EDGE_ON_SIN + 1e-3], dtype=np.float32)
+        normals = self._n32[lo:hi] if self._n32 is not None else np.zeros((0, 3), dtype=np.float32)
+        boundary = self._boundary[lo:hi] if self._boundary is not None else np.zeros(0, dtype=np.float32)
+        status, org1, len1, org2, len2, dirs = _prepare(
+            self._p32[lo:hi], self._pp[lo:hi], normals, boundary, eye_c, frame, cam, consts
+        )
+        border = np.flatnonzero(status & 4)
+        if len(border):  # within a hair of the frustum's border: Camera.in_frustum decides
+            inside = camera.in_frustum(self._sorted_points[lo + border])
+            status[border[~inside]] = 0
+        hit = np.asarray(sc.scene.run(org1, dirs, dists=len1, query="OCCLUDED")) >= 0  # -1: nothing hit
+        inside = (status & 1).astype(bool)
+        visible = inside & ~hit
+        tie = inside & ((status & 2) != 0)  # start beyond the sphere's exit: exact
+        idx = np.flatnonzero(visible & (len2 > 0))
+        if len(idx):
+            near = np.asarray(sc.scene.run(org2[idx], dirs[idx], dists=len2[idx], query="OCCLUDED")) >= 0
+            tie[idx[near]] = True
+        return visible, tie, status
+
+    def visible(self, camera: Camera, *, tolerance: float = TOLERANCE, **_ignored) -> NDArray[np.bool_]:
+        """Visibility of the points from ``camera`` (see the module docstring).  Options of
+        other methods (``resolution``...) are ignored with a log message.
+
+        Returns
+        -------
+        visible : (N,) bool
+        """
+        log_ignored("embree-fast", _ignored)
+        n = len(self.points)
+        eye_c = (np.asarray(camera.eye, dtype=np.float64) - self._scene.centre).astype(np.float32)
+        bounds = [(lo, min(lo + _CHUNK, n)) for lo in range(0, n, _CHUNK)]
+        if self.threads > 1 and len(bounds) > 1:
+            parts = list(_executor(self.threads).map(lambda b: self._chunk(b[0], b[1], camera, eye_c), bounds))
+        else:
+            parts = [self._chunk(lo, hi, camera, eye_c) for lo, hi in bounds]
+        visible, tie = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+        status = np.zeros(n, dtype=np.uint8)
+        if parts:  # back to the caller's order
+            visible[self._order] = np.concatenate([v for v, _, _ in parts])
+            tie[self._order] = np.concatenate([t for _, t, _ in parts])
+            status[self._order] = np.concatenate([st for _, _, st in parts])
+        edge = (status & 8) != 0
+        crease = np.flatnonzero(visible & ~tie & ((status & 16) != 0))
+        if len(crease):
+            # Within pass 2's start of its face's boundary, the point may be hidden by a
+            # neighbouring face closer than that start: test the faces around its own
+            # face exactly (as the oracle's crease pass does).
+            scene = _oracle_scene(self.mesh)
+            if _crease is not None:
+                pl = scene.planes
+                hidden = _crease(
+                    crease, self.points, self.face_index, np.asarray(camera.eye, dtype=np.float64), pl.normal,
+                    pl.offset, pl.edge_normals, pl.edge_offsets, scene.corner_vertex, scene.vertex_start,
+                    scene.vertex_faces, float(tolerance),
+                )
+                visible[crease[hidden]] = False
+            else:
+                k, g = scene.faces_around(self.face_index[crease])
+                kc = crease[k]
+                seg = camera.eye - self.points[kc]
+                seg_len = np.sqrt(np.einsum("ij,ij->i", seg, seg))
+                hit = _pair_occludes(self.points[kc], seg, seg_len, scene.planes, g, self.face_index[kc], tolerance)
+                visible[kc[hit]] = False
+        idx = np.flatnonzero(tie)
+        self.last_cpu_fraction = len(idx) / max(n, 1)
+        if len(idx):
+            fi = None if self.face_index is None else self.face_index[idx]
+            visible[idx] = ~occluded_embree(self.mesh, self.points[idx], camera.eye, face_index=fi, tolerance=tolerance)
+        planes = mesh_planes(self.mesh)
+        if self.face_index is None:
+            visible &= ~edge_on_any(planes, self.points, camera.eye, tolerance, order=self._x_order)
+        else:
+            idx = np.flatnonzero(visible & edge)
+            visible[idx[edge_on_own(planes.normal[self.face_index[idx]], self.points[idx], camera.eye)]] = False
+        return visible
+
+
+    def release(self) -> None:
+        """Nothing to free: the Embree BVH stays cached per mesh (a :class:`PoseSession`)."""
+
+    def __enter__(self) -> FastScene:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+@register("embree-fast", session=FastScene)
+def embree_fast_visible(
+    mesh: trimesh.Trimesh,
+    points: NDArray[np.float64],
+    camera: Camera,
+    *,
+    face_index: NDArray[np.int64] | None = None,
+    tolerance: float = TOLERANCE,
+    threads: int | None = None,
+    **_ignored,
+) -> NDArray[np.bool_]:
+    """Multi-threaded float32 Embree with float64 re-checks of near-ties; see :class:`FastScene`."""
+    log_ignored("embree-fast", _ignored)
+    return FastScene(mesh, points, face_index, threads=threads).visible(camera, tolerance=tolerance)
