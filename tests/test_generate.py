@@ -118,7 +118,7 @@ def test_generate_usage_errors_exit_2_before_any_mesh(tree, tmp_path, capsys, no
     assert main(["generate", str(tree), "--out", str(tmp_path / "out"), *ARGS, *bad]) == 2
     err = _error(capsys)
     assert option in err
-    for internal in ("n_points", "samples_per_view", "image size", "dense_points"):
+    for internal in ("n_points", "samples_per_view", "image size must be positive", "dense_points"):
         assert internal not in err
 
 

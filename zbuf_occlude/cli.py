@@ -21,10 +21,11 @@ from .cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
 from .defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION
 from .errors import InvalidInputError, ZbufOccludeError
 from .io import FORMATS, write_csv
-from .mesh import find_meshes, load_mesh
+from .mesh import load_mesh, scan_meshes
 from .metrics import agreement
-from .sampling import sample_surface
-from .visibility.registry import available_methods, get_method, visible_mask
+from .resources import MemoryEstimate, check_memory, estimate_job_memory
+from .sampling import check_seed, sample_surface
+from .visibility.registry import available_methods, get_method, method_info, visible_mask
 
 __all__ = ["main", "build_parser", "SAMPLE_MESHES"]
 
@@ -54,7 +55,6 @@ def cmd_generate(args: argparse.Namespace) -> int:
     import shlex
 
     from .farm import FarmParams
-    from .farm.checks import check_before_work
     from .farm.generate import generate
 
     params = FarmParams(
@@ -62,7 +62,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
         resolution=args.resolution, seed=args.seed, radius=args.radius, storage=args.format, method=args.method,
     )  # fmt: skip
     paths = _default_paths(args.paths)
-    check_before_work(params, args.out)  # options, --out and the GL, before any mesh is looked at
+    # generate's engine (farm.run_farm) checks the options, the memory, --out and the GL before loading a mesh
     t0 = time.perf_counter()
     summary, objects = generate(
         paths, args.out, params=params, overwrite=args.overwrite, progress=True,
@@ -90,15 +90,34 @@ def _check_at_least(args: argparse.Namespace, **lowest: int) -> None:
             raise InvalidInputError(f"--{name.replace('_', '-')} must be an integer >= {low}, got {value}")
 
 
+def _check_validate_memory(points: int, resolution: int) -> None:
+    """``validate`` holds a dense cloud of ``--points`` per mesh and one image of ``--resolution``."""
+    est = estimate_job_memory(dense_points=points, resolution=resolution)
+    check_memory(
+        MemoryEstimate(
+            {"--points": est.parts["--dense-points"], "--resolution": est.parts["--resolution"]},
+            {"--points": points, "--resolution": resolution},
+        )
+    )
+
+
 def cmd_validate(args: argparse.Namespace) -> int:
-    _check_at_least(args, points=1, resolution=1, seed=0)
+    _check_at_least(args, points=1, resolution=1)
+    check_seed(args.seed, name="--seed")
     poses = view_schedule(args.views)
-    meshes = find_meshes(_default_paths(args.paths))
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     for m in methods:
         get_method(m)  # unknown names fail here, before any work
+    if any(method_info(m).takes_resolution for m in methods):
+        from .render.context import check_image_size
+
+        check_image_size(args.resolution, name="--resolution")
+    _check_validate_memory(args.points, args.resolution)
+    meshes, skipped = scan_meshes(_default_paths(args.paths))
+    for item in skipped:
+        print(f"SKIPPED {item}", file=sys.stderr)
     rows: list[dict] = []
-    failed = 0
+    failed = len(skipped)
     header = f"{'mesh':32s} {'el':>6s} {'az':>6s} {'method':18s} {'agree%':>8s} {'f-vis%':>7s} {'f-hid%':>7s} {'ms':>8s} {'oracle ms':>9s}"
     print(header)
     for path, name in meshes:

@@ -22,17 +22,17 @@ from pathlib import Path
 
 import numpy as np
 
+from ..discovery import SkippedInput, class_and_split, scan_meshes
 from ..errors import InvalidInputError
 from ..io import OccludedCloud, read_h5, write_h5
-from ..mesh import class_and_split, find_meshes
-from ..occlude import DEFAULT_DENSE_POINTS
 from ..layout import GENERATE_STORAGES, MERGED_H5_FILE
+from ..occlude import DEFAULT_DENSE_POINTS
 from .config import FarmParams, record_path
 from .inputs import FarmObject
 from .journal import FarmSummary, read_json
 from .run import run_farm
 
-__all__ = ["generate", "objects_from_paths", "MERGED_H5_FILE", "GENERATE_DEFAULTS"]
+__all__ = ["generate", "scan_paths", "objects_from_paths", "MERGED_H5_FILE", "GENERATE_DEFAULTS"]
 
 log = logging.getLogger(__name__)
 
@@ -43,12 +43,20 @@ GENERATE_DEFAULTS = FarmParams(
 )
 
 
-def objects_from_paths(paths: Sequence[str | os.PathLike]) -> list[FarmObject]:
-    """The plan of ``generate``: mesh files and folders (searched recursively), numbered.
+def scan_paths(paths: Sequence[str | os.PathLike]) -> tuple[list[FarmObject], list[SkippedInput]]:
+    """The plan of ``generate``: mesh files and folders (searched recursively), numbered,
+    and the inputs that had to be skipped.
 
     Each object's name is its path relative to the folder given (a file given alone: its
     stem), without the suffix; class and split come from the path
     (:func:`~zbuf_occlude.mesh.class_and_split`); labels number the sorted class names.
+
+    Returns
+    -------
+    objects : list of FarmObject
+    skipped : list of SkippedInput
+        Unreadable folders and files whose names are not UTF-8
+        (:func:`~zbuf_occlude.discovery.scan_meshes`); the run records them and exits 1.
 
     Raises
     ------
@@ -57,7 +65,7 @@ def objects_from_paths(paths: Sequence[str | os.PathLike]) -> list[FarmObject]:
         (``chair_0001.off`` and ``chair_0001.obj``): the name seeds the samples and names the
         outputs, so one would overwrite the other.
     """
-    found = find_meshes(paths)
+    found, skipped = scan_meshes(paths)
     by_name: dict[str, list[Path]] = {}
     for path, name in found:
         by_name.setdefault(name, []).append(path)
@@ -70,7 +78,13 @@ def objects_from_paths(paths: Sequence[str | os.PathLike]) -> list[FarmObject]:
         )
     meta = [(path, name, *class_and_split(path)) for path, name in found]
     labels = {c: i for i, c in enumerate(sorted({m[2] for m in meta}))}
-    return [FarmObject(i, name, str(path), cls, split, labels[cls]) for i, (path, name, cls, split) in enumerate(meta)]
+    objects = [FarmObject(i, name, str(path), cls, split, labels[cls]) for i, (path, name, cls, split) in enumerate(meta)]
+    return objects, skipped
+
+
+def objects_from_paths(paths: Sequence[str | os.PathLike]) -> list[FarmObject]:
+    """:func:`scan_paths` without the skipped inputs (each was logged as a warning)."""
+    return scan_paths(paths)[0]
 
 
 def _merge_h5(out: Path, objects: Sequence[FarmObject]) -> Path | None:
@@ -120,7 +134,8 @@ def generate(
     Parameters
     ----------
     paths : sequence of str or PathLike
-        Mesh files and folders (:func:`objects_from_paths`).
+        Mesh files and folders (:func:`scan_paths`); unreadable folders and names that
+        are not UTF-8 are skipped, recorded in the card and ``summary.skipped`` (exit 1).
     out : str or PathLike
         Output folder.
     params : FarmParams
@@ -145,14 +160,12 @@ def generate(
     """
     if params.storage not in GENERATE_STORAGES:
         raise InvalidInputError(f"generate writes one of {GENERATE_STORAGES}, not {params.storage!r}")
-    objects = objects_from_paths(paths)
-    # TODO(badinput): take discovery.scan_meshes(paths).skipped here and pass it as skipped=
-    skipped: list[tuple[str, str]] = []
+    objects, skipped = scan_paths(paths)
     out = Path(out)
     summary = run_farm(
         objects, out, params=params, workers=1, overwrite=overwrite, progress=progress, command=command,
         source_text=", ".join(str(Path(p).resolve()) for p in paths),
         on_finished=(lambda folder: _merge_h5(folder, objects)) if params.storage == "h5" else None,
-        skipped=skipped,
+        skipped=[(s.path, s.reason) for s in skipped],
     )  # fmt: skip
     return summary, objects
