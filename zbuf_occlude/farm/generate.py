@@ -24,9 +24,9 @@ import numpy as np
 
 from ..discovery import SkippedInput, class_and_split, scan_meshes
 from ..errors import InvalidInputError
-from ..io import OccludedCloud, read_h5, write_h5
+from ..io import read_h5, write_h5
 from ..layout import GENERATE_STORAGES, MERGED_H5_FILE
-from ..occlude import DEFAULT_DENSE_POINTS
+from ..occlude import DEFAULT_DENSE_POINTS, OccludedCloud
 from .config import FarmParams, record_path
 from .inputs import FarmObject
 from .journal import FarmSummary, read_json
