@@ -18,7 +18,7 @@ import numpy as np
 
 from ._version import __version__
 from .cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
-from .defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION
+from .defaults import DEFAULT_DENSE_POINTS, DEFAULT_METHOD, DEFAULT_RESOLUTION, DEFAULT_VIEWS
 from .errors import InvalidInputError, ZbufOccludeError
 from .io import FORMATS, write_csv
 from .mesh import load_mesh, scan_meshes
@@ -170,9 +170,9 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 # -- parser ------------------------------------------------------------------------------------------
-def _add_common(p: argparse.ArgumentParser, *, points: int) -> None:
+def _add_common(p: argparse.ArgumentParser, *, points: int | None = None) -> None:
     p.add_argument("paths", nargs="*", metavar="PATH", help="mesh files or folders (recursive); default: the shipped sample meshes")
-    p.add_argument("--views", default="grid25", help="paper100 | grid25 | fibonacci:N | EL:AZ,EL:AZ,... (degrees)")
+    p.add_argument("--views", default=DEFAULT_VIEWS, help="paper100 | grid25 | fibonacci:N | EL:AZ,EL:AZ,... (degrees)")
     p.add_argument("--points", type=int, default=points, help="points per sample (generate) or sampled per mesh (validate)")
     p.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION, help="z-buffer image size, pixels")
     p.add_argument("--radius", type=float, default=DEFAULT_RADIUS, help="camera distance, object units (object max extent is 1)")
@@ -186,23 +186,23 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    g = sub.add_parser("generate", help="occluded point clouds from meshes")
-    _add_common(g, points=2048)
-    g.add_argument("--out", required=True, help="output folder")
-    g.add_argument("--samples-per-view", type=int, help="random draws per pose (default: 10)")
-    g.add_argument("--dense-points", type=int, help="dense cloud per mesh, drawn from per pose (default: 100000)")
-    g.add_argument("--format", choices=FORMATS, help="npz or ply: one file per sample; h5: PointNet's layout (default: npz)")
-    g.add_argument("--method", help="visibility method (see `zbuf-occlude info`; default: zbuffer)")
-    g.add_argument("--overwrite", action="store_true", help="start over (needed to change options in an existing --out)")
-    from .farm.generate import GENERATE_DEFAULTS as gd  # generate's defaults live beside its engine
+    from .farm.generate import GENERATE_DEFAULTS as gd  # generate's defaults, taken from zbuf_occlude.defaults
 
+    g = sub.add_parser("generate", help="occluded point clouds from meshes")
+    _add_common(g)
+    g.add_argument("--out", required=True, help="output folder")
+    g.add_argument("--samples-per-view", type=int, help=f"random draws per pose (default: {gd.samples_per_view})")
+    g.add_argument("--dense-points", type=int, help=f"dense cloud per mesh, drawn from per pose (default: {gd.dense_points})")
+    g.add_argument("--format", choices=FORMATS, help=f"npz or ply: one file per sample; h5: PointNet's layout (default: {gd.storage})")
+    g.add_argument("--method", help=f"visibility method (see `zbuf-occlude info`; default: {gd.method})")
+    g.add_argument("--overwrite", action="store_true", help="start over (needed to change options in an existing --out)")
     g.set_defaults(
         func=cmd_generate, views=gd.views, points=gd.n_points, resolution=gd.resolution,
         samples_per_view=gd.samples_per_view, dense_points=gd.dense_points, format=gd.storage, method=gd.method,
     )  # fmt: skip
 
     v = sub.add_parser("validate", help="agreement of visibility methods with the exact oracle, per mesh and pose")
-    _add_common(v, points=100_000)
+    _add_common(v, points=DEFAULT_DENSE_POINTS)
     v.add_argument("--methods", default=DEFAULT_METHOD, help="comma-separated methods to score")
     v.add_argument("--csv", help="also write the rows to this CSV file")
     v.set_defaults(func=cmd_validate)

@@ -19,7 +19,7 @@ import trimesh
 from numpy.typing import NDArray
 
 from .cameras import DEFAULT_RADIUS, Camera, camera_on_sphere
-from .defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION
+from .defaults import DEFAULT_DENSE_POINTS, DEFAULT_METHOD, DEFAULT_N_POINTS, DEFAULT_RESOLUTION, DEFAULT_SAMPLES_PER_VIEW
 from .errors import InvalidInputError
 from .resources import check_memory, estimate_job_memory
 from .sampling import check_seed, sample_surface
@@ -29,8 +29,6 @@ __all__ = ["OccludedCloud", "object_key", "derive_rng", "sample_rng", "draw_samp
 
 log = logging.getLogger(__name__)
 
-#: Default dense cloud size per object (points on the whole surface before HSR).
-DEFAULT_DENSE_POINTS = 100_000
 #: Stream tags keep the dense-sampling and the per-sample generators independent.
 _DENSE_STREAM, _DRAW_STREAM = 0, 1
 
@@ -182,8 +180,8 @@ def occlude_object(
     poses: Sequence[tuple[float, float]],
     *,
     key: int,
-    n_points: int = 2048,
-    samples_per_view: int = 10,
+    n_points: int = DEFAULT_N_POINTS,
+    samples_per_view: int = DEFAULT_SAMPLES_PER_VIEW,
     seed: int = 0,
     dense: DenseCloud | None = None,
     method: str = DEFAULT_METHOD,

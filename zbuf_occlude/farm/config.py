@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..cameras import DEFAULT_RADIUS, view_schedule
-from ..defaults import DEFAULT_METHOD
+from ..defaults import DEFAULT_METHOD, DEFAULT_N_POINTS, DEFAULT_SAMPLES_PER_VIEW
 from ..errors import BackendUnavailable, InvalidInputError, OutputError
 from ..layout import GENERATE_STORAGES, STORAGE_MODES, record_name, sample_file_name, shard_name
 from ..sampling import check_seed
@@ -38,8 +38,6 @@ DEFAULT_FARM_DENSE_POINTS = 32_768
 #: points on a unit box), so the candidate window is not the bottleneck of accuracy.
 DEFAULT_FARM_RESOLUTION = 512
 DEFAULT_VIEWS = "paper100"
-DEFAULT_SAMPLES_PER_VIEW = 10
-DEFAULT_N_POINTS = 2048
 #: The paper's data set, Sryamkin et al. 2023, Table 2: 28.8 samples per MB.
 PAPER_SAMPLES_PER_MB = 28.8
 #: Bytes in one MB of "samples per MB" (decimal, 10^6).

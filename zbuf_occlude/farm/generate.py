@@ -22,11 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..defaults import DEFAULT_DENSE_POINTS, DEFAULT_N_POINTS, DEFAULT_RESOLUTION, DEFAULT_SAMPLES_PER_VIEW, DEFAULT_VIEWS
 from ..discovery import SkippedInput, class_and_split, scan_meshes
 from ..errors import InvalidInputError
 from ..io import read_h5, write_h5
 from ..layout import GENERATE_STORAGES, MERGED_H5_FILE
-from ..occlude import DEFAULT_DENSE_POINTS, OccludedCloud
+from ..occlude import OccludedCloud
 from .config import FarmParams, record_path
 from .inputs import FarmObject
 from .journal import FarmSummary, read_json
@@ -39,8 +40,9 @@ log = logging.getLogger(__name__)
 #: ``generate``'s defaults, smaller poses and larger images than the farm's (one machine, a few meshes):
 #: the 5×5 grid of poses, 2048-point samples, 10 per pose, 100,000 dense points, a 1024² z-buffer.
 GENERATE_DEFAULTS = FarmParams(
-    views="grid25", samples_per_view=10, n_points=2048, dense_points=DEFAULT_DENSE_POINTS, resolution=1024, storage="npz"
-)
+    views=DEFAULT_VIEWS, samples_per_view=DEFAULT_SAMPLES_PER_VIEW, n_points=DEFAULT_N_POINTS,
+    dense_points=DEFAULT_DENSE_POINTS, resolution=DEFAULT_RESOLUTION, storage="npz",
+)  # fmt: skip
 
 
 def scan_paths(paths: Sequence[str | os.PathLike]) -> tuple[list[FarmObject], list[SkippedInput]]:
