@@ -798,3 +798,17 @@ def printable(path: str) -> str:
     from zbuf_occlude.discovery import printable_path
 
     return printable_path(path)
+
+
+@pytest.mark.parametrize("entry", ["generate", "farm"])
+def test_two_files_with_one_name_are_refused_naming_both(tmp_path: Path, entry: str) -> None:
+    # generate and the farm plan with one function (farm.inputs.number_objects)
+    from zbuf_occlude.farm.generate import scan_paths
+    from zbuf_occlude.farm.inputs import scan_objects
+
+    _tree(tmp_path, ["chair/train/chair_0001.off", "chair/train/chair_0002.off"])
+    (tmp_path / "chair/train/chair_0001.off").rename(tmp_path / "chair/train/chair_0001.obj")
+    _tree(tmp_path, ["chair/train/chair_0001.off"])
+    with pytest.raises(InvalidInputError) as info:
+        scan_paths([tmp_path]) if entry == "generate" else scan_objects(tmp_path)
+    assert_names(info.value, "chair_0001.obj and ", "chair_0001.off are both 'chair/train/chair_0001'", "unique")

@@ -29,8 +29,8 @@ from ..io import read_h5, write_h5
 from ..layout import GENERATE_STORAGES, MERGED_H5_FILE
 from ..occlude import OccludedCloud
 from .config import FarmParams, record_path
-from .inputs import FarmObject
-from .journal import FarmSummary, read_json
+from .inputs import FarmObject, number_objects
+from .journal import FarmSummary, read_json, shape_names_of
 from .run import run_farm
 
 __all__ = ["generate", "scan_paths", "objects_from_paths", "MERGED_H5_FILE", "GENERATE_DEFAULTS"]
@@ -51,7 +51,8 @@ def scan_paths(paths: Sequence[str | os.PathLike]) -> tuple[list[FarmObject], li
 
     Each object's name is its path relative to the folder given (a file given alone: its
     stem), without the suffix; class and split come from the path
-    (:func:`~zbuf_occlude.mesh.class_and_split`); labels number the sorted class names.
+    (:func:`~zbuf_occlude.mesh.class_and_split`); labels number the class names
+    (:func:`~zbuf_occlude.farm.inputs.number_objects`, as the farm does).
 
     Returns
     -------
@@ -68,19 +69,7 @@ def scan_paths(paths: Sequence[str | os.PathLike]) -> tuple[list[FarmObject], li
         outputs, so one would overwrite the other.
     """
     found, skipped = scan_meshes(paths)
-    by_name: dict[str, list[Path]] = {}
-    for path, name in found:
-        by_name.setdefault(name, []).append(path)
-    clashes = {n: p for n, p in by_name.items() if len(p) > 1}
-    if clashes:
-        text = "; ".join(f"{' and '.join(map(str, p))} are both {n!r}" for n, p in sorted(clashes.items())[:5])
-        raise InvalidInputError(
-            f"mesh names must be unique (the name seeds the samples and names the output files): {text}; "
-            "rename or move one of each"
-        )
-    meta = [(path, name, *class_and_split(path)) for path, name in found]
-    labels = {c: i for i, c in enumerate(sorted({m[2] for m in meta}))}
-    objects = [FarmObject(i, name, str(path), cls, split, labels[cls]) for i, (path, name, cls, split) in enumerate(meta)]
+    objects = number_objects([(name, str(path), *class_and_split(path)) for path, name in found])
     return objects, skipped
 
 
@@ -115,9 +104,8 @@ def _merge_h5(out: Path, objects: Sequence[FarmObject]) -> Path | None:
             )  # fmt: skip
             for i in range(len(d["data"]))
         )
-    shape_names = sorted({o.class_name for o in objects})  # label i is the i-th (objects_from_paths)
     return write_h5(
-        out / MERGED_H5_FILE, clouds, shape_names=shape_names, n_points=n_points,
+        out / MERGED_H5_FILE, clouds, shape_names=shape_names_of(objects), n_points=n_points,
         columns={k: np.concatenate(v) for k, v in columns.items()},
     )  # fmt: skip
 
