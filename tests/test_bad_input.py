@@ -710,19 +710,6 @@ def _cli_error(capsys) -> str:
 
 
 @pytest.fixture
-def no_mesh_loaded(monkeypatch):
-    """Fails the test if any mesh is loaded: the checks must come first."""
-    import zbuf_occlude.cli as cli
-    import zbuf_occlude.farm.worker as worker
-
-    def refuse(*args, **kwargs):
-        raise AssertionError("a mesh was loaded before the options were checked")
-
-    monkeypatch.setattr(worker, "load_mesh", refuse)
-    monkeypatch.setattr(cli, "load_mesh", refuse)
-
-
-@pytest.fixture
 def cli_tree(tmp_path: Path) -> Path:
     """Two shipped chairs (real meshes) in a ModelNet tree."""
     import shutil

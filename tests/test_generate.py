@@ -36,17 +36,6 @@ def tree(tmp_path, sample_meshes_dir) -> Path:
     return root
 
 
-@pytest.fixture
-def no_mesh_loaded(monkeypatch):
-    """Fails the test if any mesh is loaded (the checks must come first)."""
-    import zbuf_occlude.farm.worker as worker
-
-    def refuse(*args, **kwargs):
-        raise AssertionError("a mesh was loaded before the options were checked")
-
-    monkeypatch.setattr(worker, "load_mesh", refuse)
-
-
 def _error(capsys) -> str:
     err = capsys.readouterr().err.strip()
     assert err.startswith("zbuf-occlude: error:") and "\n" not in err and "Traceback" not in err
