@@ -253,7 +253,6 @@ def run_farm(
             raise InvalidInputError("a ready plan must number its objects 0, 1, 2, ... in order")
     mine = select_shard(objects, task, n_tasks)
     out = Path(out)
-    prepare_out(out)
     with sigterm_as_interrupt(), farm_lock(out, shard):
         return _run_locked(
             out, objects, mine, params, source_text, shard=shard, workers=workers, scheduler=scheduler,
