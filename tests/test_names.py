@@ -39,5 +39,5 @@ def test_profile_module_renamed() -> None:
 
 
 def test_one_version_and_one_renderer_cache() -> None:
-    assert zo.__version__ == _version.__version__ == worker._version()
+    assert zo.__version__ == _version.__version__ == worker.package_version()
     assert zbuffer.renderer_for is zo.render.renderer_for
