@@ -105,3 +105,16 @@ def sample_mesh_files(sample_meshes_dir: Path) -> list[Path]:
     files = _sample_files()
     assert files, f"no mesh files in {sample_meshes_dir}"
     return files
+
+
+@pytest.fixture
+def no_mesh_loaded(monkeypatch):
+    """Fails the test if any mesh is loaded (by a farm worker or by ``validate``): the checks must come first."""
+    import zbuf_occlude.cli as cli
+    import zbuf_occlude.farm.worker as worker
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("a mesh was loaded before the options were checked")
+
+    monkeypatch.setattr(worker, "load_mesh", refuse)
+    monkeypatch.setattr(cli, "load_mesh", refuse)

@@ -686,3 +686,116 @@ def test_occlude_object_refuses_a_job_that_cannot_fit_before_allocating(monkeypa
     assert peak < 2**20
     with pytest.raises(InsufficientMemoryError, match=r"--resolution"):
         next(occlude_object(mesh, [(30.0, 45.0)], key=1, n_points=16, samples_per_view=1, resolution=(40_000, 40_000)))
+
+
+# -- the command line, end to end: checks before any mesh, skipped inputs (defects 4, 6, 7, 11, 12) --
+#: One pose, one small sample: a run over the test trees takes seconds.
+CLI_ARGS = ["--views", "0:0", "--points", "32", "--resolution", "64"]
+#: The subcommands, each with what it needs besides PATH and the options above.
+_RUN = ["--out", "{out}", "--samples-per-view", "1", "--dense-points", "500"]
+CLI_COMMANDS = {"generate": _RUN, "farm": [*_RUN, "--no-progress"], "validate": []}
+
+
+def _cli(command: str, path: Path, out: Path, *extra: str) -> int:
+    from zbuf_occlude.cli import main
+
+    tail = [a.replace("{out}", str(out)) for a in CLI_COMMANDS[command]]
+    return main([command, str(path), *tail, *CLI_ARGS, *extra])
+
+
+def _cli_error(capsys) -> str:
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("zbuf-occlude: error:") and "\n" not in err and "Traceback" not in err, err
+    return err
+
+
+@pytest.fixture
+def cli_tree(tmp_path: Path) -> Path:
+    """Two shipped chairs (real meshes) in a ModelNet tree."""
+    import shutil
+
+    root = tmp_path / "in"
+    for rel in ("chair/train/chair_0001.off", "chair/test/chair_0002.off"):
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(CHAIR, root / rel)
+    return root
+
+
+@pytest.mark.parametrize("command", sorted(CLI_COMMANDS))
+def test_cli_a_billion_points_exits_2_naming_points_before_any_mesh(
+    cli_tree: Path, tmp_path: Path, capsys, monkeypatch, no_mesh_loaded, command: str
+) -> None:
+    from zbuf_occlude import resources
+
+    monkeypatch.setattr(resources, "available_memory", lambda: (8 * 2**30, "test budget"))
+    assert _cli(command, cli_tree, tmp_path / "out", "--points", "1000000000") == 2
+    err = _cli_error(capsys)
+    assert re.search(r"error: --points needs about [\d.]+ GiB of memory \(--points 1,000,000,000", err), err
+    assert_names(err, "8 GiB available (test budget)", "lower --points")
+    assert not (tmp_path / "out" / "records").exists()
+
+
+@pytest.mark.parametrize("command", sorted(CLI_COMMANDS))
+def test_cli_resolution_beyond_the_gl_maximum_exits_2_naming_the_maximum(
+    cli_tree: Path, tmp_path: Path, capsys, no_mesh_loaded, gl_context, command: str
+) -> None:
+    from zbuf_occlude.render.context import max_image_size
+
+    assert _cli(command, cli_tree, tmp_path / "out", "--resolution", "100000") == 2
+    err = _cli_error(capsys)
+    assert_names(err, "--resolution 100000", f"maximum image size of {max_image_size(gl_context)} pixels")
+
+
+@pytest.mark.parametrize("command", sorted(CLI_COMMANDS))
+def test_cli_negative_seed_exits_2_naming_the_option(cli_tree: Path, tmp_path: Path, capsys, no_mesh_loaded, command: str) -> None:
+    assert _cli(command, cli_tree, tmp_path / "out", "--seed", "-1") == 2
+    assert "--seed must be a non-negative integer, got -1" in _cli_error(capsys)
+
+
+@pytest.mark.parametrize("command", ["generate", "farm"])
+def test_cli_skipped_inputs_exit_1_are_recorded_and_the_rest_is_done(
+    cli_tree: Path, tmp_path: Path, capsys, unreadable, command: str
+) -> None:
+    import json
+    import os
+    import shutil
+
+    from zbuf_occlude.layout import CARD_FILE
+
+    latin1 = os.fsdecode(str(cli_tree).encode() + b"/chair/train/caf\xe9_0003.off")
+    shutil.copy(CHAIR, latin1)
+    (cli_tree / "table" / "train").mkdir(parents=True)
+    shutil.copy(CHAIR, cli_tree / "table" / "train" / "table_0001.off")
+    unreadable(cli_tree / "table")
+    out = tmp_path / "out"
+    assert _cli(command, cli_tree, out) == 1
+    captured = capsys.readouterr()
+    assert "Traceback" not in captured.err
+    card = json.loads((out / CARD_FILE).read_text())
+    skipped = {s["path"]: s["reason"] for s in card["skipped_inputs"]}
+    assert sorted(skipped) == sorted([str(cli_tree / "table"), printable(latin1)])
+    assert "Permission denied" in skipped[str(cli_tree / "table")] and "not valid UTF-8" in skipped[printable(latin1)]
+    records = [json.loads(p.read_text()) for p in sorted((out / "records").glob("*.json"))]
+    assert [r["status"] for r in records] == ["ok", "ok"]  # both chairs done
+    report = captured.out + captured.err
+    assert f"SKIPPED {cli_tree / 'table'}" in report or f"SKIPPED   {cli_tree / 'table'}" in report
+
+
+def printable(path: str) -> str:
+    from zbuf_occlude.discovery import printable_path
+
+    return printable_path(path)
+
+
+@pytest.mark.parametrize("entry", ["generate", "farm"])
+def test_two_files_with_one_name_are_refused_naming_both(tmp_path: Path, entry: str) -> None:
+    # generate and the farm plan with one function (farm.inputs.number_objects)
+    from zbuf_occlude.farm.generate import scan_paths
+    from zbuf_occlude.farm.inputs import scan_objects
+
+    _tree(tmp_path, ["chair/train/chair_0001.off", "chair/train/chair_0002.off"])
+    (tmp_path / "chair/train/chair_0001.off").rename(tmp_path / "chair/train/chair_0001.obj")
+    _tree(tmp_path, ["chair/train/chair_0001.off"])
+    with pytest.raises(InvalidInputError) as info:
+        scan_paths([tmp_path]) if entry == "generate" else scan_objects(tmp_path)
+    assert_names(info.value, "chair_0001.obj and ", "chair_0001.off are both 'chair/train/chair_0001'", "unique")

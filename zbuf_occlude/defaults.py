@@ -8,6 +8,10 @@ from __future__ import annotations
 __all__ = [
     "DEFAULT_METHOD",
     "DEFAULT_RESOLUTION",
+    "DEFAULT_VIEWS",
+    "DEFAULT_N_POINTS",
+    "DEFAULT_SAMPLES_PER_VIEW",
+    "DEFAULT_DENSE_POINTS",
     "DEFAULT_SELF_HIT_TOLERANCE",
     "DEFAULT_GPU_TOLERANCE",
     "DEFAULT_DEPTH_TOLERANCE",
@@ -24,6 +28,23 @@ DEFAULT_METHOD = "auto"
 #: ``validate``, ``compare`` and ``elevation-profile`` (the farm has its own, smaller
 #: default for throughput: ``zbuf_occlude.farm.config.DEFAULT_FARM_RESOLUTION``).
 DEFAULT_RESOLUTION = 1024
+
+#: Poses of ``generate``, ``validate`` and ``compare``: the 5×5 grid of
+#: :func:`zbuf_occlude.cameras.view_schedule` (the farm renders the paper's 100 poses,
+#: ``zbuf_occlude.farm.config.DEFAULT_VIEWS``).
+DEFAULT_VIEWS = "grid25"
+
+#: Points per occluded sample, the paper's (and PointNet's) 2048 (Sryamkin et al. 2023, §4.3);
+#: ``generate``, the farm and :func:`zbuf_occlude.occlude_object`.
+DEFAULT_N_POINTS = 2048
+
+#: Samples drawn per pose from its visible points (paper §4.3), everywhere.
+DEFAULT_SAMPLES_PER_VIEW = 10
+
+#: Dense cloud per object, points on the whole surface before HSR: ``generate``,
+#: :func:`zbuf_occlude.occlude_object` and the points ``validate`` scores per mesh (the farm
+#: uses fewer for throughput: ``zbuf_occlude.farm.config.DEFAULT_FARM_DENSE_POINTS``).
+DEFAULT_DENSE_POINTS = 100_000
 
 #: Distance from a point, object units, within which a face meeting the point→camera
 #: segment does not count as an occluder (the exact, float64 methods).  It absorbs the

@@ -17,7 +17,7 @@ import re
 import socket
 import tempfile
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import OutputError
+from .occlude import OccludedCloud  # re-exported: its home is the producer, occlude.py
 
 __all__ = [
     "OccludedCloud",
@@ -46,47 +47,6 @@ __all__ = [
 
 #: File formats :func:`write_clouds` knows.
 FORMATS = ("npz", "ply", "h5")
-
-
-@dataclass
-class OccludedCloud:
-    """One occluded sample: a fixed-size point set seen from one pose.
-
-    Attributes
-    ----------
-    points : (n, 3) float32
-        World (object) frame, normalised mesh units.
-    face_index : (n,) int64
-        Face of the source mesh each point lies on.
-    elevation_deg, azimuth_deg, radius : float
-        The camera pose (degrees, degrees, object units).
-    label : int
-        Class index (−1 if unknown).
-    class_name, source : str
-        Class name and source mesh path.
-    sample_index : int
-        Which of the pose's random draws this is.
-    n_visible : int
-        Visible points in the dense cloud for this pose.  If ``n_visible < n``, the
-        sample holds every visible point once plus repeats drawn at random (``padded``).
-    """
-
-    points: NDArray[np.float32]
-    face_index: NDArray[np.int64]
-    elevation_deg: float
-    azimuth_deg: float
-    radius: float
-    label: int = -1
-    class_name: str = ""
-    source: str = ""
-    sample_index: int = 0
-    n_visible: int = 0
-    extra: dict = field(default_factory=dict)
-
-    @property
-    def padded(self) -> bool:
-        """True if fewer points were visible than the sample holds (repeats added)."""
-        return self.n_visible < len(self.points)
 
 
 @functools.lru_cache(maxsize=1)

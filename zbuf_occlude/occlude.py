@@ -12,28 +12,66 @@ from __future__ import annotations
 import hashlib
 import logging
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
 from .cameras import DEFAULT_RADIUS, Camera, camera_on_sphere
-from .defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION
+from .defaults import DEFAULT_DENSE_POINTS, DEFAULT_METHOD, DEFAULT_N_POINTS, DEFAULT_RESOLUTION, DEFAULT_SAMPLES_PER_VIEW
 from .errors import InvalidInputError
-from .io import OccludedCloud
 from .resources import check_memory, estimate_job_memory
 from .sampling import check_seed, sample_surface
 from .visibility.registry import method_info, visible_mask
 
-__all__ = ["object_key", "derive_rng", "sample_rng", "draw_sample", "pose_samples", "DenseCloud", "dense_cloud", "occlude_object"]
+__all__ = ["OccludedCloud", "object_key", "derive_rng", "sample_rng", "draw_sample", "pose_samples", "DenseCloud", "dense_cloud", "occlude_object"]
 
 log = logging.getLogger(__name__)
 
-#: Default dense cloud size per object (points on the whole surface before HSR).
-DEFAULT_DENSE_POINTS = 100_000
 #: Stream tags keep the dense-sampling and the per-sample generators independent.
 _DENSE_STREAM, _DRAW_STREAM = 0, 1
+
+
+@dataclass
+class OccludedCloud:
+    """One occluded sample: a fixed-size point set seen from one pose.
+
+    Attributes
+    ----------
+    points : (n, 3) float32
+        World (object) frame, normalised mesh units.
+    face_index : (n,) int64
+        Face of the source mesh each point lies on.
+    elevation_deg, azimuth_deg, radius : float
+        The camera pose (degrees, degrees, object units).
+    label : int
+        Class index (−1 if unknown).
+    class_name, source : str
+        Class name and source mesh path.
+    sample_index : int
+        Which of the pose's random draws this is.
+    n_visible : int
+        Visible points in the dense cloud for this pose.  If ``n_visible < n``, the
+        sample holds every visible point once plus repeats drawn at random (``padded``).
+    """
+
+    points: NDArray[np.float32]
+    face_index: NDArray[np.int64]
+    elevation_deg: float
+    azimuth_deg: float
+    radius: float
+    label: int = -1
+    class_name: str = ""
+    source: str = ""
+    sample_index: int = 0
+    n_visible: int = 0
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def padded(self) -> bool:
+        """True if fewer points were visible than the sample holds (repeats added)."""
+        return self.n_visible < len(self.points)
 
 
 def object_key(name: str) -> int:
@@ -142,8 +180,8 @@ def occlude_object(
     poses: Sequence[tuple[float, float]],
     *,
     key: int,
-    n_points: int = 2048,
-    samples_per_view: int = 10,
+    n_points: int = DEFAULT_N_POINTS,
+    samples_per_view: int = DEFAULT_SAMPLES_PER_VIEW,
     seed: int = 0,
     dense: DenseCloud | None = None,
     method: str = DEFAULT_METHOD,

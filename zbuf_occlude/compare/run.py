@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
-from ..defaults import DEFAULT_RESOLUTION
+from ..defaults import DEFAULT_RESOLUTION, DEFAULT_VIEWS
 from ..errors import InvalidInputError, ZbufOccludeError
 from ..mesh import find_meshes, load_mesh
 from ..metrics import agreement
@@ -58,7 +58,6 @@ DEFAULT_METHODS = (
 #: Point counts of Table 1B of Sryamkin et al. 2023.
 DEFAULT_POINTS = (1000, 10000, 50000, 100000)
 #: Pose schedule (see :func:`zbuf_occlude.cameras.view_schedule`).
-DEFAULT_VIEWS = "grid25"
 #: The method every other is scored against: exact (Embree candidates, float64 decisions).
 DEFAULT_REFERENCE = "oracle"
 #: Z-buffer resolutions of the agreement-vs-resolution sweep, pixels.

@@ -14,10 +14,11 @@ from pathlib import Path
 
 from ..cameras import camera_on_sphere
 from ..errors import BackendUnavailable, CameraError, InvalidInputError, OutputError
+from ..resources import check_memory, estimate_job_memory
 from ..visibility.registry import get_method
 from .config import FarmParams
 
-__all__ = ["check_before_work", "prepare_out", "check_gl"]
+__all__ = ["check_before_work", "check_memory_up_front", "prepare_out", "check_gl"]
 
 log = logging.getLogger(__name__)
 
@@ -46,9 +47,10 @@ def check_gl(resolution: int) -> None:
     BackendUnavailable
         No context (the message names ``ZBUF_OCCLUDE_GL`` when it is set).
     InvalidInputError
-        ``resolution`` exceeds the GL's maximum renderbuffer size.
+        ``resolution`` exceeds the GL's maximum image size
+        (:func:`~zbuf_occlude.render.context.check_image_size`).
     """
-    from ..render.context import shared_context
+    from ..render.context import check_image_size, shared_context
 
     try:
         ctx = shared_context()
@@ -56,21 +58,42 @@ def check_gl(resolution: int) -> None:
         env = os.environ.get("ZBUF_OCCLUDE_GL")
         where = f" (ZBUF_OCCLUDE_GL={env!r}; unset it or use egl, osmesa or an order such as osmesa,egl)" if env else ""
         raise BackendUnavailable(f"{exc}{where}") from exc
-    # TODO(badinput): replace the three lines below by
-    #   render.context.check_image_size(resolution, ctx=ctx, name="--resolution")
-    # (it takes the smallest of the texture, renderbuffer and viewport limits), so the limit is queried in one place
-    limit = int(ctx.info.get("GL_MAX_RENDERBUFFER_SIZE", 0) or 0)
-    if limit and resolution > limit:
-        raise InvalidInputError(f"--resolution {resolution} is larger than this OpenGL can render ({limit} pixels, GL_MAX_RENDERBUFFER_SIZE)")
+    check_image_size(resolution, ctx=ctx, name="--resolution")
 
 
-def check_before_work(params: FarmParams, out: str | os.PathLike, *, gl: bool = True) -> None:
+def check_memory_up_front(params: FarmParams, *, workers: int = 1) -> None:
+    """Refuse a run whose objects cannot fit in memory, naming the option that costs most.
+
+    Each of ``workers`` processes holds one object at a time: its dense cloud
+    (``--dense-points``; unknown with ``--density``, then not counted), its image
+    (``--resolution``) and its samples (``--points``), all of an object's samples for the
+    writers that write one file per object (``dense``, ``h5``), one pose's for ``npz`` and
+    ``ply``, none for ``compact`` (it stores visibility bits).
+
+    Raises
+    ------
+    InsufficientMemoryError
+        The estimate exceeds the memory available (:func:`~zbuf_occlude.resources.check_memory`).
+    """
+    per_object = {"dense": len(params.poses) * params.samples_per_view, "h5": len(params.poses) * params.samples_per_view}
+    held = per_object.get(params.storage, params.samples_per_view)
+    estimate = estimate_job_memory(
+        points=0 if params.storage == "compact" else params.n_points, samples_per_view=params.samples_per_view,
+        samples_held=held, dense_points=params.dense_points or 0, resolution=params.resolution, workers=workers,
+    )  # fmt: skip
+    check_memory(estimate)
+
+
+def check_before_work(params: FarmParams, out: str | os.PathLike, *, gl: bool = True, workers: int | None = 1) -> None:
     """Every check of a run that needs no mesh, in the order a user fixes them.
 
-    Options (``FarmParams`` checked its own ranges when it was made): the method exists,
-    the camera distance ``--radius`` is outside the normalised object's bounding sphere;
-    then the environment: ``out`` writable, an OpenGL context (``gl``: the run renders in
-    this process) whose maximum image size holds ``--resolution``.
+    Options (``FarmParams`` checked its own ranges and ``--seed`` when it was made): the
+    method exists, the camera distance ``--radius`` is outside the normalised object's
+    bounding sphere; then the environment: ``out`` writable, an OpenGL context (``gl``:
+    the run renders in this process) whose maximum image size holds ``--resolution``
+    (before the memory, so that a huge ``--resolution`` is told the maximum), and the
+    memory ``workers`` processes need (:func:`check_memory_up_front`; None: they run
+    elsewhere, not checked).
 
     Raises
     ------
@@ -80,16 +103,16 @@ def check_before_work(params: FarmParams, out: str | os.PathLike, *, gl: bool = 
         ``out`` cannot be created or written.
     BackendUnavailable
         No OpenGL context here.
+    InsufficientMemoryError
+        The run needs more memory than is available (an :class:`InvalidInputError`).
     """
     get_method(params.method)
     try:
         camera_on_sphere(0.0, 0.0, params.radius, resolution=params.resolution)
     except CameraError as exc:
         raise InvalidInputError(f"--radius {params.radius}: {exc}") from None
-    # TODO(badinput): sampling.check_seed(params.seed, name="--seed") (FarmParams checks >= 0 meanwhile) and
-    #   resources.check_memory(resources.estimate_job_memory(points=params.n_points,
-    #       samples_per_view=params.samples_per_view, dense_points=params.dense_points or 0,
-    #       resolution=params.resolution, workers=workers)) go here, before any mesh is loaded
     prepare_out(Path(out))
     if gl:
         check_gl(params.resolution)
+    if workers is not None:
+        check_memory_up_front(params, workers=workers)

@@ -16,9 +16,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..cameras import DEFAULT_RADIUS, view_schedule
-from ..defaults import DEFAULT_METHOD
+from ..defaults import DEFAULT_METHOD, DEFAULT_N_POINTS, DEFAULT_SAMPLES_PER_VIEW
 from ..errors import BackendUnavailable, InvalidInputError, OutputError
 from ..layout import GENERATE_STORAGES, STORAGE_MODES, record_name, sample_file_name, shard_name
+from ..sampling import check_seed
 
 if TYPE_CHECKING:  # annotations only: inputs imports nothing from here
     from .inputs import FarmObject
@@ -37,8 +38,6 @@ DEFAULT_FARM_DENSE_POINTS = 32_768
 #: points on a unit box), so the candidate window is not the bottleneck of accuracy.
 DEFAULT_FARM_RESOLUTION = 512
 DEFAULT_VIEWS = "paper100"
-DEFAULT_SAMPLES_PER_VIEW = 10
-DEFAULT_N_POINTS = 2048
 #: The paper's data set, Sryamkin et al. 2023, Table 2: 28.8 samples per MB.
 PAPER_SAMPLES_PER_MB = 28.8
 #: Bytes in one MB of "samples per MB" (decimal, 10^6).
@@ -100,7 +99,11 @@ class FarmParams:
         # messages name the command-line options (OPTION_NAMES), not the fields
         if self.storage not in (*STORAGE_MODES, *GENERATE_STORAGES):
             raise InvalidInputError(f"--storage must be one of {STORAGE_MODES}, got {self.storage!r}")
-        for field, lowest in (("samples_per_view", 1), ("n_points", 1), ("resolution", 1), ("seed", 0)):
+        seed = check_seed(self.seed, name=OPTION_NAMES["seed"])
+        if not isinstance(seed, int):  # None or a Generator: a run must be reproducible from its card
+            raise InvalidInputError(f"{OPTION_NAMES['seed']} must be a non-negative integer, got {self.seed!r}")
+        object.__setattr__(self, "seed", seed)
+        for field, lowest in (("samples_per_view", 1), ("n_points", 1), ("resolution", 1)):
             value = getattr(self, field)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lowest:
                 raise InvalidInputError(f"{OPTION_NAMES[field]} must be an integer >= {lowest}, got {value!r}")

@@ -22,33 +22,44 @@ from pathlib import Path
 
 import numpy as np
 
+from ..defaults import DEFAULT_DENSE_POINTS, DEFAULT_N_POINTS, DEFAULT_RESOLUTION, DEFAULT_SAMPLES_PER_VIEW, DEFAULT_VIEWS
+from ..discovery import SkippedInput, class_and_split, scan_meshes
 from ..errors import InvalidInputError
-from ..io import OccludedCloud, read_h5, write_h5
-from ..mesh import class_and_split, find_meshes
-from ..occlude import DEFAULT_DENSE_POINTS
+from ..io import read_h5, write_h5
 from ..layout import GENERATE_STORAGES, MERGED_H5_FILE
+from ..occlude import OccludedCloud
 from .config import FarmParams, record_path
-from .inputs import FarmObject
-from .journal import FarmSummary, read_json
+from .inputs import FarmObject, number_objects
+from .journal import FarmSummary, read_json, shape_names_of
 from .run import run_farm
 
-__all__ = ["generate", "objects_from_paths", "MERGED_H5_FILE", "GENERATE_DEFAULTS"]
+__all__ = ["generate", "scan_paths", "objects_from_paths", "MERGED_H5_FILE", "GENERATE_DEFAULTS"]
 
 log = logging.getLogger(__name__)
 
 #: ``generate``'s defaults, smaller poses and larger images than the farm's (one machine, a few meshes):
 #: the 5×5 grid of poses, 2048-point samples, 10 per pose, 100,000 dense points, a 1024² z-buffer.
 GENERATE_DEFAULTS = FarmParams(
-    views="grid25", samples_per_view=10, n_points=2048, dense_points=DEFAULT_DENSE_POINTS, resolution=1024, storage="npz"
-)
+    views=DEFAULT_VIEWS, samples_per_view=DEFAULT_SAMPLES_PER_VIEW, n_points=DEFAULT_N_POINTS,
+    dense_points=DEFAULT_DENSE_POINTS, resolution=DEFAULT_RESOLUTION, storage="npz",
+)  # fmt: skip
 
 
-def objects_from_paths(paths: Sequence[str | os.PathLike]) -> list[FarmObject]:
-    """The plan of ``generate``: mesh files and folders (searched recursively), numbered.
+def scan_paths(paths: Sequence[str | os.PathLike]) -> tuple[list[FarmObject], list[SkippedInput]]:
+    """The plan of ``generate``: mesh files and folders (searched recursively), numbered,
+    and the inputs that had to be skipped.
 
     Each object's name is its path relative to the folder given (a file given alone: its
     stem), without the suffix; class and split come from the path
-    (:func:`~zbuf_occlude.mesh.class_and_split`); labels number the sorted class names.
+    (:func:`~zbuf_occlude.mesh.class_and_split`); labels number the class names
+    (:func:`~zbuf_occlude.farm.inputs.number_objects`, as the farm does).
+
+    Returns
+    -------
+    objects : list of FarmObject
+    skipped : list of SkippedInput
+        Unreadable folders and files whose names are not UTF-8
+        (:func:`~zbuf_occlude.discovery.scan_meshes`); the run records them and exits 1.
 
     Raises
     ------
@@ -57,20 +68,14 @@ def objects_from_paths(paths: Sequence[str | os.PathLike]) -> list[FarmObject]:
         (``chair_0001.off`` and ``chair_0001.obj``): the name seeds the samples and names the
         outputs, so one would overwrite the other.
     """
-    found = find_meshes(paths)
-    by_name: dict[str, list[Path]] = {}
-    for path, name in found:
-        by_name.setdefault(name, []).append(path)
-    clashes = {n: p for n, p in by_name.items() if len(p) > 1}
-    if clashes:
-        text = "; ".join(f"{' and '.join(map(str, p))} are both {n!r}" for n, p in sorted(clashes.items())[:5])
-        raise InvalidInputError(
-            f"mesh names must be unique (the name seeds the samples and names the output files): {text}; "
-            "rename or move one of each"
-        )
-    meta = [(path, name, *class_and_split(path)) for path, name in found]
-    labels = {c: i for i, c in enumerate(sorted({m[2] for m in meta}))}
-    return [FarmObject(i, name, str(path), cls, split, labels[cls]) for i, (path, name, cls, split) in enumerate(meta)]
+    found, skipped = scan_meshes(paths)
+    objects = number_objects([(name, str(path), *class_and_split(path)) for path, name in found])
+    return objects, skipped
+
+
+def objects_from_paths(paths: Sequence[str | os.PathLike]) -> list[FarmObject]:
+    """:func:`scan_paths` without the skipped inputs (each was logged as a warning)."""
+    return scan_paths(paths)[0]
 
 
 def _merge_h5(out: Path, objects: Sequence[FarmObject]) -> Path | None:
@@ -99,9 +104,8 @@ def _merge_h5(out: Path, objects: Sequence[FarmObject]) -> Path | None:
             )  # fmt: skip
             for i in range(len(d["data"]))
         )
-    shape_names = sorted({o.class_name for o in objects})  # label i is the i-th (objects_from_paths)
     return write_h5(
-        out / MERGED_H5_FILE, clouds, shape_names=shape_names, n_points=n_points,
+        out / MERGED_H5_FILE, clouds, shape_names=shape_names_of(objects), n_points=n_points,
         columns={k: np.concatenate(v) for k, v in columns.items()},
     )  # fmt: skip
 
@@ -120,7 +124,8 @@ def generate(
     Parameters
     ----------
     paths : sequence of str or PathLike
-        Mesh files and folders (:func:`objects_from_paths`).
+        Mesh files and folders (:func:`scan_paths`); unreadable folders and names that
+        are not UTF-8 are skipped, recorded in the card and ``summary.skipped`` (exit 1).
     out : str or PathLike
         Output folder.
     params : FarmParams
@@ -145,14 +150,12 @@ def generate(
     """
     if params.storage not in GENERATE_STORAGES:
         raise InvalidInputError(f"generate writes one of {GENERATE_STORAGES}, not {params.storage!r}")
-    objects = objects_from_paths(paths)
-    # TODO(badinput): take discovery.scan_meshes(paths).skipped here and pass it as skipped=
-    skipped: list[tuple[str, str]] = []
+    objects, skipped = scan_paths(paths)
     out = Path(out)
     summary = run_farm(
         objects, out, params=params, workers=1, overwrite=overwrite, progress=progress, command=command,
         source_text=", ".join(str(Path(p).resolve()) for p in paths),
         on_finished=(lambda folder: _merge_h5(folder, objects)) if params.storage == "h5" else None,
-        skipped=skipped,
+        skipped=[(s.path, s.reason) for s in skipped],
     )  # fmt: skip
     return summary, objects

@@ -206,12 +206,32 @@ def scan_objects(
         found = kept
     if not found:
         raise InvalidInputError(f"no meshes left under {source} after the class/split selection")
-    names = [f[0] for f in found]
-    if len(set(names)) != len(names):
-        dup = sorted({n for n in names if names.count(n) > 1})[:5]
-        raise InvalidInputError(f"mesh names must be unique (they seed the samples); repeated: {dup}")
-    shape_names = sorted({f[2] for f in found}, key=_natural_key)
-    labels = {c: i for i, c in enumerate(shape_names)}
+    return ObjectScan(number_objects(found), skipped)
+
+
+def number_objects(found: Sequence[tuple[str, str, str, str]]) -> list[FarmObject]:
+    """The plan: ``(name, source, class_name, split)`` rows numbered in the order given.
+
+    Labels number the class names in natural order (``chair_2`` before ``chair_10``), the
+    lines of ``shape_names.txt``.  Used by :func:`scan_objects` and ``generate``.
+
+    Raises
+    ------
+    InvalidInputError
+        Two rows have one name (``chair_0001.off`` and ``chair_0001.obj``): the name seeds
+        the samples and names the outputs, so one would overwrite the other.
+    """
+    by_name: dict[str, list[str]] = {}
+    for name, src, _, _ in found:
+        by_name.setdefault(name, []).append(src)
+    clashes = {n: p for n, p in by_name.items() if len(p) > 1}
+    if clashes:
+        text = "; ".join(f"{' and '.join(p)} are both {n!r}" for n, p in sorted(clashes.items())[:5])
+        raise InvalidInputError(
+            f"mesh names must be unique (the name seeds the samples and names the output files): {text}; "
+            "rename or move one of each"
+        )
+    labels = {c: i for i, c in enumerate(sorted({f[2] for f in found}, key=_natural_key))}
     objects = [FarmObject(i, name, src, cls, split, labels[cls]) for i, (name, src, cls, split) in enumerate(found)]
     keys: dict[int, str] = {}
     for o in objects:
@@ -221,7 +241,7 @@ def scan_objects(
                 keys[o.key], o.name, o.key,
             )  # fmt: skip
         keys[o.key] = o.name
-    return ObjectScan(objects, skipped)
+    return objects
 
 
 def parse_shard(text: str) -> tuple[int, int]:

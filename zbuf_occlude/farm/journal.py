@@ -87,7 +87,8 @@ def objects_of(plan: dict[str, Any]) -> list[FarmObject]:
     return [FarmObject(**o) for o in plan["objects"]]
 
 
-def _shape_names(objects: Sequence[FarmObject]) -> list[str]:
+def shape_names_of(objects: Sequence[FarmObject]) -> list[str]:
+    """Class names by label (line i of ``shape_names.txt`` is label i); a label with two names is refused."""
     names: dict[int, str] = {}
     for o in objects:
         if names.setdefault(o.label, o.class_name) != o.class_name:
@@ -120,7 +121,7 @@ def finalize(
     objects = objects_of(plan)
     params = FarmParams(**plan["params"])
     write_text(out / MANIFEST_FILE, manifest_lines(objects, params, records))
-    shape_names = _shape_names(objects)
+    shape_names = shape_names_of(objects)
     write_text(out / SHAPE_NAMES_FILE, "".join(f"{n}\n" for n in shape_names))
     splits = sorted({o.split for o in objects}, key=lambda s: (s not in SPLITS, s))
     for split in splits:

@@ -23,7 +23,7 @@ from ..layout import CARD_FILE, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAME
 from ..mesh import SPLITS
 from .checks import check_before_work, prepare_out
 from .config import MANIFEST_INTERVAL_S, OPTION_NAMES, FarmParams, record_path, shard_path
-from .inputs import FarmObject, discover_objects, select_shard
+from .inputs import FarmObject, scan_objects, select_shard
 from .journal import (
     FarmSummary,
     finalize,
@@ -184,14 +184,14 @@ def run_farm(
     Parameters
     ----------
     source : str, PathLike or sequence of FarmObject
-        Mesh tree, flat folder or list file (:func:`discover_objects`), or a ready plan.
+        Mesh tree, flat folder or list file (:func:`scan_objects`), or a ready plan.
     out : str or PathLike
         Data set folder (layout: :mod:`zbuf_occlude.dataset`).
     params : FarmParams, optional
         What to render; default :class:`FarmParams` ``()`` (paper100, 10 samples of 2048
         points per pose, 32768 dense points, 512² z-buffer, seed 0, dense storage).
     classes, per_class, splits
-        Selection, see :func:`discover_objects` (ignored for a ready plan).
+        Selection, see :func:`scan_objects` (ignored for a ready plan).
     workers : int
         Processes rendering in parallel on this machine (``spawn``ed, one GL context each).
     shard : (I, N)
@@ -214,8 +214,9 @@ def run_farm(
         Called with the data set folder, still under the lock, once an unsharded run has
         written its card (``generate --format h5`` joins its parts there).
     skipped : sequence of (path, reason)
-        Inputs the caller's discovery could not take (a ready plan); recorded in the card
-        and the summary, so the run ends with status 1.
+        Inputs the caller's discovery could not take (a ready plan), added to those
+        :func:`scan_objects` skips in a folder (unreadable folders, names that are not
+        UTF-8); recorded in the card and the summary, so the run ends with status 1.
 
     Returns
     -------
@@ -239,19 +240,19 @@ def run_farm(
     if dask_local is not None and dask_local < 1:
         raise InvalidInputError(f"--dask-local must be >= 1, got {dask_local}")
     task, n_tasks = shard
-    # before any mesh is found or loaded; the GL is checked here only when we render here
-    check_before_work(params, out, gl=not (scheduler or dask_local))
+    # before any mesh is found or loaded; the GL is checked here only when we render here, and
+    # the memory only for processes of this machine (not those of a --scheduler's cluster)
+    check_before_work(params, out, gl=not (scheduler or dask_local), workers=None if scheduler else dask_local or workers)
     if isinstance(source, (str, os.PathLike)):
         source_text = source_text or str(Path(source).resolve())
-        # TODO(badinput): objects, found_skipped = scan_objects(...) once discovery reports what it skipped
-        objects = discover_objects(source, classes=classes, per_class=per_class, splits=splits)
+        scan = scan_objects(source, classes=classes, per_class=per_class, splits=splits)
+        objects, skipped = scan.objects, [*skipped, *((s.path, s.reason) for s in scan.skipped)]
     else:
         objects, source_text = list(source), source_text or "<objects given by the caller>"
         if [o.index for o in objects] != list(range(len(objects))):
             raise InvalidInputError("a ready plan must number its objects 0, 1, 2, ... in order")
     mine = select_shard(objects, task, n_tasks)
     out = Path(out)
-    prepare_out(out)
     with sigterm_as_interrupt(), farm_lock(out, shard):
         return _run_locked(
             out, objects, mine, params, source_text, shard=shard, workers=workers, scheduler=scheduler,
