@@ -69,6 +69,24 @@ def test_points_lie_on_the_hdl32e_rings_seen_from_the_recorded_sensor(sensor_run
     assert len(rings_seen) >= 5  # not one ring repeated
 
 
+def test_return_physics_options_reach_the_scans(sensor_run, tmp_path):
+    out = _farm(tmp_path / "phys", "--sensor-footprint", "--sensor-reflectivity", "0.05:0.1", "--sensor-distance", "15:20")
+    card = json.loads((out / CARD_FILE).read_text())
+    assert card["params"]["sensor_footprint"] is True and card["params"]["sensor_reflectivity"] == [0.05, 0.1]
+    table = np.asarray(Lidar.preset("hdl32e").elevations_deg)
+    phys = OccludedDataset(out)
+    for i in range(len(phys)):  # footprint returns still lie along their beams' centre directions
+        points, _, meta = phys[i]
+        d = points.astype(np.float64) - _sensor_position(meta)
+        elevation = np.degrees(np.arctan2(d[:, 2], np.hypot(d[:, 0], d[:, 1])))
+        assert np.abs(elevation[:, None] - table[None]).min(axis=1).max() < 2e-3
+    # dark objects far away lose returns to the detection threshold: fewer than the same scans without it
+    plain = OccludedDataset(_farm(tmp_path / "plain", "--sensor-footprint", "--sensor-distance", "15:20"))
+    n_phys = sum(phys.metadata(i)["n_visible"] for i in range(len(phys)))
+    n_plain = sum(plain.metadata(i)["n_visible"] for i in range(len(plain)))
+    assert 0 < n_phys < n_plain
+
+
 def test_same_seed_same_bytes_and_worker_count_changes_nothing(sensor_run, tmp_path):
     again = _farm(tmp_path / "again")
     two = _farm(tmp_path / "two", "--workers", "2")
@@ -108,6 +126,10 @@ def test_zbuffer_farm_parameters_keep_their_digest():
         (["--sensor-distance", "5:10"], "--sensor-distance needs --sensor"),
         (["--sensor", "hdl32e", "--sensor-distance", "10:5"], "--sensor-distance"),
         (["--sensor", "hdl32e", "--sensor-size", "0:2"], "--sensor-size"),
+        (["--sensor-footprint"], "--sensor-footprint needs --sensor"),
+        (["--sensor", "hdl32e", "--sensor-reflectivity", "0.5:0.1"], "--sensor-reflectivity"),
+        (["--sensor", "kinect-v1", "--sensor-footprint"], "kinect-v1"),
+        (["--sensor", "hdl64e", "--sensor-footprint"], "beam_divergence_deg"),
     ],
 )
 def test_bad_sensor_options_are_clear_errors(tmp_path, bad, words, capsys):

@@ -64,8 +64,8 @@ def _farm_command(args: argparse.Namespace) -> int:
 
 def _sensor_params(args: argparse.Namespace) -> dict:
     if args.sensor is None:
-        for option in ("sensor_distance", "sensor_height", "sensor_size"):
-            if getattr(args, option) is not None:
+        for option in ("sensor_distance", "sensor_height", "sensor_size", "sensor_reflectivity", "sensor_footprint"):
+            if getattr(args, option) not in (None, False):
                 raise InvalidInputError(f"--{option.replace('_', '-')} needs --sensor")
         return {}
     from ..sensors.cli import parse_interval
@@ -75,6 +75,9 @@ def _sensor_params(args: argparse.Namespace) -> dict:
         text = getattr(args, option)
         if text is not None:
             out[f"{option}_m"] = parse_interval(text, f"--{option.replace('_', '-')}")
+    if args.sensor_reflectivity is not None:
+        out["sensor_reflectivity"] = parse_interval(args.sensor_reflectivity, "--sensor-reflectivity")
+    out["sensor_footprint"] = args.sensor_footprint
     return out
 
 
@@ -147,6 +150,15 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
     s.add_argument(
         "--sensor-size", metavar="LO:HI",
         help=f"the object's largest dimension, metres (default: {_interval_text(DEFAULT_SENSOR_SIZE_M)})",
+    )  # fmt: skip
+    s.add_argument(
+        "--sensor-reflectivity", metavar="LO:HI",
+        help="return physics: the object's Lambertian reflectivity, drawn per scan; returns must clear the sensor's "
+        "radiometric threshold (default: every hit returns)",
+    )  # fmt: skip
+    s.add_argument(
+        "--sensor-footprint", action="store_true",
+        help="return physics: 7 rays per firing inside the beam divergence cone, strongest echo",
     )  # fmt: skip
     ex = p.add_argument_group("execution")
     ex.add_argument("--workers", type=int, default=1, help="worker processes on this machine (default: 1)")

@@ -56,6 +56,7 @@ OPTION_NAMES = {
     "dense_points": "--dense-points", "density": "--density", "resolution": "--resolution", "seed": "--seed",
     "radius": "--radius", "storage": "--storage/--format", "method": "--method", "sensor": "--sensor",
     "sensor_distance_m": "--sensor-distance", "sensor_height_m": "--sensor-height", "sensor_size_m": "--sensor-size",
+    "sensor_reflectivity": "--sensor-reflectivity", "sensor_footprint": "--sensor-footprint",
 }  # fmt: skip
 
 #: ``farm --sensor``: per-scan placement drawn uniformly from these intervals (metres).
@@ -105,6 +106,11 @@ class FarmParams:
         and heading are uniform over 0–360° (:class:`zbuf_occlude.sensors.crops.CropDistributions`).
         Left out of :meth:`to_dict` and :meth:`digest` when ``sensor`` is ``None``, so data sets
         made without a sensor keep their digest.
+    sensor_reflectivity : (lo, hi) or None
+        Return physics: the object's Lambertian reflectivity, drawn per scan; the sensor's
+        radiometric detection threshold then applies (:func:`zbuf_occlude.sensors.scan`).
+    sensor_footprint : bool
+        Return physics: 7 rays per firing in the beam's divergence cone, strongest echo.
     """
 
     views: str = DEFAULT_VIEWS
@@ -121,6 +127,8 @@ class FarmParams:
     sensor_distance_m: tuple[float, float] = DEFAULT_SENSOR_DISTANCE_M
     sensor_height_m: tuple[float, float] = DEFAULT_SENSOR_HEIGHT_M
     sensor_size_m: tuple[float, float] = DEFAULT_SENSOR_SIZE_M
+    sensor_reflectivity: tuple[float, float] | None = None
+    sensor_footprint: bool = False
 
     def __post_init__(self) -> None:
         # messages name the command-line options (OPTION_NAMES), not the fields
@@ -155,12 +163,33 @@ class FarmParams:
             if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi) or lo < 0 or (field != "sensor_height_m" and lo <= 0):
                 raise InvalidInputError(f"{OPTION_NAMES[field]} must be LO:HI with 0 < LO <= HI metres, got {value!r}")
             object.__setattr__(self, field, (lo, hi))
+        if self.sensor_reflectivity is not None:
+            try:
+                lo, hi = (float(v) for v in self.sensor_reflectivity)
+            except (TypeError, ValueError):
+                lo = hi = float("nan")
+            if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo <= hi):
+                raise InvalidInputError(f"--sensor-reflectivity must be LO:HI with 0 <= LO <= HI, got {self.sensor_reflectivity!r}")
+            object.__setattr__(self, "sensor_reflectivity", (lo, hi))
+        object.__setattr__(self, "sensor_footprint", bool(self.sensor_footprint))
+        self.sensor_model()  # footprint needs a beam divergence
 
     def sensor_model(self):
-        """The :class:`~zbuf_occlude.sensors.Lidar` or :class:`~zbuf_occlude.sensors.DepthCamera` of ``sensor``."""
-        from ..sensors.cli import sensor_from_name
+        """The :class:`~zbuf_occlude.sensors.Lidar` or :class:`~zbuf_occlude.sensors.DepthCamera` of ``sensor``.
 
-        return sensor_from_name(self.sensor)
+        Raises
+        ------
+        InvalidInputError
+            Unknown sensor, or ``sensor_footprint``/``sensor_reflectivity`` for a depth camera
+            or a LiDAR without a beam divergence.
+        """
+        from ..sensors.cli import sensor_from_name
+        from ..sensors.lidar import Lidar
+
+        sensor = sensor_from_name(self.sensor)
+        if (self.sensor_footprint or self.sensor_reflectivity is not None) and not isinstance(sensor, Lidar):
+            raise InvalidInputError(f"--sensor-footprint and --sensor-reflectivity model LiDARs; {self.sensor} is not one")
+        return sensor.with_(footprint_rays=7) if self.sensor_footprint else sensor
 
     def crop_distributions(self):
         """``farm --sensor``'s per-scan placement, a :class:`~zbuf_occlude.sensors.crops.CropDistributions`."""
@@ -168,7 +197,7 @@ class FarmParams:
 
         return CropDistributions(
             distance_m=self.sensor_distance_m, height_m=self.sensor_height_m, azimuth_deg=(0.0, 360.0),
-            yaw_deg=(0.0, 360.0), size_m=self.sensor_size_m,
+            yaw_deg=(0.0, 360.0), size_m=self.sensor_size_m, reflectivity=self.sensor_reflectivity,
         )  # fmt: skip
 
     @functools.cached_property
@@ -179,10 +208,12 @@ class FarmParams:
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
         if self.sensor is None:  # the z-buffer farm's parameters, and digest, as before --sensor existed
-            for field in ("sensor", *_SENSOR_FIELDS):
+            for field in ("sensor", *_SENSOR_FIELDS, "sensor_reflectivity", "sensor_footprint"):
                 del d[field]
         else:
             d.update({field: list(d[field]) for field in _SENSOR_FIELDS})
+            if self.sensor_reflectivity is not None:
+                d["sensor_reflectivity"] = list(self.sensor_reflectivity)
         return d
 
     def digest(self) -> str:
