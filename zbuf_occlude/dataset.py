@@ -69,6 +69,11 @@ class ShardChecksumError(InvalidInputError):
     """A shard's bytes differ from the SHA-256 the farm recorded for it in the manifest."""
 
 
+#: Per-row datasets of a ``farm --sensor`` shard that :meth:`OccludedDataset.metadata` returns.
+SENSOR_ROW_FIELDS = (
+    "elevation_deg", "azimuth_deg", "radius", "distance_m", "sensor_height_m", "object_azimuth_deg", "yaw_deg", "size_m",
+)  # fmt: skip
+
 PoseFilter = float | Iterable[float] | Callable[[float], bool] | None
 
 
@@ -167,6 +172,8 @@ class OccludedDataset(Sequence):
         Keep poses whose elevation (azimuth), degrees, equals one of the values (within
         1e-6°) or satisfies the predicate, e.g. ``elevation_deg=lambda el: el >= 0``
         (Sryamkin et al. 2023, Table 3A trains and tests on different elevations).
+        ``farm --sensor`` data sets: each scan's own sensor direction seen from the object
+        (read from the shards), e.g. ``elevation_deg=lambda el: el < 10``.
     object_cache : int
         Compact storage: objects whose dense cloud and bitmasks stay in memory.
 
@@ -231,6 +238,8 @@ class OccludedDataset(Sequence):
         params = self.card["params"]
         self.n_points: int = int(params["n_points"])
         self._samples_per_view = int(params["samples_per_view"])
+        #: ``farm --sensor``: one sample per scan, each with its own placement stored in its shard row
+        self.sensor: str | None = params.get("sensor")
         self._seed = int(params["seed"])
         self.shape_names: list[str] = (self.root / SHAPE_NAMES_FILE).read_text(encoding="utf-8").splitlines()
         poses = np.asarray(self.card["poses"], dtype=np.float64).reshape(-1, 2)
@@ -247,6 +256,7 @@ class OccludedDataset(Sequence):
         if splits is not None and (unknown := splits - known_splits):
             raise InvalidInputError(f"unknown split(s) {sorted(unknown)} in {self.root}; it has {sorted(known_splits)}")
 
+        self._reset_handles()
         self._objects: list[dict[str, Any]] = []
         self._digests: dict[Path, str] = {}  # shard → SHA-256 recorded by the farm
         self._verified: set[Path] = set()
@@ -274,25 +284,34 @@ class OccludedDataset(Sequence):
                 continue
             if wanted_classes is not None and rec["class_name"] not in wanted_classes:
                 continue
-            spp = samples_per_pose(np.asarray(rec["n_visible"], dtype=np.int64), self._samples_per_view)
+            for rel, digest in zip(rec["shards"], rec.get("sha256") or ()):
+                self._digests[self.root / rel] = digest
+            spp = samples_per_pose(np.asarray(rec["n_visible"], dtype=np.int64), 1 if self.sensor else self._samples_per_view)
             pose = np.repeat(np.arange(len(spp)), spp)
             starts = np.cumsum(spp) - spp
             sample = np.arange(len(pose)) - np.repeat(starts, spp)
-            keep = pose_keep[pose]
+            if self.sensor is None:
+                keep = pose_keep[pose]
+            elif elevation_deg is None and azimuth_deg is None:
+                keep = np.ones(len(pose), dtype=bool)
+            else:  # each scan's own sensor direction, from its shard row
+                f = self._file(self.root / rec["shards"][0])
+                keep = _pose_mask(f["elevation_deg"][()], elevation_deg, "elevation_deg") & _pose_mask(
+                    f["azimuth_deg"][()], azimuth_deg, "azimuth_deg"
+                )
             obj_rows.append(np.full(int(keep.sum()), len(self._objects), dtype=np.int64))
             poses_rows.append(pose[keep])
             sample_rows.append(sample[keep])
             shard_rows.append(np.flatnonzero(keep))
             self._objects.append(rec)
-            for rel, digest in zip(rec["shards"], rec.get("sha256") or ()):
-                self._digests[self.root / rel] = digest
 
         def cat(parts: list[NDArray[np.int64]]) -> NDArray[np.int64]:
             return np.concatenate(parts).astype(np.int64) if parts else np.zeros(0, dtype=np.int64)
 
         self._obj, self._pose, self._sample, self._row = cat(obj_rows), cat(poses_rows), cat(sample_rows), cat(shard_rows)
         self._object_cache_size = max(1, int(object_cache))
-        self._reset_handles()
+        if not hasattr(self, "_files"):
+            self._reset_handles()
 
     # -- per-process state (DataLoader workers and pickling) ---------------------------
     def _reset_handles(self) -> None:
@@ -392,11 +411,19 @@ class OccludedDataset(Sequence):
             "object_index": int(rec["object_index"]),
             "pose_index": pose,
             "sample_index": int(self._sample[i]),
-            "elevation_deg": float(self._elevation[pose]),
-            "azimuth_deg": float(self._azimuth[pose]),
             "n_visible": n_visible,
             "padded": n_visible < self.n_points,
-        }
+        } | self._placement(rec, pose, int(self._row[i]))
+
+    def _placement(self, rec: dict[str, Any], pose: int, row: int) -> dict[str, Any]:
+        """The sensor direction of a sample (degrees); for ``farm --sensor`` rows also the
+        placement of its scan (``radius`` in mesh units, the rest in metres and degrees)."""
+        if self.sensor is None:
+            return {"elevation_deg": float(self._elevation[pose]), "azimuth_deg": float(self._azimuth[pose])}
+        f = self._file(self.root / rec["shards"][0])
+        out = {key: float(f[key][row]) for key in SENSOR_ROW_FIELDS if key in f}
+        out["sensor"] = self.sensor
+        return out
 
     def _check_index(self, i: int) -> int:
         if isinstance(i, (bool, np.bool_)) or not isinstance(i, (int, np.integer)):

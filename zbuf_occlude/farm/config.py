@@ -53,8 +53,19 @@ FATAL_ERRORS = (OutputError, BackendUnavailable)
 OPTION_NAMES = {
     "views": "--views", "samples_per_view": "--samples-per-view", "n_points": "--points",
     "dense_points": "--dense-points", "density": "--density", "resolution": "--resolution", "seed": "--seed",
-    "radius": "--radius", "storage": "--storage/--format", "method": "--method",
+    "radius": "--radius", "storage": "--storage/--format", "method": "--method", "sensor": "--sensor",
+    "sensor_distance_m": "--sensor-distance", "sensor_height_m": "--sensor-height", "sensor_size_m": "--sensor-size",
+    "sensor_reflectivity": "--sensor-reflectivity", "sensor_footprint": "--sensor-footprint",
 }  # fmt: skip
+
+#: ``farm --sensor``: per-scan placement drawn uniformly from these intervals (metres).
+#: Distance 5–25 m: the range in which an HDL-32E returns more than a few dozen points from a
+#: car (LiDARNet v2's cars lie 3–25 m away); height 1.6–2.0 m: a LiDAR on a car roof; size
+#: 4.5 m: a car's length (the object's largest dimension).
+DEFAULT_SENSOR_DISTANCE_M = (5.0, 25.0)
+DEFAULT_SENSOR_HEIGHT_M = (1.6, 2.0)
+DEFAULT_SENSOR_SIZE_M = (4.5, 4.5)
+_SENSOR_FIELDS = ("sensor_distance_m", "sensor_height_m", "sensor_size_m")
 
 GL_LOCK = threading.Lock()  # one GL context per process: threads of a Dask worker take turns
 
@@ -82,6 +93,23 @@ class FarmParams:
     storage : {"dense", "compact"}
     method : str
         Visibility method (registry name).
+    sensor : str or None
+        ``farm --sensor``: a sensor preset (``hdl32e``...) or JSON file
+        (:func:`zbuf_occlude.sensors.cli.sensor_from_name`).  Each object gets
+        ``samples_per_view`` scans, each from its own placement (see below), stored as the
+        dense layout's rows (dense storage only); ``views``, ``dense_points``, ``density``,
+        ``resolution``, ``radius`` and ``method`` do not apply.  ``None``: the z-buffer farm.
+    sensor_distance_m, sensor_height_m, sensor_size_m : (lo, hi)
+        Per scan, uniform draws of the horizontal sensor-object distance, the sensor height
+        above the ground and the object's largest dimension, metres; the object's direction
+        and heading are uniform over 0–360° (:class:`zbuf_occlude.sensors.crops.CropDistributions`).
+        Left out of :meth:`to_dict` and :meth:`digest` when ``sensor`` is ``None``, so data sets
+        made without a sensor keep their digest.
+    sensor_reflectivity : (lo, hi) or None
+        Return physics: the object's Lambertian reflectivity, drawn per scan; the sensor's
+        radiometric detection threshold then applies (:func:`zbuf_occlude.sensors.scan`).
+    sensor_footprint : bool
+        Return physics: 7 rays per firing in the beam's divergence cone, strongest echo.
     """
 
     views: str = DEFAULT_VIEWS
@@ -94,6 +122,12 @@ class FarmParams:
     radius: float = DEFAULT_RADIUS
     storage: str = "dense"
     method: str = DEFAULT_METHOD
+    sensor: str | None = None
+    sensor_distance_m: tuple[float, float] = DEFAULT_SENSOR_DISTANCE_M
+    sensor_height_m: tuple[float, float] = DEFAULT_SENSOR_HEIGHT_M
+    sensor_size_m: tuple[float, float] = DEFAULT_SENSOR_SIZE_M
+    sensor_reflectivity: tuple[float, float] | None = None
+    sensor_footprint: bool = False
 
     def __post_init__(self) -> None:
         # messages name the command-line options (OPTION_NAMES), not the fields
@@ -116,14 +150,74 @@ class FarmParams:
         elif self.dense_points is None or self.dense_points < 1:
             raise InvalidInputError(f"--dense-points must be >= 1, got {self.dense_points}")
         view_schedule(self.views)  # raises InvalidInputError on a bad spec
+        if self.sensor is not None:
+            self._check_sensor()
+
+    def _check_sensor(self) -> None:
+        if self.storage != "dense":
+            raise InvalidInputError(f"--sensor writes dense storage only, got --storage {self.storage}")
+        self.sensor_model()  # raises InvalidInputError naming an unknown sensor
+        for field in _SENSOR_FIELDS:
+            value = getattr(self, field)
+            try:
+                lo, hi = (float(v) for v in value)
+            except (TypeError, ValueError):
+                raise InvalidInputError(f"{OPTION_NAMES[field]} must be an interval LO:HI of metres, got {value!r}") from None
+            if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi) or lo < 0 or (field != "sensor_height_m" and lo <= 0):
+                raise InvalidInputError(f"{OPTION_NAMES[field]} must be LO:HI with 0 < LO <= HI metres, got {value!r}")
+            object.__setattr__(self, field, (lo, hi))
+        if self.sensor_reflectivity is not None:
+            try:
+                lo, hi = (float(v) for v in self.sensor_reflectivity)
+            except (TypeError, ValueError):
+                lo = hi = float("nan")
+            if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo <= hi):
+                raise InvalidInputError(f"--sensor-reflectivity must be LO:HI with 0 <= LO <= HI, got {self.sensor_reflectivity!r}")
+            object.__setattr__(self, "sensor_reflectivity", (lo, hi))
+        object.__setattr__(self, "sensor_footprint", bool(self.sensor_footprint))
+        self.sensor_model()  # footprint needs a beam divergence
+
+    def sensor_model(self):
+        """The :class:`~zbuf_occlude.sensors.Lidar` or :class:`~zbuf_occlude.sensors.DepthCamera` of ``sensor``.
+
+        Raises
+        ------
+        InvalidInputError
+            Unknown sensor, or ``sensor_footprint``/``sensor_reflectivity`` for a depth camera
+            or a LiDAR without a beam divergence.
+        """
+        from ..sensors.cli import sensor_from_name
+        from ..sensors.lidar import Lidar
+
+        sensor = sensor_from_name(self.sensor)
+        if (self.sensor_footprint or self.sensor_reflectivity is not None) and not isinstance(sensor, Lidar):
+            raise InvalidInputError(f"--sensor-footprint and --sensor-reflectivity model LiDARs; {self.sensor} is not one")
+        return sensor.with_(footprint_rays=7) if self.sensor_footprint else sensor
+
+    def crop_distributions(self):
+        """``farm --sensor``'s per-scan placement, a :class:`~zbuf_occlude.sensors.crops.CropDistributions`."""
+        from ..sensors.crops import CropDistributions
+
+        return CropDistributions(
+            distance_m=self.sensor_distance_m, height_m=self.sensor_height_m, azimuth_deg=(0.0, 360.0),
+            yaw_deg=(0.0, 360.0), size_m=self.sensor_size_m, reflectivity=self.sensor_reflectivity,
+        )  # fmt: skip
 
     @functools.cached_property
     def poses(self) -> list[tuple[float, float]]:
-        """``(elevation_deg, azimuth_deg)`` of every pose."""
-        return view_schedule(self.views)
+        """``(elevation_deg, azimuth_deg)`` of every pose (none with ``sensor``: each scan has its own, in its shard)."""
+        return [] if self.sensor is not None else view_schedule(self.views)
 
     def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
+        d = dataclasses.asdict(self)
+        if self.sensor is None:  # the z-buffer farm's parameters, and digest, as before --sensor existed
+            for field in ("sensor", *_SENSOR_FIELDS, "sensor_reflectivity", "sensor_footprint"):
+                del d[field]
+        else:
+            d.update({field: list(d[field]) for field in _SENSOR_FIELDS})
+            if self.sensor_reflectivity is not None:
+                d["sensor_reflectivity"] = list(self.sensor_reflectivity)
+        return d
 
     def digest(self) -> str:
         """Short hash of the parameters; records carry it so stale results are never mixed in."""

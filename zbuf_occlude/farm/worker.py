@@ -72,7 +72,58 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * scale / 2**20
 
 
+def _scan(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
+    """``farm --sensor``: ``samples_per_view`` LiDAR crops of one object into a dense shard.
+
+    Row ``i`` of the shard is scan ``pose_index[i]`` (scans without a return are left out);
+    besides the dense layout's datasets it holds the scan's placement (``distance_m``,
+    ``sensor_height_m``, ``object_azimuth_deg``, ``yaw_deg``, ``size_m``, ``radius``) and
+    ``ring``.  The record's ``n_visible`` has one entry per scan (0: no return).
+    """
+    from ..sensors.crops import farm_datasets
+
+    mesh = load_mesh(obj.source)
+    n_scans = int(params.samples_per_view)
+    datasets = farm_datasets(
+        mesh, params.sensor_model(), name=obj.name, label=obj.label, object_index=obj.index, n_samples=n_scans,
+        n_points=params.n_points, seed=params.seed, distributions=params.crop_distributions(),
+    )  # fmt: skip
+    n_visible = np.zeros(n_scans, dtype=np.int64)
+    n_visible[datasets["pose_index"]] = datasets["n_visible"]
+    rel = shard_path(obj)
+    _write_datasets(out / rel, datasets, {**_attrs(obj, params), "sensor": params.sensor})
+    b = len(datasets["data"])
+    return {
+        "shards": [rel],
+        "sha256": [file_sha256(out / rel)],
+        "n_visible": n_visible.tolist(),
+        "n_samples": b,
+        "n_padded_poses": int(np.count_nonzero((n_visible > 0) & (n_visible < params.n_points))),
+        "n_dense": 0,
+        "n_faces": int(len(mesh.faces)),
+        "bytes": int((out / rel).stat().st_size),
+    }
+
+
+def _write_datasets(path: Path, datasets: dict[str, np.ndarray], attrs: dict[str, Any]) -> None:
+    """One shard of named arrays (insertion order, no modification times: same inputs, same bytes)."""
+    import h5py
+
+    with atomic_path(path) as tmp:
+        try:
+            with h5py.File(tmp, "w") as f:
+                for key, data in datasets.items():
+                    f.create_dataset(key, data=data, track_times=False)
+                f.attrs.update(attrs)
+        except OSError as exc:
+            if exc.errno is None and "No space left" in str(exc):  # HDF5 puts it in the message only
+                raise OSError(errno.ENOSPC, str(exc)) from exc
+            raise
+
+
 def _render(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
+    if params.sensor is not None:
+        return _scan(obj, params, out)
     mesh = load_mesh(obj.source)
     dense = dense_cloud(mesh, obj.key, seed=params.seed, count=params.dense_points, density=params.density)
     poses = params.poses

@@ -86,10 +86,15 @@ def cmd_scan(args: argparse.Namespace) -> int:
     else:
         if not isinstance(sensor, Lidar):
             raise InvalidInputError("scan of a mesh file places a LiDAR; use a scene file for depth cameras")
-        try:
-            extents = tuple(float(v) for v in args.extents.split(",")) if args.extents else None
-        except ValueError:
-            raise InvalidInputError(f"--extents must be X,Y,Z in metres, got {args.extents!r}") from None
+        extents, round_xy = None, False
+        if args.extents:
+            parts = args.extents.split(",")
+            if len(parts) != 3:
+                raise InvalidInputError(f"--extents must be X,Y,Z in metres (each N or LO:HI; Y may be '='), got {args.extents!r}")
+            round_xy = parts[1].strip() == "="
+            extents = tuple(parse_interval(parts[0] if i == 1 and round_xy else v, "--extents") for i, v in enumerate(parts))
+        if args.footprint or args.power_noise:
+            sensor = sensor.with_(footprint_rays=7 if args.footprint else sensor.footprint_rays, power_noise=args.power_noise)
         mesh = PRIMITIVES.get(str(src)) if not src.exists() else None
         if mesh is None:
             from ..mesh import load_mesh
@@ -98,7 +103,9 @@ def cmd_scan(args: argparse.Namespace) -> int:
         dist = CropDistributions(
             distance_m=parse_interval(args.distance, "--distance"), height_m=parse_interval(args.height, "--height"),
             azimuth_deg=parse_interval(args.azimuth, "--azimuth"), yaw_deg=parse_interval(args.yaw, "--yaw"),
-            size_m=parse_interval(args.size, "--size"), extents_m=extents,
+            size_m=parse_interval(args.size, "--size"), extents_m=extents, round_xy=round_xy,
+            reflectivity=None if args.reflectivity is None else parse_interval(args.reflectivity, "--reflectivity"),
+            ground_reflectivity=args.ground_reflectivity,
         )  # fmt: skip
         for k in range(args.samples):
             rng = derive_rng(args.seed, object_key(src.name), k)
@@ -121,7 +128,20 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--distance", default="10", help="horizontal sensor-object distance, metres (N or LO:HI, uniform per sample)")
     p.add_argument("--height", default="1.8", help="sensor height above the ground, metres (N or LO:HI)")
     p.add_argument("--size", default="4.5", help="the object's largest dimension, metres (N or LO:HI)")
-    p.add_argument("--extents", help="X,Y,Z: stretch the mesh to these extents, metres (instead of --size)")
+    p.add_argument(
+        "--extents",
+        help="X,Y,Z: stretch the mesh to these extents, metres, each N or LO:HI drawn per sample (instead of --size); "
+        "Y '=' takes the drawn X (a round pole: --extents 0.1:0.4,=,3:9)",
+    )
+    r = p.add_argument_group("return physics (LiDAR)")
+    r.add_argument(
+        "--reflectivity", metavar="RHO or LO:HI",
+        help="the object's Lambertian reflectivity, drawn per sample: keep only returns whose received power "
+        "rho*cos(incidence)*footprint/R^2 clears the sensor's threshold (default: every hit returns)",
+    )  # fmt: skip
+    r.add_argument("--ground-reflectivity", type=float, default=0.15, help="the ground's reflectivity with --reflectivity (default: 0.15)")
+    r.add_argument("--footprint", action="store_true", help="beam footprint: 7 rays per firing in the divergence cone, strongest echo")
+    r.add_argument("--power-noise", type=float, default=0.0, help="sigma of ln(received power) per firing (default: 0, a sharp threshold)")
     p.add_argument("--azimuth", default="0", help="direction of the object from the sensor, degrees (N or LO:HI)")
     p.add_argument("--yaw", default="0", help="the object's heading, degrees (N or LO:HI)")
     p.add_argument("--samples", type=int, default=1, help="scans, each with its own draws")

@@ -59,8 +59,17 @@ class CropDistributions:
         The object's heading about +z, degrees.
     size_m : (lo, hi) or float
         The object's largest dimension, metres.
-    extents_m : (3,) float, optional
-        Instead of ``size_m``: stretch the mesh to these extents (x, y, z), metres.
+    extents_m : (3,) float or 3 × (lo, hi), optional
+        Instead of ``size_m``: stretch the mesh to these extents (x, y, z), metres, each a
+        value or an interval drawn per sample; with ``round_xy`` the y extent is the drawn x
+        (a round cross-section: poles, trunks).
+    round_xy : bool
+    reflectivity : (lo, hi), optional
+        The object's Lambertian reflectivity ρ, drawn per sample; given, the scan applies the
+        sensor's radiometric detection threshold (:func:`zbuf_occlude.sensors.scan`).
+    ground_reflectivity : float
+        ρ of the ground plane when ``reflectivity`` is given (default 0.15: asphalt and
+        concrete in the near infrared, an assumption).
     """
 
     distance_m: tuple[float, float] = (5.0, 25.0)
@@ -68,11 +77,25 @@ class CropDistributions:
     azimuth_deg: tuple[float, float] = (0.0, 360.0)
     yaw_deg: tuple[float, float] = (0.0, 360.0)
     size_m: tuple[float, float] | float = 4.5
-    extents_m: tuple[float, float, float] | None = None
+    extents_m: tuple | None = None
+    round_xy: bool = False
+    reflectivity: tuple[float, float] | None = None
+    ground_reflectivity: float = 0.15
 
     def __post_init__(self) -> None:
         for name in ("distance_m", "height_m", "azimuth_deg", "yaw_deg", "size_m"):
             object.__setattr__(self, name, _interval(name, getattr(self, name)))
+        if self.extents_m is not None:
+            if len(self.extents_m) != 3:
+                raise InvalidInputError(f"extents_m must be three values or intervals (x, y, z), got {self.extents_m!r}")
+            ext = tuple(_interval("extents_m", v) for v in self.extents_m)
+            if min(lo for lo, _ in ext) <= 0:
+                raise InvalidInputError(f"extents_m must be > 0 metres, got {self.extents_m!r}")
+            object.__setattr__(self, "extents_m", ext)
+        if self.reflectivity is not None:
+            object.__setattr__(self, "reflectivity", _interval("reflectivity", self.reflectivity))
+            if self.reflectivity[0] < 0:
+                raise InvalidInputError(f"reflectivity must be >= 0, got {self.reflectivity!r}")
         if self.distance_m[0] <= 0 or self.size_m[0] <= 0 or self.height_m[0] < 0:
             raise InvalidInputError(f"distance_m and size_m must be > 0 and height_m >= 0 metres, got {self}")
 
@@ -80,9 +103,17 @@ class CropDistributions:
 def draw_placement(dist: CropDistributions, rng: np.random.Generator) -> dict[str, float]:
     """One placement ``{distance_m, height_m, azimuth_deg, yaw_deg, size_m}`` (five uniform draws, in that order)."""
     out = {name: float(rng.uniform(*getattr(dist, name))) for name in ("distance_m", "height_m", "azimuth_deg", "yaw_deg", "size_m")}
+    # further draws only where an interval asks for them, so fixed values keep earlier streams
     if dist.extents_m is not None:
-        out["extents_m"] = tuple(float(v) for v in dist.extents_m)
+        ext = [lo if lo == hi else float(rng.uniform(lo, hi)) for lo, hi in dist.extents_m]
+        if dist.round_xy:
+            ext[1] = ext[0]
+        out["extents_m"] = tuple(ext)
         out["size_m"] = max(out["extents_m"])
+    if dist.reflectivity is not None:
+        lo, hi = dist.reflectivity
+        out["reflectivity"] = lo if lo == hi else float(rng.uniform(lo, hi))
+        out["ground_reflectivity"] = float(dist.ground_reflectivity)
     return out
 
 
@@ -146,7 +177,10 @@ def object_crop(
         half = math.degrees(math.asin(min(1.0, 0.75 * placement["size_m"] / d))) + sector_margin_deg
         if half < 180.0:
             sector = (placement["azimuth_deg"] - half, placement["azimuth_deg"] + half)
-    full = scan(scene, sensor, pose, seed=seed, azimuth_range_deg=sector, backend=backend, frame=frame)
+    rho = None
+    if "reflectivity" in placement:  # ground, the object, then the occluders (their own ρ: the object's)
+        rho = [placement.get("ground_reflectivity", 0.15)] + [placement["reflectivity"]] * (1 + len(occluders))
+    full = scan(scene, sensor, pose, seed=seed, azimuth_range_deg=sector, backend=backend, frame=frame, reflectivity=rho)
     crop = full.crop(1)
     to_world = scene.build().local_to_world[1]
     world = crop.points.astype(np.float64) + (pose[:3, 3] if frame == "sensor" else 0.0)  # sensor axes = world axes (yaw 0)

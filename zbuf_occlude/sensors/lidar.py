@@ -48,8 +48,26 @@ class Lidar:
     dropout : float
         Probability in [0, 1) that a return is lost (independent per return).
     beam_divergence_deg : float
-        Full-angle beam divergence, degrees; metadata only: every return is the centre
-        ray's first hit (the footprint is not integrated).
+        Full-angle beam divergence, degrees.  Used when ``footprint_rays`` is 7: the beam is
+        then a cone of this full angle (a top-hat profile, an assumption) sampled by 7 rays.
+    footprint_rays : {1, 7}
+        1: every return is the centre ray's first hit.  7: the centre ray and 6 rays at
+        0.756 of the cone's half-angle (7 equal-area cells of the footprint disc); the
+        return is the strongest echo: the surface (object id) that receives the most
+        energy, at the energy-weighted range of its rays, along the centre direction.  A
+        thin pole then returns on azimuths where only part of the footprint hits it.
+    detection_reflectivity, detection_range_m : float
+        Radiometric detection threshold from a data-sheet "range at reflectivity" figure: a
+        Lambertian target of this reflectivity, at normal incidence, filling the beam, is
+        detected up to this range.  Used only when :func:`~zbuf_occlude.sensors.scan` gets
+        ``reflectivity``: a return is kept when ``ρ · cos θ · f / R² ≥ τ`` with
+        ``τ = detection_reflectivity / detection_range_m²`` (the LiDAR range equation for
+        an extended Lambertian target, Kashani et al. 2015, "A review of LIDAR radiometric
+        processing", Sensors 15(11), Eq. 4; ``f``: the footprint fraction on the surface).
+    power_noise : float
+        σ of the natural log of the received power per firing (pulse energy and receiver
+        gain fluctuations; an assumption, 0: a sharp threshold).  The return probability
+        is then ``Φ(ln(ρ cos θ f / (τ R²)) / σ)``.
     azimuth_offset_deg : float
         Azimuth of the first firing of a revolution, degrees.
     source : str
@@ -72,6 +90,10 @@ class Lidar:
     dropout: float = 0.0
     beam_divergence_deg: float = 0.0
     azimuth_offset_deg: float = 0.0
+    footprint_rays: int = 1
+    detection_reflectivity: float = 0.8
+    detection_range_m: float = 100.0
+    power_noise: float = 0.0
     source: str = ""
     _elev: NDArray[np.float64] = field(init=False, repr=False, compare=False)
 
@@ -86,6 +108,13 @@ class Lidar:
         _check_positive(f"lidar {self.name!r} min_range_m", self.min_range_m, allow_zero=True)
         _check_positive(f"lidar {self.name!r} range_noise_m", self.range_noise_m, allow_zero=True)
         _check_positive(f"lidar {self.name!r} beam_divergence_deg", self.beam_divergence_deg, allow_zero=True)
+        _check_positive(f"lidar {self.name!r} detection_reflectivity", self.detection_reflectivity)
+        _check_positive(f"lidar {self.name!r} detection_range_m", self.detection_range_m)
+        _check_positive(f"lidar {self.name!r} power_noise", self.power_noise, allow_zero=True)
+        if self.footprint_rays not in (1, 7) or isinstance(self.footprint_rays, bool):
+            raise InvalidInputError(f"lidar {self.name!r}: footprint_rays must be 1 or 7, got {self.footprint_rays!r}")
+        if self.footprint_rays == 7 and self.beam_divergence_deg <= 0:
+            raise InvalidInputError(f"lidar {self.name!r}: footprint_rays 7 needs beam_divergence_deg > 0")
         if self.min_range_m >= self.max_range_m:
             raise InvalidInputError(f"lidar {self.name!r}: need min_range_m < max_range_m, got {self.min_range_m} >= {self.max_range_m}")
         if not 0.0 <= float(self.dropout) < 1.0:
@@ -112,6 +141,32 @@ class Lidar:
     def azimuths_deg(self) -> NDArray[np.float64]:
         """(A,) float64: azimuth of every firing of one revolution, degrees in [offset, offset + 360)."""
         return self.azimuth_offset_deg + np.arange(self.n_azimuths) * (360.0 / self.n_azimuths)
+
+    @property
+    def detection_threshold(self) -> float:
+        """τ = ``detection_reflectivity / detection_range_m²``, m⁻²: the least ``ρ cos θ f / R²`` detected."""
+        return self.detection_reflectivity / self.detection_range_m**2
+
+    def footprint_directions(self, directions: ArrayLike) -> NDArray[np.float64]:
+        """(N, K, 3) float64: the K = ``footprint_rays`` unit rays of each beam ``directions (N, 3)``.
+
+        Ray 0 is the centre; rays 1–6 lie at ``sqrt(4/7)`` of the half-divergence, 60° apart
+        around it (the mean-area radius of the annulus outside the centre cell, so the 7
+        cells of the footprint disc have equal areas).
+        """
+        d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+        if self.footprint_rays == 1:
+            return d[:, None, :].copy()
+        helper = np.where(np.abs(d[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+        u = np.cross(d, helper)
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
+        v = np.cross(d, u)
+        half = math.radians(self.beam_divergence_deg) / 2.0 * math.sqrt(4.0 / 7.0)
+        phi = np.radians(np.arange(6) * 60.0)
+        off = math.tan(half) * (np.cos(phi)[None, :, None] * u[:, None, :] + np.sin(phi)[None, :, None] * v[:, None, :])
+        ring = d[:, None, :] + off
+        ring /= np.linalg.norm(ring, axis=2, keepdims=True)
+        return np.concatenate([d[:, None, :], ring], axis=1)
 
     @classmethod
     def preset(cls, name: str, **changes) -> Lidar:
@@ -169,6 +224,10 @@ _HDL32E = (
 # here, i.e. the nominal spacing; the per-unit calibration file differs by up to ~0.2°).
 _HDL64E = tuple(np.round(np.concatenate([2.0 - np.arange(32) / 3.0, -8.83 - 0.5 * np.arange(32)]), 4))
 
+# Detection threshold (detection_reflectivity, detection_range_m): HDL-64E S2 data sheet "120 m
+# for cars and foliage (~0.80 reflectivity), 50 m for pavement (~0.10)"; OS1-64 data sheet
+# "120 m @ 80 % Lambertian".  The VLP-16 and HDL-32E sheets give 100 m without a reflectivity:
+# 0.8 at 100 m is an ASSUMPTION by analogy with the HDL-64E S2.
 LIDAR_PRESETS: dict[str, Lidar] = {
     # VLP-16 data sheet (Velodyne 63-9229 Rev-C) and manual: 16 channels, ±15° at 2°,
     # 5–20 Hz, firing cycle 55.296 µs (18 084 Hz; 0.2° at 10 Hz), range 100 m, accuracy ±3 cm.
@@ -188,14 +247,14 @@ LIDAR_PRESETS: dict[str, Lidar] = {
     # (40 kHz firing at 10 Hz), 120 m, accuracy < 2 cm (1σ).
     "hdl64e": Lidar(
         "hdl64e", _HDL64E, rotation_hz=10.0, firing_rate_hz=40_000.0,
-        min_range_m=0.9, max_range_m=120.0, range_noise_m=0.02,
+        min_range_m=0.9, max_range_m=120.0, range_noise_m=0.02, detection_range_m=120.0,
         source="Velodyne HDL-64E S2 data sheet 97-0038 Rev. J; HDL-64E S2 user manual 63-HDL64ES2",
     ),
     # Ouster OS1-64 (Gen 1) data sheet: 64 channels over 33.2° (+16.6° to -16.6°, uniform),
     # 1024 columns at 10 Hz (10 240 firings/s), 0.8–120 m, precision ±3 cm (1σ, 1–20 m).
     "os1-64": Lidar(
         "os1-64", tuple(np.round(np.linspace(16.6, -16.6, 64), 4)), rotation_hz=10.0, firing_rate_hz=10_240.0,
-        min_range_m=0.8, max_range_m=120.0, range_noise_m=0.03, beam_divergence_deg=0.13,
+        min_range_m=0.8, max_range_m=120.0, range_noise_m=0.03, beam_divergence_deg=0.13, detection_range_m=120.0,
         source="Ouster OS1-64 hardware user guide / data sheet (Gen 1, rev. 2019)",
     ),
 }  # fmt: skip

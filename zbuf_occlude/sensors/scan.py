@@ -206,6 +206,53 @@ def _built(scene) -> BuiltScene:
     raise InvalidInputError(f"scan needs a ScanScene or a trimesh.Trimesh, got {type(scene).__name__}")
 
 
+def _reflectivity_table(reflectivity, n_ids: int) -> NDArray[np.float64]:
+    """(n_ids,) float64 ρ per object id from a scalar or a per-id sequence."""
+    rho = np.asarray(reflectivity, dtype=np.float64).reshape(-1)
+    if rho.size == 1:
+        rho = np.full(n_ids, float(rho[0]))
+    if rho.size != n_ids or not np.all(np.isfinite(rho)) or np.any(rho < 0):
+        raise InvalidInputError(f"reflectivity must be one value >= 0 or {n_ids} (ground + objects), got {reflectivity!r}")
+    return rho
+
+
+def _strongest_echo(built: BuiltScene, rays, face, t, k: int, rho) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+    """Resolve each beam's ``k`` footprint rays into one return: the strongest echo.
+
+    Each ray carries ``1/k`` of the beam's energy; a ray hitting a surface of reflectivity ρ at
+    incidence θ and range R sends back ``ρ |cos θ| / (k R²)`` (ρ = 1 without ``rho``).  The
+    echoes of one object id add up; the object with the most energy is the return (ties: the
+    lower ray index, the centre first).  Its range is the energy-weighted mean of its rays'
+    ranges, its face the nearest of its rays' faces.
+
+    Returns
+    -------
+    face : (N,) int64, −1 where no ray hit; t : (N,) float64; energy : (N,) float64
+        ``Σ ρ |cos θ| / k`` over the chosen object's rays (the footprint fraction times ρ cos θ).
+    """
+    n = len(face) // k
+    face = face.reshape(n, k)
+    t = t.reshape(n, k)
+    hit = face >= 0
+    obj = np.where(hit, built.face_object[np.maximum(face, 0)], -1)
+    tri = np.asarray(built.mesh.triangles, dtype=np.float64)[np.maximum(face, 0)]
+    normal = np.cross(tri[..., 1, :] - tri[..., 0, :], tri[..., 2, :] - tri[..., 0, :])
+    normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-300)
+    cos = np.abs(np.einsum("nkj,nkj->nk", normal, rays.reshape(n, k, 3)))
+    weight = np.where(hit, cos * (1.0 if rho is None else rho[np.maximum(obj, 0)]) / k, 0.0)
+    energy = np.where(hit, weight / np.maximum(t, 1e-9) ** 2, 0.0)
+    same = (obj[:, :, None] == obj[:, None, :]) & hit[:, :, None] & hit[:, None, :]
+    total = np.einsum("nij,nj->ni", same, energy)
+    best = np.argmax(total, axis=1)
+    rows = np.arange(n)
+    mine = same[rows, best]  # (n, k): the rays on the chosen object
+    w = np.where(mine, energy, 0.0)
+    t_out = np.einsum("nk,nk->n", w, np.where(mine, t, 0.0)) / np.maximum(w.sum(axis=1), 1e-300)
+    nearest = np.argmin(np.where(mine, t, np.inf), axis=1)
+    face_out = np.where(hit.any(axis=1), face[rows, nearest], -1)
+    return face_out, np.where(hit.any(axis=1), t_out, np.inf), np.where(mine, weight, 0.0).sum(axis=1)
+
+
 def scan(
     scene: ScanScene | trimesh.Trimesh,
     sensor: Lidar | DepthCamera,
@@ -217,6 +264,7 @@ def scan(
     azimuth_range_deg: tuple[float, float] | None = None,
     resolution: int = 2048,
     neighborhood: int = 1,
+    reflectivity: float | ArrayLike | None = None,
 ) -> Scan:
     """Scan ``scene`` with ``sensor`` at ``pose``.
 
@@ -238,6 +286,12 @@ def scan(
         LiDAR only: fire only in this azimuth sector (degrees, sensor frame), to save time.
     resolution, neighborhood : int
         "zbuffer" backend: view size in pixels and candidate window radius.
+    reflectivity : float or (n_objects + 1,) float, optional
+        LiDAR only: Lambertian reflectivity ρ of every surface, or per object id (index 0:
+        the ground).  Given, a return is kept only when its received power clears the
+        sensor's threshold, ``ρ · cos θ · f / R² · exp(σ z) ≥ τ`` (:class:`Lidar`
+        ``detection_threshold``, ``power_noise`` σ, z ~ N(0, 1) per firing, ``f`` the
+        footprint fraction).  None: every hit returns (no radiometry).
 
     Returns
     -------
@@ -274,12 +328,21 @@ def scan(
         raise InvalidInputError(f"sensor must be a Lidar or a DepthCamera, got {type(sensor).__name__}")
     d_world = d_sensor @ rot.T
     meta: dict = {"backend": backend, "n_rays": len(d_world)}
+    k = sensor.footprint_rays if isinstance(sensor, Lidar) else 1
+    rays = d_world if k == 1 else sensor.footprint_directions(d_world).reshape(-1, 3)
     if backend == "embree":
-        face, t = cast_embree(built.mesh, origin, d_world)
+        face, t = cast_embree(built.mesh, origin, rays)
     else:
-        face, t, n_fallback = cast_zbuffer(built.mesh, origin, d_world, resolution=resolution, neighborhood=neighborhood,
+        face, t, n_fallback = cast_zbuffer(built.mesh, origin, rays, resolution=resolution, neighborhood=neighborhood,
                                            znear=max(min(0.05, near * 0.5), 1e-3), zfar=far * 1.5 + 1.0)  # fmt: skip
         meta["n_fallback"] = n_fallback
+    rho = None
+    if reflectivity is not None:
+        if not isinstance(sensor, Lidar):
+            raise InvalidInputError("reflectivity (radiometric detection) is modelled for LiDARs only")
+        rho = _reflectivity_table(reflectivity, len(built.objects) + 1)
+    if k > 1:
+        face, t, fraction = _strongest_echo(built, rays, face, t, k, rho)
     hit = np.flatnonzero(face >= 0)
     face, t, d_s, d_w = face[hit], t[hit], d_sensor[hit], d_world[hit]
     tri = np.asarray(built.mesh.triangles, dtype=np.float64)[face]
@@ -295,6 +358,12 @@ def scan(
     if isinstance(sensor, Lidar):
         measured = t + sensor.range_noise_m * gauss
         keep = (measured >= sensor.min_range_m) & (measured <= sensor.max_range_m) & ~lost
+        if rho is not None:
+            # received power of an extended Lambertian target (Kashani et al. 2015, Eq. 4), up to a constant
+            power = (fraction[hit] if k > 1 else rho[built.face_object[face]] * np.abs(cos_in)) / np.maximum(t, 1e-9) ** 2
+            if sensor.power_noise > 0:
+                power = power * np.exp(sensor.power_noise * rng.standard_normal(len(hit)))
+            keep &= power >= sensor.detection_threshold
     else:
         cos_axis = d_s[:, 2]  # depth = t · cos(angle to the optical axis)
         depth = t * cos_axis

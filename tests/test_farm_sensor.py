@@ -1,0 +1,144 @@
+"""``farm --sensor``: LiDAR crops of whole data sets, end to end through the command line.
+
+Runs on the shipped meshes (``data/samples``) with two scans of few points per object.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from zbuf_occlude.cli import main as cli_main
+from zbuf_occlude.dataset import CARD_FILE, OccludedDataset
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.farm import FarmParams
+from zbuf_occlude.mesh import load_mesh
+from zbuf_occlude.sensors import Lidar
+
+SAMPLES = Path(__file__).resolve().parents[1] / "data" / "samples"
+ARGS = ["--sensor", "hdl32e", "--samples-per-view", "2", "--points", "128", "--per-class", "1", "--splits", "train",
+        "--sensor-distance", "5:20", "--sensor-height", "1.6:2.0", "--sensor-size", "2:4.5", "--no-progress"]  # fmt: skip
+
+
+def _farm(out: Path, *extra: str) -> Path:
+    assert cli_main(["farm", str(SAMPLES), "--out", str(out), *ARGS, *extra]) == 0
+    return out
+
+
+def _shard_hashes(out: Path) -> dict[str, str]:
+    return {p.relative_to(out).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(out.rglob("*.h5"))}
+
+
+@pytest.fixture(scope="module")
+def sensor_run(tmp_path_factory) -> Path:
+    return _farm(tmp_path_factory.mktemp("farm_sensor") / "ds")
+
+
+def _sensor_position(meta: dict) -> np.ndarray:
+    """The sensor in the sample's normalised mesh frame, from the recorded direction and radius."""
+    el, az = np.radians(meta["elevation_deg"]), np.radians(meta["azimuth_deg"])
+    centre = load_mesh(meta["source"]).bounds.mean(axis=0)
+    return centre + meta["radius"] * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+
+
+def test_points_lie_on_the_hdl32e_rings_seen_from_the_recorded_sensor(sensor_run):
+    ds = OccludedDataset(sensor_run)
+    table = np.asarray(Lidar.preset("hdl32e").elevations_deg)
+    card = json.loads((sensor_run / CARD_FILE).read_text())
+    assert card["params"]["sensor"] == "hdl32e" and card["params"]["sensor_distance_m"] == [5.0, 20.0]
+    assert len(ds) >= 8 and ds.sensor == "hdl32e"
+    rings_seen = set()
+    for i in range(len(ds)):
+        points, label, meta = ds[i]
+        assert points.shape == (128, 3) and label == ds.labels[i]
+        assert 5.0 <= meta["distance_m"] <= 20.0 and 1.6 <= meta["sensor_height_m"] <= 2.0 and 2.0 <= meta["size_m"] <= 4.5
+        # mesh frame = world frame rotated about z and scaled uniformly: elevation angles are kept
+        d = points.astype(np.float64) - _sensor_position(meta)
+        elevation = np.degrees(np.arctan2(d[:, 2], np.hypot(d[:, 0], d[:, 1])))
+        nearest = np.abs(elevation[:, None] - table[None]).min(axis=1)
+        assert nearest.max() < 2e-3, (meta["name"], nearest.max())
+        rings_seen |= set(np.abs(elevation[:, None] - table[None]).argmin(axis=1).tolist())
+        # the sensor stands sensor_height_m above the ground (the mesh's lowest point), in mesh units
+        metres_per_unit = meta["size_m"] / np.ptp(load_mesh(meta["source"]).bounds, axis=0).max()
+        ground = load_mesh(meta["source"]).bounds[0, 2]
+        assert abs((_sensor_position(meta)[2] - ground) * metres_per_unit - meta["sensor_height_m"]) < 1e-6
+    assert len(rings_seen) >= 5  # not one ring repeated
+
+
+def test_return_physics_options_reach_the_scans(sensor_run, tmp_path):
+    out = _farm(tmp_path / "phys", "--sensor-footprint", "--sensor-reflectivity", "0.05:0.1", "--sensor-distance", "15:20")
+    card = json.loads((out / CARD_FILE).read_text())
+    assert card["params"]["sensor_footprint"] is True and card["params"]["sensor_reflectivity"] == [0.05, 0.1]
+    table = np.asarray(Lidar.preset("hdl32e").elevations_deg)
+    phys = OccludedDataset(out)
+    for i in range(len(phys)):  # footprint returns still lie along their beams' centre directions
+        points, _, meta = phys[i]
+        d = points.astype(np.float64) - _sensor_position(meta)
+        elevation = np.degrees(np.arctan2(d[:, 2], np.hypot(d[:, 0], d[:, 1])))
+        assert np.abs(elevation[:, None] - table[None]).min(axis=1).max() < 2e-3
+    # dark objects far away lose returns to the detection threshold: fewer than the same scans without it
+    plain = OccludedDataset(_farm(tmp_path / "plain", "--sensor-footprint", "--sensor-distance", "15:20"))
+    n_phys = sum(phys.metadata(i)["n_visible"] for i in range(len(phys)))
+    n_plain = sum(plain.metadata(i)["n_visible"] for i in range(len(plain)))
+    assert 0 < n_phys < n_plain
+
+
+def test_same_seed_same_bytes_and_worker_count_changes_nothing(sensor_run, tmp_path):
+    again = _farm(tmp_path / "again")
+    two = _farm(tmp_path / "two", "--workers", "2")
+    assert _shard_hashes(again) == _shard_hashes(sensor_run) == _shard_hashes(two)
+    assert len(_shard_hashes(sensor_run)) == 5
+    other = _farm(tmp_path / "seed1", "--seed", "1")
+    assert set(_shard_hashes(other).values()).isdisjoint(_shard_hashes(sensor_run).values())
+
+
+def test_resume_redoes_only_what_is_missing(sensor_run, tmp_path):
+    out = _farm(tmp_path / "ds")
+    shards = sorted(out.rglob("*.h5"))
+    before = {p: p.stat().st_mtime_ns for p in shards}
+    shards[2].unlink()  # killed after the record... or before it:
+    (out / "records" / "000003.json").unlink()
+    assert cli_main(["farm", str(SAMPLES), "--out", str(out), *ARGS]) == 0
+    assert _shard_hashes(out) == _shard_hashes(sensor_run)
+    redone = sorted(p for p in out.rglob("*.h5") if p.stat().st_mtime_ns != before.get(p))
+    assert redone == [shards[2], shards[3]], redone
+    assert len(OccludedDataset(out)) == len(OccludedDataset(sensor_run))
+
+
+def test_zbuffer_farm_parameters_keep_their_digest():
+    # data sets made before --sensor existed keep their digest: no sensor key in to_dict
+    assert FarmParams().digest() == "caf646a92272b6ce"
+    assert FarmParams(storage="compact", seed=3).digest() == "f3f5104aab0cd7df"
+    assert "sensor" not in FarmParams().to_dict()
+    assert FarmParams(sensor="hdl32e").digest() != FarmParams(sensor="vlp16").digest()
+    assert FarmParams(sensor="hdl32e").digest() != FarmParams(sensor="hdl32e", sensor_size_m=(1.0, 2.0)).digest()
+
+
+@pytest.mark.parametrize(
+    "bad, words",
+    [
+        (["--sensor", "hdl99"], "hdl99"),
+        (["--sensor", "hdl32e", "--storage", "compact"], "--storage"),
+        (["--sensor-distance", "5:10"], "--sensor-distance needs --sensor"),
+        (["--sensor", "hdl32e", "--sensor-distance", "10:5"], "--sensor-distance"),
+        (["--sensor", "hdl32e", "--sensor-size", "0:2"], "--sensor-size"),
+        (["--sensor-footprint"], "--sensor-footprint needs --sensor"),
+        (["--sensor", "hdl32e", "--sensor-reflectivity", "0.5:0.1"], "--sensor-reflectivity"),
+        (["--sensor", "kinect-v1", "--sensor-footprint"], "kinect-v1"),
+        (["--sensor", "hdl64e", "--sensor-footprint"], "beam_divergence_deg"),
+    ],
+)
+def test_bad_sensor_options_are_clear_errors(tmp_path, bad, words, capsys):
+    status = cli_main(["farm", str(SAMPLES), "--out", str(tmp_path / "bad"), "--no-progress", *bad])
+    assert status == 2
+    assert words in capsys.readouterr().err
+    assert not list((tmp_path / "bad").rglob("*.h5"))
+
+
+def test_sensor_params_are_checked():
+    with pytest.raises(InvalidInputError, match="--sensor-height"):
+        FarmParams(sensor="hdl32e", sensor_height_m=(-1.0, 2.0))
