@@ -32,7 +32,7 @@ def _everything_visible(mesh, points, camera, *, face_index=None, **options):
 
 def test_builtin_capabilities() -> None:
     image_space = {m for m in available_methods() if method_info(m).takes_resolution}
-    assert image_space == {"zbuffer", "zbuffer-exact", "zbuffer-tolerance", "naive-zbuffer"}
+    assert image_space == {"auto", "zbuffer", "zbuffer-exact", "zbuffer-tolerance", "naive-zbuffer"}
     assert {m for m in available_methods() if method_info(m).takes_grid} == {"og"}
     assert {m for m in available_methods() if method_info(m).grid_of == "og"} == {"og16", "og32", "og64", "og128"}
     assert {m for m in available_methods() if method_info(m).session is not None} == {"zbuffer", "zbuffer-exact", "embree-fast", "auto"}

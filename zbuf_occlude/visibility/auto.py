@@ -133,7 +133,7 @@ def make_scene(mesh: trimesh.Trimesh, points, face_index=None):
     return FastScene(mesh, points, face_index)
 
 
-@register("auto", session=make_scene)
+@register("auto", takes_resolution=True, session=make_scene)
 def auto_visible(
     mesh: trimesh.Trimesh,
     points: NDArray[np.float64],
