@@ -221,6 +221,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     for add in (add_compare_parser, add_profile_parser, add_farm_parser, add_farm_merge_parser):
         add(sub)
+    from .learn.cli import add_parser as add_experiment_parser  # zbuf-occlude experiment; torch only when it runs
+
+    add_experiment_parser(sub)
     return parser
 
 
