@@ -393,6 +393,18 @@ class ThreeDmFVNet(nn.Module):
         return self.head(self.cnn(self.fv(points)))
 
 
+#: Batch-norm momentum of PointNet and 3DmFV-Net: their code starts the moving-average decay at
+#: 0.5 (torch momentum = 1 − decay), which lets the running statistics follow a short run.
+BN_MOMENTUM = 0.5
+
+
+def _set_bn_momentum(model: nn.Module, momentum: float) -> nn.Module:
+    for mod in model.modules():
+        if isinstance(mod, nn.modules.batchnorm._BatchNorm):
+            mod.momentum = momentum
+    return model
+
+
 def build_model(name: str, n_classes: int, *, width: float = 1.0, fv_grid: int = 8) -> nn.Module:
     """A model by name (:data:`MODELS`).
 
@@ -404,11 +416,11 @@ def build_model(name: str, n_classes: int, *, width: float = 1.0, fv_grid: int =
     if n_classes < 2:
         raise InvalidInputError(f"need at least 2 classes, got {n_classes}")
     if name == "pointnet":
-        return PointNet(n_classes, width)
+        return _set_bn_momentum(PointNet(n_classes, width), BN_MOMENTUM)
     if name == "voxnet":
         return VoxNet(n_classes, width)
     if name == "3dmfv":
-        return ThreeDmFVNet(n_classes, m=fv_grid, width=width)
+        return _set_bn_momentum(ThreeDmFVNet(n_classes, m=fv_grid, width=width), BN_MOMENTUM)
     raise InvalidInputError(f"unknown model {name!r}; choose from {', '.join(MODELS)}")
 
 
