@@ -240,3 +240,30 @@ def test_one_epoch_smoke_on_samples(tmp_path):
     assert run["n_train"] + run["n_val"] == 8 * 34 and run["n_test"] == 8 * 66  # one sample per pose at quick scale
     assert "voxnet (paper) | 69.7" in (out / "table.md").read_text()
     assert (out / "accuracy_vs_elevation.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize("storage", ["dense", "compact"])
+def test_from_occluded_reads_both_storage_modes(tmp_path, storage):
+    import zbuf_occlude as zo
+    from zbuf_occlude.farm import FarmParams
+
+    meshes = sorted(SAMPLES.rglob("*.off"))[:2]
+    listing = tmp_path / "list.txt"
+    listing.write_text("".join(f"{p} {p.parent.parent.name} train\n" for p in meshes))
+    params = FarmParams(views="0:0,60:90", samples_per_view=2, n_points=32, dense_points=2000, resolution=128,
+                        storage=storage)  # fmt: skip
+    zo.run_farm(listing, tmp_path / "ds", params=params, progress=False)
+    ds = zo.OccludedDataset(tmp_path / "ds", elevation_deg=[60.0])
+    clouds = D.from_occluded(ds, n_points=16, seed=0)
+    assert clouds.points.shape == (4, 16, 3)
+    np.testing.assert_array_equal(clouds.elevation_deg, 60.0)
+    np.testing.assert_array_equal(np.sort(clouds.labels), [0, 0, 1, 1])
+    lo, hi = clouds.points.min(axis=1), clouds.points.max(axis=1)
+    np.testing.assert_allclose((hi - lo).max(axis=1), 1.0, rtol=1e-5)  # normalised per cloud
+    np.testing.assert_allclose((hi + lo) / 2, 0.0, atol=1e-6)
+    raw, _ = ds.to_arrays()
+    full = D.from_occluded(ds, seed=0)  # all 32 points: exactly the stored samples, normalised
+    from zbuf_occlude.real_scans import normalize_points
+
+    for b in range(4):
+        np.testing.assert_allclose(full.points[b], normalize_points(raw[b]), atol=1e-6)

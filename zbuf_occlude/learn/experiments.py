@@ -37,6 +37,7 @@ __all__ = [
     "plan_meshes",
     "run_elevation",
     "run_augmentation",
+    "combine_elevation",
 ]
 
 log = logging.getLogger(__name__)
@@ -279,6 +280,7 @@ def run_elevation(
     _plot_elevation(out / "accuracy_vs_elevation.png", {model: rows}, curve)
     summary = {
         "experiment": "elevation (Table 3A)", "model": model, "scale": scale, "root": str(root),
+        "data_dir": str(data_dir),
         "meshes": len(meshes), "classes": names, "points": n_points, "method": method,
         "n_train": len(tr_rows), "n_val": len(val_rows), "n_test": len(test),
         "overall_accuracy": report["overall_accuracy"], "mean_class_accuracy": report["mean_class_accuracy"],
@@ -540,3 +542,29 @@ def _plot_augmentation(path: Path, rows: list[dict], model: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def combine_elevation(run_dirs: Sequence[str | os.PathLike], out: str | os.PathLike) -> Path:
+    """Join the ``experiment elevation`` runs of several models: ``results.csv``, ``table.md`` and
+    ``accuracy_vs_elevation.png`` (all models, Fig. 12's curve from the first run's data folder) in ``out``."""
+    import csv
+
+    out = Path(out)
+    rows_by_model, summaries, all_rows, curve = {}, {}, [], None
+    for d in map(Path, run_dirs):
+        summary = json.loads((d / "run.json").read_text(encoding="utf-8"))
+        with open(d / "results.csv", encoding="utf-8") as fh:
+            rows = [{k: (v if k == "model" else float(v)) for k, v in r.items()} for r in csv.DictReader(fh)]
+        rows_by_model[summary["model"]] = rows
+        summaries[summary["model"]] = summary
+        all_rows += rows
+        cache = d / "data" / "visible_area.csv"
+        for candidate in (cache, Path(summary.get("data_dir", "")) / "visible_area.csv"):
+            if curve is None and candidate.is_file():
+                with open(candidate, encoding="utf-8") as fh:
+                    curve = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(fh)]
+    out.mkdir(parents=True, exist_ok=True)
+    write_csv(out / "results.csv", all_rows)
+    write_text(out / "table.md", _table_3a(rows_by_model, summaries))
+    _plot_elevation(out / "accuracy_vs_elevation.png", rows_by_model, curve)
+    return out
