@@ -83,7 +83,7 @@ class Scale:
 
 SCALES = {
     "quick": Scale(points=256, samples_per_view=1, dense_points=8192, resolution=512, epochs=30, patience=10,
-                   width={"pointnet": 0.25, "voxnet": 0.5, "3dmfv": 0.25}, fv_grid=8, complete_per_mesh=25,
+                   width={"pointnet": 0.25, "voxnet": 0.5, "3dmfv": 0.25}, fv_grid=5, complete_per_mesh=25,
                    val_fraction=0.1, profile_points=4000, profile_azimuths=4),
     "paper": Scale(points=1024, samples_per_view=10, dense_points=100_000, resolution=1024, epochs=100, patience=20,
                    width={"pointnet": 1.0, "voxnet": 1.0, "3dmfv": 1.0}, fv_grid=8, complete_per_mesh=1,
