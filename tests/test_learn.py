@@ -267,3 +267,28 @@ def test_from_occluded_reads_both_storage_modes(tmp_path, storage):
 
     for b in range(4):
         np.testing.assert_allclose(full.points[b], normalize_points(raw[b]), atol=1e-6)
+
+
+def test_augmentation_split_rule():
+    from zbuf_occlude.learn.experiments import _split_3b
+
+    meshes = [
+        {"name": "bathtub_1", "class_name": "bathtub", "split": "train"},
+        {"name": "bathtub_2", "class_name": "bathtub", "split": "train"},
+        {"name": "chair_1", "class_name": "chair", "split": "train"},
+        {"name": "chair_9", "class_name": "chair", "split": "test"},
+        {"name": "lamp_1", "class_name": "lamp", "split": "train"},
+    ]
+    out = {m["name"]: m["split"] for m in _split_3b(meshes)}
+    # a class without a test mesh gives its last one to test; a single-mesh class is dropped
+    assert out == {"bathtub_1": "train", "bathtub_2": "test", "chair_1": "train", "chair_9": "test"}
+    assert meshes[1]["split"] == "train"  # the input is not modified
+
+
+def test_label_map_option():
+    from zbuf_occlude.learn.cli import _label_map
+
+    assert _label_map("Car=car, 4wd = car") == {"Car": "car", "4wd": "car"}
+    assert _label_map(None) == {}
+    with pytest.raises(InvalidInputError, match="REAL=MODEL"):
+        _label_map("car")

@@ -24,6 +24,8 @@ from ..errors import InvalidInputError
 from ..io import write_csv, write_text
 from .data import CloudSet, dedupe_meshes, from_meshes, from_occluded, split_validation
 from .metrics import accuracy_by_elevation, classification_report
+from .paper import MODELNET8, PAPER_3A, PAPER_3B, PAPER_3B_MEAN_F1, PAPER_3B_TEST3, TEST_ELEVATIONS, TRAIN_ELEVATIONS
+from .report import plot_augmentation, plot_elevation, table_3a, table_3b, write_confusion
 
 __all__ = [
     "SCALES",
@@ -33,6 +35,7 @@ __all__ = [
     "PAPER_3A",
     "PAPER_3B",
     "PAPER_3B_TEST3",
+    "PAPER_3B_MEAN_F1",
     "MODELNET8",
     "plan_meshes",
     "run_elevation",
@@ -41,27 +44,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-
-#: Table 3A: poses of paper100 (Eq. 11–12) used for training (34) and testing (66), degrees.
-TRAIN_ELEVATIONS = (-90.0, -70.0, -50.0, -20.0, 20.0, 50.0, 70.0, 90.0)
-TEST_ELEVATIONS = (-80.0, -60.0, -40.0, -30.0, -10.0, 0.0, 10.0, 30.0, 40.0, 60.0, 80.0)
-#: Table 3A, overall accuracy (%) at TEST_ELEVATIONS.
-PAPER_3A = {
-    "voxnet": (69.7, 71.1, 71.6, 74.4, 69.0, 50.3, 60.4, 69.3, 69.0, 68.0, 63.9),
-    "pointnet": (65.6, 64.9, 74.4, 76.9, 75.5, 60.6, 75.6, 78.3, 78.2, 74.8, 68.0),
-    "3dmfv": (97.6, 97.3, 98.0, 98.6, 97.6, 86.8, 97.7, 99.1, 98.5, 97.0, 97.3),
-}
-#: Table 3B (%): model → training set → (Test 1 complete meshes, Test 2 occluded clouds).
-PAPER_3B = {
-    "voxnet": {"C1": (81.0, 87.0), "C2": (82.0, 88.5), "C3": (87.5, 89.5)},
-    "3dmfv": {"C1": (76.3, 95.2), "C2": (45.9, 81.3), "C3": (79.7, 95.7)},
-}
-#: Table 3B Test 3, 3DmFV at 1,024 points: accuracy on SUO "car" / "4wd" (%).
-PAPER_3B_TEST3 = {"C1": (88.6, 66.7), "C2": (36.4, 42.9), "C3": (76.1, 81.0)}
-PAPER_3B_MEAN_F1 = 79.3
-#: "ModelNet8" of Table 3B.
-MODELNET8 = ("airplane", "bed", "bookshelf", "bottle", "car", "chair", "lamp", "table")
-
 
 @dataclass(frozen=True)
 class Scale:
@@ -151,10 +133,6 @@ def _machine() -> str:
 
     cpu = platform.processor() or platform.machine()
     return f"{platform.node()} {cpu}, {os.cpu_count()} CPUs, torch {torch.__version__}, {platform.python_version()}"
-
-
-def _fmt(x: float) -> str:
-    return "" if x is None or not np.isfinite(x) else f"{100 * x:.1f}"
 
 
 # -- Table 3A ------------------------------------------------------------------------------
@@ -275,9 +253,9 @@ def run_elevation(
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "results.csv", rows)
     write_csv(out / "per_class.csv", [{"class": k, "accuracy": v} for k, v in report["per_class"].items()])
-    _write_confusion(out / "confusion.csv", report["confusion"], names)
+    write_confusion(out / "confusion.csv", report["confusion"], names)
     curve = _visible_area_curve(meshes, data_dir, sc, method, progress) if profile else None
-    _plot_elevation(out / "accuracy_vs_elevation.png", {model: rows}, curve)
+    plot_elevation(out / "accuracy_vs_elevation.png", {model: rows}, curve)
     summary = {
         "experiment": "elevation (Table 3A)", "model": model, "scale": scale, "root": str(root),
         "data_dir": str(data_dir),
@@ -290,58 +268,8 @@ def run_elevation(
         "train_samples_per_s": result.samples_per_second,
     }  # fmt: skip
     write_text(out / "run.json", json.dumps(summary, indent=1, default=float))
-    write_text(out / "table.md", _table_3a({model: rows}, {model: summary}))
+    write_text(out / "table.md", table_3a({model: rows}, {model: summary}))
     return summary
-
-
-def _write_confusion(path: Path, cm: np.ndarray, names: Sequence[str]) -> None:
-    write_csv(path, [{"true\\pred": n, **{m: int(v) for m, v in zip(names, row)}} for n, row in zip(names, cm)])
-
-
-def _table_3a(rows_by_model: dict, summaries: dict) -> str:
-    lines = ["| model | " + " | ".join(f"{e:+.0f}°" for e in TEST_ELEVATIONS) + " | overall | mean class |",
-             "|---|" + "---|" * (len(TEST_ELEVATIONS) + 2)]  # fmt: skip
-    for model, rows in rows_by_model.items():
-        ours = {r["elevation_deg"]: r["accuracy"] for r in rows}
-        s = summaries.get(model, {})
-        lines.append(f"| {model} (ours) | " + " | ".join(_fmt(ours.get(e, float("nan"))) for e in TEST_ELEVATIONS)
-                     + f" | {_fmt(s.get('overall_accuracy', float('nan')))} | {_fmt(s.get('mean_class_accuracy', float('nan')))} |")  # fmt: skip
-        lines.append(f"| {model} (paper) | " + " | ".join(f"{v:.1f}" for v in PAPER_3A[model])
-                     + f" | {np.mean(PAPER_3A[model]):.1f}¹ | |")  # fmt: skip
-    lines.append("")
-    lines.append("¹ unweighted mean of the paper's per-elevation values (the paper gives no overall figure).")
-    return "\n".join(lines) + "\n"
-
-
-def _plot_elevation(path: Path, rows_by_model: dict, curve: list[dict] | None) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(8, 4.8))
-    for model, rows in rows_by_model.items():
-        el = [r["elevation_deg"] for r in rows]
-        line = ax.plot(el, [100 * r["accuracy"] for r in rows], marker="o", label=f"{model} (ours)")[0]
-        ax.plot(TEST_ELEVATIONS, PAPER_3A[model], ls="--", marker="x", color=line.get_color(), alpha=0.6,
-                label=f"{model} (paper)")  # fmt: skip
-    ax.set(xlabel="camera elevation (degrees)", ylabel="overall accuracy (%)", ylim=(0, 100),
-           title="Accuracy vs camera elevation (Table 3A protocol)")  # fmt: skip
-    ax.set_xticks(range(-90, 91, 30))
-    ax.grid(True, alpha=0.3)
-    handles, labels = ax.get_legend_handles_labels()
-    if curve:
-        ax2 = ax.twinx()
-        el = [r["elevation_deg"] for r in curve]
-        for key, style in (("area_xy", ":"), ("area_yz", "-."), ("area_xz", (0, (1, 3)))):
-            h = ax2.plot(el, [r[key] for r in curve], color="grey", ls=style, label=f"visible {key[5:]} area (Fig. 12)")[0]
-            handles.append(h)
-            labels.append(h.get_label())
-        ax2.set_ylabel("projected visible area, mean over meshes (object units²)")
-    ax.legend(handles, labels, fontsize=7, loc="lower left")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
 
 
 # -- Table 3B ------------------------------------------------------------------------------
@@ -451,7 +379,7 @@ def run_augmentation(
     write_csv(out / "results.csv", rows)
     if test3:
         write_csv(out / "test3.csv", test3)
-    _plot_augmentation(out / "augmentation.png", rows, model)
+    plot_augmentation(out / "augmentation.png", rows, model)
     summary = {
         "experiment": "augmentation (Table 3B)", "model": model, "scale": scale, "root": str(root),
         "classes": names, "train_meshes": [m["name"] for m in train_meshes],
@@ -463,7 +391,7 @@ def run_augmentation(
         "wall_s": {"render": t_render, **timings, "total": time.perf_counter() - t_start},
     }  # fmt: skip
     write_text(out / "run.json", json.dumps(summary, indent=1, default=float))
-    write_text(out / "table.md", _table_3b(rows, test3, model))
+    write_text(out / "table.md", table_3b(rows, test3, model))
     return summary
 
 
@@ -502,48 +430,6 @@ def _test3(model, scans, names, train_set: str, config, label_map) -> list[dict]
     return rows
 
 
-def _table_3b(rows: list[dict], test3: list[dict], model: str) -> str:
-    lines = ["| training set | Test 1 ours | Test 1 paper | Test 2 ours | Test 2 paper |", "|---|---|---|---|---|"]
-    for name in ("C1", "C2", "C3"):
-        r = {x["test"]: x for x in rows if x["train_set"] == name}
-        lines.append(f"| {name} | {_fmt(r['Test1']['overall_accuracy'])} | {_fmt(r['Test1']['paper_accuracy'])} | "
-                     f"{_fmt(r['Test2']['overall_accuracy'])} | {_fmt(r['Test2']['paper_accuracy'])} |")  # fmt: skip
-    if test3:
-        lines += ["", "Test 3 (real scans):", ""]
-        keys = [k for k in test3[0] if k != "train_set"]
-        lines.append("| training set | " + " | ".join(keys) + " |")
-        lines.append("|---|" + "---|" * len(keys))
-        for r in test3:
-            vals = [f"{v:.3f}" if isinstance(v, float) else str(v) for v in (r.get(k, "") for k in keys)]
-            lines.append(f"| {r['train_set']} | " + " | ".join(vals) + " |")
-        if model == "3dmfv":
-            lines.append("")
-            lines.append("Paper (3DmFV, 1,024 points, SUO): car / 4wd accuracy C1 88.6 / 66.7, C2 36.4 / 42.9, "
-                         f"C3 76.1 / 81.0; mean F1 over six car types {PAPER_3B_MEAN_F1}.")  # fmt: skip
-    return "\n".join(lines) + "\n"
-
-
-def _plot_augmentation(path: Path, rows: list[dict], model: str) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 4.2))
-    x = np.arange(3)
-    for k, (test, off) in enumerate((("Test1", -0.3), ("Test2", 0.1))):
-        ours = [next(r["overall_accuracy"] for r in rows if r["train_set"] == c and r["test"] == test) for c in ("C1", "C2", "C3")]
-        paper = [next(r["paper_accuracy"] for r in rows if r["train_set"] == c and r["test"] == test) for c in ("C1", "C2", "C3")]
-        ax.bar(x + off, 100 * np.array(ours), 0.2, label=f"{test} ours", color=f"C{k}")
-        ax.bar(x + off + 0.2, 100 * np.array(paper), 0.2, label=f"{test} paper", color=f"C{k}", alpha=0.4)
-    ax.set_xticks(x, ["C1 occluded", "C2 complete", "C3 both"])
-    ax.set(ylabel="overall accuracy (%)", ylim=(0, 100), title=f"{model}: training set vs test set (Table 3B protocol)")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-
-
 def combine_elevation(run_dirs: Sequence[str | os.PathLike], out: str | os.PathLike) -> Path:
     """Join the ``experiment elevation`` runs of several models: ``results.csv``, ``table.md`` and
     ``accuracy_vs_elevation.png`` (all models, Fig. 12's curve from the first run's data folder) in ``out``."""
@@ -565,6 +451,6 @@ def combine_elevation(run_dirs: Sequence[str | os.PathLike], out: str | os.PathL
                     curve = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(fh)]
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "results.csv", all_rows)
-    write_text(out / "table.md", _table_3a(rows_by_model, summaries))
-    _plot_elevation(out / "accuracy_vs_elevation.png", rows_by_model, curve)
+    write_text(out / "table.md", table_3a(rows_by_model, summaries))
+    plot_elevation(out / "accuracy_vs_elevation.png", rows_by_model, curve)
     return out
