@@ -114,6 +114,16 @@ def test_lidarnet_y_up_becomes_z_up_and_duplicates_drop(tmp_path):
     assert len(load_real_scans(tmp_path, dedupe=False)) == 3
 
 
+def test_lidarnet_axes_are_a_proper_rotation(tmp_path):
+    # (x, y, z) with y up → (x, −z, y): z up, handedness kept (a mirror would flip a chiral shape)
+    pts = np.array([[0.0, 0.0, 0.0], [5.0, 0.0, 0.0], [0.0, 10.0, 0.0], [0.0, 0.0, 15.0]])
+    _write_lidarnet(tmp_path / "a.csv", pts, "car")
+    scan = read_lidarnet_csv(tmp_path / "a.csv")
+    expected = normalize_points(np.stack([pts[:, 0], -pts[:, 2], pts[:, 1]], axis=1))
+    np.testing.assert_allclose(scan.points, expected, atol=1e-6)
+    np.testing.assert_allclose(scan.extent_m, [1.0, 3.0, 2.0], rtol=1e-6)  # 5 units per metre
+
+
 def test_lidarnet_bad_header(tmp_path):
     p = tmp_path / "x.csv"
     p.write_text("a,b,c\n1,2,3\n")

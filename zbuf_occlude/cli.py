@@ -218,8 +218,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     for add in (add_compare_parser, add_profile_parser, add_farm_parser, add_farm_merge_parser):
         add(sub)
+    from .learn.cli import add_parser as add_experiment_parser  # zbuf-occlude experiment; torch only when it runs
     from .sensors.cli import add_realism_parser, add_scan_parser
-    add_scan_parser(sub), add_realism_parser(sub)
+
+    for add in (add_scan_parser, add_realism_parser, add_experiment_parser):
+        add(sub)
     return parser
 
 

@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import InvalidInputError, OutputError
+from .errors import InvalidInputError
 
 __all__ = [
     "SUO_DTYPE",
@@ -185,14 +185,10 @@ def read_suo_csv(path: str | os.PathLike) -> NDArray[np.void]:
 
 
 def _atomic_write(path: Path, data: bytes) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
+    from .io import atomic_path  # OutputError on a bad folder or a full disk
+
+    with atomic_path(path) as tmp:
         tmp.write_bytes(data)
-        os.replace(tmp, path)
-    except OSError as exc:
-        tmp.unlink(missing_ok=True)
-        raise OutputError(f"cannot write {path}: {exc}") from None
 
 
 def write_suo_bin(path: str | os.PathLike, records: NDArray[np.void]) -> None:

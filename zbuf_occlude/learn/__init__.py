@@ -1,0 +1,30 @@
+"""Classifiers trained on generated clouds: the evidence of Sryamkin et al. 2023, Table 3.
+
+An optional part of zbuf_occlude (``pip install 'zbuf-occlude[learn]'``, PyTorch); the core
+package never imports it.  Modules:
+
+``models``       PointNet, VoxNet, 3DmFV-Net (torch)
+``data``         clouds from a farm data set or from meshes, augmentation (numpy)
+``training``     one deterministic, resumable training loop with early stopping (torch)
+``metrics``      overall / mean class / per-class accuracy, confusion, per elevation (numpy)
+``experiments``  the Table 3A (elevation) and Table 3B (augmentation) protocols
+``cli``          ``zbuf-occlude experiment elevation|augmentation``
+"""
+
+from __future__ import annotations
+
+__all__ = ["require_torch"]
+
+
+def require_torch():
+    """Import torch or raise :class:`~zbuf_occlude.errors.BackendUnavailable` saying how to install it."""
+    from ..errors import BackendUnavailable
+
+    try:
+        import torch
+    except ImportError:
+        raise BackendUnavailable(
+            "zbuf_occlude.learn needs PyTorch: pip install 'zbuf-occlude[learn]' "
+            "(CPU build; for CUDA: pip install torch==2.13.0 --index-url https://download.pytorch.org/whl/cu126)"
+        ) from None
+    return torch

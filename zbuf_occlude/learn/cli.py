@@ -1,0 +1,81 @@
+"""``zbuf-occlude experiment elevation|augmentation``: Table 3A and 3B of Sryamkin et al. 2023.
+
+The parser is added without importing torch; torch is imported when a command runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+from ..errors import InvalidInputError
+
+__all__ = ["add_parser"]
+
+
+def _label_map(text: str | None) -> dict[str, str]:
+    if not text:
+        return {}
+    out = {}
+    for item in text.split(","):
+        if "=" not in item:
+            raise InvalidInputError(f"--label-map expects REAL=MODEL,..., got {item!r}")
+        real, model = item.split("=", 1)
+        out[real.strip()] = model.strip()
+    return out
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("root", help="mesh tree (ModelNet layout: CLASS/SPLIT/NAME.off); duplicate meshes are dropped")
+    p.add_argument("--out", required=True, help="output folder (results.csv, table.md, run.json, plots, checkpoints)")
+    p.add_argument("--scale", choices=("quick", "paper"), default="quick",
+                   help="quick: fits a 2-core CPU; paper: the paper's sizes (ModelNet40 and a GPU)")
+    p.add_argument("--epochs", type=int, help="override the scale's epoch count")
+    p.add_argument("--points", type=int, help="points per cloud (override the scale's)")
+    p.add_argument("--method", default="zbuffer", help="HSR method of the farm (zbuffer; og32/og64 are the paper's)")
+    p.add_argument("--classes", help="comma-separated class names to keep")
+    p.add_argument("--data", help="folder for the farm's data set (default OUT/data); reuse it across models")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
+    p.add_argument("--threads", type=int, help="torch CPU threads")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def _run(args: argparse.Namespace) -> int:
+    from . import require_torch
+
+    require_torch()
+    from .experiments import run_augmentation, run_elevation
+
+    classes = [c.strip() for c in args.classes.split(",")] if args.classes else None
+    common = dict(model=args.model, scale=args.scale, epochs=args.epochs, points=args.points, method=args.method,
+                  classes=classes, data_dir=args.data, seed=args.seed, device=args.device, threads=args.threads,
+                  progress=not args.no_progress)  # fmt: skip
+    if args.experiment == "elevation":
+        summary = run_elevation(args.root, args.out, profile=not args.no_profile, **common)
+    else:
+        summary = run_augmentation(args.root, args.out, real_scans=args.real_scans,
+                                   label_map=_label_map(args.label_map), **common)  # fmt: skip
+    sys.stdout.write(f"{args.out}/table.md\n")
+    sys.stdout.write(open(f"{args.out}/table.md", encoding="utf-8").read())
+    sys.stdout.write(f"wall time {summary['wall_s']['total']:.0f} s\n")
+    return 0
+
+
+def add_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Add ``experiment`` (with ``elevation`` and ``augmentation``) to an argparse ``subparsers``."""
+    p = subparsers.add_parser("experiment", help="train PointNet/VoxNet/3DmFV on generated clouds (Table 3 of the paper)")
+    sub = p.add_subparsers(dest="experiment", required=True)
+    e = sub.add_parser("elevation", help="Table 3A: train on elevations ±90,±70,±50,±20, test on ±80..0")
+    _common(e)
+    e.add_argument("--model", choices=("pointnet", "voxnet", "3dmfv"), default="pointnet")
+    e.add_argument("--no-profile", action="store_true", help="skip Fig. 12's visible-area curve in the plot")
+    e.set_defaults(func=_run)
+    a = sub.add_parser("augmentation", help="Table 3B: C1 occluded / C2 complete / C3 both x Test 1/2 (/3 real scans)")
+    _common(a)
+    a.add_argument("--model", choices=("voxnet", "3dmfv", "pointnet"), default="3dmfv")
+    a.add_argument("--real-scans", help="Test 3: SUO objects/ folder or LiDARNet v2 folder")
+    a.add_argument("--label-map", help="rename real labels, REAL=MODEL,... (e.g. Car=car,4wd=car)")
+    a.set_defaults(func=_run)
+    return p
