@@ -136,7 +136,8 @@ def from_meshes(
     object_index : sequence of int, optional
         Stored as ``object_index`` (default 0..len-1).
     """
-    from .. import load_mesh, sample_surface
+    from ..mesh import load_mesh
+    from ..sampling import sample_surface
 
     if len(paths) != len(labels):
         raise InvalidInputError(f"{len(paths)} meshes but {len(labels)} labels")

@@ -138,11 +138,8 @@ def _machine() -> str:
 # -- Table 3A ------------------------------------------------------------------------------
 def _visible_area_curve(meshes: list[dict], data_dir: Path, scale: Scale, method: str, progress: bool) -> list[dict]:
     """Fig. 12: projected visible areas per elevation, averaged over the meshes (cached in data_dir)."""
-    try:  # the module may be renamed elevation_profile on another branch
-        from ..elevation_profile import profile_table  # type: ignore[import-not-found]
-    except ImportError:
-        from ..profile import profile_table
-    from .. import load_mesh
+    from ..elevation_profile import profile_table
+    from ..mesh import load_mesh
     from ..io import write_csv as _w
 
     cache = data_dir / "visible_area.csv"
