@@ -9,6 +9,7 @@ import argparse
 import sys
 from typing import Any
 
+from ..defaults import DEFAULT_METHOD
 from ..errors import InvalidInputError
 
 __all__ = ["add_parser"]
@@ -33,7 +34,7 @@ def _common(p: argparse.ArgumentParser) -> None:
                    help="quick: fits a 2-core CPU; paper: the paper's sizes (ModelNet40 and a GPU)")
     p.add_argument("--epochs", type=int, help="override the scale's epoch count")
     p.add_argument("--points", type=int, help="points per cloud (override the scale's)")
-    p.add_argument("--method", default="zbuffer", help="HSR method of the farm (zbuffer; og32/og64 are the paper's)")
+    p.add_argument("--method", default=DEFAULT_METHOD, help="HSR method of the farm (default: %(default)s; og32/og64 are the paper's)")
     p.add_argument("--classes", help="comma-separated class names to keep")
     p.add_argument("--data", help="folder for the farm's data set (default OUT/data); reuse it across models")
     p.add_argument("--seed", type=int, default=0)

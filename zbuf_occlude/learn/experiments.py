@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..defaults import DEFAULT_METHOD
 from ..errors import InvalidInputError
 from ..io import write_csv, write_text
 from .data import CloudSet, dedupe_meshes, from_meshes, from_occluded, split_validation
@@ -173,7 +174,7 @@ def run_elevation(
     scale: str = "quick",
     epochs: int | None = None,
     points: int | None = None,
-    method: str = "zbuffer",
+    method: str = DEFAULT_METHOD,
     classes: Sequence[str] | None = None,
     data_dir: str | os.PathLike | None = None,
     seed: int = 0,
@@ -298,7 +299,7 @@ def run_augmentation(
     scale: str = "quick",
     epochs: int | None = None,
     points: int | None = None,
-    method: str = "zbuffer",
+    method: str = DEFAULT_METHOD,
     classes: Sequence[str] | None = None,
     real_scans: str | os.PathLike | None = None,
     label_map: dict[str, str] | None = None,
