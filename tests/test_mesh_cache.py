@@ -49,3 +49,19 @@ def test_entries_of_collected_meshes_are_dropped():
     gc.collect()
     cache(trimesh.creation.icosphere())
     assert released == [value]
+
+
+def test_a_hit_refreshes_an_entry_lru_not_fifo():
+    """a, b, a (hit), c: LRU evicts b (least recently *used*); FIFO would evict a (first in)."""
+    cache, built, released = _counting_cache(size=2)
+    a, b, c = (trimesh.creation.box() for _ in range(3))
+    va, vb = cache(a), cache(b)
+    assert cache(a) is va  # a hit: a becomes the most recent
+    cache(c)
+    assert released == [vb]
+    assert cache(a) is va and len(built) == 3  # a survived: no rebuild
+    # and on: a, c are cached, c the most recent after this lookup; a new mesh evicts a
+    cache(c)
+    d = trimesh.creation.box()
+    cache(d)
+    assert released == [vb, va]
