@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
 import zipfile
@@ -131,19 +130,19 @@ def test_unknown_backend_is_refused():
 
 
 def test_shaders_ship_in_the_wheel_and_load_from_an_install(tmp_path):
-    if shutil.which("git") is None:
-        pytest.skip("git needed to copy the tracked tree")
+    # Skip only when the build backend truly cannot be imported (the 'test' extra has it);
+    # any failed build with hatchling present is a broken package and fails the test.
+    pytest.importorskip("hatchling", reason="hatchling (the build backend, in the 'test' extra) is not installed")
     wheel_dir = tmp_path / "wheel"
     build = subprocess.run(
         [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-w", str(wheel_dir), str(REPO)],
         capture_output=True, text=True, timeout=300,
     )  # fmt: skip
-    if build.returncode != 0 and "hatchling" in build.stderr:
-        pytest.skip("hatchling not installed")
     assert build.returncode == 0, build.stderr[-2000:]
     wheel = next(wheel_dir.glob("*.whl"))
     names = zipfile.ZipFile(wheel).namelist()
-    assert "zbuf_occlude/shaders/visibility_candidates.comp" in names
+    shipped = sorted(p.name for p in (REPO / "shaders").iterdir() if p.is_file())
+    assert shipped and all(f"zbuf_occlude/shaders/{name}" in names for name in shipped), names
     site = tmp_path / "site"
     subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--target", str(site), str(wheel)], check=True, timeout=300)
     code = "from zbuf_occlude.render.shaders import load_shader, shader_dirs; load_shader('visibility_candidates.comp'); print(shader_dirs()[0])"
