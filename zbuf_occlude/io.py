@@ -219,7 +219,8 @@ def write_ply(path: str | os.PathLike, cloud: OccludedCloud) -> Path:
     path = Path(path)
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
-            fh.write(header.encode("ascii") + b"\n")
+            # a PLY header is ASCII: a non-ASCII class name is escaped, not a crash
+            fh.write(header.encode("ascii", "backslashreplace") + b"\n")
             fh.write(rows.tobytes())
     return path
 
@@ -247,9 +248,9 @@ def write_h5(path: str | os.PathLike, clouds: Sequence[OccludedCloud], *, shape_
     path = Path(path)
     with atomic_path(path) as tmp:
         with h5py.File(tmp, "w") as f:
-            f.create_dataset("data", data=np.asarray([c.points for c in clouds], dtype=np.float32).reshape(-1, n, 3))
+            f.create_dataset("data", data=np.asarray([c.points for c in clouds], dtype=np.float32).reshape(len(clouds), n, 3))
             f.create_dataset("label", data=np.asarray([c.label for c in clouds], dtype=np.int64))
-            f.create_dataset("face_index", data=np.asarray([c.face_index for c in clouds], dtype=np.int32).reshape(-1, n))
+            f.create_dataset("face_index", data=np.asarray([c.face_index for c in clouds], dtype=np.int32).reshape(len(clouds), n))
             for key in ("elevation_deg", "azimuth_deg", "radius"):
                 f.create_dataset(key, data=np.asarray([getattr(c, key) for c in clouds], dtype=np.float64))
             for key in ("sample_index", "n_visible"):
