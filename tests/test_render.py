@@ -150,3 +150,43 @@ def test_shaders_ship_in_the_wheel_and_load_from_an_install(tmp_path):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=tmp_path, timeout=120)
     assert out.returncode == 0, out.stderr
     assert Path(out.stdout.strip()).is_relative_to(site)
+
+
+# -- the compute shaders' exact segment test (shaders/common.glsl) -------------------------
+def _zbuffer(mesh, points, cam, **options):
+    # no face_index: no point is "uncertain", so the GPU alone decides every point
+    return zo.visible_mask(mesh, points, cam, "zbuffer", resolve="none", **options)
+
+
+def test_gpu_self_hit_tolerance_is_a_distance_not_a_segment_parameter():
+    """A quad hides points below it iff their distance to it exceeds the tolerance; the
+    segments are ~4 long, so t = distance / 4 would let the 1.2e-3 and 2e-3 ones through."""
+    quad = trimesh.Trimesh(
+        vertices=[[-0.4, -0.4, 0.0], [0.4, -0.4, 0.0], [0.4, 0.4, 0.0], [-0.4, 0.4, 0.0]], faces=[[0, 1, 2], [0, 2, 3]]
+    )
+    cam = zo.camera_on_sphere(90.0, 0.0, 4.0, resolution=128)
+    tol = 1e-3
+    d = np.array([0.5, 0.8, 1.3, 2.0]) * tol
+    points = np.stack([np.full(4, 0.13), np.full(4, -0.07), -d], axis=1)
+    visible = _zbuffer(quad, points, cam, tolerance=tol)
+    assert visible.tolist() == [True, True, False, False]
+
+
+def test_gpu_sight_lines_through_a_shared_edge_never_leak():
+    """Points seen exactly through the edge shared by two faces (non-dyadic, so the crossing
+    rounds off the edge in float32) are hidden: the barycentric bounds are widened."""
+    rng = np.random.default_rng(4)
+    a, b = np.array([-0.31, -0.11, 0.023]), np.array([0.347, 0.123, -0.031])
+    mid = (a + b) / 2
+    across = np.cross(b - a, [0.0, 0.0, 1.0])
+    across /= np.linalg.norm(across)
+    c1, c2 = mid + 0.29 * across + [0, 0, 0.047], mid - 0.33 * across - [0, 0, 0.052]
+    patch = trimesh.Trimesh(vertices=[a, b, c1, c2], faces=[[0, 1, 2], [1, 0, 3]], process=False)
+    cam = zo.camera_on_sphere(90.0, 0.0, 4.0, resolution=128)
+    s = rng.uniform(0.05, 0.95, 400)
+    on_edge = a + s[:, None] * (b - a)
+    to_eye = cam.eye - on_edge
+    points = on_edge - 0.2 * to_eye / np.linalg.norm(to_eye, axis=1, keepdims=True)
+    assert not zo.visible_mask(patch, points, cam, "oracle").any()
+    visible = _zbuffer(patch, points, cam)
+    assert not visible.any(), f"{visible.sum()} of {len(points)} points seen through the shared edge"
