@@ -12,7 +12,7 @@
 #
 # Environment: PYTHON (default: python), MUTATION_SCRATCH (default: $TMPDIR/zbuf_mutation),
 # MUTATION_JOBS (parallel mutants, default 2), NICE (default 10).
-set -euo pipefail
+set -euo pipefail -f  # -f: mutant-name globs are passed to mutmut, not expanded
 
 ROOT=$(git -C "$(dirname "$0")" rev-parse --show-toplevel)
 PYTHON=${PYTHON:-python}
@@ -31,6 +31,16 @@ declare -A SOURCE=(
   [oracle]=zbuf_occlude/visibility/oracle.py
   [farm_worker]=zbuf_occlude/farm/worker.py
   [dataset]=zbuf_occlude/dataset.py
+  [oracle_kernel]=zbuf_occlude/visibility/oracle.py
+)
+# modules that are part of a file: only these mutants (mutmut name globs) are run and scored
+K=zbuf_occlude.visibility.oracle
+declare -A ONLY=(
+  [oracle_kernel]="$K.xǁTrianglePlanesǁ* $K.x__dot3* $K.x__cross* $K.x_triangle_planes* $K.x__segment_plane* $K.x__inside_triangle* $K.x_segment_hits_triangles* $K.x__pair_occludes* $K.x__near_own_surface*"
+)
+# pytest -k expressions for modules whose test file has slow parts mutmut need not rerun
+declare -A KEXPR=(
+  [oracle_kernel]="not large_mesh and not convex and not same_inputs and not built_once and not cull_drops"
 )
 declare -A TESTS=(
   [io]="tests/test_io.py"
@@ -42,8 +52,9 @@ declare -A TESTS=(
   [oracle]="tests/test_oracle.py"
   [farm_worker]="tests/test_farm.py tests/test_dataset.py"
   [dataset]="tests/test_dataset.py"
+  [oracle_kernel]="tests/test_oracle.py"
 )
-ORDER=(io mesh_cache cameras sampling mesh occlude oracle farm_worker dataset)
+ORDER=(io mesh_cache cameras sampling mesh occlude oracle_kernel oracle farm_worker dataset)
 
 modules=("$@")
 [ ${#modules[@]} -eq 0 ] && modules=("${ORDER[@]}")
@@ -61,29 +72,32 @@ for m in "${modules[@]}"; do
   (cd "$ROOT" && git ls-files -z --cached --others --exclude-standard) |
     (cd "$ROOT" && xargs -0 cp --parents -t "$dir" 2>/dev/null || true)
   # this module only, against its own tests
-  "$PYTHON" - "$dir/pyproject.toml" "${SOURCE[$m]}" ${TESTS[$m]} <<'PY'
+  "$PYTHON" - "$dir/pyproject.toml" "${KEXPR[$m]:-}" "${SOURCE[$m]}" ${TESTS[$m]} <<'PY'
 import re, sys
-path, source, tests = sys.argv[1], sys.argv[2], sys.argv[3:]
+path, kexpr, source, tests = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4:]
 text = open(path, encoding="utf-8").read()
 def toml_list(items):
     return "[" + ", ".join(f'"{x}"' for x in items) + "]"
 text = re.sub(r"(?ms)^only_mutate = \[.*?\]\n", f"only_mutate = {toml_list([source])}\n", text)
 text = re.sub(r"(?ms)^pytest_add_cli_args_test_selection = \[.*?\]\n",
               f"pytest_add_cli_args_test_selection = {toml_list(tests)}\n", text)
+if kexpr:
+    text = re.sub(r"(?m)^pytest_add_cli_args = \[(.*?)\]$", lambda m: f"pytest_add_cli_args = [{m.group(1)}, \"-k\", \"{kexpr}\"]", text)
 open(path, "w", encoding="utf-8").write(text)
 PY
   echo "== $m: mutating ${SOURCE[$m]} against ${TESTS[$m]} (scratch: $dir)"
   start=$(date +%s)
   # PYTHONPATH must not point at the original sources: mutmut puts ./mutants first
-  (cd "$dir" && env -u PYTHONPATH nice -n "$NICE" "${MUTMUT[@]}" run --max-children "$JOBS" > run.log 2>&1) || true
+  # shellcheck disable=SC2086  # ONLY holds several globs
+  (cd "$dir" && env -u PYTHONPATH nice -n "$NICE" "${MUTMUT[@]}" run --max-children "$JOBS" ${ONLY[$m]:-} > run.log 2>&1) || true
   (cd "$dir" && env -u PYTHONPATH "${MUTMUT[@]}" results --all true > results.txt 2>&1) || true
-  "$PYTHON" - "$dir/results.txt" "$m" "$(( $(date +%s) - start ))" "$dir/survivors.txt" "$SCRATCH/scores.txt" <<'PY'
-import collections, sys
-results, module, seconds, survivors_path, scores_path = sys.argv[1:]
+  "$PYTHON" - "$dir/results.txt" "$m" "$(( $(date +%s) - start ))" "$dir/survivors.txt" "$SCRATCH/scores.txt" ${ONLY[$m]:-} <<'PY'
+import collections, fnmatch, sys
+results, module, seconds, survivors_path, scores_path, *only = sys.argv[1:]
 status = {}
 for line in open(results, encoding="utf-8"):
     name, sep, state = line.strip().rpartition(": ")
-    if sep and "__mutmut_" in name:
+    if sep and "__mutmut_" in name and (not only or any(fnmatch.fnmatch(name, g) for g in only)):
         status[name] = state
 count = collections.Counter(status.values())
 total = len(status)
