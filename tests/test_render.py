@@ -190,3 +190,35 @@ def test_gpu_sight_lines_through_a_shared_edge_never_leak():
     assert not zo.visible_mask(patch, points, cam, "oracle").any()
     visible = _zbuffer(patch, points, cam)
     assert not visible.any(), f"{visible.sum()} of {len(points)} points seen through the shared edge"
+
+
+def test_gpu_bit_masks_do_not_depend_on_the_point_count(sample_mesh_files):
+    """The shader packs visible and uncertain flags in 32-bit words, uncertain ones after
+    ceil(N / 32) visible words: a point's flags must not change with the number of points
+    uploaded with it (1000 is not a multiple of 32), and uncertain implies visible."""
+    mesh = zo.load_mesh(next(p for p in sample_mesh_files if "chair" in p.name))
+    points, face_index = zo.sample_surface(mesh, count=1024, seed=2)
+    renderer = renderer_for(mesh)
+    cam = zo.camera_on_sphere(30.0, 45.0, 4.0, resolution=128)
+    masks = {}
+    for n in (1024, 1000, 37):
+        buffer = renderer.upload_points(points[:n], face_index[:n])
+        try:
+            masks[n] = renderer.visible(cam, buffer, rule="candidates", neighborhood=1, tolerance=1e-5)
+        finally:
+            with renderer.ctx:
+                buffer.release()
+    visible, uncertain = masks[1024]
+    assert 0 < uncertain.sum() and 0 < visible.sum() < len(visible)  # not vacuous
+    assert not (uncertain & ~visible).any()
+    for n in (1000, 37):
+        assert np.array_equal(masks[n][0], visible[:n]) and np.array_equal(masks[n][1], uncertain[:n]), n
+    # Uncertain = visible, but the centre pixel shows another face than the point's own (as
+    # the image holds it: the lowest index of its group of identical faces).  Points within
+    # 0.01 px of a pixel border are left out: float32 may put them in the next pixel.
+    uv, _ = cam.project(points)
+    inner = np.all(np.abs(uv - np.floor(uv) - 0.5) < 0.49, axis=1) & cam.in_frustum(points)
+    pix = np.floor(uv[inner]).astype(int)
+    centre = renderer.render(cam).face_index[pix[:, 1], pix[:, 0]]
+    other_face = centre != renderer.canonical[face_index[inner]]
+    assert np.array_equal(uncertain[inner], visible[inner] & other_face)
