@@ -246,6 +246,7 @@ def test_h5_round_trip_keeps_every_field_in_pointnets_dtypes(tmp_path):
     from zbuf_occlude.io import read_h5_clouds
 
     clouds = [_odd_types_cloud(seed=i, label=np.int32(i)) for i in range(3)]
+    clouds[1].face_index = clouds[1].face_index.astype(np.int64)  # stored int32 whatever comes in
     path = write_h5(tmp_path / "x.h5", clouds, shape_names=["a", "b", "c", "chaise_longue_é"])
     for a, b in zip(clouds, read_h5_clouds(path)):
         _same_cloud(a, b)
@@ -324,3 +325,21 @@ def test_os_errors_become_output_errors_with_a_hint(tmp_path, monkeypatch, err, 
         write_npz(tmp_path / "x.npz", _cloud())
     if err == errno.EIO:
         assert "permission" not in str(info.value) and os.strerror(err) in str(info.value)
+
+
+def test_text_files_are_utf8_whatever_the_locale(tmp_path):
+    """write_text and write_csv write UTF-8 even where the locale's encoding is ASCII."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from zbuf_occlude.io import write_csv, write_text\n"
+        "write_text(sys.argv[1] + '/t.txt', 'chaise_\\u00e9\\n')\n"  # ASCII source: the locale is C
+        "write_csv(sys.argv[1] + '/c.csv', [{'class': 'chaise_\\u00e9'}])\n"
+    )
+    env = {**os.environ, "LC_ALL": "C", "LANG": "C", "PYTHONUTF8": "0", "PYTHONCOERCECLOCALE": "0", "PYTHONIOENCODING": "ascii"}
+    out = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True, env=env, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert (tmp_path / "t.txt").read_bytes() == "chaise_é\n".encode("utf-8")
+    assert (tmp_path / "c.csv").read_bytes() == "class\r\nchaise_é\r\n".encode("utf-8")
