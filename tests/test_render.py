@@ -155,7 +155,7 @@ def test_shaders_ship_in_the_wheel_and_load_from_an_install(tmp_path):
 # -- the compute shaders' exact segment test (shaders/common.glsl) -------------------------
 def _zbuffer(mesh, points, cam, **options):
     # no face_index: no point is "uncertain", so the GPU alone decides every point
-    return zo.visible_mask(mesh, points, cam, "zbuffer", resolve="none", **options)
+    return zo.visible_mask(mesh, points, cam, "zbuffer", resolve="none", resolution=cam.resolution, **options)
 
 
 def test_gpu_self_hit_tolerance_is_a_distance_not_a_segment_parameter():
@@ -222,3 +222,52 @@ def test_gpu_bit_masks_do_not_depend_on_the_point_count(sample_mesh_files):
     centre = renderer.render(cam).face_index[pix[:, 1], pix[:, 0]]
     other_face = centre != renderer.canonical[face_index[inner]]
     assert np.array_equal(uncertain[inner], visible[inner] & other_face)
+
+
+def _tolerance_rule(mesh, points, cam, face_index=None, **constants):
+    return zo.visible_mask(
+        mesh, points, cam, "zbuffer-tolerance", face_index=face_index, resolution=cam.resolution, **constants
+    )
+
+
+def test_gpu_depth_rule_shows_points_on_the_background():
+    """zbuffer-tolerance: a point whose pixel shows no surface has nothing in front of it."""
+    quad = trimesh.Trimesh(vertices=[[-0.2, -0.2, 0], [0.2, -0.2, 0], [0.2, 0.2, 0], [-0.2, 0.2, 0]], faces=[[0, 1, 2], [0, 2, 3]])
+    cam = zo.camera_on_sphere(90.0, 0.0, 4.0, resolution=64)
+    beside = np.array([[0.35, 0.0, 0.0], [-0.3, 0.3, -0.1]])
+    behind = np.array([[0.05, 0.02, -0.2]])
+    got = _tolerance_rule(quad, np.concatenate([beside, behind]), cam, depth_tolerance=0.0, slope_scale=0.0)
+    assert got.tolist() == [True, True, False]
+
+
+def test_gpu_depth_rule_slope_term_uses_the_angle_of_the_own_face():
+    """A plane at 80 degrees to the sight lines: a point's depth differs from its pixel
+    centre's by up to 0.5 px x tan(80°) ≈ 2.8 pixel footprints, so with no constant term
+    only the slope term (1 x footprint x tan θ) keeps the points visible."""
+    tilt = np.radians(80.0)
+    axis_u, axis_w = np.array([1.0, 0.0, 0.0]), np.array([0.0, np.cos(tilt), np.sin(tilt)])  # normal at 80° to z
+    corners = np.array([-0.3 * axis_u - 0.3 * axis_w, 0.3 * axis_u - 0.3 * axis_w, 0.3 * axis_u + 0.3 * axis_w, -0.3 * axis_u + 0.3 * axis_w])
+    plane = trimesh.Trimesh(vertices=corners, faces=[[0, 1, 2], [0, 2, 3]])
+    points, face_index = zo.sample_surface(plane, count=2000, seed=3)
+    cam = zo.camera_on_sphere(90.0, 0.0, 4.0, resolution=128)
+    slope = _tolerance_rule(plane, points, cam, face_index, depth_tolerance=0.0, slope_scale=1.0, max_slope=20.0)
+    flat = _tolerance_rule(plane, points, cam, face_index, depth_tolerance=0.0, slope_scale=0.0)
+    in_view = cam.in_frustum(points)
+    assert slope[in_view].mean() > 0.99  # a lone plane: everything in view is visible
+    assert flat[in_view].mean() < 0.8  # without the slope term about half fail
+
+
+def test_gpu_depth_rule_slope_of_a_back_facing_face_is_its_angle_not_the_clamp():
+    """Points on a face wound away from the camera, 0.05 behind an occluder: |cos θ| keeps
+    their slope term small (θ ≈ 0), so they stay hidden; a signed cos would clamp the slope
+    to max_slope and let them through."""
+    front = [[-0.2, -0.2, 0.0], [0.2, -0.2, 0.0], [0.2, 0.2, 0.0], [-0.2, 0.2, 0.0]]
+    back = [[-0.15, -0.15, -0.05], [-0.15, 0.15, -0.05], [0.15, 0.15, -0.05], [0.15, -0.15, -0.05]]  # normal -z
+    mesh = trimesh.Trimesh(vertices=front + back, faces=[[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]], process=False)
+    assert mesh.face_normals[2, 2] < 0  # wound away from a camera above
+    cam = zo.camera_on_sphere(90.0, 0.0, 4.0, resolution=128)
+    points, face_index = zo.sample_surface(mesh, count=4000, seed=5)
+    on_back = face_index >= 2
+    got = _tolerance_rule(mesh, points, cam, face_index, depth_tolerance=0.0, slope_scale=1.0, max_slope=10.0)
+    assert not got[on_back].any()
+    assert got[~on_back].mean() > 0.99
