@@ -552,3 +552,38 @@ def test_missing_embree_raises_backend_unavailable(monkeypatch):
     monkeypatch.setitem(sys.modules, "embreex", None)  # makes `import embreex` fail
     with pytest.raises(BackendUnavailable, match="pip install embreex"):
         occluded_embree(QUAD, np.zeros((1, 3)), EYE_ABOVE)
+
+
+def test_only_faces_between_the_point_and_the_eye_count():
+    """The segment is closed and finite: a face behind the point or beyond the eye on the
+    same line neither hits the segment nor occludes."""
+    p, eye = np.array([0.25, -0.5, -1.0]), np.array([0.25, -0.5, 1.0])
+    behind, beyond = QUAD + [0.0, 0.0, -2.0], QUAD + [0.0, 0.0, 2.0]
+    for tri in (behind, beyond):
+        hit, dist = segment_hits_triangles(p, eye, tri)
+        assert not hit.any() and np.isinf(dist).all()
+        for occ in both_occluded(tri, p[None], eye):
+            assert not occ.any()
+    hit, _ = segment_hits_triangles(p, eye, QUAD)  # the quad itself, between them
+    assert hit.any()
+
+
+def test_a_points_own_face_never_hides_it_even_with_zero_tolerance():
+    tri = np.array([[[-0.4, -0.3, 0.1], [0.5, -0.2, -0.05], [0.0, 0.45, 0.02]]])
+    mesh = trimesh.Trimesh(vertices=tri[0], faces=[[0, 1, 2]], process=False)
+    points, face_index = trimesh.sample.sample_surface(mesh, 300, seed=8)
+    eye = camera_on_sphere(-35.0, 120.0, RADIUS).eye
+    assert not occluded_numpy(tri, points, eye, face_index=face_index, tolerance=0.0).any()
+    assert not occluded_numpy(tri, points, eye, face_index=face_index, tolerance=0.0, cull=False).any()
+
+
+def test_kernel_shapes_one_triangle_and_bad_points():
+    one = QUAD[0]  # a single (3, 3) triangle is a valid input
+    hit, dist = segment_hits_triangles(np.array([0.75, -0.5, -1.0]), EYE_ABOVE, one)
+    assert hit.shape == () and bool(hit) and dist == pytest.approx(math.dist((0.75, -0.5, -1.0), (0.6, -0.4, 0.0)))
+    with pytest.raises(InvalidInputError):
+        segment_hits_triangles(np.zeros(2), EYE_ABOVE, one)  # p bad, eye fine
+    with pytest.raises(InvalidInputError):
+        segment_hits_triangles(np.zeros(3), np.zeros(2), one)  # eye bad, p fine
+    with pytest.raises(InvalidInputError):
+        triangle_planes(np.zeros((3,)))
