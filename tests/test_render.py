@@ -224,6 +224,34 @@ def test_gpu_bit_masks_do_not_depend_on_the_point_count(sample_mesh_files):
     assert np.array_equal(uncertain[inner], visible[inner] & other_face)
 
 
+def _through_pixel(cam, u, v, depth):
+    """World points at linear ``depth`` on the rays through image points (u, v) (OpenCV pixels)."""
+    u, v = np.broadcast_arrays(np.asarray(u, dtype=float), np.asarray(v, dtype=float))
+    d_cam = np.stack([(u - cam.width / 2) / cam.focal_px, (v - cam.height / 2) / cam.focal_px, np.ones_like(u)], -1)
+    return cam.eye + depth * (d_cam @ cam.extrinsics[:, :3])
+
+
+def test_gpu_candidate_window_covers_the_rows_above_and_below():
+    """A thin triangle drawn only in the pixel row just below (above) a point's pixel still
+    hides it: the candidate window is symmetric.  Each triangle spans 0.7 px in v, its long
+    edge 0.05 px past the point's sight line, its apex in the next row, whose pixel centres
+    near the point's column it covers; the point's own row shows nothing."""
+    cam = zo.camera_on_sphere(90.0, 0.0, 4.0, resolution=64)
+    r, c = 30, 20
+    points, tris = [], []
+    for col, v0, edge, apex in ((c, r + 0.95, r + 0.9, r + 1.6), (c + 16, r + 0.05, r + 0.1, r - 0.6)):
+        points.append(_through_pixel(cam, col + 0.5, v0, 4.1))  # depths inside the near/far planes
+        tris.append(_through_pixel(cam, [col - 9.5, col + 10.5, col + 0.5], [edge, edge, apex], 3.7))
+    bars = trimesh.Trimesh(vertices=np.concatenate(tris), faces=np.arange(3 * len(tris)).reshape(-1, 3), process=False)
+    points = np.array(points)
+    frame = renderer_for(bars).render(cam)
+    assert (frame.face_index[r] < 0).all()  # the points' own row shows no face
+    assert (frame.face_index[r + 1, c - 1 : c + 2] == 0).all() and (frame.face_index[r - 1, c + 15 : c + 18] == 1).all()
+    assert not zo.visible_mask(bars, points, cam, "oracle").any()
+    assert not _zbuffer(bars, points, cam, neighborhood=1).any()
+    assert _zbuffer(bars, points, cam, neighborhood=0).all()  # the centre pixel alone sees nothing
+
+
 def _tolerance_rule(mesh, points, cam, face_index=None, **constants):
     return zo.visible_mask(
         mesh, points, cam, "zbuffer-tolerance", face_index=face_index, resolution=cam.resolution, **constants
