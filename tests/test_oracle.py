@@ -564,6 +564,7 @@ def test_only_faces_between_the_point_and_the_eye_count():
         assert not hit.any() and np.isinf(dist).all()
         for occ in both_occluded(tri, p[None], eye):
             assert not occ.any()
+        assert not occluded_numpy(tri, p[None], eye, cull=False).any()  # the cull cannot hide a bug
     hit, _ = segment_hits_triangles(p, eye, QUAD)  # the quad itself, between them
     assert hit.any()
 
