@@ -38,6 +38,9 @@ K=zbuf_occlude.visibility.oracle
 declare -A ONLY=(
   [oracle_kernel]="$K.xǁTrianglePlanesǁ* $K.x__dot3* $K.x__cross* $K.x_triangle_planes* $K.x__segment_plane* $K.x__inside_triangle* $K.x_segment_hits_triangles* $K.x__pair_occludes* $K.x__near_own_surface*"
 )
+# modules whose tests open OpenGL contexts: a context inherited across fork hangs, so the
+# mutant workers are forked from a server that never ran a test (mutmut's forkserver)
+declare -A FORKSERVER=([occlude]=1 [farm_worker]=1 [dataset]=1 [oracle]=1)
 # pytest -k expressions for modules whose test file has slow parts mutmut need not rerun
 declare -A KEXPR=(
   [oracle_kernel]="not large_mesh and not convex and not same_inputs and not built_once and not cull_drops"
@@ -72,9 +75,9 @@ for m in "${modules[@]}"; do
   (cd "$ROOT" && git ls-files -z --cached --others --exclude-standard) |
     (cd "$ROOT" && xargs -0 cp --parents -t "$dir" 2>/dev/null || true)
   # this module only, against its own tests
-  "$PYTHON" - "$dir/pyproject.toml" "${KEXPR[$m]:-}" "${SOURCE[$m]}" ${TESTS[$m]} <<'PY'
+  "$PYTHON" - "$dir/pyproject.toml" "${FORKSERVER[$m]:-}" "${KEXPR[$m]:-}" "${SOURCE[$m]}" ${TESTS[$m]} <<'PY'
 import re, sys
-path, kexpr, source, tests = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4:]
+path, forkserver, kexpr, source, tests = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4], sys.argv[5:]
 text = open(path, encoding="utf-8").read()
 def toml_list(items):
     return "[" + ", ".join(f'"{x}"' for x in items) + "]"
@@ -83,6 +86,8 @@ text = re.sub(r"(?ms)^pytest_add_cli_args_test_selection = \[.*?\]\n",
               f"pytest_add_cli_args_test_selection = {toml_list(tests)}\n", text)
 if kexpr:
     text = re.sub(r"(?m)^pytest_add_cli_args = \[(.*?)\]$", lambda m: f"pytest_add_cli_args = [{m.group(1)}, \"-k\", \"{kexpr}\"]", text)
+if forkserver:
+    text = text.replace("[tool.mutmut]\n", '[tool.mutmut]\nprocess_isolation = "forkserver"\n', 1)
 open(path, "w", encoding="utf-8").write(text)
 PY
   echo "== $m: mutating ${SOURCE[$m]} against ${TESTS[$m]} (scratch: $dir)"
