@@ -74,6 +74,8 @@ for m in "${modules[@]}"; do
   # the working tree as git sees it: tracked and untracked-but-not-ignored files
   (cd "$ROOT" && git ls-files -z --cached --others --exclude-standard) |
     (cd "$ROOT" && xargs -0 cp --parents -t "$dir" 2>/dev/null || true)
+  # tests find ../shared beside the repository (mutmut runs them in $dir/mutants)
+  [ -d "$ROOT/../shared" ] && ln -s "$(cd "$ROOT/../shared" && pwd)" "$dir/shared"
   # this module only, against its own tests
   "$PYTHON" - "$dir/pyproject.toml" "${FORKSERVER[$m]:-}" "${KEXPR[$m]:-}" "${SOURCE[$m]}" ${TESTS[$m]} <<'PY'
 import re, sys
