@@ -77,3 +77,65 @@ def test_user_errors_are_one_line_and_exit_2(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith("zbuf-occlude: error:") and "\n" not in err
     assert main(["validate", "--views", "bogus"]) == 2
+
+
+# -- exit codes ----------------------------------------------------------------------------
+def test_validate_exits_1_when_a_mesh_fails(tmp_path, two_meshes, capsys):
+    bad = two_meshes / "sofa" / "train" / "broken.off"
+    bad.write_text("OFF\n3 1 0\n0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n")
+    code = main(["validate", str(two_meshes), "--views", "30:45", "--points", "500", "--resolution", "128"])
+    captured = capsys.readouterr()
+    assert code == 1
+    assert "FAILED" in captured.err and "broken.off" in captured.err
+    # the good meshes were still scored
+    assert sum(" auto " in line for line in captured.out.splitlines()) == 2
+
+
+def test_interrupt_exits_130_with_a_resume_hint(tmp_path, two_meshes, monkeypatch, capsys):
+    from zbuf_occlude.farm import worker
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(worker, "load_mesh", interrupted)  # generate loads meshes in the farm's worker
+    assert main(["generate", str(two_meshes), "--out", str(tmp_path / "o"), *ARGS]) == 130
+    assert "interrupted" in capsys.readouterr().err
+    from zbuf_occlude.farm import cli as farm_cli
+
+    monkeypatch.setattr(farm_cli, "run_farm", interrupted)
+    assert main(["farm", str(two_meshes), "--out", str(tmp_path / "f"), "--no-progress"]) == 130
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["farm", "{missing}", "--out", "{tmp}/f"],
+        ["farm", "{meshes}", "--out", "{tmp}/f", "--shard", "5/2"],
+        ["farm", "{meshes}", "--out", "{tmp}/f", "--workers", "0"],
+        ["farm", "{meshes}", "--out", "{tmp}/f", "--views", "bogus"],
+        ["farm-merge", "{missing}"],
+    ],
+    ids=["missing-root", "bad-shard", "no-workers", "bad-views", "merge-missing"],
+)
+def test_farm_errors_through_main_exit_2_on_one_line(tmp_path, two_meshes, capsys, argv):
+    argv = [a.format(missing=tmp_path / "nope", tmp=tmp_path, meshes=two_meshes) for a in argv]
+    assert main([*argv, "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("zbuf-occlude: error:") and "\n" not in err
+
+
+def test_python_dash_m_runs_the_cli_and_passes_its_exit_status(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    from zbuf_occlude import __version__
+
+    def run(*argv):
+        return subprocess.run([sys.executable, "-m", "zbuf_occlude", *argv], capture_output=True, text=True, timeout=300, env=os.environ)
+
+    out = run("--version")
+    assert out.returncode == 0 and out.stdout.strip() == f"zbuf-occlude {__version__}"
+    out = run("generate", str(tmp_path / "nope"), "--out", str(tmp_path / "o"))
+    assert out.returncode == 2 and out.stderr.startswith("zbuf-occlude: error:")
+    assert run("no-such-command").returncode == 2  # argparse's usage error

@@ -98,3 +98,248 @@ def test_h5_clouds_round_trip(tmp_path):
     for a, b in zip(clouds, back):
         assert np.array_equal(a.points, b.points) and np.array_equal(a.face_index, b.face_index)
         assert (a.label, a.sample_index, a.source, a.n_visible) == (b.label, b.sample_index, b.source, b.n_visible)
+
+
+# -- the guarantees of atomic_path, one by one ---------------------------------------------
+def _spy(monkeypatch, log):
+    """Record os.fsync (with the path of the fd) and os.replace calls, in order."""
+    real_fsync, real_replace = os.fsync, os.replace
+
+    def fsync(fd):
+        log.append(("fsync", os.readlink(f"/proc/self/fd/{fd}") if os.path.exists("/proc/self/fd") else fd))
+        return real_fsync(fd)
+
+    def replace(src, dst, *a, **k):
+        log.append(("replace", os.fspath(src), os.fspath(dst)))
+        return real_replace(src, dst, *a, **k)
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    monkeypatch.setattr(os, "replace", replace)
+
+
+def test_the_temporary_is_beside_the_target_not_in_tmpdir(tmp_path, monkeypatch):
+    """os.replace is atomic only within one file system: the temporary must be created in
+    the target's own folder, whatever $TMPDIR says."""
+    import tempfile
+
+    elsewhere = tmp_path / "tmpdir"
+    elsewhere.mkdir()
+    monkeypatch.setenv("TMPDIR", str(elsewhere))
+    monkeypatch.setattr(tempfile, "tempdir", str(elsewhere))
+    log = []
+    _spy(monkeypatch, log)
+    target = tmp_path / "out" / "x.npz"
+    write_npz(target, _cloud())
+    replaces = [e for e in log if e[0] == "replace"]
+    assert len(replaces) == 1
+    _, src, dst = replaces[0]
+    assert os.path.dirname(src) == str(target.parent) and dst == str(target)
+    assert list(elsewhere.iterdir()) == []
+    assert sorted(p.name for p in target.parent.iterdir()) == ["x.npz"]
+
+
+@pytest.mark.parametrize("writer", ["npz", "ply", "h5", "text", "csv"])
+def test_data_are_fsynced_before_the_rename(tmp_path, monkeypatch, writer):
+    from zbuf_occlude.io import write_csv, write_text
+
+    log = []
+    _spy(monkeypatch, log)
+    target = tmp_path / f"x.{writer}"
+    write = {
+        "npz": lambda: write_npz(target, _cloud()),
+        "ply": lambda: write_ply(target, _cloud()),
+        "h5": lambda: write_h5(target, [_cloud()]),
+        "text": lambda: write_text(target, "hello\n"),
+        "csv": lambda: write_csv(target, [{"a": 1, "b": 2}]),
+    }[writer]
+    write()
+    kinds = [e[0] for e in log]
+    assert kinds == ["fsync", "replace"], log
+    _, src, _ = log[1]
+    if isinstance(log[0][1], str):  # the fsynced fd is the temporary's
+        assert log[0][1] == src
+
+
+def test_written_files_get_the_mode_the_umask_gives(tmp_path):
+    """mkstemp makes 0600 files; outputs get 0666 & ~umask like a plain open()."""
+    plain = tmp_path / "plain"
+    plain.write_bytes(b"")
+    target = write_npz(tmp_path / "x.npz", _cloud())
+    assert target.stat().st_mode & 0o777 == plain.stat().st_mode & 0o777
+    # and with a stricter umask, set before the process's first write
+    code = (
+        "import os, sys\n"
+        "os.umask(0o027)\n"
+        "from zbuf_occlude.io import write_text\n"
+        "p = write_text(sys.argv[1], 'x')\n"
+        "print(oct(os.stat(p).st_mode & 0o777))\n"
+    )
+    import subprocess
+    import sys
+
+    out = subprocess.run(
+        [sys.executable, "-c", code, str(tmp_path / "strict.txt")], capture_output=True, text=True, timeout=120
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "0o640"
+
+
+@pytest.mark.parametrize("exc", [RuntimeError("numpy failed"), KeyboardInterrupt()])
+def test_an_exception_mid_write_leaves_no_partial_file(tmp_path, monkeypatch, exc):
+    """A writer dying half-way (error or Ctrl-C): no target, no temporary; an existing
+    target keeps its old bytes; while writing, the target never holds new bytes."""
+    target = tmp_path / "x.npz"
+    seen_during_write = []
+
+    def dying_savez(fh, **arrays):
+        fh.write(b"PK\x03\x04 half a zip")
+        fh.flush()
+        seen_during_write.append(target.exists())
+        raise exc
+
+    monkeypatch.setattr(np, "savez_compressed", dying_savez)
+    with pytest.raises(type(exc)):
+        write_npz(target, _cloud())
+    assert list(tmp_path.iterdir()) == [] and seen_during_write == [False]
+    monkeypatch.undo()
+    old = write_npz(target, _cloud(seed=1)).read_bytes()
+    monkeypatch.setattr(np, "savez_compressed", dying_savez)
+    with pytest.raises(type(exc)):
+        write_npz(target, _cloud(seed=2))
+    assert target.read_bytes() == old and [p.name for p in tmp_path.iterdir()] == ["x.npz"]
+
+
+# -- every field, every documented dtype ---------------------------------------------------
+def _odd_types_cloud(seed=0, **kw):
+    """A cloud whose fields come in other dtypes than the files store (float64 points,
+    int32 face_index, numpy scalar metadata), with non-ASCII text."""
+    rng = np.random.default_rng(seed)
+    base = dict(
+        points=rng.uniform(-0.5, 0.5, (16, 3)),  # float64: stored float32
+        face_index=rng.integers(0, 100, 16).astype(np.int32),  # stored int64 (npz) / int32 (h5)
+        elevation_deg=np.float32(12.5), azimuth_deg=np.float32(300.25), radius=np.float32(4.5),
+        label=np.int32(3), class_name="chaise_longue_é", source="données/chaise_0001.off",
+        sample_index=np.int16(7), n_visible=np.int32(11),
+    )  # fmt: skip
+    return OccludedCloud(**{**base, **kw})
+
+
+def _same_cloud(a: OccludedCloud, b: OccludedCloud) -> None:
+    assert np.array_equal(b.points, np.asarray(a.points, dtype=np.float32)) and b.points.dtype == np.float32
+    assert np.array_equal(b.face_index, a.face_index) and b.face_index.dtype == np.int64
+    for key in ("elevation_deg", "azimuth_deg", "radius"):
+        assert getattr(b, key) == pytest.approx(float(getattr(a, key)), abs=0) and type(getattr(b, key)) is float
+    for key in ("label", "sample_index", "n_visible"):
+        assert getattr(b, key) == int(getattr(a, key)) and type(getattr(b, key)) is int
+    for key in ("class_name", "source"):
+        assert getattr(b, key) == getattr(a, key) and type(getattr(b, key)) is str
+
+
+def test_npz_round_trip_keeps_every_field_and_normalises_dtypes(tmp_path):
+    c = _odd_types_cloud()
+    _same_cloud(c, read_npz(write_npz(tmp_path / "x.npz", c)))
+    with np.load(tmp_path / "x.npz") as z:
+        assert z["points"].dtype == np.float32 and z["face_index"].dtype == np.int64
+
+
+def test_h5_round_trip_keeps_every_field_in_pointnets_dtypes(tmp_path):
+    from zbuf_occlude.io import read_h5_clouds
+
+    clouds = [_odd_types_cloud(seed=i, label=np.int32(i)) for i in range(3)]
+    clouds[1].face_index = clouds[1].face_index.astype(np.int64)  # stored int32 whatever comes in
+    path = write_h5(tmp_path / "x.h5", clouds, shape_names=["a", "b", "c", "chaise_longue_é"])
+    for a, b in zip(clouds, read_h5_clouds(path)):
+        _same_cloud(a, b)
+    d = read_h5(path)
+    expected = {
+        "data": np.float32, "label": np.int64, "face_index": np.int32, "elevation_deg": np.float64,
+        "azimuth_deg": np.float64, "radius": np.float64, "sample_index": np.int64, "n_visible": np.int64,
+    }  # fmt: skip
+    for key, dtype in expected.items():
+        assert d[key].dtype == dtype, key
+    assert d["data"].shape == (3, 16, 3) and d["face_index"].shape == (3, 16)
+    assert list(d["shape_names"]) == ["a", "b", "c", "chaise_longue_é"]
+
+
+def test_an_empty_h5_is_written_and_read_back(tmp_path):
+    from zbuf_occlude.io import read_h5_clouds
+
+    path = write_h5(tmp_path / "x.h5", [])
+    assert read_h5_clouds(path) == []
+    assert read_h5(path)["data"].shape == (0, 0, 3)
+
+
+def test_read_h5_reads_a_plain_pointnet_file_without_shape_names(tmp_path):
+    import h5py
+
+    with h5py.File(tmp_path / "p.h5", "w") as f:
+        f.create_dataset("data", data=np.zeros((2, 4, 3), dtype=np.float32))
+        f.create_dataset("label", data=np.array([1, 0]))
+    d = read_h5(tmp_path / "p.h5")
+    assert d["data"].shape == (2, 4, 3) and d["label"].tolist() == [1, 0] and len(d["shape_names"]) == 0
+
+
+def test_ply_header_is_a_valid_binary_ply_with_the_pose(tmp_path):
+    c = _odd_types_cloud()
+    raw = write_ply(tmp_path / "x.ply", c).read_bytes()
+    header, _, body = raw.partition(b"end_header\n")
+    lines = header.decode("ascii").splitlines()
+    assert lines[:2] == ["ply", "format binary_little_endian 1.0"]
+    assert lines[-4:] == ["property float x", "property float y", "property float z", "property int face_index"]
+    assert "element vertex 16" in lines and "comment zbuf_occlude occluded point cloud" in lines
+    assert "comment elevation_deg 12.500000" in lines and "comment radius 4.500000" in lines
+    # the header is ASCII: non-ASCII text is escaped, not a UnicodeEncodeError
+    assert "comment class chaise_longue_\\xe9 label 3 sample 7 n_visible 11" in lines
+    rows = np.frombuffer(body, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("face_index", "<i4")])
+    assert np.array_equal(np.stack([rows["x"], rows["y"], rows["z"]], 1), c.points.astype(np.float32))
+    assert np.array_equal(rows["face_index"], c.face_index)
+    named = write_ply(tmp_path / "n.ply", _cloud()).read_bytes().partition(b"end_header")[0].decode("ascii")
+    assert "comment class chair label 2 sample 1 n_visible 69" in named.splitlines()
+    anonymous = write_ply(tmp_path / "a.ply", _cloud(class_name="")).read_bytes().partition(b"end_header")[0]
+    assert "comment class - label 2 sample 1 n_visible 69" in anonymous.decode("ascii").splitlines()
+
+
+def test_write_csv_columns_extras_and_empty(tmp_path):
+    import csv
+
+    from zbuf_occlude.io import write_csv
+
+    rows = [{"b": 1, "a": 2, "extra": 3}, {"b": 4, "a": 5}]
+    with open(write_csv(tmp_path / "d.csv", rows[1:]), newline="", encoding="utf-8") as fh:
+        assert list(csv.reader(fh)) == [["b", "a"], ["4", "5"]]  # default: the first row's keys
+    with open(write_csv(tmp_path / "c.csv", rows, fieldnames=["a", "b"]), newline="", encoding="utf-8") as fh:
+        assert list(csv.reader(fh)) == [["a", "b"], ["2", "1"], ["5", "4"]]  # extra keys left out
+    assert write_csv(tmp_path / "e.csv", []).read_text(encoding="utf-8").strip() == ""
+
+
+@pytest.mark.parametrize(
+    ("err", "message"),
+    [(errno.EACCES, "permission denied"), (errno.EROFS, "permission denied"), (errno.EIO, "cannot write")],
+)
+def test_os_errors_become_output_errors_with_a_hint(tmp_path, monkeypatch, err, message):
+    def failing(*a, **k):
+        raise OSError(err, os.strerror(err))
+
+    monkeypatch.setattr(os, "replace", failing)
+    with pytest.raises(OutputError, match=message) as info:
+        write_npz(tmp_path / "x.npz", _cloud())
+    if err == errno.EIO:
+        assert "permission" not in str(info.value) and os.strerror(err) in str(info.value)
+
+
+def test_text_files_are_utf8_whatever_the_locale(tmp_path):
+    """write_text and write_csv write UTF-8 even where the locale's encoding is ASCII."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from zbuf_occlude.io import write_csv, write_text\n"
+        "write_text(sys.argv[1] + '/t.txt', 'chaise_\\u00e9\\n')\n"  # ASCII source: the locale is C
+        "write_csv(sys.argv[1] + '/c.csv', [{'class': 'chaise_\\u00e9'}])\n"
+    )
+    env = {**os.environ, "LC_ALL": "C", "LANG": "C", "PYTHONUTF8": "0", "PYTHONCOERCECLOCALE": "0", "PYTHONIOENCODING": "ascii"}
+    out = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True, env=env, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert (tmp_path / "t.txt").read_bytes() == "chaise_é\n".encode("utf-8")
+    assert (tmp_path / "c.csv").read_bytes() == "class\r\nchaise_é\r\n".encode("utf-8")

@@ -263,7 +263,8 @@ def write_ply(path: str | os.PathLike, cloud: OccludedCloud) -> Path:
     path = Path(path)
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
-            fh.write(header.encode("ascii") + b"\n")
+            # a PLY header is ASCII: a non-ASCII class name is escaped, not a crash
+            fh.write(header.encode("ascii", "backslashreplace") + b"\n")
             fh.write(rows.tobytes())
     return path
 
@@ -322,7 +323,7 @@ def write_h5(
                     # no modification times: the same inputs give the same bytes
                     f.create_dataset(key, data=data, dtype=dtype, track_times=False)
 
-                put("data", np.asarray([c.points for c in clouds], dtype=np.float32).reshape(-1, n, 3))
+                put("data", np.asarray([c.points for c in clouds], dtype=np.float32).reshape(len(clouds), n, 3))
                 put("label", np.asarray([c.label for c in clouds], dtype=np.int64))
                 put("elevation_deg", np.asarray([c.elevation_deg for c in clouds], dtype=np.float64))
                 put("azimuth_deg", np.asarray([c.azimuth_deg for c in clouds], dtype=np.float64))
@@ -331,7 +332,7 @@ def write_h5(
                 put("sample_index", np.asarray([c.sample_index for c in clouds], dtype=np.int64))
                 put("n_visible", np.asarray([c.n_visible for c in clouds], dtype=np.int64))
                 if provenance:
-                    put("face_index", np.asarray([c.face_index for c in clouds], dtype=np.int32).reshape(-1, n))
+                    put("face_index", np.asarray([c.face_index for c in clouds], dtype=np.int32).reshape(len(clouds), n))
                     put("radius", np.asarray([c.radius for c in clouds], dtype=np.float64))
                     put("source", [c.source for c in clouds], text)
                     put("class_name", [c.class_name for c in clouds], text)

@@ -1,0 +1,123 @@
+#!/usr/bin/env bash
+# Mutation testing of the pure-Python core with mutmut 3 (pip install -e '.[dev]').
+#
+#   scripts/mutation.sh [MODULE ...]      default: every module below
+#
+# Each MODULE is mutated in its own scratch copy of the working tree (so ./mutants/ and
+# the original sources are never touched), against the fast tests that exercise it, and
+# a line "MODULE killed/total = score %" is printed and appended to $SCRATCH/scores.txt.
+# Survivors are listed in $SCRATCH/MODULE/survivors.txt; `cd $SCRATCH/MODULE && mutmut
+# show NAME` prints one as a diff.  Too slow for CI (minutes to hours per module on two
+# cores); see docs/testing.md for the scores and the survivors judged equivalent.
+#
+# Environment: PYTHON (default: python), MUTATION_SCRATCH (default: $TMPDIR/zbuf_mutation),
+# MUTATION_JOBS (parallel mutants, default 2), NICE (default 10).
+set -euo pipefail -f  # -f: mutant-name globs are passed to mutmut, not expanded
+
+ROOT=$(git -C "$(dirname "$0")" rev-parse --show-toplevel)
+PYTHON=${PYTHON:-python}
+SCRATCH=${MUTATION_SCRATCH:-${TMPDIR:-/tmp}/zbuf_mutation}
+JOBS=${MUTATION_JOBS:-2}
+NICE=${NICE:-10}
+
+# module -> source file | tests that exercise it (fast ones: mutmut reruns them per mutant)
+declare -A SOURCE=(
+  [io]=zbuf_occlude/io.py
+  [mesh_cache]=zbuf_occlude/mesh_cache.py
+  [cameras]=zbuf_occlude/cameras.py
+  [sampling]=zbuf_occlude/sampling.py
+  [mesh]=zbuf_occlude/mesh.py
+  [occlude]=zbuf_occlude/occlude.py
+  [oracle]=zbuf_occlude/visibility/oracle.py
+  [farm_worker]=zbuf_occlude/farm/worker.py
+  [dataset]=zbuf_occlude/dataset.py
+  [oracle_kernel]=zbuf_occlude/visibility/oracle.py
+)
+# modules that are part of a file: only these mutants (mutmut name globs) are run and scored
+K=zbuf_occlude.visibility.oracle
+declare -A ONLY=(
+  [oracle_kernel]="$K.xǁTrianglePlanesǁ* $K.x__dot3* $K.x__cross* $K.x_triangle_planes* $K.x__segment_plane* $K.x__inside_triangle* $K.x_segment_hits_triangles* $K.x__pair_occludes* $K.x__near_own_surface*"
+)
+# modules whose tests open OpenGL contexts: a context inherited across fork hangs, so the
+# mutant workers are forked from a server that never ran a test (mutmut's forkserver)
+declare -A FORKSERVER=([occlude]=1 [farm_worker]=1 [dataset]=1 [oracle]=1)
+# pytest -k expressions for modules whose test file has slow parts mutmut need not rerun
+declare -A KEXPR=(
+  [oracle_kernel]="not large_mesh and not convex and not same_inputs and not built_once and not cull_drops"
+)
+declare -A TESTS=(
+  [io]="tests/test_io.py"
+  [mesh_cache]="tests/test_mesh_cache.py"
+  [cameras]="tests/test_cameras.py"
+  [sampling]="tests/test_sampling.py"
+  [mesh]="tests/test_mesh.py"
+  [occlude]="tests/test_occlude.py"
+  [oracle]="tests/test_oracle.py"
+  [farm_worker]="tests/test_farm.py tests/test_dataset.py"
+  [dataset]="tests/test_dataset.py"
+  [oracle_kernel]="tests/test_oracle.py"
+)
+ORDER=(io mesh_cache cameras sampling mesh occlude oracle_kernel oracle farm_worker dataset)
+
+modules=("$@")
+[ ${#modules[@]} -eq 0 ] && modules=("${ORDER[@]}")
+for m in "${modules[@]}"; do
+  [ -n "${SOURCE[$m]:-}" ] || { echo "unknown module '$m'; choose from: ${ORDER[*]}" >&2; exit 2; }
+done
+"$PYTHON" -c "import mutmut" 2>/dev/null || { echo "mutmut not installed: pip install -e '.[dev]'" >&2; exit 2; }
+MUTMUT=("$PYTHON" -m mutmut)
+mkdir -p "$SCRATCH"
+
+for m in "${modules[@]}"; do
+  dir="$SCRATCH/$m"
+  rm -rf "$dir" && mkdir -p "$dir"
+  # the working tree as git sees it: tracked and untracked-but-not-ignored files
+  (cd "$ROOT" && git ls-files -z --cached --others --exclude-standard) |
+    (cd "$ROOT" && xargs -0 cp --parents -t "$dir" 2>/dev/null || true)
+  # tests find ../shared beside the repository (mutmut runs them in $dir/mutants)
+  [ -d "$ROOT/../shared" ] && ln -s "$(cd "$ROOT/../shared" && pwd)" "$dir/shared"
+  # this module only, against its own tests
+  "$PYTHON" - "$dir/pyproject.toml" "${FORKSERVER[$m]:-}" "${KEXPR[$m]:-}" "${SOURCE[$m]}" ${TESTS[$m]} <<'PY'
+import re, sys
+path, forkserver, kexpr, source, tests = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4], sys.argv[5:]
+text = open(path, encoding="utf-8").read()
+def toml_list(items):
+    return "[" + ", ".join(f'"{x}"' for x in items) + "]"
+text = re.sub(r"(?ms)^only_mutate = \[.*?\]\n", f"only_mutate = {toml_list([source])}\n", text)
+text = re.sub(r"(?ms)^pytest_add_cli_args_test_selection = \[.*?\]\n",
+              f"pytest_add_cli_args_test_selection = {toml_list(tests)}\n", text)
+if kexpr:
+    text = re.sub(r"(?m)^pytest_add_cli_args = \[(.*?)\]$", lambda m: f"pytest_add_cli_args = [{m.group(1)}, \"-k\", \"{kexpr}\"]", text)
+if forkserver:
+    text = text.replace("[tool.mutmut]\n", '[tool.mutmut]\nprocess_isolation = "forkserver"\n', 1)
+open(path, "w", encoding="utf-8").write(text)
+PY
+  echo "== $m: mutating ${SOURCE[$m]} against ${TESTS[$m]} (scratch: $dir)"
+  start=$(date +%s)
+  # PYTHONPATH must not point at the original sources: mutmut puts ./mutants first
+  # shellcheck disable=SC2086  # ONLY holds several globs
+  (cd "$dir" && env -u PYTHONPATH nice -n "$NICE" "${MUTMUT[@]}" run --max-children "$JOBS" ${ONLY[$m]:-} > run.log 2>&1) || true
+  (cd "$dir" && env -u PYTHONPATH "${MUTMUT[@]}" results --all true > results.txt 2>&1) || true
+  "$PYTHON" - "$dir/results.txt" "$m" "$(( $(date +%s) - start ))" "$dir/survivors.txt" "$SCRATCH/scores.txt" ${ONLY[$m]:-} <<'PY'
+import collections, fnmatch, sys
+results, module, seconds, survivors_path, scores_path, *only = sys.argv[1:]
+status = {}
+for line in open(results, encoding="utf-8"):
+    name, sep, state = line.strip().rpartition(": ")
+    if sep and "__mutmut_" in name and (not only or any(fnmatch.fnmatch(name, g) for g in only)):
+        status[name] = state
+count = collections.Counter(status.values())
+total = len(status)
+killed = count["killed"] + count["timeout"]
+score = 100.0 * killed / total if total else float("nan")
+with open(survivors_path, "w", encoding="utf-8") as fh:
+    for name, state in sorted(status.items()):
+        if state not in ("killed", "timeout"):
+            fh.write(f"{name}: {state}\n")
+detail = ", ".join(f"{k} {v}" for k, v in sorted(count.items()))
+line = f"{module}: {killed}/{total} killed = {score:.1f} % ({detail}; {seconds} s)"
+print(line)
+with open(scores_path, "a", encoding="utf-8") as fh:
+    fh.write(line + "\n")
+PY
+done
