@@ -467,7 +467,7 @@ def test_cli_farm_and_farm_merge_run_with_their_options(tree, tmp_path):
     base = ["--classes", "chair,sofa,stool", "--per-class", "1", "--splits", "train", "--views", "0:0,40:90",
             "--samples-per-view", "3", "--points", "64", "--density", "2000", "--resolution", "64",
             "--storage", "compact", "--no-progress"]  # fmt: skip
-    common = [*base, "--seed", "7"]
+    common = [*base, "--seed", "7", "--method", "zbuffer"]
     for i in range(2):
         assert cli_main(["farm", str(tree), "--out", str(tmp_path / f"t{i}"), "--shard", f"{i}/2", *common]) == 0
     assert not (tmp_path / "t0" / CARD_FILE).exists()  # a shard is not a finished data set
@@ -477,6 +477,7 @@ def test_cli_farm_and_farm_merge_run_with_their_options(tree, tmp_path):
     assert ds.storage == "compact" and ds.n_points == 64
     assert card["params"]["seed"] == 7 and card["params"]["density"] == 2000.0 and card["params"]["dense_points"] is None
     assert card["params"]["resolution"] == 64 and card["poses"] == [[0.0, 0.0], [40.0, 90.0]]
+    assert card["params"]["method"] == "zbuffer"
     names = {ds.metadata(i)["name"] for i in range(len(ds))}
     assert names == {"chair/train/chair_0001", "stool/train/stool_0002"}  # sofa is in test only
     assert len(ds) == 2 * 2 * 3
@@ -495,6 +496,7 @@ def test_cli_farm_and_farm_merge_run_with_their_options(tree, tmp_path):
             cli_main(["farm", str(tree), "--out", str(tmp_path / "bad"), *bad])
         assert exc.value.code == 2
     assert cli_main(["farm", str(tree), "--out", str(tmp_path / "bad"), "--shard", "2/2", "--no-progress"]) == 2
+    assert cli_main(["farm", str(tree), "--out", str(tmp_path / "bad"), "--method", "nope", "--no-progress"]) == 2
     assert not (tmp_path / "bad").exists() or not list((tmp_path / "bad").rglob("*.h5"))
 
 

@@ -8,6 +8,7 @@ import shlex
 import sys
 
 from ..cameras import DEFAULT_RADIUS
+from ..defaults import DEFAULT_METHOD
 from ..errors import InvalidInputError
 from ..layout import STORAGE_MODES
 from .config import (
@@ -41,6 +42,7 @@ def _farm_command(args: argparse.Namespace) -> int:
         seed=args.seed,
         radius=args.radius,
         storage=args.storage,
+        method=args.method,
         **_sensor_params(args),
     )
     summary = run_farm(
@@ -125,6 +127,9 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
         "--radius", type=float, default=DEFAULT_RADIUS, help=f"camera distance, object units (default: {DEFAULT_RADIUS})"
     )
     r.add_argument("--seed", type=int, default=0, help="global seed (default: 0)")
+    r.add_argument(
+        "--method", default=DEFAULT_METHOD, help="visibility method (see `zbuf-occlude info`; default: %(default)s)"
+    )
     r.add_argument(
         "--storage", choices=STORAGE_MODES, default="dense", help="dense: PointNet HDF5; compact: dense cloud + visibility bits"
     )
