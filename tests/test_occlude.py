@@ -7,6 +7,8 @@ draws are independent per (seed, object, pose, sample) and identical for the sam
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 import pytest
 import trimesh
@@ -79,6 +81,88 @@ def test_pose_samples_depend_on_seed_key_pose_and_sample_index():
         assert not np.array_equal(base, draw(**other)), other
     # the one generator readers use to redraw, equal to the writer's
     assert np.array_equal(base, draw_sample(visible, 64, sample_rng(0, 7, 3, 1))[0])
+
+
+# -- keys and generators are pinned: compact data sets redraw their samples from them ------------
+def test_object_key_is_a_fixed_64_bit_blake2b_of_the_name():
+    # stored data sets are keyed on these values: they must never change
+    assert object_key("sofa") == 17062409653437387665
+    assert object_key("chair/chair_0001.off") == 13149604242743914919
+    assert object_key("") == 13020603013274838756
+    # a non-UTF-8 file name (PEP 383 surrogate) keys on its original bytes
+    assert object_key("caf\udce9") == int.from_bytes(hashlib.blake2b(b"caf\xe9", digest_size=8).digest(), "little")
+    assert object_key("caf\udce9") != object_key("café")
+
+
+def test_generators_are_the_seed_sequence_of_seed_and_keys():
+    def first(rng):
+        return rng.integers(0, 2**31, 4)
+
+    # sample_rng = (seed, key, draw stream 1, pose, sample); the dense stream is 0
+    expected = first(np.random.default_rng(np.random.SeedSequence([3, 7, 1, 2, 1])))
+    assert np.array_equal(first(sample_rng(3, 7, 2, 1)), expected)
+    assert np.array_equal(first(derive_rng(3, 7, 1, 2, 1)), expected)
+    for bad in (None, np.random.default_rng(0), -1):
+        with pytest.raises(InvalidInputError):
+            derive_rng(bad, 1)
+
+
+def test_draw_sample_is_numpys_choice_then_padding_shuffle():
+    # the exact algorithm (readers rebuild samples bytewise): n visible of n drawn is a
+    # draw without replacement; fewer visible is all of them + repeats, permuted
+    visible = np.arange(10, 15)
+    chosen, n_visible = draw_sample(visible, 5, derive_rng(0, 1))
+    assert n_visible == 5 and np.array_equal(chosen, derive_rng(0, 1).choice(visible, size=5, replace=False))
+    chosen, n_visible = draw_sample(visible, 7, derive_rng(0, 1))
+    rng = derive_rng(0, 1)
+    extra = rng.choice(visible, size=2, replace=True)
+    assert n_visible == 5 and np.array_equal(chosen, rng.permutation(np.concatenate([visible, extra])))
+    assert pose_samples(np.zeros(0, dtype=np.int64), 5, seed=0, key=1, pose_index=0, sample_indices=[0, 1]) == []
+
+
+_BALL = trimesh.creation.icosphere(subdivisions=2, radius=0.5)
+_BALL_DENSE = dense_cloud(_BALL, object_key("ball"), seed=0, count=4000)
+
+
+def test_occlude_object_labels_each_sample_with_its_pose_and_object():
+    poses = [(10.0, 20.0), (-30.0, 200.0)]
+    out = list(occlude_object(_BALL, poses, key=object_key("ball"), n_points=64, samples_per_view=2, dense=_BALL_DENSE,
+                              method="oracle", radius=2.5, label=3, class_name="ball", source="ball.off"))  # fmt: skip
+    assert [pose_index for pose_index, _, _ in out] == [0, 1]
+    for (pose_index, visible, clouds), (el, az) in zip(out, poses):
+        assert visible.shape == (4000,) and [c.sample_index for c in clouds] == [0, 1]
+        for c in clouds:
+            assert (c.elevation_deg, c.azimuth_deg, c.radius) == (el, az, 2.5)
+            assert (c.label, c.class_name, c.source) == (3, "ball", "ball.off")
+            assert c.n_visible == int(visible.sum()) and not c.padded and c.points.dtype == np.float32
+            idx = _dense_indices(_BALL_DENSE, c)
+            assert visible[idx].all()
+    # one point and no samples are legal counts; a sample larger than the visible set is padded
+    (_, visible, clouds), = occlude_object(_BALL, poses[:1], key=1, n_points=1, samples_per_view=1, dense=_BALL_DENSE, method="oracle")
+    assert len(clouds) == 1 and len(clouds[0].points) == 1 and not clouds[0].padded
+    (_, visible, clouds), = occlude_object(_BALL, poses[:1], key=1, samples_per_view=0, dense=_BALL_DENSE, method="oracle")
+    assert clouds == [] and visible.any()
+    (_, visible, clouds), = occlude_object(_BALL, poses[:1], key=1, n_points=4000, samples_per_view=1, dense=_BALL_DENSE, method="oracle")
+    assert clouds[0].padded and clouds[0].n_visible == int(visible.sum()) < 4000
+
+
+@pytest.mark.parametrize("radius", [1.0, 1.5, 5.0])
+def test_the_camera_distance_sets_the_visible_cap_of_a_sphere(radius):
+    # from distance d a sphere of radius r shows the cap cos(theta) > r/d: a fraction
+    # (1 - r/d)/2 of its area (icosphere and sampling noise: 0.03)
+    (_, visible, _), = occlude_object(_BALL, [(20.0, 30.0)], key=1, samples_per_view=0, dense=_BALL_DENSE, method="oracle", radius=radius)
+    assert abs(visible.mean() - (1 - 0.5 / radius) / 2) < 0.03, visible.mean()
+
+
+def test_the_default_dense_cloud_is_the_seeded_one():
+    # without ``dense``, the dense cloud is dense_cloud(mesh, key, seed=seed)
+    tetra = trimesh.creation.icosphere(subdivisions=0, radius=0.5)
+    (_, visible, clouds), = occlude_object(tetra, [(0.0, 0.0)], key=5, seed=2, n_points=8, samples_per_view=1, method="oracle")
+    dense = dense_cloud(tetra, 5, seed=2)
+    assert len(visible) == len(dense.points)
+    assert np.array_equal(clouds[0].points, dense.points[pose_samples(np.flatnonzero(visible), 8, seed=2, key=5, pose_index=0, sample_indices=[0])[0]].astype(np.float32))
+    by_density = dense_cloud(tetra, 5, seed=2, density=1000.0)
+    assert abs(len(by_density.points) - 1000.0 * tetra.area) <= 0.02 * 1000.0 * tetra.area + 1
 
 
 # -- occlude_object on a real mesh -------------------------------------------------------------
