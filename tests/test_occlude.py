@@ -372,3 +372,23 @@ def test_same_seed_same_bytes(seed, key, pose, n_visible, n_points):
     dense_a = dense_cloud(_SPHERE, key, seed=seed, count=50)
     dense_b = dense_cloud(_SPHERE, key, seed=seed, count=50)
     assert dense_a.points.tobytes() == dense_b.points.tobytes()
+
+
+def test_the_memory_check_counts_this_objects_job_before_allocating(monkeypatch):
+    # occlude_object refuses a job that cannot fit before sampling: the estimate it checks
+    # is that of its own points, samples, dense cloud (given or default), image and faces
+    import zbuf_occlude.occlude as occlude_module
+    from zbuf_occlude.defaults import DEFAULT_DENSE_POINTS
+    from zbuf_occlude.resources import estimate_job_memory
+
+    checked = []
+
+    def refuse(estimate, **kw):
+        checked.append(estimate)
+        raise InvalidInputError("refused")
+
+    monkeypatch.setattr(occlude_module, "check_memory", refuse)
+    for dense, n_dense in ((_BALL_DENSE, 4000), (None, DEFAULT_DENSE_POINTS)):
+        with pytest.raises(InvalidInputError, match="refused"):
+            next(occlude_object(_BALL, [(0.0, 0.0)], key=1, n_points=33, samples_per_view=4, dense=dense, resolution=96))
+        assert checked.pop() == estimate_job_memory(points=33, samples_per_view=4, dense_points=n_dense, resolution=96, faces=len(_BALL.faces))
