@@ -392,3 +392,75 @@ def test_the_memory_check_counts_this_objects_job_before_allocating(monkeypatch)
         with pytest.raises(InvalidInputError, match="refused"):
             next(occlude_object(_BALL, [(0.0, 0.0)], key=1, n_points=33, samples_per_view=4, dense=dense, resolution=96))
         assert checked.pop() == estimate_job_memory(points=33, samples_per_view=4, dense_points=n_dense, resolution=96, faces=len(_BALL.faces))
+
+
+def test_dense_cloud_is_sampled_with_the_generator_of_seed_key_and_the_dense_stream():
+    from zbuf_occlude.sampling import sample_surface
+
+    for kw in (dict(count=300), dict(density=500.0)):
+        dense = dense_cloud(_BALL, 9, seed=4, **kw)
+        points, faces = sample_surface(_BALL, seed=derive_rng(4, 9, 0), **kw)  # stream 0: dense
+        assert np.array_equal(dense.points, points) and np.array_equal(dense.face_index, faces), kw
+        assert not np.array_equal(dense_cloud(_BALL, 10, seed=4, **kw).points, points)  # the key counts
+    assert np.array_equal(dense_cloud(_BALL, 9, count=300).points, dense_cloud(_BALL, 9, seed=0, count=300).points)
+    # nothing visible: no indices (int64) and a count of 0
+    chosen, n_visible = draw_sample(np.zeros(0, dtype=np.int64), 5, derive_rng(0))
+    assert chosen.dtype == np.int64 and n_visible == 0
+
+
+def test_occlude_object_defaults_to_seed_0_and_an_empty_source():
+    a = list(occlude_object(_BALL, [(10.0, 20.0)], key=1, n_points=16, samples_per_view=1, dense=_BALL_DENSE, method="oracle"))
+    b = list(occlude_object(_BALL, [(10.0, 20.0)], key=1, n_points=16, samples_per_view=1, dense=_BALL_DENSE, method="oracle", seed=0))
+    assert np.array_equal(a[0][2][0].points, b[0][2][0].points)
+    assert a[0][2][0].source == "" and a[0][2][0].class_name == "" and a[0][2][0].label == -1
+
+
+def test_occlude_object_passes_its_camera_and_options_to_the_method(monkeypatch):
+    # per-pose methods get the dense face indices, the resolution and the options; session
+    # methods (image space) are built once per object, asked per pose, then released
+    import zbuf_occlude.occlude as occlude_module
+    from zbuf_occlude.visibility.registry import method_info
+
+    calls = []
+
+    def spy(mesh, points, camera, method, **kw):
+        calls.append((camera, method, kw))
+        return np.ones(len(points), dtype=bool)
+
+    monkeypatch.setattr(occlude_module, "visible_mask", spy)
+    poses = [(10.0, 20.0), (-5.0, 90.0)]
+    list(occlude_object(_BALL, poses, key=1, samples_per_view=0, dense=_BALL_DENSE, method="oracle", resolution=96, radius=3.0, tolerance=0.5))
+    assert [(c.elevation_deg, c.azimuth_deg, c.radius, c.resolution) for c, _, _ in calls] == [(10.0, 20.0, 3.0, (96, 96)), (-5.0, 90.0, 3.0, (96, 96))]
+    for _, method, kw in calls:
+        assert method == "oracle" and kw["resolution"] == 96 and kw["tolerance"] == 0.5
+        assert kw["face_index"] is _BALL_DENSE.face_index
+
+    events = []
+
+    class Scene:
+        def __init__(self, mesh, points, face_index):
+            events.append(("built", len(points), face_index is _BALL_DENSE.face_index))
+
+        def visible(self, camera, **options):
+            events.append(("pose", camera.resolution, options))
+            return np.zeros(4000, dtype=bool)
+
+        def release(self):
+            events.append(("released",))
+
+    info = method_info("zbuffer")
+    monkeypatch.setattr(occlude_module, "method_info", lambda name: type(info)(**{**vars(info), "session": Scene}) if name == "zbuffer" else info)
+    list(occlude_object(_BALL, poses, key=1, samples_per_view=1, dense=_BALL_DENSE, method="zbuffer", resolution=96, depth_tolerance=0.25))
+    assert events == [("built", 4000, True), ("pose", (96, 96), {"depth_tolerance": 0.25}), ("pose", (96, 96), {"depth_tolerance": 0.25}), ("released",)]
+
+
+def test_a_pose_with_nothing_visible_warns_once_only_if_samples_were_asked(caplog):
+    # a dense cloud of one point in view and one inside the ball (hidden)
+    inside = DenseCloud(np.array([[0.0, 0.0, 0.0]]), np.array([0]))
+    visible_one = DenseCloud(np.array([[0.6, 0.0, 0.0], [0.0, 0.0, 0.0]]), np.array([0, 0]))
+    cases = [(inside, 1, True), (inside, 0, False), (visible_one, 1, False), (_BALL_DENSE, 1, False)]
+    for dense, samples, warns in cases:
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="zbuf_occlude.occlude"):
+            list(occlude_object(_BALL, [(0.0, 0.0)], key=1, n_points=4, samples_per_view=samples, dense=dense, method="oracle"))
+        assert any("nothing visible" in r.getMessage() for r in caplog.records) == warns, (len(dense.points), samples)
