@@ -12,7 +12,7 @@ import hashlib
 import numpy as np
 import pytest
 import trimesh
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 import zbuf_occlude as zo
@@ -329,13 +329,19 @@ MAX_ZBUFFER_OFF_LAW = 10
 
 @settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(el=st.floats(-89.0, 89.0), az=st.floats(0.0, 360.0))
+@example(el=84.89453125, az=209.1879417510707)  # grazing faces (see `grazing`)
 def test_a_closed_convex_mesh_shows_its_front_faces(el, az):
     # A point of a closed convex polyhedron is visible iff its face looks at the camera.
     camera = zo.camera_on_sphere(el, az, 4.0, resolution=256)
     normals = _SPHERE.face_normals[_SPHERE_DENSE.face_index]
     facing = np.einsum("ij,ij->i", normals, camera.eye - _SPHERE_DENSE.points)
     front = facing > 0
-    decided = (np.abs(facing) > 1e-6) & ~_SPHERE_NEAR_EDGE  # edge-on faces and edges may go either way
+    # edge-on faces and edges may go either way: the oracle counts a sight line passing within
+    # its tolerance (1e-6) of a neighbour's edge as a hit, which hides a point seen at a grazing
+    # angle below ~1e-6 / (distance to that edge); el=84.894..., az=209.18... gave 21 such points
+    # at sin(angle) = 8e-7 with the former threshold (facing > 1e-6 unnormalised)
+    grazing = np.abs(facing) / np.linalg.norm(camera.eye - _SPHERE_DENSE.points, axis=1) < 1e-4
+    decided = ~grazing & ~_SPHERE_NEAR_EDGE
     for method, allowed in (("oracle", 0), ("zbuffer", MAX_ZBUFFER_OFF_LAW)):
         [(_, visible, clouds)] = occlude_object(
             _SPHERE, [(el, az)], key=object_key("sphere"), n_points=512, samples_per_view=2, dense=_SPHERE_DENSE,
