@@ -505,3 +505,135 @@ def test_ready_plan_of_repeated_meshes(tmp_path):
     summary = run_farm(objects, tmp_path / "rep", params=PARAMS, progress=False)
     arrays = shard_arrays(tmp_path / "rep")
     assert summary.done == 2 and not np.array_equal(arrays["rep0/chair_0001"]["data"], arrays["rep1/chair_0001"]["data"])
+
+
+# -- the worker alone: one object, its shard and its record (oracle: no GL, fast) ----------------
+def _box_object(tmp_path: Path) -> FarmObject:
+    import trimesh
+
+    path = tmp_path / "box.off"
+    trimesh.creation.box(extents=(1.0, 0.5, 0.25)).export(path)
+    return FarmObject(index=3, name="box/train/box_0001", source=str(path), class_name="box", split="train", label=2)
+
+
+#: From el=0 the box shows its 0.5 x 0.25 end (~7 % of the dense points), from el=90 its top
+#: (~29 %): with 150 points the first pose is padded, the second is not.
+WORKER_PARAMS = dict(views="0:0,90:0", samples_per_view=3, n_points=150, dense_points=1000, resolution=32, method="oracle", seed=5)
+
+
+def _worker_truth(obj: FarmObject, params: FarmParams):
+    mesh = load_mesh(obj.source)
+    dense = dense_cloud(mesh, object_key(obj.name), seed=params.seed, count=params.dense_points)
+    visible = [visible_mask(mesh, dense.points, camera_on_sphere(el, az, params.radius, resolution=params.resolution), "oracle",
+                            face_index=dense.face_index) for el, az in params.poses]  # fmt: skip
+    return mesh, dense, visible
+
+
+def _check_record(rec: dict, obj: FarmObject, params: FarmParams, out: Path, mesh, dense, visible) -> None:
+    import os
+    import socket
+
+    from zbuf_occlude.io import file_sha256
+
+    n_visible = [int(v.sum()) for v in visible]
+    assert 0 < n_visible[0] < params.n_points <= n_visible[1]
+    assert rec["status"] == "ok" and rec["error"] is None
+    for field in ("index", "name", "source", "class_name", "label", "split", "key"):
+        assert rec["object_index" if field == "index" else field] == getattr(obj, field), field
+    assert (rec["seed"], rec["params_digest"]) == (params.seed, params.digest())
+    assert rec["n_visible"] == n_visible and rec["n_padded_poses"] == 1
+    assert rec["n_dense"] == len(dense.points) == params.dense_points and rec["n_faces"] == len(mesh.faces) == 12
+    assert rec["sha256"] == [file_sha256(out / s) for s in rec["shards"]]
+    assert rec["bytes"] == sum((out / s).stat().st_size for s in rec["shards"]) > 0
+    assert rec["host"] == socket.gethostname() and rec["pid"] == os.getpid() and rec["time_s"] >= 0 and rec["peak_rss_mb"] > 1
+    assert isinstance(rec["renderer"], str) and rec["renderer"]
+    from zbuf_occlude.farm.config import record_path
+
+    assert json.loads(record_path(out, obj.index).read_text()) == rec
+
+
+def _shard_attrs(obj: FarmObject, params: FarmParams) -> dict:
+    from zbuf_occlude import __version__
+
+    return {"format_version": 1, "storage": params.storage, "object_index": obj.index, "name": obj.name,
+            "class_name": obj.class_name, "split": obj.split, "label": obj.label, "key": obj.key, "seed": params.seed,
+            "n_points": params.n_points, "samples_per_view": params.samples_per_view, "params_digest": params.digest(),
+            "zbuf_occlude_version": __version__}  # fmt: skip
+
+
+def test_worker_compact_shard_holds_the_dense_cloud_bits_and_poses(tmp_path):
+    from zbuf_occlude.farm.config import record_path, shard_path
+    from zbuf_occlude.farm.worker import process_object
+
+    obj, params = _box_object(tmp_path), FarmParams(**WORKER_PARAMS, storage="compact")
+    out = tmp_path / "out"
+    rec = process_object(obj, params, out)
+    mesh, dense, visible = _worker_truth(obj, params)
+    _check_record(rec, obj, params, out, mesh, dense, visible)
+    assert json.loads(record_path(out, obj.index).read_text()) == rec
+    assert rec["shards"] == [shard_path(obj)] and rec["n_samples"] == 2 * 3  # both poses see something
+    with h5py.File(out / shard_path(obj), "r") as f:
+        assert np.array_equal(f["dense_points"][()], dense.points.astype(np.float32)) and f["dense_points"].dtype == np.float32
+        bits = f["visible_bits"][()]
+        assert bits.shape == (2, (1000 + 7) // 8)
+        assert all(np.array_equal(unpack_visible(bits[i], 1000), visible[i]) for i in range(2))
+        assert f["visible_bits"].compression == "gzip"
+        assert f["n_visible"][()].tolist() == rec["n_visible"]
+        assert f["elevation_deg"][()].tolist() == [0.0, 90.0] and f["azimuth_deg"][()].tolist() == [0.0, 0.0]
+        attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in f.attrs.items()}
+    assert attrs == {**_shard_attrs(obj, params), "n_dense": 1000}
+
+
+def test_worker_dense_shard_holds_each_poses_samples(tmp_path):
+    from zbuf_occlude.farm.config import shard_path
+    from zbuf_occlude.farm.worker import process_object
+
+    obj, params = _box_object(tmp_path), FarmParams(**WORKER_PARAMS, storage="dense")
+    out = tmp_path / "out"
+    rec = process_object(obj, params, out)
+    mesh, dense, visible = _worker_truth(obj, params)
+    _check_record(rec, obj, params, out, mesh, dense, visible)
+    assert rec["shards"] == [shard_path(obj)] and rec["n_samples"] == 6
+    with h5py.File(out / shard_path(obj), "r") as f:
+        assert f["pose_index"][()].tolist() == [0, 0, 0, 1, 1, 1] and f["object_index"][()].tolist() == [3] * 6
+        data = f["data"][()]
+        attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in f.attrs.items()}
+    for row, pose in zip(data, [0, 0, 0, 1, 1, 1]):  # every point a dense point visible from its pose
+        hit = (np.abs(dense.points.astype(np.float32)[None] - row[:, None]).max(axis=2) == 0)
+        assert hit.any(axis=1).all() and visible[pose][hit.argmax(axis=1)].all()
+    assert {k: attrs[k] for k in _shard_attrs(obj, params)} == _shard_attrs(obj, params)
+
+
+@pytest.mark.parametrize("storage", ["npz", "ply"])
+def test_worker_sample_files_one_per_sample(tmp_path, storage):
+    from zbuf_occlude.farm.worker import process_object
+    from zbuf_occlude.io import read_npz
+
+    obj, params = _box_object(tmp_path), FarmParams(**WORKER_PARAMS, storage=storage)
+    out = tmp_path / "out"
+    rec = process_object(obj, params, out)
+    mesh, dense, visible = _worker_truth(obj, params)
+    _check_record(rec, obj, params, out, mesh, dense, visible)
+    assert rec["n_samples"] == len(rec["shards"]) == 6 and all(s.endswith("." + storage) for s in rec["shards"])
+    assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*." + storage)) == sorted(rec["shards"])
+    if storage == "npz":
+        clouds = [read_npz(out / s) for s in rec["shards"]]
+        assert sorted((c.elevation_deg, c.sample_index) for c in clouds) == [(0.0, 0), (0.0, 1), (0.0, 2), (90.0, 0), (90.0, 1), (90.0, 2)]
+
+
+def test_worker_records_a_failed_object_and_raises_fatal_errors(tmp_path, monkeypatch):
+    from zbuf_occlude.farm import worker
+    from zbuf_occlude.farm.config import record_path
+
+    obj = FarmObject(index=4, name="gone", source=str(tmp_path / "gone.off"), class_name="x", split="test", label=0)
+    params = FarmParams(**WORKER_PARAMS, storage="compact")
+    rec = worker.process_object(obj, params, tmp_path)
+    assert rec["status"] == "failed" and rec["error"].startswith("MeshLoadError: ") and rec["renderer"] is None
+    assert rec["shards"] == [] and rec["n_samples"] == 0 and json.loads(record_path(tmp_path, 4).read_text()) == rec
+
+    def full(*a, **k):
+        raise OutputError("disk full")
+
+    monkeypatch.setattr(worker, "_render", full)
+    with pytest.raises(OutputError):
+        worker.process_object(_box_object(tmp_path), params, tmp_path)
