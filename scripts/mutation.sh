@@ -41,6 +41,7 @@ declare -A ONLY=()
 declare -A FORKSERVER=([occlude]=1 [farm_worker]=1 [dataset]=1 [oracle]=1)
 # pytest -k expressions for modules whose test file has slow parts mutmut need not rerun
 declare -A KEXPR=(
+  [farm_worker]="not dask and not worker_count"
   [segment_triangle]="not large_mesh and not convex and not same_inputs and not built_once and not cull_drops"
 )
 declare -A TESTS=(
@@ -51,7 +52,7 @@ declare -A TESTS=(
   [mesh]="tests/test_mesh.py"
   [occlude]="tests/test_occlude.py"
   [oracle]="tests/test_oracle.py"
-  [farm_worker]="tests/test_farm.py tests/test_dataset.py"
+  [farm_worker]="tests/test_farm.py tests/test_farm_sensor.py"
   [dataset]="tests/test_dataset.py"
   [segment_triangle]="tests/test_oracle.py"
 )

@@ -187,3 +187,37 @@ def test_schedules_have_their_exact_poses():
             zo.view_schedule(bad)
     cams = zo.cameras_from_schedule("10:20", 3.0, resolution=16)
     assert [(c.elevation_deg, c.azimuth_deg, c.radius, c.resolution) for c in cams] == [(10.0, 20.0, 3.0, (16, 16))]
+
+
+def test_camera_stores_float64_vectors_and_int_sizes_whatever_it_is_given():
+    cam = _cam(eye=[[0, 0, 4]], target=(0, 0, 0), up=[0, 1, 0], width=40.0, height=20.0, yfov_deg=0.5)  # ints, lists, (1, 3)
+    for v in (cam.eye, cam.target, cam.up):
+        assert isinstance(v, np.ndarray) and v.dtype == np.float64 and v.shape == (3,)
+    assert type(cam.width) is int and type(cam.height) is int and cam.resolution == (40, 20)
+    assert cam.pixel_size_at(np.array([2.0], dtype=np.float32)).dtype == np.float64
+    for field in ("eye", "target", "up"):  # the message names the bad vector
+        with pytest.raises(CameraError, match=f"camera {field} must be finite"):
+            _cam(**{field: np.array([0.0, np.nan, 1.0])})
+
+
+def test_projecting_a_point_in_the_camera_plane_warns_nothing():
+    import warnings
+
+    cam = _cam()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        uv, depth = cam.project(np.array([[1.0, 0.0, 4.0], [0.0, 0.0, 4.0]]))  # depth 0: x/0 and 0/0
+    assert depth.tolist() == [0.0, 0.0] and np.isinf(uv[0, 0]) and np.isnan(uv[1]).all()
+    assert not cam.in_frustum(np.array([[1.0, 0.0, 4.0]])).any()
+
+
+def test_schedule_and_pose_edge_cases():
+    az = np.array([a for _, a in zo.view_schedule("fibonacci:50")])
+    assert (az >= 0).all() and (az < 360).all() and az.max() > 300  # wrapped at 360 degrees
+    cam = zo.camera_on_sphere(30.0, 0.0, 4.0)
+    assert np.allclose(cam.up, [-0.5, 0.0, math.sqrt(3) / 2])
+    for bad in ("fibonacci:3:4", "90.5:0"):
+        with pytest.raises(InvalidInputError, match="bad view schedule"):
+            zo.view_schedule(bad)
+    with pytest.raises(InvalidInputError, match="paper100, grid25, fibonacci:N"):
+        zo.view_schedule("30")
