@@ -637,3 +637,28 @@ def test_worker_records_a_failed_object_and_raises_fatal_errors(tmp_path, monkey
     monkeypatch.setattr(worker, "_render", full)
     with pytest.raises(OutputError):
         worker.process_object(_box_object(tmp_path), params, tmp_path)
+
+
+def test_worker_provenance_renderer_and_peak_memory(monkeypatch):
+    # the record names the GL renderer (or "unknown" if no context: never a failure) and
+    # the process's peak resident memory in MiB (ru_maxrss is KiB on Linux)
+    import resource
+
+    import zbuf_occlude.render as render
+    from zbuf_occlude.farm import worker
+
+    monkeypatch.setattr(render, "context_info", lambda: {"renderer": "R", "backend": "B", "version": "V"})
+    worker._renderer_name.cache_clear()
+    try:
+        assert worker._renderer_name() == "R (B, V)"
+        worker._renderer_name.cache_clear()
+
+        def broken():
+            raise RuntimeError("no display")
+
+        monkeypatch.setattr(render, "context_info", broken)
+        assert worker._renderer_name() == "unknown"
+    finally:
+        worker._renderer_name.cache_clear()
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    assert before <= worker._peak_rss_mb() <= resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
