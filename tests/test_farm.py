@@ -662,3 +662,33 @@ def test_worker_provenance_renderer_and_peak_memory(monkeypatch):
         worker._renderer_name.cache_clear()
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     assert before <= worker._peak_rss_mb() <= resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def test_worker_sensor_shard_is_the_crops_datasets_and_its_record(tmp_path):
+    # farm --sensor: the shard holds farm_datasets' arrays as they are (same order) plus the
+    # object's attributes and the sensor; the record counts returns per scan
+    from zbuf_occlude.farm.config import shard_path
+    from zbuf_occlude.farm.worker import process_object
+    from zbuf_occlude.io import file_sha256
+    from zbuf_occlude.sensors.crops import farm_datasets
+
+    obj = _box_object(tmp_path)
+    params = FarmParams(sensor="hdl32e", samples_per_view=3, n_points=64, seed=2, sensor_distance_m=(4.0, 6.0),
+                        sensor_height_m=(1.0, 1.5), sensor_size_m=(2.0, 3.0))  # fmt: skip
+    out = tmp_path / "out"
+    rec = process_object(obj, params, out)
+    mesh = load_mesh(obj.source)
+    expected = farm_datasets(mesh, params.sensor_model(), name=obj.name, label=obj.label, object_index=obj.index, n_samples=3,
+                             n_points=64, seed=2, distributions=params.crop_distributions())  # fmt: skip
+    n_visible = np.zeros(3, dtype=np.int64)
+    n_visible[expected["pose_index"]] = expected["n_visible"]
+    assert rec["status"] == "ok" and rec["shards"] == [shard_path(obj)] and rec["n_samples"] == len(expected["data"]) > 0
+    assert rec["n_visible"] == n_visible.tolist() and rec["n_dense"] == 0 and rec["n_faces"] == 12
+    assert rec["n_padded_poses"] == int(np.count_nonzero((n_visible > 0) & (n_visible < 64)))
+    assert rec["sha256"] == [file_sha256(out / shard_path(obj))] and rec["bytes"] == (out / shard_path(obj)).stat().st_size
+    with h5py.File(out / shard_path(obj), "r") as f:
+        assert list(f.keys()) == sorted(expected) or set(f.keys()) == set(expected)
+        for key, value in expected.items():
+            assert np.array_equal(f[key][()], value) and f[key].dtype == value.dtype, key
+        attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in f.attrs.items()}
+    assert attrs == {**_shard_attrs(obj, params), "sensor": "hdl32e"}
