@@ -692,3 +692,13 @@ def test_worker_sensor_shard_is_the_crops_datasets_and_its_record(tmp_path):
             assert np.array_equal(f[key][()], value) and f[key].dtype == value.dtype, key
         attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in f.attrs.items()}
     assert attrs == {**_shard_attrs(obj, params), "sensor": "hdl32e"}
+
+
+def test_worker_a_pose_with_exactly_n_points_visible_is_not_padded(tmp_path):
+    from zbuf_occlude.farm.worker import process_object
+
+    obj = _box_object(tmp_path)
+    _, _, visible = _worker_truth(obj, FarmParams(**WORKER_PARAMS, storage="compact"))
+    exact = int(visible[1].sum())  # the top pose's visible count
+    rec = process_object(obj, FarmParams(**{**WORKER_PARAMS, "n_points": exact}, storage="compact"), tmp_path / "out")
+    assert rec["n_visible"][1] == exact and rec["n_padded_poses"] == 1  # only the end-on pose
