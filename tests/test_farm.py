@@ -702,3 +702,79 @@ def test_worker_a_pose_with_exactly_n_points_visible_is_not_padded(tmp_path):
     exact = int(visible[1].sum())  # the top pose's visible count
     rec = process_object(obj, FarmParams(**{**WORKER_PARAMS, "n_points": exact}, storage="compact"), tmp_path / "out")
     assert rec["n_visible"][1] == exact and rec["n_padded_poses"] == 1  # only the end-on pose
+
+
+def test_worker_shards_store_no_times_and_compact_bits_are_one_gzip_chunk(tmp_path, monkeypatch):
+    # same inputs, same bytes: no HDF5 modification times in any dataset the worker writes
+    # (h5py does not read track_times back, so the calls are watched)
+    from zbuf_occlude.farm.config import COMPACT_GZIP_LEVEL, shard_path
+    from zbuf_occlude.farm.worker import process_object
+
+    calls = []
+    create = h5py.Group.create_dataset
+
+    def watch(self, name, *args, **kwargs):
+        calls.append((name, kwargs.get("track_times", True)))
+        return create(self, name, *args, **kwargs)
+
+    monkeypatch.setattr(h5py.Group, "create_dataset", watch)
+    obj = _box_object(tmp_path)
+    for storage in ("compact", "dense"):
+        calls.clear()
+        process_object(obj, FarmParams(**WORKER_PARAMS, storage=storage), tmp_path / storage)
+        assert calls and all(track is False for _, track in calls), (storage, calls)
+    with h5py.File(tmp_path / "compact" / shard_path(obj), "r") as f:
+        assert f["visible_bits"].chunks == f["visible_bits"].shape and f["visible_bits"].compression_opts == COMPACT_GZIP_LEVEL
+    calls.clear()
+    process_object(obj, FarmParams(sensor="hdl32e", samples_per_view=1, n_points=16, sensor_distance_m=(4.0, 5.0)), tmp_path / "sensor")
+    assert calls and all(track is False for _, track in calls), calls
+
+
+@pytest.mark.parametrize("writer", ["_write_compact", "_write_datasets"])
+def test_hdf5_disk_full_becomes_enospc_and_other_errors_pass_unchanged(tmp_path, monkeypatch, writer):
+    # HDF5 reports a full disk in the message only (errno None): the writers give it ENOSPC,
+    # which atomic_path turns into "disk full"; other OSErrors pass through as they are
+    import h5py as h5
+
+    from zbuf_occlude.farm import worker
+
+    args = {"_write_compact": (np.zeros((8, 3)), np.zeros((1, 1), np.uint8), np.array([3]), [(0.0, 0.0)], {}),
+            "_write_datasets": ({"data": np.zeros(3)}, {})}[writer]  # fmt: skip
+    for raised, expected_errno in ((OSError("Unable to create file (No space left on device)"), errno.ENOSPC),
+                                   (OSError(errno.EACCES, "No space left? no: permission"), errno.EACCES),
+                                   (OSError("Unable to create file (file locked)"), None)):  # fmt: skip
+
+        def fail(*a, raised=raised, **k):
+            raise raised
+
+        monkeypatch.setattr(h5, "File", fail)
+        with pytest.raises(OutputError) as info:  # atomic_path names the file and the cause
+            getattr(worker, writer)(tmp_path / "x.h5", *args)
+        cause = info.value.__cause__
+        assert cause.errno == expected_errno and str(raised.args[-1]) in str(cause)
+        if expected_errno == errno.ENOSPC:
+            assert cause.strerror == str(raised) and "disk full" in str(info.value)
+        else:
+            assert cause is raised and "disk full" not in str(info.value)
+        assert not list(tmp_path.glob("*.h5*"))  # nothing partial left
+
+
+def test_worker_record_format_base_and_timing_fields(tmp_path):
+    import re
+    from datetime import datetime, timezone
+
+    from zbuf_occlude.farm.config import record_path
+    from zbuf_occlude.farm.worker import base_record, process_object
+
+    obj, params = _box_object(tmp_path), FarmParams(**WORKER_PARAMS, storage="compact")
+    assert base_record(obj, params) == {
+        "object_index": 3, "name": "box/train/box_0001", "source": obj.source, "class_name": "box", "label": 2,
+        "split": "train", "key": obj.key, "seed": 5, "params_digest": params.digest(), "status": "pending", "error": None,
+        "shards": [], "sha256": [], "n_visible": [], "n_samples": 0, "bytes": 0}  # fmt: skip
+    rec = process_object(obj, params, tmp_path)
+    text = record_path(tmp_path, 3).read_text()
+    assert text == json.dumps(rec, indent=1, sort_keys=True) + "\n"
+    assert isinstance(rec["time_s"], float) and rec["time_s"] == round(rec["time_s"], 4) and 0 <= rec["time_s"] < 600
+    assert isinstance(rec["peak_rss_mb"], float) and rec["peak_rss_mb"] == round(rec["peak_rss_mb"], 1)
+    assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\+00:00", rec["finished_at"])
+    assert abs((datetime.now(timezone.utc) - datetime.fromisoformat(rec["finished_at"])).total_seconds()) < 600
