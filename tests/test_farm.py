@@ -778,3 +778,24 @@ def test_worker_record_format_base_and_timing_fields(tmp_path):
     assert isinstance(rec["peak_rss_mb"], float) and rec["peak_rss_mb"] == round(rec["peak_rss_mb"], 1)
     assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\+00:00", rec["finished_at"])
     assert abs((datetime.now(timezone.utc) - datetime.fromisoformat(rec["finished_at"])).total_seconds()) < 600
+
+
+def test_worker_h5_and_npz_samples_carry_the_objects_provenance(tmp_path):
+    # generate's layouts keep each sample's class, source and camera radius (dense does not)
+    from zbuf_occlude.farm.config import shard_path
+    from zbuf_occlude.farm.worker import process_object
+    from zbuf_occlude.io import read_npz
+
+    obj = _box_object(tmp_path)
+    rec = process_object(obj, FarmParams(**WORKER_PARAMS, storage="npz", radius=3.5), tmp_path / "npz")
+    for s in rec["shards"]:
+        c = read_npz(tmp_path / "npz" / s)
+        assert (c.class_name, c.source, c.label, c.radius) == ("box", obj.source, 2, 3.5) and len(c.points) == 150
+    process_object(obj, FarmParams(**WORKER_PARAMS, storage="h5", radius=3.5), tmp_path / "h5")
+    process_object(obj, FarmParams(**WORKER_PARAMS, storage="dense", radius=3.5), tmp_path / "dense")
+    with h5py.File(tmp_path / "h5" / shard_path(obj), "r") as f, h5py.File(tmp_path / "dense" / shard_path(obj), "r") as g:
+        assert {"face_index", "radius"} <= set(f) and not {"face_index", "radius"} & set(g)
+        assert f["radius"][()].tolist() == [3.5] * 6 and f["data"].shape == (6, 150, 3)
+        assert [x.decode() if isinstance(x, bytes) else x for x in f["class_name"][()]] == ["box"] * 6
+        assert [x.decode() if isinstance(x, bytes) else x for x in f["source"][()]] == [obj.source] * 6
+        assert f["object_index"].dtype == np.int64 and f["pose_index"].dtype == np.int64
