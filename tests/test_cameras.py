@@ -102,3 +102,122 @@ def test_schedule_cameras_default_radius_is_four_max_dimensions():
     cams = zo.cameras_from_schedule("grid25", resolution=64)
     assert len(cams) == 25
     assert all(np.isclose(np.linalg.norm(c.eye), 4.0) for c in cams)
+
+
+# -- exact values and boundaries (mutation testing, docs/testing.md) -----------------------------
+def _cam(**kw):
+    args = dict(eye=np.array([0.0, 0.0, 4.0]), target=np.zeros(3), up=np.array([0.0, 1.0, 0.0]), yfov_deg=60.0,
+                width=40, height=20, znear=1.0, zfar=10.0)  # fmt: skip
+    return zo.Camera(**{**args, **kw})
+
+
+def test_camera_checks_every_bound_and_keeps_exact_values():
+    for bad in (dict(eye=np.array([np.nan, 0, 4.0])), dict(target=np.array([0, np.inf, 0.0])), dict(up=np.array([0, np.nan, 1.0])),
+                dict(yfov_deg=0.0), dict(yfov_deg=180.0), dict(width=0), dict(height=0), dict(znear=0.0), dict(znear=10.0),
+                dict(zfar=float("inf")), dict(up=np.array([0.0, 0.0, 2.0]))):  # fmt: skip
+        with pytest.raises(CameraError):
+            _cam(**bad)
+    cam = _cam(yfov_deg=179.9, width=1, height=1, znear=1e-9)  # the legal extremes
+    assert cam.resolution == (1, 1)
+    cam = _cam(width=40.0, height=20.0, up=[0, 3.0, 0])  # ints and any up length
+    assert (cam.width, cam.height) == (40, 20) and isinstance(cam.width, int) and np.array_equal(cam.up, [0, 3.0, 0])
+    # looking down -z from z = 4 with y up: the OpenGL view is a pure translation
+    assert np.allclose(cam.view_matrix, [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, -4], [0, 0, 0, 1]])
+    assert np.allclose(cam.extrinsics, [[1, 0, 0, 0], [0, -1, 0, 0], [0, 0, -1, 4]])
+
+
+def test_intrinsics_and_projection_have_the_textbook_values():
+    cam = _cam()
+    f = 10.0 / math.tan(math.radians(30.0))  # half height / tan(half fov)
+    assert math.isclose(cam.focal_px, f) and np.allclose(cam.K, [[f, 0, 20.0], [0, f, 10.0], [0, 0, 1]])
+    t = 1 / math.tan(math.radians(30.0))
+    expected = np.array([[t / 2, 0, 0, 0], [0, t, 0, 0], [0, 0, -11 / 9, -20 / 9], [0, 0, -1, 0]])
+    assert np.allclose(cam.projection_matrix, expected)
+    # a point 1 right, 0.5 up, 2 in front of the camera
+    uv, depth = cam.project(np.array([[1.0, 0.5, 2.0]]))
+    assert np.allclose(depth, [2.0]) and np.allclose(uv, [[20 + f / 2, 10 - f / 4]])
+    assert np.allclose(cam.pixel_size_at(np.array([2.0, 4.0])), [2 / f, 4 / f])
+
+
+def test_in_frustum_includes_the_near_far_and_top_left_edges_only():
+    cam = _cam()
+    f = cam.focal_px
+
+    def at(u, v, depth):  # world point that projects to pixel (u, v) at this depth
+        return [(u - 20.0) * depth / f, -(v - 10.0) * depth / f, 4.0 - depth]
+
+    inside = [at(20, 10, 1.0), at(20, 10, 10.0), at(0.0, 0.0, 5.0), at(39.99, 19.99, 5.0)]
+    outside = [at(20, 10, 0.999), at(20, 10, 10.001), at(-0.01, 10, 5.0), at(20, -0.01, 5.0), at(40.0, 10, 5.0), at(20, 20.0, 5.0)]
+    assert cam.in_frustum(np.array(inside)).tolist() == [True] * 4
+    assert cam.in_frustum(np.array(outside)).tolist() == [False] * 6
+
+
+def test_camera_on_sphere_fits_the_bounding_sphere_with_its_margin():
+    cam = zo.camera_on_sphere(0.0, 0.0, 4.0, resolution=(64, 32), bounding_radius=1.0)
+    r_fit = 1.02
+    assert (cam.width, cam.height) == (64, 32)
+    assert math.isclose(cam.yfov_deg, 2 * math.degrees(math.asin(r_fit / 4.0)))
+    assert math.isclose(cam.znear, 4.0 - r_fit) and math.isclose(cam.zfar, 4.0 + r_fit)
+    assert (cam.elevation_deg, cam.azimuth_deg, cam.radius) == (0.0, 0.0, 4.0)
+    assert np.allclose(cam.up, [0, 0, 1]) and np.allclose(cam.target, 0)
+    assert zo.camera_on_sphere(0.0, 0.0, 4.0, yfov_deg=20.0).yfov_deg == 20.0
+    assert zo.camera_on_sphere(0.0, 0.0, 4.0).resolution == (1024, 1024)
+    # up is the tangent of increasing elevation
+    cam = zo.camera_on_sphere(30.0, 90.0, 4.0)
+    assert np.allclose(cam.up, [0.0, -0.5, math.sqrt(3) / 2])
+    # just outside the fitted sphere is legal, on it is not; elevations ±90 are legal
+    zo.camera_on_sphere(0.0, 0.0, 1.0201, bounding_radius=1.0)
+    with pytest.raises(CameraError):
+        zo.camera_on_sphere(0.0, 0.0, 1.02, bounding_radius=1.0)
+    for bad in (dict(azimuth_deg=float("inf")), dict(radius=float("nan")), dict(bounding_radius=float("inf")), dict(elevation_deg=-90.01)):
+        with pytest.raises(CameraError):
+            zo.camera_on_sphere(**{"elevation_deg": 0.0, "azimuth_deg": 0.0, "radius": 4.0, **bad})
+
+
+def test_schedules_have_their_exact_poses():
+    assert zo.view_schedule("paper100")[:4] == [(-90.0, 0.0), (-80.0, 0.0), (-80.0, 180.0), (-70.0, 0.0)]
+    assert zo.view_schedule(" grid25 ")[:2] == [(-80.0, 0.0), (-80.0, 72.0)]
+    golden = math.pi * (3 - math.sqrt(5))
+    fib = zo.view_schedule("fibonacci:3")
+    assert np.allclose(fib, [(math.degrees(math.asin(1 - 2 * (k + 0.5) / 3)), math.degrees((k * golden) % (2 * math.pi))) for k in range(3)])
+    assert zo.view_schedule("fibonacci:1") == [(0.0, 0.0)]
+    assert zo.view_schedule("90:0,-90:1,") == [(90.0, 0.0), (-90.0, 1.0)]
+    for bad in ("fibonacci:-2", "30:inf", "-90.5:0", "a:b"):
+        with pytest.raises(InvalidInputError):
+            zo.view_schedule(bad)
+    cams = zo.cameras_from_schedule("10:20", 3.0, resolution=16)
+    assert [(c.elevation_deg, c.azimuth_deg, c.radius, c.resolution) for c in cams] == [(10.0, 20.0, 3.0, (16, 16))]
+
+
+def test_camera_stores_float64_vectors_and_int_sizes_whatever_it_is_given():
+    cam = _cam(eye=[[0, 0, 4]], target=(0, 0, 0), up=[0, 1, 0], width=40.0, height=20.0, yfov_deg=0.5)  # ints, lists, (1, 3)
+    for v in (cam.eye, cam.target, cam.up):
+        assert isinstance(v, np.ndarray) and v.dtype == np.float64 and v.shape == (3,)
+    assert type(cam.width) is int and type(cam.height) is int and cam.resolution == (40, 20)
+    assert cam.pixel_size_at(np.array([2.0], dtype=np.float32)).dtype == np.float64
+    for field in ("eye", "target", "up"):  # the message names the bad vector
+        with pytest.raises(CameraError, match=f"camera {field} must be finite"):
+            _cam(**{field: np.array([0.0, np.nan, 1.0])})
+
+
+def test_projecting_a_point_in_the_camera_plane_warns_nothing():
+    import warnings
+
+    cam = _cam()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        uv, depth = cam.project(np.array([[1.0, 0.0, 4.0], [0.0, 0.0, 4.0]]))  # depth 0: x/0 and 0/0
+    assert depth.tolist() == [0.0, 0.0] and np.isinf(uv[0, 0]) and np.isnan(uv[1]).all()
+    assert not cam.in_frustum(np.array([[1.0, 0.0, 4.0]])).any()
+
+
+def test_schedule_and_pose_edge_cases():
+    az = np.array([a for _, a in zo.view_schedule("fibonacci:50")])
+    assert (az >= 0).all() and (az < 360).all() and az.max() > 300  # wrapped at 360 degrees
+    cam = zo.camera_on_sphere(30.0, 0.0, 4.0)
+    assert np.allclose(cam.up, [-0.5, 0.0, math.sqrt(3) / 2])
+    for bad in ("fibonacci:3:4", "90.5:0"):
+        with pytest.raises(InvalidInputError, match="bad view schedule"):
+            zo.view_schedule(bad)
+    with pytest.raises(InvalidInputError, match="paper100, grid25, fibonacci:N"):
+        zo.view_schedule("30")

@@ -507,3 +507,297 @@ def test_ready_plan_of_repeated_meshes(tmp_path):
     summary = run_farm(objects, tmp_path / "rep", params=PARAMS, progress=False)
     arrays = shard_arrays(tmp_path / "rep")
     assert summary.done == 2 and not np.array_equal(arrays["rep0/chair_0001"]["data"], arrays["rep1/chair_0001"]["data"])
+
+
+# -- the worker alone: one object, its shard and its record (oracle: no GL, fast) ----------------
+def _box_object(tmp_path: Path) -> FarmObject:
+    import trimesh
+
+    path = tmp_path / "box.off"
+    trimesh.creation.box(extents=(1.0, 0.5, 0.25)).export(path)
+    return FarmObject(index=3, name="box/train/box_0001", source=str(path), class_name="box", split="train", label=2)
+
+
+#: From el=0 the box shows its 0.5 x 0.25 end (~7 % of the dense points), from el=90 its top
+#: (~29 %): with 150 points the first pose is padded, the second is not.
+WORKER_PARAMS = dict(views="0:0,90:0", samples_per_view=3, n_points=150, dense_points=1000, resolution=32, method="oracle", seed=5)
+
+
+def _worker_truth(obj: FarmObject, params: FarmParams):
+    mesh = load_mesh(obj.source)
+    dense = dense_cloud(mesh, object_key(obj.name), seed=params.seed, count=params.dense_points)
+    visible = [visible_mask(mesh, dense.points, camera_on_sphere(el, az, params.radius, resolution=params.resolution), "oracle",
+                            face_index=dense.face_index) for el, az in params.poses]  # fmt: skip
+    return mesh, dense, visible
+
+
+def _check_record(rec: dict, obj: FarmObject, params: FarmParams, out: Path, mesh, dense, visible) -> None:
+    import os
+    import socket
+
+    from zbuf_occlude.io import file_sha256
+
+    n_visible = [int(v.sum()) for v in visible]
+    assert 0 < n_visible[0] < params.n_points <= n_visible[1]
+    assert rec["status"] == "ok" and rec["error"] is None
+    for field in ("index", "name", "source", "class_name", "label", "split", "key"):
+        assert rec["object_index" if field == "index" else field] == getattr(obj, field), field
+    assert (rec["seed"], rec["params_digest"]) == (params.seed, params.digest())
+    assert rec["n_visible"] == n_visible and rec["n_padded_poses"] == 1
+    assert rec["n_dense"] == len(dense.points) == params.dense_points and rec["n_faces"] == len(mesh.faces) == 12
+    assert rec["sha256"] == [file_sha256(out / s) for s in rec["shards"]]
+    assert rec["bytes"] == sum((out / s).stat().st_size for s in rec["shards"]) > 0
+    assert rec["host"] == socket.gethostname() and rec["pid"] == os.getpid() and rec["time_s"] >= 0 and rec["peak_rss_mb"] > 1
+    assert isinstance(rec["renderer"], str) and rec["renderer"]
+    from zbuf_occlude.farm.config import record_path
+
+    assert json.loads(record_path(out, obj.index).read_text()) == rec
+
+
+def _shard_attrs(obj: FarmObject, params: FarmParams) -> dict:
+    from zbuf_occlude import __version__
+
+    return {"format_version": 1, "storage": params.storage, "object_index": obj.index, "name": obj.name,
+            "class_name": obj.class_name, "split": obj.split, "label": obj.label, "key": obj.key, "seed": params.seed,
+            "n_points": params.n_points, "samples_per_view": params.samples_per_view, "params_digest": params.digest(),
+            "zbuf_occlude_version": __version__}  # fmt: skip
+
+
+def test_worker_compact_shard_holds_the_dense_cloud_bits_and_poses(tmp_path):
+    from zbuf_occlude.farm.config import record_path, shard_path
+    from zbuf_occlude.farm.worker import process_object
+
+    obj, params = _box_object(tmp_path), FarmParams(**WORKER_PARAMS, storage="compact")
+    out = tmp_path / "out"
+    rec = process_object(obj, params, out)
+    mesh, dense, visible = _worker_truth(obj, params)
+    _check_record(rec, obj, params, out, mesh, dense, visible)
+    assert json.loads(record_path(out, obj.index).read_text()) == rec
+    assert rec["shards"] == [shard_path(obj)] and rec["n_samples"] == 2 * 3  # both poses see something
+    with h5py.File(out / shard_path(obj), "r") as f:
+        assert np.array_equal(f["dense_points"][()], dense.points.astype(np.float32)) and f["dense_points"].dtype == np.float32
+        bits = f["visible_bits"][()]
+        assert bits.shape == (2, (1000 + 7) // 8)
+        assert all(np.array_equal(unpack_visible(bits[i], 1000), visible[i]) for i in range(2))
+        assert f["visible_bits"].compression == "gzip"
+        assert f["n_visible"][()].tolist() == rec["n_visible"]
+        assert f["elevation_deg"][()].tolist() == [0.0, 90.0] and f["azimuth_deg"][()].tolist() == [0.0, 0.0]
+        attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in f.attrs.items()}
+    assert attrs == {**_shard_attrs(obj, params), "n_dense": 1000}
+
+
+def test_worker_dense_shard_holds_each_poses_samples(tmp_path):
+    from zbuf_occlude.farm.config import shard_path
+    from zbuf_occlude.farm.worker import process_object
+
+    obj, params = _box_object(tmp_path), FarmParams(**WORKER_PARAMS, storage="dense")
+    out = tmp_path / "out"
+    rec = process_object(obj, params, out)
+    mesh, dense, visible = _worker_truth(obj, params)
+    _check_record(rec, obj, params, out, mesh, dense, visible)
+    assert rec["shards"] == [shard_path(obj)] and rec["n_samples"] == 6
+    with h5py.File(out / shard_path(obj), "r") as f:
+        assert f["pose_index"][()].tolist() == [0, 0, 0, 1, 1, 1] and f["object_index"][()].tolist() == [3] * 6
+        data = f["data"][()]
+        attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in f.attrs.items()}
+    for row, pose in zip(data, [0, 0, 0, 1, 1, 1]):  # every point a dense point visible from its pose
+        hit = (np.abs(dense.points.astype(np.float32)[None] - row[:, None]).max(axis=2) == 0)
+        assert hit.any(axis=1).all() and visible[pose][hit.argmax(axis=1)].all()
+    assert {k: attrs[k] for k in _shard_attrs(obj, params)} == _shard_attrs(obj, params)
+
+
+@pytest.mark.parametrize("storage", ["npz", "ply"])
+def test_worker_sample_files_one_per_sample(tmp_path, storage):
+    from zbuf_occlude.farm.worker import process_object
+    from zbuf_occlude.io import read_npz
+
+    obj, params = _box_object(tmp_path), FarmParams(**WORKER_PARAMS, storage=storage)
+    out = tmp_path / "out"
+    rec = process_object(obj, params, out)
+    mesh, dense, visible = _worker_truth(obj, params)
+    _check_record(rec, obj, params, out, mesh, dense, visible)
+    assert rec["n_samples"] == len(rec["shards"]) == 6 and all(s.endswith("." + storage) for s in rec["shards"])
+    assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*." + storage)) == sorted(rec["shards"])
+    if storage == "npz":
+        clouds = [read_npz(out / s) for s in rec["shards"]]
+        assert sorted((c.elevation_deg, c.sample_index) for c in clouds) == [(0.0, 0), (0.0, 1), (0.0, 2), (90.0, 0), (90.0, 1), (90.0, 2)]
+
+
+def test_worker_records_a_failed_object_and_raises_fatal_errors(tmp_path, monkeypatch):
+    from zbuf_occlude.farm import worker
+    from zbuf_occlude.farm.config import record_path
+
+    obj = FarmObject(index=4, name="gone", source=str(tmp_path / "gone.off"), class_name="x", split="test", label=0)
+    params = FarmParams(**WORKER_PARAMS, storage="compact")
+    rec = worker.process_object(obj, params, tmp_path)
+    assert rec["status"] == "failed" and rec["error"].startswith("MeshLoadError: ") and rec["renderer"] is None
+    assert rec["shards"] == [] and rec["n_samples"] == 0 and json.loads(record_path(tmp_path, 4).read_text()) == rec
+
+    def full(*a, **k):
+        raise OutputError("disk full")
+
+    monkeypatch.setattr(worker, "_render", full)
+    with pytest.raises(OutputError):
+        worker.process_object(_box_object(tmp_path), params, tmp_path)
+
+
+def test_worker_provenance_renderer_and_peak_memory(monkeypatch):
+    # the record names the GL renderer (or "unknown" if no context: never a failure) and
+    # the process's peak resident memory in MiB (ru_maxrss is KiB on Linux)
+    import resource
+
+    import zbuf_occlude.render as render
+    from zbuf_occlude.farm import worker
+
+    monkeypatch.setattr(render, "context_info", lambda: {"renderer": "R", "backend": "B", "version": "V"})
+    worker._renderer_name.cache_clear()
+    try:
+        assert worker._renderer_name() == "R (B, V)"
+        worker._renderer_name.cache_clear()
+
+        def broken():
+            raise RuntimeError("no display")
+
+        monkeypatch.setattr(render, "context_info", broken)
+        assert worker._renderer_name() == "unknown"
+    finally:
+        worker._renderer_name.cache_clear()
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    assert before <= worker._peak_rss_mb() <= resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def test_worker_sensor_shard_is_the_crops_datasets_and_its_record(tmp_path):
+    # farm --sensor: the shard holds farm_datasets' arrays as they are (same order) plus the
+    # object's attributes and the sensor; the record counts returns per scan
+    from zbuf_occlude.farm.config import shard_path
+    from zbuf_occlude.farm.worker import process_object
+    from zbuf_occlude.io import file_sha256
+    from zbuf_occlude.sensors.crops import farm_datasets
+
+    obj = _box_object(tmp_path)
+    params = FarmParams(sensor="hdl32e", samples_per_view=3, n_points=64, seed=2, sensor_distance_m=(4.0, 6.0),
+                        sensor_height_m=(1.0, 1.5), sensor_size_m=(2.0, 3.0))  # fmt: skip
+    out = tmp_path / "out"
+    rec = process_object(obj, params, out)
+    mesh = load_mesh(obj.source)
+    expected = farm_datasets(mesh, params.sensor_model(), name=obj.name, label=obj.label, object_index=obj.index, n_samples=3,
+                             n_points=64, seed=2, distributions=params.crop_distributions())  # fmt: skip
+    n_visible = np.zeros(3, dtype=np.int64)
+    n_visible[expected["pose_index"]] = expected["n_visible"]
+    assert rec["status"] == "ok" and rec["shards"] == [shard_path(obj)] and rec["n_samples"] == len(expected["data"]) > 0
+    assert rec["n_visible"] == n_visible.tolist() and rec["n_dense"] == 0 and rec["n_faces"] == 12
+    assert rec["n_padded_poses"] == int(np.count_nonzero((n_visible > 0) & (n_visible < 64)))
+    assert rec["sha256"] == [file_sha256(out / shard_path(obj))] and rec["bytes"] == (out / shard_path(obj)).stat().st_size
+    with h5py.File(out / shard_path(obj), "r") as f:
+        assert list(f.keys()) == sorted(expected) or set(f.keys()) == set(expected)
+        for key, value in expected.items():
+            assert np.array_equal(f[key][()], value) and f[key].dtype == value.dtype, key
+        attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in f.attrs.items()}
+    assert attrs == {**_shard_attrs(obj, params), "sensor": "hdl32e"}
+
+
+def test_worker_a_pose_with_exactly_n_points_visible_is_not_padded(tmp_path):
+    from zbuf_occlude.farm.worker import process_object
+
+    obj = _box_object(tmp_path)
+    _, _, visible = _worker_truth(obj, FarmParams(**WORKER_PARAMS, storage="compact"))
+    exact = int(visible[1].sum())  # the top pose's visible count
+    rec = process_object(obj, FarmParams(**{**WORKER_PARAMS, "n_points": exact}, storage="compact"), tmp_path / "out")
+    assert rec["n_visible"][1] == exact and rec["n_padded_poses"] == 1  # only the end-on pose
+
+
+def test_worker_shards_store_no_times_and_compact_bits_are_one_gzip_chunk(tmp_path, monkeypatch):
+    # same inputs, same bytes: no HDF5 modification times in any dataset the worker writes
+    # (h5py does not read track_times back, so the calls are watched)
+    from zbuf_occlude.farm.config import COMPACT_GZIP_LEVEL, shard_path
+    from zbuf_occlude.farm.worker import process_object
+
+    calls = []
+    create = h5py.Group.create_dataset
+
+    def watch(self, name, *args, **kwargs):
+        calls.append((name, kwargs.get("track_times", True)))
+        return create(self, name, *args, **kwargs)
+
+    monkeypatch.setattr(h5py.Group, "create_dataset", watch)
+    obj = _box_object(tmp_path)
+    for storage in ("compact", "dense"):
+        calls.clear()
+        process_object(obj, FarmParams(**WORKER_PARAMS, storage=storage), tmp_path / storage)
+        assert calls and all(track is False for _, track in calls), (storage, calls)
+    with h5py.File(tmp_path / "compact" / shard_path(obj), "r") as f:
+        assert f["visible_bits"].chunks == f["visible_bits"].shape and f["visible_bits"].compression_opts == COMPACT_GZIP_LEVEL
+    calls.clear()
+    process_object(obj, FarmParams(sensor="hdl32e", samples_per_view=1, n_points=16, sensor_distance_m=(4.0, 5.0)), tmp_path / "sensor")
+    assert calls and all(track is False for _, track in calls), calls
+
+
+@pytest.mark.parametrize("writer", ["_write_compact", "_write_datasets"])
+def test_hdf5_disk_full_becomes_enospc_and_other_errors_pass_unchanged(tmp_path, monkeypatch, writer):
+    # HDF5 reports a full disk in the message only (errno None): the writers give it ENOSPC,
+    # which atomic_path turns into "disk full"; other OSErrors pass through as they are
+    import h5py as h5
+
+    from zbuf_occlude.farm import worker
+
+    args = {"_write_compact": (np.zeros((8, 3)), np.zeros((1, 1), np.uint8), np.array([3]), [(0.0, 0.0)], {}),
+            "_write_datasets": ({"data": np.zeros(3)}, {})}[writer]  # fmt: skip
+    for raised, expected_errno in ((OSError("Unable to create file (No space left on device)"), errno.ENOSPC),
+                                   (OSError(errno.EACCES, "No space left? no: permission"), errno.EACCES),
+                                   (OSError("Unable to create file (file locked)"), None)):  # fmt: skip
+
+        def fail(*a, raised=raised, **k):
+            raise raised
+
+        monkeypatch.setattr(h5, "File", fail)
+        with pytest.raises(OutputError) as info:  # atomic_path names the file and the cause
+            getattr(worker, writer)(tmp_path / "x.h5", *args)
+        cause = info.value.__cause__
+        assert cause.errno == expected_errno and str(raised.args[-1]) in str(cause)
+        if expected_errno == errno.ENOSPC:
+            assert cause.strerror == str(raised) and "disk full" in str(info.value)
+        else:
+            assert cause is raised and "disk full" not in str(info.value)
+        assert not list(tmp_path.glob("*.h5*"))  # nothing partial left
+
+
+def test_worker_record_format_base_and_timing_fields(tmp_path):
+    import re
+    from datetime import datetime, timezone
+
+    from zbuf_occlude.farm.config import record_path
+    from zbuf_occlude.farm.worker import base_record, process_object
+
+    obj, params = _box_object(tmp_path), FarmParams(**WORKER_PARAMS, storage="compact")
+    assert base_record(obj, params) == {
+        "object_index": 3, "name": "box/train/box_0001", "source": obj.source, "class_name": "box", "label": 2,
+        "split": "train", "key": obj.key, "seed": 5, "params_digest": params.digest(), "status": "pending", "error": None,
+        "shards": [], "sha256": [], "n_visible": [], "n_samples": 0, "bytes": 0}  # fmt: skip
+    rec = process_object(obj, params, tmp_path)
+    text = record_path(tmp_path, 3).read_text()
+    assert text == json.dumps(rec, indent=1, sort_keys=True) + "\n"
+    assert isinstance(rec["time_s"], float) and rec["time_s"] == round(rec["time_s"], 4) and 0 <= rec["time_s"] < 600
+    assert isinstance(rec["peak_rss_mb"], float) and rec["peak_rss_mb"] == round(rec["peak_rss_mb"], 1)
+    assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\+00:00", rec["finished_at"])
+    assert abs((datetime.now(timezone.utc) - datetime.fromisoformat(rec["finished_at"])).total_seconds()) < 600
+
+
+def test_worker_h5_and_npz_samples_carry_the_objects_provenance(tmp_path):
+    # generate's layouts keep each sample's class, source and camera radius (dense does not)
+    from zbuf_occlude.farm.config import shard_path
+    from zbuf_occlude.farm.worker import process_object
+    from zbuf_occlude.io import read_npz
+
+    obj = _box_object(tmp_path)
+    rec = process_object(obj, FarmParams(**WORKER_PARAMS, storage="npz", radius=3.5), tmp_path / "npz")
+    for s in rec["shards"]:
+        c = read_npz(tmp_path / "npz" / s)
+        assert (c.class_name, c.source, c.label, c.radius) == ("box", obj.source, 2, 3.5) and len(c.points) == 150
+    process_object(obj, FarmParams(**WORKER_PARAMS, storage="h5", radius=3.5), tmp_path / "h5")
+    process_object(obj, FarmParams(**WORKER_PARAMS, storage="dense", radius=3.5), tmp_path / "dense")
+    with h5py.File(tmp_path / "h5" / shard_path(obj), "r") as f, h5py.File(tmp_path / "dense" / shard_path(obj), "r") as g:
+        assert {"face_index", "radius"} <= set(f) and not {"face_index", "radius"} & set(g)
+        assert f["radius"][()].tolist() == [3.5] * 6 and f["data"].shape == (6, 150, 3)
+        assert [x.decode() if isinstance(x, bytes) else x for x in f["class_name"][()]] == ["box"] * 6
+        assert [x.decode() if isinstance(x, bytes) else x for x in f["source"][()]] == [obj.source] * 6
+        assert f["object_index"].dtype == np.int64 and f["pose_index"].dtype == np.int64

@@ -399,3 +399,72 @@ def test_class_and_split_of_modelnet_layouts():
     assert class_and_split("root/chair/chair_0001.off")[0] == "chair"
     assert class_and_split("root/chair/test/chair_0890.off") == ("chair", "test")
     assert class_and_split("chair_0042.off") == ("chair", "train")
+
+
+# -- exact checks and provenance (mutation testing, docs/testing.md) -----------------------------
+_TRI_V = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 1.0]])
+
+
+def _raw(vertices, faces, **metadata):
+    return trimesh.Trimesh(vertices=np.asarray(vertices, dtype=np.float64), faces=np.asarray(faces), process=False, validate=False, metadata=metadata)
+
+
+def test_checks_name_the_mesh_and_catch_each_bad_index_alone():
+    from zbuf_occlude.mesh import clean_mesh, degenerate_faces, normalize_mesh
+
+    # one past the last vertex, or negative, each alone (trimesh itself splits quads, so
+    # the "(F, 3) triangles" check cannot be reached through a Trimesh)
+    for bad in ([[0, 1, 4]], [[-1, 1, 2]]):
+        for f in (clean_mesh, normalize_mesh):
+            with pytest.raises(InvalidInputError, match="^mesh: face indices span"):
+                f(_raw(_TRI_V, bad))
+    for bad in ([[0, 1, 4]], [[-1, 1, 2]]):
+        with pytest.raises(InvalidInputError, match="face indices span"):
+            degenerate_faces(_raw(_TRI_V, bad))
+    with pytest.raises(InvalidInputError, match=r"^mesh: 1 of 3 vertices are NaN or inf \(first at index 2\)"):
+        degenerate_faces(_raw([[0, 0, 0], [1, 0, 0], [0, np.inf, 0]], [[0, 1, 2]]))
+    with pytest.raises(InvalidInputError, match=r"^mesh: vertex coordinates reach 1e\+39 \(first at index 1\)"):
+        degenerate_faces(_raw([[0, 0, 0], [1e39, 0, 0], [0, 1, 0]], [[0, 1, 2]]))
+    with pytest.raises(InvalidInputError, match="^mesh: mesh has 4 vertices but no faces"):
+        normalize_mesh(_raw(_TRI_V, np.zeros((0, 3), dtype=np.int64)))
+    with pytest.raises(InvalidInputError, match="^mesh: all 1 faces are degenerate"):
+        clean_mesh(_raw(_TRI_V, [[0, 1, 1]]))
+    empty = degenerate_faces(_raw(_TRI_V, np.zeros((0, 3), dtype=np.int64)))
+    assert empty.dtype == bool and empty.shape == (0,)
+
+
+def test_degenerate_faces_tolerance_is_relative_to_the_extent_and_inclusive():
+    from zbuf_occlude.mesh import degenerate_faces
+
+    # a collinear face (zero area, distinct indices) is degenerate even with area_rtol=0
+    line = _raw([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0]], [[0, 1, 2], [0, 1, 3]])
+    assert degenerate_faces(line, area_rtol=0.0).tolist() == [True, False]
+    # the tolerance scales with the extent (hi - lo), not with the position
+    far = _raw(_TRI_V[:3] + 1000.0, [[0, 1, 2]])
+    assert degenerate_faces(far, area_rtol=1e-3).tolist() == [False]
+
+
+def test_provenance_composes_load_clean_and_normalise(tmp_path):
+    from zbuf_occlude.mesh import METADATA_KEY, clean_mesh, load_mesh, normalize_mesh
+
+    # a degenerate face and an unreferenced vertex in the file
+    path = tmp_path / "m.off"
+    path.write_text("OFF\n6 3 0\n0 0 0\n4 0 0\n0 2 0\n4 2 2\n9 9 9\n1 1 1\n3 0 1 2\n3 1 3 2\n3 0 0 1\n")
+    raw = load_mesh(path, normalize=False)
+    prov = raw.metadata[METADATA_KEY]
+    assert prov == {"source": str(path), "n_degenerate_faces_dropped": 1, "n_unreferenced_vertices_dropped": 2,
+                    "center": [0.0, 0.0, 0.0], "scale": 1.0}  # fmt: skip
+    loaded = load_mesh(path)
+    normalised = normalize_mesh(raw)  # the same map, composed with the identity
+    assert np.allclose(normalised.vertices, loaded.vertices)
+    p1, p2 = normalised.metadata[METADATA_KEY], loaded.metadata[METADATA_KEY]
+    assert p1["source"] == str(path) and p1["n_degenerate_faces_dropped"] == 1 and p1["n_unreferenced_vertices_dropped"] == 2
+    assert np.allclose(p1["center"], p2["center"]) and np.isclose(p1["scale"], p2["scale"]) and np.allclose(p2["center"], [2, 1, 1])
+    # cleaning again adds to the counts; other metadata survives
+    more = trimesh.Trimesh(vertices=np.vstack([raw.vertices, [[7.0, 7, 7]]]), faces=np.vstack([raw.faces, [[0, 1, 1]]]),
+                           process=False, validate=False, metadata={**raw.metadata, "note": "kept"})  # fmt: skip
+    cleaned = clean_mesh(more)
+    assert cleaned.metadata["note"] == "kept"
+    assert cleaned.metadata[METADATA_KEY]["n_degenerate_faces_dropped"] == 2
+    assert cleaned.metadata[METADATA_KEY]["n_unreferenced_vertices_dropped"] == 3
+    assert cleaned.faces.dtype == np.int64 and cleaned.vertices.dtype == np.float64
