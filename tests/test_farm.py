@@ -602,6 +602,10 @@ def test_worker_dense_shard_holds_each_poses_samples(tmp_path):
         hit = (np.abs(dense.points.astype(np.float32)[None] - row[:, None]).max(axis=2) == 0)
         assert hit.any(axis=1).all() and visible[pose][hit.argmax(axis=1)].all()
     assert {k: attrs[k] for k in _shard_attrs(obj, params)} == _shard_attrs(obj, params)
+    # exactly the draws of (seed, key, pose, sample) from the visible points
+    for pose in (0, 1):
+        chosen = pose_samples(np.flatnonzero(visible[pose]), 150, seed=5, key=obj.key, pose_index=pose, sample_indices=range(3))
+        assert np.array_equal(data[3 * pose : 3 * pose + 3], dense.points[np.stack(chosen)].astype(np.float32))
 
 
 @pytest.mark.parametrize("storage", ["npz", "ply"])
