@@ -544,6 +544,7 @@ def _check_record(rec: dict, obj: FarmObject, params: FarmParams, out: Path, mes
         assert rec["object_index" if field == "index" else field] == getattr(obj, field), field
     assert (rec["seed"], rec["params_digest"]) == (params.seed, params.digest())
     assert rec["n_visible"] == n_visible and rec["n_padded_poses"] == 1
+    assert all(type(v) is int for v in rec["n_visible"])  # counts, not floats, in the JSON record
     assert rec["n_dense"] == len(dense.points) == params.dense_points and rec["n_faces"] == len(mesh.faces) == 12
     assert rec["sha256"] == [file_sha256(out / s) for s in rec["shards"]]
     assert rec["bytes"] == sum((out / s).stat().st_size for s in rec["shards"]) > 0
@@ -577,7 +578,7 @@ def test_worker_compact_shard_holds_the_dense_cloud_bits_and_poses(tmp_path):
     with h5py.File(out / shard_path(obj), "r") as f:
         assert np.array_equal(f["dense_points"][()], dense.points.astype(np.float32)) and f["dense_points"].dtype == np.float32
         bits = f["visible_bits"][()]
-        assert bits.shape == (2, (1000 + 7) // 8)
+        assert bits.shape == (2, (1000 + 7) // 8) and bits.dtype == np.uint8
         assert all(np.array_equal(unpack_visible(bits[i], 1000), visible[i]) for i in range(2))
         assert f["visible_bits"].compression == "gzip"
         assert f["n_visible"][()].tolist() == rec["n_visible"]
@@ -604,6 +605,10 @@ def test_worker_dense_shard_holds_each_poses_samples(tmp_path):
         hit = (np.abs(dense.points.astype(np.float32)[None] - row[:, None]).max(axis=2) == 0)
         assert hit.any(axis=1).all() and visible[pose][hit.argmax(axis=1)].all()
     assert {k: attrs[k] for k in _shard_attrs(obj, params)} == _shard_attrs(obj, params)
+    # exactly the draws of (seed, key, pose, sample) from the visible points
+    for pose in (0, 1):
+        chosen = pose_samples(np.flatnonzero(visible[pose]), 150, seed=5, key=obj.key, pose_index=pose, sample_indices=range(3))
+        assert np.array_equal(data[3 * pose : 3 * pose + 3], dense.points[np.stack(chosen)].astype(np.float32))
 
 
 @pytest.mark.parametrize("storage", ["npz", "ply"])
@@ -618,6 +623,7 @@ def test_worker_sample_files_one_per_sample(tmp_path, storage):
     _check_record(rec, obj, params, out, mesh, dense, visible)
     assert rec["n_samples"] == len(rec["shards"]) == 6 and all(s.endswith("." + storage) for s in rec["shards"])
     assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*." + storage)) == sorted(rec["shards"])
+    assert all((out / s).read_bytes()[:3] == (b"ply" if storage == "ply" else b"PK\x03") for s in rec["shards"])
     if storage == "npz":
         clouds = [read_npz(out / s) for s in rec["shards"]]
         assert sorted((c.elevation_deg, c.sample_index) for c in clouds) == [(0.0, 0), (0.0, 1), (0.0, 2), (90.0, 0), (90.0, 1), (90.0, 2)]
@@ -686,6 +692,7 @@ def test_worker_sensor_shard_is_the_crops_datasets_and_its_record(tmp_path):
     n_visible[expected["pose_index"]] = expected["n_visible"]
     assert rec["status"] == "ok" and rec["shards"] == [shard_path(obj)] and rec["n_samples"] == len(expected["data"]) > 0
     assert rec["n_visible"] == n_visible.tolist() and rec["n_dense"] == 0 and rec["n_faces"] == 12
+    assert all(type(v) is int for v in rec["n_visible"])
     assert rec["n_padded_poses"] == int(np.count_nonzero((n_visible > 0) & (n_visible < 64)))
     assert rec["sha256"] == [file_sha256(out / shard_path(obj))] and rec["bytes"] == (out / shard_path(obj)).stat().st_size
     with h5py.File(out / shard_path(obj), "r") as f:
