@@ -81,12 +81,11 @@ def _visible(
     points: NDArray[np.floating],
     camera: Camera,
     face_index: NDArray[np.integer] | None,
-    n_faces: int,
     tolerance: float,
-    planes: TrianglePlanes,
+    mesh: trimesh.Trimesh,
 ) -> NDArray[np.bool_]:
     pts = check_points(points)
-    fi = check_face_index(face_index, len(pts), n_faces)
+    fi = check_face_index(face_index, len(pts), len(mesh.faces))
     visible = visible_in_frustum(
         pts,
         camera,
@@ -95,7 +94,7 @@ def _visible(
         ),
     )
     # Rule (b) of visibility.definition: own face seen edge-on (issue 11).
-    return hide_edge_on(visible, planes, pts, camera.eye, fi, tolerance)
+    return hide_edge_on(visible, mesh_planes(mesh), pts, camera.eye, fi, tolerance)
 
 
 @register("oracle", exact=True)
@@ -140,7 +139,7 @@ def oracle_visible(
         On bad ``points``, ``face_index`` or ``tolerance``.
     """
     log_ignored("oracle", _ignored)
-    return _visible(occluded_embree, mesh, points, camera, face_index, len(mesh.faces), tolerance, mesh_planes(mesh))
+    return _visible(occluded_embree, mesh, points, camera, face_index, tolerance, mesh)
 
 
 @register("oracle-numpy", exact=True)
@@ -159,21 +158,5 @@ def oracle_numpy_visible(
     ignored options as :func:`oracle_visible`; raises :class:`InvalidInputError` on bad input.
     """
     log_ignored("oracle-numpy", _ignored)
-    return _visible(occluded_numpy, mesh_planes(mesh), points, camera, face_index, len(mesh.faces), tolerance, mesh_planes(mesh))
+    return _visible(occluded_numpy, mesh_planes(mesh), points, camera, face_index, tolerance, mesh)
 
-
-# Names this module had before the split (private then), so that code written against the
-# single-module oracle keeps importing while the branches merge; use the new homes.
-from .oracle_embree import _EmbreeScene, _embree_scene, _scene_for  # noqa: E402,F401
-from .oracle_numpy import occluded_unchecked as _occluded_core  # noqa: E402,F401
-from .segment_triangle import (  # noqa: E402,F401
-    boundary_times_cos as _boundary_times_cos,
-    check_eye as _check_eye,
-    check_tolerance as _check_tolerance,
-    cross as _cross,
-    dot3 as _dot3,
-    inside_triangle as _inside_triangle,
-    near_own_surface as _near_own_surface,
-    pair_occludes as _pair_occludes,
-    segment_plane as _segment_plane,
-)
