@@ -39,7 +39,7 @@ from .oracle_embree import _scene_for as _oracle_scene
 from .oracle_embree import occluded_embree
 from .segment_triangle import mesh_planes
 from .segment_triangle import pair_occludes as _pair_occludes
-from .registry import check_face_index, check_points, log_ignored, register
+from .registry import SessionBase, check_face_index, check_points, log_ignored, register
 
 __all__ = ["FastScene", "embree_fast_visible", "DEFAULT_THREADS"]
 
@@ -284,7 +284,7 @@ except ImportError:  # pragma: no cover - numba is the 'fast' extra
     _crease = None
 
 
-class FastScene:
+class FastScene(SessionBase):
     """One mesh and one point set for ``embree-fast``, tested from many cameras.
 
     Set-up is cheap: float32 copies of the points relative to the mesh's centre (and their
@@ -416,14 +416,6 @@ class FastScene:
         return visible
 
 
-    def release(self) -> None:
-        """Nothing to free: the Embree BVH stays cached per mesh (a :class:`PoseSession`)."""
-
-    def __enter__(self) -> FastScene:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.release()
 
 
 @register("embree-fast", session=FastScene)

@@ -27,7 +27,7 @@ from ..render.exact_backend import DEFAULT_TILE, ExactMesh, ExactPoints
 from .definition import EDGE_ON_SIN, TOLERANCE
 from .oracle import oracle_visible
 from .segment_triangle import mesh_planes
-from .registry import check_face_index, check_points, log_ignored, register
+from .registry import SessionBase, check_face_index, check_points, log_ignored, register
 
 __all__ = ["ExactScene", "exact_mesh_for", "zbuffer_exact_visible", "DEFAULT_RESOLUTION"]
 
@@ -62,7 +62,7 @@ def _at_resolution(camera: Camera, resolution) -> Camera:
     return dataclasses.replace(camera, width=int(width), height=int(height))
 
 
-class ExactScene:
+class ExactScene(SessionBase):
     """One mesh and one point set on the GPU for ``zbuffer-exact``, tested from many cameras.
 
     Parameters
@@ -131,11 +131,6 @@ class ExactScene:
                 self._buffer.release()
             self._buffer = None
 
-    def __enter__(self) -> ExactScene:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.release()
 
 
 @register("zbuffer-exact", takes_resolution=True, gpu=True, exact=True, session=ExactScene)

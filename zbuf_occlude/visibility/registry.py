@@ -61,6 +61,19 @@ class PoseSession(Protocol):
     def release(self) -> None: ...
 
 
+class SessionBase:
+    """``with`` support for a :class:`PoseSession`: leaving the block calls ``release()``."""
+
+    def release(self) -> None:
+        """Free what the session holds (nothing here)."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
 @dataclass(frozen=True)
 class MethodInfo:
     """What a registered method can do, declared once in its :func:`register` line.

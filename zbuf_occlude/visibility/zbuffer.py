@@ -38,7 +38,7 @@ from ..render.moderngl_backend import PointBuffer
 from ..render.renderer_cache import RENDERER_CACHE_SIZE, renderer_for  # noqa: F401 - re-exported
 from .definition import TOLERANCE, hide_edge_on
 from .segment_triangle import mesh_planes
-from .registry import check_face_index, check_points, register
+from .registry import SessionBase, check_face_index, check_points, register
 
 __all__ = ["ResidentPoints", "Scene", "renderer_for", "zbuffer_visible", "zbuffer_tolerance_visible", "DEFAULT_RESOLUTION"]
 
@@ -75,7 +75,7 @@ def _resolve_uncertain(
     return out
 
 
-class ResidentPoints:
+class ResidentPoints(SessionBase):
     """One mesh and one point set on the GPU, tested from many cameras.
 
     Holds the (cached, shared) renderer of the mesh and the points uploaded once; use it
@@ -186,11 +186,6 @@ class ResidentPoints:
                 self._buffer.release()
             self._buffer = None
 
-    def __enter__(self) -> ResidentPoints:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.release()
 
 
 class Scene(ResidentPoints):
