@@ -23,6 +23,7 @@ import numpy as np
 from ..defaults import DEFAULT_METHOD
 from ..errors import InvalidInputError
 from ..io import write_csv, write_text
+from ..visibility.registry import method_info
 from .data import CloudSet, dedupe_meshes, from_meshes, from_occluded, split_validation
 from .metrics import accuracy_by_elevation, classification_report
 from .paper import MODELNET8, PAPER_3A, PAPER_3B, PAPER_3B_MEAN_F1, PAPER_3B_TEST3, TEST_ELEVATIONS, TRAIN_ELEVATIONS
@@ -149,9 +150,13 @@ def _visible_area_curve(meshes: list[dict], data_dir: Path, scale: Scale, method
 
         with open(cache, encoding="utf-8") as fh:
             return [{k: float(v) for k, v in r.items()} for r in csv.DictReader(fh)]
+    # Fig. 12's areas need a sharp visible set: an occupancy-grid method (the paper's HSR for
+    # the data) would blur them, so those fall back to the default method.
+    info = method_info(method)
+    profile_method = DEFAULT_METHOD if (info.takes_grid or info.grid_of) else method
     per_mesh = []
     for m in meshes:
-        rows = profile_table(load_mesh(m["path"]), method=method if not method.startswith("og") else "zbuffer",
+        rows = profile_table(load_mesh(m["path"]), method=profile_method,
                              points=scale.profile_points, azimuths=scale.profile_azimuths,
                              resolution=scale.resolution, progress=False)  # fmt: skip
         per_mesh.append(rows)
