@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from ..cameras import Camera, camera_on_sphere
 from ..errors import BackendUnavailable, InvalidInputError
-from .registry import get_method, register
+from .registry import get_method, method_info, register
 
 __all__ = ["choose_method", "calibrate", "make_scene", "auto_visible", "SOFTWARE_RENDERERS", "AUTO_ENV"]
 
@@ -122,15 +122,9 @@ def choose_method() -> str:
 
 
 def make_scene(mesh: trimesh.Trimesh, points, face_index=None):
-    """A scene of :func:`choose_method`'s method for many views of one point set
-    (``scene.visible(camera)``; release with ``scene.release()`` where it has one)."""
-    if choose_method() == "zbuffer-exact":
-        from .gpu_exact import ExactScene
-
-        return ExactScene(mesh, points, face_index)
-    from .embree_fast import FastScene
-
-    return FastScene(mesh, points, face_index)
+    """The session of :func:`choose_method`'s method for many views of one point set
+    (``scene.visible(camera)``; ``with`` or ``scene.release()`` frees it)."""
+    return method_info(choose_method()).session(mesh, points, face_index)
 
 
 @register("auto", takes_resolution=True, session=make_scene)
