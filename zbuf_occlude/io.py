@@ -30,6 +30,7 @@ from .occlude import OccludedCloud  # re-exported: its home is the producer, occ
 __all__ = [
     "OccludedCloud",
     "atomic_path",
+    "atomic_h5",
     "TempOwner",
     "temp_owner",
     "temp_is_orphan",
@@ -171,6 +172,26 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     except BaseException:
         tmp_path.unlink(missing_ok=True)
         raise
+
+
+@contextlib.contextmanager
+def atomic_h5(path: str | os.PathLike) -> Iterator[Any]:
+    """An ``h5py.File`` open for writing at a temporary beside ``path`` (:func:`atomic_path`).
+
+    HDF5 reports a full disk in its message, not always in ``errno``: such an error is
+    re-raised as ``ENOSPC`` so that :func:`atomic_path` turns it into the disk-full
+    :class:`OutputError`, as for every other writer.
+    """
+    import h5py
+
+    with atomic_path(path) as tmp:
+        try:
+            with h5py.File(tmp, "w") as f:
+                yield f
+        except OSError as exc:
+            if exc.errno is None and "No space left" in str(exc):
+                raise OSError(errno.ENOSPC, str(exc)) from exc
+            raise
 
 
 def write_text(path: str | os.PathLike, text: str) -> Path:
@@ -315,35 +336,28 @@ def write_h5(
     n = sizes.pop() if sizes else int(n_points or 0)
     text = h5py.string_dtype("utf-8")
     path = Path(path)
-    with atomic_path(path) as tmp:
-        try:
-            with h5py.File(tmp, "w") as f:
+    with atomic_h5(path) as f:
 
-                def put(key: str, data, dtype=None) -> None:
-                    # no modification times: the same inputs give the same bytes
-                    f.create_dataset(key, data=data, dtype=dtype, track_times=False)
+        def put(key: str, data, dtype=None) -> None:
+            # no modification times: the same inputs give the same bytes
+            f.create_dataset(key, data=data, dtype=dtype, track_times=False)
 
-                put("data", np.asarray([c.points for c in clouds], dtype=np.float32).reshape(len(clouds), n, 3))
-                put("label", np.asarray([c.label for c in clouds], dtype=np.int64))
-                put("elevation_deg", np.asarray([c.elevation_deg for c in clouds], dtype=np.float64))
-                put("azimuth_deg", np.asarray([c.azimuth_deg for c in clouds], dtype=np.float64))
-                for key, values in (columns or {}).items():
-                    put(key, np.asarray(values, dtype=np.int64).reshape(len(clouds)))
-                put("sample_index", np.asarray([c.sample_index for c in clouds], dtype=np.int64))
-                put("n_visible", np.asarray([c.n_visible for c in clouds], dtype=np.int64))
-                if provenance:
-                    put("face_index", np.asarray([c.face_index for c in clouds], dtype=np.int32).reshape(len(clouds), n))
-                    put("radius", np.asarray([c.radius for c in clouds], dtype=np.float64))
-                    put("source", [c.source for c in clouds], text)
-                    put("class_name", [c.class_name for c in clouds], text)
-                if shape_names or provenance:
-                    f.attrs["shape_names"] = list(shape_names)
-                f.attrs.update(dict(attrs or {}))
-        except OSError as exc:
-            # HDF5 reports a full disk in its message, not always in errno
-            if exc.errno is None and "No space left" in str(exc):
-                raise OSError(errno.ENOSPC, str(exc)) from exc
-            raise
+        put("data", np.asarray([c.points for c in clouds], dtype=np.float32).reshape(len(clouds), n, 3))
+        put("label", np.asarray([c.label for c in clouds], dtype=np.int64))
+        put("elevation_deg", np.asarray([c.elevation_deg for c in clouds], dtype=np.float64))
+        put("azimuth_deg", np.asarray([c.azimuth_deg for c in clouds], dtype=np.float64))
+        for key, values in (columns or {}).items():
+            put(key, np.asarray(values, dtype=np.int64).reshape(len(clouds)))
+        put("sample_index", np.asarray([c.sample_index for c in clouds], dtype=np.int64))
+        put("n_visible", np.asarray([c.n_visible for c in clouds], dtype=np.int64))
+        if provenance:
+            put("face_index", np.asarray([c.face_index for c in clouds], dtype=np.int32).reshape(len(clouds), n))
+            put("radius", np.asarray([c.radius for c in clouds], dtype=np.float64))
+            put("source", [c.source for c in clouds], text)
+            put("class_name", [c.class_name for c in clouds], text)
+        if shape_names or provenance:
+            f.attrs["shape_names"] = list(shape_names)
+        f.attrs.update(dict(attrs or {}))
     return path
 
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import errno
 import functools
 import json
 import logging
@@ -17,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from ..io import OccludedCloud, atomic_path, file_sha256, write_h5, write_npz, write_ply, write_text
+from ..io import OccludedCloud, atomic_h5, file_sha256, write_h5, write_npz, write_ply, write_text
 from ..layout import FORMAT_VERSION, SAMPLE_FILE_FORMATS
 from ..mesh import load_mesh
 from ..occlude import dense_cloud, occlude_object
@@ -107,18 +106,10 @@ def _scan(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
 
 def _write_datasets(path: Path, datasets: dict[str, np.ndarray], attrs: dict[str, Any]) -> None:
     """One shard of named arrays (insertion order, no modification times: same inputs, same bytes)."""
-    import h5py
-
-    with atomic_path(path) as tmp:
-        try:
-            with h5py.File(tmp, "w") as f:
-                for key, data in datasets.items():
-                    f.create_dataset(key, data=data, track_times=False)
-                f.attrs.update(attrs)
-        except OSError as exc:
-            if exc.errno is None and "No space left" in str(exc):  # HDF5 puts it in the message only
-                raise OSError(errno.ENOSPC, str(exc)) from exc
-            raise
+    with atomic_h5(path) as f:
+        for key, data in datasets.items():
+            f.create_dataset(key, data=data, track_times=False)
+        f.attrs.update(attrs)
 
 
 def _render(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
@@ -185,27 +176,19 @@ def _render(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
 
 def _write_compact(path: Path, dense_points, bits, n_visible, poses, attrs: dict[str, Any]) -> None:
     """The compact shard: dense cloud once, visibility bits per pose (layout: :mod:`zbuf_occlude.layout`)."""
-    import h5py
-
     el_az = np.asarray(poses, dtype=np.float64).reshape(-1, 2)
-    with atomic_path(path) as tmp:
-        try:
-            with h5py.File(tmp, "w") as f:
-                f.create_dataset("dense_points", data=dense_points.astype(np.float32), track_times=False)
-                f.create_dataset(
-                    "visible_bits", data=bits, chunks=bits.shape if bits.size else None,
-                    compression="gzip" if bits.size else None,
-                    compression_opts=COMPACT_GZIP_LEVEL if bits.size else None, track_times=False,
-                )  # fmt: skip
-                f.create_dataset("n_visible", data=n_visible, track_times=False)
-                f.create_dataset("elevation_deg", data=el_az[:, 0], track_times=False)
-                f.create_dataset("azimuth_deg", data=el_az[:, 1], track_times=False)
-                f.attrs.update(attrs)
-                f.attrs["n_dense"] = len(dense_points)
-        except OSError as exc:
-            if exc.errno is None and "No space left" in str(exc):  # HDF5 puts it in the message only
-                raise OSError(errno.ENOSPC, str(exc)) from exc
-            raise
+    with atomic_h5(path) as f:
+        f.create_dataset("dense_points", data=dense_points.astype(np.float32), track_times=False)
+        f.create_dataset(
+            "visible_bits", data=bits, chunks=bits.shape if bits.size else None,
+            compression="gzip" if bits.size else None,
+            compression_opts=COMPACT_GZIP_LEVEL if bits.size else None, track_times=False,
+        )  # fmt: skip
+        f.create_dataset("n_visible", data=n_visible, track_times=False)
+        f.create_dataset("elevation_deg", data=el_az[:, 0], track_times=False)
+        f.create_dataset("azimuth_deg", data=el_az[:, 1], track_times=False)
+        f.attrs.update(attrs)
+        f.attrs["n_dense"] = len(dense_points)
 
 
 def base_record(obj: FarmObject, params: FarmParams) -> dict[str, Any]:
