@@ -222,7 +222,7 @@ def _alive(pid: int) -> bool:
     return state not in ("Z", "X")  # a zombie has exited; only its parent's reaping is left
 
 
-VIEWS_LONG = "fibonacci:600"
+VIEWS_LONG = "fibonacci:900"
 #: The pool-farm tests need the run to last ~10 s; the z-buffer's speed on llvmpipe gives that
 #: (``auto`` picks the faster threaded Embree path here and would finish before the signal).
 METHOD_LONG = "zbuffer"
@@ -236,7 +236,7 @@ def _start_pool_farm(tree: Path, out: Path, cwd: Path) -> tuple[subprocess.Popen
         env=_env(), cwd=cwd, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     _wait_for(lambda: len(_children(proc.pid)) >= 3, proc)  # two workers and the resource tracker
-    time.sleep(3)  # let them load and render
+    time.sleep(1)  # let them load and start rendering (the run lasts several seconds more)
     assert proc.poll() is None
     return proc, _children(proc.pid)
 
