@@ -43,6 +43,7 @@ __all__ = [
     "write_h5",
     "read_h5",
     "read_h5_clouds",
+    "clouds_of_h5",
     "FORMATS",
 ]
 
@@ -375,7 +376,11 @@ def read_h5(path: str | os.PathLike) -> dict[str, np.ndarray]:
 
 def read_h5_clouds(path: str | os.PathLike) -> list[OccludedCloud]:
     """The clouds of a file written by :func:`write_h5`, in order (its inverse)."""
-    d = read_h5(path)
+    return clouds_of_h5(read_h5(path))
+
+
+def clouds_of_h5(d: Mapping[str, np.ndarray]) -> list[OccludedCloud]:
+    """The clouds of :func:`read_h5`'s arrays (with provenance columns), in order."""
     return [
         OccludedCloud(
             points=d["data"][i],

@@ -25,7 +25,7 @@ import numpy as np
 from ..defaults import DEFAULT_DENSE_POINTS, DEFAULT_N_POINTS, DEFAULT_RESOLUTION, DEFAULT_SAMPLES_PER_VIEW, DEFAULT_VIEWS
 from ..discovery import SkippedInput, class_and_split, scan_meshes
 from ..errors import InvalidInputError
-from ..io import read_h5, write_h5
+from ..io import clouds_of_h5, read_h5, write_h5
 from ..layout import GENERATE_STORAGES, MERGED_H5_FILE
 from ..occlude import OccludedCloud
 from .config import FarmParams, record_path
@@ -95,15 +95,7 @@ def _merge_h5(out: Path, objects: Sequence[FarmObject]) -> Path | None:
         n_points = d["data"].shape[1]
         for key in columns:
             columns[key].append(d[key])
-        clouds.extend(
-            OccludedCloud(
-                points=d["data"][i], face_index=d["face_index"][i], elevation_deg=float(d["elevation_deg"][i]),
-                azimuth_deg=float(d["azimuth_deg"][i]), radius=float(d["radius"][i]), label=int(d["label"][i]),
-                class_name=str(d["class_name"][i]), source=str(d["source"][i]),
-                sample_index=int(d["sample_index"][i]), n_visible=int(d["n_visible"][i]),
-            )  # fmt: skip
-            for i in range(len(d["data"]))
-        )
+        clouds.extend(clouds_of_h5(d))
     return write_h5(
         out / MERGED_H5_FILE, clouds, shape_names=shape_names_of(objects), n_points=n_points,
         columns={k: np.concatenate(v) for k, v in columns.items()},
