@@ -12,7 +12,7 @@ under it fits:
 ``shapenetcore-v2``
     ``SYNSET/MODEL_ID/models/model_normalized.obj`` (ShapeNetCore v2);
 ``shapenetcore-v1``
-    ``SYNSET/MODEL_ID/model.obj`` (ShapeNetCore v1).  The class is the synset's name in
+    ``SYNSET/MODEL_ID/model.obj`` (ShapeNetCore v1); SYNSET is 8 digits.  The class is the synset's name in
     the ``taxonomy.json`` at the top of the folder given (its first comma-separated
     name: ``"airplane,aeroplane,plane"`` -> ``airplane``), else the synset id; the
     object's name is ``SYNSET/MODEL_ID`` (a model id may appear in two synsets); split
@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 from collections.abc import Sequence
 from os import PathLike
 from pathlib import Path
@@ -94,6 +95,8 @@ TAXONOMY_FILE = "taxonomy.json"
 
 _V2 = ("models", "model_normalized.obj")
 _V1 = "model.obj"
+#: A WordNet noun offset, the name of every ShapeNetCore synset folder.
+_SYNSET = re.compile(r"\d{8}")
 
 
 class LabelledMesh(NamedTuple):
@@ -167,11 +170,15 @@ def _synset_names(synsets: set[str], taxonomy: dict[str, str]) -> dict[str, str]
 
 
 def _shapenet(path: Path) -> tuple[str, str, str] | None:
-    """``(layout, synset, model_id)`` of a ShapeNetCore file path (absolute), else None."""
+    """``(layout, synset, model_id)`` of a ShapeNetCore file path (absolute), else None.
+
+    The synset folder must be a WordNet offset (8 digits), as every ShapeNetCore synset is:
+    ``chairs/abc/model.obj`` is no ShapeNetCore path.
+    """
     parts = path.parts
-    if tuple(parts[-2:]) == _V2 and len(parts) >= 5:
+    if tuple(parts[-2:]) == _V2 and len(parts) >= 5 and _SYNSET.fullmatch(parts[-4]):
         return "shapenetcore-v2", parts[-4], parts[-3]
-    if parts[-1] == _V1 and len(parts) >= 4:
+    if parts[-1] == _V1 and len(parts) >= 4 and _SYNSET.fullmatch(parts[-3]):
         return "shapenetcore-v1", parts[-3], parts[-2]
     return None
 
