@@ -23,11 +23,15 @@ set -euo pipefail
 ROOT=${ROOT:-$HOME/data/ModelNet40}        # ROOT/<class>/<split>/<name>.off
 OUT=${OUT:-/scratch/$USER/modelnet40_occluded}   # must be on a file system all nodes share
 TASKS=${TASKS:-16}                         # keep equal to the --array size above
-FARM_OPTIONS=(--views paper100 --samples-per-view 10 --points 2048 --per-class 5 --storage dense --seed 0)
+# Every mesh of ROOT is rendered.  To try the pipeline on a subset first, set e.g. SUBSET="--per-class 5"
+# (the first 5 meshes of each class and split) or SUBSET="--classes chair,table"; empty: all meshes.
+SUBSET=${SUBSET:-}
+# shellcheck disable=SC2206  # SUBSET is split into options on purpose
+FARM_OPTIONS=(--views paper100 --samples-per-view 10 --points 2048 --storage dense --seed 0 $SUBSET)
 
 case "${1:-task}" in
 submit)
-    job=$(sbatch --parsable --array=0-$((TASKS - 1)) --export=ALL,ROOT="$ROOT",OUT="$OUT",TASKS="$TASKS" "$0" task)
+    job=$(sbatch --parsable --array=0-$((TASKS - 1)) --export=ALL,ROOT="$ROOT",OUT="$OUT",TASKS="$TASKS",SUBSET="$SUBSET" "$0" task)
     # afterany: a task whose meshes partly failed exits 1, and the merge should still run
     sbatch --dependency=afterany:"$job" --job-name=zbuf-farm-merge --output=zbuf-farm-merge-%j.log \
         --wrap "zbuf-occlude farm-merge '$OUT' --no-progress"

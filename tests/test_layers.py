@@ -22,7 +22,7 @@ ROOT = "zbuf_occlude"
 LAYERS: dict[str, int] = {
     # base: no zbuf_occlude imports but each other's
     "errors": 0, "defaults": 0, "_version": 0, "mesh_cache": 0, "metrics": 0, "resources": 0,
-    "mesh_formats": 1, "discovery": 1, "mesh": 1,
+    "mesh_formats": 1, "discovery": 1, "mesh_layouts": 1, "mesh": 1,
     "sampling": 2,
     "cameras": 3,
     "render": 4,

@@ -18,14 +18,14 @@ import numpy as np
 
 from ._version import __version__
 from .cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
-from .defaults import DEFAULT_DENSE_POINTS, DEFAULT_METHOD, DEFAULT_RESOLUTION, DEFAULT_VIEWS
+from .defaults import DEFAULT_DENSE_POINTS, DEFAULT_METHOD, DEFAULT_RESOLUTION, DEFAULT_SEED, DEFAULT_VIEWS
 from .errors import InvalidInputError, ZbufOccludeError
 from .io import FORMATS, write_csv
 from .mesh import load_mesh, scan_meshes
 from .metrics import agreement
 from .resources import MemoryEstimate, check_memory, estimate_job_memory
 from .sampling import check_seed, sample_surface
-from .visibility.registry import available_methods, get_method, method_info, visible_mask
+from .visibility.registry import available_methods, check_runnable, method_info, unavailable_reason, visible_mask
 
 __all__ = ["main", "build_parser", "SAMPLE_MESHES"]
 
@@ -39,7 +39,10 @@ def _default_paths(paths: list[str]) -> list[str]:
     if paths:
         return paths
     if not SAMPLE_MESHES.is_dir():
-        raise InvalidInputError("no PATH given and the shipped sample meshes (data/samples) are not here; pass mesh files or folders")
+        raise InvalidInputError(
+            f"no PATH given and there are no sample meshes at {SAMPLE_MESHES} (only a checkout of the repository "
+            "ships data/samples; an installed wheel has none): pass mesh files or folders"
+        )
     return [str(SAMPLE_MESHES)]
 
 
@@ -55,18 +58,20 @@ def cmd_generate(args: argparse.Namespace) -> int:
     import shlex
 
     from .farm import FarmParams
+    from .farm.checks import check_out_option
     from .farm.generate import generate
 
     params = FarmParams(
         views=args.views, samples_per_view=args.samples_per_view, n_points=args.points, dense_points=args.dense_points,
         resolution=args.resolution, seed=args.seed, radius=args.radius, storage=args.format, method=args.method,
     )  # fmt: skip
+    check_out_option(args.out)  # before Path("") becomes the working folder
     paths = _default_paths(args.paths)
     # generate's engine (farm.run_farm) checks the options, the memory, --out and the GL before loading a mesh
     t0 = time.perf_counter()
     summary, objects = generate(
         paths, args.out, params=params, overwrite=args.overwrite, progress=True,
-        command=shlex.join(["zbuf-occlude", *sys.argv[1:]]) if sys.argv else None,
+        command=shlex.join(["zbuf-occlude", *sys.argv[1:]]) if sys.argv else None, class_from=args.class_from,
     )  # fmt: skip
     elapsed = time.perf_counter() - t0
     print(
@@ -107,7 +112,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
     poses = view_schedule(args.views)
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     for m in methods:
-        get_method(m)  # unknown names fail here, before any work
+        check_runnable(m)  # unknown names and missing extras fail here, before any output
     if any(method_info(m).takes_resolution for m in methods):
         from .render.context import check_image_size
 
@@ -165,49 +170,89 @@ def cmd_info(args: argparse.Namespace) -> int:
     print(f"zbuf_occlude {__version__}")
     for key, value in info.items():
         print(f"GL {key:8s} {value}")
-    print(f"methods     {', '.join(available_methods())}")
+    missing = {m: unavailable_reason(m) for m in available_methods()}
+    print(f"methods     {', '.join(m for m, why in missing.items() if why is None)}")
+    not_here = [m for m, why in missing.items() if why is not None]
+    if not_here:  # listed apart: `--method` with one of them fails here
+        print(f"not here    {', '.join(not_here)} (their extras are not installed)")
     return 0
 
 
 # -- parser ------------------------------------------------------------------------------------------
-def _add_common(p: argparse.ArgumentParser, *, points: int | None = None) -> None:
-    p.add_argument("paths", nargs="*", metavar="PATH", help="mesh files or folders (recursive); default: the shipped sample meshes")
-    p.add_argument("--views", default=DEFAULT_VIEWS, help="paper100 | grid25 | fibonacci:N | EL:AZ,EL:AZ,... (degrees)")
-    p.add_argument("--points", type=int, default=points, help="points per sample (generate) or sampled per mesh (validate)")
-    p.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION, help="z-buffer image size, pixels")
-    p.add_argument("--radius", type=float, default=DEFAULT_RADIUS, help="camera distance, object units (object max extent is 1)")
-    p.add_argument("--seed", type=int, default=0)
+#: The paths' help of generate and validate: a wheel ships no sample meshes (only a checkout has data/samples).
+PATHS_HELP = (
+    "mesh files (.off, .obj, .ply, .stl, .glb) or folders, searched recursively; classes and splits come from "
+    "the folder's layout (ModelNet, ShapeNetCore, CLASS/NAME; see docs/guide/inputs.md) "
+    "(default: the sample meshes in a checkout's data/samples; an installed wheel has none: pass PATH)"
+)
+
+
+
+def _add_paths(p: argparse.ArgumentParser) -> None:
+    p.add_argument("paths", nargs="*", metavar="PATH", help=PATHS_HELP)
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``zbuf-occlude`` argument parser with every subcommand."""
+    from .farm.cli import CLASS_FROM_HELP, RADIUS_HELP, VIEWS_HELP
+    from .farm.config import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION
+    from .farm.config import DEFAULT_VIEWS as FARM_VIEWS
+    from .farm.generate import GENERATE_DEFAULTS as gd  # generate's defaults, taken from zbuf_occlude.defaults
+
     parser = argparse.ArgumentParser(prog="zbuf-occlude", description="Real-like occluded point clouds from meshes (headless z-buffer HSR).")
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    from .farm.generate import GENERATE_DEFAULTS as gd  # generate's defaults, taken from zbuf_occlude.defaults
-
-    g = sub.add_parser("generate", help="occluded point clouds from meshes")
-    _add_common(g)
-    g.add_argument("--out", required=True, help="output folder")
-    g.add_argument("--samples-per-view", type=int, help=f"random draws per pose (default: {gd.samples_per_view})")
-    g.add_argument("--dense-points", type=int, help=f"dense cloud per mesh, drawn from per pose (default: {gd.dense_points})")
+    g = sub.add_parser(
+        "generate", help="occluded point clouds from a few meshes",
+        description="Render each mesh from each pose, keep the points the camera sees, and write samples of "
+        "--points points to --out. Run it again to resume; `farm` builds large data sets.",
+    )  # fmt: skip
+    _add_paths(g)
+    g.add_argument("--out", required=True, help="output folder (created; must not be a file)")
+    g.add_argument("--views", help=f"{VIEWS_HELP} (default: {gd.views}; the farm's: {FARM_VIEWS})")
+    g.add_argument("--points", type=int, help=f"points per sample (default: {gd.n_points})")
+    g.add_argument("--samples-per-view", type=int, help=f"random samples drawn per pose (default: {gd.samples_per_view})")
+    g.add_argument(
+        "--dense-points", type=int,
+        help=f"dense cloud sampled once per mesh, drawn from per pose (default: {gd.dense_points}; the farm's: {DEFAULT_FARM_DENSE_POINTS})",
+    )  # fmt: skip
+    g.add_argument(
+        "--resolution", type=int,
+        help=f"z-buffer image size, pixels (default: {gd.resolution}; the farm's: {DEFAULT_FARM_RESOLUTION})",
+    )  # fmt: skip
+    g.add_argument("--radius", type=float, default=gd.radius, help=f"{RADIUS_HELP} (default: %(default)s)")
+    g.add_argument("--seed", type=int, default=gd.seed, help="global seed: the same seed and options give the same samples (default: %(default)s)")
     g.add_argument("--format", choices=FORMATS, help=f"npz or ply: one file per sample; h5: PointNet's layout (default: {gd.storage})")
-    g.add_argument("--method", help=f"visibility method (see `zbuf-occlude info`; default: {gd.method})")
+    g.add_argument("--method", help=f"visibility method (see `zbuf-occlude info`) (default: {gd.method})")
+    g.add_argument("--class-from", type=int, metavar="N", help=CLASS_FROM_HELP)
     g.add_argument("--overwrite", action="store_true", help="start over (needed to change options in an existing --out)")
     g.set_defaults(
         func=cmd_generate, views=gd.views, points=gd.n_points, resolution=gd.resolution,
         samples_per_view=gd.samples_per_view, dense_points=gd.dense_points, format=gd.storage, method=gd.method,
     )  # fmt: skip
 
-    v = sub.add_parser("validate", help="agreement of visibility methods with the exact oracle, per mesh and pose")
-    _add_common(v, points=DEFAULT_DENSE_POINTS)
-    v.add_argument("--methods", default=DEFAULT_METHOD, help="comma-separated methods to score")
+    v = sub.add_parser(
+        "validate", help="agreement of visibility methods with the exact oracle, per mesh and pose",
+        description="Sample --points points on each mesh, decide their visibility per pose with each of --methods "
+        "and with the exact oracle, and print the agreement (false-visible, false-hidden) and the time per view.",
+    )  # fmt: skip
+    _add_paths(v)
+    v.add_argument("--methods", default=DEFAULT_METHOD, help="comma-separated methods to score (see `zbuf-occlude info`) (default: %(default)s)")
+    v.add_argument("--views", default=DEFAULT_VIEWS, help=f"{VIEWS_HELP} (default: %(default)s)")
+    v.add_argument("--points", type=int, default=DEFAULT_DENSE_POINTS, help="points sampled on each mesh's surface, scored per pose (default: %(default)s)")
+    v.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION, help="z-buffer image size of the image-space methods, pixels (default: %(default)s)")
+    v.add_argument("--radius", type=float, default=DEFAULT_RADIUS, help=f"{RADIUS_HELP} (default: %(default)s)")
+    v.add_argument("--seed", type=int, default=DEFAULT_SEED, help="seed of the surface sampling (default: %(default)s)")
     v.add_argument("--csv", help="also write the rows to this CSV file")
     v.set_defaults(func=cmd_validate)
 
-    i = sub.add_parser("info", help="the OpenGL context zbuf_occlude gets here")
+    i = sub.add_parser(
+        "info", help="the OpenGL context and the visibility methods available here",
+        description="Make an OpenGL context as the other commands do, print its renderer and version, "
+        "and list the visibility methods that can run here.",
+    )  # fmt: skip
     i.add_argument("--gl", help="egl | osmesa | an order such as osmesa,egl (default: $ZBUF_OCCLUDE_GL or egl,osmesa)")
     i.set_defaults(func=cmd_info)
 

@@ -12,6 +12,7 @@ __all__ = [
     "DEFAULT_N_POINTS",
     "DEFAULT_SAMPLES_PER_VIEW",
     "DEFAULT_DENSE_POINTS",
+    "DEFAULT_SEED",
     "DEFAULT_SELF_HIT_TOLERANCE",
     "DEFAULT_GPU_TOLERANCE",
     "DEFAULT_DEPTH_TOLERANCE",
@@ -45,6 +46,10 @@ DEFAULT_SAMPLES_PER_VIEW = 10
 #: :func:`zbuf_occlude.occlude_object` and the points ``validate`` scores per mesh (the farm
 #: uses fewer for throughput: ``zbuf_occlude.farm.config.DEFAULT_FARM_DENSE_POINTS``).
 DEFAULT_DENSE_POINTS = 100_000
+
+#: Global seed of every command and of the API's random draws; with the same seed and options
+#: the samples are the same bytes (zbuf_occlude.occlude.derive_rng).
+DEFAULT_SEED = 0
 
 #: Distance from a point, object units, within which a face meeting the point→camera
 #: segment does not count as an occluder (the exact, float64 methods).  It absorbs the

@@ -8,9 +8,11 @@ valid UTF-8 are reported (:class:`SkippedInput`, logged as warnings) and returne
 
 from __future__ import annotations
 
+import errno
 import logging
 import os
 import re
+import stat
 from collections.abc import Sequence
 from dataclasses import dataclass
 from os import PathLike
@@ -25,6 +27,10 @@ __all__ = [
     "MeshScan",
     "printable_path",
     "non_utf8_reason",
+    "unusable_entry_reason",
+    "check_mesh_extension",
+    "collect_inputs",
+    "no_meshes_error",
     "walk_mesh_files",
     "scan_meshes",
     "find_meshes",
@@ -83,12 +89,44 @@ def non_utf8_reason(path: str | PathLike[str]) -> str | None:
     return None
 
 
+def unusable_entry_reason(path: str | PathLike[str]) -> str | None:
+    """Why a folder entry cannot be used although it may hold a mesh, or None.
+
+    A dangling symbolic link or a loop of links (the target, maybe a mesh or a folder of
+    them, cannot be reached) and a mesh-named FIFO, socket or device (opening it would
+    block or read something that is no file) are reported instead of left out silently.
+    """
+    path = os.fspath(path)
+    try:
+        st = os.stat(path)
+    except OSError as exc:
+        if os.path.islink(path):
+            what = "symbolic link loop" if exc.errno == errno.ELOOP else "dangling symbolic link"
+            target = printable_path(os.readlink(path))
+            return f"{what} (-> {target}): {exc.strerror or exc}; fix or remove the link"
+        return None  # gone since it was listed: nothing to report
+    if stat.S_ISREG(st.st_mode) or stat.S_ISDIR(st.st_mode):
+        return None
+    if Path(path).suffix.lower() in SUPPORTED_EXTENSIONS:
+        return f"not a regular file ({_file_kind(st.st_mode)}); never opened"
+    return None
+
+
+def _file_kind(mode: int) -> str:
+    for test, kind in ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device")):
+        if test(mode):
+            return kind
+    return "not a file"
+
+
 def walk_mesh_files(root: str | PathLike[str], *, skip_hidden: bool = False) -> tuple[list[Path], list[SkippedInput]]:
     """Mesh files under a folder, recursively, and the inputs that had to be skipped.
 
     Like ``Path(root).rglob("*")`` (symbolic links to folders are not followed) but a
-    folder that cannot be listed (permissions, I/O error) is reported instead of being
-    left out silently, and files whose path is not valid UTF-8 are reported and left out.
+    folder that cannot be listed (permissions, I/O error), a dangling symbolic link, a
+    loop of links and a FIFO or device with a mesh's extension
+    (:func:`unusable_entry_reason`) are reported instead of being left out silently, and
+    files whose path is not valid UTF-8 are reported and left out.
 
     Parameters
     ----------
@@ -104,8 +142,8 @@ def walk_mesh_files(root: str | PathLike[str], *, skip_hidden: bool = False) -> 
         Regular files (or links to them) with an extension of :data:`SUPPORTED_EXTENSIONS`
         (any case), sorted.
     skipped : list of SkippedInput
-        Folders that could not be read and files with non-UTF-8 paths; each is also
-        logged as a warning.
+        Folders that could not be read, broken links, non-regular mesh-named entries and
+        files with non-UTF-8 paths; each is also logged as a warning.
     """
     root = Path(root)
     files: list[Path] = []
@@ -122,6 +160,10 @@ def walk_mesh_files(root: str | PathLike[str], *, skip_hidden: bool = False) -> 
         dirnames.sort()
         for name in filenames:
             path = Path(folder, name)
+            problem = unusable_entry_reason(path)
+            if problem:
+                skipped.append(SkippedInput(printable_path(path), problem))
+                continue
             if path.suffix.lower() not in SUPPORTED_EXTENSIONS or not path.is_file():
                 continue
             problem = non_utf8_reason(path)
@@ -151,30 +193,81 @@ def scan_meshes(paths: Sequence[str | PathLike[str]]) -> MeshScan:
     Raises
     ------
     InvalidInputError
-        A path does not exist, or no mesh was found (the message lists what was skipped).
+        A path does not exist, a file given is not a mesh by its extension
+        (:func:`check_mesh_extension`), or no mesh was found (the message lists what was
+        skipped).
     """
+    inputs, skipped = collect_inputs(paths)
     found: list[tuple[Path, str]] = []
+    for path, files in inputs:
+        if files is None:
+            found.append((path, path.stem))
+        else:
+            found.extend((f, f.relative_to(path).with_suffix("").as_posix()) for f in files)
+    if not found:
+        raise no_meshes_error(paths, skipped)
+    return MeshScan(found, skipped)
+
+
+def collect_inputs(
+    paths: Sequence[str | PathLike[str]], *, skip_hidden: bool = False
+) -> tuple[list[tuple[Path, list[Path] | None]], list[SkippedInput]]:
+    """The paths given, each a folder with its mesh files or a mesh file, and what was skipped.
+
+    Returns
+    -------
+    inputs : list of (Path, list of Path or None)
+        ``(folder, its mesh files)`` (:func:`walk_mesh_files`) or ``(file, None)``, in order.
+    skipped : list of SkippedInput
+        As :func:`walk_mesh_files`, and files given whose name is not UTF-8.
+
+    Raises
+    ------
+    InvalidInputError
+        A path does not exist, is no regular file or folder, or a file given is not a
+        mesh by its extension (:func:`check_mesh_extension`).
+    """
+    inputs: list[tuple[Path, list[Path] | None]] = []
     skipped: list[SkippedInput] = []
     for raw in paths:
         path = Path(raw)
         if path.is_dir():
-            files, missed = walk_mesh_files(path)
+            files, missed = walk_mesh_files(path, skip_hidden=skip_hidden)
             skipped.extend(missed)
-            found.extend((f, f.relative_to(path).with_suffix("").as_posix()) for f in files)
+            inputs.append((path, files))
         elif path.is_file():
+            check_mesh_extension(path)
             problem = non_utf8_reason(path)
             if problem:
                 skipped.append(SkippedInput(printable_path(path), problem))
                 log.warning("skipped %s", skipped[-1])
             else:
-                found.append((path, path.stem))
+                inputs.append((path, None))
         else:
-            raise InvalidInputError(f"no such file or folder: {printable_path(path)}")
-    if not found:
-        where = ", ".join(printable_path(p) for p in paths)
-        missed = f"; skipped {len(skipped)}: " + "; ".join(map(str, skipped[:3])) if skipped else ""
-        raise InvalidInputError(f"no mesh files ({', '.join(SUPPORTED_EXTENSIONS)}) under {where}{missed}")
-    return MeshScan(found, skipped)
+            problem = (unusable_entry_reason(path) or "not a regular file or folder") if os.path.lexists(path) else None
+            raise InvalidInputError(f"{printable_path(path)}: {problem}" if problem else f"no such file or folder: {printable_path(path)}")
+    return inputs, skipped
+
+
+def no_meshes_error(paths: Sequence[str | PathLike[str]], skipped: Sequence[SkippedInput]) -> InvalidInputError:
+    """The error of a search that found no mesh under ``paths`` (naming what was skipped)."""
+    where = ", ".join(printable_path(p) for p in paths)
+    missed = f"; skipped {len(skipped)}: " + "; ".join(map(str, skipped[:3])) if skipped else ""
+    return InvalidInputError(f"no mesh files ({', '.join(SUPPORTED_EXTENSIONS)}) under {where}{missed}")
+
+
+def check_mesh_extension(path: str | PathLike[str]) -> None:
+    """Refuse a file given by name that is no mesh by its extension (``notes.txt``).
+
+    Raises
+    ------
+    InvalidInputError
+        The extension is not one of :data:`SUPPORTED_EXTENSIONS`; the message names the file.
+    """
+    if Path(path).suffix.lower() not in SUPPORTED_EXTENSIONS:
+        raise InvalidInputError(
+            f"{printable_path(path)} is not a mesh file: its extension is not one of {', '.join(SUPPORTED_EXTENSIONS)}"
+        )
 
 
 def find_meshes(paths: Sequence[str | PathLike[str]]) -> list[tuple[Path, str]]:

@@ -146,7 +146,7 @@ def profile_table(
     pts, fi = sample_surface(mesh, count=int(points), seed=seed)
     az_list = [k * 360.0 / int(azimuths) for k in range(int(azimuths))]
     rows = []
-    for el in tqdm(list(elevations), desc="elevation profile", unit="elevation", disable=not progress):
+    for el in tqdm(list(elevations), desc="elevation profile", unit="elevation", disable=None if progress else True):  # None: only on a terminal
         samples = []
         for az in az_list:
             camera = camera_on_sphere(float(el), az, radius, resolution=resolution)

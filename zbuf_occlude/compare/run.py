@@ -280,7 +280,7 @@ def compare(
     # not load is reported in the table like any other failure
     paths = [f for p in paths for f in ([m for m, _ in find_meshes([p])] if Path(p).is_dir() else [p])]
     total = len(paths) * sum(len(poses) * (per_view + (len(sweeps) if n == sweep_n else 0)) for n in counts)
-    bar = tqdm(total=total, desc="compare", unit="call", disable=not progress)
+    bar = tqdm(total=total, desc="compare", unit="call", disable=None if progress else True)  # None: only on a terminal
     for path in paths:
         name = Path(path).stem
         try:

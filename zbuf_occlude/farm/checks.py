@@ -18,9 +18,21 @@ from ..resources import check_memory, estimate_job_memory
 from ..visibility.registry import get_method
 from .config import FarmParams
 
-__all__ = ["check_before_work", "check_memory_up_front", "prepare_out", "check_gl"]
+__all__ = ["check_before_work", "check_memory_up_front", "check_out_option", "prepare_out", "check_gl"]
 
 log = logging.getLogger(__name__)
+
+
+def check_out_option(out: str | os.PathLike, option: str = "--out") -> None:
+    """Refuse an empty or blank output folder before it becomes ``Path("")``, the working folder.
+
+    Raises
+    ------
+    InvalidInputError
+        ``out`` is ``""`` or whitespace only (the message names the value and ``option``).
+    """
+    if not os.fspath(out).strip():
+        raise InvalidInputError(f"{option} must name a folder, got {os.fspath(out)!r}")
 
 
 def prepare_out(out: Path) -> None:
@@ -29,8 +41,11 @@ def prepare_out(out: Path) -> None:
     Raises
     ------
     OutputError
-        It cannot be created or written (the message says: choose a writable ``--out``).
+        It is a file, or it cannot be created or written (the message says: choose a
+        writable ``--out``).
     """
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"the output folder {out} is a file, not a folder; choose another --out")
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -98,14 +113,15 @@ def check_before_work(params: FarmParams, out: str | os.PathLike, *, gl: bool = 
     Raises
     ------
     InvalidInputError
-        An option is unusable; the message names it.
+        An option is unusable (``out`` empty included); the message names it.
     OutputError
-        ``out`` cannot be created or written.
+        ``out`` is a file or cannot be created or written.
     BackendUnavailable
         No OpenGL context here.
     InsufficientMemoryError
         The run needs more memory than is available (an :class:`InvalidInputError`).
     """
+    check_out_option(out)
     get_method(params.method)
     try:
         camera_on_sphere(0.0, 0.0, params.radius, resolution=params.resolution)

@@ -8,7 +8,11 @@ import shlex
 import sys
 
 from ..cameras import DEFAULT_RADIUS
-from ..defaults import DEFAULT_METHOD
+from ..defaults import DEFAULT_DENSE_POINTS as GENERATE_DENSE_POINTS
+from ..defaults import DEFAULT_METHOD, DEFAULT_SEED
+from ..defaults import DEFAULT_RESOLUTION as GENERATE_RESOLUTION
+from ..defaults import DEFAULT_VIEWS as GENERATE_VIEWS
+from ..discovery import SPLITS
 from ..errors import InvalidInputError
 from ..layout import STORAGE_MODES
 from .config import (
@@ -22,10 +26,19 @@ from .config import (
     DEFAULT_VIEWS,
     FarmParams,
 )
+from .checks import check_out_option
 from .inputs import parse_shard
 from .run import merge_farm, run_farm
 
 log = logging.getLogger(__name__)
+
+#: Help shared by ``generate``, ``validate`` and ``farm`` (:mod:`zbuf_occlude.cli` imports them).
+VIEWS_HELP = "poses: grid25 (5x5 grid) | paper100 (the paper's 100) | fibonacci:N | EL:AZ,EL:AZ,... in degrees"
+RADIUS_HELP = "camera distance from the object's centre, object units (the normalised object's largest extent is 1)"
+CLASS_FROM_HELP = (
+    "N: take each mesh's class from the N-th folder above it (1: the folder holding it) instead of the detected "
+    "layout's; needed where the layout's classes look wrong (all one class, or folders such as 'models')"
+)
 
 
 # -- command line (called from zbuf_occlude.cli) -------------------------------------------------
@@ -52,6 +65,7 @@ def _farm_command(args: argparse.Namespace) -> int:
         classes=args.classes,
         per_class=args.per_class,
         splits=args.splits,
+        class_from=args.class_from,
         workers=args.workers,
         shard=parse_shard(args.shard) if args.shard else (0, 1),
         scheduler=args.scheduler,
@@ -88,6 +102,8 @@ def _interval_text(lo_hi: tuple[float, float]) -> str:
 
 
 def _merge_command(args: argparse.Namespace) -> int:
+    if args.out is not None:
+        check_out_option(args.out)
     summary = merge_farm(args.inputs, args.out, progress=not args.no_progress)
     print(summary.format())
     return 1 if summary.failed else 0
@@ -102,36 +118,40 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
         "Run the same command again to resume; objects already finished are skipped.",
     )
     p.add_argument(
-        "root", help="ModelNet-style tree ROOT/<class>/<split>/<name>.off, a flat folder, or a list file 'PATH LABEL [SPLIT]'"
+        "root",
+        help="a mesh folder (ModelNet CLASS/SPLIT/NAME.off, ShapeNetCore v1/v2 with its taxonomy.json, CLASS/NAME.ext, "
+        "or CLASS_NNNN.ext files; the layout used goes into the card) or a list file of 'PATH LABEL [SPLIT]' lines",
     )
     p.add_argument("--out", required=True, help="data set folder")
     sel = p.add_argument_group("selection")
     sel.add_argument("--classes", help="comma-separated class names (default: all)")
-    sel.add_argument("--per-class", type=int, help="first K meshes (by name) of each class and split")
-    sel.add_argument("--splits", default="train,test", help="comma-separated splits (default: train,test)")
+    sel.add_argument("--per-class", type=int, help="first K meshes (by name) of each class and split (default: all)")
+    sel.add_argument("--splits", default=",".join(SPLITS), help="comma-separated splits (default: %(default)s)")
+    sel.add_argument("--class-from", type=int, metavar="N", help=CLASS_FROM_HELP)
     r = p.add_argument_group("rendering")
-    r.add_argument("--views", default=DEFAULT_VIEWS, help="paper100 | grid25 | fibonacci:N | EL:AZ,... (default: paper100)")
+    r.add_argument("--views", default=DEFAULT_VIEWS, help=f"{VIEWS_HELP} (default: %(default)s; generate's: {GENERATE_VIEWS})")
     r.add_argument(
-        "--samples-per-view", type=int, default=DEFAULT_SAMPLES_PER_VIEW, help="random draws per pose (default: 10)"
+        "--samples-per-view", type=int, default=DEFAULT_SAMPLES_PER_VIEW, help="random samples drawn per pose (default: %(default)s)"
     )
-    r.add_argument("--points", type=int, default=DEFAULT_N_POINTS, help="points per sample (default: 2048)")
+    r.add_argument("--points", type=int, default=DEFAULT_N_POINTS, help="points per sample (default: %(default)s)")
     dense = r.add_mutually_exclusive_group()
     dense.add_argument(
-        "--dense-points", type=int, help=f"dense cloud per mesh, sampled once (default: {DEFAULT_FARM_DENSE_POINTS})"
+        "--dense-points", type=int, help=f"dense cloud per mesh, sampled once (default: {DEFAULT_FARM_DENSE_POINTS}; generate's: {GENERATE_DENSE_POINTS})"
     )
     dense.add_argument("--density", type=float, help="dense cloud as points per unit area of the normalised mesh")
     r.add_argument(
-        "--resolution", type=int, default=DEFAULT_FARM_RESOLUTION, help=f"z-buffer size, pixels (default: {DEFAULT_FARM_RESOLUTION})"
+        "--resolution", type=int, default=DEFAULT_FARM_RESOLUTION, help=f"z-buffer image size, pixels (default: %(default)s; generate's: {GENERATE_RESOLUTION})"
     )
     r.add_argument(
-        "--radius", type=float, default=DEFAULT_RADIUS, help=f"camera distance, object units (default: {DEFAULT_RADIUS})"
+        "--radius", type=float, default=DEFAULT_RADIUS, help=f"{RADIUS_HELP} (default: %(default)s)"
     )
-    r.add_argument("--seed", type=int, default=0, help="global seed (default: 0)")
+    r.add_argument("--seed", type=int, default=DEFAULT_SEED, help="global seed: the same seed and options give the same data set (default: %(default)s)")
     r.add_argument(
-        "--method", default=DEFAULT_METHOD, help="visibility method (see `zbuf-occlude info`; default: %(default)s)"
+        "--method", default=DEFAULT_METHOD, help="visibility method (see `zbuf-occlude info`) (default: %(default)s)"
     )
     r.add_argument(
-        "--storage", choices=STORAGE_MODES, default="dense", help="dense: PointNet HDF5; compact: dense cloud + visibility bits"
+        "--storage", choices=STORAGE_MODES, default="dense",
+        help="dense: PointNet HDF5; compact: dense cloud + visibility bits (default: %(default)s)",
     )
     s = p.add_argument_group(
         "LiDAR crops (--sensor)",
@@ -143,7 +163,7 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
         "shard, with the sensor's elevation/azimuth seen from the object and the placement per row. "
         "--views, --dense-points, --density, --resolution and --radius do not apply.",
     )
-    s.add_argument("--sensor", help="LiDAR or depth-camera preset (hdl32e, vlp16, hdl64e, os1-64, kinect-v1) or a JSON file")
+    s.add_argument("--sensor", help="LiDAR or depth-camera preset (hdl32e, vlp16, hdl64e, os1-64, kinect-v1) or a JSON file (default: none, z-buffer poses)")
     s.add_argument(
         "--sensor-distance", metavar="LO:HI",
         help=f"horizontal sensor-object distance, metres (default: {_interval_text(DEFAULT_SENSOR_DISTANCE_M)})",

@@ -23,13 +23,13 @@ from pathlib import Path
 import numpy as np
 
 from ..defaults import DEFAULT_DENSE_POINTS, DEFAULT_N_POINTS, DEFAULT_RESOLUTION, DEFAULT_SAMPLES_PER_VIEW, DEFAULT_VIEWS
-from ..discovery import SkippedInput, class_and_split, scan_meshes
+from ..discovery import SkippedInput
 from ..errors import InvalidInputError
 from ..io import clouds_of_h5, read_h5, write_h5
 from ..layout import GENERATE_STORAGES, MERGED_H5_FILE
 from ..occlude import OccludedCloud
 from .config import FarmParams, record_path
-from .inputs import FarmObject, number_objects
+from .inputs import FarmObject, scan_inputs
 from .journal import FarmSummary, read_json, shape_names_of
 from .run import run_farm
 
@@ -45,32 +45,34 @@ GENERATE_DEFAULTS = FarmParams(
 )  # fmt: skip
 
 
-def scan_paths(paths: Sequence[str | os.PathLike]) -> tuple[list[FarmObject], list[SkippedInput]]:
+def scan_paths(
+    paths: Sequence[str | os.PathLike], *, class_from: int | None = None
+) -> tuple[list[FarmObject], list[SkippedInput]]:
     """The plan of ``generate``: mesh files and folders (searched recursively), numbered,
-    and the inputs that had to be skipped.
+    and the inputs that had to be skipped (:func:`~zbuf_occlude.farm.inputs.scan_inputs`).
 
     Each object's name is its path relative to the folder given (a file given alone: its
-    stem), without the suffix; class and split come from the path
-    (:func:`~zbuf_occlude.mesh.class_and_split`); labels number the class names
+    stem; ShapeNetCore: ``SYNSET/MODEL_ID``), without the suffix; class and split come
+    from the folder's layout (:mod:`zbuf_occlude.mesh_layouts`, ``class_from``: the
+    folder level that names the class); labels number the class names
     (:func:`~zbuf_occlude.farm.inputs.number_objects`, as the farm does).
 
     Returns
     -------
     objects : list of FarmObject
     skipped : list of SkippedInput
-        Unreadable folders and files whose names are not UTF-8
-        (:func:`~zbuf_occlude.discovery.scan_meshes`); the run records them and exits 1.
+        Unreadable folders, broken links and files whose names are not UTF-8
+        (:func:`~zbuf_occlude.discovery.walk_mesh_files`); the run records them and exits 1.
 
     Raises
     ------
     InvalidInputError
-        A path is missing, nothing was found, or two files have one name
-        (``chair_0001.off`` and ``chair_0001.obj``): the name seeds the samples and names the
-        outputs, so one would overwrite the other.
+        A path is missing or no mesh file, nothing was found, the layout's labels are
+        refused, or two files have one name (``chair_0001.off`` and ``chair_0001.obj``):
+        the name seeds the samples and names the outputs, so one would overwrite the other.
     """
-    found, skipped = scan_meshes(paths)
-    objects = number_objects([(name, str(path), *class_and_split(path)) for path, name in found])
-    return objects, skipped
+    scan = scan_inputs(paths, class_from=class_from)
+    return scan.objects, scan.skipped
 
 
 def objects_from_paths(paths: Sequence[str | os.PathLike]) -> list[FarmObject]:
@@ -110,6 +112,7 @@ def generate(
     overwrite: bool = False,
     progress: bool = True,
     command: str | None = None,
+    class_from: int | None = None,
 ) -> tuple[FarmSummary, list[FarmObject]]:
     """Occluded samples of a few meshes into ``out`` (``zbuf-occlude generate``).
 
@@ -126,6 +129,8 @@ def generate(
         Start over instead of resuming (needed when ``out`` holds other parameters).
     progress : bool
         tqdm bar on stderr.
+    class_from : int, optional
+        Take each mesh's class from this folder level above it (``--class-from``).
 
     Returns
     -------
@@ -142,12 +147,13 @@ def generate(
     """
     if params.storage not in GENERATE_STORAGES:
         raise InvalidInputError(f"generate writes one of {GENERATE_STORAGES}, not {params.storage!r}")
-    objects, skipped = scan_paths(paths)
+    scan = scan_inputs(paths, class_from=class_from)
+    objects, skipped = scan.objects, scan.skipped
     out = Path(out)
     summary = run_farm(
         objects, out, params=params, workers=1, overwrite=overwrite, progress=progress, command=command,
         source_text=", ".join(str(Path(p).resolve()) for p in paths),
         on_finished=(lambda folder: _merge_h5(folder, objects)) if params.storage == "h5" else None,
-        skipped=[(s.path, s.reason) for s in skipped],
+        skipped=[(s.path, s.reason) for s in skipped], layout=scan.layout,
     )  # fmt: skip
     return summary, objects

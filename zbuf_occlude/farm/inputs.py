@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import os
 import re
+import stat
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,11 +17,12 @@ from ..discovery import (
     DEFAULT_SPLIT,
     SPLITS,
     SkippedInput,
-    class_and_split,
     non_utf8_reason,
     printable_path,
+    unusable_entry_reason,
     walk_mesh_files,
 )
+from ..mesh_layouts import label_tree, scan_labelled
 from ..mesh_formats import SUPPORTED_EXTENSIONS
 from ..occlude import object_key
 
@@ -64,15 +66,25 @@ def _natural_key(text: str) -> list:
     return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", text)]
 
 
-def _scan_tree(root: Path) -> tuple[list[tuple[str, str, str, str]], list[SkippedInput]]:
+def _scan_tree(root: Path, class_from: int | None) -> tuple[list[tuple[str, str, str, str]], list[SkippedInput], str]:
     # Hidden folders and temporary files are left out, not reported.
     files, skipped = walk_mesh_files(root, skip_hidden=True)
-    found = []
-    for path in files:
-        rel = path.relative_to(root)
-        class_name, split = class_and_split(rel)
-        found.append((rel.with_suffix("").as_posix(), str(path), class_name, split))
-    return found, skipped
+    if not files:
+        return [], skipped, ""
+    layout, meshes = label_tree(root, files, class_from=class_from)
+    return [(m.name, str(m.path), m.class_name, m.split) for m in meshes], skipped, layout
+
+
+def _not_regular(path: Path) -> str | None:
+    """Why a list file's entry is no file to open (a FIFO, socket, device), or None.
+
+    Missing files and broken links are left to the loader: they fail as their object.
+    """
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return None if stat.S_ISREG(st.st_mode) else unusable_entry_reason(path) or "not a regular file; never opened"
 
 
 def _read_list_file(list_file: Path) -> tuple[list[tuple[str, str, str, str]], list[SkippedInput]]:
@@ -99,8 +111,9 @@ def _read_list_file(list_file: Path) -> tuple[list[tuple[str, str, str, str]], l
         path = Path(path_text)
         name = path.with_suffix("").as_posix()
         source = path if path.is_absolute() else base / path
-        problem = non_utf8_reason(source)
-        if problem:  # the list file's folder: the names are written into the shards
+        # the names are written into the shards; a FIFO or device would block or mislead the loader
+        problem = non_utf8_reason(source) or _not_regular(source)
+        if problem:
             skipped.append(SkippedInput(printable_path(source), problem))
             log.warning("skipped %s", skipped[-1])
             continue
@@ -113,9 +126,12 @@ class ObjectScan(NamedTuple):
 
     #: The farm's plan, as :func:`discover_objects` returns it.
     objects: list[FarmObject]
-    #: Unreadable folders, files with non-UTF-8 names, undecodable list lines: not in
-    #: the plan.  A run that must not lose inputs silently exits non-zero when not empty.
+    #: Unreadable folders, broken links, FIFOs, files with non-UTF-8 names, undecodable
+    #: list lines: not in the plan.  A run that must not lose inputs silently exits
+    #: non-zero when not empty.
     skipped: list[SkippedInput]
+    #: How names, classes and splits were found (:data:`~zbuf_occlude.mesh_layouts.LAYOUTS`).
+    layout: str = ""
 
 
 def discover_objects(
@@ -124,10 +140,11 @@ def discover_objects(
     classes: Sequence[str] | str | None = None,
     per_class: int | None = None,
     splits: Sequence[str] | str = SPLITS,
+    class_from: int | None = None,
 ) -> list[FarmObject]:
     """The farm's plan: :func:`scan_objects` without the list of skipped inputs (they are
     logged as warnings)."""
-    return scan_objects(source, classes=classes, per_class=per_class, splits=splits).objects
+    return scan_objects(source, classes=classes, per_class=per_class, splits=splits, class_from=class_from).objects
 
 
 def scan_objects(
@@ -136,6 +153,7 @@ def scan_objects(
     classes: Sequence[str] | str | None = None,
     per_class: int | None = None,
     splits: Sequence[str] | str = SPLITS,
+    class_from: int | None = None,
 ) -> ObjectScan:
     """The farm's plan: meshes under ``source``, filtered, labelled and numbered, and the
     inputs that had to be skipped.
@@ -143,11 +161,12 @@ def scan_objects(
     Parameters
     ----------
     source : str or PathLike
-        A ModelNet-style tree ``ROOT/<class>/<split>/<name>.off`` (nested deeper is fine:
-        the class and split are the two folders above the file), a folder of class
-        folders ``ROOT/<class>/<name>.off``, a flat folder ``ROOT/<class>_<NNNN>.off``, or
-        a list file with one ``PATH LABEL [SPLIT]`` per line (paths relative to the list
-        file; ``#`` starts a comment; ``LABEL`` is a class name).  Any extension of
+        A folder in one of the layouts of :mod:`zbuf_occlude.mesh_layouts` (ModelNet
+        ``ROOT/<class>/<split>/<name>.off``, ShapeNetCore v1/v2 with ``taxonomy.json``,
+        class folders ``ROOT/<class>/<name>.off``, a flat folder ``ROOT/<class>_<NNNN>.off``),
+        or a list file with one ``PATH LABEL [SPLIT]`` per line (paths relative to the list
+        file; ``#`` starts a comment; ``LABEL`` is a class name; FIFOs and devices are
+        skipped, never opened).  Any extension of
         :data:`zbuf_occlude.mesh.SUPPORTED_EXTENSIONS`.  Objects without a split are in
         ``train``.
     classes : sequence of str or comma-separated str, optional
@@ -156,6 +175,9 @@ def scan_objects(
         Keep the first K objects (by name, natural order) of each class and split.
     splits : sequence of str or comma-separated str
         Keep these splits.
+    class_from : int, optional
+        A folder: take each mesh's class from this folder level above it (1: the folder
+        holding it) instead of the detected layout (``--class-from``).
 
     Returns
     -------
@@ -164,18 +186,22 @@ def scan_objects(
         the class in the sorted (natural order) list of kept classes.  ``skipped``:
         folders that could not be read, files whose path is not UTF-8 and list lines
         that are not UTF-8 (:class:`~zbuf_occlude.discovery.SkippedInput`, each logged as a
-        warning), whatever the class filter.
+        warning), whatever the class filter.  ``layout``: the layout used.
 
     Raises
     ------
     InvalidInputError
-        ``source`` missing, nothing found, an unknown class, or ``per_class < 1``.
+        ``source`` missing, nothing found, labels refused by the layout checks
+        (:mod:`zbuf_occlude.mesh_layouts`), ``class_from`` with a list file, an unknown
+        class, or ``per_class < 1``.
     """
     source = Path(source).absolute()  # the manifest's source paths must not depend on the working folder
     if source.is_dir():
-        found, skipped = _scan_tree(source)
+        found, skipped, layout = _scan_tree(source, class_from)
     elif source.is_file():
-        found, skipped = _read_list_file(source)
+        if class_from is not None:
+            raise InvalidInputError(f"--class-from applies to folders; the list file {printable_path(source)} names each class")
+        (found, skipped), layout = _read_list_file(source), "list-file"
     else:
         raise InvalidInputError(f"no such mesh folder or list file: {printable_path(source)}")
     if not found:
@@ -206,7 +232,23 @@ def scan_objects(
         found = kept
     if not found:
         raise InvalidInputError(f"no meshes left under {source} after the class/split selection")
-    return ObjectScan(number_objects(found), skipped)
+    return ObjectScan(number_objects(found), skipped, layout)
+
+
+def scan_inputs(paths: Sequence[str | os.PathLike], *, class_from: int | None = None) -> ObjectScan:
+    """The plan of ``generate``: mesh files and folders (searched recursively), labelled by
+    their layout (:func:`~zbuf_occlude.mesh_layouts.scan_labelled`) and numbered
+    (:func:`number_objects`), and the inputs that had to be skipped.
+
+    Raises
+    ------
+    InvalidInputError
+        A path is missing or not a mesh file, nothing was found, labels are refused by the
+        layout checks, or two files have one name.
+    """
+    found = scan_labelled(paths, class_from=class_from)
+    objects = number_objects([(m.name, str(m.path), m.class_name, m.split) for m in found.meshes])
+    return ObjectScan(objects, found.skipped, found.layout)
 
 
 def number_objects(found: Sequence[tuple[str, str, str, str]]) -> list[FarmObject]:

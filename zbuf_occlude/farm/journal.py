@@ -72,13 +72,15 @@ def remove_stale_temps(out: Path, objects: Sequence[FarmObject], everything: boo
     return removed
 
 
-def plan_doc(objects: Sequence[FarmObject], params: FarmParams, source: str) -> dict[str, Any]:
+def plan_doc(objects: Sequence[FarmObject], params: FarmParams, source: str, layout: str | None = None) -> dict[str, Any]:
+    # layout: how classes and splits were found (zbuf_occlude.mesh_layouts), for the card
     return {
         "format_version": FORMAT_VERSION,
         "params": params.to_dict(),
         "params_digest": params.digest(),
         "plan_digest": plan_digest(objects),
         "source": source,
+        "layout": layout,
         "objects": [dataclasses.asdict(o) for o in objects],
     }
 
@@ -136,6 +138,7 @@ def finalize(
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "commands": commands,
         "source": plan["source"],
+        "layout": plan.get("layout"),
         "storage": params.storage,
         "params": params.to_dict(),
         "params_digest": plan["params_digest"],

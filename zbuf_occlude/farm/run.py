@@ -178,6 +178,8 @@ def run_farm(
     source_text: str | None = None,
     on_finished: Callable[[Path], Any] | None = None,
     skipped: Sequence[tuple[str, str]] = (),
+    class_from: int | None = None,
+    layout: str | None = None,
 ) -> FarmSummary:
     """Build (or resume) an occluded data set from many meshes.
 
@@ -217,6 +219,11 @@ def run_farm(
         Inputs the caller's discovery could not take (a ready plan), added to those
         :func:`scan_objects` skips in a folder (unreadable folders, names that are not
         UTF-8); recorded in the card and the summary, so the run ends with status 1.
+    class_from : int, optional
+        A folder ``source``: the folder level above each mesh that names its class
+        (:func:`scan_objects`).
+    layout : str, optional
+        The card's ``layout`` of a ready plan (a folder's or list file's is detected).
 
     Returns
     -------
@@ -245,8 +252,9 @@ def run_farm(
     check_before_work(params, out, gl=not (scheduler or dask_local), workers=None if scheduler else dask_local or workers)
     if isinstance(source, (str, os.PathLike)):
         source_text = source_text or str(Path(source).resolve())
-        scan = scan_objects(source, classes=classes, per_class=per_class, splits=splits)
+        scan = scan_objects(source, classes=classes, per_class=per_class, splits=splits, class_from=class_from)
         objects, skipped = scan.objects, [*skipped, *((s.path, s.reason) for s in scan.skipped)]
+        layout = scan.layout
     else:
         objects, source_text = list(source), source_text or "<objects given by the caller>"
         if [o.index for o in objects] != list(range(len(objects))):
@@ -257,7 +265,7 @@ def run_farm(
         return _run_locked(
             out, objects, mine, params, source_text, shard=shard, workers=workers, scheduler=scheduler,
             dask_local=dask_local, overwrite=overwrite, progress=progress, command=command, t0=t0,
-            on_finished=on_finished, skipped=[(str(p), str(r)) for p, r in skipped],
+            on_finished=on_finished, skipped=[(str(p), str(r)) for p, r in skipped], layout=layout,
         )  # fmt: skip
 
 
@@ -278,10 +286,11 @@ def _run_locked(
     t0: float,
     on_finished: Callable[[Path], Any] | None = None,
     skipped: list[tuple[str, str]] | None = None,
+    layout: str | None = None,
 ) -> FarmSummary:
     """:func:`run_farm` once the lock of ``out`` (or of this task) is held."""
     task, n_tasks = shard
-    plan = plan_doc(objects, params, source_text)
+    plan = plan_doc(objects, params, source_text, layout=layout)
     if overwrite:
         _wipe(out, None if n_tasks == 1 else mine)
     else:

@@ -31,14 +31,14 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("root", help="mesh tree (ModelNet layout: CLASS/SPLIT/NAME.off); duplicate meshes are dropped")
     p.add_argument("--out", required=True, help="output folder (results.csv, table.md, run.json, plots, checkpoints)")
     p.add_argument("--scale", choices=("quick", "paper"), default="quick",
-                   help="quick: fits a 2-core CPU; paper: the paper's sizes (ModelNet40 and a GPU)")
+                   help="quick: fits a 2-core CPU; paper: the paper's sizes (ModelNet40 and a GPU) (default: %(default)s)")
     p.add_argument("--epochs", type=int, help="override the scale's epoch count")
     p.add_argument("--points", type=int, help="points per cloud (override the scale's)")
     p.add_argument("--method", default=DEFAULT_METHOD, help="HSR method of the farm (default: %(default)s; og32/og64 are the paper's)")
     p.add_argument("--classes", help="comma-separated class names to keep")
     p.add_argument("--data", help="folder for the farm's data set (default OUT/data); reuse it across models")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
+    p.add_argument("--seed", type=int, default=0, help="seed of the data set, the splits and the training (default: %(default)s)")
+    p.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="torch device of the training (default: %(default)s)")
     p.add_argument("--threads", type=int, help="torch CPU threads")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
@@ -66,16 +66,27 @@ def _run(args: argparse.Namespace) -> int:
 
 def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     """Add ``experiment`` (with ``elevation`` and ``augmentation``) to an argparse ``subparsers``."""
-    p = subparsers.add_parser("experiment", help="train PointNet/VoxNet/3DmFV on generated clouds (Table 3 of the paper)")
+    p = subparsers.add_parser(
+        "experiment", help="train PointNet/VoxNet/3DmFV on generated clouds (Table 3 of the paper)",
+        description="Reproduce the paper's classification experiments: build the occluded data set with the farm, "
+        "train a classifier and write the table (needs the learn extra: torch).",
+    )  # fmt: skip
     sub = p.add_subparsers(dest="experiment", required=True)
-    e = sub.add_parser("elevation", help="Table 3A: train on elevations ±90,±70,±50,±20, test on ±80..0")
+    e = sub.add_parser(
+        "elevation", help="Table 3A: train on elevations ±90,±70,±50,±20, test on ±80..0",
+        description="Table 3A: train on clouds seen from elevations ±90, ±70, ±50, ±20 degrees and test on ±80..0.",
+    )  # fmt: skip
     _common(e)
-    e.add_argument("--model", choices=("pointnet", "voxnet", "3dmfv"), default="pointnet")
+    e.add_argument("--model", choices=("pointnet", "voxnet", "3dmfv"), default="pointnet", help="classifier (default: %(default)s)")
     e.add_argument("--no-profile", action="store_true", help="skip Fig. 12's visible-area curve in the plot")
     e.set_defaults(func=_run)
-    a = sub.add_parser("augmentation", help="Table 3B: C1 occluded / C2 complete / C3 both x Test 1/2 (/3 real scans)")
+    a = sub.add_parser(
+        "augmentation", help="Table 3B: C1 occluded / C2 complete / C3 both x Test 1/2 (/3 real scans)",
+        description="Table 3B: train on occluded (C1), complete (C2) or both (C3) clouds and test on each "
+        "(and on real scans with --real-scans).",
+    )  # fmt: skip
     _common(a)
-    a.add_argument("--model", choices=("voxnet", "3dmfv", "pointnet"), default="3dmfv")
+    a.add_argument("--model", choices=("voxnet", "3dmfv", "pointnet"), default="3dmfv", help="classifier (default: %(default)s)")
     a.add_argument("--real-scans", help="Test 3: SUO objects/ folder or LiDARNet v2 folder")
     a.add_argument("--label-map", help="rename real labels, REAL=MODEL,... (e.g. Car=car,4wd=car)")
     a.set_defaults(func=_run)

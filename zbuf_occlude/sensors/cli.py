@@ -61,6 +61,27 @@ def sensor_from_name(name: str):
     raise InvalidInputError(f"unknown sensor {name!r}; use one of {sorted(LIDAR_PRESETS) + sorted(DEPTH_CAMERA_PRESETS)} or a .json file")
 
 
+def check_outside(dist) -> None:
+    """Refuse a ``--distance`` that may put the sensor inside the object.
+
+    The object's footprint centre lies ``distance_m`` from the sensor and its largest
+    horizontal dimension is up to ``size_m`` (or the X/Y ``extents_m``) high end, so a
+    distance below half of that may stand the sensor inside it (every ray starts inside).
+
+    Raises
+    ------
+    InvalidInputError
+        Naming ``--distance`` and the smallest distance allowed.
+    """
+    sizes = [dist.extents_m[0][1], dist.extents_m[1][1]] if dist.extents_m is not None else [dist.size_m[1]]
+    half = max(sizes) / 2
+    if dist.distance_m[0] < half:
+        raise InvalidInputError(
+            f"--distance {dist.distance_m[0]:g} m may put the sensor inside the object (up to {max(sizes):g} m across): "
+            f"use a distance of at least {half:g} m"
+        )
+
+
 def cmd_scan(args: argparse.Namespace) -> int:
     from .crops import CropDistributions, draw_placement, object_crop
     from .lidar import Lidar
@@ -107,6 +128,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
             reflectivity=None if args.reflectivity is None else parse_interval(args.reflectivity, "--reflectivity"),
             ground_reflectivity=args.ground_reflectivity,
         )  # fmt: skip
+        check_outside(dist)
         for k in range(args.samples):
             rng = derive_rng(args.seed, object_key(src.name), k)
             placement = draw_placement(dist, rng)
@@ -122,12 +144,16 @@ def cmd_scan(args: argparse.Namespace) -> int:
 
 def add_scan_parser(sub) -> argparse.ArgumentParser:
     """Add ``scan`` to the subparsers ``sub``."""
-    p = sub.add_parser("scan", help="LiDAR / depth-camera scan of a mesh on the ground, or of a scene file")
+    p = sub.add_parser(
+        "scan", help="LiDAR / depth-camera scan of a mesh on the ground, or of a scene file",
+        description="Stand a mesh on a ground plane at --distance from a simulated LiDAR and scan it (or scan a "
+        "scene file with any sensor); writes one point cloud per sample to --out.",
+    )  # fmt: skip
     p.add_argument("mesh_or_scene", metavar="MESH_OR_SCENE", help="mesh file (stood on the ground), 'cylinder' or 'box' (unit primitives), or a scene .json/.yaml")
-    p.add_argument("--sensor", default="hdl32e", help="vlp16 | hdl32e | hdl64e | os1-64 | kinect-v1 | sensor .json")
-    p.add_argument("--distance", default="10", help="horizontal sensor-object distance, metres (N or LO:HI, uniform per sample)")
-    p.add_argument("--height", default="1.8", help="sensor height above the ground, metres (N or LO:HI)")
-    p.add_argument("--size", default="4.5", help="the object's largest dimension, metres (N or LO:HI)")
+    p.add_argument("--sensor", default="hdl32e", help="vlp16 | hdl32e | hdl64e | os1-64 | kinect-v1 | sensor .json (default: %(default)s)")
+    p.add_argument("--distance", default="10", help="horizontal sensor-object distance, metres (N or LO:HI, uniform per sample; at least half the object's size) (default: %(default)s)")
+    p.add_argument("--height", default="1.8", help="sensor height above the ground, metres (N or LO:HI) (default: %(default)s)")
+    p.add_argument("--size", default="4.5", help="the object's largest dimension, metres (N or LO:HI) (default: %(default)s)")
     p.add_argument(
         "--extents",
         help="X,Y,Z: stretch the mesh to these extents, metres, each N or LO:HI drawn per sample (instead of --size); "
@@ -139,17 +165,24 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         help="the object's Lambertian reflectivity, drawn per sample: keep only returns whose received power "
         "rho*cos(incidence)*footprint/R^2 clears the sensor's threshold (default: every hit returns)",
     )  # fmt: skip
-    r.add_argument("--ground-reflectivity", type=float, default=0.15, help="the ground's reflectivity with --reflectivity (default: 0.15)")
+    r.add_argument("--ground-reflectivity", type=float, default=0.15, help="the ground's reflectivity with --reflectivity (default: %(default)s)")
     r.add_argument("--footprint", action="store_true", help="beam footprint: 7 rays per firing in the divergence cone, strongest echo")
-    r.add_argument("--power-noise", type=float, default=0.0, help="sigma of ln(received power) per firing (default: 0, a sharp threshold)")
-    p.add_argument("--azimuth", default="0", help="direction of the object from the sensor, degrees (N or LO:HI)")
-    p.add_argument("--yaw", default="0", help="the object's heading, degrees (N or LO:HI)")
-    p.add_argument("--samples", type=int, default=1, help="scans, each with its own draws")
+    r.add_argument("--power-noise", type=float, default=0.0, help="sigma of ln(received power) per firing; 0: a sharp threshold (default: %(default)s)")
+    p.add_argument("--azimuth", default="0", help="direction of the object from the sensor, degrees (N or LO:HI) (default: %(default)s)")
+    p.add_argument("--yaw", default="0", help="the object's heading, degrees (N or LO:HI) (default: %(default)s)")
+    p.add_argument("--samples", type=int, default=1, help="scans, each with its own draws (default: %(default)s)")
     p.add_argument("--crop", action="store_true", help="write only the object's returns; default: the object and the ground in the object's azimuth sector (±5°)")
-    p.add_argument("--frame", choices=("sensor", "world"), default="sensor")
-    p.add_argument("--format", choices=("npz", "ply", "both"), default="npz")
-    p.add_argument("--backend", choices=("embree", "zbuffer"), default="embree")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--frame", choices=("sensor", "world"), default="sensor",
+        help="frame of the written points: sensor (LiDAR at the origin, x forward, z up; cameras: OpenCV) or "
+        "world (the scene's frame) (default: %(default)s)",
+    )  # fmt: skip
+    p.add_argument("--format", choices=("npz", "ply", "both"), default="npz", help="file format of each scan (default: %(default)s)")
+    p.add_argument(
+        "--backend", choices=("embree", "zbuffer"), default="embree",
+        help="ray casting: embree (exact, CPU) or zbuffer (OpenGL depth images) (default: %(default)s)",
+    )  # fmt: skip
+    p.add_argument("--seed", type=int, default=0, help="seed of the placement draws and the sensor noise (default: %(default)s)")
     p.add_argument("--out", required=True, help="output folder")
     p.set_defaults(func=cmd_scan)
     return p
@@ -166,12 +199,16 @@ def cmd_realism(args: argparse.Namespace) -> int:
 
 def add_realism_parser(sub) -> argparse.ArgumentParser:
     """Add ``realism`` to the subparsers ``sub``."""
-    p = sub.add_parser("realism", help="ring spacing, count-vs-range exponent, spacing, extent: generated vs real clouds")
+    p = sub.add_parser(
+        "realism", help="ring spacing, count-vs-range exponent, spacing, extent: generated vs real clouds",
+        description="Compare statistics of generated scans with real LiDAR clouds and write realism.md, "
+        "realism.csv and a figure to --out.",
+    )  # fmt: skip
     p.add_argument("generated", metavar="GENERATED", help="scan .npz files or a folder of them (or LiDARNet CSVs)")
     p.add_argument("real", metavar="REAL", help="LiDARNet v2 CSV folder (or scan .npz)")
-    p.add_argument("--out", default="realism", help="folder for realism.md, realism.csv, realism.png")
-    p.add_argument("--min-points", type=int, default=1, help="ignore clouds with fewer points")
-    p.add_argument("--no-figure", action="store_true")
+    p.add_argument("--out", default="realism", help="folder for realism.md, realism.csv, realism.png (default: %(default)s)")
+    p.add_argument("--min-points", type=int, default=1, help="ignore clouds with fewer points (default: %(default)s)")
+    p.add_argument("--no-figure", action="store_true", help="do not draw realism.png")
     p.set_defaults(func=cmd_realism)
     return p
 

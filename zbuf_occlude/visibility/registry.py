@@ -18,6 +18,7 @@ units from it.  ``oracle``, ``oracle-numpy``, ``zbuffer-exact``, ``embree-fast``
 
 from __future__ import annotations
 
+import importlib
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -29,13 +30,16 @@ from numpy.typing import NDArray
 
 from ..cameras import Camera
 from ..defaults import DEFAULT_METHOD, DEFAULT_SELF_HIT_TOLERANCE
-from ..errors import InvalidInputError, RegistryError
+from ..errors import BackendUnavailable, InvalidInputError, RegistryError
 
 __all__ = [
     "register",
     "available_methods",
     "get_method",
     "method_info",
+    "unavailable_reason",
+    "check_runnable",
+    "EXTRA_MODULES",
     "MethodInfo",
     "PoseSession",
     "check_points",
@@ -48,6 +52,9 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 VisibilityMethod = Callable[..., NDArray[np.bool_]]
+
+#: The module an extra of :attr:`MethodInfo.extra` must make importable (the extra's name when absent).
+EXTRA_MODULES: dict[str, str] = {"open3d": "open3d"}
 _METHODS: dict[str, VisibilityMethod] = {}
 _INFO: dict[str, MethodInfo] = {}
 
@@ -147,6 +154,34 @@ def register(*names: str, **capabilities: Any) -> Callable[[VisibilityMethod], V
 def available_methods() -> list[str]:
     """Names accepted by ``visible_mask(..., method=...)``, sorted."""
     return sorted(_METHODS)
+
+
+def unavailable_reason(name: str) -> str | None:
+    """Why method ``name`` cannot run here, or None: the extra it declares
+    (:attr:`MethodInfo.extra`) does not import.  Unknown names raise as :func:`get_method`."""
+    extra = method_info(name).extra
+    if extra is None:
+        return None
+    try:
+        importlib.import_module(EXTRA_MODULES.get(extra, extra))
+    except (ImportError, OSError) as exc:  # a wheel whose shared libraries are missing fails with OSError
+        return f"method {name!r} needs the {extra} extra (pip install '.[{extra}]' from a checkout): {exc}"
+    return None
+
+
+def check_runnable(name: str) -> None:
+    """Refuse, before any work, a method that is unknown or cannot run here.
+
+    Raises
+    ------
+    InvalidInputError
+        Unknown name.
+    BackendUnavailable
+        Its extra is not installed (:func:`unavailable_reason`).
+    """
+    problem = unavailable_reason(name)
+    if problem:
+        raise BackendUnavailable(problem)
 
 
 def get_method(name: str) -> VisibilityMethod:
