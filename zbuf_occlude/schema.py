@@ -164,11 +164,12 @@ def read_card(path: Path) -> tuple[dict[str, Any], Card]:
     return json.loads(text), card
 
 
-def read_manifest(path: Path) -> list[tuple[int, dict[str, Any], OkRecord | None]]:
+def read_manifest(path: Path, problems: list[str] | None = None) -> list[tuple[int, dict[str, Any], OkRecord | None]]:
     """``(line number, record dict, checked record or None)`` per non-empty line.
 
     The checked record is an :class:`OkRecord` for ``status == "ok"``, ``None`` for the
-    others (failed or pending objects, which the reader skips).
+    others (failed or pending objects, which the reader skips).  With ``problems``, a bad
+    line is appended there (and left out) instead of raising.
 
     Raises
     ------
@@ -185,10 +186,14 @@ def read_manifest(path: Path) -> list[tuple[int, dict[str, Any], OkRecord | None
             status = ManifestRecord.model_validate_json(line).status
             ok = OkRecord.model_validate_json(line) if status == "ok" else None
         except ValidationError as exc:
-            raise DatasetFormatError(
+            message = (
                 f"{where} is not a valid manifest record: {describe_validation_error(exc)}; the data set is damaged: "
                 "rerun the farm command (it rewrites the manifest from the records)"
-            ) from None
+            )
+            if problems is None:
+                raise DatasetFormatError(message) from None
+            problems.append(message)
+            continue
         rows.append((lineno, json.loads(line), ok))
     return rows
 
@@ -221,9 +226,15 @@ def read_shape_names(root: Path, card: Card) -> list[str]:
 
 
 def check_records(
-    manifest: Path, rows: list[tuple[int, dict[str, Any], OkRecord | None]], card: Card, shape_names: list[str]
+    manifest: Path,
+    rows: list[tuple[int, dict[str, Any], OkRecord | None]],
+    card: Card,
+    shape_names: list[str],
+    problems: list[str] | None = None,
 ) -> None:
     """Cross-checks of the ``ok`` records against the card and the class names.
+
+    With ``problems``, each problem is appended there instead of raising.
 
     Raises
     ------
@@ -236,16 +247,20 @@ def check_records(
         if rec is None:
             continue
         where = f"{manifest}:{lineno}"
+        found = []
         if rec.label >= len(shape_names) or shape_names[rec.label] != rec.class_name:
-            raise DatasetFormatError(
+            found.append(
                 f"{where}: field 'label' {rec.label} ({rec.class_name!r}) does not match line {rec.label + 1} of "
                 f"{SHAPE_NAMES_FILE} ({len(shape_names)} names)"
             )
         if len(rec.n_visible) != n_poses:
-            raise DatasetFormatError(
+            found.append(
                 f"{where}: field 'n_visible' has {len(rec.n_visible)} entries, the card has {n_poses} "
                 f"{'scans' if card.params.sensor else 'poses'}"
             )
+        if found and problems is None:
+            raise DatasetFormatError(found[0])
+        (problems if problems is not None else []).extend(found)
 
 
 #: Datasets a shard of each storage must hold (``farm --sensor`` dense shards also hold

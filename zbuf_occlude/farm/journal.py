@@ -148,7 +148,7 @@ def shape_names_of(objects: Sequence[FarmObject]) -> list[str]:
     """
     names: dict[int, str] = {}
     for o in objects:
-        check_line_text(o.class_name, what=f"the class name of {o.source}")
+        check_line_text(o.class_name, what=f"{o.source!r}: class name")
         if names.setdefault(o.label, o.class_name) != o.class_name:
             raise InvalidInputError(f"label {o.label} is used by classes {names[o.label]!r} and {o.class_name!r}")
     return [names.get(i, f"unused_{i}") for i in range(max(names) + 1)] if names else []
