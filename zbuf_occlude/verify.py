@@ -178,7 +178,8 @@ def cmd_verify(args: argparse.Namespace) -> int:
     for problem in report.problems:
         print(f"PROBLEM {problem}", file=sys.stderr)
     if not report.ok:
-        print(f"{report.path}: {len(report.problems)} problems found; do not use this data set as it is", file=sys.stderr)
+        n = len(report.problems)
+        print(f"{report.path}: {n} problem{'s' if n != 1 else ''} found; do not use this data set as it is", file=sys.stderr)
         return 1
     print(report.summary())
     return 0
