@@ -28,8 +28,7 @@ from .layout import (
 )
 from .mesh import SPLITS
 from .occlude import pose_samples
-from .safe_paths import path_inside
-from .schema import check_records, check_shard, read_card, read_manifest, read_shape_names
+from .schema import check_records, check_shard, checked_shards, read_card, read_manifest, read_shape_names
 
 __all__ = [
     "OccludedDataset",
@@ -275,7 +274,8 @@ class OccludedDataset(Sequence):
                 continue
             if wanted_classes is not None and checked.class_name not in wanted_classes:
                 continue
-            shards = self._checked_shards(manifest_path, lineno, checked, card.checksums)
+            shards, digests = checked_shards(self.root, f"{manifest_path}:{lineno}", checked, card, verify=self.verify)
+            self._digests.update(digests)
             spp = samples_per_pose(np.asarray(checked.n_visible, dtype=np.int64), 1 if self.sensor else self._samples_per_view)
             self._shard_rows[shards[0]] = int(spp.sum())
             pose = np.repeat(np.arange(len(spp)), spp)
@@ -304,21 +304,6 @@ class OccludedDataset(Sequence):
         self._object_cache_size = max(1, int(object_cache))
         if not hasattr(self, "_files"):
             self._reset_handles()
-
-    def _checked_shards(self, manifest: Path, lineno: int, rec: Any, card_checksums: str | None) -> list[Path]:
-        """The object's shards, each inside the data set, with their SHA-256 noted for :meth:`_verify`."""
-        where = f"{manifest}:{lineno} field 'shards'"
-        shards = [path_inside(self.root, rel, what=where) for rel in rec.shards]
-        if rec.sha256 is None and self.verify:
-            said = " although the card says every file has one (field 'checksums'): the manifest was altered" if card_checksums else ""
-            raise DatasetFormatError(
-                f"{manifest}:{lineno}: object {rec.name!r} has no SHA-256 (field 'sha256'){said}; a changed shard "
-                "could not be noticed. Check the data set's source, then open it with OccludedDataset(..., verify=False) "
-                "if you trust it (`zbuf-occlude verify DIR` lists every problem)"
-            )
-        if self.verify:
-            self._digests.update(zip(shards, rec.sha256))
-        return shards
 
     # -- per-process state (DataLoader workers and pickling) ---------------------------
     def _reset_handles(self) -> None:

@@ -22,7 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from .errors import DatasetFormatError
 from .layout import SHAPE_NAMES_FILE
-from .safe_paths import control_character
+from .safe_paths import control_character, path_inside
 
 __all__ = [
     "CardParams",
@@ -35,6 +35,7 @@ __all__ = [
     "read_manifest",
     "read_shape_names",
     "check_records",
+    "checked_shards",
     "check_shard",
     "describe_validation_error",
 ]
@@ -261,6 +262,34 @@ def check_records(
         if found and problems is None:
             raise DatasetFormatError(found[0])
         (problems if problems is not None else []).extend(found)
+
+
+def checked_shards(root: Path, where: str, rec: OkRecord, card: Card, *, verify: bool) -> tuple[list[Path], dict[Path, str]]:
+    """The shards of an ``ok`` record, each inside ``root``, and their SHA-256 (none when not ``verify``).
+
+    Parameters
+    ----------
+    where : str
+        ``manifest.jsonl:LINE``, for messages.
+
+    Raises
+    ------
+    UnsafePathError
+        A shard path is absolute, has ``..`` or leads outside ``root``.
+    DatasetFormatError
+        ``verify`` and the record has no ``sha256``: a changed shard could not be noticed.
+    """
+    shards = [path_inside(root, rel, what=f"{where} field 'shards'") for rel in rec.shards]
+    if not verify:
+        return shards, {}
+    if rec.sha256 is None:
+        said = " although the card says every file has one (field 'checksums'): the manifest was altered" if card.checksums else ""
+        raise DatasetFormatError(
+            f"{where}: object {rec.name!r} has no SHA-256 (field 'sha256'){said}; a changed shard could not be "
+            "noticed. Check the data set's source, then open it with OccludedDataset(..., verify=False) if you trust it "
+            "(`zbuf-occlude verify DIR` lists every problem)"
+        )
+    return shards, dict(zip(shards, rec.sha256))
 
 
 #: Datasets a shard of each storage must hold (``farm --sensor`` dense shards also hold
