@@ -211,6 +211,31 @@ def test_farm_merge_does_not_copy_a_record_path_with_dotdot_out_of_out(dataset_d
     assert not (tmp_path / "b" / "evil").exists()
 
 
+def test_farm_merge_does_not_write_a_file_list_named_by_a_crafted_plan_out_of_out(dataset_dir: Path, tmp_path: Path) -> None:
+    from zbuf_occlude.farm import merge_farm
+
+    task = Path(shutil.copytree(dataset_dir, tmp_path / "a" / "task"))
+    plan = json.loads((task / "plan.json").read_text())
+    plan["objects"][0]["split"] = "../../evil"  # the file list would be task/../../evil_files.txt
+    (task / "plan.json").write_text(json.dumps(plan))
+    out = tmp_path / "a" / "out"
+    with pytest.raises(ZbufOccludeError, match=r"evil_files\.txt.*leaves"):
+        merge_farm([task], out, progress=False)
+    assert not (tmp_path / "evil_files.txt").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a"]
+
+
+def test_farm_merge_of_a_damaged_plan_names_it(dataset_dir: Path, tmp_path: Path) -> None:
+    from zbuf_occlude.farm import merge_farm
+
+    task = Path(shutil.copytree(dataset_dir, tmp_path / "task"))
+    plan = json.loads((task / "plan.json").read_text())
+    del plan["objects"][0]["label"]
+    (task / "plan.json").write_text(json.dumps(plan))
+    with pytest.raises(ZbufOccludeError, match=r"plan\.json.*'objects\.0\.label'"):
+        merge_farm([task], tmp_path / "out", progress=False)
+
+
 def test_farm_merge_removes_the_temporaries_of_dead_writers(dataset_dir: Path, tmp_path: Path) -> None:
     from zbuf_occlude.farm import merge_farm
 

@@ -28,7 +28,6 @@ from .layout import (
 )
 from .mesh import SPLITS
 from .occlude import pose_samples
-from .schema import check_records, check_shard, checked_shards, read_card, read_manifest, read_shape_names
 
 __all__ = [
     "OccludedDataset",
@@ -222,7 +221,10 @@ class OccludedDataset(Sequence):
                 f"{self.root} is not a finished farm data set (no {CARD_FILE}); let `zbuf-occlude farm` finish, "
                 "or run `zbuf-occlude farm-merge` after sharded runs"
             )
-        self.card, card = read_card(card_path)  # schema: zbuf_occlude.schema
+        # the schema (pydantic) is imported when a data set is opened, not with the package
+        from .schema import check_records, checked_shards, read_card, read_manifest, read_shape_names
+
+        self.card, card = read_card(card_path)
         version = card.format_version
         if version > FORMAT_VERSION:
             raise InvalidInputError(
@@ -322,6 +324,8 @@ class OccludedDataset(Sequence):
 
     def _file(self, path: Path):
         import h5py
+
+        from .schema import check_shard
 
         if self._pid != os.getpid():  # forked: the parent's HDF5 handles are not ours
             self._reset_handles()

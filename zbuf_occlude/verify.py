@@ -15,13 +15,16 @@ import argparse
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .dataset import samples_per_pose
 from .errors import InvalidInputError, ZbufOccludeError
 from .io import file_sha256
 from .layout import CARD_FILE, MANIFEST_FILE, file_list_name
 from .safe_paths import path_inside
-from .schema import Card, check_records, check_shard, read_card, read_manifest, read_shape_names
+
+if TYPE_CHECKING:  # the schema (pydantic) is imported when a data set is verified
+    from .schema import Card
 
 __all__ = ["VerifyReport", "verify_dataset", "add_verify_parser"]
 
@@ -60,6 +63,8 @@ class VerifyReport:
 def _check_hdf5(path: Path, card: Card, rows: int, n_poses: int) -> str | None:
     import h5py
 
+    from .schema import check_shard
+
     try:
         with h5py.File(path, "r") as f:
             check_shard(
@@ -91,6 +96,8 @@ def verify_dataset(path: str | os.PathLike) -> VerifyReport:
     InvalidInputError
         ``path`` is not a folder (a usage error, not a problem of a data set).
     """
+    from .schema import check_records, read_card, read_manifest, read_shape_names
+
     root = Path(path)
     if not root.is_dir():
         raise InvalidInputError(f"verify: {path} is not a folder")

@@ -16,7 +16,6 @@ from ..io import file_sha256, temp_is_orphan, temp_owner, write_text
 from ..layout import CARD_FILE, FORMAT_VERSION, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, file_list_name
 from ..mesh import SPLITS
 from ..safe_paths import check_line_text, path_inside
-from ..schema import CHECKSUM_ALGORITHM, Plan, describe_validation_error
 from .config import BYTES_PER_MB, PAPER_SAMPLES_PER_MB, FarmParams, plan_digest, record_path, shard_path
 from .inputs import FarmObject
 from .worker import base_record, package_version, write_json
@@ -43,6 +42,8 @@ def read_plan(folder: Path) -> dict[str, Any] | None:
         The plan is not JSON, a field is missing or mistyped, or its parameters are not a farm's.
     """
     from pydantic import ValidationError
+
+    from ..schema import Plan, describe_validation_error
 
     path = folder / PLAN_FILE
     try:
@@ -176,6 +177,8 @@ def finalize(
     ``skipped``: ``(path, reason)`` of inputs discovery could not take (unreadable folders,
     names that are not UTF-8), recorded in the card as ``skipped_inputs``.
     """
+    from ..schema import CHECKSUM_ALGORITHM
+
     objects = objects_of(plan)
     params = FarmParams(**plan["params"])
     write_text(out / MANIFEST_FILE, manifest_lines(objects, params, records))
