@@ -118,3 +118,17 @@ def no_mesh_loaded(monkeypatch):
 
     monkeypatch.setattr(worker, "load_mesh", refuse)
     monkeypatch.setattr(cli, "load_mesh", refuse)
+
+
+def tiny_dataset(out: Path, storage: str = "dense") -> Path:
+    """A finished farm data set of two shipped meshes (a chair, train; a desk, test), two poses,
+    one 64-point sample per pose: made in about a second, for tests that damage or craft one."""
+    from zbuf_occlude.farm import FarmParams, run_farm
+
+    tree = out.parent / f"{out.name}_meshes"
+    for rel in ("chair/train/chair_0001.off", "desk/test/desk_0201.off"):
+        (tree / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tree / rel).symlink_to(SAMPLE_MESHES / rel)
+    params = FarmParams(views="0:0,30:90", samples_per_view=1, n_points=64, dense_points=1024, resolution=64, storage=storage)
+    run_farm(tree, out, params=params, progress=False)
+    return out

@@ -564,6 +564,106 @@ def test_find_meshes_warns_about_an_unreadable_folder(tmp_path: Path, unreadable
     assert f"{tmp_path / 'table'}: cannot read folder (Permission denied)" in caplog.text
 
 
+# -- a damaged data set: an error naming the file and the field, never a KeyError or h5py's -------
+@pytest.fixture(scope="module")
+def tiny_ds(tmp_path_factory) -> Path:
+    from conftest import tiny_dataset
+
+    return tiny_dataset(tmp_path_factory.mktemp("tiny") / "ds")
+
+
+def _edit_json(path: Path, edit) -> None:
+    import json
+
+    doc = json.loads(path.read_text())
+    edit(doc)
+    path.write_text(json.dumps(doc))
+
+
+def _edit_first_record(ds: Path, edit) -> None:
+    import json
+
+    lines = (ds / "manifest.jsonl").read_text().splitlines()
+    rec = json.loads(lines[0])
+    edit(rec)
+    (ds / "manifest.jsonl").write_text("\n".join([json.dumps(rec), *lines[1:]]) + "\n")
+
+
+def _replace_first_shard(ds: Path, write) -> None:
+    """Rewrite the first object's shard with ``write(path, old_arrays)`` and record its new SHA-256."""
+    import json
+
+    import h5py
+
+    from zbuf_occlude.io import file_sha256
+
+    rel = json.loads((ds / "manifest.jsonl").read_text().splitlines()[0])["shards"][0]
+    with h5py.File(ds / rel, "r") as f:
+        old = {k: f[k][()] for k in f}
+    (ds / rel).unlink()
+    write(ds / rel, old)
+    _edit_first_record(ds, lambda r: r.update(sha256=[file_sha256(ds / rel)]))
+
+
+def _h5(path: Path, arrays: dict) -> None:
+    import h5py
+
+    with h5py.File(path, "w") as f:
+        for k, v in arrays.items():
+            f[k] = v
+
+
+DAMAGES = {
+    "manifest line without split": (lambda ds: _edit_first_record(ds, lambda r: r.pop("split")), r"manifest\.jsonl:1.*'split'"),
+    "manifest line without n_visible": (
+        lambda ds: _edit_first_record(ds, lambda r: r.pop("n_visible")), r"manifest\.jsonl:1.*'n_visible'"
+    ),
+    "empty shards list": (lambda ds: _edit_first_record(ds, lambda r: r.update(shards=[])), r"manifest\.jsonl:1.*'shards'"),
+    "missing shape_names.txt": (lambda ds: (ds / "shape_names.txt").unlink(), r"shape_names\.txt is missing"),
+    "card without n_points": (
+        lambda ds: _edit_json(ds / "dataset_card.json", lambda c: c["params"].pop("n_points")),
+        r"dataset_card\.json.*'params\.n_points'",
+    ),
+    "non-numeric format version": (
+        lambda ds: _edit_json(ds / "dataset_card.json", lambda c: c.update(format_version="one")),
+        r"dataset_card\.json.*'format_version'",
+    ),
+    "malformed poses": (
+        lambda ds: _edit_json(ds / "dataset_card.json", lambda c: c.update(poses=[[0.0, "north"], [30.0]])),
+        r"dataset_card\.json.*'poses\.0\.1'",
+    ),
+    "n_visible longer than the poses": (
+        lambda ds: _edit_first_record(ds, lambda r: r.update(n_visible=r["n_visible"] * 3)),
+        r"manifest\.jsonl:1: field 'n_visible' has 6 entries, the card has 2 poses",
+    ),
+    "n_visible promising more rows than the shard holds": (
+        lambda ds: _replace_first_shard(ds, lambda p, old: _h5(p, {"data": old["data"][:1]})),
+        r"shards/train_000000\.h5 holds fewer rows in 'data' than the manifest's field 'n_visible'",
+    ),
+    "a shard that is not HDF5": (
+        lambda ds: _replace_first_shard(ds, lambda p, old: p.write_text("not hdf5\n")),
+        r"shards/train_000000\.h5 is not a readable HDF5 file",
+    ),
+    "a shard without data": (
+        lambda ds: _replace_first_shard(ds, lambda p, old: _h5(p, {"label": old["label"]})),
+        r"shards/train_000000\.h5 has no dataset 'data'",
+    ),
+}
+
+
+@pytest.mark.parametrize("damage", sorted(DAMAGES))
+def test_a_damaged_data_set_is_an_error_naming_the_file_and_field(tiny_ds: Path, tmp_path: Path, damage: str) -> None:
+    import shutil
+
+    from zbuf_occlude import OccludedDataset
+
+    ds = Path(shutil.copytree(tiny_ds, tmp_path / "ds", symlinks=True))
+    apply, message = DAMAGES[damage]
+    apply(ds)
+    with pytest.raises(ZbufOccludeError, match=message):
+        OccludedDataset(ds).to_arrays()
+
+
 # -- meshes and cameras given through the API ----------------------------------------------------
 GPU_AND_EXACT = ["zbuffer", "zbuffer-tolerance", "naive-zbuffer", "oracle"]
 

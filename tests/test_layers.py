@@ -21,7 +21,7 @@ ROOT = "zbuf_occlude"
 #: share its layer).  A new module gets a line here, in the layer of what it does.
 LAYERS: dict[str, int] = {
     # base: no zbuf_occlude imports but each other's
-    "errors": 0, "defaults": 0, "_version": 0, "mesh_cache": 0, "metrics": 0, "resources": 0,
+    "errors": 0, "defaults": 0, "_version": 0, "safe_paths": 0, "mesh_cache": 0, "metrics": 0, "resources": 0,
     "mesh_formats": 1, "discovery": 1, "mesh_layouts": 1, "mesh": 1,
     "sampling": 2,
     "cameras": 3,
@@ -29,7 +29,7 @@ LAYERS: dict[str, int] = {
     "visibility": 5,
     "occlude": 6,
     # writers and readers, and the on-disk layout they share
-    "io": 7, "dataset": 7, "layout": 7, "real_scans": 7,
+    "io": 7, "dataset": 7, "layout": 7, "real_scans": 7, "schema": 7, "verify": 7,
     # engines on top of one object's pipeline
     "farm": 8, "compare": 8, "elevation_profile": 8, "sensors": 8,
     "learn": 9,

@@ -265,8 +265,9 @@ def build_parser() -> argparse.ArgumentParser:
         add(sub)
     from .learn.cli import add_parser as add_experiment_parser  # zbuf-occlude experiment; torch only when it runs
     from .sensors.cli import add_realism_parser, add_scan_parser
+    from .verify import add_verify_parser  # zbuf-occlude verify DIR: schema, paths, checksums of a data set
 
-    for add in (add_scan_parser, add_realism_parser, add_experiment_parser):
+    for add in (add_scan_parser, add_realism_parser, add_experiment_parser, add_verify_parser):
         add(sub)
     return parser
 

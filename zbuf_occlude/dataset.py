@@ -6,7 +6,6 @@ this module reads them (both storage modes, and ``generate --format h5`` folders
 
 from __future__ import annotations
 
-import json
 import os
 from collections import OrderedDict
 from collections.abc import Callable, Iterable, Sequence
@@ -16,7 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import InvalidInputError
+from .errors import DatasetFormatError, InvalidInputError
 from .layout import (
     CARD_FILE,
     FORMAT_VERSION,
@@ -54,16 +53,6 @@ DEFAULT_OPEN_FILES = 16
 #: Degrees: a pose matches a requested elevation/azimuth within this (poses are stored
 #: as the exact floats of the schedule, so this only absorbs decimal round trips).
 POSE_MATCH_ATOL_DEG = 1e-6
-
-def _read_json_file(path: Path) -> Any:
-    """A JSON file of the data set; a damaged one raises an error naming it."""
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InvalidInputError(f"cannot read {path}: {exc}") from exc
-    except ValueError as exc:
-        raise InvalidInputError(f"{path} is damaged (not JSON: {exc}); rerun the farm command to rewrite it") from None
-
 
 class ShardChecksumError(InvalidInputError):
     """A shard's bytes differ from the SHA-256 the farm recorded for it in the manifest."""
@@ -176,6 +165,10 @@ class OccludedDataset(Sequence):
         (read from the shards), e.g. ``elevation_deg=lambda el: el < 10``.
     object_cache : int
         Compact storage: objects whose dense cloud and bitmasks stay in memory.
+    verify : bool
+        Check every shard against its SHA-256 in the manifest before reading it (default).
+        A data set whose manifest lacks the checksums is refused unless ``verify=False``:
+        without them a changed shard cannot be noticed.
 
     Attributes
     ----------
@@ -190,8 +183,15 @@ class OccludedDataset(Sequence):
     Raises
     ------
     InvalidInputError
-        Not a finished farm data set, a newer format, a damaged card or manifest (the
-        message names the file and line), an unknown split or class name.
+        Not a finished farm data set, a newer format, an unknown split or class name.
+    DatasetFormatError
+        The card, the manifest or ``shape_names.txt`` does not match its schema
+        (:mod:`zbuf_occlude.schema`; the message names the file, line and field), checksums
+        are missing (and ``verify`` is true); on access, a shard that is not HDF5 or
+        lacks a dataset or rows.
+    UnsafePathError
+        A path in the manifest is absolute, has ``..`` or leads outside the folder
+        (through a symlink): nothing outside the data set is read.
     ShardChecksumError
         On access: a shard's bytes differ from the SHA-256 in the manifest (it names the
         shard; rerunning the farm command redoes that object).
@@ -211,23 +211,26 @@ class OccludedDataset(Sequence):
         azimuth_deg: PoseFilter = None,
         *,
         object_cache: int = DEFAULT_OBJECT_CACHE,
+        verify: bool = True,
     ):
         self.root = Path(path)
+        self.verify = bool(verify)
         card_path = self.root / CARD_FILE
         if not card_path.is_file():
             raise InvalidInputError(
                 f"{self.root} is not a finished farm data set (no {CARD_FILE}); let `zbuf-occlude farm` finish, "
                 "or run `zbuf-occlude farm-merge` after sharded runs"
             )
-        self.card: dict[str, Any] = _read_json_file(card_path)
-        if not isinstance(self.card, dict) or not {"storage", "params", "poses"} <= self.card.keys():
-            raise InvalidInputError(f"{card_path} is not a data set card (storage, params, poses missing); rerun the farm command")
-        version = int(self.card.get("format_version", 0))
+        # the schema (pydantic) is imported when a data set is opened, not with the package
+        from .schema import check_records, checked_shards, read_card, read_manifest, read_shape_names
+
+        self.card, card = read_card(card_path)
+        version = card.format_version
         if version > FORMAT_VERSION:
             raise InvalidInputError(
                 f"{self.root} has data set format {version}; this zbuf_occlude reads up to {FORMAT_VERSION}: upgrade it"
             )
-        self.storage: str = self.card["storage"]
+        self.storage: str = card.storage
         if self.storage in SAMPLE_FILE_FORMATS:
             raise InvalidInputError(
                 f"{self.root} was written by `generate --format {self.storage}`: one file per sample, read them with "
@@ -235,14 +238,14 @@ class OccludedDataset(Sequence):
             )
         if self.storage not in (*STORAGE_MODES, "h5"):
             raise InvalidInputError(f"{card_path}: unknown storage {self.storage!r}; this zbuf_occlude reads {STORAGE_MODES}")
-        params = self.card["params"]
-        self.n_points: int = int(params["n_points"])
-        self._samples_per_view = int(params["samples_per_view"])
+        params = card.params
+        self.n_points: int = params.n_points
+        self._samples_per_view = params.samples_per_view
         #: ``farm --sensor``: one sample per scan, each with its own placement stored in its shard row
-        self.sensor: str | None = params.get("sensor")
-        self._seed = int(params["seed"])
-        self.shape_names: list[str] = (self.root / SHAPE_NAMES_FILE).read_text(encoding="utf-8").splitlines()
-        poses = np.asarray(self.card["poses"], dtype=np.float64).reshape(-1, 2)
+        self.sensor: str | None = params.sensor
+        self._seed = params.seed
+        self.shape_names: list[str] = read_shape_names(self.root, card)
+        poses = np.asarray(card.poses, dtype=np.float64).reshape(-1, 2)
         self._elevation, self._azimuth = poses[:, 0], poses[:, 1]
         pose_keep = _pose_mask(self._elevation, elevation_deg, "elevation_deg") & _pose_mask(
             self._azimuth, azimuth_deg, "azimuth_deg"
@@ -252,41 +255,31 @@ class OccludedDataset(Sequence):
         wanted_classes = name_set(classes)
         if wanted_classes is not None and (unknown := wanted_classes - set(self.shape_names)):
             raise InvalidInputError(f"unknown classes {sorted(unknown)} in {self.root}; it has {self.shape_names}")
-        known_splits = set(self.card.get("splits", SPLITS))
+        known_splits = set(card.splits if card.splits is not None else SPLITS)
         if splits is not None and (unknown := splits - known_splits):
             raise InvalidInputError(f"unknown split(s) {sorted(unknown)} in {self.root}; it has {sorted(known_splits)}")
 
         self._reset_handles()
         self._objects: list[dict[str, Any]] = []
+        self._shards: list[Path] = []  # per object: its shard, checked to lie inside the data set
         self._digests: dict[Path, str] = {}  # shard → SHA-256 recorded by the farm
+        self._shard_rows: dict[Path, int] = {}  # shard → rows its manifest line promises
         self._verified: set[Path] = set()
         obj_rows, poses_rows, sample_rows, shard_rows = [], [], [], []
         manifest_path = self.root / MANIFEST_FILE
-        try:
-            manifest_text = manifest_path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise InvalidInputError(f"cannot read the manifest {manifest_path}: {exc}; rerun the farm command") from exc
-        for lineno, line in enumerate(manifest_text.splitlines(), start=1):
-            if not line.strip():
+        manifest = read_manifest(manifest_path)
+        check_records(manifest_path, manifest, card, self.shape_names)
+        for lineno, rec, checked in manifest:
+            if checked is None:  # failed or pending objects have no shard
                 continue
-            try:
-                rec = json.loads(line)
-                if not isinstance(rec, dict):
-                    raise ValueError("not a JSON object")
-            except ValueError as exc:
-                raise InvalidInputError(
-                    f"{manifest_path}:{lineno} is not a manifest record ({exc}); the file is damaged: rerun "
-                    "the farm command (it rewrites the manifest from the records)"
-                ) from None
-            if rec.get("status") != "ok":
+            if splits is not None and checked.split not in splits:
                 continue
-            if splits is not None and rec["split"] not in splits:
+            if wanted_classes is not None and checked.class_name not in wanted_classes:
                 continue
-            if wanted_classes is not None and rec["class_name"] not in wanted_classes:
-                continue
-            for rel, digest in zip(rec["shards"], rec.get("sha256") or ()):
-                self._digests[self.root / rel] = digest
-            spp = samples_per_pose(np.asarray(rec["n_visible"], dtype=np.int64), 1 if self.sensor else self._samples_per_view)
+            shards, digests = checked_shards(self.root, f"{manifest_path}:{lineno}", checked, card, verify=self.verify)
+            self._digests.update(digests)
+            spp = samples_per_pose(np.asarray(checked.n_visible, dtype=np.int64), 1 if self.sensor else self._samples_per_view)
+            self._shard_rows[shards[0]] = int(spp.sum())
             pose = np.repeat(np.arange(len(spp)), spp)
             starts = np.cumsum(spp) - spp
             sample = np.arange(len(pose)) - np.repeat(starts, spp)
@@ -295,7 +288,7 @@ class OccludedDataset(Sequence):
             elif elevation_deg is None and azimuth_deg is None:
                 keep = np.ones(len(pose), dtype=bool)
             else:  # each scan's own sensor direction, from its shard row
-                f = self._file(self.root / rec["shards"][0])
+                f = self._file(shards[0])
                 keep = _pose_mask(f["elevation_deg"][()], elevation_deg, "elevation_deg") & _pose_mask(
                     f["azimuth_deg"][()], azimuth_deg, "azimuth_deg"
                 )
@@ -304,6 +297,7 @@ class OccludedDataset(Sequence):
             sample_rows.append(sample[keep])
             shard_rows.append(np.flatnonzero(keep))
             self._objects.append(rec)
+            self._shards.append(shards[0])
 
         def cat(parts: list[NDArray[np.int64]]) -> NDArray[np.int64]:
             return np.concatenate(parts).astype(np.int64) if parts else np.zeros(0, dtype=np.int64)
@@ -331,12 +325,26 @@ class OccludedDataset(Sequence):
     def _file(self, path: Path):
         import h5py
 
+        from .schema import check_shard
+
         if self._pid != os.getpid():  # forked: the parent's HDF5 handles are not ours
             self._reset_handles()
         f = self._files.get(path)
         if f is None:
             self._verify(path)
-            f = self._files[path] = h5py.File(path, "r")
+            try:
+                f = h5py.File(path, "r")
+            except OSError as exc:  # h5py says "file signature not found" for a file that is not HDF5
+                raise DatasetFormatError(f"the shard {path} is not a readable HDF5 file ({exc})") from None
+            try:
+                check_shard(
+                    f, path, storage=self.storage, n_points=self.n_points, rows=self._shard_rows.get(path, 0),
+                    n_poses=len(self._elevation), sensor=self.sensor is not None,
+                )  # fmt: skip
+            except BaseException:
+                f.close()
+                raise
+            self._files[path] = f
             while len(self._files) > DEFAULT_OPEN_FILES:
                 self._files.popitem(last=False)[1].close()
         else:
@@ -366,7 +374,7 @@ class OccludedDataset(Sequence):
         if hit is not None and self._pid == os.getpid():
             self._compact.move_to_end(obj)
             return hit
-        f = self._file(self.root / self._objects[obj]["shards"][0])
+        f = self._file(self._shards[obj])
         arrays = (f["dense_points"][()], f["visible_bits"][()])
         self._compact[obj] = arrays
         while len(self._compact) > self._object_cache_size:
@@ -387,7 +395,7 @@ class OccludedDataset(Sequence):
         obj = int(self._obj[i])
         rec = self._objects[obj]
         if self.storage != "compact":
-            f = self._file(self.root / rec["shards"][0])
+            f = self._file(self._shards[obj])
             return f["data"][int(self._row[i])]
         dense_points, bits = self._compact_arrays(obj)
         pose = int(self._pose[i])
@@ -400,7 +408,8 @@ class OccludedDataset(Sequence):
     def metadata(self, i: int) -> dict[str, Any]:
         """The metadata of sample ``i`` (the third item of ``self[i]``) without its points."""
         i = self._check_index(i)
-        rec = self._objects[int(self._obj[i])]
+        obj = int(self._obj[i])
+        rec = self._objects[obj]
         pose = int(self._pose[i])
         n_visible = int(rec["n_visible"][pose])
         return {
@@ -413,14 +422,14 @@ class OccludedDataset(Sequence):
             "sample_index": int(self._sample[i]),
             "n_visible": n_visible,
             "padded": n_visible < self.n_points,
-        } | self._placement(rec, pose, int(self._row[i]))
+        } | self._placement(obj, pose, int(self._row[i]))
 
-    def _placement(self, rec: dict[str, Any], pose: int, row: int) -> dict[str, Any]:
+    def _placement(self, obj: int, pose: int, row: int) -> dict[str, Any]:
         """The sensor direction of a sample (degrees); for ``farm --sensor`` rows also the
         placement of its scan (``radius`` in mesh units, the rest in metres and degrees)."""
         if self.sensor is None:
             return {"elevation_deg": float(self._elevation[pose]), "azimuth_deg": float(self._azimuth[pose])}
-        f = self._file(self.root / rec["shards"][0])
+        f = self._file(self._shards[obj])
         out = {key: float(f[key][row]) for key in SENSOR_ROW_FIELDS if key in f}
         out["sensor"] = self.sensor
         return out
@@ -456,7 +465,7 @@ class OccludedDataset(Sequence):
             labels[start:stop] = int(rec["label"])
             if self.storage != "compact":
                 rows = self._row[start:stop]
-                data[start:stop] = self._file(self.root / rec["shards"][0])["data"][()][rows]
+                data[start:stop] = self._file(self._shards[obj])["data"][()][rows]
                 continue
             dense_points, bits = self._compact_arrays(obj)
             pose_rows = self._pose[start:stop]

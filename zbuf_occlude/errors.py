@@ -15,6 +15,9 @@ __all__ = [
     "BackendUnavailable",
     "OutputError",
     "RegistryError",
+    "UnsafePathError",
+    "DatasetFormatError",
+    "CheckpointError",
 ]
 
 
@@ -44,3 +47,16 @@ class OutputError(ZbufOccludeError, OSError):
 
 class RegistryError(ZbufOccludeError, RuntimeError):
     """A visibility method registered twice under one name, or with an unknown capability (a bug in a plugin)."""
+
+
+class UnsafePathError(InvalidInputError):
+    """A path named by metadata (a data set's card, manifest, records or file lists, a farm
+    task folder, a mesh name) would leave its folder: absolute, ``..``, or through a symlink."""
+
+
+class DatasetFormatError(InvalidInputError):
+    """A data set's metadata or shard does not match its schema (the message names the file and field)."""
+
+
+class CheckpointError(InvalidInputError):
+    """A checkpoint cannot be loaded as weights only: damaged, not a checkpoint, or it needs code to unpickle."""

@@ -28,6 +28,7 @@ from ..errors import InvalidInputError
 from ..io import clouds_of_h5, read_h5, write_h5
 from ..layout import GENERATE_STORAGES, MERGED_H5_FILE
 from ..occlude import OccludedCloud
+from ..safe_paths import path_inside
 from .config import FarmParams, record_path
 from .inputs import FarmObject, scan_inputs
 from .journal import FarmSummary, read_json, shape_names_of
@@ -86,7 +87,7 @@ def _merge_h5(out: Path, objects: Sequence[FarmObject]) -> Path | None:
     for o in objects:
         rec = read_json(record_path(out, o.index))
         if rec and rec.get("status") == "ok":
-            parts.extend(out / rel for rel in rec["shards"])
+            parts.extend(path_inside(out, rel, what=f"{record_path(out, o.index)} field 'shards'") for rel in rec["shards"])
     if not parts:
         return None
     clouds: list[OccludedCloud] = []

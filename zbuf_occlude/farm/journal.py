@@ -13,8 +13,9 @@ from typing import Any
 
 from ..errors import InvalidInputError
 from ..io import file_sha256, temp_is_orphan, temp_owner, write_text
-from ..layout import CARD_FILE, FORMAT_VERSION, MANIFEST_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, file_list_name
+from ..layout import CARD_FILE, FORMAT_VERSION, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, file_list_name
 from ..mesh import SPLITS
+from ..safe_paths import check_line_text, path_inside
 from .config import BYTES_PER_MB, PAPER_SAMPLES_PER_MB, FarmParams, plan_digest, record_path, shard_path
 from .inputs import FarmObject
 from .worker import base_record, package_version, write_json
@@ -23,21 +24,62 @@ log = logging.getLogger(__name__)
 
 
 # -- journal, manifest, card -------------------------------------------------------------------
-def read_json(path: Path) -> Any | None:
+def read_json(path: Path) -> dict[str, Any] | None:
+    """A JSON object of the journal (plan, record, task); ``None`` if missing, damaged or not an object."""
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
+        doc = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
+    return doc if isinstance(doc, dict) else None
+
+
+def read_plan(folder: Path) -> dict[str, Any] | None:
+    """``folder/plan.json`` checked against :class:`~zbuf_occlude.schema.Plan`; ``None`` if there is none.
+
+    Raises
+    ------
+    InvalidInputError
+        The plan is not JSON, a field is missing or mistyped, or its parameters are not a farm's.
+    """
+    from pydantic import ValidationError
+
+    from ..schema import Plan, describe_validation_error
+
+    path = folder / PLAN_FILE
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        return None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InvalidInputError(f"cannot read {path}: {exc}") from None
+    try:
+        Plan.model_validate_json(text)
+    except ValidationError as exc:
+        raise InvalidInputError(f"{path} is not a farm plan: {describe_validation_error(exc)}") from None
+    plan = json.loads(text)
+    try:
+        FarmParams(**plan["params"])
+    except TypeError as exc:
+        raise InvalidInputError(f"{path}: field 'params' is not a farm's parameters ({exc})") from None
+    return plan
 
 
 def finished_record(out: Path, obj: FarmObject, digest: str) -> dict[str, Any] | None:
-    """The record of ``obj`` if it finished (ok, same parameters, shard present and whole)."""
-    rec = read_json(record_path(out, obj.index))
-    if not rec or rec.get("params_digest") != digest or rec.get("name") != obj.name or rec.get("status") != "ok":
+    """The record of ``obj`` if it finished (ok, same parameters, shard present and whole).
+
+    Raises
+    ------
+    UnsafePathError
+        The record names a file outside ``out`` (absolute, ``..``, through a symlink).
+    """
+    where = record_path(out, obj.index)
+    rec = read_json(where)
+    if not isinstance(rec, dict) or rec.get("params_digest") != digest or rec.get("name") != obj.name:
         return None
-    sizes_ok = all((out / rel).is_file() for rel in rec["shards"]) and sum(
-        (out / rel).stat().st_size for rel in rec["shards"]
-    ) == rec["bytes"]
+    if rec.get("status") != "ok" or not isinstance(rec.get("shards"), list) or not isinstance(rec.get("bytes"), int):
+        return None
+    files = [path_inside(out, rel, what=f"{where} field 'shards'") for rel in rec["shards"]]
+    sizes_ok = all(f.is_file() for f in files) and sum(f.stat().st_size for f in files) == rec["bytes"]
     if not sizes_ok:
         return None
     # a shard rewritten in place keeps its size: compare the bytes (records of older
@@ -73,7 +115,11 @@ def remove_stale_temps(out: Path, objects: Sequence[FarmObject], everything: boo
 
 
 def plan_doc(objects: Sequence[FarmObject], params: FarmParams, source: str, layout: str | None = None) -> dict[str, Any]:
-    # layout: how classes and splits were found (zbuf_occlude.mesh_layouts), for the card
+    """The plan of a run (``plan.json``); class names that would break ``shape_names.txt`` are refused here, before any work.
+
+    ``layout`` says how classes and splits were found (zbuf_occlude.mesh_layouts), for the card.
+    """
+    shape_names_of(objects)
     return {
         "format_version": FORMAT_VERSION,
         "params": params.to_dict(),
@@ -86,13 +132,28 @@ def plan_doc(objects: Sequence[FarmObject], params: FarmParams, source: str, lay
 
 
 def objects_of(plan: dict[str, Any]) -> list[FarmObject]:
-    return [FarmObject(**o) for o in plan["objects"]]
+    """The objects of a plan (``plan.json``); a damaged plan raises InvalidInputError."""
+    try:
+        objects = [FarmObject(**o) for o in plan["objects"]]
+    except (KeyError, TypeError) as exc:
+        raise InvalidInputError(f"{PLAN_FILE} is damaged ({type(exc).__name__}: {exc}); rerun the farm command") from None
+    if not all(isinstance(o.index, int) and isinstance(o.split, str) for o in objects):
+        raise InvalidInputError(f"{PLAN_FILE} is damaged (an object's index is not an integer or its split not a string)")
+    return objects
 
 
 def shape_names_of(objects: Sequence[FarmObject]) -> list[str]:
-    """Class names by label (line i of ``shape_names.txt`` is label i); a label with two names is refused."""
+    """Class names by label (line i of ``shape_names.txt`` is label i).
+
+    Raises
+    ------
+    InvalidInputError
+        A label with two names, or a class name with a control character (``\n``,
+        ``\x85``, ...), which would break the one-name-per-line file.
+    """
     names: dict[int, str] = {}
     for o in objects:
+        check_line_text(o.class_name, what=f"{o.source!r}: class name")
         if names.setdefault(o.label, o.class_name) != o.class_name:
             raise InvalidInputError(f"label {o.label} is used by classes {names[o.label]!r} and {o.class_name!r}")
     return [names.get(i, f"unused_{i}") for i in range(max(names) + 1)] if names else []
@@ -120,6 +181,8 @@ def finalize(
     ``skipped``: ``(path, reason)`` of inputs discovery could not take (unreadable folders,
     names that are not UTF-8), recorded in the card as ``skipped_inputs``.
     """
+    from ..schema import CHECKSUM_ALGORITHM
+
     objects = objects_of(plan)
     params = FarmParams(**plan["params"])
     write_text(out / MANIFEST_FILE, manifest_lines(objects, params, records))
@@ -129,8 +192,10 @@ def finalize(
     for split in splits:
         ok_in_split = [o for o in objects if o.split == split and records[o.index]["status"] == "ok"]
         shards = [s for o in ok_in_split for s in records[o.index]["shards"]]
-        write_text(out / file_list_name(split), "".join(f"{s}\n" for s in shards))
+        # the split comes from the plan (a task folder's, for farm-merge): the list must stay inside out
+        write_text(path_inside(out, file_list_name(split), what=f"{PLAN_FILE} split"), "".join(f"{s}\n" for s in shards))
     ok = [r for r in records.values() if r["status"] == "ok"]
+    every_file_hashed = all(len(r.get("sha256") or ()) == len(r["shards"]) for r in ok)
     card = {
         "format_version": FORMAT_VERSION,
         "tool": "zbuf_occlude",
@@ -152,6 +217,8 @@ def finalize(
         "skipped_inputs": [{"path": p, "reason": r} for p, r in skipped],
         "n_samples": int(sum(r["n_samples"] for r in ok)),
         "shard_bytes": int(sum(r["bytes"] for r in ok)),
+        # the reader refuses a manifest without them (unless verify=False): removing them cannot hide a change
+        "checksums": CHECKSUM_ALGORITHM if every_file_hashed else None,
         "renderers": sorted({r["renderer"] for r in ok if r.get("renderer")}),
         "seed_derivation": "numpy SeedSequence([seed, blake2b64(name), stream, pose_index, sample_index]), "
         "zbuf_occlude.occlude.derive_rng; stream 0 = dense cloud, 1 = sample draws",

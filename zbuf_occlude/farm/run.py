@@ -21,6 +21,7 @@ from ..errors import BackendUnavailable, InvalidInputError, OutputError
 from ..io import atomic_path, write_text
 from ..layout import CARD_FILE, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, TASK_DIR, file_list_name
 from ..mesh import SPLITS
+from ..safe_paths import path_inside
 from .checks import check_before_work, prepare_out
 from .config import MANIFEST_INTERVAL_S, OPTION_NAMES, FarmParams, record_path, shard_path
 from .inputs import FarmObject, scan_objects, select_shard
@@ -33,6 +34,7 @@ from .journal import (
     objects_of,
     plan_doc,
     read_json,
+    read_plan,
     remove_stale_temps,
 )
 from .lifecycle import die_with_parent, sigterm_as_interrupt
@@ -115,8 +117,7 @@ def _wipe(out: Path, objects: Sequence[FarmObject] | None) -> None:
     for o in objects if objects is not None else objects_of(read_json(out / PLAN_FILE) or {"objects": []}):
         rec = read_json(record_path(out, o.index))  # generate's npz/ply live outside shards/
         for rel in (rec or {}).get("shards") or ():
-            if ".." not in Path(rel).parts:
-                (out / rel).unlink(missing_ok=True)
+            path_inside(out, rel, what=f"{record_path(out, o.index)} field 'shards'").unlink(missing_ok=True)
     if objects is None:
         for name in (SHARD_DIR, RECORD_DIR, TASK_DIR):
             shutil.rmtree(out / name, ignore_errors=True)
@@ -416,7 +417,7 @@ def merge_farm(
     out = Path(out) if out is not None else folders[0]
     plans = []
     for folder in folders:
-        plan = read_json(folder / PLAN_FILE)
+        plan = read_plan(folder)  # checked against its schema: a task folder may be crafted
         if plan is None:
             raise InvalidInputError(f"{folder} is not a farm output (no readable {PLAN_FILE})")
         plans.append(plan)
@@ -433,8 +434,9 @@ def _merge_locked(folders: list[Path], out: Path, plan: dict[str, Any], *, progr
     """:func:`merge_farm` once the data-set lock of ``out`` is held."""
     if out.resolve() not in {f.resolve() for f in folders}:
         _check_compatible(out, plan)
-    write_json(out / PLAN_FILE, plan)
     objects = objects_of(plan)
+    write_json(out / PLAN_FILE, plan)
+    remove_stale_temps(out, objects, everything=True)  # dead writers' temporaries, as a run does
     digest = plan["params_digest"]
     records: dict[int, dict[str, Any]] = {}
     failed: dict[int, dict[str, Any]] = {}
@@ -458,8 +460,8 @@ def _merge_locked(folders: list[Path], out: Path, plan: dict[str, Any], *, progr
                     failed[o.index] = other
                 continue
             if folder.resolve() != out.resolve():
-                for rel in rec["shards"]:
-                    with atomic_path(out / rel) as tmp:
+                for rel in rec["shards"]:  # checked inside folder by finished_record; the copy stays inside out
+                    with atomic_path(path_inside(out, rel, what=f"{record_path(folder, o.index)} field 'shards'")) as tmp:
                         shutil.copyfile(folder / rel, tmp)
                 write_json(record_path(out, o.index), rec)
             records[o.index] = rec

@@ -20,6 +20,7 @@ from ..io import OccludedCloud, atomic_h5, file_sha256, write_h5, write_npz, wri
 from ..layout import FORMAT_VERSION, SAMPLE_FILE_FORMATS
 from ..mesh import load_mesh
 from ..occlude import dense_cloud, occlude_object
+from ..safe_paths import check_relative_name, path_inside
 from .._version import __version__
 from .config import COMPACT_GZIP_LEVEL, FATAL_ERRORS, GL_LOCK, FarmParams, record_path, sample_file_path, shard_path
 from .inputs import FarmObject
@@ -115,6 +116,8 @@ def _write_datasets(path: Path, datasets: dict[str, np.ndarray], attrs: dict[str
 def _render(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
     if params.sensor is not None:
         return _scan(obj, params, out)
+    if params.storage in SAMPLE_FILE_FORMATS:  # the name becomes folders under out: `...off` (name "..") must not leave it
+        check_relative_name(obj.name, what=f"the name of {obj.source}")
     mesh = load_mesh(obj.source)
     dense = dense_cloud(mesh, obj.key, seed=params.seed, count=params.dense_points, density=params.density)
     poses = params.poses
@@ -131,7 +134,7 @@ def _render(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
             n_visible[pose_index] = int(visible.sum())
             for c in clouds:
                 rel = sample_file_path(obj.name, pose_index, c, params.storage)
-                (write_npz if params.storage == "npz" else write_ply)(out / rel, c)
+                (write_npz if params.storage == "npz" else write_ply)(path_inside(out, rel, what=obj.source), c)
                 written.append(rel)
         files = written
         b = len(written)

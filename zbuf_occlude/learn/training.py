@@ -21,7 +21,9 @@ import dataclasses
 import json
 import logging
 import os
+import pickle
 import time
+import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,12 +33,15 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from ..errors import InvalidInputError, OutputError
+from ..errors import CheckpointError, InvalidInputError, OutputError
 from ..io import atomic_path
 from .data import CloudSet, augment
 from .models import build_model
 
-__all__ = ["TrainConfig", "OPTIMISER_DEFAULTS", "train", "predict", "TrainResult", "resolve_device", "seed_everything"]
+__all__ = [
+    "TrainConfig", "OPTIMISER_DEFAULTS", "train", "predict", "TrainResult", "resolve_device", "seed_everything",
+    "load_checkpoint", "load_model",
+]  # fmt: skip
 
 log = logging.getLogger(__name__)
 
@@ -168,8 +173,67 @@ def predict(model: nn.Module, points: np.ndarray, *, batch_size: int = 64, devic
 
 
 def _save(path: Path, state: dict) -> None:
+    # only tensors, numbers, strings, None, lists and dicts: what load_checkpoint's weights-only load takes
     with atomic_path(path) as tmp:
         torch.save(state, tmp)
+
+
+#: Keys of ``last.pt`` (resume point) and ``best.pt`` (:func:`load_model`).
+RESUME_KEYS = ("config_key", "n_train", "epoch", "stale", "model", "optimizer", "scheduler", "history",
+               "best_epoch", "best_val_accuracy", "best_model")  # fmt: skip
+MODEL_KEYS = ("config", "n_classes", "model")
+
+
+def load_checkpoint(path: str | os.PathLike, *, keys: tuple[str, ...] = (), device: str | torch.device = "cpu") -> dict:
+    """A checkpoint of :func:`train`, loaded as weights only: it never runs code.
+
+    ``torch.load(weights_only=True)`` unpickles tensors, numbers, strings, ``None``, lists
+    and dicts only; a checkpoint that needs anything else (pickled objects, which could run
+    code) is refused.
+
+    Parameters
+    ----------
+    path : str or PathLike
+    keys : tuple of str
+        Keys the checkpoint's dict must hold.
+    device : str or torch.device
+        Where tensors are loaded (``map_location``).
+
+    Raises
+    ------
+    CheckpointError
+        The file is missing, damaged, truncated, not a PyTorch checkpoint, needs more than
+        weights to load, or lacks one of ``keys`` (the message names the file).
+    """
+    path = Path(path)
+    try:
+        state = torch.load(path, map_location=device, weights_only=True)
+    except pickle.UnpicklingError as exc:
+        if "weights only" in str(exc).lower() or "weights_only" in str(exc):
+            raise CheckpointError(
+                f"{path} needs more than weights to load (pickled objects that could run code); refused: "
+                "zbuf_occlude loads only tensors and plain data from checkpoints"
+            ) from None
+        raise CheckpointError(f"{path} is damaged or not a PyTorch checkpoint ({exc})") from None
+    except OSError as exc:
+        raise CheckpointError(f"cannot read the checkpoint {path}: {exc.strerror or exc}") from None
+    except (RuntimeError, EOFError, ValueError, zipfile.BadZipFile, KeyError, AttributeError, TypeError) as exc:
+        # torch reports a truncated or foreign file as a RuntimeError of its zip reader, an empty one as EOFError
+        raise CheckpointError(f"{path} is damaged, truncated or not a PyTorch checkpoint ({type(exc).__name__}: {exc})") from None
+    if not isinstance(state, dict):
+        raise CheckpointError(f"{path} is not a zbuf_occlude checkpoint (a {type(state).__name__}, not a dict)")
+    missing = [k for k in keys if k not in state]
+    if missing:
+        raise CheckpointError(f"{path} is not a zbuf_occlude checkpoint of this kind: it lacks {', '.join(missing)}")
+    return state
+
+
+def _load_state(path: Path, target, state_dict, what: str) -> None:
+    """``target.load_state_dict(state_dict)``; a mismatch names the checkpoint."""
+    try:
+        target.load_state_dict(state_dict)
+    except (RuntimeError, KeyError, ValueError, TypeError, AttributeError, IndexError) as exc:
+        raise CheckpointError(f"{path}: its {what} does not fit this model ({type(exc).__name__}: {exc})") from None
 
 
 def train(
@@ -229,19 +293,25 @@ def train(
     cfg_key = {k: v for k, v in cfg.items() if k not in ("device", "threads", "epochs", "patience")}
     ckpt_dir = Path(checkpoint_dir) if checkpoint_dir is not None else None
     if ckpt_dir is not None and (ckpt_dir / "last.pt").is_file():
-        state = torch.load(ckpt_dir / "last.pt", map_location=device, weights_only=False)
+        last = ckpt_dir / "last.pt"
+        state = load_checkpoint(last, keys=RESUME_KEYS, device=device)
         if state["config_key"] != cfg_key or state["n_train"] != len(train_set):
             raise InvalidInputError(
-                f"{ckpt_dir / 'last.pt'} was made with another configuration or data "
+                f"{last} was made with another configuration or data "
                 f"({state['config_key']}, {state['n_train']} samples); remove it or choose another --out"
             )
-        model.load_state_dict(state["model"])
-        opt.load_state_dict(state["optimizer"])
-        sched.load_state_dict(state["scheduler"])
+        for target, key in ((model, "model"), (opt, "optimizer"), (sched, "scheduler")):
+            _load_state(last, target, state[key], key)
         start_epoch, stale = state["epoch"] + 1, state["stale"]
         result.history, result.best_epoch = state["history"], state["best_epoch"]
         result.best_val_accuracy = state["best_val_accuracy"]
         best_state = state["best_model"]
+        shapes = {k: tuple(v.shape) for k, v in model.state_dict().items()}
+        if best_state is not None and (
+            not isinstance(best_state, dict)
+            or {k: tuple(getattr(v, "shape", ())) for k, v in best_state.items()} != shapes
+        ):
+            raise CheckpointError(f"{last}: its best_model does not fit this model")
         log.info("resuming %s from epoch %d", config.model, start_epoch)
     t0, seen = time.perf_counter(), 0
     n = len(train_set)
@@ -317,9 +387,21 @@ def train(
 
 
 def load_model(path: str | os.PathLike, device: str = "cpu") -> tuple[nn.Module, dict]:
-    """A model saved as ``best.pt`` by :func:`train`, in eval mode, and its config dict."""
-    state = torch.load(path, map_location=device, weights_only=False)
+    """A model saved as ``best.pt`` by :func:`train`, in eval mode, and its config dict.
+
+    Loaded as weights only (:func:`load_checkpoint`): a checkpoint never runs code.
+
+    Raises
+    ------
+    CheckpointError
+        Damaged, not a ``best.pt`` of :func:`train`, or it needs more than weights to load.
+    """
+    path = Path(path)
+    state = load_checkpoint(path, keys=MODEL_KEYS, device=device)
     cfg = state["config"]
-    model = build_model(cfg["model"], state["n_classes"], width=cfg["width"], fv_grid=cfg["fv_grid"])
-    model.load_state_dict(state["model"])
+    try:
+        model = build_model(cfg["model"], int(state["n_classes"]), width=float(cfg["width"]), fv_grid=int(cfg["fv_grid"]))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise CheckpointError(f"{path}: its config is not a model's ({type(exc).__name__}: {exc})") from None
+    _load_state(path, model, state["model"], "model")
     return model.to(device).eval(), cfg
