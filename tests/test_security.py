@@ -275,7 +275,7 @@ def test_generate_overwrite_does_not_delete_a_file_a_record_names_outside_out(tm
 
 @pytest.mark.parametrize("given", ["file", "folder"])
 def test_a_mesh_named_dot_dot_does_not_write_beside_out(tmp_path: Path, capsys, given: str) -> None:
-    meshes = tmp_path / "meshes"
+    meshes = tmp_path / "chair"  # a class folder: a folder named "meshes" is refused as a class
     meshes.mkdir()
     shutil.copy(CHAIR, meshes / "...off")  # stem ".."
     shutil.copy(CHAIR, meshes / "chair_0001.off")
@@ -284,7 +284,7 @@ def test_a_mesh_named_dot_dot_does_not_write_beside_out(tmp_path: Path, capsys, 
     paths = [meshes / "...off", meshes / "chair_0001.off"] if given == "file" else [meshes]
     status = _generate(out, *paths)
     assert sorted(p.name for p in out.parent.iterdir()) == ["out"]
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["meshes", "work"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["chair", "work"]
     assert status == 1  # the other mesh is done
     assert "cannot name a file inside the output folder" in capsys.readouterr().err
     assert any(out.glob("chair_0001/*.npz"))
