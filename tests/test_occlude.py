@@ -273,7 +273,7 @@ def test_generate_writes_occluded_samples(small_mesh, tmp_path):
 
     path, mesh = small_mesh
     assert main(["generate", str(path), "--out", str(tmp_path), "--views", "30:45,-40:200,85:10", "--points", "256",
-                 "--samples-per-view", "2", "--dense-points", "20000", "--resolution", "256"]) == 0  # fmt: skip
+                 "--samples-per-view", "2", "--dense-points", "20000", "--resolution", "256", "--format", "npz"]) == 0  # fmt: skip
     files = sorted(tmp_path.rglob("*.npz"))
     assert len(files) == 3 * 2
     hidden = total = 0

@@ -15,6 +15,7 @@ __all__ = [
     "BackendUnavailable",
     "OutputError",
     "RegistryError",
+    "PaddedSamplesWarning",
 ]
 
 
@@ -44,3 +45,7 @@ class OutputError(ZbufOccludeError, OSError):
 
 class RegistryError(ZbufOccludeError, RuntimeError):
     """A visibility method registered twice under one name, or with an unknown capability (a bug in a plugin)."""
+
+
+class PaddedSamplesWarning(UserWarning):
+    """Some samples hold repeated points: fewer points were visible than a sample holds."""

@@ -220,7 +220,7 @@ def write_csv(path: str | os.PathLike, rows: Sequence[dict], fieldnames: Sequenc
 def write_npz(path: str | os.PathLike, cloud: OccludedCloud) -> Path:
     """Write one cloud as ``.npz``: ``points (n, 3) float32``, ``face_index (n,) int64``,
     ``elevation_deg``, ``azimuth_deg``, ``radius``, ``label``, ``class_name``, ``source``,
-    ``sample_index``, ``n_visible`` (scalars as 0-d arrays)."""
+    ``sample_index``, ``n_visible``, ``split`` (scalars as 0-d arrays)."""
     path = Path(path)
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
@@ -236,6 +236,7 @@ def write_npz(path: str | os.PathLike, cloud: OccludedCloud) -> Path:
                 source=np.str_(cloud.source),
                 sample_index=np.int64(cloud.sample_index),
                 n_visible=np.int64(cloud.n_visible),
+                split=np.str_(cloud.split),
             )
     return path
 
@@ -254,6 +255,7 @@ def read_npz(path: str | os.PathLike) -> OccludedCloud:
             source=str(z["source"]),
             sample_index=int(z["sample_index"]),
             n_visible=int(z["n_visible"]),
+            split=str(z["split"]) if "split" in z.files else "",  # files of older versions have none
         )
 
 
@@ -274,6 +276,7 @@ def write_ply(path: str | os.PathLike, cloud: OccludedCloud) -> Path:
             f"comment azimuth_deg {cloud.azimuth_deg:.6f}",
             f"comment radius {cloud.radius:.6f}",
             f"comment class {cloud.class_name or '-'} label {cloud.label} sample {cloud.sample_index} n_visible {cloud.n_visible}",
+            f"comment split {cloud.split or '-'}",
             f"element vertex {len(pts)}",
             "property float x",
             "property float y",
@@ -309,7 +312,7 @@ def write_h5(
     Datasets, one row per cloud: ``data (B, n, 3) float32``, ``label (B,) int64``,
     ``elevation_deg (B,)``, ``azimuth_deg (B,)`` float64 (degrees), ``sample_index (B,)``,
     ``n_visible (B,)`` int64; with ``provenance`` also ``face_index (B, n) int32``,
-    ``radius (B,) float64``, ``source (B,)`` and ``class_name (B,)`` UTF-8 strings.
+    ``radius (B,) float64``, ``source (B,)``, ``class_name (B,)`` and ``split (B,)`` UTF-8 strings.
 
     Parameters
     ----------
@@ -356,6 +359,7 @@ def write_h5(
             put("radius", np.asarray([c.radius for c in clouds], dtype=np.float64))
             put("source", [c.source for c in clouds], text)
             put("class_name", [c.class_name for c in clouds], text)
+            put("split", [c.split for c in clouds], text)
         if shape_names or provenance:
             f.attrs["shape_names"] = list(shape_names)
         f.attrs.update(dict(attrs or {}))
@@ -393,6 +397,7 @@ def clouds_of_h5(d: Mapping[str, np.ndarray]) -> list[OccludedCloud]:
             source=str(d["source"][i]),
             sample_index=int(d["sample_index"][i]),
             n_visible=int(d["n_visible"][i]),
+            split=str(d["split"][i]) if "split" in d else "",  # files of older versions have none
         )
         for i in range(len(d["data"]))
     ]
