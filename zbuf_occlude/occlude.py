@@ -5,6 +5,10 @@ visibility from every pose, and draw ``samples_per_view`` fixed-size samples per
 the visible points.  Every random draw has its own generator derived from
 ``(seed, object_key, pose_index, sample_index)`` with :class:`numpy.random.SeedSequence`,
 so results are identical whatever the order, the worker count or the sharding.
+
+:func:`occlude` is the one-call version, ``zbuf_occlude.occlude(...)``: the package attribute
+``occlude`` is that function, so take this module's other names with ``from
+zbuf_occlude.occlude import ...`` (or ``importlib.import_module("zbuf_occlude.occlude")``).
 """
 
 from __future__ import annotations
