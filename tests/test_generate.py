@@ -244,6 +244,17 @@ def test_h5_writes_one_file_per_split_with_a_split_column(tree, tmp_path, sample
         assert set(read_h5(part)["split"]) == {part.name.split("_")[0]}
 
 
+def test_overwrite_leaves_no_stale_split_file(tree, tmp_path):
+    out = tmp_path / "gen"
+    assert main(["generate", str(tree), "--out", str(out), *ARGS]) == 0
+    assert sorted(p.name for p in out.glob("occluded_*.h5")) == ["occluded_test.h5", "occluded_train.h5"]
+    (tree / "sofa").rename(tmp_path / "sofa")  # the only test mesh goes: no test split any more
+    assert main(["generate", str(tree), "--out", str(out), *ARGS, "--overwrite"]) == 0
+    assert [p.name for p in out.glob("occluded_*.h5")] == ["occluded_train.h5"]
+    assert main(["generate", str(tree), "--out", str(out), *ARGS, "--format", "npz", "--overwrite"]) == 0
+    assert not list(out.glob("occluded_*.h5")) and len(OccludedDataset(out)) == 4
+
+
 # -- padding is said, counted and recorded ----------------------------------------------------------------
 def _padded_args(points: int) -> list[str]:
     return ["--views", "0:0,30:45,-40:200", "--points", str(points), "--samples-per-view", "2", "--dense-points", "500",

@@ -10,9 +10,9 @@ A data set folder (``farm --out``, ``generate --out``), ``format_version`` :data
       dataset_card.json      parameters, poses, tool version, command lines, GL renderers;
                              written last: it marks the data set finished
       shape_names.txt        one class name per line; line i is label i (PointNet)
-      train_files.txt        HDF5 files of the train split, one per line, paths relative to
+      train_files.txt        files of the train split, one per line, paths relative to
                              DATASET (PointNet's file list): the farm's shards; generate's
-                             occluded_train.h5
+                             occluded_train.h5 (h5) or sample files (npz, ply)
       test_files.txt         ... of the test split
       manifest.jsonl         one JSON record per object: source, class, split, status, error,
                              files and their SHA-256, visible-point counts per pose, seed, key

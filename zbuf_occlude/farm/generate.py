@@ -90,7 +90,8 @@ def _merge_h5(out: Path, objects: Sequence[FarmObject]) -> list[Path]:
 
     Rows keep the objects' order (the plan's), then pose-major, then sample index, as the
     reader serves them.  A split with no finished object gets an empty list and no file (one
-    left by an earlier run is removed, so no stale split survives ``--overwrite``).
+    left by an earlier run is removed, so no stale split survives ``--overwrite``; with no
+    ``objects``, as for ``--format npz|ply``, every split's file is).
     """
     parts: dict[str, list[Path]] = {}
     for o in objects:
@@ -175,7 +176,7 @@ def generate(
     summary = run_farm(
         objects, out, params=params, workers=1, overwrite=overwrite, progress=progress, command=command,
         source_text=", ".join(str(Path(p).resolve()) for p in paths),
-        on_finished=(lambda folder: _merge_h5(folder, objects)) if params.storage == "h5" else None,
+        on_finished=lambda folder: _merge_h5(folder, objects if params.storage == "h5" else []),
         skipped=[(s.path, s.reason) for s in skipped],
     )  # fmt: skip
     records = [rec for o in objects if (rec := read_json(record_path(out, o.index)))]
