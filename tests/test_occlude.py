@@ -488,8 +488,16 @@ def sofa_clouds(small_mesh):
     return zo.occlude(path, **OCCLUDE_OPTIONS)
 
 
-def test_occlude_is_public():
+def test_occlude_is_public_with_generates_defaults():
+    import inspect
+
+    from zbuf_occlude import defaults
+
     assert "occlude" in zo.__all__ and "OccludedCloud" in zo.__all__ and zo.occlude.__doc__
+    params = inspect.signature(zo.occlude).parameters
+    assert params["views"].default == defaults.DEFAULT_VIEWS and params["n_points"].default == defaults.DEFAULT_N_POINTS
+    assert params["dense_points"].default == defaults.DEFAULT_DENSE_POINTS and params["method"].default == defaults.DEFAULT_METHOD
+    assert params["resolution"].default == defaults.DEFAULT_RESOLUTION and params["samples_per_view"].default == 1
 
 
 def test_occlude_points_lie_on_the_mesh_and_are_visible(small_mesh, sofa_clouds):

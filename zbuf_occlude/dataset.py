@@ -155,7 +155,8 @@ def name_set(spec: str | Iterable[str] | None) -> set[str] | None:
 class OccludedDataset(Sequence):
     """Occluded samples of a farm data set, as a sequence of ``(points, label, metadata)``.
 
-    Works for both storage modes (module docstring) and with
+    Works for both storage modes, for ``generate``'s folders in every ``--format`` (``h5``,
+    ``npz``, ``ply``; module docstring) and with
     ``torch.utils.data.DataLoader`` (torch is not needed otherwise): items are numpy
     arrays, ints and dicts of scalars and strings, which the default collate turns into
     tensors and lists; open files are per process, so loader workers open their own.
@@ -163,7 +164,7 @@ class OccludedDataset(Sequence):
     Parameters
     ----------
     path : str or PathLike
-        The data set folder (``--out`` of the farm).
+        The data set folder (``--out`` of the farm or of ``generate``).
     split : str or sequence of str, optional
         ``"train"``, ``"test"`` (or both, the default).
     classes : str or sequence of str, optional
