@@ -41,6 +41,7 @@ __all__ = [
     "read_npz",
     "write_ply",
     "write_h5",
+    "concat_h5",
     "read_h5",
     "read_h5_clouds",
     "clouds_of_h5",
@@ -364,6 +365,62 @@ def write_h5(
             f.attrs["shape_names"] = list(shape_names)
         f.attrs.update(dict(attrs or {}))
     return path
+
+
+def concat_h5(
+    path: str | os.PathLike,
+    parts: Sequence[str | os.PathLike],
+    *,
+    fill: Mapping[str, str] | None = None,
+    attrs: Mapping[str, Any] | None = None,
+) -> Path:
+    """Join files of :func:`write_h5`'s layout row-wise into one, streaming (one part's
+    column in memory at a time, so a split of any size is joined in little memory).
+
+    Every part has the first part's datasets, ``(B_i, ...)`` with equal trailing shapes; the
+    result has each with ``sum(B_i)`` rows, in the order of ``parts``.
+
+    Parameters
+    ----------
+    fill : mapping of name to str, optional
+        UTF-8 per-row datasets to write with this value where a part lacks them (parts of
+        older versions).
+    attrs : mapping, optional
+        File attributes.
+
+    Raises
+    ------
+    OutputError
+        Parts whose datasets differ, or the file cannot be written (disk full included).
+    """
+    import h5py
+
+    if not parts:
+        raise OutputError(f"nothing to join into {path}")
+    fill = dict(fill or {})
+    with contextlib.ExitStack() as stack:
+        sources = [stack.enter_context(h5py.File(p, "r")) for p in parts]
+        keys = [k for k in sources[0].keys() if k not in fill] + list(fill)
+        rows = [len(src["data"]) for src in sources]
+        with atomic_h5(path) as f:
+            for key in keys:
+                first = sources[0].get(key)
+                if first is None:  # a fill column
+                    shape, dtype = (), h5py.string_dtype("utf-8")
+                else:
+                    shape, dtype = first.shape[1:], first.dtype
+                out = f.create_dataset(key, shape=(sum(rows), *shape), dtype=dtype, track_times=False)
+                start = 0
+                for src, n, name in zip(sources, rows, parts):
+                    if key in src and src[key].shape[1:] == shape:
+                        out[start : start + n] = src[key][()]
+                    elif key in fill:
+                        out[start : start + n] = [fill[key]] * n
+                    else:
+                        raise OutputError(f"cannot join {name} into {path}: its {key!r} differs from {parts[0]}'s")
+                    start += n
+            f.attrs.update(dict(attrs or {}))
+    return Path(path)
 
 
 def read_h5(path: str | os.PathLike) -> dict[str, np.ndarray]:

@@ -23,15 +23,13 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-import numpy as np
 
 from ..defaults import DEFAULT_DENSE_POINTS, DEFAULT_N_POINTS, DEFAULT_RESOLUTION, DEFAULT_SAMPLES_PER_VIEW, DEFAULT_VIEWS
 from ..discovery import SkippedInput, class_and_split, scan_meshes
 from ..errors import InvalidInputError
-from ..io import clouds_of_h5, read_h5, write_h5, write_text
+from ..io import concat_h5, write_text
 from ..layout import GENERATE_STORAGES, file_list_name, split_file_name
 from ..mesh import SPLITS
-from ..occlude import OccludedCloud
 from .config import FarmParams, record_path
 from .inputs import FarmObject, number_objects
 from .journal import FarmSummary, padded_samples, read_json, shape_names_of
@@ -107,23 +105,9 @@ def _merge_h5(out: Path, objects: Sequence[FarmObject]) -> list[Path]:
             if any(o.split == split for o in objects):
                 write_text(out / file_list_name(split), "")
             continue
-        clouds: list[OccludedCloud] = []
-        columns: dict[str, list[np.ndarray]] = {"object_index": [], "pose_index": []}
-        n_points = 0
-        for part in parts[split]:
-            d = read_h5(part)
-            n_points = d["data"].shape[1]
-            for key in columns:
-                columns[key].append(d[key])
-            clouds.extend(clouds_of_h5(d))
-        for c in clouds:  # parts of older versions have no split column; their folder says it
-            c.split = split
-        written.append(
-            write_h5(
-                target, clouds, shape_names=shape_names, n_points=n_points,
-                columns={k: np.concatenate(v) for k, v in columns.items()},
-            )  # fmt: skip
-        )
+        # streamed: a split's file may be larger than the memory (one part at a time is read);
+        # parts of older versions have no split column: their split is the one they are listed under
+        written.append(concat_h5(target, parts[split], fill={"split": split}, attrs={"shape_names": shape_names}))
         write_text(out / file_list_name(split), f"{split_file_name(split)}\n")
     return written
 
