@@ -21,7 +21,6 @@ from .errors import (
     InvalidInputError,
     MeshLoadError,
     OutputError,
-    PaddedSamplesWarning,
     RegistryError,
     ZbufOccludeError,
 )
@@ -30,7 +29,7 @@ from .render import ModernGLRenderer, context_info, render_depth
 from .sampling import points_from_barycentric, sample_faces, sample_surface
 from .visibility import MethodInfo, available_methods, method_info, register, visible_mask
 from .visibility.zbuffer import ResidentPoints, Scene  # Scene: deprecated alias of ResidentPoints
-from .occlude import OccludedCloud, occlude
+from .occlude import OccludedCloud, PaddedSamplesWarning, occlude
 from .dataset import OccludedDataset
 from .farm import merge_farm, run_farm
 from .sensors import DepthCamera, Lidar, Scan, ScanScene, SceneObject, load_scene, look_at_pose, scan

@@ -15,7 +15,6 @@ __all__ = [
     "BackendUnavailable",
     "OutputError",
     "RegistryError",
-    "PaddedSamplesWarning",
 ]
 
 
@@ -45,7 +44,3 @@ class OutputError(ZbufOccludeError, OSError):
 
 class RegistryError(ZbufOccludeError, RuntimeError):
     """A visibility method registered twice under one name, or with an unknown capability (a bug in a plugin)."""
-
-
-class PaddedSamplesWarning(UserWarning):
-    """Some samples hold repeated points: fewer points were visible than a sample holds."""

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from .cameras import DEFAULT_RADIUS, Camera, camera_on_sphere, view_schedule
 from .defaults import DEFAULT_DENSE_POINTS, DEFAULT_METHOD, DEFAULT_N_POINTS, DEFAULT_RESOLUTION, DEFAULT_SAMPLES_PER_VIEW, DEFAULT_VIEWS
-from .errors import InvalidInputError, PaddedSamplesWarning
+from .errors import InvalidInputError
 from .mesh import load_mesh, normalize_mesh
 from .resources import check_memory, estimate_job_memory
 from .sampling import check_seed, sample_surface
@@ -35,7 +35,7 @@ from .visibility.registry import method_info, visible_mask
 
 __all__ = [
     "OccludedCloud", "object_key", "derive_rng", "sample_rng", "draw_sample", "pose_samples", "count_padded",
-    "DenseCloud", "dense_cloud", "occlude_object", "occlude",
+    "DenseCloud", "dense_cloud", "occlude_object", "occlude", "PaddedSamplesWarning",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -46,6 +46,10 @@ _DENSE_STREAM, _DRAW_STREAM = 0, 1
 #: largest side 1 within this (object units): normalising again is not bit-exact, and the
 #: samples must equal those ``generate`` writes from the same file.
 NORMALISED_ATOL = 1e-9
+
+
+class PaddedSamplesWarning(UserWarning):
+    """Some samples hold repeated points: fewer points were visible than a sample holds."""
 
 
 @dataclass
@@ -372,7 +376,7 @@ def occlude(
         ``elevation_deg``, ``azimuth_deg`` (degrees), ``radius``, ``sample_index``, and
         ``n_visible``, the dense points visible from its pose.  When ``n_visible <
         n_points`` the cloud holds every visible point once plus repeats (``cloud.padded``),
-        and a :class:`~zbuf_occlude.errors.PaddedSamplesWarning` says how many clouds are.
+        and a :class:`PaddedSamplesWarning` says how many clouds are.
 
     Raises
     ------
