@@ -26,13 +26,13 @@ ARGS = ["--views", "30:45,-40:200", "--points", "128", "--samples-per-view", "2"
 
 def test_generate_writes_one_file_per_sample_and_resumes(tmp_path, two_meshes, capsys):
     out = tmp_path / "out"
-    assert main(["generate", str(two_meshes), "--out", str(out), *ARGS]) == 0
+    assert main(["generate", str(two_meshes), "--out", str(out), "--format", "npz", *ARGS]) == 0
     files = sorted(out.rglob("*.npz"))
     assert len(files) == 2 * 2 * 2
     cloud = read_npz(files[0])
     assert cloud.points.shape == (128, 3) and cloud.class_name in ("sofa", "monitor")
     mtimes = {f: f.stat().st_mtime_ns for f in files}
-    assert main(["generate", str(two_meshes), "--out", str(out), *ARGS]) == 0  # resume: nothing to redo
+    assert main(["generate", str(two_meshes), "--out", str(out), "--format", "npz", *ARGS]) == 0  # resume: nothing to redo
     assert {f: f.stat().st_mtime_ns for f in files} == mtimes
     assert "2 meshes done, 0 failed" in capsys.readouterr().out
 
@@ -41,7 +41,7 @@ def test_a_bad_mesh_is_reported_and_skipped(tmp_path, two_meshes, capsys):
     bad = two_meshes / "sofa" / "train" / "broken.off"
     bad.write_text("OFF\n3 1 0\n0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n")
     out = tmp_path / "out"
-    assert main(["generate", str(two_meshes), "--out", str(out), *ARGS]) == 1
+    assert main(["generate", str(two_meshes), "--out", str(out), "--format", "npz", *ARGS]) == 1
     captured = capsys.readouterr()
     assert "broken.off" in captured.err and "1 failed" in captured.out
     assert len(list(out.rglob("*.npz"))) == 8  # the good meshes are all there
@@ -50,7 +50,8 @@ def test_a_bad_mesh_is_reported_and_skipped(tmp_path, two_meshes, capsys):
 def test_generate_h5_and_ply(tmp_path, two_meshes):
     out = tmp_path / "h5"
     assert main(["generate", str(two_meshes), "--out", str(out), "--format", "h5", *ARGS]) == 0
-    d = read_h5(out / "occluded.h5")
+    d = read_h5(out / "occluded_train.h5")  # both meshes are in train/ folders
+    assert not (out / "occluded_test.h5").exists()
     assert d["data"].shape == (8, 128, 3) and sorted(set(d["label"].tolist())) == [0, 1]
     assert list(d["shape_names"]) == ["monitor", "sofa"]
     out = tmp_path / "ply"

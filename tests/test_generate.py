@@ -5,8 +5,10 @@ Small shipped meshes (``data/samples``), two poses, 64-point samples.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -17,7 +19,7 @@ import numpy as np
 import pytest
 
 from zbuf_occlude.cli import main
-from zbuf_occlude.dataset import OccludedDataset
+from zbuf_occlude.dataset import OccludedDataset, ShardChecksumError
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.farm import FarmParams, run_farm
 from zbuf_occlude.io import read_h5, read_npz
@@ -67,7 +69,8 @@ def test_two_files_with_one_name_are_refused_before_any_work(tree, tmp_path, cap
 )  # fmt: skip
 def test_a_rerun_with_other_options_is_refused_unless_overwrite(tree, tmp_path, capsys, change, option):
     out = tmp_path / "out"
-    assert main(["generate", str(tree), "--out", str(out), *ARGS]) == 0
+    change = [*change, "--format", "npz"]
+    assert main(["generate", str(tree), "--out", str(out), *ARGS, "--format", "npz"]) == 0
     first = sorted(out.rglob("*.npz"))
     assert len(first) == 2 * 2 * 2
     capsys.readouterr()
@@ -86,10 +89,10 @@ def test_a_rerun_with_other_options_is_refused_unless_overwrite(tree, tmp_path, 
 
 def test_generate_resumes_what_is_missing_and_records_its_files(tree, tmp_path, capsys):
     out = tmp_path / "out"
-    assert main(["generate", str(tree), "--out", str(out), *ARGS]) == 0
+    assert main(["generate", str(tree), "--out", str(out), *ARGS, "--format", "npz"]) == 0
     victim = sorted(out.rglob("*.npz"))[3]
     victim.unlink()
-    assert main(["generate", str(tree), "--out", str(out), *ARGS]) == 0
+    assert main(["generate", str(tree), "--out", str(out), *ARGS, "--format", "npz"]) == 0
     assert victim.exists()
     assert "2 meshes done, 0 failed" in capsys.readouterr().out
     records = [json.loads(p.read_text()) for p in sorted((out / "records").glob("*.json"))]
@@ -159,28 +162,153 @@ def test_a_damaged_card_or_manifest_names_the_file(tree, tmp_path, damaged):
 
 
 # -- one pipeline: generate --format h5 is the farm's engine ------------------------------------------
-def test_generate_h5_equals_the_farm_and_keeps_no_hidden_copy(tree, tmp_path):
+def test_generate_h5_equals_the_farm_split_by_split(tree, tmp_path):
     out = tmp_path / "gen"
     assert main(["generate", str(tree), "--out", str(out), "--format", "h5", *ARGS]) == 0
-    assert not (out / ".parts").exists()
-    merged = read_h5(out / "occluded.h5")
-    assert merged["data"].shape == (8, 64, 3) and list(merged["shape_names"]) == ["sofa", "stool"]
-    assert set(merged["source"]) == {str(p) for p in sorted(tree.rglob("*.off"))}
-
+    assert not (out / ".parts").exists() and not (out / "occluded.h5").exists()
     farm = tmp_path / "farm"
     params = FarmParams(views="0:0,30:45", samples_per_view=2, n_points=64, dense_points=2000, resolution=128)
     run_farm(tree, farm, params=params, progress=False)
-    farm_data, farm_labels = OccludedDataset(farm).to_arrays()
-    # same objects, keys and order: the same samples, bit for bit
-    assert np.array_equal(merged["data"], farm_data) and np.array_equal(merged["label"], farm_labels)
-    gen_data, _ = OccludedDataset(out).to_arrays()  # the parts are a data set the reader takes
-    assert np.array_equal(gen_data, farm_data)
-    with h5py.File(out / "occluded.h5") as f:
-        assert f["face_index"].shape == (8, 64)
+    for split in ("train", "test"):
+        merged = read_h5(out / f"occluded_{split}.h5")
+        assert merged["data"].shape == (4, 64, 3) and list(merged["shape_names"]) == ["sofa", "stool"]
+        assert set(merged["source"]) == {str(p) for p in sorted(tree.glob(f"*/{split}/*.off"))}
+        farm_data, farm_labels = OccludedDataset(farm, split=split).to_arrays()
+        # same objects, keys and order: the same samples, bit for bit
+        assert np.array_equal(merged["data"], farm_data) and np.array_equal(merged["label"], farm_labels)
+        gen_data, _ = OccludedDataset(out, split=split).to_arrays()  # the parts are a data set the reader takes
+        assert np.array_equal(gen_data, farm_data)
+        with h5py.File(out / f"occluded_{split}.h5") as f:
+            assert f["face_index"].shape == (4, 64)
 
 
-def test_the_reader_refuses_a_folder_of_npz_files(tree, tmp_path):
+# -- the default output is what the reader reads, in every format ---------------------------------------
+def test_the_default_generate_output_opens_with_the_reader(tree, tmp_path):
+    out = tmp_path / "gen"
+    assert main(["generate", str(tree), "--out", str(out), *ARGS]) == 0  # no --format
+    ds = OccludedDataset(out)
+    assert ds.storage == "h5" and len(ds) == 8 and ds.shape_names == ["sofa", "stool"]
+    points, label, meta = ds[0]
+    assert points.shape == (64, 3) and points.dtype == np.float32 and ds.shape_names[label] == meta["class_name"]
+
+
+def test_npz_and_ply_folders_read_as_the_h5_one(tree, tmp_path):
+    """The reader serves generate's npz and ply folders, the same samples as h5 for one set of options."""
+    got = {}
+    for fmt in ("h5", "npz", "ply"):
+        out = tmp_path / fmt
+        assert main(["generate", str(tree), "--out", str(out), "--format", fmt, *ARGS]) == 0
+        ds = OccludedDataset(out)
+        assert ds.storage == fmt and len(ds) == 8
+        got[fmt] = (*ds.to_arrays(), [ds[i] for i in range(len(ds))], OccludedDataset(out, split="test").to_arrays()[0])
+    h5_data, h5_labels, h5_items, h5_test = got["h5"]
+    for fmt in ("npz", "ply"):
+        data, labels, items, test = got[fmt]
+        assert np.array_equal(data, h5_data) and np.array_equal(labels, h5_labels) and np.array_equal(test, h5_test)
+        for (p, lab, meta), (hp, hlab, hmeta) in zip(items, h5_items):
+            assert np.array_equal(p, hp) and lab == hlab and meta == hmeta
+    # each npz file holds the points the reader serves for its row
+    ds = OccludedDataset(tmp_path / "npz")
+    rec = json.loads((tmp_path / "npz" / "manifest.jsonl").read_text().splitlines()[0])
+    assert np.array_equal(read_npz(tmp_path / "npz" / rec["shards"][1]).points, ds[1][0])
+
+
+def test_a_changed_sample_file_is_named_by_the_reader(tree, tmp_path):
+    out = tmp_path / "npz"
+    assert main(["generate", str(tree), "--out", str(out), "--format", "npz", *ARGS]) == 0
+    victim = sorted(out.rglob("*.npz"))[0]
+    victim.write_bytes(b"not a zip file")
+    ds = OccludedDataset(out)
+    with pytest.raises(ShardChecksumError, match=re.escape(victim.name)):
+        ds.to_arrays()
+
+
+# -- generate --format h5 keeps the splits apart ---------------------------------------------------------
+def test_h5_writes_one_file_per_split_with_a_split_column(tree, tmp_path, sample_meshes_dir):
+    for rel in ("desk/test/desk_0201.off", "chair/train/chair_0001.off"):  # two objects per split
+        (tree / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(sample_meshes_dir / rel, tree / rel)
     out = tmp_path / "gen"
     assert main(["generate", str(tree), "--out", str(out), *ARGS]) == 0
-    with pytest.raises(InvalidInputError, match="one file per sample"):
-        OccludedDataset(out)
+    sources = {}
+    for split in ("train", "test"):
+        assert (out / f"{split}_files.txt").read_text().splitlines() == [f"occluded_{split}.h5"]
+        d = read_h5(out / f"occluded_{split}.h5")
+        assert len(d["data"]) == 2 * 2 * 2 and set(d["split"]) == {split}
+        # every row's split is its mesh's folder
+        assert all(Path(src).parent.name == split for src in d["source"])
+        sources[split] = set(d["source"])
+    assert sources["train"].isdisjoint(sources["test"]) and len(sources["train"] | sources["test"]) == 4
+    # the per-object parts carry the column too
+    for part in (out / "shards").glob("*.h5"):
+        assert set(read_h5(part)["split"]) == {part.name.split("_")[0]}
+
+
+def test_overwrite_leaves_no_stale_split_file(tree, tmp_path):
+    out = tmp_path / "gen"
+    assert main(["generate", str(tree), "--out", str(out), *ARGS]) == 0
+    assert sorted(p.name for p in out.glob("occluded_*.h5")) == ["occluded_test.h5", "occluded_train.h5"]
+    (tree / "sofa").rename(tmp_path / "sofa")  # the only test mesh goes: no test split any more
+    assert main(["generate", str(tree), "--out", str(out), *ARGS, "--overwrite"]) == 0
+    assert [p.name for p in out.glob("occluded_*.h5")] == ["occluded_train.h5"]
+    assert main(["generate", str(tree), "--out", str(out), *ARGS, "--format", "npz", "--overwrite"]) == 0
+    assert not list(out.glob("occluded_*.h5")) and len(OccludedDataset(out)) == 4
+
+
+# -- padding is said, counted and recorded ----------------------------------------------------------------
+def _padded_args(points: int) -> list[str]:
+    return ["--views", "0:0,30:45,-40:200", "--points", str(points), "--samples-per-view", "2", "--dense-points", "500",
+            "--resolution", "128"]  # fmt: skip
+
+
+def test_padding_is_warned_once_and_recorded_in_the_card(tree, tmp_path, caplog):
+    from zbuf_occlude.farm import GENERATE_DEFAULTS, generate
+
+    out = tmp_path / "gen"
+    with caplog.at_level("WARNING"):
+        assert main(["generate", str(tree), "--out", str(out), *_padded_args(185)]) == 0
+    ds = OccludedDataset(out)
+    n_visible = np.array([ds.metadata(i)["n_visible"] for i in range(len(ds))])
+    expected = int((n_visible < 185).sum())
+    assert 0 < expected < len(ds)  # some poses see fewer than 185 of the 500 dense points (80-203 here), others more
+    card = json.loads((out / "dataset_card.json").read_text())
+    assert card["n_padded_samples"] == expected
+    warnings = [r.getMessage() for r in caplog.records if "repeated points" in r.getMessage()]
+    assert len(warnings) == 1 and f"{expected} of {len(ds)} samples" in warnings[0] and "--points 185" in warnings[0]
+    # the padded samples hold repeats, the others none
+    for i in range(len(ds)):
+        points, _, meta = ds[i]
+        assert (len(np.unique(points, axis=0)) == meta["n_visible"]) if meta["padded"] else len(np.unique(points, axis=0)) == 185
+    # the Python API's result says it too
+    params = dataclasses.replace(GENERATE_DEFAULTS, views="0:0,30:45,-40:200", n_points=185, dense_points=500, resolution=128,
+                                 samples_per_view=2)  # fmt: skip
+    summary, _ = generate([tree], tmp_path / "api", params=params, progress=False)
+    assert summary.padded == expected and "padded" in summary.format()
+
+
+def test_no_padding_no_warning(tree, tmp_path, caplog):
+    out = tmp_path / "gen"
+    with caplog.at_level("WARNING"):
+        assert main(["generate", str(tree), "--out", str(out), *_padded_args(20)]) == 0
+    assert json.loads((out / "dataset_card.json").read_text())["n_padded_samples"] == 0
+    assert not [r for r in caplog.records if "repeated points" in r.getMessage()]
+
+
+# -- PointNet's own loop -----------------------------------------------------------------------------------
+def test_pointnet_style_loop_over_the_file_lists(tree, tmp_path, monkeypatch):
+    """PointNet (provider.loadDataFile + train.py) reads data and label from each file in its list; ours are
+    relative to the data set (joined with its folder, from any working folder), one file per split so that
+    PointNet's in-file shuffle mixes objects; label (B,) is what PointNet's np.squeeze of (B, 1) gives."""
+    out = tmp_path / "gen"
+    assert main(["generate", str(tree), "--out", str(out), *ARGS]) == 0
+    monkeypatch.chdir(tmp_path)  # not the data set folder
+    shape_names = (out / "shape_names.txt").read_text().splitlines()
+    for split in ("train", "test"):
+        files = [os.path.join(out, line.rstrip()) for line in open(out / f"{split}_files.txt")]
+        assert len(files) == 1
+        with h5py.File(files[0], "r") as f:
+            data, label = f["data"][:], f["label"][:]
+        assert data.shape == (4, 64, 3) and data.dtype == np.float32
+        assert label.shape == (4,) and np.array_equal(np.squeeze(label), label)
+        expected = {"train": "stool", "test": "sofa"}[split]
+        assert {shape_names[i] for i in label} == {expected}

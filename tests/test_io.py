@@ -5,6 +5,7 @@ from __future__ import annotations
 import errno
 import os
 
+import h5py
 import numpy as np
 import pytest
 import trimesh
@@ -343,3 +344,24 @@ def test_text_files_are_utf8_whatever_the_locale(tmp_path):
     assert out.returncode == 0, out.stderr
     assert (tmp_path / "t.txt").read_bytes() == "chaise_é\n".encode("utf-8")
     assert (tmp_path / "c.csv").read_bytes() == "class\r\nchaise_é\r\n".encode("utf-8")
+
+
+def test_concat_h5_joins_parts_row_wise_and_fills_missing_columns(tmp_path):
+    from zbuf_occlude.io import concat_h5
+
+    a = [_cloud(seed=i, split="train") for i in range(3)]
+    b = [_cloud(seed=10 + i) for i in range(2)]
+    write_h5(tmp_path / "a.h5", a, columns={"object_index": [0, 0, 0]})
+    write_h5(tmp_path / "b.h5", b, columns={"object_index": [1, 1]})
+    with h5py.File(tmp_path / "b.h5", "a") as f:
+        del f["split"]  # a part of an older version
+    concat_h5(tmp_path / "ab.h5", [tmp_path / "a.h5", tmp_path / "b.h5"], fill={"split": "train"}, attrs={"shape_names": ["x"]})
+    joined, da, db = read_h5(tmp_path / "ab.h5"), read_h5(tmp_path / "a.h5"), read_h5(tmp_path / "b.h5")
+    for key in ("data", "label", "face_index", "source", "object_index", "n_visible", "elevation_deg"):
+        assert np.array_equal(joined[key], np.concatenate([da[key], db[key]])), key
+    assert list(joined["split"]) == ["train"] * 5 and list(joined["shape_names"]) == ["x"]
+
+    write_h5(tmp_path / "c.h5", [_cloud(n=32)])
+    with pytest.raises(OutputError, match="c.h5"):
+        concat_h5(tmp_path / "ac.h5", [tmp_path / "a.h5", tmp_path / "c.h5"])
+    assert not (tmp_path / "ac.h5").exists() and not list(tmp_path.glob(".ac.h5*"))

@@ -273,7 +273,7 @@ def test_generate_writes_occluded_samples(small_mesh, tmp_path):
 
     path, mesh = small_mesh
     assert main(["generate", str(path), "--out", str(tmp_path), "--views", "30:45,-40:200,85:10", "--points", "256",
-                 "--samples-per-view", "2", "--dense-points", "20000", "--resolution", "256"]) == 0  # fmt: skip
+                 "--samples-per-view", "2", "--dense-points", "20000", "--resolution", "256", "--format", "npz"]) == 0  # fmt: skip
     files = sorted(tmp_path.rglob("*.npz"))
     assert len(files) == 3 * 2
     hidden = total = 0
@@ -383,7 +383,8 @@ def test_same_seed_same_bytes(seed, key, pose, n_visible, n_points):
 def test_the_memory_check_counts_this_objects_job_before_allocating(monkeypatch):
     # occlude_object refuses a job that cannot fit before sampling: the estimate it checks
     # is that of its own points, samples, dense cloud (given or default), image and faces
-    import zbuf_occlude.occlude as occlude_module
+    import importlib
+
     from zbuf_occlude.defaults import DEFAULT_DENSE_POINTS
     from zbuf_occlude.resources import estimate_job_memory
 
@@ -393,6 +394,7 @@ def test_the_memory_check_counts_this_objects_job_before_allocating(monkeypatch)
         checked.append(estimate)
         raise InvalidInputError("refused")
 
+    occlude_module = importlib.import_module("zbuf_occlude.occlude")  # zbuf_occlude.occlude is the function
     monkeypatch.setattr(occlude_module, "check_memory", refuse)
     for dense, n_dense in ((_BALL_DENSE, 4000), (None, DEFAULT_DENSE_POINTS)):
         with pytest.raises(InvalidInputError, match="refused"):
@@ -424,8 +426,12 @@ def test_occlude_object_defaults_to_seed_0_and_an_empty_source():
 def test_occlude_object_passes_its_camera_and_options_to_the_method(monkeypatch):
     # per-pose methods get the dense face indices, the resolution and the options; session
     # methods (image space) are built once per object, asked per pose, then released
-    import zbuf_occlude.occlude as occlude_module
+    import importlib
+
     from zbuf_occlude.visibility.registry import method_info
+
+    # the module (zbuf_occlude.occlude, the package attribute, is the function zo.occlude)
+    occlude_module = importlib.import_module("zbuf_occlude.occlude")
 
     calls = []
 
@@ -470,3 +476,100 @@ def test_a_pose_with_nothing_visible_warns_once_only_if_samples_were_asked(caplo
         with caplog.at_level("WARNING", logger="zbuf_occlude.occlude"):
             list(occlude_object(_BALL, [(0.0, 0.0)], key=1, n_points=4, samples_per_view=samples, dense=dense, method="oracle"))
         assert any("nothing visible" in r.getMessage() for r in caplog.records) == warns, (len(dense.points), samples)
+
+
+# -- zo.occlude: the one-call API ----------------------------------------------------------------
+OCCLUDE_OPTIONS = dict(views="30:45,-40:200,85:10", n_points=256, samples_per_view=2, dense_points=20_000, resolution=256)
+
+
+@pytest.fixture(scope="module")
+def sofa_clouds(small_mesh):
+    path, _ = small_mesh
+    return zo.occlude(path, **OCCLUDE_OPTIONS)
+
+
+def test_occlude_is_public_with_generates_defaults():
+    import inspect
+
+    from zbuf_occlude import defaults
+
+    assert "occlude" in zo.__all__ and "OccludedCloud" in zo.__all__ and zo.occlude.__doc__
+    params = inspect.signature(zo.occlude).parameters
+    assert params["views"].default == defaults.DEFAULT_VIEWS and params["n_points"].default == defaults.DEFAULT_N_POINTS
+    assert params["dense_points"].default == defaults.DEFAULT_DENSE_POINTS and params["method"].default == defaults.DEFAULT_METHOD
+    assert params["resolution"].default == defaults.DEFAULT_RESOLUTION and params["samples_per_view"].default == 1
+
+
+def test_occlude_points_lie_on_the_mesh_and_are_visible(small_mesh, sofa_clouds):
+    _, mesh = small_mesh
+    assert len(sofa_clouds) == 3 * 2
+    assert [(c.elevation_deg, c.azimuth_deg, c.sample_index) for c in sofa_clouds] == [
+        (el, az, s) for el, az in ((30, 45), (-40, 200), (85, 10)) for s in range(2)
+    ]
+    hidden = total = 0
+    for c in sofa_clouds:
+        assert c.points.shape == (256, 3) and c.points.dtype == np.float32 and c.face_index.dtype == np.int64
+        points = c.points.astype(np.float64)
+        tri = mesh.triangles[c.face_index]
+        bary = trimesh.triangles.points_to_barycentric(tri, points)
+        assert bary.min() > -1e-5  # inside its own face (float32 rounding)
+        on_plane = np.einsum("ij,ij->i", points - tri[:, 0], mesh.face_normals[c.face_index])
+        assert np.abs(on_plane).max() < 1e-6
+        camera = zo.camera_on_sphere(c.elevation_deg, c.azimuth_deg, c.radius)
+        truth = zo.visible_mask(mesh, points, camera, "oracle", face_index=c.face_index)
+        hidden += int((~truth).sum())
+        total += len(points)
+        assert c.n_visible >= 256 and not c.padded and len(np.unique(c.points, axis=0)) == 256
+    assert hidden <= MAX_HIDDEN_IN_SAMPLES * total
+
+
+def test_occlude_is_deterministic_for_a_seed(small_mesh, sofa_clouds):
+    path, mesh = small_mesh
+    again = zo.occlude(path, **OCCLUDE_OPTIONS)
+    assert all(np.array_equal(a.points, b.points) and np.array_equal(a.face_index, b.face_index) for a, b in zip(again, sofa_clouds))
+    other = zo.occlude(path, **OCCLUDE_OPTIONS, seed=1)
+    assert not np.array_equal(other[0].points, sofa_clouds[0].points)
+    # a normalised mesh is used as it is: the same clouds as from its file
+    from_mesh = zo.occlude(mesh, **OCCLUDE_OPTIONS, name=path.stem)
+    assert all(np.array_equal(a.points, b.points) for a, b in zip(from_mesh, sofa_clouds))
+    # any other mesh is normalised first
+    big = mesh.copy()
+    big.apply_transform(trimesh.transformations.compose_matrix(scale=[100.0] * 3, translate=[5.0, -3.0, 2.0]))
+    clouds = zo.occlude(big, views="30:45", n_points=64, dense_points=2000, resolution=128)
+    assert np.abs(clouds[0].points).max() <= 0.5 + 1e-6
+
+
+def test_occlude_equals_what_generate_writes(small_mesh, sofa_clouds, tmp_path):
+    from zbuf_occlude.cli import main
+    from zbuf_occlude.dataset import OccludedDataset
+
+    path, _ = small_mesh
+    o = OCCLUDE_OPTIONS
+    assert main(["generate", str(path), "--out", str(tmp_path), "--views", o["views"], "--points", str(o["n_points"]),
+                 "--samples-per-view", str(o["samples_per_view"]), "--dense-points", str(o["dense_points"]),
+                 "--resolution", str(o["resolution"])]) == 0  # fmt: skip
+    ds = OccludedDataset(tmp_path)
+    data, _ = ds.to_arrays()
+    assert np.array_equal(data, np.stack([c.points for c in sofa_clouds]))
+    assert [ds.metadata(i)["n_visible"] for i in range(len(ds))] == [c.n_visible for c in sofa_clouds]
+
+
+def test_occlude_warns_about_padding(small_mesh):
+    path, _ = small_mesh
+    with pytest.warns(zo.PaddedSamplesWarning, match=r"^2 of 2 clouds hold repeated points") as caught:
+        clouds = zo.occlude(path, views="30:45", n_points=600, samples_per_view=2, dense_points=1000, resolution=128)
+    assert len(caught) == 1 and all(c.padded and c.n_visible < 600 for c in clouds)
+    assert all(len(np.unique(c.points, axis=0)) == c.n_visible for c in clouds)
+
+
+@pytest.mark.parametrize(
+    "kwargs, error",
+    [({"views": "nonsense"}, InvalidInputError), ({"n_points": 0}, InvalidInputError), ({"seed": -1}, InvalidInputError),
+     ({"dense_points": 0}, InvalidInputError), ({"radius": 0.1}, zo.CameraError)],
+)  # fmt: skip
+def test_occlude_errors(small_mesh, kwargs, error, tmp_path):
+    path, _ = small_mesh
+    with pytest.raises(error):
+        zo.occlude(path, **{"views": "30:45", "dense_points": 500, "resolution": 64, **kwargs})
+    with pytest.raises(zo.MeshLoadError, match="missing.off"):
+        zo.occlude(tmp_path / "missing.off")

@@ -6,6 +6,7 @@ classification" (2023) with headless z-buffer hidden surface removal (HSR), vali
 against an exact geometric oracle.
 
 >>> import zbuf_occlude as zo
+>>> clouds = zo.occlude(path, views="grid25", n_points=2048)   # list of OccludedCloud, one per pose
 >>> mesh = zo.load_mesh(path)                                # centred, max extent 1
 >>> points, face_index = zo.sample_surface(mesh, count=100_000, seed=0)
 >>> camera = zo.camera_on_sphere(elevation_deg=30.0, azimuth_deg=45.0, radius=4.0)
@@ -28,6 +29,7 @@ from .render import ModernGLRenderer, context_info, render_depth
 from .sampling import points_from_barycentric, sample_faces, sample_surface
 from .visibility import MethodInfo, available_methods, method_info, register, visible_mask
 from .visibility.zbuffer import ResidentPoints, Scene  # Scene: deprecated alias of ResidentPoints
+from .occlude import OccludedCloud, PaddedSamplesWarning, occlude
 from .dataset import OccludedDataset
 from .farm import merge_farm, run_farm
 from .sensors import DepthCamera, Lidar, Scan, ScanScene, SceneObject, load_scene, look_at_pose, scan
@@ -61,6 +63,9 @@ __all__ = [
     "BackendUnavailable",
     "OutputError",
     "RegistryError",
+    "PaddedSamplesWarning",
+    "occlude",
+    "OccludedCloud",
     "OccludedDataset",
     "run_farm",
     "merge_farm",

@@ -1,7 +1,8 @@
 """Read the data sets that :func:`zbuf_occlude.farm.run_farm` writes: :class:`OccludedDataset`.
 
 The folder layout, the storage modes and the shard schemas are in :mod:`zbuf_occlude.layout`;
-this module reads them (both storage modes, and ``generate --format h5`` folders).
+this module reads them (both storage modes, and ``generate``'s folders in every ``--format``:
+``h5`` parts like dense shards, ``npz``/``ply`` sample files through :mod:`zbuf_occlude.sample_files`).
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from .layout import (
 )
 from .mesh import SPLITS
 from .occlude import pose_samples
+from .safe_paths import path_inside
 
 __all__ = [
     "OccludedDataset",
@@ -143,7 +145,8 @@ def name_set(spec: str | Iterable[str] | None) -> set[str] | None:
 class OccludedDataset(Sequence):
     """Occluded samples of a farm data set, as a sequence of ``(points, label, metadata)``.
 
-    Works for both storage modes (module docstring) and with
+    Works for both storage modes, for ``generate``'s folders in every ``--format`` (``h5``,
+    ``npz``, ``ply``; module docstring) and with
     ``torch.utils.data.DataLoader`` (torch is not needed otherwise): items are numpy
     arrays, ints and dicts of scalars and strings, which the default collate turns into
     tensors and lists; open files are per process, so loader workers open their own.
@@ -151,7 +154,7 @@ class OccludedDataset(Sequence):
     Parameters
     ----------
     path : str or PathLike
-        The data set folder (``--out`` of the farm).
+        The data set folder (``--out`` of the farm or of ``generate``).
     split : str or sequence of str, optional
         ``"train"``, ``"test"`` (or both, the default).
     classes : str or sequence of str, optional
@@ -231,12 +234,7 @@ class OccludedDataset(Sequence):
                 f"{self.root} has data set format {version}; this zbuf_occlude reads up to {FORMAT_VERSION}: upgrade it"
             )
         self.storage: str = card.storage
-        if self.storage in SAMPLE_FILE_FORMATS:
-            raise InvalidInputError(
-                f"{self.root} was written by `generate --format {self.storage}`: one file per sample, read them with "
-                f"zbuf_occlude.io.read_{self.storage if self.storage == 'npz' else 'ply (Open3D, trimesh)'}"
-            )
-        if self.storage not in (*STORAGE_MODES, "h5"):
+        if self.storage not in (*STORAGE_MODES, "h5", *SAMPLE_FILE_FORMATS):
             raise InvalidInputError(f"{card_path}: unknown storage {self.storage!r}; this zbuf_occlude reads {STORAGE_MODES}")
         params = card.params
         self.n_points: int = params.n_points
@@ -369,6 +367,14 @@ class OccludedDataset(Sequence):
             )
         self._verified.add(path)
 
+    def _sample_file(self, rel: str) -> NDArray[np.float32]:
+        """The points of one of ``generate --format npz|ply``'s sample files, checked once."""
+        from .sample_files import read_sample_points
+
+        path = path_inside(self.root, rel, what=f"{self.root / MANIFEST_FILE} field 'shards'")  # checked on open too
+        self._verify(path)
+        return read_sample_points(path, self.storage, self.n_points)
+
     def _compact_arrays(self, obj: int) -> tuple[NDArray[np.float32], NDArray[np.uint8]]:
         hit = self._compact.get(obj)
         if hit is not None and self._pid == os.getpid():
@@ -394,6 +400,8 @@ class OccludedDataset(Sequence):
     def _points(self, i: int) -> NDArray[np.float32]:
         obj = int(self._obj[i])
         rec = self._objects[obj]
+        if self.storage in SAMPLE_FILE_FORMATS:  # generate --format npz|ply: one file per sample
+            return self._sample_file(rec["shards"][int(self._row[i])])
         if self.storage != "compact":
             f = self._file(self._shards[obj])
             return f["data"][int(self._row[i])]
@@ -463,6 +471,9 @@ class OccludedDataset(Sequence):
             obj = int(self._obj[start])
             rec = self._objects[obj]
             labels[start:stop] = int(rec["label"])
+            if self.storage in SAMPLE_FILE_FORMATS:
+                data[start:stop] = [self._sample_file(rec["shards"][int(r)]) for r in self._row[start:stop]]
+                continue
             if self.storage != "compact":
                 rows = self._row[start:stop]
                 data[start:stop] = self._file(self._shards[obj])["data"][()][rows]

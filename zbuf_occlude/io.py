@@ -41,6 +41,7 @@ __all__ = [
     "read_npz",
     "write_ply",
     "write_h5",
+    "concat_h5",
     "read_h5",
     "read_h5_clouds",
     "clouds_of_h5",
@@ -220,7 +221,7 @@ def write_csv(path: str | os.PathLike, rows: Sequence[dict], fieldnames: Sequenc
 def write_npz(path: str | os.PathLike, cloud: OccludedCloud) -> Path:
     """Write one cloud as ``.npz``: ``points (n, 3) float32``, ``face_index (n,) int64``,
     ``elevation_deg``, ``azimuth_deg``, ``radius``, ``label``, ``class_name``, ``source``,
-    ``sample_index``, ``n_visible`` (scalars as 0-d arrays)."""
+    ``sample_index``, ``n_visible``, ``split`` (scalars as 0-d arrays)."""
     path = Path(path)
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
@@ -236,6 +237,7 @@ def write_npz(path: str | os.PathLike, cloud: OccludedCloud) -> Path:
                 source=np.str_(cloud.source),
                 sample_index=np.int64(cloud.sample_index),
                 n_visible=np.int64(cloud.n_visible),
+                split=np.str_(cloud.split),
             )
     return path
 
@@ -254,6 +256,7 @@ def read_npz(path: str | os.PathLike) -> OccludedCloud:
             source=str(z["source"]),
             sample_index=int(z["sample_index"]),
             n_visible=int(z["n_visible"]),
+            split=str(z["split"]) if "split" in z.files else "",  # files of older versions have none
         )
 
 
@@ -274,6 +277,7 @@ def write_ply(path: str | os.PathLike, cloud: OccludedCloud) -> Path:
             f"comment azimuth_deg {cloud.azimuth_deg:.6f}",
             f"comment radius {cloud.radius:.6f}",
             f"comment class {cloud.class_name or '-'} label {cloud.label} sample {cloud.sample_index} n_visible {cloud.n_visible}",
+            f"comment split {cloud.split or '-'}",
             f"element vertex {len(pts)}",
             "property float x",
             "property float y",
@@ -309,7 +313,7 @@ def write_h5(
     Datasets, one row per cloud: ``data (B, n, 3) float32``, ``label (B,) int64``,
     ``elevation_deg (B,)``, ``azimuth_deg (B,)`` float64 (degrees), ``sample_index (B,)``,
     ``n_visible (B,)`` int64; with ``provenance`` also ``face_index (B, n) int32``,
-    ``radius (B,) float64``, ``source (B,)`` and ``class_name (B,)`` UTF-8 strings.
+    ``radius (B,) float64``, ``source (B,)``, ``class_name (B,)`` and ``split (B,)`` UTF-8 strings.
 
     Parameters
     ----------
@@ -356,10 +360,67 @@ def write_h5(
             put("radius", np.asarray([c.radius for c in clouds], dtype=np.float64))
             put("source", [c.source for c in clouds], text)
             put("class_name", [c.class_name for c in clouds], text)
+            put("split", [c.split for c in clouds], text)
         if shape_names or provenance:
             f.attrs["shape_names"] = list(shape_names)
         f.attrs.update(dict(attrs or {}))
     return path
+
+
+def concat_h5(
+    path: str | os.PathLike,
+    parts: Sequence[str | os.PathLike],
+    *,
+    fill: Mapping[str, str] | None = None,
+    attrs: Mapping[str, Any] | None = None,
+) -> Path:
+    """Join files of :func:`write_h5`'s layout row-wise into one, streaming (one part's
+    column in memory at a time, so a split of any size is joined in little memory).
+
+    Every part has the first part's datasets, ``(B_i, ...)`` with equal trailing shapes; the
+    result has each with ``sum(B_i)`` rows, in the order of ``parts``.
+
+    Parameters
+    ----------
+    fill : mapping of name to str, optional
+        UTF-8 per-row datasets to write with this value where a part lacks them (parts of
+        older versions).
+    attrs : mapping, optional
+        File attributes.
+
+    Raises
+    ------
+    OutputError
+        Parts whose datasets differ, or the file cannot be written (disk full included).
+    """
+    import h5py
+
+    if not parts:
+        raise OutputError(f"nothing to join into {path}")
+    fill = dict(fill or {})
+    with contextlib.ExitStack() as stack:
+        sources = [stack.enter_context(h5py.File(p, "r")) for p in parts]
+        keys = [k for k in sources[0].keys() if k not in fill] + list(fill)
+        rows = [len(src["data"]) for src in sources]
+        with atomic_h5(path) as f:
+            for key in keys:
+                first = sources[0].get(key)
+                if first is None:  # a fill column
+                    shape, dtype = (), h5py.string_dtype("utf-8")
+                else:
+                    shape, dtype = first.shape[1:], first.dtype
+                out = f.create_dataset(key, shape=(sum(rows), *shape), dtype=dtype, track_times=False)
+                start = 0
+                for src, n, name in zip(sources, rows, parts):
+                    if key in src and src[key].shape[1:] == shape:
+                        out[start : start + n] = src[key][()]
+                    elif key in fill:
+                        out[start : start + n] = [fill[key]] * n
+                    else:
+                        raise OutputError(f"cannot join {name} into {path}: its {key!r} differs from {parts[0]}'s")
+                    start += n
+            f.attrs.update(dict(attrs or {}))
+    return Path(path)
 
 
 def read_h5(path: str | os.PathLike) -> dict[str, np.ndarray]:
@@ -393,6 +454,7 @@ def clouds_of_h5(d: Mapping[str, np.ndarray]) -> list[OccludedCloud]:
             source=str(d["source"][i]),
             sample_index=int(d["sample_index"][i]),
             n_visible=int(d["n_visible"][i]),
+            split=str(d["split"][i]) if "split" in d else "",  # files of older versions have none
         )
         for i in range(len(d["data"]))
     ]

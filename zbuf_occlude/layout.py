@@ -10,7 +10,9 @@ A data set folder (``farm --out``, ``generate --out``), ``format_version`` :data
       dataset_card.json      parameters, poses, tool version, command lines, GL renderers;
                              written last: it marks the data set finished
       shape_names.txt        one class name per line; line i is label i (PointNet)
-      train_files.txt        shards of the train split, paths relative to DATASET (PointNet)
+      train_files.txt        files of the train split, one per line, paths relative to
+                             DATASET (PointNet's file list): the farm's shards; generate's
+                             occluded_train.h5 (h5) or sample files (npz, ply)
       test_files.txt         ... of the test split
       manifest.jsonl         one JSON record per object: source, class, split, status, error,
                              files and their SHA-256, visible-point counts per pose, seed, key
@@ -23,7 +25,9 @@ A data set folder (``farm --out``, ``generate --out``), ``format_version`` :data
 
 ``generate`` writes the same journal, and per sample ``DATASET/<name>/<stem>_vPPP_el±EEE_
 azAAA_sSS.npz|ply`` (``--format npz|ply``), or per object a shard with
-:data:`PROVENANCE_COLUMNS` and, joined, ``DATASET/occluded.h5`` (``--format h5``).
+:data:`PROVENANCE_COLUMNS` and, joined per split, ``DATASET/occluded_<split>.h5``
+(:func:`split_file_name`; ``--format h5``, the default): a split's samples never share a
+file with another split's, and each row's ``split`` column names its split.
 
 Storage modes of a shard (``storage`` in the card):
 
@@ -54,7 +58,8 @@ __all__ = [
     "TASK_DIR",
     "PLAN_FILE",
     "LOCK_FILE",
-    "MERGED_H5_FILE",
+    "SPLIT_FILE_PREFIX",
+    "split_file_name",
     "STORAGE_MODES",
     "SAMPLE_FILE_FORMATS",
     "GENERATE_STORAGES",
@@ -79,8 +84,8 @@ SHARD_DIR = "shards"
 RECORD_DIR, TASK_DIR, PLAN_FILE = "records", "tasks", "plan.json"
 #: The data-set lock (zbuf_occlude.farm.lock).
 LOCK_FILE = ".zbuf_occlude.lock"
-#: ``generate --format h5``'s joined file.
-MERGED_H5_FILE = "occluded.h5"
+#: ``generate --format h5``'s joined files, one per split: ``occluded_<split>.h5``.
+SPLIT_FILE_PREFIX = "occluded_"
 #: The farm's storage modes, which :class:`~zbuf_occlude.dataset.OccludedDataset` reads.
 STORAGE_MODES = ("dense", "compact")
 #: ``generate``'s one-file-per-sample formats.
@@ -92,8 +97,8 @@ POINTNET_COLUMNS = ("data", "label", "elevation_deg", "azimuth_deg", "sample_ind
 #: Per-row indices the farm and generate add (int64).
 INDEX_COLUMNS = ("object_index", "pose_index")
 #: What ``generate --format h5`` adds: ``face_index (B, n) int32``, ``radius (B,) float64``,
-#: ``source`` and ``class_name (B,)`` UTF-8.
-PROVENANCE_COLUMNS = ("face_index", "radius", "source", "class_name")
+#: ``source``, ``class_name`` and ``split (B,)`` UTF-8.
+PROVENANCE_COLUMNS = ("face_index", "radius", "source", "class_name", "split")
 #: Datasets of a compact shard.
 COMPACT_DATASETS = ("dense_points", "visible_bits", "n_visible", "elevation_deg", "azimuth_deg")
 
@@ -101,6 +106,12 @@ COMPACT_DATASETS = ("dense_points", "visible_bits", "n_visible", "elevation_deg"
 def file_list_name(split: str) -> str:
     """PointNet's name of a split's shard list, e.g. ``train_files.txt``."""
     return f"{split}_files.txt"
+
+
+def split_file_name(split: str) -> str:
+    """``generate --format h5``'s file of one split relative to the data set folder, e.g.
+    ``occluded_train.h5`` (listed in ``train_files.txt``)."""
+    return f"{SPLIT_FILE_PREFIX}{split}.h5"
 
 
 def shard_name(split: str, object_index: int) -> str:

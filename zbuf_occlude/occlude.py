@@ -5,32 +5,51 @@ visibility from every pose, and draw ``samples_per_view`` fixed-size samples per
 the visible points.  Every random draw has its own generator derived from
 ``(seed, object_key, pose_index, sample_index)`` with :class:`numpy.random.SeedSequence`,
 so results are identical whatever the order, the worker count or the sharding.
+
+:func:`occlude` is the one-call version, ``zbuf_occlude.occlude(...)``: the package attribute
+``occlude`` is that function, so take this module's other names with ``from
+zbuf_occlude.occlude import ...`` (or ``importlib.import_module("zbuf_occlude.occlude")``).
 """
 
 from __future__ import annotations
 
 import hashlib
 import logging
+import os
+import warnings
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from .cameras import DEFAULT_RADIUS, Camera, camera_on_sphere
-from .defaults import DEFAULT_DENSE_POINTS, DEFAULT_METHOD, DEFAULT_N_POINTS, DEFAULT_RESOLUTION, DEFAULT_SAMPLES_PER_VIEW
+from .cameras import DEFAULT_RADIUS, Camera, camera_on_sphere, view_schedule
+from .defaults import DEFAULT_DENSE_POINTS, DEFAULT_METHOD, DEFAULT_N_POINTS, DEFAULT_RESOLUTION, DEFAULT_SAMPLES_PER_VIEW, DEFAULT_VIEWS
 from .errors import InvalidInputError
+from .mesh import load_mesh, normalize_mesh
 from .resources import check_memory, estimate_job_memory
 from .sampling import check_seed, sample_surface
 from .visibility.registry import method_info, visible_mask
 
-__all__ = ["OccludedCloud", "object_key", "derive_rng", "sample_rng", "draw_sample", "pose_samples", "DenseCloud", "dense_cloud", "occlude_object"]
+__all__ = [
+    "OccludedCloud", "object_key", "derive_rng", "sample_rng", "draw_sample", "pose_samples", "count_padded",
+    "DenseCloud", "dense_cloud", "occlude_object", "occlude", "PaddedSamplesWarning",
+]  # fmt: skip
 
 log = logging.getLogger(__name__)
 
 #: Stream tags keep the dense-sampling and the per-sample generators independent.
 _DENSE_STREAM, _DRAW_STREAM = 0, 1
+#: :func:`occlude` uses a given mesh as it is when its bounding box is already centred with
+#: largest side 1 within this (object units): normalising again is not bit-exact, and the
+#: samples must equal those ``generate`` writes from the same file.
+NORMALISED_ATOL = 1e-9
+
+
+class PaddedSamplesWarning(UserWarning):
+    """Some samples hold repeated points: fewer points were visible than a sample holds."""
 
 
 @dataclass
@@ -49,6 +68,8 @@ class OccludedCloud:
         Class index (−1 if unknown).
     class_name, source : str
         Class name and source mesh path.
+    split : str
+        The data-set split of the source mesh (``"train"``, ``"test"``; ``""`` if unknown).
     sample_index : int
         Which of the pose's random draws this is.
     n_visible : int
@@ -66,6 +87,7 @@ class OccludedCloud:
     source: str = ""
     sample_index: int = 0
     n_visible: int = 0
+    split: str = ""
     extra: dict = field(default_factory=dict)
 
     @property
@@ -152,6 +174,25 @@ def pose_samples(
     return [draw_sample(visible_index, n_points, sample_rng(seed, key, pose_index, s))[0] for s in sample_indices]
 
 
+def count_padded(n_visible: Sequence[int] | NDArray[np.integer], n_points: int, samples_per_view: int) -> int:
+    """How many samples of an object were padded with repeats (:func:`draw_sample`).
+
+    Parameters
+    ----------
+    n_visible : (P,) int
+        Visible points of the dense cloud per pose (a record's ``n_visible``).
+    n_points, samples_per_view : int
+        Points per sample; samples drawn per pose (a pose that sees nothing has none).
+
+    Returns
+    -------
+    int
+        ``samples_per_view`` times the number of poses with ``0 < n_visible < n_points``.
+    """
+    nv = np.asarray(n_visible, dtype=np.int64)
+    return int(np.count_nonzero((nv > 0) & (nv < int(n_points)))) * int(samples_per_view)
+
+
 @dataclass
 class DenseCloud:
     """The per-object dense cloud (sampled once, reused for every pose, paper §3.4)."""
@@ -190,6 +231,7 @@ def occlude_object(
     label: int = -1,
     class_name: str = "",
     source: str = "",
+    split: str = "",
     **method_options,
 ) -> Iterator[tuple[int, NDArray[np.bool_], list[OccludedCloud]]]:
     """Yield ``(pose_index, visible (M,) bool, clouds)`` for each pose of one object.
@@ -208,6 +250,8 @@ def occlude_object(
     method : str
         Visibility method; image-space methods keep the points on the GPU across poses.
     resolution, radius : camera image size (pixels) and distance (object units).
+    label, class_name, source, split
+        Copied into every cloud (:class:`OccludedCloud`).
 
     Raises
     ------
@@ -255,6 +299,7 @@ def occlude_object(
                     source=source,
                     sample_index=sample_index,
                     n_visible=len(visible_index),
+                    split=split,
                 )
                 for sample_index, c in enumerate(chosen)
             ]
@@ -262,3 +307,119 @@ def occlude_object(
     finally:
         if scene is not None:
             scene.release()
+
+
+def _is_normalised(mesh: trimesh.Trimesh) -> bool:
+    lo, hi = mesh.bounds
+    return bool(np.all(np.abs(lo + hi) <= 2 * NORMALISED_ATOL) and abs(float(np.max(hi - lo)) - 1.0) <= NORMALISED_ATOL)
+
+
+def occlude(
+    mesh_or_path: trimesh.Trimesh | str | os.PathLike,
+    views: str | Sequence[tuple[float, float]] = DEFAULT_VIEWS,
+    n_points: int = DEFAULT_N_POINTS,
+    samples_per_view: int = 1,
+    seed: int = 0,
+    method: str = DEFAULT_METHOD,
+    *,
+    dense_points: int = DEFAULT_DENSE_POINTS,
+    resolution: int = DEFAULT_RESOLUTION,
+    radius: float = DEFAULT_RADIUS,
+    name: str | None = None,
+) -> list[OccludedCloud]:
+    """Occluded point clouds of one mesh from many poses: the one-call version of ``generate``.
+
+    Samples a dense cloud of ``dense_points`` on the surface (Sryamkin et al. 2023,
+    Algorithms 1–2), decides which points a camera on a sphere of ``radius`` sees from each
+    pose (``method``, :func:`~zbuf_occlude.visibility.visible_mask`), and draws
+    ``samples_per_view`` samples of ``n_points`` visible points per pose, without
+    replacement (paper §3.4, §4.3).  The same pipeline as ``zbuf-occlude generate``
+    (:func:`occlude_object`): for a mesh file and the same options, the clouds equal the
+    samples ``generate`` writes for it, bit for bit.
+
+    Parameters
+    ----------
+    mesh_or_path : trimesh.Trimesh, str or PathLike
+        A mesh file (OFF, OBJ, PLY, STL, GLB; loaded and normalised by
+        :func:`~zbuf_occlude.load_mesh`) or a mesh.  A mesh whose bounding box is centred with
+        largest side 1 (as :func:`~zbuf_occlude.load_mesh` returns) is used as it is; any other
+        is normalised first (a copy, :func:`~zbuf_occlude.normalize_mesh`).
+    views : str or sequence of (elevation_deg, azimuth_deg)
+        A schedule name of :func:`~zbuf_occlude.view_schedule` (``"grid25"``, ``"paper100"``,
+        ``"fibonacci:N"``, ``"EL:AZ,..."``) or the poses themselves, degrees.
+    n_points : int
+        Points per cloud (PointNet's 2048).
+    samples_per_view : int
+        Clouds drawn per pose.
+    seed : int
+        Non-negative; with ``name`` it fixes every random draw.
+    method : str
+        Visibility method (``zbuf-occlude info`` lists them; ``"auto"`` picks per machine).
+    dense_points : int
+        Points sampled on the whole surface before hidden-surface removal.
+    resolution : int
+        Z-buffer image size, pixels (image-space methods).
+    radius : float
+        Camera distance from the centre, object units (the object's largest side is 1).
+    name : str, optional
+        The object's name, which keys its random draws (:func:`object_key`).  Default: the
+        file's stem for a path (as ``generate FILE`` names it), ``""`` for a mesh.  To get the
+        samples ``generate ROOT`` wrote, pass the path relative to ``ROOT`` without the suffix,
+        e.g. ``"chair/train/chair_0001"``.
+
+    Returns
+    -------
+    clouds : list of OccludedCloud
+        Pose-major, then sample index; a pose that sees nothing gives none.  Each has
+        ``points (n_points, 3) float32`` in the normalised mesh's frame (object units, on
+        the mesh's faces), ``face_index (n_points,) int64`` into the mesh's faces,
+        ``elevation_deg``, ``azimuth_deg`` (degrees), ``radius``, ``sample_index``, and
+        ``n_visible``, the dense points visible from its pose.  When ``n_visible <
+        n_points`` the cloud holds every visible point once plus repeats (``cloud.padded``),
+        and a :class:`PaddedSamplesWarning` says how many clouds are.
+
+    Raises
+    ------
+    MeshLoadError
+        The file is missing, unreadable or not a usable mesh.
+    InvalidInputError
+        A bad view schedule, ``n_points < 1``, ``samples_per_view < 0``, a negative seed, an
+        unknown method, or a job too large for the memory available.
+    CameraError
+        ``radius`` puts the camera inside the object's bounding sphere.
+    BackendUnavailable
+        The method needs an OpenGL context or a library that is missing.
+
+    Examples
+    --------
+    >>> clouds = occlude("data/samples/chair/train/chair_0001.off", views="grid25", n_points=1024)
+    >>> clouds[0].points.shape, clouds[0].elevation_deg, clouds[0].azimuth_deg
+    ((1024, 3), -80.0, 0.0)
+    """
+    if isinstance(mesh_or_path, trimesh.Trimesh):
+        mesh = mesh_or_path if _is_normalised(mesh_or_path) else normalize_mesh(mesh_or_path)
+        default_name, source = "", ""
+    else:
+        mesh = load_mesh(mesh_or_path)
+        default_name, source = Path(mesh_or_path).stem, str(mesh_or_path)
+    poses = view_schedule(views) if isinstance(views, str) else [(float(el), float(az)) for el, az in views]
+    key = object_key(default_name if name is None else name)
+    if dense_points is None or int(dense_points) < 1:
+        raise InvalidInputError(f"dense_points must be an integer >= 1, got {dense_points!r}")
+    dense = dense_cloud(mesh, key, seed=seed, count=int(dense_points))
+    clouds = [
+        c
+        for _, _, pose_clouds in occlude_object(
+            mesh, poses, key=key, n_points=n_points, samples_per_view=samples_per_view, seed=seed, dense=dense,
+            method=method, resolution=resolution, radius=radius, source=source,
+        )  # fmt: skip
+        for c in pose_clouds
+    ]
+    n_padded = sum(c.padded for c in clouds)
+    if n_padded:
+        warnings.warn(
+            f"{n_padded} of {len(clouds)} clouds hold repeated points: fewer than n_points={n_points} points were "
+            f"visible from their poses (each cloud's n_visible says how many; raise dense_points or lower n_points)",
+            PaddedSamplesWarning, stacklevel=2,
+        )  # fmt: skip
+    return clouds

@@ -7,10 +7,13 @@ the lock on ``--out``, the per-object records with SHA-256 of every file, resume
 manifest and card, and the failure records.  Per object the worker writes
 
 * ``npz`` / ``ply``: one file per sample, ``OUT/<name>/<stem>_vPPP_el±EEE_azAAA_sSS.<fmt>``;
-* ``h5``: one PointNet-layout part per object, ``OUT/shards/<split>_<index>.h5`` (with
-  ``face_index``, ``radius``, ``source``, ``class_name``), joined at the end into
-  ``OUT/occluded.h5``.  The parts stay: they are what a rerun resumes from (and
-  :class:`~zbuf_occlude.dataset.OccludedDataset` reads the folder like a farm data set).
+* ``h5`` (the default): one PointNet-layout part per object, ``OUT/shards/<split>_<index>.h5``
+  (with ``face_index``, ``radius``, ``source``, ``class_name``, ``split``), joined at the end
+  into one file per split, ``OUT/occluded_train.h5`` and ``OUT/occluded_test.h5``, which
+  ``train_files.txt`` and ``test_files.txt`` list (PointNet's layout).  The parts stay: they
+  are what a rerun resumes from.
+
+:class:`~zbuf_occlude.dataset.OccludedDataset` reads the folder in every format.
 """
 
 from __future__ import annotations
@@ -20,29 +23,30 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-import numpy as np
 
 from ..defaults import DEFAULT_DENSE_POINTS, DEFAULT_N_POINTS, DEFAULT_RESOLUTION, DEFAULT_SAMPLES_PER_VIEW, DEFAULT_VIEWS
 from ..discovery import SkippedInput
 from ..errors import InvalidInputError
-from ..io import clouds_of_h5, read_h5, write_h5
-from ..layout import GENERATE_STORAGES, MERGED_H5_FILE
-from ..occlude import OccludedCloud
+from ..io import concat_h5, write_text
+from ..layout import GENERATE_STORAGES, file_list_name, split_file_name
+from ..mesh import SPLITS
 from ..safe_paths import path_inside
 from .config import FarmParams, record_path
 from .inputs import FarmObject, scan_inputs
-from .journal import FarmSummary, read_json, shape_names_of
+from .journal import FarmSummary, padded_samples, read_json, shape_names_of
 from .run import run_farm
 
-__all__ = ["generate", "scan_paths", "objects_from_paths", "MERGED_H5_FILE", "GENERATE_DEFAULTS"]
+__all__ = ["generate", "scan_paths", "objects_from_paths", "split_file_name", "GENERATE_DEFAULTS"]
 
 log = logging.getLogger(__name__)
 
 #: ``generate``'s defaults, smaller poses and larger images than the farm's (one machine, a few meshes):
-#: the 5×5 grid of poses, 2048-point samples, 10 per pose, 100,000 dense points, a 1024² z-buffer.
+#: the 5×5 grid of poses, 2048-point samples, 10 per pose, 100,000 dense points, a 1024² z-buffer,
+#: written as HDF5 (one file per split, which OccludedDataset, PyTorch and PointNet-style code read;
+#: npz/ply give one file per sample, millions of files for a whole data set).
 GENERATE_DEFAULTS = FarmParams(
     views=DEFAULT_VIEWS, samples_per_view=DEFAULT_SAMPLES_PER_VIEW, n_points=DEFAULT_N_POINTS,
-    dense_points=DEFAULT_DENSE_POINTS, resolution=DEFAULT_RESOLUTION, storage="npz",
+    dense_points=DEFAULT_DENSE_POINTS, resolution=DEFAULT_RESOLUTION, storage="h5",
 )  # fmt: skip
 
 
@@ -81,28 +85,36 @@ def objects_from_paths(paths: Sequence[str | os.PathLike]) -> list[FarmObject]:
     return scan_paths(paths)[0]
 
 
-def _merge_h5(out: Path, objects: Sequence[FarmObject]) -> Path | None:
-    """Join the per-object parts of the finished objects into ``OUT/occluded.h5``."""
-    parts = []
+def _merge_h5(out: Path, objects: Sequence[FarmObject]) -> list[Path]:
+    """Join the per-object parts of the finished objects into one file per split,
+    ``OUT/occluded_<split>.h5``, and list it in ``OUT/<split>_files.txt`` (PointNet's layout).
+
+    Rows keep the objects' order (the plan's), then pose-major, then sample index, as the
+    reader serves them.  A split with no finished object gets an empty list and no file (one
+    left by an earlier run is removed, so no stale split survives ``--overwrite``; with no
+    ``objects``, as for ``--format npz|ply``, every split's file is).
+    """
+    parts: dict[str, list[Path]] = {}
     for o in objects:
         rec = read_json(record_path(out, o.index))
         if rec and rec.get("status") == "ok":
-            parts.extend(path_inside(out, rel, what=f"{record_path(out, o.index)} field 'shards'") for rel in rec["shards"])
-    if not parts:
-        return None
-    clouds: list[OccludedCloud] = []
-    columns: dict[str, list[np.ndarray]] = {"object_index": [], "pose_index": []}
-    n_points = 0
-    for part in parts:
-        d = read_h5(part)
-        n_points = d["data"].shape[1]
-        for key in columns:
-            columns[key].append(d[key])
-        clouds.extend(clouds_of_h5(d))
-    return write_h5(
-        out / MERGED_H5_FILE, clouds, shape_names=shape_names_of(objects), n_points=n_points,
-        columns={k: np.concatenate(v) for k, v in columns.items()},
-    )  # fmt: skip
+            parts.setdefault(o.split, []).extend(
+                path_inside(out, rel, what=f"{record_path(out, o.index)} field 'shards'") for rel in rec["shards"]
+            )
+    shape_names = shape_names_of(objects)
+    written = []
+    for split in sorted({*SPLITS, *(o.split for o in objects)}):
+        target = out / split_file_name(split)
+        if not parts.get(split):
+            target.unlink(missing_ok=True)
+            if any(o.split == split for o in objects):
+                write_text(out / file_list_name(split), "")
+            continue
+        # streamed: a split's file may be larger than the memory (one part at a time is read);
+        # parts of older versions have no split column: their split is the one they are listed under
+        written.append(concat_h5(target, parts[split], fill={"split": split}, attrs={"shape_names": shape_names}))
+        write_text(out / file_list_name(split), f"{split_file_name(split)}\n")
+    return written
 
 
 def generate(
@@ -125,7 +137,8 @@ def generate(
     out : str or PathLike
         Output folder.
     params : FarmParams
-        ``params.storage`` is the format: ``"npz"``, ``"ply"`` or ``"h5"``.
+        ``params.storage`` is the format: ``"h5"`` (default: one file per split,
+        ``occluded_train.h5``/``occluded_test.h5``), ``"npz"`` or ``"ply"`` (one file per sample).
     overwrite : bool
         Start over instead of resuming (needed when ``out`` holds other parameters).
     progress : bool
@@ -136,6 +149,8 @@ def generate(
     Returns
     -------
     summary : FarmSummary
+        ``summary.padded``: samples holding repeated points (fewer visible than
+        ``params.n_points``), also in the card (``n_padded_samples``) and warned about once.
     objects : list of FarmObject
         The plan (names, sources), to report failures by file.
 
@@ -154,7 +169,9 @@ def generate(
     summary = run_farm(
         objects, out, params=params, workers=1, overwrite=overwrite, progress=progress, command=command,
         source_text=", ".join(str(Path(p).resolve()) for p in paths),
-        on_finished=(lambda folder: _merge_h5(folder, objects)) if params.storage == "h5" else None,
+        on_finished=lambda folder: _merge_h5(folder, objects if params.storage == "h5" else []),
         skipped=[(s.path, s.reason) for s in skipped], layout=scan.layout,
     )  # fmt: skip
+    records = [rec for o in objects if (rec := read_json(record_path(out, o.index)))]
+    summary.padded = padded_samples(records, params)
     return summary, objects

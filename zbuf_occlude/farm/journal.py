@@ -16,6 +16,7 @@ from ..io import file_sha256, temp_is_orphan, temp_owner, write_text
 from ..layout import CARD_FILE, FORMAT_VERSION, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, file_list_name
 from ..mesh import SPLITS
 from ..safe_paths import check_line_text, path_inside
+from ..occlude import count_padded
 from .config import BYTES_PER_MB, PAPER_SAMPLES_PER_MB, FarmParams, plan_digest, record_path, shard_path
 from .inputs import FarmObject
 from .worker import base_record, package_version, write_json
@@ -165,6 +166,12 @@ def manifest_lines(objects: Sequence[FarmObject], params: FarmParams, records: d
 
 
 
+def padded_samples(records: Sequence[dict[str, Any]], params: FarmParams) -> int:
+    """Samples of the finished ``records`` padded with repeated points (fewer visible than ``--points``)."""
+    per_pose = 1 if params.sensor else params.samples_per_view  # --sensor: one sample per scan
+    return sum(count_padded(r["n_visible"], params.n_points, per_pose) for r in records if r["status"] == "ok")
+
+
 def folder_bytes(out: Path) -> int:
     return sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
 
@@ -196,6 +203,14 @@ def finalize(
         write_text(path_inside(out, file_list_name(split), what=f"{PLAN_FILE} split"), "".join(f"{s}\n" for s in shards))
     ok = [r for r in records.values() if r["status"] == "ok"]
     every_file_hashed = all(len(r.get("sha256") or ()) == len(r["shards"]) for r in ok)
+    n_samples = int(sum(r["n_samples"] for r in ok))
+    n_padded = padded_samples(ok, params)
+    if n_padded:
+        log.warning(
+            "%d of %d samples hold repeated points: fewer than --points %d points were visible from their poses "
+            "(each sample's n_visible says how many; raise --dense-points or lower --points); recorded as "
+            "n_padded_samples in %s", n_padded, n_samples, params.n_points, out / CARD_FILE,
+        )  # fmt: skip
     card = {
         "format_version": FORMAT_VERSION,
         "tool": "zbuf_occlude",
@@ -215,7 +230,8 @@ def finalize(
         "n_objects_ok": len(ok),
         "n_objects_failed": len(objects) - len(ok),
         "skipped_inputs": [{"path": p, "reason": r} for p, r in skipped],
-        "n_samples": int(sum(r["n_samples"] for r in ok)),
+        "n_samples": n_samples,
+        "n_padded_samples": n_padded,
         "shard_bytes": int(sum(r["bytes"] for r in ok)),
         # the reader refuses a manifest without them (unless verify=False): removing them cannot hide a change
         "checksums": CHECKSUM_ALGORITHM if every_file_hashed else None,
@@ -249,6 +265,8 @@ class FarmSummary:
     failures: list[tuple[str, str]] = field(default_factory=list)
     #: ``(path, reason)`` of inputs that could not even be planned (unreadable folder, non-UTF-8 name).
     skipped: list[tuple[str, str]] = field(default_factory=list)
+    #: Samples holding repeated points because fewer than ``n_points`` were visible (the card's ``n_padded_samples``).
+    padded: int = 0
 
     @property
     def exit_status(self) -> int:
@@ -270,7 +288,8 @@ class FarmSummary:
             f"({'finished' if self.finished else 'this task done; run farm-merge when all tasks are'})",
             f"  objects   {self.done} done ({self.resumed} from an earlier run), {self.failed} failed, "
             f"{self.objects} planned",
-            f"  samples   {self.samples:,}  ({self.storage} storage)",
+            f"  samples   {self.samples:,}  ({self.storage} storage)"
+            + (f", {self.padded:,} padded with repeated points" if self.padded else ""),
             f"  bytes     {self.bytes:,} ({self.bytes / BYTES_PER_MB:.1f} MB)  ->  {self.samples_per_mb:,.1f} samples/MB "
             f"(paper, Table 2: {PAPER_SAMPLES_PER_MB})",
             f"  wall      {self.wall_s:.1f} s, {self.views} views rendered, {self.views_per_s:.1f} views/s, "

@@ -124,7 +124,7 @@ def _render(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
     common = dict(
         key=obj.key, n_points=params.n_points, seed=params.seed, dense=dense, method=params.method,
         resolution=params.resolution, radius=params.radius, label=obj.label, class_name=obj.class_name,
-        source=obj.source,
+        source=obj.source, split=obj.split,
     )  # fmt: skip
     n_visible = np.zeros(len(poses), dtype=np.int64)
     if params.storage in SAMPLE_FILE_FORMATS:
