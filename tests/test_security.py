@@ -253,9 +253,9 @@ def test_farm_merge_removes_the_temporaries_of_dead_writers(dataset_dir: Path, t
     assert list((out / "shards").glob(".*.tmp")) == []
 
 
-def _generate(out: Path, *paths: Path, overwrite: bool = False) -> int:
+def _generate(out: Path, *paths: Path, overwrite: bool = False, fmt: str = "h5") -> int:
     argv = ["generate", *map(str, paths), "--out", str(out), "--views", "0:0", "--points", "32", "--dense-points", "512",
-            "--resolution", "64", "--samples-per-view", "1"]  # fmt: skip
+            "--resolution", "64", "--samples-per-view", "1", "--format", fmt]  # fmt: skip
     return main([*argv, "--overwrite"] if overwrite else argv)
 
 
@@ -282,7 +282,7 @@ def test_a_mesh_named_dot_dot_does_not_write_beside_out(tmp_path: Path, capsys, 
     out = tmp_path / "work" / "out"
     out.parent.mkdir()
     paths = [meshes / "...off", meshes / "chair_0001.off"] if given == "file" else [meshes]
-    status = _generate(out, *paths)
+    status = _generate(out, *paths, fmt="npz")  # npz: each mesh's name becomes a folder under --out
     assert sorted(p.name for p in out.parent.iterdir()) == ["out"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["chair", "work"]
     assert status == 1  # the other mesh is done
