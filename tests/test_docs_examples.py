@@ -244,10 +244,16 @@ def test_the_readme_has_the_two_commands_and_ci_runs_the_second() -> None:
     assert any(c.startswith(INSTALL) for c in _ci_commands())
 
 
-def test_readme_is_short_and_has_no_issue_numbers() -> None:
+def test_readme_is_short() -> None:
     text = (ROOT / "README.md").read_text(encoding="utf-8")
     assert len(text.splitlines()) <= README_LINES_MAX
-    assert not re.search(r"\bissues? #?\d+", text, re.IGNORECASE)
+
+
+@pytest.mark.parametrize("path", doc_files(), ids=lambda p: p.relative_to(ROOT).as_posix())
+def test_user_docs_name_no_issue_numbers(path: Path) -> None:
+    """Users cannot follow "(issue 12)" or "the default before issue 11": no tracker references."""
+    for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+        assert not re.search(r"\bissues? #?\d+|\(#\d+\)", line, re.IGNORECASE), f"{path.name}:{n}: {line}"
 
 
 def test_the_examples_are_found() -> None:
