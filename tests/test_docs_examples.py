@@ -249,6 +249,16 @@ def test_readme_is_short() -> None:
     assert len(text.splitlines()) <= README_LINES_MAX
 
 
+def test_readme_links_exist() -> None:
+    """README is read on the repository's page, outside the site's strict build: its relative
+    links (docs pages, the figure) must point at files that exist."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    targets = re.findall(r"\]\(([^)\s#]+)(?:#[^)]*)?\)", text)
+    assert targets
+    missing = [t for t in targets if "://" not in t and not (ROOT / t).exists()]
+    assert not missing, missing
+
+
 @pytest.mark.parametrize("path", doc_files(), ids=lambda p: p.relative_to(ROOT).as_posix())
 def test_user_docs_name_no_issue_numbers(path: Path) -> None:
     """Users cannot follow "(issue 12)" or "the default before issue 11": no tracker references."""
