@@ -8,7 +8,7 @@
 # a line "MODULE killed/total = score %" is printed and appended to $SCRATCH/scores.txt.
 # Survivors are listed in $SCRATCH/MODULE/survivors.txt; `cd $SCRATCH/MODULE && mutmut
 # show NAME` prints one as a diff.  Too slow for CI (minutes to hours per module on two
-# cores); see docs/testing.md for the scores and the survivors judged equivalent.
+# cores); see docs/development/testing.md for the scores and the survivors judged equivalent.
 #
 # Environment: PYTHON (default: python), MUTATION_SCRATCH (default: $TMPDIR/zbuf_mutation),
 # MUTATION_JOBS (parallel mutants, default 2), NICE (default 10).

@@ -17,7 +17,7 @@ Usage (from anywhere; takes minutes per mutant on a loaded two-core machine)::
     python scripts/shader_mutants.py --tests tests/test_zbuffer.py -k "not real_modelnet"
 
 Exit status: 0 if every applicable mutant was killed or is marked equivalent, 1 otherwise.
-Outside CI (too slow); scores are recorded in docs/testing.md.
+Outside CI (too slow); scores are recorded in docs/development/testing.md.
 """
 
 from __future__ import annotations

@@ -104,7 +104,7 @@ def test_schedule_cameras_default_radius_is_four_max_dimensions():
     assert all(np.isclose(np.linalg.norm(c.eye), 4.0) for c in cams)
 
 
-# -- exact values and boundaries (mutation testing, docs/testing.md) -----------------------------
+# -- exact values and boundaries (mutation testing, docs/development/testing.md) -----------------------------
 def _cam(**kw):
     args = dict(eye=np.array([0.0, 0.0, 4.0]), target=np.zeros(3), up=np.array([0.0, 1.0, 0.0]), yfov_deg=60.0,
                 width=40, height=20, znear=1.0, zfar=10.0)  # fmt: skip

@@ -401,7 +401,7 @@ def test_class_and_split_of_modelnet_layouts():
     assert class_and_split("chair_0042.off") == ("chair", "train")
 
 
-# -- exact checks and provenance (mutation testing, docs/testing.md) -----------------------------
+# -- exact checks and provenance (mutation testing, docs/development/testing.md) -----------------------------
 _TRI_V = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 1.0]])
 
 
