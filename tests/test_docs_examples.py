@@ -216,8 +216,9 @@ def _ci_commands() -> list[str]:
     """The commands of .ci/run, without comments, ``set`` and ``cd`` lines."""
     lines = (ROOT / ".ci" / "run").read_text().splitlines()
     return [
-        ln.strip() for ln in lines
+        step.strip() for ln in lines
         if ln.strip() and not ln.lstrip().startswith(("#", "set ", "cd "))
+        for step in ln.split("&&")
     ]
 
 
