@@ -110,6 +110,7 @@ def generate(
     overwrite: bool = False,
     progress: bool = True,
     command: str | None = None,
+    isolate: bool = False,
 ) -> tuple[FarmSummary, list[FarmObject]]:
     """Occluded samples of a few meshes into ``out`` (``zbuf-occlude generate``).
 
@@ -126,6 +127,8 @@ def generate(
         Start over instead of resuming (needed when ``out`` holds other parameters).
     progress : bool
         tqdm bar on stderr.
+    isolate : bool
+        Render in a worker process that a SIGTERM stops at once (:func:`~.run.run_farm`).
 
     Returns
     -------
@@ -148,6 +151,6 @@ def generate(
         objects, out, params=params, workers=1, overwrite=overwrite, progress=progress, command=command,
         source_text=", ".join(str(Path(p).resolve()) for p in paths),
         on_finished=(lambda folder: _merge_h5(folder, objects)) if params.storage == "h5" else None,
-        skipped=[(s.path, s.reason) for s in skipped],
+        skipped=[(s.path, s.reason) for s in skipped], isolate=isolate,
     )  # fmt: skip
     return summary, objects
