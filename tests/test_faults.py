@@ -355,3 +355,39 @@ def test_a_killed_farm_worker_fails_only_its_object(tree, tmp_path):
     summary = run_farm(tree, out, params=FarmParams(**{**PARAMS.to_dict(), "views": "fibonacci:40"}), progress=False)
     assert summary.resumed == len(MESHES) - 1 and summary.done == len(MESHES) and summary.exit_status == 0
     assert not list(out.rglob(".*.tmp"))
+
+
+# -- issue 15: a mesh of many identical faces ---------------------------------------------------------
+def _tetra_with_copies(m: int):
+    import numpy as np
+    import trimesh
+
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]]) - 0.25
+    faces = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]] + [[0, 2, 1]] * m  # the base, m more times
+    return trimesh.Trimesh(v, np.array(faces), process=False)
+
+
+def test_identical_faces_cost_the_embree_oracle_one_face_per_group():
+    """The work per point around m copies of one face does not grow with m (it was O(m): a mesh of
+    300,000 copies ran for minutes), and the answer is the exact one."""
+    import numpy as np
+
+    import zbuf_occlude as zo
+    from zbuf_occlude.visibility.oracle_embree import _EmbreeScene, occluded_embree
+    from zbuf_occlude.visibility.oracle_numpy import occluded_numpy
+
+    pairs_per_face = []
+    for m in (10, 500):
+        mesh = _tetra_with_copies(m)
+        scene = _EmbreeScene(mesh.vertices, mesh.faces)
+        k, g = scene.faces_around(np.arange(len(mesh.faces)))
+        pairs_per_face.append(len(g) / len(mesh.faces))
+        assert set(g.tolist()) == {0, 1, 2, 3}  # one face stands for the m + 1 copies of the base
+        points, face_index = zo.sample_surface(mesh, count=1500, seed=1)
+        for eye in ([0.2, 0.1, -3.0], [3.0, 2.0, 1.0], [2.0, 2.0, -0.25]):  # below the base, above, edge-on
+            exact = occluded_numpy(mesh.triangles, points, np.array(eye), face_index=face_index)
+            stats: dict[str, int] = {}
+            got = occluded_embree(mesh, points, np.array(eye), face_index=face_index, stats=stats)
+            assert np.array_equal(got, exact), eye
+            assert stats["casts"] <= 2 * len(points)  # not a re-cast per copy
+    assert pairs_per_face == [9.0, 9.0]  # three corners, three faces around each
