@@ -84,7 +84,7 @@ class _Worker:
 
 def _start(ctx, params: FarmParams, out: Path) -> _Worker:
     mine, theirs = ctx.Pipe()
-    proc = ctx.Process(target=_serve, args=(theirs, os.getpid(), params, str(out)), name="zbuf-farm-worker", daemon=True)
+    proc = ctx.Process(target=_serve, args=(theirs, os.getpid(), params, str(out)), name="zbuf-farm-worker")
     proc.start()
     theirs.close()
     return _Worker(proc, mine)
