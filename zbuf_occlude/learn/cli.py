@@ -55,7 +55,7 @@ def check_options(args: argparse.Namespace) -> None:
         value = getattr(args, name, None)
         if value is not None and value < 1:
             raise InvalidInputError(f"--{name} must be an integer >= 1, got {value}")
-    check_seed(args.seed, name="--seed")
+    check_seed(getattr(args, "seed", 0), name="--seed")
 
 
 def _run(args: argparse.Namespace) -> int:
