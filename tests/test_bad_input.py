@@ -826,6 +826,22 @@ def test_a_camera_beyond_float64s_reach_is_refused_naming_the_limit() -> None:
         assert visible.mean() == pytest.approx((1 - 0.5 / radius) / 2, abs=0.03)
 
 
+def test_the_embree_oracle_stays_exact_for_a_far_eye() -> None:
+    """Its ray-sphere clip lost the sphere for far eyes (90 % of a sphere called visible at 1e8)."""
+    import zbuf_occlude as zo
+    from zbuf_occlude.visibility.oracle_embree import occluded_embree
+    from zbuf_occlude.visibility.oracle_numpy import occluded_numpy
+
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    sphere.apply_scale(0.5)
+    points, face_index = zo.sample_surface(sphere, count=3000, seed=0)
+    direction = np.array([np.cos(0.3) * np.cos(0.5), np.cos(0.3) * np.sin(0.5), np.sin(0.3)])
+    for distance in (1e7, 1e8, 1e9):
+        exact = occluded_numpy(sphere.triangles, points, distance * direction, face_index=face_index)
+        assert exact.mean() == pytest.approx(0.5, abs=0.03)
+        assert np.array_equal(occluded_embree(sphere, points, distance * direction, face_index=face_index), exact)
+
+
 @pytest.mark.parametrize("command", ["generate", "validate", "farm"])
 def test_radius_1e8_is_a_usage_error_before_any_mesh_is_loaded(tmp_path: Path, capsys, no_mesh_loaded, command) -> None:
     argv = [command, "data/samples/sofa/test/sofa_0681.off", "--radius", "1e8"]

@@ -257,7 +257,11 @@ def occluded_embree(
     margin = _EMBREE_SPHERE_MARGIN * scene.radius
     to_centre = e - scene.centre
     b = dot3(direction, to_centre)
-    disc = b * b - (dot3(to_centre, to_centre) - (scene.radius + margin) ** 2)
+    # r² - (squared distance from the centre to the line), from the perpendicular vector: the
+    # textbook b² - (|c|² - r²) cancels two terms of size R² and loses the sphere entirely
+    # for a far camera (R = 1e7: eps · R² ≈ 0.02, the size of r² itself).
+    perp = to_centre - b[:, None] * direction
+    disc = (scene.radius + margin) ** 2 - dot3(perp, perp)
     root = np.sqrt(np.maximum(disc, 0.0))
     s_lo = np.maximum(-b - root, 0.0)
     s_hi = np.minimum(seg_len - tol, -b + root)
