@@ -899,3 +899,129 @@ def test_two_files_with_one_name_are_refused_naming_both(tmp_path: Path, entry: 
     with pytest.raises(InvalidInputError) as info:
         scan_paths([tmp_path]) if entry == "generate" else scan_objects(tmp_path)
     assert_names(info.value, "chair_0001.obj and ", "chair_0001.off are both 'chair/train/chair_0001'", "unique")
+
+
+# -- issue 15: far cameras, experiment options, hostile scene files, non-UTF-8 CSVs -------------------
+def _main_exit(argv: list[str], capsys) -> tuple[int, str]:
+    from zbuf_occlude.cli import main
+
+    code = main(argv)
+    return code, capsys.readouterr().err.strip()
+
+
+def test_a_camera_beyond_float64s_reach_is_refused_naming_the_limit() -> None:
+    import zbuf_occlude as zo
+    from zbuf_occlude.cameras import MAX_CAMERA_RADIUS, camera_on_sphere
+    from zbuf_occlude.errors import CameraError
+
+    assert 1e6 <= MAX_CAMERA_RADIUS < 1e7  # derived from float64's eps and the 1e-6 tolerance
+    with pytest.raises(CameraError, match=r"camera radius 1e\+08 is beyond 1\.1e\+06 object units"):
+        camera_on_sphere(20, 30, 1e8)
+    # within the limit the exact oracle is right: a sphere seen from afar shows about half its surface
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    sphere.apply_scale(0.5)
+    points, face_index = zo.sample_surface(sphere, count=3000, seed=0)
+    for radius in (4.0, 1e6):  # a sphere of radius r seen from distance R shows (1 - r/R) / 2 of its area
+        visible = zo.visible_mask(sphere, points, camera_on_sphere(20, 30, radius), "oracle", face_index=face_index)
+        assert visible.mean() == pytest.approx((1 - 0.5 / radius) / 2, abs=0.03)
+
+
+def test_the_embree_oracle_stays_exact_for_a_far_eye() -> None:
+    """Its ray-sphere clip lost the sphere for far eyes (90 % of a sphere called visible at 1e8)."""
+    import zbuf_occlude as zo
+    from zbuf_occlude.visibility.oracle_embree import occluded_embree
+    from zbuf_occlude.visibility.oracle_numpy import occluded_numpy
+
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    sphere.apply_scale(0.5)
+    points, face_index = zo.sample_surface(sphere, count=3000, seed=0)
+    direction = np.array([np.cos(0.3) * np.cos(0.5), np.cos(0.3) * np.sin(0.5), np.sin(0.3)])
+    for distance in (1e7, 1e8, 1e9):
+        exact = occluded_numpy(sphere.triangles, points, distance * direction, face_index=face_index)
+        assert exact.mean() == pytest.approx(0.5, abs=0.03)
+        assert np.array_equal(occluded_embree(sphere, points, distance * direction, face_index=face_index), exact)
+
+
+@pytest.mark.parametrize("command", ["generate", "validate", "farm"])
+def test_radius_1e8_is_a_usage_error_before_any_mesh_is_loaded(tmp_path: Path, capsys, no_mesh_loaded, command) -> None:
+    argv = [command, "data/samples/sofa/test/sofa_0681.off", "--radius", "1e8"]
+    if command == "farm":
+        argv = [command, "data/samples", "--radius", "1e8", "--no-progress"]
+    if command != "validate":
+        argv += ["--out", str(tmp_path / "o")]
+    code, err = _main_exit(argv, capsys)
+    assert code == 2 and "\n" not in err, err
+    assert "--radius 1e+08" in err or "--radius 100000000.0" in err
+    assert "beyond 1.1e+06 object units" in err
+
+
+@pytest.mark.parametrize(
+    ("option", "value"), [("--epochs", "0"), ("--points", "0"), ("--threads", "-1"), ("--threads", "0"), ("--seed", "-2")]
+)
+def test_experiment_options_out_of_range_are_usage_errors(tmp_path: Path, capsys, option: str, value: str) -> None:
+    code, err = _main_exit(["experiment", "elevation", str(tmp_path), "--out", str(tmp_path / "o"), option, value], capsys)
+    assert code == 2, err
+    assert option in err and value in err and "\n" not in err
+    assert not (tmp_path / "o").exists()  # refused before any work
+
+
+def _nested(depth: int, suffix: str) -> str:
+    if suffix == ".json":
+        return '{"objects": ' + "[" * depth + "]" * depth + "}"
+    return "objects: " + "[" * depth + "]" * depth + "\n"  # YAML flow sequences
+
+
+@pytest.mark.parametrize("suffix", [".json", ".yaml"])
+def test_a_scene_nested_10000_deep_is_an_error_naming_the_file(tmp_path: Path, suffix: str) -> None:
+    if suffix == ".yaml":
+        pytest.importorskip("yaml", reason="YAML scenes need the [yaml] extra (PyYAML)")
+    from zbuf_occlude.sensors.scene import load_scene
+
+    path = tmp_path / f"deep{suffix}"
+    path.write_text(_nested(10_000, suffix))
+    with pytest.raises(InvalidInputError, match=rf"deep\{suffix}: the scene is nested too deeply"):
+        load_scene(path)
+
+
+def _scene(tmp_path: Path, spec: dict) -> Path:
+    import json
+
+    path = tmp_path / "scene.json"
+    path.write_text(json.dumps(spec))
+    return path
+
+
+@pytest.mark.parametrize("sections", [-4, 0, 2, 10**8, 2.5, "48"])
+def test_cylinder_sections_are_checked_before_allocating(tmp_path: Path, sections) -> None:
+    from zbuf_occlude.sensors.scene import MAX_CYLINDER_SECTIONS, load_scene
+
+    spec = {"objects": [{"mesh": {"cylinder": {"radius_m": 0.5, "height_m": 1.0, "sections": sections}}, "position_m": [5, 0]}]}
+    with pytest.raises(InvalidInputError, match=rf"scene\.json: .*sections must be an integer from 3 to {MAX_CYLINDER_SECTIONS}, got {re.escape(repr(sections))}"):
+        load_scene(_scene(tmp_path, spec)).build()
+
+
+@pytest.mark.parametrize(
+    ("spec", "message"),
+    [
+        ({"ground": {"half_extent_m": 1e300}}, r"ground half_extent_m must be > 0 and <= 16777 metres .*got 1e\+300"),
+        ({"ground": {"half_extent_m": -3}}, r"ground half_extent_m must be > 0 .*got -3"),
+        ({"sensor": {"height_m": -5}}, r"sensor height_m must be >= 0 metres \(above the ground\), got -5"),
+    ],
+    ids=["huge-ground", "negative-ground", "sensor-below-ground"],
+)
+def test_scene_numbers_out_of_range_are_usage_errors_of_scan(tmp_path: Path, capsys, spec: dict, message: str) -> None:
+    spec = {**spec, "objects": [{"mesh": {"box_m": [1, 1, 1]}, "position_m": [5, 0]}]}
+    path = _scene(tmp_path, spec)
+    code, err = _main_exit(["scan", str(path), "--sensor", "vlp16", "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and "\n" not in err, err
+    assert re.search(message, err) and "scene.json" in err, err
+
+
+def test_realism_on_a_non_utf8_csv_names_the_file(tmp_path: Path, capsys) -> None:
+    real = tmp_path / "real" / "Car"
+    real.mkdir(parents=True)
+    header = b"origin_x,origin_y,origin_z,relative_x,relative_y,relative_z,object,complexity\n"
+    (real / "car0.csv").write_bytes(header + b"100,50,200,1,1,1,Car\xe9\xff,1\n")
+    code, err = _main_exit(["realism", str(real.parent), str(real.parent), "--out", str(tmp_path / "o"), "--no-figure"], capsys)
+    assert code == 2 and "\n" not in err, err
+    assert "car0.csv is not UTF-8" in err and "Traceback" not in err

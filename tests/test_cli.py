@@ -93,12 +93,12 @@ def test_validate_exits_1_when_a_mesh_fails(tmp_path, two_meshes, capsys):
 
 
 def test_interrupt_exits_130_with_a_resume_hint(tmp_path, two_meshes, monkeypatch, capsys):
-    from zbuf_occlude.farm import worker
+    from zbuf_occlude.farm import run
 
     def interrupted(*a, **k):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(worker, "load_mesh", interrupted)  # generate loads meshes in the farm's worker
+    monkeypatch.setattr(run, "run_in_workers", interrupted)  # generate's parent waits on its worker process
     assert main(["generate", str(two_meshes), "--out", str(tmp_path / "o"), *ARGS]) == 130
     assert "interrupted" in capsys.readouterr().err
     from zbuf_occlude.farm import cli as farm_cli

@@ -270,3 +270,124 @@ def test_skipped_inputs_are_recorded_in_the_card_and_give_status_1(tree, tmp_pat
     card = json.loads((out / CARD_FILE).read_text())
     assert card["skipped_inputs"] == [{"path": "in/locked", "reason": "permission denied"}]
     assert run_farm(discover_objects(tree), out, params=PARAMS, progress=False).exit_status == 0
+
+
+# -- issue 15: a long native call, a killed worker ----------------------------------------------------
+#: Imported by every Python process started with its folder first on PYTHONPATH (the CLI and its
+#: spawned workers): makes ``load_mesh`` of the mesh named by ZO_TEST_HOLD a long native call.
+_HOLD_HOOK = """
+import os
+if os.environ.get("ZO_TEST_HOLD"):
+    import signal, time
+    import zbuf_occlude.farm.worker as worker
+
+    _load_mesh = worker.load_mesh
+
+    def load_mesh(source, *args, **kwargs):
+        name, marker = os.environ["ZO_TEST_HOLD"].split(os.pathsep)
+        if name in str(source):
+            # what a long Embree or GL call does to Python: signals wait until it returns
+            signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM, signal.SIGINT})
+            with open(marker, "w") as f:
+                f.write(str(os.getpid()))
+            time.sleep(600)
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGTERM, signal.SIGINT})
+        return _load_mesh(source, *args, **kwargs)
+
+    worker.load_mesh = load_mesh
+"""
+
+
+def _hold_env(tmp_path: Path, name: str) -> tuple[dict[str, str], Path]:
+    """Environment whose processes hold forever (signals blocked) in the load of mesh ``name``."""
+    hook = tmp_path / "hook"
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(_HOLD_HOOK)
+    marker = tmp_path / "holding"
+    env = {**_env(), "PYTHONPATH": os.pathsep.join([str(hook), str(REPO_ROOT)]), "ZO_TEST_HOLD": f"{name}{os.pathsep}{marker}"}
+    return env, marker
+
+
+def test_sigterm_inside_a_long_native_call_stops_generate_within_seconds(tree, tmp_path):
+    out = tmp_path / "gen"
+    env, marker = _hold_env(tmp_path, "stool_0002")
+    proc = subprocess.Popen(_cli("generate", str(tree), "--out", str(out), *CLI_PARAMS[:-1]), env=env, cwd=tmp_path,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        _wait_for(marker.exists, proc)
+        proc.send_signal(signal.SIGTERM)
+        rc = proc.wait(timeout=30)  # the held call lasts 600 s: only a stop from outside it ends the run
+    finally:
+        proc.kill()
+    err = proc.stderr.read()
+    assert rc == 143, err
+    assert "interrupted; run the same command again to resume" in err and "Traceback" not in err
+    assert not (out / LOCK_FILE).exists()
+    held = int(marker.read_text())
+    _wait_for(lambda: not _alive(held), timeout_s=10)  # the worker did not outlive the stop
+    done = subprocess.run(_cli("generate", str(tree), "--out", str(out), *CLI_PARAMS[:-1]), env=_env(), cwd=tmp_path,
+                          capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    card = json.loads((out / CARD_FILE).read_text())
+    assert card["n_objects_ok"] == len(MESHES)
+    assert not list(out.rglob(".*.tmp"))
+
+
+def test_a_killed_farm_worker_fails_only_its_object(tree, tmp_path):
+    out = tmp_path / "ds"
+    env, marker = _hold_env(tmp_path, "stool_0002")
+    proc = subprocess.Popen(_cli("farm", str(tree), "--out", str(out), "--workers", "2", *CLI_PARAMS), env=env,
+                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        _wait_for(marker.exists, proc)
+        os.kill(int(marker.read_text()), signal.SIGKILL)  # what the out-of-memory killer does
+        stdout, stderr = proc.communicate(timeout=300)
+    finally:
+        proc.kill()
+    assert proc.returncode == 1, stderr
+    assert "Traceback" not in stderr and "BrokenProcessPool" not in stderr
+    lines = {r["name"]: r for r in map(json.loads, (out / MANIFEST_FILE).read_text().splitlines())}
+    assert [r["status"] for r in lines.values()].count("ok") == len(MESHES) - 1  # the others were finished
+    failed = lines["stool/train/stool_0002"]
+    assert failed["status"] == "failed" and "SIGKILL" in failed["error"], failed
+    assert "FAILED" in stdout and "stool_0002" in stdout and "SIGKILL" in stdout
+    assert not (out / LOCK_FILE).exists()
+    summary = run_farm(tree, out, params=FarmParams(**{**PARAMS.to_dict(), "views": "fibonacci:40"}), progress=False)
+    assert summary.resumed == len(MESHES) - 1 and summary.done == len(MESHES) and summary.exit_status == 0
+    assert not list(out.rglob(".*.tmp"))
+
+
+# -- issue 15: a mesh of many identical faces ---------------------------------------------------------
+def _tetra_with_copies(m: int):
+    import numpy as np
+    import trimesh
+
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]]) - 0.25
+    faces = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]] + [[0, 2, 1]] * m  # the base, m more times
+    return trimesh.Trimesh(v, np.array(faces), process=False)
+
+
+def test_identical_faces_cost_the_embree_oracle_one_face_per_group():
+    """The work per point around m copies of one face does not grow with m (it was O(m): a mesh of
+    300,000 copies ran for minutes), and the answer is the exact one."""
+    import numpy as np
+
+    import zbuf_occlude as zo
+    from zbuf_occlude.visibility.oracle_embree import _EmbreeScene, occluded_embree
+    from zbuf_occlude.visibility.oracle_numpy import occluded_numpy
+
+    pairs_per_face = []
+    for m in (10, 500):
+        mesh = _tetra_with_copies(m)
+        scene = _EmbreeScene(mesh.vertices, mesh.faces)
+        k, g = scene.faces_around(np.arange(len(mesh.faces)))
+        pairs_per_face.append(len(g) / len(mesh.faces))
+        assert set(g.tolist()) == {0, 1, 2, 3}  # one face stands for the m + 1 copies of the base
+        points, face_index = zo.sample_surface(mesh, count=1500, seed=1)
+        for eye in ([0.2, 0.1, -3.0], [3.0, 2.0, 1.0], [2.0, 2.0, -0.25]):  # below the base, above, edge-on
+            exact = occluded_numpy(mesh.triangles, points, np.array(eye), face_index=face_index)
+            stats: dict[str, int] = {}
+            got = occluded_embree(mesh, points, np.array(eye), face_index=face_index, stats=stats)
+            assert np.array_equal(got, exact), eye
+            assert stats["casts"] <= 2 * len(points)  # not a re-cast per copy
+    assert pairs_per_face == [9.0, 9.0]  # three corners, three faces around each

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from .defaults import DEFAULT_RESOLUTION
+from .defaults import DEFAULT_RESOLUTION, MAX_CAMERA_RADIUS
 from .errors import CameraError, InvalidInputError
 
 __all__ = [
@@ -32,6 +32,7 @@ __all__ = [
     "cameras_from_schedule",
     "DEFAULT_RADIUS",
     "UNIT_BOX_BOUNDING_RADIUS",
+    "MAX_CAMERA_RADIUS",
 ]
 
 #: Camera distance for an object of maximum extent 1 (paper §4.1: 4 × max dimension).
@@ -234,8 +235,9 @@ def camera_on_sphere(
     Raises
     ------
     CameraError
-        If the camera is inside (or on) the bounding sphere, or the elevation is outside
-        [−90, 90].
+        If the camera is inside (or on) the bounding sphere, farther than
+        :data:`MAX_CAMERA_RADIUS` (float64 no longer resolves the visibility tolerance
+        there), or the elevation is outside [−90, 90].
     """
     if not all(math.isfinite(v) for v in (elevation_deg, azimuth_deg, radius, bounding_radius)):
         raise CameraError(f"non-finite pose: el={elevation_deg}, az={azimuth_deg}, radius={radius}")
@@ -246,6 +248,11 @@ def camera_on_sphere(
         raise CameraError(
             f"camera radius {radius} is inside the object's bounding sphere (radius {bounding_radius}); "
             f"use a radius > {r_fit:.3f} (default {DEFAULT_RADIUS})"
+        )
+    if radius > MAX_CAMERA_RADIUS:
+        raise CameraError(
+            f"camera radius {radius:g} is beyond {MAX_CAMERA_RADIUS:.3g} object units (the object's extent is 1), "
+            "the farthest camera at which float64 still decides visibility's 1e-6 tolerance; use a smaller radius"
         )
     width, height = (resolution, resolution) if np.isscalar(resolution) else resolution
     if yfov_deg is None:

@@ -70,7 +70,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
     # generate's engine (farm.run_farm) checks the options, the memory, --out and the GL before loading a mesh
     t0 = time.perf_counter()
     summary, objects = generate(
-        paths, args.out, params=params, overwrite=args.overwrite, progress=True,
+        paths, args.out, params=params, overwrite=args.overwrite, progress=True, isolate=True,
         command=shlex.join(["zbuf-occlude", *sys.argv[1:]]) if sys.argv else None, class_from=args.class_from,
     )  # fmt: skip
     elapsed = time.perf_counter() - t0
@@ -109,6 +109,9 @@ def _check_validate_memory(points: int, resolution: int) -> None:
 def cmd_validate(args: argparse.Namespace) -> int:
     _check_at_least(args, points=1, resolution=1)
     check_seed(args.seed, name="--seed")
+    from .farm.checks import check_radius
+
+    check_radius(args.radius, args.resolution)
     poses = view_schedule(args.views)
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     for m in methods:

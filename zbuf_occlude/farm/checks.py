@@ -18,7 +18,7 @@ from ..resources import check_memory, estimate_job_memory
 from ..visibility.registry import get_method
 from .config import FarmParams
 
-__all__ = ["check_before_work", "check_memory_up_front", "check_out_option", "prepare_out", "check_gl"]
+__all__ = ["check_before_work", "check_memory_up_front", "check_out_option", "check_radius", "prepare_out", "check_gl"]
 
 log = logging.getLogger(__name__)
 
@@ -99,6 +99,18 @@ def check_memory_up_front(params: FarmParams, *, workers: int = 1) -> None:
     check_memory(estimate)
 
 
+def check_radius(radius: float, resolution: int) -> None:
+    """``--radius`` makes a camera: outside the object's bounding sphere, and not so far that
+    float64 no longer decides visibility (:data:`~zbuf_occlude.cameras.MAX_CAMERA_RADIUS`).
+
+    Raises InvalidInputError naming ``--radius``.
+    """
+    try:
+        camera_on_sphere(0.0, 0.0, radius, resolution=resolution)
+    except CameraError as exc:
+        raise InvalidInputError(f"--radius {radius}: {exc}") from None
+
+
 def check_before_work(params: FarmParams, out: str | os.PathLike, *, gl: bool = True, workers: int | None = 1) -> None:
     """Every check of a run that needs no mesh, in the order a user fixes them.
 
@@ -123,10 +135,7 @@ def check_before_work(params: FarmParams, out: str | os.PathLike, *, gl: bool = 
     """
     check_out_option(out)
     get_method(params.method)
-    try:
-        camera_on_sphere(0.0, 0.0, params.radius, resolution=params.resolution)
-    except CameraError as exc:
-        raise InvalidInputError(f"--radius {params.radius}: {exc}") from None
+    check_radius(params.radius, params.resolution)
     prepare_out(Path(out))
     if gl:
         check_gl(params.resolution)

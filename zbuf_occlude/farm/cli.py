@@ -72,6 +72,7 @@ def _farm_command(args: argparse.Namespace) -> int:
         dask_local=args.dask_local,
         overwrite=args.overwrite,
         progress=not args.no_progress,
+        isolate=True,  # a SIGTERM stops the run at once, even inside a long native call
         command=shlex.join(["zbuf-occlude", *sys.argv[1:]]) if sys.argv else None,
     )
     print(summary.format())

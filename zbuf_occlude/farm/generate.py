@@ -126,6 +126,7 @@ def generate(
     progress: bool = True,
     command: str | None = None,
     class_from: int | None = None,
+    isolate: bool = False,
 ) -> tuple[FarmSummary, list[FarmObject]]:
     """Occluded samples of a few meshes into ``out`` (``zbuf-occlude generate``).
 
@@ -145,6 +146,8 @@ def generate(
         tqdm bar on stderr.
     class_from : int, optional
         Take each mesh's class from this folder level above it (``--class-from``).
+    isolate : bool
+        Render in a worker process that a SIGTERM stops at once (:func:`~.run.run_farm`).
 
     Returns
     -------
@@ -170,7 +173,7 @@ def generate(
         objects, out, params=params, workers=1, overwrite=overwrite, progress=progress, command=command,
         source_text=", ".join(str(Path(p).resolve()) for p in paths),
         on_finished=lambda folder: _merge_h5(folder, objects if params.storage == "h5" else []),
-        skipped=[(s.path, s.reason) for s in skipped], layout=scan.layout,
+        skipped=[(s.path, s.reason) for s in skipped], layout=scan.layout, isolate=isolate,
     )  # fmt: skip
     records = [rec for o in objects if (rec := read_json(record_path(out, o.index)))]
     summary.padded = padded_samples(records, params)

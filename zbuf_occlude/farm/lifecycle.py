@@ -14,8 +14,10 @@ writing records for minutes.  Here
   resumes.  The CLI exits 130 after SIGINT and 143 (128 + 15) after SIGTERM.
 
 A worker killed mid-write leaves only a temporary file named by its pid, which the next run
-removes (:func:`~zbuf_occlude.farm.journal.remove_stale_temps`); its object has no record
-and is done again.
+removes (:func:`~zbuf_occlude.farm.journal.remove_stale_temps`); the parent records its
+object as failed (:mod:`zbuf_occlude.farm.pool`) and the next run does it again.  The
+parent only waits while its workers render, so a signal reaches it at once even when a
+worker is inside a long native call (Embree, the GL driver), which in-process it would not.
 """
 
 from __future__ import annotations

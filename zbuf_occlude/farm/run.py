@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import multiprocessing
 import os
 import shlex
 import shutil
@@ -12,7 +11,6 @@ import socket
 import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -37,8 +35,9 @@ from .journal import (
     read_plan,
     remove_stale_temps,
 )
-from .lifecycle import die_with_parent, sigterm_as_interrupt
+from .lifecycle import sigterm_as_interrupt
 from .lock import farm_lock
+from .pool import run_in_workers
 from .worker import package_version, process_object, write_json
 
 log = logging.getLogger(__name__)
@@ -48,35 +47,6 @@ log = logging.getLogger(__name__)
 def _serial(todo: Sequence[FarmObject], params: FarmParams, out: Path) -> Iterator[dict[str, Any]]:
     for obj in todo:
         yield process_object(obj, params, out)
-
-
-def _pool(todo: Sequence[FarmObject], params: FarmParams, out: Path, workers: int) -> Iterator[dict[str, Any]]:
-    # spawn: a forked child would inherit the parent's GL state; each worker makes its own context.
-    # die_with_parent: a SIGKILLed parent must not leave workers rendering on (lifecycle.py).
-    ctx = multiprocessing.get_context("spawn")
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=die_with_parent, initargs=(os.getpid(),))
-    try:
-        pending = {pool.submit(process_object, obj, params, str(out)) for obj in todo}
-        while pending:
-            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-            for fut in finished:
-                yield fut.result()
-    except BaseException:
-        # interrupted (Ctrl-C, SIGTERM), a fatal error, or the consumer stopped: stop the
-        # workers now instead of letting them finish their objects; their temps are removed
-        # by the next run and their objects redone
-        _stop_workers(pool)
-        raise
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
-
-
-def _stop_workers(pool: ProcessPoolExecutor) -> None:
-    # ProcessPoolExecutor has no public way to stop running workers before Python 3.14
-    # (terminate_workers); _processes is the pid → Process map it keeps.
-    for proc in list(getattr(pool, "_processes", {}).values()):
-        with contextlib.suppress(Exception):
-            proc.terminate()
 
 
 def _dask(
@@ -181,6 +151,7 @@ def run_farm(
     skipped: Sequence[tuple[str, str]] = (),
     class_from: int | None = None,
     layout: str | None = None,
+    isolate: bool = False,
 ) -> FarmSummary:
     """Build (or resume) an occluded data set from many meshes.
 
@@ -196,7 +167,9 @@ def run_farm(
     classes, per_class, splits
         Selection, see :func:`scan_objects` (ignored for a ready plan).
     workers : int
-        Processes rendering in parallel on this machine (``spawn``ed, one GL context each).
+        Processes rendering in parallel on this machine (``spawn``ed, one GL context each;
+        :func:`~zbuf_occlude.farm.pool.run_in_workers`).  A worker killed by a signal or the
+        out-of-memory killer fails only the object it held (recorded, exit status 1).
     shard : (I, N)
         Render only the I-th of N partitions (:func:`select_shard`); with N > 1 the data
         set is completed by :func:`merge_farm` once every task has finished.
@@ -225,6 +198,10 @@ def run_farm(
         (:func:`scan_objects`).
     layout : str, optional
         The card's ``layout`` of a ready plan (a folder's or list file's is detected).
+    isolate : bool
+        With one worker, render in a worker process too instead of in this one (the CLI's
+        choice): a SIGTERM or Ctrl-C then stops the run within seconds even inside a long
+        native call (Embree, the GL driver), which an in-process run finishes first.
 
     Returns
     -------
@@ -267,6 +244,7 @@ def run_farm(
             out, objects, mine, params, source_text, shard=shard, workers=workers, scheduler=scheduler,
             dask_local=dask_local, overwrite=overwrite, progress=progress, command=command, t0=t0,
             on_finished=on_finished, skipped=[(str(p), str(r)) for p, r in skipped], layout=layout,
+            isolate=isolate,
         )  # fmt: skip
 
 
@@ -288,6 +266,7 @@ def _run_locked(
     on_finished: Callable[[Path], Any] | None = None,
     skipped: list[tuple[str, str]] | None = None,
     layout: str | None = None,
+    isolate: bool = False,
 ) -> FarmSummary:
     """:func:`run_farm` once the lock of ``out`` (or of this task) is held."""
     task, n_tasks = shard
@@ -325,9 +304,9 @@ def _run_locked(
     if scheduler or dask_local:
         records_iter = _dask(todo, params, out, scheduler, dask_local)
         workers_text = f"dask {scheduler or f'LocalCluster({dask_local})'}"
-    elif workers > 1 and len(todo) > 1:
-        records_iter = _pool(todo, params, out, min(workers, len(todo)))
-        workers_text = f"{min(workers, len(todo))} processes"
+    elif (workers > 1 and len(todo) > 1) or (isolate and todo):
+        records_iter = run_in_workers(todo, params, out, min(workers, len(todo)))
+        workers_text = f"{min(workers, len(todo))} processes" if workers > 1 else "1 worker process"
     else:
         records_iter = _serial(todo, params, out)
         workers_text = "1 process"

@@ -12,7 +12,7 @@ from typing import Any
 from ..defaults import DEFAULT_METHOD
 from ..errors import InvalidInputError
 
-__all__ = ["add_parser"]
+__all__ = ["add_parser", "check_options"]
 
 
 def _label_map(text: str | None) -> dict[str, str]:
@@ -43,7 +43,23 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
+def check_options(args: argparse.Namespace) -> None:
+    """Usage errors before torch is imported or a mesh is read: ``--epochs``, ``--points`` and
+    ``--threads`` (when given) are integers >= 1, ``--seed`` >= 0; the message names the value.
+
+    Raises InvalidInputError (exit status 2).
+    """
+    from ..sampling import check_seed
+
+    for name in ("epochs", "points", "threads"):
+        value = getattr(args, name, None)
+        if value is not None and value < 1:
+            raise InvalidInputError(f"--{name} must be an integer >= 1, got {value}")
+    check_seed(getattr(args, "seed", 0), name="--seed")
+
+
 def _run(args: argparse.Namespace) -> int:
+    check_options(args)
     from . import require_torch
 
     require_torch()

@@ -39,6 +39,14 @@ __all__ = ["SceneObject", "ScanScene", "BuiltScene", "load_scene", "GROUND_ID", 
 
 #: ``object_id`` of the ground plane's returns.
 GROUND_ID = 0
+#: Most sections of a scene cylinder.  At 4096 a facet spans 0.09°, finer than any preset's
+#: angular step (0.1–0.4°), so more sections change no scan; the limit is checked before
+#: trimesh allocates (1e8 sections would need tens of GB).
+MAX_CYLINDER_SECTIONS = 4096
+#: Largest ground half-extent, metres: the scene is ray-cast in float32 (Embree), whose 24-bit
+#: mantissa keeps 1 mm steps up to 2**24 mm ≈ 16.8 km from the origin; a larger ground loses
+#: the returns' millimetres (1e300 overflows float32 and returns nothing at all).
+MAX_GROUND_HALF_EXTENT_M = 2.0**24 * 1e-3
 
 
 def sensor_pose(position_m, yaw_deg: float = 0.0) -> NDArray[np.float64]:
@@ -53,19 +61,28 @@ def sensor_pose(position_m, yaw_deg: float = 0.0) -> NDArray[np.float64]:
     return m
 
 
-def _primitive(spec: dict) -> trimesh.Trimesh:
+def _primitive_args(spec: dict) -> tuple[str, dict[str, Any]]:
+    """The checked arguments of a primitive's trimesh constructor (before anything is allocated)."""
     if "box_m" in spec:
         extents = np.asarray(spec["box_m"], dtype=np.float64)
         if extents.shape != (3,) or np.any(~np.isfinite(extents)) or np.any(extents <= 0):
             raise InvalidInputError(f"box_m must be 3 positive sizes in metres, got {spec['box_m']!r}")
-        return trimesh.creation.box(extents=extents)
+        return "box", {"extents": extents}
     if "cylinder" in spec:
         c = spec["cylinder"]
         r, h = float(c.get("radius_m", 0)), float(c.get("height_m", 0))
         if not (r > 0 and h > 0 and math.isfinite(r) and math.isfinite(h)):
             raise InvalidInputError(f"cylinder needs radius_m > 0 and height_m > 0, got {c!r}")
-        return trimesh.creation.cylinder(radius=r, height=h, sections=int(c.get("sections", 48)))
+        sections = c.get("sections", 48)
+        if isinstance(sections, bool) or not isinstance(sections, int) or not 3 <= sections <= MAX_CYLINDER_SECTIONS:
+            raise InvalidInputError(f"cylinder sections must be an integer from 3 to {MAX_CYLINDER_SECTIONS}, got {sections!r}")
+        return "cylinder", {"radius": r, "height": h, "sections": sections}
     raise InvalidInputError(f"unknown primitive {spec!r}; use {{'box_m': [x, y, z]}} or {{'cylinder': {{'radius_m': r, 'height_m': h}}}}")
+
+
+def _primitive(spec: dict) -> trimesh.Trimesh:
+    kind, kwargs = _primitive_args(spec)
+    return getattr(trimesh.creation, kind)(**kwargs)
 
 
 @dataclass
@@ -196,6 +213,17 @@ class ScanScene:
     base_dir: Path | None = None
     _built: BuiltScene | None = field(default=None, init=False, repr=False, compare=False)
 
+    def __post_init__(self) -> None:
+        h = self.ground_half_extent_m
+        if not (isinstance(h, (int, float)) and 0 < h <= MAX_GROUND_HALF_EXTENT_M):
+            raise InvalidInputError(
+                f"ground half_extent_m must be > 0 and <= {MAX_GROUND_HALF_EXTENT_M:.0f} metres (float32 ray casting), got {h!r}"
+            )
+        z = self.sensor_height_m
+        # the same rule as the farm's --sensor-height and CropDistributions.height_m
+        if not (isinstance(z, (int, float)) and math.isfinite(z) and z >= 0):
+            raise InvalidInputError(f"sensor height_m must be >= 0 metres (above the ground), got {z!r}")
+
     def add(self, mesh, **kwargs) -> ScanScene:
         """Append a target object (``SceneObject(mesh, **kwargs)``); returns self for chaining."""
         self.objects.append(SceneObject(mesh, **kwargs))
@@ -273,6 +301,8 @@ class ScanScene:
             allowed = {"mesh", "class", "position_m", "yaw_deg", "size_m", "up"}
             if not isinstance(d, dict) or "mesh" not in d or set(d) - allowed:
                 raise InvalidInputError(f"scene object {d!r}: needs 'mesh', allows {sorted(allowed)}")
+            if isinstance(d["mesh"], dict):
+                _primitive_args(d["mesh"])  # checked now, so that the error names the file
             return SceneObject(d["mesh"], d.get("class", ""), tuple(d.get("position_m", (0.0, 0.0))), float(d.get("yaw_deg", 0.0)), d.get("size_m"), d.get("up", "z"))
 
         ground = spec.get("ground", {})
@@ -300,26 +330,34 @@ def load_scene(path: str | Path) -> ScanScene:
     path = Path(path)
     if not path.is_file():
         raise InvalidInputError(f"{path}: no such scene file")
-    text = path.read_text(encoding="utf-8")
-    suffix = path.suffix.lower()
-    if suffix == ".json":
-        try:
-            spec = json.loads(text)
-        except ValueError as exc:
-            raise InvalidInputError(f"{path}: cannot parse scene JSON ({exc})") from exc
-    elif suffix in (".yaml", ".yml"):
-        try:
-            import yaml
-        except ImportError:
-            raise InvalidInputError(f"{path}: YAML scenes need PyYAML: pip install 'zbuf-occlude[yaml]'") from None
-        try:
-            spec = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            raise InvalidInputError(f"{path}: cannot parse scene YAML ({exc})") from exc
-    else:
-        raise InvalidInputError(f"{path}: unknown scene format {path.suffix!r}; use .json, .yaml or .yml")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise InvalidInputError(f"{path}: a scene file must be UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    try:  # json and PyYAML parse nested containers recursively: a crafted file exhausts the stack
+        suffix = path.suffix.lower()
+        if suffix == ".json":
+            try:
+                spec = json.loads(text)
+            except ValueError as exc:
+                raise InvalidInputError(f"{path}: cannot parse scene JSON ({exc})") from exc
+        elif suffix in (".yaml", ".yml"):
+            try:
+                import yaml
+            except ImportError:
+                raise InvalidInputError(f"{path}: YAML scenes need PyYAML: pip install 'zbuf-occlude[yaml]'") from None
+            try:
+                spec = yaml.safe_load(text)
+            except yaml.YAMLError as exc:
+                raise InvalidInputError(f"{path}: cannot parse scene YAML ({exc})") from exc
+        else:
+            raise InvalidInputError(f"{path}: unknown scene format {path.suffix!r}; use .json, .yaml or .yml")
+    except RecursionError:  # json and PyYAML parse nested containers recursively
+        raise InvalidInputError(f"{path}: the scene is nested too deeply to be a scene (a crafted file?)") from None
     try:
         return ScanScene.from_dict(spec, base_dir=path.parent)
+    except RecursionError:
+        raise InvalidInputError(f"{path}: the scene is nested too deeply to be a scene (a crafted file?)") from None
     except MeshLoadError:
         raise
     except (TypeError, ValueError) as exc:

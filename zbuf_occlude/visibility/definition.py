@@ -20,6 +20,12 @@ definition; the two oracles decide (b) with the functions below and (c) with one
 kernel, so they agree bit for bit.  The GPU path decides (b) and (c) in float32 with
 error bounds and re-decides every pair inside the bounds in float64 with the same formulas
 (written out in ``shaders/exact_common.glsl``).
+
+The tolerance of (c) is decided only for cameras within
+:data:`~zbuf_occlude.defaults.MAX_CAMERA_RADIUS` (≈ 1.1e6 object units) of the object:
+farther, float64's rounding of ``e - p`` comes within 2**12 of it, and
+:func:`~zbuf_occlude.cameras.camera_on_sphere` refuses such a radius (the derivation is
+beside the constant).
 """
 
 from __future__ import annotations

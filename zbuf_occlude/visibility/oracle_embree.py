@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..errors import BackendUnavailable, InvalidInputError
 from ..mesh_cache import MeshCache
+from ..render.exact_backend import exact_face_groups
 from .oracle_numpy import DEFAULT_PAIRS_PER_CHUNK, occluded_unchecked
 from .registry import DEFAULT_SELF_HIT_TOLERANCE, check_face_index, check_points
 from .segment_triangle import (
@@ -75,6 +76,17 @@ class _EmbreeScene:
         faces = np.asarray(faces, dtype=np.int64)
         self.n_faces = len(faces)
         self.planes = triangle_planes(vertices[faces]) if planes is None else planes
+        # Faces with bit-identical vertices (same order) give bit-identical tests, so one face
+        # per group stands for all: the BVH, the adjacency and the exact fallback hold only
+        # these.  A mesh of m copies of one face (ModelNet repeats faces; a hostile file can
+        # hold 1e6 copies) then costs each ray O(1) tests there instead of O(m).
+        group = exact_face_groups(self.planes.vertices) if len(faces) else np.zeros(0, dtype=np.int64)
+        #: (K,) int64: the faces listed, one per group of identical faces (the lowest index).
+        self.listed = np.flatnonzero(group == np.arange(len(faces)))
+        #: (F,) int64: each face's group as a position in :attr:`listed`.
+        self.listed_pos = np.searchsorted(self.listed, group)
+        #: The planes of the :attr:`listed` faces.
+        self.listed_planes = self.planes.take(self.listed)
         used = vertices[faces].reshape(-1, 3)
         # Float32 is most precise near 0, so the BVH is built around the bounding-box centre.
         self.centre = (used.min(axis=0) + used.max(axis=0)) / 2.0 if len(used) else np.zeros(3)
@@ -84,12 +96,14 @@ class _EmbreeScene:
         _, corner_vertex = np.unique(used, axis=0, return_inverse=True)
         corner_vertex = corner_vertex.reshape(-1)  # numpy 2.0.0 returned it 2-D
         self.corner_vertex = corner_vertex.reshape(-1, 3)
-        order = np.argsort(corner_vertex, kind="stable")
-        self.vertex_faces = order // 3
-        self.vertex_start = np.searchsorted(corner_vertex[order], np.arange(corner_vertex.max(initial=-1) + 2))
-        # Per-face bounding boxes, for deciding a few fallback rays without a full cull.
-        self.face_lo = self.planes.vertices.min(axis=-2)
-        self.face_hi = self.planes.vertices.max(axis=-2)
+        listed_corners = self.corner_vertex[self.listed].reshape(-1)
+        order = np.argsort(listed_corners, kind="stable")
+        #: (K,) the listed faces around each vertex (CSR, rows ``vertex_start[v]:vertex_start[v + 1]``).
+        self.vertex_faces = self.listed[order // 3]
+        self.vertex_start = np.searchsorted(listed_corners[order], np.arange(corner_vertex.max(initial=-1) + 2))
+        # Bounding boxes of the listed faces, for deciding a few fallback rays without a full cull.
+        self.face_lo = self.listed_planes.vertices.min(axis=-2)
+        self.face_hi = self.listed_planes.vertices.max(axis=-2)
         self.scene = None
         if self.n_faces:
             # Robust mode: watertight ray/triangle tests (no leaks through shared edges).
@@ -97,11 +111,12 @@ class _EmbreeScene:
             TriangleMesh(
                 scene=self.scene,
                 vertices=np.ascontiguousarray(vertices - self.centre, dtype=np.float32),
-                indices=np.ascontiguousarray(faces, dtype=np.int32),
+                indices=np.ascontiguousarray(faces[self.listed], dtype=np.int32),
             )
 
     def faces_around(self, face: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-        """Pairs ``(k, g)``: face ``g`` shares a vertex position with ``face[k]`` (itself included)."""
+        """Pairs ``(k, g)``: listed face ``g`` shares a vertex position with ``face[k]`` (its own
+        group's listed face included); one face per group of identical faces."""
         corners = self.corner_vertex[face].ravel()
         start = self.vertex_start[corners]
         count = self.vertex_start[corners + 1] - start
@@ -119,7 +134,8 @@ class _EmbreeScene:
             dists=np.ascontiguousarray(lengths, dtype=np.float32),
             output=True,
         )
-        return out["primID"].astype(np.int64), out["tfar"].astype(np.float64)
+        prim = out["primID"].astype(np.int64)
+        return np.where(prim >= 0, self.listed[np.maximum(prim, 0)], -1), out["tfar"].astype(np.float64)
 
 
 # _EmbreeScene is looked up at build time (tests count the builds by patching it).
@@ -241,7 +257,11 @@ def occluded_embree(
     margin = _EMBREE_SPHERE_MARGIN * scene.radius
     to_centre = e - scene.centre
     b = dot3(direction, to_centre)
-    disc = b * b - (dot3(to_centre, to_centre) - (scene.radius + margin) ** 2)
+    # r² - (squared distance from the centre to the line), from the perpendicular vector: the
+    # textbook b² - (|c|² - r²) cancels two terms of size R² and loses the sphere entirely
+    # for a far camera (R = 1e7: eps · R² ≈ 0.02, the size of r² itself).
+    perp = to_centre - b[:, None] * direction
+    disc = (scene.radius + margin) ** 2 - dot3(perp, perp)
     root = np.sqrt(np.maximum(disc, 0.0))
     s_lo = np.maximum(-b - root, 0.0)
     s_hi = np.minimum(seg_len - tol, -b + root)
@@ -311,14 +331,15 @@ def occluded_embree(
             # candidates; cheaper than the image-plane cull, which projects every face.
             for k in idx:
                 lo, hi = np.minimum(pts[k], e) - tol, np.maximum(pts[k], e) + tol
-                g = np.flatnonzero(np.all((scene.face_lo <= hi) & (scene.face_hi >= lo), axis=1))
+                g = scene.listed[np.all((scene.face_lo <= hi) & (scene.face_hi >= lo), axis=1)]
                 kk = np.full(len(g), k)
                 hit = pair_occludes(pts[kk], seg[kk], seg_len[kk], scene.planes, g, None if fi is None else fi[kk], tol)
                 occluded[k] = bool(hit.any())
         else:
             occluded[idx] = occluded_unchecked(
-                scene.planes, pts[idx], e, fi[idx] if fi is not None else None, tol, DEFAULT_PAIRS_PER_CHUNK
-            )
+                scene.listed_planes, pts[idx], e, scene.listed_pos[fi[idx]] if fi is not None else None, tol,
+                DEFAULT_PAIRS_PER_CHUNK,
+            )  # fmt: skip
     log.debug("occluded_embree: %s", counters)
     if stats is not None:
         stats.update(counters)
