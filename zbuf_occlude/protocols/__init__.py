@@ -22,6 +22,7 @@ from .depth import (
 from .depth_views import PROTOCOL as _DEPTH
 from .modelnet40c import LIDAR as _MN40C_LIDAR
 from .modelnet40c import OCCLUSION as _MN40C_OCCLUSION
+from .pcn import PROTOCOL as _PCN
 
 __all__ = [
     "PROTOCOLS", "PROTOCOL_NAMES", "get_protocol", "Protocol", "ProtocolOptions", "ProtocolRun", "run_protocol",
@@ -30,7 +31,7 @@ __all__ = [
 ]  # fmt: skip
 
 #: The protocols by name (``paper`` is ``generate``'s own pipeline and is not listed here).
-PROTOCOLS: dict[str, Protocol] = {p.name: p for p in (_MN40C_OCCLUSION, _MN40C_LIDAR, _DEPTH)}
+PROTOCOLS: dict[str, Protocol] = {p.name: p for p in (_MN40C_OCCLUSION, _MN40C_LIDAR, _PCN, _DEPTH)}
 #: Every value of ``generate --protocol``.
 PROTOCOL_NAMES = ("paper", *PROTOCOLS)
 
