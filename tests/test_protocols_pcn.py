@@ -59,6 +59,8 @@ def test_mesh_is_y_up_with_unit_diagonal():
     assert np.isclose(np.linalg.norm(hi - lo), 1.0) and np.allclose(lo + hi, 0, atol=1e-12)
     ext = m.vertices.max(0) - m.vertices.min(0)
     assert np.allclose((hi - lo) * np.linalg.norm(ext), ext[[0, 2, 1]])  # y extent is the old z extent
+    # z up becomes y up (not down), x stays: (x, y, z) → (x, z, −y)
+    assert np.argmax(p.vertices[:, 1]) == np.argmax(m.vertices[:, 2]) and np.argmax(p.vertices[:, 0]) == np.argmax(m.vertices[:, 0])
     with pytest.raises(InvalidInputError, match="'x'"):
         pcn.pcn_mesh(m, "x")
 
