@@ -28,6 +28,13 @@ def test_pcn_from_the_cli(tmp_path):
     assert len(list((tmp_path / "shards").glob("pcn_*.h5"))) == 1
 
 
+def _exit_status(argv):
+    try:
+        return main(argv)
+    except SystemExit as exc:  # argparse's own errors (choices)
+        return exc.code
+
+
 @pytest.mark.parametrize(
     "argv,named",
     [
@@ -39,13 +46,6 @@ def test_pcn_from_the_cli(tmp_path):
         (["--protocol", "depth", "--downsample", "knn"], "'knn'"),
     ],
 )
-def _exit_status(argv):
-    try:
-        return main(argv)
-    except SystemExit as exc:  # argparse's own errors (choices)
-        return exc.code
-
-
 def test_bad_protocol_options_exit_2_naming_the_value(tmp_path, capsys, argv, named):
     assert _exit_status(["generate", CHAIR, "--out", str(tmp_path / "o"), *argv]) == 2
     err = capsys.readouterr().err.strip().splitlines()[-1]
