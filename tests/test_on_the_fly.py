@@ -137,3 +137,20 @@ def test_pyg_transform():
     assert not torch.equal(t(data).pos, out.pos)
     with pytest.raises(InvalidInputError, match="mesh Data"):
         t(Data(pos=torch.zeros(4, 3)))
+
+
+def test_epoch_sampler_carries_the_epoch_to_persistent_workers():
+    from zbuf_occlude.learn import EpochSampler
+
+    ds = OnTheFlyOccludedDataset(SAMPLES, n_points=128, dense_points=2048, seed=4)
+    sampler = EpochSampler(ds)
+    loader = torch.utils.data.DataLoader(ds, batch_size=4, sampler=sampler, num_workers=2, persistent_workers=True)
+    epochs = []
+    for epoch in (0, 1):
+        sampler.set_epoch(epoch)
+        epochs.append(torch.cat([x for x, _ in loader]).numpy())
+        ds.set_epoch(epoch)
+        assert np.array_equal(epochs[-1], np.stack([ds.sample(i)["points"] for i in range(len(ds))]))
+    assert not np.array_equal(epochs[0], epochs[1])
+    shuffled = EpochSampler(ds, shuffle=True, seed=1)
+    assert sorted(i for _, i in shuffled) == list(range(len(ds))) and list(shuffled) == list(EpochSampler(ds, shuffle=True, seed=1))

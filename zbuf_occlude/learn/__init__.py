@@ -15,9 +15,9 @@ package never imports it.  Modules:
 
 from __future__ import annotations
 
-__all__ = ["require_torch", "RandomOcclusion", "OnTheFlyOccludedDataset", "PoseDistribution"]
+__all__ = ["require_torch", "RandomOcclusion", "OnTheFlyOccludedDataset", "PoseDistribution", "EpochSampler"]
 
-_LAZY = {"RandomOcclusion": "on_the_fly", "OnTheFlyOccludedDataset": "on_the_fly", "PoseDistribution": "on_the_fly"}
+_LAZY = {name: "on_the_fly" for name in ("RandomOcclusion", "OnTheFlyOccludedDataset", "PoseDistribution", "EpochSampler")}
 
 
 def __getattr__(name: str):

@@ -12,10 +12,13 @@ splits ``generate`` and the farm give them and the farm's dense clouds
 Determinism: sample ``index`` of epoch ``epoch`` uses the generator ``(seed, 3, epoch, index)``
 (:func:`zbuf_occlude.occlude.derive_rng`), whatever the worker, the order or the batch size.
 
-DataLoader workers: meshes, dense clouds and visibility sessions are cached per process (an
-entry made before a ``fork`` is never used after it), and the default method runs on the CPU
-(Embree), so workers need no GL context.  ``set_epoch`` is read when workers start: use
-``persistent_workers=False`` (the default) or the epoch stays the one the workers started with.
+DataLoader workers: visibility sessions (Embree scenes, GL objects) are cached per process (an
+entry made before a ``fork`` is never used after it); meshes and dense clouds are plain numpy
+and are inherited.  The default method runs on the CPU (Embree), so workers need no GL
+context.  The epoch reaches the workers in one of two ways: :class:`EpochSampler` sends
+``(epoch, index)`` with every index (works with ``persistent_workers=True``, which keeps the
+caches warm across epochs), or ``set_epoch`` on the data set before each epoch, which
+workers read when they start (``persistent_workers=False``, the default).
 """
 
 from __future__ import annotations
@@ -40,7 +43,7 @@ from ..visibility.registry import method_info, visible_mask
 from . import require_torch
 from .data import normalize_batch
 
-__all__ = ["PoseDistribution", "RandomOcclusion", "OnTheFlyOccludedDataset", "ProcessCache", "DEFAULT_ON_THE_FLY_METHOD", "DEFAULT_DENSE_ON_THE_FLY"]
+__all__ = ["PoseDistribution", "RandomOcclusion", "OnTheFlyOccludedDataset", "EpochSampler", "ProcessCache", "DEFAULT_ON_THE_FLY_METHOD", "DEFAULT_DENSE_ON_THE_FLY"]
 
 #: The CPU method: exact, threaded Embree, no GL context to carry into forked workers.
 DEFAULT_ON_THE_FLY_METHOD = "embree-fast"
@@ -110,14 +113,14 @@ class PoseDistribution:
 
 
 class ProcessCache(OrderedDict):
-    """A small LRU cache that forgets everything made in another process (after a fork)."""
+    """A small LRU cache; with ``per_process`` it forgets what was made in another process (after a fork)."""
 
-    def __init__(self, size: int):
+    def __init__(self, size: int, *, per_process: bool = True):
         super().__init__()
-        self.size, self.pid = size, os.getpid()
+        self.size, self.pid, self.per_process = size, os.getpid(), per_process
 
     def get_or_build(self, key, build):
-        if self.pid != os.getpid():  # inherited across fork: Embree/GL state of the parent
+        if self.per_process and self.pid != os.getpid():  # inherited across fork: Embree/GL state of the parent
             self.clear()
             self.pid = os.getpid()
         if key in self:
@@ -172,7 +175,7 @@ class RandomOcclusion:
         session = self._sessions.get_or_build(key, lambda: session_of(mesh, dense.points, dense.face_index))
         return session.visible(camera)
 
-    def __call__(self, mesh: trimesh.Trimesh, dense: DenseCloud, index: int, *, key: object = None) -> dict:
+    def __call__(self, mesh: trimesh.Trimesh, dense: DenseCloud, index: int, *, key: object = None, epoch: int | None = None) -> dict:
         """The occluded sample ``index`` of the current epoch.
 
         Parameters
@@ -185,6 +188,8 @@ class RandomOcclusion:
             The sample's index in its data set (with ``seed`` and the epoch, its generator).
         key : hashable, optional
             Identifies ``(mesh, dense)`` for the per-process session cache (default: ``id``s).
+        epoch : int, optional
+            Default: the one of :meth:`set_epoch`.
 
         Returns
         -------
@@ -193,7 +198,7 @@ class RandomOcclusion:
             ``elevation_deg``, ``azimuth_deg`` (float), ``n_visible`` (int; 0: nothing
             visible, the sample is then all zeros).
         """
-        rng = derive_rng(self.seed, _ON_THE_FLY_STREAM, self.epoch, int(index))
+        rng = derive_rng(self.seed, _ON_THE_FLY_STREAM, self.epoch if epoch is None else int(epoch), int(index))
         el, az = self.poses.draw(rng)
         camera = camera_on_sphere(el, az, self.poses.radius, resolution=_RESOLUTION)
         visible = self._visible(key if key is not None else (id(mesh), id(dense)), mesh, dense, camera)
@@ -207,12 +212,7 @@ class RandomOcclusion:
         return {"points": points, "face_index": face, "elevation_deg": el, "azimuth_deg": az, "n_visible": n_visible}
 
 
-def _dataset_base():
-    torch = require_torch()
-    return torch.utils.data.Dataset
-
-
-class OnTheFlyOccludedDataset(_dataset_base()):
+class OnTheFlyOccludedDataset(require_torch().utils.data.Dataset):
     """Meshes in, a new occluded view of each per epoch out (a ``torch.utils.data.Dataset``).
 
     Parameters
@@ -255,7 +255,7 @@ class OnTheFlyOccludedDataset(_dataset_base()):
             raise InvalidInputError(f"need views_per_object >= 1 and dense_points >= 1, got {views_per_object}, {dense_points}")
         self.views_per_object, self.dense_points, self.seed = int(views_per_object), int(dense_points), int(seed)
         self.occlusion = RandomOcclusion(n_points, poses=poses, seed=seed, method=method, normalize=normalize)
-        self._objects_cache = ProcessCache(_CACHE_SIZE)
+        self._objects_cache = ProcessCache(_CACHE_SIZE, per_process=False)  # numpy only: safe across fork
 
     def __len__(self) -> int:
         return len(self.objects) * self.views_per_object
@@ -276,21 +276,44 @@ class OnTheFlyOccludedDataset(_dataset_base()):
 
         return self._objects_cache.get_or_build(obj.index, build)
 
-    def sample(self, index: int) -> dict:
-        """Sample ``index`` of the current epoch: :class:`RandomOcclusion`'s dict plus ``label``, ``name``."""
+    def sample(self, index: int, epoch: int | None = None) -> dict:
+        """Sample ``index`` of ``epoch`` (default: :meth:`set_epoch`'s): :class:`RandomOcclusion`'s dict plus ``label``, ``name``."""
         if not 0 <= index < len(self):
             raise IndexError(f"index {index} out of range for {len(self)} samples")
         obj = self.objects[index // self.views_per_object]
         mesh, dense = self._object(obj)
-        out = self.occlusion(mesh, dense, index, key=obj.index)
+        out = self.occlusion(mesh, dense, index, key=obj.index, epoch=epoch)
         out.update(label=obj.label, name=obj.name)
         return out
 
-    def __getitem__(self, index: int):
+    def __getitem__(self, index: int | tuple[int, int]):
+        """``(points, label)`` of ``index``, or of ``(epoch, index)`` (:class:`EpochSampler`)."""
         torch = require_torch()
-        s = self.sample(int(index))
+        epoch, index = index if isinstance(index, tuple) else (None, index)
+        s = self.sample(int(index), epoch)
         return torch.from_numpy(s["points"]), s["label"]
 
     def __repr__(self) -> str:
         return f"OnTheFlyOccludedDataset({len(self.objects)} objects, {len(self)} samples/epoch, {self.occlusion.method})"
 
+
+
+class EpochSampler(require_torch().utils.data.Sampler):
+    """Indices ``(epoch, i)`` for :class:`OnTheFlyOccludedDataset`: the epoch travels with each index.
+
+    Call :meth:`set_epoch` before each epoch (in the main process); works with persistent
+    workers.  ``shuffle``: a permutation drawn from ``(seed, epoch)``.
+    """
+
+    def __init__(self, data_source, *, shuffle: bool = False, seed: int = 0):
+        self.n, self.shuffle, self.seed, self.epoch = len(data_source), shuffle, int(seed), 0
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = int(epoch)
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __iter__(self):
+        order = derive_rng(self.seed, _ON_THE_FLY_STREAM, self.epoch).permutation(self.n) if self.shuffle else range(self.n)
+        return iter([(self.epoch, int(i)) for i in order])
