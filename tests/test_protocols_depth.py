@@ -139,3 +139,17 @@ def test_depth_protocol_rejects_bad_options(tmp_path):
         run_protocol(get_protocol("depth"), [CHAIR], tmp_path, ProtocolOptions(downsample="nearest"), progress=False)
     with pytest.raises(InvalidInputError, match="'bogus'"):
         get_protocol("bogus")
+
+
+def test_empty_views_give_zero_clouds_and_all_empty_is_an_error(chair):
+    from zbuf_occlude.protocols.depth_views import depth_views
+
+    seen = PinholeView.from_camera(camera_on_sphere(10.0, 20.0, 3.0, resolution=32))
+    # the same camera turned around (180° about its y axis): it looks away from the object
+    flip = np.diag([-1.0, 1.0, -1.0])
+    away = PinholeView(seen.K, np.column_stack([flip @ seen.extrinsics[:, :3], flip @ seen.extrinsics[:, 3]]), 32, 32)
+    out = depth_views(chair, [seen, away], n_points=64, rng=np.random.default_rng(0))
+    assert out["n_visible"][0] > 0 and out["n_visible"][1] == 0
+    assert not out["data"][1].any() and out["data"].shape == (2, 64, 3)
+    with pytest.raises(InvalidInputError, match="outside every view"):
+        depth_views(chair, [away], n_points=64, rng=np.random.default_rng(0))

@@ -64,10 +64,11 @@ def depth_views(
         points, cam, pixels = back_project(image.depth, view.K, view.extrinsics)
         face = image.face_index[pixels[:, 1], pixels[:, 0]]
         chosen = downsample(points, n_points, rng, downsampler)
-        if len(chosen) == 0:
-            chosen = np.zeros(0, dtype=np.int64)
         pad = n_points - len(chosen)  # an empty view gives a zero cloud with n_visible 0
-        take = lambda a: np.concatenate([a[chosen], np.zeros((pad, *a.shape[1:]), a.dtype)]) if pad else a[chosen]  # noqa: E731
+
+        def take(a: np.ndarray, chosen=chosen, pad=pad) -> np.ndarray:
+            return np.concatenate([a[chosen], np.zeros((pad, *a.shape[1:]), a.dtype)]) if pad else a[chosen]
+
         out["depth"].append(image.depth)
         out["K"].append(view.K)
         out["extrinsics"].append(view.extrinsics)
