@@ -132,6 +132,11 @@ def test_depth_protocol_shard(tmp_path, chair):
     assert run_protocol(get_protocol("depth"), [CHAIR], tmp_path, opts, progress=False).resumed == 1
     with pytest.raises(InvalidInputError, match="other options"):
         run_protocol(get_protocol("depth"), [CHAIR], tmp_path, ProtocolOptions(resolution=32), progress=False)
+    # other meshes would resume from the chair's shard 0: refused too
+    with pytest.raises(InvalidInputError, match="other options or meshes"):
+        run_protocol(get_protocol("depth"), [SAMPLES / "stool"], tmp_path, opts, progress=False)
+    run = run_protocol(get_protocol("depth"), [SAMPLES / "stool"], tmp_path, opts, progress=False, overwrite=True)
+    assert run.done == 1 and run.resumed == 0 and "stool" in read_arrays_h5(shard)["source"][0]
 
 
 def test_depth_protocol_rejects_bad_options(tmp_path):

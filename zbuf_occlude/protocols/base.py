@@ -5,8 +5,8 @@ optional ``finish`` that assembles the shards into the recipe's own layout.  The
 discovers the meshes as ``generate`` does (:func:`zbuf_occlude.farm.generate.scan_paths`:
 same names, labels and splits), writes ``OUT/shards/<protocol>_<index>.h5`` atomically
 (:func:`zbuf_occlude.io.atomic_h5`), and resumes: a shard that exists is not redone.  The
-options are recorded in ``OUT/protocol.json``; a rerun with other options is refused unless
-``overwrite``.
+options are recorded in ``OUT/protocol.json`` with the meshes; a rerun with other options or meshes is
+refused unless ``overwrite``.
 """
 
 from __future__ import annotations
@@ -152,9 +152,11 @@ def _shard(out: Path, protocol: str, index: int) -> Path:
     return out / SHARDS_DIR / f"{protocol}_{index:06d}.h5"
 
 
-def _record_options(out: Path, protocol: Protocol, options: ProtocolOptions, overwrite: bool) -> None:
+def _record_options(out: Path, protocol: Protocol, options: ProtocolOptions, objects: Sequence[FarmObject], overwrite: bool) -> None:
     recorded = {"protocol": protocol.name, **asdict(options)}
     recorded["extra"] = dict(options.extra)
+    # shards are named by plan index: another set of meshes must not resume from them
+    recorded["objects"] = [[o.name, o.source] for o in objects]
     path = out / _OPTIONS_FILE
     if path.exists() and not overwrite:
         try:
@@ -162,7 +164,7 @@ def _record_options(out: Path, protocol: Protocol, options: ProtocolOptions, ove
         except (OSError, ValueError):
             old = None
         if old != json.loads(json.dumps(recorded)):
-            raise InvalidInputError(f"{out} holds a run with other options ({path}); use --overwrite or another --out")
+            raise InvalidInputError(f"{out} holds a run with other options or meshes ({path}); use --overwrite or another --out")
     if overwrite and (out / SHARDS_DIR).is_dir():
         for old_shard in (out / SHARDS_DIR).glob("*.h5"):  # only our own shard files, never anything else
             old_shard.unlink()
@@ -187,7 +189,7 @@ def run_protocol(
     Raises
     ------
     InvalidInputError
-        A bad option (``protocol.check``), bad paths, or ``out`` holds other options.
+        A bad option (``protocol.check``), bad paths, or ``out`` holds other options or meshes.
     OutputError
         ``out`` cannot be written.
     """
@@ -197,7 +199,7 @@ def run_protocol(
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise InvalidInputError(f"--out {out} exists and is not a folder")
-    _record_options(out, protocol, options, overwrite)
+    _record_options(out, protocol, options, objects, overwrite)
     run = ProtocolRun(failures=[(s.path, s.reason) for s in skipped])
     shards: list[Path] = []
     from tqdm import tqdm
