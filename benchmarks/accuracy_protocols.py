@@ -26,7 +26,7 @@ import numpy as np
 import trimesh
 
 import zbuf_occlude as zo
-from zbuf_occlude.protocols import PinholeView, back_project, render_depth_image
+from zbuf_occlude.protocols import PinholeView, render_depth_image
 from zbuf_occlude.protocols import modelnet40c as mc
 from zbuf_occlude.protocols import pcn
 

@@ -297,7 +297,6 @@ class OnTheFlyOccludedDataset(require_torch().utils.data.Dataset):
         return f"OnTheFlyOccludedDataset({len(self.objects)} objects, {len(self)} samples/epoch, {self.occlusion.method})"
 
 
-
 class EpochSampler(require_torch().utils.data.Sampler):
     """Indices ``(epoch, i)`` for :class:`OnTheFlyOccludedDataset`: the epoch travels with each index.
 
