@@ -31,7 +31,7 @@ LAYERS: dict[str, int] = {
     # writers and readers, and the on-disk layout they share
     "io": 7, "dataset": 7, "layout": 7, "real_scans": 7, "schema": 7, "verify": 7, "sample_files": 7,
     # engines on top of one object's pipeline
-    "farm": 8, "compare": 8, "elevation_profile": 8, "sensors": 8,
+    "farm": 8, "compare": 8, "elevation_profile": 8, "sensors": 8, "protocols": 8,
     "learn": 9,
     "cli": 9, "__main__": 9,
     "__init__": 10,  # the public API re-exports everything

@@ -61,6 +61,12 @@ def cmd_generate(args: argparse.Namespace) -> int:
     from .farm.checks import check_out_option
     from .farm.generate import generate
 
+    if args.protocol != "paper":  # the field's recipes (zbuf_occlude.protocols) have their own writers
+        from .protocols.cli import run_protocol_command
+
+        return run_protocol_command(args, _default_paths(args.paths))
+    if args.severity is not None:
+        raise InvalidInputError(f"--severity {args.severity} needs --protocol modelnet40-c-occlusion or modelnet40-c-lidar")
     params = FarmParams(
         views=args.views, samples_per_view=args.samples_per_view, n_points=args.points, dense_points=args.dense_points,
         resolution=args.resolution, seed=args.seed, radius=args.radius, storage=args.format, method=args.method,
@@ -231,6 +237,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--method", help=f"visibility method (see `zbuf-occlude info`) (default: {gd.method})")
     g.add_argument("--class-from", type=int, metavar="N", help=CLASS_FROM_HELP)
     g.add_argument("--overwrite", action="store_true", help="start over (needed to change options in an existing --out)")
+    from .protocols.cli import add_protocol_arguments
+
+    add_protocol_arguments(g)
     g.set_defaults(
         func=cmd_generate, views=gd.views, points=gd.n_points, resolution=gd.resolution,
         samples_per_view=gd.samples_per_view, dense_points=gd.dense_points, format=gd.storage, method=gd.method,

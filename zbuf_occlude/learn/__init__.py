@@ -9,11 +9,24 @@ package never imports it.  Modules:
 ``metrics``      overall / mean class / per-class accuracy, confusion, per elevation (numpy)
 ``experiments``  the Table 3A (elevation) and Table 3B (augmentation) protocols
 ``cli``          ``zbuf-occlude experiment elevation|augmentation``
+``on_the_fly``   occlusion as a training-time transform: ``RandomOcclusion``, ``OnTheFlyOccludedDataset``
+``pyg``          the same as a PyTorch Geometric transform (``pip install 'zbuf-occlude[pyg]'``)
 """
 
 from __future__ import annotations
 
-__all__ = ["require_torch"]
+__all__ = ["require_torch", "RandomOcclusion", "OnTheFlyOccludedDataset", "PoseDistribution", "EpochSampler"]
+
+_LAZY = {name: "on_the_fly" for name in ("RandomOcclusion", "OnTheFlyOccludedDataset", "PoseDistribution", "EpochSampler")}
+
+
+def __getattr__(name: str):
+    # imported on first use: ``import zbuf_occlude.learn`` (the CLI does) must not import torch
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def require_torch():

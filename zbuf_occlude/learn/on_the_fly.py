@@ -1,0 +1,318 @@
+"""Occlusion on the fly: a new random view of every object in every epoch, nothing stored.
+
+:class:`RandomOcclusion` turns an object's dense cloud (with ``face_index``) and its mesh into
+one occluded sample: a camera pose is drawn from a :class:`PoseDistribution`, hidden surface
+removal keeps the visible points (:func:`zbuf_occlude.visibility.registry.visible_mask`'s
+session of the method, CPU ``embree-fast`` by default), and ``n_points`` of them are drawn
+(:func:`zbuf_occlude.occlude.draw_sample`: every visible point once before any repeat).
+:class:`OnTheFlyOccludedDataset` does this for the meshes under a folder, with the labels and
+splits ``generate`` and the farm give them and the farm's dense clouds
+(:func:`zbuf_occlude.occlude.dense_cloud`, same seed, same points).
+
+Determinism: sample ``index`` of epoch ``epoch`` uses the generator ``(seed, 3, epoch, index)``
+(:func:`zbuf_occlude.occlude.derive_rng`), whatever the worker, the order or the batch size.
+
+DataLoader workers: visibility sessions (Embree scenes, GL objects) are cached per process (an
+entry made before a ``fork`` is never used after it); meshes and dense clouds are plain numpy
+and are inherited.  The default method runs on the CPU (Embree), so workers need no GL
+context.  The epoch reaches the workers in one of two ways: :class:`EpochSampler` sends
+``(epoch, index)`` with every index (works with ``persistent_workers=True``, which keeps the
+caches warm across epochs), or ``set_epoch`` on the data set before each epoch, which
+workers read when they start (``persistent_workers=False``, the default).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections import OrderedDict
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+from numpy.typing import NDArray
+
+from ..cameras import DEFAULT_RADIUS, camera_on_sphere
+from ..errors import InvalidInputError
+from ..farm.generate import scan_paths
+from ..farm.inputs import FarmObject
+from ..mesh import load_mesh
+from ..occlude import DenseCloud, dense_cloud, derive_rng, draw_sample
+from ..visibility.registry import method_info, visible_mask
+from . import require_torch
+from .data import normalize_batch
+
+__all__ = ["PoseDistribution", "RandomOcclusion", "OnTheFlyOccludedDataset", "EpochSampler", "ProcessCache", "DEFAULT_ON_THE_FLY_METHOD", "DEFAULT_DENSE_ON_THE_FLY"]
+
+#: The CPU method: exact, threaded Embree, no GL context to carry into forked workers.
+DEFAULT_ON_THE_FLY_METHOD = "embree-fast"
+#: Dense points per object, sampled once per worker (32,768 = 16 × a 2,048-point sample).
+DEFAULT_DENSE_ON_THE_FLY = 32_768
+#: Image resolution passed to image-space methods, pixels (embree-fast ignores it).
+_RESOLUTION = 512
+_ON_THE_FLY_STREAM = 3  # occlude.py uses streams 0 and 1, the protocols 2
+_CACHE_SIZE = 64  # objects per process: meshes, dense clouds and sessions
+
+
+@dataclass(frozen=True)
+class PoseDistribution:
+    """Where the random camera is: on a sphere band around the object, looking at its centre.
+
+    Attributes
+    ----------
+    elevation_deg : (low, high)
+        Degrees, within [−90, 90].
+    azimuth_deg : (low, high)
+        Degrees.
+    radius : float
+        Object units (the mesh normalised to maximum extent 1).
+    uniform_area : bool
+        True: directions uniform in area on the band (``sin(el)`` uniform); False: the
+        elevation angle itself uniform (as ModelNet40-C draws it).
+
+    Raises
+    ------
+    InvalidInputError
+        Bounds out of order or out of range, or a radius inside the object's bounding sphere.
+    """
+
+    elevation_deg: tuple[float, float] = (-90.0, 90.0)
+    azimuth_deg: tuple[float, float] = (0.0, 360.0)
+    radius: float = DEFAULT_RADIUS
+    uniform_area: bool = True
+
+    def __post_init__(self) -> None:
+        (el0, el1), (az0, az1) = self.elevation_deg, self.azimuth_deg
+        if not (-90.0 <= el0 <= el1 <= 90.0) or not (az0 <= az1) or not all(map(math.isfinite, (az0, az1, self.radius))):
+            raise InvalidInputError(f"bad pose distribution: elevation {self.elevation_deg}, azimuth {self.azimuth_deg}, radius {self.radius}")
+        camera_on_sphere(0.0, 0.0, self.radius, resolution=8)  # raises CameraError for a radius inside the object
+
+    @classmethod
+    def modelnet40c(cls, severity: int) -> PoseDistribution:
+        """ModelNet40-C's occlusion cameras (:func:`zbuf_occlude.protocols.modelnet40c.occlusion_pose`).
+
+        Their ``angle_x ~ U[2π/3, 5π/6]`` and ``angle_z ~ U[θ ± π/5]``, ``θ = 2π·severity/5``, put
+        the camera at elevation ``angle_x − 90°`` ∈ [30°, 60°] and azimuth ``angle_z + 90°``,
+        3 units from an object of maximum extent 2: radius 1.5 here (maximum extent 1).
+        """
+        if not 1 <= int(severity) <= 5:
+            raise InvalidInputError(f"ModelNet40-C severity must be 1..5, got {severity!r}")
+        theta = 72.0 * int(severity)
+        return cls((30.0, 60.0), (theta + 90.0 - 36.0, theta + 90.0 + 36.0), 1.5, uniform_area=False)
+
+    def draw(self, rng: np.random.Generator) -> tuple[float, float]:
+        """One ``(elevation_deg, azimuth_deg)``."""
+        (el0, el1), (az0, az1) = self.elevation_deg, self.azimuth_deg
+        if self.uniform_area:
+            s = rng.uniform(math.sin(math.radians(el0)), math.sin(math.radians(el1)))
+            el = math.degrees(math.asin(min(1.0, max(-1.0, s))))
+        else:
+            el = rng.uniform(el0, el1)
+        return float(el), float(rng.uniform(az0, az1))
+
+
+class ProcessCache(OrderedDict):
+    """A small LRU cache; with ``per_process`` it forgets what was made in another process (after a fork)."""
+
+    def __init__(self, size: int, *, per_process: bool = True):
+        super().__init__()
+        self.size, self.pid, self.per_process = size, os.getpid(), per_process
+
+    def get_or_build(self, key, build):
+        if self.per_process and self.pid != os.getpid():  # inherited across fork: Embree/GL state of the parent
+            self.clear()
+            self.pid = os.getpid()
+        if key in self:
+            self.move_to_end(key)
+            return self[key]
+        value = self[key] = build()
+        while len(self) > self.size:
+            _, old = self.popitem(last=False)
+            if hasattr(old, "release"):
+                old.release()
+        return value
+
+
+class RandomOcclusion:
+    """One random occluded view of an object, as a transform.
+
+    Parameters
+    ----------
+    n_points : int
+        Points per sample.
+    poses : PoseDistribution
+    seed : int
+    method : str
+        Visibility method (default :data:`DEFAULT_ON_THE_FLY_METHOD`, CPU, exact).
+    normalize : bool
+        Centre each sample's bounding box and scale it to maximum extent 1, as the learn
+        extra's training data (:func:`zbuf_occlude.learn.data.normalize_batch`).
+
+    Raises
+    ------
+    InvalidInputError
+        ``n_points < 1`` or an unknown method.
+    """
+
+    def __init__(self, n_points: int = 2048, *, poses: PoseDistribution = PoseDistribution(), seed: int = 0,
+                 method: str = DEFAULT_ON_THE_FLY_METHOD, normalize: bool = True):  # fmt: skip
+        if int(n_points) < 1:
+            raise InvalidInputError(f"n_points must be >= 1, got {n_points}")
+        self.n_points, self.poses, self.seed, self.normalize = int(n_points), poses, int(seed), normalize
+        self.method = method_info(method).name
+        self.epoch = 0
+        self._sessions = ProcessCache(_CACHE_SIZE)
+
+    def set_epoch(self, epoch: int) -> None:
+        """The epoch whose views the next calls draw (read by workers when they start)."""
+        self.epoch = int(epoch)
+
+    def _visible(self, key, mesh: trimesh.Trimesh, dense: DenseCloud, camera) -> NDArray[np.bool_]:
+        session_of = method_info(self.method).session
+        if session_of is None:
+            return visible_mask(mesh, dense.points, camera, self.method, face_index=dense.face_index, resolution=_RESOLUTION)
+        session = self._sessions.get_or_build(key, lambda: session_of(mesh, dense.points, dense.face_index))
+        return session.visible(camera)
+
+    def __call__(self, mesh: trimesh.Trimesh, dense: DenseCloud, index: int, *, key: object = None, epoch: int | None = None) -> dict:
+        """The occluded sample ``index`` of the current epoch.
+
+        Parameters
+        ----------
+        mesh : trimesh.Trimesh
+            Normalised (maximum extent 1), world frame.
+        dense : DenseCloud
+            Points on ``mesh`` and their ``face_index``.
+        index : int
+            The sample's index in its data set (with ``seed`` and the epoch, its generator).
+        key : hashable, optional
+            Identifies ``(mesh, dense)`` for the per-process session cache (default: ``id``s).
+        epoch : int, optional
+            Default: the one of :meth:`set_epoch`.
+
+        Returns
+        -------
+        dict
+            ``points (n_points, 3) float32``, ``face_index (n_points,) int64``,
+            ``elevation_deg``, ``azimuth_deg`` (float), ``n_visible`` (int; 0: nothing
+            visible, the sample is then all zeros).
+        """
+        rng = derive_rng(self.seed, _ON_THE_FLY_STREAM, self.epoch if epoch is None else int(epoch), int(index))
+        el, az = self.poses.draw(rng)
+        camera = camera_on_sphere(el, az, self.poses.radius, resolution=_RESOLUTION)
+        visible = self._visible(key if key is not None else (id(mesh), id(dense)), mesh, dense, camera)
+        chosen, n_visible = draw_sample(np.flatnonzero(visible), self.n_points, rng)
+        if n_visible == 0:
+            points, face = np.zeros((self.n_points, 3), np.float32), np.full(self.n_points, -1, np.int64)
+        else:
+            points, face = dense.points[chosen].astype(np.float32), dense.face_index[chosen]
+            if self.normalize:
+                points = normalize_batch(points[None])[0]
+        return {"points": points, "face_index": face, "elevation_deg": el, "azimuth_deg": az, "n_visible": n_visible}
+
+
+class OnTheFlyOccludedDataset(require_torch().utils.data.Dataset):
+    """Meshes in, a new occluded view of each per epoch out (a ``torch.utils.data.Dataset``).
+
+    Parameters
+    ----------
+    mesh_root : path or sequence of paths
+        Mesh files and folders, found, named, labelled and split as ``generate`` and the
+        farm do (:func:`zbuf_occlude.farm.generate.scan_paths`).
+    split : str, optional
+        Keep the objects of this split (``train``/``test`` from ModelNet's layout).
+    n_points, poses, seed, method, normalize
+        As :class:`RandomOcclusion`.
+    dense_points : int
+        Dense cloud per object (:func:`zbuf_occlude.occlude.dense_cloud`, the farm's seed
+        stream, so the same points the farm would use with ``--seed``).
+    views_per_object : int
+        Samples per object and epoch (the data set's length is objects × this).
+
+    ``dataset[i]`` is ``(points, label)``: ``(n_points, 3)`` float32 tensor, int.
+    :meth:`sample` gives the full dict of :class:`RandomOcclusion` plus ``label``, ``name``.
+
+    Raises
+    ------
+    InvalidInputError
+        Nothing found, or no object in ``split``.
+    """
+
+    def __init__(self, mesh_root: str | os.PathLike | Sequence[str | os.PathLike], *, split: str | None = None,
+                 n_points: int = 2048, poses: PoseDistribution = PoseDistribution(), seed: int = 0,
+                 method: str = DEFAULT_ON_THE_FLY_METHOD, normalize: bool = True,
+                 dense_points: int = DEFAULT_DENSE_ON_THE_FLY, views_per_object: int = 1):  # fmt: skip
+        roots = [mesh_root] if isinstance(mesh_root, (str, os.PathLike)) else list(mesh_root)
+        objects, _ = scan_paths(roots)
+        names = {o.label: o.class_name for o in objects}
+        #: Class names by label (``shape_names.txt`` of the farm).
+        self.shape_names = [names[i] for i in sorted(names)]
+        self.objects: list[FarmObject] = [o for o in objects if split is None or o.split == split]
+        if not self.objects:
+            raise InvalidInputError(f"no meshes of split {split!r} under {', '.join(map(str, roots))}")
+        if int(views_per_object) < 1 or int(dense_points) < 1:
+            raise InvalidInputError(f"need views_per_object >= 1 and dense_points >= 1, got {views_per_object}, {dense_points}")
+        self.views_per_object, self.dense_points, self.seed = int(views_per_object), int(dense_points), int(seed)
+        self.occlusion = RandomOcclusion(n_points, poses=poses, seed=seed, method=method, normalize=normalize)
+        self._objects_cache = ProcessCache(_CACHE_SIZE, per_process=False)  # numpy only: safe across fork
+
+    def __len__(self) -> int:
+        return len(self.objects) * self.views_per_object
+
+    def set_epoch(self, epoch: int) -> None:
+        """Draw the views of ``epoch`` (call before each epoch's DataLoader iteration)."""
+        self.occlusion.set_epoch(epoch)
+
+    @property
+    def labels(self) -> NDArray[np.int64]:
+        """(len,) int64: the label of every index."""
+        return np.repeat([o.label for o in self.objects], self.views_per_object).astype(np.int64)
+
+    def _object(self, obj: FarmObject) -> tuple[trimesh.Trimesh, DenseCloud]:
+        def build():
+            mesh = load_mesh(obj.source)
+            return mesh, dense_cloud(mesh, obj.key, seed=self.seed, count=self.dense_points)
+
+        return self._objects_cache.get_or_build(obj.index, build)
+
+    def sample(self, index: int, epoch: int | None = None) -> dict:
+        """Sample ``index`` of ``epoch`` (default: :meth:`set_epoch`'s): :class:`RandomOcclusion`'s dict plus ``label``, ``name``."""
+        if not 0 <= index < len(self):
+            raise IndexError(f"index {index} out of range for {len(self)} samples")
+        obj = self.objects[index // self.views_per_object]
+        mesh, dense = self._object(obj)
+        out = self.occlusion(mesh, dense, index, key=obj.index, epoch=epoch)
+        out.update(label=obj.label, name=obj.name)
+        return out
+
+    def __getitem__(self, index: int | tuple[int, int]):
+        """``(points, label)`` of ``index``, or of ``(epoch, index)`` (:class:`EpochSampler`)."""
+        torch = require_torch()
+        epoch, index = index if isinstance(index, tuple) else (None, index)
+        s = self.sample(int(index), epoch)
+        return torch.from_numpy(s["points"]), s["label"]
+
+    def __repr__(self) -> str:
+        return f"OnTheFlyOccludedDataset({len(self.objects)} objects, {len(self)} samples/epoch, {self.occlusion.method})"
+
+
+class EpochSampler(require_torch().utils.data.Sampler):
+    """Indices ``(epoch, i)`` for :class:`OnTheFlyOccludedDataset`: the epoch travels with each index.
+
+    Call :meth:`set_epoch` before each epoch (in the main process); works with persistent
+    workers.  ``shuffle``: a permutation drawn from ``(seed, epoch)``.
+    """
+
+    def __init__(self, data_source, *, shuffle: bool = False, seed: int = 0):
+        self.n, self.shuffle, self.seed, self.epoch = len(data_source), shuffle, int(seed), 0
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = int(epoch)
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __iter__(self):
+        order = derive_rng(self.seed, _ON_THE_FLY_STREAM, self.epoch).permutation(self.n) if self.shuffle else range(self.n)
+        return iter([(self.epoch, int(i)) for i in order])

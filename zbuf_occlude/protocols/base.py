@@ -1,0 +1,229 @@
+"""The engine every protocol runs on: objects in, one HDF5 shard per object out, then a finish step.
+
+A protocol is a :class:`Protocol`: a function making one object's arrays (``make``) and an
+optional ``finish`` that assembles the shards into the recipe's own layout.  The engine
+discovers the meshes as ``generate`` does (:func:`zbuf_occlude.farm.generate.scan_paths`:
+same names, labels and splits), writes ``OUT/shards/<protocol>_<index>.h5`` atomically
+(:func:`zbuf_occlude.io.atomic_h5`), and resumes: a shard that exists is not redone.  The
+options are recorded in ``OUT/protocol.json`` with the meshes; a rerun with other options or meshes is
+refused unless ``overwrite``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import trimesh
+
+from ..errors import InvalidInputError, OutputError, ZbufOccludeError
+from ..farm.generate import scan_paths
+from ..farm.inputs import FarmObject
+from ..io import atomic_h5, write_text
+from ..mesh import load_mesh
+from ..occlude import derive_rng
+
+__all__ = ["Protocol", "ProtocolOptions", "ProtocolRun", "run_protocol", "write_arrays_h5", "read_arrays_h5", "SHARDS_DIR"]
+
+log = logging.getLogger(__name__)
+
+#: Folder of the per-object shards inside ``--out``.
+SHARDS_DIR = "shards"
+_OPTIONS_FILE = "protocol.json"
+_PROTOCOL_STREAM = 2  # seed stream of the protocols (0 and 1 are occlude.py's dense and draw streams)
+
+
+@dataclass(frozen=True)
+class ProtocolOptions:
+    """Options of a protocol run (each protocol reads the ones it uses and states its defaults).
+
+    Attributes
+    ----------
+    severity : int or None
+        ModelNet40-C's severity, 1..5.
+    seed : int
+        Base seed; each object's generator is ``(seed, object_key(name))``.
+    n_points : int or None
+        Points per cloud (None: the protocol's own).
+    views : str
+        Pose schedule (:func:`zbuf_occlude.cameras.view_schedule`) of the ``depth`` protocol.
+    resolution : int
+        Square image size of the ``depth`` protocol, pixels.
+    radius : float
+        Camera distance of the ``depth`` protocol, object units.
+    downsample : {"random", "fps"}
+        Down-sampling of back-projected clouds (:func:`zbuf_occlude.protocols.depth.downsample`).
+    normals, camera_frame : bool
+        Also write per-point face normals and camera-frame coordinates.
+    complete_points : int
+        Points of the complete cloud written beside the partial ones (0: none).
+    """
+
+    severity: int | None = None
+    seed: int = 0
+    n_points: int | None = None
+    views: str = "grid25"
+    resolution: int = 256
+    radius: float = 4.0
+    downsample: str = "random"
+    normals: bool = False
+    camera_frame: bool = False
+    complete_points: int = 0
+    extra: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """One recipe.
+
+    Attributes
+    ----------
+    name : str
+    summary : str
+        One line for ``--help``.
+    make : callable ``(mesh, obj, options, rng) -> dict[str, ndarray]``
+        One object's arrays (``mesh`` as :func:`zbuf_occlude.load_mesh` gives it).
+    finish : callable ``(out, objects, shards, options) -> list[Path]``, optional
+        Writes the recipe's own files from the shards (in plan order).
+    check : callable ``(options) -> None``, optional
+        Raises InvalidInputError naming a bad option value.
+    """
+
+    name: str
+    summary: str
+    make: Callable[[trimesh.Trimesh, FarmObject, ProtocolOptions, np.random.Generator], dict[str, np.ndarray]]
+    finish: Callable[[Path, list[FarmObject], list[Path], ProtocolOptions], list[Path]] | None = None
+    check: Callable[[ProtocolOptions], None] | None = None
+
+
+@dataclass
+class ProtocolRun:
+    """What :func:`run_protocol` did: shards written or resumed, failures ``(source, message)``, files of ``finish``."""
+
+    done: int = 0
+    resumed: int = 0
+    failures: list[tuple[str, str]] = field(default_factory=list)
+    files: list[Path] = field(default_factory=list)
+
+    @property
+    def exit_status(self) -> int:
+        return 1 if self.failures else 0
+
+
+def write_arrays_h5(path: str | os.PathLike, arrays: Mapping[str, Any], attrs: Mapping[str, Any] | None = None) -> Path:
+    """Write named arrays (strings as UTF-8) to one HDF5 file, atomically (:func:`zbuf_occlude.io.atomic_h5`)."""
+    import h5py
+
+    text = h5py.string_dtype("utf-8")
+    with atomic_h5(path) as f:
+        for key, value in arrays.items():
+            a = np.asarray(value)
+            f.create_dataset(key, data=a, dtype=text if a.dtype.kind in "UO" else None, track_times=False)
+        f.attrs.update(dict(attrs or {}))
+    return Path(path)
+
+
+def read_arrays_h5(path: str | os.PathLike) -> dict[str, Any]:
+    """Every dataset (strings decoded) and attribute of a file of :func:`write_arrays_h5`.
+
+    Raises
+    ------
+    OutputError
+        The file is damaged or not HDF5 (message names it).
+    """
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            out: dict[str, Any] = {k: (d.asstr()[()] if d.dtype.kind == "O" else d[()]) for k, d in f.items()}
+            out["attrs"] = dict(f.attrs)
+    except (OSError, KeyError, ValueError) as exc:
+        raise OutputError(f"cannot read {path}: {exc}") from None
+    return out
+
+
+def _shard(out: Path, protocol: str, index: int) -> Path:
+    return out / SHARDS_DIR / f"{protocol}_{index:06d}.h5"
+
+
+def _record_options(out: Path, protocol: Protocol, options: ProtocolOptions, objects: Sequence[FarmObject], overwrite: bool) -> None:
+    recorded = {"protocol": protocol.name, **asdict(options)}
+    recorded["extra"] = dict(options.extra)
+    # shards are named by plan index: another set of meshes must not resume from them
+    recorded["objects"] = [[o.name, o.source] for o in objects]
+    path = out / _OPTIONS_FILE
+    if path.exists() and not overwrite:
+        try:
+            old = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            old = None
+        if old != json.loads(json.dumps(recorded)):
+            raise InvalidInputError(f"{out} holds a run with other options or meshes ({path}); use --overwrite or another --out")
+    if overwrite and (out / SHARDS_DIR).is_dir():
+        for old_shard in (out / SHARDS_DIR).glob("*.h5"):  # only our own shard files, never anything else
+            old_shard.unlink()
+    write_text(path, json.dumps(recorded, indent=1, sort_keys=True) + "\n")
+
+
+def run_protocol(
+    protocol: Protocol,
+    paths: Sequence[str | os.PathLike],
+    out: str | os.PathLike,
+    options: ProtocolOptions = ProtocolOptions(),
+    *,
+    overwrite: bool = False,
+    progress: bool = True,
+) -> ProtocolRun:
+    """Run ``protocol`` over the meshes under ``paths`` into ``out``.
+
+    Per object: :func:`~zbuf_occlude.load_mesh`, the generator ``(seed, object_key(name), 2)``
+    (:func:`~zbuf_occlude.occlude.derive_rng`), ``protocol.make``, one shard.  A mesh that fails
+    (unreadable, nothing in view) is recorded and skipped (exit status 1); then ``finish``.
+
+    Raises
+    ------
+    InvalidInputError
+        A bad option (``protocol.check``), bad paths, or ``out`` holds other options or meshes.
+    OutputError
+        ``out`` cannot be written.
+    """
+    if protocol.check is not None:
+        protocol.check(options)
+    objects, skipped = scan_paths(paths)
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InvalidInputError(f"--out {out} exists and is not a folder")
+    _record_options(out, protocol, options, objects, overwrite)
+    run = ProtocolRun(failures=[(s.path, s.reason) for s in skipped])
+    shards: list[Path] = []
+    from tqdm import tqdm
+
+    for obj in tqdm(objects, desc=protocol.name, disable=None if progress else True):
+        shard = _shard(out, protocol.name, obj.index)
+        if shard.exists():
+            run.resumed += 1
+            shards.append(shard)
+            continue
+        try:
+            mesh = load_mesh(obj.source)
+            rng = derive_rng(options.seed, obj.key, _PROTOCOL_STREAM)
+            arrays = protocol.make(mesh, obj, options, rng)
+        except ZbufOccludeError as exc:
+            run.failures.append((obj.source, str(exc)))
+            log.warning("%s: %s", obj.source, exc)
+            continue
+        attrs = {"protocol": protocol.name, "name": obj.name, "source": obj.source, "class_name": obj.class_name,
+                 "split": obj.split, "label": obj.label, "object_index": obj.index}  # fmt: skip
+        write_arrays_h5(shard, arrays, attrs)
+        run.done += 1
+        shards.append(shard)
+    if protocol.finish is not None and shards:
+        done = {int(p.stem.rsplit("_", 1)[1]) for p in shards}
+        run.files = protocol.finish(out, [o for o in objects if o.index in done], shards, options)
+    return run
