@@ -230,6 +230,8 @@ class OnTheFlyOccludedDataset(require_torch().utils.data.Dataset):
     views_per_object : int
         Samples per object and epoch (the data set's length is objects × this).
 
+    Notes
+    -----
     ``dataset[i]`` is ``(points, label)``: ``(n_points, 3)`` float32 tensor, int.
     :meth:`sample` gives the full dict of :class:`RandomOcclusion` plus ``label``, ``name``.
 
