@@ -63,7 +63,7 @@ __all__ = [
 
 #: Grid cells per point in the frustum (the resolution follows the point density): more
 #: cells settle more points near face edges, fewer cost less to clear and rasterise.
-CELLS_PER_POINT = 2.0
+CELLS_PER_POINT = 0.25
 #: Bounds on the grid's cell count.
 _MIN_CELLS, _MAX_CELLS = 64 * 64, 4096 * 4096
 #: Each cell is grown by this fraction of its side on every side when a face is
@@ -85,6 +85,12 @@ _DEPTH_MARGIN = 1e-12
 #: camera plane or behind it: projected coordinates blow up there.
 _MIN_DEPTH = 1e-6
 
+#: Faces kept per cell (those of the smallest depth bounds), each tested exactly against a
+#: point of the cell in front of it: more settle points where several faces meet, at 8
+#: bytes a cell each.
+_KEEP = 7
+_COVER = 2 * _KEEP + 1  # the column of the covering faces' bound
+
 #: Point status codes of :func:`classify`.
 HIDDEN, VISIBLE, UNDECIDED = 0, 1, 2
 
@@ -104,15 +110,17 @@ def _to_camera_py(vertices, rt):
 
 def _rasterise_py(cam, faces, grid, ga, gb, row_lo, row_hi, zbuf, ids):
     """Conservative rasterisation (module docstring) of every face into rows
-    ``row_lo:row_hi`` of the buffer: ``zbuf[c, :3]`` float32 bounds, ``ids[c, 3:5]`` int32
-    faces, ``zbuf[c, 5]`` the depth bound of faces covering the whole cell (one (C, 6)
-    record per cell, two views); ``grid = (a0, b0, inv_sa, inv_sb)``."""
+    ``row_lo:row_hi`` of the buffer (:class:`ZBuffer`'s layout: ``zbuf`` and ``ids`` are two
+    views of one record per cell); ``grid = (a0, b0, inv_sa, inv_sb)``."""
     a0, b0, inv_sa, inv_sb = grid[0], grid[1], grid[2], grid[3]
     sa, sb = 1.0 / inv_sa, 1.0 / inv_sb
     grow = _CELL_GROWTH
     for c in range(row_lo * ga, row_hi * ga):
-        zbuf[c, 0] = zbuf[c, 1] = zbuf[c, 2] = zbuf[c, 5] = np.inf
-        ids[c, 3] = ids[c, 4] = -1
+        for s in range(_KEEP + 1):
+            zbuf[c, s] = np.inf
+        for s in range(_KEEP):
+            ids[c, _KEEP + 1 + s] = -1
+        zbuf[c, _COVER] = np.inf
     amax = max(abs(a0), abs(a0 + sa * ga))
     bmax = max(abs(b0), abs(b0 + sb * gb))
     ca = np.empty(3)
@@ -230,8 +238,8 @@ def _rasterise_py(cam, faces, grid, ga, gb, row_lo, row_hi, zbuf, ids):
                     if plane:
                         low = max(low, base_in + g_a * i)
                     zc = np.float32(_ROUND_UP / low)
-                    if zc < zbuf[row + i, 5]:
-                        zbuf[row + i, 5] = zc
+                    if zc < zbuf[row + i, _COVER]:
+                        zbuf[row + i, _COVER] = zc
                 inv = inv_cap
                 if plane:
                     hi = base + g_a * i
@@ -240,18 +248,16 @@ def _rasterise_py(cam, faces, grid, ga, gb, row_lo, row_hi, zbuf, ids):
                     inv = min(inv, hi)
                 z = np.float32(_ROUND_DOWN / inv)
                 c = row + i
-                if z < zbuf[c, 0]:
-                    zbuf[c, 2] = zbuf[c, 1]
-                    zbuf[c, 1] = zbuf[c, 0]
-                    ids[c, 4] = ids[c, 3]
-                    zbuf[c, 0] = z
-                    ids[c, 3] = f
-                elif z < zbuf[c, 1]:
-                    zbuf[c, 2] = zbuf[c, 1]
-                    zbuf[c, 1] = z
-                    ids[c, 4] = f
-                elif z < zbuf[c, 2]:
-                    zbuf[c, 2] = z
+                if z < zbuf[c, _KEEP]:  # insertion into the sorted bounds
+                    s = _KEEP
+                    while s > 0 and z < zbuf[c, s - 1]:
+                        zbuf[c, s] = zbuf[c, s - 1]
+                        if s < _KEEP:
+                            ids[c, _KEEP + 1 + s] = ids[c, _KEEP + s]
+                        s -= 1
+                    zbuf[c, s] = z
+                    if s < _KEEP:
+                        ids[c, _KEEP + 1 + s] = f
 
 
 def _pair_occludes_one(px, py, pz, sx, sy, sz, seg_len, pl, tolerance):
@@ -297,7 +303,7 @@ def _classify_py(points, face_index, lo, hi, rt, intr, eye, grid, ga, gb, zbuf, 
         c = int(cb) * ga + int(ca)
         own = face_index[k] if has_faces else -1
         zp = z * margin
-        if z - zbuf[c, 5] > tolerance + z * _DEPTH_MARGIN:
+        if z - zbuf[c, _COVER] > tolerance + z * _DEPTH_MARGIN:
             # A face covers the whole cell in front of the point, by more than the
             # tolerance along the sightline (which is at least as long as the depth).
             status[k] = HIDDEN
@@ -305,13 +311,13 @@ def _classify_py(points, face_index, lo, hi, rt, intr, eye, grid, ga, gb, zbuf, 
         state = VISIBLE
         sx, sy, sz = eye[0] - px, eye[1] - py, eye[2] - pz
         seg_len = np.sqrt(sx * sx + sy * sy + sz * sz)
-        for s in range(3):
+        for s in range(_KEEP + 1):
             if zbuf[c, s] > zp:  # this face and all after it lie beyond the point
                 break
-            if s == 2:
+            if s == _KEEP:
                 state = UNDECIDED
                 break
-            g = ids[c, 3 + s]
+            g = ids[c, _KEEP + 1 + s]
             if g != own and _pair_occludes_one(px, py, pz, sx, sy, sz, seg_len, planes[g], tolerance):
                 state = HIDDEN
                 break
@@ -368,13 +374,13 @@ class ZBuffer:
         image plane (``x / z``, ``y / z``, OpenCV camera frame).
     shape : (int, int)
         Cells ``(along a, along b)``; ``(0, 0)`` when the view has no buffer.
-    zbuf : (C, 6) float32
-        Per cell, columns 0-2: lower bounds of depth (object units), the two smallest and
-        the third; columns 3-4 (read through :attr:`ids`) their faces; column 5: the
-        smallest upper bound of depth of a face covering the whole cell (inf: none).
-    ids : (C, 6) int32
-        The same memory as ``zbuf``; columns 3-4 are the faces of the two smallest bounds
-        (-1: none).
+    zbuf : (C, 2 K + 2) float32
+        One record per cell, ``K =`` :data:`_KEEP`: columns ``0..K``, lower bounds of depth
+        (object units), sorted, the ``K`` smallest and the next; columns ``K+1..2K`` (read
+        through :attr:`ids`) the faces of the ``K`` smallest; column ``2K+1``, the smallest
+        upper bound of depth of a face covering the whole cell (inf: none).
+    ids : (C, 2 K + 2) int32
+        The same memory as ``zbuf``; columns ``K+1..2K`` are faces (-1: none).
     """
 
     def __init__(self, grid, shape, zbuf):
@@ -406,7 +412,7 @@ def build_zbuffer(mesh: trimesh.Trimesh, camera: Camera, n_points: int, *,
         or outside the image).
     """
     data = _mesh_data(mesh)
-    empty = ZBuffer(np.zeros(4), (0, 0), np.zeros((0, 6), np.float32))
+    empty = ZBuffer(np.zeros(4), (0, 0), np.zeros((0, _COVER + 1), np.float32))
     if len(data.faces) == 0 or n_points == 0:
         return empty
     cam = _to_camera(data.vertices, np.ascontiguousarray(camera.extrinsics))
@@ -424,7 +430,7 @@ def build_zbuffer(mesh: trimesh.Trimesh, camera: Camera, n_points: int, *,
     ga = max(1, int(math.ceil((a1 - a0) / side)))
     gb = max(1, int(math.ceil((b1 - b0) / side)))
     grid = np.array([a0, b0, ga / (a1 - a0), gb / (b1 - b0)])
-    zbuf = np.empty((ga * gb, 6), dtype=np.float32)
+    zbuf = np.empty((ga * gb, _COVER + 1), dtype=np.float32)
     zb = ZBuffer(grid, (ga, gb), zbuf)
     if run is None:
         _rasterise(cam, data.faces, grid, ga, gb, 0, gb, zbuf, zb.ids)
