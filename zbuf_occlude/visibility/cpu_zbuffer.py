@@ -108,6 +108,20 @@ def _to_camera_py(vertices, rt):
     return out
 
 
+def _insert_py(zbuf, ids, c, z, f):
+    """Face ``f`` with depth bound ``z`` into cell ``c``'s sorted bounds (:class:`ZBuffer`)."""
+    if z < zbuf[c, _KEEP]:
+        s = _KEEP
+        while s > 0 and z < zbuf[c, s - 1]:
+            zbuf[c, s] = zbuf[c, s - 1]
+            if s < _KEEP:
+                ids[c, _KEEP + 1 + s] = ids[c, _KEEP + s]
+            s -= 1
+        zbuf[c, s] = z
+        if s < _KEEP:
+            ids[c, _KEEP + 1 + s] = f
+
+
 def _rasterise_py(cam, faces, grid, ga, gb, row_lo, row_hi, zbuf, ids):
     """Conservative rasterisation (module docstring) of every face into rows
     ``row_lo:row_hi`` of the buffer (:class:`ZBuffer`'s layout: ``zbuf`` and ``ids`` are two
@@ -144,6 +158,11 @@ def _rasterise_py(cam, faces, grid, ga, gb, row_lo, row_hi, zbuf, ids):
         if lo_a > hi_a:
             continue
         zmin = min(cam[i0, 2], cam[i1, 2], cam[i2, 2])
+        if lo_a == hi_a and lo_b == hi_b:
+            # Inside one cell, grown bounding box and all: it touches that cell only (and
+            # covers none), and its nearest vertex bounds its depth.
+            _insert(zbuf, ids, lo_b * ga + lo_a, np.float32(_ROUND_DOWN * zmin), f)
+            continue
         pmax = max(abs(cam[i0, 0]) + abs(cam[i0, 1]) + abs(cam[i0, 2]), abs(cam[i1, 0]) + abs(cam[i1, 1]) + abs(cam[i1, 2]),
                    abs(cam[i2, 0]) + abs(cam[i2, 1]) + abs(cam[i2, 2]))
         # 1/z = g0 + g_a * ca + g_b * cb on the face's plane n . X = d (camera frame).
@@ -246,18 +265,7 @@ def _rasterise_py(cam, faces, grid, ga, gb, row_lo, row_hi, zbuf, ids):
                     if hi <= 0.0:
                         continue  # the plane is behind the camera over the whole cell
                     inv = min(inv, hi)
-                z = np.float32(_ROUND_DOWN / inv)
-                c = row + i
-                if z < zbuf[c, _KEEP]:  # insertion into the sorted bounds
-                    s = _KEEP
-                    while s > 0 and z < zbuf[c, s - 1]:
-                        zbuf[c, s] = zbuf[c, s - 1]
-                        if s < _KEEP:
-                            ids[c, _KEEP + 1 + s] = ids[c, _KEEP + s]
-                        s -= 1
-                    zbuf[c, s] = z
-                    if s < _KEEP:
-                        ids[c, _KEEP + 1 + s] = f
+                _insert(zbuf, ids, row + i, np.float32(_ROUND_DOWN / inv), f)
 
 
 def _pair_occludes_one(px, py, pz, sx, sy, sz, seg_len, pl, tolerance):
@@ -331,6 +339,7 @@ def _classify_py(points, face_index, lo, hi, rt, intr, eye, grid, ga, gb, zbuf, 
 try:
     import numba
 
+    _insert = numba.njit(cache=True, nogil=True, inline="always")(_insert_py)
     _to_camera = numba.njit(cache=True, nogil=True, error_model="numpy")(_to_camera_py)
     _rasterise = numba.njit(cache=True, nogil=True, error_model="numpy")(_rasterise_py)
     _pair_occludes_one = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")(_pair_occludes_one)

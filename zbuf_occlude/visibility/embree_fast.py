@@ -391,7 +391,8 @@ class FastScene(SessionBase):
         sub = _setup(self.points, rays, fi, sc.centre, sc.unit_normals, sc.edge_planes)
         eye_c = (np.asarray(camera.eye, dtype=np.float64) - sc.centre).astype(np.float32)
         m = len(rays)
-        bounds = [(lo, min(lo + _CHUNK, m)) for lo in range(0, m, _CHUNK)]
+        step = min(_CHUNK, -(-m // self.threads))  # at least one chunk per thread
+        bounds = [(lo, min(lo + step, m)) for lo in range(0, m, step)]
         if self.threads > 1 and len(bounds) > 1:
             parts = list(_executor(self.threads).map(lambda b: self._chunk(b[0], b[1], sub, camera, eye_c), bounds))
         else:
