@@ -32,13 +32,13 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 
-def meshes(use_shared: bool) -> dict:
+def meshes(modelnet: Path | None) -> dict:
     import zbuf_occlude as zo
-    from accuracy_visibility import MODELNET_SUBSET, constructed_meshes
+    from accuracy_visibility import constructed_meshes
 
     out = {f"samples/{p.stem}": zo.load_mesh(p) for p in sorted((REPO_ROOT / "data" / "samples").rglob("*.off"))}
-    if use_shared and MODELNET_SUBSET.is_dir():
-        out.update({p.stem: zo.load_mesh(p) for p in sorted(MODELNET_SUBSET.rglob("*.off"))})
+    if modelnet is not None and modelnet.is_dir():
+        out.update({p.stem: zo.load_mesh(p) for p in sorted(modelnet.rglob("*.off"))})
     out.update(constructed_meshes())
     return out
 
@@ -47,8 +47,10 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--points", type=int, default=10_000)
     ap.add_argument("--poses", default="grid25")
+    ap.add_argument("--modelnet", type=Path, default=None, help="a ModelNet tree (default: ../shared/data/modelnet_subset)")
     ap.add_argument("--no-shared", action="store_true", help="only the shipped and constructed meshes")
     args = ap.parse_args(argv)
+    from accuracy_visibility import MODELNET_SUBSET
     import zbuf_occlude as zo
     from zbuf_occlude.visibility.embree_fast import FastScene
 
@@ -58,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
     stats = {c[0]: {"agree": [], "fv": 0, "fh": 0, "n": 0, "rays": []} for c in configs}
     worst = {c[0]: ("", 2.0) for c in configs}
     load = os.getloadavg()
-    all_meshes = meshes(not args.no_shared)
+    all_meshes = meshes(None if args.no_shared else (args.modelnet or MODELNET_SUBSET))
     for name, mesh in all_meshes.items():
         points, fi = zo.sample_surface(mesh, args.points, seed=0)
         cams = [zo.camera_on_sphere(el, az) for el, az in poses]

@@ -1,9 +1,15 @@
-"""``embree-fast``: multi-threaded float32 ray casting with float64 re-checks of near-ties.
+"""``embree-fast``: a CPU z-buffer pre-pass, then float32 rays with float64 re-checks of near-ties.
 
-The CPU path of ``auto`` (:mod:`~zbuf_occlude.visibility.auto`).  Per view, the points are
-split into chunks cast on a thread pool (``embreex`` releases the GIL inside ``run``, and
-numpy does for the per-chunk arithmetic), each chunk in two Embree ``OCCLUDED`` queries
-from the point towards the camera, clipped to the mesh's bounding sphere:
+The CPU path of ``auto`` (:mod:`~zbuf_occlude.visibility.auto`).  Per view, the mesh is first
+rasterised on the CPU into a conservative depth/face buffer (:mod:`.cpu_zbuffer`, compiled
+with numba, on the thread pool), which settles most points with a proof: hidden by a face
+the oracle's own float64 pair test confirms, or visible because every other face lies
+beyond the point in its cell.  Those points get the oracle's answer bit for bit.  The rest
+(near silhouettes and where many faces meet; a few percent to a few tens of percent,
+depending on the point density) are split into chunks cast on a thread pool (``embreex``
+releases the GIL inside ``run``, and numpy does for the per-chunk arithmetic), each chunk in
+two Embree ``OCCLUDED`` queries from the point towards the camera, clipped to the mesh's
+bounding sphere:
 
 1. from ``start`` to the sphere: a hit is an occluder farther than ``start`` from the point
    (float32: only a hit grazing an unshared edge can be false);
@@ -17,7 +23,13 @@ With ``face_index``, ``start`` and ``band_lo`` grow as the point's face turns ed
 Rule (b) of :mod:`~zbuf_occlude.visibility.definition` (edge-on faces) is then applied
 exactly.  What float32 can still get wrong: an occluder closer than ``band_lo`` (a few
 float32 ulps of the scene's size over ``cos``) that is not the own face, and edge grazes
-in pass 1; measured agreement with the oracle is in README's tables.
+in pass 1, for the points cast as rays; measured agreement with the oracle is in
+``docs/results/speed.md`` (``benchmarks/bench_visibility_accuracy.py``).
+
+Per-mesh state (the Embree BVH here, the pre-pass's face data and the oracle's planes) is
+cached per mesh object (:class:`~zbuf_occlude.mesh_cache.MeshCache`), so a one-shot
+:func:`embree_fast_visible` call on a mesh already seen builds nothing but the view's
+buffer; it does not sort the points either (the kept :class:`FastScene` does, once).
 """
 
 from __future__ import annotations
