@@ -58,6 +58,7 @@ __all__ = [
     "build_zbuffer",
     "classify",
     "cell_of",
+    "group_by_face",
     "available",
 ]
 
@@ -336,9 +337,32 @@ def _classify_py(points, face_index, lo, hi, rt, intr, eye, grid, ga, gb, zbuf, 
         status[k] = state
 
 
+def _group_by_face_py(points, face_index, n_faces):
+    """Counting sort of the points by face (stable, ``O(N + F)``): the permutation and the
+    points and faces gathered in its order."""
+    start = np.zeros(n_faces + 1, dtype=np.int64)
+    for k in range(len(face_index)):
+        start[face_index[k] + 1] += 1
+    for f in range(n_faces):
+        start[f + 1] += start[f]
+    perm = np.empty(len(face_index), dtype=np.int64)
+    for k in range(len(face_index)):
+        f = face_index[k]
+        perm[start[f]] = k
+        start[f] += 1
+    out = np.empty_like(points)
+    faces = np.empty_like(face_index)
+    for j in range(len(perm)):
+        k = perm[j]
+        out[j, 0], out[j, 1], out[j, 2] = points[k, 0], points[k, 1], points[k, 2]
+        faces[j] = face_index[k]
+    return perm, out, faces
+
+
 try:
     import numba
 
+    _group_by_face = numba.njit(cache=True, nogil=True)(_group_by_face_py)
     _insert = numba.njit(cache=True, nogil=True, inline="always")(_insert_py)
     _to_camera = numba.njit(cache=True, nogil=True, error_model="numpy")(_to_camera_py)
     _rasterise = numba.njit(cache=True, nogil=True, error_model="numpy")(_rasterise_py)
@@ -499,3 +523,20 @@ def cell_of(points: NDArray[np.float64], camera: Camera, zb: ZBuffer) -> NDArray
         ca = np.nan_to_num((cam[:, 0] / cam[:, 2] - zb.grid[0]) * zb.grid[2])
         cb = np.nan_to_num((cam[:, 1] / cam[:, 2] - zb.grid[1]) * zb.grid[3])
     return np.clip(cb, 0, gb - 1).astype(np.int64) * ga + np.clip(ca, 0, ga - 1).astype(np.int64)
+
+
+def group_by_face(points: NDArray[np.float64], face_index: NDArray[np.int64], n_faces: int):
+    """The points grouped by face (a stable counting sort, ``O(N + F)``): the pre-pass then
+    reads each face's planes and cells together, as for a sorted point set, for the price of
+    one gather.
+
+    Returns
+    -------
+    perm : (N,) int64
+        ``points[perm]`` is the grouped order.
+    points : (N, 3) float64
+        ``points[perm]``.
+    face_index : (N,) int64
+        ``face_index[perm]``.
+    """
+    return _group_by_face(points, np.ascontiguousarray(face_index, dtype=np.int64), int(n_faces))

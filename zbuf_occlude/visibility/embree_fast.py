@@ -353,12 +353,17 @@ class FastScene(SessionBase):
         self._scene = _scenes(mesh)
         self._run = _Runner(self.threads)
         self._prepass = cpu_zbuffer.available() if prepass is None else bool(prepass)
-        # Without the pre-pass every point is cast, and rays in Z-order (Morton) of their
-        # points traverse the same BVH nodes: sort once.
-        self._perm = morton_order(points) if (sort or not self._prepass) and len(points) else None
-        if self._perm is not None:
+        # Rays in Z-order (Morton) of their points traverse the same BVH nodes, and the
+        # pre-pass reads the buffer in order: worth a sort for many views, or when every
+        # point is cast.  For one view, points grouped by face (a counting sort) give the
+        # pre-pass and the rays most of that locality for the price of one gather.
+        self._perm = None
+        if (sort or not self._prepass) and len(points):
+            self._perm = morton_order(points)
             points = np.ascontiguousarray(points[self._perm])
             face_index = None if face_index is None else face_index[self._perm]
+        elif face_index is not None and len(points):
+            self._perm, points, face_index = cpu_zbuffer.group_by_face(points, face_index, len(mesh.faces))
         self.points, self.face_index = points, face_index
         self._x_order: NDArray[np.int64] | None = None
         #: Fraction of the points the last call re-decided in float64 (near-ties).
