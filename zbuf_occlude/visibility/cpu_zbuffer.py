@@ -12,27 +12,31 @@ The grid covers the mesh's projection (normalised image coordinates ``x / z, y /
 OpenCV camera frame, clipped to the image), with about :data:`CELLS_PER_POINT` cells per
 point.  Each face is rasterised *conservatively*: every cell its projected triangle may
 touch (the separating-axis test of the triangle against the cell grown by
-:data:`_CELL_GROWTH`) receives a lower bound of the face's depth over the cell.  Depth ``z``
-is not affine on the image plane but ``1 / z`` is, so the bound is ``1 / z`` at the cell's
-corners, capped by the nearest vertex (a face's depth is a convex combination of its
-vertices').  Per cell the buffer keeps the two faces of smallest bound, with their ids, and
-the third smallest bound.
+:data:`_CELL_GROWTH`) receives an upper bound of the face's ``1 / z`` over the cell, i.e. a
+lower bound of its depth: ``1 / z`` is affine on the image plane, so the bound is its value
+at the cell's corners, capped by the nearest vertex (a face's depth is a convex combination
+of its vertices').  Per cell the buffer keeps the :data:`_KEEP` faces of largest bound (the
+nearest), with their ids, the next bound, and a lower bound of ``1 / z`` of the nearest face
+that covers the whole (grown) cell.
 
-A point ``p`` of depth ``z_p`` in a cell with entries ``(z1, f1), (z2, f2), z3``:
+A point ``p`` of depth ``z_p`` in its cell is
 
-* **hidden** if ``f1`` or ``f2`` (other than its own face) occludes it, decided by the
-  oracle's float64 pair test (:func:`~zbuf_occlude.visibility.segment_triangle.pair_occludes`,
-  operation for operation), so the answer is the oracle's bit for bit;
-* **visible** if, in addition, ``z3 > z_p``: every other face lies beyond ``p`` wherever it
-  covers the cell, so it cannot meet the segment from ``p`` to the eye; the edge-on rule is
-  then applied as in :func:`~zbuf_occlude.visibility.definition.edge_on_own`;
-* otherwise **undecided**: the caller casts a ray.
+* **hidden** if a face covers the cell in front of ``p`` by more than the tolerance (its
+  sightline, at least ``z_p - z`` long there, meets the face inside), or if one of the kept
+  faces in front of ``p`` (other than its own face) occludes it by the oracle's float64 pair
+  test (:func:`~zbuf_occlude.visibility.segment_triangle.pair_occludes`, operation for
+  operation), so the answer is the oracle's bit for bit;
+* **visible** if every kept face in front of ``p`` was tested and none occludes it, and the
+  next bound lies beyond ``p``: every other face lies beyond ``p`` wherever it covers the
+  cell, so it cannot meet the segment from ``p`` to the eye; the edge-on rule is then
+  applied as in :func:`~zbuf_occlude.visibility.definition.edge_on_own`;
+* otherwise **undecided** (more than :data:`_KEEP` faces in front): the caller casts a ray.
 
 The frustum test repeats :meth:`Camera.in_frustum`'s float64 arithmetic, so its answer is
 the camera's.  Bounds are kept conservative against rounding: the plane of ``1 / z`` is
 used only when its conditioning (``|n| |P| / |n · P|``) is below :data:`_MAX_PLANE_COND`,
 with an absolute slack of :data:`_PLANE_SLACK` times its terms' magnitude; bounds are
-rounded down to float32.  A view whose mesh reaches behind :data:`_MIN_DEPTH` of the
+rounded outwards to float32.  A view whose mesh reaches behind :data:`_MIN_DEPTH` of the
 camera plane gets no buffer (every point undecided).
 """
 
@@ -77,7 +81,8 @@ _MAX_PLANE_COND = 1e5
 #: Absolute slack on ``1 / z``, relative to the magnitude of its terms (float64 rounding of
 #: the camera-frame vertices, the plane and its evaluation are ~1e-15 of it).
 _PLANE_SLACK = 1e-9
-#: Bounds are scaled by this before being rounded to float32 (6e-8 relative): still below.
+#: Bounds are scaled by these before being rounded to float32 (6e-8 relative), so that
+#: they stay on their side.
 _ROUND_DOWN = 1.0 - 1e-6
 _ROUND_UP = 1.0 + 1e-6
 #: A point is beyond a face bound only with this relative margin (its own depth's rounding).
@@ -110,10 +115,10 @@ def _to_camera_py(vertices, rt):
 
 
 def _insert_py(zbuf, ids, c, z, f):
-    """Face ``f`` with depth bound ``z`` into cell ``c``'s sorted bounds (:class:`ZBuffer`)."""
-    if z < zbuf[c, _KEEP]:
+    """Face ``f`` with bound ``z`` (of ``1 / depth``) into cell ``c``'s sorted bounds (:class:`ZBuffer`)."""
+    if z > zbuf[c, _KEEP]:
         s = _KEEP
-        while s > 0 and z < zbuf[c, s - 1]:
+        while s > 0 and z > zbuf[c, s - 1]:
             zbuf[c, s] = zbuf[c, s - 1]
             if s < _KEEP:
                 ids[c, _KEEP + 1 + s] = ids[c, _KEEP + s]
@@ -132,10 +137,10 @@ def _rasterise_py(cam, faces, grid, ga, gb, row_lo, row_hi, zbuf, ids):
     grow = _CELL_GROWTH
     for c in range(row_lo * ga, row_hi * ga):
         for s in range(_KEEP + 1):
-            zbuf[c, s] = np.inf
+            zbuf[c, s] = 0.0  # (1 / depth: 0 is beyond everything)
         for s in range(_KEEP):
             ids[c, _KEEP + 1 + s] = -1
-        zbuf[c, _COVER] = np.inf
+        zbuf[c, _COVER] = 0.0
     amax = max(abs(a0), abs(a0 + sa * ga))
     bmax = max(abs(b0), abs(b0 + sb * gb))
     ca = np.empty(3)
@@ -162,7 +167,7 @@ def _rasterise_py(cam, faces, grid, ga, gb, row_lo, row_hi, zbuf, ids):
         if lo_a == hi_a and lo_b == hi_b:
             # Inside one cell, grown bounding box and all: it touches that cell only (and
             # covers none), and its nearest vertex bounds its depth.
-            _insert(zbuf, ids, lo_b * ga + lo_a, np.float32(_ROUND_DOWN * zmin), f)
+            _insert(zbuf, ids, lo_b * ga + lo_a, np.float32(_ROUND_UP / zmin), f)
             continue
         pmax = max(abs(cam[i0, 0]) + abs(cam[i0, 1]) + abs(cam[i0, 2]), abs(cam[i1, 0]) + abs(cam[i1, 1]) + abs(cam[i1, 2]),
                    abs(cam[i2, 0]) + abs(cam[i2, 1]) + abs(cam[i2, 2]))
@@ -257,8 +262,8 @@ def _rasterise_py(cam, faces, grid, ga, gb, row_lo, row_hi, zbuf, ids):
                     low = inv_floor
                     if plane:
                         low = max(low, base_in + g_a * i)
-                    zc = np.float32(_ROUND_UP / low)
-                    if zc < zbuf[row + i, _COVER]:
+                    zc = np.float32(_ROUND_DOWN * low)
+                    if zc > zbuf[row + i, _COVER]:
                         zbuf[row + i, _COVER] = zc
                 inv = inv_cap
                 if plane:
@@ -266,7 +271,7 @@ def _rasterise_py(cam, faces, grid, ga, gb, row_lo, row_hi, zbuf, ids):
                     if hi <= 0.0:
                         continue  # the plane is behind the camera over the whole cell
                     inv = min(inv, hi)
-                _insert(zbuf, ids, row + i, np.float32(_ROUND_DOWN / inv), f)
+                _insert(zbuf, ids, row + i, np.float32(_ROUND_UP * inv), f)
 
 
 def _pair_occludes_one(px, py, pz, sx, sy, sz, seg_len, pl, tolerance):
@@ -290,7 +295,7 @@ def _classify_py(points, face_index, lo, hi, rt, intr, eye, grid, ga, gb, zbuf, 
     f, width, height, znear, zfar = intr[0], intr[1], intr[2], intr[3], intr[4]
     a0, b0, inv_sa, inv_sb = grid[0], grid[1], grid[2], grid[3]
     has_faces = len(face_index) > 0
-    margin = 1.0 + _DEPTH_MARGIN
+    margin = 1.0 - _DEPTH_MARGIN
     for k in range(lo, hi):
         px, py, pz = points[k, 0], points[k, 1], points[k, 2]
         x = px * rt[0, 0] + py * rt[0, 1] + pz * rt[0, 2] + rt[0, 3]
@@ -311,8 +316,9 @@ def _classify_py(points, face_index, lo, hi, rt, intr, eye, grid, ga, gb, zbuf, 
             continue
         c = int(cb) * ga + int(ca)
         own = face_index[k] if has_faces else -1
-        zp = z * margin
-        if z - zbuf[c, _COVER] > tolerance + z * _DEPTH_MARGIN:
+        beyond = (1.0 / z) * margin  # a face whose 1 / depth bound is below this is beyond p
+        cover = zbuf[c, _COVER]
+        if cover > 0.0 and z - 1.0 / cover > tolerance + z * _DEPTH_MARGIN:
             # A face covers the whole cell in front of the point, by more than the
             # tolerance along the sightline (which is at least as long as the depth).
             status[k] = HIDDEN
@@ -321,7 +327,7 @@ def _classify_py(points, face_index, lo, hi, rt, intr, eye, grid, ga, gb, zbuf, 
         sx, sy, sz = eye[0] - px, eye[1] - py, eye[2] - pz
         seg_len = np.sqrt(sx * sx + sy * sy + sz * sz)
         for s in range(_KEEP + 1):
-            if zbuf[c, s] > zp:  # this face and all after it lie beyond the point
+            if zbuf[c, s] < beyond:  # this face and all after it lie beyond the point
                 break
             if s == _KEEP:
                 state = UNDECIDED
@@ -408,10 +414,11 @@ class ZBuffer:
     shape : (int, int)
         Cells ``(along a, along b)``; ``(0, 0)`` when the view has no buffer.
     zbuf : (C, 2 K + 2) float32
-        One record per cell, ``K =`` :data:`_KEEP`: columns ``0..K``, lower bounds of depth
-        (object units), sorted, the ``K`` smallest and the next; columns ``K+1..2K`` (read
-        through :attr:`ids`) the faces of the ``K`` smallest; column ``2K+1``, the smallest
-        upper bound of depth of a face covering the whole cell (inf: none).
+        One record per cell (64 bytes), ``K =`` :data:`_KEEP`: columns ``0..K``, upper
+        bounds of ``1 / depth`` (1 / object units), sorted, the ``K`` largest (nearest) and
+        the next (0: none); columns ``K+1..2K`` (read through :attr:`ids`) the faces of the
+        ``K`` largest; column ``2K+1``, the largest lower bound of ``1 / depth`` of a face
+        covering the whole cell (0: none).
     ids : (C, 2 K + 2) int32
         The same memory as ``zbuf``; columns ``K+1..2K`` are faces (-1: none).
     """
