@@ -70,7 +70,7 @@ __all__ = [
 #: cells settle more points near face edges, fewer cost less to clear and rasterise.
 CELLS_PER_POINT = 0.25
 #: Bounds on the grid's cell count.
-_MIN_CELLS, _MAX_CELLS = 64 * 64, 4096 * 4096
+_MIN_CELLS, _MAX_CELLS = 64 * 64, 2048 * 2048  # (64 bytes a cell: 256 MiB at most)
 #: Each cell is grown by this fraction of its side on every side when a face is
 #: rasterised, so that a point whose cell index rounds across a cell border is still
 #: covered (float64 rounding of image coordinates is ~1e-16 relative).
