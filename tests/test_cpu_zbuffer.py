@@ -133,15 +133,16 @@ def test_embree_fast_with_and_without_the_pre_pass_and_sorted_or_not():
         assert (got == without).mean() >= 0.9995
 
 
-def _count_builds(monkeypatch, cache) -> list:
+def _count_builds(monkeypatch, cls, cache) -> list:
+    """Count constructions of ``cls`` (however they are reached) after emptying ``cache``."""
     built = []
-    build = cache._build
+    init = cls.__init__
 
-    def counting(mesh):
+    def counting(self, mesh, *args, **kwargs):
         built.append(id(mesh))
-        return build(mesh)
+        init(self, mesh, *args, **kwargs)
 
-    monkeypatch.setattr(cache, "_build", counting)
+    monkeypatch.setattr(cls, "__init__", counting)
     cache.clear()
     return built
 
@@ -149,8 +150,8 @@ def _count_builds(monkeypatch, cache) -> list:
 def test_a_second_call_on_a_mesh_rebuilds_nothing(monkeypatch):
     mesh = zo.load_mesh(SAMPLES / "chair/train/chair_0001.off")
     points, fi = zo.sample_surface(mesh, 2000, seed=4)
-    scenes = _count_builds(monkeypatch, embree_fast._scenes)
-    data = _count_builds(monkeypatch, cpu_zbuffer._mesh_data)
+    scenes = _count_builds(monkeypatch, embree_fast._Scene, embree_fast._scenes)
+    data = _count_builds(monkeypatch, cpu_zbuffer._MeshData, cpu_zbuffer._mesh_data)
     cams = [zo.camera_on_sphere(el, az) for el, az in ((10.0, 0.0), (40.0, 90.0), (-30.0, 200.0))]
     first = [visible_mask(mesh, points, c, face_index=fi) for c in cams]
     assert len(data) == 1 and len(scenes) == 1
