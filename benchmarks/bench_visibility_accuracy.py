@@ -7,7 +7,7 @@ the ``--poses`` poses, each tested by
 
 * ``embree-fast`` as shipped: the CPU z-buffer pre-pass settles what it can prove, rays decide
   the rest;
-* ``embree-fast`` with rays only (``prepass=False``: the method before the pre-pass);
+* ``embree-fast`` with rays only (``prepass=False``: every point cast as a ray);
 
 with and without ``face_index``, against the oracle with ``face_index``.  Markdown on stdout:
 per configuration, agreement (mean over meshes and worst mesh), false-visible and
@@ -55,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
     from zbuf_occlude.visibility.embree_fast import FastScene
 
     poses = zo.view_schedule(args.poses)
-    configs = [(f"embree-fast{'' if pre else ', rays only (before)'}, {'with' if fi else 'without'} face_index", pre, fi)
+    configs = [(f"embree-fast{'' if pre else ', rays only (prepass=False)'}, {'with' if fi else 'without'} face_index", pre, fi)
                for pre in (True, False) for fi in (True, False)]
     stats = {c[0]: {"agree": [], "fv": 0, "fh": 0, "n": 0, "rays": []} for c in configs}
     worst = {c[0]: ("", 2.0) for c in configs}
