@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The GPU benchmark in one command: bash benchmarks/gpu.sh OUT [--smoke] [--allow-software]
+# The GPU benchmark in one command: bash benchmarks/gpu.sh OUT [--smoke] [--allow-software] [--force]
 #
 # On a machine with an NVIDIA GPU: checks that EGL renders on the NVIDIA driver (not a
 # software rasteriser such as llvmpipe; exit 3 otherwise, unless --allow-software), then
@@ -12,15 +12,17 @@
 #      as distinct objects) -- benchmarks/bench_farm.py;
 # and writes OUT/gpu.md: a Markdown report naming the device (OpenGL renderer string,
 # nvidia-smi's GPU name and driver), with both tables.  --smoke: tiny sizes, any renderer
-# (the CPU half runs in CI: tests/test_benchmarks.py).
+# (the CPU half runs in CI: tests/test_benchmarks.py).  --force: measure even when the load
+# average exceeds the CPU count (the visibility table is then flagged; without it, exit 3).
 set -euo pipefail
 
-usage() { echo "usage: bash benchmarks/gpu.sh OUT [--smoke] [--allow-software]" >&2; }
-out="" smoke=0 allow_sw=0
+usage() { echo "usage: bash benchmarks/gpu.sh OUT [--smoke] [--allow-software] [--force]" >&2; }
+out="" smoke=0 allow_sw=0 force=()
 for arg in "$@"; do
     case "$arg" in
         --smoke) smoke=1; allow_sw=1 ;;
         --allow-software) allow_sw=1 ;;
+        --force) force=(--force) ;;
         -h|--help) usage; exit 0 ;;
         -*) echo "gpu.sh: unknown option '$arg'" >&2; usage; exit 2 ;;
         *) if [ -n "$out" ]; then echo "gpu.sh: one OUT folder, got '$out' and '$arg'" >&2; exit 2; fi; out="$arg" ;;
@@ -68,7 +70,7 @@ from zbuf_occlude.visibility.auto import calibrate, choose_method
 print(f'{choose_method()} (calibration, s per view: {calibrate()})')
 " 2>/dev/null | tail -n 1)"
 
-ZBUF_OCCLUDE_AUTO=calibrate "$py" "$root/benchmarks/bench_visibility_peers.py" "${peers[@]}" --gpu-methods \
+ZBUF_OCCLUDE_AUTO=calibrate "$py" "$root/benchmarks/bench_visibility_peers.py" "${peers[@]}" "${force[@]}" --gpu-methods \
     --points "$points" --poses "$poses" > "$out/visibility.md"
 "$py" "$root/benchmarks/bench_farm.py" --root "$meshes" "${farm[@]}" --markdown > "$out/farm.md"
 
