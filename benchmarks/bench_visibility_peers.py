@@ -1,31 +1,44 @@
-"""The peer table of issue 11: our visibility methods beside the tools a user would pick instead.
+"""Visibility peers: zbuf_occlude's call beside the tools a user would pick instead.
 
-One process, one mesh (default ModelNet10 ``sofa_0001``), for each point count (100k, 1M):
-the methods run side by side on each pose (interleaved, so that a shared machine's load hits
-them alike), after one warm-up pose.  Per method: set-up cost (building the per-point-set
-scene), median wall ms per view, process CPU ms per view, agreement with the oracle pooled
-over the poses, false-visible rate, and the fraction of points decided on the CPU.  Set-up
-is timed with the mesh's own caches (Embree BVH, face planes, GPU buffers) already built,
-as for the second point set of a mesh.
+One process, one mesh (default ModelNet10 ``sofa_0001``), for each point count: every method
+tests the same points from the same cameras, interleaved pose by pose (the order rotates each
+pose, so that a shared machine's load hits all methods alike), after one warm-up pose.  Per
+method: set-up (what is built once per mesh or point set), median wall and CPU ms per view
+(CPU: the process's time, all threads), and agreement with the exact oracle pooled over the
+poses (false-visible, false-hidden).  Then the ratios of the median wall times.
 
-Methods: ``auto`` (the default; says which method it chose), ``zbuffer-exact``,
-``embree-fast``, ``zbuffer`` (issue 3) and its GPU-only variant, trimesh + Embree
-``intersects_any`` (rays from the point, offset 1e-5 towards the camera), mesh_to_sdf's rule
-(``naive-zbuffer``: a strict depth test), the project's ``oracle``, and Open3D's
-``RaycastingScene`` and ``hidden_point_removal`` when Open3D is installed.
+Rows:
+
+* ``zo.visible_mask(mesh, points, camera, face_index=fi)``: the one-shot call (method
+  ``auto``); per-mesh state (Embree scene, face data) is kept across calls by the library;
+* ``make_scene(...)`` once, then ``scene.visible(camera)``: a kept scene;
+* ``embree-fast``, rays only: the one-shot call without the z-buffer pre-pass;
+* Open3D ``RaycastingScene`` (``test_occlusions`` and ``cast_rays``), NVIDIA Warp
+  ``mesh_query_ray`` (CPU; CUDA when present), trimesh ``RayMeshIntersector.intersects_any``
+  (Embree): the peers.  Each gets its mesh structure built once (set-up) and, per view, the
+  rays a user would build: from each point in the frustum towards the eye, starting
+  ``--offset`` object units off the point (meshes are normalised to extent 1), occluded iff
+  anything is hit before the eye;
+* with ``--gpu-methods``: ``zbuffer-exact`` and ``zbuffer`` kept scenes (OpenGL).
+
+The load average (1 min) is recorded before and after; a run that starts with more load than
+CPUs is refused (exit 3) unless ``--force``, and then flagged in the output.
 
 Usage::
 
-    .venv/bin/python benchmarks/bench_visibility.py --peers            # the same as:
-    .venv/bin/python benchmarks/bench_visibility_peers.py --points 100000,1000000
+    .venv/bin/python benchmarks/bench_visibility_peers.py                 # 100k and 1M, 15 poses
+    .venv/bin/python benchmarks/bench_visibility_peers.py --smoke         # a few seconds
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import os
 import platform
 import statistics
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -33,161 +46,278 @@ from pathlib import Path
 import numpy as np
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_MESH = REPO_ROOT.parent / "shared" / "data" / "modelnet_subset" / "ModelNet10" / "sofa" / "train" / "sofa_0001.off"
-DEFAULT_POSES = "-80:0,-40:72,0:144,40:216,80:288"
-WARMUP_POSE = (-40.0, 0.0)
+SHARED_MESH = REPO_ROOT.parent / "shared" / "data" / "modelnet_subset" / "ModelNet10" / "sofa" / "train" / "sofa_0001.off"
+SHIPPED_MESH = REPO_ROOT / "data" / "samples" / "sofa"
+WARMUP_POSE = (-40.0, 10.0)
+
+try:  # NVIDIA Warp: the kernel is defined at import (Warp compiles module-level kernels)
+    with contextlib.redirect_stdout(io.StringIO()):
+        import warp as wp
+
+        wp.config.quiet = True
+        wp.init()  # prints its banner here, not in the middle of a table
+
+    @wp.kernel
+    def _warp_occluded(mesh: wp.uint64, points: wp.array(dtype=wp.vec3), eye: wp.vec3, offset: float,
+                       out: wp.array(dtype=wp.int32)):  # pragma: no cover - compiled by Warp
+        i = wp.tid()
+        p = points[i]
+        d = eye - p
+        dist = wp.length(d)
+        dn = d / dist
+        q = wp.mesh_query_ray(mesh, p + dn * offset, dn, dist - offset)
+        out[i] = wp.where(q.result, 1, 0)
+except Exception:  # noqa: BLE001 - not installed, or no usable device
+    wp = None
 
 
-def _methods(mesh, points, fi, resolution):
-    """name -> (setup() -> state, view(state, camera) -> (visible, cpu_fraction))."""
-    import trimesh
+def cores() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
+
+def _rays_towards_eye(points, cam, offset):
+    """Per frustum point: origin ``offset`` off the point towards the eye, unit direction,
+    length to the eye (float64)."""
+    d = cam.eye - points
+    dist = np.sqrt(np.einsum("ij,ij->i", d, d))
+    u = d / dist[:, None]
+    return points + offset * u, u, dist - offset
+
+
+def methods(mesh, points, fi, args) -> dict:
+    """name -> (setup() -> state, view(state, camera) -> visible (N,) bool)."""
     import zbuf_occlude as zo
-    from zbuf_occlude.visibility import visible_mask
     from zbuf_occlude.visibility.auto import choose_method, make_scene
     from zbuf_occlude.visibility.embree_fast import FastScene
-    from zbuf_occlude.visibility.gpu_exact import ExactScene
-    from zbuf_occlude.visibility.zbuffer import Scene
 
-    def frac(scene):
-        return getattr(scene, "last_cpu_fraction", float("nan"))
+    off = args.offset
+    out = {
+        f"`zo.visible_mask` one-shot (auto = {choose_method()})": (
+            lambda: None, lambda s, c: zo.visible_mask(mesh, points, c, face_index=fi)),
+        "`make_scene` once, `scene.visible` per view": (
+            lambda: make_scene(mesh, points, fi), lambda s, c: s.visible(c)),
+        "embree-fast one-shot, rays only (no z-buffer pre-pass)": (
+            lambda: None, lambda s, c: FastScene(mesh, points, fi, sort=False, prepass=False).visible(c)),
+    }
+    if args.gpu_methods:
+        from zbuf_occlude.visibility.gpu_exact import ExactScene
+        from zbuf_occlude.visibility.zbuffer import ResidentPoints
 
-    def trimesh_setup():
+        out["`zbuffer-exact` kept scene (OpenGL)"] = (lambda: ExactScene(mesh, points, fi), lambda s, c: s.visible(c))
+        out["`zbuffer` kept scene (OpenGL)"] = (lambda: ResidentPoints(mesh, points, fi), lambda s, c: s.visible(c))
+    try:
+        from zbuf_occlude.visibility.peers import import_open3d
+
+        o3d = import_open3d()
+
+        def o3d_setup():
+            scene = o3d.t.geometry.RaycastingScene()
+            scene.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, dtype=np.float32)),
+                                o3d.core.Tensor(np.asarray(mesh.faces, dtype=np.uint32)))
+            return scene
+
+        def o3d_occlusions(scene, cam):
+            inside = cam.in_frustum(points)
+            org, u, length = _rays_towards_eye(points[inside], cam, off)
+            rays = np.hstack([org, u * length[:, None]]).astype(np.float32)  # t in [0, 1]: to the eye
+            inside[inside] = ~scene.test_occlusions(o3d.core.Tensor(rays), tnear=0.0, tfar=1.0).numpy().astype(bool)
+            return inside
+
+        def o3d_cast(scene, cam):
+            inside = cam.in_frustum(points)
+            org, u, length = _rays_towards_eye(points[inside], cam, off)
+            hit = scene.cast_rays(o3d.core.Tensor(np.hstack([org, u]).astype(np.float32)))["t_hit"].numpy()
+            inside[inside] = ~(hit < length)
+            return inside
+
+        out["Open3D `RaycastingScene.test_occlusions`"] = (o3d_setup, o3d_occlusions)
+        out["Open3D `RaycastingScene.cast_rays`"] = (o3d_setup, o3d_cast)
+    except Exception as exc:  # noqa: BLE001
+        print(f"(Open3D not measured: {exc})", file=sys.stderr)
+    if wp is not None:
+        # (Warp's CPU path runs one thread: skipped above --warp-cpu-max-points)
+        devices = (["cpu"] if len(points) <= args.warp_cpu_max_points else []) + (["cuda:0"] if wp.is_cuda_available() else [])
+        for device in devices:
+            def warp_setup(device=device):
+                with contextlib.redirect_stdout(io.StringIO()):
+                    m = wp.Mesh(points=wp.array(np.asarray(mesh.vertices, dtype=np.float32), dtype=wp.vec3, device=device),
+                                indices=wp.array(np.asarray(mesh.faces, dtype=np.int32).ravel(), dtype=wp.int32, device=device))
+                return m
+
+            def warp_view(m, cam, device=device):
+                inside = cam.in_frustum(points)
+                pts = wp.array(points[inside].astype(np.float32), dtype=wp.vec3, device=device)
+                hit = wp.zeros(len(pts), dtype=wp.int32, device=device)
+                with contextlib.redirect_stdout(io.StringIO()):
+                    wp.launch(_warp_occluded, dim=len(pts), inputs=[m.id, pts, wp.vec3(*cam.eye.astype(np.float32)), off, hit],
+                              device=device)
+                inside[inside] = hit.numpy() == 0
+                return inside
+
+            out[f"Warp `mesh_query_ray` ({device})"] = (warp_setup, warp_view)
+    try:
         from trimesh.ray.ray_pyembree import RayMeshIntersector
 
-        inter = RayMeshIntersector(mesh)
-        inter.intersects_any(np.zeros((1, 3)), np.array([[1.0, 0.0, 0.0]]))  # builds the BVH
-        return inter
+        def trimesh_setup():
+            inter = RayMeshIntersector(mesh)
+            inter.intersects_any(np.zeros((1, 3)), np.array([[1.0, 0.0, 0.0]]))  # builds the BVH
+            return inter
 
-    def trimesh_view(inter, cam):
-        d = cam.eye - points
-        u = d / np.linalg.norm(d, axis=1)[:, None]
-        inside = cam.in_frustum(points)
-        return inside & ~inter.intersects_any(points + 1e-5 * u, u), 0.0
+        def trimesh_view(inter, cam):
+            inside = cam.in_frustum(points)
+            org, u, _ = _rays_towards_eye(points[inside], cam, off)
+            inside[inside] = ~inter.intersects_any(org, u)  # the eye is outside the mesh: nothing beyond it
+            return inside
 
-    out = {
-        f"auto (= {choose_method()})": (lambda: make_scene(mesh, points, fi), lambda s, c: (s.visible(c), frac(s))),
-        f"zbuffer-exact {resolution}²": (
-            lambda: ExactScene(mesh, points, fi),
-            lambda s, c: (s.visible(c, resolution=resolution), frac(s)),
-        ),
-        "embree-fast": (lambda: FastScene(mesh, points, fi), lambda s, c: (s.visible(c), frac(s))),
-        f"zbuffer (issue 3) {resolution}²": (
-            lambda: Scene(mesh, points, fi),
-            lambda s, c: (s.visible(c, resolution=resolution), float("nan")),
-        ),
-        f"zbuffer GPU-only {resolution}²": (
-            lambda: Scene(mesh, points, fi),
-            lambda s, c: (s.visible(c, resolution=resolution, resolve="none"), 0.0),
-        ),
-        "trimesh + Embree intersects_any": (trimesh_setup, trimesh_view),
-        "mesh_to_sdf rule (strict depth test)": (
-            lambda: None,
-            lambda s, c: (visible_mask(mesh, points, c, "naive-zbuffer", face_index=fi, resolution=resolution), 0.0),
-        ),
-    }
-    try:
-        import open3d  # noqa: F401
-
-        out["Open3D RaycastingScene"] = (
-            lambda: None,
-            lambda s, c: (visible_mask(mesh, points, c, "open3d-raycast", face_index=fi), 0.0),
-        )
-        out["Open3D hidden_point_removal"] = (
-            lambda: None,
-            lambda s, c: (visible_mask(mesh, points, c, "open3d-hpr", face_index=fi), 0.0),
-        )
-    except Exception:  # noqa: BLE001 - not installed (or its wheel lacks a system library)
-        pass
-    del trimesh, zo
+        out["trimesh `RayMeshIntersector.intersects_any`"] = (trimesh_setup, trimesh_view)
+    except Exception as exc:  # noqa: BLE001
+        print(f"(trimesh + Embree not measured: {exc})", file=sys.stderr)
     return out
 
 
-def run(mesh_path: Path, n_points: int, poses, resolution: int) -> tuple[list[dict], str]:
+def run(mesh, n_points: int, poses, args) -> list[dict]:
     import zbuf_occlude as zo
-    from zbuf_occlude.visibility import visible_mask
 
-    mesh = zo.load_mesh(mesh_path)
     points, fi = zo.sample_surface(mesh, n_points, seed=0)
-    methods = _methods(mesh, points, fi, resolution)
-    warm = zo.camera_on_sphere(*WARMUP_POSE, resolution=resolution)
-    visible_mask(mesh, points[:1000], warm, "oracle", face_index=fi[:1000])  # oracle's BVH
-    state, rows = {}, {}
-    for name, (setup, _) in methods.items():  # per-mesh caches (BVH, planes, GPU buffers)
-        scene = setup()
-        if hasattr(scene, "release"):
-            scene.release()
-    for name, (setup, view) in methods.items():
-        t = time.perf_counter()
-        state[name] = setup()
-        setup_s = time.perf_counter() - t
-        view(state[name], warm)  # warm-up: JIT, shaders, BVH, targets
-        rows[name] = {"method": name, "setup_ms": 1e3 * setup_s, "wall": [], "cpu": [], "agree": 0, "fv": 0, "n": 0, "cpu_frac": []}
-    oracle = {"wall": [], "cpu": []}
-    for el, az in poses:
-        cam = zo.camera_on_sphere(el, az, resolution=resolution)
+    table = methods(mesh, points, fi, args)
+    warm = zo.camera_on_sphere(*WARMUP_POSE)
+    zo.visible_mask(mesh, points[:1000], warm, "oracle", face_index=fi[:1000])  # per-mesh caches
+    rows, state = {}, {}
+    for name, (setup, view) in table.items():
         t, c = time.perf_counter(), time.process_time()
-        truth = visible_mask(mesh, points, cam, "oracle", face_index=fi)
-        oracle["wall"].append(time.perf_counter() - t)
-        oracle["cpu"].append(time.process_time() - c)
-        for name, (_, view) in methods.items():
+        state[name] = setup()
+        rows[name] = {"method": name, "setup_ms": 1e3 * (time.perf_counter() - t), "setup_cpu_ms": 1e3 * (time.process_time() - c),
+                      "wall": [], "cpu": [], "agree": 0, "fv": 0, "fh": 0, "n": 0}
+        view(state[name], warm)  # JIT, kernels, first-touch
+    oracle = {"wall": [], "cpu": []}
+    names = list(table)
+    with_truth = n_points <= args.oracle_max_points
+    for k, (el, az) in enumerate(poses):
+        cam = zo.camera_on_sphere(el, az)
+        truth = None
+        if with_truth:
             t, c = time.perf_counter(), time.process_time()
-            got, frac = view(state[name], cam)
+            truth = zo.visible_mask(mesh, points, cam, "oracle", face_index=fi)
+            oracle["wall"].append(time.perf_counter() - t)
+            oracle["cpu"].append(time.process_time() - c)
+        for name in names[k % len(names):] + names[: k % len(names)]:  # rotate the order
+            t, c = time.perf_counter(), time.process_time()
+            got = table[name][1](state[name], cam)
             r = rows[name]
             r["wall"].append(time.perf_counter() - t)
             r["cpu"].append(time.process_time() - c)
-            r["agree"] += int((got == truth).sum())
-            r["fv"] += int((got & ~truth).sum())
-            r["n"] += len(points)
-            r["cpu_frac"].append(frac)
+            if truth is not None:
+                r["agree"] += int((got == truth).sum())
+                r["fv"] += int((got & ~truth).sum())
+                r["fh"] += int((~got & truth).sum())
+                r["n"] += len(points)
+    for name, s in state.items():
+        if hasattr(s, "release"):
+            s.release()
+    out = list(rows.values())
+    if with_truth:
+        out.append({"method": "the project's exact `oracle` (truth)", "setup_ms": None, "wall": oracle["wall"],
+                    "cpu": oracle["cpu"], "agree": 1, "fv": 0, "fh": 0, "n": 1})
+    return out
+
+
+def _fmt_rate(r, key):
+    return "—" if not r["n"] else f"{r[key] / r['n']:.4%}"
+
+
+def report(rows, n_points, desc) -> list[str]:
+    lines = [f"### {n_points:,} points, {desc}", "",
+             "| method | set-up ms | wall ms / view | CPU ms / view | agreement | false-visible | false-hidden |",
+             "|---|---:|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        setup = "—" if r["setup_ms"] is None else f"{r['setup_ms']:.0f}"
+        lines.append(f"| {r['method']} | {setup} | {1e3 * statistics.median(r['wall']):.1f} | {1e3 * statistics.median(r['cpu']):.1f} "
+                     f"| {_fmt_rate(r, 'agree')} | {_fmt_rate(r, 'fv')} | {_fmt_rate(r, 'fh')} |")
+    ours = [r for r in rows[:2]]
+    peers = [r for r in rows if any(p in r["method"] for p in ("Open3D", "Warp", "trimesh"))]
+    if peers:
+        lines += ["", "Speed-up (median wall of the peer / ours; per-pose range in brackets):", "",
+                  "| peer | " + " | ".join(("one-shot", "kept scene")) + " |", "|---|---:|---:|"]
+        for p in sorted(peers, key=lambda r: statistics.median(r["wall"])):
+            cells = []
+            for o in ours:
+                per = [a / b for a, b in zip(p["wall"], o["wall"])]
+                cells.append(f"**{statistics.median(p['wall']) / statistics.median(o['wall']):.2f}×** ({min(per):.2f}–{max(per):.2f})")
+            lines.append(f"| {p['method']} | " + " | ".join(cells) + " |")
+    return lines + [""]
+
+
+def _versions() -> str:
     out = []
-    for r in rows.values():
-        out.append({
-            "method": r["method"], "setup_ms": r["setup_ms"],
-            "ms": 1e3 * statistics.median(r["wall"]), "cpu_ms": 1e3 * statistics.median(r["cpu"]),
-            "agreement": r["agree"] / r["n"], "false_visible": r["fv"] / r["n"],
-            "cpu_fraction": float(np.nanmean(r["cpu_frac"])) if not all(np.isnan(r["cpu_frac"])) else None,
-            "walls": r["wall"],
-        })
-    out.append({"method": "project oracle (truth)", "setup_ms": None, "ms": 1e3 * statistics.median(oracle["wall"]),
-                "cpu_ms": 1e3 * statistics.median(oracle["cpu"]), "agreement": 1.0, "false_visible": 0.0, "cpu_fraction": 1.0,
-                "walls": oracle["wall"]})
-    return out, f"{len(mesh.faces):,} faces"
+    for mod in ("numpy", "numba", "embreex", "trimesh", "open3d"):
+        try:
+            out.append(f"{mod} {__import__(mod).__version__}")
+        except Exception:  # noqa: BLE001
+            pass
+    if wp is not None:
+        out.append(f"warp {wp.__version__}")
+    try:
+        commit = subprocess.run(["git", "-C", str(REPO_ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                                timeout=10).stdout.strip()
+    except Exception:  # noqa: BLE001
+        commit = ""
+    return ", ".join(out) + (f"; commit {commit}" if commit else "")
+
+
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--mesh", type=Path, default=DEFAULT_MESH)
-    ap.add_argument("--points", default="100000,1000000")
-    ap.add_argument("--poses", default=DEFAULT_POSES)
-    ap.add_argument("--resolution", type=int, default=1024)
+    ap.add_argument("--mesh", type=Path, default=None, help="default: sofa_0001 of ../shared, else a shipped sofa")
+    ap.add_argument("--points", default="100000,1000000", help="comma-separated point counts")
+    ap.add_argument("--poses", default="fibonacci:15", help="a view schedule (zbuf_occlude.view_schedule)")
+    ap.add_argument("--offset", type=float, default=1e-4, help="the peers' ray start offset, object units")
+    ap.add_argument("--gpu-methods", action="store_true", help="also zbuffer-exact and zbuffer (OpenGL)")
+    ap.add_argument("--oracle-max-points", type=int, default=2_000_000, help="no agreement above this")
+    ap.add_argument("--warp-cpu-max-points", type=int, default=2_000_000, help="no Warp CPU row above this")
+    ap.add_argument("--force", action="store_true", help="run (flagged) even when the load average exceeds the CPUs")
+    ap.add_argument("--smoke", action="store_true", help="tiny sizes (2,000 points, 3 poses), any load")
     args = ap.parse_args(argv)
+    if args.smoke:
+        args.points, args.poses, args.force = "2000", "fibonacci:3", True
+    try:
+        counts = [int(x) for x in args.points.split(",")]
+        if min(counts) < 1:
+            raise ValueError
+    except ValueError:
+        print(f"bench_visibility_peers: error: --points {args.points!r}: use positive integers, e.g. 100000,1000000", file=sys.stderr)
+        return 2
     import zbuf_occlude as zo
-    from zbuf_occlude.render.context import shared_context
 
     poses = zo.view_schedule(args.poses)
-    try:
-        renderer = shared_context().info["GL_RENDERER"]
-    except Exception as exc:  # noqa: BLE001
-        renderer = f"none ({exc})"
-    print(f"# Visibility peers: {args.mesh.name}, {len(poses)} poses ({args.poses}), one run\n")
-    print(f"Machine: {platform.node()}, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at start; "
-          f"OpenGL renderer: {renderer}. Wall times on a shared machine are noisy: compare within a row group "
-          "(the methods ran interleaved, pose by pose); CPU ms is the process's CPU time (all threads).\n")
-    for n in (int(x) for x in args.points.split(",")):
-        rows, desc = run(args.mesh, n, poses, args.resolution)
-        auto = next(r for r in rows if r["method"].startswith("auto"))
-        peer = next(r for r in rows if r["method"].startswith("trimesh"))
-        ratios = [p / a for p, a in zip(peer["walls"], auto["walls"])]
-        print(f"## {n:,} points, {desc}\n")
-        print("| method | set-up ms | ms / view | CPU ms / view | agreement | false-visible | CPU-settled |")
-        print("|---|---:|---:|---:|---:|---:|---:|")
-        for r in rows:
-            setup = "—" if r["setup_ms"] is None else f"{r['setup_ms']:.0f}"
-            cpu = "—" if r["cpu_fraction"] is None or np.isnan(r["cpu_fraction"]) else f"{r['cpu_fraction']:.3%}"
-            print(f"| {r['method']} | {setup} | {r['ms']:.0f} | {r['cpu_ms']:.0f} | {r['agreement']:.4%} | {r['false_visible']:.4%} | {cpu} |")
-        print(f"\nauto vs trimesh intersects_any: {peer['ms'] / auto['ms']:.2f}× faster (median wall), per-pose ratios "
-              f"{', '.join(f'{x:.2f}' for x in ratios)}; CPU time {peer['cpu_ms'] / auto['cpu_ms']:.2f}×.\n", flush=True)
+    path = args.mesh or (SHARED_MESH if SHARED_MESH.is_file() else sorted(SHIPPED_MESH.rglob("*.off"))[0])
+    mesh = zo.load_mesh(path)
+    load_before, n_cpu = os.getloadavg(), cores()
+    loaded = load_before[0] > n_cpu
+    if loaded and not args.force:
+        print(f"bench_visibility_peers: load average {load_before[0]:.2f} exceeds the {n_cpu} CPUs: timings would be "
+              "noise. Wait for a quiet machine, or pass --force (the output is then flagged).", file=sys.stderr)
+        return 3
+    lines = [f"## Visibility peers: {path.name}, {len(poses)} poses ({args.poses}), one run"
+             + (" — ⚠ LOADED MACHINE, timings unreliable" if loaded else ""), "",
+             f"Machine: {_cpu_model()}, {n_cpu} CPUs, {platform.node()}; {_versions()}.",
+             f"Command: `{' '.join([Path(sys.executable).name, *sys.argv])}`", "",
+             f"Load average (1, 5, 15 min) before: {', '.join(f'{x:.2f}' for x in load_before)}.", ""]
+    print("\n".join(lines), flush=True)
+    for n in counts:
+        rows = run(mesh, n, poses, args)
+        print("\n".join(report(rows, n, f"{len(mesh.faces):,} faces, median of {len(poses)} views")), flush=True)
+    load_after = os.getloadavg()
+    flag = " ⚠ above the CPU count: timings unreliable" if max(load_before[0], load_after[0]) > n_cpu else ""
+    print(f"Load average (1, 5, 15 min) after: {', '.join(f'{x:.2f}' for x in load_after)}.{flag}")
     return 0
 
 

@@ -1,9 +1,15 @@
-"""``embree-fast``: multi-threaded float32 ray casting with float64 re-checks of near-ties.
+"""``embree-fast``: a CPU z-buffer pre-pass, then float32 rays with float64 re-checks of near-ties.
 
-The CPU path of ``auto`` (:mod:`~zbuf_occlude.visibility.auto`).  Per view, the points are
-split into chunks cast on a thread pool (``embreex`` releases the GIL inside ``run``, and
-numpy does for the per-chunk arithmetic), each chunk in two Embree ``OCCLUDED`` queries
-from the point towards the camera, clipped to the mesh's bounding sphere:
+The CPU path of ``auto`` (:mod:`~zbuf_occlude.visibility.auto`).  Per view, the mesh is first
+rasterised on the CPU into a conservative depth/face buffer (:mod:`.cpu_zbuffer`, compiled
+with numba, on the thread pool), which settles most points with a proof: hidden by a face
+the oracle's own float64 pair test confirms, or visible because every other face lies
+beyond the point in its cell.  Those points get the oracle's answer bit for bit.  The rest
+(near silhouettes and where many faces meet; a few percent to a few tens of percent,
+depending on the point density) are split into chunks cast on a thread pool (``embreex``
+releases the GIL inside ``run``, and numpy does for the per-chunk arithmetic), each chunk in
+two Embree ``OCCLUDED`` queries from the point towards the camera, clipped to the mesh's
+bounding sphere:
 
 1. from ``start`` to the sphere: a hit is an occluder farther than ``start`` from the point
    (float32: only a hit grazing an unshared edge can be false);
@@ -17,7 +23,13 @@ With ``face_index``, ``start`` and ``band_lo`` grow as the point's face turns ed
 Rule (b) of :mod:`~zbuf_occlude.visibility.definition` (edge-on faces) is then applied
 exactly.  What float32 can still get wrong: an occluder closer than ``band_lo`` (a few
 float32 ulps of the scene's size over ``cos``) that is not the own face, and edge grazes
-in pass 1; measured agreement with the oracle is in README's tables.
+in pass 1, for the points cast as rays; measured agreement with the oracle is in
+``docs/results/speed.md`` (``benchmarks/bench_visibility_accuracy.py``).
+
+Per-mesh state (the Embree BVH here, the pre-pass's face data and the oracle's planes) is
+cached per mesh object (:class:`~zbuf_occlude.mesh_cache.MeshCache`), so a one-shot
+:func:`embree_fast_visible` call on a mesh already seen builds nothing but the view's
+buffer; it does not sort the points either (the kept :class:`FastScene` does, once).
 """
 
 from __future__ import annotations
@@ -34,6 +46,7 @@ from ..cameras import Camera
 from ..errors import BackendUnavailable
 from ..mesh_cache import MeshCache
 from ..render.exact_backend import morton_order
+from . import cpu_zbuffer
 from .definition import EDGE_ON_SIN, TOLERANCE, edge_on_any, edge_on_own
 from .oracle_embree import _scene_for as _oracle_scene
 from .oracle_embree import occluded_embree
@@ -284,11 +297,31 @@ except ImportError:  # pragma: no cover - numba is the 'fast' extra
     _crease = None
 
 
+class _Runner:
+    """``run(fn, args_list)`` for :mod:`.cpu_zbuffer`: one call per argument tuple on the
+    thread pool (the compiled kernels release the GIL); ``bands`` is how many to make."""
+
+    def __init__(self, threads: int):
+        self.bands = threads
+
+    def __call__(self, fn, args_list) -> None:
+        if self.bands > 1 and len(args_list) > 1:
+            list(_executor(self.bands).map(lambda args: fn(*args), args_list))
+        else:
+            for args in args_list:
+                fn(*args)
+
+
 class FastScene(SessionBase):
     """One mesh and one point set for ``embree-fast``, tested from many cameras.
 
-    Set-up is cheap: float32 copies of the points relative to the mesh's centre (and their
-    faces' unit normals with ``face_index``); the Embree BVH is cached per mesh.
+    Per view, the CPU z-buffer pre-pass (:mod:`.cpu_zbuffer`) settles most points exactly;
+    the rest are cast as rays (module docstring).  What depends on the mesh alone (Embree
+    BVH, face planes) is cached per mesh, so a first view costs no more than a one-shot
+    :func:`embree_fast_visible` call; with ``sort=True`` (the session of
+    :func:`~zbuf_occlude.visibility.auto.make_scene`) the points are also put in Morton
+    order once, which makes later views faster (neighbouring points read neighbouring cells
+    and cast coherent rays).
 
     Parameters
     ----------
@@ -298,6 +331,10 @@ class FastScene(SessionBase):
     face_index : (N,) int, optional
     threads : int, optional
         Default :data:`DEFAULT_THREADS`.
+    sort : bool
+        Keep the points in Morton order (worth it for several views).
+    prepass : bool, optional
+        Use the CPU z-buffer pre-pass (default: when numba is available).
 
     Raises
     ------
@@ -307,29 +344,36 @@ class FastScene(SessionBase):
         Bad points or face index.
     """
 
-    def __init__(self, mesh: trimesh.Trimesh, points, face_index=None, *, threads: int | None = None):
+    def __init__(self, mesh: trimesh.Trimesh, points, face_index=None, *, threads: int | None = None,
+                 sort: bool = True, prepass: bool | None = None):
         self.mesh = mesh
-        self.points = check_points(points)
-        self.face_index = check_face_index(face_index, len(self.points), len(mesh.faces))
+        points = check_points(points)
+        face_index = check_face_index(face_index, len(points), len(mesh.faces))
         self.threads = int(threads or DEFAULT_THREADS)
         self._scene = _scenes(mesh)
-        # Rays in Z-order (Morton) of their points: neighbours traverse the same BVH nodes.
-        self._order = morton_order(self.points)
-        sc = self._scene
-        fi = self.face_index if self.face_index is not None else np.zeros(0, dtype=np.int64)
-        self._sorted_points, self._p32, self._pp, n32, boundary = _setup(
-            self.points, self._order, fi, sc.centre, sc.unit_normals, sc.edge_planes
-        )
-        # Unit normals of the points' faces, and distances to their faces' boundaries.
-        self._n32 = n32 if self.face_index is not None else None
-        self._boundary = boundary if self.face_index is not None else None
-        # Points sorted by x, for rule (b) without face_index (definition.edge_on_any).
-        self._x_order = np.argsort(self.points[:, 0], kind="stable") if self.face_index is None else None
-        #: Fraction of the points the last call re-decided in float64.
+        self._run = _Runner(self.threads)
+        self._prepass = cpu_zbuffer.available() if prepass is None else bool(prepass)
+        # Rays in Z-order (Morton) of their points traverse the same BVH nodes, and the
+        # pre-pass reads the buffer in order: worth a sort for many views, or when every
+        # point is cast.  For one view, points grouped by face (a counting sort) give the
+        # pre-pass and the rays most of that locality for the price of one gather.
+        self._perm = None
+        if (sort or not self._prepass) and len(points):
+            self._perm = morton_order(points)
+            points = np.ascontiguousarray(points[self._perm])
+            face_index = None if face_index is None else face_index[self._perm]
+        elif face_index is not None and len(points):
+            self._perm, points, face_index = cpu_zbuffer.group_by_face(points, face_index, len(mesh.faces))
+        self.points, self.face_index = points, face_index
+        self._x_order: NDArray[np.int64] | None = None
+        #: Fraction of the points the last call re-decided in float64 (near-ties).
         self.last_cpu_fraction = 0.0
+        #: Fraction of the points the last call cast as rays (the pre-pass settled the rest).
+        self.last_ray_fraction = 0.0
 
-    def _chunk(self, lo: int, hi: int, camera: Camera, eye_c: NDArray[np.float32]) -> tuple[NDArray, NDArray, NDArray]:
-        """(in frustum and not occluded by pass 1, near-tie, maybe edge-on) for points ``lo:hi``."""
+    def _chunk(self, lo: int, hi: int, sub, camera: Camera, eye_c: NDArray[np.float32]) -> tuple[NDArray, NDArray, NDArray]:
+        """(in frustum and not occluded by pass 1, near-tie, status) for rays ``lo:hi`` of ``sub``."""
+        sorted_points, p32, pp, n32, boundary = sub
         sc = self._scene
         rt = camera.extrinsics  # world -> OpenCV camera frame
         frame = np.empty((3, 4), dtype=np.float32)
@@ -339,14 +383,12 @@ class FastScene(SessionBase):
             [camera.focal_px, camera.width, camera.height, camera.znear, camera.zfar,
              1e-3 + 1e-5 * max(camera.width, camera.height)], dtype=np.float32)
         consts = np.array([sc.radius, _START, _MAX_START, _BAND_LO, EDGE_ON_SIN + 1e-3], dtype=np.float32)
-        normals = self._n32[lo:hi] if self._n32 is not None else np.zeros((0, 3), dtype=np.float32)
-        boundary = self._boundary[lo:hi] if self._boundary is not None else np.zeros(0, dtype=np.float32)
-        status, org1, len1, org2, len2, dirs = _prepare(
-            self._p32[lo:hi], self._pp[lo:hi], normals, boundary, eye_c, frame, cam, consts
-        )
+        normals = n32[lo:hi] if self.face_index is not None else np.zeros((0, 3), dtype=np.float32)
+        bound = boundary[lo:hi] if self.face_index is not None else np.zeros(0, dtype=np.float32)
+        status, org1, len1, org2, len2, dirs = _prepare(p32[lo:hi], pp[lo:hi], normals, bound, eye_c, frame, cam, consts)
         border = np.flatnonzero(status & 4)
         if len(border):  # within a hair of the frustum's border: Camera.in_frustum decides
-            inside = camera.in_frustum(self._sorted_points[lo + border])
+            inside = camera.in_frustum(sorted_points[lo + border])
             status[border[~inside]] = 0
         hit = np.asarray(sc.scene.run(org1, dirs, dists=len1, query="OCCLUDED")) >= 0  # -1: nothing hit
         inside = (status & 1).astype(bool)
@@ -358,30 +400,25 @@ class FastScene(SessionBase):
             tie[idx[near]] = True
         return visible, tie, status
 
-    def visible(self, camera: Camera, *, tolerance: float = TOLERANCE, **_ignored) -> NDArray[np.bool_]:
-        """Visibility of the points from ``camera`` (see the module docstring).  Options of
-        other methods (``resolution``...) are ignored with a log message.
-
-        Returns
-        -------
-        visible : (N,) bool
-        """
-        log_ignored("embree-fast", _ignored)
-        n = len(self.points)
-        eye_c = (np.asarray(camera.eye, dtype=np.float64) - self._scene.centre).astype(np.float32)
-        bounds = [(lo, min(lo + _CHUNK, n)) for lo in range(0, n, _CHUNK)]
+    def _cast(self, rays: NDArray[np.int64], camera: Camera, tolerance: float, visible: NDArray[np.bool_]) -> None:
+        """Decide points ``rays`` (in a coherent order) with Embree and float64 re-checks
+        (module docstring) into ``visible``."""
+        sc = self._scene
+        fi = self.face_index if self.face_index is not None else np.zeros(0, dtype=np.int64)
+        sub = _setup(self.points, rays, fi, sc.centre, sc.unit_normals, sc.edge_planes)
+        eye_c = (np.asarray(camera.eye, dtype=np.float64) - sc.centre).astype(np.float32)
+        m = len(rays)
+        step = min(_CHUNK, -(-m // self.threads))  # at least one chunk per thread
+        bounds = [(lo, min(lo + step, m)) for lo in range(0, m, step)]
         if self.threads > 1 and len(bounds) > 1:
-            parts = list(_executor(self.threads).map(lambda b: self._chunk(b[0], b[1], camera, eye_c), bounds))
+            parts = list(_executor(self.threads).map(lambda b: self._chunk(b[0], b[1], sub, camera, eye_c), bounds))
         else:
-            parts = [self._chunk(lo, hi, camera, eye_c) for lo, hi in bounds]
-        visible, tie = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
-        status = np.zeros(n, dtype=np.uint8)
-        if parts:  # back to the caller's order
-            visible[self._order] = np.concatenate([v for v, _, _ in parts])
-            tie[self._order] = np.concatenate([t for _, t, _ in parts])
-            status[self._order] = np.concatenate([st for _, _, st in parts])
-        edge = (status & 8) != 0
-        crease = np.flatnonzero(visible & ~tie & ((status & 16) != 0))
+            parts = [self._chunk(lo, hi, sub, camera, eye_c) for lo, hi in bounds]
+        vis = np.concatenate([v for v, _, _ in parts])
+        tie = np.concatenate([t for _, t, _ in parts])
+        status = np.concatenate([st for _, _, st in parts])
+        at = np.flatnonzero(vis & ~tie & ((status & 16) != 0))
+        crease = rays[at]
         if len(crease):
             # Within pass 2's start of its face's boundary, the point may be hidden by a
             # neighbouring face closer than that start: test the faces around its own
@@ -394,28 +431,62 @@ class FastScene(SessionBase):
                     pl.offset, pl.edge_normals, pl.edge_offsets, scene.corner_vertex, scene.vertex_start,
                     scene.vertex_faces, float(tolerance),
                 )
-                visible[crease[hidden]] = False
+                vis[at[hidden]] = False
             else:
                 k, g = scene.faces_around(self.face_index[crease])
                 kc = crease[k]
                 seg = camera.eye - self.points[kc]
                 seg_len = np.sqrt(np.einsum("ij,ij->i", seg, seg))
                 hit = _pair_occludes(self.points[kc], seg, seg_len, scene.planes, g, self.face_index[kc], tolerance)
-                visible[kc[hit]] = False
-        idx = np.flatnonzero(tie)
-        self.last_cpu_fraction = len(idx) / max(n, 1)
+                gone = np.zeros(len(self.points), dtype=bool)
+                gone[kc[hit]] = True
+                vis &= ~gone[rays]
+        idx = rays[tie]
+        self.last_cpu_fraction = len(idx) / max(len(self.points), 1)
         if len(idx):
-            fi = None if self.face_index is None else self.face_index[idx]
-            visible[idx] = ~occluded_embree(self.mesh, self.points[idx], camera.eye, face_index=fi, tolerance=tolerance)
-        planes = mesh_planes(self.mesh)
-        if self.face_index is None:
-            visible &= ~edge_on_any(planes, self.points, camera.eye, tolerance, order=self._x_order)
+            fi_t = None if self.face_index is None else self.face_index[idx]
+            vis[tie] = ~occluded_embree(self.mesh, self.points[idx], camera.eye, face_index=fi_t, tolerance=tolerance)
+        if self.face_index is not None:
+            edge = np.flatnonzero(vis & ((status & 8) != 0))
+            pts = self.points[rays[edge]]
+            vis[edge[edge_on_own(mesh_planes(self.mesh).normal[self.face_index[rays[edge]]], pts, camera.eye)]] = False
+        visible[rays] = vis
+
+    def visible(self, camera: Camera, *, tolerance: float = TOLERANCE, **_ignored) -> NDArray[np.bool_]:
+        """Visibility of the points from ``camera`` (see the module docstring).  Options of
+        other methods (``resolution``...) are ignored with a log message.
+
+        Returns
+        -------
+        visible : (N,) bool
+            In the order of the points given to the constructor.
+        """
+        log_ignored("embree-fast", _ignored)
+        n = len(self.points)
+        if self._prepass:
+            zb = cpu_zbuffer.build_zbuffer(self.mesh, camera, n, run=self._run)
+            status = cpu_zbuffer.classify(self.mesh, self.points, self.face_index, camera, zb, tolerance, run=self._run)
+            visible = status == cpu_zbuffer.VISIBLE
+            rays = np.flatnonzero(status == cpu_zbuffer.UNDECIDED)
+            if self._perm is None and len(rays):
+                # rays in the order of their cells (rows of the image plane): coherent enough
+                rays = rays[np.argsort(cpu_zbuffer.cell_of(self.points[rays], camera, zb), kind="stable")]
         else:
-            idx = np.flatnonzero(visible & edge)
-            visible[idx[edge_on_own(planes.normal[self.face_index[idx]], self.points[idx], camera.eye)]] = False
-        return visible
-
-
+            visible = np.zeros(n, dtype=bool)
+            rays = np.arange(n)
+        self.last_ray_fraction = len(rays) / max(n, 1)
+        self.last_cpu_fraction = 0.0
+        if len(rays):
+            self._cast(rays, camera, float(tolerance), visible)
+        if self.face_index is None:  # rule (b) without face_index, for every point
+            if self._x_order is None:
+                self._x_order = np.argsort(self.points[:, 0], kind="stable")
+            visible &= ~edge_on_any(mesh_planes(self.mesh), self.points, camera.eye, tolerance, order=self._x_order)
+        if self._perm is None:
+            return visible
+        out = np.empty(n, dtype=bool)
+        out[self._perm] = visible
+        return out
 
 
 @register("embree-fast", session=FastScene)
@@ -431,4 +502,5 @@ def embree_fast_visible(
 ) -> NDArray[np.bool_]:
     """Multi-threaded float32 Embree with float64 re-checks of near-ties; see :class:`FastScene`."""
     log_ignored("embree-fast", _ignored)
-    return FastScene(mesh, points, face_index, threads=threads).visible(camera, tolerance=tolerance)
+    # One view: no Morton sort of the points (the pre-pass settles most of them unsorted).
+    return FastScene(mesh, points, face_index, threads=threads, sort=False).visible(camera, tolerance=tolerance)

@@ -1,0 +1,96 @@
+#!/usr/bin/env bash
+# The GPU benchmark in one command: bash benchmarks/gpu.sh OUT [--smoke] [--allow-software] [--force]
+#
+# On a machine with an NVIDIA GPU: checks that EGL renders on the NVIDIA driver (not a
+# software rasteriser such as llvmpipe; exit 3 otherwise, unless --allow-software), then
+#   1. visibility at 100k, 1M and 10M points, 15 poses, methods interleaved pose by pose:
+#      zbuffer-exact, zbuffer, embree-fast (one-shot and kept scene), auto's choice after its
+#      calibration (ZBUF_OCCLUDE_AUTO=calibrate), and the peers (Open3D RaycastingScene,
+#      NVIDIA Warp on CPU and CUDA, trimesh + Embree) -- benchmarks/bench_visibility_peers.py;
+#   2. the farm at the paper's shape: 200 objects x paper100 poses x 10 samples x 2048 points
+#      (the meshes of ../shared/data/modelnet_subset, else the shipped data/samples, repeated
+#      as distinct objects) -- benchmarks/bench_farm.py;
+# and writes OUT/gpu.md: a Markdown report naming the device (OpenGL renderer string,
+# nvidia-smi's GPU name and driver), with both tables.  --smoke: tiny sizes, any renderer
+# (the CPU half runs in CI: tests/test_benchmarks.py).  --force: measure even when the load
+# average exceeds the CPU count (the visibility table is then flagged; without it, exit 3).
+set -euo pipefail
+
+usage() { echo "usage: bash benchmarks/gpu.sh OUT [--smoke] [--allow-software] [--force]" >&2; }
+out="" smoke=0 allow_sw=0 force=()
+for arg in "$@"; do
+    case "$arg" in
+        --smoke) smoke=1; allow_sw=1 ;;
+        --allow-software) allow_sw=1 ;;
+        --force) force=(--force) ;;
+        -h|--help) usage; exit 0 ;;
+        -*) echo "gpu.sh: unknown option '$arg'" >&2; usage; exit 2 ;;
+        *) if [ -n "$out" ]; then echo "gpu.sh: one OUT folder, got '$out' and '$arg'" >&2; exit 2; fi; out="$arg" ;;
+    esac
+done
+if [ -z "$out" ]; then usage; exit 2; fi
+
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+py="${PYTHON:-$root/.venv/bin/python}"
+[ -x "$py" ] || py="$(command -v python3)"
+export PYTHONPATH="$root${PYTHONPATH:+:$PYTHONPATH}"
+mkdir -p "$out"
+
+gpu_name="$(nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader 2>/dev/null | head -n 1 || true)"
+[ -n "$gpu_name" ] || gpu_name="none (nvidia-smi not found or no GPU)"
+renderer="$("$py" -c "
+from zbuf_occlude.render.context import shared_context
+info = shared_context().info
+print(f\"{info['GL_RENDERER']}, OpenGL {info['GL_VERSION']}\")
+" 2>&1 | tail -n 1)" || { echo "gpu.sh: no OpenGL context: $renderer" >&2; exit 3; }
+software="$("$py" -c "
+import sys
+from zbuf_occlude.visibility.auto import SOFTWARE_RENDERERS
+print(int(any(s in sys.argv[1].lower() for s in SOFTWARE_RENDERERS)))
+" "$renderer")"
+echo "gpu.sh: GPU: $gpu_name; OpenGL renderer: $renderer" >&2
+if [ "$software" = 1 ] && [ "$allow_sw" = 0 ]; then
+    echo "gpu.sh: EGL renders with a software rasteriser ($renderer), not the NVIDIA driver: check the driver's EGL" \
+         "vendor library (__EGL_VENDOR_LIBRARY_FILENAMES=/usr/share/glvnd/egl_vendor.d/10_nvidia.json), or pass --allow-software" >&2
+    exit 3
+fi
+
+meshes="$root/../shared/data/modelnet_subset"
+[ -d "$meshes" ] || meshes="$root/data/samples"
+if [ "$smoke" = 1 ]; then
+    points="2000" poses="fibonacci:3" farm=(--objects 2 --views fibonacci:2 --samples-per-view 2 --points 256 --dense-points 4096 --workers 1 --storage dense)
+    peers=(--smoke)
+else
+    points="100000,1000000,10000000" poses="fibonacci:15" farm=(--objects 200 --views paper100 --samples-per-view 10 --workers 1,2 --storage dense)
+    peers=()
+fi
+
+auto_choice="$(ZBUF_OCCLUDE_AUTO=calibrate "$py" -c "
+from zbuf_occlude.visibility.auto import calibrate, choose_method
+print(f'{choose_method()} (calibration, s per view: {calibrate()})')
+" 2>/dev/null | tail -n 1)"
+
+ZBUF_OCCLUDE_AUTO=calibrate "$py" "$root/benchmarks/bench_visibility_peers.py" "${peers[@]}" "${force[@]}" --gpu-methods \
+    --points "$points" --poses "$poses" > "$out/visibility.md"
+"$py" "$root/benchmarks/bench_farm.py" --root "$meshes" "${farm[@]}" --markdown > "$out/farm.md"
+
+{
+    echo "# GPU benchmark$([ "$smoke" = 1 ] && echo " (smoke: tiny sizes)")"
+    echo
+    echo "| device | |"
+    echo "|---|---|"
+    echo "| GPU (nvidia-smi: name, driver, memory) | $gpu_name |"
+    echo "| OpenGL renderer (EGL) | $renderer |"
+    echo "| CPU | $(grep -m 1 'model name' /proc/cpuinfo 2>/dev/null | cut -d: -f2- | sed 's/^ //') ($(nproc) CPUs) |"
+    echo "| \`auto\`'s choice after calibration | $auto_choice |"
+    echo "| date, commit | $(date -u +%Y-%m-%dT%H:%MZ), $(git -C "$root" rev-parse --short HEAD 2>/dev/null || echo unknown) |"
+    echo
+    echo "Command: \`bash benchmarks/gpu.sh $*\`"
+    echo
+    cat "$out/visibility.md"
+    echo
+    echo "## The farm at the paper's shape"
+    echo
+    sed 's/^# /- /' "$out/farm.md"  # (its comment lines as a list, not headings)
+} > "$out/gpu.md"
+echo "gpu.sh: wrote $out/gpu.md" >&2

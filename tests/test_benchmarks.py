@@ -1,0 +1,59 @@
+"""The benchmark commands run (their numbers are not tested: speed is measured, never asserted).
+
+* ``bash benchmarks/gpu.sh OUT --smoke`` writes its report (the CPU half of the GPU benchmark);
+* without ``--smoke`` or ``--allow-software`` it refuses a software OpenGL renderer (exit 3);
+* ``benchmarks/bench_visibility_peers.py`` refuses a machine loaded above its CPU count unless
+  ``--force`` (exit 3), and a bad ``--points`` (exit 2).
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO_ROOT / "benchmarks"))
+
+
+def _gpu_sh(out: Path, *flags: str) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHON": sys.executable}
+    env.pop("ZBUF_OCCLUDE_AUTO", None)
+    return subprocess.run(["bash", str(REPO_ROOT / "benchmarks" / "gpu.sh"), str(out), *flags], env=env,
+                          capture_output=True, text=True, timeout=600)
+
+
+def test_gpu_benchmark_smoke_writes_its_report(tmp_path):
+    res = _gpu_sh(tmp_path / "out", "--smoke")
+    assert res.returncode == 0, res.stderr[-3000:]
+    report = (tmp_path / "out" / "gpu.md").read_text()
+    assert "OpenGL renderer (EGL)" in report and "GPU (nvidia-smi" in report
+    assert "`zo.visible_mask` one-shot" in report and "`zbuffer-exact` kept scene" in report
+    assert "| dense | 1 | 2 |" in report  # the farm's row: 2 objects, 1 worker
+    assert "Load average (1, 5, 15 min) after" in report
+
+
+def test_gpu_benchmark_refuses_a_software_renderer(tmp_path):
+    from zbuf_occlude.render.context import shared_context
+    from zbuf_occlude.visibility.auto import SOFTWARE_RENDERERS
+
+    renderer = str(shared_context().info["GL_RENDERER"]).lower()
+    if not any(s in renderer for s in SOFTWARE_RENDERERS):
+        pytest.skip(f"a hardware renderer here ({renderer}): nothing to refuse")
+    res = _gpu_sh(tmp_path / "out")
+    assert res.returncode == 3, res.stderr[-2000:]
+    assert "software rasteriser" in res.stderr
+    assert not (tmp_path / "out" / "gpu.md").exists()
+
+
+def test_peer_benchmark_refuses_a_loaded_machine_and_bad_points(monkeypatch, capsys):
+    import bench_visibility_peers as bench
+
+    monkeypatch.setattr(os, "getloadavg", lambda: (bench.cores() + 1.0, 0.0, 0.0))
+    assert bench.main(["--points", "500", "--poses", "fibonacci:1"]) == 3
+    assert "exceeds" in capsys.readouterr().err
+    assert bench.main(["--points", "10,abc"]) == 2
+    assert "'10,abc'" in capsys.readouterr().err

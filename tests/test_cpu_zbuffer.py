@@ -1,0 +1,163 @@
+"""The CPU z-buffer pre-pass of embree-fast (zbuf_occlude.visibility.cpu_zbuffer).
+
+Laws tested:
+* soundness: every point the pre-pass settles gets the exact oracle's answer (``oracle-numpy``,
+  the paper's equations in float64), on random triangle soups from random poses (hypothesis),
+  on the shipped meshes, with and without ``face_index``, for points on and off the surface;
+* the frustum test is :meth:`Camera.in_frustum`'s, bit for bit;
+* the pre-pass settles most points (it is not a stub that leaves everything to the rays);
+* embree-fast with the pre-pass equals embree-fast without it up to float32 ray residue, and
+  its kept scene (Morton-sorted) equals its one-shot call bit for bit;
+* per-mesh state is built once: a second call on the same mesh rebuilds neither the Embree
+  scene nor the face data (builds counted), an edited mesh rebuilds.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import zbuf_occlude as zo
+from zbuf_occlude.visibility import cpu_zbuffer, embree_fast, visible_mask
+from zbuf_occlude.visibility.definition import TOLERANCE
+from zbuf_occlude.visibility.embree_fast import FastScene
+
+SAMPLES = Path(__file__).resolve().parents[1] / "data" / "samples"
+
+pytestmark = pytest.mark.skipif(not cpu_zbuffer.available(), reason="numba is a core dependency")
+
+
+def _soup(seed: int, n_faces: int) -> trimesh.Trimesh:
+    """Random triangles in the unit box: sizes from 0.005 to 0.6, some slivers (one edge 1e-4
+    of the others), some seen edge-on from the axes (a zero coordinate spread), and a floor."""
+    rng = np.random.default_rng(seed)
+    centre = rng.uniform(-0.4, 0.4, (n_faces, 1, 3))
+    size = np.exp(rng.uniform(np.log(0.005), np.log(0.6), (n_faces, 1, 1)))
+    tri = centre + size * rng.normal(size=(n_faces, 3, 3))
+    sliver = rng.random(n_faces) < 0.2
+    tri[sliver, 2] = tri[sliver, 1] + 1e-4 * (tri[sliver, 2] - tri[sliver, 1])
+    flat = rng.random(n_faces) < 0.1
+    tri[flat, :, 1] = tri[flat, :1, 1]  # in a plane y = const: edge-on from azimuth 0, elevation 0
+    floor = np.array([[[-0.6, -0.6, -0.5], [0.6, -0.6, -0.5], [0.6, 0.6, -0.5]], [[-0.6, -0.6, -0.5], [0.6, 0.6, -0.5], [-0.6, 0.6, -0.5]]])
+    tri = np.concatenate([tri, floor])
+    return trimesh.Trimesh(tri.reshape(-1, 3), np.arange(3 * len(tri)).reshape(-1, 3), process=False)
+
+
+def _check_settled(mesh, points, fi, cam, cells_per_point=cpu_zbuffer.CELLS_PER_POINT) -> float:
+    """Assert every settled point equals the exact oracle; return the settled fraction."""
+    zb = cpu_zbuffer.build_zbuffer(mesh, cam, len(points), cells_per_point=cells_per_point)
+    status = cpu_zbuffer.classify(mesh, points, fi, cam, zb, TOLERANCE)
+    truth = visible_mask(mesh, points, cam, "oracle-numpy", face_index=fi)
+    visible, hidden = status == cpu_zbuffer.VISIBLE, status == cpu_zbuffer.HIDDEN
+    assert not (visible & ~truth).any(), np.flatnonzero(visible & ~truth)
+    assert not (hidden & truth).any(), np.flatnonzero(hidden & truth)
+    # outside the frustum is HIDDEN, exactly as Camera.in_frustum says
+    assert np.array_equal(status[~cam.in_frustum(points)], np.full((~cam.in_frustum(points)).sum(), cpu_zbuffer.HIDDEN))
+    return float((status != cpu_zbuffer.UNDECIDED).mean())
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    n_faces=st.integers(1, 120),
+    el=st.floats(-89.0, 89.0),
+    az=st.floats(0.0, 360.0),
+    radius=st.floats(0.9, 6.0),
+    resolution=st.sampled_from([16, 64, 256, 1024]),
+    cells_per_point=st.sampled_from([0.05, 0.5, 2.0, 8.0]),
+)
+def test_settled_points_get_the_oracles_answer_on_random_soups(seed, n_faces, el, az, radius, resolution, cells_per_point):
+    mesh = _soup(seed, n_faces)
+    cam = zo.camera_on_sphere(el, az, radius, resolution=resolution)
+    points, fi = zo.sample_surface(mesh, 1500, seed=seed % 1000)
+    _check_settled(mesh, points, fi, cam, cells_per_point)
+    _check_settled(mesh, points, None, cam, cells_per_point)
+    # points off the surface (no face_index): the proofs do not assume a point is on a face
+    rng = np.random.default_rng(seed)
+    _check_settled(mesh, rng.uniform(-0.7, 0.7, (500, 3)), None, cam, cells_per_point)
+
+
+def test_edge_on_faces_and_axis_poses_are_settled_exactly():
+    mesh = _soup(7, 80)
+    points, fi = zo.sample_surface(mesh, 3000, seed=1)
+    for el, az in ((0.0, 0.0), (0.0, 90.0), (90.0, 0.0), (-90.0, 0.0)):
+        cam = zo.camera_on_sphere(el, az, resolution=128)
+        _check_settled(mesh, points, fi, cam)
+        _check_settled(mesh, points, None, cam)
+
+
+@pytest.mark.parametrize("name", ["chair/train/chair_0001.off", "sofa", "bathtub", "table"])
+def test_settled_points_get_the_oracles_answer_on_shipped_meshes(name):
+    path = SAMPLES / name if name.endswith(".off") else sorted((SAMPLES / name).rglob("*.off"))[0]
+    mesh = zo.load_mesh(path)
+    points, fi = zo.sample_surface(mesh, 20000, seed=2)
+    settled = []
+    for el, az in ((30.0, 20.0), (-60.0, 200.0), (0.0, 90.0), (85.0, 300.0)):
+        cam = zo.camera_on_sphere(el, az, resolution=512)
+        settled.append(_check_settled(mesh, points, fi, cam))
+        _check_settled(mesh, points, None, cam)
+    assert np.mean(settled) > 0.5, settled  # most points need no ray
+
+
+def test_a_mesh_behind_the_camera_plane_gets_no_buffer():
+    mesh = trimesh.creation.box([1.0, 1.0, 1.0])
+    cam = zo.camera_on_sphere(20.0, 30.0, 0.6, resolution=64, bounding_radius=0.5)  # eye inside the box
+    points, fi = zo.sample_surface(mesh, 500, seed=0)
+    zb = cpu_zbuffer.build_zbuffer(mesh, cam, len(points))
+    assert zb.shape == (0, 0)
+    status = cpu_zbuffer.classify(mesh, points, fi, cam, zb, 1e-6)
+    assert set(np.unique(status)) <= {cpu_zbuffer.HIDDEN, cpu_zbuffer.UNDECIDED}
+    assert np.array_equal(status == cpu_zbuffer.UNDECIDED, cam.in_frustum(points))
+
+
+def test_embree_fast_with_and_without_the_pre_pass_and_sorted_or_not():
+    mesh = zo.load_mesh(SAMPLES / "chair/train/chair_0001.off")
+    points, fi = zo.sample_surface(mesh, 5000, seed=3)
+    for el, az in ((10.0, 0.0), (-45.0, 120.0)):
+        cam = zo.camera_on_sphere(el, az)
+        truth = visible_mask(mesh, points, cam, "oracle", face_index=fi)
+        kept = FastScene(mesh, points, fi, sort=True)
+        got = kept.visible(cam)
+        assert kept.last_ray_fraction < 0.5
+        one_shot = visible_mask(mesh, points, cam, "embree-fast", face_index=fi)
+        assert np.array_equal(got, one_shot)
+        plain = FastScene(mesh, points, fi, prepass=False)
+        without = plain.visible(cam)
+        assert plain.last_ray_fraction == 1.0
+        assert (got == truth).mean() >= 0.9995 and (without == truth).mean() >= 0.9995
+        assert (got == without).mean() >= 0.9995
+
+
+def _count_builds(monkeypatch, cls, cache) -> list:
+    """Count constructions of ``cls`` (however they are reached) after emptying ``cache``."""
+    built = []
+    init = cls.__init__
+
+    def counting(self, mesh, *args, **kwargs):
+        built.append(id(mesh))
+        init(self, mesh, *args, **kwargs)
+
+    monkeypatch.setattr(cls, "__init__", counting)
+    cache.clear()
+    return built
+
+
+def test_a_second_call_on_a_mesh_rebuilds_nothing(monkeypatch):
+    mesh = zo.load_mesh(SAMPLES / "chair/train/chair_0001.off")
+    points, fi = zo.sample_surface(mesh, 2000, seed=4)
+    scenes = _count_builds(monkeypatch, embree_fast._Scene, embree_fast._scenes)
+    data = _count_builds(monkeypatch, cpu_zbuffer._MeshData, cpu_zbuffer._mesh_data)
+    cams = [zo.camera_on_sphere(el, az) for el, az in ((10.0, 0.0), (40.0, 90.0), (-30.0, 200.0))]
+    first = [visible_mask(mesh, points, c, face_index=fi) for c in cams]
+    assert len(data) == 1 and len(scenes) == 1
+    again = [visible_mask(mesh, points, c, face_index=fi) for c in cams]
+    assert len(data) == 1 and len(scenes) == 1
+    assert all(np.array_equal(a, b) for a, b in zip(first, again))
+    mesh.vertices = mesh.vertices * 1.01  # an edit: new content hash
+    visible_mask(mesh, points, cams[0], face_index=fi)
+    assert len(data) == 2 and len(scenes) == 2
