@@ -391,3 +391,22 @@ def test_identical_faces_cost_the_embree_oracle_one_face_per_group():
             assert np.array_equal(got, exact), eye
             assert stats["casts"] <= 2 * len(points)  # not a re-cast per copy
     assert pairs_per_face == [9.0, 9.0]  # three corners, three faces around each
+
+
+def test_identical_faces_enter_embree_fast_once():
+    """embree-fast's rays see one face per group of identical faces (a ray grazing m copies tested
+    all m), and the answer does not change with the copies."""
+    import numpy as np
+
+    import zbuf_occlude as zo
+    from zbuf_occlude.visibility.embree_fast import _Scene
+
+    for m in (10, 500):
+        assert _Scene(_tetra_with_copies(m)).n_faces_in_bvh == 4
+    one, many = _tetra_with_copies(0), _tetra_with_copies(200)
+    points, face_index = zo.sample_surface(one, count=2000, seed=3)
+    for elevation_deg, azimuth_deg in ((-60.0, 20.0), (30.0, 45.0), (0.0, 45.0)):  # below the base, above, edge-on
+        camera = zo.camera_on_sphere(elevation_deg=elevation_deg, azimuth_deg=azimuth_deg, radius=4.0)
+        a = zo.visible_mask(one, points, camera, face_index=face_index, method="embree-fast")
+        b = zo.visible_mask(many, points, camera, face_index=face_index, method="embree-fast")
+        assert np.array_equal(a, b)
