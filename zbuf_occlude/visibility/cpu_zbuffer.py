@@ -50,6 +50,7 @@ from numpy.typing import NDArray
 
 from ..cameras import Camera
 from ..mesh_cache import MeshCache
+from ..render.exact_backend import exact_face_groups
 from .definition import EDGE_ON_SIN
 from .segment_triangle import SCENE_CACHE_SIZE, mesh_planes
 
@@ -128,8 +129,9 @@ def _insert_py(zbuf, ids, c, z, f):
             ids[c, _KEEP + 1 + s] = f
 
 
-def _rasterise_py(cam, faces, grid, ga, gb, row_lo, row_hi, zbuf, ids):
-    """Conservative rasterisation (module docstring) of every face into rows
+def _rasterise_py(cam, faces, face_ids, grid, ga, gb, row_lo, row_hi, zbuf, ids):
+    """Conservative rasterisation (module docstring) of every face (``faces[f]``, stored as
+    ``face_ids[f]``) into rows
     ``row_lo:row_hi`` of the buffer (:class:`ZBuffer`'s layout: ``zbuf`` and ``ids`` are two
     views of one record per cell); ``grid = (a0, b0, inv_sa, inv_sb)``."""
     a0, b0, inv_sa, inv_sb = grid[0], grid[1], grid[2], grid[3]
@@ -167,7 +169,7 @@ def _rasterise_py(cam, faces, grid, ga, gb, row_lo, row_hi, zbuf, ids):
         if lo_a == hi_a and lo_b == hi_b:
             # Inside one cell, grown bounding box and all: it touches that cell only (and
             # covers none), and its nearest vertex bounds its depth.
-            _insert(zbuf, ids, lo_b * ga + lo_a, np.float32(_ROUND_UP / zmin), f)
+            _insert(zbuf, ids, lo_b * ga + lo_a, np.float32(_ROUND_UP / zmin), face_ids[f])
             continue
         pmax = max(abs(cam[i0, 0]) + abs(cam[i0, 1]) + abs(cam[i0, 2]), abs(cam[i1, 0]) + abs(cam[i1, 1]) + abs(cam[i1, 2]),
                    abs(cam[i2, 0]) + abs(cam[i2, 1]) + abs(cam[i2, 2]))
@@ -271,7 +273,7 @@ def _rasterise_py(cam, faces, grid, ga, gb, row_lo, row_hi, zbuf, ids):
                     if hi <= 0.0:
                         continue  # the plane is behind the camera over the whole cell
                     inv = min(inv, hi)
-                _insert(zbuf, ids, row + i, np.float32(_ROUND_UP * inv), f)
+                _insert(zbuf, ids, row + i, np.float32(_ROUND_UP * inv), face_ids[f])
 
 
 def _pair_occludes_one(px, py, pz, sx, sy, sz, seg_len, pl, tolerance):
@@ -393,6 +395,13 @@ class _MeshData:
     def __init__(self, mesh: trimesh.Trimesh):
         self.vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
         self.faces = np.ascontiguousarray(mesh.faces, dtype=np.int64)
+        # Rasterised: one face per group of identical faces (a stack of m copies would fill every
+        # cell it covers m times; a copy of a point's own face never occludes it, within the tolerance).
+        self.raster_ids = (
+            np.flatnonzero(exact_face_groups(mesh.triangles) == np.arange(len(self.faces))) if len(self.faces) else
+            np.zeros(0, dtype=np.int64)
+        )  # fmt: skip
+        self.raster_faces = np.ascontiguousarray(self.faces[self.raster_ids])
         planes = mesh_planes(mesh)
         n = len(self.faces)
         self.planes = np.ascontiguousarray(np.concatenate([
@@ -473,11 +482,12 @@ def build_zbuffer(mesh: trimesh.Trimesh, camera: Camera, n_points: int, *,
     zbuf = np.empty((ga * gb, _COVER + 1), dtype=np.float32)
     zb = ZBuffer(grid, (ga, gb), zbuf)
     if run is None:
-        _rasterise(cam, data.faces, grid, ga, gb, 0, gb, zbuf, zb.ids)
+        _rasterise(cam, data.raster_faces, data.raster_ids, grid, ga, gb, 0, gb, zbuf, zb.ids)
     else:
         bands = max(1, getattr(run, "bands", 1))
         cuts = [gb * k // bands for k in range(bands + 1)]
-        run(_rasterise, [(cam, data.faces, grid, ga, gb, cuts[k], cuts[k + 1], zbuf, zb.ids) for k in range(bands)])
+        run(_rasterise, [(cam, data.raster_faces, data.raster_ids, grid, ga, gb, cuts[k], cuts[k + 1], zbuf, zb.ids)
+                         for k in range(bands)])
     return zb
 
 
