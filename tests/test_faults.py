@@ -401,8 +401,11 @@ def test_identical_faces_enter_embree_fast_once():
     import zbuf_occlude as zo
     from zbuf_occlude.visibility.embree_fast import _Scene
 
+    from zbuf_occlude.visibility.cpu_zbuffer import _MeshData
+
     for m in (10, 500):
         assert _Scene(_tetra_with_copies(m)).n_faces_in_bvh == 4
+        assert _MeshData(_tetra_with_copies(m)).raster_ids.tolist() == [0, 1, 2, 3]  # the pre-pass's buffer too
     one, many = _tetra_with_copies(0), _tetra_with_copies(200)
     points, face_index = zo.sample_surface(one, count=2000, seed=3)
     for elevation_deg, azimuth_deg in ((-60.0, 20.0), (30.0, 45.0), (0.0, 45.0)):  # below the base, above, edge-on
