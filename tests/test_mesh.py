@@ -238,11 +238,11 @@ def test_format_round_trip(tmp_path: Path, ext: str) -> None:
     box.apply_translation([3.0, -1.0, 2.0])
     path = tmp_path / f"box.{ext}"
     box.export(path)
-    raw = load_mesh(path, normalize=False)
+    raw = load_mesh(path, normalize=False, up="+z")  # as stored (glTF's own +y is tests/test_mesh_scene.py's)
     assert len(raw.faces) == 12
     assert raw.area == pytest.approx(box.area)
     np.testing.assert_allclose(raw.bounds, box.bounds, atol=1e-6)
-    mesh = load_mesh(path)
+    mesh = load_mesh(path, up="+z")
     np.testing.assert_allclose(mesh.extents, [0.25, 0.5, 1.0], atol=NORM_TOL)
     _assert_normalised(mesh)
     np.testing.assert_allclose(mesh.metadata[METADATA_KEY]["center"], [3.0, -1.0, 2.0], atol=1e-6)
@@ -257,7 +257,7 @@ def test_glb_scene_is_flattened_with_transforms(tmp_path: Path) -> None:
     scene.add_geometry(sphere)
     path = tmp_path / "scene.glb"
     scene.export(path)
-    mesh = load_mesh(path, normalize=False)
+    mesh = load_mesh(path, normalize=False, up="+z")
     assert len(mesh.faces) == len(box.faces) + len(sphere.faces)
     np.testing.assert_allclose(mesh.bounds, [[-1.0, -1.0, -1.0], [10.5, 1.0, 1.0]], atol=1e-6)
 
