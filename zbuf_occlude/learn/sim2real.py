@@ -26,7 +26,7 @@ import json
 import logging
 import os
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -138,6 +138,7 @@ def run_sim2real(
     scale: str = "quick",
     points: int | None = None,
     epochs: int | None = None,
+    per_class: int | None = None,
     seeds: int = 5,
     keep_scale: bool = False,
     label_map: dict[str, str] | None = None,
@@ -165,7 +166,9 @@ def run_sim2real(
     model : {"pointnet", "voxnet", "3dmfv"}
     sensor : str or Lidar
         Scanner of the ``lidar`` set (a :data:`zbuf_occlude.sensors.LIDAR_PRESETS` name).
-    scale : {"quick", "paper"}; points, epochs : int, optional (override the scale's)
+    scale : {"quick", "paper"}; points, epochs, per_class : int, optional
+        Override the scale's points per cloud, epochs and training clouds per class (the
+        validation clouds per class follow in the scale's proportion).
     seeds : int
         Repetitions (≥ 2 for a standard deviation; 5 or more for a permutation test able to
         reach p < 0.05).
@@ -198,6 +201,8 @@ def run_sim2real(
         raise InvalidInputError(f"--seeds must be >= 1, got {seeds}")
     t_start = time.perf_counter()
     sc = SIM2REAL_SCALES[scale]
+    if per_class:
+        sc = replace(sc, per_class=int(per_class), val_per_class=max(1, round(int(per_class) * sc.val_per_class / sc.per_class)))
     n_points = int(points or sc.points)
     sizes = dict(sizes or CLASS_SIZES_M)
     lidar = _sensor(sensor)

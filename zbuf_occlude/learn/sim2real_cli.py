@@ -54,7 +54,7 @@ def _run(args: argparse.Namespace) -> int:
     real_options = {"dataset": args.real_format} if args.real_format != "auto" else {}
     summary = run_sim2real(
         args.root, args.real, args.out, model=args.model, sensor=args.sensor, scale=args.scale, points=args.points,
-        epochs=args.epochs, seeds=args.seeds, keep_scale=args.keep_scale,
+        epochs=args.epochs, per_class=args.per_class, seeds=args.seeds, keep_scale=args.keep_scale,
         label_map=parse_pairs(args.label_map, "--label-map"), up=args.up, up_map=up_map,
         sizes=parse_sizes(args.sizes), real_options=real_options, method=args.method, device=args.device,
         threads=args.threads, progress=not args.no_progress,
@@ -80,6 +80,7 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
                    help="quick: 256 points, 100 clouds per class, 20 epochs (a 2-core CPU); paper: 1024, 1000, 100")
     p.add_argument("--points", type=_positive, help="points per cloud (override the scale's)")
     p.add_argument("--epochs", type=_positive, help="epochs (override the scale's)")
+    p.add_argument("--per-class", type=_positive, help="training clouds per class (override the scale's)")
     p.add_argument("--seeds", type=_positive, default=5, help="repetitions, each redrawing clouds and initialisation (default %(default)s)")
     p.add_argument("--keep-scale", action="store_true", help="keep metres instead of normalising every cloud to max extent 1")
     p.add_argument("--label-map", help="real label to class folder, REAL=CLASS,... (e.g. Trunk=pole)")
