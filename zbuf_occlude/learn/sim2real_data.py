@@ -61,8 +61,8 @@ LIDAR_PLACEMENT = {"distance_m": (5.0, 25.0), "height_m": (1.6, 2.0)}
 MIN_RETURNS = 30
 #: ``keep_scale``: clouds are centred and divided by this many metres (a 10 m object spans ±0.5 ... 1).
 KEEP_SCALE_UNIT_M = 10.0
-#: Crops drawn per crop kept, at most (the rest have too few returns).
-_LIDAR_TRIES = 3
+#: Rounds of crop draws per mesh before the crops found are repeated (logged).
+_LIDAR_TRIES = 6
 
 
 @dataclass
@@ -191,7 +191,8 @@ def _lidar(entry: MeshEntry, k: int, n_points: int, seed: int, sensor, size: Siz
     for attempt in range(_LIDAR_TRIES):
         want = k - len(good)
         name = entry.name if attempt == 0 else f"{entry.name}#retry{attempt}"
-        clouds = lidar_object_samples(entry.mesh, sensor, name=name, n_samples=want + max(1, want // 5), n_points=n_points,
+        extra = max(1, want // 5) if attempt == 0 else want + 2  # later rounds: small objects far away miss more
+        clouds = lidar_object_samples(entry.mesh, sensor, name=name, n_samples=want + extra, n_points=n_points,
                                       seed=seed, distributions=dist, class_name=entry.class_name)  # fmt: skip
         good += [c for c in clouds if c.n_visible >= MIN_RETURNS][:want]
         if len(good) == k:
