@@ -80,12 +80,17 @@ SIM2REAL_SCALES = {
 }  # fmt: skip
 
 
-def _sensor(name_or_lidar):
-    from ..sensors import Lidar, lidar_preset
+def _sensor(name_or_sensor):
+    from ..sensors.airborne import AirborneScanner
+    from ..sensors.cli import sensor_from_name
+    from ..sensors.lidar import Lidar
 
-    if isinstance(name_or_lidar, Lidar):
-        return name_or_lidar
-    return lidar_preset(str(name_or_lidar))
+    if isinstance(name_or_sensor, (Lidar, AirborneScanner)):
+        return name_or_sensor
+    sensor = sensor_from_name(str(name_or_sensor))
+    if not isinstance(sensor, (Lidar, AirborneScanner)):
+        raise InvalidInputError(f"--sensor {name_or_sensor}: the lidar training set needs a LiDAR or an airborne scanner")
+    return sensor
 
 
 def _score(pred: np.ndarray, labels: np.ndarray, names: list[str]) -> dict:
@@ -164,8 +169,9 @@ def run_sim2real(
         Output folder (module docstring); a rerun resumes from ``runs.jsonl`` when the
         settings are unchanged, and is refused otherwise.
     model : {"pointnet", "voxnet", "3dmfv"}
-    sensor : str or Lidar
-        Scanner of the ``lidar`` set (a :data:`zbuf_occlude.sensors.LIDAR_PRESETS` name).
+    sensor : str, Lidar or AirborneScanner
+        Scanner of the ``lidar`` set: a preset name (:data:`zbuf_occlude.sensors.LIDAR_PRESETS`,
+        :data:`zbuf_occlude.sensors.airborne.AIRBORNE_PRESETS`) or a sensor ``.json`` file.
     scale : {"quick", "paper"}; points, epochs, per_class : int, optional
         Override the scale's points per cloud, epochs and training clouds per class (the
         validation clouds per class follow in the scale's proportion).
