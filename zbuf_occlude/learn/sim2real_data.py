@@ -279,7 +279,7 @@ def mix_sets(a: CloudSet, b: CloudSet, seed: int) -> CloudSet:
         n = int((a.labels == c).sum())
         rows_a += rng.permutation(np.flatnonzero(a.labels == c))[: (n + 1) // 2].tolist()
         rows_b += rng.permutation(np.flatnonzero(b.labels == c))[: n // 2].tolist()
-    return CloudSet.concat([a.subset(np.sort(rows_a)), b.subset(np.sort(rows_b))])
+    return CloudSet.concat([a.subset(np.sort(np.asarray(rows_a, np.int64))), b.subset(np.sort(np.asarray(rows_b, np.int64)))])
 
 
 def build_sets(meshes: list[MeshEntry], names: list[str], per_class: int, n_points: int, seed: int, **options) -> dict[str, CloudSet]:

@@ -40,8 +40,9 @@ def table_md(rows: list[dict], settings: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def plot_examples(path: str | Path, clouds: dict[str, np.ndarray], title: str = "") -> Path:
-    """A row of 3-D scatter plots, one per ``{label: (n, 3) cloud}``, the same view for each.
+def plot_examples(path: str | Path, rows: dict[str, dict[str, np.ndarray]], title: str = "") -> Path:
+    """A grid of 3-D scatter plots: one row per ``{row label: {column label: (n, 3) cloud}}``,
+    the same view and limits for each (normalised clouds, max extent 1).
 
     Needs matplotlib (the ``learn`` or ``plot`` extra).
     """
@@ -50,23 +51,24 @@ def plot_examples(path: str | Path, clouds: dict[str, np.ndarray], title: str = 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    n = len(clouds)
-    fig = plt.figure(figsize=(3.0 * n, 3.2))
-    for i, (label, pts) in enumerate(clouds.items()):
-        ax = fig.add_subplot(1, n, i + 1, projection="3d")
-        p = np.asarray(pts, dtype=np.float64)
-        ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=2, c=p[:, 2], cmap="viridis")
-        ax.set_title(label, fontsize=9)
-        ax.set_box_aspect((1, 1, 1))
-        lim = 0.55
-        ax.set_xlim(-lim, lim), ax.set_ylim(-lim, lim), ax.set_zlim(-lim, lim)
-        ax.view_init(elev=20, azim=-60)
-        ax.set_xticks([]), ax.set_yticks([]), ax.set_zticks([])
+    n_rows, n_cols = len(rows), max(len(r) for r in rows.values())
+    fig = plt.figure(figsize=(2.6 * n_cols, 2.7 * n_rows))
+    for i, (row_label, clouds) in enumerate(rows.items()):
+        for j, (label, pts) in enumerate(clouds.items()):
+            ax = fig.add_subplot(n_rows, n_cols, i * n_cols + j + 1, projection="3d")
+            p = np.asarray(pts, dtype=np.float64)
+            ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=1.5, c=p[:, 2], cmap="viridis")
+            ax.set_title(f"{row_label}: {label}", fontsize=8)
+            ax.set_box_aspect((1, 1, 1))
+            lim = 0.55
+            ax.set_xlim(-lim, lim), ax.set_ylim(-lim, lim), ax.set_zlim(-lim, lim)
+            ax.view_init(elev=15, azim=-60)
+            ax.set_xticks([]), ax.set_yticks([]), ax.set_zticks([])
     if title:
-        fig.suptitle(title, fontsize=10)
+        fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
