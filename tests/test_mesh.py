@@ -453,12 +453,14 @@ def test_provenance_composes_load_clean_and_normalise(tmp_path):
     raw = load_mesh(path, normalize=False)
     prov = raw.metadata[METADATA_KEY]
     assert prov == {"source": str(path), "n_degenerate_faces_dropped": 1, "n_unreferenced_vertices_dropped": 2,
-                    "center": [0.0, 0.0, 0.0], "scale": 1.0}  # fmt: skip
+                    "center": [0.0, 0.0, 0.0], "scale": 1.0, "up": "+z", "up_source": "as stored (+z)",
+                    "extent": [4.0, 2.0, 2.0], "units_m": None, "extent_m": None}  # fmt: skip
     loaded = load_mesh(path)
     normalised = normalize_mesh(raw)  # the same map, composed with the identity
     assert np.allclose(normalised.vertices, loaded.vertices)
     p1, p2 = normalised.metadata[METADATA_KEY], loaded.metadata[METADATA_KEY]
     assert p1["source"] == str(path) and p1["n_degenerate_faces_dropped"] == 1 and p1["n_unreferenced_vertices_dropped"] == 2
+    assert p1["extent"] == p2["extent"] == [4.0, 2.0, 2.0] and p1["up"] == "+z"  # the file's facts survive normalising
     assert np.allclose(p1["center"], p2["center"]) and np.isclose(p1["scale"], p2["scale"]) and np.allclose(p2["center"], [2, 1, 1])
     # cleaning again adds to the counts; other metadata survives
     more = trimesh.Trimesh(vertices=np.vstack([raw.vertices, [[7.0, 7, 7]]]), faces=np.vstack([raw.faces, [[0, 1, 1]]]),
