@@ -51,7 +51,7 @@ def _run(args: argparse.Namespace) -> int:
     bad = {k: v for k, v in up_map.items() if v not in UP_CHOICES}
     if bad:
         raise InvalidInputError(f"--up-map: axis must be one of {', '.join(UP_CHOICES)}, got {bad}")
-    real_options = {"dataset": args.real_format} if args.real_format != "auto" else {}
+    real_options = {"dataset": args.real_format, "up": args.real_up, "units": args.real_units}
     summary = run_sim2real(
         args.root, args.real, args.out, model=args.model, sensor=args.sensor, scale=args.scale, points=args.points,
         epochs=args.epochs, per_class=args.per_class, seeds=args.seeds, keep_scale=args.keep_scale,
@@ -87,7 +87,10 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--up", choices=UP_CHOICES, default="auto", help="up axis of the mesh files (default: each format's convention)")
     p.add_argument("--up-map", help="per-file up axis, GLOB=AXIS,... (globs of paths relative to ROOT)")
     p.add_argument("--sizes", help="real sizes per class, CLASS=length|height|max:LO-HI,... metres (over the defaults)")
-    p.add_argument("--real-format", default="auto", help="reader of --real (default: detected)")
+    p.add_argument("--real-format", choices=("auto", "folder", "lidarnet", "suo"), default="auto",
+                   help="reader of --real: a folder of class folders (any point-cloud files), LiDARNet v2, Sydney Urban Objects (default: detected)")
+    p.add_argument("--real-up", choices=UP_CHOICES[1:], default="+z", help="up axis of the real scans' files (folder reader; default %(default)s)")
+    p.add_argument("--real-units", default="m", help="unit of the real scans' files: m, cm, mm, in, ft or metres per unit (folder reader)")
     p.add_argument("--method", default=DEFAULT_METHOD, help="HSR method of the occluded set (default: %(default)s)")
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     p.add_argument("--threads", type=_positive, help="torch CPU threads")
