@@ -143,3 +143,20 @@ def test_bad_options_exit_2_naming_the_value(tmp_path: Path, option: str, value:
     with pytest.raises(SystemExit) as info:
         main(["experiment", "sim2real", str(tmp_path), "--real", str(tmp_path), "--out", str(tmp_path / "o"), option, value])
     assert info.value.code == 2 and value in capsys.readouterr().err
+
+
+def test_real_clouds_label_map_and_keep_scale() -> None:
+    from zbuf_occlude.learn.sim2real_data import real_clouds
+    from zbuf_occlude.real_scans import RealScan, normalize_points
+
+    tall = np.array([[0.0, 0.0, 0.0], [0.2, 0.1, 1.8], [0.1, 0.0, 0.9]])
+    scans = [RealScan(normalize_points(tall * k), label, f"{label}{k}", "test", (tall * k).max(axis=0))
+             for k, label in ((1.0, "Pedestrian"), (4.0, "Trunk"), (2.0, "Tree"))]  # fmt: skip
+    pts, labels, sources = real_clouds(scans, ["pedestrian", "pole"], {"Trunk": "pole"}, 16, 0)
+    assert labels.tolist() == [0, 1] and sources == ["Pedestrian1.0", "Trunk4.0"]  # Tree has no class: left out
+    np.testing.assert_allclose(np.ptp(pts, axis=1).max(axis=1), 1.0, atol=1e-6)
+    metric, _, _ = real_clouds(scans, ["pedestrian", "pole"], {"Trunk": "pole"}, 16, 0, keep_scale=True)
+    heights = np.ptp(metric[:, :, 2], axis=1) * KEEP_SCALE_UNIT_M
+    np.testing.assert_allclose(heights, [1.8, 7.2], rtol=1e-5)
+    with pytest.raises(InvalidInputError, match="label-map"):
+        real_clouds(scans[2:], ["pedestrian", "pole"], {}, 16, 0)
