@@ -160,3 +160,14 @@ def test_real_clouds_label_map_and_keep_scale() -> None:
     np.testing.assert_allclose(heights, [1.8, 7.2], rtol=1e-5)
     with pytest.raises(InvalidInputError, match="label-map"):
         real_clouds(scans[2:], ["pedestrian", "pole"], {}, 16, 0)
+
+
+def test_an_airborne_lidar_set(tmp_path: Path) -> None:
+    from zbuf_occlude.sensors import airborne_preset
+
+    meshes = find_class_meshes(_mesh_root(tmp_path))
+    als = airborne_preset("riegl-q1560", altitude_m=300.0)  # ~33 points/m²: a few returns on a pole's top
+    s = build_set("lidar", meshes, ["car", "pole"], 4, 32, 0, sensor=als, min_returns=2)
+    assert np.bincount(s.labels).tolist() == [4, 4]
+    with pytest.raises(InvalidInputError, match="min-returns"):
+        build_set("lidar", meshes, ["car", "pole"], 2, 32, 0, sensor=als, min_returns=10_000)

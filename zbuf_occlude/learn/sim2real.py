@@ -151,6 +151,7 @@ def run_sim2real(
     up_map: dict[str, str] | None = None,
     sizes: dict[str, SizeRange] | None = None,
     real_options: dict | None = None,
+    min_returns: int = MIN_RETURNS,
     method: str = "auto",
     device: str = "cpu",
     threads: int | None = None,
@@ -186,6 +187,8 @@ def run_sim2real(
     up, up_map : mesh up axis and per-file overrides (:func:`find_class_meshes`).
     sizes : dict, optional
         Real sizes per class (default :data:`zbuf_occlude.object_sizes.CLASS_SIZES_M`).
+    min_returns : int
+        LiDAR crops with fewer returns are redrawn (:data:`~zbuf_occlude.learn.sim2real_data.MIN_RETURNS`).
 
     Returns
     -------
@@ -227,7 +230,7 @@ def run_sim2real(
         "scale_values": asdict(sc), "points": n_points, "seeds": int(seeds), "keep_scale": bool(keep_scale),
         "label_map": dict(label_map or {}), "up": up, "up_map": dict(up_map or {}), "classes": names,
         "sizes_m": {k: asdict(v) for k, v in sizes.items()}, "occluded_elevation_deg": GROUND_ELEVATION_DEG,
-        "lidar_placement": LIDAR_PLACEMENT, "lidar_min_returns": MIN_RETURNS, "keep_scale_unit_m": KEEP_SCALE_UNIT_M,
+        "lidar_placement": LIDAR_PLACEMENT, "lidar_min_returns": int(min_returns), "keep_scale_unit_m": KEEP_SCALE_UNIT_M,
         "method": method, "train_config": {k: v for k, v in config(0).to_dict().items() if k not in ("seed", "device", "threads")},
         "meshes": {c: sum(m.class_name == c for m in meshes) for c in names},
         "mesh_up": {m.name: m.mesh.metadata["zbuf_occlude"].get("up_source") for m in meshes},
@@ -247,7 +250,7 @@ def run_sim2real(
     runs_path = out / "runs.jsonl"
     done = _load_runs(runs_path)
     half_a, half_b = _stratified_half(real_y)
-    common = dict(sensor=lidar, sizes=sizes, keep_scale=keep_scale, dense_points=sc.dense_points,
+    common = dict(sensor=lidar, sizes=sizes, keep_scale=keep_scale, dense_points=sc.dense_points, min_returns=int(min_returns),
                   resolution=sc.resolution, method=method)  # fmt: skip
     for seed in range(int(seeds)):
         train_meshes, val_meshes = split_whole_meshes(meshes, sc.val_mesh_fraction, seed)

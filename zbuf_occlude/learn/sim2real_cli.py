@@ -56,7 +56,7 @@ def _run(args: argparse.Namespace) -> int:
         args.root, args.real, args.out, model=args.model, sensor=args.sensor, scale=args.scale, points=args.points,
         epochs=args.epochs, per_class=args.per_class, seeds=args.seeds, keep_scale=args.keep_scale,
         label_map=parse_pairs(args.label_map, "--label-map"), up=args.up, up_map=up_map,
-        sizes=parse_sizes(args.sizes), real_options=real_options, method=args.method, device=args.device,
+        sizes=parse_sizes(args.sizes), real_options=real_options, min_returns=args.min_returns, method=args.method, device=args.device,
         threads=args.threads, progress=not args.no_progress,
     )  # fmt: skip
     sys.stdout.write(f"{args.out}/table.md\n")
@@ -68,6 +68,7 @@ def _run(args: argparse.Namespace) -> int:
 def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     """Add ``sim2real`` to ``experiment``'s argparse subparsers."""
     from ..mesh_scene import UP_CHOICES
+    from .sim2real_data import MIN_RETURNS
 
     p = sub.add_parser("sim2real", help="train only on clouds from meshes (complete / occluded / lidar / "
                        "lidar+complete), test on real scans; several seeds, permutation tests")  # fmt: skip
@@ -91,6 +92,8 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
                    help="reader of --real: a folder of class folders (any point-cloud files), LiDARNet v2, Sydney Urban Objects (default: detected)")
     p.add_argument("--real-up", choices=UP_CHOICES[1:], default="+z", help="up axis of the real scans' files (folder reader; default %(default)s)")
     p.add_argument("--real-units", default="m", help="unit of the real scans' files: m, cm, mm, in, ft or metres per unit (folder reader)")
+    p.add_argument("--min-returns", type=_positive, default=MIN_RETURNS,
+                   help="redraw LiDAR crops with fewer returns (default %(default)s; lower it for airborne or sparse sensors)")
     p.add_argument("--method", default=DEFAULT_METHOD, help="HSR method of the occluded set (default: %(default)s)")
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     p.add_argument("--threads", type=_positive, help="torch CPU threads")

@@ -181,26 +181,28 @@ def _occluded(entry: MeshEntry, k: int, n_points: int, seed: int, rng: np.random
     return out
 
 
-def _lidar(entry: MeshEntry, k: int, n_points: int, seed: int, sensor, size: SizeRange) -> tuple[list[NDArray], list[float]]:
+def _lidar(entry: MeshEntry, k: int, n_points: int, seed: int, sensor, size: SizeRange, min_returns: int = MIN_RETURNS
+           ) -> tuple[list[NDArray], list[float]]:  # fmt: skip
     from ..sensors.crops import CropDistributions, lidar_object_samples
 
     dist = CropDistributions(size_m=size_interval(entry.mesh.extents, size), **LIDAR_PLACEMENT)
     good: list = []
     # Draw about as many crops as needed, then more under another name (new placements) while
-    # crops come back with fewer than MIN_RETURNS returns; at most _LIDAR_TRIES rounds.
+    # crops come back with fewer than min_returns returns; at most _LIDAR_TRIES rounds.
     for attempt in range(_LIDAR_TRIES):
         want = k - len(good)
         name = entry.name if attempt == 0 else f"{entry.name}#retry{attempt}"
         extra = max(1, want // 5) if attempt == 0 else want + 2  # later rounds: small objects far away miss more
         clouds = lidar_object_samples(entry.mesh, sensor, name=name, n_samples=want + extra, n_points=n_points,
                                       seed=seed, distributions=dist, class_name=entry.class_name)  # fmt: skip
-        good += [c for c in clouds if c.n_visible >= MIN_RETURNS][:want]
+        good += [c for c in clouds if c.n_visible >= min_returns][:want]
         if len(good) == k:
             break
     if not good:
-        raise InvalidInputError(f"{entry.path}: no LiDAR crop with {MIN_RETURNS} returns in {_LIDAR_TRIES} rounds")
+        raise InvalidInputError(f"{entry.path}: no LiDAR crop with {min_returns} returns in {_LIDAR_TRIES} rounds; "
+                                "lower --min-returns (a sparse or airborne sensor) or give larger --sizes")
     if len(good) < k:
-        log.warning("%s: %d of %d LiDAR crops have >= %d returns; repeating them", entry.name, len(good), k, MIN_RETURNS)
+        log.warning("%s: %d of %d LiDAR crops have >= %d returns; repeating them", entry.name, len(good), k, min_returns)
         good = [good[i % len(good)] for i in range(k)]
     return [c.points.astype(np.float64) for c in good], [float(c.extra["size_m"]) for c in good]
 
@@ -221,12 +223,15 @@ def _finish(clouds: list[NDArray], sizes_m: NDArray[np.float64], keep_scale: boo
 
 def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: int, n_points: int, seed: int, *,
               sensor=None, sizes: dict[str, SizeRange] = CLASS_SIZES_M, keep_scale: bool = False,
-              dense_points: int = 8192, resolution: int = 512, method: str = "auto") -> CloudSet:  # fmt: skip
+              dense_points: int = 8192, resolution: int = 512, method: str = "auto",
+              min_returns: int = MIN_RETURNS) -> CloudSet:  # fmt: skip
     """``per_class`` clouds of every class in ``names`` from ``meshes``, of one training set kind.
 
     Cloud counts are spread over each class's meshes (:func:`allocate`); ``lidar+complete``
-    takes half (rounded up) from ``lidar`` and the rest from ``complete``.  ``object_index``
-    is the mesh's row in ``meshes``; ``elevation_deg`` is NaN.
+    is :func:`mix_sets` of the ``lidar`` and ``complete`` sets of the same seed.
+    ``object_index`` is the mesh's row in ``meshes``; ``elevation_deg`` is NaN.  A LiDAR crop
+    with fewer than ``min_returns`` returns is redrawn (:data:`MIN_RETURNS`; an airborne
+    scanner at a few points per m² needs a much lower value for small objects).
 
     Raises
     ------
@@ -237,7 +242,7 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
         raise InvalidInputError(f"unknown training set {kind!r}; choose from {TRAINING_SETS}")
     if kind == "lidar+complete":
         common = dict(sizes=sizes, keep_scale=keep_scale)
-        lidar = build_set("lidar", meshes, names, per_class, n_points, seed, sensor=sensor, **common)
+        lidar = build_set("lidar", meshes, names, per_class, n_points, seed, sensor=sensor, min_returns=min_returns, **common)
         return mix_sets(lidar, build_set("complete", meshes, names, per_class, n_points, seed, **common), seed)
     missing = sorted({m.class_name for m in meshes} - set(sizes))
     if missing and (kind == "lidar" or keep_scale):
@@ -255,7 +260,7 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
             elif kind == "occluded":
                 got = _occluded(entry, int(k), n_points, seed, rng, dense_points=dense_points, resolution=resolution, method=method)
             else:
-                got, size_k = _lidar(entry, int(k), n_points, seed, sensor, sizes[cls])
+                got, size_k = _lidar(entry, int(k), n_points, seed, sensor, sizes[cls], min_returns)
             if kind == "lidar":
                 sizes_m.extend(size_k)
             elif keep_scale:
