@@ -22,14 +22,14 @@ ROOT = "zbuf_occlude"
 LAYERS: dict[str, int] = {
     # base: no zbuf_occlude imports but each other's
     "errors": 0, "defaults": 0, "_version": 0, "safe_paths": 0, "mesh_cache": 0, "metrics": 0, "resources": 0,
-    "mesh_formats": 1, "discovery": 1, "mesh_layouts": 1, "mesh": 1,
+    "mesh_formats": 1, "discovery": 1, "mesh_layouts": 1, "mesh": 1, "mesh_scene": 1, "object_sizes": 1,
     "sampling": 2,
     "cameras": 3,
     "render": 4,
     "visibility": 5,
     "occlude": 6,
     # writers and readers, and the on-disk layout they share
-    "io": 7, "dataset": 7, "layout": 7, "real_scans": 7, "schema": 7, "verify": 7, "sample_files": 7,
+    "io": 7, "dataset": 7, "layout": 7, "real_scans": 7, "schema": 7, "verify": 7, "sample_files": 7, "scan_files": 7,
     # engines on top of one object's pipeline
     "farm": 8, "compare": 8, "elevation_profile": 8, "sensors": 8, "protocols": 8,
     "learn": 9,

@@ -238,11 +238,11 @@ def test_format_round_trip(tmp_path: Path, ext: str) -> None:
     box.apply_translation([3.0, -1.0, 2.0])
     path = tmp_path / f"box.{ext}"
     box.export(path)
-    raw = load_mesh(path, normalize=False)
+    raw = load_mesh(path, normalize=False, up="+z")  # as stored (glTF's own +y is tests/test_mesh_scene.py's)
     assert len(raw.faces) == 12
     assert raw.area == pytest.approx(box.area)
     np.testing.assert_allclose(raw.bounds, box.bounds, atol=1e-6)
-    mesh = load_mesh(path)
+    mesh = load_mesh(path, up="+z")
     np.testing.assert_allclose(mesh.extents, [0.25, 0.5, 1.0], atol=NORM_TOL)
     _assert_normalised(mesh)
     np.testing.assert_allclose(mesh.metadata[METADATA_KEY]["center"], [3.0, -1.0, 2.0], atol=1e-6)
@@ -257,7 +257,7 @@ def test_glb_scene_is_flattened_with_transforms(tmp_path: Path) -> None:
     scene.add_geometry(sphere)
     path = tmp_path / "scene.glb"
     scene.export(path)
-    mesh = load_mesh(path, normalize=False)
+    mesh = load_mesh(path, normalize=False, up="+z")
     assert len(mesh.faces) == len(box.faces) + len(sphere.faces)
     np.testing.assert_allclose(mesh.bounds, [[-1.0, -1.0, -1.0], [10.5, 1.0, 1.0]], atol=1e-6)
 
@@ -453,12 +453,14 @@ def test_provenance_composes_load_clean_and_normalise(tmp_path):
     raw = load_mesh(path, normalize=False)
     prov = raw.metadata[METADATA_KEY]
     assert prov == {"source": str(path), "n_degenerate_faces_dropped": 1, "n_unreferenced_vertices_dropped": 2,
-                    "center": [0.0, 0.0, 0.0], "scale": 1.0}  # fmt: skip
+                    "center": [0.0, 0.0, 0.0], "scale": 1.0, "up": "+z", "up_source": "as stored (+z)",
+                    "extent": [4.0, 2.0, 2.0], "units_m": None, "extent_m": None}  # fmt: skip
     loaded = load_mesh(path)
     normalised = normalize_mesh(raw)  # the same map, composed with the identity
     assert np.allclose(normalised.vertices, loaded.vertices)
     p1, p2 = normalised.metadata[METADATA_KEY], loaded.metadata[METADATA_KEY]
     assert p1["source"] == str(path) and p1["n_degenerate_faces_dropped"] == 1 and p1["n_unreferenced_vertices_dropped"] == 2
+    assert p1["extent"] == p2["extent"] == [4.0, 2.0, 2.0] and p1["up"] == "+z"  # the file's facts survive normalising
     assert np.allclose(p1["center"], p2["center"]) and np.isclose(p1["scale"], p2["scale"]) and np.allclose(p2["center"], [2, 1, 1])
     # cleaning again adds to the counts; other metadata survives
     more = trimesh.Trimesh(vertices=np.vstack([raw.vertices, [[7.0, 7, 7]]]), faces=np.vstack([raw.faces, [[0, 1, 1]]]),

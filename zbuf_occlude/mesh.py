@@ -18,6 +18,12 @@ Provenance is stored on every mesh this module returns, in
     The normalisation that was applied, in the source file's units:
     ``normalised = (original - center) * scale``.  Identity (``[0, 0, 0]``, ``1.0``)
     when the mesh was not normalised.
+``up``, ``up_source`` : str
+    The file's up axis, rotated to +z before anything else, and the rule that chose it
+    (:mod:`zbuf_occlude.mesh_scene`); ``center`` is in the rotated frame.
+``extent`` : list of 3 float; ``units_m`` : float or None; ``extent_m`` : list of 3 float or None
+    The z-up bounding box size before normalisation in file units, the metres per file
+    unit the format declares (glTF, COLLADA), and that size in metres.
 
 Files cut short are errors, not partial meshes (:mod:`zbuf_occlude.mesh_formats`).
 The discovery of mesh files lives in :mod:`zbuf_occlude.discovery`; its names are
@@ -55,6 +61,7 @@ from .discovery import (
 )
 from .errors import InvalidInputError, MeshLoadError, ZbufOccludeError
 from .mesh_formats import SUPPORTED_EXTENSIONS, read_trimesh
+from .mesh_scene import UP_CHOICES, declared_units_m, resolve_up, up_rotation
 
 __all__ = [
     "SUPPORTED_EXTENSIONS",
@@ -170,6 +177,10 @@ def _check(
     return lo, hi, degenerate
 
 
+#: Provenance keys that describe the file (load_mesh), carried through clean/normalise unchanged.
+_FILE_KEYS = ("up", "up_source", "extent", "units_m", "extent_m")
+
+
 def _provenance(mesh: trimesh.Trimesh) -> dict[str, Any]:
     """A fresh copy of the mesh's provenance dictionary, with defaults for missing keys."""
     old = dict(mesh.metadata.get(METADATA_KEY, {}))
@@ -179,6 +190,7 @@ def _provenance(mesh: trimesh.Trimesh) -> dict[str, Any]:
         "n_unreferenced_vertices_dropped": int(old.get("n_unreferenced_vertices_dropped", 0)),
         "center": list(old.get("center", [0.0, 0.0, 0.0])),
         "scale": float(old.get("scale", 1.0)),
+        **{k: old[k] for k in _FILE_KEYS if k in old},
     }
 
 
@@ -341,16 +353,21 @@ def normalize_mesh(mesh: trimesh.Trimesh, *, area_rtol: float = DEGENERATE_AREA_
 
 
 def load_mesh(
-    path: str | PathLike[str], *, normalize: bool = True, area_rtol: float = DEGENERATE_AREA_RTOL
+    path: str | PathLike[str],
+    *,
+    normalize: bool = True,
+    area_rtol: float = DEGENERATE_AREA_RTOL,
+    up: str = "auto",
 ) -> trimesh.Trimesh:
-    """Load a triangle mesh from OFF, OBJ, PLY, STL or GLB, cleaned and normalised.
+    """Load a triangle mesh from OFF, OBJ, PLY, STL, glTF (GLB, .gltf) or COLLADA, cleaned, z up, normalised.
 
     Steps: parse with trimesh (polygons are fan-triangulated, scenes flattened with
-    their transforms), check, drop degenerate faces and unreferenced vertices
-    (:func:`clean_mesh`), then, if ``normalize``, centre and scale to the unit box as
-    in Sryamkin et al. 2023, §4.1 (:func:`normalize_mesh`).  Duplicated vertices are
-    kept and the mesh need not be watertight or manifold.  GLB files are read as
-    stored: glTF is y-up and no axis conversion is done.
+    their node transforms; ``.gltf`` reads its external or embedded buffers, COLLADA
+    needs pycollada, the ``collada`` extra), rotate the file's up axis to +z, check,
+    drop degenerate faces and unreferenced vertices (:func:`clean_mesh`), then, if
+    ``normalize``, centre and scale to the unit box as in Sryamkin et al. 2023, §4.1
+    (:func:`normalize_mesh`).  Duplicated vertices are kept and the mesh need not be
+    watertight or manifold.
 
     Parameters
     ----------
@@ -361,12 +378,20 @@ def load_mesh(
         Centre the bounding box on the origin and scale the max extent to 1.
     area_rtol : float
         Relative area below which a face is degenerate; see :func:`degenerate_faces`.
+    up : {"auto", "+z", "+y", "-y", "+x", "-x", "-z"}
+        The file's up axis, rotated to +z.  ``auto``: the format's convention (glTF +y,
+        COLLADA its declared ``<up_axis>``, OBJ by its exporter, others as stored);
+        :mod:`zbuf_occlude.mesh_scene` gives the rules.
 
     Returns
     -------
     mesh : trimesh.Trimesh
-        vertices (V, 3) float64, faces (F, 3) int64, in file order minus dropped ones.
-        ``mesh.metadata["zbuf_occlude"]`` holds the provenance (module docstring).
+        vertices (V, 3) float64, faces (F, 3) int64, in file order minus dropped ones, z up.
+        ``mesh.metadata["zbuf_occlude"]`` holds the provenance (module docstring) and
+        ``up``, ``up_source`` (the rule applied), ``extent`` (3 floats: the bounding box
+        of the z-up mesh before normalisation, file units), ``units_m`` (metres per file
+        unit when the format declares it, else None) and ``extent_m`` (``extent`` in
+        metres, or None).
 
     Raises
     ------
@@ -376,9 +401,11 @@ def load_mesh(
         NaN/inf vertices, face indices out of range, zero extent (all vertices
         coincide) or only degenerate faces.
     InvalidInputError
-        If ``area_rtol`` is negative or not finite.
+        If ``area_rtol`` is negative or not finite, or ``up`` is not an axis.
     """
     _check_rtol(area_rtol)
+    if up not in UP_CHOICES:
+        raise InvalidInputError(f"up axis must be one of {', '.join(UP_CHOICES)}, got {up!r}")
     path = Path(path)
     if not path.exists():
         raise MeshLoadError(f"{path}: no such file")
@@ -392,6 +419,8 @@ def load_mesh(
     file_type = SUPPORTED_EXTENSIONS[suffix]
     try:
         loaded = read_trimesh(path, file_type)
+        axis, up_source = resolve_up(path, file_type, up)
+        units_m = declared_units_m(path, file_type)
     except OSError as exc:
         raise MeshLoadError(f"{path}: cannot read file ({exc.strerror or exc})") from exc
     except (MemoryError, MeshLoadError):
@@ -404,6 +433,8 @@ def load_mesh(
     if not isinstance(loaded, trimesh.Trimesh):
         raise MeshLoadError(f"{path}: trimesh returned a {type(loaded).__name__}, not a triangle mesh")
     vertices, faces = _as_arrays(loaded)
+    if axis != "+z":
+        vertices = vertices @ up_rotation(axis)[:3, :3].T
     _, _, degenerate = _check(vertices, faces, what=str(path), error=MeshLoadError, area_rtol=area_rtol)
     n_degenerate = int(degenerate.sum())
     if n_degenerate:
@@ -416,6 +447,9 @@ def load_mesh(
         "center": [0.0, 0.0, 0.0],
         "scale": 1.0,
     }
+    extent = (vertices.max(axis=0) - vertices.min(axis=0)).tolist()
+    prov.update(up=axis, up_source=up_source, extent=extent, units_m=units_m,
+                extent_m=None if units_m is None else [e * units_m for e in extent])  # fmt: skip
     if normalize:
         # Dropping degenerate faces never empties the mesh (checked above), so the
         # bounds of the kept vertices are finite and, being a superset of a

@@ -10,6 +10,7 @@ triangles, which trimesh 5.2 cannot read, are fanned first.
 
 from __future__ import annotations
 
+import importlib.util
 import io
 import re
 from pathlib import Path
@@ -18,7 +19,7 @@ import trimesh
 
 from .errors import MeshLoadError
 
-__all__ = ["SUPPORTED_EXTENSIONS", "read_trimesh"]
+__all__ = ["SUPPORTED_EXTENSIONS", "FORMAT_EXTRAS", "read_trimesh"]
 
 #: File extensions load_mesh accepts (lower case), mapped to trimesh's file type.
 SUPPORTED_EXTENSIONS: dict[str, str] = {
@@ -27,7 +28,12 @@ SUPPORTED_EXTENSIONS: dict[str, str] = {
     ".ply": "ply",
     ".stl": "stl",
     ".glb": "glb",
+    ".gltf": "gltf",
+    ".dae": "dae",
 }
+
+#: The optional package each format needs beyond trimesh, and the extra that installs it.
+FORMAT_EXTRAS: dict[str, tuple[str, str]] = {"dae": ("collada", "collada")}
 
 #: Longest prefix before "OFF" on the header line (COFF, NOFF, STOFF, 4OFF, CNOFF ...).
 _OFF_HEADER_MAX_PREFIX = 4
@@ -39,6 +45,10 @@ class _NotOff(ValueError):
 
 class _NotMesh(ValueError):
     """The file parsed but holds no triangle mesh."""
+
+
+class _NeedsExtra(ValueError):
+    """The format needs an optional package that is not installed."""
 
 
 class _Malformed(ValueError):
@@ -236,6 +246,10 @@ def _read(path: Path, file_type: str) -> trimesh.Trimesh:
         return mesh
     if file_type == "stl":
         _check_binary_stl_length(path.read_bytes())
+    if file_type in FORMAT_EXTRAS:
+        module, extra = FORMAT_EXTRAS[file_type]
+        if importlib.util.find_spec(module) is None:
+            raise _NeedsExtra(f"reading {file_type.upper()} needs the {module!r} package: pip install 'zbuf-occlude[{extra}]'")
     if file_type != "off":
         return _to_mesh(trimesh.load_scene(str(path), file_type=file_type, process=False))
     raw = path.read_bytes()
@@ -322,7 +336,7 @@ def read_trimesh(path: Path, file_type: str) -> trimesh.Trimesh:
         return _read(path, file_type)
     except _NotOff as exc:
         raise MeshLoadError(f"{path}: not an OFF file ({exc})") from exc
-    except _NotMesh as exc:
+    except (_NotMesh, _NeedsExtra) as exc:
         raise MeshLoadError(f"{path}: {exc}") from exc
     except _Malformed as exc:
         raise MeshLoadError(f"{path}: cannot parse as {file_type.upper()}: {exc}") from exc

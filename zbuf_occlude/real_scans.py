@@ -261,16 +261,23 @@ def read_lidarnet_csv(path: str | os.PathLike) -> RealScan:
     )  # fmt: skip
 
 
+def _scan_files(root: Path) -> list[Path]:
+    return sorted(p for p in root.rglob("*") if p.is_file() and p.suffix.lower() in (".bin", ".csv") and p.name != "MANIFEST.csv")
+
+
 def _detect(files: Sequence[Path]) -> str:
-    if any(f.suffix.lower() == ".bin" for f in files):
-        return "suo"
+    """``lidarnet`` (CSVs with its header), ``suo`` (``class.instance.scan.bin|csv`` names), else ``folder``."""
     for f in files:
-        try:
-            with open(f, encoding="utf-8") as fh:
-                return "lidarnet" if fh.readline().startswith("origin_x") else "suo"
-        except OSError:
-            continue
-    return "suo"
+        if f.suffix.lower() == ".csv":
+            try:
+                with open(f, encoding="utf-8", errors="replace") as fh:
+                    if fh.readline().startswith("origin_x"):
+                        return "lidarnet"
+            except OSError:
+                continue
+    if files and all(f.suffix.lower() in (".bin", ".csv") and f.name.count(".") == 3 for f in files):
+        return "suo"
+    return "folder"
 
 
 def load_real_scans(
@@ -280,6 +287,9 @@ def load_real_scans(
     classes: Iterable[str] | None = None,
     min_points: int = 1,
     dedupe: bool = True,
+    label_map: Mapping[str, str] | None = None,
+    up: str = "+z",
+    units: str | float = "m",
 ) -> list[RealScan]:
     """Every object scan under ``path`` (a file or a folder searched recursively).
 
@@ -288,7 +298,11 @@ def load_real_scans(
     path : path
         SUO ``objects/`` folder (``.bin`` preferred; ``.csv`` read where no ``.bin`` of the
         same name exists) or a LiDARNet v2 folder (``*.csv`` except ``MANIFEST.csv``).
-    dataset : {"auto", "suo", "lidarnet"}
+    dataset : {"auto", "suo", "lidarnet", "folder"}
+        ``folder``: any folder with one sub-folder per class of point-cloud files
+        (:func:`zbuf_occlude.scan_files.load_scan_folder`, which ``label_map``, ``up`` and
+        ``units`` apply to).  ``auto``: LiDARNet when a CSV has its header, SUO when every
+        file is named ``class.instance.scan.bin|csv``, else ``folder``.
     classes : iterable of str, optional
         Keep these labels only.
     min_points : int
@@ -309,13 +323,18 @@ def load_real_scans(
     root = Path(path)
     if not root.exists():
         raise InvalidInputError(f"real scans: {root} does not exist")
-    if dataset not in ("auto", "suo", "lidarnet"):
-        raise InvalidInputError(f"dataset must be auto, suo or lidarnet, got {dataset!r}")
-    files = [root] if root.is_file() else sorted(
-        p for p in root.rglob("*") if p.is_file() and p.suffix.lower() in (".bin", ".csv") and p.name != "MANIFEST.csv"
-    )  # fmt: skip
+    if dataset not in ("auto", "suo", "lidarnet", "folder"):
+        raise InvalidInputError(f"dataset must be auto, suo, lidarnet or folder, got {dataset!r}")
+    if dataset == "folder" or (dataset == "auto" and root.is_dir() and _detect(_scan_files(root)) == "folder"):
+        from .scan_files import load_scan_folder
+
+        scans = load_scan_folder(root, label_map=label_map, up=up, units=units, min_points=min_points, dedupe=dedupe)
+        return [s for s in scans if classes is None or s.label in set(classes)]
+    files = [root] if root.is_file() else _scan_files(root)
     if dataset == "auto":
         dataset = _detect(files)
+        if dataset == "folder":
+            raise InvalidInputError(f"{root}: neither a LiDARNet CSV nor an SUO object; give the folder of class folders")
     if dataset == "suo":
         stems_with_bin = {p.with_suffix("") for p in files if p.suffix.lower() == ".bin"}
         files = [p for p in files if p.suffix.lower() == ".bin" or p.with_suffix("") not in stems_with_bin]

@@ -8,9 +8,11 @@ package never imports it.  Modules:
 ``training``     one deterministic, resumable training loop with early stopping (torch)
 ``metrics``      overall / mean class / per-class accuracy, confusion, per elevation (numpy)
 ``experiments``  the Table 3A (elevation) and Table 3B (augmentation) protocols
-``cli``          ``zbuf-occlude experiment elevation|augmentation``
+``sim2real``     trained on clouds from meshes, tested on real scans (``sim2real_data``: the
+                 training sets; ``stats``: mean ± std, permutation test; ``sim2real_report``)
+``cli``          ``zbuf-occlude experiment elevation|augmentation|sim2real``
 ``on_the_fly``   occlusion as a training-time transform: ``RandomOcclusion``, ``OnTheFlyOccludedDataset``
-``pyg``          the same as a PyTorch Geometric transform (``pip install 'zbuf-occlude[pyg]'``)
+``pyg``          the same as a PyTorch Geometric transform (``pip install '.[pyg]'``)
 """
 
 from __future__ import annotations

@@ -106,4 +106,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     a.add_argument("--real-scans", help="Test 3: SUO objects/ folder or LiDARNet v2 folder")
     a.add_argument("--label-map", help="rename real labels, REAL=MODEL,... (e.g. Car=car,4wd=car)")
     a.set_defaults(func=_run)
+    from .sim2real_cli import add_sim2real_parser
+
+    add_sim2real_parser(sub)
     return p

@@ -6,6 +6,7 @@
 >>> car = s.crop(1)                                             # the car's returns, occluded
 """
 
+from .airborne import AIRBORNE_PRESETS, AirborneScanner, airborne_preset, scan_airborne
 from .depth_camera import DEPTH_CAMERA_PRESETS, DepthCamera, depth_camera_preset, nguyen_axial_sigma_m
 from .lidar import LIDAR_PRESETS, Lidar, beam_directions, lidar_preset
 from .scan import FRAMES, Scan, look_at_pose, read_scan_npz, scan
@@ -13,6 +14,7 @@ from .scene import GROUND_ID, ScanScene, SceneObject, load_scene, sensor_pose
 
 __all__ = [
     "Lidar", "LIDAR_PRESETS", "lidar_preset", "beam_directions",
+    "AirborneScanner", "AIRBORNE_PRESETS", "airborne_preset", "scan_airborne",
     "DepthCamera", "DEPTH_CAMERA_PRESETS", "depth_camera_preset", "nguyen_axial_sigma_m",
     "ScanScene", "SceneObject", "load_scene", "sensor_pose", "GROUND_ID",
     "Scan", "scan", "look_at_pose", "read_scan_npz", "FRAMES",

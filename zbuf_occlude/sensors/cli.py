@@ -41,13 +41,16 @@ def parse_interval(text: str, option: str) -> tuple[float, float]:
 
 
 def sensor_from_name(name: str):
-    """A :class:`Lidar` or :class:`DepthCamera` preset, or a sensor from a JSON file of its fields."""
+    """A :class:`Lidar`, :class:`DepthCamera` or airborne-scanner preset, or a sensor from a JSON file of its fields."""
+    from .airborne import AIRBORNE_PRESETS, AirborneScanner
     from .depth_camera import DEPTH_CAMERA_PRESETS, DepthCamera
     from .lidar import LIDAR_PRESETS, Lidar
 
     key = name.lower()
     if key in LIDAR_PRESETS:
         return LIDAR_PRESETS[key]
+    if key in AIRBORNE_PRESETS:
+        return AIRBORNE_PRESETS[key]
     if key in DEPTH_CAMERA_PRESETS:
         return DEPTH_CAMERA_PRESETS[key]
     path = Path(name)
@@ -55,10 +58,10 @@ def sensor_from_name(name: str):
         try:
             spec = json.loads(path.read_text(encoding="utf-8"))
             kind = spec.pop("kind", "lidar")
-            return Lidar(**spec) if kind == "lidar" else DepthCamera(**spec)
+            return {"lidar": Lidar, "airborne": AirborneScanner}.get(kind, DepthCamera)(**spec)
         except (ValueError, TypeError) as exc:
             raise InvalidInputError(f"{path}: bad sensor file ({exc})") from exc
-    raise InvalidInputError(f"unknown sensor {name!r}; use one of {sorted(LIDAR_PRESETS) + sorted(DEPTH_CAMERA_PRESETS)} or a .json file")
+    raise InvalidInputError(f"unknown sensor {name!r}; use one of {sorted(LIDAR_PRESETS) + sorted(AIRBORNE_PRESETS) + sorted(DEPTH_CAMERA_PRESETS)} or a .json file")
 
 
 def check_outside(dist) -> None:
@@ -83,6 +86,7 @@ def check_outside(dist) -> None:
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
+    from .airborne import AirborneScanner
     from .crops import CropDistributions, draw_placement, object_crop
     from .lidar import Lidar
     from .scan import look_at_pose, scan
@@ -102,10 +106,15 @@ def cmd_scan(args: argparse.Namespace) -> int:
             target = scene.build().local_to_world[1][:3, 3] if scene.objects else np.array([1.0, 0.0, scene.ground_z_m])
             pose = look_at_pose(scene.default_sensor_pose()[:3, 3], target + [0, 0, 0.5])
         for k in range(args.samples):
-            s = scan(scene, sensor, pose, seed=args.seed + k, backend=args.backend, frame=args.frame)
+            if isinstance(sensor, AirborneScanner):  # a flight over the scene's ground (world frame)
+                from .airborne import scan_airborne
+
+                s = scan_airborne(scene, sensor, (0.0, 0.0), scene.ground_half_extent_m, seed=args.seed + k)
+            else:
+                s = scan(scene, sensor, pose, seed=args.seed + k, backend=args.backend, frame=args.frame)
             written += [getattr(s, f"to_{fmt}")(out / f"{src.stem}_{sensor.name}_s{k:03d}.{fmt}") for fmt in formats]
     else:
-        if not isinstance(sensor, Lidar):
+        if not isinstance(sensor, (Lidar, AirborneScanner)):
             raise InvalidInputError("scan of a mesh file places a LiDAR; use a scene file for depth cameras")
         extents, round_xy = None, False
         if args.extents:
@@ -114,7 +123,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
                 raise InvalidInputError(f"--extents must be X,Y,Z in metres (each N or LO:HI; Y may be '='), got {args.extents!r}")
             round_xy = parts[1].strip() == "="
             extents = tuple(parse_interval(parts[0] if i == 1 and round_xy else v, "--extents") for i, v in enumerate(parts))
-        if args.footprint or args.power_noise:
+        if (args.footprint or args.power_noise) and isinstance(sensor, Lidar):
             sensor = sensor.with_(footprint_rays=7 if args.footprint else sensor.footprint_rays, power_noise=args.power_noise)
         mesh = PRIMITIVES.get(str(src)) if not src.exists() else None
         if mesh is None:
@@ -150,7 +159,7 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         "scene file with any sensor); writes one point cloud per sample to --out.",
     )  # fmt: skip
     p.add_argument("mesh_or_scene", metavar="MESH_OR_SCENE", help="mesh file (stood on the ground), 'cylinder' or 'box' (unit primitives), or a scene .json/.yaml")
-    p.add_argument("--sensor", default="hdl32e", help="vlp16 | hdl32e | hdl64e | os1-64 | kinect-v1 | sensor .json (default: %(default)s)")
+    p.add_argument("--sensor", default="hdl32e", help="vlp16 | hdl32e | hdl64e | os1-64 | riegl-q1560 (airborne) | kinect-v1 | sensor .json (default: %(default)s)")
     p.add_argument("--distance", default="10", help="horizontal sensor-object distance, metres (N or LO:HI, uniform per sample; at least half the object's size) (default: %(default)s)")
     p.add_argument("--height", default="1.8", help="sensor height above the ground, metres (N or LO:HI) (default: %(default)s)")
     p.add_argument("--size", default="4.5", help="the object's largest dimension, metres (N or LO:HI) (default: %(default)s)")

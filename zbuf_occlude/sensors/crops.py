@@ -22,6 +22,7 @@ from ..errors import InvalidInputError
 from ..io import OccludedCloud
 from ..mesh import load_mesh
 from ..occlude import derive_rng, draw_sample, object_key
+from .airborne import AirborneScanner
 from .depth_camera import DepthCamera
 from .lidar import Lidar
 from .scan import Scan, scan
@@ -158,7 +159,9 @@ def object_crop(
     """Scan one object placed per ``placement`` (see :func:`draw_placement`) and crop its returns.
 
     The sensor stands at the origin, ``height_m`` above the ground; the object's footprint
-    centre is ``distance_m`` away in direction ``azimuth_deg``.  A LiDAR fires only in the
+    centre is ``distance_m`` away in direction ``azimuth_deg``.  An
+    :class:`~zbuf_occlude.sensors.airborne.AirborneScanner` flies over the object instead
+    (``distance_m · sin(azimuth_deg)`` across track; points in the world frame).  A LiDAR fires only in the
     object's azimuth sector (± ``sector_margin_deg``), which gives the same returns faster.
 
     Raises
@@ -169,6 +172,8 @@ def object_crop(
     az = math.radians(placement["azimuth_deg"])
     d = placement["distance_m"]
     size = placement.get("extents_m") or placement["size_m"]
+    if isinstance(sensor, AirborneScanner):
+        return _airborne_crop(mesh, sensor, placement, seed=seed, occluders=occluders, class_name=class_name, offset_m=d * math.sin(az), size=size)
     obj = SceneObject(mesh, class_name, (d * math.cos(az), d * math.sin(az)), placement["yaw_deg"], size)
     scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=max(2.0 * d, 20.0))
     pose = sensor_pose([0.0, 0.0, placement["height_m"]])
@@ -187,6 +192,23 @@ def object_crop(
     inverse = np.linalg.inv(to_world[:3, :3])
     local = (world - to_world[:3, 3]) @ inverse.T
     return CropSample(crop, dict(placement), local, inverse @ (pose[:3, 3] - to_world[:3, 3]), full)
+
+
+def _airborne_crop(mesh, sensor: AirborneScanner, placement: dict, *, seed: int, occluders, class_name: str, offset_m: float, size) -> CropSample:
+    """An airborne crop: the object ``offset_m`` across track from the flight line (``distance_m ·
+    sin(azimuth_deg)`` of the placement; ``height_m`` is unused: the scanner flies at its altitude).
+    Points and the full scan are in the world frame."""
+    from .airborne import scan_airborne
+
+    obj = SceneObject(mesh, class_name, (0.0, offset_m), placement["yaw_deg"], size)
+    reach = float(np.max(size)) * 0.75 + 1.0
+    scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=abs(offset_m) + 2.0 * reach)
+    full = scan_airborne(scene, sensor, (0.0, offset_m), reach, seed=seed)
+    crop = full.crop(1)
+    to_world = scene.build().local_to_world[1]
+    inverse = np.linalg.inv(to_world[:3, :3])
+    local = (crop.points.astype(np.float64) - to_world[:3, 3]) @ inverse.T
+    return CropSample(crop, dict(placement), local, inverse @ (full.sensor_position - to_world[:3, 3]), full)
 
 
 def lidar_object_samples(

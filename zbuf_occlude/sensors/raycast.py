@@ -81,7 +81,8 @@ def _exact_distance(mesh: trimesh.Trimesh, origin, directions, face):
     hit = face >= 0
     if hit.any():
         tri = np.asarray(mesh.triangles, dtype=np.float64)[face[hit]]
-        t[hit], _ = ray_triangle_f64(origin, directions[hit], tri)
+        origin = np.asarray(origin, dtype=np.float64)
+        t[hit], _ = ray_triangle_f64(origin[hit] if origin.ndim == 2 else origin, directions[hit], tri)
     return t
 
 
@@ -104,7 +105,8 @@ def cast_embree(mesh: trimesh.Trimesh, origin: NDArray[np.float64], directions: 
     ----------
     mesh : trimesh.Trimesh
         World frame.
-    origin : (3,) float64
+    origin : (3,) or (N, 3) float64
+        One origin for every ray, or one per ray (an airborne scanner's moving aircraft).
     directions : (N, 3) float64
         Unit vectors.
 

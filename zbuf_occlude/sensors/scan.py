@@ -24,7 +24,7 @@ from .lidar import Lidar
 from .raycast import BACKENDS, cast_embree, cast_zbuffer
 from .scene import BuiltScene, ScanScene, SceneObject
 
-__all__ = ["Scan", "scan", "look_at_pose", "read_scan_npz", "FRAMES"]
+__all__ = ["Scan", "scan", "look_at_pose", "read_scan_npz", "build_scene", "FRAMES"]
 
 #: Frames a scan's points can be given in.
 FRAMES = ("sensor", "world")
@@ -204,6 +204,11 @@ def _built(scene) -> BuiltScene:
     if isinstance(scene, BuiltScene):
         return scene
     raise InvalidInputError(f"scan needs a ScanScene or a trimesh.Trimesh, got {type(scene).__name__}")
+
+
+def build_scene(scene) -> BuiltScene:
+    """The triangles of a :class:`ScanScene` or a bare mesh (object id 1, no ground) for ray casting."""
+    return _built(scene)
 
 
 def _reflectivity_table(reflectivity, n_ids: int) -> NDArray[np.float64]:

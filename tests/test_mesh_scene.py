@@ -1,0 +1,163 @@
+"""Real-world mesh assets: glTF (embedded and external buffers), COLLADA, up axes, units, sizes."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from zbuf_occlude.errors import InvalidInputError, MeshLoadError
+from zbuf_occlude.mesh import METADATA_KEY, load_mesh
+from zbuf_occlude.mesh_scene import collada_asset, up_rotation
+
+#: The street-object meshes (research-only, next to the repository; skipped when absent).
+STREET_OBJECTS = Path(os.environ.get("ZBUF_OCCLUDE_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data")) / "street_objects"
+needs_collada = pytest.mark.skipif(importlib.util.find_spec("collada") is None, reason="pycollada (extra 'collada') not installed")
+
+
+def _y_up_tall_box() -> trimesh.Trimesh:
+    """A box 1 wide (x), 3 tall along +y (glTF's up), 0.5 deep (z)."""
+    return trimesh.creation.box(extents=(1.0, 3.0, 0.5))
+
+
+def _tall_with_z_up(mesh: trimesh.Trimesh) -> None:
+    ext = mesh.extents
+    assert ext[2] == pytest.approx(1.0)  # normalised: the height is the largest side
+    assert ext[2] > 2.5 * ext[0] and ext[2] > 2.5 * ext[1]
+
+
+def test_y_up_glb_box_arrives_tall_with_z_up(tmp_path: Path) -> None:
+    path = tmp_path / "tall.glb"
+    _y_up_tall_box().export(path)
+    mesh = load_mesh(path)
+    _tall_with_z_up(mesh)
+    meta = mesh.metadata[METADATA_KEY]
+    assert meta["up"] == "+y" and "glTF" in meta["up_source"]
+    np.testing.assert_allclose(meta["extent"], [1.0, 0.5, 3.0], atol=1e-6)  # z-up, file units
+    np.testing.assert_allclose(meta["extent_m"], [1.0, 0.5, 3.0], atol=1e-6)  # glTF: metres
+    # the rotation is proper (no mirror): +y → +z and +z → −y
+    raw = load_mesh(path, normalize=False)
+    np.testing.assert_allclose(raw.bounds, [[-0.5, -0.25, -1.5], [0.5, 0.25, 1.5]], atol=1e-6)
+    assert load_mesh(path, up="+z").extents[1] == pytest.approx(1.0)  # as stored: tall along y
+
+
+def test_gltf_embedded_and_external_buffers(tmp_path: Path) -> None:
+    scene = trimesh.Scene()
+    scene.add_geometry(_y_up_tall_box())
+    wheel = trimesh.creation.icosphere(subdivisions=1, radius=0.25)
+    scene.add_geometry(wheel, transform=trimesh.transformations.translation_matrix([2.0, 0.0, 0.0]))
+    embedded = tmp_path / "embedded"
+    external = tmp_path / "external"
+    for folder, embed in ((embedded, True), (external, False)):
+        folder.mkdir()
+        for name, data in trimesh.exchange.gltf.export_gltf(scene, embed_buffers=embed).items():
+            (folder / name).write_bytes(data)
+    assert len(list(external.glob("*.bin"))) >= 1 and not list(embedded.glob("*.bin"))
+    for folder in (embedded, external):
+        raw = load_mesh(folder / "model.gltf", normalize=False)
+        assert len(raw.faces) == 12 + len(wheel.faces)  # both parts, the node transform baked in
+        np.testing.assert_allclose(raw.bounds, [[-0.5, -0.25, -1.5], [2.25, 0.25, 1.5]], atol=1e-6)
+
+
+def test_gltf_buffer_outside_its_folder_is_refused(tmp_path: Path) -> None:
+    folder = tmp_path / "model"
+    folder.mkdir()
+    files = trimesh.exchange.gltf.export_gltf(trimesh.Scene(_y_up_tall_box()), embed_buffers=False)
+    text = files["model.gltf"].decode()
+    for name, data in files.items():
+        if name.endswith(".bin"):
+            (tmp_path / name).write_bytes(data)  # beside the folder, not in it
+            text = text.replace(f'"{name}"', f'"../{name}"')
+    (folder / "model.gltf").write_text(text)
+    with pytest.raises(MeshLoadError, match="model.gltf"):
+        load_mesh(folder / "model.gltf")
+
+
+@needs_collada
+def test_collada_round_trip_with_declared_up_axis_and_unit(tmp_path: Path) -> None:
+    box = trimesh.creation.box(extents=(1.0, 2.0, 4.0))
+    text = trimesh.exchange.dae.export_collada(box).decode()
+    assert "<up_axis>Y_UP</up_axis>" in text  # pycollada's default
+    plain = tmp_path / "box.dae"
+    plain.write_text(text)
+    raw = load_mesh(plain, normalize=False, up="+z")
+    assert len(raw.faces) == 12 and raw.area == pytest.approx(box.area)
+    np.testing.assert_allclose(raw.bounds, box.bounds, atol=1e-6)
+    y_up = load_mesh(plain, normalize=False)  # auto: the declared Y_UP
+    np.testing.assert_allclose(y_up.extents, [1.0, 4.0, 2.0], atol=1e-6)
+    z_up = tmp_path / "z_up_cm.dae"
+    z_up.write_text(text.replace("<up_axis>Y_UP</up_axis>", '<unit meter="0.01" name="centimeter"/><up_axis>Z_UP</up_axis>'))
+    mesh = load_mesh(z_up)
+    meta = mesh.metadata[METADATA_KEY]
+    assert meta["up"] == "+z" and meta["units_m"] == pytest.approx(0.01)
+    np.testing.assert_allclose(meta["extent_m"], [0.01, 0.02, 0.04], atol=1e-9)
+
+
+def test_collada_without_pycollada_names_the_extra(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    path = tmp_path / "box.dae"
+    path.write_text('<COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" version="1.4.1"/>')
+    real_find_spec = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "collada" else real_find_spec(name, *a))
+    with pytest.raises(MeshLoadError, match=r"box\.dae.*zbuf-occlude\[collada\]"):
+        load_mesh(path)
+
+
+def test_obj_up_axis_from_its_exporter(tmp_path: Path) -> None:
+    body = trimesh.exchange.obj.export_obj(_y_up_tall_box(), header=None)
+    blender = tmp_path / "blender.obj"
+    blender.write_text("# Blender v2.79 (sub 0) OBJ File: ''\n# www.blender.org\n" + body)
+    _tall_with_z_up(load_mesh(blender))
+    plain = tmp_path / "plain.obj"
+    plain.write_text("# written by hand\n" + body)
+    assert load_mesh(plain).metadata[METADATA_KEY]["up"] == "+z"  # no convention: as stored
+    _tall_with_z_up(load_mesh(plain, up="+y"))
+
+
+@pytest.mark.parametrize("axis", ["+x", "-x", "+y", "-y", "+z", "-z"])
+def test_up_rotation_is_proper_and_sends_the_axis_to_z(axis: str) -> None:
+    m = up_rotation(axis)[:3, :3]
+    v = np.zeros(3)
+    v["xyz".index(axis[1])] = 1.0 if axis[0] == "+" else -1.0
+    np.testing.assert_allclose(m @ v, [0.0, 0.0, 1.0], atol=1e-12)
+    np.testing.assert_allclose(m @ m.T, np.eye(3), atol=1e-12)
+    assert np.linalg.det(m) == pytest.approx(1.0)
+
+
+def test_bad_up_axis_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "box.glb"
+    _y_up_tall_box().export(path)
+    with pytest.raises(InvalidInputError, match="'up'|up axis"):
+        load_mesh(path, up="y")
+
+
+def test_collada_asset_reads_only_what_is_declared() -> None:
+    assert collada_asset(b"<asset><up_axis> Z_UP </up_axis><unit meter='0.0254'/></asset>") == ("+z", 0.0254)
+    assert collada_asset(b"<asset></asset>") == (None, None)
+    assert collada_asset(b'<unit meter="-3"/><up_axis>W_UP</up_axis>') == (None, None)
+
+
+# -- the street-object meshes (research-only, next to the repository) ---------------------
+
+def _street_files() -> list[Path]:
+    if not STREET_OBJECTS.is_dir():
+        return []
+    return sorted(p for p in STREET_OBJECTS.rglob("*") if p.suffix.lower() in (".obj", ".glb", ".gltf", ".dae"))
+
+
+@needs_collada
+@pytest.mark.skipif(not _street_files(), reason="../shared/data/street_objects not present")
+def test_every_street_object_loads_and_cars_are_longer_than_tall() -> None:
+    files = _street_files()
+    assert len(files) == 48
+    for path in files:
+        mesh = load_mesh(path)
+        ext = mesh.extents
+        assert abs(ext.max() - 1.0) < 1e-9, path
+        if path.parent.name == "car":
+            assert max(ext[0], ext[1]) > 1.5 * ext[2], (path, ext)  # longer than tall
+        if path.parent.name in ("pole", "pedestrian") or path.parent.parent.name == "pedestrian":
+            assert ext[2] >= max(ext[0], ext[1]) - 0.02, (path, ext)  # taller than wide (T-poses: ≈)

@@ -1,0 +1,173 @@
+"""``experiment sim2real``: whole-mesh validation, the training sets, real sizes, and the command end to end."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+pytest.importorskip("torch")
+
+from zbuf_occlude.cli import main  # noqa: E402
+from zbuf_occlude.learn.sim2real_data import (  # noqa: E402
+    KEEP_SCALE_UNIT_M,
+    TRAINING_SETS,
+    build_set,
+    find_class_meshes,
+    mix_sets,
+    split_whole_meshes,
+)
+from zbuf_occlude.object_sizes import CLASS_SIZES_M, SizeRange, parse_sizes, size_interval  # noqa: E402
+from zbuf_occlude.errors import InvalidInputError  # noqa: E402
+
+
+def _mesh_root(tmp_path: Path) -> Path:
+    """Two classes of two procedural meshes each: cars (long low boxes, one as Y-up glTF) and poles."""
+    root = tmp_path / "meshes"
+    (root / "car").mkdir(parents=True)
+    (root / "pole").mkdir(parents=True)
+    trimesh.creation.box(extents=(4.5, 1.8, 1.5)).export(root / "car" / "sedan.obj")
+    # a Y-up glTF car: length along x, height along y
+    trimesh.creation.box(extents=(3.8, 1.4, 1.7)).export(root / "car" / "hatch.glb")
+    trimesh.creation.cylinder(radius=0.08, height=4.0, sections=12).export(root / "pole" / "post.obj")
+    lamp = trimesh.util.concatenate([trimesh.creation.cylinder(radius=0.1, height=6.0, sections=12),
+                                     trimesh.creation.box(extents=(1.0, 0.2, 0.2), transform=trimesh.transformations.translation_matrix([0.4, 0, 3.0]))])  # fmt: skip
+    lamp.export(root / "pole" / "lamp.obj")
+    return root
+
+
+def _real_root(tmp_path: Path) -> Path:
+    """A tiny "real" data set: half-visible boxes and poles as .xyz files in class folders (metres, z up)."""
+    root = tmp_path / "real"
+    rng = np.random.default_rng(0)
+    for cls, shape in (("Car", trimesh.creation.box(extents=(4.2, 1.7, 1.5))), ("Trunk", trimesh.creation.cylinder(radius=0.15, height=3.0))):
+        (root / cls).mkdir(parents=True)
+        for i in range(6):
+            pts, _ = trimesh.sample.sample_surface(shape, 300, seed=int(rng.integers(1000)))
+            pts = pts[pts[:, 0] <= np.quantile(pts[:, 0], 0.6)]  # the side facing the sensor
+            np.savetxt(root / cls / f"{i}.xyz", pts + [20.0 + i, 0.0, 0.0])
+    return root
+
+
+def test_whole_mesh_validation_split(tmp_path: Path) -> None:
+    meshes = find_class_meshes(_mesh_root(tmp_path))
+    for seed in range(5):
+        train, val = split_whole_meshes(meshes, 0.2, seed)
+        assert not {m.name for m in train} & {m.name for m in val}  # no mesh on both sides
+        assert {m.name for m in train} | {m.name for m in val} == {m.name for m in meshes}
+        for cls in ("car", "pole"):
+            assert sum(m.class_name == cls for m in val) == 1 and sum(m.class_name == cls for m in train) == 1
+
+
+def test_gltf_car_arrives_lying_down(tmp_path: Path) -> None:
+    car = [m for m in find_class_meshes(_mesh_root(tmp_path)) if m.name == "car/hatch"][0]
+    ext = car.mesh.extents
+    assert ext[0] == pytest.approx(1.0) and ext[2] < 0.5 and ext[1] > ext[2]  # +y rotated to +z
+
+
+def test_training_sets_have_equal_class_counts_and_real_sizes(tmp_path: Path) -> None:
+    from zbuf_occlude.sensors import lidar_preset
+
+    meshes = find_class_meshes(_mesh_root(tmp_path))
+    names = ["car", "pole"]
+    for kind in TRAINING_SETS:
+        s = build_set(kind, meshes, names, 6, 48, 0, sensor=lidar_preset("hdl32e"), resolution=128, dense_points=2000)
+        assert s.points.shape == (12, 48, 3) and np.bincount(s.labels).tolist() == [6, 6], kind
+        np.testing.assert_allclose((s.points.max(axis=1) - s.points.min(axis=1)).max(axis=1), 1.0, atol=1e-5)
+    metric = build_set("complete", meshes, names, 6, 200, 1, keep_scale=True)
+    height = (metric.points[:, :, 2].max(axis=1) - metric.points[:, :, 2].min(axis=1)) * KEEP_SCALE_UNIT_M
+    poles = height[metric.labels == 1]
+    assert (poles > 2.5 * 0.95).all() and (poles < 9.0 * 1.001).all()  # CLASS_SIZES_M's pole heights
+    assert height[metric.labels == 0].max() < 2.0  # a car is low
+
+
+def test_mix_sets_takes_half_of_each() -> None:
+    from zbuf_occlude.learn.data import CloudSet
+
+    def cs(value: float) -> CloudSet:
+        return CloudSet(np.full((10, 4, 3), value, np.float32), np.repeat([0, 1], 5), np.full(10, np.nan), np.arange(10))
+
+    mixed = mix_sets(cs(1.0), cs(2.0), 0)
+    assert len(mixed) == 10 and np.bincount(mixed.labels).tolist() == [5, 5]
+    assert (mixed.points[:, 0, 0] == 1.0).sum() == 6  # 3 of 5 per class (rounded up) from the first
+
+
+def test_size_interval_and_parse_sizes() -> None:
+    lo, hi = size_interval([1.0, 0.4, 0.3], CLASS_SIZES_M["car"])  # length is the largest side
+    assert (lo, hi) == (3.6, 5.2)
+    lo, hi = size_interval([0.2, 0.2, 1.0], CLASS_SIZES_M["car"])  # a "car" standing up: length 0.2
+    assert lo == pytest.approx(18.0)
+    sizes = parse_sizes("tree=height:4-20,car=max:4-5")
+    assert sizes["tree"] == SizeRange("height", 4.0, 20.0) and sizes["car"].dimension == "max"
+    for bad in ("tree=4-20", "tree=height:4", "tree=width:1-2", "tree=height:5-1"):
+        with pytest.raises(InvalidInputError):
+            parse_sizes(bad)
+
+
+def test_sim2real_command_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    meshes, real, out = _mesh_root(tmp_path), _real_root(tmp_path), tmp_path / "out"
+    argv = ["experiment", "sim2real", str(meshes), "--real", str(real), "--out", str(out), "--label-map", "Trunk=pole",
+            "--points", "32", "--epochs", "2", "--per-class", "8", "--seeds", "2", "--threads", "1", "--no-progress"]  # fmt: skip
+    assert main(argv) == 0
+    for name in ("settings.json", "runs.jsonl", "results.csv", "summary.csv", "table.md", "run.json", "confusion_complete.csv"):
+        assert (out / name).is_file(), name
+    with open(out / "results.csv", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    assert sorted((r["train_set"], r["seed"]) for r in rows) == sorted(
+        (s, str(k)) for s in (*TRAINING_SETS, "real→real") for k in range(2))
+    for r in rows:
+        assert int(r["n_test"]) == (6 if r["train_set"] == "real→real" else 12)  # the other half / every scan
+        assert 0.0 <= float(r["mean_class_accuracy"]) <= 1.0
+    settings = json.loads((out / "settings.json").read_text())
+    assert settings["classes"] == ["car", "pole"] and settings["real_scans"] == {"car": 6, "pole": 6}
+    assert "fixed_at" in settings
+    table = (out / "table.md").read_text()
+    assert "| complete | 2 |" in table and "| chance | 0 | 0.500" in table and "p vs complete" in table
+    summary = {r["train_set"]: r for r in csv.DictReader(open(out / "summary.csv", encoding="utf-8"))}
+    assert 1 / 6 - 1e-9 <= float(summary["occluded"]["p_vs_complete"]) <= 1.0  # C(4, 2) = 6 splits
+    # a rerun resumes (no training) and other settings are refused with exit status 2
+    before = (out / "runs.jsonl").read_bytes()
+    assert main(argv) == 0 and (out / "runs.jsonl").read_bytes() == before
+    other = list(argv)
+    other[other.index("--points") + 1] = "16"
+    assert main(other) == 2
+    assert "other settings" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("option, value", [("--seeds", "0"), ("--points", "-3"), ("--per-class", "x"), ("--up", "y")])
+def test_bad_options_exit_2_naming_the_value(tmp_path: Path, option: str, value: str, capsys: pytest.CaptureFixture) -> None:
+    with pytest.raises(SystemExit) as info:
+        main(["experiment", "sim2real", str(tmp_path), "--real", str(tmp_path), "--out", str(tmp_path / "o"), option, value])
+    assert info.value.code == 2 and value in capsys.readouterr().err
+
+
+def test_real_clouds_label_map_and_keep_scale() -> None:
+    from zbuf_occlude.learn.sim2real_data import real_clouds
+    from zbuf_occlude.real_scans import RealScan, normalize_points
+
+    tall = np.array([[0.0, 0.0, 0.0], [0.2, 0.1, 1.8], [0.1, 0.0, 0.9]])
+    scans = [RealScan(normalize_points(tall * k), label, f"{label}{k}", "test", (tall * k).max(axis=0))
+             for k, label in ((1.0, "Pedestrian"), (4.0, "Trunk"), (2.0, "Tree"))]  # fmt: skip
+    pts, labels, sources = real_clouds(scans, ["pedestrian", "pole"], {"Trunk": "pole"}, 16, 0)
+    assert labels.tolist() == [0, 1] and sources == ["Pedestrian1.0", "Trunk4.0"]  # Tree has no class: left out
+    np.testing.assert_allclose(np.ptp(pts, axis=1).max(axis=1), 1.0, atol=1e-6)
+    metric, _, _ = real_clouds(scans, ["pedestrian", "pole"], {"Trunk": "pole"}, 16, 0, keep_scale=True)
+    heights = np.ptp(metric[:, :, 2], axis=1) * KEEP_SCALE_UNIT_M
+    np.testing.assert_allclose(heights, [1.8, 7.2], rtol=1e-5)
+    with pytest.raises(InvalidInputError, match="label-map"):
+        real_clouds(scans[2:], ["pedestrian", "pole"], {}, 16, 0)
+
+
+def test_an_airborne_lidar_set(tmp_path: Path) -> None:
+    from zbuf_occlude.sensors import airborne_preset
+
+    meshes = find_class_meshes(_mesh_root(tmp_path))
+    als = airborne_preset("riegl-q1560", altitude_m=300.0)  # ~33 points/m²: a few returns on a pole's top
+    s = build_set("lidar", meshes, ["car", "pole"], 4, 32, 0, sensor=als, min_returns=2)
+    assert np.bincount(s.labels).tolist() == [4, 4]
+    with pytest.raises(InvalidInputError, match="min-returns"):
+        build_set("lidar", meshes, ["car", "pole"], 2, 32, 0, sensor=als, min_returns=10_000)

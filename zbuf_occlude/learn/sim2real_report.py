@@ -1,0 +1,74 @@
+"""The sim-to-real table (Markdown) and the figure of example clouds, real beside each training set."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["table_md", "plot_examples"]
+
+
+def _pm(row: dict, key: str) -> str:
+    m, s = row.get(f"{key}_mean", float("nan")), row.get(f"{key}_std", float("nan"))
+    if m is None or not np.isfinite(m):
+        return ""
+    return f"{m:.3f} ± {s:.3f}" if np.isfinite(s) else f"{m:.3f}"
+
+
+def _p(x) -> str:
+    return "" if x is None or not np.isfinite(x) else f"{x:.3g}"
+
+
+def table_md(rows: list[dict], settings: dict) -> str:
+    """One row per training set (then real→real and chance): mean class accuracy first, mean ± std
+    over seeds, the difference from ``complete`` and its one-sided permutation p; then overall
+    accuracy, the paper's car precision / recall / F1, and per-class accuracy."""
+    names = settings["classes"]
+    head = (["training set", "seeds", "mean class acc.", "Δ vs complete", "p vs complete", "overall acc.",
+             "car precision", "car recall", "car F1"] + [f"acc. {n}" for n in names])  # fmt: skip
+    lines = [f"model **{settings['model']}**, {settings['points']} points, scale {settings['scale']}, "
+             f"sensor {settings['sensor']}, {'metric scale kept' if settings['keep_scale'] else 'normalised (max extent 1)'}",
+             "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]  # fmt: skip
+    for r in rows:
+        diff = r.get("diff_vs_complete", float("nan"))
+        cells = [r["train_set"], str(r.get("n_seeds", "")), _pm(r, "mean_class_accuracy"),
+                 "" if r["train_set"] in ("complete", "chance") or not np.isfinite(diff) else f"{diff:+.3f}",
+                 _p(r.get("p_vs_complete", float("nan"))), _pm(r, "overall_accuracy"), _pm(r, "car_precision"),
+                 _pm(r, "car_recall"), _pm(r, "car_f1")] + [_pm(r, f"acc_{n}") for n in names]  # fmt: skip
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def plot_examples(path: str | Path, rows: dict[str, dict[str, np.ndarray]], title: str = "") -> Path:
+    """A grid of 3-D scatter plots: one row per ``{row label: {column label: (n, 3) cloud}}``,
+    the same view and limits for each (normalised clouds, max extent 1).
+
+    Needs matplotlib (the ``learn`` or ``plot`` extra).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n_rows, n_cols = len(rows), max(len(r) for r in rows.values())
+    fig = plt.figure(figsize=(2.6 * n_cols, 2.7 * n_rows))
+    for i, (row_label, clouds) in enumerate(rows.items()):
+        for j, (label, pts) in enumerate(clouds.items()):
+            ax = fig.add_subplot(n_rows, n_cols, i * n_cols + j + 1, projection="3d")
+            p = np.asarray(pts, dtype=np.float64)
+            ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=1.5, c=p[:, 2], cmap="viridis")
+            ax.set_title(f"{row_label}: {label}", fontsize=8)
+            ax.set_box_aspect((1, 1, 1))
+            lim = 0.55
+            ax.set_xlim(-lim, lim), ax.set_ylim(-lim, lim), ax.set_zlim(-lim, lim)
+            ax.view_init(elev=15, azim=-60)
+            ax.set_xticks([]), ax.set_yticks([]), ax.set_zticks([])
+    if title:
+        fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
