@@ -161,3 +161,29 @@ def test_a_second_call_on_a_mesh_rebuilds_nothing(monkeypatch):
     mesh.vertices = mesh.vertices * 1.01  # an edit: new content hash
     visible_mask(mesh, points, cams[0], face_index=fi)
     assert len(data) == 2 and len(scenes) == 2
+
+
+def _visible_in_child(mesh, points, face_index, queue) -> None:
+    camera = zo.camera_on_sphere(elevation_deg=20.0, azimuth_deg=30.0, radius=4.0)
+    queue.put(zo.visible_mask(mesh, points, camera, face_index=face_index, method="embree-fast").sum())
+
+
+def test_a_forked_child_gets_its_own_thread_pool():
+    """A DataLoader worker is a forked child: it inherits embree-fast's thread pool object but not
+    its threads, and a view submitted to that pool waited forever."""
+    import multiprocessing as mp
+
+    mesh = zo.load_mesh(SAMPLES / "chair/train/chair_0001.off")
+    points, face_index = zo.sample_surface(mesh, count=20_000, seed=0)
+    camera = zo.camera_on_sphere(elevation_deg=20.0, azimuth_deg=30.0, radius=4.0)
+    expected = zo.visible_mask(mesh, points, camera, face_index=face_index, method="embree-fast").sum()  # pool made here
+    ctx = mp.get_context("fork")
+    queue = ctx.Queue()
+    child = ctx.Process(target=_visible_in_child, args=(mesh, points, face_index, queue))
+    child.start()
+    child.join(timeout=120)
+    hung = child.is_alive()
+    if hung:
+        child.kill()
+    assert not hung, "the forked child's view never finished"
+    assert child.exitcode == 0 and queue.get(timeout=5) == expected

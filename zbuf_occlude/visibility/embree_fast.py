@@ -107,6 +107,16 @@ _scenes: MeshCache[_Scene] = MeshCache(_Scene, 8)
 _pool: ThreadPoolExecutor | None = None
 
 
+def _forget_pool() -> None:
+    # A forked child (a DataLoader worker) inherits the pool object but none of its threads:
+    # a task submitted to it would wait forever.  The child makes its own on first use.
+    global _pool
+    _pool = None
+
+
+os.register_at_fork(after_in_child=_forget_pool)
+
+
 def _executor(threads: int) -> ThreadPoolExecutor:
     global _pool
     if _pool is None or _pool._max_workers != threads:  # noqa: SLF001 - resize on demand
