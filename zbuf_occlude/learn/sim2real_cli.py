@@ -70,12 +70,17 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     from ..mesh_scene import UP_CHOICES
     from .sim2real_data import MIN_RETURNS
 
-    p = sub.add_parser("sim2real", help="train only on clouds from meshes (complete / occluded / lidar / "
-                       "lidar+complete), test on real scans; several seeds, permutation tests")  # fmt: skip
+    p = sub.add_parser(
+        "sim2real", help="train only on clouds from meshes (complete / occluded / lidar / "
+        "lidar+complete), test on real scans; several seeds, permutation tests",
+        description="Make four training sets from the same meshes (complete, occluded, LiDAR crops, LiDAR + complete), "
+        "train a classifier on each with validation on held-out whole meshes, then score each on the real scans of "
+        "--real (never used for training or settings), over several seeds, with chance and real->real rows.",
+    )  # fmt: skip
     p.add_argument("root", help="meshes in CLASS/ folders (OFF, OBJ, PLY, STL, glTF, GLB, COLLADA)")
     p.add_argument("--real", required=True, help="folder of real object scans (one folder per class, or labelled files)")
     p.add_argument("--out", required=True, help="output folder (settings.json, runs.jsonl, results.csv, summary.csv, table.md, run.json)")
-    p.add_argument("--model", choices=("pointnet", "voxnet", "3dmfv"), default="pointnet")
+    p.add_argument("--model", choices=("pointnet", "voxnet", "3dmfv"), default="pointnet", help="classifier (default: %(default)s)")
     p.add_argument("--sensor", default="hdl32e", help="scanner of the lidar training set (a LiDAR preset; default %(default)s)")
     p.add_argument("--scale", choices=("quick", "paper"), default="quick",
                    help="quick: 256 points, 100 clouds per class, 20 epochs (a 2-core CPU); paper: 1024, 1000, 100")
@@ -85,17 +90,17 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--seeds", type=_positive, default=5, help="repetitions, each redrawing clouds and initialisation (default %(default)s)")
     p.add_argument("--keep-scale", action="store_true", help="keep metres instead of normalising every cloud to max extent 1")
     p.add_argument("--label-map", help="real label to class folder, REAL=CLASS,... (e.g. Trunk=pole)")
-    p.add_argument("--up", choices=UP_CHOICES, default="auto", help="up axis of the mesh files (default: each format's convention)")
+    p.add_argument("--up", choices=UP_CHOICES, default="auto", help="up axis of the mesh files; auto: each format's convention (default: %(default)s)")
     p.add_argument("--up-map", help="per-file up axis, GLOB=AXIS,... (globs of paths relative to ROOT)")
     p.add_argument("--sizes", help="real sizes per class, CLASS=length|height|max:LO-HI,... metres (over the defaults)")
     p.add_argument("--real-format", choices=("auto", "folder", "lidarnet", "suo"), default="auto",
-                   help="reader of --real: a folder of class folders (any point-cloud files), LiDARNet v2, Sydney Urban Objects (default: detected)")
+                   help="reader of --real: a folder of class folders (any point-cloud files), LiDARNet v2, Sydney Urban Objects; auto: detected (default: %(default)s)")
     p.add_argument("--real-up", choices=UP_CHOICES[1:], default="+z", help="up axis of the real scans' files (folder reader; default %(default)s)")
     p.add_argument("--real-units", default="m", help="unit of the real scans' files: m, cm, mm, in, ft or metres per unit (folder reader)")
     p.add_argument("--min-returns", type=_positive, default=MIN_RETURNS,
                    help="redraw LiDAR crops with fewer returns (default %(default)s; lower it for airborne or sparse sensors)")
     p.add_argument("--method", default=DEFAULT_METHOD, help="HSR method of the occluded set (default: %(default)s)")
-    p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
+    p.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="torch device (default: %(default)s)")
     p.add_argument("--threads", type=_positive, help="torch CPU threads")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=_run)
