@@ -286,9 +286,9 @@ def test_augmentation_split_rule():
 
 
 def test_label_map_option():
-    from zbuf_occlude.learn.cli import _label_map
+    from zbuf_occlude.learn.sim2real_cli import parse_pairs
 
-    assert _label_map("Car=car, 4wd = car") == {"Car": "car", "4wd": "car"}
-    assert _label_map(None) == {}
-    with pytest.raises(InvalidInputError, match="REAL=MODEL"):
-        _label_map("car")
+    assert parse_pairs("Car=car, 4wd = car", "--label-map") == {"Car": "car", "4wd": "car"}
+    assert parse_pairs(None, "--label-map") == {}
+    with pytest.raises(InvalidInputError, match="--label-map expects KEY=VALUE"):
+        parse_pairs("car", "--label-map")

@@ -6,25 +6,13 @@ The parser is added without importing torch; torch is imported when a command ru
 from __future__ import annotations
 
 import argparse
-import sys
 from typing import Any
 
 from ..defaults import DEFAULT_METHOD
 from ..errors import InvalidInputError
+from .sim2real_cli import parse_pairs, print_table
 
 __all__ = ["add_parser", "check_options"]
-
-
-def _label_map(text: str | None) -> dict[str, str]:
-    if not text:
-        return {}
-    out = {}
-    for item in text.split(","):
-        if "=" not in item:
-            raise InvalidInputError(f"--label-map expects REAL=MODEL,..., got {item!r}")
-        real, model = item.split("=", 1)
-        out[real.strip()] = model.strip()
-    return out
 
 
 def _common(p: argparse.ArgumentParser) -> None:
@@ -73,11 +61,8 @@ def _run(args: argparse.Namespace) -> int:
         summary = run_elevation(args.root, args.out, profile=not args.no_profile, **common)
     else:
         summary = run_augmentation(args.root, args.out, real_scans=args.real_scans,
-                                   label_map=_label_map(args.label_map), **common)  # fmt: skip
-    sys.stdout.write(f"{args.out}/table.md\n")
-    sys.stdout.write(open(f"{args.out}/table.md", encoding="utf-8").read())
-    sys.stdout.write(f"wall time {summary['wall_s']['total']:.0f} s\n")
-    return 0
+                                   label_map=parse_pairs(args.label_map, "--label-map"), **common)  # fmt: skip
+    return print_table(args.out, summary)
 
 
 def add_parser(subparsers: Any) -> argparse.ArgumentParser:

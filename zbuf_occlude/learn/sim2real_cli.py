@@ -59,8 +59,14 @@ def _run(args: argparse.Namespace) -> int:
         sizes=parse_sizes(args.sizes), real_options=real_options, min_returns=args.min_returns, method=args.method, device=args.device,
         threads=args.threads, progress=not args.no_progress,
     )  # fmt: skip
-    sys.stdout.write(f"{args.out}/table.md\n")
-    sys.stdout.write(open(f"{args.out}/table.md", encoding="utf-8").read())
+    return print_table(args.out, summary)
+
+
+def print_table(out: str, summary: dict[str, Any]) -> int:
+    """Print an experiment's ``OUT/table.md`` and its wall time; exit status 0."""
+    table = f"{out}/table.md"
+    with open(table, encoding="utf-8") as f:
+        sys.stdout.write(f"{table}\n{f.read()}")
     sys.stdout.write(f"wall time {summary['wall_s']['total']:.0f} s\n")
     return 0
 
