@@ -227,8 +227,8 @@ def read_lidarnet_csv(path: str | os.PathLike) -> RealScan:
     Raises
     ------
     InvalidInputError
-        Missing file, a header without ``origin_x,origin_y,origin_z,...,object``, a bad
-        row (its line number is given), or fewer than one point.
+        Missing file, not UTF-8, a header without ``origin_x,origin_y,origin_z,...,object``,
+        a bad row (its line number is given), or fewer than one point.
     """
     path = Path(path)
     try:
@@ -247,6 +247,8 @@ def read_lidarnet_csv(path: str | os.PathLike) -> RealScan:
                     labels.add(row[obj].strip())
                 except (ValueError, IndexError):
                     raise InvalidInputError(f"{path}:{lineno}: bad row {row!r}") from None
+    except UnicodeDecodeError as exc:
+        raise InvalidInputError(f"{path} is not UTF-8 text ({exc.reason} at byte {exc.start}); is it a LiDARNet CSV?") from None
     except OSError as exc:
         raise InvalidInputError(f"cannot read LiDARNet file {path}: {exc}") from None
     if not xyz:

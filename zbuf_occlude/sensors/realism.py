@@ -100,11 +100,6 @@ def read_object_clouds(path: str | os.PathLike, *, min_points: int = 1) -> list[
     files = [root] if root.is_file() else sorted(p for p in root.rglob("*") if p.is_file() and p.suffix.lower() in (".npz", ".csv"))
     clouds: list[ObjectCloud] = []
     csvs = [f for f in files if f.suffix.lower() == ".csv" and f.name != "MANIFEST.csv"]
-    for f in csvs:  # named here: the CSV readers below would raise a bare UnicodeDecodeError
-        try:
-            f.read_bytes().decode("utf-8")
-        except UnicodeDecodeError as exc:
-            raise InvalidInputError(f"realism: {f} is not UTF-8 text ({exc.reason} at byte {exc.start}); is it a LiDARNet CSV?") from None
     if csvs:
         from ..real_scans import load_real_scans
 
