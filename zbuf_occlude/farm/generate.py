@@ -33,7 +33,7 @@ from ..mesh import SPLITS
 from ..safe_paths import path_inside
 from .config import FarmParams, record_path
 from .inputs import FarmObject, scan_inputs
-from .journal import FarmSummary, padded_samples, read_json, shape_names_of
+from .journal import FarmSummary, read_json, shape_names_of
 from .run import run_farm
 
 __all__ = ["generate", "scan_paths", "objects_from_paths", "split_file_name", "GENERATE_DEFAULTS"]
@@ -175,6 +175,4 @@ def generate(
         on_finished=lambda folder: _merge_h5(folder, objects if params.storage == "h5" else []),
         skipped=[(s.path, s.reason) for s in skipped], layout=scan.layout, isolate=isolate,
     )  # fmt: skip
-    records = [rec for o in objects if (rec := read_json(record_path(out, o.index)))]
-    summary.padded = padded_samples(records, params)
     return summary, objects
