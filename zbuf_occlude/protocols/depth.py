@@ -173,13 +173,7 @@ def _first_front_face(mesh: trimesh.Trimesh, origin, unit: NDArray[np.float64]) 
         # behind a culled face are skipped too
         t0 = t[back] * (1.0 + CULL_STEP_RTOL) + CULL_STEP_RTOL
         starts = origin + unit[back] * t0[:, None]
-        # trimesh's intersector of this mesh (Embree when embreex is installed) takes one origin per ray
-        f2 = np.asarray(mesh.ray.intersects_first(starts, unit[back]), dtype=np.int64)
-        t2 = np.full(len(back), np.inf)
-        hit = f2 >= 0
-        n, v0 = normals[f2[hit]], np.asarray(mesh.triangles)[f2[hit], 0]
-        # float64 distance to the hit face's plane, as cast_embree recomputes it on the face
-        t2[hit] = np.einsum("ij,ij->i", n, v0 - starts[hit]) / np.einsum("ij,ij->i", n, unit[back][hit])
+        f2, t2 = cast_embree(mesh, starts, unit[back])  # the same cached Embree scene, one origin per ray
         face[back], t[back] = f2, t0 + t2
         todo = back[f2 >= 0]
     return face, t
