@@ -7,11 +7,14 @@
 #      zbuffer-exact, zbuffer, embree-fast (one-shot and kept scene), auto's choice after its
 #      calibration (ZBUF_OCCLUDE_AUTO=calibrate), and the peers (Open3D RaycastingScene,
 #      NVIDIA Warp on CPU and CUDA, trimesh + Embree) -- benchmarks/bench_visibility_peers.py;
-#   2. the farm at the paper's shape: 200 objects x paper100 poses x 10 samples x 2048 points
+#   2. zbuffer-exact stage by stage (bin passes, prefix sum, points pass, read-back, unpacking)
+#      at the same point counts -- benchmarks/profile_gpu_exact.py;
+#   3. the farm at the paper's shape: 200 objects x paper100 poses x 10 samples x 2048 points
 #      (the meshes of ../shared/data/modelnet_subset, else the shipped data/samples, repeated
-#      as distinct objects) -- benchmarks/bench_farm.py;
+#      as distinct objects), one worker per CPU, dense and compact storage -- benchmarks/bench_farm.py;
+#   4. occlusion on the fly: DataLoader samples/s beside a stored data set -- benchmarks/bench_on_the_fly.py;
 # and writes OUT/gpu.md: a Markdown report naming the device (OpenGL renderer string,
-# nvidia-smi's GPU name and driver), with both tables.  --smoke: tiny sizes, any renderer
+# nvidia-smi's GPU name and driver), with the tables.  --smoke: tiny sizes, any renderer
 # (the CPU half runs in CI: tests/test_benchmarks.py).  --force: measure even when the load
 # average exceeds the CPU count (the visibility table is then flagged; without it, exit 3).
 set -euo pipefail
@@ -59,10 +62,11 @@ meshes="$root/../shared/data/modelnet_subset"
 [ -d "$meshes" ] || meshes="$root/data/samples"
 if [ "$smoke" = 1 ]; then
     points="2000" poses="fibonacci:3" farm=(--objects 2 --views fibonacci:2 --samples-per-view 2 --points 256 --dense-points 4096 --workers 1 --storage dense)
-    peers=(--smoke)
+    peers=(--smoke) on_the_fly=(--views 2 --points 256 --dense 2048 --batch 4 --width 0.125 --repeats 1)
 else
-    points="100000,1000000,10000000" poses="fibonacci:15" farm=(--objects 200 --views paper100 --samples-per-view 10 --workers 1,2 --storage dense)
-    peers=()
+    workers="$(nproc)"
+    points="100000,1000000,10000000" poses="fibonacci:15" farm=(--objects 200 --views paper100 --samples-per-view 10 --workers "$workers" --storage dense,compact)
+    peers=() on_the_fly=(--views 16 --workers "$(( workers / 2 > 1 ? workers / 2 : 1 ))" --threads "$(( workers / 2 > 1 ? workers / 2 : 1 ))" --width 0.25 --repeats 2)
 fi
 
 auto_choice="$(ZBUF_OCCLUDE_AUTO=calibrate "$py" -c "
@@ -72,7 +76,9 @@ print(f'{choose_method()} (calibration, s per view: {calibrate()})')
 
 ZBUF_OCCLUDE_AUTO=calibrate "$py" "$root/benchmarks/bench_visibility_peers.py" "${peers[@]}" "${force[@]}" --gpu-methods \
     --points "$points" --poses "$poses" > "$out/visibility.md"
+"$py" "$root/benchmarks/profile_gpu_exact.py" --points "$points" --poses "$poses" > "$out/profile.md"
 "$py" "$root/benchmarks/bench_farm.py" --root "$meshes" "${farm[@]}" --markdown > "$out/farm.md"
+"$py" "$root/benchmarks/bench_on_the_fly.py" "${on_the_fly[@]}" > "$out/on_the_fly.md"
 
 {
     echo "# GPU benchmark$([ "$smoke" = 1 ] && echo " (smoke: tiny sizes)")"
@@ -89,8 +95,14 @@ ZBUF_OCCLUDE_AUTO=calibrate "$py" "$root/benchmarks/bench_visibility_peers.py" "
     echo
     cat "$out/visibility.md"
     echo
+    sed 's/^# /## /' "$out/profile.md"
+    echo
     echo "## The farm at the paper's shape"
     echo
     sed 's/^# /- /' "$out/farm.md"  # (its comment lines as a list, not headings)
+    echo
+    echo "## Occlusion on the fly"
+    echo
+    sed 's/^# /- /' "$out/on_the_fly.md"
 } > "$out/gpu.md"
 echo "gpu.sh: wrote $out/gpu.md" >&2

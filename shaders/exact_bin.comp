@@ -7,6 +7,9 @@
 // Faces reaching behind near_w (clip w, i.e. depth) cannot be projected: they go to one
 // global list that every point tests.  Each entry carries the face's smallest clip w
 // (its nearest linear depth), so that a point skips faces entirely behind it.
+// The dispatch's y dimension splits each face's tiles: invocation (face, s) of S takes the
+// tiles s, s + S, s + 2S, ... of the face's box, so that a face covering thousands of tiles
+// is not one thread's serial loop.  The order of a tile's list does not change any result.
 layout(local_size_x = 256) in;
 
 layout(std430, binding = 2) readonly buffer Triangles { float triangles[]; };  // 9 floats per face
@@ -45,8 +48,10 @@ void main() {
             hi = max(hi, v[j]);
         }
     }
+    uint slice = gl_GlobalInvocationID.y, n_slices = gl_NumWorkGroups.y;
     if (global_face) {
 #if BIN_FILL == 0
+        if (slice != 0u) return;
         uint slot = atomicAdd(global_faces[0], 1u);
         global_faces[1u + slot] = uint(f);
 #endif
@@ -70,25 +75,25 @@ void main() {
         float slack = margin * length(nrm) + 1.0e-5 * (abs(dot(nrm, a)) + length(nrm) * float(max(resolution.x, resolution.y)));
         edge[j] = vec3(nrm, -dot(nrm, a) + slack);
     }
-    for (int y = t0.y; y <= t1.y; ++y) {
-        for (int x = t0.x; x <= t1.x; ++x) {
-            if (edge_test) {
-                vec2 c0 = vec2(float(x * tile), float(y * tile)), c1 = c0 + float(tile);
-                bool off = false;
-                for (int j = 0; j < 3; ++j) {
-                    // the tile corner farthest along the inward normal
-                    vec2 corner = vec2(edge[j].x >= 0.0 ? c1.x : c0.x, edge[j].y >= 0.0 ? c1.y : c0.y);
-                    off = off || dot(edge[j].xy, corner) + edge[j].z < 0.0;
-                }
-                if (off) continue;
+    uint nx = uint(t1.x - t0.x + 1), n_box = nx * uint(t1.y - t0.y + 1);
+    for (uint k = slice; k < n_box; k += n_slices) {
+        int x = t0.x + int(k % nx), y = t0.y + int(k / nx);
+        if (edge_test) {
+            vec2 c0 = vec2(float(x * tile), float(y * tile)), c1 = c0 + float(tile);
+            bool off = false;
+            for (int j = 0; j < 3; ++j) {
+                // the tile corner farthest along the inward normal
+                vec2 corner = vec2(edge[j].x >= 0.0 ? c1.x : c0.x, edge[j].y >= 0.0 ? c1.y : c0.y);
+                off = off || dot(edge[j].xy, corner) + edge[j].z < 0.0;
             }
-            uint id = uint(y * tiles.x + x);
-#if BIN_FILL == 0
-            atomicAdd(tile_count[id], 1u);
-#else
-            uint slot = atomicAdd(tile_count[id], 1u);
-            tile_faces[slot] = uvec2(uint(f), floatBitsToUint(min_w));
-#endif
+            if (off) continue;
         }
+        uint id = uint(y * tiles.x + x);
+#if BIN_FILL == 0
+        atomicAdd(tile_count[id], 1u);
+#else
+        uint slot = atomicAdd(tile_count[id], 1u);
+        tile_faces[slot] = uvec2(uint(f), floatBitsToUint(min_w));
+#endif
     }
 }

@@ -20,6 +20,7 @@ layout(std430, binding = 6) readonly buffer TileStart { uint tile_start[]; };   
 layout(std430, binding = 7) readonly buffer TileFaces { uvec2 tile_faces[]; };   // face, min depth bits
 layout(std430, binding = 8) readonly buffer GlobalFaces { uint global_faces[]; };
 layout(std430, binding = 9) readonly buffer Params { double params[]; };         // eye xyz, tol, edge_sin
+layout(std430, binding = 11) readonly buffer PointIndex { uint point_index[]; }; // caller's order
 
 uniform mat4 view_projection;
 uniform vec4 depth_row;      // linear depth = dot(depth_row, (p, 1))
@@ -150,7 +151,11 @@ int pair32(vec3 p, vec3 d, float md, int f, bool ask_own, out bool maybe_own) {
     return TIE;
 }
 
-void mark(uint i, uint word_offset) { atomicOr(bits[word_offset + (i >> 5)], 1u << (i & 31u)); }
+// Bits go to the point's index in the caller's order (points are stored in Morton order).
+void mark(uint i, uint word_offset) {
+    uint j = point_index[i];
+    atomicOr(bits[word_offset + (j >> 5)], 1u << (j & 31u));
+}
 
 void main() {
     uint i = gl_GlobalInvocationID.x + point_offset;

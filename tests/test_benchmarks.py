@@ -34,6 +34,8 @@ def test_gpu_benchmark_smoke_writes_its_report(tmp_path):
     assert "`zo.visible_mask` one-shot" in report and "`zbuffer-exact` kept scene" in report
     assert "| dense | 1 | 2 |" in report  # the farm's row: 2 objects, 1 worker
     assert "Load average (1, 5, 15 min) after" in report
+    assert "## zbuffer-exact, stage by stage" in report and "| bin count ms |" in report
+    assert "## Occlusion on the fly" in report and "| on-the-fly |" in report
 
 
 def test_gpu_benchmark_refuses_a_software_renderer(tmp_path):

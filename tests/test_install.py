@@ -47,11 +47,14 @@ def fake_checkout(tmp_path) -> Path:
 
 def _install(repo: Path, *args: str, gpu: bool = False, **env: str) -> tuple[int, list[str], str]:
     bin_dir = repo.parent / "bin"
+    # nvidia-smi: a stand-in either way, so that a real one in /usr/bin (a GPU machine) never counts
     if gpu:
         _executable(bin_dir / "nvidia-smi", "#!/usr/bin/env bash\necho 'GPU 0: NVIDIA H100 (UUID: GPU-0)'\n")
+    else:
+        _executable(bin_dir / "nvidia-smi", "#!/usr/bin/env bash\necho 'NVIDIA-SMI has failed: no NVIDIA driver' >&2\nexit 9\n")
     calls = repo.parent / "calls.txt"
     calls.unlink(missing_ok=True)
-    # PATH: the stand-ins first, then the system's bash tools (no real nvidia-smi counts: ours or none)
+    # PATH: the stand-ins first, then the system's bash tools
     path = os.pathsep.join([str(bin_dir), "/usr/bin", "/bin"])
     r = subprocess.run(
         ["bash", str(repo / "scripts" / "install.sh"), *args], capture_output=True, text=True, timeout=60,

@@ -71,6 +71,8 @@ def test_face_index_buffer_names_the_face_the_pixel_ray_hits_first(sample_mesh_f
 
 
 def test_pyrender_and_moderngl_depth_maps_agree(sample_mesh_files):
+    # pyrender picks its platform when first imported: headless EGL, as the backend asks
+    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
     pytest.importorskip("pyrender")
     from zbuf_occlude.render.pyrender_backend import PyrenderRenderer
 

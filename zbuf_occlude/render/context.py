@@ -28,6 +28,8 @@ __all__ = [
     "check_image_size",
     "GL_BACKENDS",
     "REQUIRED_GL_VERSION",
+    "SOFTWARE_RENDERERS",
+    "is_software_renderer",
 ]
 
 log = logging.getLogger(__name__)
@@ -36,6 +38,8 @@ log = logging.getLogger(__name__)
 REQUIRED_GL_VERSION = 430
 #: Backends tried in order when none is named.
 GL_BACKENDS = ("egl", "osmesa")
+#: Substrings of ``GL_RENDERER`` (lower case) naming a rasteriser that runs on the CPU.
+SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "lavapipe", "software")
 
 _INSTALL_HINT = (
     "install Mesa's EGL and llvmpipe driver (Debian/Ubuntu: apt-get install libegl1 libgl1-mesa-dri), "
@@ -189,6 +193,13 @@ def shared_context(backend: str | None = None) -> moderngl.Context:
                 del _shared[stale]  # inherited across fork: unusable, never released here
             ctx = _shared[key] = create_context(backend)
         return ctx
+
+
+def is_software_renderer(ctx: moderngl.Context) -> bool:
+    """True when ``ctx`` renders on the CPU (Mesa llvmpipe and the like, :data:`SOFTWARE_RENDERERS`):
+    there a shader invocation costs CPU time, and work is shaped for few cores, not a GPU."""
+    renderer = str(ctx.info["GL_RENDERER"]).lower()
+    return any(s in renderer for s in SOFTWARE_RENDERERS)
 
 
 def context_info(ctx: moderngl.Context | None = None) -> dict[str, str]:

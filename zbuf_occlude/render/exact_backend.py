@@ -20,6 +20,7 @@ the face (no pixel centre needs to sample it).
 from __future__ import annotations
 
 import math
+import time
 
 import moderngl
 import numpy as np
@@ -27,6 +28,7 @@ from numpy.typing import NDArray
 
 from ..cameras import Camera
 from ..errors import InvalidInputError
+from .context import is_software_renderer
 from .shaders import load_shader
 
 __all__ = ["ExactMesh", "ExactPoints", "exact_face_groups", "DEFAULT_TILE", "BIN_MARGIN_PX"]
@@ -38,6 +40,12 @@ BIN_MARGIN_PX = 0.01
 #: Points this close to the image border (pixels, plus 1e-5 of the image size) are left to the CPU.
 FRUSTUM_MARGIN_PX = 1e-3
 _GROUP = 256
+#: Invocations per face in the bin passes on a GPU, each taking every BIN_SLICES-th tile of the
+#: face's box: a face covering thousands of tiles (a box side seen close) would otherwise be one
+#: thread's serial loop, while small faces cost the extra invocations almost nothing.  On a
+#: software rasteriser every invocation costs CPU time, so there each face is one invocation
+#: (32 slices made the bin passes of a 27k-face mesh 10x slower on llvmpipe).
+BIN_SLICES = 32
 _EPS32 = 2.0**-24
 
 
@@ -75,7 +83,8 @@ def morton_order(points: NDArray[np.float64], bits: int = 10) -> NDArray[np.int6
 
 class ExactPoints:
     """Points uploaded for :class:`ExactMesh` (float32 and float64 copies, own-face ids),
-    stored in :func:`morton_order`; results are returned in the caller's order."""
+    stored in :func:`morton_order`; the shader writes each point's bits at its index in the
+    caller's order (``index``), so that results need no permutation on the CPU."""
 
     def __init__(self, ctx: moderngl.Context, points: NDArray[np.float64], own: NDArray[np.int64] | None):
         self.order = morton_order(points)
@@ -94,10 +103,15 @@ class ExactPoints:
         self.points32 = ctx.buffer(p32.tobytes())
         self.points64 = ctx.buffer(p64.tobytes())
         self.faces = ctx.buffer(faces.tobytes())
+        index = np.zeros(n, dtype=np.uint32)
+        index[: self.n_points] = self.order
+        self.index = ctx.buffer(index.tobytes())
         self.bits = ctx.buffer(reserve=2 * 4 * max(math.ceil(self.n_points / 32), 1))
+        #: What the CPU reads: ``bits`` copied here on the GPU (see ``ExactMesh._read``).
+        self.bits_read = ctx.buffer(reserve=self.bits.size)
 
     def release(self) -> None:
-        for buf in (self.points32, self.points64, self.faces, self.bits):
+        for buf in (self.points32, self.points64, self.faces, self.index, self.bits, self.bits_read):
             buf.release()
 
 
@@ -131,15 +145,23 @@ class ExactMesh:
             self._planes = ctx.buffer(np.ascontiguousarray(planes, dtype=np.float64).tobytes())
             self._bin_faces = ctx.buffer(binned.tobytes())
             self._global = ctx.buffer(reserve=4 * (self.n_bin_faces + 1))
+            self._global_read = ctx.buffer(reserve=4)
             self._params = ctx.buffer(reserve=8 * 8)
-            self._count = self._starts = self._list = None
+            self._count = self._count_read = self._starts = self._list = None
             self._n_tiles = -1
             self._list_capacity = 0
             self._bin_count = ctx.compute_shader(load_shader("exact_bin.comp", (("BIN_FILL", 0),)))
             self._bin_fill = ctx.compute_shader(load_shader("exact_bin.comp", (("BIN_FILL", 1),)))
             self._points = ctx.compute_shader(load_shader("exact_points.comp"))
         self._max_groups = int(ctx.info["GL_MAX_COMPUTE_WORK_GROUP_COUNT"][0])
+        #: Invocations per face in the bin passes (:data:`BIN_SLICES`; 1 on a software rasteriser).
+        self.bin_slices = 1 if is_software_renderer(ctx) else BIN_SLICES
         self.last_stats: dict[str, int] = {}
+        #: When true, :meth:`visible` waits for the GPU after each stage and records
+        #: :attr:`last_timings` (for benchmarks: the waits cost time themselves).
+        self.profile = False
+        #: Seconds per stage of the last :meth:`visible` call when :attr:`profile` is set.
+        self.last_timings: dict[str, float] = {}
 
     def upload_points(self, points: NDArray[np.float64], face_index: NDArray[np.int64] | None) -> ExactPoints:
         """Upload ``points (N, 3)`` world frame and their optional own faces."""
@@ -149,18 +171,34 @@ class ExactMesh:
 
     def _tile_buffers(self, n_tiles: int) -> None:
         if n_tiles != self._n_tiles:
-            for buf in (self._count, self._starts):
+            for buf in (self._count, self._count_read, self._starts):
                 if buf is not None:
                     buf.release()
             self._count = self.ctx.buffer(reserve=4 * (n_tiles + 1))
+            self._count_read = self.ctx.buffer(reserve=4 * (n_tiles + 1))
             self._starts = self.ctx.buffer(reserve=4 * (n_tiles + 1))
             self._n_tiles = n_tiles
 
-    def _run(self, shader: moderngl.ComputeShader, n: int, offset_name: str) -> None:
+    def _run(self, shader: moderngl.ComputeShader, n: int, offset_name: str, slices: int = 1) -> None:
         per = self._max_groups * _GROUP
         for offset in range(0, n, per):
             shader[offset_name].value = offset
-            shader.run(group_x=math.ceil(min(per, n - offset) / _GROUP))
+            shader.run(group_x=math.ceil(min(per, n - offset) / _GROUP), group_y=slices)
+
+    def _read(self, source: moderngl.Buffer, staging: moderngl.Buffer, size: int) -> bytes:
+        """``size`` bytes of a buffer the shaders write, read through ``staging``.
+
+        The CPU never reads the shaders' own buffers: a driver may move a buffer the CPU
+        reads into host memory, and atomics on it then cross the bus (NVIDIA: the bin fill
+        pass took ~3 ms instead of ~0.2 ms on an H100).
+        """
+        self.ctx.copy_buffer(staging, source, size)
+        return staging.read(size)
+
+    def _stamp(self, stamps: list[tuple[str, float]], stage: str) -> None:
+        if self.profile:
+            self.ctx.finish()
+            stamps.append((stage, time.perf_counter()))
 
     @staticmethod
     def _set(shader: moderngl.ComputeShader, uniforms: dict) -> None:
@@ -218,6 +256,7 @@ class ExactMesh:
             "depth_range": (float(camera.znear), float(camera.zfar)),
             "frustum_margin": float(FRUSTUM_MARGIN_PX + 1e-5 * max(width, height)),
         }
+        stamps = [("", time.perf_counter())]
         with self.ctx:
             self._tile_buffers(n_tiles)
             self._count.clear()
@@ -228,9 +267,10 @@ class ExactMesh:
             self._global.bind_to_storage_buffer(8)
             self._bin_faces.bind_to_storage_buffer(10)
             self._set(self._bin_count, uniforms)
-            self._run(self._bin_count, self.n_bin_faces, "face_offset")
+            self._run(self._bin_count, self.n_bin_faces, "face_offset", self.bin_slices)
             self.ctx.memory_barrier()
-            counts = np.frombuffer(self._count.read(), dtype=np.uint32)[:n_tiles].astype(np.int64)
+            self._stamp(stamps, "bin count")
+            counts = np.frombuffer(self._read(self._count, self._count_read, 4 * n_tiles), dtype=np.uint32).astype(np.int64)
             starts = np.zeros(n_tiles + 1, dtype=np.int64)
             np.cumsum(counts, out=starts[1:])
             total = int(starts[-1])
@@ -244,9 +284,11 @@ class ExactMesh:
             self._starts.write(starts.astype(np.uint32).tobytes())
             self._count.write(starts.astype(np.uint32).tobytes())  # write cursors
             self._list.bind_to_storage_buffer(7)
+            self._stamp(stamps, "prefix sum")
             self._set(self._bin_fill, uniforms)
-            self._run(self._bin_fill, self.n_bin_faces, "face_offset")
+            self._run(self._bin_fill, self.n_bin_faces, "face_offset", self.bin_slices)
             self.ctx.memory_barrier()
+            self._stamp(stamps, "bin fill")
             points.points32.bind_to_storage_buffer(0)
             points.faces.bind_to_storage_buffer(1)
             points.bits.bind_to_storage_buffer(3)
@@ -254,22 +296,29 @@ class ExactMesh:
             points.points64.bind_to_storage_buffer(5)
             self._starts.bind_to_storage_buffer(6)
             self._params.bind_to_storage_buffer(9)
+            points.index.bind_to_storage_buffer(11)
             points.bits.clear()
             self._set(self._points, uniforms)
             self._run(self._points, n, "point_offset")
             self.ctx.memory_barrier()
-            words = np.frombuffer(points.bits.read(), dtype=np.uint32).reshape(2, -1)
-            n_global = int(np.frombuffer(self._global.read(4), dtype=np.uint32)[0])
+            self._stamp(stamps, "points")
+            words = np.frombuffer(self._read(points.bits, points.bits_read, points.bits.size), dtype=np.uint32).reshape(2, -1)
+            n_global = int(np.frombuffer(self._read(self._global, self._global_read, 4), dtype=np.uint32)[0])
+            self._stamp(stamps, "read back")
         self.last_stats = {"tiles": n_tiles, "entries": total, "global_faces": n_global, "max_per_tile": int(counts.max(initial=0))}
-        bits = np.unpackbits(words.view(np.uint8), axis=1, bitorder="little")[:, :n].astype(bool)
-        out = np.empty_like(bits)
-        out[:, points.order] = bits
-        return out[0], out[1]
+        # Already in the caller's order (the shader wrote each bit at ExactPoints.index).
+        visible = np.unpackbits(words[0].view(np.uint8), count=n, bitorder="little").view(bool)
+        cpu = np.zeros(n, dtype=bool)
+        if words[1].any():  # most views leave no point to the CPU
+            cpu = np.unpackbits(words[1].view(np.uint8), count=n, bitorder="little").view(bool)
+        self._stamp(stamps, "unpack")
+        self.last_timings = {stage: t - stamps[k][1] for k, (stage, t) in enumerate(stamps[1:])}
+        return visible, cpu
 
     def release(self) -> None:
         """Free the GL objects of this mesh."""
         with self.ctx:
-            for obj in (self._triangles, self._planes, self._bin_faces, self._global, self._params,
-                        self._count, self._starts, self._list, self._bin_count, self._bin_fill, self._points):
+            for obj in (self._triangles, self._planes, self._bin_faces, self._global, self._global_read, self._params,
+                        self._count, self._count_read, self._starts, self._list, self._bin_count, self._bin_fill, self._points):
                 if obj is not None:
                     obj.release()

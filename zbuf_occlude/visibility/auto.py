@@ -25,8 +25,9 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from ..cameras import Camera, camera_on_sphere
+from ..cameras import Camera, camera_on_sphere, view_schedule
 from ..errors import BackendUnavailable, InvalidInputError
+from ..render.context import SOFTWARE_RENDERERS
 from .registry import get_method, method_info, register
 
 __all__ = ["choose_method", "calibrate", "make_scene", "auto_visible", "SOFTWARE_RENDERERS", "AUTO_ENV"]
@@ -35,8 +36,6 @@ log = logging.getLogger(__name__)
 
 #: Environment variable that forces ``auto``'s choice.
 AUTO_ENV = "ZBUF_OCCLUDE_AUTO"
-#: Substrings of ``GL_RENDERER`` (lower case) naming a rasteriser that runs on the CPU.
-SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "lavapipe", "software")
 _CANDIDATES = ("zbuffer-exact", "embree-fast")
 
 
@@ -57,7 +56,7 @@ def _has_embree() -> bool:
     return True
 
 
-def calibrate(n_points: int = 50_000, views: int = 2) -> dict[str, float]:
+def calibrate(n_points: int = 50_000, views: int = 5) -> dict[str, float]:
     """Median seconds per view of each candidate on a built-in problem (a subdivided
     icosphere inside a box, ``n_points`` points, ``views`` views after one warm-up).
 
@@ -71,17 +70,17 @@ def calibrate(n_points: int = 50_000, views: int = 2) -> dict[str, float]:
 
     mesh = trimesh.util.concatenate([trimesh.creation.icosphere(subdivisions=4, radius=0.3), trimesh.creation.box([0.9, 0.9, 0.9])])
     points, face_index = trimesh.sample.sample_surface(mesh, n_points, seed=0)
-    cameras = [camera_on_sphere(el, az) for el, az in ((20.0, 10.0), (-30.0, 100.0), (50.0, 220.0))[: views + 1]]
+    cameras = [camera_on_sphere(el, az) for el, az in view_schedule(f"fibonacci:{views + 1}")]
     out: dict[str, float] = {}
     for name, make in (("zbuffer-exact", ExactScene), ("embree-fast", FastScene)):
         try:
-            scene = make(mesh, points, face_index)
-            scene.visible(cameras[0])
-            times = []
-            for cam in cameras[1:]:
-                t = time.perf_counter()
-                scene.visible(cam)
-                times.append(time.perf_counter() - t)
+            with make(mesh, points, face_index) as scene:
+                scene.visible(cameras[0])  # warm-up: shaders, JIT, thread pool
+                times = []
+                for cam in cameras[1:]:
+                    t = time.perf_counter()
+                    scene.visible(cam)
+                    times.append(time.perf_counter() - t)
             out[name] = float(np.median(times))
         except BackendUnavailable as exc:
             log.debug("auto: %s unavailable: %s", name, exc)
