@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
 # The GPU benchmark in one command: bash benchmarks/gpu.sh OUT [--smoke] [--allow-software] [--force]
+#                                     [--points N,N,...] [--poses SPEC] [--no-farm]
 #
 # On a machine with an NVIDIA GPU: checks that EGL renders on the NVIDIA driver (not a
 # software rasteriser such as llvmpipe; exit 3 otherwise, unless --allow-software), then
@@ -19,10 +20,14 @@
 # average exceeds the CPU count (the visibility table is then flagged; without it, exit 3).
 set -euo pipefail
 
-usage() { echo "usage: bash benchmarks/gpu.sh OUT [--smoke] [--allow-software] [--force]" >&2; }
-out="" smoke=0 allow_sw=0 force=()
+usage() { echo "usage: bash benchmarks/gpu.sh OUT [--smoke] [--allow-software] [--force] [--points N,N,...] [--poses SPEC] [--no-farm]" >&2; }
+out="" smoke=0 allow_sw=0 force=() points_arg="" poses_arg="" farm_run=1 next=""
 for arg in "$@"; do
+    if [ -n "$next" ]; then printf -v "$next" '%s' "$arg"; next=""; continue; fi
     case "$arg" in
+        --points) next=points_arg ;;
+        --poses) next=poses_arg ;;
+        --no-farm) farm_run=0 ;;
         --smoke) smoke=1; allow_sw=1 ;;
         --allow-software) allow_sw=1 ;;
         --force) force=(--force) ;;
@@ -31,7 +36,7 @@ for arg in "$@"; do
         *) if [ -n "$out" ]; then echo "gpu.sh: one OUT folder, got '$out' and '$arg'" >&2; exit 2; fi; out="$arg" ;;
     esac
 done
-if [ -z "$out" ]; then usage; exit 2; fi
+if [ -z "$out" ] || [ -n "$next" ]; then usage; exit 2; fi
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 py="${PYTHON:-$root/.venv/bin/python}"
@@ -68,6 +73,8 @@ else
     points="100000,1000000,10000000" poses="fibonacci:15" farm=(--objects 200 --views paper100 --samples-per-view 10 --workers "$workers" --storage dense,compact)
     peers=() on_the_fly=(--views 16 --workers "$(( workers / 2 > 1 ? workers / 2 : 1 ))" --threads "$(( workers / 2 > 1 ? workers / 2 : 1 ))" --width 0.25 --repeats 2)
 fi
+[ -z "$points_arg" ] || points="$points_arg"
+[ -z "$poses_arg" ] || poses="$poses_arg"
 
 auto_choice="$(ZBUF_OCCLUDE_AUTO=calibrate "$py" -c "
 from zbuf_occlude.visibility.auto import calibrate, choose_method
@@ -77,8 +84,12 @@ print(f'{choose_method()} (calibration, s per view: {calibrate()})')
 ZBUF_OCCLUDE_AUTO=calibrate "$py" "$root/benchmarks/bench_visibility_peers.py" "${peers[@]}" "${force[@]}" --gpu-methods \
     --points "$points" --poses "$poses" > "$out/visibility.md"
 "$py" "$root/benchmarks/profile_gpu_exact.py" --points "$points" --poses "$poses" > "$out/profile.md"
-"$py" "$root/benchmarks/bench_farm.py" --root "$meshes" "${farm[@]}" --markdown > "$out/farm.md"
-"$py" "$root/benchmarks/bench_on_the_fly.py" "${on_the_fly[@]}" > "$out/on_the_fly.md"
+if [ "$farm_run" = 1 ]; then
+    "$py" "$root/benchmarks/bench_farm.py" --root "$meshes" "${farm[@]}" --markdown > "$out/farm.md"
+    "$py" "$root/benchmarks/bench_on_the_fly.py" "${on_the_fly[@]}" > "$out/on_the_fly.md"
+else
+    echo "# not run (--no-farm)" > "$out/farm.md"; echo "# not run (--no-farm)" > "$out/on_the_fly.md"
+fi
 
 {
     echo "# GPU benchmark$([ "$smoke" = 1 ] && echo " (smoke: tiny sizes)")"
