@@ -92,9 +92,9 @@ def methods(mesh, points, fi, args) -> dict:
 
     off = args.offset
     out = {
-        f"`zo.visible_mask` one-shot (auto = {choose_method()})": (
+        f"`zo.visible_mask` one-shot (auto = {choose_method(one_shot=True)})": (
             lambda: None, lambda s, c: zo.visible_mask(mesh, points, c, face_index=fi)),
-        "`make_scene` once, `scene.visible` per view": (
+        f"`make_scene` once (auto = {choose_method()}), `scene.visible` per view": (
             lambda: make_scene(mesh, points, fi), lambda s, c: s.visible(c)),
         "embree-fast one-shot, rays only (no z-buffer pre-pass)": (
             lambda: None, lambda s, c: FastScene(mesh, points, fi, sort=False, prepass=False).visible(c)),

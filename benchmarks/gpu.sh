@@ -78,7 +78,8 @@ fi
 
 auto_choice="$(ZBUF_OCCLUDE_AUTO=calibrate "$py" -c "
 from zbuf_occlude.visibility.auto import calibrate, choose_method
-print(f'{choose_method()} (calibration, s per view: {calibrate()})')
+print(f'kept session: {choose_method()} (s per view: {calibrate()}); one-shot call: '
+      f'{choose_method(one_shot=True)} (s per view: {calibrate(one_shot=True)})')
 " 2>/dev/null | tail -n 1)"
 
 ZBUF_OCCLUDE_AUTO=calibrate "$py" "$root/benchmarks/bench_visibility_peers.py" "${peers[@]}" "${force[@]}" --gpu-methods \

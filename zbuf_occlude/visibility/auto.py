@@ -3,7 +3,10 @@
 Both candidates decide the same definition (:mod:`~zbuf_occlude.visibility.definition`):
 ``zbuffer-exact`` on the GPU (:mod:`~zbuf_occlude.visibility.gpu_exact`) and ``embree-fast``
 on the CPU's threads (:mod:`~zbuf_occlude.visibility.embree_fast`).  :func:`choose_method`
-picks once per process:
+picks once per process, separately for the two ways of calling: a kept session
+(:func:`make_scene`, the farm, many views of one point set: the points' set-up is paid once)
+and the one-shot call (``visible_mask``: the points' set-up is paid every view; uploading
+and ordering 1M points for the GPU costs more than Embree's whole view on 16 cores):
 
 * ``$ZBUF_OCCLUDE_AUTO`` names one of them (or ``calibrate``): that wins;
 * only one of OpenGL 4.3 / ``embreex`` is available: that one;
@@ -11,11 +14,12 @@ picks once per process:
   lavapipe): ``embree-fast``, since the "GPU" runs on the same cores, where Embree is
   measured several times faster (README, "Measured results");
 * a hardware renderer: a short calibration (:func:`calibrate`, ~1 s) times both on a
-  built-in problem and keeps the faster.
+  built-in problem, the way they will be called, and keeps the faster.
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 import os
@@ -56,9 +60,19 @@ def _has_embree() -> bool:
     return True
 
 
-def calibrate(n_points: int = 50_000, views: int = 5) -> dict[str, float]:
+def calibrate(n_points: int = 50_000, views: int = 5, *, one_shot: bool = False) -> dict[str, float]:
     """Median seconds per view of each candidate on a built-in problem (a subdivided
     icosphere inside a box, ``n_points`` points, ``views`` views after one warm-up).
+
+    Parameters
+    ----------
+    n_points : int
+        Points of the problem (the farm's dense clouds hold 32,768).
+    views : int
+        Timed views (fibonacci poses) after the warm-up view.
+    one_shot : bool
+        Time the one-shot call (``method(mesh, points, camera)``: the points are set up every
+        view, the mesh's state is kept) instead of ``session.visible(camera)``.
 
     Returns
     -------
@@ -74,12 +88,13 @@ def calibrate(n_points: int = 50_000, views: int = 5) -> dict[str, float]:
     out: dict[str, float] = {}
     for name, make in (("zbuffer-exact", ExactScene), ("embree-fast", FastScene)):
         try:
-            with make(mesh, points, face_index) as scene:
-                scene.visible(cameras[0])  # warm-up: shaders, JIT, thread pool
+            with contextlib.nullcontext() if one_shot else make(mesh, points, face_index) as scene:
+                view = functools.partial(get_method(name), mesh, points, face_index=face_index) if one_shot else scene.visible
+                view(cameras[0])  # warm-up: shaders, JIT, thread pool, the mesh's cached state
                 times = []
                 for cam in cameras[1:]:
                     t = time.perf_counter()
-                    scene.visible(cam)
+                    view(cam)
                     times.append(time.perf_counter() - t)
             out[name] = float(np.median(times))
         except BackendUnavailable as exc:
@@ -87,9 +102,10 @@ def calibrate(n_points: int = 50_000, views: int = 5) -> dict[str, float]:
     return out
 
 
-@functools.lru_cache(maxsize=1)
-def choose_method() -> str:
-    """The method ``auto`` runs in this process (decided once; see the module docstring).
+@functools.lru_cache(maxsize=2)
+def choose_method(one_shot: bool = False) -> str:
+    """The method ``auto`` runs in this process (decided once per way of calling; see the
+    module docstring): for kept sessions, or with ``one_shot`` for one-shot calls.
 
     Raises
     ------
@@ -114,9 +130,9 @@ def choose_method() -> str:
     if forced != "calibrate" and any(s in renderer.lower() for s in SOFTWARE_RENDERERS):
         log.info("auto: software OpenGL renderer %r shares the CPU: embree-fast", renderer)
         return "embree-fast"
-    seconds = calibrate()
+    seconds = calibrate(one_shot=one_shot)
     choice = min(seconds, key=seconds.get) if seconds else "embree-fast"
-    log.info("auto: renderer %r, calibration %s: %s", renderer, seconds, choice)
+    log.info("auto: renderer %r, %s calibration %s: %s", renderer, "one-shot" if one_shot else "session", seconds, choice)
     return choice
 
 
@@ -135,5 +151,5 @@ def auto_visible(
     face_index: NDArray[np.int64] | None = None,
     **options,
 ) -> NDArray[np.bool_]:
-    """The default HSR method: :func:`choose_method`'s, with the same options."""
-    return get_method(choose_method())(mesh, points, camera, face_index=face_index, **options)
+    """The default HSR method: ``choose_method(one_shot=True)``'s, with the same options."""
+    return get_method(choose_method(one_shot=True))(mesh, points, camera, face_index=face_index, **options)
