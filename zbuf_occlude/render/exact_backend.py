@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 
 from ..cameras import Camera
 from ..errors import InvalidInputError
+from .compute import dispatch, read_through, set_uniforms
 from .context import is_software_renderer
 from .shaders import load_shader
 
@@ -39,7 +40,6 @@ DEFAULT_TILE = 8
 BIN_MARGIN_PX = 0.01
 #: Points this close to the image border (pixels, plus 1e-5 of the image size) are left to the CPU.
 FRUSTUM_MARGIN_PX = 1e-3
-_GROUP = 256
 #: Invocations per face in the bin passes on a GPU, each taking every BIN_SLICES-th tile of the
 #: face's box: a face covering thousands of tiles (a box side seen close) would otherwise be one
 #: thread's serial loop, while small faces cost the extra invocations almost nothing.  On a
@@ -107,7 +107,7 @@ class ExactPoints:
         index[: self.n_points] = self.order
         self.index = ctx.buffer(index.tobytes())
         self.bits = ctx.buffer(reserve=2 * 4 * max(math.ceil(self.n_points / 32), 1))
-        #: What the CPU reads: ``bits`` copied here on the GPU (see ``ExactMesh._read``).
+        #: What the CPU reads: ``bits`` copied here on the GPU (:func:`~zbuf_occlude.render.compute.read_through`).
         self.bits_read = ctx.buffer(reserve=self.bits.size)
 
     def release(self) -> None:
@@ -153,7 +153,6 @@ class ExactMesh:
             self._bin_count = ctx.compute_shader(load_shader("exact_bin.comp", (("BIN_FILL", 0),)))
             self._bin_fill = ctx.compute_shader(load_shader("exact_bin.comp", (("BIN_FILL", 1),)))
             self._points = ctx.compute_shader(load_shader("exact_points.comp"))
-        self._max_groups = int(ctx.info["GL_MAX_COMPUTE_WORK_GROUP_COUNT"][0])
         #: Invocations per face in the bin passes (:data:`BIN_SLICES`; 1 on a software rasteriser).
         self.bin_slices = 1 if is_software_renderer(ctx) else BIN_SLICES
         self.last_stats: dict[str, int] = {}
@@ -179,35 +178,10 @@ class ExactMesh:
             self._starts = self.ctx.buffer(reserve=4 * (n_tiles + 1))
             self._n_tiles = n_tiles
 
-    def _run(self, shader: moderngl.ComputeShader, n: int, offset_name: str, slices: int = 1) -> None:
-        per = self._max_groups * _GROUP
-        for offset in range(0, n, per):
-            shader[offset_name].value = offset
-            shader.run(group_x=math.ceil(min(per, n - offset) / _GROUP), group_y=slices)
-
-    def _read(self, source: moderngl.Buffer, staging: moderngl.Buffer, size: int) -> bytes:
-        """``size`` bytes of a buffer the shaders write, read through ``staging``.
-
-        The CPU never reads the shaders' own buffers: a driver may move a buffer the CPU
-        reads into host memory, and atomics on it then cross the bus (NVIDIA: the bin fill
-        pass took ~3 ms instead of ~0.2 ms on an H100).
-        """
-        self.ctx.copy_buffer(staging, source, size)
-        return staging.read(size)
-
     def _stamp(self, stamps: list[tuple[str, float]], stage: str) -> None:
         if self.profile:
             self.ctx.finish()
             stamps.append((stage, time.perf_counter()))
-
-    @staticmethod
-    def _set(shader: moderngl.ComputeShader, uniforms: dict) -> None:
-        for name, value in uniforms.items():
-            if name in shader:  # the compiler drops unused uniforms
-                if isinstance(value, bytes):
-                    shader[name].write(value)
-                else:
-                    shader[name].value = value
 
     def visible(
         self,
@@ -266,11 +240,11 @@ class ExactMesh:
             self._count.bind_to_storage_buffer(6)
             self._global.bind_to_storage_buffer(8)
             self._bin_faces.bind_to_storage_buffer(10)
-            self._set(self._bin_count, uniforms)
-            self._run(self._bin_count, self.n_bin_faces, "face_offset", self.bin_slices)
+            set_uniforms(self._bin_count, uniforms)
+            dispatch(self._bin_count, self.n_bin_faces, "face_offset", slices=self.bin_slices)
             self.ctx.memory_barrier()
             self._stamp(stamps, "bin count")
-            counts = np.frombuffer(self._read(self._count, self._count_read, 4 * n_tiles), dtype=np.uint32).astype(np.int64)
+            counts = np.frombuffer(read_through(self.ctx, self._count, self._count_read, 4 * n_tiles), dtype=np.uint32).astype(np.int64)
             starts = np.zeros(n_tiles + 1, dtype=np.int64)
             np.cumsum(counts, out=starts[1:])
             total = int(starts[-1])
@@ -285,8 +259,8 @@ class ExactMesh:
             self._count.write(starts.astype(np.uint32).tobytes())  # write cursors
             self._list.bind_to_storage_buffer(7)
             self._stamp(stamps, "prefix sum")
-            self._set(self._bin_fill, uniforms)
-            self._run(self._bin_fill, self.n_bin_faces, "face_offset", self.bin_slices)
+            set_uniforms(self._bin_fill, uniforms)
+            dispatch(self._bin_fill, self.n_bin_faces, "face_offset", slices=self.bin_slices)
             self.ctx.memory_barrier()
             self._stamp(stamps, "bin fill")
             points.points32.bind_to_storage_buffer(0)
@@ -298,12 +272,12 @@ class ExactMesh:
             self._params.bind_to_storage_buffer(9)
             points.index.bind_to_storage_buffer(11)
             points.bits.clear()
-            self._set(self._points, uniforms)
-            self._run(self._points, n, "point_offset")
+            set_uniforms(self._points, uniforms)
+            dispatch(self._points, n, "point_offset")
             self.ctx.memory_barrier()
             self._stamp(stamps, "points")
-            words = np.frombuffer(self._read(points.bits, points.bits_read, points.bits.size), dtype=np.uint32).reshape(2, -1)
-            n_global = int(np.frombuffer(self._read(self._global, self._global_read, 4), dtype=np.uint32)[0])
+            words = np.frombuffer(read_through(self.ctx, points.bits, points.bits_read, points.bits.size), dtype=np.uint32).reshape(2, -1)
+            n_global = int(np.frombuffer(read_through(self.ctx, self._global, self._global_read, 4), dtype=np.uint32)[0])
             self._stamp(stamps, "read back")
         self.last_stats = {"tiles": n_tiles, "entries": total, "global_faces": n_global, "max_per_tile": int(counts.max(initial=0))}
         # Already in the caller's order (the shader wrote each bit at ExactPoints.index).

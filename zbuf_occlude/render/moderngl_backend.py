@@ -20,6 +20,7 @@ from ..cameras import Camera
 from ..defaults import DEFAULT_GPU_TOLERANCE, DEFAULT_MAX_SLOPE
 from ..errors import InvalidInputError
 from ..mesh import MAX_ABS_COORDINATE
+from .compute import dispatch, set_uniforms
 from .context import check_image_size, shared_context
 from .shaders import load_shader
 
@@ -29,7 +30,6 @@ log = logging.getLogger(__name__)
 
 #: Face indices travel as float32 in the render target: exact below 2^24.
 MAX_FACES = 2**24
-_GROUP_SIZE = 256  # local_size_x of the compute shaders
 
 
 @dataclass(frozen=True)
@@ -158,7 +158,6 @@ class ModernGLRenderer:
             self._program = self.ctx.program(vertex_shader=load_shader("mesh.vert"), fragment_shader=load_shader("mesh.frag"))
             self._vao = self.ctx.vertex_array(self._program, [(self._vbo, "3f", "in_position")], index_buffer=self._ibo)
             self._compute: dict[tuple[str, int], moderngl.ComputeShader] = {}
-        self._max_groups = int(self.ctx.info["GL_MAX_COMPUTE_WORK_GROUP_COUNT"][0])
         self._targets: dict[tuple[int, int], tuple[moderngl.Framebuffer, moderngl.Texture, moderngl.Texture]] = {}
         self._released = False
 
@@ -186,10 +185,12 @@ class ModernGLRenderer:
         return color
 
     def _shader(self, rule: str, neighborhood: int) -> moderngl.ComputeShader:
-        key = (rule, neighborhood if rule == "candidates" else 0)
+        key = (rule, neighborhood if rule in ("candidates", "scan") else 0)
         if key not in self._compute:
             if rule == "candidates":
                 source = load_shader("visibility_candidates.comp", (("NEIGHBORHOOD", neighborhood),))
+            elif rule == "scan":
+                source = load_shader("scan_candidates.comp", (("NEIGHBORHOOD", neighborhood),))
             else:
                 source = load_shader("visibility_tolerance.comp")
             self._compute[key] = self.ctx.compute_shader(source)
@@ -287,26 +288,81 @@ class ModernGLRenderer:
             shader = self._shader(rule, int(neighborhood))
             color = self._draw(camera)
             self.ctx.memory_barrier()
-            for name, value in uniforms.items():
-                if name in shader:  # the GLSL compiler drops unused uniforms
-                    if isinstance(value, bytes):
-                        shader[name].write(value)
-                    else:
-                        shader[name].value = value
+            set_uniforms(shader, uniforms)
             color.use(location=0)
             points.points.bind_to_storage_buffer(0)
             points.faces.bind_to_storage_buffer(1)
             self._triangles.bind_to_storage_buffer(2)
             points.visible_bits.bind_to_storage_buffer(3)
             points.visible_bits.clear()
-            per_dispatch = self._max_groups * _GROUP_SIZE
-            for offset in range(0, n, per_dispatch):
-                shader["point_offset"].value = offset
-                shader.run(group_x=math.ceil(min(per_dispatch, n - offset) / _GROUP_SIZE))
+            dispatch(shader, n, "point_offset")
             self.ctx.memory_barrier()
             words = np.frombuffer(points.visible_bits.read(), dtype=np.uint32).reshape(2, -1)
         bits = np.unpackbits(words.view(np.uint8), axis=1, bitorder="little")[:, :n].astype(bool)
         return bits[0], bits[1]
+
+    def first_hits(
+        self,
+        camera: Camera,
+        origin: NDArray[np.floating],
+        directions: NDArray[np.floating],
+        *,
+        neighborhood: int,
+        znear: float,
+        edge_epsilon: float,
+    ) -> NDArray[np.int64]:
+        """The face each ray from ``origin`` hits first among the faces rasterised around it.
+
+        ``camera`` (eye at ``origin``) is rasterised into face ids; each ray tests the faces
+        of the ``(2 neighborhood + 1)²`` pixels around its projection in float32 with
+        barycentrics widened by ``edge_epsilon`` (``shaders/scan_candidates.comp``).
+
+        Parameters
+        ----------
+        camera : Camera
+            Eye at ``origin``; the rays lie in its view.
+        origin : (3,) float
+            World frame.
+        directions : (R, 3) float
+            Unit directions, world frame.
+        neighborhood : int
+            Window radius, pixels.
+        znear : float
+            Nothing nearer than this is hit, object units.
+        edge_epsilon : float
+            Barycentric widening of the float32 test.
+
+        Returns
+        -------
+        face : (R,) int64
+            Face index (the lowest of its group of identical faces); −1 no face seen in the
+            window, −2 faces seen, none hit.
+        """
+        n = len(directions)
+        uniforms = {
+            "view_projection": (camera.projection_matrix @ camera.view_matrix).T.astype(np.float32).tobytes(),
+            "origin": tuple(float(v) for v in origin), "resolution": camera.resolution, "n_rays": n,
+            "znear": float(znear), "edge_epsilon": float(edge_epsilon), "depth_and_face": 0,
+        }  # fmt: skip
+        rays = np.zeros((n, 4), dtype=np.float32)
+        rays[:, :3] = directions
+        with self.ctx:
+            shader = self._shader("scan", int(neighborhood))
+            color = self._draw(camera)  # RG32F (linear depth, face id) of this view
+            self.ctx.memory_barrier()
+            ray_buf = self.ctx.buffer(rays.tobytes())
+            out_buf = self.ctx.buffer(reserve=4 * max(n, 1))
+            set_uniforms(shader, uniforms)
+            color.use(location=0)
+            ray_buf.bind_to_storage_buffer(0)
+            out_buf.bind_to_storage_buffer(1)
+            self._triangles.bind_to_storage_buffer(2)
+            dispatch(shader, n, "ray_offset")
+            self.ctx.memory_barrier()
+            face = np.frombuffer(out_buf.read(4 * n), dtype=np.int32).astype(np.int64)
+            ray_buf.release()
+            out_buf.release()
+        return face
 
     # -- lifetime ------------------------------------------------------------------------
     def release(self) -> None:

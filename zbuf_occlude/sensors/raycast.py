@@ -165,7 +165,6 @@ def _views(origin, directions, resolution, znear, zfar):
 GPU_EDGE_EPSILON = 1e-5
 #: A GPU hit whose float64 barycentrics fall outside the face by more than this goes to Embree.
 RECHECK_EPSILON = 1e-6
-_GROUP_SIZE = 256  # local_size_x of shaders/scan_candidates.comp
 
 
 def _build_renderer(mesh: trimesh.Trimesh):
@@ -180,51 +179,6 @@ def _release_renderer(renderer) -> None:
 
 #: GL renderers of the scenes in use (mesh uploaded once for many scans).
 _renderers = MeshCache(_build_renderer, 2, release=_release_renderer)
-_programs: dict[tuple[int, int], object] = {}  # (id(ctx), neighborhood) -> compute shader
-
-
-def _gpu_candidates(renderer, cam, origin, directions, neighborhood: int, znear: float) -> NDArray[np.int64]:
-    """Per ray: the face hit first among its window's candidates, −1 (no face seen) or −2
-    (faces seen, none hit), decided by ``shaders/scan_candidates.comp``."""
-    from ..render.shaders import load_shader
-
-    ctx = renderer.ctx
-    n = len(directions)
-    with ctx:
-        key = (id(ctx), int(neighborhood))
-        if key not in _programs:
-            _programs[key] = ctx.compute_shader(load_shader("scan_candidates.comp", (("NEIGHBORHOOD", int(neighborhood)),)))
-        shader = _programs[key]
-        color = renderer._draw(cam)  # RG32F (linear depth, face id) of this view
-        ctx.memory_barrier()
-        rays = np.zeros((n, 4), dtype=np.float32)
-        rays[:, :3] = directions
-        ray_buf = ctx.buffer(rays.tobytes())
-        out_buf = ctx.buffer(reserve=4 * n)
-        uniforms = {
-            "view_projection": (cam.projection_matrix @ cam.view_matrix).T.astype(np.float32).tobytes(),
-            "origin": tuple(float(v) for v in origin), "resolution": cam.resolution, "n_rays": n,
-            "znear": float(znear), "edge_epsilon": GPU_EDGE_EPSILON, "depth_and_face": 0,
-        }  # fmt: skip
-        for name, value in uniforms.items():
-            if name in shader:
-                if isinstance(value, bytes):
-                    shader[name].write(value)
-                else:
-                    shader[name].value = value
-        color.use(location=0)
-        ray_buf.bind_to_storage_buffer(0)
-        out_buf.bind_to_storage_buffer(1)
-        renderer._triangles.bind_to_storage_buffer(2)
-        per_dispatch = int(ctx.info["GL_MAX_COMPUTE_WORK_GROUP_COUNT"][0]) * _GROUP_SIZE
-        for offset in range(0, n, per_dispatch):
-            shader["ray_offset"].value = offset
-            shader.run(group_x=math.ceil(min(per_dispatch, n - offset) / _GROUP_SIZE))
-        ctx.memory_barrier()
-        face = np.frombuffer(out_buf.read(), dtype=np.int32).astype(np.int64)
-        ray_buf.release()
-        out_buf.release()
-    return face
 
 
 def cast_zbuffer(
@@ -284,7 +238,9 @@ def cast_zbuffer(
     for k, cam in enumerate(cams):
         rays = np.flatnonzero(view == k)
         if len(rays):
-            face[rays] = _gpu_candidates(renderer, cam, origin, directions[rays], int(neighborhood), float(znear))
+            face[rays] = renderer.first_hits(
+                cam, origin, directions[rays], neighborhood=int(neighborhood), znear=float(znear), edge_epsilon=GPU_EDGE_EPSILON
+            )
     fallback = face == -2
     got = np.flatnonzero(face >= 0)
     tri = np.asarray(mesh.triangles, dtype=np.float64)[face[got]]
