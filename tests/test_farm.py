@@ -808,3 +808,16 @@ def test_worker_h5_and_npz_samples_carry_the_objects_provenance(tmp_path):
         assert [x.decode() if isinstance(x, bytes) else x for x in f["class_name"][()]] == ["box"] * 6
         assert [x.decode() if isinstance(x, bytes) else x for x in f["source"][()]] == [obj.source] * 6
         assert f["object_index"].dtype == np.int64 and f["pose_index"].dtype == np.int64
+
+
+def test_merge_counts_padded_samples_as_one_run_does(tree, tmp_path):
+    # more points per sample than a view sees of the dense cloud: samples are padded
+    params = FarmParams(views="0:0,40:90", samples_per_view=1, n_points=1500, dense_points=2048, resolution=96)
+    whole = run_farm(tree, tmp_path / "whole", params=params, progress=False)
+    assert whole.padded > 0
+    for i in range(2):
+        run_farm(tree, tmp_path / f"task{i}", params=params, shard=(i, 2), progress=False)
+    merged = merge_farm([tmp_path / "task0", tmp_path / "task1"], tmp_path / "merged", progress=False)
+    assert (merged.padded, merged.samples, merged.done) == (whole.padded, whole.samples, whole.done)
+    card = json.loads((tmp_path / "merged" / CARD_FILE).read_text())
+    assert card["n_padded_samples"] == merged.padded

@@ -268,6 +268,45 @@ class FarmSummary:
     #: Samples holding repeated points because fewer than ``n_points`` were visible (the card's ``n_padded_samples``).
     padded: int = 0
 
+    @classmethod
+    def of_records(
+        cls,
+        out: Path,
+        records: dict[int, dict[str, Any]],
+        params: FarmParams,
+        *,
+        objects: int,
+        resumed: int,
+        finished: bool,
+        wall_s: float,
+        views: int = 0,
+        workers: str = "1 process",
+        peak_rss_mb: float = 0.0,
+        skipped: Sequence[tuple[str, str]] = (),
+    ) -> FarmSummary:
+        """The summary of ``records`` (object index → record), the one place a run and a merge
+        count samples, padded samples, failures and bytes (a finished data set: its folder;
+        a task's part: its records' bytes)."""
+        ok = [r for r in records.values() if r["status"] == "ok"]
+        return cls(
+            out=str(out),
+            objects=objects,
+            done=len(ok),
+            failed=len(records) - len(ok),
+            resumed=resumed,
+            samples=int(sum(r["n_samples"] for r in ok)),
+            padded=padded_samples(ok, params),
+            bytes=folder_bytes(out) if finished else int(sum(r["bytes"] for r in ok)),
+            wall_s=wall_s,
+            views=views,
+            storage=params.storage,
+            finished=finished,
+            workers=workers,
+            peak_rss_mb=peak_rss_mb,
+            failures=[(r["name"], r["error"]) for r in records.values() if r["status"] != "ok"],
+            skipped=list(skipped),
+        )
+
     @property
     def exit_status(self) -> int:
         """0 if every input was done, 1 if some failed or were skipped (the CLI's status)."""

@@ -27,10 +27,8 @@ from .journal import (
     FarmSummary,
     finalize,
     finished_record,
-    folder_bytes,
     manifest_lines,
     objects_of,
-    padded_samples,
     plan_doc,
     read_json,
     read_plan,
@@ -347,25 +345,10 @@ def _run_locked(
             on_finished(out)
     else:
         log.info("task %d/%d done; run `zbuf-occlude farm-merge %s` when all %d tasks are", task, n_tasks, out, n_tasks)
-    ok = [r for r in records.values() if r["status"] == "ok"]
-    return FarmSummary(
-        out=str(out),
-        objects=len(mine),
-        done=len(ok),
-        failed=len(records) - len(ok),
-        resumed=resumed,
-        samples=int(sum(r["n_samples"] for r in ok)),
-        padded=padded_samples(ok, params),
-        bytes=folder_bytes(out) if finished else int(sum(r["bytes"] for r in ok)),
-        wall_s=time.perf_counter() - t0,
-        views=views,
-        storage=params.storage,
-        finished=finished,
-        workers=workers_text,
-        peak_rss_mb=peak,
-        failures=[(r["name"], r["error"]) for r in records.values() if r["status"] != "ok"],
-        skipped=list(skipped or ()),
-    )
+    return FarmSummary.of_records(
+        out, records, params, objects=len(mine), resumed=resumed, finished=finished, wall_s=time.perf_counter() - t0,
+        views=views, workers=workers_text, peak_rss_mb=peak, skipped=skipped or (),
+    )  # fmt: skip
 
 
 def merge_farm(
@@ -459,19 +442,8 @@ def _merge_locked(folders: list[Path], out: Path, plan: dict[str, Any], *, progr
         )
     commands.append(shlex.join(sys.argv))
     finalize(out, plan, records, commands)
-    ok = [r for r in records.values() if r["status"] == "ok"]
-    return FarmSummary(
-        out=str(out),
-        objects=len(objects),
-        done=len(ok),
-        failed=len(objects) - len(ok),
-        resumed=len(ok),
-        samples=int(sum(r["n_samples"] for r in ok)),
-        bytes=folder_bytes(out),
-        wall_s=time.perf_counter() - t0,
-        views=0,
-        storage=plan["params"]["storage"],
-        finished=True,
-        workers="merge",
-        failures=[(r["name"], r["error"]) for r in records.values() if r["status"] != "ok"],
-    )
+    n_ok = sum(r["status"] == "ok" for r in records.values())
+    return FarmSummary.of_records(
+        out, records, FarmParams(**plan["params"]), objects=len(objects), resumed=n_ok, finished=True,
+        wall_s=time.perf_counter() - t0, workers="merge",
+    )  # fmt: skip
