@@ -61,3 +61,15 @@ def test_sample_sizes_and_views_of_generate_validate_farm_and_occlude_object() -
     assert GENERATE_DEFAULTS.dense_points == gen.dense_points == val.points == defaults.DEFAULT_DENSE_POINTS
     assert GENERATE_DEFAULTS.resolution == gen.resolution == val.resolution == defaults.DEFAULT_RESOLUTION
     assert GENERATE_DEFAULTS.views == gen.views == val.views == COMPARE_VIEWS == defaults.DEFAULT_VIEWS
+
+
+def test_the_farm_and_occlude_take_their_own_defaults_from_defaults() -> None:
+    from zbuf_occlude import occlude as occlude_fn
+
+    fields = FarmParams.__dataclass_fields__
+    assert fields["views"].default == defaults.DEFAULT_FARM_VIEWS == "paper100"
+    assert fields["dense_points"].default == defaults.DEFAULT_FARM_DENSE_POINTS
+    assert fields["resolution"].default == defaults.DEFAULT_FARM_RESOLUTION
+    assert _default(occlude_fn, "samples_per_view") == defaults.DEFAULT_OCCLUDE_SAMPLES_PER_VIEW
+    assert _default(occlude_fn, "views") == defaults.DEFAULT_VIEWS
+    assert _default(occlude_fn, "seed") == _default(occlude_object, "seed") == defaults.DEFAULT_SEED

@@ -9,8 +9,12 @@ __all__ = [
     "DEFAULT_METHOD",
     "DEFAULT_RESOLUTION",
     "DEFAULT_VIEWS",
+    "DEFAULT_FARM_VIEWS",
+    "DEFAULT_FARM_RESOLUTION",
+    "DEFAULT_FARM_DENSE_POINTS",
     "DEFAULT_N_POINTS",
     "DEFAULT_SAMPLES_PER_VIEW",
+    "DEFAULT_OCCLUDE_SAMPLES_PER_VIEW",
     "DEFAULT_DENSE_POINTS",
     "DEFAULT_SEED",
     "DEFAULT_SELF_HIT_TOLERANCE",
@@ -27,24 +31,44 @@ DEFAULT_METHOD = "auto"
 
 #: Image size of cameras and z-buffers, pixels (square), for the API, ``generate``,
 #: ``validate``, ``compare`` and ``elevation-profile`` (the farm has its own, smaller
-#: default for throughput: ``zbuf_occlude.farm.config.DEFAULT_FARM_RESOLUTION``).
+#: default for throughput: :data:`DEFAULT_FARM_RESOLUTION`).
 DEFAULT_RESOLUTION = 1024
 
-#: Poses of ``generate``, ``validate`` and ``compare``: the 5×5 grid of
-#: :func:`zbuf_occlude.cameras.view_schedule` (the farm renders the paper's 100 poses,
-#: ``zbuf_occlude.farm.config.DEFAULT_VIEWS``).
+#: Poses of ``generate``, ``validate``, ``compare`` and :func:`zbuf_occlude.occlude`: the 5×5
+#: grid of :func:`zbuf_occlude.cameras.view_schedule` (the farm renders the paper's 100 poses,
+#: :data:`DEFAULT_FARM_VIEWS`).
 DEFAULT_VIEWS = "grid25"
+
+#: Poses of ``farm``: the paper's 100 (Sryamkin et al. 2023, §4.3, Eq. 11–12), the shape of its
+#: data set (200 objects × 100 poses × 10 samples).
+DEFAULT_FARM_VIEWS = "paper100"
+
+#: Z-buffer image size of ``farm``, pixels.  512² keeps a pixel's footprint (~2.3e-3 of the
+#: object's size at the default radius) far below the dense cloud's mean spacing (~5e-3 at
+#: 32768 points on a unit box), so the candidate window is not the bottleneck of accuracy.
+DEFAULT_FARM_RESOLUTION = 512
+
+#: Dense cloud per object of ``farm`` (points on the whole surface, sampled once, paper §3.4).
+#: 32768 leaves several thousand visible points per pose on ModelNet objects (25–45 % visible),
+#: so a 2048-point sample is a proper subsample, and keeps compact storage above 1,000
+#: samples/MB (12 bytes per point once + one bit per point and pose).
+DEFAULT_FARM_DENSE_POINTS = 32_768
 
 #: Points per occluded sample, the paper's (and PointNet's) 2048 (Sryamkin et al. 2023, §4.3);
 #: ``generate``, the farm and :func:`zbuf_occlude.occlude_object`.
 DEFAULT_N_POINTS = 2048
 
-#: Samples drawn per pose from its visible points (paper §4.3), everywhere.
+#: Samples drawn per pose from its visible points (paper §4.3): ``generate``, the farm and
+#: :func:`zbuf_occlude.occlude_object`.
 DEFAULT_SAMPLES_PER_VIEW = 10
+
+#: Samples per pose of :func:`zbuf_occlude.occlude`, which returns one cloud per sample: one
+#: cloud per pose unless asked for more.
+DEFAULT_OCCLUDE_SAMPLES_PER_VIEW = 1
 
 #: Dense cloud per object, points on the whole surface before HSR: ``generate``,
 #: :func:`zbuf_occlude.occlude_object` and the points ``validate`` scores per mesh (the farm
-#: uses fewer for throughput: ``zbuf_occlude.farm.config.DEFAULT_FARM_DENSE_POINTS``).
+#: uses fewer for throughput: :data:`DEFAULT_FARM_DENSE_POINTS`).
 DEFAULT_DENSE_POINTS = 100_000
 
 #: Global seed of every command and of the API's random draws; with the same seed and options

@@ -26,7 +26,16 @@ import trimesh
 from numpy.typing import NDArray
 
 from .cameras import DEFAULT_RADIUS, Camera, camera_on_sphere, view_schedule
-from .defaults import DEFAULT_DENSE_POINTS, DEFAULT_METHOD, DEFAULT_N_POINTS, DEFAULT_RESOLUTION, DEFAULT_SAMPLES_PER_VIEW, DEFAULT_VIEWS
+from .defaults import (
+    DEFAULT_DENSE_POINTS,
+    DEFAULT_METHOD,
+    DEFAULT_N_POINTS,
+    DEFAULT_OCCLUDE_SAMPLES_PER_VIEW,
+    DEFAULT_RESOLUTION,
+    DEFAULT_SAMPLES_PER_VIEW,
+    DEFAULT_SEED,
+    DEFAULT_VIEWS,
+)
 from .errors import InvalidInputError
 from .mesh import load_mesh, normalize_mesh
 from .resources import check_memory, estimate_job_memory
@@ -223,7 +232,7 @@ def occlude_object(
     key: int,
     n_points: int = DEFAULT_N_POINTS,
     samples_per_view: int = DEFAULT_SAMPLES_PER_VIEW,
-    seed: int = 0,
+    seed: int = DEFAULT_SEED,
     dense: DenseCloud | None = None,
     method: str = DEFAULT_METHOD,
     resolution: int = DEFAULT_RESOLUTION,
@@ -318,8 +327,8 @@ def occlude(
     mesh_or_path: trimesh.Trimesh | str | os.PathLike,
     views: str | Sequence[tuple[float, float]] = DEFAULT_VIEWS,
     n_points: int = DEFAULT_N_POINTS,
-    samples_per_view: int = 1,
-    seed: int = 0,
+    samples_per_view: int = DEFAULT_OCCLUDE_SAMPLES_PER_VIEW,
+    seed: int = DEFAULT_SEED,
     method: str = DEFAULT_METHOD,
     *,
     dense_points: int = DEFAULT_DENSE_POINTS,

@@ -16,7 +16,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..cameras import DEFAULT_RADIUS, view_schedule
-from ..defaults import DEFAULT_METHOD, DEFAULT_N_POINTS, DEFAULT_SAMPLES_PER_VIEW
+from ..defaults import (
+    DEFAULT_FARM_DENSE_POINTS,
+    DEFAULT_FARM_RESOLUTION,
+    DEFAULT_FARM_VIEWS,
+    DEFAULT_METHOD,
+    DEFAULT_N_POINTS,
+    DEFAULT_SAMPLES_PER_VIEW,
+)
 from ..errors import BackendUnavailable, InvalidInputError, OutputError
 from ..layout import GENERATE_STORAGES, STORAGE_MODES, record_name, sample_file_name, shard_name
 from ..sampling import check_seed
@@ -27,17 +34,9 @@ if TYPE_CHECKING:  # annotations only: inputs imports nothing from here
 log = logging.getLogger(__name__)
 
 
-#: Dense cloud per object (points on the whole surface, sampled once, paper §3.4).  32768
-#: leaves several thousand visible points per pose on ModelNet objects (25–45 % visible),
-#: so a 2048-point sample is a proper subsample, and keeps compact storage above 1,000
-#: samples/MB (12 bytes per point once + one bit per point and pose); a view costs
-#: tens of milliseconds on Mesa llvmpipe.
-DEFAULT_FARM_DENSE_POINTS = 32_768
-#: Z-buffer image size, pixels.  512² keeps a pixel's footprint (~2.3e-3 of the object's
-#: size at the default radius) far below the dense cloud's mean spacing (~5e-3 at 32768
-#: points on a unit box), so the candidate window is not the bottleneck of accuracy.
-DEFAULT_FARM_RESOLUTION = 512
-DEFAULT_VIEWS = "paper100"
+# The farm's defaults live in zbuf_occlude.defaults with every other; the farm's commands
+# take them from here under these names.
+DEFAULT_VIEWS = DEFAULT_FARM_VIEWS
 #: The paper's data set, Sryamkin et al. 2023, Table 2: 28.8 samples per MB.
 PAPER_SAMPLES_PER_MB = 28.8
 #: Bytes in one MB of "samples per MB" (decimal, 10^6).
