@@ -20,7 +20,7 @@ from ..cameras import Camera
 from ..defaults import DEFAULT_GPU_TOLERANCE, DEFAULT_MAX_SLOPE
 from ..errors import InvalidInputError
 from ..mesh import MAX_ABS_COORDINATE
-from .compute import dispatch, set_uniforms
+from .compute import dispatch, read_through, set_uniforms
 from .context import check_image_size, shared_context
 from .shaders import load_shader
 
@@ -101,9 +101,11 @@ class PointBuffer:
         self.faces = ctx.buffer(faces.tobytes())
         # visible bits, then uncertain bits (see shaders/common.glsl)
         self.visible_bits = ctx.buffer(reserve=2 * 4 * max(math.ceil(self.n_points / 32), 1))
+        #: What the CPU reads: ``visible_bits`` copied on the GPU (:func:`~zbuf_occlude.render.compute.read_through`).
+        self.bits_read = ctx.buffer(reserve=self.visible_bits.size)
 
     def release(self) -> None:
-        for buf in (self.points, self.faces, self.visible_bits):
+        for buf in (self.points, self.faces, self.visible_bits, self.bits_read):
             buf.release()
 
 
@@ -297,8 +299,8 @@ class ModernGLRenderer:
             points.visible_bits.clear()
             dispatch(shader, n, "point_offset")
             self.ctx.memory_barrier()
-            words = np.frombuffer(points.visible_bits.read(), dtype=np.uint32).reshape(2, -1)
-        bits = np.unpackbits(words.view(np.uint8), axis=1, bitorder="little")[:, :n].astype(bool)
+            words = np.frombuffer(read_through(self.ctx, points.visible_bits, points.bits_read, points.bits_read.size), dtype=np.uint32).reshape(2, -1)
+        bits = np.unpackbits(words.view(np.uint8), axis=1, count=n, bitorder="little").view(bool)
         return bits[0], bits[1]
 
     def first_hits(
