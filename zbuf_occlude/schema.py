@@ -64,6 +64,15 @@ class CardParams(_Model):
     sensor: str | None = None
 
 
+class JoinedFile(_Model):
+    """A file made from the shards for other readers (``generate --format h5``: PointNet's
+    ``occluded_<split>.h5`` and ``<split>_files.txt``), with its SHA-256."""
+
+    path: str
+    sha256: str
+    split: str
+
+
 class Card(_Model):
     """``dataset_card.json``."""
 
@@ -76,6 +85,8 @@ class Card(_Model):
     shape_names: list[str] | None = None
     #: ``"sha256"``: every file of every finished object has its checksum in the manifest.
     checksums: str | None = None
+    #: Files joined from the shards (PointNet's layout), each with its SHA-256; ``None``: none.
+    joined_files: list[JoinedFile] | None = None
 
 
 class ManifestRecord(_Model):

@@ -158,6 +158,24 @@ def verify_dataset(path: str | os.PathLike) -> VerifyReport:
             f"{manifest}: {missing_checksums} finished objects have no SHA-256 (field 'sha256'){said}: changes to their "
             "files cannot be noticed; OccludedDataset reads them only with verify=False"
         )
+    joined = card.joined_files or []
+    for entry in joined:  # files joined from the shards for other readers (PointNet's h5 and lists)
+        try:
+            file = path_inside(root, entry.path, what=f"{root / CARD_FILE} field 'joined_files'")
+        except ZbufOccludeError as exc:
+            problems.append(str(exc))
+            continue
+        if not file.is_file():
+            problems.append(f"{root / CARD_FILE}: the joined file {entry.path} is missing")
+        elif file_sha256(file) != entry.sha256:
+            problems.append(f"{file} differs from its SHA-256 in the card (changed after it was written)")
+        else:
+            report.files += 1
+    if card.joined_files is not None:  # the file lists name the joined files, not the shards
+        listed = {}
+        for entry in joined:
+            if entry.path != file_list_name(entry.split):
+                listed.setdefault(entry.split, []).append(entry.path)
     for split in card.splits or sorted(listed):
         list_file = root / file_list_name(split)
         if not list_file.is_file():
@@ -173,7 +191,8 @@ def verify_dataset(path: str | os.PathLike) -> VerifyReport:
             except ZbufOccludeError as exc:
                 problems.append(str(exc))
         if sorted(lines) != sorted(listed.get(split, [])):
-            problems.append(f"{list_file} does not list the same files as the manifest's {split} objects")
+            source = "the card's joined files" if card.joined_files is not None else "the manifest's objects"
+            problems.append(f"{list_file} does not list the same files as {source} of split {split}")
     return report
 
 

@@ -27,13 +27,14 @@ from pathlib import Path
 from ..defaults import DEFAULT_DENSE_POINTS, DEFAULT_N_POINTS, DEFAULT_RESOLUTION, DEFAULT_SAMPLES_PER_VIEW, DEFAULT_VIEWS
 from ..discovery import SkippedInput
 from ..errors import InvalidInputError
-from ..io import concat_h5, write_text
-from ..layout import GENERATE_STORAGES, file_list_name, split_file_name
+from ..io import concat_h5, file_sha256, write_text
+from ..layout import CARD_FILE, GENERATE_STORAGES, file_list_name, split_file_name
 from ..mesh import SPLITS
 from ..safe_paths import path_inside
 from .config import FarmParams, record_path
 from .inputs import FarmObject, scan_inputs
 from .journal import FarmSummary, read_json, shape_names_of
+from .worker import write_json
 from .run import run_farm
 
 __all__ = ["generate", "scan_paths", "objects_from_paths", "split_file_name", "GENERATE_DEFAULTS"]
@@ -92,7 +93,8 @@ def _merge_h5(out: Path, objects: Sequence[FarmObject]) -> list[Path]:
     Rows keep the objects' order (the plan's), then pose-major, then sample index, as the
     reader serves them.  A split with no finished object gets an empty list and no file (one
     left by an earlier run is removed, so no stale split survives ``--overwrite``; with no
-    ``objects``, as for ``--format npz|ply``, every split's file is).
+    ``objects``, as for ``--format npz|ply``, every split's file is).  Each joined file and file
+    list goes into the card's ``joined_files`` with its SHA-256, which ``verify`` checks.
     """
     parts: dict[str, list[Path]] = {}
     for o in objects:
@@ -114,6 +116,14 @@ def _merge_h5(out: Path, objects: Sequence[FarmObject]) -> list[Path]:
         # parts of older versions have no split column: their split is the one they are listed under
         written.append(concat_h5(target, parts[split], fill={"split": split}, attrs={"shape_names": shape_names}))
         write_text(out / file_list_name(split), f"{split_file_name(split)}\n")
+    if objects:
+        card = read_json(out / CARD_FILE)
+        card["joined_files"] = [
+            {"path": name, "sha256": file_sha256(out / name), "split": split}
+            for split in sorted({o.split for o in objects})
+            for name in ((split_file_name(split),) if parts.get(split) else ()) + (file_list_name(split),)
+        ]
+        write_json(out / CARD_FILE, card)
     return written
 
 
