@@ -154,3 +154,27 @@ def test_epoch_sampler_carries_the_epoch_to_persistent_workers():
     assert not np.array_equal(epochs[0], epochs[1])
     shuffled = EpochSampler(ds, shuffle=True, seed=1)
     assert sorted(i for _, i in shuffled) == list(range(len(ds))) and list(shuffled) == list(EpochSampler(ds, shuffle=True, seed=1))
+
+
+@pytest.mark.parametrize("context", ["fork", "spawn"])
+def test_set_epoch_reaches_persistent_workers(context):
+    """The usual pattern: ds.set_epoch(e) before each epoch, persistent workers, no special sampler."""
+    ds = OnTheFlyOccludedDataset(SAMPLES, n_points=64, dense_points=1024, seed=2)
+    loader = torch.utils.data.DataLoader(ds, batch_size=4, num_workers=2, persistent_workers=True, multiprocessing_context=context)
+    epochs = []
+    for epoch in (0, 1):
+        ds.set_epoch(epoch)
+        epochs.append(torch.cat([x for x, _ in loader]).numpy())
+        assert np.array_equal(epochs[-1], np.stack([ds.sample(i)["points"] for i in range(len(ds))]))
+    assert not np.array_equal(epochs[0], epochs[1])
+
+
+def test_a_copied_data_set_keeps_its_epoch_but_not_the_link():
+    import copy
+
+    ds = OnTheFlyOccludedDataset(SAMPLES, n_points=64, dense_points=1024)
+    ds.set_epoch(3)
+    twin = copy.deepcopy(ds)
+    assert twin.occlusion.epoch == 3
+    ds.set_epoch(4)
+    assert (ds.occlusion.epoch, twin.occlusion.epoch) == (4, 3)

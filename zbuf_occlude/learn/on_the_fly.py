@@ -16,14 +16,17 @@ DataLoader workers: visibility sessions (Embree scenes, GL objects) are cached p
 entry made before a ``fork`` is never used after it); meshes and dense clouds are plain numpy
 and are inherited.  The default method runs on the CPU (Embree), so workers need no GL
 context.  The epoch reaches the workers in one of two ways: :class:`EpochSampler` sends
-``(epoch, index)`` with every index (works with ``persistent_workers=True``, which keeps the
-caches warm across epochs), or ``set_epoch`` on the data set before each epoch, which
-workers read when they start (``persistent_workers=False``, the default).
+``(epoch, index)`` with every index, or ``set_epoch`` on the data set before each epoch, which
+writes it to shared memory (:class:`SharedEpoch`) that every worker reads, persistent workers
+(``persistent_workers=True``, which keep the caches warm across epochs) included.
 """
 
 from __future__ import annotations
 
+import functools
 import math
+import multiprocessing
+import multiprocessing.context
 import os
 from collections import OrderedDict
 from collections.abc import Sequence
@@ -43,7 +46,7 @@ from ..visibility.registry import method_info, visible_mask
 from . import require_torch
 from .data import normalize_batch
 
-__all__ = ["PoseDistribution", "RandomOcclusion", "OnTheFlyOccludedDataset", "EpochSampler", "ProcessCache", "DEFAULT_ON_THE_FLY_METHOD", "DEFAULT_DENSE_ON_THE_FLY"]
+__all__ = ["PoseDistribution", "RandomOcclusion", "OnTheFlyOccludedDataset", "EpochSampler", "SharedEpoch", "ProcessCache", "DEFAULT_ON_THE_FLY_METHOD", "DEFAULT_DENSE_ON_THE_FLY"]
 
 #: The CPU method: exact, threaded Embree, no GL context to carry into forked workers.
 DEFAULT_ON_THE_FLY_METHOD = "embree-fast"
@@ -53,6 +56,35 @@ DEFAULT_DENSE_ON_THE_FLY = 32_768
 _RESOLUTION = 512
 _ON_THE_FLY_STREAM = 3  # occlude.py uses streams 0 and 1, the protocols 2
 _CACHE_SIZE = 64  # objects per process: meshes, dense clouds and sessions
+
+
+class SharedEpoch:
+    """An epoch number shared with the processes a DataLoader forks or spawns from this one.
+
+    ``set_epoch`` in the main process must reach workers that outlive an epoch
+    (``persistent_workers=True``): a plain attribute would stay at the value the worker was
+    made with, and every epoch would repeat the first one's views.  Pickled outside the start
+    of a process (``copy.deepcopy``, saving), it becomes an unshared copy of its value.
+    """
+
+    def __init__(self, value: int = 0):
+        self._shared = multiprocessing.RawValue("q", int(value))
+
+    @property
+    def value(self) -> int:
+        return int(self._shared.value)
+
+    @value.setter
+    def value(self, epoch: int) -> None:
+        self._shared.value = int(epoch)
+
+    def __getstate__(self) -> dict:
+        if multiprocessing.context.get_spawning_popen() is not None:  # a worker being started: share
+            return {"shared": self._shared}
+        return {"value": self.value}
+
+    def __setstate__(self, state: dict) -> None:
+        self._shared = state["shared"] if "shared" in state else multiprocessing.RawValue("q", int(state["value"]))
 
 
 @dataclass(frozen=True)
@@ -133,6 +165,12 @@ class ProcessCache(OrderedDict):
                 old.release()
         return value
 
+    def __reduce__(self):
+        # what a cache holds (Embree scenes, GL objects) belongs to its process: a copy -- a
+        # spawned DataLoader worker's -- starts empty (OrderedDict's own pickling called
+        # ProcessCache() without its size, and copied the entries)
+        return (functools.partial(type(self), self.size, per_process=self.per_process), ())
+
 
 class RandomOcclusion:
     """One random occluded view of an object, as a transform.
@@ -161,12 +199,18 @@ class RandomOcclusion:
             raise InvalidInputError(f"n_points must be >= 1, got {n_points}")
         self.n_points, self.poses, self.seed, self.normalize = int(n_points), poses, int(seed), normalize
         self.method = method_info(method).name
-        self.epoch = 0
+        self._epoch = SharedEpoch()
         self._sessions = ProcessCache(_CACHE_SIZE)
 
+    @property
+    def epoch(self) -> int:
+        """The epoch whose views the next calls draw (:meth:`set_epoch`)."""
+        return self._epoch.value
+
     def set_epoch(self, epoch: int) -> None:
-        """The epoch whose views the next calls draw (read by workers when they start)."""
-        self.epoch = int(epoch)
+        """Draw the views of ``epoch`` from now on, in this process and in every DataLoader worker
+        made from it, persistent ones included (the epoch lives in shared memory)."""
+        self._epoch.value = int(epoch)
 
     def _visible(self, key, mesh: trimesh.Trimesh, dense: DenseCloud, camera) -> NDArray[np.bool_]:
         session_of = method_info(self.method).session
