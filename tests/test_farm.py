@@ -821,3 +821,14 @@ def test_merge_counts_padded_samples_as_one_run_does(tree, tmp_path):
     assert (merged.padded, merged.samples, merged.done) == (whole.padded, whole.samples, whole.done)
     card = json.loads((tmp_path / "merged" / CARD_FILE).read_text())
     assert card["n_padded_samples"] == merged.padded
+
+
+def test_a_mesh_file_given_to_farm_points_to_generate(tmp_path, capsys):
+    from zbuf_occlude.farm.inputs import scan_objects
+
+    mesh = REPO_ROOT / "data" / "samples" / "chair" / "train" / "chair_0001.off"
+    with pytest.raises(InvalidInputError, match="is a mesh file.*zbuf-occlude generate"):
+        scan_objects(mesh)
+    assert cli_main(["farm", str(mesh), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "is a mesh file" in err and "generate" in err and "expected 'PATH LABEL" not in err

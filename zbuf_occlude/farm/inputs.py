@@ -199,6 +199,11 @@ def scan_objects(
     if source.is_dir():
         found, skipped, layout = _scan_tree(source, class_from)
     elif source.is_file():
+        if source.suffix.lower() in SUPPORTED_EXTENSIONS:
+            raise InvalidInputError(
+                f"{printable_path(source)} is a mesh file; farm takes a folder of meshes or a list file "
+                f"('PATH LABEL [train|test]' per line); for one mesh run: zbuf-occlude generate {printable_path(source)}"
+            )
         if class_from is not None:
             raise InvalidInputError(f"--class-from applies to folders; the list file {printable_path(source)} names each class")
         (found, skipped), layout = _read_list_file(source), "list-file"
