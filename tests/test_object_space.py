@@ -271,16 +271,21 @@ def test_og_names_fix_the_grid() -> None:
     points, fi = zo.sample_surface(mesh, count=500, seed=0)
     camera = zo.camera_on_sphere(30.0, 60.0)
     np.testing.assert_array_equal(
-        zo.visible_mask(mesh, points, camera, "og32", face_index=fi, grid=8),
+        zo.visible_mask(mesh, points, camera, "og32", face_index=fi),
         zo.visible_mask(mesh, points, camera, "og", face_index=fi, grid=32),
     )
+    with pytest.raises(TypeError, match="'grid'"):  # the name fixes it: another grid is an error, not ignored
+        zo.visible_mask(mesh, points, camera, "og32", face_index=fi, grid=8)
 
 
-def test_unknown_options_are_ignored_and_bad_ones_raise() -> None:
+def test_options_of_other_methods_and_bad_values_raise() -> None:
     mesh = _box_behind_plate()
     points, fi = zo.sample_surface(mesh, count=50, seed=0)
     camera = zo.camera_on_sphere(30.0, 60.0)
-    zo.visible_mask(mesh, points, camera, "paper-exact", face_index=fi, resolution=512, grid=8)
+    with pytest.raises(TypeError, match="'grid', 'resolution'"):
+        zo.visible_mask(mesh, points, camera, "paper-exact", face_index=fi, resolution=512, grid=8)
+    with pytest.raises(TypeError, match="'prune'"):  # paper-pruned-plane fixes it
+        zo.visible_mask(mesh, points, camera, "paper-pruned-plane", face_index=fi, prune=("plane",))
     with pytest.raises(InvalidInputError):
         zo.visible_mask(mesh, points, camera, "paper-pruned", face_index=fi, prune="nearest")
     with pytest.raises(InvalidInputError):

@@ -444,7 +444,8 @@ def test_occlude_object_passes_its_camera_and_options_to_the_method(monkeypatch)
     list(occlude_object(_BALL, poses, key=1, samples_per_view=0, dense=_BALL_DENSE, method="oracle", resolution=96, radius=3.0, tolerance=0.5))
     assert [(c.elevation_deg, c.azimuth_deg, c.radius, c.resolution) for c, _, _ in calls] == [(10.0, 20.0, 3.0, (96, 96)), (-5.0, 90.0, 3.0, (96, 96))]
     for _, method, kw in calls:
-        assert method == "oracle" and kw["resolution"] == 96 and kw["tolerance"] == 0.5
+        # the camera carries the resolution; "oracle" takes no resolution keyword
+        assert method == "oracle" and "resolution" not in kw and kw["tolerance"] == 0.5
         assert kw["face_index"] is _BALL_DENSE.face_index
 
     events = []
@@ -462,8 +463,8 @@ def test_occlude_object_passes_its_camera_and_options_to_the_method(monkeypatch)
 
     info = method_info("zbuffer")
     monkeypatch.setattr(occlude_module, "method_info", lambda name: type(info)(**{**vars(info), "session": Scene}) if name == "zbuffer" else info)
-    list(occlude_object(_BALL, poses, key=1, samples_per_view=1, dense=_BALL_DENSE, method="zbuffer", resolution=96, depth_tolerance=0.25))
-    assert events == [("built", 4000, True), ("pose", (96, 96), {"depth_tolerance": 0.25}), ("pose", (96, 96), {"depth_tolerance": 0.25}), ("released",)]
+    list(occlude_object(_BALL, poses, key=1, samples_per_view=1, dense=_BALL_DENSE, method="zbuffer", resolution=96, neighborhood=2))
+    assert events == [("built", 4000, True), ("pose", (96, 96), {"neighborhood": 2}), ("pose", (96, 96), {"neighborhood": 2}), ("released",)]
 
 
 def test_a_pose_with_nothing_visible_warns_once_only_if_samples_were_asked(caplog):

@@ -97,9 +97,8 @@ def test_registered_methods_agree_and_apply_the_frustum():
     cam = camera_on_sphere(20.0, 60.0, RADIUS, yfov_deg=8.0, resolution=64)
     in_view = cam.in_frustum(points)
     assert 0 < in_view.sum() < len(points)
-    # Options meant for other methods (resolution) are accepted and ignored.
-    vis = registry.visible_mask(mesh, points, cam, "oracle", face_index=face_index, resolution=512)
-    vis_np = registry.visible_mask(mesh, points, cam, "oracle-numpy", face_index=face_index, resolution=512)
+    vis = registry.visible_mask(mesh, points, cam, "oracle", face_index=face_index)
+    vis_np = registry.visible_mask(mesh, points, cam, "oracle-numpy", face_index=face_index)
     assert vis.dtype == bool and vis.shape == (len(points),)
     assert np.array_equal(vis, vis_np)
     assert not vis[~in_view].any()

@@ -114,3 +114,38 @@ def test_no_module_special_cases_a_method_name() -> None:
 def test_name_check_sees_a_comparison() -> None:
     tree = ast.parse('if method == "zbuffer":\n    pass\nif args.methods in ("og", "x"):\n    pass\nif fmt == "og":\n    pass\n')
     assert _compared_names(tree, {"zbuffer", "og"}) == [(1, "zbuffer"), (3, "og")]
+
+
+# -- keywords: a misspelt option is an error, never the default ---------------------------------
+def test_every_method_refuses_an_unknown_keyword_naming_it():
+    from zbuf_occlude.visibility.registry import check_keywords, method_keywords
+
+    for name in available_methods():
+        with pytest.raises(TypeError, match=r"'tolerence'"):
+            check_keywords(name, {"tolerence": 0.5})
+        check_keywords(name, {k: None for k in method_keywords(name)})  # its own keywords pass
+
+
+def test_visible_mask_and_sessions_refuse_typos():
+    from zbuf_occlude.visibility.auto import make_scene
+
+    mesh = trimesh.creation.icosphere(subdivisions=1)
+    points, fi = zbuf_occlude.sample_surface(mesh, 50, seed=0)
+    cam = zbuf_occlude.camera_on_sphere(10.0, 20.0, resolution=64)
+    for method in ("auto", "embree-fast", "oracle", "zbuffer-exact", "paper-exact"):
+        with pytest.raises(TypeError, match="tolerence"):
+            zbuf_occlude.visible_mask(mesh, points, cam, method, face_index=fi, tolerence=0.5)
+    with pytest.raises(TypeError, match="resolution"):
+        zbuf_occlude.visible_mask(mesh, points, cam, "oracle", face_index=fi, resolution=512)  # an image-space option
+    with make_scene(mesh, points, fi) as scene, pytest.raises(TypeError, match="tolerence"):
+        scene.visible(cam, tolerence=0.5)
+    # the documented keywords still work and change what they should
+    a = zbuf_occlude.visible_mask(mesh, points, cam, "oracle", face_index=fi, tolerance=1e-6)
+    assert np.array_equal(a, zbuf_occlude.visible_mask(mesh, points, cam, "oracle", face_index=fi))
+
+
+def test_occlude_object_refuses_a_misspelt_method_option():
+    mesh = trimesh.creation.icosphere(subdivisions=1)
+    for method in ("oracle", "embree-fast"):  # the one-shot path and the session path
+        with pytest.raises(TypeError, match="tolerence"):
+            list(occlude_object(mesh, [(0.0, 0.0)], key=1, n_points=16, samples_per_view=1, method=method, tolerence=0.1))

@@ -25,7 +25,7 @@ from .mesh import load_mesh, scan_meshes
 from .metrics import agreement
 from .resources import MemoryEstimate, check_memory, estimate_job_memory
 from .sampling import check_seed, sample_surface
-from .visibility.registry import available_methods, check_runnable, method_info, unavailable_reason, visible_mask
+from .visibility.registry import available_methods, check_runnable, method_info, resolution_option, unavailable_reason, visible_mask
 
 __all__ = ["main", "build_parser", "SAMPLE_MESHES"]
 
@@ -149,7 +149,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
             oracle_ms = 1e3 * (time.perf_counter() - t)
             for method in methods:
                 t = time.perf_counter()
-                pred = visible_mask(mesh, points, camera, method, face_index=face_index, resolution=args.resolution)
+                pred = visible_mask(mesh, points, camera, method, face_index=face_index, **resolution_option(method, args.resolution))
                 ms = 1e3 * (time.perf_counter() - t)
                 a = agreement(pred, truth)
                 rows.append({"mesh": name, "elevation_deg": el, "azimuth_deg": az, "method": method, "ms": ms, "oracle_ms": oracle_ms, **a})

@@ -36,7 +36,7 @@ from .errors import InvalidInputError, OutputError
 from .io import write_csv
 from .mesh import load_mesh
 from .sampling import sample_surface
-from .visibility import visible_mask
+from .visibility.registry import resolution_option, visible_mask
 
 __all__ = [
     "PLANES",
@@ -150,7 +150,7 @@ def profile_table(
         samples = []
         for az in az_list:
             camera = camera_on_sphere(float(el), az, radius, resolution=resolution)
-            mask = visible_mask(mesh, pts, camera, method, face_index=fi, resolution=resolution, **options)
+            mask = visible_mask(mesh, pts, camera, method, face_index=fi, **resolution_option(method, resolution), **options)
             samples.append(projected_areas(mesh, fi, mask))
         row: dict[str, float] = {"elevation_deg": float(el)}
         for key in (*PLANES, "visible"):

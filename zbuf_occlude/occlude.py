@@ -40,7 +40,7 @@ from .errors import InvalidInputError
 from .mesh import load_mesh, normalize_mesh
 from .resources import check_memory, estimate_job_memory
 from .sampling import check_seed, sample_surface
-from .visibility.registry import method_info, visible_mask
+from .visibility.registry import check_keywords, method_info, resolution_option, visible_mask
 
 __all__ = [
     "OccludedCloud", "object_key", "derive_rng", "sample_rng", "draw_sample", "pose_samples", "count_padded",
@@ -272,6 +272,7 @@ def occlude_object(
     """
     if n_points < 1 or samples_per_view < 0:
         raise InvalidInputError(f"need n_points >= 1 and samples_per_view >= 0, got {n_points}, {samples_per_view}")
+    check_keywords(method, method_options)  # a misspelt option must not run with the default
     # Refuse before allocating what cannot fit (the OOM killer gives no message).
     check_memory(
         estimate_job_memory(
@@ -289,7 +290,9 @@ def occlude_object(
             if scene is not None:
                 visible = scene.visible(camera, **method_options)
             else:
-                visible = visible_mask(mesh, dense.points, camera, method, face_index=dense.face_index, resolution=resolution, **method_options)
+                visible = visible_mask(
+                    mesh, dense.points, camera, method, face_index=dense.face_index, **resolution_option(method, resolution), **method_options
+                )
             visible_index = np.flatnonzero(visible)
             if len(visible_index) == 0 and samples_per_view:
                 log.warning("%s: nothing visible from el=%g az=%g; no sample", source or "mesh", el, az)

@@ -42,7 +42,7 @@ from ..farm.generate import scan_paths
 from ..farm.inputs import FarmObject
 from ..mesh import load_mesh
 from ..occlude import DenseCloud, dense_cloud, derive_rng, draw_sample
-from ..visibility.registry import method_info, visible_mask
+from ..visibility.registry import method_info, resolution_option, visible_mask
 from . import require_torch
 from .data import normalize_batch
 
@@ -215,7 +215,7 @@ class RandomOcclusion:
     def _visible(self, key, mesh: trimesh.Trimesh, dense: DenseCloud, camera) -> NDArray[np.bool_]:
         session_of = method_info(self.method).session
         if session_of is None:
-            return visible_mask(mesh, dense.points, camera, self.method, face_index=dense.face_index, resolution=_RESOLUTION)
+            return visible_mask(mesh, dense.points, camera, self.method, face_index=dense.face_index, **resolution_option(self.method, _RESOLUTION))
         session = self._sessions.get_or_build(key, lambda: session_of(mesh, dense.points, dense.face_index))
         return session.visible(camera)
 

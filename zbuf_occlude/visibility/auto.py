@@ -32,7 +32,8 @@ from numpy.typing import NDArray
 from ..cameras import Camera, camera_on_sphere, view_schedule
 from ..errors import BackendUnavailable, InvalidInputError
 from ..render.context import SOFTWARE_RENDERERS
-from .registry import get_method, method_info, register
+from .definition import TOLERANCE
+from .registry import get_method, method_info, register, resolution_option
 
 __all__ = ["choose_method", "calibrate", "make_scene", "auto_visible", "SOFTWARE_RENDERERS", "AUTO_ENV"]
 
@@ -149,7 +150,14 @@ def auto_visible(
     camera: Camera,
     *,
     face_index: NDArray[np.int64] | None = None,
-    **options,
+    resolution: int | tuple[int, int] | None = None,
+    tolerance: float = TOLERANCE,
 ) -> NDArray[np.bool_]:
-    """The default HSR method: ``choose_method(one_shot=True)``'s, with the same options."""
-    return get_method(choose_method(one_shot=True))(mesh, points, camera, face_index=face_index, **options)
+    """The default HSR method: ``choose_method(one_shot=True)``'s.
+
+    ``tolerance`` (object units) goes to the chosen method; ``resolution`` (the tile grid of
+    ``zbuffer-exact``; it does not change the answer) only where it takes one.
+    """
+    method = choose_method(one_shot=True)
+    options = resolution_option(method, resolution) if resolution is not None else {}
+    return get_method(method)(mesh, points, camera, face_index=face_index, tolerance=tolerance, **options)

@@ -52,7 +52,7 @@ from .oracle_embree import _scene_for as _oracle_scene
 from .oracle_embree import occluded_embree
 from .segment_triangle import mesh_planes
 from .segment_triangle import pair_occludes as _pair_occludes
-from .registry import SessionBase, check_face_index, check_points, log_ignored, register
+from .registry import SessionBase, check_face_index, check_points, register
 
 __all__ = ["FastScene", "embree_fast_visible", "DEFAULT_THREADS"]
 
@@ -467,16 +467,14 @@ class FastScene(SessionBase):
             vis[edge[edge_on_own(mesh_planes(self.mesh).normal[self.face_index[rays[edge]]], pts, camera.eye)]] = False
         visible[rays] = vis
 
-    def visible(self, camera: Camera, *, tolerance: float = TOLERANCE, **_ignored) -> NDArray[np.bool_]:
-        """Visibility of the points from ``camera`` (see the module docstring).  Options of
-        other methods (``resolution``...) are ignored with a log message.
+    def visible(self, camera: Camera, *, tolerance: float = TOLERANCE) -> NDArray[np.bool_]:
+        """Visibility of the points from ``camera`` (see the module docstring).
 
         Returns
         -------
         visible : (N,) bool
             In the order of the points given to the constructor.
         """
-        log_ignored("embree-fast", _ignored)
         n = len(self.points)
         if self._prepass:
             zb = cpu_zbuffer.build_zbuffer(self.mesh, camera, n, run=self._run)
@@ -513,9 +511,7 @@ def embree_fast_visible(
     face_index: NDArray[np.int64] | None = None,
     tolerance: float = TOLERANCE,
     threads: int | None = None,
-    **_ignored,
 ) -> NDArray[np.bool_]:
     """Multi-threaded float32 Embree with float64 re-checks of near-ties; see :class:`FastScene`."""
-    log_ignored("embree-fast", _ignored)
     # One view: no Morton sort of the points (the pre-pass settles most of them unsorted).
     return FastScene(mesh, points, face_index, threads=threads, sort=False).visible(camera, tolerance=tolerance)

@@ -27,7 +27,7 @@ from ..render.exact_backend import DEFAULT_TILE, ExactMesh, ExactPoints
 from .definition import EDGE_ON_SIN, TOLERANCE
 from .oracle import oracle_visible
 from .segment_triangle import mesh_planes
-from .registry import SessionBase, check_face_index, check_points, log_ignored, register
+from .registry import SessionBase, check_face_index, check_points, register
 
 __all__ = ["ExactScene", "exact_mesh_for", "zbuffer_exact_visible", "DEFAULT_RESOLUTION"]
 
@@ -143,12 +143,8 @@ def zbuffer_exact_visible(
     resolution: int | tuple[int, int] | None = DEFAULT_RESOLUTION,
     tile: int = DEFAULT_TILE,
     tolerance: float = TOLERANCE,
-    **_ignored,
 ) -> NDArray[np.bool_]:
     """Exact GPU HSR with a complete candidate set; see :class:`ExactScene`.
-
-    Unrelated keywords are ignored so one option set can drive several methods.
     """
-    log_ignored("zbuffer-exact", _ignored)
     with ExactScene(mesh, points, face_index) as scene:
         return scene.visible(camera, resolution=resolution, tile=tile, tolerance=tolerance)

@@ -44,7 +44,7 @@ from .face_scan import BACKENDS, numba_available, occluded_by_faces
 from .occupancy import DEFAULT_GRID, DEFAULT_OG_REPRESENTATIVE, OG_GRIDS, occupancy_grid, og_visible
 from .oracle_numpy import DEFAULT_PAIRS_PER_CHUNK
 from .pruning import PRUNE_RULES, camera_distance, face_keys, min_sample_distance, parse_prune, plane_distance
-from .registry import DEFAULT_SELF_HIT_TOLERANCE, check_face_index, check_points, log_ignored, register, visible_in_frustum
+from .registry import DEFAULT_SELF_HIT_TOLERANCE, check_face_index, check_points, register, signature_without, visible_in_frustum
 from .segment_triangle import mesh_planes
 from .vertex import paper_vertex_visible, surviving_faces
 
@@ -82,7 +82,6 @@ def paper_exact_visible(
     face_order: str = "mesh",
     backend: str = "auto",
     pairs_per_chunk: int = DEFAULT_PAIRS_PER_CHUNK,
-    **_ignored: Any,
 ) -> NDArray[np.bool_]:
     """The paper's exact HSR: every sampled point against every face (Sryamkin et al. 2023, §3.5).
 
@@ -112,8 +111,6 @@ def paper_exact_visible(
         See the module docstring.
     pairs_per_chunk : int
         numpy backend: most (point, face) pairs held at once.
-    **_ignored
-        Options of other methods, accepted and ignored.
 
     Returns
     -------
@@ -126,7 +123,6 @@ def paper_exact_visible(
     BackendUnavailable
         ``backend="numba"`` without numba.
     """
-    log_ignored("paper-exact", _ignored)
     pts = check_points(points)
     fi = check_face_index(face_index, len(pts), len(mesh.faces))
     planes = mesh_planes(mesh)
@@ -166,7 +162,6 @@ def paper_pruned_visible(
     prune: str | tuple[str, ...] = PRUNE_RULES,
     backend: str = "auto",
     pairs_per_chunk: int = DEFAULT_PAIRS_PER_CHUNK,
-    **_ignored: Any,
 ) -> NDArray[np.bool_]:
     """``paper-exact`` with faces farther from the camera than the point excluded (§3.6).
 
@@ -192,8 +187,6 @@ def paper_pruned_visible(
         As :func:`paper_exact_visible`.
     prune : str or tuple of str
         Rules among ``("plane", "samples")``, e.g. ``"plane,samples"`` (default: both).
-    **_ignored
-        Options of other methods, accepted and ignored.
 
     Returns
     -------
@@ -206,7 +199,6 @@ def paper_pruned_visible(
     BackendUnavailable
         ``backend="numba"`` without numba.
     """
-    log_ignored("paper-pruned", _ignored)
     pts = check_points(points)
     fi = check_face_index(face_index, len(pts), len(mesh.faces))
     rules = parse_prune(prune)
@@ -237,3 +229,6 @@ def paper_pruned_plane_visible(
     """``paper-pruned`` with the first suggestion of §3.6 only (exact): see :func:`paper_pruned_visible`."""
     options["prune"] = ("plane",)
     return paper_pruned_visible(mesh, points, camera, **options)
+
+
+paper_pruned_plane_visible.__signature__ = signature_without(paper_pruned_visible, "prune")

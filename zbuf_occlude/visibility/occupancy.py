@@ -19,7 +19,7 @@ from ..errors import InvalidInputError
 from .face_scan import occluded_by_faces
 from .oracle_numpy import DEFAULT_PAIRS_PER_CHUNK
 from .pruning import PRUNE_RULES, camera_distance, face_keys, parse_prune
-from .registry import DEFAULT_SELF_HIT_TOLERANCE, check_face_index, check_points, log_ignored, register
+from .registry import DEFAULT_SELF_HIT_TOLERANCE, check_face_index, check_points, register, signature_without
 from .segment_triangle import mesh_planes
 
 __all__ = ["DEFAULT_GRID", "OG_GRIDS", "DEFAULT_OG_REPRESENTATIVE", "occupancy_grid", "og_visible"]
@@ -94,7 +94,6 @@ def og_visible(
     tolerance: float = DEFAULT_SELF_HIT_TOLERANCE,
     backend: str = "auto",
     pairs_per_chunk: int = DEFAULT_PAIRS_PER_CHUNK,
-    **_ignored: Any,
 ) -> NDArray[np.bool_]:
     """Occupancy-grid HSR, one test per occupied cell (Sryamkin et al. 2023, §3.6, third suggestion).
 
@@ -144,8 +143,6 @@ def og_visible(
         See above (default :data:`DEFAULT_OG_REPRESENTATIVE`).
     prune : str or tuple of str
         Exclusion rules, as in :func:`paper_pruned_visible` (default: both).
-    **_ignored
-        Options of other methods, accepted and ignored.
 
     Returns
     -------
@@ -158,7 +155,6 @@ def og_visible(
     BackendUnavailable
         ``backend="numba"`` without numba.
     """
-    log_ignored("og", _ignored)
     pts = check_points(points)
     fi = check_face_index(face_index, len(pts), len(mesh.faces))
     rules = parse_prune(prune)
@@ -217,6 +213,7 @@ def _og_fixed(size: int) -> Any:
         options["grid"] = size  # the name fixes the grid; a shared "grid" option is for "og"
         return og_visible(mesh, points, camera, **options)
 
+    og_fixed.__signature__ = signature_without(og_visible, "grid")
     og_fixed.__name__ = og_fixed.__qualname__ = f"og{size}_visible"
     og_fixed.__doc__ = f"``og`` with ``grid={size}`` (Sryamkin et al. 2023, §3.6); see :func:`og_visible`."
     return og_fixed

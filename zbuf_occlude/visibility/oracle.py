@@ -59,7 +59,7 @@ from ..cameras import Camera
 from .oracle_embree import occluded_embree
 from .oracle_numpy import DEFAULT_PAIRS_PER_CHUNK, occluded_numpy
 from .definition import hide_edge_on
-from .registry import DEFAULT_SELF_HIT_TOLERANCE, check_face_index, check_points, log_ignored, register, visible_in_frustum
+from .registry import DEFAULT_SELF_HIT_TOLERANCE, check_face_index, check_points, register, visible_in_frustum
 from .segment_triangle import TrianglePlanes, mesh_planes, segment_hits_triangles, triangle_planes
 
 __all__ = [
@@ -105,7 +105,6 @@ def oracle_visible(
     *,
     face_index: NDArray[np.integer] | None = None,
     tolerance: float = DEFAULT_SELF_HIT_TOLERANCE,
-    **_ignored: Any,
 ) -> NDArray[np.bool_]:
     """Exact HSR, Embree-accelerated: ``camera.in_frustum(points) & ~occluded_embree(...)``.
 
@@ -123,9 +122,6 @@ def oracle_visible(
         Face each point was sampled on; it never hides its own point.
     tolerance : float
         Occluders closer than this to the point are ignored (object units, default 1e-6).
-    **_ignored
-        Options of other methods (``resolution``, ...), accepted and ignored so that one
-        option set can be passed to several methods.
 
     Returns
     -------
@@ -138,7 +134,6 @@ def oracle_visible(
     InvalidInputError
         On bad ``points``, ``face_index`` or ``tolerance``.
     """
-    log_ignored("oracle", _ignored)
     return _visible(occluded_embree, mesh, points, camera, face_index, tolerance, mesh)
 
 
@@ -150,13 +145,11 @@ def oracle_numpy_visible(
     *,
     face_index: NDArray[np.integer] | None = None,
     tolerance: float = DEFAULT_SELF_HIT_TOLERANCE,
-    **_ignored: Any,
 ) -> NDArray[np.bool_]:
     """Exact HSR in pure numpy: ``camera.in_frustum(points) & ~occluded_numpy(...)``.
 
     O(N·F); meant for small meshes and for checking ``"oracle"``.  Parameters, returns and
     ignored options as :func:`oracle_visible`; raises :class:`InvalidInputError` on bad input.
     """
-    log_ignored("oracle-numpy", _ignored)
     return _visible(occluded_numpy, mesh_planes(mesh), points, camera, face_index, tolerance, mesh)
 

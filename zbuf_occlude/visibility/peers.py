@@ -62,7 +62,6 @@ def naive_zbuffer_visible(
     *,
     face_index: NDArray[np.int64] | None = None,
     resolution: int | tuple[int, int] | None = DEFAULT_RESOLUTION,
-    **_ignored: Any,
 ) -> NDArray[np.bool_]:
     """Plain z-buffer depth test, zero tolerance (the rule of ``mesh_to_sdf``'s ``Scan.is_visible``).
 
@@ -84,8 +83,6 @@ def naive_zbuffer_visible(
         Unused by the rule; accepted for the common signature.
     resolution : int or (width, height), optional
         Image size, pixels (default 1024).
-    **_ignored
-        Options of other methods, accepted and ignored.
 
     Returns
     -------
@@ -120,7 +117,6 @@ def open3d_hpr_visible(
     *,
     face_index: NDArray[np.integer] | None = None,
     hpr_radius_factor: float = HPR_RADIUS_FACTOR,
-    **_ignored: Any,
 ) -> NDArray[np.bool_]:
     """Hidden point removal of Katz et al. 2007 (Open3D ``hidden_point_removal``).
 
@@ -138,8 +134,6 @@ def open3d_hpr_visible(
         Unused.
     hpr_radius_factor : float
         Radius / bounding-box diagonal (default 100, Open3D's example).
-    **_ignored
-        Options of other methods, accepted and ignored.
 
     Returns
     -------
@@ -171,7 +165,6 @@ def open3d_raycast_visible(
     *,
     face_index: NDArray[np.integer] | None = None,
     raycast_start_offset: float = RAYCAST_START_OFFSET,
-    **_ignored: Any,
 ) -> NDArray[np.bool_]:
     """Exact-by-construction HSR with Open3D's ``RaycastingScene.test_occlusions``.
 
@@ -191,8 +184,6 @@ def open3d_raycast_visible(
         Checked, not used.
     raycast_start_offset : float
         Object units (default 1e-4, see :data:`RAYCAST_START_OFFSET`).
-    **_ignored
-        Options of other methods, accepted and ignored.
 
     Returns
     -------

@@ -18,7 +18,9 @@ units from it.  ``oracle``, ``oracle-numpy``, ``zbuffer-exact``, ``embree-fast``
 
 from __future__ import annotations
 
+import functools
 import importlib
+import inspect
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -45,7 +47,10 @@ __all__ = [
     "check_points",
     "check_face_index",
     "visible_in_frustum",
-    "log_ignored",
+    "method_keywords",
+    "signature_without",
+    "resolution_option",
+    "check_keywords",
     "DEFAULT_SELF_HIT_TOLERANCE",
 ]
 
@@ -241,10 +246,40 @@ def visible_in_frustum(
     return visible
 
 
-def log_ignored(method: str, options: dict) -> None:
-    """Debug-log the options a method accepted but does not use (``**_ignored``)."""
-    if options:
-        log.debug("visibility method %r ignores options %s", method, sorted(options))
+@functools.lru_cache(maxsize=None)
+def method_keywords(method: str) -> frozenset[str]:
+    """The keywords ``method`` takes besides ``face_index`` (from its signature).
+
+    Raises
+    ------
+    InvalidInputError
+        Unknown method.
+    """
+    params = inspect.signature(get_method(method)).parameters.values()
+    return frozenset(p.name for p in params if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name != "face_index")
+
+
+def signature_without(fn: Callable[..., Any], *fixed: str) -> inspect.Signature:
+    """``fn``'s signature without the keywords ``fixed``: the ``__signature__`` of a method that
+    calls ``fn`` with those keywords set (``og32`` = ``og`` with ``grid=32``), so that
+    :func:`method_keywords` tells what it takes."""
+    sig = inspect.signature(fn)
+    return sig.replace(parameters=[p for p in sig.parameters.values() if p.name not in fixed])
+
+
+def resolution_option(method: str, resolution) -> dict[str, Any]:
+    """``{"resolution": resolution}`` for a method that declares ``takes_resolution`` (the
+    image-space methods), else ``{}``: what a caller that drives any method passes."""
+    return {"resolution": resolution} if method_info(method).takes_resolution else {}
+
+
+def check_keywords(method: str, options: dict[str, Any]) -> None:
+    """Raise ``TypeError`` naming every key of ``options`` that ``method`` does not take
+    (a misspelt ``tolerence`` must not run with the default instead)."""
+    unknown = sorted(set(options) - method_keywords(method))
+    if unknown:
+        takes = ", ".join(sorted(method_keywords(method))) or "none"
+        raise TypeError(f"visibility method {method!r} takes no keyword {', '.join(map(repr, unknown))} (it takes: {takes})")
 
 
 def visible_mask(
@@ -279,7 +314,8 @@ def visible_mask(
         A face never hides its own points; giving it makes methods faster and exact
         at grazing angles.
     **options
-        Method-specific keywords (``resolution``, ``tolerance``, ...), see each method.
+        Method-specific keywords (``resolution``, ``tolerance``, ...), see each method
+        (:func:`method_keywords`).
 
     Returns
     -------
@@ -289,10 +325,13 @@ def visible_mask(
     ------
     InvalidInputError
         Unknown method, or bad ``points``/``face_index``.
+    TypeError
+        A keyword the method does not take (named).
     BackendUnavailable
         The method needs OpenGL or Embree and it cannot be had.
     """
     fn = get_method(method)
+    check_keywords(method, options)
     pts = check_points(points)
     fi = check_face_index(face_index, len(pts), len(mesh.faces))
     return fn(mesh, pts, camera, face_index=fi, **options)

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Any
 
 import numpy as np
 import trimesh
@@ -18,7 +17,7 @@ from ..cameras import Camera
 from ..errors import InvalidInputError
 from .face_scan import occluded_by_faces
 from .oracle_numpy import DEFAULT_PAIRS_PER_CHUNK
-from .registry import DEFAULT_SELF_HIT_TOLERANCE, check_face_index, check_points, log_ignored, register
+from .registry import DEFAULT_SELF_HIT_TOLERANCE, check_face_index, check_points, register
 from .segment_triangle import mesh_planes
 
 __all__ = ["surviving_faces", "paper_vertex_visible"]
@@ -151,7 +150,6 @@ def paper_vertex_visible(
     tolerance: float = DEFAULT_SELF_HIT_TOLERANCE,
     backend: str = "auto",
     pairs_per_chunk: int = DEFAULT_PAIRS_PER_CHUNK,
-    **_ignored: Any,
 ) -> NDArray[np.bool_]:
     """Vertex-based HSR (Sryamkin et al. 2023, §3.3): a point is visible iff its face survived.
 
@@ -168,8 +166,6 @@ def paper_vertex_visible(
         Face of each point; found with trimesh's closest-point query when missing (slower).
     max_edge : float, optional
         Subdivide faces first (Fig. 4), object units; ``None`` (default) does not.
-    **_ignored
-        Options of other methods, accepted and ignored.
 
     Returns
     -------
@@ -180,7 +176,6 @@ def paper_vertex_visible(
     InvalidInputError, BackendUnavailable
         As :func:`surviving_faces`.
     """
-    log_ignored("paper-vertex", _ignored)
     pts = check_points(points)
     fi = check_face_index(face_index, len(pts), len(mesh.faces))
     if fi is None:

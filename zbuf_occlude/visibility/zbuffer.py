@@ -212,11 +212,8 @@ def zbuffer_visible(
     neighborhood: int = 1,
     tolerance: float = DEFAULT_GPU_TOLERANCE,
     resolve: str = "embree",
-    **_ignored,
 ) -> NDArray[np.bool_]:
     """Default image-space HSR: id-buffer candidates + exact tests; see :meth:`ResidentPoints.visible`.
-
-    Unrelated keywords are ignored so one option set can drive several methods.
     """
     with ResidentPoints(mesh, points, face_index) as scene:
         return scene.visible(camera, resolution=resolution, neighborhood=neighborhood, tolerance=tolerance, resolve=resolve)
@@ -233,7 +230,6 @@ def zbuffer_tolerance_visible(
     depth_tolerance: float = DEFAULT_DEPTH_TOLERANCE,
     slope_scale: float = DEFAULT_SLOPE_SCALE,
     max_slope: float = DEFAULT_MAX_SLOPE,
-    **_ignored,
 ) -> NDArray[np.bool_]:
     """Depth-test image-space HSR with a slope-scaled tolerance; see :meth:`ResidentPoints.visible_tolerance`."""
     with ResidentPoints(mesh, points, face_index) as scene:
