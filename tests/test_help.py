@@ -196,3 +196,14 @@ def test_slurm_script_renders_every_mesh_unless_asked_for_a_subset(tmp_path: Pat
     assert not {"--per-class", "--classes", "--splits"} & set(args), args
     subset = _slurm_task_args(tmp_path, SUBSET="--per-class 5")
     assert subset[subset.index("--per-class") + 1] == "5"
+
+
+def test_every_command_taking_meshes_lists_every_supported_extension(capsys):
+    from zbuf_occlude.cli import main
+    from zbuf_occlude.mesh_formats import SUPPORTED_EXTENSIONS
+
+    for command in ("generate", "validate", "compare", "elevation-profile"):
+        with pytest.raises(SystemExit):
+            main([command, "--help"])
+        text = " ".join(capsys.readouterr().out.split())
+        assert all(ext in text for ext in SUPPORTED_EXTENSIONS), (command, [e for e in SUPPORTED_EXTENSIONS if e not in text])

@@ -22,6 +22,7 @@ from .defaults import DEFAULT_DENSE_POINTS, DEFAULT_METHOD, DEFAULT_RESOLUTION, 
 from .errors import InvalidInputError, ZbufOccludeError
 from .io import FORMATS, write_csv
 from .mesh import load_mesh, scan_meshes
+from .mesh_formats import EXTENSIONS_TEXT
 from .metrics import agreement
 from .resources import MemoryEstimate, check_memory, estimate_job_memory
 from .sampling import check_seed, sample_surface
@@ -190,7 +191,7 @@ def cmd_info(args: argparse.Namespace) -> int:
 # -- parser ------------------------------------------------------------------------------------------
 #: The paths' help of generate and validate: a wheel ships no sample meshes (only a checkout has data/samples).
 PATHS_HELP = (
-    "mesh files (.off, .obj, .ply, .stl, .glb) or folders, searched recursively; classes and splits come from "
+    f"mesh files ({EXTENSIONS_TEXT}) or folders, searched recursively; classes and splits come from "
     "the folder's layout (ModelNet, ShapeNetCore, CLASS/NAME; see docs/guide/inputs.md) "
     "(default: the sample meshes in a checkout's data/samples; an installed wheel has none: pass PATH)"
 )

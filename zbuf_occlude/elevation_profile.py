@@ -35,6 +35,7 @@ from .defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION
 from .errors import InvalidInputError, OutputError
 from .io import write_csv
 from .mesh import load_mesh
+from .mesh_formats import EXTENSIONS_TEXT
 from .sampling import sample_surface
 from .visibility.registry import resolution_option, visible_mask
 
@@ -299,7 +300,7 @@ def add_profile_parser(subparsers: Any) -> argparse.ArgumentParser:
             "elevation (-90..90 degrees), averaged over azimuths. Writes a PNG and a CSV."
         ),
     )
-    p.add_argument("mesh", help="mesh file (.off, .obj, .ply, .stl, .glb)")
+    p.add_argument("mesh", help=f"mesh file ({EXTENSIONS_TEXT})")
     p.add_argument("--out", default="elevation_profile.png", help="PNG path or folder (default: %(default)s)")
     p.add_argument("--method", default=DEFAULT_METHOD, help="HSR method (default: %(default)s)")
     p.add_argument("--points", type=int, default=DEFAULT_PROFILE_POINTS, help="surface samples (default: %(default)s)")

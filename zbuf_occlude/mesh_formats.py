@@ -19,7 +19,7 @@ import trimesh
 
 from .errors import MeshLoadError
 
-__all__ = ["SUPPORTED_EXTENSIONS", "FORMAT_EXTRAS", "read_trimesh"]
+__all__ = ["SUPPORTED_EXTENSIONS", "EXTENSIONS_TEXT", "FORMAT_EXTRAS", "read_trimesh"]
 
 #: File extensions load_mesh accepts (lower case), mapped to trimesh's file type.
 SUPPORTED_EXTENSIONS: dict[str, str] = {
@@ -31,6 +31,8 @@ SUPPORTED_EXTENSIONS: dict[str, str] = {
     ".gltf": "gltf",
     ".dae": "dae",
 }
+#: The extensions as the help of every command lists them (".off, .obj, ...").
+EXTENSIONS_TEXT = ", ".join(SUPPORTED_EXTENSIONS)
 
 #: The optional package each format needs beyond trimesh, and the extra that installs it.
 FORMAT_EXTRAS: dict[str, tuple[str, str]] = {"dae": ("collada", "collada")}

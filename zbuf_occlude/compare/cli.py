@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from ..defaults import DEFAULT_RESOLUTION
+from ..mesh_formats import EXTENSIONS_TEXT
 from .report import write_results
 from .run import DEFAULT_METHODS, DEFAULT_POINTS, DEFAULT_REFERENCE, DEFAULT_VIEWS, compare, parse_int_list, parse_methods
 
@@ -132,7 +133,7 @@ def add_compare_parser(subparsers: Any) -> argparse.ArgumentParser:
             "results.csv, report.md and PNG plots into --out."
         ),
     )
-    p.add_argument("paths", nargs="+", help="mesh files (.off, .obj, .ply, .stl, .glb) or folders (searched recursively)")
+    p.add_argument("paths", nargs="+", help=f"mesh files ({EXTENSIONS_TEXT}) or folders (searched recursively)")
     p.add_argument("--methods", default=",".join(DEFAULT_METHODS), help="comma-separated methods (default: %(default)s)")
     p.add_argument("--points", default=",".join(str(n) for n in DEFAULT_POINTS), help="point counts (default: %(default)s)")
     p.add_argument("--views", default=DEFAULT_VIEWS, help="pose schedule: grid25, paper100, fibonacci:N or EL:AZ,... (default: %(default)s)")
