@@ -149,3 +149,24 @@ def test_occlude_object_refuses_a_misspelt_method_option():
     for method in ("oracle", "embree-fast"):  # the one-shot path and the session path
         with pytest.raises(TypeError, match="tolerence"):
             list(occlude_object(mesh, [(0.0, 0.0)], key=1, n_points=16, samples_per_view=1, method=method, tolerence=0.1))
+
+
+def test_a_users_method_with_var_keywords_receives_every_option(monkeypatch):
+    from zbuf_occlude.visibility.registry import check_keywords, method_keywords
+
+    got = {}
+
+    def fn(mesh, points, camera, *, face_index=None, **options):
+        got.update(options)
+        return np.ones(len(points), dtype=bool)
+
+    monkeypatch.setitem(registry._METHODS, "user-any", fn)
+    method_keywords.cache_clear()
+    try:
+        assert method_keywords("user-any") is None
+        check_keywords("user-any", {"anything": 1})
+        mesh = trimesh.creation.icosphere(subdivisions=1)
+        zbuffer_mask = zbuf_occlude.visible_mask(mesh, mesh.vertices[:5], zbuf_occlude.camera_on_sphere(0.0, 0.0), "user-any", anything=1)
+        assert got == {"anything": 1} and zbuffer_mask.all()
+    finally:
+        method_keywords.cache_clear()

@@ -247,16 +247,20 @@ def visible_in_frustum(
 
 
 @functools.lru_cache(maxsize=None)
-def method_keywords(method: str) -> frozenset[str]:
-    """The keywords ``method`` takes besides ``face_index`` (from its signature).
+def method_keywords(method: str) -> frozenset[str] | None:
+    """The keywords ``method`` takes besides ``face_index`` (from its signature); ``None`` for
+    a method that takes any (``**options``: a user's method may forward them elsewhere).
 
     Raises
     ------
     InvalidInputError
         Unknown method.
     """
-    params = inspect.signature(get_method(method)).parameters.values()
-    return frozenset(p.name for p in params if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name != "face_index")
+    params = list(inspect.signature(get_method(method)).parameters.values())
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
+        return None
+    named = (inspect.Parameter.KEYWORD_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
+    return frozenset(p.name for p in params[3:] if p.kind in named and p.name != "face_index")  # after mesh, points, camera
 
 
 def signature_without(fn: Callable[..., Any], *fixed: str) -> inspect.Signature:
@@ -276,9 +280,10 @@ def resolution_option(method: str, resolution) -> dict[str, Any]:
 def check_keywords(method: str, options: dict[str, Any]) -> None:
     """Raise ``TypeError`` naming every key of ``options`` that ``method`` does not take
     (a misspelt ``tolerence`` must not run with the default instead)."""
-    unknown = sorted(set(options) - method_keywords(method))
+    accepted = method_keywords(method)
+    unknown = [] if accepted is None else sorted(set(options) - accepted)
     if unknown:
-        takes = ", ".join(sorted(method_keywords(method))) or "none"
+        takes = ", ".join(sorted(accepted)) or "none"
         raise TypeError(f"visibility method {method!r} takes no keyword {', '.join(map(repr, unknown))} (it takes: {takes})")
 
 
