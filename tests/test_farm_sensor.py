@@ -143,3 +143,12 @@ def test_bad_sensor_options_are_clear_errors(tmp_path, bad, words, capsys):
 def test_sensor_params_are_checked():
     with pytest.raises(InvalidInputError, match="--sensor-height"):
         FarmParams(sensor="hdl32e", sensor_height_m=(-1.0, 2.0))
+
+
+def test_the_padding_warning_of_a_sensor_farm_names_what_applies(tmp_path, caplog):
+    # 4,000 points per sample: more than a 5-20 m HDL-32E scan of a 2-4.5 m object returns
+    args = [a if a != "128" else "4000" for a in ARGS]
+    with caplog.at_level("WARNING", logger="zbuf_occlude"):
+        assert cli_main(["farm", str(SAMPLES), "--out", str(tmp_path / "ds"), *args]) == 0
+    warning = " ".join(r.getMessage() for r in caplog.records if "repeated points" in r.getMessage())
+    assert "move the sensor closer or lower --points" in warning and "--dense-points" not in warning

@@ -206,10 +206,12 @@ def finalize(
     n_samples = int(sum(r["n_samples"] for r in ok))
     n_padded = padded_samples(ok, params)
     if n_padded:
+        # a sensor's scan has the points its beams return: --dense-points does not apply to it
+        remedy = "move the sensor closer or lower --points" if params.sensor else "raise --dense-points or lower --points"
         log.warning(
             "%d of %d samples hold repeated points: fewer than --points %d points were visible from their poses "
-            "(each sample's n_visible says how many; raise --dense-points or lower --points); recorded as "
-            "n_padded_samples in %s", n_padded, n_samples, params.n_points, out / CARD_FILE,
+            "(each sample's n_visible says how many; %s); recorded as n_padded_samples in %s",
+            n_padded, n_samples, params.n_points, remedy, out / CARD_FILE,
         )  # fmt: skip
     card = {
         "format_version": FORMAT_VERSION,
