@@ -105,7 +105,8 @@ def test_filters(datasets):
     assert len(ds) == len(MESHES) * spv and all(ds.metadata(i)["azimuth_deg"] == 90.0 for i in range(len(ds)))
     assert len(OccludedDataset(path, elevation_deg=[-30, 60])) == len(MESHES) * 2 * spv
     assert len(OccludedDataset(path, elevation_deg=lambda el: el > 0, azimuth_deg=[270.0])) == len(MESHES) * spv
-    assert len(OccludedDataset(path, azimuth_deg=45.0)) == 0
+    with pytest.raises(InvalidInputError, match=r"no pose of .* matches .*azimuth_deg=45.0.*elevations -30, 0, 30, 60"):
+        OccludedDataset(path, azimuth_deg=45.0)  # a filter matching no pose is a mistake, not an empty data set
     ds = OccludedDataset(path, split="test", classes=["chair"])
     assert len(ds) == 0 and ds.to_arrays()[0].shape == (0, PARAMS.n_points, 3)
     # labels stay the data set's, whatever the filter

@@ -248,6 +248,12 @@ class OccludedDataset(Sequence):
         pose_keep = _pose_mask(self._elevation, elevation_deg, "elevation_deg") & _pose_mask(
             self._azimuth, azimuth_deg, "azimuth_deg"
         )
+        if self.sensor is None and len(pose_keep) and not pose_keep.any():  # a typo, not an empty data set
+            elevations = ", ".join(f"{v:g}" for v in sorted(set(self._elevation.tolist())))
+            raise InvalidInputError(
+                f"no pose of {self.root} matches elevation_deg={elevation_deg!r}, azimuth_deg={azimuth_deg!r}; "
+                f"its poses have elevations {elevations} (degrees)"
+            )
 
         splits = name_set(split)
         wanted_classes = name_set(classes)
