@@ -17,6 +17,7 @@ import trimesh
 
 from zbuf_occlude.errors import InvalidInputError, MeshLoadError, ZbufOccludeError
 from zbuf_occlude.mesh import load_mesh
+from zbuf_occlude.visibility.registry import resolution_option
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 #: A shipped ModelNet chair: OFF, 2,382 vertices and 2,234 faces (data/samples/SOURCE.md).
@@ -691,7 +692,7 @@ def test_visibility_of_a_non_finite_mesh_is_an_error_not_an_answer(chair_and_poi
     vertices[5] = {"nan": np.nan, "inf": np.inf, "huge": 1e200}[bad]
     broken = trimesh.Trimesh(vertices=vertices, faces=mesh.faces, process=False)
     with pytest.raises(InvalidInputError, match="NaN|inf"):
-        zo.visible_mask(broken, points, camera_on_sphere(30, 45, 3.0), method, face_index=face_index, resolution=64)
+        zo.visible_mask(broken, points, camera_on_sphere(30, 45, 3.0), method, face_index=face_index, **resolution_option(method, 64))
 
 
 @pytest.mark.parametrize("radius", [0.0, 0.1, 0.6])
@@ -703,7 +704,7 @@ def test_camera_inside_the_object_is_a_camera_error_naming_the_radius(chair_and_
 
     mesh, points, face_index = chair_and_points
     with pytest.raises(CameraError, match=rf"radius {radius} is inside the object's bounding sphere"):
-        zo.visible_mask(mesh, points, camera_on_sphere(30, 45, radius), method, face_index=face_index, resolution=64)
+        zo.visible_mask(mesh, points, camera_on_sphere(30, 45, radius), method, face_index=face_index, **resolution_option(method, 64))
 
 
 @pytest.mark.parametrize("method", GPU_AND_EXACT)
@@ -715,7 +716,7 @@ def test_nan_points_are_an_error(chair_and_points, method: str) -> None:
     points = points.copy()
     points[7, 1] = np.nan
     with pytest.raises(InvalidInputError, match="NaN"):
-        zo.visible_mask(mesh, points, camera_on_sphere(30, 45, 3.0), method, face_index=face_index, resolution=64)
+        zo.visible_mask(mesh, points, camera_on_sphere(30, 45, 3.0), method, face_index=face_index, **resolution_option(method, 64))
 
 
 EMPTY_AND_DEGENERATE = {
