@@ -22,6 +22,7 @@ from .errors import (
     MeshLoadError,
     OutputError,
     RegistryError,
+    UnknownOptionError,
     ZbufOccludeError,
 )
 from .mesh import load_mesh, normalize_mesh
@@ -63,6 +64,7 @@ __all__ = [
     "BackendUnavailable",
     "OutputError",
     "RegistryError",
+    "UnknownOptionError",
     "PaddedSamplesWarning",
     "occlude",
     "OccludedCloud",

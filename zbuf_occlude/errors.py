@@ -15,6 +15,7 @@ __all__ = [
     "BackendUnavailable",
     "OutputError",
     "RegistryError",
+    "UnknownOptionError",
     "UnsafePathError",
     "DatasetFormatError",
     "CheckpointError",
@@ -47,6 +48,11 @@ class OutputError(ZbufOccludeError, OSError):
 
 class RegistryError(ZbufOccludeError, RuntimeError):
     """A visibility method registered twice under one name, or with an unknown capability (a bug in a plugin)."""
+
+
+class UnknownOptionError(ZbufOccludeError, TypeError):
+    """A keyword a visibility method does not take (a misspelt ``tolerence``); a ``TypeError``,
+    as Python's own for an unexpected keyword argument."""
 
 
 class UnsafePathError(InvalidInputError):

@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from ..cameras import Camera
 from ..defaults import DEFAULT_METHOD, DEFAULT_SELF_HIT_TOLERANCE
-from ..errors import BackendUnavailable, InvalidInputError, RegistryError
+from ..errors import BackendUnavailable, InvalidInputError, RegistryError, UnknownOptionError
 
 __all__ = [
     "register",
@@ -278,13 +278,13 @@ def resolution_option(method: str, resolution) -> dict[str, Any]:
 
 
 def check_keywords(method: str, options: dict[str, Any]) -> None:
-    """Raise ``TypeError`` naming every key of ``options`` that ``method`` does not take
+    """Raise :class:`~zbuf_occlude.errors.UnknownOptionError` (a ``TypeError``) naming every key of ``options`` that ``method`` does not take
     (a misspelt ``tolerence`` must not run with the default instead)."""
     accepted = method_keywords(method)
     unknown = [] if accepted is None else sorted(set(options) - accepted)
     if unknown:
         takes = ", ".join(sorted(accepted)) or "none"
-        raise TypeError(f"visibility method {method!r} takes no keyword {', '.join(map(repr, unknown))} (it takes: {takes})")
+        raise UnknownOptionError(f"visibility method {method!r} takes no keyword {', '.join(map(repr, unknown))} (it takes: {takes})")
 
 
 def visible_mask(
@@ -330,8 +330,8 @@ def visible_mask(
     ------
     InvalidInputError
         Unknown method, or bad ``points``/``face_index``.
-    TypeError
-        A keyword the method does not take (named).
+    UnknownOptionError
+        (a ``TypeError``) A keyword the method does not take (named).
     BackendUnavailable
         The method needs OpenGL or Embree and it cannot be had.
     """
