@@ -1026,3 +1026,16 @@ def test_realism_on_a_non_utf8_csv_names_the_file(tmp_path: Path, capsys) -> Non
     code, err = _main_exit(["realism", str(real.parent), str(real.parent), "--out", str(tmp_path / "o"), "--no-figure"], capsys)
     assert code == 2 and "\n" not in err, err
     assert "car0.csv is not UTF-8" in err and "Traceback" not in err
+
+
+def test_first_day_mistakes_get_messages_that_say_what_to_do(tmp_path, capsys):
+    import zbuf_occlude as zo
+    from zbuf_occlude.cli import main
+
+    with pytest.raises(InvalidInputError, match="got PointCloud.*point cloud has no faces"):
+        zo.occlude(trimesh.PointCloud(np.random.default_rng(0).random((10, 3))))
+    with pytest.raises(InvalidInputError, match="no such data set folder"):
+        zo.OccludedDataset(tmp_path / "missing")
+    chair = Path(__file__).resolve().parents[1] / "data" / "samples" / "chair"
+    assert main(["generate", str(chair), "--protocol", "modelnet40-c-occlusion", "--out", str(tmp_path / "o")]) == 2
+    assert "needs a severity: --severity 1..5" in capsys.readouterr().err and not (tmp_path / "o").exists()

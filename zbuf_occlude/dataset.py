@@ -219,6 +219,8 @@ class OccludedDataset(Sequence):
         self.root = Path(path)
         self.verify = bool(verify)
         card_path = self.root / CARD_FILE
+        if not self.root.is_dir():
+            raise InvalidInputError(f"no such data set folder: {self.root}")
         if not card_path.is_file():
             raise InvalidInputError(
                 f"{self.root} is not a finished farm data set (no {CARD_FILE}); let `zbuf-occlude farm` finish, "

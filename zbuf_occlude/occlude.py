@@ -395,8 +395,9 @@ def occlude(
     MeshLoadError
         The file is missing, unreadable or not a usable mesh.
     InvalidInputError
-        A bad view schedule, ``n_points < 1``, ``samples_per_view < 0``, a negative seed, an
-        unknown method, or a job too large for the memory available.
+        Not a path or a ``trimesh.Trimesh``, a bad view schedule, ``n_points < 1``,
+        ``samples_per_view < 0``, a negative seed, an unknown method, or a job too large for
+        the memory available.
     CameraError
         ``radius`` puts the camera inside the object's bounding sphere.
     BackendUnavailable
@@ -411,6 +412,11 @@ def occlude(
     if isinstance(mesh_or_path, trimesh.Trimesh):
         mesh = mesh_or_path if _is_normalised(mesh_or_path) else normalize_mesh(mesh_or_path)
         default_name, source = "", ""
+    elif not isinstance(mesh_or_path, (str, os.PathLike)):  # a point cloud, a Scene, an array...
+        raise InvalidInputError(
+            f"occlude needs a mesh file or a trimesh.Trimesh (faces occlude), got {type(mesh_or_path).__name__}; "
+            "a trimesh.Scene: scene.to_mesh(); a point cloud has no faces to hide anything"
+        )
     else:
         mesh = load_mesh(mesh_or_path)
         default_name, source = Path(mesh_or_path).stem, str(mesh_or_path)

@@ -106,6 +106,8 @@ def _pose(angle_x: float, angle_z: float, distance: float) -> tuple[NDArray[np.f
 
 
 def _check_severity(severity: object) -> int:
+    if severity is None:
+        raise InvalidInputError("ModelNet40-C needs a severity: --severity 1..5 (severity=1..5 in Python)")
     if isinstance(severity, bool) or not isinstance(severity, (int, np.integer)) or not 1 <= severity <= 5:
         raise InvalidInputError(f"ModelNet40-C severity must be an integer 1..5, got {severity!r}")
     return int(severity)
