@@ -51,3 +51,17 @@ def test_bad_protocol_options_exit_2_naming_the_value(tmp_path, capsys, argv, na
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert named in err
     assert not (tmp_path / "o" / "shards").exists()
+
+
+def test_modelnet40c_says_when_its_labels_are_not_modelnet40s(tmp_path, caplog):
+    import shutil
+
+    mesh = Path(CHAIR) / "train" / "chair_0001.off"
+    (tmp_path / "in" / "pedestrian" / "train").mkdir(parents=True)
+    shutil.copy(mesh, tmp_path / "in" / "pedestrian" / "train" / "pedestrian_0001.off")
+    with caplog.at_level("INFO", logger="zbuf_occlude"):
+        assert main(["generate", str(tmp_path / "in"), "--protocol", "modelnet40-c-occlusion", "--severity", "1",
+                     "--out", str(tmp_path / "o")]) == 0  # fmt: skip
+    said = " ".join(r.getMessage() for r in caplog.records)
+    assert "not ModelNet40's 40" in said and "'pedestrian'" in said
+    assert (tmp_path / "o" / "shape_names.txt").read_text() == "pedestrian\n" and np.load(tmp_path / "o" / "label.npy").tolist() == [[0]]

@@ -41,6 +41,8 @@ degenerate faces and unreferenced vertices before the normalisation, which Open3
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 import trimesh
 from numpy.typing import NDArray
@@ -50,6 +52,8 @@ from ..farm.inputs import FarmObject
 from ..io import atomic_path, write_text
 from .base import Protocol, ProtocolOptions, read_arrays_h5
 from .depth import PinholeView, back_project, render_depth_image
+
+log = logging.getLogger(__name__)
 
 __all__ = [
     "MODELNET40_CLASSES", "normalize", "occlusion_pose", "lidar_pose", "intrinsics", "depth_cloud", "simulate_lidar",
@@ -262,6 +266,13 @@ def _finisher(corruption: str):
         data = np.stack([read_arrays_h5(s)["points"] for s in shards]).astype(np.float32)
         classes = sorted({o.class_name for o in objects})
         names = list(MODELNET40_CLASSES) if set(classes) <= set(MODELNET40_CLASSES) else classes
+        if names is classes:  # said out loud: a ModelNet40-C model's outputs do not index these labels
+            log.warning(
+                "label.npy indexes this folder's %d classes (shape_names.txt), not ModelNet40's 40: "
+                "classes %s are not ModelNet40's", len(names), sorted(set(classes) - set(MODELNET40_CLASSES)),
+            )  # fmt: skip
+        else:
+            log.info("label.npy holds ModelNet40's class indices (shape_names.txt: its 40 classes)")
         labels = np.array([[names.index(o.class_name)] for o in objects], dtype=np.uint8 if len(names) < 256 else np.int64)
         files = []
         for name, array in ((f"data_{corruption}_{options.severity}.npy", data), ("label.npy", labels)):
