@@ -312,3 +312,17 @@ def test_pointnet_style_loop_over_the_file_lists(tree, tmp_path, monkeypatch):
         assert label.shape == (4,) and np.array_equal(np.squeeze(label), label)
         expected = {"train": "stool", "test": "sofa"}[split]
         assert {shape_names[i] for i in label} == {expected}
+
+
+@pytest.mark.parametrize("command", ["generate", "farm"])
+def test_an_out_inside_the_input_folder_is_refused_before_any_work(tmp_path, capsys, command):
+    import shutil
+
+    from zbuf_occlude.cli import main
+
+    tree = tmp_path / "meshes"
+    shutil.copytree(Path(__file__).resolve().parents[1] / "data" / "samples" / "chair", tree / "chair")
+    out = tree / "out"
+    assert main([command, str(tree), "--out", str(out), "--views", "0:0", "--format" if command == "generate" else "--storage",
+                 "ply" if command == "generate" else "dense"]) == 2  # fmt: skip
+    assert "lies inside the input folder" in capsys.readouterr().err and not out.exists()

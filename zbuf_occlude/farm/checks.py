@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import os
+from collections.abc import Sequence
 from pathlib import Path
 
 from ..cameras import camera_on_sphere
@@ -18,7 +19,8 @@ from ..resources import check_memory, estimate_job_memory
 from ..visibility.registry import get_method
 from .config import FarmParams
 
-__all__ = ["check_before_work", "check_memory_up_front", "check_out_option", "check_radius", "prepare_out", "check_gl"]
+__all__ = ["check_before_work", "check_memory_up_front", "check_out_option", "check_out_outside_inputs", "check_radius",
+           "prepare_out", "check_gl"]
 
 log = logging.getLogger(__name__)
 
@@ -33,6 +35,25 @@ def check_out_option(out: str | os.PathLike, option: str = "--out") -> None:
     """
     if not os.fspath(out).strip():
         raise InvalidInputError(f"{option} must name a folder, got {os.fspath(out)!r}")
+
+
+def check_out_outside_inputs(out: str | os.PathLike, inputs: Sequence[str | os.PathLike]) -> None:
+    """Refuse an ``out`` inside an input folder (symlinks resolved): a rerun would find the
+    outputs written there (a ``--format ply`` sample is a mesh file) among its inputs.
+
+    Raises
+    ------
+    InvalidInputError
+        ``out`` is an input folder or lies inside one (both named).
+    """
+    target = Path(out).resolve()
+    for source in inputs:
+        folder = Path(source).resolve()
+        if folder.is_dir() and (target == folder or folder in target.parents):
+            raise InvalidInputError(
+                f"--out {out} lies inside the input folder {source}: a rerun would read its outputs as inputs; "
+                "choose an --out outside it"
+            )
 
 
 def prepare_out(out: Path) -> None:

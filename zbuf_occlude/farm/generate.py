@@ -31,6 +31,7 @@ from ..io import concat_h5, file_sha256, write_text
 from ..layout import CARD_FILE, GENERATE_STORAGES, file_list_name, split_file_name
 from ..mesh import SPLITS
 from ..safe_paths import path_inside
+from .checks import check_out_outside_inputs
 from .config import FarmParams, record_path
 from .inputs import FarmObject, scan_inputs
 from .journal import FarmSummary, read_json, shape_names_of
@@ -176,6 +177,7 @@ def generate(
     """
     if params.storage not in GENERATE_STORAGES:
         raise InvalidInputError(f"generate writes one of {GENERATE_STORAGES}, not {params.storage!r}")
+    check_out_outside_inputs(out, paths)
     scan = scan_inputs(paths, class_from=class_from)
     objects, skipped = scan.objects, scan.skipped
     out = Path(out)

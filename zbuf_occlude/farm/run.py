@@ -20,7 +20,7 @@ from ..io import atomic_path, write_text
 from ..layout import CARD_FILE, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, TASK_DIR, file_list_name
 from ..mesh import SPLITS
 from ..safe_paths import path_inside
-from .checks import check_before_work, prepare_out
+from .checks import check_before_work, check_out_outside_inputs, prepare_out
 from .config import MANIFEST_INTERVAL_S, OPTION_NAMES, FarmParams, record_path, shard_path
 from .inputs import FarmObject, scan_objects, select_shard
 from .journal import (
@@ -224,6 +224,8 @@ def run_farm(
     if dask_local is not None and dask_local < 1:
         raise InvalidInputError(f"--dask-local must be >= 1, got {dask_local}")
     task, n_tasks = shard
+    if isinstance(source, (str, os.PathLike)):
+        check_out_outside_inputs(out, [source])
     # before any mesh is found or loaded; the GL is checked here only when we render here, and
     # the memory only for processes of this machine (not those of a --scheduler's cluster)
     check_before_work(params, out, gl=not (scheduler or dask_local), workers=None if scheduler else dask_local or workers)
