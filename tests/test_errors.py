@@ -52,3 +52,19 @@ def test_bad_resolve_is_an_invalid_input_even_without_uncertain_points() -> None
     with pytest.raises(errors.InvalidInputError, match="resolve must be"):
         zo.visible_mask(mesh, points, camera, "zbuffer", face_index=face_index, resolve="bogus")
     assert issubclass(errors.InvalidInputError, ValueError)  # callers catching ValueError still do
+
+
+def test_every_exception_type_is_defined_in_errors_and_exported() -> None:
+    """One home for exceptions: a class deriving from an error anywhere else is a second door."""
+    elsewhere = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if path.name == "errors.py" and path.parent == PACKAGE:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ClassDef) and not node.name.startswith("_"):  # private: caught where raised
+                bases = {b.id if isinstance(b, ast.Name) else getattr(b, "attr", "") for b in node.bases}
+                if any(b == "Exception" or b.endswith("Error") for b in bases):
+                    elsewhere.append(f"{path.relative_to(PACKAGE)}:{node.lineno} {node.name}")
+    assert not elsewhere, elsewhere
+    for name in errors.__all__:
+        assert getattr(zo, name) is getattr(errors, name), name

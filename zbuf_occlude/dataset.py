@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import DatasetFormatError, InvalidInputError
+from .errors import DatasetFormatError, InvalidInputError, ShardChecksumError
 from .layout import (
     CARD_FILE,
     FORMAT_VERSION,
@@ -55,10 +55,6 @@ DEFAULT_OPEN_FILES = 16
 #: Degrees: a pose matches a requested elevation/azimuth within this (poses are stored
 #: as the exact floats of the schedule, so this only absorbs decimal round trips).
 POSE_MATCH_ATOL_DEG = 1e-6
-
-class ShardChecksumError(InvalidInputError):
-    """A shard's bytes differ from the SHA-256 the farm recorded for it in the manifest."""
-
 
 #: Per-row datasets of a ``farm --sensor`` shard that :meth:`OccludedDataset.metadata` returns.
 SENSOR_ROW_FIELDS = (

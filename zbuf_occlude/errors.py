@@ -19,6 +19,9 @@ __all__ = [
     "UnsafePathError",
     "DatasetFormatError",
     "CheckpointError",
+    "ShardChecksumError",
+    "InsufficientMemoryError",
+    "DatasetBusy",
 ]
 
 
@@ -66,3 +69,15 @@ class DatasetFormatError(InvalidInputError):
 
 class CheckpointError(InvalidInputError):
     """A checkpoint cannot be loaded as weights only: damaged, not a checkpoint, or it needs code to unpickle."""
+
+
+class ShardChecksumError(InvalidInputError):
+    """A shard's bytes differ from the SHA-256 the farm recorded for it in the manifest."""
+
+
+class InsufficientMemoryError(InvalidInputError):
+    """A job would need more memory than is available; the message names the option."""
+
+
+class DatasetBusy(OutputError):
+    """Another live process holds the lock of this data set (or of this shard)."""

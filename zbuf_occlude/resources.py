@@ -20,7 +20,7 @@ import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .errors import InvalidInputError
+from .errors import InsufficientMemoryError, InvalidInputError
 
 __all__ = [
     "InsufficientMemoryError",
@@ -61,10 +61,6 @@ BYTES_PER_WORKER = 256 * 2**20
 #: Allocations smaller than this are not checked by library functions (reading
 #: /proc costs more than they risk).
 MIN_CHECKED_BYTES = 64 * 2**20
-
-
-class InsufficientMemoryError(InvalidInputError):
-    """A job would need more memory than is available; the message names the option."""
 
 
 def format_bytes(n: float) -> str:

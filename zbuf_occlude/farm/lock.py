@@ -28,7 +28,7 @@ from collections.abc import Iterator
 from datetime import datetime, timezone
 from pathlib import Path
 
-from ..errors import OutputError
+from ..errors import DatasetBusy, OutputError
 from ..layout import LOCK_FILE, TASK_DIR, task_lock_name
 
 __all__ = ["DatasetBusy", "LOCK_FILE", "farm_lock", "lock_holder", "task_lock_path"]
@@ -39,10 +39,6 @@ log = logging.getLogger(__name__)
 #: (checked on each try) or for a concurrent peek to end, short enough to refuse at once.
 ACQUIRE_TIMEOUT_S = 2.0
 POLL_INTERVAL_S = 0.05
-
-
-class DatasetBusy(OutputError):
-    """Another live process holds the lock of this data set (or of this shard)."""
 
 
 def task_lock_path(out: Path, shard: tuple[int, int]) -> Path:
