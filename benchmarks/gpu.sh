@@ -53,8 +53,8 @@ print(f\"{info['GL_RENDERER']}, OpenGL {info['GL_VERSION']}\")
 " 2>&1 | tail -n 1)" || { echo "gpu.sh: no OpenGL context: $renderer" >&2; exit 3; }
 software="$("$py" -c "
 import sys
-from zbuf_occlude.visibility.auto import SOFTWARE_RENDERERS
-print(int(any(s in sys.argv[1].lower() for s in SOFTWARE_RENDERERS)))
+from zbuf_occlude.render.context import is_software_renderer
+print(int(is_software_renderer(sys.argv[1])))
 " "$renderer")"
 echo "gpu.sh: GPU: $gpu_name; OpenGL renderer: $renderer" >&2
 if [ "$software" = 1 ] && [ "$allow_sw" = 0 ]; then

@@ -236,11 +236,11 @@ def shared_context(backend: str | None = None) -> moderngl.Context:
         return ctx
 
 
-def is_software_renderer(ctx: moderngl.Context) -> bool:
-    """True when ``ctx`` renders on the CPU (Mesa llvmpipe and the like, :data:`SOFTWARE_RENDERERS`):
-    there a shader invocation costs CPU time, and work is shaped for few cores, not a GPU."""
-    renderer = str(ctx.info["GL_RENDERER"]).lower()
-    return any(s in renderer for s in SOFTWARE_RENDERERS)
+def is_software_renderer(renderer: str) -> bool:
+    """True when ``renderer`` (a ``GL_RENDERER`` string) names a rasteriser that runs on the CPU
+    (Mesa llvmpipe and the like, :data:`SOFTWARE_RENDERERS`): there a shader invocation costs
+    CPU time, and work is shaped for few cores, not a GPU."""
+    return any(s in renderer.lower() for s in SOFTWARE_RENDERERS)
 
 
 def context_info(ctx: moderngl.Context | None = None) -> dict[str, str]:

@@ -154,7 +154,7 @@ class ExactMesh:
             self._bin_fill = ctx.compute_shader(load_shader("exact_bin.comp", (("BIN_FILL", 1),)))
             self._points = ctx.compute_shader(load_shader("exact_points.comp"))
         #: Invocations per face in the bin passes (:data:`BIN_SLICES`; 1 on a software rasteriser).
-        self.bin_slices = 1 if is_software_renderer(ctx) else BIN_SLICES
+        self.bin_slices = 1 if is_software_renderer(str(ctx.info["GL_RENDERER"])) else BIN_SLICES
         self.last_stats: dict[str, int] = {}
         #: When true, :meth:`visible` waits for the GPU after each stage and records
         #: :attr:`last_timings` (for benchmarks: the waits cost time themselves).

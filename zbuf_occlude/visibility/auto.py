@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 
 from ..cameras import Camera, camera_on_sphere, view_schedule
 from ..errors import BackendUnavailable, InvalidInputError
-from ..render.context import SOFTWARE_RENDERERS
+from ..render.context import SOFTWARE_RENDERERS, is_software_renderer
 from .definition import TOLERANCE
 from .registry import get_method, method_info, register, resolution_option
 
@@ -128,7 +128,7 @@ def choose_method(one_shot: bool = False) -> str:
         return "embree-fast"
     if not embree:
         return "zbuffer-exact"
-    if forced != "calibrate" and any(s in renderer.lower() for s in SOFTWARE_RENDERERS):
+    if forced != "calibrate" and is_software_renderer(renderer):
         log.info("auto: software OpenGL renderer %r shares the CPU: embree-fast", renderer)
         return "embree-fast"
     seconds = calibrate(one_shot=one_shot)
