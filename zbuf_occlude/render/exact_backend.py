@@ -87,9 +87,9 @@ class ExactPoints:
     caller's order (``index``), so that results need no permutation on the CPU."""
 
     def __init__(self, ctx: moderngl.Context, points: NDArray[np.float64], own: NDArray[np.int64] | None):
-        self.order = morton_order(points)
-        points = points[self.order]
-        own = None if own is None else own[self.order]
+        order = morton_order(points)
+        points = points[order]
+        own = None if own is None else own[order]
         self.n_points = len(points)
         n = max(self.n_points, 1)
         p32 = np.zeros((n, 4), dtype=np.float32)
@@ -104,7 +104,7 @@ class ExactPoints:
         self.points64 = ctx.buffer(p64.tobytes())
         self.faces = ctx.buffer(faces.tobytes())
         index = np.zeros(n, dtype=np.uint32)
-        index[: self.n_points] = self.order
+        index[: self.n_points] = order
         self.index = ctx.buffer(index.tobytes())
         self.bits = ctx.buffer(reserve=2 * 4 * max(math.ceil(self.n_points / 32), 1))
         #: What the CPU reads: ``bits`` copied here on the GPU (:func:`~zbuf_occlude.render.compute.read_through`).
