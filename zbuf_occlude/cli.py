@@ -205,8 +205,8 @@ def _add_paths(p: argparse.ArgumentParser) -> None:
 def build_parser() -> argparse.ArgumentParser:
     """The ``zbuf-occlude`` argument parser with every subcommand."""
     from .farm.cli import CLASS_FROM_HELP, RADIUS_HELP, VIEWS_HELP
-    from .farm.config import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION
-    from .farm.config import DEFAULT_VIEWS as FARM_VIEWS
+    from .defaults import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION
+    from .defaults import DEFAULT_FARM_VIEWS as FARM_VIEWS
     from .farm.generate import GENERATE_DEFAULTS as gd  # generate's defaults, taken from zbuf_occlude.defaults
 
     parser = argparse.ArgumentParser(prog="zbuf-occlude", description="Real-like occluded point clouds from meshes (headless z-buffer HSR).")

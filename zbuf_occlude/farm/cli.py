@@ -11,6 +11,7 @@ from ..cameras import DEFAULT_RADIUS
 from ..defaults import DEFAULT_DENSE_POINTS as GENERATE_DENSE_POINTS
 from ..defaults import DEFAULT_METHOD, DEFAULT_SEED
 from ..defaults import DEFAULT_RESOLUTION as GENERATE_RESOLUTION
+from ..defaults import DEFAULT_FARM_VIEWS
 from ..defaults import DEFAULT_VIEWS as GENERATE_VIEWS
 from ..discovery import SPLITS
 from ..errors import InvalidInputError
@@ -23,7 +24,6 @@ from .config import (
     DEFAULT_SENSOR_DISTANCE_M,
     DEFAULT_SENSOR_HEIGHT_M,
     DEFAULT_SENSOR_SIZE_M,
-    DEFAULT_VIEWS,
     FarmParams,
 )
 from .checks import check_out_option
@@ -130,7 +130,7 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
     sel.add_argument("--splits", default=",".join(SPLITS), help="comma-separated splits (default: %(default)s)")
     sel.add_argument("--class-from", type=int, metavar="N", help=CLASS_FROM_HELP)
     r = p.add_argument_group("rendering")
-    r.add_argument("--views", default=DEFAULT_VIEWS, help=f"{VIEWS_HELP} (default: %(default)s; generate's: {GENERATE_VIEWS})")
+    r.add_argument("--views", default=DEFAULT_FARM_VIEWS, help=f"{VIEWS_HELP} (default: %(default)s; generate's: {GENERATE_VIEWS})")
     r.add_argument(
         "--samples-per-view", type=int, default=DEFAULT_SAMPLES_PER_VIEW, help="random samples drawn per pose (default: %(default)s)"
     )

@@ -34,8 +34,7 @@ if TYPE_CHECKING:  # annotations only: inputs imports nothing from here
 log = logging.getLogger(__name__)
 
 
-# The farm's defaults live in zbuf_occlude.defaults with every other; the farm's commands
-# take them from here under these names.
+#: The farm's poses under their older name here (:data:`zbuf_occlude.defaults.DEFAULT_FARM_VIEWS`).
 DEFAULT_VIEWS = DEFAULT_FARM_VIEWS
 #: The paper's data set, Sryamkin et al. 2023, Table 2: 28.8 samples per MB.
 PAPER_SAMPLES_PER_MB = 28.8
@@ -111,7 +110,7 @@ class FarmParams:
         Return physics: 7 rays per firing in the beam's divergence cone, strongest echo.
     """
 
-    views: str = DEFAULT_VIEWS
+    views: str = DEFAULT_FARM_VIEWS
     samples_per_view: int = DEFAULT_SAMPLES_PER_VIEW
     n_points: int = DEFAULT_N_POINTS
     dense_points: int | None = DEFAULT_FARM_DENSE_POINTS
