@@ -45,9 +45,10 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from sofa_mesh import default_mesh  # noqa: E402
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
-SHARED_MESH = REPO_ROOT.parent / "shared" / "data" / "modelnet_subset" / "ModelNet10" / "sofa" / "train" / "sofa_0001.off"
-SHIPPED_MESH = REPO_ROOT / "data" / "samples" / "sofa"
 WARMUP_POSE = (-40.0, 10.0)
 
 try:  # NVIDIA Warp: the kernel is defined at import (Warp compiles module-level kernels)
@@ -298,7 +299,7 @@ def main(argv: list[str] | None = None) -> int:
     import zbuf_occlude as zo
 
     poses = zo.view_schedule(args.poses)
-    path = args.mesh or (SHARED_MESH if SHARED_MESH.is_file() else sorted(SHIPPED_MESH.rglob("*.off"))[0])
+    path = args.mesh or default_mesh()
     mesh = zo.load_mesh(path)
     load_before, n_cpu = os.getloadavg(), cores()
     loaded = load_before[0] > n_cpu

@@ -28,15 +28,8 @@ import sys
 import time
 from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-SHARED_MESH = REPO_ROOT.parent / "shared" / "data" / "modelnet_subset" / "ModelNet10" / "sofa" / "train" / "sofa_0001.off"
-SHIPPED_MESH = REPO_ROOT / "data" / "samples" / "sofa"
-
-
-def default_mesh() -> Path:
-    if SHARED_MESH.is_file():
-        return SHARED_MESH
-    return sorted(SHIPPED_MESH.rglob("*.off"))[0]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from sofa_mesh import default_mesh  # noqa: E402
 
 
 def profile(mesh, n_points: int, poses, resolution: int) -> dict:
