@@ -135,6 +135,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
     failed = len(skipped)
     header = f"{'mesh':32s} {'el':>6s} {'az':>6s} {'method':18s} {'agree%':>8s} {'f-vis%':>7s} {'f-hid%':>7s} {'ms':>8s} {'oracle ms':>9s}"
     print(header)
+    options = {m: resolution_option(m, args.resolution) for m in methods}
     for path, name in meshes:
         try:
             mesh = load_mesh(path)
@@ -150,7 +151,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
             oracle_ms = 1e3 * (time.perf_counter() - t)
             for method in methods:
                 t = time.perf_counter()
-                pred = visible_mask(mesh, points, camera, method, face_index=face_index, **resolution_option(method, args.resolution))
+                pred = visible_mask(mesh, points, camera, method, face_index=face_index, **options[method])
                 ms = 1e3 * (time.perf_counter() - t)
                 a = agreement(pred, truth)
                 rows.append({"mesh": name, "elevation_deg": el, "azimuth_deg": az, "method": method, "ms": ms, "oracle_ms": oracle_ms, **a})

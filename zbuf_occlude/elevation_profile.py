@@ -146,12 +146,13 @@ def profile_table(
         raise InvalidInputError(f"azimuths and points must be >= 1, got {azimuths} and {points}")
     pts, fi = sample_surface(mesh, count=int(points), seed=seed)
     az_list = [k * 360.0 / int(azimuths) for k in range(int(azimuths))]
+    method_options = {**resolution_option(method, resolution), **options}
     rows = []
     for el in tqdm(list(elevations), desc="elevation profile", unit="elevation", disable=None if progress else True):  # None: only on a terminal
         samples = []
         for az in az_list:
             camera = camera_on_sphere(float(el), az, radius, resolution=resolution)
-            mask = visible_mask(mesh, pts, camera, method, face_index=fi, **resolution_option(method, resolution), **options)
+            mask = visible_mask(mesh, pts, camera, method, face_index=fi, **method_options)
             samples.append(projected_areas(mesh, fi, mask))
         row: dict[str, float] = {"elevation_deg": float(el)}
         for key in (*PLANES, "visible"):

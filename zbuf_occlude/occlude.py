@@ -284,15 +284,14 @@ def occlude_object(
     dense = dense or dense_cloud(mesh, key, seed=seed)
     session = method_info(method).session
     scene = session(mesh, dense.points, dense.face_index) if session is not None else None
+    one_shot_options = {**resolution_option(method, resolution), **method_options}
     try:
         for pose_index, (el, az) in enumerate(poses):
             camera: Camera = camera_on_sphere(el, az, radius, resolution=resolution)
             if scene is not None:
                 visible = scene.visible(camera, **method_options)
             else:
-                visible = visible_mask(
-                    mesh, dense.points, camera, method, face_index=dense.face_index, **resolution_option(method, resolution), **method_options
-                )
+                visible = visible_mask(mesh, dense.points, camera, method, face_index=dense.face_index, **one_shot_options)
             visible_index = np.flatnonzero(visible)
             if len(visible_index) == 0 and samples_per_view:
                 log.warning("%s: nothing visible from el=%g az=%g; no sample", source or "mesh", el, az)
