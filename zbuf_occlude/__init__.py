@@ -13,34 +13,15 @@ against an exact geometric oracle.
 >>> mask = zo.visible_mask(mesh, points, camera, method="zbuffer", resolution=1024, face_index=face_index)
 """
 
-from ._version import __version__
-from .cameras import DEFAULT_RADIUS, Camera, camera_on_sphere, cameras_from_schedule, view_schedule
-from .errors import (
-    BackendUnavailable,
-    CameraError,
-    CheckpointError,
-    DatasetBusy,
-    DatasetFormatError,
-    InvalidInputError,
-    MeshLoadError,
-    OutputError,
-    InsufficientMemoryError,
-    RegistryError,
-    ShardChecksumError,
-    UnknownOptionError,
-    UnsafePathError,
-    ZbufOccludeError,
-)
-from .mesh import load_mesh, normalize_mesh
-from .render import ModernGLRenderer, context_info, render_depth
-from .sampling import points_from_barycentric, sample_faces, sample_surface
-from .visibility import MethodInfo, available_methods, method_info, register, visible_mask
-from .visibility.zbuffer import ResidentPoints, Scene  # Scene: deprecated alias of ResidentPoints
-from .occlude import OccludedCloud, PaddedSamplesWarning, occlude
-from .dataset import OccludedDataset
-from .farm import merge_farm, run_farm
-from .sensors import DepthCamera, Lidar, Scan, ScanScene, SceneObject, load_scene, look_at_pose, scan
+# Nothing heavy is imported here: each public name is imported from its module the first time it
+# is used (lazy_loader, from the imports listed in __init__.pyi): `import zbuf_occlude` pays for
+# none of numba, moderngl, scipy, trimesh or h5py, and a program pays only for what it calls.
+import lazy_loader as _lazy
 
+_lazy_getattr, __dir__, _stub_names = _lazy.attach_stub(__name__, __file__)
+
+# The public API in the order the documentation lists it; the same names as __init__.pyi's (a test
+# checks), written out because the API docs read __all__ from this file.
 __all__ = [
     "__version__",
     "load_mesh",
@@ -87,6 +68,7 @@ __all__ = [
 ]
 
 
+
 def __getattr__(name: str):
     # ``zbuf_occlude.profile`` was renamed ``elevation_profile`` (it shadowed the standard
     # library's ``profile``); the old name keeps working, with a warning, for one release.
@@ -98,4 +80,4 @@ def __getattr__(name: str):
             "zbuf_occlude.profile is deprecated, use zbuf_occlude.elevation_profile", DeprecationWarning, stacklevel=2
         )
         return importlib.import_module(".elevation_profile", __name__)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return _lazy_getattr(name)

@@ -21,11 +21,9 @@ from .cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
 from .defaults import DEFAULT_DENSE_POINTS, DEFAULT_METHOD, DEFAULT_RESOLUTION, DEFAULT_SEED, DEFAULT_VIEWS
 from .errors import InvalidInputError, ZbufOccludeError
 from .io import FORMATS, write_csv
-from .mesh import load_mesh, scan_meshes
 from .mesh_formats import EXTENSIONS_TEXT
 from .metrics import agreement
 from .resources import MemoryEstimate, check_memory, estimate_job_memory
-from .sampling import check_seed, sample_surface
 from .visibility.registry import available_methods, check_runnable, method_info, resolution_option, unavailable_reason, visible_mask
 
 __all__ = ["main", "build_parser", "SAMPLE_MESHES"]
@@ -114,6 +112,9 @@ def _check_validate_memory(points: int, resolution: int) -> None:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
+    from .mesh import load_mesh, scan_meshes  # trimesh (and scipy): imported by the commands that load meshes
+    from .sampling import check_seed, sample_surface
+
     _check_at_least(args, points=1, resolution=1)
     check_seed(args.seed, name="--seed")
     from .farm.checks import check_radius
@@ -208,7 +209,7 @@ def build_parser() -> argparse.ArgumentParser:
     from .farm.cli import CLASS_FROM_HELP, RADIUS_HELP, VIEWS_HELP
     from .defaults import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION
     from .defaults import DEFAULT_FARM_VIEWS as FARM_VIEWS
-    from .farm.generate import GENERATE_DEFAULTS as gd  # generate's defaults, taken from zbuf_occlude.defaults
+    from .farm.config import GENERATE_DEFAULTS as gd  # generate's defaults, taken from zbuf_occlude.defaults
 
     parser = argparse.ArgumentParser(prog="zbuf-occlude", description="Real-like occluded point clouds from meshes (headless z-buffer HSR).")
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")

@@ -27,7 +27,7 @@ from .layout import (
     STORAGE_MODES,
     file_list_name,
 )
-from .mesh import SPLITS
+from .discovery import SPLITS
 from .occlude import pose_samples
 from .safe_paths import path_inside
 

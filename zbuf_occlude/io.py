@@ -19,13 +19,15 @@ import tempfile
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import OutputError
-from .occlude import OccludedCloud  # re-exported: its home is the producer, occlude.py
+
+if TYPE_CHECKING:  # its home is the producer, occlude.py, which needs trimesh: imported where a cloud is made
+    from .occlude import OccludedCloud
 
 __all__ = [
     "OccludedCloud",
@@ -244,6 +246,8 @@ def write_npz(path: str | os.PathLike, cloud: OccludedCloud) -> Path:
 
 def read_npz(path: str | os.PathLike) -> OccludedCloud:
     """Read a cloud written by :func:`write_npz`."""
+    from .occlude import OccludedCloud
+
     with np.load(path) as z:
         return OccludedCloud(
             points=z["points"],
@@ -442,6 +446,8 @@ def read_h5_clouds(path: str | os.PathLike) -> list[OccludedCloud]:
 
 def clouds_of_h5(d: Mapping[str, np.ndarray]) -> list[OccludedCloud]:
     """The clouds of :func:`read_h5`'s arrays (with provenance columns), in order."""
+    from .occlude import OccludedCloud
+
     return [
         OccludedCloud(
             points=d["data"][i],
@@ -458,3 +464,12 @@ def clouds_of_h5(d: Mapping[str, np.ndarray]) -> list[OccludedCloud]:
         )
         for i in range(len(d["data"]))
     ]
+
+
+def __getattr__(name: str):
+    # OccludedCloud is re-exported here, imported on first use (see the imports above)
+    if name == "OccludedCloud":
+        from .occlude import OccludedCloud
+
+        return OccludedCloud
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

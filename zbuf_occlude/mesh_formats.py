@@ -15,9 +15,12 @@ import io
 import re
 from pathlib import Path
 
-import trimesh
+from typing import TYPE_CHECKING
 
 from .errors import MeshLoadError
+
+if TYPE_CHECKING:  # trimesh (and scipy with it) is imported by the readers below, when a file is read
+    import trimesh
 
 __all__ = ["SUPPORTED_EXTENSIONS", "EXTENSIONS_TEXT", "FORMAT_EXTRAS", "read_trimesh"]
 
@@ -241,6 +244,8 @@ def _check_binary_stl_length(raw: bytes) -> None:
 
 def _read(path: Path, file_type: str) -> trimesh.Trimesh:
     """Parse ``path`` with trimesh into one Trimesh; scenes are flattened with transforms."""
+    import trimesh
+
     if file_type == "ply":
         raw = _utf8_ply_header(path.read_bytes())
         mesh = _to_mesh(trimesh.load_scene(io.BytesIO(raw), file_type="ply", process=False))
@@ -297,6 +302,8 @@ def _read(path: Path, file_type: str) -> trimesh.Trimesh:
 
 
 def _to_mesh(scene: trimesh.Scene) -> trimesh.Trimesh:
+    import trimesh
+
     # Scene.to_mesh() concatenates every Trimesh of a scene (GLB) with its node
     # transform baked in, and drops points and paths.  process=False at load keeps
     # vertex and face order as in the file (no merging of ModelNet's duplicated vertices).

@@ -21,8 +21,9 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import trimesh
 from numpy.typing import NDArray
 
 from .cameras import DEFAULT_RADIUS, Camera, camera_on_sphere, view_schedule
@@ -37,10 +38,12 @@ from .defaults import (
     DEFAULT_VIEWS,
 )
 from .errors import InvalidInputError
-from .mesh import load_mesh, normalize_mesh
 from .resources import check_memory, estimate_job_memory
 from .sampling import check_seed, sample_surface
 from .visibility.registry import check_keywords, method_info, resolution_option, visible_mask
+
+if TYPE_CHECKING:  # trimesh (and scipy) is imported by occlude(), which takes files and meshes
+    import trimesh
 
 __all__ = [
     "OccludedCloud", "object_key", "derive_rng", "sample_rng", "draw_sample", "pose_samples", "count_padded",
@@ -408,6 +411,10 @@ def occlude(
     >>> clouds[0].points.shape, clouds[0].elevation_deg, clouds[0].azimuth_deg
     ((1024, 3), -80.0, 0.0)
     """
+    import trimesh
+
+    from .mesh import load_mesh, normalize_mesh
+
     if isinstance(mesh_or_path, trimesh.Trimesh):
         mesh = mesh_or_path if _is_normalised(mesh_or_path) else normalize_mesh(mesh_or_path)
         default_name, source = "", ""

@@ -23,13 +23,16 @@ from __future__ import annotations
 
 import math
 import numbers
+from typing import TYPE_CHECKING, TypeAlias
 
 import numpy as np
-import trimesh
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import InvalidInputError
 from .resources import BYTES_PER_DENSE_POINT, check_memory
+
+if TYPE_CHECKING:  # imported where a mesh is looked at: check_seed's users (the farm's options) need no trimesh
+    import trimesh
 
 __all__ = [
     "sample_faces",
@@ -45,7 +48,7 @@ __all__ = [
 SeedLike = int | np.random.Generator | None
 
 #: A mesh, or its triangles as a (F, 3, 3) array of corner coordinates.
-MeshOrTriangles = trimesh.Trimesh | ArrayLike
+MeshOrTriangles: TypeAlias = "trimesh.Trimesh | ArrayLike"
 
 
 def triangles_of(mesh_or_triangles: MeshOrTriangles) -> NDArray[np.float64]:
@@ -66,6 +69,8 @@ def triangles_of(mesh_or_triangles: MeshOrTriangles) -> NDArray[np.float64]:
     InvalidInputError
         On a wrong shape or NaN/inf coordinates.
     """
+    import trimesh
+
     if isinstance(mesh_or_triangles, trimesh.Trimesh):
         vertices = np.asarray(mesh_or_triangles.vertices, dtype=np.float64)
         faces = np.asarray(mesh_or_triangles.faces, dtype=np.int64).reshape(-1, 3)

@@ -37,9 +37,7 @@ from .run import (
     DEFAULT_POINTS,
     DEFAULT_REFERENCE,
     DEFAULT_VIEWS,
-    GRID_METHODS,
     GRID_SWEEP,
-    IMAGE_SPACE_METHODS,
     RESOLUTION_SWEEP,
     chamfer_distance,
     compare,
@@ -73,3 +71,12 @@ __all__ = [
     "PAPER_TABLE_1A_REDUCTION",
     "PAPER_TABLE_1B_REDUCTION",
 ]
+
+
+def __getattr__(name: str):
+    # IMAGE_SPACE_METHODS and GRID_METHODS are read from the registry when first used (run.py)
+    if name in ("IMAGE_SPACE_METHODS", "GRID_METHODS"):
+        from . import run
+
+        return getattr(run, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

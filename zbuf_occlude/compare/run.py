@@ -64,12 +64,22 @@ DEFAULT_REFERENCE = "oracle"
 RESOLUTION_SWEEP = (128, 256, 512, 1024, 2048)
 #: Occupancy-grid sizes of the agreement-vs-grid sweep, cells per axis.
 GRID_SWEEP = (16, 32, 64, 128)
-#: Methods with a ``resolution`` option, swept over :data:`RESOLUTION_SWEEP` (the built-in
-#: methods declaring ``takes_resolution``; the run asks :func:`method_info`, so methods
-#: registered later are swept too).
-IMAGE_SPACE_METHODS = tuple(m for m in available_methods() if method_info(m).takes_resolution)
-#: Methods with a ``grid`` option (or a grid in their name), swept over :data:`GRID_SWEEP`.
-GRID_METHODS = tuple(m for m in available_methods() if method_info(m).takes_grid or method_info(m).grid_of)
+#: ``IMAGE_SPACE_METHODS``: methods with a ``resolution`` option, swept over
+#: :data:`RESOLUTION_SWEEP` (the registered methods declaring ``takes_resolution``; the run asks
+#: :func:`method_info`, so methods registered later are swept too).  ``GRID_METHODS``: methods
+#: with a ``grid`` option (or a grid in their name), swept over :data:`GRID_SWEEP`.  Both are
+#: read from the registry when first used (:func:`__getattr__`): asking it imports every built-in
+#: method, with numba and moderngl, which ``zbuf-occlude --help`` must not pay for.
+_METHOD_GROUPS = {
+    "IMAGE_SPACE_METHODS": lambda info: info.takes_resolution,
+    "GRID_METHODS": lambda info: info.takes_grid or bool(info.grid_of),
+}
+
+
+def __getattr__(name: str):
+    if name in _METHOD_GROUPS:
+        return tuple(m for m in available_methods() if _METHOD_GROUPS[name](method_info(m)))
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 #: Bytes per mebibyte, for the ``peak_mib`` column.
 _MIB = float(1 << 20)
 

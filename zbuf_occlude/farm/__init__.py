@@ -32,16 +32,13 @@ manifest, card, summary), ``lock``, ``lifecycle``, ``run`` (executors, :func:`ru
 :func:`merge_farm`), ``generate``, ``cli`` (the subcommands).
 """
 
-from .cli import add_farm_merge_parser, add_farm_parser
-from .config import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION, PAPER_SAMPLES_PER_MB, FarmParams, shard_path
-from .inputs import FarmObject, discover_objects, parse_shard, select_shard
-from .generate import GENERATE_DEFAULTS, generate, objects_from_paths
-from .journal import FarmSummary
-from .lifecycle import Terminated
-from .lock import DatasetBusy, farm_lock
-from .run import merge_farm, run_farm
-from .worker import process_object
+# Each name is imported from its module when first used (the imports are in __init__.pyi):
+# ``zbuf-occlude --help`` builds the farm's parsers without loading meshes or visibility.
+import lazy_loader as _lazy
 
+__getattr__, __dir__, _stub_names = _lazy.attach_stub(__name__, __file__)
+
+# The same names as __init__.pyi's (a test checks), written out because the API docs read __all__ here.
 __all__ = [
     "FarmObject",
     "FarmParams",

@@ -28,7 +28,6 @@ from .config import (
 )
 from .checks import check_out_option
 from .inputs import parse_shard
-from .run import merge_farm, run_farm
 
 log = logging.getLogger(__name__)
 
@@ -58,6 +57,8 @@ def _farm_command(args: argparse.Namespace) -> int:
         method=args.method,
         **_sensor_params(args),
     )
+    from .run import run_farm  # meshes, visibility and the GL: imported when the command runs
+
     summary = run_farm(
         args.root,
         args.out,
@@ -105,6 +106,8 @@ def _interval_text(lo_hi: tuple[float, float]) -> str:
 def _merge_command(args: argparse.Namespace) -> int:
     if args.out is not None:
         check_out_option(args.out)
+    from .run import merge_farm
+
     summary = merge_farm(args.inputs, args.out, progress=not args.no_progress)
     print(summary.format())
     return 1 if summary.failed else 0

@@ -17,13 +17,16 @@ import numpy as np
 
 from ..cameras import DEFAULT_RADIUS, view_schedule
 from ..defaults import (
+    DEFAULT_DENSE_POINTS,
     DEFAULT_FARM_DENSE_POINTS,
     DEFAULT_FARM_RESOLUTION,
     DEFAULT_FARM_VIEWS,
     DEFAULT_METHOD,
     DEFAULT_N_POINTS,
+    DEFAULT_RESOLUTION,
     DEFAULT_SAMPLES_PER_VIEW,
 )
+from ..defaults import DEFAULT_VIEWS as GENERATE_VIEWS
 from ..errors import BackendUnavailable, InvalidInputError, OutputError
 from ..layout import GENERATE_STORAGES, STORAGE_MODES, record_name, sample_file_name, shard_name
 from ..sampling import check_seed
@@ -244,3 +247,13 @@ def sample_file_path(name: str, pose_index: int, cloud, fmt: str) -> str:
 
 def record_path(out: Path, index: int) -> Path:
     return out / record_name(index)
+
+
+#: ``generate``'s defaults, smaller poses and larger images than the farm's (one machine, a few meshes):
+#: the 5×5 grid of poses, 2048-point samples, 10 per pose, 100,000 dense points, a 1024² z-buffer,
+#: written as HDF5 (one file per split, which OccludedDataset, PyTorch and PointNet-style code read;
+#: npz/ply give one file per sample, millions of files for a whole data set).
+GENERATE_DEFAULTS = FarmParams(
+    views=GENERATE_VIEWS, samples_per_view=DEFAULT_SAMPLES_PER_VIEW, n_points=DEFAULT_N_POINTS,
+    dense_points=DEFAULT_DENSE_POINTS, resolution=DEFAULT_RESOLUTION, storage="h5",
+)  # fmt: skip

@@ -23,16 +23,13 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-
-from ..defaults import DEFAULT_DENSE_POINTS, DEFAULT_N_POINTS, DEFAULT_RESOLUTION, DEFAULT_SAMPLES_PER_VIEW, DEFAULT_VIEWS
-from ..discovery import SkippedInput
+from ..discovery import SPLITS, SkippedInput
 from ..errors import InvalidInputError
 from ..io import concat_h5, file_sha256, write_text
 from ..layout import CARD_FILE, GENERATE_STORAGES, file_list_name, split_file_name
-from ..mesh import SPLITS
 from ..safe_paths import path_inside
 from .checks import check_out_outside_inputs
-from .config import FarmParams, record_path
+from .config import GENERATE_DEFAULTS, FarmParams, record_path
 from .inputs import FarmObject, scan_inputs
 from .journal import FarmSummary, read_json, shape_names_of
 from .worker import write_json
@@ -41,15 +38,6 @@ from .run import run_farm
 __all__ = ["generate", "scan_paths", "objects_from_paths", "split_file_name", "GENERATE_DEFAULTS"]
 
 log = logging.getLogger(__name__)
-
-#: ``generate``'s defaults, smaller poses and larger images than the farm's (one machine, a few meshes):
-#: the 5×5 grid of poses, 2048-point samples, 10 per pose, 100,000 dense points, a 1024² z-buffer,
-#: written as HDF5 (one file per split, which OccludedDataset, PyTorch and PointNet-style code read;
-#: npz/ply give one file per sample, millions of files for a whole data set).
-GENERATE_DEFAULTS = FarmParams(
-    views=DEFAULT_VIEWS, samples_per_view=DEFAULT_SAMPLES_PER_VIEW, n_points=DEFAULT_N_POINTS,
-    dense_points=DEFAULT_DENSE_POINTS, resolution=DEFAULT_RESOLUTION, storage="h5",
-)  # fmt: skip
 
 
 def scan_paths(

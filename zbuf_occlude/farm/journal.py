@@ -14,7 +14,7 @@ from typing import Any
 from ..errors import InvalidInputError
 from ..io import file_sha256, temp_is_orphan, temp_owner, write_text
 from ..layout import CARD_FILE, FORMAT_VERSION, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, file_list_name
-from ..mesh import SPLITS
+from ..discovery import SPLITS
 from ..safe_paths import check_line_text, path_inside
 from ..occlude import count_padded
 from .config import BYTES_PER_MB, PAPER_SAMPLES_PER_MB, FarmParams, plan_digest, record_path, shard_path

@@ -18,7 +18,7 @@ from typing import Any
 from ..errors import BackendUnavailable, InvalidInputError, OutputError
 from ..io import atomic_path, write_text
 from ..layout import CARD_FILE, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, TASK_DIR, file_list_name
-from ..mesh import SPLITS
+from ..discovery import SPLITS
 from ..safe_paths import path_inside
 from .checks import check_before_work, check_out_outside_inputs, prepare_out
 from .config import MANIFEST_INTERVAL_S, OPTION_NAMES, FarmParams, record_path, shard_path

@@ -18,7 +18,6 @@ import numpy as np
 
 from ..io import OccludedCloud, atomic_h5, file_sha256, write_h5, write_npz, write_ply, write_text
 from ..layout import FORMAT_VERSION, SAMPLE_FILE_FORMATS
-from ..mesh import load_mesh
 from ..occlude import dense_cloud, occlude_object
 from ..safe_paths import check_relative_name, path_inside
 from .._version import __version__
@@ -80,6 +79,7 @@ def _scan(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
     ``sensor_height_m``, ``object_azimuth_deg``, ``yaw_deg``, ``size_m``, ``radius``) and
     ``ring``.  The record's ``n_visible`` has one entry per scan (0: no return).
     """
+    from ..mesh import load_mesh  # trimesh: imported by the work, not by modules that only read records
     from ..sensors.crops import farm_datasets
 
     mesh = load_mesh(obj.source)
@@ -118,6 +118,8 @@ def _render(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
         return _scan(obj, params, out)
     if params.storage in SAMPLE_FILE_FORMATS:  # the name becomes folders under out: `...off` (name "..") must not leave it
         check_relative_name(obj.name, what=f"the name of {obj.source}")
+    from ..mesh import load_mesh  # trimesh: imported by the work, not by modules that only read records
+
     mesh = load_mesh(obj.source)
     dense = dense_cloud(mesh, obj.key, seed=params.seed, count=params.dense_points, density=params.density)
     poses = params.poses

@@ -17,17 +17,19 @@ import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
 
 import numpy as np
-import trimesh
 
 from ..errors import InvalidInputError, OutputError, ZbufOccludeError
 from ..farm.generate import scan_paths
 from ..farm.inputs import FarmObject
 from ..io import atomic_h5, write_text
-from ..mesh import load_mesh
 from ..occlude import derive_rng
+
+if TYPE_CHECKING:
+    import trimesh
 
 __all__ = ["Protocol", "ProtocolOptions", "ProtocolRun", "run_protocol", "write_arrays_h5", "read_arrays_h5", "SHARDS_DIR"]
 
@@ -211,6 +213,8 @@ def run_protocol(
             shards.append(shard)
             continue
         try:
+            from ..mesh import load_mesh  # trimesh: imported when a protocol runs
+
             mesh = load_mesh(obj.source)
             rng = derive_rng(options.seed, obj.key, _PROTOCOL_STREAM)
             arrays = protocol.make(mesh, obj, options, rng)

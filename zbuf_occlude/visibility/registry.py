@@ -24,15 +24,17 @@ import inspect
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
-import trimesh
 from numpy.typing import NDArray
 
 from ..cameras import Camera
 from ..defaults import DEFAULT_METHOD, DEFAULT_SELF_HIT_TOLERANCE
 from ..errors import BackendUnavailable, InvalidInputError, RegistryError, UnknownOptionError
+
+if TYPE_CHECKING:  # annotations only: trimesh (and scipy with it) is imported where meshes are made
+    import trimesh
 
 __all__ = [
     "register",
@@ -62,6 +64,20 @@ VisibilityMethod = Callable[..., NDArray[np.bool_]]
 EXTRA_MODULES: dict[str, str] = {"open3d": "open3d"}
 _METHODS: dict[str, VisibilityMethod] = {}
 _INFO: dict[str, MethodInfo] = {}
+#: Modules of this package whose import registers the built-in methods: image space (zbuffer,
+#: zbuffer-exact), the exact oracles, the paper's object-space methods (§3.3-3.6), peers and
+#: auto.  They are imported the first time a method is looked up, not with the package, so that
+#: a program pays for numba, moderngl and Embree only when it asks for visibility.
+BUILTIN_MODULES = ("auto", "embree_fast", "gpu_exact", "object_space", "occupancy", "oracle", "peers", "vertex", "zbuffer")
+_builtins_loaded = False
+
+
+def _load_builtins() -> None:
+    global _builtins_loaded
+    if not _builtins_loaded:
+        _builtins_loaded = True  # first: a method module that looks a method up while it loads must not recurse
+        for module in BUILTIN_MODULES:
+            importlib.import_module(f"{__package__}.{module}")
 
 
 
@@ -158,6 +174,7 @@ def register(*names: str, **capabilities: Any) -> Callable[[VisibilityMethod], V
 
 def available_methods() -> list[str]:
     """Names accepted by ``visible_mask(..., method=...)``, sorted."""
+    _load_builtins()
     return sorted(_METHODS)
 
 
@@ -191,6 +208,7 @@ def check_runnable(name: str) -> None:
 
 def get_method(name: str) -> VisibilityMethod:
     """The function registered as ``name``; :class:`InvalidInputError` if unknown."""
+    _load_builtins()
     try:
         return _METHODS[name]
     except KeyError:

@@ -1,0 +1,61 @@
+"""What a program pays at import: ``import zbuf_occlude`` and ``zbuf-occlude --help`` load no heavy
+library; each is imported by the code that uses it (the public names come from __init__.pyi)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+HEAVY = ("numba", "moderngl", "scipy", "h5py", "torch", "trimesh", "embreex", "open3d")
+
+
+def _loaded_after(code: str) -> list[str]:
+    probe = f"{code}\nimport json, sys\nprint(json.dumps([m for m in {HEAVY!r} if m in sys.modules]))"
+    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, env=env, timeout=120, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_import_zbuf_occlude_loads_no_heavy_library():
+    assert _loaded_after("import zbuf_occlude") == []
+
+
+def test_a_public_name_imports_what_it_needs_and_nothing_else():
+    # visibility's registry is numpy only; the methods (numba, moderngl, Embree) load when one is asked for
+    assert _loaded_after("import zbuf_occlude as zo\nzo.visible_mask, zo.Camera, zo.camera_on_sphere") == []
+    assert "trimesh" in _loaded_after("import zbuf_occlude as zo\nzo.load_mesh")
+
+
+def test_help_loads_neither_numba_nor_moderngl():
+    code = "from zbuf_occlude.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass"
+    loaded = _loaded_after(code)
+    assert not {"numba", "moderngl", "torch", "h5py"} & set(loaded), loaded
+
+
+def test_every_public_name_resolves_and_occlude_is_the_function():
+    import zbuf_occlude as zo
+
+    for name in zo.__all__:
+        assert getattr(zo, name) is not None, name
+    import zbuf_occlude.occlude  # importing the module of the same name must not replace the function
+
+    assert callable(zo.occlude) and zo.occlude.__module__ == "zbuf_occlude.occlude"
+
+
+def test_all_lists_the_names_the_stub_imports():
+    import zbuf_occlude as zo
+
+    submodules = {n for n in zo._stub_names if n not in zo.__all__ and n != "__version__"}
+    assert set(zo.__all__) == set(zo._stub_names) - submodules
+    assert all(getattr(zo, m).__name__ == f"zbuf_occlude.{m}" for m in submodules)
+
+
+def test_the_farms_all_lists_the_names_its_stub_imports():
+    import zbuf_occlude.farm as farm
+
+    assert set(farm.__all__) == set(farm._stub_names)
+    assert all(getattr(farm, name) is not None for name in farm.__all__)

@@ -1,0 +1,34 @@
+"""The public API of zbuf_occlude: what ``import zbuf_occlude as zo`` exposes.
+
+Read by ``lazy_loader.attach_stub`` in ``__init__.py`` (each name is imported from its module
+the first time it is used) and by type checkers and the API docs (these imports, as written).
+"""
+
+from ._version import __version__
+from .cameras import DEFAULT_RADIUS, Camera, camera_on_sphere, cameras_from_schedule, view_schedule
+from .errors import (
+    BackendUnavailable,
+    CameraError,
+    CheckpointError,
+    DatasetBusy,
+    DatasetFormatError,
+    InsufficientMemoryError,
+    InvalidInputError,
+    MeshLoadError,
+    OutputError,
+    RegistryError,
+    ShardChecksumError,
+    UnknownOptionError,
+    UnsafePathError,
+    ZbufOccludeError,
+)
+from .mesh import load_mesh, normalize_mesh
+from .render import ModernGLRenderer, context_info, render_depth
+from .sampling import points_from_barycentric, sample_faces, sample_surface
+from .visibility import MethodInfo, available_methods, method_info, register, visible_mask
+from .visibility.zbuffer import ResidentPoints, Scene  # Scene: deprecated alias of ResidentPoints
+from .occlude import OccludedCloud, PaddedSamplesWarning, occlude
+from .dataset import OccludedDataset
+from .farm import merge_farm, run_farm
+from .sensors import DepthCamera, Lidar, Scan, ScanScene, SceneObject, load_scene, look_at_pose, scan
+from . import cameras, dataset, errors, farm, mesh, render, sampling, sensors, visibility
