@@ -110,14 +110,13 @@ def sample_mesh_files(sample_meshes_dir: Path) -> list[Path]:
 @pytest.fixture
 def no_mesh_loaded(monkeypatch):
     """Fails the test if any mesh is loaded (by a farm worker or by ``validate``): the checks must come first."""
-    import zbuf_occlude.cli as cli
-    import zbuf_occlude.farm.worker as worker
+    import zbuf_occlude.mesh as mesh
 
     def refuse(*args, **kwargs):
         raise AssertionError("a mesh was loaded before the options were checked")
 
-    monkeypatch.setattr(worker, "load_mesh", refuse)
-    monkeypatch.setattr(cli, "load_mesh", refuse)
+    # the farm's worker and validate import load_mesh from its module when they run
+    monkeypatch.setattr(mesh, "load_mesh", refuse)
 
 
 def tiny_dataset(out: Path, storage: str = "dense") -> Path:

@@ -101,9 +101,7 @@ def test_interrupt_exits_130_with_a_resume_hint(tmp_path, two_meshes, monkeypatc
     monkeypatch.setattr(run, "run_in_workers", interrupted)  # generate's parent waits on its worker process
     assert main(["generate", str(two_meshes), "--out", str(tmp_path / "o"), *ARGS]) == 130
     assert "interrupted" in capsys.readouterr().err
-    from zbuf_occlude.farm import cli as farm_cli
-
-    monkeypatch.setattr(farm_cli, "run_farm", interrupted)
+    monkeypatch.setattr(run, "run_farm", interrupted)  # the farm command imports run_farm from run when it runs
     assert main(["farm", str(two_meshes), "--out", str(tmp_path / "f"), "--no-progress"]) == 130
 
 

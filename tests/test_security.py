@@ -318,13 +318,13 @@ def test_a_changed_shard_is_still_caught_with_its_checksum(ds: Path) -> None:
 # -- class names with control characters ---------------------------------------------------------
 @pytest.mark.parametrize("cls", ["a\x85b", "c\nd", "e\u2028f"])
 def test_a_class_name_with_a_control_character_is_refused_before_any_work(tmp_path: Path, cls: str, monkeypatch) -> None:
+    import zbuf_occlude.mesh as mesh
     from zbuf_occlude.farm import FarmParams, run_farm
-    from zbuf_occlude.farm import worker
 
     (tmp_path / "meshes" / cls).mkdir(parents=True)
     shutil.copy(CHAIR, tmp_path / "meshes" / cls / "x_0001.off")
     shutil.copytree(SAMPLE_MESHES / "chair", tmp_path / "meshes" / "chair")
-    monkeypatch.setattr(worker, "load_mesh", lambda *a: pytest.fail("a mesh was loaded"))
+    monkeypatch.setattr(mesh, "load_mesh", lambda *a: pytest.fail("a mesh was loaded"))  # the worker imports it when it runs
     with pytest.raises(InvalidInputError, match=re.escape(f"class name {cls!r} holds the control character")):
         run_farm(tmp_path / "meshes", tmp_path / "out", params=FarmParams(views="0:0", dense_points=256), progress=False)
 
