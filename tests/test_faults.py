@@ -279,9 +279,9 @@ _HOLD_HOOK = """
 import os
 if os.environ.get("ZO_TEST_HOLD"):
     import signal, time
-    import zbuf_occlude.farm.worker as worker
+    import zbuf_occlude.mesh as mesh  # the farm's worker imports load_mesh from here when it runs
 
-    _load_mesh = worker.load_mesh
+    _load_mesh = mesh.load_mesh
 
     def load_mesh(source, *args, **kwargs):
         name, marker = os.environ["ZO_TEST_HOLD"].split(os.pathsep)
@@ -294,7 +294,7 @@ if os.environ.get("ZO_TEST_HOLD"):
             signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGTERM, signal.SIGINT})
         return _load_mesh(source, *args, **kwargs)
 
-    worker.load_mesh = load_mesh
+    mesh.load_mesh = load_mesh
 """
 
 
