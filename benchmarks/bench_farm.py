@@ -30,15 +30,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from zbuf_occlude.farm import (
-    DEFAULT_FARM_DENSE_POINTS,
-    DEFAULT_FARM_RESOLUTION,
-    PAPER_SAMPLES_PER_MB,
-    FarmObject,
-    FarmParams,
-    discover_objects,
-    run_farm,
-)
+from zbuf_occlude.farm import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION, PAPER_SAMPLES_PER_MB, FarmParams, run_farm
+from zbuf_occlude.mesh.inputs import FarmObject, discover_objects
 
 #: The paper's data set: 5 meshes × 40 classes (§4.3).
 PAPER_OBJECTS = 200

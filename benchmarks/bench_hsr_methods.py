@@ -31,7 +31,7 @@ import sys
 import time
 from pathlib import Path
 
-from zbuf_occlude.compare import compare, read_csv, table_1a, table_1b, write_results
+from zbuf_occlude.experiments.compare import compare, read_csv, table_1a, table_1b, write_results
 from zbuf_occlude.visibility import available_methods
 
 MODELNET = Path(__file__).resolve().parents[2] / "shared" / "data" / "modelnet_subset"

@@ -24,7 +24,7 @@ import time
 import torch
 import torch.nn.functional as F
 
-from zbuf_occlude.learn.experiments import SCALES
+from zbuf_occlude.experiments.table3 import SCALES
 from zbuf_occlude.learn.models import MODELS, build_model, count_parameters
 from zbuf_occlude.learn.training import OPTIMISER_DEFAULTS, resolve_device
 

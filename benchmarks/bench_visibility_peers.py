@@ -11,7 +11,7 @@ Rows:
 
 * ``zo.visible_mask(mesh, points, camera, face_index=fi)``: the one-shot call (method
   ``auto``); per-mesh state (Embree scene, face data) is kept across calls by the library;
-* ``make_scene(...)`` once, then ``scene.visible(camera)``: a kept scene;
+* ``zo.VisibilitySession(...)`` once, then ``session.visible(camera)``: a kept session;
 * ``embree-fast``, rays only: the one-shot call without the z-buffer pre-pass;
 * Open3D ``RaycastingScene`` (``test_occlusions`` and ``cast_rays``), NVIDIA Warp
   ``mesh_query_ray`` (CPU; CUDA when present), trimesh ``RayMeshIntersector.intersects_any``
@@ -88,24 +88,23 @@ def _rays_towards_eye(points, cam, offset):
 def methods(mesh, points, fi, args) -> dict:
     """name -> (setup() -> state, view(state, camera) -> visible (N,) bool)."""
     import zbuf_occlude as zo
-    from zbuf_occlude.visibility.auto import choose_method, make_scene
+    from zbuf_occlude.visibility.auto import choose_method
     from zbuf_occlude.visibility.embree_fast import FastScene
 
     off = args.offset
     out = {
         f"`zo.visible_mask` one-shot (auto = {choose_method(one_shot=True)})": (
             lambda: None, lambda s, c: zo.visible_mask(mesh, points, c, face_index=fi)),
-        f"`make_scene` once (auto = {choose_method()}), `scene.visible` per view": (
-            lambda: make_scene(mesh, points, fi), lambda s, c: s.visible(c)),
+        f"`VisibilitySession` once (auto = {choose_method()}), `session.visible` per view": (
+            lambda: zo.VisibilitySession(mesh, points, fi), lambda s, c: s.visible(c)),
         "embree-fast one-shot, rays only (no z-buffer pre-pass)": (
             lambda: None, lambda s, c: FastScene(mesh, points, fi, sort=False, prepass=False).visible(c)),
     }
     if args.gpu_methods:
         from zbuf_occlude.visibility.gpu_exact import ExactScene
-        from zbuf_occlude.visibility.zbuffer import ResidentPoints
 
         out["`zbuffer-exact` kept scene (OpenGL)"] = (lambda: ExactScene(mesh, points, fi), lambda s, c: s.visible(c))
-        out["`zbuffer` kept scene (OpenGL)"] = (lambda: ResidentPoints(mesh, points, fi), lambda s, c: s.visible(c))
+        out["`zbuffer` kept scene (OpenGL)"] = (lambda: zo.VisibilitySession(mesh, points, fi, method="zbuffer"), lambda s, c: s.visible(c))
     try:
         from zbuf_occlude.visibility.peers import import_open3d
 

@@ -115,7 +115,7 @@ def make_figure(mesh_path: Path, out: Path, *, n_points: int = DEFAULT_POINTS, r
         fontsize=11,
     )
 
-    with zo.ResidentPoints(mesh, points, face_index) as scene:
+    with zo.VisibilitySession(mesh, points, face_index, method="zbuffer") as scene:
         for col, (el, az) in enumerate(POSES, start=1):
             camera = zo.camera_on_sphere(el, az, resolution=resolution)
             visible = scene.visible(camera)

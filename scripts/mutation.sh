@@ -22,16 +22,16 @@ NICE=${NICE:-10}
 
 # module -> source file | tests that exercise it (fast ones: mutmut reruns them per mutant)
 declare -A SOURCE=(
-  [io]=zbuf_occlude/io.py
-  [mesh_cache]=zbuf_occlude/mesh_cache.py
-  [cameras]=zbuf_occlude/cameras.py
-  [sampling]=zbuf_occlude/sampling.py
-  [mesh]=zbuf_occlude/mesh.py
-  [occlude]=zbuf_occlude/occlude.py
+  [io]=zbuf_occlude/io/clouds.py
+  [mesh_cache]=zbuf_occlude/mesh/cache.py
+  [cameras]=zbuf_occlude/geometry/cameras.py
+  [sampling]=zbuf_occlude/geometry/sampling.py
+  [mesh]=zbuf_occlude/mesh/load.py
+  [occlude]=zbuf_occlude/pipeline.py
   [oracle]=zbuf_occlude/visibility/oracle.py
   [segment_triangle]=zbuf_occlude/visibility/segment_triangle.py
   [farm_worker]=zbuf_occlude/farm/worker.py
-  [dataset]=zbuf_occlude/dataset.py
+  [dataset]=zbuf_occlude/dataset/reader.py
 )
 # modules that are part of a file: only these mutants (mutmut name globs) are run and scored
 # (none now: the oracle's kernel has its own file, visibility/segment_triangle.py)

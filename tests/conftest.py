@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from zbuf_occlude.mesh import SUPPORTED_EXTENSIONS
+from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 #: Real ModelNet meshes, next to (not inside) the repository.
@@ -110,7 +110,7 @@ def sample_mesh_files(sample_meshes_dir: Path) -> list[Path]:
 @pytest.fixture
 def no_mesh_loaded(monkeypatch):
     """Fails the test if any mesh is loaded (by a farm worker or by ``validate``): the checks must come first."""
-    import zbuf_occlude.mesh as mesh
+    import zbuf_occlude.mesh.load as mesh
 
     def refuse(*args, **kwargs):
         raise AssertionError("a mesh was loaded before the options were checked")

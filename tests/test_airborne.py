@@ -11,7 +11,7 @@ import trimesh
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors import AirborneScanner, airborne_preset, scan_airborne
-from zbuf_occlude.sensors.cli import sensor_from_name
+from zbuf_occlude.sensors.presets import sensor_from_name
 from zbuf_occlude.sensors.crops import CropDistributions, lidar_object_samples
 
 #: Relative tolerance of simulated vs analytic density (the lines' phase moves a few points in or out of a square).
@@ -56,7 +56,7 @@ def test_preset_numbers() -> None:
 
 
 def test_a_car_seen_from_the_air_is_mostly_its_roof() -> None:
-    from zbuf_occlude.mesh import normalize_mesh
+    from zbuf_occlude.mesh.load import normalize_mesh
 
     clouds = lidar_object_samples(normalize_mesh(trimesh.creation.box(extents=(1.0, 1.0, 1.0))), airborne_preset("riegl-q1560"), name="car", n_samples=4, n_points=64,
                                   distributions=CropDistributions(size_m=4.5, distance_m=(1.0, 300.0)))  # fmt: skip

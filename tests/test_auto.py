@@ -53,7 +53,7 @@ def test_the_one_shot_call_runs_the_one_shot_choice_and_a_session_the_session_ch
     visible = zo.visible_mask(mesh, points, cam, face_index=face_index)
     assert ran == ["embree-fast"]
     assert np.array_equal(visible, zo.visible_mask(mesh, points, cam, "oracle", face_index=face_index))
-    with auto.make_scene(mesh, points, face_index) as scene:
+    with zo.method_info("auto").session(mesh, points, face_index) as scene:
         assert type(scene).__name__ == "ExactScene"
 
 

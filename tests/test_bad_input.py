@@ -16,7 +16,7 @@ import pytest
 import trimesh
 
 from zbuf_occlude.errors import InvalidInputError, MeshLoadError, ZbufOccludeError
-from zbuf_occlude.mesh import load_mesh
+from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.visibility.registry import resolution_option
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -250,7 +250,8 @@ def test_bad_seed_is_our_error_naming_the_seed(seed) -> None:
 
 
 def test_bad_seed_in_the_seed_derivation_of_generate_and_farm() -> None:
-    from zbuf_occlude.occlude import dense_cloud, derive_rng
+    from zbuf_occlude.pipeline import dense_cloud
+    from zbuf_occlude.geometry.samples import derive_rng
 
     with pytest.raises(InvalidInputError, match="seed must be a non-negative integer, got -1"):
         derive_rng(-1, 7)
@@ -259,7 +260,7 @@ def test_bad_seed_in_the_seed_derivation_of_generate_and_farm() -> None:
 
 
 def test_check_seed_names_the_option_and_accepts_good_seeds() -> None:
-    from zbuf_occlude.sampling import check_seed
+    from zbuf_occlude.geometry.sampling import check_seed
 
     with pytest.raises(InvalidInputError, match="^--seed must be a non-negative integer, got -3$"):
         check_seed(-3, name="--seed")
@@ -280,7 +281,7 @@ def gl_context():
 
 def test_resolution_beyond_the_gl_maximum_names_the_maximum(gl_context) -> None:
     import zbuf_occlude as zo
-    from zbuf_occlude.cameras import camera_on_sphere
+    from zbuf_occlude.geometry.cameras import camera_on_sphere
     from zbuf_occlude.render.context import max_image_size
 
     limit = max_image_size(gl_context)
@@ -315,7 +316,8 @@ def test_check_image_size_names_the_option(gl_context) -> None:
 
 # -- options: memory (defect 7) -----------------------------------------------------------------
 def test_a_billion_points_is_refused_naming_option_estimate_and_memory() -> None:
-    from zbuf_occlude.resources import InsufficientMemoryError, check_memory, estimate_job_memory, format_bytes
+    from zbuf_occlude.errors import InsufficientMemoryError
+    from zbuf_occlude.resources import check_memory, estimate_job_memory, format_bytes
 
     estimate = estimate_job_memory(points=10**9, samples_per_view=10, dense_points=100_000, resolution=1024)
     available = 16 * 2**30
@@ -358,7 +360,7 @@ def test_sampling_refuses_before_allocating(monkeypatch) -> None:
 
     import zbuf_occlude as zo
     from zbuf_occlude import resources
-    from zbuf_occlude.resources import InsufficientMemoryError
+    from zbuf_occlude.errors import InsufficientMemoryError
 
     monkeypatch.setattr(resources, "available_memory", lambda: (2**20, "test budget"))
     monkeypatch.setattr(resources, "MIN_CHECKED_BYTES", 0)
@@ -424,7 +426,7 @@ LATIN1_NAME = b"chair/train/caf\xe9_0002.off"
 
 
 def test_non_utf8_file_name_is_reported_and_the_others_are_found(tmp_path: Path) -> None:
-    from zbuf_occlude.discovery import find_meshes, scan_meshes
+    from zbuf_occlude.mesh.discovery import find_meshes, scan_meshes
 
     _tree(tmp_path, ["chair/train/chair_0001.off", LATIN1_NAME, "chair/test/chair_0003.off"])
     scan = scan_meshes([tmp_path])
@@ -439,7 +441,7 @@ def test_non_utf8_file_name_is_reported_and_the_others_are_found(tmp_path: Path)
 
 
 def test_non_utf8_name_given_as_a_file_is_reported(tmp_path: Path) -> None:
-    from zbuf_occlude.discovery import scan_meshes
+    from zbuf_occlude.mesh.discovery import scan_meshes
 
     _tree(tmp_path, [b"caf\xe9.off", "ok.off"])
     bad = tmp_path / b"caf\xe9.off".decode("utf-8", "surrogateescape")
@@ -450,7 +452,7 @@ def test_non_utf8_name_given_as_a_file_is_reported(tmp_path: Path) -> None:
 
 
 def test_farm_discovery_reports_non_utf8_names_and_plans_the_rest(tmp_path: Path) -> None:
-    from zbuf_occlude.farm.inputs import discover_objects, scan_objects
+    from zbuf_occlude.mesh.inputs import discover_objects, scan_objects
 
     _tree(tmp_path, ["chair/train/chair_0001.off", LATIN1_NAME, "table/train/table_0001.off"])
     scan = scan_objects(tmp_path)
@@ -461,7 +463,7 @@ def test_farm_discovery_reports_non_utf8_names_and_plans_the_rest(tmp_path: Path
 
 
 def test_farm_list_file_with_a_non_utf8_line(tmp_path: Path) -> None:
-    from zbuf_occlude.farm.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs import scan_objects
 
     _tree(tmp_path, ["a.off", "b.off"])
     listing = tmp_path / "list.txt"
@@ -472,7 +474,7 @@ def test_farm_list_file_with_a_non_utf8_line(tmp_path: Path) -> None:
 
 
 def test_object_key_of_a_non_utf8_name_keys_on_its_bytes() -> None:
-    from zbuf_occlude.occlude import object_key
+    from zbuf_occlude.geometry.samples import object_key
 
     name = b"caf\xe9_0002".decode("utf-8", "surrogateescape")
     assert object_key(name) != object_key("caf\xe9_0002")  # Latin-1 bytes, not the UTF-8 é
@@ -511,7 +513,7 @@ def unreadable(monkeypatch):
 
 
 def test_unreadable_class_folder_is_reported_not_silently_lost(tmp_path: Path, unreadable) -> None:
-    from zbuf_occlude.discovery import find_meshes, scan_meshes
+    from zbuf_occlude.mesh.discovery import find_meshes, scan_meshes
 
     _tree(tmp_path, ["chair/train/chair_0001.off", "table/train/table_0001.off", "table/test/table_0002.off"])
     unreadable(tmp_path / "table")
@@ -522,7 +524,7 @@ def test_unreadable_class_folder_is_reported_not_silently_lost(tmp_path: Path, u
 
 
 def test_unreadable_root_folder_says_so(tmp_path: Path, unreadable) -> None:
-    from zbuf_occlude.discovery import scan_meshes
+    from zbuf_occlude.mesh.discovery import scan_meshes
 
     _tree(tmp_path, ["data/chair_0001.off"])
     unreadable(tmp_path / "data")
@@ -531,7 +533,7 @@ def test_unreadable_root_folder_says_so(tmp_path: Path, unreadable) -> None:
 
 
 def test_farm_discovery_reports_unreadable_folders_but_not_hidden_ones(tmp_path: Path, unreadable) -> None:
-    from zbuf_occlude.farm.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs import scan_objects
 
     _tree(tmp_path, ["chair/train/chair_0001.off", "table/train/table_0001.off", ".cache/x/chair_0009.off"])
     unreadable(tmp_path / "table" / "train")
@@ -544,9 +546,9 @@ def test_farm_discovery_reports_unreadable_folders_but_not_hidden_ones(tmp_path:
 
 def test_generate_and_farm_entry_points_survive_a_non_utf8_name(tmp_path: Path) -> None:
     # What `generate DIR` and `farm DIR` do first: find the meshes and key each name.
-    from zbuf_occlude.farm.inputs import discover_objects
-    from zbuf_occlude.mesh import find_meshes
-    from zbuf_occlude.occlude import object_key
+    from zbuf_occlude.mesh.inputs import discover_objects
+    from zbuf_occlude.mesh.discovery import find_meshes
+    from zbuf_occlude.geometry.samples import object_key
 
     _tree(tmp_path, ["chair/train/chair_0001.off", LATIN1_NAME])
     meshes = find_meshes([tmp_path])
@@ -556,7 +558,7 @@ def test_generate_and_farm_entry_points_survive_a_non_utf8_name(tmp_path: Path) 
 
 
 def test_find_meshes_warns_about_an_unreadable_folder(tmp_path: Path, unreadable, caplog) -> None:
-    from zbuf_occlude.mesh import find_meshes
+    from zbuf_occlude.mesh.discovery import find_meshes
 
     _tree(tmp_path, ["chair/chair_0001.off", "table/table_0001.off"])
     unreadable(tmp_path / "table")
@@ -596,7 +598,7 @@ def _replace_first_shard(ds: Path, write) -> None:
 
     import h5py
 
-    from zbuf_occlude.io import file_sha256
+    from zbuf_occlude.io.atomic import file_sha256
 
     rel = json.loads((ds / "manifest.jsonl").read_text().splitlines()[0])["shards"][0]
     with h5py.File(ds / rel, "r") as f:
@@ -685,7 +687,7 @@ def chair_and_points():
 )
 def test_visibility_of_a_non_finite_mesh_is_an_error_not_an_answer(chair_and_points, method: str, bad: str) -> None:
     import zbuf_occlude as zo
-    from zbuf_occlude.cameras import camera_on_sphere
+    from zbuf_occlude.geometry.cameras import camera_on_sphere
 
     mesh, points, face_index = chair_and_points
     vertices = mesh.vertices.copy()
@@ -699,7 +701,7 @@ def test_visibility_of_a_non_finite_mesh_is_an_error_not_an_answer(chair_and_poi
 @pytest.mark.parametrize("method", GPU_AND_EXACT)
 def test_camera_inside_the_object_is_a_camera_error_naming_the_radius(chair_and_points, method: str, radius: float) -> None:
     import zbuf_occlude as zo
-    from zbuf_occlude.cameras import camera_on_sphere
+    from zbuf_occlude.geometry.cameras import camera_on_sphere
     from zbuf_occlude.errors import CameraError
 
     mesh, points, face_index = chair_and_points
@@ -710,7 +712,7 @@ def test_camera_inside_the_object_is_a_camera_error_naming_the_radius(chair_and_
 @pytest.mark.parametrize("method", GPU_AND_EXACT)
 def test_nan_points_are_an_error(chair_and_points, method: str) -> None:
     import zbuf_occlude as zo
-    from zbuf_occlude.cameras import camera_on_sphere
+    from zbuf_occlude.geometry.cameras import camera_on_sphere
 
     mesh, points, face_index = chair_and_points
     points = points.copy()
@@ -729,7 +731,7 @@ EMPTY_AND_DEGENERATE = {
 @pytest.mark.parametrize("name", sorted(EMPTY_AND_DEGENERATE))
 def test_empty_degenerate_and_nan_meshes_cannot_be_sampled_or_normalised(name: str) -> None:
     import zbuf_occlude as zo
-    from zbuf_occlude.mesh import clean_mesh, normalize_mesh
+    from zbuf_occlude.mesh.load import clean_mesh, normalize_mesh
 
     mesh = EMPTY_AND_DEGENERATE[name]
     cause = {"empty": "zero total area|empty", "one_degenerate_face": "zero total area|degenerate", "nan_vertex": "NaN"}[name]
@@ -739,7 +741,7 @@ def test_empty_degenerate_and_nan_meshes_cannot_be_sampled_or_normalised(name: s
 
 
 def test_farm_list_file_in_a_non_utf8_folder_is_reported(tmp_path: Path) -> None:
-    from zbuf_occlude.farm.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs import scan_objects
 
     folder = tmp_path / b"caf\xe9".decode("utf-8", "surrogateescape")
     _tree(folder, ["a.off"])
@@ -772,8 +774,8 @@ def test_occlude_object_refuses_a_job_that_cannot_fit_before_allocating(monkeypa
     import tracemalloc
 
     from zbuf_occlude import resources
-    from zbuf_occlude.occlude import occlude_object
-    from zbuf_occlude.resources import InsufficientMemoryError
+    from zbuf_occlude.pipeline import occlude_object
+    from zbuf_occlude.errors import InsufficientMemoryError
 
     monkeypatch.setattr(resources, "available_memory", lambda: (8 * 2**30, "test budget"))
     mesh = load_mesh(CHAIR)
@@ -798,7 +800,7 @@ CLI_COMMANDS = {"generate": _RUN, "farm": [*_RUN, "--no-progress"], "validate": 
 
 
 def _cli(command: str, path: Path, out: Path, *extra: str) -> int:
-    from zbuf_occlude.cli import main
+    from zbuf_occlude.cli.main import main
 
     tail = [a.replace("{out}", str(out)) for a in CLI_COMMANDS[command]]
     return main([command, str(path), *tail, *CLI_ARGS, *extra])
@@ -861,7 +863,7 @@ def test_cli_skipped_inputs_exit_1_are_recorded_and_the_rest_is_done(
     import os
     import shutil
 
-    from zbuf_occlude.layout import CARD_FILE
+    from zbuf_occlude.dataset.layout import CARD_FILE
 
     latin1 = os.fsdecode(str(cli_tree).encode() + b"/chair/train/caf\xe9_0003.off")
     shutil.copy(CHAIR, latin1)
@@ -883,7 +885,7 @@ def test_cli_skipped_inputs_exit_1_are_recorded_and_the_rest_is_done(
 
 
 def printable(path: str) -> str:
-    from zbuf_occlude.discovery import printable_path
+    from zbuf_occlude.mesh.discovery import printable_path
 
     return printable_path(path)
 
@@ -891,8 +893,8 @@ def printable(path: str) -> str:
 @pytest.mark.parametrize("entry", ["generate", "farm"])
 def test_two_files_with_one_name_are_refused_naming_both(tmp_path: Path, entry: str) -> None:
     # generate and the farm plan with one function (farm.inputs.number_objects)
-    from zbuf_occlude.farm.generate import scan_paths
-    from zbuf_occlude.farm.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs import scan_paths
+    from zbuf_occlude.mesh.inputs import scan_objects
 
     _tree(tmp_path, ["chair/train/chair_0001.off", "chair/train/chair_0002.off"])
     (tmp_path / "chair/train/chair_0001.off").rename(tmp_path / "chair/train/chair_0001.obj")
@@ -904,7 +906,7 @@ def test_two_files_with_one_name_are_refused_naming_both(tmp_path: Path, entry: 
 
 # -- issue 15: far cameras, experiment options, hostile scene files, non-UTF-8 CSVs -------------------
 def _main_exit(argv: list[str], capsys) -> tuple[int, str]:
-    from zbuf_occlude.cli import main
+    from zbuf_occlude.cli.main import main
 
     code = main(argv)
     return code, capsys.readouterr().err.strip()
@@ -912,7 +914,8 @@ def _main_exit(argv: list[str], capsys) -> tuple[int, str]:
 
 def test_a_camera_beyond_float64s_reach_is_refused_naming_the_limit() -> None:
     import zbuf_occlude as zo
-    from zbuf_occlude.cameras import MAX_CAMERA_RADIUS, camera_on_sphere
+    from zbuf_occlude.defaults import MAX_CAMERA_RADIUS
+    from zbuf_occlude.geometry.cameras import camera_on_sphere
     from zbuf_occlude.errors import CameraError
 
     assert 1e6 <= MAX_CAMERA_RADIUS < 1e7  # derived from float64's eps and the 1e-6 tolerance
@@ -1030,7 +1033,7 @@ def test_realism_on_a_non_utf8_csv_names_the_file(tmp_path: Path, capsys) -> Non
 
 def test_first_day_mistakes_get_messages_that_say_what_to_do(tmp_path, capsys):
     import zbuf_occlude as zo
-    from zbuf_occlude.cli import main
+    from zbuf_occlude.cli.main import main
 
     with pytest.raises(InvalidInputError, match="got PointCloud.*point cloud has no faces"):
         zo.occlude(trimesh.PointCloud(np.random.default_rng(0).random((10, 3))))

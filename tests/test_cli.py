@@ -6,8 +6,8 @@ import shutil
 
 import pytest
 
-from zbuf_occlude.cli import main
-from zbuf_occlude.io import read_h5, read_npz
+from zbuf_occlude.cli.main import main
+from zbuf_occlude.io.clouds import read_h5, read_npz
 
 
 @pytest.fixture

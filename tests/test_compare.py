@@ -1,4 +1,4 @@
-"""The comparison engine (zbuf_occlude.compare) and the elevation profile (zbuf_occlude.profile)."""
+"""The comparison engine (zbuf_occlude.experiments.compare) and the elevation profile (zbuf_occlude.profile)."""
 
 from __future__ import annotations
 
@@ -13,8 +13,8 @@ import trimesh
 from conftest import real_mesh
 
 import zbuf_occlude as zo
-from zbuf_occlude import compare as cmp
-from zbuf_occlude import elevation_profile as prof
+from zbuf_occlude.experiments import compare as cmp
+from zbuf_occlude.experiments import elevation_profile as prof
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 
 #: A tiny real mesh: bathtub_0002 (664 faces) from ../shared, else the shipped sofa_0681 (224).
@@ -148,7 +148,7 @@ def test_tables_1a_1b_hold_the_measured_values() -> None:
 
 
 def test_cli_main_runs_compare_and_elevation_profile(tmp_path: Path) -> None:
-    from zbuf_occlude.cli import main
+    from zbuf_occlude.cli.main import main
 
     path = _tiny_path()
     assert main(["compare", str(path), "--methods", "oracle,og32", "--points", "120", "--views", "0:0,45:90",
@@ -169,7 +169,9 @@ def test_cli_main_runs_compare_and_elevation_profile(tmp_path: Path) -> None:
 def test_cli_compare_handler_runs(tmp_path: Path) -> None:
     path = _tiny_path()
     parser = argparse.ArgumentParser()
-    cmp.add_compare_parser(parser.add_subparsers())
+    from zbuf_occlude.cli.compare import add_compare_parser
+
+    add_compare_parser(parser.add_subparsers())
     args = parser.parse_args(
         [
             "compare", str(path), "--methods", "oracle,og32", "--points", "150", "--views", "0:0",

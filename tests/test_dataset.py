@@ -12,7 +12,8 @@ import pytest
 from conftest import SAMPLE_MESHES
 
 from zbuf_occlude import OccludedDataset
-from zbuf_occlude.dataset import MANIFEST_FILE, reconstruct_samples, samples_per_pose, unpack_visible
+from zbuf_occlude.dataset.layout import MANIFEST_FILE
+from zbuf_occlude.dataset.reader import reconstruct_samples, samples_per_pose, unpack_visible
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.farm import FarmParams, run_farm
 

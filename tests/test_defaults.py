@@ -7,10 +7,10 @@ import inspect
 import pytest
 
 from zbuf_occlude import defaults
-from zbuf_occlude.cameras import camera_on_sphere, cameras_from_schedule
-from zbuf_occlude.compare import compare, run_compare
+from zbuf_occlude.geometry.cameras import camera_on_sphere, cameras_from_schedule
+from zbuf_occlude.experiments.compare import compare, run_compare
 from zbuf_occlude.farm.config import FarmParams
-from zbuf_occlude.occlude import occlude_object
+from zbuf_occlude.pipeline import occlude_object
 from zbuf_occlude.render.moderngl_backend import ModernGLRenderer
 from zbuf_occlude.visibility.peers import naive_zbuffer_visible
 from zbuf_occlude.visibility.registry import visible_mask
@@ -47,9 +47,9 @@ def test_gpu_constants_agree_between_backend_and_methods() -> None:
 
 
 def test_sample_sizes_and_views_of_generate_validate_farm_and_occlude_object() -> None:
-    from zbuf_occlude.cli import build_parser
-    from zbuf_occlude.compare.run import DEFAULT_VIEWS as COMPARE_VIEWS
-    from zbuf_occlude.farm.generate import GENERATE_DEFAULTS
+    from zbuf_occlude.cli.main import build_parser
+    from zbuf_occlude.defaults import DEFAULT_VIEWS as COMPARE_VIEWS
+    from zbuf_occlude.farm.config import GENERATE_DEFAULTS
 
     parser = build_parser()
     gen = parser.parse_args(["generate", "--out", "x"])

@@ -22,24 +22,18 @@ import numpy as np
 import pytest
 from conftest import SAMPLE_MESHES
 
-from zbuf_occlude.dataset import CARD_FILE, MANIFEST_FILE, SHAPE_NAMES_FILE, OccludedDataset
+from zbuf_occlude.dataset.layout import CARD_FILE, MANIFEST_FILE, SHAPE_NAMES_FILE
+from zbuf_occlude.dataset.reader import OccludedDataset
 from zbuf_occlude.errors import InvalidInputError, OutputError
-from zbuf_occlude.farm import (
-    FarmObject,
-    FarmParams,
-    add_farm_merge_parser,
-    add_farm_parser,
-    discover_objects,
-    merge_farm,
-    parse_shard,
-    run_farm,
-    select_shard,
-)
-from zbuf_occlude.cameras import camera_on_sphere
-from zbuf_occlude.cli import main as cli_main
-from zbuf_occlude.dataset import unpack_visible
-from zbuf_occlude.mesh import load_mesh
-from zbuf_occlude.occlude import dense_cloud, object_key, pose_samples
+from zbuf_occlude.mesh.inputs import FarmObject, discover_objects
+from zbuf_occlude.farm import FarmParams, merge_farm, parse_shard, run_farm, select_shard
+from zbuf_occlude.cli.farm import add_farm_merge_parser, add_farm_parser
+from zbuf_occlude.geometry.cameras import camera_on_sphere
+from zbuf_occlude.cli.main import main as cli_main
+from zbuf_occlude.dataset.reader import unpack_visible
+from zbuf_occlude.mesh.load import load_mesh
+from zbuf_occlude.pipeline import dense_cloud
+from zbuf_occlude.geometry.samples import object_key, pose_samples
 from zbuf_occlude.visibility.registry import visible_mask
 from zbuf_occlude.visibility.registry import method_info
 
@@ -535,7 +529,7 @@ def _check_record(rec: dict, obj: FarmObject, params: FarmParams, out: Path, mes
     import os
     import socket
 
-    from zbuf_occlude.io import file_sha256
+    from zbuf_occlude.io.atomic import file_sha256
 
     n_visible = [int(v.sum()) for v in visible]
     assert 0 < n_visible[0] < params.n_points <= n_visible[1]
@@ -614,7 +608,7 @@ def test_worker_dense_shard_holds_each_poses_samples(tmp_path):
 @pytest.mark.parametrize("storage", ["npz", "ply"])
 def test_worker_sample_files_one_per_sample(tmp_path, storage):
     from zbuf_occlude.farm.worker import process_object
-    from zbuf_occlude.io import read_npz
+    from zbuf_occlude.io.clouds import read_npz
 
     obj, params = _box_object(tmp_path), FarmParams(**WORKER_PARAMS, storage=storage)
     out = tmp_path / "out"
@@ -677,7 +671,7 @@ def test_worker_sensor_shard_is_the_crops_datasets_and_its_record(tmp_path):
     # object's attributes and the sensor; the record counts returns per scan
     from zbuf_occlude.farm.config import shard_path
     from zbuf_occlude.farm.worker import process_object
-    from zbuf_occlude.io import file_sha256
+    from zbuf_occlude.io.atomic import file_sha256
     from zbuf_occlude.sensors.crops import farm_datasets
 
     obj = _box_object(tmp_path)
@@ -793,7 +787,7 @@ def test_worker_h5_and_npz_samples_carry_the_objects_provenance(tmp_path):
     # generate's layouts keep each sample's class, source and camera radius (dense does not)
     from zbuf_occlude.farm.config import shard_path
     from zbuf_occlude.farm.worker import process_object
-    from zbuf_occlude.io import read_npz
+    from zbuf_occlude.io.clouds import read_npz
 
     obj = _box_object(tmp_path)
     rec = process_object(obj, FarmParams(**WORKER_PARAMS, storage="npz", radius=3.5), tmp_path / "npz")
@@ -824,7 +818,7 @@ def test_merge_counts_padded_samples_as_one_run_does(tree, tmp_path):
 
 
 def test_a_mesh_file_given_to_farm_points_to_generate(tmp_path, capsys):
-    from zbuf_occlude.farm.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs import scan_objects
 
     mesh = REPO_ROOT / "data" / "samples" / "chair" / "train" / "chair_0001.off"
     with pytest.raises(InvalidInputError, match="is a mesh file.*zbuf-occlude generate"):

@@ -12,11 +12,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from zbuf_occlude.cli import main as cli_main
-from zbuf_occlude.dataset import CARD_FILE, OccludedDataset
+from zbuf_occlude.cli.main import main as cli_main
+from zbuf_occlude.dataset.layout import CARD_FILE
+from zbuf_occlude.dataset.reader import OccludedDataset
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.farm import FarmParams
-from zbuf_occlude.mesh import load_mesh
+from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors import Lidar
 
 SAMPLES = Path(__file__).resolve().parents[1] / "data" / "samples"

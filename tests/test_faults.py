@@ -17,9 +17,12 @@ from pathlib import Path
 
 import pytest
 
-from zbuf_occlude.dataset import CARD_FILE, MANIFEST_FILE, OccludedDataset
+from zbuf_occlude.dataset.layout import CARD_FILE, MANIFEST_FILE
+from zbuf_occlude.dataset.reader import OccludedDataset
 from zbuf_occlude.farm import FarmParams, merge_farm, run_farm
-from zbuf_occlude.farm.lock import LOCK_FILE, DatasetBusy, farm_lock, task_lock_path
+from zbuf_occlude.dataset.layout import LOCK_FILE
+from zbuf_occlude.errors import DatasetBusy
+from zbuf_occlude.farm.lock import farm_lock, task_lock_path
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 #: The three smallest shipped meshes (96–400 faces).
@@ -114,7 +117,7 @@ def test_a_lock_of_another_host_is_never_broken(tree, tmp_path):
 def test_stale_temp_cleanup_spares_temps_of_live_processes(tree, tmp_path):
     out = tmp_path / "ds"
     run_farm(tree, out, params=PARAMS, progress=False)
-    from zbuf_occlude.io import _host_tag
+    from zbuf_occlude.io.atomic import _host_tag
 
     alive = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
     try:
@@ -132,7 +135,7 @@ def test_stale_temp_cleanup_spares_temps_of_live_processes(tree, tmp_path):
 
 
 def test_temp_names_are_unique_per_process_and_name_their_writer(tmp_path):
-    from zbuf_occlude.io import atomic_path, temp_owner
+    from zbuf_occlude.io.atomic import atomic_path, temp_owner
 
     with atomic_path(tmp_path / "a.h5") as t1, atomic_path(tmp_path / "a.h5") as t2:
         assert t1 != t2
@@ -180,7 +183,7 @@ def test_a_shard_changed_in_place_is_caught_by_the_reader_and_redone_by_resume(t
     import h5py
     import numpy as np
 
-    from zbuf_occlude.dataset import ShardChecksumError
+    from zbuf_occlude.errors import ShardChecksumError
 
     out = tmp_path / "ds"
     run_farm(tree, out, params=PARAMS, progress=False)
@@ -261,7 +264,7 @@ def test_workers_do_not_outlive_a_killed_parent(tree, tmp_path, sig):
 
 # -- skipped inputs are recorded and end the run with status 1 (defect 12's slot in the farm) ----
 def test_skipped_inputs_are_recorded_in_the_card_and_give_status_1(tree, tmp_path):
-    from zbuf_occlude.farm import discover_objects
+    from zbuf_occlude.mesh.inputs import discover_objects
 
     out = tmp_path / "ds"
     summary = run_farm(discover_objects(tree), out, params=PARAMS, progress=False, skipped=[("in/locked", "permission denied")])
@@ -279,7 +282,7 @@ _HOLD_HOOK = """
 import os
 if os.environ.get("ZO_TEST_HOLD"):
     import signal, time
-    import zbuf_occlude.mesh as mesh  # the farm's worker imports load_mesh from here when it runs
+    import zbuf_occlude.mesh.load as mesh  # the farm's worker imports load_mesh from here when it runs
 
     _load_mesh = mesh.load_mesh
 

@@ -18,11 +18,12 @@ import h5py
 import numpy as np
 import pytest
 
-from zbuf_occlude.cli import main
-from zbuf_occlude.dataset import OccludedDataset, ShardChecksumError
+from zbuf_occlude.cli.main import main
+from zbuf_occlude.dataset.reader import OccludedDataset
+from zbuf_occlude.errors import ShardChecksumError
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.farm import FarmParams, run_farm
-from zbuf_occlude.io import read_h5, read_npz
+from zbuf_occlude.io.clouds import read_h5, read_npz
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 ARGS = ["--views", "0:0,30:45", "--points", "64", "--samples-per-view", "2", "--dense-points", "2000", "--resolution", "128"]
@@ -318,7 +319,7 @@ def test_pointnet_style_loop_over_the_file_lists(tree, tmp_path, monkeypatch):
 def test_an_out_inside_the_input_folder_is_refused_before_any_work(tmp_path, capsys, command):
     import shutil
 
-    from zbuf_occlude.cli import main
+    from zbuf_occlude.cli.main import main
 
     tree = tmp_path / "meshes"
     shutil.copytree(Path(__file__).resolve().parents[1] / "data" / "samples" / "chair", tree / "chair")

@@ -14,10 +14,10 @@ from pathlib import Path
 
 import pytest
 
-from zbuf_occlude.cameras import DEFAULT_RADIUS
-from zbuf_occlude.cli import build_parser, main
+from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
+from zbuf_occlude.cli.main import build_parser, main
 from zbuf_occlude.defaults import DEFAULT_DENSE_POINTS, DEFAULT_N_POINTS, DEFAULT_RESOLUTION, DEFAULT_SEED, DEFAULT_VIEWS
-from zbuf_occlude.farm.config import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION
+from zbuf_occlude.defaults import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION
 from zbuf_occlude.farm.config import DEFAULT_VIEWS as FARM_VIEWS
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -136,7 +136,7 @@ def test_scan_refuses_a_sensor_inside_the_object(tmp_path: Path, capsys) -> None
 
 def test_scan_distance_limit_is_half_the_largest_horizontal_size() -> None:
     from zbuf_occlude.errors import InvalidInputError
-    from zbuf_occlude.sensors.cli import check_outside
+    from zbuf_occlude.cli.sensors import check_outside
     from zbuf_occlude.sensors.crops import CropDistributions
 
     check_outside(CropDistributions(distance_m=(2.25, 9.0), size_m=(4.5, 4.5)))
@@ -148,7 +148,7 @@ def test_scan_distance_limit_is_half_the_largest_horizontal_size() -> None:
 
 # -- a wheel has no sample meshes --------------------------------------------------------------
 def test_generate_without_path_says_a_wheel_ships_no_samples(tmp_path: Path, capsys, monkeypatch) -> None:
-    import zbuf_occlude.cli as cli
+    import zbuf_occlude.cli.main as cli
 
     monkeypatch.setattr(cli, "SAMPLE_MESHES", tmp_path / "site-packages" / "data" / "samples")
     assert main(["generate", "--out", str(tmp_path / "x")]) == 2
@@ -199,8 +199,8 @@ def test_slurm_script_renders_every_mesh_unless_asked_for_a_subset(tmp_path: Pat
 
 
 def test_every_command_taking_meshes_lists_every_supported_extension(capsys):
-    from zbuf_occlude.cli import main
-    from zbuf_occlude.mesh_formats import SUPPORTED_EXTENSIONS
+    from zbuf_occlude.cli.main import main
+    from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS
 
     for command in ("generate", "validate", "compare", "elevation-profile"):
         with pytest.raises(SystemExit):

@@ -31,7 +31,7 @@ def test_a_public_name_imports_what_it_needs_and_nothing_else():
 
 
 def test_help_loads_neither_numba_nor_moderngl():
-    code = "from zbuf_occlude.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass"
+    code = "from zbuf_occlude.cli.main import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass"
     loaded = _loaded_after(code)
     assert not {"numba", "moderngl", "torch", "h5py"} & set(loaded), loaded
 
@@ -41,9 +41,9 @@ def test_every_public_name_resolves_and_occlude_is_the_function():
 
     for name in zo.__all__:
         assert getattr(zo, name) is not None, name
-    import zbuf_occlude.occlude  # importing the module of the same name must not replace the function
+    import zbuf_occlude.pipeline  # importing the module of the same name must not replace the function
 
-    assert callable(zo.occlude) and zo.occlude.__module__ == "zbuf_occlude.occlude"
+    assert callable(zo.occlude) and zo.occlude.__module__ == "zbuf_occlude.pipeline"
 
 
 def test_all_lists_the_names_the_stub_imports():

@@ -13,9 +13,9 @@ from pathlib import Path
 import pytest
 import trimesh
 
-from zbuf_occlude.cli import main
+from zbuf_occlude.cli.main import main
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.layout import CARD_FILE, SHAPE_NAMES_FILE
+from zbuf_occlude.dataset.layout import CARD_FILE, SHAPE_NAMES_FILE
 
 #: One pose, one small sample: a run over a test tree takes seconds.
 TINY = ["--views", "0:0", "--points", "32", "--resolution", "64", "--samples-per-view", "1", "--dense-points", "500"]
@@ -72,8 +72,8 @@ def test_a_shapenetcore_v2_tree_gets_its_real_class_names(tmp_path: Path, comman
 @pytest.mark.parametrize("version", [1, 2])
 @pytest.mark.parametrize("entry", ["farm", "generate"])
 def test_shapenetcore_without_taxonomy_is_labelled_by_synset_id(tmp_path: Path, version: int, entry: str) -> None:
-    from zbuf_occlude.farm.generate import scan_paths
-    from zbuf_occlude.farm.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs import scan_paths
+    from zbuf_occlude.mesh.inputs import scan_objects
 
     root = shapenet_tree(tmp_path / "sn", version=version, taxonomy=False)
     objects = scan_objects(root).objects if entry == "farm" else scan_paths([root])[0]
@@ -84,7 +84,7 @@ def test_shapenetcore_without_taxonomy_is_labelled_by_synset_id(tmp_path: Path, 
 
 
 def test_one_synset_folder_given_takes_the_synset_from_its_own_name(tmp_path: Path) -> None:
-    from zbuf_occlude.farm.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs import scan_objects
 
     root = shapenet_tree(tmp_path / "sn", taxonomy=False)
     scan = scan_objects(root / CHAIR)
@@ -97,7 +97,7 @@ def test_one_synset_folder_given_takes_the_synset_from_its_own_name(tmp_path: Pa
      ('[{"synsetId": 3, "name": "x"}]', "entry 0 needs text fields"), ('[{"synsetId": "1", "name": "a\\nb"}]', "not printable")],
 )  # fmt: skip
 def test_a_broken_taxonomy_is_an_error_naming_the_file(tmp_path: Path, text: str, message: str) -> None:
-    from zbuf_occlude.farm.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs import scan_objects
 
     root = shapenet_tree(tmp_path / "sn", taxonomy=False)
     (root / "taxonomy.json").write_text(text, encoding="utf-8")
@@ -118,7 +118,7 @@ def test_a_broken_taxonomy_is_an_error_naming_the_file(tmp_path: Path, text: str
     ],
 )  # fmt: skip
 def test_each_layout_is_detected_and_labels_its_meshes(tmp_path: Path, files, layout, labels) -> None:
-    from zbuf_occlude.farm.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs import scan_objects
 
     for k, rel in enumerate(files):
         _box(tmp_path / "root" / rel, k)
@@ -129,7 +129,7 @@ def test_each_layout_is_detected_and_labels_its_meshes(tmp_path: Path, files, la
 
 def test_a_modelnet_class_folder_given_alone_keeps_its_class(tmp_path: Path) -> None:
     # the class folder is the root itself: its name is the class, not "train"
-    from zbuf_occlude.farm.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs import scan_objects
 
     _box(tmp_path / "chair" / "train" / "a.off")
     _box(tmp_path / "chair" / "test" / "b.off")
@@ -138,7 +138,7 @@ def test_a_modelnet_class_folder_given_alone_keeps_its_class(tmp_path: Path) -> 
 
 
 def test_a_list_file_is_recorded_as_its_layout(tmp_path: Path) -> None:
-    from zbuf_occlude.farm.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs import scan_objects
 
     _box(tmp_path / "a.off")
     (tmp_path / "list.txt").write_text("a.off chair test\n", encoding="utf-8")
@@ -182,7 +182,7 @@ def test_class_from_names_the_class_folder(tmp_path: Path, command: str) -> None
 
 
 def test_class_from_confirms_one_class_and_takes_the_split_below_it(tmp_path: Path) -> None:
-    from zbuf_occlude.farm.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs import scan_objects
 
     for k, rel in enumerate(["chairs/a.obj", "chairs/b.obj"]):
         _box(tmp_path / "root" / rel, k)
@@ -223,7 +223,7 @@ def test_broken_links_and_link_loops_are_skipped_reported_and_recorded(tmp_path:
 
 
 def test_a_fifo_in_a_tree_is_reported_never_opened(tmp_path: Path) -> None:
-    from zbuf_occlude.discovery import walk_mesh_files
+    from zbuf_occlude.mesh.discovery import walk_mesh_files
 
     _box(tmp_path / "a.off")
     os.mkfifo(tmp_path / "pipe.off")
@@ -233,7 +233,7 @@ def test_a_fifo_in_a_tree_is_reported_never_opened(tmp_path: Path) -> None:
 
 
 def test_a_fifo_in_a_list_file_is_skipped_with_a_warning(tmp_path: Path, caplog) -> None:
-    from zbuf_occlude.farm.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs import scan_objects
 
     _box(tmp_path / "a.off")
     os.mkfifo(tmp_path / "pipe.off")

@@ -112,7 +112,7 @@ def test_extras_take_version_ranges_and_ci_runs_readmes_test_command():
 
 
 def test_the_package_and_its_cli_import_no_torch():
-    code = "import sys, zbuf_occlude, zbuf_occlude.cli; zbuf_occlude.cli.build_parser(); print('torch' in sys.modules)"
+    code = "import sys, zbuf_occlude, zbuf_occlude.cli.main; zbuf_occlude.cli.main.build_parser(); print('torch' in sys.modules)"
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT,
                        env={**os.environ, "PYTHONPATH": str(ROOT)})  # fmt: skip
     assert r.returncode == 0 and r.stdout.strip() == "False", r.stderr

@@ -11,7 +11,9 @@ import pytest
 import trimesh
 
 from zbuf_occlude.errors import OutputError
-from zbuf_occlude.io import OccludedCloud, atomic_path, read_h5, read_npz, write_h5, write_npz, write_ply
+from zbuf_occlude.geometry.samples import OccludedCloud
+from zbuf_occlude.io.atomic import atomic_path
+from zbuf_occlude.io.clouds import read_h5, read_npz, write_h5, write_npz, write_ply
 
 
 def _cloud(n=64, seed=0, **kw):
@@ -91,7 +93,7 @@ def test_unwritable_output_folder_is_a_clear_error(tmp_path):
 
 
 def test_h5_clouds_round_trip(tmp_path):
-    from zbuf_occlude.io import read_h5_clouds
+    from zbuf_occlude.io.clouds import read_h5_clouds
 
     clouds = [_cloud(seed=i, label=i, sample_index=i) for i in range(3)]
     back = read_h5_clouds(write_h5(tmp_path / "x.h5", clouds))
@@ -141,7 +143,8 @@ def test_the_temporary_is_beside_the_target_not_in_tmpdir(tmp_path, monkeypatch)
 
 @pytest.mark.parametrize("writer", ["npz", "ply", "h5", "text", "csv"])
 def test_data_are_fsynced_before_the_rename(tmp_path, monkeypatch, writer):
-    from zbuf_occlude.io import write_csv, write_text
+    from zbuf_occlude.io.atomic import write_csv
+    from zbuf_occlude.io.atomic import write_text
 
     log = []
     _spy(monkeypatch, log)
@@ -171,7 +174,7 @@ def test_written_files_get_the_mode_the_umask_gives(tmp_path):
     code = (
         "import os, sys\n"
         "os.umask(0o027)\n"
-        "from zbuf_occlude.io import write_text\n"
+        "from zbuf_occlude.io.atomic import write_text\n"
         "p = write_text(sys.argv[1], 'x')\n"
         "print(oct(os.stat(p).st_mode & 0o777))\n"
     )
@@ -244,7 +247,7 @@ def test_npz_round_trip_keeps_every_field_and_normalises_dtypes(tmp_path):
 
 
 def test_h5_round_trip_keeps_every_field_in_pointnets_dtypes(tmp_path):
-    from zbuf_occlude.io import read_h5_clouds
+    from zbuf_occlude.io.clouds import read_h5_clouds
 
     clouds = [_odd_types_cloud(seed=i, label=np.int32(i)) for i in range(3)]
     clouds[1].face_index = clouds[1].face_index.astype(np.int64)  # stored int32 whatever comes in
@@ -263,7 +266,7 @@ def test_h5_round_trip_keeps_every_field_in_pointnets_dtypes(tmp_path):
 
 
 def test_an_empty_h5_is_written_and_read_back(tmp_path):
-    from zbuf_occlude.io import read_h5_clouds
+    from zbuf_occlude.io.clouds import read_h5_clouds
 
     path = write_h5(tmp_path / "x.h5", [])
     assert read_h5_clouds(path) == []
@@ -303,7 +306,7 @@ def test_ply_header_is_a_valid_binary_ply_with_the_pose(tmp_path):
 def test_write_csv_columns_extras_and_empty(tmp_path):
     import csv
 
-    from zbuf_occlude.io import write_csv
+    from zbuf_occlude.io.atomic import write_csv
 
     rows = [{"b": 1, "a": 2, "extra": 3}, {"b": 4, "a": 5}]
     with open(write_csv(tmp_path / "d.csv", rows[1:]), newline="", encoding="utf-8") as fh:
@@ -335,7 +338,7 @@ def test_text_files_are_utf8_whatever_the_locale(tmp_path):
 
     code = (
         "import sys\n"
-        "from zbuf_occlude.io import write_csv, write_text\n"
+        "from zbuf_occlude.io.atomic import write_csv, write_text\n"
         "write_text(sys.argv[1] + '/t.txt', 'chaise_\\u00e9\\n')\n"  # ASCII source: the locale is C
         "write_csv(sys.argv[1] + '/c.csv', [{'class': 'chaise_\\u00e9'}])\n"
     )
@@ -347,7 +350,7 @@ def test_text_files_are_utf8_whatever_the_locale(tmp_path):
 
 
 def test_concat_h5_joins_parts_row_wise_and_fills_missing_columns(tmp_path):
-    from zbuf_occlude.io import concat_h5
+    from zbuf_occlude.io.clouds import concat_h5
 
     a = [_cloud(seed=i, split="train") for i in range(3)]
     b = [_cloud(seed=10 + i) for i in range(2)]

@@ -1,13 +1,18 @@
-"""No module imports from a layer above its own (deferred imports inside functions included).
+"""The package's import rule: each package imports only packages below it, never sideways or up.
 
-The layers, lowest first: the base (errors, defaults, ...) → mesh → sampling → cameras →
-render → visibility → occlude → io → farm/compare → cli → the package's ``__init__``.
-Modules of one layer may import each other.
+The layers, lowest first (one per package or base module, so no two packages can lean on each
+other unseen): _version → errors → defaults → resources → geometry → io → mesh → render →
+visibility → pipeline → dataset → real_scans → sensors → farm → protocols → learn → experiments →
+cli → __main__ → the package's ``__init__``.  Deferred imports inside functions count too.  Also
+here: no import cycle between modules, argparse and ``cli`` only in ``cli``, moderngl only in
+``render``, and the architecture page names every package.
 """
 
 from __future__ import annotations
 
 import ast
+import re
+from collections import defaultdict
 from pathlib import Path
 
 import pytest
@@ -16,25 +21,28 @@ import zbuf_occlude
 
 PACKAGE = Path(zbuf_occlude.__file__).parent
 ROOT = "zbuf_occlude"
+ARCHITECTURE = PACKAGE.parent / "docs" / "development" / "architecture.md"
 
-#: Layer of each top-level module or subpackage of zbuf_occlude (a subpackage's modules
-#: share its layer).  A new module gets a line here, in the layer of what it does.
+#: Layer of each top-level module or subpackage of zbuf_occlude (a subpackage's modules share its
+#: layer; a module may import modules of its own package).  A new package gets its own number.
 LAYERS: dict[str, int] = {
-    # base: no zbuf_occlude imports but each other's
-    "errors": 0, "defaults": 0, "_version": 0, "safe_paths": 0, "mesh_cache": 0, "metrics": 0, "resources": 0,
-    "mesh_formats": 1, "discovery": 1, "mesh_layouts": 1, "mesh": 1, "mesh_scene": 1, "object_sizes": 1,
-    "sampling": 2,
-    "cameras": 3,
-    "render": 4,
-    "visibility": 5,
-    "occlude": 6,
-    # writers and readers, and the on-disk layout they share
-    "io": 7, "dataset": 7, "layout": 7, "real_scans": 7, "schema": 7, "verify": 7, "sample_files": 7, "scan_files": 7,
-    # engines on top of one object's pipeline
-    "farm": 8, "compare": 8, "elevation_profile": 8, "sensors": 8, "protocols": 8,
-    "learn": 9,
-    "cli": 9, "__main__": 9,
-    "__init__": 10,  # the public API re-exports everything
+    "_version": 0, "errors": 1, "defaults": 2, "resources": 3, "_moved": 4,
+    "geometry": 5,      # pure numpy: cameras, sampling, seeds and draws
+    "io": 6,            # atomic writes, cloud formats, safe paths
+    "mesh": 7,          # files -> normalised trimesh, discovery, layouts
+    "render": 8,        # everything OpenGL
+    "visibility": 9,    # HSR methods behind visible_mask
+    "pipeline": 10,     # occlude(): one object, many poses
+    "dataset": 11,      # the on-disk data set
+    "real_scans": 12,
+    "sensors": 13,
+    "farm": 14,
+    "protocols": 15,
+    "learn": 16,
+    "experiments": 17,
+    "cli": 18,
+    "__main__": 19,
+    "__init__": 20,     # the public API
 }  # fmt: skip
 
 #: Known exceptions, each with its reason; the list may only shrink.
@@ -69,7 +77,7 @@ def imported_modules(module: str, source: str, is_package: bool = False) -> list
                 target = node.module or ""
             if target.split(".")[0] != ROOT:
                 continue
-            if target == ROOT:  # `from .. import io` names modules; `from .. import __version__` the package
+            if target == ROOT:  # `from zbuf_occlude import io` names a module; `... import __version__` the package
                 found += [(node.lineno, f"{ROOT}.{a.name}" if a.name in LAYERS else ROOT) for a in node.names]
             else:
                 found.append((node.lineno, target))
@@ -120,12 +128,107 @@ def test_allowed_exceptions_still_exist() -> None:
     ("module", "source", "is_package", "expected"),
     [
         ("zbuf_occlude.render", "def f():\n    from ..visibility.zbuffer import renderer_for\n", True, 1),
-        ("zbuf_occlude.render.moderngl_backend", "from ..visibility import registry\n", False, 1),
+        ("zbuf_occlude.render.moderngl_backend", "from zbuf_occlude.visibility import registry\n", False, 1),
         ("zbuf_occlude.farm.worker", "def v():\n    from .. import __version__\n", False, 1),
-        ("zbuf_occlude.mesh", "import zbuf_occlude.sampling\n", False, 1),
+        ("zbuf_occlude.geometry.sampling", "import zbuf_occlude.mesh.load\n", False, 1),
+        ("zbuf_occlude.sensors.scan", "from zbuf_occlude.real_scans import RealScan\n", False, 0),
+        ("zbuf_occlude.real_scans.files", "from zbuf_occlude.sensors import scan\n", False, 1),  # sideways: a lower layer
         ("zbuf_occlude.visibility.zbuffer", "from ..render.renderer_cache import renderer_for\n", False, 0),
         ("zbuf_occlude.farm.run", "from .. import io\nfrom .worker import x\n", False, 0),
     ],
 )
 def test_the_check_sees_upward_imports(module: str, source: str, is_package: bool, expected: int) -> None:
     assert len(violations({module: (source, is_package)})) == expected
+
+
+def _module_graph() -> dict[str, set[str]]:
+    """Module → zbuf_occlude modules it imports (a package import counts as its ``__init__``)."""
+    sources = _package_sources()
+    graph: dict[str, set[str]] = defaultdict(set)
+    for module, (source, is_package) in sources.items():
+        for _, target in imported_modules(module, source, is_package):
+            while target not in sources and "." in target:  # `from pkg.mod import name` where name is no module
+                target = target.rpartition(".")[0]
+            if target != module:
+                graph[module].add(target)
+    return graph
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components of more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def test_no_import_cycle() -> None:
+    # a package's __init__ imports its own modules, which may import names from it: not a cycle of the code
+    graph = {m: {t for t in ts if not (m.startswith(t + ".") and _module_name_is_package(t))} for m, ts in _module_graph().items()}
+    assert not _cycles(graph), _cycles(graph)
+
+
+def _module_name_is_package(module: str) -> bool:
+    return (PACKAGE.parent / module.replace(".", "/") / "__init__.py").is_file()
+
+
+def test_the_cycle_check_sees_a_cycle() -> None:
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def _imports_of(path: Path) -> set[str]:
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            names |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+            names.add(node.module)
+    return names
+
+
+@pytest.mark.parametrize(
+    ("library", "home"),
+    [("argparse", "cli"), ("zbuf_occlude.cli", "cli"), ("moderngl", "render"), ("glcontext", "render")],
+)
+def test_only_its_package_imports(library: str, home: str) -> None:
+    outside = [
+        str(p.relative_to(PACKAGE.parent))
+        for p in sorted(PACKAGE.rglob("*.py"))
+        if p.relative_to(PACKAGE).parts[0] not in (home, "__main__.py")  # python -m zbuf_occlude runs the CLI
+        and any(n == library or n.startswith(library + ".") for n in _imports_of(p))
+    ]
+    assert not outside, f"only zbuf_occlude/{home}/ may import {library}: {outside}"
+
+
+def test_architecture_page_names_every_package() -> None:
+    text = ARCHITECTURE.read_text(encoding="utf-8")
+    packages = sorted(p.parent.name for p in PACKAGE.glob("*/__init__.py"))
+    missing = [p for p in packages if not re.search(rf"\b{p}/", text)]
+    assert not missing, f"docs/development/architecture.md does not describe: {missing}"

@@ -27,7 +27,7 @@ SAMPLES = Path(__file__).resolve().parents[1] / "data" / "samples"
 
 
 def test_core_import_does_not_import_torch():
-    code = "import sys, zbuf_occlude, zbuf_occlude.cli; zbuf_occlude.cli.build_parser(); print('torch' in sys.modules)"
+    code = "import sys, zbuf_occlude, zbuf_occlude.cli.main; zbuf_occlude.cli.main.build_parser(); print('torch' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
 
@@ -224,7 +224,7 @@ def test_dedupe_ignores_off_header_layout(tmp_path):
 
 def test_one_epoch_smoke_on_samples(tmp_path):
     """The documented smoke test: `zbuf-occlude experiment elevation data/samples --epochs 1`."""
-    from zbuf_occlude.cli import main
+    from zbuf_occlude.cli.main import main
 
     out = tmp_path / "el"
     rc = main(["experiment", "elevation", str(SAMPLES), "--model", "voxnet", "--out", str(out), "--epochs", "1",
@@ -263,14 +263,14 @@ def test_from_occluded_reads_both_storage_modes(tmp_path, storage):
     np.testing.assert_allclose((hi + lo) / 2, 0.0, atol=1e-6)
     raw, _ = ds.to_arrays()
     full = D.from_occluded(ds, seed=0)  # all 32 points: exactly the stored samples, normalised
-    from zbuf_occlude.real_scans import normalize_points
+    from zbuf_occlude.real_scans.records import normalize_points
 
     for b in range(4):
         np.testing.assert_allclose(full.points[b], normalize_points(raw[b]), atol=1e-6)
 
 
 def test_augmentation_split_rule():
-    from zbuf_occlude.learn.experiments import _split_3b
+    from zbuf_occlude.experiments.table3 import _split_3b
 
     meshes = [
         {"name": "bathtub_1", "class_name": "bathtub", "split": "train"},
@@ -286,7 +286,7 @@ def test_augmentation_split_rule():
 
 
 def test_label_map_option():
-    from zbuf_occlude.learn.sim2real_cli import parse_pairs
+    from zbuf_occlude.cli.sim2real import parse_pairs
 
     assert parse_pairs("Car=car, 4wd = car", "--label-map") == {"Car": "car", "4wd": "car"}
     assert parse_pairs(None, "--label-map") == {}

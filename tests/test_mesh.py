@@ -1,4 +1,4 @@
-"""Tests of zbuf_occlude.mesh: loading, cleaning and normalisation (paper §4.1)."""
+"""Tests of zbuf_occlude.mesh.load: loading, cleaning and normalisation (paper §4.1)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import trimesh
 from conftest import MODELNET_SUBSET, real_mesh, shared_available
 
 from zbuf_occlude.errors import InvalidInputError, MeshLoadError
-from zbuf_occlude.mesh import (
+from zbuf_occlude.mesh.load import (
     DEGENERATE_AREA_RTOL,
     METADATA_KEY,
     clean_mesh,
@@ -393,7 +393,7 @@ def test_degenerate_area_tolerance_is_relative() -> None:
 
 
 def test_class_and_split_of_modelnet_layouts():
-    from zbuf_occlude.mesh import class_and_split
+    from zbuf_occlude.mesh.discovery import class_and_split
 
     assert class_and_split("root/chair/train/chair_0001.off")[0] == "chair"
     assert class_and_split("root/chair/chair_0001.off")[0] == "chair"
@@ -410,7 +410,7 @@ def _raw(vertices, faces, **metadata):
 
 
 def test_checks_name_the_mesh_and_catch_each_bad_index_alone():
-    from zbuf_occlude.mesh import clean_mesh, degenerate_faces, normalize_mesh
+    from zbuf_occlude.mesh.load import clean_mesh, degenerate_faces, normalize_mesh
 
     # one past the last vertex, or negative, each alone (trimesh itself splits quads, so
     # the "(F, 3) triangles" check cannot be reached through a Trimesh)
@@ -434,7 +434,7 @@ def test_checks_name_the_mesh_and_catch_each_bad_index_alone():
 
 
 def test_degenerate_faces_tolerance_is_relative_to_the_extent_and_inclusive():
-    from zbuf_occlude.mesh import degenerate_faces
+    from zbuf_occlude.mesh.load import degenerate_faces
 
     # a collinear face (zero area, distinct indices) is degenerate even with area_rtol=0
     line = _raw([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0]], [[0, 1, 2], [0, 1, 3]])
@@ -445,7 +445,7 @@ def test_degenerate_faces_tolerance_is_relative_to_the_extent_and_inclusive():
 
 
 def test_provenance_composes_load_clean_and_normalise(tmp_path):
-    from zbuf_occlude.mesh import METADATA_KEY, clean_mesh, load_mesh, normalize_mesh
+    from zbuf_occlude.mesh.load import METADATA_KEY, clean_mesh, load_mesh, normalize_mesh
 
     # a degenerate face and an unreferenced vertex in the file
     path = tmp_path / "m.off"

@@ -6,7 +6,7 @@ import gc
 
 import trimesh
 
-from zbuf_occlude.mesh_cache import MeshCache
+from zbuf_occlude.mesh.cache import MeshCache
 
 
 def _counting_cache(size=2):

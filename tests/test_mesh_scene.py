@@ -11,8 +11,8 @@ import pytest
 import trimesh
 
 from zbuf_occlude.errors import InvalidInputError, MeshLoadError
-from zbuf_occlude.mesh import METADATA_KEY, load_mesh
-from zbuf_occlude.mesh_scene import collada_asset, up_rotation
+from zbuf_occlude.mesh.load import METADATA_KEY, load_mesh
+from zbuf_occlude.mesh.scene import collada_asset, up_rotation
 
 #: The street-object meshes (research-only, next to the repository; skipped when absent).
 STREET_OBJECTS = Path(os.environ.get("ZBUF_OCCLUDE_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data")) / "street_objects"

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.metrics import agreement
+from zbuf_occlude.visibility.metrics import agreement
 
 
 def test_agreement_rates_add_up():

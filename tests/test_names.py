@@ -9,7 +9,8 @@ import pytest
 import trimesh
 
 import zbuf_occlude as zo
-from zbuf_occlude import _version, elevation_profile
+from zbuf_occlude import _version
+from zbuf_occlude.experiments import elevation_profile
 from zbuf_occlude.farm import worker
 from zbuf_occlude.visibility import zbuffer
 
@@ -19,15 +20,16 @@ def test_resident_points_and_the_deprecated_scene_alias() -> None:
     points, face_index = trimesh.sample.sample_surface(mesh, 300, seed=2)
     camera = zo.camera_on_sphere(25.0, 40.0, 4.0, resolution=128)
     with warnings.catch_warnings():
-        warnings.simplefilter("error")  # the new name warns about nothing
-        with zo.ResidentPoints(mesh, points, face_index) as resident:
-            expected = resident.visible(camera)
-    with pytest.warns(DeprecationWarning, match="ResidentPoints"):
+        warnings.simplefilter("error")  # the one route warns about nothing
+        with zo.VisibilitySession(mesh, points, face_index, method="zbuffer") as session:
+            expected = session.visible(camera)
+    with pytest.warns(DeprecationWarning, match="VisibilitySession"):
         scene = zo.Scene(mesh, points, face_index)
     with scene:
         assert np.array_equal(scene.visible(camera), expected)
-    assert isinstance(scene, zo.ResidentPoints)
-    assert zo.method_info("zbuffer").session is zo.ResidentPoints
+    with pytest.warns(DeprecationWarning, match="VisibilitySession"):
+        assert isinstance(scene, zo.ResidentPoints)
+    assert zo.method_info("zbuffer").session is zbuffer.ResidentPoints
 
 
 def test_profile_module_renamed() -> None:

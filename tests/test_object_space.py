@@ -1,4 +1,4 @@
-"""The paper's object-space HSR methods (zbuf_occlude.visibility.object_space) and the peers.
+"""The paper's object-space HSR methods (zbuf_occlude.visibility.paper.object_space) and the peers.
 
 Bounds are measured on real ModelNet meshes (see docs/results for the large runs):
 
@@ -24,8 +24,9 @@ from conftest import real_mesh
 
 import zbuf_occlude as zo
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
-from zbuf_occlude.visibility import object_space as osp
-from zbuf_occlude.visibility.oracle import occluded_numpy, triangle_planes
+from zbuf_occlude.visibility.paper import object_space as osp
+from zbuf_occlude.visibility.oracle_numpy import occluded_numpy
+from zbuf_occlude.visibility.segment_triangle import triangle_planes
 
 #: Small real meshes (faces): quick enough for the O(N·F) methods in CI.  Each is
 #: (path in the subset, shipped substitute when the subset is absent); see conftest.

@@ -16,18 +16,10 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 import zbuf_occlude as zo
-from zbuf_occlude.cameras import DEFAULT_RADIUS
+from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.occlude import (
-    DenseCloud,
-    dense_cloud,
-    derive_rng,
-    draw_sample,
-    object_key,
-    occlude_object,
-    pose_samples,
-    sample_rng,
-)
+from zbuf_occlude.pipeline import DenseCloud, dense_cloud, occlude_object
+from zbuf_occlude.geometry.samples import derive_rng, draw_sample, object_key, pose_samples, sample_rng
 
 #: The oracle hides at most this fraction of the points the default ``zbuffer`` method
 #: samples.  Measured on the shipped sofa (20k dense points, 256²): 1 of 1536 sampled
@@ -268,8 +260,8 @@ def test_generate_writes_occluded_samples(small_mesh, tmp_path):
     # `zbuf-occlude generate` end to end: each written sample's points lie on the mesh and
     # are visible from the sample's own pose by the oracle (measured: 0 of 1536 hidden);
     # a generator that ignores occlusion writes ~half hidden points.
-    from zbuf_occlude.cli import main
-    from zbuf_occlude.io import read_npz
+    from zbuf_occlude.cli.main import main
+    from zbuf_occlude.io.clouds import read_npz
 
     path, mesh = small_mesh
     assert main(["generate", str(path), "--out", str(tmp_path), "--views", "30:45,-40:200,85:10", "--points", "256",
@@ -394,7 +386,7 @@ def test_the_memory_check_counts_this_objects_job_before_allocating(monkeypatch)
         checked.append(estimate)
         raise InvalidInputError("refused")
 
-    occlude_module = importlib.import_module("zbuf_occlude.occlude")  # zbuf_occlude.occlude is the function
+    occlude_module = importlib.import_module("zbuf_occlude.pipeline")  # zbuf_occlude.pipeline is the function
     monkeypatch.setattr(occlude_module, "check_memory", refuse)
     for dense, n_dense in ((_BALL_DENSE, 4000), (None, DEFAULT_DENSE_POINTS)):
         with pytest.raises(InvalidInputError, match="refused"):
@@ -403,7 +395,7 @@ def test_the_memory_check_counts_this_objects_job_before_allocating(monkeypatch)
 
 
 def test_dense_cloud_is_sampled_with_the_generator_of_seed_key_and_the_dense_stream():
-    from zbuf_occlude.sampling import sample_surface
+    from zbuf_occlude.geometry.sampling import sample_surface
 
     for kw in (dict(count=300), dict(density=500.0)):
         dense = dense_cloud(_BALL, 9, seed=4, **kw)
@@ -430,8 +422,8 @@ def test_occlude_object_passes_its_camera_and_options_to_the_method(monkeypatch)
 
     from zbuf_occlude.visibility.registry import method_info
 
-    # the module (zbuf_occlude.occlude, the package attribute, is the function zo.occlude)
-    occlude_module = importlib.import_module("zbuf_occlude.occlude")
+    # the module (zbuf_occlude.pipeline, the package attribute, is the function zo.occlude)
+    occlude_module = importlib.import_module("zbuf_occlude.pipeline")
 
     calls = []
 
@@ -474,7 +466,7 @@ def test_a_pose_with_nothing_visible_warns_once_only_if_samples_were_asked(caplo
     cases = [(inside, 1, True), (inside, 0, False), (visible_one, 1, False), (_BALL_DENSE, 1, False)]
     for dense, samples, warns in cases:
         caplog.clear()
-        with caplog.at_level("WARNING", logger="zbuf_occlude.occlude"):
+        with caplog.at_level("WARNING", logger="zbuf_occlude.pipeline"):
             list(occlude_object(_BALL, [(0.0, 0.0)], key=1, n_points=4, samples_per_view=samples, dense=dense, method="oracle"))
         assert any("nothing visible" in r.getMessage() for r in caplog.records) == warns, (len(dense.points), samples)
 
@@ -541,8 +533,8 @@ def test_occlude_is_deterministic_for_a_seed(small_mesh, sofa_clouds):
 
 
 def test_occlude_equals_what_generate_writes(small_mesh, sofa_clouds, tmp_path):
-    from zbuf_occlude.cli import main
-    from zbuf_occlude.dataset import OccludedDataset
+    from zbuf_occlude.cli.main import main
+    from zbuf_occlude.dataset.reader import OccludedDataset
 
     path, _ = small_mesh
     o = OCCLUDE_OPTIONS

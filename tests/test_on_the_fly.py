@@ -9,12 +9,13 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from zbuf_occlude.cameras import camera_on_sphere  # noqa: E402
+from zbuf_occlude.geometry.cameras import camera_on_sphere  # noqa: E402
 from zbuf_occlude.errors import InvalidInputError  # noqa: E402
 from zbuf_occlude.learn import OnTheFlyOccludedDataset, PoseDistribution, RandomOcclusion  # noqa: E402
 from zbuf_occlude.learn.models import PointNet  # noqa: E402
-from zbuf_occlude.mesh import load_mesh  # noqa: E402
-from zbuf_occlude.occlude import dense_cloud, object_key  # noqa: E402
+from zbuf_occlude.mesh.load import load_mesh  # noqa: E402
+from zbuf_occlude.pipeline import dense_cloud  # noqa: E402
+from zbuf_occlude.geometry.samples import object_key
 from zbuf_occlude.protocols import modelnet40c  # noqa: E402
 from zbuf_occlude.visibility.registry import visible_mask  # noqa: E402
 
@@ -79,7 +80,7 @@ def test_modelnet40c_distribution_covers_their_cameras(severity):
 
 
 def test_dataset_labels_and_splits_match_the_farm():
-    from zbuf_occlude.farm.generate import scan_paths
+    from zbuf_occlude.mesh.inputs import scan_paths
 
     ds = OnTheFlyOccludedDataset(SAMPLES, split="test", n_points=128, dense_points=2048)
     objects, _ = scan_paths([SAMPLES])

@@ -1,7 +1,7 @@
 """Tests of zbuf_occlude.visibility.oracle, the exact hidden-surface-removal ground truth.
 
 Meshes are built with trimesh directly (loaded with ``process=False`` and normalised here),
-so these tests do not depend on zbuf_occlude.mesh / sampling.
+so these tests do not depend on zbuf_occlude.mesh.load / sampling.
 """
 
 from __future__ import annotations
@@ -16,15 +16,12 @@ import trimesh
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from zbuf_occlude.cameras import camera_on_sphere
+from zbuf_occlude.geometry.cameras import camera_on_sphere
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 from zbuf_occlude.visibility import oracle_embree as oracle, registry  # _EmbreeScene lives in oracle_embree
-from zbuf_occlude.visibility.oracle import (
-    occluded_embree,
-    occluded_numpy,
-    segment_hits_triangles,
-    triangle_planes,
-)
+from zbuf_occlude.visibility.oracle_embree import occluded_embree
+from zbuf_occlude.visibility.oracle_numpy import occluded_numpy
+from zbuf_occlude.visibility.segment_triangle import segment_hits_triangles, triangle_planes
 
 REPO = Path(__file__).resolve().parents[1]
 #: Real ModelNet meshes next to the repository (extra coverage when present).

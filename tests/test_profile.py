@@ -1,4 +1,4 @@
-"""Values of the Fig. 12 elevation profile (zbuf_occlude.elevation_profile) against analytic areas.
+"""Values of the Fig. 12 elevation profile (zbuf_occlude.experiments.elevation_profile) against analytic areas.
 
 An axis-aligned box of sides (1, 0.6, 0.3) has faces of three different areas, one per
 projection plane, so a swapped plane or an ignored elevation changes the numbers.  A
@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from zbuf_occlude import elevation_profile as prof
-from zbuf_occlude.cameras import DEFAULT_RADIUS
+from zbuf_occlude.experiments import elevation_profile as prof
+from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
 
 SIDES = np.array([1.0, 0.6, 0.3])  # x, y, z extents: the maximum extent is 1 (normalised)
 #: plane name -> axis of its normal (x-y plane ⟂ z, y-z plane ⟂ x, x-z plane ⟂ y)

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from zbuf_occlude.cli import main
+from zbuf_occlude.cli.main import main
 
 CHAIR = str(Path(__file__).resolve().parents[1] / "data" / "samples" / "chair")
 

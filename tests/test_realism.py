@@ -11,7 +11,7 @@ import trimesh
 
 import zbuf_occlude.sensors as S
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.realism import (
+from zbuf_occlude.experiments.realism import (
     cloud_stats, compare_sets, fit_count_exponent, read_object_clouds, realism_report, ring_spacings_deg,
 )  # fmt: skip
 
@@ -56,7 +56,7 @@ def test_wall_scans_fall_as_inverse_square(tmp_path):
 
 
 def test_report_files_and_cli(tmp_path):
-    from zbuf_occlude.cli import main
+    from zbuf_occlude.cli.main import main
 
     out = tmp_path / "gen"
     assert main(["scan", "cylinder", "--extents", "0.3,0.3,6", "--distance", "4:12", "--azimuth", "0:360", "--samples", "4", "--crop", "--out", str(out)]) == 0

@@ -10,9 +10,10 @@ import pytest
 import trimesh
 
 import zbuf_occlude
-from zbuf_occlude.compare.run import _sweep_jobs
+from zbuf_occlude.experiments.compare.run import _sweep_jobs
 from zbuf_occlude.errors import InvalidInputError, RegistryError, ZbufOccludeError
-from zbuf_occlude.occlude import object_key, occlude_object
+from zbuf_occlude.geometry.samples import object_key
+from zbuf_occlude.pipeline import occlude_object
 from zbuf_occlude.visibility import registry
 from zbuf_occlude.visibility.registry import available_methods, method_info, register
 
@@ -127,8 +128,6 @@ def test_every_method_refuses_an_unknown_keyword_naming_it():
 
 
 def test_visible_mask_and_sessions_refuse_typos():
-    from zbuf_occlude.visibility.auto import make_scene
-
     mesh = trimesh.creation.icosphere(subdivisions=1)
     points, fi = zbuf_occlude.sample_surface(mesh, 50, seed=0)
     cam = zbuf_occlude.camera_on_sphere(10.0, 20.0, resolution=64)
@@ -137,7 +136,9 @@ def test_visible_mask_and_sessions_refuse_typos():
             zbuf_occlude.visible_mask(mesh, points, cam, method, face_index=fi, tolerence=0.5)
     with pytest.raises(TypeError, match="resolution"):
         zbuf_occlude.visible_mask(mesh, points, cam, "oracle", face_index=fi, resolution=512)  # an image-space option
-    with make_scene(mesh, points, fi) as scene, pytest.raises(TypeError, match="tolerence"):
+    with pytest.raises(TypeError, match="tolerence"):
+        zbuf_occlude.VisibilitySession(mesh, points, fi, tolerence=0.5)
+    with method_info("auto").session(mesh, points, fi) as scene, pytest.raises(TypeError, match="tolerence"):
         scene.visible(cam, tolerence=0.5)
     # the documented keywords still work and change what they should
     a = zbuf_occlude.visible_mask(mesh, points, cam, "oracle", face_index=fi, tolerance=1e-6)

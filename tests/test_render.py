@@ -16,7 +16,7 @@ import zbuf_occlude as zo
 from zbuf_occlude.errors import BackendUnavailable
 from zbuf_occlude.render.context import create_context
 from zbuf_occlude.render.moderngl_backend import ModernGLRenderer
-from zbuf_occlude.visibility.oracle import segment_hits_triangles
+from zbuf_occlude.visibility.segment_triangle import segment_hits_triangles
 from zbuf_occlude.render import renderer_for
 
 REPO = Path(__file__).resolve().parents[1]

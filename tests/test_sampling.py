@@ -1,4 +1,4 @@
-"""Tests of zbuf_occlude.sampling (Sryamkin et al. 2023, §3.4, Algorithms 1 and 2).
+"""Tests of zbuf_occlude.geometry.sampling (Sryamkin et al. 2023, §3.4, Algorithms 1 and 2).
 
 Statistical tests use fixed seeds, so they are deterministic; their thresholds
 (p > P_MIN, or a few standard deviations) are loose enough that a correct sampler
@@ -17,8 +17,8 @@ from conftest import real_mesh as real_mesh_path
 from scipy import stats
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.mesh import load_mesh
-from zbuf_occlude.sampling import points_from_barycentric, sample_faces, sample_surface, triangles_of
+from zbuf_occlude.mesh.load import load_mesh
+from zbuf_occlude.geometry.sampling import points_from_barycentric, sample_faces, sample_surface, triangles_of
 
 #: Smallest p-value accepted from a goodness-of-fit test.
 P_MIN = 1e-3

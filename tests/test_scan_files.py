@@ -11,8 +11,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.real_scans import load_real_scans
-from zbuf_occlude.scan_files import POINT_EXTENSIONS, load_scan_folder, read_points, units_to_m
+from zbuf_occlude.real_scans.datasets import load_real_scans
+from zbuf_occlude.real_scans.files import POINT_EXTENSIONS, load_scan_folder, read_points, units_to_m
 
 PTS = np.array([[1.0, 2.0, 3.0], [4.5, -5.0, 6.25], [-7.0, 8.0, 0.5], [0.0, 0.0, 10.0]])
 

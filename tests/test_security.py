@@ -19,7 +19,7 @@ import pytest
 from conftest import REPO_ROOT, SAMPLE_MESHES, tiny_dataset
 
 from zbuf_occlude import OccludedDataset
-from zbuf_occlude.cli import main
+from zbuf_occlude.cli.main import main
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
 
 CHAIR = SAMPLE_MESHES / "chair/train/chair_0001.off"
@@ -242,7 +242,7 @@ def test_farm_merge_removes_the_temporaries_of_dead_writers(dataset_dir: Path, t
     out = Path(shutil.copytree(dataset_dir, tmp_path / "out"))
     # a writer killed mid-write (os._exit inside atomic_path) leaves its temporary behind
     code = (
-        "import os\nfrom zbuf_occlude.io import atomic_path\n"
+        "import os\nfrom zbuf_occlude.io.clouds import atomic_path\n"
         "with atomic_path('shards/train_000000.h5') as tmp:\n    tmp.write_bytes(b'partial')\n    os._exit(9)\n"
     )
     env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
@@ -318,7 +318,7 @@ def test_a_changed_shard_is_still_caught_with_its_checksum(ds: Path) -> None:
 # -- class names with control characters ---------------------------------------------------------
 @pytest.mark.parametrize("cls", ["a\x85b", "c\nd", "e\u2028f"])
 def test_a_class_name_with_a_control_character_is_refused_before_any_work(tmp_path: Path, cls: str, monkeypatch) -> None:
-    import zbuf_occlude.mesh as mesh
+    import zbuf_occlude.mesh.load as mesh
     from zbuf_occlude.farm import FarmParams, run_farm
 
     (tmp_path / "meshes" / cls).mkdir(parents=True)
@@ -387,7 +387,7 @@ def test_verify_a_folder_that_is_not_a_data_set_exits_1(tmp_path: Path, capsys) 
 
 
 def test_paths_inside_the_folder_pass_and_others_do_not(tmp_path: Path) -> None:
-    from zbuf_occlude.safe_paths import check_relative_name, path_inside
+    from zbuf_occlude.io.safe_paths import check_relative_name, path_inside
 
     (tmp_path / "d").mkdir()
     (tmp_path / "d" / "in").symlink_to(tmp_path / "d", target_is_directory=True)  # a symlink that stays inside

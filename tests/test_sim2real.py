@@ -12,8 +12,8 @@ import trimesh
 
 pytest.importorskip("torch")
 
-from zbuf_occlude.cli import main  # noqa: E402
-from zbuf_occlude.learn.sim2real_data import (  # noqa: E402
+from zbuf_occlude.cli.main import main  # noqa: E402
+from zbuf_occlude.experiments.sim2real_data import (  # noqa: E402
     KEEP_SCALE_UNIT_M,
     TRAINING_SETS,
     build_set,
@@ -21,7 +21,7 @@ from zbuf_occlude.learn.sim2real_data import (  # noqa: E402
     mix_sets,
     split_whole_meshes,
 )
-from zbuf_occlude.object_sizes import CLASS_SIZES_M, SizeRange, parse_sizes, size_interval  # noqa: E402
+from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange, parse_sizes, size_interval  # noqa: E402
 from zbuf_occlude.errors import InvalidInputError  # noqa: E402
 
 
@@ -146,8 +146,8 @@ def test_bad_options_exit_2_naming_the_value(tmp_path: Path, option: str, value:
 
 
 def test_real_clouds_label_map_and_keep_scale() -> None:
-    from zbuf_occlude.learn.sim2real_data import real_clouds
-    from zbuf_occlude.real_scans import RealScan, normalize_points
+    from zbuf_occlude.experiments.sim2real_data import real_clouds
+    from zbuf_occlude.real_scans.records import RealScan, normalize_points
 
     tall = np.array([[0.0, 0.0, 0.0], [0.2, 0.1, 1.8], [0.1, 0.0, 0.9]])
     scans = [RealScan(normalize_points(tall * k), label, f"{label}{k}", "test", (tall * k).max(axis=0))

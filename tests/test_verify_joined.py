@@ -9,8 +9,8 @@ import h5py
 import numpy as np
 import pytest
 
-from zbuf_occlude.cli import main
-from zbuf_occlude.verify import verify_dataset
+from zbuf_occlude.cli.main import main
+from zbuf_occlude.dataset.verify import verify_dataset
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 CHAIR = REPO_ROOT / "data" / "samples" / "chair"

@@ -29,7 +29,7 @@ from zbuf_occlude.visibility import available_methods, visible_mask
 from zbuf_occlude.visibility.definition import EDGE_ON_SIN, edge_on_any, edge_on_own
 from zbuf_occlude.visibility.embree_fast import FastScene
 from zbuf_occlude.visibility.gpu_exact import ExactScene
-from zbuf_occlude.visibility.oracle import mesh_planes
+from zbuf_occlude.visibility.segment_triangle import mesh_planes
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SAMPLES = REPO_ROOT / "data" / "samples"

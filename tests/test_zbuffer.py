@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 import zbuf_occlude as zo
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.metrics import agreement
+from zbuf_occlude.visibility.metrics import agreement
 from zbuf_occlude.visibility.zbuffer import ResidentPoints as Scene
 
 #: z-buffer vs oracle agreement at 1024² over the grid25 poses, 20k points per mesh.
@@ -230,7 +230,7 @@ def test_duplicate_faces_are_drawn_once_under_the_lowest_index(chair_scene):
     # points on the copies see their own face in the image exactly as points on the
     # originals do (same visible and same uncertain points); without the grouping the
     # original wins the depth test and every copy's point is uncertain.
-    from zbuf_occlude.visibility.zbuffer import renderer_for
+    from zbuf_occlude.render.renderer_cache import renderer_for
 
     mesh, points, face_index, _ = chair_scene
     n_faces, n_vertices = len(mesh.faces), len(mesh.vertices)

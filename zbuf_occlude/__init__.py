@@ -37,9 +37,8 @@ __all__ = [
     "ModernGLRenderer",
     "render_depth",
     "context_info",
-    "ResidentPoints",
-    "Scene",
     "visible_mask",
+    "VisibilitySession",
     "available_methods",
     "method_info",
     "MethodInfo",
@@ -67,17 +66,28 @@ __all__ = [
     "Lidar", "DepthCamera", "ScanScene", "SceneObject", "load_scene", "look_at_pose", "Scan", "scan",
 ]
 
+from zbuf_occlude import _moved
+
+_moved.install()  # old module paths of the flat layout: a DeprecationWarning, then the new module
+
+
+#: Old routes to "many poses of one point set", kept for one release with a DeprecationWarning.
+_DEPRECATED = {"ResidentPoints": "ResidentPoints", "Scene": "Scene"}
 
 
 def __getattr__(name: str):
-    # ``zbuf_occlude.profile`` was renamed ``elevation_profile`` (it shadowed the standard
-    # library's ``profile``); the old name keeps working, with a warning, for one release.
-    if name == "profile":
-        import importlib
+    if name in _moved.MOVED and name not in _stub_names:  # ``zbuf_occlude.cameras`` and the other modules that moved
+        return _moved.new_module(name)
+    if name in _DEPRECATED:
         import warnings
 
+        from zbuf_occlude.visibility import zbuffer
+
         warnings.warn(
-            "zbuf_occlude.profile is deprecated, use zbuf_occlude.elevation_profile", DeprecationWarning, stacklevel=2
+            f"zbuf_occlude.{name} is deprecated: use zbuf_occlude.VisibilitySession(mesh, points, face_index, "
+            f"method='zbuffer') (or the default method), or zbuf_occlude.visibility.zbuffer.ResidentPoints",
+            DeprecationWarning,
+            stacklevel=2,
         )
-        return importlib.import_module(".elevation_profile", __name__)
+        return getattr(zbuffer, _DEPRECATED[name])
     return _lazy_getattr(name)

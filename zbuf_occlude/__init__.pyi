@@ -5,7 +5,7 @@ the first time it is used) and by type checkers and the API docs (these imports,
 """
 
 from ._version import __version__
-from .cameras import DEFAULT_RADIUS, Camera, camera_on_sphere, cameras_from_schedule, view_schedule
+from .geometry.cameras import DEFAULT_RADIUS, Camera, camera_on_sphere, cameras_from_schedule, view_schedule
 from .errors import (
     BackendUnavailable,
     CameraError,
@@ -15,6 +15,7 @@ from .errors import (
     InsufficientMemoryError,
     InvalidInputError,
     MeshLoadError,
+    PaddedSamplesWarning,
     OutputError,
     RegistryError,
     ShardChecksumError,
@@ -22,13 +23,14 @@ from .errors import (
     UnsafePathError,
     ZbufOccludeError,
 )
-from .mesh import load_mesh, normalize_mesh
+from .mesh.load import load_mesh, normalize_mesh
 from .render import ModernGLRenderer, context_info, render_depth
-from .sampling import points_from_barycentric, sample_faces, sample_surface
+from .geometry.sampling import points_from_barycentric, sample_faces, sample_surface
 from .visibility import MethodInfo, available_methods, method_info, register, visible_mask
-from .visibility.zbuffer import ResidentPoints, Scene  # Scene: deprecated alias of ResidentPoints
-from .occlude import OccludedCloud, PaddedSamplesWarning, occlude
-from .dataset import OccludedDataset
+from .visibility.session import VisibilitySession
+from .geometry.samples import OccludedCloud
+from .pipeline import occlude
+from .dataset.reader import OccludedDataset
 from .farm import merge_farm, run_farm
 from .sensors import DepthCamera, Lidar, Scan, ScanScene, SceneObject, load_scene, look_at_pose, scan
-from . import cameras, dataset, errors, farm, mesh, render, sampling, sensors, visibility
+from . import dataset, errors, experiments, farm, geometry, io, learn, mesh, pipeline, protocols, real_scans, render, sensors, visibility

@@ -34,8 +34,8 @@ DEFAULT_METHOD = "auto"
 #: default for throughput: :data:`DEFAULT_FARM_RESOLUTION`).
 DEFAULT_RESOLUTION = 1024
 
-#: Poses of ``generate``, ``validate``, ``compare`` and :func:`zbuf_occlude.occlude`: the 5×5
-#: grid of :func:`zbuf_occlude.cameras.view_schedule` (the farm renders the paper's 100 poses,
+#: Poses of ``generate``, ``validate``, ``compare`` and :func:`zbuf_occlude.pipeline`: the 5×5
+#: grid of :func:`zbuf_occlude.geometry.cameras.view_schedule` (the farm renders the paper's 100 poses,
 #: :data:`DEFAULT_FARM_VIEWS`).
 DEFAULT_VIEWS = "grid25"
 
@@ -62,7 +62,7 @@ DEFAULT_N_POINTS = 2048
 #: :func:`zbuf_occlude.occlude_object`.
 DEFAULT_SAMPLES_PER_VIEW = 10
 
-#: Samples per pose of :func:`zbuf_occlude.occlude`, which returns one cloud per sample: one
+#: Samples per pose of :func:`zbuf_occlude.pipeline`, which returns one cloud per sample: one
 #: cloud per pose unless asked for more.
 DEFAULT_OCCLUDE_SAMPLES_PER_VIEW = 1
 
@@ -72,7 +72,7 @@ DEFAULT_OCCLUDE_SAMPLES_PER_VIEW = 1
 DEFAULT_DENSE_POINTS = 100_000
 
 #: Global seed of every command and of the API's random draws; with the same seed and options
-#: the samples are the same bytes (zbuf_occlude.occlude.derive_rng).
+#: the samples are the same bytes (zbuf_occlude.pipeline.derive_rng).
 DEFAULT_SEED = 0
 
 #: Distance from a point, object units, within which a face meeting the point→camera

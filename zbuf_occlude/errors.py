@@ -16,6 +16,7 @@ __all__ = [
     "OutputError",
     "RegistryError",
     "UnknownOptionError",
+    "PaddedSamplesWarning",
     "UnsafePathError",
     "DatasetFormatError",
     "CheckpointError",
@@ -81,3 +82,7 @@ class InsufficientMemoryError(InvalidInputError):
 
 class DatasetBusy(OutputError):
     """Another live process holds the lock of this data set (or of this shard)."""
+
+
+class PaddedSamplesWarning(UserWarning):
+    """Some samples hold repeated points: fewer points were visible than a sample holds."""

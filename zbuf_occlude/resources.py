@@ -2,7 +2,7 @@
 
 ``generate --points 1000000000`` used to grow to 23 GB and be killed by the OOM killer
 (issue 9, defect 7).  The CLI and the farm call :func:`estimate_job_memory` and
-:func:`check_memory` up front; :func:`zbuf_occlude.sampling.sample_faces` checks its own
+:func:`check_memory` up front; :func:`zbuf_occlude.geometry.sampling.sample_faces` checks its own
 allocation too.  The estimate is linear in each size, with per-item costs measured on
 this code (peak resident memory of one object's job, see the constants); it is an
 estimate, so the check refuses only what clearly cannot fit.
@@ -20,7 +20,7 @@ import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .errors import InsufficientMemoryError, InvalidInputError
+from zbuf_occlude.errors import InsufficientMemoryError, InvalidInputError
 
 __all__ = [
     "InsufficientMemoryError",

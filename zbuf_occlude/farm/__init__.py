@@ -3,12 +3,12 @@
 One object is the unit of work (Sryamkin et al. 2023, §3.4, §4.3): load and normalise the
 mesh once, sample its dense cloud once, decide visibility from every pose with the points
 kept on the GPU (:class:`~zbuf_occlude.visibility.zbuffer.Scene`), and draw
-``samples_per_view`` samples per pose (:func:`~zbuf_occlude.occlude.occlude_object`).
+``samples_per_view`` samples per pose (:func:`~zbuf_occlude.pipeline.occlude_object`).
 Each object's result is one shard, written atomically, then a small record; a run that
 is killed and started again skips every object whose record and shard are there.
 
-Determinism: every random draw comes from :func:`~zbuf_occlude.occlude.derive_rng` of the
-global seed and the object's key, :func:`~zbuf_occlude.occlude.object_key` of its path
+Determinism: every random draw comes from :func:`~zbuf_occlude.pipeline.derive_rng` of the
+global seed and the object's key, :func:`~zbuf_occlude.pipeline.object_key` of its path
 relative to the input root without the suffix (the name ``zbuf-occlude generate`` uses),
 so an object's samples do not depend on the worker count, the executor, ``--shard``,
 ``--classes`` or ``--per-class``.  They do depend on the OpenGL implementation (the GL
@@ -18,7 +18,7 @@ Executors: in-process (``workers=1``), a process pool started with ``spawn`` (on
 context per worker process, never inherited across ``fork``), or Dask distributed
 (``scheduler="tcp://HOST:PORT"`` or ``dask_local=N``).  Beyond one machine, ``shard=(I, N)``
 runs the I-th of N deterministic partitions (a SLURM array or Kubernetes indexed job) and
-:func:`merge_farm` joins the outputs.  The folder layout is in :mod:`zbuf_occlude.layout`.
+:func:`merge_farm` joins the outputs.  The folder layout is in :mod:`zbuf_occlude.dataset.layout`.
 
 Safety: one writer per data set (``lock``: :func:`farm_lock`, a ``--shard`` task locks only
 its own part), a SHA-256 of every file in its record (checked on resume and by the reader),
@@ -29,35 +29,51 @@ engine with one worker, its own defaults and npz/ply/h5 writers (``generate``).
 Modules: ``inputs`` (discovering objects, shards), ``config`` (parameters, constants,
 journal paths), ``checks`` (up-front checks), ``worker`` (one object), ``journal`` (records,
 manifest, card, summary), ``lock``, ``lifecycle``, ``run`` (executors, :func:`run_farm`,
-:func:`merge_farm`), ``generate``, ``cli`` (the subcommands).
+:func:`merge_farm`), ``generate``, ``shards`` (``--shard I/N``).  The objects it renders come
+from :mod:`zbuf_occlude.mesh.inputs`; its commands are in :mod:`zbuf_occlude.cli.farm`.
 """
 
 # Each name is imported from its module when first used (the imports are in __init__.pyi):
 # ``zbuf-occlude --help`` builds the farm's parsers without loading meshes or visibility.
 import lazy_loader as _lazy
 
-__getattr__, __dir__, _stub_names = _lazy.attach_stub(__name__, __file__)
+_lazy_getattr, __dir__, _stub_names = _lazy.attach_stub(__name__, __file__)
+
+#: Names that moved out of the farm, kept for one release with a DeprecationWarning.
+_MOVED_NAMES = {
+    "FarmObject": "zbuf_occlude.mesh.inputs",
+    "discover_objects": "zbuf_occlude.mesh.inputs",
+    "objects_from_paths": "zbuf_occlude.mesh.inputs",
+    "add_farm_parser": "zbuf_occlude.cli.farm",
+    "add_farm_merge_parser": "zbuf_occlude.cli.farm",
+}
+
+
+def __getattr__(name: str):
+    if name in _MOVED_NAMES:
+        import importlib
+        import warnings
+
+        home = _MOVED_NAMES[name]
+        warnings.warn(f"zbuf_occlude.farm.{name} has moved to {home}.{name}", DeprecationWarning, stacklevel=2)
+        return getattr(importlib.import_module(home), name)
+    return _lazy_getattr(name)
 
 # The same names as __init__.pyi's (a test checks), written out because the API docs read __all__ here.
 __all__ = [
-    "FarmObject",
     "FarmParams",
     "FarmSummary",
     "DatasetBusy",
     "Terminated",
     "farm_lock",
     "generate",
-    "objects_from_paths",
     "GENERATE_DEFAULTS",
-    "discover_objects",
     "process_object",
     "shard_path",
     "select_shard",
     "parse_shard",
     "run_farm",
     "merge_farm",
-    "add_farm_parser",
-    "add_farm_merge_parser",
     "DEFAULT_FARM_DENSE_POINTS",
     "DEFAULT_FARM_RESOLUTION",
     "PAPER_SAMPLES_PER_MB",

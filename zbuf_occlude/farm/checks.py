@@ -13,11 +13,11 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-from ..cameras import camera_on_sphere
-from ..errors import BackendUnavailable, CameraError, InvalidInputError, OutputError
-from ..resources import check_memory, estimate_job_memory
-from ..visibility.registry import get_method
-from .config import FarmParams
+from zbuf_occlude.geometry.cameras import camera_on_sphere
+from zbuf_occlude.errors import BackendUnavailable, CameraError, InvalidInputError, OutputError
+from zbuf_occlude.resources import check_memory, estimate_job_memory
+from zbuf_occlude.visibility.registry import get_method
+from zbuf_occlude.farm.config import FarmParams
 
 __all__ = ["check_before_work", "check_memory_up_front", "check_out_option", "check_out_outside_inputs", "check_radius",
            "prepare_out", "check_gl"]
@@ -86,7 +86,7 @@ def check_gl(resolution: int) -> None:
         ``resolution`` exceeds the GL's maximum image size
         (:func:`~zbuf_occlude.render.context.check_image_size`).
     """
-    from ..render.context import check_image_size, shared_context
+    from zbuf_occlude.render.context import check_image_size, shared_context
 
     try:
         ctx = shared_context()
@@ -122,7 +122,7 @@ def check_memory_up_front(params: FarmParams, *, workers: int = 1) -> None:
 
 def check_radius(radius: float, resolution: int) -> None:
     """``--radius`` makes a camera: outside the object's bounding sphere, and not so far that
-    float64 no longer decides visibility (:data:`~zbuf_occlude.cameras.MAX_CAMERA_RADIUS`).
+    float64 no longer decides visibility (:data:`~zbuf_occlude.geometry.cameras.MAX_CAMERA_RADIUS`).
 
     Raises InvalidInputError naming ``--radius``.
     """

@@ -15,8 +15,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..cameras import DEFAULT_RADIUS, view_schedule
-from ..defaults import (
+from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, view_schedule
+from zbuf_occlude.defaults import (
     DEFAULT_DENSE_POINTS,
     DEFAULT_FARM_DENSE_POINTS,
     DEFAULT_FARM_RESOLUTION,
@@ -26,13 +26,13 @@ from ..defaults import (
     DEFAULT_RESOLUTION,
     DEFAULT_SAMPLES_PER_VIEW,
 )
-from ..defaults import DEFAULT_VIEWS as GENERATE_VIEWS
-from ..errors import BackendUnavailable, InvalidInputError, OutputError
-from ..layout import GENERATE_STORAGES, STORAGE_MODES, record_name, sample_file_name, shard_name
-from ..sampling import check_seed
+from zbuf_occlude.defaults import DEFAULT_VIEWS as GENERATE_VIEWS
+from zbuf_occlude.errors import BackendUnavailable, InvalidInputError, OutputError
+from zbuf_occlude.dataset.layout import GENERATE_STORAGES, STORAGE_MODES, record_name, sample_file_name, shard_name
+from zbuf_occlude.geometry.sampling import check_seed
 
 if TYPE_CHECKING:  # annotations only: inputs imports nothing from here
-    from .inputs import FarmObject
+    from zbuf_occlude.mesh.inputs import FarmObject
 
 log = logging.getLogger(__name__)
 
@@ -79,7 +79,7 @@ class FarmParams:
     Parameters
     ----------
     views : str
-        Pose schedule, :func:`~zbuf_occlude.cameras.view_schedule` (``paper100``: Eq. 11–12).
+        Pose schedule, :func:`~zbuf_occlude.geometry.cameras.view_schedule` (``paper100``: Eq. 11–12).
     samples_per_view, n_points : int
         Samples drawn per pose, points per sample.
     dense_points : int or None
@@ -96,7 +96,7 @@ class FarmParams:
         Visibility method (registry name).
     sensor : str or None
         ``farm --sensor``: a sensor preset (``hdl32e``...) or JSON file
-        (:func:`zbuf_occlude.sensors.cli.sensor_from_name`).  Each object gets
+        (:func:`zbuf_occlude.cli.sensors.sensor_from_name`).  Each object gets
         ``samples_per_view`` scans, each from its own placement (see below), stored as the
         dense layout's rows (dense storage only); ``views``, ``dense_points``, ``density``,
         ``resolution``, ``radius`` and ``method`` do not apply.  ``None``: the z-buffer farm.
@@ -187,8 +187,8 @@ class FarmParams:
             Unknown sensor, or ``sensor_footprint``/``sensor_reflectivity`` for a depth camera
             or a LiDAR without a beam divergence.
         """
-        from ..sensors.cli import sensor_from_name
-        from ..sensors.lidar import Lidar
+        from zbuf_occlude.sensors.presets import sensor_from_name
+        from zbuf_occlude.sensors.lidar import Lidar
 
         sensor = sensor_from_name(self.sensor)
         if (self.sensor_footprint or self.sensor_reflectivity is not None) and not isinstance(sensor, Lidar):
@@ -197,7 +197,7 @@ class FarmParams:
 
     def crop_distributions(self):
         """``farm --sensor``'s per-scan placement, a :class:`~zbuf_occlude.sensors.crops.CropDistributions`."""
-        from ..sensors.crops import CropDistributions
+        from zbuf_occlude.sensors.crops import CropDistributions
 
         return CropDistributions(
             distance_m=self.sensor_distance_m, height_m=self.sensor_height_m, azimuth_deg=(0.0, 360.0),

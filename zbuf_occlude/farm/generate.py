@@ -13,7 +13,7 @@ manifest and card, and the failure records.  Per object the worker writes
   ``train_files.txt`` and ``test_files.txt`` list (PointNet's layout).  The parts stay: they
   are what a rerun resumes from.
 
-:class:`~zbuf_occlude.dataset.OccludedDataset` reads the folder in every format.
+:class:`~zbuf_occlude.dataset.reader.OccludedDataset` reads the folder in every format.
 """
 
 from __future__ import annotations
@@ -23,56 +23,22 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-from ..discovery import SPLITS, SkippedInput
-from ..errors import InvalidInputError
-from ..io import concat_h5, file_sha256, write_text
-from ..layout import CARD_FILE, GENERATE_STORAGES, file_list_name, split_file_name
-from ..safe_paths import path_inside
-from .checks import check_out_outside_inputs
-from .config import GENERATE_DEFAULTS, FarmParams, record_path
-from .inputs import FarmObject, scan_inputs
-from .journal import FarmSummary, read_json, shape_names_of
-from .worker import write_json
-from .run import run_farm
+from zbuf_occlude.mesh.discovery import SPLITS
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.io.clouds import concat_h5
+from zbuf_occlude.io.atomic import file_sha256, write_text
+from zbuf_occlude.dataset.layout import CARD_FILE, GENERATE_STORAGES, file_list_name, split_file_name
+from zbuf_occlude.io.safe_paths import path_inside
+from zbuf_occlude.farm.checks import check_out_outside_inputs
+from zbuf_occlude.farm.config import GENERATE_DEFAULTS, FarmParams, record_path
+from zbuf_occlude.mesh.inputs import FarmObject, scan_inputs
+from zbuf_occlude.farm.journal import FarmSummary, read_json, shape_names_of
+from zbuf_occlude.farm.worker import write_json
+from zbuf_occlude.farm.run import run_farm
 
-__all__ = ["generate", "scan_paths", "objects_from_paths", "split_file_name", "GENERATE_DEFAULTS"]
+__all__ = ["generate"]
 
 log = logging.getLogger(__name__)
-
-
-def scan_paths(
-    paths: Sequence[str | os.PathLike], *, class_from: int | None = None
-) -> tuple[list[FarmObject], list[SkippedInput]]:
-    """The plan of ``generate``: mesh files and folders (searched recursively), numbered,
-    and the inputs that had to be skipped (:func:`~zbuf_occlude.farm.inputs.scan_inputs`).
-
-    Each object's name is its path relative to the folder given (a file given alone: its
-    stem; ShapeNetCore: ``SYNSET/MODEL_ID``), without the suffix; class and split come
-    from the folder's layout (:mod:`zbuf_occlude.mesh_layouts`, ``class_from``: the
-    folder level that names the class); labels number the class names
-    (:func:`~zbuf_occlude.farm.inputs.number_objects`, as the farm does).
-
-    Returns
-    -------
-    objects : list of FarmObject
-    skipped : list of SkippedInput
-        Unreadable folders, broken links and files whose names are not UTF-8
-        (:func:`~zbuf_occlude.discovery.walk_mesh_files`); the run records them and exits 1.
-
-    Raises
-    ------
-    InvalidInputError
-        A path is missing or no mesh file, nothing was found, the layout's labels are
-        refused, or two files have one name (``chair_0001.off`` and ``chair_0001.obj``):
-        the name seeds the samples and names the outputs, so one would overwrite the other.
-    """
-    scan = scan_inputs(paths, class_from=class_from)
-    return scan.objects, scan.skipped
-
-
-def objects_from_paths(paths: Sequence[str | os.PathLike]) -> list[FarmObject]:
-    """:func:`scan_paths` without the skipped inputs (each was logged as a warning)."""
-    return scan_paths(paths)[0]
 
 
 def _merge_h5(out: Path, objects: Sequence[FarmObject]) -> list[Path]:

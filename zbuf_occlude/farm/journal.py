@@ -11,15 +11,15 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from ..errors import InvalidInputError
-from ..io import file_sha256, temp_is_orphan, temp_owner, write_text
-from ..layout import CARD_FILE, FORMAT_VERSION, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, file_list_name
-from ..discovery import SPLITS
-from ..safe_paths import check_line_text, path_inside
-from ..occlude import count_padded
-from .config import BYTES_PER_MB, PAPER_SAMPLES_PER_MB, FarmParams, plan_digest, record_path, shard_path
-from .inputs import FarmObject
-from .worker import base_record, package_version, write_json
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.io.atomic import file_sha256, temp_is_orphan, temp_owner, write_text
+from zbuf_occlude.dataset.layout import CARD_FILE, FORMAT_VERSION, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, file_list_name
+from zbuf_occlude.mesh.discovery import SPLITS
+from zbuf_occlude.io.safe_paths import check_line_text, path_inside
+from zbuf_occlude.geometry.samples import count_padded
+from zbuf_occlude.farm.config import BYTES_PER_MB, PAPER_SAMPLES_PER_MB, FarmParams, plan_digest, record_path, shard_path
+from zbuf_occlude.mesh.inputs import FarmObject
+from zbuf_occlude.farm.worker import base_record, package_version, write_json
 
 log = logging.getLogger(__name__)
 
@@ -35,7 +35,7 @@ def read_json(path: Path) -> dict[str, Any] | None:
 
 
 def read_plan(folder: Path) -> dict[str, Any] | None:
-    """``folder/plan.json`` checked against :class:`~zbuf_occlude.schema.Plan`; ``None`` if there is none.
+    """``folder/plan.json`` checked against :class:`~zbuf_occlude.dataset.schema.Plan`; ``None`` if there is none.
 
     Raises
     ------
@@ -44,7 +44,7 @@ def read_plan(folder: Path) -> dict[str, Any] | None:
     """
     from pydantic import ValidationError
 
-    from ..schema import Plan, describe_validation_error
+    from zbuf_occlude.dataset.schema import Plan, describe_validation_error
 
     path = folder / PLAN_FILE
     try:
@@ -95,9 +95,9 @@ def finished_record(out: Path, obj: FarmObject, digest: str) -> dict[str, Any] |
 def remove_stale_temps(out: Path, objects: Sequence[FarmObject], everything: bool) -> int:
     """Remove the temporary files that dead writers left in ``out``; return how many.
 
-    :func:`~zbuf_occlude.io.atomic_path` leaves ``.<name>.<pid>-<host>-<random>.tmp`` behind
+    :func:`~zbuf_occlude.io.clouds.atomic_path` leaves ``.<name>.<pid>-<host>-<random>.tmp`` behind
     when a run is SIGKILLed mid-write.  Only temps of dead processes on this host go
-    (:func:`~zbuf_occlude.io.temp_is_orphan`), and a sharded task (``everything=False``)
+    (:func:`~zbuf_occlude.io.clouds.temp_is_orphan`), and a sharded task (``everything=False``)
     touches only those of its own objects: other tasks may be writing theirs right now.
     Call it while holding the lock (:func:`~zbuf_occlude.farm.lock.farm_lock`).
     """
@@ -118,7 +118,7 @@ def remove_stale_temps(out: Path, objects: Sequence[FarmObject], everything: boo
 def plan_doc(objects: Sequence[FarmObject], params: FarmParams, source: str, layout: str | None = None) -> dict[str, Any]:
     """The plan of a run (``plan.json``); class names that would break ``shape_names.txt`` are refused here, before any work.
 
-    ``layout`` says how classes and splits were found (zbuf_occlude.mesh_layouts), for the card.
+    ``layout`` says how classes and splits were found (zbuf_occlude.mesh.layouts), for the card.
     """
     shape_names_of(objects)
     return {
@@ -188,7 +188,7 @@ def finalize(
     ``skipped``: ``(path, reason)`` of inputs discovery could not take (unreadable folders,
     names that are not UTF-8), recorded in the card as ``skipped_inputs``.
     """
-    from ..schema import CHECKSUM_ALGORITHM
+    from zbuf_occlude.dataset.schema import CHECKSUM_ALGORITHM
 
     objects = objects_of(plan)
     params = FarmParams(**plan["params"])
@@ -239,7 +239,7 @@ def finalize(
         "checksums": CHECKSUM_ALGORITHM if every_file_hashed else None,
         "renderers": sorted({r["renderer"] for r in ok if r.get("renderer")}),
         "seed_derivation": "numpy SeedSequence([seed, blake2b64(name), stream, pose_index, sample_index]), "
-        "zbuf_occlude.occlude.derive_rng; stream 0 = dense cloud, 1 = sample draws",
+        "zbuf_occlude.pipeline.derive_rng; stream 0 = dense cloud, 1 = sample draws",
         "reference": "Sryamkin, Msallam, Klestov 2023, "
         "A method to create real-like point clouds for 3D object classification",
     }

@@ -28,10 +28,10 @@ from multiprocessing.connection import Connection, wait
 from pathlib import Path
 from typing import Any
 
-from .config import FarmParams, record_path
-from .inputs import FarmObject
-from .lifecycle import die_with_parent
-from .worker import base_record, process_object, write_json
+from zbuf_occlude.farm.config import FarmParams, record_path
+from zbuf_occlude.mesh.inputs import FarmObject
+from zbuf_occlude.farm.lifecycle import die_with_parent
+from zbuf_occlude.farm.worker import base_record, process_object, write_json
 
 __all__ = ["run_in_workers", "STOP_GRACE_S", "worker_death_error"]
 

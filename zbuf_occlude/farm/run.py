@@ -15,15 +15,16 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from ..errors import BackendUnavailable, InvalidInputError, OutputError
-from ..io import atomic_path, write_text
-from ..layout import CARD_FILE, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, TASK_DIR, file_list_name
-from ..discovery import SPLITS
-from ..safe_paths import path_inside
-from .checks import check_before_work, check_out_outside_inputs, prepare_out
-from .config import MANIFEST_INTERVAL_S, OPTION_NAMES, FarmParams, record_path, shard_path
-from .inputs import FarmObject, scan_objects, select_shard
-from .journal import (
+from zbuf_occlude.errors import BackendUnavailable, InvalidInputError, OutputError
+from zbuf_occlude.io.atomic import atomic_path, write_text
+from zbuf_occlude.dataset.layout import CARD_FILE, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, TASK_DIR, file_list_name
+from zbuf_occlude.mesh.discovery import SPLITS
+from zbuf_occlude.io.safe_paths import path_inside
+from zbuf_occlude.farm.checks import check_before_work, check_out_outside_inputs, prepare_out
+from zbuf_occlude.farm.config import MANIFEST_INTERVAL_S, OPTION_NAMES, FarmParams, record_path, shard_path
+from zbuf_occlude.mesh.inputs import FarmObject, scan_objects
+from zbuf_occlude.farm.shards import select_shard
+from zbuf_occlude.farm.journal import (
     FarmSummary,
     finalize,
     finished_record,
@@ -34,10 +35,10 @@ from .journal import (
     read_plan,
     remove_stale_temps,
 )
-from .lifecycle import sigterm_as_interrupt
-from .lock import farm_lock
-from .pool import run_in_workers
-from .worker import package_version, process_object, write_json
+from zbuf_occlude.farm.lifecycle import sigterm_as_interrupt
+from zbuf_occlude.farm.lock import farm_lock
+from zbuf_occlude.farm.pool import run_in_workers
+from zbuf_occlude.farm.worker import package_version, process_object, write_json
 
 log = logging.getLogger(__name__)
 
@@ -159,7 +160,7 @@ def run_farm(
     source : str, PathLike or sequence of FarmObject
         Mesh tree, flat folder or list file (:func:`scan_objects`), or a ready plan.
     out : str or PathLike
-        Data set folder (layout: :mod:`zbuf_occlude.dataset`).
+        Data set folder (layout: :mod:`zbuf_occlude.dataset.reader`).
     params : FarmParams, optional
         What to render; default :class:`FarmParams` ``()`` (paper100, 10 samples of 2048
         points per pose, 32768 dense points, 512² z-buffer, seed 0, dense storage).

@@ -16,13 +16,15 @@ from typing import Any
 
 import numpy as np
 
-from ..io import OccludedCloud, atomic_h5, file_sha256, write_h5, write_npz, write_ply, write_text
-from ..layout import FORMAT_VERSION, SAMPLE_FILE_FORMATS
-from ..occlude import dense_cloud, occlude_object
-from ..safe_paths import check_relative_name, path_inside
-from .._version import __version__
-from .config import COMPACT_GZIP_LEVEL, FATAL_ERRORS, GL_LOCK, FarmParams, record_path, sample_file_path, shard_path
-from .inputs import FarmObject
+from zbuf_occlude.geometry.samples import OccludedCloud
+from zbuf_occlude.io.atomic import atomic_h5, file_sha256, write_text
+from zbuf_occlude.io.clouds import write_h5, write_npz, write_ply
+from zbuf_occlude.dataset.layout import FORMAT_VERSION, SAMPLE_FILE_FORMATS
+from zbuf_occlude.pipeline import dense_cloud, occlude_object
+from zbuf_occlude.io.safe_paths import check_relative_name, path_inside
+from zbuf_occlude._version import __version__
+from zbuf_occlude.farm.config import COMPACT_GZIP_LEVEL, FATAL_ERRORS, GL_LOCK, FarmParams, record_path, sample_file_path, shard_path
+from zbuf_occlude.mesh.inputs import FarmObject
 
 log = logging.getLogger(__name__)
 
@@ -56,7 +58,7 @@ def _attrs(obj: FarmObject, params: FarmParams) -> dict[str, Any]:
 
 @functools.lru_cache(maxsize=1)
 def _renderer_name() -> str:
-    from ..render import context_info
+    from zbuf_occlude.render import context_info
 
     try:
         info = context_info()
@@ -79,8 +81,8 @@ def _scan(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
     ``sensor_height_m``, ``object_azimuth_deg``, ``yaw_deg``, ``size_m``, ``radius``) and
     ``ring``.  The record's ``n_visible`` has one entry per scan (0: no return).
     """
-    from ..mesh import load_mesh  # trimesh: imported by the work, not by modules that only read records
-    from ..sensors.crops import farm_datasets
+    from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported by the work, not by modules that only read records
+    from zbuf_occlude.sensors.crops import farm_datasets
 
     mesh = load_mesh(obj.source)
     n_scans = int(params.samples_per_view)
@@ -118,7 +120,7 @@ def _render(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
         return _scan(obj, params, out)
     if params.storage in SAMPLE_FILE_FORMATS:  # the name becomes folders under out: `...off` (name "..") must not leave it
         check_relative_name(obj.name, what=f"the name of {obj.source}")
-    from ..mesh import load_mesh  # trimesh: imported by the work, not by modules that only read records
+    from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported by the work, not by modules that only read records
 
     mesh = load_mesh(obj.source)
     dense = dense_cloud(mesh, obj.key, seed=params.seed, count=params.dense_points, density=params.density)
@@ -180,7 +182,7 @@ def _render(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
 
 
 def _write_compact(path: Path, dense_points, bits, n_visible, poses, attrs: dict[str, Any]) -> None:
-    """The compact shard: dense cloud once, visibility bits per pose (layout: :mod:`zbuf_occlude.layout`)."""
+    """The compact shard: dense cloud once, visibility bits per pose (layout: :mod:`zbuf_occlude.dataset.layout`)."""
     el_az = np.asarray(poses, dtype=np.float64).reshape(-1, 2)
     with atomic_h5(path) as f:
         f.create_dataset("dense_points", data=dense_points.astype(np.float32), track_times=False)

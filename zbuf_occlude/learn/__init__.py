@@ -33,7 +33,7 @@ def __getattr__(name: str):
 
 def require_torch():
     """Import torch or raise :class:`~zbuf_occlude.errors.BackendUnavailable` saying how to install it."""
-    from ..errors import BackendUnavailable
+    from zbuf_occlude.errors import BackendUnavailable
 
     try:
         import torch

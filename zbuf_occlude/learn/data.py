@@ -2,7 +2,7 @@
 
 Everything here is numpy (no torch): a :class:`CloudSet` is the in-memory arrays a training
 run needs, ``points (B, N, 3) float32`` normalised per cloud like the paper (bounding-box
-centre at 0, maximum extent 1, z up; :func:`zbuf_occlude.real_scans.normalize_points`),
+centre at 0, maximum extent 1, z up; :func:`zbuf_occlude.real_scans.datasets.normalize_points`),
 ``labels (B,) int64``, ``elevation_deg (B,) float64`` (NaN for complete clouds) and
 ``object_index (B,) int64`` (which mesh each cloud came from).
 """
@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import InvalidInputError
+from zbuf_occlude.errors import InvalidInputError
 
 __all__ = [
     "CloudSet",
@@ -136,8 +136,8 @@ def from_meshes(
     object_index : sequence of int, optional
         Stored as ``object_index`` (default 0..len-1).
     """
-    from ..mesh import load_mesh
-    from ..sampling import sample_surface
+    from zbuf_occlude.mesh.load import load_mesh
+    from zbuf_occlude.geometry.sampling import sample_surface
 
     if len(paths) != len(labels):
         raise InvalidInputError(f"{len(paths)} meshes but {len(labels)} labels")

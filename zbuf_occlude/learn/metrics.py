@@ -7,7 +7,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import InvalidInputError
+from zbuf_occlude.errors import InvalidInputError
 
 __all__ = ["confusion_matrix", "classification_report", "accuracy_by_elevation"]
 

@@ -26,7 +26,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from ..errors import InvalidInputError
+from zbuf_occlude.errors import InvalidInputError
 
 __all__ = [
     "MODELS",

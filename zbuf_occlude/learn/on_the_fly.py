@@ -4,13 +4,13 @@
 one occluded sample: a camera pose is drawn from a :class:`PoseDistribution`, hidden surface
 removal keeps the visible points (:func:`zbuf_occlude.visibility.registry.visible_mask`'s
 session of the method, CPU ``embree-fast`` by default), and ``n_points`` of them are drawn
-(:func:`zbuf_occlude.occlude.draw_sample`: every visible point once before any repeat).
+(:func:`zbuf_occlude.pipeline.draw_sample`: every visible point once before any repeat).
 :class:`OnTheFlyOccludedDataset` does this for the meshes under a folder, with the labels and
 splits ``generate`` and the farm give them and the farm's dense clouds
-(:func:`zbuf_occlude.occlude.dense_cloud`, same seed, same points).
+(:func:`zbuf_occlude.pipeline.dense_cloud`, same seed, same points).
 
 Determinism: sample ``index`` of epoch ``epoch`` uses the generator ``(seed, 3, epoch, index)``
-(:func:`zbuf_occlude.occlude.derive_rng`), whatever the worker, the order or the batch size.
+(:func:`zbuf_occlude.pipeline.derive_rng`), whatever the worker, the order or the batch size.
 
 DataLoader workers: visibility sessions (Embree scenes, GL objects) are cached per process (an
 entry made before a ``fork`` is never used after it); meshes and dense clouds are plain numpy
@@ -36,15 +36,16 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from ..cameras import DEFAULT_RADIUS, camera_on_sphere
-from ..errors import InvalidInputError
-from ..farm.generate import scan_paths
-from ..farm.inputs import FarmObject
-from ..mesh import load_mesh
-from ..occlude import DenseCloud, dense_cloud, derive_rng, draw_sample
-from ..visibility.registry import method_info, resolution_option, visible_mask
-from . import require_torch
-from .data import normalize_batch
+from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.mesh.inputs import scan_paths
+from zbuf_occlude.mesh.inputs import FarmObject
+from zbuf_occlude.mesh.load import load_mesh
+from zbuf_occlude.pipeline import DenseCloud, dense_cloud
+from zbuf_occlude.geometry.samples import derive_rng, draw_sample
+from zbuf_occlude.visibility.registry import method_info, resolution_option, visible_mask
+from zbuf_occlude.learn import require_torch
+from zbuf_occlude.learn.data import normalize_batch
 
 __all__ = ["PoseDistribution", "RandomOcclusion", "OnTheFlyOccludedDataset", "EpochSampler", "SharedEpoch", "ProcessCache", "DEFAULT_ON_THE_FLY_METHOD", "DEFAULT_DENSE_ON_THE_FLY"]
 
@@ -269,7 +270,7 @@ class OnTheFlyOccludedDataset(require_torch().utils.data.Dataset):
     n_points, poses, seed, method, normalize
         As :class:`RandomOcclusion`.
     dense_points : int
-        Dense cloud per object (:func:`zbuf_occlude.occlude.dense_cloud`, the farm's seed
+        Dense cloud per object (:func:`zbuf_occlude.pipeline.dense_cloud`, the farm's seed
         stream, so the same points the farm would use with ``--seed``).
     views_per_object : int
         Samples per object and epoch (the data set's length is objects × this).

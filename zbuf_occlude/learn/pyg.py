@@ -4,7 +4,7 @@
 ``torch_geometric.datasets.ModelNet`` yields — and returns ``Data(pos=(n_points, 3), y=...)``:
 one random occluded view (:class:`zbuf_occlude.learn.on_the_fly.RandomOcclusion`), where PyG's
 own ``SamplePoints`` would give a complete cloud.  The mesh is normalised to maximum extent 1
-(:func:`zbuf_occlude.mesh.normalize_mesh`) and sampled densely once per process.
+(:func:`zbuf_occlude.mesh.load.normalize_mesh`) and sampled densely once per process.
 
 PyG gives a transform no sample index, so the view is a function of ``(seed, epoch, mesh
 content)`` (the BLAKE2b key of the vertex and face bytes): deterministic across workers and
@@ -18,11 +18,11 @@ import hashlib
 import numpy as np
 import trimesh
 
-from ..errors import BackendUnavailable, InvalidInputError
-from ..mesh import normalize_mesh
-from ..occlude import dense_cloud
-from . import require_torch
-from .on_the_fly import DEFAULT_DENSE_ON_THE_FLY, DEFAULT_ON_THE_FLY_METHOD, PoseDistribution, RandomOcclusion, ProcessCache
+from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
+from zbuf_occlude.mesh.load import normalize_mesh
+from zbuf_occlude.pipeline import dense_cloud
+from zbuf_occlude.learn import require_torch
+from zbuf_occlude.learn.on_the_fly import DEFAULT_DENSE_ON_THE_FLY, DEFAULT_ON_THE_FLY_METHOD, PoseDistribution, RandomOcclusion, ProcessCache
 
 __all__ = ["OccludeMesh"]
 

@@ -33,10 +33,10 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from ..errors import CheckpointError, InvalidInputError, OutputError
-from ..io import atomic_path
-from .data import CloudSet, augment
-from .models import build_model
+from zbuf_occlude.errors import CheckpointError, InvalidInputError, OutputError
+from zbuf_occlude.io.atomic import atomic_path
+from zbuf_occlude.learn.data import CloudSet, augment
+from zbuf_occlude.learn.models import build_model
 
 __all__ = [
     "TrainConfig", "OPTIMISER_DEFAULTS", "train", "predict", "TrainResult", "resolve_device", "seed_everything",
@@ -122,7 +122,7 @@ class TrainResult:
 
 def resolve_device(name: str) -> torch.device:
     """``cpu`` or ``cuda``; raises :class:`~zbuf_occlude.errors.BackendUnavailable` if CUDA is asked for but absent."""
-    from ..errors import BackendUnavailable
+    from zbuf_occlude.errors import BackendUnavailable
 
     if name == "cuda":
         if not torch.cuda.is_available():

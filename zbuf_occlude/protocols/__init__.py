@@ -6,9 +6,9 @@ Each recipe is one module that cites the code it reproduces; :data:`PROTOCOLS` n
 
 from __future__ import annotations
 
-from ..errors import InvalidInputError
-from .base import Protocol, ProtocolOptions, ProtocolRun, read_arrays_h5, run_protocol, write_arrays_h5
-from .depth import (
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.protocols.base import Protocol, ProtocolOptions, ProtocolRun, read_arrays_h5, run_protocol, write_arrays_h5
+from zbuf_occlude.protocols.depth import (
     DOWNSAMPLERS,
     SAMPLINGS,
     DepthImage,
@@ -19,10 +19,10 @@ from .depth import (
     project,
     render_depth_image,
 )
-from .depth_views import PROTOCOL as _DEPTH
-from .modelnet40c import LIDAR as _MN40C_LIDAR
-from .modelnet40c import OCCLUSION as _MN40C_OCCLUSION
-from .pcn import PROTOCOL as _PCN
+from zbuf_occlude.protocols.depth_views import PROTOCOL as _DEPTH
+from zbuf_occlude.protocols.modelnet40c import LIDAR as _MN40C_LIDAR
+from zbuf_occlude.protocols.modelnet40c import OCCLUSION as _MN40C_OCCLUSION
+from zbuf_occlude.protocols.pcn import PROTOCOL as _PCN
 
 __all__ = [
     "PROTOCOLS", "PROTOCOL_NAMES", "get_protocol", "Protocol", "ProtocolOptions", "ProtocolRun", "run_protocol",

@@ -4,7 +4,7 @@ A protocol is a :class:`Protocol`: a function making one object's arrays (``make
 optional ``finish`` that assembles the shards into the recipe's own layout.  The engine
 discovers the meshes as ``generate`` does (:func:`zbuf_occlude.farm.generate.scan_paths`:
 same names, labels and splits), writes ``OUT/shards/<protocol>_<index>.h5`` atomically
-(:func:`zbuf_occlude.io.atomic_h5`), and resumes: a shard that exists is not redone.  The
+(:func:`zbuf_occlude.io.clouds.atomic_h5`), and resumes: a shard that exists is not redone.  The
 options are recorded in ``OUT/protocol.json`` with the meshes; a rerun with other options or meshes is
 refused unless ``overwrite``.
 """
@@ -22,11 +22,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..errors import InvalidInputError, OutputError, ZbufOccludeError
-from ..farm.generate import scan_paths
-from ..farm.inputs import FarmObject
-from ..io import atomic_h5, write_text
-from ..occlude import derive_rng
+from zbuf_occlude.errors import InvalidInputError, OutputError, ZbufOccludeError
+from zbuf_occlude.mesh.inputs import scan_paths
+from zbuf_occlude.mesh.inputs import FarmObject
+from zbuf_occlude.io.atomic import atomic_h5, write_text
+from zbuf_occlude.geometry.samples import derive_rng
 
 if TYPE_CHECKING:
     import trimesh
@@ -54,7 +54,7 @@ class ProtocolOptions:
     n_points : int or None
         Points per cloud (None: the protocol's own).
     views : str
-        Pose schedule (:func:`zbuf_occlude.cameras.view_schedule`) of the ``depth`` protocol.
+        Pose schedule (:func:`zbuf_occlude.geometry.cameras.view_schedule`) of the ``depth`` protocol.
     resolution : int
         Square image size of the ``depth`` protocol, pixels.
     radius : float
@@ -119,7 +119,7 @@ class ProtocolRun:
 
 
 def write_arrays_h5(path: str | os.PathLike, arrays: Mapping[str, Any], attrs: Mapping[str, Any] | None = None) -> Path:
-    """Write named arrays (strings as UTF-8) to one HDF5 file, atomically (:func:`zbuf_occlude.io.atomic_h5`)."""
+    """Write named arrays (strings as UTF-8) to one HDF5 file, atomically (:func:`zbuf_occlude.io.clouds.atomic_h5`)."""
     import h5py
 
     text = h5py.string_dtype("utf-8")
@@ -185,7 +185,7 @@ def run_protocol(
     """Run ``protocol`` over the meshes under ``paths`` into ``out``.
 
     Per object: :func:`~zbuf_occlude.load_mesh`, the generator ``(seed, object_key(name), 2)``
-    (:func:`~zbuf_occlude.occlude.derive_rng`), ``protocol.make``, one shard.  A mesh that fails
+    (:func:`~zbuf_occlude.pipeline.derive_rng`), ``protocol.make``, one shard.  A mesh that fails
     (unreadable, nothing in view) is recorded and skipped (exit status 1); then ``finish``.
 
     Raises
@@ -213,7 +213,7 @@ def run_protocol(
             shards.append(shard)
             continue
         try:
-            from ..mesh import load_mesh  # trimesh: imported when a protocol runs
+            from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported when a protocol runs
 
             mesh = load_mesh(obj.source)
             rng = derive_rng(options.seed, obj.key, _PROTOCOL_STREAM)

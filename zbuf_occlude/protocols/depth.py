@@ -10,7 +10,7 @@ Conventions (OpenCV, as Open3D's ``PinholeCameraIntrinsic`` and ModelNet40-C use
 
 * ``K`` (3, 3): pixel ``(u, v)`` = (column, row), row 0 at the top, **pixel centres at integer
   coordinates**; a principal point at the image centre is ``cx = W/2 − 0.5, cy = H/2 − 0.5``.
-  (:attr:`zbuf_occlude.cameras.Camera.K` puts pixel centres at half-integers; :meth:`PinholeView.from_camera`
+  (:attr:`zbuf_occlude.geometry.cameras.Camera.K` puts pixel centres at half-integers; :meth:`PinholeView.from_camera`
   converts.)
 * ``extrinsics`` (3, 4) ``[R | t]``: world → camera, camera looks down +z, y down.
 * ``depth`` (H, W) float32: distance along the optical axis (camera z), object units; 0 = no hit.
@@ -24,10 +24,10 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from ..cameras import Camera
-from ..errors import InvalidInputError
-from ..occlude import draw_sample
-from ..sensors.raycast import cast_embree
+from zbuf_occlude.geometry.cameras import Camera
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.geometry.samples import draw_sample
+from zbuf_occlude.sensors.raycast import cast_embree
 
 __all__ = [
     "PinholeView",
@@ -89,7 +89,7 @@ class PinholeView:
 
     @classmethod
     def from_camera(cls, camera: Camera) -> PinholeView:
-        """The same camera as ``camera`` (:class:`~zbuf_occlude.cameras.Camera`), K shifted to integer pixel centres."""
+        """The same camera as ``camera`` (:class:`~zbuf_occlude.geometry.cameras.Camera`), K shifted to integer pixel centres."""
         K = camera.K.copy()
         K[0, 2] -= 0.5
         K[1, 2] -= 0.5
@@ -289,7 +289,7 @@ def farthest_point_sample(points: NDArray[np.floating], n_points: int, rng: np.r
 def downsample(points: NDArray[np.floating], n_points: int, rng: np.random.Generator, method: str = "random") -> NDArray[np.int64]:
     """Indices of ``n_points`` rows of a back-projected cloud.
 
-    ``random``: uniformly at random without replacement (:func:`zbuf_occlude.occlude.draw_sample`);
+    ``random``: uniformly at random without replacement (:func:`zbuf_occlude.pipeline.draw_sample`);
     ``fps``: :func:`farthest_point_sample`.  When fewer points exist, every point is taken
     once and the rest are repeats drawn at random (both methods).  Empty input → empty output.
 

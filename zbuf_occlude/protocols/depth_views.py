@@ -1,6 +1,6 @@
 """``--protocol depth``: depth images, K, extrinsics and back-projected clouds from the paper's poses.
 
-Per pose of ``--views`` (:func:`zbuf_occlude.cameras.camera_on_sphere`, Sryamkin et al. 2023,
+Per pose of ``--views`` (:func:`zbuf_occlude.geometry.cameras.camera_on_sphere`, Sryamkin et al. 2023,
 §3.3 and Eq. 11–12 for ``paper100``), a depth image is ray-cast
 (:func:`~zbuf_occlude.protocols.depth.render_depth_image`), every hit pixel is lifted to 3D
 (:func:`~zbuf_occlude.protocols.depth.back_project`, ``sampling="depth"``) and the cloud is
@@ -12,8 +12,8 @@ Shard datasets (one row per view, V views; object units, world frame = the norma
   (OpenCV, pixel centres at integers, world → camera);
 * ``data (V, n, 3) float32``, ``face_index (V, n) int32``, ``n_visible (V,)`` (lifted pixels),
   ``label``, ``elevation_deg``, ``azimuth_deg``, ``radius``, ``sample_index``, ``source``,
-  ``class_name``: the keys of :func:`zbuf_occlude.io.write_h5`, so
-  :func:`zbuf_occlude.io.read_h5_clouds` reads the clouds;
+  ``class_name``: the keys of :func:`zbuf_occlude.io.clouds.write_h5`, so
+  :func:`zbuf_occlude.io.clouds.read_h5_clouds` reads the clouds;
 * options: ``normals (V, n, 3) float32`` (the hit face's unit normal, winding as stored),
   ``camera_points (V, n, 3) float32`` (OpenCV camera frame), ``complete (C, 3) float32`` with
   ``complete_face_index (C,)`` (uniform on the whole surface: a partial/complete pair).
@@ -24,13 +24,13 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from ..cameras import camera_on_sphere, view_schedule
-from ..defaults import DEFAULT_N_POINTS
-from ..errors import InvalidInputError
-from ..farm.inputs import FarmObject
-from ..sampling import sample_surface
-from .base import Protocol, ProtocolOptions
-from .depth import DOWNSAMPLERS, PinholeView, back_project, downsample, render_depth_image
+from zbuf_occlude.geometry.cameras import camera_on_sphere, view_schedule
+from zbuf_occlude.defaults import DEFAULT_N_POINTS
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.mesh.inputs import FarmObject
+from zbuf_occlude.geometry.sampling import sample_surface
+from zbuf_occlude.protocols.base import Protocol, ProtocolOptions
+from zbuf_occlude.protocols.depth import DOWNSAMPLERS, PinholeView, back_project, downsample, render_depth_image
 
 __all__ = ["depth_views", "PROTOCOL"]
 

@@ -47,11 +47,11 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from ..errors import InvalidInputError
-from ..farm.inputs import FarmObject
-from ..io import atomic_path, write_text
-from .base import Protocol, ProtocolOptions, read_arrays_h5
-from .depth import PinholeView, back_project, render_depth_image
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.mesh.inputs import FarmObject
+from zbuf_occlude.io.atomic import atomic_path, write_text
+from zbuf_occlude.protocols.base import Protocol, ProtocolOptions, read_arrays_h5
+from zbuf_occlude.protocols.depth import PinholeView, back_project, render_depth_image
 
 log = logging.getLogger(__name__)
 

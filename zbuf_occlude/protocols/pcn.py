@@ -35,11 +35,11 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from ..errors import InvalidInputError
-from ..farm.inputs import FarmObject
-from ..sampling import sample_surface
-from .base import Protocol, ProtocolOptions
-from .depth import PinholeView, render_depth_image
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.mesh.inputs import FarmObject
+from zbuf_occlude.geometry.sampling import sample_surface
+from zbuf_occlude.protocols.base import Protocol, ProtocolOptions
+from zbuf_occlude.protocols.depth import PinholeView, render_depth_image
 
 __all__ = [
     "random_pose", "intrinsics", "opencv_intrinsics", "depth2pcd", "pcn_mesh", "pcn_views", "PROTOCOL",

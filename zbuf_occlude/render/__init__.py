@@ -5,9 +5,9 @@ face-index buffers and runs the visibility compute shaders; ``pyrender_backend``
 depth independently for cross-checks.
 """
 
-from .context import context_info, create_context, shared_context
-from .moderngl_backend import DepthRender, ModernGLRenderer, PointBuffer
-from .renderer_cache import renderer_for
+from zbuf_occlude.render.context import context_info, create_context, shared_context
+from zbuf_occlude.render.moderngl_backend import DepthRender, ModernGLRenderer, PointBuffer
+from zbuf_occlude.render.renderer_cache import renderer_for
 
 __all__ = ["create_context", "shared_context", "context_info", "ModernGLRenderer", "DepthRender", "PointBuffer", "render_depth", "renderer_for"]
 
@@ -20,10 +20,10 @@ def render_depth(mesh, camera, backend: str = "moderngl"):
     if backend == "moderngl":
         return renderer_for(mesh).render(camera).depth
     if backend == "pyrender":
-        from .pyrender_backend import PyrenderRenderer
+        from zbuf_occlude.render.pyrender_backend import PyrenderRenderer
 
         with PyrenderRenderer(mesh) as renderer:
             return renderer.render_depth(camera)
-    from ..errors import InvalidInputError
+    from zbuf_occlude.errors import InvalidInputError
 
     raise InvalidInputError(f"unknown render backend {backend!r}; use 'moderngl' or 'pyrender'")

@@ -30,7 +30,7 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
-from ..errors import BackendUnavailable, InvalidInputError
+from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 
 __all__ = [
     "create_context",

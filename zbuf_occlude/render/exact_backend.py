@@ -26,11 +26,11 @@ import moderngl
 import numpy as np
 from numpy.typing import NDArray
 
-from ..cameras import Camera
-from ..errors import InvalidInputError
-from .compute import dispatch, read_through, set_uniforms
-from .context import is_software_renderer
-from .shaders import load_shader
+from zbuf_occlude.geometry.cameras import Camera
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.render.compute import dispatch, read_through, set_uniforms
+from zbuf_occlude.render.context import is_software_renderer
+from zbuf_occlude.render.shaders import load_shader
 
 __all__ = ["ExactMesh", "ExactPoints", "exact_face_groups", "DEFAULT_TILE", "BIN_MARGIN_PX"]
 

@@ -16,13 +16,13 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from ..cameras import Camera
-from ..defaults import DEFAULT_GPU_TOLERANCE, DEFAULT_MAX_SLOPE
-from ..errors import InvalidInputError
-from ..mesh import MAX_ABS_COORDINATE
-from .compute import dispatch, read_through, set_uniforms
-from .context import check_image_size, shared_context
-from .shaders import load_shader
+from zbuf_occlude.geometry.cameras import Camera
+from zbuf_occlude.defaults import DEFAULT_GPU_TOLERANCE, DEFAULT_MAX_SLOPE
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.mesh.load import MAX_ABS_COORDINATE
+from zbuf_occlude.render.compute import dispatch, read_through, set_uniforms
+from zbuf_occlude.render.context import check_image_size, shared_context
+from zbuf_occlude.render.shaders import load_shader
 
 __all__ = ["DepthRender", "PointBuffer", "ModernGLRenderer", "MAX_FACES"]
 
@@ -126,7 +126,7 @@ class ModernGLRenderer:
     ------
     InvalidInputError
         Empty mesh, more than 2^24 faces, NaN/inf vertices or coordinates beyond
-        float32 (:data:`~zbuf_occlude.mesh.MAX_ABS_COORDINATE`); a camera larger than the GL's maximum
+        float32 (:data:`~zbuf_occlude.mesh.load.MAX_ABS_COORDINATE`); a camera larger than the GL's maximum
         image size (:func:`~zbuf_occlude.render.context.max_image_size`) when rendering.
     BackendUnavailable
         No OpenGL 4.3 context can be created.

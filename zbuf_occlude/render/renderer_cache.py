@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import trimesh
 
-from ..mesh_cache import MeshCache
-from .moderngl_backend import ModernGLRenderer
+from zbuf_occlude.mesh.cache import MeshCache
+from zbuf_occlude.render.moderngl_backend import ModernGLRenderer
 
 __all__ = ["renderer_for", "RENDERER_CACHE_SIZE"]
 
@@ -22,7 +22,7 @@ _renderers: MeshCache[ModernGLRenderer] = MeshCache(ModernGLRenderer, RENDERER_C
 def renderer_for(mesh: trimesh.Trimesh) -> ModernGLRenderer:
     """The cached :class:`ModernGLRenderer` of ``mesh`` in this process (made on first use).
 
-    One entry per live mesh object (:class:`~zbuf_occlude.mesh_cache.MeshCache`); a mesh
+    One entry per live mesh object (:class:`~zbuf_occlude.mesh.cache.MeshCache`); a mesh
     whose vertices or faces changed gets a new renderer, and evicted renderers release
     their GL objects.
     """

@@ -11,7 +11,7 @@ import functools
 import re
 from pathlib import Path
 
-from ..errors import BackendUnavailable
+from zbuf_occlude.errors import BackendUnavailable
 
 __all__ = ["shader_dirs", "load_shader"]
 

@@ -6,11 +6,11 @@
 >>> car = s.crop(1)                                             # the car's returns, occluded
 """
 
-from .airborne import AIRBORNE_PRESETS, AirborneScanner, airborne_preset, scan_airborne
-from .depth_camera import DEPTH_CAMERA_PRESETS, DepthCamera, depth_camera_preset, nguyen_axial_sigma_m
-from .lidar import LIDAR_PRESETS, Lidar, beam_directions, lidar_preset
-from .scan import FRAMES, Scan, look_at_pose, read_scan_npz, scan
-from .scene import GROUND_ID, ScanScene, SceneObject, load_scene, sensor_pose
+from zbuf_occlude.sensors.airborne import AIRBORNE_PRESETS, AirborneScanner, airborne_preset, scan_airborne
+from zbuf_occlude.sensors.depth_camera import DEPTH_CAMERA_PRESETS, DepthCamera, depth_camera_preset, nguyen_axial_sigma_m
+from zbuf_occlude.sensors.lidar import LIDAR_PRESETS, Lidar, beam_directions, lidar_preset
+from zbuf_occlude.sensors.scan import FRAMES, Scan, look_at_pose, read_scan_npz, scan
+from zbuf_occlude.sensors.scene import GROUND_ID, ScanScene, SceneObject, load_scene, sensor_pose
 
 __all__ = [
     "Lidar", "LIDAR_PRESETS", "lidar_preset", "beam_directions",

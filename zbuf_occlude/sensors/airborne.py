@@ -28,7 +28,7 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from ..errors import InvalidInputError
+from zbuf_occlude.errors import InvalidInputError
 
 __all__ = ["AirborneScanner", "AIRBORNE_PRESETS", "airborne_preset", "scan_airborne"]
 
@@ -218,8 +218,8 @@ def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_si
         ``frame="world"``, ``ring`` and ``pixel`` None, ``sensor_position`` the mean aircraft
         position of the returns, ``meta["scan_angle_deg"]`` per return.
     """
-    from .raycast import cast_embree
-    from .scan import Scan, build_scene
+    from zbuf_occlude.sensors.raycast import cast_embree
+    from zbuf_occlude.sensors.scan import Scan, build_scene
 
     built = build_scene(scene)
     rng = np.random.default_rng(seed)

@@ -4,7 +4,7 @@ This is the per-object step a data-set farm calls (``farm --sensor``): for sampl
 object, draw the sensor placement from :class:`CropDistributions`, scan the object (plus any
 occluders) with :func:`zbuf_occlude.sensors.scan`, keep the object's returns (external
 occlusion included, as real data sets were segmented from street scans), and return them
-both in metres (sensor frame) and as a fixed-size :class:`zbuf_occlude.io.OccludedCloud` in the
+both in metres (sensor frame) and as a fixed-size :class:`zbuf_occlude.io.clouds.OccludedCloud` in the
 object's normalised mesh frame, the farm's HDF5 layout.
 """
 
@@ -18,15 +18,15 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from ..errors import InvalidInputError
-from ..io import OccludedCloud
-from ..mesh import load_mesh
-from ..occlude import derive_rng, draw_sample, object_key
-from .airborne import AirborneScanner
-from .depth_camera import DepthCamera
-from .lidar import Lidar
-from .scan import Scan, scan
-from .scene import ScanScene, SceneObject, sensor_pose
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.geometry.samples import OccludedCloud
+from zbuf_occlude.mesh.load import load_mesh
+from zbuf_occlude.geometry.samples import derive_rng, draw_sample, object_key
+from zbuf_occlude.sensors.airborne import AirborneScanner
+from zbuf_occlude.sensors.depth_camera import DepthCamera
+from zbuf_occlude.sensors.lidar import Lidar
+from zbuf_occlude.sensors.scan import Scan, scan
+from zbuf_occlude.sensors.scene import ScanScene, SceneObject, sensor_pose
 
 __all__ = ["CropDistributions", "CropSample", "draw_placement", "object_crop", "lidar_object_samples", "farm_datasets"]
 
@@ -198,7 +198,7 @@ def _airborne_crop(mesh, sensor: AirborneScanner, placement: dict, *, seed: int,
     """An airborne crop: the object ``offset_m`` across track from the flight line (``distance_m ·
     sin(azimuth_deg)`` of the placement; ``height_m`` is unused: the scanner flies at its altitude).
     Points and the full scan are in the world frame."""
-    from .airborne import scan_airborne
+    from zbuf_occlude.sensors.airborne import scan_airborne
 
     obj = SceneObject(mesh, class_name, (0.0, offset_m), placement["yaw_deg"], size)
     reach = float(np.max(size)) * 0.75 + 1.0
@@ -238,7 +238,7 @@ def lidar_object_samples(
         The object's stable name (seeds, ``source``).
     n_samples, n_points : int
         Crops per object and points per crop (fewer returns are padded with repeats, more
-        are subsampled, as :func:`zbuf_occlude.occlude.draw_sample`).
+        are subsampled, as :func:`zbuf_occlude.pipeline.draw_sample`).
     distributions : CropDistributions
 
     Returns

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import InvalidInputError
+from zbuf_occlude.errors import InvalidInputError
 
 __all__ = ["Lidar", "LIDAR_PRESETS", "lidar_preset", "beam_directions"]
 

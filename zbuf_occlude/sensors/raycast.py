@@ -23,8 +23,8 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from ..errors import BackendUnavailable, InvalidInputError
-from ..mesh_cache import MeshCache
+from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
+from zbuf_occlude.mesh.cache import MeshCache
 
 __all__ = ["ray_triangle_f64", "cast_embree", "cast_zbuffer", "BACKENDS"]
 
@@ -94,7 +94,7 @@ def _build_intersector(mesh: trimesh.Trimesh):
     return RayMeshIntersector(mesh)
 
 
-#: Embree BVHs of the scenes in use, rebuilt after a mesh edit (:class:`~zbuf_occlude.mesh_cache.MeshCache`).
+#: Embree BVHs of the scenes in use, rebuilt after a mesh edit (:class:`~zbuf_occlude.mesh.cache.MeshCache`).
 _intersector = MeshCache(_build_intersector, 4)
 
 
@@ -139,7 +139,7 @@ _CUBE = [  # (forward, up) of the six cube-map views
 
 def _views(origin, directions, resolution, znear, zfar):
     """Cameras covering every ray, and each ray's view index."""
-    from ..cameras import Camera
+    from zbuf_occlude.geometry.cameras import Camera
 
     mean = directions.mean(axis=0)
     norm = np.linalg.norm(mean)
@@ -168,7 +168,7 @@ RECHECK_EPSILON = 1e-6
 
 
 def _build_renderer(mesh: trimesh.Trimesh):
-    from ..render.moderngl_backend import ModernGLRenderer
+    from zbuf_occlude.render.moderngl_backend import ModernGLRenderer
 
     return ModernGLRenderer(mesh)
 

@@ -17,12 +17,12 @@ import numpy as np
 import trimesh
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import InvalidInputError
-from ..io import atomic_path
-from .depth_camera import DepthCamera
-from .lidar import Lidar
-from .raycast import BACKENDS, cast_embree, cast_zbuffer
-from .scene import BuiltScene, ScanScene, SceneObject
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.io.atomic import atomic_path
+from zbuf_occlude.sensors.depth_camera import DepthCamera
+from zbuf_occlude.sensors.lidar import Lidar
+from zbuf_occlude.sensors.raycast import BACKENDS, cast_embree, cast_zbuffer
+from zbuf_occlude.sensors.scene import BuiltScene, ScanScene, SceneObject
 
 __all__ = ["Scan", "scan", "look_at_pose", "read_scan_npz", "build_scene", "FRAMES"]
 

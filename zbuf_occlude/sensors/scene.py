@@ -32,8 +32,8 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from ..errors import InvalidInputError, MeshLoadError
-from ..mesh import load_mesh
+from zbuf_occlude.errors import InvalidInputError, MeshLoadError
+from zbuf_occlude.mesh.load import load_mesh
 
 __all__ = ["SceneObject", "ScanScene", "BuiltScene", "load_scene", "GROUND_ID", "sensor_pose"]
 

@@ -4,6 +4,11 @@ The built-in methods register themselves when their modules are imported, which 
 does the first time a method is looked up (:data:`~zbuf_occlude.visibility.registry.BUILTIN_MODULES`).
 """
 
-from .registry import DEFAULT_SELF_HIT_TOLERANCE, MethodInfo, available_methods, method_info, register, visible_mask
+from zbuf_occlude.defaults import DEFAULT_SELF_HIT_TOLERANCE
+from zbuf_occlude.visibility.registry import MethodInfo, available_methods, method_info, register, visible_mask
+from zbuf_occlude.visibility.session import VisibilitySession
 
-__all__ = ["visible_mask", "available_methods", "method_info", "MethodInfo", "register", "DEFAULT_SELF_HIT_TOLERANCE"]
+__all__ = [
+    "visible_mask", "VisibilitySession", "available_methods", "method_info", "MethodInfo", "register",
+    "DEFAULT_SELF_HIT_TOLERANCE",
+]  # fmt: skip

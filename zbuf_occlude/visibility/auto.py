@@ -4,7 +4,7 @@ Both candidates decide the same definition (:mod:`~zbuf_occlude.visibility.defin
 ``zbuffer-exact`` on the GPU (:mod:`~zbuf_occlude.visibility.gpu_exact`) and ``embree-fast``
 on the CPU's threads (:mod:`~zbuf_occlude.visibility.embree_fast`).  :func:`choose_method`
 picks once per process, separately for the two ways of calling: a kept session
-(:func:`make_scene`, the farm, many views of one point set: the points' set-up is paid once)
+(:class:`~zbuf_occlude.visibility.session.VisibilitySession`, the farm, many views of one point set: the points' set-up is paid once)
 and the one-shot call (``visible_mask``: the points' set-up is paid every view; uploading
 and ordering 1M points for the GPU costs more than Embree's whole view on 16 cores):
 
@@ -29,13 +29,13 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from ..cameras import Camera, camera_on_sphere, view_schedule
-from ..errors import BackendUnavailable, InvalidInputError
-from ..render.context import SOFTWARE_RENDERERS, is_software_renderer
-from .definition import TOLERANCE
-from .registry import get_method, method_info, register, resolution_option
+from zbuf_occlude.geometry.cameras import Camera, camera_on_sphere, view_schedule
+from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
+from zbuf_occlude.render.context import SOFTWARE_RENDERERS, is_software_renderer
+from zbuf_occlude.visibility.definition import TOLERANCE
+from zbuf_occlude.visibility.registry import get_method, method_info, register, resolution_option
 
-__all__ = ["choose_method", "calibrate", "make_scene", "auto_visible", "SOFTWARE_RENDERERS", "AUTO_ENV"]
+__all__ = ["choose_method", "calibrate", "auto_visible", "SOFTWARE_RENDERERS", "AUTO_ENV"]
 
 log = logging.getLogger(__name__)
 
@@ -46,7 +46,7 @@ _CANDIDATES = ("zbuffer-exact", "embree-fast")
 
 def _gl_renderer() -> str | None:
     try:
-        from ..render.context import shared_context
+        from zbuf_occlude.render.context import shared_context
 
         return str(shared_context().info["GL_RENDERER"])
     except BackendUnavailable:
@@ -80,8 +80,8 @@ def calibrate(n_points: int = 50_000, views: int = 5, *, one_shot: bool = False)
     seconds : dict
         Method name → seconds per view, for the candidates that run here.
     """
-    from .embree_fast import FastScene
-    from .gpu_exact import ExactScene
+    from zbuf_occlude.visibility.embree_fast import FastScene
+    from zbuf_occlude.visibility.gpu_exact import ExactScene
 
     mesh = trimesh.util.concatenate([trimesh.creation.icosphere(subdivisions=4, radius=0.3), trimesh.creation.box([0.9, 0.9, 0.9])])
     points, face_index = trimesh.sample.sample_surface(mesh, n_points, seed=0)
@@ -137,13 +137,20 @@ def choose_method(one_shot: bool = False) -> str:
     return choice
 
 
-def make_scene(mesh: trimesh.Trimesh, points, face_index=None):
-    """The session of :func:`choose_method`'s method for many views of one point set
-    (``scene.visible(camera)``; ``with`` or ``scene.release()`` frees it)."""
+def _session(mesh: trimesh.Trimesh, points, face_index=None):
+    # auto's session factory: the session of the method chosen for kept sessions
     return method_info(choose_method()).session(mesh, points, face_index)
 
 
-@register("auto", takes_resolution=True, session=make_scene)
+def make_scene(mesh: trimesh.Trimesh, points, face_index=None):
+    """Deprecated: use :class:`~zbuf_occlude.visibility.session.VisibilitySession` (``zo.VisibilitySession``)."""
+    import warnings
+
+    warnings.warn("make_scene is deprecated, use zbuf_occlude.VisibilitySession(mesh, points, face_index)", DeprecationWarning, stacklevel=2)
+    return _session(mesh, points, face_index)
+
+
+@register("auto", takes_resolution=True, session=_session)
 def auto_visible(
     mesh: trimesh.Trimesh,
     points: NDArray[np.float64],

@@ -48,11 +48,11 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from ..cameras import Camera
-from ..mesh_cache import MeshCache
-from ..render.exact_backend import exact_face_groups
-from .definition import EDGE_ON_SIN
-from .segment_triangle import SCENE_CACHE_SIZE, mesh_planes
+from zbuf_occlude.geometry.cameras import Camera
+from zbuf_occlude.mesh.cache import MeshCache
+from zbuf_occlude.render.exact_backend import exact_face_groups
+from zbuf_occlude.visibility.definition import EDGE_ON_SIN
+from zbuf_occlude.visibility.segment_triangle import SCENE_CACHE_SIZE, mesh_planes
 
 __all__ = [
     "CELLS_PER_POINT",

@@ -24,7 +24,7 @@ error bounds and re-decides every pair inside the bounds in float64 with the sam
 The tolerance of (c) is decided only for cameras within
 :data:`~zbuf_occlude.defaults.MAX_CAMERA_RADIUS` (≈ 1.1e6 object units) of the object:
 farther, float64's rounding of ``e - p`` comes within 2**12 of it, and
-:func:`~zbuf_occlude.cameras.camera_on_sphere` refuses such a radius (the derivation is
+:func:`~zbuf_occlude.geometry.cameras.camera_on_sphere` refuses such a radius (the derivation is
 beside the constant).
 """
 
@@ -35,7 +35,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from .registry import DEFAULT_SELF_HIT_TOLERANCE
+from zbuf_occlude.defaults import DEFAULT_SELF_HIT_TOLERANCE
 
 __all__ = ["TOLERANCE", "EDGE_ON_DEGREES", "EDGE_ON_SIN", "edge_on_own", "edge_on_any"]
 

@@ -27,7 +27,7 @@ in pass 1, for the points cast as rays; measured agreement with the oracle is in
 ``docs/results/speed.md`` (``benchmarks/bench_visibility_accuracy.py``).
 
 Per-mesh state (the Embree BVH here, the pre-pass's face data and the oracle's planes) is
-cached per mesh object (:class:`~zbuf_occlude.mesh_cache.MeshCache`), so a one-shot
+cached per mesh object (:class:`~zbuf_occlude.mesh.cache.MeshCache`), so a one-shot
 :func:`embree_fast_visible` call on a mesh already seen builds nothing but the view's
 buffer; it does not sort the points either (the kept :class:`FastScene` does, once).
 """
@@ -42,17 +42,17 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from ..cameras import Camera
-from ..errors import BackendUnavailable
-from ..mesh_cache import MeshCache
-from ..render.exact_backend import exact_face_groups, morton_order
-from . import cpu_zbuffer
-from .definition import EDGE_ON_SIN, TOLERANCE, edge_on_any, edge_on_own
-from .oracle_embree import _scene_for as _oracle_scene
-from .oracle_embree import occluded_embree
-from .segment_triangle import mesh_planes
-from .segment_triangle import pair_occludes as _pair_occludes
-from .registry import SessionBase, check_face_index, check_points, register
+from zbuf_occlude.geometry.cameras import Camera
+from zbuf_occlude.errors import BackendUnavailable
+from zbuf_occlude.mesh.cache import MeshCache
+from zbuf_occlude.render.exact_backend import exact_face_groups, morton_order
+from zbuf_occlude.visibility import cpu_zbuffer
+from zbuf_occlude.visibility.definition import EDGE_ON_SIN, TOLERANCE, edge_on_any, edge_on_own
+from zbuf_occlude.visibility.oracle_embree import _scene_for as _oracle_scene
+from zbuf_occlude.visibility.oracle_embree import occluded_embree
+from zbuf_occlude.visibility.segment_triangle import mesh_planes
+from zbuf_occlude.visibility.segment_triangle import pair_occludes as _pair_occludes
+from zbuf_occlude.visibility.registry import SessionBase, check_face_index, check_points, register
 
 __all__ = ["FastScene", "embree_fast_visible", "DEFAULT_THREADS"]
 

@@ -55,12 +55,13 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from ..cameras import Camera
-from .oracle_embree import occluded_embree
-from .oracle_numpy import DEFAULT_PAIRS_PER_CHUNK, occluded_numpy
-from .definition import hide_edge_on
-from .registry import DEFAULT_SELF_HIT_TOLERANCE, check_face_index, check_points, register, visible_in_frustum
-from .segment_triangle import TrianglePlanes, mesh_planes, segment_hits_triangles, triangle_planes
+from zbuf_occlude.geometry.cameras import Camera
+from zbuf_occlude.visibility.oracle_embree import occluded_embree
+from zbuf_occlude.visibility.oracle_numpy import DEFAULT_PAIRS_PER_CHUNK, occluded_numpy
+from zbuf_occlude.visibility.definition import hide_edge_on
+from zbuf_occlude.defaults import DEFAULT_SELF_HIT_TOLERANCE
+from zbuf_occlude.visibility.registry import check_face_index, check_points, register, visible_in_frustum
+from zbuf_occlude.visibility.segment_triangle import TrianglePlanes, mesh_planes, segment_hits_triangles, triangle_planes
 
 __all__ = [
     "TrianglePlanes",

@@ -16,12 +16,13 @@ import numpy as np
 import trimesh
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import BackendUnavailable, InvalidInputError
-from ..mesh_cache import MeshCache
-from ..render.exact_backend import exact_face_groups
-from .oracle_numpy import DEFAULT_PAIRS_PER_CHUNK, occluded_unchecked
-from .registry import DEFAULT_SELF_HIT_TOLERANCE, check_face_index, check_points
-from .segment_triangle import (
+from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
+from zbuf_occlude.mesh.cache import MeshCache
+from zbuf_occlude.render.exact_backend import exact_face_groups
+from zbuf_occlude.visibility.oracle_numpy import DEFAULT_PAIRS_PER_CHUNK, occluded_unchecked
+from zbuf_occlude.defaults import DEFAULT_SELF_HIT_TOLERANCE
+from zbuf_occlude.visibility.registry import check_face_index, check_points
+from zbuf_occlude.visibility.segment_triangle import (
     SCENE_CACHE_SIZE,
     TrianglePlanes,
     boundary_times_cos,
@@ -145,7 +146,7 @@ _scenes: MeshCache[_EmbreeScene] = MeshCache(
 
 
 def _scene_for(mesh: trimesh.Trimesh) -> _EmbreeScene:
-    """The cached Embree scene of ``mesh`` (:class:`~zbuf_occlude.mesh_cache.MeshCache`)."""
+    """The cached Embree scene of ``mesh`` (:class:`~zbuf_occlude.mesh.cache.MeshCache`)."""
     return _scenes(mesh)
 
 

@@ -29,9 +29,9 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from ..cameras import Camera
-from ..defaults import DEFAULT_METHOD, DEFAULT_SELF_HIT_TOLERANCE
-from ..errors import BackendUnavailable, InvalidInputError, RegistryError, UnknownOptionError
+from zbuf_occlude.geometry.cameras import Camera
+from zbuf_occlude.defaults import DEFAULT_METHOD, DEFAULT_SELF_HIT_TOLERANCE
+from zbuf_occlude.errors import BackendUnavailable, InvalidInputError, RegistryError, UnknownOptionError
 
 if TYPE_CHECKING:  # annotations only: trimesh (and scipy with it) is imported where meshes are made
     import trimesh
@@ -68,7 +68,10 @@ _INFO: dict[str, MethodInfo] = {}
 #: zbuffer-exact), the exact oracles, the paper's object-space methods (§3.3-3.6), peers and
 #: auto.  They are imported the first time a method is looked up, not with the package, so that
 #: a program pays for numba, moderngl and Embree only when it asks for visibility.
-BUILTIN_MODULES = ("auto", "embree_fast", "gpu_exact", "object_space", "occupancy", "oracle", "peers", "vertex", "zbuffer")
+BUILTIN_MODULES = (
+    "auto", "embree_fast", "gpu_exact", "oracle", "peers", "zbuffer",
+    "paper.object_space", "paper.occupancy", "paper.vertex",
+)  # fmt: skip
 _builtins_loaded = False
 
 

@@ -28,8 +28,8 @@ import numpy as np
 import trimesh
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import InvalidInputError
-from ..mesh_cache import MeshCache
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.mesh.cache import MeshCache
 
 __all__ = [
     "TrianglePlanes",

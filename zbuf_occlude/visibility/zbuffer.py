@@ -25,20 +25,20 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from ..cameras import Camera
-from ..defaults import (  # noqa: F401 - DEFAULT_RESOLUTION etc. are re-exported from here
+from zbuf_occlude.geometry.cameras import Camera
+from zbuf_occlude.defaults import (  # noqa: F401 - DEFAULT_RESOLUTION etc. are re-exported from here
     DEFAULT_DEPTH_TOLERANCE,
     DEFAULT_GPU_TOLERANCE,
     DEFAULT_MAX_SLOPE,
     DEFAULT_RESOLUTION,
     DEFAULT_SLOPE_SCALE,
 )
-from ..errors import InvalidInputError
-from ..render.moderngl_backend import PointBuffer
-from ..render.renderer_cache import RENDERER_CACHE_SIZE, renderer_for  # noqa: F401 - re-exported
-from .definition import TOLERANCE, hide_edge_on
-from .segment_triangle import mesh_planes
-from .registry import SessionBase, check_face_index, check_points, register
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.render.moderngl_backend import PointBuffer
+from zbuf_occlude.render.renderer_cache import RENDERER_CACHE_SIZE, renderer_for  # noqa: F401 - re-exported
+from zbuf_occlude.visibility.definition import TOLERANCE, hide_edge_on
+from zbuf_occlude.visibility.segment_triangle import mesh_planes
+from zbuf_occlude.visibility.registry import SessionBase, check_face_index, check_points, register
 
 __all__ = ["ResidentPoints", "Scene", "renderer_for", "zbuffer_visible", "zbuffer_tolerance_visible", "DEFAULT_RESOLUTION"]
 
@@ -66,7 +66,7 @@ def _resolve_uncertain(
         raise InvalidInputError(f"resolve must be 'embree' or 'none', got {resolve!r}")
     if resolve == "none" or not uncertain.any():
         return visible
-    from .oracle_embree import occluded_embree  # deferred: only needed when points are uncertain
+    from zbuf_occlude.visibility.oracle_embree import occluded_embree  # deferred: only needed when points are uncertain
 
     idx = np.flatnonzero(uncertain)
     fi = None if face_index is None else face_index[idx]
@@ -194,7 +194,7 @@ class Scene(ResidentPoints):
 
     def __init__(self, *args, **kwargs):
         warnings.warn(
-            "zbuf_occlude.Scene is deprecated, use zbuf_occlude.ResidentPoints (same arguments)",
+            "zbuf_occlude.Scene is deprecated, use zbuf_occlude.VisibilitySession(mesh, points, face_index, method=\"zbuffer\")",
             DeprecationWarning,
             stacklevel=2,
         )

@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from zbuf_occlude.learn.sim2real_data import TRAINING_SETS, build_sets, find_class_meshes, real_clouds
-from zbuf_occlude.learn.sim2real_report import plot_examples
-from zbuf_occlude.real_scans import load_real_scans
+from zbuf_occlude.experiments.sim2real_data import TRAINING_SETS, build_sets, find_class_meshes, real_clouds
+from zbuf_occlude.experiments.sim2real_report import plot_examples
+from zbuf_occlude.real_scans.datasets import load_real_scans
 from zbuf_occlude.sensors import lidar_preset
 
 logging.getLogger("trimesh").setLevel(logging.ERROR)

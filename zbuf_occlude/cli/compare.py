@@ -1,0 +1,68 @@
+"""The ``zbuf-occlude compare`` command: the argparse face of :func:`~zbuf_occlude.experiments.compare.job.run_compare`."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from zbuf_occlude.defaults import DEFAULT_RESOLUTION
+from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
+from zbuf_occlude.experiments.compare.job import run_compare
+from zbuf_occlude.experiments.compare.run import DEFAULT_METHODS, DEFAULT_POINTS, DEFAULT_REFERENCE
+from zbuf_occlude.defaults import DEFAULT_VIEWS
+
+__all__ = ["add_compare_parser"]
+
+
+def _cli_compare(args: argparse.Namespace) -> int:
+    import shlex
+    import sys
+
+    report = run_compare(
+        args.paths,
+        args.methods,
+        args.points,
+        args.views,
+        args.resolution,
+        args.out,
+        args.seed,
+        reference=args.reference,
+        resolution_sweep=args.resolution_sweep,
+        grid_sweep=args.grid_sweep,
+        sweep_points=args.sweep_points,
+        memory=args.memory,
+        method_budget_s=args.method_budget,
+        progress=not args.no_progress,
+        command="zbuf-occlude " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
+    )
+    sys.stdout.write(f"{report}\n")  # the command's output: where the report went
+    return 0
+
+
+def add_compare_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Add the ``compare`` subcommand to an argparse ``subparsers``; ``func`` returns an exit code."""
+    p = subparsers.add_parser(
+        "compare",
+        help="time every HSR method and score it against the exact oracle",
+        description=(
+            "For every mesh x point count x camera pose x method: wall time per view and agreement with "
+            "the oracle (accuracy, false-visible and false-hidden rates, IoU, Chamfer distance). Writes "
+            "results.csv, report.md and PNG plots into --out."
+        ),
+    )
+    p.add_argument("paths", nargs="+", help=f"mesh files ({EXTENSIONS_TEXT}) or folders (searched recursively)")
+    p.add_argument("--methods", default=",".join(DEFAULT_METHODS), help="comma-separated methods (default: %(default)s)")
+    p.add_argument("--points", default=",".join(str(n) for n in DEFAULT_POINTS), help="point counts (default: %(default)s)")
+    p.add_argument("--views", default=DEFAULT_VIEWS, help="pose schedule: grid25, paper100, fibonacci:N or EL:AZ,... (default: %(default)s)")
+    p.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION, help="z-buffer resolution in pixels (default: %(default)s)")
+    p.add_argument("--out", default="compare_out", help="output folder (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0, help="sampling seed (default: %(default)s)")
+    p.add_argument("--reference", default=DEFAULT_REFERENCE, help="method that defines the truth (default: %(default)s)")
+    p.add_argument("--resolution-sweep", default="", help="e.g. 128,256,512,1024,2048: agreement vs resolution")
+    p.add_argument("--grid-sweep", default="", help="e.g. 16,32,64,128: agreement vs occupancy-grid size")
+    p.add_argument("--sweep-points", type=int, default=None, help="point count of the sweeps (default: smallest --points)")
+    p.add_argument("--memory", action="store_true", help="also record peak traced memory per method")
+    p.add_argument("--method-budget", type=float, default=None, help="seconds per view after which a method is skipped at larger point counts")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cli_compare)
+    return p

@@ -1,0 +1,210 @@
+"""The ``farm`` and ``farm-merge`` subcommands (called from :mod:`zbuf_occlude.cli.main`)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import shlex
+import sys
+
+from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
+from zbuf_occlude.defaults import DEFAULT_DENSE_POINTS as GENERATE_DENSE_POINTS
+from zbuf_occlude.defaults import DEFAULT_METHOD, DEFAULT_SEED
+from zbuf_occlude.defaults import DEFAULT_RESOLUTION as GENERATE_RESOLUTION
+from zbuf_occlude.defaults import DEFAULT_FARM_VIEWS
+from zbuf_occlude.defaults import DEFAULT_VIEWS as GENERATE_VIEWS
+from zbuf_occlude.mesh.discovery import SPLITS
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.dataset.layout import STORAGE_MODES
+from zbuf_occlude.defaults import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION, DEFAULT_N_POINTS, DEFAULT_SAMPLES_PER_VIEW
+from zbuf_occlude.farm.config import DEFAULT_SENSOR_DISTANCE_M, DEFAULT_SENSOR_HEIGHT_M, DEFAULT_SENSOR_SIZE_M, FarmParams
+from zbuf_occlude.farm.checks import check_out_option
+from zbuf_occlude.farm.shards import parse_shard
+
+log = logging.getLogger(__name__)
+
+#: Help shared by ``generate``, ``validate`` and ``farm`` (:mod:`zbuf_occlude.cli.main` imports them).
+VIEWS_HELP = "poses: grid25 (5x5 grid) | paper100 (the paper's 100) | fibonacci:N | EL:AZ,EL:AZ,... in degrees"
+RADIUS_HELP = "camera distance from the object's centre, object units (the normalised object's largest extent is 1)"
+CLASS_FROM_HELP = (
+    "N: take each mesh's class from the N-th folder above it (1: the folder holding it) instead of the detected "
+    "layout's; needed where the layout's classes look wrong (all one class, or folders such as 'models')"
+)
+
+
+# -- command line (called from zbuf_occlude.cli.main) -------------------------------------------------
+def _farm_command(args: argparse.Namespace) -> int:
+    if args.density is not None and args.dense_points is not None:
+        raise InvalidInputError("give either --density or --dense-points, not both")
+    params = FarmParams(
+        views=args.views,
+        samples_per_view=args.samples_per_view,
+        n_points=args.points,
+        dense_points=args.dense_points if args.dense_points is not None else DEFAULT_FARM_DENSE_POINTS,
+        density=args.density,
+        resolution=args.resolution,
+        seed=args.seed,
+        radius=args.radius,
+        storage=args.storage,
+        method=args.method,
+        **_sensor_params(args),
+    )
+    from zbuf_occlude.farm.run import run_farm  # meshes, visibility and the GL: imported when the command runs
+
+    summary = run_farm(
+        args.root,
+        args.out,
+        params=params,
+        classes=args.classes,
+        per_class=args.per_class,
+        splits=args.splits,
+        class_from=args.class_from,
+        workers=args.workers,
+        shard=parse_shard(args.shard) if args.shard else (0, 1),
+        scheduler=args.scheduler,
+        dask_local=args.dask_local,
+        overwrite=args.overwrite,
+        progress=not args.no_progress,
+        isolate=True,  # a SIGTERM stops the run at once, even inside a long native call
+        command=shlex.join(["zbuf-occlude", *sys.argv[1:]]) if sys.argv else None,
+    )
+    print(summary.format())
+    return summary.exit_status
+
+
+def _sensor_params(args: argparse.Namespace) -> dict:
+    if args.sensor is None:
+        for option in ("sensor_distance", "sensor_height", "sensor_size", "sensor_reflectivity", "sensor_footprint"):
+            if getattr(args, option) not in (None, False):
+                raise InvalidInputError(f"--{option.replace('_', '-')} needs --sensor")
+        return {}
+    from zbuf_occlude.cli.sensors import parse_interval
+
+    out: dict = {"sensor": args.sensor}
+    for option in ("sensor_distance", "sensor_height", "sensor_size"):
+        text = getattr(args, option)
+        if text is not None:
+            out[f"{option}_m"] = parse_interval(text, f"--{option.replace('_', '-')}")
+    if args.sensor_reflectivity is not None:
+        out["sensor_reflectivity"] = parse_interval(args.sensor_reflectivity, "--sensor-reflectivity")
+    out["sensor_footprint"] = args.sensor_footprint
+    return out
+
+
+def _interval_text(lo_hi: tuple[float, float]) -> str:
+    return f"{lo_hi[0]:g}" if lo_hi[0] == lo_hi[1] else f"{lo_hi[0]:g}:{lo_hi[1]:g}"
+
+
+def _merge_command(args: argparse.Namespace) -> int:
+    if args.out is not None:
+        check_out_option(args.out)
+    from zbuf_occlude.farm.run import merge_farm
+
+    summary = merge_farm(args.inputs, args.out, progress=not args.no_progress)
+    print(summary.format())
+    return 1 if summary.failed else 0
+
+
+def add_farm_parser(subparsers) -> argparse.ArgumentParser:
+    """Add the ``farm`` subcommand to an ``argparse`` subparsers object (``func`` → exit status)."""
+    p = subparsers.add_parser(
+        "farm",
+        help="build a whole occluded data set (parallel, resumable, sharded, Dask)",
+        description="Render every mesh of ROOT from every pose and write a PointNet-style HDF5 data set to --out. "
+        "Run the same command again to resume; objects already finished are skipped.",
+    )
+    p.add_argument(
+        "root",
+        help="a mesh folder (ModelNet CLASS/SPLIT/NAME.off, ShapeNetCore v1/v2 with its taxonomy.json, CLASS/NAME.ext, "
+        "or CLASS_NNNN.ext files; the layout used goes into the card) or a list file of 'PATH LABEL [SPLIT]' lines",
+    )
+    p.add_argument("--out", required=True, help="data set folder")
+    sel = p.add_argument_group("selection")
+    sel.add_argument("--classes", help="comma-separated class names (default: all)")
+    sel.add_argument("--per-class", type=int, help="first K meshes (by name) of each class and split (default: all)")
+    sel.add_argument("--splits", default=",".join(SPLITS), help="comma-separated splits (default: %(default)s)")
+    sel.add_argument("--class-from", type=int, metavar="N", help=CLASS_FROM_HELP)
+    r = p.add_argument_group("rendering")
+    r.add_argument("--views", default=DEFAULT_FARM_VIEWS, help=f"{VIEWS_HELP} (default: %(default)s; generate's: {GENERATE_VIEWS})")
+    r.add_argument(
+        "--samples-per-view", type=int, default=DEFAULT_SAMPLES_PER_VIEW, help="random samples drawn per pose (default: %(default)s)"
+    )
+    r.add_argument("--points", type=int, default=DEFAULT_N_POINTS, help="points per sample (default: %(default)s)")
+    dense = r.add_mutually_exclusive_group()
+    dense.add_argument(
+        "--dense-points", type=int, help=f"dense cloud per mesh, sampled once (default: {DEFAULT_FARM_DENSE_POINTS}; generate's: {GENERATE_DENSE_POINTS})"
+    )
+    dense.add_argument("--density", type=float, help="dense cloud as points per unit area of the normalised mesh")
+    r.add_argument(
+        "--resolution", type=int, default=DEFAULT_FARM_RESOLUTION, help=f"z-buffer image size, pixels (default: %(default)s; generate's: {GENERATE_RESOLUTION})"
+    )
+    r.add_argument(
+        "--radius", type=float, default=DEFAULT_RADIUS, help=f"{RADIUS_HELP} (default: %(default)s)"
+    )
+    r.add_argument("--seed", type=int, default=DEFAULT_SEED, help="global seed: the same seed and options give the same data set (default: %(default)s)")
+    r.add_argument(
+        "--method", default=DEFAULT_METHOD, help="visibility method (see `zbuf-occlude info`) (default: %(default)s)"
+    )
+    r.add_argument(
+        "--storage", choices=STORAGE_MODES, default="dense",
+        help="dense: PointNet HDF5; compact: dense cloud + visibility bits (default: %(default)s)",
+    )
+    s = p.add_argument_group(
+        "LiDAR crops (--sensor)",
+        "Instead of z-buffer poses, scan each object with a simulated sensor: --samples-per-view scans per object, "
+        "each with its own placement, every quantity drawn uniformly and independently per scan: the "
+        "horizontal distance (--sensor-distance), the sensor height above the ground (--sensor-height), the "
+        "object's largest dimension (--sensor-size), its direction from the sensor and its heading (0-360 deg). "
+        "The object stands on a ground plane; its returns (normalised mesh frame) are the rows of a dense "
+        "shard, with the sensor's elevation/azimuth seen from the object and the placement per row. "
+        "--views, --dense-points, --density, --resolution and --radius do not apply.",
+    )
+    s.add_argument("--sensor", help="LiDAR or depth-camera preset (hdl32e, vlp16, hdl64e, os1-64, kinect-v1) or a JSON file (default: none, z-buffer poses)")
+    s.add_argument(
+        "--sensor-distance", metavar="LO:HI",
+        help=f"horizontal sensor-object distance, metres (default: {_interval_text(DEFAULT_SENSOR_DISTANCE_M)})",
+    )  # fmt: skip
+    s.add_argument(
+        "--sensor-height", metavar="LO:HI",
+        help=f"sensor height above the ground, metres (default: {_interval_text(DEFAULT_SENSOR_HEIGHT_M)})",
+    )  # fmt: skip
+    s.add_argument(
+        "--sensor-size", metavar="LO:HI",
+        help=f"the object's largest dimension, metres (default: {_interval_text(DEFAULT_SENSOR_SIZE_M)})",
+    )  # fmt: skip
+    s.add_argument(
+        "--sensor-reflectivity", metavar="LO:HI",
+        help="return physics: the object's Lambertian reflectivity, drawn per scan; returns must clear the sensor's "
+        "radiometric threshold (default: every hit returns)",
+    )  # fmt: skip
+    s.add_argument(
+        "--sensor-footprint", action="store_true",
+        help="return physics: 7 rays per firing inside the beam divergence cone, strongest echo",
+    )  # fmt: skip
+    ex = p.add_argument_group("execution")
+    ex.add_argument("--workers", type=int, default=1, help="worker processes on this machine (default: 1)")
+    ex.add_argument(
+        "--shard", help="I/N: render the I-th of N partitions (SLURM array, Kubernetes indexed job); then farm-merge"
+    )
+    dask = ex.add_mutually_exclusive_group()
+    dask.add_argument("--scheduler", help="Dask scheduler address tcp://HOST:PORT (out must be on a shared file system)")
+    dask.add_argument("--dask-local", type=int, metavar="N", help="run on a local Dask cluster of N worker processes")
+    ex.add_argument("--overwrite", action="store_true", help="start over instead of resuming")
+    ex.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_farm_command)
+    return p
+
+
+def add_farm_merge_parser(subparsers) -> argparse.ArgumentParser:
+    """Add the ``farm-merge`` subcommand (``func`` → exit status)."""
+    p = subparsers.add_parser(
+        "farm-merge",
+        help="join the outputs of `farm --shard I/N` tasks into one data set",
+        description="Check that every object of the plan has a result, copy shards from other task folders, "
+        "and write the manifest, file lists and data set card.",
+    )
+    p.add_argument("inputs", nargs="+", help="task output folders (one folder if all tasks shared --out)")
+    p.add_argument("--out", help="data set folder (default: the first input)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_merge_command)
+    return p

@@ -1,0 +1,97 @@
+"""``zbuf-occlude experiment elevation|augmentation``: Table 3A and 3B of Sryamkin et al. 2023.
+
+The parser is added without importing torch; torch is imported when a command runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from zbuf_occlude.defaults import DEFAULT_METHOD
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.cli.sim2real import parse_pairs, print_table
+
+__all__ = ["add_parser", "check_options"]
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("root", help="mesh tree (ModelNet layout: CLASS/SPLIT/NAME.off); duplicate meshes are dropped")
+    p.add_argument("--out", required=True, help="output folder (results.csv, table.md, run.json, plots, checkpoints)")
+    p.add_argument("--scale", choices=("quick", "paper"), default="quick",
+                   help="quick: fits a 2-core CPU; paper: the paper's sizes (ModelNet40 and a GPU) (default: %(default)s)")
+    p.add_argument("--epochs", type=int, help="override the scale's epoch count")
+    p.add_argument("--points", type=int, help="points per cloud (override the scale's)")
+    p.add_argument("--method", default=DEFAULT_METHOD, help="HSR method of the farm (default: %(default)s; og32/og64 are the paper's)")
+    p.add_argument("--classes", help="comma-separated class names to keep")
+    p.add_argument("--data", help="folder for the farm's data set (default OUT/data); reuse it across models")
+    p.add_argument("--seed", type=int, default=0, help="seed of the data set, the splits and the training (default: %(default)s)")
+    p.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="torch device of the training (default: %(default)s)")
+    p.add_argument("--threads", type=int, help="torch CPU threads")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def check_options(args: argparse.Namespace) -> None:
+    """Usage errors before torch is imported or a mesh is read: ``--epochs``, ``--points`` and
+    ``--threads`` (when given) are integers >= 1, ``--seed`` >= 0; the message names the value.
+
+    Raises InvalidInputError (exit status 2).
+    """
+    from zbuf_occlude.geometry.sampling import check_seed
+
+    for name in ("epochs", "points", "threads"):
+        value = getattr(args, name, None)
+        if value is not None and value < 1:
+            raise InvalidInputError(f"--{name} must be an integer >= 1, got {value}")
+    check_seed(getattr(args, "seed", 0), name="--seed")
+
+
+def _run(args: argparse.Namespace) -> int:
+    check_options(args)
+    from zbuf_occlude.learn import require_torch
+
+    require_torch()
+    from zbuf_occlude.experiments.table3 import run_augmentation, run_elevation
+
+    classes = [c.strip() for c in args.classes.split(",")] if args.classes else None
+    common = dict(model=args.model, scale=args.scale, epochs=args.epochs, points=args.points, method=args.method,
+                  classes=classes, data_dir=args.data, seed=args.seed, device=args.device, threads=args.threads,
+                  progress=not args.no_progress)  # fmt: skip
+    if args.experiment == "elevation":
+        summary = run_elevation(args.root, args.out, profile=not args.no_profile, **common)
+    else:
+        summary = run_augmentation(args.root, args.out, real_scans=args.real_scans,
+                                   label_map=parse_pairs(args.label_map, "--label-map"), **common)  # fmt: skip
+    return print_table(args.out, summary)
+
+
+def add_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Add ``experiment`` (with ``elevation`` and ``augmentation``) to an argparse ``subparsers``."""
+    p = subparsers.add_parser(
+        "experiment", help="train PointNet/VoxNet/3DmFV on generated clouds (Table 3 of the paper)",
+        description="Reproduce the paper's classification experiments: build the occluded data set with the farm, "
+        "train a classifier and write the table (needs the learn extra: torch).",
+    )  # fmt: skip
+    sub = p.add_subparsers(dest="experiment", required=True)
+    e = sub.add_parser(
+        "elevation", help="Table 3A: train on elevations ±90,±70,±50,±20, test on ±80..0",
+        description="Table 3A: train on clouds seen from elevations ±90, ±70, ±50, ±20 degrees and test on ±80..0.",
+    )  # fmt: skip
+    _common(e)
+    e.add_argument("--model", choices=("pointnet", "voxnet", "3dmfv"), default="pointnet", help="classifier (default: %(default)s)")
+    e.add_argument("--no-profile", action="store_true", help="skip Fig. 12's visible-area curve in the plot")
+    e.set_defaults(func=_run)
+    a = sub.add_parser(
+        "augmentation", help="Table 3B: C1 occluded / C2 complete / C3 both x Test 1/2 (/3 real scans)",
+        description="Table 3B: train on occluded (C1), complete (C2) or both (C3) clouds and test on each "
+        "(and on real scans with --real-scans).",
+    )  # fmt: skip
+    _common(a)
+    a.add_argument("--model", choices=("voxnet", "3dmfv", "pointnet"), default="3dmfv", help="classifier (default: %(default)s)")
+    a.add_argument("--real-scans", help="Test 3: SUO objects/ folder or LiDARNet v2 folder")
+    a.add_argument("--label-map", help="rename real labels, REAL=MODEL,... (e.g. Car=car,4wd=car)")
+    a.set_defaults(func=_run)
+    from zbuf_occlude.cli.sim2real import add_sim2real_parser
+
+    add_sim2real_parser(sub)
+    return p

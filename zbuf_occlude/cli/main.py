@@ -1,0 +1,309 @@
+"""Command-line interface ``zbuf-occlude`` (also ``python -m zbuf_occlude``).
+
+Thin: parse arguments, call the library, print.  A :class:`ZbufOccludeError` is printed on
+one line and the exit status is non-zero; any other exception is a bug and shows a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from zbuf_occlude._version import __version__
+from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
+from zbuf_occlude.defaults import DEFAULT_DENSE_POINTS, DEFAULT_METHOD, DEFAULT_RESOLUTION, DEFAULT_SEED, DEFAULT_VIEWS
+from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
+from zbuf_occlude.io.clouds import FORMATS
+from zbuf_occlude.io.atomic import write_csv
+from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
+from zbuf_occlude.visibility.metrics import agreement
+from zbuf_occlude.resources import MemoryEstimate, check_memory, estimate_job_memory
+from zbuf_occlude.visibility.registry import available_methods, check_runnable, method_info, resolution_option, unavailable_reason, visible_mask
+
+__all__ = ["main", "build_parser", "SAMPLE_MESHES"]
+
+log = logging.getLogger("zbuf_occlude")
+
+#: Real ModelNet meshes shipped with a checkout (see data/samples/SOURCE.md).
+SAMPLE_MESHES = Path(__file__).resolve().parents[1] / "data" / "samples"
+
+
+def _default_paths(paths: list[str]) -> list[str]:
+    if paths:
+        return paths
+    if not SAMPLE_MESHES.is_dir():
+        raise InvalidInputError(
+            f"no PATH given and there are no sample meshes at {SAMPLE_MESHES} (only a checkout of the repository "
+            "ships data/samples; an installed wheel has none): pass mesh files or folders"
+        )
+    return [str(SAMPLE_MESHES)]
+
+
+def _progress(iterable, **kwargs):
+    from tqdm.auto import tqdm
+
+    return tqdm(iterable, disable=None, **kwargs)
+
+
+# -- generate ------------------------------------------------------------------------------
+def cmd_generate(args: argparse.Namespace) -> int:
+    """``generate`` runs on the farm's engine (:mod:`zbuf_occlude.farm.generate`)."""
+    import shlex
+
+    from zbuf_occlude.farm import FarmParams
+    from zbuf_occlude.farm.checks import check_out_option
+    from zbuf_occlude.farm.generate import generate
+
+    if args.protocol != "paper":  # the field's recipes (zbuf_occlude.protocols) have their own writers
+        from zbuf_occlude.cli.protocols import run_protocol_command
+
+        return run_protocol_command(args, _default_paths(args.paths))
+    if args.severity is not None:
+        raise InvalidInputError(f"--severity {args.severity} needs --protocol modelnet40-c-occlusion or modelnet40-c-lidar")
+    params = FarmParams(
+        views=args.views, samples_per_view=args.samples_per_view, n_points=args.points, dense_points=args.dense_points,
+        resolution=args.resolution, seed=args.seed, radius=args.radius, storage=args.format, method=args.method,
+    )  # fmt: skip
+    check_out_option(args.out)  # before Path("") becomes the working folder
+    paths = _default_paths(args.paths)
+    # generate's engine (farm.run_farm) checks the options, the memory, --out and the GL before loading a mesh
+    t0 = time.perf_counter()
+    summary, objects = generate(
+        paths, args.out, params=params, overwrite=args.overwrite, progress=True, isolate=True,
+        command=shlex.join(["zbuf-occlude", *sys.argv[1:]]) if sys.argv else None, class_from=args.class_from,
+    )  # fmt: skip
+    elapsed = time.perf_counter() - t0
+    print(
+        f"{summary.done} meshes done, {summary.failed} failed, {summary.samples} samples "
+        f"({summary.resumed} meshes from an earlier run) in {elapsed:.1f} s -> {args.out}"
+    )
+    source = {o.name: o.source for o in objects}
+    for name, err in summary.failures:
+        print(f"FAILED {source.get(name, name)}: {err}", file=sys.stderr)
+    for path, reason in summary.skipped:
+        print(f"SKIPPED {path}: {reason}", file=sys.stderr)
+    return summary.exit_status
+
+
+# -- validate ----------------------------------------------------------------------------------
+def _check_at_least(args: argparse.Namespace, **lowest: int) -> None:
+    """Usage errors name the option: ``--points must be an integer >= 1, got 0``."""
+    for name, low in lowest.items():
+        value = getattr(args, name)
+        if value < low:
+            raise InvalidInputError(f"--{name.replace('_', '-')} must be an integer >= {low}, got {value}")
+
+
+def _check_validate_memory(points: int, resolution: int) -> None:
+    """``validate`` holds a dense cloud of ``--points`` per mesh and one image of ``--resolution``."""
+    est = estimate_job_memory(dense_points=points, resolution=resolution)
+    check_memory(
+        MemoryEstimate(
+            {"--points": est.parts["--dense-points"], "--resolution": est.parts["--resolution"]},
+            {"--points": points, "--resolution": resolution},
+        )
+    )
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    from zbuf_occlude.mesh.load import load_mesh  # trimesh (and scipy): imported by the commands that load meshes
+    from zbuf_occlude.mesh.discovery import scan_meshes
+    from zbuf_occlude.geometry.sampling import check_seed, sample_surface
+
+    _check_at_least(args, points=1, resolution=1)
+    check_seed(args.seed, name="--seed")
+    from zbuf_occlude.farm.checks import check_radius
+
+    check_radius(args.radius, args.resolution)
+    poses = view_schedule(args.views)
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    for m in methods:
+        check_runnable(m)  # unknown names and missing extras fail here, before any output
+    if any(method_info(m).takes_resolution for m in methods):
+        from zbuf_occlude.render.context import check_image_size
+
+        check_image_size(args.resolution, name="--resolution")
+    _check_validate_memory(args.points, args.resolution)
+    meshes, skipped = scan_meshes(_default_paths(args.paths))
+    for item in skipped:
+        print(f"SKIPPED {item}", file=sys.stderr)
+    rows: list[dict] = []
+    failed = len(skipped)
+    header = f"{'mesh':32s} {'el':>6s} {'az':>6s} {'method':18s} {'agree%':>8s} {'f-vis%':>7s} {'f-hid%':>7s} {'ms':>8s} {'oracle ms':>9s}"
+    print(header)
+    options = {m: resolution_option(m, args.resolution) for m in methods}
+    for path, name in meshes:
+        try:
+            mesh = load_mesh(path)
+        except ZbufOccludeError as exc:
+            failed += 1
+            print(f"FAILED {path}: {exc}", file=sys.stderr)
+            continue
+        points, face_index = sample_surface(mesh, count=args.points, seed=args.seed)
+        for el, az in poses:
+            camera = camera_on_sphere(el, az, args.radius, resolution=args.resolution)
+            t = time.perf_counter()
+            truth = visible_mask(mesh, points, camera, "oracle", face_index=face_index)
+            oracle_ms = 1e3 * (time.perf_counter() - t)
+            for method in methods:
+                t = time.perf_counter()
+                pred = visible_mask(mesh, points, camera, method, face_index=face_index, **options[method])
+                ms = 1e3 * (time.perf_counter() - t)
+                a = agreement(pred, truth)
+                rows.append({"mesh": name, "elevation_deg": el, "azimuth_deg": az, "method": method, "ms": ms, "oracle_ms": oracle_ms, **a})
+                print(
+                    f"{name[-32:]:32s} {el:6.1f} {az:6.1f} {method:18s} {100 * a['accuracy']:8.3f} "
+                    f"{100 * a['false_visible']:7.3f} {100 * a['false_hidden']:7.3f} {ms:8.1f} {oracle_ms:9.1f}"
+                )
+    for method in methods:
+        acc = [r["accuracy"] for r in rows if r["method"] == method]
+        if acc:
+            worst = min((r for r in rows if r["method"] == method), key=lambda r: r["accuracy"])
+            print(
+                f"{method}: mean agreement {100 * np.mean(acc):.3f} %, worst {100 * worst['accuracy']:.3f} % "
+                f"({worst['mesh']} el={worst['elevation_deg']:g} az={worst['azimuth_deg']:g}), "
+                f"median {np.median([r['ms'] for r in rows if r['method'] == method]):.1f} ms/view"
+            )
+    if args.csv and rows:
+        write_csv(args.csv, rows)
+    return 1 if failed else 0
+
+
+# -- info -----------------------------------------------------------------------------------------
+def cmd_info(args: argparse.Namespace) -> int:
+    from zbuf_occlude.render.context import context_info, create_context
+
+    info = context_info(create_context(args.gl))
+    print(f"zbuf_occlude {__version__}")
+    for key, value in info.items():
+        print(f"GL {key:8s} {value}")
+    missing = {m: unavailable_reason(m) for m in available_methods()}
+    print(f"methods     {', '.join(m for m, why in missing.items() if why is None)}")
+    not_here = [m for m, why in missing.items() if why is not None]
+    if not_here:  # listed apart: `--method` with one of them fails here
+        print(f"not here    {', '.join(not_here)} (their extras are not installed)")
+    return 0
+
+
+# -- parser ------------------------------------------------------------------------------------------
+#: The paths' help of generate and validate: a wheel ships no sample meshes (only a checkout has data/samples).
+PATHS_HELP = (
+    f"mesh files ({EXTENSIONS_TEXT}) or folders, searched recursively; classes and splits come from "
+    "the folder's layout (ModelNet, ShapeNetCore, CLASS/NAME; see docs/guide/inputs.md) "
+    "(default: the sample meshes in a checkout's data/samples; an installed wheel has none: pass PATH)"
+)
+
+
+
+def _add_paths(p: argparse.ArgumentParser) -> None:
+    p.add_argument("paths", nargs="*", metavar="PATH", help=PATHS_HELP)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``zbuf-occlude`` argument parser with every subcommand."""
+    from zbuf_occlude.cli.farm import CLASS_FROM_HELP, RADIUS_HELP, VIEWS_HELP
+    from zbuf_occlude.defaults import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION
+    from zbuf_occlude.defaults import DEFAULT_FARM_VIEWS as FARM_VIEWS
+    from zbuf_occlude.farm.config import GENERATE_DEFAULTS as gd  # generate's defaults, taken from zbuf_occlude.defaults
+
+    parser = argparse.ArgumentParser(prog="zbuf-occlude", description="Real-like occluded point clouds from meshes (headless z-buffer HSR).")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    g = sub.add_parser(
+        "generate", help="occluded point clouds from a few meshes",
+        description="Render each mesh from each pose, keep the points the camera sees, and write samples of "
+        "--points points to --out. Run it again to resume; `farm` builds large data sets.",
+    )  # fmt: skip
+    _add_paths(g)
+    g.add_argument("--out", required=True, help="output folder (created; must not be a file)")
+    g.add_argument("--views", help=f"{VIEWS_HELP} (default: {gd.views}; the farm's: {FARM_VIEWS})")
+    g.add_argument("--points", type=int, help=f"points per sample (default: {gd.n_points})")
+    g.add_argument("--samples-per-view", type=int, help=f"random samples drawn per pose (default: {gd.samples_per_view})")
+    g.add_argument(
+        "--dense-points", type=int,
+        help=f"dense cloud sampled once per mesh, drawn from per pose (default: {gd.dense_points}; the farm's: {DEFAULT_FARM_DENSE_POINTS})",
+    )  # fmt: skip
+    g.add_argument(
+        "--resolution", type=int,
+        help=f"z-buffer image size, pixels (default: {gd.resolution}; the farm's: {DEFAULT_FARM_RESOLUTION})",
+    )  # fmt: skip
+    g.add_argument("--radius", type=float, default=gd.radius, help=f"{RADIUS_HELP} (default: %(default)s)")
+    g.add_argument("--seed", type=int, default=gd.seed, help="global seed: the same seed and options give the same samples (default: %(default)s)")
+    g.add_argument("--format", choices=FORMATS, help=f"npz or ply: one file per sample; h5: PointNet's layout (default: {gd.storage})")
+    g.add_argument("--method", help=f"visibility method (see `zbuf-occlude info`) (default: {gd.method})")
+    g.add_argument("--class-from", type=int, metavar="N", help=CLASS_FROM_HELP)
+    g.add_argument("--overwrite", action="store_true", help="start over (needed to change options in an existing --out)")
+    from zbuf_occlude.cli.protocols import add_protocol_arguments
+
+    add_protocol_arguments(g)
+    g.set_defaults(
+        func=cmd_generate, views=gd.views, points=gd.n_points, resolution=gd.resolution,
+        samples_per_view=gd.samples_per_view, dense_points=gd.dense_points, format=gd.storage, method=gd.method,
+    )  # fmt: skip
+
+    v = sub.add_parser(
+        "validate", help="agreement of visibility methods with the exact oracle, per mesh and pose",
+        description="Sample --points points on each mesh, decide their visibility per pose with each of --methods "
+        "and with the exact oracle, and print the agreement (false-visible, false-hidden) and the time per view.",
+    )  # fmt: skip
+    _add_paths(v)
+    v.add_argument("--methods", default=DEFAULT_METHOD, help="comma-separated methods to score (see `zbuf-occlude info`) (default: %(default)s)")
+    v.add_argument("--views", default=DEFAULT_VIEWS, help=f"{VIEWS_HELP} (default: %(default)s)")
+    v.add_argument("--points", type=int, default=DEFAULT_DENSE_POINTS, help="points sampled on each mesh's surface, scored per pose (default: %(default)s)")
+    v.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION, help="z-buffer image size of the image-space methods, pixels (default: %(default)s)")
+    v.add_argument("--radius", type=float, default=DEFAULT_RADIUS, help=f"{RADIUS_HELP} (default: %(default)s)")
+    v.add_argument("--seed", type=int, default=DEFAULT_SEED, help="seed of the surface sampling (default: %(default)s)")
+    v.add_argument("--csv", help="also write the rows to this CSV file")
+    v.set_defaults(func=cmd_validate)
+
+    i = sub.add_parser(
+        "info", help="the OpenGL context and the visibility methods available here",
+        description="Make an OpenGL context as the other commands do, print its renderer and version, "
+        "and list the visibility methods that can run here.",
+    )  # fmt: skip
+    i.add_argument("--gl", help="egl | osmesa | an order such as osmesa,egl (default: $ZBUF_OCCLUDE_GL or egl,osmesa)")
+    i.set_defaults(func=cmd_info)
+
+    # Subcommands whose options live beside their engines.
+    from zbuf_occlude.cli.compare import add_compare_parser
+    from zbuf_occlude.cli.farm import add_farm_merge_parser, add_farm_parser
+    from zbuf_occlude.cli.elevation_profile import add_profile_parser
+
+    for add in (add_compare_parser, add_profile_parser, add_farm_parser, add_farm_merge_parser):
+        add(sub)
+    from zbuf_occlude.cli.learn import add_parser as add_experiment_parser  # zbuf-occlude experiment; torch only when it runs
+    from zbuf_occlude.cli.sensors import add_realism_parser, add_scan_parser
+    from zbuf_occlude.cli.verify import add_verify_parser  # zbuf-occlude verify DIR: schema, paths, checksums of a data set
+
+    for add in (add_scan_parser, add_realism_parser, add_experiment_parser, add_verify_parser):
+        add(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the console script; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return int(args.func(args) or 0)
+    except ZbufOccludeError as exc:
+        print(f"zbuf-occlude: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt as exc:
+        # 130 after Ctrl-C (SIGINT), 143 after SIGTERM (farm.lifecycle.Terminated): 128 + the signal
+        print("zbuf-occlude: interrupted; run the same command again to resume", file=sys.stderr)
+        return 128 + getattr(exc, "signum", signal.SIGINT)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

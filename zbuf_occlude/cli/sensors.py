@@ -1,0 +1,204 @@
+"""``zbuf-occlude scan`` and ``zbuf-occlude realism``: options beside their engines.
+
+``cli.build_parser`` calls :func:`add_scan_parser` and :func:`add_realism_parser`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.presets import sensor_from_name
+from zbuf_occlude.geometry.samples import derive_rng, object_key
+
+__all__ = ["add_scan_parser", "add_realism_parser", "add_parser", "parse_interval"]
+
+log = logging.getLogger(__name__)
+
+
+#: Unit primitives ``scan`` takes instead of a mesh file (stretch them with ``--extents``).
+PRIMITIVES = {
+    "cylinder": {"cylinder": {"radius_m": 0.5, "height_m": 1.0, "sections": 48}},
+    "box": {"box_m": [1.0, 1.0, 1.0]},
+}
+
+
+def parse_interval(text: str, option: str) -> tuple[float, float]:
+    """``"10"`` → (10, 10); ``"5:25"`` → (5, 25) (a uniform draw per sample)."""
+    try:
+        parts = [float(v) for v in str(text).split(":")]
+    except ValueError:
+        raise InvalidInputError(f"{option} must be a number or LO:HI, got {text!r}") from None
+    if len(parts) == 1:
+        parts *= 2
+    if len(parts) != 2 or not parts[0] <= parts[1]:
+        raise InvalidInputError(f"{option} must be a number or LO:HI with LO <= HI, got {text!r}")
+    return parts[0], parts[1]
+
+
+def check_outside(dist) -> None:
+    """Refuse a ``--distance`` that may put the sensor inside the object.
+
+    The object's footprint centre lies ``distance_m`` from the sensor and its largest
+    horizontal dimension is up to ``size_m`` (or the X/Y ``extents_m``) high end, so a
+    distance below half of that may stand the sensor inside it (every ray starts inside).
+
+    Raises
+    ------
+    InvalidInputError
+        Naming ``--distance`` and the smallest distance allowed.
+    """
+    sizes = [dist.extents_m[0][1], dist.extents_m[1][1]] if dist.extents_m is not None else [dist.size_m[1]]
+    half = max(sizes) / 2
+    if dist.distance_m[0] < half:
+        raise InvalidInputError(
+            f"--distance {dist.distance_m[0]:g} m may put the sensor inside the object (up to {max(sizes):g} m across): "
+            f"use a distance of at least {half:g} m"
+        )
+
+
+def cmd_scan(args: argparse.Namespace) -> int:
+    from zbuf_occlude.sensors.airborne import AirborneScanner
+    from zbuf_occlude.sensors.crops import CropDistributions, draw_placement, object_crop
+    from zbuf_occlude.sensors.lidar import Lidar
+    from zbuf_occlude.sensors.scan import look_at_pose, scan
+    from zbuf_occlude.sensors.scene import load_scene
+
+    sensor = sensor_from_name(args.sensor)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    formats = ("npz", "ply") if args.format == "both" else (args.format,)
+    src = Path(args.mesh_or_scene)
+    written = []
+    if src.suffix.lower() in (".json", ".yaml", ".yml"):
+        scene = load_scene(src)
+        if isinstance(sensor, Lidar):
+            pose = scene.default_sensor_pose()
+        else:  # a camera looks at the first object from the sensor position
+            target = scene.build().local_to_world[1][:3, 3] if scene.objects else np.array([1.0, 0.0, scene.ground_z_m])
+            pose = look_at_pose(scene.default_sensor_pose()[:3, 3], target + [0, 0, 0.5])
+        for k in range(args.samples):
+            if isinstance(sensor, AirborneScanner):  # a flight over the scene's ground (world frame)
+                from zbuf_occlude.sensors.airborne import scan_airborne
+
+                s = scan_airborne(scene, sensor, (0.0, 0.0), scene.ground_half_extent_m, seed=args.seed + k)
+            else:
+                s = scan(scene, sensor, pose, seed=args.seed + k, backend=args.backend, frame=args.frame)
+            written += [getattr(s, f"to_{fmt}")(out / f"{src.stem}_{sensor.name}_s{k:03d}.{fmt}") for fmt in formats]
+    else:
+        if not isinstance(sensor, (Lidar, AirborneScanner)):
+            raise InvalidInputError("scan of a mesh file places a LiDAR; use a scene file for depth cameras")
+        extents, round_xy = None, False
+        if args.extents:
+            parts = args.extents.split(",")
+            if len(parts) != 3:
+                raise InvalidInputError(f"--extents must be X,Y,Z in metres (each N or LO:HI; Y may be '='), got {args.extents!r}")
+            round_xy = parts[1].strip() == "="
+            extents = tuple(parse_interval(parts[0] if i == 1 and round_xy else v, "--extents") for i, v in enumerate(parts))
+        if (args.footprint or args.power_noise) and isinstance(sensor, Lidar):
+            sensor = sensor.with_(footprint_rays=7 if args.footprint else sensor.footprint_rays, power_noise=args.power_noise)
+        mesh = PRIMITIVES.get(str(src)) if not src.exists() else None
+        if mesh is None:
+            from zbuf_occlude.mesh.load import load_mesh
+
+            mesh = load_mesh(src)  # once, not per sample
+        dist = CropDistributions(
+            distance_m=parse_interval(args.distance, "--distance"), height_m=parse_interval(args.height, "--height"),
+            azimuth_deg=parse_interval(args.azimuth, "--azimuth"), yaw_deg=parse_interval(args.yaw, "--yaw"),
+            size_m=parse_interval(args.size, "--size"), extents_m=extents, round_xy=round_xy,
+            reflectivity=None if args.reflectivity is None else parse_interval(args.reflectivity, "--reflectivity"),
+            ground_reflectivity=args.ground_reflectivity,
+        )  # fmt: skip
+        check_outside(dist)
+        for k in range(args.samples):
+            rng = derive_rng(args.seed, object_key(src.name), k)
+            placement = draw_placement(dist, rng)
+            crop = object_crop(mesh, sensor, placement, seed=int(rng.integers(2**63)), backend=args.backend, frame=args.frame)
+            s = crop.scan if args.crop else crop.full
+            s.meta.update(placement)
+            stem = f"{src.stem}_{sensor.name}_s{k:03d}"
+            written += [getattr(s, f"to_{fmt}")(out / f"{stem}.{fmt}") for fmt in formats]
+            log.info("%s: %d returns at %.2f m", stem, len(s), placement["distance_m"])
+    print(f"wrote {len(written)} files to {out}")
+    return 0
+
+
+def add_scan_parser(sub) -> argparse.ArgumentParser:
+    """Add ``scan`` to the subparsers ``sub``."""
+    p = sub.add_parser(
+        "scan", help="LiDAR / depth-camera scan of a mesh on the ground, or of a scene file",
+        description="Stand a mesh on a ground plane at --distance from a simulated LiDAR and scan it (or scan a "
+        "scene file with any sensor); writes one point cloud per sample to --out.",
+    )  # fmt: skip
+    p.add_argument("mesh_or_scene", metavar="MESH_OR_SCENE", help="mesh file (stood on the ground), 'cylinder' or 'box' (unit primitives), or a scene .json/.yaml")
+    p.add_argument("--sensor", default="hdl32e", help="vlp16 | hdl32e | hdl64e | os1-64 | riegl-q1560 (airborne) | kinect-v1 | sensor .json (default: %(default)s)")
+    p.add_argument("--distance", default="10", help="horizontal sensor-object distance, metres (N or LO:HI, uniform per sample; at least half the object's size) (default: %(default)s)")
+    p.add_argument("--height", default="1.8", help="sensor height above the ground, metres (N or LO:HI) (default: %(default)s)")
+    p.add_argument("--size", default="4.5", help="the object's largest dimension, metres (N or LO:HI) (default: %(default)s)")
+    p.add_argument(
+        "--extents",
+        help="X,Y,Z: stretch the mesh to these extents, metres, each N or LO:HI drawn per sample (instead of --size); "
+        "Y '=' takes the drawn X (a round pole: --extents 0.1:0.4,=,3:9)",
+    )
+    r = p.add_argument_group("return physics (LiDAR)")
+    r.add_argument(
+        "--reflectivity", metavar="RHO or LO:HI",
+        help="the object's Lambertian reflectivity, drawn per sample: keep only returns whose received power "
+        "rho*cos(incidence)*footprint/R^2 clears the sensor's threshold (default: every hit returns)",
+    )  # fmt: skip
+    r.add_argument("--ground-reflectivity", type=float, default=0.15, help="the ground's reflectivity with --reflectivity (default: %(default)s)")
+    r.add_argument("--footprint", action="store_true", help="beam footprint: 7 rays per firing in the divergence cone, strongest echo")
+    r.add_argument("--power-noise", type=float, default=0.0, help="sigma of ln(received power) per firing; 0: a sharp threshold (default: %(default)s)")
+    p.add_argument("--azimuth", default="0", help="direction of the object from the sensor, degrees (N or LO:HI) (default: %(default)s)")
+    p.add_argument("--yaw", default="0", help="the object's heading, degrees (N or LO:HI) (default: %(default)s)")
+    p.add_argument("--samples", type=int, default=1, help="scans, each with its own draws (default: %(default)s)")
+    p.add_argument("--crop", action="store_true", help="write only the object's returns; default: the object and the ground in the object's azimuth sector (±5°)")
+    p.add_argument(
+        "--frame", choices=("sensor", "world"), default="sensor",
+        help="frame of the written points: sensor (LiDAR at the origin, x forward, z up; cameras: OpenCV) or "
+        "world (the scene's frame) (default: %(default)s)",
+    )  # fmt: skip
+    p.add_argument("--format", choices=("npz", "ply", "both"), default="npz", help="file format of each scan (default: %(default)s)")
+    p.add_argument(
+        "--backend", choices=("embree", "zbuffer"), default="embree",
+        help="ray casting: embree (exact, CPU) or zbuffer (OpenGL depth images) (default: %(default)s)",
+    )  # fmt: skip
+    p.add_argument("--seed", type=int, default=0, help="seed of the placement draws and the sensor noise (default: %(default)s)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.set_defaults(func=cmd_scan)
+    return p
+
+
+def cmd_realism(args: argparse.Namespace) -> int:
+    from zbuf_occlude.experiments.realism import markdown_table, realism_report
+
+    rows = realism_report(args.generated, args.real, args.out, min_points=args.min_points, figure=not args.no_figure)
+    print(markdown_table(rows), end="")
+    print(f"wrote {Path(args.out) / 'realism.md'}, realism.csv" + ("" if args.no_figure else ", realism.png"))
+    return 0
+
+
+def add_realism_parser(sub) -> argparse.ArgumentParser:
+    """Add ``realism`` to the subparsers ``sub``."""
+    p = sub.add_parser(
+        "realism", help="ring spacing, count-vs-range exponent, spacing, extent: generated vs real clouds",
+        description="Compare statistics of generated scans with real LiDAR clouds and write realism.md, "
+        "realism.csv and a figure to --out.",
+    )  # fmt: skip
+    p.add_argument("generated", metavar="GENERATED", help="scan .npz files or a folder of them (or LiDARNet CSVs)")
+    p.add_argument("real", metavar="REAL", help="LiDARNet v2 CSV folder (or scan .npz)")
+    p.add_argument("--out", default="realism", help="folder for realism.md, realism.csv, realism.png (default: %(default)s)")
+    p.add_argument("--min-points", type=int, default=1, help="ignore clouds with fewer points (default: %(default)s)")
+    p.add_argument("--no-figure", action="store_true", help="do not draw realism.png")
+    p.set_defaults(func=cmd_realism)
+    return p
+
+
+def add_parser(sub) -> None:
+    """Add both subcommands."""
+    add_scan_parser(sub)
+    add_realism_parser(sub)

@@ -1,0 +1,113 @@
+"""``zbuf-occlude experiment sim2real MESH_ROOT --real PATH --model ... --out DIR``: the parser and its thin runner.
+
+Added to ``experiment``'s subcommands by :mod:`zbuf_occlude.cli.learn`; torch is imported only
+when the command runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+from zbuf_occlude.defaults import DEFAULT_METHOD
+from zbuf_occlude.errors import InvalidInputError
+
+__all__ = ["add_sim2real_parser", "parse_pairs"]
+
+
+def _positive(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
+    return value
+
+
+def parse_pairs(text: str | None, option: str) -> dict[str, str]:
+    """``A=B,C=D`` → ``{"A": "B", "C": "D"}``; InvalidInputError naming ``option`` and the item."""
+    out: dict[str, str] = {}
+    for item in (text or "").split(","):
+        if not item.strip():
+            continue
+        if "=" not in item:
+            raise InvalidInputError(f"{option} expects KEY=VALUE,..., got {item.strip()!r}")
+        key, value = item.split("=", 1)
+        out[key.strip()] = value.strip()
+    return out
+
+
+def _run(args: argparse.Namespace) -> int:
+    from zbuf_occlude.learn import require_torch
+
+    require_torch()
+    from zbuf_occlude.mesh.scene import UP_CHOICES
+    from zbuf_occlude.mesh.sizes import parse_sizes
+    from zbuf_occlude.experiments.sim2real import run_sim2real
+
+    up_map = parse_pairs(args.up_map, "--up-map")
+    bad = {k: v for k, v in up_map.items() if v not in UP_CHOICES}
+    if bad:
+        raise InvalidInputError(f"--up-map: axis must be one of {', '.join(UP_CHOICES)}, got {bad}")
+    real_options = {"dataset": args.real_format, "up": args.real_up, "units": args.real_units}
+    summary = run_sim2real(
+        args.root, args.real, args.out, model=args.model, sensor=args.sensor, scale=args.scale, points=args.points,
+        epochs=args.epochs, per_class=args.per_class, seeds=args.seeds, keep_scale=args.keep_scale,
+        label_map=parse_pairs(args.label_map, "--label-map"), up=args.up, up_map=up_map,
+        sizes=parse_sizes(args.sizes), real_options=real_options, min_returns=args.min_returns, method=args.method, device=args.device,
+        threads=args.threads, progress=not args.no_progress,
+    )  # fmt: skip
+    return print_table(args.out, summary)
+
+
+def print_table(out: str, summary: dict[str, Any]) -> int:
+    """Print an experiment's ``OUT/table.md`` and its wall time; exit status 0."""
+    table = f"{out}/table.md"
+    with open(table, encoding="utf-8") as f:
+        sys.stdout.write(f"{table}\n{f.read()}")
+    sys.stdout.write(f"wall time {summary['wall_s']['total']:.0f} s\n")
+    return 0
+
+
+def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
+    """Add ``sim2real`` to ``experiment``'s argparse subparsers."""
+    from zbuf_occlude.mesh.scene import UP_CHOICES
+    from zbuf_occlude.experiments.sim2real_data import MIN_RETURNS
+
+    p = sub.add_parser(
+        "sim2real", help="train only on clouds from meshes (complete / occluded / lidar / "
+        "lidar+complete), test on real scans; several seeds, permutation tests",
+        description="Make four training sets from the same meshes (complete, occluded, LiDAR crops, LiDAR + complete), "
+        "train a classifier on each with validation on held-out whole meshes, then score each on the real scans of "
+        "--real (never used for training or settings), over several seeds, with chance and real->real rows.",
+    )  # fmt: skip
+    p.add_argument("root", help="meshes in CLASS/ folders (OFF, OBJ, PLY, STL, glTF, GLB, COLLADA)")
+    p.add_argument("--real", required=True, help="folder of real object scans (one folder per class, or labelled files)")
+    p.add_argument("--out", required=True, help="output folder (settings.json, runs.jsonl, results.csv, summary.csv, table.md, run.json)")
+    p.add_argument("--model", choices=("pointnet", "voxnet", "3dmfv"), default="pointnet", help="classifier (default: %(default)s)")
+    p.add_argument("--sensor", default="hdl32e", help="scanner of the lidar training set (a LiDAR preset; default %(default)s)")
+    p.add_argument("--scale", choices=("quick", "paper"), default="quick",
+                   help="quick: 256 points, 100 clouds per class, 20 epochs (a 2-core CPU); paper: 1024, 1000, 100")
+    p.add_argument("--points", type=_positive, help="points per cloud (override the scale's)")
+    p.add_argument("--epochs", type=_positive, help="epochs (override the scale's)")
+    p.add_argument("--per-class", type=_positive, help="training clouds per class (override the scale's)")
+    p.add_argument("--seeds", type=_positive, default=5, help="repetitions, each redrawing clouds and initialisation (default %(default)s)")
+    p.add_argument("--keep-scale", action="store_true", help="keep metres instead of normalising every cloud to max extent 1")
+    p.add_argument("--label-map", help="real label to class folder, REAL=CLASS,... (e.g. Trunk=pole)")
+    p.add_argument("--up", choices=UP_CHOICES, default="auto", help="up axis of the mesh files; auto: each format's convention (default: %(default)s)")
+    p.add_argument("--up-map", help="per-file up axis, GLOB=AXIS,... (globs of paths relative to ROOT)")
+    p.add_argument("--sizes", help="real sizes per class, CLASS=length|height|max:LO-HI,... metres (over the defaults)")
+    p.add_argument("--real-format", choices=("auto", "folder", "lidarnet", "suo"), default="auto",
+                   help="reader of --real: a folder of class folders (any point-cloud files), LiDARNet v2, Sydney Urban Objects; auto: detected (default: %(default)s)")
+    p.add_argument("--real-up", choices=UP_CHOICES[1:], default="+z", help="up axis of the real scans' files (folder reader; default %(default)s)")
+    p.add_argument("--real-units", default="m", help="unit of the real scans' files: m, cm, mm, in, ft or metres per unit (folder reader)")
+    p.add_argument("--min-returns", type=_positive, default=MIN_RETURNS,
+                   help="redraw LiDAR crops with fewer returns (default %(default)s; lower it for airborne or sparse sensors)")
+    p.add_argument("--method", default=DEFAULT_METHOD, help="HSR method of the occluded set (default: %(default)s)")
+    p.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="torch device (default: %(default)s)")
+    p.add_argument("--threads", type=_positive, help="torch CPU threads")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(func=_run)
+    return p

@@ -1,0 +1,352 @@
+"""The schema of a data set's metadata, checked when it is opened (pydantic models).
+
+A data set may come from anyone, so nothing in it is trusted: the card
+(``dataset_card.json``), every line of ``manifest.jsonl``, ``shape_names.txt`` and each
+shard as it is opened are checked here, and anything that does not fit raises
+:class:`~zbuf_occlude.errors.DatasetFormatError` naming the file and the field, never a
+``KeyError`` or a raw h5py error.  The layout itself is described in
+:mod:`zbuf_occlude.dataset.layout`; paths in the metadata are checked by
+:func:`zbuf_occlude.io.safe_paths.path_inside`.
+
+Unknown fields are allowed (a newer writer may add some); missing or mistyped ones are not.
+Numbers must be JSON numbers (``"2048"`` is refused), poses pairs of numbers.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Any
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from zbuf_occlude.errors import DatasetFormatError
+from zbuf_occlude.dataset.layout import SHAPE_NAMES_FILE
+from zbuf_occlude.io.safe_paths import control_character, path_inside
+
+__all__ = [
+    "CardParams",
+    "Card",
+    "ManifestRecord",
+    "OkRecord",
+    "Plan",
+    "CHECKSUM_ALGORITHM",
+    "read_card",
+    "read_manifest",
+    "read_shape_names",
+    "check_records",
+    "checked_shards",
+    "check_shard",
+    "describe_validation_error",
+]
+
+#: What the card's ``checksums`` field says when every file of every object has one in the manifest.
+CHECKSUM_ALGORITHM = "sha256"
+#: Problems listed per validation error before "and N more".
+MAX_LISTED = 5
+
+NonNegativeInt = Annotated[int, Field(ge=0)]
+PositiveInt = Annotated[int, Field(ge=1)]
+Sha256 = Annotated[str, Field(pattern=r"^[0-9a-f]{64}$")]
+
+
+class _Model(BaseModel):
+    # strict: JSON numbers only (no "2048"); extra fields: a newer writer may add some
+    model_config = ConfigDict(strict=True, extra="allow")
+
+
+class CardParams(_Model):
+    """The parameters in the card the reader needs (the rest are kept as they are)."""
+
+    n_points: PositiveInt
+    samples_per_view: PositiveInt
+    seed: NonNegativeInt
+    sensor: str | None = None
+
+
+class JoinedFile(_Model):
+    """A file made from the shards for other readers (``generate --format h5``: PointNet's
+    ``occluded_<split>.h5`` and ``<split>_files.txt``), with its SHA-256."""
+
+    path: str
+    sha256: str
+    split: str
+
+
+class Card(_Model):
+    """``dataset_card.json``."""
+
+    format_version: NonNegativeInt = 0
+    storage: str
+    params: CardParams
+    #: ``(elevation_deg, azimuth_deg)`` of every pose, degrees.
+    poses: list[tuple[float, float]]
+    splits: list[str] | None = None
+    shape_names: list[str] | None = None
+    #: ``"sha256"``: every file of every finished object has its checksum in the manifest.
+    checksums: str | None = None
+    #: Files joined from the shards (PointNet's layout), each with its SHA-256; ``None``: none.
+    joined_files: list[JoinedFile] | None = None
+
+
+class ManifestRecord(_Model):
+    """Any line of ``manifest.jsonl``: only the status decides what else it must hold."""
+
+    status: str
+
+
+class OkRecord(_Model):
+    """A line of ``manifest.jsonl`` whose object finished (``status == "ok"``)."""
+
+    status: str
+    name: str
+    source: str
+    class_name: str
+    split: str
+    object_index: NonNegativeInt
+    label: NonNegativeInt
+    key: int
+    shards: list[str] = Field(min_length=1)
+    #: SHA-256 of each shard, parallel to ``shards``; ``None``: missing (readable only with ``verify=False``).
+    sha256: list[Sha256] | None = None
+    #: Visible points per pose (``farm --sensor``: per scan).
+    n_visible: list[NonNegativeInt]
+
+    @model_validator(mode="after")
+    def _parallel(self) -> OkRecord:
+        if self.sha256 is not None and len(self.sha256) != len(self.shards):
+            raise ValueError(f"sha256 has {len(self.sha256)} entries for {len(self.shards)} shards")
+        return self
+
+
+class PlanObject(_Model):
+    """One object of a farm's ``plan.json``."""
+
+    index: NonNegativeInt
+    name: str
+    source: str
+    class_name: str
+    split: str
+    label: NonNegativeInt
+
+
+class Plan(_Model):
+    """A farm's ``plan.json`` (what ``farm-merge`` reads from each task folder)."""
+
+    params: dict[str, Any]
+    params_digest: str
+    plan_digest: str
+    source: str
+    objects: list[PlanObject]
+
+
+def describe_validation_error(exc: ValidationError) -> str:
+    """``field 'params.n_points': Field required; ...`` for the first few problems."""
+    errors = exc.errors(include_url=False)
+    parts = []
+    for e in errors[:MAX_LISTED]:
+        loc = ".".join(str(x) for x in e["loc"])
+        parts.append(f"field {loc!r}: {e['msg']}" if loc else e["msg"])
+    more = f"; and {len(errors) - MAX_LISTED} more" if len(errors) > MAX_LISTED else ""
+    return "; ".join(parts) + more
+
+
+def _read_text(path: Path, what: str) -> str:
+    try:
+        return path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise DatasetFormatError(f"{path} is missing: this data set has no {what}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DatasetFormatError(f"cannot read {path}: {exc}") from None
+
+
+def read_card(path: Path) -> tuple[dict[str, Any], Card]:
+    """The card as a dict and as a checked :class:`Card`.
+
+    Raises
+    ------
+    DatasetFormatError
+        Unreadable, not JSON, or a field missing or of the wrong type (named).
+    """
+    text = _read_text(path, "card")
+    try:
+        card = Card.model_validate_json(text)
+    except ValidationError as exc:
+        raise DatasetFormatError(f"{path} is not a valid data set card: {describe_validation_error(exc)}") from None
+    return json.loads(text), card
+
+
+def read_manifest(path: Path, problems: list[str] | None = None) -> list[tuple[int, dict[str, Any], OkRecord | None]]:
+    """``(line number, record dict, checked record or None)`` per non-empty line.
+
+    The checked record is an :class:`OkRecord` for ``status == "ok"``, ``None`` for the
+    others (failed or pending objects, which the reader skips).  With ``problems``, a bad
+    line is appended there (and left out) instead of raising.
+
+    Raises
+    ------
+    DatasetFormatError
+        Unreadable, a line that is not a JSON object, or an ``ok`` line with a missing
+        or mistyped field (the message names the line and the field).
+    """
+    rows = []
+    for lineno, line in enumerate(_read_text(path, "manifest").splitlines(), start=1):
+        if not line.strip():
+            continue
+        where = f"{path}:{lineno}"
+        try:
+            status = ManifestRecord.model_validate_json(line).status
+            ok = OkRecord.model_validate_json(line) if status == "ok" else None
+        except ValidationError as exc:
+            message = (
+                f"{where} is not a valid manifest record: {describe_validation_error(exc)}; the data set is damaged: "
+                "rerun the farm command (it rewrites the manifest from the records)"
+            )
+            if problems is None:
+                raise DatasetFormatError(message) from None
+            problems.append(message)
+            continue
+        rows.append((lineno, json.loads(line), ok))
+    return rows
+
+
+def read_shape_names(root: Path, card: Card) -> list[str]:
+    """``shape_names.txt``: line i is the class name of label i (checked against the card).
+
+    Raises
+    ------
+    DatasetFormatError
+        Missing or unreadable, a name with a control character, or names that differ
+        from the card's ``shape_names``.
+    """
+    path = root / SHAPE_NAMES_FILE
+    text = _read_text(path, "class names")
+    # split on "\n" only: str.splitlines would also split on \x85, \u2028, ... inside a name
+    names = text.split("\n")
+    if names and names[-1] == "":
+        names.pop()
+    for i, name in enumerate(names):
+        bad = control_character(name)
+        if bad is not None or not name:
+            raise DatasetFormatError(
+                f"{path}:{i + 1}: class name {name!r} is empty or holds the control character "
+                f"U+{ord(bad or chr(0)):04X}; the label -> name mapping cannot be trusted"
+            )
+    if card.shape_names is not None and names != card.shape_names:
+        raise DatasetFormatError(f"{path} does not match the field 'shape_names' of the card ({card.shape_names})")
+    return names
+
+
+def check_records(
+    manifest: Path,
+    rows: list[tuple[int, dict[str, Any], OkRecord | None]],
+    card: Card,
+    shape_names: list[str],
+    problems: list[str] | None = None,
+) -> None:
+    """Cross-checks of the ``ok`` records against the card and the class names.
+
+    With ``problems``, each problem is appended there instead of raising.
+
+    Raises
+    ------
+    DatasetFormatError
+        A label with no line in ``shape_names.txt`` (or another name there), or
+        ``n_visible`` with another count than the card's poses (scans for ``--sensor``).
+    """
+    n_poses = card.params.samples_per_view if card.params.sensor else len(card.poses)
+    for lineno, _, rec in rows:
+        if rec is None:
+            continue
+        where = f"{manifest}:{lineno}"
+        found = []
+        if rec.label >= len(shape_names) or shape_names[rec.label] != rec.class_name:
+            found.append(
+                f"{where}: field 'label' {rec.label} ({rec.class_name!r}) does not match line {rec.label + 1} of "
+                f"{SHAPE_NAMES_FILE} ({len(shape_names)} names)"
+            )
+        if len(rec.n_visible) != n_poses:
+            found.append(
+                f"{where}: field 'n_visible' has {len(rec.n_visible)} entries, the card has {n_poses} "
+                f"{'scans' if card.params.sensor else 'poses'}"
+            )
+        if found and problems is None:
+            raise DatasetFormatError(found[0])
+        (problems if problems is not None else []).extend(found)
+
+
+def checked_shards(root: Path, where: str, rec: OkRecord, card: Card, *, verify: bool) -> tuple[list[Path], dict[Path, str]]:
+    """The shards of an ``ok`` record, each inside ``root``, and their SHA-256 (none when not ``verify``).
+
+    Parameters
+    ----------
+    where : str
+        ``manifest.jsonl:LINE``, for messages.
+
+    Raises
+    ------
+    UnsafePathError
+        A shard path is absolute, has ``..`` or leads outside ``root``.
+    DatasetFormatError
+        ``verify`` and the record has no ``sha256``: a changed shard could not be noticed.
+    """
+    shards = [path_inside(root, rel, what=f"{where} field 'shards'") for rel in rec.shards]
+    if not verify:
+        return shards, {}
+    if rec.sha256 is None:
+        said = " although the card says every file has one (field 'checksums'): the manifest was altered" if card.checksums else ""
+        raise DatasetFormatError(
+            f"{where}: object {rec.name!r} has no SHA-256 (field 'sha256'){said}; a changed shard could not be "
+            "noticed. Check the data set's source, then open it with OccludedDataset(..., verify=False) if you trust it "
+            "(`zbuf-occlude verify DIR` lists every problem)"
+        )
+    return shards, dict(zip(shards, rec.sha256))
+
+
+#: Datasets a shard of each storage must hold (``farm --sensor`` dense shards also hold
+#: ``elevation_deg`` and ``azimuth_deg`` per row).
+SHARD_DATASETS = {"dense": ("data",), "h5": ("data",), "compact": ("dense_points", "visible_bits")}
+
+
+def _shape(f: Any, key: str) -> tuple[int, ...] | None:
+    item = f.get(key)
+    return tuple(item.shape) if item is not None and hasattr(item, "shape") else None
+
+
+def check_shard(f: Any, path: Path, *, storage: str, n_points: int, rows: int, n_poses: int, sensor: bool) -> None:
+    """Check an open shard (``h5py.File``) against what the manifest says of its object.
+
+    Parameters
+    ----------
+    rows : int
+        Samples (dense) the manifest's ``n_visible`` implies for this object.
+    n_poses : int
+        Entries of the object's ``n_visible``.
+
+    Raises
+    ------
+    DatasetFormatError
+        A dataset is missing or has the wrong shape, or the shard holds fewer rows than
+        ``n_visible`` promises.
+    """
+    needed = SHARD_DATASETS.get(storage, ()) + (("elevation_deg", "azimuth_deg") if sensor else ())
+    missing = [k for k in needed if _shape(f, k) is None]
+    if missing:
+        raise DatasetFormatError(f"the shard {path} has no dataset {', '.join(map(repr, missing))} ({storage} storage)")
+    if storage == "compact":
+        dense, bits = _shape(f, "dense_points"), _shape(f, "visible_bits")
+        if len(dense) != 2 or dense[1] != 3 or bits != (n_poses, (dense[0] + 7) // 8):
+            raise DatasetFormatError(
+                f"the shard {path}: 'dense_points' {dense} and 'visible_bits' {bits} do not fit {n_poses} poses "
+                "(expected (M, 3) and (poses, ceil(M / 8)))"
+            )
+        return
+    data = _shape(f, "data")
+    if len(data) != 3 or data[1:] != (n_points, 3):
+        raise DatasetFormatError(f"the shard {path}: dataset 'data' has shape {data}, expected (B, {n_points}, 3)")
+    short = [k for k in ("data", *(needed[1:])) if _shape(f, k)[0] < rows]
+    if short:
+        raise DatasetFormatError(
+            f"the shard {path} holds fewer rows in {', '.join(map(repr, short))} than the manifest's field "
+            f"'n_visible' promises ({rows} samples); the data set is damaged"
+        )

@@ -1,0 +1,197 @@
+"""``zbuf-occlude verify DIR``: check a data set before trusting it (schema, paths, checksums).
+
+Nothing in a downloaded data set is trusted.  :func:`verify_dataset` checks what
+:class:`~zbuf_occlude.dataset.reader.OccludedDataset` checks as it reads, but all of it at once
+and without stopping at the first problem: the card, ``shape_names.txt`` and every line of
+``manifest.jsonl`` against their schema (:mod:`zbuf_occlude.dataset.schema`), every path named
+by the manifest and the file lists (inside the folder, symlinks resolved:
+:func:`~zbuf_occlude.io.safe_paths.path_inside`), every file's SHA-256, and every HDF5 shard's
+datasets and rows.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from zbuf_occlude.dataset.reader import samples_per_pose
+from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
+from zbuf_occlude.io.atomic import file_sha256
+from zbuf_occlude.dataset.layout import CARD_FILE, MANIFEST_FILE, file_list_name
+from zbuf_occlude.io.safe_paths import path_inside
+
+if TYPE_CHECKING:  # the schema (pydantic) is imported when a data set is verified
+    from zbuf_occlude.dataset.schema import Card
+
+__all__ = ["VerifyReport", "verify_dataset"]
+
+#: Storages whose files are HDF5 shards (their datasets and rows are checked too).
+HDF5_STORAGES = ("dense", "compact", "h5")
+
+
+@dataclass
+class VerifyReport:
+    """What :func:`verify_dataset` found.
+
+    Attributes
+    ----------
+    path : str
+    problems : list of str
+        One line per problem, each naming the file (and line and field); empty when clean.
+    objects, files, samples : int
+        Finished objects, files checked (and hashed), samples they hold.
+    """
+
+    path: str
+    problems: list[str] = field(default_factory=list)
+    objects: int = 0
+    files: int = 0
+    samples: int = 0
+
+    @property
+    def ok(self) -> bool:
+        return not self.problems
+
+    def summary(self) -> str:
+        """One line: ``OK DIR: 3 objects, 3 files (SHA-256 checked), 48 samples``."""
+        return f"OK {self.path}: {self.objects} objects, {self.files} files (SHA-256 checked), {self.samples} samples"
+
+
+def _check_hdf5(path: Path, card: Card, rows: int, n_poses: int) -> str | None:
+    import h5py
+
+    from zbuf_occlude.dataset.schema import check_shard
+
+    try:
+        with h5py.File(path, "r") as f:
+            check_shard(
+                f, path, storage=card.storage, n_points=card.params.n_points, rows=rows, n_poses=n_poses,
+                sensor=card.params.sensor is not None,
+            )  # fmt: skip
+    except OSError as exc:
+        return f"the shard {path} is not a readable HDF5 file ({exc})"
+    except ZbufOccludeError as exc:
+        return str(exc)
+    return None
+
+
+def verify_dataset(path: str | os.PathLike) -> VerifyReport:
+    """Check a data set folder and list every problem found.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        The data set folder (``farm --out``, ``generate --out``).
+
+    Returns
+    -------
+    VerifyReport
+        ``report.ok`` is true when nothing was found.
+
+    Raises
+    ------
+    InvalidInputError
+        ``path`` is not a folder (a usage error, not a problem of a data set).
+    """
+    from zbuf_occlude.dataset.schema import check_records, read_card, read_manifest, read_shape_names
+
+    root = Path(path)
+    if not root.is_dir():
+        raise InvalidInputError(f"verify: {path} is not a folder")
+    report = VerifyReport(str(root))
+    problems = report.problems
+    try:
+        _, card = read_card(root / CARD_FILE)
+    except ZbufOccludeError as exc:
+        problems.append(str(exc) if (root / CARD_FILE).exists() else f"{root} has no {CARD_FILE}: not a finished data set")
+        return report
+    try:
+        shape_names = read_shape_names(root, card)
+    except ZbufOccludeError as exc:
+        problems.append(str(exc))
+        shape_names = None
+    manifest = root / MANIFEST_FILE
+    try:
+        rows = read_manifest(manifest, problems)
+    except ZbufOccludeError as exc:
+        problems.append(str(exc))
+        return report
+    if shape_names is not None:
+        check_records(manifest, rows, card, shape_names, problems)
+    n_poses = card.params.samples_per_view if card.params.sensor else len(card.poses)
+    spv = 1 if card.params.sensor else card.params.samples_per_view
+    listed: dict[str, list[str]] = {}
+    missing_checksums = 0
+    for lineno, _, rec in rows:
+        if rec is None:
+            continue
+        report.objects += 1
+        where = f"{manifest}:{lineno}"
+        listed.setdefault(rec.split, []).extend(rec.shards)
+        if rec.sha256 is None:
+            missing_checksums += 1
+        n_rows = int(samples_per_pose(rec.n_visible, spv).sum())
+        report.samples += n_rows
+        for i, rel in enumerate(rec.shards):
+            try:
+                file = path_inside(root, rel, what=f"{where} field 'shards'")
+            except ZbufOccludeError as exc:
+                problems.append(str(exc))
+                continue
+            if not file.is_file():
+                problems.append(f"{where}: the file {rel} is missing")
+                continue
+            report.files += 1
+            if rec.sha256 is not None and file_sha256(file) != rec.sha256[i]:
+                problems.append(f"{where}: {rel} differs from its SHA-256 in the manifest (changed after it was written)")
+                continue
+            if card.storage in HDF5_STORAGES and len(rec.shards) == 1:
+                found = _check_hdf5(file, card, n_rows, len(rec.n_visible))
+                if found:
+                    problems.append(found)
+    if missing_checksums:
+        said = " although the card's field 'checksums' says every file has one" if card.checksums else ""
+        problems.append(
+            f"{manifest}: {missing_checksums} finished objects have no SHA-256 (field 'sha256'){said}: changes to their "
+            "files cannot be noticed; OccludedDataset reads them only with verify=False"
+        )
+    joined = card.joined_files or []
+    for entry in joined:  # files joined from the shards for other readers (PointNet's h5 and lists)
+        try:
+            file = path_inside(root, entry.path, what=f"{root / CARD_FILE} field 'joined_files'")
+        except ZbufOccludeError as exc:
+            problems.append(str(exc))
+            continue
+        if not file.is_file():
+            problems.append(f"{root / CARD_FILE}: the joined file {entry.path} is missing")
+        elif file_sha256(file) != entry.sha256:
+            problems.append(f"{file} differs from its SHA-256 in the card (changed after it was written)")
+        else:
+            report.files += 1
+    if card.joined_files is not None:  # the file lists name the joined files, not the shards
+        listed = {}
+        for entry in joined:
+            if entry.path != file_list_name(entry.split):
+                listed.setdefault(entry.split, []).append(entry.path)
+    for split in card.splits or sorted(listed):
+        list_file = root / file_list_name(split)
+        if not list_file.is_file():
+            continue
+        try:
+            lines = [s for s in list_file.read_text(encoding="utf-8").split("\n") if s]
+        except (OSError, UnicodeDecodeError) as exc:
+            problems.append(f"cannot read {list_file}: {exc}")
+            continue
+        for n, rel in enumerate(lines, start=1):
+            try:
+                path_inside(root, rel, what=f"{list_file}:{n}")
+            except ZbufOccludeError as exc:
+                problems.append(str(exc))
+        if sorted(lines) != sorted(listed.get(split, [])):
+            source = "the card's joined files" if card.joined_files is not None else "the manifest's objects"
+            problems.append(f"{list_file} does not list the same files as {source} of split {split}")
+    return report
+
+

@@ -1,0 +1,103 @@
+"""``results.csv``: the comparison's rows written, read back and averaged."""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+from collections import defaultdict
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from zbuf_occlude import io
+
+__all__ = ["RESULT_FIELDS", "write_csv", "read_csv", "summarise", "ok_rows"]
+
+#: Columns of ``results.csv``, in order.
+RESULT_FIELDS = (
+    "mesh",
+    "n_faces",
+    "n_points",
+    "view",
+    "elevation_deg",
+    "azimuth_deg",
+    "method",
+    "sweep",
+    "param",
+    "time_s",
+    "peak_mib",
+    "n_visible",
+    "n_reference_visible",
+    "accuracy",
+    "false_visible_rate",
+    "false_hidden_rate",
+    "iou",
+    "chamfer",
+    "error",
+)
+
+
+def write_csv(rows: Sequence[dict[str, Any]], path: str | os.PathLike) -> Path:
+    """Write rows with the columns of :data:`RESULT_FIELDS` (atomically) and return the path."""
+    return io.write_csv(path, [{k: _fmt_csv(row.get(k, "")) for k in RESULT_FIELDS} for row in rows], RESULT_FIELDS)
+
+
+def _fmt_csv(value: Any) -> Any:
+    if isinstance(value, float):
+        return repr(value) if math.isfinite(value) else str(value)
+    return value
+
+
+_NUMERIC = {
+    "n_faces": int, "n_points": int, "view": int, "n_visible": int, "n_reference_visible": int,
+    "elevation_deg": float, "azimuth_deg": float, "time_s": float, "peak_mib": float, "accuracy": float,
+    "false_visible_rate": float, "false_hidden_rate": float, "iou": float, "chamfer": float,
+}  # fmt: skip
+
+
+def read_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
+    """Rows of a ``results.csv`` written by :func:`write_csv`, numbers parsed back."""
+    rows = []
+    with open(path, newline="") as fh:
+        for raw in csv.DictReader(fh):
+            row: dict[str, Any] = dict(raw)
+            for key, typ in _NUMERIC.items():
+                if row.get(key, "") != "":
+                    row[key] = typ(float(row[key])) if typ is int else typ(row[key])
+            if row.get("param", "") != "":
+                row["param"] = int(row["param"])
+            rows.append(row)
+    return rows
+
+
+def ok_rows(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The rows without an error that carry a time."""
+    return [r for r in rows if not r.get("error") and r.get("time_s", "") != ""]
+
+
+def summarise(
+    rows: Sequence[dict[str, Any]], by: Sequence[str] = ("method", "n_points"), sweep: str = ""
+) -> dict[tuple, dict[str, float]]:
+    """Mean of every metric over the rows (without errors) sharing the ``by`` keys.
+
+    Returns
+    -------
+    dict
+        ``key tuple -> {"time_s", "accuracy", ..., "views"}`` (``views`` = number of rows).
+    """
+    groups: dict[tuple, list[dict[str, Any]]] = defaultdict(list)
+    for r in ok_rows(rows):
+        if r.get("sweep", "") == sweep:
+            groups[tuple(r[k] for k in by)].append(r)
+    out = {}
+    for key, group in groups.items():
+        stats = {}
+        for metric in ("time_s", "accuracy", "false_visible_rate", "false_hidden_rate", "iou", "chamfer", "peak_mib"):
+            values = [float(r[metric]) for r in group if r.get(metric, "") != "" and not math.isnan(float(r[metric]))]
+            stats[metric] = float(np.mean(values)) if values else math.nan
+        stats["views"] = len(group)
+        out[key] = stats
+    return out

@@ -1,0 +1,328 @@
+"""``experiment sim2real``: classifiers trained only on clouds made from meshes, tested on real scans.
+
+The question of Sryamkin et al. 2023, Table 3B "Test 3" (do occluded training clouds teach a
+classifier to recognise real, partial scans?), asked on real data with the protocol of
+:mod:`zbuf_occlude.experiments.sim2real_data`:
+
+* four training sets from the same meshes, the same number of clouds per class and points
+  per cloud (``complete``, ``occluded``, ``lidar``, ``lidar+complete``);
+* validation (early stopping, best epoch) on clouds of the same kind made from **held-out
+  whole meshes**; no real scan is used for training, validation or any setting, and every
+  setting is written to ``settings.json`` before the first real scan is scored;
+* ``seeds`` repetitions, each redrawing the mesh split, the clouds and the initialisation;
+  mean ± standard deviation over seeds and an exact one-sided permutation test of each set
+  against ``complete`` (:mod:`zbuf_occlude.learn.stats`);
+* context rows: chance (``1/K``) and ``real→real`` (a fixed stratified half of the real scans
+  trains, 10 % of that half validates, the other half tests).
+
+Outputs in ``out``: ``settings.json``, ``runs.jsonl`` (one line per training run, what a
+rerun resumes from), ``results.csv`` (one row per run), ``summary.csv`` (mean ± std per
+training set), ``confusion_<set>.csv`` (summed over seeds), ``table.md``, ``run.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import time
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.io.atomic import write_csv
+from zbuf_occlude.io.atomic import write_text
+from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
+from zbuf_occlude.learn.data import CloudSet, split_validation
+from zbuf_occlude.learn.metrics import classification_report
+from zbuf_occlude.experiments.sim2real_data import (
+    GROUND_ELEVATION_DEG, KEEP_SCALE_UNIT_M, LIDAR_PLACEMENT, MIN_RETURNS, TRAINING_SETS, build_sets, find_class_meshes,
+    real_clouds, split_whole_meshes,
+)  # fmt: skip
+from zbuf_occlude.learn.stats import mean_std, permutation_p
+
+__all__ = ["Sim2RealScale", "SIM2REAL_SCALES", "REAL_TO_REAL", "run_sim2real"]
+
+log = logging.getLogger(__name__)
+
+#: Name of the real→real context row.
+REAL_TO_REAL = "real→real"
+#: Seed of the fixed stratified half split of the real scans (real→real), the same for every run.
+_REAL_SPLIT_SEED = 20_231
+
+
+@dataclass(frozen=True)
+class Sim2RealScale:
+    """Sizes of a run: points per cloud, training clouds per class, validation clouds per class
+    (from held-out meshes), epochs, early-stopping patience, model width, 3DmFV grid, the
+    ``occluded`` set's dense points and z-buffer resolution, and the share of meshes held out."""
+
+    points: int
+    per_class: int
+    val_per_class: int
+    epochs: int
+    patience: int
+    width: dict
+    fv_grid: int
+    dense_points: int
+    resolution: int
+    val_mesh_fraction: float
+
+
+SIM2REAL_SCALES = {
+    "quick": Sim2RealScale(points=256, per_class=100, val_per_class=25, epochs=20, patience=6,
+                           width={"pointnet": 0.25, "voxnet": 0.5, "3dmfv": 0.25}, fv_grid=5, dense_points=8192,
+                           resolution=512, val_mesh_fraction=0.2),
+    "paper": Sim2RealScale(points=1024, per_class=1000, val_per_class=200, epochs=100, patience=20,
+                           width={"pointnet": 1.0, "voxnet": 1.0, "3dmfv": 1.0}, fv_grid=8, dense_points=100_000,
+                           resolution=1024, val_mesh_fraction=0.2),
+}  # fmt: skip
+
+
+def _sensor(name_or_sensor):
+    from zbuf_occlude.sensors.airborne import AirborneScanner
+    from zbuf_occlude.sensors.presets import sensor_from_name
+    from zbuf_occlude.sensors.lidar import Lidar
+
+    if isinstance(name_or_sensor, (Lidar, AirborneScanner)):
+        return name_or_sensor
+    sensor = sensor_from_name(str(name_or_sensor))
+    if not isinstance(sensor, (Lidar, AirborneScanner)):
+        raise InvalidInputError(f"--sensor {name_or_sensor}: the lidar training set needs a LiDAR or an airborne scanner")
+    return sensor
+
+
+def _score(pred: np.ndarray, labels: np.ndarray, names: list[str]) -> dict:
+    from zbuf_occlude.real_scans.datasets import car_scores_from_labels
+
+    rep = classification_report(labels, pred, names)
+    row = {"overall_accuracy": rep["overall_accuracy"], "mean_class_accuracy": rep["mean_class_accuracy"],
+           **{f"acc_{n}": rep["per_class"][n] for n in names}, "confusion": rep["confusion"].tolist()}  # fmt: skip
+    if "car" in names:
+        car = car_scores_from_labels([names[i] for i in labels], [names[i] for i in pred], model_classes=names,
+                                     car_classes=("car",))  # fmt: skip
+        c = car["per_class"][0] if car["per_class"] else {}
+        row.update(car_precision=c.get("precision", float("nan")), car_recall=c.get("recall", float("nan")),
+                   car_f1=c.get("f1", float("nan")))  # fmt: skip
+    return row
+
+
+def _load_runs(path: Path) -> dict:
+    done = {}
+    if path.is_file():
+        for line in path.read_text(encoding="utf-8").splitlines():
+            if line.strip():
+                r = json.loads(line)
+                done[(r["train_set"], r["seed"])] = r
+    return done
+
+
+def _append_run(path: Path, done: dict, row: dict) -> None:
+    done[(row["train_set"], row["seed"])] = row
+    write_text(path, "".join(json.dumps(r, default=float) + "\n" for r in done.values()))
+
+
+def _stratified_half(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(_REAL_SPLIT_SEED)
+    a = []
+    for c in np.unique(labels):
+        rows = rng.permutation(np.flatnonzero(labels == c))
+        a.extend(rows[: len(rows) // 2].tolist())
+    a = np.sort(np.asarray(a, np.int64))
+    return a, np.setdiff1d(np.arange(len(labels)), a)
+
+
+def run_sim2real(
+    mesh_root: str | os.PathLike,
+    real: str | os.PathLike,
+    out: str | os.PathLike,
+    *,
+    model: str = "pointnet",
+    sensor="hdl32e",
+    scale: str = "quick",
+    points: int | None = None,
+    epochs: int | None = None,
+    per_class: int | None = None,
+    seeds: int = 5,
+    keep_scale: bool = False,
+    label_map: dict[str, str] | None = None,
+    up: str = "auto",
+    up_map: dict[str, str] | None = None,
+    sizes: dict[str, SizeRange] | None = None,
+    real_options: dict | None = None,
+    min_returns: int = MIN_RETURNS,
+    method: str = "auto",
+    device: str = "cpu",
+    threads: int | None = None,
+    progress: bool = True,
+) -> dict:
+    """Train on each synthetic training set and on real scans, ``seeds`` times; score on the real scans.
+
+    Parameters
+    ----------
+    mesh_root : path
+        ``CLASS/.../mesh`` files (any format :func:`zbuf_occlude.load_mesh` reads).
+    real : path
+        Real scans (:func:`zbuf_occlude.real_scans.datasets.load_real_scans`; ``real_options`` are
+        passed to it).
+    out : path
+        Output folder (module docstring); a rerun resumes from ``runs.jsonl`` when the
+        settings are unchanged, and is refused otherwise.
+    model : {"pointnet", "voxnet", "3dmfv"}
+    sensor : str, Lidar or AirborneScanner
+        Scanner of the ``lidar`` set: a preset name (:data:`zbuf_occlude.sensors.LIDAR_PRESETS`,
+        :data:`zbuf_occlude.sensors.airborne.AIRBORNE_PRESETS`) or a sensor ``.json`` file.
+    scale : {"quick", "paper"}; points, epochs, per_class : int, optional
+        Override the scale's points per cloud, epochs and training clouds per class (the
+        validation clouds per class follow in the scale's proportion).
+    seeds : int
+        Repetitions (≥ 2 for a standard deviation; 5 or more for a permutation test able to
+        reach p < 0.05).
+    keep_scale : bool
+        Keep metres (centred, divided by :data:`KEEP_SCALE_UNIT_M`; augmentation off, random yaw
+        drawn once per cloud) instead of the paper's normalisation.
+    label_map : dict, optional
+        Real label → class folder name (labels equal to a class up to case need none).
+    up, up_map : mesh up axis and per-file overrides (:func:`find_class_meshes`).
+    sizes : dict, optional
+        Real sizes per class (default :data:`zbuf_occlude.mesh.sizes.CLASS_SIZES_M`).
+    min_returns : int
+        LiDAR crops with fewer returns are redrawn (:data:`~zbuf_occlude.experiments.sim2real_data.MIN_RETURNS`).
+
+    Returns
+    -------
+    dict
+        The ``run.json`` summary.
+
+    Raises
+    ------
+    InvalidInputError
+        Bad options, unusable meshes or scans, or an ``out`` made with other settings.
+    """
+    from zbuf_occlude.real_scans.datasets import load_real_scans
+    from zbuf_occlude.experiments.table3 import _machine
+    from zbuf_occlude.learn.training import TrainConfig, predict, train
+
+    if scale not in SIM2REAL_SCALES:
+        raise InvalidInputError(f"--scale must be one of {sorted(SIM2REAL_SCALES)}, got {scale!r}")
+    if int(seeds) < 1:
+        raise InvalidInputError(f"--seeds must be >= 1, got {seeds}")
+    t_start = time.perf_counter()
+    sc = SIM2REAL_SCALES[scale]
+    if per_class:
+        sc = replace(sc, per_class=int(per_class), val_per_class=max(1, round(int(per_class) * sc.val_per_class / sc.per_class)))
+    n_points = int(points or sc.points)
+    sizes = dict(sizes or CLASS_SIZES_M)
+    lidar = _sensor(sensor)
+    out = Path(out)
+    meshes = find_class_meshes(mesh_root, up=up, up_map=up_map)
+    names = sorted({m.class_name for m in meshes})
+    scans = load_real_scans(real, **(real_options or {}))
+    real_pts, real_y, _ = real_clouds(scans, names, dict(label_map or {}), n_points, 0, keep_scale=keep_scale)
+
+    def config(seed: int) -> TrainConfig:
+        return TrainConfig(model=model, epochs=int(epochs or sc.epochs), patience=sc.patience, width=sc.width[model],
+                           fv_grid=sc.fv_grid, seed=seed, device=device, threads=threads, augment=not keep_scale)  # fmt: skip
+
+    settings = {
+        "mesh_root": str(mesh_root), "real": str(real), "model": model, "sensor": lidar.name, "scale": scale,
+        "scale_values": asdict(sc), "points": n_points, "seeds": int(seeds), "keep_scale": bool(keep_scale),
+        "label_map": dict(label_map or {}), "up": up, "up_map": dict(up_map or {}), "classes": names,
+        "sizes_m": {k: asdict(v) for k, v in sizes.items()}, "occluded_elevation_deg": GROUND_ELEVATION_DEG,
+        "lidar_placement": LIDAR_PLACEMENT, "lidar_min_returns": int(min_returns), "keep_scale_unit_m": KEEP_SCALE_UNIT_M,
+        "method": method, "train_config": {k: v for k, v in config(0).to_dict().items() if k not in ("seed", "device", "threads")},
+        "meshes": {c: sum(m.class_name == c for m in meshes) for c in names},
+        "mesh_up": {m.name: m.mesh.metadata["zbuf_occlude"].get("up_source") for m in meshes},
+        "real_scans": {c: int((real_y == i).sum()) for i, c in enumerate(names)},
+    }  # fmt: skip
+    out.mkdir(parents=True, exist_ok=True)
+    settings_path = out / "settings.json"
+    if settings_path.is_file():
+        old = json.loads(settings_path.read_text(encoding="utf-8"))
+        old.pop("fixed_at", None)
+        if old != json.loads(json.dumps(settings, default=float)):
+            raise InvalidInputError(f"{out} holds a run with other settings ({settings_path}); choose another --out")
+    else:
+        # Every setting is fixed here, before any real scan is scored.
+        write_text(settings_path, json.dumps({**settings, "fixed_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
+                                             indent=1, default=float))  # fmt: skip
+    runs_path = out / "runs.jsonl"
+    done = _load_runs(runs_path)
+    half_a, half_b = _stratified_half(real_y)
+    common = dict(sensor=lidar, sizes=sizes, keep_scale=keep_scale, dense_points=sc.dense_points, min_returns=int(min_returns),
+                  resolution=sc.resolution, method=method)  # fmt: skip
+    for seed in range(int(seeds)):
+        train_meshes, val_meshes = split_whole_meshes(meshes, sc.val_mesh_fraction, seed)
+        sets: dict = {}
+        for kind in (*TRAINING_SETS, REAL_TO_REAL):
+            if (kind, seed) in done:
+                continue
+            t0 = time.perf_counter()
+            if kind == REAL_TO_REAL:
+                tr_rows, val_rows = split_validation(len(half_a), 0.1, seed, labels=real_y[half_a])
+                base = CloudSet(real_pts[half_a], real_y[half_a], np.full(len(half_a), np.nan), half_a)
+                tr, val = base.subset(tr_rows), base.subset(val_rows)
+                test_x, test_y = real_pts[half_b], real_y[half_b]
+            else:
+                if not sets:  # the four sets of this seed at once (lidar+complete reuses two)
+                    sets = {"train": build_sets(train_meshes, names, sc.per_class, n_points, seed, **common),
+                            "val": build_sets(val_meshes, names, sc.val_per_class, n_points, seed + 10_000, **common)}  # fmt: skip
+                tr, val = sets["train"][kind], sets["val"][kind]
+                test_x, test_y = real_pts, real_y
+            t_data = time.perf_counter() - t0
+            cfg = config(seed)
+            res = train(tr, len(names), cfg, val_set=val, checkpoint_dir=out / "checkpoints" / kind.replace("→", "_to_") / f"seed{seed}",
+                        progress=progress)  # fmt: skip
+            pred, _ = predict(res.model, test_x, batch_size=cfg.batch_size, device=cfg.device)
+            row = {"train_set": kind, "seed": seed, "model": model, "n_train": len(tr), "n_val": len(val),
+                   "n_test": len(test_y), "best_epoch": res.best_epoch, "epochs_run": len(res.history),
+                   "best_val_accuracy": res.best_val_accuracy,
+                   "final_train_accuracy": res.history[-1]["train_accuracy"] if res.history else float("nan"),
+                   "val_meshes": sorted(m.name for m in val_meshes) if kind != REAL_TO_REAL else [],
+                   "data_s": t_data, "train_s": res.seconds, **_score(pred, test_y, names)}  # fmt: skip
+            _append_run(runs_path, done, row)
+            log.info("%s seed %d: mean class accuracy %.3f", kind, seed, row["mean_class_accuracy"])
+    summary_rows = summarise(list(done.values()), names)
+    write_csv(out / "results.csv", [{k: v for k, v in r.items() if k not in ("confusion", "val_meshes")} for r in done.values()])
+    write_csv(out / "summary.csv", summary_rows)
+    for kind in (*TRAINING_SETS, REAL_TO_REAL):
+        cms = [np.asarray(r["confusion"]) for r in done.values() if r["train_set"] == kind]
+        if cms:
+            write_csv(out / f"confusion_{kind.replace('→', '_to_').replace('+', '_')}.csv",
+                      [{"true": n, **{f"pred_{m}": int(v) for m, v in zip(names, row)}} for n, row in zip(names, sum(cms))])  # fmt: skip
+    from zbuf_occlude.experiments.sim2real_report import table_md
+
+    summary = {"experiment": "sim2real", **settings, "machine": _machine(), "n_runs": len(done),
+               "summary": summary_rows, "wall_s": {"total": time.perf_counter() - t_start,
+                                                   "data": sum(r["data_s"] for r in done.values()),
+                                                   "train": sum(r["train_s"] for r in done.values())}}  # fmt: skip
+    write_text(out / "run.json", json.dumps(summary, indent=1, default=float))
+    write_text(out / "table.md", table_md(summary_rows, settings))
+    return summary
+
+
+def summarise(runs: list[dict], names: list[str]) -> list[dict]:
+    """Per training set: mean ± std over seeds of every score, and the one-sided permutation p
+    of its mean class accuracy against ``complete``; then the chance row (``1/K``)."""
+    keys = ["mean_class_accuracy", "overall_accuracy", "car_precision", "car_recall", "car_f1",
+            *[f"acc_{n}" for n in names]]  # fmt: skip
+    ref = [r["mean_class_accuracy"] for r in runs if r["train_set"] == "complete"]
+    rows = []
+    for kind in (*TRAINING_SETS, REAL_TO_REAL):
+        mine = [r for r in runs if r["train_set"] == kind]
+        if not mine:
+            continue
+        row = {"train_set": kind, "n_seeds": len(mine)}
+        for k in keys:
+            if k in mine[0]:
+                row[f"{k}_mean"], row[f"{k}_std"] = mean_std([r[k] for r in mine])
+        mca = [r["mean_class_accuracy"] for r in mine]
+        row["p_vs_complete"] = permutation_p(mca, ref) if kind not in ("complete", REAL_TO_REAL) and ref else float("nan")
+        row["diff_vs_complete"] = (row["mean_class_accuracy_mean"] - float(np.mean(ref))) if ref else float("nan")
+        rows.append(row)
+    k = len(names)
+    rows.append({"train_set": "chance", "n_seeds": 0, "mean_class_accuracy_mean": 1.0 / k, "mean_class_accuracy_std": 0.0,
+                 "overall_accuracy_mean": 1.0 / k, "overall_accuracy_std": 0.0})  # fmt: skip
+    return rows

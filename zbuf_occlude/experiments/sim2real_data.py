@@ -1,0 +1,336 @@
+"""The clouds of the sim-to-real experiment: meshes per class, whole-mesh splits, four training sets, real scans.
+
+Everything a training set holds is made from meshes only:
+
+``complete``
+    Uniform samples of the whole surface (Algorithms 1–2 of Sryamkin et al. 2023).
+``occluded``
+    The points of a dense surface sample visible from one camera pose (z-buffer HSR,
+    :func:`zbuf_occlude.occlude_object`), poses like a ground sensor's: elevation drawn
+    uniformly in :data:`GROUND_ELEVATION_DEG`, azimuth in [0, 360).
+``lidar``
+    Object crops of a simulated spinning LiDAR (:func:`zbuf_occlude.sensors.crops.lidar_object_samples`):
+    the object on a ground plane, scaled to a real size drawn from its class's range
+    (:data:`zbuf_occlude.mesh.sizes.CLASS_SIZES_M`), the sensor at a distance and height
+    drawn from :data:`LIDAR_PLACEMENT` (published geometry, never the real test scans).
+``lidar+complete``
+    Half of each (the paper's C3 analogue at the same size).
+
+Every cloud ends ``(n_points, 3) float32`` in the pipeline's frame (z up) and is normalised
+like the paper's (bounding-box centre 0, max extent 1), or, with ``keep_scale``, centred and
+divided by :data:`KEEP_SCALE_UNIT_M` so that size stays a cue.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import logging
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import trimesh
+from numpy.typing import NDArray
+
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange, size_interval
+from zbuf_occlude.learn.data import CloudSet, dedupe_meshes, normalize_batch, resample
+
+__all__ = [
+    "TRAINING_SETS", "GROUND_ELEVATION_DEG", "LIDAR_PLACEMENT", "MIN_RETURNS", "KEEP_SCALE_UNIT_M",
+    "MeshEntry", "find_class_meshes", "split_whole_meshes", "allocate", "build_set", "build_sets", "mix_sets",
+    "real_clouds",
+]  # fmt: skip
+
+log = logging.getLogger(__name__)
+
+#: The training sets, in report order (``complete`` is the reference of the permutation tests).
+TRAINING_SETS = ("complete", "occluded", "lidar", "lidar+complete")
+#: Camera elevations of the ``occluded`` set, degrees: a sensor on the ground or on a vehicle sees
+#: objects from slightly below the horizon (kerbs, slopes) to about 30° above (a pedestrian or a
+#: bush a few metres from a roof-mounted sensor).
+GROUND_ELEVATION_DEG = (-5.0, 30.0)
+#: Sensor placement of the ``lidar`` set (uniform draws): the distance range where a 32-beam
+#: sensor at 1.33° ring spacing puts at least three rings on a 1.5 m object (1.5 m / (3 · tan 1.33°)
+#: ≈ 21 m) up to 25 m, from 5 m (closer, the object leaves the vertical field of view); the
+#: height of a roof mount on a passenger car or small UGV (1.6–2.0 m; KITTI's HDL-64E: 1.73 m).
+LIDAR_PLACEMENT = {"distance_m": (5.0, 25.0), "height_m": (1.6, 2.0)}
+#: A crop with fewer returns is redrawn: a segmentation pipeline drops clusters this small, and
+#: a handful of points padded to ``n_points`` describes no shape (fixed before any real scan was scored).
+MIN_RETURNS = 30
+#: ``keep_scale``: clouds are centred and divided by this many metres (a 10 m object spans ±0.5 ... 1).
+KEEP_SCALE_UNIT_M = 10.0
+#: Rounds of crop draws per mesh before the crops found are repeated (logged).
+_LIDAR_TRIES = 6
+
+
+@dataclass
+class MeshEntry:
+    """One mesh of the experiment: file, class, stable name, the loaded (z-up, normalised) mesh."""
+
+    path: Path
+    class_name: str
+    name: str
+    mesh: trimesh.Trimesh
+
+
+def _up_for(rel: str, up: str, up_map: dict[str, str]) -> str:
+    for pattern, axis in up_map.items():
+        if fnmatch.fnmatch(rel, pattern):
+            return axis
+    return up
+
+
+def find_class_meshes(root: str | os.PathLike, *, up: str = "auto", up_map: dict[str, str] | None = None,
+                      classes: list[str] | None = None) -> list[MeshEntry]:  # fmt: skip
+    """Meshes under ``root/CLASS/...`` (the class is the first folder), loaded, duplicates dropped.
+
+    Parameters
+    ----------
+    up : str
+        Up axis of every file (:func:`zbuf_occlude.load_mesh`; ``auto``: each format's convention).
+    up_map : dict, optional
+        ``{glob of the path relative to root: axis}``, first match wins, for files that break
+        their format's convention.
+
+    Raises
+    ------
+    InvalidInputError
+        No mesh, fewer than two classes, or a class with a single mesh (nothing to validate on).
+    MeshLoadError
+        A mesh that cannot be loaded (named).
+    """
+    from zbuf_occlude.mesh.load import load_mesh
+    from zbuf_occlude.mesh.discovery import walk_mesh_files
+
+    root = Path(root)
+    if not root.is_dir():
+        raise InvalidInputError(f"mesh root {root} is not a folder")
+    files, _ = walk_mesh_files(root, skip_hidden=True)
+    files = [f for f in files if len(f.relative_to(root).parts) >= 2]
+    kept, dropped = dedupe_meshes(files)
+    for dup, orig in dropped:
+        log.warning("dropping %s: same bytes as %s", dup, orig)
+    out = []
+    for f in kept:
+        rel = f.relative_to(root).as_posix()
+        cls = rel.split("/", 1)[0]
+        if classes and cls not in classes:
+            continue
+        mesh = load_mesh(f, up=_up_for(rel, up, up_map or {}))
+        out.append(MeshEntry(f, cls, rel.rsplit(".", 1)[0], mesh))
+    by_class = {}
+    for m in out:
+        by_class.setdefault(m.class_name, []).append(m)
+    if len(by_class) < 2:
+        raise InvalidInputError(f"{root}: need meshes of two or more classes in CLASS/ folders, found {sorted(by_class)}")
+    single = [c for c, ms in by_class.items() if len(ms) < 2]
+    if single:
+        raise InvalidInputError(f"{root}: classes {single} have one mesh; a held-out mesh is needed for validation")
+    return out
+
+
+def split_whole_meshes(meshes: list[MeshEntry], fraction: float, seed: int) -> tuple[list[MeshEntry], list[MeshEntry]]:
+    """Training and validation meshes: per class ``round(fraction · n)`` whole meshes (at least
+    one, at most ``n − 1``) drawn with ``seed`` go to validation; no mesh is on both sides."""
+    rng = np.random.default_rng([seed, 0x5E2])
+    train, val = [], []
+    for cls in sorted({m.class_name for m in meshes}):
+        ms = [m for m in meshes if m.class_name == cls]
+        k = min(max(int(round(fraction * len(ms))), 1), len(ms) - 1)
+        held = set(rng.permutation(len(ms))[:k].tolist())
+        for i, m in enumerate(ms):
+            (val if i in held else train).append(m)
+    return train, val
+
+
+def allocate(n_meshes: int, n_clouds: int, rng: np.random.Generator) -> NDArray[np.int64]:
+    """Clouds per mesh: ``n_clouds`` spread evenly, the remainder to meshes drawn at random."""
+    counts = np.full(n_meshes, n_clouds // n_meshes, dtype=np.int64)
+    counts[rng.permutation(n_meshes)[: n_clouds % n_meshes]] += 1
+    return counts
+
+
+def _draw_sizes(mesh: trimesh.Trimesh, size: SizeRange, k: int, rng: np.random.Generator) -> NDArray[np.float64]:
+    lo, hi = size_interval(mesh.extents, size)
+    return rng.uniform(lo, hi, k)
+
+
+def _complete(entry: MeshEntry, k: int, n_points: int, rng: np.random.Generator) -> list[NDArray]:
+    from zbuf_occlude.geometry.sampling import sample_surface
+
+    return [sample_surface(entry.mesh, count=n_points, seed=rng)[0] for _ in range(k)]
+
+
+def _occluded(entry: MeshEntry, k: int, n_points: int, seed: int, rng: np.random.Generator, *, dense_points: int,
+              resolution: int, method: str) -> list[NDArray]:  # fmt: skip
+    from zbuf_occlude.pipeline import dense_cloud, occlude_object
+    from zbuf_occlude.geometry.samples import object_key
+
+    key = object_key(entry.name)
+    poses = list(zip(rng.uniform(*GROUND_ELEVATION_DEG, 2 * k + 2), rng.uniform(0.0, 360.0, 2 * k + 2)))
+    dense = dense_cloud(entry.mesh, key, seed=seed, count=dense_points)
+    out = []
+    for _, _, clouds in occlude_object(entry.mesh, poses, key=key, n_points=n_points, samples_per_view=1, seed=seed,
+                                       dense=dense, method=method, resolution=resolution):  # fmt: skip
+        if clouds:
+            out.append(clouds[0].points.astype(np.float64))
+        if len(out) == k:
+            break
+    if len(out) < k:
+        raise InvalidInputError(f"{entry.path}: only {len(out)} of {k} poses see any point")
+    return out
+
+
+def _lidar(entry: MeshEntry, k: int, n_points: int, seed: int, sensor, size: SizeRange, min_returns: int = MIN_RETURNS
+           ) -> tuple[list[NDArray], list[float]]:  # fmt: skip
+    from zbuf_occlude.sensors.crops import CropDistributions, lidar_object_samples
+
+    dist = CropDistributions(size_m=size_interval(entry.mesh.extents, size), **LIDAR_PLACEMENT)
+    good: list = []
+    # Draw about as many crops as needed, then more under another name (new placements) while
+    # crops come back with fewer than min_returns returns; at most _LIDAR_TRIES rounds.
+    for attempt in range(_LIDAR_TRIES):
+        want = k - len(good)
+        name = entry.name if attempt == 0 else f"{entry.name}#retry{attempt}"
+        extra = max(1, want // 5) if attempt == 0 else want + 2  # later rounds: small objects far away miss more
+        clouds = lidar_object_samples(entry.mesh, sensor, name=name, n_samples=want + extra, n_points=n_points,
+                                      seed=seed, distributions=dist, class_name=entry.class_name)  # fmt: skip
+        good += [c for c in clouds if c.n_visible >= min_returns][:want]
+        if len(good) == k:
+            break
+    if not good:
+        raise InvalidInputError(f"{entry.path}: no LiDAR crop with {min_returns} returns in {_LIDAR_TRIES} rounds; "
+                                "lower --min-returns (a sparse or airborne sensor) or give larger --sizes")
+    if len(good) < k:
+        log.warning("%s: %d of %d LiDAR crops have >= %d returns; repeating them", entry.name, len(good), k, min_returns)
+        good = [good[i % len(good)] for i in range(k)]
+    return [c.points.astype(np.float64) for c in good], [float(c.extra["size_m"]) for c in good]
+
+
+def _finish(clouds: list[NDArray], sizes_m: NDArray[np.float64], keep_scale: bool, rng: np.random.Generator) -> NDArray[np.float32]:
+    """Normalise (paper) or scale to metres and centre (``keep_scale``, with a random yaw)."""
+    pts = np.stack(clouds)
+    if not keep_scale:
+        return normalize_batch(pts)
+    pts = pts * np.asarray(sizes_m, dtype=np.float64)[:, None, None]
+    theta = rng.uniform(0.0, 2 * np.pi, len(pts))
+    c, s = np.cos(theta), np.sin(theta)
+    x, y = pts[..., 0].copy(), pts[..., 1].copy()
+    pts[..., 0], pts[..., 1] = c[:, None] * x - s[:, None] * y, s[:, None] * x + c[:, None] * y
+    lo, hi = pts.min(axis=1, keepdims=True), pts.max(axis=1, keepdims=True)
+    return ((pts - (lo + hi) / 2) / KEEP_SCALE_UNIT_M).astype(np.float32)
+
+
+def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: int, n_points: int, seed: int, *,
+              sensor=None, sizes: dict[str, SizeRange] = CLASS_SIZES_M, keep_scale: bool = False,
+              dense_points: int = 8192, resolution: int = 512, method: str = "auto",
+              min_returns: int = MIN_RETURNS) -> CloudSet:  # fmt: skip
+    """``per_class`` clouds of every class in ``names`` from ``meshes``, of one training set kind.
+
+    Cloud counts are spread over each class's meshes (:func:`allocate`); ``lidar+complete``
+    is :func:`mix_sets` of the ``lidar`` and ``complete`` sets of the same seed.
+    ``object_index`` is the mesh's row in ``meshes``; ``elevation_deg`` is NaN.  A LiDAR crop
+    with fewer than ``min_returns`` returns is redrawn (:data:`MIN_RETURNS`; an airborne
+    scanner at a few points per m² needs a much lower value for small objects).
+
+    Raises
+    ------
+    InvalidInputError
+        Unknown kind, a class without a size range, or a mesh no pose or crop sees.
+    """
+    if kind not in TRAINING_SETS:
+        raise InvalidInputError(f"unknown training set {kind!r}; choose from {TRAINING_SETS}")
+    if kind == "lidar+complete":
+        common = dict(sizes=sizes, keep_scale=keep_scale)
+        lidar = build_set("lidar", meshes, names, per_class, n_points, seed, sensor=sensor, min_returns=min_returns, **common)
+        return mix_sets(lidar, build_set("complete", meshes, names, per_class, n_points, seed, **common), seed)
+    missing = sorted({m.class_name for m in meshes} - set(sizes))
+    if missing and (kind == "lidar" or keep_scale):
+        raise InvalidInputError(f"no real size for classes {missing}; give them with --sizes CLASS=height:LO-HI")
+    rng = np.random.default_rng([seed, TRAINING_SETS.index(kind), 0x52])
+    clouds, sizes_m, labels, objs = [], [], [], []
+    for label, cls in enumerate(names):
+        rows = [i for i, m in enumerate(meshes) if m.class_name == cls]
+        for i, k in zip(rows, allocate(len(rows), per_class, rng)):
+            if k == 0:
+                continue
+            entry = meshes[i]
+            if kind == "complete":
+                got = _complete(entry, int(k), n_points, rng)
+            elif kind == "occluded":
+                got = _occluded(entry, int(k), n_points, seed, rng, dense_points=dense_points, resolution=resolution, method=method)
+            else:
+                got, size_k = _lidar(entry, int(k), n_points, seed, sensor, sizes[cls], min_returns)
+            if kind == "lidar":
+                sizes_m.extend(size_k)
+            elif keep_scale:
+                sizes_m.extend(_draw_sizes(entry.mesh, sizes[cls], len(got), rng).tolist())
+            else:
+                sizes_m.extend([1.0] * len(got))
+            clouds += got
+            labels += [label] * len(got)
+            objs += [i] * len(got)
+    points = _finish(clouds, np.asarray(sizes_m), keep_scale, rng)
+    n = len(labels)
+    return CloudSet(points, np.asarray(labels, np.int64), np.full(n, np.nan), np.asarray(objs, np.int64))
+
+
+def mix_sets(a: CloudSet, b: CloudSet, seed: int) -> CloudSet:
+    """Per class, half of the clouds (rounded up) drawn from ``a`` and the rest from ``b``, as
+    many per class as ``a`` has: the ``lidar+complete`` set from the ``lidar`` and ``complete`` sets."""
+    rng = np.random.default_rng([seed, 0x313])
+    rows_a, rows_b = [], []
+    for c in np.unique(a.labels):
+        n = int((a.labels == c).sum())
+        rows_a += rng.permutation(np.flatnonzero(a.labels == c))[: (n + 1) // 2].tolist()
+        rows_b += rng.permutation(np.flatnonzero(b.labels == c))[: n // 2].tolist()
+    return CloudSet.concat([a.subset(np.sort(np.asarray(rows_a, np.int64))), b.subset(np.sort(np.asarray(rows_b, np.int64)))])
+
+
+def build_sets(meshes: list[MeshEntry], names: list[str], per_class: int, n_points: int, seed: int, **options) -> dict[str, CloudSet]:
+    """All of :data:`TRAINING_SETS` for one seed (``lidar+complete`` mixes the other two; options
+    as :func:`build_set`)."""
+    out = {kind: build_set(kind, meshes, names, per_class, n_points, seed, **options) for kind in TRAINING_SETS[:3]}
+    out["lidar+complete"] = mix_sets(out["lidar"], out["complete"], seed)
+    return out
+
+
+def real_clouds(scans, names: list[str], label_map: dict[str, str], n_points: int, seed: int, *,
+                keep_scale: bool = False) -> tuple[NDArray[np.float32], NDArray[np.int64], list[str]]:  # fmt: skip
+    """Real scans as clouds of ``n_points`` (random subset, or all plus repeats) and label indices.
+
+    Labels are renamed with ``label_map`` (then lower-cased when that matches a class); scans
+    of labels outside ``names`` are left out (logged).
+
+    Returns
+    -------
+    points : (S, n_points, 3) float32; labels : (S,) int64; sources : list of str
+    """
+    rng = np.random.default_rng([seed, 0x2EA1])
+    index = {n: i for i, n in enumerate(names)}
+    pts, labels, sources, dropped = [], [], [], {}
+    for s in scans:
+        label = label_map.get(s.label, s.label)
+        label = label if label in index else label.lower()
+        if label not in index:
+            dropped[s.label] = dropped.get(s.label, 0) + 1
+            continue
+        p = resample(np.asarray(s.points, np.float32)[None], n_points, rng)[0].astype(np.float64)
+        if keep_scale:
+            p = p * float(np.max(s.extent_m))
+        pts.append(p)
+        labels.append(index[label])
+        sources.append(s.source)
+    if dropped:
+        log.warning("real scans left out (label not a training class %s): %s", names, dropped)
+    if not pts:
+        raise InvalidInputError(f"no real scan has a label among the training classes {names}; use --label-map")
+    arr = np.stack(pts)
+    if keep_scale:
+        lo, hi = arr.min(axis=1, keepdims=True), arr.max(axis=1, keepdims=True)
+        out = ((arr - (lo + hi) / 2) / KEEP_SCALE_UNIT_M).astype(np.float32)
+    else:
+        out = normalize_batch(arr)
+    return out, np.asarray(labels, np.int64), sources

@@ -1,0 +1,203 @@
+"""Atomic writes: a reader or a resumed run never sees a partial file.
+
+Data go to a temporary file in the target folder, are flushed and fsynced, then renamed over
+the target (``os.replace``).  A failed write (unwritable folder, disk full) raises
+:class:`~zbuf_occlude.errors.OutputError` and leaves no temporary file behind; a temporary
+file's name says which process on which host owns it, so a resumed run removes only orphans.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import functools
+import hashlib
+import os
+import re
+import socket
+import tempfile
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from zbuf_occlude.errors import OutputError
+
+__all__ = [
+    "atomic_path",
+    "atomic_h5",
+    "TempOwner",
+    "temp_owner",
+    "temp_is_orphan",
+    "file_sha256",
+    "write_text",
+    "write_csv",
+]
+
+
+@functools.lru_cache(maxsize=1)
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _raise_output_error(path: Path, exc: OSError) -> None:
+    if exc.errno == errno.ENOSPC:
+        raise OutputError(f"disk full while writing {path}; free space and run again (finished files are kept)") from exc
+    if exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        raise OutputError(f"cannot write {path}: permission denied; choose a writable --out folder") from exc
+    raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from exc
+
+
+@functools.lru_cache(maxsize=1)
+def _host_tag() -> str:
+    # 8 hex digits of the host name: temp names stay short and free of the dots host names hold
+    return hashlib.blake2b(socket.gethostname().encode("utf-8", "surrogateescape"), digest_size=4).hexdigest()
+
+
+#: ``.<target>.<pid>-<host tag>-<random>.tmp``: the temporary files of :func:`atomic_path`.
+_TEMP_RE = re.compile(r"^\.(?P<target>.+)\.(?P<pid>\d+)-(?P<host>[0-9a-f]{8})-[^.]*\.tmp$")
+
+
+#: Temporary files of older versions, ``.<target>.<random>.tmp`` (no owner recorded).
+_LEGACY_TEMP_RE = re.compile(r"^\.(?P<target>.+)\.[^.]+\.tmp$")
+
+
+@dataclass(frozen=True)
+class TempOwner:
+    """Who wrote a temporary file of :func:`atomic_path` (parsed from its name).
+
+    Attributes
+    ----------
+    target : str
+        Name of the file it was going to become.
+    pid : int or None
+        Process id of the writer (``None``: a temp of an older version, owner unknown).
+    host_tag : str or None
+        Hash of the writer's host name (``None`` as above).
+    """
+
+    target: str
+    pid: int | None
+    host_tag: str | None
+
+
+def temp_owner(name: str) -> TempOwner | None:
+    """Parse a temporary file name of :func:`atomic_path`; ``None`` if it is not one."""
+    m = _TEMP_RE.match(name)
+    if m:
+        return TempOwner(m["target"], int(m["pid"]), m["host"])
+    m = _LEGACY_TEMP_RE.match(name)
+    return TempOwner(m["target"], None, None) if m else None
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's live process
+        return True
+    return True
+
+
+def temp_is_orphan(owner: TempOwner) -> bool:
+    """True if the process that wrote a temporary file is gone.
+
+    Only a process on this host can be checked; a temp of another host is never an
+    orphan here (its writer may be alive on a shared file system).  Temps of older
+    versions record no owner and count as orphans: call this only while holding the
+    data set's lock.
+    """
+    if owner.pid is None:
+        return True
+    return owner.host_tag == _host_tag() and not _pid_alive(owner.pid)
+
+
+def file_sha256(path: str | os.PathLike, *, chunk_bytes: int = 1 << 20) -> str:
+    """Hex SHA-256 of a file's bytes, read in ``chunk_bytes`` pieces."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while block := fh.read(chunk_bytes):
+            h.update(block)
+    return h.hexdigest()
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; on success fsync and rename it to ``path``.
+
+    The temporary name, ``.<name>.<pid>-<host tag>-<random>.tmp``, is unique per process and
+    records its writer (:func:`temp_owner`), so a cleanup removes only the temps of dead
+    processes (:func:`temp_is_orphan`).
+
+    Raises
+    ------
+    OutputError
+        The folder cannot be created or written, or the disk is full.
+    """
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}-{_host_tag()}-", suffix=".tmp", dir=path.parent)
+        os.close(fd)
+        # mkstemp makes 0600 files; outputs are meant to be shared, so give them the mode a
+        # plain open() would (0666 less the umask)
+        os.chmod(tmp, 0o666 & ~_umask())
+    except OSError as exc:
+        _raise_output_error(path, exc)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        with open(tmp_path, "rb+") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp_path, path)
+    except OSError as exc:
+        tmp_path.unlink(missing_ok=True)
+        _raise_output_error(path, exc)
+    except BaseException:
+        tmp_path.unlink(missing_ok=True)
+        raise
+
+
+@contextlib.contextmanager
+def atomic_h5(path: str | os.PathLike) -> Iterator[Any]:
+    """An ``h5py.File`` open for writing at a temporary beside ``path`` (:func:`atomic_path`).
+
+    HDF5 reports a full disk in its message, not always in ``errno``: such an error is
+    re-raised as ``ENOSPC`` so that :func:`atomic_path` turns it into the disk-full
+    :class:`OutputError`, as for every other writer.
+    """
+    import h5py
+
+    with atomic_path(path) as tmp:
+        try:
+            with h5py.File(tmp, "w") as f:
+                yield f
+        except OSError as exc:
+            if exc.errno is None and "No space left" in str(exc):
+                raise OSError(errno.ENOSPC, str(exc)) from exc
+            raise
+
+
+def write_text(path: str | os.PathLike, text: str) -> Path:
+    """Write UTF-8 ``text`` to ``path`` atomically (:func:`atomic_path`)."""
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return path
+
+
+def write_csv(path: str | os.PathLike, rows: Sequence[dict], fieldnames: Sequence[str] | None = None) -> Path:
+    """Write dict rows as CSV atomically; columns ``fieldnames`` (default: the first row's keys),
+    keys outside them are left out."""
+    import csv
+
+    path = Path(path)
+    fields = list(fieldnames) if fieldnames is not None else list(rows[0]) if rows else []
+    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
+        writer = csv.DictWriter(fh, fieldnames=fields, extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows(rows)
+    return path

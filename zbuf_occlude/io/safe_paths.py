@@ -1,0 +1,118 @@
+"""Paths and names that metadata gives us stay inside their folder.
+
+A data set, a farm task folder or a mesh tree may come from anyone.  Every path that is
+read from metadata (a data set's card, manifest, records, file lists; a task folder's
+records) and every file the project writes or deletes because metadata named it goes
+through :func:`path_inside`: it must be relative, without ``..``, and still inside the
+folder once symlinks are resolved.  Names that become file or folder names (a mesh's
+name under ``generate --out``) go through :func:`check_relative_name`; names written one
+per line (class names in ``shape_names.txt``) through :func:`check_line_text`.
+"""
+
+from __future__ import annotations
+
+import os
+import unicodedata
+from pathlib import Path, PurePosixPath
+
+from zbuf_occlude.errors import InvalidInputError, UnsafePathError
+
+__all__ = ["path_inside", "check_relative_name", "check_line_text", "control_character"]
+
+#: Unicode categories that break "one name per line" (``str.splitlines`` splits on
+#: ``\n``, ``\r``, ``\x0b``, ``\x0c``, ``\x1c``-``\x1e``, ``\x85``, U+2028, U+2029): control
+#: characters (Cc) and the line and paragraph separators (Zl, Zp).
+_LINE_BREAKING = ("Cc", "Zl", "Zp")
+
+
+def control_character(text: str) -> str | None:
+    """The first control or line-separator character of ``text`` (``None`` if it has none)."""
+    return next((c for c in text if unicodedata.category(c) in _LINE_BREAKING), None)
+
+
+def check_line_text(text: object, *, what: str) -> str:
+    """``text`` if it is a non-empty string that can stand on a line of its own.
+
+    Raises
+    ------
+    InvalidInputError
+        ``text`` is not a string, is empty, or holds a control character (``\\n``,
+        ``\\x85``, ...): it would break the one-name-per-line files (``shape_names.txt``).
+    """
+    if not isinstance(text, str) or not text:
+        raise InvalidInputError(f"{what} must be a non-empty string, got {text!r}")
+    bad = control_character(text)
+    if bad is not None:
+        raise InvalidInputError(
+            f"{what} {text!r} holds the control character U+{ord(bad):04X}; names are written one per line "
+            "(shape_names.txt): rename it"
+        )
+    return text
+
+
+def check_relative_name(name: object, *, what: str) -> str:
+    """``name`` if it can name files and folders inside an output folder.
+
+    A relative POSIX path whose parts are neither empty, ``.`` nor ``..`` and hold no
+    control character (``chair/train/chair_0001`` is fine; ``..``, ``/etc/x``, ``a//b`` are not).
+
+    Raises
+    ------
+    UnsafePathError
+        The name would leave the folder or is not a plain relative path.
+    """
+    if not isinstance(name, str) or not name:
+        raise UnsafePathError(f"{what} must be a non-empty relative path, got {name!r}")
+    parts = name.split("/")
+    if name.startswith("/") or any(p in ("", ".", "..") for p in parts) or "\0" in name or control_character(name):
+        raise UnsafePathError(
+            f"{what} {name!r} cannot name a file inside the output folder (absolute, empty, '.' or '..' parts, "
+            "or control characters); rename the file"
+        )
+    return name
+
+
+def path_inside(root: str | os.PathLike, rel: object, *, what: str) -> Path:
+    """``root / rel``, after checking that it lies inside ``root``.
+
+    ``rel`` must be a relative path (str) without ``..`` parts, and ``root / rel`` must
+    still be inside ``root`` once every symlink (of both) is resolved; the file need not
+    exist.  Use it for every path read from metadata and every write or deletion that
+    metadata decides.
+
+    Parameters
+    ----------
+    root : str or PathLike
+        The folder (a data set, ``--out``, a task folder).
+    rel : str
+        The path the metadata gives, relative to ``root``.
+    what : str
+        Where ``rel`` comes from, for the message (e.g. ``"manifest.jsonl:3 shards"``).
+
+    Returns
+    -------
+    Path
+        ``root / rel`` (not resolved).
+
+    Raises
+    ------
+    UnsafePathError
+        ``rel`` is not a string, is absolute, has ``..`` parts, or leads outside ``root``
+        (through a symlink).
+    """
+    if not isinstance(rel, (str, os.PathLike)) or not str(rel) or "\0" in str(rel):
+        raise UnsafePathError(f"{what}: {rel!r} is not a relative path")
+    rel_path = PurePosixPath(os.fspath(rel))
+    if rel_path.is_absolute() or Path(rel).is_absolute():
+        raise UnsafePathError(f"{what}: {str(rel)!r} is an absolute path; paths in metadata must stay inside {root}")
+    if ".." in rel_path.parts:
+        raise UnsafePathError(f"{what}: {str(rel)!r} leaves {root} ('..'); paths in metadata must stay inside it")
+    root = Path(root)
+    path = root / rel_path
+    try:
+        real_root, real = root.resolve(), path.resolve()
+    except (OSError, RuntimeError) as exc:  # a symlink loop (RuntimeError before Python 3.13)
+        raise UnsafePathError(f"{what}: {str(rel)!r} cannot be resolved inside {root} ({exc})") from None
+    if real != real_root and real_root not in real.parents:
+        raise UnsafePathError(f"{what}: {str(rel)!r} leads outside {root} (to {real}, through a symlink); refused")
+    return path

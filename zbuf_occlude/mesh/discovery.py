@@ -1,0 +1,317 @@
+"""Finding mesh files: folders searched recursively, names, ModelNet's class and split.
+
+Nothing is lost silently: a folder that cannot be read and a file whose path is not
+valid UTF-8 are reported (:class:`SkippedInput`, logged as warnings) and returned by
+:func:`scan_meshes`, so that a run can say so and exit non-zero.  The farm's discovery
+(:mod:`zbuf_occlude.mesh.inputs`) walks with :func:`walk_mesh_files` too.
+"""
+
+from __future__ import annotations
+
+import errno
+import logging
+import os
+import re
+import stat
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from os import PathLike
+from pathlib import Path
+from typing import NamedTuple
+
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS
+
+__all__ = [
+    "SkippedInput",
+    "MeshScan",
+    "printable_path",
+    "non_utf8_reason",
+    "unusable_entry_reason",
+    "check_mesh_extension",
+    "collect_inputs",
+    "no_meshes_error",
+    "walk_mesh_files",
+    "scan_meshes",
+    "find_meshes",
+    "SPLITS",
+    "DEFAULT_SPLIT",
+    "class_and_split",
+    "name_set",
+]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class SkippedInput:
+    """An input that mesh discovery could not use, and why.
+
+    Attributes
+    ----------
+    path : str
+        The folder or file, printable: bytes that are not UTF-8 appear as ``\\xNN``.
+    reason : str
+        E.g. "cannot read folder (Permission denied)", "file name is not valid UTF-8".
+    """
+
+    path: str
+    reason: str
+
+    def __str__(self) -> str:
+        return f"{self.path}: {self.reason}"
+
+
+class MeshScan(NamedTuple):
+    """What :func:`scan_meshes` found."""
+
+    #: ``(file, name)`` pairs, as :func:`find_meshes` returns them.
+    meshes: list[tuple[Path, str]]
+    #: Unreadable folders and files with names that are not UTF-8, in the order met.
+    skipped: list[SkippedInput]
+
+
+def printable_path(path: str | PathLike[str]) -> str:
+    """``path`` as valid text: undecodable bytes of a file name become ``\\xNN``."""
+    return os.fsencode(path).decode("utf-8", "backslashreplace")
+
+
+def non_utf8_reason(path: str | PathLike[str]) -> str | None:
+    """Why ``path`` cannot be used (its name is not valid UTF-8), or None if it can."""
+    # Python decodes undecodable file-name bytes to lone surrogates (PEP 383); names
+    # seed the samples and are written into JSON, HDF5 and PLY headers, all UTF-8.
+    try:
+        os.fspath(path).encode("utf-8")
+    except UnicodeEncodeError:
+        return (
+            "file name is not valid UTF-8 (skipped: names are written into the outputs as UTF-8); "
+            "rename it, e.g. convmv -f latin1 -t utf8 --notest"
+        )
+    return None
+
+
+def unusable_entry_reason(path: str | PathLike[str]) -> str | None:
+    """Why a folder entry cannot be used although it may hold a mesh, or None.
+
+    A dangling symbolic link or a loop of links (the target, maybe a mesh or a folder of
+    them, cannot be reached) and a mesh-named FIFO, socket or device (opening it would
+    block or read something that is no file) are reported instead of left out silently.
+    """
+    path = os.fspath(path)
+    try:
+        st = os.stat(path)
+    except OSError as exc:
+        if os.path.islink(path):
+            what = "symbolic link loop" if exc.errno == errno.ELOOP else "dangling symbolic link"
+            target = printable_path(os.readlink(path))
+            return f"{what} (-> {target}): {exc.strerror or exc}; fix or remove the link"
+        return None  # gone since it was listed: nothing to report
+    if stat.S_ISREG(st.st_mode) or stat.S_ISDIR(st.st_mode):
+        return None
+    if Path(path).suffix.lower() in SUPPORTED_EXTENSIONS:
+        return f"not a regular file ({_file_kind(st.st_mode)}); never opened"
+    return None
+
+
+def _file_kind(mode: int) -> str:
+    for test, kind in ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device")):
+        if test(mode):
+            return kind
+    return "not a file"
+
+
+def walk_mesh_files(root: str | PathLike[str], *, skip_hidden: bool = False) -> tuple[list[Path], list[SkippedInput]]:
+    """Mesh files under a folder, recursively, and the inputs that had to be skipped.
+
+    Like ``Path(root).rglob("*")`` (symbolic links to folders are not followed) but a
+    folder that cannot be listed (permissions, I/O error), a dangling symbolic link, a
+    loop of links and a FIFO or device with a mesh's extension
+    (:func:`unusable_entry_reason`) are reported instead of being left out silently, and
+    files whose path is not valid UTF-8 are reported and left out.
+
+    Parameters
+    ----------
+    root : str or PathLike
+        Folder to search.
+    skip_hidden : bool
+        Leave out files and folders whose name starts with ``.`` (not searched, not
+        reported).
+
+    Returns
+    -------
+    files : list of Path
+        Regular files (or links to them) with an extension of :data:`SUPPORTED_EXTENSIONS`
+        (any case), sorted.
+    skipped : list of SkippedInput
+        Folders that could not be read, broken links, non-regular mesh-named entries and
+        files with non-UTF-8 paths; each is also logged as a warning.
+    """
+    root = Path(root)
+    files: list[Path] = []
+    skipped: list[SkippedInput] = []
+
+    def unreadable(exc: OSError) -> None:
+        folder = exc.filename if exc.filename is not None else root
+        skipped.append(SkippedInput(printable_path(folder), f"cannot read folder ({exc.strerror or exc})"))
+
+    for folder, dirnames, filenames in os.walk(root, onerror=unreadable):
+        if skip_hidden:
+            dirnames[:] = [d for d in dirnames if not d.startswith(".")]
+            filenames = [f for f in filenames if not f.startswith(".")]
+        dirnames.sort()
+        for name in filenames:
+            path = Path(folder, name)
+            problem = unusable_entry_reason(path)
+            if problem:
+                skipped.append(SkippedInput(printable_path(path), problem))
+                continue
+            if path.suffix.lower() not in SUPPORTED_EXTENSIONS or not path.is_file():
+                continue
+            problem = non_utf8_reason(path)
+            if problem:
+                skipped.append(SkippedInput(printable_path(path), problem))
+            else:
+                files.append(path)
+    for s in skipped:
+        log.warning("skipped %s", s)
+    return sorted(files), skipped
+
+
+def scan_meshes(paths: Sequence[str | PathLike[str]]) -> MeshScan:
+    """Mesh files under ``paths`` with unique names, and what had to be skipped.
+
+    Files are taken as given; folders are searched recursively (:func:`walk_mesh_files`).
+    A mesh's name is its path relative to the folder given, without the suffix (a file
+    given directly: its stem).
+
+    Returns
+    -------
+    MeshScan
+        ``meshes``: ``(file, name)`` sorted per folder; ``skipped``: unreadable folders
+        and non-UTF-8 file names (each logged as a warning).  A caller that must not
+        lose inputs silently exits non-zero when ``skipped`` is not empty.
+
+    Raises
+    ------
+    InvalidInputError
+        A path does not exist, a file given is not a mesh by its extension
+        (:func:`check_mesh_extension`), or no mesh was found (the message lists what was
+        skipped).
+    """
+    inputs, skipped = collect_inputs(paths)
+    found: list[tuple[Path, str]] = []
+    for path, files in inputs:
+        if files is None:
+            found.append((path, path.stem))
+        else:
+            found.extend((f, f.relative_to(path).with_suffix("").as_posix()) for f in files)
+    if not found:
+        raise no_meshes_error(paths, skipped)
+    return MeshScan(found, skipped)
+
+
+def collect_inputs(
+    paths: Sequence[str | PathLike[str]], *, skip_hidden: bool = False
+) -> tuple[list[tuple[Path, list[Path] | None]], list[SkippedInput]]:
+    """The paths given, each a folder with its mesh files or a mesh file, and what was skipped.
+
+    Returns
+    -------
+    inputs : list of (Path, list of Path or None)
+        ``(folder, its mesh files)`` (:func:`walk_mesh_files`) or ``(file, None)``, in order.
+    skipped : list of SkippedInput
+        As :func:`walk_mesh_files`, and files given whose name is not UTF-8.
+
+    Raises
+    ------
+    InvalidInputError
+        A path does not exist, is no regular file or folder, or a file given is not a
+        mesh by its extension (:func:`check_mesh_extension`).
+    """
+    inputs: list[tuple[Path, list[Path] | None]] = []
+    skipped: list[SkippedInput] = []
+    for raw in paths:
+        path = Path(raw)
+        if path.is_dir():
+            files, missed = walk_mesh_files(path, skip_hidden=skip_hidden)
+            skipped.extend(missed)
+            inputs.append((path, files))
+        elif path.is_file():
+            check_mesh_extension(path)
+            problem = non_utf8_reason(path)
+            if problem:
+                skipped.append(SkippedInput(printable_path(path), problem))
+                log.warning("skipped %s", skipped[-1])
+            else:
+                inputs.append((path, None))
+        else:
+            problem = (unusable_entry_reason(path) or "not a regular file or folder") if os.path.lexists(path) else None
+            raise InvalidInputError(f"{printable_path(path)}: {problem}" if problem else f"no such file or folder: {printable_path(path)}")
+    return inputs, skipped
+
+
+def no_meshes_error(paths: Sequence[str | PathLike[str]], skipped: Sequence[SkippedInput]) -> InvalidInputError:
+    """The error of a search that found no mesh under ``paths`` (naming what was skipped)."""
+    where = ", ".join(printable_path(p) for p in paths)
+    missed = f"; skipped {len(skipped)}: " + "; ".join(map(str, skipped[:3])) if skipped else ""
+    return InvalidInputError(f"no mesh files ({', '.join(SUPPORTED_EXTENSIONS)}) under {where}{missed}")
+
+
+def check_mesh_extension(path: str | PathLike[str]) -> None:
+    """Refuse a file given by name that is no mesh by its extension (``notes.txt``).
+
+    Raises
+    ------
+    InvalidInputError
+        The extension is not one of :data:`SUPPORTED_EXTENSIONS`; the message names the file.
+    """
+    if Path(path).suffix.lower() not in SUPPORTED_EXTENSIONS:
+        raise InvalidInputError(
+            f"{printable_path(path)} is not a mesh file: its extension is not one of {', '.join(SUPPORTED_EXTENSIONS)}"
+        )
+
+
+def find_meshes(paths: Sequence[str | PathLike[str]]) -> list[tuple[Path, str]]:
+    """Mesh files under ``paths`` (files, or folders searched recursively), sorted, each with a
+    unique name: its path relative to the folder given, without the suffix.
+
+    Unreadable folders and files with non-UTF-8 names are logged as warnings and left
+    out; use :func:`scan_meshes` to get them (and exit non-zero).
+
+    Raises
+    ------
+    InvalidInputError
+        A path does not exist, or nothing was found.
+    """
+    return scan_meshes(paths).meshes
+
+
+#: ModelNet's split folders.
+SPLITS = ("train", "test")
+#: Split of a mesh whose path names none (flat folder, list file without a split column).
+DEFAULT_SPLIT = "train"
+
+
+def class_and_split(path: str | Path) -> tuple[str, str]:
+    """Class and split of a mesh from its path, ModelNet's layout.
+
+    ``.../<class>/<split>/<name>.off`` (split ``train`` or ``test``), else
+    ``.../<class>/<name>.off`` (split :data:`DEFAULT_SPLIT`), else, for a bare file name
+    ``<class>_<NNNN>.off`` (a flat folder), the name without its number.
+    """
+    path = Path(path)
+    parent = path.parent
+    if parent.name in SPLITS and parent.parent.name:
+        return parent.parent.name, parent.name
+    if parent.name:
+        return parent.name, DEFAULT_SPLIT
+    return re.sub(r"_\d+$", "", path.stem) or path.stem, DEFAULT_SPLIT
+
+
+def name_set(spec: str | Iterable[str] | None) -> set[str] | None:
+    """Names from a comma-separated string or a sequence (``None`` stays ``None``)."""
+    if spec is None:
+        return None
+    if isinstance(spec, str):
+        return {s.strip() for s in spec.split(",") if s.strip()}
+    return {str(s) for s in spec}

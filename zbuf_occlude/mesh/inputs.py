@@ -1,0 +1,332 @@
+"""The objects of a data set: the meshes of a tree, a flat folder or a list file, numbered and labelled."""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+import stat
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import NamedTuple
+
+
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.mesh.discovery import (
+    DEFAULT_SPLIT,
+    SPLITS,
+    SkippedInput,
+    name_set,
+    non_utf8_reason,
+    printable_path,
+    unusable_entry_reason,
+    walk_mesh_files,
+)
+from zbuf_occlude.mesh.layouts import label_tree, scan_labelled
+from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS
+from zbuf_occlude.geometry.samples import object_key
+
+__all__ = [
+    "FarmObject", "ObjectScan", "discover_objects", "scan_objects", "scan_inputs", "number_objects",
+    "scan_paths", "objects_from_paths",
+]  # fmt: skip
+
+log = logging.getLogger(__name__)
+
+
+# -- inputs ------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class FarmObject:
+    """One mesh of the farm's plan.
+
+    Attributes
+    ----------
+    index : int
+        Position in the plan (``object_index`` in the shards); shards and records are named by it.
+    name : str
+        Path relative to the input root (or as written in the list file), POSIX, without
+        suffix; the seed key is :func:`~zbuf_occlude.pipeline.object_key` ``(name)``.
+    source : str
+        The mesh file.
+    class_name, split : str
+    label : int
+        Line of ``shape_names.txt``.
+    """
+
+    index: int
+    name: str
+    source: str
+    class_name: str
+    split: str
+    label: int
+
+    @property
+    def key(self) -> int:
+        """Seed key of the object (:func:`~zbuf_occlude.pipeline.object_key` of ``name``)."""
+        return object_key(self.name)
+
+
+def _natural_key(text: str) -> list:
+    # "chair_2" < "chair_10"; integer labels of a list file sort numerically.
+    return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", text)]
+
+
+def _scan_tree(root: Path, class_from: int | None) -> tuple[list[tuple[str, str, str, str]], list[SkippedInput], str]:
+    # Hidden folders and temporary files are left out, not reported.
+    files, skipped = walk_mesh_files(root, skip_hidden=True)
+    if not files:
+        return [], skipped, ""
+    layout, meshes = label_tree(root, files, class_from=class_from)
+    return [(m.name, str(m.path), m.class_name, m.split) for m in meshes], skipped, layout
+
+
+def _not_regular(path: Path) -> str | None:
+    """Why a list file's entry is no file to open (a FIFO, socket, device), or None.
+
+    Missing files and broken links are left to the loader: they fail as their object.
+    """
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return None if stat.S_ISREG(st.st_mode) else unusable_entry_reason(path) or "not a regular file; never opened"
+
+
+def _read_list_file(list_file: Path) -> tuple[list[tuple[str, str, str, str]], list[SkippedInput]]:
+    found, skipped = [], []
+    base = list_file.parent
+    for lineno, raw_bytes in enumerate(list_file.read_bytes().splitlines(), start=1):
+        try:
+            raw = raw_bytes.decode("utf-8")
+        except UnicodeDecodeError:
+            skipped.append(SkippedInput(f"{printable_path(list_file)}:{lineno}", "line is not valid UTF-8; re-save the list as UTF-8"))
+            log.warning("skipped %s", skipped[-1])
+            continue
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        tokens = line.rsplit(maxsplit=2)
+        if len(tokens) == 3 and tokens[2] in SPLITS:
+            path_text, label, split = tokens
+        else:
+            tokens = line.rsplit(maxsplit=1)
+            if len(tokens) != 2:
+                raise InvalidInputError(f"{list_file}:{lineno}: expected 'PATH LABEL [train|test]', got {raw!r}")
+            (path_text, label), split = tokens, DEFAULT_SPLIT
+        path = Path(path_text)
+        name = path.with_suffix("").as_posix()
+        source = path if path.is_absolute() else base / path
+        # the names are written into the shards; a FIFO or device would block or mislead the loader
+        problem = non_utf8_reason(source) or _not_regular(source)
+        if problem:
+            skipped.append(SkippedInput(printable_path(source), problem))
+            log.warning("skipped %s", skipped[-1])
+            continue
+        found.append((name, str(source), label, split))
+    return found, skipped
+
+
+class ObjectScan(NamedTuple):
+    """What :func:`scan_objects` found."""
+
+    #: The farm's plan, as :func:`discover_objects` returns it.
+    objects: list[FarmObject]
+    #: Unreadable folders, broken links, FIFOs, files with non-UTF-8 names, undecodable
+    #: list lines: not in the plan.  A run that must not lose inputs silently exits
+    #: non-zero when not empty.
+    skipped: list[SkippedInput]
+    #: How names, classes and splits were found (:data:`~zbuf_occlude.mesh.layouts.LAYOUTS`).
+    layout: str = ""
+
+
+def discover_objects(
+    source: str | os.PathLike,
+    *,
+    classes: Sequence[str] | str | None = None,
+    per_class: int | None = None,
+    splits: Sequence[str] | str = SPLITS,
+    class_from: int | None = None,
+) -> list[FarmObject]:
+    """The farm's plan: :func:`scan_objects` without the list of skipped inputs (they are
+    logged as warnings)."""
+    return scan_objects(source, classes=classes, per_class=per_class, splits=splits, class_from=class_from).objects
+
+
+def scan_objects(
+    source: str | os.PathLike,
+    *,
+    classes: Sequence[str] | str | None = None,
+    per_class: int | None = None,
+    splits: Sequence[str] | str = SPLITS,
+    class_from: int | None = None,
+) -> ObjectScan:
+    """The farm's plan: meshes under ``source``, filtered, labelled and numbered, and the
+    inputs that had to be skipped.
+
+    Parameters
+    ----------
+    source : str or PathLike
+        A folder in one of the layouts of :mod:`zbuf_occlude.mesh.layouts` (ModelNet
+        ``ROOT/<class>/<split>/<name>.off``, ShapeNetCore v1/v2 with ``taxonomy.json``,
+        class folders ``ROOT/<class>/<name>.off``, a flat folder ``ROOT/<class>_<NNNN>.off``),
+        or a list file with one ``PATH LABEL [SPLIT]`` per line (paths relative to the list
+        file; ``#`` starts a comment; ``LABEL`` is a class name; FIFOs and devices are
+        skipped, never opened).  Any extension of
+        :data:`zbuf_occlude.mesh.load.SUPPORTED_EXTENSIONS`.  Objects without a split are in
+        ``train``.
+    classes : sequence of str or comma-separated str, optional
+        Keep these classes only.
+    per_class : int, optional
+        Keep the first K objects (by name, natural order) of each class and split.
+    splits : sequence of str or comma-separated str
+        Keep these splits.
+    class_from : int, optional
+        A folder: take each mesh's class from this folder level above it (1: the folder
+        holding it) instead of the detected layout (``--class-from``).
+
+    Returns
+    -------
+    ObjectScan
+        ``objects``: sorted by name; ``index`` is the position, ``label`` the position of
+        the class in the sorted (natural order) list of kept classes.  ``skipped``:
+        folders that could not be read, files whose path is not UTF-8 and list lines
+        that are not UTF-8 (:class:`~zbuf_occlude.mesh.discovery.SkippedInput`, each logged as a
+        warning), whatever the class filter.  ``layout``: the layout used.
+
+    Raises
+    ------
+    InvalidInputError
+        ``source`` missing, nothing found, labels refused by the layout checks
+        (:mod:`zbuf_occlude.mesh.layouts`), ``class_from`` with a list file, an unknown
+        class, or ``per_class < 1``.
+    """
+    source = Path(source).absolute()  # the manifest's source paths must not depend on the working folder
+    if source.is_dir():
+        found, skipped, layout = _scan_tree(source, class_from)
+    elif source.is_file():
+        if source.suffix.lower() in SUPPORTED_EXTENSIONS:
+            raise InvalidInputError(
+                f"{printable_path(source)} is a mesh file; farm takes a folder of meshes or a list file "
+                f"('PATH LABEL [train|test]' per line); for one mesh run: zbuf-occlude generate {printable_path(source)}"
+            )
+        if class_from is not None:
+            raise InvalidInputError(f"--class-from applies to folders; the list file {printable_path(source)} names each class")
+        (found, skipped), layout = _read_list_file(source), "list-file"
+    else:
+        raise InvalidInputError(f"no such mesh folder or list file: {printable_path(source)}")
+    if not found:
+        missed = f"; skipped {len(skipped)}: " + "; ".join(map(str, skipped[:3])) if skipped else ""
+        raise InvalidInputError(
+            f"no mesh files ({', '.join(tuple(SUPPORTED_EXTENSIONS))}) under {printable_path(source)}{missed}"
+        )
+    if classes is not None:
+        wanted = name_set(classes)
+        unknown = wanted - {f[2] for f in found}
+        if unknown:
+            have = sorted({f[2] for f in found}, key=_natural_key)
+            raise InvalidInputError(f"classes {sorted(unknown)} not found under {source}; it has {have}")
+        found = [f for f in found if f[2] in wanted]
+    split_set = name_set(splits)
+    found = [f for f in found if f[3] in split_set]
+    found.sort(key=lambda f: _natural_key(f[0]))
+    if per_class is not None:
+        if per_class < 1:
+            raise InvalidInputError(f"--per-class must be >= 1, got {per_class}")
+        taken: dict[tuple[str, str], int] = {}
+        kept = []
+        for f in found:
+            n = taken.get((f[2], f[3]), 0)
+            if n < per_class:
+                kept.append(f)
+                taken[(f[2], f[3])] = n + 1
+        found = kept
+    if not found:
+        raise InvalidInputError(f"no meshes left under {source} after the class/split selection")
+    return ObjectScan(number_objects(found), skipped, layout)
+
+
+def scan_inputs(paths: Sequence[str | os.PathLike], *, class_from: int | None = None) -> ObjectScan:
+    """The plan of ``generate``: mesh files and folders (searched recursively), labelled by
+    their layout (:func:`~zbuf_occlude.mesh.layouts.scan_labelled`) and numbered
+    (:func:`number_objects`), and the inputs that had to be skipped.
+
+    Raises
+    ------
+    InvalidInputError
+        A path is missing or not a mesh file, nothing was found, labels are refused by the
+        layout checks, or two files have one name.
+    """
+    found = scan_labelled(paths, class_from=class_from)
+    objects = number_objects([(m.name, str(m.path), m.class_name, m.split) for m in found.meshes])
+    return ObjectScan(objects, found.skipped, found.layout)
+
+
+def number_objects(found: Sequence[tuple[str, str, str, str]]) -> list[FarmObject]:
+    """The plan: ``(name, source, class_name, split)`` rows numbered in the order given.
+
+    Labels number the class names in natural order (``chair_2`` before ``chair_10``), the
+    lines of ``shape_names.txt``.  Used by :func:`scan_objects` and ``generate``.
+
+    Raises
+    ------
+    InvalidInputError
+        Two rows have one name (``chair_0001.off`` and ``chair_0001.obj``): the name seeds
+        the samples and names the outputs, so one would overwrite the other.
+    """
+    by_name: dict[str, list[str]] = {}
+    for name, src, _, _ in found:
+        by_name.setdefault(name, []).append(src)
+    clashes = {n: p for n, p in by_name.items() if len(p) > 1}
+    if clashes:
+        text = "; ".join(f"{' and '.join(p)} are both {n!r}" for n, p in sorted(clashes.items())[:5])
+        raise InvalidInputError(
+            f"mesh names must be unique (the name seeds the samples and names the output files): {text}; "
+            "rename or move one of each"
+        )
+    labels = {c: i for i, c in enumerate(sorted({f[2] for f in found}, key=_natural_key))}
+    objects = [FarmObject(i, name, src, cls, split, labels[cls]) for i, (name, src, cls, split) in enumerate(found)]
+    keys: dict[int, str] = {}
+    for o in objects:
+        if o.key in keys:
+            log.warning(
+                "objects %s and %s share the seed key %d (hash collision): their draws are correlated",
+                keys[o.key], o.name, o.key,
+            )  # fmt: skip
+        keys[o.key] = o.name
+    return objects
+
+
+def scan_paths(
+    paths: Sequence[str | os.PathLike], *, class_from: int | None = None
+) -> tuple[list[FarmObject], list[SkippedInput]]:
+    """The plan of ``generate``: mesh files and folders (searched recursively), numbered,
+    and the inputs that had to be skipped (:func:`~zbuf_occlude.mesh.inputs.scan_inputs`).
+
+    Each object's name is its path relative to the folder given (a file given alone: its
+    stem; ShapeNetCore: ``SYNSET/MODEL_ID``), without the suffix; class and split come
+    from the folder's layout (:mod:`zbuf_occlude.mesh.layouts`, ``class_from``: the
+    folder level that names the class); labels number the class names
+    (:func:`~zbuf_occlude.mesh.inputs.number_objects`, as the farm does).
+
+    Returns
+    -------
+    objects : list of FarmObject
+    skipped : list of SkippedInput
+        Unreadable folders, broken links and files whose names are not UTF-8
+        (:func:`~zbuf_occlude.mesh.discovery.walk_mesh_files`); the run records them and exits 1.
+
+    Raises
+    ------
+    InvalidInputError
+        A path is missing or no mesh file, nothing was found, the layout's labels are
+        refused, or two files have one name (``chair_0001.off`` and ``chair_0001.obj``):
+        the name seeds the samples and names the outputs, so one would overwrite the other.
+    """
+    scan = scan_inputs(paths, class_from=class_from)
+    return scan.objects, scan.skipped
+
+
+def objects_from_paths(paths: Sequence[str | os.PathLike]) -> list[FarmObject]:
+    """:func:`scan_paths` without the skipped inputs (each was logged as a warning)."""
+    return scan_paths(paths)[0]

@@ -1,0 +1,158 @@
+"""Real-world mesh assets: which axis is up, and what unit the file is in.
+
+A mesh made for a game, a simulator or a CAD tool is a scene of parts (wheels, doors) with
+their own transforms, in a unit and with an up axis of its tool's choosing.  trimesh flattens
+the scene (:mod:`zbuf_occlude.mesh.formats`); this module decides the rotation that brings
+the file's up axis to +z (the pipeline's frame: cameras, the ground of a LiDAR scene) and
+what the file says about its unit.
+
+Up axis, by format, when ``up="auto"``:
+
+* glTF 2.0 (``.gltf``, ``.glb``): **+y**.  The specification fixes it ("glTF uses a
+  right-handed coordinate system ... +Y is up", Khronos glTF 2.0 §3.4 *Coordinate System
+  and Units*), and its unit is the metre.
+* COLLADA (``.dae``): the file's ``<asset><up_axis>`` (``X_UP``, ``Y_UP`` or ``Z_UP``),
+  **Y_UP when absent** (COLLADA 1.5 specification, *asset* element: "up_axis ... default
+  Y_UP"); the unit is ``<unit meter="...">`` (default 1.0).
+* Wavefront OBJ has no convention of its own; the exporter named in the file's first
+  comment lines decides: Blender's OBJ exporter writes Y up by default (``axis_up='Y'``),
+  MakeHuman works in a Y-up frame; anything else (3ds Max exports used by Gazebo, ModelNet,
+  trimesh) is taken **as stored, +z**.
+* OFF, PLY, STL: as stored, +z (ModelNet's frame).
+
+``auto`` is a rule, not a measurement: a file that breaks its format's convention needs an
+explicit ``up``.  The rule applied is kept in the mesh's metadata (``up_source``).
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import trimesh
+from numpy.typing import NDArray
+
+from zbuf_occlude.errors import InvalidInputError
+
+__all__ = ["UP_AXES", "UP_CHOICES", "resolve_up", "up_rotation", "declared_units_m", "collada_asset"]
+
+#: Axes a file may declare as up (the rotation sends it to +z).
+UP_AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
+#: What ``load_mesh(up=...)`` and ``--up`` accept.
+UP_CHOICES = ("auto", *UP_AXES)
+
+#: Bytes of a COLLADA file searched for its ``<asset>`` block, which the schema puts first;
+#: the head of the file, not the whole (a hostile file may be gigabytes).
+_COLLADA_HEAD_BYTES = 1 << 16
+#: Bytes of an OBJ file searched for the exporter's comment.
+_OBJ_HEAD_BYTES = 1024
+
+_OBJ_Y_UP_EXPORTERS = (("blender", "Blender's OBJ exporter (default axis_up='Y')"),
+                       ("make_clothes", "MakeHuman export (Y-up frame)"),
+                       ("makehuman", "MakeHuman export (Y-up frame)"))  # fmt: skip
+
+
+#: (rotation axis, angle in degrees) of the quarter or half turn that sends each up axis to +z.
+_UP_TURNS = {"+y": ((1.0, 0.0, 0.0), 90.0), "-y": ((1.0, 0.0, 0.0), -90.0), "+x": ((0.0, 1.0, 0.0), -90.0),
+             "-x": ((0.0, 1.0, 0.0), 90.0), "-z": ((1.0, 0.0, 0.0), 180.0)}  # fmt: skip
+
+
+def up_rotation(axis: str) -> NDArray[np.float64]:
+    """(4, 4) float64 proper rotation that sends ``axis`` to +z.
+
+    A turn about x for ±y and −z (+y up gives ``(x, y, z) → (x, −z, y)``, the usual
+    glTF → z-up map, which keeps x), about y for ±x; the identity for +z.
+
+    Raises
+    ------
+    InvalidInputError
+        ``axis`` not one of :data:`UP_AXES`.
+    """
+    if axis not in UP_AXES:
+        raise InvalidInputError(f"up axis must be one of {', '.join(UP_CHOICES)}, got {axis!r}")
+    if axis == "+z":
+        return np.eye(4)
+    direction, degrees = _UP_TURNS[axis]
+    m = trimesh.transformations.rotation_matrix(np.radians(degrees), direction)
+    return np.round(m, 15)  # exact zeros and ones for quarter turns
+
+
+def collada_asset(head: bytes) -> tuple[str | None, float | None]:
+    """The ``<up_axis>`` (as ``+x``/``+y``/``+z``) and ``<unit meter>`` of a COLLADA file's head.
+
+    A regular expression over the first bytes, no XML parser: nothing in the file is
+    expanded or fetched.  ``None`` for what is not declared (or not a positive finite number).
+    """
+    text = head[:_COLLADA_HEAD_BYTES].decode("latin-1")
+    up = re.search(r"<up_axis>\s*([XYZ])_UP\s*</up_axis>", text, re.IGNORECASE)
+    unit = re.search(r"<unit\b[^>]*\bmeter\s*=\s*[\"']([^\"']+)[\"']", text)
+    meters = None
+    if unit:
+        try:
+            meters = float(unit.group(1))
+        except ValueError:
+            meters = None
+        if meters is not None and not (np.isfinite(meters) and meters > 0):
+            meters = None
+    return ("+" + up.group(1).lower()) if up else None, meters
+
+
+def _head(path: Path, n: int) -> bytes:
+    with open(path, "rb") as fh:
+        return fh.read(n)
+
+
+def resolve_up(path: Path, file_type: str, up: str) -> tuple[str, str]:
+    """The up axis of a mesh file and the rule that decided it (module docstring).
+
+    Parameters
+    ----------
+    path : Path
+        The file (its head is read for COLLADA and OBJ).
+    file_type : str
+        trimesh's file type (``gltf``, ``glb``, ``dae``, ``obj``, ...).
+    up : str
+        One of :data:`UP_CHOICES`.
+
+    Returns
+    -------
+    axis : str
+        One of :data:`UP_AXES`.
+    source : str
+        Why: ``"explicit"``, ``"glTF convention"``, ``"COLLADA <up_axis>"``, ...
+
+    Raises
+    ------
+    InvalidInputError
+        ``up`` not one of :data:`UP_CHOICES`.
+    OSError
+        The file cannot be read.
+    """
+    if up not in UP_CHOICES:
+        raise InvalidInputError(f"up axis must be one of {', '.join(UP_CHOICES)}, got {up!r}")
+    if up != "auto":
+        return up, "explicit"
+    if file_type in ("gltf", "glb"):
+        return "+y", "glTF convention (+Y up)"
+    if file_type == "dae":
+        declared, _ = collada_asset(_head(path, _COLLADA_HEAD_BYTES))
+        return (declared, "COLLADA <up_axis>") if declared else ("+y", "COLLADA default (Y_UP)")
+    if file_type == "obj":
+        head = _head(path, _OBJ_HEAD_BYTES).decode("latin-1").lower()
+        comments = " ".join(line for line in head.splitlines()[:5] if not line.startswith(("v ", "f ")))
+        for word, why in _OBJ_Y_UP_EXPORTERS:
+            if word in comments:
+                return "+y", why
+    return "+z", "as stored (+z)"
+
+
+def declared_units_m(path: Path, file_type: str) -> float | None:
+    """Metres per file unit when the format declares it: glTF 1.0 (the metre by
+    specification), COLLADA's ``<unit meter>`` (1.0 when absent, its default); None otherwise."""
+    if file_type in ("gltf", "glb"):
+        return 1.0
+    if file_type == "dae":
+        _, meters = collada_asset(_head(path, _COLLADA_HEAD_BYTES))
+        return 1.0 if meters is None else meters
+    return None

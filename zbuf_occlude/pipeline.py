@@ -1,0 +1,295 @@
+"""Occluded samples of one object from many poses: the unit of work of ``generate`` and the farm.
+
+Per object (Sryamkin et al. 2023, §3.4 and §4.3): sample a dense cloud once, decide its
+visibility from every pose, and draw ``samples_per_view`` fixed-size samples per pose from
+the visible points (seeds and draws: :mod:`zbuf_occlude.geometry.samples`).
+
+:func:`occlude` is the one-call version, ``zbuf_occlude.occlude(...)``.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import warnings
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, Camera, camera_on_sphere, view_schedule
+from zbuf_occlude.defaults import (
+    DEFAULT_DENSE_POINTS,
+    DEFAULT_METHOD,
+    DEFAULT_N_POINTS,
+    DEFAULT_OCCLUDE_SAMPLES_PER_VIEW,
+    DEFAULT_RESOLUTION,
+    DEFAULT_SAMPLES_PER_VIEW,
+    DEFAULT_SEED,
+    DEFAULT_VIEWS,
+)
+from zbuf_occlude.errors import InvalidInputError, PaddedSamplesWarning
+from zbuf_occlude.geometry.samples import DENSE_STREAM, OccludedCloud, derive_rng, object_key, pose_samples
+from zbuf_occlude.resources import check_memory, estimate_job_memory
+from zbuf_occlude.geometry.sampling import sample_surface
+from zbuf_occlude.visibility.registry import check_keywords, method_info, resolution_option, visible_mask
+
+if TYPE_CHECKING:  # trimesh (and scipy) is imported by occlude(), which takes files and meshes
+    import trimesh
+
+__all__ = ["DenseCloud", "dense_cloud", "occlude_object", "occlude"]
+
+log = logging.getLogger(__name__)
+
+#: :func:`occlude` uses a given mesh as it is when its bounding box is already centred with
+#: largest side 1 within this (object units): normalising again is not bit-exact, and the
+#: samples must equal those ``generate`` writes from the same file.
+NORMALISED_ATOL = 1e-9
+
+
+@dataclass
+class DenseCloud:
+    """The per-object dense cloud (sampled once, reused for every pose, paper §3.4)."""
+
+    points: NDArray[np.float64]
+    face_index: NDArray[np.int64]
+
+
+def dense_cloud(
+    mesh: trimesh.Trimesh, key: int, *, seed: int = 0, count: int | None = DEFAULT_DENSE_POINTS, density: float | None = None
+) -> DenseCloud:
+    """Sample the object's dense cloud with the generator of ``(seed, key)``.
+
+    ``count`` points area-weighted, or ``density`` points per unit area (Algorithm 1).
+    """
+    rng = derive_rng(seed, key, DENSE_STREAM)
+    if density is not None:
+        points, face_index = sample_surface(mesh, density=density, seed=rng)
+    else:
+        points, face_index = sample_surface(mesh, count=count, seed=rng)
+    return DenseCloud(points, face_index)
+
+
+def occlude_object(
+    mesh: trimesh.Trimesh,
+    poses: Sequence[tuple[float, float]],
+    *,
+    key: int,
+    n_points: int = DEFAULT_N_POINTS,
+    samples_per_view: int = DEFAULT_SAMPLES_PER_VIEW,
+    seed: int = DEFAULT_SEED,
+    dense: DenseCloud | None = None,
+    method: str = DEFAULT_METHOD,
+    resolution: int = DEFAULT_RESOLUTION,
+    radius: float = DEFAULT_RADIUS,
+    label: int = -1,
+    class_name: str = "",
+    source: str = "",
+    split: str = "",
+    **method_options,
+) -> Iterator[tuple[int, NDArray[np.bool_], list[OccludedCloud]]]:
+    """Yield ``(pose_index, visible (M,) bool, clouds)`` for each pose of one object.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        Normalised (max extent 1), world frame.
+    poses : sequence of (elevation_deg, azimuth_deg)
+    key : int
+        The object's seed key (:func:`object_key` of a stable name).
+    n_points, samples_per_view : int
+        Points per sample and samples drawn per pose.
+    dense : DenseCloud, optional
+        Default: :func:`dense_cloud` ``(mesh, key, seed=seed)``.
+    method : str
+        Visibility method; image-space methods keep the points on the GPU across poses.
+    resolution, radius : camera image size (pixels) and distance (object units).
+    label, class_name, source, split
+        Copied into every cloud (:class:`OccludedCloud`).
+
+    Raises
+    ------
+    InvalidInputError
+        ``n_points < 1`` or ``samples_per_view < 0``.
+    InsufficientMemoryError
+        (an InvalidInputError) The object's job would not fit in the memory available
+        (:func:`zbuf_occlude.resources.check_memory`), checked before any allocation.
+    """
+    if n_points < 1 or samples_per_view < 0:
+        raise InvalidInputError(f"need n_points >= 1 and samples_per_view >= 0, got {n_points}, {samples_per_view}")
+    check_keywords(method, method_options)  # a misspelt option must not run with the default
+    # Refuse before allocating what cannot fit (the OOM killer gives no message).
+    check_memory(
+        estimate_job_memory(
+            points=int(n_points), samples_per_view=int(samples_per_view),
+            dense_points=len(dense.points) if dense is not None else DEFAULT_DENSE_POINTS,
+            resolution=resolution, faces=len(mesh.faces),
+        )
+    )  # fmt: skip
+    dense = dense or dense_cloud(mesh, key, seed=seed)
+    session = method_info(method).session
+    scene = session(mesh, dense.points, dense.face_index) if session is not None else None
+    one_shot_options = {**resolution_option(method, resolution), **method_options}
+    try:
+        for pose_index, (el, az) in enumerate(poses):
+            camera: Camera = camera_on_sphere(el, az, radius, resolution=resolution)
+            if scene is not None:
+                visible = scene.visible(camera, **method_options)
+            else:
+                visible = visible_mask(mesh, dense.points, camera, method, face_index=dense.face_index, **one_shot_options)
+            visible_index = np.flatnonzero(visible)
+            if len(visible_index) == 0 and samples_per_view:
+                log.warning("%s: nothing visible from el=%g az=%g; no sample", source or "mesh", el, az)
+            chosen = pose_samples(
+                visible_index, n_points, seed=seed, key=key, pose_index=pose_index, sample_indices=range(samples_per_view)
+            )
+            clouds = [
+                OccludedCloud(
+                    points=dense.points[c].astype(np.float32),
+                    face_index=dense.face_index[c],
+                    elevation_deg=float(el),
+                    azimuth_deg=float(az),
+                    radius=float(radius),
+                    label=label,
+                    class_name=class_name,
+                    source=source,
+                    sample_index=sample_index,
+                    n_visible=len(visible_index),
+                    split=split,
+                )
+                for sample_index, c in enumerate(chosen)
+            ]
+            yield pose_index, visible, clouds
+    finally:
+        if scene is not None:
+            scene.release()
+
+
+def _is_normalised(mesh: trimesh.Trimesh) -> bool:
+    lo, hi = mesh.bounds
+    return bool(np.all(np.abs(lo + hi) <= 2 * NORMALISED_ATOL) and abs(float(np.max(hi - lo)) - 1.0) <= NORMALISED_ATOL)
+
+
+def occlude(
+    mesh_or_path: trimesh.Trimesh | str | os.PathLike,
+    views: str | Sequence[tuple[float, float]] = DEFAULT_VIEWS,
+    n_points: int = DEFAULT_N_POINTS,
+    samples_per_view: int = DEFAULT_OCCLUDE_SAMPLES_PER_VIEW,
+    seed: int = DEFAULT_SEED,
+    method: str = DEFAULT_METHOD,
+    *,
+    dense_points: int = DEFAULT_DENSE_POINTS,
+    resolution: int = DEFAULT_RESOLUTION,
+    radius: float = DEFAULT_RADIUS,
+    name: str | None = None,
+) -> list[OccludedCloud]:
+    """Occluded point clouds of one mesh from many poses: the one-call version of ``generate``.
+
+    Samples a dense cloud of ``dense_points`` on the surface (Sryamkin et al. 2023,
+    Algorithms 1–2), decides which points a camera on a sphere of ``radius`` sees from each
+    pose (``method``, :func:`~zbuf_occlude.visibility.visible_mask`), and draws
+    ``samples_per_view`` samples of ``n_points`` visible points per pose, without
+    replacement (paper §3.4, §4.3).  The same pipeline as ``zbuf-occlude generate``
+    (:func:`occlude_object`): for a mesh file and the same options, the clouds equal the
+    samples ``generate`` writes for it, bit for bit.
+
+    Parameters
+    ----------
+    mesh_or_path : trimesh.Trimesh, str or PathLike
+        A mesh file (OFF, OBJ, PLY, STL, GLB; loaded and normalised by
+        :func:`~zbuf_occlude.load_mesh`) or a mesh.  A mesh whose bounding box is centred with
+        largest side 1 (as :func:`~zbuf_occlude.load_mesh` returns) is used as it is; any other
+        is normalised first (a copy, :func:`~zbuf_occlude.normalize_mesh`).
+    views : str or sequence of (elevation_deg, azimuth_deg)
+        A schedule name of :func:`~zbuf_occlude.view_schedule` (``"grid25"``, ``"paper100"``,
+        ``"fibonacci:N"``, ``"EL:AZ,..."``) or the poses themselves, degrees.
+    n_points : int
+        Points per cloud (PointNet's 2048).
+    samples_per_view : int
+        Clouds drawn per pose.
+    seed : int
+        Non-negative; with ``name`` it fixes every random draw.
+    method : str
+        Visibility method (``zbuf-occlude info`` lists them; ``"auto"`` picks per machine).
+    dense_points : int
+        Points sampled on the whole surface before hidden-surface removal.
+    resolution : int
+        Z-buffer image size, pixels (image-space methods).
+    radius : float
+        Camera distance from the centre, object units (the object's largest side is 1).
+    name : str, optional
+        The object's name, which keys its random draws (:func:`object_key`).  Default: the
+        file's stem for a path (as ``generate FILE`` names it), ``""`` for a mesh.  To get the
+        samples ``generate ROOT`` wrote, pass the path relative to ``ROOT`` without the suffix,
+        e.g. ``"chair/train/chair_0001"``.
+
+    Returns
+    -------
+    clouds : list of OccludedCloud
+        Pose-major, then sample index; a pose that sees nothing gives none.  Each has
+        ``points (n_points, 3) float32`` in the normalised mesh's frame (object units, on
+        the mesh's faces), ``face_index (n_points,) int64`` into the mesh's faces,
+        ``elevation_deg``, ``azimuth_deg`` (degrees), ``radius``, ``sample_index``, and
+        ``n_visible``, the dense points visible from its pose.  When ``n_visible <
+        n_points`` the cloud holds every visible point once plus repeats (``cloud.padded``),
+        and a :class:`PaddedSamplesWarning` says how many clouds are.
+
+    Raises
+    ------
+    MeshLoadError
+        The file is missing, unreadable or not a usable mesh.
+    InvalidInputError
+        Not a path or a ``trimesh.Trimesh``, a bad view schedule, ``n_points < 1``,
+        ``samples_per_view < 0``, a negative seed, an unknown method, or a job too large for
+        the memory available.
+    CameraError
+        ``radius`` puts the camera inside the object's bounding sphere.
+    BackendUnavailable
+        The method needs an OpenGL context or a library that is missing.
+
+    Examples
+    --------
+    >>> clouds = occlude("data/samples/chair/train/chair_0001.off", views="grid25", n_points=1024)
+    >>> clouds[0].points.shape, clouds[0].elevation_deg, clouds[0].azimuth_deg
+    ((1024, 3), -80.0, 0.0)
+    """
+    import trimesh
+
+    from zbuf_occlude.mesh.load import load_mesh, normalize_mesh
+
+    if isinstance(mesh_or_path, trimesh.Trimesh):
+        mesh = mesh_or_path if _is_normalised(mesh_or_path) else normalize_mesh(mesh_or_path)
+        default_name, source = "", ""
+    elif not isinstance(mesh_or_path, (str, os.PathLike)):  # a point cloud, a Scene, an array...
+        raise InvalidInputError(
+            f"occlude needs a mesh file or a trimesh.Trimesh (faces occlude), got {type(mesh_or_path).__name__}; "
+            "a trimesh.Scene: scene.to_mesh(); a point cloud has no faces to hide anything"
+        )
+    else:
+        mesh = load_mesh(mesh_or_path)
+        default_name, source = Path(mesh_or_path).stem, str(mesh_or_path)
+    poses = view_schedule(views) if isinstance(views, str) else [(float(el), float(az)) for el, az in views]
+    key = object_key(default_name if name is None else name)
+    if dense_points is None or int(dense_points) < 1:
+        raise InvalidInputError(f"dense_points must be an integer >= 1, got {dense_points!r}")
+    dense = dense_cloud(mesh, key, seed=seed, count=int(dense_points))
+    clouds = [
+        c
+        for _, _, pose_clouds in occlude_object(
+            mesh, poses, key=key, n_points=n_points, samples_per_view=samples_per_view, seed=seed, dense=dense,
+            method=method, resolution=resolution, radius=radius, source=source,
+        )  # fmt: skip
+        for c in pose_clouds
+    ]
+    n_padded = sum(c.padded for c in clouds)
+    if n_padded:
+        warnings.warn(
+            f"{n_padded} of {len(clouds)} clouds hold repeated points: fewer than n_points={n_points} points were "
+            f"visible from their poses (each cloud's n_visible says how many; raise dense_points or lower n_points)",
+            PaddedSamplesWarning, stacklevel=2,
+        )  # fmt: skip
+    return clouds

@@ -1,0 +1,65 @@
+"""One real object scan, normalised like the paper's meshes (Sryamkin et al. 2023, §4.1)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from zbuf_occlude.errors import InvalidInputError
+
+__all__ = ["RealScan", "normalize_points"]
+
+
+@dataclass
+class RealScan:
+    """One real object scan, normalised.
+
+    Attributes
+    ----------
+    points : (n, 3) float32
+        Bounding-box centre at 0, max extent 1, z up (object units, like a normalised mesh).
+    label : str
+        The data set's class name (``object`` column, or SUO file-name prefix).
+    source : str
+        The file it came from.
+    dataset : {"suo", "lidarnet"}
+    extent_m : (3,) float64
+        Bounding-box size before normalisation, metres (x, y, z with z up).
+    """
+
+    points: NDArray[np.float32]
+    label: str
+    source: str
+    dataset: str
+    extent_m: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+
+
+def normalize_points(points: NDArray[np.floating]) -> NDArray[np.float32]:
+    """Centre the bounding box on the origin and scale the largest extent to 1.
+
+    Parameters
+    ----------
+    points : (n, 3) float
+        Any unit.
+
+    Returns
+    -------
+    (n, 3) float32
+
+    Raises
+    ------
+    InvalidInputError
+        Empty, not (n, 3), non-finite values, or zero extent.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3 or len(p) == 0:
+        raise InvalidInputError(f"need (n >= 1, 3) points, got shape {p.shape}")
+    if not np.isfinite(p).all():
+        raise InvalidInputError("points contain NaN or inf")
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    extent = float((hi - lo).max())
+    if extent == 0.0:
+        raise InvalidInputError("all points coincide (zero extent)")
+    return ((p - (lo + hi) / 2.0) / extent).astype(np.float32)
