@@ -45,16 +45,16 @@ declare -A KEXPR=(
   [segment_triangle]="not large_mesh and not convex and not same_inputs and not built_once and not cull_drops"
 )
 declare -A TESTS=(
-  [io]="tests/test_io.py"
-  [mesh_cache]="tests/test_mesh_cache.py"
-  [cameras]="tests/test_cameras.py"
-  [sampling]="tests/test_sampling.py"
-  [mesh]="tests/test_mesh.py"
-  [occlude]="tests/test_occlude.py"
-  [oracle]="tests/test_oracle.py"
-  [farm_worker]="tests/test_farm.py tests/test_farm_sensor.py"
-  [dataset]="tests/test_dataset.py"
-  [segment_triangle]="tests/test_oracle.py"
+  [io]="tests/io/test_clouds.py"
+  [mesh_cache]="tests/mesh/test_cache.py"
+  [cameras]="tests/geometry/test_cameras.py"
+  [sampling]="tests/geometry/test_sampling.py"
+  [mesh]="tests/mesh/test_load.py"
+  [occlude]="tests/test_pipeline.py"
+  [oracle]="tests/visibility/test_oracle.py"
+  [farm_worker]="tests/farm/test_run.py tests/farm/test_sensor_crops.py"
+  [dataset]="tests/dataset/test_reader.py"
+  [segment_triangle]="tests/visibility/test_oracle.py"
 )
 ORDER=(io mesh_cache cameras sampling mesh occlude segment_triangle oracle farm_worker dataset)
 

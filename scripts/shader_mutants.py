@@ -14,7 +14,7 @@ Usage (from anywhere; takes minutes per mutant on a loaded two-core machine)::
     python scripts/shader_mutants.py                 # every mutant, default tests
     python scripts/shader_mutants.py --list          # the mutants, not run
     python scripts/shader_mutants.py --only vert-depth-sign frag-raw-primitive-id
-    python scripts/shader_mutants.py --tests tests/test_zbuffer.py -k "not real_modelnet"
+    python scripts/shader_mutants.py --tests tests/visibility/test_zbuffer.py -k "not real_modelnet"
 
 Exit status: 0 if every applicable mutant was killed or is marked equivalent, 1 otherwise.
 Outside CI (too slow); scores are recorded in docs/development/testing.md.
@@ -33,7 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-DEFAULT_TESTS = ["tests/test_zbuffer.py", "tests/test_render.py"]
+DEFAULT_TESTS = ["tests/visibility/test_zbuffer.py", "tests/render/test_moderngl_backend.py"]
 # the real-mesh sweep needs ../shared and minutes; the wheel build needs no shader edits
 DEFAULT_K = "not real_modelnet and not wheel"
 

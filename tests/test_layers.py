@@ -232,3 +232,11 @@ def test_architecture_page_names_every_package() -> None:
     packages = sorted(p.parent.name for p in PACKAGE.glob("*/__init__.py"))
     missing = [p for p in packages if not re.search(rf"\b{p}/", text)]
     assert not missing, f"docs/development/architecture.md does not describe: {missing}"
+
+
+def test_tests_mirror_the_package() -> None:
+    """A test folder is named after the package it tests (tests/visibility/test_oracle.py for visibility/oracle.py)."""
+    tests = Path(__file__).resolve().parent
+    folders = [p.relative_to(tests) for p in tests.rglob("*") if p.is_dir() and any(p.glob("test_*.py"))]
+    stray = [str(f) for f in folders if not (PACKAGE / f / "__init__.py").is_file()]
+    assert not stray, f"test folders that name no package of zbuf_occlude: {stray}"

@@ -12,7 +12,7 @@ Two backends run the same arithmetic (:func:`occluded_by_faces`):
     first occluder, as the paper describes.  It is a line-by-line transcription of the
     float64 kernel of :func:`~zbuf_occlude.visibility.segment_triangle.segment_hits_triangles`
     (same operations in the same order, no fused multiply-add), so it decides every
-    (point, face) pair bit for bit as the numpy kernel does; ``tests/test_object_space.py``
+    (point, face) pair bit for bit as the numpy kernel does; ``tests/visibility/paper/test_object_space.py``
     checks this.  Needs ``pip install 'zbuf-occlude[fast]'`` (numba).
 ``"numpy"``
     The kernel functions of :mod:`.segment_triangle` on blocks of (point, face) pairs, a block of faces

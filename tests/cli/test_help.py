@@ -20,7 +20,7 @@ from zbuf_occlude.defaults import DEFAULT_DENSE_POINTS, DEFAULT_N_POINTS, DEFAUL
 from zbuf_occlude.defaults import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION
 from zbuf_occlude.farm.config import DEFAULT_VIEWS as FARM_VIEWS
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
+REPO_ROOT = Path(__file__).resolve().parents[2]
 BOX = REPO_ROOT / "data" / "samples" / "chair" / "train" / "chair_0001.off"
 
 

@@ -37,7 +37,7 @@ from zbuf_occlude.geometry.samples import object_key, pose_samples
 from zbuf_occlude.visibility.registry import visible_mask
 from zbuf_occlude.visibility.registry import method_info
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
+REPO_ROOT = Path(__file__).resolve().parents[2]
 #: Shipped real meshes (224–7608 faces), as (path under data/samples, class, split).
 SMALL_MESHES = [
     ("sofa/test/sofa_0681.off", "sofa", "test"),

@@ -19,7 +19,7 @@ from zbuf_occlude.geometry.samples import object_key
 from zbuf_occlude.protocols import modelnet40c  # noqa: E402
 from zbuf_occlude.visibility.registry import visible_mask  # noqa: E402
 
-SAMPLES = Path(__file__).resolve().parents[1] / "data" / "samples"
+SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 CHAIR = SAMPLES / "chair" / "train" / "chair_0001.off"
 
 

@@ -25,7 +25,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.farm import FarmParams, run_farm
 from zbuf_occlude.io.clouds import read_h5, read_npz
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
+REPO_ROOT = Path(__file__).resolve().parents[2]
 ARGS = ["--views", "0:0,30:45", "--points", "64", "--samples-per-view", "2", "--dense-points", "2000", "--resolution", "128"]
 
 
@@ -322,7 +322,7 @@ def test_an_out_inside_the_input_folder_is_refused_before_any_work(tmp_path, cap
     from zbuf_occlude.cli.main import main
 
     tree = tmp_path / "meshes"
-    shutil.copytree(Path(__file__).resolve().parents[1] / "data" / "samples" / "chair", tree / "chair")
+    shutil.copytree(Path(__file__).resolve().parents[2] / "data" / "samples" / "chair", tree / "chair")
     out = tree / "out"
     assert main([command, str(tree), "--out", str(out), "--views", "0:0", "--format" if command == "generate" else "--storage",
                  "ply" if command == "generate" else "dense"]) == 2  # fmt: skip

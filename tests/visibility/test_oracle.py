@@ -23,7 +23,7 @@ from zbuf_occlude.visibility.oracle_embree import occluded_embree
 from zbuf_occlude.visibility.oracle_numpy import occluded_numpy
 from zbuf_occlude.visibility.segment_triangle import segment_hits_triangles, triangle_planes
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 #: Real ModelNet meshes next to the repository (extra coverage when present).
 SHARED = REPO.parent / "shared" / "data" / "modelnet_subset"
 #: Real ModelNet meshes shipped with the repository (always present).

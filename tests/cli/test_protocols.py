@@ -9,7 +9,7 @@ import pytest
 
 from zbuf_occlude.cli.main import main
 
-CHAIR = str(Path(__file__).resolve().parents[1] / "data" / "samples" / "chair")
+CHAIR = str(Path(__file__).resolve().parents[2] / "data" / "samples" / "chair")
 
 
 def test_modelnet40c_occlusion_from_the_cli(tmp_path, capsys):

@@ -19,7 +19,7 @@ from zbuf_occlude.errors import InvalidInputError, MeshLoadError, ZbufOccludeErr
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.visibility.registry import resolution_option
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
+REPO_ROOT = Path(__file__).resolve().parents[2]
 #: A shipped ModelNet chair: OFF, 2,382 vertices and 2,234 faces (data/samples/SOURCE.md).
 CHAIR = REPO_ROOT / "data" / "samples" / "chair" / "train" / "chair_0001.off"
 
@@ -1039,6 +1039,6 @@ def test_first_day_mistakes_get_messages_that_say_what_to_do(tmp_path, capsys):
         zo.occlude(trimesh.PointCloud(np.random.default_rng(0).random((10, 3))))
     with pytest.raises(InvalidInputError, match="no such data set folder"):
         zo.OccludedDataset(tmp_path / "missing")
-    chair = Path(__file__).resolve().parents[1] / "data" / "samples" / "chair"
+    chair = Path(__file__).resolve().parents[2] / "data" / "samples" / "chair"
     assert main(["generate", str(chair), "--protocol", "modelnet40-c-occlusion", "--out", str(tmp_path / "o")]) == 2
     assert "needs a severity: --severity 1..5" in capsys.readouterr().err and not (tmp_path / "o").exists()

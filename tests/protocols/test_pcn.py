@@ -13,7 +13,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.protocols import ProtocolOptions, get_protocol, project, read_arrays_h5, run_protocol
 from zbuf_occlude.protocols import pcn
 
-CHAIR = Path(__file__).resolve().parents[1] / "data" / "samples" / "chair" / "train" / "chair_0001.off"
+CHAIR = Path(__file__).resolve().parents[2] / "data" / "samples" / "chair" / "train" / "chair_0001.off"
 
 
 def _their_random_pose():  # render_depth.py::random_pose, global np.random as they use it

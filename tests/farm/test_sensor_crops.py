@@ -20,7 +20,7 @@ from zbuf_occlude.farm import FarmParams
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors import Lidar
 
-SAMPLES = Path(__file__).resolve().parents[1] / "data" / "samples"
+SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 ARGS = ["--sensor", "hdl32e", "--samples-per-view", "2", "--points", "128", "--per-class", "1", "--splits", "train",
         "--sensor-distance", "5:20", "--sensor-height", "1.6:2.0", "--sensor-size", "2:4.5", "--no-progress"]  # fmt: skip
 

@@ -12,7 +12,7 @@ import pytest
 from zbuf_occlude.cli.main import main
 from zbuf_occlude.dataset.verify import verify_dataset
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
+REPO_ROOT = Path(__file__).resolve().parents[2]
 CHAIR = REPO_ROOT / "data" / "samples" / "chair"
 
 

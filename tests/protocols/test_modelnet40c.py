@@ -18,7 +18,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.protocols import PinholeView, ProtocolOptions, back_project, get_protocol, project, render_depth_image, run_protocol
 from zbuf_occlude.protocols import modelnet40c as mc
 
-SAMPLES = Path(__file__).resolve().parents[1] / "data" / "samples"
+SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 CHAIR = SAMPLES / "chair" / "train" / "chair_0001.off"
 
 

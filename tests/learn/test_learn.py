@@ -23,7 +23,7 @@ from zbuf_occlude.learn.models import (  # noqa: E402
 )
 from zbuf_occlude.learn.training import TrainConfig, predict, train  # noqa: E402
 
-SAMPLES = Path(__file__).resolve().parents[1] / "data" / "samples"
+SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 
 
 def test_core_import_does_not_import_torch():

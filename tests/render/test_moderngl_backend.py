@@ -19,7 +19,7 @@ from zbuf_occlude.render.moderngl_backend import ModernGLRenderer
 from zbuf_occlude.visibility.segment_triangle import segment_hits_triangles
 from zbuf_occlude.render import renderer_for
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 SPHERE_RADIUS = 0.5
 
 

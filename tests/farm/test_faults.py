@@ -24,7 +24,7 @@ from zbuf_occlude.dataset.layout import LOCK_FILE
 from zbuf_occlude.errors import DatasetBusy
 from zbuf_occlude.farm.lock import farm_lock, task_lock_path
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
+REPO_ROOT = Path(__file__).resolve().parents[2]
 #: The three smallest shipped meshes (96–400 faces).
 MESHES = ("sofa/test/sofa_0681.off", "stool/train/stool_0002.off", "monitor/train/monitor_0001.off")
 PARAMS = FarmParams(views="0:0,40:90,-40:200", samples_per_view=2, n_points=64, dense_points=1024, resolution=64)

@@ -27,7 +27,7 @@ from zbuf_occlude.visibility import cpu_zbuffer, embree_fast, visible_mask
 from zbuf_occlude.visibility.definition import TOLERANCE
 from zbuf_occlude.visibility.embree_fast import FastScene
 
-SAMPLES = Path(__file__).resolve().parents[1] / "data" / "samples"
+SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 
 pytestmark = pytest.mark.skipif(not cpu_zbuffer.available(), reason="numba is a core dependency")
 

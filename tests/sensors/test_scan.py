@@ -112,7 +112,7 @@ def _sample_scene(sample_meshes):
 def sample_meshes():
     from pathlib import Path
 
-    root = Path(__file__).resolve().parents[1] / "data" / "samples"
+    root = Path(__file__).resolve().parents[2] / "data" / "samples"
     return sorted(root.rglob("*.off"))
 
 

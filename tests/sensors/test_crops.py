@@ -12,7 +12,7 @@ import zbuf_occlude as zo
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.crops import CropDistributions, draw_placement, farm_datasets, lidar_object_samples
 
-MESH = Path(__file__).resolve().parents[1] / "data" / "samples" / "bed" / "train" / "bed_0001.off"
+MESH = Path(__file__).resolve().parents[2] / "data" / "samples" / "bed" / "train" / "bed_0001.off"
 
 
 def test_samples_are_crops_in_the_mesh_frame():

@@ -15,7 +15,7 @@ from zbuf_occlude.experiments.realism import (
     cloud_stats, compare_sets, fit_count_exponent, read_object_clouds, realism_report, ring_spacings_deg,
 )  # fmt: skip
 
-LIDARNET = Path(__file__).resolve().parents[2] / "shared" / "data" / "lidarnet_v2_partial"
+LIDARNET = Path(__file__).resolve().parents[3] / "shared" / "data" / "lidarnet_v2_partial"
 
 
 def test_ring_spacing_of_synthetic_rings():

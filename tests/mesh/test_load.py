@@ -238,7 +238,7 @@ def test_format_round_trip(tmp_path: Path, ext: str) -> None:
     box.apply_translation([3.0, -1.0, 2.0])
     path = tmp_path / f"box.{ext}"
     box.export(path)
-    raw = load_mesh(path, normalize=False, up="+z")  # as stored (glTF's own +y is tests/test_mesh_scene.py's)
+    raw = load_mesh(path, normalize=False, up="+z")  # as stored (glTF's own +y is tests/mesh/test_scene.py's)
     assert len(raw.faces) == 12
     assert raw.area == pytest.approx(box.area)
     np.testing.assert_allclose(raw.bounds, box.bounds, atol=1e-6)

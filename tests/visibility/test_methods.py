@@ -31,7 +31,7 @@ from zbuf_occlude.visibility.embree_fast import FastScene
 from zbuf_occlude.visibility.gpu_exact import ExactScene
 from zbuf_occlude.visibility.segment_triangle import mesh_planes
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
+REPO_ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = REPO_ROOT / "data" / "samples"
 EXACT_METHODS = ("oracle", "oracle-numpy", "zbuffer-exact", "embree-fast", "auto")
 

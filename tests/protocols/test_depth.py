@@ -26,7 +26,7 @@ from zbuf_occlude.protocols import (
     run_protocol,
 )
 
-SAMPLES = Path(__file__).resolve().parents[1] / "data" / "samples"
+SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 CHAIR = SAMPLES / "chair" / "train" / "chair_0001.off"
 
 
