@@ -30,10 +30,10 @@ def test_a_public_name_imports_what_it_needs_and_nothing_else():
     assert "trimesh" in _loaded_after("import zbuf_occlude as zo\nzo.load_mesh")
 
 
-def test_help_loads_neither_numba_nor_moderngl():
+def test_help_loads_no_heavy_library():
+    # every subcommand's parser is built for --help: none may import a mesh, GL or learning library to do it
     code = "from zbuf_occlude.cli.main import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass"
-    loaded = _loaded_after(code)
-    assert not {"numba", "moderngl", "torch", "h5py"} & set(loaded), loaded
+    assert _loaded_after(code) == []
 
 
 def test_every_public_name_resolves_and_occlude_is_the_function():

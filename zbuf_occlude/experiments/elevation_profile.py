@@ -19,6 +19,8 @@ surface, weighted by ``|n · e_k|`` of its face, and the estimate is averaged ov
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import logging
 import os
 from collections.abc import Sequence
@@ -26,16 +28,17 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import trimesh
 from numpy.typing import NDArray
 
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere
 from zbuf_occlude.defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION
 from zbuf_occlude.errors import InvalidInputError, OutputError
 from zbuf_occlude.io.atomic import write_csv
-from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.geometry.sampling import sample_surface
 from zbuf_occlude.visibility.registry import resolution_option, visible_mask
+
+if TYPE_CHECKING:  # trimesh is imported where it is used
+    import trimesh
 
 __all__ = [
     "PLANES",
@@ -242,6 +245,8 @@ def elevation_profile(
         import matplotlib  # noqa: F401  (checked before the long run, used by _plot)
     except ImportError:
         raise BackendUnavailable("elevation-profile needs matplotlib: pip install 'zbuf-occlude[plot]'") from None
+    from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported when a profile runs
+
     mesh = load_mesh(mesh_path)
     out = Path(out)
     if out.is_dir() or out.suffix == "":

@@ -23,6 +23,8 @@ divided by :data:`KEEP_SCALE_UNIT_M` so that size stays a cue.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import fnmatch
 import logging
 import os
@@ -30,12 +32,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import trimesh
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange, size_interval
 from zbuf_occlude.learn.data import CloudSet, dedupe_meshes, normalize_batch, resample
+
+if TYPE_CHECKING:  # trimesh is imported where it is used
+    import trimesh
 
 __all__ = [
     "TRAINING_SETS", "GROUND_ELEVATION_DEG", "LIDAR_PLACEMENT", "MIN_RETURNS", "KEEP_SCALE_UNIT_M",

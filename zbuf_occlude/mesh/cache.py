@@ -14,9 +14,10 @@ import threading
 import weakref
 from collections import OrderedDict
 from collections.abc import Callable
-from typing import Generic, TypeVar
+from typing import TYPE_CHECKING, Generic, TypeVar
 
-import trimesh
+if TYPE_CHECKING:  # trimesh is imported where it is used
+    import trimesh
 
 __all__ = ["MeshCache"]
 

@@ -26,14 +26,18 @@ explicit ``up``.  The rule applied is kept in the mesh's metadata (``up_source``
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import re
 from pathlib import Path
 
 import numpy as np
-import trimesh
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
+
+if TYPE_CHECKING:  # trimesh is imported where it is used
+    import trimesh
 
 __all__ = ["UP_AXES", "UP_CHOICES", "resolve_up", "up_rotation", "declared_units_m", "collada_asset"]
 
@@ -69,6 +73,8 @@ def up_rotation(axis: str) -> NDArray[np.float64]:
     InvalidInputError
         ``axis`` not one of :data:`UP_AXES`.
     """
+    import trimesh
+
     if axis not in UP_AXES:
         raise InvalidInputError(f"up axis must be one of {', '.join(UP_CHOICES)}, got {axis!r}")
     if axis == "+z":

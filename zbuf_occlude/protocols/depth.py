@@ -18,16 +18,20 @@ Conventions (OpenCV, as Open3D's ``PinholeCameraIntrinsic`` and ModelNet40-C use
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from dataclasses import dataclass
 
 import numpy as np
-import trimesh
 from numpy.typing import NDArray
 
 from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.samples import draw_sample
 from zbuf_occlude.sensors.raycast import cast_embree
+
+if TYPE_CHECKING:  # trimesh is imported where it is used
+    import trimesh
 
 __all__ = [
     "PinholeView",

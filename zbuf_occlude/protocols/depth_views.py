@@ -21,8 +21,9 @@ Shard datasets (one row per view, V views; object units, world frame = the norma
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import trimesh
 
 from zbuf_occlude.geometry.cameras import camera_on_sphere, view_schedule
 from zbuf_occlude.defaults import DEFAULT_N_POINTS
@@ -31,6 +32,9 @@ from zbuf_occlude.mesh.inputs import FarmObject
 from zbuf_occlude.geometry.sampling import sample_surface
 from zbuf_occlude.protocols.base import Protocol, ProtocolOptions
 from zbuf_occlude.protocols.depth import DOWNSAMPLERS, PinholeView, back_project, downsample, render_depth_image
+
+if TYPE_CHECKING:  # trimesh is imported where it is used
+    import trimesh
 
 __all__ = ["depth_views", "PROTOCOL"]
 

@@ -41,10 +41,11 @@ degenerate faces and unreferenced vertices before the normalisation, which Open3
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import logging
 
 import numpy as np
-import trimesh
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
@@ -52,6 +53,9 @@ from zbuf_occlude.mesh.inputs import FarmObject
 from zbuf_occlude.io.atomic import atomic_path, write_text
 from zbuf_occlude.protocols.base import Protocol, ProtocolOptions, read_arrays_h5
 from zbuf_occlude.protocols.depth import PinholeView, back_project, render_depth_image
+
+if TYPE_CHECKING:  # trimesh is imported where it is used
+    import trimesh
 
 log = logging.getLogger(__name__)
 
@@ -227,6 +231,8 @@ def to_modelnet40c_axes(points: NDArray[np.floating]) -> NDArray[np.float64]:
 
 
 def _their_mesh(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    import trimesh
+
     return trimesh.Trimesh(normalize(np.asarray(mesh.vertices, dtype=np.float64)), np.asarray(mesh.faces), process=False)
 
 

@@ -31,8 +31,9 @@ truth size), same frame.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import trimesh
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
@@ -40,6 +41,9 @@ from zbuf_occlude.mesh.inputs import FarmObject
 from zbuf_occlude.geometry.sampling import sample_surface
 from zbuf_occlude.protocols.base import Protocol, ProtocolOptions
 from zbuf_occlude.protocols.depth import PinholeView, render_depth_image
+
+if TYPE_CHECKING:  # trimesh is imported where it is used
+    import trimesh
 
 __all__ = [
     "random_pose", "intrinsics", "opencv_intrinsics", "depth2pcd", "pcn_mesh", "pcn_views", "PROTOCOL",
@@ -102,6 +106,8 @@ def pcn_mesh(mesh: trimesh.Trimesh, up_axis: str = "z") -> trimesh.Trimesh:
     InvalidInputError
         ``up_axis`` is not ``"z"`` or ``"y"``.
     """
+    import trimesh
+
     if up_axis not in ("z", "y"):
         raise InvalidInputError(f"up axis must be 'z' or 'y', got {up_axis!r}")
     v = np.asarray(mesh.vertices, dtype=np.float64)

@@ -10,12 +10,13 @@ object's normalised mesh frame, the farm's HDF5 layout.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import logging
 import math
 from dataclasses import dataclass
 
 import numpy as np
-import trimesh
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
@@ -27,6 +28,9 @@ from zbuf_occlude.sensors.depth_camera import DepthCamera
 from zbuf_occlude.sensors.lidar import Lidar
 from zbuf_occlude.sensors.scan import Scan, scan
 from zbuf_occlude.sensors.scene import ScanScene, SceneObject, sensor_pose
+
+if TYPE_CHECKING:  # trimesh is imported where it is used
+    import trimesh
 
 __all__ = ["CropDistributions", "CropSample", "draw_placement", "object_crop", "lidar_object_samples", "farm_datasets"]
 
@@ -255,6 +259,8 @@ def lidar_object_samples(
     InvalidInputError
         ``n_samples`` or ``n_points`` below 1.
     """
+    import trimesh
+
     if int(n_samples) < 1 or int(n_points) < 1:
         raise InvalidInputError(f"n_samples and n_points must be >= 1, got {n_samples}, {n_points}")
     if not isinstance(mesh, trimesh.Trimesh):

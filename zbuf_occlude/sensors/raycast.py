@@ -16,15 +16,19 @@ face (Möller–Trumbore), so that the backends differ only in *which* face they
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import logging
 import math
 
 import numpy as np
-import trimesh
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 from zbuf_occlude.mesh.cache import MeshCache
+
+if TYPE_CHECKING:  # trimesh is imported where it is used
+    import trimesh
 
 __all__ = ["ray_triangle_f64", "cast_embree", "cast_zbuffer", "BACKENDS"]
 

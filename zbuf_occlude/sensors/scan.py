@@ -9,12 +9,13 @@ default (LiDAR: x forward, z up; camera: OpenCV), like real scans.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-import trimesh
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
@@ -23,6 +24,9 @@ from zbuf_occlude.sensors.depth_camera import DepthCamera
 from zbuf_occlude.sensors.lidar import Lidar
 from zbuf_occlude.sensors.raycast import BACKENDS, cast_embree, cast_zbuffer
 from zbuf_occlude.sensors.scene import BuiltScene, ScanScene, SceneObject
+
+if TYPE_CHECKING:  # trimesh is imported where it is used
+    import trimesh
 
 __all__ = ["Scan", "scan", "look_at_pose", "read_scan_npz", "build_scene", "FRAMES"]
 
@@ -195,6 +199,8 @@ def _as_pose(pose) -> NDArray[np.float64]:
 
 
 def _built(scene) -> BuiltScene:
+    import trimesh
+
     if isinstance(scene, ScanScene):
         return scene.build()
     if isinstance(scene, trimesh.Trimesh):

@@ -22,6 +22,8 @@ from 1 in the order given (objects first).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import json
 import math
 from dataclasses import dataclass, field
@@ -29,11 +31,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import trimesh
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError, MeshLoadError
-from zbuf_occlude.mesh.load import load_mesh
+
+if TYPE_CHECKING:  # trimesh is imported where it is used
+    import trimesh
 
 __all__ = ["SceneObject", "ScanScene", "BuiltScene", "load_scene", "GROUND_ID", "sensor_pose"]
 
@@ -81,6 +84,8 @@ def _primitive_args(spec: dict) -> tuple[str, dict[str, Any]]:
 
 
 def _primitive(spec: dict) -> trimesh.Trimesh:
+    import trimesh
+
     kind, kwargs = _primitive_args(spec)
     return getattr(trimesh.creation, kind)(**kwargs)
 
@@ -117,6 +122,10 @@ class SceneObject:
     def build(self, base: Path | None = None) -> tuple[trimesh.Trimesh, NDArray[np.float64]]:
         """The object's mesh in its local frame (as loaded) and its (4, 4) local → world transform,
         with the ground at z = 0."""
+        import trimesh
+
+        from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported when a scene is built
+
         if isinstance(self.mesh, trimesh.Trimesh):
             local = self.mesh
         elif isinstance(self.mesh, dict):
@@ -243,6 +252,8 @@ class ScanScene:
 
     def build(self) -> BuiltScene:
         """Flatten into one mesh (cached until :meth:`add`)."""
+        import trimesh
+
         if self._built is not None:
             return self._built
         vertices, faces, face_object, face_local = [], [], [], []

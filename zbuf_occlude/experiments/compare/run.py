@@ -21,7 +21,6 @@ from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere, view
 from zbuf_occlude.defaults import DEFAULT_RESOLUTION, DEFAULT_VIEWS
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
 from zbuf_occlude.mesh.discovery import find_meshes
-from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.visibility.metrics import agreement
 from zbuf_occlude.geometry.sampling import sample_surface
 from zbuf_occlude.visibility import available_methods, visible_mask
@@ -284,6 +283,8 @@ def compare(
     if sweep_n not in counts:
         counts = sorted(set(counts) | {sweep_n})
     sweeps = _sweep_jobs(methods, resolution_sweep, grid_sweep)
+    from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported when a comparison runs
+
     options = method_options or {}
     rows: list[dict[str, Any]] = []
     per_view = len(methods) + 1
