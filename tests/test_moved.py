@@ -18,7 +18,10 @@ def test_old_path_warns_and_gives_the_new_module(old: str) -> None:
     with pytest.warns(DeprecationWarning, match=MOVED[old].replace(".", r"\.")):
         module = importlib.import_module(f"zbuf_occlude.{old}")
     if old == "occlude":
+        import zbuf_occlude as zo
+
         assert module.occlude_object is new.occlude_object and module.OccludedCloud is zo_cloud()
+        assert zo.occlude is new.occlude  # the package attribute stays the function
     else:
         assert module is new
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 import warnings
 
 import numpy as np
@@ -33,6 +34,8 @@ def test_resident_points_and_the_deprecated_scene_alias() -> None:
 
 
 def test_profile_module_renamed() -> None:
+    vars(zo).pop("profile", None)  # an earlier import of the old path set the attribute
+    sys.modules.pop("zbuf_occlude.profile", None)
     with pytest.warns(DeprecationWarning, match="elevation_profile"):
         from zbuf_occlude import profile
     assert profile is elevation_profile

@@ -73,14 +73,7 @@ def new_module(old: str):
 
 
 class _OccludeModule(types.ModuleType):
-    """The old ``zbuf_occlude.occlude`` module: its names, and callable as the function it was shadowed by.
-
-    Importing a submodule sets the package attribute of its name, so the old module path would
-    replace ``zbuf_occlude.occlude`` (the function) with a module; this one can still be called.
-    """
-
-    def __call__(self, *args, **kwargs):
-        return importlib.import_module(f"{_ROOT}.pipeline").occlude(*args, **kwargs)
+    """The old ``zbuf_occlude.occlude`` module: the names it had, now in pipeline, geometry.samples and errors."""
 
     def __getattr__(self, name: str):
         for home in ("pipeline", "geometry.samples", "errors"):
@@ -112,7 +105,21 @@ class _MovedFinder(importlib.abc.MetaPathFinder):
         return None
 
 
+class _Package(types.ModuleType):
+    """The package module: importing the old ``zbuf_occlude.occlude`` module must not replace the function.
+
+    Python sets a package attribute for every submodule it imports; ``zbuf_occlude.occlude`` stays
+    the function (resolved on first use from ``__init__.pyi``) whatever was imported.
+    """
+
+    def __setattr__(self, name: str, value) -> None:
+        if name == "occlude" and isinstance(value, types.ModuleType):
+            return
+        super().__setattr__(name, value)
+
+
 def install() -> None:
-    """Put the finder of old paths on ``sys.meta_path`` (once)."""
+    """Put the finder of old paths on ``sys.meta_path`` (once) and guard the package's ``occlude``."""
     if not any(isinstance(f, _MovedFinder) for f in sys.meta_path):
         sys.meta_path.insert(0, _MovedFinder())  # before the path finder: `compare.run` must not load run.py twice
+    sys.modules[_ROOT].__class__ = _Package
