@@ -59,3 +59,14 @@ def test_the_farms_all_lists_the_names_its_stub_imports():
 
     assert set(farm.__all__) == set(farm._stub_names)
     assert all(getattr(farm, name) is not None for name in farm.__all__)
+
+
+def test_cpu_visibility_methods_load_no_opengl():
+    # Embree, the CPU z-buffer and the paper's methods run where no GL driver exists
+    code = (
+        "import zbuf_occlude.visibility.embree_fast, zbuf_occlude.visibility.cpu_zbuffer\n"
+        "import zbuf_occlude.visibility.oracle, zbuf_occlude.visibility.paper.object_space\n"
+        "import sys\nassert not {'moderngl', 'glcontext'} & set(sys.modules), sorted(sys.modules)"
+    )
+    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
+    subprocess.run([sys.executable, "-c", code], env=env, timeout=300, check=True)

@@ -29,8 +29,6 @@ from zbuf_occlude.visibility.embree_fast import FastScene
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 
-pytestmark = pytest.mark.skipif(not cpu_zbuffer.available(), reason="numba is a core dependency")
-
 
 def _soup(seed: int, n_faces: int) -> trimesh.Trimesh:
     """Random triangles in the unit box: sizes from 0.005 to 0.6, some slivers (one edge 1e-4

@@ -26,8 +26,6 @@ explicit ``up``.  The rule applied is kept in the mesh's metadata (``up_source``
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import re
 from pathlib import Path
 
@@ -36,8 +34,6 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 
-if TYPE_CHECKING:  # trimesh is imported where it is used
-    import trimesh
 
 __all__ = ["UP_AXES", "UP_CHOICES", "resolve_up", "up_rotation", "declared_units_m", "collada_asset"]
 

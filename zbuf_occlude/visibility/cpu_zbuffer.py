@@ -44,15 +44,17 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
 from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.mesh.cache import MeshCache
-from zbuf_occlude.render.exact_backend import exact_face_groups
+from zbuf_occlude.geometry.grouping import exact_face_groups
 from zbuf_occlude.visibility.definition import EDGE_ON_SIN
-from zbuf_occlude.visibility.segment_triangle import SCENE_CACHE_SIZE, mesh_planes
+from zbuf_occlude.visibility.kernels import pair_occludes_one
+from zbuf_occlude.visibility.segment_triangle import SCENE_CACHE_SIZE, mesh_planes, pack_planes
 
 __all__ = [
     "CELLS_PER_POINT",
@@ -64,7 +66,6 @@ __all__ = [
     "classify",
     "cell_of",
     "group_by_face",
-    "available",
 ]
 
 #: Grid cells per point in the frustum (the resolution follows the point density): more
@@ -276,19 +277,6 @@ def _rasterise_py(cam, faces, face_ids, grid, ga, gb, row_lo, row_hi, zbuf, ids)
                 _insert(zbuf, ids, row + i, np.float32(_ROUND_UP * inv), face_ids[f])
 
 
-def _pair_occludes_one(px, py, pz, sx, sy, sz, seg_len, pl, tolerance):
-    """The face of packed planes ``pl`` (:class:`_MeshData`) occludes the point:
-    :func:`segment_triangle.pair_occludes` for one pair, operation for operation."""
-    t = (pl[3] - (pl[0] * px + pl[1] * py + pl[2] * pz)) / (pl[0] * sx + pl[1] * sy + pl[2] * sz)
-    if not (t >= 0.0 and t <= 1.0 and t * seg_len > tolerance):
-        return False
-    x, y, z = px + t * sx, py + t * sy, pz + t * sz
-    for e in range(3):
-        if not (x * pl[4 + 3 * e] + y * pl[5 + 3 * e] + z * pl[6 + 3 * e] >= pl[13 + e]):
-            return False
-    return True
-
-
 def _classify_py(points, face_index, lo, hi, rt, intr, eye, grid, ga, gb, zbuf, ids, planes,
                  tolerance, edge_on_sin, status):
     """:data:`HIDDEN` (or outside the frustum), :data:`VISIBLE` or :data:`UNDECIDED` for
@@ -335,7 +323,7 @@ def _classify_py(points, face_index, lo, hi, rt, intr, eye, grid, ga, gb, zbuf, 
                 state = UNDECIDED
                 break
             g = ids[c, _KEEP + 1 + s]
-            if g != own and _pair_occludes_one(px, py, pz, sx, sy, sz, seg_len, planes[g], tolerance):
+            if g != own and pair_occludes_one(px, py, pz, sx, sy, sz, seg_len, planes[g], tolerance):
                 state = HIDDEN
                 break
         if state == VISIBLE and has_faces:  # rule (b), as definition.edge_on_own
@@ -367,23 +355,11 @@ def _group_by_face_py(points, face_index, n_faces):
     return perm, out, faces
 
 
-try:
-    import numba
-
-    _group_by_face = numba.njit(cache=True, nogil=True)(_group_by_face_py)
-    _insert = numba.njit(cache=True, nogil=True, inline="always")(_insert_py)
-    _to_camera = numba.njit(cache=True, nogil=True, error_model="numpy")(_to_camera_py)
-    _rasterise = numba.njit(cache=True, nogil=True, error_model="numpy")(_rasterise_py)
-    _pair_occludes_one = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")(_pair_occludes_one)
-    _classify = numba.njit(cache=True, nogil=True, error_model="numpy")(_classify_py)
-    _HAVE_NUMBA = True
-except ImportError:  # pragma: no cover - numba is a core dependency
-    _HAVE_NUMBA = False
-
-
-def available() -> bool:
-    """True when the pre-pass can run (numba imports)."""
-    return _HAVE_NUMBA
+_group_by_face = numba.njit(cache=True, nogil=True)(_group_by_face_py)
+_insert = numba.njit(cache=True, nogil=True, inline="always")(_insert_py)
+_to_camera = numba.njit(cache=True, nogil=True, error_model="numpy")(_to_camera_py)
+_rasterise = numba.njit(cache=True, nogil=True, error_model="numpy")(_rasterise_py)
+_classify = numba.njit(cache=True, nogil=True, error_model="numpy")(_classify_py)
 
 
 class _MeshData:
@@ -402,11 +378,7 @@ class _MeshData:
             np.zeros(0, dtype=np.int64)
         )  # fmt: skip
         self.raster_faces = np.ascontiguousarray(self.faces[self.raster_ids])
-        planes = mesh_planes(mesh)
-        n = len(self.faces)
-        self.planes = np.ascontiguousarray(np.concatenate([
-            planes.normal.reshape(n, 3), planes.offset.reshape(n, 1), planes.edge_normals.reshape(n, 9),
-            planes.edge_offsets.reshape(n, 3)], axis=1))
+        self.planes = pack_planes(mesh_planes(mesh))
 
 
 _mesh_data: MeshCache[_MeshData] = MeshCache(_MeshData, SCENE_CACHE_SIZE)

@@ -38,6 +38,7 @@ import logging
 import os
 from concurrent.futures import ThreadPoolExecutor
 
+import numba
 import numpy as np
 import trimesh
 from numpy.typing import NDArray
@@ -45,13 +46,13 @@ from numpy.typing import NDArray
 from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.errors import BackendUnavailable
 from zbuf_occlude.mesh.cache import MeshCache
-from zbuf_occlude.render.exact_backend import exact_face_groups, morton_order
+from zbuf_occlude.geometry.grouping import exact_face_groups, morton_order
 from zbuf_occlude.visibility import cpu_zbuffer
 from zbuf_occlude.visibility.definition import EDGE_ON_SIN, TOLERANCE, edge_on_any, edge_on_own
-from zbuf_occlude.visibility.oracle_embree import _scene_for as _oracle_scene
+from zbuf_occlude.visibility.kernels import pair_occludes_one
+from zbuf_occlude.visibility.oracle_embree import scene_for as oracle_scene
 from zbuf_occlude.visibility.oracle_embree import occluded_embree
 from zbuf_occlude.visibility.segment_triangle import mesh_planes
-from zbuf_occlude.visibility.segment_triangle import pair_occludes as _pair_occludes
 from zbuf_occlude.visibility.registry import SessionBase, check_face_index, check_points, register
 
 __all__ = ["FastScene", "embree_fast_visible", "DEFAULT_THREADS"]
@@ -213,64 +214,10 @@ def _setup_py(points, order, face_index, centre, unit_normals, edge_planes):
     return sorted_points, p32, pp, n32, boundary
 
 
-def _prepare_np(p, pp, normals, boundary, eye, frame, cam, consts):
-    """:func:`_prepare_py` vectorised with numpy (used without numba)."""
-    n = len(p)
-    f, width, height, znear, zfar, margin = (np.float32(v) for v in cam)
-    radius, start_rel, max_start, band_rel, edge_cos = (np.float32(v) for v in consts)
-    x, y, z = p[:, 0], p[:, 1], p[:, 2]
-    depth = frame[2, 0] * x + frame[2, 1] * y + frame[2, 2] * z + frame[2, 3]
-    dm = np.float32(1e-5) * np.abs(depth)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = (frame[0, 0] * x + frame[0, 1] * y + frame[0, 2] * z + frame[0, 3]) * f / depth + np.float32(0.5) * width
-        v = (frame[1, 0] * x + frame[1, 1] * y + frame[1, 2] * z + frame[1, 3]) * f / depth + np.float32(0.5) * height
-    inside = (depth >= znear - dm) & (depth <= zfar + dm)
-    inside &= (u >= -margin) & (u < width + margin) & (v >= -margin) & (v < height + margin)
-    border = (depth < znear + dm) | (depth > zfar - dm) | (u < margin) | (u >= width - margin) | (v < margin) | (v >= height - margin)
-    d = eye - p
-    length = np.sqrt(np.einsum("ij,ij->i", d, d))
-    dirs = (d / length[:, None]).astype(np.float32)
-    if len(normals) == n and n > 0:
-        cos = np.abs(np.einsum("ij,ij->i", normals, dirs))
-    else:
-        cos = np.ones(n, dtype=np.float32)
-    tiny = np.float32(1e-30)
-    start = np.minimum(start_rel * radius / np.maximum(cos, tiny), max_start * radius)
-    band = band_rel * radius / np.maximum(cos, tiny)
-    b = np.einsum("ij,ij->i", p, dirs)
-    far = np.minimum(-b + np.sqrt(np.maximum(b * b - (pp - radius * radius), 0)), length)
-    ok = inside & (start < far)
-    two = ok & (band < start)
-    status = inside.astype(np.uint8)
-    status |= np.where(inside & border, 4, 0).astype(np.uint8)
-    if len(normals) == n and n > 0:
-        status |= np.where(inside & (cos < edge_cos), 8, 0).astype(np.uint8)
-        status |= np.where(inside & (boundary < band), 16, 0).astype(np.uint8)
-    status |= np.where(inside & ~ok & (band < far), 2, 0).astype(np.uint8)
-    org1 = np.where(ok[:, None], p + dirs * start[:, None], p).astype(np.float32)
-    len1 = np.where(ok, far - start, 0).astype(np.float32)
-    org2 = np.where(two[:, None], p + dirs * band[:, None], p).astype(np.float32)
-    len2 = np.where(two, start - band, 0).astype(np.float32)
-    return status, org1, len1, org2, len2, dirs
-
-
-def _setup_np(points, order, face_index, centre, unit_normals, edge_planes):
-    """:func:`_setup_py` vectorised with numpy (used without numba)."""
-    sorted_points = points[order]
-    p32 = (sorted_points - centre).astype(np.float32)
-    pp = np.einsum("ij,ij->i", p32, p32)
-    if len(face_index) != len(points) or len(points) == 0:
-        return sorted_points, p32, pp, np.empty((0, 3), np.float32), np.empty(0, np.float32)
-    f = face_index[order]
-    e = edge_planes[f]
-    dist = np.abs(np.einsum("ijk,ik->ij", e[..., :3], sorted_points) - e[..., 3])
-    return sorted_points, p32, pp, unit_normals[f], dist.min(axis=1).astype(np.float32)
-
-
-def _crease_py(idx, points, face_index, eye, normal, offset, edge_normals, edge_offsets,
-               corner_vertex, vertex_start, vertex_faces, tolerance):
-    """(K,) bool: point ``idx[k]`` is hidden by a face sharing a vertex with its own face;
-    the oracle's ``_pair_occludes`` arithmetic, pair by pair, stopping at the first hit."""
+def _crease_py(idx, points, face_index, eye, planes, corner_vertex, vertex_start, vertex_faces, tolerance):
+    """(K,) bool: point ``idx[k]`` is hidden by a face sharing a vertex with its own face
+    (``planes``: packed rows, :func:`~zbuf_occlude.visibility.segment_triangle.pack_planes`);
+    the oracle's pair test (:func:`~zbuf_occlude.visibility.kernels.pair_occludes_one`), stopping at the first hit."""
     out = np.zeros(len(idx), dtype=np.bool_)
     for j in range(len(idx)):
         k = idx[j]
@@ -282,18 +229,7 @@ def _crease_py(idx, points, face_index, eye, normal, offset, edge_normals, edge_
             v = corner_vertex[own, c]
             for q in range(vertex_start[v], vertex_start[v + 1]):
                 g = vertex_faces[q]
-                if g == own:
-                    continue
-                t = (offset[g] - (normal[g, 0] * px + normal[g, 1] * py + normal[g, 2] * pz)) / (
-                    normal[g, 0] * sx + normal[g, 1] * sy + normal[g, 2] * sz)
-                if not (t >= 0.0 and t <= 1.0 and t * seg_len > tolerance):
-                    continue
-                x, y, z = px + t * sx, py + t * sy, pz + t * sz
-                inside = True
-                for e in range(3):
-                    if not (x * edge_normals[g, e, 0] + y * edge_normals[g, e, 1] + z * edge_normals[g, e, 2] >= edge_offsets[g, e]):
-                        inside = False
-                if inside:
+                if g != own and pair_occludes_one(px, py, pz, sx, sy, sz, seg_len, planes[g], tolerance):
                     out[j] = True
                     break
             if out[j]:
@@ -301,15 +237,9 @@ def _crease_py(idx, points, face_index, eye, normal, offset, edge_normals, edge_
     return out
 
 
-try:
-    import numba
-
-    _prepare = numba.njit(cache=True, nogil=True)(_prepare_py)
-    _setup = numba.njit(cache=True, nogil=True)(_setup_py)
-    _crease = numba.njit(cache=True, nogil=True, error_model="numpy")(_crease_py)
-except ImportError:  # pragma: no cover - numba is the 'fast' extra
-    _prepare, _setup = _prepare_np, _setup_np
-    _crease = None
+_prepare = numba.njit(cache=True, nogil=True)(_prepare_py)
+_setup = numba.njit(cache=True, nogil=True)(_setup_py)
+_crease = numba.njit(cache=True, nogil=True, error_model="numpy")(_crease_py)
 
 
 class _Runner:
@@ -349,7 +279,7 @@ class FastScene(SessionBase):
     sort : bool
         Keep the points in Morton order (worth it for several views).
     prepass : bool, optional
-        Use the CPU z-buffer pre-pass (default: when numba is available).
+        Use the CPU z-buffer pre-pass (default: yes).
 
     Raises
     ------
@@ -367,7 +297,7 @@ class FastScene(SessionBase):
         self.threads = int(threads or DEFAULT_THREADS)
         self._scene = _scenes(mesh)
         self._run = _Runner(self.threads)
-        self._prepass = cpu_zbuffer.available() if prepass is None else bool(prepass)
+        self._prepass = True if prepass is None else bool(prepass)
         # Rays in Z-order (Morton) of their points traverse the same BVH nodes, and the
         # pre-pass reads the buffer in order: worth a sort for many views, or when every
         # point is cast.  For one view, points grouped by face (a counting sort) give the
@@ -438,24 +368,12 @@ class FastScene(SessionBase):
             # Within pass 2's start of its face's boundary, the point may be hidden by a
             # neighbouring face closer than that start: test the faces around its own
             # face exactly (as the oracle's crease pass does).
-            scene = _oracle_scene(self.mesh)
-            if _crease is not None:
-                pl = scene.planes
-                hidden = _crease(
-                    crease, self.points, self.face_index, np.asarray(camera.eye, dtype=np.float64), pl.normal,
-                    pl.offset, pl.edge_normals, pl.edge_offsets, scene.corner_vertex, scene.vertex_start,
-                    scene.vertex_faces, float(tolerance),
-                )
-                vis[at[hidden]] = False
-            else:
-                k, g = scene.faces_around(self.face_index[crease])
-                kc = crease[k]
-                seg = camera.eye - self.points[kc]
-                seg_len = np.sqrt(np.einsum("ij,ij->i", seg, seg))
-                hit = _pair_occludes(self.points[kc], seg, seg_len, scene.planes, g, self.face_index[kc], tolerance)
-                gone = np.zeros(len(self.points), dtype=bool)
-                gone[kc[hit]] = True
-                vis &= ~gone[rays]
+            scene = oracle_scene(self.mesh)
+            hidden = _crease(
+                crease, self.points, self.face_index, np.asarray(camera.eye, dtype=np.float64), scene.packed_planes,
+                scene.corner_vertex, scene.vertex_start, scene.vertex_faces, float(tolerance),
+            )
+            vis[at[hidden]] = False
         idx = rays[tie]
         self.last_cpu_fraction = len(idx) / max(len(self.points), 1)
         if len(idx):

@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 from zbuf_occlude.mesh.cache import MeshCache
-from zbuf_occlude.render.exact_backend import exact_face_groups
+from zbuf_occlude.geometry.grouping import exact_face_groups
 from zbuf_occlude.visibility.oracle_numpy import DEFAULT_PAIRS_PER_CHUNK, occluded_unchecked
 from zbuf_occlude.defaults import DEFAULT_SELF_HIT_TOLERANCE
 from zbuf_occlude.visibility.registry import check_face_index, check_points
@@ -30,6 +30,7 @@ from zbuf_occlude.visibility.segment_triangle import (
     check_tolerance,
     dot3,
     mesh_planes,
+    pack_planes,
     near_own_surface,
     pair_occludes,
     triangle_planes,
@@ -77,6 +78,7 @@ class _EmbreeScene:
         faces = np.asarray(faces, dtype=np.int64)
         self.n_faces = len(faces)
         self.planes = triangle_planes(vertices[faces]) if planes is None else planes
+        self.packed_planes = pack_planes(self.planes)  # rows of kernels.pair_occludes_one (crease re-checks)
         # Faces with bit-identical vertices (same order) give bit-identical tests, so one face
         # per group stands for all: the BVH, the adjacency and the exact fallback hold only
         # these.  A mesh of m copies of one face (ModelNet repeats faces; a hostile file can
@@ -145,14 +147,14 @@ _scenes: MeshCache[_EmbreeScene] = MeshCache(
 )
 
 
-def _scene_for(mesh: trimesh.Trimesh) -> _EmbreeScene:
+def scene_for(mesh: trimesh.Trimesh) -> _EmbreeScene:
     """The cached Embree scene of ``mesh`` (:class:`~zbuf_occlude.mesh.cache.MeshCache`)."""
     return _scenes(mesh)
 
 
 def _embree_scene(mesh: trimesh.Trimesh | ArrayLike) -> _EmbreeScene:
     if isinstance(mesh, trimesh.Trimesh):
-        return _scene_for(mesh)
+        return scene_for(mesh)
     tri = np.asarray(mesh, dtype=np.float64)
     if tri.ndim != 3 or tri.shape[1:] != (3, 3):
         raise InvalidInputError(f"expected a trimesh.Trimesh or (F, 3, 3) triangles, got shape {tri.shape}")

@@ -32,6 +32,8 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.cache import MeshCache
 
 __all__ = [
+    "PACKED_COLUMNS",
+    "pack_planes",
     "TrianglePlanes",
     "triangle_planes",
     "mesh_planes",
@@ -288,6 +290,22 @@ def boundary_times_cos(
         cos = np.abs(dot3(direction, planes.normal)) / np.sqrt(dot3(planes.normal, planes.normal))
     # Degenerate faces give NaN: keep those points in (NaN fails every "> band" test).
     return np.nan_to_num(np.abs(edge_dist).min(axis=1) * cos, nan=0.0)
+
+
+#: float64 values per face in :func:`pack_planes`'s rows.
+PACKED_COLUMNS = 16
+
+
+def pack_planes(planes: TrianglePlanes) -> NDArray[np.float64]:
+    """``(F, 16) float64``, C-contiguous: one row per face, ``normal (3)``, ``offset``, three ``edge normals (3 × 3)``,
+    three ``edge offsets``: what :func:`zbuf_occlude.visibility.kernels.pair_occludes_one` reads."""
+    n = int(planes.offset.shape[0])
+    packed = np.empty((n, PACKED_COLUMNS))
+    packed[:, 0:3] = planes.normal
+    packed[:, 3] = planes.offset
+    packed[:, 4:13] = planes.edge_normals.reshape(n, 9)
+    packed[:, 13:16] = planes.edge_offsets
+    return packed
 
 
 def check_eye(eye: ArrayLike) -> NDArray[np.float64]:

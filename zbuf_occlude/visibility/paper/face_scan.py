@@ -38,7 +38,14 @@ from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 from zbuf_occlude.visibility.oracle_numpy import DEFAULT_PAIRS_PER_CHUNK
 from zbuf_occlude.defaults import DEFAULT_SELF_HIT_TOLERANCE
 from zbuf_occlude.visibility.registry import check_face_index, check_points
-from zbuf_occlude.visibility.segment_triangle import TrianglePlanes, check_eye, check_tolerance, inside_triangle, segment_plane
+from zbuf_occlude.visibility.segment_triangle import (
+    TrianglePlanes,
+    check_eye,
+    check_tolerance,
+    inside_triangle,
+    pack_planes,
+    segment_plane,
+)
 
 __all__ = ["BACKENDS", "occluded_by_faces", "numba_available", "face_count"]
 
@@ -48,9 +55,6 @@ BACKENDS = ("auto", "numba", "numpy")
 #: ``pairs_per_chunk // 256`` faces at a time, small enough that a hidden point stops
 #: being tested soon after its first occluder, large enough to amortise numpy's overhead.
 _NUMPY_POINTS_PER_BLOCK = 256
-#: Columns of the packed per-face rows the numba kernel reads: normal (3), offset (1),
-#: edge normals (9), edge offsets (3), so that one face is two cache lines.
-_PACKED_COLUMNS = 16
 
 
 def numba_available() -> bool:
@@ -61,11 +65,11 @@ def numba_available() -> bool:
 # ``prange`` is ``range`` until numba is imported by _numba_kernel(), which rebinds it to
 # numba.prange before compiling, so that this module imports without numba.
 prange = range
+pair_occludes_one = None  # bound by _numba_kernel() to visibility.kernels.pair_occludes_one
 
 
 def _occluded_loop(points, eye, packed, own_face, end, tolerance, out):  # pragma: no cover - compiled
-    # Transcription of segment_triangle.segment_plane + inside_triangle for one pair at a
-    # time: keep every operation and its order, or the two backends could disagree.
+    # The pair test is the one kernel of every CPU method (visibility/kernels.py), inlined here.
     use_own = own_face.shape[0] > 0
     for k in prange(points.shape[0]):
         px = points[k, 0]
@@ -77,25 +81,7 @@ def _occluded_loop(points, eye, packed, own_face, end, tolerance, out):  # pragm
         seg_len = math.sqrt(sx * sx + sy * sy + sz * sz)
         own = own_face[k] if use_own else -1
         for j in range(end[k]):
-            if j == own:
-                continue
-            row = packed[j]
-            # Eq. 4-6: t = (n·A - n·p) / (n·(e - p)); a parallel segment gives inf/nan
-            # and fails the comparisons below (error_model="numpy": no exception).
-            t = (row[3] - (row[0] * px + row[1] * py + row[2] * pz)) / (row[0] * sx + row[1] * sy + row[2] * sz)
-            if not (t >= 0.0 and t <= 1.0):
-                continue
-            if not (t * seg_len > tolerance):
-                continue
-            # Eq. 7-10: X = p + t (e - p) on the inner side of the three edge planes.
-            x0 = px + t * sx
-            x1 = py + t * sy
-            x2 = pz + t * sz
-            if (
-                x0 * row[4] + x1 * row[5] + x2 * row[6] >= row[13]
-                and x0 * row[7] + x1 * row[8] + x2 * row[9] >= row[14]
-                and x0 * row[10] + x1 * row[11] + x2 * row[12] >= row[15]
-            ):
+            if j != own and pair_occludes_one(px, py, pz, sx, sy, sz, seg_len, packed[j], tolerance):
                 out[k] = True
                 break
 
@@ -108,7 +94,10 @@ def _numba_kernel() -> Any:
         raise BackendUnavailable(
             f"backend='numba' needs numba: pip install 'zbuf-occlude[fast]' ({exc}); or use backend='numpy'"
         ) from None
+    from zbuf_occlude.visibility.kernels import pair_occludes_one
+
     globals()["prange"] = numba.prange
+    globals()["pair_occludes_one"] = pair_occludes_one
     # cache=True keeps the compiled kernel in __pycache__ (compiling takes seconds);
     # error_model="numpy" makes x / 0 give inf/nan like numpy instead of raising.
     return numba.njit(parallel=True, cache=True, error_model="numpy", nogil=True)(_occluded_loop)
@@ -124,15 +113,6 @@ def _resolve_backend(backend: str) -> str:
 
 def face_count(planes: TrianglePlanes) -> int:
     return int(planes.offset.shape[0])
-
-
-def _pack(planes: TrianglePlanes) -> NDArray[np.float64]:
-    packed = np.empty((face_count(planes), _PACKED_COLUMNS))
-    packed[:, 0:3] = planes.normal
-    packed[:, 3] = planes.offset
-    packed[:, 4:13] = planes.edge_normals.reshape(-1, 9)
-    packed[:, 13:16] = planes.edge_offsets
-    return packed
 
 
 def _occluded_numpy_blocks(
@@ -278,7 +258,7 @@ def occluded_by_faces(
         kernel(
             pts,
             e,
-            _pack(ordered),
+            pack_planes(ordered),
             own if own is not None else np.zeros(0, dtype=np.int64),
             end,
             tol,
