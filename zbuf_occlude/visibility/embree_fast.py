@@ -70,6 +70,28 @@ _MAX_START = 2e-2
 _BAND_LO = 2e-6
 #: Rays per chunk of the thread pool.
 _CHUNK = 65536
+#: Depth slack of the frustum test, relative to the depth: float32 points within it of the near or
+#: far plane are settled by the float64 frustum test of the oracle (``FRUSTUM_BORDER``).
+_DEPTH_REL_MARGIN = 1e-5
+#: Smallest ``|cos|`` of a sightline and its face used in divisions (an edge-on face gives 0).
+_MIN_COS = 1e-30
+#: Frustum border, pixels: a constant plus a share of the image size, above float32's projection
+#: error (~1e-3 px at 1024²); points within it of an image edge get the float64 frustum test.
+_BORDER_PX, _BORDER_PER_PX = 1e-3, 1e-5
+#: Faces within this much more than the edge-on sine (float32 cosines) are re-checked in float64.
+_EDGE_ON_SLACK = 1e-3
+
+# Bits of a point's status from _prepare (numba reads these module ints as constants).
+#: The point is in the camera's frustum.
+IN_FRUSTUM = 1
+#: Its ray would start beyond the bounding sphere: decided by the exact test, not by Embree.
+EXACT_NEEDED = 2
+#: Within the frustum's float32 margin: re-checked by the float64 frustum test.
+FRUSTUM_BORDER = 4
+#: Its face may be seen edge-on (definition rule b): re-checked in float64.
+MAYBE_EDGE_ON = 8
+#: Closer to its face's boundary than pass 2's start: a neighbouring face may hide it (crease).
+CREASE = 16
 
 
 class _Scene:
@@ -128,9 +150,9 @@ def _executor(threads: int) -> ThreadPoolExecutor:
 def _prepare_py(p, pp, normals, boundary, eye, frame, cam, consts):
     """Per point of a chunk: frustum status and the two rays (see :class:`FastScene`).
 
-    Returns ``status`` (uint8 bits: 1 in frustum, 2 exact needed, 4 frustum border,
-    8 maybe edge-on, 16 closer to its face's boundary than pass 2's start: a crease), pass-1 origins and lengths, pass-2 origins and lengths (0: no ray),
-    unit directions (float32, mesh-centred frame).
+    Returns ``status`` (uint8 bits :data:`IN_FRUSTUM`, :data:`EXACT_NEEDED`, :data:`FRUSTUM_BORDER`,
+    :data:`MAYBE_EDGE_ON`, :data:`CREASE`), pass-1 origins and lengths, pass-2 origins and lengths
+    (0: no ray), unit directions (float32, mesh-centred frame).
     """
     n = len(p)
     status = np.zeros(n, dtype=np.uint8)
@@ -147,16 +169,16 @@ def _prepare_py(p, pp, normals, boundary, eye, frame, cam, consts):
         org1[i, 0], org1[i, 1], org1[i, 2] = x, y, z
         dirs[i, 0], dirs[i, 1], dirs[i, 2] = 1.0, 0.0, 0.0
         depth = frame[2, 0] * x + frame[2, 1] * y + frame[2, 2] * z + frame[2, 3]
-        dm = 1e-5 * abs(depth)
+        dm = _DEPTH_REL_MARGIN * abs(depth)
         if depth < znear - dm or depth > zfar + dm:
             continue
         u = (frame[0, 0] * x + frame[0, 1] * y + frame[0, 2] * z + frame[0, 3]) * f / depth + 0.5 * width
         v = (frame[1, 0] * x + frame[1, 1] * y + frame[1, 2] * z + frame[1, 3]) * f / depth + 0.5 * height
         if u < -margin or u >= width + margin or v < -margin or v >= height + margin:
             continue
-        st = 1
+        st = IN_FRUSTUM
         if depth < znear + dm or depth > zfar - dm or u < margin or u >= width - margin or v < margin or v >= height - margin:
-            st |= 4
+            st |= FRUSTUM_BORDER
         dx, dy, dz = eye[0] - x, eye[1] - y, eye[2] - z
         length = np.sqrt(dx * dx + dy * dy + dz * dz)
         dx, dy, dz = dx / length, dy / length, dz / length
@@ -165,11 +187,11 @@ def _prepare_py(p, pp, normals, boundary, eye, frame, cam, consts):
         if has_normals:
             cos = abs(normals[i, 0] * dx + normals[i, 1] * dy + normals[i, 2] * dz)
             if cos < edge_cos:
-                st |= 8
-        start = min(start_rel * radius / max(cos, 1e-30), max_start * radius)
-        band = band_rel * radius / max(cos, 1e-30)
+                st |= MAYBE_EDGE_ON
+        start = min(start_rel * radius / max(cos, _MIN_COS), max_start * radius)
+        band = band_rel * radius / max(cos, _MIN_COS)
         if has_normals and boundary[i] < band:
-            st |= 16
+            st |= CREASE
         b = x * dx + y * dy + z * dz
         disc = b * b - (pp[i] - radius * radius)
         far = min(-b + np.sqrt(max(disc, 0.0)), length)
@@ -180,7 +202,7 @@ def _prepare_py(p, pp, normals, boundary, eye, frame, cam, consts):
                 org2[i, 0], org2[i, 1], org2[i, 2] = x + dx * band, y + dy * band, z + dz * band
                 len2[i] = start - band
         elif band < far:
-            st |= 2
+            st |= EXACT_NEEDED
         status[i] = st
     return status, org1, len1, org2, len2, dirs
 
@@ -326,19 +348,19 @@ class FastScene(SessionBase):
         frame[:, 3] = rt[:, :3] @ sc.centre + rt[:, 3]
         cam = np.array(
             [camera.focal_px, camera.width, camera.height, camera.znear, camera.zfar,
-             1e-3 + 1e-5 * max(camera.width, camera.height)], dtype=np.float32)
-        consts = np.array([sc.radius, _START, _MAX_START, _BAND_LO, EDGE_ON_SIN + 1e-3], dtype=np.float32)
+             _BORDER_PX + _BORDER_PER_PX * max(camera.width, camera.height)], dtype=np.float32)
+        consts = np.array([sc.radius, _START, _MAX_START, _BAND_LO, EDGE_ON_SIN + _EDGE_ON_SLACK], dtype=np.float32)
         normals = n32[lo:hi] if self.face_index is not None else np.zeros((0, 3), dtype=np.float32)
         bound = boundary[lo:hi] if self.face_index is not None else np.zeros(0, dtype=np.float32)
         status, org1, len1, org2, len2, dirs = _prepare(p32[lo:hi], pp[lo:hi], normals, bound, eye_c, frame, cam, consts)
-        border = np.flatnonzero(status & 4)
+        border = np.flatnonzero(status & FRUSTUM_BORDER)
         if len(border):  # within a hair of the frustum's border: Camera.in_frustum decides
             inside = camera.in_frustum(sorted_points[lo + border])
             status[border[~inside]] = 0
         hit = np.asarray(sc.scene.run(org1, dirs, dists=len1, query="OCCLUDED")) >= 0  # -1: nothing hit
-        inside = (status & 1).astype(bool)
+        inside = (status & IN_FRUSTUM).astype(bool)
         visible = inside & ~hit
-        tie = inside & ((status & 2) != 0)  # start beyond the sphere's exit: exact
+        tie = inside & ((status & EXACT_NEEDED) != 0)  # start beyond the sphere's exit: exact
         idx = np.flatnonzero(visible & (len2 > 0))
         if len(idx):
             near = np.asarray(sc.scene.run(org2[idx], dirs[idx], dists=len2[idx], query="OCCLUDED")) >= 0
@@ -362,7 +384,7 @@ class FastScene(SessionBase):
         vis = np.concatenate([v for v, _, _ in parts])
         tie = np.concatenate([t for _, t, _ in parts])
         status = np.concatenate([st for _, _, st in parts])
-        at = np.flatnonzero(vis & ~tie & ((status & 16) != 0))
+        at = np.flatnonzero(vis & ~tie & ((status & CREASE) != 0))
         crease = rays[at]
         if len(crease):
             # Within pass 2's start of its face's boundary, the point may be hidden by a
@@ -380,7 +402,7 @@ class FastScene(SessionBase):
             fi_t = None if self.face_index is None else self.face_index[idx]
             vis[tie] = ~occluded_embree(self.mesh, self.points[idx], camera.eye, face_index=fi_t, tolerance=tolerance)
         if self.face_index is not None:
-            edge = np.flatnonzero(vis & ((status & 8) != 0))
+            edge = np.flatnonzero(vis & ((status & MAYBE_EDGE_ON) != 0))
             pts = self.points[rays[edge]]
             vis[edge[edge_on_own(mesh_planes(self.mesh).normal[self.face_index[rays[edge]]], pts, camera.eye)]] = False
         visible[rays] = vis
