@@ -30,7 +30,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from zbuf_occlude.farm import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION, PAPER_SAMPLES_PER_MB, FarmParams, run_farm
+from zbuf_occlude.farm import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION, PAPER_SAMPLES_PER_MB, FarmParams, RunOptions, run_farm
 from zbuf_occlude.mesh.inputs import FarmObject, discover_objects
 
 #: The paper's data set: 5 meshes × 40 classes (§4.3).
@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
                 dense_points=args.dense_points, resolution=args.resolution, storage=storage,
             )  # fmt: skip
             t0 = time.perf_counter()
-            s = run_farm(objects, out, params=params, workers=workers, progress=True, command="benchmarks/bench_farm.py")
+            s = run_farm(objects, out, params, RunOptions(workers=workers, command="benchmarks/bench_farm.py"))
             wall = time.perf_counter() - t0
             load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
             rows.append({

@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 
 from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS
+from zbuf_occlude.farm.config import RunOptions
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 #: Real ModelNet meshes, next to (not inside) the repository.
@@ -129,5 +130,5 @@ def tiny_dataset(out: Path, storage: str = "dense") -> Path:
         (tree / rel).parent.mkdir(parents=True, exist_ok=True)
         (tree / rel).symlink_to(SAMPLE_MESHES / rel)
     params = FarmParams(views="0:0,30:90", samples_per_view=1, n_points=64, dense_points=1024, resolution=64, storage=storage)
-    run_farm(tree, out, params=params, progress=False)
+    run_farm(tree, out, params=params, options=RunOptions(progress=False))
     return out

@@ -21,6 +21,7 @@ from conftest import REPO_ROOT, SAMPLE_MESHES, tiny_dataset
 from zbuf_occlude import OccludedDataset
 from zbuf_occlude.cli.main import main
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
+from zbuf_occlude.farm.config import RunOptions
 
 CHAIR = SAMPLE_MESHES / "chair/train/chair_0001.off"
 
@@ -326,7 +327,7 @@ def test_a_class_name_with_a_control_character_is_refused_before_any_work(tmp_pa
     shutil.copytree(SAMPLE_MESHES / "chair", tmp_path / "meshes" / "chair")
     monkeypatch.setattr(mesh, "load_mesh", lambda *a: pytest.fail("a mesh was loaded"))  # the worker imports it when it runs
     with pytest.raises(InvalidInputError, match=re.escape(f"class name {cls!r} holds the control character")):
-        run_farm(tmp_path / "meshes", tmp_path / "out", params=FarmParams(views="0:0", dense_points=256), progress=False)
+        run_farm(tmp_path / "meshes", tmp_path / "out", params=FarmParams(views="0:0", dense_points=256), options=RunOptions(progress=False))
 
 
 def test_shape_names_with_a_control_character_are_refused_by_the_reader(ds: Path) -> None:

@@ -16,6 +16,7 @@ import pytest
 
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
 from zbuf_occlude.cli.main import build_parser, main
+from zbuf_occlude.cli.options import RenamedOption
 from zbuf_occlude.defaults import DEFAULT_DENSE_POINTS, DEFAULT_N_POINTS, DEFAULT_RESOLUTION, DEFAULT_SEED, DEFAULT_VIEWS
 from zbuf_occlude.defaults import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION
 from zbuf_occlude.farm.config import DEFAULT_VIEWS as FARM_VIEWS
@@ -54,8 +55,8 @@ def test_every_subcommand_has_a_description_and_every_option_help(name: str) -> 
     sub = SUBCOMMANDS[name]
     assert sub.description and len(sub.description) > 20, f"{name}: no description"
     for action in sub._actions:
-        if isinstance(action, (argparse._HelpAction, argparse._SubParsersAction)):
-            continue
+        if isinstance(action, (argparse._HelpAction, argparse._SubParsersAction, RenamedOption)):
+            continue  # an old spelling is hidden on purpose
         assert action.help and action.help != argparse.SUPPRESS, f"{name} {action.option_strings or action.dest}: no help"
 
 
@@ -73,7 +74,7 @@ def test_shown_defaults_are_the_defaults(name: str) -> None:
 EXPECTED = {
     "generate": {"--views": DEFAULT_VIEWS, "--points": DEFAULT_N_POINTS, "--resolution": DEFAULT_RESOLUTION,
                  "--radius": DEFAULT_RADIUS, "--seed": DEFAULT_SEED, "--dense-points": DEFAULT_DENSE_POINTS},
-    "validate": {"--views": DEFAULT_VIEWS, "--points": DEFAULT_DENSE_POINTS, "--resolution": DEFAULT_RESOLUTION,
+    "validate": {"--views": DEFAULT_VIEWS, "--dense-points": DEFAULT_DENSE_POINTS, "--resolution": DEFAULT_RESOLUTION,
                  "--radius": DEFAULT_RADIUS, "--seed": DEFAULT_SEED},
     "farm": {"--views": FARM_VIEWS, "--points": DEFAULT_N_POINTS, "--resolution": DEFAULT_FARM_RESOLUTION,
              "--radius": DEFAULT_RADIUS, "--seed": DEFAULT_SEED, "--dense-points": DEFAULT_FARM_DENSE_POINTS},
@@ -98,11 +99,21 @@ def test_generate_notes_where_its_defaults_differ_from_the_farms() -> None:
     assert f"generate's: {DEFAULT_RESOLUTION}" in _option(f, "--resolution").help
 
 
-def test_generate_and_validate_describe_their_own_points() -> None:
-    generate = _option(SUBCOMMANDS["generate"], "--points").help
-    validate = _option(SUBCOMMANDS["validate"], "--points").help
-    assert "per sample" in generate and "validate" not in generate
-    assert "each mesh's surface" in validate and "generate" not in validate
+def test_one_meaning_per_option_name() -> None:
+    # --points: the points of one sample; --dense-points: the cloud sampled on each mesh
+    for name in ("generate", "farm"):
+        assert "per sample" in _option(SUBCOMMANDS[name], "--points").help
+    for name in ("validate", "compare", "elevation-profile"):
+        assert "surface" in _option(SUBCOMMANDS[name], "--dense-points").help or "each mesh" in _option(SUBCOMMANDS[name], "--dense-points").help
+        assert _option(SUBCOMMANDS[name], "--points").help == argparse.SUPPRESS  # the old spelling, hidden
+
+
+@pytest.mark.parametrize("command", [["validate", "--views", "0:0", "--resolution", "64"], ["compare", "--methods", "oracle", "--views", "0:0",
+                                     "--resolution", "64", "--no-progress"]])
+def test_the_old_spelling_still_works_and_warns(command, tmp_path, capsys) -> None:
+    extra = ["--out", str(tmp_path / "c")] if command[0] == "compare" else []
+    assert main([command[0], str(BOX), *command[1:], *extra, "--points", "150"]) == 0
+    assert "--points is deprecated here" in capsys.readouterr().err
 
 
 # -- methods whose extra is missing ------------------------------------------------------------
@@ -121,7 +132,7 @@ def test_info_does_not_offer_open3d_methods_without_open3d(no_open3d, capsys) ->
 
 
 def test_validate_refuses_a_missing_extra_before_printing_anything(no_open3d, capsys) -> None:
-    assert main(["validate", str(BOX), "--methods", "open3d-raycast", "--views", "0:0", "--points", "100"]) == 2
+    assert main(["validate", str(BOX), "--methods", "open3d-raycast", "--views", "0:0", "--dense-points", "100"]) == 2
     captured = capsys.readouterr()
     assert captured.out == ""  # no table header
     assert "method 'open3d-raycast' needs the open3d extra" in captured.err
@@ -164,8 +175,8 @@ def _option_help(parser: argparse.ArgumentParser, dest: str) -> str:
 # -- progress bars only on a terminal ------------------------------------------------------------
 @pytest.mark.parametrize(
     "argv",
-    [["compare", str(BOX), "--methods", "oracle", "--points", "200", "--views", "0:0", "--resolution", "64", "--out", "{tmp}/c"],
-     ["elevation-profile", str(BOX), "--method", "oracle", "--points", "200", "--azimuths", "1", "--elevations", "0,30",
+    [["compare", str(BOX), "--methods", "oracle", "--dense-points", "200", "--views", "0:0", "--resolution", "64", "--out", "{tmp}/c"],
+     ["elevation-profile", str(BOX), "--method", "oracle", "--dense-points", "200", "--azimuths", "1", "--elevations", "0,30",
       "--resolution", "64", "--out", "{tmp}/p.png"]],
     ids=["compare", "elevation-profile"],
 )  # fmt: skip

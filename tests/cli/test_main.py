@@ -61,7 +61,7 @@ def test_generate_h5_and_ply(tmp_path, two_meshes):
 
 def test_validate_prints_agreement_per_pose(two_meshes, tmp_path, capsys):
     csv_path = tmp_path / "v.csv"
-    code = main(["validate", str(two_meshes), "--views", "30:45", "--points", "3000", "--methods", "zbuffer,zbuffer-tolerance", "--csv", str(csv_path)])
+    code = main(["validate", str(two_meshes), "--views", "30:45", "--dense-points", "3000", "--methods", "zbuffer,zbuffer-tolerance", "--csv", str(csv_path)])
     out = capsys.readouterr().out
     assert code == 0 and "zbuffer: mean agreement" in out and csv_path.exists()
     accuracy = [float(line.split()[4]) for line in out.splitlines() if " zbuffer " in line]
@@ -84,7 +84,7 @@ def test_user_errors_are_one_line_and_exit_2(tmp_path, capsys):
 def test_validate_exits_1_when_a_mesh_fails(tmp_path, two_meshes, capsys):
     bad = two_meshes / "sofa" / "train" / "broken.off"
     bad.write_text("OFF\n3 1 0\n0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n")
-    code = main(["validate", str(two_meshes), "--views", "30:45", "--points", "500", "--resolution", "128"])
+    code = main(["validate", str(two_meshes), "--views", "30:45", "--dense-points", "500", "--resolution", "128"])
     captured = capsys.readouterr()
     assert code == 1
     assert "FAILED" in captured.err and "broken.off" in captured.err

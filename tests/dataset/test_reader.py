@@ -16,6 +16,7 @@ from zbuf_occlude.dataset.layout import MANIFEST_FILE
 from zbuf_occlude.dataset.reader import reconstruct_samples, samples_per_pose, unpack_visible
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.farm import FarmParams, run_farm
+from zbuf_occlude.farm.config import RunOptions
 
 #: Shipped real meshes (data/samples), as (path there, class, split): a fresh clone runs it all.
 MESHES = [
@@ -39,7 +40,7 @@ def datasets(tmp_path_factory) -> dict[str, Path]:
     for storage in ("dense", "compact"):
         out[storage] = tmp_path_factory.mktemp(storage)
         params = FarmParams(**{**PARAMS.to_dict(), "storage": storage})
-        run_farm(root, out[storage], params=params, progress=False)
+        run_farm(root, out[storage], params=params, options=RunOptions(progress=False))
     return out
 
 

@@ -151,14 +151,14 @@ def test_cli_main_runs_compare_and_elevation_profile(tmp_path: Path) -> None:
     from zbuf_occlude.cli.main import main
 
     path = _tiny_path()
-    assert main(["compare", str(path), "--methods", "oracle,og32", "--points", "120", "--views", "0:0,45:90",
+    assert main(["compare", str(path), "--methods", "oracle,og32", "--dense-points", "120", "--views", "0:0,45:90",
                  "--resolution", "96", "--out", str(tmp_path / "c"), "--no-progress"]) == 0  # fmt: skip
     with open(tmp_path / "c" / "results.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert {r["method"] for r in rows} == {"oracle", "og32"} and all(r["error"] == "" for r in rows)
     by_method = {r["method"]: r for r in rows}
     assert float(by_method["oracle"]["accuracy"]) == 1.0 and 0.8 < float(by_method["og32"]["accuracy"]) <= 1.0
-    assert main(["elevation-profile", str(path), "--method", "oracle", "--points", "400", "--elevations=-90,90",
+    assert main(["elevation-profile", str(path), "--method", "oracle", "--dense-points", "400", "--elevations=-90,90",
                  "--azimuths", "2", "--out", str(tmp_path / "p"), "--no-progress"]) == 0  # fmt: skip
     with open(tmp_path / "p" / "elevation_profile.csv") as fh:
         assert [float(r["elevation_deg"]) for r in csv.DictReader(fh)] == [-90.0, 90.0]
@@ -174,7 +174,7 @@ def test_cli_compare_handler_runs(tmp_path: Path) -> None:
     add_compare_parser(parser.add_subparsers())
     args = parser.parse_args(
         [
-            "compare", str(path), "--methods", "oracle,og32", "--points", "150", "--views", "0:0",
+            "compare", str(path), "--methods", "oracle,og32", "--dense-points", "150", "--views", "0:0",
             "--resolution", "128", "--out", str(tmp_path / "o"), "--no-progress",
         ]
     )  # fmt: skip

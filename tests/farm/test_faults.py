@@ -23,6 +23,7 @@ from zbuf_occlude.farm import FarmParams, merge_farm, run_farm
 from zbuf_occlude.dataset.layout import LOCK_FILE
 from zbuf_occlude.errors import DatasetBusy
 from zbuf_occlude.farm.lock import farm_lock, task_lock_path
+from zbuf_occlude.farm.config import RunOptions
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 #: The three smallest shipped meshes (96–400 faces).
@@ -100,7 +101,7 @@ def test_a_lock_left_by_a_dead_process_is_taken_over(tree, tmp_path):
     out = tmp_path / "ds"
     out.mkdir()
     (out / LOCK_FILE).write_text(f"{_dead_pid()}\n{_host()}\n")
-    summary = run_farm(tree, out, params=PARAMS, progress=False)
+    summary = run_farm(tree, out, params=PARAMS, options=RunOptions(progress=False))
     assert summary.finished and summary.done == len(MESHES)
     assert not (out / LOCK_FILE).exists()
 
@@ -110,13 +111,13 @@ def test_a_lock_of_another_host_is_never_broken(tree, tmp_path):
     out.mkdir()
     (out / LOCK_FILE).write_text("4242\nnode17.cluster\n")
     with pytest.raises(DatasetBusy, match=r"pid 4242 on host node17\.cluster since .*delete .*\.zbuf_occlude\.lock"):
-        run_farm(tree, out, params=PARAMS, progress=False)
+        run_farm(tree, out, params=PARAMS, options=RunOptions(progress=False))
     assert (out / LOCK_FILE).exists() and not (out / "records").exists()  # nothing written
 
 
 def test_stale_temp_cleanup_spares_temps_of_live_processes(tree, tmp_path):
     out = tmp_path / "ds"
-    run_farm(tree, out, params=PARAMS, progress=False)
+    run_farm(tree, out, params=PARAMS, options=RunOptions(progress=False))
     from zbuf_occlude.io.atomic import _host_tag
 
     alive = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
@@ -126,7 +127,7 @@ def test_stale_temp_cleanup_spares_temps_of_live_processes(tree, tmp_path):
         legacy_tmp = out / "records" / ".000001.json.k2j3h4.tmp"
         for tmp in (live_tmp, dead_tmp, legacy_tmp):
             tmp.write_bytes(b"partial")
-        run_farm(tree, out, params=PARAMS, progress=False)
+        run_farm(tree, out, params=PARAMS, options=RunOptions(progress=False))
         assert live_tmp.exists()  # another process may be writing it right now
         assert not dead_tmp.exists() and not legacy_tmp.exists()
     finally:
@@ -156,15 +157,15 @@ def test_shard_tasks_run_at_once_but_not_beside_a_whole_run(tree, tmp_path):
     )  # fmt: skip
     try:
         assert holder.stdout.readline().strip() == "held"
-        summary = run_farm(tree, out, params=PARAMS, shard=(1, 2), progress=False)  # runs beside task 0
+        summary = run_farm(tree, out, params=PARAMS, options=RunOptions(shard=(1, 2), progress=False))  # runs beside task 0
         assert summary.done == len(MESHES[1::2]) and not summary.finished
         # only farm-merge writes the data-set-wide files
         assert not (out / MANIFEST_FILE).exists() and not (out / CARD_FILE).exists()
         assert not (out / "train_files.txt").exists() and not (out / "shape_names.txt").exists()
         with pytest.raises(DatasetBusy, match=f"task 0/2.*pid {holder.pid}"):
-            run_farm(tree, out, params=PARAMS, progress=False)
+            run_farm(tree, out, params=PARAMS, options=RunOptions(progress=False))
         with pytest.raises(DatasetBusy, match=f"task 0/2.*pid {holder.pid}"):
-            run_farm(tree, out, params=PARAMS, shard=(0, 2), progress=False)
+            run_farm(tree, out, params=PARAMS, options=RunOptions(shard=(0, 2), progress=False))
         with pytest.raises(DatasetBusy, match=f"task 0/2.*pid {holder.pid}"):
             merge_farm([out])  # a merge waits for every task
     finally:
@@ -173,8 +174,8 @@ def test_shard_tasks_run_at_once_but_not_beside_a_whole_run(tree, tmp_path):
     assert task_lock_path(out, (0, 2)).exists()  # left by the killed holder, broken by the next run
     with farm_lock(out):  # a whole-data-set holder keeps tasks out
         with pytest.raises(DatasetBusy, match="the data set"):
-            run_farm(tree, out, params=PARAMS, shard=(0, 2), progress=False)
-    run_farm(tree, out, params=PARAMS, shard=(0, 2), progress=False)
+            run_farm(tree, out, params=PARAMS, options=RunOptions(shard=(0, 2), progress=False))
+    run_farm(tree, out, params=PARAMS, options=RunOptions(shard=(0, 2), progress=False))
     assert not task_lock_path(out, (0, 2)).exists()
 
 
@@ -186,7 +187,7 @@ def test_a_shard_changed_in_place_is_caught_by_the_reader_and_redone_by_resume(t
     from zbuf_occlude.errors import ShardChecksumError
 
     out = tmp_path / "ds"
-    run_farm(tree, out, params=PARAMS, progress=False)
+    run_farm(tree, out, params=PARAMS, options=RunOptions(progress=False))
     before, _ = OccludedDataset(out).to_arrays()
     shard = out / "shards" / "test_000001.h5"
     size = shard.stat().st_size
@@ -200,7 +201,7 @@ def test_a_shard_changed_in_place_is_caught_by_the_reader_and_redone_by_resume(t
     with pytest.raises(ShardChecksumError, match="test_000001"):
         [ds[i] for i in range(len(ds))]
 
-    summary = run_farm(tree, out, params=PARAMS, progress=False)
+    summary = run_farm(tree, out, params=PARAMS, options=RunOptions(progress=False))
     assert summary.resumed == len(MESHES) - 1 and summary.done == len(MESHES)  # only the changed one redone
     after, _ = OccludedDataset(out).to_arrays()
     assert np.array_equal(before, after) and np.abs(after).max() <= 1.0
@@ -257,7 +258,7 @@ def test_workers_do_not_outlive_a_killed_parent(tree, tmp_path, sig):
         assert rc == 143, proc.stderr.read()
         assert "interrupted; run the same command again to resume" in proc.stderr.read()
         assert not (out / LOCK_FILE).exists()
-        summary = run_farm(tree, out, params=FarmParams(**{**PARAMS.to_dict(), "views": VIEWS_LONG, "method": METHOD_LONG}), progress=False)
+        summary = run_farm(tree, out, params=FarmParams(**{**PARAMS.to_dict(), "views": VIEWS_LONG, "method": METHOD_LONG}), options=RunOptions(progress=False))
         assert summary.finished and summary.done == len(MESHES) and summary.failed == 0
         assert not list(out.rglob(".*.tmp"))
 
@@ -267,12 +268,12 @@ def test_skipped_inputs_are_recorded_in_the_card_and_give_status_1(tree, tmp_pat
     from zbuf_occlude.mesh.inputs import discover_objects
 
     out = tmp_path / "ds"
-    summary = run_farm(discover_objects(tree), out, params=PARAMS, progress=False, skipped=[("in/locked", "permission denied")])
+    summary = run_farm(discover_objects(tree), out, params=PARAMS, options=RunOptions(progress=False, skipped=[("in/locked", "permission denied")]))
     assert summary.done == len(MESHES) and summary.exit_status == 1
     assert "SKIPPED   in/locked: permission denied" in summary.format()
     card = json.loads((out / CARD_FILE).read_text())
     assert card["skipped_inputs"] == [{"path": "in/locked", "reason": "permission denied"}]
-    assert run_farm(discover_objects(tree), out, params=PARAMS, progress=False).exit_status == 0
+    assert run_farm(discover_objects(tree), out, params=PARAMS, options=RunOptions(progress=False)).exit_status == 0
 
 
 # -- issue 15: a long native call, a killed worker ----------------------------------------------------
@@ -355,7 +356,7 @@ def test_a_killed_farm_worker_fails_only_its_object(tree, tmp_path):
     assert failed["status"] == "failed" and "SIGKILL" in failed["error"], failed
     assert "FAILED" in stdout and "stool_0002" in stdout and "SIGKILL" in stdout
     assert not (out / LOCK_FILE).exists()
-    summary = run_farm(tree, out, params=FarmParams(**{**PARAMS.to_dict(), "views": "fibonacci:40"}), progress=False)
+    summary = run_farm(tree, out, params=FarmParams(**{**PARAMS.to_dict(), "views": "fibonacci:40"}), options=RunOptions(progress=False))
     assert summary.resumed == len(MESHES) - 1 and summary.done == len(MESHES) and summary.exit_status == 0
     assert not list(out.rglob(".*.tmp"))
 

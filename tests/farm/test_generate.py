@@ -24,6 +24,7 @@ from zbuf_occlude.errors import ShardChecksumError
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.farm import FarmParams, run_farm
 from zbuf_occlude.io.clouds import read_h5, read_npz
+from zbuf_occlude.farm.config import RunOptions
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 ARGS = ["--views", "0:0,30:45", "--points", "64", "--samples-per-view", "2", "--dense-points", "2000", "--resolution", "128"]
@@ -147,15 +148,14 @@ def test_the_farm_refuses_bad_options_up_front(tree, tmp_path, capsys, no_mesh_l
 
 # -- defect 13 -------------------------------------------------------------------------------------
 def test_validate_points_0_is_a_usage_error(tree, capsys):
-    assert main(["validate", str(tree), "--views", "0:0", "--points", "0"]) == 2
+    assert main(["validate", str(tree), "--views", "0:0", "--dense-points", "0"]) == 2
     assert "--points" in _error(capsys)
 
 
 @pytest.mark.parametrize("damaged", ["dataset_card.json", "manifest.jsonl"])
 def test_a_damaged_card_or_manifest_names_the_file(tree, tmp_path, damaged):
     out = tmp_path / "ds"
-    run_farm(tree, out, params=FarmParams(views="0:0", samples_per_view=1, n_points=32, dense_points=500, resolution=64),
-             progress=False)  # fmt: skip
+    run_farm(tree, out, params=FarmParams(views="0:0", samples_per_view=1, n_points=32, dense_points=500, resolution=64), options=RunOptions(progress=False))  # fmt: skip
     path = out / damaged
     path.write_text(path.read_text()[:-25])  # cut short
     with pytest.raises(InvalidInputError, match=damaged.replace(".", r"\.")):
@@ -169,7 +169,7 @@ def test_generate_h5_equals_the_farm_split_by_split(tree, tmp_path):
     assert not (out / ".parts").exists() and not (out / "occluded.h5").exists()
     farm = tmp_path / "farm"
     params = FarmParams(views="0:0,30:45", samples_per_view=2, n_points=64, dense_points=2000, resolution=128)
-    run_farm(tree, farm, params=params, progress=False)
+    run_farm(tree, farm, params=params, options=RunOptions(progress=False))
     for split in ("train", "test"):
         merged = read_h5(out / f"occluded_{split}.h5")
         assert merged["data"].shape == (4, 64, 3) and list(merged["shape_names"]) == ["sofa", "stool"]

@@ -36,6 +36,7 @@ from zbuf_occlude.pipeline import dense_cloud
 from zbuf_occlude.geometry.samples import object_key, pose_samples
 from zbuf_occlude.visibility.registry import visible_mask
 from zbuf_occlude.visibility.registry import method_info
+from zbuf_occlude.farm.config import RunOptions
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 #: Shipped real meshes (224–7608 faces), as (path under data/samples, class, split).
@@ -85,14 +86,14 @@ def tree(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def dense_run(tree, tmp_path_factory):
     out = tmp_path_factory.mktemp("dense")
-    summary = run_farm(tree, out, params=PARAMS, progress=False, command="test dense")
+    summary = run_farm(tree, out, params=PARAMS, options=RunOptions(progress=False, command="test dense"))
     return out, summary
 
 
 @pytest.fixture(scope="module")
 def compact_run(tree, tmp_path_factory):
     out = tmp_path_factory.mktemp("compact")
-    summary = run_farm(tree, out, params=FarmParams(**{**PARAMS.to_dict(), "storage": "compact"}), progress=False)
+    summary = run_farm(tree, out, params=FarmParams(**{**PARAMS.to_dict(), "storage": "compact"}), options=RunOptions(progress=False))
     return out, summary
 
 
@@ -210,14 +211,14 @@ def test_dense_layout_counts_labels_manifest_card(dense_run):
 
 # -- determinism ------------------------------------------------------------------------------
 def test_worker_count_does_not_change_a_bit(tree, dense_run, tmp_path):
-    summary = run_farm(tree, tmp_path / "w2", params=PARAMS, workers=2, progress=False)
+    summary = run_farm(tree, tmp_path / "w2", params=PARAMS, options=RunOptions(workers=2, progress=False))
     assert summary.workers == "2 processes" and summary.done == len(SMALL_MESHES)
     assert_same_samples(dense_run[0], tmp_path / "w2")
 
 
 def test_shards_then_merge_equal_one_run(tree, dense_run, tmp_path):
     for i in range(2):
-        s = run_farm(tree, tmp_path / f"task{i}", params=PARAMS, shard=(i, 2), progress=False)
+        s = run_farm(tree, tmp_path / f"task{i}", params=PARAMS, options=RunOptions(shard=(i, 2), progress=False))
         assert not s.finished and not (tmp_path / f"task{i}" / CARD_FILE).exists()
     with pytest.raises(InvalidInputError, match="no result yet"):
         merge_farm([tmp_path / "task0"], tmp_path / "partial", progress=False)
@@ -230,14 +231,14 @@ def test_shards_then_merge_equal_one_run(tree, dense_run, tmp_path):
 
     # tasks sharing one --out (a shared file system), merged in place
     for i in (1, 0):
-        run_farm(tree, tmp_path / "shared", params=PARAMS, shard=(i, 2), progress=False)
+        run_farm(tree, tmp_path / "shared", params=PARAMS, options=RunOptions(shard=(i, 2), progress=False))
     merge_farm([tmp_path / "shared"], progress=False)
     assert_same_samples(dense_run[0], tmp_path / "shared")
     assert OccludedDataset(tmp_path / "shared").to_arrays()[0].shape[0] == dense_run[1].samples
 
 
 def test_selection_does_not_change_an_objects_samples(tree, dense_run, tmp_path):
-    run_farm(tree, tmp_path / "sel", params=PARAMS, classes=["stool", "sofa"], progress=False)
+    run_farm(tree, tmp_path / "sel", params=PARAMS, options=RunOptions(classes=["stool", "sofa"], progress=False))
     full, sel = shard_arrays(dense_run[0]), shard_arrays(tmp_path / "sel")
     assert set(sel) == {"sofa/test/sofa_0681", "stool/train/stool_0002"}
     for name, arrays in sel.items():
@@ -246,7 +247,7 @@ def test_selection_does_not_change_an_objects_samples(tree, dense_run, tmp_path)
 
 def test_dask_local_cluster_gives_the_same_data_set(tree, dense_run, tmp_path):
     pytest.importorskip("distributed")
-    summary = run_farm(tree, tmp_path / "dask", params=PARAMS, dask_local=2, progress=False)
+    summary = run_farm(tree, tmp_path / "dask", params=PARAMS, options=RunOptions(dask_local=2, progress=False))
     assert summary.workers.startswith("dask") and summary.done == len(SMALL_MESHES)
     assert_same_samples(dense_run[0], tmp_path / "dask")
 
@@ -255,7 +256,7 @@ def test_dask_scheduler_address_gives_the_same_data_set(tree, dense_run, tmp_pat
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         address = cluster.scheduler_address
-        summary = run_farm(tree, tmp_path / "sched", params=PARAMS, scheduler=address, progress=False)
+        summary = run_farm(tree, tmp_path / "sched", params=PARAMS, options=RunOptions(scheduler=address, progress=False))
     assert summary.workers == f"dask {address}" and summary.done == len(SMALL_MESHES)
     assert_same_samples(dense_run[0], tmp_path / "sched")
 
@@ -337,7 +338,7 @@ def test_padded_poses_through_the_farm_and_the_reader(tree, tmp_path):
     runs = {}
     for storage in ("dense", "compact"):
         p = FarmParams(**{**params.to_dict(), "storage": storage})
-        summary = run_farm(tree, tmp_path / storage, params=p, classes="sofa,stool", progress=False)
+        summary = run_farm(tree, tmp_path / storage, params=p, options=RunOptions(classes="sofa,stool", progress=False))
         assert summary.done == 2
         runs[storage] = OccludedDataset(tmp_path / storage)
     for rec in _manifest(tmp_path / "dense"):
@@ -386,28 +387,28 @@ def test_sigkill_mid_run_then_resume_loses_and_repeats_nothing(tree, tmp_path):
     assert 0 < len(before) < len(SMALL_MESHES)
     assert not (out / CARD_FILE).exists()
 
-    summary = run_farm(tree, out, params=params, progress=False)
+    summary = run_farm(tree, out, params=params, options=RunOptions(progress=False))
     assert summary.finished and summary.done == len(SMALL_MESHES) and summary.resumed == len(before)
     after = {p.name: p.stat().st_mtime_ns for p in (out / "records").glob("*.json")}
     assert all(after[name] == mtime for name, mtime in before.items())  # not redone
     assert not list(out.rglob(".*.tmp"))
 
-    clean = run_farm(tree, tmp_path / "clean", params=params, progress=False)
+    clean = run_farm(tree, tmp_path / "clean", params=params, options=RunOptions(progress=False))
     assert clean.samples == summary.samples
     assert_same_samples(out, tmp_path / "clean")  # nothing missing, nothing twice
-    again = run_farm(tree, out, params=params, progress=False)
+    again = run_farm(tree, out, params=params, options=RunOptions(progress=False))
     assert again.resumed == len(SMALL_MESHES) and again.views == 0
 
 
 def test_other_parameters_need_overwrite(tree, dense_run, tmp_path):
     out = tmp_path / "ow"
     small = FarmParams(**{**PARAMS.to_dict(), "views": "0:0"})
-    run_farm(tree, out, params=small, classes=["chair"], progress=False)
+    run_farm(tree, out, params=small, options=RunOptions(classes=["chair"], progress=False))
     with pytest.raises(InvalidInputError, match="other parameters"):
-        run_farm(tree, out, params=PARAMS, classes=["chair"], progress=False)
+        run_farm(tree, out, params=PARAMS, options=RunOptions(classes=["chair"], progress=False))
     with pytest.raises(InvalidInputError, match="other objects"):
-        run_farm(tree, out, params=small, progress=False)
-    summary = run_farm(tree, out, params=PARAMS, classes=["chair"], overwrite=True, progress=False)
+        run_farm(tree, out, params=small, options=RunOptions(progress=False))
+    summary = run_farm(tree, out, params=PARAMS, options=RunOptions(classes=["chair"], overwrite=True, progress=False))
     assert summary.resumed == 0 and summary.samples == len(PARAMS.poses) * PARAMS.samples_per_view
 
 
@@ -442,7 +443,7 @@ def test_unwritable_output_folder(tree, tmp_path):
     blocker = tmp_path / "a_file"
     blocker.write_text("not a folder")
     with pytest.raises(OutputError, match="cannot create the output folder"):
-        run_farm(tree, blocker / "out", params=PARAMS, progress=False)
+        run_farm(tree, blocker / "out", params=PARAMS, options=RunOptions(progress=False))
 
 
 @pytest.mark.parametrize("error", [OSError(errno.ENOSPC, "No space left on device"), OSError("file write failed: No space left on device")])
@@ -452,7 +453,7 @@ def test_disk_full_is_a_clear_error_and_leaves_no_partial_files(tree, tmp_path, 
 
     monkeypatch.setattr(h5py, "File", full)
     with pytest.raises(OutputError, match="disk full"):
-        run_farm(tree, tmp_path / "full", params=PARAMS, classes=["chair"], progress=False)
+        run_farm(tree, tmp_path / "full", params=PARAMS, options=RunOptions(classes=["chair"], progress=False))
     assert not list((tmp_path / "full").rglob("*.h5")) and not list((tmp_path / "full").rglob(".*.tmp"))
 
 
@@ -498,7 +499,7 @@ def test_ready_plan_of_repeated_meshes(tmp_path):
     # the benchmark's way to repeat a few real meshes as distinct objects (distinct keys)
     src = str(SAMPLE_MESHES / SMALL_MESHES[2][0])
     objects = [FarmObject(i, f"rep{i}/chair_0001", src, "chair", "train", 0) for i in range(2)]
-    summary = run_farm(objects, tmp_path / "rep", params=PARAMS, progress=False)
+    summary = run_farm(objects, tmp_path / "rep", params=PARAMS, options=RunOptions(progress=False))
     arrays = shard_arrays(tmp_path / "rep")
     assert summary.done == 2 and not np.array_equal(arrays["rep0/chair_0001"]["data"], arrays["rep1/chair_0001"]["data"])
 
@@ -672,7 +673,7 @@ def test_worker_sensor_shard_is_the_crops_datasets_and_its_record(tmp_path):
     from zbuf_occlude.farm.config import shard_path
     from zbuf_occlude.farm.worker import process_object
     from zbuf_occlude.io.atomic import file_sha256
-    from zbuf_occlude.sensors.crops import farm_datasets
+    from zbuf_occlude.farm.sensor_crops import farm_datasets
 
     obj = _box_object(tmp_path)
     params = FarmParams(sensor="hdl32e", samples_per_view=3, n_points=64, seed=2, sensor_distance_m=(4.0, 6.0),
@@ -807,10 +808,10 @@ def test_worker_h5_and_npz_samples_carry_the_objects_provenance(tmp_path):
 def test_merge_counts_padded_samples_as_one_run_does(tree, tmp_path):
     # more points per sample than a view sees of the dense cloud: samples are padded
     params = FarmParams(views="0:0,40:90", samples_per_view=1, n_points=1500, dense_points=2048, resolution=96)
-    whole = run_farm(tree, tmp_path / "whole", params=params, progress=False)
+    whole = run_farm(tree, tmp_path / "whole", params=params, options=RunOptions(progress=False))
     assert whole.padded > 0
     for i in range(2):
-        run_farm(tree, tmp_path / f"task{i}", params=params, shard=(i, 2), progress=False)
+        run_farm(tree, tmp_path / f"task{i}", params=params, options=RunOptions(shard=(i, 2), progress=False))
     merged = merge_farm([tmp_path / "task0", tmp_path / "task1"], tmp_path / "merged", progress=False)
     assert (merged.padded, merged.samples, merged.done) == (whole.padded, whole.samples, whole.done)
     card = json.loads((tmp_path / "merged" / CARD_FILE).read_text())
@@ -826,3 +827,15 @@ def test_a_mesh_file_given_to_farm_points_to_generate(tmp_path, capsys):
     assert cli_main(["farm", str(mesh), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert "is a mesh file" in err and "generate" in err and "expected 'PATH LABEL" not in err
+
+
+def test_run_options_are_one_object_and_old_keywords_warn(tmp_path) -> None:
+    from zbuf_occlude.farm.config import options_with
+
+    assert options_with(None, {}) == RunOptions()
+    with pytest.warns(DeprecationWarning, match=r"options=RunOptions\(progress, workers=...\)"):
+        assert options_with(RunOptions(overwrite=True), {"workers": 3, "progress": False}) == RunOptions(
+            workers=3, progress=False, overwrite=True
+        )
+    with pytest.raises(TypeError, match="'wrokers'"):
+        run_farm(tmp_path / "none", tmp_path / "out", PARAMS, wrokers=2)

@@ -12,7 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import zbuf_occlude as zo
 from zbuf_occlude.cli.main import main as cli_main
+from zbuf_occlude.farm.sensor_crops import farm_datasets
+from zbuf_occlude.sensors.crops import CropDistributions
 from zbuf_occlude.dataset.layout import CARD_FILE
 from zbuf_occlude.dataset.reader import OccludedDataset
 from zbuf_occlude.errors import InvalidInputError
@@ -153,3 +156,15 @@ def test_the_padding_warning_of_a_sensor_farm_names_what_applies(tmp_path, caplo
         assert cli_main(["farm", str(SAMPLES), "--out", str(tmp_path / "ds"), *args]) == 0
     warning = " ".join(r.getMessage() for r in caplog.records if "repeated points" in r.getMessage())
     assert "move the sensor closer or lower --points" in warning and "--dense-points" not in warning
+
+
+def test_farm_datasets_are_reproducible_per_sample():
+    kw = dict(name="bed", label=3, object_index=7, n_points=256, seed=11, distributions=CropDistributions(distance_m=(5, 15)))
+    a = farm_datasets(str(SAMPLES / "bed" / "train" / "bed_0001.off"), zo.Lidar.preset("vlp16"), n_samples=3, **kw)
+    b = farm_datasets(str(SAMPLES / "bed" / "train" / "bed_0001.off"), zo.Lidar.preset("vlp16"), n_samples=2, **kw)
+    assert a["data"].shape == (3, 256, 3) and np.all(a["label"] == 3) and np.all(a["object_index"] == 7)
+    # sample k depends on (seed, name, k) only
+    for key in ("data", "distance_m", "n_visible", "ring"):
+        assert np.array_equal(a[key][:2], b[key]), key
+    assert len(set(a["distance_m"].tolist())) == 3
+    assert np.all((a["ring"] >= 0) & (a["ring"] < 16))

@@ -22,6 +22,7 @@ from zbuf_occlude.learn.models import (  # noqa: E402
     voxelize,
 )
 from zbuf_occlude.learn.training import TrainConfig, predict, train  # noqa: E402
+from zbuf_occlude.farm.config import RunOptions
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 
@@ -252,7 +253,7 @@ def test_from_occluded_reads_both_storage_modes(tmp_path, storage):
     listing.write_text("".join(f"{p} {p.parent.parent.name} train\n" for p in meshes))
     params = FarmParams(views="0:0,60:90", samples_per_view=2, n_points=32, dense_points=2000, resolution=128,
                         storage=storage)  # fmt: skip
-    zo.run_farm(listing, tmp_path / "ds", params=params, progress=False)
+    zo.run_farm(listing, tmp_path / "ds", params=params, options=RunOptions(progress=False))
     ds = zo.OccludedDataset(tmp_path / "ds", elevation_deg=[60.0])
     clouds = D.from_occluded(ds, n_points=16, seed=0)
     assert clouds.points.shape == (4, 16, 3)

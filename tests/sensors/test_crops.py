@@ -10,7 +10,7 @@ import pytest
 
 import zbuf_occlude as zo
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.crops import CropDistributions, draw_placement, farm_datasets, lidar_object_samples
+from zbuf_occlude.sensors.crops import CropDistributions, draw_placement, lidar_object_samples
 
 MESH = Path(__file__).resolve().parents[2] / "data" / "samples" / "bed" / "train" / "bed_0001.off"
 
@@ -35,18 +35,6 @@ def test_samples_are_crops_in_the_mesh_frame():
         centre_height_m = (hi[2] - lo[2]) / 2 * 4.5
         assert c.radius == pytest.approx(math.hypot(d, h - centre_height_m) / 4.5, rel=1e-6)
         assert c.n_visible == c.extra["n_returns"] > 0
-
-
-def test_farm_datasets_are_reproducible_per_sample():
-    kw = dict(name="bed", label=3, object_index=7, n_points=256, seed=11, distributions=CropDistributions(distance_m=(5, 15)))
-    a = farm_datasets(str(MESH), zo.Lidar.preset("vlp16"), n_samples=3, **kw)
-    b = farm_datasets(str(MESH), zo.Lidar.preset("vlp16"), n_samples=2, **kw)
-    assert a["data"].shape == (3, 256, 3) and np.all(a["label"] == 3) and np.all(a["object_index"] == 7)
-    # sample k depends on (seed, name, k) only
-    for key in ("data", "distance_m", "n_visible", "ring"):
-        assert np.array_equal(a[key][:2], b[key]), key
-    assert len(set(a["distance_m"].tolist())) == 3
-    assert np.all((a["ring"] >= 0) & (a["ring"] < 16))
 
 
 def test_distribution_errors():

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from zbuf_occlude.cli.options import add_renamed
 from zbuf_occlude.defaults import DEFAULT_RESOLUTION
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.experiments.compare.job import run_compare
@@ -21,7 +22,7 @@ def _cli_compare(args: argparse.Namespace) -> int:
     report = run_compare(
         args.paths,
         args.methods,
-        args.points,
+        args.dense_points,
         args.views,
         args.resolution,
         args.out,
@@ -52,7 +53,11 @@ def add_compare_parser(subparsers: Any) -> argparse.ArgumentParser:
     )
     p.add_argument("paths", nargs="+", help=f"mesh files ({EXTENSIONS_TEXT}) or folders (searched recursively)")
     p.add_argument("--methods", default=",".join(DEFAULT_METHODS), help="comma-separated methods (default: %(default)s)")
-    p.add_argument("--points", default=",".join(str(n) for n in DEFAULT_POINTS), help="point counts (default: %(default)s)")
+    p.add_argument(
+        "--dense-points", default=",".join(str(n) for n in DEFAULT_POINTS),
+        help="points sampled on each mesh, one run per count, comma-separated (default: %(default)s)",
+    )  # fmt: skip
+    add_renamed(p, "--points", "--dense-points", "dense_points")
     p.add_argument("--views", default=DEFAULT_VIEWS, help="pose schedule: grid25, paper100, fibonacci:N or EL:AZ,... (default: %(default)s)")
     p.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION, help="z-buffer resolution in pixels (default: %(default)s)")
     p.add_argument("--out", default="compare_out", help="output folder (default: %(default)s)")

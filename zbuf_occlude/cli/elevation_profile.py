@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from zbuf_occlude.cli.options import add_renamed
 from zbuf_occlude.defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION
 from zbuf_occlude.experiments.elevation_profile import DEFAULT_AZIMUTHS, DEFAULT_ELEVATIONS, DEFAULT_PROFILE_POINTS, elevation_profile
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
@@ -20,7 +21,7 @@ def _cli_profile(args: argparse.Namespace) -> int:
         args.mesh,
         args.out,
         method=args.method,
-        points=args.points,
+        points=args.dense_points,
         elevations=elevations,
         azimuths=args.azimuths,
         resolution=args.resolution,
@@ -44,7 +45,8 @@ def add_profile_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("mesh", help=f"mesh file ({EXTENSIONS_TEXT})")
     p.add_argument("--out", default="elevation_profile.png", help="PNG path or folder (default: %(default)s)")
     p.add_argument("--method", default=DEFAULT_METHOD, help="HSR method (default: %(default)s)")
-    p.add_argument("--points", type=int, default=DEFAULT_PROFILE_POINTS, help="surface samples (default: %(default)s)")
+    p.add_argument("--dense-points", type=int, default=DEFAULT_PROFILE_POINTS, help="points sampled on the surface (default: %(default)s)")
+    add_renamed(p, "--points", "--dense-points", "dense_points", type=int)
     p.add_argument("--elevations", default="", help="comma-separated degrees (default: -90..90 step 10)")
     p.add_argument("--azimuths", type=int, default=DEFAULT_AZIMUTHS, help="azimuths averaged per elevation (default: %(default)s)")
     p.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION, help="image size in pixels (default: %(default)s)")

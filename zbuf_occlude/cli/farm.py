@@ -49,12 +49,10 @@ def _farm_command(args: argparse.Namespace) -> int:
         method=args.method,
         **_sensor_params(args),
     )
+    from zbuf_occlude.farm.config import RunOptions
     from zbuf_occlude.farm.run import run_farm  # meshes, visibility and the GL: imported when the command runs
 
-    summary = run_farm(
-        args.root,
-        args.out,
-        params=params,
+    options = RunOptions(
         classes=args.classes,
         per_class=args.per_class,
         splits=args.splits,
@@ -68,6 +66,7 @@ def _farm_command(args: argparse.Namespace) -> int:
         isolate=True,  # a SIGTERM stops the run at once, even inside a long native call
         command=shlex.join(["zbuf-occlude", *sys.argv[1:]]) if sys.argv else None,
     )
+    summary = run_farm(args.root, args.out, params, options)
     print(summary.format())
     return summary.exit_status
 

@@ -24,7 +24,8 @@ from zbuf_occlude.io.clouds import FORMATS
 from zbuf_occlude.io.atomic import write_csv
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.visibility.metrics import agreement
-from zbuf_occlude.resources import MemoryEstimate, check_memory, estimate_job_memory
+from zbuf_occlude.resources import check_memory, estimate_job_memory
+from zbuf_occlude.cli.options import add_renamed
 from zbuf_occlude.visibility.registry import available_methods, check_runnable, method_info, resolution_option, unavailable_reason, visible_mask
 
 __all__ = ["main", "build_parser", "SAMPLE_MESHES"]
@@ -94,7 +95,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
 
 # -- validate ----------------------------------------------------------------------------------
 def _check_at_least(args: argparse.Namespace, **lowest: int) -> None:
-    """Usage errors name the option: ``--points must be an integer >= 1, got 0``."""
+    """Usage errors name the option: ``--dense-points must be an integer >= 1, got 0``."""
     for name, low in lowest.items():
         value = getattr(args, name)
         if value < low:
@@ -102,14 +103,8 @@ def _check_at_least(args: argparse.Namespace, **lowest: int) -> None:
 
 
 def _check_validate_memory(points: int, resolution: int) -> None:
-    """``validate`` holds a dense cloud of ``--points`` per mesh and one image of ``--resolution``."""
-    est = estimate_job_memory(dense_points=points, resolution=resolution)
-    check_memory(
-        MemoryEstimate(
-            {"--points": est.parts["--dense-points"], "--resolution": est.parts["--resolution"]},
-            {"--points": points, "--resolution": resolution},
-        )
-    )
+    """``validate`` holds a dense cloud of ``--dense-points`` per mesh and one image of ``--resolution``."""
+    check_memory(estimate_job_memory(dense_points=points, resolution=resolution))
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
@@ -117,7 +112,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
     from zbuf_occlude.mesh.discovery import scan_meshes
     from zbuf_occlude.geometry.sampling import check_seed, sample_surface
 
-    _check_at_least(args, points=1, resolution=1)
+    _check_at_least(args, dense_points=1, resolution=1)
     check_seed(args.seed, name="--seed")
     from zbuf_occlude.farm.checks import check_radius
 
@@ -130,7 +125,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
         from zbuf_occlude.render.context import check_image_size
 
         check_image_size(args.resolution, name="--resolution")
-    _check_validate_memory(args.points, args.resolution)
+    _check_validate_memory(args.dense_points, args.resolution)
     meshes, skipped = scan_meshes(_default_paths(args.paths))
     for item in skipped:
         print(f"SKIPPED {item}", file=sys.stderr)
@@ -146,7 +141,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
             failed += 1
             print(f"FAILED {path}: {exc}", file=sys.stderr)
             continue
-        points, face_index = sample_surface(mesh, count=args.points, seed=args.seed)
+        points, face_index = sample_surface(mesh, count=args.dense_points, seed=args.seed)
         for el, az in poses:
             camera = camera_on_sphere(el, az, args.radius, resolution=args.resolution)
             t = time.perf_counter()
@@ -258,7 +253,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_paths(v)
     v.add_argument("--methods", default=DEFAULT_METHOD, help="comma-separated methods to score (see `zbuf-occlude info`) (default: %(default)s)")
     v.add_argument("--views", default=DEFAULT_VIEWS, help=f"{VIEWS_HELP} (default: %(default)s)")
-    v.add_argument("--points", type=int, default=DEFAULT_DENSE_POINTS, help="points sampled on each mesh's surface, scored per pose (default: %(default)s)")
+    v.add_argument("--dense-points", type=int, default=DEFAULT_DENSE_POINTS, help="points sampled on each mesh's surface, scored per pose (default: %(default)s)")
+    add_renamed(v, "--points", "--dense-points", "dense_points", type=int)
     v.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION, help="z-buffer image size of the image-space methods, pixels (default: %(default)s)")
     v.add_argument("--radius", type=float, default=DEFAULT_RADIUS, help=f"{RADIUS_HELP} (default: %(default)s)")
     v.add_argument("--seed", type=int, default=DEFAULT_SEED, help="seed of the surface sampling (default: %(default)s)")

@@ -111,7 +111,7 @@ def plan_meshes(root: str | os.PathLike, classes: Sequence[str] | None = None) -
 def _render(meshes: list[dict], data_dir: Path, views: str, scale: Scale, points: int, method: str, seed: int,
             progress: bool) -> Path:  # fmt: skip
     """Farm the meshes (compact storage) into ``data_dir`` (resumes; reuses a finished run)."""
-    from zbuf_occlude.farm import FarmParams, run_farm
+    from zbuf_occlude.farm import FarmParams, RunOptions, run_farm
 
     data_dir.mkdir(parents=True, exist_ok=True)
     list_file = data_dir / "meshes.txt"
@@ -119,7 +119,7 @@ def _render(meshes: list[dict], data_dir: Path, views: str, scale: Scale, points
     params = FarmParams(views=views, samples_per_view=scale.samples_per_view, n_points=points,
                         dense_points=scale.dense_points, resolution=scale.resolution, seed=seed,
                         storage="compact", method=method)  # fmt: skip
-    run_farm(list_file, data_dir / "dataset", params=params, progress=progress)
+    run_farm(list_file, data_dir / "dataset", params, RunOptions(progress=progress))
     return data_dir / "dataset"
 
 

@@ -62,6 +62,7 @@ def __getattr__(name: str):
 # The same names as __init__.pyi's (a test checks), written out because the API docs read __all__ here.
 __all__ = [
     "FarmParams",
+    "RunOptions",
     "FarmSummary",
     "DatasetBusy",
     "Terminated",

@@ -1,7 +1,7 @@
 """The farm's public names (see ``__init__.py``): read by ``lazy_loader.attach_stub`` and by
 type checkers and the API docs."""
 
-from .config import GENERATE_DEFAULTS, DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION, PAPER_SAMPLES_PER_MB, FarmParams, shard_path
+from .config import GENERATE_DEFAULTS, DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION, PAPER_SAMPLES_PER_MB, FarmParams, RunOptions, shard_path
 from .shards import parse_shard, select_shard
 from .generate import generate
 from .journal import FarmSummary

@@ -8,7 +8,8 @@ import hashlib
 import json
 import logging
 import threading
-from collections.abc import Sequence
+import warnings
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -30,6 +31,7 @@ from zbuf_occlude.defaults import DEFAULT_VIEWS as GENERATE_VIEWS
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError, OutputError
 from zbuf_occlude.dataset.layout import GENERATE_STORAGES, STORAGE_MODES, record_name, sample_file_name, shard_name
 from zbuf_occlude.geometry.sampling import check_seed
+from zbuf_occlude.mesh.discovery import SPLITS
 
 if TYPE_CHECKING:  # annotations only: inputs imports nothing from here
     from zbuf_occlude.mesh.inputs import FarmObject
@@ -257,3 +259,49 @@ GENERATE_DEFAULTS = FarmParams(
     views=GENERATE_VIEWS, samples_per_view=DEFAULT_SAMPLES_PER_VIEW, n_points=DEFAULT_N_POINTS,
     dense_points=DEFAULT_DENSE_POINTS, resolution=DEFAULT_RESOLUTION, storage="h5",
 )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """How a farm run is carried out, beside :class:`FarmParams` (what it renders); the fields are
+    described in :func:`~zbuf_occlude.farm.run.run_farm`.  None of them changes a written sample."""
+
+    classes: Sequence[str] | str | None = None
+    per_class: int | None = None
+    splits: Sequence[str] | str = SPLITS
+    workers: int = 1
+    shard: tuple[int, int] = (0, 1)
+    scheduler: str | None = None
+    dask_local: int | None = None
+    overwrite: bool = False
+    progress: bool = True
+    command: str | None = None
+    source_text: str | None = None
+    on_finished: Callable[[Path], Any] | None = None
+    skipped: Sequence[tuple[str, str]] = ()
+    class_from: int | None = None
+    layout: str | None = None
+    isolate: bool = False
+
+
+def options_with(options: RunOptions | None, keywords: Mapping[str, Any]) -> RunOptions:
+    """``options`` (default :class:`RunOptions` ``()``) with the fields given as keywords, the old way
+    of :func:`~zbuf_occlude.farm.run.run_farm`: a ``DeprecationWarning`` naming them, for one release.
+
+    Raises
+    ------
+    TypeError
+        A keyword that is no field of :class:`RunOptions` (named).
+    """
+    fields = {f.name for f in dataclasses.fields(RunOptions)}
+    unknown = sorted(set(keywords) - fields)
+    if unknown:
+        raise TypeError(f"run_farm() got unexpected keyword(s) {', '.join(map(repr, unknown))}; RunOptions has: {', '.join(sorted(fields))}")
+    options = options or RunOptions()
+    if keywords:
+        names = ", ".join(sorted(keywords))
+        warnings.warn(
+            f"run_farm({names}=...) is deprecated: pass options=RunOptions({names}=...)", DeprecationWarning, stacklevel=3
+        )
+        options = dataclasses.replace(options, **keywords)
+    return options

@@ -30,7 +30,7 @@ from zbuf_occlude.io.atomic import file_sha256, write_text
 from zbuf_occlude.dataset.layout import CARD_FILE, GENERATE_STORAGES, file_list_name, split_file_name
 from zbuf_occlude.io.safe_paths import path_inside
 from zbuf_occlude.farm.checks import check_out_outside_inputs
-from zbuf_occlude.farm.config import GENERATE_DEFAULTS, FarmParams, record_path
+from zbuf_occlude.farm.config import GENERATE_DEFAULTS, FarmParams, RunOptions, record_path
 from zbuf_occlude.mesh.inputs import FarmObject, scan_inputs
 from zbuf_occlude.farm.journal import FarmSummary, read_json, shape_names_of
 from zbuf_occlude.farm.worker import write_json
@@ -135,10 +135,11 @@ def generate(
     scan = scan_inputs(paths, class_from=class_from)
     objects, skipped = scan.objects, scan.skipped
     out = Path(out)
-    summary = run_farm(
-        objects, out, params=params, workers=1, overwrite=overwrite, progress=progress, command=command,
+    options = RunOptions(
+        workers=1, overwrite=overwrite, progress=progress, command=command,
         source_text=", ".join(str(Path(p).resolve()) for p in paths),
         on_finished=lambda folder: _merge_h5(folder, objects if params.storage == "h5" else []),
-        skipped=[(s.path, s.reason) for s in skipped], layout=scan.layout, isolate=isolate,
+        skipped=tuple((s.path, s.reason) for s in skipped), layout=scan.layout, isolate=isolate,
     )  # fmt: skip
+    summary = run_farm(objects, out, params, options)
     return summary, objects

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import logging
 import os
 import shlex
@@ -10,7 +11,7 @@ import shutil
 import socket
 import sys
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -21,7 +22,7 @@ from zbuf_occlude.dataset.layout import CARD_FILE, MANIFEST_FILE, PLAN_FILE, REC
 from zbuf_occlude.mesh.discovery import SPLITS
 from zbuf_occlude.io.safe_paths import path_inside
 from zbuf_occlude.farm.checks import check_before_work, check_out_outside_inputs, prepare_out
-from zbuf_occlude.farm.config import MANIFEST_INTERVAL_S, OPTION_NAMES, FarmParams, record_path, shard_path
+from zbuf_occlude.farm.config import MANIFEST_INTERVAL_S, OPTION_NAMES, FarmParams, RunOptions, options_with, record_path, shard_path
 from zbuf_occlude.mesh.inputs import FarmObject, scan_objects
 from zbuf_occlude.farm.shards import select_shard
 from zbuf_occlude.farm.journal import (
@@ -134,24 +135,9 @@ def _estimate_bytes(params: FarmParams) -> int:
 def run_farm(
     source: str | os.PathLike | Sequence[FarmObject],
     out: str | os.PathLike,
-    *,
     params: FarmParams | None = None,
-    classes: Sequence[str] | str | None = None,
-    per_class: int | None = None,
-    splits: Sequence[str] | str = SPLITS,
-    workers: int = 1,
-    shard: tuple[int, int] = (0, 1),
-    scheduler: str | None = None,
-    dask_local: int | None = None,
-    overwrite: bool = False,
-    progress: bool = True,
-    command: str | None = None,
-    source_text: str | None = None,
-    on_finished: Callable[[Path], Any] | None = None,
-    skipped: Sequence[tuple[str, str]] = (),
-    class_from: int | None = None,
-    layout: str | None = None,
-    isolate: bool = False,
+    options: RunOptions | None = None,
+    **deprecated: Any,
 ) -> FarmSummary:
     """Build (or resume) an occluded data set from many meshes.
 
@@ -164,6 +150,15 @@ def run_farm(
     params : FarmParams, optional
         What to render; default :class:`FarmParams` ``()`` (paper100, 10 samples of 2048
         points per pose, 32768 dense points, 512² z-buffer, seed 0, dense storage).
+    options : RunOptions, optional
+        How to run it (default :class:`RunOptions` ``()``: one process, the whole data set),
+        with the fields below.
+    **deprecated
+        The fields of :class:`RunOptions` as keywords, kept for one release with a
+        ``DeprecationWarning``; an unknown keyword is a ``TypeError`` naming it.
+
+    The fields of :class:`RunOptions`:
+
     classes, per_class, splits
         Selection, see :func:`scan_objects` (ignored for a ready plan).
     workers : int
@@ -218,6 +213,9 @@ def run_farm(
     """
     t0 = time.perf_counter()
     params = params or FarmParams()
+    o = options_with(options, deprecated)
+    workers, scheduler, dask_local, shard, skipped = o.workers, o.scheduler, o.dask_local, o.shard, o.skipped
+    source_text, layout = o.source_text, o.layout
     if workers < 1:
         raise InvalidInputError(f"--workers must be >= 1, got {workers}")
     if scheduler and dask_local:
@@ -232,7 +230,7 @@ def run_farm(
     check_before_work(params, out, gl=not (scheduler or dask_local), workers=None if scheduler else dask_local or workers)
     if isinstance(source, (str, os.PathLike)):
         source_text = source_text or str(Path(source).resolve())
-        scan = scan_objects(source, classes=classes, per_class=per_class, splits=splits, class_from=class_from)
+        scan = scan_objects(source, classes=o.classes, per_class=o.per_class, splits=o.splits, class_from=o.class_from)
         objects, skipped = scan.objects, [*skipped, *((s.path, s.reason) for s in scan.skipped)]
         layout = scan.layout
     else:
@@ -242,45 +240,25 @@ def run_farm(
     mine = select_shard(objects, task, n_tasks)
     out = Path(out)
     with sigterm_as_interrupt(), farm_lock(out, shard):
-        return _run_locked(
-            out, objects, mine, params, source_text, shard=shard, workers=workers, scheduler=scheduler,
-            dask_local=dask_local, overwrite=overwrite, progress=progress, command=command, t0=t0,
-            on_finished=on_finished, skipped=[(str(p), str(r)) for p, r in skipped], layout=layout,
-            isolate=isolate,
-        )  # fmt: skip
+        run = dataclasses.replace(o, source_text=source_text, layout=layout, skipped=tuple((str(p), str(r)) for p, r in skipped))
+        return _run_locked(out, objects, mine, params, run, t0)
 
 
 def _run_locked(
-    out: Path,
-    objects: list[FarmObject],
-    mine: list[FarmObject],
-    params: FarmParams,
-    source_text: str,
-    *,
-    shard: tuple[int, int],
-    workers: int,
-    scheduler: str | None,
-    dask_local: int | None,
-    overwrite: bool,
-    progress: bool,
-    command: str | None,
-    t0: float,
-    on_finished: Callable[[Path], Any] | None = None,
-    skipped: list[tuple[str, str]] | None = None,
-    layout: str | None = None,
-    isolate: bool = False,
+    out: Path, objects: list[FarmObject], mine: list[FarmObject], params: FarmParams, run: RunOptions, t0: float
 ) -> FarmSummary:
     """:func:`run_farm` once the lock of ``out`` (or of this task) is held."""
-    task, n_tasks = shard
-    plan = plan_doc(objects, params, source_text, layout=layout)
-    if overwrite:
+    task, n_tasks = run.shard
+    workers, scheduler, dask_local, skipped = run.workers, run.scheduler, run.dask_local, run.skipped
+    plan = plan_doc(objects, params, run.source_text, layout=run.layout)
+    if run.overwrite:
         _wipe(out, None if n_tasks == 1 else mine)
     else:
         _check_compatible(out, plan)
     if n_tasks == 1 or read_json(out / PLAN_FILE) != plan:
         # tasks of one array share plan.json; it is written once, the same for all (checked above)
         write_json(out / PLAN_FILE, plan)
-    command = command or shlex.join(sys.argv)
+    command = run.command or shlex.join(sys.argv)
     write_json(
         out / TASK_DIR / f"task-{task}-of-{n_tasks}.json",
         {"shard": [task, n_tasks], "command": command, "version": package_version(), "host": socket.gethostname(),
@@ -306,7 +284,7 @@ def _run_locked(
     if scheduler or dask_local:
         records_iter = _dask(todo, params, out, scheduler, dask_local)
         workers_text = f"dask {scheduler or f'LocalCluster({dask_local})'}"
-    elif (workers > 1 and len(todo) > 1) or (isolate and todo):
+    elif (workers > 1 and len(todo) > 1) or (run.isolate and todo):
         records_iter = run_in_workers(todo, params, out, min(workers, len(todo)))
         workers_text = f"{min(workers, len(todo))} processes" if workers > 1 else "1 worker process"
     else:
@@ -319,7 +297,7 @@ def _run_locked(
     last_manifest = time.monotonic()
     from tqdm.auto import tqdm
 
-    bar = tqdm(total=len(mine), initial=resumed, unit="obj", desc="farm", disable=not progress or None, dynamic_ncols=True)
+    bar = tqdm(total=len(mine), initial=resumed, unit="obj", desc="farm", disable=not run.progress or None, dynamic_ncols=True)
     t_render = time.perf_counter()
     try:
         for rec in records_iter:
@@ -344,8 +322,8 @@ def _run_locked(
     if n_tasks == 1:
         finalize(out, plan, records, [command], skipped or ())
         finished = True
-        if on_finished is not None:
-            on_finished(out)
+        if run.on_finished is not None:
+            run.on_finished(out)
     else:
         log.info("task %d/%d done; run `zbuf-occlude farm-merge %s` when all %d tasks are", task, n_tasks, out, n_tasks)
     return FarmSummary.of_records(

@@ -82,7 +82,7 @@ def _scan(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
     ``ring``.  The record's ``n_visible`` has one entry per scan (0: no return).
     """
     from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported by the work, not by modules that only read records
-    from zbuf_occlude.sensors.crops import farm_datasets
+    from zbuf_occlude.farm.sensor_crops import farm_datasets
 
     mesh = load_mesh(obj.source)
     n_scans = int(params.samples_per_view)

@@ -32,7 +32,7 @@ from zbuf_occlude.sensors.scene import ScanScene, SceneObject, sensor_pose
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
-__all__ = ["CropDistributions", "CropSample", "draw_placement", "object_crop", "lidar_object_samples", "farm_datasets"]
+__all__ = ["CropDistributions", "CropSample", "draw_placement", "object_crop", "lidar_object_samples"]
 
 log = logging.getLogger(__name__)
 
@@ -297,53 +297,3 @@ def lidar_object_samples(
     return out
 
 
-def farm_datasets(
-    mesh: trimesh.Trimesh | str,
-    sensor: Lidar | DepthCamera,
-    *,
-    name: str,
-    label: int,
-    object_index: int,
-    n_samples: int,
-    n_points: int = 2048,
-    seed: int = 0,
-    distributions: CropDistributions = CropDistributions(),
-    backend: str = "embree",
-) -> dict[str, np.ndarray]:
-    """What the farm writes for one object with ``--sensor``: the datasets of a dense shard.
-
-    Each LiDAR sample is its own "pose" (its placement is drawn per sample), so
-    ``pose_index`` is the sample number and ``sample_index`` is 0; samples without a return
-    are left out (their ``n_visible`` would be 0, as for an empty pose).
-
-    Returns
-    -------
-    dict of str → ndarray, B = samples with returns
-        The dense layout: ``data (B, n_points, 3) float32`` (normalised mesh frame), ``label``,
-        ``object_index``, ``pose_index``, ``sample_index`` (int64), ``elevation_deg``,
-        ``azimuth_deg`` (the sensor seen from the object, degrees), ``n_visible`` (returns);
-        and the placement: ``radius`` (mesh units), ``distance_m``, ``sensor_height_m``,
-        ``object_azimuth_deg``, ``yaw_deg``, ``size_m`` (float64), ``ring (B, n_points) int16``.
-    """
-    clouds = lidar_object_samples(mesh, sensor, name=name, n_samples=n_samples, n_points=n_points, seed=seed,
-                                  distributions=distributions, label=label, backend=backend)  # fmt: skip
-    b = len(clouds)
-    f64 = lambda values: np.asarray(values, dtype=np.float64).reshape(b)  # noqa: E731
-    return {
-        "data": np.stack([c.points for c in clouds]) if b else np.zeros((0, n_points, 3), np.float32),
-        "label": np.full(b, label, dtype=np.int64),
-        "object_index": np.full(b, object_index, dtype=np.int64),
-        "pose_index": np.array([c.sample_index for c in clouds], dtype=np.int64),
-        "sample_index": np.zeros(b, dtype=np.int64),
-        "elevation_deg": f64([c.elevation_deg for c in clouds]),
-        "azimuth_deg": f64([c.azimuth_deg for c in clouds]),
-        "n_visible": np.array([c.n_visible for c in clouds], dtype=np.int64),
-        "radius": f64([c.radius for c in clouds]),
-        "distance_m": f64([c.extra["distance_m"] for c in clouds]),
-        "sensor_height_m": f64([c.extra["height_m"] for c in clouds]),
-        "object_azimuth_deg": f64([c.extra["azimuth_deg"] for c in clouds]),
-        "yaw_deg": f64([c.extra["yaw_deg"] for c in clouds]),
-        "size_m": f64([c.extra["size_m"] for c in clouds]),
-        "ring": (np.stack([c.extra["ring"] for c in clouds]).astype(np.int16) if b and clouds[0].extra["ring"] is not None
-                 else np.zeros((b, n_points), np.int16)),
-    }  # fmt: skip
