@@ -23,7 +23,6 @@ from pathlib import Path
 from zbuf_occlude.errors import InsufficientMemoryError, InvalidInputError
 
 __all__ = [
-    "InsufficientMemoryError",
     "MemoryEstimate",
     "estimate_job_memory",
     "available_memory",

@@ -83,5 +83,5 @@ def test_the_glsl_twin_decides_every_pair_as_the_kernel(seed: int, tie_fraction:
     assert set(np.unique(gpu)) <= {MISS, HIT, TIE}
     decided = gpu != TIE
     np.testing.assert_array_equal(gpu[decided] == HIT, cpu[decided])  # a tie goes to the CPU: no claim
-    assert decided.mean() > 0.9  # ties are rare, even among segments aimed at edges
+    assert decided.mean() > (0.98 if tie_fraction == 0.0 else 0.5)  # a twin that calls everything a tie proves nothing
     assert cpu[decided].any() and (~cpu[decided]).any()

@@ -17,6 +17,7 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from zbuf_occlude.geometry.cameras import camera_on_sphere
+from zbuf_occlude.defaults import DEFAULT_SELF_HIT_TOLERANCE
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 from zbuf_occlude.visibility import oracle_embree as oracle, registry  # _EmbreeScene lives in oracle_embree
 from zbuf_occlude.visibility.oracle_embree import occluded_embree
@@ -48,7 +49,7 @@ LARGE_MESH = next(
 )
 POSES = [(0.0, 0.0), (30.0, 45.0), (-60.0, 200.0), (90.0, 0.0), (10.0, 300.0)]
 RADIUS = 4.0
-TOL = registry.DEFAULT_SELF_HIT_TOLERANCE
+TOL = DEFAULT_SELF_HIT_TOLERANCE
 
 
 def _mesh_id(path: Path) -> str:

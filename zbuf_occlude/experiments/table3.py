@@ -27,24 +27,10 @@ from zbuf_occlude.io.atomic import write_text
 from zbuf_occlude.visibility.registry import method_info
 from zbuf_occlude.learn.data import CloudSet, dedupe_meshes, from_meshes, from_occluded, split_validation
 from zbuf_occlude.learn.metrics import accuracy_by_elevation, classification_report
-from zbuf_occlude.experiments.paper import MODELNET8, PAPER_3A, PAPER_3B, PAPER_3B_MEAN_F1, PAPER_3B_TEST3, TEST_ELEVATIONS, TRAIN_ELEVATIONS
+from zbuf_occlude.experiments.paper import MODELNET8, PAPER_3A, PAPER_3B, TEST_ELEVATIONS, TRAIN_ELEVATIONS
 from zbuf_occlude.experiments.table3_report import plot_augmentation, plot_elevation, table_3a, table_3b, write_confusion
 
-__all__ = [
-    "SCALES",
-    "Scale",
-    "TRAIN_ELEVATIONS",
-    "TEST_ELEVATIONS",
-    "PAPER_3A",
-    "PAPER_3B",
-    "PAPER_3B_TEST3",
-    "PAPER_3B_MEAN_F1",
-    "MODELNET8",
-    "plan_meshes",
-    "run_elevation",
-    "run_augmentation",
-    "combine_elevation",
-]
+__all__ = ["SCALES", "Scale", "plan_meshes", "run_elevation", "run_augmentation", "combine_elevation"]
 
 log = logging.getLogger(__name__)
 

@@ -31,7 +31,7 @@ from pathlib import Path
 from zbuf_occlude.errors import DatasetBusy, OutputError
 from zbuf_occlude.dataset.layout import LOCK_FILE, TASK_DIR, task_lock_name
 
-__all__ = ["DatasetBusy", "LOCK_FILE", "farm_lock", "lock_holder", "task_lock_path"]
+__all__ = ["farm_lock", "lock_holder", "task_lock_path"]
 
 log = logging.getLogger(__name__)
 

@@ -32,7 +32,6 @@ __all__ = [
     "cameras_from_schedule",
     "DEFAULT_RADIUS",
     "UNIT_BOX_BOUNDING_RADIUS",
-    "MAX_CAMERA_RADIUS",
 ]
 
 #: Camera distance for an object of maximum extent 1 (paper §4.1: 4 × max dimension).

@@ -47,6 +47,11 @@ def pair64_on_gpu(
     k = len(points)
     pairs = np.empty((k, 7), dtype=np.float64)
     pairs[:, 0:3], pairs[:, 3:6], pairs[:, 6] = points, eyes, float(tolerance)
+    with ctx:  # another context of this process may be current
+        return _run(ctx, packed_planes, pairs, faces, k)
+
+
+def _run(ctx, packed_planes, pairs, faces, k):
     shader = ctx.compute_shader(load_shader("pair64_probe.comp"))
     buffers = [
         ctx.buffer(np.ascontiguousarray(packed_planes, dtype=np.float64).tobytes() or b"\0" * 8),

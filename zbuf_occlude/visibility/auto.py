@@ -31,11 +31,11 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.geometry.cameras import Camera, camera_on_sphere, view_schedule
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
-from zbuf_occlude.render.context import SOFTWARE_RENDERERS, is_software_renderer
+from zbuf_occlude.render.context import is_software_renderer
 from zbuf_occlude.visibility.definition import TOLERANCE
 from zbuf_occlude.visibility.registry import get_method, method_info, register, resolution_option
 
-__all__ = ["choose_method", "calibrate", "auto_visible", "SOFTWARE_RENDERERS", "AUTO_ENV"]
+__all__ = ["choose_method", "calibrate", "auto_visible", "AUTO_ENV"]
 
 log = logging.getLogger(__name__)
 

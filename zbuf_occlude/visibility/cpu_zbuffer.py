@@ -87,6 +87,13 @@ _PLANE_SLACK = 1e-9
 #: they stay on their side.
 _ROUND_DOWN = 1.0 - 1e-6
 _ROUND_UP = 1.0 + 1e-6
+#: A triangle is flat (seen edge-on: its projected area may be rounding) below this share of its
+#: squared span, plus this share of its span times its largest cell coordinate.
+_FLAT_AREA_REL, _FLAT_AREA_ABS = 1e-9, 1e-12
+#: Rounding slack of an edge function, relative to its terms (float64: ~1e-16 of them).
+_EDGE_SLACK = 1e-9
+#: Columns bounds are moved outwards (touching) or inwards (inside) by this, in cells.
+_COLUMN_SLACK = 1e-6
 #: A point is beyond a face bound only with this relative margin (its own depth's rounding).
 _DEPTH_MARGIN = 1e-12
 #: No buffer when a vertex is this close (relative to the mesh's depth range) to the
@@ -130,6 +137,120 @@ def _insert_py(zbuf, ids, c, z, f):
             ids[c, _KEEP + 1 + s] = f
 
 
+def _clear_rows_py(zbuf, ids, row_lo, row_hi, ga):
+    """Empty cells of rows ``row_lo:row_hi``: no face, bounds beyond everything (``1 / depth = 0``)."""
+    for c in range(row_lo * ga, row_hi * ga):
+        for s in range(_KEEP + 1):
+            zbuf[c, s] = 0.0
+        for s in range(_KEEP):
+            ids[c, _KEEP + 1 + s] = -1
+        zbuf[c, _COVER] = 0.0
+
+
+def _inverse_depth_plane_py(cam, i0, i1, i2, a0, b0, sa, sb, grow, amax, bmax):
+    """The face's ``1 / z`` as a plane over the grid, ``1/z = g0 + g_a * column + g_b * row``:
+    ``(trusted, g_max, g_a, g_b, g_min)`` with ``g_max`` and ``g_min`` the plane at a cell's corner
+    plus and minus its reach over the grown cell and the rounding slack (``trusted``: the plane is
+    well conditioned, :data:`_MAX_PLANE_COND`; else only the vertices bound the depth)."""
+    pmax = max(abs(cam[i0, 0]) + abs(cam[i0, 1]) + abs(cam[i0, 2]), abs(cam[i1, 0]) + abs(cam[i1, 1]) + abs(cam[i1, 2]),
+               abs(cam[i2, 0]) + abs(cam[i2, 1]) + abs(cam[i2, 2]))
+    # 1/z = g0 + g_a * ca + g_b * cb on the face's plane n . X = d (camera frame).
+    e1x, e1y, e1z = cam[i1, 0] - cam[i0, 0], cam[i1, 1] - cam[i0, 1], cam[i1, 2] - cam[i0, 2]
+    e2x, e2y, e2z = cam[i2, 0] - cam[i0, 0], cam[i2, 1] - cam[i0, 1], cam[i2, 2] - cam[i0, 2]
+    nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+    d = nx * cam[i0, 0] + ny * cam[i0, 1] + nz * cam[i0, 2]
+    nn = abs(nx) + abs(ny) + abs(nz)
+    trusted = abs(d) * _MAX_PLANE_COND > nn * pmax and nn > 0.0
+    g_max = g_a = g_b = g_min = 0.0
+    if trusted:
+        g_a, g_b = nx * sa / d, ny * sb / d
+        # the plane at the cell's centre, plus its half-extents and the rounding slack
+        # (|nx a| + |ny b| + |nz| over the grid, over |d|: the terms' magnitude)
+        g_min = (nx * a0 + ny * b0 + nz) / d + 0.5 * (g_a + g_b)
+        reach = (abs(g_a) + abs(g_b)) * (0.5 + grow) + _PLANE_SLACK * (abs(nx) * amax + abs(ny) * bmax + abs(nz)) / abs(d)
+        g_max = g_min + reach
+        g_min -= reach  # (the smallest 1/z over the cell: the largest depth)
+    return trusted, g_max, g_a, g_b, g_min
+
+
+def _edge_constraints_py(ca, cb, grow, ga, gb, con_i, con_j, con_0, con_in):
+    """The triangle's edge functions as per-cell constraints linear in the column and the row.
+
+    Edge functions E_k(c) = (c_{k+1} - c_k) x (c - c_k), signed so that inside is >= 0; a cell
+    may touch the triangle iff max over the grown cell of each E_k >= 0 (the separating axes of
+    a triangle and a box: the box's axes, the bounding box loop, and the edges' normals).  Writes
+    per constraint ``1 / coefficient of the column`` (``con_i``), the row's coefficient
+    (``con_j``), the constant of "may touch" (``con_0``) and of "the grown cell is inside"
+    (``con_in``); returns ``(count, flat)``, ``flat`` when the triangle is seen edge-on.
+    """
+    area = (ca[1] - ca[0]) * (cb[2] - cb[0]) - (ca[2] - ca[0]) * (cb[1] - cb[0])
+    span = max(max(ca[0], ca[1], ca[2]) - min(ca[0], ca[1], ca[2]), max(cb[0], cb[1], cb[2]) - min(cb[0], cb[1], cb[2]))
+    cmax = max(abs(ca[0]), abs(ca[1]), abs(ca[2]), abs(cb[0]), abs(cb[1]), abs(cb[2])) + 1.0
+    flat = abs(area) <= _FLAT_AREA_REL * span * span + _FLAT_AREA_ABS * span * cmax  # (or its sign is rounding)
+    sign = 1.0 if area >= 0.0 else -1.0
+    n_con = 0
+    for m in range(2 if flat else 3):
+        if flat:
+            # Seen edge-on, the triangle is a segment: the band |E_k| <= w around its
+            # longest edge's line that holds the third vertex.
+            best, k = -1.0, 0
+            for q in range(3):
+                ln = abs(ca[(q + 1) % 3] - ca[q]) + abs(cb[(q + 1) % 3] - cb[q])
+                if ln > best:
+                    best, k = ln, q
+            k1, k2 = (k + 1) % 3, (k + 2) % 3
+            sgn = 1.0 if m == 0 else -1.0
+            da, db = ca[k1] - ca[k], cb[k1] - cb[k]
+            w = abs((cb[k2] - cb[k]) * da - (ca[k2] - ca[k]) * db)
+        else:
+            k, sgn, w = m, sign, 0.0
+            da, db = ca[(k + 1) % 3] - ca[k], cb[(k + 1) % 3] - cb[k]
+        # E at the cell centre (i + 0.5, j + 0.5), plus the half-extents and rounding slack
+        ci = -sgn * db
+        con_j[n_con] = sgn * da
+        centre = sgn * (-cb[k] * da + (ca[k] - 0.5) * db + 0.5 * da)
+        reach = (abs(da) + abs(db)) * (0.5 + grow) + _EDGE_SLACK * (abs(da) + abs(db)) * (abs(ca[k]) + abs(cb[k]) + ga + gb)
+        con_0[n_con] = centre + w + reach
+        con_in[n_con] = -1.0 if flat else centre - reach
+        if ci == 0.0:
+            con_i[n_con] = 0.0
+        else:
+            con_i[n_con] = 1.0 / ci
+        n_con += 1
+    return n_con, flat
+
+
+def _row_span_py(j, lo_a, hi_a, flat, n_con, con_i, con_j, con_0, con_in):
+    """Columns of row ``j`` the face may touch, ``first..last``, and those whose grown cell lies
+    inside it, ``first_in..last_in`` (empty when ``last < first``)."""
+    first, last = lo_a, hi_a
+    first_in, last_in = lo_a, hi_a if not flat else lo_a - 1
+    for m in range(n_con):
+        cst = con_j[m] * j + con_0[m]
+        cin = con_j[m] * j + con_in[m]
+        # (bounds compared as floats first: a near-zero coefficient gives huge ones)
+        if con_i[m] > 0.0:
+            x = -cst * con_i[m] - _COLUMN_SLACK
+            if x > first:
+                first = int(math.ceil(min(x, hi_a + 1.0)))
+            x = -cin * con_i[m] + _COLUMN_SLACK
+            if x > first_in:
+                first_in = int(math.ceil(min(x, hi_a + 1.0)))
+        elif con_i[m] < 0.0:
+            x = -cst * con_i[m] + _COLUMN_SLACK
+            if x < last:
+                last = int(math.floor(max(x, lo_a - 1.0)))
+            x = -cin * con_i[m] - _COLUMN_SLACK
+            if x < last_in:
+                last_in = int(math.floor(max(x, lo_a - 1.0)))
+        else:
+            if cst < 0.0:
+                last = first - 1
+            if cin < 0.0:
+                last_in = first_in - 1
+    return first, last, first_in, last_in
+
+
 def _rasterise_py(cam, faces, face_ids, grid, ga, gb, row_lo, row_hi, zbuf, ids):
     """Conservative rasterisation (module docstring) of every face (``faces[f]``, stored as
     ``face_ids[f]``) into rows
@@ -138,15 +259,10 @@ def _rasterise_py(cam, faces, face_ids, grid, ga, gb, row_lo, row_hi, zbuf, ids)
     a0, b0, inv_sa, inv_sb = grid[0], grid[1], grid[2], grid[3]
     sa, sb = 1.0 / inv_sa, 1.0 / inv_sb
     grow = _CELL_GROWTH
-    for c in range(row_lo * ga, row_hi * ga):
-        for s in range(_KEEP + 1):
-            zbuf[c, s] = 0.0  # (1 / depth: 0 is beyond everything)
-        for s in range(_KEEP):
-            ids[c, _KEEP + 1 + s] = -1
-        zbuf[c, _COVER] = 0.0
+    _clear_rows(zbuf, ids, row_lo, row_hi, ga)
     amax = max(abs(a0), abs(a0 + sa * ga))
     bmax = max(abs(b0), abs(b0 + sb * gb))
-    ca = np.empty(3)
+    ca = np.empty(3)  # the face's vertices in cell units: column, row
     cb = np.empty(3)
     con_i = np.empty(3)  # per constraint: 1 / coefficient of the column i, of the row j, constant
     con_j = np.empty(3)
@@ -172,104 +288,26 @@ def _rasterise_py(cam, faces, face_ids, grid, ga, gb, row_lo, row_hi, zbuf, ids)
             # covers none), and its nearest vertex bounds its depth.
             _insert(zbuf, ids, lo_b * ga + lo_a, np.float32(_ROUND_UP / zmin), face_ids[f])
             continue
-        pmax = max(abs(cam[i0, 0]) + abs(cam[i0, 1]) + abs(cam[i0, 2]), abs(cam[i1, 0]) + abs(cam[i1, 1]) + abs(cam[i1, 2]),
-                   abs(cam[i2, 0]) + abs(cam[i2, 1]) + abs(cam[i2, 2]))
-        # 1/z = g0 + g_a * ca + g_b * cb on the face's plane n . X = d (camera frame).
-        e1x, e1y, e1z = cam[i1, 0] - cam[i0, 0], cam[i1, 1] - cam[i0, 1], cam[i1, 2] - cam[i0, 2]
-        e2x, e2y, e2z = cam[i2, 0] - cam[i0, 0], cam[i2, 1] - cam[i0, 1], cam[i2, 2] - cam[i0, 2]
-        nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
-        d = nx * cam[i0, 0] + ny * cam[i0, 1] + nz * cam[i0, 2]
-        nn = abs(nx) + abs(ny) + abs(nz)
-        plane = abs(d) * _MAX_PLANE_COND > nn * pmax and nn > 0.0
+        trusted, g_max, g_a, g_b, g_min = _inverse_depth_plane(cam, i0, i1, i2, a0, b0, sa, sb, grow, amax, bmax)
         inv_cap = 1.0 / zmin
         inv_floor = 1.0 / max(cam[i0, 2], cam[i1, 2], cam[i2, 2])
-        g0 = g_a = g_b = g_in = 0.0
-        if plane:
-            g_a, g_b = nx * sa / d, ny * sb / d
-            # the plane at the cell's centre, plus its half-extents and the rounding slack
-            # (|nx a| + |ny b| + |nz| over the grid, over |d|: the terms' magnitude)
-            g_in = (nx * a0 + ny * b0 + nz) / d + 0.5 * (g_a + g_b)
-            reach = (abs(g_a) + abs(g_b)) * (0.5 + grow) + _PLANE_SLACK * (abs(nx) * amax + abs(ny) * bmax + abs(nz)) / abs(d)
-            g0 = g_in + reach
-            g_in -= reach  # (the smallest 1/z over the cell: the largest depth)
-        # Edge functions E_k(c) = (c_{k+1} - c_k) x (c - c_k), signed so that inside is >= 0;
-        # a cell may touch the triangle iff max over the grown cell of each E_k >= 0 (the
-        # separating axes of a triangle and a box: the box's axes, the bounding box loop,
-        # and the edges' normals).  Linear in the column i: per row, a span of columns.
-        area = (ca[1] - ca[0]) * (cb[2] - cb[0]) - (ca[2] - ca[0]) * (cb[1] - cb[0])
-        span = max(max(ca[0], ca[1], ca[2]) - min(ca[0], ca[1], ca[2]), max(cb[0], cb[1], cb[2]) - min(cb[0], cb[1], cb[2]))
-        cmax = max(abs(ca[0]), abs(ca[1]), abs(ca[2]), abs(cb[0]), abs(cb[1]), abs(cb[2])) + 1.0
-        flat = abs(area) <= 1e-9 * span * span + 1e-12 * span * cmax  # (or its sign is rounding)
-        sign = 1.0 if area >= 0.0 else -1.0
-        n_con = 0
-        for m in range(2 if flat else 3):
-            if flat:
-                # Seen edge-on, the triangle is a segment: the band |E_k| <= w around its
-                # longest edge's line that holds the third vertex.
-                best, k = -1.0, 0
-                for q in range(3):
-                    ln = abs(ca[(q + 1) % 3] - ca[q]) + abs(cb[(q + 1) % 3] - cb[q])
-                    if ln > best:
-                        best, k = ln, q
-                k1, k2 = (k + 1) % 3, (k + 2) % 3
-                sgn = 1.0 if m == 0 else -1.0
-                da, db = ca[k1] - ca[k], cb[k1] - cb[k]
-                w = abs((cb[k2] - cb[k]) * da - (ca[k2] - ca[k]) * db)
-            else:
-                k, sgn, w = m, sign, 0.0
-                da, db = ca[(k + 1) % 3] - ca[k], cb[(k + 1) % 3] - cb[k]
-            # E at the cell centre (i + 0.5, j + 0.5), plus the half-extents and rounding slack
-            ci = -sgn * db
-            con_j[n_con] = sgn * da
-            centre = sgn * (-cb[k] * da + (ca[k] - 0.5) * db + 0.5 * da)
-            reach = (abs(da) + abs(db)) * (0.5 + grow) + 1e-9 * (abs(da) + abs(db)) * (abs(ca[k]) + abs(cb[k]) + ga + gb)
-            con_0[n_con] = centre + w + reach
-            con_in[n_con] = -1.0 if flat else centre - reach
-            if ci == 0.0:
-                con_i[n_con] = 0.0
-            else:
-                con_i[n_con] = 1.0 / ci
-            n_con += 1
+        n_con, flat = _edge_constraints(ca, cb, grow, ga, gb, con_i, con_j, con_0, con_in)
         for j in range(lo_b, hi_b + 1):
-            first, last = lo_a, hi_a
-            first_in, last_in = lo_a, hi_a if not flat else lo_a - 1
-            for m in range(n_con):
-                cst = con_j[m] * j + con_0[m]
-                cin = con_j[m] * j + con_in[m]
-                # (bounds compared as floats first: a near-zero coefficient gives huge ones)
-                if con_i[m] > 0.0:
-                    x = -cst * con_i[m] - 1e-6
-                    if x > first:
-                        first = int(math.ceil(min(x, hi_a + 1.0)))
-                    x = -cin * con_i[m] + 1e-6
-                    if x > first_in:
-                        first_in = int(math.ceil(min(x, hi_a + 1.0)))
-                elif con_i[m] < 0.0:
-                    x = -cst * con_i[m] + 1e-6
-                    if x < last:
-                        last = int(math.floor(max(x, lo_a - 1.0)))
-                    x = -cin * con_i[m] - 1e-6
-                    if x < last_in:
-                        last_in = int(math.floor(max(x, lo_a - 1.0)))
-                else:
-                    if cst < 0.0:
-                        last = first - 1
-                    if cin < 0.0:
-                        last_in = first_in - 1
+            first, last, first_in, last_in = _row_span(j, lo_a, hi_a, flat, n_con, con_i, con_j, con_0, con_in)
             row = j * ga
-            base = g0 + g_b * j
-            base_in = g_in + g_b * j
+            base = g_max + g_b * j
+            base_in = g_min + g_b * j
             for i in range(first, last + 1):
                 if i >= first_in and i <= last_in:
                     # the grown cell lies inside the triangle: an upper bound of its depth there
                     low = inv_floor
-                    if plane:
+                    if trusted:
                         low = max(low, base_in + g_a * i)
                     zc = np.float32(_ROUND_DOWN * low)
                     if zc > zbuf[row + i, _COVER]:
                         zbuf[row + i, _COVER] = zc
                 inv = inv_cap
-                if plane:
+                if trusted:
                     hi = base + g_a * i
                     if hi <= 0.0:
                         continue  # the plane is behind the camera over the whole cell
@@ -358,6 +396,10 @@ def _group_by_face_py(points, face_index, n_faces):
 _group_by_face = numba.njit(cache=True, nogil=True)(_group_by_face_py)
 _insert = numba.njit(cache=True, nogil=True, inline="always")(_insert_py)
 _to_camera = numba.njit(cache=True, nogil=True, error_model="numpy")(_to_camera_py)
+_clear_rows = numba.njit(cache=True, nogil=True, inline="always")(_clear_rows_py)
+_inverse_depth_plane = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")(_inverse_depth_plane_py)
+_edge_constraints = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")(_edge_constraints_py)
+_row_span = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")(_row_span_py)
 _rasterise = numba.njit(cache=True, nogil=True, error_model="numpy")(_rasterise_py)
 _classify = numba.njit(cache=True, nogil=True, error_model="numpy")(_classify_py)
 

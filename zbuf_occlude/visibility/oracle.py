@@ -57,23 +57,13 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.visibility.oracle_embree import occluded_embree
-from zbuf_occlude.visibility.oracle_numpy import DEFAULT_PAIRS_PER_CHUNK, occluded_numpy
+from zbuf_occlude.visibility.oracle_numpy import occluded_numpy
 from zbuf_occlude.visibility.definition import hide_edge_on
 from zbuf_occlude.defaults import DEFAULT_SELF_HIT_TOLERANCE
 from zbuf_occlude.visibility.registry import check_face_index, check_points, register, visible_in_frustum
-from zbuf_occlude.visibility.segment_triangle import TrianglePlanes, mesh_planes, segment_hits_triangles, triangle_planes
+from zbuf_occlude.visibility.segment_triangle import mesh_planes
 
-__all__ = [
-    "TrianglePlanes",
-    "triangle_planes",
-    "mesh_planes",
-    "segment_hits_triangles",
-    "occluded_numpy",
-    "occluded_embree",
-    "oracle_visible",
-    "oracle_numpy_visible",
-    "DEFAULT_PAIRS_PER_CHUNK",
-]
+__all__ = ["oracle_visible", "oracle_numpy_visible"]
 
 
 def _visible(

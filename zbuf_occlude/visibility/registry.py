@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.geometry.cameras import Camera
-from zbuf_occlude.defaults import DEFAULT_METHOD, DEFAULT_SELF_HIT_TOLERANCE
+from zbuf_occlude.defaults import DEFAULT_METHOD
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError, RegistryError, UnknownOptionError
 
 if TYPE_CHECKING:  # annotations only: trimesh (and scipy with it) is imported where meshes are made
@@ -53,7 +53,6 @@ __all__ = [
     "signature_without",
     "resolution_option",
     "check_keywords",
-    "DEFAULT_SELF_HIT_TOLERANCE",
 ]
 
 log = logging.getLogger(__name__)

@@ -40,7 +40,7 @@ from zbuf_occlude.visibility.definition import TOLERANCE, hide_edge_on
 from zbuf_occlude.visibility.segment_triangle import mesh_planes
 from zbuf_occlude.visibility.registry import SessionBase, check_face_index, check_points, register
 
-__all__ = ["ResidentPoints", "Scene", "renderer_for", "zbuffer_visible", "zbuffer_tolerance_visible", "DEFAULT_RESOLUTION"]
+__all__ = ["ResidentPoints", "Scene", "zbuffer_visible", "zbuffer_tolerance_visible"]
 
 
 def _at_resolution(camera: Camera, resolution: int | tuple[int, int] | None) -> Camera:

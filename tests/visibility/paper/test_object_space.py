@@ -24,6 +24,7 @@ from conftest import real_mesh
 
 import zbuf_occlude as zo
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
+from zbuf_occlude.visibility.paper import face_scan, occupancy, pruning, vertex
 from zbuf_occlude.visibility.paper import object_space as osp
 from zbuf_occlude.visibility.oracle_numpy import occluded_numpy
 from zbuf_occlude.visibility.segment_triangle import triangle_planes
@@ -59,7 +60,7 @@ def _box_behind_plate() -> trimesh.Trimesh:
     return trimesh.util.concatenate([plate, box])
 
 
-BACKENDS = ["numpy"] + (["numba"] if osp.numba_available() else [])
+BACKENDS = ["numpy"] + (["numba"] if face_scan.numba_available() else [])
 
 
 # -----------------------------------------------------------------------------------------
@@ -72,7 +73,7 @@ def test_kernel_equals_oracle_numpy_pair_for_pair(backend: str) -> None:
     planes = triangle_planes(mesh.triangles)
     eye = np.array([0.3, -0.2, 4.0])
     ref = occluded_numpy(planes, points, eye, face_index=fi)
-    got = osp.occluded_by_faces(planes, points, eye, face_index=fi, backend=backend)
+    got = face_scan.occluded_by_faces(planes, points, eye, face_index=fi, backend=backend)
     np.testing.assert_array_equal(got, ref)
     assert ref.any() and not ref.all()
 
@@ -85,22 +86,22 @@ def test_kernel_on_real_mesh_matches_oracle_numpy(backend: str) -> None:
     for el, az in POSES:
         eye = zo.camera_on_sphere(el, az).eye
         np.testing.assert_array_equal(
-            osp.occluded_by_faces(planes, points, eye, face_index=fi, backend=backend),
+            face_scan.occluded_by_faces(planes, points, eye, face_index=fi, backend=backend),
             occluded_numpy(planes, points, eye, face_index=fi),
         )
 
 
 def test_kernel_backends_agree_with_exclusion_keys() -> None:
-    if not osp.numba_available():
+    if not face_scan.numba_available():
         pytest.skip("numba not installed (pip install 'zbuf-occlude[fast]')")
     mesh = _real(SMALL[2])
     points, fi = zo.sample_surface(mesh, count=500, seed=2)
     planes = triangle_planes(mesh.triangles)
     eye = zo.camera_on_sphere(20.0, 130.0).eye
-    key = osp.face_keys(mesh, planes, eye, ("plane", "samples"), points, fi)
+    key = pruning.face_keys(mesh, planes, eye, ("plane", "samples"), points, fi)
     limit = np.linalg.norm(points - eye, axis=1)
-    a = osp.occluded_by_faces(planes, points, eye, face_index=fi, face_key=key, limit=limit, backend="numpy")
-    b = osp.occluded_by_faces(planes, points, eye, face_index=fi, face_key=key, limit=limit, backend="numba")
+    a = face_scan.occluded_by_faces(planes, points, eye, face_index=fi, face_key=key, limit=limit, backend="numpy")
+    b = face_scan.occluded_by_faces(planes, points, eye, face_index=fi, face_key=key, limit=limit, backend="numba")
     np.testing.assert_array_equal(a, b)
 
 
@@ -109,32 +110,32 @@ def test_face_order_never_changes_the_answer() -> None:
     points, fi = zo.sample_surface(mesh, count=300, seed=4)
     planes = triangle_planes(mesh.triangles)
     eye = np.array([0.1, 0.2, 3.5])
-    base = osp.occluded_by_faces(planes, points, eye, face_index=fi)
+    base = face_scan.occluded_by_faces(planes, points, eye, face_index=fi)
     order = np.random.default_rng(0).permutation(len(mesh.faces))
-    np.testing.assert_array_equal(osp.occluded_by_faces(planes, points, eye, face_index=fi, order=order), base)
+    np.testing.assert_array_equal(face_scan.occluded_by_faces(planes, points, eye, face_index=fi, order=order), base)
 
 
 def test_kernel_rejects_bad_arguments() -> None:
     planes = triangle_planes(_box_behind_plate().triangles)
     pts = np.zeros((2, 3))
     with pytest.raises(InvalidInputError):
-        osp.occluded_by_faces(planes, pts, [0, 0, 4], backend="cuda")
+        face_scan.occluded_by_faces(planes, pts, [0, 0, 4], backend="cuda")
     with pytest.raises(InvalidInputError):
-        osp.occluded_by_faces(planes, pts, [0, 0, 4], face_key=np.zeros(len(planes.offset)))
+        face_scan.occluded_by_faces(planes, pts, [0, 0, 4], face_key=np.zeros(len(planes.offset)))
     with pytest.raises(InvalidInputError):
-        osp.occluded_by_faces(planes, pts, [0, 0, 4], tolerance=-1.0)
+        face_scan.occluded_by_faces(planes, pts, [0, 0, 4], tolerance=-1.0)
     with pytest.raises(InvalidInputError):
-        osp.occluded_by_faces(planes, pts, [0, 0, np.nan])
+        face_scan.occluded_by_faces(planes, pts, [0, 0, np.nan])
 
 
 def test_plane_distance_is_a_lower_bound_of_every_corner() -> None:
     mesh = _box_behind_plate()
     planes = triangle_planes(mesh.triangles)
     eye = np.array([1.0, 2.0, 3.0])
-    d = osp.plane_distance(planes, eye)
+    d = pruning.plane_distance(planes, eye)
     corners = np.linalg.norm(mesh.triangles - eye, axis=2).min(axis=1)
     assert np.all(d <= corners + 1e-12)
-    assert np.allclose(osp.min_sample_distance(np.asarray(mesh.triangles), eye), corners)
+    assert np.allclose(pruning.min_sample_distance(np.asarray(mesh.triangles), eye), corners)
 
 
 # -----------------------------------------------------------------------------------------
@@ -215,10 +216,10 @@ def test_paper_vertex_subdivision_keeps_more_faces() -> None:
     plate.apply_translation((0.4, 0.4, 0.2))
     mesh = trimesh.util.concatenate([ground, plate])
     camera = zo.camera_on_sphere(90.0, 0.0)
-    tested, survived, parent = osp.surviving_faces(mesh, camera)
+    tested, survived, parent = vertex.surviving_faces(mesh, camera)
     assert tested is mesh and np.array_equal(parent, np.arange(len(mesh.faces)))
     assert not survived[:2].any()  # the ground is gone
-    tested, survived, parent = osp.surviving_faces(mesh, camera, max_edge=0.05)
+    tested, survived, parent = vertex.surviving_faces(mesh, camera, max_edge=0.05)
     assert len(tested.faces) > len(mesh.faces) and parent.max() == len(mesh.faces) - 1
     assert np.sqrt(tested.area_faces.max() * 2) <= 0.05 + 1e-12  # right triangles, legs <= max_edge
     kept = tested.area_faces[survived & (parent < 2)].sum()
@@ -259,12 +260,12 @@ def test_paper_vertex_without_face_index_locates_points() -> None:
 def test_occupancy_grid_cells_contain_their_points() -> None:
     rng = np.random.default_rng(0)
     points = rng.uniform(-0.5, 0.5, size=(2000, 3)) * [1.0, 0.5, 0.25]
-    centres, cell_of, size = osp.occupancy_grid(points, 16)
+    centres, cell_of, size = occupancy.occupancy_grid(points, 16)
     assert math.isclose(size, float((points.max(0) - points.min(0)).max()) / 16)
     assert np.all(np.abs(points - centres[cell_of]) <= size / 2 + 1e-12)
     assert len(np.unique(cell_of)) == len(centres)
     with pytest.raises(InvalidInputError):
-        osp.occupancy_grid(points, 0)
+        occupancy.occupancy_grid(points, 0)
 
 
 def test_og_names_fix_the_grid() -> None:

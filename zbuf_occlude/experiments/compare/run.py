@@ -34,7 +34,6 @@ __all__ = [
     "compare",
     "DEFAULT_METHODS",
     "DEFAULT_POINTS",
-    "DEFAULT_VIEWS",
     "DEFAULT_REFERENCE",
     "RESOLUTION_SWEEP",
     "GRID_SWEEP",

@@ -40,33 +40,14 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.visibility.paper.face_scan import BACKENDS, numba_available, occluded_by_faces
-from zbuf_occlude.visibility.paper.occupancy import DEFAULT_GRID, DEFAULT_OG_REPRESENTATIVE, OG_GRIDS, occupancy_grid, og_visible
+from zbuf_occlude.visibility.paper.face_scan import occluded_by_faces
 from zbuf_occlude.visibility.oracle_numpy import DEFAULT_PAIRS_PER_CHUNK
-from zbuf_occlude.visibility.paper.pruning import PRUNE_RULES, camera_distance, face_keys, min_sample_distance, parse_prune, plane_distance
+from zbuf_occlude.visibility.paper.pruning import PRUNE_RULES, camera_distance, face_keys, min_sample_distance, parse_prune
 from zbuf_occlude.defaults import DEFAULT_SELF_HIT_TOLERANCE
 from zbuf_occlude.visibility.registry import check_face_index, check_points, register, signature_without, visible_in_frustum
 from zbuf_occlude.visibility.segment_triangle import mesh_planes
-from zbuf_occlude.visibility.paper.vertex import paper_vertex_visible, surviving_faces
 
-__all__ = [
-    "BACKENDS",
-    "DEFAULT_GRID",
-    "DEFAULT_OG_REPRESENTATIVE",
-    "OG_GRIDS",
-    "PRUNE_RULES",
-    "occluded_by_faces",
-    "plane_distance",
-    "min_sample_distance",
-    "face_keys",
-    "surviving_faces",
-    "occupancy_grid",
-    "paper_vertex_visible",
-    "paper_exact_visible",
-    "paper_pruned_visible",
-    "og_visible",
-    "numba_available",
-]
+__all__ = ["paper_exact_visible", "paper_pruned_visible"]
 
 
 # =========================================================================================
