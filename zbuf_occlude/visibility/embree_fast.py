@@ -37,6 +37,7 @@ from __future__ import annotations
 import logging
 import os
 from concurrent.futures import ThreadPoolExecutor
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -80,6 +81,29 @@ _MIN_COS = 1e-30
 _BORDER_PX, _BORDER_PER_PX = 1e-3, 1e-5
 #: Faces within this much more than the edge-on sine (float32 cosines) are re-checked in float64.
 _EDGE_ON_SLACK = 1e-3
+
+class _Intrinsics(NamedTuple):
+    """The camera as _prepare reads it (float32): focal length and image size in pixels, depth
+    range, and the frustum border (pixels) within which the float64 test decides."""
+
+    focal_px: np.float32
+    width: np.float32
+    height: np.float32
+    znear: np.float32
+    zfar: np.float32
+    border_px: np.float32
+
+
+class _RaySettings(NamedTuple):
+    """The rays' set-up (float32): the bounding sphere's radius, pass 1's start (relative, and its
+    cap), pass 2's start (relative), and the cosine below which a face may be seen edge-on."""
+
+    radius: np.float32
+    start_rel: np.float32
+    max_start: np.float32
+    band_rel: np.float32
+    edge_cos: np.float32
+
 
 # Bits of a point's status from _prepare (numba reads these module ints as constants).
 #: The point is in the camera's frustum.
@@ -147,7 +171,7 @@ def _executor(threads: int) -> ThreadPoolExecutor:
     return _pool
 
 
-def _prepare_py(p, pp, normals, boundary, eye, frame, cam, consts):
+def _prepare_py(p, pp, normals, boundary, eye, frame, cam, rays):
     """Per point of a chunk: frustum status and the two rays (see :class:`FastScene`).
 
     Returns ``status`` (uint8 bits :data:`IN_FRUSTUM`, :data:`EXACT_NEEDED`, :data:`FRUSTUM_BORDER`,
@@ -161,8 +185,8 @@ def _prepare_py(p, pp, normals, boundary, eye, frame, cam, consts):
     dirs = np.empty((n, 3), dtype=np.float32)
     len1 = np.zeros(n, dtype=np.float32)
     len2 = np.zeros(n, dtype=np.float32)
-    f, width, height, znear, zfar, margin = cam[0], cam[1], cam[2], cam[3], cam[4], cam[5]
-    radius, start_rel, max_start, band_rel, edge_cos = consts[0], consts[1], consts[2], consts[3], consts[4]
+    f, width, height, znear, zfar, margin = cam.focal_px, cam.width, cam.height, cam.znear, cam.zfar, cam.border_px
+    radius, start_rel, max_start, band_rel, edge_cos = rays.radius, rays.start_rel, rays.max_start, rays.band_rel, rays.edge_cos
     has_normals = len(normals) == n and n > 0
     for i in range(n):
         x, y, z = p[i, 0], p[i, 1], p[i, 2]
@@ -346,13 +370,13 @@ class FastScene(SessionBase):
         frame = np.empty((3, 4), dtype=np.float32)
         frame[:, :3] = rt[:, :3]
         frame[:, 3] = rt[:, :3] @ sc.centre + rt[:, 3]
-        cam = np.array(
+        cam = _Intrinsics(*np.array(
             [camera.focal_px, camera.width, camera.height, camera.znear, camera.zfar,
-             _BORDER_PX + _BORDER_PER_PX * max(camera.width, camera.height)], dtype=np.float32)
-        consts = np.array([sc.radius, _START, _MAX_START, _BAND_LO, EDGE_ON_SIN + _EDGE_ON_SLACK], dtype=np.float32)
+             _BORDER_PX + _BORDER_PER_PX * max(camera.width, camera.height)], dtype=np.float32))
+        rays = _RaySettings(*np.array([sc.radius, _START, _MAX_START, _BAND_LO, EDGE_ON_SIN + _EDGE_ON_SLACK], dtype=np.float32))
         normals = n32[lo:hi] if self.face_index is not None else np.zeros((0, 3), dtype=np.float32)
         bound = boundary[lo:hi] if self.face_index is not None else np.zeros(0, dtype=np.float32)
-        status, org1, len1, org2, len2, dirs = _prepare(p32[lo:hi], pp[lo:hi], normals, bound, eye_c, frame, cam, consts)
+        status, org1, len1, org2, len2, dirs = _prepare(p32[lo:hi], pp[lo:hi], normals, bound, eye_c, frame, cam, rays)
         border = np.flatnonzero(status & FRUSTUM_BORDER)
         if len(border):  # within a hair of the frustum's border: Camera.in_frustum decides
             inside = camera.in_frustum(sorted_points[lo + border])
