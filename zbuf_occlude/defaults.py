@@ -72,7 +72,7 @@ DEFAULT_OCCLUDE_SAMPLES_PER_VIEW = 1
 DEFAULT_DENSE_POINTS = 100_000
 
 #: Global seed of every command and of the API's random draws; with the same seed and options
-#: the samples are the same bytes (zbuf_occlude.pipeline.derive_rng).
+#: the samples are the same bytes (zbuf_occlude.geometry.samples.derive_rng).
 DEFAULT_SEED = 0
 
 #: Distance from a point, object units, within which a face meeting the point→camera

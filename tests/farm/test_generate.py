@@ -147,9 +147,9 @@ def test_the_farm_refuses_bad_options_up_front(tree, tmp_path, capsys, no_mesh_l
 
 
 # -- defect 13 -------------------------------------------------------------------------------------
-def test_validate_points_0_is_a_usage_error(tree, capsys):
+def test_validate_dense_points_0_is_a_usage_error(tree, capsys):
     assert main(["validate", str(tree), "--views", "0:0", "--dense-points", "0"]) == 2
-    assert "--points" in _error(capsys)
+    assert "--dense-points" in _error(capsys)
 
 
 @pytest.mark.parametrize("damaged", ["dataset_card.json", "manifest.jsonl"])

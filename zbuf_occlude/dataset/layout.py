@@ -39,7 +39,7 @@ Storage modes of a shard (``storage`` in the card):
     :data:`COMPACT_DATASETS`: the object's dense cloud once, ``dense_points (M, 3)
     float32``, and per pose a visibility bitmask ``visible_bits (P, ceil(M / 8)) uint8``
     (:func:`numpy.packbits`), plus ``n_visible``, ``elevation_deg``, ``azimuth_deg (P,)``;
-    the reader redraws the samples bit-identically (:func:`zbuf_occlude.pipeline.pose_samples`).
+    the reader redraws the samples bit-identically (:func:`zbuf_occlude.geometry.samples.pose_samples`).
 
 Row order inside a shard, and sample order of the reader: pose-major, then sample index.
 Integrity: every file of an object has its SHA-256 in the object's record and the manifest

@@ -73,7 +73,7 @@ def reconstruct_samples(
 ) -> NDArray[np.float32]:
     """Redraw samples of one pose from the dense cloud and the pose's visibility mask.
 
-    :func:`~zbuf_occlude.pipeline.pose_samples`, the draw
+    :func:`~zbuf_occlude.geometry.samples.pose_samples`, the draw
     :func:`~zbuf_occlude.pipeline.occlude_object` makes, so the result is bit-identical to
     the ``data`` a dense-storage run writes.
 

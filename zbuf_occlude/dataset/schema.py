@@ -28,6 +28,7 @@ __all__ = [
     "CardParams",
     "Card",
     "ManifestRecord",
+    "ObjectRecord",
     "OkRecord",
     "Plan",
     "CHECKSUM_ALGORITHM",
@@ -95,22 +96,61 @@ class ManifestRecord(_Model):
     status: str
 
 
-class OkRecord(_Model):
-    """A line of ``manifest.jsonl`` whose object finished (``status == "ok"``)."""
+class ObjectRecord(_Model):
+    """One object's record, ``records/<index>.json`` and a line of ``manifest.jsonl``: what the farm's
+    worker writes (:func:`zbuf_occlude.farm.worker.process_object`, every field, nothing else) and
+    what readers check (:class:`OkRecord`)."""
 
-    status: str
+    # the writer's model: a field the worker writes must be declared here
+    model_config = ConfigDict(strict=True, extra="forbid")
+
+    object_index: NonNegativeInt
     name: str
     source: str
     class_name: str
-    split: str
-    object_index: NonNegativeInt
     label: NonNegativeInt
+    split: str
+    #: The object's seed key (:func:`zbuf_occlude.geometry.samples.object_key`).
     key: int
-    shards: list[str] = Field(min_length=1)
-    #: SHA-256 of each shard, parallel to ``shards``; ``None``: missing (readable only with ``verify=False``).
-    sha256: list[Sha256] | None = None
-    #: Visible points per pose (``farm --sensor``: per scan).
+    seed: NonNegativeInt
+    params_digest: str
+    #: ``"pending"`` while it renders, then ``"ok"`` or ``"failed"`` (with ``error``).
+    status: str
+    error: str | None
+    #: Shard files, relative to the data set folder, and their SHA-256 (parallel lists).
+    shards: list[str]
+    sha256: list[Sha256] | None
+    #: Visible points per pose (``farm --sensor``: returns per scan).
     n_visible: list[NonNegativeInt]
+    n_samples: NonNegativeInt
+    bytes: NonNegativeInt
+    #: Poses with ``0 < n_visible < n_points`` (their samples repeat points), dense points, faces.
+    n_padded_poses: NonNegativeInt | None = None
+    n_dense: NonNegativeInt | None = None
+    n_faces: NonNegativeInt | None = None
+    #: Wall seconds, when it finished (ISO 8601, UTC), the OpenGL renderer, the host, the process.
+    time_s: float | None = None
+    finished_at: str | None = None
+    renderer: str | None = None
+    host: str | None = None
+    pid: int | None = None
+    peak_rss_mb: float | None = None
+
+
+class OkRecord(ObjectRecord):
+    """A line of ``manifest.jsonl`` whose object finished (``status == "ok"``), as readers check it:
+    the fields they need (a newer writer may add more)."""
+
+    model_config = ConfigDict(strict=True, extra="allow")
+
+    seed: NonNegativeInt | None = None
+    params_digest: str | None = None
+    error: str | None = None
+    shards: list[str] = Field(min_length=1)
+    #: ``None``: missing (readable only with ``verify=False``).
+    sha256: list[Sha256] | None = None
+    n_samples: NonNegativeInt | None = None
+    bytes: NonNegativeInt | None = None
 
     @model_validator(mode="after")
     def _parallel(self) -> OkRecord:

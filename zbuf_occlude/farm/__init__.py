@@ -7,8 +7,8 @@ kept on the GPU (:class:`~zbuf_occlude.visibility.zbuffer.Scene`), and draw
 Each object's result is one shard, written atomically, then a small record; a run that
 is killed and started again skips every object whose record and shard are there.
 
-Determinism: every random draw comes from :func:`~zbuf_occlude.pipeline.derive_rng` of the
-global seed and the object's key, :func:`~zbuf_occlude.pipeline.object_key` of its path
+Determinism: every random draw comes from :func:`~zbuf_occlude.geometry.samples.derive_rng` of the
+global seed and the object's key, :func:`~zbuf_occlude.geometry.samples.object_key` of its path
 relative to the input root without the suffix (the name ``zbuf-occlude generate`` uses),
 so an object's samples do not depend on the worker count, the executor, ``--shard``,
 ``--classes`` or ``--per-class``.  They do depend on the OpenGL implementation (the GL

@@ -239,7 +239,7 @@ def finalize(
         "checksums": CHECKSUM_ALGORITHM if every_file_hashed else None,
         "renderers": sorted({r["renderer"] for r in ok if r.get("renderer")}),
         "seed_derivation": "numpy SeedSequence([seed, blake2b64(name), stream, pose_index, sample_index]), "
-        "zbuf_occlude.pipeline.derive_rng; stream 0 = dense cloud, 1 = sample draws",
+        "zbuf_occlude.geometry.samples.derive_rng; stream 0 = dense cloud, 1 = sample draws",
         "reference": "Sryamkin, Msallam, Klestov 2023, "
         "A method to create real-like point clouds for 3D object classification",
     }

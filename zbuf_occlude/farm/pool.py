@@ -28,10 +28,10 @@ from multiprocessing.connection import Connection, wait
 from pathlib import Path
 from typing import Any
 
-from zbuf_occlude.farm.config import FarmParams, record_path
+from zbuf_occlude.farm.config import FarmParams
 from zbuf_occlude.mesh.inputs import FarmObject
 from zbuf_occlude.farm.lifecycle import die_with_parent
-from zbuf_occlude.farm.worker import base_record, process_object, write_json
+from zbuf_occlude.farm.worker import base_record, process_object, write_record
 
 __all__ = ["run_in_workers", "STOP_GRACE_S", "worker_death_error"]
 
@@ -109,8 +109,7 @@ def _died(w: _Worker, params: FarmParams, out: Path) -> dict[str, Any]:
     record = base_record(w.obj, params)
     record.update(status="failed", error=worker_death_error(w.process.exitcode), pid=w.process.pid)
     log.warning("object %s (%s) failed: %s", w.obj.index, w.obj.source, record["error"])
-    write_json(record_path(out, w.obj.index), record)
-    return record
+    return write_record(out, w.obj, record)
 
 
 def run_in_workers(todo: Sequence[FarmObject], params: FarmParams, out: Path, workers: int) -> Iterator[dict[str, Any]]:

@@ -20,6 +20,7 @@ from zbuf_occlude.geometry.samples import OccludedCloud
 from zbuf_occlude.io.atomic import atomic_h5, file_sha256, write_text
 from zbuf_occlude.io.clouds import write_h5, write_npz, write_ply
 from zbuf_occlude.dataset.layout import FORMAT_VERSION, SAMPLE_FILE_FORMATS
+from zbuf_occlude.dataset.schema import ObjectRecord
 from zbuf_occlude.pipeline import dense_cloud, occlude_object
 from zbuf_occlude.io.safe_paths import check_relative_name, path_inside
 from zbuf_occlude._version import __version__
@@ -253,5 +254,12 @@ def process_object(obj: FarmObject, params: FarmParams, out: str | os.PathLike) 
         pid=os.getpid(),
         peak_rss_mb=round(_peak_rss_mb(), 1),
     )
+    return write_record(out, obj, record)
+
+
+def write_record(out: Path, obj: FarmObject, record: dict[str, Any]) -> dict[str, Any]:
+    """Write ``record`` as the schema's :class:`~zbuf_occlude.dataset.schema.ObjectRecord` (a field
+    it does not declare, or a value of the wrong type, is our bug: pydantic's ``ValidationError``)."""
+    record = ObjectRecord.model_validate(record).model_dump(exclude_unset=True)
     write_json(record_path(out, obj.index), record)
     return record

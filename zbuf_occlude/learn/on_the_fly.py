@@ -4,13 +4,13 @@
 one occluded sample: a camera pose is drawn from a :class:`PoseDistribution`, hidden surface
 removal keeps the visible points (:func:`zbuf_occlude.visibility.registry.visible_mask`'s
 session of the method, CPU ``embree-fast`` by default), and ``n_points`` of them are drawn
-(:func:`zbuf_occlude.pipeline.draw_sample`: every visible point once before any repeat).
+(:func:`zbuf_occlude.geometry.samples.draw_sample`: every visible point once before any repeat).
 :class:`OnTheFlyOccludedDataset` does this for the meshes under a folder, with the labels and
 splits ``generate`` and the farm give them and the farm's dense clouds
 (:func:`zbuf_occlude.pipeline.dense_cloud`, same seed, same points).
 
 Determinism: sample ``index`` of epoch ``epoch`` uses the generator ``(seed, 3, epoch, index)``
-(:func:`zbuf_occlude.pipeline.derive_rng`), whatever the worker, the order or the batch size.
+(:func:`zbuf_occlude.geometry.samples.derive_rng`), whatever the worker, the order or the batch size.
 
 DataLoader workers: visibility sessions (Embree scenes, GL objects) are cached per process (an
 entry made before a ``fork`` is never used after it); meshes and dense clouds are plain numpy

@@ -46,7 +46,7 @@ class FarmObject:
         Position in the plan (``object_index`` in the shards); shards and records are named by it.
     name : str
         Path relative to the input root (or as written in the list file), POSIX, without
-        suffix; the seed key is :func:`~zbuf_occlude.pipeline.object_key` ``(name)``.
+        suffix; the seed key is :func:`~zbuf_occlude.geometry.samples.object_key` ``(name)``.
     source : str
         The mesh file.
     class_name, split : str
@@ -63,7 +63,7 @@ class FarmObject:
 
     @property
     def key(self) -> int:
-        """Seed key of the object (:func:`~zbuf_occlude.pipeline.object_key` of ``name``)."""
+        """Seed key of the object (:func:`~zbuf_occlude.geometry.samples.object_key` of ``name``)."""
         return object_key(self.name)
 
 

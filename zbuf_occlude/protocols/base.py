@@ -185,7 +185,7 @@ def run_protocol(
     """Run ``protocol`` over the meshes under ``paths`` into ``out``.
 
     Per object: :func:`~zbuf_occlude.load_mesh`, the generator ``(seed, object_key(name), 2)``
-    (:func:`~zbuf_occlude.pipeline.derive_rng`), ``protocol.make``, one shard.  A mesh that fails
+    (:func:`~zbuf_occlude.geometry.samples.derive_rng`), ``protocol.make``, one shard.  A mesh that fails
     (unreadable, nothing in view) is recorded and skipped (exit status 1); then ``finish``.
 
     Raises

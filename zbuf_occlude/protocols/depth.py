@@ -293,7 +293,7 @@ def farthest_point_sample(points: NDArray[np.floating], n_points: int, rng: np.r
 def downsample(points: NDArray[np.floating], n_points: int, rng: np.random.Generator, method: str = "random") -> NDArray[np.int64]:
     """Indices of ``n_points`` rows of a back-projected cloud.
 
-    ``random``: uniformly at random without replacement (:func:`zbuf_occlude.pipeline.draw_sample`);
+    ``random``: uniformly at random without replacement (:func:`zbuf_occlude.geometry.samples.draw_sample`);
     ``fps``: :func:`farthest_point_sample`.  When fewer points exist, every point is taken
     once and the rest are repeats drawn at random (both methods).  Empty input → empty output.
 

@@ -242,7 +242,7 @@ def lidar_object_samples(
         The object's stable name (seeds, ``source``).
     n_samples, n_points : int
         Crops per object and points per crop (fewer returns are padded with repeats, more
-        are subsampled, as :func:`zbuf_occlude.pipeline.draw_sample`).
+        are subsampled, as :func:`zbuf_occlude.geometry.samples.draw_sample`).
     distributions : CropDistributions
 
     Returns
