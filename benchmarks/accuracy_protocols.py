@@ -26,9 +26,8 @@ import numpy as np
 import trimesh
 
 import zbuf_occlude as zo
-from zbuf_occlude.protocols import PinholeView, render_depth_image
+from zbuf_occlude.protocols import PinholeView, pcn, render_depth_image
 from zbuf_occlude.protocols import modelnet40c as mc
-from zbuf_occlude.protocols import pcn
 
 SAMPLES = Path(__file__).resolve().parents[1] / "data" / "samples"
 

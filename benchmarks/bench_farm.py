@@ -30,7 +30,14 @@ import tempfile
 import time
 from pathlib import Path
 
-from zbuf_occlude.farm import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION, PAPER_SAMPLES_PER_MB, FarmParams, RunOptions, run_farm
+from zbuf_occlude.farm import (
+    DEFAULT_FARM_DENSE_POINTS,
+    DEFAULT_FARM_RESOLUTION,
+    PAPER_SAMPLES_PER_MB,
+    FarmParams,
+    RunOptions,
+    run_farm,
+)
 from zbuf_occlude.mesh.inputs import FarmObject, discover_objects
 
 #: The paper's data set: 5 meshes × 40 classes (§4.3).

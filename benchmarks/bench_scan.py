@@ -19,7 +19,6 @@ import statistics
 import time
 from pathlib import Path
 
-
 from zbuf_occlude.sensors import DepthCamera, Lidar, ScanScene, look_at_pose, scan
 from zbuf_occlude.sensors.depth_camera import DEPTH_CAMERA_PRESETS
 from zbuf_occlude.sensors.lidar import LIDAR_PRESETS

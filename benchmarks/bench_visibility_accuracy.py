@@ -33,8 +33,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 
 def meshes(modelnet: Path | None) -> dict:
-    import zbuf_occlude as zo
     from accuracy_visibility import constructed_meshes
+
+    import zbuf_occlude as zo
 
     out = {f"samples/{p.stem}": zo.load_mesh(p) for p in sorted((REPO_ROOT / "data" / "samples").rglob("*.off"))}
     if modelnet is not None and modelnet.is_dir():
@@ -51,6 +52,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-shared", action="store_true", help="only the shipped and constructed meshes")
     args = ap.parse_args(argv)
     from accuracy_visibility import MODELNET_SUBSET
+
     import zbuf_occlude as zo
     from zbuf_occlude.visibility.embree_fast import FastScene
 

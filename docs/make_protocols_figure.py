@@ -15,9 +15,13 @@ import numpy as np  # noqa: E402
 import trimesh  # noqa: E402
 
 import zbuf_occlude as zo  # noqa: E402
-from zbuf_occlude.protocols import PinholeView, back_project, render_depth_image  # noqa: E402
+from zbuf_occlude.protocols import (  # noqa: E402
+    PinholeView,
+    back_project,
+    pcn,  # noqa: E402
+    render_depth_image,
+)
 from zbuf_occlude.protocols import modelnet40c as mc  # noqa: E402
-from zbuf_occlude.protocols import pcn  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "docs" / "protocols_figure.png"

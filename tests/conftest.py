@@ -19,8 +19,8 @@ from pathlib import Path
 
 import pytest
 
-from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS
 from zbuf_occlude.farm.config import RunOptions
+from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 #: Real ModelNet meshes, next to (not inside) the repository.

@@ -39,8 +39,7 @@ def test_gpu_benchmark_smoke_writes_its_report(tmp_path):
 
 
 def test_gpu_benchmark_refuses_a_software_renderer(tmp_path):
-    from zbuf_occlude.render.context import shared_context
-    from zbuf_occlude.render.context import SOFTWARE_RENDERERS
+    from zbuf_occlude.render.context import SOFTWARE_RENDERERS, shared_context
 
     renderer = str(shared_context().info["GL_RENDERER"]).lower()
     if not any(s in renderer for s in SOFTWARE_RENDERERS):

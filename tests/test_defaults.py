@@ -7,9 +7,9 @@ import inspect
 import pytest
 
 from zbuf_occlude import defaults
-from zbuf_occlude.geometry.cameras import camera_on_sphere, cameras_from_schedule
 from zbuf_occlude.experiments.compare import compare, run_compare
 from zbuf_occlude.farm.config import FarmParams
+from zbuf_occlude.geometry.cameras import camera_on_sphere, cameras_from_schedule
 from zbuf_occlude.pipeline import occlude_object
 from zbuf_occlude.render.moderngl_backend import ModernGLRenderer
 from zbuf_occlude.visibility.peers import naive_zbuffer_visible

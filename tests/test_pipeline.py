@@ -16,10 +16,10 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 import zbuf_occlude as zo
-from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.pipeline import DenseCloud, dense_cloud, occlude_object
+from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
 from zbuf_occlude.geometry.samples import derive_rng, draw_sample, object_key, pose_samples, sample_rng
+from zbuf_occlude.pipeline import DenseCloud, dense_cloud, occlude_object
 
 #: The oracle hides at most this fraction of the points the default ``zbuffer`` method
 #: samples.  Measured on the shipped sofa (20k dense points, 256²): 1 of 1536 sampled

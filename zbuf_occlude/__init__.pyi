@@ -4,8 +4,24 @@ Read by ``lazy_loader.attach_stub`` in ``__init__.py`` (each name is imported fr
 the first time it is used) and by type checkers and the API docs (these imports, as written).
 """
 
+from . import (
+    dataset,
+    errors,
+    experiments,
+    farm,
+    geometry,
+    io,
+    learn,
+    mesh,
+    pipeline,
+    protocols,
+    real_scans,
+    render,
+    sensors,
+    visibility,
+)
 from ._version import __version__
-from .geometry.cameras import DEFAULT_RADIUS, Camera, camera_on_sphere, cameras_from_schedule, view_schedule
+from .dataset.reader import OccludedDataset
 from .errors import (
     BackendUnavailable,
     CameraError,
@@ -15,22 +31,21 @@ from .errors import (
     InsufficientMemoryError,
     InvalidInputError,
     MeshLoadError,
-    PaddedSamplesWarning,
     OutputError,
+    PaddedSamplesWarning,
     RegistryError,
     ShardChecksumError,
     UnknownOptionError,
     UnsafePathError,
     ZbufOccludeError,
 )
-from .mesh.load import load_mesh, normalize_mesh
-from .render import ModernGLRenderer, context_info, render_depth
+from .farm import merge_farm, run_farm
+from .geometry.cameras import DEFAULT_RADIUS, Camera, camera_on_sphere, cameras_from_schedule, view_schedule
+from .geometry.samples import OccludedCloud
 from .geometry.sampling import points_from_barycentric, sample_faces, sample_surface
+from .mesh.load import load_mesh, normalize_mesh
+from .pipeline import occlude
+from .render import ModernGLRenderer, context_info, render_depth
+from .sensors import DepthCamera, Lidar, Scan, ScanScene, SceneObject, load_scene, look_at_pose, scan
 from .visibility import MethodInfo, available_methods, method_info, register, visible_mask
 from .visibility.session import VisibilitySession
-from .geometry.samples import OccludedCloud
-from .pipeline import occlude
-from .dataset.reader import OccludedDataset
-from .farm import merge_farm, run_farm
-from .sensors import DepthCamera, Lidar, Scan, ScanScene, SceneObject, load_scene, look_at_pose, scan
-from . import dataset, errors, experiments, farm, geometry, io, learn, mesh, pipeline, protocols, real_scans, render, sensors, visibility

@@ -15,13 +15,11 @@ import warnings
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-
 from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, Camera, camera_on_sphere, view_schedule
 from zbuf_occlude.defaults import (
     DEFAULT_DENSE_POINTS,
     DEFAULT_METHOD,
@@ -33,9 +31,10 @@ from zbuf_occlude.defaults import (
     DEFAULT_VIEWS,
 )
 from zbuf_occlude.errors import InvalidInputError, PaddedSamplesWarning
+from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, Camera, camera_on_sphere, view_schedule
 from zbuf_occlude.geometry.samples import DENSE_STREAM, OccludedCloud, derive_rng, object_key, pose_samples
-from zbuf_occlude.resources import check_memory, estimate_job_memory
 from zbuf_occlude.geometry.sampling import sample_surface
+from zbuf_occlude.resources import check_memory, estimate_job_memory
 from zbuf_occlude.visibility.registry import check_keywords, method_info, resolution_option, visible_mask
 
 if TYPE_CHECKING:  # trimesh (and scipy) is imported by occlude(), which takes files and meshes

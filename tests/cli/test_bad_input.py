@@ -250,8 +250,8 @@ def test_bad_seed_is_our_error_naming_the_seed(seed) -> None:
 
 
 def test_bad_seed_in_the_seed_derivation_of_generate_and_farm() -> None:
-    from zbuf_occlude.pipeline import dense_cloud
     from zbuf_occlude.geometry.samples import derive_rng
+    from zbuf_occlude.pipeline import dense_cloud
 
     with pytest.raises(InvalidInputError, match="seed must be a non-negative integer, got -1"):
         derive_rng(-1, 7)
@@ -546,9 +546,9 @@ def test_farm_discovery_reports_unreadable_folders_but_not_hidden_ones(tmp_path:
 
 def test_generate_and_farm_entry_points_survive_a_non_utf8_name(tmp_path: Path) -> None:
     # What `generate DIR` and `farm DIR` do first: find the meshes and key each name.
-    from zbuf_occlude.mesh.inputs import discover_objects
-    from zbuf_occlude.mesh.discovery import find_meshes
     from zbuf_occlude.geometry.samples import object_key
+    from zbuf_occlude.mesh.discovery import find_meshes
+    from zbuf_occlude.mesh.inputs import discover_objects
 
     _tree(tmp_path, ["chair/train/chair_0001.off", LATIN1_NAME])
     meshes = find_meshes([tmp_path])
@@ -701,8 +701,8 @@ def test_visibility_of_a_non_finite_mesh_is_an_error_not_an_answer(chair_and_poi
 @pytest.mark.parametrize("method", GPU_AND_EXACT)
 def test_camera_inside_the_object_is_a_camera_error_naming_the_radius(chair_and_points, method: str, radius: float) -> None:
     import zbuf_occlude as zo
-    from zbuf_occlude.geometry.cameras import camera_on_sphere
     from zbuf_occlude.errors import CameraError
+    from zbuf_occlude.geometry.cameras import camera_on_sphere
 
     mesh, points, face_index = chair_and_points
     with pytest.raises(CameraError, match=rf"radius {radius} is inside the object's bounding sphere"):
@@ -774,8 +774,8 @@ def test_occlude_object_refuses_a_job_that_cannot_fit_before_allocating(monkeypa
     import tracemalloc
 
     from zbuf_occlude import resources
-    from zbuf_occlude.pipeline import occlude_object
     from zbuf_occlude.errors import InsufficientMemoryError
+    from zbuf_occlude.pipeline import occlude_object
 
     monkeypatch.setattr(resources, "available_memory", lambda: (8 * 2**30, "test budget"))
     mesh = load_mesh(CHAIR)
@@ -893,8 +893,7 @@ def printable(path: str) -> str:
 @pytest.mark.parametrize("entry", ["generate", "farm"])
 def test_two_files_with_one_name_are_refused_naming_both(tmp_path: Path, entry: str) -> None:
     # generate and the farm plan with one function (farm.inputs.number_objects)
-    from zbuf_occlude.mesh.inputs import scan_paths
-    from zbuf_occlude.mesh.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs import scan_objects, scan_paths
 
     _tree(tmp_path, ["chair/train/chair_0001.off", "chair/train/chair_0002.off"])
     (tmp_path / "chair/train/chair_0001.off").rename(tmp_path / "chair/train/chair_0001.obj")
@@ -915,8 +914,8 @@ def _main_exit(argv: list[str], capsys) -> tuple[int, str]:
 def test_a_camera_beyond_float64s_reach_is_refused_naming_the_limit() -> None:
     import zbuf_occlude as zo
     from zbuf_occlude.defaults import MAX_CAMERA_RADIUS
-    from zbuf_occlude.geometry.cameras import camera_on_sphere
     from zbuf_occlude.errors import CameraError
+    from zbuf_occlude.geometry.cameras import camera_on_sphere
 
     assert 1e6 <= MAX_CAMERA_RADIUS < 1e7  # derived from float64's eps and the 1e-6 tolerance
     with pytest.raises(CameraError, match=r"camera radius 1e\+08 is beyond 1\.1e\+06 object units"):

@@ -14,12 +14,19 @@ from pathlib import Path
 
 import pytest
 
-from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
 from zbuf_occlude.cli.main import build_parser, main
 from zbuf_occlude.cli.options import RenamedOption
-from zbuf_occlude.defaults import DEFAULT_DENSE_POINTS, DEFAULT_N_POINTS, DEFAULT_RESOLUTION, DEFAULT_SEED, DEFAULT_VIEWS
-from zbuf_occlude.defaults import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION
+from zbuf_occlude.defaults import (
+    DEFAULT_DENSE_POINTS,
+    DEFAULT_FARM_DENSE_POINTS,
+    DEFAULT_FARM_RESOLUTION,
+    DEFAULT_N_POINTS,
+    DEFAULT_RESOLUTION,
+    DEFAULT_SEED,
+    DEFAULT_VIEWS,
+)
 from zbuf_occlude.farm.config import DEFAULT_VIEWS as FARM_VIEWS
+from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 BOX = REPO_ROOT / "data" / "samples" / "chair" / "train" / "chair_0001.off"
@@ -146,8 +153,8 @@ def test_scan_refuses_a_sensor_inside_the_object(tmp_path: Path, capsys) -> None
 
 
 def test_scan_distance_limit_is_half_the_largest_horizontal_size() -> None:
-    from zbuf_occlude.errors import InvalidInputError
     from zbuf_occlude.cli.sensors import check_outside
+    from zbuf_occlude.errors import InvalidInputError
     from zbuf_occlude.sensors.crops import CropDistributions
 
     check_outside(CropDistributions(distance_m=(2.25, 9.0), size_m=(4.5, 4.5)))

@@ -13,9 +13,9 @@ import trimesh
 from conftest import real_mesh
 
 import zbuf_occlude as zo
+from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 from zbuf_occlude.experiments import compare as cmp
 from zbuf_occlude.experiments import elevation_profile as prof
-from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 
 #: A tiny real mesh: bathtub_0002 (664 faces) from ../shared, else the shipped sofa_0681 (224).
 TINY = real_mesh("ModelNet40/bathtub/train/bathtub_0002.off", substitute="ModelNet10/sofa/test/sofa_0681.off")

@@ -12,7 +12,12 @@ import trimesh
 import zbuf_occlude.sensors as S
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.realism import (
-    cloud_stats, compare_sets, fit_count_exponent, read_object_clouds, realism_report, ring_spacings_deg,
+    cloud_stats,
+    compare_sets,
+    fit_count_exponent,
+    read_object_clouds,
+    realism_report,
+    ring_spacings_deg,
 )  # fmt: skip
 
 LIDARNET = Path(__file__).resolve().parents[3] / "shared" / "data" / "lidarnet_v2_partial"

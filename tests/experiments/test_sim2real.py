@@ -13,6 +13,7 @@ import trimesh
 pytest.importorskip("torch")
 
 from zbuf_occlude.cli.main import main  # noqa: E402
+from zbuf_occlude.errors import InvalidInputError  # noqa: E402
 from zbuf_occlude.experiments.sim2real_data import (  # noqa: E402
     KEEP_SCALE_UNIT_M,
     TRAINING_SETS,
@@ -22,7 +23,6 @@ from zbuf_occlude.experiments.sim2real_data import (  # noqa: E402
     split_whole_meshes,
 )
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange, parse_sizes, size_interval  # noqa: E402
-from zbuf_occlude.errors import InvalidInputError  # noqa: E402
 
 
 def _mesh_root(tmp_path: Path) -> Path:

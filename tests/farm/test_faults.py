@@ -17,13 +17,12 @@ from pathlib import Path
 
 import pytest
 
-from zbuf_occlude.dataset.layout import CARD_FILE, MANIFEST_FILE
+from zbuf_occlude.dataset.layout import CARD_FILE, LOCK_FILE, MANIFEST_FILE
 from zbuf_occlude.dataset.reader import OccludedDataset
-from zbuf_occlude.farm import FarmParams, merge_farm, run_farm
-from zbuf_occlude.dataset.layout import LOCK_FILE
 from zbuf_occlude.errors import DatasetBusy
-from zbuf_occlude.farm.lock import farm_lock, task_lock_path
+from zbuf_occlude.farm import FarmParams, merge_farm, run_farm
 from zbuf_occlude.farm.config import RunOptions
+from zbuf_occlude.farm.lock import farm_lock, task_lock_path
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 #: The three smallest shipped meshes (96–400 faces).
@@ -403,9 +402,8 @@ def test_identical_faces_enter_embree_fast_once():
     import numpy as np
 
     import zbuf_occlude as zo
-    from zbuf_occlude.visibility.embree_fast import _Scene
-
     from zbuf_occlude.visibility.cpu_zbuffer import _MeshData
+    from zbuf_occlude.visibility.embree_fast import _Scene
 
     for m in (10, 500):
         assert _Scene(_tetra_with_copies(m)).n_faces_in_bvh == 4

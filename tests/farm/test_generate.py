@@ -20,11 +20,10 @@ import pytest
 
 from zbuf_occlude.cli.main import main
 from zbuf_occlude.dataset.reader import OccludedDataset
-from zbuf_occlude.errors import ShardChecksumError
-from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.errors import InvalidInputError, ShardChecksumError
 from zbuf_occlude.farm import FarmParams, run_farm
-from zbuf_occlude.io.clouds import read_h5, read_npz
 from zbuf_occlude.farm.config import RunOptions
+from zbuf_occlude.io.clouds import read_h5, read_npz
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 ARGS = ["--views", "0:0,30:45", "--points", "64", "--samples-per-view", "2", "--dense-points", "2000", "--resolution", "128"]

@@ -22,21 +22,19 @@ import numpy as np
 import pytest
 from conftest import SAMPLE_MESHES
 
-from zbuf_occlude.dataset.layout import CARD_FILE, MANIFEST_FILE, SHAPE_NAMES_FILE
-from zbuf_occlude.dataset.reader import OccludedDataset
-from zbuf_occlude.errors import InvalidInputError, OutputError
-from zbuf_occlude.mesh.inputs import FarmObject, discover_objects
-from zbuf_occlude.farm import FarmParams, merge_farm, parse_shard, run_farm, select_shard
 from zbuf_occlude.cli.farm import add_farm_merge_parser, add_farm_parser
-from zbuf_occlude.geometry.cameras import camera_on_sphere
 from zbuf_occlude.cli.main import main as cli_main
-from zbuf_occlude.dataset.reader import unpack_visible
+from zbuf_occlude.dataset.layout import CARD_FILE, MANIFEST_FILE, SHAPE_NAMES_FILE
+from zbuf_occlude.dataset.reader import OccludedDataset, unpack_visible
+from zbuf_occlude.errors import InvalidInputError, OutputError
+from zbuf_occlude.farm import FarmParams, merge_farm, parse_shard, run_farm, select_shard
+from zbuf_occlude.farm.config import RunOptions
+from zbuf_occlude.geometry.cameras import camera_on_sphere
+from zbuf_occlude.geometry.samples import object_key, pose_samples
+from zbuf_occlude.mesh.inputs import FarmObject, discover_objects
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.pipeline import dense_cloud
-from zbuf_occlude.geometry.samples import object_key, pose_samples
-from zbuf_occlude.visibility.registry import visible_mask
-from zbuf_occlude.visibility.registry import method_info
-from zbuf_occlude.farm.config import RunOptions
+from zbuf_occlude.visibility.registry import method_info, visible_mask
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 #: Shipped real meshes (224–7608 faces), as (path under data/samples, class, split).
@@ -671,9 +669,9 @@ def test_worker_sensor_shard_is_the_crops_datasets_and_its_record(tmp_path):
     # farm --sensor: the shard holds farm_datasets' arrays as they are (same order) plus the
     # object's attributes and the sensor; the record counts returns per scan
     from zbuf_occlude.farm.config import shard_path
+    from zbuf_occlude.farm.sensor_crops import farm_datasets
     from zbuf_occlude.farm.worker import process_object
     from zbuf_occlude.io.atomic import file_sha256
-    from zbuf_occlude.farm.sensor_crops import farm_datasets
 
     obj = _box_object(tmp_path)
     params = FarmParams(sensor="hdl32e", samples_per_view=3, n_points=64, seed=2, sensor_distance_m=(4.0, 6.0),

@@ -14,14 +14,14 @@ import pytest
 
 import zbuf_occlude as zo
 from zbuf_occlude.cli.main import main as cli_main
-from zbuf_occlude.farm.sensor_crops import farm_datasets
-from zbuf_occlude.sensors.crops import CropDistributions
 from zbuf_occlude.dataset.layout import CARD_FILE
 from zbuf_occlude.dataset.reader import OccludedDataset
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.farm import FarmParams
+from zbuf_occlude.farm.sensor_crops import farm_datasets
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors import Lidar
+from zbuf_occlude.sensors.crops import CropDistributions
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 ARGS = ["--sensor", "hdl32e", "--samples-per-view", "2", "--points", "128", "--per-class", "1", "--splits", "train",

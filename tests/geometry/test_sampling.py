@@ -10,15 +10,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
+from conftest import real_mesh as real_mesh_path
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
-from conftest import real_mesh as real_mesh_path
 from scipy import stats
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.geometry.sampling import points_from_barycentric, sample_faces, sample_surface, triangles_of
+from zbuf_occlude.mesh.load import load_mesh
 
 #: Smallest p-value accepted from a goodness-of-fit test.
 P_MIN = 1e-3

@@ -143,8 +143,7 @@ def test_the_temporary_is_beside_the_target_not_in_tmpdir(tmp_path, monkeypatch)
 
 @pytest.mark.parametrize("writer", ["npz", "ply", "h5", "text", "csv"])
 def test_data_are_fsynced_before_the_rename(tmp_path, monkeypatch, writer):
-    from zbuf_occlude.io.atomic import write_csv
-    from zbuf_occlude.io.atomic import write_text
+    from zbuf_occlude.io.atomic import write_csv, write_text
 
     log = []
     _spy(monkeypatch, log)

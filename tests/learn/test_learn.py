@@ -12,6 +12,7 @@ import pytest
 torch = pytest.importorskip("torch", reason="zbuf_occlude.learn needs PyTorch: pip install 'zbuf-occlude[learn]'")
 
 from zbuf_occlude.errors import InvalidInputError  # noqa: E402
+from zbuf_occlude.farm.config import RunOptions
 from zbuf_occlude.learn import data as D  # noqa: E402
 from zbuf_occlude.learn.metrics import accuracy_by_elevation, classification_report, confusion_matrix  # noqa: E402
 from zbuf_occlude.learn.models import (  # noqa: E402
@@ -22,7 +23,6 @@ from zbuf_occlude.learn.models import (  # noqa: E402
     voxelize,
 )
 from zbuf_occlude.learn.training import TrainConfig, predict, train  # noqa: E402
-from zbuf_occlude.farm.config import RunOptions
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 

@@ -9,13 +9,13 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from zbuf_occlude.geometry.cameras import camera_on_sphere  # noqa: E402
 from zbuf_occlude.errors import InvalidInputError  # noqa: E402
+from zbuf_occlude.geometry.cameras import camera_on_sphere  # noqa: E402
+from zbuf_occlude.geometry.samples import object_key
 from zbuf_occlude.learn import OnTheFlyOccludedDataset, PoseDistribution, RandomOcclusion  # noqa: E402
 from zbuf_occlude.learn.models import PointNet  # noqa: E402
 from zbuf_occlude.mesh.load import load_mesh  # noqa: E402
 from zbuf_occlude.pipeline import dense_cloud  # noqa: E402
-from zbuf_occlude.geometry.samples import object_key
 from zbuf_occlude.protocols import modelnet40c  # noqa: E402
 from zbuf_occlude.visibility.registry import visible_mask  # noqa: E402
 

@@ -14,8 +14,8 @@ import pytest
 import trimesh
 
 from zbuf_occlude.cli.main import main
-from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.dataset.layout import CARD_FILE, SHAPE_NAMES_FILE
+from zbuf_occlude.errors import InvalidInputError
 
 #: One pose, one small sample: a run over a test tree takes seconds.
 TINY = ["--views", "0:0", "--points", "32", "--resolution", "64", "--samples-per-view", "1", "--dense-points", "500"]
@@ -72,8 +72,7 @@ def test_a_shapenetcore_v2_tree_gets_its_real_class_names(tmp_path: Path, comman
 @pytest.mark.parametrize("version", [1, 2])
 @pytest.mark.parametrize("entry", ["farm", "generate"])
 def test_shapenetcore_without_taxonomy_is_labelled_by_synset_id(tmp_path: Path, version: int, entry: str) -> None:
-    from zbuf_occlude.mesh.inputs import scan_paths
-    from zbuf_occlude.mesh.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs import scan_objects, scan_paths
 
     root = shapenet_tree(tmp_path / "sn", version=version, taxonomy=False)
     objects = scan_objects(root).objects if entry == "farm" else scan_paths([root])[0]

@@ -11,8 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import zbuf_occlude as zo
-from zbuf_occlude.geometry.cameras import camera_on_sphere
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.geometry.cameras import camera_on_sphere
 from zbuf_occlude.io.clouds import read_h5_clouds
 from zbuf_occlude.protocols import (
     PinholeView,

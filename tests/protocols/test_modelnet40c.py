@@ -15,7 +15,15 @@ import trimesh
 
 import zbuf_occlude as zo
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.protocols import PinholeView, ProtocolOptions, back_project, get_protocol, project, render_depth_image, run_protocol
+from zbuf_occlude.protocols import (
+    PinholeView,
+    ProtocolOptions,
+    back_project,
+    get_protocol,
+    project,
+    render_depth_image,
+    run_protocol,
+)
 from zbuf_occlude.protocols import modelnet40c as mc
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"

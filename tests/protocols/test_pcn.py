@@ -10,8 +10,7 @@ import trimesh
 
 import zbuf_occlude as zo
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.protocols import ProtocolOptions, get_protocol, project, read_arrays_h5, run_protocol
-from zbuf_occlude.protocols import pcn
+from zbuf_occlude.protocols import ProtocolOptions, get_protocol, pcn, project, read_arrays_h5, run_protocol
 
 CHAIR = Path(__file__).resolve().parents[2] / "data" / "samples" / "chair" / "train" / "chair_0001.off"
 

@@ -9,7 +9,18 @@ import numpy as np
 import pytest
 
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
-from zbuf_occlude.real_scans.datasets import SUO_DTYPE, car_scores, car_scores_from_labels, load_real_scans, read_lidarnet_csv, read_suo_bin, read_suo_csv, read_suo_object, write_suo_bin, write_suo_csv
+from zbuf_occlude.real_scans.datasets import (
+    SUO_DTYPE,
+    car_scores,
+    car_scores_from_labels,
+    load_real_scans,
+    read_lidarnet_csv,
+    read_suo_bin,
+    read_suo_csv,
+    read_suo_object,
+    write_suo_bin,
+    write_suo_csv,
+)
 from zbuf_occlude.real_scans.records import normalize_points
 
 LIDARNET = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "lidarnet_v2_partial"

@@ -14,10 +14,10 @@ import trimesh
 
 import zbuf_occlude as zo
 from zbuf_occlude.errors import BackendUnavailable
+from zbuf_occlude.render import renderer_for
 from zbuf_occlude.render.context import create_context
 from zbuf_occlude.render.moderngl_backend import ModernGLRenderer
 from zbuf_occlude.visibility.segment_triangle import segment_hits_triangles
-from zbuf_occlude.render import renderer_for
 
 REPO = Path(__file__).resolve().parents[2]
 SPHERE_RADIUS = 0.5

@@ -16,10 +16,11 @@ import trimesh
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from zbuf_occlude.geometry.cameras import camera_on_sphere
 from zbuf_occlude.defaults import DEFAULT_SELF_HIT_TOLERANCE
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
-from zbuf_occlude.visibility import oracle_embree as oracle, registry  # _EmbreeScene lives in oracle_embree
+from zbuf_occlude.geometry.cameras import camera_on_sphere
+from zbuf_occlude.visibility import oracle_embree as oracle  # _EmbreeScene lives in oracle_embree
+from zbuf_occlude.visibility import registry
 from zbuf_occlude.visibility.oracle_embree import occluded_embree
 from zbuf_occlude.visibility.oracle_numpy import occluded_numpy
 from zbuf_occlude.visibility.segment_triangle import segment_hits_triangles, triangle_planes

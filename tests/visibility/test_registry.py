@@ -10,8 +10,8 @@ import pytest
 import trimesh
 
 import zbuf_occlude
-from zbuf_occlude.experiments.compare.run import _sweep_jobs
 from zbuf_occlude.errors import InvalidInputError, RegistryError, ZbufOccludeError
+from zbuf_occlude.experiments.compare.run import _sweep_jobs
 from zbuf_occlude.geometry.samples import object_key
 from zbuf_occlude.pipeline import occlude_object
 from zbuf_occlude.visibility import registry

@@ -6,11 +6,10 @@ import argparse
 from typing import Any
 
 from zbuf_occlude.cli.options import add_renamed
-from zbuf_occlude.defaults import DEFAULT_RESOLUTION
-from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
+from zbuf_occlude.defaults import DEFAULT_RESOLUTION, DEFAULT_VIEWS
 from zbuf_occlude.experiments.compare.job import run_compare
 from zbuf_occlude.experiments.compare.run import DEFAULT_METHODS, DEFAULT_POINTS, DEFAULT_REFERENCE
-from zbuf_occlude.defaults import DEFAULT_VIEWS
+from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 
 __all__ = ["add_compare_parser"]
 

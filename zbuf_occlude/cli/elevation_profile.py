@@ -7,7 +7,12 @@ from typing import Any
 
 from zbuf_occlude.cli.options import add_renamed
 from zbuf_occlude.defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION
-from zbuf_occlude.experiments.elevation_profile import DEFAULT_AZIMUTHS, DEFAULT_ELEVATIONS, DEFAULT_PROFILE_POINTS, elevation_profile
+from zbuf_occlude.experiments.elevation_profile import (
+    DEFAULT_AZIMUTHS,
+    DEFAULT_ELEVATIONS,
+    DEFAULT_PROFILE_POINTS,
+    elevation_profile,
+)
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 
 __all__ = ["add_profile_parser"]

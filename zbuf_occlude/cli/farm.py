@@ -7,19 +7,25 @@ import logging
 import shlex
 import sys
 
-from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
-from zbuf_occlude.defaults import DEFAULT_DENSE_POINTS as GENERATE_DENSE_POINTS
-from zbuf_occlude.defaults import DEFAULT_METHOD, DEFAULT_SEED
-from zbuf_occlude.defaults import DEFAULT_RESOLUTION as GENERATE_RESOLUTION
-from zbuf_occlude.defaults import DEFAULT_FARM_VIEWS
-from zbuf_occlude.defaults import DEFAULT_VIEWS as GENERATE_VIEWS
-from zbuf_occlude.mesh.discovery import SPLITS
-from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.dataset.layout import STORAGE_MODES
-from zbuf_occlude.defaults import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION, DEFAULT_N_POINTS, DEFAULT_SAMPLES_PER_VIEW
-from zbuf_occlude.farm.config import DEFAULT_SENSOR_DISTANCE_M, DEFAULT_SENSOR_HEIGHT_M, DEFAULT_SENSOR_SIZE_M, FarmParams
+from zbuf_occlude.defaults import DEFAULT_DENSE_POINTS as GENERATE_DENSE_POINTS
+from zbuf_occlude.defaults import (
+    DEFAULT_FARM_DENSE_POINTS,
+    DEFAULT_FARM_RESOLUTION,
+    DEFAULT_FARM_VIEWS,
+    DEFAULT_METHOD,
+    DEFAULT_N_POINTS,
+    DEFAULT_SAMPLES_PER_VIEW,
+    DEFAULT_SEED,
+)
+from zbuf_occlude.defaults import DEFAULT_RESOLUTION as GENERATE_RESOLUTION
+from zbuf_occlude.defaults import DEFAULT_VIEWS as GENERATE_VIEWS
+from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.farm.checks import check_out_option
+from zbuf_occlude.farm.config import DEFAULT_SENSOR_DISTANCE_M, DEFAULT_SENSOR_HEIGHT_M, DEFAULT_SENSOR_SIZE_M, FarmParams
 from zbuf_occlude.farm.shards import parse_shard
+from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
+from zbuf_occlude.mesh.discovery import SPLITS
 
 log = logging.getLogger(__name__)
 

@@ -8,9 +8,9 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from zbuf_occlude.cli.sim2real import parse_pairs, print_table
 from zbuf_occlude.defaults import DEFAULT_METHOD
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.cli.sim2real import parse_pairs, print_table
 
 __all__ = ["add_parser", "check_options"]
 

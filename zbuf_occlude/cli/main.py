@@ -17,16 +17,23 @@ from pathlib import Path
 import numpy as np
 
 from zbuf_occlude._version import __version__
-from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
+from zbuf_occlude.cli.options import add_renamed
 from zbuf_occlude.defaults import DEFAULT_DENSE_POINTS, DEFAULT_METHOD, DEFAULT_RESOLUTION, DEFAULT_SEED, DEFAULT_VIEWS
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
-from zbuf_occlude.io.clouds import FORMATS
+from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
 from zbuf_occlude.io.atomic import write_csv
+from zbuf_occlude.io.clouds import FORMATS
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
-from zbuf_occlude.visibility.metrics import agreement
 from zbuf_occlude.resources import check_memory, estimate_job_memory
-from zbuf_occlude.cli.options import add_renamed
-from zbuf_occlude.visibility.registry import available_methods, check_runnable, method_info, resolution_option, unavailable_reason, visible_mask
+from zbuf_occlude.visibility.metrics import agreement
+from zbuf_occlude.visibility.registry import (
+    available_methods,
+    check_runnable,
+    method_info,
+    resolution_option,
+    unavailable_reason,
+    visible_mask,
+)
 
 __all__ = ["main", "build_parser", "SAMPLE_MESHES"]
 
@@ -108,9 +115,9 @@ def _check_validate_memory(points: int, resolution: int) -> None:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from zbuf_occlude.mesh.load import load_mesh  # trimesh (and scipy): imported by the commands that load meshes
-    from zbuf_occlude.mesh.discovery import scan_meshes
     from zbuf_occlude.geometry.sampling import check_seed, sample_surface
+    from zbuf_occlude.mesh.discovery import scan_meshes
+    from zbuf_occlude.mesh.load import load_mesh  # trimesh (and scipy): imported by the commands that load meshes
 
     _check_at_least(args, dense_points=1, resolution=1)
     check_seed(args.seed, name="--seed")
@@ -271,8 +278,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     # Subcommands whose options live beside their engines.
     from zbuf_occlude.cli.compare import add_compare_parser
-    from zbuf_occlude.cli.farm import add_farm_merge_parser, add_farm_parser
     from zbuf_occlude.cli.elevation_profile import add_profile_parser
+    from zbuf_occlude.cli.farm import add_farm_merge_parser, add_farm_parser
 
     for add in (add_compare_parser, add_profile_parser, add_farm_parser, add_farm_merge_parser):
         add(sub)

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.presets import sensor_from_name
 from zbuf_occlude.geometry.samples import derive_rng, object_key
+from zbuf_occlude.sensors.presets import sensor_from_name
 
 __all__ = ["add_scan_parser", "add_realism_parser", "add_parser", "parse_interval"]
 

@@ -43,9 +43,9 @@ def _run(args: argparse.Namespace) -> int:
     from zbuf_occlude.learn import require_torch
 
     require_torch()
+    from zbuf_occlude.experiments.sim2real import run_sim2real
     from zbuf_occlude.mesh.scene import UP_CHOICES
     from zbuf_occlude.mesh.sizes import parse_sizes
-    from zbuf_occlude.experiments.sim2real import run_sim2real
 
     up_map = parse_pairs(args.up_map, "--up-map")
     bad = {k: v for k, v in up_map.items() if v not in UP_CHOICES}
@@ -73,8 +73,8 @@ def print_table(out: str, summary: dict[str, Any]) -> int:
 
 def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     """Add ``sim2real`` to ``experiment``'s argparse subparsers."""
-    from zbuf_occlude.mesh.scene import UP_CHOICES
     from zbuf_occlude.experiments.sim2real_data import MIN_RETURNS
+    from zbuf_occlude.mesh.scene import UP_CHOICES
 
     p = sub.add_parser(
         "sim2real", help="train only on clouds from meshes (complete / occluded / lidar / "

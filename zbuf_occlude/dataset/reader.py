@@ -16,7 +16,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude.errors import DatasetFormatError, InvalidInputError, ShardChecksumError
 from zbuf_occlude.dataset.layout import (
     CARD_FILE,
     FORMAT_VERSION,
@@ -24,9 +23,10 @@ from zbuf_occlude.dataset.layout import (
     SAMPLE_FILE_FORMATS,
     STORAGE_MODES,
 )
-from zbuf_occlude.mesh.discovery import SPLITS, name_set
+from zbuf_occlude.errors import DatasetFormatError, InvalidInputError, ShardChecksumError
 from zbuf_occlude.geometry.samples import pose_samples
 from zbuf_occlude.io.safe_paths import path_inside
+from zbuf_occlude.mesh.discovery import SPLITS, name_set
 
 __all__ = ["OccludedDataset", "reconstruct_samples", "unpack_visible", "samples_per_pose"]
 

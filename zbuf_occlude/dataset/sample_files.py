@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.dataset.layout import SAMPLE_FILE_FORMATS
+from zbuf_occlude.errors import InvalidInputError
 
 __all__ = ["read_sample_points"]
 

@@ -20,8 +20,8 @@ from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from zbuf_occlude.errors import DatasetFormatError
 from zbuf_occlude.dataset.layout import SHAPE_NAMES_FILE
+from zbuf_occlude.errors import DatasetFormatError
 from zbuf_occlude.io.safe_paths import control_character, path_inside
 
 __all__ = [

@@ -16,10 +16,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from zbuf_occlude.dataset.layout import CARD_FILE, MANIFEST_FILE, file_list_name
 from zbuf_occlude.dataset.reader import samples_per_pose
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
 from zbuf_occlude.io.atomic import file_sha256
-from zbuf_occlude.dataset.layout import CARD_FILE, MANIFEST_FILE, file_list_name
 from zbuf_occlude.io.safe_paths import path_inside
 
 if TYPE_CHECKING:  # the schema (pydantic) is imported when a data set is verified

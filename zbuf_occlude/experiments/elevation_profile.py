@@ -19,22 +19,20 @@ surface, weighted by ``|n · e_k|`` of its face, and the estimate is averaged ov
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import logging
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere
 from zbuf_occlude.defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION
 from zbuf_occlude.errors import InvalidInputError, OutputError
-from zbuf_occlude.io.atomic import write_csv
+from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere
 from zbuf_occlude.geometry.sampling import sample_surface
+from zbuf_occlude.io.atomic import write_csv
 from zbuf_occlude.visibility.registry import resolution_option, visible_mask
 
 if TYPE_CHECKING:  # trimesh is imported where it is used

@@ -27,8 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.io.atomic import atomic_path, write_text
-from zbuf_occlude.io.atomic import write_csv
+from zbuf_occlude.io.atomic import atomic_path, write_csv, write_text
 from zbuf_occlude.sensors.scan import read_scan_npz
 from zbuf_occlude.sensors.scene import GROUND_ID
 

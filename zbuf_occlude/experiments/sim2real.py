@@ -32,16 +32,22 @@ from pathlib import Path
 import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.io.atomic import write_csv
-from zbuf_occlude.io.atomic import write_text
-from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
+from zbuf_occlude.experiments.sim2real_data import (
+    GROUND_ELEVATION_DEG,
+    KEEP_SCALE_UNIT_M,
+    LIDAR_PLACEMENT,
+    MIN_RETURNS,
+    TRAINING_SETS,
+    build_sets,
+    find_class_meshes,
+    real_clouds,
+    split_whole_meshes,
+)  # fmt: skip
+from zbuf_occlude.io.atomic import write_csv, write_text
 from zbuf_occlude.learn.data import CloudSet, split_validation
 from zbuf_occlude.learn.metrics import classification_report
-from zbuf_occlude.experiments.sim2real_data import (
-    GROUND_ELEVATION_DEG, KEEP_SCALE_UNIT_M, LIDAR_PLACEMENT, MIN_RETURNS, TRAINING_SETS, build_sets, find_class_meshes,
-    real_clouds, split_whole_meshes,
-)  # fmt: skip
 from zbuf_occlude.learn.stats import mean_std, permutation_p
+from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
 
 __all__ = ["Sim2RealScale", "SIM2REAL_SCALES", "REAL_TO_REAL", "run_sim2real"]
 
@@ -83,8 +89,8 @@ SIM2REAL_SCALES = {
 
 def _sensor(name_or_sensor):
     from zbuf_occlude.sensors.airborne import AirborneScanner
-    from zbuf_occlude.sensors.presets import sensor_from_name
     from zbuf_occlude.sensors.lidar import Lidar
+    from zbuf_occlude.sensors.presets import sensor_from_name
 
     if isinstance(name_or_sensor, (Lidar, AirborneScanner)):
         return name_or_sensor
@@ -201,9 +207,9 @@ def run_sim2real(
     InvalidInputError
         Bad options, unusable meshes or scans, or an ``out`` made with other settings.
     """
-    from zbuf_occlude.real_scans.datasets import load_real_scans
     from zbuf_occlude.experiments.table3 import _machine
     from zbuf_occlude.learn.training import TrainConfig, predict, train
+    from zbuf_occlude.real_scans.datasets import load_real_scans
 
     if scale not in SIM2REAL_SCALES:
         raise InvalidInputError(f"--scale must be one of {sorted(SIM2REAL_SCALES)}, got {scale!r}")

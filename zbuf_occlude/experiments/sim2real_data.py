@@ -23,20 +23,19 @@ divided by :data:`KEEP_SCALE_UNIT_M` so that size stays a cue.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import fnmatch
 import logging
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange, size_interval
 from zbuf_occlude.learn.data import CloudSet, dedupe_meshes, normalize_batch, resample
+from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange, size_interval
 
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
@@ -105,8 +104,8 @@ def find_class_meshes(root: str | os.PathLike, *, up: str = "auto", up_map: dict
     MeshLoadError
         A mesh that cannot be loaded (named).
     """
-    from zbuf_occlude.mesh.load import load_mesh
     from zbuf_occlude.mesh.discovery import walk_mesh_files
+    from zbuf_occlude.mesh.load import load_mesh
 
     root = Path(root)
     if not root.is_dir():
@@ -169,8 +168,8 @@ def _complete(entry: MeshEntry, k: int, n_points: int, rng: np.random.Generator)
 
 def _occluded(entry: MeshEntry, k: int, n_points: int, seed: int, rng: np.random.Generator, *, dense_points: int,
               resolution: int, method: str) -> list[NDArray]:  # fmt: skip
-    from zbuf_occlude.pipeline import dense_cloud, occlude_object
     from zbuf_occlude.geometry.samples import object_key
+    from zbuf_occlude.pipeline import dense_cloud, occlude_object
 
     key = object_key(entry.name)
     poses = list(zip(rng.uniform(*GROUND_ELEVATION_DEG, 2 * k + 2), rng.uniform(0.0, 360.0, 2 * k + 2)))

@@ -22,13 +22,12 @@ import numpy as np
 
 from zbuf_occlude.defaults import DEFAULT_METHOD
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.io.atomic import write_csv
-from zbuf_occlude.io.atomic import write_text
-from zbuf_occlude.visibility.registry import method_info
-from zbuf_occlude.learn.data import CloudSet, dedupe_meshes, from_meshes, from_occluded, split_validation
-from zbuf_occlude.learn.metrics import accuracy_by_elevation, classification_report
 from zbuf_occlude.experiments.paper import MODELNET8, PAPER_3A, PAPER_3B, TEST_ELEVATIONS, TRAIN_ELEVATIONS
 from zbuf_occlude.experiments.table3_report import plot_augmentation, plot_elevation, table_3a, table_3b, write_confusion
+from zbuf_occlude.io.atomic import write_csv, write_text
+from zbuf_occlude.learn.data import CloudSet, dedupe_meshes, from_meshes, from_occluded, split_validation
+from zbuf_occlude.learn.metrics import accuracy_by_elevation, classification_report
+from zbuf_occlude.visibility.registry import method_info
 
 __all__ = ["SCALES", "Scale", "plan_meshes", "run_elevation", "run_augmentation", "combine_elevation"]
 
@@ -128,8 +127,8 @@ def _machine() -> str:
 def _visible_area_curve(meshes: list[dict], data_dir: Path, scale: Scale, method: str, progress: bool) -> list[dict]:
     """Fig. 12: projected visible areas per elevation, averaged over the meshes (cached in data_dir)."""
     from zbuf_occlude.experiments.elevation_profile import profile_table
-    from zbuf_occlude.mesh.load import load_mesh
     from zbuf_occlude.io.atomic import write_csv as _w
+    from zbuf_occlude.mesh.load import load_mesh
 
     cache = data_dir / "visible_area.csv"
     if cache.is_file():
@@ -386,8 +385,8 @@ def run_augmentation(
 
 
 def _load_scans(path, n_points: int, seed: int):
-    from zbuf_occlude.real_scans.datasets import load_real_scans
     from zbuf_occlude.learn.data import normalize_batch, resample
+    from zbuf_occlude.real_scans.datasets import load_real_scans
 
     scans = load_real_scans(path)
     rng = np.random.default_rng([seed, 3])
@@ -396,8 +395,8 @@ def _load_scans(path, n_points: int, seed: int):
 
 
 def _test3(model, scans, names, train_set: str, config, label_map) -> list[dict]:
-    from zbuf_occlude.real_scans.datasets import SUO_CAR_CLASSES, car_scores_from_labels
     from zbuf_occlude.learn.training import predict
+    from zbuf_occlude.real_scans.datasets import SUO_CAR_CLASSES, car_scores_from_labels
 
     points, labels = scans
     pred, _ = predict(model, points, batch_size=config.batch_size, device=config.device)

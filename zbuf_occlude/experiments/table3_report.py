@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from zbuf_occlude.io.atomic import write_csv
 from zbuf_occlude.experiments.paper import PAPER_3A, PAPER_3B_MEAN_F1, TEST_ELEVATIONS
+from zbuf_occlude.io.atomic import write_csv
 
 __all__ = ["table_3a", "table_3b", "plot_elevation", "plot_augmentation", "write_confusion"]
 

@@ -13,11 +13,11 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-from zbuf_occlude.geometry.cameras import camera_on_sphere
 from zbuf_occlude.errors import BackendUnavailable, CameraError, InvalidInputError, OutputError
+from zbuf_occlude.farm.config import FarmParams
+from zbuf_occlude.geometry.cameras import camera_on_sphere
 from zbuf_occlude.resources import check_memory, estimate_job_memory
 from zbuf_occlude.visibility.registry import get_method
-from zbuf_occlude.farm.config import FarmParams
 
 __all__ = ["check_before_work", "check_memory_up_front", "check_out_option", "check_out_outside_inputs", "check_radius",
            "prepare_out", "check_gl"]

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, view_schedule
+from zbuf_occlude.dataset.layout import GENERATE_STORAGES, STORAGE_MODES, record_name, sample_file_name, shard_name
 from zbuf_occlude.defaults import (
     DEFAULT_DENSE_POINTS,
     DEFAULT_FARM_DENSE_POINTS,
@@ -29,7 +29,7 @@ from zbuf_occlude.defaults import (
 )
 from zbuf_occlude.defaults import DEFAULT_VIEWS as GENERATE_VIEWS
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError, OutputError
-from zbuf_occlude.dataset.layout import GENERATE_STORAGES, STORAGE_MODES, record_name, sample_file_name, shard_name
+from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, view_schedule
 from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.mesh.discovery import SPLITS
 
@@ -189,8 +189,8 @@ class FarmParams:
             Unknown sensor, or ``sensor_footprint``/``sensor_reflectivity`` for a depth camera
             or a LiDAR without a beam divergence.
         """
-        from zbuf_occlude.sensors.presets import sensor_from_name
         from zbuf_occlude.sensors.lidar import Lidar
+        from zbuf_occlude.sensors.presets import sensor_from_name
 
         sensor = sensor_from_name(self.sensor)
         if (self.sensor_footprint or self.sensor_reflectivity is not None) and not isinstance(sensor, Lidar):

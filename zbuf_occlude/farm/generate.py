@@ -23,18 +23,18 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-from zbuf_occlude.mesh.discovery import SPLITS
-from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.io.clouds import concat_h5
-from zbuf_occlude.io.atomic import file_sha256, write_text
 from zbuf_occlude.dataset.layout import CARD_FILE, GENERATE_STORAGES, file_list_name, split_file_name
-from zbuf_occlude.io.safe_paths import path_inside
+from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.farm.checks import check_out_outside_inputs
 from zbuf_occlude.farm.config import GENERATE_DEFAULTS, FarmParams, RunOptions, record_path
-from zbuf_occlude.mesh.inputs import FarmObject, scan_inputs
 from zbuf_occlude.farm.journal import FarmSummary, read_json, shape_names_of
-from zbuf_occlude.farm.worker import write_json
 from zbuf_occlude.farm.run import run_farm
+from zbuf_occlude.farm.worker import write_json
+from zbuf_occlude.io.atomic import file_sha256, write_text
+from zbuf_occlude.io.clouds import concat_h5
+from zbuf_occlude.io.safe_paths import path_inside
+from zbuf_occlude.mesh.discovery import SPLITS
+from zbuf_occlude.mesh.inputs import FarmObject, scan_inputs
 
 __all__ = ["generate"]
 

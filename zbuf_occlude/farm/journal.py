@@ -11,15 +11,24 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from zbuf_occlude.dataset.layout import (
+    CARD_FILE,
+    FORMAT_VERSION,
+    MANIFEST_FILE,
+    PLAN_FILE,
+    RECORD_DIR,
+    SHAPE_NAMES_FILE,
+    SHARD_DIR,
+    file_list_name,
+)
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.io.atomic import file_sha256, temp_is_orphan, temp_owner, write_text
-from zbuf_occlude.dataset.layout import CARD_FILE, FORMAT_VERSION, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, file_list_name
-from zbuf_occlude.mesh.discovery import SPLITS
-from zbuf_occlude.io.safe_paths import check_line_text, path_inside
-from zbuf_occlude.geometry.samples import count_padded
 from zbuf_occlude.farm.config import BYTES_PER_MB, PAPER_SAMPLES_PER_MB, FarmParams, plan_digest, record_path, shard_path
-from zbuf_occlude.mesh.inputs import FarmObject
 from zbuf_occlude.farm.worker import base_record, package_version, write_json
+from zbuf_occlude.geometry.samples import count_padded
+from zbuf_occlude.io.atomic import file_sha256, temp_is_orphan, temp_owner, write_text
+from zbuf_occlude.io.safe_paths import check_line_text, path_inside
+from zbuf_occlude.mesh.discovery import SPLITS
+from zbuf_occlude.mesh.inputs import FarmObject
 
 log = logging.getLogger(__name__)
 

@@ -28,8 +28,8 @@ from collections.abc import Iterator
 from datetime import datetime, timezone
 from pathlib import Path
 
-from zbuf_occlude.errors import DatasetBusy, OutputError
 from zbuf_occlude.dataset.layout import LOCK_FILE, TASK_DIR, task_lock_name
+from zbuf_occlude.errors import DatasetBusy, OutputError
 
 __all__ = ["farm_lock", "lock_holder", "task_lock_path"]
 

@@ -29,9 +29,9 @@ from pathlib import Path
 from typing import Any
 
 from zbuf_occlude.farm.config import FarmParams
-from zbuf_occlude.mesh.inputs import FarmObject
 from zbuf_occlude.farm.lifecycle import die_with_parent
 from zbuf_occlude.farm.worker import base_record, process_object, write_record
+from zbuf_occlude.mesh.inputs import FarmObject
 
 __all__ = ["run_in_workers", "STOP_GRACE_S", "worker_death_error"]
 

@@ -16,15 +16,27 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from zbuf_occlude.dataset.layout import (
+    CARD_FILE,
+    MANIFEST_FILE,
+    PLAN_FILE,
+    RECORD_DIR,
+    SHAPE_NAMES_FILE,
+    SHARD_DIR,
+    TASK_DIR,
+    file_list_name,
+)
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError, OutputError
-from zbuf_occlude.io.atomic import atomic_path, write_text
-from zbuf_occlude.dataset.layout import CARD_FILE, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, TASK_DIR, file_list_name
-from zbuf_occlude.mesh.discovery import SPLITS
-from zbuf_occlude.io.safe_paths import path_inside
 from zbuf_occlude.farm.checks import check_before_work, check_out_outside_inputs, prepare_out
-from zbuf_occlude.farm.config import MANIFEST_INTERVAL_S, OPTION_NAMES, FarmParams, RunOptions, options_with, record_path, shard_path
-from zbuf_occlude.mesh.inputs import FarmObject, scan_objects
-from zbuf_occlude.farm.shards import select_shard
+from zbuf_occlude.farm.config import (
+    MANIFEST_INTERVAL_S,
+    OPTION_NAMES,
+    FarmParams,
+    RunOptions,
+    options_with,
+    record_path,
+    shard_path,
+)
 from zbuf_occlude.farm.journal import (
     FarmSummary,
     finalize,
@@ -39,7 +51,12 @@ from zbuf_occlude.farm.journal import (
 from zbuf_occlude.farm.lifecycle import sigterm_as_interrupt
 from zbuf_occlude.farm.lock import farm_lock
 from zbuf_occlude.farm.pool import run_in_workers
+from zbuf_occlude.farm.shards import select_shard
 from zbuf_occlude.farm.worker import package_version, process_object, write_json
+from zbuf_occlude.io.atomic import atomic_path, write_text
+from zbuf_occlude.io.safe_paths import path_inside
+from zbuf_occlude.mesh.discovery import SPLITS
+from zbuf_occlude.mesh.inputs import FarmObject, scan_objects
 
 log = logging.getLogger(__name__)
 

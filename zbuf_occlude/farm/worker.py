@@ -16,16 +16,24 @@ from typing import Any
 
 import numpy as np
 
+from zbuf_occlude._version import __version__
+from zbuf_occlude.dataset.layout import FORMAT_VERSION, SAMPLE_FILE_FORMATS
+from zbuf_occlude.dataset.schema import ObjectRecord
+from zbuf_occlude.farm.config import (
+    COMPACT_GZIP_LEVEL,
+    FATAL_ERRORS,
+    GL_LOCK,
+    FarmParams,
+    record_path,
+    sample_file_path,
+    shard_path,
+)
 from zbuf_occlude.geometry.samples import OccludedCloud
 from zbuf_occlude.io.atomic import atomic_h5, file_sha256, write_text
 from zbuf_occlude.io.clouds import write_h5, write_npz, write_ply
-from zbuf_occlude.dataset.layout import FORMAT_VERSION, SAMPLE_FILE_FORMATS
-from zbuf_occlude.dataset.schema import ObjectRecord
-from zbuf_occlude.pipeline import dense_cloud, occlude_object
 from zbuf_occlude.io.safe_paths import check_relative_name, path_inside
-from zbuf_occlude._version import __version__
-from zbuf_occlude.farm.config import COMPACT_GZIP_LEVEL, FATAL_ERRORS, GL_LOCK, FarmParams, record_path, sample_file_path, shard_path
 from zbuf_occlude.mesh.inputs import FarmObject
+from zbuf_occlude.pipeline import dense_cloud, occlude_object
 
 log = logging.getLogger(__name__)
 
@@ -82,8 +90,8 @@ def _scan(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
     ``sensor_height_m``, ``object_azimuth_deg``, ``yaw_deg``, ``size_m``, ``radius``) and
     ``ring``.  The record's ``n_visible`` has one entry per scan (0: no return).
     """
-    from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported by the work, not by modules that only read records
     from zbuf_occlude.farm.sensor_crops import farm_datasets
+    from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported by the work, not by modules that only read records
 
     mesh = load_mesh(obj.source)
     n_scans = int(params.samples_per_view)

@@ -136,8 +136,8 @@ def from_meshes(
     object_index : sequence of int, optional
         Stored as ``object_index`` (default 0..len-1).
     """
-    from zbuf_occlude.mesh.load import load_mesh
     from zbuf_occlude.geometry.sampling import sample_surface
+    from zbuf_occlude.mesh.load import load_mesh
 
     if len(paths) != len(labels):
         raise InvalidInputError(f"{len(paths)} meshes but {len(labels)} labels")

@@ -36,16 +36,15 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.mesh.inputs import scan_paths
-from zbuf_occlude.mesh.inputs import FarmObject
-from zbuf_occlude.mesh.load import load_mesh
-from zbuf_occlude.pipeline import DenseCloud, dense_cloud
+from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere
 from zbuf_occlude.geometry.samples import derive_rng, draw_sample
-from zbuf_occlude.visibility.registry import method_info, resolution_option, visible_mask
 from zbuf_occlude.learn import require_torch
 from zbuf_occlude.learn.data import normalize_batch
+from zbuf_occlude.mesh.inputs import FarmObject, scan_paths
+from zbuf_occlude.mesh.load import load_mesh
+from zbuf_occlude.pipeline import DenseCloud, dense_cloud
+from zbuf_occlude.visibility.registry import method_info, resolution_option, visible_mask
 
 __all__ = ["PoseDistribution", "RandomOcclusion", "OnTheFlyOccludedDataset", "EpochSampler", "SharedEpoch", "ProcessCache", "DEFAULT_ON_THE_FLY_METHOD", "DEFAULT_DENSE_ON_THE_FLY"]
 

@@ -19,10 +19,16 @@ import numpy as np
 import trimesh
 
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
+from zbuf_occlude.learn import require_torch
+from zbuf_occlude.learn.on_the_fly import (
+    DEFAULT_DENSE_ON_THE_FLY,
+    DEFAULT_ON_THE_FLY_METHOD,
+    PoseDistribution,
+    ProcessCache,
+    RandomOcclusion,
+)
 from zbuf_occlude.mesh.load import normalize_mesh
 from zbuf_occlude.pipeline import dense_cloud
-from zbuf_occlude.learn import require_torch
-from zbuf_occlude.learn.on_the_fly import DEFAULT_DENSE_ON_THE_FLY, DEFAULT_ON_THE_FLY_METHOD, PoseDistribution, RandomOcclusion, ProcessCache
 
 __all__ = ["OccludeMesh"]
 

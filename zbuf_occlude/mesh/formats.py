@@ -14,7 +14,6 @@ import importlib.util
 import io
 import re
 from pathlib import Path
-
 from typing import TYPE_CHECKING
 
 from zbuf_occlude.errors import MeshLoadError

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
 
-
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.geometry.samples import object_key
 from zbuf_occlude.mesh.discovery import (
     DEFAULT_SPLIT,
     SPLITS,
@@ -23,9 +23,8 @@ from zbuf_occlude.mesh.discovery import (
     unusable_entry_reason,
     walk_mesh_files,
 )
-from zbuf_occlude.mesh.layouts import label_tree, scan_labelled
 from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS
-from zbuf_occlude.geometry.samples import object_key
+from zbuf_occlude.mesh.layouts import label_tree, scan_labelled
 
 __all__ = [
     "FarmObject", "ObjectScan", "discover_objects", "scan_objects", "scan_inputs", "number_objects",

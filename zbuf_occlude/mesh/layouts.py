@@ -46,6 +46,7 @@ from os import PathLike
 from pathlib import Path
 from typing import NamedTuple
 
+from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.discovery import (
     DEFAULT_SPLIT,
     SPLITS,
@@ -55,7 +56,6 @@ from zbuf_occlude.mesh.discovery import (
     no_meshes_error,
     printable_path,
 )
-from zbuf_occlude.errors import InvalidInputError
 
 __all__ = [
     "LAYOUTS",

@@ -34,7 +34,6 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 
-
 __all__ = ["UP_AXES", "UP_CHOICES", "resolve_up", "up_rotation", "declared_units_m", "collada_asset"]
 
 #: Axes a file may declare as up (the rotation sends it to +z).

@@ -19,14 +19,12 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-
 import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError, OutputError, ZbufOccludeError
-from zbuf_occlude.mesh.inputs import scan_paths
-from zbuf_occlude.mesh.inputs import FarmObject
-from zbuf_occlude.io.atomic import atomic_h5, write_text
 from zbuf_occlude.geometry.samples import derive_rng
+from zbuf_occlude.io.atomic import atomic_h5, write_text
+from zbuf_occlude.mesh.inputs import FarmObject, scan_paths
 
 if TYPE_CHECKING:
     import trimesh

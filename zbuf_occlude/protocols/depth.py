@@ -18,15 +18,14 @@ Conventions (OpenCV, as Open3D's ``PinholeCameraIntrinsic`` and ModelNet40-C use
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.geometry.samples import draw_sample
 from zbuf_occlude.sensors.raycast import cast_embree
 

@@ -41,16 +41,15 @@ degenerate faces and unreferenced vertices before the normalisation, which Open3
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import logging
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.mesh.inputs import FarmObject
 from zbuf_occlude.io.atomic import atomic_path, write_text
+from zbuf_occlude.mesh.inputs import FarmObject
 from zbuf_occlude.protocols.base import Protocol, ProtocolOptions, read_arrays_h5
 from zbuf_occlude.protocols.depth import PinholeView, back_project, render_depth_image
 

@@ -33,10 +33,10 @@ naming it and the cause, never a traceback.
 from __future__ import annotations
 
 import csv
+import hashlib
 import io
 import logging
 import os
-import hashlib
 import re
 from collections.abc import Mapping
 from pathlib import Path

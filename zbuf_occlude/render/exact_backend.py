@@ -26,8 +26,8 @@ import moderngl
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.geometry.grouping import exact_face_groups, morton_order
 from zbuf_occlude.render.compute import dispatch, read_through, set_uniforms
 from zbuf_occlude.render.context import is_software_renderer

@@ -16,9 +16,9 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.defaults import DEFAULT_GPU_TOLERANCE, DEFAULT_MAX_SLOPE
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.mesh.load import MAX_ABS_COORDINATE
 from zbuf_occlude.render.compute import dispatch, read_through, set_uniforms
 from zbuf_occlude.render.context import check_image_size, shared_context

@@ -24,8 +24,8 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.errors import BackendUnavailable
+from zbuf_occlude.geometry.cameras import Camera
 
 __all__ = ["PyrenderRenderer"]
 

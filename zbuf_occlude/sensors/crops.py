@@ -10,19 +10,17 @@ object's normalised mesh frame, the farm's HDF5 layout.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import logging
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.geometry.samples import OccludedCloud
+from zbuf_occlude.geometry.samples import OccludedCloud, derive_rng, draw_sample, object_key
 from zbuf_occlude.mesh.load import load_mesh
-from zbuf_occlude.geometry.samples import derive_rng, draw_sample, object_key
 from zbuf_occlude.sensors.airborne import AirborneScanner
 from zbuf_occlude.sensors.depth_camera import DepthCamera
 from zbuf_occlude.sensors.lidar import Lidar

@@ -16,10 +16,9 @@ face (Möller–Trumbore), so that the backends differ only in *which* face they
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import logging
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray

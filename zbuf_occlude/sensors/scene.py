@@ -22,13 +22,11 @@ from 1 in the order given (objects first).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray

@@ -29,8 +29,8 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from zbuf_occlude.geometry.cameras import Camera, camera_on_sphere, view_schedule
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
+from zbuf_occlude.geometry.cameras import Camera, camera_on_sphere, view_schedule
 from zbuf_occlude.render.context import is_software_renderer
 from zbuf_occlude.visibility.definition import TOLERANCE
 from zbuf_occlude.visibility.registry import get_method, method_info, register, resolution_option

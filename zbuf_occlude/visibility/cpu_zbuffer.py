@@ -50,8 +50,8 @@ import trimesh
 from numpy.typing import NDArray
 
 from zbuf_occlude.geometry.cameras import Camera
-from zbuf_occlude.mesh.cache import MeshCache
 from zbuf_occlude.geometry.grouping import exact_face_groups
+from zbuf_occlude.mesh.cache import MeshCache
 from zbuf_occlude.visibility.definition import EDGE_ON_SIN
 from zbuf_occlude.visibility.kernels import pair_occludes_one
 from zbuf_occlude.visibility.segment_triangle import SCENE_CACHE_SIZE, mesh_planes, pack_planes

@@ -44,17 +44,17 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.errors import BackendUnavailable
-from zbuf_occlude.mesh.cache import MeshCache
+from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.geometry.grouping import exact_face_groups, morton_order
+from zbuf_occlude.mesh.cache import MeshCache
 from zbuf_occlude.visibility import cpu_zbuffer
 from zbuf_occlude.visibility.definition import EDGE_ON_SIN, TOLERANCE, edge_on_any, edge_on_own
 from zbuf_occlude.visibility.kernels import pair_occludes_one
-from zbuf_occlude.visibility.oracle_embree import scene_for as oracle_scene
 from zbuf_occlude.visibility.oracle_embree import occluded_embree
-from zbuf_occlude.visibility.segment_triangle import mesh_planes
+from zbuf_occlude.visibility.oracle_embree import scene_for as oracle_scene
 from zbuf_occlude.visibility.registry import SessionBase, check_face_index, check_points, register
+from zbuf_occlude.visibility.segment_triangle import mesh_planes
 
 __all__ = ["FastScene", "embree_fast_visible", "DEFAULT_THREADS"]
 

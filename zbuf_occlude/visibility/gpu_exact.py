@@ -26,8 +26,8 @@ from zbuf_occlude.render.context import shared_context
 from zbuf_occlude.render.exact_backend import DEFAULT_TILE, ExactMesh, ExactPoints
 from zbuf_occlude.visibility.definition import EDGE_ON_SIN, TOLERANCE
 from zbuf_occlude.visibility.oracle import oracle_visible
-from zbuf_occlude.visibility.segment_triangle import mesh_planes
 from zbuf_occlude.visibility.registry import SessionBase, check_face_index, check_points, register
+from zbuf_occlude.visibility.segment_triangle import mesh_planes
 
 __all__ = ["ExactScene", "exact_mesh_for", "zbuffer_exact_visible", "DEFAULT_RESOLUTION"]
 

@@ -55,11 +55,11 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
+from zbuf_occlude.defaults import DEFAULT_SELF_HIT_TOLERANCE
 from zbuf_occlude.geometry.cameras import Camera
+from zbuf_occlude.visibility.definition import hide_edge_on
 from zbuf_occlude.visibility.oracle_embree import occluded_embree
 from zbuf_occlude.visibility.oracle_numpy import occluded_numpy
-from zbuf_occlude.visibility.definition import hide_edge_on
-from zbuf_occlude.defaults import DEFAULT_SELF_HIT_TOLERANCE
 from zbuf_occlude.visibility.registry import check_face_index, check_points, register, visible_in_frustum
 from zbuf_occlude.visibility.segment_triangle import mesh_planes
 

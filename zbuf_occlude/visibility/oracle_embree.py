@@ -16,11 +16,11 @@ import numpy as np
 import trimesh
 from numpy.typing import ArrayLike, NDArray
 
-from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
-from zbuf_occlude.mesh.cache import MeshCache
-from zbuf_occlude.geometry.grouping import exact_face_groups
-from zbuf_occlude.visibility.oracle_numpy import DEFAULT_PAIRS_PER_CHUNK, occluded_unchecked
 from zbuf_occlude.defaults import DEFAULT_SELF_HIT_TOLERANCE
+from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
+from zbuf_occlude.geometry.grouping import exact_face_groups
+from zbuf_occlude.mesh.cache import MeshCache
+from zbuf_occlude.visibility.oracle_numpy import DEFAULT_PAIRS_PER_CHUNK, occluded_unchecked
 from zbuf_occlude.visibility.registry import check_face_index, check_points
 from zbuf_occlude.visibility.segment_triangle import (
     SCENE_CACHE_SIZE,
@@ -30,8 +30,8 @@ from zbuf_occlude.visibility.segment_triangle import (
     check_tolerance,
     dot3,
     mesh_planes,
-    pack_planes,
     near_own_surface,
+    pack_planes,
     pair_occludes,
     triangle_planes,
 )

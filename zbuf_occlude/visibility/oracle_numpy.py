@@ -12,8 +12,8 @@ from collections.abc import Iterator
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.defaults import DEFAULT_SELF_HIT_TOLERANCE
+from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.visibility.registry import check_face_index, check_points
 from zbuf_occlude.visibility.segment_triangle import (
     TrianglePlanes,

@@ -27,10 +27,10 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from zbuf_occlude.geometry.cameras import Camera
-from zbuf_occlude.errors import BackendUnavailable
-from zbuf_occlude.visibility.registry import check_face_index, check_points, register, visible_in_frustum
 from zbuf_occlude.defaults import DEFAULT_RESOLUTION
+from zbuf_occlude.errors import BackendUnavailable
+from zbuf_occlude.geometry.cameras import Camera
+from zbuf_occlude.visibility.registry import check_face_index, check_points, register, visible_in_frustum
 from zbuf_occlude.visibility.zbuffer import ResidentPoints
 
 __all__ = [

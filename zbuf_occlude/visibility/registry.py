@@ -29,9 +29,9 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.defaults import DEFAULT_METHOD
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError, RegistryError, UnknownOptionError
+from zbuf_occlude.geometry.cameras import Camera
 
 if TYPE_CHECKING:  # annotations only: trimesh (and scipy with it) is imported where meshes are made
     import trimesh

@@ -25,7 +25,6 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.defaults import (  # noqa: F401 - DEFAULT_RESOLUTION etc. are re-exported from here
     DEFAULT_DEPTH_TOLERANCE,
     DEFAULT_GPU_TOLERANCE,
@@ -34,11 +33,12 @@ from zbuf_occlude.defaults import (  # noqa: F401 - DEFAULT_RESOLUTION etc. are 
     DEFAULT_SLOPE_SCALE,
 )
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.render.moderngl_backend import PointBuffer
 from zbuf_occlude.render.renderer_cache import RENDERER_CACHE_SIZE, renderer_for  # noqa: F401 - re-exported
 from zbuf_occlude.visibility.definition import TOLERANCE, hide_edge_on
-from zbuf_occlude.visibility.segment_triangle import mesh_planes
 from zbuf_occlude.visibility.registry import SessionBase, check_face_index, check_points, register
+from zbuf_occlude.visibility.segment_triangle import mesh_planes
 
 __all__ = ["ResidentPoints", "Scene", "zbuffer_visible", "zbuffer_tolerance_visible"]
 

@@ -30,11 +30,21 @@ Table 1A/1B) and :mod:`.job` (:func:`run_compare`, the whole command; its argpar
 :mod:`zbuf_occlude.cli.compare`).
 """
 
+from zbuf_occlude.defaults import DEFAULT_VIEWS
 from zbuf_occlude.experiments.compare.job import run_compare
 from zbuf_occlude.experiments.compare.report import write_results
 from zbuf_occlude.experiments.compare.results import RESULT_FIELDS, read_csv, summarise, write_csv
-from zbuf_occlude.experiments.compare.run import DEFAULT_METHODS, DEFAULT_POINTS, DEFAULT_REFERENCE, GRID_SWEEP, RESOLUTION_SWEEP, chamfer_distance, compare, parse_int_list, parse_methods
-from zbuf_occlude.defaults import DEFAULT_VIEWS
+from zbuf_occlude.experiments.compare.run import (
+    DEFAULT_METHODS,
+    DEFAULT_POINTS,
+    DEFAULT_REFERENCE,
+    GRID_SWEEP,
+    RESOLUTION_SWEEP,
+    chamfer_distance,
+    compare,
+    parse_int_list,
+    parse_methods,
+)
 from zbuf_occlude.experiments.compare.tables import PAPER_TABLE_1A_REDUCTION, PAPER_TABLE_1B_REDUCTION, table_1a, table_1b
 
 __all__ = [

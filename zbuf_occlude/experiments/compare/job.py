@@ -8,7 +8,14 @@ from pathlib import Path
 
 from zbuf_occlude.defaults import DEFAULT_RESOLUTION, DEFAULT_VIEWS
 from zbuf_occlude.experiments.compare.report import write_results
-from zbuf_occlude.experiments.compare.run import DEFAULT_METHODS, DEFAULT_POINTS, DEFAULT_REFERENCE, compare, parse_int_list, parse_methods
+from zbuf_occlude.experiments.compare.run import (
+    DEFAULT_METHODS,
+    DEFAULT_POINTS,
+    DEFAULT_REFERENCE,
+    compare,
+    parse_int_list,
+    parse_methods,
+)
 
 __all__ = ["run_compare"]
 

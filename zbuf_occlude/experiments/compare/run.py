@@ -17,15 +17,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
 from zbuf_occlude.defaults import DEFAULT_RESOLUTION, DEFAULT_VIEWS
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
-from zbuf_occlude.mesh.discovery import find_meshes
-from zbuf_occlude.visibility.metrics import agreement
-from zbuf_occlude.geometry.sampling import sample_surface
-from zbuf_occlude.visibility import available_methods, visible_mask
-from zbuf_occlude.visibility.registry import method_info
 from zbuf_occlude.experiments.compare.results import RESULT_FIELDS
+from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
+from zbuf_occlude.geometry.sampling import sample_surface
+from zbuf_occlude.mesh.discovery import find_meshes
+from zbuf_occlude.visibility import available_methods, visible_mask
+from zbuf_occlude.visibility.metrics import agreement
+from zbuf_occlude.visibility.registry import method_info
 
 __all__ = [
     "chamfer_distance",

@@ -34,9 +34,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from zbuf_occlude.defaults import DEFAULT_SELF_HIT_TOLERANCE
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 from zbuf_occlude.visibility.oracle_numpy import DEFAULT_PAIRS_PER_CHUNK
-from zbuf_occlude.defaults import DEFAULT_SELF_HIT_TOLERANCE
 from zbuf_occlude.visibility.registry import check_face_index, check_points
 from zbuf_occlude.visibility.segment_triangle import (
     TrianglePlanes,

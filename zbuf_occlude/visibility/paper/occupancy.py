@@ -14,12 +14,12 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from zbuf_occlude.geometry.cameras import Camera
-from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.visibility.paper.face_scan import occluded_by_faces
-from zbuf_occlude.visibility.oracle_numpy import DEFAULT_PAIRS_PER_CHUNK
-from zbuf_occlude.visibility.paper.pruning import PRUNE_RULES, camera_distance, face_keys, parse_prune
 from zbuf_occlude.defaults import DEFAULT_SELF_HIT_TOLERANCE
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.geometry.cameras import Camera
+from zbuf_occlude.visibility.oracle_numpy import DEFAULT_PAIRS_PER_CHUNK
+from zbuf_occlude.visibility.paper.face_scan import occluded_by_faces
+from zbuf_occlude.visibility.paper.pruning import PRUNE_RULES, camera_distance, face_keys, parse_prune
 from zbuf_occlude.visibility.registry import check_face_index, check_points, register, signature_without
 from zbuf_occlude.visibility.segment_triangle import mesh_planes
 
