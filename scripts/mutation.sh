@@ -23,6 +23,8 @@ NICE=${NICE:-10}
 # module -> source file | tests that exercise it (fast ones: mutmut reruns them per mutant)
 declare -A SOURCE=(
   [io]=zbuf_occlude/io/clouds.py
+  [atomic]=zbuf_occlude/io/atomic.py
+  [samples]=zbuf_occlude/geometry/samples.py
   [mesh_cache]=zbuf_occlude/mesh/cache.py
   [cameras]=zbuf_occlude/geometry/cameras.py
   [sampling]=zbuf_occlude/geometry/sampling.py
@@ -38,7 +40,7 @@ declare -A SOURCE=(
 declare -A ONLY=()
 # modules whose tests open OpenGL contexts: a context inherited across fork hangs, so the
 # mutant workers are forked from a server that never ran a test (mutmut's forkserver)
-declare -A FORKSERVER=([occlude]=1 [farm_worker]=1 [dataset]=1 [oracle]=1)
+declare -A FORKSERVER=([occlude]=1 [samples]=1 [farm_worker]=1 [dataset]=1 [oracle]=1)
 # pytest -k expressions for modules whose test file has slow parts mutmut need not rerun
 declare -A KEXPR=(
   [farm_worker]="not dask and not worker_count"
@@ -46,6 +48,8 @@ declare -A KEXPR=(
 )
 declare -A TESTS=(
   [io]="tests/io/test_clouds.py"
+  [atomic]="tests/io/test_clouds.py"
+  [samples]="tests/geometry/test_samples.py tests/test_pipeline.py tests/dataset/test_reader.py"
   [mesh_cache]="tests/mesh/test_cache.py"
   [cameras]="tests/geometry/test_cameras.py"
   [sampling]="tests/geometry/test_sampling.py"
@@ -56,7 +60,7 @@ declare -A TESTS=(
   [dataset]="tests/dataset/test_reader.py"
   [segment_triangle]="tests/visibility/test_oracle.py"
 )
-ORDER=(io mesh_cache cameras sampling mesh occlude segment_triangle oracle farm_worker dataset)
+ORDER=(io atomic mesh_cache cameras sampling samples mesh occlude segment_triangle oracle farm_worker dataset)
 
 modules=("$@")
 [ ${#modules[@]} -eq 0 ] && modules=("${ORDER[@]}")

@@ -58,7 +58,7 @@ def test_sample_sizes_and_views_of_generate_validate_farm_and_occlude_object() -
     assert _default(occlude_object, "n_points") == GENERATE_DEFAULTS.n_points == farm.n_points == gen.points == defaults.DEFAULT_N_POINTS
     assert (_default(occlude_object, "samples_per_view") == GENERATE_DEFAULTS.samples_per_view == farm.samples_per_view
             == gen.samples_per_view == defaults.DEFAULT_SAMPLES_PER_VIEW)  # fmt: skip
-    assert GENERATE_DEFAULTS.dense_points == gen.dense_points == val.points == defaults.DEFAULT_DENSE_POINTS
+    assert GENERATE_DEFAULTS.dense_points == gen.dense_points == val.dense_points == defaults.DEFAULT_DENSE_POINTS
     assert GENERATE_DEFAULTS.resolution == gen.resolution == val.resolution == defaults.DEFAULT_RESOLUTION
     assert GENERATE_DEFAULTS.views == gen.views == val.views == COMPARE_VIEWS == defaults.DEFAULT_VIEWS
 

@@ -793,10 +793,12 @@ def test_occlude_object_refuses_a_job_that_cannot_fit_before_allocating(monkeypa
 
 # -- the command line, end to end: checks before any mesh, skipped inputs (defects 4, 6, 7, 11, 12) --
 #: One pose, one small sample: a run over the test trees takes seconds.
-CLI_ARGS = ["--views", "0:0", "--points", "32", "--resolution", "64"]
+CLI_ARGS = ["--views", "0:0", "--resolution", "64"]
 #: The subcommands, each with what it needs besides PATH and the options above.
-_RUN = ["--out", "{out}", "--samples-per-view", "1", "--dense-points", "500"]
-CLI_COMMANDS = {"generate": _RUN, "farm": [*_RUN, "--no-progress"], "validate": []}
+_RUN = ["--out", "{out}", "--samples-per-view", "1", "--points", "32", "--dense-points", "500"]
+CLI_COMMANDS = {"generate": _RUN, "farm": [*_RUN, "--no-progress"], "validate": ["--dense-points", "32"]}
+#: The option that sizes the command's largest point array (validate holds only the dense cloud).
+POINTS_OPTION = {"generate": "--points", "farm": "--points", "validate": "--dense-points"}
 
 
 def _cli(command: str, path: Path, out: Path, *extra: str) -> int:
@@ -831,10 +833,11 @@ def test_cli_a_billion_points_exits_2_naming_points_before_any_mesh(
     from zbuf_occlude import resources
 
     monkeypatch.setattr(resources, "available_memory", lambda: (8 * 2**30, "test budget"))
-    assert _cli(command, cli_tree, tmp_path / "out", "--points", "1000000000") == 2
+    option = POINTS_OPTION[command]
+    assert _cli(command, cli_tree, tmp_path / "out", option, "1000000000") == 2
     err = _cli_error(capsys)
-    assert re.search(r"error: --points needs about [\d.]+ GiB of memory \(--points 1,000,000,000", err), err
-    assert_names(err, "8 GiB available (test budget)", "lower --points")
+    assert re.search(rf"error: {option} needs about [\d.]+ GiB of memory \({option} 1,000,000,000", err), err
+    assert_names(err, "8 GiB available (test budget)", f"lower {option}")
     assert not (tmp_path / "out" / "records").exists()
 
 

@@ -168,52 +168,11 @@ def run_farm(
         What to render; default :class:`FarmParams` ``()`` (paper100, 10 samples of 2048
         points per pose, 32768 dense points, 512² z-buffer, seed 0, dense storage).
     options : RunOptions, optional
-        How to run it (default :class:`RunOptions` ``()``: one process, the whole data set),
-        with the fields below.
+        How to run it (default :class:`RunOptions` ``()``: one process, the whole data set,
+        a progress bar); its fields are described there.
     **deprecated
         The fields of :class:`RunOptions` as keywords, kept for one release with a
         ``DeprecationWarning``; an unknown keyword is a ``TypeError`` naming it.
-
-    The fields of :class:`RunOptions`:
-
-    classes, per_class, splits
-        Selection, see :func:`scan_objects` (ignored for a ready plan).
-    workers : int
-        Processes rendering in parallel on this machine (``spawn``ed, one GL context each;
-        :func:`~zbuf_occlude.farm.pool.run_in_workers`).  A worker killed by a signal or the
-        out-of-memory killer fails only the object it held (recorded, exit status 1).
-    shard : (I, N)
-        Render only the I-th of N partitions (:func:`select_shard`); with N > 1 the data
-        set is completed by :func:`merge_farm` once every task has finished.
-    scheduler : str, optional
-        Dask scheduler address (``tcp://HOST:PORT``); workers must see ``out`` at the same
-        path (shared file system) and have zbuf_occlude installed.
-    dask_local : int, optional
-        Start a local Dask cluster of this many single-threaded worker processes.
-    overwrite : bool
-        Start over: remove this run's earlier results (all of them, or this task's objects).
-    progress : bool
-        Show a tqdm bar (objects, views/s, ETA) on stderr.
-    command : str, optional
-        Command line for the data set card (default: this process's ``sys.argv``).
-    source_text : str, optional
-        What the card names as the source of a ready plan.
-    on_finished : callable, optional
-        Called with the data set folder, still under the lock, once an unsharded run has
-        written its card (``generate --format h5`` joins its parts there).
-    skipped : sequence of (path, reason)
-        Inputs the caller's discovery could not take (a ready plan), added to those
-        :func:`scan_objects` skips in a folder (unreadable folders, names that are not
-        UTF-8); recorded in the card and the summary, so the run ends with status 1.
-    class_from : int, optional
-        A folder ``source``: the folder level above each mesh that names its class
-        (:func:`scan_objects`).
-    layout : str, optional
-        The card's ``layout`` of a ready plan (a folder's or list file's is detected).
-    isolate : bool
-        With one worker, render in a worker process too instead of in this one (the CLI's
-        choice): a SIGTERM or Ctrl-C then stops the run within seconds even inside a long
-        native call (Embree, the GL driver), which an in-process run finishes first.
 
     Returns
     -------
