@@ -6,45 +6,8 @@ its folder).
 """
 
 from zbuf_occlude.geometry.samples import OccludedCloud
-from zbuf_occlude.io.atomic import (
-    TempOwner,
-    atomic_h5,
-    atomic_path,
-    file_sha256,
-    temp_is_orphan,
-    temp_owner,
-    write_csv,
-    write_text,
-)
-from zbuf_occlude.io.clouds import (
-    FORMATS,
-    clouds_of_h5,
-    concat_h5,
-    read_h5,
-    read_h5_clouds,
-    read_npz,
-    write_h5,
-    write_npz,
-    write_ply,
-)
+from zbuf_occlude.io import atomic, clouds
+from zbuf_occlude.io.atomic import *  # noqa: F403  (each module's __all__, re-exported whole)
+from zbuf_occlude.io.clouds import *  # noqa: F403
 
-__all__ = [
-    "OccludedCloud",
-    "atomic_path",
-    "atomic_h5",
-    "TempOwner",
-    "temp_owner",
-    "temp_is_orphan",
-    "file_sha256",
-    "write_text",
-    "write_csv",
-    "write_npz",
-    "read_npz",
-    "write_ply",
-    "write_h5",
-    "concat_h5",
-    "read_h5",
-    "read_h5_clouds",
-    "clouds_of_h5",
-    "FORMATS",
-]
+__all__ = ["OccludedCloud", *atomic.__all__, *clouds.__all__]
