@@ -225,3 +225,10 @@ def test_every_command_taking_meshes_lists_every_supported_extension(capsys):
             main([command, "--help"])
         text = " ".join(capsys.readouterr().out.split())
         assert all(ext in text for ext in SUPPORTED_EXTENSIONS), (command, [e for e in SUPPORTED_EXTENSIONS if e not in text])
+
+
+def test_counts_take_the_right_number() -> None:
+    from zbuf_occlude.cli.options import counted
+
+    assert [counted(n, "mesh", "meshes") for n in (0, 1, 2)] == ["0 meshes", "1 mesh", "2 meshes"]
+    assert counted(1, "file") == "1 file" and counted(3, "file") == "3 files"

@@ -17,7 +17,7 @@ def test_modelnet40c_occlusion_from_the_cli(tmp_path, capsys):
     data = np.load(tmp_path / "data_occlusion_3.npy")
     assert data.shape == (1, 1024, 3) and data.dtype == np.float32
     assert np.load(tmp_path / "label.npy").tolist() == [[8]]  # chair in ModelNet40's shape_names
-    assert "1 meshes done" in capsys.readouterr().out
+    assert "1 mesh done" in capsys.readouterr().out  # not "1 meshes"
     # a rerun resumes from the shard and writes the same bytes
     assert main(["generate", CHAIR, "--protocol", "modelnet40-c-occlusion", "--severity", "3", "--out", str(tmp_path)]) == 0
     assert np.array_equal(np.load(tmp_path / "data_occlusion_3.npy"), data)

@@ -326,3 +326,18 @@ def test_an_out_inside_the_input_folder_is_refused_before_any_work(tmp_path, cap
     assert main([command, str(tree), "--out", str(out), "--views", "0:0", "--format" if command == "generate" else "--storage",
                  "ply" if command == "generate" else "dense"]) == 2  # fmt: skip
     assert "lies inside the input folder" in capsys.readouterr().err and not out.exists()
+
+
+def test_generates_progress_bar_is_called_generate(tree, tmp_path, monkeypatch):
+    import tqdm.auto
+
+    names = []
+    real = tqdm.auto.tqdm
+
+    def recording(*args, **kwargs):
+        names.append(kwargs.get("desc"))
+        return real(*args, **{**kwargs, "disable": True})
+
+    monkeypatch.setattr(tqdm.auto, "tqdm", recording)
+    assert main(["generate", str(tree), "--out", str(tmp_path / "out"), *ARGS]) == 0
+    assert names == ["generate"]

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from zbuf_occlude._version import __version__
-from zbuf_occlude.cli.options import add_renamed
+from zbuf_occlude.cli.options import add_renamed, counted
 from zbuf_occlude.defaults import DEFAULT_DENSE_POINTS, DEFAULT_METHOD, DEFAULT_RESOLUTION, DEFAULT_SEED, DEFAULT_VIEWS
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
@@ -89,8 +89,8 @@ def cmd_generate(args: argparse.Namespace) -> int:
     )  # fmt: skip
     elapsed = time.perf_counter() - t0
     print(
-        f"{summary.done} meshes done, {summary.failed} failed, {summary.samples} samples "
-        f"({summary.resumed} meshes from an earlier run) in {elapsed:.1f} s -> {args.out}"
+        f"{counted(summary.done, 'mesh', 'meshes')} done, {summary.failed} failed, {counted(summary.samples, 'sample')} "
+        f"({counted(summary.resumed, 'mesh', 'meshes')} from an earlier run) in {elapsed:.1f} s -> {args.out}"
     )
     source = {o.name: o.source for o in objects}
     for name, err in summary.failures:

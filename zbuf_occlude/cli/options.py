@@ -1,4 +1,4 @@
-"""Options shared by the commands: one name per meaning, old spellings kept for one release."""
+"""Options and wording shared by the commands: one name per meaning, old spellings kept for one release."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import Any
 
-__all__ = ["RenamedOption", "add_renamed"]
+__all__ = ["RenamedOption", "add_renamed", "counted"]
 
 
 class RenamedOption(argparse.Action):
@@ -24,3 +24,8 @@ class RenamedOption(argparse.Action):
 def add_renamed(parser: argparse.ArgumentParser, old: str, new: str, dest: str, **kwargs: Any) -> None:
     """Accept ``old`` as a hidden spelling of the option ``new`` (stored in ``dest``)."""
     parser.add_argument(old, dest=dest, action=RenamedOption, new=new, help=argparse.SUPPRESS, **kwargs)
+
+
+def counted(n: int, noun: str, plural: str | None = None) -> str:
+    """``"1 mesh"``, ``"2 meshes"``: ``n`` and the noun in the number it takes (``plural``: default ``noun + "s"``)."""
+    return f"{n} {noun if n == 1 else plural or noun + 's'}"

@@ -6,6 +6,7 @@ import argparse
 import sys
 import time
 
+from zbuf_occlude.cli.options import counted
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.protocols import PROTOCOL_NAMES, PROTOCOLS, get_protocol
 from zbuf_occlude.protocols.base import ProtocolOptions, run_protocol
@@ -52,7 +53,7 @@ def run_protocol_command(args: argparse.Namespace, paths: list[str]) -> int:
     t0 = time.perf_counter()
     run = run_protocol(protocol, paths, args.out, options, overwrite=args.overwrite)
     print(
-        f"{args.protocol}: {run.done} meshes done, {run.resumed} from an earlier run, {len(run.failures)} failed "
+        f"{args.protocol}: {counted(run.done, 'mesh', 'meshes')} done, {run.resumed} from an earlier run, {len(run.failures)} failed "
         f"in {time.perf_counter() - t0:.1f} s -> {args.out}"
     )
     for path in run.files:

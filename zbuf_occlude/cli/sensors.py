@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from zbuf_occlude.cli.options import counted
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.samples import derive_rng, object_key
 from zbuf_occlude.sensors.presets import sensor_from_name
@@ -123,7 +124,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
             stem = f"{src.stem}_{sensor.name}_s{k:03d}"
             written += [getattr(s, f"to_{fmt}")(out / f"{stem}.{fmt}") for fmt in formats]
             log.info("%s: %d returns at %.2f m", stem, len(s), placement["distance_m"])
-    print(f"wrote {len(written)} files to {out}")
+    print(f"wrote {counted(len(written), 'file')} to {out}")
     return 0
 
 

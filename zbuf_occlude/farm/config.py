@@ -306,6 +306,8 @@ class RunOptions:
         With one worker, render in a worker process too instead of in this one (the CLI's
         choice): a SIGTERM or Ctrl-C then stops the run within seconds even inside a long
         native call (Embree, the GL driver), which an in-process run finishes first.
+    progress_label : str
+        The progress bar's name (``generate`` calls it after itself).
     """
 
     classes: Sequence[str] | str | None = None
@@ -324,6 +326,7 @@ class RunOptions:
     class_from: int | None = None
     layout: str | None = None
     isolate: bool = False
+    progress_label: str = "farm"
 
 
 def options_with(options: RunOptions | None, keywords: Mapping[str, Any]) -> RunOptions:

@@ -140,6 +140,7 @@ def generate(
         source_text=", ".join(str(Path(p).resolve()) for p in paths),
         on_finished=lambda folder: _merge_h5(folder, objects if params.storage == "h5" else []),
         skipped=tuple((s.path, s.reason) for s in skipped), layout=scan.layout, isolate=isolate,
+        progress_label="generate",
     )  # fmt: skip
     summary = run_farm(objects, out, params, options)
     return summary, objects

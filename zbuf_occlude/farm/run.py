@@ -273,7 +273,7 @@ def _run_locked(
     last_manifest = time.monotonic()
     from tqdm.auto import tqdm
 
-    bar = tqdm(total=len(mine), initial=resumed, unit="obj", desc="farm", disable=not run.progress or None, dynamic_ncols=True)
+    bar = tqdm(total=len(mine), initial=resumed, unit="obj", desc=run.progress_label, disable=not run.progress or None, dynamic_ncols=True)
     t_render = time.perf_counter()
     try:
         for rec in records_iter:
