@@ -85,3 +85,11 @@ def test_the_glsl_twin_decides_every_pair_as_the_kernel(seed: int, tie_fraction:
     np.testing.assert_array_equal(gpu[decided] == HIT, cpu[decided])  # a tie goes to the CPU: no claim
     assert decided.mean() > (0.98 if tie_fraction == 0.0 else 0.5)  # a twin that calls everything a tie proves nothing
     assert cpu[decided].any() and (~cpu[decided]).any()
+
+
+def test_the_triangle_is_closed_where_a_crossing_lies_exactly_on_an_edge_plane() -> None:
+    # a hand-packed face: plane x = 0, edges y >= 0.5, -y >= -10, z >= -10; the segment crosses at
+    # (0, 0.5, 0), exactly on the first edge plane (0.5 >= 0.5): closed, so it occludes
+    row = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 1.0, 0.5, -10.0, -10.0])
+    assert pair_occludes_one(-1.0, 0.5, 0.0, 2.0, 0.0, 0.0, 2.0, row, TOLERANCE)
+    assert not pair_occludes_one(-1.0, 0.25, 0.0, 2.0, 0.0, 0.0, 2.0, row, TOLERANCE)  # just outside
