@@ -67,6 +67,7 @@ __all__ = [
     "INDEX_COLUMNS",
     "PROVENANCE_COLUMNS",
     "COMPACT_DATASETS",
+    "COLUMN_TYPES",
     "file_list_name",
     "shard_name",
     "record_name",
@@ -101,6 +102,18 @@ INDEX_COLUMNS = ("object_index", "pose_index")
 PROVENANCE_COLUMNS = ("face_index", "radius", "source", "class_name", "split")
 #: Datasets of a compact shard.
 COMPACT_DATASETS = ("dense_points", "visible_bits", "n_visible", "elevation_deg", "azimuth_deg")
+#: What each dataset of a shard holds: ``(kinds, ndim)``, kinds from ``"f"`` float, ``"i"``/``"u"``
+#: integer, ``"T"`` string (:class:`zbuf_occlude.io.hdf5.Column`).  The reader and ``verify``
+#: refuse a shard whose dataset differs (a string or integer ``data`` is not points).
+COLUMN_TYPES = {
+    "data": ("f", 3), "label": ("iu", 1), "elevation_deg": ("f", 1), "azimuth_deg": ("f", 1),
+    "sample_index": ("iu", 1), "n_visible": ("iu", 1), "object_index": ("iu", 1), "pose_index": ("iu", 1),
+    "face_index": ("iu", 2), "radius": ("f", 1), "source": ("T", 1), "class_name": ("T", 1), "split": ("T", 1),
+    "dense_points": ("f", 2), "visible_bits": ("u", 2),
+    # farm --sensor rows (zbuf_occlude.sensors.crops.farm_datasets)
+    "distance_m": ("f", 1), "sensor_height_m": ("f", 1), "object_azimuth_deg": ("f", 1), "yaw_deg": ("f", 1),
+    "size_m": ("f", 1), "ring": ("iu", 2),
+}  # fmt: skip
 
 
 def file_list_name(split: str) -> str:

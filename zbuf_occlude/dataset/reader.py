@@ -298,27 +298,17 @@ class OccludedDataset(Sequence):
         self._reset_handles()
 
     def _file(self, path: Path):
-        import h5py
-
-        from zbuf_occlude.dataset.schema import check_shard
+        from zbuf_occlude.dataset.schema import open_shard
 
         if self._pid != os.getpid():  # forked: the parent's HDF5 handles are not ours
             self._reset_handles()
         f = self._files.get(path)
         if f is None:
             self._verify(path)
-            try:
-                f = h5py.File(path, "r")
-            except OSError as exc:  # h5py says "file signature not found" for a file that is not HDF5
-                raise DatasetFormatError(f"the shard {path} is not a readable HDF5 file ({exc})") from None
-            try:
-                check_shard(
-                    f, path, storage=self.storage, n_points=self.n_points, rows=self._shard_rows.get(path, 0),
-                    n_poses=len(self._elevation), sensor=self.sensor is not None,
-                )  # fmt: skip
-            except BaseException:
-                f.close()
-                raise
+            f = open_shard(
+                path, storage=self.storage, n_points=self.n_points, rows=self._shard_rows.get(path, 0),
+                n_poses=len(self._elevation), sensor=self.sensor is not None,
+            )  # fmt: skip
             self._files[path] = f
             while len(self._files) > DEFAULT_OPEN_FILES:
                 self._files.popitem(last=False)[1].close()
@@ -357,8 +347,11 @@ class OccludedDataset(Sequence):
         if hit is not None and self._pid == os.getpid():
             self._compact.move_to_end(obj)
             return hit
+        from zbuf_occlude.dataset.schema import check_visible_bits
+
         f = self._file(self._shards[obj])
         arrays = (f["dense_points"][()], f["visible_bits"][()])
+        check_visible_bits(self._shards[obj], arrays[1], len(arrays[0]), self._objects[obj]["n_visible"])
         self._compact[obj] = arrays
         while len(self._compact) > self._object_cache_size:
             self._compact.popitem(last=False)

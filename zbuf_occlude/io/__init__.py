@@ -2,7 +2,7 @@
 
 :mod:`.atomic` (every write of the package goes through it), :mod:`.clouds` (one sample per
 ``.npz``/``.ply`` file, many per ``.h5``), :mod:`.safe_paths` (paths a file names stay inside
-its folder).
+its folder), :mod:`.hdf5` (HDF5 files from anyone: only data stored inside them).
 """
 
 from zbuf_occlude.geometry.samples import OccludedCloud
@@ -16,6 +16,7 @@ from zbuf_occlude.io.atomic import (
     write_csv,
     write_text,
 )
+from zbuf_occlude.io.hdf5 import check_hdf5, open_hdf5
 from zbuf_occlude.io.clouds import (
     FORMATS,
     clouds_of_h5,
@@ -47,4 +48,6 @@ __all__ = [
     "read_h5_clouds",
     "clouds_of_h5",
     "FORMATS",
+    "check_hdf5",
+    "open_hdf5",
 ]
