@@ -13,7 +13,10 @@ from typing import Any
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.atomic import file_sha256, temp_is_orphan, temp_owner, write_text
-from zbuf_occlude.dataset.layout import CARD_FILE, FORMAT_VERSION, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, file_list_name
+from zbuf_occlude.dataset.layout import (
+    CARD_FILE, FORMAT_VERSION, LOCK_FILE, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, TASK_DIR,
+    file_list_name, split_file_name,
+)  # fmt: skip
 from zbuf_occlude.mesh.discovery import SPLITS
 from zbuf_occlude.io.safe_paths import check_line_text, path_inside
 from zbuf_occlude.geometry.samples import count_padded
@@ -25,6 +28,27 @@ log = logging.getLogger(__name__)
 
 
 # -- journal, manifest, card -------------------------------------------------------------------
+def check_out_layout(out: Path) -> None:
+    """Check that every folder and file the farm writes or deletes directly under ``out`` stays inside it.
+
+    The one check behind every write and delete of a run, ``generate``, ``--overwrite``
+    (:func:`~zbuf_occlude.farm.run._wipe`) and ``farm-merge``: ``shards/``, ``records/``,
+    ``tasks/`` (locks included), the plan, card, manifest, class names, file lists, joined
+    files and the lock, once symlinks are resolved (:func:`~zbuf_occlude.io.safe_paths.path_inside`).
+    Files named by records (generate's ``npz``/``ply`` samples) are checked where they are
+    written or deleted.  A symlink to elsewhere is refused, not followed: ``OUT/shards`` linked
+    to another folder would have the run overwrite, or ``--overwrite`` delete, the files there.
+
+    Raises
+    ------
+    UnsafePathError
+        One of them leads outside ``out`` (the message names it and where it leads).
+    """
+    names = (SHARD_DIR, RECORD_DIR, TASK_DIR, PLAN_FILE, CARD_FILE, MANIFEST_FILE, SHAPE_NAMES_FILE, LOCK_FILE)
+    for name in (*names, *map(file_list_name, SPLITS), *map(split_file_name, SPLITS)):
+        path_inside(out, name, what=f"the output folder {out}")
+
+
 def read_json(path: Path) -> dict[str, Any] | None:
     """A JSON object of the journal (plan, record, task); ``None`` if missing, damaged or not an object."""
     try:

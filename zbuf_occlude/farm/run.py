@@ -26,6 +26,7 @@ from zbuf_occlude.mesh.inputs import FarmObject, scan_objects
 from zbuf_occlude.farm.shards import select_shard
 from zbuf_occlude.farm.journal import (
     FarmSummary,
+    check_out_layout,
     finalize,
     finished_record,
     manifest_lines,
@@ -241,6 +242,7 @@ def run_farm(
             raise InvalidInputError("a ready plan must number its objects 0, 1, 2, ... in order")
     mine = select_shard(objects, task, n_tasks)
     out = Path(out)
+    check_out_layout(out)  # every write and delete below stays inside out
     with sigterm_as_interrupt(), farm_lock(out, shard):
         return _run_locked(
             out, objects, mine, params, source_text, shard=shard, workers=workers, scheduler=scheduler,
@@ -393,6 +395,7 @@ def merge_farm(
             raise InvalidInputError(f"{folder} was made with other parameters or objects than {folders[0]}; cannot merge")
     plan = plans[0]
     prepare_out(out)
+    check_out_layout(out)
     with farm_lock(out):
         return _merge_locked(folders, out, plan, progress=progress, t0=t0)
 
