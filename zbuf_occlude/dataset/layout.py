@@ -9,6 +9,8 @@ A data set folder (``farm --out``, ``generate --out``), ``format_version`` :data
     DATASET/
       dataset_card.json      parameters, poses, tool version, command lines, GL renderers;
                              written last: it marks the data set finished
+      dataset_card.json.sha256
+                             the card's SHA-256 (``sha256sum`` format), written right after it
       shape_names.txt        one class name per line; line i is label i (PointNet)
       train_files.txt        files of the train split, one per line, paths relative to
                              DATASET (PointNet's file list): the farm's shards; generate's
@@ -51,6 +53,7 @@ from __future__ import annotations
 __all__ = [
     "FORMAT_VERSION",
     "CARD_FILE",
+    "CARD_SHA256_FILE",
     "MANIFEST_FILE",
     "SHAPE_NAMES_FILE",
     "SHARD_DIR",
@@ -78,6 +81,9 @@ __all__ = [
 #: Version of the layout above; readers refuse newer ones.
 FORMAT_VERSION = 1
 CARD_FILE = "dataset_card.json"
+#: The card's SHA-256, ``<hex>  dataset_card.json`` (``sha256sum -c`` reads it); data sets
+#: written before it existed have none and still read.
+CARD_SHA256_FILE = "dataset_card.json.sha256"
 MANIFEST_FILE = "manifest.jsonl"
 SHAPE_NAMES_FILE = "shape_names.txt"
 SHARD_DIR = "shards"

@@ -21,7 +21,7 @@ from typing import Annotated, Any
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from zbuf_occlude.errors import DatasetFormatError
-from zbuf_occlude.dataset.layout import COLUMN_TYPES, SHAPE_NAMES_FILE
+from zbuf_occlude.dataset.layout import CARD_FILE, CARD_SHA256_FILE, COLUMN_TYPES, SHAPE_NAMES_FILE
 from zbuf_occlude.io.hdf5 import Column, declared_nbytes, open_hdf5
 from zbuf_occlude.io.safe_paths import control_character, path_inside
 from zbuf_occlude.resources import check_memory
@@ -34,6 +34,8 @@ __all__ = [
     "Plan",
     "CHECKSUM_ALGORITHM",
     "read_card",
+    "card_sha256_line",
+    "check_card_sha256",
     "read_manifest",
     "read_shape_names",
     "check_records",
@@ -178,6 +180,47 @@ def read_card(path: Path) -> tuple[dict[str, Any], Card]:
     except ValidationError as exc:
         raise DatasetFormatError(f"{path} is not a valid data set card: {describe_validation_error(exc)}") from None
     return json.loads(text), card
+
+
+def card_sha256_line(digest: str) -> str:
+    """The line of :data:`~zbuf_occlude.dataset.layout.CARD_SHA256_FILE` for a card of SHA-256 ``digest``."""
+    return f"{digest}  {CARD_FILE}\n"
+
+
+def check_card_sha256(root: Path) -> bool:
+    """Check the card of data set ``root`` against its SHA-256 file.
+
+    Returns
+    -------
+    bool
+        True when it matches; False when there is no SHA-256 file (a data set written
+        before the card had one: it still reads, ``verify`` says so).
+
+    Raises
+    ------
+    DatasetFormatError
+        The SHA-256 file is unreadable or malformed, or the card differs from it (edited
+        after it was written: its sizes, ``n_points`` included, cannot be trusted).
+    """
+    from zbuf_occlude.io.atomic import file_sha256
+
+    sidecar = root / CARD_SHA256_FILE
+    if not sidecar.exists():
+        return False
+    text = _read_text(sidecar, "card checksum")
+    digest = text.split(" ", 1)[0]
+    if len(text) > 200 or text != card_sha256_line(digest) or len(digest) != 64:
+        raise DatasetFormatError(f"{sidecar} is not a SHA-256 line for {CARD_FILE} ('<64 hex digits>  {CARD_FILE}')")
+    try:
+        actual = file_sha256(root / CARD_FILE)
+    except OSError as exc:
+        raise DatasetFormatError(f"cannot read {root / CARD_FILE}: {exc}") from None
+    if actual != digest:
+        raise DatasetFormatError(
+            f"{root / CARD_FILE} differs from its SHA-256 in {CARD_SHA256_FILE} (changed after it was written); "
+            "its parameters cannot be trusted: get the data set again from its source"
+        )
+    return True
 
 
 def read_manifest(path: Path, problems: list[str] | None = None) -> list[tuple[int, dict[str, Any], OkRecord | None]]:

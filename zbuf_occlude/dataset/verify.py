@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 from zbuf_occlude.dataset.reader import samples_per_pose
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
 from zbuf_occlude.io.atomic import file_sha256
-from zbuf_occlude.dataset.layout import CARD_FILE, MANIFEST_FILE, SAMPLE_FILE_FORMATS, file_list_name
+from zbuf_occlude.dataset.layout import CARD_FILE, CARD_SHA256_FILE, MANIFEST_FILE, SAMPLE_FILE_FORMATS, file_list_name
 from zbuf_occlude.io.safe_paths import path_inside
 
 if TYPE_CHECKING:  # the schema (pydantic) is imported when a data set is verified
@@ -51,6 +51,8 @@ class VerifyReport:
     objects: int = 0
     files: int = 0
     samples: int = 0
+    #: What is worth knowing but not a problem (a card without its SHA-256 file).
+    notes: list[str] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -58,7 +60,8 @@ class VerifyReport:
 
     def summary(self) -> str:
         """One line: ``OK DIR: 3 objects, 3 files (SHA-256 checked), 48 samples``."""
-        return f"OK {self.path}: {self.objects} objects, {self.files} files (SHA-256 checked), {self.samples} samples"
+        line = f"OK {self.path}: {self.objects} objects, {self.files} files (SHA-256 checked), {self.samples} samples"
+        return "; ".join([line, *self.notes])
 
 
 def _check_hdf5(path: Path, card: Card, rows: int, n_visible: list[int]) -> str | None:
@@ -107,13 +110,21 @@ def verify_dataset(path: str | os.PathLike) -> VerifyReport:
     InvalidInputError
         ``path`` is not a folder (a usage error, not a problem of a data set).
     """
-    from zbuf_occlude.dataset.schema import check_records, read_card, read_manifest, read_shape_names
+    from zbuf_occlude.dataset.schema import check_card_sha256, check_records, read_card, read_manifest, read_shape_names
 
     root = Path(path)
     if not root.is_dir():
         raise InvalidInputError(f"verify: {path} is not a folder")
     report = VerifyReport(str(root))
     problems = report.problems
+    try:
+        if (root / CARD_FILE).exists() and not check_card_sha256(root):
+            report.notes.append(
+                f"{root / CARD_FILE} has no SHA-256 file ({CARD_SHA256_FILE}; written by an older zbuf_occlude): "
+                "changes to the card cannot be noticed"
+            )
+    except ZbufOccludeError as exc:
+        problems.append(str(exc))
     try:
         _, card = read_card(root / CARD_FILE)
     except ZbufOccludeError as exc:

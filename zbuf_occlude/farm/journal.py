@@ -14,7 +14,7 @@ from typing import Any
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.atomic import file_sha256, temp_is_orphan, temp_owner, write_text
 from zbuf_occlude.dataset.layout import (
-    CARD_FILE, FORMAT_VERSION, LOCK_FILE, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, TASK_DIR,
+    CARD_FILE, CARD_SHA256_FILE, FORMAT_VERSION, LOCK_FILE, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, TASK_DIR,
     file_list_name, split_file_name,
 )  # fmt: skip
 from zbuf_occlude.mesh.discovery import SPLITS
@@ -44,7 +44,7 @@ def check_out_layout(out: Path) -> None:
     UnsafePathError
         One of them leads outside ``out`` (the message names it and where it leads).
     """
-    names = (SHARD_DIR, RECORD_DIR, TASK_DIR, PLAN_FILE, CARD_FILE, MANIFEST_FILE, SHAPE_NAMES_FILE, LOCK_FILE)
+    names = (SHARD_DIR, RECORD_DIR, TASK_DIR, PLAN_FILE, CARD_FILE, CARD_SHA256_FILE, MANIFEST_FILE, SHAPE_NAMES_FILE, LOCK_FILE)
     for name in (*names, *map(file_list_name, SPLITS), *map(split_file_name, SPLITS)):
         path_inside(out, name, what=f"the output folder {out}")
 
@@ -267,7 +267,20 @@ def finalize(
         "reference": "Sryamkin, Msallam, Klestov 2023, "
         "A method to create real-like point clouds for 3D object classification",
     }
+    write_card(out, card)
+
+
+def write_card(out: Path, card: dict[str, Any]) -> None:
+    """Write the card, then its SHA-256 file (:data:`~zbuf_occlude.dataset.layout.CARD_SHA256_FILE`).
+
+    The old SHA-256 file goes first: a run stopped in between leaves a card without one
+    (read like an older data set), never one with a stale checksum.
+    """
+    from zbuf_occlude.dataset.schema import card_sha256_line
+
+    (out / CARD_SHA256_FILE).unlink(missing_ok=True)
     write_json(out / CARD_FILE, card)
+    write_text(out / CARD_SHA256_FILE, card_sha256_line(file_sha256(out / CARD_FILE)))
 
 
 # -- summary -------------------------------------------------------------------------------------

@@ -17,7 +17,7 @@ from typing import Any
 
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError, OutputError
 from zbuf_occlude.io.atomic import atomic_path, write_text
-from zbuf_occlude.dataset.layout import CARD_FILE, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, TASK_DIR, file_list_name
+from zbuf_occlude.dataset.layout import CARD_FILE, CARD_SHA256_FILE, MANIFEST_FILE, PLAN_FILE, RECORD_DIR, SHAPE_NAMES_FILE, SHARD_DIR, TASK_DIR, file_list_name
 from zbuf_occlude.mesh.discovery import SPLITS
 from zbuf_occlude.io.safe_paths import path_inside
 from zbuf_occlude.farm.checks import check_before_work, check_out_outside_inputs, prepare_out
@@ -92,10 +92,11 @@ def _wipe(out: Path, objects: Sequence[FarmObject] | None) -> None:
     if objects is None:
         for name in (SHARD_DIR, RECORD_DIR, TASK_DIR):
             shutil.rmtree(out / name, ignore_errors=True)
-        for name in (PLAN_FILE, CARD_FILE, MANIFEST_FILE, SHAPE_NAMES_FILE, *(file_list_name(s) for s in SPLITS)):
+        for name in (PLAN_FILE, CARD_FILE, CARD_SHA256_FILE, MANIFEST_FILE, SHAPE_NAMES_FILE, *(file_list_name(s) for s in SPLITS)):
             (out / name).unlink(missing_ok=True)
         return
     (out / CARD_FILE).unlink(missing_ok=True)
+    (out / CARD_SHA256_FILE).unlink(missing_ok=True)
     for o in objects:
         record_path(out, o.index).unlink(missing_ok=True)
         (out / shard_path(o)).unlink(missing_ok=True)
