@@ -291,6 +291,72 @@ def test_a_mesh_named_dot_dot_does_not_write_beside_out(tmp_path: Path, capsys, 
     assert any(out.glob("chair_0001/*.npz"))
 
 
+# -- symlinked subfolders of --out: nothing outside is written or deleted --------------------------
+FARM_OPTIONS = ["--views", "0:0", "--points", "32", "--dense-points", "512", "--resolution", "64",
+                "--samples-per-view", "1", "--no-progress"]  # fmt: skip
+
+
+def _two_meshes(tmp_path: Path) -> Path:
+    tree = tmp_path / "meshes"
+    for rel in ("chair/train/chair_0001.off", "desk/test/desk_0201.off"):
+        (tree / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tree / rel).symlink_to(SAMPLE_MESHES / rel)
+    return tree
+
+
+def _victim(tmp_path: Path, out: Path) -> dict[Path, bytes]:
+    """OUT/shards and OUT/records as symlinks to folders elsewhere, holding files the farm would write."""
+    files = {}
+    for sub, names in (("shards", ["train_000000.h5", "test_000001.h5"]), ("records", ["000000.json", "000001.json"])):
+        victim = tmp_path / "victim" / sub
+        victim.mkdir(parents=True, exist_ok=True)
+        for name in names:
+            (victim / name).write_bytes(b"keep me " + name.encode())
+            files[victim / name] = (victim / name).read_bytes()
+        if (out / sub).exists():
+            shutil.rmtree(out / sub)
+        (out / sub).symlink_to(victim, target_is_directory=True)
+    return files
+
+
+def _untouched(files: dict[Path, bytes]) -> bool:
+    folders = {p.parent for p in files}
+    return all(p.is_file() and p.read_bytes() == b for p, b in files.items()) and sum(
+        len(list(f.iterdir())) for f in folders
+    ) == len(files)
+
+
+@pytest.mark.parametrize("run", ["farm", "generate --overwrite", "farm --shard 0/2 --overwrite"])
+def test_a_symlinked_subfolder_of_out_is_refused_and_nothing_outside_changes(tmp_path: Path, capsys, run: str) -> None:
+    tree, out = _two_meshes(tmp_path), tmp_path / "out"
+    if run == "farm":
+        out.mkdir()
+        argv = ["farm", str(tree), "--out", str(out), *FARM_OPTIONS]
+    elif run == "generate --overwrite":
+        assert _generate(out, CHAIR) == 0
+        argv = ["generate", str(CHAIR), "--out", str(out), "--overwrite", *FARM_OPTIONS[:-1], "--format", "h5"]
+    else:
+        assert main(["farm", str(tree), "--out", str(out), "--shard", "0/2", *FARM_OPTIONS]) == 0
+        argv = ["farm", str(tree), "--out", str(out), "--shard", "0/2", "--overwrite", *FARM_OPTIONS]
+    files = _victim(tmp_path, out)
+    capsys.readouterr()
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert re.search(r"'(shards|records)' leads outside .*out", err), err
+    assert _untouched(files)
+
+
+def test_farm_merge_refuses_a_symlinked_subfolder_of_out(dataset_dir: Path, tmp_path: Path) -> None:
+    from zbuf_occlude.errors import UnsafePathError
+    from zbuf_occlude.farm import merge_farm
+
+    out = Path(shutil.copytree(dataset_dir, tmp_path / "out"))
+    files = _victim(tmp_path, out)
+    with pytest.raises(UnsafePathError, match=r"'(shards|records)' leads outside"):
+        merge_farm([out], progress=False)
+    assert _untouched(files)
+
+
 # -- tamper detection cannot be switched off -----------------------------------------------------
 def test_a_manifest_without_checksums_is_read_only_with_verify_false(ds: Path) -> None:
     records = _manifest(ds)
@@ -338,6 +404,7 @@ def test_shape_names_with_a_control_character_are_refused_by_the_reader(ds: Path
     card = json.loads((ds / "dataset_card.json").read_text())
     card["shape_names"][0] = "cha\x85ir"
     (ds / "dataset_card.json").write_text(json.dumps(card))
+    (ds / "dataset_card.json.sha256").unlink()  # a crafted data set: its author leaves out (or redoes) the checksum
     with pytest.raises(ZbufOccludeError, match=r"shape_names\.txt:1.*U\+0085"):
         OccludedDataset(ds)
 

@@ -162,3 +162,61 @@ def test_failed_objects_are_not_served(datasets, tmp_path):
     ds = OccludedDataset(copy)
     assert len(ds) == (len(MESHES) - 1) * len(POSES) * PARAMS.samples_per_view
     assert rec["name"] not in {ds.metadata(i)["name"] for i in range(len(ds))}
+
+
+def test_a_card_declaring_huge_samples_is_refused_before_allocating(tmp_path, monkeypatch):
+    # n_points edited to 1e8 in the card: one compact sample would be redrawn into 3.2 GB
+    import shutil
+
+    import zbuf_occlude.resources as resources
+    from conftest import tiny_dataset
+
+    from zbuf_occlude.errors import InsufficientMemoryError
+
+    ds = tiny_dataset(tmp_path / "ds", "compact")
+    card = json.loads((ds / "dataset_card.json").read_text())
+    card["params"]["n_points"] = 100_000_000
+    (ds / "dataset_card.json").write_text(json.dumps(card))
+    (ds / "dataset_card.json.sha256").unlink()  # or re-signed by its author: the checksum is no defence here
+    monkeypatch.setattr(resources, "available_memory", lambda: (2**30, "test"))
+    with pytest.raises(InsufficientMemoryError, match=r"dataset_card\.json field 'params\.n_points' \(100,000,000\) needs about"):
+        OccludedDataset(ds)[0]
+    shutil.rmtree(ds)
+
+
+def test_to_arrays_checks_the_memory_before_allocating(datasets, monkeypatch):
+    from functools import partial
+
+    import zbuf_occlude.dataset.reader as reader
+    from zbuf_occlude.errors import InsufficientMemoryError
+    from zbuf_occlude.resources import check_memory
+
+    ds = OccludedDataset(datasets["dense"])
+    monkeypatch.setattr(reader, "check_memory", partial(check_memory, available=1000))
+    with pytest.raises(InsufficientMemoryError, match=r"to_arrays\(\) of .* samples of .* more than the 1000 B"):
+        ds.to_arrays()
+
+
+def test_an_edited_card_is_caught_by_its_checksum_and_an_old_one_still_reads(tmp_path, capsys):
+    import shutil
+
+    from zbuf_occlude.cli.main import main
+    from zbuf_occlude.dataset.layout import CARD_SHA256_FILE
+    from zbuf_occlude.errors import DatasetFormatError
+
+    from conftest import tiny_dataset
+
+    ds = tiny_dataset(tmp_path / "ds")
+    assert (ds / CARD_SHA256_FILE).read_text().endswith("  dataset_card.json\n")
+    old = shutil.copytree(ds, tmp_path / "old")
+    card = json.loads((ds / "dataset_card.json").read_text())
+    card["params"]["n_points"] = 100_000_000
+    (ds / "dataset_card.json").write_text(json.dumps(card))
+    with pytest.raises(DatasetFormatError, match=r"dataset_card\.json differs from its SHA-256 in dataset_card\.json\.sha256"):
+        OccludedDataset(ds)
+    assert main(["verify", str(ds)]) == 1
+    assert "dataset_card.json differs from its SHA-256" in capsys.readouterr().err
+    (old / CARD_SHA256_FILE).unlink()  # a data set written before the card had a checksum
+    assert len(OccludedDataset(old)) == 4
+    assert main(["verify", str(old)]) == 0
+    assert "has no SHA-256 file" in capsys.readouterr().out

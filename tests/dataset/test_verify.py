@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import h5py
@@ -71,3 +72,161 @@ def test_a_joined_file_named_outside_the_folder_is_refused(generated, tmp_path):
     (ds / "dataset_card.json").write_text(json.dumps(card))
     problems = verify_dataset(ds).problems
     assert any("joined_files" in p and "outside.h5" in p for p in problems), problems
+
+
+# -- verify and the reader refuse the same files -------------------------------------------------
+@pytest.fixture(scope="module")
+def farmed(tmp_path_factory) -> dict[str, Path]:
+    from conftest import tiny_dataset
+
+    root = tmp_path_factory.mktemp("farmed")
+    return {storage: tiny_dataset(root / storage, storage) for storage in ("dense", "compact")}
+
+
+@pytest.fixture(scope="module")
+def sample_files(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("npz") / "o"
+    assert main(["generate", str(CHAIR / "train" / "chair_0001.off"), "--views", "0:0", "--dense-points", "512",
+                 "--points", "32", "--resolution", "64", "--samples-per-view", "1", "--format", "npz",
+                 "--out", str(out)]) == 0  # fmt: skip
+    return out
+
+
+def _resign(ds: Path, rel: str) -> None:
+    """Record the changed file's SHA-256 in the manifest, as the data set's author would."""
+    from zbuf_occlude.io.atomic import file_sha256
+
+    lines = [json.loads(s) for s in (ds / "manifest.jsonl").read_text().splitlines()]
+    for rec in lines:
+        if rel in rec.get("shards", []):
+            rec["sha256"][rec["shards"].index(rel)] = file_sha256(ds / rel)
+    (ds / "manifest.jsonl").write_text("".join(json.dumps(r) + "\n" for r in lines))
+
+
+def _rewrite_shard(shard: Path, **replace) -> None:
+    """The shard again, with some datasets replaced (``None``: left out; a callable: makes it in the new file)."""
+    with h5py.File(shard, "r") as f:
+        arrays = {k: f[k][()] for k in f}
+    shard.unlink()
+    with h5py.File(shard, "w") as f:
+        for key, value in arrays.items():
+            new = replace.get(key, value)
+            if callable(new):
+                new(f, key, value)
+            elif new is not None:
+                f[key] = new
+
+
+def _reader_and_verify_refuse(ds: Path, file: Path, message: str, capsys) -> None:
+    from zbuf_occlude import OccludedDataset
+    from zbuf_occlude.errors import DatasetFormatError
+
+    with pytest.raises(DatasetFormatError, match=re.escape(str(file)) + f".*{message}"):
+        OccludedDataset(ds).to_arrays()
+    capsys.readouterr()
+    assert main(["verify", str(ds)]) == 1
+    err = capsys.readouterr().err
+    assert str(file) in err and re.search(message, err), err
+
+
+def _external_storage(tmp: Path):
+    def make(f, key, value):
+        (tmp / "secret.bin").write_bytes(np.full(value.size, 7, dtype=np.float32).tobytes())
+        f.create_dataset(key, shape=value.shape, dtype=np.float32, external=[(str(tmp / "secret.bin"), 0, value.nbytes)])
+
+    return make
+
+
+def _external_link(target: str, tmp: Path):
+    def make(f, key, value):
+        with h5py.File(tmp / "secret.h5", "w") as g:
+            g["data"] = np.full(value.shape, 7, dtype=np.float32)
+        f[key] = h5py.ExternalLink(target.format(tmp=tmp), "/data")
+
+    return make
+
+
+def _virtual(tmp: Path):
+    def make(f, key, value):
+        with h5py.File(tmp / "secret.h5", "w") as g:
+            g["data"] = np.full(value.shape, 7, dtype=np.float32)
+        layout = h5py.VirtualLayout(shape=value.shape, dtype=np.float32)
+        layout[:] = h5py.VirtualSource(str(tmp / "secret.h5"), "data", shape=value.shape)
+        f.create_virtual_dataset(key, layout)
+
+    return make
+
+
+HOSTILE_DATA = {
+    "external storage": (_external_storage, "external storage"),
+    "external link absolute": (lambda tmp: _external_link("{tmp}/secret.h5", tmp), "external link"),
+    "external link ../": (lambda tmp: _external_link("../../secret.h5", tmp), "external link"),
+    "soft link": (lambda tmp: lambda f, k, v: (f.create_dataset("p", data=v), f.__setitem__(k, h5py.SoftLink("/p"))), "soft link"),
+    "virtual dataset": (_virtual, "virtual dataset"),
+    "string data": (lambda tmp: lambda f, k, v: f.create_dataset(k, data=["x"] * len(v), dtype=h5py.string_dtype()), "string values"),
+    "integer data": (lambda tmp: lambda f, k, v: f.create_dataset(k, data=v.astype(np.int32)), "integer values"),
+}
+
+
+@pytest.mark.parametrize("how", list(HOSTILE_DATA))
+def test_a_shard_whose_data_points_elsewhere_is_refused_by_reader_and_verify(farmed, tmp_path, how, capsys):
+    # the author re-signs the shard: its SHA-256 is right, what it points to is not covered
+    ds = _copy(farmed["dense"], tmp_path / "a" / "b" / "ds")
+    rel = json.loads((ds / "manifest.jsonl").read_text().splitlines()[0])["shards"][0]
+    make, message = HOSTILE_DATA[how]
+    _rewrite_shard(ds / rel, data=make(tmp_path / "a"))
+    _resign(ds, rel)
+    _reader_and_verify_refuse(ds, ds / rel, message, capsys)
+
+
+def test_compact_bits_that_contradict_n_visible_are_refused_not_an_index_error(farmed, tmp_path, capsys):
+    ds = _copy(farmed["compact"], tmp_path / "ds")
+    rel = json.loads((ds / "manifest.jsonl").read_text().splitlines()[0])["shards"][0]
+    _rewrite_shard(ds / rel, visible_bits=lambda f, k, v: f.create_dataset(k, data=np.zeros_like(v)))
+    _resign(ds, rel)
+    _reader_and_verify_refuse(ds, ds / rel, r"'visible_bits' of pose 0 marks 0 visible points", capsys)
+
+
+def test_a_dense_shard_declaring_more_rows_than_its_object_has_is_refused(farmed, tmp_path, capsys):
+    # 2e7 rows declared in a chunked file of a few KB: read whole it would need 7.5 GB
+    ds = _copy(farmed["dense"], tmp_path / "ds")
+    rel = json.loads((ds / "manifest.jsonl").read_text().splitlines()[0])["shards"][0]
+
+    def huge(f, key, value):
+        f.create_dataset(key, shape=(20_000_000, *value.shape[1:]), dtype=value.dtype, chunks=(1, *value.shape[1:]))
+
+    _rewrite_shard(ds / rel, data=huge, label=huge, elevation_deg=huge, azimuth_deg=huge)
+    assert (ds / rel).stat().st_size < 100_000
+    _resign(ds, rel)
+    _reader_and_verify_refuse(ds, ds / rel, r"holds more rows in 'data'.*'data' declares 20000000", capsys)
+
+
+def test_a_shard_declaring_more_than_the_memory_available_is_refused_before_reading(farmed, tmp_path, monkeypatch):
+    from functools import partial
+
+    import zbuf_occlude.dataset.schema as schema
+    from zbuf_occlude.errors import InsufficientMemoryError
+    from zbuf_occlude.resources import check_memory
+
+    shard = sorted((farmed["dense"] / "shards").glob("*.h5"))[0]
+    monkeypatch.setattr(schema, "check_memory", partial(check_memory, available=1000))
+    with pytest.raises(InsufficientMemoryError, match=rf"the shard {shard} needs about .* more than the 1000 B"):
+        schema.open_shard(shard, storage="dense", n_points=64, rows=2, n_poses=2, sensor=False)
+
+
+@pytest.mark.parametrize("damage", ["garbage", "no points", "5 points"])
+def test_a_damaged_sample_file_is_refused_by_reader_and_verify(sample_files, tmp_path, damage, capsys):
+    ds = _copy(sample_files, tmp_path / "ds")
+    rel = json.loads((ds / "manifest.jsonl").read_text().splitlines()[0])["shards"][0]
+    file = ds / rel
+    if damage == "garbage":
+        file.write_bytes(b"PK\x03\x04 not a zip at all")
+        message = "not a zip file"
+    elif damage == "no points":
+        np.savez(file.with_suffix(""), other=np.zeros((32, 3), np.float32))
+        message = "no array 'points'"
+    else:
+        np.savez(file.with_suffix(""), points=np.zeros((5, 3), np.float32))
+        message = r"declared \(5, 3\)"
+    _resign(ds, rel)
+    _reader_and_verify_refuse(ds, file, message, capsys)

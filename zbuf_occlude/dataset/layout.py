@@ -9,6 +9,8 @@ A data set folder (``farm --out``, ``generate --out``), ``format_version`` :data
     DATASET/
       dataset_card.json      parameters, poses, tool version, command lines, GL renderers;
                              written last: it marks the data set finished
+      dataset_card.json.sha256
+                             the card's SHA-256 (``sha256sum`` format), written right after it
       shape_names.txt        one class name per line; line i is label i (PointNet)
       train_files.txt        files of the train split, one per line, paths relative to
                              DATASET (PointNet's file list): the farm's shards; generate's
@@ -51,6 +53,7 @@ from __future__ import annotations
 __all__ = [
     "FORMAT_VERSION",
     "CARD_FILE",
+    "CARD_SHA256_FILE",
     "MANIFEST_FILE",
     "SHAPE_NAMES_FILE",
     "SHARD_DIR",
@@ -67,6 +70,7 @@ __all__ = [
     "INDEX_COLUMNS",
     "PROVENANCE_COLUMNS",
     "COMPACT_DATASETS",
+    "COLUMN_TYPES",
     "file_list_name",
     "shard_name",
     "record_name",
@@ -77,6 +81,9 @@ __all__ = [
 #: Version of the layout above; readers refuse newer ones.
 FORMAT_VERSION = 1
 CARD_FILE = "dataset_card.json"
+#: The card's SHA-256, ``<hex>  dataset_card.json`` (``sha256sum -c`` reads it); data sets
+#: written before it existed have none and still read.
+CARD_SHA256_FILE = "dataset_card.json.sha256"
 MANIFEST_FILE = "manifest.jsonl"
 SHAPE_NAMES_FILE = "shape_names.txt"
 SHARD_DIR = "shards"
@@ -101,6 +108,18 @@ INDEX_COLUMNS = ("object_index", "pose_index")
 PROVENANCE_COLUMNS = ("face_index", "radius", "source", "class_name", "split")
 #: Datasets of a compact shard.
 COMPACT_DATASETS = ("dense_points", "visible_bits", "n_visible", "elevation_deg", "azimuth_deg")
+#: What each dataset of a shard holds: ``(kinds, ndim)``, kinds from ``"f"`` float, ``"i"``/``"u"``
+#: integer, ``"T"`` string (:class:`zbuf_occlude.io.hdf5.Column`).  The reader and ``verify``
+#: refuse a shard whose dataset differs (a string or integer ``data`` is not points).
+COLUMN_TYPES = {
+    "data": ("f", 3), "label": ("iu", 1), "elevation_deg": ("f", 1), "azimuth_deg": ("f", 1),
+    "sample_index": ("iu", 1), "n_visible": ("iu", 1), "object_index": ("iu", 1), "pose_index": ("iu", 1),
+    "face_index": ("iu", 2), "radius": ("f", 1), "source": ("T", 1), "class_name": ("T", 1), "split": ("T", 1),
+    "dense_points": ("f", 2), "visible_bits": ("u", 2),
+    # farm --sensor rows (zbuf_occlude.sensors.crops.farm_datasets)
+    "distance_m": ("f", 1), "sensor_height_m": ("f", 1), "object_azimuth_deg": ("f", 1), "yaw_deg": ("f", 1),
+    "size_m": ("f", 1), "ring": ("iu", 2),
+}  # fmt: skip
 
 
 def file_list_name(split: str) -> str:

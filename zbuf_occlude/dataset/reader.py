@@ -23,10 +23,11 @@ from zbuf_occlude.dataset.layout import (
     SAMPLE_FILE_FORMATS,
     STORAGE_MODES,
 )
-from zbuf_occlude.errors import DatasetFormatError, InvalidInputError, ShardChecksumError
+from zbuf_occlude.errors import InvalidInputError, ShardChecksumError
 from zbuf_occlude.geometry.samples import pose_samples
 from zbuf_occlude.io.safe_paths import path_inside
 from zbuf_occlude.mesh.discovery import SPLITS, name_set
+from zbuf_occlude.resources import check_memory
 
 __all__ = ["OccludedDataset", "reconstruct_samples", "unpack_visible", "samples_per_pose"]
 
@@ -37,6 +38,10 @@ DEFAULT_OPEN_FILES = 16
 #: Degrees: a pose matches a requested elevation/azimuth within this (poses are stored
 #: as the exact floats of the schedule, so this only absorbs decimal round trips).
 POSE_MATCH_ATOL_DEG = 1e-6
+
+#: Bytes one point of one sample costs while it is read or redrawn: float32 xyz in the result
+#: (12), its index into the dense cloud (int64, 8) and the gathered copy (12), rounded up.
+BYTES_PER_SAMPLE_POINT = 40
 
 #: Per-row datasets of a ``farm --sensor`` shard that :meth:`OccludedDataset.metadata` returns.
 SENSOR_ROW_FIELDS = (
@@ -157,7 +162,8 @@ class OccludedDataset(Sequence):
     InvalidInputError
         Not a finished farm data set, a newer format, an unknown split or class name.
     DatasetFormatError
-        The card, the manifest or ``shape_names.txt`` does not match its schema
+        The card differs from its SHA-256 file (``dataset_card.json.sha256``; a data set
+        without one still reads), the card, the manifest or ``shape_names.txt`` does not match its schema
         (:mod:`zbuf_occlude.dataset.schema`; the message names the file, line and field), checksums
         are missing (and ``verify`` is true); on access, a shard that is not HDF5 or
         lacks a dataset or rows.
@@ -167,6 +173,9 @@ class OccludedDataset(Sequence):
     ShardChecksumError
         On access: a shard's bytes differ from the SHA-256 in the manifest (it names the
         shard; rerunning the farm command redoes that object).
+    InsufficientMemoryError
+        The card's ``n_points`` makes one sample larger than the memory available; on
+        access, a shard declares datasets larger than it; :meth:`to_arrays` would not fit.
 
     Examples
     --------
@@ -196,9 +205,17 @@ class OccludedDataset(Sequence):
                 "or run `zbuf-occlude farm-merge` after sharded runs"
             )
         # the schema (pydantic) is imported when a data set is opened, not with the package
-        from zbuf_occlude.dataset.schema import check_records, checked_shards, read_card, read_manifest, read_shape_names
+        from zbuf_occlude.dataset.schema import (
+            check_card_sha256,
+            check_records,
+            checked_shards,
+            read_card,
+            read_manifest,
+            read_shape_names,
+        )  # fmt: skip
 
-        self.card, card = read_card(card_path)
+        self.card, card = read_card(card_path)  # its schema first: a damaged field is named
+        check_card_sha256(self.root)  # then its checksum, before any size it declares is used
         version = card.format_version
         if version > FORMAT_VERSION:
             raise InvalidInputError(
@@ -209,6 +226,11 @@ class OccludedDataset(Sequence):
             raise InvalidInputError(f"{card_path}: unknown storage {self.storage!r}; this zbuf_occlude reads {STORAGE_MODES}")
         params = card.params
         self.n_points: int = params.n_points
+        # the card is data: an n_points edited to 1e8 must not allocate GBs for one sample
+        check_memory(
+            self.n_points * BYTES_PER_SAMPLE_POINT, option=f"{card_path} field 'params.n_points' ({self.n_points:,})",
+            hint="one sample of this data set would not fit in memory: check where the data set comes from",
+        )  # fmt: skip
         self._samples_per_view = params.samples_per_view
         #: ``farm --sensor``: one sample per scan, each with its own placement stored in its shard row
         self.sensor: str | None = params.sensor
@@ -298,27 +320,17 @@ class OccludedDataset(Sequence):
         self._reset_handles()
 
     def _file(self, path: Path):
-        import h5py
-
-        from zbuf_occlude.dataset.schema import check_shard
+        from zbuf_occlude.dataset.schema import open_shard
 
         if self._pid != os.getpid():  # forked: the parent's HDF5 handles are not ours
             self._reset_handles()
         f = self._files.get(path)
         if f is None:
             self._verify(path)
-            try:
-                f = h5py.File(path, "r")
-            except OSError as exc:  # h5py says "file signature not found" for a file that is not HDF5
-                raise DatasetFormatError(f"the shard {path} is not a readable HDF5 file ({exc})") from None
-            try:
-                check_shard(
-                    f, path, storage=self.storage, n_points=self.n_points, rows=self._shard_rows.get(path, 0),
-                    n_poses=len(self._elevation), sensor=self.sensor is not None,
-                )  # fmt: skip
-            except BaseException:
-                f.close()
-                raise
+            f = open_shard(
+                path, storage=self.storage, n_points=self.n_points, rows=self._shard_rows.get(path, 0),
+                n_poses=len(self._elevation), sensor=self.sensor is not None,
+            )  # fmt: skip
             self._files[path] = f
             while len(self._files) > DEFAULT_OPEN_FILES:
                 self._files.popitem(last=False)[1].close()
@@ -357,8 +369,11 @@ class OccludedDataset(Sequence):
         if hit is not None and self._pid == os.getpid():
             self._compact.move_to_end(obj)
             return hit
+        from zbuf_occlude.dataset.schema import check_visible_bits
+
         f = self._file(self._shards[obj])
         arrays = (f["dense_points"][()], f["visible_bits"][()])
+        check_visible_bits(self._shards[obj], arrays[1], len(arrays[0]), self._objects[obj]["n_visible"])
         self._compact[obj] = arrays
         while len(self._compact) > self._object_cache_size:
             self._compact.popitem(last=False)
@@ -440,7 +455,17 @@ class OccludedDataset(Sequence):
         -------
         data : (B, n, 3) float32
         label : (B,) int64
+
+        Raises
+        ------
+        InsufficientMemoryError
+            ``B * n * 12`` bytes are more than the memory available (checked before allocating).
         """
+        check_memory(
+            len(self) * self.n_points * 3 * np.dtype(np.float32).itemsize,
+            option=f"to_arrays() of {self.root} ({len(self):,} samples of {self.n_points:,} points)",
+            hint="select fewer samples (split, classes, poses) or read them one at a time (ds[i])",
+        )  # fmt: skip
         data = np.empty((len(self), self.n_points, 3), dtype=np.float32)
         labels = np.empty(len(self), dtype=np.int64)
         bounds = np.flatnonzero(np.diff(self._obj, prepend=-1, append=-1))

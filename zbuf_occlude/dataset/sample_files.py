@@ -13,16 +13,28 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
+from numpy.lib import format as npy_format
 from numpy.typing import NDArray
 
 from zbuf_occlude.dataset.layout import SAMPLE_FILE_FORMATS
-from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.errors import DatasetFormatError, InvalidInputError
 
 __all__ = ["read_sample_points"]
 
 
-def _npz_points(path: Path) -> NDArray:
+def _npz_points(path: Path, n_points: int) -> NDArray:
     with np.load(path, allow_pickle=False) as z:
+        if "points" not in z.files:
+            raise KeyError(f"no array 'points' (it holds {sorted(z.files)[:5]})")
+        # the shape and dtype the member declares, before it is inflated: a small member may inflate to GBs
+        with z.zip.open("points.npy") as member:
+            read_header = {(1, 0): npy_format.read_array_header_1_0, (2, 0): npy_format.read_array_header_2_0}
+            version = npy_format.read_magic(member)
+            if version not in read_header:
+                raise ValueError(f"'points' has .npy format version {version}, not one numpy writes for it")
+            shape, _, dtype = read_header[version](member)
+        if shape != (n_points, 3) or dtype.kind != "f":
+            raise ValueError(f"'points' is declared {shape} {dtype}, not ({n_points}, 3) floats")
         return z["points"]
 
 
@@ -54,19 +66,22 @@ def read_sample_points(path: str | os.PathLike, fmt: str, n_points: int) -> NDAr
     Raises
     ------
     InvalidInputError
-        Unknown format, or the file cannot be read or does not hold ``n_points`` points
-        (the message names the file).
+        Unknown format.
+    DatasetFormatError
+        The file cannot be read, has no ``points``, or does not hold ``(n_points, 3)``
+        floats (checked in an ``.npz`` member's header, before it is inflated); the
+        message names the file.
     """
     if fmt not in SAMPLE_FILE_FORMATS:
         raise InvalidInputError(f"{path}: unknown sample file format {fmt!r}; expected one of {SAMPLE_FILE_FORMATS}")
     path = Path(path)
     try:
-        points = _npz_points(path) if fmt == "npz" else _ply_points(path)
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
-        raise InvalidInputError(f"cannot read the sample file {path}: {exc}; rerun the generate command to redo it") from None
+        points = _npz_points(path, int(n_points)) if fmt == "npz" else _ply_points(path)
+    except (OSError, ValueError, KeyError, IndexError, TypeError, EOFError, zipfile.BadZipFile) as exc:
+        raise DatasetFormatError(f"cannot read the sample file {path}: {exc}; rerun the generate command to redo it") from None
     points = np.asarray(points)
     if points.shape != (int(n_points), 3) or not np.issubdtype(points.dtype, np.floating):
-        raise InvalidInputError(
+        raise DatasetFormatError(
             f"the sample file {path} holds points of shape {points.shape} ({points.dtype}), not ({int(n_points)}, 3) floats"
         )
     return points.astype(np.float32, copy=False)

@@ -20,9 +20,11 @@ from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from zbuf_occlude.dataset.layout import SHAPE_NAMES_FILE
+from zbuf_occlude.dataset.layout import CARD_FILE, CARD_SHA256_FILE, COLUMN_TYPES, SHAPE_NAMES_FILE
 from zbuf_occlude.errors import DatasetFormatError
+from zbuf_occlude.io.hdf5 import Column, declared_nbytes, open_hdf5
 from zbuf_occlude.io.safe_paths import control_character, path_inside
+from zbuf_occlude.resources import check_memory
 
 __all__ = [
     "CardParams",
@@ -33,11 +35,15 @@ __all__ = [
     "Plan",
     "CHECKSUM_ALGORITHM",
     "read_card",
+    "card_sha256_line",
+    "check_card_sha256",
     "read_manifest",
     "read_shape_names",
     "check_records",
     "checked_shards",
     "check_shard",
+    "open_shard",
+    "check_visible_bits",
     "describe_validation_error",
 ]
 
@@ -216,6 +222,47 @@ def read_card(path: Path) -> tuple[dict[str, Any], Card]:
     return json.loads(text), card
 
 
+def card_sha256_line(digest: str) -> str:
+    """The line of :data:`~zbuf_occlude.dataset.layout.CARD_SHA256_FILE` for a card of SHA-256 ``digest``."""
+    return f"{digest}  {CARD_FILE}\n"
+
+
+def check_card_sha256(root: Path) -> bool:
+    """Check the card of data set ``root`` against its SHA-256 file.
+
+    Returns
+    -------
+    bool
+        True when it matches; False when there is no SHA-256 file (a data set written
+        before the card had one: it still reads, ``verify`` says so).
+
+    Raises
+    ------
+    DatasetFormatError
+        The SHA-256 file is unreadable or malformed, or the card differs from it (edited
+        after it was written: its sizes, ``n_points`` included, cannot be trusted).
+    """
+    from zbuf_occlude.io.atomic import file_sha256
+
+    sidecar = root / CARD_SHA256_FILE
+    if not sidecar.exists():
+        return False
+    text = _read_text(sidecar, "card checksum")
+    digest = text.split(" ", 1)[0]
+    if len(text) > 200 or text != card_sha256_line(digest) or len(digest) != 64:
+        raise DatasetFormatError(f"{sidecar} is not a SHA-256 line for {CARD_FILE} ('<64 hex digits>  {CARD_FILE}')")
+    try:
+        actual = file_sha256(root / CARD_FILE)
+    except OSError as exc:
+        raise DatasetFormatError(f"cannot read {root / CARD_FILE}: {exc}") from None
+    if actual != digest:
+        raise DatasetFormatError(
+            f"{root / CARD_FILE} differs from its SHA-256 in {CARD_SHA256_FILE} (changed after it was written); "
+            "its parameters cannot be trusted: get the data set again from its source"
+        )
+    return True
+
+
 def read_manifest(path: Path, problems: list[str] | None = None) -> list[tuple[int, dict[str, Any], OkRecord | None]]:
     """``(line number, record dict, checked record or None)`` per non-empty line.
 
@@ -366,8 +413,8 @@ def check_shard(f: Any, path: Path, *, storage: str, n_points: int, rows: int, n
     Raises
     ------
     DatasetFormatError
-        A dataset is missing or has the wrong shape, or the shard holds fewer rows than
-        ``n_visible`` promises.
+        A dataset is missing or has the wrong shape, or the shard holds another number of
+        rows than ``n_visible`` promises.
     """
     needed = SHARD_DATASETS.get(storage, ()) + (("elevation_deg", "azimuth_deg") if sensor else ())
     missing = [k for k in needed if _shape(f, k) is None]
@@ -384,9 +431,77 @@ def check_shard(f: Any, path: Path, *, storage: str, n_points: int, rows: int, n
     data = _shape(f, "data")
     if len(data) != 3 or data[1:] != (n_points, 3):
         raise DatasetFormatError(f"the shard {path}: dataset 'data' has shape {data}, expected (B, {n_points}, 3)")
-    short = [k for k in ("data", *(needed[1:])) if _shape(f, k)[0] < rows]
-    if short:
+    # exactly: a shard declaring more rows than its object has would be read whole by to_arrays()
+    wrong = [k for k in ("data", *(needed[1:])) if _shape(f, k)[0] != rows]
+    if wrong:
+        more = _shape(f, wrong[0])[0] > rows
         raise DatasetFormatError(
-            f"the shard {path} holds fewer rows in {', '.join(map(repr, short))} than the manifest's field "
-            f"'n_visible' promises ({rows} samples); the data set is damaged"
+            f"the shard {path} holds {'more' if more else 'fewer'} rows in {', '.join(map(repr, wrong))} than the "
+            f"manifest's field 'n_visible' promises ({rows} samples; {wrong[0]!r} declares {_shape(f, wrong[0])[0]}); "
+            "the data set is damaged"
+        )
+
+
+#: :data:`~zbuf_occlude.dataset.layout.COLUMN_TYPES` as :class:`~zbuf_occlude.io.hdf5.Column`.
+SHARD_COLUMNS = {name: Column(*spec) for name, spec in COLUMN_TYPES.items()}
+
+
+def open_shard(path: Path, *, storage: str, n_points: int, rows: int, n_poses: int, sensor: bool) -> Any:
+    """Open a shard for reading after every check that needs no data: the one door the reader
+    and ``verify`` use.
+
+    :func:`zbuf_occlude.io.hdf5.check_hdf5` against :data:`SHARD_COLUMNS` (data stored inside
+    the file, no links, the schema's dtypes), :func:`check_shard` (datasets, shapes, rows), and
+    the memory its datasets declare against the memory available
+    (:func:`zbuf_occlude.resources.check_memory`), so that a small file declaring 2e7 rows is
+    refused before it is read.  Parameters as :func:`check_shard`.
+
+    Returns
+    -------
+    h5py.File
+        Open for reading; the caller closes it.
+
+    Raises
+    ------
+    DatasetFormatError
+        Not HDF5, or any check of :func:`~zbuf_occlude.io.hdf5.check_hdf5` or :func:`check_shard`.
+    InsufficientMemoryError
+        Its datasets, read whole, would need more memory than is available (names the file).
+    """
+    f = open_hdf5(path, SHARD_COLUMNS)
+    try:
+        check_shard(f, path, storage=storage, n_points=n_points, rows=rows, n_poses=n_poses, sensor=sensor)
+        declared = sum(declared_nbytes(f[k]) for k in f.keys() if _shape(f, k) is not None)
+        check_memory(declared, option=f"the shard {path}", hint="it declares datasets larger than the data set can hold")
+    except BaseException:
+        f.close()
+        raise
+    return f
+
+
+def check_visible_bits(path: Path, bits: Any, n_dense: int, n_visible: list[int]) -> None:
+    """Check a compact shard's visibility masks against the manifest's ``n_visible``.
+
+    Parameters
+    ----------
+    bits : (P, ceil(n_dense / 8)) uint8
+        The shard's ``visible_bits``.
+    n_visible : list of int
+        The manifest's visible points per pose.
+
+    Raises
+    ------
+    DatasetFormatError
+        A pose whose mask has another number of visible points than ``n_visible`` says
+        (a reader would draw samples from no points).
+    """
+    import numpy as np
+
+    counts = np.unpackbits(np.asarray(bits, dtype=np.uint8), axis=1, count=int(n_dense)).sum(axis=1)
+    wrong = np.flatnonzero(counts != np.asarray(n_visible, dtype=np.int64))
+    if len(wrong):
+        p = int(wrong[0])
+        raise DatasetFormatError(
+            f"the shard {path}: 'visible_bits' of pose {p} marks {int(counts[p])} visible points, the manifest's field "
+            f"'n_visible' says {int(n_visible[p])} ({len(wrong)} poses differ); the data set is damaged"
         )

@@ -6,7 +6,9 @@ and without stopping at the first problem: the card, ``shape_names.txt`` and eve
 ``manifest.jsonl`` against their schema (:mod:`zbuf_occlude.dataset.schema`), every path named
 by the manifest and the file lists (inside the folder, symlinks resolved:
 :func:`~zbuf_occlude.io.safe_paths.path_inside`), every file's SHA-256, and every HDF5 shard's
-datasets and rows.
+datasets and rows.  The file checks are the reader's own
+(:func:`~zbuf_occlude.dataset.schema.open_shard`, :func:`~zbuf_occlude.dataset.schema.check_visible_bits`,
+:func:`~zbuf_occlude.dataset.sample_files.read_sample_points`), so what ``verify`` passes the reader reads.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from zbuf_occlude.dataset.layout import CARD_FILE, MANIFEST_FILE, file_list_name
+from zbuf_occlude.dataset.layout import CARD_FILE, CARD_SHA256_FILE, MANIFEST_FILE, SAMPLE_FILE_FORMATS, file_list_name
 from zbuf_occlude.dataset.reader import samples_per_pose
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
 from zbuf_occlude.io.atomic import file_sha256
@@ -49,6 +51,8 @@ class VerifyReport:
     objects: int = 0
     files: int = 0
     samples: int = 0
+    #: What is worth knowing but not a problem (a card without its SHA-256 file).
+    notes: list[str] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -56,22 +60,33 @@ class VerifyReport:
 
     def summary(self) -> str:
         """One line: ``OK DIR: 3 objects, 3 files (SHA-256 checked), 48 samples``."""
-        return f"OK {self.path}: {self.objects} objects, {self.files} files (SHA-256 checked), {self.samples} samples"
+        line = f"OK {self.path}: {self.objects} objects, {self.files} files (SHA-256 checked), {self.samples} samples"
+        return "; ".join([line, *self.notes])
 
 
-def _check_hdf5(path: Path, card: Card, rows: int, n_poses: int) -> str | None:
-    import h5py
-
-    from zbuf_occlude.dataset.schema import check_shard
+def _check_hdf5(path: Path, card: Card, rows: int, n_visible: list[int]) -> str | None:
+    """What the reader would refuse on opening the shard (:func:`~zbuf_occlude.dataset.schema.open_shard`)
+    and, for compact storage, on reading its masks (:func:`~zbuf_occlude.dataset.schema.check_visible_bits`)."""
+    from zbuf_occlude.dataset.schema import check_visible_bits, open_shard
 
     try:
-        with h5py.File(path, "r") as f:
-            check_shard(
-                f, path, storage=card.storage, n_points=card.params.n_points, rows=rows, n_poses=n_poses,
-                sensor=card.params.sensor is not None,
-            )  # fmt: skip
-    except OSError as exc:
-        return f"the shard {path} is not a readable HDF5 file ({exc})"
+        with open_shard(
+            path, storage=card.storage, n_points=card.params.n_points, rows=rows, n_poses=len(n_visible),
+            sensor=card.params.sensor is not None,
+        ) as f:  # fmt: skip
+            if card.storage == "compact":
+                check_visible_bits(path, f["visible_bits"][()], len(f["dense_points"]), n_visible)
+    except ZbufOccludeError as exc:
+        return str(exc)
+    return None
+
+
+def _check_sample_file(path: Path, card: Card) -> str | None:
+    """What the reader would refuse in one of ``generate --format npz|ply``'s sample files."""
+    from zbuf_occlude.dataset.sample_files import read_sample_points
+
+    try:
+        read_sample_points(path, card.storage, card.params.n_points)
     except ZbufOccludeError as exc:
         return str(exc)
     return None
@@ -95,13 +110,21 @@ def verify_dataset(path: str | os.PathLike) -> VerifyReport:
     InvalidInputError
         ``path`` is not a folder (a usage error, not a problem of a data set).
     """
-    from zbuf_occlude.dataset.schema import check_records, read_card, read_manifest, read_shape_names
+    from zbuf_occlude.dataset.schema import check_card_sha256, check_records, read_card, read_manifest, read_shape_names
 
     root = Path(path)
     if not root.is_dir():
         raise InvalidInputError(f"verify: {path} is not a folder")
     report = VerifyReport(str(root))
     problems = report.problems
+    try:
+        if (root / CARD_FILE).exists() and not check_card_sha256(root):
+            report.notes.append(
+                f"{root / CARD_FILE} has no SHA-256 file ({CARD_SHA256_FILE}; written by an older zbuf_occlude): "
+                "changes to the card cannot be noticed"
+            )
+    except ZbufOccludeError as exc:
+        problems.append(str(exc))
     try:
         _, card = read_card(root / CARD_FILE)
     except ZbufOccludeError as exc:
@@ -148,9 +171,13 @@ def verify_dataset(path: str | os.PathLike) -> VerifyReport:
                 problems.append(f"{where}: {rel} differs from its SHA-256 in the manifest (changed after it was written)")
                 continue
             if card.storage in HDF5_STORAGES and len(rec.shards) == 1:
-                found = _check_hdf5(file, card, n_rows, len(rec.n_visible))
-                if found:
-                    problems.append(found)
+                found = _check_hdf5(file, card, n_rows, rec.n_visible)
+            elif card.storage in SAMPLE_FILE_FORMATS:
+                found = _check_sample_file(file, card)
+            else:
+                found = None
+            if found:
+                problems.append(found)
     if missing_checksums:
         said = " although the card's field 'checksums' says every file has one" if card.checksums else ""
         problems.append(

@@ -27,9 +27,8 @@ from zbuf_occlude.dataset.layout import CARD_FILE, GENERATE_STORAGES, file_list_
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.farm.checks import check_out_outside_inputs
 from zbuf_occlude.farm.config import GENERATE_DEFAULTS, FarmParams, RunOptions, record_path
-from zbuf_occlude.farm.journal import FarmSummary, read_json, shape_names_of
+from zbuf_occlude.farm.journal import FarmSummary, read_json, shape_names_of, write_card
 from zbuf_occlude.farm.run import run_farm
-from zbuf_occlude.farm.worker import write_json
 from zbuf_occlude.io.atomic import file_sha256, write_text
 from zbuf_occlude.io.clouds import concat_h5
 from zbuf_occlude.io.safe_paths import path_inside
@@ -78,7 +77,7 @@ def _merge_h5(out: Path, objects: Sequence[FarmObject]) -> list[Path]:
             for split in sorted({o.split for o in objects})
             for name in ((split_file_name(split),) if parts.get(split) else ()) + (file_list_name(split),)
         ]
-        write_json(out / CARD_FILE, card)
+        write_card(out, card)
     return written
 
 

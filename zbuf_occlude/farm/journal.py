@@ -13,14 +13,18 @@ from typing import Any
 
 from zbuf_occlude.dataset.layout import (
     CARD_FILE,
+    CARD_SHA256_FILE,
     FORMAT_VERSION,
+    LOCK_FILE,
     MANIFEST_FILE,
     PLAN_FILE,
     RECORD_DIR,
     SHAPE_NAMES_FILE,
     SHARD_DIR,
+    TASK_DIR,
     file_list_name,
-)
+    split_file_name,
+)  # fmt: skip
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.farm.config import BYTES_PER_MB, PAPER_SAMPLES_PER_MB, FarmParams, plan_digest, record_path, shard_path
 from zbuf_occlude.farm.worker import base_record, package_version, write_json
@@ -34,6 +38,27 @@ log = logging.getLogger(__name__)
 
 
 # -- journal, manifest, card -------------------------------------------------------------------
+def check_out_layout(out: Path) -> None:
+    """Check that every folder and file the farm writes or deletes directly under ``out`` stays inside it.
+
+    The one check behind every write and delete of a run, ``generate``, ``--overwrite``
+    (:func:`~zbuf_occlude.farm.run._wipe`) and ``farm-merge``: ``shards/``, ``records/``,
+    ``tasks/`` (locks included), the plan, card, manifest, class names, file lists, joined
+    files and the lock, once symlinks are resolved (:func:`~zbuf_occlude.io.safe_paths.path_inside`).
+    Files named by records (generate's ``npz``/``ply`` samples) are checked where they are
+    written or deleted.  A symlink to elsewhere is refused, not followed: ``OUT/shards`` linked
+    to another folder would have the run overwrite, or ``--overwrite`` delete, the files there.
+
+    Raises
+    ------
+    UnsafePathError
+        One of them leads outside ``out`` (the message names it and where it leads).
+    """
+    names = (SHARD_DIR, RECORD_DIR, TASK_DIR, PLAN_FILE, CARD_FILE, CARD_SHA256_FILE, MANIFEST_FILE, SHAPE_NAMES_FILE, LOCK_FILE)
+    for name in (*names, *map(file_list_name, SPLITS), *map(split_file_name, SPLITS)):
+        path_inside(out, name, what=f"the output folder {out}")
+
+
 def read_json(path: Path) -> dict[str, Any] | None:
     """A JSON object of the journal (plan, record, task); ``None`` if missing, damaged or not an object."""
     try:
@@ -252,7 +277,20 @@ def finalize(
         "reference": "Sryamkin, Msallam, Klestov 2023, "
         "A method to create real-like point clouds for 3D object classification",
     }
+    write_card(out, card)
+
+
+def write_card(out: Path, card: dict[str, Any]) -> None:
+    """Write the card, then its SHA-256 file (:data:`~zbuf_occlude.dataset.layout.CARD_SHA256_FILE`).
+
+    The old SHA-256 file goes first: a run stopped in between leaves a card without one
+    (read like an older data set), never one with a stale checksum.
+    """
+    from zbuf_occlude.dataset.schema import card_sha256_line
+
+    (out / CARD_SHA256_FILE).unlink(missing_ok=True)
     write_json(out / CARD_FILE, card)
+    write_text(out / CARD_SHA256_FILE, card_sha256_line(file_sha256(out / CARD_FILE)))
 
 
 # -- summary -------------------------------------------------------------------------------------

@@ -18,6 +18,7 @@ from typing import Any
 
 from zbuf_occlude.dataset.layout import (
     CARD_FILE,
+    CARD_SHA256_FILE,
     MANIFEST_FILE,
     PLAN_FILE,
     RECORD_DIR,
@@ -39,6 +40,7 @@ from zbuf_occlude.farm.config import (
 )
 from zbuf_occlude.farm.journal import (
     FarmSummary,
+    check_out_layout,
     finalize,
     finished_record,
     manifest_lines,
@@ -109,10 +111,11 @@ def _wipe(out: Path, objects: Sequence[FarmObject] | None) -> None:
     if objects is None:
         for name in (SHARD_DIR, RECORD_DIR, TASK_DIR):
             shutil.rmtree(out / name, ignore_errors=True)
-        for name in (PLAN_FILE, CARD_FILE, MANIFEST_FILE, SHAPE_NAMES_FILE, *(file_list_name(s) for s in SPLITS)):
+        for name in (PLAN_FILE, CARD_FILE, CARD_SHA256_FILE, MANIFEST_FILE, SHAPE_NAMES_FILE, *(file_list_name(s) for s in SPLITS)):
             (out / name).unlink(missing_ok=True)
         return
     (out / CARD_FILE).unlink(missing_ok=True)
+    (out / CARD_SHA256_FILE).unlink(missing_ok=True)
     for o in objects:
         record_path(out, o.index).unlink(missing_ok=True)
         (out / shard_path(o)).unlink(missing_ok=True)
@@ -215,6 +218,7 @@ def run_farm(
             raise InvalidInputError("a ready plan must number its objects 0, 1, 2, ... in order")
     mine = select_shard(objects, task, n_tasks)
     out = Path(out)
+    check_out_layout(out)  # every write and delete below stays inside out
     with sigterm_as_interrupt(), farm_lock(out, shard):
         run = dataclasses.replace(o, source_text=source_text, layout=layout, skipped=tuple((str(p), str(r)) for p, r in skipped))
         return _run_locked(out, objects, mine, params, run, t0)
@@ -347,6 +351,7 @@ def merge_farm(
             raise InvalidInputError(f"{folder} was made with other parameters or objects than {folders[0]}; cannot merge")
     plan = plans[0]
     prepare_out(out)
+    check_out_layout(out)
     with farm_lock(out):
         return _merge_locked(folders, out, plan, progress=progress, t0=t0)
 

@@ -2,12 +2,13 @@
 
 :mod:`.atomic` (every write of the package goes through it), :mod:`.clouds` (one sample per
 ``.npz``/``.ply`` file, many per ``.h5``), :mod:`.safe_paths` (paths a file names stay inside
-its folder).
+its folder), :mod:`.hdf5` (HDF5 files from anyone: only data stored inside them).
 """
 
 from zbuf_occlude.geometry.samples import OccludedCloud
 from zbuf_occlude.io import atomic, clouds
 from zbuf_occlude.io.atomic import *  # noqa: F403  (each module's __all__, re-exported whole)
 from zbuf_occlude.io.clouds import *  # noqa: F403
+from zbuf_occlude.io.hdf5 import check_hdf5, open_hdf5
 
-__all__ = ["OccludedCloud", *atomic.__all__, *clouds.__all__]
+__all__ = ["OccludedCloud", *atomic.__all__, *clouds.__all__, "check_hdf5", "open_hdf5"]

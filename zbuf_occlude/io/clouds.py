@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike
 from zbuf_occlude.errors import OutputError
 from zbuf_occlude.geometry.samples import OccludedCloud
 from zbuf_occlude.io.atomic import atomic_h5, atomic_path
+from zbuf_occlude.io.hdf5 import Column, open_hdf5
 
 __all__ = [
     "write_npz",
@@ -209,6 +210,8 @@ def concat_h5(
     ------
     OutputError
         Parts whose datasets differ, or the file cannot be written (disk full included).
+    DatasetFormatError
+        A part is not HDF5 or points elsewhere (:func:`zbuf_occlude.io.hdf5.check_hdf5`).
     """
     import h5py
 
@@ -216,7 +219,7 @@ def concat_h5(
         raise OutputError(f"nothing to join into {path}")
     fill = dict(fill or {})
     with contextlib.ExitStack() as stack:
-        sources = [stack.enter_context(h5py.File(p, "r")) for p in parts]
+        sources = [stack.enter_context(open_hdf5(p)) for p in parts]
         keys = [k for k in sources[0].keys() if k not in fill] + list(fill)
         rows = [len(src["data"]) for src in sources]
         with atomic_h5(path) as f:
@@ -240,12 +243,20 @@ def concat_h5(
     return Path(path)
 
 
-def read_h5(path: str | os.PathLike) -> dict[str, np.ndarray]:
-    """Every dataset of a file written by :func:`write_h5`, as numpy arrays (strings decoded)."""
-    import h5py
+def read_h5(path: str | os.PathLike, columns: Mapping[str, Column] | None = None) -> dict[str, np.ndarray]:
+    """Every dataset of a file written by :func:`write_h5`, as numpy arrays (strings decoded).
 
+    The file is checked first (:func:`zbuf_occlude.io.hdf5.check_hdf5`): only data stored inside
+    it, no links, numbers or strings, and ``columns`` (e.g. the data set schema
+    :data:`zbuf_occlude.dataset.schema.SHARD_COLUMNS`) when given.
+
+    Raises
+    ------
+    DatasetFormatError
+        Not HDF5, or the file points elsewhere or holds other types (names file and dataset).
+    """
     out: dict[str, np.ndarray] = {}
-    with h5py.File(path, "r") as f:
+    with open_hdf5(path, columns) as f:
         for key, ds in f.items():
             out[key] = ds.asstr()[()] if ds.dtype.kind == "O" else ds[()]
         out["shape_names"] = np.asarray(list(f.attrs.get("shape_names", [])), dtype=str)
