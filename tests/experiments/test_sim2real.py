@@ -32,7 +32,10 @@ def _mesh_root(tmp_path: Path) -> Path:
     (root / "pole").mkdir(parents=True)
     trimesh.creation.box(extents=(4.5, 1.8, 1.5)).export(root / "car" / "sedan.obj")
     # a Y-up glTF car: length along x, height along y
-    trimesh.creation.box(extents=(3.8, 1.4, 1.7)).export(root / "car" / "hatch.glb")
+    # (relabelled as Blender's: trimesh's own glTF files are read as stored, zbuf_occlude.mesh.scene)
+    glb = trimesh.creation.box(extents=(3.8, 1.4, 1.7)).export(file_type="glb")
+    trimesh_generator = b'"https://github.com/mikedh/trimesh"'
+    (root / "car" / "hatch.glb").write_bytes(glb.replace(trimesh_generator, b'"Khronos glTF Blender I/O v4.1.63"'.ljust(len(trimesh_generator))))
     trimesh.creation.cylinder(radius=0.08, height=4.0, sections=12).export(root / "pole" / "post.obj")
     lamp = trimesh.util.concatenate([trimesh.creation.cylinder(radius=0.1, height=6.0, sections=12),
                                      trimesh.creation.box(extents=(1.0, 0.2, 0.2), transform=trimesh.transformations.translation_matrix([0.4, 0, 3.0]))])  # fmt: skip
