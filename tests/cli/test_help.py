@@ -207,3 +207,20 @@ def test_every_command_taking_meshes_lists_every_supported_extension(capsys):
             main([command, "--help"])
         text = " ".join(capsys.readouterr().out.split())
         assert all(ext in text for ext in SUPPORTED_EXTENSIONS), (command, [e for e in SUPPORTED_EXTENSIONS if e not in text])
+
+
+# -- --up ------------------------------------------------------------------------------------------
+def test_scan_reads_the_mesh_with_up(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import trimesh
+
+    import zbuf_occlude.mesh.load as load
+
+    mesh = tmp_path / "box.obj"
+    trimesh.creation.box(extents=(1.0, 3.0, 0.6)).export(mesh)
+    seen = []
+    real = load.load_mesh
+    monkeypatch.setattr(load, "load_mesh", lambda path, **kw: seen.append(kw.get("up")) or real(path, **kw))
+    assert main(["scan", str(mesh), "--up", "+y", "--distance", "8", "--out", str(tmp_path / "s")]) == 0
+    assert seen == ["+y"]
+    for command in (["generate", "--out", "o"], ["farm", "root", "--out", "o"], ["scan", "box", "--out", "o"]):
+        assert build_parser().parse_args(command).up == "auto"

@@ -41,7 +41,6 @@ import re
 from pathlib import Path
 
 import numpy as np
-import trimesh
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
@@ -93,6 +92,8 @@ def up_rotation(axis: str) -> NDArray[np.float64]:
     if axis == "+z":
         return np.eye(4)
     direction, degrees = _UP_TURNS[axis]
+    import trimesh  # here, not at import: the CLI's option checks import UP_CHOICES
+
     m = trimesh.transformations.rotation_matrix(np.radians(degrees), direction)
     return np.round(m, 15)  # exact zeros and ones for quarter turns
 
