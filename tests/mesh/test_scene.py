@@ -216,3 +216,41 @@ def test_every_street_object_loads_and_cars_are_longer_than_tall() -> None:
             assert max(ext[0], ext[1]) > 1.5 * ext[2], (path, ext)  # longer than tall
         if path.parent.name in ("pole", "pedestrian") or path.parent.parent.name == "pedestrian":
             assert ext[2] >= max(ext[0], ext[1]) - 0.02, (path, ext)  # taller than wide (T-poses: ≈)
+
+
+#: A COLLADA triangle whose material names a texture that is not there (as Gazebo models do).
+COLLADA_WITH_MISSING_TEXTURE = """<?xml version="1.0"?>
+<COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" version="1.4.1">
+<asset><up_axis>Z_UP</up_axis></asset>
+<library_images><image id="img"><init_from>../materials/textures/missing.png</init_from></image></library_images>
+<library_effects><effect id="eff"><profile_COMMON>
+ <newparam sid="surf"><surface type="2D"><init_from>img</init_from></surface></newparam>
+ <newparam sid="samp"><sampler2D><source>surf</source></sampler2D></newparam>
+ <technique sid="common"><lambert><emission><texture texture="samp" texcoord="UV"/></emission>
+  <diffuse><texture texture="samp" texcoord="UV"/></diffuse></lambert></technique>
+</profile_COMMON></effect></library_effects>
+<library_materials><material id="mat"><instance_effect url="#eff"/></material></library_materials>
+<library_geometries><geometry id="g"><mesh>
+ <source id="pos"><float_array id="pa" count="9">0 0 0 1 0 0 0 1 2</float_array><technique_common>
+  <accessor source="#pa" count="3" stride="3"><param name="X" type="float"/><param name="Y" type="float"/>
+  <param name="Z" type="float"/></accessor></technique_common></source>
+ <vertices id="v"><input semantic="POSITION" source="#pos"/></vertices>
+ <triangles count="1" material="m"><input semantic="VERTEX" source="#v" offset="0"/><p>0 1 2</p></triangles>
+</mesh></geometry></library_geometries>
+<library_visual_scenes><visual_scene id="s"><node id="n"><instance_geometry url="#g"><bind_material><technique_common>
+ <instance_material symbol="m" target="#mat"/></technique_common></bind_material></instance_geometry></node></visual_scene>
+</library_visual_scenes>
+<scene><instance_visual_scene url="#s"/></scene>
+</COLLADA>
+"""
+
+
+@needs_collada
+def test_collada_textures_are_not_loaded_and_log_nothing(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    path = tmp_path / "sign.dae"
+    path.write_text(COLLADA_WITH_MISSING_TEXTURE)
+    with caplog.at_level("DEBUG"):
+        mesh = load_mesh(path, normalize=False)
+    assert len(mesh.faces) == 1 and mesh.bounds[1][2] == pytest.approx(2.0)  # the geometry, Z_UP as stored
+    noisy = [r for r in caplog.records if r.levelno >= 30 or r.exc_info]
+    assert not noisy, [r.getMessage() for r in noisy]  # no warning, no traceback per material
