@@ -232,3 +232,20 @@ def test_counts_take_the_right_number() -> None:
 
     assert [counted(n, "mesh", "meshes") for n in (0, 1, 2)] == ["0 meshes", "1 mesh", "2 meshes"]
     assert counted(1, "file") == "1 file" and counted(3, "file") == "3 files"
+
+
+# -- --up ------------------------------------------------------------------------------------------
+def test_scan_reads_the_mesh_with_up(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import trimesh
+
+    import zbuf_occlude.mesh.load as load
+
+    mesh = tmp_path / "box.obj"
+    trimesh.creation.box(extents=(1.0, 3.0, 0.6)).export(mesh)
+    seen = []
+    real = load.load_mesh
+    monkeypatch.setattr(load, "load_mesh", lambda path, **kw: seen.append(kw.get("up")) or real(path, **kw))
+    assert main(["scan", str(mesh), "--up", "+y", "--distance", "8", "--out", str(tmp_path / "s")]) == 0
+    assert seen == ["+y"]
+    for command in (["generate", "--out", "o"], ["farm", "root", "--out", "o"], ["scan", "box", "--out", "o"]):
+        assert build_parser().parse_args(command).up == "auto"

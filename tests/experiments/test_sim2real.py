@@ -32,7 +32,10 @@ def _mesh_root(tmp_path: Path) -> Path:
     (root / "pole").mkdir(parents=True)
     trimesh.creation.box(extents=(4.5, 1.8, 1.5)).export(root / "car" / "sedan.obj")
     # a Y-up glTF car: length along x, height along y
-    trimesh.creation.box(extents=(3.8, 1.4, 1.7)).export(root / "car" / "hatch.glb")
+    # (relabelled as Blender's: trimesh's own glTF files are read as stored, zbuf_occlude.mesh.scene)
+    glb = trimesh.creation.box(extents=(3.8, 1.4, 1.7)).export(file_type="glb")
+    trimesh_generator = b'"https://github.com/mikedh/trimesh"'
+    (root / "car" / "hatch.glb").write_bytes(glb.replace(trimesh_generator, b'"Khronos glTF Blender I/O v4.1.63"'.ljust(len(trimesh_generator))))
     trimesh.creation.cylinder(radius=0.08, height=4.0, sections=12).export(root / "pole" / "post.obj")
     lamp = trimesh.util.concatenate([trimesh.creation.cylinder(radius=0.1, height=6.0, sections=12),
                                      trimesh.creation.box(extents=(1.0, 0.2, 0.2), transform=trimesh.transformations.translation_matrix([0.4, 0, 3.0]))])  # fmt: skip
@@ -171,3 +174,68 @@ def test_an_airborne_lidar_set(tmp_path: Path) -> None:
     assert np.bincount(s.labels).tolist() == [4, 4]
     with pytest.raises(InvalidInputError, match="min-returns"):
         build_set("lidar", meshes, ["car", "pole"], 2, 32, 0, sensor=als, min_returns=10_000)
+
+
+# -- --classes, --occluded-elevation, the LiDAR pre-check ----------------------------------------
+
+
+def test_classes_real_trains_only_the_real_sets_classes(tmp_path: Path) -> None:
+    from types import SimpleNamespace
+
+    from zbuf_occlude.experiments.sim2real import _classes
+
+    root = _mesh_root(tmp_path)
+    (root / "bush").mkdir()  # a class the real scans do not have
+    scans = [SimpleNamespace(label=label) for label in ("Car", "Trunk", "Car")]
+    assert _classes("real", root, scans, {"Trunk": "pole"}) == ["car", "pole"]
+    assert _classes(None, root, scans, {}) is None  # every folder
+    assert _classes(["bush", "car"], root, scans, {}) == ["bush", "car"]
+    with pytest.raises(InvalidInputError, match="label-map"):
+        _classes("real", root, scans, {})  # Trunk matches no folder: one class left
+    with pytest.raises(InvalidInputError, match="tree"):
+        _classes(["car", "tree"], root, scans, {})
+
+
+def test_occluded_set_draws_its_elevations_in_the_range_given(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import zbuf_occlude.pipeline as pipeline
+
+    meshes = find_class_meshes(_mesh_root(tmp_path))
+    seen: list[float] = []
+    real = pipeline.occlude_object
+
+    def spy(mesh, poses, **kw):
+        seen.extend(el for el, _ in poses)
+        return real(mesh, poses, **kw)
+
+    monkeypatch.setattr(pipeline, "occlude_object", spy)
+    build_set("occluded", meshes, ["car", "pole"], 2, 32, 0, dense_points=500, resolution=64, elevation_deg=(60.0, 80.0))
+    assert seen and min(seen) >= 60.0 and max(seen) <= 80.0
+    seen.clear()
+    build_set("occluded", meshes, ["car", "pole"], 2, 32, 0, dense_points=500, resolution=64)
+    assert seen and min(seen) >= -5.0 and max(seen) <= 30.0  # the ground sensor's default
+
+
+def test_a_mesh_without_a_lidar_crop_is_skipped_before_the_work_naming_it(tmp_path: Path, monkeypatch, caplog) -> None:
+    import zbuf_occlude.experiments.sim2real_data as data
+    from zbuf_occlude.experiments.sim2real_data import check_lidar_meshes
+    from zbuf_occlude.sensors import lidar_preset
+
+    root = _mesh_root(tmp_path)
+    trimesh.creation.box(extents=(4.0, 1.8, 1.4)).export(root / "car" / "van.obj")
+    meshes = find_class_meshes(root)
+    real_lidar = data._lidar
+
+    def no_crop_for_the_van(entry, *args, **kw):
+        if entry.name == "car/van":
+            raise InvalidInputError(f"{entry.path}: no LiDAR crop with 30 returns in 6 rounds")
+        return real_lidar(entry, *args, **kw)
+
+    monkeypatch.setattr(data, "_lidar", no_crop_for_the_van)
+    kept, skipped = check_lidar_meshes(meshes, lidar_preset("hdl32e"), CLASS_SIZES_M, 32)
+    assert skipped == [str(root / "car" / "van.obj")] and len(kept) == len(meshes) - 1
+    assert any("van.obj" in r.getMessage() and r.levelname == "WARNING" for r in caplog.records)
+    # a class left with one mesh cannot be validated: refused before any set is made, naming what was skipped
+    monkeypatch.setattr(data, "_lidar", lambda entry, *a, **k: (_ for _ in ()).throw(InvalidInputError("no crop"))
+                        if entry.class_name == "pole" else real_lidar(entry, *a, **k))  # fmt: skip
+    with pytest.raises(InvalidInputError, match="post.obj"):
+        check_lidar_meshes(meshes, lidar_preset("hdl32e"), CLASS_SIZES_M, 32)

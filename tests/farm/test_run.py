@@ -837,3 +837,46 @@ def test_run_options_are_one_object_and_old_keywords_warn(tmp_path) -> None:
         )
     with pytest.raises(TypeError, match="'wrokers'"):
         run_farm(tmp_path / "none", tmp_path / "out", PARAMS, wrokers=2)
+
+
+# -- up axis ----------------------------------------------------------------------------------
+
+
+def _shapenet_tree(root: Path) -> Path:
+    """ShapeNetCore v2 layout, two y-up boxes 3 tall along +y (ShapeNetCore's up), OBJ without an exporter comment."""
+    import trimesh
+
+    for i, synset in enumerate(("02691156", "03001627")):
+        path = root / synset / f"model{i}" / "models" / "model_normalized.obj"
+        path.parent.mkdir(parents=True)
+        path.write_text(trimesh.exchange.obj.export_obj(trimesh.creation.box(extents=(1.0, 3.0, 0.6)), header=None))
+    return root
+
+
+@pytest.mark.parametrize("command", ["farm", "generate"])
+def test_shapenet_layout_is_read_y_up_and_the_card_says_so(tmp_path, command):
+    tree = _shapenet_tree(tmp_path / "shapenet")
+    common = ["--views", "0:0", "--points", "32", "--dense-points", "400", "--resolution", "64"]
+    if command == "farm":
+        common.append("--no-progress")
+    heights = {}
+    for up in ("auto", "+z"):
+        out = tmp_path / f"{command}_{up}"
+        assert cli_main([command, str(tree), "--out", str(out), "--up", up, *common]) == 0
+        card = json.loads((out / CARD_FILE).read_text())
+        assert card["layout"] == "shapenetcore-v2" and card["up"] == up
+        why = "ShapeNetCore layout (+Y up)" if up == "auto" else "explicit"
+        assert card["up_axes"] == {f"{'+y' if up == 'auto' else '+z'} ({why})": 2}
+        assert all(rec["up"] == ("+y" if up == "auto" else "+z") for rec in _manifest(out))
+        ds = OccludedDataset(out)
+        pts = np.concatenate([ds[i][0] for i in range(len(ds))])
+        heights[up] = np.ptp(pts, axis=0)
+    assert heights["auto"][2] > 2 * heights["auto"][0]  # tall along z: +y turned up
+    assert heights["+z"][1] > 2 * heights["+z"][2]  # told +z: as stored, tall along y
+
+
+def test_up_reaches_the_params_and_is_checked():
+    assert "up" not in FarmParams().to_dict()  # "auto": the digest of earlier data sets
+    assert FarmParams(up="+y").to_dict()["up"] == "+y" and FarmParams(up="+y").digest() != FarmParams().digest()
+    with pytest.raises(InvalidInputError, match="--up"):
+        FarmParams(up="y")

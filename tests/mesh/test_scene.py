@@ -12,7 +12,7 @@ import trimesh
 
 from zbuf_occlude.errors import InvalidInputError, MeshLoadError
 from zbuf_occlude.mesh.load import METADATA_KEY, load_mesh
-from zbuf_occlude.mesh.scene import collada_asset, up_rotation
+from zbuf_occlude.mesh.scene import collada_asset, gltf_generator, up_rotation
 
 #: The street-object meshes (research-only, next to the repository; skipped when absent).
 STREET_OBJECTS = Path(os.environ.get("ZBUF_OCCLUDE_SHARED_DATA", Path(__file__).resolve().parents[3] / "shared" / "data")) / "street_objects"
@@ -24,6 +24,24 @@ def _y_up_tall_box() -> trimesh.Trimesh:
     return trimesh.creation.box(extents=(1.0, 3.0, 0.5))
 
 
+#: What trimesh writes as ``asset.generator`` and what Blender's exporter writes, padded to the
+#: same length (JSON whitespace) so that a GLB's chunk lengths stay right.
+TRIMESH_GENERATOR = b'"https://github.com/mikedh/trimesh"'
+BLENDER_GENERATOR = b'"Khronos glTF Blender I/O v4.1.63"'.ljust(len(TRIMESH_GENERATOR))
+
+
+def as_blender_writes(data: bytes) -> bytes:
+    """glTF or GLB bytes written by trimesh, relabelled as Blender's exporter's, which follows
+    the specification (+y up); the vertices are untouched."""
+    assert TRIMESH_GENERATOR in data
+    return data.replace(TRIMESH_GENERATOR, BLENDER_GENERATOR)
+
+
+def _export_y_up_glb(mesh: trimesh.Trimesh, path: Path) -> Path:
+    path.write_bytes(as_blender_writes(mesh.export(file_type="glb")))
+    return path
+
+
 def _tall_with_z_up(mesh: trimesh.Trimesh) -> None:
     ext = mesh.extents
     assert ext[2] == pytest.approx(1.0)  # normalised: the height is the largest side
@@ -31,8 +49,7 @@ def _tall_with_z_up(mesh: trimesh.Trimesh) -> None:
 
 
 def test_y_up_glb_box_arrives_tall_with_z_up(tmp_path: Path) -> None:
-    path = tmp_path / "tall.glb"
-    _y_up_tall_box().export(path)
+    path = _export_y_up_glb(_y_up_tall_box(), tmp_path / "tall.glb")
     mesh = load_mesh(path)
     _tall_with_z_up(mesh)
     meta = mesh.metadata[METADATA_KEY]
@@ -45,6 +62,45 @@ def test_y_up_glb_box_arrives_tall_with_z_up(tmp_path: Path) -> None:
     assert load_mesh(path, up="+z").extents[1] == pytest.approx(1.0)  # as stored: tall along y
 
 
+@pytest.mark.parametrize("file_type", ["glb", "gltf"])
+def test_z_up_box_written_by_trimesh_comes_back_standing(tmp_path: Path, file_type: str) -> None:
+    # trimesh writes the vertices unconverted and says so in asset.generator: read as stored
+    tall = trimesh.creation.box(extents=(1.0, 0.5, 3.0))  # tall along z
+    path = tmp_path / f"z_up.{file_type}"
+    tall.export(path)
+    mesh = load_mesh(path)
+    _tall_with_z_up(mesh)
+    assert mesh.metadata[METADATA_KEY]["up"] == "+z" and "trimesh" in mesh.metadata[METADATA_KEY]["up_source"]
+    _tall_with_z_up(load_mesh(path, up="+z"))
+
+
+def test_gltf_generator_is_read_from_the_head_only() -> None:
+    assert gltf_generator(b'{"asset":{"generator" : "Khronos glTF Blender I/O v1.6.16","version":"2.0"}}') == (
+        "Khronos glTF Blender I/O v1.6.16"
+    )
+    assert gltf_generator(b'{"asset":{"version":"2.0"}}') is None
+    assert gltf_generator(b" " * (1 << 16) + b'"generator":"trimesh"') is None  # beyond the head: the spec's rule
+
+
+@pytest.mark.parametrize("rel", ["02691156/1a2b3c/models/model_normalized.obj", "03001627/4d5e6f/model.obj"])
+def test_shapenet_layout_y_up_box_arrives_tall_along_z(tmp_path: Path, rel: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    path = tmp_path / rel
+    path.parent.mkdir(parents=True)
+    path.write_text(trimesh.exchange.obj.export_obj(_y_up_tall_box(), header=None))  # no exporter comment
+    mesh = load_mesh(path)
+    _tall_with_z_up(mesh)
+    assert mesh.metadata[METADATA_KEY]["up"] == "+y" and "ShapeNetCore" in mesh.metadata[METADATA_KEY]["up_source"]
+    assert load_mesh(path, up="+z").extents[1] == pytest.approx(1.0)  # told otherwise: as stored
+    depth = 3 if "models" in rel else 2  # folders below the synset
+    monkeypatch.chdir(path.parents[depth - 1])  # inside the synset folder: the path given names no synset
+    _tall_with_z_up(load_mesh(Path(*path.parts[-depth:])))
+    # the same file outside a ShapeNetCore layout (no 8-digit synset folder) is read as stored
+    other = tmp_path / "chairs" / "abc" / "model.obj"
+    other.parent.mkdir(parents=True)
+    other.write_bytes(path.read_bytes())
+    assert load_mesh(other).metadata[METADATA_KEY]["up"] == "+z"
+
+
 def test_gltf_embedded_and_external_buffers(tmp_path: Path) -> None:
     scene = trimesh.Scene()
     scene.add_geometry(_y_up_tall_box())
@@ -55,7 +111,7 @@ def test_gltf_embedded_and_external_buffers(tmp_path: Path) -> None:
     for folder, embed in ((embedded, True), (external, False)):
         folder.mkdir()
         for name, data in trimesh.exchange.gltf.export_gltf(scene, embed_buffers=embed).items():
-            (folder / name).write_bytes(data)
+            (folder / name).write_bytes(as_blender_writes(data) if name.endswith(".gltf") else data)
     assert len(list(external.glob("*.bin"))) >= 1 and not list(embedded.glob("*.bin"))
     for folder in (embedded, external):
         raw = load_mesh(folder / "model.gltf", normalize=False)
@@ -128,8 +184,7 @@ def test_up_rotation_is_proper_and_sends_the_axis_to_z(axis: str) -> None:
 
 
 def test_bad_up_axis_is_refused(tmp_path: Path) -> None:
-    path = tmp_path / "box.glb"
-    _y_up_tall_box().export(path)
+    path = _export_y_up_glb(_y_up_tall_box(), tmp_path / "box.glb")
     with pytest.raises(InvalidInputError, match="'up'|up axis"):
         load_mesh(path, up="y")
 
@@ -161,3 +216,41 @@ def test_every_street_object_loads_and_cars_are_longer_than_tall() -> None:
             assert max(ext[0], ext[1]) > 1.5 * ext[2], (path, ext)  # longer than tall
         if path.parent.name in ("pole", "pedestrian") or path.parent.parent.name == "pedestrian":
             assert ext[2] >= max(ext[0], ext[1]) - 0.02, (path, ext)  # taller than wide (T-poses: ≈)
+
+
+#: A COLLADA triangle whose material names a texture that is not there (as Gazebo models do).
+COLLADA_WITH_MISSING_TEXTURE = """<?xml version="1.0"?>
+<COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" version="1.4.1">
+<asset><up_axis>Z_UP</up_axis></asset>
+<library_images><image id="img"><init_from>../materials/textures/missing.png</init_from></image></library_images>
+<library_effects><effect id="eff"><profile_COMMON>
+ <newparam sid="surf"><surface type="2D"><init_from>img</init_from></surface></newparam>
+ <newparam sid="samp"><sampler2D><source>surf</source></sampler2D></newparam>
+ <technique sid="common"><lambert><emission><texture texture="samp" texcoord="UV"/></emission>
+  <diffuse><texture texture="samp" texcoord="UV"/></diffuse></lambert></technique>
+</profile_COMMON></effect></library_effects>
+<library_materials><material id="mat"><instance_effect url="#eff"/></material></library_materials>
+<library_geometries><geometry id="g"><mesh>
+ <source id="pos"><float_array id="pa" count="9">0 0 0 1 0 0 0 1 2</float_array><technique_common>
+  <accessor source="#pa" count="3" stride="3"><param name="X" type="float"/><param name="Y" type="float"/>
+  <param name="Z" type="float"/></accessor></technique_common></source>
+ <vertices id="v"><input semantic="POSITION" source="#pos"/></vertices>
+ <triangles count="1" material="m"><input semantic="VERTEX" source="#v" offset="0"/><p>0 1 2</p></triangles>
+</mesh></geometry></library_geometries>
+<library_visual_scenes><visual_scene id="s"><node id="n"><instance_geometry url="#g"><bind_material><technique_common>
+ <instance_material symbol="m" target="#mat"/></technique_common></bind_material></instance_geometry></node></visual_scene>
+</library_visual_scenes>
+<scene><instance_visual_scene url="#s"/></scene>
+</COLLADA>
+"""
+
+
+@needs_collada
+def test_collada_textures_are_not_loaded_and_log_nothing(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    path = tmp_path / "sign.dae"
+    path.write_text(COLLADA_WITH_MISSING_TEXTURE)
+    with caplog.at_level("DEBUG"):
+        mesh = load_mesh(path, normalize=False)
+    assert len(mesh.faces) == 1 and mesh.bounds[1][2] == pytest.approx(2.0)  # the geometry, Z_UP as stored
+    noisy = [r for r in caplog.records if r.levelno >= 30 or r.exc_info]
+    assert not noisy, [r.getMessage() for r in noisy]  # no warning, no traceback per material

@@ -26,12 +26,18 @@ from zbuf_occlude.farm.config import DEFAULT_SENSOR_DISTANCE_M, DEFAULT_SENSOR_H
 from zbuf_occlude.farm.shards import parse_shard
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
 from zbuf_occlude.mesh.discovery import SPLITS
+from zbuf_occlude.mesh.scene import UP_CHOICES
 
 log = logging.getLogger(__name__)
 
 #: Help shared by ``generate``, ``validate`` and ``farm`` (:mod:`zbuf_occlude.cli.main` imports them).
 VIEWS_HELP = "poses: grid25 (5x5 grid) | paper100 (the paper's 100) | fibonacci:N | EL:AZ,EL:AZ,... in degrees"
 RADIUS_HELP = "camera distance from the object's centre, object units (the normalised object's largest extent is 1)"
+UP_HELP = (
+    "the meshes' up axis, turned to +z; auto: per file, +y for ShapeNetCore paths (SYNSET/MODEL_ID/...), "
+    "+y for glTF (as stored when trimesh wrote it), COLLADA's <up_axis>, OBJ by its exporter, else as stored; "
+    "the axis used goes into each record and the card (default: %(default)s)"
+)
 CLASS_FROM_HELP = (
     "N: take each mesh's class from the N-th folder above it (1: the folder holding it) instead of the detected "
     "layout's; needed where the layout's classes look wrong (all one class, or folders such as 'models')"
@@ -53,6 +59,7 @@ def _farm_command(args: argparse.Namespace) -> int:
         radius=args.radius,
         storage=args.storage,
         method=args.method,
+        up=args.up,
         **_sensor_params(args),
     )
     from zbuf_occlude.farm.config import RunOptions
@@ -129,6 +136,7 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
     sel.add_argument("--per-class", type=int, help="first K meshes (by name) of each class and split (default: all)")
     sel.add_argument("--splits", default=",".join(SPLITS), help="comma-separated splits (default: %(default)s)")
     sel.add_argument("--class-from", type=int, metavar="N", help=CLASS_FROM_HELP)
+    sel.add_argument("--up", choices=UP_CHOICES, default="auto", help=UP_HELP)
     r = p.add_argument_group("rendering")
     r.add_argument("--views", default=DEFAULT_FARM_VIEWS, help=f"{VIEWS_HELP} (default: %(default)s; generate's: {GENERATE_VIEWS})")
     r.add_argument(

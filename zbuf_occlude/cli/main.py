@@ -78,6 +78,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
     params = FarmParams(
         views=args.views, samples_per_view=args.samples_per_view, n_points=args.points, dense_points=args.dense_points,
         resolution=args.resolution, seed=args.seed, radius=args.radius, storage=args.format, method=args.method,
+        up=args.up,
     )  # fmt: skip
     check_out_option(args.out)  # before Path("") becomes the working folder
     paths = _default_paths(args.paths)
@@ -210,7 +211,8 @@ def _add_paths(p: argparse.ArgumentParser) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``zbuf-occlude`` argument parser with every subcommand."""
-    from zbuf_occlude.cli.farm import CLASS_FROM_HELP, RADIUS_HELP, VIEWS_HELP
+    from zbuf_occlude.cli.farm import CLASS_FROM_HELP, RADIUS_HELP, UP_HELP, VIEWS_HELP
+    from zbuf_occlude.mesh.scene import UP_CHOICES
     from zbuf_occlude.defaults import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION
     from zbuf_occlude.defaults import DEFAULT_FARM_VIEWS as FARM_VIEWS
     from zbuf_occlude.farm.config import GENERATE_DEFAULTS as gd  # generate's defaults, taken from zbuf_occlude.defaults
@@ -243,6 +245,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--format", choices=FORMATS, help=f"npz or ply: one file per sample; h5: PointNet's layout (default: {gd.storage})")
     g.add_argument("--method", help=f"visibility method (see `zbuf-occlude info`) (default: {gd.method})")
     g.add_argument("--class-from", type=int, metavar="N", help=CLASS_FROM_HELP)
+    g.add_argument("--up", choices=UP_CHOICES, default="auto", help=UP_HELP)
     g.add_argument("--overwrite", action="store_true", help="start over (needed to change options in an existing --out)")
     from zbuf_occlude.cli.protocols import add_protocol_arguments
 

@@ -106,7 +106,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
         if mesh is None:
             from zbuf_occlude.mesh.load import load_mesh
 
-            mesh = load_mesh(src)  # once, not per sample
+            mesh = load_mesh(src, up=args.up)  # once, not per sample
         dist = CropDistributions(
             distance_m=parse_interval(args.distance, "--distance"), height_m=parse_interval(args.height, "--height"),
             azimuth_deg=parse_interval(args.azimuth, "--azimuth"), yaw_deg=parse_interval(args.yaw, "--yaw"),
@@ -130,6 +130,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
 
 def add_scan_parser(sub) -> argparse.ArgumentParser:
     """Add ``scan`` to the subparsers ``sub``."""
+    from zbuf_occlude.mesh.scene import UP_CHOICES
+
     p = sub.add_parser(
         "scan", help="LiDAR / depth-camera scan of a mesh on the ground, or of a scene file",
         description="Stand a mesh on a ground plane at --distance from a simulated LiDAR and scan it (or scan a "
@@ -169,6 +171,8 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         help="ray casting: embree (exact, CPU) or zbuffer (OpenGL depth images) (default: %(default)s)",
     )  # fmt: skip
     p.add_argument("--seed", type=int, default=0, help="seed of the placement draws and the sensor noise (default: %(default)s)")
+    p.add_argument("--up", choices=UP_CHOICES, default="auto", help="a mesh file's up axis, turned to +z; auto: by its path and format, as in generate and farm "
+                   "(ShapeNetCore paths and glTF +y, ...) (default: %(default)s)")
     p.add_argument("--out", required=True, help="output folder")
     p.set_defaults(func=cmd_scan)
     return p

@@ -43,6 +43,7 @@ def _run(args: argparse.Namespace) -> int:
     from zbuf_occlude.learn import require_torch
 
     require_torch()
+    from zbuf_occlude.cli.sensors import parse_interval
     from zbuf_occlude.experiments.sim2real import run_sim2real
     from zbuf_occlude.mesh.scene import UP_CHOICES
     from zbuf_occlude.mesh.sizes import parse_sizes
@@ -57,9 +58,19 @@ def _run(args: argparse.Namespace) -> int:
         epochs=args.epochs, per_class=args.per_class, seeds=args.seeds, keep_scale=args.keep_scale,
         label_map=parse_pairs(args.label_map, "--label-map"), up=args.up, up_map=up_map,
         sizes=parse_sizes(args.sizes), real_options=real_options, min_returns=args.min_returns, method=args.method, device=args.device,
-        threads=args.threads, progress=not args.no_progress,
+        threads=args.threads, progress=not args.no_progress, classes=_classes_option(args.classes),
+        occluded_elevation_deg=parse_interval(args.occluded_elevation, "--occluded-elevation"),
     )  # fmt: skip
     return print_table(args.out, summary)
+
+
+def _classes_option(text: str | None) -> str | list[str] | None:
+    if text is None or text.strip() == "real":
+        return None if text is None else "real"
+    names = [c.strip() for c in text.split(",") if c.strip()]
+    if len(names) < 2:
+        raise InvalidInputError(f"--classes needs 'real' or two or more class folders, got {text!r}")
+    return names
 
 
 def print_table(out: str, summary: dict[str, Any]) -> int:
@@ -73,7 +84,7 @@ def print_table(out: str, summary: dict[str, Any]) -> int:
 
 def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     """Add ``sim2real`` to ``experiment``'s argparse subparsers."""
-    from zbuf_occlude.experiments.sim2real_data import MIN_RETURNS
+    from zbuf_occlude.experiments.sim2real_data import GROUND_ELEVATION_DEG, MIN_RETURNS
     from zbuf_occlude.mesh.scene import UP_CHOICES
 
     p = sub.add_parser(
@@ -96,6 +107,11 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--seeds", type=_positive, default=5, help="repetitions, each redrawing clouds and initialisation (default %(default)s)")
     p.add_argument("--keep-scale", action="store_true", help="keep metres instead of normalising every cloud to max extent 1")
     p.add_argument("--label-map", help="real label to class folder, REAL=CLASS,... (e.g. Trunk=pole)")
+    p.add_argument("--classes", help="class folders to train on: 'real' (those the real scans have, after --label-map) "
+                   "or CLASS,CLASS,... (default: every class folder of ROOT)")
+    p.add_argument("--occluded-elevation", metavar="LO:HI", default=f"{GROUND_ELEVATION_DEG[0]:g}:{GROUND_ELEVATION_DEG[1]:g}",
+                   help="camera elevations of the occluded set, degrees, drawn uniformly (an airborne sensor sees from "
+                   "above: e.g. 30:80; a negative LO needs =, as in --occluded-elevation=-5:30) (default: %(default)s)")
     p.add_argument("--up", choices=UP_CHOICES, default="auto", help="up axis of the mesh files; auto: each format's convention (default: %(default)s)")
     p.add_argument("--up-map", help="per-file up axis, GLOB=AXIS,... (globs of paths relative to ROOT)")
     p.add_argument("--sizes", help="real sizes per class, CLASS=length|height|max:LO-HI,... metres (over the defaults)")

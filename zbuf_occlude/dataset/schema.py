@@ -134,6 +134,9 @@ class ObjectRecord(_Model):
     n_padded_poses: NonNegativeInt | None = None
     n_dense: NonNegativeInt | None = None
     n_faces: NonNegativeInt | None = None
+    #: The up axis the mesh was read with (``+x`` … ``-z``) and why (the file, the layout, or the option).
+    up: str | None = None
+    up_source: str | None = None
     #: Wall seconds, when it finished (ISO 8601, UTC), the OpenGL renderer, the host, the process.
     time_s: float | None = None
     finished_at: str | None = None

@@ -39,10 +39,11 @@ from zbuf_occlude.experiments.sim2real_data import (
     MIN_RETURNS,
     TRAINING_SETS,
     build_sets,
+    check_lidar_meshes,
     find_class_meshes,
     real_clouds,
     split_whole_meshes,
-)  # fmt: skip
+)  # fmt: skip  # fmt: skip
 from zbuf_occlude.io.atomic import write_csv, write_text
 from zbuf_occlude.learn.data import CloudSet, split_validation
 from zbuf_occlude.learn.metrics import classification_report
@@ -163,6 +164,8 @@ def run_sim2real(
     device: str = "cpu",
     threads: int | None = None,
     progress: bool = True,
+    classes: str | list[str] | None = None,
+    occluded_elevation_deg: tuple[float, float] = GROUND_ELEVATION_DEG,
 ) -> dict:
     """Train on each synthetic training set and on real scans, ``seeds`` times; score on the real scans.
 
@@ -196,6 +199,16 @@ def run_sim2real(
         Real sizes per class (default :data:`zbuf_occlude.mesh.sizes.CLASS_SIZES_M`).
     min_returns : int
         LiDAR crops with fewer returns are redrawn (:data:`~zbuf_occlude.experiments.sim2real_data.MIN_RETURNS`).
+        Before any set is made, every mesh is tried once with the sensor; one that gives no
+        such crop is skipped with a warning naming it (``settings.json``: ``meshes_skipped``).
+    classes : "real", list of str, or None
+        Class folders to train on: ``"real"``, those the real scans have (after
+        ``label_map``; a real scan can then only be called a class it can be); a list, those;
+        None, every class folder of ``mesh_root``.
+    occluded_elevation_deg : (lo, hi)
+        Camera elevations of the ``occluded`` set, degrees in [-90, 90], drawn uniformly
+        (default :data:`~zbuf_occlude.experiments.sim2real_data.GROUND_ELEVATION_DEG`; an
+        airborne sensor sees from above, e.g. ``(30, 80)``).
 
     Returns
     -------
@@ -223,9 +236,12 @@ def run_sim2real(
     sizes = dict(sizes or CLASS_SIZES_M)
     lidar = _sensor(sensor)
     out = Path(out)
-    meshes = find_class_meshes(mesh_root, up=up, up_map=up_map)
+    elevation = _elevation_range(occluded_elevation_deg)
+    scans = load_real_scans(real, **(real_options or {}))  # first: cheap, and --classes real needs them
+    wanted = _classes(classes, mesh_root, scans, dict(label_map or {}))
+    meshes = find_class_meshes(mesh_root, up=up, up_map=up_map, classes=wanted)
+    meshes, skipped = check_lidar_meshes(meshes, lidar, sizes, n_points, min_returns=int(min_returns))
     names = sorted({m.class_name for m in meshes})
-    scans = load_real_scans(real, **(real_options or {}))
     real_pts, real_y, _ = real_clouds(scans, names, dict(label_map or {}), n_points, 0, keep_scale=keep_scale)
 
     def config(seed: int) -> TrainConfig:
@@ -236,13 +252,15 @@ def run_sim2real(
         "mesh_root": str(mesh_root), "real": str(real), "model": model, "sensor": lidar.name, "scale": scale,
         "scale_values": asdict(sc), "points": n_points, "seeds": int(seeds), "keep_scale": bool(keep_scale),
         "label_map": dict(label_map or {}), "up": up, "up_map": dict(up_map or {}), "classes": names,
-        "sizes_m": {k: asdict(v) for k, v in sizes.items()}, "occluded_elevation_deg": GROUND_ELEVATION_DEG,
+        "sizes_m": {k: asdict(v) for k, v in sizes.items()}, "occluded_elevation_deg": list(elevation),
         "lidar_placement": LIDAR_PLACEMENT, "lidar_min_returns": int(min_returns), "keep_scale_unit_m": KEEP_SCALE_UNIT_M,
         "method": method, "train_config": {k: v for k, v in config(0).to_dict().items() if k not in ("seed", "device", "threads")},
         "meshes": {c: sum(m.class_name == c for m in meshes) for c in names},
         "mesh_up": {m.name: m.mesh.metadata["zbuf_occlude"].get("up_source") for m in meshes},
         "real_scans": {c: int((real_y == i).sum()) for i, c in enumerate(names)},
     }  # fmt: skip
+    if skipped:  # only then: the settings of runs without a skipped mesh stay as they were (resume)
+        settings["meshes_skipped"] = skipped
     out.mkdir(parents=True, exist_ok=True)
     settings_path = out / "settings.json"
     if settings_path.is_file():
@@ -258,7 +276,7 @@ def run_sim2real(
     done = _load_runs(runs_path)
     half_a, half_b = _stratified_half(real_y)
     common = dict(sensor=lidar, sizes=sizes, keep_scale=keep_scale, dense_points=sc.dense_points, min_returns=int(min_returns),
-                  resolution=sc.resolution, method=method)  # fmt: skip
+                  resolution=sc.resolution, method=method, elevation_deg=elevation)  # fmt: skip
     for seed in range(int(seeds)):
         train_meshes, val_meshes = split_whole_meshes(meshes, sc.val_mesh_fraction, seed)
         sets: dict = {}
@@ -307,6 +325,37 @@ def run_sim2real(
     write_text(out / "run.json", json.dumps(summary, indent=1, default=float))
     write_text(out / "table.md", table_md(summary_rows, settings))
     return summary
+
+
+def _elevation_range(value) -> tuple[float, float]:
+    try:
+        lo, hi = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"--occluded-elevation must be LO:HI degrees, got {value!r}") from None
+    if not (-90.0 <= lo <= hi <= 90.0):
+        raise InvalidInputError(f"--occluded-elevation must be LO:HI with -90 <= LO <= HI <= 90 degrees, got {lo:g}:{hi:g}")
+    return lo, hi
+
+
+def _classes(classes, mesh_root, scans, label_map: dict[str, str]) -> list[str] | None:
+    """The class folders to train on (``run_sim2real``'s ``classes``), None for all."""
+    if classes is None:
+        return None
+    folders = sorted(d.name for d in Path(mesh_root).iterdir() if d.is_dir() and not d.name.startswith("."))
+    if classes == "real":
+        labels = {label_map.get(s.label, s.label) for s in scans}
+        wanted = [c for c in folders if c in labels or c in {x.lower() for x in labels}]
+        if len(wanted) < 2:
+            raise InvalidInputError(
+                f"--classes real: the real scans' labels {sorted(labels)} match {wanted or 'no'} class folders of "
+                f"{mesh_root} ({folders}); two are needed: use --label-map REAL=CLASS"
+            )
+        return wanted
+    wanted = list(classes)
+    unknown = sorted(set(wanted) - set(folders))
+    if unknown:
+        raise InvalidInputError(f"--classes: no class folder {unknown} in {mesh_root} (it has {folders})")
+    return wanted
 
 
 def summarise(runs: list[dict], names: list[str]) -> list[dict]:

@@ -7,7 +7,8 @@ Everything a training set holds is made from meshes only:
 ``occluded``
     The points of a dense surface sample visible from one camera pose (z-buffer HSR,
     :func:`zbuf_occlude.occlude_object`), poses like a ground sensor's: elevation drawn
-    uniformly in :data:`GROUND_ELEVATION_DEG`, azimuth in [0, 360).
+    uniformly in :data:`GROUND_ELEVATION_DEG` (or the range given: an airborne sensor sees from
+    above), azimuth in [0, 360).
 ``lidar``
     Object crops of a simulated spinning LiDAR (:func:`zbuf_occlude.sensors.crops.lidar_object_samples`):
     the object on a ground plane, scaled to a real size drawn from its class's range
@@ -42,7 +43,7 @@ if TYPE_CHECKING:  # trimesh is imported where it is used
 
 __all__ = [
     "TRAINING_SETS", "GROUND_ELEVATION_DEG", "LIDAR_PLACEMENT", "MIN_RETURNS", "KEEP_SCALE_UNIT_M",
-    "MeshEntry", "find_class_meshes", "split_whole_meshes", "allocate", "build_set", "build_sets", "mix_sets",
+    "MeshEntry", "find_class_meshes", "check_lidar_meshes", "split_whole_meshes", "allocate", "build_set", "build_sets", "mix_sets",
     "real_clouds",
 ]  # fmt: skip
 
@@ -123,15 +124,49 @@ def find_class_meshes(root: str | os.PathLike, *, up: str = "auto", up_map: dict
             continue
         mesh = load_mesh(f, up=_up_for(rel, up, up_map or {}))
         out.append(MeshEntry(f, cls, rel.rsplit(".", 1)[0], mesh))
-    by_class = {}
-    for m in out:
+    _check_classes(out, str(root))
+    return out
+
+
+def _check_classes(meshes: list[MeshEntry], where: str) -> None:
+    by_class: dict[str, list[MeshEntry]] = {}
+    for m in meshes:
         by_class.setdefault(m.class_name, []).append(m)
     if len(by_class) < 2:
-        raise InvalidInputError(f"{root}: need meshes of two or more classes in CLASS/ folders, found {sorted(by_class)}")
+        raise InvalidInputError(f"{where}: need meshes of two or more classes in CLASS/ folders, found {sorted(by_class)}")
     single = [c for c, ms in by_class.items() if len(ms) < 2]
     if single:
-        raise InvalidInputError(f"{root}: classes {single} have one mesh; a held-out mesh is needed for validation")
-    return out
+        raise InvalidInputError(f"{where}: classes {single} have one mesh; a held-out mesh is needed for validation")
+
+
+def check_lidar_meshes(meshes: list[MeshEntry], sensor, sizes: dict[str, SizeRange], n_points: int, *,
+                       min_returns: int = MIN_RETURNS) -> tuple[list[MeshEntry], list[str]]:  # fmt: skip
+    """The meshes that give a LiDAR crop with ``min_returns`` returns, and the paths of those that do not.
+
+    Run before any training set is made, so that a mesh the sensor cannot see (too small for
+    its class's size, a sliver) is skipped, with a warning naming its file, instead of aborting
+    the run minutes later.  One draw per mesh (:func:`_lidar` with ``k=1``, seed 0).
+
+    Raises
+    ------
+    InvalidInputError
+        A class without a size range, or fewer than two classes of two meshes left.
+    """
+    missing = sorted({m.class_name for m in meshes} - set(sizes))
+    if missing:
+        raise InvalidInputError(f"no real size for classes {missing}; give them with --sizes CLASS=height:LO-HI")
+    kept, skipped = [], []
+    for entry in meshes:
+        try:
+            _lidar(entry, 1, n_points, 0, sensor, sizes[entry.class_name], min_returns)
+        except InvalidInputError as exc:
+            log.warning("skipping mesh %s: %s", entry.path, exc)
+            skipped.append(str(entry.path))
+            continue
+        kept.append(entry)
+    if skipped:
+        _check_classes(kept, f"after skipping {len(skipped)} meshes without a LiDAR crop ({', '.join(skipped)})")
+    return kept, skipped
 
 
 def split_whole_meshes(meshes: list[MeshEntry], fraction: float, seed: int) -> tuple[list[MeshEntry], list[MeshEntry]]:
@@ -167,12 +202,12 @@ def _complete(entry: MeshEntry, k: int, n_points: int, rng: np.random.Generator)
 
 
 def _occluded(entry: MeshEntry, k: int, n_points: int, seed: int, rng: np.random.Generator, *, dense_points: int,
-              resolution: int, method: str) -> list[NDArray]:  # fmt: skip
+              resolution: int, method: str, elevation_deg: tuple[float, float] = GROUND_ELEVATION_DEG) -> list[NDArray]:  # fmt: skip
     from zbuf_occlude.geometry.samples import object_key
     from zbuf_occlude.pipeline import dense_cloud, occlude_object
 
     key = object_key(entry.name)
-    poses = list(zip(rng.uniform(*GROUND_ELEVATION_DEG, 2 * k + 2), rng.uniform(0.0, 360.0, 2 * k + 2)))
+    poses = list(zip(rng.uniform(*elevation_deg, 2 * k + 2), rng.uniform(0.0, 360.0, 2 * k + 2)))
     dense = dense_cloud(entry.mesh, key, seed=seed, count=dense_points)
     out = []
     for _, _, clouds in occlude_object(entry.mesh, poses, key=key, n_points=n_points, samples_per_view=1, seed=seed,
@@ -229,14 +264,15 @@ def _finish(clouds: list[NDArray], sizes_m: NDArray[np.float64], keep_scale: boo
 def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: int, n_points: int, seed: int, *,
               sensor=None, sizes: dict[str, SizeRange] = CLASS_SIZES_M, keep_scale: bool = False,
               dense_points: int = 8192, resolution: int = 512, method: str = "auto",
-              min_returns: int = MIN_RETURNS) -> CloudSet:  # fmt: skip
+              min_returns: int = MIN_RETURNS, elevation_deg: tuple[float, float] = GROUND_ELEVATION_DEG) -> CloudSet:  # fmt: skip
     """``per_class`` clouds of every class in ``names`` from ``meshes``, of one training set kind.
 
     Cloud counts are spread over each class's meshes (:func:`allocate`); ``lidar+complete``
     is :func:`mix_sets` of the ``lidar`` and ``complete`` sets of the same seed.
     ``object_index`` is the mesh's row in ``meshes``; ``elevation_deg`` is NaN.  A LiDAR crop
     with fewer than ``min_returns`` returns is redrawn (:data:`MIN_RETURNS`; an airborne
-    scanner at a few points per m² needs a much lower value for small objects).
+    scanner at a few points per m² needs a much lower value for small objects).  The
+    ``occluded`` set's camera elevations are drawn uniformly in ``elevation_deg`` (degrees).
 
     Raises
     ------
@@ -263,7 +299,8 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
             if kind == "complete":
                 got = _complete(entry, int(k), n_points, rng)
             elif kind == "occluded":
-                got = _occluded(entry, int(k), n_points, seed, rng, dense_points=dense_points, resolution=resolution, method=method)
+                got = _occluded(entry, int(k), n_points, seed, rng, dense_points=dense_points, resolution=resolution, method=method,
+                                elevation_deg=elevation_deg)  # fmt: skip
             else:
                 got, size_k = _lidar(entry, int(k), n_points, seed, sensor, sizes[cls], min_returns)
             if kind == "lidar":

@@ -32,6 +32,7 @@ from zbuf_occlude.errors import BackendUnavailable, InvalidInputError, OutputErr
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, view_schedule
 from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.mesh.discovery import SPLITS
+from zbuf_occlude.mesh.scene import UP_CHOICES
 
 if TYPE_CHECKING:  # annotations only: inputs imports nothing from here
     from zbuf_occlude.mesh.inputs import FarmObject
@@ -58,7 +59,7 @@ OPTION_NAMES = {
     "dense_points": "--dense-points", "density": "--density", "resolution": "--resolution", "seed": "--seed",
     "radius": "--radius", "storage": "--storage/--format", "method": "--method", "sensor": "--sensor",
     "sensor_distance_m": "--sensor-distance", "sensor_height_m": "--sensor-height", "sensor_size_m": "--sensor-size",
-    "sensor_reflectivity": "--sensor-reflectivity", "sensor_footprint": "--sensor-footprint",
+    "sensor_reflectivity": "--sensor-reflectivity", "sensor_footprint": "--sensor-footprint", "up": "--up",
 }  # fmt: skip
 
 #: ``farm --sensor``: per-scan placement drawn uniformly from these intervals (metres).
@@ -113,6 +114,12 @@ class FarmParams:
         radiometric detection threshold then applies (:func:`zbuf_occlude.sensors.scan`).
     sensor_footprint : bool
         Return physics: 7 rays per firing in the beam's divergence cone, strongest echo.
+    up : str
+        The meshes' up axis (:data:`zbuf_occlude.mesh.scene.UP_CHOICES`), turned to +z by
+        :func:`~zbuf_occlude.mesh.load.load_mesh`; ``"auto"``: per file, by its layout and
+        format (ShapeNetCore +y, glTF +y, ...; :mod:`zbuf_occlude.mesh.scene`).  Each
+        record and the card say the axis used and why.  Left out of :meth:`to_dict` and
+        :meth:`digest` when ``"auto"``, so earlier data sets keep their digest.
     """
 
     views: str = DEFAULT_FARM_VIEWS
@@ -131,6 +138,7 @@ class FarmParams:
     sensor_size_m: tuple[float, float] = DEFAULT_SENSOR_SIZE_M
     sensor_reflectivity: tuple[float, float] | None = None
     sensor_footprint: bool = False
+    up: str = "auto"
 
     def __post_init__(self) -> None:
         # messages name the command-line options (OPTION_NAMES), not the fields
@@ -153,6 +161,8 @@ class FarmParams:
         elif self.dense_points is None or self.dense_points < 1:
             raise InvalidInputError(f"--dense-points must be >= 1, got {self.dense_points}")
         view_schedule(self.views)  # raises InvalidInputError on a bad spec
+        if self.up not in UP_CHOICES:
+            raise InvalidInputError(f"--up must be one of {', '.join(UP_CHOICES)}, got {self.up!r}")
         if self.sensor is not None:
             self._check_sensor()
 
@@ -213,6 +223,8 @@ class FarmParams:
 
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
+        if self.up == "auto":  # the digest of data sets made before --up existed
+            del d["up"]
         if self.sensor is None:  # the z-buffer farm's parameters, and digest, as before --sensor existed
             for field in ("sensor", *_SENSOR_FIELDS, "sensor_reflectivity", "sensor_footprint"):
                 del d[field]

@@ -206,6 +206,16 @@ def padded_samples(records: Sequence[dict[str, Any]], params: FarmParams) -> int
     return sum(count_padded(r["n_visible"], params.n_points, per_pose) for r in records if r["status"] == "ok")
 
 
+def up_axes(records: Sequence[dict[str, Any]]) -> dict[str, int]:
+    """``{"+y (ShapeNetCore layout (+Y up))": n, ...}`` over ``records`` that say their up axis."""
+    counts: dict[str, int] = {}
+    for r in records:
+        if r.get("up"):
+            key = f"{r['up']} ({r.get('up_source', '?')})"
+            counts[key] = counts.get(key, 0) + 1
+    return dict(sorted(counts.items()))
+
+
 def folder_bytes(out: Path) -> int:
     return sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
 
@@ -266,6 +276,9 @@ def finalize(
         "n_objects_ok": len(ok),
         "n_objects_failed": len(objects) - len(ok),
         "skipped_inputs": [{"path": p, "reason": r} for p, r in skipped],
+        "up": params.up,
+        # how many objects were read with each up axis, and why (ShapeNetCore layout, glTF, as stored...)
+        "up_axes": up_axes(ok),
         "n_samples": n_samples,
         "n_padded_samples": n_padded,
         "shard_bytes": int(sum(r["bytes"] for r in ok)),

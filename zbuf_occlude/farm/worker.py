@@ -93,7 +93,7 @@ def _scan(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
     from zbuf_occlude.farm.sensor_crops import farm_datasets
     from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported by the work, not by modules that only read records
 
-    mesh = load_mesh(obj.source)
+    mesh = load_mesh(obj.source, up=params.up)
     n_scans = int(params.samples_per_view)
     datasets = farm_datasets(
         mesh, params.sensor_model(), name=obj.name, label=obj.label, object_index=obj.index, n_samples=n_scans,
@@ -113,7 +113,16 @@ def _scan(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
         "n_dense": 0,
         "n_faces": int(len(mesh.faces)),
         "bytes": int((out / rel).stat().st_size),
+        **_up_record(mesh),
     }
+
+
+def _up_record(mesh) -> dict[str, str]:
+    """The up axis the mesh was read with and the rule that chose it (the card sums them)."""
+    from zbuf_occlude.mesh.load import METADATA_KEY
+
+    meta = mesh.metadata.get(METADATA_KEY, {})
+    return {"up": str(meta.get("up", "+z")), "up_source": str(meta.get("up_source", "as stored (+z)"))}
 
 
 def _write_datasets(path: Path, datasets: dict[str, np.ndarray], attrs: dict[str, Any]) -> None:
@@ -131,7 +140,7 @@ def _render(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
         check_relative_name(obj.name, what=f"the name of {obj.source}")
     from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported by the work, not by modules that only read records
 
-    mesh = load_mesh(obj.source)
+    mesh = load_mesh(obj.source, up=params.up)
     dense = dense_cloud(mesh, obj.key, seed=params.seed, count=params.dense_points, density=params.density)
     poses = params.poses
     common = dict(
@@ -187,6 +196,7 @@ def _render(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
         "n_dense": int(len(dense.points)),
         "n_faces": int(len(mesh.faces)),
         "bytes": int(sum((out / rel).stat().st_size for rel in files)),
+        **_up_record(mesh),
     }
 
 

@@ -10,6 +10,7 @@ triangles, which trimesh 5.2 cannot read, are fanned first.
 
 from __future__ import annotations
 
+import base64
 import importlib.util
 import io
 import re
@@ -241,6 +242,38 @@ def _check_binary_stl_length(raw: bytes) -> None:
         )
 
 
+#: A 1×1 grey PNG: what every image a COLLADA file names resolves to.
+_BLANK_PNG = base64.b64decode("iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAAAAAA6fptVAAAACklEQVR4nGNgAAAAAgABSK+kcQAAAABJRU5ErkJggg==")
+
+
+def _no_textures_resolver():
+    """A trimesh resolver that reads no file: every texture a COLLADA file names is one blank pixel.
+
+    Only the geometry is used, so textures are not loaded: a missing image (Gazebo models name
+    textures in other folders) would otherwise make trimesh log a warning with a whole
+    traceback per material, and a file could make the loader open paths of its choosing.
+    """
+    import trimesh
+
+    class _NoTextures(trimesh.resolvers.Resolver):
+        def __init__(self) -> None:  # no folder: nothing to resolve against
+            pass
+
+        def get(self, name: str) -> bytes:
+            return _BLANK_PNG
+
+        def keys(self):
+            return iter(())
+
+        def namespaced(self, namespace: str):
+            return self
+
+        def write(self, name: str, data) -> None:
+            raise NotImplementedError("reading only")
+
+    return _NoTextures()
+
+
 def _read(path: Path, file_type: str) -> trimesh.Trimesh:
     """Parse ``path`` with trimesh into one Trimesh; scenes are flattened with transforms."""
     import trimesh
@@ -256,6 +289,8 @@ def _read(path: Path, file_type: str) -> trimesh.Trimesh:
         module, extra = FORMAT_EXTRAS[file_type]
         if importlib.util.find_spec(module) is None:
             raise _NeedsExtra(f"reading {file_type.upper()} needs the {module!r} package: pip install 'zbuf-occlude[{extra}]'")
+    if file_type == "dae":  # textures are not needed: never read (_no_textures_resolver)
+        return _to_mesh(trimesh.load_scene(str(path), file_type=file_type, process=False, resolver=_no_textures_resolver()))
     if file_type != "off":
         return _to_mesh(trimesh.load_scene(str(path), file_type=file_type, process=False))
     raw = path.read_bytes()

@@ -16,7 +16,9 @@ under it fits:
     the ``taxonomy.json`` at the top of the folder given (its first comma-separated
     name: ``"airplane,aeroplane,plane"`` -> ``airplane``), else the synset id; the
     object's name is ``SYNSET/MODEL_ID`` (a model id may appear in two synsets); split
-    ``train``.
+    ``train``.  ShapeNetCore's models are **+y up** (its ``taxonomy``'s alignment: up
+    ``(0, 1, 0)``), so a file at such a path is turned y → z unless told otherwise
+    (:func:`zbuf_occlude.mesh.scene.resolve_up`, :func:`shapenet_path`).
 ``modelnet``
     ``CLASS/SPLIT/NAME.ext`` with SPLIT ``train`` or ``test`` (ModelNet10/40).
 ``flat``
@@ -68,6 +70,7 @@ __all__ = [
     "label_file",
     "scan_labelled",
     "layout_text",
+    "shapenet_path",
 ]
 
 log = logging.getLogger(__name__)
@@ -169,13 +172,14 @@ def _synset_names(synsets: set[str], taxonomy: dict[str, str]) -> dict[str, str]
     return names
 
 
-def _shapenet(path: Path) -> tuple[str, str, str] | None:
-    """``(layout, synset, model_id)`` of a ShapeNetCore file path (absolute), else None.
+def shapenet_path(path: str | PathLike[str]) -> tuple[str, str, str] | None:
+    """``(layout, synset, model_id)`` of a ShapeNetCore file path, else None.
 
     The synset folder must be a WordNet offset (8 digits), as every ShapeNetCore synset is:
-    ``chairs/abc/model.obj`` is no ShapeNetCore path.
+    ``chairs/abc/model.obj`` is no ShapeNetCore path.  A relative path is made absolute
+    first (the synset folder may be the working folder's name).
     """
-    parts = path.parts
+    parts = Path(path).absolute().parts
     if tuple(parts[-2:]) == _V2 and len(parts) >= 5 and _SYNSET.fullmatch(parts[-4]):
         return "shapenetcore-v2", parts[-4], parts[-3]
     if parts[-1] == _V1 and len(parts) >= 4 and _SYNSET.fullmatch(parts[-3]):
@@ -255,7 +259,7 @@ def label_tree(root: str | PathLike[str], files: Sequence[Path], *, class_from: 
 
     if class_from is not None:
         return f"class-from:{class_from}", [LabelledMesh(name_of(p), p, *_class_from_level(p, class_from)) for p in paths]
-    shapenet = [_shapenet(p) for p in paths]
+    shapenet = [shapenet_path(p) for p in paths]
     for layout in ("shapenetcore-v2", "shapenetcore-v1"):
         if paths and all(m is not None and m[0] == layout for m in shapenet):
             names = _synset_names({m[1] for m in shapenet}, read_taxonomy(root))
@@ -290,7 +294,7 @@ def label_file(path: str | PathLike[str], *, class_from: int | None = None) -> t
     p = Path(path).absolute()
     if class_from is not None:
         return f"class-from:{class_from}", LabelledMesh(p.stem, p, *_class_from_level(p, class_from))
-    shapenet = _shapenet(p)
+    shapenet = shapenet_path(p)
     if shapenet is not None:
         mesh = LabelledMesh(f"{shapenet[1]}/{shapenet[2]}", p, shapenet[1], DEFAULT_SPLIT)
     else:

@@ -356,8 +356,9 @@ def load_mesh(
     area_rtol : float
         Relative area below which a face is degenerate; see :func:`degenerate_faces`.
     up : {"auto", "+z", "+y", "-y", "+x", "-x", "-z"}
-        The file's up axis, rotated to +z.  ``auto``: the format's convention (glTF +y,
-        COLLADA its declared ``<up_axis>``, OBJ by its exporter, others as stored);
+        The file's up axis, rotated to +z.  ``auto``: +y for a file at a ShapeNetCore path,
+        else the format's convention (glTF +y unless trimesh wrote it, COLLADA its declared
+        ``<up_axis>``, OBJ by its exporter, others as stored);
         :mod:`zbuf_occlude.mesh.scene` gives the rules.
 
     Returns

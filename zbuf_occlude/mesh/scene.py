@@ -10,10 +10,21 @@ Up axis, by format, when ``up="auto"``:
 
 * glTF 2.0 (``.gltf``, ``.glb``): **+y**.  The specification fixes it ("glTF uses a
   right-handed coordinate system ... +Y is up", Khronos glTF 2.0 §3.4 *Coordinate System
-  and Units*), and its unit is the metre.
+  and Units*), and its unit is the metre.  Blender's exporter follows it (its default
+  ``export_yup=True`` turns Blender's z-up scene to +y), as do three.js and Khronos' tools.
+  One exception, read from the file's ``asset.generator``: **trimesh** writes the
+  vertices as they are, with no axis conversion (checked: a box tall along z exported by
+  trimesh 4–5 has ``max = [.., .., 2.5]`` in its accessor), and reads them back the same
+  way, so a file it wrote holds the frame of the mesh it was given, which in this
+  package's world (trimesh, ModelNet) is z up: taken **as stored, +z**, so that a
+  z-up mesh written by trimesh comes back standing.
 * COLLADA (``.dae``): the file's ``<asset><up_axis>`` (``X_UP``, ``Y_UP`` or ``Z_UP``),
   **Y_UP when absent** (COLLADA 1.5 specification, *asset* element: "up_axis ... default
   Y_UP"); the unit is ``<unit meter="...">`` (default 1.0).
+* A file at a ShapeNetCore path (``SYNSET/MODEL_ID/models/model_normalized.obj``, v2, or
+  ``SYNSET/MODEL_ID/model.obj``, v1; :func:`zbuf_occlude.mesh.layouts.shapenet_path`):
+  **+y**, ShapeNetCore's alignment (up ``(0, 1, 0)``, front ``(0, 0, -1)`` in v2), whatever
+  wrote it.
 * Wavefront OBJ has no convention of its own; the exporter named in the file's first
   comment lines decides: Blender's OBJ exporter writes Y up by default (``axis_up='Y'``),
   MakeHuman works in a Y-up frame; anything else (3ds Max exports used by Gazebo, ModelNet,
@@ -33,8 +44,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.mesh.layouts import shapenet_path
 
-__all__ = ["UP_AXES", "UP_CHOICES", "resolve_up", "up_rotation", "declared_units_m", "collada_asset"]
+__all__ = ["UP_AXES", "UP_CHOICES", "resolve_up", "up_rotation", "declared_units_m", "collada_asset", "gltf_generator"]
 
 #: Axes a file may declare as up (the rotation sends it to +z).
 UP_AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
@@ -46,6 +58,13 @@ UP_CHOICES = ("auto", *UP_AXES)
 _COLLADA_HEAD_BYTES = 1 << 16
 #: Bytes of an OBJ file searched for the exporter's comment.
 _OBJ_HEAD_BYTES = 1024
+#: Bytes of a glTF file searched for ``asset.generator``: trimesh writes ``asset`` near the
+#: top of the JSON (GLB: the JSON chunk starts at byte 20); a file whose ``asset`` lies
+#: further on is read by the specification's rule.
+_GLTF_HEAD_BYTES = 1 << 16
+#: glTF writers known to store vertices without turning them to +y (module docstring).
+_GLTF_AS_STORED_GENERATORS = ("trimesh",)
+_GENERATOR = re.compile(rb'"generator"\s*:\s*"([^"\\]{0,256})"')
 
 _OBJ_Y_UP_EXPORTERS = (("blender", "Blender's OBJ exporter (default axis_up='Y')"),
                        ("make_clothes", "MakeHuman export (Y-up frame)"),
@@ -68,13 +87,13 @@ def up_rotation(axis: str) -> NDArray[np.float64]:
     InvalidInputError
         ``axis`` not one of :data:`UP_AXES`.
     """
-    import trimesh
-
     if axis not in UP_AXES:
         raise InvalidInputError(f"up axis must be one of {', '.join(UP_CHOICES)}, got {axis!r}")
     if axis == "+z":
         return np.eye(4)
     direction, degrees = _UP_TURNS[axis]
+    import trimesh  # here, not at import: the CLI's option checks import UP_CHOICES
+
     m = trimesh.transformations.rotation_matrix(np.radians(degrees), direction)
     return np.round(m, 15)  # exact zeros and ones for quarter turns
 
@@ -99,6 +118,15 @@ def collada_asset(head: bytes) -> tuple[str | None, float | None]:
     return ("+" + up.group(1).lower()) if up else None, meters
 
 
+def gltf_generator(head: bytes) -> str | None:
+    """``asset.generator`` of a glTF file (``.gltf`` text or GLB bytes) from its first bytes, or None.
+
+    A regular expression, not a JSON parser: only the head is read, nothing is expanded.
+    """
+    found = _GENERATOR.search(head[:_GLTF_HEAD_BYTES])
+    return found.group(1).decode("latin-1") if found else None
+
+
 def _head(path: Path, n: int) -> bytes:
     with open(path, "rb") as fh:
         return fh.read(n)
@@ -110,7 +138,7 @@ def resolve_up(path: Path, file_type: str, up: str) -> tuple[str, str]:
     Parameters
     ----------
     path : Path
-        The file (its head is read for COLLADA and OBJ).
+        The file (its head is read for glTF, COLLADA and OBJ; its path tells a ShapeNetCore model).
     file_type : str
         trimesh's file type (``gltf``, ``glb``, ``dae``, ``obj``, ...).
     up : str
@@ -134,7 +162,12 @@ def resolve_up(path: Path, file_type: str, up: str) -> tuple[str, str]:
         raise InvalidInputError(f"up axis must be one of {', '.join(UP_CHOICES)}, got {up!r}")
     if up != "auto":
         return up, "explicit"
+    if shapenet_path(path) is not None:
+        return "+y", "ShapeNetCore layout (+Y up)"
     if file_type in ("gltf", "glb"):
+        generator = gltf_generator(_head(path, _GLTF_HEAD_BYTES)) or ""
+        if any(name in generator.lower() for name in _GLTF_AS_STORED_GENERATORS):
+            return "+z", f"as stored (+z): written by {generator}, which does not convert axes"
         return "+y", "glTF convention (+Y up)"
     if file_type == "dae":
         declared, _ = collada_asset(_head(path, _COLLADA_HEAD_BYTES))

@@ -26,7 +26,6 @@ import zbuf_occlude as zo
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 from zbuf_occlude.visibility.oracle_numpy import occluded_numpy
 from zbuf_occlude.visibility.paper import face_scan, occupancy, pruning, vertex
-from zbuf_occlude.visibility.paper import object_space as osp
 from zbuf_occlude.visibility.segment_triangle import triangle_planes
 
 #: Small real meshes (faces): quick enough for the O(N·F) methods in CI.  Each is
