@@ -138,3 +138,11 @@ def test_python_dash_m_runs_the_cli_and_passes_its_exit_status(tmp_path):
     out = run("generate", str(tmp_path / "nope"), "--out", str(tmp_path / "o"))
     assert out.returncode == 2 and out.stderr.startswith("zbuf-occlude: error:")
     assert run("no-such-command").returncode == 2  # argparse's usage error
+
+
+def test_generate_without_a_path_finds_the_shipped_samples() -> None:
+    # README's first command, `zbuf-occlude generate --out out`, runs on data/samples of the checkout
+    from zbuf_occlude.cli.main import SAMPLE_MESHES
+
+    assert SAMPLE_MESHES == Path(__file__).resolve().parents[2] / "data" / "samples"
+    assert any(SAMPLE_MESHES.rglob("*.off"))

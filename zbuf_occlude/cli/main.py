@@ -40,7 +40,7 @@ __all__ = ["main", "build_parser", "SAMPLE_MESHES"]
 log = logging.getLogger("zbuf_occlude")
 
 #: Real ModelNet meshes shipped with a checkout (see data/samples/SOURCE.md).
-SAMPLE_MESHES = Path(__file__).resolve().parents[1] / "data" / "samples"
+SAMPLE_MESHES = Path(__file__).resolve().parents[2] / "data" / "samples"
 
 
 def _default_paths(paths: list[str]) -> list[str]:
