@@ -18,6 +18,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from zbuf_occlude.errors import MeshLoadError
+from zbuf_occlude.mesh.limits import DeclaredTooLarge, check_gltf_declared_sizes
+from zbuf_occlude.mesh.named_files import folder_resolver, read_regular_file
 
 if TYPE_CHECKING:  # trimesh (and scipy with it) is imported by the readers below, when a file is read
     import trimesh
@@ -242,24 +244,52 @@ def _check_binary_stl_length(raw: bytes) -> None:
         )
 
 
+#: An OBJ face corner: ``v``, ``v/vt``, ``v//vn`` or ``v/vt/vn``; the vertex index is the first number.
+_OBJ_FACE_LINE = re.compile(rb"^[ \t]*f[ \t]+([^\r\n#]*)", re.M)
+
+
+def _check_obj_indices(raw: bytes) -> None:
+    """Raise _Malformed on an OBJ face corner with index 0.
+
+    OBJ indices start at 1 (negative ones count back from the last vertex); trimesh reads a
+    0 as the first vertex, so ``f 0 4 5`` loads as another face instead of an error.
+    """
+    for match in _OBJ_FACE_LINE.finditer(raw):
+        for corner in match.group(1).split():
+            first = corner.split(b"/", 1)[0]
+            if first.lstrip(b"+-").isdigit() and int(first) == 0:
+                line = raw.count(b"\n", 0, match.start()) + 1
+                raise _Malformed(f"line {line}: face {match.group(0).strip().decode('latin-1')[:60]!r} uses vertex index 0 (OBJ indices start at 1)")
+
+
 def _read(path: Path, file_type: str) -> trimesh.Trimesh:
-    """Parse ``path`` with trimesh into one Trimesh; scenes are flattened with transforms."""
+    """Parse ``path`` with trimesh into one Trimesh; scenes are flattened with transforms.
+
+    The file and every file it names are read through :mod:`zbuf_occlude.mesh.named_files`
+    (regular files only, inside the file's folder, size capped); glTF's declared sizes are
+    checked (:mod:`zbuf_occlude.mesh.limits`) before trimesh allocates them.
+    """
     import trimesh
 
+    raw = read_regular_file(path)
     if file_type == "ply":
-        raw = _utf8_ply_header(path.read_bytes())
+        raw = _utf8_ply_header(raw)
         mesh = _to_mesh(trimesh.load_scene(io.BytesIO(raw), file_type="ply", process=False))
         _check_ply_counts(raw, mesh)
         return mesh
     if file_type == "stl":
-        _check_binary_stl_length(path.read_bytes())
+        _check_binary_stl_length(raw)
     if file_type in FORMAT_EXTRAS:
         module, extra = FORMAT_EXTRAS[file_type]
         if importlib.util.find_spec(module) is None:
             raise _NeedsExtra(f"reading {file_type.upper()} needs the {module!r} package: pip install 'zbuf-occlude[{extra}]'")
+    if file_type in ("gltf", "glb"):
+        check_gltf_declared_sizes(raw)
+    if file_type == "obj":
+        _check_obj_indices(raw)
     if file_type != "off":
-        return _to_mesh(trimesh.load_scene(str(path), file_type=file_type, process=False))
-    raw = path.read_bytes()
+        scene = trimesh.load_scene(io.BytesIO(raw), file_type=file_type, resolver=folder_resolver(path), process=False)
+        return _to_mesh(scene)
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError:
@@ -345,7 +375,7 @@ def read_trimesh(path: Path, file_type: str) -> trimesh.Trimesh:
         return _read(path, file_type)
     except _NotOff as exc:
         raise MeshLoadError(f"{path}: not an OFF file ({exc})") from exc
-    except (_NotMesh, _NeedsExtra) as exc:
+    except (_NotMesh, _NeedsExtra, DeclaredTooLarge) as exc:
         raise MeshLoadError(f"{path}: {exc}") from exc
     except _Malformed as exc:
         raise MeshLoadError(f"{path}: cannot parse as {file_type.upper()}: {exc}") from exc
