@@ -24,7 +24,7 @@ from zbuf_occlude.mesh.named_files import folder_resolver, read_regular_file
 if TYPE_CHECKING:  # trimesh (and scipy with it) is imported by the readers below, when a file is read
     import trimesh
 
-__all__ = ["SUPPORTED_EXTENSIONS", "EXTENSIONS_TEXT", "FORMAT_EXTRAS", "read_trimesh"]
+__all__ = ["SUPPORTED_EXTENSIONS", "EXTENSIONS_TEXT", "FORMAT_EXTRAS", "read_trimesh", "ply_declared_counts"]
 
 #: File extensions load_mesh accepts (lower case), mapped to trimesh's file type.
 SUPPORTED_EXTENSIONS: dict[str, str] = {
@@ -204,6 +204,13 @@ def _utf8_ply_header(raw: bytes) -> bytes:
     return raw
 
 
+def ply_declared_counts(raw: bytes) -> dict[str, int]:
+    """The element counts a PLY header declares, e.g. ``{"vertex": 10, "face": 12}`` (empty without a header)."""
+    end = raw.find(b"end_header")
+    header = raw[: max(end, 0)].decode("utf-8", "replace")
+    return {m.group(1): int(m.group(2)) for m in re.finditer(r"^element\s+(\w+)\s+(\d+)", header, re.M)}
+
+
 def _check_ply_counts(raw: bytes, mesh: trimesh.Trimesh) -> None:
     """Raise _Malformed when a PLY holds fewer vertices or faces than its header declares.
 
@@ -211,8 +218,7 @@ def _check_ply_counts(raw: bytes, mesh: trimesh.Trimesh) -> None:
     chair's 2,234 faces).  Polygons become one or more triangles, so fewer faces than
     declared means lines are missing.
     """
-    header = raw[: raw.find(b"end_header")].decode("utf-8", "replace")
-    declared = {m.group(1): int(m.group(2)) for m in re.finditer(r"^element\s+(vertex|face)\s+(\d+)", header, re.M)}
+    declared = ply_declared_counts(raw)
     n_vertices, n_faces = declared.get("vertex"), declared.get("face")
     if (n_vertices is not None and len(mesh.vertices) < n_vertices) or (n_faces is not None and len(mesh.faces) < n_faces):
         raise _Malformed(
