@@ -38,7 +38,6 @@ import logging
 import os
 import itertools
 import re
-import zipfile
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -47,7 +46,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InsufficientMemoryError, InvalidInputError
 from zbuf_occlude.mesh.formats import ply_declared_counts
-from zbuf_occlude.mesh.named_files import file_digest, read_regular_file, regular_file_size
+from zbuf_occlude.mesh.named_files import check_array_sizes, file_digest, read_regular_file, regular_file_size
 from zbuf_occlude.mesh.scene import up_rotation
 from zbuf_occlude.resources import check_memory
 from zbuf_occlude.real_scans.records import RealScan, normalize_points
@@ -246,48 +245,6 @@ def _from_array(path: Path, arr: np.ndarray) -> NDArray[np.float64]:
     return np.asarray(arr[:, :3], dtype=np.float64)
 
 
-def _npy_declared_bytes(fh) -> int:
-    """Bytes the ``.npy`` header at ``fh`` declares (shape x itemsize); reads the header only."""
-    from numpy.lib import format as npy_format
-
-    version = npy_format.read_magic(fh)
-    read_header = npy_format.read_array_header_1_0 if version == (1, 0) else npy_format.read_array_header_2_0
-    shape, _, dtype = read_header(fh)
-    return int(np.prod(shape, dtype=object)) * dtype.itemsize
-
-
-def check_array_file(path: Path, *, max_bytes: int | None = None) -> None:
-    """Refuse a ``.npy``/``.npz`` whose arrays would inflate past ``max_bytes``, reading only headers.
-
-    ``max_bytes`` defaults to :data:`MAX_ARRAY_BYTES`.  For ``.npz``, the zip directory's uncompressed sizes (what inflating costs) and each
-    member's ``.npy`` header (what numpy allocates) are both checked; a header declaring more
-    than its member holds is refused too.
-
-    Raises
-    ------
-    InvalidInputError
-        Naming the file (and member), the declared bytes and the cap.
-    """
-    max_bytes = MAX_ARRAY_BYTES if max_bytes is None else max_bytes
-    if path.suffix.lower() == ".npy":
-        with open(path, "rb") as fh:
-            declared = _npy_declared_bytes(fh)
-        if declared > min(max_bytes, path.stat().st_size):
-            raise InvalidInputError(f"{path}: its header declares {declared:,} bytes of array, more than the file "
-                                    f"({path.stat().st_size:,} bytes) or the {max_bytes:,} a scan may have")  # fmt: skip
-        return
-    with zipfile.ZipFile(path) as zf:
-        members = zf.infolist()
-        inflated = sum(m.file_size for m in members)
-        if inflated > max_bytes:
-            raise InvalidInputError(f"{path}: its members inflate to {inflated:,} bytes, more than the {max_bytes:,} a scan may have")
-        for m in members:
-            with zf.open(m) as fh:
-                declared = _npy_declared_bytes(fh)
-            if declared > m.file_size:
-                raise InvalidInputError(f"{path}: member {m.filename} declares {declared:,} bytes of array but holds {m.file_size:,}")
-
-
 def _read_npz(path: Path) -> NDArray[np.float64]:
     with np.load(path, allow_pickle=False) as z:
         for key in ("points", "xyz", "data"):
@@ -348,7 +305,7 @@ def read_points(path: str | os.PathLike) -> NDArray[np.float64]:
         if size > MAX_FILE_BYTES:
             raise InvalidInputError(f"{path}: {size:,} bytes, more than the {MAX_FILE_BYTES:,} a scan may have")
         if suffix in (".npy", ".npz"):
-            check_array_file(path)
+            check_array_sizes(path, max_bytes=MAX_ARRAY_BYTES, error=InvalidInputError)
             pts = _from_array(path, np.load(path, allow_pickle=False)) if suffix == ".npy" else _read_npz(path)
         elif suffix == ".ply":
             pts = _read_ply(path, read_regular_file(path, max_bytes=MAX_FILE_BYTES, error=InvalidInputError))
