@@ -9,7 +9,11 @@ read here first, in time linear in its size, and the file is refused when what i
 passes a cap below, or when the memory it would take (:mod:`zbuf_occlude.resources`) is more
 than this machine has.  The error names the file, the number and the cap.
 
-Caps (each a count real assets stay far below):
+Caps (each a count real assets stay far below; the reason is beside each constant):
+
+* triangles after instancing: :data:`MAX_MESH_FACES` (10,000,000);
+* nodes: :data:`MAX_SCENE_NODES` (100,000); depth of the hierarchy: :data:`MAX_SCENE_DEPTH` (256);
+* bytes of all accessors together: :data:`MAX_ACCESSOR_BYTES` (4 GiB).
 """
 
 from __future__ import annotations
@@ -44,12 +48,6 @@ MAX_SCENE_DEPTH = 256
 #: Bytes all accessors of a glTF file declare together: 4 GiB, the most a GLB can hold
 #: (its length field is a uint32).
 MAX_ACCESSOR_BYTES = 4 << 30
-
-__doc__ += f"""
-* faces after instancing: :data:`MAX_MESH_FACES` ({MAX_MESH_FACES:,});
-* nodes: :data:`MAX_SCENE_NODES` ({MAX_SCENE_NODES:,}); depth: :data:`MAX_SCENE_DEPTH` ({MAX_SCENE_DEPTH});
-* bytes of all accessors: :data:`MAX_ACCESSOR_BYTES` (4 GiB).
-"""
 
 #: glTF 2.0 §3.6.2.2 accessor element sizes.
 _COMPONENT_BYTES = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
