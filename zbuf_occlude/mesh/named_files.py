@@ -12,8 +12,8 @@ a folder of scans names itself.  Every such name is opened here, so that one set
   the file, its size and the cap);
 * arrays (``.npy``, ``.npz``) are checked against the sizes their headers and zip directory
   declare (:func:`check_array_sizes`): a zip member of zeros inflates 1000:1;
-* a name a file gives is resolved **inside that file's folder** (trimesh's
-  ``FilePathResolver`` rule, kept): ``../../secret`` is refused.
+* a name a file gives is resolved **inside that file's folder**, symlinks resolved, by the
+  project's one rule (:func:`zbuf_occlude.io.safe_paths.path_inside`): ``../../secret`` is refused.
 
 :func:`folder_resolver` is the trimesh resolver every mesh reader is given, so glTF buffers and
 images, OBJ materials and COLLADA images all go through :func:`read_regular_file`.
@@ -32,7 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from zbuf_occlude.errors import MeshLoadError, ZbufOccludeError
+from zbuf_occlude.errors import MeshLoadError, UnsafePathError, ZbufOccludeError
+from zbuf_occlude.io.safe_paths import path_inside
 
 __all__ = ["MAX_NAMED_FILE_BYTES", "check_array_sizes", "read_regular_file", "regular_file_size", "file_digest", "folder_resolver"]
 
@@ -189,15 +190,20 @@ def _resolver_class() -> type:
             return RegularFileResolver(os.path.join(self.parent, namespace))
 
         def get(self, name: str) -> bytes:
-            candidates = (name.strip(), name.strip().lstrip("/"), os.path.split(name)[-1])
+            # trimesh's candidates (as written, without a leading "/", the bare file name),
+            # each kept inside the folder by the project's one rule (io.safe_paths.path_inside).
+            candidates = (name.strip(), name.strip().lstrip("/"), os.path.split(name.strip())[-1])
+            refused = None
             for candidate in candidates:
                 try:
-                    path = self.absolute(candidate)
-                except ValueError:
+                    path = path_inside(self.parent, candidate, what=f"{self.file_path}: a file it names")
+                except UnsafePathError as exc:
+                    refused = refused or exc
                     continue
                 if os.path.lexists(path):
                     return read_regular_file(path)
-            self.absolute(name)  # a name that escapes the folder: trimesh's own message
+            if refused is not None:
+                raise MeshLoadError(str(refused))
             raise FileNotFoundError(name)
 
     return RegularFileResolver
