@@ -297,7 +297,7 @@ def test_label_map_option():
 @pytest.mark.parametrize(
     ("field", "config", "n_classes"),
     [("width", {"width": 1e9}, 2), ("n_classes", {}, 10**9), ("fv_grid", {"model": "3dmfv", "fv_grid": 100_000}, 2),
-     ("width", {"width": "wide"}, 2), ("n_classes", {}, 2.5), ("model", {"model": ["pointnet"]}, 2)],  # fmt: skip
+     ("width", {"width": "wide"}, 2), ("n_classes", {}, 2.5), ("model", {"model": ["pointnet"]}, 2)],
 )
 def test_load_model_bounds_every_config_field_before_building(tmp_path, field, config, n_classes):
     """A 1 KB checkpoint may not ask for a 768 GB model: the field is named before anything is built."""

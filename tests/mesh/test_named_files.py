@@ -11,7 +11,11 @@ from pathlib import Path
 import pytest
 
 from zbuf_occlude.errors import InvalidInputError, MeshLoadError
-from zbuf_occlude.mesh.named_files import file_digest, folder_resolver, read_regular_file
+from zbuf_occlude.mesh.named_files import (
+    file_digest,
+    folder_resolver,
+    read_regular_file,
+)
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs os.mkfifo")
 
@@ -33,7 +37,7 @@ else:
 
 def _load_in_child(path: Path) -> str:
     try:
-        done = subprocess.run([sys.executable, "-c", _LOAD, str(path)], capture_output=True, text=True, timeout=_CHILD_SECONDS)
+        done = subprocess.run([sys.executable, "-c", _LOAD, str(path)], capture_output=True, text=True, timeout=_CHILD_SECONDS, check=False)
     except subprocess.TimeoutExpired:
         pytest.fail(f"load_mesh({path.name}) blocked for {_CHILD_SECONDS} s on a FIFO it names")
     assert done.returncode == 0, done.stderr[-2000:]

@@ -13,10 +13,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import zbuf_occlude.real_scans.files as files
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.real_scans import files
 from zbuf_occlude.real_scans.datasets import load_real_scans
-from zbuf_occlude.real_scans.files import MAX_FILE_BYTES, MAX_LINE_BYTES, load_scan_folder, read_points
+from zbuf_occlude.real_scans.files import (
+    MAX_FILE_BYTES,
+    MAX_LINE_BYTES,
+    load_scan_folder,
+    read_points,
+)
 
 ROWS = np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.5]])
 
@@ -103,9 +108,6 @@ def test_detection_reads_a_bounded_first_line(tmp_path: Path, monkeypatch) -> No
     seen = []
     real_open = open
 
-    class Spy(io.BufferedReader):
-        pass
-
     def spy_open(file, mode="r", *args, **kwargs):
         fh = real_open(file, mode, *args, **kwargs)
         if "b" in mode:
@@ -113,7 +115,7 @@ def test_detection_reads_a_bounded_first_line(tmp_path: Path, monkeypatch) -> No
             fh.readline = lambda size=-1: seen.append(size) or original(size)  # type: ignore[method-assign]
         return fh
 
-    import zbuf_occlude.real_scans.datasets as datasets
+    from zbuf_occlude.real_scans import datasets
 
     monkeypatch.setattr(datasets, "open", spy_open, raising=False)
     with pytest.raises(InvalidInputError):
@@ -154,7 +156,7 @@ def test_ascii_ply_holding_fewer_vertices_than_declared_is_an_error(tmp_path: Pa
 @pytest.mark.parametrize(
     ("points", "width", "stored", "match"),
     [(2, 10, 10, "header declares POINTS 2 but WIDTH x HEIGHT = 10"), (2, 2, 10, r"declares 2 points \(24 bytes\) but holds 120 bytes"),
-     (10, 10, 3, "declares 10 points")],  # fmt: skip
+     (10, 10, 3, "declares 10 points")],
 )
 def test_binary_pcd_points_must_match_width_height_and_body(tmp_path: Path, points, width, stored, match) -> None:
     path = tmp_path / "scan.pcd"

@@ -251,7 +251,7 @@ def _check_binary_stl_length(raw: bytes) -> None:
 
 
 #: An OBJ face corner: ``v``, ``v/vt``, ``v//vn`` or ``v/vt/vn``; the vertex index is the first number.
-_OBJ_FACE_LINE = re.compile(rb"^[ \t]*f[ \t]+([^\r\n#]*)", re.M)
+_OBJ_FACE_LINE = re.compile(rb"^[ \t]*f[ \t]+([^\r\n#]*)", re.MULTILINE)
 
 
 def _check_obj_indices(raw: bytes) -> None:

@@ -27,10 +27,10 @@ from zbuf_occlude.errors import InsufficientMemoryError
 from zbuf_occlude.resources import BYTES_PER_FACE, check_memory, format_bytes
 
 __all__ = [
-    "MAX_MESH_FACES",
-    "MAX_SCENE_NODES",
-    "MAX_SCENE_DEPTH",
     "MAX_ACCESSOR_BYTES",
+    "MAX_MESH_FACES",
+    "MAX_SCENE_DEPTH",
+    "MAX_SCENE_NODES",
     "DeclaredTooLarge",
     "check_gltf_declared_sizes",
 ]

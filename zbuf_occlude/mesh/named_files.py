@@ -35,7 +35,7 @@ import numpy as np
 from zbuf_occlude.errors import MeshLoadError, UnsafePathError, ZbufOccludeError
 from zbuf_occlude.io.safe_paths import path_inside
 
-__all__ = ["MAX_NAMED_FILE_BYTES", "check_array_sizes", "read_regular_file", "regular_file_size", "file_digest", "folder_resolver"]
+__all__ = ["MAX_NAMED_FILE_BYTES", "check_array_sizes", "file_digest", "folder_resolver", "read_regular_file", "regular_file_size"]
 
 #: Largest file a mesh may name (a glTF buffer, an OBJ material, a texture): 2 GiB.  glTF
 #: buffers are addressed with 32-bit byte lengths and a GLB is at most 4 GiB by its uint32

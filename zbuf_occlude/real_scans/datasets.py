@@ -48,7 +48,14 @@ from numpy.typing import NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.atomic import atomic_path
 from zbuf_occlude.mesh.named_files import read_regular_file, regular_file_size
-from zbuf_occlude.real_scans.files import MAX_FILE_BYTES, MAX_LINE_BYTES, POINT_EXTENSIONS, load_scan_folder, read_lines, scan_digest
+from zbuf_occlude.real_scans.files import (
+    MAX_FILE_BYTES,
+    MAX_LINE_BYTES,
+    POINT_EXTENSIONS,
+    load_scan_folder,
+    read_lines,
+    scan_digest,
+)
 from zbuf_occlude.real_scans.records import RealScan, normalize_points
 
 __all__ = [
