@@ -6,8 +6,8 @@ a folder of scans names itself.  Every such name is opened here, so that one set
 * only a **regular file** is read.  A FIFO, a socket or a device named by a file would block
   the reader forever (a FIFO) or read without end (``/dev/zero``).  The file is opened with
   ``O_NONBLOCK`` (opening a FIFO for reading then returns at once instead of waiting for a
-  writer), and its type is checked on the open descriptor (``fstat``), so a name swapped
-  between a check and the open cannot slip through;
+  writer), and its type is checked on the open file (``fstat``), so a name swapped between a
+  check and the open cannot slip through;
 * its **size is checked before it is read**, against a cap the caller gives (the error names
   the file, its size and the cap);
 * arrays (``.npy``, ``.npz``) are checked against the sizes their headers and zip directory
@@ -28,7 +28,7 @@ import zipfile
 from functools import lru_cache
 from os import PathLike
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 
@@ -45,18 +45,23 @@ MAX_NAMED_FILE_BYTES = 2 << 30
 _HASH_CHUNK_BYTES = 1 << 20
 
 
-def _open_regular(path: Path, error: type[ZbufOccludeError]) -> tuple[int, int]:
-    """(descriptor, size) of ``path`` opened for reading; refuses anything but a regular file."""
+def _nonblocking(name: str, flags: int) -> int:
+    # O_NONBLOCK: opening a FIFO for reading returns at once instead of waiting for a writer.
+    return os.open(name, flags | getattr(os, "O_NONBLOCK", 0))
+
+
+def _open_regular(path: Path, error: type[ZbufOccludeError]) -> tuple[BinaryIO, int]:
+    """(binary file, size) of ``path`` opened for reading; refuses anything but a regular file."""
     try:
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+        fh = open(path, "rb", opener=_nonblocking)  # noqa: SIM115 - closed by the callers
     except OSError as exc:
-        raise error(f"{path}: cannot open ({exc.strerror or exc})") from None
-    info = os.fstat(fd)
+        raise error(f"{path}: cannot read file ({exc.strerror or exc})") from None
+    info = os.fstat(fh.fileno())
     if not stat.S_ISREG(info.st_mode):
-        os.close(fd)
+        fh.close()
         kind = "a FIFO" if stat.S_ISFIFO(info.st_mode) else "a folder" if stat.S_ISDIR(info.st_mode) else "not a regular file"
         raise error(f"{path}: is {kind}; only regular files are read")
-    return fd, int(info.st_size)
+    return fh, int(info.st_size)
 
 
 def regular_file_size(path: str | PathLike[str], *, error: type[ZbufOccludeError] = MeshLoadError) -> int:
@@ -67,8 +72,8 @@ def regular_file_size(path: str | PathLike[str], *, error: type[ZbufOccludeError
     ``error``
         Naming the file: missing, unreadable, or a FIFO, socket, device or folder.
     """
-    fd, size = _open_regular(Path(path), error)
-    os.close(fd)
+    fh, size = _open_regular(Path(path), error)
+    fh.close()
     return size
 
 
@@ -93,17 +98,14 @@ def read_regular_file(
         larger than ``max_bytes`` (both numbers given).
     """
     path = Path(path)
-    fd, size = _open_regular(path, error)
-    try:
+    fh, size = _open_regular(path, error)
+    with fh:
         if size > max_bytes:
             raise error(f"{path}: {size:,} bytes, more than the {max_bytes:,} a file named here may have")
-        with os.fdopen(fd, "rb", closefd=False) as fh:
-            data = fh.read(max_bytes + 1)  # the file may grow after fstat: never read past the cap
-        if len(data) > max_bytes:
-            raise error(f"{path}: more than the {max_bytes:,} bytes a file named here may have")
-        return data
-    finally:
-        os.close(fd)
+        data = fh.read(max_bytes + 1)  # the file may grow after fstat: never read past the cap
+    if len(data) > max_bytes:
+        raise error(f"{path}: more than the {max_bytes:,} bytes a file named here may have")
+    return data
 
 
 def file_digest(path: str | PathLike[str], *, max_bytes: int, error: type[ZbufOccludeError] = MeshLoadError) -> str:
@@ -115,17 +117,14 @@ def file_digest(path: str | PathLike[str], *, max_bytes: int, error: type[ZbufOc
         As :func:`read_regular_file`; the size is checked before the first byte is hashed.
     """
     path = Path(path)
-    fd, size = _open_regular(path, error)
-    try:
+    fh, size = _open_regular(path, error)
+    with fh:
         if size > max_bytes:
             raise error(f"{path}: {size:,} bytes, more than the {max_bytes:,} a file read here may have")
         digest = hashlib.md5(usedforsecurity=False)
-        with os.fdopen(fd, "rb", closefd=False) as fh:
-            while chunk := fh.read(_HASH_CHUNK_BYTES):
-                digest.update(chunk)
-        return digest.hexdigest()
-    finally:
-        os.close(fd)
+        while chunk := fh.read(_HASH_CHUNK_BYTES):
+            digest.update(chunk)
+    return digest.hexdigest()
 
 
 def _npy_declared_bytes(fh) -> int:
