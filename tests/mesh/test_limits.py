@@ -96,8 +96,8 @@ def test_shared_children_multiply_instances() -> None:
     levels = 8
     doc["nodes"] = [{"children": [2 * level + 2, 2 * level + 3]} if level < levels - 1 else {"mesh": 0}
                     for level in range(levels) for _ in range(2)]  # fmt: skip
-    with pytest.raises(ValueError, match="25,600,000 triangles after node instancing"):
-        check_gltf_declared_sizes(json.dumps(doc).encode())
+    with pytest.raises(MeshLoadError, match="shared.gltf: declares 25,600,000 triangles after node instancing"):
+        check_gltf_declared_sizes(json.dumps(doc).encode(), "shared.gltf")
 
 
 def test_a_200000_node_chain_is_refused_in_seconds(tmp_path: Path) -> None:
@@ -119,8 +119,8 @@ def test_a_chain_deeper_than_the_cap_is_refused(tmp_path: Path) -> None:
 
 def test_a_node_cycle_is_refused() -> None:
     doc = {"asset": {"version": "2.0"}, "nodes": [{"children": [1]}, {"children": [0]}]}
-    with pytest.raises(ValueError, match="cycle"):
-        check_gltf_declared_sizes(json.dumps(doc).encode())
+    with pytest.raises(MeshLoadError, match="cycle.gltf: .*cycle"):
+        check_gltf_declared_sizes(json.dumps(doc).encode(), "cycle.gltf")
 
 
 def test_glb_json_chunk_is_checked(tmp_path: Path) -> None:

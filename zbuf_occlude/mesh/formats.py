@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from zbuf_occlude.errors import MeshLoadError
-from zbuf_occlude.mesh.limits import DeclaredTooLarge, check_gltf_declared_sizes
+from zbuf_occlude.mesh.limits import check_gltf_declared_sizes
 from zbuf_occlude.mesh.named_files import folder_resolver, read_regular_file
 
 if TYPE_CHECKING:  # trimesh (and scipy with it) is imported by the readers below, when a file is read
@@ -290,7 +290,7 @@ def _read(path: Path, file_type: str) -> trimesh.Trimesh:
         if importlib.util.find_spec(module) is None:
             raise _NeedsExtra(f"reading {file_type.upper()} needs the {module!r} package: pip install 'zbuf-occlude[{extra}]'")
     if file_type in ("gltf", "glb"):
-        check_gltf_declared_sizes(raw)
+        check_gltf_declared_sizes(raw, path)
     if file_type == "obj":
         _check_obj_indices(raw)
     if file_type != "off":
@@ -381,7 +381,7 @@ def read_trimesh(path: Path, file_type: str) -> trimesh.Trimesh:
         return _read(path, file_type)
     except _NotOff as exc:
         raise MeshLoadError(f"{path}: not an OFF file ({exc})") from exc
-    except (_NotMesh, _NeedsExtra, DeclaredTooLarge) as exc:
+    except (_NotMesh, _NeedsExtra) as exc:
         raise MeshLoadError(f"{path}: {exc}") from exc
     except _Malformed as exc:
         raise MeshLoadError(f"{path}: cannot parse as {file_type.upper()}: {exc}") from exc

@@ -21,9 +21,10 @@ from __future__ import annotations
 import json
 import struct
 from collections.abc import Mapping, Sequence
+from os import PathLike
 from typing import Any
 
-from zbuf_occlude.errors import InsufficientMemoryError
+from zbuf_occlude.errors import InsufficientMemoryError, MeshLoadError
 from zbuf_occlude.resources import BYTES_PER_FACE, check_memory, format_bytes
 
 __all__ = [
@@ -31,7 +32,6 @@ __all__ = [
     "MAX_MESH_FACES",
     "MAX_SCENE_DEPTH",
     "MAX_SCENE_NODES",
-    "DeclaredTooLarge",
     "check_gltf_declared_sizes",
 ]
 
@@ -55,10 +55,6 @@ _TYPE_COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MA
 #: Primitive modes (glTF 2.0 §3.7.2.1) and triangles per index count: TRIANGLES n/3,
 #: TRIANGLE_STRIP and TRIANGLE_FAN n-2; points and lines give none.
 _TRIANGLE_MODES = {4, 5, 6}
-
-
-class DeclaredTooLarge(ValueError):
-    """A mesh file declares more than a cap or than the memory there is (message without the file)."""
 
 
 def _gltf_json(raw: bytes) -> Mapping[str, Any] | None:
@@ -147,15 +143,22 @@ def _instances_and_depth(nodes: Sequence[Any]) -> tuple[list[int], int]:
     return instances, deepest
 
 
-def check_gltf_declared_sizes(raw: bytes) -> None:
+def check_gltf_declared_sizes(raw: bytes, path: str | PathLike[str]) -> None:
     """Refuse a glTF (``.gltf`` text or ``.glb`` bytes) whose declared sizes pass the caps.
 
     Linear in the JSON's size; nothing the file declares is allocated.
 
+    Parameters
+    ----------
+    raw : bytes
+        The file's content.
+    path : path
+        The file, for the message.
+
     Raises
     ------
-    DeclaredTooLarge
-        More nodes than :data:`MAX_SCENE_NODES`, a hierarchy deeper than
+    MeshLoadError
+        Naming ``path``: more nodes than :data:`MAX_SCENE_NODES`, a hierarchy deeper than
         :data:`MAX_SCENE_DEPTH` (or a cycle), more triangles after instancing than
         :data:`MAX_MESH_FACES`, accessors declaring more than :data:`MAX_ACCESSOR_BYTES`, or
         more memory than is available; the message gives the number and the cap.
@@ -165,13 +168,13 @@ def check_gltf_declared_sizes(raw: bytes) -> None:
         return
     nodes, accessors = _list(doc, "nodes"), _list(doc, "accessors")
     if len(nodes) > MAX_SCENE_NODES:
-        raise DeclaredTooLarge(f"declares {len(nodes):,} scene nodes, more than the {MAX_SCENE_NODES:,} accepted")
+        raise MeshLoadError(f"{path}: declares {len(nodes):,} scene nodes, more than the {MAX_SCENE_NODES:,} accepted")
     instances, depth = _instances_and_depth(nodes)
     if depth > MAX_SCENE_DEPTH:
-        raise DeclaredTooLarge(f"its node hierarchy is {depth:,} deep (or has a cycle), more than the {MAX_SCENE_DEPTH} accepted")
+        raise MeshLoadError(f"{path}: its node hierarchy is {depth:,} deep (or has a cycle), more than the {MAX_SCENE_DEPTH} accepted")
     n_bytes = _accessor_bytes(accessors)
     if n_bytes > MAX_ACCESSOR_BYTES:
-        raise DeclaredTooLarge(f"its accessors declare {format_bytes(n_bytes)}, more than the {format_bytes(MAX_ACCESSOR_BYTES)} accepted")
+        raise MeshLoadError(f"{path}: its accessors declare {format_bytes(n_bytes)}, more than the {format_bytes(MAX_ACCESSOR_BYTES)} accepted")
     faces_per_mesh = _mesh_faces(_list(doc, "meshes"), accessors)
     n_faces = sum(
         instances[i] * faces_per_mesh[node["mesh"]]
@@ -179,8 +182,8 @@ def check_gltf_declared_sizes(raw: bytes) -> None:
         if isinstance(node, dict) and isinstance(node.get("mesh"), int) and 0 <= node["mesh"] < len(faces_per_mesh)
     )
     if n_faces > MAX_MESH_FACES:
-        raise DeclaredTooLarge(f"declares {n_faces:,} triangles after node instancing, more than the {MAX_MESH_FACES:,} accepted")
+        raise MeshLoadError(f"{path}: declares {n_faces:,} triangles after node instancing, more than the {MAX_MESH_FACES:,} accepted")
     try:
         check_memory(n_bytes + n_faces * BYTES_PER_FACE, option="the mesh", hint="use a smaller mesh or a machine with more memory")
     except InsufficientMemoryError as exc:
-        raise DeclaredTooLarge(str(exc)) from None
+        raise MeshLoadError(f"{path}: {exc}") from None
