@@ -293,3 +293,34 @@ def test_label_map_option():
     assert parse_pairs(None, "--label-map") == {}
     with pytest.raises(InvalidInputError, match="--label-map expects KEY=VALUE"):
         parse_pairs("car", "--label-map")
+
+
+@pytest.mark.parametrize(
+    ("field", "config", "n_classes"),
+    [("width", {"width": 1e9}, 2), ("n_classes", {}, 10**9), ("fv_grid", {"model": "3dmfv", "fv_grid": 100_000}, 2),
+     ("width", {"width": "wide"}, 2), ("n_classes", {}, 2.5), ("model", {"model": ["pointnet"]}, 2)],
+)
+def test_load_model_bounds_every_config_field_before_building(tmp_path, field, config, n_classes):
+    """A 1 KB checkpoint may not ask for a 768 GB model: the field is named before anything is built."""
+    import torch
+
+    from zbuf_occlude.errors import CheckpointError
+    from zbuf_occlude.learn.training import load_model
+
+    path = tmp_path / "best.pt"
+    torch.save({"config": {"model": "pointnet", "width": 1.0, "fv_grid": 8, **config}, "n_classes": n_classes, "model": {}}, path)
+    assert path.stat().st_size < 2048
+    with pytest.raises(CheckpointError, match=rf"best\.pt: config field {field}:"):
+        load_model(path)
+
+
+def test_build_model_bounds_match_the_documented_limits():
+    from zbuf_occlude.learn.models import MAX_CLASSES, MAX_FV_GRID, MAX_WIDTH, check_model_config
+
+    assert check_model_config("3dmfv", MAX_CLASSES, MAX_WIDTH, MAX_FV_GRID) == ("3dmfv", MAX_CLASSES, MAX_WIDTH, MAX_FV_GRID)
+    assert check_model_config("pointnet", 40.0, 1, 8) == ("pointnet", 40, 1.0, 8)
+    for bad in ({"n_classes": MAX_CLASSES + 1}, {"width": MAX_WIDTH * 1.01}, {"fv_grid": MAX_FV_GRID + 1}, {"width": 0.0},
+                {"n_classes": True}, {"width": float("nan")}):  # fmt: skip
+        args = {"name": "pointnet", "n_classes": 4, "width": 1.0, "fv_grid": 8, **bad}
+        with pytest.raises(InvalidInputError, match=next(iter(bad))):
+            check_model_config(**args)

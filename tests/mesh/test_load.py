@@ -470,3 +470,26 @@ def test_provenance_composes_load_clean_and_normalise(tmp_path):
     assert cleaned.metadata[METADATA_KEY]["n_degenerate_faces_dropped"] == 2
     assert cleaned.metadata[METADATA_KEY]["n_unreferenced_vertices_dropped"] == 3
     assert cleaned.faces.dtype == np.int64 and cleaned.vertices.dtype == np.float64
+
+
+def test_obj_face_with_vertex_index_0_is_an_error_naming_the_file(tmp_path: Path) -> None:
+    """OBJ indices start at 1; trimesh would read ``f 0 4 5`` as the first vertex."""
+    path = tmp_path / "zero.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nv 1 1 1\nf 1 2 3\nf 0/1 4 5\n")
+    with pytest.raises(MeshLoadError, match=r"zero\.obj.*line 7.*vertex index 0"):
+        load_mesh(path)
+    path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nv 1 1 1\nf 1 2 3\nf -1 4 3\n")  # negative: counted back
+    assert len(load_mesh(path).faces) == 2
+
+
+def test_memory_error_while_parsing_becomes_a_mesh_load_error(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import zbuf_occlude.mesh.load as load_module
+
+    def explode(path, file_type):
+        raise MemoryError
+
+    monkeypatch.setattr(load_module, "read_trimesh", explode)
+    path = tmp_path / "m.obj"
+    path.write_text("v 0 0 0\n")
+    with pytest.raises(MeshLoadError, match=r"m\.obj: not enough memory"):
+        load_mesh(path)

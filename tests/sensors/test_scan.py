@@ -290,3 +290,47 @@ def test_zbuffer_rechecks_widened_gpu_hits_in_float64():
     f_e, t_e = cast_embree(mesh, np.zeros(3), d)
     assert np.all(f_e >= 1) and np.array_equal(f_z, f_e)
     assert np.allclose(t_z, t_e, atol=1e-6) and n_fallback > 0
+
+
+def _scan_arrays(n: int = 4) -> dict:
+    """A minimal scan NPZ's arrays, as Scan.to_npz writes them."""
+    rng = np.random.default_rng(0)
+    return {"points": rng.normal(size=(n, 3)).astype(np.float32), "range_m": np.ones(n, np.float32),
+            "face_index": np.arange(n), "object_id": np.array([1] * n, np.int32), "normal": np.zeros((n, 3), np.float32),
+            "incidence_deg": np.zeros(n, np.float32), "sensor_position": np.zeros(3), "sensor_to_world": np.eye(4),
+            "frame": np.array("sensor"), "sensor": np.array("vlp16")}  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [({"sensor_to_world": np.eye(2)}, r"sensor_to_world must be a finite \(4, 4\)"),
+     ({"points": np.zeros((4, 2), np.float32)}, r"points must be a \(N, 3\) number array, got shape \(4, 2\)"),
+     ({"sensor_position": np.array("here")}, r"sensor_position must be a finite \(3,\) number array"),
+     ({"sensor_to_world": np.full((4, 4), np.nan)}, "sensor_to_world must be a finite"),
+     ({"object_id": np.ones(4, np.float32)}, "object_id must be a \\(N,\\) integer array"),
+     ({"range_m": np.ones(3, np.float32)}, "range_m has 3 rows but points has 4"),
+     ({"frame": np.array("moon")}, "frame must be one of")],
+)
+def test_read_scan_npz_checks_shapes_and_dtypes(tmp_path, change, match):
+    from zbuf_occlude.experiments.realism import read_object_clouds
+
+    path = tmp_path / "scan.npz"
+    np.savez(path, **{**_scan_arrays(), **change})
+    with pytest.raises(InvalidInputError, match=rf"scan\.npz: {match}"):
+        S.read_scan_npz(path)
+    with pytest.raises(InvalidInputError, match=rf"scan\.npz: {match}"):  # realism reads through it
+        read_object_clouds(path)
+
+
+def test_read_scan_npz_refuses_inflation_past_the_cap(tmp_path, monkeypatch):
+    import importlib
+
+    scan_module = importlib.import_module("zbuf_occlude.sensors.scan")  # the package exports a function named scan
+
+    path = tmp_path / "zeros.npz"
+    np.savez_compressed(path, **{**_scan_arrays(), "normal": np.zeros((4, 3), np.float32), "pad": np.zeros(1_000_000)})
+    monkeypatch.setattr(scan_module, "MAX_SCAN_NPZ_BYTES", 1 << 20)  # stands for 4 GiB
+    with pytest.raises(InvalidInputError, match=r"zeros\.npz: its members inflate to 8,0\d\d,\d+ bytes, more than the 1,048,576"):
+        S.read_scan_npz(path)
+    np.savez(tmp_path / "ok.npz", **_scan_arrays())
+    assert len(S.read_scan_npz(tmp_path / "ok.npz")) == 4

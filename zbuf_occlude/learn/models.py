@@ -36,12 +36,23 @@ __all__ = [
     "FisherVectorLayer",
     "ThreeDmFVNet",
     "build_model",
+    "check_model_config",
+    "MAX_WIDTH",
+    "MAX_CLASSES",
+    "MAX_FV_GRID",
     "orthogonality_loss",
     "voxelize",
     "normalize_clouds",
 ]
 
 MODELS = ("pointnet", "voxnet", "3dmfv")
+#: Largest channel multiplier: 8.  The paper's models are width 1.0; parameters grow with its
+#: square, so 8 is 64x (~220M for PointNet, ~0.9 GB); a checkpoint saying 1e9 would ask 768 GB.
+MAX_WIDTH = 8.0
+#: Most classes a model may have: 1,000 (ModelNet40 has 40, ShapeNet 55, ImageNet 1,000).
+MAX_CLASSES = 1000
+#: Most 3DmFV Gaussians per side: 16 (the 3DmFV paper uses 3 to 8; memory grows with its cube).
+MAX_FV_GRID = 16
 
 
 def _c(n: int, width: float) -> int:
@@ -405,16 +416,49 @@ def _set_bn_momentum(model: nn.Module, momentum: float) -> nn.Module:
     return model
 
 
+def check_model_config(name: object, n_classes: object, width: object, fv_grid: object) -> tuple[str, int, float, int]:
+    """The model settings, checked before anything is built (a checkpoint's config is untrusted).
+
+    Returns
+    -------
+    (name, n_classes, width, fv_grid) : (str, int, float, int)
+
+    Raises
+    ------
+    InvalidInputError
+        The message starts with the field: ``model`` not one of :data:`MODELS`, ``n_classes``
+        not an integer in [2, :data:`MAX_CLASSES`], ``width`` not a number in
+        (0, :data:`MAX_WIDTH`], ``fv_grid`` not an integer in [1, :data:`MAX_FV_GRID`].
+    """
+    if not isinstance(name, str) or name not in MODELS:
+        raise InvalidInputError(f"model: unknown model {name!r}; choose from {', '.join(MODELS)}")
+
+    def integer(field: str, value: object, lo: int, hi: int, why: str) -> int:
+        if isinstance(value, (float, np.floating)) and math.isfinite(value) and float(value).is_integer():
+            value = int(value)
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise InvalidInputError(f"{field}: must be an integer in [{lo}, {hi:,}], got {value!r}")
+        if not lo <= int(value) <= hi:
+            raise InvalidInputError(f"{field}: {int(value):,} is outside [{lo}, {hi:,}] ({why})")
+        return int(value)
+
+    n_classes = integer("n_classes", n_classes, 2, MAX_CLASSES, "a classifier needs at least 2 classes; see MAX_CLASSES")
+    fv_grid = integer("fv_grid", fv_grid, 1, MAX_FV_GRID, "Gaussians per side; see MAX_FV_GRID")
+    if isinstance(width, bool) or not isinstance(width, (int, float, np.integer, np.floating)) or not 0 < width <= MAX_WIDTH:
+        raise InvalidInputError(f"width: must be a number in (0, {MAX_WIDTH:g}], got {width!r}")
+    return name, n_classes, float(width), fv_grid
+
+
 def build_model(name: str, n_classes: int, *, width: float = 1.0, fv_grid: int = 8) -> nn.Module:
     """A model by name (:data:`MODELS`).
 
     Raises
     ------
     InvalidInputError
-        Unknown name, or fewer than 2 classes.
+        Unknown name or settings out of bounds (:func:`check_model_config`), checked before
+        any layer is allocated.
     """
-    if n_classes < 2:
-        raise InvalidInputError(f"need at least 2 classes, got {n_classes}")
+    name, n_classes, width, fv_grid = check_model_config(name, n_classes, width, fv_grid)
     if name == "pointnet":
         return _set_bn_momentum(PointNet(n_classes, width), BN_MOMENTUM)
     if name == "voxnet":

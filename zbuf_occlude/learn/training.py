@@ -36,7 +36,7 @@ from torch.nn import functional as F
 from zbuf_occlude.errors import CheckpointError, InvalidInputError, OutputError
 from zbuf_occlude.io.atomic import atomic_path
 from zbuf_occlude.learn.data import CloudSet, augment
-from zbuf_occlude.learn.models import build_model
+from zbuf_occlude.learn.models import build_model, check_model_config
 
 __all__ = [
     "TrainConfig", "OPTIMISER_DEFAULTS", "train", "predict", "TrainResult", "resolve_device", "seed_everything",
@@ -394,14 +394,24 @@ def load_model(path: str | os.PathLike, device: str = "cpu") -> tuple[nn.Module,
     Raises
     ------
     CheckpointError
-        Damaged, not a ``best.pt`` of :func:`train`, or it needs more than weights to load.
+        Damaged, not a ``best.pt`` of :func:`train`, it needs more than weights to load, or a
+        config field out of the bounds of :func:`zbuf_occlude.learn.models.check_model_config`
+        (``width`` <= 8, ``n_classes`` <= 1,000, ``fv_grid`` <= 16; the message names the field),
+        checked before the model is built.
     """
     path = Path(path)
     state = load_checkpoint(path, keys=MODEL_KEYS, device=device)
     cfg = state["config"]
+    if not isinstance(cfg, dict):
+        raise CheckpointError(f"{path}: its config is a {type(cfg).__name__}, not a dict")
+    missing = [k for k in ("model", "width", "fv_grid") if k not in cfg]
+    if missing:
+        raise CheckpointError(f"{path}: its config lacks {', '.join(missing)}")
     try:
-        model = build_model(cfg["model"], int(state["n_classes"]), width=float(cfg["width"]), fv_grid=int(cfg["fv_grid"]))
-    except (KeyError, TypeError, ValueError) as exc:
-        raise CheckpointError(f"{path}: its config is not a model's ({type(exc).__name__}: {exc})") from None
+        # bounded before anything is built: a 1 KB checkpoint may say width 1e9 (768 GB)
+        name, n_classes, width, fv_grid = check_model_config(cfg["model"], state["n_classes"], cfg["width"], cfg["fv_grid"])
+    except InvalidInputError as exc:
+        raise CheckpointError(f"{path}: config field {exc}") from None
+    model = build_model(name, n_classes, width=width, fv_grid=fv_grid)
     _load_state(path, model, state["model"], "model")
     return model.to(device).eval(), cfg

@@ -18,11 +18,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from zbuf_occlude.errors import MeshLoadError
+from zbuf_occlude.mesh.limits import check_gltf_declared_sizes
+from zbuf_occlude.mesh.named_files import folder_resolver, read_regular_file
 
 if TYPE_CHECKING:  # trimesh (and scipy with it) is imported by the readers below, when a file is read
     import trimesh
 
-__all__ = ["SUPPORTED_EXTENSIONS", "EXTENSIONS_TEXT", "FORMAT_EXTRAS", "read_trimesh"]
+__all__ = ["SUPPORTED_EXTENSIONS", "EXTENSIONS_TEXT", "FORMAT_EXTRAS", "read_trimesh", "ply_declared_counts"]
 
 #: File extensions load_mesh accepts (lower case), mapped to trimesh's file type.
 SUPPORTED_EXTENSIONS: dict[str, str] = {
@@ -202,6 +204,13 @@ def _utf8_ply_header(raw: bytes) -> bytes:
     return raw
 
 
+def ply_declared_counts(raw: bytes) -> dict[str, int]:
+    """The element counts a PLY header declares, e.g. ``{"vertex": 10, "face": 12}`` (empty without a header)."""
+    end = raw.find(b"end_header")
+    header = raw[: max(end, 0)].decode("utf-8", "replace")
+    return {m.group(1): int(m.group(2)) for m in re.finditer(r"^element\s+(\w+)\s+(\d+)", header, re.M)}
+
+
 def _check_ply_counts(raw: bytes, mesh: trimesh.Trimesh) -> None:
     """Raise _Malformed when a PLY holds fewer vertices or faces than its header declares.
 
@@ -209,8 +218,7 @@ def _check_ply_counts(raw: bytes, mesh: trimesh.Trimesh) -> None:
     chair's 2,234 faces).  Polygons become one or more triangles, so fewer faces than
     declared means lines are missing.
     """
-    header = raw[: raw.find(b"end_header")].decode("utf-8", "replace")
-    declared = {m.group(1): int(m.group(2)) for m in re.finditer(r"^element\s+(vertex|face)\s+(\d+)", header, re.M)}
+    declared = ply_declared_counts(raw)
     n_vertices, n_faces = declared.get("vertex"), declared.get("face")
     if (n_vertices is not None and len(mesh.vertices) < n_vertices) or (n_faces is not None and len(mesh.faces) < n_faces):
         raise _Malformed(
@@ -274,26 +282,54 @@ def _no_textures_resolver():
     return _NoTextures()
 
 
+#: An OBJ face corner: ``v``, ``v/vt``, ``v//vn`` or ``v/vt/vn``; the vertex index is the first number.
+_OBJ_FACE_LINE = re.compile(rb"^[ \t]*f[ \t]+([^\r\n#]*)", re.MULTILINE)
+
+
+def _check_obj_indices(raw: bytes) -> None:
+    """Raise _Malformed on an OBJ face corner with index 0.
+
+    OBJ indices start at 1 (negative ones count back from the last vertex); trimesh reads a
+    0 as the first vertex, so ``f 0 4 5`` loads as another face instead of an error.
+    """
+    for match in _OBJ_FACE_LINE.finditer(raw):
+        for corner in match.group(1).split():
+            first = corner.split(b"/", 1)[0]
+            if first.lstrip(b"+-").isdigit() and int(first) == 0:
+                line = raw.count(b"\n", 0, match.start()) + 1
+                raise _Malformed(f"line {line}: face {match.group(0).strip().decode('latin-1')[:60]!r} uses vertex index 0 (OBJ indices start at 1)")
+
+
 def _read(path: Path, file_type: str) -> trimesh.Trimesh:
-    """Parse ``path`` with trimesh into one Trimesh; scenes are flattened with transforms."""
+    """Parse ``path`` with trimesh into one Trimesh; scenes are flattened with transforms.
+
+    The file and every file it names are read through :mod:`zbuf_occlude.mesh.named_files`
+    (regular files only, inside the file's folder, size capped); glTF's declared sizes are
+    checked (:mod:`zbuf_occlude.mesh.limits`) before trimesh allocates them.
+    """
     import trimesh
 
+    raw = read_regular_file(path)
     if file_type == "ply":
-        raw = _utf8_ply_header(path.read_bytes())
+        raw = _utf8_ply_header(raw)
         mesh = _to_mesh(trimesh.load_scene(io.BytesIO(raw), file_type="ply", process=False))
         _check_ply_counts(raw, mesh)
         return mesh
     if file_type == "stl":
-        _check_binary_stl_length(path.read_bytes())
+        _check_binary_stl_length(raw)
     if file_type in FORMAT_EXTRAS:
         module, extra = FORMAT_EXTRAS[file_type]
         if importlib.util.find_spec(module) is None:
             raise _NeedsExtra(f"reading {file_type.upper()} needs the {module!r} package: pip install 'zbuf-occlude[{extra}]'")
+    if file_type in ("gltf", "glb"):
+        check_gltf_declared_sizes(raw, path)
+    if file_type == "obj":
+        _check_obj_indices(raw)
     if file_type == "dae":  # textures are not needed: never read (_no_textures_resolver)
         return _to_mesh(trimesh.load_scene(str(path), file_type=file_type, process=False, resolver=_no_textures_resolver()))
     if file_type != "off":
-        return _to_mesh(trimesh.load_scene(str(path), file_type=file_type, process=False))
-    raw = path.read_bytes()
+        scene = trimesh.load_scene(io.BytesIO(raw), file_type=file_type, resolver=folder_resolver(path), process=False)
+        return _to_mesh(scene)
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError:

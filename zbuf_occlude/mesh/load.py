@@ -377,7 +377,9 @@ def load_mesh(
         With the file name and cause: missing file, a directory, unsupported
         extension, unreadable or unparsable content, no vertices or no faces,
         NaN/inf vertices, face indices out of range, zero extent (all vertices
-        coincide) or only degenerate faces.
+        coincide) or only degenerate faces; declared sizes past the caps of
+        :mod:`zbuf_occlude.mesh.limits` or more than the memory there is; a file it names
+        that is not a regular file in its folder (a FIFO); never a ``MemoryError``.
     InvalidInputError
         If ``area_rtol`` is negative or not finite, or ``up`` is not an axis.
     """
@@ -401,7 +403,10 @@ def load_mesh(
         units_m = declared_units_m(path, file_type)
     except OSError as exc:
         raise MeshLoadError(f"{path}: cannot read file ({exc.strerror or exc})") from exc
-    except (MemoryError, MeshLoadError):
+    except MemoryError:
+        # A size the file declares that passed the caps of mesh.limits but not this machine.
+        raise MeshLoadError(f"{path}: not enough memory to load it; the file declares more than this machine can hold") from None
+    except MeshLoadError:
         raise
     except Exception as exc:  # trimesh raises a zoo of types (ValueError, IndexError, NameError, KeyError, ...)
         raise MeshLoadError(

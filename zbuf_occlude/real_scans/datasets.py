@@ -37,7 +37,6 @@ precision = TP/(TP+FP), recall = TP/(TP+FN), F1 their harmonic mean; the paper's
 from __future__ import annotations
 
 import csv
-import hashlib
 import logging
 import os
 from collections.abc import Iterable, Mapping, Sequence
@@ -48,7 +47,15 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.atomic import atomic_path
-from zbuf_occlude.real_scans.files import load_scan_folder
+from zbuf_occlude.mesh.named_files import read_regular_file, regular_file_size
+from zbuf_occlude.real_scans.files import (
+    MAX_FILE_BYTES,
+    MAX_LINE_BYTES,
+    POINT_EXTENSIONS,
+    load_scan_folder,
+    read_lines,
+    scan_digest,
+)
 from zbuf_occlude.real_scans.records import RealScan, normalize_points
 
 __all__ = [
@@ -92,10 +99,7 @@ def read_suo_bin(path: str | os.PathLike) -> NDArray[np.void]:
         Missing file, or a size that is not a whole number of 34-byte records.
     """
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise InvalidInputError(f"cannot read SUO file {path}: {exc}") from None
+    raw = read_regular_file(path, max_bytes=MAX_FILE_BYTES, error=InvalidInputError)
     if len(raw) % SUO_DTYPE.itemsize:
         raise InvalidInputError(
             f"{path}: {len(raw)} bytes is not a multiple of the {SUO_DTYPE.itemsize}-byte SUO record "
@@ -114,9 +118,11 @@ def read_suo_csv(path: str | os.PathLike) -> NDArray[np.void]:
     """
     path = Path(path)
     rows = []
+    if regular_file_size(path, error=InvalidInputError) > MAX_FILE_BYTES:
+        raise InvalidInputError(f"{path}: more than the {MAX_FILE_BYTES:,} bytes a scan may have")
     try:
-        with open(path, encoding="utf-8") as fh:
-            for lineno, line in enumerate(fh, 1):
+        with open(path, "rb") as fh:
+            for lineno, line in read_lines(path, fh):
                 if not line.strip():
                     continue
                 parts = line.strip().split(",")
@@ -176,6 +182,8 @@ def read_lidarnet_csv(path: str | os.PathLike) -> RealScan:
         a bad row (its line number is given), or fewer than one point.
     """
     path = Path(path)
+    if regular_file_size(path, error=InvalidInputError) > MAX_FILE_BYTES:
+        raise InvalidInputError(f"{path}: more than the {MAX_FILE_BYTES:,} bytes a scan may have")
     try:
         with open(path, encoding="utf-8", newline="") as fh:
             reader = csv.reader(fh)
@@ -194,6 +202,8 @@ def read_lidarnet_csv(path: str | os.PathLike) -> RealScan:
                     raise InvalidInputError(f"{path}:{lineno}: bad row {row!r}") from None
     except UnicodeDecodeError as exc:
         raise InvalidInputError(f"{path} is not UTF-8 text ({exc.reason} at byte {exc.start}); is it a LiDARNet CSV?") from None
+    except csv.Error as exc:  # a field longer than csv.field_size_limit(), a NUL byte
+        raise InvalidInputError(f"{path}: not a LiDARNet CSV ({exc})") from None
     except OSError as exc:
         raise InvalidInputError(f"cannot read LiDARNet file {path}: {exc}") from None
     if not xyz:
@@ -209,19 +219,54 @@ def read_lidarnet_csv(path: str | os.PathLike) -> RealScan:
 
 
 def _scan_files(root: Path) -> list[Path]:
-    return sorted(p for p in root.rglob("*") if p.is_file() and p.suffix.lower() in (".bin", ".csv") and p.name != "MANIFEST.csv")
+    """Every point-cloud file under ``root`` (any extension :func:`read_points` knows), but ``MANIFEST.csv``."""
+    return sorted(p for p in root.rglob("*") if p.is_file() and p.suffix.lower() in POINT_EXTENSIONS and p.name != "MANIFEST.csv")
 
 
-def _detect(files: Sequence[Path]) -> str:
-    """``lidarnet`` (CSVs with its header), ``suo`` (``class.instance.scan.bin|csv`` names), else ``folder``."""
-    for f in files:
-        if f.suffix.lower() == ".csv":
-            try:
-                with open(f, encoding="utf-8", errors="replace") as fh:
-                    if fh.readline().startswith("origin_x"):
-                        return "lidarnet"
-            except OSError:
-                continue
+def _is_lidarnet_csv(path: Path) -> bool:
+    """Whether a CSV's first line is LiDARNet's header (read with a bounded ``readline``)."""
+    try:
+        with open(path, "rb") as fh:
+            first = fh.readline(MAX_LINE_BYTES)
+    except OSError:
+        return False
+    return first.decode("utf-8", errors="replace").startswith(",".join(_LIDARNET_HEADER))
+
+
+#: Extensions each data set's reader reads.
+_READS = {"lidarnet": (".csv",), "suo": (".bin", ".csv")}
+
+
+def _unreadable(files: Sequence[Path], dataset: str) -> list[Path]:
+    return [f for f in files if f.suffix.lower() not in _READS[dataset]]
+
+
+def _refuse_unreadable(root: Path, files: Sequence[Path], dataset: str, why: str) -> None:
+    """Raise naming the files ``dataset``'s reader would skip, so that no class vanishes silently."""
+    left = _unreadable(files, dataset) if not why else list(files)
+    if left:
+        names = ", ".join(str(f.relative_to(root) if f.is_relative_to(root) else f) for f in left[:5])
+        more = f" and {len(left) - 5} more" if len(left) > 5 else ""
+        raise InvalidInputError(
+            f"real scans under {root}: the {dataset} reader cannot read {len(left)} file(s): {names}{more}"
+            f"{why or ''}; pass dataset='folder' to read every file as a plain point cloud, or move them out"
+        )
+
+
+def _detect(root: Path, files: Sequence[Path]) -> str:
+    """``lidarnet`` (every file a CSV with its header), ``suo`` (every file ``class.instance.scan.bin|csv``), else ``folder``.
+
+    Raises
+    ------
+    InvalidInputError
+        Some CSVs carry LiDARNet's header and other files do not: its reader would drop
+        them (a whole class in another format), so the files are named instead.
+    """
+    lidarnet = [f for f in files if f.suffix.lower() == ".csv" and _is_lidarnet_csv(f)]
+    if lidarnet:
+        chosen = set(lidarnet)
+        _refuse_unreadable(root, [f for f in files if f not in chosen], "lidarnet", " (no LiDARNet header)")
+        return "lidarnet"
     if files and all(f.suffix.lower() in (".bin", ".csv") and f.name.count(".") == 3 for f in files):
         return "suo"
     return "folder"
@@ -272,14 +317,15 @@ def load_real_scans(
         raise InvalidInputError(f"real scans: {root} does not exist")
     if dataset not in ("auto", "suo", "lidarnet", "folder"):
         raise InvalidInputError(f"dataset must be auto, suo, lidarnet or folder, got {dataset!r}")
-    if dataset == "folder" or (dataset == "auto" and root.is_dir() and _detect(_scan_files(root)) == "folder"):
+    if dataset == "folder" or (dataset == "auto" and root.is_dir() and _detect(root, _scan_files(root)) == "folder"):
         scans = load_scan_folder(root, label_map=label_map, up=up, units=units, min_points=min_points, dedupe=dedupe)
         return [s for s in scans if classes is None or s.label in set(classes)]
     files = [root] if root.is_file() else _scan_files(root)
     if dataset == "auto":
-        dataset = _detect(files)
+        dataset = _detect(root, files)
         if dataset == "folder":
             raise InvalidInputError(f"{root}: neither a LiDARNet CSV nor an SUO object; give the folder of class folders")
+    _refuse_unreadable(root, files, dataset, "")
     if dataset == "suo":
         stems_with_bin = {p.with_suffix("") for p in files if p.suffix.lower() == ".bin"}
         files = [p for p in files if p.suffix.lower() == ".bin" or p.with_suffix("") not in stems_with_bin]
@@ -289,7 +335,7 @@ def load_real_scans(
     n_dupes = 0
     for f in files:
         if dedupe:
-            digest = hashlib.md5(f.read_bytes()).hexdigest()
+            digest = scan_digest(f)
             if digest in seen:
                 n_dupes += 1
                 continue

@@ -33,8 +33,8 @@ naming it and the cause, never a traceback.
 from __future__ import annotations
 
 import csv
-import hashlib
 import io
+import itertools
 import logging
 import os
 import re
@@ -44,11 +44,15 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.errors import InsufficientMemoryError, InvalidInputError
+from zbuf_occlude.mesh.formats import ply_declared_counts
+from zbuf_occlude.mesh.named_files import check_array_sizes, file_digest, read_regular_file, regular_file_size
 from zbuf_occlude.mesh.scene import up_rotation
 from zbuf_occlude.real_scans.records import RealScan, normalize_points
+from zbuf_occlude.resources import check_memory
 
-__all__ = ["POINT_EXTENSIONS", "UNITS_M", "read_points", "units_to_m", "load_scan_folder"]
+__all__ = ["POINT_EXTENSIONS", "UNITS_M", "MAX_FILE_BYTES", "MAX_SCAN_POINTS", "MAX_ARRAY_BYTES", "MAX_LINE_BYTES",
+           "read_points", "read_lines", "scan_digest", "units_to_m", "load_scan_folder"]
 
 log = logging.getLogger(__name__)
 
@@ -58,6 +62,18 @@ POINT_EXTENSIONS = (".csv", ".txt", ".xyz", ".pts", ".ply", ".pcd", ".npy", ".np
 UNITS_M = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048, "km": 1000.0}
 #: Files larger than this are refused before reading (a scan of one object is kilobytes to megabytes).
 MAX_FILE_BYTES = 1 << 30
+#: Points one scan may hold: 50 million.  A segmented object is thousands to a million points;
+#: 5e7 is 1.2 GB as float64 (x, y, z), checked before the array is allocated.
+MAX_SCAN_POINTS = 50_000_000
+#: Bytes an ``.npy``/``.npz`` may declare once inflated: the same 1 GiB as a file.  A zip member
+#: compresses 1000:1 (zeros), so the cap is checked against the sizes the zip directory and
+#: the ``.npy`` header declare, before anything is read.
+MAX_ARRAY_BYTES = MAX_FILE_BYTES
+#: Longest line of a text scan: 4 KiB.  A row is a few numbers (x y z, intensity, a label);
+#: a longer line is not a row, and splitting a 1 GB line takes ~50x its size in Python strings.
+MAX_LINE_BYTES = 4096
+#: Rows parsed into Python objects at a time before they are stored as float64.
+_ROWS_PER_CHUNK = 65536
 _KITTI_RECORD = np.dtype("<f4")
 _PCD_TYPES = {("F", 4): "<f4", ("F", 8): "<f8", ("I", 1): "i1", ("I", 2): "<i2", ("I", 4): "<i4", ("I", 8): "<i8",
               ("U", 1): "u1", ("U", 2): "<u2", ("U", 4): "<u4", ("U", 8): "<u8"}  # fmt: skip
@@ -85,42 +101,80 @@ def _xyz_columns(header: list[str]) -> list[int] | None:
     return None
 
 
-def _rows_to_array(path: Path, rows: list[list[str]], columns: list[int] | None, first_line: int) -> NDArray[np.float64]:
-    out = np.empty((len(rows), 3))
-    for i, row in enumerate(rows):
-        try:
-            out[i] = [float(row[c]) for c in columns] if columns else [float(v) for v in row[:3]]
-            if len(row) < 3:
-                raise IndexError
-        except (ValueError, IndexError):
-            raise InvalidInputError(f"{path}:{first_line + i}: expected three numbers, got {row[:6]!r}") from None
-    return out
-
-
 def _split(line: str) -> list[str]:
     return [t for t in re.split(r"[,;\s]+", line.strip()) if t]
 
 
-def _read_text_table(path: Path, text: str) -> NDArray[np.float64]:
-    lines = [(i + 1, ln) for i, ln in enumerate(text.splitlines())]
-    lines = [(i, ln) for i, ln in lines if ln.strip() and not ln.lstrip().startswith(("#", "//"))]
-    if not lines:
-        raise InvalidInputError(f"{path}: no points")
-    columns, start = None, 0
-    first = _split(lines[0][1]) if path.suffix.lower() != ".csv" else next(csv.reader(io.StringIO(lines[0][1])))
-    if path.suffix.lower() == ".csv" and len(first) < 3:
-        first = _split(lines[0][1])
-    if not all(_NUMBER.match(t.strip()) for t in first):
-        columns, start = _xyz_columns(first), 1
-        if columns is None:
-            numeric = _split(lines[1][1]) if len(lines) > 1 else []
-            columns = [j for j, t in enumerate(numeric) if _NUMBER.match(t)][:3] or None
-    elif len(first) == 1 and len(lines) > 1:  # a .pts count line
-        start = 1
-    rows = [_split(ln) for _, ln in lines[start:]]
-    if not rows:
+def read_lines(path: Path, fh: io.BufferedReader):
+    """``(line number, text)`` of a binary file handle, one line at a time, none longer than :data:`MAX_LINE_BYTES`.
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the file and the line, on a line longer than the cap (a file with no newline).
+    """
+    for lineno, line in enumerate(iter(lambda: fh.readline(MAX_LINE_BYTES + 1), b""), 1):
+        if len(line) > MAX_LINE_BYTES:
+            raise InvalidInputError(f"{path}:{lineno}: a line longer than {MAX_LINE_BYTES:,} bytes is not a row of a point cloud")
+        yield lineno, line.decode("utf-8", errors="replace")
+
+
+def _check_points(path: Path, n: int, what: str = "declares") -> None:
+    """Refuse ``n`` points past :data:`MAX_SCAN_POINTS` or the memory there is, before allocating them."""
+    if n > MAX_SCAN_POINTS:
+        raise InvalidInputError(f"{path}: {what} {n:,} points, more than the {MAX_SCAN_POINTS:,} a scan may have")
+    try:
+        check_memory(n * 3 * np.dtype(np.float64).itemsize, option=f"{path}")
+    except InsufficientMemoryError as exc:
+        raise InvalidInputError(str(exc)) from None
+
+
+def _count_lines(fh: io.BufferedReader) -> int:
+    """Lines of a binary file (a last line without newline counts), read in 1 MiB chunks."""
+    n, last = 0, b"\n"
+    while chunk := fh.read(1 << 20):
+        n += chunk.count(b"\n")
+        last = chunk[-1:]
+    fh.seek(0)
+    return n + (last != b"\n")
+
+
+def _read_text_table(path: Path) -> NDArray[np.float64]:
+    """Rows of a CSV/TXT/XYZ/PTS file, streamed: memory is the (N, 3) float64 result, not Python strings."""
+    with open(path, "rb") as fh:
+        capacity = _count_lines(fh)
+        _check_points(path, capacity, "has up to")
+        content = ((i, ln) for i, ln in read_lines(path, fh) if ln.strip() and not ln.lstrip().startswith(("#", "//")))
+        head = next(content, None)
+        if head is None:
+            raise InvalidInputError(f"{path}: no points")
+        first = _split(head[1]) if path.suffix.lower() != ".csv" else next(csv.reader(io.StringIO(head[1])))
+        if path.suffix.lower() == ".csv" and len(first) < 3:
+            first = _split(head[1])
+        columns, pending = None, []
+        if not all(_NUMBER.match(t.strip()) for t in first):
+            columns = _xyz_columns(first)
+            if columns is None:
+                second = next(content, None)
+                if second is not None:
+                    pending = [second]
+                    columns = [j for j, t in enumerate(_split(second[1])) if _NUMBER.match(t)][:3] or None
+        elif len(first) != 1:  # a single number first is the .pts count line
+            pending = [head]
+        out = np.empty((capacity, 3))
+        n = 0
+        for lineno, line in itertools.chain(pending, content):
+            row = _split(line)
+            try:
+                out[n] = [float(row[c]) for c in columns] if columns else [float(v) for v in row[:3]]
+                if len(row) < 3:
+                    raise IndexError
+            except (ValueError, IndexError):
+                raise InvalidInputError(f"{path}:{lineno}: expected three numbers, got {row[:6]!r}") from None
+            n += 1
+    if n == 0:
         raise InvalidInputError(f"{path}: a header and no points")
-    return _rows_to_array(path, rows, columns, lines[start][0])
+    return out[:n] if n == capacity else out[:n].copy()
 
 
 def _read_pcd(path: Path, raw: bytes) -> NDArray[np.float64]:
@@ -140,12 +194,18 @@ def _read_pcd(path: Path, raw: bytes) -> NDArray[np.float64]:
             break
     try:
         fields = header["FIELDS"]
-        n = int(header.get("POINTS", [0])[0]) or int(header["WIDTH"][0]) * int(header.get("HEIGHT", ["1"])[0])
+        grid = int(header["WIDTH"][0]) * int(header.get("HEIGHT", ["1"])[0]) if "WIDTH" in header else None
+        n = int(header["POINTS"][0]) if "POINTS" in header else grid
         sizes = [int(s) for s in header.get("SIZE", ["4"] * len(fields))]
         types = header.get("TYPE", ["F"] * len(fields))
         counts = [int(c) for c in header.get("COUNT", ["1"] * len(fields))]
     except (KeyError, ValueError, IndexError):
         raise InvalidInputError(f"{path}: PCD header lacks FIELDS/POINTS or has non-numeric sizes ({header})") from None
+    if n is None:
+        raise InvalidInputError(f"{path}: PCD header has neither POINTS nor WIDTH")
+    if grid is not None and grid != n:
+        raise InvalidInputError(f"{path}: PCD header declares POINTS {n:,} but WIDTH x HEIGHT = {grid:,}")
+    _check_points(path, n)
     if not all(a in fields for a in "xyz"):
         raise InvalidInputError(f"{path}: PCD fields {fields} have no x y z")
     if not (len(sizes) == len(types) == len(counts) == len(fields)) or n < 0:
@@ -153,6 +213,8 @@ def _read_pcd(path: Path, raw: bytes) -> NDArray[np.float64]:
     mode = header["DATA"][0].lower() if header["DATA"] else ""
     if mode == "ascii":
         table = np.array([_split(ln) for ln in raw[pos:].decode("latin-1").splitlines() if ln.strip()], dtype=object)
+        if len(table) != n:
+            raise InvalidInputError(f"{path}: PCD declares {n:,} points but holds {len(table):,} rows")
         offsets = np.cumsum([0] + counts)
         try:
             cols = [np.asarray(table[:, offsets[fields.index(a)]], dtype=np.float64) for a in "xyz"] if len(table) else [np.zeros(0)] * 3
@@ -166,8 +228,11 @@ def _read_pcd(path: Path, raw: bytes) -> NDArray[np.float64]:
     except (KeyError, TypeError, ValueError):
         raise InvalidInputError(f"{path}: PCD field types {list(zip(types, sizes))} not supported") from None
     body = raw[pos:]
-    if len(body) < n * dtype.itemsize:
-        raise InvalidInputError(f"{path}: PCD declares {n} points ({n * dtype.itemsize} bytes) but holds {len(body)} bytes")
+    if len(body) != n * dtype.itemsize:
+        raise InvalidInputError(
+            f"{path}: PCD declares {n:,} points ({n * dtype.itemsize:,} bytes) but holds {len(body):,} bytes "
+            f"({len(body) / dtype.itemsize:,.6g} points)"
+        )
     rec = np.frombuffer(body, dtype=dtype, count=n)
     return np.stack([rec[a][:, 0].astype(np.float64) for a in "xyz"], axis=1)
 
@@ -192,44 +257,74 @@ def _read_npz(path: Path) -> NDArray[np.float64]:
     return _from_array(path, fits[0])
 
 
+def _read_ply(path: Path, raw: bytes) -> NDArray[np.float64]:
+    """Vertices of a PLY, exactly as many as its header declares."""
+    import trimesh
+
+    declared = ply_declared_counts(raw).get("vertex")
+    if declared is None:
+        raise InvalidInputError(f"{path}: PLY header declares no vertex element")
+    _check_points(path, declared)
+    pts = np.asarray(trimesh.load(io.BytesIO(raw), file_type="ply", process=False).vertices, dtype=np.float64)
+    if len(pts) != declared:
+        raise InvalidInputError(f"{path}: PLY declares {declared:,} vertices but holds {len(pts):,}; the file is cut short")
+    return pts
+
+
+def scan_digest(path: Path) -> str:
+    """MD5 of a scan file (for dropping duplicates), its size checked first and read in chunks.
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the file: larger than :data:`MAX_FILE_BYTES`, not a regular file, unreadable.
+    """
+    return file_digest(path, max_bytes=MAX_FILE_BYTES, error=InvalidInputError)
+
+
 def read_points(path: str | os.PathLike) -> NDArray[np.float64]:
     """The ``(N, 3) float64`` coordinates of one point-cloud file, as stored (module docstring).
 
     Raises
     ------
     InvalidInputError
-        Naming the file: missing, too large, unknown extension, malformed content,
-        non-finite coordinates or no point.
+        Naming the file: missing, not a regular file, larger than :data:`MAX_FILE_BYTES`,
+        declaring more than :data:`MAX_SCAN_POINTS` points or (``.npy``/``.npz``) more than
+        :data:`MAX_ARRAY_BYTES` inflated, a line longer than :data:`MAX_LINE_BYTES`, a PLY or
+        PCD holding more or fewer points than its header declares, unknown extension,
+        malformed content, non-finite coordinates or no point.
     """
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in POINT_EXTENSIONS:
         raise InvalidInputError(f"{path}: unsupported point-cloud extension {path.suffix!r}; use one of {', '.join(POINT_EXTENSIONS)}")
     try:
-        if not path.is_file():
+        if not path.exists():
             raise InvalidInputError(f"{path}: no such file")
-        if path.stat().st_size > MAX_FILE_BYTES:
-            raise InvalidInputError(f"{path}: {path.stat().st_size:,} bytes, more than the {MAX_FILE_BYTES:,} a scan may have")
+        size = regular_file_size(path, error=InvalidInputError)
+        if size > MAX_FILE_BYTES:
+            raise InvalidInputError(f"{path}: {size:,} bytes, more than the {MAX_FILE_BYTES:,} a scan may have")
         if suffix in (".npy", ".npz"):
+            check_array_sizes(path, max_bytes=MAX_ARRAY_BYTES, error=InvalidInputError)
             pts = _from_array(path, np.load(path, allow_pickle=False)) if suffix == ".npy" else _read_npz(path)
         elif suffix == ".ply":
-            import trimesh
-
-            pts = np.asarray(trimesh.load(path, file_type="ply", process=False).vertices, dtype=np.float64)
+            pts = _read_ply(path, read_regular_file(path, max_bytes=MAX_FILE_BYTES, error=InvalidInputError))
+        elif suffix in (".csv", ".txt", ".xyz", ".pts"):
+            pts = _read_text_table(path)
         else:
-            raw = path.read_bytes()
+            raw = read_regular_file(path, max_bytes=MAX_FILE_BYTES, error=InvalidInputError)
             if suffix == ".bin":
                 if len(raw) % (4 * _KITTI_RECORD.itemsize):
                     raise InvalidInputError(f"{path}: {len(raw)} bytes is not a whole number of 16-byte KITTI records (float32 x y z r)")
                 pts = np.frombuffer(raw, dtype=_KITTI_RECORD).reshape(-1, 4)[:, :3].astype(np.float64)
-            elif suffix == ".pcd":
-                pts = _read_pcd(path, raw)
             else:
-                pts = _read_text_table(path, raw.decode("utf-8", errors="replace"))
+                pts = _read_pcd(path, raw)
     except InvalidInputError:
         raise
     except OSError as exc:
         raise InvalidInputError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    except MemoryError:
+        raise InvalidInputError(f"{path}: not enough memory to read it") from None
     except Exception as exc:  # numpy/trimesh raise many types on hostile bytes
         raise InvalidInputError(f"{path}: cannot parse as {suffix[1:].upper()} ({type(exc).__name__}: {exc})") from None
     if len(pts) == 0:
@@ -275,8 +370,8 @@ def load_scan_folder(
     Raises
     ------
     InvalidInputError
-        ``root`` not a folder, no scan file in a class folder, a bad ``up``/``units``, or a
-        file that cannot be read (named).
+        ``root`` not a folder, no scan file in a class folder, a point-cloud file beside the
+        class folders (named), a bad ``up``/``units``, or a file that cannot be read (named).
     """
     root = Path(root)
     if not root.is_dir():
@@ -284,14 +379,19 @@ def load_scan_folder(
     rot = up_rotation(up)[:3, :3]
     scale = units_to_m(units)
     label_map = dict(label_map or {})
-    files = sorted(p for p in root.rglob("*") if p.suffix.lower() in POINT_EXTENSIONS and p.is_file()
-                   and len(p.relative_to(root).parts) >= 2 and p.name != "MANIFEST.csv")  # fmt: skip
+    found = sorted(p for p in root.rglob("*") if p.suffix.lower() in POINT_EXTENSIONS and p.is_file() and p.name != "MANIFEST.csv")
+    loose = [p.name for p in found if len(p.relative_to(root).parts) < 2]
+    if loose:
+        # Not silently left out: a file beside the class folders has no class.
+        raise InvalidInputError(f"real scans under {root}: {len(loose)} file(s) outside any class folder "
+                                f"({', '.join(loose[:5])}); move each into its class's folder")  # fmt: skip
+    files = [p for p in found if len(p.relative_to(root).parts) >= 2]
     if not files:
         raise InvalidInputError(f"real scans: no {'/'.join(POINT_EXTENSIONS)} files in class folders under {root}")
     seen, scans, few = set(), [], 0
     for f in files:
         if dedupe:
-            digest = hashlib.md5(f.read_bytes()).hexdigest()
+            digest = scan_digest(f)
             if digest in seen:
                 continue
             seen.add(digest)

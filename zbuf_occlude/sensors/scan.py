@@ -10,6 +10,7 @@ default (LiDAR: x forward, z up; camera: OpenCV), like real scans.
 from __future__ import annotations
 
 import os
+import zipfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -19,6 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.atomic import atomic_path
+from zbuf_occlude.mesh.named_files import check_array_sizes, regular_file_size
 from zbuf_occlude.sensors.depth_camera import DepthCamera
 from zbuf_occlude.sensors.lidar import Lidar
 from zbuf_occlude.sensors.raycast import BACKENDS, cast_embree, cast_zbuffer
@@ -27,7 +29,7 @@ from zbuf_occlude.sensors.scene import BuiltScene, ScanScene, SceneObject
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
-__all__ = ["Scan", "scan", "look_at_pose", "read_scan_npz", "build_scene", "FRAMES"]
+__all__ = ["Scan", "scan", "look_at_pose", "read_scan_npz", "build_scene", "FRAMES", "MAX_SCAN_NPZ_BYTES"]
 
 #: Frames a scan's points can be given in.
 FRAMES = ("sensor", "world")
@@ -136,25 +138,74 @@ class Scan:
         return path
 
 
+#: Largest scan ``.npz`` read, inflated: 4 GiB (a 128-beam sweep of a street is ~2.6 M returns,
+#: ~0.1 GB in this layout); checked from the zip directory and the array headers before reading.
+MAX_SCAN_NPZ_BYTES = 4 << 30
+
+#: Per-point arrays of a scan NPZ: (columns or None for (N,), dtype kinds accepted); "f" = any
+#: real number (integers too), "i" = integers only.
+_NPZ_PER_POINT = {"points": (3, "f"), "range_m": (None, "f"), "face_index": (None, "i"), "object_id": (None, "i"),
+                  "normal": (3, "f"), "incidence_deg": (None, "f"), "ring": (None, "i"), "pixel": (2, "i")}  # fmt: skip
+_KINDS = {"f": "fiu", "i": "iu"}
+
+
+def _checked_npz(path: Path, d: dict[str, np.ndarray]) -> None:
+    """Shapes and dtypes of a scan NPZ's arrays, each error naming the file and the key."""
+    n = None
+    for key, (cols, kind) in _NPZ_PER_POINT.items():
+        if key not in d:
+            continue
+        a = d[key]
+        want = "(N,)" if cols is None else f"(N, {cols})"
+        if a.dtype.kind not in _KINDS[kind] or a.ndim != (1 if cols is None else 2) or (cols is not None and a.shape[1] != cols):
+            raise InvalidInputError(f"{path}: {key} must be a {want} {'number' if kind == 'f' else 'integer'} array, "
+                                    f"got shape {a.shape} dtype {a.dtype}")  # fmt: skip
+        if n is not None and len(a) != n:
+            raise InvalidInputError(f"{path}: {key} has {len(a)} rows but points has {n}")
+        n = len(a) if n is None else n
+    for key, shape in (("sensor_position", (3,)), ("sensor_to_world", (4, 4))):
+        a = d.get(key)
+        if a is None:
+            continue
+        if a.dtype.kind not in "fiu" or a.shape != shape or not np.isfinite(a).all():
+            raise InvalidInputError(f"{path}: {key} must be a finite {shape} number array, got shape {a.shape} dtype {a.dtype}")
+    for key in ("frame", "sensor"):
+        if key in d and (d[key].dtype.kind != "U" or d[key].ndim != 0):
+            raise InvalidInputError(f"{path}: {key} must be a string, got shape {d[key].shape} dtype {d[key].dtype}")
+    if "frame" in d and str(d["frame"]) not in FRAMES:
+        raise InvalidInputError(f"{path}: frame must be one of {FRAMES}, got {str(d['frame'])!r}")
+
+
 def read_scan_npz(path: str | os.PathLike) -> Scan:
-    """Read a scan written by :meth:`Scan.to_npz`.
+    """Read a scan written by :meth:`Scan.to_npz`, checking every array before it is used.
 
     Raises
     ------
     InvalidInputError
-        Missing file or keys.
+        Naming the file: missing, not a regular file, inflating past
+        :data:`MAX_SCAN_NPZ_BYTES`, missing keys, or an array of the wrong shape or dtype
+        (per-point arrays of N rows, ``points``/``normal`` (N, 3) numbers, indices integers,
+        ``sensor_position`` a finite (3,), ``sensor_to_world`` a finite (4, 4), ``frame`` one
+        of :data:`FRAMES`).
     """
+    path = Path(path)
     try:
+        regular_file_size(path, error=InvalidInputError)
+        check_array_sizes(path, max_bytes=MAX_SCAN_NPZ_BYTES, error=InvalidInputError)
         with np.load(path, allow_pickle=False) as z:
             d = {k: z[k] for k in z.files}
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+        if isinstance(exc, InvalidInputError):
+            raise
         raise InvalidInputError(f"{path}: cannot read scan NPZ ({exc})") from exc
     missing = {"points", "range_m", "face_index", "object_id", "normal", "incidence_deg", "sensor_position"} - set(d)
     if missing:
         raise InvalidInputError(f"{path}: not a scan NPZ, missing keys {sorted(missing)}")
+    _checked_npz(path, d)
     return Scan(
         d["points"], d.get("ring"), d.get("pixel"), d["range_m"], d["face_index"], d["object_id"], d["normal"],
-        d["incidence_deg"], str(d.get("frame", "sensor")), d["sensor_position"], d.get("sensor_to_world", np.eye(4)), str(d.get("sensor", "")),
+        d["incidence_deg"], str(d.get("frame", "sensor")), d["sensor_position"].astype(np.float64),
+        d.get("sensor_to_world", np.eye(4)).astype(np.float64), str(d.get("sensor", "")),
     )  # fmt: skip
 
 
