@@ -61,18 +61,6 @@ class ObjectCloud:
 
 
 # -- reading ------------------------------------------------------------------------------------
-def _lidarnet_sensor_frame(path: Path) -> NDArray[np.float64]:
-    """A LiDARNet CSV's ``origin_*`` columns, z up, metres.
-
-    Until :mod:`zbuf_occlude.real_scans.datasets` keeps the sensor-frame points (its ``RealScan`` holds
-    normalised points only), this reads them here, with its units and axes.
-    """
-    from zbuf_occlude.real_scans.datasets import LIDARNET_UNITS_PER_METRE
-
-    p = np.loadtxt(path, delimiter=",", skiprows=1, usecols=(0, 1, 2), ndmin=2)
-    return np.stack([p[:, 0], -p[:, 2], p[:, 1]], axis=1) / LIDARNET_UNITS_PER_METRE  # as real_scans: y up → z up
-
-
 def _from_npz(path: Path) -> list[ObjectCloud]:
     s = read_scan_npz(path)
     pts = s.points.astype(np.float64) - s.sensor_position
@@ -104,7 +92,7 @@ def read_object_clouds(path: str | os.PathLike, *, min_points: int = 1) -> list[
         from zbuf_occlude.real_scans.datasets import load_real_scans
 
         for real in load_real_scans(root, dataset="lidarnet"):  # discovery, labels, de-duplication
-            clouds.append(ObjectCloud(_lidarnet_sensor_frame(Path(real.source)), real.label, real.source))
+            clouds.append(ObjectCloud(real.points_sensor_m, real.label, real.source))
     for f in files:
         if f.suffix.lower() == ".npz":
             clouds.extend(_from_npz(f))

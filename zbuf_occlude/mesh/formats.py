@@ -13,18 +13,20 @@ from __future__ import annotations
 import base64
 import importlib.util
 import io
+import itertools
 import re
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from zbuf_occlude.errors import MeshLoadError
-from zbuf_occlude.mesh.limits import check_gltf_declared_sizes
+from zbuf_occlude.mesh.flatten import flatten_scene
+from zbuf_occlude.mesh.limits import check_collada_declared_sizes, check_gltf_declared_sizes
 from zbuf_occlude.mesh.named_files import folder_resolver, read_regular_file
 
 if TYPE_CHECKING:  # trimesh (and scipy with it) is imported by the readers below, when a file is read
     import trimesh
 
-__all__ = ["SUPPORTED_EXTENSIONS", "EXTENSIONS_TEXT", "FORMAT_EXTRAS", "read_trimesh", "ply_declared_counts"]
+__all__ = ["EXTENSIONS_TEXT", "FORMAT_EXTRAS", "SUPPORTED_EXTENSIONS", "ply_declared_counts", "read_trimesh"]
 
 #: File extensions load_mesh accepts (lower case), mapped to trimesh's file type.
 SUPPORTED_EXTENSIONS: dict[str, str] = {
@@ -175,7 +177,7 @@ def _fan_triangulate_off(text: str) -> str | None:
             if len(corners) > 4:
                 n_fanned += 1
                 # the same fan trimesh builds: (c0, ci, ci+1)
-                faces.extend(f"3 {corners[0]} {a} {b}" for a, b in zip(corners[1:-1], corners[2:]))
+                faces.extend(f"3 {corners[0]} {a} {b}" for a, b in itertools.pairwise(corners[1:]))
             else:
                 faces.append(" ".join([str(len(corners)), *corners]))
     except (IndexError, ValueError):
@@ -208,7 +210,7 @@ def ply_declared_counts(raw: bytes) -> dict[str, int]:
     """The element counts a PLY header declares, e.g. ``{"vertex": 10, "face": 12}`` (empty without a header)."""
     end = raw.find(b"end_header")
     header = raw[: max(end, 0)].decode("utf-8", "replace")
-    return {m.group(1): int(m.group(2)) for m in re.finditer(r"^element\s+(\w+)\s+(\d+)", header, re.M)}
+    return {m.group(1): int(m.group(2)) for m in re.finditer(r"^element\s+(\w+)\s+(\d+)", header, re.MULTILINE)}
 
 
 def _check_ply_counts(raw: bytes, mesh: trimesh.Trimesh) -> None:
@@ -304,8 +306,9 @@ def _read(path: Path, file_type: str) -> trimesh.Trimesh:
     """Parse ``path`` with trimesh into one Trimesh; scenes are flattened with transforms.
 
     The file and every file it names are read through :mod:`zbuf_occlude.mesh.named_files`
-    (regular files only, inside the file's folder, size capped); glTF's declared sizes are
-    checked (:mod:`zbuf_occlude.mesh.limits`) before trimesh allocates them.
+    (regular files only, inside the file's folder, size capped); glTF's and COLLADA's declared
+    sizes are checked (:mod:`zbuf_occlude.mesh.limits`) before trimesh allocates them, and the
+    scene is flattened in linear time (:mod:`zbuf_occlude.mesh.flatten`).
     """
     import trimesh
 
@@ -326,6 +329,7 @@ def _read(path: Path, file_type: str) -> trimesh.Trimesh:
     if file_type == "obj":
         _check_obj_indices(raw)
     if file_type == "dae":  # textures are not needed: never read (_no_textures_resolver)
+        check_collada_declared_sizes(raw, path)
         return _to_mesh(trimesh.load_scene(str(path), file_type=file_type, process=False, resolver=_no_textures_resolver()))
     if file_type != "off":
         scene = trimesh.load_scene(io.BytesIO(raw), file_type=file_type, resolver=folder_resolver(path), process=False)
@@ -374,10 +378,11 @@ def _read(path: Path, file_type: str) -> trimesh.Trimesh:
 def _to_mesh(scene: trimesh.Scene) -> trimesh.Trimesh:
     import trimesh
 
-    # Scene.to_mesh() concatenates every Trimesh of a scene (GLB) with its node
-    # transform baked in, and drops points and paths.  process=False at load keeps
-    # vertex and face order as in the file (no merging of ModelNet's duplicated vertices).
-    mesh = scene.to_mesh()
+    # flatten_scene concatenates every Trimesh of a scene (GLB) with its node transform
+    # baked in, and drops points and paths: Scene.to_mesh() in time linear in the nodes.
+    # process=False at load keeps vertex and face order as in the file (no merging of
+    # ModelNet's duplicated vertices).
+    mesh = flatten_scene(scene)
     if len(mesh.faces) == 0:
         n_points = sum(len(g.vertices) for g in scene.geometry.values() if isinstance(g, trimesh.PointCloud))
         if n_points:

@@ -167,7 +167,7 @@ def read_suo_object(path: str | os.PathLike) -> RealScan:
     xyz = np.stack([rec["x"], rec["y"], rec["z"]], axis=1).astype(np.float64)
     return RealScan(
         points=normalize_points(xyz), label=path.name.split(".")[0], source=str(path), dataset="suo",
-        extent_m=xyz.max(axis=0) - xyz.min(axis=0),
+        extent_m=xyz.max(axis=0) - xyz.min(axis=0), points_sensor_m=xyz,
     )  # fmt: skip
 
 
@@ -214,7 +214,7 @@ def read_lidarnet_csv(path: str | os.PathLike) -> RealScan:
     zup = np.stack([p[:, 0], -p[:, 2], p[:, 1]], axis=1) / LIDARNET_UNITS_PER_METRE  # y up → z up, metres
     return RealScan(
         points=normalize_points(zup), label=labels.pop(), source=str(path), dataset="lidarnet",
-        extent_m=zup.max(axis=0) - zup.min(axis=0),
+        extent_m=zup.max(axis=0) - zup.min(axis=0), points_sensor_m=zup,
     )  # fmt: skip
 
 

@@ -405,7 +405,8 @@ def load_scan_folder(
         except InvalidInputError as exc:
             raise InvalidInputError(f"{f}: {exc}") from None
         scans.append(RealScan(points=normalised, label=label_map.get(folder, folder), source=str(f),
-                              dataset=dataset, extent_m=pts.max(axis=0) - pts.min(axis=0)))  # fmt: skip
+                              dataset=dataset, extent_m=pts.max(axis=0) - pts.min(axis=0),
+                              points_sensor_m=np.asarray(pts, dtype=np.float64)))  # fmt: skip
     if few:
         log.info("real scans: %d files under %s have fewer than %d points", few, root, min_points)
     if not scans:

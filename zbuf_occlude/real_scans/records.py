@@ -27,6 +27,11 @@ class RealScan:
     dataset : {"suo", "lidarnet"}
     extent_m : (3,) float64
         Bounding-box size before normalisation, metres (x, y, z with z up).
+    points_sensor_m : (n, 3) float64 or None
+        The same returns before normalisation, z up, metres, in ``points``' order: the sensor
+        frame (sensor at the origin) for SUO and LiDARNet; for class folders of point files, the
+        file's own coordinates (a sensor frame when the data set keeps one; a fit refuses
+        clouds centred on the object, :func:`zbuf_occlude.sensors.fit.fit_lidar`).
     """
 
     points: NDArray[np.float32]
@@ -34,6 +39,7 @@ class RealScan:
     source: str
     dataset: str
     extent_m: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    points_sensor_m: NDArray[np.float64] | None = None
 
 
 def normalize_points(points: NDArray[np.floating]) -> NDArray[np.float32]:
