@@ -132,3 +132,32 @@ def tiny_dataset(out: Path, storage: str = "dense") -> Path:
     params = FarmParams(views="0:0,30:90", samples_per_view=1, n_points=64, dense_points=1024, resolution=64, storage=storage)
     run_farm(tree, out, params=params, options=RunOptions(progress=False))
     return out
+
+
+def shingles_mesh(cards: int = 60, step: float = 0.01, gap: float = 0.01):
+    """A deck of ``cards`` unit squares facing ±x, each ``gap`` behind the one before and shifted
+    ``step`` along y, normalised: from ``el=0, az=0`` (the camera on +x) every card but the first
+    shows only a strip, so the faces a pose sees are mostly hidden.  The visible surface is then
+    too small a part of them for the bounded top-up (``geometry.samples.top_up``): the
+    degenerate case whose samples stay padded."""
+    import numpy as np
+    import trimesh
+
+    from zbuf_occlude.mesh.load import normalize_mesh
+
+    vertices, faces = [], []
+    for j in range(cards):
+        x, y0, base = -j * gap, j * step, len(vertices)
+        vertices += [[x, y0, 0.0], [x, y0 + 1.0, 0.0], [x, y0 + 1.0, 1.0], [x, y0, 1.0]]
+        faces += [[base, base + 1, base + 2], [base, base + 2, base + 3]]
+    return normalize_mesh(trimesh.Trimesh(np.array(vertices), np.array(faces), process=False))
+
+
+@pytest.fixture(scope="session")
+def shingles_tree(tmp_path_factory) -> Path:
+    """A ModelNet-style tree holding one :func:`shingles_mesh`, ``shingles/train/shingles_0001.off``."""
+    root = tmp_path_factory.mktemp("shingles")
+    path = root / "shingles" / "train" / "shingles_0001.off"
+    path.parent.mkdir(parents=True)
+    shingles_mesh().export(path)
+    return root

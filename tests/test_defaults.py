@@ -10,7 +10,7 @@ from zbuf_occlude import defaults
 from zbuf_occlude.experiments.compare import compare, run_compare
 from zbuf_occlude.farm.config import FarmParams
 from zbuf_occlude.geometry.cameras import camera_on_sphere, cameras_from_schedule
-from zbuf_occlude.pipeline import occlude_object
+from zbuf_occlude.pipeline import occlude_poses
 from zbuf_occlude.render.moderngl_backend import ModernGLRenderer
 from zbuf_occlude.visibility.peers import naive_zbuffer_visible
 from zbuf_occlude.visibility.registry import visible_mask
@@ -23,7 +23,7 @@ def _default(fn, name):
 
 @pytest.mark.parametrize(
     "fn",
-    [camera_on_sphere, cameras_from_schedule, occlude_object, zbuffer_visible, zbuffer_tolerance_visible,
+    [camera_on_sphere, cameras_from_schedule, occlude_poses, zbuffer_visible, zbuffer_tolerance_visible,
      naive_zbuffer_visible, compare, run_compare],
 )  # fmt: skip
 def test_resolution_default(fn) -> None:
@@ -31,7 +31,7 @@ def test_resolution_default(fn) -> None:
 
 
 def test_method_default() -> None:
-    assert _default(visible_mask, "method") == _default(occlude_object, "method") == defaults.DEFAULT_METHOD
+    assert _default(visible_mask, "method") == _default(occlude_poses, "method") == defaults.DEFAULT_METHOD
     assert FarmParams.__dataclass_fields__["method"].default == defaults.DEFAULT_METHOD
 
 
@@ -46,7 +46,7 @@ def test_gpu_constants_agree_between_backend_and_methods() -> None:
         assert _default(fn, "slope_scale") == defaults.DEFAULT_SLOPE_SCALE
 
 
-def test_sample_sizes_and_views_of_generate_validate_farm_and_occlude_object() -> None:
+def test_sample_sizes_and_views_of_generate_validate_farm_and_occlude_poses() -> None:
     from zbuf_occlude.cli.main import build_parser
     from zbuf_occlude.defaults import DEFAULT_VIEWS as COMPARE_VIEWS
     from zbuf_occlude.farm.config import GENERATE_DEFAULTS
@@ -55,8 +55,8 @@ def test_sample_sizes_and_views_of_generate_validate_farm_and_occlude_object() -
     gen = parser.parse_args(["generate", "--out", "x"])
     val = parser.parse_args(["validate"])
     farm = FarmParams()
-    assert _default(occlude_object, "n_points") == GENERATE_DEFAULTS.n_points == farm.n_points == gen.points == defaults.DEFAULT_N_POINTS
-    assert (_default(occlude_object, "samples_per_view") == GENERATE_DEFAULTS.samples_per_view == farm.samples_per_view
+    assert _default(occlude_poses, "n_points") == GENERATE_DEFAULTS.n_points == farm.n_points == gen.points == defaults.DEFAULT_N_POINTS
+    assert (_default(occlude_poses, "samples_per_view") == GENERATE_DEFAULTS.samples_per_view == farm.samples_per_view
             == gen.samples_per_view == defaults.DEFAULT_SAMPLES_PER_VIEW)  # fmt: skip
     assert GENERATE_DEFAULTS.dense_points == gen.dense_points == val.dense_points == defaults.DEFAULT_DENSE_POINTS
     assert GENERATE_DEFAULTS.resolution == gen.resolution == val.resolution == defaults.DEFAULT_RESOLUTION
@@ -72,4 +72,4 @@ def test_the_farm_and_occlude_take_their_own_defaults_from_defaults() -> None:
     assert fields["resolution"].default == defaults.DEFAULT_FARM_RESOLUTION
     assert _default(occlude_fn, "samples_per_view") == defaults.DEFAULT_OCCLUDE_SAMPLES_PER_VIEW
     assert _default(occlude_fn, "views") == defaults.DEFAULT_VIEWS
-    assert _default(occlude_fn, "seed") == _default(occlude_object, "seed") == defaults.DEFAULT_SEED
+    assert _default(occlude_fn, "seed") == _default(occlude_poses, "seed") == defaults.DEFAULT_SEED

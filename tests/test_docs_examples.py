@@ -3,9 +3,13 @@
 Each fenced ```bash and ```python block of README.md and docs/**/*.md is one test (id
 ``FILE:LINE``).  It runs in a fresh temporary copy of the repository's files (what ``git
 ls-files`` lists, plus untracked files git does not ignore; so no ``../shared`` and no build
-outputs), with the copy as the working directory, as a user following the page on a fresh
-clone would: the blocks of one page run in order in one copy of their own, so a later block
-may read what an earlier one wrote (running one block alone first runs the blocks above it).
+outputs), with the copy as the working directory, as a user following the pages on a fresh
+clone would: **one copy for every page**, the pages one after another (README.md first, then
+docs/ in file order) and the blocks of a page in order, so a later block may read what an
+earlier one wrote (running one block alone first runs the blocks above it on its page), and an
+example that is refused because another page's example wrote the same folder fails.  Examples
+write under ``runs/``, each to a folder of its own: a block that leaves anything else new at
+the repository root fails.
 ``python`` and ``zbuf-occlude`` (also as ``.venv/bin/python`` and ``.venv/bin/zbuf-occlude``,
 the names the install script creates) resolve to the interpreter running the tests, and the
 copy's package comes first on ``PYTHONPATH``.
@@ -38,6 +42,8 @@ TIMEOUT_S = float(os.environ.get("ZBUF_DOCS_EXAMPLE_TIMEOUT", "180"))
 RUN_LANGUAGES = {"bash": "bash", "sh": "bash", "shell": "bash", "python": "python", "py": "python"}
 FENCE = re.compile(r"^(?P<indent>[ \t]*)(?P<fence>`{3,}|~{3,})(?P<info>[^`]*)$")
 INSTALL = "bash scripts/install.sh"
+#: The folder under the repository root where the examples write (each to a folder of its own).
+EXAMPLE_OUTPUTS = "runs"
 README_LINES_MAX = 200
 
 
@@ -173,43 +179,99 @@ RUNNABLE = [b for b in BLOCKS if not is_install_block(b)]
 INSTALLS = [b for b in BLOCKS if is_install_block(b)]
 
 
-class _Pages:
-    """One fresh copy per page; remembers which of its blocks have run there."""
+class _SharedCopy:
+    """One fresh copy of the repository for every page, made on first use; remembers which blocks
+    have run in it and what its root held before any did."""
 
     def __init__(self, base: Path):
         self.base = base
-        self.copies: dict[str, tuple[Path, set[int]]] = {}
+        self.root: Path | None = None
+        self.done: set[str] = set()  # ids of the blocks that have run
+        self.entries: set[str] = set()
 
-    def copy_for(self, path: str) -> tuple[Path, set[int]]:
-        if path not in self.copies:
-            d = self.base / re.sub(r"[^A-Za-z0-9_.-]", "_", path)
-            (d / "scratch").mkdir(parents=True)
-            self.copies[path] = (fresh_copy(d / "repo"), set())
-        return self.copies[path]
+    def get(self) -> Path:
+        if self.root is None:
+            (self.base / "scratch").mkdir(parents=True)
+            self.root = fresh_copy(self.base / "repo")
+            self.entries = {p.name for p in self.root.iterdir()}
+        return self.root
+
+    def new_at_root(self) -> list[str]:
+        """What the examples left at the repository root besides ``runs/``."""
+        return sorted({p.name for p in self.get().iterdir()} - self.entries - {EXAMPLE_OUTPUTS})
 
 
 @pytest.fixture(scope="session")
-def pages(tmp_path_factory) -> _Pages:
-    return _Pages(tmp_path_factory.mktemp("docs_examples"))
+def shared_copy(tmp_path_factory) -> _SharedCopy:
+    return _SharedCopy(tmp_path_factory.mktemp("docs_examples"))
 
 
 @pytest.mark.parametrize("block", RUNNABLE, ids=[b.id for b in RUNNABLE])
-def test_example_runs(block: Block, pages: _Pages) -> None:
+def test_example_runs(block: Block, shared_copy: _SharedCopy) -> None:
     if needs_torch(block) and importlib.util.find_spec("torch") is None:
         pytest.skip("needs torch (pip install -e '.[learn]')")
-    copy, done = pages.copy_for(block.path)
+    copy = shared_copy.get()
     scratch = copy.parent / "scratch"
     # the blocks above this one on the same page, as a reader would have run them
-    for earlier in (b for b in RUNNABLE if b.path == block.path and b.index < block.index and b.index not in done):
+    for earlier in (b for b in RUNNABLE if b.path == block.path and b.index < block.index and b.id not in shared_copy.done):
         if needs_torch(earlier) and importlib.util.find_spec("torch") is None:
             continue
         r = run_block(earlier, copy, scratch)
-        done.add(earlier.index)
+        shared_copy.done.add(earlier.id)
         if r.returncode != 0:
             pytest.fail(f"an earlier block of the page, {earlier.id}, failed (exit {r.returncode}):\n{r.stdout}\n{r.stderr}")
     r = run_block(block, copy, scratch)
-    done.add(block.index)
+    shared_copy.done.add(block.id)
     assert r.returncode == 0, f"{block.id} exited {r.returncode}\n--- code\n{block.code}--- stdout\n{r.stdout}\n--- stderr\n{r.stderr}"
+    new = shared_copy.new_at_root()
+    assert not new, f"{block.id} (or a block above it) left {new} at the repository root: examples write under {EXAMPLE_OUTPUTS}/"
+
+
+def documented_folder_tree(text: str) -> set[str]:
+    """The entries of the folder tree under "## The folder" in docs/guide/outputs.md: the first
+    word of each line indented by two spaces (``shards/``, ``<name>/``, ``plan.json``)."""
+    section = text[text.index("## The folder"):]
+    block = section[section.index("```text"):]
+    block = block[: block.index("```", 3)]
+    return {m[1] for m in re.finditer(r"^  (\S+)", block, re.MULTILINE)}
+
+
+def test_the_documented_folder_tree_is_what_generate_and_farm_write(tmp_path: Path) -> None:
+    """docs/guide/outputs.md's tree, entry for entry, against real runs of generate (h5, npz) and
+    farm: each run writes exactly the entries the page says it writes, and nothing else."""
+    import json
+
+    from zbuf_occlude.cli.main import main
+
+    tree = documented_folder_tree((ROOT / "docs" / "guide" / "outputs.md").read_text(encoding="utf-8"))
+    meshes = [str(ROOT / "data" / "samples" / rel) for rel in ("chair/train/chair_0001.off", "sofa/test/sofa_0681.off")]
+    small = ["--views", "0:0", "--points", "64", "--samples-per-view", "1", "--dense-points", "1000", "--resolution", "64"]
+    runs = {
+        "generate --format h5": (["generate", *meshes, *small], tree - {"<name>/"}),
+        "generate --format npz": (["generate", *meshes, *small, "--format", "npz"], tree - {"occluded_train.h5", "occluded_test.h5", "shards/"}),
+        "farm": (["farm", str(ROOT / "data" / "samples"), "--classes", "chair,sofa", "--per-class", "1", *small, "--no-progress"],
+                 tree - {"occluded_train.h5", "occluded_test.h5", "<name>/"}),
+    }  # fmt: skip
+    for i, (what, (argv, expected)) in enumerate(runs.items()):
+        out = tmp_path / f"run{i}"
+        assert main([*argv, "--out", str(out)]) == 0, what
+        names = {json.loads(line)["name"].split("/")[0] + "/" for line in (out / "manifest.jsonl").read_text().splitlines()}
+        written = {p.name + "/" * p.is_dir() for p in out.iterdir() if not p.name.startswith(".")}
+        written = (written - names) | ({"<name>/"} if written & names else set())
+        assert written == expected, f"{what}: written but not in the tree {sorted(written - expected)}, in the tree but not written {sorted(expected - written)}"
+
+
+def test_examples_write_under_runs_each_to_a_folder_of_its_own() -> None:
+    """Every ``--out`` of a runnable example is a folder under ``runs/``, and no two pages write
+    the same one (a page may come back to its own folder: a resume, a merge)."""
+    pages_of: dict[str, set[str]] = {}
+    for block in RUNNABLE:
+        for out in re.findall(r"--out[ =](\S+)", block.code):
+            assert out.startswith(f"{EXAMPLE_OUTPUTS}/"), f"{block.id}: --out {out} is not under {EXAMPLE_OUTPUTS}/"
+            pages_of.setdefault(out.rstrip("/"), set()).add(block.path)
+    shared = {out: sorted(pages) for out, pages in pages_of.items() if len(pages) > 1}
+    assert not shared, f"folders written by the examples of several pages: {shared}"
+    assert len(pages_of) > 10  # the examples were found
 
 
 def _ci_commands() -> list[str]:
@@ -260,11 +322,77 @@ def test_readme_links_exist() -> None:
     assert not missing, missing
 
 
+def heading_slugs(text: str) -> set[str]:
+    """The anchors of a Markdown page's headings, as the site's ``toc`` extension makes them
+    (Python-Markdown's ``slugify``: NFKD to ASCII, punctuation dropped, lower case, runs of spaces
+    and hyphens to one hyphen; an explicit ``{#id}`` wins), headings inside code fences left out."""
+    import unicodedata
+
+    slugs, fence = set(), None
+    for line in text.splitlines():
+        m = FENCE.match(line)
+        if m and (fence is None or (m["fence"][0] == fence[0] and len(m["fence"]) >= len(fence) and not m["info"].strip())):
+            fence = m["fence"] if fence is None else None
+            continue
+        heading = re.match(r"^#{1,6}\s+(.*?)\s*#*\s*$", line) if fence is None else None
+        if not heading:
+            continue
+        title = heading[1]
+        explicit = re.search(r"\{[^}]*#([\w-]+)[^}]*\}\s*$", title)
+        if explicit:
+            slugs.add(explicit[1])
+            continue
+        title = re.sub(r"<[^>]+>", "", re.sub(r"\[([^\]]*)\]\([^)]*\)", r"\1", title))  # link text, no tags
+        value = unicodedata.normalize("NFKD", title).encode("ascii", "ignore").decode("ascii")
+        slugs.add(re.sub(r"[-\s]+", "-", re.sub(r"[^\w\s-]", "", value).strip().lower()))
+    return slugs
+
+
+def test_heading_slugs_are_the_sites() -> None:
+    text = "# Padding and `n_visible`\n## LiDAR crops: `farm --sensor`\n```bash\n# not a heading\n```\n### The paper's shape {#shape}\n"
+    assert heading_slugs(text) == {"padding-and-n_visible", "lidar-crops-farm-sensor", "shape"}
+
+
+@pytest.mark.parametrize("path", doc_files(), ids=lambda p: p.relative_to(ROOT).as_posix())
+def test_links_to_a_section_find_its_heading(path: Path) -> None:
+    """Every link ``[..](PAGE.md#anchor)`` or ``[..](#anchor)`` names a heading that exists (a
+    link to a README section that was renamed or never written leads nowhere), and no page
+    sends the reader to a README section by its quoted title unless the README has it."""
+    text = path.read_text(encoding="utf-8")
+    broken = []
+    for target, anchor in re.findall(r"\]\(([^)\s#]*)#([^)\s]+)\)", text):
+        if "://" in target or (target and not target.endswith(".md")):
+            continue
+        page = (path.parent / target).resolve() if target else path
+        if not page.is_file() or anchor not in heading_slugs(page.read_text(encoding="utf-8")):
+            broken.append(f"{target}#{anchor}")
+    assert not broken, f"{path.relative_to(ROOT)}: links to sections that do not exist: {broken}"
+    readme = {h.lower() for h in re.findall(r"^#{1,6}\s+(.+?)\s*$", (ROOT / "README.md").read_text(encoding="utf-8"), re.MULTILINE)}
+    named = re.findall(r"README\s*\(?[\"“]([^\"”]+)[\"”]", text)
+    assert not [n for n in named if n.lower() not in readme], f"{path.relative_to(ROOT)}: names README sections it lacks: {named}"
+
+
 @pytest.mark.parametrize("path", doc_files(), ids=lambda p: p.relative_to(ROOT).as_posix())
 def test_user_docs_name_no_issue_numbers(path: Path) -> None:
     """Users cannot follow "(issue 12)" or "the default before issue 11": no tracker references."""
     for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
         assert not re.search(r"\bissues? #?\d+|\(#\d+\)", line, re.IGNORECASE), f"{path.name}:{n}: {line}"
+
+
+@pytest.mark.parametrize("path", doc_files(), ids=lambda p: p.relative_to(ROOT).as_posix())
+def test_mesh_format_lists_name_every_format(path: Path) -> None:
+    """A paragraph that lists mesh formats (three of OFF, OBJ, PLY, STL, as names or extensions)
+    names glTF and COLLADA too (``.gltf``, ``.glb``, ``.dae`` where it lists extensions)."""
+    from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS
+
+    for paragraph in re.split(r"\n\s*\n", path.read_text(encoding="utf-8")):
+        extensions = set(re.findall(r"(?<![\w/])\.(?:off|obj|ply|stl)\b", paragraph, re.IGNORECASE))
+        if len({e.lower() for e in extensions}) >= 3:
+            missing = [e for e in SUPPORTED_EXTENSIONS if not re.search(rf"(?<![\w/]){re.escape(e)}\b", paragraph, re.IGNORECASE)]
+            assert not missing, f"{path.name}: lists mesh extensions without {missing}:\n{paragraph}"
+        every_extension = all(re.search(rf"(?<![\w/]){re.escape(e)}\b", paragraph, re.IGNORECASE) for e in SUPPORTED_EXTENSIONS)
+        if len(set(re.findall(r"\b(?:OFF|OBJ|PLY|STL)\b", paragraph))) >= 3 and not every_extension:
+            assert "glTF" in paragraph and "COLLADA" in paragraph, f"{path.name}: lists mesh formats without glTF or COLLADA:\n{paragraph}"
 
 
 def test_the_examples_are_found() -> None:

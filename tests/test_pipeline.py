@@ -1,13 +1,16 @@
-"""Per-object occlusion: samples are occluded, draws, padding, determinism.
+"""Per-object occlusion: samples are occluded, draws, top-up, padding, determinism.
 
-The laws: every sampled point is a dense point visible from its pose (hidden points never
-appear), a closed convex mesh shows its front-facing faces (about half its area), and the
-draws are independent per (seed, object, pose, sample) and identical for the same ones.
+The laws: every sampled point is a dense point visible from its pose, or a top-up point the
+same method finds visible (hidden points never appear), a closed convex mesh shows its
+front-facing faces (about half its area), a pose that sees fewer than ``n_points`` dense
+points still gives ``n_points`` distinct points unless its visible surface is too small, and
+the draws are independent per (seed, object, pose, sample) and identical for the same ones.
 """
 
 from __future__ import annotations
 
 import hashlib
+import warnings
 
 import numpy as np
 import pytest
@@ -19,7 +22,7 @@ import zbuf_occlude as zo
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
 from zbuf_occlude.geometry.samples import derive_rng, draw_sample, object_key, pose_samples, sample_rng
-from zbuf_occlude.pipeline import DenseCloud, dense_cloud, occlude_object
+from zbuf_occlude.pipeline import DenseCloud, dense_cloud, occlude_object, occlude_poses
 
 #: The oracle hides at most this fraction of the points the default ``zbuffer`` method
 #: samples.  Measured on the shipped sofa (20k dense points, 256²): 1 of 1536 sampled
@@ -129,13 +132,15 @@ def test_occlude_object_labels_each_sample_with_its_pose_and_object():
             assert c.n_visible == int(visible.sum()) and not c.padded and c.points.dtype == np.float32
             idx = _dense_indices(_BALL_DENSE, c)
             assert visible[idx].all()
-    # one point and no samples are legal counts; a sample larger than the visible set is padded
+    # one point and no samples are legal counts; a sample larger than the visible set is topped up
     (_, visible, clouds), = occlude_object(_BALL, poses[:1], key=1, n_points=1, samples_per_view=1, dense=_BALL_DENSE, method="oracle")
     assert len(clouds) == 1 and len(clouds[0].points) == 1 and not clouds[0].padded
     (_, visible, clouds), = occlude_object(_BALL, poses[:1], key=1, samples_per_view=0, dense=_BALL_DENSE, method="oracle")
     assert clouds == [] and visible.any()
     (_, visible, clouds), = occlude_object(_BALL, poses[:1], key=1, n_points=4000, samples_per_view=1, dense=_BALL_DENSE, method="oracle")
-    assert clouds[0].padded and clouds[0].n_visible == int(visible.sum()) < 4000
+    c = clouds[0]
+    assert int(visible.sum()) < 4000 <= c.n_visible and c.n_topped_up == c.n_visible - int(visible.sum()) and not c.padded
+    assert len(np.unique(c.points, axis=0)) == 4000
 
 
 @pytest.mark.parametrize("radius", [1.0, 1.5, 5.0])
@@ -241,19 +246,68 @@ def test_poses_draw_independently(small_mesh, sofa_dense):
         assert not np.array_equal(x.points, y.points)
 
 
-def test_padded_poses_hold_every_visible_point_in_random_order(small_mesh):
-    # a dense cloud smaller than a sample: every pose is padded
+def test_a_pose_seeing_too_few_dense_points_is_topped_up_with_distinct_points_the_oracle_sees(small_mesh):
+    # a dense cloud smaller than a sample: every pose sees fewer than n_points dense points
     _, mesh = small_mesh
     dense = dense_cloud(mesh, object_key("sofa"), seed=0, count=300)
-    for _, visible, clouds in _run(mesh, zo.view_schedule("30:45,-40:200"), 0, dense=dense, n_points=256, samples_per_view=2):
-        visible_index = np.flatnonzero(visible)
-        assert 0 < len(visible_index) < 256
-        for cloud in clouds:
-            idx = _dense_indices(dense, cloud)
-            assert cloud.n_visible == len(visible_index) and len(idx) == 256
-            assert set(idx.tolist()) == set(visible_index.tolist())  # each visible point, nothing else
-            assert not np.array_equal(idx[: len(visible_index)], visible_index)  # shuffled
-        assert not np.array_equal(clouds[0].points, clouds[1].points)
+    poses = zo.view_schedule("30:45,-40:200")
+    for pose in occlude_poses(mesh, poses, key=object_key("sofa"), seed=0, dense=dense, n_points=256, samples_per_view=2,
+                              method="oracle"):  # fmt: skip
+        visible_index, extra = np.flatnonzero(pose.visible), pose.topped_up
+        assert 0 < len(visible_index) < 256 <= pose.n_visible == len(visible_index) + len(extra)
+        # on the faces the pose sees, and visible by the oracle from its camera
+        assert set(extra.face_index.tolist()) <= set(dense.face_index[visible_index].tolist())
+        camera = zo.camera_on_sphere(*poses[pose.pose_index])
+        assert zo.visible_mask(mesh, extra.points, camera, "oracle", face_index=extra.face_index).all()
+        for cloud in pose.clouds:
+            assert len(np.unique(cloud.points, axis=0)) == 256 and not cloud.padded  # distinct: no repeats
+            assert (cloud.n_visible, cloud.n_topped_up) == (pose.n_visible, len(extra))
+            points = cloud.points.astype(np.float64)
+            assert zo.visible_mask(mesh, points, camera, "oracle", face_index=cloud.face_index).all()
+            tri = mesh.triangles[cloud.face_index]  # each on its own face
+            assert trimesh.triangles.points_to_barycentric(tri, points).min() > -1e-5
+        assert not np.array_equal(pose.clouds[0].points, pose.clouds[1].points)
+
+
+def test_poses_that_see_enough_dense_points_are_not_touched_by_the_top_up(small_mesh, sofa_dense):
+    _, mesh = small_mesh
+    poses = zo.view_schedule("30:45,-40:200,85:10")
+    kw = {"key": object_key("sofa"), "seed": 0, "dense": sofa_dense, "n_points": 256, "samples_per_view": 2, "method": "oracle"}
+    for a, b in zip(occlude_poses(mesh, poses, **kw), occlude_poses(mesh, poses, topped_up=False, **kw)):
+        assert a.visible.sum() >= 256 and len(a.topped_up) == 0 == a.topped_up.candidates
+        assert len(a.clouds) == len(b.clouds) == 2
+        for x, y in zip(a.clouds, b.clouds):  # the same bytes as without top-up
+            assert np.array_equal(x.points, y.points) and np.array_equal(x.face_index, y.face_index)
+            assert (x.n_visible, x.n_topped_up) == (y.n_visible, y.n_topped_up) == (int(a.visible.sum()), 0)
+
+
+def test_a_pose_topped_up_is_deterministic_and_keyed(small_mesh):
+    _, mesh = small_mesh
+    dense = dense_cloud(mesh, object_key("sofa"), seed=0, count=300)
+    kw = {"dense": dense, "n_points": 256, "samples_per_view": 1, "method": "oracle"}
+    poses = [(30.0, 45.0), (30.0, 45.0)]
+    a, b = list(occlude_poses(mesh, poses, key=1, **kw)), list(occlude_poses(mesh, poses, key=1, **kw))
+    assert all(np.array_equal(x.topped_up.points, y.topped_up.points) for x, y in zip(a, b))
+    assert all(np.array_equal(x.clouds[0].points, y.clouds[0].points) for x, y in zip(a, b))
+    assert not np.array_equal(a[0].topped_up.points[:8], a[1].topped_up.points[:8])  # the same pose twice: own draws
+    other = next(occlude_poses(mesh, poses[:1], key=2, **kw))
+    assert not np.array_equal(a[0].topped_up.points[:8], other.topped_up.points[:8])
+
+
+def test_a_tiny_visible_surface_still_pads_and_is_counted():
+    from conftest import shingles_mesh
+
+    mesh = shingles_mesh()
+    dense = dense_cloud(mesh, object_key("shingles"), seed=0, count=4000)
+    with pytest.warns(zo.PaddedSamplesWarning, match=r"^2 of 2 clouds hold repeated points") as caught:
+        clouds = zo.occlude(mesh, views="0:0,0:180", n_points=1024, dense_points=4000, method="oracle", name="shingles")
+    assert len(caught) == 1
+    for pose, cloud in zip(occlude_poses(mesh, [(0.0, 0.0), (0.0, 180.0)], key=object_key("shingles"), dense=dense,
+                                         n_points=1024, samples_per_view=1, method="oracle"), clouds):  # fmt: skip
+        assert np.array_equal(pose.clouds[0].points, cloud.points)
+        # topped up to the bound, still short: every distinct point once, then repeats
+        assert 0 < pose.topped_up.candidates <= 8 * 1024 and cloud.n_topped_up == len(pose.topped_up) > 0
+        assert cloud.padded and len(np.unique(cloud.points, axis=0)) == cloud.n_visible < 1024
 
 
 def test_generate_writes_occluded_samples(small_mesh, tmp_path):
@@ -547,12 +601,14 @@ def test_occlude_equals_what_generate_writes(small_mesh, sofa_clouds, tmp_path):
     assert [ds.metadata(i)["n_visible"] for i in range(len(ds))] == [c.n_visible for c in sofa_clouds]
 
 
-def test_occlude_warns_about_padding(small_mesh):
+def test_occlude_tops_up_instead_of_padding(small_mesh):
+    # 1000 dense points show fewer than 600 from 30:45: topped up, no repeat and no warning
     path, _ = small_mesh
-    with pytest.warns(zo.PaddedSamplesWarning, match=r"^2 of 2 clouds hold repeated points") as caught:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", zo.PaddedSamplesWarning)
         clouds = zo.occlude(path, views="30:45", n_points=600, samples_per_view=2, dense_points=1000, resolution=128)
-    assert len(caught) == 1 and all(c.padded and c.n_visible < 600 for c in clouds)
-    assert all(len(np.unique(c.points, axis=0)) == c.n_visible for c in clouds)
+    assert all(not c.padded and c.n_topped_up > 0 and c.n_visible - c.n_topped_up < 600 for c in clouds)
+    assert all(len(np.unique(c.points, axis=0)) == 600 for c in clouds)
 
 
 @pytest.mark.parametrize(

@@ -55,19 +55,19 @@ DEFAULT_FARM_RESOLUTION = 512
 DEFAULT_FARM_DENSE_POINTS = 32_768
 
 #: Points per occluded sample, the paper's (and PointNet's) 2048 (Sryamkin et al. 2023, §4.3);
-#: ``generate``, the farm and :func:`zbuf_occlude.occlude_object`.
+#: ``generate``, the farm and :func:`zbuf_occlude.pipeline.occlude_poses`.
 DEFAULT_N_POINTS = 2048
 
 #: Samples drawn per pose from its visible points (paper §4.3): ``generate``, the farm and
-#: :func:`zbuf_occlude.occlude_object`.
+#: :func:`zbuf_occlude.pipeline.occlude_poses`.
 DEFAULT_SAMPLES_PER_VIEW = 10
 
-#: Samples per pose of :func:`zbuf_occlude.pipeline`, which returns one cloud per sample: one
+#: Samples per pose of :func:`zbuf_occlude.occlude`, which returns one cloud per sample: one
 #: cloud per pose unless asked for more.
 DEFAULT_OCCLUDE_SAMPLES_PER_VIEW = 1
 
 #: Dense cloud per object, points on the whole surface before HSR: ``generate``,
-#: :func:`zbuf_occlude.occlude_object` and the points ``validate`` scores per mesh (the farm
+#: :func:`zbuf_occlude.pipeline.occlude_poses` and the points ``validate`` scores per mesh (the farm
 #: uses fewer for throughput: :data:`DEFAULT_FARM_DENSE_POINTS`).
 DEFAULT_DENSE_POINTS = 100_000
 

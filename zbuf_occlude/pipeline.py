@@ -2,7 +2,10 @@
 
 Per object (Sryamkin et al. 2023, §3.4 and §4.3): sample a dense cloud once, decide its
 visibility from every pose, and draw ``samples_per_view`` fixed-size samples per pose from
-the visible points (seeds and draws: :mod:`zbuf_occlude.geometry.samples`).
+the visible points (seeds and draws: :mod:`zbuf_occlude.geometry.samples`).  A pose that sees
+fewer than ``n_points`` dense points is topped up with more visible points drawn on the faces
+it sees (:func:`~zbuf_occlude.geometry.samples.top_up`), so its samples hold distinct points
+unless its visible surface is truly too small.
 
 :func:`occlude` is the one-call version, ``zbuf_occlude.occlude(...)``.
 """
@@ -32,15 +35,24 @@ from zbuf_occlude.defaults import (
 )
 from zbuf_occlude.errors import InvalidInputError, PaddedSamplesWarning
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, Camera, camera_on_sphere, view_schedule
-from zbuf_occlude.geometry.samples import DENSE_STREAM, OccludedCloud, derive_rng, object_key, pose_samples
-from zbuf_occlude.geometry.sampling import sample_surface
+from zbuf_occlude.geometry.samples import (
+    DENSE_STREAM,
+    OccludedCloud,
+    TopUp,
+    derive_rng,
+    object_key,
+    pool_take,
+    pose_samples,
+    top_up,
+)
+from zbuf_occlude.geometry.sampling import sample_surface, triangles_of
 from zbuf_occlude.resources import check_memory, estimate_job_memory
 from zbuf_occlude.visibility.registry import check_keywords, method_info, resolution_option, visible_mask
 
 if TYPE_CHECKING:  # trimesh (and scipy) is imported by occlude(), which takes files and meshes
     import trimesh
 
-__all__ = ["DenseCloud", "dense_cloud", "occlude_object", "occlude"]
+__all__ = ["DenseCloud", "dense_cloud", "PoseResult", "occlude_poses", "occlude_object", "occlude"]
 
 log = logging.getLogger(__name__)
 
@@ -73,7 +85,34 @@ def dense_cloud(
     return DenseCloud(points, face_index)
 
 
-def occlude_object(
+@dataclass
+class PoseResult:
+    """What :func:`occlude_poses` gives for one pose.
+
+    Attributes
+    ----------
+    pose_index : int
+    visible : (M,) bool
+        Which dense points the pose sees.
+    topped_up : TopUp
+        The pose's top-up points (``(T, 3) float64`` points, ``(T,) int64`` face indices; empty
+        when it sees ``n_points`` dense points, or nothing).
+    clouds : list of OccludedCloud
+        Its samples (none when it sees nothing).
+    """
+
+    pose_index: int
+    visible: NDArray[np.bool_]
+    topped_up: TopUp
+    clouds: list[OccludedCloud]
+
+    @property
+    def n_visible(self) -> int:
+        """Distinct visible points the pose offers its samples: visible dense points plus top-up points."""
+        return int(np.count_nonzero(self.visible)) + len(self.topped_up)
+
+
+def occlude_poses(
     mesh: trimesh.Trimesh,
     poses: Sequence[tuple[float, float]],
     *,
@@ -89,9 +128,18 @@ def occlude_object(
     class_name: str = "",
     source: str = "",
     split: str = "",
+    topped_up: bool = True,
     **method_options,
-) -> Iterator[tuple[int, NDArray[np.bool_], list[OccludedCloud]]]:
-    """Yield ``(pose_index, visible (M,) bool, clouds)`` for each pose of one object.
+) -> Iterator[PoseResult]:
+    """Yield a :class:`PoseResult` for each pose of one object: mask, top-up points and samples.
+
+    A pose that sees ``0 < V < n_points`` dense points is topped up: candidates drawn on the
+    faces holding its visible dense points are tested with ``method`` from the same camera, in
+    a session of their own (:func:`~zbuf_occlude.geometry.samples.top_up`, seeded by ``(seed,
+    key, TOPUP_STREAM, pose_index, round)``), and the visible ones join the pose's pool.  Poses
+    that see ``n_points`` or more are not touched: their samples are the same bytes either way.
+    ``open3d-hpr``, which decides from the point set alone, judges the candidates among
+    themselves.
 
     Parameters
     ----------
@@ -109,6 +157,11 @@ def occlude_object(
     resolution, radius : camera image size (pixels) and distance (object units).
     label, class_name, source, split
         Copied into every cloud (:class:`OccludedCloud`).
+    topped_up : bool
+        Top up the poses that see too few dense points (default); ``False`` draws from the
+        visible dense points alone (padding with repeats when they are too few).
+    **method_options
+        The visibility method's keywords.
 
     Raises
     ------
@@ -130,9 +183,22 @@ def occlude_object(
         )
     )  # fmt: skip
     dense = dense or dense_cloud(mesh, key, seed=seed)
+    n_dense = len(dense.points)
     session = method_info(method).session
     scene = session(mesh, dense.points, dense.face_index) if session is not None else None
     one_shot_options = {**resolution_option(method, resolution), **method_options}
+    triangles: NDArray[np.float64] | None = None  # the mesh's corners, once, for the first pose topped up
+
+    def candidates_visible(camera: Camera, points: NDArray[np.float64], face_index: NDArray[np.int64]) -> NDArray[np.bool_]:
+        # the method of the dense points: its own session over the candidates (mesh-side state is cached per mesh)
+        if session is None:
+            return visible_mask(mesh, points, camera, method, face_index=face_index, **one_shot_options)
+        candidates = session(mesh, points, face_index)
+        try:
+            return candidates.visible(camera, **method_options)
+        finally:
+            candidates.release()
+
     try:
         for pose_index, (el, az) in enumerate(poses):
             camera: Camera = camera_on_sphere(el, az, radius, resolution=resolution)
@@ -143,13 +209,26 @@ def occlude_object(
             visible_index = np.flatnonzero(visible)
             if len(visible_index) == 0 and samples_per_view:
                 log.warning("%s: nothing visible from el=%g az=%g; no sample", source or "mesh", el, az)
+            extra = TopUp()
+            if topped_up and 0 < len(visible_index) < n_points:
+                triangles = triangles_of(mesh) if triangles is None else triangles
+                seen_faces = np.unique(dense.face_index[visible_index])
+                on_seen = int(np.count_nonzero(np.isin(dense.face_index, seen_faces)))
+                extra = top_up(
+                    triangles, seen_faces, n_points - len(visible_index),
+                    lambda p, f, camera=camera: candidates_visible(camera, p, f),
+                    seed=seed, key=key, pose_index=pose_index, n_points=n_points,
+                    visible_fraction=len(visible_index) / on_seen,
+                )  # fmt: skip
             chosen = pose_samples(
-                visible_index, n_points, seed=seed, key=key, pose_index=pose_index, sample_indices=range(samples_per_view)
-            )
+                visible_index, n_points, seed=seed, key=key, pose_index=pose_index,
+                sample_indices=range(samples_per_view), n_dense=n_dense, n_topped_up=len(extra),
+            )  # fmt: skip
+            n_visible = len(visible_index) + len(extra)
             clouds = [
                 OccludedCloud(
-                    points=dense.points[c].astype(np.float32),
-                    face_index=dense.face_index[c],
+                    points=pool_take(dense.points, extra.points, c).astype(np.float32),
+                    face_index=pool_take(dense.face_index, extra.face_index, c),
                     elevation_deg=float(el),
                     azimuth_deg=float(az),
                     radius=float(radius),
@@ -157,15 +236,35 @@ def occlude_object(
                     class_name=class_name,
                     source=source,
                     sample_index=sample_index,
-                    n_visible=len(visible_index),
+                    n_visible=n_visible,
                     split=split,
+                    n_topped_up=len(extra),
                 )
                 for sample_index, c in enumerate(chosen)
             ]
-            yield pose_index, visible, clouds
+            yield PoseResult(pose_index, visible, extra, clouds)
     finally:
         if scene is not None:
             scene.release()
+
+
+def occlude_object(
+    mesh: trimesh.Trimesh, poses: Sequence[tuple[float, float]], *, key: int, **options
+) -> Iterator[tuple[int, NDArray[np.bool_], list[OccludedCloud]]]:
+    """Yield ``(pose_index, visible (M,) bool, clouds)`` for each pose of one object.
+
+    :func:`occlude_poses` (same keywords, same samples) without the top-up points: a pose that
+    sees fewer than ``n_points`` dense points is topped up with visible points on the faces it
+    sees; with ``samples_per_view=0`` there is nothing to top up, so nothing is.
+
+    Raises
+    ------
+    InvalidInputError, InsufficientMemoryError
+        As :func:`occlude_poses`.
+    """
+    options.setdefault("topped_up", options.get("samples_per_view", DEFAULT_SAMPLES_PER_VIEW) > 0)
+    for result in occlude_poses(mesh, poses, key=key, **options):
+        yield result.pose_index, result.visible, result.clouds
 
 
 def _is_normalised(mesh: trimesh.Trimesh) -> bool:
@@ -232,10 +331,12 @@ def occlude(
         Pose-major, then sample index; a pose that sees nothing gives none.  Each has
         ``points (n_points, 3) float32`` in the normalised mesh's frame (object units, on
         the mesh's faces), ``face_index (n_points,) int64`` into the mesh's faces,
-        ``elevation_deg``, ``azimuth_deg`` (degrees), ``radius``, ``sample_index``, and
-        ``n_visible``, the dense points visible from its pose.  When ``n_visible <
-        n_points`` the cloud holds every visible point once plus repeats (``cloud.padded``),
-        and a :class:`PaddedSamplesWarning` says how many clouds are.
+        ``elevation_deg``, ``azimuth_deg`` (degrees), ``radius``, ``sample_index``,
+        ``n_visible``, the distinct visible points its pose offered, and ``n_topped_up``, how
+        many of them were drawn on the faces the pose sees because it saw fewer than
+        ``n_points`` dense points (:func:`occlude_poses`).  Only when even then ``n_visible <
+        n_points`` (a tiny visible surface) does the cloud hold every visible point once plus
+        repeats (``cloud.padded``), and a :class:`PaddedSamplesWarning` says how many clouds are.
 
     Raises
     ------
@@ -288,7 +389,7 @@ def occlude(
     if n_padded:
         warnings.warn(
             f"{n_padded} of {len(clouds)} clouds hold repeated points: fewer than n_points={n_points} points were "
-            f"visible from their poses (each cloud's n_visible says how many; raise dense_points or lower n_points)",
+            f"visible from their poses, top-up included (each cloud's n_visible says how many; lower n_points)",
             PaddedSamplesWarning, stacklevel=2,
         )  # fmt: skip
     return clouds

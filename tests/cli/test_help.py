@@ -249,3 +249,19 @@ def test_scan_reads_the_mesh_with_up(tmp_path: Path, monkeypatch: pytest.MonkeyP
     assert seen == ["+y"]
     for command in (["generate", "--out", "o"], ["farm", "root", "--out", "o"], ["scan", "box", "--out", "o"]):
         assert build_parser().parse_args(command).up == "auto"
+
+
+def test_every_argument_that_takes_meshes_lists_every_mesh_format() -> None:
+    """Where the help says an argument takes mesh files, it names every extension load_mesh reads
+    (glTF and COLLADA were missing from some)."""
+    from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS
+
+    takes_meshes = []
+    for name, sub in SUBCOMMANDS.items():
+        for action in sub._actions:
+            text = sub._get_formatter()._expand_help(action) if action.help else ""
+            if not action.option_strings and re.search(r"\bmesh (files?|folders?|tree)\b|\bmeshes in\b", text):
+                takes_meshes.append(f"{name} {action.dest}")
+                missing = [ext for ext in SUPPORTED_EXTENSIONS if ext not in text]
+                assert not missing, f"{name} {action.dest}: its help lacks {missing}: {text}"
+    assert {"generate paths", "farm root", "scan mesh_or_scene", "experiment sim2real root"} <= set(takes_meshes), takes_meshes

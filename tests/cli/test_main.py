@@ -132,7 +132,7 @@ def test_python_dash_m_runs_the_cli_and_passes_its_exit_status(tmp_path):
     from zbuf_occlude import __version__
 
     def run(*argv):
-        return subprocess.run([sys.executable, "-m", "zbuf_occlude", *argv], capture_output=True, text=True, timeout=300, env=os.environ)
+        return subprocess.run([sys.executable, "-m", "zbuf_occlude", *argv], check=False, capture_output=True, text=True, timeout=300, env=os.environ)
 
     out = run("--version")
     assert out.returncode == 0 and out.stdout.strip() == f"zbuf-occlude {__version__}"
@@ -147,3 +147,64 @@ def test_generate_without_a_path_finds_the_shipped_samples() -> None:
 
     assert SAMPLE_MESHES == Path(__file__).resolve().parents[2] / "data" / "samples"
     assert any(SAMPLE_MESHES.rglob("*.off"))
+
+
+def _no_memory(*args, **kwargs):
+    raise MemoryError("Unable to allocate 7.45 GiB for an array with shape (1000000000,) and data type float64")
+
+
+def test_out_of_memory_is_one_line_naming_what_and_which_file_and_exits_1(sample_meshes_dir, monkeypatch, capsys):
+    # validate loads the chair, then samples its surface: sampling's memory check runs out of memory
+    monkeypatch.setattr("zbuf_occlude.geometry.sampling.check_memory", _no_memory)
+    chair = min(sample_meshes_dir.glob("chair/*/*.off"))
+    assert main(["validate", str(chair), "--views", "30:45", "--dense-points", "100", "--methods", "oracle"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "Traceback" not in err, err
+    assert err.startswith("zbuf-occlude: error: `validate` ran out of memory"), err
+    assert "zbuf_occlude.geometry.sampling.sample_faces" in err and f"on {chair}" in err and "7.45 GiB" in err, err
+
+
+def test_out_of_memory_without_a_file_names_the_command(monkeypatch, capsys):
+    monkeypatch.setattr("zbuf_occlude.render.context.context_info", _no_memory)
+    assert main(["info"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and err.startswith("zbuf-occlude: error: `info` ran out of memory (Unable to allocate"), err
+
+
+# -- a refused run leaves no empty --out behind -----------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("argv", "out"),
+    [
+        (["farm", "{tmp}/no_such_meshes", "--out", "{out}"], "o"),
+        (["farm", "{samples}", "--classes", "no_such_class", "--out", "{out}"], "a/b/c"),  # its parents too
+        (["generate", "{samples}/chair", "--resolution", "1000000", "--out", "{out}"], "o"),  # beyond the GL's maximum
+    ],
+)
+def test_a_refused_run_leaves_no_empty_out_folder(tmp_path, sample_meshes_dir, capsys, argv, out):
+    argv = [a.format(tmp=tmp_path, samples=sample_meshes_dir, out=tmp_path / "runs" / out) for a in argv]
+    (tmp_path / "runs").mkdir()
+    assert main(argv) == 2
+    assert "zbuf-occlude: error:" in capsys.readouterr().err
+    assert list((tmp_path / "runs").iterdir()) == []  # runs/ existed before: kept, and empty
+
+
+def test_a_refused_run_keeps_an_out_that_existed_or_holds_a_file(tmp_path, monkeypatch):
+    from zbuf_occlude.errors import InvalidInputError
+    from zbuf_occlude.farm import run as farm_run
+
+    existed = tmp_path / "existed"
+    existed.mkdir()
+    assert main(["farm", str(tmp_path / "no_such_meshes"), "--out", str(existed)]) == 2
+    assert existed.is_dir()
+
+    def refuse_after_writing(root, out, *args, **kwargs):
+        (Path(out) / "shards").mkdir(parents=True)
+        if Path(out).name == "keep":
+            (Path(out) / "shards" / "part.h5").write_bytes(b"")
+        raise InvalidInputError("refused after writing")
+
+    monkeypatch.setattr(farm_run, "run_farm", refuse_after_writing)
+    assert main(["farm", str(tmp_path), "--out", str(tmp_path / "keep")]) == 2
+    assert (tmp_path / "keep" / "shards" / "part.h5").is_file()  # written: never removed
+    assert main(["farm", str(tmp_path), "--out", str(tmp_path / "empty_tree")]) == 2
+    assert not (tmp_path / "empty_tree").exists()  # only empty folders: removed

@@ -65,3 +65,30 @@ def test_modelnet40c_says_when_its_labels_are_not_modelnet40s(tmp_path, caplog):
     said = " ".join(r.getMessage() for r in caplog.records)
     assert "not ModelNet40's 40" in said and "'pedestrian'" in said
     assert (tmp_path / "o" / "shape_names.txt").read_text() == "pedestrian\n" and np.load(tmp_path / "o" / "label.npy").tolist() == [[0]]
+
+
+def _pcn_complete(out: Path) -> np.ndarray:
+    import h5py
+
+    (shard,) = sorted((out / "shards").glob("pcn_*.h5"))
+    with h5py.File(shard, "r") as f:
+        return f["complete"][()]
+
+
+def test_protocols_take_generates_up_axis(tmp_path, capsys):
+    """``--up`` reaches the protocols (it was read only by the paper's samples); the old PCN
+    spelling ``--up-axis y`` means ``--up +y`` and says so."""
+    assert main(["generate", CHAIR, "--protocol", "pcn", "--out", str(tmp_path / "auto")]) == 0
+    assert main(["generate", CHAIR, "--protocol", "pcn", "--up", "+y", "--out", str(tmp_path / "y")]) == 0
+    assert main(["generate", CHAIR, "--protocol", "pcn", "--up-axis", "y", "--out", str(tmp_path / "legacy")]) == 0
+    assert "--up-axis is deprecated" in capsys.readouterr().err
+    auto, y_up, legacy = (_pcn_complete(tmp_path / name) for name in ("auto", "y", "legacy"))
+    # PCN's frame is y up: a z-up chair is tallest along y; read as y-up, its old y becomes up
+    assert np.ptp(auto[:, 1]) > np.ptp(auto[:, 2])
+    assert not np.allclose(np.ptp(auto, axis=0), np.ptp(y_up, axis=0), atol=1e-3)
+    np.testing.assert_array_equal(legacy, y_up)
+
+
+def test_bad_legacy_up_axis_exits_2_naming_it(tmp_path, capsys):
+    assert _exit_status(["generate", CHAIR, "--protocol", "pcn", "--up-axis", "w", "--out", str(tmp_path / "o")]) == 2
+    assert "'w'" in capsys.readouterr().err

@@ -96,6 +96,23 @@ def test_compact_samples_come_from_visible_points(datasets):
     assert list(samples_per_pose(np.array([0, 5, 1]), 3)) == [0, 3, 3]
 
 
+def test_compact_samples_of_a_topped_up_pose_come_from_its_visible_and_top_up_points():
+    rng = np.random.default_rng(0)
+    dense_points = rng.random((50, 3)).astype(np.float32)
+    visible = np.zeros(50, dtype=bool)
+    visible[::5] = True  # 10 visible dense points
+    topup = rng.random((8, 3)).astype(np.float32) + 2.0  # 8 top-up points, told apart by x > 1
+    kw = {"seed": 1, "key": 2, "pose_index": 3, "sample_indices": [0, 1]}
+    samples = reconstruct_samples(dense_points, visible, n_points=16, topup_points=topup, **kw)
+    pool = {p.tobytes() for p in dense_points[visible]} | {p.tobytes() for p in topup}
+    for s in samples:  # 18 distinct points offered: 16 distinct drawn, none hidden
+        assert len({p.tobytes() for p in s}) == 16 and {p.tobytes() for p in s} <= pool
+    assert (samples[..., 0] > 1).any() and (samples[..., 0] < 1).any()
+    # without top-up points (or with none) the draw is the one of the mask alone
+    plain = reconstruct_samples(dense_points, visible, n_points=8, **kw)
+    assert np.array_equal(plain, reconstruct_samples(dense_points, visible, n_points=8, topup_points=topup[:0], **kw))
+
+
 def test_filters(datasets):
     path = datasets["dense"]
     spv = PARAMS.samples_per_view

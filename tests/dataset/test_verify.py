@@ -230,3 +230,132 @@ def test_a_damaged_sample_file_is_refused_by_reader_and_verify(sample_files, tmp
         message = r"declared \(5, 3\)"
     _resign(ds, rel)
     _reader_and_verify_refuse(ds, file, message, capsys)
+
+
+# -- top-up points of compact shards ------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def topped_up(tmp_path_factory) -> dict[str, Path]:
+    """Two objects whose poses see fewer than 300 of their 400 dense points: every pose is topped up."""
+    from conftest import SAMPLE_MESHES
+
+    from zbuf_occlude.farm import FarmParams, run_farm
+    from zbuf_occlude.farm.config import RunOptions
+
+    root = tmp_path_factory.mktemp("topped")
+    for rel in ("chair/train/chair_0001.off", "desk/test/desk_0201.off"):
+        (root / "meshes" / rel).parent.mkdir(parents=True, exist_ok=True)
+        (root / "meshes" / rel).symlink_to(SAMPLE_MESHES / rel)
+    out = {}
+    for storage in ("dense", "compact"):
+        params = FarmParams(views="0:0,30:90", samples_per_view=2, n_points=300, dense_points=400, resolution=64,
+                            storage=storage)  # fmt: skip
+        run_farm(root / "meshes", root / storage, params=params, options=RunOptions(progress=False))
+        out[storage] = root / storage
+    return out
+
+
+def _edit_manifest(ds: Path, edit) -> None:
+    lines = [json.loads(s) for s in (ds / "manifest.jsonl").read_text().splitlines()]
+    edit(lines[0])
+    (ds / "manifest.jsonl").write_text("".join(json.dumps(r) + "\n" for r in lines))
+
+
+def test_verify_passes_topped_up_data_sets_and_both_storages_read_the_same(topped_up):
+    from zbuf_occlude import OccludedDataset
+
+    for storage in ("dense", "compact"):
+        report = verify_dataset(topped_up[storage])
+        assert report.ok and report.samples == 8, report.problems
+    dense, compact = OccludedDataset(topped_up["dense"]), OccludedDataset(topped_up["compact"])
+    topped = [dense.metadata(i)["n_topped_up"] for i in range(len(dense))]
+    assert min(topped) > 0 and not any(dense.metadata(i)["padded"] for i in range(len(dense)))
+    for i in range(len(dense)):
+        (a, _, ma), (b, _, mb) = dense[i], compact[i]
+        assert np.array_equal(a, b) and ma == mb and len(np.unique(a, axis=0)) == 300
+
+
+def test_top_up_points_that_contradict_the_manifest_are_refused(topped_up, tmp_path, capsys):
+    ds = _copy(topped_up["compact"], tmp_path / "rows")
+    rel = json.loads((ds / "manifest.jsonl").read_text().splitlines()[0])["shards"][0]
+    _rewrite_shard(ds / rel, topup_points=lambda f, k, v: f.create_dataset(k, data=v[:-1]))  # one point dropped
+    _resign(ds, rel)
+    _reader_and_verify_refuse(ds, ds / rel, r"'topup_points' has shape .* 'n_topped_up' promises", capsys)
+    # the manifest moves a point from the top-up to the dense cloud: the masks say otherwise
+    ds = _copy(topped_up["compact"], tmp_path / "moved")
+
+    def move(rec):
+        rec["n_topped_up"][0] -= 1
+        rec["n_topped_up"][1] += 1
+
+    _edit_manifest(ds, move)
+    _reader_and_verify_refuse(ds, ds / rel, r"'visible_bits' of pose 0 marks \d+ visible points.*'n_topped_up'", capsys)
+
+
+def test_a_manifest_whose_n_topped_up_does_not_fit_n_visible_is_refused(topped_up, tmp_path, capsys):
+    from zbuf_occlude import OccludedDataset
+    from zbuf_occlude.errors import DatasetFormatError
+
+    for name, edit in (("short", lambda rec: rec["n_topped_up"].pop()),
+                       ("above", lambda rec: rec["n_topped_up"].__setitem__(0, rec["n_visible"][0] + 1))):  # fmt: skip
+        ds = _copy(topped_up["compact"], tmp_path / name)
+        _edit_manifest(ds, edit)
+        with pytest.raises(DatasetFormatError, match=r"manifest\.jsonl:1: field 'n_topped_up'"):
+            OccludedDataset(ds)
+        assert main(["verify", str(ds)]) == 1 and "field 'n_topped_up'" in capsys.readouterr().err
+
+
+def test_a_format_1_compact_data_set_without_top_up_still_reads_and_verifies(farmed, tmp_path):
+    # written before top-up: no topup_points nor n_topped_up in its shards, no n_topped_up in its manifest
+    from zbuf_occlude import OccludedDataset
+
+    ds = _copy(farmed["compact"], tmp_path / "old")
+    assert all(max(json.loads(s)["n_topped_up"]) == 0 for s in (ds / "manifest.jsonl").read_text().splitlines())
+    for s in (ds / "manifest.jsonl").read_text().splitlines():
+        rel = json.loads(s)["shards"][0]
+        _rewrite_shard(ds / rel, topup_points=None, n_topped_up=None)
+        _resign(ds, rel)
+    lines = [json.loads(s) for s in (ds / "manifest.jsonl").read_text().splitlines()]
+    for rec in lines:
+        rec.pop("n_topped_up", None)
+    (ds / "manifest.jsonl").write_text("".join(json.dumps(r) + "\n" for r in lines))
+    assert verify_dataset(ds).ok
+    old, new = OccludedDataset(ds), OccludedDataset(farmed["compact"])
+    assert np.array_equal(old.to_arrays()[0], new.to_arrays()[0])
+    assert old.metadata(0)["n_topped_up"] == 0
+
+
+# -- folders verify does not check say what they are ----------------------------------------------------------
+def test_verify_of_a_missing_folder_or_a_file_says_so(tmp_path, capsys):
+    assert main(["verify", str(tmp_path / "MISSING_DIR")]) == 2
+    err = capsys.readouterr().err
+    assert f"no such folder: {tmp_path / 'MISSING_DIR'}" in err and "finished" not in err
+    (tmp_path / "f.txt").write_text("x")
+    assert main(["verify", str(tmp_path / "f.txt")]) == 2
+    assert "is a file, not a data set folder" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("protocol", "extra", "kind", "reader"),
+    [
+        ("pcn", ["--complete-points", "256", "--resolution", "32"], "a PCN pairs folder", "read_arrays_h5"),
+        ("modelnet40-c-lidar", ["--severity", "1"], "a ModelNet40-C folder", "data_lidar_<severity>.npy"),
+    ],
+)
+def test_verify_of_a_protocol_folder_names_its_kind_and_reader(tmp_path, capsys, protocol, extra, kind, reader):
+    out = tmp_path / "pairs"
+    assert main(["generate", str(CHAIR / "train"), "--protocol", protocol, *extra, "--out", str(out)]) == 0
+    capsys.readouterr()
+    assert main(["verify", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"{out} is {kind}, not a farm data set" in err and reader in err and f"--protocol {protocol}" in err, err
+    assert "not a finished" not in err
+
+
+def test_verify_of_an_unfinished_farm_run_or_another_folder_says_which(tmp_path):
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "plan.json").write_text("{}")
+    assert any("an unfinished farm run" in p for p in verify_dataset(tmp_path / "run").problems)
+    (tmp_path / "photos").mkdir()
+    (tmp_path / "photos" / "protocol.json").write_bytes(b"\xff not json")  # untrusted: no traceback
+    problems = verify_dataset(tmp_path / "photos").problems
+    assert problems == [f"{tmp_path / 'photos'} has no dataset_card.json: not a data set written by `zbuf-occlude farm` or `generate`"]

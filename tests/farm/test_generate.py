@@ -256,31 +256,37 @@ def test_overwrite_leaves_no_stale_split_file(tree, tmp_path):
 
 
 # -- padding is said, counted and recorded ----------------------------------------------------------------
-def _padded_args(points: int) -> list[str]:
-    return ["--views", "0:0,30:45,-40:200", "--points", str(points), "--samples-per-view", "2", "--dense-points", "500",
-            "--resolution", "128"]  # fmt: skip
+def _padded_args(points: int, dense_points: int = 4000) -> list[str]:
+    return ["--views", "0:0,0:180,30:45", "--points", str(points), "--samples-per-view", "2", "--dense-points",
+            str(dense_points), "--resolution", "128"]  # fmt: skip
 
 
-def test_padding_is_warned_once_and_recorded_in_the_card(tree, tmp_path, caplog):
+def test_padding_is_warned_once_and_recorded_in_the_card(tree, shingles_tree, tmp_path, caplog):
+    # 4000 dense points show 840-1800 per pose: the real meshes' short poses are topped up to 1024
+    # distinct points; the shingles (a tiny visible surface) stay padded, and those samples alone
+    # are counted
     from zbuf_occlude.farm import GENERATE_DEFAULTS, generate
 
+    shutil.copytree(shingles_tree / "shingles", tree / "shingles")
     out = tmp_path / "gen"
     with caplog.at_level("WARNING"):
-        assert main(["generate", str(tree), "--out", str(out), *_padded_args(185)]) == 0
+        assert main(["generate", str(tree), "--out", str(out), *_padded_args(1024)]) == 0
     ds = OccludedDataset(out)
-    n_visible = np.array([ds.metadata(i)["n_visible"] for i in range(len(ds))])
-    expected = int((n_visible < 185).sum())
-    assert 0 < expected < len(ds)  # some poses see fewer than 185 of the 500 dense points (80-203 here), others more
+    meta = [ds.metadata(i) for i in range(len(ds))]
+    expected = sum(m["n_visible"] < 1024 for m in meta)
+    assert expected == sum(m["padded"] for m in meta) > 0 and all(m["name"].startswith("shingles") for m in meta if m["padded"])
+    short = [m for m in meta if m["n_visible"] - m["n_topped_up"] < 1024]  # poses that saw too few dense points
+    assert all(m["n_topped_up"] > 0 for m in short) and any(not m["padded"] for m in short)
     card = json.loads((out / "dataset_card.json").read_text())
     assert card["n_padded_samples"] == expected
     warnings = [r.getMessage() for r in caplog.records if "repeated points" in r.getMessage()]
-    assert len(warnings) == 1 and f"{expected} of {len(ds)} samples" in warnings[0] and "--points 185" in warnings[0]
+    assert len(warnings) == 1 and f"{expected} of {len(ds)} samples" in warnings[0] and "--points 1024" in warnings[0]
     # the padded samples hold repeats, the others none
     for i in range(len(ds)):
-        points, _, meta = ds[i]
-        assert (len(np.unique(points, axis=0)) == meta["n_visible"]) if meta["padded"] else len(np.unique(points, axis=0)) == 185
+        points, _, m = ds[i]
+        assert (len(np.unique(points, axis=0)) == m["n_visible"]) if m["padded"] else len(np.unique(points, axis=0)) == 1024
     # the Python API's result says it too
-    params = dataclasses.replace(GENERATE_DEFAULTS, views="0:0,30:45,-40:200", n_points=185, dense_points=500, resolution=128,
+    params = dataclasses.replace(GENERATE_DEFAULTS, views="0:0,0:180,30:45", n_points=1024, dense_points=4000, resolution=128,
                                  samples_per_view=2)  # fmt: skip
     summary, _ = generate([tree], tmp_path / "api", params=params, progress=False)
     assert summary.padded == expected and "padded" in summary.format()
@@ -289,7 +295,7 @@ def test_padding_is_warned_once_and_recorded_in_the_card(tree, tmp_path, caplog)
 def test_no_padding_no_warning(tree, tmp_path, caplog):
     out = tmp_path / "gen"
     with caplog.at_level("WARNING"):
-        assert main(["generate", str(tree), "--out", str(out), *_padded_args(20)]) == 0
+        assert main(["generate", str(tree), "--out", str(out), *_padded_args(20, 500)]) == 0
     assert json.loads((out / "dataset_card.json").read_text())["n_padded_samples"] == 0
     assert not [r for r in caplog.records if "repeated points" in r.getMessage()]
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import errno
 import json
+import shlex
 import signal
 import subprocess
 import sys
@@ -24,7 +25,7 @@ from conftest import SAMPLE_MESHES
 
 from zbuf_occlude.cli.farm import add_farm_merge_parser, add_farm_parser
 from zbuf_occlude.cli.main import main as cli_main
-from zbuf_occlude.dataset.layout import CARD_FILE, MANIFEST_FILE, SHAPE_NAMES_FILE
+from zbuf_occlude.dataset.layout import CARD_FILE, FORMAT_VERSION, MANIFEST_FILE, SHAPE_NAMES_FILE
 from zbuf_occlude.dataset.reader import OccludedDataset, unpack_visible
 from zbuf_occlude.errors import InvalidInputError, OutputError
 from zbuf_occlude.farm import FarmParams, merge_farm, parse_shard, run_farm, select_shard
@@ -33,7 +34,7 @@ from zbuf_occlude.geometry.cameras import camera_on_sphere
 from zbuf_occlude.geometry.samples import object_key, pose_samples
 from zbuf_occlude.mesh.inputs import FarmObject, discover_objects
 from zbuf_occlude.mesh.load import load_mesh
-from zbuf_occlude.pipeline import dense_cloud
+from zbuf_occlude.pipeline import dense_cloud, occlude_poses
 from zbuf_occlude.visibility.registry import method_info, visible_mask
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -330,19 +331,32 @@ def test_compact_shards_hold_the_named_dense_cloud_and_its_visibility_bits(compa
             assert n_visible[pose] == vis.sum() == rec["n_visible"][pose]
 
 
-def test_padded_poses_through_the_farm_and_the_reader(tree, tmp_path):
-    # more points per sample than the dense cloud has visible: every sample is padded
+def test_topped_up_poses_through_the_farm_and_the_reader(tree, tmp_path):
+    # fewer dense points visible than a sample holds: every pose is topped up and no sample is
+    # padded; dense and compact storage serve the same bytes, whatever the worker count, and verify
+    # passes on both
+    from zbuf_occlude.dataset.verify import verify_dataset
+
     params = FarmParams(**{**PARAMS.to_dict(), "n_points": 600, "dense_points": 800, "samples_per_view": 2})
     runs = {}
-    for storage in ("dense", "compact"):
-        p = FarmParams(**{**params.to_dict(), "storage": storage})
-        summary = run_farm(tree, tmp_path / storage, params=p, options=RunOptions(classes="sofa,stool", progress=False))
-        assert summary.done == 2
+    for storage, workers in (("dense", 1), ("compact", 1), ("compact_w2", 2)):
+        p = FarmParams(**{**params.to_dict(), "storage": storage.split("_")[0]})
+        options = RunOptions(classes="sofa,stool", progress=False, workers=workers)
+        summary = run_farm(tree, tmp_path / storage, params=p, options=options)
+        assert summary.done == 2 and summary.padded == 0 and "padded" not in summary.format()
+        assert json.loads((tmp_path / storage / CARD_FILE).read_text())["n_padded_samples"] == 0
+        report = verify_dataset(tmp_path / storage)
+        assert report.ok, report.problems
         runs[storage] = OccludedDataset(tmp_path / storage)
+    assert_same_samples(tmp_path / "compact", tmp_path / "compact_w2")
     for rec in _manifest(tmp_path / "dense"):
-        assert rec["n_padded_poses"] == len(params.poses) and 0 < max(rec["n_visible"]) < 600
+        assert rec["n_padded_poses"] == 0 and min(rec["n_topped_up"]) > 0 and min(rec["n_visible"]) >= 600
+    assert _manifest(tmp_path / "dense") != [] and [r["n_topped_up"] for r in _manifest(tmp_path / "compact")] == [
+        r["n_topped_up"] for r in _manifest(tmp_path / "dense")
+    ]
     dense_ds, compact_ds = runs["dense"], runs["compact"]
     assert len(dense_ds) == len(compact_ds) == 2 * len(params.poses) * 2
+    assert all(np.array_equal(x, y) for x, y in zip(dense_ds.to_arrays(), compact_ds.to_arrays()))
     by_name = {}
     for rec in _manifest(tmp_path / "dense"):
         _, dense, visible = _expected_object(rec, params)
@@ -350,15 +364,53 @@ def test_padded_poses_through_the_farm_and_the_reader(tree, tmp_path):
     for i in range(len(dense_ds)):
         (a, label, meta), (b, _, meta_b) = dense_ds[i], compact_ds[i]
         assert np.array_equal(a, b) and meta == meta_b
-        assert meta["padded"] and meta["n_visible"] < 600
+        assert not meta["padded"] and meta["n_topped_up"] > 0 and len(np.unique(a, axis=0)) == 600  # distinct points
         points, visible = by_name[meta["name"]]
         vis = visible[meta["pose_index"]]
-        assert meta["n_visible"] == vis.sum()
-        # every visible point once, then repeats of visible points, in random order
-        rows = {p.tobytes() for p in a}
-        assert rows == {p.tobytes() for p in points[vis]}
-        assert not np.array_equal(a[: meta["n_visible"]], points[vis])
-    assert np.array_equal(dense_ds.to_arrays()[0], compact_ds.to_arrays()[0])
+        assert meta["n_visible"] - meta["n_topped_up"] == vis.sum() < 600
+        # the points taken from the dense cloud are visible ones; the others are the pose's top-up
+        dense_rows = {p.tobytes() for p in a} & {p.tobytes() for p in points}
+        assert dense_rows <= {p.tobytes() for p in points[vis]} and len(dense_rows) < 600
+
+
+def test_a_tiny_visible_surface_pads_through_the_farm_and_is_counted(shingles_tree, tmp_path, caplog):
+    # the shingles show from 0:0 and 0:180 only strips of the faces they see: even topped up, their
+    # samples are short and padded, counted per sample in the card, the warning and the reader
+    from zbuf_occlude.dataset.verify import verify_dataset
+
+    params = FarmParams(views="0:0,0:180", samples_per_view=2, n_points=1024, dense_points=4000, resolution=64, method="oracle")
+    arrays = {}
+    for storage in ("dense", "compact"):
+        out = tmp_path / storage
+        with caplog.at_level("WARNING"):
+            summary = run_farm(shingles_tree, out, params=FarmParams(**{**params.to_dict(), "storage": storage}),
+                               options=RunOptions(progress=False))  # fmt: skip
+        (rec,) = _manifest(out)
+        assert rec["n_padded_poses"] == 2 and min(rec["n_topped_up"]) > 0 and max(rec["n_visible"]) < 1024
+        assert summary.padded == 4 == json.loads((out / CARD_FILE).read_text())["n_padded_samples"]
+        assert any("4 of 4 samples hold repeated points" in r.getMessage() for r in caplog.records)
+        assert verify_dataset(out).ok
+        ds = OccludedDataset(out)
+        for i in range(len(ds)):
+            points, _, meta = ds[i]
+            assert meta["padded"] and len(np.unique(points, axis=0)) == meta["n_visible"] < 1024
+        arrays[storage] = ds.to_arrays()[0]
+    assert np.array_equal(arrays["dense"], arrays["compact"])
+
+
+def test_the_readme_and_farm_guide_examples_pad_under_5_percent(tmp_path, monkeypatch):
+    # the first examples a user runs: README's farm line and the farm guide's demo, as written
+    readme = (REPO_ROOT / "README.md").read_text()
+    guide = (REPO_ROOT / "docs" / "farm.md").read_text()
+    lines = [next(line for line in text.splitlines() if line.startswith("zbuf-occlude farm data/samples "))
+             for text in (readme, guide)]  # fmt: skip
+    monkeypatch.chdir(REPO_ROOT)  # the examples name data/samples relative to a checkout
+    for n, line in enumerate(lines):
+        args = shlex.split(line)[1:]
+        args[args.index("--out") + 1] = str(tmp_path / f"example{n}")
+        assert cli_main([*args, "--no-progress"] if "--no-progress" not in args else args) == 0
+        card = json.loads((tmp_path / f"example{n}" / CARD_FILE).read_text())
+        assert card["n_samples"] > 0 and card["n_padded_samples"] < 0.05 * card["n_samples"], (line, card["n_padded_samples"])
 
 
 # -- resume, failures, errors ---------------------------------------------------------------
@@ -512,7 +564,7 @@ def _box_object(tmp_path: Path) -> FarmObject:
 
 
 #: From el=0 the box shows its 0.5 x 0.25 end (~7 % of the dense points), from el=90 its top
-#: (~29 %): with 150 points the first pose is padded, the second is not.
+#: (~29 %): with 150 points the first pose is topped up (not padded), the second needs nothing.
 WORKER_PARAMS = dict(views="0:0,90:0", samples_per_view=3, n_points=150, dense_points=1000, resolution=32, method="oracle", seed=5)
 
 
@@ -536,7 +588,9 @@ def _check_record(rec: dict, obj: FarmObject, params: FarmParams, out: Path, mes
     for field in ("index", "name", "source", "class_name", "label", "split", "key"):
         assert rec["object_index" if field == "index" else field] == getattr(obj, field), field
     assert (rec["seed"], rec["params_digest"]) == (params.seed, params.digest())
-    assert rec["n_visible"] == n_visible and rec["n_padded_poses"] == 1
+    # the end-on pose is topped up to n_points distinct visible points, the top pose is not touched
+    assert rec["n_topped_up"][0] > 0 and rec["n_visible"][0] == n_visible[0] + rec["n_topped_up"][0] >= params.n_points
+    assert rec["n_topped_up"][1] == 0 and rec["n_visible"][1] == n_visible[1] and rec["n_padded_poses"] == 0
     assert all(type(v) is int for v in rec["n_visible"])  # counts, not floats, in the JSON record
     assert rec["n_dense"] == len(dense.points) == params.dense_points and rec["n_faces"] == len(mesh.faces) == 12
     assert rec["sha256"] == [file_sha256(out / s) for s in rec["shards"]]
@@ -551,7 +605,7 @@ def _check_record(rec: dict, obj: FarmObject, params: FarmParams, out: Path, mes
 def _shard_attrs(obj: FarmObject, params: FarmParams) -> dict:
     from zbuf_occlude import __version__
 
-    return {"format_version": 1, "storage": params.storage, "object_index": obj.index, "name": obj.name,
+    return {"format_version": FORMAT_VERSION, "storage": params.storage, "object_index": obj.index, "name": obj.name,
             "class_name": obj.class_name, "split": obj.split, "label": obj.label, "key": obj.key, "seed": params.seed,
             "n_points": params.n_points, "samples_per_view": params.samples_per_view, "params_digest": params.digest(),
             "zbuf_occlude_version": __version__}  # fmt: skip
@@ -574,10 +628,16 @@ def test_worker_compact_shard_holds_the_dense_cloud_bits_and_poses(tmp_path):
         assert bits.shape == (2, (1000 + 7) // 8) and bits.dtype == np.uint8
         assert all(np.array_equal(unpack_visible(bits[i], 1000), visible[i]) for i in range(2))
         assert f["visible_bits"].compression == "gzip"
-        assert f["n_visible"][()].tolist() == rec["n_visible"]
+        assert f["n_visible"][()].tolist() == rec["n_visible"] and f["n_topped_up"][()].tolist() == rec["n_topped_up"]
         assert f["elevation_deg"][()].tolist() == [0.0, 90.0] and f["azimuth_deg"][()].tolist() == [0.0, 0.0]
+        topup = f["topup_points"][()]
         attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in f.attrs.items()}
     assert attrs == {**_shard_attrs(obj, params), "n_dense": 1000}
+    # the top-up points of each pose, pose after pose, as float32: those occlude_poses draws
+    poses = list(occlude_poses(mesh, params.poses, key=obj.key, n_points=150, samples_per_view=0, seed=5, dense=dense,
+                               method="oracle", resolution=32))  # fmt: skip
+    expected = np.concatenate([p.topped_up.points for p in poses]).astype(np.float32)
+    assert topup.dtype == np.float32 and len(topup) == sum(rec["n_topped_up"]) and np.array_equal(topup, expected)
 
 
 def test_worker_dense_shard_holds_each_poses_samples(tmp_path):
@@ -594,14 +654,21 @@ def test_worker_dense_shard_holds_each_poses_samples(tmp_path):
         assert f["pose_index"][()].tolist() == [0, 0, 0, 1, 1, 1] and f["object_index"][()].tolist() == [3] * 6
         data = f["data"][()]
         attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in f.attrs.items()}
-    for row, pose in zip(data, [0, 0, 0, 1, 1, 1]):  # every point a dense point visible from its pose
+    for row in data[3:]:  # the top pose: every point a dense point visible from it
         hit = (np.abs(dense.points.astype(np.float32)[None] - row[:, None]).max(axis=2) == 0)
-        assert hit.any(axis=1).all() and visible[pose][hit.argmax(axis=1)].all()
+        assert hit.any(axis=1).all() and visible[1][hit.argmax(axis=1)].all()
+    for row in data[:3]:  # the end-on pose: 150 distinct points, its visible dense points among them
+        assert len(np.unique(row, axis=0)) == 150
     assert {k: attrs[k] for k in _shard_attrs(obj, params)} == _shard_attrs(obj, params)
-    # exactly the draws of (seed, key, pose, sample) from the visible points
+    # exactly the draws of (seed, key, pose, sample) from the pose's visible and top-up points
+    poses = list(occlude_poses(mesh, params.poses, key=obj.key, n_points=150, samples_per_view=0, seed=5, dense=dense,
+                               method="oracle", resolution=32))  # fmt: skip
     for pose in (0, 1):
-        chosen = pose_samples(np.flatnonzero(visible[pose]), 150, seed=5, key=obj.key, pose_index=pose, sample_indices=range(3))
-        assert np.array_equal(data[3 * pose : 3 * pose + 3], dense.points[np.stack(chosen)].astype(np.float32))
+        extra = poses[pose].topped_up
+        chosen = pose_samples(np.flatnonzero(visible[pose]), 150, seed=5, key=obj.key, pose_index=pose, sample_indices=range(3),
+                              n_dense=1000, n_topped_up=len(extra))  # fmt: skip
+        table = np.concatenate([dense.points, extra.points]).astype(np.float32)
+        assert np.array_equal(data[3 * pose : 3 * pose + 3], table[np.stack(chosen)])
 
 
 @pytest.mark.parametrize("storage", ["npz", "ply"])
@@ -703,7 +770,8 @@ def test_worker_a_pose_with_exactly_n_points_visible_is_not_padded(tmp_path):
     _, _, visible = _worker_truth(obj, FarmParams(**WORKER_PARAMS, storage="compact"))
     exact = int(visible[1].sum())  # the top pose's visible count
     rec = process_object(obj, FarmParams(**{**WORKER_PARAMS, "n_points": exact}, storage="compact"), tmp_path / "out")
-    assert rec["n_visible"][1] == exact and rec["n_padded_poses"] == 1  # only the end-on pose
+    assert rec["n_visible"][1] == exact and rec["n_topped_up"][1] == 0  # not padded, so not topped up
+    assert rec["n_topped_up"][0] > 0 and rec["n_padded_poses"] == 0  # only the end-on pose is topped up
 
 
 def test_worker_shards_store_no_times_and_compact_bits_are_one_gzip_chunk(tmp_path, monkeypatch):
@@ -740,7 +808,8 @@ def test_hdf5_disk_full_becomes_enospc_and_other_errors_pass_unchanged(tmp_path,
 
     from zbuf_occlude.farm import worker
 
-    args = {"_write_compact": (np.zeros((8, 3)), np.zeros((1, 1), np.uint8), np.array([3]), [(0.0, 0.0)], {}),
+    args = {"_write_compact": (np.zeros((8, 3)), np.zeros((1, 1), np.uint8), np.array([3]), np.array([0]), np.zeros((0, 3)),
+                               [(0.0, 0.0)], {}),
             "_write_datasets": ({"data": np.zeros(3)}, {})}[writer]  # fmt: skip
     for raised, expected_errno in ((OSError("Unable to create file (No space left on device)"), errno.ENOSPC),
                                    (OSError(errno.EACCES, "No space left? no: permission"), errno.EACCES),
@@ -803,13 +872,16 @@ def test_worker_h5_and_npz_samples_carry_the_objects_provenance(tmp_path):
         assert f["object_index"].dtype == np.int64 and f["pose_index"].dtype == np.int64
 
 
-def test_merge_counts_padded_samples_as_one_run_does(tree, tmp_path):
-    # more points per sample than a view sees of the dense cloud: samples are padded
-    params = FarmParams(views="0:0,40:90", samples_per_view=1, n_points=1500, dense_points=2048, resolution=96)
-    whole = run_farm(tree, tmp_path / "whole", params=params, options=RunOptions(progress=False))
-    assert whole.padded > 0
+def test_merge_counts_padded_samples_as_one_run_does(tree, shingles_tree, tmp_path):
+    # the shingles' poses stay padded even topped up (a tiny visible surface); the real meshes' are not
+    mixed = make_tree(tmp_path / "mixed", SMALL_MESHES[:2])
+    (mixed / "shingles" / "train").mkdir(parents=True)
+    (mixed / "shingles" / "train" / "shingles_0001.off").symlink_to(shingles_tree / "shingles" / "train" / "shingles_0001.off")
+    params = FarmParams(views="0:0,0:180", samples_per_view=1, n_points=1024, dense_points=4000, resolution=64, method="oracle")
+    whole = run_farm(mixed, tmp_path / "whole", params=params, options=RunOptions(progress=False))
+    assert whole.padded == 2 and whole.samples == 6
     for i in range(2):
-        run_farm(tree, tmp_path / f"task{i}", params=params, options=RunOptions(shard=(i, 2), progress=False))
+        run_farm(mixed, tmp_path / f"task{i}", params=params, options=RunOptions(shard=(i, 2), progress=False))
     merged = merge_farm([tmp_path / "task0", tmp_path / "task1"], tmp_path / "merged", progress=False)
     assert (merged.padded, merged.samples, merged.done) == (whole.padded, whole.samples, whole.done)
     card = json.loads((tmp_path / "merged" / CARD_FILE).read_text())

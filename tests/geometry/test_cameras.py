@@ -54,10 +54,10 @@ def test_camera_on_sphere_uses_the_matlab_convention():
     el, az = math.radians(30), math.radians(45)
     assert np.allclose(cam.eye, 4 * np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)]))
     uv, depth = cam.project(np.zeros((1, 3)))
-    assert np.allclose(uv, [[cam.width / 2, cam.height / 2]]) and np.isclose(depth[0], 4.0)
+    assert np.allclose(uv, [[(cam.width - 1) / 2, (cam.height - 1) / 2]]) and np.isclose(depth[0], 4.0)
     # world z (up) projects upwards in the image (smaller row index)
     uv_up, _ = cam.project(np.array([[0.0, 0.0, 0.1]]))
-    assert uv_up[0, 1] < cam.height / 2
+    assert uv_up[0, 1] < (cam.height - 1) / 2
 
 
 @pytest.mark.parametrize("elevation", [-90.0, 90.0])
@@ -78,9 +78,9 @@ def test_projection_matrix_agrees_with_K_and_the_whole_box_is_in_view(el, az, ra
     pts = np.random.default_rng(0).uniform(-0.5, 0.5, (50, 3))
     clip = np.c_[pts, np.ones(len(pts))] @ (cam.projection_matrix @ cam.view_matrix).T
     ndc = clip[:, :3] / clip[:, 3:]
-    uv_gl = np.c_[(ndc[:, 0] + 1) / 2 * cam.width, (1 - ndc[:, 1]) / 2 * cam.height]
+    uv_gl = np.c_[(ndc[:, 0] + 1) / 2 * cam.width, (1 - ndc[:, 1]) / 2 * cam.height]  # window coordinates
     uv_cv, depth = cam.project(pts)
-    assert np.allclose(uv_gl, uv_cv, atol=1e-6 * res)
+    assert np.allclose(uv_gl - 0.5, uv_cv, atol=1e-6 * res)  # GL's pixel centres are at +0.5, OpenCV's at integers
     assert np.allclose(depth, clip[:, 3])  # w_clip == linear depth
     assert np.all((ndc[:, 2] > -1) & (ndc[:, 2] < 1))  # tight near/far still contain the box
 
@@ -129,14 +129,40 @@ def test_camera_checks_every_bound_and_keeps_exact_values():
 def test_intrinsics_and_projection_have_the_textbook_values():
     cam = _cam()
     f = 10.0 / math.tan(math.radians(30.0))  # half height / tan(half fov)
-    assert math.isclose(cam.focal_px, f) and np.allclose(cam.K, [[f, 0, 20.0], [0, f, 10.0], [0, 0, 1]])
+    assert math.isclose(cam.focal_px, f) and np.allclose(cam.K, [[f, 0, 19.5], [0, f, 9.5], [0, 0, 1]])
     t = 1 / math.tan(math.radians(30.0))
     expected = np.array([[t / 2, 0, 0, 0], [0, t, 0, 0], [0, 0, -11 / 9, -20 / 9], [0, 0, -1, 0]])
     assert np.allclose(cam.projection_matrix, expected)
     # a point 1 right, 0.5 up, 2 in front of the camera
     uv, depth = cam.project(np.array([[1.0, 0.5, 2.0]]))
-    assert np.allclose(depth, [2.0]) and np.allclose(uv, [[20 + f / 2, 10 - f / 4]])
+    assert np.allclose(depth, [2.0]) and np.allclose(uv, [[19.5 + f / 2, 9.5 - f / 4]])
     assert np.allclose(cam.pixel_size_at(np.array([2.0, 4.0])), [2 / f, 4 / f])
+
+
+@pytest.mark.parametrize("size", [(640, 480), (1080, 720), (160, 120), (7, 5), (1, 1)])
+def test_K_is_opencv_and_open3d_pixel_centres_at_integers(size):
+    """One convention for every intrinsics in the package: OpenCV's, as Open3D's
+    ``PinholeCameraIntrinsic`` (its PrimeSense default, 640 x 480, has cx = 319.5, cy = 239.5)
+    and ModelNet40-C's ``get_default_camera_intrinsic`` (cx = W/2 - 0.5) have it."""
+    from zbuf_occlude.protocols import PinholeView, project
+    from zbuf_occlude.protocols.modelnet40c import intrinsics as modelnet40c_intrinsics
+
+    width, height = size
+    cam = zo.camera_on_sphere(25.0, 60.0, 4.0, resolution=size)
+    assert cam.K[0, 2] == (width - 1) / 2 and cam.K[1, 2] == (height - 1) / 2
+    if size == (640, 480):
+        assert (cam.K[0, 2], cam.K[1, 2]) == (319.5, 239.5)  # Open3D's PrimeSenseDefault
+    assert np.array_equal(modelnet40c_intrinsics(width, height)[:2, 2], cam.K[:2, 2])
+    # K applied by hand, Camera.project and the protocols' project give the same pixels
+    pts = np.random.default_rng(1).uniform(-0.5, 0.5, (20, 3))
+    cam_pts = pts @ cam.extrinsics[:, :3].T + cam.extrinsics[:, 3]
+    by_hand = (cam_pts @ cam.K.T)[:, :2] / cam_pts[:, 2:]
+    uv, _ = cam.project(pts)
+    view = PinholeView.from_camera(cam)
+    assert np.allclose(uv, by_hand, atol=1e-9) and np.array_equal(view.K, cam.K)
+    assert np.allclose(project(pts, view.K, view.extrinsics)[0], uv, atol=1e-9)
+    # the optical axis goes through the image's centre: the middle of the border pixels' outer edges
+    assert cam.in_frustum(np.zeros((1, 3)))[0] and np.allclose(cam.project(np.zeros((1, 3)))[0], cam.K[:2, 2])
 
 
 def test_in_frustum_includes_the_near_far_and_top_left_edges_only():

@@ -91,7 +91,9 @@ def test_dataset_labels_and_splits_match_the_farm():
 
 
 def _epoch(ds, workers):
-    loader = torch.utils.data.DataLoader(ds, batch_size=4, num_workers=workers, shuffle=False)
+    # spawn: the parent has rendered (threads of the renderer and Embree); a fork then can deadlock a worker
+    extra = {"multiprocessing_context": "spawn", "timeout": 300} if workers else {}
+    loader = torch.utils.data.DataLoader(ds, batch_size=4, num_workers=workers, shuffle=False, **extra)
     return torch.cat([x for x, _ in loader]).numpy()
 
 
@@ -112,7 +114,8 @@ def test_random_occlusion_trains_pointnet_for_one_epoch():
     before = [p.detach().clone() for p in model.parameters()]
     losses = []
     ds.set_epoch(0)
-    for x, y in torch.utils.data.DataLoader(ds, batch_size=4, shuffle=True, num_workers=2, drop_last=True):
+    for x, y in torch.utils.data.DataLoader(ds, batch_size=4, shuffle=True, num_workers=2, drop_last=True,
+                                       multiprocessing_context="spawn", timeout=300):
         loss = torch.nn.functional.cross_entropy(model(x), y) + model.regularizer
         opt.zero_grad()
         loss.backward()
@@ -145,7 +148,8 @@ def test_epoch_sampler_carries_the_epoch_to_persistent_workers():
 
     ds = OnTheFlyOccludedDataset(SAMPLES, n_points=128, dense_points=2048, seed=4)
     sampler = EpochSampler(ds)
-    loader = torch.utils.data.DataLoader(ds, batch_size=4, sampler=sampler, num_workers=2, persistent_workers=True)
+    loader = torch.utils.data.DataLoader(ds, batch_size=4, sampler=sampler, num_workers=2, persistent_workers=True,
+                                         multiprocessing_context="spawn", timeout=300)
     epochs = []
     for epoch in (0, 1):
         sampler.set_epoch(epoch)
@@ -161,7 +165,8 @@ def test_epoch_sampler_carries_the_epoch_to_persistent_workers():
 def test_set_epoch_reaches_persistent_workers(context):
     """The usual pattern: ds.set_epoch(e) before each epoch, persistent workers, no special sampler."""
     ds = OnTheFlyOccludedDataset(SAMPLES, n_points=64, dense_points=1024, seed=2)
-    loader = torch.utils.data.DataLoader(ds, batch_size=4, num_workers=2, persistent_workers=True, multiprocessing_context=context)
+    loader = torch.utils.data.DataLoader(ds, batch_size=4, num_workers=2, persistent_workers=True, multiprocessing_context=context,
+                                         timeout=300)
     epochs = []
     for epoch in (0, 1):
         ds.set_epoch(epoch)

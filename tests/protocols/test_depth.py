@@ -81,8 +81,9 @@ def test_pinhole_view_matches_the_camera(chair):
     pts = np.asarray(chair.vertices)[:50]
     uv_cam, z_cam = camera.project(pts)
     uv, z = project(pts, view.K, view.extrinsics)
-    # Camera.K puts pixel centres at half-integers, PinholeView (OpenCV) at integers
-    assert np.allclose(uv, uv_cam - 0.5, atol=1e-9) and np.allclose(z, z_cam, atol=1e-12)
+    # one convention (OpenCV, pixel centres at integers): the same K, the same pixels
+    assert np.array_equal(view.K, camera.K)
+    assert np.allclose(uv, uv_cam, atol=1e-9) and np.allclose(z, z_cam, atol=1e-12)
     assert np.allclose(PinholeView.from_pose(view.K, view.camera_to_world, 120, 90).extrinsics, view.extrinsics, atol=1e-12)
     assert np.allclose(view.center, camera.eye, atol=1e-12)
 

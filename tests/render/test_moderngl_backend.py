@@ -221,9 +221,9 @@ def test_gpu_bit_masks_do_not_depend_on_the_point_count(sample_mesh_files):
     # Uncertain = visible, but the centre pixel shows another face than the point's own (as
     # the image holds it: the lowest index of its group of identical faces).  Points within
     # 0.01 px of a pixel border are left out: float32 may put them in the next pixel.
-    uv, _ = cam.project(points)
-    inner = np.all(np.abs(uv - np.floor(uv) - 0.5) < 0.49, axis=1) & cam.in_frustum(points)
-    pix = np.floor(uv[inner]).astype(int)
+    uv, _ = cam.project(points)  # OpenCV pixels: centres at integers
+    inner = np.all(np.abs(uv - np.round(uv)) < 0.49, axis=1) & cam.in_frustum(points)
+    pix = np.round(uv[inner]).astype(int)
     centre = renderer.render(cam).face_index[pix[:, 1], pix[:, 0]]
     other_face = centre != renderer.canonical[face_index[inner]]
     assert np.array_equal(uncertain[inner], visible[inner] & other_face)
@@ -234,6 +234,25 @@ def _through_pixel(cam, u, v, depth):
     u, v = np.broadcast_arrays(np.asarray(u, dtype=float), np.asarray(v, dtype=float))
     d_cam = np.stack([(u - cam.width / 2) / cam.focal_px, (v - cam.height / 2) / cam.focal_px, np.ones_like(u)], -1)
     return cam.eye + depth * (d_cam @ cam.extrinsics[:, :3])
+
+
+def test_a_point_projected_with_K_lands_on_the_pixel_the_renderer_lights():
+    """Camera.K is OpenCV's (pixel centres at integers, cx = (W - 1)/2): a tiny triangle
+    around the point K puts at pixel (u, v) lights that pixel and no other.  With the
+    principal point at W/2 the point would sit on a pixel corner, 0.7 px from every centre."""
+    cam = zo.camera_on_sphere(35.0, 20.0, 4.0, resolution=(48, 32))  # W != H: cx and cy both count
+    K_inv, R, t = np.linalg.inv(cam.K), cam.extrinsics[:, :3], cam.extrinsics[:, 3]
+    pixels = [(0, 0), (47, 31), (23, 15), (24, 16), (5, 27), (40, 3)]
+    tris = []
+    for u, v in pixels:
+        corners = np.array([[u - 0.3, v - 0.2, 1.0], [u + 0.3, v - 0.2, 1.0], [u, v + 0.4, 1.0]])  # centroid (u, v)
+        tris.append((3.9 * corners @ K_inv.T - t) @ R)  # camera frame at depth 3.9 -> world
+    mesh = trimesh.Trimesh(vertices=np.concatenate(tris), faces=np.arange(3 * len(tris)).reshape(-1, 3), process=False)
+    face = renderer_for(mesh).render(cam).face_index
+    lit = {(int(c), int(r)): int(face[r, c]) for r, c in zip(*np.nonzero(face >= 0))}
+    assert lit == {uv: i for i, uv in enumerate(pixels)}
+    uv, _ = cam.project(mesh.triangles_center)  # Camera.project applies the same K
+    assert np.allclose(uv, pixels, atol=1e-9)
 
 
 def test_gpu_candidate_window_covers_the_rows_above_and_below():

@@ -26,6 +26,7 @@ from zbuf_occlude.farm.config import DEFAULT_SENSOR_DISTANCE_M, DEFAULT_SENSOR_H
 from zbuf_occlude.farm.shards import parse_shard
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
 from zbuf_occlude.mesh.discovery import SPLITS
+from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.mesh.scene import UP_CHOICES
 
 log = logging.getLogger(__name__)
@@ -127,8 +128,9 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
     )
     p.add_argument(
         "root",
-        help="a mesh folder (ModelNet CLASS/SPLIT/NAME.off, ShapeNetCore v1/v2 with its taxonomy.json, CLASS/NAME.ext, "
-        "or CLASS_NNNN.ext files; the layout used goes into the card) or a list file of 'PATH LABEL [SPLIT]' lines",
+        help=f"a folder of mesh files ({EXTENSIONS_TEXT}): ModelNet CLASS/SPLIT/NAME.off, ShapeNetCore v1/v2 with its "
+        "taxonomy.json, CLASS/NAME.ext or CLASS_NNNN.ext files (the layout used goes into the card; see docs/guide/inputs.md); "
+        "or a list file of 'PATH LABEL [SPLIT]' lines",
     )
     p.add_argument("--out", required=True, help="data set folder")
     sel = p.add_argument_group("selection")

@@ -11,12 +11,15 @@ from typing import Any
 from zbuf_occlude.cli.sim2real import parse_pairs, print_table
 from zbuf_occlude.defaults import DEFAULT_METHOD
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 
 __all__ = ["add_parser", "check_options"]
 
 
 def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("root", help="mesh tree (ModelNet layout: CLASS/SPLIT/NAME.off); duplicate meshes are dropped")
+    p.add_argument(
+        "root", help=f"mesh tree in ModelNet's layout, CLASS/SPLIT/NAME.ext with files {EXTENSIONS_TEXT}; duplicate meshes are dropped"
+    )
     p.add_argument("--out", required=True, help="output folder (results.csv, table.md, run.json, plots, checkpoints)")
     p.add_argument("--scale", choices=("quick", "paper"), default="quick",
                    help="quick: fits a 2-core CPU; paper: the paper's sizes (ModelNet40 and a GPU) (default: %(default)s)")

@@ -1,18 +1,22 @@
 """Command-line interface ``zbuf-occlude`` (also ``python -m zbuf_occlude``).
 
 Thin: parse arguments, call the library, print.  A :class:`ZbufOccludeError` is printed on
-one line and the exit status is non-zero; any other exception is a bug and shows a traceback.
+one line and the exit status is 2; running out of memory (a ``MemoryError`` anywhere) is one
+line naming the command, what it was doing and the file when known, exit status 1; any other
+exception is a bug and shows a traceback.
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import os
 import signal
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from types import TracebackType
 
 import numpy as np
 
@@ -35,7 +39,7 @@ from zbuf_occlude.visibility.registry import (
     visible_mask,
 )
 
-__all__ = ["main", "build_parser", "SAMPLE_MESHES"]
+__all__ = ["SAMPLE_MESHES", "build_parser", "main"]
 
 log = logging.getLogger("zbuf_occlude")
 
@@ -212,10 +216,10 @@ def _add_paths(p: argparse.ArgumentParser) -> None:
 def build_parser() -> argparse.ArgumentParser:
     """The ``zbuf-occlude`` argument parser with every subcommand."""
     from zbuf_occlude.cli.farm import CLASS_FROM_HELP, RADIUS_HELP, UP_HELP, VIEWS_HELP
-    from zbuf_occlude.mesh.scene import UP_CHOICES
     from zbuf_occlude.defaults import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION
     from zbuf_occlude.defaults import DEFAULT_FARM_VIEWS as FARM_VIEWS
     from zbuf_occlude.farm.config import GENERATE_DEFAULTS as gd  # generate's defaults, taken from zbuf_occlude.defaults
+    from zbuf_occlude.mesh.scene import UP_CHOICES
 
     parser = argparse.ArgumentParser(prog="zbuf-occlude", description="Real-like occluded point clouds from meshes (headless z-buffer HSR).")
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
@@ -295,16 +299,90 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: Local variables that hold the file a library function works on, looked up in the frames of a
+#: ``MemoryError`` to name that file (the library's own name for it is ``path``).
+_FILE_LOCALS = ("path", "mesh_path", "file_path", "filename")
+
+
+def _out_of_memory(command: str, exc: MemoryError) -> str:
+    """One line for a ``MemoryError``: the command, the innermost zbuf_occlude function and the file it worked on.
+
+    The traceback's frames are read innermost first; the first function of the package names
+    what was being done and the first ``path`` (or :data:`_FILE_LOCALS`) in those frames the file.
+    """
+    doing, file = None, None
+    frames: list[TracebackType] = []
+    tb = exc.__traceback__
+    while tb is not None:
+        frames.append(tb)
+        tb = tb.tb_next
+    for tb in reversed(frames):
+        frame = tb.tb_frame
+        module = frame.f_globals.get("__name__", "")
+        if not module.startswith("zbuf_occlude"):
+            continue
+        if doing is None and not module.startswith("zbuf_occlude.cli"):
+            doing = f"{module}.{frame.f_code.co_name}"
+        if file is None:
+            found = (frame.f_locals.get(name) for name in _FILE_LOCALS)
+            file = next((os.fspath(v) for v in found if isinstance(v, (str, os.PathLike))), None)
+    where = f"`{command}` ran out of memory"
+    if doing:
+        where += f" in {doing}"
+    if file:
+        where += f" on {file}"
+    detail = " ".join(str(exc).split())  # numpy says what it could not allocate
+    return f"{where}{f' ({detail})' if detail else ''}: free memory, or use smaller inputs or options"
+
+
+def _missing_folders(out: object) -> list[Path]:
+    """``--out`` and those of its parents that do not exist yet, deepest first (none for a blank value)."""
+    if not isinstance(out, str) or not out.strip():
+        return []
+    missing = []
+    for folder in (Path(out), *Path(out).parents):
+        if os.path.lexists(folder):
+            break
+        missing.append(folder)
+    return missing
+
+
+def _remove_if_empty(folders: list[Path]) -> None:
+    """Remove the folders a refused run created, deepest first, if nothing was written in them.
+
+    ``os.rmdir`` removes only empty folders, so a file anywhere inside (or a link) keeps the folder.
+    """
+    for folder in folders:
+        if not folder.is_dir() or folder.is_symlink():
+            continue
+        for below, _, _ in os.walk(folder, topdown=False):
+            try:
+                os.rmdir(below)
+            except OSError:
+                return
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the console script; returns the exit status."""
+    """Entry point of the console script; returns the exit status.
+
+    A run refused with a usage error (exit 2) leaves no empty ``--out`` folder behind: the folders
+    it created for ``--out`` are removed again when nothing was written in them.
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    created = _missing_folders(getattr(args, "out", None))
     try:
         return int(args.func(args) or 0)
     except ZbufOccludeError as exc:
         print(f"zbuf-occlude: error: {exc}", file=sys.stderr)
+        _remove_if_empty(created)
         return 2
+    except MemoryError as exc:
+        # Readers turn a MemoryError into an error naming their file; anything else that runs
+        # out of memory ends here, in one line, not with a traceback.
+        print(f"zbuf-occlude: error: {_out_of_memory(args.command, exc)}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt as exc:
         # 130 after Ctrl-C (SIGINT), 143 after SIGTERM (farm.lifecycle.Terminated): 128 + the signal
         print("zbuf-occlude: interrupted; run the same command again to resume", file=sys.stderr)

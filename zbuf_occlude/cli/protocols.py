@@ -6,7 +6,7 @@ import argparse
 import sys
 import time
 
-from zbuf_occlude.cli.options import counted
+from zbuf_occlude.cli.options import add_renamed, counted
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.protocols import PROTOCOL_NAMES, PROTOCOLS, get_protocol
 from zbuf_occlude.protocols.base import ProtocolOptions, run_protocol
@@ -30,7 +30,14 @@ def add_protocol_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--normals", action="store_true", help="depth protocol: also write per-point face normals")
     g.add_argument("--camera-frame", action="store_true", help="depth protocol: also write camera-frame coordinates")
     g.add_argument("--complete-points", type=int, default=0, help="depth protocol: complete cloud beside the partial ones (pcn: default 16384)")
-    g.add_argument("--up-axis", default="z", choices=("z", "y"), help="pcn: the meshes' up axis (ShapeNet OBJ: y)")
+    # the old PCN-only spelling of generate's --up: z → +z, y → +y
+    add_renamed(parser, "--up-axis", "--up", "up", type=_legacy_up_axis)
+
+
+def _legacy_up_axis(text: str) -> str:
+    if text not in ("z", "y"):
+        raise argparse.ArgumentTypeError(f"invalid choice: {text!r} (choose from 'z', 'y'; or use --up)")
+    return "+" + text
 
 
 def run_protocol_command(args: argparse.Namespace, paths: list[str]) -> int:
@@ -47,8 +54,7 @@ def run_protocol_command(args: argparse.Namespace, paths: list[str]) -> int:
     options = ProtocolOptions(
         severity=args.severity, seed=args.seed, views=args.views, resolution=args.resolution, radius=args.radius,
         n_points=args.points if args.protocol == "depth" else None, downsample=args.downsample, normals=args.normals,
-        camera_frame=args.camera_frame, complete_points=args.complete_points,
-        extra={"up_axis": args.up_axis} if args.protocol == "pcn" else {},
+        camera_frame=args.camera_frame, complete_points=args.complete_points, up=args.up,
     )  # fmt: skip
     t0 = time.perf_counter()
     run = run_protocol(protocol, paths, args.out, options, overwrite=args.overwrite)

@@ -60,6 +60,7 @@ __all__ = [
     "RECORD_DIR",
     "TASK_DIR",
     "PLAN_FILE",
+    "PROTOCOL_FILE",
     "LOCK_FILE",
     "SPLIT_FILE_PREFIX",
     "split_file_name",
@@ -78,8 +79,8 @@ __all__ = [
     "sample_file_name",
 ]
 
-#: Version of the layout above; readers refuse newer ones.
-FORMAT_VERSION = 1
+#: Version of the layout above; readers refuse newer ones.  2: compact shards hold top-up points.
+FORMAT_VERSION = 2
 CARD_FILE = "dataset_card.json"
 #: The card's SHA-256, ``<hex>  dataset_card.json`` (``sha256sum -c`` reads it); data sets
 #: written before it existed have none and still read.
@@ -89,6 +90,8 @@ SHAPE_NAMES_FILE = "shape_names.txt"
 SHARD_DIR = "shards"
 #: The journal.
 RECORD_DIR, TASK_DIR, PLAN_FILE = "records", "tasks", "plan.json"
+#: The options of a ``generate --protocol`` folder (zbuf_occlude.protocols), which is not a data set of this layout.
+PROTOCOL_FILE = "protocol.json"
 #: The data-set lock (zbuf_occlude.farm.lock).
 LOCK_FILE = ".zbuf_occlude.lock"
 #: ``generate --format h5``'s joined files, one per split: ``occluded_<split>.h5``.
@@ -106,8 +109,8 @@ INDEX_COLUMNS = ("object_index", "pose_index")
 #: What ``generate --format h5`` adds: ``face_index (B, n) int32``, ``radius (B,) float64``,
 #: ``source``, ``class_name`` and ``split (B,)`` UTF-8.
 PROVENANCE_COLUMNS = ("face_index", "radius", "source", "class_name", "split")
-#: Datasets of a compact shard.
-COMPACT_DATASETS = ("dense_points", "visible_bits", "n_visible", "elevation_deg", "azimuth_deg")
+#: Datasets of a compact shard (format 1 shards lack the last two).
+COMPACT_DATASETS = ("dense_points", "visible_bits", "n_visible", "elevation_deg", "azimuth_deg", "n_topped_up", "topup_points")
 #: What each dataset of a shard holds: ``(kinds, ndim)``, kinds from ``"f"`` float, ``"i"``/``"u"``
 #: integer, ``"T"`` string (:class:`zbuf_occlude.io.hdf5.Column`).  The reader and ``verify``
 #: refuse a shard whose dataset differs (a string or integer ``data`` is not points).
@@ -115,7 +118,7 @@ COLUMN_TYPES = {
     "data": ("f", 3), "label": ("iu", 1), "elevation_deg": ("f", 1), "azimuth_deg": ("f", 1),
     "sample_index": ("iu", 1), "n_visible": ("iu", 1), "object_index": ("iu", 1), "pose_index": ("iu", 1),
     "face_index": ("iu", 2), "radius": ("f", 1), "source": ("T", 1), "class_name": ("T", 1), "split": ("T", 1),
-    "dense_points": ("f", 2), "visible_bits": ("u", 2),
+    "dense_points": ("f", 2), "visible_bits": ("u", 2), "n_topped_up": ("iu", 1), "topup_points": ("f", 2),
     # farm --sensor rows (zbuf_occlude.sensors.crops.farm_datasets)
     "distance_m": ("f", 1), "sensor_height_m": ("f", 1), "object_azimuth_deg": ("f", 1), "yaw_deg": ("f", 1),
     "size_m": ("f", 1), "ring": ("iu", 2),

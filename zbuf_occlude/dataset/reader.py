@@ -7,6 +7,7 @@ this module reads them (both storage modes, and ``generate``'s folders in every 
 
 from __future__ import annotations
 
+import itertools
 import os
 from collections import OrderedDict
 from collections.abc import Callable, Iterable, Sequence
@@ -24,7 +25,7 @@ from zbuf_occlude.dataset.layout import (
     STORAGE_MODES,
 )
 from zbuf_occlude.errors import InvalidInputError, ShardChecksumError
-from zbuf_occlude.geometry.samples import pose_samples
+from zbuf_occlude.geometry.samples import pool_take, pose_samples
 from zbuf_occlude.io.safe_paths import path_inside
 from zbuf_occlude.mesh.discovery import SPLITS, name_set
 from zbuf_occlude.resources import check_memory
@@ -75,11 +76,12 @@ def reconstruct_samples(
     pose_index: int,
     n_points: int,
     sample_indices: Iterable[int],
+    topup_points: NDArray[np.float32] | None = None,
 ) -> NDArray[np.float32]:
-    """Redraw samples of one pose from the dense cloud and the pose's visibility mask.
+    """Redraw samples of one pose from the dense cloud, the pose's visibility mask and its top-up points.
 
     :func:`~zbuf_occlude.geometry.samples.pose_samples`, the draw
-    :func:`~zbuf_occlude.pipeline.occlude_object` makes, so the result is bit-identical to
+    :func:`~zbuf_occlude.pipeline.occlude_poses` makes, so the result is bit-identical to
     the ``data`` a dense-storage run writes.
 
     Parameters
@@ -91,18 +93,22 @@ def reconstruct_samples(
         Global seed and the object's key (manifest fields ``seed``, ``key``).
     pose_index, n_points : int
     sample_indices : iterable of int
+    topup_points : (T, 3) float32, optional
+        The pose's top-up points (its rows of the shard's ``topup_points``); none by default.
 
     Returns
     -------
     samples : (S, n_points, 3) float32
         ``S = len(sample_indices)``; ``(0, n_points, 3)`` if nothing is visible.
     """
+    n_topped_up = 0 if topup_points is None else len(topup_points)
     chosen = pose_samples(
-        np.flatnonzero(visible), n_points, seed=seed, key=key, pose_index=pose_index, sample_indices=sample_indices
-    )
+        np.flatnonzero(visible), n_points, seed=seed, key=key, pose_index=pose_index, sample_indices=sample_indices,
+        n_dense=len(dense_points), n_topped_up=n_topped_up,
+    )  # fmt: skip
     if not chosen:
         return np.zeros((0, n_points, 3), dtype=np.float32)
-    return np.stack([dense_points[c] for c in chosen]).astype(np.float32, copy=False)
+    return np.stack([pool_take(dense_points, topup_points, c) for c in chosen]).astype(np.float32, copy=False)
 
 
 def _pose_mask(values: NDArray[np.float64], spec: PoseFilter, name: str) -> NDArray[np.bool_]:
@@ -160,7 +166,8 @@ class OccludedDataset(Sequence):
     Raises
     ------
     InvalidInputError
-        Not a finished farm data set, a newer format, an unknown split or class name.
+        Not a finished farm data set, a newer format, an unknown split or class name, or an
+        ``elevation_deg``/``azimuth_deg`` filter that leaves none of the chosen samples.
     DatasetFormatError
         The card differs from its SHA-256 file (``dataset_card.json.sha256``; a data set
         without one still reads), the card, the manifest or ``shape_names.txt`` does not match its schema
@@ -261,8 +268,12 @@ class OccludedDataset(Sequence):
         self._shards: list[Path] = []  # per object: its shard, checked to lie inside the data set
         self._digests: dict[Path, str] = {}  # shard → SHA-256 recorded by the farm
         self._shard_rows: dict[Path, int] = {}  # shard → rows its manifest line promises
+        self._topup_rows: dict[Path, int] = {}  # compact shard → top-up points its manifest line promises
         self._verified: set[Path] = set()
         obj_rows, poses_rows, sample_rows, shard_rows = [], [], [], []
+        pose_filtered = elevation_deg is not None or azimuth_deg is not None
+        before_pose_filter = 0  # samples of the chosen splits and classes: a pose filter that leaves none of them is a mistake
+        scan_directions: list[NDArray[np.float64]] = []  # farm --sensor: each scan's (elevation, azimuth), for that message
         manifest_path = self.root / MANIFEST_FILE
         manifest = read_manifest(manifest_path)
         check_records(manifest_path, manifest, card, self.shape_names)
@@ -277,6 +288,7 @@ class OccludedDataset(Sequence):
             self._digests.update(digests)
             spp = samples_per_pose(np.asarray(checked.n_visible, dtype=np.int64), 1 if self.sensor else self._samples_per_view)
             self._shard_rows[shards[0]] = int(spp.sum())
+            self._topup_rows[shards[0]] = int(sum(checked.n_topped_up or ()))
             pose = np.repeat(np.arange(len(spp)), spp)
             starts = np.cumsum(spp) - spp
             sample = np.arange(len(pose)) - np.repeat(starts, spp)
@@ -286,9 +298,10 @@ class OccludedDataset(Sequence):
                 keep = np.ones(len(pose), dtype=bool)
             else:  # each scan's own sensor direction, from its shard row
                 f = self._file(shards[0])
-                keep = _pose_mask(f["elevation_deg"][()], elevation_deg, "elevation_deg") & _pose_mask(
-                    f["azimuth_deg"][()], azimuth_deg, "azimuth_deg"
-                )
+                el, az = f["elevation_deg"][()], f["azimuth_deg"][()]
+                scan_directions.append(np.column_stack([el, az]).astype(np.float64))
+                keep = _pose_mask(el, elevation_deg, "elevation_deg") & _pose_mask(az, azimuth_deg, "azimuth_deg")
+            before_pose_filter += len(pose)
             obj_rows.append(np.full(int(keep.sum()), len(self._objects), dtype=np.int64))
             poses_rows.append(pose[keep])
             sample_rows.append(sample[keep])
@@ -300,6 +313,17 @@ class OccludedDataset(Sequence):
             return np.concatenate(parts).astype(np.int64) if parts else np.zeros(0, dtype=np.int64)
 
         self._obj, self._pose, self._sample, self._row = cat(obj_rows), cat(poses_rows), cat(sample_rows), cat(shard_rows)
+        if pose_filtered and before_pose_filter and not len(self._obj):  # a typo, not an empty data set
+            directions = np.concatenate(scan_directions) if scan_directions else np.zeros((0, 2))
+            seen = (
+                f"its scans' sensor elevations span {directions[:, 0].min():g} to {directions[:, 0].max():g} and azimuths "
+                f"{directions[:, 1].min():g} to {directions[:, 1].max():g} (degrees, seen from the object)"
+                if len(directions) else "the poses it matches hold no sample of the chosen splits and classes (nothing visible)"
+            )  # fmt: skip
+            raise InvalidInputError(
+                f"no sample of {self.root} matches elevation_deg={elevation_deg!r}, azimuth_deg={azimuth_deg!r} "
+                f"({before_pose_filter} samples before this filter); {seen}"
+            )
         self._object_cache_size = max(1, int(object_cache))
         if not hasattr(self, "_files"):
             self._reset_handles()
@@ -308,7 +332,7 @@ class OccludedDataset(Sequence):
     def _reset_handles(self) -> None:
         self._pid = os.getpid()
         self._files: OrderedDict[Path, Any] = OrderedDict()
-        self._compact: OrderedDict[int, tuple[NDArray[np.float32], NDArray[np.uint8]]] = OrderedDict()
+        self._compact: OrderedDict[int, tuple[NDArray[np.float32], NDArray[np.uint8], list[NDArray[np.float32]]]] = OrderedDict()
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
@@ -329,7 +353,7 @@ class OccludedDataset(Sequence):
             self._verify(path)
             f = open_shard(
                 path, storage=self.storage, n_points=self.n_points, rows=self._shard_rows.get(path, 0),
-                n_poses=len(self._elevation), sensor=self.sensor is not None,
+                n_poses=len(self._elevation), sensor=self.sensor is not None, topup_rows=self._topup_rows.get(path, 0),
             )  # fmt: skip
             self._files[path] = f
             while len(self._files) > DEFAULT_OPEN_FILES:
@@ -364,7 +388,8 @@ class OccludedDataset(Sequence):
         self._verify(path)
         return read_sample_points(path, self.storage, self.n_points)
 
-    def _compact_arrays(self, obj: int) -> tuple[NDArray[np.float32], NDArray[np.uint8]]:
+    def _compact_arrays(self, obj: int) -> tuple[NDArray[np.float32], NDArray[np.uint8], list[NDArray[np.float32]]]:
+        """An object's dense cloud, visibility bits and top-up points of each pose (checked once, cached)."""
         hit = self._compact.get(obj)
         if hit is not None and self._pid == os.getpid():
             self._compact.move_to_end(obj)
@@ -372,8 +397,14 @@ class OccludedDataset(Sequence):
         from zbuf_occlude.dataset.schema import check_visible_bits
 
         f = self._file(self._shards[obj])
-        arrays = (f["dense_points"][()], f["visible_bits"][()])
-        check_visible_bits(self._shards[obj], arrays[1], len(arrays[0]), self._objects[obj]["n_visible"])
+        rec = self._objects[obj]
+        n_topped_up = rec.get("n_topped_up")
+        dense_points, bits = f["dense_points"][()], f["visible_bits"][()]
+        check_visible_bits(self._shards[obj], bits, len(dense_points), rec["n_visible"], n_topped_up)
+        # rows of topup_points, pose after pose (open_shard checked their total against n_topped_up)
+        topup = f["topup_points"][()] if n_topped_up else np.zeros((0, 3), dtype=np.float32)
+        bounds = np.cumsum([0, *(n_topped_up or [0] * len(bits))])
+        arrays = (dense_points, bits, [topup[a:b] for a, b in itertools.pairwise(bounds)])
         self._compact[obj] = arrays
         while len(self._compact) > self._object_cache_size:
             self._compact.popitem(last=False)
@@ -397,12 +428,12 @@ class OccludedDataset(Sequence):
         if self.storage != "compact":
             f = self._file(self._shards[obj])
             return f["data"][int(self._row[i])]
-        dense_points, bits = self._compact_arrays(obj)
+        dense_points, bits, topup = self._compact_arrays(obj)
         pose = int(self._pose[i])
         visible = unpack_visible(bits[pose], len(dense_points))
         return reconstruct_samples(
             dense_points, visible, seed=self._seed, key=int(rec["key"]), pose_index=pose,
-            n_points=self.n_points, sample_indices=[int(self._sample[i])],
+            n_points=self.n_points, sample_indices=[int(self._sample[i])], topup_points=topup[pose],
         )[0]  # fmt: skip
 
     def metadata(self, i: int) -> dict[str, Any]:
@@ -412,6 +443,7 @@ class OccludedDataset(Sequence):
         rec = self._objects[obj]
         pose = int(self._pose[i])
         n_visible = int(rec["n_visible"][pose])
+        n_topped_up = rec.get("n_topped_up")
         return {
             "class_name": rec["class_name"],
             "split": rec["split"],
@@ -421,6 +453,7 @@ class OccludedDataset(Sequence):
             "pose_index": pose,
             "sample_index": int(self._sample[i]),
             "n_visible": n_visible,
+            "n_topped_up": int(n_topped_up[pose]) if n_topped_up else 0,
             "padded": n_visible < self.n_points,
         } | self._placement(obj, pose, int(self._row[i]))
 
@@ -480,14 +513,14 @@ class OccludedDataset(Sequence):
                 rows = self._row[start:stop]
                 data[start:stop] = self._file(self._shards[obj])["data"][()][rows]
                 continue
-            dense_points, bits = self._compact_arrays(obj)
+            dense_points, bits, topup = self._compact_arrays(obj)
             pose_rows = self._pose[start:stop]
             for pose in np.unique(pose_rows):
                 sel = np.flatnonzero(pose_rows == pose) + start
                 data[sel] = reconstruct_samples(
                     dense_points, unpack_visible(bits[pose], len(dense_points)), seed=self._seed,
                     key=int(rec["key"]), pose_index=int(pose), n_points=self.n_points,
-                    sample_indices=self._sample[sel].tolist(),
+                    sample_indices=self._sample[sel].tolist(), topup_points=topup[int(pose)],
                 )  # fmt: skip
         return data, labels
 

@@ -126,12 +126,15 @@ class ObjectRecord(_Model):
     #: Shard files, relative to the data set folder, and their SHA-256 (parallel lists).
     shards: list[str]
     sha256: list[Sha256] | None
-    #: Visible points per pose (``farm --sensor``: returns per scan).
+    #: Distinct visible points per pose: visible dense points plus top-up points (``farm --sensor``: returns per scan).
     n_visible: list[NonNegativeInt]
     n_samples: NonNegativeInt
     bytes: NonNegativeInt
     #: Poses with ``0 < n_visible < n_points`` (their samples repeat points), dense points, faces.
     n_padded_poses: NonNegativeInt | None = None
+    #: Per pose, how many of its ``n_visible`` points were topped up on the faces it sees
+    #: (:func:`zbuf_occlude.geometry.samples.top_up`); ``None``: none (``--sensor``, older writers).
+    n_topped_up: list[NonNegativeInt] | None = None
     n_dense: NonNegativeInt | None = None
     n_faces: NonNegativeInt | None = None
     #: The up axis the mesh was read with (``+x`` … ``-z``) and why (the file, the layout, or the option).
@@ -342,7 +345,8 @@ def check_records(
     ------
     DatasetFormatError
         A label with no line in ``shape_names.txt`` (or another name there), or
-        ``n_visible`` with another count than the card's poses (scans for ``--sensor``).
+        ``n_visible`` with another count than the card's poses (scans for ``--sensor``), or
+        ``n_topped_up`` with another count than ``n_visible`` or an entry above its pose's.
     """
     n_poses = card.params.samples_per_view if card.params.sensor else len(card.poses)
     for lineno, _, rec in rows:
@@ -359,6 +363,12 @@ def check_records(
             found.append(
                 f"{where}: field 'n_visible' has {len(rec.n_visible)} entries, the card has {n_poses} "
                 f"{'scans' if card.params.sensor else 'poses'}"
+            )
+        topped = rec.n_topped_up
+        if topped is not None and (len(topped) != len(rec.n_visible) or any(t > v for t, v in zip(topped, rec.n_visible))):
+            found.append(
+                f"{where}: field 'n_topped_up' ({len(topped)} entries) does not fit 'n_visible' ({len(rec.n_visible)} "
+                "entries): one per pose, each at most the pose's visible points"
             )
         if found and problems is None:
             raise DatasetFormatError(found[0])
@@ -403,7 +413,9 @@ def _shape(f: Any, key: str) -> tuple[int, ...] | None:
     return tuple(item.shape) if item is not None and hasattr(item, "shape") else None
 
 
-def check_shard(f: Any, path: Path, *, storage: str, n_points: int, rows: int, n_poses: int, sensor: bool) -> None:
+def check_shard(
+    f: Any, path: Path, *, storage: str, n_points: int, rows: int, n_poses: int, sensor: bool, topup_rows: int = 0
+) -> None:
     """Check an open shard (``h5py.File``) against what the manifest says of its object.
 
     Parameters
@@ -412,12 +424,14 @@ def check_shard(f: Any, path: Path, *, storage: str, n_points: int, rows: int, n
         Samples (dense) the manifest's ``n_visible`` implies for this object.
     n_poses : int
         Entries of the object's ``n_visible``.
+    topup_rows : int
+        Compact storage: top-up points of all poses, the sum of the manifest's ``n_topped_up``.
 
     Raises
     ------
     DatasetFormatError
         A dataset is missing or has the wrong shape, or the shard holds another number of
-        rows than ``n_visible`` promises.
+        rows (samples, or compact top-up points) than the manifest promises.
     """
     needed = SHARD_DATASETS.get(storage, ()) + (("elevation_deg", "azimuth_deg") if sensor else ())
     missing = [k for k in needed if _shape(f, k) is None]
@@ -429,6 +443,12 @@ def check_shard(f: Any, path: Path, *, storage: str, n_points: int, rows: int, n
             raise DatasetFormatError(
                 f"the shard {path}: 'dense_points' {dense} and 'visible_bits' {bits} do not fit {n_poses} poses "
                 "(expected (M, 3) and (poses, ceil(M / 8)))"
+            )
+        topup = _shape(f, "topup_points")
+        if (topup or (0, 3)) != (int(topup_rows), 3):
+            raise DatasetFormatError(
+                f"the shard {path}: 'topup_points' has shape {topup}, the manifest's field 'n_topped_up' promises "
+                f"({int(topup_rows)}, 3); the data set is damaged"
             )
         return
     data = _shape(f, "data")
@@ -449,7 +469,9 @@ def check_shard(f: Any, path: Path, *, storage: str, n_points: int, rows: int, n
 SHARD_COLUMNS = {name: Column(*spec) for name, spec in COLUMN_TYPES.items()}
 
 
-def open_shard(path: Path, *, storage: str, n_points: int, rows: int, n_poses: int, sensor: bool) -> Any:
+def open_shard(
+    path: Path, *, storage: str, n_points: int, rows: int, n_poses: int, sensor: bool, topup_rows: int = 0
+) -> Any:
     """Open a shard for reading after every check that needs no data: the one door the reader
     and ``verify`` use.
 
@@ -473,7 +495,9 @@ def open_shard(path: Path, *, storage: str, n_points: int, rows: int, n_poses: i
     """
     f = open_hdf5(path, SHARD_COLUMNS)
     try:
-        check_shard(f, path, storage=storage, n_points=n_points, rows=rows, n_poses=n_poses, sensor=sensor)
+        check_shard(
+            f, path, storage=storage, n_points=n_points, rows=rows, n_poses=n_poses, sensor=sensor, topup_rows=topup_rows
+        )
         declared = sum(declared_nbytes(f[k]) for k in f.keys() if _shape(f, k) is not None)
         check_memory(declared, option=f"the shard {path}", hint="it declares datasets larger than the data set can hold")
     except BaseException:
@@ -482,29 +506,37 @@ def open_shard(path: Path, *, storage: str, n_points: int, rows: int, n_poses: i
     return f
 
 
-def check_visible_bits(path: Path, bits: Any, n_dense: int, n_visible: list[int]) -> None:
-    """Check a compact shard's visibility masks against the manifest's ``n_visible``.
+def check_visible_bits(path: Path, bits: Any, n_dense: int, n_visible: list[int], n_topped_up: list[int] | None = None) -> None:
+    """Check a compact shard's visibility masks against the manifest's ``n_visible`` and ``n_topped_up``.
 
     Parameters
     ----------
     bits : (P, ceil(n_dense / 8)) uint8
         The shard's ``visible_bits``.
     n_visible : list of int
-        The manifest's visible points per pose.
+        The manifest's distinct visible points per pose (dense and topped up).
+    n_topped_up : list of int, optional
+        The manifest's top-up points per pose (``None``: none).
 
     Raises
     ------
     DatasetFormatError
-        A pose whose mask has another number of visible points than ``n_visible`` says
-        (a reader would draw samples from no points).
+        A pose whose mask has another number of visible points than ``n_visible - n_topped_up``
+        says (a reader would draw samples from no points).
     """
     import numpy as np
 
     counts = np.unpackbits(np.asarray(bits, dtype=np.uint8), axis=1, count=int(n_dense)).sum(axis=1)
-    wrong = np.flatnonzero(counts != np.asarray(n_visible, dtype=np.int64))
+    dense_visible = np.asarray(n_visible, dtype=np.int64)
+    if n_topped_up is not None:
+        dense_visible = dense_visible - np.asarray(n_topped_up, dtype=np.int64)
+    wrong = np.flatnonzero(counts != dense_visible)
     if len(wrong):
         p = int(wrong[0])
+        said = f"'n_visible' minus 'n_topped_up' says {int(dense_visible[p])}" if n_topped_up is not None else (
+            f"'n_visible' says {int(n_visible[p])}"
+        )
         raise DatasetFormatError(
             f"the shard {path}: 'visible_bits' of pose {p} marks {int(counts[p])} visible points, the manifest's field "
-            f"'n_visible' says {int(n_visible[p])} ({len(wrong)} poses differ); the data set is damaged"
+            f"{said} ({len(wrong)} poses differ); the data set is damaged"
         )

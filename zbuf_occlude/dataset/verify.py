@@ -18,7 +18,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from zbuf_occlude.dataset.layout import CARD_FILE, CARD_SHA256_FILE, MANIFEST_FILE, SAMPLE_FILE_FORMATS, file_list_name
+from zbuf_occlude.dataset.layout import (
+    CARD_FILE,
+    CARD_SHA256_FILE,
+    MANIFEST_FILE,
+    PLAN_FILE,
+    PROTOCOL_FILE,
+    SAMPLE_FILE_FORMATS,
+    file_list_name,
+)
 from zbuf_occlude.dataset.reader import samples_per_pose
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
 from zbuf_occlude.io.atomic import file_sha256
@@ -31,6 +39,43 @@ __all__ = ["VerifyReport", "verify_dataset"]
 
 #: Storages whose files are HDF5 shards (their datasets and rows are checked too).
 HDF5_STORAGES = ("dense", "compact", "h5")
+
+#: What a ``generate --protocol NAME`` folder is, and what reads it (docs/guide/protocols.md).
+PROTOCOL_FOLDERS: dict[str, tuple[str, str]] = {
+    "pcn": ("a PCN pairs folder", "read its shards/*.h5 with zbuf_occlude.protocols.read_arrays_h5"),
+    "depth": ("a depth-image folder", "read its shards/*.h5 with zbuf_occlude.protocols.read_arrays_h5"),
+    "modelnet40-c-occlusion": ("a ModelNet40-C folder", "read its data_occlusion_<severity>.npy and label.npy with numpy.load"),
+    "modelnet40-c-lidar": ("a ModelNet40-C folder", "read its data_lidar_<severity>.npy and label.npy with numpy.load"),
+}
+#: Longest protocol.json read to name the protocol (the file is small; a large one is not ours).
+_PROTOCOL_FILE_MAX_BYTES = 1 << 20
+
+
+def _protocol_of(root: Path) -> str | None:
+    """The ``protocol`` field of ``root/protocol.json`` (``generate --protocol``), or None.
+
+    The folder is untrusted: a file that is too large, not JSON or without a string field gives None.
+    """
+    import json
+
+    path = root / PROTOCOL_FILE
+    try:
+        if not path.is_file() or path.stat().st_size > _PROTOCOL_FILE_MAX_BYTES:
+            return None
+        name = json.loads(path.read_text(encoding="utf-8")).get("protocol")
+    except (OSError, UnicodeDecodeError, ValueError, AttributeError):
+        return None
+    return name if isinstance(name, str) else None
+
+
+def _not_a_data_set(root: Path) -> str:
+    """Why a folder without a card is not a data set ``verify`` checks, in the user's terms."""
+    if (root / PLAN_FILE).is_file():
+        return (
+            f"{root} has no {CARD_FILE}: an unfinished farm run; run the same `zbuf-occlude farm` command again to "
+            "finish it, or `zbuf-occlude farm-merge` after sharded runs"
+        )
+    return f"{root} has no {CARD_FILE}: not a data set written by `zbuf-occlude farm` or `generate`"
 
 
 @dataclass
@@ -64,18 +109,18 @@ class VerifyReport:
         return "; ".join([line, *self.notes])
 
 
-def _check_hdf5(path: Path, card: Card, rows: int, n_visible: list[int]) -> str | None:
+def _check_hdf5(path: Path, card: Card, rows: int, n_visible: list[int], n_topped_up: list[int] | None) -> str | None:
     """What the reader would refuse on opening the shard (:func:`~zbuf_occlude.dataset.schema.open_shard`)
-    and, for compact storage, on reading its masks (:func:`~zbuf_occlude.dataset.schema.check_visible_bits`)."""
+    and, for compact storage, on reading its masks and top-up points (:func:`~zbuf_occlude.dataset.schema.check_visible_bits`)."""
     from zbuf_occlude.dataset.schema import check_visible_bits, open_shard
 
     try:
         with open_shard(
             path, storage=card.storage, n_points=card.params.n_points, rows=rows, n_poses=len(n_visible),
-            sensor=card.params.sensor is not None,
+            sensor=card.params.sensor is not None, topup_rows=sum(n_topped_up or ()),
         ) as f:  # fmt: skip
             if card.storage == "compact":
-                check_visible_bits(path, f["visible_bits"][()], len(f["dense_points"]), n_visible)
+                check_visible_bits(path, f["visible_bits"][()], len(f["dense_points"]), n_visible, n_topped_up)
     except ZbufOccludeError as exc:
         return str(exc)
     return None
@@ -108,13 +153,23 @@ def verify_dataset(path: str | os.PathLike) -> VerifyReport:
     Raises
     ------
     InvalidInputError
-        ``path`` is not a folder (a usage error, not a problem of a data set).
+        ``path`` does not exist or is not a folder, or it is a ``generate --protocol`` folder
+        (PCN pairs, depth images, ModelNet40-C arrays: not a data set; the message names its kind
+        and what reads it).  These are usage errors, not problems of a data set.
     """
     from zbuf_occlude.dataset.schema import check_card_sha256, check_records, read_card, read_manifest, read_shape_names
 
     root = Path(path)
+    if not root.exists():
+        raise InvalidInputError(f"verify: no such folder: {path}")
     if not root.is_dir():
-        raise InvalidInputError(f"verify: {path} is not a folder")
+        raise InvalidInputError(f"verify: {path} is a file, not a data set folder")
+    if not (root / CARD_FILE).exists() and (protocol := _protocol_of(root)) is not None:
+        kind, reader = PROTOCOL_FOLDERS.get(protocol, (f"a `--protocol {protocol}` folder", "see docs/guide/protocols.md"))
+        raise InvalidInputError(
+            f"verify: {path} is {kind}, not a farm data set: it was written by `zbuf-occlude generate --protocol "
+            f"{protocol}`, whose own layout verify does not check; {reader}"
+        )
     report = VerifyReport(str(root))
     problems = report.problems
     try:
@@ -128,7 +183,7 @@ def verify_dataset(path: str | os.PathLike) -> VerifyReport:
     try:
         _, card = read_card(root / CARD_FILE)
     except ZbufOccludeError as exc:
-        problems.append(str(exc) if (root / CARD_FILE).exists() else f"{root} has no {CARD_FILE}: not a finished data set")
+        problems.append(str(exc) if (root / CARD_FILE).exists() else _not_a_data_set(root))
         return report
     try:
         shape_names = read_shape_names(root, card)
@@ -171,7 +226,7 @@ def verify_dataset(path: str | os.PathLike) -> VerifyReport:
                 problems.append(f"{where}: {rel} differs from its SHA-256 in the manifest (changed after it was written)")
                 continue
             if card.storage in HDF5_STORAGES and len(rec.shards) == 1:
-                found = _check_hdf5(file, card, n_rows, rec.n_visible)
+                found = _check_hdf5(file, card, n_rows, rec.n_visible, rec.n_topped_up)
             elif card.storage in SAMPLE_FILE_FORMATS:
                 found = _check_sample_file(file, card)
             else:

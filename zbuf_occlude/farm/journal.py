@@ -250,8 +250,8 @@ def finalize(
     n_samples = int(sum(r["n_samples"] for r in ok))
     n_padded = padded_samples(ok, params)
     if n_padded:
-        # a sensor's scan has the points its beams return: --dense-points does not apply to it
-        remedy = "move the sensor closer or lower --points" if params.sensor else "raise --dense-points or lower --points"
+        # a sensor's scan has the points its beams return; a pose already took the top-up (geometry.samples.top_up)
+        remedy = "move the sensor closer or lower --points" if params.sensor else "lower --points: topped up, still too few"
         log.warning(
             "%d of %d samples hold repeated points: fewer than --points %d points were visible from their poses "
             "(each sample's n_visible says how many; %s); recorded as n_padded_samples in %s",
@@ -286,7 +286,8 @@ def finalize(
         "checksums": CHECKSUM_ALGORITHM if every_file_hashed else None,
         "renderers": sorted({r["renderer"] for r in ok if r.get("renderer")}),
         "seed_derivation": "numpy SeedSequence([seed, blake2b64(name), stream, pose_index, sample_index]), "
-        "zbuf_occlude.geometry.samples.derive_rng; stream 0 = dense cloud, 1 = sample draws",
+        "zbuf_occlude.geometry.samples.derive_rng; stream 0 = dense cloud, 1 = sample draws, "
+        "2 = top-up candidates (pose_index, round)",
         "reference": "Sryamkin, Msallam, Klestov 2023, "
         "A method to create real-like point clouds for 3D object classification",
     }

@@ -33,7 +33,7 @@ from zbuf_occlude.io.atomic import atomic_h5, file_sha256, write_text
 from zbuf_occlude.io.clouds import write_h5, write_npz, write_ply
 from zbuf_occlude.io.safe_paths import check_relative_name, path_inside
 from zbuf_occlude.mesh.inputs import FarmObject
-from zbuf_occlude.pipeline import dense_cloud, occlude_object
+from zbuf_occlude.pipeline import dense_cloud, occlude_poses
 
 log = logging.getLogger(__name__)
 
@@ -148,14 +148,15 @@ def _render(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
         resolution=params.resolution, radius=params.radius, label=obj.label, class_name=obj.class_name,
         source=obj.source, split=obj.split,
     )  # fmt: skip
-    n_visible = np.zeros(len(poses), dtype=np.int64)
+    n_visible = np.zeros(len(poses), dtype=np.int64)  # distinct visible points per pose, top-up included
+    n_topped_up = np.zeros(len(poses), dtype=np.int64)
     if params.storage in SAMPLE_FILE_FORMATS:
         # generate's npz/ply: one file per sample under DATASET/<name>/
         written: list[str] = []
-        for pose_index, visible, clouds in occlude_object(mesh, poses, samples_per_view=params.samples_per_view, **common):
-            n_visible[pose_index] = int(visible.sum())
-            for c in clouds:
-                rel = sample_file_path(obj.name, pose_index, c, params.storage)
+        for pose in occlude_poses(mesh, poses, samples_per_view=params.samples_per_view, **common):
+            n_visible[pose.pose_index], n_topped_up[pose.pose_index] = pose.n_visible, len(pose.topped_up)
+            for c in pose.clouds:
+                rel = sample_file_path(obj.name, pose.pose_index, c, params.storage)
                 (write_npz if params.storage == "npz" else write_ply)(path_inside(out, rel, what=obj.source), c)
                 written.append(rel)
         files = written
@@ -163,10 +164,10 @@ def _render(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
     elif params.storage in ("dense", "h5"):
         clouds_all: list[OccludedCloud] = []
         pose_of: list[int] = []
-        for pose_index, visible, clouds in occlude_object(mesh, poses, samples_per_view=params.samples_per_view, **common):
-            n_visible[pose_index] = int(visible.sum())
-            clouds_all.extend(clouds)
-            pose_of.extend([pose_index] * len(clouds))
+        for pose in occlude_poses(mesh, poses, samples_per_view=params.samples_per_view, **common):
+            n_visible[pose.pose_index], n_topped_up[pose.pose_index] = pose.n_visible, len(pose.topped_up)
+            clouds_all.extend(pose.clouds)
+            pose_of.extend([pose.pose_index] * len(pose.clouds))
         b = len(clouds_all)
         # dense (farm): PointNet's columns only; h5 (generate): with face_index, radius, source, class
         write_h5(
@@ -178,12 +179,17 @@ def _render(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
     else:
         n_dense = len(dense.points)
         bits = np.zeros((len(poses), (n_dense + 7) // 8), dtype=np.uint8)
-        # samples_per_view=0: only the masks are needed, the reader draws the samples
-        for pose_index, visible, _ in occlude_object(mesh, poses, samples_per_view=0, **common):
-            n_visible[pose_index] = int(visible.sum())
-            bits[pose_index] = np.packbits(visible)
+        topped_up: list[np.ndarray] = []
+        # samples_per_view=0: only the masks and the top-up points are needed, the reader draws the samples
+        for pose in occlude_poses(mesh, poses, samples_per_view=0, topped_up=True, **common):
+            n_visible[pose.pose_index], n_topped_up[pose.pose_index] = pose.n_visible, len(pose.topped_up)
+            bits[pose.pose_index] = np.packbits(pose.visible)
+            topped_up.append(pose.topped_up.points)
         b = int(np.count_nonzero(n_visible) * params.samples_per_view)
-        _write_compact(out / shard_path(obj), dense.points, bits, n_visible, poses, _attrs(obj, params))
+        topup_points = np.concatenate(topped_up) if topped_up else np.zeros((0, 3))
+        _write_compact(
+            out / shard_path(obj), dense.points, bits, n_visible, n_topped_up, topup_points, poses, _attrs(obj, params)
+        )
         files = [shard_path(obj)]
 
     # hashed right after writing, under the data set's lock: nobody else writes these files
@@ -193,6 +199,7 @@ def _render(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
         "n_visible": n_visible.tolist(),
         "n_samples": b,
         "n_padded_poses": int(np.count_nonzero((n_visible > 0) & (n_visible < params.n_points))),
+        "n_topped_up": n_topped_up.tolist(),
         "n_dense": int(len(dense.points)),
         "n_faces": int(len(mesh.faces)),
         "bytes": int(sum((out / rel).stat().st_size for rel in files)),
@@ -200,8 +207,9 @@ def _render(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
     }
 
 
-def _write_compact(path: Path, dense_points, bits, n_visible, poses, attrs: dict[str, Any]) -> None:
-    """The compact shard: dense cloud once, visibility bits per pose (layout: :mod:`zbuf_occlude.dataset.layout`)."""
+def _write_compact(path: Path, dense_points, bits, n_visible, n_topped_up, topup_points, poses, attrs: dict[str, Any]) -> None:
+    """The compact shard: dense cloud once, visibility bits and top-up points per pose (layout:
+    :mod:`zbuf_occlude.dataset.layout`)."""
     el_az = np.asarray(poses, dtype=np.float64).reshape(-1, 2)
     with atomic_h5(path) as f:
         f.create_dataset("dense_points", data=dense_points.astype(np.float32), track_times=False)
@@ -211,6 +219,8 @@ def _write_compact(path: Path, dense_points, bits, n_visible, poses, attrs: dict
             compression_opts=COMPACT_GZIP_LEVEL if bits.size else None, track_times=False,
         )  # fmt: skip
         f.create_dataset("n_visible", data=n_visible, track_times=False)
+        f.create_dataset("n_topped_up", data=n_topped_up, track_times=False)
+        f.create_dataset("topup_points", data=np.asarray(topup_points, dtype=np.float32).reshape(-1, 3), track_times=False)
         f.create_dataset("elevation_deg", data=el_az[:, 0], track_times=False)
         f.create_dataset("azimuth_deg", data=el_az[:, 1], track_times=False)
         f.attrs.update(attrs)

@@ -6,9 +6,16 @@ centred at the origin with maximum extent 1 (Sryamkin et al. 2023, §4.1).
 Camera frames (both are exposed, because OpenGL and OpenCV users each expect theirs):
 
 * ``view_matrix`` maps world → OpenGL eye space (x right, y up, camera looks down −z).
-* ``K`` and ``extrinsics`` follow OpenCV (x right, y down, camera looks down +z, pixel
-  origin at the top-left corner of the top-left pixel).  ``extrinsics = diag(1, −1, −1) ·
-  view_matrix[:3]``.
+* ``K`` and ``extrinsics`` follow OpenCV (x right, y down, camera looks down +z).
+  ``extrinsics = diag(1, −1, −1) · view_matrix[:3]``.
+
+Pixels follow OpenCV and Open3D (``PinholeCameraIntrinsic``): pixel ``(u, v)`` = (column, row),
+row 0 at the top, **pixel centres at integer coordinates**, so pixel ``(i, j)`` covers
+``[i − ½, i + ½) × [j − ½, j + ½)`` and a centred principal point is ``cx = (W − 1)/2``,
+``cy = (H − 1)/2``.  The renderer lights pixel ``(i, j)`` for the surface through its centre
+(OpenGL samples at pixel centres), so a point projected with ``K`` lands on the pixel
+``round(u), round(v)`` that shows it.  Every class of the package that exposes intrinsics uses
+this convention (:class:`zbuf_occlude.protocols.depth.PinholeView`, the protocols' ``K``).
 
 Linear depth (``depth``) is the distance along the optical axis in object units,
 i.e. ``−z_eye``; ``window_depth`` is OpenGL's [0, 1] value.
@@ -134,9 +141,19 @@ class Camera:
 
     @property
     def K(self) -> NDArray[np.float64]:
-        """(3, 3) float64 OpenCV intrinsics; principal point at the image centre."""
+        """(3, 3) float64 OpenCV intrinsics, pixels: ``[[f, 0, cx], [0, f, cy], [0, 0, 1]]``.
+
+        Pixel centres at integer coordinates (module docstring), principal point at the image
+        centre: ``cx = (W − 1)/2``, ``cy = (H − 1)/2``, as OpenCV and Open3D's
+        ``PinholeCameraIntrinsic`` (and ModelNet40-C's intrinsics) have it.
+        """
         f = self.focal_px
-        return np.array([[f, 0.0, self.width / 2.0], [0.0, f, self.height / 2.0], [0.0, 0.0, 1.0]])
+        cx, cy = self._principal_point
+        return np.array([[f, 0.0, cx], [0.0, f, cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def _principal_point(self) -> tuple[float, float]:
+        return (self.width - 1) / 2.0, (self.height - 1) / 2.0
 
     @property
     def projection_matrix(self) -> NDArray[np.float64]:
@@ -164,23 +181,37 @@ class Camera:
         Returns
         -------
         pixels : (N, 2) float64
-            OpenCV pixel coordinates (u right, v down; pixel (i, j) spans [i, i+1) × [j, j+1)).
+            OpenCV pixel coordinates, ``K`` applied to the camera-frame point (u right, v down;
+            pixel centres at integers: pixel (i, j) covers [i − ½, i + ½) × [j − ½, j + ½), so
+            the pixel that shows the point is ``floor(pixels + ½)``).
         depth : (N,) float64
             Linear depth along the optical axis, object units (negative behind the camera).
         """
+        cam = self._camera_frame(points)
+        depth = cam[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            uv = cam[:, :2] / depth[:, None] * self.focal_px + np.array(self._principal_point)
+        return uv, depth
+
+    def _camera_frame(self, points: NDArray[np.floating]) -> NDArray[np.float64]:
         pts = np.asarray(points, dtype=np.float64)
         rt = self.extrinsics
         # Column sums rather than ``pts @ R.T``: a (N, 3) x (3, 3) product goes through
         # multithreaded BLAS, which is several times slower for this shape on a busy machine.
-        cam = pts[:, 0:1] * rt[:, 0] + pts[:, 1:2] * rt[:, 1] + pts[:, 2:3] * rt[:, 2] + rt[:, 3]
+        return pts[:, 0:1] * rt[:, 0] + pts[:, 1:2] * rt[:, 1] + pts[:, 2:3] * rt[:, 2] + rt[:, 3]
+
+    def in_frustum(self, points: NDArray[np.floating]) -> NDArray[np.bool_]:
+        """(N,) bool: inside the view frustum (image bounds and znear ≤ depth ≤ zfar).
+
+        The image bounds are the outer edges of the border pixels, ``−½ ≤ u < W − ½``; the test
+        is computed from the image's top-left corner (``u + ½``), the arithmetic that
+        :mod:`zbuf_occlude.visibility.cpu_zbuffer` and :mod:`zbuf_occlude.visibility.embree_fast`
+        repeat to give the same answer to the last bit.
+        """
+        cam = self._camera_frame(points)
         depth = cam[:, 2]
         with np.errstate(divide="ignore", invalid="ignore"):
             uv = cam[:, :2] / depth[:, None] * self.focal_px + np.array([self.width / 2.0, self.height / 2.0])
-        return uv, depth
-
-    def in_frustum(self, points: NDArray[np.floating]) -> NDArray[np.bool_]:
-        """(N,) bool: inside the view frustum (image bounds and znear ≤ depth ≤ zfar)."""
-        uv, depth = self.project(points)
         return (
             (depth >= self.znear)
             & (depth <= self.zfar)

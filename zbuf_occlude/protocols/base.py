@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from zbuf_occlude.dataset.layout import PROTOCOL_FILE
 from zbuf_occlude.errors import InvalidInputError, OutputError, ZbufOccludeError
 from zbuf_occlude.geometry.samples import derive_rng
 from zbuf_occlude.io.atomic import atomic_h5, write_text
@@ -35,7 +36,7 @@ log = logging.getLogger(__name__)
 
 #: Folder of the per-object shards inside ``--out``.
 SHARDS_DIR = "shards"
-_OPTIONS_FILE = "protocol.json"
+_OPTIONS_FILE = PROTOCOL_FILE
 _PROTOCOL_STREAM = 2  # seed stream of the protocols (0 and 1 are occlude.py's dense and draw streams)
 
 
@@ -63,6 +64,9 @@ class ProtocolOptions:
         Also write per-point face normals and camera-frame coordinates.
     complete_points : int
         Points of the complete cloud written beside the partial ones (0: none).
+    up : {"auto", "+z", "+y", "-y", "+x", "-x", "-z"}
+        The mesh files' up axis, turned to +z on loading (:func:`~zbuf_occlude.load_mesh`'s ``up``;
+        ``auto``: by path and format).
     """
 
     severity: int | None = None
@@ -75,6 +79,7 @@ class ProtocolOptions:
     normals: bool = False
     camera_frame: bool = False
     complete_points: int = 0
+    up: str = "auto"
     extra: Mapping[str, Any] = field(default_factory=dict)
 
 
@@ -182,7 +187,7 @@ def run_protocol(
 ) -> ProtocolRun:
     """Run ``protocol`` over the meshes under ``paths`` into ``out``.
 
-    Per object: :func:`~zbuf_occlude.load_mesh`, the generator ``(seed, object_key(name), 2)``
+    Per object: :func:`~zbuf_occlude.load_mesh` (``options.up``), the generator ``(seed, object_key(name), 2)``
     (:func:`~zbuf_occlude.geometry.samples.derive_rng`), ``protocol.make``, one shard.  A mesh that fails
     (unreadable, nothing in view) is recorded and skipped (exit status 1); then ``finish``.
 
@@ -213,7 +218,7 @@ def run_protocol(
         try:
             from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported when a protocol runs
 
-            mesh = load_mesh(obj.source)
+            mesh = load_mesh(obj.source, up=options.up)
             rng = derive_rng(options.seed, obj.key, _PROTOCOL_STREAM)
             arrays = protocol.make(mesh, obj, options, rng)
         except ZbufOccludeError as exc:

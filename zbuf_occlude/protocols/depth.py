@@ -9,9 +9,8 @@ only error of a back-projected point is the float32 rounding of the stored depth
 Conventions (OpenCV, as Open3D's ``PinholeCameraIntrinsic`` and ModelNet40-C use them):
 
 * ``K`` (3, 3): pixel ``(u, v)`` = (column, row), row 0 at the top, **pixel centres at integer
-  coordinates**; a principal point at the image centre is ``cx = W/2 − 0.5, cy = H/2 − 0.5``.
-  (:attr:`zbuf_occlude.geometry.cameras.Camera.K` puts pixel centres at half-integers; :meth:`PinholeView.from_camera`
-  converts.)
+  coordinates**; a principal point at the image centre is ``cx = (W − 1)/2, cy = (H − 1)/2``,
+  the convention of :attr:`zbuf_occlude.geometry.cameras.Camera.K` too.
 * ``extrinsics`` (3, 4) ``[R | t]``: world → camera, camera looks down +z, y down.
 * ``depth`` (H, W) float32: distance along the optical axis (camera z), object units; 0 = no hit.
 """
@@ -92,11 +91,8 @@ class PinholeView:
 
     @classmethod
     def from_camera(cls, camera: Camera) -> PinholeView:
-        """The same camera as ``camera`` (:class:`~zbuf_occlude.geometry.cameras.Camera`), K shifted to integer pixel centres."""
-        K = camera.K.copy()
-        K[0, 2] -= 0.5
-        K[1, 2] -= 0.5
-        return cls(K, camera.extrinsics, camera.width, camera.height)
+        """The same camera as ``camera`` (:class:`~zbuf_occlude.geometry.cameras.Camera`): its ``K``, extrinsics and size."""
+        return cls(camera.K, camera.extrinsics, camera.width, camera.height)
 
     @classmethod
     def from_pose(cls, K, camera_to_world, width: int, height: int) -> PinholeView:

@@ -5,8 +5,9 @@ Reproduces https://github.com/wentaoyuan/pcn, ``render/render_depth.py`` (Blende
 
 1. ``render_depth.py``: the OBJ is imported and rotated back by −π/2 about x, so Blender's world
    is the OBJ's own (ShapeNet: y up).  Our meshes are loaded z-up (ModelNet's convention), so
-   they are turned to y-up first (``(x, y, z) → (x, z, −y)``; ``up_axis="y"`` skips it for
-   meshes already y-up) and scaled to ShapeNetCore v1's normalisation, a bounding-box
+   they are turned to y-up first (``(x, y, z) → (x, z, −y)``; a file stored y-up, such as a
+   ShapeNet OBJ, was turned to z up by :func:`~zbuf_occlude.load_mesh` with ``up="+y"``, which
+   ``auto`` picks at a ShapeNetCore path) and scaled to ShapeNetCore v1's normalisation, a bounding-box
    diagonal of 1 centred at the origin (:func:`pcn_mesh`).
 2. ``render_depth.py::random_pose``: ``α, β, γ ~ 2π·U[0, 1)`` in that order, ``R = Rz(γ) Ry(β)
    Rx(α)``, camera at ``t = R[:, 2]`` (1 unit from the origin), ``pose = [R | t]`` camera → world
@@ -152,7 +153,7 @@ def pcn_views(mesh: trimesh.Trimesh, rs: np.random.RandomState, n_views: int = N
 
 
 def _make(mesh: trimesh.Trimesh, obj: FarmObject, options: ProtocolOptions, rng: np.random.Generator) -> dict:
-    m = pcn_mesh(mesh, str(options.extra.get("up_axis", "z")))
+    m = pcn_mesh(mesh)  # load_mesh gave it z up (options.up)
     arrays = pcn_views(m, np.random.RandomState(int(rng.integers(2**32))))
     if arrays["partial_offsets"][-1] == 0:
         raise InvalidInputError("every PCN view is empty (the mesh is not in front of the cameras)")
@@ -165,8 +166,6 @@ def _make(mesh: trimesh.Trimesh, obj: FarmObject, options: ProtocolOptions, rng:
 def _check(options: ProtocolOptions) -> None:
     if options.complete_points < 0:
         raise InvalidInputError(f"--complete-points must be >= 0, got {options.complete_points}")
-    if str(options.extra.get("up_axis", "z")) not in ("z", "y"):
-        raise InvalidInputError(f"--up-axis must be z or y, got {options.extra.get('up_axis')!r}")
 
 
 #: ``--protocol pcn``: per model 8 partial scans (depth, K, pose) and a complete cloud.

@@ -90,8 +90,10 @@ class PyrenderRenderer:
         pr = self._pyrender
         renderer = _offscreen_renderer(pr, camera.width, camera.height)
         K = camera.K
+        # pyrender's principal point counts from the image's corner (centred: W/2), K's from the
+        # first pixel's centre (centred: (W - 1)/2, OpenCV): half a pixel apart
         pr_camera = pr.IntrinsicsCamera(
-            fx=K[0, 0], fy=K[1, 1], cx=K[0, 2], cy=K[1, 2], znear=camera.znear, zfar=camera.zfar
+            fx=K[0, 0], fy=K[1, 1], cx=K[0, 2] + 0.5, cy=K[1, 2] + 0.5, znear=camera.znear, zfar=camera.zfar
         )
         if self._camera_node is not None:
             self._scene.remove_node(self._camera_node)
