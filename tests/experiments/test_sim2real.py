@@ -239,3 +239,197 @@ def test_a_mesh_without_a_lidar_crop_is_skipped_before_the_work_naming_it(tmp_pa
                         if entry.class_name == "pole" else real_lidar(entry, *a, **k))  # fmt: skip
     with pytest.raises(InvalidInputError, match="post.obj"):
         check_lidar_meshes(meshes, lidar_preset("hdl32e"), CLASS_SIZES_M, 32)
+
+
+# -- --fit-sensor: a sensor fitted on one fixed half, every row scored on the other -------------
+
+
+def _fit_spy(monkeypatch: pytest.MonkeyPatch) -> list[list[str]]:
+    """Replace the fit by a spy that records the scans it is given and returns the HDL-32E preset,
+    crops 15-20 m away and the default sizes."""
+    import zbuf_occlude.experiments.sim2real as s2r
+    from zbuf_occlude.sensors import lidar_preset
+
+    calls: list[list[str]] = []
+
+    def spy(scans, base, labels, names):
+        calls.append([s.source for s in scans])
+        return lidar_preset("hdl32e"), dict.fromkeys(names, (15.0, 20.0)), CLASS_SIZES_M, {"name": "fitted-by-spy", "base": base.name}
+
+    monkeypatch.setattr(s2r, "_fit_sensor", spy)
+    return calls
+
+
+def _test_clouds(monkeypatch: pytest.MonkeyPatch) -> list[np.ndarray]:
+    """Record the clouds every trained model is scored on (predict's calls outside training)."""
+    from zbuf_occlude.learn import training
+
+    scored: list[np.ndarray] = []
+    real_train, real_predict = training.train, training.predict
+    inside = [False]
+
+    def train(*a, **kw):
+        inside[0] = True
+        try:
+            return real_train(*a, **kw)
+        finally:
+            inside[0] = False
+
+    def predict(model, points, **kw):
+        if not inside[0]:
+            scored.append(np.array(points))
+        return real_predict(model, points, **kw)
+
+    monkeypatch.setattr(training, "train", train)
+    monkeypatch.setattr(training, "predict", predict)
+    return scored
+
+
+def _rows(path: Path) -> list[dict]:
+    with open(path, encoding="utf-8") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_fit_sensor_fits_on_one_half_and_scores_every_row_on_the_other(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from zbuf_occlude.experiments.sim2real_data import (
+        FITTED_PLACED,
+        FITTED_SETS,
+        real_clouds,
+    )
+    from zbuf_occlude.real_scans.datasets import load_real_scans
+
+    meshes, real, out = _mesh_root(tmp_path), _real_root(tmp_path), tmp_path / "out"
+    fits, scored = _fit_spy(monkeypatch), _test_clouds(monkeypatch)
+    argv = ["experiment", "sim2real", str(meshes), "--real", str(real), "--label-map", "Trunk=pole", "--fit-sensor",
+            "--points", "32", "--epochs", "1", "--per-class", "4", "--threads", "1", "--no-progress"]  # fmt: skip
+    assert main([*argv, "--out", str(out), "--seeds", "2"]) == 0
+    split = _rows(out / "real_split.csv")
+    fit = {r["source"] for r in split if r["half"] == "fit"}
+    held = {r["source"] for r in split if r["half"] == "scored"}
+    assert len(split) == 12 and not fit & held and len(fit) == len(held) == 6
+    assert sorted(r["class"] for r in split if r["half"] == "fit") == ["car"] * 3 + ["pole"] * 3  # stratified
+    assert fits == [sorted(fit, key=[r["source"] for r in split].index)]  # the fit saw the fit half, nothing else
+    assert json.loads((out / "fitted_sensor.json").read_text()) == {"name": "fitted-by-spy", "base": "hdl32e"}
+    # every row, the mesh-only sets and real→real alike, is scored on the held-out half, and only on it
+    pts, _, sources = real_clouds(load_real_scans(real), ["car", "pole"], {"Trunk": "pole"}, 32, 0)
+    expected = pts[[i for i, s in enumerate(sources) if s in held]]
+    results = _rows(out / "results.csv")
+    assert sorted((r["train_set"], r["seed"]) for r in results) == sorted(
+        (s, str(k)) for s in (*TRAINING_SETS, *FITTED_SETS, "real→real") for k in range(2))
+    assert len(scored) == len(results) and all(np.array_equal(x, expected) for x in scored)
+    assert all(int(r["n_test"]) == 6 for r in results)
+    summary = {r["train_set"]: r for r in _rows(out / "summary.csv")}
+    for kind in FITTED_SETS:
+        assert 1 / 6 - 1e-9 <= float(summary[kind]["p_vs_lidar"]) <= 1.0 and "diff_vs_lidar" in summary[kind]
+        assert f"| {kind} | 2 |" in (out / "table.md").read_text() and f"{kind} vs lidar" in (out / "table.md").read_text()
+    assert (out / "confusion_fitted.csv").is_file() and (out / f"confusion_{FITTED_PLACED.replace('+', '_')}.csv").is_file()
+    settings = json.loads((out / "settings.json").read_text())
+    assert settings["fit_sensor"]["fit_scans"] == settings["fit_sensor"]["scored_scans"] == {"car": 3, "pole": 3}
+    # the same split and the same runs again: the split does not depend on the run's seeds
+    again = tmp_path / "again"
+    assert main([*argv, "--out", str(again), "--seeds", "1"]) == 0
+    assert (again / "real_split.csv").read_bytes() == (out / "real_split.csv").read_bytes()
+    timing = ("data_s", "train_s")
+    first = [{k: v for k, v in r.items() if k not in timing} for r in map(json.loads, (out / "runs.jsonl").read_text().splitlines())]
+    second = [{k: v for k, v in r.items() if k not in timing} for r in map(json.loads, (again / "runs.jsonl").read_text().splitlines())]
+    assert second == [r for r in first if r["seed"] == 0]
+
+
+def test_without_fit_sensor_every_scan_is_scored_and_no_fitted_set(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    fits, out = _fit_spy(monkeypatch), tmp_path / "out"
+    argv = ["experiment", "sim2real", str(_mesh_root(tmp_path)), "--real", str(_real_root(tmp_path)), "--out", str(out),
+            "--label-map", "Trunk=pole", "--points", "32", "--epochs", "1", "--per-class", "4", "--seeds", "1", "--threads", "1",
+            "--no-progress"]  # fmt: skip
+    assert main(argv) == 0 and fits == []
+    assert not (out / "fitted_sensor.json").exists() and not (out / "real_split.csv").exists()
+    assert {r["train_set"] for r in _rows(out / "results.csv")} == {*TRAINING_SETS, "real→real"}
+    assert "fit_sensor" not in json.loads((out / "settings.json").read_text())
+
+
+def test_fit_sensor_needs_sensor_frame_points_and_a_spinning_lidar() -> None:
+    from types import SimpleNamespace
+
+    from zbuf_occlude.experiments.sim2real import _fit_sensor
+    from zbuf_occlude.sensors import airborne_preset, lidar_preset
+
+    with pytest.raises(InvalidInputError, match="spinning LiDAR"):
+        _fit_sensor([], airborne_preset("riegl-q1560"), np.zeros(0), [])
+    with pytest.raises(InvalidInputError, match="Car/0.xyz"):
+        _fit_sensor([SimpleNamespace(source="Car/0.xyz", points_sensor_m=None)], lidar_preset("hdl32e"), np.zeros(1), ["car"])
+
+
+def _box_scan(distance: float, seed: int) -> np.ndarray:
+    from zbuf_occlude.sensors import lidar_preset, scan
+
+    box = trimesh.creation.box(extents=(1.5, 1.5, 1.5))
+    box.apply_translation((distance, 0.0, 0.75 - 1.8))
+    return np.asarray(scan(box, lidar_preset("hdl32e"), np.eye(4), seed=seed, azimuth_range_deg=(-30.0, 30.0)).points, np.float64)
+
+
+def test_fit_sensor_fits_crop_distances_and_heights_per_class() -> None:
+    """Each class's crops are placed at the distances its own real scans were taken from, as tall as they look."""
+    from types import SimpleNamespace
+
+    from zbuf_occlude.experiments.sim2real import _fit_sensor
+    from zbuf_occlude.sensors import lidar_preset
+
+    near, far = [4.0, 5.0, 6.0, 7.0], [12.0, 14.0, 16.0, 18.0]
+    clouds = [_box_scan(d, i) for i, d in enumerate(near + far)]
+    scans = [SimpleNamespace(source=f"{i}.xyz", points_sensor_m=c) for i, c in enumerate(clouds)]
+    labels = np.array([0] * 4 + [1] * 4)
+    _, distances, sizes, spec = _fit_sensor(scans, lidar_preset("hdl32e"), labels, ["car", "pole"])
+    # the centroid of the visible faces lies up to half the box (0.75 m) nearer than its centre
+    assert 4.0 - 0.8 < distances["car"][0] < distances["car"][1] < 7.0 and 12.0 - 0.8 < distances["pole"][0] < distances["pole"][1] < 18.0
+    crops = spec["fit"]["crops"]
+    assert crops["quantiles"] == [10.0, 90.0] and crops["distance_m"] == {k: list(v) for k, v in distances.items()}
+    # 1.5 m boxes: the near ones seen whole, the far ones between beams 1.33 degrees (0.3-0.4 m) apart
+    assert sizes["car"].dimension == "height" and 1.2 < sizes["car"].lo_m <= sizes["car"].hi_m <= 1.5 + 0.1  # range noise 2 cm
+    assert 0.9 < sizes["pole"].lo_m <= sizes["pole"].hi_m < sizes["car"].hi_m
+    assert crops["object_height_m"]["pole"] == [sizes["pole"].lo_m, sizes["pole"].hi_m]
+    with pytest.raises(InvalidInputError, match="--fit-sensor: class 'pole'.*at least 3"):
+        _fit_sensor(scans[:6], lidar_preset("hdl32e"), labels[:6], ["car", "pole"])
+
+
+def test_fit_crop_distances_are_percentiles_of_the_horizontal_distances() -> None:
+    from zbuf_occlude.sensors.fit import fit_crop_distances
+
+    # one point per scan, at horizontal distance d (and some height): the distance is d exactly
+    clouds = [np.array([[d * np.cos(a), d * np.sin(a), -1.0]]) for d, a in zip(np.arange(1.0, 12.0), np.linspace(0, 6, 11))]
+    assert fit_crop_distances(clouds) == pytest.approx((2.0, 10.0))
+    assert fit_crop_distances(clouds, (0.0, 100.0)) == pytest.approx((1.0, 11.0))
+    with pytest.raises(InvalidInputError, match="at least 3"):
+        fit_crop_distances(clouds[:2])
+    with pytest.raises(InvalidInputError, match="quantiles"):
+        fit_crop_distances(clouds, (90.0, 10.0))
+
+
+def test_the_fitted_placed_set_draws_the_fitted_distances_and_the_others_the_preset_ones(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from zbuf_occlude.experiments.sim2real_data import (
+        FITTED,
+        FITTED_PLACED,
+        LIDAR_PLACEMENT,
+        build_sets,
+    )
+    from zbuf_occlude.sensors import crops, lidar_preset
+
+    seen: list[tuple[str, tuple[float, float]]] = []
+    real = crops.lidar_object_samples
+
+    def spy(mesh, sensor, **kw):
+        seen.append((sensor.name, kw["distributions"].distance_m))
+        return real(mesh, sensor, **kw)
+
+    monkeypatch.setattr(crops, "lidar_object_samples", spy)
+    meshes = find_class_meshes(_mesh_root(tmp_path))
+    fitted = lidar_preset("hdl32e").with_(name="fitted")
+    heights = {"car": SizeRange("height", 1.0, 1.0), "pole": SizeRange("height", 2.0, 2.0)}
+    sets = build_sets(meshes, ["car", "pole"], 2, 32, 0, sensor=lidar_preset("hdl32e"), resolution=128, dense_points=2000, keep_scale=True,
+                      fitted_sensor=fitted, fitted_distance_m={"car": (6.0, 7.0), "pole": (8.0, 9.0)}, fitted_sizes=heights)  # fmt: skip
+    assert sets[FITTED].points.shape == sets[FITTED_PLACED].points.shape == (4, 32, 3)
+    # kept in metres: the placed crops are as tall as the fitted heights at most, the others' poles taller (2.5-9 m)
+    tall = lambda s, label: float(np.ptp(s.points[s.labels == label][..., 2], axis=1).max()) * KEEP_SCALE_UNIT_M  # noqa: E731
+    assert tall(sets[FITTED_PLACED], 0) <= 1.0 + 1e-3 and tall(sets[FITTED_PLACED], 1) <= 2.0 + 1e-3
+    assert tall(sets["lidar"], 1) > 2.0 and tall(sets[FITTED], 1) > 2.0
+    # the preset sensor and the fitted set at the preset's distances; the placed set at the fitted ones
+    assert {d for name, d in seen if name == "hdl32e"} == {LIDAR_PLACEMENT["distance_m"]}
+    assert {d for name, d in seen if name == "fitted"} == {LIDAR_PLACEMENT["distance_m"], (6.0, 7.0), (8.0, 9.0)}

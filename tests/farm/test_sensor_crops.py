@@ -73,6 +73,17 @@ def test_points_lie_on_the_hdl32e_rings_seen_from_the_recorded_sensor(sensor_run
     assert len(rings_seen) >= 5  # not one ring repeated
 
 
+def test_a_direction_filter_matching_no_scan_is_an_error_not_an_empty_data_set(sensor_run):
+    from zbuf_occlude.errors import InvalidInputError
+
+    low = OccludedDataset(sensor_run, elevation_deg=lambda el: el < 30)  # scans from a car roof: a few degrees up
+    assert 0 < len(low) <= len(OccludedDataset(sensor_run))
+    with pytest.raises(InvalidInputError, match=r"no sample of .* matches elevation_deg=60.* sensor elevations span -?\d"):
+        OccludedDataset(sensor_run, elevation_deg=60.0)
+    with pytest.raises(InvalidInputError, match=r"matches .*azimuth_deg=<function"):
+        OccludedDataset(sensor_run, azimuth_deg=lambda az: az > 1000)
+
+
 def test_return_physics_options_reach_the_scans(sensor_run, tmp_path):
     out = _farm(tmp_path / "phys", "--sensor-footprint", "--sensor-reflectivity", "0.05:0.1", "--sensor-distance", "15:20")
     card = json.loads((out / CARD_FILE).read_text())

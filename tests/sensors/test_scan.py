@@ -334,3 +334,16 @@ def test_read_scan_npz_refuses_inflation_past_the_cap(tmp_path, monkeypatch):
         S.read_scan_npz(path)
     np.savez(tmp_path / "ok.npz", **_scan_arrays())
     assert len(S.read_scan_npz(tmp_path / "ok.npz")) == 4
+
+
+def test_depth_camera_intrinsics_follow_opencv() -> None:
+    """Pixel centres at integers (OpenCV, Open3D, and the package's Camera.K): the Kinect's principal
+    point is ((W − 1)/2, (H − 1)/2), and the ray of pixel (u, v) projects back onto (u, v) with K."""
+    from zbuf_occlude.sensors.depth_camera import depth_camera_preset
+
+    cam = depth_camera_preset("kinect-v1")
+    K = np.asarray(cam.intrinsics)
+    assert (K[0, 2], K[1, 2]) == ((cam.width - 1) / 2, (cam.height - 1) / 2)
+    directions, pixel = cam.rays()
+    uvw = directions @ K.T
+    np.testing.assert_allclose(uvw[:, :2] / uvw[:, 2:], pixel, atol=1e-9)

@@ -291,10 +291,10 @@ def build_parser() -> argparse.ArgumentParser:
     for add in (add_compare_parser, add_profile_parser, add_farm_parser, add_farm_merge_parser):
         add(sub)
     from zbuf_occlude.cli.learn import add_parser as add_experiment_parser  # zbuf-occlude experiment; torch only when it runs
-    from zbuf_occlude.cli.sensors import add_realism_parser, add_scan_parser
+    from zbuf_occlude.cli.sensors import add_fit_sensor_parser, add_realism_parser, add_scan_parser
     from zbuf_occlude.cli.verify import add_verify_parser  # zbuf-occlude verify DIR: schema, paths, checksums of a data set
 
-    for add in (add_scan_parser, add_realism_parser, add_experiment_parser, add_verify_parser):
+    for add in (add_scan_parser, add_realism_parser, add_fit_sensor_parser, add_experiment_parser, add_verify_parser):
         add(sub)
     return parser
 

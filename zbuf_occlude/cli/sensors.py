@@ -12,8 +12,10 @@ from pathlib import Path
 import numpy as np
 
 from zbuf_occlude.cli.options import counted
+from zbuf_occlude.defaults import DEFAULT_SEED
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.samples import derive_rng, object_key
+from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.sensors.presets import sensor_from_name
 
 __all__ = ["add_scan_parser", "add_realism_parser", "add_parser", "parse_interval"]
@@ -64,7 +66,11 @@ def check_outside(dist) -> None:
 
 def cmd_scan(args: argparse.Namespace) -> int:
     from zbuf_occlude.sensors.airborne import AirborneScanner
-    from zbuf_occlude.sensors.crops import CropDistributions, draw_placement, object_crop
+    from zbuf_occlude.sensors.crops import (
+        CropDistributions,
+        draw_placement,
+        object_crop,
+    )
     from zbuf_occlude.sensors.lidar import Lidar
     from zbuf_occlude.sensors.scan import look_at_pose, scan
     from zbuf_occlude.sensors.scene import load_scene
@@ -137,7 +143,7 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         description="Stand a mesh on a ground plane at --distance from a simulated LiDAR and scan it (or scan a "
         "scene file with any sensor); writes one point cloud per sample to --out.",
     )  # fmt: skip
-    p.add_argument("mesh_or_scene", metavar="MESH_OR_SCENE", help="mesh file (stood on the ground), 'cylinder' or 'box' (unit primitives), or a scene .json/.yaml")
+    p.add_argument("mesh_or_scene", metavar="MESH_OR_SCENE", help=f"mesh file ({EXTENSIONS_TEXT}; stood on the ground), 'cylinder' or 'box' (unit primitives), or a scene .json/.yaml")
     p.add_argument("--sensor", default="hdl32e", help="vlp16 | hdl32e | hdl64e | os1-64 | riegl-q1560 (airborne) | kinect-v1 | sensor .json (default: %(default)s)")
     p.add_argument("--distance", default="10", help="horizontal sensor-object distance, metres (N or LO:HI, uniform per sample; at least half the object's size) (default: %(default)s)")
     p.add_argument("--height", default="1.8", help="sensor height above the ground, metres (N or LO:HI) (default: %(default)s)")
@@ -203,7 +209,34 @@ def add_realism_parser(sub) -> argparse.ArgumentParser:
     return p
 
 
+def cmd_fit_sensor(args: argparse.Namespace) -> int:
+    from zbuf_occlude.experiments.sensor_fit import fit_sensor_to_scans
+
+    fit, json_path, md_path = fit_sensor_to_scans(args.real, args.sensor, args.out, seed=args.seed)
+    print(fit.markdown(), end="")
+    print(f"wrote {json_path} (use it as --sensor {json_path}), {md_path}")
+    return 0
+
+
+def add_fit_sensor_parser(sub) -> argparse.ArgumentParser:
+    """Add ``fit-sensor`` to the subparsers ``sub``."""
+    p = sub.add_parser(
+        "fit-sensor", help="fit a spinning LiDAR's firing rate, range noise and dropout to your real object scans",
+        description="Estimate what the simulation can set from a folder of real segmented object scans "
+        "(sensor frame, metres): azimuth step, range noise, dropout; report ring spacing, the count-vs-range "
+        "law and ground returns, each with a bootstrap uncertainty. Writes a sensor JSON that scan, "
+        "farm --sensor and experiment sim2real --sensor take.",
+    )  # fmt: skip
+    p.add_argument("real", metavar="REAL_SCANS", help="folder of real object scans (LiDARNet CSVs, SUO, or class folders)")
+    p.add_argument("--sensor", required=True, help="the spinning-LiDAR preset or JSON file to start from (its beam table is kept)")
+    p.add_argument("--out", required=True, help="the fitted sensor, a .json file (a .md table is written beside it)")
+    p.add_argument("--seed", type=int, default=DEFAULT_SEED, help="seed of the bootstrap (default: %(default)s)")
+    p.set_defaults(func=cmd_fit_sensor)
+    return p
+
+
 def add_parser(sub) -> None:
-    """Add both subcommands."""
+    """Add ``scan``, ``realism`` and ``fit-sensor``."""
     add_scan_parser(sub)
     add_realism_parser(sub)
+    add_fit_sensor_parser(sub)

@@ -12,6 +12,7 @@ from typing import Any
 
 from zbuf_occlude.defaults import DEFAULT_METHOD
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 
 __all__ = ["add_sim2real_parser", "parse_pairs"]
 
@@ -60,6 +61,7 @@ def _run(args: argparse.Namespace) -> int:
         sizes=parse_sizes(args.sizes), real_options=real_options, min_returns=args.min_returns, method=args.method, device=args.device,
         threads=args.threads, progress=not args.no_progress, classes=_classes_option(args.classes),
         occluded_elevation_deg=parse_interval(args.occluded_elevation, "--occluded-elevation"),
+        fit_sensor=args.fit_sensor, recipe=args.recipe,
     )  # fmt: skip
     return print_table(args.out, summary)
 
@@ -84,6 +86,7 @@ def print_table(out: str, summary: dict[str, Any]) -> int:
 
 def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     """Add ``sim2real`` to ``experiment``'s argparse subparsers."""
+    from zbuf_occlude.experiments.sim2real import SIM2REAL_RECIPE
     from zbuf_occlude.experiments.sim2real_data import GROUND_ELEVATION_DEG, MIN_RETURNS
     from zbuf_occlude.mesh.scene import UP_CHOICES
 
@@ -94,11 +97,17 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
         "train a classifier on each with validation on held-out whole meshes, then score each on the real scans of "
         "--real (never used for training or settings), over several seeds, with chance and real->real rows.",
     )  # fmt: skip
-    p.add_argument("root", help="meshes in CLASS/ folders (OFF, OBJ, PLY, STL, glTF, GLB, COLLADA)")
+    p.add_argument("root", help=f"mesh files ({EXTENSIONS_TEXT}) in CLASS/ folders")
     p.add_argument("--real", required=True, help="folder of real object scans (one folder per class, or labelled files)")
     p.add_argument("--out", required=True, help="output folder (settings.json, runs.jsonl, results.csv, summary.csv, table.md, run.json)")
     p.add_argument("--model", choices=("pointnet", "voxnet", "3dmfv"), default="pointnet", help="classifier (default: %(default)s)")
     p.add_argument("--sensor", default="hdl32e", help="scanner of the lidar training set (a LiDAR preset; default %(default)s)")
+    p.add_argument("--fit-sensor", action="store_true",
+                   help="fit --sensor to a fixed half of the real scans (written to OUT/fitted_sensor.json), add a 'fitted' "
+                   "training set made with it, and score every row on the other half only")
+    p.add_argument("--recipe", choices=("stable", "plain"), default=SIM2REAL_RECIPE,
+                   help="training recipe: stable (class-balanced sampling, best epoch by validation mean class accuracy, "
+                   "warm-up, gradient clipping) or plain (the models' own loop) (default: %(default)s)")
     p.add_argument("--scale", choices=("quick", "paper"), default="quick",
                    help="quick: 256 points, 100 clouds per class, 20 epochs (a 2-core CPU); paper: 1024, 1000, 100")
     p.add_argument("--points", type=_positive, help="points per cloud (override the scale's)")

@@ -13,9 +13,25 @@ classifier to recognise real, partial scans?), asked on real data with the proto
   mean ± standard deviation over seeds and an exact one-sided permutation test of each set
   against ``complete`` (:mod:`zbuf_occlude.learn.stats`);
 * context rows: chance (``1/K``) and ``real→real`` (a fixed stratified half of the real scans
-  trains, 10 % of that half validates, the other half tests).
+  trains, 10 % of that half validates, the other half tests);
+* with ``fit_sensor``, a sensor fitted to the real scans (:func:`zbuf_occlude.sensors.fit.fit_lidar`):
+  the real scans are split once into the same fixed stratified halves as ``real→real``'s (a seed
+  of its own, independent of the run's seeds; the split uses the class indices and the scans'
+  order only), the sensor is fitted on the first half (the half ``real→real`` trains on), and
+  so are, per class, the crops' sensor distances and the objects' heights (their visible
+  heights in the scans; :func:`zbuf_occlude.sensors.fit.crop_placement_json`);
+  both are written to ``fitted_sensor.json``; two more training sets are made,
+  :data:`~zbuf_occlude.experiments.sim2real_data.FITTED` (the fitted sensor, the ``lidar`` set's
+  placements and sizes) and :data:`~zbuf_occlude.experiments.sim2real_data.FITTED_PLACED` (the
+  fitted sensor, distances and heights), and **every row is scored on the other half only**; the
+  fitted set is also tested against ``lidar``.  ``real_split.csv`` lists each scan's half.
 
-Outputs in ``out``: ``settings.json``, ``runs.jsonl`` (one line per training run, what a
+Every run trains with one recipe (``recipe``, :data:`zbuf_occlude.learn.training.RECIPES`):
+``stable`` (class-balanced sampling, best epoch by validation mean class accuracy, warm-up,
+gradient clipping) keeps a seed from losing a small class of an imbalanced set (real→real);
+``plain`` is the models' own loop.
+
+Outputs in ``out``: ``settings.json``, (``fitted_sensor.json``, ``real_split.csv``), ``runs.jsonl`` (one line per training run, what a
 rerun resumes from), ``results.csv`` (one row per run), ``summary.csv`` (mean ± std per
 training set), ``confusion_<set>.csv`` (summed over seeds), ``table.md``, ``run.json``.
 """
@@ -33,6 +49,9 @@ import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.sim2real_data import (
+    FITTED,
+    FITTED_PLACED,
+    FITTED_SETS,
     GROUND_ELEVATION_DEG,
     KEEP_SCALE_UNIT_M,
     LIDAR_PLACEMENT,
@@ -42,15 +61,16 @@ from zbuf_occlude.experiments.sim2real_data import (
     check_lidar_meshes,
     find_class_meshes,
     real_clouds,
+    real_scan_rows,
     split_whole_meshes,
-)  # fmt: skip  # fmt: skip
+)  # fmt: skip
 from zbuf_occlude.io.atomic import write_csv, write_text
 from zbuf_occlude.learn.data import CloudSet, split_validation
 from zbuf_occlude.learn.metrics import classification_report
 from zbuf_occlude.learn.stats import mean_std, permutation_p
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
 
-__all__ = ["Sim2RealScale", "SIM2REAL_SCALES", "REAL_TO_REAL", "run_sim2real"]
+__all__ = ["Sim2RealScale", "SIM2REAL_SCALES", "REAL_TO_REAL", "SIM2REAL_RECIPE", "run_sim2real", "summarise"]
 
 log = logging.getLogger(__name__)
 
@@ -58,6 +78,8 @@ log = logging.getLogger(__name__)
 REAL_TO_REAL = "real→real"
 #: Seed of the fixed stratified half split of the real scans (real→real), the same for every run.
 _REAL_SPLIT_SEED = 20_231
+#: The training recipe of every run (:data:`zbuf_occlude.learn.training.RECIPES`; module docstring).
+SIM2REAL_RECIPE = "stable"
 
 
 @dataclass(frozen=True)
@@ -99,6 +121,38 @@ def _sensor(name_or_sensor):
     if not isinstance(sensor, (Lidar, AirborneScanner)):
         raise InvalidInputError(f"--sensor {name_or_sensor}: the lidar training set needs a LiDAR or an airborne scanner")
     return sensor
+
+
+def _fit_sensor(scans: list, base, labels: np.ndarray, names: list[str]):
+    """``fit_lidar`` on the sensor-frame points of ``scans``, and per class (``labels`` index
+    ``names``) the crops' placement (:func:`~zbuf_occlude.sensors.fit.crop_placement_json`).
+
+    Returns the fitted Lidar, ``{class: (lo_m, hi_m)}`` sensor distances, ``{class: SizeRange}``
+    (visible heights) and the sensor's JSON with the fit and the ``crops`` block.
+    """
+    from zbuf_occlude.sensors.lidar import Lidar
+
+    if not isinstance(base, Lidar):
+        raise InvalidInputError(f"--fit-sensor fits a spinning LiDAR: --sensor must name one, got {base.name!r}")
+    clouds = []
+    for s in scans:
+        pts = getattr(s, "points_sensor_m", None)
+        if pts is None or len(pts) == 0:
+            raise InvalidInputError(f"{s.source}: no sensor-frame points to fit a sensor to (--fit-sensor needs the scans' "
+                                    "coordinates with the sensor at the origin)")  # fmt: skip
+        clouds.append(np.asarray(pts, dtype=np.float64))
+    from zbuf_occlude.sensors.fit import crop_placement_json, fit_lidar
+
+    fit = fit_lidar(clouds, base, seed=0)
+    try:
+        crops = crop_placement_json(clouds, [names[int(y)] for y in labels])
+    except InvalidInputError as exc:
+        raise InvalidInputError(f"--fit-sensor: {exc}") from None
+    spec = fit.to_json()
+    spec["fit"]["crops"] = crops
+    distances = {k: (float(lo), float(hi)) for k, (lo, hi) in crops["distance_m"].items()}
+    sizes = {k: SizeRange("height", max(float(lo), 0.05), max(float(hi), 0.05)) for k, (lo, hi) in crops["object_height_m"].items()}
+    return fit.sensor, distances, sizes, spec
 
 
 def _score(pred: np.ndarray, labels: np.ndarray, names: list[str]) -> dict:
@@ -166,6 +220,8 @@ def run_sim2real(
     progress: bool = True,
     classes: str | list[str] | None = None,
     occluded_elevation_deg: tuple[float, float] = GROUND_ELEVATION_DEG,
+    fit_sensor: bool = False,
+    recipe: str = SIM2REAL_RECIPE,
 ) -> dict:
     """Train on each synthetic training set and on real scans, ``seeds`` times; score on the real scans.
 
@@ -209,6 +265,13 @@ def run_sim2real(
         Camera elevations of the ``occluded`` set, degrees in [-90, 90], drawn uniformly
         (default :data:`~zbuf_occlude.experiments.sim2real_data.GROUND_ELEVATION_DEG`; an
         airborne sensor sees from above, e.g. ``(30, 80)``).
+    fit_sensor : bool
+        Fit ``sensor`` (a spinning LiDAR) to the sensor-frame points of the fixed first half of
+        the real scans, and each class's crop distances and heights to the same scans, add the
+        :data:`~zbuf_occlude.experiments.sim2real_data.FITTED_SETS`, and score every row on the
+        other half only (module docstring).
+    recipe : {"stable", "plain"}
+        Training recipe (:data:`zbuf_occlude.learn.training.RECIPES`).
 
     Returns
     -------
@@ -218,14 +281,22 @@ def run_sim2real(
     Raises
     ------
     InvalidInputError
-        Bad options, unusable meshes or scans, or an ``out`` made with other settings.
+        Bad options, unusable meshes or scans (with ``fit_sensor``: scans without sensor-frame
+        points, or an airborne ``sensor``), or an ``out`` made with other settings.
     """
     from zbuf_occlude.experiments.table3 import _machine
-    from zbuf_occlude.learn.training import TrainConfig, predict, train
+    from zbuf_occlude.learn.training import (
+        RECIPES,
+        TrainConfig,
+        predict,
+        train,
+    )
     from zbuf_occlude.real_scans.datasets import load_real_scans
 
     if scale not in SIM2REAL_SCALES:
         raise InvalidInputError(f"--scale must be one of {sorted(SIM2REAL_SCALES)}, got {scale!r}")
+    if recipe not in RECIPES:
+        raise InvalidInputError(f"--recipe must be one of {sorted(RECIPES)}, got {recipe!r}")
     if int(seeds) < 1:
         raise InvalidInputError(f"--seeds must be >= 1, got {seeds}")
     t_start = time.perf_counter()
@@ -242,11 +313,26 @@ def run_sim2real(
     meshes = find_class_meshes(mesh_root, up=up, up_map=up_map, classes=wanted)
     meshes, skipped = check_lidar_meshes(meshes, lidar, sizes, n_points, min_returns=int(min_returns))
     names = sorted({m.class_name for m in meshes})
-    real_pts, real_y, _ = real_clouds(scans, names, dict(label_map or {}), n_points, 0, keep_scale=keep_scale)
+    real_pts, real_y, sources = real_clouds(scans, names, dict(label_map or {}), n_points, 0, keep_scale=keep_scale)
+    half_a, half_b = _stratified_half(real_y)  # real→real trains on half_a; with fit_sensor, half_a is the fit half
+    fitted, fitted_distances, fitted_sizes, fit_json = None, None, None, None
+    if fit_sensor:
+        kept = real_scan_rows(scans, names, dict(label_map or {}))
+        fitted, fitted_distances, fitted_sizes, fit_json = _fit_sensor([scans[kept[i]] for i in half_a], lidar, real_y[half_a], names)
+        meshes, skipped_fitted = check_lidar_meshes(meshes, fitted, sizes, n_points, min_returns=int(min_returns))
+        skipped += skipped_fitted
+        if fitted_sizes is not None:
+            meshes, skipped_placed = check_lidar_meshes(meshes, fitted, fitted_sizes, n_points, min_returns=int(min_returns),
+                                                        distance_m=fitted_distances)  # fmt: skip
+            skipped += skipped_placed
+        if sorted({m.class_name for m in meshes}) != names:
+            raise InvalidInputError(f"the fitted sensor sees no mesh of classes {sorted(set(names) - {m.class_name for m in meshes})}")
+    kinds = (*TRAINING_SETS, FITTED, *((FITTED_PLACED,) if fitted_sizes is not None else ())) if fit_sensor else TRAINING_SETS
 
     def config(seed: int) -> TrainConfig:
         return TrainConfig(model=model, epochs=int(epochs or sc.epochs), patience=sc.patience, width=sc.width[model],
-                           fv_grid=sc.fv_grid, seed=seed, device=device, threads=threads, augment=not keep_scale)  # fmt: skip
+                           fv_grid=sc.fv_grid, seed=seed, device=device, threads=threads, augment=not keep_scale,
+                           **RECIPES[recipe])  # fmt: skip
 
     settings = {
         "mesh_root": str(mesh_root), "real": str(real), "model": model, "sensor": lidar.name, "scale": scale,
@@ -254,13 +340,19 @@ def run_sim2real(
         "label_map": dict(label_map or {}), "up": up, "up_map": dict(up_map or {}), "classes": names,
         "sizes_m": {k: asdict(v) for k, v in sizes.items()}, "occluded_elevation_deg": list(elevation),
         "lidar_placement": LIDAR_PLACEMENT, "lidar_min_returns": int(min_returns), "keep_scale_unit_m": KEEP_SCALE_UNIT_M,
-        "method": method, "train_config": {k: v for k, v in config(0).to_dict().items() if k not in ("seed", "device", "threads")},
+        "method": method, "train_config": config(0).identity(("seed", "device", "threads")),
         "meshes": {c: sum(m.class_name == c for m in meshes) for c in names},
         "mesh_up": {m.name: m.mesh.metadata["zbuf_occlude"].get("up_source") for m in meshes},
         "real_scans": {c: int((real_y == i).sum()) for i, c in enumerate(names)},
     }  # fmt: skip
     if skipped:  # only then: the settings of runs without a skipped mesh stay as they were (resume)
         settings["meshes_skipped"] = skipped
+    if fit_sensor:  # likewise: runs without it keep their settings
+        settings["fit_sensor"] = {
+            "split_seed": _REAL_SPLIT_SEED, "fitted_sensor": fit_json,
+            "fit_scans": {c: int((real_y[half_a] == i).sum()) for i, c in enumerate(names)},
+            "scored_scans": {c: int((real_y[half_b] == i).sum()) for i, c in enumerate(names)},
+        }  # fmt: skip
     out.mkdir(parents=True, exist_ok=True)
     settings_path = out / "settings.json"
     if settings_path.is_file():
@@ -272,15 +364,21 @@ def run_sim2real(
         # Every setting is fixed here, before any real scan is scored.
         write_text(settings_path, json.dumps({**settings, "fixed_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
                                              indent=1, default=float))  # fmt: skip
+    if fit_sensor:
+        write_text(out / "fitted_sensor.json", json.dumps(fit_json, indent=1, default=float))
+        halves = {int(i): "fit" for i in half_a} | {int(i): "scored" for i in half_b}
+        write_csv(out / "real_split.csv", [{"row": i, "source": src, "class": names[real_y[i]], "half": halves[i]}
+                                           for i, src in enumerate(sources)])  # fmt: skip
     runs_path = out / "runs.jsonl"
     done = _load_runs(runs_path)
-    half_a, half_b = _stratified_half(real_y)
+    # every row is scored on the other half when the sensor was fitted on the first one
+    score_x, score_y = (real_pts[half_b], real_y[half_b]) if fit_sensor else (real_pts, real_y)
     common = dict(sensor=lidar, sizes=sizes, keep_scale=keep_scale, dense_points=sc.dense_points, min_returns=int(min_returns),
                   resolution=sc.resolution, method=method, elevation_deg=elevation)  # fmt: skip
     for seed in range(int(seeds)):
         train_meshes, val_meshes = split_whole_meshes(meshes, sc.val_mesh_fraction, seed)
         sets: dict = {}
-        for kind in (*TRAINING_SETS, REAL_TO_REAL):
+        for kind in (*kinds, REAL_TO_REAL):
             if (kind, seed) in done:
                 continue
             t0 = time.perf_counter()
@@ -290,11 +388,12 @@ def run_sim2real(
                 tr, val = base.subset(tr_rows), base.subset(val_rows)
                 test_x, test_y = real_pts[half_b], real_y[half_b]
             else:
-                if not sets:  # the four sets of this seed at once (lidar+complete reuses two)
-                    sets = {"train": build_sets(train_meshes, names, sc.per_class, n_points, seed, **common),
-                            "val": build_sets(val_meshes, names, sc.val_per_class, n_points, seed + 10_000, **common)}  # fmt: skip
+                if not sets:  # the sets of this seed at once (lidar+complete reuses two)
+                    fits = {"fitted_sensor": fitted, "fitted_distance_m": fitted_distances, "fitted_sizes": fitted_sizes}
+                    sets = {"train": build_sets(train_meshes, names, sc.per_class, n_points, seed, **fits, **common),
+                            "val": build_sets(val_meshes, names, sc.val_per_class, n_points, seed + 10_000, **fits, **common)}  # fmt: skip
                 tr, val = sets["train"][kind], sets["val"][kind]
-                test_x, test_y = real_pts, real_y
+                test_x, test_y = score_x, score_y
             t_data = time.perf_counter() - t0
             cfg = config(seed)
             res = train(tr, len(names), cfg, val_set=val, checkpoint_dir=out / "checkpoints" / kind.replace("→", "_to_") / f"seed{seed}",
@@ -302,7 +401,7 @@ def run_sim2real(
             pred, _ = predict(res.model, test_x, batch_size=cfg.batch_size, device=cfg.device)
             row = {"train_set": kind, "seed": seed, "model": model, "n_train": len(tr), "n_val": len(val),
                    "n_test": len(test_y), "best_epoch": res.best_epoch, "epochs_run": len(res.history),
-                   "best_val_accuracy": res.best_val_accuracy,
+                   "best_val_accuracy": res.best_val_accuracy, "best_val_mean_class_accuracy": res.best_val_mean_class_accuracy,
                    "final_train_accuracy": res.history[-1]["train_accuracy"] if res.history else float("nan"),
                    "val_meshes": sorted(m.name for m in val_meshes) if kind != REAL_TO_REAL else [],
                    "data_s": t_data, "train_s": res.seconds, **_score(pred, test_y, names)}  # fmt: skip
@@ -310,8 +409,8 @@ def run_sim2real(
             log.info("%s seed %d: mean class accuracy %.3f", kind, seed, row["mean_class_accuracy"])
     summary_rows = summarise(list(done.values()), names)
     write_csv(out / "results.csv", [{k: v for k, v in r.items() if k not in ("confusion", "val_meshes")} for r in done.values()])
-    write_csv(out / "summary.csv", summary_rows)
-    for kind in (*TRAINING_SETS, REAL_TO_REAL):
+    write_csv(out / "summary.csv", summary_rows, fieldnames=list(dict.fromkeys(k for r in summary_rows for k in r)))
+    for kind in (*kinds, REAL_TO_REAL):
         cms = [np.asarray(r["confusion"]) for r in done.values() if r["train_set"] == kind]
         if cms:
             write_csv(out / f"confusion_{kind.replace('→', '_to_').replace('+', '_')}.csv",
@@ -360,12 +459,17 @@ def _classes(classes, mesh_root, scans, label_map: dict[str, str]) -> list[str] 
 
 def summarise(runs: list[dict], names: list[str]) -> list[dict]:
     """Per training set: mean ± std over seeds of every score, and the one-sided permutation p
-    of its mean class accuracy against ``complete``; then the chance row (``1/K``)."""
+    of its mean class accuracy against ``complete``; then the chance row (``1/K``).
+
+    The rows of :data:`~zbuf_occlude.experiments.sim2real_data.FITTED_SETS` also hold their
+    difference from ``lidar`` (``diff_vs_lidar``) and both one-sided p-values: ``p_vs_lidar``
+    (the fitted set above lidar) and ``p_lidar_above`` (lidar above it)."""
     keys = ["mean_class_accuracy", "overall_accuracy", "car_precision", "car_recall", "car_f1",
             *[f"acc_{n}" for n in names]]  # fmt: skip
     ref = [r["mean_class_accuracy"] for r in runs if r["train_set"] == "complete"]
+    lidar = [r["mean_class_accuracy"] for r in runs if r["train_set"] == "lidar"]
     rows = []
-    for kind in (*TRAINING_SETS, REAL_TO_REAL):
+    for kind in (*TRAINING_SETS, *FITTED_SETS, REAL_TO_REAL):
         mine = [r for r in runs if r["train_set"] == kind]
         if not mine:
             continue
@@ -376,6 +480,9 @@ def summarise(runs: list[dict], names: list[str]) -> list[dict]:
         mca = [r["mean_class_accuracy"] for r in mine]
         row["p_vs_complete"] = permutation_p(mca, ref) if kind not in ("complete", REAL_TO_REAL) and ref else float("nan")
         row["diff_vs_complete"] = (row["mean_class_accuracy_mean"] - float(np.mean(ref))) if ref else float("nan")
+        if kind in FITTED_SETS and lidar:
+            row["diff_vs_lidar"] = row["mean_class_accuracy_mean"] - float(np.mean(lidar))
+            row["p_vs_lidar"], row["p_lidar_above"] = permutation_p(mca, lidar), permutation_p(lidar, mca)
         rows.append(row)
     k = len(names)
     rows.append({"train_set": "chance", "n_seeds": 0, "mean_class_accuracy_mean": 1.0 / k, "mean_class_accuracy_std": 0.0,

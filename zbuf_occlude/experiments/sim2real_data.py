@@ -44,13 +44,21 @@ if TYPE_CHECKING:  # trimesh is imported where it is used
 __all__ = [
     "TRAINING_SETS", "GROUND_ELEVATION_DEG", "LIDAR_PLACEMENT", "MIN_RETURNS", "KEEP_SCALE_UNIT_M",
     "MeshEntry", "find_class_meshes", "check_lidar_meshes", "split_whole_meshes", "allocate", "build_set", "build_sets", "mix_sets",
-    "real_clouds",
+    "real_clouds", "real_scan_rows", "FITTED", "FITTED_PLACED", "FITTED_SETS",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
 
 #: The training sets, in report order (``complete`` is the reference of the permutation tests).
 TRAINING_SETS = ("complete", "occluded", "lidar", "lidar+complete")
+#: The set made with a sensor fitted to the real scans (``run_sim2real(fit_sensor=True)``): LiDAR
+#: crops like ``lidar``'s, from the same placements and sizes, only the sensor differs.
+FITTED = "fitted"
+#: The fitted sensor, and per class the sensor distances and the objects' heights fitted to the
+#: same scans (:func:`zbuf_occlude.sensors.fit.crop_placement_json`); the headings are ``lidar``'s.
+FITTED_PLACED = "fitted+placed"
+#: The sets made with a fitted sensor, in report order.
+FITTED_SETS = (FITTED, FITTED_PLACED)
 #: Camera elevations of the ``occluded`` set, degrees: a sensor on the ground or on a vehicle sees
 #: objects from slightly below the horizon (kerbs, slopes) to about 30° above (a pedestrian or a
 #: bush a few metres from a roof-mounted sensor).
@@ -140,12 +148,14 @@ def _check_classes(meshes: list[MeshEntry], where: str) -> None:
 
 
 def check_lidar_meshes(meshes: list[MeshEntry], sensor, sizes: dict[str, SizeRange], n_points: int, *,
-                       min_returns: int = MIN_RETURNS) -> tuple[list[MeshEntry], list[str]]:  # fmt: skip
+                       min_returns: int = MIN_RETURNS, distance_m: dict[str, tuple[float, float]] | None = None,
+                       ) -> tuple[list[MeshEntry], list[str]]:  # fmt: skip
     """The meshes that give a LiDAR crop with ``min_returns`` returns, and the paths of those that do not.
 
     Run before any training set is made, so that a mesh the sensor cannot see (too small for
     its class's size, a sliver) is skipped, with a warning naming its file, instead of aborting
-    the run minutes later.  One draw per mesh (:func:`_lidar` with ``k=1``, seed 0).
+    the run minutes later.  One draw per mesh (:func:`_lidar` with ``k=1``, seed 0), at the
+    class's ``distance_m`` where given.
 
     Raises
     ------
@@ -158,7 +168,7 @@ def check_lidar_meshes(meshes: list[MeshEntry], sensor, sizes: dict[str, SizeRan
     kept, skipped = [], []
     for entry in meshes:
         try:
-            _lidar(entry, 1, n_points, 0, sensor, sizes[entry.class_name], min_returns)
+            _lidar(entry, 1, n_points, 0, sensor, sizes[entry.class_name], min_returns, (distance_m or {}).get(entry.class_name))
         except InvalidInputError as exc:
             log.warning("skipping mesh %s: %s", entry.path, exc)
             skipped.append(str(entry.path))
@@ -221,11 +231,12 @@ def _occluded(entry: MeshEntry, k: int, n_points: int, seed: int, rng: np.random
     return out
 
 
-def _lidar(entry: MeshEntry, k: int, n_points: int, seed: int, sensor, size: SizeRange, min_returns: int = MIN_RETURNS
-           ) -> tuple[list[NDArray], list[float]]:  # fmt: skip
+def _lidar(entry: MeshEntry, k: int, n_points: int, seed: int, sensor, size: SizeRange, min_returns: int = MIN_RETURNS,
+           distance_m: tuple[float, float] | None = None) -> tuple[list[NDArray], list[float]]:  # fmt: skip
     from zbuf_occlude.sensors.crops import CropDistributions, lidar_object_samples
 
-    dist = CropDistributions(size_m=size_interval(entry.mesh.extents, size), **LIDAR_PLACEMENT)
+    placement = LIDAR_PLACEMENT if distance_m is None else {**LIDAR_PLACEMENT, "distance_m": tuple(distance_m)}
+    dist = CropDistributions(size_m=size_interval(entry.mesh.extents, size), **placement)
     good: list = []
     # Draw about as many crops as needed, then more under another name (new placements) while
     # crops come back with fewer than min_returns returns; at most _LIDAR_TRIES rounds.
@@ -264,7 +275,8 @@ def _finish(clouds: list[NDArray], sizes_m: NDArray[np.float64], keep_scale: boo
 def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: int, n_points: int, seed: int, *,
               sensor=None, sizes: dict[str, SizeRange] = CLASS_SIZES_M, keep_scale: bool = False,
               dense_points: int = 8192, resolution: int = 512, method: str = "auto",
-              min_returns: int = MIN_RETURNS, elevation_deg: tuple[float, float] = GROUND_ELEVATION_DEG) -> CloudSet:  # fmt: skip
+              min_returns: int = MIN_RETURNS, elevation_deg: tuple[float, float] = GROUND_ELEVATION_DEG,
+              distance_m: dict[str, tuple[float, float]] | None = None) -> CloudSet:  # fmt: skip
     """``per_class`` clouds of every class in ``names`` from ``meshes``, of one training set kind.
 
     Cloud counts are spread over each class's meshes (:func:`allocate`); ``lidar+complete``
@@ -273,6 +285,8 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
     with fewer than ``min_returns`` returns is redrawn (:data:`MIN_RETURNS`; an airborne
     scanner at a few points per m² needs a much lower value for small objects).  The
     ``occluded`` set's camera elevations are drawn uniformly in ``elevation_deg`` (degrees).
+    ``distance_m`` gives a LiDAR set's sensor distances per class (metres, drawn uniformly)
+    instead of :data:`LIDAR_PLACEMENT`'s.
 
     Raises
     ------
@@ -283,7 +297,8 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
         raise InvalidInputError(f"unknown training set {kind!r}; choose from {TRAINING_SETS}")
     if kind == "lidar+complete":
         common = dict(sizes=sizes, keep_scale=keep_scale)
-        lidar = build_set("lidar", meshes, names, per_class, n_points, seed, sensor=sensor, min_returns=min_returns, **common)
+        lidar = build_set("lidar", meshes, names, per_class, n_points, seed, sensor=sensor, min_returns=min_returns,
+                          distance_m=distance_m, **common)  # fmt: skip
         return mix_sets(lidar, build_set("complete", meshes, names, per_class, n_points, seed, **common), seed)
     missing = sorted({m.class_name for m in meshes} - set(sizes))
     if missing and (kind == "lidar" or keep_scale):
@@ -302,7 +317,7 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
                 got = _occluded(entry, int(k), n_points, seed, rng, dense_points=dense_points, resolution=resolution, method=method,
                                 elevation_deg=elevation_deg)  # fmt: skip
             else:
-                got, size_k = _lidar(entry, int(k), n_points, seed, sensor, sizes[cls], min_returns)
+                got, size_k = _lidar(entry, int(k), n_points, seed, sensor, sizes[cls], min_returns, (distance_m or {}).get(cls))
             if kind == "lidar":
                 sizes_m.extend(size_k)
             elif keep_scale:
@@ -329,12 +344,33 @@ def mix_sets(a: CloudSet, b: CloudSet, seed: int) -> CloudSet:
     return CloudSet.concat([a.subset(np.sort(np.asarray(rows_a, np.int64))), b.subset(np.sort(np.asarray(rows_b, np.int64)))])
 
 
-def build_sets(meshes: list[MeshEntry], names: list[str], per_class: int, n_points: int, seed: int, **options) -> dict[str, CloudSet]:
+def build_sets(meshes: list[MeshEntry], names: list[str], per_class: int, n_points: int, seed: int, *,
+               fitted_sensor=None, fitted_distance_m: dict[str, tuple[float, float]] | None = None,
+               fitted_sizes: dict[str, SizeRange] | None = None, **options) -> dict[str, CloudSet]:  # fmt: skip
     """All of :data:`TRAINING_SETS` for one seed (``lidar+complete`` mixes the other two; options
-    as :func:`build_set`)."""
+    as :func:`build_set`); with ``fitted_sensor`` the :data:`FITTED` set, the ``lidar`` set's recipe
+    (the same seed, so the same sizes and placements) scanned by ``fitted_sensor``; and with
+    ``fitted_distance_m`` and ``fitted_sizes`` as well, the :data:`FITTED_PLACED` set, whose crops
+    stand at those distances per class and are scaled to those sizes."""
     out = {kind: build_set(kind, meshes, names, per_class, n_points, seed, **options) for kind in TRAINING_SETS[:3]}
     out["lidar+complete"] = mix_sets(out["lidar"], out["complete"], seed)
+    if fitted_sensor is not None:
+        out[FITTED] = build_set("lidar", meshes, names, per_class, n_points, seed, **{**options, "sensor": fitted_sensor})
+        if fitted_distance_m is not None and fitted_sizes is not None:
+            out[FITTED_PLACED] = build_set("lidar", meshes, names, per_class, n_points, seed,
+                                           **{**options, "sensor": fitted_sensor, "distance_m": fitted_distance_m, "sizes": fitted_sizes})  # fmt: skip
     return out
+
+
+def _real_label(scan, index: dict[str, int], label_map: dict[str, str]) -> str:
+    label = label_map.get(scan.label, scan.label)
+    return label if label in index else label.lower()
+
+
+def real_scan_rows(scans, names: list[str], label_map: dict[str, str]) -> list[int]:
+    """Indices into ``scans`` of the scans :func:`real_clouds` keeps (a label among ``names``), in its order."""
+    index = {n: i for i, n in enumerate(names)}
+    return [i for i, s in enumerate(scans) if _real_label(s, index, label_map) in index]
 
 
 def real_clouds(scans, names: list[str], label_map: dict[str, str], n_points: int, seed: int, *,
@@ -352,8 +388,7 @@ def real_clouds(scans, names: list[str], label_map: dict[str, str], n_points: in
     index = {n: i for i, n in enumerate(names)}
     pts, labels, sources, dropped = [], [], [], {}
     for s in scans:
-        label = label_map.get(s.label, s.label)
-        label = label if label in index else label.lower()
+        label = _real_label(s, index, label_map)
         if label not in index:
             dropped[s.label] = dropped.get(s.label, 0) + 1
             continue

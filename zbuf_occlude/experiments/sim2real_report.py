@@ -37,6 +37,14 @@ def table_md(rows: list[dict], settings: dict) -> str:
                  _p(r.get("p_vs_complete", float("nan"))), _pm(r, "overall_accuracy"), _pm(r, "car_precision"),
                  _pm(r, "car_recall"), _pm(r, "car_f1")] + [_pm(r, f"acc_{n}") for n in names]  # fmt: skip
         lines.append("| " + " | ".join(cells) + " |")
+    for r in rows:
+        if "p_vs_lidar" in r:
+            lines += ["", (f"{r['train_set']} vs lidar: Δ {r['diff_vs_lidar']:+.3f} mean class accuracy, one-sided p "
+                           f"{_p(r['p_vs_lidar'])} ({r['train_set']} above lidar), {_p(r['p_lidar_above'])} (lidar above {r['train_set']})")]  # fmt: skip
+    if settings.get("fit_sensor"):
+        fs = settings["fit_sensor"]
+        lines += ["", (f"Every row is scored on the held-out half of the real scans ({sum(fs['scored_scans'].values())} scans); "
+                       f"the sensor was fitted on the other half ({sum(fs['fit_scans'].values())} scans), which real→real trains on.")]  # fmt: skip
     return "\n".join(lines) + "\n"
 
 

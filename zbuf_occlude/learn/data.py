@@ -32,6 +32,7 @@ __all__ = [
     "mesh_content_key",
     "dedupe_meshes",
     "split_validation",
+    "balanced_epoch_rows",
 ]
 
 log = logging.getLogger(__name__)
@@ -250,3 +251,37 @@ def split_validation(n: int, fraction: float, seed: int, groups: NDArray[np.inte
     val_rows = np.sort(np.asarray(val, dtype=np.int64))
     train_rows = np.setdiff1d(np.arange(n, dtype=np.int64), val_rows)
     return train_rows, val_rows
+
+
+def balanced_epoch_rows(labels: NDArray[np.integer], rng: np.random.Generator) -> NDArray[np.int64]:
+    """One epoch's rows with every class equally often: class-balanced sampling.
+
+    Each of the ``K`` classes present in ``labels`` gives ``len(labels) // K`` rows (so an epoch
+    is about as long as the data set), taken from a fresh permutation of that class's rows,
+    which is repeated as often as needed (a small class's rows are seen several times, a large
+    class's a subset of them, each row at most once more than any other row of its class); the
+    rows are then shuffled.  This is the "class-aware sampling" of Shen et al., ECCV 2016
+    ("Relay backpropagation"), the usual remedy when a minority class is lost to the majority.
+
+    Parameters
+    ----------
+    labels : (n,) int
+        Class index of every row.
+    rng : numpy Generator
+
+    Returns
+    -------
+    (K * (n // K),) int64
+        Row indices into ``labels``, in random order; exactly ``n // K`` of every class.
+    """
+    labels = np.asarray(labels)
+    classes = np.unique(labels)
+    if len(classes) == 0:
+        return np.zeros(0, dtype=np.int64)
+    per_class = max(len(labels) // len(classes), 1)
+    rows = []
+    for c in classes:
+        own = np.flatnonzero(labels == c)
+        reps = -(-per_class // len(own))  # ceil
+        rows.append(np.concatenate([rng.permutation(own) for _ in range(reps)])[:per_class])
+    return rng.permutation(np.concatenate(rows)).astype(np.int64)

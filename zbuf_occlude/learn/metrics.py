@@ -9,7 +9,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 
-__all__ = ["confusion_matrix", "classification_report", "accuracy_by_elevation"]
+__all__ = ["confusion_matrix", "classification_report", "accuracy_by_elevation", "mean_class_accuracy", "balanced_nll"]
 
 
 def confusion_matrix(y_true: NDArray[np.integer], y_pred: NDArray[np.integer], n_classes: int) -> NDArray[np.int64]:
@@ -61,3 +61,32 @@ def accuracy_by_elevation(
         rows.append({"elevation_deg": float(e), "n": int(sel.sum()),
                      "accuracy": float((y_true[sel] == y_pred[sel]).mean())})  # fmt: skip
     return rows
+
+
+def mean_class_accuracy(y_true: NDArray[np.integer], y_pred: NDArray[np.integer], n_classes: int) -> float:
+    """Mean over the classes present in ``y_true`` of each class's accuracy (its recall); NaN if empty."""
+    return classification_report(y_true, y_pred, [str(i) for i in range(n_classes)])["mean_class_accuracy"]
+
+
+def balanced_nll(prob: NDArray[np.floating], y_true: NDArray[np.integer], *, floor: float = 1e-12) -> float:
+    """Class-balanced cross-entropy: the mean over the classes present of each class's mean ``-log p(true class)``.
+
+    Parameters
+    ----------
+    prob : (B, K) float
+        Predicted class probabilities (softmax).
+    y_true : (B,) int
+    floor : float
+        Probabilities are clipped below at this value, so that one confident mistake gives a
+        large but finite loss.
+
+    Returns
+    -------
+    float
+        NaN for an empty set.
+    """
+    prob, y_true = np.asarray(prob, dtype=np.float64), np.asarray(y_true, dtype=np.int64)
+    if len(y_true) == 0:
+        return float("nan")
+    nll = -np.log(np.clip(prob[np.arange(len(y_true)), y_true], floor, None))
+    return float(np.mean([nll[y_true == c].mean() for c in np.unique(y_true)]))

@@ -9,6 +9,19 @@ Optimiser defaults (Sryamkin et al. 2023 give none; these are the models' own pa
 * 3DmFV-Net (Ben-Shabat et al. 2018, §IV-A): Adam, lr 0.001, batch 64, lr × 0.7 every 20
   epochs, weight decay 0 (its code), dropout keep 0.7.
 
+Recipe options for small, imbalanced sets (all off by default, so that the paper's Table 3
+runs are unchanged; ``experiment sim2real`` turns them on, :data:`STABLE_RECIPE`):
+
+* ``balance="sampler"``: class-balanced sampling (:func:`~zbuf_occlude.learn.data.balanced_epoch_rows`,
+  Shen et al., ECCV 2016), every class equally often in every epoch;
+* ``select="mean_class_accuracy"``: early stopping and the best epoch on the validation set's
+  mean class accuracy (ties: the lower class-balanced validation cross-entropy,
+  :func:`~zbuf_occlude.learn.metrics.balanced_nll`) instead of its overall accuracy, which a
+  model that drops a small class barely loses;
+* ``warmup_epochs``: the learning rate rises linearly from ``lr / steps`` to ``lr`` over the
+  first epochs' batches (Goyal et al. 2017, "Accurate, large minibatch SGD", §2.2);
+* ``grad_clip``: the gradient's global L2 norm is clipped (Pascanu et al., ICML 2013).
+
 Determinism: given a seed, model initialisation, the epoch's shuffle and augmentation all
 come from that seed (and the epoch number), and torch runs with deterministic algorithms
 on CPU; a resumed run continues from the last finished epoch's checkpoint (model,
@@ -35,12 +48,13 @@ from torch.nn import functional as F
 
 from zbuf_occlude.errors import CheckpointError, InvalidInputError, OutputError
 from zbuf_occlude.io.atomic import atomic_path
-from zbuf_occlude.learn.data import CloudSet, augment
+from zbuf_occlude.learn.data import CloudSet, augment, balanced_epoch_rows
+from zbuf_occlude.learn.metrics import balanced_nll, mean_class_accuracy
 from zbuf_occlude.learn.models import build_model, check_model_config
 
 __all__ = [
     "TrainConfig", "OPTIMISER_DEFAULTS", "train", "predict", "TrainResult", "resolve_device", "seed_everything",
-    "load_checkpoint", "load_model",
+    "load_checkpoint", "load_model", "PLAIN_RECIPE", "STABLE_RECIPE", "RECIPES",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -51,6 +65,16 @@ OPTIMISER_DEFAULTS = {
     "voxnet": {"optimizer": "sgd", "lr": 1e-2, "batch_size": 32, "lr_step": 20, "lr_gamma": 0.1, "weight_decay": 1e-3},
     "3dmfv": {"optimizer": "adam", "lr": 1e-3, "batch_size": 64, "lr_step": 20, "lr_gamma": 0.7, "weight_decay": 0.0},
 }
+
+#: The recipe options' values that reproduce the plain loop (TrainConfig's defaults): a checkpoint
+#: made before the options existed resumes with them.
+PLAIN_RECIPE = {"balance": "none", "select": "accuracy", "warmup_epochs": 0, "grad_clip": None}
+#: The recipe for small, imbalanced sets (module docstring): class-balanced sampling, selection
+#: on validation mean class accuracy, two epochs of warm-up, gradient norm clipped at 5 (a
+#: bound that normal steps of these models stay under and a diverging step does not).
+STABLE_RECIPE = {"balance": "sampler", "select": "mean_class_accuracy", "warmup_epochs": 2, "grad_clip": 5.0}
+#: The recipes by name (``experiment sim2real --recipe``).
+RECIPES = {"plain": PLAIN_RECIPE, "stable": STABLE_RECIPE}
 
 
 @dataclass
@@ -73,6 +97,14 @@ class TrainConfig:
         3DmFV Gaussians per side.
     augment : bool
         Rotation about z, scaling and jitter on every training batch.
+    balance : {"none", "sampler"}
+        ``sampler``: class-balanced epochs (module docstring).
+    select : {"accuracy", "mean_class_accuracy"}
+        What early stopping and the best epoch go by on the validation set.
+    warmup_epochs : int
+        Epochs of linear learning-rate warm-up, per batch (0: none).
+    grad_clip : float or None
+        Maximum global L2 norm of the gradient (None: not clipped).
     seed : int
     device : {"cpu", "cuda"}
     threads : int or None
@@ -91,6 +123,10 @@ class TrainConfig:
     width: float = 1.0
     fv_grid: int = 8
     augment: bool = True
+    balance: str = "none"
+    select: str = "accuracy"
+    warmup_epochs: int = 0
+    grad_clip: float | None = None
     seed: int = 0
     device: str = "cpu"
     threads: int | None = None
@@ -105,9 +141,21 @@ class TrainConfig:
             raise InvalidInputError(f"need epochs >= 1 and batch size >= 1, got {self.epochs}, {self.batch_size}")
         if self.optimizer not in ("adam", "sgd"):
             raise InvalidInputError(f"optimizer must be adam or sgd, got {self.optimizer!r}")
+        if self.balance not in ("none", "sampler"):
+            raise InvalidInputError(f"balance must be none or sampler, got {self.balance!r}")
+        if self.select not in ("accuracy", "mean_class_accuracy"):
+            raise InvalidInputError(f"select must be accuracy or mean_class_accuracy, got {self.select!r}")
+        if self.warmup_epochs < 0 or (self.grad_clip is not None and not self.grad_clip > 0):
+            raise InvalidInputError(f"need warmup_epochs >= 0 and grad_clip > 0 or None, got {self.warmup_epochs}, {self.grad_clip}")
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
+
+    def identity(self, exclude: tuple[str, ...]) -> dict:
+        """The fields that make results differ, for a checkpoint's or a run's settings: all but
+        ``exclude``, with recipe options at their :data:`PLAIN_RECIPE` values left out (so a config
+        from before those options existed compares equal)."""
+        return {k: v for k, v in self.to_dict().items() if k not in exclude and not (k in PLAIN_RECIPE and v == PLAIN_RECIPE[k])}
 
 
 @dataclass
@@ -116,6 +164,7 @@ class TrainResult:
     history: list[dict] = field(default_factory=list)
     best_epoch: int = 0
     best_val_accuracy: float = float("nan")
+    best_val_mean_class_accuracy: float = float("nan")
     seconds: float = 0.0
     samples_per_second: float = float("nan")
 
@@ -139,6 +188,19 @@ def resolve_device(name: str) -> torch.device:
 def seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
     torch.use_deterministic_algorithms(True, warn_only=True)
+
+
+def _val_score(select: str, prob: np.ndarray, labels: np.ndarray, n_classes: int) -> tuple[float, ...]:
+    """The validation score an epoch is ranked by (higher is better, compared as a tuple)."""
+    pred = prob.argmax(axis=1)
+    if select == "accuracy":
+        return (float((pred == labels).mean()),)
+    return (mean_class_accuracy(labels, pred, n_classes), -balanced_nll(prob, labels))
+
+
+def _better(score: tuple[float, ...], best: tuple[float, ...] | None) -> bool:
+    # NaN-safe: the first epoch always counts
+    return best is None or not (score <= tuple(best))
 
 
 def _loss(model: nn.Module, logits: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
@@ -255,8 +317,8 @@ def train(
     n_classes : int
     config : TrainConfig
     val_set : CloudSet, optional
-        Early stopping and best-epoch selection on its overall accuracy; without it the
-        last epoch is kept.
+        Early stopping and best-epoch selection on its overall accuracy (or what
+        ``config.select`` says); without it the last epoch is kept.
     checkpoint_dir : path, optional
         ``last.pt`` (resume point) and ``best.pt`` (best validation weights) go here; a
         ``last.pt`` made with another config is refused.
@@ -288,9 +350,9 @@ def train(
         opt = torch.optim.SGD(model.parameters(), lr=config.lr, momentum=0.9, weight_decay=config.weight_decay)
     sched = torch.optim.lr_scheduler.StepLR(opt, step_size=config.lr_step, gamma=config.lr_gamma)
     result = TrainResult(model)
-    start_epoch, best_state, stale = 0, None, 0
+    start_epoch, best_state, stale, best_score = 0, None, 0, None
     cfg = config.to_dict()
-    cfg_key = {k: v for k, v in cfg.items() if k not in ("device", "threads", "epochs", "patience")}
+    cfg_key = config.identity(("device", "threads", "epochs", "patience"))  # older checkpoints resume
     ckpt_dir = Path(checkpoint_dir) if checkpoint_dir is not None else None
     if ckpt_dir is not None and (ckpt_dir / "last.pt").is_file():
         last = ckpt_dir / "last.pt"
@@ -305,6 +367,8 @@ def train(
         start_epoch, stale = state["epoch"] + 1, state["stale"]
         result.history, result.best_epoch = state["history"], state["best_epoch"]
         result.best_val_accuracy = state["best_val_accuracy"]
+        result.best_val_mean_class_accuracy = state.get("best_val_mean_class_accuracy", float("nan"))
+        best_score = state.get("best_score", None if state["best_epoch"] == 0 else [result.best_val_accuracy])
         best_state = state["best_model"]
         shapes = {k: tuple(v.shape) for k, v in model.state_dict().items()}
         if best_state is not None and (
@@ -320,10 +384,12 @@ def train(
             break
         rng = np.random.default_rng([config.seed, epoch])
         torch.manual_seed(config.seed * 100_003 + epoch)
-        order = rng.permutation(n)
+        order = balanced_epoch_rows(train_set.labels, rng) if config.balance == "sampler" else rng.permutation(n)
         model.train()
+        epoch_lr = [g["lr"] for g in opt.param_groups]
+        warmup_steps = config.warmup_epochs * -(-len(order) // config.batch_size)
         total_loss, correct = 0.0, 0
-        batches = range(0, n, config.batch_size)
+        batches = range(0, len(order), config.batch_size)
         bar = tqdm(batches, desc=f"{config.model} epoch {epoch + 1}/{config.epochs}", disable=not progress, leave=False)
         for i in bar:
             rows = order[i : i + config.batch_size]
@@ -334,24 +400,36 @@ def train(
                 pts = augment(pts, rng)
             x = torch.from_numpy(np.ascontiguousarray(pts)).to(device)
             y = torch.from_numpy(train_set.labels[rows]).to(device)
+            step = epoch * -(-len(order) // config.batch_size) + i // config.batch_size
+            if step < warmup_steps:
+                for g, lr in zip(opt.param_groups, epoch_lr):
+                    g["lr"] = lr * (step + 1) / warmup_steps
             opt.zero_grad()
             logits = model(x)
             loss = _loss(model, logits, y)
             loss.backward()
+            if config.grad_clip is not None:
+                torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
             opt.step()
             total_loss += loss.item() * len(rows)
             correct += int((logits.argmax(1) == y).sum())
             seen += len(rows)
             bar.set_postfix(loss=f"{loss.item():.3f}")
+        for g, lr in zip(opt.param_groups, epoch_lr):  # the scheduler steps from the epoch's own rate
+            g["lr"] = lr
         sched.step()
-        row = {"epoch": epoch + 1, "train_loss": total_loss / n, "train_accuracy": correct / n,
+        row = {"epoch": epoch + 1, "train_loss": total_loss / len(order), "train_accuracy": correct / len(order),
                "lr": opt.param_groups[0]["lr"]}  # fmt: skip
         if val_set is not None and len(val_set):
-            pred, _ = predict(model, val_set.points, batch_size=config.batch_size, device=device)
+            pred, prob = predict(model, val_set.points, batch_size=config.batch_size, device=device)
             acc = float((pred == val_set.labels).mean())
             row["val_accuracy"] = acc
-            if not (acc <= result.best_val_accuracy):  # NaN-safe: the first epoch always counts
-                result.best_val_accuracy, result.best_epoch, stale = acc, epoch + 1, 0
+            score = _val_score(config.select, prob, val_set.labels, n_classes)
+            if config.select != "accuracy":
+                row["val_mean_class_accuracy"], row["val_balanced_nll"] = score[0], -score[1]
+            if _better(score, best_score):
+                result.best_val_accuracy, result.best_epoch, stale, best_score = acc, epoch + 1, 0, list(score)
+                result.best_val_mean_class_accuracy = mean_class_accuracy(val_set.labels, pred, n_classes)
                 best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
             else:
                 stale += 1
@@ -371,7 +449,8 @@ def train(
                 "config": cfg, "config_key": cfg_key, "n_train": n, "epoch": epoch, "stale": stale,
                 "model": model.state_dict(), "optimizer": opt.state_dict(), "scheduler": sched.state_dict(),
                 "history": result.history, "best_epoch": result.best_epoch,
-                "best_val_accuracy": result.best_val_accuracy, "best_model": best_state,
+                "best_val_accuracy": result.best_val_accuracy, "best_model": best_state, "best_score": best_score,
+                "best_val_mean_class_accuracy": result.best_val_mean_class_accuracy,
             })  # fmt: skip
     if best_state is not None:
         model.load_state_dict(best_state)

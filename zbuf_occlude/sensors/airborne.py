@@ -17,6 +17,23 @@ points per m² (S: the swath in radians, h: altitude, v: speed), and over the wh
 ``PRR / (v · W)`` with ``W = 2 h tan(S/2)`` (:attr:`AirborneScanner.density_m2`), the figure
 flight plans quote (e.g. Baltsavias, "Airborne laser scanning: basic relations and formulas",
 ISPRS J. Photogramm. 54, 1999, Eq. 17: mean point density = PRR / (v · swath width)).
+
+Flight plans
+------------
+A survey flies several lines and merges their returns.  ``n_lines`` parallel lines per heading
+in ``headings_deg`` (degrees counter-clockwise from +x; not a compass heading), ``s = W · (1 −
+side_overlap)`` apart (:attr:`AirborneScanner.flight_line_spacing_m`; ``side_overlap``: the
+fraction of a strip's width its neighbour covers again), centred on the plan centre (the world
+origin) and shifted together across track by a lateral shift; every line starts at its own time
+phase.  Line ``j`` of heading ``h`` has the id ``h · n_lines + j``.  With the defaults
+(``n_lines=1``, ``headings_deg=(0,)``) the plan is the single line above.
+
+Overlapping strips add up: where the block is unbounded (at least ``W/2 − s`` inside its outer
+lines' nadirs), every across-track interval one spacing ``s`` wide receives each column of
+pulses of one line exactly once, so the mean density there is ``PRR / (v · s)`` per heading
+(:attr:`AirborneScanner.survey_density_m2`; ``W / s = 1 / (1 − side_overlap)`` strips cover
+a point on average).  This is Baltsavias' Eq. 17 with the swath width replaced by the line
+spacing, the rule flight planners use for multi-strip density.
 """
 
 from __future__ import annotations
@@ -29,10 +46,54 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 
-__all__ = ["AirborneScanner", "AIRBORNE_PRESETS", "airborne_preset", "scan_airborne"]
+__all__ = ["AIRBORNE_PRESETS", "MAX_FLIGHT_LINES", "AirborneScanner", "FlightLine", "airborne_preset", "scan_airborne"]
 
 #: Scan patterns (module docstring).
 PATTERNS = ("linear", "oscillating")
+#: Most flight lines one plan may hold (``n_lines · len(headings_deg)``): a sensor file is
+#: untrusted input, and each line costs a pass over the scanned square.
+MAX_FLIGHT_LINES = 256
+
+
+def _is_number(value) -> bool:
+    """A real number from Python or numpy, not a bool (JSON's true would read as 1)."""
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+
+
+@dataclass(frozen=True)
+class FlightLine:
+    """One line of a flight plan: a straight, level pass.
+
+    Attributes
+    ----------
+    line_id : int
+        ``heading index · n_lines + index in its block``.
+    heading_deg : float
+        Direction of flight, degrees counter-clockwise from +x.
+    offset_m : float
+        Signed distance of the line from the plan centre (the world origin), metres, along the
+        left normal ``(−sin φ, cos φ)`` of the heading φ.
+    """
+
+    line_id: int
+    heading_deg: float
+    offset_m: float
+
+    def axes(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The unit vectors ``(along, across)`` of the line in the world x–y plane."""
+        phi = math.radians(self.heading_deg)
+        return np.array([math.cos(phi), math.sin(phi)]), np.array([-math.sin(phi), math.cos(phi)])
+
+    @property
+    def is_reference(self) -> bool:
+        """True for the single line of a plain scanner: along +x over ``y = 0`` (no transform)."""
+        return self.heading_deg == 0.0 and self.offset_m == 0.0
+
+    def to_line(self, xy) -> NDArray[np.float64]:
+        """World ``(..., 2)`` x–y points in the line's frame (x along track, y across, metres)."""
+        along, across = self.axes()
+        rel = np.asarray(xy, dtype=np.float64) - self.offset_m * across
+        return np.stack([rel @ along, rel @ across], axis=-1)
 
 
 @dataclass(frozen=True)
@@ -56,12 +117,21 @@ class AirborneScanner:
     dropout : float
         Probability in [0, 1) that a return is lost.
     source : str
+    n_lines : int
+        Flight lines per heading, parallel (module docstring, *Flight plans*); 1: one line.
+    side_overlap : float
+        Fraction in [0, 1) of a strip's width that the next line's strip covers again; sets
+        :attr:`flight_line_spacing_m`.  Unused with one line.
+    headings_deg : tuple of float
+        One block of ``n_lines`` lines per heading, degrees counter-clockwise from +x (two
+        headings 90° apart: a cross-hatched survey).
 
     Raises
     ------
     InvalidInputError
         A non-positive or non-finite number, a swath outside (0°, 180°), an unknown pattern,
-        fewer than one pulse per line.
+        fewer than one pulse per line, ``n_lines`` not an integer ≥ 1, ``side_overlap``
+        outside [0, 1), no heading or a non-finite one, more than :data:`MAX_FLIGHT_LINES` lines.
     """
 
     name: str
@@ -74,6 +144,9 @@ class AirborneScanner:
     range_noise_m: float = 0.02
     dropout: float = 0.0
     source: str = ""
+    n_lines: int = 1
+    side_overlap: float = 0.0
+    headings_deg: tuple[float, ...] = (0.0,)
 
     def __post_init__(self) -> None:
         for key in ("pulse_rate_hz", "line_rate_hz", "altitude_m", "speed_mps"):
@@ -88,11 +161,27 @@ class AirborneScanner:
             raise InvalidInputError(f"airborne scanner {self.name!r}: need range_noise_m >= 0 and dropout in [0, 1)")
         if self.pulses_per_line < 1:
             raise InvalidInputError(f"airborne scanner {self.name!r}: fewer than one pulse per line")
+        if not (_is_number(self.n_lines) and float(self.n_lines).is_integer() and self.n_lines >= 1):
+            raise InvalidInputError(f"airborne scanner {self.name!r}: n_lines must be an integer >= 1, got {self.n_lines!r}")
+        f = self.side_overlap
+        if not (_is_number(f) and math.isfinite(f) and 0.0 <= f < 1.0):
+            raise InvalidInputError(f"airborne scanner {self.name!r}: side_overlap must be a fraction in [0, 1), got {f!r}")
+        headings = self.headings_deg
+        if _is_number(headings):
+            headings = (headings,)
+        finite = isinstance(headings, (tuple, list)) and all(_is_number(h) and math.isfinite(h) for h in headings)
+        if not (finite and headings):
+            raise InvalidInputError(f"airborne scanner {self.name!r}: headings_deg must be one or more finite angles, got {self.headings_deg!r}")
+        object.__setattr__(self, "n_lines", int(self.n_lines))
+        object.__setattr__(self, "headings_deg", tuple(float(h) for h in headings))
+        if self.n_lines * len(self.headings_deg) > MAX_FLIGHT_LINES:
+            raise InvalidInputError(f"airborne scanner {self.name!r}: {self.n_lines} lines x {len(self.headings_deg)} headings "
+                                    f"is more than {MAX_FLIGHT_LINES} flight lines")  # fmt: skip
 
     @property
     def pulses_per_line(self) -> int:
         """Pulses fired during one scan line (``round(pulse_rate_hz / line_rate_hz)``)."""
-        return int(round(self.pulse_rate_hz / self.line_rate_hz))
+        return int(round(self.pulse_rate_hz / self.line_rate_hz))  # noqa: RUF046 (numpy floats round to floats)
 
     @property
     def swath_width_m(self) -> float:
@@ -113,6 +202,70 @@ class AirborneScanner:
         """Point density on flat ground at an across-track position, points per m²: ``PRR cos²θ / (S h v)``."""
         theta = math.atan2(across_track_m, self.altitude_m)
         return self.pulse_rate_hz * math.cos(theta) ** 2 / (math.radians(self.swath_deg) * self.altitude_m * self.speed_mps)
+
+    @property
+    def flight_line_spacing_m(self) -> float:
+        """Distance between neighbouring parallel flight lines, metres: ``W · (1 − side_overlap)``."""
+        return self.swath_width_m * (1.0 - self.side_overlap)
+
+    @property
+    def survey_density_m2(self) -> float:
+        """Mean point density on flat ground where the plan's blocks are unbounded, points per m².
+
+        ``len(headings_deg) · PRR / (v · s)`` with ``s`` the flight-line spacing, or the swath
+        width for one line per heading (then :attr:`density_m2` per heading); module docstring.
+        """
+        spacing = self.flight_line_spacing_m if self.n_lines > 1 else self.swath_width_m
+        return len(self.headings_deg) * self.pulse_rate_hz / (self.speed_mps * spacing)
+
+    def flight_lines(self, lateral_shift_m=0.0) -> list[FlightLine]:
+        """The plan's lines (module docstring, *Flight plans*).
+
+        Parameters
+        ----------
+        lateral_shift_m : float or sequence of float
+            Shift of each heading's block across its lines, metres (one value for every block,
+            or one per heading).
+
+        Returns
+        -------
+        list of FlightLine
+            ``n_lines · len(headings_deg)`` lines, ordered by line id.
+        """
+        shifts = np.broadcast_to(np.asarray(lateral_shift_m, dtype=np.float64), (len(self.headings_deg),))
+        if not np.all(np.isfinite(shifts)):
+            raise InvalidInputError(f"lateral_shift_m must be finite, got {lateral_shift_m!r}")
+        s = self.flight_line_spacing_m
+        n = self.n_lines
+        return [FlightLine(h * n + j, heading, (j - (n - 1) / 2.0) * s + float(shifts[h]) if n > 1 else float(shifts[h]))
+                for h, heading in enumerate(self.headings_deg) for j in range(n)]  # fmt: skip
+
+    def survey_density_at_m2(self, xy, lateral_shift_m=0.0) -> NDArray[np.float64]:
+        """Point density of the whole plan on flat ground at world points ``xy``, points per m².
+
+        The sum over the lines whose strip covers the point of :meth:`density_at_m2` at its
+        across-track position (lines are unbounded along track).
+
+        Parameters
+        ----------
+        xy : (2,) or (N, 2) float
+            World x–y, metres.
+        lateral_shift_m : float or sequence of float
+            As :meth:`flight_lines`.
+
+        Returns
+        -------
+        () or (N,) float64
+        """
+        pts = np.asarray(xy, dtype=np.float64)
+        half = self.swath_width_m / 2.0
+        total = np.zeros(pts.shape[:-1])
+        for line in self.flight_lines(lateral_shift_m):
+            y = line.to_line(pts)[..., 1]
+            theta = np.arctan2(y, self.altitude_m)
+            rho = self.pulse_rate_hz * np.cos(theta) ** 2 / (math.radians(self.swath_deg) * self.altitude_m * self.speed_mps)
+            total = total + np.where(np.abs(y) <= half, rho, 0.0)
+        return total
 
     def with_(self, **changes) -> AirborneScanner:
         """A copy with some fields changed."""
@@ -174,11 +327,27 @@ class AirborneScanner:
 # 20 mm.  Speed 72 m/s (140 kn) is a typical survey speed of the twin-engine aircraft such systems
 # fly in (an ASSUMPTION); 209 lines/s makes the along- and across-track spacings equal (0.34 m).
 # One pass: 7.7 points/m² (DALES reaches ~50 with overlapping strips).
+#
+# "dales-q1560" is the same scanner flown as a survey block with DALES's density.  From the DALES
+# paper: the abstract gives over half a billion labelled points on 10 km², i.e. about 50 points/m²
+# (every return, vegetation's multiple returns included); its data-collection section gives the
+# RIEGL Q1560 and 1,300 m (as cited above) and, as recalled (not re-read for this preset), a "400%
+# minimum overlap".  ASSUMPTIONS: that overlap read as every ground point lying in at least four strips;
+# the speed (72 m/s, as above); lines all parallel, one heading.  Given those, a side overlap of
+# 0.85 (lines 216 m apart, 6 to 7 strips on every point) gives PRR / (v · s) = 51.4 points/m² on
+# flat open ground (single returns).  Nine lines: any object within ±250 m of the plan centre
+# lies where the block is unbounded (module docstring), wherever the lines' random shift puts them.
 AIRBORNE_PRESETS: dict[str, AirborneScanner] = {
     "riegl-q1560": AirborneScanner(
         "riegl-q1560", swath_deg=58.0, pulse_rate_hz=800_000.0, line_rate_hz=209.0, altitude_m=1300.0,
         speed_mps=72.0, pattern="linear", range_noise_m=0.02,
         source="RIEGL LMS-Q1560 data sheet (2015); DALES (Varney et al., CVPRW 2020) flight altitude 1,300 m",
+    ),
+    "dales-q1560": AirborneScanner(
+        "dales-q1560", swath_deg=58.0, pulse_rate_hz=800_000.0, line_rate_hz=209.0, altitude_m=1300.0,
+        speed_mps=72.0, pattern="linear", range_noise_m=0.02, n_lines=9, side_overlap=0.85,
+        source="riegl-q1560 flown as a survey block: 9 parallel lines, side overlap 0.85, 51.4 points/m² "
+               "(DALES, Varney et al., CVPRW 2020: ~50 points/m² at 1,300 m; overlap and speed are assumptions)",
     ),
 }  # fmt: skip
 
@@ -198,8 +367,13 @@ def airborne_preset(name: str, **changes) -> AirborneScanner:
 
 
 def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_size_m: float = 10.0, *, seed: int = 0,
-                  phase_s: float | None = None):  # fmt: skip
-    """Scan the part of ``scene`` around ``center_xy`` with an airborne scanner; world frame.
+                  phase_s: float | None = None, lateral_shift_m=None):  # fmt: skip
+    """Scan the part of ``scene`` around ``center_xy`` from every line of the scanner's flight plan; world frame.
+
+    Every line casts the pulses whose flat-ground footprint falls in the square ``center_xy ±
+    half_size_m`` of its own frame (:meth:`AirborneScanner.ground_rays`; for a line at another
+    heading a rotated square, which still covers the disc of radius ``half_size_m``); the returns
+    of all lines are merged, each keeping its line id.
 
     Parameters
     ----------
@@ -207,23 +381,66 @@ def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_si
         World frame, metres, ground at z = 0 (a bare mesh: as given).
     scanner : AirborneScanner
     center_xy, half_size_m
-        The square of flat ground whose pulses are cast (:meth:`AirborneScanner.ground_rays`).
+        The square of flat ground whose pulses are cast, metres.
     seed : int
-        Noise, dropout and (when ``phase_s`` is None) the lines' time phase.
+        Noise, dropout and what is drawn (below).
+    phase_s : float, optional
+        Time of every line's first pulse, seconds; None: drawn per line, uniformly over one
+        scan-line period (each line its own phase).
+    lateral_shift_m : float or sequence of float, optional
+        Shift of each heading's block of lines across track, metres (:meth:`AirborneScanner.flight_lines`);
+        None: drawn per heading, uniformly in ``±s/2`` (s: the flight-line spacing), for plans of
+        more than one line per heading, so an object falls anywhere between the lines; 0 for one
+        line (which then flies over ``y = 0``).
 
     Returns
     -------
     Scan
         ``frame="world"``, ``ring`` and ``pixel`` None, ``sensor_position`` the mean aircraft
-        position of the returns, ``meta["scan_angle_deg"]`` per return.
+        position of the returns.  ``meta``: ``scan_angle_deg`` (N,) float64 and ``line_id``
+        (N,) int32 per return; ``phase_s`` (the first line's), ``line_phase_s`` (per line, by
+        id), ``lateral_shift_m`` (per heading), ``n_rays``.  The same seed gives the same bytes;
+        a single-line scanner draws exactly what it drew before flight plans existed.
+
+    Raises
+    ------
+    InvalidInputError
+        A non-finite or non-positive square, a non-finite phase or shift.
     """
     from zbuf_occlude.sensors.raycast import cast_embree
     from zbuf_occlude.sensors.scan import Scan, build_scene
 
     built = build_scene(scene)
     rng = np.random.default_rng(seed)
-    phase = float(rng.uniform(0.0, 1.0 / scanner.line_rate_hz)) if phase_s is None else float(phase_s)
-    origins, directions, angle = scanner.ground_rays(center_xy, half_size_m, phase)
+    n_total = scanner.n_lines * len(scanner.headings_deg)
+    # draw order: phases (one per line), then shifts (one per heading, plans of > 1 line per
+    # heading only), then noise and dropout; a single line draws one phase, as it always did
+    if phase_s is None:
+        phases = [float(rng.uniform(0.0, 1.0 / scanner.line_rate_hz)) for _ in range(n_total)]
+    else:
+        if not math.isfinite(float(phase_s)):
+            raise InvalidInputError(f"phase_s must be finite, got {phase_s!r}")
+        phases = [float(phase_s)] * n_total
+    if lateral_shift_m is None:
+        s = scanner.flight_line_spacing_m
+        shifts = [float(rng.uniform(-s / 2.0, s / 2.0)) if scanner.n_lines > 1 else 0.0 for _ in scanner.headings_deg]
+    else:
+        shifts = np.broadcast_to(np.asarray(lateral_shift_m, dtype=np.float64), (len(scanner.headings_deg),)).tolist()
+    parts = []
+    for line in scanner.flight_lines(shifts):
+        if line.is_reference:
+            o, d, a = scanner.ground_rays(center_xy, half_size_m, phases[line.line_id])
+        else:
+            c = line.to_line(np.asarray(center_xy, dtype=np.float64).reshape(2))
+            o, d, a = scanner.ground_rays(c, half_size_m, phases[line.line_id])
+            along, across = line.axes()
+            o = np.column_stack([o[:, :1] * along + (line.offset_m + o[:, 1:2]) * across, o[:, 2]])
+            d = np.column_stack([d[:, :1] * along + d[:, 1:2] * across, d[:, 2]])
+        parts.append((o, d, a, np.full(len(a), line.line_id, np.int32)))
+    if len(parts) == 1:
+        origins, directions, angle, line_id = parts[0]
+    else:
+        origins, directions, angle, line_id = (np.concatenate(arrays) for arrays in zip(*parts))
     face, t = cast_embree(built.mesh, origins, directions) if len(origins) else (np.zeros(0, np.int64), np.zeros(0))
     hit = np.flatnonzero(face >= 0)
     face, t, o, d = face[hit], t[hit], origins[hit], directions[hit]
@@ -238,10 +455,11 @@ def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_si
     position = o.mean(axis=0) if len(o) else np.array([0.0, 0.0, scanner.altitude_m])
     pose = np.eye(4)
     pose[:3, 3] = position
+    meta = {"n_rays": len(origins), "phase_s": phases[0], "scan_angle_deg": angle[hit][keep], "line_id": line_id[hit][keep],
+            "line_phase_s": tuple(phases), "lateral_shift_m": tuple(float(v) for v in shifts)}  # fmt: skip
     return Scan(
         points=(o + d * measured[:, None]).astype(np.float32), ring=None, pixel=None, range_m=measured.astype(np.float32),
         face_index=built.face_local[face], object_id=built.face_object[face], normal=normal.astype(np.float32),
         incidence_deg=np.degrees(np.arccos(np.clip(np.abs(cos_in), 0.0, 1.0))).astype(np.float32), frame="world",
-        sensor_position=position, sensor_to_world=pose, sensor=scanner.name,
-        meta={"n_rays": len(origins), "phase_s": phase, "scan_angle_deg": angle[hit][keep]},
+        sensor_position=position, sensor_to_world=pose, sensor=scanner.name, meta=meta,
     )  # fmt: skip

@@ -197,16 +197,19 @@ def object_crop(
 
 
 def _airborne_crop(mesh, sensor: AirborneScanner, placement: dict, *, seed: int, occluders, class_name: str, offset_m: float, size) -> CropSample:
-    """An airborne crop: the object ``offset_m`` across track from the flight line (``distance_m ·
-    sin(azimuth_deg)`` of the placement; ``height_m`` is unused: the scanner flies at its altitude).
-    Points and the full scan are in the world frame."""
+    """An airborne crop: the object ``offset_m`` across track from the plan centre (``distance_m ·
+    sin(azimuth_deg)`` of the placement; ``height_m`` is unused: the scanner flies at its altitude),
+    scanned from every line of the flight plan that sees it.  Points and the full scan are in the
+    world frame; the crop's ``meta["line_id"]`` and ``meta["scan_angle_deg"]`` are its returns'."""
     from zbuf_occlude.sensors.airborne import scan_airborne
 
     obj = SceneObject(mesh, class_name, (0.0, offset_m), placement["yaw_deg"], size)
     reach = float(np.max(size)) * 0.75 + 1.0
     scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=abs(offset_m) + 2.0 * reach)
     full = scan_airborne(scene, sensor, (0.0, offset_m), reach, seed=seed)
-    crop = full.crop(1)
+    mine = full.object_id == 1
+    crop = full.select(mine)
+    crop.meta.update({key: full.meta[key][mine] for key in ("line_id", "scan_angle_deg")})
     to_world = scene.build().local_to_world[1]
     inverse = np.linalg.inv(to_world[:3, :3])
     local = (crop.points.astype(np.float64) - to_world[:3, 3]) @ inverse.T

@@ -135,18 +135,20 @@ class DepthCamera:
         Returns
         -------
         directions : (H·W, 3) float64
-            ``K⁻¹ (u + ½, v + ½, 1)``, z component 1 (so that ray parameter = depth).
+            ``K⁻¹ (u, v, 1)``, z component 1 (so that ray parameter = depth): OpenCV's convention,
+            pixel centres at integer ``(u, v)``, as every intrinsics matrix of the package.
         pixel : (H·W, 2) int64
             ``(u, v)`` column and row, row-major order.
         """
         v, u = np.mgrid[0 : self.height, 0 : self.width]
         pixel = np.stack([u.ravel(), v.ravel()], axis=1).astype(np.int64)
-        uv1 = np.column_stack([pixel + 0.5, np.ones(len(pixel))])
+        uv1 = np.column_stack([pixel.astype(np.float64), np.ones(len(pixel))])
         return uv1 @ np.linalg.inv(self._K).T, pixel
 
 
 def _kinect_K(width: int, height: int, f_px: float) -> tuple[tuple[float, ...], ...]:
-    return ((f_px, 0.0, width / 2.0), (0.0, f_px, height / 2.0), (0.0, 0.0, 1.0))
+    # OpenCV's convention: pixel centres at integers, so the image centre is ((W − 1)/2, (H − 1)/2)
+    return ((f_px, 0.0, (width - 1) / 2.0), (0.0, f_px, (height - 1) / 2.0), (0.0, 0.0, 1.0))
 
 
 DEPTH_CAMERA_PRESETS: dict[str, DepthCamera] = {

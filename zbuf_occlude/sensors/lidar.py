@@ -46,7 +46,13 @@ class Lidar:
     range_noise_m : float
         Standard deviation σ of the Gaussian range error along the beam, metres.
     dropout : float
-        Probability in [0, 1) that a return is lost (independent per return).
+        Probability in [0, 1) that a return is lost (independent per return), at range 0.
+    dropout_range_per_m : float
+        Growth of that probability with the return's range, per metre: a return at range
+        ``R`` is lost with probability ``clip(dropout + dropout_range_per_m · R, 0, 0.95)``
+        (:meth:`dropout_probability`).  An empirical linear law, the one
+        :func:`~zbuf_occlude.sensors.fit.fit_lidar` measures on real scans (weak far returns
+        drop out more often); 0 (default): one rate at every range.
     beam_divergence_deg : float
         Full-angle beam divergence, degrees.  Used when ``footprint_rays`` is 7: the beam is
         then a cone of this full angle (a top-hat profile, an assumption) sampled by 7 rays.
@@ -88,6 +94,7 @@ class Lidar:
     max_range_m: float = 100.0
     range_noise_m: float = 0.02
     dropout: float = 0.0
+    dropout_range_per_m: float = 0.0
     beam_divergence_deg: float = 0.0
     azimuth_offset_deg: float = 0.0
     footprint_rays: int = 1
@@ -119,6 +126,8 @@ class Lidar:
             raise InvalidInputError(f"lidar {self.name!r}: need min_range_m < max_range_m, got {self.min_range_m} >= {self.max_range_m}")
         if not 0.0 <= float(self.dropout) < 1.0:
             raise InvalidInputError(f"lidar {self.name!r}: dropout must lie in [0, 1), got {self.dropout!r}")
+        if not math.isfinite(float(self.dropout_range_per_m)):
+            raise InvalidInputError(f"lidar {self.name!r}: dropout_range_per_m must be finite, got {self.dropout_range_per_m!r}")
         if self.firing_rate_hz < self.rotation_hz:
             raise InvalidInputError(f"lidar {self.name!r}: firing_rate_hz {self.firing_rate_hz} below rotation_hz {self.rotation_hz}")
 
@@ -146,6 +155,17 @@ class Lidar:
     def detection_threshold(self) -> float:
         """τ = ``detection_reflectivity / detection_range_m²``, m⁻²: the least ``ρ cos θ f / R²`` detected."""
         return self.detection_reflectivity / self.detection_range_m**2
+
+    def dropout_probability(self, range_m: ArrayLike) -> NDArray[np.float64]:
+        """Probability that a return at ``range_m`` (metres, any shape) is lost, float64 of that shape.
+
+        ``clip(dropout + dropout_range_per_m · range_m, 0, 0.95)``; exactly ``dropout`` everywhere
+        when ``dropout_range_per_m`` is 0.
+        """
+        r = np.asarray(range_m, dtype=np.float64)
+        if self.dropout_range_per_m == 0.0:
+            return np.full(r.shape, float(self.dropout))
+        return np.clip(self.dropout + self.dropout_range_per_m * r, 0.0, 0.95)
 
     def footprint_directions(self, directions: ArrayLike) -> NDArray[np.float64]:
         """(N, K, 3) float64: the K = ``footprint_rays`` unit rays of each beam ``directions (N, 3)``.

@@ -414,7 +414,7 @@ def scan(
     incidence = np.degrees(np.arccos(np.clip(np.abs(cos_in), 0.0, 1.0)))
     rng = np.random.default_rng(seed)
     gauss = rng.standard_normal(len(hit))  # drawn for every hit, so filters do not shift streams
-    lost = rng.random(len(hit)) < sensor.dropout
+    lost = rng.random(len(hit)) < (sensor.dropout_probability(t) if isinstance(sensor, Lidar) else sensor.dropout)
     # Limits apply to what the sensor measures (noise and quantisation included).
     if isinstance(sensor, Lidar):
         measured = t + sensor.range_noise_m * gauss
