@@ -287,7 +287,7 @@ def finalize(
         "renderers": sorted({r["renderer"] for r in ok if r.get("renderer")}),
         "seed_derivation": "numpy SeedSequence([seed, blake2b64(name), stream, pose_index, sample_index]), "
         "zbuf_occlude.geometry.samples.derive_rng; stream 0 = dense cloud, 1 = sample draws, "
-        "2 = top-up candidates (pose_index, round)",
+        "3 = top-up candidates (pose_index, round)",
         "reference": "Sryamkin, Msallam, Klestov 2023, "
         "A method to create real-like point clouds for 3D object classification",
     }

@@ -33,12 +33,14 @@ from zbuf_occlude.geometry.sampling import check_seed, points_from_barycentric, 
 
 __all__ = [
     "OccludedCloud", "object_key", "derive_rng", "sample_rng", "topup_rng", "draw_sample", "pose_samples",
-    "count_padded", "TopUp", "top_up", "pool_index", "pool_take", "DENSE_STREAM", "DRAW_STREAM", "TOPUP_STREAM",
+    "count_padded", "TopUp", "top_up", "pool_index", "pool_take", "DENSE_STREAM", "DRAW_STREAM", "PROTOCOL_STREAM", "TOPUP_STREAM",
     "TOPUP_MAX_ROUNDS", "TOPUP_MAX_CANDIDATES_FACTOR", "TOPUP_MARGIN",
 ]  # fmt: skip
 
-#: Stream tags keep the dense-sampling, the per-sample and the top-up generators independent.
-DENSE_STREAM, DRAW_STREAM, TOPUP_STREAM = 0, 1, 2
+#: Stream tags keep the generators of one object independent, one tag per use: the dense cloud (0),
+#: the sample draws (1), the protocols' own draws (2, :mod:`zbuf_occlude.protocols`) and the top-up
+#: candidates (3).
+DENSE_STREAM, DRAW_STREAM, PROTOCOL_STREAM, TOPUP_STREAM = 0, 1, 2, 3
 
 #: Rounds of candidates :func:`top_up` draws at most for one pose.  Each round is sized from the
 #: fraction of candidates found visible so far, so one or two rounds usually suffice; the bound

@@ -23,7 +23,7 @@ import numpy as np
 
 from zbuf_occlude.dataset.layout import PROTOCOL_FILE
 from zbuf_occlude.errors import InvalidInputError, OutputError, ZbufOccludeError
-from zbuf_occlude.geometry.samples import derive_rng
+from zbuf_occlude.geometry.samples import PROTOCOL_STREAM, derive_rng
 from zbuf_occlude.io.atomic import atomic_h5, write_text
 from zbuf_occlude.mesh.inputs import FarmObject, scan_paths
 
@@ -37,7 +37,6 @@ log = logging.getLogger(__name__)
 #: Folder of the per-object shards inside ``--out``.
 SHARDS_DIR = "shards"
 _OPTIONS_FILE = PROTOCOL_FILE
-_PROTOCOL_STREAM = 2  # seed stream of the protocols (0 and 1 are occlude.py's dense and draw streams)
 
 
 @dataclass(frozen=True)
@@ -219,7 +218,7 @@ def run_protocol(
             from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported when a protocol runs
 
             mesh = load_mesh(obj.source, up=options.up)
-            rng = derive_rng(options.seed, obj.key, _PROTOCOL_STREAM)
+            rng = derive_rng(options.seed, obj.key, PROTOCOL_STREAM)
             arrays = protocol.make(mesh, obj, options, rng)
         except ZbufOccludeError as exc:
             run.failures.append((obj.source, str(exc)))
