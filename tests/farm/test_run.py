@@ -362,7 +362,7 @@ def test_topped_up_poses_through_the_farm_and_the_reader(tree, tmp_path):
         _, dense, visible = _expected_object(rec, params)
         by_name[rec["name"]] = (dense.points.astype(np.float32), visible)
     for i in range(len(dense_ds)):
-        (a, label, meta), (b, _, meta_b) = dense_ds[i], compact_ds[i]
+        (a, _, meta), (b, _, meta_b) = dense_ds[i], compact_ds[i]
         assert np.array_equal(a, b) and meta == meta_b
         assert not meta["padded"] and meta["n_topped_up"] > 0 and len(np.unique(a, axis=0)) == 600  # distinct points
         points, visible = by_name[meta["name"]]

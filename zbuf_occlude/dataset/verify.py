@@ -198,7 +198,6 @@ def verify_dataset(path: str | os.PathLike) -> VerifyReport:
         return report
     if shape_names is not None:
         check_records(manifest, rows, card, shape_names, problems)
-    n_poses = card.params.samples_per_view if card.params.sensor else len(card.poses)
     spv = 1 if card.params.sensor else card.params.samples_per_view
     listed: dict[str, list[str]] = {}
     missing_checksums = 0
