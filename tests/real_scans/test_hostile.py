@@ -90,6 +90,70 @@ def test_a_multi_gb_scan_is_refused_before_it_is_hashed(tmp_path: Path, monkeypa
         load_scan_folder(tmp_path, dedupe=True)
 
 
+_LIDARNET_HEAD = b"origin_x,origin_y,origin_z,relative_x,relative_y,relative_z,object,complexity\n"
+
+
+def _peak_bytes(read, path: Path):
+    tracemalloc.start()
+    try:
+        result = read(path)
+        return result, tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def test_a_lidarnet_csv_takes_memory_like_its_points_not_like_python_rows(tmp_path: Path) -> None:
+    from zbuf_occlude.real_scans.datasets import read_lidarnet_csv
+
+    path = tmp_path / "car0.csv"
+    n = 100_000
+    path.write_bytes(_LIDARNET_HEAD + b"".join(b"%d,2,3,0,0,0,car,1\n" % (i % 10) for i in range(n)))
+    scan, peak = _peak_bytes(read_lidarnet_csv, path)
+    assert scan.points_sensor_m.shape == (n, 3) and scan.label == "car"
+    # the points (24 B each) and the copies a RealScan holds (z-up metres, normalised float32)
+    # take ~84 B a point; a list of float lists would take ~150 B a point more
+    assert peak < 100 * n, peak / n
+
+
+def test_a_suo_csv_takes_memory_like_its_records_not_like_python_tuples(tmp_path: Path) -> None:
+    from zbuf_occlude.real_scans.datasets import SUO_DTYPE, read_suo_csv
+
+    path = tmp_path / "car.0.csv"
+    n = 100_000
+    path.write_bytes(b"1,2,3,1.5,2.5,3.5,4.5,5.5,7\n" * n)
+    records, peak = _peak_bytes(read_suo_csv, path)
+    assert records.dtype == SUO_DTYPE and len(records) == n and records["x"][0] == 1.5
+    assert peak < 2.5 * path.stat().st_size, peak / path.stat().st_size  # 40 B a record against 28 B a line
+
+
+def test_a_lidarnet_csv_with_a_line_past_the_cap_is_refused_naming_it(tmp_path: Path) -> None:
+    from zbuf_occlude.real_scans.datasets import read_lidarnet_csv
+
+    path = tmp_path / "car0.csv"
+    path.write_bytes(_LIDARNET_HEAD + b"1,2,3,0,0,0,car,1\n" + b"9" * (4 * MAX_LINE_BYTES))
+    with pytest.raises(InvalidInputError, match=rf"car0\.csv:3: a line longer than {MAX_LINE_BYTES:,} bytes"):
+        read_lidarnet_csv(path)
+
+
+def test_a_lidarnet_csv_stops_at_its_second_object_label(tmp_path: Path) -> None:
+    from zbuf_occlude.real_scans.datasets import read_lidarnet_csv
+
+    path = tmp_path / "car0.csv"
+    path.write_bytes(_LIDARNET_HEAD + b"1,2,3,0,0,0,car,1\n" + b"1,2,3,0,0,0,bush,1\n" + b"1,2,3,0,0,0,x,1\n" * 1000)
+    with pytest.raises(InvalidInputError, match=r"car0\.csv:3: expected one object label, got \['bush', 'car'\]"):
+        read_lidarnet_csv(path)
+
+
+def test_a_lidarnet_csv_with_more_lines_than_a_scan_may_have_is_refused_before_reading(tmp_path: Path, monkeypatch) -> None:
+    from zbuf_occlude.real_scans.datasets import read_lidarnet_csv
+
+    path = tmp_path / "car0.csv"
+    path.write_bytes(_LIDARNET_HEAD + b"1,2,3,0,0,0,car,1\n" * 50)
+    monkeypatch.setattr(files, "MAX_SCAN_POINTS", 10)  # stands for the 50 M cap
+    with pytest.raises(InvalidInputError, match=r"car0\.csv: has up to 51 points, more than the 10 a scan may have"):
+        read_lidarnet_csv(path)
+
+
 def test_a_multi_gb_lidarnet_csv_is_refused_before_it_is_hashed(tmp_path: Path, monkeypatch) -> None:
     big = tmp_path / "Car" / "car1.csv"
     big.parent.mkdir()

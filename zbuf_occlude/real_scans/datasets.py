@@ -52,6 +52,8 @@ from zbuf_occlude.real_scans.files import (
     MAX_FILE_BYTES,
     MAX_LINE_BYTES,
     POINT_EXTENSIONS,
+    check_scan_points,
+    count_lines,
     load_scan_folder,
     read_lines,
     scan_digest,
@@ -111,17 +113,24 @@ def read_suo_bin(path: str | os.PathLike) -> NDArray[np.void]:
 def read_suo_csv(path: str | os.PathLike) -> NDArray[np.void]:
     """SUO CSV object file (9 comma-separated fields per line, no header) → structured array.
 
+    Streamed into one :data:`SUO_DTYPE` array sized from the file's line count, checked first
+    like a LiDARNet CSV's (:func:`read_lidarnet_csv`).
+
     Raises
     ------
     InvalidInputError
-        Missing file, or a line without 9 numeric fields (its line number is given).
+        Missing file, too large, too many lines or a line too long, or a line without 9
+        numeric fields (its line number is given).
     """
     path = Path(path)
-    rows = []
     if regular_file_size(path, error=InvalidInputError) > MAX_FILE_BYTES:
         raise InvalidInputError(f"{path}: more than the {MAX_FILE_BYTES:,} bytes a scan may have")
     try:
         with open(path, "rb") as fh:
+            # streamed into one structured array: memory is the records, not a Python tuple per line
+            capacity = count_lines(fh)
+            check_scan_points(path, capacity, "has up to", bytes_per_point=SUO_DTYPE.itemsize)
+            out, n = np.empty(capacity, dtype=SUO_DTYPE), 0
             for lineno, line in read_lines(path, fh):
                 if not line.strip():
                     continue
@@ -129,12 +138,13 @@ def read_suo_csv(path: str | os.PathLike) -> NDArray[np.void]:
                 if len(parts) != len(SUO_FIELDS):
                     raise InvalidInputError(f"{path}:{lineno}: expected {len(SUO_FIELDS)} fields, got {len(parts)}")
                 try:
-                    rows.append((int(parts[0]), int(parts[1]), int(parts[2]), *map(float, parts[3:8]), int(parts[8])))
-                except ValueError:
+                    out[n] = (int(parts[0]), int(parts[1]), int(parts[2]), *map(float, parts[3:8]), int(parts[8]))
+                except (ValueError, OverflowError):
                     raise InvalidInputError(f"{path}:{lineno}: non-numeric field in {line.strip()!r}") from None
+                n += 1
     except OSError as exc:
         raise InvalidInputError(f"cannot read SUO file {path}: {exc}") from None
-    return np.array(rows, dtype=SUO_DTYPE)
+    return out[:n].copy() if n < capacity else out
 
 
 def _atomic_write(path: Path, data: bytes) -> None:
@@ -175,42 +185,53 @@ def read_suo_object(path: str | os.PathLike) -> RealScan:
 def read_lidarnet_csv(path: str | os.PathLike) -> RealScan:
     """One LiDARNet v2 object CSV as a normalised, z-up :class:`RealScan`.
 
+    The rows are streamed into one ``(N, 3) float64`` array sized from the file's line count,
+    which is checked first (:data:`~zbuf_occlude.real_scans.files.MAX_SCAN_POINTS` and the memory
+    available), and no line may pass :data:`~zbuf_occlude.real_scans.files.MAX_LINE_BYTES`.
+
     Raises
     ------
     InvalidInputError
-        Missing file, not UTF-8, a header without ``origin_x,origin_y,origin_z,...,object``,
-        a bad row (its line number is given), or fewer than one point.
+        Missing file, more than :data:`~zbuf_occlude.real_scans.files.MAX_FILE_BYTES`, too many
+        lines or a line too long, not UTF-8, a header without
+        ``origin_x,origin_y,origin_z,...,object``, a bad row or a second object label (its line
+        number is given), or fewer than one point.
     """
     path = Path(path)
     if regular_file_size(path, error=InvalidInputError) > MAX_FILE_BYTES:
         raise InvalidInputError(f"{path}: more than the {MAX_FILE_BYTES:,} bytes a scan may have")
     try:
-        with open(path, encoding="utf-8", newline="") as fh:
-            reader = csv.reader(fh)
-            header = [h.strip() for h in next(reader, [])]
+        with open(path, "rb") as fh:
+            # streamed into one (N, 3) float64 array, lines bounded: memory is the points, not Python rows
+            capacity = count_lines(fh)
+            check_scan_points(path, capacity, "has up to")
+            rows = ((i, next(csv.reader([line]), [])) for i, line in read_lines(path, fh, errors="strict"))
+            _, first = next(rows, (1, []))
+            header = [h.strip() for h in first]
             if tuple(header[:3]) != _LIDARNET_HEADER or "object" not in header:
                 raise InvalidInputError(f"{path}: not a LiDARNet CSV (header {header[:8]})")
             obj = header.index("object")
-            xyz, labels = [], set()
-            for lineno, row in enumerate(reader, 2):
+            p, n, labels = np.empty((capacity, 3)), 0, set()
+            for lineno, row in rows:
                 if not row:
                     continue
                 try:
-                    xyz.append([float(row[0]), float(row[1]), float(row[2])])
+                    p[n] = float(row[0]), float(row[1]), float(row[2])
                     labels.add(row[obj].strip())
                 except (ValueError, IndexError):
-                    raise InvalidInputError(f"{path}:{lineno}: bad row {row!r}") from None
+                    raise InvalidInputError(f"{path}:{lineno}: bad row {row[:12]!r}") from None
+                if len(labels) > 1:  # one object per file: stop at the second label
+                    raise InvalidInputError(f"{path}:{lineno}: expected one object label, got {sorted(labels)}")
+                n += 1
     except UnicodeDecodeError as exc:
-        raise InvalidInputError(f"{path} is not UTF-8 text ({exc.reason} at byte {exc.start}); is it a LiDARNet CSV?") from None
+        raise InvalidInputError(f"{path} is not UTF-8 text ({exc.reason}); is it a LiDARNet CSV?") from None
     except csv.Error as exc:  # a field longer than csv.field_size_limit(), a NUL byte
         raise InvalidInputError(f"{path}: not a LiDARNet CSV ({exc})") from None
     except OSError as exc:
         raise InvalidInputError(f"cannot read LiDARNet file {path}: {exc}") from None
-    if not xyz:
+    if n == 0:
         raise InvalidInputError(f"{path}: no points")
-    if len(labels) != 1:
-        raise InvalidInputError(f"{path}: expected one object label, got {sorted(labels)}")
-    p = np.asarray(xyz, dtype=np.float64)
+    p = p[:n]
     zup = np.stack([p[:, 0], -p[:, 2], p[:, 1]], axis=1) / LIDARNET_UNITS_PER_METRE  # y up → z up, metres
     return RealScan(
         points=normalize_points(zup), label=labels.pop(), source=str(path), dataset="lidarnet",

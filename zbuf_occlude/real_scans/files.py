@@ -52,7 +52,7 @@ from zbuf_occlude.real_scans.records import RealScan, normalize_points
 from zbuf_occlude.resources import check_memory
 
 __all__ = ["POINT_EXTENSIONS", "UNITS_M", "MAX_FILE_BYTES", "MAX_SCAN_POINTS", "MAX_ARRAY_BYTES", "MAX_LINE_BYTES",
-           "read_points", "read_lines", "scan_digest", "units_to_m", "load_scan_folder"]
+           "check_scan_points", "count_lines", "read_points", "read_lines", "scan_digest", "units_to_m", "load_scan_folder"]
 
 log = logging.getLogger(__name__)
 
@@ -105,8 +105,10 @@ def _split(line: str) -> list[str]:
     return [t for t in re.split(r"[,;\s]+", line.strip()) if t]
 
 
-def read_lines(path: Path, fh: io.BufferedReader):
+def read_lines(path: Path, fh: io.BufferedReader, errors: str = "replace"):
     """``(line number, text)`` of a binary file handle, one line at a time, none longer than :data:`MAX_LINE_BYTES`.
+
+    ``errors`` is the UTF-8 decoder's (``"strict"``: a ``UnicodeDecodeError`` for the caller to name).
 
     Raises
     ------
@@ -116,20 +118,28 @@ def read_lines(path: Path, fh: io.BufferedReader):
     for lineno, line in enumerate(iter(lambda: fh.readline(MAX_LINE_BYTES + 1), b""), 1):
         if len(line) > MAX_LINE_BYTES:
             raise InvalidInputError(f"{path}:{lineno}: a line longer than {MAX_LINE_BYTES:,} bytes is not a row of a point cloud")
-        yield lineno, line.decode("utf-8", errors="replace")
+        yield lineno, line.decode("utf-8", errors=errors)
 
 
-def _check_points(path: Path, n: int, what: str = "declares") -> None:
-    """Refuse ``n`` points past :data:`MAX_SCAN_POINTS` or the memory there is, before allocating them."""
+def check_scan_points(path: Path, n: int, what: str = "declares", bytes_per_point: int = 24) -> None:
+    """Refuse ``n`` points past :data:`MAX_SCAN_POINTS` or the memory there is, before allocating them.
+
+    ``bytes_per_point``: what one point takes once read (24: three float64).
+
+    Raises
+    ------
+    InvalidInputError
+        Naming ``path``, the count and the cap, or the memory needed.
+    """
     if n > MAX_SCAN_POINTS:
         raise InvalidInputError(f"{path}: {what} {n:,} points, more than the {MAX_SCAN_POINTS:,} a scan may have")
     try:
-        check_memory(n * 3 * np.dtype(np.float64).itemsize, option=f"{path}")
+        check_memory(n * int(bytes_per_point), option=f"{path}")
     except InsufficientMemoryError as exc:
         raise InvalidInputError(str(exc)) from None
 
 
-def _count_lines(fh: io.BufferedReader) -> int:
+def count_lines(fh: io.BufferedReader) -> int:
     """Lines of a binary file (a last line without newline counts), read in 1 MiB chunks."""
     n, last = 0, b"\n"
     while chunk := fh.read(1 << 20):
@@ -142,8 +152,8 @@ def _count_lines(fh: io.BufferedReader) -> int:
 def _read_text_table(path: Path) -> NDArray[np.float64]:
     """Rows of a CSV/TXT/XYZ/PTS file, streamed: memory is the (N, 3) float64 result, not Python strings."""
     with open(path, "rb") as fh:
-        capacity = _count_lines(fh)
-        _check_points(path, capacity, "has up to")
+        capacity = count_lines(fh)
+        check_scan_points(path, capacity, "has up to")
         content = ((i, ln) for i, ln in read_lines(path, fh) if ln.strip() and not ln.lstrip().startswith(("#", "//")))
         head = next(content, None)
         if head is None:
@@ -205,7 +215,7 @@ def _read_pcd(path: Path, raw: bytes) -> NDArray[np.float64]:
         raise InvalidInputError(f"{path}: PCD header has neither POINTS nor WIDTH")
     if grid is not None and grid != n:
         raise InvalidInputError(f"{path}: PCD header declares POINTS {n:,} but WIDTH x HEIGHT = {grid:,}")
-    _check_points(path, n)
+    check_scan_points(path, n)
     if not all(a in fields for a in "xyz"):
         raise InvalidInputError(f"{path}: PCD fields {fields} have no x y z")
     if not (len(sizes) == len(types) == len(counts) == len(fields)) or n < 0:
@@ -264,7 +274,7 @@ def _read_ply(path: Path, raw: bytes) -> NDArray[np.float64]:
     declared = ply_declared_counts(raw).get("vertex")
     if declared is None:
         raise InvalidInputError(f"{path}: PLY header declares no vertex element")
-    _check_points(path, declared)
+    check_scan_points(path, declared)
     pts = np.asarray(trimesh.load(io.BytesIO(raw), file_type="ply", process=False).vertices, dtype=np.float64)
     if len(pts) != declared:
         raise InvalidInputError(f"{path}: PLY declares {declared:,} vertices but holds {len(pts):,}; the file is cut short")
