@@ -1044,3 +1044,19 @@ def test_first_day_mistakes_get_messages_that_say_what_to_do(tmp_path, capsys):
     chair = Path(__file__).resolve().parents[2] / "data" / "samples" / "chair"
     assert main(["generate", str(chair), "--protocol", "modelnet40-c-occlusion", "--out", str(tmp_path / "o")]) == 2
     assert "needs a severity: --severity 1..5" in capsys.readouterr().err and not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        (["--echo-separation", "0.75"], r"--echo-separation 0\.75 needs --footprint"),
+        (["--footprint", "--echo-separation", "-1"], r"echo_separation_m must be a finite number >= 0, got -1"),
+        (["--ground-margin", "0.5"], r"--ground-margin .* needs --crop"),
+        (["--crop", "--ground-margin", "nan"], r"ground_margin_m must be a number >= 0 metres, got nan"),
+    ],
+)
+def test_return_physics_options_of_scan_are_usage_errors(tmp_path: Path, capsys, options: list, message: str) -> None:
+    code, err = _main_exit(["scan", "box", "--out", str(tmp_path / "o"), *options], capsys)
+    assert code == 2 and "\n" not in err, err
+    assert re.search(message, err), err
+    assert not (tmp_path / "o").exists()

@@ -22,6 +22,7 @@ from zbuf_occlude.farm.sensor_crops import farm_datasets
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors import Lidar
 from zbuf_occlude.sensors.crops import CropDistributions
+from zbuf_occlude.sensors.fit import lidar_to_json
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 ARGS = ["--sensor", "hdl32e", "--samples-per-view", "2", "--points", "128", "--per-class", "1", "--splits", "train",
@@ -102,6 +103,44 @@ def test_return_physics_options_reach_the_scans(sensor_run, tmp_path):
     assert 0 < n_phys < n_plain
 
 
+def test_ground_margin_keeps_the_ground_under_each_object(tmp_path):
+    out = _farm(tmp_path / "ground", "--sensor-ground-margin", "0.5", "--points", "2048")
+    card = json.loads((out / CARD_FILE).read_text())
+    assert card["params"]["sensor_ground_margin_m"] == 0.5
+    ds = OccludedDataset(out)
+    outside = 0
+    for i in range(len(ds)):
+        points, _, meta = ds[i]
+        mesh = load_mesh(meta["source"])
+        per_m = np.ptp(mesh.bounds, axis=0).max() / meta["size_m"]  # mesh units per metre
+        lo, hi = mesh.bounds[:, :2]
+        beyond = np.maximum(lo - points[:, :2], points[:, :2] - hi).max(axis=1)  # > 0: outside the mesh's outline
+        out_of_mesh = beyond > 0.1 * per_m  # 5 σ of the 2 cm range noise
+        # those are ground returns (range noise: 2 cm), none further than the 0.5 m margin
+        assert np.all(np.abs(points[out_of_mesh, 2] - mesh.bounds[0, 2]) < 0.1 * per_m)
+        assert np.all(beyond <= 0.5 * per_m + 1e-4)
+        outside += int(out_of_mesh.sum())
+    assert outside > 0
+    assert "sensor_ground_margin_m" not in FarmParams(sensor="hdl32e").to_dict()  # earlier sensor data sets keep their digest
+
+
+def test_a_sensor_file_with_mixed_pixels_changes_the_scans(sensor_run, tmp_path):
+    # a 7-ray footprint whose echoes within 0.75 m merge, against the same footprint without merging
+    paths = {}
+    for name, separation in (("sharp", 0.0), ("mixed", 0.75)):
+        spec = lidar_to_json(Lidar.preset("hdl32e").with_(name=f"hdl32e-{name}", footprint_rays=7, echo_separation_m=separation))
+        paths[name] = tmp_path / f"{name}.json"
+        paths[name].write_text(json.dumps(spec))
+    runs = {}
+    for name, path in paths.items():
+        args = [str(path) if a == "hdl32e" else a for a in ARGS]
+        assert cli_main(["farm", str(SAMPLES), "--out", str(tmp_path / name), *args]) == 0
+        runs[name] = OccludedDataset(tmp_path / name)
+    assert len(runs["sharp"]) == len(runs["mixed"])
+    differ = sum(not np.array_equal(runs["sharp"][i][0], runs["mixed"][i][0]) for i in range(len(runs["sharp"])))
+    assert differ >= 1
+
+
 def test_same_seed_same_bytes_and_worker_count_changes_nothing(sensor_run, tmp_path):
     again = _farm(tmp_path / "again")
     two = _farm(tmp_path / "two", "--workers", "2")
@@ -146,6 +185,8 @@ def test_zbuffer_farm_parameters_keep_their_digest():
         (["--sensor", "hdl32e", "--sensor-reflectivity", "0.5:0.1"], "--sensor-reflectivity"),
         (["--sensor", "kinect-v1", "--sensor-footprint"], "kinect-v1"),
         (["--sensor", "hdl64e", "--sensor-footprint"], "beam_divergence_deg"),
+        (["--sensor-ground-margin", "1"], "--sensor-ground-margin needs --sensor"),
+        (["--sensor", "hdl32e", "--sensor-ground-margin", "-1"], "--sensor-ground-margin must be a number >= 0 metres, got -1"),
     ],
 )
 def test_bad_sensor_options_are_clear_errors(tmp_path, bad, words, capsys):

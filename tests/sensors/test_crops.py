@@ -10,7 +10,7 @@ import pytest
 
 import zbuf_occlude as zo
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.crops import CropDistributions, draw_placement, lidar_object_samples
+from zbuf_occlude.sensors.crops import CropDistributions, draw_placement, lidar_object_samples, object_crop
 
 MESH = Path(__file__).resolve().parents[2] / "data" / "samples" / "bed" / "train" / "bed_0001.off"
 
@@ -58,3 +58,48 @@ def test_pose_is_measured_from_the_box_centre_of_an_uncentred_mesh():
     assert c.radius == pytest.approx(np.linalg.norm(expected), rel=1e-9)
     assert c.azimuth_deg == pytest.approx(180.0) and c.elevation_deg == pytest.approx(math.degrees(math.atan2(expected[2], 8.0 / scale)))
     assert np.all(np.abs(c.points - box.bounds.mean(axis=0)) <= np.array([0.5, 0.2, 0.15]) + 1e-5)
+
+
+def test_ground_margin_keeps_the_ground_under_the_object_and_nothing_else():
+    import trimesh
+
+    box = trimesh.creation.box(extents=(2.0, 1.0, 1.0))
+    dist = CropDistributions(distance_m=6.0, height_m=1.8, size_m=2.0, yaw_deg=30.0, azimuth_deg=10.0)
+    lidar = zo.Lidar.preset("hdl32e", range_noise_m=0.0)
+    placement = draw_placement(dist, np.random.default_rng(0))
+    bare = object_crop(box, lidar, placement, seed=1)
+    assert np.all(bare.scan.object_id == 1)
+    counts = []
+    for margin in (0.0, 0.5, 1.5):
+        crop = object_crop(box, lidar, placement | {"ground_margin_m": margin}, seed=1)
+        ground = crop.scan.object_id == 0
+        # the object's own returns are untouched; the ground ones lie in the yawed box grown by the margin
+        np.testing.assert_array_equal(crop.scan.points[~ground], bare.scan.points)
+        np.testing.assert_array_equal(crop.local_points[~ground], bare.local_points)
+        local = crop.local_points[ground]  # mesh frame: 1 unit = 1 m here (size 2 m, extent 2)
+        assert np.all(np.abs(local[:, 0]) <= 1.0 + margin + 1e-6) and np.all(np.abs(local[:, 1]) <= 0.5 + margin + 1e-6)
+        np.testing.assert_allclose(local[:, 2], -0.5, atol=1e-6)  # on the ground, the box's bottom face
+        counts.append(int(ground.sum()))
+    assert counts[0] <= 2 < counts[1] < counts[2]  # the box hides the ground inside its own outline
+    # every ground return of the sweep inside that outline is kept, and no other
+    full = crop.full
+    world = full.points.astype(np.float64) + [0.0, 0.0, placement["height_m"]]  # sensor frame, yaw 0
+    yaw, centre = math.radians(30.0), 6.0 * np.array([math.cos(math.radians(10.0)), math.sin(math.radians(10.0))])
+    rel = world[:, :2] - centre
+    along = rel @ [math.cos(yaw), math.sin(yaw)]
+    across = rel @ [-math.sin(yaw), math.cos(yaw)]
+    inside = (full.object_id == 0) & (np.abs(along) <= 2.5) & (np.abs(across) <= 2.0)
+    assert abs(int(inside.sum()) - counts[2]) <= 2  # 1e-6 m rounding at the outline's edge
+
+
+def test_ground_returns_have_no_face_of_the_mesh():
+    import trimesh
+
+    box = trimesh.creation.box(extents=(2.0, 1.0, 1.0))
+    dist = CropDistributions(distance_m=6.0, height_m=1.8, size_m=2.0, ground_margin_m=1.0)
+    (c,) = lidar_object_samples(box, zo.Lidar.preset("hdl32e", range_noise_m=0.0), name="box", n_samples=1, n_points=4096, distributions=dist)
+    on_ground = np.abs(c.points[:, 2] + 0.5) < 1e-5
+    assert on_ground.any() and np.all(c.face_index[on_ground & (c.face_index >= 0)] < len(box.faces))
+    assert np.all(c.face_index[c.face_index < 0] == -1) and np.any(c.face_index == -1)
+    with pytest.raises(InvalidInputError, match="ground_margin_m"):
+        CropDistributions(ground_margin_m=-1.0)

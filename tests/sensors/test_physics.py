@@ -156,10 +156,51 @@ def test_strongest_echo_picks_the_surface_with_more_energy():
     assert centre.object_id[int(np.argmin(np.abs(_return_azimuths(centre) - 0.1)))] == 2
 
 
+def _two_walls(near_m: float, far_m: float) -> BuiltScene:
+    """A near wall (x = near_m, object 1) over azimuths < 0 in front of a far wall (x = far_m, object 2)."""
+    near = _wall(near_m)
+    near.vertices[:, 1] = np.clip(near.vertices[:, 1], -200.0, 0.0)
+    far = _wall(far_m)
+    return BuiltScene(trimesh.util.concatenate([near, far]), np.array([1, 1, 2, 2], np.int32), np.array([0, 1, 0, 1]),
+                      [SceneObject(near), SceneObject(far)], [np.eye(4)] * 3, [None, near, far])  # fmt: skip
+
+
+def test_unresolved_echoes_merge_into_a_mixed_pixel_at_a_shallow_depth_edge():
+    # walls 5.0 m and 5.5 m away, 2° divergence, echoes within 0.75 m unresolved.  At azimuth
+    # 0.1° three rays of 7 (at 0.1° − 0.756°, 0.1° − 0.378° twice) hit the near wall: energies
+    # 3/25 against 4/30.25, the
+    # far wall is the strongest echo, and the near rays merge into it at the weighted range
+    built = _two_walls(5.0, 5.5)
+    lidar = _lidar(elevations_deg=(0.0,), firing_rate_hz=36_000.0, beam_divergence_deg=2.0, footprint_rays=7)
+    sharp = scan(built, lidar, np.zeros(3), azimuth_range_deg=(-2.0, 2.0))
+    mixed = scan(built, lidar.with_(echo_separation_m=0.75), np.zeros(3), azimuth_range_deg=(-2.0, 2.0))
+    az = _return_azimuths(mixed)
+    np.testing.assert_allclose(az, _return_azimuths(sharp), atol=1e-5)  # the same firings return (0.1° apart)
+    i = int(np.argmin(np.abs(az - 0.1)))
+    expected = (5.0 * 3 / 25 + 5.5 * 4 / 30.25) / (3 / 25 + 4 / 30.25)
+    assert mixed.range_m[i] == pytest.approx(expected, abs=3e-3) and mixed.object_id[i] == 2
+    assert sharp.range_m[i] == pytest.approx(5.5, abs=3e-3)
+    # mixed pixels lie strictly between the walls, only where the footprint straddles the edge
+    straddle = np.abs(az) < 0.756 + 0.01
+    between = (mixed.range_m > 5.0 + 0.01) & (mixed.range_m < 5.5 - 0.01)
+    assert between.sum() >= 12 and not np.any(between & ~straddle)
+    np.testing.assert_array_equal(mixed.range_m[~straddle], sharp.range_m[~straddle])
+
+
+def test_echoes_further_apart_than_the_separation_stay_apart():
+    built = _two_walls(5.0, 10.0)
+    lidar = _lidar(elevations_deg=(0.0, 3.0), firing_rate_hz=36_000.0, beam_divergence_deg=2.0, footprint_rays=7, range_noise_m=0.01)
+    sharp = scan(built, lidar, np.zeros(3), azimuth_range_deg=(-2.0, 2.0), seed=4)
+    mixed = scan(built, lidar.with_(echo_separation_m=0.75), np.zeros(3), azimuth_range_deg=(-2.0, 2.0), seed=4)
+    for name in ("points", "range_m", "object_id", "face_index", "ring"):
+        np.testing.assert_array_equal(getattr(mixed, name), getattr(sharp, name))
+
+
 @pytest.mark.parametrize(
     "changes, words",
     [({"footprint_rays": 3}, "footprint_rays"), ({"footprint_rays": 7, "beam_divergence_deg": 0.0}, "beam_divergence_deg"),
-     ({"power_noise": -1.0}, "power_noise"), ({"detection_range_m": 0.0}, "detection_range_m")],
+     ({"power_noise": -1.0}, "power_noise"), ({"detection_range_m": 0.0}, "detection_range_m"),
+     ({"echo_separation_m": 0.75}, "echo_separation_m.*footprint_rays 7"), ({"echo_separation_m": -1.0}, "echo_separation_m")],
 )  # fmt: skip
 def test_bad_physics_parameters_are_clear_errors(changes, words):
     with pytest.raises(InvalidInputError, match=words):

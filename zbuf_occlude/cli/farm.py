@@ -87,7 +87,7 @@ def _farm_command(args: argparse.Namespace) -> int:
 
 def _sensor_params(args: argparse.Namespace) -> dict:
     if args.sensor is None:
-        for option in ("sensor_distance", "sensor_height", "sensor_size", "sensor_reflectivity", "sensor_footprint"):
+        for option in ("sensor_distance", "sensor_height", "sensor_size", "sensor_reflectivity", "sensor_footprint", "sensor_ground_margin"):
             if getattr(args, option) not in (None, False):
                 raise InvalidInputError(f"--{option.replace('_', '-')} needs --sensor")
         return {}
@@ -101,6 +101,8 @@ def _sensor_params(args: argparse.Namespace) -> dict:
     if args.sensor_reflectivity is not None:
         out["sensor_reflectivity"] = parse_interval(args.sensor_reflectivity, "--sensor-reflectivity")
     out["sensor_footprint"] = args.sensor_footprint
+    if args.sensor_ground_margin is not None:
+        out["sensor_ground_margin_m"] = args.sensor_ground_margin
     return out
 
 
@@ -195,6 +197,11 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
     s.add_argument(
         "--sensor-footprint", action="store_true",
         help="return physics: 7 rays per firing inside the beam divergence cone, strongest echo",
+    )  # fmt: skip
+    s.add_argument(
+        "--sensor-ground-margin", metavar="M", type=float,
+        help="keep the ground returns under each object, inside its footprint grown by M metres, as a box "
+        "segmentation of a street scan leaves them (default: the object's returns only)",
     )  # fmt: skip
     ex = p.add_argument_group("execution")
     ex.add_argument("--workers", type=int, default=1, help="worker processes on this machine (default: 1)")

@@ -77,7 +77,6 @@ def cmd_scan(args: argparse.Namespace) -> int:
 
     sensor = sensor_from_name(args.sensor)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     formats = ("npz", "ply") if args.format == "both" else (args.format,)
     src = Path(args.mesh_or_scene)
     written = []
@@ -88,6 +87,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
         else:  # a camera looks at the first object from the sensor position
             target = scene.build().local_to_world[1][:3, 3] if scene.objects else np.array([1.0, 0.0, scene.ground_z_m])
             pose = look_at_pose(scene.default_sensor_pose()[:3, 3], target + [0, 0, 0.5])
+        out.mkdir(parents=True, exist_ok=True)
         for k in range(args.samples):
             if isinstance(sensor, AirborneScanner):  # a flight over the scene's ground (world frame)
                 from zbuf_occlude.sensors.airborne import scan_airborne
@@ -106,8 +106,13 @@ def cmd_scan(args: argparse.Namespace) -> int:
                 raise InvalidInputError(f"--extents must be X,Y,Z in metres (each N or LO:HI; Y may be '='), got {args.extents!r}")
             round_xy = parts[1].strip() == "="
             extents = tuple(parse_interval(parts[0] if i == 1 and round_xy else v, "--extents") for i, v in enumerate(parts))
-        if (args.footprint or args.power_noise) and isinstance(sensor, Lidar):
-            sensor = sensor.with_(footprint_rays=7 if args.footprint else sensor.footprint_rays, power_noise=args.power_noise)
+        if args.echo_separation and not (args.footprint or getattr(sensor, "footprint_rays", 1) == 7):
+            raise InvalidInputError(f"--echo-separation {args.echo_separation:g} needs --footprint (mixed pixels come from a wide footprint)")
+        if (args.footprint or args.power_noise or args.echo_separation) and isinstance(sensor, Lidar):
+            sensor = sensor.with_(footprint_rays=7 if args.footprint else sensor.footprint_rays, power_noise=args.power_noise,
+                                  echo_separation_m=args.echo_separation or sensor.echo_separation_m)  # fmt: skip
+        if args.ground_margin is not None and not args.crop:
+            raise InvalidInputError("--ground-margin chooses the ground kept in a crop: it needs --crop")
         mesh = PRIMITIVES.get(str(src)) if not src.exists() else None
         if mesh is None:
             from zbuf_occlude.mesh.load import load_mesh
@@ -118,9 +123,10 @@ def cmd_scan(args: argparse.Namespace) -> int:
             azimuth_deg=parse_interval(args.azimuth, "--azimuth"), yaw_deg=parse_interval(args.yaw, "--yaw"),
             size_m=parse_interval(args.size, "--size"), extents_m=extents, round_xy=round_xy,
             reflectivity=None if args.reflectivity is None else parse_interval(args.reflectivity, "--reflectivity"),
-            ground_reflectivity=args.ground_reflectivity,
+            ground_reflectivity=args.ground_reflectivity, ground_margin_m=args.ground_margin,
         )  # fmt: skip
         check_outside(dist)
+        out.mkdir(parents=True, exist_ok=True)
         for k in range(args.samples):
             rng = derive_rng(args.seed, object_key(src.name), k)
             placement = draw_placement(dist, rng)
@@ -162,10 +168,20 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
     r.add_argument("--ground-reflectivity", type=float, default=0.15, help="the ground's reflectivity with --reflectivity (default: %(default)s)")
     r.add_argument("--footprint", action="store_true", help="beam footprint: 7 rays per firing in the divergence cone, strongest echo")
     r.add_argument("--power-noise", type=float, default=0.0, help="sigma of ln(received power) per firing; 0: a sharp threshold (default: %(default)s)")
+    r.add_argument(
+        "--echo-separation", metavar="M", type=float, default=0.0,
+        help="with --footprint: echoes within M metres of the strongest merge into one return at their energy-weighted "
+        "range (mixed pixels at shallow depth edges; half the pulse length, ~0.75 m for 5 ns) (default: 0, never)",
+    )  # fmt: skip
     p.add_argument("--azimuth", default="0", help="direction of the object from the sensor, degrees (N or LO:HI) (default: %(default)s)")
     p.add_argument("--yaw", default="0", help="the object's heading, degrees (N or LO:HI) (default: %(default)s)")
     p.add_argument("--samples", type=int, default=1, help="scans, each with its own draws (default: %(default)s)")
     p.add_argument("--crop", action="store_true", help="write only the object's returns; default: the object and the ground in the object's azimuth sector (±5°)")
+    p.add_argument(
+        "--ground-margin", metavar="M", type=float,
+        help="with --crop: also keep the ground returns under the object, inside its footprint grown by M metres, as a "
+        "box segmentation of a street scan leaves them",
+    )  # fmt: skip
     p.add_argument(
         "--frame", choices=("sensor", "world"), default="sensor",
         help="frame of the written points: sensor (LiDAR at the origin, x forward, z up; cameras: OpenCV) or "

@@ -59,7 +59,8 @@ OPTION_NAMES = {
     "dense_points": "--dense-points", "density": "--density", "resolution": "--resolution", "seed": "--seed",
     "radius": "--radius", "storage": "--storage/--format", "method": "--method", "sensor": "--sensor",
     "sensor_distance_m": "--sensor-distance", "sensor_height_m": "--sensor-height", "sensor_size_m": "--sensor-size",
-    "sensor_reflectivity": "--sensor-reflectivity", "sensor_footprint": "--sensor-footprint", "up": "--up",
+    "sensor_reflectivity": "--sensor-reflectivity", "sensor_footprint": "--sensor-footprint",
+    "sensor_ground_margin_m": "--sensor-ground-margin", "up": "--up",
 }  # fmt: skip
 
 #: ``farm --sensor``: per-scan placement drawn uniformly from these intervals (metres).
@@ -114,6 +115,10 @@ class FarmParams:
         radiometric detection threshold then applies (:func:`zbuf_occlude.sensors.scan`).
     sensor_footprint : bool
         Return physics: 7 rays per firing in the beam's divergence cone, strongest echo.
+    sensor_ground_margin_m : float or None
+        Keep the ground returns under each object, inside its footprint grown by this margin,
+        metres (:class:`~zbuf_occlude.sensors.crops.CropDistributions` ``ground_margin_m``);
+        ``None``: the object's returns only.  Left out of :meth:`to_dict` when ``None``.
     up : str
         The meshes' up axis (:data:`zbuf_occlude.mesh.scene.UP_CHOICES`), turned to +z by
         :func:`~zbuf_occlude.mesh.load.load_mesh`; ``"auto"``: per file, by its layout and
@@ -138,6 +143,7 @@ class FarmParams:
     sensor_size_m: tuple[float, float] = DEFAULT_SENSOR_SIZE_M
     sensor_reflectivity: tuple[float, float] | None = None
     sensor_footprint: bool = False
+    sensor_ground_margin_m: float | None = None
     up: str = "auto"
 
     def __post_init__(self) -> None:
@@ -188,6 +194,14 @@ class FarmParams:
                 raise InvalidInputError(f"--sensor-reflectivity must be LO:HI with 0 <= LO <= HI, got {self.sensor_reflectivity!r}")
             object.__setattr__(self, "sensor_reflectivity", (lo, hi))
         object.__setattr__(self, "sensor_footprint", bool(self.sensor_footprint))
+        if self.sensor_ground_margin_m is not None:
+            try:
+                margin = float(self.sensor_ground_margin_m)
+            except (TypeError, ValueError):
+                margin = float("nan")
+            if not (np.isfinite(margin) and margin >= 0):
+                raise InvalidInputError(f"--sensor-ground-margin must be a number >= 0 metres, got {self.sensor_ground_margin_m!r}")
+            object.__setattr__(self, "sensor_ground_margin_m", margin)
         self.sensor_model()  # footprint needs a beam divergence
 
     def sensor_model(self):
@@ -214,6 +228,7 @@ class FarmParams:
         return CropDistributions(
             distance_m=self.sensor_distance_m, height_m=self.sensor_height_m, azimuth_deg=(0.0, 360.0),
             yaw_deg=(0.0, 360.0), size_m=self.sensor_size_m, reflectivity=self.sensor_reflectivity,
+            ground_margin_m=self.sensor_ground_margin_m,
         )  # fmt: skip
 
     @functools.cached_property
@@ -226,12 +241,14 @@ class FarmParams:
         if self.up == "auto":  # the digest of data sets made before --up existed
             del d["up"]
         if self.sensor is None:  # the z-buffer farm's parameters, and digest, as before --sensor existed
-            for field in ("sensor", *_SENSOR_FIELDS, "sensor_reflectivity", "sensor_footprint"):
+            for field in ("sensor", *_SENSOR_FIELDS, "sensor_reflectivity", "sensor_footprint", "sensor_ground_margin_m"):
                 del d[field]
         else:
             d.update({field: list(d[field]) for field in _SENSOR_FIELDS})
             if self.sensor_reflectivity is not None:
                 d["sensor_reflectivity"] = list(self.sensor_reflectivity)
+            if self.sensor_ground_margin_m is None:  # the digest of sensor data sets made before it existed
+                del d["sensor_ground_margin_m"]
         return d
 
     def digest(self) -> str:

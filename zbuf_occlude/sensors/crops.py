@@ -73,6 +73,12 @@ class CropDistributions:
     ground_reflectivity : float
         ρ of the ground plane when ``reflectivity`` is given (default 0.15: asphalt and
         concrete in the near infrared, an assumption).
+    ground_margin_m : float, optional
+        Keep the ground returns under the object, the way a box segmentation of a street scan
+        leaves them: those inside the object's footprint (its bounding box in the ground plane,
+        yawed with it) grown by this margin on every side, metres.  None (default): the crop
+        holds the object's returns only.  :func:`~zbuf_occlude.sensors.fit.fit_lidar` reports
+        the share of ground returns in real crops (``ground_fraction``) to compare with.
     """
 
     distance_m: tuple[float, float] = (5.0, 25.0)
@@ -84,6 +90,7 @@ class CropDistributions:
     round_xy: bool = False
     reflectivity: tuple[float, float] | None = None
     ground_reflectivity: float = 0.15
+    ground_margin_m: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("distance_m", "height_m", "azimuth_deg", "yaw_deg", "size_m"):
@@ -99,6 +106,11 @@ class CropDistributions:
             object.__setattr__(self, "reflectivity", _interval("reflectivity", self.reflectivity))
             if self.reflectivity[0] < 0:
                 raise InvalidInputError(f"reflectivity must be >= 0, got {self.reflectivity!r}")
+        if self.ground_margin_m is not None:
+            margin = float(self.ground_margin_m)
+            if not (math.isfinite(margin) and margin >= 0):
+                raise InvalidInputError(f"ground_margin_m must be a number >= 0 metres, got {self.ground_margin_m!r}")
+            object.__setattr__(self, "ground_margin_m", margin)
         if self.distance_m[0] <= 0 or self.size_m[0] <= 0 or self.height_m[0] < 0:
             raise InvalidInputError(f"distance_m and size_m must be > 0 and height_m >= 0 metres, got {self}")
 
@@ -117,6 +129,8 @@ def draw_placement(dist: CropDistributions, rng: np.random.Generator) -> dict[st
         lo, hi = dist.reflectivity
         out["reflectivity"] = lo if lo == hi else float(rng.uniform(lo, hi))
         out["ground_reflectivity"] = float(dist.ground_reflectivity)
+    if dist.ground_margin_m is not None:  # no draw: a fixed value
+        out["ground_margin_m"] = dist.ground_margin_m
     return out
 
 
@@ -127,7 +141,8 @@ class CropSample:
     Attributes
     ----------
     scan : Scan
-        The object's returns only, sensor frame (metres, z up, sensor at the origin).
+        The object's returns, sensor frame (metres, z up, sensor at the origin), and, with a
+        ``ground_margin_m`` in the placement, the ground returns under it (``object_id`` 0).
     placement : dict
         The drawn ``distance_m, height_m, azimuth_deg, yaw_deg, size_m``.
     local_points : (N, 3) float64
@@ -161,7 +176,9 @@ def object_crop(
     """Scan one object placed per ``placement`` (see :func:`draw_placement`) and crop its returns.
 
     The sensor stands at the origin, ``height_m`` above the ground; the object's footprint
-    centre is ``distance_m`` away in direction ``azimuth_deg``.  An
+    centre is ``distance_m`` away in direction ``azimuth_deg``.  With ``ground_margin_m`` in the
+    placement (:class:`CropDistributions`), the crop also keeps the ground returns inside the
+    object's footprint grown by that margin.  An
     :class:`~zbuf_occlude.sensors.airborne.AirborneScanner` flies over the object instead
     (``distance_m · sin(azimuth_deg)`` across track; points in the world frame).  A LiDAR fires only in the
     object's azimuth sector (± ``sector_margin_deg``), which gives the same returns faster.
@@ -188,12 +205,27 @@ def object_crop(
     if "reflectivity" in placement:  # ground, the object, then the occluders (their own ρ: the object's)
         rho = [placement.get("ground_reflectivity", 0.15)] + [placement["reflectivity"]] * (1 + len(occluders))
     full = scan(scene, sensor, pose, seed=seed, azimuth_range_deg=sector, backend=backend, frame=frame, reflectivity=rho)
-    crop = full.crop(1)
-    to_world = scene.build().local_to_world[1]
-    world = crop.points.astype(np.float64) + (pose[:3, 3] if frame == "sensor" else 0.0)  # sensor axes = world axes (yaw 0)
+    built = scene.build()
+    to_world = built.local_to_world[1]
     inverse = np.linalg.inv(to_world[:3, :3])
-    local = (world - to_world[:3, 3]) @ inverse.T
+    offset = pose[:3, 3] if frame == "sensor" else 0.0  # sensor axes = world axes (yaw 0)
+    keep = full.object_id == 1
+    if placement.get("ground_margin_m") is not None:
+        world = full.points.astype(np.float64) + offset
+        keep |= (full.object_id == 0) & _under_footprint(built.local_meshes[1], to_world, inverse, world, placement["ground_margin_m"])
+    crop = full.select(keep)
+    local = (crop.points.astype(np.float64) + offset - to_world[:3, 3]) @ inverse.T
     return CropSample(crop, dict(placement), local, inverse @ (pose[:3, 3] - to_world[:3, 3]), full)
+
+
+def _under_footprint(mesh, to_world, inverse, world, margin_m: float) -> NDArray[np.bool_]:
+    """(N,) bool: the world points ``(N, 3)`` whose ground-plane position lies in the object's
+    bounding box (mesh frame) grown by ``margin_m`` metres along each of its horizontal axes."""
+    local = (world - to_world[:3, 3]) @ inverse.T
+    scale = np.linalg.norm(to_world[:3, :2], axis=0)  # metres per mesh unit along the box's x and y
+    lo, hi = np.asarray(mesh.bounds, dtype=np.float64)[:, :2]
+    grow = margin_m / scale
+    return np.all((local[:, :2] >= lo - grow) & (local[:, :2] <= hi + grow), axis=1)
 
 
 def _airborne_crop(mesh, sensor: AirborneScanner, placement: dict, *, seed: int, occluders, class_name: str, offset_m: float, size) -> CropSample:
@@ -207,11 +239,14 @@ def _airborne_crop(mesh, sensor: AirborneScanner, placement: dict, *, seed: int,
     reach = float(np.max(size)) * 0.75 + 1.0
     scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=abs(offset_m) + 2.0 * reach)
     full = scan_airborne(scene, sensor, (0.0, offset_m), reach, seed=seed)
+    built = scene.build()
+    to_world = built.local_to_world[1]
+    inverse = np.linalg.inv(to_world[:3, :3])
     mine = full.object_id == 1
+    if placement.get("ground_margin_m") is not None:
+        mine |= (full.object_id == 0) & _under_footprint(built.local_meshes[1], to_world, inverse, full.points.astype(np.float64), placement["ground_margin_m"])
     crop = full.select(mine)
     crop.meta.update({key: full.meta[key][mine] for key in ("line_id", "scan_angle_deg")})
-    to_world = scene.build().local_to_world[1]
-    inverse = np.linalg.inv(to_world[:3, :3])
     local = (crop.points.astype(np.float64) - to_world[:3, 3]) @ inverse.T
     return CropSample(crop, dict(placement), local, inverse @ (full.sensor_position - to_world[:3, 3]), full)
 
@@ -250,7 +285,7 @@ def lidar_object_samples(
     -------
     list of OccludedCloud
         ``points (n_points, 3) float32`` in the normalised mesh frame; ``face_index`` into the
-        mesh; ``elevation_deg, azimuth_deg, radius``: the sensor seen from the object's bounding
+        mesh (−1: a ground return, with ``ground_margin_m``); ``elevation_deg, azimuth_deg, radius``: the sensor seen from the object's bounding
         box centre (degrees, degrees, mesh units); ``n_visible``: the returns;
         ``extra``: the placement (metres, degrees), ``n_returns``, ``sensor``, the per-point
         ``ring``.  Samples with no return are left out (logged).
@@ -283,7 +318,7 @@ def lidar_object_samples(
         out.append(
             OccludedCloud(
                 points=crop.local_points[chosen].astype(np.float32),
-                face_index=crop.scan.face_index[chosen].astype(np.int64),
+                face_index=np.where(crop.scan.object_id[chosen] == 1, crop.scan.face_index[chosen], -1).astype(np.int64),
                 elevation_deg=math.degrees(math.asin(sensor_local[2] / r)),
                 azimuth_deg=math.degrees(math.atan2(sensor_local[1], sensor_local[0])) % 360.0,
                 radius=r,

@@ -277,14 +277,18 @@ def _reflectivity_table(reflectivity, n_ids: int) -> NDArray[np.float64]:
     return rho
 
 
-def _strongest_echo(built: BuiltScene, rays, face, t, k: int, rho) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+def _strongest_echo(built: BuiltScene, rays, face, t, k: int, rho, separation: float = 0.0) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
     """Resolve each beam's ``k`` footprint rays into one return: the strongest echo.
 
     Each ray carries ``1/k`` of the beam's energy; a ray hitting a surface of reflectivity ρ at
     incidence θ and range R sends back ``ρ |cos θ| / (k R²)`` (ρ = 1 without ``rho``).  The
     echoes of one object id add up; the object with the most energy is the return (ties: the
     lower ray index, the centre first).  Its range is the energy-weighted mean of its rays'
-    ranges, its face the nearest of its rays' faces.
+    ranges, its face the nearest of its rays' faces.  With ``separation > 0`` (the sensor's
+    ``echo_separation_m``), the rays of any surface within ``separation`` of that range join
+    the return, its range becomes the energy-weighted mean over all of them and its energy
+    their sum: a mixed pixel where the footprint straddles a shallow depth edge (its face and
+    object stay the strongest echo's).
 
     Returns
     -------
@@ -311,6 +315,10 @@ def _strongest_echo(built: BuiltScene, rays, face, t, k: int, rho) -> tuple[NDAr
     t_out = np.einsum("nk,nk->n", w, np.where(mine, t, 0.0)) / np.maximum(w.sum(axis=1), 1e-300)
     nearest = np.argmin(np.where(mine, t, np.inf), axis=1)
     face_out = np.where(hit.any(axis=1), face[rows, nearest], -1)
+    if separation > 0.0:  # unresolved echoes of other surfaces merge into the return
+        mine = mine | (hit & (np.abs(t - t_out[:, None]) <= separation))
+        w = np.where(mine, energy, 0.0)
+        t_out = np.einsum("nk,nk->n", w, np.where(mine, t, 0.0)) / np.maximum(w.sum(axis=1), 1e-300)
     return face_out, np.where(hit.any(axis=1), t_out, np.inf), np.where(mine, weight, 0.0).sum(axis=1)
 
 
@@ -403,7 +411,7 @@ def scan(
             raise InvalidInputError("reflectivity (radiometric detection) is modelled for LiDARs only")
         rho = _reflectivity_table(reflectivity, len(built.objects) + 1)
     if k > 1:
-        face, t, fraction = _strongest_echo(built, rays, face, t, k, rho)
+        face, t, fraction = _strongest_echo(built, rays, face, t, k, rho, sensor.echo_separation_m)
     hit = np.flatnonzero(face >= 0)
     face, t, d_s, d_w = face[hit], t[hit], d_sensor[hit], d_world[hit]
     tri = np.asarray(built.mesh.triangles, dtype=np.float64)[face]
