@@ -107,3 +107,20 @@ def test_lidarnet_rings_are_the_hdl32e_table(cls, tmp_path):
         for c, d in zip(sorted(clouds, key=lambda c: c.source), (6.0, 9.0)):
             assert abs(np.percentile(c.points_m[:, 0], 1) - (d - 2.25)) < 0.05  # the box's near face, metres
             assert abs(np.percentile(c.points_m[:, 2], 99) - (1.5 - 1.8)) < 0.05  # its top, below the sensor
+
+
+def test_ground_in_crops_counts_a_crops_ground_returns_and_nothing_else(tmp_path):
+    from zbuf_occlude.cli.main import main
+
+    crops, full = tmp_path / "crops", tmp_path / "full"
+    assert main(["scan", "box", "--extents", "4.5,1.8,1.5", "--distance", "8", "--crop", "--ground-margin", "0.5", "--out", str(crops)]) == 0
+    assert main(["scan", "box", "--extents", "4.5,1.8,1.5", "--distance", "8", "--out", str(full)]) == 0
+    scan = S.read_scan_npz(next(crops.glob("*.npz")))
+    n_object, n_ground = int(np.sum(scan.object_id == 1)), int(np.sum(scan.object_id == 0))
+    assert n_object > 0 and n_ground > 0
+    (alone,) = read_object_clouds(crops)
+    (with_ground,) = read_object_clouds(crops, ground_in_crops=True)
+    assert len(alone.points_m) == n_object and len(with_ground.points_m) == n_object + n_ground
+    # without the option the ground never counts, in a crop or in a full scan of the sector
+    (full_cloud,) = read_object_clouds(full)
+    assert len(full_cloud.points_m) == int(np.sum(S.read_scan_npz(next(full.glob("*.npz"))).object_id == 1))

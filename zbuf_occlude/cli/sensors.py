@@ -203,7 +203,7 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
 def cmd_realism(args: argparse.Namespace) -> int:
     from zbuf_occlude.experiments.realism import markdown_table, realism_report
 
-    rows = realism_report(args.generated, args.real, args.out, min_points=args.min_points, figure=not args.no_figure)
+    rows = realism_report(args.generated, args.real, args.out, min_points=args.min_points, figure=not args.no_figure, ground_in_crops=args.ground_in_crops)
     print(markdown_table(rows), end="")
     print(f"wrote {Path(args.out) / 'realism.md'}, realism.csv" + ("" if args.no_figure else ", realism.png"))
     return 0
@@ -220,6 +220,11 @@ def add_realism_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("real", metavar="REAL", help="LiDARNet v2 CSV folder (or scan .npz)")
     p.add_argument("--out", default="realism", help="folder for realism.md, realism.csv, realism.png (default: %(default)s)")
     p.add_argument("--min-points", type=int, default=1, help="ignore clouds with fewer points (default: %(default)s)")
+    p.add_argument(
+        "--ground-in-crops", action="store_true",
+        help="a generated scan file holding one object (a crop made with scan --crop --ground-margin) counts its ground "
+        "returns as part of it, as a real crop holds them (default: ground returns never count)",
+    )  # fmt: skip
     p.add_argument("--no-figure", action="store_true", help="do not draw realism.png")
     p.set_defaults(func=cmd_realism)
     return p

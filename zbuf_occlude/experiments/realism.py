@@ -61,21 +61,25 @@ class ObjectCloud:
 
 
 # -- reading ------------------------------------------------------------------------------------
-def _from_npz(path: Path) -> list[ObjectCloud]:
+def _from_npz(path: Path, ground_in_crops: bool = False) -> list[ObjectCloud]:
     s = read_scan_npz(path)
     pts = s.points.astype(np.float64) - s.sensor_position
     if s.frame == "sensor":
         pts = pts @ np.asarray(s.sensor_to_world, dtype=np.float64)[:3, :3].T  # world axes: z up
-    out = []
-    for oid in np.unique(s.object_id):
-        if oid != GROUND_ID:
-            out.append(ObjectCloud(pts[s.object_id == oid], f"object{oid}", f"{path}#{oid}"))
-    return out
+    objects = [oid for oid in np.unique(s.object_id) if oid != GROUND_ID]
+    if ground_in_crops and len(objects) == 1:  # a crop: its ground returns are part of it
+        return [ObjectCloud(pts, f"object{objects[0]}", f"{path}#{objects[0]}")]
+    return [ObjectCloud(pts[s.object_id == oid], f"object{oid}", f"{path}#{oid}") for oid in objects]
 
 
-def read_object_clouds(path: str | os.PathLike, *, min_points: int = 1) -> list[ObjectCloud]:
+def read_object_clouds(path: str | os.PathLike, *, min_points: int = 1, ground_in_crops: bool = False) -> list[ObjectCloud]:
     """Object clouds under ``path``: scan ``.npz`` files and/or LiDARNet v2 ``.csv`` files
     (a file or a folder, searched recursively; LiDARNet duplicates dropped).
+
+    Each object of a scan file is one cloud, its ground returns (object id 0) left out; with
+    ``ground_in_crops``, a file holding one object (a crop made with a ground margin:
+    ``scan --crop --ground-margin``) is one cloud with its ground returns, as a real crop that
+    a box segmentation cut holds them.
 
     Raises
     ------
@@ -95,7 +99,7 @@ def read_object_clouds(path: str | os.PathLike, *, min_points: int = 1) -> list[
             clouds.append(ObjectCloud(real.points_sensor_m, real.label, real.source))
     for f in files:
         if f.suffix.lower() == ".npz":
-            clouds.extend(_from_npz(f))
+            clouds.extend(_from_npz(f, ground_in_crops))
     clouds = [c for c in clouds if len(c.points_m) >= min_points]
     if not clouds:
         raise InvalidInputError(f"realism: no object clouds (scan .npz or LiDARNet .csv) under {root}")
@@ -250,9 +254,11 @@ def _figure(g: dict, r: dict, path: Path, labels: tuple[str, str]) -> None:
     plt.close(fig)
 
 
-def realism_report(generated: str | os.PathLike, real: str | os.PathLike, out_dir: str | os.PathLike, *, ring_gap_deg: float = RING_GAP_DEG, min_points: int = 1, figure: bool = True) -> list[dict]:
+def realism_report(generated: str | os.PathLike, real: str | os.PathLike, out_dir: str | os.PathLike, *, ring_gap_deg: float = RING_GAP_DEG, min_points: int = 1, figure: bool = True,
+                   ground_in_crops: bool = False) -> list[dict]:  # fmt: skip
     """Compare two sets of object clouds; write ``realism.md``, ``realism.csv`` and ``realism.png``
-    under ``out_dir``.
+    under ``out_dir``.  ``ground_in_crops``: the generated crops' ground returns count
+    (:func:`read_object_clouds`).
 
     Raises
     ------
@@ -261,7 +267,7 @@ def realism_report(generated: str | os.PathLike, real: str | os.PathLike, out_di
     OutputError
         ``out_dir`` cannot be written.
     """
-    gen_clouds = read_object_clouds(generated, min_points=min_points)
+    gen_clouds = read_object_clouds(generated, min_points=min_points, ground_in_crops=ground_in_crops)
     real_clouds = read_object_clouds(real, min_points=min_points)
     rows, g, r = compare_sets(gen_clouds, real_clouds, ring_gap_deg=ring_gap_deg)
     out = Path(out_dir)

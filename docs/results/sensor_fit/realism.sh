@@ -1,20 +1,27 @@
 #!/bin/bash
-# Realism of HDL-32E crops of the street meshes against the real scans, three ways:
+# Realism of HDL-32E crops of the street meshes against the real scans, five ways:
 #   preset  the hdl32e preset, sensor 5-25 m away;
 #   fitted  the fitted sensor, the same placements;
-#   placed  the fitted sensor at each class's fitted distances (fit.crops in the JSON), poles as tall as fitted.
+#   placed  the fitted sensor at each class's fitted distances (fit.crops in the JSON), poles as tall as fitted;
+#   physics placed, with return physics: a 7-ray beam footprint and echoes within 0.75 m merged (mixed pixels);
+#   ground  physics, and the ground within 0.25 m of the object's footprint kept in the crop (and counted).
 # usage: bash docs/results/sensor_fit/realism.sh SHARED_DATA FITTED_SENSOR.json OUT   (zbuf-occlude on PATH)
+#        TAGS="physics ground" bash ...   runs only those
 set -euo pipefail
 data=$1; fitted=$2; out=$3
 mkdir -p "$out"
 crops() {  # crops CLASS KEY -> LO:HI from the fitted sensor's fit.crops block
   python3 -c 'import json, sys; lo, hi = json.load(open(sys.argv[1]))["fit"]["crops"][sys.argv[3]][sys.argv[2]]; print(f"{lo:.2f}:{hi:.2f}")' "$fitted" "$1" "$2"
 }
-for tag in preset fitted placed; do
+tags=${TAGS:-preset fitted placed physics ground}
+for tag in $tags; do
   sensor=$([ $tag = preset ] && echo hdl32e || echo "$fitted")
   for cls in car pole; do
     distance=5:25; size=$([ $cls = car ] && echo 3.5:5.0 || echo 3:9)
-    if [ $tag = placed ]; then
+    physics=()
+    [ $tag = physics ] && physics=(--footprint --echo-separation 0.75)
+    [ $tag = ground ] && physics=(--footprint --echo-separation 0.75 --ground-margin 0.25)
+    if [ $tag != preset ] && [ $tag != fitted ]; then
       distance=$(crops $cls distance_m)
       [ $cls = pole ] && size=$(crops $cls object_height_m)  # a pole's largest dimension is its height
     fi
@@ -23,13 +30,14 @@ for tag in preset fitted placed; do
       [ -f "$mesh" ] || continue
       i=$((i + 1))
       zbuf-occlude scan "$mesh" --sensor "$sensor" --distance "$distance" --height 1.6:2.0 --size "$size" --azimuth=-180:180 \
-        --yaw 0:360 --samples 4 --crop --seed $i --out "$out/scans_${tag}_$cls/$i" > /dev/null
+        --yaw 0:360 --samples 4 --crop "${physics[@]}" --seed $i --out "$out/scans_${tag}_$cls/$i" > /dev/null
     done
   done
 done
 for cls in car pole; do
   real=$([ $cls = car ] && echo Car || echo Trunk)
-  for tag in preset fitted placed; do
-    zbuf-occlude realism "$out/scans_${tag}_$cls" "$data/lidarnet_v2_partial/$real" --out "$out/realism_${tag}_$cls" --no-figure
+  for tag in $tags; do
+    ground=(); [ $tag = ground ] && ground=(--ground-in-crops)  # its crops hold the ground under the object
+    zbuf-occlude realism "$out/scans_${tag}_$cls" "$data/lidarnet_v2_partial/$real" --out "$out/realism_${tag}_$cls" --no-figure "${ground[@]}"
   done
 done
