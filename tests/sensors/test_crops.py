@@ -103,3 +103,5 @@ def test_ground_returns_have_no_face_of_the_mesh():
     assert np.all(c.face_index[c.face_index < 0] == -1) and np.any(c.face_index == -1)
     with pytest.raises(InvalidInputError, match="ground_margin_m"):
         CropDistributions(ground_margin_m=-1.0)
+    with pytest.raises(InvalidInputError, match="ground_margin_m"):
+        CropDistributions(ground_margin_m="wide")

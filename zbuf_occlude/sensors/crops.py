@@ -107,7 +107,10 @@ class CropDistributions:
             if self.reflectivity[0] < 0:
                 raise InvalidInputError(f"reflectivity must be >= 0, got {self.reflectivity!r}")
         if self.ground_margin_m is not None:
-            margin = float(self.ground_margin_m)
+            try:
+                margin = float(self.ground_margin_m)
+            except (TypeError, ValueError):
+                margin = math.nan
             if not (math.isfinite(margin) and margin >= 0):
                 raise InvalidInputError(f"ground_margin_m must be a number >= 0 metres, got {self.ground_margin_m!r}")
             object.__setattr__(self, "ground_margin_m", margin)
