@@ -1053,6 +1053,7 @@ def test_first_day_mistakes_get_messages_that_say_what_to_do(tmp_path, capsys):
         (["--footprint", "--echo-separation", "-1"], r"echo_separation_m must be a finite number >= 0, got -1"),
         (["--ground-margin", "0.5"], r"--ground-margin .* needs --crop"),
         (["--crop", "--ground-margin", "nan"], r"ground_margin_m must be a number >= 0 metres, got nan"),
+        (["--sensor", "riegl-q1560", "--footprint"], r"model spinning LiDARs; riegl-q1560 is not one"),
     ],
 )
 def test_return_physics_options_of_scan_are_usage_errors(tmp_path: Path, capsys, options: list, message: str) -> None:

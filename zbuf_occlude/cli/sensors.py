@@ -106,9 +106,11 @@ def cmd_scan(args: argparse.Namespace) -> int:
                 raise InvalidInputError(f"--extents must be X,Y,Z in metres (each N or LO:HI; Y may be '='), got {args.extents!r}")
             round_xy = parts[1].strip() == "="
             extents = tuple(parse_interval(parts[0] if i == 1 and round_xy else v, "--extents") for i, v in enumerate(parts))
+        if (args.footprint or args.power_noise or args.echo_separation) and not isinstance(sensor, Lidar):
+            raise InvalidInputError(f"--footprint, --power-noise and --echo-separation model spinning LiDARs; {args.sensor} is not one")
         if args.echo_separation and not (args.footprint or getattr(sensor, "footprint_rays", 1) == 7):
             raise InvalidInputError(f"--echo-separation {args.echo_separation:g} needs --footprint (mixed pixels come from a wide footprint)")
-        if (args.footprint or args.power_noise or args.echo_separation) and isinstance(sensor, Lidar):
+        if args.footprint or args.power_noise or args.echo_separation:
             sensor = sensor.with_(footprint_rays=7 if args.footprint else sensor.footprint_rays, power_noise=args.power_noise,
                                   echo_separation_m=args.echo_separation or sensor.echo_separation_m)  # fmt: skip
         if args.ground_margin is not None and not args.crop:
