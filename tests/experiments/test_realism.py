@@ -124,3 +124,13 @@ def test_ground_in_crops_counts_a_crops_ground_returns_and_nothing_else(tmp_path
     # without the option the ground never counts, in a crop or in a full scan of the sector
     (full_cloud,) = read_object_clouds(full)
     assert len(full_cloud.points_m) == int(np.sum(S.read_scan_npz(next(full.glob("*.npz"))).object_id == 1))
+
+
+def test_ground_in_crops_leaves_a_scan_of_several_objects_as_it_is(tmp_path):
+    boxes = [S.SceneObject(trimesh.creation.box(extents=(1.0, 1.0, 1.0)), position_m=(6.0, y)) for y in (-2.0, 2.0)]
+    scan = S.scan(S.ScanScene(objects=boxes), S.Lidar.preset("vlp16", range_noise_m=0.0), [0.0, 0.0, 1.0])
+    scan.to_npz(tmp_path / "two.npz")
+    assert set(np.unique(scan.object_id)) == {0, 1, 2}
+    for flag in (False, True):  # not a crop: each object alone, never the ground
+        clouds = read_object_clouds(tmp_path, ground_in_crops=flag)
+        assert sorted(len(c.points_m) for c in clouds) == sorted(int(np.sum(scan.object_id == i)) for i in (1, 2))
