@@ -64,22 +64,35 @@ def check_outside(dist) -> None:
         )
 
 
+def _with_return_physics(sensor, args: argparse.Namespace):
+    """``sensor`` with ``--footprint``, ``--power-noise`` and ``--echo-separation`` applied (a spinning LiDAR only)."""
+    from zbuf_occlude.sensors.lidar import Lidar
+
+    if not (args.footprint or args.power_noise or args.echo_separation):
+        return sensor
+    if not isinstance(sensor, Lidar):
+        raise InvalidInputError(f"--footprint, --power-noise and --echo-separation model spinning LiDARs; {args.sensor} is not one")
+    if args.echo_separation and not (args.footprint or sensor.footprint_rays == 7):
+        raise InvalidInputError(f"--echo-separation {args.echo_separation:g} needs --footprint (mixed pixels come from a wide footprint)")
+    return sensor.with_(footprint_rays=7 if args.footprint else sensor.footprint_rays, power_noise=args.power_noise,
+                        echo_separation_m=args.echo_separation or sensor.echo_separation_m)  # fmt: skip
+
+
 def cmd_scan(args: argparse.Namespace) -> int:
     from zbuf_occlude.sensors.airborne import AirborneScanner
-    from zbuf_occlude.sensors.crops import (
-        CropDistributions,
-        draw_placement,
-        object_crop,
-    )
+    from zbuf_occlude.sensors.crops import CropDistributions, draw_placement, object_crop
     from zbuf_occlude.sensors.lidar import Lidar
     from zbuf_occlude.sensors.scan import look_at_pose, scan
     from zbuf_occlude.sensors.scene import load_scene
 
-    sensor = sensor_from_name(args.sensor)
+    sensor = _with_return_physics(sensor_from_name(args.sensor), args)
+    if args.ground_margin is not None and not args.crop:
+        raise InvalidInputError("--ground-margin chooses the ground kept in a crop: it needs --crop")
     out = Path(args.out)
     formats = ("npz", "ply") if args.format == "both" else (args.format,)
     src = Path(args.mesh_or_scene)
     written = []
+    out.mkdir(parents=True, exist_ok=True)  # a refused run's empty --out is removed by cli.main
     if src.suffix.lower() in (".json", ".yaml", ".yml"):
         scene = load_scene(src)
         if isinstance(sensor, Lidar):
@@ -87,7 +100,6 @@ def cmd_scan(args: argparse.Namespace) -> int:
         else:  # a camera looks at the first object from the sensor position
             target = scene.build().local_to_world[1][:3, 3] if scene.objects else np.array([1.0, 0.0, scene.ground_z_m])
             pose = look_at_pose(scene.default_sensor_pose()[:3, 3], target + [0, 0, 0.5])
-        out.mkdir(parents=True, exist_ok=True)
         for k in range(args.samples):
             if isinstance(sensor, AirborneScanner):  # a flight over the scene's ground (world frame)
                 from zbuf_occlude.sensors.airborne import scan_airborne
@@ -106,15 +118,6 @@ def cmd_scan(args: argparse.Namespace) -> int:
                 raise InvalidInputError(f"--extents must be X,Y,Z in metres (each N or LO:HI; Y may be '='), got {args.extents!r}")
             round_xy = parts[1].strip() == "="
             extents = tuple(parse_interval(parts[0] if i == 1 and round_xy else v, "--extents") for i, v in enumerate(parts))
-        if (args.footprint or args.power_noise or args.echo_separation) and not isinstance(sensor, Lidar):
-            raise InvalidInputError(f"--footprint, --power-noise and --echo-separation model spinning LiDARs; {args.sensor} is not one")
-        if args.echo_separation and not (args.footprint or getattr(sensor, "footprint_rays", 1) == 7):
-            raise InvalidInputError(f"--echo-separation {args.echo_separation:g} needs --footprint (mixed pixels come from a wide footprint)")
-        if args.footprint or args.power_noise or args.echo_separation:
-            sensor = sensor.with_(footprint_rays=7 if args.footprint else sensor.footprint_rays, power_noise=args.power_noise,
-                                  echo_separation_m=args.echo_separation or sensor.echo_separation_m)  # fmt: skip
-        if args.ground_margin is not None and not args.crop:
-            raise InvalidInputError("--ground-margin chooses the ground kept in a crop: it needs --crop")
         mesh = PRIMITIVES.get(str(src)) if not src.exists() else None
         if mesh is None:
             from zbuf_occlude.mesh.load import load_mesh
@@ -128,7 +131,6 @@ def cmd_scan(args: argparse.Namespace) -> int:
             ground_reflectivity=args.ground_reflectivity, ground_margin_m=args.ground_margin,
         )  # fmt: skip
         check_outside(dist)
-        out.mkdir(parents=True, exist_ok=True)
         for k in range(args.samples):
             rng = derive_rng(args.seed, object_key(src.name), k)
             placement = draw_placement(dist, rng)

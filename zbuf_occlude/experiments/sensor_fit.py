@@ -2,7 +2,7 @@
 
 Reads the scans with :func:`zbuf_occlude.real_scans.datasets.load_real_scans` (any real-scan
 format it detects; the sensor-frame points), fits with :func:`zbuf_occlude.sensors.fit.fit_lidar`
-(and, per class of at least 3 scans, the crops' sensor distances and object heights,
+(and, per class of at least :data:`~zbuf_occlude.sensors.fit.MIN_PLACEMENT_SCANS` scans, the crops' sensor distances and object heights,
 :func:`zbuf_occlude.sensors.fit.crop_placement_json`) and writes the sensor JSON (which ``scan``, ``farm --sensor`` and ``experiment sim2real
 --sensor`` read) and a Markdown table of the estimates beside it, both atomically.
 """
@@ -12,15 +12,64 @@ from __future__ import annotations
 import json
 import os
 from collections import Counter
+from collections.abc import Sequence
 from pathlib import Path
+
+import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.atomic import write_text
 from zbuf_occlude.real_scans.datasets import load_real_scans
-from zbuf_occlude.sensors.fit import LidarFit, crop_placement_json, fit_lidar
+from zbuf_occlude.sensors.fit import MIN_PLACEMENT_SCANS, LidarFit, crop_placement_json, fit_lidar
+from zbuf_occlude.sensors.lidar import Lidar
 from zbuf_occlude.sensors.presets import sensor_from_name
 
-__all__ = ["fit_sensor_to_scans"]
+__all__ = ["fit_to_scans", "fit_sensor_to_scans"]
+
+
+def fit_to_scans(scans: Sequence, base: Lidar, labels: Sequence[str], *, seed: int = 0,
+                 every_class: bool = False) -> tuple[LidarFit, dict]:  # fmt: skip
+    """``base`` fitted to the sensor-frame points of ``scans``, and its JSON with the crops' placement per class.
+
+    Parameters
+    ----------
+    scans : sequence of RealScan
+        Each with ``points_sensor_m (N, 3) float64`` (sensor at the origin, z up, metres) and ``source``.
+    base : Lidar
+    labels : sequence of str
+        One class name per scan.
+    seed : int
+        Seeds the bootstrap (:func:`~zbuf_occlude.sensors.fit.fit_lidar`).
+    every_class : bool
+        Every class must have :data:`~zbuf_occlude.sensors.fit.MIN_PLACEMENT_SCANS` scans for its ``fit.crops`` entry (an error
+        names the one that has fewer); False: such classes are left out of ``fit.crops``.
+
+    Returns
+    -------
+    fit : LidarFit
+    spec : dict
+        ``fit.to_json()`` with ``spec["fit"]["crops"]`` (:func:`~zbuf_occlude.sensors.fit.crop_placement_json`)
+        when a class has enough scans.
+
+    Raises
+    ------
+    InvalidInputError
+        A scan without sensor-frame points (naming it and how many such scans there are), what
+        :func:`~zbuf_occlude.sensors.fit.fit_lidar` refuses, or, with ``every_class``, a class
+        with too few scans.
+    """
+    missing = [s.source for s in scans if s.points_sensor_m is None or len(s.points_sensor_m) == 0]
+    if missing:
+        raise InvalidInputError(f"{missing[0]}: no sensor-frame points to fit a sensor to ({len(missing)} such scans; the "
+                                "fit needs the scans' coordinates with the sensor at the origin)")  # fmt: skip
+    clouds = [np.asarray(s.points_sensor_m, dtype=np.float64) for s in scans]
+    fit = fit_lidar(clouds, base, seed=seed)
+    spec = fit.to_json()
+    counts = Counter(labels)
+    rows = [i for i, y in enumerate(labels) if every_class or counts[y] >= MIN_PLACEMENT_SCANS]
+    if rows:
+        spec["fit"]["crops"] = crop_placement_json([clouds[i] for i in rows], [labels[i] for i in rows])
+    return fit, spec
 
 
 def fit_sensor_to_scans(real: str | os.PathLike, sensor: str, out: str | os.PathLike, *, seed: int = 0,
@@ -44,17 +93,9 @@ def fit_sensor_to_scans(real: str | os.PathLike, sensor: str, out: str | os.Path
         raise InvalidInputError(f"--out {out}: the fitted sensor is written as a .json file")
     base = sensor_from_name(sensor)
     scans = load_real_scans(real, dataset=dataset)
-    missing = [s.source for s in scans if s.points_sensor_m is None]
-    if missing:
-        raise InvalidInputError(f"{missing[0]}: no sensor-frame points to fit a sensor to ({len(missing)} such scans)")
-    clouds = [s.points_sensor_m for s in scans]
-    fit = fit_lidar(clouds, base, seed=seed)
-    spec = fit.to_json()
+    fit, spec = fit_to_scans(scans, base, [s.label for s in scans], seed=seed)
+    crops = spec["fit"].get("crops")
     counts = Counter(s.label for s in scans)
-    rows = [i for i, s in enumerate(scans) if counts[s.label] >= 3]
-    crops = crop_placement_json([clouds[i] for i in rows], [scans[i].label for i in rows]) if rows else None
-    if crops is not None:
-        spec["fit"]["crops"] = crops
     md = out.with_suffix(".md")
     write_text(out, json.dumps(spec, indent=1, default=float) + "\n")
     text = f"# {fit.sensor.name}: fitted to {fit.n_scans} scans under {Path(real).name}\n\n{fit.markdown()}"

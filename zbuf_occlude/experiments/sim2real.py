@@ -49,8 +49,6 @@ import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.sim2real_data import (
-    FITTED,
-    FITTED_PLACED,
     FITTED_SETS,
     GROUND_ELEVATION_DEG,
     KEEP_SCALE_UNIT_M,
@@ -124,32 +122,22 @@ def _sensor(name_or_sensor):
 
 
 def _fit_sensor(scans: list, base, labels: np.ndarray, names: list[str]):
-    """``fit_lidar`` on the sensor-frame points of ``scans``, and per class (``labels`` index
-    ``names``) the crops' placement (:func:`~zbuf_occlude.sensors.fit.crop_placement_json`).
+    """:func:`~zbuf_occlude.experiments.sensor_fit.fit_to_scans` on ``scans`` (``labels`` index
+    ``names``), every class's crop placement included.
 
     Returns the fitted Lidar, ``{class: (lo_m, hi_m)}`` sensor distances, ``{class: SizeRange}``
     (visible heights) and the sensor's JSON with the fit and the ``crops`` block.
     """
+    from zbuf_occlude.experiments.sensor_fit import fit_to_scans
     from zbuf_occlude.sensors.lidar import Lidar
 
     if not isinstance(base, Lidar):
         raise InvalidInputError(f"--fit-sensor fits a spinning LiDAR: --sensor must name one, got {base.name!r}")
-    clouds = []
-    for s in scans:
-        pts = getattr(s, "points_sensor_m", None)
-        if pts is None or len(pts) == 0:
-            raise InvalidInputError(f"{s.source}: no sensor-frame points to fit a sensor to (--fit-sensor needs the scans' "
-                                    "coordinates with the sensor at the origin)")  # fmt: skip
-        clouds.append(np.asarray(pts, dtype=np.float64))
-    from zbuf_occlude.sensors.fit import crop_placement_json, fit_lidar
-
-    fit = fit_lidar(clouds, base, seed=0)
     try:
-        crops = crop_placement_json(clouds, [names[int(y)] for y in labels])
+        fit, spec = fit_to_scans(scans, base, [names[int(y)] for y in labels], every_class=True)
     except InvalidInputError as exc:
         raise InvalidInputError(f"--fit-sensor: {exc}") from None
-    spec = fit.to_json()
-    spec["fit"]["crops"] = crops
+    crops = spec["fit"]["crops"]
     distances = {k: (float(lo), float(hi)) for k, (lo, hi) in crops["distance_m"].items()}
     sizes = {k: SizeRange("height", max(float(lo), 0.05), max(float(hi), 0.05)) for k, (lo, hi) in crops["object_height_m"].items()}
     return fit.sensor, distances, sizes, spec
@@ -320,14 +308,12 @@ def run_sim2real(
         kept = real_scan_rows(scans, names, dict(label_map or {}))
         fitted, fitted_distances, fitted_sizes, fit_json = _fit_sensor([scans[kept[i]] for i in half_a], lidar, real_y[half_a], names)
         meshes, skipped_fitted = check_lidar_meshes(meshes, fitted, sizes, n_points, min_returns=int(min_returns))
-        skipped += skipped_fitted
-        if fitted_sizes is not None:
-            meshes, skipped_placed = check_lidar_meshes(meshes, fitted, fitted_sizes, n_points, min_returns=int(min_returns),
-                                                        distance_m=fitted_distances)  # fmt: skip
-            skipped += skipped_placed
+        meshes, skipped_placed = check_lidar_meshes(meshes, fitted, fitted_sizes, n_points, min_returns=int(min_returns),
+                                                    distance_m=fitted_distances)  # fmt: skip
+        skipped += skipped_fitted + skipped_placed
         if sorted({m.class_name for m in meshes}) != names:
             raise InvalidInputError(f"the fitted sensor sees no mesh of classes {sorted(set(names) - {m.class_name for m in meshes})}")
-    kinds = (*TRAINING_SETS, FITTED, *((FITTED_PLACED,) if fitted_sizes is not None else ())) if fit_sensor else TRAINING_SETS
+    kinds = (*TRAINING_SETS, *FITTED_SETS) if fit_sensor else TRAINING_SETS
 
     def config(seed: int) -> TrainConfig:
         return TrainConfig(model=model, epochs=int(epochs or sc.epochs), patience=sc.patience, width=sc.width[model],

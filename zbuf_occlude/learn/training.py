@@ -387,7 +387,8 @@ def train(
         order = balanced_epoch_rows(train_set.labels, rng) if config.balance == "sampler" else rng.permutation(n)
         model.train()
         epoch_lr = [g["lr"] for g in opt.param_groups]
-        warmup_steps = config.warmup_epochs * -(-len(order) // config.batch_size)
+        n_batches = -(-len(order) // config.batch_size)  # ceil
+        warmup_steps = config.warmup_epochs * n_batches
         total_loss, correct = 0.0, 0
         batches = range(0, len(order), config.batch_size)
         bar = tqdm(batches, desc=f"{config.model} epoch {epoch + 1}/{config.epochs}", disable=not progress, leave=False)
@@ -400,7 +401,7 @@ def train(
                 pts = augment(pts, rng)
             x = torch.from_numpy(np.ascontiguousarray(pts)).to(device)
             y = torch.from_numpy(train_set.labels[rows]).to(device)
-            step = epoch * -(-len(order) // config.batch_size) + i // config.batch_size
+            step = epoch * n_batches + i // config.batch_size
             if step < warmup_steps:
                 for g, lr in zip(opt.param_groups, epoch_lr):
                     g["lr"] = lr * (step + 1) / warmup_steps

@@ -330,7 +330,8 @@ def _read(path: Path, file_type: str) -> trimesh.Trimesh:
         _check_obj_indices(raw)
     if file_type == "dae":  # textures are not needed: never read (_no_textures_resolver)
         check_collada_declared_sizes(raw, path)
-        return _to_mesh(trimesh.load_scene(str(path), file_type=file_type, process=False, resolver=_no_textures_resolver()))
+        # the bytes just checked, not the file read again (it could have changed in between)
+        return _to_mesh(trimesh.load_scene(io.BytesIO(raw), file_type=file_type, process=False, resolver=_no_textures_resolver()))
     if file_type != "off":
         scene = trimesh.load_scene(io.BytesIO(raw), file_type=file_type, resolver=folder_resolver(path), process=False)
         return _to_mesh(scene)

@@ -370,6 +370,11 @@ class SceneCounts(NamedTuple):
     depth: int
 
 
+def _placed_together(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> tuple[int, int, int, int]:
+    """(faces, instances, nodes, depth) of two sibling subtrees: counts add, depth is the deeper one."""
+    return a[0] + b[0], a[1] + b[1], a[2] + b[2], max(a[3], b[3])
+
+
 def _collada_totals(counts: _ColladaCounts, path: str | PathLike[str]) -> SceneCounts:
     """The scene's counts after instancing, in linear time.
 
@@ -398,27 +403,24 @@ def _collada_totals(counts: _ColladaCounts, path: str | PathLike[str]) -> SceneC
             on_path.discard(id(node))
             faces = sum(counts.geometry_faces.get(g, 0) for g in node.geometries)
             instances = sum(counts.geometry_primitives.get(g, 0) for g in node.geometries)
-            n_nodes, depth = 1, 0
+            below = (0, 0, 0, 0)  # what the node's children and instanced nodes place
             for child in node.children:
-                f, i, n, d = totals[id(child)]
-                faces, instances, n_nodes, depth = faces + f, instances + i, n_nodes + n, max(depth, d)
+                below = _placed_together(below, totals[id(child)])
             for ident in node.instanced:
                 defined = [totals[id(n)] for n in counts.nodes_by_id.get(ident, [])]
                 if defined:  # an id defined twice: the larger counts (pycollada keeps one of them)
-                    f, i, n, d = max(defined)
-                    faces, instances, n_nodes, depth = faces + f, instances + i, n_nodes + n, max(depth, d)
-            totals[id(node)] = (faces, instances, n_nodes, depth + 1)
+                    below = _placed_together(below, max(defined))
+            totals[id(node)] = (faces + below[0], instances + below[1], 1 + below[2], below[3] + 1)
         return totals[id(root)]
 
     if counts.scene_url in counts.visual_scenes:
         roots = counts.visual_scenes[counts.scene_url]
     else:  # no <scene> naming one: count them all
         roots = [node for scene in counts.visual_scenes.values() for node in scene]
-    faces = instances = n_nodes = depth = 0
+    scene = (0, 0, 0, 0)
     for root in roots:
-        f, i, n, d = evaluate(root)
-        faces, instances, n_nodes, depth = faces + f, instances + i, n_nodes + n, max(depth, d)
-    return SceneCounts(faces, instances, n_nodes, depth)
+        scene = _placed_together(scene, evaluate(root))
+    return SceneCounts(*scene)
 
 
 def count_collada_scene(raw: bytes, path: str | PathLike[str]) -> SceneCounts:

@@ -36,7 +36,6 @@ log = logging.getLogger(__name__)
 
 #: Folder of the per-object shards inside ``--out``.
 SHARDS_DIR = "shards"
-_OPTIONS_FILE = PROTOCOL_FILE
 
 
 @dataclass(frozen=True)
@@ -161,7 +160,7 @@ def _record_options(out: Path, protocol: Protocol, options: ProtocolOptions, obj
     recorded["extra"] = dict(options.extra)
     # shards are named by plan index: another set of meshes must not resume from them
     recorded["objects"] = [[o.name, o.source] for o in objects]
-    path = out / _OPTIONS_FILE
+    path = out / PROTOCOL_FILE
     if path.exists() and not overwrite:
         try:
             old = json.loads(path.read_text(encoding="utf-8"))

@@ -59,10 +59,12 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.lidar import Lidar
 
 __all__ = [
-    "BOOTSTRAP", "DISTANCE_QUANTILES", "MAX_DROPOUT_GAP", "PLANE_NEIGHBOURS", "Estimate", "LidarFit",
+    "BOOTSTRAP", "DISTANCE_QUANTILES", "MAX_DROPOUT_GAP", "MIN_PLACEMENT_SCANS", "PLANE_NEIGHBOURS", "Estimate", "LidarFit",
     "crop_placement_json", "fit_crop_distances", "fit_crop_heights", "fit_lidar", "lidar_to_json",
 ]  # fmt: skip
 
+#: Non-empty scans a class needs for its crops' distances and heights (:func:`crop_placement_json`).
+MIN_PLACEMENT_SCANS = 3
 #: Percentiles of the real scans' distances that bound the fitted crop distances (:func:`fit_crop_distances`).
 DISTANCE_QUANTILES = (10.0, 90.0)
 #: Bootstrap resamples of the scans for every uncertainty.
@@ -194,7 +196,7 @@ def _scan_stats(points: NDArray[np.float64], beams_deg: NDArray[np.float64]) -> 
             d = np.diff(np.concatenate([a, a[:1] + 360.0]))
             d = np.delete(d, np.argmax(d))
             diffs.append(d[d > 1e-6])
-        ring_elev.append(float(np.median(elev[ring == b])))
+        ring_elev.append(float(np.median(elev[sel])))
     ring_elev = np.sort(ring_elev)
     normal = _plane_normals(points, PLANE_NEIGHBOURS) if len(points) >= PLANE_NEIGHBOURS else None
     ground = 0
@@ -357,8 +359,8 @@ def _percentiles_per_scan(clouds: Sequence[NDArray[np.floating]], quantiles: tup
         p = _checked_scan(i, c)
         if len(p):
             values.append(float(measure(p)))
-    if len(values) < 3:
-        raise InvalidInputError(f"{what} needs at least 3 non-empty scans, got {len(values)}")
+    if len(values) < MIN_PLACEMENT_SCANS:
+        raise InvalidInputError(f"{what} needs at least {MIN_PLACEMENT_SCANS} non-empty scans, got {len(values)}")
     lo, hi = np.percentile(values, [lo_q, hi_q])
     return float(lo), float(hi)
 
