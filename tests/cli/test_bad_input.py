@@ -1061,3 +1061,19 @@ def test_return_physics_options_of_scan_are_usage_errors(tmp_path: Path, capsys,
     assert code == 2 and "\n" not in err, err
     assert re.search(message, err), err
     assert not (tmp_path / "o").exists()
+
+
+def test_return_physics_options_apply_to_a_scene_file_too(tmp_path: Path, capsys) -> None:
+    path = _scene(tmp_path, {"objects": [{"mesh": {"box_m": [1, 1, 1]}, "position_m": [5, 0]}]})
+    code, err = _main_exit(["scan", str(path), "--sensor", "riegl-q1560", "--footprint", "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and re.search(r"model spinning LiDARs; riegl-q1560 is not one", err), err
+    assert not (tmp_path / "o").exists()
+
+    def returns(name: str, *options: str) -> int:
+        assert _main_exit(["scan", str(path), "--sensor", "vlp16", "--format", "npz", "--out", str(tmp_path / name), *options], capsys)[0] == 0
+        (npz,) = (tmp_path / name).glob("*.npz")
+        with np.load(npz) as data:
+            return len(data["points"])
+
+    # a 7-ray footprint widens the box by the divergence cone: more returns than the centre ray alone
+    assert returns("wide", "--footprint") > returns("plain")
