@@ -433,3 +433,42 @@ def test_the_fitted_placed_set_draws_the_fitted_distances_and_the_others_the_pre
     # the preset sensor and the fitted set at the preset's distances; the placed set at the fitted ones
     assert {d for name, d in seen if name == "hdl32e"} == {LIDAR_PLACEMENT["distance_m"]}
     assert {d for name, d in seen if name == "fitted"} == {LIDAR_PLACEMENT["distance_m"], (6.0, 7.0), (8.0, 9.0)}
+
+
+def test_validate_on_fit_half_validates_mesh_sets_on_the_fit_half_and_trains_on_every_mesh(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from zbuf_occlude.experiments.sim2real_data import FITTED_SETS
+    from zbuf_occlude.learn import training
+
+    meshes, real, out = _mesh_root(tmp_path), _real_root(tmp_path), tmp_path / "out"
+    _fit_spy(monkeypatch)
+    seen: list[tuple[int, np.ndarray]] = []
+    real_train = training.train
+
+    def train(train_set, n_classes, cfg, *, val_set, **kw):
+        seen.append((set(train_set.object_index.tolist()), np.array(val_set.points)))
+        return real_train(train_set, n_classes, cfg, val_set=val_set, **kw)
+
+    monkeypatch.setattr(training, "train", train)
+    argv = ["experiment", "sim2real", str(meshes), "--real", str(real), "--label-map", "Trunk=pole", "--fit-sensor",
+            "--points", "32", "--epochs", "1", "--per-class", "8", "--threads", "1", "--no-progress", "--seeds", "1"]  # fmt: skip
+    assert main([*argv, "--out", str(out), "--validate-on", "fit-half"]) == 0
+    results = _rows(out / "results.csv")
+    kinds = [r["train_set"] for r in results]
+    assert kinds == [*TRAINING_SETS, *FITTED_SETS, "real→real"]
+    from zbuf_occlude.experiments.sim2real_data import real_clouds
+    from zbuf_occlude.real_scans.datasets import load_real_scans
+
+    pts, _, sources = real_clouds(load_real_scans(real), ["car", "pole"], {"Trunk": "pole"}, 32, 0)
+    fit_half = {r["source"] for r in _rows(out / "real_split.csv") if r["half"] == "fit"}
+    expected = pts[[i for i, s in enumerate(sources) if s in fit_half]]
+    for kind, (objects, val) in zip(kinds, seen):
+        if kind == "real→real":  # its own 10 % of the fit half, as without the option
+            assert len(val) < len(expected) and all(any(np.array_equal(v, x) for x in expected) for v in val)
+        else:  # every mesh trains; the whole fit half validates
+            assert np.array_equal(val, expected), kind
+            assert len(objects) == 4, (kind, objects)
+    assert all(int(r["n_val"]) == 6 for r in results if r["train_set"] != "real→real")
+    assert json.loads((out / "settings.json").read_text())["validate_on"] == "fit-half"
+    assert "fit half's real scans" in (out / "table.md").read_text()
+    # without --fit-sensor there is no fit half: a usage error naming the option
+    assert main([*argv[:7], *argv[8:], "--out", str(tmp_path / "o2"), "--validate-on", "fit-half"]) == 2

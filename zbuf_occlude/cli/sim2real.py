@@ -61,7 +61,7 @@ def _run(args: argparse.Namespace) -> int:
         sizes=parse_sizes(args.sizes), real_options=real_options, min_returns=args.min_returns, method=args.method, device=args.device,
         threads=args.threads, progress=not args.no_progress, classes=_classes_option(args.classes),
         occluded_elevation_deg=parse_interval(args.occluded_elevation, "--occluded-elevation"),
-        fit_sensor=args.fit_sensor, recipe=args.recipe,
+        fit_sensor=args.fit_sensor, recipe=args.recipe, validate_on=args.validate_on,
     )  # fmt: skip
     return print_table(args.out, summary)
 
@@ -86,7 +86,7 @@ def print_table(out: str, summary: dict[str, Any]) -> int:
 
 def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     """Add ``sim2real`` to ``experiment``'s argparse subparsers."""
-    from zbuf_occlude.experiments.sim2real import SIM2REAL_RECIPE
+    from zbuf_occlude.experiments.sim2real import SIM2REAL_RECIPE, VALIDATION_CHOICES
     from zbuf_occlude.experiments.sim2real_data import GROUND_ELEVATION_DEG, MIN_RETURNS
     from zbuf_occlude.mesh.scene import UP_CHOICES
 
@@ -105,6 +105,10 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--fit-sensor", action="store_true",
                    help="fit --sensor to a fixed half of the real scans (written to OUT/fitted_sensor.json), add a 'fitted' "
                    "training set made with it, and score every row on the other half only")
+    p.add_argument("--validate-on", choices=VALIDATION_CHOICES, default="meshes",
+                   help="what the mesh-only sets validate on (best epoch, early stopping): clouds of held-out whole meshes, "
+                   "or, with --fit-sensor, the fit half's real scans (then every mesh trains; the scored half stays unseen) "
+                   "(default: %(default)s)")
     p.add_argument("--recipe", choices=("stable", "plain"), default=SIM2REAL_RECIPE,
                    help="training recipe: stable (class-balanced sampling, best epoch by validation mean class accuracy, "
                    "warm-up, gradient clipping) or plain (the models' own loop) (default: %(default)s)")

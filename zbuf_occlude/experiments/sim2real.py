@@ -24,7 +24,11 @@ classifier to recognise real, partial scans?), asked on real data with the proto
   :data:`~zbuf_occlude.experiments.sim2real_data.FITTED` (the fitted sensor, the ``lidar`` set's
   placements and sizes) and :data:`~zbuf_occlude.experiments.sim2real_data.FITTED_PLACED` (the
   fitted sensor, distances and heights), and **every row is scored on the other half only**; the
-  fitted set is also tested against ``lidar``.  ``real_split.csv`` lists each scan's half.
+  fitted set is also tested against ``lidar``.  ``real_split.csv`` lists each scan's half;
+* with ``validate_on="fit-half"`` (needs ``fit_sensor``), the mesh-only sets are validated on the
+  real scans of the fit half instead of held-out meshes (best epoch and early stopping), and train
+  on every mesh: the fit half is already what the sensor was fitted to, the scored half stays
+  unseen, and a small mesh library no longer loses a fifth of its meshes to validation.
 
 Every run trains with one recipe (``recipe``, :data:`zbuf_occlude.learn.training.RECIPES`):
 ``stable`` (class-balanced sampling, best epoch by validation mean class accuracy, warm-up,
@@ -68,7 +72,7 @@ from zbuf_occlude.learn.metrics import classification_report
 from zbuf_occlude.learn.stats import mean_std, permutation_p
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
 
-__all__ = ["Sim2RealScale", "SIM2REAL_SCALES", "REAL_TO_REAL", "SIM2REAL_RECIPE", "run_sim2real", "summarise"]
+__all__ = ["Sim2RealScale", "SIM2REAL_SCALES", "REAL_TO_REAL", "SIM2REAL_RECIPE", "VALIDATION_CHOICES", "run_sim2real", "summarise"]
 
 log = logging.getLogger(__name__)
 
@@ -78,6 +82,8 @@ REAL_TO_REAL = "real→real"
 _REAL_SPLIT_SEED = 20_231
 #: The training recipe of every run (:data:`zbuf_occlude.learn.training.RECIPES`; module docstring).
 SIM2REAL_RECIPE = "stable"
+#: What the mesh-only sets validate on: clouds of held-out whole meshes, or the real scans of the fit half.
+VALIDATION_CHOICES = ("meshes", "fit-half")
 
 
 @dataclass(frozen=True)
@@ -210,6 +216,7 @@ def run_sim2real(
     occluded_elevation_deg: tuple[float, float] = GROUND_ELEVATION_DEG,
     fit_sensor: bool = False,
     recipe: str = SIM2REAL_RECIPE,
+    validate_on: str = "meshes",
 ) -> dict:
     """Train on each synthetic training set and on real scans, ``seeds`` times; score on the real scans.
 
@@ -260,6 +267,10 @@ def run_sim2real(
         other half only (module docstring).
     recipe : {"stable", "plain"}
         Training recipe (:data:`zbuf_occlude.learn.training.RECIPES`).
+    validate_on : {"meshes", "fit-half"}
+        What the mesh-only sets validate on (best epoch, early stopping): clouds of the same kind
+        from held-out whole meshes, or, with ``fit_sensor``, the real scans of the fit half (the
+        sets then train on every mesh; module docstring). real→real is the same either way.
 
     Returns
     -------
@@ -269,8 +280,9 @@ def run_sim2real(
     Raises
     ------
     InvalidInputError
-        Bad options, unusable meshes or scans (with ``fit_sensor``: scans without sensor-frame
-        points, or an airborne ``sensor``), or an ``out`` made with other settings.
+        Bad options (``validate_on="fit-half"`` without ``fit_sensor``), unusable meshes or scans
+        (with ``fit_sensor``: scans without sensor-frame points, or an airborne ``sensor``), or an
+        ``out`` made with other settings.
     """
     from zbuf_occlude.experiments.table3 import _machine
     from zbuf_occlude.learn.training import (
@@ -287,6 +299,11 @@ def run_sim2real(
         raise InvalidInputError(f"--recipe must be one of {sorted(RECIPES)}, got {recipe!r}")
     if int(seeds) < 1:
         raise InvalidInputError(f"--seeds must be >= 1, got {seeds}")
+    if validate_on not in VALIDATION_CHOICES:
+        raise InvalidInputError(f"--validate-on must be one of {', '.join(VALIDATION_CHOICES)}, got {validate_on!r}")
+    if validate_on == "fit-half" and not fit_sensor:
+        raise InvalidInputError("--validate-on fit-half needs --fit-sensor (which splits the real scans into the fit half and the scored half)")
+    real_val = validate_on == "fit-half"
     t_start = time.perf_counter()
     sc = SIM2REAL_SCALES[scale]
     if per_class:
@@ -333,6 +350,8 @@ def run_sim2real(
     }  # fmt: skip
     if skipped:  # only then: the settings of runs without a skipped mesh stay as they were (resume)
         settings["meshes_skipped"] = skipped
+    if real_val:  # likewise: runs that validate on meshes keep their settings
+        settings["validate_on"] = validate_on
     if fit_sensor:  # likewise: runs without it keep their settings
         settings["fit_sensor"] = {
             "split_seed": _REAL_SPLIT_SEED, "fitted_sensor": fit_json,
@@ -361,8 +380,10 @@ def run_sim2real(
     score_x, score_y = (real_pts[half_b], real_y[half_b]) if fit_sensor else (real_pts, real_y)
     common = dict(sensor=lidar, sizes=sizes, keep_scale=keep_scale, dense_points=sc.dense_points, min_returns=int(min_returns),
                   resolution=sc.resolution, method=method, elevation_deg=elevation)  # fmt: skip
+    fit_half = CloudSet(real_pts[half_a], real_y[half_a], np.full(len(half_a), np.nan), half_a)
     for seed in range(int(seeds)):
-        train_meshes, val_meshes = split_whole_meshes(meshes, sc.val_mesh_fraction, seed)
+        # validated on the fit half's real scans, the sets train on every mesh
+        train_meshes, val_meshes = (meshes, []) if real_val else split_whole_meshes(meshes, sc.val_mesh_fraction, seed)
         sets: dict = {}
         for kind in (*kinds, REAL_TO_REAL):
             if (kind, seed) in done:
@@ -370,15 +391,15 @@ def run_sim2real(
             t0 = time.perf_counter()
             if kind == REAL_TO_REAL:
                 tr_rows, val_rows = split_validation(len(half_a), 0.1, seed, labels=real_y[half_a])
-                base = CloudSet(real_pts[half_a], real_y[half_a], np.full(len(half_a), np.nan), half_a)
-                tr, val = base.subset(tr_rows), base.subset(val_rows)
+                tr, val = fit_half.subset(tr_rows), fit_half.subset(val_rows)
                 test_x, test_y = real_pts[half_b], real_y[half_b]
             else:
                 if not sets:  # the sets of this seed at once (lidar+complete reuses two)
                     fits = {"fitted_sensor": fitted, "fitted_distance_m": fitted_distances, "fitted_sizes": fitted_sizes}
-                    sets = {"train": build_sets(train_meshes, names, sc.per_class, n_points, seed, **fits, **common),
-                            "val": build_sets(val_meshes, names, sc.val_per_class, n_points, seed + 10_000, **fits, **common)}  # fmt: skip
-                tr, val = sets["train"][kind], sets["val"][kind]
+                    sets = {"train": build_sets(train_meshes, names, sc.per_class, n_points, seed, **fits, **common)}
+                    if not real_val:
+                        sets["val"] = build_sets(val_meshes, names, sc.val_per_class, n_points, seed + 10_000, **fits, **common)
+                tr, val = sets["train"][kind], (fit_half if real_val else sets["val"][kind])
                 test_x, test_y = score_x, score_y
             t_data = time.perf_counter() - t0
             cfg = config(seed)

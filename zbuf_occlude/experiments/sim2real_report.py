@@ -45,6 +45,9 @@ def table_md(rows: list[dict], settings: dict) -> str:
         fs = settings["fit_sensor"]
         lines += ["", (f"Every row is scored on the held-out half of the real scans ({sum(fs['scored_scans'].values())} scans); "
                        f"the sensor was fitted on the other half ({sum(fs['fit_scans'].values())} scans), which real→real trains on.")]  # fmt: skip
+        if settings.get("validate_on") == "fit-half":
+            lines += ["", ("The mesh-only sets trained on every mesh and chose their best epoch (and stopped early) on the "
+                           "fit half's real scans, never on the scored half.")]  # fmt: skip
     return "\n".join(lines) + "\n"
 
 
