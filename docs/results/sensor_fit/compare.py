@@ -1,0 +1,74 @@
+"""Two sim2real runs of the same models, set by set, and each set against real→real.
+
+    python docs/results/sensor_fit/compare.py docs/results/sensor_fit/sim2real docs/results/sensor_fit/sim2real_realval
+
+Each argument holds one folder per model with the ``runs.jsonl`` of ``experiment sim2real``.
+Prints, per model and training set, mean class accuracy (mean ± std over seeds) in each run,
+the difference (second − first) with both one-sided exact permutation p-values, then the second
+run's sets against its real→real row (difference and p that real→real is above).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from zbuf_occlude.learn.stats import mean_std, permutation_p
+
+MODELS = ("pointnet", "voxnet", "3dmfv")
+
+
+def scores(folder: Path) -> dict[str, list[float]]:
+    """``{training set: [mean class accuracy per seed, in seed order]}``."""
+    out: dict[str, list[tuple[int, float]]] = {}
+    for line in (folder / "runs.jsonl").read_text(encoding="utf-8").splitlines():
+        r = json.loads(line)
+        out.setdefault(r["train_set"], []).append((r["seed"], r["mean_class_accuracy"]))
+    return {k: [v for _, v in sorted(rows)] for k, rows in out.items()}
+
+
+def pm(values: list[float]) -> str:
+    m, s = mean_std(values)
+    return f"{m:.3f} ± {s:.3f}"
+
+
+first, second = Path(sys.argv[1]), Path(sys.argv[2])
+print("| model | training set | first | second | Δ | p (second above) | p (first above) |\n|---|---|---|---|---|---|---|")
+for model in MODELS:
+    if not (second / model / "runs.jsonl").is_file():
+        continue
+    a, b = scores(first / model), scores(second / model)
+    for kind in b:
+        if kind in a and kind != "real→real":
+            d = sum(b[kind]) / len(b[kind]) - sum(a[kind]) / len(a[kind])
+            print(f"| {model} | {kind} | {pm(a[kind])} | {pm(b[kind])} | {d:+.3f} | "
+                  f"{permutation_p(b[kind], a[kind]):.3g} | {permutation_p(a[kind], b[kind]):.3g} |")
+print("\n| model | training set | mean class acc. | real→real | Δ | p (real→real above) |\n|---|---|---|---|---|---|")
+for model in MODELS:
+    if not (second / model / "runs.jsonl").is_file():
+        continue
+    b = scores(second / model)
+    ref = b["real→real"]
+    for kind, v in b.items():
+        if kind != "real→real":
+            d = sum(v) / len(v) - sum(ref) / len(ref)
+            print(f"| {model} | {kind} | {pm(v)} | {pm(ref)} | {d:+.3f} | {permutation_p(ref, v):.3g} |")
+
+# With --validate-on fit-half every mesh-only run's best validation score is on the fit half's
+# real scans: choosing the set per seed by it is a choice the scored half has no part in.
+print("\n| model | seed | set chosen on the fit half | its fit-half score | its scored mean class acc. |\n|---|---|---|---|---|")
+for model in MODELS:
+    folder = second / model
+    if not (folder / "runs.jsonl").is_file():
+        continue
+    if json.loads((folder / "settings.json").read_text(encoding="utf-8")).get("validate_on") != "fit-half":
+        continue
+    runs = [json.loads(line) for line in (folder / "runs.jsonl").read_text(encoding="utf-8").splitlines()]
+    chosen = []
+    for seed in sorted({r["seed"] for r in runs}):
+        mesh_only = [r for r in runs if r["seed"] == seed and r["train_set"] != "real→real"]
+        best = max(mesh_only, key=lambda r: r["best_val_mean_class_accuracy"])
+        chosen.append(best["mean_class_accuracy"])
+        print(f"| {model} | {seed} | {best['train_set']} | {best['best_val_mean_class_accuracy']:.3f} | {best['mean_class_accuracy']:.3f} |")
+    print(f"| {model} | all | | | {pm(chosen)} |")
