@@ -470,5 +470,29 @@ def test_validate_on_fit_half_validates_mesh_sets_on_the_fit_half_and_trains_on_
     assert all(int(r["n_val"]) == 6 for r in results if r["train_set"] != "real→real")
     assert json.loads((out / "settings.json").read_text())["validate_on"] == "fit-half"
     assert "fit half's real scans" in (out / "table.md").read_text()
+    chosen = {r["train_set"]: r for r in _rows(out / "summary.csv")}["chosen on fit half"]
+    best = max((r for r in map(json.loads, (out / "runs.jsonl").read_text().splitlines()) if r["train_set"] != "real→real"),
+               key=lambda r: r["best_val_mean_class_accuracy"])  # fmt: skip
+    assert chosen["chosen_sets"] == best["train_set"] and float(chosen["mean_class_accuracy_mean"]) == pytest.approx(best["mean_class_accuracy"])
+    assert "| chosen on fit half | 1 |" in (out / "table.md").read_text()
     # without --fit-sensor there is no fit half: a usage error naming the option
     assert main([*argv[:7], *argv[8:], "--out", str(tmp_path / "o2"), "--validate-on", "fit-half"]) == 2
+
+
+def test_the_set_chosen_on_the_fit_half_is_the_best_validated_per_seed_never_the_best_scored() -> None:
+    from zbuf_occlude.experiments.sim2real import CHOSEN_ON_FIT_HALF, summarise
+
+    def run(kind: str, seed: int, val: float, scored: float) -> dict:
+        return {"train_set": kind, "seed": seed, "best_val_mean_class_accuracy": val, "mean_class_accuracy": scored}
+
+    runs = [run("complete", 0, 0.50, 0.60), run("lidar", 0, 0.80, 0.70), run("fitted", 0, 0.70, 0.95),
+            run("complete", 1, 0.60, 0.55), run("lidar", 1, 0.90, 0.99), run("occluded", 1, 0.90, 0.65),  # a tie: the first set
+            run("real→real", 0, 0.99, 0.90), run("real→real", 1, 0.99, 0.92)]  # its validation never counts
+    rows = {r["train_set"]: r for r in summarise(runs, ["car", "pole"], chosen_on_fit_half=True)}
+    chosen = rows[CHOSEN_ON_FIT_HALF]
+    assert chosen["chosen_sets"] == "lidar occluded" and chosen["n_seeds"] == 2
+    assert chosen["mean_class_accuracy_mean"] == pytest.approx(0.675)
+    assert chosen["diff_vs_real_to_real"] == pytest.approx(0.675 - 0.91)
+    assert chosen["p_real_to_real_above"] == pytest.approx(1 / 6)  # both real→real seeds above both chosen ones
+    assert chosen["diff_vs_complete"] == pytest.approx(0.675 - 0.575)
+    assert CHOSEN_ON_FIT_HALF not in {r["train_set"] for r in summarise(runs, ["car", "pole"])}

@@ -41,6 +41,11 @@ def table_md(rows: list[dict], settings: dict) -> str:
         if "p_vs_lidar" in r:
             lines += ["", (f"{r['train_set']} vs lidar: Δ {r['diff_vs_lidar']:+.3f} mean class accuracy, one-sided p "
                            f"{_p(r['p_vs_lidar'])} ({r['train_set']} above lidar), {_p(r['p_lidar_above'])} (lidar above {r['train_set']})")]  # fmt: skip
+    for r in rows:
+        if "chosen_sets" in r:
+            lines += ["", (f"{r['train_set']}: per seed, the mesh-only set with the best fit-half validation score "
+                           f"({r['chosen_sets']}); Δ {r['diff_vs_real_to_real']:+.3f} mean class accuracy against real→real, "
+                           f"one-sided p {_p(r['p_real_to_real_above'])} (real→real above)")]  # fmt: skip
     if settings.get("fit_sensor"):
         fs = settings["fit_sensor"]
         lines += ["", (f"Every row is scored on the held-out half of the real scans ({sum(fs['scored_scans'].values())} scans); "

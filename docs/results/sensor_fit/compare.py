@@ -5,7 +5,8 @@
 Each argument holds one folder per model with the ``runs.jsonl`` of ``experiment sim2real``.
 Prints, per model and training set, mean class accuracy (mean ± std over seeds) in each run,
 the difference (second − first) with both one-sided exact permutation p-values, then the second
-run's sets against its real→real row (difference and p that real→real is above).
+run's sets against its real→real row (difference and p that real→real is above).  The set chosen
+per seed on the fit half is in each run's own table (``experiment sim2real --validate-on fit-half``).
 """
 
 from __future__ import annotations
@@ -55,20 +56,3 @@ for model in MODELS:
             d = sum(v) / len(v) - sum(ref) / len(ref)
             print(f"| {model} | {kind} | {pm(v)} | {pm(ref)} | {d:+.3f} | {permutation_p(ref, v):.3g} |")
 
-# With --validate-on fit-half every mesh-only run's best validation score is on the fit half's
-# real scans: choosing the set per seed by it is a choice the scored half has no part in.
-print("\n| model | seed | set chosen on the fit half | its fit-half score | its scored mean class acc. |\n|---|---|---|---|---|")
-for model in MODELS:
-    folder = second / model
-    if not (folder / "runs.jsonl").is_file():
-        continue
-    if json.loads((folder / "settings.json").read_text(encoding="utf-8")).get("validate_on") != "fit-half":
-        continue
-    runs = [json.loads(line) for line in (folder / "runs.jsonl").read_text(encoding="utf-8").splitlines()]
-    chosen = []
-    for seed in sorted({r["seed"] for r in runs}):
-        mesh_only = [r for r in runs if r["seed"] == seed and r["train_set"] != "real→real"]
-        best = max(mesh_only, key=lambda r: r["best_val_mean_class_accuracy"])
-        chosen.append(best["mean_class_accuracy"])
-        print(f"| {model} | {seed} | {best['train_set']} | {best['best_val_mean_class_accuracy']:.3f} | {best['mean_class_accuracy']:.3f} |")
-    print(f"| {model} | all | | | {pm(chosen)} |")
