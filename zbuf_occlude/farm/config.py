@@ -195,13 +195,9 @@ class FarmParams:
             object.__setattr__(self, "sensor_reflectivity", (lo, hi))
         object.__setattr__(self, "sensor_footprint", bool(self.sensor_footprint))
         if self.sensor_ground_margin_m is not None:
-            try:
-                margin = float(self.sensor_ground_margin_m)
-            except (TypeError, ValueError):
-                margin = float("nan")
-            if not (np.isfinite(margin) and margin >= 0):
-                raise InvalidInputError(f"--sensor-ground-margin must be a number >= 0 metres, got {self.sensor_ground_margin_m!r}")
-            object.__setattr__(self, "sensor_ground_margin_m", margin)
+            from zbuf_occlude.sensors.crops import check_ground_margin
+
+            object.__setattr__(self, "sensor_ground_margin_m", check_ground_margin(self.sensor_ground_margin_m, "--sensor-ground-margin"))
         self.sensor_model()  # footprint needs a beam divergence
 
     def sensor_model(self):

@@ -52,8 +52,7 @@ from zbuf_occlude.real_scans.files import (
     MAX_FILE_BYTES,
     MAX_LINE_BYTES,
     POINT_EXTENSIONS,
-    check_scan_points,
-    count_lines,
+    row_capacity,
     load_scan_folder,
     read_lines,
     scan_digest,
@@ -110,6 +109,12 @@ def read_suo_bin(path: str | os.PathLike) -> NDArray[np.void]:
     return np.frombuffer(raw, dtype=SUO_DTYPE).copy()
 
 
+def _check_file_size(path: Path) -> None:
+    """InvalidInputError naming ``path`` when it is missing, not a regular file or past :data:`MAX_FILE_BYTES`."""
+    if regular_file_size(path, error=InvalidInputError) > MAX_FILE_BYTES:
+        raise InvalidInputError(f"{path}: more than the {MAX_FILE_BYTES:,} bytes a scan may have")
+
+
 def read_suo_csv(path: str | os.PathLike) -> NDArray[np.void]:
     """SUO CSV object file (9 comma-separated fields per line, no header) → structured array.
 
@@ -123,13 +128,11 @@ def read_suo_csv(path: str | os.PathLike) -> NDArray[np.void]:
         numeric fields (its line number is given).
     """
     path = Path(path)
-    if regular_file_size(path, error=InvalidInputError) > MAX_FILE_BYTES:
-        raise InvalidInputError(f"{path}: more than the {MAX_FILE_BYTES:,} bytes a scan may have")
+    _check_file_size(path)
     try:
         with open(path, "rb") as fh:
             # streamed into one structured array: memory is the records, not a Python tuple per line
-            capacity = count_lines(fh)
-            check_scan_points(path, capacity, "has up to", bytes_per_point=SUO_DTYPE.itemsize)
+            capacity = row_capacity(path, fh, bytes_per_point=SUO_DTYPE.itemsize)
             out, n = np.empty(capacity, dtype=SUO_DTYPE), 0
             for lineno, line in read_lines(path, fh):
                 if not line.strip():
@@ -198,13 +201,11 @@ def read_lidarnet_csv(path: str | os.PathLike) -> RealScan:
         number is given), or fewer than one point.
     """
     path = Path(path)
-    if regular_file_size(path, error=InvalidInputError) > MAX_FILE_BYTES:
-        raise InvalidInputError(f"{path}: more than the {MAX_FILE_BYTES:,} bytes a scan may have")
+    _check_file_size(path)
     try:
         with open(path, "rb") as fh:
             # streamed into one (N, 3) float64 array, lines bounded: memory is the points, not Python rows
-            capacity = count_lines(fh)
-            check_scan_points(path, capacity, "has up to")
+            capacity = row_capacity(path, fh)
             rows = ((i, next(csv.reader([line]), [])) for i, line in read_lines(path, fh, errors="strict"))
             _, first = next(rows, (1, []))
             header = [h.strip() for h in first]

@@ -52,7 +52,7 @@ from zbuf_occlude.real_scans.records import RealScan, normalize_points
 from zbuf_occlude.resources import check_memory
 
 __all__ = ["POINT_EXTENSIONS", "UNITS_M", "MAX_FILE_BYTES", "MAX_SCAN_POINTS", "MAX_ARRAY_BYTES", "MAX_LINE_BYTES",
-           "check_scan_points", "count_lines", "read_points", "read_lines", "scan_digest", "units_to_m", "load_scan_folder"]
+           "row_capacity", "read_points", "read_lines", "scan_digest", "units_to_m", "load_scan_folder"]
 
 log = logging.getLogger(__name__)
 
@@ -121,7 +121,7 @@ def read_lines(path: Path, fh: io.BufferedReader, errors: str = "replace"):
         yield lineno, line.decode("utf-8", errors=errors)
 
 
-def check_scan_points(path: Path, n: int, what: str = "declares", bytes_per_point: int = 24) -> None:
+def _check_points(path: Path, n: int, what: str = "declares", bytes_per_point: int = 24) -> None:
     """Refuse ``n`` points past :data:`MAX_SCAN_POINTS` or the memory there is, before allocating them.
 
     ``bytes_per_point``: what one point takes once read (24: three float64).
@@ -139,7 +139,7 @@ def check_scan_points(path: Path, n: int, what: str = "declares", bytes_per_poin
         raise InvalidInputError(str(exc)) from None
 
 
-def count_lines(fh: io.BufferedReader) -> int:
+def _count_lines(fh: io.BufferedReader) -> int:
     """Lines of a binary file (a last line without newline counts), read in 1 MiB chunks."""
     n, last = 0, b"\n"
     while chunk := fh.read(1 << 20):
@@ -149,11 +149,24 @@ def count_lines(fh: io.BufferedReader) -> int:
     return n + (last != b"\n")
 
 
+def row_capacity(path: Path, fh: io.BufferedReader, bytes_per_point: int = 24) -> int:
+    """Lines of the open file ``fh`` (rewound), checked as points (:func:`_check_points`): the
+    rows to allocate before a text scan is streamed in.
+
+    Raises
+    ------
+    InvalidInputError
+        Naming ``path``: more lines than :data:`MAX_SCAN_POINTS`, or than the memory holds.
+    """
+    capacity = _count_lines(fh)
+    _check_points(path, capacity, "has up to", bytes_per_point=bytes_per_point)
+    return capacity
+
+
 def _read_text_table(path: Path) -> NDArray[np.float64]:
     """Rows of a CSV/TXT/XYZ/PTS file, streamed: memory is the (N, 3) float64 result, not Python strings."""
     with open(path, "rb") as fh:
-        capacity = count_lines(fh)
-        check_scan_points(path, capacity, "has up to")
+        capacity = row_capacity(path, fh)
         content = ((i, ln) for i, ln in read_lines(path, fh) if ln.strip() and not ln.lstrip().startswith(("#", "//")))
         head = next(content, None)
         if head is None:
@@ -215,7 +228,7 @@ def _read_pcd(path: Path, raw: bytes) -> NDArray[np.float64]:
         raise InvalidInputError(f"{path}: PCD header has neither POINTS nor WIDTH")
     if grid is not None and grid != n:
         raise InvalidInputError(f"{path}: PCD header declares POINTS {n:,} but WIDTH x HEIGHT = {grid:,}")
-    check_scan_points(path, n)
+    _check_points(path, n)
     if not all(a in fields for a in "xyz"):
         raise InvalidInputError(f"{path}: PCD fields {fields} have no x y z")
     if not (len(sizes) == len(types) == len(counts) == len(fields)) or n < 0:
@@ -274,7 +287,7 @@ def _read_ply(path: Path, raw: bytes) -> NDArray[np.float64]:
     declared = ply_declared_counts(raw).get("vertex")
     if declared is None:
         raise InvalidInputError(f"{path}: PLY header declares no vertex element")
-    check_scan_points(path, declared)
+    _check_points(path, declared)
     pts = np.asarray(trimesh.load(io.BytesIO(raw), file_type="ply", process=False).vertices, dtype=np.float64)
     if len(pts) != declared:
         raise InvalidInputError(f"{path}: PLY declares {declared:,} vertices but holds {len(pts):,}; the file is cut short")

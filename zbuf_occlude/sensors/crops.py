@@ -30,7 +30,7 @@ from zbuf_occlude.sensors.scene import ScanScene, SceneObject, sensor_pose
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
-__all__ = ["CropDistributions", "CropSample", "draw_placement", "object_crop", "lidar_object_samples"]
+__all__ = ["CropDistributions", "CropSample", "check_ground_margin", "draw_placement", "object_crop", "lidar_object_samples"]
 
 log = logging.getLogger(__name__)
 
@@ -42,6 +42,23 @@ def _interval(name: str, value) -> tuple[float, float]:
     if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
         raise InvalidInputError(f"{name} must be a number or an interval lo <= hi, got {value!r}")
     return lo, hi
+
+
+def check_ground_margin(value, option: str = "ground_margin_m") -> float:
+    """``value`` as a ground margin in metres (:class:`CropDistributions`).
+
+    Raises
+    ------
+    InvalidInputError
+        Not a finite number >= 0, naming ``option`` and the value.
+    """
+    try:
+        margin = float(value)
+    except (TypeError, ValueError):
+        margin = math.nan
+    if not (math.isfinite(margin) and margin >= 0):
+        raise InvalidInputError(f"{option} must be a number >= 0 metres, got {value!r}")
+    return margin
 
 
 @dataclass(frozen=True)
@@ -107,13 +124,7 @@ class CropDistributions:
             if self.reflectivity[0] < 0:
                 raise InvalidInputError(f"reflectivity must be >= 0, got {self.reflectivity!r}")
         if self.ground_margin_m is not None:
-            try:
-                margin = float(self.ground_margin_m)
-            except (TypeError, ValueError):
-                margin = math.nan
-            if not (math.isfinite(margin) and margin >= 0):
-                raise InvalidInputError(f"ground_margin_m must be a number >= 0 metres, got {self.ground_margin_m!r}")
-            object.__setattr__(self, "ground_margin_m", margin)
+            object.__setattr__(self, "ground_margin_m", check_ground_margin(self.ground_margin_m))
         if self.distance_m[0] <= 0 or self.size_m[0] <= 0 or self.height_m[0] < 0:
             raise InvalidInputError(f"distance_m and size_m must be > 0 and height_m >= 0 metres, got {self}")
 
@@ -208,17 +219,31 @@ def object_crop(
     if "reflectivity" in placement:  # ground, the object, then the occluders (their own ρ: the object's)
         rho = [placement.get("ground_reflectivity", 0.15)] + [placement["reflectivity"]] * (1 + len(occluders))
     full = scan(scene, sensor, pose, seed=seed, azimuth_range_deg=sector, backend=backend, frame=frame, reflectivity=rho)
+    offset = pose[:3, 3] if frame == "sensor" else 0.0  # sensor axes = world axes (yaw 0)
+    return _crop_object(scene, full, placement, pose[:3, 3], offset)
+
+
+def _crop_object(scene: ScanScene, full: Scan, placement: dict, sensor_world, offset=None, per_return: tuple[str, ...] = ()) -> CropSample:
+    """The crop of object 1 from ``full`` (its points in the world frame, less ``offset`` when
+    given): the object's returns and, with a ``ground_margin_m`` in the placement, the ground
+    returns under it (:func:`_under_footprint`); ``per_return`` names ``full.meta`` arrays cropped
+    alike.  Local points in the object's mesh frame, and the sensor's (world ``sensor_world``)."""
     built = scene.build()
     to_world = built.local_to_world[1]
     inverse = np.linalg.inv(to_world[:3, :3])
-    offset = pose[:3, 3] if frame == "sensor" else 0.0  # sensor axes = world axes (yaw 0)
+
+    def world(points):
+        p = points.astype(np.float64)
+        return p if offset is None else p + offset
+
     keep = full.object_id == 1
-    if placement.get("ground_margin_m") is not None:
-        world = full.points.astype(np.float64) + offset
-        keep |= (full.object_id == 0) & _under_footprint(built.local_meshes[1], to_world, inverse, world, placement["ground_margin_m"])
+    if placement.get("ground_margin_m") is not None:  # only the ground returns are tested
+        ground = np.flatnonzero(full.object_id == 0)
+        keep[ground] = _under_footprint(built.local_meshes[1], to_world, inverse, world(full.points[ground]), placement["ground_margin_m"])
     crop = full.select(keep)
-    local = (crop.points.astype(np.float64) + offset - to_world[:3, 3]) @ inverse.T
-    return CropSample(crop, dict(placement), local, inverse @ (pose[:3, 3] - to_world[:3, 3]), full)
+    crop.meta.update({key: full.meta[key][keep] for key in per_return})
+    local = (world(crop.points) - to_world[:3, 3]) @ inverse.T
+    return CropSample(crop, dict(placement), local, inverse @ (sensor_world - to_world[:3, 3]), full)
 
 
 def _under_footprint(mesh, to_world, inverse, world, margin_m: float) -> NDArray[np.bool_]:
@@ -242,16 +267,7 @@ def _airborne_crop(mesh, sensor: AirborneScanner, placement: dict, *, seed: int,
     reach = float(np.max(size)) * 0.75 + 1.0
     scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=abs(offset_m) + 2.0 * reach)
     full = scan_airborne(scene, sensor, (0.0, offset_m), reach, seed=seed)
-    built = scene.build()
-    to_world = built.local_to_world[1]
-    inverse = np.linalg.inv(to_world[:3, :3])
-    mine = full.object_id == 1
-    if placement.get("ground_margin_m") is not None:
-        mine |= (full.object_id == 0) & _under_footprint(built.local_meshes[1], to_world, inverse, full.points.astype(np.float64), placement["ground_margin_m"])
-    crop = full.select(mine)
-    crop.meta.update({key: full.meta[key][mine] for key in ("line_id", "scan_angle_deg")})
-    local = (crop.points.astype(np.float64) - to_world[:3, 3]) @ inverse.T
-    return CropSample(crop, dict(placement), local, inverse @ (full.sensor_position - to_world[:3, 3]), full)
+    return _crop_object(scene, full, placement, full.sensor_position, per_return=("line_id", "scan_angle_deg"))
 
 
 def lidar_object_samples(
