@@ -254,7 +254,8 @@ def _fit_spy(monkeypatch: pytest.MonkeyPatch) -> list[list[str]]:
 
     def spy(scans, base, labels, names):
         calls.append([s.source for s in scans])
-        return lidar_preset("hdl32e"), dict.fromkeys(names, (15.0, 20.0)), CLASS_SIZES_M, {"name": "fitted-by-spy", "base": base.name}
+        placement = {n: {"distance_m": (15.0, 20.0), "hidden_below_m": (0.0, 0.1)} for n in names}
+        return lidar_preset("hdl32e"), placement, CLASS_SIZES_M, {"name": "fitted-by-spy", "base": base.name}
 
     monkeypatch.setattr(s2r, "_fit_sensor", spy)
     return calls
@@ -377,7 +378,8 @@ def test_fit_sensor_fits_crop_distances_and_heights_per_class() -> None:
     clouds = [_box_scan(d, i) for i, d in enumerate(near + far)]
     scans = [SimpleNamespace(source=f"{i}.xyz", points_sensor_m=c) for i, c in enumerate(clouds)]
     labels = np.array([0] * 4 + [1] * 4)
-    _, distances, sizes, spec = _fit_sensor(scans, lidar_preset("hdl32e"), labels, ["car", "pole"])
+    _, placement, sizes, spec = _fit_sensor(scans, lidar_preset("hdl32e"), labels, ["car", "pole"])
+    distances = {k: v["distance_m"] for k, v in placement.items()}
     # the centroid of the visible faces lies up to half the box (0.75 m) nearer than its centre
     assert 4.0 - 0.8 < distances["car"][0] < distances["car"][1] < 7.0 and 12.0 - 0.8 < distances["pole"][0] < distances["pole"][1] < 18.0
     crops = spec["fit"]["crops"]
@@ -386,6 +388,9 @@ def test_fit_sensor_fits_crop_distances_and_heights_per_class() -> None:
     assert sizes["car"].dimension == "height" and 1.2 < sizes["car"].lo_m <= sizes["car"].hi_m <= 1.5 + 0.1  # range noise 2 cm
     assert 0.9 < sizes["pole"].lo_m <= sizes["pole"].hi_m < sizes["car"].hi_m
     assert crops["object_height_m"]["pole"] == [sizes["pole"].lo_m, sizes["pole"].hi_m]
+    # boxes on the ground: their bottoms are seen, within a ring of it, and the placement carries them
+    assert {k: list(v["hidden_below_m"]) for k, v in placement.items()} == crops["hidden_below_m"]
+    assert all(0.0 <= lo <= hi < 0.5 for lo, hi in crops["hidden_below_m"].values())
     with pytest.raises(InvalidInputError, match="--fit-sensor: class 'pole'.*at least 3"):
         _fit_sensor(scans[:6], lidar_preset("hdl32e"), labels[:6], ["car", "pole"])
 
@@ -416,7 +421,7 @@ def test_the_fitted_placed_set_draws_the_fitted_distances_and_the_others_the_pre
     real = crops.lidar_object_samples
 
     def spy(mesh, sensor, **kw):
-        seen.append((sensor.name, kw["distributions"].distance_m))
+        seen.append((sensor.name, kw["distributions"].distance_m, kw["distributions"].hidden_below_m))
         return real(mesh, sensor, **kw)
 
     monkeypatch.setattr(crops, "lidar_object_samples", spy)
@@ -424,15 +429,16 @@ def test_the_fitted_placed_set_draws_the_fitted_distances_and_the_others_the_pre
     fitted = lidar_preset("hdl32e").with_(name="fitted")
     heights = {"car": SizeRange("height", 1.0, 1.0), "pole": SizeRange("height", 2.0, 2.0)}
     sets = build_sets(meshes, ["car", "pole"], 2, 32, 0, sensor=lidar_preset("hdl32e"), resolution=128, dense_points=2000, keep_scale=True,
-                      fitted_sensor=fitted, fitted_distance_m={"car": (6.0, 7.0), "pole": (8.0, 9.0)}, fitted_sizes=heights)  # fmt: skip
+                      fitted_sensor=fitted, fitted_placement={"car": {"distance_m": (6.0, 7.0), "hidden_below_m": (0.2, 0.4)}, "pole": {"distance_m": (8.0, 9.0)}},
+                      fitted_sizes=heights)  # fmt: skip
     assert sets[FITTED].points.shape == sets[FITTED_PLACED].points.shape == (4, 32, 3)
     # kept in metres: the placed crops are as tall as the fitted heights at most, the others' poles taller (2.5-9 m)
     tall = lambda s, label: float(np.ptp(s.points[s.labels == label][..., 2], axis=1).max()) * KEEP_SCALE_UNIT_M  # noqa: E731
     assert tall(sets[FITTED_PLACED], 0) <= 1.0 + 1e-3 and tall(sets[FITTED_PLACED], 1) <= 2.0 + 1e-3
     assert tall(sets["lidar"], 1) > 2.0 and tall(sets[FITTED], 1) > 2.0
     # the preset sensor and the fitted set at the preset's distances; the placed set at the fitted ones
-    assert {d for name, d in seen if name == "hdl32e"} == {LIDAR_PLACEMENT["distance_m"]}
-    assert {d for name, d in seen if name == "fitted"} == {LIDAR_PLACEMENT["distance_m"], (6.0, 7.0), (8.0, 9.0)}
+    assert {(d, h) for name, d, h in seen if name == "hdl32e"} == {(LIDAR_PLACEMENT["distance_m"], None)}
+    assert {(d, h) for name, d, h in seen if name == "fitted"} == {(LIDAR_PLACEMENT["distance_m"], None), ((6.0, 7.0), (0.2, 0.4)), ((8.0, 9.0), None)}
 
 
 def test_validate_on_fit_half_validates_mesh_sets_on_the_fit_half_and_trains_on_every_mesh(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -105,3 +105,38 @@ def test_ground_returns_have_no_face_of_the_mesh():
         CropDistributions(ground_margin_m=-1.0)
     with pytest.raises(InvalidInputError, match="ground_margin_m"):
         CropDistributions(ground_margin_m="wide")
+
+
+def test_hidden_below_drops_exactly_the_object_returns_under_the_cut():
+    import trimesh
+
+    box = trimesh.creation.box(extents=(2.0, 1.0, 1.0))
+    dist = CropDistributions(distance_m=6.0, height_m=1.8, size_m=2.0, yaw_deg=30.0, azimuth_deg=10.0)
+    lidar = zo.Lidar.preset("hdl32e", range_noise_m=0.0)
+    placement = draw_placement(dist, np.random.default_rng(0))
+    bare = object_crop(box, lidar, placement, seed=1)
+    bare_z = bare.scan.points[:, 2].astype(np.float64) + placement["height_m"]  # sensor frame -> above the ground
+    counts = []
+    for cut in (0.0, 0.3, 0.7, 1.5):
+        crop = object_crop(box, lidar, placement | {"hidden_below_m": cut}, seed=1)
+        kept = bare_z >= cut
+        np.testing.assert_array_equal(crop.scan.points, bare.scan.points[kept])
+        np.testing.assert_array_equal(crop.local_points, bare.local_points[kept])
+        np.testing.assert_array_equal(crop.full.points, bare.full.points)  # the sweep itself is untouched
+        counts.append(len(crop.scan))
+    assert counts[0] == len(bare.scan) > counts[1] > counts[2] > counts[3] == 0
+    # with a ground margin the ground returns stay: only the object's own are cut
+    both = object_crop(box, lidar, placement | {"hidden_below_m": 0.7, "ground_margin_m": 0.5}, seed=1)
+    ground = both.scan.object_id == 0
+    assert ground.any() and len(both.scan) - int(ground.sum()) == counts[2]
+
+
+def test_hidden_below_is_drawn_after_the_placement_and_checked():
+    rng = lambda: np.random.default_rng(7)  # noqa: E731
+    plain = draw_placement(CropDistributions(), rng())
+    drawn = draw_placement(CropDistributions(hidden_below_m=(0.2, 0.6)), rng())
+    assert {k: drawn[k] for k in plain} == plain and 0.2 <= drawn["hidden_below_m"] <= 0.6
+    assert draw_placement(CropDistributions(hidden_below_m=0.4), rng())["hidden_below_m"] == 0.4
+    for bad in (-0.1, (0.5, 0.2), "low"):
+        with pytest.raises(InvalidInputError, match="hidden_below_m"):
+            CropDistributions(hidden_below_m=bad)

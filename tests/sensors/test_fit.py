@@ -153,3 +153,43 @@ def test_fit_sensor_command_on_lidarnet_style_csvs(tmp_path: Path, capsys) -> No
     h_lo, h_hi = spec["fit"]["crops"]["object_height_m"][label]
     assert 1.0 < h_lo <= h_hi <= 1.5 + 0.1  # 1.5 m boxes (range noise 2 cm)
     assert main(["fit-sensor", str(tmp_path / "scans"), "--sensor", "hdl32e", "--out", str(tmp_path / "f.txt")]) == 2
+
+
+def test_crop_bottoms_are_percentiles_of_the_lowest_returns_above_the_fitted_ground() -> None:
+    from zbuf_occlude.sensors.fit import fit_crop_bottoms, fit_sensor_height
+
+    # one scan per depth: the lowest return 1.8 m below the sensor for six, higher for two
+    depths = [1.8] * 6 + [1.2, 1.5]
+    clouds = [np.array([[5.0, 0.0, -d], [5.0, 0.1, 0.2]]) for d in depths]
+    assert fit_sensor_height(clouds) == pytest.approx(1.8)
+    assert fit_sensor_height(clouds, 0.0) == pytest.approx(1.2)
+    # heights above the ground: 0 (x6), 0.3 and 0.6; a return below the ground counts as 0
+    assert fit_crop_bottoms(clouds, 1.8, (0.0, 100.0)) == pytest.approx((0.0, 0.6))
+    assert fit_crop_bottoms(clouds, 1.8, (90.0, 90.0))[0] == pytest.approx(np.percentile([0] * 6 + [0.3, 0.6], 90))
+    assert fit_crop_bottoms(clouds, 1.7, (0.0, 0.0)) == (0.0, 0.0)
+    with pytest.raises(InvalidInputError, match="sensor_height_m"):
+        fit_crop_bottoms(clouds, float("nan"))
+    with pytest.raises(InvalidInputError, match="quantile"):
+        fit_sensor_height(clouds, 120.0)
+
+
+def test_fit_recovers_the_ground_and_the_hidden_bottoms_of_simulated_crops() -> None:
+    from zbuf_occlude.sensors.crops import CropDistributions, draw_placement, object_crop
+    from zbuf_occlude.sensors.fit import crop_placement_json
+
+    box = trimesh.creation.box(extents=(2.0, 1.0, 1.0))
+    lidar = lidar_preset("hdl32e", range_noise_m=0.0)
+    rng = np.random.default_rng(0)
+    clouds, labels = [], []
+    for label, hidden in (("whole", 0.0), ("cut", 0.5)):
+        dist = CropDistributions(distance_m=(5.0, 7.0), height_m=1.8, size_m=2.0, hidden_below_m=hidden)
+        clouds += [object_crop(box, lidar, draw_placement(dist, rng), seed=k).scan.points.astype(np.float64) for k in range(8)]
+        labels += [label] * 8
+    crops = crop_placement_json(clouds, labels)
+    # the lowest beam on the box lies up to one ring (1.33 degrees: 0.16 m at 7 m) above its cut
+    gap = 7.0 * np.tan(np.radians(1.33))
+    assert 1.8 - gap <= crops["sensor_height_m"] <= 1.8 + 1e-6
+    lo, hi = crops["hidden_below_m"]["whole"]
+    assert 0.0 <= lo <= hi <= gap
+    lo, hi = crops["hidden_below_m"]["cut"]
+    assert 0.5 - gap <= lo <= hi <= 0.5 + gap and lo > crops["hidden_below_m"]["whole"][1]

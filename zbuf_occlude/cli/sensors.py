@@ -78,6 +78,13 @@ def _with_return_physics(sensor, args: argparse.Namespace):
                         echo_separation_m=args.echo_separation or sensor.echo_separation_m)  # fmt: skip
 
 
+def _hidden_below(text: str) -> tuple[float, float]:
+    lo, hi = parse_interval(text, "--hidden-below")
+    if lo < 0:
+        raise InvalidInputError(f"--hidden-below must be >= 0 metres above the ground, got {text!r}")
+    return lo, hi
+
+
 def cmd_scan(args: argparse.Namespace) -> int:
     from zbuf_occlude.sensors.airborne import AirborneScanner
     from zbuf_occlude.sensors.crops import CropDistributions, draw_placement, object_crop
@@ -88,12 +95,16 @@ def cmd_scan(args: argparse.Namespace) -> int:
     sensor = _with_return_physics(sensor_from_name(args.sensor), args)
     if args.ground_margin is not None and not args.crop:
         raise InvalidInputError("--ground-margin chooses the ground kept in a crop: it needs --crop")
+    if args.hidden_below is not None and not args.crop:
+        raise InvalidInputError("--hidden-below hides the bottom of the object in a crop: it needs --crop")
     out = Path(args.out)
     formats = ("npz", "ply") if args.format == "both" else (args.format,)
     src = Path(args.mesh_or_scene)
     written = []
     out.mkdir(parents=True, exist_ok=True)  # a refused run's empty --out is removed by cli.main
     if src.suffix.lower() in (".json", ".yaml", ".yml"):
+        if args.crop:
+            raise InvalidInputError(f"--crop keeps one mesh's returns; {src.name} is a scene file, scanned whole")
         scene = load_scene(src)
         if isinstance(sensor, Lidar):
             pose = scene.default_sensor_pose()
@@ -129,6 +140,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
             size_m=parse_interval(args.size, "--size"), extents_m=extents, round_xy=round_xy,
             reflectivity=None if args.reflectivity is None else parse_interval(args.reflectivity, "--reflectivity"),
             ground_reflectivity=args.ground_reflectivity, ground_margin_m=args.ground_margin,
+            hidden_below_m=None if args.hidden_below is None else _hidden_below(args.hidden_below),
         )  # fmt: skip
         check_outside(dist)
         for k in range(args.samples):
@@ -185,6 +197,11 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         "--ground-margin", metavar="M", type=float,
         help="with --crop: also keep the ground returns under the object, inside its footprint grown by M metres, as a "
         "box segmentation of a street scan leaves them",
+    )  # fmt: skip
+    p.add_argument(
+        "--hidden-below", metavar="M or LO:HI",
+        help="with --crop: drop the object's returns lower than this height above the ground, metres, drawn per sample "
+        "(a bottom hidden by parked cars or kerbs, or removed with the ground; fit-sensor fits it per class)",
     )  # fmt: skip
     p.add_argument(
         "--frame", choices=("sensor", "world"), default="sensor",

@@ -136,8 +136,9 @@ def _fit_sensor(scans: list, base, labels: np.ndarray, names: list[str]):
     """:func:`~zbuf_occlude.experiments.sensor_fit.fit_to_scans` on ``scans`` (``labels`` index
     ``names``), every class's crop placement included.
 
-    Returns the fitted Lidar, ``{class: (lo_m, hi_m)}`` sensor distances, ``{class: SizeRange}``
-    (visible heights) and the sensor's JSON with the fit and the ``crops`` block.
+    Returns the fitted Lidar, the crops' placement per class (``{class: {"distance_m": (lo_m, hi_m),
+    "hidden_below_m": (lo_m, hi_m)}}``: the sensor's distances and the objects' hidden bottoms),
+    ``{class: SizeRange}`` (visible heights) and the sensor's JSON with the fit and the ``crops`` block.
     """
     from zbuf_occlude.experiments.sensor_fit import fit_to_scans
     from zbuf_occlude.sensors.lidar import Lidar
@@ -149,9 +150,9 @@ def _fit_sensor(scans: list, base, labels: np.ndarray, names: list[str]):
     except InvalidInputError as exc:
         raise InvalidInputError(f"--fit-sensor: {exc}") from None
     crops = spec["fit"]["crops"]
-    distances = {k: (float(lo), float(hi)) for k, (lo, hi) in crops["distance_m"].items()}
+    placement = {k: {key: tuple(float(v) for v in crops[key][k]) for key in ("distance_m", "hidden_below_m")} for k in crops["distance_m"]}
     sizes = {k: SizeRange("height", max(float(lo), 0.05), max(float(hi), 0.05)) for k, (lo, hi) in crops["object_height_m"].items()}
-    return fit.sensor, distances, sizes, spec
+    return fit.sensor, placement, sizes, spec
 
 
 def _score(pred: np.ndarray, labels: np.ndarray, names: list[str]) -> dict:
@@ -325,13 +326,13 @@ def run_sim2real(
     names = sorted({m.class_name for m in meshes})
     real_pts, real_y, sources = real_clouds(scans, names, dict(label_map or {}), n_points, 0, keep_scale=keep_scale)
     half_a, half_b = _stratified_half(real_y)  # real→real trains on half_a; with fit_sensor, half_a is the fit half
-    fitted, fitted_distances, fitted_sizes, fit_json = None, None, None, None
+    fitted, fitted_placement, fitted_sizes, fit_json = None, None, None, None
     if fit_sensor:
         kept = real_scan_rows(scans, names, dict(label_map or {}))
-        fitted, fitted_distances, fitted_sizes, fit_json = _fit_sensor([scans[kept[i]] for i in half_a], lidar, real_y[half_a], names)
+        fitted, fitted_placement, fitted_sizes, fit_json = _fit_sensor([scans[kept[i]] for i in half_a], lidar, real_y[half_a], names)
         meshes, skipped_fitted = check_lidar_meshes(meshes, fitted, sizes, n_points, min_returns=int(min_returns))
         meshes, skipped_placed = check_lidar_meshes(meshes, fitted, fitted_sizes, n_points, min_returns=int(min_returns),
-                                                    distance_m=fitted_distances)  # fmt: skip
+                                                    placement=fitted_placement)  # fmt: skip
         skipped += skipped_fitted + skipped_placed
         if sorted({m.class_name for m in meshes}) != names:
             raise InvalidInputError(f"the fitted sensor sees no mesh of classes {sorted(set(names) - {m.class_name for m in meshes})}")
@@ -400,7 +401,7 @@ def run_sim2real(
                 test_x, test_y = real_pts[half_b], real_y[half_b]
             else:
                 if not sets:  # the sets of this seed at once (lidar+complete reuses two)
-                    fits = {"fitted_sensor": fitted, "fitted_distance_m": fitted_distances, "fitted_sizes": fitted_sizes}
+                    fits = {"fitted_sensor": fitted, "fitted_placement": fitted_placement, "fitted_sizes": fitted_sizes}
                     sets = {"train": build_sets(train_meshes, names, sc.per_class, n_points, seed, **fits, **common)}
                     if not real_val:
                         sets["val"] = build_sets(val_meshes, names, sc.val_per_class, n_points, seed + 10_000, **fits, **common)

@@ -54,8 +54,9 @@ TRAINING_SETS = ("complete", "occluded", "lidar", "lidar+complete")
 #: The set made with a sensor fitted to the real scans (``run_sim2real(fit_sensor=True)``): LiDAR
 #: crops like ``lidar``'s, from the same placements and sizes, only the sensor differs.
 FITTED = "fitted"
-#: The fitted sensor, and per class the sensor distances and the objects' heights fitted to the
-#: same scans (:func:`zbuf_occlude.sensors.fit.crop_placement_json`); the headings are ``lidar``'s.
+#: The fitted sensor, and per class the sensor distances, the objects' heights and their hidden
+#: bottoms fitted to the same scans (:func:`zbuf_occlude.sensors.fit.crop_placement_json`); the
+#: headings are ``lidar``'s.
 FITTED_PLACED = "fitted+placed"
 #: The sets made with a fitted sensor, in report order.
 FITTED_SETS = (FITTED, FITTED_PLACED)
@@ -148,14 +149,14 @@ def _check_classes(meshes: list[MeshEntry], where: str) -> None:
 
 
 def check_lidar_meshes(meshes: list[MeshEntry], sensor, sizes: dict[str, SizeRange], n_points: int, *,
-                       min_returns: int = MIN_RETURNS, distance_m: dict[str, tuple[float, float]] | None = None,
+                       min_returns: int = MIN_RETURNS, placement: dict[str, dict] | None = None,
                        ) -> tuple[list[MeshEntry], list[str]]:  # fmt: skip
     """The meshes that give a LiDAR crop with ``min_returns`` returns, and the paths of those that do not.
 
     Run before any training set is made, so that a mesh the sensor cannot see (too small for
     its class's size, a sliver) is skipped, with a warning naming its file, instead of aborting
-    the run minutes later.  One draw per mesh (:func:`_lidar` with ``k=1``, seed 0), at the
-    class's ``distance_m`` where given.
+    the run minutes later.  One draw per mesh (:func:`_lidar` with ``k=1``, seed 0), with the
+    class's ``placement`` where given (as :func:`build_set`).
 
     Raises
     ------
@@ -168,7 +169,7 @@ def check_lidar_meshes(meshes: list[MeshEntry], sensor, sizes: dict[str, SizeRan
     kept, skipped = [], []
     for entry in meshes:
         try:
-            _lidar(entry, 1, n_points, 0, sensor, sizes[entry.class_name], min_returns, (distance_m or {}).get(entry.class_name))
+            _lidar(entry, 1, n_points, 0, sensor, sizes[entry.class_name], min_returns, (placement or {}).get(entry.class_name))
         except InvalidInputError as exc:
             log.warning("skipping mesh %s: %s", entry.path, exc)
             skipped.append(str(entry.path))
@@ -232,11 +233,10 @@ def _occluded(entry: MeshEntry, k: int, n_points: int, seed: int, rng: np.random
 
 
 def _lidar(entry: MeshEntry, k: int, n_points: int, seed: int, sensor, size: SizeRange, min_returns: int = MIN_RETURNS,
-           distance_m: tuple[float, float] | None = None) -> tuple[list[NDArray], list[float]]:  # fmt: skip
+           placement: dict | None = None) -> tuple[list[NDArray], list[float]]:  # fmt: skip
     from zbuf_occlude.sensors.crops import CropDistributions, lidar_object_samples
 
-    placement = LIDAR_PLACEMENT if distance_m is None else {**LIDAR_PLACEMENT, "distance_m": tuple(distance_m)}
-    dist = CropDistributions(size_m=size_interval(entry.mesh.extents, size), **placement)
+    dist = CropDistributions(size_m=size_interval(entry.mesh.extents, size), **{**LIDAR_PLACEMENT, **(placement or {})})
     good: list = []
     # Draw about as many crops as needed, then more under another name (new placements) while
     # crops come back with fewer than min_returns returns; at most _LIDAR_TRIES rounds.
@@ -276,7 +276,7 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
               sensor=None, sizes: dict[str, SizeRange] = CLASS_SIZES_M, keep_scale: bool = False,
               dense_points: int = 8192, resolution: int = 512, method: str = "auto",
               min_returns: int = MIN_RETURNS, elevation_deg: tuple[float, float] = GROUND_ELEVATION_DEG,
-              distance_m: dict[str, tuple[float, float]] | None = None) -> CloudSet:  # fmt: skip
+              placement: dict[str, dict] | None = None) -> CloudSet:  # fmt: skip
     """``per_class`` clouds of every class in ``names`` from ``meshes``, of one training set kind.
 
     Cloud counts are spread over each class's meshes (:func:`allocate`); ``lidar+complete``
@@ -285,8 +285,9 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
     with fewer than ``min_returns`` returns is redrawn (:data:`MIN_RETURNS`; an airborne
     scanner at a few points per m² needs a much lower value for small objects).  The
     ``occluded`` set's camera elevations are drawn uniformly in ``elevation_deg`` (degrees).
-    ``distance_m`` gives a LiDAR set's sensor distances per class (metres, drawn uniformly)
-    instead of :data:`LIDAR_PLACEMENT`'s.
+    ``placement`` gives a LiDAR set's :class:`~zbuf_occlude.sensors.crops.CropDistributions`
+    keywords per class (``{class: {"distance_m": (lo, hi), "hidden_below_m": (lo, hi)}}``,
+    metres), over :data:`LIDAR_PLACEMENT`'s.
 
     Raises
     ------
@@ -298,7 +299,7 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
     if kind == "lidar+complete":
         common = dict(sizes=sizes, keep_scale=keep_scale)
         lidar = build_set("lidar", meshes, names, per_class, n_points, seed, sensor=sensor, min_returns=min_returns,
-                          distance_m=distance_m, **common)  # fmt: skip
+                          placement=placement, **common)  # fmt: skip
         return mix_sets(lidar, build_set("complete", meshes, names, per_class, n_points, seed, **common), seed)
     missing = sorted({m.class_name for m in meshes} - set(sizes))
     if missing and (kind == "lidar" or keep_scale):
@@ -317,7 +318,7 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
                 got = _occluded(entry, int(k), n_points, seed, rng, dense_points=dense_points, resolution=resolution, method=method,
                                 elevation_deg=elevation_deg)  # fmt: skip
             else:
-                got, size_k = _lidar(entry, int(k), n_points, seed, sensor, sizes[cls], min_returns, (distance_m or {}).get(cls))
+                got, size_k = _lidar(entry, int(k), n_points, seed, sensor, sizes[cls], min_returns, (placement or {}).get(cls))
             if kind == "lidar":
                 sizes_m.extend(size_k)
             elif keep_scale:
@@ -345,20 +346,20 @@ def mix_sets(a: CloudSet, b: CloudSet, seed: int) -> CloudSet:
 
 
 def build_sets(meshes: list[MeshEntry], names: list[str], per_class: int, n_points: int, seed: int, *,
-               fitted_sensor=None, fitted_distance_m: dict[str, tuple[float, float]] | None = None,
+               fitted_sensor=None, fitted_placement: dict[str, dict] | None = None,
                fitted_sizes: dict[str, SizeRange] | None = None, **options) -> dict[str, CloudSet]:  # fmt: skip
     """All of :data:`TRAINING_SETS` for one seed (``lidar+complete`` mixes the other two; options
     as :func:`build_set`); with ``fitted_sensor`` the :data:`FITTED` set, the ``lidar`` set's recipe
     (the same seed, so the same sizes and placements) scanned by ``fitted_sensor``; and with
-    ``fitted_distance_m`` and ``fitted_sizes`` as well, the :data:`FITTED_PLACED` set, whose crops
-    stand at those distances per class and are scaled to those sizes."""
+    ``fitted_placement`` (per class, as :func:`build_set`'s ``placement``) and ``fitted_sizes`` as
+    well, the :data:`FITTED_PLACED` set, whose crops are placed so per class and scaled to those sizes."""
     out = {kind: build_set(kind, meshes, names, per_class, n_points, seed, **options) for kind in TRAINING_SETS[:3]}
     out["lidar+complete"] = mix_sets(out["lidar"], out["complete"], seed)
     if fitted_sensor is not None:
         out[FITTED] = build_set("lidar", meshes, names, per_class, n_points, seed, **{**options, "sensor": fitted_sensor})
-        if fitted_distance_m is not None and fitted_sizes is not None:
+        if fitted_placement is not None and fitted_sizes is not None:
             out[FITTED_PLACED] = build_set("lidar", meshes, names, per_class, n_points, seed,
-                                           **{**options, "sensor": fitted_sensor, "distance_m": fitted_distance_m, "sizes": fitted_sizes})  # fmt: skip
+                                           **{**options, "sensor": fitted_sensor, "placement": fitted_placement, "sizes": fitted_sizes})  # fmt: skip
     return out
 
 

@@ -38,7 +38,10 @@ _CROP_STREAM = 0x5C4E  # keeps crop draws apart from the farm's other streams of
 
 
 def _interval(name: str, value) -> tuple[float, float]:
-    lo, hi = (float(value), float(value)) if np.isscalar(value) else (float(value[0]), float(value[1]))
+    try:
+        lo, hi = (float(value), float(value)) if np.isscalar(value) else (float(value[0]), float(value[1]))
+    except (TypeError, ValueError, IndexError):
+        lo, hi = math.nan, math.nan
     if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
         raise InvalidInputError(f"{name} must be a number or an interval lo <= hi, got {value!r}")
     return lo, hi
@@ -96,6 +99,12 @@ class CropDistributions:
         yawed with it) grown by this margin on every side, metres.  None (default): the crop
         holds the object's returns only.  :func:`~zbuf_occlude.sensors.fit.fit_lidar` reports
         the share of ground returns in real crops (``ground_fraction``) to compare with.
+    hidden_below_m : (lo, hi), optional
+        Hide the object's returns lower than this height above the ground, metres, drawn per
+        sample: the bottom of an object that a real street scan loses to what stands between
+        it and the sensor (parked cars, kerbs, low hedges) or to a segmentation's ground
+        removal.  A horizontal cut, not a ray-cast occluder.  None (default): nothing hidden.
+        :func:`~zbuf_occlude.sensors.fit.fit_crop_bottoms` fits it per class to real scans.
     """
 
     distance_m: tuple[float, float] = (5.0, 25.0)
@@ -108,6 +117,7 @@ class CropDistributions:
     reflectivity: tuple[float, float] | None = None
     ground_reflectivity: float = 0.15
     ground_margin_m: float | None = None
+    hidden_below_m: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         for name in ("distance_m", "height_m", "azimuth_deg", "yaw_deg", "size_m"):
@@ -125,12 +135,17 @@ class CropDistributions:
                 raise InvalidInputError(f"reflectivity must be >= 0, got {self.reflectivity!r}")
         if self.ground_margin_m is not None:
             object.__setattr__(self, "ground_margin_m", check_ground_margin(self.ground_margin_m))
+        if self.hidden_below_m is not None:
+            object.__setattr__(self, "hidden_below_m", _interval("hidden_below_m", self.hidden_below_m))
+            if self.hidden_below_m[0] < 0:
+                raise InvalidInputError(f"hidden_below_m must be >= 0 metres, got {self.hidden_below_m!r}")
         if self.distance_m[0] <= 0 or self.size_m[0] <= 0 or self.height_m[0] < 0:
             raise InvalidInputError(f"distance_m and size_m must be > 0 and height_m >= 0 metres, got {self}")
 
 
 def draw_placement(dist: CropDistributions, rng: np.random.Generator) -> dict[str, float]:
-    """One placement ``{distance_m, height_m, azimuth_deg, yaw_deg, size_m}`` (five uniform draws, in that order)."""
+    """One placement ``{distance_m, height_m, azimuth_deg, yaw_deg, size_m}`` (five uniform draws, in that order),
+    then ``extents_m``, ``reflectivity`` and ``hidden_below_m`` where ``dist`` gives them (drawn only when an interval)."""
     out = {name: float(rng.uniform(*getattr(dist, name))) for name in ("distance_m", "height_m", "azimuth_deg", "yaw_deg", "size_m")}
     # further draws only where an interval asks for them, so fixed values keep earlier streams
     if dist.extents_m is not None:
@@ -143,6 +158,9 @@ def draw_placement(dist: CropDistributions, rng: np.random.Generator) -> dict[st
         lo, hi = dist.reflectivity
         out["reflectivity"] = lo if lo == hi else float(rng.uniform(lo, hi))
         out["ground_reflectivity"] = float(dist.ground_reflectivity)
+    if dist.hidden_below_m is not None:
+        lo, hi = dist.hidden_below_m
+        out["hidden_below_m"] = lo if lo == hi else float(rng.uniform(lo, hi))
     if dist.ground_margin_m is not None:  # no draw: a fixed value
         out["ground_margin_m"] = dist.ground_margin_m
     return out
@@ -192,7 +210,8 @@ def object_crop(
     The sensor stands at the origin, ``height_m`` above the ground; the object's footprint
     centre is ``distance_m`` away in direction ``azimuth_deg``.  With ``ground_margin_m`` in the
     placement (:class:`CropDistributions`), the crop also keeps the ground returns inside the
-    object's footprint grown by that margin.  An
+    object's footprint grown by that margin; with ``hidden_below_m``, it drops the object's
+    returns lower than that above the ground (``full`` keeps them).  An
     :class:`~zbuf_occlude.sensors.airborne.AirborneScanner` flies over the object instead
     (``distance_m · sin(azimuth_deg)`` across track; points in the world frame).  A LiDAR fires only in the
     object's azimuth sector (± ``sector_margin_deg``), which gives the same returns faster.
@@ -225,8 +244,9 @@ def object_crop(
 
 def _crop_object(scene: ScanScene, full: Scan, placement: dict, sensor_world, offset=None, per_return: tuple[str, ...] = ()) -> CropSample:
     """The crop of object 1 from ``full`` (its points in the world frame, less ``offset`` when
-    given): the object's returns and, with a ``ground_margin_m`` in the placement, the ground
-    returns under it (:func:`_under_footprint`); ``per_return`` names ``full.meta`` arrays cropped
+    given): the object's returns (those at least ``hidden_below_m`` above the ground, when the
+    placement gives it) and, with a ``ground_margin_m`` in the placement, the ground returns
+    under it (:func:`_under_footprint`); ``per_return`` names ``full.meta`` arrays cropped
     alike.  Local points in the object's mesh frame, and the sensor's (world ``sensor_world``)."""
     built = scene.build()
     to_world = built.local_to_world[1]
@@ -237,6 +257,9 @@ def _crop_object(scene: ScanScene, full: Scan, placement: dict, sensor_world, of
         return p if offset is None else p + offset
 
     keep = full.object_id == 1
+    if placement.get("hidden_below_m") is not None:
+        own = np.flatnonzero(keep)
+        keep[own] = world(full.points[own])[:, 2] >= scene.ground_z_m + placement["hidden_below_m"]
     if placement.get("ground_margin_m") is not None:  # only the ground returns are tested
         ground = np.flatnonzero(full.object_id == 0)
         keep[ground] = _under_footprint(built.local_meshes[1], to_world, inverse, world(full.points[ground]), placement["ground_margin_m"])

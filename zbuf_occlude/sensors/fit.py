@@ -42,8 +42,10 @@ replacement, seed given).  Nothing depends on file names or class labels.
 
 Where the crops stand and how tall their objects are is the scene's, not the sensor's, and is
 fitted per class of the user's scans (:func:`crop_placement_json`): the sensor's horizontal
-distance to each scan's centroid (:func:`fit_crop_distances`) and each scan's vertical extent
-(:func:`fit_crop_heights`), as percentile intervals to draw uniformly.
+distance to each scan's centroid (:func:`fit_crop_distances`), each scan's vertical extent
+(:func:`fit_crop_heights`) and how high above the ground its lowest return lies
+(:func:`fit_crop_bottoms`, with the ground from :func:`fit_sensor_height`), as percentile
+intervals to draw uniformly.
 """
 
 from __future__ import annotations
@@ -60,13 +62,16 @@ from zbuf_occlude.sensors.lidar import Lidar
 
 __all__ = [
     "BOOTSTRAP", "DISTANCE_QUANTILES", "MAX_DROPOUT_GAP", "MIN_PLACEMENT_SCANS", "PLANE_NEIGHBOURS", "Estimate", "LidarFit",
-    "crop_placement_json", "fit_crop_distances", "fit_crop_heights", "fit_lidar", "lidar_to_json",
+    "SENSOR_HEIGHT_QUANTILE", "crop_placement_json", "fit_crop_bottoms", "fit_crop_distances", "fit_crop_heights", "fit_lidar",
+    "fit_sensor_height", "lidar_to_json",
 ]  # fmt: skip
 
 #: Non-empty scans a class needs for its crops' distances and heights (:func:`crop_placement_json`).
 MIN_PLACEMENT_SCANS = 3
 #: Percentiles of the real scans' distances that bound the fitted crop distances (:func:`fit_crop_distances`).
 DISTANCE_QUANTILES = (10.0, 90.0)
+#: Percentile of the scans' lowest-return depths below the sensor taken as the ground's (:func:`fit_sensor_height`).
+SENSOR_HEIGHT_QUANTILE = 75.0
 #: Bootstrap resamples of the scans for every uncertainty.
 BOOTSTRAP = 200
 #: Longest gap inside a ring, in azimuth steps, counted as lost returns (module docstring).
@@ -408,11 +413,78 @@ def fit_crop_heights(clouds: Sequence[NDArray[np.floating]], quantiles: tuple[fl
     return _percentiles_per_scan(clouds, quantiles, lambda p: np.ptp(p[:, 2]), "fit_crop_heights")
 
 
-def crop_placement_json(clouds: Sequence[NDArray[np.floating]], labels: Sequence[str]) -> dict:
-    """:func:`fit_crop_distances` and :func:`fit_crop_heights` per label: the ``crops`` block of a fitted sensor's ``fit``.
+def fit_sensor_height(clouds: Sequence[NDArray[np.floating]], quantile: float = SENSOR_HEIGHT_QUANTILE) -> float:
+    """The sensor's height above the ground the scanned objects stand on, from their lowest returns.
 
-    Returns ``{"quantiles": [lo, hi], "distance_m": {label: [lo_m, hi_m]}, "object_height_m":
-    {label: [lo_m, hi_m]}}`` (labels sorted).
+    Each scan's lowest return lies ``−min z`` below the sensor: at the ground (within the beam
+    gap) for an object seen down to its foot, higher for one whose bottom is hidden.  The
+    ground's depth is the ``quantile`` percentile of these depths over all scans, of every class
+    (75: at least a quarter of the scans must reach the ground; sloped ground spreads them).
+
+    Parameters
+    ----------
+    clouds : sequence of (N_i, 3) float
+        Segmented object scans; sensor at the origin, z up, metres.
+    quantile : float
+        Percentile in [0, 100].
+
+    Returns
+    -------
+    float
+        Metres (may be <= 0 for scans that were not taken from above the ground).
+
+    Raises
+    ------
+    InvalidInputError
+        Fewer than 3 non-empty scans, a scan that is not finite (N, 3), or a bad quantile.
+    """
+    q = float(quantile)
+    if not 0.0 <= q <= 100.0:
+        raise InvalidInputError(f"quantile must be in [0, 100], got {quantile!r}")
+    return _percentiles_per_scan(clouds, (q, q), lambda p: -p[:, 2].min(), "fit_sensor_height")[0]
+
+
+def fit_crop_bottoms(clouds: Sequence[NDArray[np.floating]], sensor_height_m: float,
+                     quantiles: tuple[float, float] = DISTANCE_QUANTILES) -> tuple[float, float]:  # fmt: skip
+    """The interval of heights above the ground of real scans' lowest returns, for the crops' ``hidden_below_m``.
+
+    A scan's lowest return lies ``min z + sensor_height_m`` above the ground (clipped at 0);
+    the interval is their ``quantiles`` percentiles, to be drawn uniformly as
+    :class:`~zbuf_occlude.sensors.crops.CropDistributions` ``hidden_below_m``.  A real bottom
+    includes the gap between the ground and the lowest beam that hits the object, which the
+    simulated scan makes again under the cut, so the simulated bottoms lie slightly higher.
+
+    Parameters
+    ----------
+    clouds : sequence of (N_i, 3) float
+        Segmented object scans of one class; sensor at the origin, z up, metres.
+    sensor_height_m : float
+        :func:`fit_sensor_height` of the user's scans, metres.
+    quantiles : (lo, hi)
+        Percentiles in [0, 100], lo <= hi.
+
+    Returns
+    -------
+    (lo_m, hi_m) : tuple of float
+        Metres, >= 0.
+
+    Raises
+    ------
+    InvalidInputError
+        As :func:`fit_crop_distances`, or a sensor height that is not finite.
+    """
+    h = float(sensor_height_m)
+    if not math.isfinite(h):
+        raise InvalidInputError(f"sensor_height_m must be finite metres, got {sensor_height_m!r}")
+    return _percentiles_per_scan(clouds, quantiles, lambda p: max(float(p[:, 2].min()) + h, 0.0), "fit_crop_bottoms")
+
+
+def crop_placement_json(clouds: Sequence[NDArray[np.floating]], labels: Sequence[str]) -> dict:
+    """:func:`fit_crop_distances`, :func:`fit_crop_heights` and :func:`fit_crop_bottoms` per label: the ``crops`` block of a fitted sensor's ``fit``.
+
+    Returns ``{"quantiles": [lo, hi], "sensor_height_m": h, "distance_m": {label: [lo_m, hi_m]},
+    "object_height_m": {label: [lo_m, hi_m]}, "hidden_below_m": {label: [lo_m, hi_m]}}`` (labels
+    sorted; ``h`` is :func:`fit_sensor_height` over every scan).
 
     Raises
     ------
@@ -421,12 +493,14 @@ def crop_placement_json(clouds: Sequence[NDArray[np.floating]], labels: Sequence
     """
     if len(labels) != len(clouds):
         raise InvalidInputError(f"crop_placement_json: {len(labels)} labels for {len(clouds)} scans")
-    out: dict = {"quantiles": list(DISTANCE_QUANTILES), "distance_m": {}, "object_height_m": {}}
+    height = fit_sensor_height(clouds)
+    out: dict = {"quantiles": list(DISTANCE_QUANTILES), "sensor_height_m": height, "distance_m": {}, "object_height_m": {}, "hidden_below_m": {}}
     for label in sorted(set(labels)):
         of_label = [c for c, y in zip(clouds, labels) if y == label]
         try:
             out["distance_m"][label] = list(fit_crop_distances(of_label))
             out["object_height_m"][label] = list(fit_crop_heights(of_label))
+            out["hidden_below_m"][label] = list(fit_crop_bottoms(of_label, height))
         except InvalidInputError as exc:
             raise InvalidInputError(f"class {label!r}: {exc}") from None
     return out

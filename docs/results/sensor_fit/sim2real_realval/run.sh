@@ -1,9 +1,9 @@
 #!/bin/bash
 # One model of the fit-half-validated sim2real runs, timed, with the load before and after:
 #   bash docs/results/sensor_fit/sim2real_realval/run.sh voxnet   (from the repository root, ../shared beside it)
-# writes runs/s2r_realval/MODEL/ and runs/s2r_realval/MODEL.wall.txt
+# writes ${ROOT:-runs/s2r_realval}/MODEL/ and .../MODEL.wall.txt
 set -u
-m=$1; out=runs/s2r_realval/$m
+m=$1; out=${ROOT:-runs/s2r_realval}/$m
 mkdir -p "$out"
 {
 echo "start $(date -u +%FT%TZ) uptime: $(uptime)"
