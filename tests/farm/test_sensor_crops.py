@@ -124,6 +124,20 @@ def test_ground_margin_keeps_the_ground_under_each_object(tmp_path):
     assert "sensor_ground_margin_m" not in FarmParams(sensor="hdl32e").to_dict()  # earlier sensor data sets keep their digest
 
 
+def test_hidden_below_hides_each_objects_bottom(tmp_path):
+    out = _farm(tmp_path / "hidden", "--sensor-hidden-below", "0.6:0.8", "--points", "2048")
+    card = json.loads((out / CARD_FILE).read_text())
+    assert card["params"]["sensor_hidden_below_m"] == [0.6, 0.8]
+    ds = OccludedDataset(out)
+    for i in range(len(ds)):
+        points, _, meta = ds[i]
+        mesh = load_mesh(meta["source"])
+        per_m = np.ptp(mesh.bounds, axis=0).max() / meta["size_m"]  # mesh units per metre
+        # every return lies at least the lowest height drawn above the object's foot (range noise: 2 cm)
+        assert points[:, 2].min() >= mesh.bounds[0, 2] + (0.6 - 0.1) * per_m
+    assert "sensor_hidden_below_m" not in FarmParams(sensor="hdl32e").to_dict()  # earlier sensor data sets keep their digest
+
+
 def test_a_sensor_file_with_mixed_pixels_changes_the_scans(sensor_run, tmp_path):
     # a 7-ray footprint whose echoes within 0.75 m merge, against the same footprint without merging
     paths = {}
@@ -187,6 +201,8 @@ def test_zbuffer_farm_parameters_keep_their_digest():
         (["--sensor", "hdl64e", "--sensor-footprint"], "beam_divergence_deg"),
         (["--sensor-ground-margin", "1"], "--sensor-ground-margin needs --sensor"),
         (["--sensor", "hdl32e", "--sensor-ground-margin", "-1"], "--sensor-ground-margin must be a number >= 0 metres, got -1"),
+        (["--sensor-hidden-below", "0.5"], "--sensor-hidden-below needs --sensor"),
+        (["--sensor", "hdl32e", "--sensor-hidden-below=-0.5:1"], "--sensor-hidden-below must be LO:HI with 0 <= LO <= HI"),
     ],
 )
 def test_bad_sensor_options_are_clear_errors(tmp_path, bad, words, capsys):

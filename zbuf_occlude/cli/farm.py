@@ -87,7 +87,8 @@ def _farm_command(args: argparse.Namespace) -> int:
 
 def _sensor_params(args: argparse.Namespace) -> dict:
     if args.sensor is None:
-        for option in ("sensor_distance", "sensor_height", "sensor_size", "sensor_reflectivity", "sensor_footprint", "sensor_ground_margin"):
+        for option in ("sensor_distance", "sensor_height", "sensor_size", "sensor_reflectivity", "sensor_footprint", "sensor_ground_margin",
+                       "sensor_hidden_below"):  # fmt: skip
             if getattr(args, option) not in (None, False):
                 raise InvalidInputError(f"--{option.replace('_', '-')} needs --sensor")
         return {}
@@ -103,6 +104,8 @@ def _sensor_params(args: argparse.Namespace) -> dict:
     out["sensor_footprint"] = args.sensor_footprint
     if args.sensor_ground_margin is not None:
         out["sensor_ground_margin_m"] = args.sensor_ground_margin
+    if args.sensor_hidden_below is not None:
+        out["sensor_hidden_below_m"] = parse_interval(args.sensor_hidden_below, "--sensor-hidden-below")
     return out
 
 
@@ -202,6 +205,11 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
         "--sensor-ground-margin", metavar="M", type=float,
         help="keep the ground returns under each object, inside its footprint grown by M metres, as a box "
         "segmentation of a street scan leaves them (default: the object's returns only)",
+    )  # fmt: skip
+    s.add_argument(
+        "--sensor-hidden-below", metavar="LO:HI",
+        help="hide each object's returns lower than a height drawn per scan, metres above the ground (a bottom hidden "
+        "by parked cars or kerbs, or removed with the ground; fit-sensor fits it per class) (default: nothing hidden)",
     )  # fmt: skip
     ex = p.add_argument_group("execution")
     ex.add_argument("--workers", type=int, default=1, help="worker processes on this machine (default: 1)")

@@ -60,7 +60,7 @@ OPTION_NAMES = {
     "radius": "--radius", "storage": "--storage/--format", "method": "--method", "sensor": "--sensor",
     "sensor_distance_m": "--sensor-distance", "sensor_height_m": "--sensor-height", "sensor_size_m": "--sensor-size",
     "sensor_reflectivity": "--sensor-reflectivity", "sensor_footprint": "--sensor-footprint",
-    "sensor_ground_margin_m": "--sensor-ground-margin", "up": "--up",
+    "sensor_ground_margin_m": "--sensor-ground-margin", "sensor_hidden_below_m": "--sensor-hidden-below", "up": "--up",
 }  # fmt: skip
 
 #: ``farm --sensor``: per-scan placement drawn uniformly from these intervals (metres).
@@ -119,6 +119,10 @@ class FarmParams:
         Keep the ground returns under each object, inside its footprint grown by this margin,
         metres (:class:`~zbuf_occlude.sensors.crops.CropDistributions` ``ground_margin_m``);
         ``None``: the object's returns only.  Left out of :meth:`to_dict` when ``None``.
+    sensor_hidden_below_m : (lo, hi) or None
+        Hide each object's returns lower than a height drawn per scan, metres above the ground
+        (:class:`~zbuf_occlude.sensors.crops.CropDistributions` ``hidden_below_m``); ``None``:
+        nothing hidden.  Left out of :meth:`to_dict` when ``None``.
     up : str
         The meshes' up axis (:data:`zbuf_occlude.mesh.scene.UP_CHOICES`), turned to +z by
         :func:`~zbuf_occlude.mesh.load.load_mesh`; ``"auto"``: per file, by its layout and
@@ -144,6 +148,7 @@ class FarmParams:
     sensor_reflectivity: tuple[float, float] | None = None
     sensor_footprint: bool = False
     sensor_ground_margin_m: float | None = None
+    sensor_hidden_below_m: tuple[float, float] | None = None
     up: str = "auto"
 
     def __post_init__(self) -> None:
@@ -185,14 +190,16 @@ class FarmParams:
             if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi) or lo < 0 or (field != "sensor_height_m" and lo <= 0):
                 raise InvalidInputError(f"{OPTION_NAMES[field]} must be LO:HI with 0 < LO <= HI metres, got {value!r}")
             object.__setattr__(self, field, (lo, hi))
-        if self.sensor_reflectivity is not None:
-            try:
-                lo, hi = (float(v) for v in self.sensor_reflectivity)
-            except (TypeError, ValueError):
-                lo = hi = float("nan")
-            if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo <= hi):
-                raise InvalidInputError(f"--sensor-reflectivity must be LO:HI with 0 <= LO <= HI, got {self.sensor_reflectivity!r}")
-            object.__setattr__(self, "sensor_reflectivity", (lo, hi))
+        for field in ("sensor_reflectivity", "sensor_hidden_below_m"):
+            value = getattr(self, field)
+            if value is not None:
+                try:
+                    lo, hi = (float(v) for v in value)
+                except (TypeError, ValueError):
+                    lo = hi = float("nan")
+                if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo <= hi):
+                    raise InvalidInputError(f"{OPTION_NAMES[field]} must be LO:HI with 0 <= LO <= HI, got {value!r}")
+                object.__setattr__(self, field, (lo, hi))
         object.__setattr__(self, "sensor_footprint", bool(self.sensor_footprint))
         if self.sensor_ground_margin_m is not None:
             from zbuf_occlude.sensors.crops import check_ground_margin
@@ -224,7 +231,7 @@ class FarmParams:
         return CropDistributions(
             distance_m=self.sensor_distance_m, height_m=self.sensor_height_m, azimuth_deg=(0.0, 360.0),
             yaw_deg=(0.0, 360.0), size_m=self.sensor_size_m, reflectivity=self.sensor_reflectivity,
-            ground_margin_m=self.sensor_ground_margin_m,
+            ground_margin_m=self.sensor_ground_margin_m, hidden_below_m=self.sensor_hidden_below_m,
         )  # fmt: skip
 
     @functools.cached_property
@@ -237,14 +244,17 @@ class FarmParams:
         if self.up == "auto":  # the digest of data sets made before --up existed
             del d["up"]
         if self.sensor is None:  # the z-buffer farm's parameters, and digest, as before --sensor existed
-            for field in ("sensor", *_SENSOR_FIELDS, "sensor_reflectivity", "sensor_footprint", "sensor_ground_margin_m"):
+            for field in ("sensor", *_SENSOR_FIELDS, "sensor_reflectivity", "sensor_footprint", "sensor_ground_margin_m", "sensor_hidden_below_m"):
                 del d[field]
         else:
             d.update({field: list(d[field]) for field in _SENSOR_FIELDS})
             if self.sensor_reflectivity is not None:
                 d["sensor_reflectivity"] = list(self.sensor_reflectivity)
-            if self.sensor_ground_margin_m is None:  # the digest of sensor data sets made before it existed
-                del d["sensor_ground_margin_m"]
+            for field in ("sensor_ground_margin_m", "sensor_hidden_below_m"):  # the digest of sensor data sets made before they existed
+                if getattr(self, field) is None:
+                    del d[field]
+            if self.sensor_hidden_below_m is not None:
+                d["sensor_hidden_below_m"] = list(self.sensor_hidden_below_m)
         return d
 
     def digest(self) -> str:
