@@ -60,14 +60,19 @@ def test_pose_is_measured_from_the_box_centre_of_an_uncentred_mesh():
     assert np.all(np.abs(c.points - box.bounds.mean(axis=0)) <= np.array([0.5, 0.2, 0.15]) + 1e-5)
 
 
-def test_ground_margin_keeps_the_ground_under_the_object_and_nothing_else():
+def _box_6m_away():
+    """A 2 x 1 x 1 m box 6 m from a noise-free HDL-32E 1.8 m high: (box, lidar, placement, its bare crop)."""
     import trimesh
 
     box = trimesh.creation.box(extents=(2.0, 1.0, 1.0))
     dist = CropDistributions(distance_m=6.0, height_m=1.8, size_m=2.0, yaw_deg=30.0, azimuth_deg=10.0)
     lidar = zo.Lidar.preset("hdl32e", range_noise_m=0.0)
     placement = draw_placement(dist, np.random.default_rng(0))
-    bare = object_crop(box, lidar, placement, seed=1)
+    return box, lidar, placement, object_crop(box, lidar, placement, seed=1)
+
+
+def test_ground_margin_keeps_the_ground_under_the_object_and_nothing_else():
+    box, lidar, placement, bare = _box_6m_away()
     assert np.all(bare.scan.object_id == 1)
     counts = []
     for margin in (0.0, 0.5, 1.5):
@@ -108,13 +113,7 @@ def test_ground_returns_have_no_face_of_the_mesh():
 
 
 def test_hidden_below_drops_exactly_the_object_returns_under_the_cut():
-    import trimesh
-
-    box = trimesh.creation.box(extents=(2.0, 1.0, 1.0))
-    dist = CropDistributions(distance_m=6.0, height_m=1.8, size_m=2.0, yaw_deg=30.0, azimuth_deg=10.0)
-    lidar = zo.Lidar.preset("hdl32e", range_noise_m=0.0)
-    placement = draw_placement(dist, np.random.default_rng(0))
-    bare = object_crop(box, lidar, placement, seed=1)
+    box, lidar, placement, bare = _box_6m_away()
     bare_z = bare.scan.points[:, 2].astype(np.float64) + placement["height_m"]  # sensor frame -> above the ground
     counts = []
     for cut in (0.0, 0.3, 0.7, 1.5):
