@@ -4,7 +4,8 @@
 #   fitted  the fitted sensor, the same placements;
 #   placed  the fitted sensor at each class's fitted distances (fit.crops in the JSON), poles as tall as fitted;
 #   physics placed, with return physics: a 7-ray beam footprint and echoes within 0.75 m merged (mixed pixels);
-#   ground  physics, and the ground within 0.25 m of the object's footprint kept in the crop (and counted).
+#   ground  physics, and the ground within 0.25 m of the object's footprint kept in the crop (and counted);
+#   hidden  placed, and each crop's bottom hidden up to a height drawn from the class's fitted interval (fit.crops.hidden_below_m).
 # usage: bash docs/results/sensor_fit/realism.sh SHARED_DATA FITTED_SENSOR.json OUT   (zbuf-occlude on PATH)
 #        TAGS="physics ground" bash ...   runs only those
 set -euo pipefail
@@ -13,7 +14,7 @@ mkdir -p "$out"
 crops() {  # crops CLASS KEY -> LO:HI from the fitted sensor's fit.crops block
   python3 -c 'import json, sys; lo, hi = json.load(open(sys.argv[1]))["fit"]["crops"][sys.argv[3]][sys.argv[2]]; print(f"{lo:.2f}:{hi:.2f}")' "$fitted" "$1" "$2"
 }
-tags=${TAGS:-preset fitted placed physics ground}
+tags=${TAGS:-preset fitted placed physics ground hidden}
 for tag in $tags; do
   sensor=$([ $tag = preset ] && echo hdl32e || echo "$fitted")
   for cls in car pole; do
@@ -21,6 +22,7 @@ for tag in $tags; do
     physics=()
     [ $tag = physics ] && physics=(--footprint --echo-separation 0.75)
     [ $tag = ground ] && physics=(--footprint --echo-separation 0.75 --ground-margin 0.25)
+    [ $tag = hidden ] && physics=(--hidden-below "$(crops $cls hidden_below_m)")
     if [ $tag != preset ] && [ $tag != fitted ]; then
       distance=$(crops $cls distance_m)
       [ $cls = pole ] && size=$(crops $cls object_height_m)  # a pole's largest dimension is its height
