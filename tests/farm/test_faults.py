@@ -275,7 +275,7 @@ def test_skipped_inputs_are_recorded_in_the_card_and_give_status_1(tree, tmp_pat
     assert run_farm(discover_objects(tree), out, params=PARAMS, options=RunOptions(progress=False)).exit_status == 0
 
 
-# -- issue 15: a long native call, a killed worker ----------------------------------------------------
+# -- a long native call, a killed worker ----------------------------------------------------------
 #: Imported by every Python process started with its folder first on PYTHONPATH (the CLI and its
 #: spawned workers): makes ``load_mesh`` of the mesh named by ZO_TEST_HOLD a long native call.
 _HOLD_HOOK = """
@@ -291,8 +291,9 @@ if os.environ.get("ZO_TEST_HOLD"):
         if name in str(source):
             # what a long Embree or GL call does to Python: signals wait until it returns
             signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM, signal.SIGINT})
-            with open(marker, "w") as f:
+            with open(marker + ".part", "w") as f:  # whole or absent: the test reads the pid once the file exists
                 f.write(str(os.getpid()))
+            os.replace(marker + ".part", marker)
             time.sleep(600)
             signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGTERM, signal.SIGINT})
         return _load_mesh(source, *args, **kwargs)

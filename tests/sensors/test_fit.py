@@ -152,6 +152,8 @@ def test_fit_sensor_command_on_lidarnet_style_csvs(tmp_path: Path, capsys) -> No
     assert 5.0 < lo < hi < 15.0 and f"| {label} | 6 |" in out.with_suffix(".md").read_text()
     h_lo, h_hi = spec["fit"]["crops"]["object_height_m"][label]
     assert 1.0 < h_lo <= h_hi <= 1.5 + 0.1  # 1.5 m boxes (range noise 2 cm)
+    b_lo, b_hi = spec["fit"]["crops"]["hidden_below_m"][label]
+    assert 0.0 <= b_lo <= b_hi and f"| {h_lo:.2f}–{h_hi:.2f} | {b_lo:.2f}–{b_hi:.2f} |" in out.with_suffix(".md").read_text()
     assert main(["fit-sensor", str(tmp_path / "scans"), "--sensor", "hdl32e", "--out", str(tmp_path / "f.txt")]) == 2
 
 
