@@ -47,12 +47,14 @@ def farm_datasets(
         ``object_index``, ``pose_index``, ``sample_index`` (int64), ``elevation_deg``,
         ``azimuth_deg`` (the sensor seen from the object, degrees), ``n_visible`` (returns);
         and the placement: ``radius`` (mesh units), ``distance_m``, ``sensor_height_m``,
-        ``object_azimuth_deg``, ``yaw_deg``, ``size_m`` (float64), ``ring (B, n_points) int16``.
+        ``object_azimuth_deg``, ``yaw_deg``, ``size_m`` (float64), ``ring (B, n_points) int16``;
+        ``hidden_below_m`` (float64, metres) when ``distributions`` hides the objects' bottoms.
     """
     clouds = lidar_object_samples(mesh, sensor, name=name, n_samples=n_samples, n_points=n_points, seed=seed,
                                   distributions=distributions, label=label, backend=backend)  # fmt: skip
     b = len(clouds)
     f64 = lambda values: np.asarray(values, dtype=np.float64).reshape(b)  # noqa: E731
+    hidden = {} if distributions.hidden_below_m is None else {"hidden_below_m": f64([c.extra["hidden_below_m"] for c in clouds])}
     return {
         "data": np.stack([c.points for c in clouds]) if b else np.zeros((0, n_points, 3), np.float32),
         "label": np.full(b, label, dtype=np.int64),
@@ -70,4 +72,5 @@ def farm_datasets(
         "size_m": f64([c.extra["size_m"] for c in clouds]),
         "ring": (np.stack([c.extra["ring"] for c in clouds]).astype(np.int16) if b and clouds[0].extra["ring"] is not None
                  else np.zeros((b, n_points), np.int16)),
+        **hidden,
     }  # fmt: skip
