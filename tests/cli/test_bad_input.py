@@ -1054,6 +1054,9 @@ def test_first_day_mistakes_get_messages_that_say_what_to_do(tmp_path, capsys):
         (["--ground-margin", "0.5"], r"--ground-margin .* needs --crop"),
         (["--crop", "--ground-margin", "nan"], r"ground_margin_m must be a number >= 0 metres, got nan"),
         (["--sensor", "riegl-q1560", "--footprint"], r"model spinning LiDARs; riegl-q1560 is not one"),
+        (["--hidden-below", "0.5"], r"--hidden-below .* needs --crop"),
+        (["--crop", "--hidden-below=-0.2:0.5"], r"--hidden-below must be >= 0 metres above the ground, got '-0\.2:0\.5'"),
+        (["--crop", "--hidden-below", "low"], r"--hidden-below must be a number or LO:HI, got 'low'"),
     ],
 )
 def test_return_physics_options_of_scan_are_usage_errors(tmp_path: Path, capsys, options: list, message: str) -> None:
@@ -1075,5 +1078,7 @@ def test_return_physics_options_apply_to_a_scene_file_too(tmp_path: Path, capsys
         with np.load(npz) as data:
             return len(data["points"])
 
+    code, err = _main_exit(["scan", str(path), "--crop", "--out", str(tmp_path / "c")], capsys)
+    assert code == 2 and re.search(r"--crop keeps one mesh's returns; .* is a scene file", err), err
     # a 7-ray footprint widens the box by the divergence cone: more returns than the centre ray alone
     assert returns("wide", "--footprint") > returns("plain")
