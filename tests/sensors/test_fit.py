@@ -158,7 +158,7 @@ def test_fit_sensor_command_on_lidarnet_style_csvs(tmp_path: Path, capsys) -> No
 
 
 def test_crop_bottoms_are_percentiles_of_the_lowest_returns_above_the_fitted_ground() -> None:
-    from zbuf_occlude.sensors.fit import fit_crop_bottoms, fit_sensor_height
+    from zbuf_occlude.sensors.fit import fit_crop_bottoms, fit_crop_heights, fit_sensor_height
 
     # one scan per depth: the lowest return 1.8 m below the sensor for six, higher for two
     depths = [1.8] * 6 + [1.2, 1.5]
@@ -169,6 +169,8 @@ def test_crop_bottoms_are_percentiles_of_the_lowest_returns_above_the_fitted_gro
     assert fit_crop_bottoms(clouds, 1.8, (0.0, 100.0)) == pytest.approx((0.0, 0.6))
     assert fit_crop_bottoms(clouds, 1.8, (90.0, 90.0))[0] == pytest.approx(np.percentile([0] * 6 + [0.3, 0.6], 90))
     assert fit_crop_bottoms(clouds, 1.7, (0.0, 0.0)) == (0.0, 0.0)
+    # heights: the top return (0.2 m above the sensor) above the ground, whatever the bottom
+    assert fit_crop_heights(clouds, 1.8, (0.0, 100.0)) == pytest.approx((2.0, 2.0))
     with pytest.raises(InvalidInputError, match="sensor_height_m"):
         fit_crop_bottoms(clouds, float("nan"))
     with pytest.raises(InvalidInputError, match="quantile"):
@@ -195,3 +197,7 @@ def test_fit_recovers_the_ground_and_the_hidden_bottoms_of_simulated_crops() -> 
     assert 0.0 <= lo <= hi <= gap
     lo, hi = crops["hidden_below_m"]["cut"]
     assert 0.5 - gap <= lo <= hi <= 0.5 + gap and lo > crops["hidden_below_m"]["whole"][1]
+    # both stand 1 m tall: a hidden bottom does not make the fitted object shorter
+    for label in ("whole", "cut"):
+        lo, hi = crops["object_height_m"][label]
+        assert 1.0 - gap <= lo <= hi <= 1.0 + (1.8 - crops["sensor_height_m"]) + 1e-6

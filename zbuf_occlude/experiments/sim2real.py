@@ -138,7 +138,7 @@ def _fit_sensor(scans: list, base, labels: np.ndarray, names: list[str]):
 
     Returns the fitted Lidar, the crops' placement per class (``{class: {"distance_m": (lo_m, hi_m),
     "hidden_below_m": (lo_m, hi_m)}}``: the sensor's distances and the objects' hidden bottoms),
-    ``{class: SizeRange}`` (visible heights) and the sensor's JSON with the fit and the ``crops`` block.
+    ``{class: SizeRange}`` (heights: the top return above the ground) and the sensor's JSON with the fit and the ``crops`` block.
     """
     from zbuf_occlude.experiments.sensor_fit import fit_to_scans
     from zbuf_occlude.sensors.lidar import Lidar

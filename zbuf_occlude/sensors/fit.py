@@ -42,8 +42,8 @@ replacement, seed given).  Nothing depends on file names or class labels.
 
 Where the crops stand and how tall their objects are is the scene's, not the sensor's, and is
 fitted per class of the user's scans (:func:`crop_placement_json`): the sensor's horizontal
-distance to each scan's centroid (:func:`fit_crop_distances`), each scan's vertical extent
-(:func:`fit_crop_heights`) and how high above the ground its lowest return lies
+distance to each scan's centroid (:func:`fit_crop_distances`), each scan's height
+(:func:`fit_crop_heights`: its top above the ground) and how high above the ground its lowest return lies
 (:func:`fit_crop_bottoms`, with the ground from :func:`fit_sensor_height`), as percentile
 intervals to draw uniformly.
 """
@@ -81,6 +81,7 @@ PLANE_NEIGHBOURS = 24
 #: Fewest returns a scan needs to take part in the fit.
 MIN_RETURNS = 20
 _GROUND_SLICE_M = 0.15
+_MIN_HEIGHT_M = 0.05  # a fitted object height is at least this (a scan whose top lies at or below the fitted ground)
 _PLANARITY = 0.3
 _GROUND_NORMAL_COS = math.cos(math.radians(25.0))
 
@@ -399,18 +400,40 @@ def fit_crop_distances(clouds: Sequence[NDArray[np.floating]], quantiles: tuple[
     return _percentiles_per_scan(clouds, quantiles, lambda p: np.hypot(*p[:, :2].mean(axis=0)), "fit_crop_distances")
 
 
-def fit_crop_heights(clouds: Sequence[NDArray[np.floating]], quantiles: tuple[float, float] = DISTANCE_QUANTILES) -> tuple[float, float]:
-    """The interval of the objects' visible heights in real object scans, for the crops' sizes.
+def fit_crop_heights(clouds: Sequence[NDArray[np.floating]], sensor_height_m: float,
+                     quantiles: tuple[float, float] = DISTANCE_QUANTILES) -> tuple[float, float]:  # fmt: skip
+    """The interval of the objects' heights in real object scans, for the crops' sizes.
 
-    The visible height of a scan is the vertical extent of its returns (z up, metres); the
-    interval is their ``quantiles`` percentiles, to be drawn uniformly as a
-    :class:`~zbuf_occlude.mesh.sizes.SizeRange` of dimension ``"height"``.  It is what the
-    sensor saw: an object taller than the top beam reaches at its distance, or one whose
-    bottom the segmentation cut off, counts as shorter, and the crops are made as tall as that.
+    An object's height is how high above the ground its top return lies, ``max z +
+    sensor_height_m`` (z up, metres); the interval is their ``quantiles`` percentiles, to be
+    drawn uniformly as a :class:`~zbuf_occlude.mesh.sizes.SizeRange` of dimension ``"height"``.
+    Measured from the ground, not from the lowest return, it stays the object's height where
+    the bottom is hidden (:func:`fit_crop_bottoms` gives how much), so a crop scaled to it and
+    cut as fitted shows what the real scan showed.  It is what the sensor saw at the top: an
+    object taller than the top beam reaches at its distance counts as shorter, and the crops
+    are made as tall as that.
 
-    Parameters and errors as :func:`fit_crop_distances`.
+    Parameters
+    ----------
+    clouds : sequence of (N_i, 3) float
+        Segmented object scans of one class; sensor at the origin, z up, metres.
+    sensor_height_m : float
+        :func:`fit_sensor_height` of the user's scans, metres.
+    quantiles : (lo, hi)
+        Percentiles in [0, 100], lo <= hi.
+
+    Returns
+    -------
+    (lo_m, hi_m) : tuple of float
+        Metres, > 0.
+
+    Raises
+    ------
+    InvalidInputError
+        As :func:`fit_crop_distances`, or a sensor height that is not finite.
     """
-    return _percentiles_per_scan(clouds, quantiles, lambda p: np.ptp(p[:, 2]), "fit_crop_heights")
+    h = _check_height(sensor_height_m)
+    return _percentiles_per_scan(clouds, quantiles, lambda p: max(float(p[:, 2].max()) + h, _MIN_HEIGHT_M), "fit_crop_heights")
 
 
 def fit_sensor_height(clouds: Sequence[NDArray[np.floating]], quantile: float = SENSOR_HEIGHT_QUANTILE) -> float:
@@ -473,10 +496,15 @@ def fit_crop_bottoms(clouds: Sequence[NDArray[np.floating]], sensor_height_m: fl
     InvalidInputError
         As :func:`fit_crop_distances`, or a sensor height that is not finite.
     """
+    h = _check_height(sensor_height_m)
+    return _percentiles_per_scan(clouds, quantiles, lambda p: max(float(p[:, 2].min()) + h, 0.0), "fit_crop_bottoms")
+
+
+def _check_height(sensor_height_m) -> float:
     h = float(sensor_height_m)
     if not math.isfinite(h):
         raise InvalidInputError(f"sensor_height_m must be finite metres, got {sensor_height_m!r}")
-    return _percentiles_per_scan(clouds, quantiles, lambda p: max(float(p[:, 2].min()) + h, 0.0), "fit_crop_bottoms")
+    return h
 
 
 def crop_placement_json(clouds: Sequence[NDArray[np.floating]], labels: Sequence[str]) -> dict:
@@ -499,7 +527,7 @@ def crop_placement_json(clouds: Sequence[NDArray[np.floating]], labels: Sequence
         of_label = [c for c, y in zip(clouds, labels) if y == label]
         try:
             out["distance_m"][label] = list(fit_crop_distances(of_label))
-            out["object_height_m"][label] = list(fit_crop_heights(of_label))
+            out["object_height_m"][label] = list(fit_crop_heights(of_label, height))
             out["hidden_below_m"][label] = list(fit_crop_bottoms(of_label, height))
         except InvalidInputError as exc:
             raise InvalidInputError(f"class {label!r}: {exc}") from None
