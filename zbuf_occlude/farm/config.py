@@ -247,14 +247,10 @@ class FarmParams:
             for field in ("sensor", *_SENSOR_FIELDS, "sensor_reflectivity", "sensor_footprint", "sensor_ground_margin_m", "sensor_hidden_below_m"):
                 del d[field]
         else:
-            d.update({field: list(d[field]) for field in _SENSOR_FIELDS})
-            if self.sensor_reflectivity is not None:
-                d["sensor_reflectivity"] = list(self.sensor_reflectivity)
+            d.update({field: list(d[field]) for field in (*_SENSOR_FIELDS, "sensor_reflectivity", "sensor_hidden_below_m") if d[field] is not None})
             for field in ("sensor_ground_margin_m", "sensor_hidden_below_m"):  # the digest of sensor data sets made before they existed
-                if getattr(self, field) is None:
+                if d[field] is None:
                     del d[field]
-            if self.sensor_hidden_below_m is not None:
-                d["sensor_hidden_below_m"] = list(self.sensor_hidden_below_m)
         return d
 
     def digest(self) -> str:

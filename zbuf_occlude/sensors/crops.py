@@ -37,14 +37,22 @@ log = logging.getLogger(__name__)
 _CROP_STREAM = 0x5C4E  # keeps crop draws apart from the farm's other streams of one seed
 
 
-def _interval(name: str, value) -> tuple[float, float]:
+def _interval(name: str, value, lowest: float | None = None) -> tuple[float, float]:
     try:
         lo, hi = (float(value), float(value)) if np.isscalar(value) else (float(value[0]), float(value[1]))
     except (TypeError, ValueError, IndexError):
         lo, hi = math.nan, math.nan
     if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
         raise InvalidInputError(f"{name} must be a number or an interval lo <= hi, got {value!r}")
+    if lowest is not None and lo < lowest:
+        raise InvalidInputError(f"{name} must be >= {lowest:g}, got {value!r}")
     return lo, hi
+
+
+def _draw(interval: tuple[float, float], rng: np.random.Generator) -> float:
+    """A uniform draw from ``(lo, hi)``; ``lo`` itself, and no draw, when ``lo == hi``."""
+    lo, hi = interval
+    return lo if lo == hi else float(rng.uniform(lo, hi))
 
 
 def check_ground_margin(value, option: str = "ground_margin_m") -> float:
@@ -129,16 +137,11 @@ class CropDistributions:
             if min(lo for lo, _ in ext) <= 0:
                 raise InvalidInputError(f"extents_m must be > 0 metres, got {self.extents_m!r}")
             object.__setattr__(self, "extents_m", ext)
-        if self.reflectivity is not None:
-            object.__setattr__(self, "reflectivity", _interval("reflectivity", self.reflectivity))
-            if self.reflectivity[0] < 0:
-                raise InvalidInputError(f"reflectivity must be >= 0, got {self.reflectivity!r}")
+        for name in ("reflectivity", "hidden_below_m"):  # optional intervals of values >= 0
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, _interval(name, getattr(self, name), lowest=0.0))
         if self.ground_margin_m is not None:
             object.__setattr__(self, "ground_margin_m", check_ground_margin(self.ground_margin_m))
-        if self.hidden_below_m is not None:
-            object.__setattr__(self, "hidden_below_m", _interval("hidden_below_m", self.hidden_below_m))
-            if self.hidden_below_m[0] < 0:
-                raise InvalidInputError(f"hidden_below_m must be >= 0 metres, got {self.hidden_below_m!r}")
         if self.distance_m[0] <= 0 or self.size_m[0] <= 0 or self.height_m[0] < 0:
             raise InvalidInputError(f"distance_m and size_m must be > 0 and height_m >= 0 metres, got {self}")
 
@@ -149,18 +152,16 @@ def draw_placement(dist: CropDistributions, rng: np.random.Generator) -> dict[st
     out = {name: float(rng.uniform(*getattr(dist, name))) for name in ("distance_m", "height_m", "azimuth_deg", "yaw_deg", "size_m")}
     # further draws only where an interval asks for them, so fixed values keep earlier streams
     if dist.extents_m is not None:
-        ext = [lo if lo == hi else float(rng.uniform(lo, hi)) for lo, hi in dist.extents_m]
+        ext = [_draw(interval, rng) for interval in dist.extents_m]
         if dist.round_xy:
             ext[1] = ext[0]
         out["extents_m"] = tuple(ext)
         out["size_m"] = max(out["extents_m"])
     if dist.reflectivity is not None:
-        lo, hi = dist.reflectivity
-        out["reflectivity"] = lo if lo == hi else float(rng.uniform(lo, hi))
+        out["reflectivity"] = _draw(dist.reflectivity, rng)
         out["ground_reflectivity"] = float(dist.ground_reflectivity)
     if dist.hidden_below_m is not None:
-        lo, hi = dist.hidden_below_m
-        out["hidden_below_m"] = lo if lo == hi else float(rng.uniform(lo, hi))
+        out["hidden_below_m"] = _draw(dist.hidden_below_m, rng)
     if dist.ground_margin_m is not None:  # no draw: a fixed value
         out["ground_margin_m"] = dist.ground_margin_m
     return out

@@ -461,10 +461,7 @@ def fit_sensor_height(clouds: Sequence[NDArray[np.floating]], quantile: float = 
     InvalidInputError
         Fewer than 3 non-empty scans, a scan that is not finite (N, 3), or a bad quantile.
     """
-    q = float(quantile)
-    if not 0.0 <= q <= 100.0:
-        raise InvalidInputError(f"quantile must be in [0, 100], got {quantile!r}")
-    return _percentiles_per_scan(clouds, (q, q), lambda p: -p[:, 2].min(), "fit_sensor_height")[0]
+    return _percentiles_per_scan(clouds, (quantile, quantile), lambda p: -p[:, 2].min(), "fit_sensor_height")[0]
 
 
 def fit_crop_bottoms(clouds: Sequence[NDArray[np.floating]], sensor_height_m: float,
@@ -473,28 +470,12 @@ def fit_crop_bottoms(clouds: Sequence[NDArray[np.floating]], sensor_height_m: fl
 
     A scan's lowest return lies ``min z + sensor_height_m`` above the ground (clipped at 0);
     the interval is their ``quantiles`` percentiles, to be drawn uniformly as
-    :class:`~zbuf_occlude.sensors.crops.CropDistributions` ``hidden_below_m``.  A real bottom
-    includes the gap between the ground and the lowest beam that hits the object, which the
-    simulated scan makes again under the cut, so the simulated bottoms lie slightly higher.
+    :class:`~zbuf_occlude.sensors.crops.CropDistributions` ``hidden_below_m`` (metres, >= 0).  A
+    real bottom includes the gap between the ground and the lowest beam that hits the object,
+    which the simulated scan makes again under the cut, so the simulated bottoms lie slightly
+    higher.
 
-    Parameters
-    ----------
-    clouds : sequence of (N_i, 3) float
-        Segmented object scans of one class; sensor at the origin, z up, metres.
-    sensor_height_m : float
-        :func:`fit_sensor_height` of the user's scans, metres.
-    quantiles : (lo, hi)
-        Percentiles in [0, 100], lo <= hi.
-
-    Returns
-    -------
-    (lo_m, hi_m) : tuple of float
-        Metres, >= 0.
-
-    Raises
-    ------
-    InvalidInputError
-        As :func:`fit_crop_distances`, or a sensor height that is not finite.
+    Parameters, returns and errors as :func:`fit_crop_heights`.
     """
     h = _check_height(sensor_height_m)
     return _percentiles_per_scan(clouds, quantiles, lambda p: max(float(p[:, 2].min()) + h, 0.0), "fit_crop_bottoms")
