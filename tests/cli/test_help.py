@@ -162,6 +162,13 @@ def test_scan_distance_limit_is_half_the_largest_horizontal_size() -> None:
         check_outside(CropDistributions(distance_m=(2.2, 9.0), size_m=(4.0, 4.5)))
     with pytest.raises(InvalidInputError, match="at least 3 m"):
         check_outside(CropDistributions(distance_m=(2.5, 9.0), extents_m=((1.0, 2.0), (1.0, 6.0), (1.0, 1.0))))
+    # a mesh's own proportions: a post 9 m tall and 0.9 m wide may stand 0.45 m away, and 3x as wide, 1.35 m
+    post = CropDistributions(distance_m=(0.45, 9.0), size_m=(6.0, 9.0))
+    check_outside(post, (0.1, 0.05, 1.0))
+    with pytest.raises(InvalidInputError, match="at least 4.5 m"):
+        check_outside(post)
+    with pytest.raises(InvalidInputError, match=r"up to 2.7 m across\): use a distance of at least 1.35 m"):
+        check_outside(CropDistributions(distance_m=(0.45, 9.0), size_m=(6.0, 9.0), width_scale=(1.0, 3.0)), (0.1, 0.05, 1.0))
 
 
 # -- a wheel has no sample meshes --------------------------------------------------------------

@@ -391,6 +391,9 @@ def test_fit_sensor_fits_crop_distances_and_heights_per_class() -> None:
     # boxes on the ground: their bottoms are seen, within a ring of it, and the placement carries them
     assert {k: list(v["hidden_below_m"]) for k, v in placement.items()} == crops["hidden_below_m"]
     assert all(0.0 <= lo <= hi < 0.5 for lo, hi in crops["hidden_below_m"].values())
+    # and their widths across the line of sight: 1.5 m boxes face-on, less at most an azimuth step at each edge (0.11 m at 18 m)
+    assert {k: list(v["across_sight_width_m"]) for k, v in placement.items()} == crops["across_sight_width_m"]
+    assert all(1.39 < lo <= hi < 1.52 for lo, hi in crops["across_sight_width_m"].values())
     with pytest.raises(InvalidInputError, match="--fit-sensor: class 'pole'.*at least 3"):
         _fit_sensor(scans[:6], lidar_preset("hdl32e"), labels[:6], ["car", "pole"])
 
@@ -418,10 +421,12 @@ def test_the_fitted_placed_set_draws_the_fitted_distances_and_the_others_the_pre
     from zbuf_occlude.sensors import crops, lidar_preset
 
     seen: list[tuple[str, tuple[float, float]]] = []
+    widths: list[tuple[str, tuple[float, float], tuple[float, float] | None]] = []
     real = crops.lidar_object_samples
 
     def spy(mesh, sensor, **kw):
         seen.append((sensor.name, kw["distributions"].distance_m, kw["distributions"].hidden_below_m))
+        widths.append((sensor.name, kw["distributions"].distance_m, kw["distributions"].width_scale))
         return real(mesh, sensor, **kw)
 
     monkeypatch.setattr(crops, "lidar_object_samples", spy)
@@ -429,7 +434,8 @@ def test_the_fitted_placed_set_draws_the_fitted_distances_and_the_others_the_pre
     fitted = lidar_preset("hdl32e").with_(name="fitted")
     heights = {"car": SizeRange("height", 1.0, 1.0), "pole": SizeRange("height", 2.0, 2.0)}
     sets = build_sets(meshes, ["car", "pole"], 2, 32, 0, sensor=lidar_preset("hdl32e"), resolution=128, dense_points=2000, keep_scale=True,
-                      fitted_sensor=fitted, fitted_placement={"car": {"distance_m": (6.0, 7.0), "hidden_below_m": (0.2, 0.4)}, "pole": {"distance_m": (8.0, 9.0)}},
+                      fitted_sensor=fitted, fitted_placement={"car": {"distance_m": (6.0, 7.0), "hidden_below_m": (0.2, 0.4)},
+                                        "pole": {"distance_m": (8.0, 9.0), "across_sight_width_m": (0.4, 0.8)}},
                       fitted_sizes=heights)  # fmt: skip
     assert sets[FITTED].points.shape == sets[FITTED_PLACED].points.shape == (4, 32, 3)
     # kept in metres: the placed crops are as tall as the fitted heights at most, the others' poles taller (2.5-9 m)
@@ -439,6 +445,10 @@ def test_the_fitted_placed_set_draws_the_fitted_distances_and_the_others_the_pre
     # the preset sensor and the fitted set at the preset's distances; the placed set at the fitted ones
     assert {(d, h) for name, d, h in seen if name == "hdl32e"} == {(LIDAR_PLACEMENT["distance_m"], None)}
     assert {(d, h) for name, d, h in seen if name == "fitted"} == {(LIDAR_PLACEMENT["distance_m"], None), ((6.0, 7.0), (0.2, 0.4)), ((8.0, 9.0), None)}
+    # only the placed poles are stretched, each pole mesh to the fitted widths (twice as wide at the top as at the bottom)
+    stretched = [w for name, d, w in widths if w is not None]
+    assert {d for name, d, w in widths if w is not None} == {(8.0, 9.0)} and all(hi == pytest.approx(2 * lo) for lo, hi in stretched)
+    assert sets[FITTED_PLACED].points[sets[FITTED_PLACED].labels == 1].shape == (2, 32, 3)
 
 
 def test_validate_on_fit_half_validates_mesh_sets_on_the_fit_half_and_trains_on_every_mesh(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -43,19 +44,27 @@ def parse_interval(text: str, option: str) -> tuple[float, float]:
     return parts[0], parts[1]
 
 
-def check_outside(dist) -> None:
+def check_outside(dist, extents=None) -> None:
     """Refuse a ``--distance`` that may put the sensor inside the object.
 
     The object's footprint centre lies ``distance_m`` from the sensor and its largest
-    horizontal dimension is up to ``size_m`` (or the X/Y ``extents_m``) high end, so a
-    distance below half of that may stand the sensor inside it (every ray starts inside).
+    horizontal dimension is up to ``size_m`` (or the X/Y ``extents_m``) high end, or, given the
+    mesh's ``extents (3,)``, its larger horizontal side scaled so, times the ``width_scale``
+    high end where it stretches the object; a distance below half of that may stand the sensor
+    inside it (every ray starts inside).
 
     Raises
     ------
     InvalidInputError
         Naming ``--distance`` and the smallest distance allowed.
     """
-    sizes = [dist.extents_m[0][1], dist.extents_m[1][1]] if dist.extents_m is not None else [dist.size_m[1]]
+    if dist.extents_m is not None:
+        sizes = [dist.extents_m[0][1], dist.extents_m[1][1]]
+    else:
+        e = None if extents is None else np.asarray(extents, dtype=np.float64)
+        sizes = [dist.size_m[1] * (1.0 if e is None or not e.max() > 0 else float(e[:2].max() / e.max()))]
+    if dist.width_scale is not None:
+        sizes = [v * dist.width_scale[1] for v in sizes]
     half = max(sizes) / 2
     if dist.distance_m[0] < half:
         raise InvalidInputError(
@@ -97,6 +106,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
         raise InvalidInputError("--ground-margin chooses the ground kept in a crop: it needs --crop")
     if args.hidden_below is not None and not args.crop:
         raise InvalidInputError("--hidden-below hides the bottom of the object in a crop: it needs --crop")
+    if args.across_sight_width is not None and not args.crop:
+        raise InvalidInputError("--across-sight-width makes the object's crops as wide as real scans: it needs --crop")
     out = Path(args.out)
     formats = ("npz", "ply") if args.format == "both" else (args.format,)
     src = Path(args.mesh_or_scene)
@@ -142,7 +153,18 @@ def cmd_scan(args: argparse.Namespace) -> int:
             ground_reflectivity=args.ground_reflectivity, ground_margin_m=args.ground_margin,
             hidden_below_m=None if args.hidden_below is None else _hidden_below(args.hidden_below),
         )  # fmt: skip
-        check_outside(dist)
+        if args.across_sight_width is not None:
+            from zbuf_occlude.sensors.fit import fit_width_scale
+
+            width_m = parse_interval(args.across_sight_width, "--across-sight-width")
+            if width_m[0] < 0:
+                raise InvalidInputError(f"--across-sight-width must be >= 0 metres, got {args.across_sight_width!r}")
+            try:
+                dist = replace(dist, width_scale=fit_width_scale(mesh, sensor, dist, width_m, seed=args.seed))
+            except InvalidInputError as exc:
+                raise InvalidInputError(f"{src}: --across-sight-width: {exc}") from None
+            log.info("%s: width_scale %.3g–%.3g", src.name, *dist.width_scale)
+        check_outside(dist, None if isinstance(mesh, dict) else np.ptp(np.asarray(mesh.vertices), axis=0))
         for k in range(args.samples):
             rng = derive_rng(args.seed, object_key(src.name), k)
             placement = draw_placement(dist, rng)
@@ -202,6 +224,11 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         "--hidden-below", metavar="M or LO:HI",
         help="with --crop: drop the object's returns lower than this height above the ground, metres, drawn per sample "
         "(a bottom hidden by parked cars or kerbs, or removed with the ground; fit-sensor fits it per class)",
+    )  # fmt: skip
+    p.add_argument(
+        "--across-sight-width", metavar="M or LO:HI",
+        help="with --crop: stretch the object horizontally so that its crops are, at the median, this wide across the "
+        "line of sight, metres, drawn per sample (posts as thick as real trunks; fit-sensor fits it per class)",
     )  # fmt: skip
     p.add_argument(
         "--frame", choices=("sensor", "world"), default="sensor",

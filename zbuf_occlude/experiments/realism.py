@@ -8,7 +8,9 @@ For each object cloud, in a frame centred on the sensor with z up (metres):
 * range: distance from the sensor to the cloud's centroid, metres; the point count against it
   gives the exponent ``b`` of ``count ∝ range^b`` (least squares in log–log over the clouds);
 * nearest-neighbour spacing: median distance of a point to its nearest other point, metres;
-* vertical extent: ``max z − min z``, metres.
+* vertical extent: ``max z − min z``, metres;
+* across-sight width: how wide the cloud shows across the line of sight, metres
+  (:func:`zbuf_occlude.sensors.fit.across_sight_width`).
 
 Two sets are compared by :func:`compare_sets`; :func:`realism_report` writes the table (Markdown
 and CSV) and a side-by-side figure.  Sets are read by :func:`read_object_clouds` from scan NPZ
@@ -28,6 +30,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.atomic import atomic_path, write_csv, write_text
+from zbuf_occlude.sensors.fit import across_sight_width
 from zbuf_occlude.sensors.scan import read_scan_npz
 from zbuf_occlude.sensors.scene import GROUND_ID
 
@@ -119,7 +122,7 @@ def ring_spacings_deg(points_m: NDArray[np.floating], *, ring_gap_deg: float = R
 
 
 def cloud_stats(cloud: ObjectCloud, *, ring_gap_deg: float = RING_GAP_DEG) -> dict:
-    """Per-cloud statistics: ``n_points, range_m, n_rings, ring_spacings_deg, nn_spacing_m, vertical_extent_m``."""
+    """Per-cloud statistics: ``n_points, range_m, n_rings, ring_spacings_deg, nn_spacing_m, vertical_extent_m, across_sight_width_m``."""
     from scipy.spatial import cKDTree
 
     p = cloud.points_m
@@ -132,6 +135,7 @@ def cloud_stats(cloud: ObjectCloud, *, ring_gap_deg: float = RING_GAP_DEG) -> di
         "ring_spacings_deg": spacing,
         "nn_spacing_m": nn,
         "vertical_extent_m": float(np.ptp(p[:, 2])) if len(p) else 0.0,
+        "across_sight_width_m": across_sight_width(p),
     }
 
 
@@ -160,6 +164,7 @@ def _summary(stats: list[dict]) -> dict:
         "range_m_p5_p95": (float(np.percentile(r, 5)), float(np.percentile(r, 95))),
         "median_nn_spacing_m": float(np.nanmedian([s["nn_spacing_m"] for s in stats])),
         "median_vertical_extent_m": float(np.median([s["vertical_extent_m"] for s in stats])),
+        "median_across_sight_width_m": float(np.median([s["across_sight_width_m"] for s in stats])),
         "_spacing": spacing, "_range": r, "_count": n, "_nn": np.array([s["nn_spacing_m"] for s in stats]),
     }  # fmt: skip
 
@@ -208,6 +213,7 @@ def compare_sets(generated: list[ObjectCloud], real: list[ObjectCloud], *, ring_
         {"metric": "median points per cloud", "generated": g["median_points"], "real": r["median_points"], "difference": "", "target": "", "met": ""},
         {"metric": "median nearest-neighbour spacing, m", "generated": g["median_nn_spacing_m"], "real": r["median_nn_spacing_m"], "difference": g["median_nn_spacing_m"] - r["median_nn_spacing_m"], "target": "", "met": ""},
         {"metric": "median vertical extent, m", "generated": g["median_vertical_extent_m"], "real": r["median_vertical_extent_m"], "difference": g["median_vertical_extent_m"] - r["median_vertical_extent_m"], "target": "", "met": ""},
+        {"metric": "median across-sight width, m", "generated": g["median_across_sight_width_m"], "real": r["median_across_sight_width_m"], "difference": g["median_across_sight_width_m"] - r["median_across_sight_width_m"], "target": "", "met": ""},
     ]  # fmt: skip
     return rows, g, r
 

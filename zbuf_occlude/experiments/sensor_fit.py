@@ -102,13 +102,14 @@ def fit_sensor_to_scans(real: str | os.PathLike, sensor: str, out: str | os.Path
     if crops is not None:
         lo_q, hi_q = crops["quantiles"]
         text += (f"\nPer class, {lo_q:g}th to {hi_q:g}th percentile over its scans: the sensor's horizontal distance to the "
-                 "returns' centroid (crops' `distance_m`), and the top return's and the lowest return's heights above the "
+                 "returns' centroid (crops' `distance_m`), the top return's and the lowest return's heights above the "
                  f"ground (crops' `object_height_m` and `hidden_below_m`; the ground {crops['sensor_height_m']:.2f} m below "
-                 "the sensor):\n\n"
-                 "| class | scans | distance, m | top return, m | lowest return, m |\n|---|---|---|---|---|\n")  # fmt: skip
+                 "the sensor), and the width across the line of sight (crops' `across_sight_width_m`):\n\n"
+                 "| class | scans | distance, m | top return, m | lowest return, m | width, m |\n|---|---|---|---|---|---|\n")  # fmt: skip
         for k, (lo, hi) in crops["distance_m"].items():
             h_lo, h_hi = crops["object_height_m"][k]
             b_lo, b_hi = crops["hidden_below_m"][k]
-            text += f"| {k} | {counts[k]} | {lo:.1f}–{hi:.1f} | {h_lo:.2f}–{h_hi:.2f} | {b_lo:.2f}–{b_hi:.2f} |\n"
+            w_lo, w_hi = crops["across_sight_width_m"][k]
+            text += f"| {k} | {counts[k]} | {lo:.1f}–{hi:.1f} | {h_lo:.2f}–{h_hi:.2f} | {b_lo:.2f}–{b_hi:.2f} | {w_lo:.2f}–{w_hi:.2f} |\n"
     write_text(md, text)
     return fit, out, md

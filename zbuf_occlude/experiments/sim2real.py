@@ -18,12 +18,14 @@ classifier to recognise real, partial scans?), asked on real data with the proto
   the real scans are split once into the same fixed stratified halves as ``real→real``'s (a seed
   of its own, independent of the run's seeds; the split uses the class indices and the scans'
   order only), the sensor is fitted on the first half (the half ``real→real`` trains on), and
-  so are, per class, the crops' sensor distances and the objects' heights (their visible
-  heights in the scans; :func:`zbuf_occlude.sensors.fit.crop_placement_json`);
+  so are, per class, the crops' sensor distances, the objects' heights (their visible
+  heights in the scans), their hidden bottoms and their widths across the line of sight
+  (:func:`zbuf_occlude.sensors.fit.crop_placement_json`);
   both are written to ``fitted_sensor.json``; two more training sets are made,
   :data:`~zbuf_occlude.experiments.sim2real_data.FITTED` (the fitted sensor, the ``lidar`` set's
   placements and sizes) and :data:`~zbuf_occlude.experiments.sim2real_data.FITTED_PLACED` (the
-  fitted sensor, distances and heights), and **every row is scored on the other half only**; the
+  fitted sensor, distances, heights, bottoms, and each mesh stretched to the widths:
+  :func:`zbuf_occlude.sensors.fit.fit_width_scale`), and **every row is scored on the other half only**; the
   fitted set is also tested against ``lidar``.  ``real_split.csv`` lists each scan's half;
 * with ``validate_on="fit-half"`` (needs ``fit_sensor``), the mesh-only sets are validated on the
   real scans of the fit half instead of held-out meshes (best epoch and early stopping), and train
@@ -137,7 +139,8 @@ def _fit_sensor(scans: list, base, labels: np.ndarray, names: list[str]):
     ``names``), every class's crop placement included.
 
     Returns the fitted Lidar, the crops' placement per class (``{class: {"distance_m": (lo_m, hi_m),
-    "hidden_below_m": (lo_m, hi_m)}}``: the sensor's distances and the objects' hidden bottoms),
+    "hidden_below_m": (lo_m, hi_m), "across_sight_width_m": (lo_m, hi_m)}}``: the sensor's
+    distances, the objects' hidden bottoms and their widths),
     ``{class: SizeRange}`` (heights: the top return above the ground) and the sensor's JSON with the fit and the ``crops`` block.
     """
     from zbuf_occlude.experiments.sensor_fit import fit_to_scans
@@ -150,7 +153,7 @@ def _fit_sensor(scans: list, base, labels: np.ndarray, names: list[str]):
     except InvalidInputError as exc:
         raise InvalidInputError(f"--fit-sensor: {exc}") from None
     crops = spec["fit"]["crops"]
-    placement = {k: {key: tuple(float(v) for v in crops[key][k]) for key in ("distance_m", "hidden_below_m")} for k in crops["distance_m"]}
+    placement = {k: {key: tuple(float(v) for v in crops[key][k]) for key in ("distance_m", "hidden_below_m", "across_sight_width_m")} for k in crops["distance_m"]}
     sizes = {k: SizeRange("height", max(float(lo), 0.05), max(float(hi), 0.05)) for k, (lo, hi) in crops["object_height_m"].items()}
     return fit.sensor, placement, sizes, spec
 

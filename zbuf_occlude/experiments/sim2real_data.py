@@ -27,7 +27,7 @@ from __future__ import annotations
 import fnmatch
 import logging
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -235,8 +235,16 @@ def _occluded(entry: MeshEntry, k: int, n_points: int, seed: int, rng: np.random
 def _lidar(entry: MeshEntry, k: int, n_points: int, seed: int, sensor, size: SizeRange, min_returns: int = MIN_RETURNS,
            placement: dict | None = None) -> tuple[list[NDArray], list[float]]:  # fmt: skip
     from zbuf_occlude.sensors.crops import CropDistributions, lidar_object_samples
+    from zbuf_occlude.sensors.fit import fit_width_scale
 
-    dist = CropDistributions(size_m=size_interval(entry.mesh.extents, size), **{**LIDAR_PLACEMENT, **(placement or {})})
+    keywords = {**LIDAR_PLACEMENT, **(placement or {})}
+    width_m = keywords.pop("across_sight_width_m", None)
+    dist = CropDistributions(size_m=size_interval(entry.mesh.extents, size), **keywords)
+    if width_m is not None:  # this mesh's stretch to the class's real widths
+        try:
+            dist = replace(dist, width_scale=fit_width_scale(entry.mesh, sensor, dist, width_m))
+        except InvalidInputError as exc:
+            raise InvalidInputError(f"{entry.path}: {exc}") from None
     good: list = []
     # Draw about as many crops as needed, then more under another name (new placements) while
     # crops come back with fewer than min_returns returns; at most _LIDAR_TRIES rounds.
@@ -287,7 +295,8 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
     ``occluded`` set's camera elevations are drawn uniformly in ``elevation_deg`` (degrees).
     ``placement`` gives a LiDAR set's :class:`~zbuf_occlude.sensors.crops.CropDistributions`
     keywords per class (``{class: {"distance_m": (lo, hi), "hidden_below_m": (lo, hi)}}``,
-    metres), over :data:`LIDAR_PLACEMENT`'s.
+    metres), over :data:`LIDAR_PLACEMENT`'s; its ``"across_sight_width_m": (lo, hi)`` stretches
+    each mesh of the class to those widths (:func:`zbuf_occlude.sensors.fit.fit_width_scale`).
 
     Raises
     ------

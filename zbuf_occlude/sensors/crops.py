@@ -113,6 +113,12 @@ class CropDistributions:
         it and the sensor (parked cars, kerbs, low hedges) or to a segmentation's ground
         removal.  A horizontal cut, not a ray-cast occluder.  None (default): nothing hidden.
         :func:`~zbuf_occlude.sensors.fit.fit_crop_bottoms` fits it per class to real scans.
+    width_scale : (lo, hi) or float, optional
+        Stretch the object's horizontal axes by this factor (> 0), drawn per sample, after the
+        scaling to ``size_m`` (which then measures the object before the stretch): posts made as
+        thick as the trunks a real scan shows, keeping their height.  None (default): the
+        mesh's own proportions.  :func:`~zbuf_occlude.sensors.fit.fit_width_scale` fits it to
+        the widths of real scans.
     """
 
     distance_m: tuple[float, float] = (5.0, 25.0)
@@ -126,6 +132,7 @@ class CropDistributions:
     ground_reflectivity: float = 0.15
     ground_margin_m: float | None = None
     hidden_below_m: tuple[float, float] | None = None
+    width_scale: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         for name in ("distance_m", "height_m", "azimuth_deg", "yaw_deg", "size_m"):
@@ -140,6 +147,10 @@ class CropDistributions:
         for name in ("reflectivity", "hidden_below_m"):  # optional intervals of values >= 0
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, _interval(name, getattr(self, name), lowest=0.0))
+        if self.width_scale is not None:
+            object.__setattr__(self, "width_scale", _interval("width_scale", self.width_scale, lowest=0.0))
+            if self.width_scale[0] <= 0:
+                raise InvalidInputError(f"width_scale must be > 0, got {self.width_scale!r}")
         if self.ground_margin_m is not None:
             object.__setattr__(self, "ground_margin_m", check_ground_margin(self.ground_margin_m))
         if self.distance_m[0] <= 0 or self.size_m[0] <= 0 or self.height_m[0] < 0:
@@ -148,7 +159,7 @@ class CropDistributions:
 
 def draw_placement(dist: CropDistributions, rng: np.random.Generator) -> dict[str, float]:
     """One placement ``{distance_m, height_m, azimuth_deg, yaw_deg, size_m}`` (five uniform draws, in that order),
-    then ``extents_m``, ``reflectivity`` and ``hidden_below_m`` where ``dist`` gives them (drawn only when an interval)."""
+    then ``extents_m``, ``reflectivity``, ``hidden_below_m`` and ``width_scale`` where ``dist`` gives them (drawn only when an interval)."""
     out = {name: float(rng.uniform(*getattr(dist, name))) for name in ("distance_m", "height_m", "azimuth_deg", "yaw_deg", "size_m")}
     # further draws only where an interval asks for them, so fixed values keep earlier streams
     if dist.extents_m is not None:
@@ -162,6 +173,8 @@ def draw_placement(dist: CropDistributions, rng: np.random.Generator) -> dict[st
         out["ground_reflectivity"] = float(dist.ground_reflectivity)
     if dist.hidden_below_m is not None:
         out["hidden_below_m"] = _draw(dist.hidden_below_m, rng)
+    if dist.width_scale is not None:
+        out["width_scale"] = _draw(dist.width_scale, rng)
     if dist.ground_margin_m is not None:  # no draw: a fixed value
         out["ground_margin_m"] = dist.ground_margin_m
     return out
@@ -225,14 +238,17 @@ def object_crop(
     az = math.radians(placement["azimuth_deg"])
     d = placement["distance_m"]
     size = placement.get("extents_m") or placement["size_m"]
+    width_scale = placement.get("width_scale", 1.0)
+    reach = placement["size_m"] * max(1.0, width_scale)  # the largest side after the stretch, at most
     if isinstance(sensor, AirborneScanner):
-        return _airborne_crop(mesh, sensor, placement, seed=seed, occluders=occluders, class_name=class_name, offset_m=d * math.sin(az), size=size)
-    obj = SceneObject(mesh, class_name, (d * math.cos(az), d * math.sin(az)), placement["yaw_deg"], size)
+        return _airborne_crop(mesh, sensor, placement, seed=seed, occluders=occluders, class_name=class_name, offset_m=d * math.sin(az), size=size,
+                              width_scale=width_scale, reach=reach)  # fmt: skip
+    obj = SceneObject(mesh, class_name, (d * math.cos(az), d * math.sin(az)), placement["yaw_deg"], size, width_scale=width_scale)
     scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=max(2.0 * d, 20.0))
     pose = sensor_pose([0.0, 0.0, placement["height_m"]])
     sector = None
     if isinstance(sensor, Lidar) and not occluders:
-        half = math.degrees(math.asin(min(1.0, 0.75 * placement["size_m"] / d))) + sector_margin_deg
+        half = math.degrees(math.asin(min(1.0, 0.75 * reach / d))) + sector_margin_deg
         if half < 180.0:
             sector = (placement["azimuth_deg"] - half, placement["azimuth_deg"] + half)
     rho = None
@@ -280,15 +296,16 @@ def _under_footprint(mesh, to_world, inverse, world, margin_m: float) -> NDArray
     return np.all((local[:, :2] >= lo - grow) & (local[:, :2] <= hi + grow), axis=1)
 
 
-def _airborne_crop(mesh, sensor: AirborneScanner, placement: dict, *, seed: int, occluders, class_name: str, offset_m: float, size) -> CropSample:
+def _airborne_crop(mesh, sensor: AirborneScanner, placement: dict, *, seed: int, occluders, class_name: str, offset_m: float, size,
+                  width_scale: float, reach: float) -> CropSample:  # fmt: skip
     """An airborne crop: the object ``offset_m`` across track from the plan centre (``distance_m ·
     sin(azimuth_deg)`` of the placement; ``height_m`` is unused: the scanner flies at its altitude),
     scanned from every line of the flight plan that sees it.  Points and the full scan are in the
     world frame; the crop's ``meta["line_id"]`` and ``meta["scan_angle_deg"]`` are its returns'."""
     from zbuf_occlude.sensors.airborne import scan_airborne
 
-    obj = SceneObject(mesh, class_name, (0.0, offset_m), placement["yaw_deg"], size)
-    reach = float(np.max(size)) * 0.75 + 1.0
+    obj = SceneObject(mesh, class_name, (0.0, offset_m), placement["yaw_deg"], size, width_scale=width_scale)
+    reach = max(float(np.max(size)), reach) * 0.75 + 1.0
     scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=abs(offset_m) + 2.0 * reach)
     full = scan_airborne(scene, sensor, (0.0, offset_m), reach, seed=seed)
     return _crop_object(scene, full, placement, full.sensor_position, per_return=("line_id", "scan_angle_deg"))

@@ -44,8 +44,10 @@ Where the crops stand and how tall their objects are is the scene's, not the sen
 fitted per class of the user's scans (:func:`crop_placement_json`): the sensor's horizontal
 distance to each scan's centroid (:func:`fit_crop_distances`), each scan's height
 (:func:`fit_crop_heights`: its top above the ground) and how high above the ground its lowest return lies
-(:func:`fit_crop_bottoms`, with the ground from :func:`fit_sensor_height`), as percentile
-intervals to draw uniformly.
+(:func:`fit_crop_bottoms`, with the ground from :func:`fit_sensor_height`) and how wide it shows
+across the line of sight (:func:`fit_crop_widths`), as percentile intervals to draw uniformly.  A
+mesh is made as wide as that by a horizontal stretch fitted to its own simulated crops
+(:func:`fit_width_scale`).
 """
 
 from __future__ import annotations
@@ -58,12 +60,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.geometry.samples import derive_rng
+from zbuf_occlude.sensors.crops import draw_placement, object_crop
 from zbuf_occlude.sensors.lidar import Lidar
 
 __all__ = [
     "BOOTSTRAP", "DISTANCE_QUANTILES", "MAX_DROPOUT_GAP", "MIN_PLACEMENT_SCANS", "PLANE_NEIGHBOURS", "Estimate", "LidarFit",
-    "SENSOR_HEIGHT_QUANTILE", "crop_placement_json", "fit_crop_bottoms", "fit_crop_distances", "fit_crop_heights", "fit_lidar",
-    "fit_sensor_height", "lidar_to_json",
+    "SENSOR_HEIGHT_QUANTILE", "WIDTH_BAND_M", "WIDTH_SAMPLES", "across_sight_width", "crop_placement_json", "fit_crop_bottoms",
+    "fit_crop_distances", "fit_crop_heights", "fit_crop_widths", "fit_lidar", "fit_sensor_height", "fit_width_scale", "lidar_to_json",
 ]  # fmt: skip
 
 #: Non-empty scans a class needs for its crops' distances and heights (:func:`crop_placement_json`).
@@ -80,9 +84,16 @@ MAX_DROPOUT_GAP = 4
 PLANE_NEIGHBOURS = 24
 #: Fewest returns a scan needs to take part in the fit.
 MIN_RETURNS = 20
+#: Height of the horizontal bands in which :func:`across_sight_width` measures a scan, metres
+#: (about one HDL-32E ring beyond 7 m).
+WIDTH_BAND_M = 0.15
+#: Simulated crops of a mesh that :func:`fit_width_scale` measures.
+WIDTH_SAMPLES = 16
 _GROUND_SLICE_M = 0.15
 _MIN_HEIGHT_M = 0.05  # a fitted object height is at least this (a scan whose top lies at or below the fitted ground)
 _PLANARITY = 0.3
+_WIDTH_STREAM = 0x57D7  # fit_width_scale's crops
+_WIDTH_GROWTHS = 6  # fit_width_scale widens a mesh that shows no width up to 4**6 times
 _GROUND_NORMAL_COS = math.cos(math.radians(25.0))
 
 
@@ -356,10 +367,7 @@ def fit_lidar(clouds: Sequence[NDArray[np.floating]], base: Lidar, *, seed: int 
     return LidarFit(sensor=sensor, base=base, estimates=estimates, n_scans=len(stats))
 
 
-def _percentiles_per_scan(clouds: Sequence[NDArray[np.floating]], quantiles: tuple[float, float], measure, what: str) -> tuple[float, float]:
-    lo_q, hi_q = (float(q) for q in quantiles)
-    if not 0.0 <= lo_q <= hi_q <= 100.0:
-        raise InvalidInputError(f"quantiles must satisfy 0 <= lo <= hi <= 100, got {quantiles!r}")
+def _per_scan(clouds: Sequence[NDArray[np.floating]], measure, what: str) -> NDArray[np.float64]:
     values = []
     for i, c in enumerate(clouds):
         p = _checked_scan(i, c)
@@ -367,7 +375,14 @@ def _percentiles_per_scan(clouds: Sequence[NDArray[np.floating]], quantiles: tup
             values.append(float(measure(p)))
     if len(values) < MIN_PLACEMENT_SCANS:
         raise InvalidInputError(f"{what} needs at least {MIN_PLACEMENT_SCANS} non-empty scans, got {len(values)}")
-    lo, hi = np.percentile(values, [lo_q, hi_q])
+    return np.asarray(values)
+
+
+def _percentiles_per_scan(clouds: Sequence[NDArray[np.floating]], quantiles: tuple[float, float], measure, what: str) -> tuple[float, float]:
+    lo_q, hi_q = (float(q) for q in quantiles)
+    if not 0.0 <= lo_q <= hi_q <= 100.0:
+        raise InvalidInputError(f"quantiles must satisfy 0 <= lo <= hi <= 100, got {quantiles!r}")
+    lo, hi = np.percentile(_per_scan(clouds, measure, what), [lo_q, hi_q])
     return float(lo), float(hi)
 
 
@@ -481,6 +496,152 @@ def fit_crop_bottoms(clouds: Sequence[NDArray[np.floating]], sensor_height_m: fl
     return _percentiles_per_scan(clouds, quantiles, lambda p: max(float(p[:, 2].min()) + h, 0.0), "fit_crop_bottoms")
 
 
+def across_sight_width(points: NDArray[np.floating], band_m: float = WIDTH_BAND_M) -> float:
+    """How wide an object scan shows across the line of sight, metres.
+
+    The returns are cut into horizontal bands ``band_m`` high; in each band of two or more
+    returns, the width is their extent along the horizontal direction perpendicular to the
+    line of sight (from the sensor to the scan's centroid, in the ground plane).  The scan's
+    width is the median over those bands: a trunk's diameter, a person's shoulders, a post's
+    thickness under its sign, whatever the scan's outline.  A ring's returns sample the outline
+    at the sensor's azimuth step, so measure real and simulated scans of one sensor alike.
+
+    Parameters
+    ----------
+    points : (N, 3) float
+        One object scan; sensor at the origin, z up, metres.
+    band_m : float
+        Band height, metres, > 0.
+
+    Returns
+    -------
+    float
+        Metres, >= 0; 0 when no band holds two returns.
+
+    Raises
+    ------
+    InvalidInputError
+        ``points`` not a finite (N, 3) array, or a bad ``band_m``.
+    """
+    p = _checked_scan(0, points)
+    if not (math.isfinite(band_m) and band_m > 0):
+        raise InvalidInputError(f"band_m must be a number > 0 metres, got {band_m!r}")
+    if len(p) < 2:
+        return 0.0
+    sight = p[:, :2].mean(axis=0)
+    norm = float(np.hypot(*sight))
+    across = np.array([-sight[1], sight[0]]) / norm if norm > 0 else np.array([1.0, 0.0])
+    s = p[:, :2] @ across
+    bands = np.floor((p[:, 2] - p[:, 2].min()) / band_m).astype(np.int64)
+    order = np.argsort(bands, kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(bands[order]) != 0])
+    counts = np.diff(np.r_[starts, len(p)])
+    hi = np.maximum.reduceat(s[order], starts)
+    lo = np.minimum.reduceat(s[order], starts)
+    widths = (hi - lo)[counts >= 2]
+    return float(np.median(widths)) if len(widths) else 0.0
+
+
+def fit_crop_widths(clouds: Sequence[NDArray[np.floating]]) -> tuple[float, float]:
+    """The interval of real object scans' widths across the line of sight (:func:`across_sight_width`), for :func:`fit_width_scale`.
+
+    The uniform interval with the scans' median width ``m`` and interquartile range ``q``:
+    ``(max(m − q, 0), m + q)``.  Widths have a long upper tail (two objects segmented as one),
+    so a uniform draw between outer percentiles would make the crops wider than most scans.
+
+    Parameters
+    ----------
+    clouds : sequence of (N_i, 3) float
+        Segmented object scans of one class; sensor at the origin, z up, metres.
+
+    Returns
+    -------
+    (lo_m, hi_m) : tuple of float
+        Metres, >= 0.
+
+    Raises
+    ------
+    InvalidInputError
+        Fewer than 3 non-empty scans, or a scan that is not finite (N, 3).
+    """
+    q25, m, q75 = np.percentile(_per_scan(clouds, across_sight_width, "fit_crop_widths"), [25.0, 50.0, 75.0])
+    return max(float(m - (q75 - q25)), 0.0), float(m + (q75 - q25))
+
+
+def fit_width_scale(mesh, sensor, distributions, width_m: tuple[float, float], *, n_samples: int = WIDTH_SAMPLES,
+                    seed: int = 0) -> tuple[float, float]:  # fmt: skip
+    """The horizontal stretch that makes a mesh's crops as wide as real scans, for :class:`~zbuf_occlude.sensors.crops.CropDistributions` ``width_scale``.
+
+    ``n_samples`` crops of ``mesh`` drawn from ``distributions`` are measured with
+    :func:`across_sight_width`, first at the mesh's own proportions (its ``width_scale``
+    ignored; a mesh that shows no width, a post thinner than the sensor's azimuth step, is
+    widened 4x at a time until it does), then once more at the stretch ``s`` that this first
+    median asks for; ``s`` is corrected by the second median (a thin post's width does not
+    grow in proportion at first: one return per ring has no width).  The
+    interval ``width_m · s / w̄``, with ``w̄`` the middle of ``width_m``, then gives crops whose
+    median width is about ``w̄`` and whose spread is ``width_m``'s, and that keep the height and
+    placement they would have had.  The stretch changes how the object looks, not only how
+    large it is: fit it where the real objects are thicker or thinner than the mesh (trunks
+    scanned as poles, cars seen in part), and compare the crops with the real scans
+    (:mod:`zbuf_occlude.experiments.realism`).
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        A normalised, z-up mesh (:func:`zbuf_occlude.load_mesh`).
+    sensor : Lidar
+    distributions : CropDistributions
+    width_m : (lo, hi)
+        Metres, 0 <= lo <= hi, hi > 0 (:func:`fit_crop_widths`).
+    n_samples, seed : int
+        Crops measured per round (>= 1) and their seed (placements and sensor noise).
+
+    Returns
+    -------
+    (lo, hi) : tuple of float
+        Stretch factors, > 0.
+
+    Raises
+    ------
+    InvalidInputError
+        A bad ``width_m`` or ``n_samples``, a sensor that is not a :class:`Lidar`, or no crop of
+        the mesh with a band of two returns.
+    """
+    try:
+        lo, hi = (float(v) for v in width_m)
+    except (TypeError, ValueError):
+        lo, hi = math.nan, math.nan
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo <= hi and hi > 0):
+        raise InvalidInputError(f"width_m must be an interval 0 <= lo <= hi, hi > 0 metres, got {width_m!r}")
+    if int(n_samples) < 1:
+        raise InvalidInputError(f"n_samples must be >= 1, got {n_samples}")
+    if not isinstance(sensor, Lidar):
+        raise InvalidInputError(f"widths are measured across a spinning LiDAR's line of sight; {getattr(sensor, 'name', sensor)!r} is not one")
+    def median_width(scale: float) -> float:
+        dist = replace(distributions, width_scale=scale)
+        widths = []
+        for k in range(int(n_samples)):
+            rng = derive_rng(seed, _WIDTH_STREAM, k)
+            crop = object_crop(mesh, sensor, draw_placement(dist, rng), seed=int(rng.integers(2**63)))
+            widths.append(across_sight_width(crop.scan.points))
+        return float(np.median(widths))
+
+    middle, scale = (lo + hi) / 2, 1.0
+    w = median_width(scale)
+    for _ in range(_WIDTH_GROWTHS):  # a mesh too thin to show a width: widen it until it shows one
+        if w > 0:
+            break
+        scale *= 4.0
+        w = median_width(scale)
+    if not w > 0:
+        raise InvalidInputError(f"no crop of {n_samples} shows the mesh two returns wide in a band, even {scale:g}x as wide")
+    scale *= middle / w
+    w = median_width(scale)
+    if w > 0:  # the correction
+        scale *= middle / w
+    return max(lo, 1e-3 * hi) * scale / middle, hi * scale / middle
+
+
 def _check_height(sensor_height_m) -> float:
     h = float(sensor_height_m)
     if not math.isfinite(h):
@@ -489,11 +650,12 @@ def _check_height(sensor_height_m) -> float:
 
 
 def crop_placement_json(clouds: Sequence[NDArray[np.floating]], labels: Sequence[str]) -> dict:
-    """:func:`fit_crop_distances`, :func:`fit_crop_heights` and :func:`fit_crop_bottoms` per label: the ``crops`` block of a fitted sensor's ``fit``.
+    """:func:`fit_crop_distances`, :func:`fit_crop_heights`, :func:`fit_crop_bottoms` and :func:`fit_crop_widths` per label: the ``crops`` block of a fitted sensor's ``fit``.
 
     Returns ``{"quantiles": [lo, hi], "sensor_height_m": h, "distance_m": {label: [lo_m, hi_m]},
-    "object_height_m": {label: [lo_m, hi_m]}, "hidden_below_m": {label: [lo_m, hi_m]}}`` (labels
-    sorted; ``h`` is :func:`fit_sensor_height` over every scan).
+    "object_height_m": {label: [lo_m, hi_m]}, "hidden_below_m": {label: [lo_m, hi_m]},
+    "across_sight_width_m": {label: [lo_m, hi_m]}}`` (labels sorted; ``h`` is
+    :func:`fit_sensor_height` over every scan).
 
     Raises
     ------
@@ -503,13 +665,15 @@ def crop_placement_json(clouds: Sequence[NDArray[np.floating]], labels: Sequence
     if len(labels) != len(clouds):
         raise InvalidInputError(f"crop_placement_json: {len(labels)} labels for {len(clouds)} scans")
     height = fit_sensor_height(clouds)
-    out: dict = {"quantiles": list(DISTANCE_QUANTILES), "sensor_height_m": height, "distance_m": {}, "object_height_m": {}, "hidden_below_m": {}}
+    out: dict = {"quantiles": list(DISTANCE_QUANTILES), "sensor_height_m": height, "distance_m": {}, "object_height_m": {}, "hidden_below_m": {},
+                 "across_sight_width_m": {}}  # fmt: skip
     for label in sorted(set(labels)):
         of_label = [c for c, y in zip(clouds, labels) if y == label]
         try:
             out["distance_m"][label] = list(fit_crop_distances(of_label))
             out["object_height_m"][label] = list(fit_crop_heights(of_label, height))
             out["hidden_below_m"][label] = list(fit_crop_bottoms(of_label, height))
+            out["across_sight_width_m"][label] = list(fit_crop_widths(of_label))
         except InvalidInputError as exc:
             raise InvalidInputError(f"class {label!r}: {exc}") from None
     return out

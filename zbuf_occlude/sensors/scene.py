@@ -108,6 +108,9 @@ class SceneObject:
         size (max extent 1 m); a primitive or a given mesh keeps its own size in metres.
     up : {"z", "y"}
         The mesh's up axis; "y" meshes (glTF) are turned to z-up first.
+    width_scale : float
+        After the scaling to ``size_m``, stretch the object's horizontal axes (x and y) by this
+        factor, > 0: a post made as thick as a tree trunk, keeping its height.  Default 1.
     """
 
     mesh: Any
@@ -116,6 +119,7 @@ class SceneObject:
     yaw_deg: float = 0.0
     size_m: float | None = None
     up: str = "z"
+    width_scale: float = 1.0
 
     def build(self, base: Path | None = None) -> tuple[trimesh.Trimesh, NDArray[np.float64]]:
         """The object's mesh in its local frame (as loaded) and its (4, 4) local → world transform,
@@ -152,6 +156,9 @@ class SceneObject:
                 if np.any(extents <= 0):
                     raise InvalidInputError(f"object {self.class_name or self.mesh!r}: a flat mesh cannot take three extents {size!r}")
                 scale = size_arr / extents
+        if not (math.isfinite(self.width_scale) and self.width_scale > 0):
+            raise InvalidInputError(f"object {self.class_name or self.mesh!r}: width_scale must be a number > 0, got {self.width_scale!r}")
+        scale[:2] *= self.width_scale
         pos = np.asarray(self.position_m, dtype=np.float64).reshape(-1)
         if pos.shape not in ((2,), (3,)) or not np.all(np.isfinite(pos)):
             raise InvalidInputError(f"object {self.class_name or self.mesh!r}: position_m must be 2 or 3 finite metres, got {self.position_m!r}")
