@@ -22,7 +22,7 @@ from zbuf_occlude.farm.sensor_crops import farm_datasets
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors import Lidar
 from zbuf_occlude.sensors.crops import CropDistributions
-from zbuf_occlude.sensors.fit import lidar_to_json
+from zbuf_occlude.sensors.fit import fit_width_scale, lidar_to_json
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 ARGS = ["--sensor", "hdl32e", "--samples-per-view", "2", "--points", "128", "--per-class", "1", "--splits", "train",
@@ -140,6 +140,25 @@ def test_hidden_below_hides_each_objects_bottom(tmp_path):
     assert cli_main(["verify", str(out)]) == 0
 
 
+def test_across_sight_width_stretches_each_object_to_the_asked_widths(tmp_path):
+    out = _farm(tmp_path / "wide", "--sensor-across-sight-width", "0.6:0.9", "--samples-per-view", "3")
+    card = json.loads((out / CARD_FILE).read_text())
+    assert card["params"]["sensor_across_sight_width_m"] == [0.6, 0.9]
+    # each scan's stretch is drawn from its own mesh's interval: the sensor package's fit for that mesh and seed
+    params = FarmParams(sensor="hdl32e", sensor_distance_m=(5.0, 20.0), sensor_size_m=(2.0, 4.5), sensor_across_sight_width_m=(0.6, 0.9))
+    ds, fitted = OccludedDataset(out), {}
+    for i in range(len(ds)):
+        meta = ds.metadata(i)
+        if meta["source"] not in fitted:
+            fitted[meta["source"]] = fit_width_scale(load_mesh(meta["source"]), params.sensor_model(), params.crop_distributions(), (0.6, 0.9))
+        lo, hi = fitted[meta["source"]]
+        assert lo <= meta["width_scale"] <= hi and hi == pytest.approx(1.5 * lo)
+    assert len({round(lo, 6) for lo, _ in fitted.values()}) == len(fitted) > 1  # one interval per mesh
+    assert "sensor_across_sight_width_m" not in FarmParams(sensor="hdl32e").to_dict()  # earlier sensor data sets keep their digest
+    assert params.digest() != FarmParams(sensor="hdl32e", sensor_distance_m=(5.0, 20.0), sensor_size_m=(2.0, 4.5)).digest()
+    assert cli_main(["verify", str(out)]) == 0
+
+
 def test_a_sensor_file_with_mixed_pixels_changes_the_scans(sensor_run, tmp_path):
     # a 7-ray footprint whose echoes within 0.75 m merge, against the same footprint without merging
     paths = {}
@@ -205,6 +224,9 @@ def test_zbuffer_farm_parameters_keep_their_digest():
         (["--sensor", "hdl32e", "--sensor-ground-margin", "-1"], "--sensor-ground-margin must be a number >= 0 metres, got -1"),
         (["--sensor-hidden-below", "0.5"], "--sensor-hidden-below needs --sensor"),
         (["--sensor", "hdl32e", "--sensor-hidden-below=-0.5:1"], "--sensor-hidden-below must be LO:HI with 0 <= LO <= HI"),
+        (["--sensor-across-sight-width", "0.5"], "--sensor-across-sight-width needs --sensor"),
+        (["--sensor", "hdl32e", "--sensor-across-sight-width", "0:0"], "--sensor-across-sight-width must be LO:HI with 0 <= LO <= HI"),
+        (["--sensor", "kinect-v1", "--sensor-across-sight-width", "0.5"], "spinning LiDAR"),
     ],
 )
 def test_bad_sensor_options_are_clear_errors(tmp_path, bad, words, capsys):

@@ -88,7 +88,7 @@ def _farm_command(args: argparse.Namespace) -> int:
 def _sensor_params(args: argparse.Namespace) -> dict:
     if args.sensor is None:
         for option in ("sensor_distance", "sensor_height", "sensor_size", "sensor_reflectivity", "sensor_footprint", "sensor_ground_margin",
-                       "sensor_hidden_below"):  # fmt: skip
+                       "sensor_hidden_below", "sensor_across_sight_width"):  # fmt: skip
             if getattr(args, option) not in (None, False):
                 raise InvalidInputError(f"--{option.replace('_', '-')} needs --sensor")
         return {}
@@ -106,6 +106,8 @@ def _sensor_params(args: argparse.Namespace) -> dict:
         out["sensor_ground_margin_m"] = args.sensor_ground_margin
     if args.sensor_hidden_below is not None:
         out["sensor_hidden_below_m"] = parse_interval(args.sensor_hidden_below, "--sensor-hidden-below")
+    if args.sensor_across_sight_width is not None:
+        out["sensor_across_sight_width_m"] = parse_interval(args.sensor_across_sight_width, "--sensor-across-sight-width")
     return out
 
 
@@ -210,6 +212,11 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
         "--sensor-hidden-below", metavar="LO:HI",
         help="hide each object's returns lower than a height drawn per scan, metres above the ground (a bottom hidden "
         "by parked cars or kerbs, or removed with the ground; fit-sensor fits it per class) (default: nothing hidden)",
+    )  # fmt: skip
+    s.add_argument(
+        "--sensor-across-sight-width", metavar="LO:HI",
+        help="stretch each object horizontally so that its crops are, at the median, this wide across the line of sight, "
+        "metres, drawn per scan (posts as thick as real trunks; fit-sensor fits it per class) (default: the meshes' proportions)",
     )  # fmt: skip
     ex = p.add_argument_group("execution")
     ex.add_argument("--workers", type=int, default=1, help="worker processes on this machine (default: 1)")

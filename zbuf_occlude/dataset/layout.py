@@ -121,7 +121,7 @@ COLUMN_TYPES = {
     "dense_points": ("f", 2), "visible_bits": ("u", 2), "n_topped_up": ("iu", 1), "topup_points": ("f", 2),
     # farm --sensor rows (zbuf_occlude.sensors.crops.farm_datasets)
     "distance_m": ("f", 1), "sensor_height_m": ("f", 1), "object_azimuth_deg": ("f", 1), "yaw_deg": ("f", 1),
-    "size_m": ("f", 1), "ring": ("iu", 2), "hidden_below_m": ("f", 1),
+    "size_m": ("f", 1), "ring": ("iu", 2), "hidden_below_m": ("f", 1), "width_scale": ("f", 1),
 }  # fmt: skip
 
 

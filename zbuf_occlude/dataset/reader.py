@@ -47,7 +47,7 @@ BYTES_PER_SAMPLE_POINT = 40
 #: Per-row datasets of a ``farm --sensor`` shard that :meth:`OccludedDataset.metadata` returns.
 SENSOR_ROW_FIELDS = (
     "elevation_deg", "azimuth_deg", "radius", "distance_m", "sensor_height_m", "object_azimuth_deg", "yaw_deg", "size_m",
-    "hidden_below_m",
+    "hidden_below_m", "width_scale",
 )  # fmt: skip
 
 PoseFilter = float | Iterable[float] | Callable[[float], bool] | None

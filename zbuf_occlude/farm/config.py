@@ -60,7 +60,8 @@ OPTION_NAMES = {
     "radius": "--radius", "storage": "--storage/--format", "method": "--method", "sensor": "--sensor",
     "sensor_distance_m": "--sensor-distance", "sensor_height_m": "--sensor-height", "sensor_size_m": "--sensor-size",
     "sensor_reflectivity": "--sensor-reflectivity", "sensor_footprint": "--sensor-footprint",
-    "sensor_ground_margin_m": "--sensor-ground-margin", "sensor_hidden_below_m": "--sensor-hidden-below", "up": "--up",
+    "sensor_ground_margin_m": "--sensor-ground-margin", "sensor_hidden_below_m": "--sensor-hidden-below",
+    "sensor_across_sight_width_m": "--sensor-across-sight-width", "up": "--up",
 }  # fmt: skip
 
 #: ``farm --sensor``: per-scan placement drawn uniformly from these intervals (metres).
@@ -71,6 +72,7 @@ DEFAULT_SENSOR_DISTANCE_M = (5.0, 25.0)
 DEFAULT_SENSOR_HEIGHT_M = (1.6, 2.0)
 DEFAULT_SENSOR_SIZE_M = (4.5, 4.5)
 _SENSOR_FIELDS = ("sensor_distance_m", "sensor_height_m", "sensor_size_m")
+_SENSOR_OPTIONAL_INTERVALS = ("sensor_reflectivity", "sensor_hidden_below_m", "sensor_across_sight_width_m")
 
 GL_LOCK = threading.Lock()  # one GL context per process: threads of a Dask worker take turns
 
@@ -123,6 +125,11 @@ class FarmParams:
         Hide each object's returns lower than a height drawn per scan, metres above the ground
         (:class:`~zbuf_occlude.sensors.crops.CropDistributions` ``hidden_below_m``); ``None``:
         nothing hidden.  Left out of :meth:`to_dict` when ``None``.
+    sensor_across_sight_width_m : (lo, hi) or None
+        Stretch each mesh horizontally so that its crops are, at the median, as wide across the
+        line of sight as this interval, metres, drawn per scan
+        (:func:`~zbuf_occlude.sensors.fit.fit_width_scale`, a spinning LiDAR only); ``None``: the
+        meshes' own proportions.  Left out of :meth:`to_dict` when ``None``.
     up : str
         The meshes' up axis (:data:`zbuf_occlude.mesh.scene.UP_CHOICES`), turned to +z by
         :func:`~zbuf_occlude.mesh.load.load_mesh`; ``"auto"``: per file, by its layout and
@@ -149,6 +156,7 @@ class FarmParams:
     sensor_footprint: bool = False
     sensor_ground_margin_m: float | None = None
     sensor_hidden_below_m: tuple[float, float] | None = None
+    sensor_across_sight_width_m: tuple[float, float] | None = None
     up: str = "auto"
 
     def __post_init__(self) -> None:
@@ -190,14 +198,14 @@ class FarmParams:
             if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi) or lo < 0 or (field != "sensor_height_m" and lo <= 0):
                 raise InvalidInputError(f"{OPTION_NAMES[field]} must be LO:HI with 0 < LO <= HI metres, got {value!r}")
             object.__setattr__(self, field, (lo, hi))
-        for field in ("sensor_reflectivity", "sensor_hidden_below_m"):
+        for field in _SENSOR_OPTIONAL_INTERVALS:
             value = getattr(self, field)
             if value is not None:
                 try:
                     lo, hi = (float(v) for v in value)
                 except (TypeError, ValueError):
                     lo = hi = float("nan")
-                if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo <= hi):
+                if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo <= hi) or (field == "sensor_across_sight_width_m" and not hi > 0):
                     raise InvalidInputError(f"{OPTION_NAMES[field]} must be LO:HI with 0 <= LO <= HI, got {value!r}")
                 object.__setattr__(self, field, (lo, hi))
         object.__setattr__(self, "sensor_footprint", bool(self.sensor_footprint))
@@ -222,6 +230,8 @@ class FarmParams:
         sensor = sensor_from_name(self.sensor)
         if (self.sensor_footprint or self.sensor_reflectivity is not None) and not isinstance(sensor, Lidar):
             raise InvalidInputError(f"--sensor-footprint and --sensor-reflectivity model LiDARs; {self.sensor} is not one")
+        if self.sensor_across_sight_width_m is not None and not isinstance(sensor, Lidar):
+            raise InvalidInputError(f"--sensor-across-sight-width measures across a spinning LiDAR's line of sight; {self.sensor} is not one")
         return sensor.with_(footprint_rays=7) if self.sensor_footprint else sensor
 
     def crop_distributions(self):
@@ -244,11 +254,11 @@ class FarmParams:
         if self.up == "auto":  # the digest of data sets made before --up existed
             del d["up"]
         if self.sensor is None:  # the z-buffer farm's parameters, and digest, as before --sensor existed
-            for field in ("sensor", *_SENSOR_FIELDS, "sensor_reflectivity", "sensor_footprint", "sensor_ground_margin_m", "sensor_hidden_below_m"):
+            for field in ("sensor", *_SENSOR_FIELDS, "sensor_footprint", "sensor_ground_margin_m", *_SENSOR_OPTIONAL_INTERVALS):
                 del d[field]
         else:
-            d.update({field: list(d[field]) for field in (*_SENSOR_FIELDS, "sensor_reflectivity", "sensor_hidden_below_m") if d[field] is not None})
-            for field in ("sensor_ground_margin_m", "sensor_hidden_below_m"):  # the digest of sensor data sets made before they existed
+            d.update({field: list(d[field]) for field in (*_SENSOR_FIELDS, *_SENSOR_OPTIONAL_INTERVALS) if d[field] is not None})
+            for field in ("sensor_ground_margin_m", "sensor_hidden_below_m", "sensor_across_sight_width_m"):  # the digest of sensor data sets made before they existed
                 if d[field] is None:
                     del d[field]
         return d

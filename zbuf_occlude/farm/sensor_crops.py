@@ -6,11 +6,16 @@ the farm owns its shard layout (:mod:`zbuf_occlude.dataset.layout`), so the arra
 
 from __future__ import annotations
 
+import os
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors.crops import CropDistributions, lidar_object_samples
+from zbuf_occlude.sensors.fit import fit_width_scale
 
 if TYPE_CHECKING:
     import trimesh
@@ -22,7 +27,7 @@ __all__ = ["farm_datasets"]
 
 
 def farm_datasets(
-    mesh: trimesh.Trimesh | str,
+    mesh: trimesh.Trimesh | str | os.PathLike,
     sensor: Lidar | DepthCamera,
     *,
     name: str,
@@ -32,13 +37,16 @@ def farm_datasets(
     n_points: int = 2048,
     seed: int = 0,
     distributions: CropDistributions = CropDistributions(),
+    across_sight_width_m: tuple[float, float] | None = None,
     backend: str = "embree",
 ) -> dict[str, np.ndarray]:
     """What the farm writes for one object with ``--sensor``: the datasets of a dense shard.
 
     Each LiDAR sample is its own "pose" (its placement is drawn per sample), so
     ``pose_index`` is the sample number and ``sample_index`` is 0; samples without a return
-    are left out (their ``n_visible`` would be 0, as for an empty pose).
+    are left out (their ``n_visible`` would be 0, as for an empty pose).  With
+    ``across_sight_width_m`` (metres, a LiDAR), the object is stretched horizontally to those
+    widths (:func:`~zbuf_occlude.sensors.fit.fit_width_scale`, seeded with ``seed``).
 
     Returns
     -------
@@ -48,13 +56,25 @@ def farm_datasets(
         ``azimuth_deg`` (the sensor seen from the object, degrees), ``n_visible`` (returns);
         and the placement: ``radius`` (mesh units), ``distance_m``, ``sensor_height_m``,
         ``object_azimuth_deg``, ``yaw_deg``, ``size_m`` (float64), ``ring (B, n_points) int16``;
-        ``hidden_below_m`` (float64, metres) when ``distributions`` hides the objects' bottoms.
+        ``hidden_below_m`` (float64, metres) when ``distributions`` hides the objects' bottoms;
+        ``width_scale`` (float64) when the object is stretched.
+
+    Raises
+    ------
+    InvalidInputError
+        A mesh the width stretch cannot measure (naming ``name``), or bad distributions.
     """
+    if across_sight_width_m is not None:
+        mesh = load_mesh(mesh) if isinstance(mesh, (str, os.PathLike)) else mesh  # once, for the fit and the crops
+        try:
+            distributions = replace(distributions, width_scale=fit_width_scale(mesh, sensor, distributions, across_sight_width_m, seed=seed))
+        except InvalidInputError as exc:
+            raise InvalidInputError(f"{name}: --sensor-across-sight-width: {exc}") from None
     clouds = lidar_object_samples(mesh, sensor, name=name, n_samples=n_samples, n_points=n_points, seed=seed,
                                   distributions=distributions, label=label, backend=backend)  # fmt: skip
     b = len(clouds)
     f64 = lambda values: np.asarray(values, dtype=np.float64).reshape(b)  # noqa: E731
-    hidden = {} if distributions.hidden_below_m is None else {"hidden_below_m": f64([c.extra["hidden_below_m"] for c in clouds])}
+    optional = {key: f64([c.extra[key] for c in clouds]) for key in ("hidden_below_m", "width_scale") if getattr(distributions, key) is not None}
     return {
         "data": np.stack([c.points for c in clouds]) if b else np.zeros((0, n_points, 3), np.float32),
         "label": np.full(b, label, dtype=np.int64),
@@ -72,5 +92,5 @@ def farm_datasets(
         "size_m": f64([c.extra["size_m"] for c in clouds]),
         "ring": (np.stack([c.extra["ring"] for c in clouds]).astype(np.int16) if b and clouds[0].extra["ring"] is not None
                  else np.zeros((b, n_points), np.int16)),
-        **hidden,
+        **optional,
     }  # fmt: skip

@@ -98,6 +98,7 @@ def _scan(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
     datasets = farm_datasets(
         mesh, params.sensor_model(), name=obj.name, label=obj.label, object_index=obj.index, n_samples=n_scans,
         n_points=params.n_points, seed=params.seed, distributions=params.crop_distributions(),
+        across_sight_width_m=params.sensor_across_sight_width_m,
     )  # fmt: skip
     n_visible = np.zeros(n_scans, dtype=np.int64)
     n_visible[datasets["pose_index"]] = datasets["n_visible"]
