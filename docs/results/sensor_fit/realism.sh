@@ -5,7 +5,8 @@
 #   placed  the fitted sensor at each class's fitted distances (fit.crops in the JSON), poles as tall as fitted;
 #   physics placed, with return physics: a 7-ray beam footprint and echoes within 0.75 m merged (mixed pixels);
 #   ground  physics, and the ground within 0.25 m of the object's footprint kept in the crop (and counted);
-#   hidden  placed, and each crop's bottom hidden up to a height drawn from the class's fitted interval (fit.crops.hidden_below_m).
+#   hidden  placed, and each crop's bottom hidden up to a height drawn from the class's fitted interval (fit.crops.hidden_below_m);
+#   widths  hidden, and each mesh stretched horizontally to the class's fitted widths across the line of sight (fit.crops.across_sight_width_m).
 # usage: bash docs/results/sensor_fit/realism.sh SHARED_DATA FITTED_SENSOR.json OUT   (zbuf-occlude on PATH)
 #        TAGS="physics ground" bash ...   runs only those
 set -euo pipefail
@@ -14,7 +15,7 @@ mkdir -p "$out"
 crops() {  # crops CLASS KEY -> LO:HI from the fitted sensor's fit.crops block
   python3 -c 'import json, sys; lo, hi = json.load(open(sys.argv[1]))["fit"]["crops"][sys.argv[3]][sys.argv[2]]; print(f"{lo:.2f}:{hi:.2f}")' "$fitted" "$1" "$2"
 }
-tags=${TAGS:-preset fitted placed physics ground hidden}
+tags=${TAGS:-preset fitted placed physics ground hidden widths}
 for tag in $tags; do
   sensor=$([ $tag = preset ] && echo hdl32e || echo "$fitted")
   for cls in car pole; do
@@ -23,6 +24,7 @@ for tag in $tags; do
     [ $tag = physics ] && physics=(--footprint --echo-separation 0.75)
     [ $tag = ground ] && physics=(--footprint --echo-separation 0.75 --ground-margin 0.25)
     [ $tag = hidden ] && physics=(--hidden-below "$(crops $cls hidden_below_m)")
+    [ $tag = widths ] && physics=(--hidden-below "$(crops $cls hidden_below_m)" --across-sight-width "$(crops $cls across_sight_width_m)")
     if [ $tag != preset ] && [ $tag != fitted ]; then
       distance=$(crops $cls distance_m)
       [ $cls = pole ] && size=$(crops $cls object_height_m)  # a pole's largest dimension is its height
@@ -31,8 +33,10 @@ for tag in $tags; do
     for mesh in "$data"/street_objects/$cls/*.{glb,gltf,dae,obj}; do
       [ -f "$mesh" ] || continue
       i=$((i + 1))
+      # a mesh stretched wider than twice the nearest distance is refused (the sensor could stand inside it): listed, left out
       zbuf-occlude scan "$mesh" --sensor "$sensor" --distance "$distance" --height 1.6:2.0 --size "$size" --azimuth=-180:180 \
-        --yaw 0:360 --samples 4 --crop "${physics[@]}" --seed $i --out "$out/scans_${tag}_$cls/$i" > /dev/null
+        --yaw 0:360 --samples 4 --crop "${physics[@]}" --seed $i --out "$out/scans_${tag}_$cls/$i" > /dev/null \
+        || echo "left out: $tag $mesh" >> "$out/left_out.txt"
     done
   done
 done

@@ -1,0 +1,59 @@
+"""Per class: how wide the fitted+placed crops show across the line of sight, and how many returns they hold,
+without and with the width stretch, against the fit half's real scans (the sensor fitted as `--fit-sensor` does).
+
+    python docs/results/sensor_fit/widths_by_class.py ../shared/data   (from the repository root)
+
+12 crops per mesh, one seed; medians and quartiles over the class's crops and scans (which stand at different
+ranges: the realism tables compare counts at matched range).
+"""
+
+import collections
+import sys
+from dataclasses import replace
+
+import numpy as np
+
+from zbuf_occlude.experiments import sim2real as S
+from zbuf_occlude.experiments.sim2real_data import LIDAR_PLACEMENT, check_lidar_meshes, find_class_meshes, real_clouds, real_scan_rows
+from zbuf_occlude.mesh.sizes import size_interval
+from zbuf_occlude.real_scans.datasets import load_real_scans
+from zbuf_occlude.sensors.crops import CropDistributions, draw_placement, object_crop
+from zbuf_occlude.sensors.fit import across_sight_width, fit_width_scale
+from zbuf_occlude.sensors.presets import sensor_from_name
+
+data = sys.argv[1]
+scans = load_real_scans(f"{data}/lidarnet_v2_partial")
+meshes = find_class_meshes(f"{data}/street_objects", up_map={"bush/openglforest__*": "+y"})
+names = sorted({m.class_name for m in meshes})
+_, real_y, _ = real_clouds(scans, names, {}, 256, 0)
+fit_half, _ = S._stratified_half(real_y)
+kept = real_scan_rows(scans, names, {})
+fitted, placement, sizes, _ = S._fit_sensor([scans[kept[i]] for i in fit_half], sensor_from_name("hdl32e"), real_y[fit_half], names)
+meshes, _ = check_lidar_meshes(meshes, fitted, sizes, 256, placement=placement)
+stats = {"real": collections.defaultdict(list), "unstretched": collections.defaultdict(list), "stretched": collections.defaultdict(list)}
+for i in fit_half:
+    p = np.asarray(scans[kept[i]].points_sensor_m, np.float64)
+    stats["real"][names[real_y[i]]].append((across_sight_width(p), len(p)))
+rng = np.random.default_rng(1)
+scales = {}
+for m in meshes:
+    keywords = dict(placement[m.class_name])
+    width_m = keywords.pop("across_sight_width_m")
+    dist = CropDistributions(size_m=size_interval(m.mesh.extents, sizes[m.class_name]), **{**LIDAR_PLACEMENT, **keywords})
+    scales[m.name] = fit_width_scale(m.mesh, fitted, dist, width_m)
+    for tag, d in (("unstretched", dist), ("stretched", replace(dist, width_scale=scales[m.name]))):
+        for k in range(12):
+            c = object_crop(m.mesh, fitted, draw_placement(d, rng), seed=k).scan.points
+            if len(c) >= 30:  # sim2real's MIN_RETURNS
+                stats[tag][m.class_name].append((across_sight_width(c), len(c)))
+q = lambda v: f"{np.median(v):.2f} ({np.percentile(v, 25):.2f}–{np.percentile(v, 75):.2f})"  # noqa: E731
+print("| class | fitted width, m | real: width, m | returns | unstretched: width, m | returns | stretched: width, m | returns | stretch per mesh |")
+print("|---|---|---|---|---|---|---|---|---|")
+for c in names:
+    cells = [f"{placement[c]['across_sight_width_m'][0]:.2f}–{placement[c]['across_sight_width_m'][1]:.2f}"]
+    for tag in stats:
+        v = np.array(stats[tag][c])
+        cells += [q(v[:, 0]), f"{np.median(v[:, 1]):.0f}"]
+    s = [scales[m.name] for m in meshes if m.class_name == c]
+    cells.append(f"{min(lo for lo, _ in s):.2f}–{max(hi for _, hi in s):.2f}")
+    print(f"| {c} | " + " | ".join(cells) + " |")
