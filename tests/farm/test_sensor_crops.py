@@ -225,7 +225,7 @@ def test_zbuffer_farm_parameters_keep_their_digest():
         (["--sensor-hidden-below", "0.5"], "--sensor-hidden-below needs --sensor"),
         (["--sensor", "hdl32e", "--sensor-hidden-below=-0.5:1"], "--sensor-hidden-below must be LO:HI with 0 <= LO <= HI"),
         (["--sensor-across-sight-width", "0.5"], "--sensor-across-sight-width needs --sensor"),
-        (["--sensor", "hdl32e", "--sensor-across-sight-width", "0:0"], "--sensor-across-sight-width must be LO:HI with 0 <= LO <= HI"),
+        (["--sensor", "hdl32e", "--sensor-across-sight-width", "0:0"], "--sensor-across-sight-width must be LO:HI with 0 <= LO <= HI, HI > 0"),
         (["--sensor", "kinect-v1", "--sensor-across-sight-width", "0.5"], "spinning LiDAR"),
     ],
 )

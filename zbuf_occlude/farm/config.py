@@ -205,8 +205,9 @@ class FarmParams:
                     lo, hi = (float(v) for v in value)
                 except (TypeError, ValueError):
                     lo = hi = float("nan")
-                if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo <= hi) or (field == "sensor_across_sight_width_m" and not hi > 0):
-                    raise InvalidInputError(f"{OPTION_NAMES[field]} must be LO:HI with 0 <= LO <= HI, got {value!r}")
+                positive = field == "sensor_across_sight_width_m"  # a width of nothing cannot be fitted
+                if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo <= hi) or (positive and not hi > 0):
+                    raise InvalidInputError(f"{OPTION_NAMES[field]} must be LO:HI with 0 <= LO <= HI{', HI > 0' if positive else ''}, got {value!r}")
                 object.__setattr__(self, field, (lo, hi))
         object.__setattr__(self, "sensor_footprint", bool(self.sensor_footprint))
         if self.sensor_ground_margin_m is not None:
