@@ -8,7 +8,7 @@
 #   hidden  placed, and each crop's bottom hidden up to a height drawn from the class's fitted interval (fit.crops.hidden_below_m);
 #   widths  hidden, and each mesh stretched horizontally to the class's fitted widths across the line of sight (fit.crops.across_sight_width_m).
 # usage: bash docs/results/sensor_fit/realism.sh SHARED_DATA FITTED_SENSOR.json OUT   (zbuf-occlude on PATH)
-#        TAGS="physics ground" bash ...   runs only those
+#        TAGS="physics ground" bash ...   runs only those; CLASSES="pedestrian bush" bash ... other classes (default: car pole)
 set -euo pipefail
 data=$1; fitted=$2; out=$3
 mkdir -p "$out"
@@ -16,10 +16,13 @@ crops() {  # crops CLASS KEY -> LO:HI from the fitted sensor's fit.crops block
   python3 -c 'import json, sys; lo, hi = json.load(open(sys.argv[1]))["fit"]["crops"][sys.argv[3]][sys.argv[2]]; print(f"{lo:.2f}:{hi:.2f}")' "$fitted" "$1" "$2"
 }
 tags=${TAGS:-preset fitted placed physics ground hidden widths}
+classes=${CLASSES:-car pole}
+declare -A REAL=([car]=Car [pole]=Trunk [pedestrian]=Pedestrian [bush]=Bush)
+declare -A SIZE=([car]=3.5:5.0 [pole]=3:9 [pedestrian]=1.5:1.95 [bush]=0.4:2.5)  # the preset recipe's (sim2real's CLASS_SIZES_M)
 for tag in $tags; do
   sensor=$([ $tag = preset ] && echo hdl32e || echo "$fitted")
-  for cls in car pole; do
-    distance=5:25; size=$([ $cls = car ] && echo 3.5:5.0 || echo 3:9)
+  for cls in $classes; do
+    distance=5:25; size=${SIZE[$cls]}
     physics=()
     [ $tag = physics ] && physics=(--footprint --echo-separation 0.75)
     [ $tag = ground ] && physics=(--footprint --echo-separation 0.75 --ground-margin 0.25)
@@ -27,21 +30,22 @@ for tag in $tags; do
     [ $tag = widths ] && physics=(--hidden-below "$(crops $cls hidden_below_m)" --across-sight-width "$(crops $cls across_sight_width_m)")
     if [ $tag != preset ] && [ $tag != fitted ]; then
       distance=$(crops $cls distance_m)
-      [ $cls = pole ] && size=$(crops $cls object_height_m)  # a pole's largest dimension is its height
+      [ $cls != car ] && size=$(crops $cls object_height_m)  # the largest dimension of a pole, a person or a bush is its height (cars keep their lengths)
     fi
     i=0
-    for mesh in "$data"/street_objects/$cls/*.{glb,gltf,dae,obj}; do
+    for mesh in "$data"/street_objects/$cls/*.{glb,gltf,dae,obj} "$data"/street_objects/$cls/*/*.{glb,gltf,dae,obj}; do
       [ -f "$mesh" ] || continue
       i=$((i + 1))
+      up=auto; case $mesh in */bush/openglforest__*) up=+y;; esac  # as sim2real's --up-map
       # a mesh stretched wider than twice the nearest distance is refused (the sensor could stand inside it): listed, left out
       zbuf-occlude scan "$mesh" --sensor "$sensor" --distance "$distance" --height 1.6:2.0 --size "$size" --azimuth=-180:180 \
-        --yaw 0:360 --samples 4 --crop "${physics[@]}" --seed $i --out "$out/scans_${tag}_$cls/$i" > /dev/null \
+        --yaw 0:360 --samples 4 --crop "${physics[@]}" --seed $i --up $up --out "$out/scans_${tag}_$cls/$i" > /dev/null \
         || echo "left out: $tag $mesh" >> "$out/left_out.txt"
     done
   done
 done
-for cls in car pole; do
-  real=$([ $cls = car ] && echo Car || echo Trunk)
+for cls in $classes; do
+  real=${REAL[$cls]}
   for tag in $tags; do
     ground=(); [ $tag = ground ] && ground=(--ground-in-crops)  # its crops hold the ground under the object
     zbuf-occlude realism "$out/scans_${tag}_$cls" "$data/lidarnet_v2_partial/$real" --out "$out/realism_${tag}_$cls" --no-figure "${ground[@]}"
