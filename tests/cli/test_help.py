@@ -272,3 +272,18 @@ def test_every_argument_that_takes_meshes_lists_every_mesh_format() -> None:
                 missing = [ext for ext in SUPPORTED_EXTENSIONS if ext not in text]
                 assert not missing, f"{name} {action.dest}: its help lacks {missing}: {text}"
     assert {"generate paths", "farm root", "scan mesh_or_scene", "experiment sim2real root"} <= set(takes_meshes), takes_meshes
+
+
+def test_scan_size_of_says_which_side_size_measures(tmp_path: Path) -> None:
+    import trimesh
+
+    from zbuf_occlude.sensors.scan import read_scan_npz
+
+    trimesh.creation.box(extents=(2.0, 1.0, 0.5)).export(tmp_path / "box.obj")
+    base = ["scan", str(tmp_path / "box.obj"), "--size", "1", "--distance", "6", "--height", "2", "--yaw", "90", "--crop"]
+    for size_of, top in (("max", 0.25), ("length", 0.25), ("height", 1.0)):  # a box 1 m long and 0.25 m tall, or 1 m tall
+        assert main([*base, "--size-of", size_of, "--out", str(tmp_path / size_of)]) == 0
+        points = read_scan_npz(next((tmp_path / size_of).glob("*.npz"))).points
+        assert float(points[:, 2].max()) + 2.0 == pytest.approx(top, abs=0.02)  # the top face above the ground, seen from above
+    assert main(["scan", "box", "--size", "1", "--size-of", "height", "--out", str(tmp_path / "p")]) == 2  # a primitive has no proportions here
+    assert main([*base, "--size-of", "height", "--extents", "1,1,1", "--out", str(tmp_path / "e")]) == 2

@@ -17,6 +17,7 @@ from zbuf_occlude.defaults import DEFAULT_SEED
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.samples import derive_rng, object_key
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
+from zbuf_occlude.mesh.sizes import DIMENSIONS, SizeRange, size_interval
 from zbuf_occlude.sensors.presets import sensor_from_name
 
 __all__ = ["add_scan_parser", "add_realism_parser", "add_parser", "parse_interval"]
@@ -94,6 +95,18 @@ def _hidden_below(text: str) -> tuple[float, float]:
     return lo, hi
 
 
+def _largest_side(args: argparse.Namespace, mesh) -> tuple[float, float]:
+    """``--size`` as the interval of the object's largest side, metres (``--size-of`` a mesh's height or length converted)."""
+    lo, hi = parse_interval(args.size, "--size")
+    if args.size_of == "max":
+        return lo, hi
+    if isinstance(mesh, dict):
+        raise InvalidInputError(f"--size-of {args.size_of} measures a mesh file; a primitive takes --size (its largest dimension) or --extents")
+    if not 0 < lo:
+        raise InvalidInputError(f"--size must be > 0 metres, got {args.size!r}")
+    return size_interval(np.ptp(np.asarray(mesh.vertices), axis=0), SizeRange(args.size_of, lo, hi))
+
+
 def cmd_scan(args: argparse.Namespace) -> int:
     from zbuf_occlude.sensors.airborne import AirborneScanner
     from zbuf_occlude.sensors.crops import CropDistributions, draw_placement, object_crop
@@ -134,6 +147,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
         if not isinstance(sensor, (Lidar, AirborneScanner)):
             raise InvalidInputError("scan of a mesh file places a LiDAR; use a scene file for depth cameras")
         extents, round_xy = None, False
+        if args.extents and args.size_of != "max":
+            raise InvalidInputError(f"--size-of {args.size_of} says what --size measures; --extents gives every side instead")
         if args.extents:
             parts = args.extents.split(",")
             if len(parts) != 3:
@@ -148,7 +163,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
         dist = CropDistributions(
             distance_m=parse_interval(args.distance, "--distance"), height_m=parse_interval(args.height, "--height"),
             azimuth_deg=parse_interval(args.azimuth, "--azimuth"), yaw_deg=parse_interval(args.yaw, "--yaw"),
-            size_m=parse_interval(args.size, "--size"), extents_m=extents, round_xy=round_xy,
+            size_m=_largest_side(args, mesh), extents_m=extents, round_xy=round_xy,
             reflectivity=None if args.reflectivity is None else parse_interval(args.reflectivity, "--reflectivity"),
             ground_reflectivity=args.ground_reflectivity, ground_margin_m=args.ground_margin,
             hidden_below_m=None if args.hidden_below is None else _hidden_below(args.hidden_below),
@@ -191,7 +206,12 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--sensor", default="hdl32e", help="vlp16 | hdl32e | hdl64e | os1-64 | riegl-q1560 (airborne) | kinect-v1 | sensor .json (default: %(default)s)")
     p.add_argument("--distance", default="10", help="horizontal sensor-object distance, metres (N or LO:HI, uniform per sample; at least half the object's size) (default: %(default)s)")
     p.add_argument("--height", default="1.8", help="sensor height above the ground, metres (N or LO:HI) (default: %(default)s)")
-    p.add_argument("--size", default="4.5", help="the object's largest dimension, metres (N or LO:HI) (default: %(default)s)")
+    p.add_argument("--size", default="4.5", help="the object's largest dimension, metres (N or LO:HI; see --size-of) (default: %(default)s)")
+    p.add_argument(
+        "--size-of", choices=DIMENSIONS, default="max",
+        help="what --size measures: max (the largest dimension), height, or length (the larger horizontal side); the mesh keeps "
+        "its proportions (default: %(default)s)",
+    )  # fmt: skip
     p.add_argument(
         "--extents",
         help="X,Y,Z: stretch the mesh to these extents, metres, each N or LO:HI drawn per sample (instead of --size); "
