@@ -60,8 +60,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.geometry.samples import derive_rng
-from zbuf_occlude.sensors.crops import draw_placement, object_crop
 from zbuf_occlude.sensors.lidar import Lidar
 
 __all__ = [
@@ -617,6 +615,9 @@ def fit_width_scale(mesh, sensor, distributions, width_m: tuple[float, float], *
         raise InvalidInputError(f"n_samples must be >= 1, got {n_samples}")
     if not isinstance(sensor, Lidar):
         raise InvalidInputError(f"widths are measured across a spinning LiDAR's line of sight; {getattr(sensor, 'name', sensor)!r} is not one")
+    from zbuf_occlude.geometry.samples import derive_rng
+    from zbuf_occlude.sensors.crops import draw_placement, object_crop  # scans: trimesh and embree, imported when a width is fitted
+
     def median_width(scale: float) -> float:
         dist = replace(distributions, width_scale=scale)
         widths = []

@@ -6,7 +6,8 @@
 #   physics placed, with return physics: a 7-ray beam footprint and echoes within 0.75 m merged (mixed pixels);
 #   ground  physics, and the ground within 0.25 m of the object's footprint kept in the crop (and counted);
 #   hidden  placed, and each crop's bottom hidden up to a height drawn from the class's fitted interval (fit.crops.hidden_below_m);
-#   widths  hidden, and each mesh stretched horizontally to the class's fitted widths across the line of sight (fit.crops.across_sight_width_m).
+#   widths  hidden, and each mesh stretched horizontally to the class's fitted widths across the line of sight (fit.crops.across_sight_width_m);
+#   train   widths with every class, cars too, as tall as its fitted heights: the crops sim2real --fit-sensor trains fitted+placed on.
 # usage: bash docs/results/sensor_fit/realism.sh SHARED_DATA FITTED_SENSOR.json OUT   (zbuf-occlude on PATH)
 #        TAGS="physics ground" bash ...   runs only those; CLASSES="pedestrian bush" bash ... other classes (default: car pole)
 set -euo pipefail
@@ -27,10 +28,12 @@ for tag in $tags; do
     [ $tag = physics ] && physics=(--footprint --echo-separation 0.75)
     [ $tag = ground ] && physics=(--footprint --echo-separation 0.75 --ground-margin 0.25)
     [ $tag = hidden ] && physics=(--hidden-below "$(crops $cls hidden_below_m)")
-    [ $tag = widths ] && physics=(--hidden-below "$(crops $cls hidden_below_m)" --across-sight-width "$(crops $cls across_sight_width_m)")
+    case $tag in widths|train) physics=(--hidden-below "$(crops $cls hidden_below_m)" --across-sight-width "$(crops $cls across_sight_width_m)");; esac
+    size_of=max
     if [ $tag != preset ] && [ $tag != fitted ]; then
       distance=$(crops $cls distance_m)
       [ $cls != car ] && size=$(crops $cls object_height_m)  # the largest dimension of a pole, a person or a bush is its height (cars keep their lengths)
+      [ $tag = train ] && size=$(crops $cls object_height_m) && size_of=height
     fi
     i=0
     for mesh in "$data"/street_objects/$cls/*.{glb,gltf,dae,obj} "$data"/street_objects/$cls/*/*.{glb,gltf,dae,obj}; do
@@ -39,7 +42,7 @@ for tag in $tags; do
       up=auto; case $mesh in */bush/openglforest__*) up=+y;; esac  # as sim2real's --up-map
       # a mesh stretched wider than twice the nearest distance is refused (the sensor could stand inside it): listed, left out
       zbuf-occlude scan "$mesh" --sensor "$sensor" --distance "$distance" --height 1.6:2.0 --size "$size" --azimuth=-180:180 \
-        --yaw 0:360 --samples 4 --crop "${physics[@]}" --seed $i --up $up --out "$out/scans_${tag}_$cls/$i" > /dev/null \
+        --yaw 0:360 --samples 4 --crop "${physics[@]}" --seed $i --up $up --size-of $size_of --out "$out/scans_${tag}_$cls/$i" > /dev/null \
         || echo "left out: $tag $mesh" >> "$out/left_out.txt"
     done
   done
