@@ -512,3 +512,23 @@ def test_the_set_chosen_on_the_fit_half_is_the_best_validated_per_seed_never_the
     assert chosen["p_real_to_real_above"] == pytest.approx(1 / 6)  # both real→real seeds above both chosen ones
     assert chosen["diff_vs_complete"] == pytest.approx(0.675 - 0.575)
     assert CHOSEN_ON_FIT_HALF not in {r["train_set"] for r in summarise(runs, ["car", "pole"])}
+
+
+def test_width_scales_fitted_once_give_the_crops_of_fitting_them_in_every_draw(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from zbuf_occlude.experiments.sim2real_data import build_set, fit_width_scales
+    from zbuf_occlude.sensors import fit, lidar_preset
+
+    meshes = find_class_meshes(_mesh_root(tmp_path))
+    sensor = lidar_preset("hdl32e")
+    sizes = {"car": SizeRange("height", 1.5, 1.5), "pole": SizeRange("height", 3.0, 4.0)}
+    placement = {"car": {"distance_m": (6.0, 8.0)}, "pole": {"distance_m": (5.0, 9.0), "across_sight_width_m": (0.3, 0.5)}}
+    every_draw = build_set("lidar", meshes, ["car", "pole"], 4, 64, 3, sensor=sensor, sizes=sizes, placement=placement)
+    once = fit_width_scales(meshes, sensor, sizes, placement)
+    assert sorted(once) == sorted(m.name for m in meshes if m.class_name == "pole")  # the classes that give widths
+    assert once["pole/post"] != once["pole/lamp"]  # each mesh its own stretch
+    calls = []
+    monkeypatch.setattr(fit, "fit_width_scale", lambda *a, **k: calls.append(a) or (1.0, 1.0))
+    merged = build_set("lidar", meshes, ["car", "pole"], 4, 64, 3, sensor=sensor, sizes=sizes, placement={**placement, **once})
+    np.testing.assert_array_equal(merged.points, every_draw.points)
+    assert calls == []  # not fitted again
+

@@ -65,6 +65,7 @@ from zbuf_occlude.experiments.sim2real_data import (
     TRAINING_SETS,
     build_sets,
     check_lidar_meshes,
+    fit_width_scales,
     find_class_meshes,
     real_clouds,
     real_scan_rows,
@@ -334,6 +335,8 @@ def run_sim2real(
         kept = real_scan_rows(scans, names, dict(label_map or {}))
         fitted, fitted_placement, fitted_sizes, fit_json = _fit_sensor([scans[kept[i]] for i in half_a], lidar, real_y[half_a], names)
         meshes, skipped_fitted = check_lidar_meshes(meshes, fitted, sizes, n_points, min_returns=int(min_returns))
+        # each mesh's stretch to its class's widths, fitted once for every seed (seed 0: the same every run)
+        fitted_placement = {**fitted_placement, **fit_width_scales(meshes, fitted, fitted_sizes, fitted_placement)}
         meshes, skipped_placed = check_lidar_meshes(meshes, fitted, fitted_sizes, n_points, min_returns=int(min_returns),
                                                     placement=fitted_placement)  # fmt: skip
         skipped += skipped_fitted + skipped_placed

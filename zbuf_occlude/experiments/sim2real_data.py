@@ -41,10 +41,12 @@ from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange, size_interval
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
+    from zbuf_occlude.sensors.crops import CropDistributions
+
 __all__ = [
     "TRAINING_SETS", "GROUND_ELEVATION_DEG", "LIDAR_PLACEMENT", "MIN_RETURNS", "KEEP_SCALE_UNIT_M",
     "MeshEntry", "find_class_meshes", "check_lidar_meshes", "split_whole_meshes", "allocate", "build_set", "build_sets", "mix_sets",
-    "real_clouds", "real_scan_rows", "FITTED", "FITTED_PLACED", "FITTED_SETS",
+    "real_clouds", "real_scan_rows", "FITTED", "FITTED_PLACED", "FITTED_SETS", "fit_width_scales",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -169,7 +171,7 @@ def check_lidar_meshes(meshes: list[MeshEntry], sensor, sizes: dict[str, SizeRan
     kept, skipped = [], []
     for entry in meshes:
         try:
-            _lidar(entry, 1, n_points, 0, sensor, sizes[entry.class_name], min_returns, (placement or {}).get(entry.class_name))
+            _lidar(entry, 1, n_points, 0, sensor, sizes[entry.class_name], min_returns, _placement_of(placement, entry))
         except InvalidInputError as exc:
             log.warning("skipping mesh %s: %s", entry.path, exc)
             skipped.append(str(entry.path))
@@ -232,19 +234,56 @@ def _occluded(entry: MeshEntry, k: int, n_points: int, seed: int, rng: np.random
     return out
 
 
-def _lidar(entry: MeshEntry, k: int, n_points: int, seed: int, sensor, size: SizeRange, min_returns: int = MIN_RETURNS,
-           placement: dict | None = None) -> tuple[list[NDArray], list[float]]:  # fmt: skip
-    from zbuf_occlude.sensors.crops import CropDistributions, lidar_object_samples
+def _placement_of(placement: dict[str, dict] | None, entry: MeshEntry) -> dict:
+    """``placement``'s keywords for ``entry``: its class's, and over them its own (keyed by its name)."""
+    return {**(placement or {}).get(entry.class_name, {}), **(placement or {}).get(entry.name, {})}
+
+
+def _distributions(entry: MeshEntry, size: SizeRange, placement: dict) -> tuple[CropDistributions, tuple[float, float] | None]:
+    """The mesh's crop distributions (its stretch left out) and its class's ``across_sight_width_m``, if any."""
+    from zbuf_occlude.sensors.crops import CropDistributions
+
+    keywords = {**LIDAR_PLACEMENT, **placement}
+    width_m = keywords.pop("across_sight_width_m", None)
+    return CropDistributions(size_m=size_interval(entry.mesh.extents, size), **keywords), width_m
+
+
+def _width_scale(entry: MeshEntry, sensor, dist: CropDistributions, width_m: tuple[float, float]) -> tuple[float, float]:
     from zbuf_occlude.sensors.fit import fit_width_scale
 
-    keywords = {**LIDAR_PLACEMENT, **(placement or {})}
-    width_m = keywords.pop("across_sight_width_m", None)
-    dist = CropDistributions(size_m=size_interval(entry.mesh.extents, size), **keywords)
-    if width_m is not None:  # this mesh's stretch to the class's real widths
-        try:
-            dist = replace(dist, width_scale=fit_width_scale(entry.mesh, sensor, dist, width_m))
-        except InvalidInputError as exc:
-            raise InvalidInputError(f"{entry.path}: {exc}") from None
+    try:
+        return fit_width_scale(entry.mesh, sensor, dist, width_m)
+    except InvalidInputError as exc:
+        raise InvalidInputError(f"{entry.path}: {exc}") from None
+
+
+def fit_width_scales(meshes: list[MeshEntry], sensor, sizes: dict[str, SizeRange], placement: dict[str, dict]) -> dict[str, dict]:
+    """Each mesh's stretch to its class's ``across_sight_width_m`` in ``placement``, once for every training set and seed.
+
+    Returns ``{mesh name: {"width_scale": (lo, hi)}}`` (:func:`zbuf_occlude.sensors.fit.fit_width_scale`,
+    seed 0) for the meshes of classes that give widths, to merge into ``placement``: a mesh's
+    own keywords override its class's (:func:`build_set`), so the crops are what fitting the
+    stretch in every draw would give, without fitting it again.  A mesh whose stretch cannot be
+    fitted is left out (its crops then raise, naming it; :func:`check_lidar_meshes` skips it).
+    """
+    out = {}
+    for entry in meshes:
+        dist, width_m = _distributions(entry, sizes[entry.class_name], _placement_of(placement, entry))
+        if width_m is not None:
+            try:
+                out[entry.name] = {"width_scale": _width_scale(entry, sensor, dist, width_m)}
+            except InvalidInputError as exc:
+                log.warning("%s", exc)
+    return out
+
+
+def _lidar(entry: MeshEntry, k: int, n_points: int, seed: int, sensor, size: SizeRange, min_returns: int = MIN_RETURNS,
+           placement: dict | None = None) -> tuple[list[NDArray], list[float]]:  # fmt: skip
+    from zbuf_occlude.sensors.crops import lidar_object_samples
+
+    dist, width_m = _distributions(entry, size, placement or {})
+    if width_m is not None and dist.width_scale is None:  # this mesh's stretch to the class's real widths
+        dist = replace(dist, width_scale=_width_scale(entry, sensor, dist, width_m))
     good: list = []
     # Draw about as many crops as needed, then more under another name (new placements) while
     # crops come back with fewer than min_returns returns; at most _LIDAR_TRIES rounds.
@@ -295,8 +334,10 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
     ``occluded`` set's camera elevations are drawn uniformly in ``elevation_deg`` (degrees).
     ``placement`` gives a LiDAR set's :class:`~zbuf_occlude.sensors.crops.CropDistributions`
     keywords per class (``{class: {"distance_m": (lo, hi), "hidden_below_m": (lo, hi)}}``,
-    metres), over :data:`LIDAR_PLACEMENT`'s; its ``"across_sight_width_m": (lo, hi)`` stretches
-    each mesh of the class to those widths (:func:`zbuf_occlude.sensors.fit.fit_width_scale`).
+    metres), over :data:`LIDAR_PLACEMENT`'s, and per mesh (keyed by its name, over its class's);
+    a class's ``"across_sight_width_m": (lo, hi)`` stretches each of its meshes to those widths
+    (:func:`zbuf_occlude.sensors.fit.fit_width_scale`) unless the mesh gives its ``width_scale``
+    (:func:`fit_width_scales`).
 
     Raises
     ------
@@ -327,7 +368,7 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
                 got = _occluded(entry, int(k), n_points, seed, rng, dense_points=dense_points, resolution=resolution, method=method,
                                 elevation_deg=elevation_deg)  # fmt: skip
             else:
-                got, size_k = _lidar(entry, int(k), n_points, seed, sensor, sizes[cls], min_returns, (placement or {}).get(cls))
+                got, size_k = _lidar(entry, int(k), n_points, seed, sensor, sizes[cls], min_returns, _placement_of(placement, entry))
             if kind == "lidar":
                 sizes_m.extend(size_k)
             elif keep_scale:
