@@ -1,0 +1,58 @@
+"""Cost of ``zbuf_occlude.sensors.fit.fit_width_scale`` per mesh (not a test; prints a Markdown table).
+
+Each mesh (a folder's mesh files, its class the folder above the file) is scaled to ``--height``,
+placed ``--distance`` from an HDL-32E and stretched to ``--width`` across the line of sight: 16
+crops at its own proportions (more while it shows no width), 16 at the stretch they ask for.
+Wall time per mesh, the stretch found, and the total: what a ``sim2real --fit-sensor`` run spends
+once on its meshes and ``farm --sensor-across-sight-width`` once per object.
+
+    python benchmarks/bench_width_scale.py data/samples
+    python benchmarks/bench_width_scale.py ../shared/data/street_objects --height 1.5:3 --width 0.2:0.5
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+from pathlib import Path
+
+from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS
+from zbuf_occlude.mesh.load import load_mesh
+from zbuf_occlude.mesh.sizes import SizeRange, size_interval
+from zbuf_occlude.sensors.crops import CropDistributions
+from zbuf_occlude.sensors.fit import fit_width_scale
+from zbuf_occlude.sensors.lidar import Lidar
+
+
+def _interval(text: str) -> tuple[float, float]:
+    lo, _, hi = text.partition(":")
+    return float(lo), float(hi or lo)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("root", type=Path, help="a folder of mesh files (searched recursively)")
+    ap.add_argument("--height", type=_interval, default=(1.0, 2.0), help="object height, metres, LO:HI (default 1:2)")
+    ap.add_argument("--distance", type=_interval, default=(4.0, 12.0), help="sensor distance, metres, LO:HI (default 4:12)")
+    ap.add_argument("--width", type=_interval, default=(0.3, 0.6), help="across-sight width, metres, LO:HI (default 0.3:0.6)")
+    args = ap.parse_args()
+    paths = sorted(p for p in args.root.rglob("*") if p.suffix.lower() in SUPPORTED_EXTENSIONS and p.is_file())
+    sensor = Lidar.preset("hdl32e")
+    print(f"# bench_width_scale: {len(paths)} meshes under {args.root}, {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.2f} at the start\n")
+    print("| mesh | s | stretch |\n|---|---|---|")
+    times = []
+    for path in paths:
+        mesh = load_mesh(path)
+        dist = CropDistributions(distance_m=args.distance, size_m=size_interval(mesh.extents, SizeRange("height", *args.height)))
+        t0 = time.perf_counter()
+        lo, hi = fit_width_scale(mesh, sensor, dist, args.width)
+        times.append(time.perf_counter() - t0)
+        print(f"| {path.relative_to(args.root)} | {times[-1]:.2f} | {lo:.2f}–{hi:.2f} |", flush=True)
+    print(f"\ntotal {sum(times):.1f} s, median {statistics.median(times):.2f} s, max {max(times):.2f} s per mesh; "
+          f"load {os.getloadavg()[0]:.2f} at the end")
+
+
+if __name__ == "__main__":
+    main()
