@@ -133,6 +133,10 @@ def test_fit_width_scale_makes_the_crops_as_wide_as_asked() -> None:
     for bad in ((0.6, 0.3), (-0.1, 0.2), ("a", 1), (0.0, 0.0)):
         with pytest.raises(InvalidInputError, match="width_m"):
             fit_width_scale(post, lidar, dist, bad)
+    # a sliver shows no width however far it is widened; the error names it
+    sliver = trimesh.Trimesh([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0], [1e-7, 1e-7, 0.5]], [[0, 1, 2]], process=False)
+    with pytest.raises(InvalidInputError, match="sliver.obj: no crop of 16 shows it two returns wide"):
+        fit_width_scale(sliver, lidar, dist, (0.3, 0.6), name="sliver.obj")
     with pytest.raises(InvalidInputError, match="spinning LiDAR"):
         fit_width_scale(post, sensor_from_name("riegl-q1560"), dist, (0.3, 0.6))
 

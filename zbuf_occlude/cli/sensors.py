@@ -104,7 +104,7 @@ def _largest_side(args: argparse.Namespace, mesh) -> tuple[float, float]:
         raise InvalidInputError(f"--size-of {args.size_of} measures a mesh file; a primitive takes --size (its largest dimension) or --extents")
     if not 0 < lo:
         raise InvalidInputError(f"--size must be > 0 metres, got {args.size!r}")
-    return size_interval(np.ptp(np.asarray(mesh.vertices), axis=0), SizeRange(args.size_of, lo, hi))
+    return size_interval(mesh.extents, SizeRange(args.size_of, lo, hi))
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
@@ -172,14 +172,11 @@ def cmd_scan(args: argparse.Namespace) -> int:
             from zbuf_occlude.sensors.fit import fit_width_scale
 
             width_m = parse_interval(args.across_sight_width, "--across-sight-width")
-            if width_m[0] < 0:
-                raise InvalidInputError(f"--across-sight-width must be >= 0 metres, got {args.across_sight_width!r}")
-            try:
-                dist = replace(dist, width_scale=fit_width_scale(mesh, sensor, dist, width_m, seed=args.seed))
-            except InvalidInputError as exc:
-                raise InvalidInputError(f"{src}: --across-sight-width: {exc}") from None
+            if width_m[0] < 0 or not width_m[1] > 0:
+                raise InvalidInputError(f"--across-sight-width must be >= 0 metres, and HI > 0, got {args.across_sight_width!r}")
+            dist = replace(dist, width_scale=fit_width_scale(mesh, sensor, dist, width_m, seed=args.seed, name=str(src)))
             log.info("%s: width_scale %.3g–%.3g", src.name, *dist.width_scale)
-        check_outside(dist, None if isinstance(mesh, dict) else np.ptp(np.asarray(mesh.vertices), axis=0))
+        check_outside(dist, None if isinstance(mesh, dict) else mesh.extents)
         for k in range(args.samples):
             rng = derive_rng(args.seed, object_key(src.name), k)
             placement = draw_placement(dist, rng)

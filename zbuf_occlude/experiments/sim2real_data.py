@@ -248,15 +248,6 @@ def _distributions(entry: MeshEntry, size: SizeRange, placement: dict) -> tuple[
     return CropDistributions(size_m=size_interval(entry.mesh.extents, size), **keywords), width_m
 
 
-def _width_scale(entry: MeshEntry, sensor, dist: CropDistributions, width_m: tuple[float, float]) -> tuple[float, float]:
-    from zbuf_occlude.sensors.fit import fit_width_scale
-
-    try:
-        return fit_width_scale(entry.mesh, sensor, dist, width_m)
-    except InvalidInputError as exc:
-        raise InvalidInputError(f"{entry.path}: {exc}") from None
-
-
 def fit_width_scales(meshes: list[MeshEntry], sensor, sizes: dict[str, SizeRange], placement: dict[str, dict]) -> dict[str, dict]:
     """Each mesh's stretch to its class's ``across_sight_width_m`` in ``placement``, once for every training set and seed.
 
@@ -266,12 +257,14 @@ def fit_width_scales(meshes: list[MeshEntry], sensor, sizes: dict[str, SizeRange
     stretch in every draw would give, without fitting it again.  A mesh whose stretch cannot be
     fitted is left out (its crops then raise, naming it; :func:`check_lidar_meshes` skips it).
     """
+    from zbuf_occlude.sensors.fit import fit_width_scale
+
     out = {}
     for entry in meshes:
         dist, width_m = _distributions(entry, sizes[entry.class_name], _placement_of(placement, entry))
         if width_m is not None:
             try:
-                out[entry.name] = {"width_scale": _width_scale(entry, sensor, dist, width_m)}
+                out[entry.name] = {"width_scale": fit_width_scale(entry.mesh, sensor, dist, width_m, name=str(entry.path))}
             except InvalidInputError as exc:
                 log.warning("%s", exc)
     return out
@@ -280,10 +273,11 @@ def fit_width_scales(meshes: list[MeshEntry], sensor, sizes: dict[str, SizeRange
 def _lidar(entry: MeshEntry, k: int, n_points: int, seed: int, sensor, size: SizeRange, min_returns: int = MIN_RETURNS,
            placement: dict | None = None) -> tuple[list[NDArray], list[float]]:  # fmt: skip
     from zbuf_occlude.sensors.crops import lidar_object_samples
+    from zbuf_occlude.sensors.fit import fit_width_scale
 
     dist, width_m = _distributions(entry, size, placement or {})
     if width_m is not None and dist.width_scale is None:  # this mesh's stretch to the class's real widths
-        dist = replace(dist, width_scale=_width_scale(entry, sensor, dist, width_m))
+        dist = replace(dist, width_scale=fit_width_scale(entry.mesh, sensor, dist, width_m, name=str(entry.path)))
     good: list = []
     # Draw about as many crops as needed, then more under another name (new placements) while
     # crops come back with fewer than min_returns returns; at most _LIDAR_TRIES rounds.

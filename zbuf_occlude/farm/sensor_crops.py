@@ -12,7 +12,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors.crops import CropDistributions, lidar_object_samples
 from zbuf_occlude.sensors.fit import fit_width_scale
@@ -66,10 +65,7 @@ def farm_datasets(
     """
     if across_sight_width_m is not None:
         mesh = load_mesh(mesh) if isinstance(mesh, (str, os.PathLike)) else mesh  # once, for the fit and the crops
-        try:
-            distributions = replace(distributions, width_scale=fit_width_scale(mesh, sensor, distributions, across_sight_width_m, seed=seed))
-        except InvalidInputError as exc:
-            raise InvalidInputError(f"{name}: --sensor-across-sight-width: {exc}") from None
+        distributions = replace(distributions, width_scale=fit_width_scale(mesh, sensor, distributions, across_sight_width_m, seed=seed, name=name))
     clouds = lidar_object_samples(mesh, sensor, name=name, n_samples=n_samples, n_points=n_points, seed=seed,
                                   distributions=distributions, label=label, backend=backend)  # fmt: skip
     b = len(clouds)

@@ -524,6 +524,11 @@ def across_sight_width(points: NDArray[np.floating], band_m: float = WIDTH_BAND_
     p = _checked_scan(0, points)
     if not (math.isfinite(band_m) and band_m > 0):
         raise InvalidInputError(f"band_m must be a number > 0 metres, got {band_m!r}")
+    return _across_sight_width(p, band_m)
+
+
+def _across_sight_width(p: NDArray[np.float64], band_m: float = WIDTH_BAND_M) -> float:
+    """:func:`across_sight_width` of a checked ``(N, 3) float64`` scan."""
     if len(p) < 2:
         return 0.0
     sight = p[:, :2].mean(axis=0)
@@ -562,12 +567,12 @@ def fit_crop_widths(clouds: Sequence[NDArray[np.floating]]) -> tuple[float, floa
     InvalidInputError
         Fewer than 3 non-empty scans, or a scan that is not finite (N, 3).
     """
-    q25, m, q75 = np.percentile(_per_scan(clouds, across_sight_width, "fit_crop_widths"), [25.0, 50.0, 75.0])
+    q25, m, q75 = np.percentile(_per_scan(clouds, _across_sight_width, "fit_crop_widths"), [25.0, 50.0, 75.0])
     return max(float(m - (q75 - q25)), 0.0), float(m + (q75 - q25))
 
 
 def fit_width_scale(mesh, sensor, distributions, width_m: tuple[float, float], *, n_samples: int = WIDTH_SAMPLES,
-                    seed: int = 0) -> tuple[float, float]:  # fmt: skip
+                    seed: int = 0, name: str = "the mesh") -> tuple[float, float]:  # fmt: skip
     """The horizontal stretch that makes a mesh's crops as wide as real scans, for :class:`~zbuf_occlude.sensors.crops.CropDistributions` ``width_scale``.
 
     ``n_samples`` crops of ``mesh`` drawn from ``distributions`` are measured with
@@ -593,6 +598,8 @@ def fit_width_scale(mesh, sensor, distributions, width_m: tuple[float, float], *
         Metres, 0 <= lo <= hi, hi > 0 (:func:`fit_crop_widths`).
     n_samples, seed : int
         Crops measured per round (>= 1) and their seed (placements and sensor noise).
+    name : str
+        The mesh as errors name it (its file).
 
     Returns
     -------
@@ -603,7 +610,7 @@ def fit_width_scale(mesh, sensor, distributions, width_m: tuple[float, float], *
     ------
     InvalidInputError
         A bad ``width_m`` or ``n_samples``, a sensor that is not a :class:`Lidar`, or no crop of
-        the mesh with a band of two returns.
+        the mesh with a band of two returns (naming ``name``).
     """
     try:
         lo, hi = (float(v) for v in width_m)
@@ -624,7 +631,7 @@ def fit_width_scale(mesh, sensor, distributions, width_m: tuple[float, float], *
         for k in range(int(n_samples)):
             rng = derive_rng(seed, _WIDTH_STREAM, k)
             crop = object_crop(mesh, sensor, draw_placement(dist, rng), seed=int(rng.integers(2**63)))
-            widths.append(across_sight_width(crop.scan.points))
+            widths.append(_across_sight_width(crop.scan.points.astype(np.float64)))
         return float(np.median(widths))
 
     middle, scale = (lo + hi) / 2, 1.0
@@ -635,7 +642,7 @@ def fit_width_scale(mesh, sensor, distributions, width_m: tuple[float, float], *
         scale *= 4.0
         w = median_width(scale)
     if not w > 0:
-        raise InvalidInputError(f"no crop of {n_samples} shows the mesh two returns wide in a band, even {scale:g}x as wide")
+        raise InvalidInputError(f"{name}: no crop of {n_samples} shows it two returns wide in a band, even {scale:g}x as wide")
     scale *= middle / w
     w = median_width(scale)
     if w > 0:  # the correction
