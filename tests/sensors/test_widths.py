@@ -109,6 +109,26 @@ def test_a_stretched_post_is_scanned_whole_and_as_wide_as_stretched() -> None:
             assert across_sight_width(wide.scan.points) == pytest.approx(w * across_sight_width(thin.scan.points), rel=0.15)
 
 
+@pytest.mark.parametrize("stretch", [0.3, 2.5])
+def test_a_stretched_crop_keeps_its_stretch_in_the_mesh_frame(stretch: float) -> None:
+    """The crop's mesh-frame points (the training clouds) show the object as scanned: as wide as stretched, as tall.
+
+    The local frame inverts the object's transform; without the stretch kept, a crop of a
+    stretched box would show the box's own proportions, and training would never see the widths.
+    """
+    box = trimesh.creation.box(extents=(0.5, 0.5, 1.0))
+    lidar = lidar_preset("hdl32e", range_noise_m=0.0)
+    placement = draw_placement(CropDistributions(distance_m=6.0, height_m=1.8, size_m=2.0, yaw_deg=0.0), np.random.default_rng(0))
+    plain = object_crop(box, lidar, placement, seed=1)
+    wide = object_crop(box, lidar, placement | {"width_scale": stretch}, seed=1)
+    assert np.all(np.abs(wide.local_points[:, :2]) <= 0.25 * stretch + 1e-6)  # on the stretched box
+    assert np.ptp(wide.local_points[:, 1]) == pytest.approx(stretch * np.ptp(plain.local_points[:, 1]), rel=0.1)  # across the sight (+x)
+    assert np.ptp(wide.local_points[:, 2]) == pytest.approx(np.ptp(plain.local_points[:, 2]), abs=0.05)
+    # the sensor in the same frame: the metric scene over the object's size (2 m), unchanged by the stretch
+    assert wide.sensor_local == pytest.approx(plain.sensor_local, abs=1e-9)
+    assert np.hypot(*(plain.sensor_local[:2])) == pytest.approx(6.0 / 2.0, abs=1e-9)
+
+
 def test_fit_width_scale_makes_the_crops_as_wide_as_asked() -> None:
     post = trimesh.creation.cylinder(radius=0.05, height=1.0, sections=32)
     lidar = lidar_preset("hdl32e", range_noise_m=0.0)

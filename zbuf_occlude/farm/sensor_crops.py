@@ -50,7 +50,7 @@ def farm_datasets(
     Returns
     -------
     dict of str → ndarray, B = samples with returns
-        The dense layout: ``data (B, n_points, 3) float32`` (normalised mesh frame), ``label``,
+        The dense layout: ``data (B, n_points, 3) float32`` (normalised mesh frame, x and y times ``width_scale``), ``label``,
         ``object_index``, ``pose_index``, ``sample_index`` (int64), ``elevation_deg``,
         ``azimuth_deg`` (the sensor seen from the object, degrees), ``n_visible`` (returns);
         and the placement: ``radius`` (mesh units), ``distance_m``, ``sensor_height_m``,

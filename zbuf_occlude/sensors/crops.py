@@ -192,7 +192,10 @@ class CropSample:
     placement : dict
         The drawn ``distance_m, height_m, azimuth_deg, yaw_deg, size_m``.
     local_points : (N, 3) float64
-        The same returns in the object's mesh frame (as loaded: normalised for mesh files).
+        The same returns in the object's mesh frame (as loaded: normalised for mesh files, z up),
+        with the object's horizontal stretch (the placement's ``width_scale``) kept: x and y
+        times it, so that the points show the object as it was scanned.  ``face_index`` rows
+        are the mesh's.
     sensor_local : (3,) float64
         The sensor centre in that frame.
     full : Scan
@@ -282,8 +285,10 @@ def _crop_object(scene: ScanScene, full: Scan, placement: dict, sensor_world, of
         keep[ground] = _under_footprint(built.local_meshes[1], to_world, inverse, world(full.points[ground]), placement["ground_margin_m"])
     crop = full.select(keep)
     crop.meta.update({key: full.meta[key][keep] for key in per_return})
-    local = (world(crop.points) - to_world[:3, 3]) @ inverse.T
-    return CropSample(crop, dict(placement), local, inverse @ (sensor_world - to_world[:3, 3]), full)
+    # the mesh frame with the object's horizontal stretch kept: the crop shows the object as scanned
+    stretch = np.array([placement.get("width_scale", 1.0), placement.get("width_scale", 1.0), 1.0])
+    local = ((world(crop.points) - to_world[:3, 3]) @ inverse.T) * stretch
+    return CropSample(crop, dict(placement), local, (inverse @ (sensor_world - to_world[:3, 3])) * stretch, full)
 
 
 def _under_footprint(mesh, to_world, inverse, world, margin_m: float) -> NDArray[np.bool_]:
@@ -344,7 +349,8 @@ def lidar_object_samples(
     Returns
     -------
     list of OccludedCloud
-        ``points (n_points, 3) float32`` in the normalised mesh frame; ``face_index`` into the
+        ``points (n_points, 3) float32`` in the normalised mesh frame (x and y times the
+        placement's ``width_scale``, as :attr:`CropSample.local_points`); ``face_index`` into the
         mesh (−1: a ground return, with ``ground_margin_m``); ``elevation_deg, azimuth_deg, radius``: the sensor seen from the object's bounding
         box centre (degrees, degrees, mesh units); ``n_visible``: the returns;
         ``extra``: the placement (metres, degrees), ``n_returns``, ``sensor``, the per-point
