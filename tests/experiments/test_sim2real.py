@@ -495,6 +495,42 @@ def test_validate_on_fit_half_validates_mesh_sets_on_the_fit_half_and_trains_on_
     assert main([*argv[:7], *argv[8:], "--out", str(tmp_path / "o2"), "--validate-on", "fit-half"]) == 2
 
 
+def test_fitted_shape_gives_the_placed_meshes_the_fitted_widths_or_outline_or_neither(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                                       capsys: pytest.CaptureFixture) -> None:  # fmt: skip
+    from zbuf_occlude.experiments import sim2real
+
+    from zbuf_occlude.sensors import lidar_preset
+
+    meshes, real = _mesh_root(tmp_path), _real_root(tmp_path)
+
+    def fit(scans, base, labels, names):  # the fit, with widths and an outline per class
+        shaped = {"distance_m": (6.0, 9.0), "across_sight_width_m": (0.3, 0.5), "across_sight_profile": (1.0,) * 8}
+        return lidar_preset("hdl32e"), {n: dict(shaped) for n in names}, CLASS_SIZES_M, {"name": "fitted-by-spy", "base": base.name}
+
+    monkeypatch.setattr(sim2real, "_fit_sensor", fit)
+    asked: list[set[str]] = []
+    real_fit = sim2real.fit_width_scales
+
+    def spy(meshes, sensor, sizes, placement):
+        asked.append({key for kw in placement.values() for key in kw})
+        return real_fit(meshes, sensor, sizes, placement)
+
+    monkeypatch.setattr(sim2real, "fit_width_scales", spy)
+    argv = ["experiment", "sim2real", str(meshes), "--real", str(real), "--label-map", "Trunk=pole", "--fit-sensor", "--points", "32",
+            "--epochs", "1", "--per-class", "4", "--threads", "1", "--no-progress", "--seeds", "1", "--validate-on", "fit-half"]  # fmt: skip
+    for shape, out in (("none", "o1"), ("outline", "o2"), ("widths,outline", "o3")):
+        assert main([*argv, "--out", str(tmp_path / out), "--fitted-shape", shape]) == 0
+        assert json.loads((tmp_path / out / "settings.json").read_text())["fit_sensor"]["fitted_shape"] == ([] if shape == "none" else shape.split(","))
+    assert [{"across_sight_width_m", "across_sight_profile"} & keys for keys in asked] == [
+        set(), {"across_sight_profile"}, {"across_sight_width_m", "across_sight_profile"}]
+    # a shape that does not exist, or one without --fit-sensor: usage errors naming the value or the option
+    capsys.readouterr()
+    assert main([*argv, "--out", str(tmp_path / "o4"), "--fitted-shape", "outlines"]) == 2
+    assert "'outlines'" in capsys.readouterr().err
+    assert main([*argv[:7], *argv[8:-2], "--out", str(tmp_path / "o5"), "--fitted-shape", "outline"]) == 2
+    assert "--fit-sensor" in capsys.readouterr().err
+
+
 def test_the_set_chosen_on_the_fit_half_is_the_best_validated_per_seed_never_the_best_scored() -> None:
     from zbuf_occlude.experiments.sim2real import CHOSEN_ON_FIT_HALF, summarise
 
@@ -512,6 +548,29 @@ def test_the_set_chosen_on_the_fit_half_is_the_best_validated_per_seed_never_the
     assert chosen["p_real_to_real_above"] == pytest.approx(1 / 6)  # both real→real seeds above both chosen ones
     assert chosen["diff_vs_complete"] == pytest.approx(0.675 - 0.575)
     assert CHOSEN_ON_FIT_HALF not in {r["train_set"] for r in summarise(runs, ["car", "pole"])}
+
+
+def test_a_class_outline_warps_each_mesh_then_stretches_it_under_the_warp(tmp_path: Path) -> None:
+    from zbuf_occlude.experiments.sim2real_data import build_set, fit_width_scales
+    from zbuf_occlude.sensors import lidar_preset
+
+    meshes = [m for m in find_class_meshes(_mesh_root(tmp_path)) if m.class_name == "pole"]
+    sensor = lidar_preset("hdl32e")
+    sizes = {"pole": SizeRange("height", 3.0, 4.0)}
+    widths = {"distance_m": (5.0, 9.0), "across_sight_width_m": (0.3, 0.5)}
+    outline = (0.5, 0.5, 1.0, 1.0, 1.0, 1.0, 2.0, 2.0)
+    plain = fit_width_scales(meshes, sensor, sizes, {"pole": widths})
+    warped = fit_width_scales(meshes, sensor, sizes, {"pole": {**widths, "across_sight_profile": outline}})
+    for m in meshes:
+        assert "width_profile" not in plain[m.name] and len(warped[m.name]["width_profile"]) == len(outline)
+        assert warped[m.name]["width_profile"][0] < warped[m.name]["width_profile"][-1]  # narrower at the foot than at the top
+        assert warped[m.name]["width_scale"] != plain[m.name]["width_scale"]  # stretched again under the warp
+    placement = {"pole": {**widths, "across_sight_profile": outline}}
+    every_draw = build_set("lidar", meshes, ["pole"], 2, 64, 3, sensor=sensor, sizes=sizes, placement=placement)
+    once = build_set("lidar", meshes, ["pole"], 2, 64, 3, sensor=sensor, sizes=sizes, placement={**placement, **warped})
+    np.testing.assert_array_equal(once.points, every_draw.points)
+    unwarped = build_set("lidar", meshes, ["pole"], 2, 64, 3, sensor=sensor, sizes=sizes, placement={"pole": widths, **plain})
+    assert not np.array_equal(once.points, unwarped.points)
 
 
 def test_width_scales_fitted_once_give_the_crops_of_fitting_them_in_every_draw(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -157,6 +157,9 @@ def test_fit_sensor_command_on_lidarnet_style_csvs(tmp_path: Path, capsys) -> No
     b_lo, b_hi = spec["fit"]["crops"]["hidden_below_m"][label]
     w_lo, w_hi = spec["fit"]["crops"]["across_sight_width_m"][label]
     assert 0.0 <= b_lo <= b_hi and f"| {h_lo:.2f}–{h_hi:.2f} | {b_lo:.2f}–{b_hi:.2f} | {w_lo:.2f}–{w_hi:.2f} |" in out.with_suffix(".md").read_text()
+    outline = spec["fit"]["crops"]["across_sight_profile"][label]  # boxes: about as wide at every height
+    assert len(outline) == 8 and max(abs(v - 1.0) for v in outline) < 0.35
+    assert f"| {label} | " + " | ".join(f"{v:.2f}" for v in outline) + " |" in out.with_suffix(".md").read_text()
     assert main(["fit-sensor", str(tmp_path / "scans"), "--sensor", "hdl32e", "--out", str(tmp_path / "f.txt")]) == 2
 
 

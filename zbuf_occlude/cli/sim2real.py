@@ -62,6 +62,7 @@ def _run(args: argparse.Namespace) -> int:
         threads=args.threads, progress=not args.no_progress, classes=_classes_option(args.classes),
         occluded_elevation_deg=parse_interval(args.occluded_elevation, "--occluded-elevation"),
         fit_sensor=args.fit_sensor, recipe=args.recipe, validate_on=args.validate_on,
+        fitted_shape=() if args.fitted_shape == "none" else tuple(v.strip() for v in args.fitted_shape.split(",")),
     )  # fmt: skip
     return print_table(args.out, summary)
 
@@ -109,6 +110,10 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
                    help="what the mesh-only sets validate on (best epoch, early stopping): clouds of held-out whole meshes, "
                    "or, with --fit-sensor, the fit half's real scans (then every mesh trains; the scored half stays unseen) "
                    "(default: %(default)s)")
+    p.add_argument("--fitted-shape", default="none", metavar="none|widths|outline|widths,outline",
+                   help="with --fit-sensor, what the fitted+placed set changes in each mesh's shape to look like the fit "
+                   "half's scans: its widths across the line of sight (a horizontal stretch), its outline over the height "
+                   "(a warp), both, or none (default: %(default)s)")
     p.add_argument("--recipe", choices=("stable", "plain"), default=SIM2REAL_RECIPE,
                    help="training recipe: stable (class-balanced sampling, best epoch by validation mean class accuracy, "
                    "warm-up, gradient clipping) or plain (the models' own loop) (default: %(default)s)")

@@ -111,5 +111,12 @@ def fit_sensor_to_scans(real: str | os.PathLike, sensor: str, out: str | os.Path
             b_lo, b_hi = crops["hidden_below_m"][k]
             w_lo, w_hi = crops["across_sight_width_m"][k]
             text += f"| {k} | {counts[k]} | {lo:.1f}–{hi:.1f} | {h_lo:.2f}–{h_hi:.2f} | {b_lo:.2f}–{b_hi:.2f} | {w_lo:.2f}–{w_hi:.2f} |\n"
+        profiles = crops["across_sight_profile"]
+        bins = len(next(iter(profiles.values())))
+        text += ("\nThe outline over the height (crops' `across_sight_profile`): per class, the median over its scans of the "
+                 f"width in {bins} bins of relative height (bottom to top), over the scan's width:\n\n"
+                 "| class | " + " | ".join(f"{b / bins:.3g}–{(b + 1) / bins:.3g}" for b in range(bins)) + " |\n|---|" + "---|" * bins + "\n")  # fmt: skip
+        for k, values in profiles.items():
+            text += f"| {k} | " + " | ".join(f"{v:.2f}" for v in values) + " |\n"
     write_text(md, text)
     return fit, out, md

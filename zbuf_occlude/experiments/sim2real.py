@@ -24,8 +24,9 @@ classifier to recognise real, partial scans?), asked on real data with the proto
   both are written to ``fitted_sensor.json``; two more training sets are made,
   :data:`~zbuf_occlude.experiments.sim2real_data.FITTED` (the fitted sensor, the ``lidar`` set's
   placements and sizes) and :data:`~zbuf_occlude.experiments.sim2real_data.FITTED_PLACED` (the
-  fitted sensor, distances, heights, bottoms, and each mesh stretched to the widths:
-  :func:`zbuf_occlude.sensors.fit.fit_width_scale`), and **every row is scored on the other half only**; the
+  fitted sensor, distances, heights and bottoms; with ``fitted_shape``, each mesh also stretched
+  to the widths, :func:`zbuf_occlude.sensors.fit.fit_width_scale`, and/or warped to the class's
+  outline over the height, :func:`zbuf_occlude.sensors.fit.fit_width_profile`), and **every row is scored on the other half only**; the
   fitted set is also tested against ``lidar``.  ``real_split.csv`` lists each scan's half;
 * with ``validate_on="fit-half"`` (needs ``fit_sensor``), the mesh-only sets are validated on the
   real scans of the fit half instead of held-out meshes (best epoch and early stopping), and train
@@ -77,7 +78,7 @@ from zbuf_occlude.learn.metrics import classification_report
 from zbuf_occlude.learn.stats import mean_std, permutation_p
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
 
-__all__ = ["Sim2RealScale", "SIM2REAL_SCALES", "REAL_TO_REAL", "SIM2REAL_RECIPE", "VALIDATION_CHOICES", "CHOSEN_ON_FIT_HALF",
+__all__ = ["Sim2RealScale", "SIM2REAL_SCALES", "REAL_TO_REAL", "SIM2REAL_RECIPE", "VALIDATION_CHOICES", "FITTED_SHAPES", "CHOSEN_ON_FIT_HALF",
            "run_sim2real", "summarise"]
 
 log = logging.getLogger(__name__)
@@ -90,6 +91,8 @@ _REAL_SPLIT_SEED = 20_231
 SIM2REAL_RECIPE = "stable"
 #: What the mesh-only sets validate on: clouds of held-out whole meshes, or the real scans of the fit half.
 VALIDATION_CHOICES = ("meshes", "fit-half")
+#: What ``fitted_shape`` may give the fitted+placed set's meshes, and the fitted crop keywords each uses.
+FITTED_SHAPES = {"widths": "across_sight_width_m", "outline": "across_sight_profile"}
 #: Name of the row that takes, per seed, the mesh-only set with the best fit-half validation score.
 CHOSEN_ON_FIT_HALF = "chosen on fit half"
 
@@ -140,8 +143,8 @@ def _fit_sensor(scans: list, base, labels: np.ndarray, names: list[str]):
     ``names``), every class's crop placement included.
 
     Returns the fitted Lidar, the crops' placement per class (``{class: {"distance_m": (lo_m, hi_m),
-    "hidden_below_m": (lo_m, hi_m), "across_sight_width_m": (lo_m, hi_m)}}``: the sensor's
-    distances, the objects' hidden bottoms and their widths),
+    "hidden_below_m": (lo_m, hi_m), "across_sight_width_m": (lo_m, hi_m), "across_sight_profile": (K values)}}``: the sensor's
+    distances, the objects' hidden bottoms, their widths and their outline over the height),
     ``{class: SizeRange}`` (heights: the top return above the ground) and the sensor's JSON with the fit and the ``crops`` block.
     """
     from zbuf_occlude.experiments.sensor_fit import fit_to_scans
@@ -154,7 +157,8 @@ def _fit_sensor(scans: list, base, labels: np.ndarray, names: list[str]):
     except InvalidInputError as exc:
         raise InvalidInputError(f"--fit-sensor: {exc}") from None
     crops = spec["fit"]["crops"]
-    placement = {k: {key: tuple(float(v) for v in crops[key][k]) for key in ("distance_m", "hidden_below_m", "across_sight_width_m")} for k in crops["distance_m"]}
+    keys = ("distance_m", "hidden_below_m", "across_sight_width_m", "across_sight_profile")
+    placement = {k: {key: tuple(float(v) for v in crops[key][k]) for key in keys} for k in crops["distance_m"]}
     sizes = {k: SizeRange("height", max(float(lo), 0.05), max(float(hi), 0.05)) for k, (lo, hi) in crops["object_height_m"].items()}
     return fit.sensor, placement, sizes, spec
 
@@ -227,6 +231,7 @@ def run_sim2real(
     fit_sensor: bool = False,
     recipe: str = SIM2REAL_RECIPE,
     validate_on: str = "meshes",
+    fitted_shape: tuple[str, ...] = (),
 ) -> dict:
     """Train on each synthetic training set and on real scans, ``seeds`` times; score on the real scans.
 
@@ -281,6 +286,11 @@ def run_sim2real(
         What the mesh-only sets validate on (best epoch, early stopping): clouds of the same kind
         from held-out whole meshes, or, with ``fit_sensor``, the real scans of the fit half (the
         sets then train on every mesh; module docstring). real→real is the same either way.
+    fitted_shape : tuple of str
+        What the fitted+placed set changes in each mesh's shape (needs ``fit_sensor``; keys of
+        :data:`FITTED_SHAPES`): ``"widths"``, a horizontal stretch to the class's widths across
+        the line of sight; ``"outline"``, a warp to its outline over the height.  Empty
+        (default): the meshes' own shapes.  Each is fitted per mesh once (:func:`fit_width_scales`).
 
     Returns
     -------
@@ -313,6 +323,11 @@ def run_sim2real(
         raise InvalidInputError(f"--validate-on must be one of {', '.join(VALIDATION_CHOICES)}, got {validate_on!r}")
     if validate_on == "fit-half" and not fit_sensor:
         raise InvalidInputError("--validate-on fit-half needs --fit-sensor (which splits the real scans into the fit half and the scored half)")
+    fitted_shape = tuple(fitted_shape)
+    if unknown := [v for v in fitted_shape if v not in FITTED_SHAPES]:
+        raise InvalidInputError(f"--fitted-shape must name {' and/or '.join(FITTED_SHAPES)}, got {', '.join(map(repr, unknown))}")
+    if fitted_shape and not fit_sensor:
+        raise InvalidInputError("--fitted-shape needs --fit-sensor (it shapes the fitted+placed set's meshes)")
     real_val = validate_on == "fit-half"
     t_start = time.perf_counter()
     sc = SIM2REAL_SCALES[scale]
@@ -335,7 +350,9 @@ def run_sim2real(
         kept = real_scan_rows(scans, names, dict(label_map or {}))
         fitted, fitted_placement, fitted_sizes, fit_json = _fit_sensor([scans[kept[i]] for i in half_a], lidar, real_y[half_a], names)
         meshes, skipped_fitted = check_lidar_meshes(meshes, fitted, sizes, n_points, min_returns=int(min_returns))
-        # each mesh's stretch to its class's widths, fitted once for every seed (seed 0: the same every run)
+        unused = [key for shape, key in FITTED_SHAPES.items() if shape not in fitted_shape]
+        fitted_placement = {c: {k: v for k, v in kw.items() if k not in unused} for c, kw in fitted_placement.items()}
+        # each mesh's stretch and warp to its class's scans, fitted once for every seed (seed 0: the same every run)
         fitted_placement = {**fitted_placement, **fit_width_scales(meshes, fitted, fitted_sizes, fitted_placement)}
         meshes, skipped_placed = check_lidar_meshes(meshes, fitted, fitted_sizes, n_points, min_returns=int(min_returns),
                                                     placement=fitted_placement)  # fmt: skip
@@ -366,7 +383,7 @@ def run_sim2real(
         settings["validate_on"] = validate_on
     if fit_sensor:  # likewise: runs without it keep their settings
         settings["fit_sensor"] = {
-            "split_seed": _REAL_SPLIT_SEED, "fitted_sensor": fit_json,
+            "split_seed": _REAL_SPLIT_SEED, "fitted_sensor": fit_json, "fitted_shape": list(fitted_shape),
             "fit_scans": {c: int((real_y[half_a] == i).sum()) for i, c in enumerate(names)},
             "scored_scans": {c: int((real_y[half_b] == i).sum()) for i, c in enumerate(names)},
         }  # fmt: skip

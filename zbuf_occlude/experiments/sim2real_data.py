@@ -239,32 +239,49 @@ def _placement_of(placement: dict[str, dict] | None, entry: MeshEntry) -> dict:
     return {**(placement or {}).get(entry.class_name, {}), **(placement or {}).get(entry.name, {})}
 
 
-def _distributions(entry: MeshEntry, size: SizeRange, placement: dict) -> tuple[CropDistributions, tuple[float, float] | None]:
-    """The mesh's crop distributions (its stretch left out) and its class's ``across_sight_width_m``, if any."""
+def _distributions(entry: MeshEntry, size: SizeRange, placement: dict) -> tuple[CropDistributions, tuple[float, float] | None, tuple | None]:
+    """The mesh's crop distributions (its stretch left out unless given) and its class's
+    ``across_sight_width_m`` and ``across_sight_profile``, if any."""
     from zbuf_occlude.sensors.crops import CropDistributions
 
     keywords = {**LIDAR_PLACEMENT, **placement}
     width_m = keywords.pop("across_sight_width_m", None)
-    return CropDistributions(size_m=size_interval(entry.mesh.extents, size), **keywords), width_m
+    profile = keywords.pop("across_sight_profile", None)
+    return CropDistributions(size_m=size_interval(entry.mesh.extents, size), **keywords), width_m, profile
+
+
+def _fit_stretch(entry: MeshEntry, sensor, dist: CropDistributions, width_m: tuple[float, float] | None, profile: tuple | None) -> dict:
+    """``{"width_scale": (lo, hi)}`` with the class's ``width_m`` (:func:`~zbuf_occlude.sensors.fit.fit_width_scale`),
+    ``{"width_profile": (K factors)}`` with its ``profile`` (:func:`zbuf_occlude.sensors.fit.fit_width_profile`); with
+    both, the mesh is warped to the outline at its width stretch, then stretched again under the warp."""
+    from zbuf_occlude.sensors.fit import fit_width_profile, fit_width_scale
+
+    out = {}
+    if width_m is not None:
+        out["width_scale"] = fit_width_scale(entry.mesh, sensor, dist, width_m, name=str(entry.path))
+    if profile is not None:
+        at = replace(dist, width_scale=out.get("width_scale", dist.width_scale))
+        out["width_profile"] = fit_width_profile(entry.mesh, sensor, at, profile, name=str(entry.path))
+        if width_m is not None:
+            out["width_scale"] = fit_width_scale(entry.mesh, sensor, replace(dist, width_profile=out["width_profile"]), width_m, name=str(entry.path))
+    return out
 
 
 def fit_width_scales(meshes: list[MeshEntry], sensor, sizes: dict[str, SizeRange], placement: dict[str, dict]) -> dict[str, dict]:
-    """Each mesh's stretch to its class's ``across_sight_width_m`` in ``placement``, once for every training set and seed.
+    """Each mesh's stretch to its class's ``across_sight_width_m`` and warp to its ``across_sight_profile`` in ``placement``, once for every training set and seed.
 
-    Returns ``{mesh name: {"width_scale": (lo, hi)}}`` (:func:`zbuf_occlude.sensors.fit.fit_width_scale`,
-    seed 0) for the meshes of classes that give widths, to merge into ``placement``: a mesh's
+    Returns ``{mesh name: {"width_scale": (lo, hi), "width_profile": (K factors)}}`` (:func:`_fit_stretch`,
+    seed 0; each key where the class gives what it fits) for the meshes of classes that give either, to merge into ``placement``: a mesh's
     own keywords override its class's (:func:`build_set`), so the crops are what fitting the
     stretch in every draw would give, without fitting it again.  A mesh whose stretch cannot be
     fitted is left out (its crops then raise, naming it; :func:`check_lidar_meshes` skips it).
     """
-    from zbuf_occlude.sensors.fit import fit_width_scale
-
     out = {}
     for entry in meshes:
-        dist, width_m = _distributions(entry, sizes[entry.class_name], _placement_of(placement, entry))
-        if width_m is not None:
+        dist, width_m, profile = _distributions(entry, sizes[entry.class_name], _placement_of(placement, entry))
+        if width_m is not None or profile is not None:
             try:
-                out[entry.name] = {"width_scale": fit_width_scale(entry.mesh, sensor, dist, width_m, name=str(entry.path))}
+                out[entry.name] = _fit_stretch(entry, sensor, dist, width_m, profile)
             except InvalidInputError as exc:
                 log.warning("%s", exc)
     return out
@@ -273,11 +290,10 @@ def fit_width_scales(meshes: list[MeshEntry], sensor, sizes: dict[str, SizeRange
 def _lidar(entry: MeshEntry, k: int, n_points: int, seed: int, sensor, size: SizeRange, min_returns: int = MIN_RETURNS,
            placement: dict | None = None) -> tuple[list[NDArray], list[float]]:  # fmt: skip
     from zbuf_occlude.sensors.crops import lidar_object_samples
-    from zbuf_occlude.sensors.fit import fit_width_scale
 
-    dist, width_m = _distributions(entry, size, placement or {})
-    if width_m is not None and dist.width_scale is None:  # this mesh's stretch to the class's real widths
-        dist = replace(dist, width_scale=fit_width_scale(entry.mesh, sensor, dist, width_m, name=str(entry.path)))
+    dist, width_m, profile = _distributions(entry, size, placement or {})
+    if (width_m is not None and dist.width_scale is None) or (profile is not None and dist.width_profile is None):
+        dist = replace(dist, **_fit_stretch(entry, sensor, dist, width_m, profile))  # this mesh's, to the class's real scans
     good: list = []
     # Draw about as many crops as needed, then more under another name (new placements) while
     # crops come back with fewer than min_returns returns; at most _LIDAR_TRIES rounds.
@@ -330,8 +346,9 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
     keywords per class (``{class: {"distance_m": (lo, hi), "hidden_below_m": (lo, hi)}}``,
     metres), over :data:`LIDAR_PLACEMENT`'s, and per mesh (keyed by its name, over its class's);
     a class's ``"across_sight_width_m": (lo, hi)`` stretches each of its meshes to those widths
-    (:func:`zbuf_occlude.sensors.fit.fit_width_scale`) unless the mesh gives its ``width_scale``
-    (:func:`fit_width_scales`).
+    (:func:`zbuf_occlude.sensors.fit.fit_width_scale`), and its ``"across_sight_profile"`` warps
+    them to that outline (:func:`zbuf_occlude.sensors.fit.fit_width_profile`), unless the
+    mesh gives its ``width_scale`` and ``width_profile`` (:func:`fit_width_scales`).
 
     Raises
     ------

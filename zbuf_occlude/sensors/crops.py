@@ -25,7 +25,7 @@ from zbuf_occlude.sensors.airborne import AirborneScanner
 from zbuf_occlude.sensors.depth_camera import DepthCamera
 from zbuf_occlude.sensors.lidar import Lidar
 from zbuf_occlude.sensors.scan import Scan, scan
-from zbuf_occlude.sensors.scene import ScanScene, SceneObject, sensor_pose
+from zbuf_occlude.sensors.scene import ScanScene, SceneObject, check_width_profile, sensor_pose
 
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
@@ -119,6 +119,10 @@ class CropDistributions:
         thick as the trunks a real scan shows, keeping their height.  None (default): the
         mesh's own proportions.  :func:`~zbuf_occlude.sensors.fit.fit_width_scale` fits it to
         the widths of real scans.
+    width_profile : sequence of float, optional
+        A fixed horizontal stretch per relative-height bin (:class:`~zbuf_occlude.sensors.scene.SceneObject`
+        ``width_profile``), on top of ``width_scale``: the outline over the height that real scans
+        show.  None (default): none.  :func:`~zbuf_occlude.sensors.fit.fit_width_profile` fits it.
     """
 
     distance_m: tuple[float, float] = (5.0, 25.0)
@@ -133,6 +137,7 @@ class CropDistributions:
     ground_margin_m: float | None = None
     hidden_below_m: tuple[float, float] | None = None
     width_scale: tuple[float, float] | None = None
+    width_profile: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         for name in ("distance_m", "height_m", "azimuth_deg", "yaw_deg", "size_m"):
@@ -151,6 +156,8 @@ class CropDistributions:
             object.__setattr__(self, "width_scale", _interval("width_scale", self.width_scale, lowest=0.0))
             if self.width_scale[0] <= 0:
                 raise InvalidInputError(f"width_scale must be > 0, got {self.width_scale!r}")
+        if self.width_profile is not None:
+            object.__setattr__(self, "width_profile", check_width_profile(self.width_profile))
         if self.ground_margin_m is not None:
             object.__setattr__(self, "ground_margin_m", check_ground_margin(self.ground_margin_m))
         if self.distance_m[0] <= 0 or self.size_m[0] <= 0 or self.height_m[0] < 0:
@@ -159,7 +166,8 @@ class CropDistributions:
 
 def draw_placement(dist: CropDistributions, rng: np.random.Generator) -> dict[str, float]:
     """One placement ``{distance_m, height_m, azimuth_deg, yaw_deg, size_m}`` (five uniform draws, in that order),
-    then ``extents_m``, ``reflectivity``, ``hidden_below_m`` and ``width_scale`` where ``dist`` gives them (drawn only when an interval)."""
+    then ``extents_m``, ``reflectivity``, ``hidden_below_m`` and ``width_scale`` where ``dist`` gives them (drawn only when an interval),
+    and ``ground_margin_m`` and ``width_profile`` as given (no draw)."""
     out = {name: float(rng.uniform(*getattr(dist, name))) for name in ("distance_m", "height_m", "azimuth_deg", "yaw_deg", "size_m")}
     # further draws only where an interval asks for them, so fixed values keep earlier streams
     if dist.extents_m is not None:
@@ -177,6 +185,8 @@ def draw_placement(dist: CropDistributions, rng: np.random.Generator) -> dict[st
         out["width_scale"] = _draw(dist.width_scale, rng)
     if dist.ground_margin_m is not None:  # no draw: a fixed value
         out["ground_margin_m"] = dist.ground_margin_m
+    if dist.width_profile is not None:  # no draw
+        out["width_profile"] = dist.width_profile
     return out
 
 
@@ -194,8 +204,8 @@ class CropSample:
     local_points : (N, 3) float64
         The same returns in the object's mesh frame (as loaded: normalised for mesh files, z up),
         with the object's horizontal stretch (the placement's ``width_scale``) kept: x and y
-        times it, so that the points show the object as it was scanned.  ``face_index`` rows
-        are the mesh's.
+        times it, and warped by its ``width_profile``, so that the points show the object as it
+        was scanned.  ``face_index`` rows are the mesh's.
     sensor_local : (3,) float64
         The sensor centre in that frame.
     full : Scan
@@ -241,12 +251,14 @@ def object_crop(
     az = math.radians(placement["azimuth_deg"])
     d = placement["distance_m"]
     size = placement.get("extents_m") or placement["size_m"]
-    width_scale = placement.get("width_scale", 1.0)
-    reach = placement["size_m"] * max(1.0, width_scale)  # the largest side after the stretch, at most
+    width_scale, profile = placement.get("width_scale", 1.0), placement.get("width_profile")
+    # the largest side after the stretch, at most
+    reach = placement["size_m"] * max(1.0, width_scale) * (1.0 if profile is None else max(1.0, *profile))
     if isinstance(sensor, AirborneScanner):
         return _airborne_crop(mesh, sensor, placement, seed=seed, occluders=occluders, class_name=class_name, offset_m=d * math.sin(az), size=size,
                               width_scale=width_scale, reach=reach)  # fmt: skip
-    obj = SceneObject(mesh, class_name, (d * math.cos(az), d * math.sin(az)), placement["yaw_deg"], size, width_scale=width_scale)
+    obj = SceneObject(mesh, class_name, (d * math.cos(az), d * math.sin(az)), placement["yaw_deg"], size, width_scale=width_scale,
+                      width_profile=profile)  # fmt: skip
     scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=max(2.0 * d, 20.0))
     pose = sensor_pose([0.0, 0.0, placement["height_m"]])
     sector = None
@@ -309,7 +321,8 @@ def _airborne_crop(mesh, sensor: AirborneScanner, placement: dict, *, seed: int,
     world frame; the crop's ``meta["line_id"]`` and ``meta["scan_angle_deg"]`` are its returns'."""
     from zbuf_occlude.sensors.airborne import scan_airborne
 
-    obj = SceneObject(mesh, class_name, (0.0, offset_m), placement["yaw_deg"], size, width_scale=width_scale)
+    obj = SceneObject(mesh, class_name, (0.0, offset_m), placement["yaw_deg"], size, width_scale=width_scale,
+                      width_profile=placement.get("width_profile"))  # fmt: skip
     reach = max(float(np.max(size)), reach) * 0.75 + 1.0
     scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=abs(offset_m) + 2.0 * reach)
     full = scan_airborne(scene, sensor, (0.0, offset_m), reach, seed=seed)

@@ -64,8 +64,9 @@ from zbuf_occlude.sensors.lidar import Lidar
 
 __all__ = [
     "BOOTSTRAP", "DISTANCE_QUANTILES", "MAX_DROPOUT_GAP", "MIN_PLACEMENT_SCANS", "PLANE_NEIGHBOURS", "Estimate", "LidarFit",
-    "SENSOR_HEIGHT_QUANTILE", "WIDTH_BAND_M", "WIDTH_SAMPLES", "across_sight_width", "crop_placement_json", "fit_crop_bottoms",
-    "fit_crop_distances", "fit_crop_heights", "fit_crop_widths", "fit_lidar", "fit_sensor_height", "fit_width_scale", "lidar_to_json",
+    "SENSOR_HEIGHT_QUANTILE", "WIDTH_BAND_M", "WIDTH_PROFILE_BINS", "WIDTH_SAMPLES", "across_sight_width", "crop_placement_json",
+    "fit_crop_bottoms", "fit_crop_distances", "fit_crop_heights", "fit_crop_width_profile", "fit_crop_widths", "fit_lidar",
+    "fit_sensor_height", "fit_width_profile", "fit_width_scale", "lidar_to_json", "width_profile",
 ]  # fmt: skip
 
 #: Non-empty scans a class needs for its crops' distances and heights (:func:`crop_placement_json`).
@@ -85,12 +86,15 @@ MIN_RETURNS = 20
 #: Height of the horizontal bands in which :func:`across_sight_width` measures a scan, metres
 #: (about one HDL-32E ring beyond 7 m).
 WIDTH_BAND_M = 0.15
-#: Simulated crops of a mesh that :func:`fit_width_scale` measures.
+#: Simulated crops of a mesh that :func:`fit_width_scale` and :func:`fit_width_profile` measure.
 WIDTH_SAMPLES = 16
+#: Bins of relative height of :func:`width_profile`.
+WIDTH_PROFILE_BINS = 8
 _GROUND_SLICE_M = 0.15
 _MIN_HEIGHT_M = 0.05  # a fitted object height is at least this (a scan whose top lies at or below the fitted ground)
 _PLANARITY = 0.3
 _WIDTH_STREAM = 0x57D7  # fit_width_scale's crops
+_PROFILE_STREAM = 0x9F0F  # fit_width_profile's crops
 _WIDTH_GROWTHS = 6  # fit_width_scale widens a mesh that shows no width up to 4**6 times
 _GROUND_NORMAL_COS = math.cos(math.radians(25.0))
 
@@ -650,6 +654,169 @@ def fit_width_scale(mesh, sensor, distributions, width_m: tuple[float, float], *
     return max(lo, 1e-3 * hi) * scale / middle, hi * scale / middle
 
 
+def width_profile(points: NDArray[np.floating], n_bins: int = WIDTH_PROFILE_BINS) -> NDArray[np.float64]:
+    """An object scan's outline over its height: how wide it shows across the line of sight per bin of relative height, over its width.
+
+    The scan's vertical extent is cut into ``n_bins`` equal bins (0: its lowest return, 1: its
+    top); a bin of two or more returns has their extent along the horizontal direction
+    perpendicular to the line of sight (as :func:`across_sight_width`), divided by the scan's
+    :func:`across_sight_width`.  Unitless: a real person's knees show about 0.5 of their width
+    and their shoulders 1.2; a trunk about 1 throughout.
+
+    Parameters
+    ----------
+    points : (N, 3) float
+        One object scan; sensor at the origin, z up, metres.
+    n_bins : int
+        Bins, >= 2.
+
+    Returns
+    -------
+    (n_bins,) float64
+        NaN for a bin of fewer than two returns, and everywhere when the scan shows no width.
+
+    Raises
+    ------
+    InvalidInputError
+        ``points`` not a finite (N, 3) array, or ``n_bins`` < 2.
+    """
+    if int(n_bins) < 2:
+        raise InvalidInputError(f"n_bins must be >= 2, got {n_bins!r}")
+    return _width_profile(_checked_scan(0, points), int(n_bins))
+
+
+def _width_profile(p: NDArray[np.float64], n_bins: int) -> NDArray[np.float64]:
+    """:func:`width_profile` of a checked ``(N, 3) float64`` scan."""
+    out = np.full(n_bins, np.nan)
+    width = _across_sight_width(p)
+    if not width > 0:
+        return out
+    sight = p[:, :2].mean(axis=0)
+    norm = float(np.hypot(*sight))
+    across = p[:, :2] @ (np.array([-sight[1], sight[0]]) / norm if norm > 0 else np.array([1.0, 0.0]))
+    extent = float(np.ptp(p[:, 2]))
+    k = np.zeros(len(p), np.int64) if extent <= 0 else np.minimum(((p[:, 2] - p[:, 2].min()) / extent * n_bins).astype(np.int64), n_bins - 1)
+    for b in range(n_bins):
+        if np.count_nonzero(k == b) >= 2:
+            out[b] = np.ptp(across[k == b]) / width
+    return out
+
+
+def fit_crop_width_profile(clouds: Sequence[NDArray[np.floating]], n_bins: int = WIDTH_PROFILE_BINS) -> tuple[float, ...]:
+    """The outline over the height of one class of real object scans: the median of their :func:`width_profile`, bin by bin.
+
+    Parameters
+    ----------
+    clouds : sequence of (N_i, 3) float
+        Segmented object scans of one class; sensor at the origin, z up, metres.
+    n_bins : int
+        Bins, >= 2.
+
+    Returns
+    -------
+    tuple of ``n_bins`` float
+        Widths over the scans' widths; 1.0 in a bin that no scan fills (no information: no warp).
+
+    Raises
+    ------
+    InvalidInputError
+        Fewer than 3 scans that show a width, a scan that is not finite (N, 3), or ``n_bins`` < 2.
+    """
+    if int(n_bins) < 2:
+        raise InvalidInputError(f"n_bins must be >= 2, got {n_bins!r}")
+    rows = [row for i, c in enumerate(clouds) if len(p := _checked_scan(i, c)) and np.any(np.isfinite(row := _width_profile(p, int(n_bins))))]
+    if len(rows) < MIN_PLACEMENT_SCANS:
+        raise InvalidInputError(f"fit_crop_width_profile needs at least {MIN_PLACEMENT_SCANS} scans that show a width, got {len(rows)}")
+    return _nan_median_or_one(np.array(rows))
+
+
+def _nan_median_or_one(rows: NDArray[np.float64]) -> tuple[float, ...]:
+    filled = np.isfinite(rows).any(axis=0)
+    median = np.full(rows.shape[1], 1.0)
+    median[filled] = np.nanmedian(rows[:, filled], axis=0)
+    return tuple(float(v) for v in median)
+
+
+def fit_width_profile(mesh, sensor, distributions, profile: Sequence[float], *, n_samples: int = WIDTH_SAMPLES, seed: int = 0,
+                      name: str = "the mesh") -> tuple[float, ...]:  # fmt: skip
+    """The warp over the height that gives a mesh's crops a class's outline, for :class:`~zbuf_occlude.sensors.crops.CropDistributions` ``width_profile``.
+
+    ``n_samples`` crops of ``mesh`` drawn from ``distributions`` (its ``width_scale`` and
+    ``width_profile`` as given) are measured with :func:`width_profile`; the stretch of each bin
+    is the target ``profile`` over their median, clipped to [1/8, 8] (1 where either is
+    unknown).  Those bins are of the crops' relative height, which starts above the mesh's
+    bottom where the placement hides it; they are mapped to the mesh's own relative height by
+    the crops' median lowest and highest return, then the crops are measured once more under
+    the warp and each bin corrected once.  Both profiles are over the scan's median width, so
+    the warp leaves that width about as it was: fit ``width_scale`` again under the warp
+    (:func:`fit_width_scale`) to keep it exact.  A mesh made to look like the user's scans, not
+    a sensor setting: its parts move (a T-posed person's arms are pulled in; a sign's plate is
+    made as narrow as its post).
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        A normalised, z-up mesh (:func:`zbuf_occlude.load_mesh`).
+    sensor : Lidar
+    distributions : CropDistributions
+    profile : sequence of float
+        The class's outline, ``K >= 2`` values > 0 (:func:`fit_crop_width_profile`).
+    n_samples, seed : int
+        Crops measured per round (>= 1) and their seed.
+    name : str
+        The mesh as errors name it.
+
+    Returns
+    -------
+    tuple of K float
+        Stretch factors in [1/8, 8] at the centres of ``K`` equal bins of the mesh's relative height.
+
+    Raises
+    ------
+    InvalidInputError
+        A bad ``profile`` or ``n_samples``, a sensor that is not a :class:`Lidar`, or no crop of
+        the mesh that shows a width (naming ``name``).
+    """
+    from zbuf_occlude.sensors.scene import check_width_profile
+
+    target = np.asarray(check_width_profile(profile))
+    if int(n_samples) < 1:
+        raise InvalidInputError(f"n_samples must be >= 1, got {n_samples}")
+    if not isinstance(sensor, Lidar):
+        raise InvalidInputError(f"widths are measured across a spinning LiDAR's line of sight; {getattr(sensor, 'name', sensor)!r} is not one")
+    from zbuf_occlude.geometry.samples import derive_rng
+    from zbuf_occlude.sensors.crops import draw_placement, object_crop  # scans: imported when a profile is fitted
+
+    k = len(target)
+    z_lo, z_hi = (float(v) for v in np.asarray(mesh.bounds, dtype=np.float64)[:, 2])
+    centres = (np.arange(k) + 0.5) / k
+
+    def measure(dist) -> tuple[NDArray[np.float64], float, float]:
+        """The crops' median profile, and their median lowest and highest return in the mesh's relative height."""
+        rows, spans = [], []
+        for i in range(int(n_samples)):
+            rng = derive_rng(seed, _PROFILE_STREAM, i)
+            crop = object_crop(mesh, sensor, draw_placement(dist, rng), seed=int(rng.integers(2**63)))
+            row = _width_profile(crop.scan.points.astype(np.float64), k)
+            if np.any(np.isfinite(row)):
+                rows.append(row)
+                spans.append((crop.local_points[:, 2].min(), crop.local_points[:, 2].max()))
+        if not rows:
+            raise InvalidInputError(f"{name}: no crop of {n_samples} shows a width to fit its outline to")
+        lo, hi = (np.median(np.array(spans), axis=0) - z_lo) / max(z_hi - z_lo, 1e-12)
+        return np.array(_nan_median_or_one(np.array(rows))), float(lo), float(hi)
+
+    def stretch(measured, lo, hi) -> NDArray[np.float64]:
+        """Target over measured per crop bin, at the mesh's bin centres."""
+        ratio = np.clip(target / measured, 1 / 8, 8)
+        return np.interp(centres, lo + centres * (hi - lo), ratio)
+
+    first = stretch(*measure(distributions))
+    dist = replace(distributions, width_profile=tuple(float(v) for v in first))
+    factors = np.clip(first * stretch(*measure(dist)), 1 / 8, 8)  # the correction
+    return tuple(float(v) for v in factors)
+
+
 def _check_height(sensor_height_m) -> float:
     h = float(sensor_height_m)
     if not math.isfinite(h):
@@ -658,12 +825,12 @@ def _check_height(sensor_height_m) -> float:
 
 
 def crop_placement_json(clouds: Sequence[NDArray[np.floating]], labels: Sequence[str]) -> dict:
-    """:func:`fit_crop_distances`, :func:`fit_crop_heights`, :func:`fit_crop_bottoms` and :func:`fit_crop_widths` per label: the ``crops`` block of a fitted sensor's ``fit``.
+    """:func:`fit_crop_distances`, :func:`fit_crop_heights`, :func:`fit_crop_bottoms`, :func:`fit_crop_widths` and :func:`fit_crop_width_profile` per label: the ``crops`` block of a fitted sensor's ``fit``.
 
     Returns ``{"quantiles": [lo, hi], "sensor_height_m": h, "distance_m": {label: [lo_m, hi_m]},
     "object_height_m": {label: [lo_m, hi_m]}, "hidden_below_m": {label: [lo_m, hi_m]},
-    "across_sight_width_m": {label: [lo_m, hi_m]}}`` (labels sorted; ``h`` is
-    :func:`fit_sensor_height` over every scan).
+    "across_sight_width_m": {label: [lo_m, hi_m]}, "across_sight_profile": {label: [K values]}}``
+    (labels sorted; ``h`` is :func:`fit_sensor_height` over every scan).
 
     Raises
     ------
@@ -674,7 +841,7 @@ def crop_placement_json(clouds: Sequence[NDArray[np.floating]], labels: Sequence
         raise InvalidInputError(f"crop_placement_json: {len(labels)} labels for {len(clouds)} scans")
     height = fit_sensor_height(clouds)
     out: dict = {"quantiles": list(DISTANCE_QUANTILES), "sensor_height_m": height, "distance_m": {}, "object_height_m": {}, "hidden_below_m": {},
-                 "across_sight_width_m": {}}  # fmt: skip
+                 "across_sight_width_m": {}, "across_sight_profile": {}}  # fmt: skip
     for label in sorted(set(labels)):
         of_label = [c for c, y in zip(clouds, labels) if y == label]
         try:
@@ -682,6 +849,7 @@ def crop_placement_json(clouds: Sequence[NDArray[np.floating]], labels: Sequence
             out["object_height_m"][label] = list(fit_crop_heights(of_label, height))
             out["hidden_below_m"][label] = list(fit_crop_bottoms(of_label, height))
             out["across_sight_width_m"][label] = list(fit_crop_widths(of_label))
+            out["across_sight_profile"][label] = list(fit_crop_width_profile(of_label))
         except InvalidInputError as exc:
             raise InvalidInputError(f"class {label!r}: {exc}") from None
     return out

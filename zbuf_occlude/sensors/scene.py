@@ -36,8 +36,10 @@ from zbuf_occlude.errors import InvalidInputError, MeshLoadError
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
-__all__ = ["SceneObject", "ScanScene", "BuiltScene", "load_scene", "GROUND_ID", "sensor_pose"]
+__all__ = ["SceneObject", "ScanScene", "BuiltScene", "load_scene", "GROUND_ID", "sensor_pose", "check_width_profile", "width_profile_factors"]
 
+#: Key of a warped object's local mesh ``metadata``: ``(F,) int64``, each face's row in the mesh as loaded.
+FACE_ROWS = "face_rows_as_loaded"
 #: ``object_id`` of the ground plane's returns.
 GROUND_ID = 0
 #: Most sections of a scene cylinder.  At 4096 a facet spans 0.09°, finer than any preset's
@@ -60,6 +62,54 @@ def sensor_pose(position_m, yaw_deg: float = 0.0) -> NDArray[np.float64]:
     m[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
     m[:3, 3] = p
     return m
+
+
+def check_width_profile(profile) -> tuple[float, ...]:
+    """``profile`` as a tuple of floats, checked: at least 2 finite factors > 0 (:class:`SceneObject` ``width_profile``).
+
+    Raises
+    ------
+    InvalidInputError
+        Anything else, naming the value.
+    """
+    try:
+        out = tuple(float(v) for v in profile)
+    except (TypeError, ValueError):
+        out = ()
+    if len(out) < 2 or not all(math.isfinite(v) and v > 0 for v in out):
+        raise InvalidInputError(f"width_profile must be 2 or more factors > 0, one per relative-height bin, got {profile!r}")
+    return out
+
+
+def width_profile_factors(z: NDArray[np.floating], profile: tuple[float, ...]) -> NDArray[np.float64]:
+    """The horizontal stretch of each height ``z (N,)`` under a width profile: ``(N,) float64``.
+
+    ``profile`` holds ``K`` factors at the centres ``(k + 0.5) / K`` of ``K`` equal bins of the
+    relative height ``(z − min z) / (max z − min z)``; the factor is linear between centres and
+    constant beyond the outer ones (all ``profile[0]`` when ``z`` has no extent).
+    """
+    z = np.asarray(z, dtype=np.float64)
+    extent = float(np.ptp(z)) if len(z) else 0.0
+    if extent <= 0:
+        return np.full(len(z), profile[0])
+    k = len(profile)
+    return np.interp((z - z.min()) / extent, (np.arange(k) + 0.5) / k, np.asarray(profile, dtype=np.float64))
+
+
+def _split_tall_faces(v: NDArray[np.float64], faces: NDArray[np.int64], bins: int):
+    """Bisect every edge that spans more than half a profile bin in height (``ptp(z) / (2 · bins)``),
+    so that a warp by :func:`width_profile_factors` bends long walls too: a post's sides have
+    vertices only at its ends.  Edges are measured with x and y squashed 1000x, so that only
+    their height counts (a midpoint stays a midpoint under the squash).  Returns the new
+    vertices ``(V', 3) float64``, faces ``(F', 3) int64`` and each new face's row in ``faces``."""
+    import trimesh.remesh
+
+    extent = float(np.ptp(v[:, 2]))
+    if extent <= 0:
+        return v.copy(), faces, np.arange(len(faces))
+    squash = np.array([1e-3, 1e-3, 1.0])
+    sv, sf, rows = trimesh.remesh.subdivide_to_size(v * squash, faces, extent / (2 * bins), max_iter=12, return_index=True)
+    return sv / squash, np.asarray(sf, dtype=np.int64), np.asarray(rows, dtype=np.int64)
 
 
 def _primitive_args(spec: dict) -> tuple[str, dict[str, Any]]:
@@ -111,6 +161,17 @@ class SceneObject:
     width_scale : float
         After the scaling to ``size_m``, stretch the object's horizontal axes (x and y) by this
         factor, > 0: a post made as thick as a tree trunk, keeping its height.  Default 1.
+    width_profile : sequence of float, optional
+        A horizontal stretch that varies with height: ``K >= 2`` factors > 0 at the centres of
+        ``K`` equal bins of the mesh's relative height (0: its lowest vertex, 1: its top),
+        linear in between and constant beyond the outer centres (:func:`width_profile_factors`).
+        Each vertex's x and y move away from (or towards) the footprint centre by its factor,
+        before the scaling to ``size_m`` (which still measures the mesh as loaded) and on top of
+        ``width_scale``: a person's legs made as narrow as real scans show them, a sign pole's
+        plate as narrow as a trunk.  The object's mesh (``build``'s local mesh) is the warped
+        one, its faces cut where they span more than half a bin in height; its
+        ``metadata[FACE_ROWS]`` gives each face's row as loaded, which the scene's
+        ``face_local`` reports.  None (default): no warp.
     """
 
     mesh: Any
@@ -120,6 +181,7 @@ class SceneObject:
     size_m: float | None = None
     up: str = "z"
     width_scale: float = 1.0
+    width_profile: tuple[float, ...] | None = None
 
     def build(self, base: Path | None = None) -> tuple[trimesh.Trimesh, NDArray[np.float64]]:
         """The object's mesh in its local frame (as loaded) and its (4, 4) local → world transform,
@@ -159,6 +221,17 @@ class SceneObject:
         if not (math.isfinite(self.width_scale) and self.width_scale > 0):
             raise InvalidInputError(f"object {self.class_name or self.mesh!r}: width_scale must be a number > 0, got {self.width_scale!r}")
         scale[:2] *= self.width_scale
+        if self.width_profile is not None:
+            try:
+                profile = check_width_profile(self.width_profile)
+            except InvalidInputError as exc:
+                raise InvalidInputError(f"object {self.class_name or self.mesh!r}: {exc}") from None
+            v, faces, rows = _split_tall_faces(v, np.asarray(local.faces, dtype=np.int64), len(profile))
+            factors = width_profile_factors(v[:, 2], profile)
+            centre_xy = (v[:, :2].min(axis=0) + v[:, :2].max(axis=0)) / 2
+            v[:, :2] = centre_xy + (v[:, :2] - centre_xy) * factors[:, None]
+            local = trimesh.Trimesh(v @ rot_up, faces, process=False)  # rot_up is orthonormal: v @ rot_up undoes it
+            local.metadata[FACE_ROWS] = rows
         pos = np.asarray(self.position_m, dtype=np.float64).reshape(-1)
         if pos.shape not in ((2,), (3,)) or not np.all(np.isfinite(pos)):
             raise InvalidInputError(f"object {self.class_name or self.mesh!r}: position_m must be 2 or 3 finite metres, got {self.position_m!r}")
@@ -284,7 +357,7 @@ class ScanScene:
             vertices.append(v)
             faces.append(f + n_vertices)
             face_object.append(np.full(len(f), oid, np.int32))
-            face_local.append(np.arange(len(f)))
+            face_local.append(local.metadata.get(FACE_ROWS, np.arange(len(f))))
             transforms.append(m)
             locals_.append(local)
             n_vertices += len(v)

@@ -39,6 +39,7 @@ scales = {}
 for m in meshes:
     keywords = dict(placement[m.class_name])
     width_m = keywords.pop("across_sight_width_m")
+    keywords.pop("across_sight_profile", None)  # the outline: profile_by_class.py
     dist = CropDistributions(size_m=size_interval(m.mesh.extents, sizes[m.class_name]), **{**LIDAR_PLACEMENT, **keywords})
     scales[m.name] = fit_width_scale(m.mesh, fitted, dist, width_m)
     for tag, d in (("unstretched", dist), ("stretched", replace(dist, width_scale=scales[m.name]))):

@@ -1,0 +1,73 @@
+"""Per class: the outline over the height (width_profile) of the fitted+placed crops as `--fitted-shape none`, `widths` and
+`outline` make them, against the fit half's real scans (the sensor fitted as `--fit-sensor` does).
+
+    python docs/results/sensor_fit/profile_by_class.py ../shared/data   (from the repository root)
+
+12 crops per mesh, one seed, at least 30 returns each; medians over the class's crops and scans. Also the median width across
+the line of sight and the returns per crop, and each mesh's distance from its class's real outline (the mean absolute
+difference over the 8 bins) without → with the warp, and the warp.
+"""
+
+import collections
+import sys
+from dataclasses import replace
+
+import numpy as np
+
+from zbuf_occlude.experiments import sim2real as S
+from zbuf_occlude.experiments.sim2real_data import _distributions, _placement_of, check_lidar_meshes, find_class_meshes, fit_width_scales
+from zbuf_occlude.experiments.sim2real_data import real_clouds, real_scan_rows
+from zbuf_occlude.real_scans.datasets import load_real_scans
+from zbuf_occlude.sensors.crops import draw_placement, object_crop
+from zbuf_occlude.sensors.fit import across_sight_width, width_profile
+from zbuf_occlude.sensors.presets import sensor_from_name
+
+data = sys.argv[1]
+scans = load_real_scans(f"{data}/lidarnet_v2_partial")
+meshes = find_class_meshes(f"{data}/street_objects", up_map={"bush/openglforest__*": "+y"})
+names = sorted({m.class_name for m in meshes})
+_, real_y, _ = real_clouds(scans, names, {}, 256, 0)
+fit_half, _ = S._stratified_half(real_y)
+kept = real_scan_rows(scans, names, {})
+fitted, placement, sizes, _ = S._fit_sensor([scans[kept[i]] for i in fit_half], sensor_from_name("hdl32e"), real_y[fit_half], names)
+meshes, _ = check_lidar_meshes(meshes, fitted, sizes, 256, placement=placement)
+
+
+def without(*keys: str) -> dict:
+    shaped = {c: {k: v for k, v in kw.items() if k not in keys} for c, kw in placement.items()}
+    return {**shaped, **fit_width_scales(meshes, fitted, sizes, shaped)}
+
+
+# --fitted-shape none, widths and outline
+variants = {"placed": without("across_sight_width_m", "across_sight_profile"), "widths": without("across_sight_profile"),
+            "outline": without("across_sight_width_m")}
+stats = collections.defaultdict(list)  # (tag, class) -> [(profile, width, returns)]
+per_mesh = collections.defaultdict(list)  # (tag, mesh) -> [profile]
+for i in fit_half:
+    p = np.asarray(scans[kept[i]].points_sensor_m, np.float64)
+    stats["real", names[real_y[i]]].append((width_profile(p), across_sight_width(p), len(p)))
+for tag, place in variants.items():
+    rng = np.random.default_rng(1)
+    for m in meshes:
+        dist, _, _ = _distributions(m, sizes[m.class_name], _placement_of(place, m))
+        for k in range(12):
+            c = object_crop(m.mesh, fitted, draw_placement(dist, rng), seed=k).scan.points.astype(np.float64)
+            if len(c) >= 30:  # sim2real's MIN_RETURNS
+                stats[tag, m.class_name].append((width_profile(c), across_sight_width(c), len(c)))
+                per_mesh[tag, m.name].append(width_profile(c))
+real_profile = {c: np.asarray(placement[c]["across_sight_profile"]) for c in names}
+print("| class | crops | " + " | ".join(f"{b / 8:.3g}–{(b + 1) / 8:.3g}" for b in range(8)) + " | width, m | returns |")
+print("|---|---|" + "---|" * 10)
+for c in names:
+    for tag in ("real", *variants):
+        rows = stats[tag, c]
+        prof = np.nanmedian(np.array([r[0] for r in rows]), axis=0)
+        print(f"| {c} | {tag} | " + " | ".join(f"{v:.2f}" for v in prof) + f" | {np.median([r[1] for r in rows]):.2f} | {np.median([r[2] for r in rows]):.0f} |")
+print()
+print("| class | mesh | outline distance, placed → outline | warp per bin (mesh height, bottom → top) |")
+print("|---|---|---|---|")
+for m in meshes:
+    d = [np.nanmean(np.abs(np.nanmedian(np.array(per_mesh[t, m.name]), axis=0) - real_profile[m.class_name])) if per_mesh[t, m.name] else np.nan
+         for t in ("placed", "outline")]  # fmt: skip
+    warp = variants["outline"].get(m.name, {}).get("width_profile")
+    print(f"| {m.class_name} | {m.name} | {d[0]:.2f} → {d[1]:.2f} | " + (" ".join(f"{v:.2f}" for v in warp) if warp else "") + " |")

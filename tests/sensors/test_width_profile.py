@@ -1,0 +1,135 @@
+"""The outline over the height: its measure on scans, its fit to real scans, and the warp that gives a mesh's crops that outline."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.crops import CropDistributions, draw_placement, object_crop
+from zbuf_occlude.sensors.fit import crop_placement_json, fit_crop_width_profile, fit_width_profile, width_profile
+from zbuf_occlude.sensors.lidar import lidar_preset
+from zbuf_occlude.sensors.scene import FACE_ROWS, ScanScene, SceneObject, width_profile_factors
+
+
+def _stack(widths: list[float], distance: float = 8.0, height: float = 1.6) -> np.ndarray:
+    """A scan straight ahead (+x): ``len(widths)`` equal height bins, each with two rings spread across the sight (y) over its width."""
+    rows = []
+    n = len(widths)
+    for k, w in enumerate(widths):
+        for z in (k + 0.2, k + 0.8):
+            rows += [[distance + 0.01 * i, y, z * height / n] for i, y in enumerate(np.linspace(-w / 2, w / 2, 5))]
+    return np.array(rows)
+
+
+def test_width_profile_is_each_bins_width_over_the_scans_width() -> None:
+    # four bins (two 0.15 m bands each at 1.6 m tall): widths 0.2, 0.4, 0.4, 0.8; the scan's width is the median band, 0.4
+    profile = width_profile(_stack([0.2, 0.4, 0.4, 0.8]), n_bins=4)
+    np.testing.assert_allclose(profile, [0.5, 1.0, 1.0, 2.0])
+    # depth along the sight does not count; a bin of one return is NaN; a scan that shows no width is NaN throughout
+    lone = np.array([[8.0, -0.2, 0.0], [9.0, 0.2, 0.05], [8.0, -0.2, 1.0], [8.5, 0.2, 1.05], [8.0, 0.0, 0.5]])
+    np.testing.assert_allclose(width_profile(lone, n_bins=3), [1.0, np.nan, 1.0])
+    assert np.all(np.isnan(width_profile(np.array([[5.0, 0.0, 0.0], [5.0, 0.0, 1.0]]), n_bins=2)))
+    with pytest.raises(InvalidInputError, match="n_bins"):
+        width_profile(lone, n_bins=1)
+    with pytest.raises(InvalidInputError, match="scan"):
+        width_profile(np.array([[1.0, np.inf, 0.0]]))
+
+
+@settings(max_examples=40, deadline=None)
+@given(turn=st.floats(-np.pi, np.pi), stretch=st.floats(0.2, 5.0), lift=st.floats(-3.0, 3.0),
+       widths=st.lists(st.floats(0.05, 3.0), min_size=2, max_size=6))  # fmt: skip
+def test_width_profile_is_a_shape_not_a_size(turn: float, stretch: float, lift: float, widths: list[float]) -> None:
+    """Laws: turning the scan about the vertical axis, stretching x and y alike, or raising it changes no bin."""
+    scan = _stack(widths)
+    c, s = np.cos(turn), np.sin(turn)
+    turned = scan @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]).T
+    for other in (turned, scan * [stretch, stretch, 1.0], scan + [0.0, 0.0, lift]):
+        np.testing.assert_allclose(width_profile(other, len(widths)), width_profile(scan, len(widths)), rtol=1e-6, atol=1e-9)
+
+
+def test_fit_crop_width_profile_is_the_median_per_bin() -> None:
+    clouds = [_stack([0.2 * f, 0.4, 0.4, 0.8 * g]) for f, g in ((1, 1), (2, 1), (3, 2), (1, 3))]
+    # the scans' widths (median of 8 bands) are 0.4, 0.4, 0.5 and 0.4 m; the third's bins are 1.2, 0.8, 0.8, 3.2
+    # bottom: median(0.5, 1.0, 1.2, 0.5) = 0.75; middle: median(1, 1, 0.8, 1) = 1; top: median(2, 2, 3.2, 6) = 2.6
+    np.testing.assert_allclose(fit_crop_width_profile(clouds, n_bins=4), [0.75, 1.0, 1.0, 2.6])
+    # a bin no scan fills is 1 (no warp); too few scans that show a width is an error
+    holes = [np.vstack([c[:10], c[-10:]]) for c in clouds]  # the bottom and top bins only
+    np.testing.assert_allclose(fit_crop_width_profile(holes, n_bins=4)[1:3], [1.0, 1.0])
+    with pytest.raises(InvalidInputError, match="at least 3"):
+        fit_crop_width_profile(clouds[:2] + [np.array([[5.0, 0.0, 0.0], [5.0, 0.0, 1.0]])], n_bins=4)
+    assert crop_placement_json(clouds[:3], ["a"] * 3)["across_sight_profile"]["a"] == pytest.approx(fit_crop_width_profile(clouds[:3]))
+
+
+@settings(max_examples=40, deadline=None)
+@given(profile=st.lists(st.floats(0.125, 8.0), min_size=2, max_size=8), z=st.lists(st.floats(-5.0, 5.0), min_size=2, max_size=30))
+def test_width_profile_factors_interpolate_between_bin_centres(profile: list[float], z: list[float]) -> None:
+    factors = width_profile_factors(np.array(z), tuple(profile))
+    assert np.all(factors >= min(profile) - 1e-12) and np.all(factors <= max(profile) + 1e-12)
+    k = len(profile)
+    lo, hi = min(z), max(z)
+    if hi > lo:  # at the bin centres, the profile itself; below the first centre and above the last, the end values
+        centres = lo + (np.arange(k) + 0.5) / k * (hi - lo)
+        np.testing.assert_allclose(width_profile_factors(np.r_[lo, hi, centres], tuple(profile))[2:], profile, rtol=1e-9)
+        np.testing.assert_allclose(width_profile_factors(np.r_[lo, hi], tuple(profile)), [profile[0], profile[-1]], rtol=1e-9)
+
+
+def test_a_warped_object_follows_its_profile_and_keeps_its_size_and_faces() -> None:
+    post = trimesh.creation.box(extents=(0.2, 0.2, 1.0))  # vertices at its ends only: the warp must cut its sides
+    profile = (0.5, 1.0, 1.0, 3.0)
+    local, to_world = SceneObject(post, size_m=2.0, width_profile=profile).build()
+    world = trimesh.transform_points(local.vertices, to_world)
+    assert np.ptp(world[:, 2]) == pytest.approx(2.0)  # size_m measures the mesh as loaded: as tall
+    for k, f in enumerate(profile):  # at each bin centre, as wide as the profile asks (0.4 m before the warp)
+        z = (k + 0.5) / 4 * 2.0
+        section = trimesh.intersections.mesh_plane(trimesh.Trimesh(world, local.faces), [0, 0, 1], [0, 0, z])
+        assert np.ptp(section.reshape(-1, 3)[:, 0]) == pytest.approx(0.4 * f, rel=1e-6)
+    rows = local.metadata[FACE_ROWS]
+    assert len(rows) == len(local.faces) > len(post.faces) and set(rows) == set(range(len(post.faces)))
+    built = ScanScene(objects=[SceneObject(post, size_m=2.0, width_profile=profile)], ground=False).build()
+    np.testing.assert_array_equal(built.face_local, rows)  # the scene reports the faces as loaded
+    for bad in ((1.0,), (1.0, 0.0), (1.0, float("nan")), "wide"):
+        with pytest.raises(InvalidInputError, match="width_profile"):
+            SceneObject(post, class_name="p", width_profile=bad).build()
+        with pytest.raises(InvalidInputError, match="width_profile"):
+            CropDistributions(width_profile=bad)
+
+
+def test_width_profile_draws_nothing_and_reaches_the_crop() -> None:
+    rng = lambda: np.random.default_rng(5)  # noqa: E731
+    plain = draw_placement(CropDistributions(width_scale=(1.0, 2.0)), rng())
+    warped = draw_placement(CropDistributions(width_scale=(1.0, 2.0), width_profile=[1, 2]), rng())
+    assert warped == {**plain, "width_profile": (1.0, 2.0)}
+    post = trimesh.creation.box(extents=(0.2, 0.2, 1.0))
+    lidar = lidar_preset("hdl32e", range_noise_m=0.0)
+    placement = draw_placement(CropDistributions(distance_m=5.0, height_m=1.8, size_m=2.0, yaw_deg=0.0), rng())
+    crop = object_crop(post, lidar, placement | {"width_profile": (0.5, 0.5, 4.0, 4.0)}, seed=1)
+    low, high = crop.local_points[:, 2] < -0.3, crop.local_points[:, 2] > 0.3  # the mesh frame keeps the warp
+    assert np.ptp(crop.local_points[low, 1]) < 0.11 and np.ptp(crop.local_points[high, 1]) > 0.6
+
+
+def test_fit_width_profile_gives_a_sign_post_a_trunks_outline() -> None:
+    """A post with a plate on its upper third, fitted to a uniform outline: the plate is pulled in, the post is kept."""
+    post = trimesh.creation.box(extents=(0.06, 0.06, 1.0))
+    plate = trimesh.creation.box(extents=(0.3, 0.3, 0.3))
+    plate.apply_translation((0.0, 0.0, 0.3))
+    sign = trimesh.util.concatenate([post, plate])
+    lidar = lidar_preset("hdl32e", range_noise_m=0.0)
+    dist = CropDistributions(distance_m=(4.0, 6.0), height_m=1.8, size_m=3.0)
+
+    def outline(d) -> np.ndarray:
+        rng = np.random.default_rng(11)
+        return np.nanmedian([width_profile(object_crop(sign, lidar, draw_placement(d, rng), seed=k).scan.points) for k in range(12)], axis=0)
+
+    target = (1.0,) * 8
+    warp = fit_width_profile(sign, lidar, dist, target, n_samples=8, name="sign")
+    assert max(warp[:4]) == pytest.approx(1.0, abs=0.15) and max(warp[-2:]) < 0.5  # the post kept, the plate pulled in
+    before, after = outline(dist), outline(CropDistributions(distance_m=(4.0, 6.0), height_m=1.8, size_m=3.0, width_profile=warp))
+    assert np.nanmean(np.abs(after - 1.0)) < 0.5 * np.nanmean(np.abs(before - 1.0))
+    with pytest.raises(InvalidInputError, match="width_profile"):
+        fit_width_profile(sign, lidar, dist, (1.0,), name="sign")
+    with pytest.raises(InvalidInputError, match="spinning"):
+        fit_width_profile(sign, object(), dist, target, name="sign")
