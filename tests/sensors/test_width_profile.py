@@ -75,6 +75,9 @@ def test_width_profile_factors_interpolate_between_bin_centres(profile: list[flo
         centres = lo + (np.arange(k) + 0.5) / k * (hi - lo)
         np.testing.assert_allclose(width_profile_factors(np.r_[lo, hi, centres], tuple(profile))[2:], profile, rtol=1e-9)
         np.testing.assert_allclose(width_profile_factors(np.r_[lo, hi], tuple(profile)), [profile[0], profile[-1]], rtol=1e-9)
+        middles = (centres[1:] + centres[:-1]) / 2  # linear between centres: halfway, the mean of the two
+        np.testing.assert_allclose(width_profile_factors(np.r_[lo, hi, middles], tuple(profile))[2:],
+                                   (np.array(profile[1:]) + profile[:-1]) / 2, rtol=1e-9)  # fmt: skip
 
 
 def test_a_warped_object_follows_its_profile_and_keeps_its_size_and_faces() -> None:
