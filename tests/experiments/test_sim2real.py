@@ -565,6 +565,8 @@ def test_a_class_outline_warps_each_mesh_then_stretches_it_under_the_warp(tmp_pa
         assert "width_profile" not in plain[m.name] and len(warped[m.name]["width_profile"]) == len(outline)
         assert warped[m.name]["width_profile"][0] < warped[m.name]["width_profile"][-1]  # narrower at the foot than at the top
         assert warped[m.name]["width_scale"] != plain[m.name]["width_scale"]  # stretched again under the warp
+    only = fit_width_scales(meshes, sensor, sizes, {"pole": {"distance_m": (5.0, 9.0), "across_sight_profile": outline}})
+    assert all(set(v) == {"width_profile"} for v in only.values()) and len(only) == len(meshes)  # a warp without a stretch
     placement = {"pole": {**widths, "across_sight_profile": outline}}
     every_draw = build_set("lidar", meshes, ["pole"], 2, 64, 3, sensor=sensor, sizes=sizes, placement=placement)
     once = build_set("lidar", meshes, ["pole"], 2, 64, 3, sensor=sensor, sizes=sizes, placement={**placement, **warped})

@@ -747,9 +747,10 @@ def fit_width_profile(mesh, sensor, distributions, profile: Sequence[float], *, 
     unknown).  Those bins are of the crops' relative height, which starts above the mesh's
     bottom where the placement hides it; they are mapped to the mesh's own relative height by
     the crops' median lowest and highest return, then the crops are measured once more under
-    the warp and each bin corrected once.  Both profiles are over the scan's median width, so
-    the warp leaves that width about as it was: fit ``width_scale`` again under the warp
-    (:func:`fit_width_scale`) to keep it exact.  A mesh made to look like the user's scans, not
+    the warp and each bin corrected once.  Both profiles are over the scan's median width, which
+    the warp moves too, so the crops get the outline's shape up to a common factor (a person's
+    knees at 0.5 and shoulders at 1.2 may come out 0.57 and 1.36); fit ``width_scale`` again
+    under the warp (:func:`fit_width_scale`) for the widths in metres.  A mesh made to look like the user's scans, not
     a sensor setting: its parts move (a T-posed person's arms are pulled in; a sign's plate is
     made as narrow as its post).
 
