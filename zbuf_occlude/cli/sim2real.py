@@ -110,10 +110,11 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
                    help="what the mesh-only sets validate on (best epoch, early stopping): clouds of held-out whole meshes, "
                    "or, with --fit-sensor, the fit half's real scans (then every mesh trains; the scored half stays unseen) "
                    "(default: %(default)s)")
-    p.add_argument("--fitted-shape", default="none", metavar="none|widths|outline|widths,outline",
+    p.add_argument("--fitted-shape", default="none", metavar="none|SHAPE[,outline]",
                    help="with --fit-sensor, what the fitted+placed set changes in each mesh's shape to look like the fit "
-                   "half's scans: its widths across the line of sight (a horizontal stretch), its outline over the height "
-                   "(a warp), both, or none (default: %(default)s)")
+                   "half's scans: widths (a horizontal stretch to their widths across the line of sight), widen (the same, "
+                   "but never narrower than the mesh), outline (a warp to their outline over the height), widths,outline or "
+                   "widen,outline, or none (default: %(default)s)")
     p.add_argument("--recipe", choices=("stable", "plain"), default=SIM2REAL_RECIPE,
                    help="training recipe: stable (class-balanced sampling, best epoch by validation mean class accuracy, "
                    "warm-up, gradient clipping) or plain (the models' own loop) (default: %(default)s)")

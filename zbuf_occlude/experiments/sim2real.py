@@ -91,8 +91,9 @@ _REAL_SPLIT_SEED = 20_231
 SIM2REAL_RECIPE = "stable"
 #: What the mesh-only sets validate on: clouds of held-out whole meshes, or the real scans of the fit half.
 VALIDATION_CHOICES = ("meshes", "fit-half")
-#: What ``fitted_shape`` may give the fitted+placed set's meshes, and the fitted crop keywords each uses.
-FITTED_SHAPES = {"widths": "across_sight_width_m", "outline": "across_sight_profile"}
+#: What ``fitted_shape`` may give the fitted+placed set's meshes, and the fitted crop keywords each uses
+#: (``widen`` is ``widths`` with every stretch below 1 raised to 1).
+FITTED_SHAPES = {"widths": "across_sight_width_m", "widen": "across_sight_width_m", "outline": "across_sight_profile"}
 #: Name of the row that takes, per seed, the mesh-only set with the best fit-half validation score.
 CHOSEN_ON_FIT_HALF = "chosen on fit half"
 
@@ -289,8 +290,10 @@ def run_sim2real(
     fitted_shape : tuple of str
         What the fitted+placed set changes in each mesh's shape (needs ``fit_sensor``; keys of
         :data:`FITTED_SHAPES`): ``"widths"``, a horizontal stretch to the class's widths across
-        the line of sight; ``"outline"``, a warp to its outline over the height.  Empty
-        (default): the meshes' own shapes.  Each is fitted per mesh once (:func:`fit_width_scales`).
+        the line of sight, or ``"widen"``, the same stretch where it widens the mesh and none
+        where it would narrow it (a narrow real width is often a partial view, not a thinner
+        object); ``"outline"``, a warp to its outline over the height.  Empty (default): the
+        meshes' own shapes.  Each is fitted per mesh once (:func:`fit_width_scales`).
 
     Returns
     -------
@@ -326,6 +329,8 @@ def run_sim2real(
     fitted_shape = tuple(fitted_shape)
     if unknown := [v for v in fitted_shape if v not in FITTED_SHAPES]:
         raise InvalidInputError(f"--fitted-shape must name {' and/or '.join(FITTED_SHAPES)}, got {', '.join(map(repr, unknown))}")
+    if {"widths", "widen"} <= set(fitted_shape):
+        raise InvalidInputError("--fitted-shape takes widths or widen, not both")
     if fitted_shape and not fit_sensor:
         raise InvalidInputError("--fitted-shape needs --fit-sensor (it shapes the fitted+placed set's meshes)")
     real_val = validate_on == "fit-half"
@@ -350,10 +355,13 @@ def run_sim2real(
         kept = real_scan_rows(scans, names, dict(label_map or {}))
         fitted, fitted_placement, fitted_sizes, fit_json = _fit_sensor([scans[kept[i]] for i in half_a], lidar, real_y[half_a], names)
         meshes, skipped_fitted = check_lidar_meshes(meshes, fitted, sizes, n_points, min_returns=int(min_returns))
-        unused = [key for shape, key in FITTED_SHAPES.items() if shape not in fitted_shape]
-        fitted_placement = {c: {k: v for k, v in kw.items() if k not in unused} for c, kw in fitted_placement.items()}
+        used = {FITTED_SHAPES[shape] for shape in fitted_shape}
+        fitted_placement = {c: {k: v for k, v in kw.items() if k not in FITTED_SHAPES.values() or k in used} for c, kw in fitted_placement.items()}
         # each mesh's stretch and warp to its class's scans, fitted once for every seed (seed 0: the same every run)
-        fitted_placement = {**fitted_placement, **fit_width_scales(meshes, fitted, fitted_sizes, fitted_placement)}
+        shapes = fit_width_scales(meshes, fitted, fitted_sizes, fitted_placement)
+        if "widen" in fitted_shape:  # never narrower than the mesh
+            shapes = {name: {**kw, "width_scale": tuple(max(v, 1.0) for v in kw["width_scale"])} for name, kw in shapes.items()}
+        fitted_placement = {**fitted_placement, **shapes}
         meshes, skipped_placed = check_lidar_meshes(meshes, fitted, fitted_sizes, n_points, min_returns=int(min_returns),
                                                     placement=fitted_placement)  # fmt: skip
         skipped += skipped_fitted + skipped_placed
