@@ -360,7 +360,8 @@ def run_sim2real(
         # each mesh's stretch and warp to its class's scans, fitted once for every seed (seed 0: the same every run)
         shapes = fit_width_scales(meshes, fitted, fitted_sizes, fitted_placement)
         if "widen" in fitted_shape:  # never narrower than the mesh
-            shapes = {name: {**kw, "width_scale": tuple(max(v, 1.0) for v in kw["width_scale"])} for name, kw in shapes.items()}
+            shapes = {name: {**kw, "width_scale": tuple(max(v, 1.0) for v in kw["width_scale"])} if "width_scale" in kw else kw
+                      for name, kw in shapes.items()}  # fmt: skip
         fitted_placement = {**fitted_placement, **shapes}
         meshes, skipped_placed = check_lidar_meshes(meshes, fitted, fitted_sizes, n_points, min_returns=int(min_returns),
                                                     placement=fitted_placement)  # fmt: skip

@@ -45,9 +45,10 @@ fitted per class of the user's scans (:func:`crop_placement_json`): the sensor's
 distance to each scan's centroid (:func:`fit_crop_distances`), each scan's height
 (:func:`fit_crop_heights`: its top above the ground) and how high above the ground its lowest return lies
 (:func:`fit_crop_bottoms`, with the ground from :func:`fit_sensor_height`) and how wide it shows
-across the line of sight (:func:`fit_crop_widths`), as percentile intervals to draw uniformly.  A
-mesh is made as wide as that by a horizontal stretch fitted to its own simulated crops
-(:func:`fit_width_scale`).
+across the line of sight (:func:`fit_crop_widths`), as percentile intervals to draw uniformly, and
+its outline over the height (:func:`fit_crop_width_profile`).  A mesh is made as wide as that by a
+horizontal stretch fitted to its own simulated crops (:func:`fit_width_scale`), and given that
+outline by a warp (:func:`fit_width_profile`).
 """
 
 from __future__ import annotations
@@ -535,10 +536,7 @@ def _across_sight_width(p: NDArray[np.float64], band_m: float = WIDTH_BAND_M) ->
     """:func:`across_sight_width` of a checked ``(N, 3) float64`` scan."""
     if len(p) < 2:
         return 0.0
-    sight = p[:, :2].mean(axis=0)
-    norm = float(np.hypot(*sight))
-    across = np.array([-sight[1], sight[0]]) / norm if norm > 0 else np.array([1.0, 0.0])
-    s = p[:, :2] @ across
+    s = _across_sight(p)
     bands = np.floor((p[:, 2] - p[:, 2].min()) / band_m).astype(np.int64)
     order = np.argsort(bands, kind="stable")
     starts = np.flatnonzero(np.r_[True, np.diff(bands[order]) != 0])
@@ -547,6 +545,14 @@ def _across_sight_width(p: NDArray[np.float64], band_m: float = WIDTH_BAND_M) ->
     lo = np.minimum.reduceat(s[order], starts)
     widths = (hi - lo)[counts >= 2]
     return float(np.median(widths)) if len(widths) else 0.0
+
+
+def _across_sight(p: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(N,)`` each return's coordinate along the horizontal direction perpendicular to the line
+    of sight from the sensor (the origin) to the scan's centroid; along x for a centroid straight above."""
+    sight = p[:, :2].mean(axis=0)
+    norm = float(np.hypot(*sight))
+    return p[:, :2] @ (np.array([-sight[1], sight[0]]) / norm if norm > 0 else np.array([1.0, 0.0]))
 
 
 def fit_crop_widths(clouds: Sequence[NDArray[np.floating]]) -> tuple[float, float]:
@@ -589,8 +595,9 @@ def fit_width_scale(mesh, sensor, distributions, width_m: tuple[float, float], *
     median width is about ``w̄`` and whose spread is ``width_m``'s, and that keep the height and
     placement they would have had.  The stretch changes how the object looks, not only how
     large it is: fit it where the real objects are thicker or thinner than the mesh (trunks
-    scanned as poles, cars seen in part), and compare the crops with the real scans
-    (:mod:`zbuf_occlude.experiments.realism`).
+    scanned as posts, shrubs as slim trees), not where the real scans are narrow because they
+    show part of an object (a car squeezed to a partial view's width is a tall narrow lump), and
+    compare the crops with the real scans (:mod:`zbuf_occlude.experiments.realism`).
 
     Parameters
     ----------
@@ -691,9 +698,7 @@ def _width_profile(p: NDArray[np.float64], n_bins: int) -> NDArray[np.float64]:
     width = _across_sight_width(p)
     if not width > 0:
         return out
-    sight = p[:, :2].mean(axis=0)
-    norm = float(np.hypot(*sight))
-    across = p[:, :2] @ (np.array([-sight[1], sight[0]]) / norm if norm > 0 else np.array([1.0, 0.0]))
+    across = _across_sight(p)
     extent = float(np.ptp(p[:, 2]))
     k = np.zeros(len(p), np.int64) if extent <= 0 else np.minimum(((p[:, 2] - p[:, 2].min()) / extent * n_bins).astype(np.int64), n_bins - 1)
     for b in range(n_bins):
@@ -750,9 +755,10 @@ def fit_width_profile(mesh, sensor, distributions, profile: Sequence[float], *, 
     the warp and each bin corrected once.  Both profiles are over the scan's median width, which
     the warp moves too, so the crops get the outline's shape up to a common factor (a person's
     knees at 0.5 and shoulders at 1.2 may come out 0.57 and 1.36); fit ``width_scale`` again
-    under the warp (:func:`fit_width_scale`) for the widths in metres.  A mesh made to look like the user's scans, not
-    a sensor setting: its parts move (a T-posed person's arms are pulled in; a sign's plate is
-    made as narrow as its post).
+    under the warp (:func:`fit_width_scale`) for the widths in metres.  A mesh made to look
+    like the user's scans, not a sensor setting: its parts move (a T-posed person's arms are
+    pulled in; a sign's plate is made as narrow as its post; a tree's trunk as wide as its
+    crown).
 
     Parameters
     ----------
