@@ -10,7 +10,6 @@ difference over the 8 bins) without → with the warp, and the warp.
 
 import collections
 import sys
-from dataclasses import replace
 
 import numpy as np
 
