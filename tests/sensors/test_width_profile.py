@@ -162,3 +162,20 @@ def test_fit_width_profile_pulls_a_t_posed_persons_arms_in() -> None:
     warped = replace(dist, width_profile=warp)
     outline = np.nanmedian([width_profile(object_crop(person, lidar, draw_placement(warped, rng), seed=k).scan.points) for k in range(24)], axis=0)
     assert outline[6] < 1.65
+
+
+def test_scan_outline_option(tmp_path) -> None:
+    """`scan --crop --outline`: a cylinder narrowed at its foot and widened at its top shows that outline, and the option is checked."""
+    from zbuf_occlude.cli.main import main
+    from zbuf_occlude.sensors.scan import read_scan_npz
+
+    base = ["scan", "cylinder", "--size", "2", "--distance", "6:8", "--height", "1.8", "--samples", "6", "--seed", "2"]
+    outline = (0.5, 0.5, 1.0, 1.0, 1.0, 1.0, 1.5, 1.5)
+    assert main([*base, "--crop", "--outline", ",".join(map(str, outline)), "--out", str(tmp_path / "o")]) == 0
+    assert main([*base, "--crop", "--out", str(tmp_path / "p")]) == 0
+    shown = {tag: np.nanmedian([width_profile(read_scan_npz(p).points) for p in sorted((tmp_path / tag).glob("*.npz"))], axis=0) for tag in "op"}
+    assert np.nanmax(np.abs(shown["p"] - 1.0)) < 0.15  # a cylinder: as wide at every height
+    assert shown["o"][0] < 0.75 * shown["o"][4] and shown["o"][-1] > 1.2 * shown["o"][4]
+    assert main([*base, "--crop", "--outline", "1,1", "--across-sight-width", "0.5", "--out", str(tmp_path / "b")]) == 0  # both
+    for bad in (["--outline", "1,1"], ["--crop", "--outline", "1"], ["--crop", "--outline", "1,-1"], ["--crop", "--outline", "wide,1"]):
+        assert main([*base, *bad, "--out", str(tmp_path / "x")]) == 2

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -45,13 +46,27 @@ def parse_interval(text: str, option: str) -> tuple[float, float]:
     return parts[0], parts[1]
 
 
+def _outline(text: str | None) -> tuple[float, ...] | None:
+    """``--outline V,V,...``: two or more widths over the scan's width, bottom to top."""
+    if text is None:
+        return None
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) < 2 or not all(math.isfinite(v) and v > 0 for v in values):
+        raise InvalidInputError(f"--outline must be 2 or more numbers > 0, V,V,..., bottom to top, got {text!r}")
+    return values
+
+
 def check_outside(dist, extents=None) -> None:
     """Refuse a ``--distance`` that may put the sensor inside the object.
 
     The object's footprint centre lies ``distance_m`` from the sensor and its largest
     horizontal dimension is up to ``size_m`` (or the X/Y ``extents_m``) high end, or, given the
     mesh's ``extents (3,)``, its larger horizontal side scaled so, times the ``width_scale``
-    high end where it stretches the object; a distance below half of that may stand the sensor
+    high end where it stretches the object and the largest ``width_profile`` factor above 1
+    where it warps it; a distance below half of that may stand the sensor
     inside it (every ray starts inside).
 
     Raises
@@ -66,6 +81,8 @@ def check_outside(dist, extents=None) -> None:
         sizes = [dist.size_m[1] * (1.0 if e is None or not e.max() > 0 else float(e[:2].max() / e.max()))]
     if dist.width_scale is not None:
         sizes = [v * dist.width_scale[1] for v in sizes]
+    if dist.width_profile is not None:
+        sizes = [v * max(1.0, *dist.width_profile) for v in sizes]
     half = max(sizes) / 2
     if dist.distance_m[0] < half:
         raise InvalidInputError(
@@ -121,6 +138,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
         raise InvalidInputError("--hidden-below hides the bottom of the object in a crop: it needs --crop")
     if args.across_sight_width is not None and not args.crop:
         raise InvalidInputError("--across-sight-width makes the object's crops as wide as real scans: it needs --crop")
+    if args.outline is not None and not args.crop:
+        raise InvalidInputError("--outline gives the object's crops the outline of real scans: it needs --crop")
     out = Path(args.out)
     formats = ("npz", "ply") if args.format == "both" else (args.format,)
     src = Path(args.mesh_or_scene)
@@ -168,14 +187,14 @@ def cmd_scan(args: argparse.Namespace) -> int:
             ground_reflectivity=args.ground_reflectivity, ground_margin_m=args.ground_margin,
             hidden_below_m=None if args.hidden_below is None else _hidden_below(args.hidden_below),
         )  # fmt: skip
-        if args.across_sight_width is not None:
-            from zbuf_occlude.sensors.fit import fit_width_scale
+        if args.across_sight_width is not None or args.outline is not None:
+            from zbuf_occlude.sensors.fit import fit_object_shape
 
-            width_m = parse_interval(args.across_sight_width, "--across-sight-width")
-            if width_m[0] < 0 or not width_m[1] > 0:
+            width_m = None if args.across_sight_width is None else parse_interval(args.across_sight_width, "--across-sight-width")
+            if width_m is not None and (width_m[0] < 0 or not width_m[1] > 0):
                 raise InvalidInputError(f"--across-sight-width must be >= 0 metres, and HI > 0, got {args.across_sight_width!r}")
-            dist = replace(dist, width_scale=fit_width_scale(mesh, sensor, dist, width_m, seed=args.seed, name=str(src)))
-            log.info("%s: width_scale %.3g–%.3g", src.name, *dist.width_scale)
+            dist = replace(dist, **fit_object_shape(mesh, sensor, dist, width_m, _outline(args.outline), seed=args.seed, name=str(src)))
+            log.info("%s: width_scale %s, width_profile %s", src.name, dist.width_scale, dist.width_profile)
         check_outside(dist, None if isinstance(mesh, dict) else mesh.extents)
         for k in range(args.samples):
             rng = derive_rng(args.seed, object_key(src.name), k)
@@ -246,6 +265,11 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         "--across-sight-width", metavar="M or LO:HI",
         help="with --crop: stretch the object horizontally so that its crops are, at the median, this wide across the "
         "line of sight, metres, drawn per sample (posts as thick as real trunks; fit-sensor fits it per class)",
+    )  # fmt: skip
+    p.add_argument(
+        "--outline", metavar="V,V,...",
+        help="with --crop: warp the object so that its crops show this outline over the height: how wide they are in "
+        "equal bins of their height, bottom to top, over their width (fit-sensor's across_sight_profile per class)",
     )  # fmt: skip
     p.add_argument(
         "--frame", choices=("sensor", "world"), default="sensor",

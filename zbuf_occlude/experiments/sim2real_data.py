@@ -251,20 +251,10 @@ def _distributions(entry: MeshEntry, size: SizeRange, placement: dict) -> tuple[
 
 
 def _fit_stretch(entry: MeshEntry, sensor, dist: CropDistributions, width_m: tuple[float, float] | None, profile: tuple | None) -> dict:
-    """``{"width_scale": (lo, hi)}`` with the class's ``width_m`` (:func:`~zbuf_occlude.sensors.fit.fit_width_scale`),
-    ``{"width_profile": (K factors)}`` with its ``profile`` (:func:`zbuf_occlude.sensors.fit.fit_width_profile`); with
-    both, the mesh is warped to the outline at its width stretch, then stretched again under the warp."""
-    from zbuf_occlude.sensors.fit import fit_width_profile, fit_width_scale
+    """:func:`zbuf_occlude.sensors.fit.fit_object_shape` of the mesh (seed 0), naming its file in errors."""
+    from zbuf_occlude.sensors.fit import fit_object_shape
 
-    out = {}
-    if width_m is not None:
-        out["width_scale"] = fit_width_scale(entry.mesh, sensor, dist, width_m, name=str(entry.path))
-    if profile is not None:
-        at = replace(dist, width_scale=out.get("width_scale", dist.width_scale))
-        out["width_profile"] = fit_width_profile(entry.mesh, sensor, at, profile, name=str(entry.path))
-        if width_m is not None:
-            out["width_scale"] = fit_width_scale(entry.mesh, sensor, replace(dist, width_profile=out["width_profile"]), width_m, name=str(entry.path))
-    return out
+    return fit_object_shape(entry.mesh, sensor, dist, width_m, profile, name=str(entry.path))
 
 
 def fit_width_scales(meshes: list[MeshEntry], sensor, sizes: dict[str, SizeRange], placement: dict[str, dict]) -> dict[str, dict]:

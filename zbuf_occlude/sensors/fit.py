@@ -67,7 +67,7 @@ __all__ = [
     "BOOTSTRAP", "DISTANCE_QUANTILES", "MAX_DROPOUT_GAP", "MIN_PLACEMENT_SCANS", "PLANE_NEIGHBOURS", "Estimate", "LidarFit",
     "SENSOR_HEIGHT_QUANTILE", "WIDTH_BAND_M", "WIDTH_PROFILE_BINS", "WIDTH_SAMPLES", "across_sight_width", "crop_placement_json",
     "fit_crop_bottoms", "fit_crop_distances", "fit_crop_heights", "fit_crop_width_profile", "fit_crop_widths", "fit_lidar",
-    "fit_sensor_height", "fit_width_profile", "fit_width_scale", "lidar_to_json", "width_profile",
+    "fit_object_shape", "fit_sensor_height", "fit_width_profile", "fit_width_scale", "lidar_to_json", "width_profile",
 ]  # fmt: skip
 
 #: Non-empty scans a class needs for its crops' distances and heights (:func:`crop_placement_json`).
@@ -762,8 +762,9 @@ def fit_width_profile(mesh, sensor, distributions, profile: Sequence[float], *, 
 
     Parameters
     ----------
-    mesh : trimesh.Trimesh
-        A normalised, z-up mesh (:func:`zbuf_occlude.load_mesh`).
+    mesh : trimesh.Trimesh or dict
+        A normalised, z-up mesh (:func:`zbuf_occlude.load_mesh`), or a primitive spec
+        (:mod:`zbuf_occlude.sensors.scene`).
     sensor : Lidar
     distributions : CropDistributions
     profile : sequence of float
@@ -784,7 +785,7 @@ def fit_width_profile(mesh, sensor, distributions, profile: Sequence[float], *, 
         A bad ``profile`` or ``n_samples``, a sensor that is not a :class:`Lidar`, or no crop of
         the mesh that shows a width (naming ``name``).
     """
-    from zbuf_occlude.sensors.scene import check_width_profile
+    from zbuf_occlude.sensors.scene import SceneObject, check_width_profile
 
     target = np.asarray(check_width_profile(profile))
     if int(n_samples) < 1:
@@ -795,7 +796,7 @@ def fit_width_profile(mesh, sensor, distributions, profile: Sequence[float], *, 
     from zbuf_occlude.sensors.crops import draw_placement, object_crop  # scans: imported when a profile is fitted
 
     k = len(target)
-    z_lo, z_hi = (float(v) for v in np.asarray(mesh.bounds, dtype=np.float64)[:, 2])
+    z_lo, z_hi = (float(v) for v in np.asarray(SceneObject(mesh).build()[0].bounds, dtype=np.float64)[:, 2])  # a primitive's too
     centres = (np.arange(k) + 0.5) / k
 
     def measure(dist) -> tuple[NDArray[np.float64], float, float]:
@@ -822,6 +823,26 @@ def fit_width_profile(mesh, sensor, distributions, profile: Sequence[float], *, 
     dist = replace(distributions, width_profile=tuple(float(v) for v in first))
     factors = np.clip(first * stretch(*measure(dist)), 1 / 8, 8)  # the correction
     return tuple(float(v) for v in factors)
+
+
+def fit_object_shape(mesh, sensor, distributions, width_m: tuple[float, float] | None = None, profile: Sequence[float] | None = None, *,
+                     seed: int = 0, name: str = "the mesh") -> dict:  # fmt: skip
+    """A mesh's stretch to real widths and warp to a real outline, as :class:`~zbuf_occlude.sensors.crops.CropDistributions` keywords.
+
+    With ``width_m`` only: ``{"width_scale": (lo, hi)}`` (:func:`fit_width_scale`).  With
+    ``profile`` only: ``{"width_profile": (K factors)}`` (:func:`fit_width_profile`).  With
+    both, the warp is fitted at the width stretch, then the stretch again under the warp.
+    Neither: ``{}``.  Parameters and errors as those two.
+    """
+    out: dict = {}
+    if width_m is not None:
+        out["width_scale"] = fit_width_scale(mesh, sensor, distributions, width_m, seed=seed, name=name)
+    if profile is not None:
+        at = replace(distributions, width_scale=out.get("width_scale", distributions.width_scale))
+        out["width_profile"] = fit_width_profile(mesh, sensor, at, profile, seed=seed, name=name)
+        if width_m is not None:
+            out["width_scale"] = fit_width_scale(mesh, sensor, replace(distributions, width_profile=out["width_profile"]), width_m, seed=seed, name=name)
+    return out
 
 
 def _check_height(sensor_height_m) -> float:
