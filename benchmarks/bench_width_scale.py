@@ -1,13 +1,16 @@
-"""Cost of ``zbuf_occlude.sensors.fit.fit_width_scale`` per mesh (not a test; prints a Markdown table).
+"""Cost of ``zbuf_occlude.sensors.fit.fit_width_scale`` per mesh, and of ``fit_object_shape`` with an outline beside it (not a test; prints a Markdown table).
 
 Each mesh (a folder's mesh files, its class the folder above the file) is scaled to ``--height``,
 placed ``--distance`` from an HDL-32E and stretched to ``--width`` across the line of sight: 16
 crops at its own proportions (more while it shows no width), 16 at the stretch they ask for.
 Wall time per mesh, the stretch found, and the total: what a ``sim2real --fit-sensor`` run spends
-once on its meshes and ``farm --sensor-across-sight-width`` once per object.
+once on its meshes and ``farm --sensor-across-sight-width`` once per object.  With ``--outline``,
+each mesh is then also fitted to that outline and stretched again under the warp
+(``fit_object_shape``, what ``sim2real --fitted-shape widths,outline`` and ``scan --outline
+--across-sight-width`` do), right after, so the two columns share the machine's load.
 
     python benchmarks/bench_width_scale.py data/samples
-    python benchmarks/bench_width_scale.py ../shared/data/street_objects --height 1.5:3 --width 0.2:0.5
+    python benchmarks/bench_width_scale.py ../shared/data/street_objects --height 1.5:3 --width 0.2:0.5 --outline 1.4,0.8,1,1,1.2,1.5,1.4,0.8
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.mesh.sizes import SizeRange, size_interval
 from zbuf_occlude.sensors.crops import CropDistributions
-from zbuf_occlude.sensors.fit import fit_width_scale
+from zbuf_occlude.sensors.fit import fit_object_shape, fit_width_scale
 from zbuf_occlude.sensors.lidar import Lidar
 
 
@@ -37,21 +40,31 @@ def main() -> None:
     ap.add_argument("--height", type=_interval, default=(1.0, 2.0), help="object height, metres, LO:HI (default 1:2)")
     ap.add_argument("--distance", type=_interval, default=(4.0, 12.0), help="sensor distance, metres, LO:HI (default 4:12)")
     ap.add_argument("--width", type=_interval, default=(0.3, 0.6), help="across-sight width, metres, LO:HI (default 0.3:0.6)")
+    ap.add_argument("--outline", type=lambda t: tuple(float(v) for v in t.split(",")), help="also time the fit to this outline, V,V,...")
     args = ap.parse_args()
     paths = sorted(p for p in args.root.rglob("*") if p.suffix.lower() in SUPPORTED_EXTENSIONS and p.is_file())
     sensor = Lidar.preset("hdl32e")
     print(f"# bench_width_scale: {len(paths)} meshes under {args.root}, {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.2f} at the start\n")
-    print("| mesh | s | stretch |\n|---|---|---|")
-    times = []
+    print("| mesh | s | stretch |" + (" with the outline, s | ratio |\n|---|---|---|---|---|" if args.outline else "\n|---|---|---|"))
+    times, shaped = [], []
     for path in paths:
         mesh = load_mesh(path)
         dist = CropDistributions(distance_m=args.distance, size_m=size_interval(mesh.extents, SizeRange("height", *args.height)))
         t0 = time.perf_counter()
         lo, hi = fit_width_scale(mesh, sensor, dist, args.width)
         times.append(time.perf_counter() - t0)
-        print(f"| {path.relative_to(args.root)} | {times[-1]:.2f} | {lo:.2f}–{hi:.2f} |", flush=True)
+        row = f"| {path.relative_to(args.root)} | {times[-1]:.2f} | {lo:.2f}–{hi:.2f} |"
+        if args.outline:
+            t0 = time.perf_counter()
+            fit_object_shape(mesh, sensor, dist, args.width, args.outline)
+            shaped.append(time.perf_counter() - t0)
+            row += f" {shaped[-1]:.2f} | {shaped[-1] / times[-1]:.2f} |"
+        print(row, flush=True)
     print(f"\ntotal {sum(times):.1f} s, median {statistics.median(times):.2f} s, max {max(times):.2f} s per mesh; "
           f"load {os.getloadavg()[0]:.2f} at the end")
+    if shaped:
+        print(f"with the outline: total {sum(shaped):.1f} s, median {statistics.median(shaped):.2f} s per mesh, "
+              f"median ratio {statistics.median(b / a for a, b in zip(times, shaped)):.2f}")
 
 
 if __name__ == "__main__":
