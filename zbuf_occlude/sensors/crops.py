@@ -256,7 +256,7 @@ def object_crop(
     reach = placement["size_m"] * max(1.0, width_scale) * (1.0 if profile is None else max(1.0, *profile))
     if isinstance(sensor, AirborneScanner):
         return _airborne_crop(mesh, sensor, placement, seed=seed, occluders=occluders, class_name=class_name, offset_m=d * math.sin(az), size=size,
-                              width_scale=width_scale, reach=reach)  # fmt: skip
+                              reach=reach)  # fmt: skip
     obj = SceneObject(mesh, class_name, (d * math.cos(az), d * math.sin(az)), placement["yaw_deg"], size, width_scale=width_scale,
                       width_profile=profile)  # fmt: skip
     scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=max(2.0 * d, 20.0))
@@ -297,10 +297,8 @@ def _crop_object(scene: ScanScene, full: Scan, placement: dict, sensor_world, of
         keep[ground] = _under_footprint(built.local_meshes[1], to_world, inverse, world(full.points[ground]), placement["ground_margin_m"])
     crop = full.select(keep)
     crop.meta.update({key: full.meta[key][keep] for key in per_return})
-    # the mesh frame with the object's horizontal stretch kept: the crop shows the object as scanned
-    stretch = np.array([placement.get("width_scale", 1.0), placement.get("width_scale", 1.0), 1.0])
-    local = ((world(crop.points) - to_world[:3, 3]) @ inverse.T) * stretch
-    return CropSample(crop, dict(placement), local, (inverse @ (sensor_world - to_world[:3, 3])) * stretch, full)
+    local = (world(crop.points) - to_world[:3, 3]) @ inverse.T  # the object's local mesh frame: its stretch and warp kept
+    return CropSample(crop, dict(placement), local, inverse @ (sensor_world - to_world[:3, 3]), full)
 
 
 def _under_footprint(mesh, to_world, inverse, world, margin_m: float) -> NDArray[np.bool_]:
@@ -314,14 +312,14 @@ def _under_footprint(mesh, to_world, inverse, world, margin_m: float) -> NDArray
 
 
 def _airborne_crop(mesh, sensor: AirborneScanner, placement: dict, *, seed: int, occluders, class_name: str, offset_m: float, size,
-                  width_scale: float, reach: float) -> CropSample:  # fmt: skip
+                  reach: float) -> CropSample:  # fmt: skip
     """An airborne crop: the object ``offset_m`` across track from the plan centre (``distance_m ·
     sin(azimuth_deg)`` of the placement; ``height_m`` is unused: the scanner flies at its altitude),
     scanned from every line of the flight plan that sees it.  Points and the full scan are in the
     world frame; the crop's ``meta["line_id"]`` and ``meta["scan_angle_deg"]`` are its returns'."""
     from zbuf_occlude.sensors.airborne import scan_airborne
 
-    obj = SceneObject(mesh, class_name, (0.0, offset_m), placement["yaw_deg"], size, width_scale=width_scale,
+    obj = SceneObject(mesh, class_name, (0.0, offset_m), placement["yaw_deg"], size, width_scale=placement.get("width_scale", 1.0),
                       width_profile=placement.get("width_profile"))  # fmt: skip
     reach = max(float(np.max(size)), reach) * 0.75 + 1.0
     scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=abs(offset_m) + 2.0 * reach)

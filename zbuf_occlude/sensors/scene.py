@@ -184,8 +184,9 @@ class SceneObject:
     width_profile: tuple[float, ...] | None = None
 
     def build(self, base: Path | None = None) -> tuple[trimesh.Trimesh, NDArray[np.float64]]:
-        """The object's mesh in its local frame (as loaded) and its (4, 4) local → world transform,
-        with the ground at z = 0."""
+        """The object's mesh in its local frame (as loaded, stretched by ``width_scale`` and warped
+        by ``width_profile``: the object's own shape) and its (4, 4) local → world transform (the
+        scaling to ``size_m``, the yaw and the position), with the ground at z = 0."""
         import trimesh
 
         from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported when a scene is built
@@ -220,18 +221,23 @@ class SceneObject:
                 scale = size_arr / extents
         if not (math.isfinite(self.width_scale) and self.width_scale > 0):
             raise InvalidInputError(f"object {self.class_name or self.mesh!r}: width_scale must be a number > 0, got {self.width_scale!r}")
-        scale[:2] *= self.width_scale
+        # The object's own shape, stretch and warp, is its local mesh; the transform only sizes, turns and places it.
+        faces, rows = np.asarray(local.faces, dtype=np.int64), None
         if self.width_profile is not None:
             try:
                 profile = check_width_profile(self.width_profile)
             except InvalidInputError as exc:
                 raise InvalidInputError(f"object {self.class_name or self.mesh!r}: {exc}") from None
-            v, faces, rows = _split_tall_faces(v, np.asarray(local.faces, dtype=np.int64), len(profile))
+            v, faces, rows = _split_tall_faces(v, faces, len(profile))
             factors = width_profile_factors(v[:, 2], profile)
             centre_xy = (v[:, :2].min(axis=0) + v[:, :2].max(axis=0)) / 2
             v[:, :2] = centre_xy + (v[:, :2] - centre_xy) * factors[:, None]
+        if self.width_scale != 1.0:
+            v = v * np.array([self.width_scale, self.width_scale, 1.0])
+        if self.width_profile is not None or self.width_scale != 1.0:
             local = trimesh.Trimesh(v @ rot_up, faces, process=False)  # rot_up is orthonormal: v @ rot_up undoes it
-            local.metadata[FACE_ROWS] = rows
+            if rows is not None:
+                local.metadata[FACE_ROWS] = rows
         pos = np.asarray(self.position_m, dtype=np.float64).reshape(-1)
         if pos.shape not in ((2,), (3,)) or not np.all(np.isfinite(pos)):
             raise InvalidInputError(f"object {self.class_name or self.mesh!r}: position_m must be 2 or 3 finite metres, got {self.position_m!r}")
