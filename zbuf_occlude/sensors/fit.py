@@ -534,17 +534,23 @@ def across_sight_width(points: NDArray[np.floating], band_m: float = WIDTH_BAND_
 
 def _across_sight_width(p: NDArray[np.float64], band_m: float = WIDTH_BAND_M) -> float:
     """:func:`across_sight_width` of a checked ``(N, 3) float64`` scan."""
-    if len(p) < 2:
-        return 0.0
-    s = _across_sight(p)
-    bands = np.floor((p[:, 2] - p[:, 2].min()) / band_m).astype(np.int64)
-    order = np.argsort(bands, kind="stable")
-    starts = np.flatnonzero(np.r_[True, np.diff(bands[order]) != 0])
-    counts = np.diff(np.r_[starts, len(p)])
-    hi = np.maximum.reduceat(s[order], starts)
-    lo = np.minimum.reduceat(s[order], starts)
-    widths = (hi - lo)[counts >= 2]
+    return _band_width(_across_sight(p), p[:, 2], band_m) if len(p) >= 2 else 0.0
+
+
+def _band_width(across: NDArray[np.float64], z: NDArray[np.float64], band_m: float) -> float:
+    """The median over ``band_m`` high bands of two or more returns of their extent in ``across`` (0 when none)."""
+    _, extent, counts = _extent_per_group(across, np.floor((z - z.min()) / band_m).astype(np.int64))
+    widths = extent[counts >= 2]
     return float(np.median(widths)) if len(widths) else 0.0
+
+
+def _extent_per_group(values: NDArray[np.float64], groups: NDArray[np.int64]):
+    """For each group id present in ``groups (N,)``: the id, ``max − min`` of its ``values (N,)``, and its count."""
+    order = np.argsort(groups, kind="stable")
+    sorted_groups = groups[order]
+    starts = np.flatnonzero(np.r_[True, np.diff(sorted_groups) != 0])
+    extent = np.maximum.reduceat(values[order], starts) - np.minimum.reduceat(values[order], starts)
+    return sorted_groups[starts], extent, np.diff(np.r_[starts, len(values)])
 
 
 def _across_sight(p: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -633,17 +639,9 @@ def fit_width_scale(mesh, sensor, distributions, width_m: tuple[float, float], *
         raise InvalidInputError(f"n_samples must be >= 1, got {n_samples}")
     if not isinstance(sensor, Lidar):
         raise InvalidInputError(f"widths are measured across a spinning LiDAR's line of sight; {getattr(sensor, 'name', sensor)!r} is not one")
-    from zbuf_occlude.geometry.samples import derive_rng
-    from zbuf_occlude.sensors.crops import draw_placement, object_crop  # scans: trimesh and embree, imported when a width is fitted
-
     def median_width(scale: float) -> float:
-        dist = replace(distributions, width_scale=scale)
-        widths = []
-        for k in range(int(n_samples)):
-            rng = derive_rng(seed, _WIDTH_STREAM, k)
-            crop = object_crop(mesh, sensor, draw_placement(dist, rng), seed=int(rng.integers(2**63)))
-            widths.append(_across_sight_width(crop.scan.points.astype(np.float64)))
-        return float(np.median(widths))
+        crops = _fit_crops(mesh, sensor, replace(distributions, width_scale=scale), int(n_samples), seed, _WIDTH_STREAM)
+        return float(np.median([_across_sight_width(crop.scan.points.astype(np.float64)) for crop in crops]))
 
     middle, scale = (lo + hi) / 2, 1.0
     w = median_width(scale)
@@ -695,15 +693,16 @@ def width_profile(points: NDArray[np.floating], n_bins: int = WIDTH_PROFILE_BINS
 def _width_profile(p: NDArray[np.float64], n_bins: int) -> NDArray[np.float64]:
     """:func:`width_profile` of a checked ``(N, 3) float64`` scan."""
     out = np.full(n_bins, np.nan)
-    width = _across_sight_width(p)
+    if len(p) < 2:
+        return out
+    across, z = _across_sight(p), p[:, 2]
+    width = _band_width(across, z, WIDTH_BAND_M)
     if not width > 0:
         return out
-    across = _across_sight(p)
-    extent = float(np.ptp(p[:, 2]))
-    k = np.zeros(len(p), np.int64) if extent <= 0 else np.minimum(((p[:, 2] - p[:, 2].min()) / extent * n_bins).astype(np.int64), n_bins - 1)
-    for b in range(n_bins):
-        if np.count_nonzero(k == b) >= 2:
-            out[b] = np.ptp(across[k == b]) / width
+    height = float(np.ptp(z))
+    bins = np.zeros(len(p), np.int64) if height <= 0 else np.minimum(((z - z.min()) / height * n_bins).astype(np.int64), n_bins - 1)
+    ids, extent, counts = _extent_per_group(across, bins)
+    out[ids[counts >= 2]] = extent[counts >= 2] / width
     return out
 
 
@@ -792,9 +791,6 @@ def fit_width_profile(mesh, sensor, distributions, profile: Sequence[float], *, 
         raise InvalidInputError(f"n_samples must be >= 1, got {n_samples}")
     if not isinstance(sensor, Lidar):
         raise InvalidInputError(f"widths are measured across a spinning LiDAR's line of sight; {getattr(sensor, 'name', sensor)!r} is not one")
-    from zbuf_occlude.geometry.samples import derive_rng
-    from zbuf_occlude.sensors.crops import draw_placement, object_crop  # scans: imported when a profile is fitted
-
     k = len(target)
     z_lo, z_hi = (float(v) for v in np.asarray(SceneObject(mesh).build()[0].bounds, dtype=np.float64)[:, 2])  # a primitive's too
     centres = (np.arange(k) + 0.5) / k
@@ -802,9 +798,7 @@ def fit_width_profile(mesh, sensor, distributions, profile: Sequence[float], *, 
     def measure(dist) -> tuple[NDArray[np.float64], float, float]:
         """The crops' median profile, and their median lowest and highest return in the mesh's relative height."""
         rows, spans = [], []
-        for i in range(int(n_samples)):
-            rng = derive_rng(seed, _PROFILE_STREAM, i)
-            crop = object_crop(mesh, sensor, draw_placement(dist, rng), seed=int(rng.integers(2**63)))
+        for crop in _fit_crops(mesh, sensor, dist, int(n_samples), seed, _PROFILE_STREAM):
             row = _width_profile(crop.scan.points.astype(np.float64), k)
             if np.any(np.isfinite(row)):
                 rows.append(row)
@@ -843,6 +837,16 @@ def fit_object_shape(mesh, sensor, distributions, width_m: tuple[float, float] |
         if width_m is not None:
             out["width_scale"] = fit_width_scale(mesh, sensor, replace(distributions, width_profile=out["width_profile"]), width_m, seed=seed, name=name)
     return out
+
+
+def _fit_crops(mesh, sensor, distributions, n: int, seed: int, stream: int):
+    """The ``n`` crops a fit measures, crop ``k`` drawn from ``derive_rng(seed, stream, k)`` (a generator)."""
+    from zbuf_occlude.geometry.samples import derive_rng
+    from zbuf_occlude.sensors.crops import draw_placement, object_crop  # scans: trimesh and embree, imported when a fit measures
+
+    for k in range(n):
+        rng = derive_rng(seed, stream, k)
+        yield object_crop(mesh, sensor, draw_placement(distributions, rng), seed=int(rng.integers(2**63)))
 
 
 def _check_height(sensor_height_m) -> float:
