@@ -509,13 +509,13 @@ def test_fitted_shape_gives_the_placed_meshes_the_fitted_widths_or_outline_or_ne
 
     monkeypatch.setattr(sim2real, "_fit_sensor", fit)
     asked: list[set[str]] = []
-    real_fit = sim2real.fit_width_scales
+    real_fit = sim2real.fit_mesh_shapes
 
     def spy(meshes, sensor, sizes, placement):
         asked.append({key for kw in placement.values() for key in kw})
         return real_fit(meshes, sensor, sizes, placement)
 
-    monkeypatch.setattr(sim2real, "fit_width_scales", spy)
+    monkeypatch.setattr(sim2real, "fit_mesh_shapes", spy)
     argv = ["experiment", "sim2real", str(meshes), "--real", str(real), "--label-map", "Trunk=pole", "--fit-sensor", "--points", "32",
             "--epochs", "1", "--per-class", "4", "--threads", "1", "--no-progress", "--seeds", "1", "--validate-on", "fit-half"]  # fmt: skip
     scales = []
@@ -564,7 +564,7 @@ def test_the_set_chosen_on_the_fit_half_is_the_best_validated_per_seed_never_the
 
 
 def test_a_class_outline_warps_each_mesh_then_stretches_it_under_the_warp(tmp_path: Path) -> None:
-    from zbuf_occlude.experiments.sim2real_data import build_set, fit_width_scales
+    from zbuf_occlude.experiments.sim2real_data import build_set, fit_mesh_shapes
     from zbuf_occlude.sensors import lidar_preset
 
     meshes = [m for m in find_class_meshes(_mesh_root(tmp_path)) if m.class_name == "pole"]
@@ -572,13 +572,13 @@ def test_a_class_outline_warps_each_mesh_then_stretches_it_under_the_warp(tmp_pa
     sizes = {"pole": SizeRange("height", 3.0, 4.0)}
     widths = {"distance_m": (5.0, 9.0), "across_sight_width_m": (0.3, 0.5)}
     outline = (0.5, 0.5, 1.0, 1.0, 1.0, 1.0, 2.0, 2.0)
-    plain = fit_width_scales(meshes, sensor, sizes, {"pole": widths})
-    warped = fit_width_scales(meshes, sensor, sizes, {"pole": {**widths, "across_sight_profile": outline}})
+    plain = fit_mesh_shapes(meshes, sensor, sizes, {"pole": widths})
+    warped = fit_mesh_shapes(meshes, sensor, sizes, {"pole": {**widths, "across_sight_profile": outline}})
     for m in meshes:
         assert "width_profile" not in plain[m.name] and len(warped[m.name]["width_profile"]) == len(outline)
         assert warped[m.name]["width_profile"][0] < warped[m.name]["width_profile"][-1]  # narrower at the foot than at the top
         assert warped[m.name]["width_scale"] != plain[m.name]["width_scale"]  # stretched again under the warp
-    only = fit_width_scales(meshes, sensor, sizes, {"pole": {"distance_m": (5.0, 9.0), "across_sight_profile": outline}})
+    only = fit_mesh_shapes(meshes, sensor, sizes, {"pole": {"distance_m": (5.0, 9.0), "across_sight_profile": outline}})
     assert all(set(v) == {"width_profile"} for v in only.values()) and len(only) == len(meshes)  # a warp without a stretch
     placement = {"pole": {**widths, "across_sight_profile": outline}}
     every_draw = build_set("lidar", meshes, ["pole"], 2, 64, 3, sensor=sensor, sizes=sizes, placement=placement)
@@ -589,7 +589,7 @@ def test_a_class_outline_warps_each_mesh_then_stretches_it_under_the_warp(tmp_pa
 
 
 def test_width_scales_fitted_once_give_the_crops_of_fitting_them_in_every_draw(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from zbuf_occlude.experiments.sim2real_data import build_set, fit_width_scales
+    from zbuf_occlude.experiments.sim2real_data import build_set, fit_mesh_shapes
     from zbuf_occlude.sensors import fit, lidar_preset
 
     meshes = find_class_meshes(_mesh_root(tmp_path))
@@ -597,7 +597,7 @@ def test_width_scales_fitted_once_give_the_crops_of_fitting_them_in_every_draw(t
     sizes = {"car": SizeRange("height", 1.5, 1.5), "pole": SizeRange("height", 3.0, 4.0)}
     placement = {"car": {"distance_m": (6.0, 8.0)}, "pole": {"distance_m": (5.0, 9.0), "across_sight_width_m": (0.3, 0.5)}}
     every_draw = build_set("lidar", meshes, ["car", "pole"], 4, 64, 3, sensor=sensor, sizes=sizes, placement=placement)
-    once = fit_width_scales(meshes, sensor, sizes, placement)
+    once = fit_mesh_shapes(meshes, sensor, sizes, placement)
     assert sorted(once) == sorted(m.name for m in meshes if m.class_name == "pole")  # the classes that give widths
     assert once["pole/post"] != once["pole/lamp"]  # each mesh its own stretch
     calls = []

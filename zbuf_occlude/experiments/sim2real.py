@@ -66,7 +66,7 @@ from zbuf_occlude.experiments.sim2real_data import (
     TRAINING_SETS,
     build_sets,
     check_lidar_meshes,
-    fit_width_scales,
+    fit_mesh_shapes,
     find_class_meshes,
     real_clouds,
     real_scan_rows,
@@ -293,7 +293,7 @@ def run_sim2real(
         the line of sight, or ``"widen"``, the same stretch where it widens the mesh and none
         where it would narrow it (a narrow real width is often a partial view, not a thinner
         object); ``"outline"``, a warp to its outline over the height.  Empty (default): the
-        meshes' own shapes.  Each is fitted per mesh once (:func:`fit_width_scales`).
+        meshes' own shapes.  Each is fitted per mesh once (:func:`fit_mesh_shapes`).
 
     Returns
     -------
@@ -358,7 +358,7 @@ def run_sim2real(
         used = {FITTED_SHAPES[shape] for shape in fitted_shape}
         fitted_placement = {c: {k: v for k, v in kw.items() if k not in FITTED_SHAPES.values() or k in used} for c, kw in fitted_placement.items()}
         # each mesh's stretch and warp to its class's scans, fitted once for every seed (seed 0: the same every run)
-        shapes = fit_width_scales(meshes, fitted, fitted_sizes, fitted_placement)
+        shapes = fit_mesh_shapes(meshes, fitted, fitted_sizes, fitted_placement)
         if "widen" in fitted_shape:  # never narrower than the mesh
             shapes = {name: {**kw, "width_scale": tuple(max(v, 1.0) for v in kw["width_scale"])} if "width_scale" in kw else kw
                       for name, kw in shapes.items()}  # fmt: skip

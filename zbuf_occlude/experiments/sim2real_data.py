@@ -46,7 +46,7 @@ if TYPE_CHECKING:  # trimesh is imported where it is used
 __all__ = [
     "TRAINING_SETS", "GROUND_ELEVATION_DEG", "LIDAR_PLACEMENT", "MIN_RETURNS", "KEEP_SCALE_UNIT_M",
     "MeshEntry", "find_class_meshes", "check_lidar_meshes", "split_whole_meshes", "allocate", "build_set", "build_sets", "mix_sets",
-    "real_clouds", "real_scan_rows", "FITTED", "FITTED_PLACED", "FITTED_SETS", "fit_width_scales",
+    "real_clouds", "real_scan_rows", "FITTED", "FITTED_PLACED", "FITTED_SETS", "fit_mesh_shapes",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -250,28 +250,23 @@ def _distributions(entry: MeshEntry, size: SizeRange, placement: dict) -> tuple[
     return CropDistributions(size_m=size_interval(entry.mesh.extents, size), **keywords), width_m, profile
 
 
-def _fit_stretch(entry: MeshEntry, sensor, dist: CropDistributions, width_m: tuple[float, float] | None, profile: tuple | None) -> dict:
-    """:func:`zbuf_occlude.sensors.fit.fit_object_shape` of the mesh (seed 0), naming its file in errors."""
-    from zbuf_occlude.sensors.fit import fit_object_shape
-
-    return fit_object_shape(entry.mesh, sensor, dist, width_m, profile, name=str(entry.path))
-
-
-def fit_width_scales(meshes: list[MeshEntry], sensor, sizes: dict[str, SizeRange], placement: dict[str, dict]) -> dict[str, dict]:
+def fit_mesh_shapes(meshes: list[MeshEntry], sensor, sizes: dict[str, SizeRange], placement: dict[str, dict]) -> dict[str, dict]:
     """Each mesh's stretch to its class's ``across_sight_width_m`` and warp to its ``across_sight_profile`` in ``placement``, once for every training set and seed.
 
-    Returns ``{mesh name: {"width_scale": (lo, hi), "width_profile": (K factors)}}`` (:func:`_fit_stretch`,
-    seed 0; each key where the class gives what it fits) for the meshes of classes that give either, to merge into ``placement``: a mesh's
+    Returns ``{mesh name: {"width_scale": (lo, hi), "width_profile": (K factors)}}``
+    (:func:`zbuf_occlude.sensors.fit.fit_object_shape`, seed 0; each key where the class gives what it fits) for the meshes of classes that give either, to merge into ``placement``: a mesh's
     own keywords override its class's (:func:`build_set`), so the crops are what fitting the
     stretch in every draw would give, without fitting it again.  A mesh whose stretch cannot be
     fitted is left out (its crops then raise, naming it; :func:`check_lidar_meshes` skips it).
     """
+    from zbuf_occlude.sensors.fit import fit_object_shape
+
     out = {}
     for entry in meshes:
         dist, width_m, profile = _distributions(entry, sizes[entry.class_name], _placement_of(placement, entry))
         if width_m is not None or profile is not None:
             try:
-                out[entry.name] = _fit_stretch(entry, sensor, dist, width_m, profile)
+                out[entry.name] = fit_object_shape(entry.mesh, sensor, dist, width_m, profile, name=str(entry.path))
             except InvalidInputError as exc:
                 log.warning("%s", exc)
     return out
@@ -280,10 +275,11 @@ def fit_width_scales(meshes: list[MeshEntry], sensor, sizes: dict[str, SizeRange
 def _lidar(entry: MeshEntry, k: int, n_points: int, seed: int, sensor, size: SizeRange, min_returns: int = MIN_RETURNS,
            placement: dict | None = None) -> tuple[list[NDArray], list[float]]:  # fmt: skip
     from zbuf_occlude.sensors.crops import lidar_object_samples
+    from zbuf_occlude.sensors.fit import fit_object_shape
 
     dist, width_m, profile = _distributions(entry, size, placement or {})
-    if (width_m is not None and dist.width_scale is None) or (profile is not None and dist.width_profile is None):
-        dist = replace(dist, **_fit_stretch(entry, sensor, dist, width_m, profile))  # this mesh's, to the class's real scans
+    if (width_m is not None and dist.width_scale is None) or (profile is not None and dist.width_profile is None):  # this mesh's, to the class's scans
+        dist = replace(dist, **fit_object_shape(entry.mesh, sensor, dist, width_m, profile, name=str(entry.path)))
     good: list = []
     # Draw about as many crops as needed, then more under another name (new placements) while
     # crops come back with fewer than min_returns returns; at most _LIDAR_TRIES rounds.
@@ -338,7 +334,7 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
     a class's ``"across_sight_width_m": (lo, hi)`` stretches each of its meshes to those widths
     (:func:`zbuf_occlude.sensors.fit.fit_width_scale`), and its ``"across_sight_profile"`` warps
     them to that outline (:func:`zbuf_occlude.sensors.fit.fit_width_profile`), unless the
-    mesh gives its ``width_scale`` and ``width_profile`` (:func:`fit_width_scales`).
+    mesh gives its ``width_scale`` and ``width_profile`` (:func:`fit_mesh_shapes`).
 
     Raises
     ------

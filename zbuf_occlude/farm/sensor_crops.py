@@ -14,7 +14,7 @@ import numpy as np
 
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors.crops import CropDistributions, lidar_object_samples
-from zbuf_occlude.sensors.fit import fit_width_scale
+from zbuf_occlude.sensors.fit import fit_object_shape
 
 if TYPE_CHECKING:
     import trimesh
@@ -65,7 +65,7 @@ def farm_datasets(
     """
     if across_sight_width_m is not None:
         mesh = load_mesh(mesh) if isinstance(mesh, (str, os.PathLike)) else mesh  # once, for the fit and the crops
-        distributions = replace(distributions, width_scale=fit_width_scale(mesh, sensor, distributions, across_sight_width_m, seed=seed, name=name))
+        distributions = replace(distributions, **fit_object_shape(mesh, sensor, distributions, across_sight_width_m, seed=seed, name=name))
     clouds = lidar_object_samples(mesh, sensor, name=name, n_samples=n_samples, n_points=n_points, seed=seed,
                                   distributions=distributions, label=label, backend=backend)  # fmt: skip
     b = len(clouds)

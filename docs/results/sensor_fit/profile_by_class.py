@@ -14,7 +14,7 @@ import sys
 import numpy as np
 
 from zbuf_occlude.experiments import sim2real as S
-from zbuf_occlude.experiments.sim2real_data import _distributions, _placement_of, check_lidar_meshes, find_class_meshes, fit_width_scales
+from zbuf_occlude.experiments.sim2real_data import _distributions, _placement_of, check_lidar_meshes, find_class_meshes, fit_mesh_shapes
 from zbuf_occlude.experiments.sim2real_data import real_clouds, real_scan_rows
 from zbuf_occlude.real_scans.datasets import load_real_scans
 from zbuf_occlude.sensors.crops import draw_placement, object_crop
@@ -34,7 +34,7 @@ meshes, _ = check_lidar_meshes(meshes, fitted, sizes, 256, placement=placement)
 
 def without(*keys: str) -> dict:
     shaped = {c: {k: v for k, v in kw.items() if k not in keys} for c, kw in placement.items()}
-    return {**shaped, **fit_width_scales(meshes, fitted, sizes, shaped)}
+    return {**shaped, **fit_mesh_shapes(meshes, fitted, sizes, shaped)}
 
 
 # --fitted-shape none, widths and outline
