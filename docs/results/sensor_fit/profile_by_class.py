@@ -13,23 +13,14 @@ import sys
 
 import numpy as np
 
-from zbuf_occlude.experiments import sim2real as S
-from zbuf_occlude.experiments.sim2real_data import _distributions, _placement_of, check_lidar_meshes, find_class_meshes, fit_mesh_shapes
-from zbuf_occlude.experiments.sim2real_data import real_clouds, real_scan_rows
-from zbuf_occlude.real_scans.datasets import load_real_scans
+from fit_half import load_fit_half
+from zbuf_occlude.experiments.sim2real_data import _distributions, _placement_of, fit_mesh_shapes
 from zbuf_occlude.sensors.crops import draw_placement, object_crop
 from zbuf_occlude.sensors.fit import across_sight_width, width_profile
-from zbuf_occlude.sensors.presets import sensor_from_name
 
-data = sys.argv[1]
-scans = load_real_scans(f"{data}/lidarnet_v2_partial")
-meshes = find_class_meshes(f"{data}/street_objects", up_map={"bush/openglforest__*": "+y"})
-names = sorted({m.class_name for m in meshes})
-_, real_y, _ = real_clouds(scans, names, {}, 256, 0)
-fit_half, _ = S._stratified_half(real_y)
-kept = real_scan_rows(scans, names, {})
-fitted, placement, sizes, _ = S._fit_sensor([scans[kept[i]] for i in fit_half], sensor_from_name("hdl32e"), real_y[fit_half], names)
-meshes, _ = check_lidar_meshes(meshes, fitted, sizes, 256, placement=placement)
+f = load_fit_half(sys.argv[1])
+scans, kept, names, real_y, fit_half, fitted, placement, sizes, meshes = (f.scans, f.kept, f.names, f.real_y, f.fit_half, f.fitted,
+                                                                           f.placement, f.sizes, f.meshes)  # fmt: skip
 
 
 def without(*keys: str) -> dict:
