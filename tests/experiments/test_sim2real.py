@@ -15,9 +15,12 @@ pytest.importorskip("torch")
 from zbuf_occlude.cli.main import main  # noqa: E402
 from zbuf_occlude.errors import InvalidInputError  # noqa: E402
 from zbuf_occlude.experiments.sim2real_data import (  # noqa: E402
+    FITTED_PLACED,
+    FITTED_SETS,
     KEEP_SCALE_UNIT_M,
     TRAINING_SETS,
     build_set,
+    build_sets,
     find_class_meshes,
     mix_sets,
     split_whole_meshes,
@@ -336,6 +339,37 @@ def test_fit_sensor_fits_on_one_half_and_scores_every_row_on_the_other(tmp_path:
     assert second == [r for r in first if r["seed"] == 0]
 
 
+def test_a_resumed_run_makes_only_the_sets_it_still_trains_and_they_come_out_the_same(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from zbuf_occlude.experiments import sim2real
+
+    _fit_spy(monkeypatch)
+    out = tmp_path / "out"
+    argv = ["experiment", "sim2real", str(_mesh_root(tmp_path)), "--real", str(_real_root(tmp_path)), "--out", str(out),
+            "--label-map", "Trunk=pole", "--fit-sensor", "--points", "32", "--epochs", "1", "--per-class", "4", "--seeds", "1",
+            "--threads", "1", "--no-progress"]  # fmt: skip
+    asked: list[list[str]] = []
+    real_build = sim2real.build_sets
+
+    def build_sets(*a, kinds=None, **kw):
+        asked.append(list(kinds))
+        return real_build(*a, kinds=kinds, **kw)
+
+    monkeypatch.setattr(sim2real, "build_sets", build_sets)
+    assert main(argv) == 0
+    timing = ("data_s", "train_s")
+    rows = [{k: v for k, v in json.loads(line).items() if k not in timing} for line in (out / "runs.jsonl").read_text().splitlines()]
+    assert asked == [[*TRAINING_SETS, *FITTED_SETS]] * 2  # the training clouds and those of the held-out meshes
+    # two rows lost (an interrupted run): only their sets are made again, and they train to the same rows
+    kept = [line for line in (out / "runs.jsonl").read_text().splitlines() if json.loads(line)["train_set"] not in ("occluded", FITTED_PLACED)]
+    (out / "runs.jsonl").write_text("\n".join(kept) + "\n")
+    assert main(argv) == 0 and asked[2:] == [["occluded", FITTED_PLACED]] * 2
+    again = {r["train_set"]: r for r in ({k: v for k, v in json.loads(line).items() if k not in timing}
+                                         for line in (out / "runs.jsonl").read_text().splitlines())}  # fmt: skip
+    assert again == {r["train_set"]: r for r in rows}
+    # nothing left to train: no set is made
+    assert main(argv) == 0 and len(asked) == 4
+
+
 def test_without_fit_sensor_every_scan_is_scored_and_no_fitted_set(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     fits, out = _fit_spy(monkeypatch), tmp_path / "out"
     argv = ["experiment", "sim2real", str(_mesh_root(tmp_path)), "--real", str(_real_root(tmp_path)), "--out", str(out),
@@ -449,6 +483,20 @@ def test_the_fitted_placed_set_draws_the_fitted_distances_and_the_others_the_pre
     stretched = [w for name, d, w in widths if w is not None]
     assert {d for name, d, w in widths if w is not None} == {(8.0, 9.0)} and all(hi == pytest.approx(2 * lo) for lo, hi in stretched)
     assert sets[FITTED_PLACED].points[sets[FITTED_PLACED].labels == 1].shape == (2, 32, 3)
+
+
+def test_build_sets_makes_the_sets_asked_for_and_refuses_one_it_cannot_make(tmp_path: Path) -> None:
+    from zbuf_occlude.sensors import lidar_preset
+
+    meshes = find_class_meshes(_mesh_root(tmp_path))
+    options = dict(sensor=lidar_preset("hdl32e"), resolution=128, dense_points=2000)
+    every = build_sets(meshes, ["car", "pole"], 2, 32, 0, **options)
+    assert list(every) == list(TRAINING_SETS)
+    some = build_sets(meshes, ["car", "pole"], 2, 32, 0, kinds=["lidar+complete", "occluded"], **options)
+    assert list(some) == ["occluded", "lidar+complete"]  # in report order
+    assert all(np.array_equal(some[k].points, every[k].points) and np.array_equal(some[k].labels, every[k].labels) for k in some)
+    with pytest.raises(InvalidInputError, match=r"\['fitted\+placed'\]"):
+        build_sets(meshes, ["car", "pole"], 2, 32, 0, kinds=[FITTED_PLACED], **options)
 
 
 def test_validate_on_fit_half_validates_mesh_sets_on_the_fit_half_and_trains_on_every_mesh(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -432,8 +432,9 @@ def run_sim2real(
                 tr, val = fit_half.subset(tr_rows), fit_half.subset(val_rows)
                 test_x, test_y = real_pts[half_b], real_y[half_b]
             else:
-                if not sets:  # the sets of this seed at once (lidar+complete reuses two)
-                    fits = {"fitted_sensor": fitted, "fitted_placement": fitted_placement, "fitted_sizes": fitted_sizes}
+                if not sets:  # the sets this seed still trains, at once (lidar+complete reuses two)
+                    fits = {"fitted_sensor": fitted, "fitted_placement": fitted_placement, "fitted_sizes": fitted_sizes,
+                            "kinds": [k for k in kinds if (k, seed) not in done]}  # fmt: skip
                     sets = {"train": build_sets(train_meshes, names, sc.per_class, n_points, seed, **fits, **common)}
                     if not real_val:
                         sets["val"] = build_sets(val_meshes, names, sc.val_per_class, n_points, seed + 10_000, **fits, **common)

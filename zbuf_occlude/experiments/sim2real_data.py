@@ -27,6 +27,7 @@ from __future__ import annotations
 import fnmatch
 import logging
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -394,20 +395,43 @@ def mix_sets(a: CloudSet, b: CloudSet, seed: int) -> CloudSet:
 
 def build_sets(meshes: list[MeshEntry], names: list[str], per_class: int, n_points: int, seed: int, *,
                fitted_sensor=None, fitted_placement: dict[str, dict] | None = None,
-               fitted_sizes: dict[str, SizeRange] | None = None, **options) -> dict[str, CloudSet]:  # fmt: skip
-    """All of :data:`TRAINING_SETS` for one seed (``lidar+complete`` mixes the other two; options
-    as :func:`build_set`); with ``fitted_sensor`` the :data:`FITTED` set, the ``lidar`` set's recipe
-    (the same seed, so the same sizes and placements) scanned by ``fitted_sensor``; and with
-    ``fitted_placement`` (per class, as :func:`build_set`'s ``placement``) and ``fitted_sizes`` as
-    well, the :data:`FITTED_PLACED` set, whose crops are placed so per class and scaled to those sizes."""
-    out = {kind: build_set(kind, meshes, names, per_class, n_points, seed, **options) for kind in TRAINING_SETS[:3]}
-    out["lidar+complete"] = mix_sets(out["lidar"], out["complete"], seed)
+               fitted_sizes: dict[str, SizeRange] | None = None, kinds: Sequence[str] | None = None,
+               **options) -> dict[str, CloudSet]:  # fmt: skip
+    """The training sets of one seed (options as :func:`build_set`): :data:`TRAINING_SETS`
+    (``lidar+complete`` mixes the other two); with ``fitted_sensor`` the :data:`FITTED` set, the
+    ``lidar`` set's recipe (the same seed, so the same sizes and placements) scanned by
+    ``fitted_sensor``; and with ``fitted_placement`` (per class, as :func:`build_set`'s
+    ``placement``) and ``fitted_sizes`` as well, the :data:`FITTED_PLACED` set, whose crops are
+    placed so per class and scaled to those sizes.
+
+    ``kinds`` (default: all of those) names the sets wanted, and only those (and the two that
+    ``lidar+complete`` mixes) are made: each set draws from its own random stream, so a set is
+    the same whichever others are made with it (a resumed run makes only what it still needs).
+
+    Raises
+    ------
+    InvalidInputError
+        A kind in ``kinds`` that these arguments cannot make, and :func:`build_set`'s errors.
+    """
+    available = [*TRAINING_SETS]
     if fitted_sensor is not None:
-        out[FITTED] = build_set("lidar", meshes, names, per_class, n_points, seed, **{**options, "sensor": fitted_sensor})
+        available.append(FITTED)
         if fitted_placement is not None and fitted_sizes is not None:
-            out[FITTED_PLACED] = build_set("lidar", meshes, names, per_class, n_points, seed,
-                                           **{**options, "sensor": fitted_sensor, "placement": fitted_placement, "sizes": fitted_sizes})  # fmt: skip
-    return out
+            available.append(FITTED_PLACED)
+    wanted = list(available if kinds is None else kinds)
+    unknown = [k for k in wanted if k not in available]
+    if unknown:
+        raise InvalidInputError(f"cannot make training sets {unknown} with these arguments; these can be made: {available}")
+    made = set(wanted) | ({"lidar", "complete"} if "lidar+complete" in wanted else set())
+    out = {kind: build_set(kind, meshes, names, per_class, n_points, seed, **options) for kind in TRAINING_SETS[:3] if kind in made}
+    if "lidar+complete" in made:
+        out["lidar+complete"] = mix_sets(out["lidar"], out["complete"], seed)
+    if FITTED in made:
+        out[FITTED] = build_set("lidar", meshes, names, per_class, n_points, seed, **{**options, "sensor": fitted_sensor})
+    if FITTED_PLACED in made:
+        out[FITTED_PLACED] = build_set("lidar", meshes, names, per_class, n_points, seed,
+                                       **{**options, "sensor": fitted_sensor, "placement": fitted_placement, "sizes": fitted_sizes})  # fmt: skip
+    return {kind: out[kind] for kind in available if kind in wanted}
 
 
 def _real_label(scan, index: dict[str, int], label_map: dict[str, str]) -> str:
