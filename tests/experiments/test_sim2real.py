@@ -569,25 +569,31 @@ def test_fitted_shape_gives_the_placed_meshes_the_fitted_widths_or_outline_or_ne
     scales = []
     real_build = sim2real.build_sets
 
-    def build_sets(*a, fitted_placement=None, **kw):  # the stretches the fitted+placed set is given
+    shares = []
+
+    def build_sets(*a, fitted_placement=None, **kw):  # the stretches and visible shares the fitted+placed set is given
         scales.append({name: v["width_scale"] for name, v in fitted_placement.items() if "width_scale" in v})
+        shares.append({name: v["visible_across_sight"] for name, v in fitted_placement.items() if "visible_across_sight" in v})
         return real_build(*a, fitted_placement=fitted_placement, **kw)
 
     monkeypatch.setattr(sim2real, "build_sets", build_sets)
-    for shape, out in (("none", "o1"), ("outline", "o2"), ("widths,outline", "o3"), ("widen", "o6")):
+    for shape, out in (("none", "o1"), ("outline", "o2"), ("widths,outline", "o3"), ("widen", "o6"), ("occlude", "o8")):
         assert main([*argv, "--out", str(tmp_path / out), "--fitted-shape", shape]) == 0
         assert json.loads((tmp_path / out / "settings.json").read_text())["fit_sensor"]["fitted_shape"] == ([] if shape == "none" else shape.split(","))
     assert [{"across_sight_width_m", "across_sight_profile"} & keys for keys in asked] == [
-        set(), {"across_sight_profile"}, {"across_sight_width_m", "across_sight_profile"}, {"across_sight_width_m"}]
-    assert scales[0] == scales[1] == {} and scales[2] and scales[3]
+        set(), {"across_sight_profile"}, {"across_sight_width_m", "across_sight_profile"}, {"across_sight_width_m"}, {"across_sight_width_m"}]
+    assert scales[0] == scales[1] == scales[4] == {} and scales[2] and scales[3]
+    # occlude: no stretch, a visible share per mesh, below 1 for the meshes wider than 0.3-0.5 m
+    assert not any(shares[:4]) and set(shares[4]) == set(scales[2]) and any(lo < 1.0 for lo, _ in shares[4].values())
     assert min(v for lo_hi in scales[3].values() for v in lo_hi) >= 1.0  # widen: never narrower
     assert any(lo < 1.0 for lo, _ in scales[2].values())  # these meshes are wider than 0.3-0.5 m somewhere: widths narrows them
     # a shape that does not exist, or one without --fit-sensor: usage errors naming the value or the option
     capsys.readouterr()
     assert main([*argv, "--out", str(tmp_path / "o4"), "--fitted-shape", "outlines"]) == 2
     assert "'outlines'" in capsys.readouterr().err
-    assert main([*argv, "--out", str(tmp_path / "o7"), "--fitted-shape", "widths,widen"]) == 2
-    assert "not both" in capsys.readouterr().err
+    for both in ("widths,widen", "occlude,widths,outline"):
+        assert main([*argv, "--out", str(tmp_path / "o7"), "--fitted-shape", both]) == 2
+        assert "not both" in capsys.readouterr().err
     assert main([*argv[:7], *argv[8:-2], "--out", str(tmp_path / "o5"), "--fitted-shape", "outline"]) == 2
     assert "--fit-sensor" in capsys.readouterr().err
 

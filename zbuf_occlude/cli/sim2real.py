@@ -113,8 +113,9 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--fitted-shape", default="none", metavar="none|SHAPE[,outline]",
                    help="with --fit-sensor, what the fitted+placed set changes in each mesh's shape to look like the fit "
                    "half's scans: widths (a horizontal stretch to their widths across the line of sight), widen (the same, "
-                   "but never narrower than the mesh), outline (a warp to their outline over the height), widths,outline or "
-                   "widen,outline, or none (default: %(default)s)")
+                   "but never narrower than the mesh), occlude (a side occluder that leaves as much of it in view as they "
+                   "show, where the mesh shows wider), outline (a warp to their outline over the height), one of the "
+                   "first three with outline (widths,outline), or none (default: %(default)s)")
     p.add_argument("--recipe", choices=("stable", "plain"), default=SIM2REAL_RECIPE,
                    help="training recipe: stable (class-balanced sampling, best epoch by validation mean class accuracy, "
                    "warm-up, gradient clipping) or plain (the models' own loop) (default: %(default)s)")

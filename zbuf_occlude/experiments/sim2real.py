@@ -92,8 +92,12 @@ SIM2REAL_RECIPE = "stable"
 #: What the mesh-only sets validate on: clouds of held-out whole meshes, or the real scans of the fit half.
 VALIDATION_CHOICES = ("meshes", "fit-half")
 #: What ``fitted_shape`` may give the fitted+placed set's meshes, and the fitted crop keywords each uses
-#: (``widen`` is ``widths`` with every stretch below 1 raised to 1).
-FITTED_SHAPES = {"widths": "across_sight_width_m", "widen": "across_sight_width_m", "outline": "across_sight_profile"}
+#: (``widen`` is ``widths`` with every stretch below 1 raised to 1; ``occlude`` meets the widths with a
+#: side occluder instead of a stretch).
+FITTED_SHAPES = {"widths": "across_sight_width_m", "widen": "across_sight_width_m", "occlude": "across_sight_width_m",
+                 "outline": "across_sight_profile"}  # fmt: skip
+#: The shapes that meet the widths, of which a run takes one.
+_WIDTH_SHAPES = ("widths", "widen", "occlude")
 #: Name of the row that takes, per seed, the mesh-only set with the best fit-half validation score.
 CHOSEN_ON_FIT_HALF = "chosen on fit half"
 
@@ -292,8 +296,11 @@ def run_sim2real(
         :data:`FITTED_SHAPES`): ``"widths"``, a horizontal stretch to the class's widths across
         the line of sight, or ``"widen"``, the same stretch where it widens the mesh and none
         where it would narrow it (a narrow real width is often a partial view, not a thinner
-        object); ``"outline"``, a warp to its outline over the height.  Empty (default): the
-        meshes' own shapes.  Each is fitted per mesh once (:func:`fit_mesh_shapes`).
+        object), or ``"occlude"``, a side occluder that leaves in view as much of the mesh as
+        the widths show where its crops are wider (a partial view; nothing hidden where they are
+        narrower); ``"outline"``, a warp to its outline over the height, alone or with one of
+        the three.  Empty (default): the meshes' own shapes.  Each is fitted per mesh once
+        (:func:`fit_mesh_shapes`).
 
     Returns
     -------
@@ -329,8 +336,8 @@ def run_sim2real(
     fitted_shape = tuple(fitted_shape)
     if unknown := [v for v in fitted_shape if v not in FITTED_SHAPES]:
         raise InvalidInputError(f"--fitted-shape must name {' and/or '.join(FITTED_SHAPES)}, got {', '.join(map(repr, unknown))}")
-    if {"widths", "widen"} <= set(fitted_shape):
-        raise InvalidInputError("--fitted-shape takes widths or widen, not both")
+    if len(set(fitted_shape) & set(_WIDTH_SHAPES)) > 1:
+        raise InvalidInputError(f"--fitted-shape takes one of {', '.join(_WIDTH_SHAPES)}, not both, got {','.join(fitted_shape)!r}")
     if fitted_shape and not fit_sensor:
         raise InvalidInputError("--fitted-shape needs --fit-sensor (it shapes the fitted+placed set's meshes)")
     real_val = validate_on == "fit-half"
@@ -357,6 +364,8 @@ def run_sim2real(
         meshes, skipped_fitted = check_lidar_meshes(meshes, fitted, sizes, n_points, min_returns=int(min_returns))
         used = {FITTED_SHAPES[shape] for shape in fitted_shape}
         fitted_placement = {c: {k: v for k, v in kw.items() if k not in FITTED_SHAPES.values() or k in used} for c, kw in fitted_placement.items()}
+        if "occlude" in fitted_shape:
+            fitted_placement = {c: {**kw, "across_sight_width_by": "occluder"} for c, kw in fitted_placement.items()}
         # each mesh's stretch and warp to its class's scans, fitted once for every seed (seed 0: the same every run)
         shapes = fit_mesh_shapes(meshes, fitted, fitted_sizes, fitted_placement)
         if "widen" in fitted_shape:  # never narrower than the mesh

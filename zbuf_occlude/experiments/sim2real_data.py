@@ -47,7 +47,7 @@ if TYPE_CHECKING:  # trimesh is imported where it is used
 __all__ = [
     "TRAINING_SETS", "GROUND_ELEVATION_DEG", "LIDAR_PLACEMENT", "MIN_RETURNS", "KEEP_SCALE_UNIT_M",
     "MeshEntry", "find_class_meshes", "check_lidar_meshes", "split_whole_meshes", "allocate", "build_set", "build_sets", "mix_sets",
-    "real_clouds", "real_scan_rows", "FITTED", "FITTED_PLACED", "FITTED_SETS", "fit_mesh_shapes",
+    "real_clouds", "real_scan_rows", "FITTED", "FITTED_PLACED", "FITTED_SETS", "fit_mesh_shapes", "WIDTH_BY",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -77,6 +77,10 @@ LIDAR_PLACEMENT = {"distance_m": (5.0, 25.0), "height_m": (1.6, 2.0)}
 MIN_RETURNS = 30
 #: ``keep_scale``: clouds are centred and divided by this many metres (a 10 m object spans ±0.5 ... 1).
 KEEP_SCALE_UNIT_M = 10.0
+#: How a placement's ``across_sight_width_by`` meets its class's ``across_sight_width_m``: a
+#: horizontal stretch of each mesh, or a side occluder that leaves part of it in view
+#: (:func:`zbuf_occlude.sensors.fit.fit_object_shape`).
+WIDTH_BY = ("stretch", "occluder")
 #: Rounds of crop draws per mesh before the crops found are repeated (logged).
 _LIDAR_TRIES = 6
 
@@ -240,21 +244,26 @@ def _placement_of(placement: dict[str, dict] | None, entry: MeshEntry) -> dict:
     return {**(placement or {}).get(entry.class_name, {}), **(placement or {}).get(entry.name, {})}
 
 
-def _distributions(entry: MeshEntry, size: SizeRange, placement: dict) -> tuple[CropDistributions, tuple[float, float] | None, tuple | None]:
-    """The mesh's crop distributions (its stretch left out unless given) and its class's
-    ``across_sight_width_m`` and ``across_sight_profile``, if any."""
+def _distributions(entry: MeshEntry, size: SizeRange, placement: dict) -> tuple[CropDistributions, dict]:
+    """The mesh's crop distributions (its stretch left out unless given) and what its class's
+    ``across_sight_width_m``, ``across_sight_profile`` and ``across_sight_width_by`` ask
+    :func:`~zbuf_occlude.sensors.fit.fit_object_shape` to fit (``width_m``, ``profile``, ``occlude``)."""
     from zbuf_occlude.sensors.crops import CropDistributions
 
     keywords = {**LIDAR_PLACEMENT, **placement}
-    width_m = keywords.pop("across_sight_width_m", None)
-    profile = keywords.pop("across_sight_profile", None)
-    return CropDistributions(size_m=size_interval(entry.mesh.extents, size), **keywords), width_m, profile
+    by = keywords.pop("across_sight_width_by", "stretch")
+    if by not in WIDTH_BY:
+        raise InvalidInputError(f"across_sight_width_by must be one of {WIDTH_BY}, got {by!r}")
+    shape = {"width_m": keywords.pop("across_sight_width_m", None), "profile": keywords.pop("across_sight_profile", None),
+             "occlude": by == "occluder"}  # fmt: skip
+    return CropDistributions(size_m=size_interval(entry.mesh.extents, size), **keywords), shape
 
 
 def fit_mesh_shapes(meshes: list[MeshEntry], sensor, sizes: dict[str, SizeRange], placement: dict[str, dict]) -> dict[str, dict]:
     """Each mesh's stretch to its class's ``across_sight_width_m`` and warp to its ``across_sight_profile`` in ``placement``, once for every training set and seed.
 
-    Returns ``{mesh name: {"width_scale": (lo, hi), "width_profile": (K factors)}}``
+    Returns ``{mesh name: {"width_scale": (lo, hi), "width_profile": (K factors)}}`` (``"visible_across_sight"``
+    instead of ``"width_scale"`` where the class's ``across_sight_width_by`` is ``"occluder"``)
     (:func:`zbuf_occlude.sensors.fit.fit_object_shape`, seed 0; each key where the class gives what it fits) for the meshes of classes that give either, to merge into ``placement``: a mesh's
     own keywords override its class's (:func:`build_set`), so the crops are what fitting the
     stretch in every draw would give, without fitting it again.  A mesh whose stretch cannot be
@@ -264,10 +273,10 @@ def fit_mesh_shapes(meshes: list[MeshEntry], sensor, sizes: dict[str, SizeRange]
 
     out = {}
     for entry in meshes:
-        dist, width_m, profile = _distributions(entry, sizes[entry.class_name], _placement_of(placement, entry))
-        if width_m is not None or profile is not None:
+        dist, shape = _distributions(entry, sizes[entry.class_name], _placement_of(placement, entry))
+        if shape["width_m"] is not None or shape["profile"] is not None:
             try:
-                out[entry.name] = fit_object_shape(entry.mesh, sensor, dist, width_m, profile, name=str(entry.path))
+                out[entry.name] = fit_object_shape(entry.mesh, sensor, dist, **shape, name=str(entry.path))
             except InvalidInputError as exc:
                 log.warning("%s", exc)
     return out
@@ -278,9 +287,10 @@ def _lidar(entry: MeshEntry, k: int, n_points: int, seed: int, sensor, size: Siz
     from zbuf_occlude.sensors.crops import lidar_object_samples
     from zbuf_occlude.sensors.fit import fit_object_shape
 
-    dist, width_m, profile = _distributions(entry, size, placement or {})
-    if (width_m is not None and dist.width_scale is None) or (profile is not None and dist.width_profile is None):  # this mesh's, to the class's scans
-        dist = replace(dist, **fit_object_shape(entry.mesh, sensor, dist, width_m, profile, name=str(entry.path)))
+    dist, shape = _distributions(entry, size, placement or {})
+    width_given = dist.visible_across_sight if shape["occlude"] else dist.width_scale
+    if (shape["width_m"] is not None and width_given is None) or (shape["profile"] is not None and dist.width_profile is None):
+        dist = replace(dist, **fit_object_shape(entry.mesh, sensor, dist, **shape, name=str(entry.path)))  # this mesh's, to the class's scans
     good: list = []
     # Draw about as many crops as needed, then more under another name (new placements) while
     # crops come back with fewer than min_returns returns; at most _LIDAR_TRIES rounds.
@@ -333,9 +343,11 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
     keywords per class (``{class: {"distance_m": (lo, hi), "hidden_below_m": (lo, hi)}}``,
     metres), over :data:`LIDAR_PLACEMENT`'s, and per mesh (keyed by its name, over its class's);
     a class's ``"across_sight_width_m": (lo, hi)`` stretches each of its meshes to those widths
-    (:func:`zbuf_occlude.sensors.fit.fit_width_scale`), and its ``"across_sight_profile"`` warps
+    (:func:`zbuf_occlude.sensors.fit.fit_width_scale`), or with ``"across_sight_width_by":
+    "occluder"`` hides a side of each where its crops are wider (:func:`zbuf_occlude.sensors.fit.fit_visible_across_sight`;
+    :data:`WIDTH_BY`), and its ``"across_sight_profile"`` warps
     them to that outline (:func:`zbuf_occlude.sensors.fit.fit_width_profile`), unless the
-    mesh gives its ``width_scale`` and ``width_profile`` (:func:`fit_mesh_shapes`).
+    mesh gives its ``width_scale`` (or ``visible_across_sight``) and ``width_profile`` (:func:`fit_mesh_shapes`).
 
     Raises
     ------

@@ -30,7 +30,8 @@ from zbuf_occlude.sensors.scene import ScanScene, SceneObject, check_width_profi
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
-__all__ = ["CropDistributions", "CropSample", "check_ground_margin", "draw_placement", "object_crop", "lidar_object_samples"]
+__all__ = ["CropDistributions", "CropSample", "check_ground_margin", "draw_placement", "object_crop", "lidar_object_samples",
+           "side_occluders", "SIDE_OCCLUDER_RANGE"]
 
 log = logging.getLogger(__name__)
 
@@ -123,6 +124,14 @@ class CropDistributions:
         A fixed horizontal stretch per relative-height bin (:class:`~zbuf_occlude.sensors.scene.SceneObject`
         ``width_profile``), on top of ``width_scale``: the outline over the height that real scans
         show.  None (default): none.  :func:`~zbuf_occlude.sensors.fit.fit_width_profile` fits it.
+    visible_across_sight : (lo, hi), optional
+        Hide one side of the object behind an occluder that stands between it and the sensor
+        (:func:`side_occluders`): the share of the object's angular width, as the sensor sees it,
+        left visible, drawn per sample and capped at 1 (1 or more: nothing hidden); the hidden
+        side, left or right, is drawn too.  A real street crop often shows part of an object, the
+        rest behind a parked car, a wall or a tree, or cut off by the segmentation: a partial
+        view, not a thinner object (compare ``width_scale``).  None (default): nothing hidden.
+        :func:`~zbuf_occlude.sensors.fit.fit_visible_across_sight` fits it to the widths of real scans.
     """
 
     distance_m: tuple[float, float] = (5.0, 25.0)
@@ -138,6 +147,7 @@ class CropDistributions:
     hidden_below_m: tuple[float, float] | None = None
     width_scale: tuple[float, float] | None = None
     width_profile: tuple[float, ...] | None = None
+    visible_across_sight: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         for name in ("distance_m", "height_m", "azimuth_deg", "yaw_deg", "size_m"):
@@ -160,6 +170,11 @@ class CropDistributions:
             object.__setattr__(self, "width_profile", check_width_profile(self.width_profile))
         if self.ground_margin_m is not None:
             object.__setattr__(self, "ground_margin_m", check_ground_margin(self.ground_margin_m))
+        if self.visible_across_sight is not None:
+            visible = _interval("visible_across_sight", self.visible_across_sight, lowest=0.0)
+            if visible[1] <= 0:
+                raise InvalidInputError(f"visible_across_sight must leave a share > 0 visible, got {self.visible_across_sight!r}")
+            object.__setattr__(self, "visible_across_sight", visible)
         if self.distance_m[0] <= 0 or self.size_m[0] <= 0 or self.height_m[0] < 0:
             raise InvalidInputError(f"distance_m and size_m must be > 0 and height_m >= 0 metres, got {self}")
 
@@ -167,7 +182,8 @@ class CropDistributions:
 def draw_placement(dist: CropDistributions, rng: np.random.Generator) -> dict[str, float]:
     """One placement ``{distance_m, height_m, azimuth_deg, yaw_deg, size_m}`` (five uniform draws, in that order),
     then ``extents_m``, ``reflectivity``, ``hidden_below_m`` and ``width_scale`` where ``dist`` gives them (drawn only when an interval),
-    and ``ground_margin_m`` and ``width_profile`` as given (no draw)."""
+    ``ground_margin_m`` and ``width_profile`` as given (no draw), and ``visible_across_sight`` (capped at 1)
+    with ``occluder_side`` (+1: the occluder hides the object's counter-clockwise side, −1 the other; one draw) where given."""
     out = {name: float(rng.uniform(*getattr(dist, name))) for name in ("distance_m", "height_m", "azimuth_deg", "yaw_deg", "size_m")}
     # further draws only where an interval asks for them, so fixed values keep earlier streams
     if dist.extents_m is not None:
@@ -187,6 +203,9 @@ def draw_placement(dist: CropDistributions, rng: np.random.Generator) -> dict[st
         out["ground_margin_m"] = dist.ground_margin_m
     if dist.width_profile is not None:  # no draw
         out["width_profile"] = dist.width_profile
+    if dist.visible_across_sight is not None:
+        out["visible_across_sight"] = min(1.0, _draw(dist.visible_across_sight, rng))
+        out["occluder_side"] = 1.0 if rng.uniform() < 0.5 else -1.0
     return out
 
 
@@ -259,10 +278,15 @@ def object_crop(
                               reach=reach)  # fmt: skip
     obj = SceneObject(mesh, class_name, (d * math.cos(az), d * math.sin(az)), placement["yaw_deg"], size, width_scale=width_scale,
                       width_profile=profile)  # fmt: skip
-    scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=max(2.0 * d, 20.0))
     pose = sensor_pose([0.0, 0.0, placement["height_m"]])
+    own: list[SceneObject] = []
+    if placement.get("visible_across_sight", 1.0) < 1.0:
+        local, to_world = obj.build()
+        world = np.asarray(local.vertices, dtype=np.float64) @ to_world[:3, :3].T + to_world[:3, 3]
+        own += side_occluders(world, pose[:3, 3], placement["visible_across_sight"], placement["occluder_side"])
+    scene = ScanScene(objects=[obj], occluders=[*occluders, *own], ground_half_extent_m=max(2.0 * d, 20.0))
     sector = None
-    if isinstance(sensor, Lidar) and not occluders:
+    if isinstance(sensor, Lidar) and not occluders:  # the side occluder stands inside the object's sector
         half = math.degrees(math.asin(min(1.0, 0.75 * reach / d))) + sector_margin_deg
         if half < 180.0:
             sector = (placement["azimuth_deg"] - half, placement["azimuth_deg"] + half)
@@ -272,6 +296,78 @@ def object_crop(
     full = scan(scene, sensor, pose, seed=seed, azimuth_range_deg=sector, backend=backend, frame=frame, reflectivity=rho)
     offset = pose[:3, 3] if frame == "sensor" else 0.0  # sensor axes = world axes (yaw 0)
     return _crop_object(scene, full, placement, pose[:3, 3], offset)
+
+
+#: A side occluder stands at this share of the distance to the object's nearest vertex.
+SIDE_OCCLUDER_RANGE = 0.5
+#: It hides this share of the object's angular width more than asked, on the outer side, and stands
+#: this many metres taller than the sensor and the object's top: every ray to the hidden side ends on it.
+_SIDE_OCCLUDER_MARGIN = 0.05
+_SIDE_OCCLUDER_RISE_M = 0.5
+_SIDE_OCCLUDER_DEPTH_M = 0.05
+#: Widest azimuth one flat panel covers, degrees; a wider hidden sector takes several side by side.
+_SIDE_PANEL_DEG = 60.0
+
+
+def side_occluders(world_vertices: NDArray[np.floating], sensor_m, visible: float, side: float) -> list[SceneObject]:
+    """Thin upright panels between the sensor and an object that hide one side of it.
+
+    The object's vertices span azimuths ``[φ_lo, φ_hi]`` seen from the sensor; the panels cover
+    ``[φ_hi − (1 − visible)·Δφ, φ_hi]`` (``side`` > 0) or ``[φ_lo, φ_lo + (1 − visible)·Δφ]``
+    (``side`` < 0), widened on the outer side by :data:`_SIDE_OCCLUDER_MARGIN`, each at most
+    :data:`_SIDE_PANEL_DEG` wide, facing the sensor at :data:`SIDE_OCCLUDER_RANGE` of the
+    horizontal distance to the nearest vertex, from the ground to 0.5 m above both the sensor
+    and the object's top, so that each ray from the sensor to the hidden side ends on one.  A
+    partial view as a street's parked cars and walls make it: the edge is vertical, and the
+    object keeps its shape and size.
+
+    Parameters
+    ----------
+    world_vertices : (V, 3) float
+        The object's vertices, world frame (metres, z up, ground at its lowest vertex or below).
+    sensor_m : (3,) float
+        The sensor's centre, world frame.
+    visible : float
+        The share of the angular width left visible, in (0, 1).
+    side : float
+        > 0 hides the counter-clockwise side, < 0 the clockwise one.
+
+    Returns
+    -------
+    list of SceneObject
+        Box primitives (``box_m``: depth along the line of sight, width, height; metres).
+
+    Raises
+    ------
+    InvalidInputError
+        ``visible`` outside (0, 1), or an object that does not lie within a half-turn of
+        azimuth seen from the sensor (the sensor inside it, or beside a wall around it).
+    """
+    if not 0.0 < visible < 1.0:
+        raise InvalidInputError(f"the visible share of a side-occluded object must be in (0, 1), got {visible!r}")
+    v = np.asarray(world_vertices, dtype=np.float64) - np.asarray(sensor_m, dtype=np.float64)
+    centre = math.atan2(float(np.mean(v[:, 1])), float(np.mean(v[:, 0])))
+    phi = (np.arctan2(v[:, 1], v[:, 0]) - centre + math.pi) % (2 * math.pi) - math.pi
+    lo, hi = float(phi.min()), float(phi.max())
+    near = float(np.hypot(v[:, 0], v[:, 1]).min())
+    if not (hi - lo < math.radians(170.0) and near > 0):
+        raise InvalidInputError("a side occluder needs an object seen from outside of it, within 170° of azimuth")
+    hidden, margin = (1.0 - visible) * (hi - lo), _SIDE_OCCLUDER_MARGIN * (hi - lo) + math.radians(0.5)
+    a, b = (hi - hidden, hi + margin) if side > 0 else (lo - margin, lo + hidden)
+    r = SIDE_OCCLUDER_RANGE * near
+    height = max(float(np.max(v[:, 2])), 0.0) + float(sensor_m[2]) + _SIDE_OCCLUDER_RISE_M
+    n = math.ceil((b - a) / math.radians(_SIDE_PANEL_DEG))
+    out = []
+    overlap = math.radians(0.5)  # neighbours overlap, so that no ray passes between them; the visible edge stays where asked
+    for k in range(n):  # side by side, each facing the sensor
+        a_k = a + (b - a) * k / n - (overlap if k > 0 else 0.0)
+        b_k = a + (b - a) * (k + 1) / n + (overlap if k < n - 1 else 0.0)
+        mid = centre + (a_k + b_k) / 2
+        width = 2.0 * r * math.tan((b_k - a_k) / 2)
+        reach = r + _SIDE_OCCLUDER_DEPTH_M / 2
+        x, y = float(sensor_m[0]) + reach * math.cos(mid), float(sensor_m[1]) + reach * math.sin(mid)
+        out.append(SceneObject({"box_m": [_SIDE_OCCLUDER_DEPTH_M, width, height]}, "occluder", (x, y), math.degrees(mid)))
+    return out
 
 
 def _crop_object(scene: ScanScene, full: Scan, placement: dict, sensor_world, offset=None, per_return: tuple[str, ...] = ()) -> CropSample:

@@ -67,7 +67,8 @@ __all__ = [
     "BOOTSTRAP", "DISTANCE_QUANTILES", "MAX_DROPOUT_GAP", "MIN_PLACEMENT_SCANS", "PLANE_NEIGHBOURS", "Estimate", "LidarFit",
     "SENSOR_HEIGHT_QUANTILE", "WIDTH_BAND_M", "WIDTH_PROFILE_BINS", "WIDTH_SAMPLES", "across_sight_width", "crop_placement_json",
     "fit_crop_bottoms", "fit_crop_distances", "fit_crop_heights", "fit_crop_width_profile", "fit_crop_widths", "fit_lidar",
-    "fit_object_shape", "fit_sensor_height", "fit_width_profile", "fit_width_scale", "lidar_to_json", "width_profile",
+    "fit_object_shape", "fit_sensor_height", "fit_visible_across_sight", "fit_width_profile", "fit_width_scale", "lidar_to_json",
+    "width_profile",
 ]  # fmt: skip
 
 #: Non-empty scans a class needs for its crops' distances and heights (:func:`crop_placement_json`).
@@ -629,19 +630,10 @@ def fit_width_scale(mesh, sensor, distributions, width_m: tuple[float, float], *
         A bad ``width_m`` or ``n_samples``, a sensor that is not a :class:`Lidar`, or no crop of
         the mesh with a band of two returns (naming ``name``).
     """
-    try:
-        lo, hi = (float(v) for v in width_m)
-    except (TypeError, ValueError):
-        lo, hi = math.nan, math.nan
-    if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo <= hi and hi > 0):
-        raise InvalidInputError(f"width_m must be an interval 0 <= lo <= hi, hi > 0 metres, got {width_m!r}")
-    if int(n_samples) < 1:
-        raise InvalidInputError(f"n_samples must be >= 1, got {n_samples}")
-    if not isinstance(sensor, Lidar):
-        raise InvalidInputError(f"widths are measured across a spinning LiDAR's line of sight; {getattr(sensor, 'name', sensor)!r} is not one")
+    lo, hi = _check_width_fit(width_m, n_samples, sensor)
+
     def median_width(scale: float) -> float:
-        crops = _fit_crops(mesh, sensor, replace(distributions, width_scale=scale), int(n_samples), seed, _WIDTH_STREAM)
-        return float(np.median([_across_sight_width(crop.scan.points.astype(np.float64)) for crop in crops]))
+        return _median_crop_width(mesh, sensor, replace(distributions, width_scale=scale), int(n_samples), seed)
 
     middle, scale = (lo + hi) / 2, 1.0
     w = median_width(scale)
@@ -657,6 +649,61 @@ def fit_width_scale(mesh, sensor, distributions, width_m: tuple[float, float], *
     if w > 0:  # the correction
         scale *= middle / w
     return max(lo, 1e-3 * hi) * scale / middle, hi * scale / middle
+
+
+def fit_visible_across_sight(mesh, sensor, distributions, width_m: tuple[float, float], *, n_samples: int = WIDTH_SAMPLES,
+                             seed: int = 0, name: str = "the mesh") -> tuple[float, float]:  # fmt: skip
+    """The share of a mesh's width to leave visible so that its crops are as wide as real scans, for :class:`~zbuf_occlude.sensors.crops.CropDistributions` ``visible_across_sight``.
+
+    ``n_samples`` crops of ``mesh`` drawn from ``distributions`` with nothing hidden are
+    measured with :func:`across_sight_width` (median ``w``); where ``w`` is wider than the
+    middle ``w̄`` of ``width_m``, the share ``v = w̄ / w`` is measured once more under a side
+    occluder (:func:`~zbuf_occlude.sensors.crops.side_occluders`) and corrected by that median.
+    The interval ``width_m · v / w̄`` then gives crops whose median width is about ``w̄`` where
+    the mesh shows wider, and whole crops where the real scans are wider than the mesh's (the
+    share is capped at 1 when drawn).  Fit it where real scans are narrow because they show
+    part of an object (a parked car's one end), where :func:`fit_width_scale` would squeeze it.
+
+    Parameters and errors as :func:`fit_width_scale`.
+
+    Returns
+    -------
+    (lo, hi) : tuple of float
+        Shares > 0 (values of 1 or more: nothing hidden).
+    """
+    lo, hi = _check_width_fit(width_m, n_samples, sensor)
+    dist = replace(distributions, visible_across_sight=None)
+    w = _median_crop_width(mesh, sensor, dist, int(n_samples), seed)
+    if not w > 0:  # narrower than the sensor resolves: every real width is wider
+        return 1.0, 1.0
+    middle = (lo + hi) / 2
+    share = middle / w
+    if share < 1.0:  # the correction: a side occluder's edge does not cut the band widths in proportion
+        hidden = _median_crop_width(mesh, sensor, replace(dist, visible_across_sight=(share, share)), int(n_samples), seed)
+        if hidden > 0:
+            share *= middle / hidden
+    return max(lo, 1e-3 * hi) * share / middle, hi * share / middle
+
+
+def _check_width_fit(width_m, n_samples, sensor) -> tuple[float, float]:
+    """``width_m`` as ``(lo, hi)`` metres, with ``n_samples`` >= 1 and a spinning LiDAR (the width fits' arguments)."""
+    try:
+        lo, hi = (float(v) for v in width_m)
+    except (TypeError, ValueError):
+        lo, hi = math.nan, math.nan
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo <= hi and hi > 0):
+        raise InvalidInputError(f"width_m must be an interval 0 <= lo <= hi, hi > 0 metres, got {width_m!r}")
+    if int(n_samples) < 1:
+        raise InvalidInputError(f"n_samples must be >= 1, got {n_samples}")
+    if not isinstance(sensor, Lidar):
+        raise InvalidInputError(f"widths are measured across a spinning LiDAR's line of sight; {getattr(sensor, 'name', sensor)!r} is not one")
+    return lo, hi
+
+
+def _median_crop_width(mesh, sensor, distributions, n: int, seed: int) -> float:
+    """The median :func:`across_sight_width` of a width fit's ``n`` crops (metres)."""
+    crops = _fit_crops(mesh, sensor, distributions, n, seed, _WIDTH_STREAM)
+    return float(np.median([_across_sight_width(crop.scan.points.astype(np.float64)) for crop in crops]))
 
 
 def width_profile(points: NDArray[np.floating], n_bins: int = WIDTH_PROFILE_BINS) -> NDArray[np.float64]:
@@ -820,22 +867,27 @@ def fit_width_profile(mesh, sensor, distributions, profile: Sequence[float], *, 
 
 
 def fit_object_shape(mesh, sensor, distributions, width_m: tuple[float, float] | None = None, profile: Sequence[float] | None = None, *,
-                     seed: int = 0, name: str = "the mesh") -> dict:  # fmt: skip
-    """A mesh's stretch to real widths and warp to a real outline, as :class:`~zbuf_occlude.sensors.crops.CropDistributions` keywords.
+                     occlude: bool = False, seed: int = 0, name: str = "the mesh") -> dict:  # fmt: skip
+    """What makes a mesh's crops as wide as real scans and gives them a real outline, as :class:`~zbuf_occlude.sensors.crops.CropDistributions` keywords.
 
-    With ``width_m`` only: ``{"width_scale": (lo, hi)}`` (:func:`fit_width_scale`).  With
-    ``profile`` only: ``{"width_profile": (K factors)}`` (:func:`fit_width_profile`).  With
-    both, the warp is fitted at the width stretch, then the stretch again under the warp.
-    Neither: ``{}``.  Parameters and errors as those two.
+    With ``width_m`` only: ``{"width_scale": (lo, hi)}`` (:func:`fit_width_scale`), or with
+    ``occlude`` ``{"visible_across_sight": (lo, hi)}`` (:func:`fit_visible_across_sight`: a
+    partial view instead of a thinner object).  With ``profile`` only: ``{"width_profile": (K
+    factors)}`` (:func:`fit_width_profile`).  With both, the warp is fitted at the width stretch
+    (or at the mesh's own width, with ``occlude``), then the width again under the warp.
+    Neither: ``{}``.  Parameters and errors as those functions.
     """
+    fit_width = fit_visible_across_sight if occlude else fit_width_scale
+    key = "visible_across_sight" if occlude else "width_scale"
     out: dict = {}
-    if width_m is not None:
-        out["width_scale"] = fit_width_scale(mesh, sensor, distributions, width_m, seed=seed, name=name)
+    if width_m is not None and not occlude:
+        out[key] = fit_width(mesh, sensor, distributions, width_m, seed=seed, name=name)
     if profile is not None:
         at = replace(distributions, width_scale=out.get("width_scale", distributions.width_scale))
         out["width_profile"] = fit_width_profile(mesh, sensor, at, profile, seed=seed, name=name)
-        if width_m is not None:
-            out["width_scale"] = fit_width_scale(mesh, sensor, replace(distributions, width_profile=out["width_profile"]), width_m, seed=seed, name=name)
+    if width_m is not None and (occlude or profile is not None):
+        out[key] = fit_width(mesh, sensor, replace(distributions, width_profile=out.get("width_profile", distributions.width_profile)),
+                             width_m, seed=seed, name=name)  # fmt: skip
     return out
 
 

@@ -39,7 +39,7 @@ for i in fit_half:
 for tag, place in variants.items():
     rng = np.random.default_rng(1)
     for m in meshes:
-        dist, _, _ = _distributions(m, sizes[m.class_name], _placement_of(place, m))
+        dist, _ = _distributions(m, sizes[m.class_name], _placement_of(place, m))
         for k in range(12):
             c = object_crop(m.mesh, fitted, draw_placement(dist, rng), seed=k).scan.points.astype(np.float64)
             if len(c) >= 30:  # sim2real's MIN_RETURNS
