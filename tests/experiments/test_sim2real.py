@@ -499,6 +499,24 @@ def test_build_sets_makes_the_sets_asked_for_and_refuses_one_it_cannot_make(tmp_
         build_sets(meshes, ["car", "pole"], 2, 32, 0, kinds=[FITTED_PLACED], **options)
 
 
+def test_the_pooled_set_is_the_three_lidar_sets_of_its_seed_in_one(tmp_path: Path) -> None:
+    from zbuf_occlude.experiments.sim2real_data import FITTED, POOLED
+    from zbuf_occlude.sensors import lidar_preset
+
+    meshes = find_class_meshes(_mesh_root(tmp_path))
+    options = dict(sensor=lidar_preset("hdl32e"), fitted_sensor=lidar_preset("hdl32e", range_noise_m=0.0).with_(name="fitted"),
+                   fitted_placement={"car": {"distance_m": (6.0, 7.0)}, "pole": {"distance_m": (8.0, 9.0)}},
+                   fitted_sizes={"car": SizeRange("height", 1.0, 1.5), "pole": SizeRange("height", 2.0, 3.0)})  # fmt: skip
+    every = build_sets(meshes, ["car", "pole"], 3, 32, 0, **options)
+    assert list(every) == [*TRAINING_SETS, FITTED, FITTED_PLACED, POOLED]
+    pooled = build_sets(meshes, ["car", "pole"], 3, 32, 0, kinds=[POOLED], **options)[POOLED]
+    parts = [every[k] for k in ("lidar", FITTED, FITTED_PLACED)]
+    assert np.array_equal(pooled.points, np.concatenate([s.points for s in parts]))
+    assert np.array_equal(pooled.labels, np.concatenate([s.labels for s in parts])) and np.bincount(pooled.labels).tolist() == [9, 9]
+    # the three differ (the sensor, then the placements): pooling them is not one set three times
+    assert not np.array_equal(parts[0].points, parts[1].points) and not np.array_equal(parts[1].points, parts[2].points)
+
+
 def test_validate_on_fit_half_validates_mesh_sets_on_the_fit_half_and_trains_on_every_mesh(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from zbuf_occlude.experiments.sim2real_data import FITTED_SETS
     from zbuf_occlude.learn import training

@@ -111,14 +111,13 @@ def test_the_panel_stands_between_and_covers_the_hidden_azimuths(azimuth: float,
     assert np.all(np.isinf(first[shown]) | (first[shown] > lengths[shown]))  # the rest stays in view
 
 
-def test_side_occluder_refuses_what_it_cannot_hide() -> None:
+def test_side_occluders_refuse_a_bad_share_and_stand_nowhere_around_the_sensor() -> None:
     box = np.array([[5.0, -1.0, 0.0], [5.0, 1.0, 2.0]])
     for bad in (0.0, 1.0, 1.2):
         with pytest.raises(InvalidInputError, match="visible share"):
             side_occluders(box, [0.0, 0.0, 1.8], bad, 1.0)
     around = np.array([[5.0, 0.0, 0.0], [-5.0, 0.1, 0.0], [0.0, 5.0, 1.0]])  # the sensor inside the object
-    with pytest.raises(InvalidInputError, match="within 170"):
-        side_occluders(around, [0.0, 0.0, 1.8], 0.5, 1.0)
+    assert side_occluders(around, [0.0, 0.0, 1.8], 0.5, 1.0) == []  # nothing stands between a sensor and what surrounds it
     # a long wall close by (120° of azimuth): 95 % of it hidden takes three panels of 60° at most, half of it two
     wall = np.array([[2.0, -3.5, 0.0], [2.0, 3.5, 0.0], [2.0, 0.0, 3.0]])
     assert len(side_occluders(wall, [0.0, 0.0, 1.8], 0.05, -1.0)) == 3 and len(side_occluders(wall, [0.0, 0.0, 1.8], 0.5, 1.0)) == 2

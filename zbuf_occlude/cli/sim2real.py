@@ -104,8 +104,9 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--model", choices=("pointnet", "voxnet", "3dmfv"), default="pointnet", help="classifier (default: %(default)s)")
     p.add_argument("--sensor", default="hdl32e", help="scanner of the lidar training set (a LiDAR preset; default %(default)s)")
     p.add_argument("--fit-sensor", action="store_true",
-                   help="fit --sensor to a fixed half of the real scans (written to OUT/fitted_sensor.json), add a 'fitted' "
-                   "training set made with it, and score every row on the other half only")
+                   help="fit --sensor to a fixed half of the real scans (written to OUT/fitted_sensor.json), add training sets "
+                   "made with it ('fitted'; 'fitted+placed', also placed and sized as those scans; 'pooled', the three LiDAR "
+                   "sets in one), and score every row on the other half only")
     p.add_argument("--validate-on", choices=VALIDATION_CHOICES, default="meshes",
                    help="what the mesh-only sets validate on (best epoch, early stopping): clouds of held-out whole meshes, "
                    "or, with --fit-sensor, the fit half's real scans (then every mesh trains; the scored half stays unseen) "

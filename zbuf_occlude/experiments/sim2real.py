@@ -21,13 +21,15 @@ classifier to recognise real, partial scans?), asked on real data with the proto
   so are, per class, the crops' sensor distances, the objects' heights (their visible
   heights in the scans), their hidden bottoms and their widths across the line of sight
   (:func:`zbuf_occlude.sensors.fit.crop_placement_json`);
-  both are written to ``fitted_sensor.json``; two more training sets are made,
+  both are written to ``fitted_sensor.json``; three more training sets are made,
   :data:`~zbuf_occlude.experiments.sim2real_data.FITTED` (the fitted sensor, the ``lidar`` set's
-  placements and sizes) and :data:`~zbuf_occlude.experiments.sim2real_data.FITTED_PLACED` (the
+  placements and sizes), :data:`~zbuf_occlude.experiments.sim2real_data.FITTED_PLACED` (the
   fitted sensor, distances, heights and bottoms; with ``fitted_shape``, each mesh also stretched
-  to the widths, :func:`zbuf_occlude.sensors.fit.fit_width_scale`, and/or warped to the class's
-  outline over the height, :func:`zbuf_occlude.sensors.fit.fit_width_profile`), and **every row is scored on the other half only**; the
-  fitted set is also tested against ``lidar``.  ``real_split.csv`` lists each scan's half;
+  to the widths, :func:`zbuf_occlude.sensors.fit.fit_width_scale`, or partly hidden to them,
+  :func:`zbuf_occlude.sensors.fit.fit_visible_across_sight`, and/or warped to the class's
+  outline over the height, :func:`zbuf_occlude.sensors.fit.fit_width_profile`) and
+  :data:`~zbuf_occlude.experiments.sim2real_data.POOLED` (the three LiDAR sets in one), and
+  **every row is scored on the other half only**; the fitted sets are also tested against ``lidar``.  ``real_split.csv`` lists each scan's half;
 * with ``validate_on="fit-half"`` (needs ``fit_sensor``), the mesh-only sets are validated on the
   real scans of the fit half instead of held-out meshes (best epoch and early stopping), and train
   on every mesh: the fit half is already what the sensor was fitted to, the scored half stays

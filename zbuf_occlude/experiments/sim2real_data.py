@@ -47,7 +47,7 @@ if TYPE_CHECKING:  # trimesh is imported where it is used
 __all__ = [
     "TRAINING_SETS", "GROUND_ELEVATION_DEG", "LIDAR_PLACEMENT", "MIN_RETURNS", "KEEP_SCALE_UNIT_M",
     "MeshEntry", "find_class_meshes", "check_lidar_meshes", "split_whole_meshes", "allocate", "build_set", "build_sets", "mix_sets",
-    "real_clouds", "real_scan_rows", "FITTED", "FITTED_PLACED", "FITTED_SETS", "fit_mesh_shapes", "WIDTH_BY",
+    "real_clouds", "real_scan_rows", "FITTED", "FITTED_PLACED", "POOLED", "FITTED_SETS", "fit_mesh_shapes", "WIDTH_BY",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -61,8 +61,12 @@ FITTED = "fitted"
 #: bottoms fitted to the same scans (:func:`zbuf_occlude.sensors.fit.crop_placement_json`); the
 #: headings are ``lidar``'s.
 FITTED_PLACED = "fitted+placed"
+#: The three LiDAR sets of one seed pooled, ``lidar``, ``fitted`` and ``fitted+placed`` (three times
+#: their clouds): the sensor and the placements drawn from what the fit pins down and from the
+#: wider published ranges alike, so that a classifier meets more of what real scans vary in.
+POOLED = "pooled"
 #: The sets made with a fitted sensor, in report order.
-FITTED_SETS = (FITTED, FITTED_PLACED)
+FITTED_SETS = (FITTED, FITTED_PLACED, POOLED)
 #: Camera elevations of the ``occluded`` set, degrees: a sensor on the ground or on a vehicle sees
 #: objects from slightly below the horizon (kerbs, slopes) to about 30° above (a pedestrian or a
 #: bush a few metres from a roof-mounted sensor).
@@ -414,7 +418,8 @@ def build_sets(meshes: list[MeshEntry], names: list[str], per_class: int, n_poin
     ``lidar`` set's recipe (the same seed, so the same sizes and placements) scanned by
     ``fitted_sensor``; and with ``fitted_placement`` (per class, as :func:`build_set`'s
     ``placement``) and ``fitted_sizes`` as well, the :data:`FITTED_PLACED` set, whose crops are
-    placed so per class and scaled to those sizes.
+    placed so per class and scaled to those sizes; with both, :data:`POOLED` as well (those
+    three LiDAR sets in one, ``3 · per_class`` clouds per class).
 
     ``kinds`` (default: all of those) names the sets wanted, and only those (and the two that
     ``lidar+complete`` mixes) are made: each set draws from its own random stream, so a set is
@@ -429,12 +434,12 @@ def build_sets(meshes: list[MeshEntry], names: list[str], per_class: int, n_poin
     if fitted_sensor is not None:
         available.append(FITTED)
         if fitted_placement is not None and fitted_sizes is not None:
-            available.append(FITTED_PLACED)
+            available += [FITTED_PLACED, POOLED]
     wanted = list(available if kinds is None else kinds)
     unknown = [k for k in wanted if k not in available]
     if unknown:
         raise InvalidInputError(f"cannot make training sets {unknown} with these arguments; these can be made: {available}")
-    made = set(wanted) | ({"lidar", "complete"} if "lidar+complete" in wanted else set())
+    made = set(wanted) | ({"lidar", "complete"} if "lidar+complete" in wanted else set()) | ({"lidar", FITTED, FITTED_PLACED} if POOLED in wanted else set())
     out = {kind: build_set(kind, meshes, names, per_class, n_points, seed, **options) for kind in TRAINING_SETS[:3] if kind in made}
     if "lidar+complete" in made:
         out["lidar+complete"] = mix_sets(out["lidar"], out["complete"], seed)
@@ -443,6 +448,8 @@ def build_sets(meshes: list[MeshEntry], names: list[str], per_class: int, n_poin
     if FITTED_PLACED in made:
         out[FITTED_PLACED] = build_set("lidar", meshes, names, per_class, n_points, seed,
                                        **{**options, "sensor": fitted_sensor, "placement": fitted_placement, "sizes": fitted_sizes})  # fmt: skip
+    if POOLED in made:
+        out[POOLED] = CloudSet.concat([out["lidar"], out[FITTED], out[FITTED_PLACED]])
     return {kind: out[kind] for kind in available if kind in wanted}
 
 

@@ -335,13 +335,14 @@ def side_occluders(world_vertices: NDArray[np.floating], sensor_m, visible: floa
     Returns
     -------
     list of SceneObject
-        Box primitives (``box_m``: depth along the line of sight, width, height; metres).
+        Box primitives (``box_m``: depth along the line of sight, width, height; metres); none
+        where the object spans 170° of azimuth or more (the sensor inside its outline or
+        against it): nothing stands between them.
 
     Raises
     ------
     InvalidInputError
-        ``visible`` outside (0, 1), or an object that does not lie within a half-turn of
-        azimuth seen from the sensor (the sensor inside it, or beside a wall around it).
+        ``visible`` outside (0, 1).
     """
     if not 0.0 < visible < 1.0:
         raise InvalidInputError(f"the visible share of a side-occluded object must be in (0, 1), got {visible!r}")
@@ -351,7 +352,7 @@ def side_occluders(world_vertices: NDArray[np.floating], sensor_m, visible: floa
     lo, hi = float(phi.min()), float(phi.max())
     near = float(np.hypot(v[:, 0], v[:, 1]).min())
     if not (hi - lo < math.radians(170.0) and near > 0):
-        raise InvalidInputError("a side occluder needs an object seen from outside of it, within 170° of azimuth")
+        return []
     hidden, margin = (1.0 - visible) * (hi - lo), _SIDE_OCCLUDER_MARGIN * (hi - lo) + math.radians(0.5)
     a, b = (hi - hidden, hi + margin) if side > 0 else (lo - margin, lo + hidden)
     r = SIDE_OCCLUDER_RANGE * near
