@@ -662,7 +662,8 @@ def test_a_class_outline_warps_each_mesh_then_stretches_it_under_the_warp(tmp_pa
 
 def test_width_scales_fitted_once_give_the_crops_of_fitting_them_in_every_draw(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from zbuf_occlude.experiments.sim2real_data import build_set, fit_mesh_shapes
-    from zbuf_occlude.sensors import fit, lidar_preset
+    from zbuf_occlude.sensors import lidar_preset
+    from zbuf_occlude.sensors.fit import shapes
 
     meshes = find_class_meshes(_mesh_root(tmp_path))
     sensor = lidar_preset("hdl32e")
@@ -673,7 +674,7 @@ def test_width_scales_fitted_once_give_the_crops_of_fitting_them_in_every_draw(t
     assert sorted(once) == sorted(m.name for m in meshes if m.class_name == "pole")  # the classes that give widths
     assert once["pole/post"] != once["pole/lamp"]  # each mesh its own stretch
     calls = []
-    monkeypatch.setattr(fit, "fit_width_scale", lambda *a, **k: calls.append(a) or (1.0, 1.0))
+    monkeypatch.setattr(shapes, "fit_width_scale", lambda *a, **k: calls.append(a) or (1.0, 1.0))
     merged = build_set("lidar", meshes, ["car", "pole"], 4, 64, 3, sensor=sensor, sizes=sizes, placement={**placement, **once})
     np.testing.assert_array_equal(merged.points, every_draw.points)
     assert calls == []  # not fitted again

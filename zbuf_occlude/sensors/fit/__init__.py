@@ -1,0 +1,58 @@
+"""A spinning LiDAR and its scenes fitted to real object scans: what the simulation can set, estimated from the user's own scans.
+
+``lidar``
+    The sensor: azimuth step (firing rate), range noise, range-dependent dropout, with their
+    uncertainties (:func:`fit_lidar`).
+``scans``
+    The scenes, per class: where the crops stand, how tall their objects are, how much is hidden
+    below, how wide they show across the line of sight and their outline over the height
+    (:func:`crop_placement_json`).
+``shapes``
+    The meshes made to show that, fitted on their own simulated crops (:func:`fit_object_shape`).
+
+Every name is imported from here (``from zbuf_occlude.sensors.fit import fit_lidar``).
+"""
+
+from __future__ import annotations
+
+from zbuf_occlude.sensors.fit.lidar import (
+    BOOTSTRAP,
+    MAX_DROPOUT_GAP,
+    MIN_RETURNS,
+    PLANE_NEIGHBOURS,
+    Estimate,
+    LidarFit,
+    fit_lidar,
+    lidar_to_json,
+)
+from zbuf_occlude.sensors.fit.scans import (
+    DISTANCE_QUANTILES,
+    MIN_PLACEMENT_SCANS,
+    SENSOR_HEIGHT_QUANTILE,
+    WIDTH_BAND_M,
+    WIDTH_PROFILE_BINS,
+    across_sight_width,
+    crop_placement_json,
+    fit_crop_bottoms,
+    fit_crop_distances,
+    fit_crop_heights,
+    fit_crop_width_profile,
+    fit_crop_widths,
+    fit_sensor_height,
+    width_profile,
+)
+from zbuf_occlude.sensors.fit.shapes import (
+    WIDTH_SAMPLES,
+    fit_object_shape,
+    fit_visible_across_sight,
+    fit_width_profile,
+    fit_width_scale,
+)
+
+__all__ = [
+    "across_sight_width", "BOOTSTRAP", "crop_placement_json", "DISTANCE_QUANTILES", "Estimate", "fit_crop_bottoms",
+    "fit_crop_distances", "fit_crop_heights", "fit_crop_width_profile", "fit_crop_widths", "fit_lidar", "fit_object_shape",
+    "fit_sensor_height", "fit_visible_across_sight", "fit_width_profile", "fit_width_scale", "lidar_to_json", "LidarFit",
+    "MAX_DROPOUT_GAP", "MIN_PLACEMENT_SCANS", "MIN_RETURNS", "PLANE_NEIGHBOURS", "SENSOR_HEIGHT_QUANTILE", "WIDTH_BAND_M",
+    "width_profile", "WIDTH_PROFILE_BINS", "WIDTH_SAMPLES",
+]  # fmt: skip
