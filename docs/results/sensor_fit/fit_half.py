@@ -23,3 +23,47 @@ def load_fit_half(data: str) -> SimpleNamespace:
     meshes, _ = check_lidar_meshes(meshes, fitted, sizes, 256, placement=placement)
     return SimpleNamespace(scans=scans, kept=kept, names=names, real_y=real_y, fit_half=half, fitted=fitted, placement=placement,
                            sizes=sizes, meshes=meshes)  # fmt: skip
+
+
+def widths_table(data: str, fit_width, keyword: str, tags: tuple[str, str], last_columns) -> None:
+    """Print, per class, the fit half's widths across the line of sight and returns beside those of fitted+placed crops
+    made without and with ``keyword`` (``fit_width(mesh, sensor, distributions, width_m)`` per mesh), 12 crops per mesh
+    (one seed, at least 30 returns each); ``last_columns(fits)`` gives the closing columns' names and cells per class."""
+    import collections
+    from dataclasses import replace
+
+    import numpy as np
+
+    from zbuf_occlude.experiments.sim2real_data import LIDAR_PLACEMENT
+    from zbuf_occlude.mesh.sizes import size_interval
+    from zbuf_occlude.sensors.crops import CropDistributions, draw_placement, object_crop
+    from zbuf_occlude.sensors.fit import across_sight_width
+
+    f = load_fit_half(data)
+    stats = {tag: collections.defaultdict(list) for tag in ("real", *tags)}
+    for i in f.fit_half:
+        p = np.asarray(f.scans[f.kept[i]].points_sensor_m, np.float64)
+        stats["real"][f.names[f.real_y[i]]].append((across_sight_width(p), len(p)))
+    rng = np.random.default_rng(1)
+    fits = {}
+    for m in f.meshes:
+        keywords = dict(f.placement[m.class_name])
+        width_m = keywords.pop("across_sight_width_m")
+        keywords.pop("across_sight_profile", None)  # the outline: profile_by_class.py
+        dist = CropDistributions(size_m=size_interval(m.mesh.extents, f.sizes[m.class_name]), **{**LIDAR_PLACEMENT, **keywords})
+        fits[m.name] = fit_width(m.mesh, f.fitted, dist, width_m)
+        for tag, d in zip(tags, (dist, replace(dist, **{keyword: fits[m.name]}))):
+            for k in range(12):
+                c = object_crop(m.mesh, f.fitted, draw_placement(d, rng), seed=k).scan.points
+                if len(c) >= 30:  # sim2real's MIN_RETURNS
+                    stats[tag][m.class_name].append((across_sight_width(c), len(c)))
+    q = lambda v: f"{np.median(v):.2f} ({np.percentile(v, 25):.2f}–{np.percentile(v, 75):.2f})"  # noqa: E731
+    names, cells_of = last_columns(fits, f.meshes)
+    header = ["class", "fitted width, m"] + [h for tag in stats for h in (f"{tag}: width, m", "returns")] + names
+    print("| " + " | ".join(header) + " |\n" + "|---" * len(header) + "|")
+    for c in f.names:
+        cells = [f"{f.placement[c]['across_sight_width_m'][0]:.2f}–{f.placement[c]['across_sight_width_m'][1]:.2f}"]
+        for tag in stats:
+            v = np.array(stats[tag][c])
+            cells += [q(v[:, 0]), f"{np.median(v[:, 1]):.0f}"]
+        print(f"| {c} | " + " | ".join(cells + cells_of(c)) + " |")
