@@ -151,3 +151,25 @@ def test_fit_object_shape_meets_the_widths_by_an_occluder_or_a_stretch() -> None
     assert fit_object_shape(CAR, lidar, dist, (1.5, 2.5), occlude=True) == {"visible_across_sight": fit_visible_across_sight(CAR, lidar, dist, (1.5, 2.5))}
     assert fit_object_shape(CAR, lidar, dist, (1.5, 2.5)) == {"width_scale": fit_width_scale(CAR, lidar, dist, (1.5, 2.5))}
     assert fit_object_shape(CAR, lidar, dist, occlude=True) == {}
+
+
+def test_scan_occlude_option(tmp_path) -> None:
+    from zbuf_occlude.cli.main import main
+    from zbuf_occlude.sensors.scan import read_scan_npz
+
+    base = ["scan", "box", "--size", "4.5", "--distance", "6:8", "--height", "1.8", "--azimuth", "0", "--yaw", "80:100", "--samples", "6", "--seed", "2", "--crop"]
+    box = str(tmp_path / "box.obj")
+    CAR.export(box)
+    base[1] = box
+    assert main([*base, "--across-sight-width", "1.5", "--occlude", "--out", str(tmp_path / "o")]) == 0
+    assert main([*base, "--out", str(tmp_path / "w")]) == 0
+    assert main([*base, "--across-sight-width", "1.5", "--out", str(tmp_path / "s")]) == 0
+    scans = {tag: [read_scan_npz(p) for p in sorted((tmp_path / tag).glob("*.npz"))] for tag in "ows"}
+    widths = {tag: np.median([across_sight_width(s.points) for s in v]) for tag, v in scans.items()}
+    assert widths["o"] == pytest.approx(1.5, rel=0.2) and widths["s"] == pytest.approx(1.5, rel=0.2) and widths["w"] > 3.0
+    # the object straight ahead (+x): an occluded crop shows one end of it, off the line of sight; a stretched one its middle
+    aside = {tag: np.median([abs(s.points[:, 1].mean()) for s in v]) for tag, v in scans.items()}
+    assert aside["o"] > 0.8 and aside["s"] < 0.3 and aside["w"] < 0.3
+    # hidden, not squeezed: as tall as the whole crops, with fewer returns
+    assert np.median([np.ptp(s.points[:, 2]) for s in scans["o"]]) == pytest.approx(np.median([np.ptp(s.points[:, 2]) for s in scans["w"]]), abs=0.1)
+    assert main([*base, "--occlude", "--out", str(tmp_path / "x")]) == 2  # needs --across-sight-width

@@ -140,6 +140,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
         raise InvalidInputError("--across-sight-width makes the object's crops as wide as real scans: it needs --crop")
     if args.outline is not None and not args.crop:
         raise InvalidInputError("--outline gives the object's crops the outline of real scans: it needs --crop")
+    if args.occlude and args.across_sight_width is None:
+        raise InvalidInputError("--occlude meets --across-sight-width with a side occluder: it needs --across-sight-width")
     out = Path(args.out)
     formats = ("npz", "ply") if args.format == "both" else (args.format,)
     src = Path(args.mesh_or_scene)
@@ -193,8 +195,10 @@ def cmd_scan(args: argparse.Namespace) -> int:
             width_m = None if args.across_sight_width is None else parse_interval(args.across_sight_width, "--across-sight-width")
             if width_m is not None and (width_m[0] < 0 or not width_m[1] > 0):
                 raise InvalidInputError(f"--across-sight-width must be >= 0 metres, and HI > 0, got {args.across_sight_width!r}")
-            dist = replace(dist, **fit_object_shape(mesh, sensor, dist, width_m, _outline(args.outline), seed=args.seed, name=str(src)))
-            log.info("%s: width_scale %s, width_profile %s", src.name, dist.width_scale, dist.width_profile)
+            dist = replace(dist, **fit_object_shape(mesh, sensor, dist, width_m, _outline(args.outline), occlude=args.occlude, seed=args.seed,
+                                                    name=str(src)))  # fmt: skip
+            log.info("%s: width_scale %s, visible_across_sight %s, width_profile %s", src.name, dist.width_scale, dist.visible_across_sight,
+                     dist.width_profile)  # fmt: skip
         check_outside(dist, None if isinstance(mesh, dict) else mesh.extents)
         for k in range(args.samples):
             rng = derive_rng(args.seed, object_key(src.name), k)
@@ -265,6 +269,11 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         "--across-sight-width", metavar="M or LO:HI",
         help="with --crop: stretch the object horizontally so that its crops are, at the median, this wide across the "
         "line of sight, metres, drawn per sample (posts as thick as real trunks; fit-sensor fits it per class)",
+    )  # fmt: skip
+    p.add_argument(
+        "--occlude", action="store_true",
+        help="with --across-sight-width: instead of the stretch, hide one side of the object behind panels between it "
+        "and the sensor, leaving as much of it in view as that width asks where it shows wider (a partial view)",
     )  # fmt: skip
     p.add_argument(
         "--outline", metavar="V,V,...",
