@@ -74,6 +74,9 @@ def test_a_share_of_one_hides_nothing_and_the_draw_is_capped_and_checked() -> No
     for bad in (0.0, (-0.1, 0.5), (0.6, 0.5), "half"):
         with pytest.raises(InvalidInputError, match="visible_across_sight"):
             CropDistributions(visible_across_sight=bad)
+    # an airborne scanner flies over the object: nothing stands between, and the share is refused, not ignored
+    with pytest.raises(InvalidInputError, match="airborne"):
+        object_crop(CAR, sensor_from_name("riegl-q1560"), PLACED | {"visible_across_sight": 0.5, "occluder_side": 1.0}, seed=1)
 
 
 @settings(max_examples=40, deadline=None)

@@ -260,12 +260,14 @@ def object_crop(
     returns lower than that above the ground (``full`` keeps them).  An
     :class:`~zbuf_occlude.sensors.airborne.AirborneScanner` flies over the object instead
     (``distance_m · sin(azimuth_deg)`` across track; points in the world frame).  A LiDAR fires only in the
-    object's azimuth sector (± ``sector_margin_deg``), which gives the same returns faster.
+    object's azimuth sector (± ``sector_margin_deg``), which gives the same returns faster.  With
+    ``visible_across_sight`` below 1 in the placement, :func:`side_occluders` stand between the
+    sensor and the object (after ``occluders``; the object keeps id 1).
 
     Raises
     ------
     InvalidInputError, MeshLoadError
-        Bad placement or mesh.
+        Bad placement or mesh, or ``visible_across_sight`` below 1 for an airborne scanner.
     """
     az = math.radians(placement["azimuth_deg"])
     d = placement["distance_m"]
@@ -274,6 +276,8 @@ def object_crop(
     # the largest side after the stretch, at most
     reach = placement["size_m"] * max(1.0, width_scale) * (1.0 if profile is None else max(1.0, *profile))
     if isinstance(sensor, AirborneScanner):
+        if placement.get("visible_across_sight", 1.0) < 1.0:
+            raise InvalidInputError("visible_across_sight hides a side of the object from a sensor on the ground; an airborne scanner flies over it")
         return _airborne_crop(mesh, sensor, placement, seed=seed, occluders=occluders, class_name=class_name, offset_m=d * math.sin(az), size=size,
                               reach=reach)  # fmt: skip
     obj = SceneObject(mesh, class_name, (d * math.cos(az), d * math.sin(az)), placement["yaw_deg"], size, width_scale=width_scale,
