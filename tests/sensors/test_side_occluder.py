@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 import trimesh
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from zbuf_occlude.errors import InvalidInputError
@@ -87,6 +87,7 @@ def test_a_share_of_one_hides_nothing_and_the_draw_is_capped_and_checked() -> No
     visible=st.floats(0.05, 0.95),
     side=st.sampled_from([1.0, -1.0]),
 )
+@example(azimuth=57.0, distance=4.0, length=2.0, visible=0.5, side=-1.0)  # a vertex on the panel's edge
 def test_the_panel_stands_between_and_covers_the_hidden_azimuths(azimuth: float, distance: float, length: float, visible: float,
                                                                   side: float) -> None:  # fmt: skip
     """Law: every ray from the sensor to a vertex in the hidden share of the azimuths meets the panel before the vertex."""
@@ -103,7 +104,8 @@ def test_the_panel_stands_between_and_covers_the_hidden_azimuths(azimuth: float,
     phi = np.arctan2(vertices[:, 1], vertices[:, 0]) - a
     phi = (phi + np.pi) % (2 * np.pi) - np.pi
     span = phi.max() - phi.min()
-    hidden = phi >= phi.max() - (1 - visible) * span - 1e-9 if side > 0 else phi <= phi.min() + (1 - visible) * span + 1e-9
+    # a vertex on the panel's edge is a grazing ray either way: the law holds a hair inside the hidden share
+    hidden = phi >= phi.max() - (1 - visible) * span + 0.002 * span if side > 0 else phi <= phi.min() + (1 - visible) * span - 0.002 * span
     shown = phi < phi.max() - (1 - visible) * span - 0.02 * span if side > 0 else phi > phi.min() + (1 - visible) * span + 0.02 * span
     rays = vertices - sensor
     lengths = np.linalg.norm(rays, axis=1)
@@ -176,3 +178,4 @@ def test_scan_occlude_option(tmp_path) -> None:
     # hidden, not squeezed: as tall as the whole crops, with fewer returns
     assert np.median([np.ptp(s.points[:, 2]) for s in scans["o"]]) == pytest.approx(np.median([np.ptp(s.points[:, 2]) for s in scans["w"]]), abs=0.1)
     assert main([*base, "--occlude", "--out", str(tmp_path / "x")]) == 2  # needs --across-sight-width
+
