@@ -179,3 +179,20 @@ def test_scan_occlude_option(tmp_path) -> None:
     assert np.median([np.ptp(s.points[:, 2]) for s in scans["o"]]) == pytest.approx(np.median([np.ptp(s.points[:, 2]) for s in scans["w"]]), abs=0.1)
     assert main([*base, "--occlude", "--out", str(tmp_path / "x")]) == 2  # needs --across-sight-width
 
+
+def test_an_occluded_crop_builds_its_object_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The panels are placed from the built object; the scene built again with them reuses that build."""
+    from zbuf_occlude.sensors.scene import SceneObject
+
+    calls = []
+    real = SceneObject.build
+
+    def counted(self, base=None):
+        calls.append(self.class_name)
+        return real(self, base)
+
+    monkeypatch.setattr(SceneObject, "build", counted)
+    placement = PLACED | {"visible_across_sight": 0.5, "occluder_side": 1.0, "width_profile": (1.0, 1.2, 0.9, 1.0)}
+    crop = object_crop(CAR, lidar_preset("hdl32e", range_noise_m=0.0), placement, seed=1, class_name="car")
+    assert set(np.unique(crop.full.object_id)) == {0, 1, 2}
+    assert calls.count("car") == 1 and calls.count("occluder") == 1

@@ -283,12 +283,12 @@ def object_crop(
     obj = SceneObject(mesh, class_name, (d * math.cos(az), d * math.sin(az)), placement["yaw_deg"], size, width_scale=width_scale,
                       width_profile=profile)  # fmt: skip
     pose = sensor_pose([0.0, 0.0, placement["height_m"]])
-    own: list[SceneObject] = []
-    if placement.get("visible_across_sight", 1.0) < 1.0:
-        local, to_world = obj.build()
-        world = np.asarray(local.vertices, dtype=np.float64) @ to_world[:3, :3].T + to_world[:3, 3]
-        own += side_occluders(world, pose[:3, 3], placement["visible_across_sight"], placement["occluder_side"])
-    scene = ScanScene(objects=[obj], occluders=[*occluders, *own], ground_half_extent_m=max(2.0 * d, 20.0))
+    scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=max(2.0 * d, 20.0))
+    if placement.get("visible_across_sight", 1.0) < 1.0:  # after the given occluders; the object is built once
+        built = scene.build()
+        world = np.asarray(built.local_meshes[1].vertices, dtype=np.float64) @ built.local_to_world[1][:3, :3].T + built.local_to_world[1][:3, 3]
+        for panel in side_occluders(world, pose[:3, 3], placement["visible_across_sight"], placement["occluder_side"]):
+            scene.add_occluder(panel)
     sector = None
     if isinstance(sensor, Lidar) and not occluders:  # the side occluder stands inside the object's sector
         half = math.degrees(math.asin(min(1.0, 0.75 * reach / d))) + sector_margin_deg

@@ -305,6 +305,8 @@ class ScanScene:
     sensor_position_m: tuple[float, float] = (0.0, 0.0)
     base_dir: Path | None = None
     _built: BuiltScene | None = field(default=None, init=False, repr=False, compare=False)
+    # each object's build, by identity (kept with it), so that a scene built again after an add builds only what is new
+    _object_builds: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         h = self.ground_half_extent_m
@@ -324,8 +326,9 @@ class ScanScene:
         return self
 
     def add_occluder(self, mesh, **kwargs) -> ScanScene:
-        """Append an occluder; returns self."""
-        self.occluders.append(SceneObject(mesh, **kwargs))
+        """Append an occluder (``SceneObject(mesh, **kwargs)``, or ``mesh`` itself when it is a
+        :class:`SceneObject` and no keyword is given); returns self."""
+        self.occluders.append(mesh if isinstance(mesh, SceneObject) and not kwargs else SceneObject(mesh, **kwargs))
         self._built = None
         return self
 
@@ -334,8 +337,16 @@ class ScanScene:
         x, y = (float(v) for v in self.sensor_position_m)
         return sensor_pose([x, y, self.ground_z_m + float(self.sensor_height_m)])
 
+    def _object_build(self, obj: SceneObject) -> tuple[trimesh.Trimesh, NDArray[np.float64]]:
+        """``obj.build(self.base_dir)``, once per object of this scene."""
+        hit = self._object_builds.get(id(obj))
+        if hit is None or hit[0] is not obj:
+            hit = self._object_builds[id(obj)] = (obj, *obj.build(self.base_dir))
+        return hit[1], hit[2]
+
     def build(self) -> BuiltScene:
-        """Flatten into one mesh (cached until :meth:`add`)."""
+        """Flatten into one mesh (cached until :meth:`add` or :meth:`add_occluder`; each object's
+        own build is kept, so only the objects added since are built again)."""
         import trimesh
 
         if self._built is not None:
@@ -355,7 +366,7 @@ class ScanScene:
             face_local.append(np.arange(2))
             n_vertices = 4
         for oid, obj in enumerate([*self.objects, *self.occluders], start=1):
-            local, m = obj.build(self.base_dir)
+            local, m = self._object_build(obj)
             m = m.copy()
             m[2, 3] += self.ground_z_m
             v = np.asarray(local.vertices, dtype=np.float64) @ m[:3, :3].T + m[:3, 3]
