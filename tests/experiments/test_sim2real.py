@@ -679,3 +679,30 @@ def test_width_scales_fitted_once_give_the_crops_of_fitting_them_in_every_draw(t
     np.testing.assert_array_equal(merged.points, every_draw.points)
     assert calls == []  # not fitted again
 
+
+
+def test_widen_is_never_narrower_whether_fitted_once_or_in_the_draw(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``across_sight_width_by: widen`` raises each stretch below 1 to 1, in fit_mesh_shapes and in a set's own fit alike."""
+    from zbuf_occlude.experiments.sim2real_data import fit_mesh_shapes
+    from zbuf_occlude.sensors import crops, lidar_preset
+
+    meshes = [m for m in find_class_meshes(_mesh_root(tmp_path)) if m.class_name == "pole"]
+    sensor = lidar_preset("hdl32e")
+    sizes = {"pole": SizeRange("height", 3.0, 4.0)}
+    narrow = {"distance_m": (5.0, 9.0), "across_sight_width_m": (0.05, 0.08)}  # narrower than every pole mesh
+    stretched = fit_mesh_shapes(meshes, sensor, sizes, {"pole": narrow})
+    widened = fit_mesh_shapes(meshes, sensor, sizes, {"pole": {**narrow, "across_sight_width_by": "widen"}})
+    assert all(lo < 1.0 for lo, _ in (v["width_scale"] for v in stretched.values()))
+    assert all(v["width_scale"] == (1.0, 1.0) for v in widened.values())
+    seen = []
+    real = crops.lidar_object_samples
+
+    def spy(mesh, sensor, **kw):
+        seen.append(kw["distributions"].width_scale)
+        return real(mesh, sensor, **kw)
+
+    monkeypatch.setattr(crops, "lidar_object_samples", spy)
+    build_set("lidar", meshes, ["pole"], 2, 32, 0, sensor=sensor, sizes=sizes, placement={"pole": {**narrow, "across_sight_width_by": "widen"}})
+    assert seen and all(s == (1.0, 1.0) for s in seen)
+    with pytest.raises(InvalidInputError, match="across_sight_width_by"):
+        fit_mesh_shapes(meshes, sensor, sizes, {"pole": {**narrow, "across_sight_width_by": "squeeze"}})

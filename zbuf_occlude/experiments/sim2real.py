@@ -98,8 +98,9 @@ VALIDATION_CHOICES = ("meshes", "fit-half")
 #: side occluder instead of a stretch).
 FITTED_SHAPES = {"widths": "across_sight_width_m", "widen": "across_sight_width_m", "occlude": "across_sight_width_m",
                  "outline": "across_sight_profile"}  # fmt: skip
-#: The shapes that meet the widths, of which a run takes one.
-_WIDTH_SHAPES = ("widths", "widen", "occlude")
+#: The shapes that meet the widths, of which a run takes one, and how each meets them
+#: (:data:`~zbuf_occlude.experiments.sim2real_data.WIDTH_BY`).
+_WIDTH_SHAPES = {"widths": "stretch", "widen": "widen", "occlude": "occluder"}
 #: Name of the row that takes, per seed, the mesh-only set with the best fit-half validation score.
 CHOSEN_ON_FIT_HALF = "chosen on fit half"
 
@@ -366,14 +367,11 @@ def run_sim2real(
         meshes, skipped_fitted = check_lidar_meshes(meshes, fitted, sizes, n_points, min_returns=int(min_returns))
         used = {FITTED_SHAPES[shape] for shape in fitted_shape}
         fitted_placement = {c: {k: v for k, v in kw.items() if k not in FITTED_SHAPES.values() or k in used} for c, kw in fitted_placement.items()}
-        if "occlude" in fitted_shape:
-            fitted_placement = {c: {**kw, "across_sight_width_by": "occluder"} for c, kw in fitted_placement.items()}
+        width_by = next((_WIDTH_SHAPES[shape] for shape in fitted_shape if shape in _WIDTH_SHAPES), None)
+        if width_by is not None:
+            fitted_placement = {c: {**kw, "across_sight_width_by": width_by} for c, kw in fitted_placement.items()}
         # each mesh's stretch and warp to its class's scans, fitted once for every seed (seed 0: the same every run)
-        shapes = fit_mesh_shapes(meshes, fitted, fitted_sizes, fitted_placement)
-        if "widen" in fitted_shape:  # never narrower than the mesh
-            shapes = {name: {**kw, "width_scale": tuple(max(v, 1.0) for v in kw["width_scale"])} if "width_scale" in kw else kw
-                      for name, kw in shapes.items()}  # fmt: skip
-        fitted_placement = {**fitted_placement, **shapes}
+        fitted_placement = {**fitted_placement, **fit_mesh_shapes(meshes, fitted, fitted_sizes, fitted_placement)}
         meshes, skipped_placed = check_lidar_meshes(meshes, fitted, fitted_sizes, n_points, min_returns=int(min_returns),
                                                     placement=fitted_placement)  # fmt: skip
         skipped += skipped_fitted + skipped_placed

@@ -82,9 +82,10 @@ MIN_RETURNS = 30
 #: ``keep_scale``: clouds are centred and divided by this many metres (a 10 m object spans ±0.5 ... 1).
 KEEP_SCALE_UNIT_M = 10.0
 #: How a placement's ``across_sight_width_by`` meets its class's ``across_sight_width_m``: a
-#: horizontal stretch of each mesh, or a side occluder that leaves part of it in view
+#: horizontal stretch of each mesh, the same stretch where it widens the mesh and none where it
+#: would narrow it, or a side occluder that leaves part of it in view
 #: (:func:`zbuf_occlude.sensors.fit.fit_object_shape`).
-WIDTH_BY = ("stretch", "occluder")
+WIDTH_BY = ("stretch", "widen", "occluder")
 #: Rounds of crop draws per mesh before the crops found are repeated (logged).
 _LIDAR_TRIES = 6
 
@@ -251,16 +252,27 @@ def _placement_of(placement: dict[str, dict] | None, entry: MeshEntry) -> dict:
 def _distributions(entry: MeshEntry, size: SizeRange, placement: dict) -> tuple[CropDistributions, dict]:
     """The mesh's crop distributions (its stretch left out unless given) and what its class's
     ``across_sight_width_m``, ``across_sight_profile`` and ``across_sight_width_by`` ask
-    :func:`~zbuf_occlude.sensors.fit.fit_object_shape` to fit (``width_m``, ``profile``, ``occlude``)."""
+    :func:`_fit_shape` to fit (``width_m``, ``profile``, ``by``)."""
     from zbuf_occlude.sensors.crops import CropDistributions
 
     keywords = {**LIDAR_PLACEMENT, **placement}
     by = keywords.pop("across_sight_width_by", "stretch")
     if by not in WIDTH_BY:
         raise InvalidInputError(f"across_sight_width_by must be one of {WIDTH_BY}, got {by!r}")
-    shape = {"width_m": keywords.pop("across_sight_width_m", None), "profile": keywords.pop("across_sight_profile", None),
-             "occlude": by == "occluder"}  # fmt: skip
+    shape = {"width_m": keywords.pop("across_sight_width_m", None), "profile": keywords.pop("across_sight_profile", None), "by": by}
     return CropDistributions(size_m=size_interval(entry.mesh.extents, size), **keywords), shape
+
+
+def _fit_shape(entry: MeshEntry, sensor, dist: CropDistributions, shape: dict) -> dict:
+    """The mesh's :func:`~zbuf_occlude.sensors.fit.fit_object_shape` for a ``shape`` of :func:`_distributions`
+    (with ``by="widen"``, each stretch below 1 raised to 1: never narrower than the mesh)."""
+    from zbuf_occlude.sensors.fit import fit_object_shape
+
+    out = fit_object_shape(entry.mesh, sensor, dist, shape["width_m"], shape["profile"], occlude=shape["by"] == "occluder",
+                           name=str(entry.path))  # fmt: skip
+    if shape["by"] == "widen" and "width_scale" in out:
+        out["width_scale"] = tuple(max(v, 1.0) for v in out["width_scale"])
+    return out
 
 
 def fit_mesh_shapes(meshes: list[MeshEntry], sensor, sizes: dict[str, SizeRange], placement: dict[str, dict]) -> dict[str, dict]:
@@ -268,19 +280,17 @@ def fit_mesh_shapes(meshes: list[MeshEntry], sensor, sizes: dict[str, SizeRange]
 
     Returns ``{mesh name: {"width_scale": (lo, hi), "width_profile": (K factors)}}`` (``"visible_across_sight"``
     instead of ``"width_scale"`` where the class's ``across_sight_width_by`` is ``"occluder"``)
-    (:func:`zbuf_occlude.sensors.fit.fit_object_shape`, seed 0; each key where the class gives what it fits) for the meshes of classes that give either, to merge into ``placement``: a mesh's
+    (:func:`_fit_shape`, seed 0; each key where the class gives what it fits) for the meshes of classes that give either, to merge into ``placement``: a mesh's
     own keywords override its class's (:func:`build_set`), so the crops are what fitting the
     stretch in every draw would give, without fitting it again.  A mesh whose stretch cannot be
     fitted is left out (its crops then raise, naming it; :func:`check_lidar_meshes` skips it).
     """
-    from zbuf_occlude.sensors.fit import fit_object_shape
-
     out = {}
     for entry in meshes:
         dist, shape = _distributions(entry, sizes[entry.class_name], _placement_of(placement, entry))
         if shape["width_m"] is not None or shape["profile"] is not None:
             try:
-                out[entry.name] = fit_object_shape(entry.mesh, sensor, dist, **shape, name=str(entry.path))
+                out[entry.name] = _fit_shape(entry, sensor, dist, shape)
             except InvalidInputError as exc:
                 log.warning("%s", exc)
     return out
@@ -289,12 +299,10 @@ def fit_mesh_shapes(meshes: list[MeshEntry], sensor, sizes: dict[str, SizeRange]
 def _lidar(entry: MeshEntry, k: int, n_points: int, seed: int, sensor, size: SizeRange, min_returns: int = MIN_RETURNS,
            placement: dict | None = None) -> tuple[list[NDArray], list[float]]:  # fmt: skip
     from zbuf_occlude.sensors.crops import lidar_object_samples
-    from zbuf_occlude.sensors.fit import fit_object_shape
-
     dist, shape = _distributions(entry, size, placement or {})
-    width_given = dist.visible_across_sight if shape["occlude"] else dist.width_scale
+    width_given = dist.visible_across_sight if shape["by"] == "occluder" else dist.width_scale
     if (shape["width_m"] is not None and width_given is None) or (shape["profile"] is not None and dist.width_profile is None):
-        dist = replace(dist, **fit_object_shape(entry.mesh, sensor, dist, **shape, name=str(entry.path)))  # this mesh's, to the class's scans
+        dist = replace(dist, **_fit_shape(entry, sensor, dist, shape))  # this mesh's, to the class's scans
     good: list = []
     # Draw about as many crops as needed, then more under another name (new placements) while
     # crops come back with fewer than min_returns returns; at most _LIDAR_TRIES rounds.
@@ -347,9 +355,9 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
     keywords per class (``{class: {"distance_m": (lo, hi), "hidden_below_m": (lo, hi)}}``,
     metres), over :data:`LIDAR_PLACEMENT`'s, and per mesh (keyed by its name, over its class's);
     a class's ``"across_sight_width_m": (lo, hi)`` stretches each of its meshes to those widths
-    (:func:`zbuf_occlude.sensors.fit.fit_width_scale`), or with ``"across_sight_width_by":
-    "occluder"`` hides a side of each where its crops are wider (:func:`zbuf_occlude.sensors.fit.fit_visible_across_sight`;
-    :data:`WIDTH_BY`), and its ``"across_sight_profile"`` warps
+    (:func:`zbuf_occlude.sensors.fit.fit_width_scale`; with ``"across_sight_width_by": "widen"``
+    never narrower), or with ``"occluder"`` hides a side of each where its crops are wider
+    (:func:`zbuf_occlude.sensors.fit.fit_visible_across_sight`; :data:`WIDTH_BY`), and its ``"across_sight_profile"`` warps
     them to that outline (:func:`zbuf_occlude.sensors.fit.fit_width_profile`), unless the
     mesh gives its ``width_scale`` (or ``visible_across_sight``) and ``width_profile`` (:func:`fit_mesh_shapes`).
 
