@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -47,16 +46,15 @@ def parse_interval(text: str, option: str) -> tuple[float, float]:
 
 
 def _outline(text: str | None) -> tuple[float, ...] | None:
-    """``--outline V,V,...``: two or more widths over the scan's width, bottom to top."""
+    """``--outline V,V,...``: two or more widths over the scan's width, bottom to top (:func:`~zbuf_occlude.sensors.scene.check_width_profile`)."""
+    from zbuf_occlude.sensors.scene import check_width_profile
+
     if text is None:
         return None
     try:
-        values = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        values = ()
-    if len(values) < 2 or not all(math.isfinite(v) and v > 0 for v in values):
-        raise InvalidInputError(f"--outline must be 2 or more numbers > 0, V,V,..., bottom to top, got {text!r}")
-    return values
+        return check_width_profile(text.split(","))
+    except InvalidInputError:
+        raise InvalidInputError(f"--outline must be 2 or more numbers > 0, V,V,..., bottom to top, got {text!r}") from None
 
 
 def check_outside(dist, extents=None) -> None:

@@ -139,11 +139,16 @@ def _check_width_fit(width_m, n_samples, sensor) -> tuple[float, float]:
         lo, hi = math.nan, math.nan
     if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo <= hi and hi > 0):
         raise InvalidInputError(f"width_m must be an interval 0 <= lo <= hi, hi > 0 metres, got {width_m!r}")
+    _check_measure(n_samples, sensor)
+    return lo, hi
+
+
+def _check_measure(n_samples, sensor) -> None:
+    """A fit's crops: ``n_samples`` >= 1 of a spinning LiDAR (widths are measured across its line of sight)."""
     if int(n_samples) < 1:
         raise InvalidInputError(f"n_samples must be >= 1, got {n_samples}")
     if not isinstance(sensor, Lidar):
         raise InvalidInputError(f"widths are measured across a spinning LiDAR's line of sight; {getattr(sensor, 'name', sensor)!r} is not one")
-    return lo, hi
 
 
 def _median_crop_width(mesh, sensor, distributions, n: int, seed: int) -> float:
@@ -198,10 +203,7 @@ def fit_width_profile(mesh, sensor, distributions, profile: Sequence[float], *, 
     from zbuf_occlude.sensors.scene import SceneObject, check_width_profile
 
     target = np.asarray(check_width_profile(profile))
-    if int(n_samples) < 1:
-        raise InvalidInputError(f"n_samples must be >= 1, got {n_samples}")
-    if not isinstance(sensor, Lidar):
-        raise InvalidInputError(f"widths are measured across a spinning LiDAR's line of sight; {getattr(sensor, 'name', sensor)!r} is not one")
+    _check_measure(n_samples, sensor)
     k = len(target)
     z_lo, z_hi = (float(v) for v in np.asarray(SceneObject(mesh).build()[0].bounds, dtype=np.float64)[:, 2])  # a primitive's too
     centres = (np.arange(k) + 0.5) / k
@@ -244,14 +246,14 @@ def fit_object_shape(mesh, sensor, distributions, width_m: tuple[float, float] |
     fit_width = fit_visible_across_sight if occlude else fit_width_scale
     key = "visible_across_sight" if occlude else "width_scale"
     out: dict = {}
-    if width_m is not None and not occlude:
-        out[key] = fit_width(mesh, sensor, distributions, width_m, seed=seed, name=name)
     if profile is not None:
-        at = replace(distributions, width_scale=out.get("width_scale", distributions.width_scale))
+        at = distributions  # the warp is fitted at the width stretch, or at the mesh's own width
+        if width_m is not None and not occlude:
+            at = replace(distributions, width_scale=fit_width_scale(mesh, sensor, distributions, width_m, seed=seed, name=name))
         out["width_profile"] = fit_width_profile(mesh, sensor, at, profile, seed=seed, name=name)
-    if width_m is not None and (occlude or profile is not None):
-        out[key] = fit_width(mesh, sensor, replace(distributions, width_profile=out.get("width_profile", distributions.width_profile)),
-                             width_m, seed=seed, name=name)  # fmt: skip
+        distributions = replace(distributions, width_profile=out["width_profile"])
+    if width_m is not None:
+        out[key] = fit_width(mesh, sensor, distributions, width_m, seed=seed, name=name)
     return out
 
 
