@@ -27,6 +27,19 @@ def _stack(widths: list[float], distance: float = 8.0, height: float = 1.6) -> n
     return np.array(rows)
 
 
+def _box_under_box(lower: tuple[float, float, float], upper: tuple[float, float, float], upper_z: float) -> trimesh.Trimesh:
+    """A normalised test mesh: a box with a second box centred ``upper_z`` above its centre (a sign's plate, a person's arms)."""
+    top = trimesh.creation.box(extents=upper)
+    top.apply_translation((0.0, 0.0, upper_z))
+    return trimesh.util.concatenate([trimesh.creation.box(extents=lower), top])
+
+
+def _median_outline(mesh, lidar, dist: CropDistributions, n: int) -> np.ndarray:
+    """The median :func:`width_profile` of ``n`` crops of ``mesh`` (placements from a fixed seed)."""
+    rng = np.random.default_rng(11)
+    return np.nanmedian([width_profile(object_crop(mesh, lidar, draw_placement(dist, rng), seed=k).scan.points) for k in range(n)], axis=0)
+
+
 def test_width_profile_is_each_bins_width_over_the_scans_width() -> None:
     # four bins (two 0.15 m bands each at 1.6 m tall): widths 0.2, 0.4, 0.4, 0.8; the scan's width is the median band, 0.4
     profile = width_profile(_stack([0.2, 0.4, 0.4, 0.8]), n_bins=4)
@@ -118,16 +131,12 @@ def test_width_profile_draws_nothing_and_reaches_the_crop() -> None:
 
 def test_fit_width_profile_gives_a_sign_post_a_trunks_outline() -> None:
     """A post with a plate on its upper third, fitted to a uniform outline: the plate is pulled in, the post is kept."""
-    post = trimesh.creation.box(extents=(0.06, 0.06, 1.0))
-    plate = trimesh.creation.box(extents=(0.3, 0.3, 0.3))
-    plate.apply_translation((0.0, 0.0, 0.3))
-    sign = trimesh.util.concatenate([post, plate])
+    sign = _box_under_box((0.06, 0.06, 1.0), (0.3, 0.3, 0.3), 0.3)
     lidar = lidar_preset("hdl32e", range_noise_m=0.0)
     dist = CropDistributions(distance_m=(4.0, 6.0), height_m=1.8, size_m=3.0)
 
     def outline(d) -> np.ndarray:
-        rng = np.random.default_rng(11)
-        return np.nanmedian([width_profile(object_crop(sign, lidar, draw_placement(d, rng), seed=k).scan.points) for k in range(12)], axis=0)
+        return _median_outline(sign, lidar, d, 12)
 
     target = (1.0,) * 8
     warp = fit_width_profile(sign, lidar, dist, target, n_samples=8, name="sign")
@@ -150,17 +159,12 @@ def test_fit_width_profile_gives_a_sign_post_a_trunks_outline() -> None:
 def test_fit_width_profile_pulls_a_t_posed_persons_arms_in() -> None:
     """Arms held out at 0.75-0.9 of the height show 1.7-1.8 times the body's width; a uniform outline asks them pulled in.
     One round of the fit leaves them at 1.76 (warp 0.62); the correction brings them to about 1.5 (warp 0.50)."""
-    body = trimesh.creation.box(extents=(0.25, 0.15, 1.0))
-    arms = trimesh.creation.box(extents=(0.8, 0.1, 0.15))
-    arms.apply_translation((0.0, 0.0, 0.3))
-    person = trimesh.util.concatenate([body, arms])
+    person = _box_under_box((0.25, 0.15, 1.0), (0.8, 0.1, 0.15), 0.3)
     lidar = lidar_preset("hdl32e", range_noise_m=0.0)
     dist = CropDistributions(distance_m=(4.0, 9.0), height_m=1.8, size_m=1.7)
     warp = fit_width_profile(person, lidar, dist, (1.0,) * 8, name="person")
     assert warp[6] < 0.56 and min(warp[:5]) > 0.9  # the arms' bin pulled in, the legs and the trunk kept
-    rng = np.random.default_rng(11)
-    warped = replace(dist, width_profile=warp)
-    outline = np.nanmedian([width_profile(object_crop(person, lidar, draw_placement(warped, rng), seed=k).scan.points) for k in range(24)], axis=0)
+    outline = _median_outline(person, lidar, replace(dist, width_profile=warp), 24)
     assert outline[6] < 1.65
 
 
