@@ -25,6 +25,8 @@ import statistics
 import time
 from pathlib import Path
 
+import numpy as np
+
 from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.mesh.sizes import SizeRange, size_interval
@@ -38,9 +40,7 @@ def _interval(text: str) -> tuple[float, float]:
     return float(lo), float(hi or lo)
 
 
-def _rng(k: int):
-    import numpy as np
-
+def _rng(k: int) -> np.random.Generator:
     return np.random.default_rng([0x0CC1, k])
 
 

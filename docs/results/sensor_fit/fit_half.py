@@ -2,11 +2,18 @@
 `experiment sim2real --fit-sensor --sensor hdl32e` fits to it, with the street meshes it sees (bush trees glTF, +y up).
 Imported by the scripts beside it (run from the repository root, ../shared beside it)."""
 
+import collections
+from dataclasses import replace
 from types import SimpleNamespace
 
+import numpy as np
+
 from zbuf_occlude.experiments import sim2real as S
-from zbuf_occlude.experiments.sim2real_data import check_lidar_meshes, find_class_meshes, real_clouds, real_scan_rows
+from zbuf_occlude.experiments.sim2real_data import LIDAR_PLACEMENT, check_lidar_meshes, find_class_meshes, real_clouds, real_scan_rows
+from zbuf_occlude.mesh.sizes import size_interval
 from zbuf_occlude.real_scans.datasets import load_real_scans
+from zbuf_occlude.sensors.crops import CropDistributions, draw_placement, object_crop
+from zbuf_occlude.sensors.fit import across_sight_width
 from zbuf_occlude.sensors.presets import sensor_from_name
 
 
@@ -28,17 +35,8 @@ def load_fit_half(data: str) -> SimpleNamespace:
 def widths_table(data: str, fit_width, keyword: str, tags: tuple[str, str], last_columns) -> None:
     """Print, per class, the fit half's widths across the line of sight and returns beside those of fitted+placed crops
     made without and with ``keyword`` (``fit_width(mesh, sensor, distributions, width_m)`` per mesh), 12 crops per mesh
-    (one seed, at least 30 returns each); ``last_columns(fits)`` gives the closing columns' names and cells per class."""
-    import collections
-    from dataclasses import replace
-
-    import numpy as np
-
-    from zbuf_occlude.experiments.sim2real_data import LIDAR_PLACEMENT
-    from zbuf_occlude.mesh.sizes import size_interval
-    from zbuf_occlude.sensors.crops import CropDistributions, draw_placement, object_crop
-    from zbuf_occlude.sensors.fit import across_sight_width
-
+    (one seed, at least 30 returns each); ``last_columns(fits, meshes)`` gives the closing columns' names and a
+    function of the class that gives their cells."""
     f = load_fit_half(data)
     stats = {tag: collections.defaultdict(list) for tag in ("real", *tags)}
     for i in f.fit_half:
