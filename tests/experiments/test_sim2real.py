@@ -142,6 +142,11 @@ def test_sim2real_command_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixtu
     other[other.index("--points") + 1] = "16"
     assert main(other) == 2
     assert "other settings" in capsys.readouterr().err
+    # the aspect augmentation is a setting of every run (its train_config), and needs the augmentation keep_scale turns off
+    assert main([*argv, "--augment", "aspect"]) == 2
+    assert "other settings" in capsys.readouterr().err
+    assert main([*argv, "--augment", "aspect", "--keep-scale"]) == 2
+    assert "--augment aspect" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("option, value", [("--seeds", "0"), ("--points", "-3"), ("--per-class", "x"), ("--up", "y")])

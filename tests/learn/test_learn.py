@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 torch = pytest.importorskip("torch", reason="zbuf_occlude.learn needs PyTorch: pip install 'zbuf-occlude[learn]'")
 
@@ -164,6 +166,9 @@ def test_training_is_deterministic_and_resume_is_exact(tmp_path):
     assert a.history == c2.history
     other = train(data, 2, TrainConfig(epochs=1, **{**cfg, "seed": 6}), progress=False)
     assert any(not torch.equal(v, _state(other.model)[k]) for k, v in sa.items())
+    # the aspect augmentation reaches the batches: the same seed trains other weights
+    aspect = train(data, 2, TrainConfig(epochs=1, aspect=True, **cfg), progress=False)
+    assert any(not torch.equal(v, _state(aspect.model)[k]) for k, v in _state(c1.model).items())
     with pytest.raises(InvalidInputError, match="another configuration"):
         train(data, 2, TrainConfig(epochs=2, **{**cfg, "seed": 7}), checkpoint_dir=tmp_path, progress=False)
     assert (tmp_path / "best.pt").is_file() and (tmp_path / "history.json").is_file()
@@ -197,6 +202,45 @@ def test_augment_rotates_about_z_only():
     np.testing.assert_array_equal(out, again)
     jit = D.augment(pts, np.random.default_rng(1), rotate=False, scale=False)
     assert np.abs(jit - pts).max() <= D.JITTER_CLIP + 1e-7 and np.abs(jit - pts).max() > 0
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.floats(0.05, 1.0), min_size=3, max_size=3), st.integers(0, 2**32 - 1))
+def test_aspect_changes_the_proportions_within_its_range_and_keeps_the_size(axes: list[float], seed: int):
+    rng = np.random.default_rng(seed)
+    pts = D.normalize_batch(rng.uniform(-1, 1, (3, 40, 3)) * np.asarray(axes))
+    out = D.augment(pts, np.random.default_rng(seed), rotate=False, scale=False, jitter=False, aspect=True)
+    # each axis stretched by a factor in [2/3, 3/2], then re-normalised: max extent 1, and any two axes' ratio
+    # changes by at most (3/2) / (2/3)
+    ext_in, ext_out = np.ptp(pts, axis=1), np.ptp(out, axis=1)
+    np.testing.assert_allclose(ext_out.max(axis=1), 1.0, rtol=1e-5)
+    change = (ext_out / ext_in) / (ext_out / ext_in).max(axis=1, keepdims=True)
+    assert np.all(change >= (2 / 3) / (3 / 2) - 1e-5) and np.all(change <= 1 + 1e-6)
+    # the stretch is an affine map: the points keep their place between the box's faces
+    rel_in = (pts - pts.min(axis=1, keepdims=True)) / ext_in[:, None]
+    np.testing.assert_allclose((out - out.min(axis=1, keepdims=True)) / ext_out[:, None], rel_in, atol=1e-4)
+
+
+def test_aspect_is_off_by_default_and_draws_new_proportions_when_on():
+    rng = np.random.default_rng(0)
+    pts = D.normalize_batch(rng.uniform(-1, 1, (256, 60, 3)))
+    plain = D.augment(pts, np.random.default_rng(1))
+    np.testing.assert_array_equal(plain, D.augment(pts, np.random.default_rng(1), aspect=False))
+
+    def ratio(p):  # each cloud's height over its width
+        return np.ptp(p[..., 2], axis=1) / np.ptp(p[..., :2], axis=1).max(axis=1)
+
+    on = D.augment(pts, np.random.default_rng(1), rotate=False, jitter=False, aspect=True)
+    off = D.augment(pts, np.random.default_rng(1), rotate=False, jitter=False)
+    # a cube's height over its width stays as it was without it; with it, it spreads towards (2/3)/(3/2) ... (3/2)/(2/3)
+    np.testing.assert_allclose(ratio(off), ratio(pts), rtol=1e-5)
+    assert ratio(pts).min() > 0.8 and ratio(on).min() < 0.6 and ratio(on).max() > 1.6
+    extent = np.ptp(on, axis=1).max(axis=1)
+    assert extent.min() >= D.SCALE_RANGE[0] - 1e-5 and extent.max() <= D.SCALE_RANGE[1] + 1e-5
+    # a training run's setting: left out of the identity when off (older runs' settings compare equal), refused without augment
+    assert "aspect" not in TrainConfig().identity(("seed",)) and TrainConfig(aspect=True).identity(("seed",))["aspect"] is True
+    with pytest.raises(InvalidInputError, match="aspect"):
+        TrainConfig(aspect=True, augment=False)
 
 
 def test_resample_and_split():

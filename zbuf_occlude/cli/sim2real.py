@@ -63,6 +63,7 @@ def _run(args: argparse.Namespace) -> int:
         occluded_elevation_deg=parse_interval(args.occluded_elevation, "--occluded-elevation"),
         fit_sensor=args.fit_sensor, recipe=args.recipe, validate_on=args.validate_on,
         fitted_shape=() if args.fitted_shape == "none" else tuple(v.strip() for v in args.fitted_shape.split(",")),
+        aspect=args.augment == "aspect",
     )  # fmt: skip
     return print_table(args.out, summary)
 
@@ -120,6 +121,10 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--recipe", choices=("stable", "plain"), default=SIM2REAL_RECIPE,
                    help="training recipe: stable (class-balanced sampling, best epoch by validation mean class accuracy, "
                    "warm-up, gradient clipping) or plain (the models' own loop) (default: %(default)s)")
+    p.add_argument("--augment", choices=("standard", "aspect"), default="standard",
+                   help="training augmentation of every run: standard (rotation about z, scaling, jitter) or aspect (also "
+                   "random proportions: x, y, z stretched by independent factors in [2/3, 3/2]; not with --keep-scale) "
+                   "(default: %(default)s)")
     p.add_argument("--scale", choices=("quick", "paper"), default="quick",
                    help="quick: 256 points, 100 clouds per class, 20 epochs (a 2-core CPU); paper: 1024, 1000, 100")
     p.add_argument("--points", type=_positive, help="points per cloud (override the scale's)")

@@ -240,6 +240,7 @@ def run_sim2real(
     recipe: str = SIM2REAL_RECIPE,
     validate_on: str = "meshes",
     fitted_shape: tuple[str, ...] = (),
+    aspect: bool = False,
 ) -> dict:
     """Train on each synthetic training set and on real scans, ``seeds`` times; score on the real scans.
 
@@ -304,6 +305,10 @@ def run_sim2real(
         narrower); ``"outline"``, a warp to its outline over the height, alone or with one of
         the three.  Empty (default): the meshes' own shapes.  Each is fitted per mesh once
         (:func:`fit_mesh_shapes`).
+    aspect : bool
+        Every run's augmentation also draws random proportions (x, y and z stretched by
+        independent factors in [2/3, 3/2], DGCNN's range; :func:`zbuf_occlude.learn.data.augment`),
+        real→real's too.  Not with ``keep_scale``, which turns augmentation off.
 
     Returns
     -------
@@ -313,7 +318,8 @@ def run_sim2real(
     Raises
     ------
     InvalidInputError
-        Bad options (``validate_on="fit-half"`` without ``fit_sensor``), unusable meshes or scans
+        Bad options (``validate_on="fit-half"`` without ``fit_sensor``, ``aspect`` with
+        ``keep_scale``), unusable meshes or scans
         (with ``fit_sensor``: scans without sensor-frame points, or an airborne ``sensor``), or an
         ``out`` made with other settings.
     """
@@ -330,6 +336,8 @@ def run_sim2real(
         raise InvalidInputError(f"--scale must be one of {sorted(SIM2REAL_SCALES)}, got {scale!r}")
     if recipe not in RECIPES:
         raise InvalidInputError(f"--recipe must be one of {sorted(RECIPES)}, got {recipe!r}")
+    if aspect and keep_scale:
+        raise InvalidInputError("--augment aspect needs augmentation, which --keep-scale turns off")
     if int(seeds) < 1:
         raise InvalidInputError(f"--seeds must be >= 1, got {seeds}")
     if validate_on not in VALIDATION_CHOICES:
@@ -382,7 +390,7 @@ def run_sim2real(
     def config(seed: int) -> TrainConfig:
         return TrainConfig(model=model, epochs=int(epochs or sc.epochs), patience=sc.patience, width=sc.width[model],
                            fv_grid=sc.fv_grid, seed=seed, device=device, threads=threads, augment=not keep_scale,
-                           **RECIPES[recipe])  # fmt: skip
+                           aspect=bool(aspect), **RECIPES[recipe])  # fmt: skip
 
     settings = {
         "mesh_root": str(mesh_root), "real": str(real), "model": model, "sensor": lidar.name, "scale": scale,

@@ -42,6 +42,10 @@ log = logging.getLogger(__name__)
 #: at 0.05) and PointNet++'s scaling range [0.8, 1.25] (Qi et al. NeurIPS 2017).
 SCALE_RANGE = (0.8, 1.25)
 JITTER_SIGMA, JITTER_CLIP = 0.01, 0.05
+#: Per-axis factors of the ``aspect`` augmentation: DGCNN's anisotropic scaling range (Wang et al.,
+#: ACM TOG 2019; its ``data.py``, ``translate_pointcloud``: ``uniform(2/3, 3/2, size=3)``), without
+#: its translation (every cloud here is centred on its bounding box, the real ones too).
+ASPECT_RANGE = (2.0 / 3.0, 3.0 / 2.0)
 
 
 @dataclass
@@ -156,19 +160,27 @@ def from_meshes(
 
 
 def augment(points: NDArray[np.float32], rng: np.random.Generator, *, rotate: bool = True,
-            scale: bool = True, jitter: bool = True) -> NDArray[np.float32]:  # fmt: skip
-    """Random rotation about the up (z) axis, isotropic scaling and Gaussian jitter, per cloud.
+            scale: bool = True, jitter: bool = True, aspect: bool = False) -> NDArray[np.float32]:  # fmt: skip
+    """Random rotation about the up (z) axis, isotropic scaling and Gaussian jitter, per cloud;
+    with ``aspect``, random proportions too.
 
     Parameters
     ----------
     points : (B, N, 3) float32
         Normalised clouds.
     rng : numpy Generator
+    rotate, scale, jitter : bool
+        Each step on or off.
+    aspect : bool
+        Stretch x, y and z by independent factors ``U(2/3, 3/2)`` (:data:`ASPECT_RANGE`), after
+        the rotation, and re-normalise: the proportions change (a post as thick as a trunk, a
+        tree as low as a shrub), the size is the isotropic scaling's alone.  Off by default,
+        so that the draws of runs without it are unchanged.
 
     Returns
     -------
     (B, N, 3) float32
-        Rotated clouds are re-normalised to max extent 1 before scaling by
+        Rotated (and stretched) clouds are re-normalised to max extent 1 before scaling by
         ``U(0.8, 1.25)``; jitter ``N(0, 0.01²)`` clipped to ±0.05 (object units).
     """
     b, n, _ = points.shape
@@ -179,6 +191,8 @@ def augment(points: NDArray[np.float32], rng: np.random.Generator, *, rotate: bo
         rot = np.zeros((b, 3, 3), dtype=np.float32)
         rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1], rot[:, 2, 2] = c, -s, s, c, 1.0
         out = normalize_batch(np.einsum("bij,bnj->bni", rot, out))
+    if aspect:
+        out = normalize_batch(out * rng.uniform(*ASPECT_RANGE, (b, 1, 3)).astype(np.float32))
     if scale:
         out = out * rng.uniform(*SCALE_RANGE, (b, 1, 1)).astype(np.float32)
     if jitter:

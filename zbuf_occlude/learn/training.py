@@ -68,7 +68,7 @@ OPTIMISER_DEFAULTS = {
 
 #: The recipe options' values that reproduce the plain loop (TrainConfig's defaults): a checkpoint
 #: made before the options existed resumes with them.
-PLAIN_RECIPE = {"balance": "none", "select": "accuracy", "warmup_epochs": 0, "grad_clip": None}
+PLAIN_RECIPE = {"balance": "none", "select": "accuracy", "warmup_epochs": 0, "grad_clip": None, "aspect": False}
 #: The recipe for small, imbalanced sets (module docstring): class-balanced sampling, selection
 #: on validation mean class accuracy, two epochs of warm-up, gradient norm clipped at 5 (a
 #: bound that normal steps of these models stay under and a diverging step does not).
@@ -97,6 +97,9 @@ class TrainConfig:
         3DmFV Gaussians per side.
     augment : bool
         Rotation about z, scaling and jitter on every training batch.
+    aspect : bool
+        With ``augment``, random proportions too (:func:`~zbuf_occlude.learn.data.augment`'s
+        ``aspect``: x, y and z stretched by independent factors in [2/3, 3/2]).
     balance : {"none", "sampler"}
         ``sampler``: class-balanced epochs (module docstring).
     select : {"accuracy", "mean_class_accuracy"}
@@ -123,6 +126,7 @@ class TrainConfig:
     width: float = 1.0
     fv_grid: int = 8
     augment: bool = True
+    aspect: bool = False
     balance: str = "none"
     select: str = "accuracy"
     warmup_epochs: int = 0
@@ -145,6 +149,8 @@ class TrainConfig:
             raise InvalidInputError(f"balance must be none or sampler, got {self.balance!r}")
         if self.select not in ("accuracy", "mean_class_accuracy"):
             raise InvalidInputError(f"select must be accuracy or mean_class_accuracy, got {self.select!r}")
+        if self.aspect and not self.augment:
+            raise InvalidInputError("aspect is an augmentation: it needs augment=True")
         if self.warmup_epochs < 0 or (self.grad_clip is not None and not self.grad_clip > 0):
             raise InvalidInputError(f"need warmup_epochs >= 0 and grad_clip > 0 or None, got {self.warmup_epochs}, {self.grad_clip}")
 
@@ -398,7 +404,7 @@ def train(
                 continue
             pts = train_set.points[rows]
             if config.augment:
-                pts = augment(pts, rng)
+                pts = augment(pts, rng, aspect=config.aspect)
             x = torch.from_numpy(np.ascontiguousarray(pts)).to(device)
             y = torch.from_numpy(train_set.labels[rows]).to(device)
             step = epoch * n_batches + i // config.batch_size

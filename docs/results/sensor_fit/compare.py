@@ -1,11 +1,14 @@
 """Two sim2real runs of the same models, set by set, and each set against real→real.
 
-    python docs/results/sensor_fit/compare.py docs/results/sensor_fit/sim2real docs/results/sensor_fit/sim2real_realval
+    python docs/results/sensor_fit/compare.py docs/results/sensor_fit/sim2real docs/results/sensor_fit/sim2real_realval [LO-HI]
 
-Each argument holds one folder per model with the ``runs.jsonl`` of ``experiment sim2real``.
+Each argument holds one folder per model with the ``runs.jsonl`` of ``experiment sim2real``;
+``LO-HI`` keeps seeds LO to HI of both (default: every seed each has).
 Prints, per model and training set, mean class accuracy (mean ± std over seeds) in each run,
 the difference (second − first) with both one-sided exact permutation p-values, then the second
-run's sets against its real→real row (difference and p that real→real is above).  The set chosen
+run's sets against its real→real row (difference and p that real→real is above), then each
+set's validation mean class accuracy in both runs (with ``--validate-on fit-half``: on the fit
+half, the score its settings are chosen by).  The set chosen
 per seed on the fit half is in each run's own table (``experiment sim2real --validate-on fit-half``).
 """
 
@@ -20,12 +23,13 @@ from zbuf_occlude.learn.stats import mean_std, permutation_p
 MODELS = ("pointnet", "voxnet", "3dmfv")
 
 
-def scores(folder: Path) -> dict[str, list[float]]:
-    """``{training set: [mean class accuracy per seed, in seed order]}``."""
+def scores(folder: Path, key: str = "mean_class_accuracy") -> dict[str, list[float]]:
+    """``{training set: [key per seed, in seed order]}`` over the seeds kept."""
     out: dict[str, list[tuple[int, float]]] = {}
     for line in (folder / "runs.jsonl").read_text(encoding="utf-8").splitlines():
         r = json.loads(line)
-        out.setdefault(r["train_set"], []).append((r["seed"], r["mean_class_accuracy"]))
+        if SEEDS[0] <= r["seed"] <= SEEDS[1]:
+            out.setdefault(r["train_set"], []).append((r["seed"], r[key]))
     return {k: [v for _, v in sorted(rows)] for k, rows in out.items()}
 
 
@@ -35,6 +39,7 @@ def pm(values: list[float]) -> str:
 
 
 first, second = Path(sys.argv[1]), Path(sys.argv[2])
+SEEDS = tuple(int(v) for v in sys.argv[3].split("-")) if len(sys.argv) > 3 else (0, 10**9)
 print("| model | training set | first | second | Δ | p (second above) | p (first above) |\n|---|---|---|---|---|---|---|")
 for model in MODELS:
     if not (second / model / "runs.jsonl").is_file():
@@ -56,3 +61,12 @@ for model in MODELS:
             d = sum(v) / len(v) - sum(ref) / len(ref)
             print(f"| {model} | {kind} | {pm(v)} | {pm(ref)} | {d:+.3f} | {permutation_p(ref, v):.3g} |")
 
+print("\n| model | training set | validation, first | validation, second | Δ |\n|---|---|---|---|---|")
+for model in MODELS:
+    if not (second / model / "runs.jsonl").is_file():
+        continue
+    a, b = scores(first / model, "best_val_mean_class_accuracy"), scores(second / model, "best_val_mean_class_accuracy")
+    for kind in b:
+        if kind in a and kind != "real→real":
+            d = sum(b[kind]) / len(b[kind]) - sum(a[kind]) / len(a[kind])
+            print(f"| {model} | {kind} | {pm(a[kind])} | {pm(b[kind])} | {d:+.3f} |")
