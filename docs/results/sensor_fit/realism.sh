@@ -8,6 +8,8 @@
 #   hidden  placed, and each crop's bottom hidden up to a height drawn from the class's fitted interval (fit.crops.hidden_below_m);
 #   widths  hidden, and each mesh stretched horizontally to the class's fitted widths across the line of sight (fit.crops.across_sight_width_m);
 #   train   widths with every class, cars too, as tall as its fitted heights: the crops sim2real --fit-sensor trains fitted+placed on.
+#   occluded hidden, and one side of each mesh hidden behind panels so that its crops are as wide as the fitted widths
+#           where it shows wider (scan --occlude; cars keep their lengths, as in placed).
 # usage: bash docs/results/sensor_fit/realism.sh SHARED_DATA FITTED_SENSOR.json OUT   (zbuf-occlude on PATH)
 #        TAGS="physics ground" bash ...   runs only those; CLASSES="pedestrian bush" bash ... other classes (default: car pole)
 set -euo pipefail
@@ -29,6 +31,7 @@ for tag in $tags; do
     [ $tag = ground ] && physics=(--footprint --echo-separation 0.75 --ground-margin 0.25)
     [ $tag = hidden ] && physics=(--hidden-below "$(crops $cls hidden_below_m)")
     case $tag in widths|train) physics=(--hidden-below "$(crops $cls hidden_below_m)" --across-sight-width "$(crops $cls across_sight_width_m)");; esac
+    [ $tag = occluded ] && physics=(--hidden-below "$(crops $cls hidden_below_m)" --across-sight-width "$(crops $cls across_sight_width_m)" --occlude)
     size_of=max
     if [ $tag != preset ] && [ $tag != fitted ]; then
       distance=$(crops $cls distance_m)
