@@ -24,7 +24,7 @@ from zbuf_occlude.learn.models import (  # noqa: E402
     orthogonality_loss,
     voxelize,
 )
-from zbuf_occlude.learn.training import TrainConfig, predict, train  # noqa: E402
+from zbuf_occlude.learn.training import RECIPES, TrainConfig, predict, train  # noqa: E402
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 
@@ -241,6 +241,8 @@ def test_aspect_is_off_by_default_and_draws_new_proportions_when_on():
     assert "aspect" not in TrainConfig().identity(("seed",)) and TrainConfig(aspect=True).identity(("seed",))["aspect"] is True
     with pytest.raises(InvalidInputError, match="aspect"):
         TrainConfig(aspect=True, augment=False)
+    for recipe in RECIPES.values():  # it goes with either recipe
+        assert TrainConfig(aspect=True, **recipe).aspect and "aspect" not in TrainConfig(**recipe).identity(("seed",))
 
 
 def test_resample_and_split():

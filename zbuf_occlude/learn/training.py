@@ -68,7 +68,7 @@ OPTIMISER_DEFAULTS = {
 
 #: The recipe options' values that reproduce the plain loop (TrainConfig's defaults): a checkpoint
 #: made before the options existed resumes with them.
-PLAIN_RECIPE = {"balance": "none", "select": "accuracy", "warmup_epochs": 0, "grad_clip": None, "aspect": False}
+PLAIN_RECIPE = {"balance": "none", "select": "accuracy", "warmup_epochs": 0, "grad_clip": None}
 #: The recipe for small, imbalanced sets (module docstring): class-balanced sampling, selection
 #: on validation mean class accuracy, two epochs of warm-up, gradient norm clipped at 5 (a
 #: bound that normal steps of these models stay under and a diverging step does not).
@@ -159,9 +159,10 @@ class TrainConfig:
 
     def identity(self, exclude: tuple[str, ...]) -> dict:
         """The fields that make results differ, for a checkpoint's or a run's settings: all but
-        ``exclude``, with recipe options at their :data:`PLAIN_RECIPE` values left out (so a config
-        from before those options existed compares equal)."""
-        return {k: v for k, v in self.to_dict().items() if k not in exclude and not (k in PLAIN_RECIPE and v == PLAIN_RECIPE[k])}
+        ``exclude``, with recipe options at their :data:`PLAIN_RECIPE` values and ``aspect`` off
+        left out (so a config from before those options existed compares equal)."""
+        left_out = {**PLAIN_RECIPE, "aspect": False}
+        return {k: v for k, v in self.to_dict().items() if k not in exclude and not (k in left_out and v == left_out[k])}
 
 
 @dataclass
