@@ -161,6 +161,19 @@ def test_fit_width_scale_makes_the_crops_as_wide_as_asked() -> None:
         fit_width_scale(post, sensor_from_name("riegl-q1560"), dist, (0.3, 0.6))
 
 
+@pytest.mark.parametrize("second, stretch", [(1e-9, 0.2), (0.02, 0.1), (0.0025, 0.8), (0.0, 0.2)])
+def test_fit_width_scale_corrects_by_at_most_four_times_wider(monkeypatch: pytest.MonkeyPatch, second: float, stretch: float) -> None:
+    # a lamp post squeezed towards a 1 cm target showed 2e-9 m in the second round (two returns of one azimuth column in
+    # a band), and dividing by it asked for a 5.6e5 x stretch: a correction above 4 x is noise, and the first estimate stays
+    from zbuf_occlude.sensors.fit import shapes
+
+    widths = iter([0.05, second])  # the mesh's own crops 5 cm wide; then the crops at the first estimate, 0.2 x
+    monkeypatch.setattr(shapes, "_median_crop_width", lambda *args: next(widths))
+    post = trimesh.creation.cylinder(radius=0.05, height=1.0, sections=8)
+    lo, hi = fit_width_scale(post, lidar_preset("hdl32e"), CropDistributions(distance_m=5.0, height_m=1.8, size_m=3.0), (0.005, 0.015))
+    assert (lo, hi) == pytest.approx((0.5 * stretch, 1.5 * stretch))
+
+
 def test_scan_across_sight_width_option(tmp_path: Path) -> None:
     from zbuf_occlude.cli.main import main
 

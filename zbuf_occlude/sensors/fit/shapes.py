@@ -32,6 +32,10 @@ WIDTH_SAMPLES = 16
 _WIDTH_STREAM = 0x57D7  # fit_width_scale's crops
 _PROFILE_STREAM = 0x9F0F  # fit_width_profile's crops
 _WIDTH_GROWTHS = 6  # fit_width_scale widens a mesh that shows no width up to 4**6 times
+#: The width fits' second round widens the first's estimate by at most this factor.  A larger
+#: one means the crops it measured are narrower than the sensor resolves (two returns of one
+#: azimuth column in a band, a width of 1e-9 m), not that they widen out of proportion.
+_MAX_CORRECTION = 4.0
 
 
 def fit_width_scale(mesh, sensor, distributions, width_m: tuple[float, float], *, n_samples: int = WIDTH_SAMPLES,
@@ -91,9 +95,7 @@ def fit_width_scale(mesh, sensor, distributions, width_m: tuple[float, float], *
     if not w > 0:
         raise InvalidInputError(f"{name}: no crop of {n_samples} shows it two returns wide in a band, even {scale:g}x as wide")
     scale *= middle / w
-    w = median_width(scale)
-    if w > 0:  # the correction
-        scale *= middle / w
+    scale *= _correction(middle, median_width(scale))
     return max(lo, 1e-3 * hi) * scale / middle, hi * scale / middle
 
 
@@ -125,10 +127,18 @@ def fit_visible_across_sight(mesh, sensor, distributions, width_m: tuple[float, 
     middle = (lo + hi) / 2
     share = middle / w
     if share < 1.0:  # the correction: a side occluder's edge does not cut the band widths in proportion
-        hidden = _median_crop_width(mesh, sensor, replace(dist, visible_across_sight=(share, share)), int(n_samples), seed)
-        if hidden > 0:
-            share *= middle / hidden
+        share *= _correction(middle, _median_crop_width(mesh, sensor, replace(dist, visible_across_sight=(share, share)), int(n_samples), seed))
     return max(lo, 1e-3 * hi) * share / middle, hi * share / middle
+
+
+def _correction(target: float, measured: float) -> float:
+    """The second round's factor ``target / measured``; 1 (the first round's estimate kept) where
+    the crops show no width or it is above :data:`_MAX_CORRECTION` (a target narrower than the
+    sensor resolves: the width measured is noise, and dividing by it asks for any stretch)."""
+    if not measured > 0:
+        return 1.0
+    factor = target / measured
+    return factor if factor <= _MAX_CORRECTION else 1.0
 
 
 def _check_width_fit(width_m, n_samples, sensor) -> tuple[float, float]:
