@@ -4,12 +4,14 @@
 
 The second argument is the OUT of realism.sh; its scans_{placed,hidden,occluded}_car folders are read where present.
 Heights are z in the sensor's frame (z up, metres; the fitted ground lies 1.81 m below the sensor); medians per bin.
+Then the slope of the real cars' lowest return over their distance (Theil-Sen, and least squares).
 """
 
 import sys
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import theilslopes
 
 from zbuf_occlude.experiments.realism import cloud_stats, read_object_clouds
 
@@ -40,3 +42,10 @@ rows("real", Path(data) / "lidarnet_v2_partial" / "Car")
 for tag in ("placed", "hidden", "occluded"):
     if (out / f"scans_{tag}_car").is_dir():
         rows(tag, out / f"scans_{tag}_car")
+
+real = [c.points_m for c in read_object_clouds(Path(data) / "lidarnet_v2_partial" / "Car")]
+bottom = np.array([p[:, 2].min() for p in real])
+distance = np.array([np.hypot(*p[:, :2].mean(axis=0)) for p in real])
+slope, _, lo, hi = theilslopes(bottom, distance)
+print(f"\nreal cars' lowest return over distance: Theil-Sen {slope:.3f} m/m (95 % {lo:.3f} to {hi:.3f}), "
+      f"least squares {np.polyfit(distance, bottom, 1)[0]:.3f} m/m, {len(real)} cars")
