@@ -285,8 +285,7 @@ def object_crop(
     pose = sensor_pose([0.0, 0.0, placement["height_m"]])
     scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=max(2.0 * d, 20.0))
     if placement.get("visible_across_sight", 1.0) < 1.0:  # after the given occluders; the object is built once
-        built = scene.build()
-        world = np.asarray(built.local_meshes[1].vertices, dtype=np.float64) @ built.local_to_world[1][:3, :3].T + built.local_to_world[1][:3, 3]
+        world = scene.build().world_vertices(1)
         for panel in side_occluders(world, pose[:3, 3], placement["visible_across_sight"], placement["occluder_side"]):
             scene.add_occluder(panel)
     sector = None

@@ -276,6 +276,15 @@ class BuiltScene:
     local_to_world: list[NDArray[np.float64]]
     local_meshes: list[trimesh.Trimesh | None]
 
+    def world_vertices(self, object_id: int) -> NDArray[np.float64]:
+        """``(V, 3) float64``: the vertices of object ``object_id`` (>= 1) in the world frame, metres, as in :attr:`mesh`."""
+        return _to_world(self.local_meshes[object_id].vertices, self.local_to_world[object_id])
+
+
+def _to_world(vertices, local_to_world: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(V, 3)`` local vertices through a ``(4, 4)`` local-to-world transform."""
+    return np.asarray(vertices, dtype=np.float64) @ local_to_world[:3, :3].T + local_to_world[:3, 3]
+
 
 @dataclass
 class ScanScene:
@@ -369,7 +378,7 @@ class ScanScene:
             local, m = self._object_build(obj)
             m = m.copy()
             m[2, 3] += self.ground_z_m
-            v = np.asarray(local.vertices, dtype=np.float64) @ m[:3, :3].T + m[:3, 3]
+            v = _to_world(local.vertices, m)
             f = np.asarray(local.faces, dtype=np.int64)
             vertices.append(v)
             faces.append(f + n_vertices)
