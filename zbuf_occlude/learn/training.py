@@ -75,6 +75,8 @@ PLAIN_RECIPE = {"balance": "none", "select": "accuracy", "warmup_epochs": 0, "gr
 STABLE_RECIPE = {"balance": "sampler", "select": "mean_class_accuracy", "warmup_epochs": 2, "grad_clip": 5.0}
 #: The recipes by name (``experiment sim2real --recipe``).
 RECIPES = {"plain": PLAIN_RECIPE, "stable": STABLE_RECIPE}
+#: Fields a run's identity leaves out at these values (:meth:`TrainConfig.identity`): options newer than some runs.
+_IDENTITY_DEFAULTS = {**PLAIN_RECIPE, "aspect": False}
 
 
 @dataclass
@@ -161,8 +163,7 @@ class TrainConfig:
         """The fields that make results differ, for a checkpoint's or a run's settings: all but
         ``exclude``, with recipe options at their :data:`PLAIN_RECIPE` values and ``aspect`` off
         left out (so a config from before those options existed compares equal)."""
-        left_out = {**PLAIN_RECIPE, "aspect": False}
-        return {k: v for k, v in self.to_dict().items() if k not in exclude and not (k in left_out and v == left_out[k])}
+        return {k: v for k, v in self.to_dict().items() if k not in exclude and not (k in _IDENTITY_DEFAULTS and v == _IDENTITY_DEFAULTS[k])}
 
 
 @dataclass

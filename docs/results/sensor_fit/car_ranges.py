@@ -16,8 +16,7 @@ from scipy.stats import theilslopes
 from zbuf_occlude.experiments.realism import cloud_stats, read_object_clouds
 
 
-def rows(name: str, path: Path) -> None:
-    clouds = read_object_clouds(path)
+def rows(name: str, clouds: list) -> None:
     stats = [cloud_stats(c) for c in clouds]
     r = np.array([s["range_m"] for s in stats])
     cols = {
@@ -38,14 +37,14 @@ def rows(name: str, path: Path) -> None:
 data, out = sys.argv[1], Path(sys.argv[2])
 print("| crops | range | clouds | returns | rings | visible height, m | lowest z, m | top z, m | width, m |")
 print("|---|---|---|---|---|---|---|---|---|")
-rows("real", Path(data) / "lidarnet_v2_partial" / "Car")
+real = read_object_clouds(Path(data) / "lidarnet_v2_partial" / "Car")
+rows("real", real)
 for tag in ("placed", "hidden", "occluded"):
     if (out / f"scans_{tag}_car").is_dir():
-        rows(tag, out / f"scans_{tag}_car")
+        rows(tag, read_object_clouds(out / f"scans_{tag}_car"))
 
-real = [c.points_m for c in read_object_clouds(Path(data) / "lidarnet_v2_partial" / "Car")]
-bottom = np.array([p[:, 2].min() for p in real])
-distance = np.array([np.hypot(*p[:, :2].mean(axis=0)) for p in real])
+bottom = np.array([c.points_m[:, 2].min() for c in real])
+distance = np.array([np.hypot(*c.points_m[:, :2].mean(axis=0)) for c in real])
 slope, _, lo, hi = theilslopes(bottom, distance)
 print(f"\nreal cars' lowest return over distance: Theil-Sen {slope:.3f} m/m (95 % {lo:.3f} to {hi:.3f}), "
       f"least squares {np.polyfit(distance, bottom, 1)[0]:.3f} m/m, {len(real)} cars")

@@ -23,12 +23,12 @@ from zbuf_occlude.learn.stats import mean_std, permutation_p
 MODELS = ("pointnet", "voxnet", "3dmfv")
 
 
-def scores(folder: Path, key: str = "mean_class_accuracy") -> dict[str, list[float]]:
-    """``{training set: [key per seed, in seed order]}`` over the seeds kept."""
+def scores(folder: Path, seeds: tuple[int, int], key: str) -> dict[str, list[float]]:
+    """``{training set: [key per seed, in seed order]}`` over ``seeds`` (lo, hi)."""
     out: dict[str, list[tuple[int, float]]] = {}
     for line in (folder / "runs.jsonl").read_text(encoding="utf-8").splitlines():
         r = json.loads(line)
-        if SEEDS[0] <= r["seed"] <= SEEDS[1]:
+        if seeds[0] <= r["seed"] <= seeds[1]:
             out.setdefault(r["train_set"], []).append((r["seed"], r[key]))
     return {k: [v for _, v in sorted(rows)] for k, rows in out.items()}
 
@@ -38,35 +38,32 @@ def pm(values: list[float]) -> str:
     return f"{m:.3f} ± {s:.3f}"
 
 
+def mean(values: list[float]) -> float:
+    return sum(values) / len(values)
+
+
+def pairs(key: str):
+    """``(model, training set, first run's values, second's)`` of ``key`` for every mesh-only set both runs hold."""
+    for model in MODELS:
+        if (second / model / "runs.jsonl").is_file():
+            a, b = scores(first / model, SEEDS, key), scores(second / model, SEEDS, key)
+            yield from ((model, kind, a[kind], b[kind]) for kind in b if kind in a and kind != "real→real")
+
+
 first, second = Path(sys.argv[1]), Path(sys.argv[2])
 SEEDS = tuple(int(v) for v in sys.argv[3].split("-")) if len(sys.argv) > 3 else (0, 10**9)
 print("| model | training set | first | second | Δ | p (second above) | p (first above) |\n|---|---|---|---|---|---|---|")
-for model in MODELS:
-    if not (second / model / "runs.jsonl").is_file():
-        continue
-    a, b = scores(first / model), scores(second / model)
-    for kind in b:
-        if kind in a and kind != "real→real":
-            d = sum(b[kind]) / len(b[kind]) - sum(a[kind]) / len(a[kind])
-            print(f"| {model} | {kind} | {pm(a[kind])} | {pm(b[kind])} | {d:+.3f} | "
-                  f"{permutation_p(b[kind], a[kind]):.3g} | {permutation_p(a[kind], b[kind]):.3g} |")
+for model, kind, a, b in pairs("mean_class_accuracy"):
+    print(f"| {model} | {kind} | {pm(a)} | {pm(b)} | {mean(b) - mean(a):+.3f} | {permutation_p(b, a):.3g} | {permutation_p(a, b):.3g} |")
 print("\n| model | training set | mean class acc. | real→real | Δ | p (real→real above) |\n|---|---|---|---|---|---|")
 for model in MODELS:
     if not (second / model / "runs.jsonl").is_file():
         continue
-    b = scores(second / model)
+    b = scores(second / model, SEEDS, "mean_class_accuracy")
     ref = b["real→real"]
     for kind, v in b.items():
         if kind != "real→real":
-            d = sum(v) / len(v) - sum(ref) / len(ref)
-            print(f"| {model} | {kind} | {pm(v)} | {pm(ref)} | {d:+.3f} | {permutation_p(ref, v):.3g} |")
-
+            print(f"| {model} | {kind} | {pm(v)} | {pm(ref)} | {mean(v) - mean(ref):+.3f} | {permutation_p(ref, v):.3g} |")
 print("\n| model | training set | validation, first | validation, second | Δ |\n|---|---|---|---|---|")
-for model in MODELS:
-    if not (second / model / "runs.jsonl").is_file():
-        continue
-    a, b = scores(first / model, "best_val_mean_class_accuracy"), scores(second / model, "best_val_mean_class_accuracy")
-    for kind in b:
-        if kind in a and kind != "real→real":
-            d = sum(b[kind]) / len(b[kind]) - sum(a[kind]) / len(a[kind])
-            print(f"| {model} | {kind} | {pm(a[kind])} | {pm(b[kind])} | {d:+.3f} |")
+for model, kind, a, b in pairs("best_val_mean_class_accuracy"):
+    print(f"| {model} | {kind} | {pm(a)} | {pm(b)} | {mean(b) - mean(a):+.3f} |")

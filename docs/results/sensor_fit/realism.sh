@@ -30,8 +30,8 @@ for tag in $tags; do
     [ $tag = physics ] && physics=(--footprint --echo-separation 0.75)
     [ $tag = ground ] && physics=(--footprint --echo-separation 0.75 --ground-margin 0.25)
     [ $tag = hidden ] && physics=(--hidden-below "$(crops $cls hidden_below_m)")
-    case $tag in widths|train) physics=(--hidden-below "$(crops $cls hidden_below_m)" --across-sight-width "$(crops $cls across_sight_width_m)");; esac
-    [ $tag = occluded ] && physics=(--hidden-below "$(crops $cls hidden_below_m)" --across-sight-width "$(crops $cls across_sight_width_m)" --occlude)
+    case $tag in widths|train|occluded) physics=(--hidden-below "$(crops $cls hidden_below_m)" --across-sight-width "$(crops $cls across_sight_width_m)");; esac
+    [ $tag = occluded ] && physics+=(--occlude)
     size_of=max
     if [ $tag != preset ] && [ $tag != fitted ]; then
       distance=$(crops $cls distance_m)
