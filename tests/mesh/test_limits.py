@@ -285,3 +285,19 @@ def test_collada_counts_match_what_trimesh_loads(tmp_path: Path) -> None:
     assert counts.faces == (7 + 2 + 3 + 4) * 5 == sum(len(g.faces) for g in loaded.dump())
     assert counts.instances == 3 * 5 == len(loaded.graph.nodes_geometry)
     assert counts.depth == 6  # the scene's node > n2 > its inner node > n1 > its inner node > n0
+
+
+@pytest.mark.parametrize("skinned", [True, False])
+def test_a_skinned_gltf_warns_that_it_loads_in_its_bind_pose(tmp_path: Path, caplog: pytest.LogCaptureFixture, skinned: bool) -> None:
+    """trimesh applies no skin: a simulator's character comes in its T-pose, which the user must be told."""
+    node = {"mesh": 0, "skin": 0} if skinned else {"mesh": 0}
+    doc = {**_embedded_triangle(), "nodes": [node, {"name": "hip"}], "scenes": [{"nodes": [0, 1]}]}
+    if skinned:
+        doc["skins"] = [{"joints": [1]}]
+    path = _gltf(tmp_path, doc, name="walker.gltf")
+    with caplog.at_level("WARNING", logger="zbuf_occlude.mesh.formats"):
+        mesh = load_mesh(path, normalize=False)
+    assert len(mesh.faces) == 1
+    warned = [r.getMessage() for r in caplog.records if "bind pose" in r.getMessage()]
+    assert warned == ([f"{path}: 1 skinned mesh node(s) load in their bind pose (often a T-pose): skins and animations are not applied"]
+                      if skinned else [])  # fmt: skip

@@ -14,14 +14,18 @@ import base64
 import importlib.util
 import io
 import itertools
+import logging
 import re
+from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from zbuf_occlude.errors import MeshLoadError
 from zbuf_occlude.mesh.flatten import flatten_scene
 from zbuf_occlude.mesh.limits import check_collada_declared_sizes, check_gltf_declared_sizes
 from zbuf_occlude.mesh.named_files import folder_resolver, read_regular_file
+
+log = logging.getLogger(__name__)
 
 if TYPE_CHECKING:  # trimesh (and scipy with it) is imported by the readers below, when a file is read
     import trimesh
@@ -302,6 +306,17 @@ def _check_obj_indices(raw: bytes) -> None:
                 raise _Malformed(f"line {line}: face {match.group(0).strip().decode('latin-1')[:60]!r} uses vertex index 0 (OBJ indices start at 1)")
 
 
+def _warn_bind_pose(doc: Mapping[str, Any] | None, path: Path) -> None:
+    """Log a warning naming ``path`` when its glTF ``doc`` has skinned mesh nodes: trimesh applies
+    neither skins nor animations, so such a character (a simulator's pedestrian) loads in the pose
+    it was modelled in, often a T-pose with the arms out, not as it stands or walks."""
+    nodes = doc.get("nodes") if doc is not None else None
+    skinned = sum(isinstance(n, dict) and "mesh" in n and "skin" in n for n in nodes) if isinstance(nodes, list) else 0
+    if skinned:
+        log.warning("%s: %d skinned mesh node(s) load in their bind pose (often a T-pose): skins and animations are not applied",
+                    path, skinned)  # fmt: skip
+
+
 def _read(path: Path, file_type: str) -> trimesh.Trimesh:
     """Parse ``path`` with trimesh into one Trimesh; scenes are flattened with transforms.
 
@@ -325,7 +340,7 @@ def _read(path: Path, file_type: str) -> trimesh.Trimesh:
         if importlib.util.find_spec(module) is None:
             raise _NeedsExtra(f"reading {file_type.upper()} needs the {module!r} package: pip install 'zbuf-occlude[{extra}]'")
     if file_type in ("gltf", "glb"):
-        check_gltf_declared_sizes(raw, path)
+        _warn_bind_pose(check_gltf_declared_sizes(raw, path), path)
     if file_type == "obj":
         _check_obj_indices(raw)
     if file_type == "dae":  # textures are not needed: never read (_no_textures_resolver)

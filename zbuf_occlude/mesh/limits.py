@@ -181,7 +181,7 @@ def _check_totals(path: str | PathLike[str], *, faces: int, instances: int, node
         raise MeshLoadError(f"{path}: {exc}") from None
 
 
-def check_gltf_declared_sizes(raw: bytes, path: str | PathLike[str]) -> None:
+def check_gltf_declared_sizes(raw: bytes, path: str | PathLike[str]) -> Mapping[str, Any] | None:
     """Refuse a glTF (``.gltf`` text or ``.glb`` bytes) whose declared sizes pass the caps.
 
     Linear in the JSON's size; nothing the file declares is allocated.
@@ -192,6 +192,12 @@ def check_gltf_declared_sizes(raw: bytes, path: str | PathLike[str]) -> None:
         The file's content.
     path : path
         The file, for the message.
+
+    Returns
+    -------
+    dict or None
+        The file's JSON document, checked (None when it cannot be parsed: trimesh then
+        reports the file).
 
     Raises
     ------
@@ -204,7 +210,7 @@ def check_gltf_declared_sizes(raw: bytes, path: str | PathLike[str]) -> None:
     """
     doc = _gltf_json(raw)
     if doc is None:
-        return
+        return None
     nodes, accessors = _list(doc, "nodes"), _list(doc, "accessors")
     if len(nodes) > MAX_SCENE_NODES:  # before the walk: its lists take memory per node
         raise MeshLoadError(f"{path}: declares {len(nodes):,} scene nodes, more than the {MAX_SCENE_NODES:,} accepted")
@@ -221,6 +227,7 @@ def check_gltf_declared_sizes(raw: bytes, path: str | PathLike[str]) -> None:
         path, faces=sum(k * faces_per_mesh[m] for k, m in placed), instances=sum(k * primitives_per_mesh[m] for k, m in placed),
         nodes=len(nodes), extra_bytes=n_bytes,
     )  # fmt: skip
+    return doc
 
 
 # -- COLLADA -------------------------------------------------------------------------------
