@@ -20,30 +20,25 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from zbuf_occlude.mesh.named_files import folder_resolver, read_regular_file
+
 _COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 
 
 def read_gltf(path: Path) -> tuple[dict, list[bytes]]:
-    """The JSON and the buffers of a .gltf (buffers beside it, or data URIs) or .glb file."""
-    raw = path.read_bytes()
+    """The JSON and the buffers of a .gltf (buffers beside it, or data URIs) or .glb file, read as the
+    mesh loader reads them (regular files only, inside the file's folder: ``zbuf_occlude.mesh.named_files``)."""
+    raw = read_regular_file(path)
     if raw[:4] == b"glTF":
         n = struct.unpack_from("<I", raw, 12)[0]
         doc = json.loads(raw[20 : 20 + n])
         blob = raw[20 + n + 8 :]
         return doc, [blob]
     doc = json.loads(raw)
-    buffers = []
-    for b in doc["buffers"]:
-        uri = b["uri"]
-        if uri.startswith("data:"):
-            buffers.append(base64.b64decode(uri.split(",", 1)[1]))
-        else:
-            target = (path.parent / uri).resolve()
-            if path.parent.resolve() not in target.parents:
-                raise SystemExit(f"{path}: buffer {uri!r} lies outside its folder")
-            buffers.append(target.read_bytes())
-    return doc, buffers
+    resolver = folder_resolver(path)
+    return doc, [base64.b64decode(b["uri"].split(",", 1)[1]) if b["uri"].startswith("data:") else resolver.get(b["uri"])
+                 for b in doc["buffers"]]  # fmt: skip
 
 
 def accessor(doc: dict, buffers: list[bytes], index: int) -> np.ndarray:

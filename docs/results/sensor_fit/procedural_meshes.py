@@ -33,10 +33,15 @@ def trunk(rng: np.random.Generator) -> trimesh.Trimesh:
     r0 = rng.uniform(0.02, 0.09)
     flare, taper, ellipse = rng.uniform(0.2, 0.8), rng.uniform(0.6, 0.9), rng.uniform(0.75, 1.0)
     bend = rng.uniform(-0.06, 0.06, 2)
-    radius = r0 * (1 - (1 - taper) * z) * (1 + flare * np.exp(-z / 0.06))
+
+    def axis(t):  # the stem's centre (x, y) and its radius without the flare at height t
+        return bend[0] * t**2, bend[1] * t**2, r0 * (1 - (1 - taper) * t)
+
+    cx, cy, r = axis(z[:, None])
+    radius = r * (1 + flare * np.exp(-z[:, None] / 0.06))
     noise = 1 + 0.04 * rng.standard_normal((n_z, n_a))
-    x = (radius[:, None] * noise * np.cos(a)[None]) + bend[0] * z[:, None] ** 2
-    y = (radius[:, None] * noise * ellipse * np.sin(a)[None]) + bend[1] * z[:, None] ** 2
+    x = (radius * noise * np.cos(a)[None]) + cx
+    y = (radius * noise * ellipse * np.sin(a)[None]) + cy
     verts = np.stack([x, y, np.broadcast_to(z[:, None], x.shape)], axis=-1).reshape(-1, 3)
     faces = []
     for i in range(n_z - 1):
@@ -44,16 +49,16 @@ def trunk(rng: np.random.Generator) -> trimesh.Trimesh:
             p, q = i * n_a + j, i * n_a + (j + 1) % n_a
             faces += [(p, q, q + n_a), (p, q + n_a, p + n_a)]
     top = len(verts)
-    verts = np.vstack([verts, [[bend[0], bend[1], 1.0]]])
+    verts = np.vstack([verts, [[*axis(1.0)[:2], 1.0]]])
     faces += [((n_z - 1) * n_a + j, (n_z - 1) * n_a + (j + 1) % n_a, top) for j in range(n_a)]
     parts = [trimesh.Trimesh(verts, np.asarray(faces), process=False)]
     for _ in range(rng.choice([0, 1, 2, 3], p=[0.25, 0.3, 0.3, 0.15])):
         h = rng.uniform(0.75, 0.97)
         tilt, heading = np.radians(rng.uniform(30.0, 65.0)), rng.uniform(0.0, 2 * np.pi)
         length = rng.uniform(0.08, 0.3)
-        start = np.array([bend[0] * h**2, bend[1] * h**2, h])
+        *centre, r_here = axis(h)
+        start = np.array([*centre, h])
         end = start + length * np.array([np.sin(tilt) * np.cos(heading), np.sin(tilt) * np.sin(heading), np.cos(tilt)])
-        r_here = r0 * (1 - (1 - taper) * h)
         parts.append(trimesh.creation.cylinder(radius=r_here * rng.uniform(0.35, 0.7), segment=[start, end], sections=10))
     return trimesh.util.concatenate(parts)
 
