@@ -66,7 +66,9 @@ __all__ = [
     "Lidar", "DepthCamera", "ScanScene", "SceneObject", "load_scene", "look_at_pose", "Scan", "scan",
 ]
 
-from zbuf_occlude import _moved
+from zbuf_occlude import _llvm, _moved
+
+_llvm.install()  # Triton's LLVM binds to itself, whatever OpenGL context is made before or after (see _llvm)
 
 _moved.install()  # old module paths of the flat layout: a DeprecationWarning, then the new module
 

@@ -3,8 +3,9 @@
 PyPI's default PyTorch brings Triton, whose ``libtriton.so`` carries its own LLVM.  Mesa's EGL
 loads llvmpipe and its ``libLLVM`` into the global symbol scope; a ``libtriton.so`` loaded after
 that bound its LLVM calls to Mesa's and died with SIGSEGV (``torch.use_deterministic_algorithms``,
-``torch.compile``, ``import triton``).  Each case runs in a fresh interpreter, since a crash
-kills the process.  CI installs Triton (the ``test`` extra) so that these run there.
+``torch.compile``, ``import triton``), whoever made the context: us, pyrender, or the user's own
+moderngl code (zbuf_occlude._llvm).  Each case runs in a fresh interpreter, since a crash kills
+the process.  CI installs Triton (the ``test`` extra) so that these run there.
 """
 
 from __future__ import annotations
@@ -25,8 +26,8 @@ pytestmark = pytest.mark.skipif(
 )
 
 
-def _run(code: str, timeout: float = 300) -> subprocess.CompletedProcess:
-    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
+def _run(code: str, timeout: float = 300, path: Path | None = None) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(str(p) for p in (REPO_ROOT, path) if p)}
     return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=timeout)
 
 
@@ -95,13 +96,89 @@ print("ok")
     _assert_survives(_run(code))
 
 
-def test_the_preload_loads_triton_without_importing_it():
+def test_import_loads_no_llvm_and_importing_triton_loads_it_bound_to_itself():
     code = """
 import sys
+import zbuf_occlude
 from zbuf_occlude.render.context import shared_context
 shared_context()
-maps = open("/proc/self/maps").read()
-assert "libtriton.so" in maps and "triton" not in sys.modules, sorted(m for m in sys.modules if "triton" in m)
+assert "libtriton.so" not in open("/proc/self/maps").read()  # nothing paid until Triton is imported
+import triton
+assert "libtriton.so" in open("/proc/self/maps").read()
 print("ok")
 """
     _assert_survives(_run(code))
+
+
+COMPILE = "f = torch.compile(lambda x: (x * 2).sin().sum()); assert abs(float(f(torch.ones(8))) - 8 * 0.9092974) < 1e-4"
+
+
+@pytest.mark.parametrize("then", ["torch.use_deterministic_algorithms(True)", COMPILE])
+def test_pyrender_backend_then_triton(then):
+    pytest.importorskip("pyrender")
+    code = f"""
+import torch, trimesh, zbuf_occlude as zo
+mesh = trimesh.creation.icosphere(subdivisions=2)
+depth = zo.render_depth(mesh, zo.camera_on_sphere(20.0, 30.0, resolution=64), backend="pyrender")
+assert depth.max() > 0
+{then}
+print("ok")
+"""
+    _assert_survives(_run(code, timeout=600))
+
+
+@pytest.mark.parametrize(
+    "before",
+    [
+        "import zbuf_occlude\nimport moderngl\nctx = moderngl.create_standalone_context(backend='egl')",
+        # the user's own context before importing us: the library is still bound to itself
+        "import moderngl\nctx = moderngl.create_standalone_context(backend='egl')\nimport zbuf_occlude",
+    ],
+    ids=["import-then-own-context", "own-context-then-import"],
+)
+@pytest.mark.parametrize("then", ["torch.use_deterministic_algorithms(True)", COMPILE], ids=["deterministic", "compile"])
+def test_a_users_own_moderngl_context(before, then):
+    _assert_survives(_run(f"import torch\n{before}\n{then}\nprint('ok')", timeout=600))
+
+
+def test_torch_compile_before_the_first_render():
+    code = """
+import torch, trimesh, zbuf_occlude as zo
+f = torch.compile(lambda x: (x * 2).sin().sum())
+f(torch.ones(8))
+mesh = trimesh.creation.icosphere(subdivisions=2)
+points, fi = zo.sample_surface(mesh, 500, seed=0)
+zo.visible_mask(mesh, points, zo.camera_on_sphere(20.0, 30.0, resolution=64), "zbuffer-exact", face_index=fi)
+f(torch.ones(16))
+print("ok")
+"""
+    _assert_survives(_run(code, timeout=600))
+
+
+def test_spawned_dataloader_workers_render_and_import_triton(tmp_path):
+    (tmp_path / "spawn_items.py").write_text("""
+import torch
+from torch.utils.data import Dataset
+
+class Items(Dataset):
+    def __len__(self):
+        return 4
+    def __getitem__(self, i):
+        from zbuf_occlude.render.context import shared_context
+        shared_context()  # a Mesa context in the fresh worker first
+        import triton  # then Triton
+        return torch.tensor(float(i))
+""")
+    code = """
+from torch.utils.data import DataLoader
+from spawn_items import Items
+if __name__ == "__main__":
+    loader = DataLoader(Items(), batch_size=2, num_workers=2, multiprocessing_context="spawn")
+    assert sorted(float(x) for batch in loader for x in batch) == [0.0, 1.0, 2.0, 3.0]
+    print("ok")
+"""
+    script = tmp_path / "main.py"
+    script.write_text(code)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO_ROOT), str(tmp_path)])}
+    res = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=env, timeout=300)
+    _assert_survives(res)

@@ -6,26 +6,18 @@ Visibility needs OpenGL 4.3 (compute shaders, shader storage buffers).
 The backend order can be forced with the environment variable ``ZBUF_OCCLUDE_GL``
 (``egl``, ``osmesa``, or a comma-separated order such as ``osmesa,egl``).
 
-Mesa and other copies of LLVM in one process: Mesa's EGL loads its driver (llvmpipe, and the
-``libLLVM`` it links) with ``RTLD_GLOBAL``.  A library loaded later that carries its own LLVM
-and exports its symbols -- Triton's ``libtriton.so``, which PyPI's default PyTorch brings and
-imports for ``torch.compile`` or ``torch.use_deterministic_algorithms`` -- then has its LLVM
-calls bound to Mesa's LLVM of another version, and the process dies with SIGSEGV
-(``LD_DEBUG=bindings`` shows ``libtriton.so`` bound to ``libLLVM-15.so.1``).  Loaded first, with
-``RTLD_LOCAL``, it binds to its own.  So before the first context, :func:`create_context`
-loads the libraries of :data:`LLVM_BUNDLES` that are installed (without importing their
-Python packages).
+Mesa loads its llvmpipe driver and the ``libLLVM`` it links into the global symbol scope;
+:mod:`zbuf_occlude._llvm` (installed by ``import zbuf_occlude``) keeps Triton's own LLVM from
+binding to it, for our contexts and every other (pyrender's, a user's own).
 """
 
 from __future__ import annotations
 
 import ctypes
 import ctypes.util
-import importlib.util
 import logging
 import os
 import threading
-from pathlib import Path
 
 import moderngl
 import numpy as np
@@ -42,7 +34,6 @@ __all__ = [
     "REQUIRED_GL_VERSION",
     "SOFTWARE_RENDERERS",
     "is_software_renderer",
-    "LLVM_BUNDLES",
 ]
 
 log = logging.getLogger(__name__)
@@ -51,9 +42,6 @@ log = logging.getLogger(__name__)
 REQUIRED_GL_VERSION = 430
 #: Backends tried in order when none is named.
 GL_BACKENDS = ("egl", "osmesa")
-#: Python packages whose native library carries its own LLVM with exported symbols, and that
-#: library's path inside the package: loaded before any OpenGL context (module docstring).
-LLVM_BUNDLES = (("triton", ("_C", "libtriton.so")),)
 #: Substrings of ``GL_RENDERER`` (lower case) naming a rasteriser that runs on the CPU.
 SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "lavapipe", "software")
 
@@ -149,29 +137,6 @@ def _create_osmesa() -> moderngl.Context:
 
 
 _FACTORIES = {"egl": _create_egl, "osmesa": _create_osmesa}
-_preloaded = False
-
-
-def _preload_llvm_bundles() -> None:
-    """Load the installed libraries of :data:`LLVM_BUNDLES` with ``RTLD_LOCAL`` before Mesa
-    puts its ``libLLVM`` in the global scope (module docstring); once per process."""
-    global _preloaded
-    if _preloaded:
-        return
-    _preloaded = True
-    for package, relpath in LLVM_BUNDLES:
-        try:
-            spec = importlib.util.find_spec(package)  # finds, does not import
-        except (ImportError, ValueError):
-            continue
-        if spec is None or not spec.submodule_search_locations:
-            continue
-        library = Path(next(iter(spec.submodule_search_locations)), *relpath)
-        if library.is_file():
-            try:
-                ctypes.CDLL(str(library), mode=os.RTLD_NOW | os.RTLD_LOCAL)
-            except OSError as exc:  # a broken install of that package is its own problem, not ours
-                log.debug("could not preload %s: %s", library, exc)
 
 
 def _backend_order(backend: str | None) -> list[str]:
@@ -200,7 +165,6 @@ def create_context(backend: str | None = None) -> moderngl.Context:
     """
     failures = []
     order = _backend_order(backend)
-    _preload_llvm_bundles()
     for name in order:
         try:
             ctx = _FACTORIES[name]()
