@@ -30,6 +30,7 @@ from zbuf_occlude.farm.config import BYTES_PER_MB, PAPER_SAMPLES_PER_MB, FarmPar
 from zbuf_occlude.farm.worker import base_record, package_version, write_json
 from zbuf_occlude.geometry.samples import count_padded
 from zbuf_occlude.io.atomic import file_sha256, temp_is_orphan, temp_owner, write_text
+from zbuf_occlude.io.json_files import loads_json
 from zbuf_occlude.io.safe_paths import check_line_text, path_inside
 from zbuf_occlude.mesh.discovery import SPLITS
 from zbuf_occlude.mesh.inputs import FarmObject
@@ -62,8 +63,8 @@ def check_out_layout(out: Path) -> None:
 def read_json(path: Path) -> dict[str, Any] | None:
     """A JSON object of the journal (plan, record, task); ``None`` if missing, damaged or not an object."""
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        doc = loads_json(path.read_bytes(), what=str(path))
+    except (OSError, InvalidInputError):  # nested too deep, not JSON: damaged, as far as the journal goes
         return None
     return doc if isinstance(doc, dict) else None
 
@@ -91,7 +92,7 @@ def read_plan(folder: Path) -> dict[str, Any] | None:
         Plan.model_validate_json(text)
     except ValidationError as exc:
         raise InvalidInputError(f"{path} is not a farm plan: {describe_validation_error(exc)}") from None
-    plan = json.loads(text)
+    plan = loads_json(text, what=str(path))
     try:
         FarmParams(**plan["params"])
     except TypeError as exc:

@@ -17,15 +17,9 @@ from pathlib import Path
 from typing import Any
 
 from zbuf_occlude.dataset.layout import (
-    CARD_FILE,
-    CARD_SHA256_FILE,
     MANIFEST_FILE,
     PLAN_FILE,
-    RECORD_DIR,
-    SHAPE_NAMES_FILE,
-    SHARD_DIR,
     TASK_DIR,
-    file_list_name,
 )
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError, OutputError
 from zbuf_occlude.farm.checks import check_before_work, check_out_outside_inputs, prepare_out
@@ -36,7 +30,6 @@ from zbuf_occlude.farm.config import (
     RunOptions,
     options_with,
     record_path,
-    shard_path,
 )
 from zbuf_occlude.farm.journal import (
     FarmSummary,
@@ -52,12 +45,12 @@ from zbuf_occlude.farm.journal import (
 )
 from zbuf_occlude.farm.lifecycle import sigterm_as_interrupt
 from zbuf_occlude.farm.lock import farm_lock
+from zbuf_occlude.farm.ownership import check_inputs_outside_out, check_no_foreign_files, wipe_earlier_run
 from zbuf_occlude.farm.pool import run_in_workers
 from zbuf_occlude.farm.shards import select_shard
 from zbuf_occlude.farm.worker import package_version, process_object, write_json
 from zbuf_occlude.io.atomic import atomic_path, write_text
 from zbuf_occlude.io.safe_paths import path_inside
-from zbuf_occlude.mesh.discovery import SPLITS
 from zbuf_occlude.mesh.inputs import FarmObject, scan_objects
 
 log = logging.getLogger(__name__)
@@ -102,25 +95,6 @@ def _dask(
 
 
 # -- the farm ----------------------------------------------------------------------------------
-def _wipe(out: Path, objects: Sequence[FarmObject] | None) -> None:
-    """``--overwrite``: remove the farm's own files (all, or those of ``objects`` for a sharded task)."""
-    for o in objects if objects is not None else objects_of(read_json(out / PLAN_FILE) or {"objects": []}):
-        rec = read_json(record_path(out, o.index))  # generate's npz/ply live outside shards/
-        for rel in (rec or {}).get("shards") or ():
-            path_inside(out, rel, what=f"{record_path(out, o.index)} field 'shards'").unlink(missing_ok=True)
-    if objects is None:
-        for name in (SHARD_DIR, RECORD_DIR, TASK_DIR):
-            shutil.rmtree(out / name, ignore_errors=True)
-        for name in (PLAN_FILE, CARD_FILE, CARD_SHA256_FILE, MANIFEST_FILE, SHAPE_NAMES_FILE, *(file_list_name(s) for s in SPLITS)):
-            (out / name).unlink(missing_ok=True)
-        return
-    (out / CARD_FILE).unlink(missing_ok=True)
-    (out / CARD_SHA256_FILE).unlink(missing_ok=True)
-    for o in objects:
-        record_path(out, o.index).unlink(missing_ok=True)
-        (out / shard_path(o)).unlink(missing_ok=True)
-
-
 def _check_compatible(out: Path, plan: dict[str, Any]) -> None:
     old = read_json(out / PLAN_FILE)
     if old is None:
@@ -204,6 +178,7 @@ def run_farm(
     task, n_tasks = shard
     if isinstance(source, (str, os.PathLike)):
         check_out_outside_inputs(out, [source])
+        check_inputs_outside_out(out, [source])
     # before any mesh is found or loaded; the GL is checked here only when we render here, and
     # the memory only for processes of this machine (not those of a --scheduler's cluster)
     check_before_work(params, out, gl=not (scheduler or dask_local), workers=None if scheduler else dask_local or workers)
@@ -216,6 +191,7 @@ def run_farm(
         objects, source_text = list(source), source_text or "<objects given by the caller>"
         if [o.index for o in objects] != list(range(len(objects))):
             raise InvalidInputError("a ready plan must number its objects 0, 1, 2, ... in order")
+    check_inputs_outside_out(out, (o.source for o in objects))  # before anything in out is touched
     mine = select_shard(objects, task, n_tasks)
     out = Path(out)
     check_out_layout(out)  # every write and delete below stays inside out
@@ -231,8 +207,9 @@ def _run_locked(
     task, n_tasks = run.shard
     workers, scheduler, dask_local, skipped = run.workers, run.scheduler, run.dask_local, run.skipped
     plan = plan_doc(objects, params, run.source_text, layout=run.layout)
+    check_no_foreign_files(out, objects, params.storage)
     if run.overwrite:
-        _wipe(out, None if n_tasks == 1 else mine)
+        wipe_earlier_run(out, None if n_tasks == 1 else mine)
     else:
         _check_compatible(out, plan)
     if n_tasks == 1 or read_json(out / PLAN_FILE) != plan:
@@ -357,51 +334,63 @@ def merge_farm(
 
 
 def _merge_locked(folders: list[Path], out: Path, plan: dict[str, Any], *, progress: bool, t0: float) -> FarmSummary:
-    """:func:`merge_farm` once the data-set lock of ``out`` is held."""
-    if out.resolve() not in {f.resolve() for f in folders}:
-        _check_compatible(out, plan)
+    """:func:`merge_farm` once the data-set lock of ``out`` is held.
+
+    Every input is read before anything is written: a merge that cannot finish (objects without
+    a result, a damaged record) leaves ``out`` as it was.
+    """
     objects = objects_of(plan)
-    write_json(out / PLAN_FILE, plan)
-    remove_stale_temps(out, objects, everything=True)  # dead writers' temporaries, as a run does
+    if out.resolve() not in {f.resolve() for f in folders}:
+        check_no_foreign_files(out, objects, plan["params"].get("storage"))
+        _check_compatible(out, plan)
     digest = plan["params_digest"]
-    records: dict[int, dict[str, Any]] = {}
+    found: dict[int, tuple[Path, dict[str, Any]]] = {}
     failed: dict[int, dict[str, Any]] = {}
     commands: list[str] = []
+    task_docs: list[tuple[str, dict[str, Any]]] = []
     from tqdm.auto import tqdm
 
     for folder in folders:
         for task_file in sorted((folder / TASK_DIR).glob("task-*.json")):
             doc = read_json(task_file)
-            if doc and doc.get("command") not in commands:
+            if doc and isinstance(doc.get("command"), str) and doc["command"] not in commands:
                 commands.append(doc["command"])
             if doc and folder.resolve() != out.resolve():
-                write_json(out / TASK_DIR / task_file.name, doc)
-        for o in tqdm(objects, desc=f"merge {folder.name}", unit="obj", disable=not progress or None, leave=False):
-            if o.index in records:
+                task_docs.append((task_file.name, doc))
+        for o in tqdm(objects, desc=f"read {folder.name}", unit="obj", disable=not progress or None, leave=False):
+            if o.index in found:
                 continue
-            rec = finished_record(folder, o, digest)
-            if rec is None:
-                other = read_json(record_path(folder, o.index))
-                if other and other.get("params_digest") == digest and other.get("status") == "failed":
-                    failed[o.index] = other
+            rec = finished_record(folder, o, digest)  # its files checked inside folder
+            if rec is not None:
+                found[o.index] = (folder, rec)
                 continue
-            if folder.resolve() != out.resolve():
-                for rel in rec["shards"]:  # checked inside folder by finished_record; the copy stays inside out
-                    with atomic_path(path_inside(out, rel, what=f"{record_path(folder, o.index)} field 'shards'")) as tmp:
-                        shutil.copyfile(folder / rel, tmp)
-                write_json(record_path(out, o.index), rec)
-            records[o.index] = rec
-    for index, rec in failed.items():
-        if index not in records:
-            records[index] = rec
-            write_json(record_path(out, index), rec)
-    missing = [o for o in objects if o.index not in records]
+            other = read_json(record_path(folder, o.index))
+            if other and other.get("params_digest") == digest and other.get("status") == "failed":
+                failed.setdefault(o.index, other)
+    missing = [o for o in objects if o.index not in found and o.index not in failed]
     if missing:
         names = ", ".join(f"{o.index}:{o.name}" for o in missing[:5])
         raise InvalidInputError(
             f"{len(missing)} of {len(objects)} objects have no result yet ({names}{', ...' if len(missing) > 5 else ''}); "
             "rerun the tasks that own them (object i belongs to task i mod N), then merge again"
         )
+
+    write_json(out / PLAN_FILE, plan)
+    remove_stale_temps(out, objects, everything=True)  # dead writers' temporaries, as a run does
+    for name, doc in task_docs:
+        write_json(out / TASK_DIR / name, doc)
+    records: dict[int, dict[str, Any]] = {}
+    for index, (folder, rec) in tqdm(sorted(found.items()), desc="merge", unit="obj", disable=not progress or None, leave=False):
+        if folder.resolve() != out.resolve():
+            for rel in rec["shards"]:  # the copy stays inside out
+                with atomic_path(path_inside(out, rel, what=f"{record_path(folder, index)} field 'shards'")) as tmp:
+                    shutil.copyfile(folder / rel, tmp)
+            write_json(record_path(out, index), rec)
+        records[index] = rec
+    for index, rec in failed.items():
+        if index not in records:
+            records[index] = rec
+            write_json(record_path(out, index), rec)
     commands.append(shlex.join(sys.argv))
     finalize(out, plan, records, commands)
     n_ok = sum(r["status"] == "ok" for r in records.values())

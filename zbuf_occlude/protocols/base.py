@@ -24,7 +24,9 @@ import numpy as np
 from zbuf_occlude.dataset.layout import PROTOCOL_FILE
 from zbuf_occlude.errors import InvalidInputError, OutputError, ZbufOccludeError
 from zbuf_occlude.geometry.samples import PROTOCOL_STREAM, derive_rng
+from zbuf_occlude.farm.ownership import check_inputs_outside_out
 from zbuf_occlude.io.atomic import atomic_h5, write_text
+from zbuf_occlude.io.json_files import read_json_file
 from zbuf_occlude.mesh.inputs import FarmObject, scan_paths
 
 if TYPE_CHECKING:
@@ -155,23 +157,44 @@ def _shard(out: Path, protocol: str, index: int) -> Path:
     return out / SHARDS_DIR / f"{protocol}_{index:06d}.h5"
 
 
+def _earlier_options(out: Path) -> dict[str, Any] | None:
+    """The options an earlier protocol run recorded in ``out`` (``None`` when there is none).
+
+    Raises
+    ------
+    InvalidInputError
+        ``out/protocol.json`` exists but is not ours, or ``out/shards/`` holds files and no
+        ``protocol.json`` says they are ours: a run would replace or delete them.
+    """
+    path, shards = out / PROTOCOL_FILE, out / SHARDS_DIR
+    if not os.path.lexists(path):
+        if shards.is_dir() and any(shards.iterdir()) or os.path.lexists(shards) and not shards.is_dir():
+            raise InvalidInputError(
+                f"{shards} was not written by zbuf_occlude ({out} holds no earlier run: no {PROTOCOL_FILE}), and a run "
+                "would replace or delete what it holds: move it away, or choose an empty --out"
+            )
+        return None
+    try:
+        old = read_json_file(path)
+    except InvalidInputError as exc:
+        old = exc
+    if not isinstance(old, dict) or not isinstance(old.get("protocol"), str) or not isinstance(old.get("objects"), list):
+        raise InvalidInputError(f"{path} was not written by zbuf_occlude; move it away, or choose another --out")
+    return old
+
+
 def _record_options(out: Path, protocol: Protocol, options: ProtocolOptions, objects: Sequence[FarmObject], overwrite: bool) -> None:
     recorded = {"protocol": protocol.name, **asdict(options)}
     recorded["extra"] = dict(options.extra)
     # shards are named by plan index: another set of meshes must not resume from them
     recorded["objects"] = [[o.name, o.source] for o in objects]
-    path = out / PROTOCOL_FILE
-    if path.exists() and not overwrite:
-        try:
-            old = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            old = None
-        if old != json.loads(json.dumps(recorded)):
-            raise InvalidInputError(f"{out} holds a run with other options or meshes ({path}); use --overwrite or another --out")
-    if overwrite and (out / SHARDS_DIR).is_dir():
-        for old_shard in (out / SHARDS_DIR).glob("*.h5"):  # only our own shard files, never anything else
-            old_shard.unlink()
-    write_text(path, json.dumps(recorded, indent=1, sort_keys=True) + "\n")
+    old = _earlier_options(out)
+    if old is not None and not overwrite and old != json.loads(json.dumps(recorded)):
+        raise InvalidInputError(f"{out} holds a run with other options or meshes ({out / PROTOCOL_FILE}); use --overwrite or another --out")
+    if old is not None and overwrite:
+        for index in range(len(old["objects"])):  # the shards that run wrote, by its own names; nothing else
+            _shard(out, old["protocol"], index).unlink(missing_ok=True)
+    write_text(out / PROTOCOL_FILE, json.dumps(recorded, indent=1, sort_keys=True) + "\n")
 
 
 def run_protocol(
@@ -202,6 +225,7 @@ def run_protocol(
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise InvalidInputError(f"--out {out} exists and is not a folder")
+    check_inputs_outside_out(out, (*paths, *(o.source for o in objects)))  # before anything in out is touched
     _record_options(out, protocol, options, objects, overwrite)
     run = ProtocolRun(failures=[(s.path, s.reason) for s in skipped])
     shards: list[Path] = []

@@ -1,0 +1,190 @@
+"""What a run may replace or delete in its output folder: only what an earlier run of ours there wrote.
+
+The rule, for ``farm``, ``generate`` and ``farm-merge`` (``--overwrite`` or not):
+
+* An input (the folder or list file given, and every mesh it names) inside ``--out`` is refused
+  before anything is touched: a run writes and deletes there.
+* A folder that holds no earlier run of ours (no ``plan.json``) must hold none of the names a run
+  writes (``shards/``, ``records/``, ``tasks/``, the card, manifest, ``shape_names.txt``, the file
+  lists, ``generate``'s joined files and per-mesh folders); an empty folder of such a name is
+  fine.  Otherwise the run is refused, naming the first such file: it is somebody else's (a
+  PointNet download's ``shape_names.txt``, the user's own ``records/``).
+* A ``plan.json`` that is not a plan of ours is such a foreign file too.
+* ``--overwrite`` over an earlier run of ours deletes only the files that run recorded: each
+  object's record and the files its record names, the object's shard, the plan, card, manifest,
+  class names, file lists and joined files, and the task journal's own files.  Anything else
+  under ``--out``, inside ``shards/`` or ``records/`` too, is left where it is.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+from zbuf_occlude.dataset.layout import (
+    CARD_FILE,
+    CARD_SHA256_FILE,
+    MANIFEST_FILE,
+    PLAN_FILE,
+    RECORD_DIR,
+    SHAPE_NAMES_FILE,
+    SHARD_DIR,
+    TASK_DIR,
+    file_list_name,
+    split_file_name,
+)
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.farm.config import record_path, shard_path
+from zbuf_occlude.farm.journal import objects_of, read_json, read_plan
+from zbuf_occlude.io.safe_paths import path_inside
+from zbuf_occlude.mesh.discovery import SPLITS
+from zbuf_occlude.mesh.inputs import FarmObject
+
+__all__ = ["check_inputs_outside_out", "check_no_foreign_files", "earlier_plan", "wipe_earlier_run", "written_names"]
+
+#: Files of ``tasks/`` that a run writes (``task-I-of-N.json``, ``manifest-I-of-N.jsonl``); locks stay.
+_TASK_FILE = re.compile(r"(task-\d+-of-\d+\.json|manifest-\d+-of-\d+\.jsonl)")
+#: The lock files of ``--shard I/N`` tasks (zbuf_occlude.farm.lock), made before the plan is written.
+_TASK_LOCK = re.compile(r"lock-\d+-of-\d+\.lock")
+
+
+def check_inputs_outside_out(out: str | os.PathLike, inputs: Iterable[str | os.PathLike]) -> None:
+    """Refuse an input (a mesh, a folder or list file of meshes) that lies inside ``out``, symlinks resolved.
+
+    Raises
+    ------
+    InvalidInputError
+        The first such input, named with ``out``.
+    """
+    target = Path(out).resolve()
+    for source in inputs:
+        path = Path(source).resolve()
+        if path == target or target in path.parents:
+            raise InvalidInputError(
+                f"the input {source} lies inside --out {out}: a run writes and deletes files there; "
+                "move the input out of it or choose another --out"
+            )
+
+
+def written_names(objects: Sequence[FarmObject] = (), storage: str | None = None) -> list[str]:
+    """The names directly under the output folder that a run writes: the journal, the data set's
+    files, and for ``generate --format npz|ply`` the first folder of each object's name."""
+    names = [SHARD_DIR, RECORD_DIR, TASK_DIR, CARD_FILE, CARD_SHA256_FILE, MANIFEST_FILE, SHAPE_NAMES_FILE]
+    splits = sorted({*SPLITS, *(o.split for o in objects)})
+    names += [file_list_name(s) for s in splits] + [split_file_name(s) for s in splits]
+    if storage in ("npz", "ply"):
+        # a name that is no folder name ("..") is refused later, where names are checked
+        names += sorted({o.name.split("/")[0] for o in objects} - {"", ".", ".."})
+    return names
+
+
+def earlier_plan(out: Path) -> dict[str, Any] | None:
+    """The plan of an earlier run of ours in ``out`` (``None`` if there is none).
+
+    Raises
+    ------
+    InvalidInputError
+        ``out/plan.json`` exists but is not a plan of ours: it is not ours to replace.
+    """
+    try:
+        return read_plan(out)
+    except InvalidInputError as exc:
+        raise InvalidInputError(
+            f"{out / PLAN_FILE} was not written by zbuf_occlude ({exc}); a run would replace it: "
+            "move it away, or choose another --out"
+        ) from None
+
+
+def _holds_something(path: Path) -> bool:
+    if not os.path.lexists(path):
+        return False
+    if path.is_dir() and not path.is_symlink():
+        # the tasks of one array start together: their locks come before anybody's plan
+        return any(not (path.name == TASK_DIR and _TASK_LOCK.fullmatch(p.name)) for p in path.iterdir())
+    return True
+
+
+def check_no_foreign_files(out: Path, objects: Sequence[FarmObject] = (), storage: str | None = None) -> None:
+    """Refuse to write into a folder whose files of our names are not ours (module docstring).
+
+    Raises
+    ------
+    InvalidInputError
+        ``out`` holds no earlier run of ours but holds one of :func:`written_names` (the first
+        is named), or its ``plan.json`` is not ours.
+    """
+    if earlier_plan(out) is not None:
+        return
+    for name in written_names(objects, storage):
+        if _holds_something(out / name):
+            what = "holds files that were" if (out / name).is_dir() else "was"
+            raise InvalidInputError(
+                f"{out / name} {what} not written by zbuf_occlude ({out} holds no earlier run: no {PLAN_FILE}), "
+                "and a run would replace or delete it: move it away, or choose an empty --out"
+            )
+
+
+def _unlink_inside(out: Path, rel: str, what: str) -> None:
+    """Delete ``out/rel`` (kept inside ``out``), then the folders of ``generate``'s sample files
+    that it leaves empty (never ``shards/`` or ``records/``, which other tasks may be writing into)."""
+    path_inside(out, rel, what=what).unlink(missing_ok=True)
+    for folder in list(Path(rel).parents)[:-1]:
+        if str(folder) in (SHARD_DIR, RECORD_DIR):
+            break
+        try:
+            (out / folder).rmdir()  # only an empty folder goes
+        except OSError:
+            break
+
+
+def wipe_earlier_run(out: Path, objects: Sequence[FarmObject] | None = None) -> None:
+    """``--overwrite``: delete what the earlier run of ours in ``out`` recorded (module docstring).
+
+    Parameters
+    ----------
+    out : Path
+        The output folder; nothing is deleted when it holds no plan of ours.
+    objects : sequence of FarmObject, optional
+        A ``--shard I/N`` task's objects: only theirs go, and the card (the data set is no longer
+        finished).  Default: the whole earlier run.
+
+    Raises
+    ------
+    InvalidInputError
+        The earlier plan is not ours (:func:`earlier_plan`).
+    UnsafePathError
+        A record names a file outside ``out``.
+    """
+    plan = earlier_plan(out)
+    if plan is None:
+        return
+    for o in objects_of(plan) if objects is None else objects:
+        where = record_path(out, o.index)
+        rec = read_json(where)
+        shards = (rec or {}).get("shards")
+        for rel in shards if isinstance(shards, list) else ():
+            if isinstance(rel, str):
+                _unlink_inside(out, rel, what=f"{where} field 'shards'")
+        _unlink_inside(out, shard_path(o), what=f"the shard of object {o.index}")
+        _unlink_inside(out, os.path.relpath(where, out), what=f"the record of object {o.index}")
+    for name in (CARD_FILE, CARD_SHA256_FILE):
+        (out / name).unlink(missing_ok=True)
+    if objects is not None:
+        return
+    tasks = out / TASK_DIR
+    if tasks.is_dir() and not tasks.is_symlink():
+        for path in tasks.iterdir():
+            if _TASK_FILE.fullmatch(path.name) and path.is_file():
+                path.unlink()
+    splits = {o.split for o in objects_of(plan)}
+    for name in (MANIFEST_FILE, SHAPE_NAMES_FILE, *(f for s in {*SPLITS, *splits} for f in (file_list_name(s), split_file_name(s)))):
+        (out / name).unlink(missing_ok=True)
+    for name in (SHARD_DIR, RECORD_DIR, TASK_DIR):
+        try:
+            (out / name).rmdir()  # only when nothing else is left in it
+        except OSError:
+            pass
+    (out / PLAN_FILE).unlink()
