@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 
 import numpy as np
 import pytest
@@ -235,9 +236,10 @@ def _spec_writers():
 
 @pytest.mark.parametrize("suffix, dump", _spec_writers())
 def test_scene_spec_file_equals_builder(tmp_path, sample_meshes, suffix, dump):
+    shutil.copy(sample_meshes[0], tmp_path / sample_meshes[0].name)  # a scene file's meshes lie in its folder
     spec = {
         "ground": {"z_m": 0.0, "half_extent_m": 40.0},
-        "objects": [{"mesh": str(sample_meshes[0]), "class": "x", "position_m": [10, 0], "yaw_deg": 30, "size_m": 4.5}],
+        "objects": [{"mesh": sample_meshes[0].name, "class": "x", "position_m": [10, 0], "yaw_deg": 30, "size_m": 4.5}],
         "occluders": [{"mesh": {"box_m": [0.5, 2.0, 1.0]}, "position_m": [6, 0.5]}],
         "sensor": {"height_m": 1.7},
     }

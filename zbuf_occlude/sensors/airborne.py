@@ -45,6 +45,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.checks import MAX_RANGE_M, MAX_SENSOR_RAYS, count, is_number, located, real, reals, sensor_name, shown, text
 
 __all__ = ["AIRBORNE_PRESETS", "MAX_FLIGHT_LINES", "AirborneScanner", "FlightLine", "airborne_preset", "scan_airborne"]
 
@@ -53,11 +54,6 @@ PATTERNS = ("linear", "oscillating")
 #: Most flight lines one plan may hold (``n_lines · len(headings_deg)``): a sensor file is
 #: untrusted input, and each line costs a pass over the scanned square.
 MAX_FLIGHT_LINES = 256
-
-
-def _is_number(value) -> bool:
-    """A real number from Python or numpy, not a bool (JSON's true would read as 1)."""
-    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
 
 
 @dataclass(frozen=True)
@@ -129,9 +125,12 @@ class AirborneScanner:
     Raises
     ------
     InvalidInputError
-        A non-positive or non-finite number, a swath outside (0°, 180°), an unknown pattern,
-        fewer than one pulse per line, ``n_lines`` not an integer ≥ 1, ``side_overlap``
-        outside [0, 1), no heading or a non-finite one, more than :data:`MAX_FLIGHT_LINES` lines.
+        Naming the field: a value that is not a number (``True``, ``"5"``), a non-positive or
+        non-finite number, an altitude or noise beyond :data:`~zbuf_occlude.sensors.checks.MAX_RANGE_M`,
+        a swath outside (0°, 180°), an unknown pattern, fewer than one pulse per line or more
+        than :data:`~zbuf_occlude.sensors.checks.MAX_SENSOR_RAYS`, ``n_lines`` not an integer ≥ 1,
+        ``side_overlap`` outside [0, 1), no heading or a non-finite one, more than
+        :data:`MAX_FLIGHT_LINES` lines, a name that cannot name files.
     """
 
     name: str
@@ -149,34 +148,32 @@ class AirborneScanner:
     headings_deg: tuple[float, ...] = (0.0,)
 
     def __post_init__(self) -> None:
-        for key in ("pulse_rate_hz", "line_rate_hz", "altitude_m", "speed_mps"):
-            value = getattr(self, key)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise InvalidInputError(f"airborne scanner {self.name!r}: {key} must be a finite number > 0, got {value!r}")
-        if not (0.0 < float(self.swath_deg) < 180.0):
-            raise InvalidInputError(f"airborne scanner {self.name!r}: swath_deg must lie in (0, 180), got {self.swath_deg!r}")
-        if self.pattern not in PATTERNS:
-            raise InvalidInputError(f"airborne scanner {self.name!r}: pattern must be one of {PATTERNS}, got {self.pattern!r}")
-        if not (math.isfinite(self.range_noise_m) and self.range_noise_m >= 0 and 0.0 <= self.dropout < 1.0):
-            raise InvalidInputError(f"airborne scanner {self.name!r}: need range_noise_m >= 0 and dropout in [0, 1)")
-        if self.pulses_per_line < 1:
-            raise InvalidInputError(f"airborne scanner {self.name!r}: fewer than one pulse per line")
-        if not (_is_number(self.n_lines) and float(self.n_lines).is_integer() and self.n_lines >= 1):
-            raise InvalidInputError(f"airborne scanner {self.name!r}: n_lines must be an integer >= 1, got {self.n_lines!r}")
-        f = self.side_overlap
-        if not (_is_number(f) and math.isfinite(f) and 0.0 <= f < 1.0):
-            raise InvalidInputError(f"airborne scanner {self.name!r}: side_overlap must be a fraction in [0, 1), got {f!r}")
-        headings = self.headings_deg
-        if _is_number(headings):
-            headings = (headings,)
-        finite = isinstance(headings, (tuple, list)) and all(_is_number(h) and math.isfinite(h) for h in headings)
-        if not (finite and headings):
-            raise InvalidInputError(f"airborne scanner {self.name!r}: headings_deg must be one or more finite angles, got {self.headings_deg!r}")
-        object.__setattr__(self, "n_lines", int(self.n_lines))
-        object.__setattr__(self, "headings_deg", tuple(float(h) for h in headings))
+        sensor_name(self.name, "airborne scanner name")
+        with located(f"airborne scanner {self.name!r}"):
+            self._check()
+
+    def _check(self) -> None:
+        """Check every field and store the numbers as floats (messages start with the field's name)."""
+        positive = {"low": 0.0, "low_open": True}
+        numbers = {
+            "pulse_rate_hz": positive, "line_rate_hz": positive, "altitude_m": {**positive, "high": MAX_RANGE_M},
+            "speed_mps": positive, "swath_deg": {**positive, "high": 180.0, "high_open": True},
+            "range_noise_m": {"low": 0.0, "high": MAX_RANGE_M}, "dropout": {"low": 0.0, "high": 1.0, "high_open": True},
+            "side_overlap": {"low": 0.0, "high": 1.0, "high_open": True, "expected": "a fraction in [0, 1)"},
+        }  # fmt: skip
+        for name, bounds in numbers.items():
+            object.__setattr__(self, name, real(getattr(self, name), name, **bounds))
+        text(self.pattern, "pattern", choices=PATTERNS)
+        text(self.source, "source")
+        per_line = self.pulse_rate_hz / self.line_rate_hz  # checked before pulses_per_line rounds it
+        if not per_line <= MAX_SENSOR_RAYS or self.pulses_per_line < 1:
+            raise InvalidInputError(f"pulse_rate_hz / line_rate_hz must give 1 to {MAX_SENSOR_RAYS:,} pulses per line, got {shown(per_line)}")
+        object.__setattr__(self, "n_lines", count(self.n_lines, "n_lines", low=1, high=MAX_FLIGHT_LINES))
+        headings = (self.headings_deg,) if is_number(self.headings_deg) else self.headings_deg
+        headings = reals(headings, "headings_deg", max_length=MAX_FLIGHT_LINES, expected="one or more finite angles")
+        object.__setattr__(self, "headings_deg", headings)
         if self.n_lines * len(self.headings_deg) > MAX_FLIGHT_LINES:
-            raise InvalidInputError(f"airborne scanner {self.name!r}: {self.n_lines} lines x {len(self.headings_deg)} headings "
-                                    f"is more than {MAX_FLIGHT_LINES} flight lines")  # fmt: skip
+            raise InvalidInputError(f"{self.n_lines} lines x {len(self.headings_deg)} headings is more than {MAX_FLIGHT_LINES} flight lines")
 
     @property
     def pulses_per_line(self) -> int:
@@ -234,7 +231,7 @@ class AirborneScanner:
         """
         shifts = np.broadcast_to(np.asarray(lateral_shift_m, dtype=np.float64), (len(self.headings_deg),))
         if not np.all(np.isfinite(shifts)):
-            raise InvalidInputError(f"lateral_shift_m must be finite, got {lateral_shift_m!r}")
+            raise InvalidInputError(f"lateral_shift_m must be finite, got {shown(lateral_shift_m)}")
         s = self.flight_line_spacing_m
         n = self.n_lines
         return [FlightLine(h * n + j, heading, (j - (n - 1) / 2.0) * s + float(shifts[h]) if n > 1 else float(shifts[h]))
@@ -290,11 +287,17 @@ class AirborneScanner:
             Unit beam directions ``(0, sin θ, −cos θ)``.
         scan_angle_deg : (N,) float64
             θ, degrees (negative: −y side).
+
+        Raises
+        ------
+        InvalidInputError
+            A non-finite centre or phase, a half size not > 0, or more than
+            :data:`~zbuf_occlude.sensors.checks.MAX_SENSOR_RAYS` pulses (counted before any is made).
         """
         cx, cy = (float(v) for v in center_xy)
         r = float(half_size_m)
-        if not (math.isfinite(cx) and math.isfinite(cy) and math.isfinite(r) and r > 0):
-            raise InvalidInputError(f"ground_rays needs a finite centre and half size > 0, got {center_xy!r}, {half_size_m!r}")
+        if not (math.isfinite(cx) and math.isfinite(cy) and math.isfinite(r) and r > 0 and math.isfinite(phase_s)):
+            raise InvalidInputError(f"ground_rays needs a finite centre, phase and half size > 0, got {shown(center_xy)}, {shown(phase_s)}, {shown(half_size_m)}")
         m = self.pulses_per_line
         period = 1.0 / self.line_rate_hz
         s = math.radians(self.swath_deg)
@@ -305,6 +308,12 @@ class AirborneScanner:
             return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
         # lines whose pulses can land in [cx - r, cx + r] (a line spans speed · period along track)
         line_length = self.speed_mps * period
+        n_k = 2.0 * r / line_length + 3.0 if line_length > 0 else math.inf
+        if not len(columns) * n_k <= MAX_SENSOR_RAYS:  # before arange(k0, k1) allocates them
+            raise InvalidInputError(
+                f"airborne scanner {self.name!r}: the square {2 * r:g} m wide takes about {len(columns) * n_k:.3g} pulses per line, "
+                f"more than {MAX_SENSOR_RAYS:,}; scan a smaller square or a sparser scanner"
+            )
         k0 = math.floor((cx - r - self.speed_mps * phase_s) / line_length) - 1
         k1 = math.ceil((cx + r - self.speed_mps * phase_s) / line_length) + 1
         k = np.arange(k0, k1 + 1)
@@ -362,7 +371,7 @@ def airborne_preset(name: str, **changes) -> AirborneScanner:
     """
     key = str(name).lower()
     if key not in AIRBORNE_PRESETS:
-        raise InvalidInputError(f"unknown airborne scanner {name!r}; choose one of {sorted(AIRBORNE_PRESETS)}")
+        raise InvalidInputError(f"unknown airborne scanner {shown(name)}; choose one of {sorted(AIRBORNE_PRESETS)}")
     return replace(AIRBORNE_PRESETS[key], **changes)
 
 
@@ -405,7 +414,9 @@ def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_si
     Raises
     ------
     InvalidInputError
-        A non-finite or non-positive square, a non-finite phase or shift.
+        A non-finite or non-positive square, a non-finite phase or shift, more than
+        :data:`~zbuf_occlude.sensors.checks.MAX_SENSOR_RAYS` pulses in all (counted line by line,
+        before the rays are cast).
     """
     from zbuf_occlude.sensors.raycast import cast_embree
     from zbuf_occlude.sensors.scan import Scan, build_scene
@@ -418,9 +429,7 @@ def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_si
     if phase_s is None:
         phases = [float(rng.uniform(0.0, 1.0 / scanner.line_rate_hz)) for _ in range(n_total)]
     else:
-        if not math.isfinite(float(phase_s)):
-            raise InvalidInputError(f"phase_s must be finite, got {phase_s!r}")
-        phases = [float(phase_s)] * n_total
+        phases = [real(phase_s, "phase_s")] * n_total
     if lateral_shift_m is None:
         s = scanner.flight_line_spacing_m
         shifts = [float(rng.uniform(-s / 2.0, s / 2.0)) if scanner.n_lines > 1 else 0.0 for _ in scanner.headings_deg]
@@ -437,6 +446,12 @@ def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_si
             o = np.column_stack([o[:, :1] * along + (line.offset_m + o[:, 1:2]) * across, o[:, 2]])
             d = np.column_stack([d[:, :1] * along + d[:, 1:2] * across, d[:, 2]])
         parts.append((o, d, a, np.full(len(a), line.line_id, np.int32)))
+        n_rays = sum(len(p[2]) for p in parts)
+        if n_rays > MAX_SENSOR_RAYS:  # every line is bounded on its own; the plan's lines add up
+            raise InvalidInputError(
+                f"airborne scanner {scanner.name!r}: {n_rays:,} pulses by line {line.line_id} of {n_total} over the square "
+                f"{2 * float(half_size_m):g} m wide, more than {MAX_SENSOR_RAYS:,}; scan a smaller square or fly fewer lines"
+            )
     if len(parts) == 1:
         origins, directions, angle, line_id = parts[0]
     else:

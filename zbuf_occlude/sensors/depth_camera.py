@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.checks import MAX_RANGE_M, MAX_SENSOR_RAYS, count, located, real, reals, sensor_name, shown, text
 
 __all__ = ["DepthCamera", "DEPTH_CAMERA_PRESETS", "depth_camera_preset", "nguyen_axial_sigma_m"]
 
@@ -61,7 +62,11 @@ class DepthCamera:
     Raises
     ------
     InvalidInputError
-        Bad K, size, depth range, angle or probability.
+        Naming the field: a value that is not a number (``True``, ``"5"``) or not finite; a K
+        that is not a (3, 3) OpenCV matrix with fx, fy > 0; an image size below 1 pixel or of
+        more than :data:`~zbuf_occlude.sensors.checks.MAX_SENSOR_RAYS` pixels; a depth range
+        not ``0 <= min_depth_m < max_depth_m <=`` :data:`~zbuf_occlude.sensors.checks.MAX_RANGE_M`;
+        a bad noise, angle or probability; a name that cannot name files.
     """
 
     name: str
@@ -78,26 +83,40 @@ class DepthCamera:
     _K: NDArray[np.float64] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        K = np.asarray(self.K, dtype=np.float64)
-        if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0 or not np.allclose(K[2], [0, 0, 1]):
-            raise InvalidInputError(f"depth camera {self.name!r}: K must be a finite (3, 3) OpenCV matrix with fx, fy > 0, got {self.K!r}")
+        sensor_name(self.name, "depth camera name")
+        with located(f"depth camera {self.name!r}"):
+            self._check()
+
+    def _check(self) -> None:
+        """Check every field and store the numbers as floats (messages start with the field's name)."""
+        rows = self.K.tolist() if isinstance(self.K, np.ndarray) else self.K
+        if not (isinstance(rows, (list, tuple)) and len(rows) == 3):
+            raise InvalidInputError(f"K must be a finite (3, 3) OpenCV matrix with fx, fy > 0, got {shown(self.K)}")
+        K = np.array([reals(row, f"K[{i}]", lengths=(3,)) for i, row in enumerate(rows)])
+        if K[0, 0] <= 0 or K[1, 1] <= 0 or not np.allclose(K[2], [0, 0, 1]):
+            raise InvalidInputError(f"K must be a finite (3, 3) OpenCV matrix with fx, fy > 0, got {shown(self.K)}")
         object.__setattr__(self, "K", tuple(tuple(float(v) for v in row) for row in K))
         object.__setattr__(self, "_K", K)
-        if int(self.width) < 1 or int(self.height) < 1:
-            raise InvalidInputError(f"depth camera {self.name!r}: image size must be positive, got {self.width}x{self.height}")
-        if not (0.0 <= self.min_depth_m < self.max_depth_m) or not math.isfinite(self.max_depth_m):
-            raise InvalidInputError(f"depth camera {self.name!r}: need 0 <= min_depth_m < max_depth_m < inf, got {self.min_depth_m}, {self.max_depth_m}")
-        if not isinstance(self.noise, str):
-            if not (math.isfinite(float(self.noise)) and float(self.noise) >= 0):
-                raise InvalidInputError(f"depth camera {self.name!r}: constant noise σ must be >= 0 metres, got {self.noise!r}")
-        elif self.noise not in ("nguyen2012", "none"):
-            raise InvalidInputError(f"depth camera {self.name!r}: noise must be 'nguyen2012', 'none' or a σ in metres, got {self.noise!r}")
-        if not (0.0 <= self.quantization_m_per_m2 < 1.0):
-            raise InvalidInputError(f"depth camera {self.name!r}: quantization_m_per_m2 must be in [0, 1), got {self.quantization_m_per_m2}")
-        if not (0.0 < self.max_incidence_deg <= 90.0):
-            raise InvalidInputError(f"depth camera {self.name!r}: max_incidence_deg must be in (0, 90], got {self.max_incidence_deg}")
-        if not 0.0 <= float(self.dropout) < 1.0:
-            raise InvalidInputError(f"depth camera {self.name!r}: dropout must lie in [0, 1), got {self.dropout!r}")
+        for name in ("width", "height"):
+            object.__setattr__(self, name, count(getattr(self, name), name, low=1, high=MAX_SENSOR_RAYS))
+        if self.width * self.height > MAX_SENSOR_RAYS:
+            raise InvalidInputError(f"image size {self.width}x{self.height} is more than {MAX_SENSOR_RAYS:,} pixels")
+        object.__setattr__(self, "min_depth_m", real(self.min_depth_m, "min_depth_m", low=0.0, high=MAX_RANGE_M))
+        object.__setattr__(self, "max_depth_m", real(self.max_depth_m, "max_depth_m", low=0.0, low_open=True, high=MAX_RANGE_M))
+        if not self.min_depth_m < self.max_depth_m:
+            raise InvalidInputError(f"need min_depth_m < max_depth_m, got {self.min_depth_m}, {self.max_depth_m}")
+        if isinstance(self.noise, str):
+            text(self.noise, "noise", choices=("nguyen2012", "none"))
+        else:
+            object.__setattr__(self, "noise", real(self.noise, "noise", low=0.0, high=MAX_RANGE_M, expected="'nguyen2012', 'none' or a σ >= 0 metres"))
+        numbers = {
+            "quantization_m_per_m2": {"low": 0.0, "high": 1.0, "high_open": True},
+            "max_incidence_deg": {"low": 0.0, "low_open": True, "high": 90.0},
+            "dropout": {"low": 0.0, "high": 1.0, "high_open": True},
+        }  # fmt: skip
+        for name, bounds in numbers.items():
+            object.__setattr__(self, name, real(getattr(self, name), name, **bounds))
+        text(self.source, "source")
 
     @property
     def intrinsics(self) -> NDArray[np.float64]:
@@ -173,6 +192,6 @@ def depth_camera_preset(name: str, **changes) -> DepthCamera:
     """
     key = str(name).lower()
     if key not in DEPTH_CAMERA_PRESETS:
-        raise InvalidInputError(f"unknown depth camera preset {name!r}; choose one of {sorted(DEPTH_CAMERA_PRESETS)}")
+        raise InvalidInputError(f"unknown depth camera preset {shown(name)}; choose one of {sorted(DEPTH_CAMERA_PRESETS)}")
     cam = DEPTH_CAMERA_PRESETS[key]
     return replace(cam, **changes) if changes else cam

@@ -14,15 +14,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.checks import MAX_RANGE_M, MAX_SENSOR_RAYS, count, located, real, reals, sensor_name, shown, text
 
 __all__ = ["Lidar", "LIDAR_PRESETS", "lidar_preset", "beam_directions"]
-
-
-def _check_positive(name: str, value: float, *, allow_zero: bool = False) -> float:
-    v = float(value)
-    if not math.isfinite(v) or v < 0.0 or (v == 0.0 and not allow_zero):
-        raise InvalidInputError(f"{name} must be a finite number {'>=' if allow_zero else '>'} 0, got {value!r}")
-    return v
 
 
 @dataclass(frozen=True)
@@ -92,9 +86,13 @@ class Lidar:
     Raises
     ------
     InvalidInputError
-        Empty or non-finite beam table, elevations outside (−90°, 90°), non-positive rates,
-        ``min_range_m >= max_range_m``, negative noise, dropout outside [0, 1),
-        ``echo_separation_m`` without a 7-ray footprint.
+        Naming the field: a value that is not a number (``True``, ``"5"``) or not finite;
+        an empty beam table or elevations outside (−90°, 90°); non-positive rates; more than
+        :data:`~zbuf_occlude.sensors.checks.MAX_SENSOR_RAYS` rays per revolution
+        (``elevations × firing_rate_hz / rotation_hz``); ``min_range_m >= max_range_m`` or a
+        range or noise beyond :data:`~zbuf_occlude.sensors.checks.MAX_RANGE_M`;
+        negative noise; dropout outside [0, 1); a divergence outside [0°, 90°];
+        ``echo_separation_m`` without a 7-ray footprint; a name that cannot name files.
     """
 
     name: str
@@ -117,34 +115,46 @@ class Lidar:
     _elev: NDArray[np.float64] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        elev = np.asarray(self.elevations_deg, dtype=np.float64).reshape(-1)
-        if elev.size == 0 or not np.all(np.isfinite(elev)) or np.any(np.abs(elev) >= 90.0):
-            raise InvalidInputError(f"lidar {self.name!r}: elevations_deg must be finite, non-empty, inside (-90, 90) degrees")
-        object.__setattr__(self, "elevations_deg", tuple(float(e) for e in elev))
-        object.__setattr__(self, "_elev", elev)
-        for name in ("rotation_hz", "firing_rate_hz", "max_range_m"):
-            _check_positive(f"lidar {self.name!r} {name}", getattr(self, name))
-        _check_positive(f"lidar {self.name!r} min_range_m", self.min_range_m, allow_zero=True)
-        _check_positive(f"lidar {self.name!r} range_noise_m", self.range_noise_m, allow_zero=True)
-        _check_positive(f"lidar {self.name!r} beam_divergence_deg", self.beam_divergence_deg, allow_zero=True)
-        _check_positive(f"lidar {self.name!r} echo_separation_m", self.echo_separation_m, allow_zero=True)
-        _check_positive(f"lidar {self.name!r} detection_reflectivity", self.detection_reflectivity)
-        _check_positive(f"lidar {self.name!r} detection_range_m", self.detection_range_m)
-        _check_positive(f"lidar {self.name!r} power_noise", self.power_noise, allow_zero=True)
-        if self.footprint_rays not in (1, 7) or isinstance(self.footprint_rays, bool):
-            raise InvalidInputError(f"lidar {self.name!r}: footprint_rays must be 1 or 7, got {self.footprint_rays!r}")
+        sensor_name(self.name, "lidar name")
+        with located(f"lidar {self.name!r}"):
+            self._check()
+
+    def _check(self) -> None:
+        """Check every field and store the numbers as floats (messages start with the field's name)."""
+        n_rays = MAX_SENSOR_RAYS
+        elev = reals(self.elevations_deg, "elevations_deg", max_length=n_rays, low=-90.0, high=90.0, low_open=True, high_open=True)
+        object.__setattr__(self, "elevations_deg", elev)
+        object.__setattr__(self, "_elev", np.array(elev, dtype=np.float64))
+        positive, at_least_0 = {"low": 0.0, "low_open": True}, {"low": 0.0}
+        ranges = {"high": MAX_RANGE_M}
+        numbers = {
+            "rotation_hz": positive, "firing_rate_hz": positive, "max_range_m": {**positive, **ranges},
+            "min_range_m": {**at_least_0, **ranges}, "range_noise_m": {**at_least_0, **ranges},
+            "dropout": {"low": 0.0, "high": 1.0, "high_open": True}, "dropout_range_per_m": {},
+            "beam_divergence_deg": {**at_least_0, "high": 90.0}, "azimuth_offset_deg": {},
+            "echo_separation_m": at_least_0, "detection_reflectivity": positive,
+            "detection_range_m": {**positive, **ranges}, "power_noise": at_least_0,
+        }  # fmt: skip
+        for name, bounds in numbers.items():
+            object.__setattr__(self, name, real(getattr(self, name), name, **bounds))
+        text(self.source, "source")
+        object.__setattr__(self, "footprint_rays", count(self.footprint_rays, "footprint_rays", low=1, high=7))
+        if self.footprint_rays not in (1, 7):
+            raise InvalidInputError(f"footprint_rays must be 1 or 7, got {self.footprint_rays!r}")
         if self.footprint_rays == 7 and self.beam_divergence_deg <= 0:
-            raise InvalidInputError(f"lidar {self.name!r}: footprint_rays 7 needs beam_divergence_deg > 0")
+            raise InvalidInputError("footprint_rays 7 needs beam_divergence_deg > 0")
         if self.echo_separation_m > 0 and self.footprint_rays != 7:
-            raise InvalidInputError(f"lidar {self.name!r}: echo_separation_m {self.echo_separation_m} needs footprint_rays 7 (mixed pixels come from a wide footprint)")
+            raise InvalidInputError(f"echo_separation_m {self.echo_separation_m} needs footprint_rays 7 (mixed pixels come from a wide footprint)")
         if self.min_range_m >= self.max_range_m:
-            raise InvalidInputError(f"lidar {self.name!r}: need min_range_m < max_range_m, got {self.min_range_m} >= {self.max_range_m}")
-        if not 0.0 <= float(self.dropout) < 1.0:
-            raise InvalidInputError(f"lidar {self.name!r}: dropout must lie in [0, 1), got {self.dropout!r}")
-        if not math.isfinite(float(self.dropout_range_per_m)):
-            raise InvalidInputError(f"lidar {self.name!r}: dropout_range_per_m must be finite, got {self.dropout_range_per_m!r}")
+            raise InvalidInputError(f"need min_range_m < max_range_m, got {self.min_range_m} >= {self.max_range_m}")
         if self.firing_rate_hz < self.rotation_hz:
-            raise InvalidInputError(f"lidar {self.name!r}: firing_rate_hz {self.firing_rate_hz} below rotation_hz {self.rotation_hz}")
+            raise InvalidInputError(f"firing_rate_hz {self.firing_rate_hz} below rotation_hz {self.rotation_hz}")
+        per_revolution = len(elev) * (self.firing_rate_hz / self.rotation_hz)  # checked before n_azimuths rounds it
+        if not per_revolution <= n_rays:
+            raise InvalidInputError(
+                f"{len(elev)} elevations_deg x firing_rate_hz / rotation_hz {shown(self.firing_rate_hz / self.rotation_hz)} firings "
+                f"is more than {n_rays:,} rays per revolution"
+            )
 
     @property
     def n_beams(self) -> int:
@@ -305,6 +315,6 @@ def lidar_preset(name: str, **changes) -> Lidar:
     """
     key = str(name).lower()
     if key not in LIDAR_PRESETS:
-        raise InvalidInputError(f"unknown lidar preset {name!r}; choose one of {sorted(LIDAR_PRESETS)}")
+        raise InvalidInputError(f"unknown lidar preset {shown(name)}; choose one of {sorted(LIDAR_PRESETS)}")
     lidar = LIDAR_PRESETS[key]
     return replace(lidar, **changes) if changes else lidar

@@ -2,30 +2,45 @@
 
 from __future__ import annotations
 
-import json
+import os
+from dataclasses import fields
 from pathlib import Path
 
 from zbuf_occlude.errors import InvalidInputError
 
-__all__ = ["sensor_from_name"]
+__all__ = ["SENSOR_KINDS", "sensor_from_name"]
+
+#: ``"kind"`` of a sensor file, and the class it makes (``"lidar"`` when the file has none).
+SENSOR_KINDS = ("lidar", "airborne", "depth_camera")
 
 
-def sensor_from_name(name: str):
+def sensor_from_name(name: str | os.PathLike):
     """A :class:`Lidar`, :class:`DepthCamera` or airborne-scanner preset, or a sensor from a JSON file of its fields.
 
-    An airborne file (``"kind": "airborne"``) holds the fields of
+    A sensor file is a JSON object: ``"kind"`` (one of :data:`SENSOR_KINDS`, default
+    ``"lidar"``) and the constructor fields of that class (an optional ``"fit"`` block, as
+    :func:`~zbuf_occlude.sensors.fit.fit_lidar` writes, is metadata).  An airborne file
+    (``"kind": "airborne"``) holds the fields of
     :class:`~zbuf_occlude.sensors.airborne.AirborneScanner`, flight plan included (``n_lines``,
-    ``side_overlap``, ``headings_deg``), or ``"preset": NAME`` and the fields it changes.
+    ``side_overlap``, ``headings_deg``), or ``"preset": NAME`` and the fields it changes.  The
+    file is read by :func:`~zbuf_occlude.sensors.spec_files.read_spec_file` (size and nesting
+    bounded) and every field is checked by the class (:mod:`zbuf_occlude.sensors.checks`).
 
     Raises
     ------
     InvalidInputError
-        An unknown name, or a file whose fields are wrong (naming the file).
+        An unknown name, or a file that is not JSON, nests too deep, has an unknown kind or
+        key, or a field of the wrong type or range (the message names the file and the field).
     """
     from zbuf_occlude.sensors.airborne import AIRBORNE_PRESETS, AirborneScanner, airborne_preset
+    from zbuf_occlude.sensors.checks import located, mapping, shown, text
     from zbuf_occlude.sensors.depth_camera import DEPTH_CAMERA_PRESETS, DepthCamera
     from zbuf_occlude.sensors.lidar import LIDAR_PRESETS, Lidar
+    from zbuf_occlude.sensors.spec_files import read_spec_file
 
+    if not isinstance(name, (str, os.PathLike)):
+        raise InvalidInputError(f"a sensor must be a preset name or a .json file, got {type(name).__name__} {shown(name)}")
+    name = os.fspath(name)
     key = name.lower()
     if key in LIDAR_PRESETS:
         return LIDAR_PRESETS[key]
@@ -35,15 +50,27 @@ def sensor_from_name(name: str):
         return DEPTH_CAMERA_PRESETS[key]
     path = Path(name)
     if path.suffix.lower() == ".json" and path.is_file():
-        try:
-            spec = json.loads(path.read_text(encoding="utf-8"))
+        spec = read_spec_file(path, what="sensor", yaml_ok=False)
+        with located(str(path)):
             if not isinstance(spec, dict):
-                raise TypeError("expected a JSON object of the sensor's fields")
-            spec.pop("fit", None)  # a fitted sensor's estimates (zbuf_occlude.sensors.fit): metadata
-            kind = spec.pop("kind", "lidar")
-            if kind == "airborne" and "preset" in spec:
-                return airborne_preset(spec.pop("preset")).with_(**spec)
-            return {"lidar": Lidar, "airborne": AirborneScanner}.get(kind, DepthCamera)(**spec)
-        except (ValueError, TypeError) as exc:
-            raise InvalidInputError(f"{path}: bad sensor file ({exc})") from exc
-    raise InvalidInputError(f"unknown sensor {name!r}; use one of {sorted(LIDAR_PRESETS) + sorted(AIRBORNE_PRESETS) + sorted(DEPTH_CAMERA_PRESETS)} or a .json file")
+                raise InvalidInputError(f"a sensor file must be a JSON object of the sensor's fields, got {type(spec).__name__} {shown(spec)}")
+            kind = text(spec.get("kind", "lidar"), "kind", choices=SENSOR_KINDS)
+            cls = {"lidar": Lidar, "airborne": AirborneScanner, "depth_camera": DepthCamera}[kind]
+            extra = ("kind", "fit", "preset") if kind == "airborne" else ("kind", "fit")
+            spec = mapping(spec, kind, (*extra, *(f.name for f in fields(cls) if f.init)))
+            for key in ("kind", "fit"):  # fit: a fitted sensor's estimates (zbuf_occlude.sensors.fit), metadata
+                spec.pop(key, None)
+            if "preset" in spec:
+                return airborne_preset(text(spec.pop("preset"), "preset")).with_(**spec)
+            return cls(**_complete(spec, cls))
+    raise InvalidInputError(f"unknown sensor {shown(name)}; use one of {sorted(LIDAR_PRESETS) + sorted(AIRBORNE_PRESETS) + sorted(DEPTH_CAMERA_PRESETS)} or a .json file")
+
+
+def _complete(spec: dict, cls: type) -> dict:
+    """``spec`` if it gives every field ``cls`` requires (a missing one is named, not a TypeError)."""
+    from dataclasses import MISSING
+
+    missing = [f.name for f in fields(cls) if f.init and f.default is MISSING and f.default_factory is MISSING and f.name not in spec]
+    if missing:
+        raise InvalidInputError(f"a {cls.__name__} needs {', '.join(missing)}")
+    return spec

@@ -10,7 +10,7 @@ file with the same fields (:func:`load_scene`)::
      "occluders": [{"mesh": {"box_m": [0.5, 2.0, 1.0]}, "position_m": [6, 0.5]}],
      "sensor": {"height_m": 1.8}}
 
-``mesh`` is a file path (relative paths are relative to the spec file), or a primitive:
+``mesh`` is a file path (relative to the spec file, inside its folder), or a primitive:
 ``{"box_m": [x, y, z]}`` or ``{"cylinder": {"radius_m": r, "height_m": h}}``.  A mesh file is
 normalised (:func:`zbuf_occlude.load_mesh`: centred, max extent 1) and scaled so that its
 largest dimension is ``size_m``; a primitive keeps its metric size unless ``size_m`` is given.
@@ -18,12 +18,21 @@ Every object then stands on the ground (its lowest vertex at ``ground_z_m``), it
 box centred on ``position_m`` (x, y; a third value is added to the standing height), turned
 by ``yaw_deg`` about +z.  Object ids: 0 is the ground, objects and occluders are numbered
 from 1 in the order given (objects first).
+
+A scene file may come from anyone.  It is read by :func:`~zbuf_occlude.sensors.spec_files.read_spec_file`
+(size and nesting bounded, no YAML aliases), every field is checked where the dataclass is
+made (:mod:`zbuf_occlude.sensors.checks`: numbers finite and in range, types, unknown keys),
+a mesh file it names must lie inside the scene file's folder (relative, no ``..``, symlinks
+resolved: :func:`zbuf_occlude.io.safe_paths.path_inside`), and it holds at most
+:data:`~zbuf_occlude.sensors.checks.MAX_SCENE_OBJECTS` objects.  Every error is one line that
+names the file and the field (``street.yaml: objects[2]: yaw_deg must be a finite number, got nan``).
 """
 
 from __future__ import annotations
 
-import json
 import math
+import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -31,7 +40,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude.errors import InvalidInputError, MeshLoadError
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.mesh.limits import MAX_MESH_FACES
+from zbuf_occlude.sensors.checks import (
+    MAX_COORDINATE_M, MAX_PATH_CHARS, MAX_SCENE_OBJECTS, count, is_number, located, mapping, real, reals, shown, text,
+)  # fmt: skip
 
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
@@ -48,15 +61,23 @@ GROUND_ID = 0
 MAX_CYLINDER_SECTIONS = 4096
 #: Largest ground half-extent, metres: the scene is ray-cast in float32 (Embree), whose 24-bit
 #: mantissa keeps 1 mm steps up to 2**24 mm ≈ 16.8 km from the origin; a larger ground loses
-#: the returns' millimetres (1e300 overflows float32 and returns nothing at all).
-MAX_GROUND_HALF_EXTENT_M = 2.0**24 * 1e-3
+#: the returns' millimetres (1e300 overflows float32 and returns nothing at all).  Object
+#: positions, sizes and the sensor's place are bounded by the same figure.
+MAX_GROUND_HALF_EXTENT_M = MAX_COORDINATE_M
+#: Keys of a scene file, of its ``ground``, ``sensor`` and objects, and of a primitive.
+SCENE_KEYS = ("ground", "objects", "occluders", "sensor")
+GROUND_KEYS = ("z_m", "half_extent_m")
+SENSOR_KEYS = ("height_m", "position_m")
+OBJECT_KEYS = ("mesh", "class", "position_m", "yaw_deg", "size_m", "up")
+PRIMITIVE_KEYS = ("box_m", "cylinder")
+CYLINDER_KEYS = ("radius_m", "height_m", "sections")
 
 
 def sensor_pose(position_m, yaw_deg: float = 0.0) -> NDArray[np.float64]:
     """(4, 4) float64 sensor → world transform: a translation and a turn about +z (degrees)."""
     p = np.asarray(position_m, dtype=np.float64).reshape(3)
     if not np.all(np.isfinite(p)) or not math.isfinite(yaw_deg):
-        raise InvalidInputError(f"sensor position {position_m!r} and yaw {yaw_deg!r} must be finite")
+        raise InvalidInputError(f"sensor position {shown(position_m)} and yaw {shown(yaw_deg)} must be finite")
     c, s = math.cos(math.radians(yaw_deg)), math.sin(math.radians(yaw_deg))
     m = np.eye(4)
     m[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
@@ -77,7 +98,7 @@ def check_width_profile(profile) -> tuple[float, ...]:
     except (TypeError, ValueError):
         out = ()
     if len(out) < 2 or not all(math.isfinite(v) and v > 0 for v in out):
-        raise InvalidInputError(f"width_profile must be 2 or more factors > 0, one per relative-height bin, got {profile!r}")
+        raise InvalidInputError(f"width_profile must be 2 or more factors > 0, one per relative-height bin, got {shown(profile)}")
     return out
 
 
@@ -112,26 +133,30 @@ def _split_tall_faces(v: NDArray[np.float64], faces: NDArray[np.int64], bins: in
     return sv / squash, np.asarray(sf, dtype=np.int64), np.asarray(rows, dtype=np.int64)
 
 
-def _primitive_args(spec: dict) -> tuple[str, dict[str, Any]]:
-    """The checked arguments of a primitive's trimesh constructor (before anything is allocated)."""
+def _primitive_args(spec: Mapping) -> tuple[str, dict[str, Any]]:
+    """The checked arguments of a primitive's trimesh constructor (before anything is allocated).
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the field (``mesh.cylinder.radius_m``): not exactly one of ``box_m`` and
+        ``cylinder``, an unknown key, sizes not in (0, :data:`MAX_GROUND_HALF_EXTENT_M`] metres,
+        sections not an integer from 3 to :data:`MAX_CYLINDER_SECTIONS`.
+    """
+    spec = mapping(spec, "mesh", PRIMITIVE_KEYS)
+    if len(spec) != 1:
+        raise InvalidInputError(f"mesh must be a primitive {{'box_m': [x, y, z]}} or {{'cylinder': {{'radius_m': r, 'height_m': h}}}}, got {shown(spec)}")
+    size = {"low": 0.0, "low_open": True, "high": MAX_COORDINATE_M}
     if "box_m" in spec:
-        extents = np.asarray(spec["box_m"], dtype=np.float64)
-        if extents.shape != (3,) or np.any(~np.isfinite(extents)) or np.any(extents <= 0):
-            raise InvalidInputError(f"box_m must be 3 positive sizes in metres, got {spec['box_m']!r}")
-        return "box", {"extents": extents}
-    if "cylinder" in spec:
-        c = spec["cylinder"]
-        r, h = float(c.get("radius_m", 0)), float(c.get("height_m", 0))
-        if not (r > 0 and h > 0 and math.isfinite(r) and math.isfinite(h)):
-            raise InvalidInputError(f"cylinder needs radius_m > 0 and height_m > 0, got {c!r}")
-        sections = c.get("sections", 48)
-        if isinstance(sections, bool) or not isinstance(sections, int) or not 3 <= sections <= MAX_CYLINDER_SECTIONS:
-            raise InvalidInputError(f"cylinder sections must be an integer from 3 to {MAX_CYLINDER_SECTIONS}, got {sections!r}")
-        return "cylinder", {"radius": r, "height": h, "sections": sections}
-    raise InvalidInputError(f"unknown primitive {spec!r}; use {{'box_m': [x, y, z]}} or {{'cylinder': {{'radius_m': r, 'height_m': h}}}}")
+        extents = reals(spec["box_m"], "mesh.box_m", lengths=(3,), expected="3 sizes in metres", **size)
+        return "box", {"extents": np.array(extents)}
+    c = mapping(spec["cylinder"], "mesh.cylinder", CYLINDER_KEYS, required=("radius_m", "height_m"))
+    r, h = real(c["radius_m"], "mesh.cylinder.radius_m", **size), real(c["height_m"], "mesh.cylinder.height_m", **size)
+    sections = count(c.get("sections", 48), "mesh.cylinder.sections", low=3, high=MAX_CYLINDER_SECTIONS)
+    return "cylinder", {"radius": r, "height": h, "sections": sections}
 
 
-def _primitive(spec: dict) -> trimesh.Trimesh:
+def _primitive(spec: Mapping) -> trimesh.Trimesh:
     import trimesh
 
     kind, kwargs = _primitive_args(spec)
@@ -172,6 +197,14 @@ class SceneObject:
         one, its faces cut where they span more than half a bin in height; its
         ``metadata[FACE_ROWS]`` gives each face's row as loaded, which the scene's
         ``face_local`` reports.  None (default): no warp.
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the field: a ``mesh`` that is none of the above (or a primitive with a bad
+        field), a ``position_m`` or ``size_m`` that is not 2–3 (1 or 3) finite numbers within
+        :data:`MAX_GROUND_HALF_EXTENT_M` metres (sizes > 0), a non-finite ``yaw_deg``, ``up``
+        not "z" or "y", ``width_scale`` not > 0, a bad ``width_profile`` (:func:`check_width_profile`).
     """
 
     mesh: Any
@@ -183,17 +216,71 @@ class SceneObject:
     width_scale: float = 1.0
     width_profile: tuple[float, ...] | None = None
 
+    def __post_init__(self) -> None:
+        self._check()
+
+    def _check(self) -> None:
+        """Check every field and normalise the numbers to floats (the one place of these rules;
+        :meth:`build` checks again, as fields may be changed after construction).
+
+        Raises
+        ------
+        InvalidInputError
+            The message starts with the field's name (``yaw_deg must be a finite number, got nan``).
+        """
+        mesh = self.mesh
+        if isinstance(mesh, (str, os.PathLike)):
+            name = os.fspath(mesh)
+            try:
+                ok = isinstance(name, str) and 0 < len(name) <= MAX_PATH_CHARS and "\0" not in name and bool(os.fsencode(name))
+            except UnicodeError:  # a lone surrogate ("\ud800", which JSON's \u escapes can write) names no file
+                ok = False
+            if not ok:
+                raise InvalidInputError(f"mesh must be a file path of 1 to {MAX_PATH_CHARS} characters, without NUL or lone surrogates, got {shown(mesh)}")
+        elif isinstance(mesh, Mapping):
+            _primitive_args(mesh)  # checked before anything is allocated
+        elif not _is_trimesh(mesh):
+            raise InvalidInputError(
+                "mesh must be a mesh file path, a primitive {'box_m': [x, y, z]} or {'cylinder': {'radius_m': r, 'height_m': h}}, "
+                f"or a trimesh.Trimesh, got {type(mesh).__name__} {shown(mesh)}"
+            )
+        text(self.class_name, "class_name")
+        where = {"low": -MAX_COORDINATE_M, "high": MAX_COORDINATE_M}
+        self.position_m = reals(self.position_m, "position_m", lengths=(2, 3), expected="2 or 3 numbers (x, y[, z]) in metres", **where)
+        self.yaw_deg = real(self.yaw_deg, "yaw_deg")
+        if self.size_m is not None:
+            size = {"low": 0.0, "low_open": True, "high": MAX_COORDINATE_M}
+            if is_number(self.size_m):
+                self.size_m = real(self.size_m, "size_m", **size)
+            else:
+                sizes = reals(self.size_m, "size_m", lengths=(1, 3), expected="one size or 3 extents (x, y, z) in metres", **size)
+                self.size_m = sizes[0] if len(sizes) == 1 else sizes
+        text(self.up, "up", choices=("z", "y"))
+        self.width_scale = real(self.width_scale, "width_scale", low=0.0, low_open=True)
+        if self.width_profile is not None:
+            self.width_profile = check_width_profile(self.width_profile)
+
     def build(self, base: Path | None = None) -> tuple[trimesh.Trimesh, NDArray[np.float64]]:
         """The object's mesh in its local frame (as loaded, stretched by ``width_scale`` and warped
         by ``width_profile``: the object's own shape) and its (4, 4) local → world transform (the
-        scaling to ``size_m``, the yaw and the position), with the ground at z = 0."""
+        scaling to ``size_m``, the yaw and the position), with the ground at z = 0.
+
+        Raises
+        ------
+        InvalidInputError
+            A field that is wrong (:meth:`_check`), three extents for a flat mesh.
+        MeshLoadError
+            The mesh file cannot be loaded.
+        """
         import trimesh
 
         from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported when a scene is built
 
+        with located(f"object {shown(self.class_name or self.mesh)}"):
+            self._check()
         if isinstance(self.mesh, trimesh.Trimesh):
             local = self.mesh
-        elif isinstance(self.mesh, dict):
+        elif isinstance(self.mesh, Mapping):
             local = _primitive(self.mesh)
         else:
             path = Path(self.mesh)
@@ -201,8 +288,6 @@ class SceneObject:
                 path = base / path
             local = load_mesh(path)
         vertices = np.asarray(local.vertices, dtype=np.float64)
-        if self.up not in ("z", "y"):
-            raise InvalidInputError(f"object {self.class_name or self.mesh!r}: up must be 'z' or 'y', got {self.up!r}")
         rot_up = np.eye(3) if self.up == "z" else np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])
         size = self.size_m
         v = vertices @ rot_up.T
@@ -210,24 +295,17 @@ class SceneObject:
             scale = np.ones(3)
         else:
             size_arr = np.asarray(size, dtype=np.float64).reshape(-1)
-            if size_arr.shape not in ((1,), (3,)) or not np.all(np.isfinite(size_arr)) or np.any(size_arr <= 0):
-                raise InvalidInputError(f"object {self.class_name or self.mesh!r}: size_m must be one or three sizes > 0 metres, got {size!r}")
             extents = np.ptp(v, axis=0)
             if len(size_arr) == 1:
                 scale = np.full(3, size_arr[0] / extents.max())
             else:
                 if np.any(extents <= 0):
-                    raise InvalidInputError(f"object {self.class_name or self.mesh!r}: a flat mesh cannot take three extents {size!r}")
+                    raise InvalidInputError(f"object {shown(self.class_name or self.mesh)}: a flat mesh cannot take three extents {shown(size)}")
                 scale = size_arr / extents
-        if not (math.isfinite(self.width_scale) and self.width_scale > 0):
-            raise InvalidInputError(f"object {self.class_name or self.mesh!r}: width_scale must be a number > 0, got {self.width_scale!r}")
         # The object's own shape, stretch and warp, is its local mesh; the transform only sizes, turns and places it.
         faces, rows = np.asarray(local.faces, dtype=np.int64), None
         if self.width_profile is not None:
-            try:
-                profile = check_width_profile(self.width_profile)
-            except InvalidInputError as exc:
-                raise InvalidInputError(f"object {self.class_name or self.mesh!r}: {exc}") from None
+            profile = self.width_profile
             v, faces, rows = _split_tall_faces(v, faces, len(profile))
             factors = width_profile_factors(v[:, 2], profile)
             centre_xy = (v[:, :2].min(axis=0) + v[:, :2].max(axis=0)) / 2
@@ -238,9 +316,7 @@ class SceneObject:
             local = trimesh.Trimesh(v @ rot_up, faces, process=False)  # rot_up is orthonormal: v @ rot_up undoes it
             if rows is not None:
                 local.metadata[FACE_ROWS] = rows
-        pos = np.asarray(self.position_m, dtype=np.float64).reshape(-1)
-        if pos.shape not in ((2,), (3,)) or not np.all(np.isfinite(pos)):
-            raise InvalidInputError(f"object {self.class_name or self.mesh!r}: position_m must be 2 or 3 finite metres, got {self.position_m!r}")
+        pos = self.position_m
         c, s = math.cos(math.radians(self.yaw_deg)), math.sin(math.radians(self.yaw_deg))
         yaw = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         lo, hi = v.min(axis=0) * scale, v.max(axis=0) * scale
@@ -249,6 +325,15 @@ class SceneObject:
         m[:3, :3] = yaw @ (scale[:, None] * rot_up)
         m[:3, 3] = -(yaw @ centre) + np.array([pos[0], pos[1], pos[2] if len(pos) == 3 else 0.0])
         return local, m
+
+
+def _is_trimesh(mesh: object) -> bool:
+    """Whether ``mesh`` is a ``trimesh.Trimesh`` (trimesh is imported only if it could be one)."""
+    if not type(mesh).__module__.startswith("trimesh"):
+        return False
+    import trimesh
+
+    return isinstance(mesh, trimesh.Trimesh)
 
 
 @dataclass
@@ -303,6 +388,16 @@ class ScanScene:
         Height of the sensor above the ground, for :meth:`default_sensor_pose`.
     sensor_position_m : (2,) float
         Sensor (x, y), metres; default the origin.
+    base_dir : Path, optional
+        Folder of the scene file: relative mesh paths are read from it.
+
+    Raises
+    ------
+    InvalidInputError
+        ``ground`` not a bool; ``ground_z_m``, ``sensor_position_m`` or ``sensor_height_m``
+        (>= 0) not finite or beyond :data:`MAX_GROUND_HALF_EXTENT_M` metres;
+        ``ground_half_extent_m`` not in (0, :data:`MAX_GROUND_HALF_EXTENT_M`]; an object
+        that is not a :class:`SceneObject`.
     """
 
     objects: list[SceneObject] = field(default_factory=list)
@@ -318,15 +413,29 @@ class ScanScene:
     _object_builds: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        h = self.ground_half_extent_m
-        if not (isinstance(h, (int, float)) and 0 < h <= MAX_GROUND_HALF_EXTENT_M):
-            raise InvalidInputError(
-                f"ground half_extent_m must be > 0 and <= {MAX_GROUND_HALF_EXTENT_M:.0f} metres (float32 ray casting), got {h!r}"
-            )
-        z = self.sensor_height_m
+        far = f"<= {MAX_GROUND_HALF_EXTENT_M:.0f} metres (float32 ray casting)"
+        if not isinstance(self.ground, (bool, np.bool_)):
+            raise InvalidInputError(f"ground must be true or false, got {shown(self.ground)}")
+        self.ground_z_m = real(self.ground_z_m, "ground z_m", low=-MAX_GROUND_HALF_EXTENT_M, high=MAX_GROUND_HALF_EXTENT_M)
+        self.ground_half_extent_m = real(
+            self.ground_half_extent_m, "ground half_extent_m", low=0.0, low_open=True, high=MAX_GROUND_HALF_EXTENT_M, expected=f"> 0 and {far}"
+        )
         # the same rule as the farm's --sensor-height and CropDistributions.height_m
-        if not (isinstance(z, (int, float)) and math.isfinite(z) and z >= 0):
-            raise InvalidInputError(f"sensor height_m must be >= 0 metres (above the ground), got {z!r}")
+        self.sensor_height_m = real(self.sensor_height_m, "sensor height_m", low=0.0, expected=">= 0 metres (above the ground)")
+        real(self.sensor_height_m, "sensor height_m", high=MAX_GROUND_HALF_EXTENT_M, expected=far)
+        self.sensor_position_m = reals(
+            self.sensor_position_m, "sensor position_m", lengths=(2,), expected="2 numbers (x, y) in metres",
+            low=-MAX_GROUND_HALF_EXTENT_M, high=MAX_GROUND_HALF_EXTENT_M,
+        )  # fmt: skip
+        for name in ("objects", "occluders"):
+            items = getattr(self, name)
+            if not isinstance(items, (list, tuple)):
+                raise InvalidInputError(f"{name} must be a list of SceneObject, got {type(items).__name__}")
+            bad = next((i for i, obj in enumerate(items) if not isinstance(obj, SceneObject)), None)
+            if bad is not None:
+                raise InvalidInputError(f"{name}[{bad}] must be a SceneObject, got {type(items[bad]).__name__} {shown(items[bad])}")
+            if isinstance(items, tuple):  # add() appends to the list given
+                setattr(self, name, list(items))
 
     def add(self, mesh, **kwargs) -> ScanScene:
         """Append a target object (``SceneObject(mesh, **kwargs)``); returns self for chaining."""
@@ -343,8 +452,8 @@ class ScanScene:
 
     def default_sensor_pose(self) -> NDArray[np.float64]:
         """(4, 4) sensor → world: at ``sensor_position_m``, ``sensor_height_m`` above the ground, yaw 0."""
-        x, y = (float(v) for v in self.sensor_position_m)
-        return sensor_pose([x, y, self.ground_z_m + float(self.sensor_height_m)])
+        x, y = self.sensor_position_m
+        return sensor_pose([x, y, self.ground_z_m + self.sensor_height_m])
 
     def _object_build(self, obj: SceneObject) -> tuple[trimesh.Trimesh, NDArray[np.float64]]:
         """``obj.build(self.base_dir)``, once per object of this scene."""
@@ -363,11 +472,9 @@ class ScanScene:
         vertices, faces, face_object, face_local = [], [], [], []
         transforms: list[NDArray[np.float64]] = [np.eye(4)]
         locals_: list[trimesh.Trimesh | None] = [None]
-        n_vertices = 0
+        n_vertices = n_faces = 0
         if self.ground:
-            h = float(self.ground_half_extent_m)
-            if not (math.isfinite(h) and h > 0):
-                raise InvalidInputError(f"ground_half_extent_m must be > 0 metres, got {self.ground_half_extent_m!r}")
+            h = self.ground_half_extent_m
             g = np.array([[-h, -h, 0.0], [h, -h, 0.0], [h, h, 0.0], [-h, h, 0.0]]) + [0.0, 0.0, self.ground_z_m]
             vertices.append(g)
             faces.append(np.array([[0, 1, 2], [0, 2, 3]]))
@@ -376,6 +483,12 @@ class ScanScene:
             n_vertices = 4
         for oid, obj in enumerate([*self.objects, *self.occluders], start=1):
             local, m = self._object_build(obj)
+            n_faces += len(local.faces)
+            if n_faces > MAX_MESH_FACES:  # each mesh file is capped on its own; a scene may name one 10,000 times
+                raise InvalidInputError(
+                    f"the scene holds more than {MAX_MESH_FACES:,} triangles by object {oid} ({shown(obj.class_name or obj.mesh)}); "
+                    "use fewer or simpler meshes"
+                )
             m = m.copy()
             m[2, 3] += self.ground_z_m
             v = _to_world(local.vertices, m)
@@ -398,38 +511,59 @@ class ScanScene:
 
     # -- files ---------------------------------------------------------------------------------
     @classmethod
-    def from_dict(cls, spec: dict, base_dir: Path | None = None) -> ScanScene:
+    def from_dict(cls, spec: Mapping, base_dir: Path | None = None) -> ScanScene:
         """A scene from the JSON/YAML structure of the module docstring.
+
+        Parameters
+        ----------
+        spec : mapping
+        base_dir : Path, optional
+            The scene file's folder: a mesh path must be relative and lie inside it (symlinks
+            resolved).  None: paths as given (a scene built in Python).
 
         Raises
         ------
         InvalidInputError
-            Unknown keys or bad values (the message names them).
+            Unknown keys or bad values, more than :data:`~zbuf_occlude.sensors.checks.MAX_SCENE_OBJECTS`
+            objects (the message names the field: ``objects[2]: yaw_deg ...``); :class:`~zbuf_occlude.errors.UnsafePathError`
+            for a mesh path that leaves ``base_dir``.
         """
-        if not isinstance(spec, dict):
-            raise InvalidInputError(f"a scene spec must be a mapping, got {type(spec).__name__}")
-        unknown = set(spec) - {"ground", "objects", "occluders", "sensor"}
-        if unknown:
-            raise InvalidInputError(f"unknown scene keys {sorted(unknown)}; use ground, objects, occluders, sensor")
+        from zbuf_occlude.io.safe_paths import path_inside
 
-        def obj(d: dict) -> SceneObject:
-            allowed = {"mesh", "class", "position_m", "yaw_deg", "size_m", "up"}
-            if not isinstance(d, dict) or "mesh" not in d or set(d) - allowed:
-                raise InvalidInputError(f"scene object {d!r}: needs 'mesh', allows {sorted(allowed)}")
-            if isinstance(d["mesh"], dict):
-                _primitive_args(d["mesh"])  # checked now, so that the error names the file
-            return SceneObject(d["mesh"], d.get("class", ""), tuple(d.get("position_m", (0.0, 0.0))), float(d.get("yaw_deg", 0.0)), d.get("size_m"), d.get("up", "z"))
+        spec = mapping(spec, "scene", SCENE_KEYS)
+        lists = {}
+        for key in ("objects", "occluders"):
+            items = spec.get(key)
+            if items is not None and not isinstance(items, list):
+                raise InvalidInputError(f"{key} must be a list of objects, got {type(items).__name__} {shown(items)}")
+            lists[key] = items or []
+        if len(lists["objects"]) + len(lists["occluders"]) > MAX_SCENE_OBJECTS:
+            raise InvalidInputError(f"the scene holds {len(lists['objects']) + len(lists['occluders']):,} objects and occluders, more than {MAX_SCENE_OBJECTS:,}")
+
+        def obj(d: object, where: str) -> SceneObject:
+            with located(where):
+                d = mapping(d, "object", OBJECT_KEYS, required=("mesh",))
+                made = SceneObject(d["mesh"], d.get("class", ""), d.get("position_m", (0.0, 0.0)), d.get("yaw_deg", 0.0), d.get("size_m"), d.get("up", "z"))
+                if base_dir is not None and isinstance(made.mesh, str):  # a file named by a scene file stays in its folder
+                    path_inside(base_dir, made.mesh, what="mesh")
+            return made
 
         ground = spec.get("ground", {})
-        sensor = spec.get("sensor", {})
+        if ground is None or isinstance(ground, bool):
+            ground, has_ground = {}, bool(ground)
+        else:
+            ground, has_ground = mapping(ground, "ground", GROUND_KEYS), True
+        sensor = mapping(spec.get("sensor", {}), "sensor", SENSOR_KEYS)
+        if not (has_ground or lists["objects"] or lists["occluders"]):
+            raise InvalidInputError("the scene is empty: no ground and no objects")
         return cls(
-            objects=[obj(d) for d in spec.get("objects", [])],
-            occluders=[obj(d) for d in spec.get("occluders", [])],
-            ground=ground is not False and ground is not None,
-            ground_z_m=float((ground or {}).get("z_m", 0.0)) if isinstance(ground, dict) else 0.0,
-            ground_half_extent_m=float(ground.get("half_extent_m", 80.0)) if isinstance(ground, dict) else 80.0,
-            sensor_height_m=float(sensor.get("height_m", 1.8)),
-            sensor_position_m=tuple(sensor.get("position_m", (0.0, 0.0))),
+            objects=[obj(d, f"objects[{i}]") for i, d in enumerate(lists["objects"])],
+            occluders=[obj(d, f"occluders[{i}]") for i, d in enumerate(lists["occluders"])],
+            ground=has_ground,
+            ground_z_m=ground.get("z_m", 0.0),
+            ground_half_extent_m=ground.get("half_extent_m", 80.0),
+            sensor_height_m=sensor.get("height_m", 1.8),
+            sensor_position_m=sensor.get("position_m", (0.0, 0.0)),
             base_dir=base_dir,
         )
 
@@ -437,45 +571,22 @@ class ScanScene:
 def load_scene(path: str | Path) -> ScanScene:
     """Read a scene spec from ``.json``, ``.yaml`` or ``.yml`` (module docstring).
 
+    The file is read by :func:`~zbuf_occlude.sensors.spec_files.read_spec_file` (a regular
+    file of at most :data:`~zbuf_occlude.sensors.spec_files.MAX_SPEC_FILE_BYTES`, nested at
+    most 64 levels, no YAML aliases), then :meth:`ScanScene.from_dict` with the file's folder.
+
     Raises
     ------
     InvalidInputError
-        Missing or unparsable file, unknown format, bad fields.
+        Missing or unparsable file, unknown format, bad fields (the message names the file and
+        the field); :class:`~zbuf_occlude.errors.UnsafePathError` for a mesh path outside the
+        file's folder.
     """
+    from zbuf_occlude.sensors.spec_files import read_spec_file
+
     path = Path(path)
     if not path.is_file():
         raise InvalidInputError(f"{path}: no such scene file")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as exc:
-        raise InvalidInputError(f"{path}: a scene file must be UTF-8 text ({exc.reason} at byte {exc.start})") from None
-    try:  # json and PyYAML parse nested containers recursively: a crafted file exhausts the stack
-        suffix = path.suffix.lower()
-        if suffix == ".json":
-            try:
-                spec = json.loads(text)
-            except ValueError as exc:
-                raise InvalidInputError(f"{path}: cannot parse scene JSON ({exc})") from exc
-        elif suffix in (".yaml", ".yml"):
-            try:
-                import yaml
-            except ImportError:
-                raise InvalidInputError(f"{path}: YAML scenes need PyYAML: pip install 'zbuf-occlude[yaml]'") from None
-            try:
-                spec = yaml.safe_load(text)
-            except yaml.YAMLError as exc:
-                raise InvalidInputError(f"{path}: cannot parse scene YAML ({exc})") from exc
-        else:
-            raise InvalidInputError(f"{path}: unknown scene format {path.suffix!r}; use .json, .yaml or .yml")
-    except RecursionError:  # json and PyYAML parse nested containers recursively
-        raise InvalidInputError(f"{path}: the scene is nested too deeply to be a scene (a crafted file?)") from None
-    try:
+    spec = read_spec_file(path, what="scene")
+    with located(str(path)):
         return ScanScene.from_dict(spec, base_dir=path.parent)
-    except RecursionError:
-        raise InvalidInputError(f"{path}: the scene is nested too deeply to be a scene (a crafted file?)") from None
-    except MeshLoadError:
-        raise
-    except (TypeError, ValueError) as exc:
-        if isinstance(exc, InvalidInputError):
-            raise InvalidInputError(f"{path}: {exc}") from exc
-        raise InvalidInputError(f"{path}: bad scene field ({exc})") from exc
