@@ -22,6 +22,16 @@ __all__ = [
     "DEFAULT_DEPTH_TOLERANCE",
     "DEFAULT_SLOPE_SCALE",
     "DEFAULT_MAX_SLOPE",
+    "MAX_VIEWS",
+    "MAX_POINTS",
+    "MAX_SAMPLES",
+    "MAX_RESOLUTION",
+    "MAX_GRID",
+    "MAX_LIST_VALUES",
+    "MAX_WORKERS",
+    "MAX_EPOCHS",
+    "MAX_REPETITIONS",
+    "MAX_SEED",
 ]
 
 #: The visibility method used when none is named: ``auto`` picks, per machine, the exact
@@ -108,3 +118,39 @@ DEFAULT_SLOPE_SCALE = 1.0
 #: Clamp of tan θ near grazing incidence in ``zbuffer-tolerance`` (see above); README's
 #: ``min(tan θ, 4)``.
 DEFAULT_MAX_SLOPE = 4.0
+
+
+# -- caps of the counted options --------------------------------------------------------------------
+# The largest value each counted option of the command line takes (zbuf_occlude.cli.options checks
+# them while parsing, before a mesh is read or anything is written): far above any real run, they
+# stop a typo or a hostile value from running until memory or time is gone.  Memory is estimated
+# again per run (zbuf_occlude.resources), and --resolution against the GL's maximum where it renders.
+
+#: Poses of one schedule (``--views fibonacci:N`` or ``EL:AZ,...``, ``--azimuths``,
+#: ``--elevations``): 1,000× the paper's 100; each pose is one render per object.
+MAX_VIEWS = 100_000
+#: Points of one cloud (``--points``, ``--dense-points``, ``--complete-points``, ...): 10⁸ points
+#: are 2.4 GB in float64, more than one object needs at any density used in the field.
+MAX_POINTS = 100_000_000
+#: Samples, scans or clouds drawn per pose, object or class (``--samples-per-view``,
+#: ``scan --samples``, ``--per-class``): 10,000× the paper's 10 per pose; each is written.
+MAX_SAMPLES = 100_000
+#: Image size, pixels per side (``--resolution``, ``--resolution-sweep``): twice the largest
+#: ``GL_MAX_TEXTURE_SIZE`` of current GPUs (32,768); one such float32 image is 16 GiB.
+MAX_RESOLUTION = 65_536
+#: Occupancy-grid cells per axis (``compare --grid-sweep``): 128× the paper's 32; one exact
+#: test runs per occupied cell.
+MAX_GRID = 4_096
+#: Values in one comma-separated list of counts (``compare --dense-points`` and its sweeps):
+#: each value is a whole run over every mesh and pose.
+MAX_LIST_VALUES = 1_000
+#: Processes or threads on one machine (``--workers``, ``--dask-local``, ``--threads``): more
+#: than any machine's cores; more machines take ``--shard`` or ``--scheduler``.
+MAX_WORKERS = 1_024
+#: Training epochs (``--epochs``): 100× the paper's 100.
+MAX_EPOCHS = 10_000
+#: Repetitions of an experiment (``sim2real --seeds``), each a whole training run per training set.
+MAX_REPETITIONS = 1_000
+#: Largest ``--seed``: numpy takes seeds of any size, the storage does not (past 2**64 - 1 HDF5 has
+#: no integer type and every object of a farm fails); int64 is the type every reader shares.
+MAX_SEED = 2**63 - 1

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from zbuf_occlude.cli.options import add_renamed
+from zbuf_occlude.cli.options import Checked, add_renamed, count, count_list, out_folder, poses, real, seed
 from zbuf_occlude.defaults import DEFAULT_RESOLUTION, DEFAULT_VIEWS
 from zbuf_occlude.experiments.compare.job import run_compare
 from zbuf_occlude.experiments.compare.run import DEFAULT_METHODS, DEFAULT_POINTS, DEFAULT_REFERENCE
@@ -18,6 +18,7 @@ def _cli_compare(args: argparse.Namespace) -> int:
     import shlex
     import sys
 
+    out_folder(args.out, "--out")  # the default's check; a given --out was checked while parsing
     report = run_compare(
         args.paths,
         args.methods,
@@ -53,20 +54,38 @@ def add_compare_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("paths", nargs="+", help=f"mesh files ({EXTENSIONS_TEXT}) or folders (searched recursively)")
     p.add_argument("--methods", default=",".join(DEFAULT_METHODS), help="comma-separated methods (default: %(default)s)")
     p.add_argument(
-        "--dense-points", default=",".join(str(n) for n in DEFAULT_POINTS),
+        "--dense-points", action=Checked, check=count_list("MAX_POINTS"), default=",".join(str(n) for n in DEFAULT_POINTS),
         help="points sampled on each mesh, one run per count, comma-separated (default: %(default)s)",
     )  # fmt: skip
-    add_renamed(p, "--points", "--dense-points", "dense_points")
-    p.add_argument("--views", default=DEFAULT_VIEWS, help="pose schedule: grid25, paper100, fibonacci:N or EL:AZ,... (default: %(default)s)")
-    p.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION, help="z-buffer resolution in pixels (default: %(default)s)")
-    p.add_argument("--out", default="compare_out", help="output folder (default: %(default)s)")
-    p.add_argument("--seed", type=int, default=0, help="sampling seed (default: %(default)s)")
+    add_renamed(p, "--points", "--dense-points", "dense_points", check=count_list("MAX_POINTS"))
+    p.add_argument(
+        "--views", action=Checked, check=poses, default=DEFAULT_VIEWS,
+        help="pose schedule: grid25, paper100, fibonacci:N or EL:AZ,... (default: %(default)s)",
+    )  # fmt: skip
+    p.add_argument(
+        "--resolution", action=Checked, check=count("MAX_RESOLUTION"), default=DEFAULT_RESOLUTION,
+        help="z-buffer resolution in pixels (default: %(default)s)",
+    )  # fmt: skip
+    p.add_argument("--out", action=Checked, check=out_folder, default="compare_out", help="output folder (default: %(default)s)")
+    p.add_argument("--seed", action=Checked, check=seed, default=0, help="sampling seed (default: %(default)s)")
     p.add_argument("--reference", default=DEFAULT_REFERENCE, help="method that defines the truth (default: %(default)s)")
-    p.add_argument("--resolution-sweep", default="", help="e.g. 128,256,512,1024,2048: agreement vs resolution")
-    p.add_argument("--grid-sweep", default="", help="e.g. 16,32,64,128: agreement vs occupancy-grid size")
-    p.add_argument("--sweep-points", type=int, default=None, help="point count of the sweeps (default: smallest --points)")
+    p.add_argument(
+        "--resolution-sweep", action=Checked, check=count_list("MAX_RESOLUTION", empty=True), default="",
+        help="e.g. 128,256,512,1024,2048: agreement vs resolution",
+    )  # fmt: skip
+    p.add_argument(
+        "--grid-sweep", action=Checked, check=count_list("MAX_GRID", empty=True), default="",
+        help="e.g. 16,32,64,128: agreement vs occupancy-grid size",
+    )  # fmt: skip
+    p.add_argument(
+        "--sweep-points", action=Checked, check=count("MAX_POINTS"), default=None,
+        help="point count of the sweeps (default: smallest --points)",
+    )  # fmt: skip
     p.add_argument("--memory", action="store_true", help="also record peak traced memory per method")
-    p.add_argument("--method-budget", type=float, default=None, help="seconds per view after which a method is skipped at larger point counts")
+    p.add_argument(
+        "--method-budget", action=Checked, check=real(0.0, above=True), default=None,
+        help="seconds per view after which a method is skipped at larger point counts",
+    )  # fmt: skip
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cli_compare)
     return p

@@ -5,8 +5,9 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from zbuf_occlude.cli.options import add_renamed
-from zbuf_occlude.defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION
+from zbuf_occlude.cli.options import Checked, add_renamed, count, elevations, seed
+from zbuf_occlude.defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION, MAX_VIEWS
+from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.elevation_profile import (
     DEFAULT_AZIMUTHS,
     DEFAULT_ELEVATIONS,
@@ -21,13 +22,18 @@ __all__ = ["add_profile_parser"]
 def _cli_profile(args: argparse.Namespace) -> int:
     import sys
 
-    elevations = [float(e) for e in args.elevations.split(",")] if args.elevations else DEFAULT_ELEVATIONS
+    elevations_deg = args.elevations or DEFAULT_ELEVATIONS  # a given list was checked while parsing
+    if len(elevations_deg) * args.azimuths > MAX_VIEWS:
+        raise InvalidInputError(
+            f"--elevations ({len(elevations_deg)}) times --azimuths ({args.azimuths}) is {len(elevations_deg) * args.azimuths:,} poses, "
+            f"more than the {MAX_VIEWS:,} accepted (MAX_VIEWS)"
+        )
     png = elevation_profile(
         args.mesh,
         args.out,
         method=args.method,
         points=args.dense_points,
-        elevations=elevations,
+        elevations=elevations_deg,
         azimuths=args.azimuths,
         resolution=args.resolution,
         seed=args.seed,
@@ -50,12 +56,21 @@ def add_profile_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("mesh", help=f"mesh file ({EXTENSIONS_TEXT})")
     p.add_argument("--out", default="elevation_profile.png", help="PNG path or folder (default: %(default)s)")
     p.add_argument("--method", default=DEFAULT_METHOD, help="HSR method (default: %(default)s)")
-    p.add_argument("--dense-points", type=int, default=DEFAULT_PROFILE_POINTS, help="points sampled on the surface (default: %(default)s)")
-    add_renamed(p, "--points", "--dense-points", "dense_points", type=int)
-    p.add_argument("--elevations", default="", help="comma-separated degrees (default: -90..90 step 10)")
-    p.add_argument("--azimuths", type=int, default=DEFAULT_AZIMUTHS, help="azimuths averaged per elevation (default: %(default)s)")
-    p.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION, help="image size in pixels (default: %(default)s)")
-    p.add_argument("--seed", type=int, default=0, help="sampling seed (default: %(default)s)")
+    p.add_argument(
+        "--dense-points", action=Checked, check=count("MAX_POINTS"), default=DEFAULT_PROFILE_POINTS,
+        help="points sampled on the surface (default: %(default)s)",
+    )  # fmt: skip
+    add_renamed(p, "--points", "--dense-points", "dense_points", check=count("MAX_POINTS"))
+    p.add_argument("--elevations", action=Checked, check=elevations, default="", help="comma-separated degrees (default: -90..90 step 10)")
+    p.add_argument(
+        "--azimuths", action=Checked, check=count("MAX_VIEWS"), default=DEFAULT_AZIMUTHS,
+        help="azimuths averaged per elevation (default: %(default)s)",
+    )  # fmt: skip
+    p.add_argument(
+        "--resolution", action=Checked, check=count("MAX_RESOLUTION"), default=DEFAULT_RESOLUTION,
+        help="image size in pixels (default: %(default)s)",
+    )  # fmt: skip
+    p.add_argument("--seed", action=Checked, check=seed, default=0, help="sampling seed (default: %(default)s)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cli_profile)
     return p

@@ -7,6 +7,7 @@ import logging
 import shlex
 import sys
 
+from zbuf_occlude.cli.options import Checked, count, interval, out_folder, parse_interval, poses, real, seed
 from zbuf_occlude.dataset.layout import STORAGE_MODES
 from zbuf_occlude.defaults import DEFAULT_DENSE_POINTS as GENERATE_DENSE_POINTS
 from zbuf_occlude.defaults import (
@@ -21,7 +22,6 @@ from zbuf_occlude.defaults import (
 from zbuf_occlude.defaults import DEFAULT_RESOLUTION as GENERATE_RESOLUTION
 from zbuf_occlude.defaults import DEFAULT_VIEWS as GENERATE_VIEWS
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.farm.checks import check_out_option
 from zbuf_occlude.farm.config import DEFAULT_SENSOR_DISTANCE_M, DEFAULT_SENSOR_HEIGHT_M, DEFAULT_SENSOR_SIZE_M, FarmParams
 from zbuf_occlude.farm.shards import parse_shard
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
@@ -43,6 +43,8 @@ CLASS_FROM_HELP = (
     "N: take each mesh's class from the N-th folder above it (1: the folder holding it) instead of the detected "
     "layout's; needed where the layout's classes look wrong (all one class, or folders such as 'models')"
 )
+#: ``--class-from N``'s check (a folder level, no cap): ``mesh.layouts`` says the same of a bad value.
+CLASS_FROM = count(None, hint="1: the folder holding each file")
 
 
 # -- command line (called from zbuf_occlude.cli.main) -------------------------------------------------
@@ -92,8 +94,6 @@ def _sensor_params(args: argparse.Namespace) -> dict:
             if getattr(args, option) not in (None, False):
                 raise InvalidInputError(f"--{option.replace('_', '-')} needs --sensor")
         return {}
-    from zbuf_occlude.cli.sensors import parse_interval
-
     out: dict = {"sensor": args.sensor}
     for option in ("sensor_distance", "sensor_height", "sensor_size"):
         text = getattr(args, option)
@@ -116,8 +116,6 @@ def _interval_text(lo_hi: tuple[float, float]) -> str:
 
 
 def _merge_command(args: argparse.Namespace) -> int:
-    if args.out is not None:
-        check_out_option(args.out)
     from zbuf_occlude.farm.run import merge_farm
 
     summary = merge_farm(args.inputs, args.out, progress=not args.no_progress)
@@ -139,31 +137,31 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
         "taxonomy.json, CLASS/NAME.ext or CLASS_NNNN.ext files (the layout used goes into the card; see docs/guide/inputs.md); "
         "or a list file of 'PATH LABEL [SPLIT]' lines",
     )
-    p.add_argument("--out", required=True, help="data set folder")
+    p.add_argument("--out", required=True, action=Checked, check=out_folder, help="data set folder")
     sel = p.add_argument_group("selection")
     sel.add_argument("--classes", help="comma-separated class names (default: all)")
-    sel.add_argument("--per-class", type=int, help="first K meshes (by name) of each class and split (default: all)")
+    sel.add_argument("--per-class", action=Checked, check=count(None), help="first K meshes (by name) of each class and split (default: all)")
     sel.add_argument("--splits", default=",".join(SPLITS), help="comma-separated splits (default: %(default)s)")
-    sel.add_argument("--class-from", type=int, metavar="N", help=CLASS_FROM_HELP)
+    sel.add_argument("--class-from", action=Checked, check=CLASS_FROM, metavar="N", help=CLASS_FROM_HELP)
     sel.add_argument("--up", choices=UP_CHOICES, default="auto", help=UP_HELP)
     r = p.add_argument_group("rendering")
-    r.add_argument("--views", default=DEFAULT_FARM_VIEWS, help=f"{VIEWS_HELP} (default: %(default)s; generate's: {GENERATE_VIEWS})")
+    r.add_argument("--views", action=Checked, check=poses, default=DEFAULT_FARM_VIEWS, help=f"{VIEWS_HELP} (default: %(default)s; generate's: {GENERATE_VIEWS})")
     r.add_argument(
-        "--samples-per-view", type=int, default=DEFAULT_SAMPLES_PER_VIEW, help="random samples drawn per pose (default: %(default)s)"
+        "--samples-per-view", action=Checked, check=count("MAX_SAMPLES"), default=DEFAULT_SAMPLES_PER_VIEW, help="random samples drawn per pose (default: %(default)s)"
     )
-    r.add_argument("--points", type=int, default=DEFAULT_N_POINTS, help="points per sample (default: %(default)s)")
+    r.add_argument("--points", action=Checked, check=count("MAX_POINTS"), default=DEFAULT_N_POINTS, help="points per sample (default: %(default)s)")
     dense = r.add_mutually_exclusive_group()
     dense.add_argument(
-        "--dense-points", type=int, help=f"dense cloud per mesh, sampled once (default: {DEFAULT_FARM_DENSE_POINTS}; generate's: {GENERATE_DENSE_POINTS})"
+        "--dense-points", action=Checked, check=count("MAX_POINTS"), help=f"dense cloud per mesh, sampled once (default: {DEFAULT_FARM_DENSE_POINTS}; generate's: {GENERATE_DENSE_POINTS})"
     )
-    dense.add_argument("--density", type=float, help="dense cloud as points per unit area of the normalised mesh")
+    dense.add_argument("--density", action=Checked, check=real(0.0, above=True), help="dense cloud as points per unit area of the normalised mesh")
     r.add_argument(
-        "--resolution", type=int, default=DEFAULT_FARM_RESOLUTION, help=f"z-buffer image size, pixels (default: %(default)s; generate's: {GENERATE_RESOLUTION})"
+        "--resolution", action=Checked, check=count("MAX_RESOLUTION"), default=DEFAULT_FARM_RESOLUTION, help=f"z-buffer image size, pixels (default: %(default)s; generate's: {GENERATE_RESOLUTION})"
     )
     r.add_argument(
-        "--radius", type=float, default=DEFAULT_RADIUS, help=f"{RADIUS_HELP} (default: %(default)s)"
+        "--radius", action=Checked, check=real(), default=DEFAULT_RADIUS, help=f"{RADIUS_HELP} (default: %(default)s)"
     )
-    r.add_argument("--seed", type=int, default=DEFAULT_SEED, help="global seed: the same seed and options give the same data set (default: %(default)s)")
+    r.add_argument("--seed", action=Checked, check=seed, default=DEFAULT_SEED, help="global seed: the same seed and options give the same data set (default: %(default)s)")
     r.add_argument(
         "--method", default=DEFAULT_METHOD, help="visibility method (see `zbuf-occlude info`) (default: %(default)s)"
     )
@@ -183,19 +181,19 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
     )
     s.add_argument("--sensor", help="LiDAR or depth-camera preset (hdl32e, vlp16, hdl64e, os1-64, kinect-v1) or a JSON file (default: none, z-buffer poses)")
     s.add_argument(
-        "--sensor-distance", metavar="LO:HI",
+        "--sensor-distance", metavar="LO:HI", action=Checked, check=interval,
         help=f"horizontal sensor-object distance, metres (default: {_interval_text(DEFAULT_SENSOR_DISTANCE_M)})",
     )  # fmt: skip
     s.add_argument(
-        "--sensor-height", metavar="LO:HI",
+        "--sensor-height", metavar="LO:HI", action=Checked, check=interval,
         help=f"sensor height above the ground, metres (default: {_interval_text(DEFAULT_SENSOR_HEIGHT_M)})",
     )  # fmt: skip
     s.add_argument(
-        "--sensor-size", metavar="LO:HI",
+        "--sensor-size", metavar="LO:HI", action=Checked, check=interval,
         help=f"the object's largest dimension, metres (default: {_interval_text(DEFAULT_SENSOR_SIZE_M)})",
     )  # fmt: skip
     s.add_argument(
-        "--sensor-reflectivity", metavar="LO:HI",
+        "--sensor-reflectivity", metavar="LO:HI", action=Checked, check=interval,
         help="return physics: the object's Lambertian reflectivity, drawn per scan; returns must clear the sensor's "
         "radiometric threshold (default: every hit returns)",
     )  # fmt: skip
@@ -204,28 +202,28 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
         help="return physics: 7 rays per firing inside the beam divergence cone, strongest echo",
     )  # fmt: skip
     s.add_argument(
-        "--sensor-ground-margin", metavar="M", type=float,
+        "--sensor-ground-margin", metavar="M", action=Checked, check=real(0.0, unit="metres"),
         help="keep the ground returns under each object, inside its footprint grown by M metres, as a box "
         "segmentation of a street scan leaves them (default: the object's returns only)",
     )  # fmt: skip
     s.add_argument(
-        "--sensor-hidden-below", metavar="LO:HI",
+        "--sensor-hidden-below", metavar="LO:HI", action=Checked, check=interval,
         help="hide each object's returns lower than a height drawn per scan, metres above the ground (a bottom hidden "
         "by parked cars or kerbs, or removed with the ground; fit-sensor fits it per class) (default: nothing hidden)",
     )  # fmt: skip
     s.add_argument(
-        "--sensor-across-sight-width", metavar="LO:HI",
+        "--sensor-across-sight-width", metavar="LO:HI", action=Checked, check=interval,
         help="stretch each object horizontally so that its crops are, at the median, this wide across the line of sight, "
         "metres, drawn per scan (posts as thick as real trunks; fit-sensor fits it per class) (default: the meshes' proportions)",
     )  # fmt: skip
     ex = p.add_argument_group("execution")
-    ex.add_argument("--workers", type=int, default=1, help="worker processes on this machine (default: 1)")
+    ex.add_argument("--workers", action=Checked, check=count("MAX_WORKERS"), default=1, help="worker processes on this machine (default: 1)")
     ex.add_argument(
         "--shard", help="I/N: render the I-th of N partitions (SLURM array, Kubernetes indexed job); then farm-merge"
     )
     dask = ex.add_mutually_exclusive_group()
     dask.add_argument("--scheduler", help="Dask scheduler address tcp://HOST:PORT (out must be on a shared file system)")
-    dask.add_argument("--dask-local", type=int, metavar="N", help="run on a local Dask cluster of N worker processes")
+    dask.add_argument("--dask-local", action=Checked, check=count("MAX_WORKERS"), metavar="N", help="run on a local Dask cluster of N worker processes")
     ex.add_argument("--overwrite", action="store_true", help="start over instead of resuming")
     ex.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_farm_command)
@@ -241,7 +239,7 @@ def add_farm_merge_parser(subparsers) -> argparse.ArgumentParser:
         "and write the manifest, file lists and data set card.",
     )
     p.add_argument("inputs", nargs="+", help="task output folders (one folder if all tasks shared --out)")
-    p.add_argument("--out", help="data set folder (default: the first input)")
+    p.add_argument("--out", action=Checked, check=out_folder, help="data set folder (default: the first input)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_merge_command)
     return p

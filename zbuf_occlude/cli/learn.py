@@ -8,52 +8,36 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from zbuf_occlude.cli.options import Checked, check_device, count, out_folder, seed
 from zbuf_occlude.cli.sim2real import parse_pairs, print_table
 from zbuf_occlude.defaults import DEFAULT_METHOD
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 
-__all__ = ["add_parser", "check_options"]
+__all__ = ["add_parser"]
 
 
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "root", help=f"mesh tree in ModelNet's layout, CLASS/SPLIT/NAME.ext with files {EXTENSIONS_TEXT}; duplicate meshes are dropped"
     )
-    p.add_argument("--out", required=True, help="output folder (results.csv, table.md, run.json, plots, checkpoints)")
+    p.add_argument("--out", required=True, action=Checked, check=out_folder, help="output folder (results.csv, table.md, run.json, plots, checkpoints)")
     p.add_argument("--scale", choices=("quick", "paper"), default="quick",
                    help="quick: fits a 2-core CPU; paper: the paper's sizes (ModelNet40 and a GPU) (default: %(default)s)")
-    p.add_argument("--epochs", type=int, help="override the scale's epoch count")
-    p.add_argument("--points", type=int, help="points per cloud (override the scale's)")
+    p.add_argument("--epochs", action=Checked, check=count("MAX_EPOCHS"), help="override the scale's epoch count")
+    p.add_argument("--points", action=Checked, check=count("MAX_POINTS"), help="points per cloud (override the scale's)")
     p.add_argument("--method", default=DEFAULT_METHOD, help="HSR method of the farm (default: %(default)s; og32/og64 are the paper's)")
     p.add_argument("--classes", help="comma-separated class names to keep")
-    p.add_argument("--data", help="folder for the farm's data set (default OUT/data); reuse it across models")
-    p.add_argument("--seed", type=int, default=0, help="seed of the data set, the splits and the training (default: %(default)s)")
+    p.add_argument("--data", action=Checked, check=out_folder, help="folder for the farm's data set (default OUT/data); reuse it across models")
+    p.add_argument("--seed", action=Checked, check=seed, default=0, help="seed of the data set, the splits and the training (default: %(default)s)")
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="torch device of the training (default: %(default)s)")
-    p.add_argument("--threads", type=int, help="torch CPU threads")
+    p.add_argument("--threads", action=Checked, check=count("MAX_WORKERS"), help="torch CPU threads")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
-def check_options(args: argparse.Namespace) -> None:
-    """Usage errors before torch is imported or a mesh is read: ``--epochs``, ``--points`` and
-    ``--threads`` (when given) are integers >= 1, ``--seed`` >= 0; the message names the value.
-
-    Raises InvalidInputError (exit status 2).
-    """
-    from zbuf_occlude.geometry.sampling import check_seed
-
-    for name in ("epochs", "points", "threads"):
-        value = getattr(args, name, None)
-        if value is not None and value < 1:
-            raise InvalidInputError(f"--{name} must be an integer >= 1, got {value}")
-    check_seed(getattr(args, "seed", 0), name="--seed")
-
-
 def _run(args: argparse.Namespace) -> int:
-    check_options(args)
-    from zbuf_occlude.learn import require_torch
-
-    require_torch()
+    # the counts, --seed and --out were checked while parsing (cli.options); the device before any rendering
+    check_device(args.device)
     from zbuf_occlude.experiments.table3 import run_augmentation, run_elevation
 
     classes = [c.strip() for c in args.classes.split(",")] if args.classes else None

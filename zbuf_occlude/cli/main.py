@@ -1,27 +1,33 @@
 """Command-line interface ``zbuf-occlude`` (also ``python -m zbuf_occlude``).
 
-Thin: parse arguments, call the library, print.  A :class:`ZbufOccludeError` is printed on
-one line and the exit status is 2; running out of memory (a ``MemoryError`` anywhere) is one
-line naming the command, what it was doing and the file when known, exit status 1; any other
-exception is a bug and shows a traceback.
+Thin: parse arguments, call the library, print.  Every option is checked while the command line
+is parsed (:mod:`zbuf_occlude.cli.options`: counts against their caps, seeds, reals, pose lists,
+output folders), before any work.  A :class:`ZbufOccludeError` is printed on one line and the
+exit status is 2; running out of memory (a ``MemoryError`` anywhere) is one line naming the
+command, what it was doing and the file when known, exit status 1; a closed stdout exits 141
+quietly and an unwritable one is one line, exit 1 (:func:`main`); any other exception is a bug
+and shows a traceback.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import errno
 import logging
 import os
 import signal
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from types import TracebackType
+from typing import Any
 
 import numpy as np
 
 from zbuf_occlude._version import __version__
-from zbuf_occlude.cli.options import add_renamed, counted
+from zbuf_occlude.cli.options import Checked, add_renamed, count, counted, out_folder, poses, real, seed
 from zbuf_occlude.defaults import DEFAULT_DENSE_POINTS, DEFAULT_METHOD, DEFAULT_RESOLUTION, DEFAULT_SEED, DEFAULT_VIEWS
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
@@ -70,7 +76,6 @@ def cmd_generate(args: argparse.Namespace) -> int:
     import shlex
 
     from zbuf_occlude.farm import FarmParams
-    from zbuf_occlude.farm.checks import check_out_option
     from zbuf_occlude.farm.generate import generate
 
     if args.protocol != "paper":  # the field's recipes (zbuf_occlude.protocols) have their own writers
@@ -84,7 +89,6 @@ def cmd_generate(args: argparse.Namespace) -> int:
         resolution=args.resolution, seed=args.seed, radius=args.radius, storage=args.format, method=args.method,
         up=args.up,
     )  # fmt: skip
-    check_out_option(args.out)  # before Path("") becomes the working folder
     paths = _default_paths(args.paths)
     # generate's engine (farm.run_farm) checks the options, the memory, --out and the GL before loading a mesh
     t0 = time.perf_counter()
@@ -106,26 +110,17 @@ def cmd_generate(args: argparse.Namespace) -> int:
 
 
 # -- validate ----------------------------------------------------------------------------------
-def _check_at_least(args: argparse.Namespace, **lowest: int) -> None:
-    """Usage errors name the option: ``--dense-points must be an integer >= 1, got 0``."""
-    for name, low in lowest.items():
-        value = getattr(args, name)
-        if value < low:
-            raise InvalidInputError(f"--{name.replace('_', '-')} must be an integer >= {low}, got {value}")
-
-
 def _check_validate_memory(points: int, resolution: int) -> None:
     """``validate`` holds a dense cloud of ``--dense-points`` per mesh and one image of ``--resolution``."""
     check_memory(estimate_job_memory(dense_points=points, resolution=resolution))
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from zbuf_occlude.geometry.sampling import check_seed, sample_surface
+    from zbuf_occlude.geometry.sampling import sample_surface
     from zbuf_occlude.mesh.discovery import scan_meshes
     from zbuf_occlude.mesh.load import load_mesh  # trimesh (and scipy): imported by the commands that load meshes
 
-    _check_at_least(args, dense_points=1, resolution=1)
-    check_seed(args.seed, name="--seed")
+    # the counts, --seed and --views were checked when the command line was parsed (cli.options)
     from zbuf_occlude.farm.checks import check_radius
 
     check_radius(args.radius, args.resolution)
@@ -215,7 +210,7 @@ def _add_paths(p: argparse.ArgumentParser) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``zbuf-occlude`` argument parser with every subcommand."""
-    from zbuf_occlude.cli.farm import CLASS_FROM_HELP, RADIUS_HELP, UP_HELP, VIEWS_HELP
+    from zbuf_occlude.cli.farm import CLASS_FROM, CLASS_FROM_HELP, RADIUS_HELP, UP_HELP, VIEWS_HELP
     from zbuf_occlude.defaults import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION
     from zbuf_occlude.defaults import DEFAULT_FARM_VIEWS as FARM_VIEWS
     from zbuf_occlude.farm.config import GENERATE_DEFAULTS as gd  # generate's defaults, taken from zbuf_occlude.defaults
@@ -232,23 +227,29 @@ def build_parser() -> argparse.ArgumentParser:
         "--points points to --out. Run it again to resume; `farm` builds large data sets.",
     )  # fmt: skip
     _add_paths(g)
-    g.add_argument("--out", required=True, help="output folder (created; must not be a file)")
-    g.add_argument("--views", help=f"{VIEWS_HELP} (default: {gd.views}; the farm's: {FARM_VIEWS})")
-    g.add_argument("--points", type=int, help=f"points per sample (default: {gd.n_points})")
-    g.add_argument("--samples-per-view", type=int, help=f"random samples drawn per pose (default: {gd.samples_per_view})")
+    g.add_argument("--out", required=True, action=Checked, check=out_folder, help="output folder (created; must not be a file)")
+    g.add_argument("--views", action=Checked, check=poses, help=f"{VIEWS_HELP} (default: {gd.views}; the farm's: {FARM_VIEWS})")
+    g.add_argument("--points", action=Checked, check=count("MAX_POINTS"), help=f"points per sample (default: {gd.n_points})")
     g.add_argument(
-        "--dense-points", type=int,
+        "--samples-per-view", action=Checked, check=count("MAX_SAMPLES"),
+        help=f"random samples drawn per pose (default: {gd.samples_per_view})",
+    )  # fmt: skip
+    g.add_argument(
+        "--dense-points", action=Checked, check=count("MAX_POINTS"),
         help=f"dense cloud sampled once per mesh, drawn from per pose (default: {gd.dense_points}; the farm's: {DEFAULT_FARM_DENSE_POINTS})",
     )  # fmt: skip
     g.add_argument(
-        "--resolution", type=int,
+        "--resolution", action=Checked, check=count("MAX_RESOLUTION"),
         help=f"z-buffer image size, pixels (default: {gd.resolution}; the farm's: {DEFAULT_FARM_RESOLUTION})",
     )  # fmt: skip
-    g.add_argument("--radius", type=float, default=gd.radius, help=f"{RADIUS_HELP} (default: %(default)s)")
-    g.add_argument("--seed", type=int, default=gd.seed, help="global seed: the same seed and options give the same samples (default: %(default)s)")
+    g.add_argument("--radius", action=Checked, check=real(), default=gd.radius, help=f"{RADIUS_HELP} (default: %(default)s)")
+    g.add_argument(
+        "--seed", action=Checked, check=seed, default=gd.seed,
+        help="global seed: the same seed and options give the same samples (default: %(default)s)",
+    )  # fmt: skip
     g.add_argument("--format", choices=FORMATS, help=f"npz or ply: one file per sample; h5: PointNet's layout (default: {gd.storage})")
     g.add_argument("--method", help=f"visibility method (see `zbuf-occlude info`) (default: {gd.method})")
-    g.add_argument("--class-from", type=int, metavar="N", help=CLASS_FROM_HELP)
+    g.add_argument("--class-from", action=Checked, check=CLASS_FROM, metavar="N", help=CLASS_FROM_HELP)
     g.add_argument("--up", choices=UP_CHOICES, default="auto", help=UP_HELP)
     g.add_argument("--overwrite", action="store_true", help="start over (needed to change options in an existing --out)")
     from zbuf_occlude.cli.protocols import add_protocol_arguments
@@ -266,12 +267,18 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     _add_paths(v)
     v.add_argument("--methods", default=DEFAULT_METHOD, help="comma-separated methods to score (see `zbuf-occlude info`) (default: %(default)s)")
-    v.add_argument("--views", default=DEFAULT_VIEWS, help=f"{VIEWS_HELP} (default: %(default)s)")
-    v.add_argument("--dense-points", type=int, default=DEFAULT_DENSE_POINTS, help="points sampled on each mesh's surface, scored per pose (default: %(default)s)")
-    add_renamed(v, "--points", "--dense-points", "dense_points", type=int)
-    v.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION, help="z-buffer image size of the image-space methods, pixels (default: %(default)s)")
-    v.add_argument("--radius", type=float, default=DEFAULT_RADIUS, help=f"{RADIUS_HELP} (default: %(default)s)")
-    v.add_argument("--seed", type=int, default=DEFAULT_SEED, help="seed of the surface sampling (default: %(default)s)")
+    v.add_argument("--views", action=Checked, check=poses, default=DEFAULT_VIEWS, help=f"{VIEWS_HELP} (default: %(default)s)")
+    v.add_argument(
+        "--dense-points", action=Checked, check=count("MAX_POINTS"), default=DEFAULT_DENSE_POINTS,
+        help="points sampled on each mesh's surface, scored per pose (default: %(default)s)",
+    )  # fmt: skip
+    add_renamed(v, "--points", "--dense-points", "dense_points", check=count("MAX_POINTS"))
+    v.add_argument(
+        "--resolution", action=Checked, check=count("MAX_RESOLUTION"), default=DEFAULT_RESOLUTION,
+        help="z-buffer image size of the image-space methods, pixels (default: %(default)s)",
+    )  # fmt: skip
+    v.add_argument("--radius", action=Checked, check=real(), default=DEFAULT_RADIUS, help=f"{RADIUS_HELP} (default: %(default)s)")
+    v.add_argument("--seed", action=Checked, check=seed, default=DEFAULT_SEED, help="seed of the surface sampling (default: %(default)s)")
     v.add_argument("--csv", help="also write the rows to this CSV file")
     v.set_defaults(func=cmd_validate)
 
@@ -298,6 +305,10 @@ def build_parser() -> argparse.ArgumentParser:
         add(sub)
     return parser
 
+
+#: Exit status when standard output was closed by its reader (``| head``): 128 + SIGPIPE (13), what a
+#: shell shows for a process that SIGPIPE ended (Python ignores SIGPIPE and gets EPIPE instead).
+EXIT_CLOSED_STDOUT = 141
 
 #: Local variables that hold the file a library function works on, looked up in the frames of a
 #: ``MemoryError`` to name that file (the library's own name for it is ``path``).
@@ -362,17 +373,16 @@ def _remove_if_empty(folders: list[Path]) -> None:
                 return
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the console script; returns the exit status.
-
-    A run refused with a usage error (exit 2) leaves no empty ``--out`` folder behind: the folders
-    it created for ``--out`` are removed again when nothing was written in them.
-    """
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    created = _missing_folders(getattr(args, "out", None))
+def _run(argv: Sequence[str] | None) -> int:
+    """Parse ``argv`` and run its command; the exit status (see :func:`main`)."""
+    created: list[Path] = []
+    command = "zbuf-occlude"
     try:
+        # inside the try: the options' checkers (cli.options) raise while the command line is parsed
+        args = build_parser().parse_args(argv)
+        command = args.command
+        logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+        created = _missing_folders(getattr(args, "out", None))
         return int(args.func(args) or 0)
     except ZbufOccludeError as exc:
         print(f"zbuf-occlude: error: {exc}", file=sys.stderr)
@@ -381,12 +391,109 @@ def main(argv: Sequence[str] | None = None) -> int:
     except MemoryError as exc:
         # Readers turn a MemoryError into an error naming their file; anything else that runs
         # out of memory ends here, in one line, not with a traceback.
-        print(f"zbuf-occlude: error: {_out_of_memory(args.command, exc)}", file=sys.stderr)
+        print(f"zbuf-occlude: error: {_out_of_memory(command, exc)}", file=sys.stderr)
         return 1
     except KeyboardInterrupt as exc:
         # 130 after Ctrl-C (SIGINT), 143 after SIGTERM (farm.lifecycle.Terminated): 128 + the signal
         print("zbuf-occlude: interrupted; run the same command again to resume", file=sys.stderr)
         return 128 + getattr(exc, "signum", signal.SIGINT)
+
+
+class _WatchedStdout:
+    """``sys.stdout`` while a command runs: the same stream, keeping the first OSError a write raised.
+
+    A reader that went away (``| head``: EPIPE) stops the command: the error propagates, as
+    Python's documentation recommends.  Any other error (``> /dev/full``: ENOSPC) drops what is
+    printed from then on and lets the command finish its files; :func:`main` says so at the end.
+    Only stdout's own errors are kept: another file's OSError stays a bug with a traceback.
+    """
+
+    def __init__(self, stream: Any) -> None:
+        self.stream = stream
+        self.error: OSError | None = None
+
+    def _failed(self, exc: OSError) -> None:
+        self.error = exc
+        if exc.errno == errno.EPIPE:
+            raise exc
+
+    def write(self, text: str) -> int:
+        if self.error is None:
+            try:
+                return self.stream.write(text)
+            except OSError as exc:
+                self._failed(exc)
+        return len(text)  # stdout is lost: the text is dropped, the command goes on
+
+    def writelines(self, lines: Iterable[str]) -> None:
+        for line in lines:
+            self.write(line)
+
+    def flush(self) -> None:
+        if self.error is None:
+            try:
+                self.stream.flush()
+            except OSError as exc:
+                self._failed(exc)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.stream, name)
+
+
+def _stdout_lost(stdout: _WatchedStdout, status: int | None) -> int:
+    """The exit status when stdout could not be written, after pointing stdout at ``os.devnull``
+    (so that the interpreter's own flush at exit does not fail again with a traceback).
+
+    A closed pipe exits :data:`EXIT_CLOSED_STDOUT` quietly; any other error is one line on
+    stderr and exit 1 (or the command's own non-zero ``status``; None: it stopped there).
+    """
+    exc = stdout.error
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, stdout.stream.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):  # a stdout without a file descriptor (tests, embedding)
+        pass
+    if exc is not None and exc.errno == errno.EPIPE:
+        return EXIT_CLOSED_STDOUT
+    done = "the command stopped there" if status is None else "the command finished its work; what it printed is lost"
+    with contextlib.suppress(OSError):
+        print(f"zbuf-occlude: error: could not write to standard output ({getattr(exc, 'strerror', None) or exc}); {done}", file=sys.stderr)
+    return status or 1
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the console script; returns the exit status.
+
+    A usage error (an option refused while parsing, or any :class:`ZbufOccludeError`) is one line
+    on stderr, exit 2.  A run refused with a usage error leaves no empty ``--out`` folder behind:
+    the folders it created for ``--out`` are removed again when nothing was written in them.
+    Standard output is watched and flushed here, not at exit, for every command: a reader that
+    went away (``| head``) ends the command quietly with exit status 141; a stdout that cannot be
+    written (``> /dev/full``) lets the command finish, then is one line on stderr and exit 1.
+    """
+    if sys.stdout is None:  # no stdout at all (pythonw): nothing to watch
+        return _run(argv)
+    stdout = sys.stdout = _WatchedStdout(sys.stdout)
+    try:
+        try:
+            status = _run(argv)
+            with contextlib.suppress(OSError):
+                stdout.flush()  # here, not at exit
+        except SystemExit:  # argparse after --help, --version or a usage error; it ignores a failed write itself
+            with contextlib.suppress(OSError):
+                stdout.flush()
+            if stdout.error is None:
+                raise
+            return _stdout_lost(stdout, 0)
+        except OSError:
+            if stdout.error is None:  # another file's error: a bug, shown with its traceback
+                raise
+            return _stdout_lost(stdout, None)
+        return status if stdout.error is None else _stdout_lost(stdout, status)
+    finally:
+        if sys.stdout is stdout:
+            sys.stdout = stdout.stream
 
 
 if __name__ == "__main__":

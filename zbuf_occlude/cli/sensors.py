@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from zbuf_occlude.cli.options import counted
+from zbuf_occlude.cli.options import Checked, count, counted, interval, out_folder, parse_interval, real, seed
 from zbuf_occlude.defaults import DEFAULT_SEED
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.samples import derive_rng, object_key
@@ -30,19 +30,6 @@ PRIMITIVES = {
     "cylinder": {"cylinder": {"radius_m": 0.5, "height_m": 1.0, "sections": 48}},
     "box": {"box_m": [1.0, 1.0, 1.0]},
 }
-
-
-def parse_interval(text: str, option: str) -> tuple[float, float]:
-    """``"10"`` → (10, 10); ``"5:25"`` → (5, 25) (a uniform draw per sample)."""
-    try:
-        parts = [float(v) for v in str(text).split(":")]
-    except ValueError:
-        raise InvalidInputError(f"{option} must be a number or LO:HI, got {text!r}") from None
-    if len(parts) == 1:
-        parts *= 2
-    if len(parts) != 2 or not parts[0] <= parts[1]:
-        raise InvalidInputError(f"{option} must be a number or LO:HI with LO <= HI, got {text!r}")
-    return parts[0], parts[1]
 
 
 def _outline(text: str | None) -> tuple[float, ...] | None:
@@ -222,9 +209,9 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
     )  # fmt: skip
     p.add_argument("mesh_or_scene", metavar="MESH_OR_SCENE", help=f"mesh file ({EXTENSIONS_TEXT}; stood on the ground), 'cylinder' or 'box' (unit primitives), or a scene .json/.yaml")
     p.add_argument("--sensor", default="hdl32e", help="vlp16 | hdl32e | hdl64e | os1-64 | riegl-q1560 (airborne) | kinect-v1 | sensor .json (default: %(default)s)")
-    p.add_argument("--distance", default="10", help="horizontal sensor-object distance, metres (N or LO:HI, uniform per sample; at least half the object's size) (default: %(default)s)")
-    p.add_argument("--height", default="1.8", help="sensor height above the ground, metres (N or LO:HI) (default: %(default)s)")
-    p.add_argument("--size", default="4.5", help="the object's largest dimension, metres (N or LO:HI; see --size-of) (default: %(default)s)")
+    p.add_argument("--distance", action=Checked, check=interval, default="10", help="horizontal sensor-object distance, metres (N or LO:HI, uniform per sample; at least half the object's size) (default: %(default)s)")
+    p.add_argument("--height", action=Checked, check=interval, default="1.8", help="sensor height above the ground, metres (N or LO:HI) (default: %(default)s)")
+    p.add_argument("--size", action=Checked, check=interval, default="4.5", help="the object's largest dimension, metres (N or LO:HI; see --size-of) (default: %(default)s)")
     p.add_argument(
         "--size-of", choices=DIMENSIONS, default="max",
         help="what --size measures: max (the largest dimension), height, or length (the larger horizontal side); the mesh keeps "
@@ -237,34 +224,34 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
     )
     r = p.add_argument_group("return physics (LiDAR)")
     r.add_argument(
-        "--reflectivity", metavar="RHO or LO:HI",
+        "--reflectivity", metavar="RHO or LO:HI", action=Checked, check=interval,
         help="the object's Lambertian reflectivity, drawn per sample: keep only returns whose received power "
         "rho*cos(incidence)*footprint/R^2 clears the sensor's threshold (default: every hit returns)",
     )  # fmt: skip
-    r.add_argument("--ground-reflectivity", type=float, default=0.15, help="the ground's reflectivity with --reflectivity (default: %(default)s)")
+    r.add_argument("--ground-reflectivity", action=Checked, check=real(0.0), default=0.15, help="the ground's reflectivity with --reflectivity (default: %(default)s)")
     r.add_argument("--footprint", action="store_true", help="beam footprint: 7 rays per firing in the divergence cone, strongest echo")
-    r.add_argument("--power-noise", type=float, default=0.0, help="sigma of ln(received power) per firing; 0: a sharp threshold (default: %(default)s)")
+    r.add_argument("--power-noise", action=Checked, check=real(0.0), default=0.0, help="sigma of ln(received power) per firing; 0: a sharp threshold (default: %(default)s)")
     r.add_argument(
-        "--echo-separation", metavar="M", type=float, default=0.0,
+        "--echo-separation", metavar="M", action=Checked, check=real(0.0, unit="metres"), default=0.0,
         help="with --footprint: echoes within M metres of the strongest merge into one return at their energy-weighted "
         "range (mixed pixels at shallow depth edges; half the pulse length, ~0.75 m for 5 ns) (default: 0, never)",
     )  # fmt: skip
-    p.add_argument("--azimuth", default="0", help="direction of the object from the sensor, degrees (N or LO:HI) (default: %(default)s)")
-    p.add_argument("--yaw", default="0", help="the object's heading, degrees (N or LO:HI) (default: %(default)s)")
-    p.add_argument("--samples", type=int, default=1, help="scans, each with its own draws (default: %(default)s)")
+    p.add_argument("--azimuth", action=Checked, check=interval, default="0", help="direction of the object from the sensor, degrees (N or LO:HI) (default: %(default)s)")
+    p.add_argument("--yaw", action=Checked, check=interval, default="0", help="the object's heading, degrees (N or LO:HI) (default: %(default)s)")
+    p.add_argument("--samples", action=Checked, check=count("MAX_SAMPLES"), default=1, help="scans, each with its own draws (default: %(default)s)")
     p.add_argument("--crop", action="store_true", help="write only the object's returns; default: the object and the ground in the object's azimuth sector (±5°)")
     p.add_argument(
-        "--ground-margin", metavar="M", type=float,
+        "--ground-margin", metavar="M", action=Checked, check=real(0.0, unit="metres"),
         help="with --crop: also keep the ground returns under the object, inside its footprint grown by M metres, as a "
         "box segmentation of a street scan leaves them",
     )  # fmt: skip
     p.add_argument(
-        "--hidden-below", metavar="M or LO:HI",
+        "--hidden-below", metavar="M or LO:HI", action=Checked, check=interval,
         help="with --crop: drop the object's returns lower than this height above the ground, metres, drawn per sample "
         "(a bottom hidden by parked cars or kerbs, or removed with the ground; fit-sensor fits it per class)",
     )  # fmt: skip
     p.add_argument(
-        "--across-sight-width", metavar="M or LO:HI",
+        "--across-sight-width", metavar="M or LO:HI", action=Checked, check=interval,
         help="with --crop: stretch the object horizontally so that its crops are, at the median, this wide across the "
         "line of sight, metres, drawn per sample (posts as thick as real trunks; fit-sensor fits it per class)",
     )  # fmt: skip
@@ -288,10 +275,10 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         "--backend", choices=("embree", "zbuffer"), default="embree",
         help="ray casting: embree (exact, CPU) or zbuffer (OpenGL depth images) (default: %(default)s)",
     )  # fmt: skip
-    p.add_argument("--seed", type=int, default=0, help="seed of the placement draws and the sensor noise (default: %(default)s)")
+    p.add_argument("--seed", action=Checked, check=seed, default=0, help="seed of the placement draws and the sensor noise (default: %(default)s)")
     p.add_argument("--up", choices=UP_CHOICES, default="auto", help="a mesh file's up axis, turned to +z; auto: by its path and format, as in generate and farm "
                    "(ShapeNetCore paths and glTF +y, ...) (default: %(default)s)")
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", required=True, action=Checked, check=out_folder, help="output folder")
     p.set_defaults(func=cmd_scan)
     return p
 
@@ -299,6 +286,7 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
 def cmd_realism(args: argparse.Namespace) -> int:
     from zbuf_occlude.experiments.realism import markdown_table, realism_report
 
+    out_folder(args.out, "--out")  # the default's check; a given --out was checked while parsing
     rows = realism_report(args.generated, args.real, args.out, min_points=args.min_points, figure=not args.no_figure, ground_in_crops=args.ground_in_crops)
     print(markdown_table(rows), end="")
     print(f"wrote {Path(args.out) / 'realism.md'}, realism.csv" + ("" if args.no_figure else ", realism.png"))
@@ -314,8 +302,8 @@ def add_realism_parser(sub) -> argparse.ArgumentParser:
     )  # fmt: skip
     p.add_argument("generated", metavar="GENERATED", help="scan .npz files or a folder of them (or LiDARNet CSVs)")
     p.add_argument("real", metavar="REAL", help="LiDARNet v2 CSV folder (or scan .npz)")
-    p.add_argument("--out", default="realism", help="folder for realism.md, realism.csv, realism.png (default: %(default)s)")
-    p.add_argument("--min-points", type=int, default=1, help="ignore clouds with fewer points (default: %(default)s)")
+    p.add_argument("--out", action=Checked, check=out_folder, default="realism", help="folder for realism.md, realism.csv, realism.png (default: %(default)s)")
+    p.add_argument("--min-points", action=Checked, check=count("MAX_POINTS", lowest=0), default=1, help="ignore clouds with fewer points (default: %(default)s)")
     p.add_argument(
         "--ground-in-crops", action="store_true",
         help="a generated scan file holding one object (a crop made with scan --crop --ground-margin) counts its ground "
@@ -347,7 +335,7 @@ def add_fit_sensor_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("real", metavar="REAL_SCANS", help="folder of real object scans (LiDARNet CSVs, SUO, or class folders)")
     p.add_argument("--sensor", required=True, help="the spinning-LiDAR preset or JSON file to start from (its beam table is kept)")
     p.add_argument("--out", required=True, help="the fitted sensor, a .json file (a .md table is written beside it)")
-    p.add_argument("--seed", type=int, default=DEFAULT_SEED, help="seed of the bootstrap (default: %(default)s)")
+    p.add_argument("--seed", action=Checked, check=seed, default=DEFAULT_SEED, help="seed of the bootstrap (default: %(default)s)")
     p.set_defaults(func=cmd_fit_sensor)
     return p
 

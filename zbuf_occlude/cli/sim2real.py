@@ -10,21 +10,12 @@ import argparse
 import sys
 from typing import Any
 
+from zbuf_occlude.cli.options import Checked, check_device, count, interval, out_folder, parse_interval
 from zbuf_occlude.defaults import DEFAULT_METHOD
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 
 __all__ = ["add_sim2real_parser", "parse_pairs"]
-
-
-def _positive(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
-    return value
 
 
 def parse_pairs(text: str | None, option: str) -> dict[str, str]:
@@ -41,10 +32,8 @@ def parse_pairs(text: str | None, option: str) -> dict[str, str]:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from zbuf_occlude.learn import require_torch
-
-    require_torch()
-    from zbuf_occlude.cli.sensors import parse_interval
+    # the counts and --out were checked while parsing (cli.options); the device before any rendering
+    check_device(args.device)
     from zbuf_occlude.experiments.sim2real import run_sim2real
     from zbuf_occlude.mesh.scene import UP_CHOICES
     from zbuf_occlude.mesh.sizes import parse_sizes
@@ -101,7 +90,7 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     )  # fmt: skip
     p.add_argument("root", help=f"mesh files ({EXTENSIONS_TEXT}) in CLASS/ folders")
     p.add_argument("--real", required=True, help="folder of real object scans (one folder per class, or labelled files)")
-    p.add_argument("--out", required=True, help="output folder (settings.json, runs.jsonl, results.csv, summary.csv, table.md, run.json)")
+    p.add_argument("--out", required=True, action=Checked, check=out_folder, help="output folder (settings.json, runs.jsonl, results.csv, summary.csv, table.md, run.json)")
     p.add_argument("--model", choices=("pointnet", "voxnet", "3dmfv"), default="pointnet", help="classifier (default: %(default)s)")
     p.add_argument("--sensor", default="hdl32e", help="scanner of the lidar training set (a LiDAR preset; default %(default)s)")
     p.add_argument("--fit-sensor", action="store_true",
@@ -127,15 +116,15 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
                    "(default: %(default)s)")
     p.add_argument("--scale", choices=("quick", "paper"), default="quick",
                    help="quick: 256 points, 100 clouds per class, 20 epochs (a 2-core CPU); paper: 1024, 1000, 100")
-    p.add_argument("--points", type=_positive, help="points per cloud (override the scale's)")
-    p.add_argument("--epochs", type=_positive, help="epochs (override the scale's)")
-    p.add_argument("--per-class", type=_positive, help="training clouds per class (override the scale's)")
-    p.add_argument("--seeds", type=_positive, default=5, help="repetitions, each redrawing clouds and initialisation (default %(default)s)")
+    p.add_argument("--points", action=Checked, check=count("MAX_POINTS"), help="points per cloud (override the scale's)")
+    p.add_argument("--epochs", action=Checked, check=count("MAX_EPOCHS"), help="epochs (override the scale's)")
+    p.add_argument("--per-class", action=Checked, check=count("MAX_SAMPLES"), help="training clouds per class (override the scale's)")
+    p.add_argument("--seeds", action=Checked, check=count("MAX_REPETITIONS"), default=5, help="repetitions, each redrawing clouds and initialisation (default %(default)s)")
     p.add_argument("--keep-scale", action="store_true", help="keep metres instead of normalising every cloud to max extent 1")
     p.add_argument("--label-map", help="real label to class folder, REAL=CLASS,... (e.g. Trunk=pole)")
     p.add_argument("--classes", help="class folders to train on: 'real' (those the real scans have, after --label-map) "
                    "or CLASS,CLASS,... (default: every class folder of ROOT)")
-    p.add_argument("--occluded-elevation", metavar="LO:HI", default=f"{GROUND_ELEVATION_DEG[0]:g}:{GROUND_ELEVATION_DEG[1]:g}",
+    p.add_argument("--occluded-elevation", metavar="LO:HI", action=Checked, check=interval, default=f"{GROUND_ELEVATION_DEG[0]:g}:{GROUND_ELEVATION_DEG[1]:g}",
                    help="camera elevations of the occluded set, degrees, drawn uniformly (an airborne sensor sees from "
                    "above: e.g. 30:80; a negative LO needs =, as in --occluded-elevation=-5:30) (default: %(default)s)")
     p.add_argument("--up", choices=UP_CHOICES, default="auto", help="up axis of the mesh files; auto: each format's convention (default: %(default)s)")
@@ -145,11 +134,11 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
                    help="reader of --real: a folder of class folders (any point-cloud files), LiDARNet v2, Sydney Urban Objects; auto: detected (default: %(default)s)")
     p.add_argument("--real-up", choices=UP_CHOICES[1:], default="+z", help="up axis of the real scans' files (folder reader; default %(default)s)")
     p.add_argument("--real-units", default="m", help="unit of the real scans' files: m, cm, mm, in, ft or metres per unit (folder reader)")
-    p.add_argument("--min-returns", type=_positive, default=MIN_RETURNS,
+    p.add_argument("--min-returns", action=Checked, check=count("MAX_POINTS"), default=MIN_RETURNS,
                    help="redraw LiDAR crops with fewer returns (default %(default)s; lower it for airborne or sparse sensors)")
     p.add_argument("--method", default=DEFAULT_METHOD, help="HSR method of the occluded set (default: %(default)s)")
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="torch device (default: %(default)s)")
-    p.add_argument("--threads", type=_positive, help="torch CPU threads")
+    p.add_argument("--threads", action=Checked, check=count("MAX_WORKERS"), help="torch CPU threads")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=_run)
     return p

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude.defaults import DEFAULT_RESOLUTION, MAX_CAMERA_RADIUS
+from zbuf_occlude.defaults import DEFAULT_RESOLUTION, MAX_CAMERA_RADIUS, MAX_VIEWS
 from zbuf_occlude.errors import CameraError, InvalidInputError
 
 __all__ = [
@@ -47,6 +47,8 @@ DEFAULT_RADIUS = 4.0
 UNIT_BOX_BOUNDING_RADIUS = math.sqrt(3.0) / 2.0
 #: Relative margin added around the bounding sphere when fitting fov and clip planes.
 FIT_MARGIN = 0.02
+#: Characters of a view schedule quoted in an error (a list of 10⁷ poses is not echoed whole).
+SHOWN_SPEC_CHARS = 60
 
 
 @dataclass(frozen=True)
@@ -325,6 +327,23 @@ def _fibonacci(n: int) -> list[tuple[float, float]]:
     return poses
 
 
+def _shown(spec: str) -> str:
+    """``spec`` quoted for a message, cut to :data:`SHOWN_SPEC_CHARS` characters."""
+    if len(spec) <= SHOWN_SPEC_CHARS:
+        return repr(spec)
+    return f"{spec[:SHOWN_SPEC_CHARS]!r}... ({len(spec):,} characters)"
+
+
+def _fibonacci_count(text: str) -> int:
+    """N of ``fibonacci:N``; 0 when it is not a whole number (a 10⁶-digit N is not parsed: it is too many)."""
+    if len(text) > len(str(MAX_VIEWS)) + 2:
+        return MAX_VIEWS + 1 if text.isdecimal() else 0
+    try:
+        return int(text)
+    except ValueError:
+        return 0
+
+
 def view_schedule(spec: str) -> list[tuple[float, float]]:
     """Named camera pose schedules, as ``(elevation_deg, azimuth_deg)`` pairs.
 
@@ -336,11 +355,12 @@ def view_schedule(spec: str) -> list[tuple[float, float]]:
         ``"grid25"``: el ∈ {−80, −40, 0, 40, 80} × az ∈ {0, 72, 144, 216, 288}.
         ``"fibonacci:N"``: N near-uniform poses (golden-angle lattice).
         ``"EL:AZ,EL:AZ,..."``: an explicit list, degrees.
+        At most :data:`~zbuf_occlude.defaults.MAX_VIEWS` poses, checked before any is made.
 
     Raises
     ------
     InvalidInputError
-        On an unknown name or a malformed list.
+        On an unknown name, a malformed list, or more poses than ``MAX_VIEWS``.
     """
     spec = spec.strip()
     if spec == "paper100":
@@ -348,24 +368,26 @@ def view_schedule(spec: str) -> list[tuple[float, float]]:
     if spec == "grid25":
         return [(el, az) for el in (-80.0, -40.0, 0.0, 40.0, 80.0) for az in (0.0, 72.0, 144.0, 216.0, 288.0)]
     if spec.startswith("fibonacci:"):
-        try:
-            n = int(spec.split(":", 1)[1])
-        except ValueError:
-            n = 0
+        n = _fibonacci_count(spec.split(":", 1)[1].strip())
         if n < 1:
-            raise InvalidInputError(f"bad view schedule {spec!r}: use fibonacci:N with N >= 1")
+            raise InvalidInputError(f"bad view schedule {_shown(spec)}: use fibonacci:N with N >= 1")
+        if n > MAX_VIEWS:
+            raise InvalidInputError(f"bad view schedule {_shown(spec)}: more than the {MAX_VIEWS:,} poses accepted (MAX_VIEWS)")
         return _fibonacci(n)
+    listed = spec.count(",") + 1  # counted before the split: a list of 10⁷ poses is refused without making it
+    if listed > MAX_VIEWS:
+        raise InvalidInputError(f"bad view schedule {_shown(spec)}: {listed:,} poses listed, more than the {MAX_VIEWS:,} accepted (MAX_VIEWS)")
     try:
         poses = [tuple(float(v) for v in item.split(":")) for item in spec.split(",") if item.strip()]
     except ValueError:
         poses = []
     if not poses or any(len(p) != 2 or not all(math.isfinite(v) for v in p) for p in poses):
         raise InvalidInputError(
-            f"bad view schedule {spec!r}: use paper100, grid25, fibonacci:N or EL:AZ,EL:AZ,... (degrees)"
+            f"bad view schedule {_shown(spec)}: use paper100, grid25, fibonacci:N or EL:AZ,EL:AZ,... (degrees)"
         )
     for el, _ in poses:
         if not -90.0 <= el <= 90.0:
-            raise InvalidInputError(f"bad view schedule {spec!r}: elevation {el} outside [-90, 90]")
+            raise InvalidInputError(f"bad view schedule {_shown(spec)}: elevation {el} outside [-90, 90]")
     return [(p[0], p[1]) for p in poses]
 
 

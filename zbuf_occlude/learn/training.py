@@ -177,20 +177,75 @@ class TrainResult:
     samples_per_second: float = float("nan")
 
 
-def resolve_device(name: str) -> torch.device:
-    """``cpu`` or ``cuda``; raises :class:`~zbuf_occlude.errors.BackendUnavailable` if CUDA is asked for but absent."""
+#: Where CUDA builds of torch are installed from (pip's index of the PyTorch project, CUDA 12.6).
+CUDA_WHEEL_INDEX = "https://download.pytorch.org/whl/cu126"
+
+
+def _torch_release() -> str:
+    """This torch's version without its local build tag (``2.13.0+cpu`` → ``2.13.0``)."""
+    return torch.__version__.split("+", 1)[0]
+
+
+def _cuda_device(option: str, index: int | None) -> torch.device:
     from zbuf_occlude.errors import BackendUnavailable
 
-    if name == "cuda":
-        if not torch.cuda.is_available():
-            raise BackendUnavailable(
-                "--device cuda: this torch has no CUDA (install a CUDA build: "
-                "pip install torch==2.13.0 --index-url https://download.pytorch.org/whl/cu126)"
-            )
-        return torch.device("cuda")
-    if name != "cpu":
-        raise InvalidInputError(f"--device must be cpu or cuda, got {name!r}")
-    return torch.device("cpu")
+    if torch.version.cuda is None and getattr(torch.version, "hip", None) is None:
+        raise BackendUnavailable(
+            f"{option}: this torch ({torch.__version__}) is a CPU-only build, without CUDA: install a CUDA build of the "
+            f"same version (pip install torch=={_torch_release()} --index-url {CUDA_WHEEL_INDEX}), or use --device cpu"
+        )
+    count = torch.cuda.device_count()
+    if not torch.cuda.is_available() or count == 0:
+        built = f"CUDA {torch.version.cuda}" if torch.version.cuda else f"ROCm (HIP {torch.version.hip})"
+        hidden = os.environ.get("CUDA_VISIBLE_DEVICES")
+        where = f"; CUDA_VISIBLE_DEVICES={hidden!r} may hide it" if hidden is not None else ""
+        raise BackendUnavailable(
+            f"{option}: torch {torch.__version__} is built with {built} but sees no GPU (torch.cuda.is_available() is False, "
+            f"torch.cuda.device_count() = {count}): no GPU or no working driver is visible here (check nvidia-smi{where}), "
+            "or use --device cpu"
+        )
+    if index is not None and index >= count:
+        raise BackendUnavailable(f"{option}: there is no GPU {index} here; torch sees {count} (cuda:0 to cuda:{count - 1})")
+    return torch.device("cuda" if index is None else f"cuda:{index}")
+
+
+def _mps_device(option: str) -> torch.device:
+    from zbuf_occlude.errors import BackendUnavailable
+
+    mps = getattr(torch.backends, "mps", None)
+    if mps is None or not mps.is_built():
+        raise BackendUnavailable(f"{option}: this torch ({torch.__version__}) is built without MPS (Apple's GPUs: the macOS builds have it), "
+                                 "or use --device cpu")  # fmt: skip
+    if not mps.is_available():
+        raise BackendUnavailable(f"{option}: torch is built with MPS but cannot use it here: it needs macOS 12.3 or later on a Mac "
+                                 "with an Apple-silicon or AMD GPU; or use --device cpu")  # fmt: skip
+    return torch.device("mps")
+
+
+def resolve_device(name: str) -> torch.device:
+    """The torch device ``name`` (``cpu``, ``cuda``, ``cuda:N`` or ``mps``), checked to be usable here.
+
+    Call it before any work: the message names the device and says what is really missing.
+
+    Raises
+    ------
+    BackendUnavailable
+        ``cuda``: torch is a CPU-only build (how to install a CUDA build of the same version),
+        or it is built with CUDA but sees no GPU (``torch.cuda.device_count()``, the driver,
+        ``CUDA_VISIBLE_DEVICES``), or GPU ``N`` does not exist; ``mps``: torch is built
+        without MPS, or MPS is not available on this machine.
+    InvalidInputError
+        Not one of the names above.
+    """
+    option = f"--device {name}"
+    kind, colon, index = str(name).strip().partition(":")
+    if kind == "cpu" and not colon:
+        return torch.device("cpu")
+    if kind == "cuda" and (not colon or index.isdecimal()):
+        return _cuda_device(option, int(index) if colon else None)
+    if kind == "mps" and not colon:
+        return _mps_device(option)
+    raise InvalidInputError(f"--device must be cpu, cuda, cuda:N or mps, got {name!r}")
 
 
 def seed_everything(seed: int) -> None:
