@@ -54,6 +54,7 @@ __all__ = [
     "ShardChecksumError",
     "InsufficientMemoryError",
     "DatasetBusy",
+    "ArgumentTypeError",
     "UnsafePathError",
     "DatasetFormatError",
     "CheckpointError",

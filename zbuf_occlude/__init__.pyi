@@ -23,6 +23,7 @@ from . import (
 from ._version import __version__
 from .dataset.reader import OccludedDataset
 from .errors import (
+    ArgumentTypeError,
     BackendUnavailable,
     CameraError,
     CheckpointError,

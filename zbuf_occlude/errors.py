@@ -23,6 +23,7 @@ __all__ = [
     "ShardChecksumError",
     "InsufficientMemoryError",
     "DatasetBusy",
+    "ArgumentTypeError",
 ]
 
 
@@ -82,6 +83,11 @@ class InsufficientMemoryError(InvalidInputError):
 
 class DatasetBusy(OutputError):
     """Another live process holds the lock of this data set (or of this shard)."""
+
+
+class ArgumentTypeError(ZbufOccludeError, TypeError):
+    """An API argument of the wrong kind (a file name where a mesh goes, a tuple where a
+    :class:`~zbuf_occlude.Camera` goes, text where points go); a ``TypeError``, as Python's own."""
 
 
 class PaddedSamplesWarning(UserWarning):

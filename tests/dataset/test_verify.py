@@ -93,13 +93,14 @@ def sample_files(tmp_path_factory) -> Path:
 
 
 def _resign(ds: Path, rel: str) -> None:
-    """Record the changed file's SHA-256 in the manifest, as the data set's author would."""
+    """Record the changed file's SHA-256 and size in the manifest, as the data set's author would."""
     from zbuf_occlude.io.atomic import file_sha256
 
     lines = [json.loads(s) for s in (ds / "manifest.jsonl").read_text().splitlines()]
     for rec in lines:
         if rel in rec.get("shards", []):
             rec["sha256"][rec["shards"].index(rel)] = file_sha256(ds / rel)
+            rec["bytes"] = sum((ds / r).stat().st_size for r in rec["shards"])
     (ds / "manifest.jsonl").write_text("".join(json.dumps(r) + "\n" for r in lines))
 
 

@@ -20,7 +20,7 @@ import pytest
 
 from zbuf_occlude.cli.main import main
 from zbuf_occlude.dataset.reader import OccludedDataset
-from zbuf_occlude.errors import InvalidInputError, ShardChecksumError
+from zbuf_occlude.errors import DatasetFormatError, InvalidInputError, ShardChecksumError
 from zbuf_occlude.farm import FarmParams, run_farm
 from zbuf_occlude.farm.config import RunOptions
 from zbuf_occlude.io.clouds import read_h5, read_npz
@@ -217,10 +217,14 @@ def test_a_changed_sample_file_is_named_by_the_reader(tree, tmp_path):
     out = tmp_path / "npz"
     assert main(["generate", str(tree), "--out", str(out), "--format", "npz", *ARGS]) == 0
     victim = sorted(out.rglob("*.npz"))[0]
-    victim.write_bytes(b"not a zip file")
+    data = victim.read_bytes()
+    victim.write_bytes(data[:-1] + bytes([data[-1] ^ 1]))  # the same size: only its SHA-256 tells
     ds = OccludedDataset(out)
     with pytest.raises(ShardChecksumError, match=re.escape(victim.name)):
         ds.to_arrays()
+    victim.write_bytes(b"not a zip file")  # another size: refused when the data set is opened, unread
+    with pytest.raises(DatasetFormatError, match=re.escape(victim.name) + ".*bytes where the record says"):
+        OccludedDataset(out)
 
 
 # -- generate --format h5 keeps the splits apart ---------------------------------------------------------

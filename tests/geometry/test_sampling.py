@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy import stats
 
-from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.geometry.sampling import points_from_barycentric, sample_faces, sample_surface, triangles_of
 from zbuf_occlude.mesh.load import load_mesh
 
@@ -317,8 +317,13 @@ def test_zero_total_area_is_rejected(mesh: object) -> None:
 
 @pytest.mark.parametrize(
     ("triangles", "match"),
-    [(np.zeros((2, 3)), "shape"), (np.full((1, 3, 3), np.nan), "NaN"), ("not an array", "float")],
+    [(np.zeros((2, 3)), "shape"), (np.full((1, 3, 3), np.nan), "NaN"), ([["a", "b", "c"]], "float")],
 )
 def test_bad_triangles(triangles: object, match: str) -> None:
     with pytest.raises(InvalidInputError, match=match):
         sample_surface(triangles, 10)
+
+
+def test_a_file_name_is_not_a_mesh() -> None:
+    with pytest.raises(ArgumentTypeError, match=r"zo.load_mesh"):
+        sample_surface("chair.off", 10)

@@ -11,7 +11,6 @@ from typing import Any
 from zbuf_occlude.cli.options import Checked, check_device, count, out_folder, seed
 from zbuf_occlude.cli.sim2real import parse_pairs, print_table
 from zbuf_occlude.defaults import DEFAULT_METHOD
-from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 
 __all__ = ["add_parser"]

@@ -14,7 +14,6 @@ Numbers must be JSON numbers (``"2048"`` is refused), poses pairs of numbers.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -23,6 +22,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from zbuf_occlude.dataset.layout import CARD_FILE, CARD_SHA256_FILE, COLUMN_TYPES, SHAPE_NAMES_FILE
 from zbuf_occlude.errors import DatasetFormatError
 from zbuf_occlude.io.hdf5 import Column, declared_nbytes, open_hdf5
+from zbuf_occlude.io.atomic import size_mismatch
+from zbuf_occlude.io.json_files import loads_json
 from zbuf_occlude.io.safe_paths import control_character, path_inside
 from zbuf_occlude.resources import check_memory
 
@@ -225,7 +226,7 @@ def read_card(path: Path) -> tuple[dict[str, Any], Card]:
         card = Card.model_validate_json(text)
     except ValidationError as exc:
         raise DatasetFormatError(f"{path} is not a valid data set card: {describe_validation_error(exc)}") from None
-    return json.loads(text), card
+    return loads_json(text, what=str(path)), card
 
 
 def card_sha256_line(digest: str) -> str:
@@ -299,7 +300,7 @@ def read_manifest(path: Path, problems: list[str] | None = None) -> list[tuple[i
                 raise DatasetFormatError(message) from None
             problems.append(message)
             continue
-        rows.append((lineno, json.loads(line), ok))
+        rows.append((lineno, loads_json(line, what=where), ok))
     return rows
 
 
@@ -400,6 +401,9 @@ def checked_shards(root: Path, where: str, rec: OkRecord, card: Card, *, verify:
             "noticed. Check the data set's source, then open it with OccludedDataset(..., verify=False) if you trust it "
             "(`zbuf-occlude verify DIR` lists every problem)"
         )
+    mismatch = size_mismatch(shards, rec.bytes)  # before any shard is hashed or opened
+    if mismatch is not None:
+        raise DatasetFormatError(f"{where}: {mismatch}; the data set was changed after it was written")
     return shards, dict(zip(shards, rec.sha256))
 
 

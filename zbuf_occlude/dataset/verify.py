@@ -29,7 +29,8 @@ from zbuf_occlude.dataset.layout import (
 )
 from zbuf_occlude.dataset.reader import samples_per_pose
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
-from zbuf_occlude.io.atomic import file_sha256
+from zbuf_occlude.io.atomic import file_sha256, size_mismatch
+from zbuf_occlude.io.json_files import loads_json
 from zbuf_occlude.io.safe_paths import path_inside
 
 if TYPE_CHECKING:  # the schema (pydantic) is imported when a data set is verified
@@ -51,19 +52,25 @@ PROTOCOL_FOLDERS: dict[str, tuple[str, str]] = {
 _PROTOCOL_FILE_MAX_BYTES = 1 << 20
 
 
+#: A joined file (``occluded_<split>.h5``, a file list) holds its split's samples once more, in
+#: HDF5's layout of one file: larger than this many times its shards' recorded bytes, plus
+#: :data:`JOINED_BYTES_SLACK`, it is not one of ours and is not hashed (a sparse file would be read in full).
+JOINED_BYTES_FACTOR = 2
+JOINED_BYTES_SLACK = 1 << 20
+
+
 def _protocol_of(root: Path) -> str | None:
     """The ``protocol`` field of ``root/protocol.json`` (``generate --protocol``), or None.
 
     The folder is untrusted: a file that is too large, not JSON or without a string field gives None.
     """
-    import json
 
     path = root / PROTOCOL_FILE
     try:
         if not path.is_file() or path.stat().st_size > _PROTOCOL_FILE_MAX_BYTES:
             return None
-        name = json.loads(path.read_text(encoding="utf-8")).get("protocol")
-    except (OSError, UnicodeDecodeError, ValueError, AttributeError):
+        name = loads_json(path.read_bytes(), what=str(path)).get("protocol")
+    except (OSError, InvalidInputError, AttributeError):
         return None
     return name if isinstance(name, str) else None
 
@@ -200,6 +207,7 @@ def verify_dataset(path: str | os.PathLike) -> VerifyReport:
         check_records(manifest, rows, card, shape_names, problems)
     spv = 1 if card.params.sensor else card.params.samples_per_view
     listed: dict[str, list[str]] = {}
+    split_bytes: dict[str, int] = {}  # the shards' recorded sizes, which bound the joined files
     missing_checksums = 0
     for lineno, _, rec in rows:
         if rec is None:
@@ -207,19 +215,25 @@ def verify_dataset(path: str | os.PathLike) -> VerifyReport:
         report.objects += 1
         where = f"{manifest}:{lineno}"
         listed.setdefault(rec.split, []).extend(rec.shards)
+        split_bytes[rec.split] = split_bytes.get(rec.split, 0) + (rec.bytes or 0)
         if rec.sha256 is None:
             missing_checksums += 1
         n_rows = int(samples_per_pose(rec.n_visible, spv).sum())
         report.samples += n_rows
-        for i, rel in enumerate(rec.shards):
-            try:
-                file = path_inside(root, rel, what=f"{where} field 'shards'")
-            except ZbufOccludeError as exc:
-                problems.append(str(exc))
-                continue
-            if not file.is_file():
-                problems.append(f"{where}: the file {rel} is missing")
-                continue
+        try:
+            files = [path_inside(root, rel, what=f"{where} field 'shards'") for rel in rec.shards]
+        except ZbufOccludeError as exc:
+            problems.append(str(exc))
+            continue
+        missing = [rel for rel, file in zip(rec.shards, files) if not file.is_file()]
+        if missing:
+            problems.extend(f"{where}: the file {rel} is missing" for rel in missing)
+            continue
+        mismatch = size_mismatch(files, rec.bytes)  # before a byte is read
+        if mismatch is not None:
+            problems.append(f"{where}: {mismatch} (changed after it was written)")
+            continue
+        for i, (rel, file) in enumerate(zip(rec.shards, files)):
             report.files += 1
             if rec.sha256 is not None and file_sha256(file) != rec.sha256[i]:
                 problems.append(f"{where}: {rel} differs from its SHA-256 in the manifest (changed after it was written)")
@@ -247,6 +261,11 @@ def verify_dataset(path: str | os.PathLike) -> VerifyReport:
             continue
         if not file.is_file():
             problems.append(f"{root / CARD_FILE}: the joined file {entry.path} is missing")
+        elif file.stat().st_size > JOINED_BYTES_FACTOR * split_bytes.get(entry.split, 0) + JOINED_BYTES_SLACK:
+            problems.append(
+                f"{file} holds {file.stat().st_size:,} bytes, more than the shards of split {entry.split!r} could make "
+                f"({JOINED_BYTES_FACTOR} x {split_bytes.get(entry.split, 0):,} + {JOINED_BYTES_SLACK:,}); not read"
+            )
         elif file_sha256(file) != entry.sha256:
             problems.append(f"{file} differs from its SHA-256 in the card (changed after it was written)")
         else:

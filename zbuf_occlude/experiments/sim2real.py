@@ -75,6 +75,7 @@ from zbuf_occlude.experiments.sim2real_data import (
     split_whole_meshes,
 )  # fmt: skip
 from zbuf_occlude.io.atomic import write_csv, write_text
+from zbuf_occlude.io.json_files import loads_json, read_json_file
 from zbuf_occlude.learn.data import CloudSet, split_validation
 from zbuf_occlude.learn.metrics import classification_report
 from zbuf_occlude.learn.stats import mean_std, permutation_p
@@ -191,7 +192,7 @@ def _load_runs(path: Path) -> dict:
     if path.is_file():
         for line in path.read_text(encoding="utf-8").splitlines():
             if line.strip():
-                r = json.loads(line)
+                r = loads_json(line, what=str(path))
                 done[(r["train_set"], r["seed"])] = r
     return done
 
@@ -416,7 +417,9 @@ def run_sim2real(
     out.mkdir(parents=True, exist_ok=True)
     settings_path = out / "settings.json"
     if settings_path.is_file():
-        old = json.loads(settings_path.read_text(encoding="utf-8"))
+        old = read_json_file(settings_path)
+        if not isinstance(old, dict):
+            raise InvalidInputError(f"{settings_path} is not a settings file of ours; choose another --out")
         old.pop("fixed_at", None)
         if old != json.loads(json.dumps(settings, default=float)):
             raise InvalidInputError(f"{out} holds a run with other settings ({settings_path}); choose another --out")

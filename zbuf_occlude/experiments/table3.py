@@ -25,6 +25,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.paper import MODELNET8, PAPER_3A, PAPER_3B, TEST_ELEVATIONS, TRAIN_ELEVATIONS
 from zbuf_occlude.experiments.table3_report import plot_augmentation, plot_elevation, table_3a, table_3b, write_confusion
 from zbuf_occlude.io.atomic import write_csv, write_text
+from zbuf_occlude.io.json_files import read_json_file
 from zbuf_occlude.learn.data import CloudSet, dedupe_meshes, from_meshes, from_occluded, split_validation
 from zbuf_occlude.learn.metrics import accuracy_by_elevation, classification_report
 from zbuf_occlude.visibility.registry import method_info
@@ -427,7 +428,7 @@ def combine_elevation(run_dirs: Sequence[str | os.PathLike], out: str | os.PathL
     out = Path(out)
     rows_by_model, summaries, all_rows, curve = {}, {}, [], None
     for d in map(Path, run_dirs):
-        summary = json.loads((d / "run.json").read_text(encoding="utf-8"))
+        summary = read_json_file(d / "run.json")
         with open(d / "results.csv", encoding="utf-8") as fh:
             rows = [{k: (v if k == "model" else float(v)) for k, v in r.items()} for r in csv.DictReader(fh)]
         rows_by_model[summary["model"]] = rows

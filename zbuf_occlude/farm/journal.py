@@ -29,7 +29,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.farm.config import BYTES_PER_MB, PAPER_SAMPLES_PER_MB, FarmParams, plan_digest, record_path, shard_path
 from zbuf_occlude.farm.worker import base_record, package_version, write_json
 from zbuf_occlude.geometry.samples import count_padded
-from zbuf_occlude.io.atomic import file_sha256, temp_is_orphan, temp_owner, write_text
+from zbuf_occlude.io.atomic import file_sha256, size_mismatch, temp_is_orphan, temp_owner, write_text
 from zbuf_occlude.io.json_files import loads_json
 from zbuf_occlude.io.safe_paths import check_line_text, path_inside
 from zbuf_occlude.mesh.discovery import SPLITS
@@ -115,8 +115,7 @@ def finished_record(out: Path, obj: FarmObject, digest: str) -> dict[str, Any] |
     if rec.get("status") != "ok" or not isinstance(rec.get("shards"), list) or not isinstance(rec.get("bytes"), int):
         return None
     files = [path_inside(out, rel, what=f"{where} field 'shards'") for rel in rec["shards"]]
-    sizes_ok = all(f.is_file() for f in files) and sum(f.stat().st_size for f in files) == rec["bytes"]
-    if not sizes_ok:
+    if size_mismatch(files, rec["bytes"]) is not None:  # before a byte is read
         return None
     # a shard rewritten in place keeps its size: compare the bytes (records of older
     # versions carry no digest and are trusted on their size)

@@ -23,12 +23,14 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
 from typing import TYPE_CHECKING, TypeAlias
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.geometry.arguments import check_mesh
 from zbuf_occlude.resources import BYTES_PER_DENSE_POINT, check_memory
 
 if TYPE_CHECKING:  # imported where a mesh is looked at: check_seed's users (the farm's options) need no trimesh
@@ -71,6 +73,8 @@ def triangles_of(mesh_or_triangles: MeshOrTriangles) -> NDArray[np.float64]:
     """
     import trimesh
 
+    if isinstance(mesh_or_triangles, (str, bytes, os.PathLike)):
+        check_mesh(mesh_or_triangles)  # a file name: load it first (the error says how)
     if isinstance(mesh_or_triangles, trimesh.Trimesh):
         vertices = np.asarray(mesh_or_triangles.vertices, dtype=np.float64)
         faces = np.asarray(mesh_or_triangles.faces, dtype=np.int64).reshape(-1, 3)

@@ -30,6 +30,7 @@ __all__ = [
     "temp_owner",
     "temp_is_orphan",
     "file_sha256",
+    "size_mismatch",
     "write_text",
     "write_csv",
 ]
@@ -113,6 +114,32 @@ def temp_is_orphan(owner: TempOwner) -> bool:
     if owner.pid is None:
         return True
     return owner.host_tag == _host_tag() and not _pid_alive(owner.pid)
+
+
+def size_mismatch(files: Sequence[Path], recorded_bytes: int | None) -> str | None:
+    """Why ``files`` cannot be the ones a record describes, told from their sizes alone (no byte is
+    read); ``None`` when they may be.
+
+    The one check made before any recorded file is hashed: a file swapped for a large or sparse one
+    (a 1 TB hole reads as zeros) is refused at once instead of being read in full.
+
+    Parameters
+    ----------
+    files : sequence of Path
+        The files of one record (an object's shard or sample files).
+    recorded_bytes : int, optional
+        Their total size as recorded; ``None`` (records of older versions): only that each is a
+        regular file.
+    """
+    for file in files:
+        if not file.is_file():
+            return f"{file} is missing or not a regular file"
+    if recorded_bytes is None:
+        return None
+    total = sum(file.stat().st_size for file in files)
+    if total != recorded_bytes:
+        return f"{', '.join(map(str, files[:3]))}{' ...' if len(files) > 3 else ''} hold {total:,} bytes where the record says {recorded_bytes:,}"
+    return None
 
 
 def file_sha256(path: str | os.PathLike, *, chunk_bytes: int = 1 << 20) -> str:

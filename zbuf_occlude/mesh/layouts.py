@@ -40,7 +40,6 @@ classes).  ``class_from=N`` takes the class from the N-th folder above each file
 
 from __future__ import annotations
 
-import json
 import logging
 import re
 from collections.abc import Sequence
@@ -49,6 +48,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.io.json_files import read_json_file
 from zbuf_occlude.mesh.discovery import (
     DEFAULT_SPLIT,
     SPLITS,
@@ -141,8 +141,8 @@ def read_taxonomy(folder: str | PathLike[str]) -> dict[str, str]:
     if not path.is_file():
         return {}
     try:
-        entries = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
+        entries = read_json_file(path)
+    except InvalidInputError as exc:
         raise InvalidInputError(f"{path}: not a readable JSON file ({exc})") from None
     if not isinstance(entries, list):
         raise InvalidInputError(f"{path}: expected a list of {{'synsetId', 'name'}} objects, got {type(entries).__name__}")

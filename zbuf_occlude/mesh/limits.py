@@ -28,7 +28,6 @@ and external entities, so no file or URL is fetched) before pycollada parses the
 
 from __future__ import annotations
 
-import json
 import struct
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -36,7 +35,8 @@ from os import PathLike
 from typing import Any, NamedTuple
 from xml.parsers import expat
 
-from zbuf_occlude.errors import InsufficientMemoryError, MeshLoadError
+from zbuf_occlude.errors import InsufficientMemoryError, InvalidInputError, MeshLoadError
+from zbuf_occlude.io.json_files import loads_json
 from zbuf_occlude.resources import BYTES_PER_FACE, check_memory, format_bytes
 
 __all__ = [
@@ -94,8 +94,8 @@ def _gltf_json(raw: bytes) -> Mapping[str, Any] | None:
             return None
         text = raw[20 : 20 + length]
     try:
-        doc = json.loads(text)
-    except (ValueError, UnicodeDecodeError, RecursionError):
+        doc = loads_json(text, what="glTF JSON")
+    except InvalidInputError:
         return None
     return doc if isinstance(doc, dict) else None
 

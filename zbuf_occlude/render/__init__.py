@@ -17,6 +17,10 @@ def render_depth(mesh, camera, backend: str = "moderngl"):
 
     ``backend``: ``"moderngl"`` (cached renderer of the mesh) or ``"pyrender"``.
     """
+    from zbuf_occlude.geometry.arguments import check_camera, check_mesh
+
+    check_mesh(mesh)
+    check_camera(camera)
     if backend == "moderngl":
         return renderer_for(mesh).render(camera).depth
     if backend == "pyrender":

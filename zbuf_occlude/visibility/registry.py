@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.defaults import DEFAULT_METHOD
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError, RegistryError, UnknownOptionError
+from zbuf_occlude.geometry.arguments import check_camera, check_face_index, check_mesh, check_points
 from zbuf_occlude.geometry.cameras import Camera
 
 if TYPE_CHECKING:  # annotations only: trimesh (and scipy with it) is imported where meshes are made
@@ -227,28 +228,6 @@ def method_info(name: str) -> MethodInfo:
     return info if info is not None and info.function is fn else MethodInfo(name=name, function=fn)
 
 
-def check_points(points: NDArray[np.floating]) -> NDArray[np.float64]:
-    """Validate ``points (N, 3)`` finite and return them as C-contiguous float64."""
-    pts = np.ascontiguousarray(points, dtype=np.float64)
-    if pts.ndim != 2 or pts.shape[1] != 3:
-        raise InvalidInputError(f"points must have shape (N, 3), got {pts.shape}")
-    if not np.all(np.isfinite(pts)):
-        raise InvalidInputError(f"points contain {int((~np.isfinite(pts)).any(axis=1).sum())} rows with NaN/inf")
-    return pts
-
-
-def check_face_index(face_index: NDArray[np.integer] | None, n_points: int, n_faces: int) -> NDArray[np.int64] | None:
-    """Validate ``face_index (N,)`` in ``[0, n_faces)``; ``None`` passes through."""
-    if face_index is None:
-        return None
-    fi = np.ascontiguousarray(face_index, dtype=np.int64)
-    if fi.shape != (n_points,):
-        raise InvalidInputError(f"face_index must have shape ({n_points},), got {fi.shape}")
-    if n_points and (fi.min() < 0 or fi.max() >= n_faces):
-        raise InvalidInputError(f"face_index out of range [0, {n_faces})")
-    return fi
-
-
 def visible_in_frustum(
     points: NDArray[np.float64], camera: Camera, occluded: Callable[[NDArray[np.int64]], NDArray[np.bool_]]
 ) -> NDArray[np.bool_]:
@@ -357,6 +336,8 @@ def visible_mask(
     """
     fn = get_method(method)
     check_keywords(method, options)
+    check_mesh(mesh)
+    check_camera(camera)
     pts = check_points(points)
     fi = check_face_index(face_index, len(pts), len(mesh.faces))
     return fn(mesh, pts, camera, face_index=fi, **options)

@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.defaults import DEFAULT_METHOD
+from zbuf_occlude.geometry.arguments import check_camera, check_mesh
 from zbuf_occlude.visibility.registry import (
     SessionBase,
     check_face_index,
@@ -78,7 +79,7 @@ class VisibilitySession(SessionBase):
         self.options = dict(options)
         self._function = get_method(method)
         check_keywords(method, self.options)
-        self._mesh = mesh
+        self._mesh = check_mesh(mesh)
         self._points = check_points(points)
         self._face_index = check_face_index(face_index, len(self._points), len(mesh.faces))
         factory = method_info(method).session
@@ -86,6 +87,7 @@ class VisibilitySession(SessionBase):
 
     def visible(self, camera: Camera) -> NDArray[np.bool_]:
         """The visibility of every point from ``camera``: ``(N,) bool``, in the order given."""
+        check_camera(camera)
         if self._session is not None:
             return self._session.visible(camera, **self.options)
         return self._function(self._mesh, self._points, camera, face_index=self._face_index, **self.options)

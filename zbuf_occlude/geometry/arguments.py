@@ -1,0 +1,116 @@
+"""The checks of the public API's arguments: one per kind (mesh, camera, points, face index).
+
+A wrong kind of argument (a file name where a mesh goes, ``(30, 45)`` where a camera goes, text
+where points go) is an :class:`~zbuf_occlude.errors.ArgumentTypeError` (a ``TypeError``) saying
+what was expected, what was given and how to make the right thing; a right kind with wrong
+values (a shape, NaN) is an :class:`~zbuf_occlude.errors.InvalidInputError`.  Every public
+function that takes these arguments calls these checks first.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
+from zbuf_occlude.geometry.cameras import Camera
+
+__all__ = ["check_camera", "check_face_index", "check_mesh", "check_points", "described"]
+
+#: Characters of a value quoted in a message.
+_SHOWN = 60
+
+
+def described(value: Any) -> str:
+    """``str 'x.off'``, ``tuple (30, 45)``: the type and the start of the value, for a message."""
+    text = repr(value) if isinstance(value, (str, bytes, os.PathLike, tuple, int, float)) else ""
+    text = text if len(text) <= _SHOWN else text[: _SHOWN - 3] + "..."
+    return f"{type(value).__name__} {text}".rstrip()
+
+
+def check_mesh(mesh: Any, name: str = "mesh") -> Any:
+    """``mesh`` if it is a mesh (a ``trimesh.Trimesh``, or anything with ``vertices`` and ``faces``).
+
+    Raises
+    ------
+    ArgumentTypeError
+        A path or anything else (the message says to load a file with ``zo.load_mesh``).
+    """
+    if hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
+        return mesh
+    hint = " (load a mesh file with zo.load_mesh(path) first)" if isinstance(mesh, (str, bytes, os.PathLike)) else ""
+    raise ArgumentTypeError(f"{name} must be a trimesh.Trimesh{hint}, got {described(mesh)}")
+
+
+def check_camera(camera: Any, name: str = "camera") -> Camera:
+    """``camera`` if it is a :class:`~zbuf_occlude.geometry.cameras.Camera`.
+
+    Raises
+    ------
+    ArgumentTypeError
+        Anything else; a pair of numbers is told about ``zo.camera_on_sphere``.
+    """
+    if isinstance(camera, Camera):
+        return camera
+    hint = ""
+    if isinstance(camera, (tuple, list)) and len(camera) == 2:
+        hint = " (make one from elevation and azimuth with zo.camera_on_sphere(elevation_deg, azimuth_deg))"
+    raise ArgumentTypeError(f"{name} must be a zbuf_occlude.Camera{hint}, got {described(camera)}")
+
+
+def _numeric(value: Any, name: str, kinds: str) -> np.ndarray:
+    if isinstance(value, (str, bytes, os.PathLike, dict)):
+        raise ArgumentTypeError(f"{name} must be a numeric array, got {described(value)}")
+    try:
+        array = np.asarray(value)
+    except (ValueError, TypeError) as exc:  # ragged nested lists
+        raise InvalidInputError(f"{name} must be a numeric array: {exc}") from None
+    if array.dtype == object:
+        try:
+            array = array.astype(np.float64)
+        except (ValueError, TypeError):
+            raise ArgumentTypeError(f"{name} must be a numeric array, got an array of objects that are not all numbers") from None
+    if array.dtype.kind not in kinds:
+        raise ArgumentTypeError(f"{name} must be a numeric array, got dtype {array.dtype}")
+    return array
+
+
+def check_points(points: Any, name: str = "points") -> NDArray[np.float64]:
+    """``points (N, 3)`` as C-contiguous float64, every coordinate finite.
+
+    Raises
+    ------
+    ArgumentTypeError
+        Not a numeric array (text, a path, complex or boolean values).
+    InvalidInputError
+        Another shape than ``(N, 3)``, or NaN/inf (the message counts the rows).
+    """
+    pts = np.ascontiguousarray(_numeric(points, name, "fiu"), dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise InvalidInputError(f"{name} must have shape (N, 3), got {pts.shape}")
+    if not np.all(np.isfinite(pts)):
+        raise InvalidInputError(f"{name} contain {int((~np.isfinite(pts)).any(axis=1).sum())} rows with NaN/inf")
+    return pts
+
+
+def check_face_index(face_index: Any, n_points: int, n_faces: int) -> NDArray[np.int64] | None:
+    """``face_index (N,)`` as int64 in ``[0, n_faces)``; ``None`` passes through.
+
+    Raises
+    ------
+    ArgumentTypeError
+        Not an integer array.
+    InvalidInputError
+        Another shape than ``(n_points,)``, or an index out of range.
+    """
+    if face_index is None:
+        return None
+    fi = np.ascontiguousarray(_numeric(face_index, "face_index", "iu"), dtype=np.int64)
+    if fi.shape != (n_points,):
+        raise InvalidInputError(f"face_index must have shape ({n_points},), got {fi.shape}")
+    if n_points and (fi.min() < 0 or fi.max() >= n_faces):
+        raise InvalidInputError(f"face_index out of range [0, {n_faces})")
+    return fi
