@@ -141,12 +141,12 @@ def count_list(cap_name: str, *, lowest: int = 1, empty: bool = False) -> Check:
 
 def seed(text: str, option: str) -> int:
     """A seed: a whole number from 0 to :data:`~zbuf_occlude.defaults.MAX_SEED` (2**63 - 1), the one rule of every command."""
+    from zbuf_occlude.geometry.sampling import check_seed  # the library's rule, numpy only
+
     value = _whole(text)
-    if value is None or value < 0:
+    if value is None:
         raise InvalidInputError(f"{option} must be a non-negative integer, got {shown(text)}")
-    if value > defaults.MAX_SEED:
-        raise InvalidInputError(f"{option} must be at most 2**63 - 1 = {defaults.MAX_SEED} (MAX_SEED: seeds are stored as int64), got {shown(text)}")
-    return value
+    return check_seed(value, name=option)
 
 
 def real(low: float | None = None, *, above: bool = False, unit: str = "") -> Check:

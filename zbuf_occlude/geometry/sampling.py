@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, TypeAlias
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from zbuf_occlude.defaults import MAX_SEED
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.arguments import check_mesh
 from zbuf_occlude.resources import BYTES_PER_DENSE_POINT, check_memory
@@ -138,7 +139,8 @@ def check_seed(seed: object, *, name: str = "seed") -> SeedLike:
     Raises
     ------
     InvalidInputError
-        If ``seed`` is negative, a bool, or not an integer, None or Generator.
+        If ``seed`` is negative, above :data:`~zbuf_occlude.defaults.MAX_SEED`, a bool, or not an
+        integer, None or Generator.
     """
     if seed is None or isinstance(seed, np.random.Generator):
         return seed
@@ -148,6 +150,8 @@ def check_seed(seed: object, *, name: str = "seed") -> SeedLike:
         )
     if seed < 0:
         raise InvalidInputError(f"{name} must be a non-negative integer, got {seed}")
+    if seed > MAX_SEED:
+        raise InvalidInputError(f"{name} must be at most 2**63 - 1 = {MAX_SEED} (MAX_SEED: seeds are stored as int64), got {seed}")
     return int(seed)
 
 
