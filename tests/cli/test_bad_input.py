@@ -268,7 +268,9 @@ def test_check_seed_names_the_option_and_accepts_good_seeds() -> None:
     assert check_seed(rng) is rng
     assert check_seed(None) is None
     assert check_seed(np.int64(5)) == 5 and type(check_seed(np.int64(5))) is int
-    assert check_seed(2**64) == 2**64  # SeedSequence takes big ints
+    assert check_seed(2**63 - 1) == 2**63 - 1  # the largest seed an int64 field can record
+    with pytest.raises(InvalidInputError, match=r"^--seed must be at most 2\*\*63 - 1"):
+        check_seed(2**64, name="--seed")
 
 
 # -- options: resolution beyond the GL's limits (defect 6) ----------------------------------------
@@ -593,7 +595,7 @@ def _edit_first_record(ds: Path, edit) -> None:
 
 
 def _replace_first_shard(ds: Path, write) -> None:
-    """Rewrite the first object's shard with ``write(path, old_arrays)`` and record its new SHA-256."""
+    """Rewrite the first object's shard with ``write(path, old_arrays)`` and record its new SHA-256 and size."""
     import json
 
     import h5py
@@ -605,7 +607,7 @@ def _replace_first_shard(ds: Path, write) -> None:
         old = {k: f[k][()] for k in f}
     (ds / rel).unlink()
     write(ds / rel, old)
-    _edit_first_record(ds, lambda r: r.update(sha256=[file_sha256(ds / rel)]))
+    _edit_first_record(ds, lambda r: r.update(sha256=[file_sha256(ds / rel)], bytes=(ds / rel).stat().st_size))
 
 
 def _h5(path: Path, arrays: dict) -> None:

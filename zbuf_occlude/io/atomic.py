@@ -138,7 +138,9 @@ def size_mismatch(files: Sequence[Path], recorded_bytes: int | None) -> str | No
         return None
     total = sum(file.stat().st_size for file in files)
     if total != recorded_bytes:
-        return f"{', '.join(map(str, files[:3]))}{' ...' if len(files) > 3 else ''} hold {total:,} bytes where the record says {recorded_bytes:,}"
+        named = ", ".join(map(str, files[:3])) + (" ..." if len(files) > 3 else "")
+        verb = "holds" if len(files) == 1 else "hold"
+        return f"{named} {verb} {total:,} bytes where the record says {recorded_bytes:,}"
     return None
 
 
