@@ -1,7 +1,7 @@
 """Per-view cost of z-buffer hidden surface removal against the exact oracles (issue 3, item 11).
 
 For each mesh (small, medium, large) and point count, one subprocess loads the mesh, samples
-the points, builds a :class:`zbuf_occlude.Scene` once and then, for each pose, runs side by side:
+the points, builds a :class:`zbuf_occlude.visibility.zbuffer.ResidentPoints` once and then, for each pose, runs side by side:
 
 * ``zbuffer``: ``scene.visible(camera, resolution=R)``, the pipeline a user of many views runs
   (rasterise depth + face id, compute-shader candidate tests, Embree for the uncertain points);
@@ -203,7 +203,7 @@ def _parse_poses(text: str) -> list[tuple[float, float]]:
 def run_config(job: dict[str, Any]) -> dict[str, Any]:
     """One (mesh, point count) row: every method over every pose.  Runs in a fresh process."""
     import zbuf_occlude as zo
-    from zbuf_occlude.visibility.zbuffer import Scene
+    from zbuf_occlude.visibility.zbuffer import ResidentPoints
 
     out: dict[str, Any] = {"job": job, "gl": zo.context_info()}
     t0 = time.perf_counter()
@@ -217,7 +217,7 @@ def run_config(job: dict[str, Any]) -> dict[str, Any]:
     warm = zo.camera_on_sphere(*WARMUP_POSE, resolution=res)
 
     t0 = time.perf_counter()
-    scene = Scene(mesh, points, face_index)
+    scene = ResidentPoints(mesh, points, face_index)
     out["scene_build_s"] = time.perf_counter() - t0
     out["setup_peak_mb"] = _peak_rss_mb()
 
@@ -259,7 +259,7 @@ def run_config(job: dict[str, Any]) -> dict[str, Any]:
         timers["render"](lambda: scene.renderer.render(cam))
         o = timers["oracle"](lambda: zo.visible_mask(mesh, points, cam, method="oracle", face_index=face_index))
         # Share of points the compute shader leaves to Embree (untimed; the private buffer is
-        # the Scene's own upload, so this repeats exactly what scene.visible just did).
+        # the ResidentPoints' own upload, so this repeats exactly what scene.visible just did).
         uncertain.append(float(scene.renderer.visible(cam, scene._buffer)[1].mean()))
         agree["zbuffer"].append(_agreement_counts(z, o))
         agree["gpu_only"].append(_agreement_counts(g, o))
@@ -278,9 +278,9 @@ def run_config(job: dict[str, Any]) -> dict[str, Any]:
 
 
 def run_throughput(job: dict[str, Any]) -> dict[str, Any]:
-    """Views per second of ``scene.visible`` over the grid25 poses, one process, one Scene."""
+    """Views per second of ``scene.visible`` over the grid25 poses, one process, one ResidentPoints."""
     import zbuf_occlude as zo
-    from zbuf_occlude.visibility.zbuffer import Scene
+    from zbuf_occlude.visibility.zbuffer import ResidentPoints
 
     mesh = _load(job["mesh"])
     points, face_index = zo.sample_surface(mesh, count=job["points"], seed=job["seed"])
@@ -288,7 +288,7 @@ def run_throughput(job: dict[str, Any]) -> dict[str, Any]:
     grid = zo.view_schedule("grid25")
     cameras = [zo.camera_on_sphere(*grid[k % len(grid)], resolution=res) for k in range(job["views"])]
     out: dict[str, Any] = {"job": job, "n_faces": len(mesh.faces)}
-    with Scene(mesh, points, face_index) as scene:
+    with ResidentPoints(mesh, points, face_index) as scene:
         for resolve in ("embree", "none"):
             scene.visible(zo.camera_on_sphere(*WARMUP_POSE, resolution=res), resolve=resolve)
             w0, c0 = time.perf_counter(), time.process_time()
@@ -423,11 +423,11 @@ def report(results: list[dict[str, Any]], throughput: dict[str, Any] | None, arg
         "`sent to Embree`: points the compute shader flags uncertain (the centre pixel does not show "
         "their own face: sub-pixel faces, cracks), decided by Embree in `zbuffer`, called visible in `GPU only`. "
         "Peak RSS, MiB: the process's peak resident set during that method's calls (mesh, points and "
-        "GL buffers included); `setup` = load + sample + `Scene` build.",
+        "GL buffers included); `setup` = load + sample + `ResidentPoints` build.",
         "",
         "| mesh | faces | points | visible | zbuffer acc. (worst pose) | false-vis. | false-hid. | "
         "GPU only acc. | sent to Embree, mean (max) | numpy == Embree | peak RSS setup / zbuffer / Embree | "
-        "one-off: Scene build, BVH build |",
+        "one-off: ResidentPoints build, BVH build |",
         "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in results:

@@ -26,7 +26,7 @@ ARCHITECTURE = PACKAGE.parent / "docs" / "development" / "architecture.md"
 #: Layer of each top-level module or subpackage of zbuf_occlude (a subpackage's modules share its
 #: layer; a module may import modules of its own package).  A new package gets its own number.
 LAYERS: dict[str, int] = {
-    "_version": 0, "_llvm": 0, "errors": 1, "defaults": 2, "resources": 3, "_moved": 4,
+    "_version": 0, "_llvm": 0, "errors": 1, "defaults": 2, "resources": 3,
     "geometry": 5,      # pure numpy: cameras, sampling, seeds and draws
     "io": 6,            # atomic writes, cloud formats, safe paths
     "mesh": 7,          # files -> normalised trimesh, discovery, layouts

@@ -18,7 +18,7 @@ against an exact geometric oracle.
 # none of numba, moderngl, scipy, trimesh or h5py, and a program pays only for what it calls.
 import lazy_loader as _lazy
 
-_lazy_getattr, __dir__, _stub_names = _lazy.attach_stub(__name__, __file__)
+__getattr__, __dir__, _stub_names = _lazy.attach_stub(__name__, __file__)
 
 # The public API in the order the documentation lists it; the same names as __init__.pyi's (a test
 # checks), written out because the API docs read __all__ from this file.
@@ -67,30 +67,6 @@ __all__ = [
     "Lidar", "DepthCamera", "ScanScene", "SceneObject", "load_scene", "look_at_pose", "Scan", "scan",
 ]
 
-from zbuf_occlude import _llvm, _moved
+from zbuf_occlude import _llvm
 
 _llvm.install()  # Triton's LLVM binds to itself, whatever OpenGL context is made before or after (see _llvm)
-
-_moved.install()  # old module paths of the flat layout: a DeprecationWarning, then the new module
-
-
-#: Old routes to "many poses of one point set", kept for one release with a DeprecationWarning.
-_DEPRECATED = {"ResidentPoints": "ResidentPoints", "Scene": "Scene"}
-
-
-def __getattr__(name: str):
-    if name in _moved.MOVED and name not in _stub_names:  # ``zbuf_occlude.cameras`` and the other modules that moved
-        return _moved.new_module(name)
-    if name in _DEPRECATED:
-        import warnings
-
-        from zbuf_occlude.visibility import zbuffer
-
-        warnings.warn(
-            f"zbuf_occlude.{name} is deprecated: use zbuf_occlude.VisibilitySession(mesh, points, face_index, "
-            f"method='zbuffer') (or the default method), or zbuf_occlude.visibility.zbuffer.ResidentPoints",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        return getattr(zbuffer, _DEPRECATED[name])
-    return _lazy_getattr(name)

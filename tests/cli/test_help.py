@@ -15,7 +15,6 @@ from pathlib import Path
 import pytest
 
 from zbuf_occlude.cli.main import build_parser, main
-from zbuf_occlude.cli.options import RenamedOption
 from zbuf_occlude.defaults import (
     DEFAULT_DENSE_POINTS,
     DEFAULT_FARM_DENSE_POINTS,
@@ -62,7 +61,7 @@ def test_every_subcommand_has_a_description_and_every_option_help(name: str) -> 
     sub = SUBCOMMANDS[name]
     assert sub.description and len(sub.description) > 20, f"{name}: no description"
     for action in sub._actions:
-        if isinstance(action, (argparse._HelpAction, argparse._SubParsersAction, RenamedOption)):
+        if isinstance(action, (argparse._HelpAction, argparse._SubParsersAction)):
             continue  # an old spelling is hidden on purpose
         assert action.help and action.help != argparse.SUPPRESS, f"{name} {action.option_strings or action.dest}: no help"
 
@@ -112,15 +111,17 @@ def test_one_meaning_per_option_name() -> None:
         assert "per sample" in _option(SUBCOMMANDS[name], "--points").help
     for name in ("validate", "compare", "elevation-profile"):
         assert "surface" in _option(SUBCOMMANDS[name], "--dense-points").help or "each mesh" in _option(SUBCOMMANDS[name], "--dense-points").help
-        assert _option(SUBCOMMANDS[name], "--points").help == argparse.SUPPRESS  # the old spelling, hidden
+        assert "--points" not in SUBCOMMANDS[name]._option_string_actions  # one spelling: --dense-points
 
 
 @pytest.mark.parametrize("command", [["validate", "--views", "0:0", "--resolution", "64"], ["compare", "--methods", "oracle", "--views", "0:0",
                                      "--resolution", "64", "--no-progress"]])
-def test_the_old_spelling_still_works_and_warns(command, tmp_path, capsys) -> None:
+def test_dense_points_is_the_one_spelling(command, tmp_path, capsys) -> None:
     extra = ["--out", str(tmp_path / "c")] if command[0] == "compare" else []
-    assert main([command[0], str(BOX), *command[1:], *extra, "--points", "150"]) == 0
-    assert "--points is deprecated here" in capsys.readouterr().err
+    assert main([command[0], str(BOX), *command[1:], *extra, "--dense-points", "150"]) == 0
+    with pytest.raises(SystemExit) as exit_info:
+        main([command[0], str(BOX), *command[1:], *extra, "--points", "150"])
+    assert exit_info.value.code == 2 and "--points" in capsys.readouterr().err
 
 
 # -- methods whose extra is missing ------------------------------------------------------------

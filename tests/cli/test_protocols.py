@@ -76,19 +76,16 @@ def _pcn_complete(out: Path) -> np.ndarray:
 
 
 def test_protocols_take_generates_up_axis(tmp_path, capsys):
-    """``--up`` reaches the protocols (it was read only by the paper's samples); the old PCN
-    spelling ``--up-axis y`` means ``--up +y`` and says so."""
+    """``--up`` reaches the protocols (not only the paper's samples)."""
     assert main(["generate", CHAIR, "--protocol", "pcn", "--out", str(tmp_path / "auto")]) == 0
     assert main(["generate", CHAIR, "--protocol", "pcn", "--up", "+y", "--out", str(tmp_path / "y")]) == 0
-    assert main(["generate", CHAIR, "--protocol", "pcn", "--up-axis", "y", "--out", str(tmp_path / "legacy")]) == 0
-    assert "--up-axis is deprecated" in capsys.readouterr().err
-    auto, y_up, legacy = (_pcn_complete(tmp_path / name) for name in ("auto", "y", "legacy"))
+    auto, y_up = (_pcn_complete(tmp_path / name) for name in ("auto", "y"))
     # PCN's frame is y up: a z-up chair is tallest along y; read as y-up, its old y becomes up
     assert np.ptp(auto[:, 1]) > np.ptp(auto[:, 2])
     assert not np.allclose(np.ptp(auto, axis=0), np.ptp(y_up, axis=0), atol=1e-3)
-    np.testing.assert_array_equal(legacy, y_up)
 
 
-def test_bad_legacy_up_axis_exits_2_naming_it(tmp_path, capsys):
-    assert _exit_status(["generate", CHAIR, "--protocol", "pcn", "--up-axis", "w", "--out", str(tmp_path / "o")]) == 2
-    assert "'w'" in capsys.readouterr().err
+def test_an_unknown_spelling_of_up_exits_2_naming_it(tmp_path, capsys):
+    assert _exit_status(["generate", CHAIR, "--protocol", "pcn", "--up-axis", "y", "--out", str(tmp_path / "o")]) == 2
+    assert "--up-axis" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()

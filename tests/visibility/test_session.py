@@ -57,15 +57,3 @@ def test_unknown_keyword_is_named(scene) -> None:
         zo.VisibilitySession(mesh, points, face_index, tolerence=0.5)
     with pytest.raises(zo.InvalidInputError, match="no-such-method"):
         zo.VisibilitySession(mesh, points, face_index, method="no-such-method")
-
-
-def test_old_routes_warn(scene) -> None:
-    mesh, points, face_index, cameras = scene
-    from zbuf_occlude.visibility import auto
-
-    with pytest.warns(DeprecationWarning, match="VisibilitySession"):
-        old = auto.make_scene(mesh, points, face_index)
-    with old, zo.VisibilitySession(mesh, points, face_index) as new:
-        np.testing.assert_array_equal(old.visible(cameras[2]), new.visible(cameras[2]))
-    with pytest.warns(DeprecationWarning, match="VisibilitySession"):
-        assert zo.ResidentPoints is method_info("zbuffer").session

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from zbuf_occlude.cli.options import Checked, add_renamed, count, count_list, out_folder, poses, real, seed
+from zbuf_occlude.cli.options import Checked, count, count_list, out_folder, poses, real, seed
 from zbuf_occlude.defaults import DEFAULT_RESOLUTION, DEFAULT_VIEWS
 from zbuf_occlude.experiments.compare.job import run_compare
 from zbuf_occlude.experiments.compare.run import DEFAULT_METHODS, DEFAULT_POINTS, DEFAULT_REFERENCE
@@ -57,7 +57,6 @@ def add_compare_parser(subparsers: Any) -> argparse.ArgumentParser:
         "--dense-points", action=Checked, check=count_list("MAX_POINTS"), default=",".join(str(n) for n in DEFAULT_POINTS),
         help="points sampled on each mesh, one run per count, comma-separated (default: %(default)s)",
     )  # fmt: skip
-    add_renamed(p, "--points", "--dense-points", "dense_points", check=count_list("MAX_POINTS"))
     p.add_argument(
         "--views", action=Checked, check=poses, default=DEFAULT_VIEWS,
         help="pose schedule: grid25, paper100, fibonacci:N or EL:AZ,... (default: %(default)s)",

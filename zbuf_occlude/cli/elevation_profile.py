@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from zbuf_occlude.cli.options import Checked, add_renamed, count, elevations, seed
+from zbuf_occlude.cli.options import Checked, count, elevations, seed
 from zbuf_occlude.defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION, MAX_VIEWS
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.elevation_profile import (
@@ -60,7 +60,6 @@ def add_profile_parser(subparsers: Any) -> argparse.ArgumentParser:
         "--dense-points", action=Checked, check=count("MAX_POINTS"), default=DEFAULT_PROFILE_POINTS,
         help="points sampled on the surface (default: %(default)s)",
     )  # fmt: skip
-    add_renamed(p, "--points", "--dense-points", "dense_points", check=count("MAX_POINTS"))
     p.add_argument("--elevations", action=Checked, check=elevations, default="", help="comma-separated degrees (default: -90..90 step 10)")
     p.add_argument(
         "--azimuths", action=Checked, check=count("MAX_VIEWS"), default=DEFAULT_AZIMUTHS,

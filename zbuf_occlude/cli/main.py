@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from zbuf_occlude._version import __version__
-from zbuf_occlude.cli.options import Checked, add_renamed, count, counted, out_folder, poses, real, seed
+from zbuf_occlude.cli.options import Checked, count, counted, out_folder, poses, real, seed
 from zbuf_occlude.defaults import DEFAULT_DENSE_POINTS, DEFAULT_METHOD, DEFAULT_RESOLUTION, DEFAULT_SEED, DEFAULT_VIEWS
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
@@ -272,7 +272,6 @@ def build_parser() -> argparse.ArgumentParser:
         "--dense-points", action=Checked, check=count("MAX_POINTS"), default=DEFAULT_DENSE_POINTS,
         help="points sampled on each mesh's surface, scored per pose (default: %(default)s)",
     )  # fmt: skip
-    add_renamed(v, "--points", "--dense-points", "dense_points", check=count("MAX_POINTS"))
     v.add_argument(
         "--resolution", action=Checked, check=count("MAX_RESOLUTION"), default=DEFAULT_RESOLUTION,
         help="z-buffer image size of the image-space methods, pixels (default: %(default)s)",

@@ -13,7 +13,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -22,7 +21,7 @@ from zbuf_occlude import defaults
 from zbuf_occlude.errors import InvalidInputError
 
 __all__ = [
-    "Checked", "RenamedOption", "add_renamed", "counted", "count", "count_list", "seed", "real", "elevations", "interval", "parse_interval", "out_folder", "poses",
+    "Checked", "counted", "count", "count_list", "seed", "real", "elevations", "interval", "parse_interval", "out_folder", "poses",
     "check_device", "shown",
 ]  # fmt: skip
 
@@ -58,23 +57,6 @@ class Checked(argparse.Action):
 
     def __call__(self, parser, namespace, values, option_string=None) -> None:
         setattr(namespace, self.dest, self.check(values, option_string or self.dest))
-
-
-class RenamedOption(Checked):
-    """An old spelling of an option: stores into the new option's ``dest`` and says so on stderr."""
-
-    def __init__(self, option_strings: list[str], dest: str, *, new: str, check: Check | None = None, **kwargs: Any) -> None:
-        self.new = new
-        super().__init__(option_strings, dest, check=check or (lambda text, option: text), **kwargs)
-
-    def __call__(self, parser, namespace, values, option_string=None) -> None:
-        super().__call__(parser, namespace, values, option_string)  # a refused value is one line, without the notice
-        print(f"{parser.prog}: {option_string} is deprecated here and goes in the next release: use {self.new}", file=sys.stderr)
-
-
-def add_renamed(parser: argparse.ArgumentParser, old: str, new: str, dest: str, **kwargs: Any) -> None:
-    """Accept ``old`` as a hidden spelling of the option ``new`` (stored in ``dest``; ``check=`` as the new one's)."""
-    parser.add_argument(old, dest=dest, action=RenamedOption, new=new, help=argparse.SUPPRESS, **kwargs)
 
 
 def counted(n: int, noun: str, plural: str | None = None) -> str:

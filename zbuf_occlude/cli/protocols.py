@@ -6,7 +6,7 @@ import argparse
 import sys
 import time
 
-from zbuf_occlude.cli.options import Checked, add_renamed, count, counted
+from zbuf_occlude.cli.options import Checked, count, counted
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.protocols import PROTOCOL_NAMES, PROTOCOLS, get_protocol
 from zbuf_occlude.protocols.base import ProtocolOptions, run_protocol
@@ -30,14 +30,6 @@ def add_protocol_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--normals", action="store_true", help="depth protocol: also write per-point face normals")
     g.add_argument("--camera-frame", action="store_true", help="depth protocol: also write camera-frame coordinates")
     g.add_argument("--complete-points", action=Checked, check=count("MAX_POINTS", lowest=0), default=0, help="depth protocol: complete cloud beside the partial ones (pcn: default 16384)")
-    # the old PCN-only spelling of generate's --up: z → +z, y → +y
-    add_renamed(parser, "--up-axis", "--up", "up", type=_legacy_up_axis)
-
-
-def _legacy_up_axis(text: str) -> str:
-    if text not in ("z", "y"):
-        raise argparse.ArgumentTypeError(f"invalid choice: {text!r} (choose from 'z', 'y'; or use --up)")
-    return "+" + text
 
 
 def run_protocol_command(args: argparse.Namespace, paths: list[str]) -> int:

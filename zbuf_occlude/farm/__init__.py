@@ -37,27 +37,7 @@ from :mod:`zbuf_occlude.mesh.inputs`; its commands are in :mod:`zbuf_occlude.cli
 # ``zbuf-occlude --help`` builds the farm's parsers without loading meshes or visibility.
 import lazy_loader as _lazy
 
-_lazy_getattr, __dir__, _stub_names = _lazy.attach_stub(__name__, __file__)
-
-#: Names that moved out of the farm, kept for one release with a DeprecationWarning.
-_MOVED_NAMES = {
-    "FarmObject": "zbuf_occlude.mesh.inputs",
-    "discover_objects": "zbuf_occlude.mesh.inputs",
-    "objects_from_paths": "zbuf_occlude.mesh.inputs",
-    "add_farm_parser": "zbuf_occlude.cli.farm",
-    "add_farm_merge_parser": "zbuf_occlude.cli.farm",
-}
-
-
-def __getattr__(name: str):
-    if name in _MOVED_NAMES:
-        import importlib
-        import warnings
-
-        home = _MOVED_NAMES[name]
-        warnings.warn(f"zbuf_occlude.farm.{name} has moved to {home}.{name}", DeprecationWarning, stacklevel=2)
-        return getattr(importlib.import_module(home), name)
-    return _lazy_getattr(name)
+__getattr__, __dir__, _stub_names = _lazy.attach_stub(__name__, __file__)
 
 # The same names as __init__.pyi's (a test checks), written out because the API docs read __all__ here.
 __all__ = [

@@ -142,14 +142,6 @@ def _session(mesh: trimesh.Trimesh, points, face_index=None):
     return method_info(choose_method()).session(mesh, points, face_index)
 
 
-def make_scene(mesh: trimesh.Trimesh, points, face_index=None):
-    """Deprecated: use :class:`~zbuf_occlude.visibility.session.VisibilitySession` (``zo.VisibilitySession``)."""
-    import warnings
-
-    warnings.warn("make_scene is deprecated, use zbuf_occlude.VisibilitySession(mesh, points, face_index)", DeprecationWarning, stacklevel=2)
-    return _session(mesh, points, face_index)
-
-
 @register("auto", takes_resolution=True, session=_session)
 def auto_visible(
     mesh: trimesh.Trimesh,

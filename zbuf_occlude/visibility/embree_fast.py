@@ -309,8 +309,8 @@ class FastScene(SessionBase):
     Per view, the CPU z-buffer pre-pass (:mod:`.cpu_zbuffer`) settles most points exactly;
     the rest are cast as rays (module docstring).  What depends on the mesh alone (Embree
     BVH, face planes) is cached per mesh, so a first view costs no more than a one-shot
-    :func:`embree_fast_visible` call; with ``sort=True`` (the session of
-    :func:`~zbuf_occlude.visibility.auto.make_scene`) the points are also put in Morton
+    :func:`embree_fast_visible` call; with ``sort=True`` (the session that
+    :class:`~zbuf_occlude.visibility.session.VisibilitySession` keeps) the points are also put in Morton
     order once, which makes later views faster (neighbouring points read neighbouring cells
     and cast coherent rays).
 

@@ -19,7 +19,6 @@ mesh (a few meshes, least recently used), and :class:`ResidentPoints` also keeps
 from __future__ import annotations
 
 import dataclasses
-import warnings
 
 import numpy as np
 import trimesh
@@ -40,7 +39,7 @@ from zbuf_occlude.visibility.definition import TOLERANCE, hide_edge_on
 from zbuf_occlude.visibility.registry import SessionBase, check_face_index, check_points, register
 from zbuf_occlude.visibility.segment_triangle import mesh_planes
 
-__all__ = ["ResidentPoints", "Scene", "zbuffer_visible", "zbuffer_tolerance_visible"]
+__all__ = ["ResidentPoints", "zbuffer_visible", "zbuffer_tolerance_visible"]
 
 
 def _at_resolution(camera: Camera, resolution: int | tuple[int, int] | None) -> Camera:
@@ -186,19 +185,6 @@ class ResidentPoints(SessionBase):
                 self._buffer.release()
             self._buffer = None
 
-
-
-class Scene(ResidentPoints):
-    """Deprecated alias of :class:`ResidentPoints` (``zo.Scene`` clashed with ``trimesh.Scene``
-    and ``pyrender.Scene``); removed in the next release."""
-
-    def __init__(self, *args, **kwargs):
-        warnings.warn(
-            "zbuf_occlude.Scene is deprecated, use zbuf_occlude.VisibilitySession(mesh, points, face_index, method=\"zbuffer\")",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        super().__init__(*args, **kwargs)
 
 
 @register("zbuffer", takes_resolution=True, gpu=True, session=ResidentPoints)
