@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.geometry.grouping import exact_face_groups, morton_order
+from zbuf_occlude.render import bindings
 from zbuf_occlude.render.compute import dispatch, read_through, set_uniforms
 from zbuf_occlude.render.context import is_software_renderer
 from zbuf_occlude.render.shaders import load_shader
@@ -205,10 +206,10 @@ class ExactMesh:
             self._count.clear()
             self._global.write(np.zeros(1, dtype=np.uint32).tobytes())
             self._params.write(np.array([*eye, tolerance, edge_sin], dtype=np.float64).tobytes())
-            self._triangles.bind_to_storage_buffer(2)
-            self._count.bind_to_storage_buffer(6)
-            self._global.bind_to_storage_buffer(8)
-            self._bin_faces.bind_to_storage_buffer(10)
+            self._triangles.bind_to_storage_buffer(bindings.EXACT_TRIANGLES)
+            self._count.bind_to_storage_buffer(bindings.EXACT_TILE_COUNT)
+            self._global.bind_to_storage_buffer(bindings.EXACT_GLOBAL_FACES)
+            self._bin_faces.bind_to_storage_buffer(bindings.EXACT_BIN_FACES)
             set_uniforms(self._bin_count, uniforms)
             dispatch(self._bin_count, self.n_bin_faces, "face_offset", slices=self.bin_slices)
             self.ctx.memory_barrier()
@@ -226,20 +227,20 @@ class ExactMesh:
                 self._list = self.ctx.buffer(reserve=8 * self._list_capacity)
             self._starts.write(starts.astype(np.uint32).tobytes())
             self._count.write(starts.astype(np.uint32).tobytes())  # write cursors
-            self._list.bind_to_storage_buffer(7)
+            self._list.bind_to_storage_buffer(bindings.EXACT_TILE_FACES)
             self._stamp(stamps, "prefix sum")
             set_uniforms(self._bin_fill, uniforms)
             dispatch(self._bin_fill, self.n_bin_faces, "face_offset", slices=self.bin_slices)
             self.ctx.memory_barrier()
             self._stamp(stamps, "bin fill")
-            points.points32.bind_to_storage_buffer(0)
-            points.faces.bind_to_storage_buffer(1)
-            points.bits.bind_to_storage_buffer(3)
-            self._planes.bind_to_storage_buffer(4)
-            points.points64.bind_to_storage_buffer(5)
-            self._starts.bind_to_storage_buffer(6)
-            self._params.bind_to_storage_buffer(9)
-            points.index.bind_to_storage_buffer(11)
+            points.points32.bind_to_storage_buffer(bindings.EXACT_POINTS)
+            points.faces.bind_to_storage_buffer(bindings.EXACT_POINT_FACES)
+            points.bits.bind_to_storage_buffer(bindings.EXACT_BITS)
+            self._planes.bind_to_storage_buffer(bindings.EXACT_PLANES)
+            points.points64.bind_to_storage_buffer(bindings.EXACT_POINTS64)
+            self._starts.bind_to_storage_buffer(bindings.EXACT_TILE_START)
+            self._params.bind_to_storage_buffer(bindings.EXACT_PARAMS)
+            points.index.bind_to_storage_buffer(bindings.EXACT_POINT_INDEX)
             points.bits.clear()
             set_uniforms(self._points, uniforms)
             dispatch(self._points, n, "point_offset")
