@@ -88,8 +88,8 @@ MEASURED_SOURCES = (
     "zbuf_occlude/visibility/zbuffer.py",
     "zbuf_occlude/visibility/oracle.py",
     "zbuf_occlude/render/moderngl_backend.py",
-    "shaders/visibility_candidates.comp",
-    "shaders/common.glsl",
+    "zbuf_occlude/render/shaders/visibility_candidates.comp",
+    "zbuf_occlude/render/shaders/common.glsl",
 )
 #: numpy's BLAS threads in the workers.  (N, 3) @ (3, 3) products (``Camera.project``, used by
 #: the oracles' frustum test) under a multithreaded OpenBLAS cost ~6x more on a busy 2-core

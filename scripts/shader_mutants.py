@@ -1,10 +1,10 @@
 #!/usr/bin/env python
-"""Hand-written mutants of the GLSL shaders in ``shaders/`` (mutmut cannot mutate GLSL).
+"""Hand-written mutants of the GLSL shaders in ``zbuf_occlude/render/shaders/`` (mutmut cannot mutate GLSL).
 
-Each mutant is one textual change to one shader.  For each, the package and the shader
-folder are copied to a temporary directory, the change is applied to the copy, and the
+Each mutant is one textual change to one shader.  For each, the package (its shaders
+included) is copied to a temporary directory, the change is applied to the copy, and the
 relevant tests run against the copy (``PYTHONPATH`` points at it, so
-:func:`zbuf_occlude.render.shaders.shader_dirs` finds the mutated ``shaders/`` there; the
+:func:`zbuf_occlude.render.shaders.shader_dir` is the copy's mutated folder; the
 checkout is never modified).  A mutant is *killed* when a test fails, *survived* when all
 pass, *error* when pytest could not run (e.g. collection failed) and *n/a* when the text
 it changes is no longer in the shader (the shader was edited: update the mutant).
@@ -33,6 +33,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
+#: The shaders' folder, relative to the repository root and to a copy's root.
+SHADERS = Path("zbuf_occlude", "render", "shaders")
 DEFAULT_TESTS = ["tests/visibility/test_zbuffer.py", "tests/render/test_moderngl_backend.py"]
 # the real-mesh sweep needs ../shared and minutes; the wheel build needs no shader edits
 DEFAULT_K = "not real_modelnet and not wheel"
@@ -146,7 +148,6 @@ def fresh_copy(root: Path) -> Path:
         shutil.rmtree(root)
     root.mkdir(parents=True)
     shutil.copytree(REPO / "zbuf_occlude", root / "zbuf_occlude", ignore=shutil.ignore_patterns("__pycache__"))
-    shutil.copytree(REPO / "shaders", root / "shaders")
     (root / "pyproject.toml").write_text("")  # keeps pytest from taking the copy for a project root
     return root
 
@@ -172,10 +173,10 @@ def main(argv: list[str] | None = None) -> int:
         copy = Path(tmp) / "tree"
         fresh_copy(copy)
         probe = subprocess.run(
-            [sys.executable, "-c", "from zbuf_occlude.render.shaders import shader_dirs; print(shader_dirs()[0])"],
+            [sys.executable, "-c", "from zbuf_occlude.render.shaders import shader_dir; print(shader_dir())"],
             env={**os.environ, "PYTHONPATH": str(copy)}, cwd=copy, capture_output=True, text=True,
         )  # fmt: skip
-        if Path(probe.stdout.strip()) != copy / "shaders":
+        if Path(probe.stdout.strip()) != copy / SHADERS:
             print(f"the copy's shaders are not the ones loaded: {probe.stdout.strip()!r} {probe.stderr[-500:]}", file=sys.stderr)
             return 2
         t0 = time.perf_counter()
@@ -187,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
         results = {}
         for m in mutants:
             fresh_copy(copy)
-            if not apply(m, copy / "shaders"):
+            if not apply(m, copy / SHADERS):
                 results[m.id] = "n/a"
                 print(f"{m.id:26s} {'n/a':9s}        text not found once in {m.shader}", flush=True)
                 continue

@@ -2,7 +2,7 @@
 
 * :func:`set_uniforms`: a dict of values written to a program, skipping the uniforms the GLSL
   compiler dropped (unused ones have no location);
-* :func:`dispatch`: ``n`` invocations of a shader with ``local_size_x = GROUP_SIZE``, in as many
+* :func:`dispatch`: ``n`` invocations of a shader with ``local_size_x = GROUP_SIZE`` (:mod:`~zbuf_occlude.render.bindings`), in as many
   dispatches as ``GL_MAX_COMPUTE_WORK_GROUP_COUNT`` requires, each told its first index through
   an offset uniform;
 * :func:`read_through`: read a buffer that shaders write through a staging copy made on the GPU.
@@ -15,10 +15,9 @@ from typing import Any, Mapping
 
 import moderngl
 
-__all__ = ["GROUP_SIZE", "set_uniforms", "dispatch", "read_through"]
+from zbuf_occlude.render.bindings import GROUP_SIZE
 
-#: ``local_size_x`` of every compute shader in ``shaders/``.
-GROUP_SIZE = 256
+__all__ = ["dispatch", "read_through", "set_uniforms"]
 
 
 def set_uniforms(shader: moderngl.ComputeShader, uniforms: Mapping[str, Any]) -> None:
@@ -38,7 +37,7 @@ def dispatch(shader: moderngl.ComputeShader, n: int, offset_name: str, *, slices
     Parameters
     ----------
     shader : moderngl.ComputeShader
-        ``local_size_x`` = :data:`GROUP_SIZE`, an ``uint`` uniform ``offset_name`` added to
+        ``local_size_x`` = :data:`~zbuf_occlude.render.bindings.GROUP_SIZE`, an ``uint`` uniform ``offset_name`` added to
         ``gl_GlobalInvocationID.x``.
     n : int
         Invocations along x (points, faces, rays).

@@ -12,6 +12,10 @@ Per view, three compute passes (``shaders/exact_bin.comp``, ``shaders/exact_poin
    point come back: visible, and "cpu" (a float64 result within 1e-12 of a boundary, or a
    point on the frustum's border), which the caller decides on the CPU.
 
+:meth:`ExactMesh.visible` runs them in turn, one method each (``_count_pass``, ``_prefix_sum``,
+``_fill_pass``, ``_points_pass``, then ``_read_back``); every pass binds the buffers its shader
+declares, by the names of :mod:`zbuf_occlude.render.bindings`.
+
 A face that meets the segment from a point to the camera contains the point's projection,
 so it is in the point's tile: the candidate set is complete by construction, however thin
 the face (no pixel centre needs to sample it).
@@ -29,6 +33,7 @@ from numpy.typing import NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.geometry.grouping import exact_face_groups, morton_order
+from zbuf_occlude.render import bindings
 from zbuf_occlude.render.compute import dispatch, read_through, set_uniforms
 from zbuf_occlude.render.context import is_software_renderer
 from zbuf_occlude.render.shaders import load_shader
@@ -161,7 +166,7 @@ class ExactMesh:
         edge_sin: float,
         tile: int = DEFAULT_TILE,
     ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
-        """Decide every uploaded point from ``camera``.
+        """Decide every uploaded point from ``camera``: the passes of the module docstring in turn.
 
         Returns
         -------
@@ -169,6 +174,11 @@ class ExactMesh:
             The GPU's decision (meaningless where ``cpu``).
         cpu : (N,) bool
             Points the GPU leaves to the CPU (float64 near-ties, frustum border).
+
+        Raises
+        ------
+        InvalidInputError
+            ``tile`` < 1, or more than 2^31 (tile, face) entries (a larger tile is needed).
         """
         if int(tile) < 1:
             raise InvalidInputError(f"tile must be >= 1 pixel, got {tile!r}")
@@ -178,19 +188,41 @@ class ExactMesh:
         width, height = camera.resolution
         tiles = (math.ceil(width / tile), math.ceil(height / tile))
         n_tiles = tiles[0] * tiles[1]
-        vp = (camera.projection_matrix @ camera.view_matrix).T.astype(np.float32).tobytes()
+        uniforms = self._uniforms(camera, points, tolerance=tolerance, edge_sin=edge_sin, tile=int(tile), tiles=tiles)
+        params = np.array([*camera.eye, tolerance, edge_sin], dtype=np.float64)
+        stamps = [("", time.perf_counter())]
+        with self.ctx:
+            self._count_pass(uniforms, n_tiles)
+            self._stamp(stamps, "bin count")
+            counts = self._prefix_sum(n_tiles, tile)
+            self._stamp(stamps, "prefix sum")
+            self._fill_pass(uniforms)
+            self._stamp(stamps, "bin fill")
+            self._points_pass(points, uniforms, params)
+            self._stamp(stamps, "points")
+            words, n_global = self._read_back(points)
+            self._stamp(stamps, "read back")
+        self.last_stats = {"tiles": n_tiles, "entries": int(counts.sum()), "global_faces": n_global, "max_per_tile": int(counts.max(initial=0))}
+        visible, cpu = _unpack(words, n)
+        self._stamp(stamps, "unpack")
+        self.last_timings = {stage: t - stamps[k][1] for k, (stage, t) in enumerate(stamps[1:])}
+        return visible, cpu
+
+    def _uniforms(self, camera: Camera, points: ExactPoints, *, tolerance: float, edge_sin: float, tile: int, tiles: tuple[int, int]) -> dict:
+        """The uniforms of the three shaders (each takes the ones it declares)."""
+        width, height = camera.resolution
         eye = np.asarray(camera.eye, dtype=np.float64)
         scale = max(self.coord_max, points.coord_max)
-        uniforms = {
-            "view_projection": vp,
+        return {
+            "view_projection": (camera.projection_matrix @ camera.view_matrix).T.astype(np.float32).tobytes(),
             "resolution": (width, height),
-            "tile": int(tile),
+            "tile": tile,
             "tiles": tiles,
             "n_bin_faces": self.n_bin_faces,
             "near_w": float(0.5 * camera.znear),
             "margin": float(BIN_MARGIN_PX + 1e-5 * max(width, height)),
             "depth_row": tuple(float(v) for v in -camera.view_matrix[2]),
-            "n_points": n,
+            "n_points": points.n_points,
             "eye": tuple(float(v) for v in eye),
             "tolerance": float(tolerance),
             "edge_sin": float(edge_sin),
@@ -199,64 +231,74 @@ class ExactMesh:
             "depth_range": (float(camera.znear), float(camera.zfar)),
             "frustum_margin": float(FRUSTUM_MARGIN_PX + 1e-5 * max(width, height)),
         }
-        stamps = [("", time.perf_counter())]
-        with self.ctx:
-            self._tile_buffers(n_tiles)
-            self._count.clear()
-            self._global.write(np.zeros(1, dtype=np.uint32).tobytes())
-            self._params.write(np.array([*eye, tolerance, edge_sin], dtype=np.float64).tobytes())
-            self._triangles.bind_to_storage_buffer(2)
-            self._count.bind_to_storage_buffer(6)
-            self._global.bind_to_storage_buffer(8)
-            self._bin_faces.bind_to_storage_buffer(10)
-            set_uniforms(self._bin_count, uniforms)
-            dispatch(self._bin_count, self.n_bin_faces, "face_offset", slices=self.bin_slices)
-            self.ctx.memory_barrier()
-            self._stamp(stamps, "bin count")
-            counts = np.frombuffer(read_through(self.ctx, self._count, self._count_read, 4 * n_tiles), dtype=np.uint32).astype(np.int64)
-            starts = np.zeros(n_tiles + 1, dtype=np.int64)
-            np.cumsum(counts, out=starts[1:])
-            total = int(starts[-1])
-            if total > 2**31:
-                raise InvalidInputError(f"{total} (tile, face) entries: use a larger tile than {tile} px")
-            if total > self._list_capacity:
-                if self._list is not None:
-                    self._list.release()
-                self._list_capacity = max(int(total * 1.5), 1024)
-                self._list = self.ctx.buffer(reserve=8 * self._list_capacity)
-            self._starts.write(starts.astype(np.uint32).tobytes())
-            self._count.write(starts.astype(np.uint32).tobytes())  # write cursors
-            self._list.bind_to_storage_buffer(7)
-            self._stamp(stamps, "prefix sum")
-            set_uniforms(self._bin_fill, uniforms)
-            dispatch(self._bin_fill, self.n_bin_faces, "face_offset", slices=self.bin_slices)
-            self.ctx.memory_barrier()
-            self._stamp(stamps, "bin fill")
-            points.points32.bind_to_storage_buffer(0)
-            points.faces.bind_to_storage_buffer(1)
-            points.bits.bind_to_storage_buffer(3)
-            self._planes.bind_to_storage_buffer(4)
-            points.points64.bind_to_storage_buffer(5)
-            self._starts.bind_to_storage_buffer(6)
-            self._params.bind_to_storage_buffer(9)
-            points.index.bind_to_storage_buffer(11)
-            points.bits.clear()
-            set_uniforms(self._points, uniforms)
-            dispatch(self._points, n, "point_offset")
-            self.ctx.memory_barrier()
-            self._stamp(stamps, "points")
-            words = np.frombuffer(read_through(self.ctx, points.bits, points.bits_read, points.bits.size), dtype=np.uint32).reshape(2, -1)
-            n_global = int(np.frombuffer(read_through(self.ctx, self._global, self._global_read, 4), dtype=np.uint32)[0])
-            self._stamp(stamps, "read back")
-        self.last_stats = {"tiles": n_tiles, "entries": total, "global_faces": n_global, "max_per_tile": int(counts.max(initial=0))}
-        # Already in the caller's order (the shader wrote each bit at ExactPoints.index).
-        visible = np.unpackbits(words[0].view(np.uint8), count=n, bitorder="little").view(bool)
-        cpu = np.zeros(n, dtype=bool)
-        if words[1].any():  # most views leave no point to the CPU
-            cpu = np.unpackbits(words[1].view(np.uint8), count=n, bitorder="little").view(bool)
-        self._stamp(stamps, "unpack")
-        self.last_timings = {stage: t - stamps[k][1] for k, (stage, t) in enumerate(stamps[1:])}
-        return visible, cpu
+
+    def _count_pass(self, uniforms: dict, n_tiles: int) -> None:
+        """Pass 1: count the faces of each tile; faces reaching behind the near plane go to the global list."""
+        self._tile_buffers(n_tiles)
+        self._count.clear()
+        self._global.write(np.zeros(1, dtype=np.uint32).tobytes())
+        self._triangles.bind_to_storage_buffer(bindings.EXACT_TRIANGLES)
+        self._count.bind_to_storage_buffer(bindings.EXACT_TILE_COUNT)
+        self._global.bind_to_storage_buffer(bindings.EXACT_GLOBAL_FACES)
+        self._bin_faces.bind_to_storage_buffer(bindings.EXACT_BIN_FACES)
+        set_uniforms(self._bin_count, uniforms)
+        dispatch(self._bin_count, self.n_bin_faces, "face_offset", slices=self.bin_slices)
+        self.ctx.memory_barrier()
+
+    def _prefix_sum(self, n_tiles: int, tile: int) -> NDArray[np.int64]:
+        """Pass 2 (CPU): read the counts, write each tile's list start and the fill pass's write
+        cursors, grow the list buffer when needed; returns the ``(n_tiles,) int64`` counts."""
+        counts = np.frombuffer(read_through(self.ctx, self._count, self._count_read, 4 * n_tiles), dtype=np.uint32).astype(np.int64)
+        starts = np.zeros(n_tiles + 1, dtype=np.int64)
+        np.cumsum(counts, out=starts[1:])
+        total = int(starts[-1])
+        if total > 2**31:
+            raise InvalidInputError(f"{total} (tile, face) entries: use a larger tile than {tile} px")
+        if total > self._list_capacity:
+            if self._list is not None:
+                self._list.release()
+            self._list_capacity = max(int(total * 1.5), 1024)
+            self._list = self.ctx.buffer(reserve=8 * self._list_capacity)
+        self._starts.write(starts.astype(np.uint32).tobytes())
+        self._count.write(starts.astype(np.uint32).tobytes())  # write cursors
+        return counts
+
+    def _fill_pass(self, uniforms: dict) -> None:
+        """Pass 2 (GPU): write each binned face into the lists of the tiles it overlaps."""
+        self._triangles.bind_to_storage_buffer(bindings.EXACT_TRIANGLES)
+        self._count.bind_to_storage_buffer(bindings.EXACT_TILE_COUNT)
+        self._list.bind_to_storage_buffer(bindings.EXACT_TILE_FACES)
+        self._global.bind_to_storage_buffer(bindings.EXACT_GLOBAL_FACES)
+        self._bin_faces.bind_to_storage_buffer(bindings.EXACT_BIN_FACES)
+        set_uniforms(self._bin_fill, uniforms)
+        dispatch(self._bin_fill, self.n_bin_faces, "face_offset", slices=self.bin_slices)
+        self.ctx.memory_barrier()
+
+    def _points_pass(self, points: ExactPoints, uniforms: dict, params: NDArray[np.float64]) -> None:
+        """Pass 3: each point against the global list and its tile's list; ``params`` (5,) float64:
+        eye xyz (world frame), tolerance (object units), edge-on sine."""
+        self._params.write(params.tobytes())
+        points.points32.bind_to_storage_buffer(bindings.EXACT_POINTS)
+        points.faces.bind_to_storage_buffer(bindings.EXACT_POINT_FACES)
+        self._triangles.bind_to_storage_buffer(bindings.EXACT_TRIANGLES)
+        points.bits.bind_to_storage_buffer(bindings.EXACT_BITS)
+        self._planes.bind_to_storage_buffer(bindings.EXACT_PLANES)
+        points.points64.bind_to_storage_buffer(bindings.EXACT_POINTS64)
+        self._starts.bind_to_storage_buffer(bindings.EXACT_TILE_START)
+        self._list.bind_to_storage_buffer(bindings.EXACT_TILE_FACES)
+        self._global.bind_to_storage_buffer(bindings.EXACT_GLOBAL_FACES)
+        self._params.bind_to_storage_buffer(bindings.EXACT_PARAMS)
+        points.index.bind_to_storage_buffer(bindings.EXACT_POINT_INDEX)
+        points.bits.clear()
+        set_uniforms(self._points, uniforms)
+        dispatch(self._points, points.n_points, "point_offset")
+        self.ctx.memory_barrier()
+
+    def _read_back(self, points: ExactPoints) -> tuple[NDArray[np.uint32], int]:
+        """The points pass's words ``(2, ceil(N / 32)) uint32`` (visible, cpu) and the global list's length."""
+        words = np.frombuffer(read_through(self.ctx, points.bits, points.bits_read, points.bits.size), dtype=np.uint32).reshape(2, -1)
+        n_global = int(np.frombuffer(read_through(self.ctx, self._global, self._global_read, 4), dtype=np.uint32)[0])
+        return words, n_global
 
     def release(self) -> None:
         """Free the GL objects of this mesh."""
@@ -265,3 +307,13 @@ class ExactMesh:
                         self._count, self._count_read, self._starts, self._list, self._bin_count, self._bin_fill, self._points):
                 if obj is not None:
                     obj.release()
+
+
+def _unpack(words: NDArray[np.uint32], n: int) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """``visible, cpu`` ``(n,) bool`` from the points pass's words, already in the caller's order
+    (the shader wrote each bit at :attr:`ExactPoints.index`)."""
+    visible = np.unpackbits(words[0].view(np.uint8), count=n, bitorder="little").view(bool)
+    cpu = np.zeros(n, dtype=bool)
+    if words[1].any():  # most views leave no point to the CPU
+        cpu = np.unpackbits(words[1].view(np.uint8), count=n, bitorder="little").view(bool)
+    return visible, cpu

@@ -20,6 +20,7 @@ from zbuf_occlude.defaults import DEFAULT_GPU_TOLERANCE, DEFAULT_MAX_SLOPE
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.mesh.load import MAX_ABS_COORDINATE
+from zbuf_occlude.render import bindings
 from zbuf_occlude.render.compute import dispatch, read_through, set_uniforms
 from zbuf_occlude.render.context import check_image_size, shared_context
 from zbuf_occlude.render.shaders import load_shader
@@ -182,7 +183,7 @@ class ModernGLRenderer:
         self.ctx.disable(moderngl.CULL_FACE)  # meshes are triangle soup: two-sided
         self._program["view_matrix"].write(camera.view_matrix.T.astype(np.float32).tobytes())
         self._program["projection_matrix"].write(camera.projection_matrix.T.astype(np.float32).tobytes())
-        self._draw_faces.bind_to_storage_buffer(4)
+        self._draw_faces.bind_to_storage_buffer(bindings.DRAW_FACES)
         self._vao.render(moderngl.TRIANGLES)
         return color
 
@@ -284,18 +285,17 @@ class ModernGLRenderer:
             "slope_scale": float(slope_scale),
             "max_slope": float(max_slope),
             "focal_px": float(camera.focal_px),
-            "depth_and_face": 0,
         }
         with self.ctx:
             shader = self._shader(rule, int(neighborhood))
             color = self._draw(camera)
             self.ctx.memory_barrier()
             set_uniforms(shader, uniforms)
-            color.use(location=0)
-            points.points.bind_to_storage_buffer(0)
-            points.faces.bind_to_storage_buffer(1)
-            self._triangles.bind_to_storage_buffer(2)
-            points.visible_bits.bind_to_storage_buffer(3)
+            color.use(location=bindings.DEPTH_AND_FACE_UNIT)
+            points.points.bind_to_storage_buffer(bindings.VISIBILITY_POINTS)
+            points.faces.bind_to_storage_buffer(bindings.VISIBILITY_POINT_FACES)
+            self._triangles.bind_to_storage_buffer(bindings.VISIBILITY_TRIANGLES)
+            points.visible_bits.bind_to_storage_buffer(bindings.VISIBILITY_BITS)
             points.visible_bits.clear()
             dispatch(shader, n, "point_offset")
             self.ctx.memory_barrier()
@@ -344,7 +344,7 @@ class ModernGLRenderer:
         uniforms = {
             "view_projection": (camera.projection_matrix @ camera.view_matrix).T.astype(np.float32).tobytes(),
             "origin": tuple(float(v) for v in origin), "resolution": camera.resolution, "n_rays": n,
-            "znear": float(znear), "edge_epsilon": float(edge_epsilon), "depth_and_face": 0,
+            "znear": float(znear), "edge_epsilon": float(edge_epsilon),
         }  # fmt: skip
         rays = np.zeros((n, 4), dtype=np.float32)
         rays[:, :3] = directions
@@ -355,10 +355,10 @@ class ModernGLRenderer:
             ray_buf = self.ctx.buffer(rays.tobytes())
             out_buf = self.ctx.buffer(reserve=4 * max(n, 1))
             set_uniforms(shader, uniforms)
-            color.use(location=0)
-            ray_buf.bind_to_storage_buffer(0)
-            out_buf.bind_to_storage_buffer(1)
-            self._triangles.bind_to_storage_buffer(2)
+            color.use(location=bindings.DEPTH_AND_FACE_UNIT)
+            ray_buf.bind_to_storage_buffer(bindings.SCAN_RAYS)
+            out_buf.bind_to_storage_buffer(bindings.SCAN_HITS)
+            self._triangles.bind_to_storage_buffer(bindings.SCAN_TRIANGLES)
             dispatch(shader, n, "ray_offset")
             self.ctx.memory_barrier()
             face = np.frombuffer(out_buf.read(4 * n), dtype=np.int32).astype(np.int64)

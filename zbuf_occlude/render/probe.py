@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from zbuf_occlude.render import bindings
 from zbuf_occlude.render.compute import dispatch, read_through
 from zbuf_occlude.render.context import shared_context
 from zbuf_occlude.render.shaders import load_shader
@@ -53,19 +54,19 @@ def pair64_on_gpu(
 
 def _run(ctx, packed_planes, pairs, faces, k):
     shader = ctx.compute_shader(load_shader("pair64_probe.comp"))
-    buffers = [
-        ctx.buffer(np.ascontiguousarray(packed_planes, dtype=np.float64).tobytes() or b"\0" * 8),
-        ctx.buffer(pairs.tobytes() or b"\0" * 8),
-        ctx.buffer(np.ascontiguousarray(faces, dtype=np.int32).tobytes() or b"\0" * 4),
-        ctx.buffer(reserve=max(4 * k, 4)),
-    ]
+    planes = ctx.buffer(np.ascontiguousarray(packed_planes, dtype=np.float64).tobytes() or b"\0" * 8)
+    pairs_buffer = ctx.buffer(pairs.tobytes() or b"\0" * 8)
+    pair_faces = ctx.buffer(np.ascontiguousarray(faces, dtype=np.int32).tobytes() or b"\0" * 4)
+    result = ctx.buffer(reserve=max(4 * k, 4))
     staging = ctx.buffer(reserve=max(4 * k, 4))
     try:
-        for binding, buffer in enumerate(buffers):
-            buffer.bind_to_storage_buffer(binding)
+        planes.bind_to_storage_buffer(bindings.PROBE_PLANES)
+        pairs_buffer.bind_to_storage_buffer(bindings.PROBE_PAIRS)
+        pair_faces.bind_to_storage_buffer(bindings.PROBE_PAIR_FACES)
+        result.bind_to_storage_buffer(bindings.PROBE_RESULT)
         shader["n_pairs"].value = k
         dispatch(shader, k, "pair_offset")
-        return np.frombuffer(read_through(ctx, buffers[3], staging, 4 * k), dtype=np.int32).copy()
+        return np.frombuffer(read_through(ctx, result, staging, 4 * k), dtype=np.int32).copy()
     finally:
-        for obj in (*buffers, staging, shader):
+        for obj in (planes, pairs_buffer, pair_faces, result, staging, shader):
             obj.release()

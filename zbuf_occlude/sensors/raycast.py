@@ -8,7 +8,7 @@ face (Möller–Trumbore), so that the backends differ only in *which* face they
 * :func:`cast_zbuffer`: the scene is rasterised from the ray origin with moderngl (one
   perspective view for rays inside a cone, else the six faces of a cube map) into face-id
   images; each ray's candidates are the faces seen in the ``(2r+1)²`` pixels around its
-  projection, tested exactly on the GPU (``shaders/scan_candidates.comp``), as the z-buffer
+  projection, tested exactly on the GPU (``render/shaders/scan_candidates.comp``), as the z-buffer
   visibility method decides points (:mod:`zbuf_occlude.visibility.zbuffer`); the distance on
   the chosen face is recomputed in float64.  Rays whose window shows faces but none of them
   is hit (sub-pixel faces, cracks) are decided by Embree.
@@ -197,7 +197,7 @@ def cast_zbuffer(
     """First hit of each ray from one origin, from rasterised face-id images (module docstring).
 
     The views are rasterised and each ray's candidates tested on the GPU
-    (``shaders/scan_candidates.comp``, float32); the distance on the chosen face is then
+    (``render/shaders/scan_candidates.comp``, float32); the distance on the chosen face is then
     recomputed in float64, and a ray goes to Embree when its window showed faces but none was
     hit, or when the float64 test puts the chosen face's hit outside it by more than
     :data:`RECHECK_EPSILON`.

@@ -19,7 +19,7 @@ Every method (the oracles, ``zbuffer-exact``, ``embree-fast``, ``auto``) impleme
 definition; the two oracles decide (b) with the functions below and (c) with one float64
 kernel, so they agree bit for bit.  The GPU path decides (b) and (c) in float32 with
 error bounds and re-decides every pair inside the bounds in float64 with the same formulas
-(written out in ``shaders/exact_common.glsl``).
+(written out in ``render/shaders/exact_pair64.glsl``).
 
 The tolerance of (c) is decided only for cameras within
 :data:`~zbuf_occlude.defaults.MAX_CAMERA_RADIUS` (≈ 1.1e6 object units) of the object:

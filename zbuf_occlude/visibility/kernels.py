@@ -13,7 +13,7 @@ One implementation, compiled with numba and inlined into the loops of the CPU z-
 (:mod:`.cpu_zbuffer`), Embree's crease re-check (:mod:`.embree_fast`) and the paper's face scan
 (:mod:`.paper.face_scan`).  :func:`zbuf_occlude.visibility.segment_triangle.pair_occludes` is its
 vectorised numpy form (operation for operation; a hypothesis test holds them equal), and
-``shaders/exact_pair64.glsl`` its GLSL twin for the GPU (the same operations, in ``precise``
+``render/shaders/exact_pair64.glsl`` its GLSL twin for the GPU (the same operations, in ``precise``
 float64; a test runs both on random pairs).
 
 The planes of a face are packed in one row of 16 float64 so that the loops read one contiguous

@@ -1,15 +1,15 @@
 // Shared by the visibility compute shaders: buffers, reprojection, and the exact
 // segment-triangle test.  Included by the loader at the //#include line.
-layout(local_size_x = 256) in;
+layout(local_size_x = GROUP_SIZE) in;
 
-layout(std430, binding = 0) readonly buffer Points { vec4 points[]; };     // xyz world frame
-layout(std430, binding = 1) readonly buffer PointFaces { int point_face[]; }; // -1: unknown
-layout(std430, binding = 2) readonly buffer Triangles { float triangles[]; }; // 9 floats per face
+layout(std430, binding = VISIBILITY_POINTS) readonly buffer Points { vec4 points[]; };     // xyz world frame
+layout(std430, binding = VISIBILITY_POINT_FACES) readonly buffer PointFaces { int point_face[]; }; // -1: unknown
+layout(std430, binding = VISIBILITY_TRIANGLES) readonly buffer Triangles { float triangles[]; }; // 9 floats per face
 // 1 bit per point: words [0, n_words) visible, [n_words, 2 n_words) uncertain (the image
 // holds no evidence either way; the caller decides those points exactly on the CPU).
-layout(std430, binding = 3) buffer Visible { uint visible_bits[]; };
+layout(std430, binding = VISIBILITY_BITS) buffer Visible { uint visible_bits[]; };
 
-uniform sampler2D depth_and_face;  // RG32F render target: linear depth, face index (-1: none)
+layout(binding = DEPTH_AND_FACE_UNIT) uniform sampler2D depth_and_face;  // RG32F render target: linear depth, face index (-1: none)
 uniform mat4 view_projection;      // world -> clip space
 uniform vec3 eye;                  // camera centre, world frame
 uniform vec4 depth_row;            // -(row 2 of view_matrix): linear depth = dot(depth_row, (p, 1))

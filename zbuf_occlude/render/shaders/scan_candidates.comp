@@ -5,13 +5,13 @@
 // per ray: the face (>= 0); -1: the window shows no face (a miss); -2: faces seen but none
 // hit (sub-pixel faces, cracks: the caller decides the ray exactly).  The caller recomputes
 // the distance on the chosen face in float64.
-layout(local_size_x = 256) in;
+layout(local_size_x = GROUP_SIZE) in;
 
-layout(std430, binding = 0) readonly buffer Rays { vec4 rays[]; };          // xyz: unit direction, world
-layout(std430, binding = 1) writeonly buffer Hits { int hit_face[]; };
-layout(std430, binding = 2) readonly buffer Triangles { float triangles[]; };  // 9 floats per face
+layout(std430, binding = SCAN_RAYS) readonly buffer Rays { vec4 rays[]; };          // xyz: unit direction, world
+layout(std430, binding = SCAN_HITS) writeonly buffer Hits { int hit_face[]; };
+layout(std430, binding = SCAN_TRIANGLES) readonly buffer Triangles { float triangles[]; };  // 9 floats per face
 
-uniform sampler2D depth_and_face;  // RG32F render target: linear depth, face index (-1: none)
+layout(binding = DEPTH_AND_FACE_UNIT) uniform sampler2D depth_and_face;  // RG32F render target: linear depth, face index (-1: none)
 uniform mat4 view_projection;      // world -> clip space
 uniform vec3 origin;               // sensor centre, world frame
 uniform ivec2 resolution;          // (width, height) pixels

@@ -10,13 +10,13 @@
 // The dispatch's y dimension splits each face's tiles: invocation (face, s) of S takes the
 // tiles s, s + S, s + 2S, ... of the face's box, so that a face covering thousands of tiles
 // is not one thread's serial loop.  The order of a tile's list does not change any result.
-layout(local_size_x = 256) in;
+layout(local_size_x = GROUP_SIZE) in;
 
-layout(std430, binding = 2) readonly buffer Triangles { float triangles[]; };  // 9 floats per face
-layout(std430, binding = 6) buffer TileCount { uint tile_count[]; };
-layout(std430, binding = 7) writeonly buffer TileFaces { uvec2 tile_faces[]; };  // face, min depth bits
-layout(std430, binding = 8) buffer GlobalFaces { uint global_faces[]; };  // [0]: count
-layout(std430, binding = 10) readonly buffer BinFaces { int bin_faces[]; };
+layout(std430, binding = EXACT_TRIANGLES) readonly buffer Triangles { float triangles[]; };  // 9 floats per face
+layout(std430, binding = EXACT_TILE_COUNT) buffer TileCount { uint tile_count[]; };
+layout(std430, binding = EXACT_TILE_FACES) writeonly buffer TileFaces { uvec2 tile_faces[]; };  // face, min depth bits
+layout(std430, binding = EXACT_GLOBAL_FACES) buffer GlobalFaces { uint global_faces[]; };  // [0]: count
+layout(std430, binding = EXACT_BIN_FACES) readonly buffer BinFaces { int bin_faces[]; };
 
 uniform mat4 view_projection;
 uniform ivec2 resolution;

@@ -4,7 +4,7 @@
 // the draw's gl_PrimitiveID to that face's row in mesh.faces, the group's lowest index.
 // Float ids are exact below 2^24 faces; the renderer refuses larger meshes.  Background
 // keeps the clear value (0, -1).
-layout(std430, binding = 4) readonly buffer DrawFaces { int draw_face[]; };
+layout(std430, binding = DRAW_FACES) readonly buffer DrawFaces { int draw_face[]; };
 in float v_depth;
 layout(location = 0) out vec2 depth_and_face;
 

@@ -1,12 +1,12 @@
 #version 430
 // Test harness: exact_pair64.glsl's pair64 on given (point, eye, face) triples, so that a test can
 // hold the GPU's float64 decisions against the CPU kernel (visibility/kernels.py) pair by pair.
-layout(local_size_x = 256) in;
+layout(local_size_x = GROUP_SIZE) in;
 
-layout(std430, binding = 0) readonly buffer Planes { double planes[]; };   // 16 per face
-layout(std430, binding = 1) readonly buffer Pairs { double pairs[]; };     // point xyz, eye xyz, tolerance
-layout(std430, binding = 2) readonly buffer PairFaces { int pair_face[]; };
-layout(std430, binding = 3) buffer Result { int result[]; };                // MISS, HIT or TIE
+layout(std430, binding = PROBE_PLANES) readonly buffer Planes { double planes[]; };   // 16 per face
+layout(std430, binding = PROBE_PAIRS) readonly buffer Pairs { double pairs[]; };     // point xyz, eye xyz, tolerance
+layout(std430, binding = PROBE_PAIR_FACES) readonly buffer PairFaces { int pair_face[]; };
+layout(std430, binding = PROBE_RESULT) buffer Result { int result[]; };                // MISS, HIT or TIE
 uniform uint n_pairs;
 uniform uint pair_offset;
 

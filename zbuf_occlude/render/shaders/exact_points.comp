@@ -8,19 +8,19 @@
 // so that it gives the oracle's bits.  Only a float64 result within 1e-12 (relative) of a
 // decision boundary, or a point within a hair of the frustum's border, is left to the CPU
 // ("cpu" bit).  Output: 1 bit visible, 1 bit cpu per point.
-layout(local_size_x = 256) in;
+layout(local_size_x = GROUP_SIZE) in;
 
-layout(std430, binding = 0) readonly buffer Points { vec4 points[]; };          // float32 xyz
-layout(std430, binding = 1) readonly buffer PointFaces { int point_face[]; };    // -1: unknown
-layout(std430, binding = 2) readonly buffer Triangles { float triangles[]; };    // 9 per face
-layout(std430, binding = 3) buffer Bits { uint bits[]; };                        // visible | cpu
-layout(std430, binding = 4) readonly buffer Planes { double planes[]; };         // 16 per face
-layout(std430, binding = 5) readonly buffer Points64 { double points64[]; };     // 3 per point
-layout(std430, binding = 6) readonly buffer TileStart { uint tile_start[]; };    // n_tiles + 1
-layout(std430, binding = 7) readonly buffer TileFaces { uvec2 tile_faces[]; };   // face, min depth bits
-layout(std430, binding = 8) readonly buffer GlobalFaces { uint global_faces[]; };
-layout(std430, binding = 9) readonly buffer Params { double params[]; };         // eye xyz, tol, edge_sin
-layout(std430, binding = 11) readonly buffer PointIndex { uint point_index[]; }; // caller's order
+layout(std430, binding = EXACT_POINTS) readonly buffer Points { vec4 points[]; };          // float32 xyz
+layout(std430, binding = EXACT_POINT_FACES) readonly buffer PointFaces { int point_face[]; };    // -1: unknown
+layout(std430, binding = EXACT_TRIANGLES) readonly buffer Triangles { float triangles[]; };    // 9 per face
+layout(std430, binding = EXACT_BITS) buffer Bits { uint bits[]; };                        // visible | cpu
+layout(std430, binding = EXACT_PLANES) readonly buffer Planes { double planes[]; };         // 16 per face
+layout(std430, binding = EXACT_POINTS64) readonly buffer Points64 { double points64[]; };     // 3 per point
+layout(std430, binding = EXACT_TILE_START) readonly buffer TileStart { uint tile_start[]; };    // n_tiles + 1
+layout(std430, binding = EXACT_TILE_FACES) readonly buffer TileFaces { uvec2 tile_faces[]; };   // face, min depth bits
+layout(std430, binding = EXACT_GLOBAL_FACES) readonly buffer GlobalFaces { uint global_faces[]; };
+layout(std430, binding = EXACT_PARAMS) readonly buffer Params { double params[]; };         // eye xyz, tol, edge_sin
+layout(std430, binding = EXACT_POINT_INDEX) readonly buffer PointIndex { uint point_index[]; }; // caller's order
 
 uniform mat4 view_projection;
 uniform vec4 depth_row;      // linear depth = dot(depth_row, (p, 1))
