@@ -372,13 +372,42 @@ def _remove_if_empty(folders: list[Path]) -> None:
                 return
 
 
+def parse_command_line(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> argparse.Namespace:
+    """``parser.parse_args(argv)``, but an unknown option is refused by the sub-command it was given to:
+    its usage, and the nearest of its options (``--veiws``: "did you mean --views?").
+
+    Raises
+    ------
+    SystemExit
+        Exit 2, as argparse does, for any bad command line.
+    """
+    import difflib
+
+    args, extras = parser.parse_known_args(argv)
+    if not extras:
+        return args
+    chosen = parser
+    while True:  # down the sub-commands given (``experiment sim2real``)
+        subs = [a for a in chosen._actions if isinstance(a, argparse._SubParsersAction)]
+        name = getattr(args, subs[0].dest, None) if subs else None
+        if name not in (subs[0].choices if subs else {}):
+            break
+        chosen = subs[0].choices[name]
+    hints = []
+    for extra in extras:
+        if extra.startswith("-"):
+            near = difflib.get_close_matches(extra.split("=", 1)[0], list(chosen._option_string_actions), n=1, cutoff=0.6)
+            hints += [f"did you mean {near[0]}?"] if near else []
+    chosen.error(f"unrecognized arguments: {' '.join(extras)}" + (f" ({'; '.join(hints)})" if hints else ""))
+
+
 def _run(argv: Sequence[str] | None) -> int:
     """Parse ``argv`` and run its command; the exit status (see :func:`main`)."""
     created: list[Path] = []
     command = "zbuf-occlude"
     try:
         # inside the try: the options' checkers (cli.options) raise while the command line is parsed
-        args = build_parser().parse_args(argv)
+        args = parse_command_line(build_parser(), argv)
         command = args.command
         logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
         created = _missing_folders(getattr(args, "out", None))
