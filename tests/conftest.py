@@ -161,3 +161,39 @@ def shingles_tree(tmp_path_factory) -> Path:
     path.parent.mkdir(parents=True)
     shingles_mesh().export(path)
     return root
+
+
+#: Memory a child loading a hostile mesh may map: enough for Python, numpy and trimesh, far below any bomb.
+_CHILD_MEMORY_BYTES = 3 << 30
+#: A guard, not a measurement: the refusals take well under a second.
+_CHILD_SECONDS = 60
+
+
+def load_in_child(path: Path) -> str:
+    """Run load_mesh(path) in a child under a memory limit (RLIMIT_AS) and a wall-clock guard; return
+    what it printed (the error, or the bounds), so that a load that would exhaust the machine fails the
+    test (MemoryError, killed, or minutes of work) instead of taking the machine down."""
+    import subprocess
+    import sys
+    import textwrap
+
+    code = textwrap.dedent(
+        f"""
+        import resource, sys
+        resource.setrlimit(resource.RLIMIT_AS, ({_CHILD_MEMORY_BYTES}, {_CHILD_MEMORY_BYTES}))
+        from zbuf_occlude.errors import MeshLoadError
+        from zbuf_occlude.mesh.load import load_mesh
+        try:
+            mesh = load_mesh(sys.argv[1], normalize=False, up="+z")
+        except MeshLoadError as exc:
+            print("MeshLoadError:", exc)
+        else:
+            print("loaded", len(mesh.faces), mesh.bounds.tolist())
+        """
+    )
+    try:
+        done = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, timeout=_CHILD_SECONDS, check=False)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"load_mesh({path.name}) ran past {_CHILD_SECONDS} s")
+    assert done.returncode == 0, done.stderr[-2000:]
+    return done.stdout

@@ -1,11 +1,12 @@
 """Mesh files → normalised z-up trimesh: formats, units and up axes, discovery, layouts, real sizes.
 
-:mod:`.load` (:func:`load_mesh`, :func:`normalize_mesh`), :mod:`.formats` (which parser reads
-which suffix), :mod:`.scene` (glTF/COLLADA scenes: units, up axes), :mod:`.discovery` (mesh files
-of a folder, names, splits), :mod:`.layouts` (ModelNet, ShapeNetCore and other trees → labels),
-:mod:`.inputs` (the numbered objects of a data set), :mod:`.sizes` (real object sizes per class),
-:mod:`.cache` (per-mesh caches of the renderers).  trimesh and pycollada do the parsing; each name
-is imported from its module when first used, so ``import zbuf_occlude.mesh`` loads no trimesh.
+:mod:`.load` (:func:`load_mesh`, :func:`normalize_mesh`), :mod:`.formats` (the table of formats,
+suffix → reader and checks, a module per format family), :mod:`.scene` (glTF/COLLADA scenes: units,
+up axes), :mod:`.discovery` (mesh files of a folder, names, splits), :mod:`.layouts` (ModelNet,
+ShapeNetCore and other trees → labels), :mod:`.inputs` (the numbered objects of a data set),
+:mod:`.sizes` (real object sizes per class), :mod:`.cache` (per-mesh caches of the renderers).
+trimesh and pycollada do the parsing; each name is imported from its module when first used, so
+``import zbuf_occlude.mesh`` loads no trimesh.
 """
 
 import lazy_loader as _lazy

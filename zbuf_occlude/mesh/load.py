@@ -378,8 +378,9 @@ def load_mesh(
         extension, unreadable or unparsable content, no vertices or no faces,
         NaN/inf vertices, face indices out of range, zero extent (all vertices
         coincide) or only degenerate faces; declared sizes past the caps of
-        :mod:`zbuf_occlude.mesh.limits` or more than the memory there is; a file it names
-        that is not a regular file in its folder (a FIFO); never a ``MemoryError``.
+        :mod:`zbuf_occlude.mesh.limits` or of the file's format (:mod:`zbuf_occlude.mesh.formats`)
+        or more than the memory there is; a file it names that is not a regular file in its
+        folder (a FIFO); never a ``MemoryError``.
     InvalidInputError
         If ``area_rtol`` is negative or not finite, or ``up`` is not an axis.
     """
@@ -404,7 +405,7 @@ def load_mesh(
     except OSError as exc:
         raise MeshLoadError(f"{path}: cannot read file ({exc.strerror or exc})") from exc
     except MemoryError:
-        # A size the file declares that passed the caps of mesh.limits but not this machine.
+        # A size the file declares that passed the caps of its format's check but not this machine.
         raise MeshLoadError(f"{path}: not enough memory to load it; the file declares more than this machine can hold") from None
     except MeshLoadError:
         raise

@@ -1,0 +1,92 @@
+"""The mesh file formats: one module per format family, each giving its table entries; one dispatcher.
+
+trimesh parses; each format's module (:mod:`.off`, :mod:`.obj`, :mod:`.ply`, :mod:`.stl`,
+:mod:`.gltf`, :mod:`.collada`) makes sure the result is the whole file and that what the file
+declares is checked before trimesh allocates it, and contributes :class:`~.base.Format` entries
+(file type, extensions, reader, check, optional package) to :data:`FORMATS`, the one table
+:func:`zbuf_occlude.mesh.load.load_mesh` dispatches on by extension.  A format is added by one
+module and one line in :data:`FORMATS`.
+
+Every file goes through the same steps, in this order (:func:`read_trimesh`):
+
+1. the file is read once (:func:`zbuf_occlude.mesh.named_files.read_regular_file`: a regular
+   file, size capped), and every later step gets these bytes;
+2. ``needs``: the optional package the format needs is importable (COLLADA: pycollada);
+3. ``check``: what the bytes declare, before trimesh parses them (OFF: header and counts; STL:
+   a binary file's length; OBJ: no vertex index 0; glTF and COLLADA: the scene's sizes,
+   :mod:`zbuf_occlude.mesh.limits`);
+4. ``read``: trimesh parses the bytes into one mesh, its scene flattened
+   (:mod:`zbuf_occlude.mesh.flatten`); what can only be compared with the parsed mesh is
+   checked there (PLY: the header's counts; OFF: faces read vs declared).
+
+The first step that fails ends the load with a :class:`~zbuf_occlude.errors.MeshLoadError`
+naming the file.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from zbuf_occlude.errors import MeshLoadError
+from zbuf_occlude.mesh.formats import collada, gltf, obj, off, ply, stl
+from zbuf_occlude.mesh.formats.base import Format
+from zbuf_occlude.mesh.named_files import read_regular_file
+
+if TYPE_CHECKING:
+    import trimesh
+
+__all__ = ["EXTENSIONS_TEXT", "FORMATS", "SUPPORTED_EXTENSIONS", "read_trimesh"]
+
+#: Every format, by trimesh's file type, in the order the help lists their extensions.
+FORMATS: dict[str, Format] = {fmt.file_type: fmt for module in (off, obj, ply, stl, gltf, collada) for fmt in module.FORMATS}
+#: File extensions load_mesh accepts (lower case), mapped to trimesh's file type.
+SUPPORTED_EXTENSIONS: dict[str, str] = {ext: fmt.file_type for fmt in FORMATS.values() for ext in fmt.extensions}
+#: The extensions as the help of every command lists them (".off, .obj, ...").
+EXTENSIONS_TEXT = ", ".join(SUPPORTED_EXTENSIONS)
+
+
+def _check_installed(fmt: Format, path: Path) -> None:
+    if fmt.needs is not None:
+        module, extra = fmt.needs
+        if importlib.util.find_spec(module) is None:
+            raise MeshLoadError(f"{path}: reading {fmt.file_type.upper()} needs the {module!r} package: pip install 'zbuf-occlude[{extra}]'")
+
+
+def read_trimesh(path: Path, file_type: str) -> trimesh.Trimesh:
+    """Parse ``path`` with trimesh into one Trimesh (scenes flattened with their transforms).
+
+    The steps of the module docstring, with the entry of :data:`FORMATS` for ``file_type``.
+
+    Parameters
+    ----------
+    path : Path
+        The file.
+    file_type : str
+        A value of :data:`SUPPORTED_EXTENSIONS`.
+
+    Returns
+    -------
+    mesh : trimesh.Trimesh
+        As parsed (``process=False``): vertices and faces in file order.
+
+    Raises
+    ------
+    MeshLoadError
+        Naming the file: not an OFF file, a point cloud and no faces, fewer vertices or
+        faces than declared, a vertex or face line cut short, a missing optional package,
+        declared sizes past the caps of :mod:`zbuf_occlude.mesh.limits`, a file it names that
+        is not a regular file in its folder.
+    OSError
+        The file cannot be read.
+    Exception
+        Whatever trimesh raises on content it cannot parse (a zoo of types);
+        :func:`zbuf_occlude.mesh.load.load_mesh` reports it with the file name.
+    """
+    fmt = FORMATS[file_type]
+    raw = read_regular_file(path)
+    _check_installed(fmt, path)
+    if fmt.check is not None:
+        fmt.check(raw, path)
+    return fmt.read(raw, path, file_type)
