@@ -34,13 +34,14 @@ declare -A SOURCE=(
   [segment_triangle]=zbuf_occlude/visibility/segment_triangle.py
   [farm_worker]=zbuf_occlude/farm/worker.py
   [dataset]=zbuf_occlude/dataset/reader.py
+  [storage]=zbuf_occlude/dataset/storage.py
 )
 # modules that are part of a file: only these mutants (mutmut name globs) are run and scored
 # (none now: the oracle's kernel has its own file, visibility/segment_triangle.py)
 declare -A ONLY=()
 # modules whose tests open OpenGL contexts: a context inherited across fork hangs, so the
 # mutant workers are forked from a server that never ran a test (mutmut's forkserver)
-declare -A FORKSERVER=([occlude]=1 [samples]=1 [farm_worker]=1 [dataset]=1 [oracle]=1)
+declare -A FORKSERVER=([occlude]=1 [samples]=1 [farm_worker]=1 [dataset]=1 [storage]=1 [oracle]=1)
 # pytest -k expressions for modules whose test file has slow parts mutmut need not rerun
 declare -A KEXPR=(
   [farm_worker]="not dask and not worker_count"
@@ -58,9 +59,10 @@ declare -A TESTS=(
   [oracle]="tests/visibility/test_oracle.py"
   [farm_worker]="tests/farm/test_run.py tests/farm/test_sensor_crops.py"
   [dataset]="tests/dataset/test_reader.py"
+  [storage]="tests/dataset/test_storage.py tests/dataset/test_reader.py"
   [segment_triangle]="tests/visibility/test_oracle.py"
 )
-ORDER=(io atomic mesh_cache cameras sampling samples mesh occlude segment_triangle oracle farm_worker dataset)
+ORDER=(io atomic mesh_cache cameras sampling samples mesh occlude segment_triangle oracle farm_worker dataset storage)
 
 modules=("$@")
 [ ${#modules[@]} -eq 0 ] && modules=("${ORDER[@]}")

@@ -360,3 +360,22 @@ def test_verify_of_an_unfinished_farm_run_or_another_folder_says_which(tmp_path)
     (tmp_path / "photos" / "protocol.json").write_bytes(b"\xff not json")  # untrusted: no traceback
     problems = verify_dataset(tmp_path / "photos").problems
     assert problems == [f"{tmp_path / 'photos'} has no dataset_card.json: not a data set written by `zbuf-occlude farm` or `generate`"]
+
+
+@pytest.mark.parametrize(("storage", "sensor"), [("sparse", None), ("compact", "hdl32e")])
+def test_a_storage_no_kind_reads_is_refused_by_the_reader_and_a_problem_for_verify(farmed, tmp_path, storage, sensor):
+    # a card naming a storage the reader refuses (farm --sensor data sets are dense) cannot pass verify
+    from zbuf_occlude import OccludedDataset
+    from zbuf_occlude.dataset.schema import card_sha256_line
+    from zbuf_occlude.errors import InvalidInputError
+    from zbuf_occlude.io.atomic import file_sha256
+
+    ds = _copy(farmed["compact"], tmp_path / "ds")
+    card = json.loads((ds / "dataset_card.json").read_text())
+    card["storage"], card["params"]["sensor"] = storage, sensor
+    (ds / "dataset_card.json").write_text(json.dumps(card))
+    (ds / "dataset_card.json.sha256").write_text(card_sha256_line(file_sha256(ds / "dataset_card.json")))
+    with pytest.raises(InvalidInputError, match=f"dataset_card.json: unknown storage '{storage}'"):
+        OccludedDataset(ds)
+    problems = verify_dataset(ds).problems
+    assert any(f"unknown storage '{storage}'" in p for p in problems), problems

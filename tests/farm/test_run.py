@@ -800,36 +800,6 @@ def test_worker_shards_store_no_times_and_compact_bits_are_one_gzip_chunk(tmp_pa
     assert calls and all(track is False for _, track in calls), calls
 
 
-@pytest.mark.parametrize("writer", ["_write_compact", "_write_datasets"])
-def test_hdf5_disk_full_becomes_enospc_and_other_errors_pass_unchanged(tmp_path, monkeypatch, writer):
-    # HDF5 reports a full disk in the message only (errno None): the writers give it ENOSPC,
-    # which atomic_path turns into "disk full"; other OSErrors pass through as they are
-    import h5py as h5
-
-    from zbuf_occlude.farm import worker
-
-    args = {"_write_compact": (np.zeros((8, 3)), np.zeros((1, 1), np.uint8), np.array([3]), np.array([0]), np.zeros((0, 3)),
-                               [(0.0, 0.0)], {}),
-            "_write_datasets": ({"data": np.zeros(3)}, {})}[writer]  # fmt: skip
-    for raised, expected_errno in ((OSError("Unable to create file (No space left on device)"), errno.ENOSPC),
-                                   (OSError(errno.EACCES, "No space left? no: permission"), errno.EACCES),
-                                   (OSError("Unable to create file (file locked)"), None)):  # fmt: skip
-
-        def fail(*a, raised=raised, **k):
-            raise raised
-
-        monkeypatch.setattr(h5, "File", fail)
-        with pytest.raises(OutputError) as info:  # atomic_path names the file and the cause
-            getattr(worker, writer)(tmp_path / "x.h5", *args)
-        cause = info.value.__cause__
-        assert cause.errno == expected_errno and str(raised.args[-1]) in str(cause)
-        if expected_errno == errno.ENOSPC:
-            assert cause.strerror == str(raised) and "disk full" in str(info.value)
-        else:
-            assert cause is raised and "disk full" not in str(info.value)
-        assert not list(tmp_path.glob("*.h5*"))  # nothing partial left
-
-
 def test_worker_record_format_base_and_timing_fields(tmp_path):
     import re
     from datetime import datetime, timezone

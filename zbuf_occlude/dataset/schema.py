@@ -20,6 +20,7 @@ from typing import Annotated, Any
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from zbuf_occlude.dataset.layout import CARD_FILE, CARD_SHA256_FILE, COLUMN_TYPES, SHAPE_NAMES_FILE
+from zbuf_occlude.dataset.storage import check_visible_bits, storage_kind
 from zbuf_occlude.errors import DatasetFormatError
 from zbuf_occlude.io.hdf5 import Column, declared_nbytes, open_hdf5
 from zbuf_occlude.io.atomic import size_mismatch
@@ -407,11 +408,6 @@ def checked_shards(root: Path, where: str, rec: OkRecord, card: Card, *, verify:
     return shards, dict(zip(shards, rec.sha256))
 
 
-#: Datasets a shard of each storage must hold (``farm --sensor`` dense shards also hold
-#: ``elevation_deg`` and ``azimuth_deg`` per row).
-SHARD_DATASETS = {"dense": ("data",), "h5": ("data",), "compact": ("dense_points", "visible_bits")}
-
-
 def _shape(f: Any, key: str) -> tuple[int, ...] | None:
     item = f.get(key)
     return tuple(item.shape) if item is not None and hasattr(item, "shape") else None
@@ -436,12 +432,15 @@ def check_shard(
     DatasetFormatError
         A dataset is missing or has the wrong shape, or the shard holds another number of
         rows (samples, or compact top-up points) than the manifest promises.
+    InvalidInputError
+        No storage kind is ``storage`` (:func:`~zbuf_occlude.dataset.storage.storage_kind`).
     """
-    needed = SHARD_DATASETS.get(storage, ()) + (("elevation_deg", "azimuth_deg") if sensor else ())
+    kind = storage_kind(storage, sensor=sensor)
+    needed = kind.shard_datasets
     missing = [k for k in needed if _shape(f, k) is None]
     if missing:
         raise DatasetFormatError(f"the shard {path} has no dataset {', '.join(map(repr, missing))} ({storage} storage)")
-    if storage == "compact":
+    if kind.redraws:
         dense, bits = _shape(f, "dense_points"), _shape(f, "visible_bits")
         if len(dense) != 2 or dense[1] != 3 or bits != (n_poses, (dense[0] + 7) // 8):
             raise DatasetFormatError(
@@ -508,39 +507,3 @@ def open_shard(
         f.close()
         raise
     return f
-
-
-def check_visible_bits(path: Path, bits: Any, n_dense: int, n_visible: list[int], n_topped_up: list[int] | None = None) -> None:
-    """Check a compact shard's visibility masks against the manifest's ``n_visible`` and ``n_topped_up``.
-
-    Parameters
-    ----------
-    bits : (P, ceil(n_dense / 8)) uint8
-        The shard's ``visible_bits``.
-    n_visible : list of int
-        The manifest's distinct visible points per pose (dense and topped up).
-    n_topped_up : list of int, optional
-        The manifest's top-up points per pose (``None``: none).
-
-    Raises
-    ------
-    DatasetFormatError
-        A pose whose mask has another number of visible points than ``n_visible - n_topped_up``
-        says (a reader would draw samples from no points).
-    """
-    import numpy as np
-
-    counts = np.unpackbits(np.asarray(bits, dtype=np.uint8), axis=1, count=int(n_dense)).sum(axis=1)
-    dense_visible = np.asarray(n_visible, dtype=np.int64)
-    if n_topped_up is not None:
-        dense_visible = dense_visible - np.asarray(n_topped_up, dtype=np.int64)
-    wrong = np.flatnonzero(counts != dense_visible)
-    if len(wrong):
-        p = int(wrong[0])
-        said = f"'n_visible' minus 'n_topped_up' says {int(dense_visible[p])}" if n_topped_up is not None else (
-            f"'n_visible' says {int(n_visible[p])}"
-        )
-        raise DatasetFormatError(
-            f"the shard {path}: 'visible_bits' of pose {p} marks {int(counts[p])} visible points, the manifest's field "
-            f"{said} ({len(wrong)} poses differ); the data set is damaged"
-        )

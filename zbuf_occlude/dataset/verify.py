@@ -18,16 +18,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from zbuf_occlude.dataset.layout import (
-    CARD_FILE,
-    CARD_SHA256_FILE,
-    MANIFEST_FILE,
-    PLAN_FILE,
-    PROTOCOL_FILE,
-    SAMPLE_FILE_FORMATS,
-    file_list_name,
-)
-from zbuf_occlude.dataset.reader import samples_per_pose
+from zbuf_occlude.dataset.layout import CARD_FILE, CARD_SHA256_FILE, MANIFEST_FILE, PLAN_FILE, PROTOCOL_FILE, file_list_name
+from zbuf_occlude.dataset.storage import STORAGE_KINDS, StorageKind, storage_kind
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
 from zbuf_occlude.io.atomic import file_sha256, size_mismatch
 from zbuf_occlude.io.json_files import loads_json
@@ -37,9 +29,6 @@ if TYPE_CHECKING:  # the schema (pydantic) is imported when a data set is verifi
     from zbuf_occlude.dataset.schema import Card
 
 __all__ = ["VerifyReport", "verify_dataset"]
-
-#: Storages whose files are HDF5 shards (their datasets and rows are checked too).
-HDF5_STORAGES = ("dense", "compact", "h5")
 
 #: What a ``generate --protocol NAME`` folder is, and what reads it (docs/guide/protocols.md).
 PROTOCOL_FOLDERS: dict[str, tuple[str, str]] = {
@@ -116,9 +105,9 @@ class VerifyReport:
         return "; ".join([line, *self.notes])
 
 
-def _check_hdf5(path: Path, card: Card, rows: int, n_visible: list[int], n_topped_up: list[int] | None) -> str | None:
+def _check_hdf5(path: Path, card: Card, kind: StorageKind, rows: int, n_visible: list[int], n_topped_up: list[int] | None) -> str | None:
     """What the reader would refuse on opening the shard (:func:`~zbuf_occlude.dataset.schema.open_shard`)
-    and, for compact storage, on reading its masks and top-up points (:func:`~zbuf_occlude.dataset.schema.check_visible_bits`)."""
+    and, for compact storage, on reading its masks and top-up points (:func:`~zbuf_occlude.dataset.storage.check_visible_bits`)."""
     from zbuf_occlude.dataset.schema import check_visible_bits, open_shard
 
     try:
@@ -126,7 +115,7 @@ def _check_hdf5(path: Path, card: Card, rows: int, n_visible: list[int], n_toppe
             path, storage=card.storage, n_points=card.params.n_points, rows=rows, n_poses=len(n_visible),
             sensor=card.params.sensor is not None, topup_rows=sum(n_topped_up or ()),
         ) as f:  # fmt: skip
-            if card.storage == "compact":
+            if kind.redraws:
                 check_visible_bits(path, f["visible_bits"][()], len(f["dense_points"]), n_visible, n_topped_up)
     except ZbufOccludeError as exc:
         return str(exc)
@@ -172,9 +161,9 @@ def verify_dataset(path: str | os.PathLike) -> VerifyReport:
     if not root.is_dir():
         raise InvalidInputError(f"verify: {path} is a file, not a data set folder")
     if not (root / CARD_FILE).exists() and (protocol := _protocol_of(root)) is not None:
-        kind, reader = PROTOCOL_FOLDERS.get(protocol, (f"a `--protocol {protocol}` folder", "see docs/guide/protocols.md"))
+        folder, reader = PROTOCOL_FOLDERS.get(protocol, (f"a `--protocol {protocol}` folder", "see docs/guide/protocols.md"))
         raise InvalidInputError(
-            f"verify: {path} is {kind}, not a farm data set: it was written by `zbuf-occlude generate --protocol "
+            f"verify: {path} is {folder}, not a farm data set: it was written by `zbuf-occlude generate --protocol "
             f"{protocol}`, whose own layout verify does not check; {reader}"
         )
     report = VerifyReport(str(root))
@@ -205,7 +194,11 @@ def verify_dataset(path: str | os.PathLike) -> VerifyReport:
         return report
     if shape_names is not None:
         check_records(manifest, rows, card, shape_names, problems)
-    spv = 1 if card.params.sensor else card.params.samples_per_view
+    kind: StorageKind | None = None  # None: the reader refuses the storage; its files are still counted and hashed
+    try:
+        kind = storage_kind(card.storage, sensor=card.params.sensor is not None)
+    except InvalidInputError as exc:
+        problems.append(f"{root / CARD_FILE}: {exc}")
     listed: dict[str, list[str]] = {}
     split_bytes: dict[str, int] = {}  # the shards' recorded sizes, which bound the joined files
     missing_checksums = 0
@@ -218,7 +211,7 @@ def verify_dataset(path: str | os.PathLike) -> VerifyReport:
         split_bytes[rec.split] = split_bytes.get(rec.split, 0) + (rec.bytes or 0)
         if rec.sha256 is None:
             missing_checksums += 1
-        n_rows = int(samples_per_pose(rec.n_visible, spv).sum())
+        n_rows = int((kind or STORAGE_KINDS["dense"]).rows_per_pose(rec.n_visible, card.params.samples_per_view).sum())
         report.samples += n_rows
         try:
             files = [path_inside(root, rel, what=f"{where} field 'shards'") for rel in rec.shards]
@@ -238,12 +231,12 @@ def verify_dataset(path: str | os.PathLike) -> VerifyReport:
             if rec.sha256 is not None and file_sha256(file) != rec.sha256[i]:
                 problems.append(f"{where}: {rel} differs from its SHA-256 in the manifest (changed after it was written)")
                 continue
-            if card.storage in HDF5_STORAGES and len(rec.shards) == 1:
-                found = _check_hdf5(file, card, n_rows, rec.n_visible, rec.n_topped_up)
-            elif card.storage in SAMPLE_FILE_FORMATS:
-                found = _check_sample_file(file, card)
-            else:
+            if kind is None:
                 found = None
+            elif kind.hdf5:
+                found = _check_hdf5(file, card, kind, n_rows, rec.n_visible, rec.n_topped_up) if len(rec.shards) == 1 else None
+            else:
+                found = _check_sample_file(file, card)
             if found:
                 problems.append(found)
     if missing_checksums:
