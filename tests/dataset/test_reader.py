@@ -13,7 +13,8 @@ from conftest import SAMPLE_MESHES
 
 from zbuf_occlude import OccludedDataset
 from zbuf_occlude.dataset.layout import MANIFEST_FILE
-from zbuf_occlude.dataset.reader import reconstruct_samples, samples_per_pose, unpack_visible
+from zbuf_occlude.dataset.index import samples_per_pose
+from zbuf_occlude.dataset.storage import reconstruct_samples, unpack_visible
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.farm import FarmParams, run_farm
 from zbuf_occlude.farm.config import RunOptions

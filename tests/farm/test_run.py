@@ -26,7 +26,8 @@ from conftest import SAMPLE_MESHES
 from zbuf_occlude.cli.farm import add_farm_merge_parser, add_farm_parser
 from zbuf_occlude.cli.main import main as cli_main
 from zbuf_occlude.dataset.layout import CARD_FILE, FORMAT_VERSION, MANIFEST_FILE, SHAPE_NAMES_FILE
-from zbuf_occlude.dataset.reader import OccludedDataset, unpack_visible
+from zbuf_occlude.dataset.reader import OccludedDataset
+from zbuf_occlude.dataset.storage import unpack_visible
 from zbuf_occlude.errors import InvalidInputError, OutputError
 from zbuf_occlude.farm import FarmParams, merge_farm, parse_shard, run_farm, select_shard
 from zbuf_occlude.farm.config import RunOptions

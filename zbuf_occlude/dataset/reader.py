@@ -29,7 +29,7 @@ from zbuf_occlude.resources import check_memory
 if TYPE_CHECKING:  # the schema (pydantic) is imported when a data set is opened, not with the package
     from zbuf_occlude.dataset.schema import Card
 
-__all__ = ["OccludedDataset", "reconstruct_samples", "unpack_visible", "samples_per_pose"]
+__all__ = ["OccludedDataset"]
 
 #: Objects whose compact arrays (dense cloud and bitmasks, ~1 MB each) the reader keeps.
 DEFAULT_OBJECT_CACHE = 8

@@ -45,7 +45,6 @@ __all__ = [
     "checked_shards",
     "check_shard",
     "open_shard",
-    "check_visible_bits",
     "describe_validation_error",
 ]
 

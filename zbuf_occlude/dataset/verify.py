@@ -108,7 +108,8 @@ class VerifyReport:
 def _check_hdf5(path: Path, card: Card, kind: StorageKind, rows: int, n_visible: list[int], n_topped_up: list[int] | None) -> str | None:
     """What the reader would refuse on opening the shard (:func:`~zbuf_occlude.dataset.schema.open_shard`)
     and, for compact storage, on reading its masks and top-up points (:func:`~zbuf_occlude.dataset.storage.check_visible_bits`)."""
-    from zbuf_occlude.dataset.schema import check_visible_bits, open_shard
+    from zbuf_occlude.dataset.schema import open_shard
+    from zbuf_occlude.dataset.storage import check_visible_bits
 
     try:
         with open_shard(
