@@ -190,10 +190,10 @@ def cmd_scan(args: argparse.Namespace) -> int:
             placement = draw_placement(dist, rng)
             crop = object_crop(mesh, sensor, placement, seed=int(rng.integers(2**63)), backend=args.backend, frame=args.frame)
             s = crop.scan if args.crop else crop.full
-            s.meta.update(placement)
+            s.meta.update(placement.to_dict())
             stem = f"{src.stem}_{sensor.name}_s{k:03d}"
             written += [getattr(s, f"to_{fmt}")(out / f"{stem}.{fmt}") for fmt in formats]
-            log.info("%s: %d returns at %.2f m", stem, len(s), placement["distance_m"])
+            log.info("%s: %d returns at %.2f m", stem, len(s), placement.distance_m)
     print(f"wrote {counted(len(written), 'file')} to {out}")
     return 0
 
