@@ -1059,7 +1059,7 @@ def test_first_day_mistakes_get_messages_that_say_what_to_do(tmp_path, capsys):
         (["--crop", "--ground-margin", "nan"], r"--ground-margin must be a finite number of metres, got nan"),
         (["--sensor", "riegl-q1560", "--footprint"], r"model spinning LiDARs; riegl-q1560 is not one"),
         (["--hidden-below", "0.5"], r"--hidden-below .* needs --crop"),
-        (["--crop", "--hidden-below=-0.2:0.5"], r"--hidden-below must be >= 0 metres above the ground, got '-0\.2:0\.5'"),
+        (["--crop", "--hidden-below=-0.2:0.5"], r"--hidden-below must be >= 0 metres above the ground, got \(-0\.2, 0\.5\)"),
         (["--crop", "--hidden-below", "low"], r"--hidden-below must be a number or LO:HI, got 'low'"),
     ],
 )

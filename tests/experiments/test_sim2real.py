@@ -714,3 +714,50 @@ def test_widen_is_never_narrower_whether_fitted_once_or_in_the_draw(tmp_path: Pa
     assert seen and all(s == (1.0, 1.0) for s in seen)
     with pytest.raises(InvalidInputError, match="across_sight_width_by"):
         fit_mesh_shapes(meshes, sensor, sizes, {"pole": {**narrow, "across_sight_width_by": "squeeze"}})
+
+
+# -- Sim2RealConfig: checked once, and the identity settings.json holds ------------------------------
+
+
+def test_config_messages_name_the_fields_or_the_flags_given() -> None:
+    from zbuf_occlude.cli.sim2real import OPTION_NAMES
+    from zbuf_occlude.experiments.sim2real import Sim2RealConfig
+
+    cases = [({"validate_on": "fit-half"}, "validate_on fit-half needs fit_sensor", "--validate-on fit-half needs --fit-sensor"),
+             ({"aspect": True, "keep_scale": True}, "aspect needs augmentation, which keep_scale", "--augment aspect needs augmentation, which --keep-scale"),
+             ({"fitted_shape": ("outline",)}, "fitted_shape needs fit_sensor", "--fitted-shape needs --fit-sensor"),
+             ({"occluded_elevation_deg": (10.0, 95.0)}, "occluded_elevation_deg must be", "--occluded-elevation must be"),
+             ({"seeds": 0}, "seeds must be >= 1", "--seeds must be >= 1"),
+             ({"sensor": "kinect-v1"}, "sensor kinect-v1: the lidar training set needs", "--sensor kinect-v1: the lidar training set needs")]  # fmt: skip
+    for bad, field_words, flag_words in cases:
+        with pytest.raises(InvalidInputError, match=field_words):
+            Sim2RealConfig("m", "r", **bad)
+        with pytest.raises(InvalidInputError, match=flag_words):
+            Sim2RealConfig("m", "r", **bad, option_names=OPTION_NAMES)
+
+
+RECORDED_SETTINGS = sorted((Path(__file__).resolve().parents[2] / "docs" / "results").glob("**/sim2real*/*/settings.json"))
+
+
+@pytest.mark.parametrize("path", RECORDED_SETTINGS, ids=lambda p: "/".join(p.parts[-3:-1]))
+def test_the_identity_of_a_config_is_what_recorded_runs_hold_so_they_resume(path: Path) -> None:
+    from zbuf_occlude.experiments.sim2real import SIM2REAL_SCALES, Sim2RealConfig
+    from zbuf_occlude.mesh.sizes import SizeRange
+
+    s = json.loads(path.read_text())
+    if s["sensor"].endswith("-physics"):
+        pytest.skip(f"made with a sensor file ({s['sensor']}) that is not kept")
+    tc = s["train_config"]
+    fit = s.get("fit_sensor") or {}
+    config = Sim2RealConfig(
+        s["mesh_root"], s["real"], model=s["model"], sensor=s["sensor"], scale=s["scale"], points=s["points"], epochs=tc["epochs"],
+        per_class=s["scale_values"]["per_class"], seeds=s["seeds"], keep_scale=s["keep_scale"], label_map=s["label_map"], up=s["up"],
+        up_map=s["up_map"], sizes={k: SizeRange(**v) for k, v in s["sizes_m"].items()}, min_returns=s.get("lidar_min_returns", 30),
+        method=s["method"], occluded_elevation_deg=tuple(s["occluded_elevation_deg"]), fit_sensor=bool(fit),
+        recipe="stable" if tc.get("balance") == "sampler" else "plain", validate_on=s.get("validate_on", "meshes"),
+        fitted_shape=tuple(fit.get("fitted_shape", ())), aspect=tc.get("aspect", False),
+    )  # fmt: skip
+    identity = json.loads(json.dumps(config.identity(), default=float))  # as run_sim2real compares it
+    assert SIM2REAL_SCALES[s["scale"]].per_class != s["scale_values"]["per_class"] or identity["scale_values"] == s["scale_values"]
+    assert identity == {k: s[k] for k in identity if k in s}
+    assert set(identity) <= set(s) or "lidar_min_returns" not in s  # a run from before the option lacks it

@@ -420,8 +420,8 @@ def test_sigkill_mid_run_then_resume_loses_and_repeats_nothing(tree, tmp_path):
     params = FarmParams(**{**PARAMS.to_dict(), "views": "fibonacci:24"})
     script = textwrap.dedent(
         f"""
-        from zbuf_occlude.farm import FarmParams, run_farm
-        run_farm({str(tree)!r}, {str(out)!r}, params=FarmParams(**{params.to_dict()!r}), progress=False)
+        from zbuf_occlude.farm import FarmParams, RunOptions, run_farm
+        run_farm({str(tree)!r}, {str(out)!r}, params=FarmParams(**{params.to_dict()!r}), options=RunOptions(progress=False))
         """
     )
     proc = subprocess.Popen([sys.executable, "-c", script], cwd=REPO_ROOT)
@@ -870,16 +870,11 @@ def test_a_mesh_file_given_to_farm_points_to_generate(tmp_path, capsys):
     assert "is a mesh file" in err and "generate" in err and "expected 'PATH LABEL" not in err
 
 
-def test_run_options_are_one_object_and_old_keywords_warn(tmp_path) -> None:
-    from zbuf_occlude.farm.config import options_with
-
-    assert options_with(None, {}) == RunOptions()
-    with pytest.warns(DeprecationWarning, match=r"options=RunOptions\(progress, workers=...\)"):
-        assert options_with(RunOptions(overwrite=True), {"workers": 3, "progress": False}) == RunOptions(
-            workers=3, progress=False, overwrite=True
-        )
+def test_run_options_are_one_object_and_keywords_are_no_options(tmp_path) -> None:
+    with pytest.raises(TypeError, match="'workers'"):
+        run_farm(tmp_path / "none", tmp_path / "out", PARAMS, workers=2)
     with pytest.raises(TypeError, match="'wrokers'"):
-        run_farm(tmp_path / "none", tmp_path / "out", PARAMS, wrokers=2)
+        RunOptions(wrokers=2)
 
 
 # -- up axis ----------------------------------------------------------------------------------

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -43,7 +44,7 @@ def test_distribution_errors():
     with pytest.raises(InvalidInputError):
         CropDistributions(size_m=0.0)
     p = draw_placement(CropDistributions(extents_m=(1.8, 4.5, 1.5)), np.random.default_rng(0))
-    assert p["size_m"] == 4.5 and p["extents_m"] == (1.8, 4.5, 1.5)
+    assert p.size_m == 4.5 and p.extents_m == (1.8, 4.5, 1.5)
 
 
 def test_pose_is_measured_from_the_box_centre_of_an_uncentred_mesh():
@@ -76,7 +77,7 @@ def test_ground_margin_keeps_the_ground_under_the_object_and_nothing_else():
     assert np.all(bare.scan.object_id == 1)
     counts = []
     for margin in (0.0, 0.5, 1.5):
-        crop = object_crop(box, lidar, placement | {"ground_margin_m": margin}, seed=1)
+        crop = object_crop(box, lidar, replace(placement, ground_margin_m=margin), seed=1)
         ground = crop.scan.object_id == 0
         # the object's own returns are untouched; the ground ones lie in the yawed box grown by the margin
         np.testing.assert_array_equal(crop.scan.points[~ground], bare.scan.points)
@@ -88,7 +89,7 @@ def test_ground_margin_keeps_the_ground_under_the_object_and_nothing_else():
     assert counts[0] <= 2 < counts[1] < counts[2]  # the box hides the ground inside its own outline
     # every ground return of the sweep inside that outline is kept, and no other
     full = crop.full
-    world = full.points.astype(np.float64) + [0.0, 0.0, placement["height_m"]]  # sensor frame, yaw 0
+    world = full.points.astype(np.float64) + [0.0, 0.0, placement.height_m]  # sensor frame, yaw 0
     yaw, centre = math.radians(30.0), 6.0 * np.array([math.cos(math.radians(10.0)), math.sin(math.radians(10.0))])
     rel = world[:, :2] - centre
     along = rel @ [math.cos(yaw), math.sin(yaw)]
@@ -114,10 +115,10 @@ def test_ground_returns_have_no_face_of_the_mesh():
 
 def test_hidden_below_drops_exactly_the_object_returns_under_the_cut():
     box, lidar, placement, bare = _box_6m_away()
-    bare_z = bare.scan.points[:, 2].astype(np.float64) + placement["height_m"]  # sensor frame -> above the ground
+    bare_z = bare.scan.points[:, 2].astype(np.float64) + placement.height_m  # sensor frame -> above the ground
     counts = []
     for cut in (0.0, 0.3, 0.7, 1.5):
-        crop = object_crop(box, lidar, placement | {"hidden_below_m": cut}, seed=1)
+        crop = object_crop(box, lidar, replace(placement, hidden_below_m=cut), seed=1)
         kept = bare_z >= cut
         np.testing.assert_array_equal(crop.scan.points, bare.scan.points[kept])
         np.testing.assert_array_equal(crop.local_points, bare.local_points[kept])
@@ -125,7 +126,7 @@ def test_hidden_below_drops_exactly_the_object_returns_under_the_cut():
         counts.append(len(crop.scan))
     assert counts[0] == len(bare.scan) > counts[1] > counts[2] > counts[3] == 0
     # with a ground margin the ground returns stay: only the object's own are cut
-    both = object_crop(box, lidar, placement | {"hidden_below_m": 0.7, "ground_margin_m": 0.5}, seed=1)
+    both = object_crop(box, lidar, replace(placement, hidden_below_m=0.7, ground_margin_m=0.5), seed=1)
     ground = both.scan.object_id == 0
     assert ground.any() and len(both.scan) - int(ground.sum()) == counts[2]
 
@@ -134,8 +135,8 @@ def test_hidden_below_is_drawn_after_the_placement_and_checked():
     rng = lambda: np.random.default_rng(7)  # noqa: E731
     plain = draw_placement(CropDistributions(), rng())
     drawn = draw_placement(CropDistributions(hidden_below_m=(0.2, 0.6)), rng())
-    assert {k: drawn[k] for k in plain} == plain and 0.2 <= drawn["hidden_below_m"] <= 0.6
-    assert draw_placement(CropDistributions(hidden_below_m=0.4), rng())["hidden_below_m"] == 0.4
+    assert {k: v for k, v in drawn.to_dict().items() if k in plain.to_dict()} == plain.to_dict() and 0.2 <= drawn.hidden_below_m <= 0.6
+    assert draw_placement(CropDistributions(hidden_below_m=0.4), rng()).hidden_below_m == 0.4
     for bad in (-0.1, (0.5, 0.2), "low"):
         with pytest.raises(InvalidInputError, match="hidden_below_m"):
             CropDistributions(hidden_below_m=bad)

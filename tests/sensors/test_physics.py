@@ -218,10 +218,10 @@ def test_pole_sizes_drawn_per_sample_with_a_round_cross_section():
     dist = CropDistributions(extents_m=((0.1, 0.4), (0.1, 0.4), (3.0, 9.0)), round_xy=True, reflectivity=(0.1, 0.5))
     rng = np.random.default_rng(0)
     drawn = [draw_placement(dist, rng) for _ in range(200)]
-    x, y, z = np.array([p["extents_m"] for p in drawn]).T
+    x, y, z = np.array([p.extents_m for p in drawn]).T
     assert np.array_equal(x, y) and 0.1 <= x.min() and x.max() <= 0.4 and 3.0 <= z.min() and z.max() <= 9.0
     assert np.ptp(x) > 0.25 and np.ptp(z) > 5.0  # really drawn, over the whole interval
-    assert all(0.1 <= p["reflectivity"] <= 0.5 and p["size_m"] == max(p["extents_m"]) for p in drawn)
+    assert all(0.1 <= p.reflectivity <= 0.5 and p.size_m == max(p.extents_m) for p in drawn)
     # fixed extents draw nothing more: the generator stream (and older data sets) stay as they were
     a, b = np.random.default_rng(5), np.random.default_rng(5)
     draw_placement(CropDistributions(extents_m=(0.3, 0.3, 6.0)), a)

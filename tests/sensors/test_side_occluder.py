@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -13,6 +14,7 @@ from hypothesis import strategies as st
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.crops import (
     CropDistributions,
+    Placement,
     draw_placement,
     object_crop,
     side_occluders,
@@ -27,7 +29,7 @@ from zbuf_occlude.sensors.lidar import lidar_preset
 from zbuf_occlude.sensors.presets import sensor_from_name
 
 CAR = trimesh.creation.box(extents=(1.0, 0.4, 0.33))  # a normalised car-like box: 4.5 m long at size_m 4.5
-PLACED = {"distance_m": 7.0, "height_m": 1.8, "azimuth_deg": 30.0, "yaw_deg": 90.0, "size_m": 4.5}
+PLACED = Placement(distance_m=7.0, height_m=1.8, azimuth_deg=30.0, yaw_deg=90.0, size_m=4.5)
 
 
 def _azimuths_deg(points: np.ndarray) -> np.ndarray:
@@ -40,7 +42,7 @@ def test_a_side_occluder_hides_the_asked_share_of_the_object_from_the_asked_side
     whole = object_crop(CAR, lidar, PLACED, seed=1)
     lo, hi = np.percentile(_azimuths_deg(whole.scan.points), [0, 100])
     for side in (1.0, -1.0):
-        part = object_crop(CAR, lidar, PLACED | {"visible_across_sight": visible, "occluder_side": side}, seed=1)
+        part = object_crop(CAR, lidar, replace(PLACED, visible_across_sight=visible, occluder_side=side), seed=1)
         az = _azimuths_deg(part.scan.points)
         shown = (az.max() - az.min()) / (hi - lo)
         assert shown == pytest.approx(visible, abs=0.04)  # within an azimuth step or two of 43°
@@ -58,7 +60,7 @@ def test_a_side_occluder_hides_the_asked_share_of_the_object_from_the_asked_side
 def test_a_share_of_one_hides_nothing_and_the_draw_is_capped_and_checked() -> None:
     lidar = lidar_preset("hdl32e", range_noise_m=0.0)
     whole = object_crop(CAR, lidar, PLACED, seed=1)
-    same = object_crop(CAR, lidar, PLACED | {"visible_across_sight": 1.0, "occluder_side": 1.0}, seed=1)
+    same = object_crop(CAR, lidar, replace(PLACED, visible_across_sight=1.0, occluder_side=1.0), seed=1)
     assert np.array_equal(same.scan.points, whole.scan.points) and set(np.unique(same.full.object_id)) == {0, 1}
     # drawn last, capped at 1, with the side; the earlier draws are those of the same distributions without it
     rng = lambda: np.random.default_rng(4)  # noqa: E731
@@ -66,17 +68,17 @@ def test_a_share_of_one_hides_nothing_and_the_draw_is_capped_and_checked() -> No
     shares, sides = [], set()
     for seed in range(40):
         drawn = draw_placement(CropDistributions(hidden_below_m=(0.0, 0.5), visible_across_sight=(0.5, 1.5)), np.random.default_rng(seed))
-        shares.append(drawn["visible_across_sight"])
-        sides.add(drawn["occluder_side"])
+        shares.append(drawn.visible_across_sight)
+        sides.add(drawn.occluder_side)
     drawn = draw_placement(CropDistributions(hidden_below_m=(0.0, 0.5), visible_across_sight=(0.5, 1.5)), rng())
-    assert {k: drawn[k] for k in plain} == plain
+    assert {k: v for k, v in drawn.to_dict().items() if k in plain.to_dict()} == plain.to_dict()
     assert min(shares) >= 0.5 and max(shares) == 1.0 and 0.3 < np.mean(np.asarray(shares) == 1.0) < 0.7 and sides == {1.0, -1.0}
     for bad in (0.0, (-0.1, 0.5), (0.6, 0.5), "half"):
         with pytest.raises(InvalidInputError, match="visible_across_sight"):
             CropDistributions(visible_across_sight=bad)
     # an airborne scanner flies over the object: nothing stands between, and the share is refused, not ignored
     with pytest.raises(InvalidInputError, match="airborne"):
-        object_crop(CAR, sensor_from_name("riegl-q1560"), PLACED | {"visible_across_sight": 0.5, "occluder_side": 1.0}, seed=1)
+        object_crop(CAR, sensor_from_name("riegl-q1560"), replace(PLACED, visible_across_sight=0.5, occluder_side=1.0), seed=1)
 
 
 @settings(max_examples=40, deadline=None)
@@ -192,7 +194,7 @@ def test_an_occluded_crop_builds_its_object_once(monkeypatch: pytest.MonkeyPatch
         return real(self, base)
 
     monkeypatch.setattr(SceneObject, "build", counted)
-    placement = PLACED | {"visible_across_sight": 0.5, "occluder_side": 1.0, "width_profile": (1.0, 1.2, 0.9, 1.0)}
+    placement = replace(PLACED, visible_across_sight=0.5, occluder_side=1.0, width_profile=(1.0, 1.2, 0.9, 1.0))
     crop = object_crop(CAR, lidar_preset("hdl32e", range_noise_m=0.0), placement, seed=1, class_name="car")
     assert set(np.unique(crop.full.object_id)) == {0, 1, 2}
     assert calls.count("car") == 1 and calls.count("occluder") == 1

@@ -120,11 +120,11 @@ def test_width_profile_draws_nothing_and_reaches_the_crop() -> None:
     rng = lambda: np.random.default_rng(5)  # noqa: E731
     plain = draw_placement(CropDistributions(width_scale=(1.0, 2.0)), rng())
     warped = draw_placement(CropDistributions(width_scale=(1.0, 2.0), width_profile=[1, 2]), rng())
-    assert warped == {**plain, "width_profile": (1.0, 2.0)}
+    assert warped == replace(plain, width_profile=(1.0, 2.0))
     post = trimesh.creation.box(extents=(0.2, 0.2, 1.0))
     lidar = lidar_preset("hdl32e", range_noise_m=0.0)
     placement = draw_placement(CropDistributions(distance_m=5.0, height_m=1.8, size_m=2.0, yaw_deg=0.0), rng())
-    crop = object_crop(post, lidar, placement | {"width_profile": (0.5, 0.5, 4.0, 4.0)}, seed=1)
+    crop = object_crop(post, lidar, replace(placement, width_profile=(0.5, 0.5, 4.0, 4.0)), seed=1)
     low, high = crop.local_points[:, 2] < -0.3, crop.local_points[:, 2] > 0.3  # the mesh frame keeps the warp
     assert np.ptp(crop.local_points[low, 1]) < 0.11 and np.ptp(crop.local_points[high, 1]) > 0.6
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -85,9 +86,9 @@ def test_width_scale_is_drawn_last_and_checked() -> None:
     rng = lambda: np.random.default_rng(3)  # noqa: E731
     plain = draw_placement(CropDistributions(hidden_below_m=(0.0, 0.5)), rng())
     drawn = draw_placement(CropDistributions(hidden_below_m=(0.0, 0.5), width_scale=(2.0, 3.0)), rng())
-    assert {k: drawn[k] for k in plain} == plain and 2.0 <= drawn["width_scale"] <= 3.0
+    assert {k: v for k, v in drawn.to_dict().items() if k in plain.to_dict()} == plain.to_dict() and 2.0 <= drawn.width_scale <= 3.0
     fixed = rng()
-    assert draw_placement(CropDistributions(width_scale=2.5), fixed)["width_scale"] == 2.5
+    assert draw_placement(CropDistributions(width_scale=2.5), fixed).width_scale == 2.5
     assert fixed.uniform() == (same := rng(), draw_placement(CropDistributions(), same), same.uniform())[2]  # a fixed value draws nothing
     for bad in (0.0, -1.0, (3.0, 2.0), "thick"):
         with pytest.raises(InvalidInputError, match="width_scale"):
@@ -101,8 +102,8 @@ def test_a_stretched_post_is_scanned_whole_and_as_wide_as_stretched() -> None:
     placement = draw_placement(CropDistributions(distance_m=4.0, height_m=1.8, size_m=3.0, yaw_deg=0.0), np.random.default_rng(0))
     thin = object_crop(post, lidar, placement, seed=1)
     for w in (6.0, 20.0):  # 1.8 m and 6 m wide at 4 m: the second wider than the default sector
-        wide = object_crop(post, lidar, placement | {"width_scale": w}, seed=1)
-        whole = object_crop(post, lidar, placement | {"width_scale": w}, seed=1, sector_margin_deg=180.0)
+        wide = object_crop(post, lidar, replace(placement, width_scale=w), seed=1)
+        whole = object_crop(post, lidar, replace(placement, width_scale=w), seed=1, sector_margin_deg=180.0)
         assert len(wide.scan) == len(whole.scan) > len(thin.scan)
         assert np.ptp(wide.scan.points[:, 2]) == pytest.approx(np.ptp(thin.scan.points[:, 2]), abs=0.1)  # as tall, within a ring (0.09 m at 4 m)
         if w == 6.0:  # (the 6 m box's near face is 1 m from the sensor: it shows only part of its width)
@@ -120,7 +121,7 @@ def test_a_stretched_crop_keeps_its_stretch_in_the_mesh_frame(stretch: float) ->
     lidar = lidar_preset("hdl32e", range_noise_m=0.0)
     placement = draw_placement(CropDistributions(distance_m=6.0, height_m=1.8, size_m=2.0, yaw_deg=0.0), np.random.default_rng(0))
     plain = object_crop(box, lidar, placement, seed=1)
-    wide = object_crop(box, lidar, placement | {"width_scale": stretch}, seed=1)
+    wide = object_crop(box, lidar, replace(placement, width_scale=stretch), seed=1)
     assert np.all(np.abs(wide.local_points[:, :2]) <= 0.25 * stretch + 1e-6)  # on the stretched box
     assert np.ptp(wide.local_points[:, 1]) == pytest.approx(stretch * np.ptp(plain.local_points[:, 1]), rel=0.1)  # across the sight (+x)
     assert np.ptp(wide.local_points[:, 2]) == pytest.approx(np.ptp(plain.local_points[:, 2]), abs=0.05)

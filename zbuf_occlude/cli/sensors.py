@@ -90,11 +90,12 @@ def _with_return_physics(sensor, args: argparse.Namespace):
                         echo_separation_m=args.echo_separation or sensor.echo_separation_m)  # fmt: skip
 
 
-def _hidden_below(text: str) -> tuple[float, float]:
-    lo, hi = parse_interval(text, "--hidden-below")
-    if lo < 0:
-        raise InvalidInputError(f"--hidden-below must be >= 0 metres above the ground, got {text!r}")
-    return lo, hi
+#: The flag of each :class:`~zbuf_occlude.sensors.placement.CropDistributions` field ``scan`` sets, for its messages.
+CROP_OPTION_NAMES = {
+    "distance_m": "--distance", "height_m": "--height", "azimuth_deg": "--azimuth", "yaw_deg": "--yaw", "size_m": "--size",
+    "extents_m": "--extents", "reflectivity": "--reflectivity", "ground_reflectivity": "--ground-reflectivity",
+    "ground_margin_m": "--ground-margin", "hidden_below_m": "--hidden-below",
+}  # fmt: skip
 
 
 def _largest_side(args: argparse.Namespace, mesh) -> tuple[float, float]:
@@ -172,7 +173,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
             size_m=_largest_side(args, mesh), extents_m=extents, round_xy=round_xy,
             reflectivity=None if args.reflectivity is None else parse_interval(args.reflectivity, "--reflectivity"),
             ground_reflectivity=args.ground_reflectivity, ground_margin_m=args.ground_margin,
-            hidden_below_m=None if args.hidden_below is None else _hidden_below(args.hidden_below),
+            hidden_below_m=None if args.hidden_below is None else parse_interval(args.hidden_below, "--hidden-below"),
+            option_names=CROP_OPTION_NAMES,
         )  # fmt: skip
         if args.across_sight_width is not None or args.outline is not None:
             from zbuf_occlude.sensors.fit import fit_object_shape
@@ -190,10 +192,10 @@ def cmd_scan(args: argparse.Namespace) -> int:
             placement = draw_placement(dist, rng)
             crop = object_crop(mesh, sensor, placement, seed=int(rng.integers(2**63)), backend=args.backend, frame=args.frame)
             s = crop.scan if args.crop else crop.full
-            s.meta.update(placement)
+            s.meta.update(placement.to_dict())
             stem = f"{src.stem}_{sensor.name}_s{k:03d}"
             written += [getattr(s, f"to_{fmt}")(out / f"{stem}.{fmt}") for fmt in formats]
-            log.info("%s: %d returns at %.2f m", stem, len(s), placement["distance_m"])
+            log.info("%s: %d returns at %.2f m", stem, len(s), placement.distance_m)
     print(f"wrote {counted(len(written), 'file')} to {out}")
     return 0
 

@@ -31,10 +31,20 @@ def parse_pairs(text: str | None, option: str) -> dict[str, str]:
     return out
 
 
+#: The flag of each :class:`~zbuf_occlude.experiments.sim2real.Sim2RealConfig` field, for its messages.
+OPTION_NAMES = {
+    "model": "--model", "sensor": "--sensor", "scale": "--scale", "points": "--points", "epochs": "--epochs",
+    "per_class": "--per-class", "seeds": "--seeds", "keep_scale": "--keep-scale", "label_map": "--label-map", "up": "--up",
+    "up_map": "--up-map", "sizes": "--sizes", "min_returns": "--min-returns", "method": "--method", "classes": "--classes",
+    "occluded_elevation_deg": "--occluded-elevation", "fit_sensor": "--fit-sensor", "recipe": "--recipe",
+    "validate_on": "--validate-on", "fitted_shape": "--fitted-shape", "aspect": "--augment aspect",
+}  # fmt: skip
+
+
 def _run(args: argparse.Namespace) -> int:
     # the counts and --out were checked while parsing (cli.options); the device before any rendering
     check_device(args.device)
-    from zbuf_occlude.experiments.sim2real import run_sim2real
+    from zbuf_occlude.experiments.sim2real import Sim2RealConfig, run_sim2real
     from zbuf_occlude.mesh.scene import UP_CHOICES
     from zbuf_occlude.mesh.sizes import parse_sizes
 
@@ -43,17 +53,17 @@ def _run(args: argparse.Namespace) -> int:
     if bad:
         raise InvalidInputError(f"--up-map: axis must be one of {', '.join(UP_CHOICES)}, got {bad}")
     real_options = {"dataset": args.real_format, "up": args.real_up, "units": args.real_units}
-    summary = run_sim2real(
-        args.root, args.real, args.out, model=args.model, sensor=args.sensor, scale=args.scale, points=args.points,
-        epochs=args.epochs, per_class=args.per_class, seeds=args.seeds, keep_scale=args.keep_scale,
-        label_map=parse_pairs(args.label_map, "--label-map"), up=args.up, up_map=up_map,
-        sizes=parse_sizes(args.sizes), real_options=real_options, min_returns=args.min_returns, method=args.method, device=args.device,
-        threads=args.threads, progress=not args.no_progress, classes=_classes_option(args.classes),
-        occluded_elevation_deg=parse_interval(args.occluded_elevation, "--occluded-elevation"),
-        fit_sensor=args.fit_sensor, recipe=args.recipe, validate_on=args.validate_on,
+    config = Sim2RealConfig(
+        args.root, args.real, model=args.model, sensor=args.sensor, scale=args.scale, points=args.points, epochs=args.epochs,
+        per_class=args.per_class, seeds=args.seeds, keep_scale=args.keep_scale, label_map=parse_pairs(args.label_map, "--label-map"),
+        up=args.up, up_map=up_map, sizes=parse_sizes(args.sizes), real_options=real_options, min_returns=args.min_returns,
+        method=args.method, classes=_classes_option(args.classes),
+        occluded_elevation_deg=parse_interval(args.occluded_elevation, "--occluded-elevation"), fit_sensor=args.fit_sensor,
+        recipe=args.recipe, validate_on=args.validate_on,
         fitted_shape=() if args.fitted_shape == "none" else tuple(v.strip() for v in args.fitted_shape.split(",")),
-        aspect=args.augment == "aspect",
+        aspect=args.augment == "aspect", option_names=OPTION_NAMES,
     )  # fmt: skip
+    summary = run_sim2real(config, args.out, device=args.device, threads=args.threads, progress=not args.no_progress)
     return print_table(args.out, summary)
 
 

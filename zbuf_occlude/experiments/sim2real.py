@@ -45,6 +45,10 @@ gradient clipping) keeps a seed from losing a small class of an imbalanced set (
 Outputs in ``out``: ``settings.json``, (``fitted_sensor.json``, ``real_split.csv``), ``runs.jsonl`` (one line per training run, what a
 rerun resumes from), ``results.csv`` (one row per run), ``summary.csv`` (mean ± std per
 training set), ``confusion_<set>.csv`` (summed over seeds), ``table.md``, ``run.json``.
+
+A run is a :class:`~zbuf_occlude.experiments.sim2real_config.Sim2RealConfig` (every setting, checked
+once) given to :func:`run_sim2real`, in three stages: :func:`prepare_sets` (scans, meshes, the fit),
+:func:`run_seed` (per seed) and :func:`write_outputs`.
 """
 
 from __future__ import annotations
@@ -53,18 +57,23 @@ import json
 import logging
 import os
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.experiments.sim2real_config import (
+    FITTED_SHAPES,
+    SIM2REAL_RECIPE,
+    SIM2REAL_SCALES,
+    VALIDATION_CHOICES,
+    WIDTH_SHAPES,
+    Sim2RealConfig,
+    Sim2RealScale,
+)
 from zbuf_occlude.experiments.sim2real_data import (
     FITTED_SETS,
-    GROUND_ELEVATION_DEG,
-    KEEP_SCALE_UNIT_M,
-    LIDAR_PLACEMENT,
-    MIN_RETURNS,
     TRAINING_SETS,
     build_sets,
     check_lidar_meshes,
@@ -79,10 +88,10 @@ from zbuf_occlude.io.json_files import loads_json, read_json_file
 from zbuf_occlude.learn.data import CloudSet, split_validation
 from zbuf_occlude.learn.metrics import classification_report
 from zbuf_occlude.learn.stats import mean_std, permutation_p
-from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
+from zbuf_occlude.mesh.sizes import SizeRange
 
-__all__ = ["Sim2RealScale", "SIM2REAL_SCALES", "REAL_TO_REAL", "SIM2REAL_RECIPE", "VALIDATION_CHOICES", "FITTED_SHAPES", "CHOSEN_ON_FIT_HALF",
-           "run_sim2real", "summarise"]
+__all__ = ["Sim2RealConfig", "Sim2RealScale", "SIM2REAL_SCALES", "REAL_TO_REAL", "SIM2REAL_RECIPE", "VALIDATION_CHOICES", "FITTED_SHAPES",
+           "CHOSEN_ON_FIT_HALF", "Sim2RealSets", "run_sim2real", "prepare_sets", "run_seed", "write_outputs", "summarise"]
 
 log = logging.getLogger(__name__)
 
@@ -90,61 +99,8 @@ log = logging.getLogger(__name__)
 REAL_TO_REAL = "real→real"
 #: Seed of the fixed stratified half split of the real scans (real→real), the same for every run.
 _REAL_SPLIT_SEED = 20_231
-#: The training recipe of every run (:data:`zbuf_occlude.learn.training.RECIPES`; module docstring).
-SIM2REAL_RECIPE = "stable"
-#: What the mesh-only sets validate on: clouds of held-out whole meshes, or the real scans of the fit half.
-VALIDATION_CHOICES = ("meshes", "fit-half")
-#: What ``fitted_shape`` may give the fitted+placed set's meshes, and the fitted crop keywords each uses
-#: (``widen`` is ``widths`` with every stretch below 1 raised to 1; ``occlude`` meets the widths with a
-#: side occluder instead of a stretch).
-FITTED_SHAPES = {"widths": "across_sight_width_m", "widen": "across_sight_width_m", "occlude": "across_sight_width_m",
-                 "outline": "across_sight_profile"}  # fmt: skip
-#: The shapes that meet the widths, of which a run takes one, and how each meets them
-#: (:data:`~zbuf_occlude.experiments.sim2real_data.WIDTH_BY`).
-_WIDTH_SHAPES = {"widths": "stretch", "widen": "widen", "occlude": "occluder"}
 #: Name of the row that takes, per seed, the mesh-only set with the best fit-half validation score.
 CHOSEN_ON_FIT_HALF = "chosen on fit half"
-
-
-@dataclass(frozen=True)
-class Sim2RealScale:
-    """Sizes of a run: points per cloud, training clouds per class, validation clouds per class
-    (from held-out meshes), epochs, early-stopping patience, model width, 3DmFV grid, the
-    ``occluded`` set's dense points and z-buffer resolution, and the share of meshes held out."""
-
-    points: int
-    per_class: int
-    val_per_class: int
-    epochs: int
-    patience: int
-    width: dict
-    fv_grid: int
-    dense_points: int
-    resolution: int
-    val_mesh_fraction: float
-
-
-SIM2REAL_SCALES = {
-    "quick": Sim2RealScale(points=256, per_class=100, val_per_class=25, epochs=20, patience=6,
-                           width={"pointnet": 0.25, "voxnet": 0.5, "3dmfv": 0.25}, fv_grid=5, dense_points=8192,
-                           resolution=512, val_mesh_fraction=0.2),
-    "paper": Sim2RealScale(points=1024, per_class=1000, val_per_class=200, epochs=100, patience=20,
-                           width={"pointnet": 1.0, "voxnet": 1.0, "3dmfv": 1.0}, fv_grid=8, dense_points=100_000,
-                           resolution=1024, val_mesh_fraction=0.2),
-}  # fmt: skip
-
-
-def _sensor(name_or_sensor):
-    from zbuf_occlude.sensors.airborne import AirborneScanner
-    from zbuf_occlude.sensors.lidar import Lidar
-    from zbuf_occlude.sensors.presets import sensor_from_name
-
-    if isinstance(name_or_sensor, (Lidar, AirborneScanner)):
-        return name_or_sensor
-    sensor = sensor_from_name(str(name_or_sensor))
-    if not isinstance(sensor, (Lidar, AirborneScanner)):
-        raise InvalidInputError(f"--sensor {name_or_sensor}: the lidar training set needs a LiDAR or an airborne scanner")
-    return sensor
 
 
 def _fit_sensor(scans: list, base, labels: np.ndarray, names: list[str]):
@@ -212,104 +168,63 @@ def _stratified_half(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return a, np.setdiff1d(np.arange(len(labels)), a)
 
 
-def run_sim2real(
-    mesh_root: str | os.PathLike,
-    real: str | os.PathLike,
-    out: str | os.PathLike,
-    *,
-    model: str = "pointnet",
-    sensor="hdl32e",
-    scale: str = "quick",
-    points: int | None = None,
-    epochs: int | None = None,
-    per_class: int | None = None,
-    seeds: int = 5,
-    keep_scale: bool = False,
-    label_map: dict[str, str] | None = None,
-    up: str = "auto",
-    up_map: dict[str, str] | None = None,
-    sizes: dict[str, SizeRange] | None = None,
-    real_options: dict | None = None,
-    min_returns: int = MIN_RETURNS,
-    method: str = "auto",
-    device: str = "cpu",
-    threads: int | None = None,
-    progress: bool = True,
-    classes: str | list[str] | None = None,
-    occluded_elevation_deg: tuple[float, float] = GROUND_ELEVATION_DEG,
-    fit_sensor: bool = False,
-    recipe: str = SIM2REAL_RECIPE,
-    validate_on: str = "meshes",
-    fitted_shape: tuple[str, ...] = (),
-    aspect: bool = False,
-) -> dict:
-    """Train on each synthetic training set and on real scans, ``seeds`` times; score on the real scans.
+@dataclass(frozen=True)
+class Sim2RealSets:
+    """What :func:`prepare_sets` finds and fits before any training: every seed's material.
+
+    Attributes
+    ----------
+    names : list of str
+        The classes, sorted (label ``i`` is ``names[i]``).
+    meshes : list of MeshEntry
+        The meshes the sensor (and the fitted sensor) sees; ``skipped`` those it does not, ``[name, reason]``.
+    real_points : (R, n_points, 3) float32; real_labels : (R,) int64; sources : list of str
+        The real scans as clouds, their classes and their files.
+    half_a, half_b : (R/2,) int64
+        The fixed stratified halves of the real scans (:func:`_stratified_half`): real→real
+        trains on ``half_a`` and is scored on ``half_b``; with ``fit_sensor``, ``half_a`` is the fit half.
+    fitted, fitted_placement, fitted_sizes, fit_json
+        With ``fit_sensor``: the fitted Lidar, the crop keywords per class and per mesh
+        (:func:`~zbuf_occlude.experiments.sim2real_data.build_set`'s ``placement``), the heights
+        per class and the sensor's JSON; None otherwise.
+    """
+
+    names: list
+    meshes: list
+    skipped: list
+    real_points: np.ndarray
+    real_labels: np.ndarray
+    sources: list
+    half_a: np.ndarray
+    half_b: np.ndarray
+    fitted: object = None
+    fitted_placement: dict | None = None
+    fitted_sizes: dict | None = None
+    fit_json: dict | None = None
+
+
+def _kinds(config: Sim2RealConfig) -> tuple[str, ...]:
+    """The mesh-only training sets of a run, in report order."""
+    return (*TRAINING_SETS, *FITTED_SETS) if config.fit_sensor else TRAINING_SETS
+
+
+def run_sim2real(config: Sim2RealConfig, out: str | os.PathLike, *, device: str = "cpu", threads: int | None = None,
+                 progress: bool = True) -> dict:  # fmt: skip
+    """Train on each synthetic training set and on real scans, ``config.seeds`` times; score on the real scans.
+
+    Three stages: :func:`prepare_sets` (the scans, meshes and fitted sensor every seed uses; then
+    every setting is fixed in ``settings.json``, before any real scan is scored), :func:`run_seed`
+    per seed, :func:`write_outputs`.
 
     Parameters
     ----------
-    mesh_root : path
-        ``CLASS/.../mesh`` files (any format :func:`zbuf_occlude.load_mesh` reads).
-    real : path
-        Real scans (:func:`zbuf_occlude.real_scans.datasets.load_real_scans`; ``real_options`` are
-        passed to it).
+    config : Sim2RealConfig
+        What is run (checked when it was made).
     out : path
         Output folder (module docstring); a rerun resumes from ``runs.jsonl`` when the
         settings are unchanged, and is refused otherwise.
-    model : {"pointnet", "voxnet", "3dmfv"}
-    sensor : str, Lidar or AirborneScanner
-        Scanner of the ``lidar`` set: a preset name (:data:`zbuf_occlude.sensors.LIDAR_PRESETS`,
-        :data:`zbuf_occlude.sensors.airborne.AIRBORNE_PRESETS`) or a sensor ``.json`` file.
-    scale : {"quick", "paper"}; points, epochs, per_class : int, optional
-        Override the scale's points per cloud, epochs and training clouds per class (the
-        validation clouds per class follow in the scale's proportion).
-    seeds : int
-        Repetitions (≥ 2 for a standard deviation; 5 or more for a permutation test able to
-        reach p < 0.05).
-    keep_scale : bool
-        Keep metres (centred, divided by :data:`KEEP_SCALE_UNIT_M`; augmentation off, random yaw
-        drawn once per cloud) instead of the paper's normalisation.
-    label_map : dict, optional
-        Real label → class folder name (labels equal to a class up to case need none).
-    up, up_map : mesh up axis and per-file overrides (:func:`find_class_meshes`).
-    sizes : dict, optional
-        Real sizes per class (default :data:`zbuf_occlude.mesh.sizes.CLASS_SIZES_M`).
-    min_returns : int
-        LiDAR crops with fewer returns are redrawn (:data:`~zbuf_occlude.experiments.sim2real_data.MIN_RETURNS`).
-        Before any set is made, every mesh is tried once with the sensor; one that gives no
-        such crop is skipped with a warning naming it (``settings.json``: ``meshes_skipped``).
-    classes : "real", list of str, or None
-        Class folders to train on: ``"real"``, those the real scans have (after
-        ``label_map``; a real scan can then only be called a class it can be); a list, those;
-        None, every class folder of ``mesh_root``.
-    occluded_elevation_deg : (lo, hi)
-        Camera elevations of the ``occluded`` set, degrees in [-90, 90], drawn uniformly
-        (default :data:`~zbuf_occlude.experiments.sim2real_data.GROUND_ELEVATION_DEG`; an
-        airborne sensor sees from above, e.g. ``(30, 80)``).
-    fit_sensor : bool
-        Fit ``sensor`` (a spinning LiDAR) to the sensor-frame points of the fixed first half of
-        the real scans, and each class's crop distances and heights to the same scans, add the
-        :data:`~zbuf_occlude.experiments.sim2real_data.FITTED_SETS`, and score every row on the
-        other half only (module docstring).
-    recipe : {"stable", "plain"}
-        Training recipe (:data:`zbuf_occlude.learn.training.RECIPES`).
-    validate_on : {"meshes", "fit-half"}
-        What the mesh-only sets validate on (best epoch, early stopping): clouds of the same kind
-        from held-out whole meshes, or, with ``fit_sensor``, the real scans of the fit half (the
-        sets then train on every mesh; module docstring). real→real is the same either way.
-    fitted_shape : tuple of str
-        What the fitted+placed set changes in each mesh's shape (needs ``fit_sensor``; keys of
-        :data:`FITTED_SHAPES`): ``"widths"``, a horizontal stretch to the class's widths across
-        the line of sight, or ``"widen"``, the same stretch where it widens the mesh and none
-        where it would narrow it (a narrow real width is often a partial view, not a thinner
-        object), or ``"occlude"``, a side occluder that leaves in view as much of the mesh as
-        the widths show where its crops are wider (a partial view; nothing hidden where they are
-        narrower); ``"outline"``, a warp to its outline over the height, alone or with one of
-        the three.  Empty (default): the meshes' own shapes.  Each is fitted per mesh once
-        (:func:`fit_mesh_shapes`).
-    aspect : bool
-        Every run's augmentation also draws random proportions (x, y and z stretched by
-        independent factors in [2/3, 3/2], DGCNN's range; :func:`zbuf_occlude.learn.data.augment`),
-        real→real's too.  Not with ``keep_scale``, which turns augmentation off.
+    device : {"cpu", "cuda"}; threads : int, optional; progress : bool
+        How the training runs (torch device and CPU threads, progress bars); no result depends on them.
 
     Returns
     -------
@@ -319,187 +234,198 @@ def run_sim2real(
     Raises
     ------
     InvalidInputError
-        Bad options (``validate_on="fit-half"`` without ``fit_sensor``, ``aspect`` with
-        ``keep_scale``), unusable meshes or scans
-        (with ``fit_sensor``: scans without sensor-frame points, or an airborne ``sensor``), or an
-        ``out`` made with other settings.
+        Unusable meshes or scans (with ``fit_sensor``: scans without sensor-frame points, or an
+        airborne ``sensor``), or an ``out`` made with other settings.
     """
-    from zbuf_occlude.experiments.table3 import _machine
-    from zbuf_occlude.learn.training import (
-        RECIPES,
-        TrainConfig,
-        predict,
-        train,
-    )
+    t_start = time.perf_counter()
+    out = Path(out)
+    sets = prepare_sets(config)
+    settings = _fix_settings(config, sets, out)
+    done = _load_runs(out / "runs.jsonl")
+    for seed in range(int(config.seeds)):
+        run_seed(config, sets, seed, done, out, device=device, threads=threads, progress=progress)
+    return write_outputs(config, sets, settings, done, out, wall_s=time.perf_counter() - t_start)
+
+
+def prepare_sets(config: Sim2RealConfig) -> Sim2RealSets:
+    """Load the real scans and the meshes, split the scans into their fixed halves and, with
+    ``fit_sensor``, fit the sensor and the crops to the first half (:class:`Sim2RealSets`).
+
+    Raises
+    ------
+    InvalidInputError
+        No usable classes, meshes or scans, or a fit that sees no mesh of a class.
+    """
     from zbuf_occlude.real_scans.datasets import load_real_scans
 
-    if scale not in SIM2REAL_SCALES:
-        raise InvalidInputError(f"--scale must be one of {sorted(SIM2REAL_SCALES)}, got {scale!r}")
-    if recipe not in RECIPES:
-        raise InvalidInputError(f"--recipe must be one of {sorted(RECIPES)}, got {recipe!r}")
-    if aspect and keep_scale:
-        raise InvalidInputError("--augment aspect needs augmentation, which --keep-scale turns off")
-    if int(seeds) < 1:
-        raise InvalidInputError(f"--seeds must be >= 1, got {seeds}")
-    if validate_on not in VALIDATION_CHOICES:
-        raise InvalidInputError(f"--validate-on must be one of {', '.join(VALIDATION_CHOICES)}, got {validate_on!r}")
-    if validate_on == "fit-half" and not fit_sensor:
-        raise InvalidInputError("--validate-on fit-half needs --fit-sensor (which splits the real scans into the fit half and the scored half)")
-    fitted_shape = tuple(fitted_shape)
-    if unknown := [v for v in fitted_shape if v not in FITTED_SHAPES]:
-        raise InvalidInputError(f"--fitted-shape must name {' and/or '.join(FITTED_SHAPES)}, got {', '.join(map(repr, unknown))}")
-    if len(set(fitted_shape) & set(_WIDTH_SHAPES)) > 1:
-        raise InvalidInputError(f"--fitted-shape takes one of {', '.join(_WIDTH_SHAPES)}, not both, got {','.join(fitted_shape)!r}")
-    if fitted_shape and not fit_sensor:
-        raise InvalidInputError("--fitted-shape needs --fit-sensor (it shapes the fitted+placed set's meshes)")
-    real_val = validate_on == "fit-half"
-    t_start = time.perf_counter()
-    sc = SIM2REAL_SCALES[scale]
-    if per_class:
-        sc = replace(sc, per_class=int(per_class), val_per_class=max(1, round(int(per_class) * sc.val_per_class / sc.per_class)))
-    n_points = int(points or sc.points)
-    sizes = dict(sizes or CLASS_SIZES_M)
-    lidar = _sensor(sensor)
-    out = Path(out)
-    elevation = _elevation_range(occluded_elevation_deg)
-    scans = load_real_scans(real, **(real_options or {}))  # first: cheap, and --classes real needs them
-    wanted = _classes(classes, mesh_root, scans, dict(label_map or {}))
-    meshes = find_class_meshes(mesh_root, up=up, up_map=up_map, classes=wanted)
-    meshes, skipped = check_lidar_meshes(meshes, lidar, sizes, n_points, min_returns=int(min_returns))
+    lidar, n_points, label_map = config.sensor, config.n_points, dict(config.label_map)
+    scans = load_real_scans(config.real, **config.real_options)  # first: cheap, and classes="real" needs them
+    wanted = _classes(config.classes, config.mesh_root, scans, label_map)
+    meshes = find_class_meshes(config.mesh_root, up=config.up, up_map=config.up_map, classes=wanted)
+    meshes, skipped = check_lidar_meshes(meshes, lidar, config.sizes, n_points, min_returns=int(config.min_returns))
     names = sorted({m.class_name for m in meshes})
-    real_pts, real_y, sources = real_clouds(scans, names, dict(label_map or {}), n_points, 0, keep_scale=keep_scale)
+    real_pts, real_y, sources = real_clouds(scans, names, label_map, n_points, 0, keep_scale=config.keep_scale)
     half_a, half_b = _stratified_half(real_y)  # real→real trains on half_a; with fit_sensor, half_a is the fit half
-    fitted, fitted_placement, fitted_sizes, fit_json = None, None, None, None
-    if fit_sensor:
-        kept = real_scan_rows(scans, names, dict(label_map or {}))
-        fitted, fitted_placement, fitted_sizes, fit_json = _fit_sensor([scans[kept[i]] for i in half_a], lidar, real_y[half_a], names)
-        meshes, skipped_fitted = check_lidar_meshes(meshes, fitted, sizes, n_points, min_returns=int(min_returns))
-        used = {FITTED_SHAPES[shape] for shape in fitted_shape}
-        fitted_placement = {c: {k: v for k, v in kw.items() if k not in FITTED_SHAPES.values() or k in used} for c, kw in fitted_placement.items()}
-        width_by = next((_WIDTH_SHAPES[shape] for shape in fitted_shape if shape in _WIDTH_SHAPES), None)
-        if width_by is not None:
-            fitted_placement = {c: {**kw, "across_sight_width_by": width_by} for c, kw in fitted_placement.items()}
-        # each mesh's stretch and warp to its class's scans, fitted once for every seed (seed 0: the same every run)
-        fitted_placement = {**fitted_placement, **fit_mesh_shapes(meshes, fitted, fitted_sizes, fitted_placement)}
-        meshes, skipped_placed = check_lidar_meshes(meshes, fitted, fitted_sizes, n_points, min_returns=int(min_returns),
-                                                    placement=fitted_placement)  # fmt: skip
-        skipped += skipped_fitted + skipped_placed
-        if sorted({m.class_name for m in meshes}) != names:
-            raise InvalidInputError(f"the fitted sensor sees no mesh of classes {sorted(set(names) - {m.class_name for m in meshes})}")
-    kinds = (*TRAINING_SETS, *FITTED_SETS) if fit_sensor else TRAINING_SETS
+    sets = Sim2RealSets(names, meshes, skipped, real_pts, real_y, sources, half_a, half_b)
+    if not config.fit_sensor:
+        return sets
+    kept = real_scan_rows(scans, names, label_map)
+    fitted, placement, fitted_sizes, fit_json = _fit_sensor([scans[kept[i]] for i in half_a], lidar, real_y[half_a], names)
+    meshes, skipped_fitted = check_lidar_meshes(meshes, fitted, config.sizes, n_points, min_returns=int(config.min_returns))
+    placement = _fitted_placement(config, placement)
+    # each mesh's stretch and warp to its class's scans, fitted once for every seed (seed 0: the same every run)
+    placement = {**placement, **fit_mesh_shapes(meshes, fitted, fitted_sizes, placement)}
+    meshes, skipped_placed = check_lidar_meshes(meshes, fitted, fitted_sizes, n_points, min_returns=int(config.min_returns),
+                                                placement=placement)  # fmt: skip
+    if sorted({m.class_name for m in meshes}) != names:
+        raise InvalidInputError(f"the fitted sensor sees no mesh of classes {sorted(set(names) - {m.class_name for m in meshes})}")
+    return replace(sets, meshes=meshes, skipped=skipped + skipped_fitted + skipped_placed, fitted=fitted, fitted_placement=placement,
+                   fitted_sizes=fitted_sizes, fit_json=fit_json)  # fmt: skip
 
-    def config(seed: int) -> TrainConfig:
-        return TrainConfig(model=model, epochs=int(epochs or sc.epochs), patience=sc.patience, width=sc.width[model],
-                           fv_grid=sc.fv_grid, seed=seed, device=device, threads=threads, augment=not keep_scale,
-                           aspect=bool(aspect), **RECIPES[recipe])  # fmt: skip
 
+def _fitted_placement(config: Sim2RealConfig, placement: dict[str, dict]) -> dict[str, dict]:
+    """The fitted crop keywords per class that ``config.fitted_shape`` uses, and how the widths are met."""
+    used = {FITTED_SHAPES[shape] for shape in config.fitted_shape}
+    placement = {c: {k: v for k, v in kw.items() if k not in FITTED_SHAPES.values() or k in used} for c, kw in placement.items()}
+    width_by = next((WIDTH_SHAPES[shape] for shape in config.fitted_shape if shape in WIDTH_SHAPES), None)
+    if width_by is not None:
+        placement = {c: {**kw, "across_sight_width_by": width_by} for c, kw in placement.items()}
+    return placement
+
+
+def _fix_settings(config: Sim2RealConfig, sets: Sim2RealSets, out: Path) -> dict:
+    """Every setting of the run (``config.identity()`` and what :func:`prepare_sets` found), written
+    to ``out/settings.json`` before any real scan is scored, or compared with the settings there.
+
+    Raises
+    ------
+    InvalidInputError
+        ``out`` holds a run with other settings, or a ``settings.json`` that is not ours.
+    """
+    names, real_y = sets.names, sets.real_labels
     settings = {
-        "mesh_root": str(mesh_root), "real": str(real), "model": model, "sensor": lidar.name, "scale": scale,
-        "scale_values": asdict(sc), "points": n_points, "seeds": int(seeds), "keep_scale": bool(keep_scale),
-        "label_map": dict(label_map or {}), "up": up, "up_map": dict(up_map or {}), "classes": names,
-        "sizes_m": {k: asdict(v) for k, v in sizes.items()}, "occluded_elevation_deg": list(elevation),
-        "lidar_placement": LIDAR_PLACEMENT, "lidar_min_returns": int(min_returns), "keep_scale_unit_m": KEEP_SCALE_UNIT_M,
-        "method": method, "train_config": config(0).identity(("seed", "device", "threads")),
-        "meshes": {c: sum(m.class_name == c for m in meshes) for c in names},
-        "mesh_up": {m.name: m.mesh.metadata["zbuf_occlude"].get("up_source") for m in meshes},
+        **config.identity(), "classes": names, "meshes": {c: sum(m.class_name == c for m in sets.meshes) for c in names},
+        "mesh_up": {m.name: m.mesh.metadata["zbuf_occlude"].get("up_source") for m in sets.meshes},
         "real_scans": {c: int((real_y == i).sum()) for i, c in enumerate(names)},
     }  # fmt: skip
-    if skipped:  # only then: the settings of runs without a skipped mesh stay as they were (resume)
-        settings["meshes_skipped"] = skipped
-    if real_val:  # likewise: runs that validate on meshes keep their settings
-        settings["validate_on"] = validate_on
-    if fit_sensor:  # likewise: runs without it keep their settings
+    if sets.skipped:  # only then: the settings of runs without a skipped mesh stay as they were (resume)
+        settings["meshes_skipped"] = sets.skipped
+    if config.fit_sensor:  # likewise: runs without it keep their settings
         settings["fit_sensor"] = {
-            "split_seed": _REAL_SPLIT_SEED, "fitted_sensor": fit_json, "fitted_shape": list(fitted_shape),
-            "fit_scans": {c: int((real_y[half_a] == i).sum()) for i, c in enumerate(names)},
-            "scored_scans": {c: int((real_y[half_b] == i).sum()) for i, c in enumerate(names)},
+            "split_seed": _REAL_SPLIT_SEED, "fitted_sensor": sets.fit_json, "fitted_shape": list(config.fitted_shape),
+            "fit_scans": {c: int((real_y[sets.half_a] == i).sum()) for i, c in enumerate(names)},
+            "scored_scans": {c: int((real_y[sets.half_b] == i).sum()) for i, c in enumerate(names)},
         }  # fmt: skip
     out.mkdir(parents=True, exist_ok=True)
-    settings_path = out / "settings.json"
-    if settings_path.is_file():
-        old = read_json_file(settings_path)
+    path = out / "settings.json"
+    if path.is_file():
+        old = read_json_file(path)
         if not isinstance(old, dict):
-            raise InvalidInputError(f"{settings_path} is not a settings file of ours; choose another --out")
+            raise InvalidInputError(f"{path} is not a settings file of ours; choose another --out")
         old.pop("fixed_at", None)
         if old != json.loads(json.dumps(settings, default=float)):
-            raise InvalidInputError(f"{out} holds a run with other settings ({settings_path}); choose another --out")
+            raise InvalidInputError(f"{out} holds a run with other settings ({path}); choose another --out")
     else:
         # Every setting is fixed here, before any real scan is scored.
-        write_text(settings_path, json.dumps({**settings, "fixed_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
-                                             indent=1, default=float))  # fmt: skip
-    if fit_sensor:
-        write_text(out / "fitted_sensor.json", json.dumps(fit_json, indent=1, default=float))
-        halves = {int(i): "fit" for i in half_a} | {int(i): "scored" for i in half_b}
+        write_text(path, json.dumps({**settings, "fixed_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}, indent=1, default=float))
+    if config.fit_sensor:
+        write_text(out / "fitted_sensor.json", json.dumps(sets.fit_json, indent=1, default=float))
+        halves = {int(i): "fit" for i in sets.half_a} | {int(i): "scored" for i in sets.half_b}
         write_csv(out / "real_split.csv", [{"row": i, "source": src, "class": names[real_y[i]], "half": halves[i]}
-                                           for i, src in enumerate(sources)])  # fmt: skip
-    runs_path = out / "runs.jsonl"
-    done = _load_runs(runs_path)
-    # every row is scored on the other half when the sensor was fitted on the first one
-    score_x, score_y = (real_pts[half_b], real_y[half_b]) if fit_sensor else (real_pts, real_y)
-    common = dict(sensor=lidar, sizes=sizes, keep_scale=keep_scale, dense_points=sc.dense_points, min_returns=int(min_returns),
-                  resolution=sc.resolution, method=method, elevation_deg=elevation)  # fmt: skip
+                                           for i, src in enumerate(sets.sources)])  # fmt: skip
+    return settings
+
+
+def run_seed(config: Sim2RealConfig, sets: Sim2RealSets, seed: int, done: dict, out: Path, *, device: str = "cpu",
+             threads: int | None = None, progress: bool = True) -> None:  # fmt: skip
+    """Train and score every set of ``seed`` not in ``done`` (``{(train_set, seed): row}``), each
+    row appended to ``out/runs.jsonl`` and ``done`` as soon as it is scored.
+
+    The mesh-only sets still to train are made at once (``lidar+complete`` reuses two), on a
+    whole-mesh split of the seed (or every mesh, validated on the fit half); real→real trains on
+    the fit half (10 % of it validates) and every row is scored on the other half when the
+    sensor was fitted, on every real scan otherwise."""
+    real_val, half_a, half_b = config.validates_on_fit_half, sets.half_a, sets.half_b
+    real_pts, real_y = sets.real_points, sets.real_labels
+    sc = config.scale_values
+    # validated on the fit half's real scans, the sets train on every mesh
+    train_meshes, val_meshes = (sets.meshes, []) if real_val else split_whole_meshes(sets.meshes, sc.val_mesh_fraction, seed)
     fit_half = CloudSet(real_pts[half_a], real_y[half_a], np.full(len(half_a), np.nan), half_a)
-    for seed in range(int(seeds)):
-        # validated on the fit half's real scans, the sets train on every mesh
-        train_meshes, val_meshes = (meshes, []) if real_val else split_whole_meshes(meshes, sc.val_mesh_fraction, seed)
-        sets: dict = {}
-        for kind in (*kinds, REAL_TO_REAL):
-            if (kind, seed) in done:
-                continue
-            t0 = time.perf_counter()
-            if kind == REAL_TO_REAL:
-                tr_rows, val_rows = split_validation(len(half_a), 0.1, seed, labels=real_y[half_a])
-                tr, val = fit_half.subset(tr_rows), fit_half.subset(val_rows)
-                test_x, test_y = real_pts[half_b], real_y[half_b]
-            else:
-                if not sets:  # the sets this seed still trains, at once (lidar+complete reuses two)
-                    fits = {"fitted_sensor": fitted, "fitted_placement": fitted_placement, "fitted_sizes": fitted_sizes,
-                            "kinds": [k for k in kinds if (k, seed) not in done]}  # fmt: skip
-                    sets = {"train": build_sets(train_meshes, names, sc.per_class, n_points, seed, **fits, **common)}
-                    if not real_val:
-                        sets["val"] = build_sets(val_meshes, names, sc.val_per_class, n_points, seed + 10_000, **fits, **common)
-                tr, val = sets["train"][kind], (fit_half if real_val else sets["val"][kind])
-                test_x, test_y = score_x, score_y
-            t_data = time.perf_counter() - t0
-            cfg = config(seed)
-            res = train(tr, len(names), cfg, val_set=val, checkpoint_dir=out / "checkpoints" / kind.replace("→", "_to_") / f"seed{seed}",
-                        progress=progress)  # fmt: skip
-            pred, _ = predict(res.model, test_x, batch_size=cfg.batch_size, device=cfg.device)
-            row = {"train_set": kind, "seed": seed, "model": model, "n_train": len(tr), "n_val": len(val),
-                   "n_test": len(test_y), "best_epoch": res.best_epoch, "epochs_run": len(res.history),
-                   "best_val_accuracy": res.best_val_accuracy, "best_val_mean_class_accuracy": res.best_val_mean_class_accuracy,
-                   "final_train_accuracy": res.history[-1]["train_accuracy"] if res.history else float("nan"),
-                   "val_meshes": sorted(m.name for m in val_meshes) if kind != REAL_TO_REAL else [],
-                   "data_s": t_data, "train_s": res.seconds, **_score(pred, test_y, names)}  # fmt: skip
-            _append_run(runs_path, done, row)
-            log.info("%s seed %d: mean class accuracy %.3f", kind, seed, row["mean_class_accuracy"])
-    summary_rows = summarise(list(done.values()), names, chosen_on_fit_half=real_val)
+    score = (real_pts[half_b], real_y[half_b]) if config.fit_sensor else (real_pts, real_y)
+    built: dict = {}
+    for kind in (*_kinds(config), REAL_TO_REAL):
+        if (kind, seed) in done:
+            continue
+        t0 = time.perf_counter()
+        if kind == REAL_TO_REAL:
+            tr_rows, val_rows = split_validation(len(half_a), 0.1, seed, labels=real_y[half_a])
+            tr, val, test = fit_half.subset(tr_rows), fit_half.subset(val_rows), (real_pts[half_b], real_y[half_b])
+        else:
+            if not built:  # the sets this seed still trains, at once
+                built = _build_seed_sets(config, sets, seed, train_meshes, val_meshes, done)
+            tr, val, test = built["train"][kind], (fit_half if real_val else built["val"][kind]), score
+        made = {"val_meshes": sorted(m.name for m in val_meshes) if kind != REAL_TO_REAL else [], "data_s": time.perf_counter() - t0}
+        row = _train_and_score(config, sets.names, kind, seed, (tr, val, test), made, out, device=device, threads=threads, progress=progress)
+        _append_run(out / "runs.jsonl", done, row)
+        log.info("%s seed %d: mean class accuracy %.3f", kind, seed, row["mean_class_accuracy"])
+
+
+def _build_seed_sets(config: Sim2RealConfig, sets: Sim2RealSets, seed: int, train_meshes, val_meshes, done: dict) -> dict:
+    """``{"train": {kind: CloudSet}, "val": ...}``: the mesh-only sets of ``seed`` not yet in ``done``
+    (no ``"val"`` when they validate on the fit half)."""
+    sc, n_points = config.scale_values, config.n_points
+    kinds = _kinds(config)
+    options = dict(sensor=config.sensor, sizes=config.sizes, keep_scale=config.keep_scale, dense_points=sc.dense_points,
+                   min_returns=int(config.min_returns), resolution=sc.resolution, method=config.method,
+                   elevation_deg=config.occluded_elevation_deg, fitted_sensor=sets.fitted, fitted_placement=sets.fitted_placement,
+                   fitted_sizes=sets.fitted_sizes, kinds=[k for k in kinds if (k, seed) not in done])  # fmt: skip
+    built = {"train": build_sets(train_meshes, sets.names, sc.per_class, n_points, seed, **options)}
+    if not config.validates_on_fit_half:
+        built["val"] = build_sets(val_meshes, sets.names, sc.val_per_class, n_points, seed + 10_000, **options)
+    return built
+
+
+def _train_and_score(config: Sim2RealConfig, names: list[str], kind: str, seed: int, data: tuple, made: dict, out: Path, *, device: str,
+                     threads: int | None, progress: bool) -> dict:  # fmt: skip
+    """One training run of ``kind`` and ``seed`` on ``data`` ``(train CloudSet, validation CloudSet, (test points, test labels))``:
+    its row of ``runs.jsonl``, with ``made`` (``val_meshes``, ``data_s``) before its times and scores."""
+    from zbuf_occlude.learn.training import predict, train
+
+    tr, val, test = data
+    cfg = config.train_config(seed, device=device, threads=threads)
+    res = train(tr, len(names), cfg, val_set=val, checkpoint_dir=out / "checkpoints" / kind.replace("→", "_to_") / f"seed{seed}",
+                progress=progress)  # fmt: skip
+    test_x, test_y = test
+    pred, _ = predict(res.model, test_x, batch_size=cfg.batch_size, device=cfg.device)
+    return {"train_set": kind, "seed": seed, "model": config.model, "n_train": len(tr), "n_val": len(val),
+            "n_test": len(test_y), "best_epoch": res.best_epoch, "epochs_run": len(res.history),
+            "best_val_accuracy": res.best_val_accuracy, "best_val_mean_class_accuracy": res.best_val_mean_class_accuracy,
+            "final_train_accuracy": res.history[-1]["train_accuracy"] if res.history else float("nan"),
+            **made, "train_s": res.seconds, **_score(pred, test_y, names)}  # fmt: skip
+
+
+def write_outputs(config: Sim2RealConfig, sets: Sim2RealSets, settings: dict, done: dict, out: Path, *, wall_s: float) -> dict:
+    """Write ``results.csv``, ``summary.csv``, the ``confusion_<set>.csv`` files (summed over seeds),
+    ``run.json`` and ``table.md`` from every run in ``done``; return the ``run.json`` summary."""
+    from zbuf_occlude.experiments.sim2real_report import table_md
+    from zbuf_occlude.experiments.table3 import _machine
+
+    names = sets.names
+    summary_rows = summarise(list(done.values()), names, chosen_on_fit_half=config.validates_on_fit_half)
     write_csv(out / "results.csv", [{k: v for k, v in r.items() if k not in ("confusion", "val_meshes")} for r in done.values()])
     write_csv(out / "summary.csv", summary_rows, fieldnames=list(dict.fromkeys(k for r in summary_rows for k in r)))
-    for kind in (*kinds, REAL_TO_REAL):
+    for kind in (*_kinds(config), REAL_TO_REAL):
         cms = [np.asarray(r["confusion"]) for r in done.values() if r["train_set"] == kind]
         if cms:
             write_csv(out / f"confusion_{kind.replace('→', '_to_').replace('+', '_')}.csv",
                       [{"true": n, **{f"pred_{m}": int(v) for m, v in zip(names, row)}} for n, row in zip(names, sum(cms))])  # fmt: skip
-    from zbuf_occlude.experiments.sim2real_report import table_md
-
     summary = {"experiment": "sim2real", **settings, "machine": _machine(), "n_runs": len(done),
-               "summary": summary_rows, "wall_s": {"total": time.perf_counter() - t_start,
+               "summary": summary_rows, "wall_s": {"total": wall_s,
                                                    "data": sum(r["data_s"] for r in done.values()),
                                                    "train": sum(r["train_s"] for r in done.values())}}  # fmt: skip
     write_text(out / "run.json", json.dumps(summary, indent=1, default=float))
     write_text(out / "table.md", table_md(summary_rows, settings))
     return summary
-
-
-def _elevation_range(value) -> tuple[float, float]:
-    try:
-        lo, hi = (float(v) for v in value)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"--occluded-elevation must be LO:HI degrees, got {value!r}") from None
-    if not (-90.0 <= lo <= hi <= 90.0):
-        raise InvalidInputError(f"--occluded-elevation must be LO:HI with -90 <= LO <= HI <= 90 degrees, got {lo:g}:{hi:g}")
-    return lo, hi
 
 
 def _classes(classes, mesh_root, scans, label_map: dict[str, str]) -> list[str] | None:

@@ -54,7 +54,7 @@ log = logging.getLogger(__name__)
 
 #: The training sets, in report order (``complete`` is the reference of the permutation tests).
 TRAINING_SETS = ("complete", "occluded", "lidar", "lidar+complete")
-#: The set made with a sensor fitted to the real scans (``run_sim2real(fit_sensor=True)``): LiDAR
+#: The set made with a sensor fitted to the real scans (``Sim2RealConfig(fit_sensor=True)``): LiDAR
 #: crops like ``lidar``'s, from the same placements and sizes, only the sensor differs.
 FITTED = "fitted"
 #: The fitted sensor, and per class the sensor distances, the objects' heights and their hidden

@@ -8,8 +8,7 @@ import hashlib
 import json
 import logging
 import threading
-import warnings
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -370,25 +369,3 @@ class RunOptions:
     isolate: bool = False
     progress_label: str = "farm"
 
-
-def options_with(options: RunOptions | None, keywords: Mapping[str, Any]) -> RunOptions:
-    """``options`` (default :class:`RunOptions` ``()``) with the fields given as keywords, the old way
-    of :func:`~zbuf_occlude.farm.run.run_farm`: a ``DeprecationWarning`` naming them, for one release.
-
-    Raises
-    ------
-    TypeError
-        A keyword that is no field of :class:`RunOptions` (named).
-    """
-    fields = {f.name for f in dataclasses.fields(RunOptions)}
-    unknown = sorted(set(keywords) - fields)
-    if unknown:
-        raise TypeError(f"run_farm() got unexpected keyword(s) {', '.join(map(repr, unknown))}; RunOptions has: {', '.join(sorted(fields))}")
-    options = options or RunOptions()
-    if keywords:
-        names = ", ".join(sorted(keywords))
-        warnings.warn(
-            f"run_farm({names}=...) is deprecated: pass options=RunOptions({names}=...)", DeprecationWarning, stacklevel=3
-        )
-        options = dataclasses.replace(options, **keywords)
-    return options

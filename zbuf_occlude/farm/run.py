@@ -28,7 +28,6 @@ from zbuf_occlude.farm.config import (
     OPTION_NAMES,
     FarmParams,
     RunOptions,
-    options_with,
     record_path,
 )
 from zbuf_occlude.farm.journal import (
@@ -131,7 +130,6 @@ def run_farm(
     out: str | os.PathLike,
     params: FarmParams | None = None,
     options: RunOptions | None = None,
-    **deprecated: Any,
 ) -> FarmSummary:
     """Build (or resume) an occluded data set from many meshes.
 
@@ -147,9 +145,6 @@ def run_farm(
     options : RunOptions, optional
         How to run it (default :class:`RunOptions` ``()``: one process, the whole data set,
         a progress bar); its fields are described there.
-    **deprecated
-        The fields of :class:`RunOptions` as keywords, kept for one release with a
-        ``DeprecationWarning``; an unknown keyword is a ``TypeError`` naming it.
 
     Returns
     -------
@@ -166,7 +161,7 @@ def run_farm(
     """
     t0 = time.perf_counter()
     params = params or FarmParams()
-    o = options_with(options, deprecated)
+    o = options or RunOptions()
     workers, scheduler, dask_local, shard, skipped = o.workers, o.scheduler, o.dask_local, o.shard, o.skipped
     source_text, layout = o.source_text, o.layout
     if workers < 1:

@@ -24,189 +24,19 @@ from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors.airborne import AirborneScanner
 from zbuf_occlude.sensors.depth_camera import DepthCamera
 from zbuf_occlude.sensors.lidar import Lidar
+from zbuf_occlude.sensors.placement import DEFAULT_GROUND_REFLECTIVITY, CropDistributions, Placement, check_ground_margin, draw_placement
 from zbuf_occlude.sensors.scan import Scan, scan
-from zbuf_occlude.sensors.scene import ScanScene, SceneObject, check_width_profile, sensor_pose
+from zbuf_occlude.sensors.scene import ScanScene, SceneObject, sensor_pose
 
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
-__all__ = ["CropDistributions", "CropSample", "check_ground_margin", "draw_placement", "object_crop", "lidar_object_samples",
+__all__ = ["CropDistributions", "Placement", "CropSample", "check_ground_margin", "draw_placement", "object_crop", "lidar_object_samples",
            "side_occluders", "SIDE_OCCLUDER_RANGE"]
 
 log = logging.getLogger(__name__)
 
 _CROP_STREAM = 0x5C4E  # keeps crop draws apart from the farm's other streams of one seed
-
-
-def _interval(name: str, value, lowest: float | None = None) -> tuple[float, float]:
-    try:
-        lo, hi = (float(value), float(value)) if np.isscalar(value) else (float(value[0]), float(value[1]))
-    except (TypeError, ValueError, IndexError):
-        lo, hi = math.nan, math.nan
-    if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
-        raise InvalidInputError(f"{name} must be a number or an interval lo <= hi, got {value!r}")
-    if lowest is not None and lo < lowest:
-        raise InvalidInputError(f"{name} must be >= {lowest:g}, got {value!r}")
-    return lo, hi
-
-
-def _draw(interval: tuple[float, float], rng: np.random.Generator) -> float:
-    """A uniform draw from ``(lo, hi)``; ``lo`` itself, and no draw, when ``lo == hi``."""
-    lo, hi = interval
-    return lo if lo == hi else float(rng.uniform(lo, hi))
-
-
-def check_ground_margin(value, option: str = "ground_margin_m") -> float:
-    """``value`` as a ground margin in metres (:class:`CropDistributions`).
-
-    Raises
-    ------
-    InvalidInputError
-        Not a finite number >= 0, naming ``option`` and the value.
-    """
-    try:
-        margin = float(value)
-    except (TypeError, ValueError):
-        margin = math.nan
-    if not (math.isfinite(margin) and margin >= 0):
-        raise InvalidInputError(f"{option} must be a number >= 0 metres, got {value!r}")
-    return margin
-
-
-@dataclass(frozen=True)
-class CropDistributions:
-    """Per-sample sensor placement, every quantity drawn independently and uniformly.
-
-    Parameters
-    ----------
-    distance_m : (lo, hi)
-        Horizontal distance from the sensor to the object's footprint centre, metres.
-        Default 5–25 m, the range where an HDL-32E returns more than a few dozen points
-        from a car.
-    height_m : (lo, hi)
-        Sensor height above the ground, metres (car roofs: 1.6–2.0 m).
-    azimuth_deg : (lo, hi)
-        Direction of the object seen from the sensor, degrees (sensor frame).
-    yaw_deg : (lo, hi)
-        The object's heading about +z, degrees.
-    size_m : (lo, hi) or float
-        The object's largest dimension, metres.
-    extents_m : (3,) float or 3 × (lo, hi), optional
-        Instead of ``size_m``: stretch the mesh to these extents (x, y, z), metres, each a
-        value or an interval drawn per sample; with ``round_xy`` the y extent is the drawn x
-        (a round cross-section: poles, trunks).
-    round_xy : bool
-    reflectivity : (lo, hi), optional
-        The object's Lambertian reflectivity ρ, drawn per sample; given, the scan applies the
-        sensor's radiometric detection threshold (:func:`zbuf_occlude.sensors.scan`).
-    ground_reflectivity : float
-        ρ of the ground plane when ``reflectivity`` is given (default 0.15: asphalt and
-        concrete in the near infrared, an assumption).
-    ground_margin_m : float, optional
-        Keep the ground returns under the object, the way a box segmentation of a street scan
-        leaves them: those inside the object's footprint (its bounding box in the ground plane,
-        yawed with it) grown by this margin on every side, metres.  None (default): the crop
-        holds the object's returns only.  :func:`~zbuf_occlude.sensors.fit.fit_lidar` reports
-        the share of ground returns in real crops (``ground_fraction``) to compare with.
-    hidden_below_m : (lo, hi), optional
-        Hide the object's returns lower than this height above the ground, metres, drawn per
-        sample: the bottom of an object that a real street scan loses to what stands between
-        it and the sensor (parked cars, kerbs, low hedges) or to a segmentation's ground
-        removal.  A horizontal cut, not a ray-cast occluder.  None (default): nothing hidden.
-        :func:`~zbuf_occlude.sensors.fit.fit_crop_bottoms` fits it per class to real scans.
-    width_scale : (lo, hi) or float, optional
-        Stretch the object's horizontal axes by this factor (> 0), drawn per sample, after the
-        scaling to ``size_m`` (which then measures the object before the stretch): posts made as
-        thick as the trunks a real scan shows, keeping their height.  None (default): the
-        mesh's own proportions.  :func:`~zbuf_occlude.sensors.fit.fit_width_scale` fits it to
-        the widths of real scans.
-    width_profile : sequence of float, optional
-        A fixed horizontal stretch per relative-height bin (:class:`~zbuf_occlude.sensors.scene.SceneObject`
-        ``width_profile``), on top of ``width_scale``: the outline over the height that real scans
-        show.  None (default): none.  :func:`~zbuf_occlude.sensors.fit.fit_width_profile` fits it.
-    visible_across_sight : (lo, hi), optional
-        Hide one side of the object behind an occluder that stands between it and the sensor
-        (:func:`side_occluders`): the share of the object's angular width, as the sensor sees it,
-        left visible, drawn per sample and capped at 1 (1 or more: nothing hidden); the hidden
-        side, left or right, is drawn too.  A real street crop often shows part of an object, the
-        rest behind a parked car, a wall or a tree, or cut off by the segmentation: a partial
-        view, not a thinner object (compare ``width_scale``).  None (default): nothing hidden.
-        :func:`~zbuf_occlude.sensors.fit.fit_visible_across_sight` fits it to the widths of real scans.
-    """
-
-    distance_m: tuple[float, float] = (5.0, 25.0)
-    height_m: tuple[float, float] = (1.6, 2.0)
-    azimuth_deg: tuple[float, float] = (0.0, 360.0)
-    yaw_deg: tuple[float, float] = (0.0, 360.0)
-    size_m: tuple[float, float] | float = 4.5
-    extents_m: tuple | None = None
-    round_xy: bool = False
-    reflectivity: tuple[float, float] | None = None
-    ground_reflectivity: float = 0.15
-    ground_margin_m: float | None = None
-    hidden_below_m: tuple[float, float] | None = None
-    width_scale: tuple[float, float] | None = None
-    width_profile: tuple[float, ...] | None = None
-    visible_across_sight: tuple[float, float] | None = None
-
-    def __post_init__(self) -> None:
-        for name in ("distance_m", "height_m", "azimuth_deg", "yaw_deg", "size_m"):
-            object.__setattr__(self, name, _interval(name, getattr(self, name)))
-        if self.extents_m is not None:
-            if len(self.extents_m) != 3:
-                raise InvalidInputError(f"extents_m must be three values or intervals (x, y, z), got {self.extents_m!r}")
-            ext = tuple(_interval("extents_m", v) for v in self.extents_m)
-            if min(lo for lo, _ in ext) <= 0:
-                raise InvalidInputError(f"extents_m must be > 0 metres, got {self.extents_m!r}")
-            object.__setattr__(self, "extents_m", ext)
-        for name in ("reflectivity", "hidden_below_m"):  # optional intervals of values >= 0
-            if getattr(self, name) is not None:
-                object.__setattr__(self, name, _interval(name, getattr(self, name), lowest=0.0))
-        if self.width_scale is not None:
-            object.__setattr__(self, "width_scale", _interval("width_scale", self.width_scale, lowest=0.0))
-            if self.width_scale[0] <= 0:
-                raise InvalidInputError(f"width_scale must be > 0, got {self.width_scale!r}")
-        if self.width_profile is not None:
-            object.__setattr__(self, "width_profile", check_width_profile(self.width_profile))
-        if self.ground_margin_m is not None:
-            object.__setattr__(self, "ground_margin_m", check_ground_margin(self.ground_margin_m))
-        if self.visible_across_sight is not None:
-            visible = _interval("visible_across_sight", self.visible_across_sight, lowest=0.0)
-            if visible[1] <= 0:
-                raise InvalidInputError(f"visible_across_sight must leave a share > 0 visible, got {self.visible_across_sight!r}")
-            object.__setattr__(self, "visible_across_sight", visible)
-        if self.distance_m[0] <= 0 or self.size_m[0] <= 0 or self.height_m[0] < 0:
-            raise InvalidInputError(f"distance_m and size_m must be > 0 and height_m >= 0 metres, got {self}")
-
-
-def draw_placement(dist: CropDistributions, rng: np.random.Generator) -> dict[str, float]:
-    """One placement ``{distance_m, height_m, azimuth_deg, yaw_deg, size_m}`` (five uniform draws, in that order),
-    then ``extents_m``, ``reflectivity``, ``hidden_below_m`` and ``width_scale`` where ``dist`` gives them (drawn only when an interval),
-    ``ground_margin_m`` and ``width_profile`` as given (no draw), and ``visible_across_sight`` (capped at 1)
-    with ``occluder_side`` (+1: the occluder hides the object's counter-clockwise side, −1 the other; one draw) where given."""
-    out = {name: float(rng.uniform(*getattr(dist, name))) for name in ("distance_m", "height_m", "azimuth_deg", "yaw_deg", "size_m")}
-    # further draws only where an interval asks for them, so fixed values keep earlier streams
-    if dist.extents_m is not None:
-        ext = [_draw(interval, rng) for interval in dist.extents_m]
-        if dist.round_xy:
-            ext[1] = ext[0]
-        out["extents_m"] = tuple(ext)
-        out["size_m"] = max(out["extents_m"])
-    if dist.reflectivity is not None:
-        out["reflectivity"] = _draw(dist.reflectivity, rng)
-        out["ground_reflectivity"] = float(dist.ground_reflectivity)
-    if dist.hidden_below_m is not None:
-        out["hidden_below_m"] = _draw(dist.hidden_below_m, rng)
-    if dist.width_scale is not None:
-        out["width_scale"] = _draw(dist.width_scale, rng)
-    if dist.ground_margin_m is not None:  # no draw: a fixed value
-        out["ground_margin_m"] = dist.ground_margin_m
-    if dist.width_profile is not None:  # no draw
-        out["width_profile"] = dist.width_profile
-    if dist.visible_across_sight is not None:
-        out["visible_across_sight"] = min(1.0, _draw(dist.visible_across_sight, rng))
-        out["occluder_side"] = 1.0 if rng.uniform() < 0.5 else -1.0
-    return out
 
 
 @dataclass
@@ -218,8 +48,8 @@ class CropSample:
     scan : Scan
         The object's returns, sensor frame (metres, z up, sensor at the origin), and, with a
         ``ground_margin_m`` in the placement, the ground returns under it (``object_id`` 0).
-    placement : dict
-        The drawn ``distance_m, height_m, azimuth_deg, yaw_deg, size_m``.
+    placement : Placement
+        Where the object stood and how it was seen.
     local_points : (N, 3) float64
         The same returns in the object's mesh frame (as loaded: normalised for mesh files, z up),
         with the object's horizontal stretch (the placement's ``width_scale``) kept: x and y
@@ -233,7 +63,7 @@ class CropSample:
     """
 
     scan: Scan
-    placement: dict
+    placement: Placement
     local_points: NDArray[np.float64]
     sensor_local: NDArray[np.float64]
     full: Scan
@@ -242,7 +72,7 @@ class CropSample:
 def object_crop(
     mesh,
     sensor: Lidar | DepthCamera,
-    placement: dict,
+    placement: Placement,
     *,
     seed: int = 0,
     occluders: tuple[SceneObject, ...] = (),
@@ -269,33 +99,34 @@ def object_crop(
     InvalidInputError, MeshLoadError
         Bad placement or mesh, or ``visible_across_sight`` below 1 for an airborne scanner.
     """
-    az = math.radians(placement["azimuth_deg"])
-    d = placement["distance_m"]
-    size = placement.get("extents_m") or placement["size_m"]
-    width_scale, profile = placement.get("width_scale", 1.0), placement.get("width_profile")
+    az = math.radians(placement.azimuth_deg)
+    d = placement.distance_m
+    size = placement.extents_m or placement.size_m
+    width_scale, profile = placement.stretch, placement.width_profile
     # the largest side after the stretch, at most
-    reach = placement["size_m"] * max(1.0, width_scale) * (1.0 if profile is None else max(1.0, *profile))
+    reach = placement.size_m * max(1.0, width_scale) * (1.0 if profile is None else max(1.0, *profile))
     if isinstance(sensor, AirborneScanner):
-        if placement.get("visible_across_sight", 1.0) < 1.0:
+        if placement.visible_share < 1.0:
             raise InvalidInputError("visible_across_sight hides a side of the object from a sensor on the ground; an airborne scanner flies over it")
         return _airborne_crop(mesh, sensor, placement, seed=seed, occluders=occluders, class_name=class_name, offset_m=d * math.sin(az), size=size,
                               reach=reach)  # fmt: skip
-    obj = SceneObject(mesh, class_name, (d * math.cos(az), d * math.sin(az)), placement["yaw_deg"], size, width_scale=width_scale,
+    obj = SceneObject(mesh, class_name, (d * math.cos(az), d * math.sin(az)), placement.yaw_deg, size, width_scale=width_scale,
                       width_profile=profile)  # fmt: skip
-    pose = sensor_pose([0.0, 0.0, placement["height_m"]])
+    pose = sensor_pose([0.0, 0.0, placement.height_m])
     scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=max(2.0 * d, 20.0))
-    if placement.get("visible_across_sight", 1.0) < 1.0:  # after the given occluders; the object is built once
+    if placement.visible_share < 1.0:  # after the given occluders; the object is built once
         world = scene.build().world_vertices(1)
-        for panel in side_occluders(world, pose[:3, 3], placement["visible_across_sight"], placement["occluder_side"]):
+        for panel in side_occluders(world, pose[:3, 3], placement.visible_share, placement.occluder_side):
             scene.add_occluder(panel)
     sector = None
     if isinstance(sensor, Lidar) and not occluders:  # the side occluder stands inside the object's sector
         half = math.degrees(math.asin(min(1.0, 0.75 * reach / d))) + sector_margin_deg
         if half < 180.0:
-            sector = (placement["azimuth_deg"] - half, placement["azimuth_deg"] + half)
+            sector = (placement.azimuth_deg - half, placement.azimuth_deg + half)
     rho = None
-    if "reflectivity" in placement:  # ground, the object, then the occluders (their own ρ: the object's)
-        rho = [placement.get("ground_reflectivity", 0.15)] + [placement["reflectivity"]] * (1 + len(occluders))
+    if placement.reflectivity is not None:  # ground, the object, then the occluders (their own ρ: the object's)
+        ground = DEFAULT_GROUND_REFLECTIVITY if placement.ground_reflectivity is None else placement.ground_reflectivity
+        rho = [ground] + [placement.reflectivity] * (1 + len(occluders))
     full = scan(scene, sensor, pose, seed=seed, azimuth_range_deg=sector, backend=backend, frame=frame, reflectivity=rho)
     offset = pose[:3, 3] if frame == "sensor" else 0.0  # sensor axes = world axes (yaw 0)
     return _crop_object(scene, full, placement, pose[:3, 3], offset)
@@ -374,7 +205,7 @@ def side_occluders(world_vertices: NDArray[np.floating], sensor_m, visible: floa
     return out
 
 
-def _crop_object(scene: ScanScene, full: Scan, placement: dict, sensor_world, offset=None, per_return: tuple[str, ...] = ()) -> CropSample:
+def _crop_object(scene: ScanScene, full: Scan, placement: Placement, sensor_world, offset=None, per_return: tuple[str, ...] = ()) -> CropSample:
     """The crop of object 1 from ``full`` (its points in the world frame, less ``offset`` when
     given): the object's returns (those at least ``hidden_below_m`` above the ground, when the
     placement gives it) and, with a ``ground_margin_m`` in the placement, the ground returns
@@ -389,16 +220,16 @@ def _crop_object(scene: ScanScene, full: Scan, placement: dict, sensor_world, of
         return p if offset is None else p + offset
 
     keep = full.object_id == 1
-    if placement.get("hidden_below_m") is not None:
+    if placement.hidden_below_m is not None:
         own = np.flatnonzero(keep)
-        keep[own] = world(full.points[own])[:, 2] >= scene.ground_z_m + placement["hidden_below_m"]
-    if placement.get("ground_margin_m") is not None:  # only the ground returns are tested
+        keep[own] = world(full.points[own])[:, 2] >= scene.ground_z_m + placement.hidden_below_m
+    if placement.ground_margin_m is not None:  # only the ground returns are tested
         ground = np.flatnonzero(full.object_id == 0)
-        keep[ground] = _under_footprint(built.local_meshes[1], to_world, inverse, world(full.points[ground]), placement["ground_margin_m"])
+        keep[ground] = _under_footprint(built.local_meshes[1], to_world, inverse, world(full.points[ground]), placement.ground_margin_m)
     crop = full.select(keep)
     crop.meta.update({key: full.meta[key][keep] for key in per_return})
     local = (world(crop.points) - to_world[:3, 3]) @ inverse.T  # the object's local mesh frame: its stretch and warp kept
-    return CropSample(crop, dict(placement), local, inverse @ (sensor_world - to_world[:3, 3]), full)
+    return CropSample(crop, placement, local, inverse @ (sensor_world - to_world[:3, 3]), full)
 
 
 def _under_footprint(mesh, to_world, inverse, world, margin_m: float) -> NDArray[np.bool_]:
@@ -411,7 +242,7 @@ def _under_footprint(mesh, to_world, inverse, world, margin_m: float) -> NDArray
     return np.all((local[:, :2] >= lo - grow) & (local[:, :2] <= hi + grow), axis=1)
 
 
-def _airborne_crop(mesh, sensor: AirborneScanner, placement: dict, *, seed: int, occluders, class_name: str, offset_m: float, size,
+def _airborne_crop(mesh, sensor: AirborneScanner, placement: Placement, *, seed: int, occluders, class_name: str, offset_m: float, size,
                   reach: float) -> CropSample:  # fmt: skip
     """An airborne crop: the object ``offset_m`` across track from the plan centre (``distance_m ·
     sin(azimuth_deg)`` of the placement; ``height_m`` is unused: the scanner flies at its altitude),
@@ -419,8 +250,8 @@ def _airborne_crop(mesh, sensor: AirborneScanner, placement: dict, *, seed: int,
     world frame; the crop's ``meta["line_id"]`` and ``meta["scan_angle_deg"]`` are its returns'."""
     from zbuf_occlude.sensors.airborne import scan_airborne
 
-    obj = SceneObject(mesh, class_name, (0.0, offset_m), placement["yaw_deg"], size, width_scale=placement.get("width_scale", 1.0),
-                      width_profile=placement.get("width_profile"))  # fmt: skip
+    obj = SceneObject(mesh, class_name, (0.0, offset_m), placement.yaw_deg, size, width_scale=placement.stretch,
+                      width_profile=placement.width_profile)  # fmt: skip
     reach = max(float(np.max(size)), reach) * 0.75 + 1.0
     scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=abs(offset_m) + 2.0 * reach)
     full = scan_airborne(scene, sensor, (0.0, offset_m), reach, seed=seed)
@@ -486,7 +317,7 @@ def lidar_object_samples(
         crop = object_crop(mesh, sensor, placement, seed=int(rng.integers(2**63)), class_name=class_name, backend=backend)
         n = len(crop.scan)
         if n == 0:
-            log.info("%s sample %d: no return at %.1f m", name, k, placement["distance_m"])
+            log.info("%s sample %d: no return at %.1f m", name, k, placement.distance_m)
             continue
         chosen, _ = draw_sample(np.arange(n), int(n_points), rng)
         # Sensor seen from the object's bounding-box centre, in the mesh frame.
@@ -504,7 +335,7 @@ def lidar_object_samples(
                 source=name,
                 sample_index=k,
                 n_visible=n,
-                extra={**placement, "n_returns": n, "sensor": sensor.name, "ring": None if crop.scan.ring is None else crop.scan.ring[chosen]},
+                extra={**placement.to_dict(), "n_returns": n, "sensor": sensor.name, "ring": None if crop.scan.ring is None else crop.scan.ring[chosen]},
             )
         )
     return out

@@ -1,0 +1,282 @@
+"""What an ``experiment sim2real`` run is: its sizes (:class:`Sim2RealScale`) and every setting (:class:`Sim2RealConfig`).
+
+:class:`Sim2RealConfig` checks its settings when it is made, in one place; its messages name the
+fields, or the options of the caller's ``option_names`` (the command line passes its flags).
+:meth:`Sim2RealConfig.identity` is what of it ``settings.json`` holds, so that a rerun resumes
+only a run made with the same settings (:func:`zbuf_occlude.experiments.sim2real.run_sim2real`).
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from collections.abc import Mapping
+from dataclasses import InitVar, asdict, dataclass, replace
+from typing import TYPE_CHECKING, Any
+
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.experiments.sim2real_data import GROUND_ELEVATION_DEG, KEEP_SCALE_UNIT_M, LIDAR_PLACEMENT, MIN_RETURNS
+from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
+
+if TYPE_CHECKING:  # torch is imported when a run trains
+    from zbuf_occlude.learn.training import TrainConfig
+
+__all__ = ["Sim2RealScale", "SIM2REAL_SCALES", "SIM2REAL_RECIPE", "VALIDATION_CHOICES", "FITTED_SHAPES", "WIDTH_SHAPES",
+           "Sim2RealConfig"]  # fmt: skip
+
+#: The training recipe of every run (:data:`zbuf_occlude.learn.training.RECIPES`; :mod:`~zbuf_occlude.experiments.sim2real`).
+SIM2REAL_RECIPE = "stable"
+#: What the mesh-only sets validate on: clouds of held-out whole meshes, or the real scans of the fit half.
+VALIDATION_CHOICES = ("meshes", "fit-half")
+#: What ``fitted_shape`` may give the fitted+placed set's meshes, and the fitted crop keywords each uses
+#: (``widen`` is ``widths`` with every stretch below 1 raised to 1; ``occlude`` meets the widths with a
+#: side occluder instead of a stretch).
+FITTED_SHAPES = {"widths": "across_sight_width_m", "widen": "across_sight_width_m", "occlude": "across_sight_width_m",
+                 "outline": "across_sight_profile"}  # fmt: skip
+#: The shapes that meet the widths, of which a run takes one, and how each meets them
+#: (:data:`~zbuf_occlude.experiments.sim2real_data.WIDTH_BY`).
+WIDTH_SHAPES = {"widths": "stretch", "widen": "widen", "occlude": "occluder"}
+
+
+@dataclass(frozen=True)
+class Sim2RealScale:
+    """Sizes of a run: points per cloud, training clouds per class, validation clouds per class
+    (from held-out meshes), epochs, early-stopping patience, model width, 3DmFV grid, the
+    ``occluded`` set's dense points and z-buffer resolution, and the share of meshes held out."""
+
+    points: int
+    per_class: int
+    val_per_class: int
+    epochs: int
+    patience: int
+    width: dict
+    fv_grid: int
+    dense_points: int
+    resolution: int
+    val_mesh_fraction: float
+
+
+SIM2REAL_SCALES = {
+    "quick": Sim2RealScale(points=256, per_class=100, val_per_class=25, epochs=20, patience=6,
+                           width={"pointnet": 0.25, "voxnet": 0.5, "3dmfv": 0.25}, fv_grid=5, dense_points=8192,
+                           resolution=512, val_mesh_fraction=0.2),
+    "paper": Sim2RealScale(points=1024, per_class=1000, val_per_class=200, epochs=100, patience=20,
+                           width={"pointnet": 1.0, "voxnet": 1.0, "3dmfv": 1.0}, fv_grid=8, dense_points=100_000,
+                           resolution=1024, val_mesh_fraction=0.2),
+}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Sim2RealConfig:
+    """Every setting of a sim-to-real run (:mod:`zbuf_occlude.experiments.sim2real`), checked when made.
+
+    Parameters
+    ----------
+    mesh_root : path
+        ``CLASS/.../mesh`` files (any format :func:`zbuf_occlude.load_mesh` reads).
+    real : path
+        Real scans (:func:`zbuf_occlude.real_scans.datasets.load_real_scans`; ``real_options`` are
+        passed to it).
+    model : {"pointnet", "voxnet", "3dmfv"}
+    sensor : str, Lidar or AirborneScanner
+        Scanner of the ``lidar`` set: a preset name (:data:`zbuf_occlude.sensors.LIDAR_PRESETS`,
+        :data:`zbuf_occlude.sensors.airborne.AIRBORNE_PRESETS`) or a sensor ``.json`` file.
+    scale : {"quick", "paper"}; points, epochs, per_class : int, optional
+        Override the scale's points per cloud, epochs and training clouds per class (the
+        validation clouds per class follow in the scale's proportion).
+    seeds : int
+        Repetitions (≥ 2 for a standard deviation; 5 or more for a permutation test able to
+        reach p < 0.05).
+    keep_scale : bool
+        Keep metres (centred, divided by :data:`~zbuf_occlude.experiments.sim2real_data.KEEP_SCALE_UNIT_M`;
+        augmentation off, random yaw drawn once per cloud) instead of the paper's normalisation.
+    label_map : mapping, optional
+        Real label → class folder name (labels equal to a class up to case need none).
+    up, up_map : mesh up axis and per-file overrides (:func:`~zbuf_occlude.experiments.sim2real_data.find_class_meshes`).
+    sizes : mapping of str to SizeRange, optional
+        Real sizes per class (default :data:`zbuf_occlude.mesh.sizes.CLASS_SIZES_M`).
+    real_options : mapping, optional
+        Keywords of :func:`~zbuf_occlude.real_scans.datasets.load_real_scans`.
+    min_returns : int
+        LiDAR crops with fewer returns are redrawn (:data:`~zbuf_occlude.experiments.sim2real_data.MIN_RETURNS`).
+        Before any set is made, every mesh is tried once with the sensor; one that gives no
+        such crop is skipped with a warning naming it (``settings.json``: ``meshes_skipped``).
+    method : str
+        HSR method of the ``occluded`` set.
+    classes : "real", sequence of str, or None
+        Class folders to train on: ``"real"``, those the real scans have (after
+        ``label_map``; a real scan can then only be called a class it can be); a list, those;
+        None, every class folder of ``mesh_root``.
+    occluded_elevation_deg : (lo, hi)
+        Camera elevations of the ``occluded`` set, degrees in [-90, 90], drawn uniformly
+        (default :data:`~zbuf_occlude.experiments.sim2real_data.GROUND_ELEVATION_DEG`; an
+        airborne sensor sees from above, e.g. ``(30, 80)``).
+    fit_sensor : bool
+        Fit ``sensor`` (a spinning LiDAR) to the sensor-frame points of the fixed first half of
+        the real scans, and each class's crop distances and heights to the same scans, add the
+        :data:`~zbuf_occlude.experiments.sim2real_data.FITTED_SETS`, and score every row on the
+        other half only (:mod:`~zbuf_occlude.experiments.sim2real`).
+    recipe : {"stable", "plain"}
+        Training recipe (:data:`zbuf_occlude.learn.training.RECIPES`).
+    validate_on : {"meshes", "fit-half"}
+        What the mesh-only sets validate on (best epoch, early stopping): clouds of the same kind
+        from held-out whole meshes, or, with ``fit_sensor``, the real scans of the fit half (the
+        sets then train on every mesh). real→real is the same either way.
+    fitted_shape : tuple of str
+        What the fitted+placed set changes in each mesh's shape (needs ``fit_sensor``; keys of
+        :data:`FITTED_SHAPES`): ``"widths"``, a horizontal stretch to the class's widths across
+        the line of sight, or ``"widen"``, the same stretch where it widens the mesh and none
+        where it would narrow it (a narrow real width is often a partial view, not a thinner
+        object), or ``"occlude"``, a side occluder that leaves in view as much of the mesh as
+        the widths show where its crops are wider (a partial view; nothing hidden where they are
+        narrower); ``"outline"``, a warp to its outline over the height, alone or with one of
+        the three.  Empty (default): the meshes' own shapes.  Each is fitted per mesh once
+        (:func:`~zbuf_occlude.experiments.sim2real_data.fit_mesh_shapes`).
+    aspect : bool
+        Every run's augmentation also draws random proportions (x, y and z stretched by
+        independent factors in [2/3, 3/2], DGCNN's range; :func:`zbuf_occlude.learn.data.augment`),
+        real→real's too.  Not with ``keep_scale``, which turns augmentation off.
+    option_names : mapping of str to str, optional
+        What the messages call each field (``{"validate_on": "--validate-on", ...}``: the
+        command line's flags); a field not named here is called by its name.  Not stored.
+
+    Raises
+    ------
+    InvalidInputError
+        A bad setting (an unknown scale, recipe, model or validation choice, seeds below 1,
+        ``aspect`` with ``keep_scale``, ``validate_on="fit-half"`` or ``fitted_shape`` without
+        ``fit_sensor``, an unknown shape or two that meet the widths, elevations outside
+        [-90, 90] degrees, a sensor that is no LiDAR), naming the field or its option.
+    """
+
+    mesh_root: str | os.PathLike
+    real: str | os.PathLike
+    model: str = "pointnet"
+    sensor: Any = "hdl32e"
+    scale: str = "quick"
+    points: int | None = None
+    epochs: int | None = None
+    per_class: int | None = None
+    seeds: int = 5
+    keep_scale: bool = False
+    label_map: Mapping[str, str] | None = None
+    up: str = "auto"
+    up_map: Mapping[str, str] | None = None
+    sizes: Mapping[str, SizeRange] | None = None
+    real_options: Mapping[str, Any] | None = None
+    min_returns: int = MIN_RETURNS
+    method: str = "auto"
+    classes: str | tuple[str, ...] | None = None
+    occluded_elevation_deg: tuple[float, float] = GROUND_ELEVATION_DEG
+    fit_sensor: bool = False
+    recipe: str = SIM2REAL_RECIPE
+    validate_on: str = "meshes"
+    fitted_shape: tuple[str, ...] = ()
+    aspect: bool = False
+    option_names: InitVar[Mapping[str, str] | None] = None
+
+    def __post_init__(self, option_names: Mapping[str, str] | None) -> None:
+        from zbuf_occlude.learn.training import OPTIMISER_DEFAULTS, RECIPES
+
+        def n(name: str) -> str:
+            return (option_names or {}).get(name, name)
+
+        for name, value in (("label_map", self.label_map), ("up_map", self.up_map), ("real_options", self.real_options)):
+            object.__setattr__(self, name, dict(value or {}))
+        object.__setattr__(self, "sizes", dict(self.sizes or CLASS_SIZES_M))
+        object.__setattr__(self, "fitted_shape", tuple(self.fitted_shape))
+        if self.classes is not None and self.classes != "real":
+            object.__setattr__(self, "classes", tuple(self.classes))
+        if self.model not in OPTIMISER_DEFAULTS:
+            raise InvalidInputError(f"{n('model')} must be one of {', '.join(OPTIMISER_DEFAULTS)}, got {self.model!r}")
+        if self.scale not in SIM2REAL_SCALES:
+            raise InvalidInputError(f"{n('scale')} must be one of {sorted(SIM2REAL_SCALES)}, got {self.scale!r}")
+        if self.recipe not in RECIPES:
+            raise InvalidInputError(f"{n('recipe')} must be one of {sorted(RECIPES)}, got {self.recipe!r}")
+        if self.aspect and self.keep_scale:
+            raise InvalidInputError(f"{n('aspect')} needs augmentation, which {n('keep_scale')} turns off")
+        if int(self.seeds) < 1:
+            raise InvalidInputError(f"{n('seeds')} must be >= 1, got {self.seeds}")
+        self._check_validation(n)
+        self._check_fitted_shape(n)
+        object.__setattr__(self, "occluded_elevation_deg", _elevation_range(self.occluded_elevation_deg, n("occluded_elevation_deg")))
+        self._check_sensor(n)
+
+    def _check_validation(self, n) -> None:
+        if self.validate_on not in VALIDATION_CHOICES:
+            raise InvalidInputError(f"{n('validate_on')} must be one of {', '.join(VALIDATION_CHOICES)}, got {self.validate_on!r}")
+        if self.validate_on == "fit-half" and not self.fit_sensor:
+            raise InvalidInputError(f"{n('validate_on')} fit-half needs {n('fit_sensor')} (which splits the real scans into the fit half "
+                                    "and the scored half)")  # fmt: skip
+
+    def _check_fitted_shape(self, n) -> None:
+        shapes = self.fitted_shape
+        if unknown := [v for v in shapes if v not in FITTED_SHAPES]:
+            raise InvalidInputError(f"{n('fitted_shape')} must name {' and/or '.join(FITTED_SHAPES)}, got {', '.join(map(repr, unknown))}")
+        if len(set(shapes) & set(WIDTH_SHAPES)) > 1:
+            raise InvalidInputError(f"{n('fitted_shape')} takes one of {', '.join(WIDTH_SHAPES)}, not both, got {','.join(shapes)!r}")
+        if shapes and not self.fit_sensor:
+            raise InvalidInputError(f"{n('fitted_shape')} needs {n('fit_sensor')} (it shapes the fitted+placed set's meshes)")
+
+    def _check_sensor(self, n) -> None:
+        from zbuf_occlude.sensors.airborne import AirborneScanner
+        from zbuf_occlude.sensors.lidar import Lidar
+        from zbuf_occlude.sensors.presets import sensor_from_name
+
+        sensor = self.sensor if isinstance(self.sensor, (Lidar, AirborneScanner)) else sensor_from_name(str(self.sensor))
+        if not isinstance(sensor, (Lidar, AirborneScanner)):
+            raise InvalidInputError(f"{n('sensor')} {self.sensor}: the lidar training set needs a LiDAR or an airborne scanner")
+        object.__setattr__(self, "sensor", sensor)
+
+    @functools.cached_property
+    def scale_values(self) -> Sim2RealScale:
+        """The scale's sizes, with ``per_class`` (and the validation clouds in proportion) where given."""
+        sc = SIM2REAL_SCALES[self.scale]
+        if self.per_class:
+            per_class = int(self.per_class)
+            sc = replace(sc, per_class=per_class, val_per_class=max(1, round(per_class * sc.val_per_class / sc.per_class)))
+        return sc
+
+    @property
+    def n_points(self) -> int:
+        """Points per cloud: ``points``, or the scale's."""
+        return int(self.points or self.scale_values.points)
+
+    @property
+    def validates_on_fit_half(self) -> bool:
+        return self.validate_on == "fit-half"
+
+    def train_config(self, seed: int, *, device: str = "cpu", threads: int | None = None) -> TrainConfig:
+        """The :class:`~zbuf_occlude.learn.training.TrainConfig` of every run of ``seed`` (``device``, ``threads``: how it runs)."""
+        from zbuf_occlude.learn.training import RECIPES, TrainConfig
+
+        sc = self.scale_values
+        return TrainConfig(model=self.model, epochs=int(self.epochs or sc.epochs), patience=sc.patience, width=sc.width[self.model],
+                           fv_grid=sc.fv_grid, seed=seed, device=device, threads=threads, augment=not self.keep_scale,
+                           aspect=bool(self.aspect), **RECIPES[self.recipe])  # fmt: skip
+
+    def identity(self) -> dict[str, Any]:
+        """The settings that make results differ, as ``settings.json`` holds them (JSON types).
+
+        ``validate_on`` only when it is ``"fit-half"``, so that runs which validate on meshes
+        keep the settings they were written with; what the run finds in its inputs (classes,
+        meshes, scans, the fitted sensor) is added by the run."""
+        return {
+            "mesh_root": str(self.mesh_root), "real": str(self.real), "model": self.model, "sensor": self.sensor.name,
+            "scale": self.scale, "scale_values": asdict(self.scale_values), "points": self.n_points, "seeds": int(self.seeds),
+            "keep_scale": bool(self.keep_scale), "label_map": dict(self.label_map), "up": self.up, "up_map": dict(self.up_map),
+            "sizes_m": {k: asdict(v) for k, v in self.sizes.items()}, "occluded_elevation_deg": list(self.occluded_elevation_deg),
+            "lidar_placement": LIDAR_PLACEMENT, "lidar_min_returns": int(self.min_returns), "keep_scale_unit_m": KEEP_SCALE_UNIT_M,
+            "method": self.method, "train_config": self.train_config(0).identity(("seed", "device", "threads")),
+            **({"validate_on": self.validate_on} if self.validates_on_fit_half else {}),
+        }  # fmt: skip
+
+
+def _elevation_range(value, name: str) -> tuple[float, float]:
+    try:
+        lo, hi = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"{name} must be LO:HI degrees, got {value!r}") from None
+    if not (-90.0 <= lo <= hi <= 90.0):
+        raise InvalidInputError(f"{name} must be LO:HI with -90 <= LO <= HI <= 90 degrees, got {lo:g}:{hi:g}")
+    return lo, hi
