@@ -157,3 +157,45 @@ def test_crops_without_a_top_are_refused_with_a_reason() -> None:
         poles.append(np.column_stack([0.15 * np.cos(a), 0.15 * np.sin(a), z]))
     with pytest.raises(InvalidInputError, match="no crop has a horizontal top"):
         fit_airborne(poles, SCANNERS["35 points/m², 500 m, 60°"], bootstrap=2)
+
+
+# -- the spinning fit refuses what no spinning sensor could have scanned ------------------------------
+def _aerial_crops_beside_an_origin(offset) -> list[np.ndarray]:
+    crops, _, _ = _box_crops(SCANNERS["35 points/m², 500 m, 60°"], 6, seed=3)
+    return [c - np.r_[c[:, :2].mean(axis=0), 0.0] + np.asarray(offset, dtype=np.float64) for c in crops]
+
+
+@pytest.mark.parametrize("offset", [(8.0, 0.0, -2.0), (5.0, 5.0, -30.0)])
+def test_the_spinning_fit_refuses_aerial_crops_naming_why(offset) -> None:
+    from zbuf_occlude.sensors.fit import fit_lidar
+    from zbuf_occlude.sensors.lidar import lidar_preset
+
+    with pytest.raises(InvalidInputError, match="no sensor origin consistent with hdl32e's rings") as info:
+        fit_lidar(_aerial_crops_beside_an_origin(offset), lidar_preset("hdl32e"))
+    assert "fit_airborne" in str(info.value) and "\n" not in str(info.value)
+
+
+def test_the_spinning_fit_refuses_crops_beyond_its_range() -> None:
+    from zbuf_occlude.sensors.fit import fit_lidar
+    from zbuf_occlude.sensors.lidar import lidar_preset
+
+    with pytest.raises(InvalidInputError, match=r"beyond hdl32e's \d+ m range"):
+        fit_lidar(_aerial_crops_beside_an_origin((400.0, 300.0, 0.0)), lidar_preset("hdl32e"))
+
+
+def test_the_spinning_fit_still_takes_spinning_scans() -> None:
+    # the rings' check passes what a spinning sensor makes, far objects and a mount tilt included
+    from zbuf_occlude.sensors.fit import fit_lidar
+    from zbuf_occlude.sensors.lidar import lidar_preset
+    from zbuf_occlude.sensors.scan import scan
+
+    sensor = lidar_preset("hdl32e")
+    tilt = trimesh.transformations.rotation_matrix(np.radians(0.6), (0, 1, 0))
+    clouds = []
+    for i, (distance, yaw) in enumerate([(6.0, 0.0), (9.0, 20.0), (14.0, -15.0), (30.0, 5.0)]):
+        box = trimesh.creation.box(extents=(4.0, 1.8, 1.5))
+        box.apply_transform(trimesh.transformations.rotation_matrix(np.radians(yaw), (0, 0, 1)))
+        box.apply_translation((distance, 0.0, 0.75 - 1.8))
+        s = scan(box, sensor, tilt, seed=i, azimuth_range_deg=(-40.0, 40.0))
+        clouds.append(np.asarray(s.points, dtype=np.float64) @ tilt[:3, :3])  # in the tilted sensor's frame
+    assert fit_lidar(clouds, sensor, bootstrap=5).n_scans == 4
