@@ -54,7 +54,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.lidar import Lidar
 
 __all__ = [
-    "BOOTSTRAP", "Estimate", "fit_lidar", "lidar_to_json", "LidarFit", "MAX_DROPOUT_GAP", "MIN_RETURNS", "PLANE_NEIGHBOURS",
+    "BOOTSTRAP", "Estimate", "fit_lidar", "lidar_to_json", "LidarFit", "MAX_DROPOUT_GAP", "MIN_RETURNS", "PLANE_NEIGHBOURS", "RING_SHARE",
 ]  # fmt: skip
 #: Bootstrap resamples of the scans for every uncertainty.
 BOOTSTRAP = 200
@@ -64,6 +64,10 @@ MAX_DROPOUT_GAP = 4
 PLANE_NEIGHBOURS = 24
 #: Fewest returns a scan needs to take part in the fit.
 MIN_RETURNS = 20
+#: Least share of the returns within an eighth of a beam spacing of a beam (:func:`_check_rings`).
+RING_SHARE = 0.6
+#: Degrees beyond half the widest beam gap at which a return lies outside every beam.
+_OUTSIDE_BEAMS_DEG = 0.5
 _GROUND_SLICE_M = 0.15
 _PLANARITY = 0.3
 _GROUND_NORMAL_COS = math.cos(math.radians(25.0))
@@ -271,6 +275,48 @@ _METHODS = {
 _SETS_SENSOR = ("firing_rate_hz", "dropout_at_0m", "dropout_range_per_m", "range_noise_m")
 
 
+def _check_rings(stats: Sequence[_ScanStats], base: Lidar) -> None:
+    """Refuse scans that no spinning sensor at the origin could have made (airborne crops, a world frame).
+
+    A spinning sensor's returns lie on its beams' cones: once each scan's median offset (a mount
+    tilt) is taken out, nearly all lie within an eighth of the beam spacing of a beam, where
+    elevations unrelated to the beams put a quarter (told from scans over three rings or more,
+    when at least 3 are), and nearly none lie above or below every beam.  Scans whose objects lie
+    beyond the sensor's range cannot be its scans either.
+    """
+    ranges = np.array([st.range_m for st in stats])
+    if np.median(ranges) > base.max_range_m:
+        raise InvalidInputError(
+            f"fit_lidar: the scans' objects lie a median {np.median(ranges):,.0f} m from the origin, beyond {base.name}'s "
+            f"{base.max_range_m:g} m range: these are not scans in a spinning sensor's frame (airborne crops or world "
+            "coordinates?); fit an airborne scanner to airborne crops (fit_airborne)"
+        )
+    beams = np.sort(np.asarray(base.elevations_deg, dtype=np.float64))
+    spacing = float(np.median(np.diff(beams))) if len(beams) > 1 else math.inf
+    residual = np.concatenate([st.elevation_residual_deg - np.median(st.elevation_residual_deg) for st in stats])
+    widest = float(np.max(np.diff(beams))) if len(beams) > 1 else 0.0
+    outside = float(np.mean(np.abs(residual) > widest / 2.0 + _OUTSIDE_BEAMS_DEG))
+    if outside > 1.0 - RING_SHARE:
+        raise InvalidInputError(
+            f"fit_lidar: no sensor origin consistent with {base.name}'s rings: {outside:.0%} of the returns lie outside its "
+            f"beams' elevations ({beams[0]:g}° to {beams[-1]:g}°) seen from the origin; these are not scans in a spinning "
+            "sensor's frame (airborne crops or world coordinates?); fit an airborne scanner to airborne crops (fit_airborne)"
+        )
+    # only scans over three rings or more tell: a short object far away may lie within one beam spacing
+    telling = [st for st in stats if st.ring_spacings_deg.sum() >= 2.0 * spacing]
+    if len(telling) < 3:
+        return
+    near = [np.abs(st.elevation_residual_deg - np.median(st.elevation_residual_deg)) <= spacing / 8.0 for st in telling]
+    share = float(np.concatenate(near).mean())
+    if share < RING_SHARE:
+        raise InvalidInputError(
+            f"fit_lidar: no sensor origin consistent with {base.name}'s rings: {share:.0%} of the returns lie within an eighth "
+            f"of a beam spacing of a beam (a spinning scan puts nearly all there, unrelated elevations a quarter); these "
+            "are not scans in a spinning sensor's frame (airborne crops or world coordinates?); fit an airborne scanner "
+            "to airborne crops (fit_airborne)"
+        )
+
+
 def fit_lidar(clouds: Sequence[NDArray[np.floating]], base: Lidar, *, seed: int = 0, bootstrap: int = BOOTSTRAP) -> LidarFit:
     """Fit ``base``'s firing rate, range noise and range-dependent dropout to real object scans (module docstring).
 
@@ -312,6 +358,7 @@ def fit_lidar(clouds: Sequence[NDArray[np.floating]], base: Lidar, *, seed: int 
             stats.append(_scan_stats(p, beams))
     if len(stats) < 3:
         raise InvalidInputError(f"fit_lidar needs at least 3 scans of {MIN_RETURNS}+ returns, got {len(stats)}")
+    _check_rings(stats, base)
     point = _aggregate(stats)
     rng = np.random.default_rng(seed)
     boots = [_aggregate([stats[j] for j in rng.integers(len(stats), size=len(stats))]) for _ in range(int(bootstrap))]
