@@ -30,7 +30,8 @@ import numpy as np
 from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.mesh.sizes import SizeRange, size_interval
-from zbuf_occlude.sensors.crops import CropDistributions, draw_placement, object_crop
+from zbuf_occlude.sensors.crops import object_crop
+from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
 from zbuf_occlude.sensors.fit import fit_object_shape, fit_visible_across_sight, fit_width_scale
 from zbuf_occlude.sensors.lidar import Lidar
 

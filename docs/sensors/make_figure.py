@@ -18,7 +18,8 @@ import numpy as np
 
 import zbuf_occlude.sensors as S
 from zbuf_occlude.experiments.realism import read_object_clouds
-from zbuf_occlude.sensors.crops import Placement, object_crop
+from zbuf_occlude.sensors.crops import object_crop
+from zbuf_occlude.sensors.placement import Placement
 
 ROOT = Path(__file__).resolve().parents[2]
 MESH = ROOT / "data" / "samples" / "bed" / "train" / "bed_0001.off"

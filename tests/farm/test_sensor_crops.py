@@ -21,7 +21,7 @@ from zbuf_occlude.farm import FarmParams
 from zbuf_occlude.farm.sensor_crops import farm_datasets
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors import Lidar
-from zbuf_occlude.sensors.crops import CropDistributions
+from zbuf_occlude.sensors.placement import CropDistributions
 from zbuf_occlude.sensors.fit import fit_width_scale, lidar_to_json
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"

@@ -11,7 +11,8 @@ import trimesh
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors import AirborneScanner, airborne_preset, scan_airborne
-from zbuf_occlude.sensors.crops import CropDistributions, lidar_object_samples
+from zbuf_occlude.sensors.crops import lidar_object_samples
+from zbuf_occlude.sensors.placement import CropDistributions
 from zbuf_occlude.sensors.presets import sensor_from_name
 
 #: Relative tolerance of simulated vs analytic density (the lines' phase moves a few points in or out of a square).

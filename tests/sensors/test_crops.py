@@ -11,7 +11,8 @@ import pytest
 
 import zbuf_occlude as zo
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.crops import CropDistributions, draw_placement, lidar_object_samples, object_crop
+from zbuf_occlude.sensors.crops import lidar_object_samples, object_crop
+from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
 
 MESH = Path(__file__).resolve().parents[2] / "data" / "samples" / "bed" / "train" / "bed_0001.off"
 

@@ -184,7 +184,8 @@ def test_crop_bottoms_are_percentiles_of_the_lowest_returns_above_the_fitted_gro
 
 
 def test_fit_recovers_the_ground_and_the_hidden_bottoms_of_simulated_crops() -> None:
-    from zbuf_occlude.sensors.crops import CropDistributions, draw_placement, object_crop
+    from zbuf_occlude.sensors.crops import object_crop
+    from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
     from zbuf_occlude.sensors.fit import crop_placement_json
 
     box = trimesh.creation.box(extents=(2.0, 1.0, 1.0))

@@ -213,7 +213,7 @@ def test_bad_reflectivity_is_a_clear_error():
 
 
 def test_pole_sizes_drawn_per_sample_with_a_round_cross_section():
-    from zbuf_occlude.sensors.crops import CropDistributions, draw_placement
+    from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
 
     dist = CropDistributions(extents_m=((0.1, 0.4), (0.1, 0.4), (3.0, 9.0)), round_xy=True, reflectivity=(0.1, 0.5))
     rng = np.random.default_rng(0)

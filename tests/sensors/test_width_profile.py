@@ -11,7 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.crops import CropDistributions, draw_placement, object_crop
+from zbuf_occlude.sensors.crops import object_crop
+from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
 from zbuf_occlude.sensors.fit import crop_placement_json, fit_crop_width_profile, fit_width_profile, width_profile
 from zbuf_occlude.sensors.lidar import lidar_preset
 from zbuf_occlude.sensors.scene import FACE_ROWS, ScanScene, SceneObject, width_profile_factors

@@ -42,7 +42,7 @@ from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange, size_interval
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
-    from zbuf_occlude.sensors.crops import CropDistributions
+    from zbuf_occlude.sensors.placement import CropDistributions
 
 __all__ = [
     "TRAINING_SETS", "GROUND_ELEVATION_DEG", "LIDAR_PLACEMENT", "MIN_RETURNS", "KEEP_SCALE_UNIT_M",
@@ -253,7 +253,7 @@ def _distributions(entry: MeshEntry, size: SizeRange, placement: dict) -> tuple[
     """The mesh's crop distributions (its stretch left out unless given) and what its class's
     ``across_sight_width_m``, ``across_sight_profile`` and ``across_sight_width_by`` ask
     :func:`_fit_shape` to fit (``width_m``, ``profile``, ``by``)."""
-    from zbuf_occlude.sensors.crops import CropDistributions
+    from zbuf_occlude.sensors.placement import CropDistributions
 
     keywords = {**LIDAR_PLACEMENT, **placement}
     by = keywords.pop("across_sight_width_by", "stretch")
@@ -351,7 +351,7 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
     with fewer than ``min_returns`` returns is redrawn (:data:`MIN_RETURNS`; an airborne
     scanner at a few points per m² needs a much lower value for small objects).  The
     ``occluded`` set's camera elevations are drawn uniformly in ``elevation_deg`` (degrees).
-    ``placement`` gives a LiDAR set's :class:`~zbuf_occlude.sensors.crops.CropDistributions`
+    ``placement`` gives a LiDAR set's :class:`~zbuf_occlude.sensors.placement.CropDistributions`
     keywords per class (``{class: {"distance_m": (lo, hi), "hidden_below_m": (lo, hi)}}``,
     metres), over :data:`LIDAR_PLACEMENT`'s, and per mesh (keyed by its name, over its class's);
     a class's ``"across_sight_width_m": (lo, hi)`` stretches each of its meshes to those widths

@@ -108,7 +108,7 @@ class FarmParams:
     sensor_distance_m, sensor_height_m, sensor_size_m : (lo, hi)
         Per scan, uniform draws of the horizontal sensor-object distance, the sensor height
         above the ground and the object's largest dimension, metres; the object's direction
-        and heading are uniform over 0–360° (:class:`zbuf_occlude.sensors.crops.CropDistributions`).
+        and heading are uniform over 0–360° (:class:`zbuf_occlude.sensors.placement.CropDistributions`).
         Left out of :meth:`to_dict` and :meth:`digest` when ``sensor`` is ``None``, so data sets
         made without a sensor keep their digest.
     sensor_reflectivity : (lo, hi) or None
@@ -118,11 +118,11 @@ class FarmParams:
         Return physics: 7 rays per firing in the beam's divergence cone, strongest echo.
     sensor_ground_margin_m : float or None
         Keep the ground returns under each object, inside its footprint grown by this margin,
-        metres (:class:`~zbuf_occlude.sensors.crops.CropDistributions` ``ground_margin_m``);
+        metres (:class:`~zbuf_occlude.sensors.placement.CropDistributions` ``ground_margin_m``);
         ``None``: the object's returns only.  Left out of :meth:`to_dict` when ``None``.
     sensor_hidden_below_m : (lo, hi) or None
         Hide each object's returns lower than a height drawn per scan, metres above the ground
-        (:class:`~zbuf_occlude.sensors.crops.CropDistributions` ``hidden_below_m``); ``None``:
+        (:class:`~zbuf_occlude.sensors.placement.CropDistributions` ``hidden_below_m``); ``None``:
         nothing hidden.  Left out of :meth:`to_dict` when ``None``.
     sensor_across_sight_width_m : (lo, hi) or None
         Stretch each mesh horizontally so that its crops are, at the median, as wide across the
@@ -210,7 +210,7 @@ class FarmParams:
                 object.__setattr__(self, field, (lo, hi))
         object.__setattr__(self, "sensor_footprint", bool(self.sensor_footprint))
         if self.sensor_ground_margin_m is not None:
-            from zbuf_occlude.sensors.crops import check_ground_margin
+            from zbuf_occlude.sensors.placement import check_ground_margin
 
             object.__setattr__(self, "sensor_ground_margin_m", check_ground_margin(self.sensor_ground_margin_m, "--sensor-ground-margin"))
         self.sensor_model()  # footprint needs a beam divergence
@@ -235,8 +235,8 @@ class FarmParams:
         return sensor.with_(footprint_rays=7) if self.sensor_footprint else sensor
 
     def crop_distributions(self):
-        """``farm --sensor``'s per-scan placement, a :class:`~zbuf_occlude.sensors.crops.CropDistributions`."""
-        from zbuf_occlude.sensors.crops import CropDistributions
+        """``farm --sensor``'s per-scan placement, a :class:`~zbuf_occlude.sensors.placement.CropDistributions`."""
+        from zbuf_occlude.sensors.placement import CropDistributions
 
         return CropDistributions(
             distance_m=self.sensor_distance_m, height_m=self.sensor_height_m, azimuth_deg=(0.0, 360.0),

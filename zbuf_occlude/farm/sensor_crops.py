@@ -13,7 +13,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from zbuf_occlude.mesh.load import load_mesh
-from zbuf_occlude.sensors.crops import CropDistributions, lidar_object_samples
+from zbuf_occlude.sensors.crops import lidar_object_samples
+from zbuf_occlude.sensors.placement import CropDistributions
 from zbuf_occlude.sensors.fit import fit_object_shape
 
 if TYPE_CHECKING:

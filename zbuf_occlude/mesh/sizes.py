@@ -105,7 +105,7 @@ def size_interval(extents: ArrayLike, size: SizeRange) -> tuple[float, float]:
     Returns
     -------
     (lo, hi) : metres
-        For :class:`zbuf_occlude.sensors.crops.CropDistributions` ``size_m``.
+        For :class:`zbuf_occlude.sensors.placement.CropDistributions` ``size_m``.
 
     Raises
     ------

@@ -24,15 +24,14 @@ from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors.airborne import AirborneScanner
 from zbuf_occlude.sensors.depth_camera import DepthCamera
 from zbuf_occlude.sensors.lidar import Lidar
-from zbuf_occlude.sensors.placement import DEFAULT_GROUND_REFLECTIVITY, CropDistributions, Placement, check_ground_margin, draw_placement
+from zbuf_occlude.sensors.placement import DEFAULT_GROUND_REFLECTIVITY, CropDistributions, Placement, draw_placement
 from zbuf_occlude.sensors.scan import Scan, scan
 from zbuf_occlude.sensors.scene import ScanScene, SceneObject, sensor_pose
 
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
-__all__ = ["CropDistributions", "Placement", "CropSample", "check_ground_margin", "draw_placement", "object_crop", "lidar_object_samples",
-           "side_occluders", "SIDE_OCCLUDER_RANGE"]
+__all__ = ["CropSample", "object_crop", "lidar_object_samples", "side_occluders", "SIDE_OCCLUDER_RANGE"]
 
 log = logging.getLogger(__name__)
 

@@ -23,7 +23,8 @@ import numpy as np
 
 from zbuf_occlude.experiments.sim2real_data import LIDAR_PLACEMENT, MIN_RETURNS, find_class_meshes
 from zbuf_occlude.mesh.sizes import parse_sizes, size_interval
-from zbuf_occlude.sensors.crops import CropDistributions, lidar_object_samples
+from zbuf_occlude.sensors.crops import lidar_object_samples
+from zbuf_occlude.sensors.placement import CropDistributions
 from zbuf_occlude.sensors.presets import sensor_from_name
 
 #: The one mesh of street_objects that breaks its format's up-axis convention (docs/results/sim2real.md).

@@ -12,7 +12,8 @@ from zbuf_occlude.experiments import sim2real as S
 from zbuf_occlude.experiments.sim2real_data import LIDAR_PLACEMENT, check_lidar_meshes, find_class_meshes, real_clouds, real_scan_rows
 from zbuf_occlude.mesh.sizes import size_interval
 from zbuf_occlude.real_scans.datasets import load_real_scans
-from zbuf_occlude.sensors.crops import CropDistributions, draw_placement, object_crop
+from zbuf_occlude.sensors.crops import object_crop
+from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
 from zbuf_occlude.sensors.fit import across_sight_width
 from zbuf_occlude.sensors.presets import sensor_from_name
 

@@ -15,7 +15,8 @@ import numpy as np
 
 from fit_half import load_fit_half
 from zbuf_occlude.experiments.sim2real_data import _distributions, _placement_of, fit_mesh_shapes
-from zbuf_occlude.sensors.crops import draw_placement, object_crop
+from zbuf_occlude.sensors.crops import object_crop
+from zbuf_occlude.sensors.placement import draw_placement
 from zbuf_occlude.sensors.fit import across_sight_width, width_profile
 
 f = load_fit_half(sys.argv[1])

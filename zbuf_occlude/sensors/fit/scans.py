@@ -66,7 +66,7 @@ def fit_crop_distances(clouds: Sequence[NDArray[np.floating]], quantiles: tuple[
 
     The distance of a scan is the horizontal distance (xy) from the sensor to the centroid of its
     returns; the interval is their ``quantiles`` percentiles, to be drawn uniformly as
-    :class:`~zbuf_occlude.sensors.crops.CropDistributions` ``distance_m``.  The centroid of the
+    :class:`~zbuf_occlude.sensors.placement.CropDistributions` ``distance_m``.  The centroid of the
     visible surface lies nearer than the object's centre by up to half the object's depth, so
     the fitted crops stand slightly nearer than the real objects did.
 
@@ -160,7 +160,7 @@ def fit_crop_bottoms(clouds: Sequence[NDArray[np.floating]], sensor_height_m: fl
 
     A scan's lowest return lies ``min z + sensor_height_m`` above the ground (clipped at 0);
     the interval is their ``quantiles`` percentiles, to be drawn uniformly as
-    :class:`~zbuf_occlude.sensors.crops.CropDistributions` ``hidden_below_m`` (metres, >= 0).  A
+    :class:`~zbuf_occlude.sensors.placement.CropDistributions` ``hidden_below_m`` (metres, >= 0).  A
     real bottom includes the gap between the ground and the lowest beam that hits the object,
     which the simulated scan makes again under the cut, so the simulated bottoms lie slightly
     higher.

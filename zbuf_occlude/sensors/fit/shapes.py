@@ -40,7 +40,7 @@ _MAX_CORRECTION = 4.0
 
 def fit_width_scale(mesh, sensor, distributions, width_m: tuple[float, float], *, n_samples: int = WIDTH_SAMPLES,
                     seed: int = 0, name: str = "the mesh") -> tuple[float, float]:  # fmt: skip
-    """The horizontal stretch that makes a mesh's crops as wide as real scans, for :class:`~zbuf_occlude.sensors.crops.CropDistributions` ``width_scale``.
+    """The horizontal stretch that makes a mesh's crops as wide as real scans, for :class:`~zbuf_occlude.sensors.placement.CropDistributions` ``width_scale``.
 
     ``n_samples`` crops of ``mesh`` drawn from ``distributions`` are measured with
     :func:`across_sight_width`, first at the mesh's own proportions (its ``width_scale``
@@ -101,7 +101,7 @@ def fit_width_scale(mesh, sensor, distributions, width_m: tuple[float, float], *
 
 def fit_visible_across_sight(mesh, sensor, distributions, width_m: tuple[float, float], *, n_samples: int = WIDTH_SAMPLES,
                              seed: int = 0, name: str = "the mesh") -> tuple[float, float]:  # fmt: skip
-    """The share of a mesh's width to leave visible so that its crops are as wide as real scans, for :class:`~zbuf_occlude.sensors.crops.CropDistributions` ``visible_across_sight``.
+    """The share of a mesh's width to leave visible so that its crops are as wide as real scans, for :class:`~zbuf_occlude.sensors.placement.CropDistributions` ``visible_across_sight``.
 
     ``n_samples`` crops of ``mesh`` drawn from ``distributions`` with nothing hidden are
     measured with :func:`across_sight_width` (median ``w``); where ``w`` is wider than the
@@ -169,7 +169,7 @@ def _median_crop_width(mesh, sensor, distributions, n: int, seed: int) -> float:
 
 def fit_width_profile(mesh, sensor, distributions, profile: Sequence[float], *, n_samples: int = WIDTH_SAMPLES, seed: int = 0,
                       name: str = "the mesh") -> tuple[float, ...]:  # fmt: skip
-    """The warp over the height that gives a mesh's crops a class's outline, for :class:`~zbuf_occlude.sensors.crops.CropDistributions` ``width_profile``.
+    """The warp over the height that gives a mesh's crops a class's outline, for :class:`~zbuf_occlude.sensors.placement.CropDistributions` ``width_profile``.
 
     ``n_samples`` crops of ``mesh`` drawn from ``distributions`` (its ``width_scale`` and
     ``width_profile`` as given) are measured with :func:`width_profile`; the stretch of each bin
@@ -244,7 +244,7 @@ def fit_width_profile(mesh, sensor, distributions, profile: Sequence[float], *, 
 
 def fit_object_shape(mesh, sensor, distributions, width_m: tuple[float, float] | None = None, profile: Sequence[float] | None = None, *,
                      occlude: bool = False, seed: int = 0, name: str = "the mesh") -> dict:  # fmt: skip
-    """What makes a mesh's crops as wide as real scans and gives them a real outline, as :class:`~zbuf_occlude.sensors.crops.CropDistributions` keywords.
+    """What makes a mesh's crops as wide as real scans and gives them a real outline, as :class:`~zbuf_occlude.sensors.placement.CropDistributions` keywords.
 
     With ``width_m`` only: ``{"width_scale": (lo, hi)}`` (:func:`fit_width_scale`), or with
     ``occlude`` ``{"visible_across_sight": (lo, hi)}`` (:func:`fit_visible_across_sight`: a
