@@ -1,8 +1,11 @@
-"""A spinning LiDAR and its scenes fitted to real object scans: what the simulation can set, estimated from the user's own scans.
+"""Sensors and their scenes fitted to real object scans: what the simulation can set, estimated from the user's own scans.
 
 ``lidar``
     The sensor: azimuth step (firing rate), range noise, range-dependent dropout, with their
     uncertainties (:func:`fit_lidar`).
+``airborne``
+    An airborne scanner from segmented aerial crops with no sensor position: point density,
+    the scan angle at each crop and half the swath, vertical and range noise (:func:`fit_airborne`).
 ``scans``
     The scenes, per class: where the crops stand, how tall their objects are, how much is hidden
     below, how wide they show across the line of sight and their outline over the height
@@ -15,11 +18,13 @@ Every name is imported from here (``from zbuf_occlude.sensors.fit import fit_lid
 
 from __future__ import annotations
 
+from zbuf_occlude.sensors.fit.airborne import AirborneFit, airborne_to_json, crop_faces, fit_airborne
 from zbuf_occlude.sensors.fit.lidar import (
     BOOTSTRAP,
     MAX_DROPOUT_GAP,
     MIN_RETURNS,
     PLANE_NEIGHBOURS,
+    RING_SHARE,
     Estimate,
     LidarFit,
     fit_lidar,
@@ -50,6 +55,7 @@ from zbuf_occlude.sensors.fit.shapes import (
 )
 
 __all__ = [
+    "AirborneFit", "airborne_to_json", "crop_faces", "fit_airborne", "RING_SHARE",
     "across_sight_width", "BOOTSTRAP", "crop_placement_json", "DISTANCE_QUANTILES", "Estimate", "fit_crop_bottoms",
     "fit_crop_distances", "fit_crop_heights", "fit_crop_width_profile", "fit_crop_widths", "fit_lidar", "fit_object_shape",
     "fit_sensor_height", "fit_visible_across_sight", "fit_width_profile", "fit_width_scale", "lidar_to_json", "LidarFit",
