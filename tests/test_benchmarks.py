@@ -26,6 +26,7 @@ def _gpu_sh(out: Path, *flags: str) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, timeout=600)
 
 
+@pytest.mark.slow
 def test_gpu_benchmark_smoke_writes_its_report(tmp_path):
     res = _gpu_sh(tmp_path / "out", "--smoke")
     assert res.returncode == 0, res.stderr[-3000:]
@@ -38,6 +39,7 @@ def test_gpu_benchmark_smoke_writes_its_report(tmp_path):
     assert "## Occlusion on the fly" in report and "| on-the-fly |" in report
 
 
+@pytest.mark.slow
 def test_gpu_benchmark_refuses_a_software_renderer(tmp_path):
     from zbuf_occlude.render.context import SOFTWARE_RENDERERS, shared_context
 

@@ -206,6 +206,7 @@ def shared_copy(tmp_path_factory) -> _SharedCopy:
     return _SharedCopy(tmp_path_factory.mktemp("docs_examples"))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("block", RUNNABLE, ids=[b.id for b in RUNNABLE])
 def test_example_runs(block: Block, shared_copy: _SharedCopy) -> None:
     if needs_torch(block) and importlib.util.find_spec("torch") is None:
@@ -236,6 +237,7 @@ def documented_folder_tree(text: str) -> set[str]:
     return {m[1] for m in re.finditer(r"^  (\S+)", block, re.MULTILINE)}
 
 
+@pytest.mark.slow
 def test_the_documented_folder_tree_is_what_generate_and_farm_write(tmp_path: Path) -> None:
     """docs/guide/outputs.md's tree, entry for entry, against real runs of generate (h5, npz) and
     farm: each run writes exactly the entries the page says it writes, and nothing else."""
@@ -414,6 +416,7 @@ def _mkdocs_missing() -> str | None:
     return None
 
 
+@pytest.mark.slow
 def test_the_documentation_site_builds_strict(tmp_path: Path) -> None:
     missing = _mkdocs_missing()
     if missing:

@@ -9,6 +9,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 HEAVY = ("numba", "moderngl", "scipy", "h5py", "torch", "trimesh", "embreex", "open3d")
 
@@ -24,6 +26,7 @@ def test_import_zbuf_occlude_loads_no_heavy_library():
     assert _loaded_after("import zbuf_occlude") == []
 
 
+@pytest.mark.slow
 def test_a_public_name_imports_what_it_needs_and_nothing_else():
     # visibility's registry is numpy only; the methods (numba, moderngl, Embree) load when one is asked for
     assert _loaded_after("import zbuf_occlude as zo\nzo.visible_mask, zo.Camera, zo.camera_on_sphere") == []
@@ -61,6 +64,7 @@ def test_the_farms_all_lists_the_names_its_stub_imports():
     assert all(getattr(farm, name) is not None for name in farm.__all__)
 
 
+@pytest.mark.slow
 def test_cpu_visibility_methods_load_no_opengl():
     # Embree, the CPU z-buffer and the paper's methods run where no GL driver exists
     code = (

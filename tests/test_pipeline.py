@@ -310,6 +310,7 @@ def test_a_tiny_visible_surface_still_pads_and_is_counted():
         assert cloud.padded and len(np.unique(cloud.points, axis=0)) == cloud.n_visible < 1024
 
 
+@pytest.mark.slow
 def test_generate_writes_occluded_samples(small_mesh, tmp_path):
     # `zbuf-occlude generate` end to end: each written sample's points lie on the mesh and
     # are visible from the sample's own pose by the oracle (measured: 0 of 1536 hidden);
@@ -586,6 +587,7 @@ def test_occlude_is_deterministic_for_a_seed(small_mesh, sofa_clouds):
     assert np.abs(clouds[0].points).max() <= 0.5 + 1e-6
 
 
+@pytest.mark.slow
 def test_occlude_equals_what_generate_writes(small_mesh, sofa_clouds, tmp_path):
     from zbuf_occlude.cli.main import main
     from zbuf_occlude.dataset.reader import OccludedDataset

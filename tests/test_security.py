@@ -260,6 +260,7 @@ def _generate(out: Path, *paths: Path, overwrite: bool = False, fmt: str = "h5")
     return main([*argv, "--overwrite"] if overwrite else argv)
 
 
+@pytest.mark.slow
 def test_generate_overwrite_does_not_delete_a_file_a_record_names_outside_out(tmp_path: Path) -> None:
     out = tmp_path / "out"
     assert _generate(out, CHAIR) == 0
@@ -274,6 +275,7 @@ def test_generate_overwrite_does_not_delete_a_file_a_record_names_outside_out(tm
     assert status == 2
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("given", ["file", "folder"])
 def test_a_mesh_named_dot_dot_does_not_write_beside_out(tmp_path: Path, capsys, given: str) -> None:
     meshes = tmp_path / "chair"  # a class folder: a folder named "meshes" is refused as a class
@@ -326,6 +328,7 @@ def _untouched(files: dict[Path, bytes]) -> bool:
     ) == len(files)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("run", ["farm", "generate --overwrite", "farm --shard 0/2 --overwrite"])
 def test_a_symlinked_subfolder_of_out_is_refused_and_nothing_outside_changes(tmp_path: Path, capsys, run: str) -> None:
     tree, out = _two_meshes(tmp_path), tmp_path / "out"

@@ -862,6 +862,7 @@ def test_cli_negative_seed_exits_2_naming_the_option(cli_tree: Path, tmp_path: P
     assert "--seed must be a non-negative integer, got -1" in _cli_error(capsys)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["generate", "farm"])
 def test_cli_skipped_inputs_exit_1_are_recorded_and_the_rest_is_done(
     cli_tree: Path, tmp_path: Path, capsys, unreadable, command: str

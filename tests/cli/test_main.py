@@ -25,6 +25,7 @@ def two_meshes(tmp_path, sample_meshes_dir):
 ARGS = ["--views", "30:45,-40:200", "--points", "128", "--samples-per-view", "2", "--resolution", "256", "--dense-points", "5000"]
 
 
+@pytest.mark.slow
 def test_generate_writes_one_file_per_sample_and_resumes(tmp_path, two_meshes, capsys):
     out = tmp_path / "out"
     assert main(["generate", str(two_meshes), "--out", str(out), "--format", "npz", *ARGS]) == 0
@@ -38,6 +39,7 @@ def test_generate_writes_one_file_per_sample_and_resumes(tmp_path, two_meshes, c
     assert "2 meshes done, 0 failed" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_a_bad_mesh_is_reported_and_skipped(tmp_path, two_meshes, capsys):
     bad = two_meshes / "sofa" / "train" / "broken.off"
     bad.write_text("OFF\n3 1 0\n0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n")
@@ -48,6 +50,7 @@ def test_a_bad_mesh_is_reported_and_skipped(tmp_path, two_meshes, capsys):
     assert len(list(out.rglob("*.npz"))) == 8  # the good meshes are all there
 
 
+@pytest.mark.slow
 def test_generate_h5_and_ply(tmp_path, two_meshes):
     out = tmp_path / "h5"
     assert main(["generate", str(two_meshes), "--out", str(out), "--format", "h5", *ARGS]) == 0
@@ -124,6 +127,7 @@ def test_farm_errors_through_main_exit_2_on_one_line(tmp_path, two_meshes, capsy
     assert err.startswith("zbuf-occlude: error:") and "\n" not in err
 
 
+@pytest.mark.slow
 def test_python_dash_m_runs_the_cli_and_passes_its_exit_status(tmp_path):
     import os
     import subprocess

@@ -59,6 +59,7 @@ def _clean(stderr: str) -> None:
     assert "Traceback" not in stderr and "Exception ignored" not in stderr, stderr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("argv", [["info"], ["--help"], ["--version"], ["farm", "--help"]])
 def test_a_reader_that_went_away_ends_quietly_with_141(argv) -> None:
     write = _closed_pipe()
@@ -95,6 +96,7 @@ def test_a_full_stdout_lets_the_command_finish_then_says_so_once(tmp_path, unbuf
                      "the command finished its work; what it printed is lost"], done.stderr  # fmt: skip
 
 
+@pytest.mark.slow
 @needs_dev_full
 def test_farm_into_dev_full_finishes_the_data_set_and_exits_1_without_a_traceback(tmp_path) -> None:
     root = tmp_path / "in" / "chair" / "train"

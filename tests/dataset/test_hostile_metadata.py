@@ -61,6 +61,7 @@ def _sparse_shard(root: Path) -> Path:
     return shard
 
 
+@pytest.mark.slow
 def test_verify_refuses_a_sparse_shard_from_its_size_without_reading_it(copy, monkeypatch):
     _sparse_shard(copy)
     _no_hashing(monkeypatch)
@@ -76,6 +77,7 @@ def test_the_reader_refuses_a_sparse_shard_when_it_opens_the_data_set(copy, monk
         OccludedDataset(copy)
 
 
+@pytest.mark.slow
 def test_a_resumed_farm_redoes_a_sparse_shard_without_hashing_it(copy, monkeypatch):
     shard = _sparse_shard(copy)
     calls = []
@@ -90,6 +92,7 @@ def test_a_resumed_farm_redoes_a_sparse_shard_without_hashing_it(copy, monkeypat
     assert shard not in calls and shard.stat().st_size < 10**9
 
 
+@pytest.mark.slow
 def test_verify_refuses_a_sparse_joined_file_without_reading_it(tmp_path, monkeypatch):
     out = tmp_path / "gen"
     assert cli_main(["generate", str(SAMPLE_MESHES / "chair"), "--out", str(out), *SMALL]) == 0

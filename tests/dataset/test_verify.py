@@ -32,6 +32,7 @@ def _copy(src: Path, dst: Path) -> Path:
     return dst
 
 
+@pytest.mark.slow
 def test_verify_accepts_what_generate_writes_by_default(generated, capsys):
     assert (generated / "occluded_train.h5").is_file()
     card = json.loads((generated / "dataset_card.json").read_text())
@@ -215,6 +216,7 @@ def test_a_shard_declaring_more_than_the_memory_available_is_refused_before_read
         schema.open_shard(shard, storage="dense", n_points=64, rows=2, n_poses=2, sensor=False)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("damage", ["garbage", "no points", "5 points"])
 def test_a_damaged_sample_file_is_refused_by_reader_and_verify(sample_files, tmp_path, damage, capsys):
     ds = _copy(sample_files, tmp_path / "ds")

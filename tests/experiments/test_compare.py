@@ -59,6 +59,7 @@ def test_parsers() -> None:
 # -----------------------------------------------------------------------------------------
 # End to end on a tiny input
 # -----------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_compare_end_to_end_on_tiny_input(tmp_path: Path) -> None:
     _gl_or_skip()
     path = _tiny_path()

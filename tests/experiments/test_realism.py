@@ -43,6 +43,7 @@ def test_fit_recovers_exponent(b):
     assert abs(got - b) < 3 * se + 1e-9 and se < 0.05 and abs(a - math.log(5000)) < 0.2
 
 
+@pytest.mark.slow
 def test_wall_scans_fall_as_inverse_square(tmp_path):
     """A fixed extended object inside the FOV: count ∝ r^-2 (both angles shrink as 1/r); a fine
     custom beam table (0.1°) keeps ring discretisation out of the law."""

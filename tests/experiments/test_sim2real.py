@@ -114,6 +114,7 @@ def test_size_interval_and_parse_sizes() -> None:
             parse_sizes(bad)
 
 
+@pytest.mark.slow
 def test_sim2real_command_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     meshes, real, out = _mesh_root(tmp_path), _real_root(tmp_path), tmp_path / "out"
     argv = ["experiment", "sim2real", str(meshes), "--real", str(real), "--out", str(out), "--label-map", "Trunk=pole",
@@ -302,6 +303,7 @@ def _rows(path: Path) -> list[dict]:
         return list(csv.DictReader(fh))
 
 
+@pytest.mark.slow
 def test_fit_sensor_fits_on_one_half_and_scores_every_row_on_the_other(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from zbuf_occlude.experiments.sim2real_data import (
         FITTED_PLACED,
@@ -347,6 +349,7 @@ def test_fit_sensor_fits_on_one_half_and_scores_every_row_on_the_other(tmp_path:
     assert second == [r for r in first if r["seed"] == 0]
 
 
+@pytest.mark.slow
 def test_a_resumed_run_makes_only_the_sets_it_still_trains_and_they_come_out_the_same(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from zbuf_occlude.experiments import sim2real
 
@@ -453,6 +456,7 @@ def test_fit_crop_distances_are_percentiles_of_the_horizontal_distances() -> Non
         fit_crop_distances(clouds, (90.0, 10.0))
 
 
+@pytest.mark.slow
 def test_the_fitted_placed_set_draws_the_fitted_distances_and_the_others_the_preset_ones(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from zbuf_occlude.experiments.sim2real_data import (
         FITTED,
@@ -525,6 +529,7 @@ def test_the_pooled_set_is_the_three_lidar_sets_of_its_seed_in_one(tmp_path: Pat
     assert not np.array_equal(parts[0].points, parts[1].points) and not np.array_equal(parts[1].points, parts[2].points)
 
 
+@pytest.mark.slow
 def test_validate_on_fit_half_validates_mesh_sets_on_the_fit_half_and_trains_on_every_mesh(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from zbuf_occlude.experiments.sim2real_data import FITTED_SETS
     from zbuf_occlude.learn import training
@@ -569,6 +574,7 @@ def test_validate_on_fit_half_validates_mesh_sets_on_the_fit_half_and_trains_on_
     assert main([*argv[:7], *argv[8:], "--out", str(tmp_path / "o2"), "--validate-on", "fit-half"]) == 2
 
 
+@pytest.mark.slow
 def test_fitted_shape_gives_the_placed_meshes_the_fitted_widths_or_outline_or_neither(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                                                        capsys: pytest.CaptureFixture) -> None:  # fmt: skip
     from zbuf_occlude.experiments import sim2real
@@ -643,6 +649,7 @@ def test_the_set_chosen_on_the_fit_half_is_the_best_validated_per_seed_never_the
     assert CHOSEN_ON_FIT_HALF not in {r["train_set"] for r in summarise(runs, ["car", "pole"])}
 
 
+@pytest.mark.slow
 def test_a_class_outline_warps_each_mesh_then_stretches_it_under_the_warp(tmp_path: Path) -> None:
     from zbuf_occlude.experiments.sim2real_data import build_set, fit_mesh_shapes
     from zbuf_occlude.sensors import lidar_preset
@@ -668,6 +675,7 @@ def test_a_class_outline_warps_each_mesh_then_stretches_it_under_the_warp(tmp_pa
     assert not np.array_equal(once.points, unwarped.points)
 
 
+@pytest.mark.slow
 def test_width_scales_fitted_once_give_the_crops_of_fitting_them_in_every_draw(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from zbuf_occlude.experiments.sim2real_data import build_set, fit_mesh_shapes
     from zbuf_occlude.sensors import lidar_preset
@@ -689,6 +697,7 @@ def test_width_scales_fitted_once_give_the_crops_of_fitting_them_in_every_draw(t
 
 
 
+@pytest.mark.slow
 def test_widen_is_never_narrower_whether_fitted_once_or_in_the_draw(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """``across_sight_width_by: widen`` raises each stretch below 1 to 1, in fit_mesh_shapes and in a set's own fit alike."""
     from zbuf_occlude.experiments.sim2real_data import fit_mesh_shapes

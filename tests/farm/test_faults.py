@@ -71,6 +71,7 @@ def _host() -> str:
 
 
 # -- defect 1: two farms on one --out ---------------------------------------------------------------
+@pytest.mark.slow
 def test_second_farm_on_the_same_out_refuses_and_names_the_holder(tree, tmp_path):
     """The issue's scenario: pause the first run mid-write, run a second to the end, resume the first."""
     out = tmp_path / "ds"
@@ -105,6 +106,7 @@ def test_a_lock_left_by_a_dead_process_is_taken_over(tree, tmp_path):
     assert not (out / LOCK_FILE).exists()
 
 
+@pytest.mark.slow
 def test_a_lock_of_another_host_is_never_broken(tree, tmp_path):
     out = tmp_path / "ds"
     out.mkdir()
@@ -145,6 +147,7 @@ def test_temp_names_are_unique_per_process_and_name_their_writer(tmp_path):
         t2.write_bytes(b"2")
 
 
+@pytest.mark.slow
 def test_shard_tasks_run_at_once_but_not_beside_a_whole_run(tree, tmp_path):
     out = tmp_path / "ds"
     out.mkdir()
@@ -244,6 +247,7 @@ def _start_pool_farm(tree: Path, out: Path, cwd: Path) -> tuple[subprocess.Popen
     return proc, _children(proc.pid)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="needs Linux /proc to find the workers")
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
 def test_workers_do_not_outlive_a_killed_parent(tree, tmp_path, sig):
@@ -312,6 +316,7 @@ def _hold_env(tmp_path: Path, name: str) -> tuple[dict[str, str], Path]:
     return env, marker
 
 
+@pytest.mark.slow
 def test_sigterm_inside_a_long_native_call_stops_generate_within_seconds(tree, tmp_path):
     out = tmp_path / "gen"
     env, marker = _hold_env(tmp_path, "stool_0002")
@@ -337,6 +342,7 @@ def test_sigterm_inside_a_long_native_call_stops_generate_within_seconds(tree, t
     assert not list(out.rglob(".*.tmp"))
 
 
+@pytest.mark.slow
 def test_a_killed_farm_worker_fails_only_its_object(tree, tmp_path):
     out = tmp_path / "ds"
     env, marker = _hold_env(tmp_path, "stool_0002")

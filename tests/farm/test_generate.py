@@ -63,6 +63,7 @@ def test_two_files_with_one_name_are_refused_before_any_work(tree, tmp_path, cap
 
 
 # -- defect 3: other parameters into the same --out -------------------------------------------------
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "change, option",
     [(["--points", "32"], "--points"), (["--views", "0:0"], "--views"), (["--dense-points", "1000"], "--dense-points"),
@@ -88,6 +89,7 @@ def test_a_rerun_with_other_options_is_refused_unless_overwrite(tree, tmp_path, 
     assert {read_npz(f).points.shape[0] for f in files} == {int(args["--points"])}
 
 
+@pytest.mark.slow
 def test_generate_resumes_what_is_missing_and_records_its_files(tree, tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["generate", str(tree), "--out", str(out), *ARGS, "--format", "npz"]) == 0
@@ -122,6 +124,7 @@ def test_an_unwritable_out_is_a_usage_error_before_any_mesh(tree, tmp_path, caps
     assert "--out" in _error(capsys)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["generate", "farm"])
 def test_a_bogus_gl_backend_is_named_and_exits_2(tree, tmp_path, command):
     extra = ["--no-progress"] if command == "farm" else []
@@ -162,6 +165,7 @@ def test_a_damaged_card_or_manifest_names_the_file(tree, tmp_path, damaged):
 
 
 # -- one pipeline: generate --format h5 is the farm's engine ------------------------------------------
+@pytest.mark.slow
 def test_generate_h5_equals_the_farm_split_by_split(tree, tmp_path):
     out = tmp_path / "gen"
     assert main(["generate", str(tree), "--out", str(out), "--format", "h5", *ARGS]) == 0
@@ -183,6 +187,7 @@ def test_generate_h5_equals_the_farm_split_by_split(tree, tmp_path):
 
 
 # -- the default output is what the reader reads, in every format ---------------------------------------
+@pytest.mark.slow
 def test_the_default_generate_output_opens_with_the_reader(tree, tmp_path):
     out = tmp_path / "gen"
     assert main(["generate", str(tree), "--out", str(out), *ARGS]) == 0  # no --format
@@ -192,6 +197,7 @@ def test_the_default_generate_output_opens_with_the_reader(tree, tmp_path):
     assert points.shape == (64, 3) and points.dtype == np.float32 and ds.shape_names[label] == meta["class_name"]
 
 
+@pytest.mark.slow
 def test_npz_and_ply_folders_read_as_the_h5_one(tree, tmp_path):
     """The reader serves generate's npz and ply folders, the same samples as h5 for one set of options."""
     got = {}
@@ -213,6 +219,7 @@ def test_npz_and_ply_folders_read_as_the_h5_one(tree, tmp_path):
     assert np.array_equal(read_npz(tmp_path / "npz" / rec["shards"][1]).points, ds[1][0])
 
 
+@pytest.mark.slow
 def test_a_changed_sample_file_is_named_by_the_reader(tree, tmp_path):
     out = tmp_path / "npz"
     assert main(["generate", str(tree), "--out", str(out), "--format", "npz", *ARGS]) == 0
@@ -228,6 +235,7 @@ def test_a_changed_sample_file_is_named_by_the_reader(tree, tmp_path):
 
 
 # -- generate --format h5 keeps the splits apart ---------------------------------------------------------
+@pytest.mark.slow
 def test_h5_writes_one_file_per_split_with_a_split_column(tree, tmp_path, sample_meshes_dir):
     for rel in ("desk/test/desk_0201.off", "chair/train/chair_0001.off"):  # two objects per split
         (tree / rel).parent.mkdir(parents=True, exist_ok=True)
@@ -248,6 +256,7 @@ def test_h5_writes_one_file_per_split_with_a_split_column(tree, tmp_path, sample
         assert set(read_h5(part)["split"]) == {part.name.split("_")[0]}
 
 
+@pytest.mark.slow
 def test_overwrite_leaves_no_stale_split_file(tree, tmp_path):
     out = tmp_path / "gen"
     assert main(["generate", str(tree), "--out", str(out), *ARGS]) == 0
@@ -265,6 +274,7 @@ def _padded_args(points: int, dense_points: int = 4000) -> list[str]:
             str(dense_points), "--resolution", "128"]  # fmt: skip
 
 
+@pytest.mark.slow
 def test_padding_is_warned_once_and_recorded_in_the_card(tree, shingles_tree, tmp_path, caplog):
     # 4000 dense points show 840-1800 per pose: the real meshes' short poses are topped up to 1024
     # distinct points; the shingles (a tiny visible surface) stay padded, and those samples alone
@@ -296,6 +306,7 @@ def test_padding_is_warned_once_and_recorded_in_the_card(tree, shingles_tree, tm
     assert summary.padded == expected and "padded" in summary.format()
 
 
+@pytest.mark.slow
 def test_no_padding_no_warning(tree, tmp_path, caplog):
     out = tmp_path / "gen"
     with caplog.at_level("WARNING"):
@@ -305,6 +316,7 @@ def test_no_padding_no_warning(tree, tmp_path, caplog):
 
 
 # -- PointNet's own loop -----------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_pointnet_style_loop_over_the_file_lists(tree, tmp_path, monkeypatch):
     """PointNet (provider.loadDataFile + train.py) reads data and label from each file in its list; ours are
     relative to the data set (joined with its folder, from any working folder), one file per split so that
@@ -338,6 +350,7 @@ def test_an_out_inside_the_input_folder_is_refused_before_any_work(tmp_path, cap
     assert "lies inside the input folder" in capsys.readouterr().err and not out.exists()
 
 
+@pytest.mark.slow
 def test_generates_progress_bar_is_called_generate(tree, tmp_path, monkeypatch):
     import tqdm.auto
 

@@ -69,6 +69,7 @@ def test_a_folder_with_no_run_of_ours_is_refused_and_left_as_it_was(tmp_path, ca
     assert not (out / PLAN_FILE).exists()
 
 
+@pytest.mark.slow
 def test_empty_folders_of_our_names_are_no_reason_to_refuse(tmp_path):
     src, out = _meshes(tmp_path / "meshes"), tmp_path / "out"
     for name in ("shards", "records", "tasks"):
@@ -116,6 +117,7 @@ def test_a_list_file_naming_meshes_inside_out_is_refused(tmp_path, capsys, comma
     assert _snapshot(out) == before
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt", ["h5", "npz"])
 def test_overwrite_deletes_only_what_the_earlier_run_recorded(tmp_path, fmt):
     src, out = _meshes(tmp_path / "meshes"), tmp_path / "out"
@@ -137,6 +139,7 @@ def test_overwrite_deletes_only_what_the_earlier_run_recorded(tmp_path, fmt):
         assert rel not in after or after[rel] != ours[rel]
 
 
+@pytest.mark.slow
 def test_overwrite_of_a_sharded_task_keeps_the_other_tasks_objects(tmp_path):
     src, out = tmp_path / "meshes", tmp_path / "out"
     for i, rel in enumerate(["chair/train/chair_0001.off", "sofa/test/sofa_0681.off"]):
@@ -161,6 +164,7 @@ def _task_folders(tmp_path: Path) -> tuple[Path, Path, Path]:
     return src, a, b
 
 
+@pytest.mark.slow
 def test_merge_into_a_folder_with_foreign_files_is_refused(tmp_path, capsys):
     _, a, b = _task_folders(tmp_path)
     out = tmp_path / "merged"
@@ -171,6 +175,7 @@ def test_merge_into_a_folder_with_foreign_files_is_refused(tmp_path, capsys):
     assert _snapshot(out) == before
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("damage", ["deep", "missing"])
 def test_a_merge_that_cannot_finish_writes_nothing(tmp_path, capsys, damage):
     _, a, b = _task_folders(tmp_path)

@@ -210,6 +210,7 @@ def test_dense_layout_counts_labels_manifest_card(dense_run):
 
 
 # -- determinism ------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_worker_count_does_not_change_a_bit(tree, dense_run, tmp_path):
     summary = run_farm(tree, tmp_path / "w2", params=PARAMS, options=RunOptions(workers=2, progress=False))
     assert summary.workers == "2 processes" and summary.done == len(SMALL_MESHES)
@@ -245,6 +246,7 @@ def test_selection_does_not_change_an_objects_samples(tree, dense_run, tmp_path)
         assert np.array_equal(arrays["data"], full[name]["data"])
 
 
+@pytest.mark.slow
 def test_dask_local_cluster_gives_the_same_data_set(tree, dense_run, tmp_path):
     pytest.importorskip("distributed")
     summary = run_farm(tree, tmp_path / "dask", params=PARAMS, options=RunOptions(dask_local=2, progress=False))
@@ -252,6 +254,7 @@ def test_dask_local_cluster_gives_the_same_data_set(tree, dense_run, tmp_path):
     assert_same_samples(dense_run[0], tmp_path / "dask")
 
 
+@pytest.mark.slow
 def test_dask_scheduler_address_gives_the_same_data_set(tree, dense_run, tmp_path):
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
@@ -261,6 +264,7 @@ def test_dask_scheduler_address_gives_the_same_data_set(tree, dense_run, tmp_pat
     assert_same_samples(dense_run[0], tmp_path / "sched")
 
 
+@pytest.mark.slow
 def test_unreachable_dask_scheduler_is_a_clear_error(tree, tmp_path, capsys):
     dask = pytest.importorskip("dask")
     pytest.importorskip("distributed")
@@ -332,6 +336,7 @@ def test_compact_shards_hold_the_named_dense_cloud_and_its_visibility_bits(compa
             assert n_visible[pose] == vis.sum() == rec["n_visible"][pose]
 
 
+@pytest.mark.slow
 def test_topped_up_poses_through_the_farm_and_the_reader(tree, tmp_path):
     # fewer dense points visible than a sample holds: every pose is topped up and no sample is
     # padded; dense and compact storage serve the same bytes, whatever the worker count, and verify
@@ -399,6 +404,7 @@ def test_a_tiny_visible_surface_pads_through_the_farm_and_is_counted(shingles_tr
     assert np.array_equal(arrays["dense"], arrays["compact"])
 
 
+@pytest.mark.slow
 def test_the_readme_and_farm_guide_examples_pad_under_5_percent(tmp_path, monkeypatch):
     # the first examples a user runs: README's farm line and the farm guide's demo, as written
     readme = (REPO_ROOT / "README.md").read_text()
@@ -415,6 +421,7 @@ def test_the_readme_and_farm_guide_examples_pad_under_5_percent(tmp_path, monkey
 
 
 # -- resume, failures, errors ---------------------------------------------------------------
+@pytest.mark.slow
 def test_sigkill_mid_run_then_resume_loses_and_repeats_nothing(tree, tmp_path):
     out = tmp_path / "killed"
     params = FarmParams(**{**PARAMS.to_dict(), "views": "fibonacci:24"})
@@ -463,6 +470,7 @@ def test_other_parameters_need_overwrite(tree, dense_run, tmp_path):
     assert summary.resumed == 0 and summary.samples == len(PARAMS.poses) * PARAMS.samples_per_view
 
 
+@pytest.mark.slow
 def test_corrupt_mesh_is_recorded_and_skipped(tmp_path):
     root = make_tree(tmp_path / "meshes", SMALL_MESHES[:2])
     bad = root / "chair" / "train" / "chair_0999.off"
@@ -508,6 +516,7 @@ def test_disk_full_is_a_clear_error_and_leaves_no_partial_files(tree, tmp_path, 
     assert not list((tmp_path / "full").rglob("*.h5")) and not list((tmp_path / "full").rglob(".*.tmp"))
 
 
+@pytest.mark.slow
 def test_cli_farm_and_farm_merge_run_with_their_options(tree, tmp_path):
     # the options reach run_farm: selection, rendering, storage, seed, shards, merge
     base = ["--classes", "chair,sofa,stool", "--per-class", "1", "--splits", "train", "--views", "0:0,40:90",
@@ -891,6 +900,7 @@ def _shapenet_tree(root: Path) -> Path:
     return root
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["farm", "generate"])
 def test_shapenet_layout_is_read_y_up_and_the_card_says_so(tmp_path, command):
     tree = _shapenet_tree(tmp_path / "shapenet")

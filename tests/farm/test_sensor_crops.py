@@ -50,6 +50,7 @@ def _sensor_position(meta: dict) -> np.ndarray:
     return centre + meta["radius"] * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
 
 
+@pytest.mark.slow
 def test_points_lie_on_the_hdl32e_rings_seen_from_the_recorded_sensor(sensor_run):
     ds = OccludedDataset(sensor_run)
     table = np.asarray(Lidar.preset("hdl32e").elevations_deg)
@@ -85,6 +86,7 @@ def test_a_direction_filter_matching_no_scan_is_an_error_not_an_empty_data_set(s
         OccludedDataset(sensor_run, azimuth_deg=lambda az: az > 1000)
 
 
+@pytest.mark.slow
 def test_return_physics_options_reach_the_scans(sensor_run, tmp_path):
     out = _farm(tmp_path / "phys", "--sensor-footprint", "--sensor-reflectivity", "0.05:0.1", "--sensor-distance", "15:20")
     card = json.loads((out / CARD_FILE).read_text())
@@ -103,6 +105,7 @@ def test_return_physics_options_reach_the_scans(sensor_run, tmp_path):
     assert 0 < n_phys < n_plain
 
 
+@pytest.mark.slow
 def test_ground_margin_keeps_the_ground_under_each_object(tmp_path):
     out = _farm(tmp_path / "ground", "--sensor-ground-margin", "0.5", "--points", "2048")
     card = json.loads((out / CARD_FILE).read_text())
@@ -124,6 +127,7 @@ def test_ground_margin_keeps_the_ground_under_each_object(tmp_path):
     assert "sensor_ground_margin_m" not in FarmParams(sensor="hdl32e").to_dict()  # earlier sensor data sets keep their digest
 
 
+@pytest.mark.slow
 def test_hidden_below_hides_each_objects_bottom(tmp_path):
     out = _farm(tmp_path / "hidden", "--sensor-hidden-below", "0.6:0.8", "--points", "2048")
     card = json.loads((out / CARD_FILE).read_text())
@@ -140,6 +144,7 @@ def test_hidden_below_hides_each_objects_bottom(tmp_path):
     assert cli_main(["verify", str(out)]) == 0
 
 
+@pytest.mark.slow
 def test_across_sight_width_stretches_each_object_to_the_asked_widths(tmp_path):
     out = _farm(tmp_path / "wide", "--sensor-across-sight-width", "0.6:0.9", "--samples-per-view", "3")
     card = json.loads((out / CARD_FILE).read_text())
@@ -159,6 +164,7 @@ def test_across_sight_width_stretches_each_object_to_the_asked_widths(tmp_path):
     assert cli_main(["verify", str(out)]) == 0
 
 
+@pytest.mark.slow
 def test_a_sensor_file_with_mixed_pixels_changes_the_scans(sensor_run, tmp_path):
     # a 7-ray footprint whose echoes within 0.75 m merge, against the same footprint without merging
     paths = {}
@@ -176,6 +182,7 @@ def test_a_sensor_file_with_mixed_pixels_changes_the_scans(sensor_run, tmp_path)
     assert differ >= 1
 
 
+@pytest.mark.slow
 def test_same_seed_same_bytes_and_worker_count_changes_nothing(sensor_run, tmp_path):
     again = _farm(tmp_path / "again")
     two = _farm(tmp_path / "two", "--workers", "2")
@@ -185,6 +192,7 @@ def test_same_seed_same_bytes_and_worker_count_changes_nothing(sensor_run, tmp_p
     assert set(_shard_hashes(other).values()).isdisjoint(_shard_hashes(sensor_run).values())
 
 
+@pytest.mark.slow
 def test_resume_redoes_only_what_is_missing(sensor_run, tmp_path):
     out = _farm(tmp_path / "ds")
     shards = sorted(out.rglob("*.h5"))
@@ -241,6 +249,7 @@ def test_sensor_params_are_checked():
         FarmParams(sensor="hdl32e", sensor_height_m=(-1.0, 2.0))
 
 
+@pytest.mark.slow
 def test_the_padding_warning_of_a_sensor_farm_names_what_applies(tmp_path, caplog):
     # 4,000 points per sample: more than a 5-20 m HDL-32E scan of a 2-4.5 m object returns
     args = [a if a != "128" else "4000" for a in ARGS]

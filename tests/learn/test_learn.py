@@ -124,6 +124,7 @@ def _box_vs_sphere(n_per_class: int, n_points: int, seed: int) -> D.CloudSet:
     return D.CloudSet(pts, np.array(labels), np.full(len(labels), np.nan), np.arange(len(labels)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "name,epochs,points,width,optimizer,lr",
     [
@@ -269,6 +270,7 @@ def test_dedupe_ignores_off_header_layout(tmp_path):
     assert [p.name for p in kept] == ["a.off", "c.off"] and [(d.name, o.name) for d, o in dropped] == [("b.off", "a.off")]
 
 
+@pytest.mark.slow
 def test_one_epoch_smoke_on_samples(tmp_path):
     """The documented smoke test: `zbuf-occlude experiment elevation data/samples --epochs 1`."""
     from zbuf_occlude.cli.main import main

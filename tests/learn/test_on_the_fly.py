@@ -97,6 +97,7 @@ def _epoch(ds, workers):
     return torch.cat([x for x, _ in loader]).numpy()
 
 
+@pytest.mark.slow
 def test_dataloader_workers_give_the_single_process_samples():
     ds = OnTheFlyOccludedDataset(SAMPLES, n_points=256, dense_points=4096, seed=2)
     ds.set_epoch(4)
@@ -106,6 +107,7 @@ def test_dataloader_workers_give_the_single_process_samples():
     assert not np.array_equal(_epoch(ds, 2), single)
 
 
+@pytest.mark.slow
 def test_random_occlusion_trains_pointnet_for_one_epoch():
     torch.manual_seed(0)
     ds = OnTheFlyOccludedDataset(SAMPLES, n_points=512, dense_points=8192, views_per_object=2)
@@ -143,6 +145,7 @@ def test_pyg_transform():
         t(Data(pos=torch.zeros(4, 3)))
 
 
+@pytest.mark.slow
 def test_epoch_sampler_carries_the_epoch_to_persistent_workers():
     from zbuf_occlude.learn import EpochSampler
 
@@ -161,6 +164,7 @@ def test_epoch_sampler_carries_the_epoch_to_persistent_workers():
     assert sorted(i for _, i in shuffled) == list(range(len(ds))) and list(shuffled) == list(EpochSampler(ds, shuffle=True, seed=1))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("context", ["fork", "spawn"])
 def test_set_epoch_reaches_persistent_workers(context):
     """The usual pattern: ds.set_epoch(e) before each epoch, persistent workers, no special sampler."""

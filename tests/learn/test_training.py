@@ -36,6 +36,7 @@ def _labels_seen(monkeypatch: pytest.MonkeyPatch) -> list[np.ndarray]:
     return seen
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("balance, expected", [("none", [12, 4]), ("sampler", [8, 8])])
 def test_the_sampler_shows_every_class_equally_often(monkeypatch, balance, expected) -> None:
     seen = _labels_seen(monkeypatch)

@@ -102,6 +102,7 @@ class _CountedEdges(dict):
         return super().__contains__(key)
 
 
+@pytest.mark.slow
 def test_a_50000_deep_chain_is_walked_once() -> None:
     """Each edge read a bounded number of times (trimesh reads a path per mesh: n² / 2 here)."""
     n, every = 50_000, 1_000

@@ -54,6 +54,7 @@ def _card(out: Path) -> dict:
 
 
 # -- ShapeNetCore ------------------------------------------------------------------------
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["farm", "generate"])
 def test_a_shapenetcore_v2_tree_gets_its_real_class_names(tmp_path: Path, command: str) -> None:
     root = shapenet_tree(tmp_path / "ShapeNetCore.v2")
@@ -170,6 +171,7 @@ def test_a_tree_whose_classes_look_wrong_exits_2(tmp_path: Path, capsys, command
     assert not (tmp_path / "out" / "records").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["farm", "generate"])
 def test_class_from_names_the_class_folder(tmp_path: Path, command: str) -> None:
     for k, rel in enumerate(DEGENERATE["container"]):
@@ -199,6 +201,7 @@ def test_class_from_below_1_exits_2_naming_the_value(tmp_path: Path, capsys, val
 
 
 # -- what cannot be used is reported -------------------------------------------------------------
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["generate", "farm"])
 def test_broken_links_and_link_loops_are_skipped_reported_and_recorded(tmp_path: Path, capsys, command: str) -> None:
     root = tmp_path / "root"

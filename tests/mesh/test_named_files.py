@@ -58,6 +58,7 @@ def test_gltf_buffer_uri_naming_a_fifo_is_refused(tmp_path: Path) -> None:
     assert "MeshLoadError" in out and "data.bin" in out and "FIFO" in out, out
 
 
+@pytest.mark.slow
 def test_obj_mtllib_naming_a_fifo_does_not_block(tmp_path: Path) -> None:
     os.mkfifo(tmp_path / "mat.mtl")
     path = tmp_path / "tri.obj"

@@ -203,6 +203,7 @@ def _street_files() -> list[Path]:
     return sorted(p for p in STREET_OBJECTS.rglob("*") if p.suffix.lower() in (".obj", ".glb", ".gltf", ".dae"))
 
 
+@pytest.mark.slow
 @needs_collada
 @pytest.mark.skipif(not _street_files(), reason="../shared/data/street_objects not present")
 def test_every_street_object_loads_and_cars_are_longer_than_tall() -> None:

@@ -138,6 +138,7 @@ def test_load_real_scans_missing_path(tmp_path):
 
 if LIDARNET.is_dir():  # extra coverage next to ../shared; a fresh clone has nothing to skip
 
+    @pytest.mark.slow
     def test_real_lidarnet_tree():
         scans = load_real_scans(LIDARNET)
         labels = {s.label for s in scans}

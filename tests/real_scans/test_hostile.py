@@ -51,6 +51,7 @@ def test_npy_header_declaring_more_than_the_member_holds_is_refused(tmp_path: Pa
         read_points(path)
 
 
+@pytest.mark.slow
 def test_a_csv_scan_takes_memory_like_its_points_not_like_python_strings(tmp_path: Path) -> None:
     path = tmp_path / "many.csv"
     n = 200_000
@@ -102,6 +103,7 @@ def _peak_bytes(read, path: Path):
         tracemalloc.stop()
 
 
+@pytest.mark.slow
 def test_a_lidarnet_csv_takes_memory_like_its_points_not_like_python_rows(tmp_path: Path) -> None:
     from zbuf_occlude.real_scans.datasets import read_lidarnet_csv
 
@@ -115,6 +117,7 @@ def test_a_lidarnet_csv_takes_memory_like_its_points_not_like_python_rows(tmp_pa
     assert peak < 100 * n, peak / n
 
 
+@pytest.mark.slow
 def test_a_suo_csv_takes_memory_like_its_records_not_like_python_tuples(tmp_path: Path) -> None:
     from zbuf_occlude.real_scans.datasets import SUO_DTYPE, read_suo_csv
 

@@ -146,6 +146,7 @@ def _probe(**env) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow
 def test_without_egl_the_default_falls_back_to_osmesa_for_real():
     got = _probe(**NO_EGL)
     if HAVE_OSMESA:
@@ -155,6 +156,7 @@ def test_without_egl_the_default_falls_back_to_osmesa_for_real():
         assert not got["ok"] and "egl:" in got["error"] and "osmesa:" in got["error"], got
 
 
+@pytest.mark.slow
 def test_zbuf_occlude_gl_picks_the_backend_for_real():
     got = _probe(ZBUF_OCCLUDE_GL="osmesa")
     if HAVE_OSMESA:

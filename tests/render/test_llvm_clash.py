@@ -45,6 +45,7 @@ print("ok")
 """
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "then",
     [
@@ -56,11 +57,13 @@ def test_triton_after_a_gl_context_does_not_crash(then):
     _assert_survives(_run(CONTEXT_FIRST.format(then=then)))
 
 
+@pytest.mark.slow
 def test_triton_before_a_gl_context_still_works():
     _assert_survives(_run("import torch, triton\nfrom zbuf_occlude.render.context import shared_context\nshared_context()\n"
                           "torch.use_deterministic_algorithms(True)\nprint('ok')"))
 
 
+@pytest.mark.slow
 def test_a_users_torch_compile_after_visibility_work():
     code = """
 import numpy as np, torch, trimesh, zbuf_occlude as zo
@@ -74,6 +77,7 @@ print("ok")
     _assert_survives(_run(code, timeout=600))
 
 
+@pytest.mark.slow
 def test_forked_dataloader_workers_import_triton_after_the_parents_context():
     code = """
 import torch
@@ -96,6 +100,7 @@ print("ok")
     _assert_survives(_run(code))
 
 
+@pytest.mark.slow
 def test_import_loads_no_llvm_and_importing_triton_loads_it_bound_to_itself():
     code = """
 import sys
@@ -113,6 +118,7 @@ print("ok")
 COMPILE = "f = torch.compile(lambda x: (x * 2).sin().sum()); assert abs(float(f(torch.ones(8))) - 8 * 0.9092974) < 1e-4"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("then", ["torch.use_deterministic_algorithms(True)", COMPILE])
 def test_pyrender_backend_then_triton(then):
     pytest.importorskip("pyrender")
@@ -127,6 +133,7 @@ print("ok")
     _assert_survives(_run(code, timeout=600))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "before",
     [
@@ -141,6 +148,7 @@ def test_a_users_own_moderngl_context(before, then):
     _assert_survives(_run(f"import torch\n{before}\n{then}\nprint('ok')", timeout=600))
 
 
+@pytest.mark.slow
 def test_torch_compile_before_the_first_render():
     code = """
 import torch, trimesh, zbuf_occlude as zo
@@ -155,6 +163,7 @@ print("ok")
     _assert_survives(_run(code, timeout=600))
 
 
+@pytest.mark.slow
 def test_spawned_dataloader_workers_render_and_import_triton(tmp_path):
     (tmp_path / "spawn_items.py").write_text("""
 import torch

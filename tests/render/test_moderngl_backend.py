@@ -115,6 +115,7 @@ def test_osmesa_fallback_renders_the_same_depth(sphere):
     assert np.allclose(egl, osmesa, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_missing_egl_gives_a_clear_error():
     code = (
         "from zbuf_occlude.render.context import create_context\n"

@@ -39,6 +39,7 @@ def _in_patch(points, heading_deg: float, center, half_along: float, half_across
     return int(np.sum((np.abs(local[:, 0]) <= half_along) & (np.abs(local[:, 1]) <= half_across)))
 
 
+@pytest.mark.slow
 @settings(max_examples=25, deadline=None)
 @given(
     altitude_m=st.floats(100.0, 400.0),

@@ -124,6 +124,7 @@ def test_yaml_aliases_are_refused_before_anything_is_expanded(tmp_path: Path) ->
     assert "laughs.yaml" in message and "alias" in message and "line 5" in message
 
 
+@pytest.mark.slow
 def test_the_billion_laughs_scene_is_refused_in_a_process_capped_at_1_gib(tmp_path: Path) -> None:
     """9**11 values from 800 bytes grew past 8 GB; run where a regression dies of MemoryError instead."""
     path = tmp_path / "laughs.yaml"

@@ -169,6 +169,7 @@ def test_fit_width_profile_pulls_a_t_posed_persons_arms_in() -> None:
     assert outline[6] < 1.65
 
 
+@pytest.mark.slow
 def test_scan_outline_option(tmp_path) -> None:
     """`scan --crop --outline`: a cylinder narrowed at its foot and widened at its top shows that outline, and the option is checked."""
     from zbuf_occlude.cli.main import main

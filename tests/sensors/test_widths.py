@@ -131,6 +131,7 @@ def test_a_stretched_crop_keeps_its_stretch_in_the_mesh_frame(stretch: float) ->
     assert np.hypot(*(plain.sensor_local[:2])) == pytest.approx(6.0 / 2.0, abs=1e-9)
 
 
+@pytest.mark.slow
 def test_fit_width_scale_makes_the_crops_as_wide_as_asked() -> None:
     post = trimesh.creation.cylinder(radius=0.05, height=1.0, sections=32)
     lidar = lidar_preset("hdl32e", range_noise_m=0.0)

@@ -89,6 +89,7 @@ def test_edge_on_faces_and_axis_poses_are_settled_exactly():
         _check_settled(mesh, points, None, cam)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["chair/train/chair_0001.off", "sofa", "bathtub", "table"])
 def test_settled_points_get_the_oracles_answer_on_shipped_meshes(name):
     path = SAMPLES / name if name.endswith(".off") else sorted((SAMPLES / name).rglob("*.off"))[0]

@@ -187,6 +187,7 @@ def test_edge_on_rule_is_a_threshold_on_the_angle():
     assert edge_on_own(n[1:], p[1:], eye[1]).tolist() == [False]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("backend", ["egl", "osmesa"])
 def test_auto_picks_a_valid_method_on_each_gl_backend(backend):
     code = (

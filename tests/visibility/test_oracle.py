@@ -317,6 +317,7 @@ def test_the_reference_itself_on_a_hand_checked_case():
     assert tie.tolist() == [[False, False], [False, False], [True, True], [False, False]]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", SMALL_MESHES, ids=_mesh_id)
 def test_oracle_matches_an_independent_moller_trumbore_on_real_meshes(path, record_property):
     """Numpy and Embree oracles vs the reference, on real non-dyadic meshes: equal on every

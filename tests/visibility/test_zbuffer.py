@@ -57,6 +57,7 @@ def test_zbuffer_agrees_with_the_oracle_on_real_modelnet_meshes(modelnet_off_fil
     _assert_sweep(_sweep(modelnet_off_file), modelnet_off_file, MIN_AGREEMENT)
 
 
+@pytest.mark.slow
 def test_zbuffer_tolerance_is_a_weaker_but_sane_baseline(sample_mesh_files):
     # measured on chair_0001 at 1024²: mean ~93 %, worst pose ~82 % (thin parts, slivers);
     # the default method must beat it on average

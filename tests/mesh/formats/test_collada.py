@@ -52,6 +52,7 @@ def _doubling_nodes(levels: int) -> str:
     return "".join(nodes)
 
 
+@pytest.mark.slow
 @needs_collada
 def test_collada_instancing_past_the_face_cap_is_refused_before_trimesh(tmp_path: Path) -> None:
     # 10,000 triangles placed 2**11 times through instance_node: 20,480,000 triangles from 60 KB.

@@ -66,6 +66,7 @@ def test_shared_children_multiply_instances() -> None:
         check_gltf_declared_sizes(json.dumps(doc).encode(), "shared.gltf")
 
 
+@pytest.mark.slow
 def test_more_nodes_than_the_cap_are_refused_before_the_walk() -> None:
     doc = {"asset": {"version": "2.0"}, "nodes": [{}] * (MAX_SCENE_NODES + 1)}
     with pytest.raises(MeshLoadError, match=rf"nodes.gltf: declares {MAX_SCENE_NODES + 1:,} scene nodes.*{MAX_SCENE_NODES:,}"):
@@ -83,6 +84,7 @@ def _embedded_triangle() -> dict:
     }
 
 
+@pytest.mark.slow
 def test_a_50000_deep_chain_loads_in_linear_time(tmp_path: Path) -> None:
     """Every node moves its child 1 along x; the triangle at the root and at the leaf.
 
