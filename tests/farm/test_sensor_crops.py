@@ -22,7 +22,8 @@ from zbuf_occlude.farm.sensor_crops import farm_datasets
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors import Lidar
 from zbuf_occlude.sensors.placement import CropDistributions
-from zbuf_occlude.sensors.fit import fit_width_scale, lidar_to_json
+from zbuf_occlude.sensors.fit import fit_width_scale
+from zbuf_occlude.sensors.presets import sensor_to_json
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 ARGS = ["--sensor", "hdl32e", "--samples-per-view", "2", "--points", "128", "--per-class", "1", "--splits", "train",
@@ -169,7 +170,7 @@ def test_a_sensor_file_with_mixed_pixels_changes_the_scans(sensor_run, tmp_path)
     # a 7-ray footprint whose echoes within 0.75 m merge, against the same footprint without merging
     paths = {}
     for name, separation in (("sharp", 0.0), ("mixed", 0.75)):
-        spec = lidar_to_json(Lidar.preset("hdl32e").with_(name=f"hdl32e-{name}", footprint_rays=7, echo_separation_m=separation))
+        spec = sensor_to_json(Lidar.preset("hdl32e").with_(name=f"hdl32e-{name}", footprint_rays=7, echo_separation_m=separation))
         paths[name] = tmp_path / f"{name}.json"
         paths[name].write_text(json.dumps(spec))
     runs = {}

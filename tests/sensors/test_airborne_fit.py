@@ -199,3 +199,15 @@ def test_the_spinning_fit_still_takes_spinning_scans() -> None:
         s = scan(box, sensor, tilt, seed=i, azimuth_range_deg=(-40.0, 40.0))
         clouds.append(np.asarray(s.points, dtype=np.float64) @ tilt[:3, :3])  # in the tilted sensor's frame
     assert fit_lidar(clouds, sensor, bootstrap=5).n_scans == 4
+
+
+@pytest.mark.parametrize("name", ["hdl32e", "dales-q1560", "riegl-q1560", "kinect-v1"])
+def test_sensor_to_json_is_what_sensor_from_name_reads_back(name, tmp_path) -> None:
+    from zbuf_occlude.sensors.presets import sensor_to_json
+
+    sensor = sensor_from_name(name)
+    path = tmp_path / "s.json"
+    path.write_text(json.dumps(sensor_to_json(sensor)))
+    assert sensor_from_name(path) == sensor
+    with pytest.raises(InvalidInputError, match="not a sensor: str"):
+        sensor_to_json("hdl32e")

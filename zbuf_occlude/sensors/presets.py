@@ -8,7 +8,7 @@ from pathlib import Path
 
 from zbuf_occlude.errors import InvalidInputError
 
-__all__ = ["SENSOR_KINDS", "sensor_from_name"]
+__all__ = ["SENSOR_KINDS", "sensor_from_name", "sensor_to_json"]
 
 #: ``"kind"`` of a sensor file, and the class it makes (``"lidar"`` when the file has none).
 SENSOR_KINDS = ("lidar", "airborne", "depth_camera")
@@ -64,6 +64,30 @@ def sensor_from_name(name: str | os.PathLike):
                 return airborne_preset(text(spec.pop("preset"), "preset")).with_(**spec)
             return cls(**_complete(spec, cls))
     raise InvalidInputError(f"unknown sensor {shown(name)}; use one of {sorted(LIDAR_PRESETS) + sorted(AIRBORNE_PRESETS) + sorted(DEPTH_CAMERA_PRESETS)} or a .json file")
+
+
+def sensor_to_json(sensor) -> dict:
+    """A sensor's constructor fields as JSON-ready values with its ``"kind"``: the file
+    :func:`sensor_from_name` reads back as an equal sensor.
+
+    Raises
+    ------
+    InvalidInputError
+        Not a :class:`Lidar`, :class:`AirborneScanner` or :class:`DepthCamera`.
+    """
+    from zbuf_occlude.sensors.airborne import AirborneScanner
+    from zbuf_occlude.sensors.depth_camera import DepthCamera
+    from zbuf_occlude.sensors.lidar import Lidar
+
+    kinds = {Lidar: "lidar", AirborneScanner: "airborne", DepthCamera: "depth_camera"}
+    if type(sensor) not in kinds:
+        raise InvalidInputError(f"not a sensor: {type(sensor).__name__}")
+    spec: dict = {"kind": kinds[type(sensor)]}
+    for f in fields(sensor):
+        if f.init:
+            v = getattr(sensor, f.name)
+            spec[f.name] = list(v) if isinstance(v, tuple) else v
+    return spec
 
 
 def _complete(spec: dict, cls: type) -> dict:

@@ -18,7 +18,7 @@ Every name is imported from here (``from zbuf_occlude.sensors.fit import fit_lid
 
 from __future__ import annotations
 
-from zbuf_occlude.sensors.fit.airborne import AirborneFit, airborne_to_json, crop_faces, fit_airborne
+from zbuf_occlude.sensors.fit.airborne import AirborneFit, crop_faces, fit_airborne
 from zbuf_occlude.sensors.fit.lidar import (
     BOOTSTRAP,
     MAX_DROPOUT_GAP,
@@ -28,7 +28,6 @@ from zbuf_occlude.sensors.fit.lidar import (
     Estimate,
     LidarFit,
     fit_lidar,
-    lidar_to_json,
 )
 from zbuf_occlude.sensors.fit.scans import (
     DISTANCE_QUANTILES,
@@ -55,10 +54,10 @@ from zbuf_occlude.sensors.fit.shapes import (
 )
 
 __all__ = [
-    "AirborneFit", "airborne_to_json", "crop_faces", "fit_airborne", "RING_SHARE",
+    "AirborneFit", "crop_faces", "fit_airborne", "RING_SHARE",
     "across_sight_width", "BOOTSTRAP", "crop_placement_json", "DISTANCE_QUANTILES", "Estimate", "fit_crop_bottoms",
     "fit_crop_distances", "fit_crop_heights", "fit_crop_width_profile", "fit_crop_widths", "fit_lidar", "fit_object_shape",
-    "fit_sensor_height", "fit_visible_across_sight", "fit_width_profile", "fit_width_scale", "lidar_to_json", "LidarFit",
+    "fit_sensor_height", "fit_visible_across_sight", "fit_width_profile", "fit_width_scale", "LidarFit",
     "MAX_DROPOUT_GAP", "MIN_PLACEMENT_SCANS", "MIN_RETURNS", "PLANE_NEIGHBOURS", "SENSOR_HEIGHT_QUANTILE", "WIDTH_BAND_M",
     "width_profile", "WIDTH_PROFILE_BINS", "WIDTH_SAMPLES",
 ]  # fmt: skip

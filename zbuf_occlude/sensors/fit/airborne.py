@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -60,7 +60,7 @@ from zbuf_occlude.sensors.airborne import AirborneScanner
 from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate
 
 __all__ = [
-    "AirborneFit", "CropFaces", "HORIZONTAL_DEG", "MIN_CROP_POINTS", "PLANE_NEIGHBOURS", "airborne_to_json", "crop_faces",
+    "AirborneFit", "CropFaces", "HORIZONTAL_DEG", "MIN_CROP_POINTS", "PLANE_NEIGHBOURS", "crop_faces",
     "fit_airborne",
 ]  # fmt: skip
 
@@ -306,22 +306,14 @@ class AirborneFit:
     def to_json(self) -> dict:
         """A sensor file that ``scan``, ``farm --sensor`` and ``experiment sim2real --sensor`` take: the
         scanner's fields with ``"kind": "airborne"`` and, under ``"fit"``, the estimates (metadata)."""
-        spec = airborne_to_json(self.sensor)
+        from zbuf_occlude.sensors.presets import sensor_to_json
+
+        spec = sensor_to_json(self.sensor)
         spec["fit"] = {
             "base": self.base.name, "n_crops": self.n_crops,
-            "estimates": {k: {f.name: getattr(e, f.name) for f in fields(e)} for k, e in self.estimates.items()},
+            "estimates": {k: vars(e) for k, e in self.estimates.items()},
         }  # fmt: skip
         return spec
-
-
-def airborne_to_json(sensor: AirborneScanner) -> dict:
-    """An AirborneScanner's constructor fields as JSON-ready values, with ``"kind": "airborne"``."""
-    spec: dict = {"kind": "airborne"}
-    for f in fields(sensor):
-        if f.init:
-            v = getattr(sensor, f.name)
-            spec[f.name] = list(v) if isinstance(v, tuple) else v
-    return spec
 
 
 def fit_airborne(crops: Sequence[NDArray[np.floating]], base: AirborneScanner, *, seed: int = 0, bootstrap: int = BOOTSTRAP) -> AirborneFit:

@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -54,7 +54,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.lidar import Lidar
 
 __all__ = [
-    "BOOTSTRAP", "Estimate", "fit_lidar", "lidar_to_json", "LidarFit", "MAX_DROPOUT_GAP", "MIN_RETURNS", "PLANE_NEIGHBOURS", "RING_SHARE",
+    "BOOTSTRAP", "Estimate", "fit_lidar", "LidarFit", "MAX_DROPOUT_GAP", "MIN_RETURNS", "PLANE_NEIGHBOURS", "RING_SHARE",
 ]  # fmt: skip
 #: Bootstrap resamples of the scans for every uncertainty.
 BOOTSTRAP = 200
@@ -106,7 +106,9 @@ class LidarFit:
 
     def to_json(self) -> dict:
         """The sensor as :func:`~zbuf_occlude.sensors.presets.sensor_from_name` reads it, plus a ``fit`` block."""
-        spec = lidar_to_json(self.sensor)
+        from zbuf_occlude.sensors.presets import sensor_to_json
+
+        spec = sensor_to_json(self.sensor)
         spec["fit"] = {"base": self.base.name, "n_scans": self.n_scans,
                        "estimates": {k: vars(e) for k, e in self.estimates.items()}}  # fmt: skip
         return spec
@@ -117,16 +119,6 @@ class LidarFit:
         for name, e in self.estimates.items():
             lines.append(f"| {name} | {e.value:.4g} ± {e.std:.2g} | {e.unit} | {e.n} | {'yes' if e.set_in_sensor else 'no'} | {e.method} |")
         return "\n".join(lines) + "\n"
-
-
-def lidar_to_json(sensor: Lidar) -> dict:
-    """A Lidar's constructor fields as JSON-ready values, with ``"kind": "lidar"``."""
-    spec = {"kind": "lidar"}
-    for f in fields(sensor):
-        if f.init:
-            v = getattr(sensor, f.name)
-            spec[f.name] = list(v) if isinstance(v, tuple) else v
-    return spec
 
 
 @dataclass
