@@ -64,12 +64,6 @@ def _default_paths(paths: list[str]) -> list[str]:
     return [str(SAMPLE_MESHES)]
 
 
-def _progress(iterable, **kwargs):
-    from tqdm.auto import tqdm
-
-    return tqdm(iterable, disable=None, **kwargs)
-
-
 # -- generate ------------------------------------------------------------------------------
 def cmd_generate(args: argparse.Namespace) -> int:
     """``generate`` runs on the farm's engine (:mod:`zbuf_occlude.farm.generate`)."""

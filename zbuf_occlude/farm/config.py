@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from zbuf_occlude.dataset.layout import GENERATE_STORAGES, STORAGE_MODES, record_name, sample_file_name, shard_name
+from zbuf_occlude.dataset.layout import GENERATE_STORAGES, STORAGE_MODES, record_name, shard_name
 from zbuf_occlude.defaults import (
     DEFAULT_DENSE_POINTS,
     DEFAULT_FARM_DENSE_POINTS,
@@ -279,13 +279,6 @@ def plan_digest(objects: Sequence[FarmObject]) -> str:
 def shard_path(obj: FarmObject) -> str:
     """The shard of ``obj`` relative to the data set folder."""
     return shard_name(obj.split, obj.index)
-
-
-def sample_file_path(name: str, pose_index: int, cloud, fmt: str) -> str:
-    """``generate``'s file of one sample relative to ``--out``, e.g.
-    ``chair/train/chair_0001/chair_0001_v007_el+030_az045_s03.npz``: the pose index keeps
-    names unique, the angles (whole degrees) keep them readable."""
-    return sample_file_name(name, pose_index, cloud.elevation_deg, cloud.azimuth_deg, cloud.sample_index, fmt)
 
 
 def record_path(out: Path, index: int) -> Path:
