@@ -178,6 +178,14 @@ def _walls(normals: NDArray[np.float64]) -> list[NDArray[np.int64]]:
     return [g for g in groups if len(g) >= _MIN_WALL_POINTS]
 
 
+def _checked_crop(points, where: str = "") -> NDArray[np.float64]:
+    """``points`` as ``(N, 3) float64``, or InvalidInputError (``where`` names the crop)."""
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3 or not np.all(np.isfinite(p)):
+        raise InvalidInputError(f"{where}expected finite (N, 3) points, got shape {p.shape}")
+    return p
+
+
 def crop_faces(points: NDArray[np.floating]) -> CropFaces:
     """Split one crop into its top and walls and measure them (module docstring).
 
@@ -191,9 +199,7 @@ def crop_faces(points: NDArray[np.floating]) -> CropFaces:
     InvalidInputError
         Not finite ``(N, 3)`` points, or fewer than :data:`MIN_CROP_POINTS`.
     """
-    p = np.asarray(points, dtype=np.float64)
-    if p.ndim != 2 or p.shape[1] != 3 or not np.all(np.isfinite(p)):
-        raise InvalidInputError(f"expected finite (N, 3) points, got shape {p.shape}")
+    p = _checked_crop(points)
     if len(p) < MIN_CROP_POINTS:
         raise InvalidInputError(f"a crop needs at least {MIN_CROP_POINTS} points, got {len(p)}")
     normal, variance, idx = _local_planes(p)
@@ -344,9 +350,7 @@ def fit_airborne(crops: Sequence[NDArray[np.floating]], base: AirborneScanner, *
         raise InvalidInputError(f"bootstrap must be >= 2, got {bootstrap!r}")
     faces = []
     for i, crop in enumerate(crops):
-        p = np.asarray(crop, dtype=np.float64)
-        if p.ndim != 2 or p.shape[1] != 3 or not np.all(np.isfinite(p)):
-            raise InvalidInputError(f"crop {i}: expected finite (N, 3) points, got shape {p.shape}")
+        p = _checked_crop(crop, f"crop {i}: ")
         if len(p) >= MIN_CROP_POINTS:
             faces.append(crop_faces(p))
     if len(faces) < 2:

@@ -285,9 +285,10 @@ def _check_rings(stats: Sequence[_ScanStats], base: Lidar) -> None:
         )
     beams = np.sort(np.asarray(base.elevations_deg, dtype=np.float64))
     spacing = float(np.median(np.diff(beams))) if len(beams) > 1 else math.inf
-    residual = np.concatenate([st.elevation_residual_deg - np.median(st.elevation_residual_deg) for st in stats])
+    # each scan's residuals about its own median (a mount tilt taken out)
+    centred = [np.abs(st.elevation_residual_deg - np.median(st.elevation_residual_deg)) for st in stats]
     widest = float(np.max(np.diff(beams))) if len(beams) > 1 else 0.0
-    outside = float(np.mean(np.abs(residual) > widest / 2.0 + _OUTSIDE_BEAMS_DEG))
+    outside = float(np.mean(np.concatenate(centred) > widest / 2.0 + _OUTSIDE_BEAMS_DEG))
     if outside > 1.0 - RING_SHARE:
         raise InvalidInputError(
             f"fit_lidar: no sensor origin consistent with {base.name}'s rings: {outside:.0%} of the returns lie outside its "
@@ -295,11 +296,10 @@ def _check_rings(stats: Sequence[_ScanStats], base: Lidar) -> None:
             "sensor's frame (airborne crops or world coordinates?); fit an airborne scanner to airborne crops (fit_airborne)"
         )
     # only scans over three rings or more tell: a short object far away may lie within one beam spacing
-    telling = [st for st in stats if st.ring_spacings_deg.sum() >= 2.0 * spacing]
+    telling = [c for st, c in zip(stats, centred, strict=True) if st.ring_spacings_deg.sum() >= 2.0 * spacing]
     if len(telling) < 3:
         return
-    near = [np.abs(st.elevation_residual_deg - np.median(st.elevation_residual_deg)) <= spacing / 8.0 for st in telling]
-    share = float(np.concatenate(near).mean())
+    share = float(np.mean(np.concatenate(telling) <= spacing / 8.0))
     if share < RING_SHARE:
         raise InvalidInputError(
             f"fit_lidar: no sensor origin consistent with {base.name}'s rings: {share:.0%} of the returns lie within an eighth "
