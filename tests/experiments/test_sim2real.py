@@ -404,6 +404,39 @@ def test_fit_sensor_needs_sensor_frame_points_and_a_spinning_lidar() -> None:
         _fit_sensor([SimpleNamespace(source="Car/0.xyz", points_sensor_m=None)], lidar_preset("hdl32e"), np.zeros(1), ["car"])
 
 
+def test_an_airborne_sensor_with_fit_sensor_is_refused_before_anything_is_read(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                              capsys: pytest.CaptureFixture) -> None:  # fmt: skip
+    import zbuf_occlude.experiments.sim2real as s2r
+    import zbuf_occlude.real_scans.datasets as datasets
+
+    read: list[str] = []
+    monkeypatch.setattr(datasets, "load_real_scans", lambda *a, **k: read.append("scans") or [])
+    monkeypatch.setattr(s2r, "find_class_meshes", lambda *a, **k: read.append("meshes") or [])
+    argv = ["experiment", "sim2real", str(_mesh_root(tmp_path)), "--real", str(tmp_path), "--out", str(tmp_path / "o"),
+            "--sensor", "dales-q1560", "--fit-sensor", "--no-progress"]  # fmt: skip
+    assert main(argv) == 2 and read == []
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--fit-sensor" in err and "--sensor dales-q1560" in err and "airborne" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_fit_sensor_says_what_it_reads_and_fits_before_and_after_the_fit(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import zbuf_occlude.experiments.sim2real as s2r
+    from zbuf_occlude.experiments.sim2real import Sim2RealConfig, prepare_sets
+
+    said: list[str] = []
+    fits = _fit_spy(monkeypatch)
+    spy = s2r._fit_sensor
+    monkeypatch.setattr(s2r, "_fit_sensor", lambda *a: said.append("<fit>") or spy(*a))
+    config = Sim2RealConfig(_mesh_root(tmp_path), _real_root(tmp_path), label_map={"Trunk": "pole"}, fit_sensor=True, points=32)
+    prepare_sets(config, say=said.append)
+    assert len(fits) == 1
+    fit_at = said.index("<fit>")
+    assert str(tmp_path / "real") in said[0]  # what it reads, first
+    assert "fitting hdl32e" in said[fit_at - 1] and "6 scans" in said[fit_at - 1]  # a line before the fit ...
+    assert said[fit_at + 1].startswith("fitted hdl32e in")  # ... and one after it
+
+
 def _box_scan(distance: float, seed: int) -> np.ndarray:
     from zbuf_occlude.sensors import lidar_preset, scan
 
@@ -737,7 +770,9 @@ def test_config_messages_name_the_fields_or_the_flags_given() -> None:
              ({"fitted_shape": ("outline",)}, "fitted_shape needs fit_sensor", "--fitted-shape needs --fit-sensor"),
              ({"occluded_elevation_deg": (10.0, 95.0)}, "occluded_elevation_deg must be", "--occluded-elevation must be"),
              ({"seeds": 0}, "seeds must be >= 1", "--seeds must be >= 1"),
-             ({"sensor": "kinect-v1"}, "sensor kinect-v1: the lidar training set needs", "--sensor kinect-v1: the lidar training set needs")]  # fmt: skip
+             ({"sensor": "kinect-v1"}, "sensor kinect-v1: the lidar training set needs", "--sensor kinect-v1: the lidar training set needs"),
+             ({"sensor": "dales-q1560", "fit_sensor": True}, "fit_sensor fits a spinning LiDAR, but sensor dales-q1560",
+              "--fit-sensor fits a spinning LiDAR, but --sensor dales-q1560")]  # fmt: skip
     for bad, field_words, flag_words in cases:
         with pytest.raises(InvalidInputError, match=field_words):
             Sim2RealConfig("m", "r", **bad)

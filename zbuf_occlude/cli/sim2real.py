@@ -63,8 +63,13 @@ def _run(args: argparse.Namespace) -> int:
         fitted_shape=() if args.fitted_shape == "none" else tuple(v.strip() for v in args.fitted_shape.split(",")),
         aspect=args.augment == "aspect", option_names=OPTION_NAMES,
     )  # fmt: skip
-    summary = run_sim2real(config, args.out, device=args.device, threads=args.threads, progress=not args.no_progress)
+    summary = run_sim2real(config, args.out, device=args.device, threads=args.threads, progress=not args.no_progress, say=_say)
     return print_table(args.out, summary)
+
+
+def _say(line: str) -> None:
+    """A stage of the run, one line on stderr as it starts (reading, the fit: minutes on a large data set)."""
+    print(f"sim2real: {line}", file=sys.stderr, flush=True)
 
 
 def _classes_option(text: str | None) -> str | list[str] | None:

@@ -57,6 +57,7 @@ import json
 import logging
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -209,7 +210,7 @@ def _kinds(config: Sim2RealConfig) -> tuple[str, ...]:
 
 
 def run_sim2real(config: Sim2RealConfig, out: str | os.PathLike, *, device: str = "cpu", threads: int | None = None,
-                 progress: bool = True) -> dict:  # fmt: skip
+                 progress: bool = True, say: Callable[[str], None] | None = None) -> dict:  # fmt: skip
     """Train on each synthetic training set and on real scans, ``config.seeds`` times; score on the real scans.
 
     Three stages: :func:`prepare_sets` (the scans, meshes and fitted sensor every seed uses; then
@@ -225,6 +226,9 @@ def run_sim2real(config: Sim2RealConfig, out: str | os.PathLike, *, device: str 
         settings are unchanged, and is refused otherwise.
     device : {"cpu", "cuda"}; threads : int, optional; progress : bool
         How the training runs (torch device and CPU threads, progress bars); no result depends on them.
+    say : callable, optional
+        Takes one line per stage of :func:`prepare_sets` (what it reads, the fit before and after it);
+        default: the module's log at INFO level.
 
     Returns
     -------
@@ -239,7 +243,7 @@ def run_sim2real(config: Sim2RealConfig, out: str | os.PathLike, *, device: str 
     """
     t_start = time.perf_counter()
     out = Path(out)
-    sets = prepare_sets(config)
+    sets = prepare_sets(config, say=say)
     settings = _fix_settings(config, sets, out)
     done = _load_runs(out / "runs.jsonl")
     for seed in range(int(config.seeds)):
@@ -247,9 +251,11 @@ def run_sim2real(config: Sim2RealConfig, out: str | os.PathLike, *, device: str 
     return write_outputs(config, sets, settings, done, out, wall_s=time.perf_counter() - t_start)
 
 
-def prepare_sets(config: Sim2RealConfig) -> Sim2RealSets:
+def prepare_sets(config: Sim2RealConfig, *, say: Callable[[str], None] | None = None) -> Sim2RealSets:
     """Load the real scans and the meshes, split the scans into their fixed halves and, with
     ``fit_sensor``, fit the sensor and the crops to the first half (:class:`Sim2RealSets`).
+
+    ``say`` takes a line before each slow stage and after the fit (default: the log at INFO level).
 
     Raises
     ------
@@ -258,9 +264,12 @@ def prepare_sets(config: Sim2RealConfig) -> Sim2RealSets:
     """
     from zbuf_occlude.real_scans.datasets import load_real_scans
 
+    say = say or log.info
     lidar, n_points, label_map = config.sensor, config.n_points, dict(config.label_map)
+    say(f"reading the real scans of {config.real}")
     scans = load_real_scans(config.real, **config.real_options)  # first: cheap, and classes="real" needs them
     wanted = _classes(config.classes, config.mesh_root, scans, label_map)
+    say(f"{len(scans)} real scans; loading the meshes of {config.mesh_root} and trying each with {lidar.name}")
     meshes = find_class_meshes(config.mesh_root, up=config.up, up_map=config.up_map, classes=wanted)
     meshes, skipped = check_lidar_meshes(meshes, lidar, config.sizes, n_points, min_returns=int(config.min_returns))
     names = sorted({m.class_name for m in meshes})
@@ -270,7 +279,12 @@ def prepare_sets(config: Sim2RealConfig) -> Sim2RealSets:
     if not config.fit_sensor:
         return sets
     kept = real_scan_rows(scans, names, label_map)
+    n_returns = sum(len(scans[kept[i]].points) for i in half_a)
+    say(f"fitting {lidar.name} to the sensor-frame points of the fit half: {len(half_a)} scans, {n_returns} returns "
+        "(the longest stage before training)")  # fmt: skip
+    t0 = time.perf_counter()
     fitted, placement, fitted_sizes, fit_json = _fit_sensor([scans[kept[i]] for i in half_a], lidar, real_y[half_a], names)
+    say(f"fitted {fitted.name} in {time.perf_counter() - t0:.0f} s; trying each mesh with it")
     meshes, skipped_fitted = check_lidar_meshes(meshes, fitted, config.sizes, n_points, min_returns=int(config.min_returns))
     placement = _fitted_placement(config, placement)
     # each mesh's stretch and warp to its class's scans, fitted once for every seed (seed 0: the same every run)

@@ -146,7 +146,8 @@ class Sim2RealConfig:
         A bad setting (an unknown scale, recipe, model or validation choice, seeds below 1,
         ``aspect`` with ``keep_scale``, ``validate_on="fit-half"`` or ``fitted_shape`` without
         ``fit_sensor``, an unknown shape or two that meet the widths, elevations outside
-        [-90, 90] degrees, a sensor that is no LiDAR), naming the field or its option.
+        [-90, 90] degrees, a sensor that is no LiDAR, ``fit_sensor`` with an airborne
+        ``sensor``), naming the field or its option.
     """
 
     mesh_root: str | os.PathLike
@@ -226,6 +227,10 @@ class Sim2RealConfig:
         sensor = self.sensor if isinstance(self.sensor, (Lidar, AirborneScanner)) else sensor_from_name(str(self.sensor))
         if not isinstance(sensor, (Lidar, AirborneScanner)):
             raise InvalidInputError(f"{n('sensor')} {self.sensor}: the lidar training set needs a LiDAR or an airborne scanner")
+        if self.fit_sensor and not isinstance(sensor, Lidar):
+            # refused here, before any scan or mesh is read: the fit (sensors.fit.fit_lidar) fits a spinning LiDAR only
+            raise InvalidInputError(f"{n('fit_sensor')} fits a spinning LiDAR, but {n('sensor')} {sensor.name} is an airborne scanner: "
+                                    f"drop {n('fit_sensor')} or give {n('sensor')} a spinning LiDAR")  # fmt: skip
         object.__setattr__(self, "sensor", sensor)
 
     @functools.cached_property
