@@ -132,6 +132,8 @@ def test_sim2real_command_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixtu
     settings = json.loads((out / "settings.json").read_text())
     assert settings["classes"] == ["car", "pole"] and settings["real_scans"] == {"car": 6, "pole": 6}
     assert "fixed_at" in settings
+    # the occluded set's elevations: those the default sensor (hdl32e) sees objects from, and where they came from
+    assert settings["occluded_elevation_deg"] == pytest.approx([3.66, 21.80], abs=0.01) and "hdl32e" in settings["occluded_elevation_from"]
     table = (out / "table.md").read_text()
     assert "| complete | 2 |" in table and "| chance | 0 | 0.500" in table and "p vs complete" in table
     summary = {r["train_set"]: r for r in csv.DictReader(open(out / "summary.csv", encoding="utf-8"))}
@@ -139,10 +141,12 @@ def test_sim2real_command_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixtu
     # a rerun resumes (no training) and other settings are refused with exit status 2
     before = (out / "runs.jsonl").read_bytes()
     assert main(argv) == 0 and (out / "runs.jsonl").read_bytes() == before
+    lo, hi = settings["occluded_elevation_deg"]  # the same elevations given as an option: the same run, resumed
+    assert main([*argv, "--occluded-elevation", f"{lo!r}:{hi!r}"]) == 0 and (out / "runs.jsonl").read_bytes() == before
     other = list(argv)
     other[other.index("--points") + 1] = "16"
     assert main(other) == 2
-    assert "other settings" in capsys.readouterr().err
+    assert "other settings" in (err := capsys.readouterr().err) and "points" in err  # naming what differs
     # the aspect augmentation is a setting of every run (its train_config), and needs the augmentation keep_scale turns off
     assert main([*argv, "--augment", "aspect"]) == 2
     assert "other settings" in capsys.readouterr().err
@@ -225,6 +229,40 @@ def test_occluded_set_draws_its_elevations_in_the_range_given(tmp_path: Path, mo
     seen.clear()
     build_set("occluded", meshes, ["car", "pole"], 2, 32, 0, dense_points=500, resolution=64)
     assert seen and min(seen) >= -5.0 and max(seen) <= 30.0  # the ground sensor's default
+
+
+def test_the_occluded_sets_elevations_default_to_those_the_sensor_sees_objects_from(tmp_path: Path) -> None:
+    """Airborne: 90° minus the flight plan's incidence angles (nadir to half the swath); spinning:
+    atan(height / distance) over the lidar set's mount; given: as given."""
+    from zbuf_occlude.experiments.sim2real import Sim2RealConfig
+    from zbuf_occlude.experiments.sim2real_data import LIDAR_PLACEMENT
+    from zbuf_occlude.sensors import airborne_preset
+    from zbuf_occlude.sensors.presets import sensor_to_json
+
+    dales = Sim2RealConfig("m", "r", sensor="dales-q1560")
+    assert dales.occluded_elevation_deg == (61.0, 90.0) and "dales-q1560" in dales.occluded_elevation_from
+    narrow = tmp_path / "narrow.json"  # an airborne sensor file with a 40° swath: incidence up to 20°
+    narrow.write_text(json.dumps(sensor_to_json(airborne_preset("riegl-q1560", swath_deg=40.0).with_(name="narrow"))))
+    assert Sim2RealConfig("m", "r", sensor=str(narrow)).occluded_elevation_deg == (70.0, 90.0)
+    (h_lo, h_hi), (d_lo, d_hi) = LIDAR_PLACEMENT["height_m"], LIDAR_PLACEMENT["distance_m"]
+    ground = Sim2RealConfig("m", "r", sensor="hdl32e")
+    assert ground.occluded_elevation_deg == pytest.approx((np.degrees(np.arctan(h_lo / d_hi)), np.degrees(np.arctan(h_hi / d_lo))))
+    assert ground.occluded_elevation_deg == pytest.approx((3.66, 21.80), abs=0.01) and "hdl32e" in ground.occluded_elevation_from
+    given = Sim2RealConfig("m", "r", sensor="dales-q1560", occluded_elevation_deg=(30.0, 80.0))
+    assert given.occluded_elevation_deg == (30.0, 80.0) and given.occluded_elevation_from == "option"
+    assert given.identity()["occluded_elevation_deg"] == [30.0, 80.0]
+
+
+def test_the_occluded_elevation_help_gives_the_ranges_the_sensors_give(capsys: pytest.CaptureFixture) -> None:
+    from zbuf_occlude.experiments.sim2real_data import sensor_elevation_deg
+    from zbuf_occlude.sensors import airborne_preset, lidar_preset
+
+    with pytest.raises(SystemExit):
+        main(["experiment", "sim2real", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    (a_lo, a_hi), _ = sensor_elevation_deg(airborne_preset("dales-q1560"))
+    (g_lo, g_hi), _ = sensor_elevation_deg(lidar_preset("hdl32e"))
+    assert f"{a_lo:g}:{a_hi:g} for dales-q1560" in text and f"{g_lo:.1f}:{g_hi:.1f}" in text and "30:80" not in text
 
 
 def test_a_mesh_without_a_lidar_crop_is_skipped_before_the_work_naming_it(tmp_path: Path, monkeypatch, caplog) -> None:

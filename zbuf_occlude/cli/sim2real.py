@@ -58,7 +58,8 @@ def _run(args: argparse.Namespace) -> int:
         per_class=args.per_class, seeds=args.seeds, keep_scale=args.keep_scale, label_map=parse_pairs(args.label_map, "--label-map"),
         up=args.up, up_map=up_map, sizes=parse_sizes(args.sizes), real_options=real_options, min_returns=args.min_returns,
         method=args.method, classes=_classes_option(args.classes),
-        occluded_elevation_deg=parse_interval(args.occluded_elevation, "--occluded-elevation"), fit_sensor=args.fit_sensor,
+        occluded_elevation_deg=None if args.occluded_elevation is None else parse_interval(args.occluded_elevation, "--occluded-elevation"),
+        fit_sensor=args.fit_sensor,
         recipe=args.recipe, validate_on=args.validate_on,
         fitted_shape=() if args.fitted_shape == "none" else tuple(v.strip() for v in args.fitted_shape.split(",")),
         aspect=args.augment == "aspect", option_names=OPTION_NAMES,
@@ -93,7 +94,7 @@ def print_table(out: str, summary: dict[str, Any]) -> int:
 def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     """Add ``sim2real`` to ``experiment``'s argparse subparsers."""
     from zbuf_occlude.experiments.sim2real import SIM2REAL_RECIPE, VALIDATION_CHOICES
-    from zbuf_occlude.experiments.sim2real_data import GROUND_ELEVATION_DEG, MIN_RETURNS
+    from zbuf_occlude.experiments.sim2real_data import MIN_RETURNS
     from zbuf_occlude.mesh.scene import UP_CHOICES
 
     p = sub.add_parser(
@@ -139,9 +140,11 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--label-map", help="real label to class folder, REAL=CLASS,... (e.g. Trunk=pole)")
     p.add_argument("--classes", help="class folders to train on: 'real' (those the real scans have, after --label-map) "
                    "or CLASS,CLASS,... (default: every class folder of ROOT)")
-    p.add_argument("--occluded-elevation", metavar="LO:HI", action=Checked, check=interval, default=f"{GROUND_ELEVATION_DEG[0]:g}:{GROUND_ELEVATION_DEG[1]:g}",
-                   help="camera elevations of the occluded set, degrees, drawn uniformly (an airborne sensor sees from "
-                   "above: e.g. 30:80; a negative LO needs =, as in --occluded-elevation=-5:30) (default: %(default)s)")
+    p.add_argument("--occluded-elevation", metavar="LO:HI", action=Checked, check=interval,
+                   help="camera elevations of the occluded set, degrees, drawn uniformly (default: those --sensor sees objects "
+                   "from: a spinning LiDAR on the lidar set's mount, atan(height/distance) over heights 1.6-2 m and distances "
+                   "5-25 m, about 3.7:21.8; an airborne scanner, 90 minus its incidence angles up to half its swath, 61:90 "
+                   "for dales-q1560; settings.json records which; a negative LO needs =, as in --occluded-elevation=-5:30)"),
     p.add_argument("--up", choices=UP_CHOICES, default="auto", help="up axis of the mesh files; auto: each format's convention (default: %(default)s)")
     p.add_argument("--up-map", help="per-file up axis, GLOB=AXIS,... (globs of paths relative to ROOT)")
     p.add_argument("--sizes", help="real sizes per class, CLASS=length|height|max:LO-HI,... metres (over the defaults)")

@@ -102,6 +102,10 @@ REAL_TO_REAL = "real→real"
 _REAL_SPLIT_SEED = 20_231
 #: Name of the row that takes, per seed, the mesh-only set with the best fit-half validation score.
 CHOSEN_ON_FIT_HALF = "chosen on fit half"
+#: Keys of ``settings.json`` that say when or how a setting was chosen, not what it is: a rerun
+#: does not compare them (the same elevations given as an option or derived from the sensor make the same run).
+_NOTES = ("fixed_at", "occluded_elevation_from")
+_MISSING = object()
 
 
 def _fit_sensor(scans: list, base, labels: np.ndarray, names: list[str]):
@@ -318,7 +322,7 @@ def _fix_settings(config: Sim2RealConfig, sets: Sim2RealSets, out: Path) -> dict
     """
     names, real_y = sets.names, sets.real_labels
     settings = {
-        **config.identity(), "classes": names, "meshes": {c: sum(m.class_name == c for m in sets.meshes) for c in names},
+        **config.identity(), "occluded_elevation_from": config.occluded_elevation_from, "classes": names, "meshes": {c: sum(m.class_name == c for m in sets.meshes) for c in names},
         "mesh_up": {m.name: m.mesh.metadata["zbuf_occlude"].get("up_source") for m in sets.meshes},
         "real_scans": {c: int((real_y == i).sum()) for i, c in enumerate(names)},
     }  # fmt: skip
@@ -336,9 +340,10 @@ def _fix_settings(config: Sim2RealConfig, sets: Sim2RealSets, out: Path) -> dict
         old = read_json_file(path)
         if not isinstance(old, dict):
             raise InvalidInputError(f"{path} is not a settings file of ours; choose another --out")
-        old.pop("fixed_at", None)
-        if old != json.loads(json.dumps(settings, default=float)):
-            raise InvalidInputError(f"{out} holds a run with other settings ({path}); choose another --out")
+        old, new = ({k: v for k, v in d.items() if k not in _NOTES} for d in (old, json.loads(json.dumps(settings, default=float))))
+        if old != new:
+            differ = sorted(k for k in old.keys() | new.keys() if old.get(k, _MISSING) != new.get(k, _MISSING))
+            raise InvalidInputError(f"{out} holds a run with other settings ({path}: {', '.join(differ)} differ); choose another --out")
     else:
         # Every setting is fixed here, before any real scan is scored.
         write_text(path, json.dumps({**settings, "fixed_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}, indent=1, default=float))

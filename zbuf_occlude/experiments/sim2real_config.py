@@ -11,11 +11,11 @@ from __future__ import annotations
 import functools
 import os
 from collections.abc import Mapping
-from dataclasses import InitVar, asdict, dataclass, replace
+from dataclasses import InitVar, asdict, dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.experiments.sim2real_data import GROUND_ELEVATION_DEG, KEEP_SCALE_UNIT_M, LIDAR_PLACEMENT, MIN_RETURNS
+from zbuf_occlude.experiments.sim2real_data import KEEP_SCALE_UNIT_M, LIDAR_PLACEMENT, MIN_RETURNS, sensor_elevation_deg
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
 
 if TYPE_CHECKING:  # torch is imported when a run trains
@@ -107,10 +107,12 @@ class Sim2RealConfig:
         Class folders to train on: ``"real"``, those the real scans have (after
         ``label_map``; a real scan can then only be called a class it can be); a list, those;
         None, every class folder of ``mesh_root``.
-    occluded_elevation_deg : (lo, hi)
-        Camera elevations of the ``occluded`` set, degrees in [-90, 90], drawn uniformly
-        (default :data:`~zbuf_occlude.experiments.sim2real_data.GROUND_ELEVATION_DEG`; an
-        airborne sensor sees from above, e.g. ``(30, 80)``).
+    occluded_elevation_deg : (lo, hi), optional
+        Camera elevations of the ``occluded`` set, degrees in [-90, 90], drawn uniformly.
+        Default: the range ``sensor`` sees objects from
+        (:func:`~zbuf_occlude.experiments.sim2real_data.sensor_elevation_deg`: about 3.7° to
+        21.8° for a spinning LiDAR on the ``lidar`` set's mount, ``90° − swath/2`` to 90° for an
+        airborne scanner, e.g. 61° to 90°); :attr:`occluded_elevation_from` says which.
     fit_sensor : bool
         Fit ``sensor`` (a spinning LiDAR) to the sensor-frame points of the fixed first half of
         the real scans, and each class's crop distances and heights to the same scans, add the
@@ -140,6 +142,12 @@ class Sim2RealConfig:
         What the messages call each field (``{"validate_on": "--validate-on", ...}``: the
         command line's flags); a field not named here is called by its name.  Not stored.
 
+    Attributes
+    ----------
+    occluded_elevation_from : str
+        ``"option"`` when ``occluded_elevation_deg`` was given, else how it was derived from the
+        sensor (one line; ``settings.json`` records it).
+
     Raises
     ------
     InvalidInputError
@@ -168,13 +176,14 @@ class Sim2RealConfig:
     min_returns: int = MIN_RETURNS
     method: str = "auto"
     classes: str | tuple[str, ...] | None = None
-    occluded_elevation_deg: tuple[float, float] = GROUND_ELEVATION_DEG
+    occluded_elevation_deg: tuple[float, float] | None = None
     fit_sensor: bool = False
     recipe: str = SIM2REAL_RECIPE
     validate_on: str = "meshes"
     fitted_shape: tuple[str, ...] = ()
     aspect: bool = False
     option_names: InitVar[Mapping[str, str] | None] = None
+    occluded_elevation_from: str = field(init=False, default="option")
 
     def __post_init__(self, option_names: Mapping[str, str] | None) -> None:
         from zbuf_occlude.learn.training import OPTIMISER_DEFAULTS, RECIPES
@@ -200,8 +209,12 @@ class Sim2RealConfig:
             raise InvalidInputError(f"{n('seeds')} must be >= 1, got {self.seeds}")
         self._check_validation(n)
         self._check_fitted_shape(n)
-        object.__setattr__(self, "occluded_elevation_deg", _elevation_range(self.occluded_elevation_deg, n("occluded_elevation_deg")))
         self._check_sensor(n)
+        if self.occluded_elevation_deg is None:  # derived from the sensor, which is checked by now
+            elevation, source = sensor_elevation_deg(self.sensor)
+            object.__setattr__(self, "occluded_elevation_deg", elevation)
+            object.__setattr__(self, "occluded_elevation_from", source)
+        object.__setattr__(self, "occluded_elevation_deg", _elevation_range(self.occluded_elevation_deg, n("occluded_elevation_deg")))
 
     def _check_validation(self, n) -> None:
         if self.validate_on not in VALIDATION_CHOICES:

@@ -6,9 +6,10 @@ Everything a training set holds is made from meshes only:
     Uniform samples of the whole surface (Algorithms 1–2 of Sryamkin et al. 2023).
 ``occluded``
     The points of a dense surface sample visible from one camera pose (z-buffer HSR,
-    :func:`zbuf_occlude.occlude_object`), poses like a ground sensor's: elevation drawn
-    uniformly in :data:`GROUND_ELEVATION_DEG` (or the range given: an airborne sensor sees from
-    above), azimuth in [0, 360).
+    :func:`zbuf_occlude.occlude_object`), elevation drawn uniformly in the range the run's
+    sensor sees objects from (:func:`sensor_elevation_deg`: low for a spinning LiDAR, from
+    above for an airborne scanner; :data:`GROUND_ELEVATION_DEG` without a sensor), azimuth
+    in [0, 360).
 ``lidar``
     Object crops of a simulated spinning LiDAR (:func:`zbuf_occlude.sensors.crops.lidar_object_samples`):
     the object on a ground plane, scaled to a real size drawn from its class's range
@@ -26,6 +27,7 @@ from __future__ import annotations
 
 import fnmatch
 import logging
+import math
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -48,6 +50,7 @@ __all__ = [
     "TRAINING_SETS", "GROUND_ELEVATION_DEG", "LIDAR_PLACEMENT", "MIN_RETURNS", "KEEP_SCALE_UNIT_M",
     "MeshEntry", "find_class_meshes", "check_lidar_meshes", "split_whole_meshes", "allocate", "build_set", "build_sets", "mix_sets",
     "real_clouds", "real_scan_rows", "FITTED", "FITTED_PLACED", "POOLED", "FITTED_SETS", "fit_mesh_shapes", "WIDTH_BY",
+    "sensor_elevation_deg",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -67,9 +70,10 @@ FITTED_PLACED = "fitted+placed"
 POOLED = "pooled"
 #: The sets made with a fitted sensor, in report order.
 FITTED_SETS = (FITTED, FITTED_PLACED, POOLED)
-#: Camera elevations of the ``occluded`` set, degrees: a sensor on the ground or on a vehicle sees
-#: objects from slightly below the horizon (kerbs, slopes) to about 30° above (a pedestrian or a
-#: bush a few metres from a roof-mounted sensor).
+#: Camera elevations of the ``occluded`` set without a sensor to derive them from
+#: (:func:`sensor_elevation_deg`), degrees: a sensor on the ground or on a vehicle sees objects
+#: from slightly below the horizon (kerbs, slopes) to about 30° above (a pedestrian or a bush a
+#: few metres from a roof-mounted sensor).
 GROUND_ELEVATION_DEG = (-5.0, 30.0)
 #: Sensor placement of the ``lidar`` set (uniform draws): the distance range where a 32-beam
 #: sensor at 1.33° ring spacing puts at least three rings on a 1.5 m object (1.5 m / (3 · tan 1.33°)
@@ -88,6 +92,47 @@ KEEP_SCALE_UNIT_M = 10.0
 WIDTH_BY = ("stretch", "widen", "occluder")
 #: Rounds of crop draws per mesh before the crops found are repeated (logged).
 _LIDAR_TRIES = 6
+
+
+def sensor_elevation_deg(sensor) -> tuple[tuple[float, float], str]:
+    """The camera elevations, degrees, from which ``sensor`` sees an object on the ground, and how they were found.
+
+    * A spinning LiDAR (:class:`~zbuf_occlude.sensors.lidar.Lidar`) on the ``lidar`` set's mount
+      (:data:`LIDAR_PLACEMENT`: heights ``h`` of 1.6–2.0 m, objects ``d`` = 5–25 m away) is seen
+      from the object's foot at ``atan(h / d)``: from ``atan(h_lo / d_hi)`` (the low mount, the
+      far object) to ``atan(h_hi / d_lo)`` (the high mount, the near one), about 3.7° to 21.8°.
+    * An airborne scanner (:class:`~zbuf_occlude.sensors.airborne.AirborneScanner`) sees the
+      ground at incidence angles from 0° (nadir) to half its swath (the strip's edge, where a
+      flight plan's neighbouring lines see a point again), so from elevations ``90° − swath/2``
+      to 90° (61° to 90° for the RIEGL LMS-Q1560's 58° swath).
+    * None: :data:`GROUND_ELEVATION_DEG`.
+
+    Returns
+    -------
+    (lo_deg, hi_deg) : tuple of float
+        ``lo_deg <= hi_deg``, within [-90, 90].
+    source : str
+        One line saying how (recorded in ``settings.json`` as ``occluded_elevation_from``).
+
+    Raises
+    ------
+    InvalidInputError
+        A sensor of another kind (a depth camera: no mount to derive elevations from).
+    """
+    from zbuf_occlude.sensors.airborne import AirborneScanner
+    from zbuf_occlude.sensors.lidar import Lidar
+
+    if sensor is None:
+        return GROUND_ELEVATION_DEG, "no sensor: a ground sensor's default range"
+    if isinstance(sensor, AirborneScanner):
+        half = float(sensor.swath_deg) / 2.0
+        return (90.0 - half, 90.0), f"sensor {sensor.name}: 90° minus its incidence angles, 0° to half its {float(sensor.swath_deg):g}° swath"
+    if isinstance(sensor, Lidar):
+        (h_lo, h_hi), (d_lo, d_hi) = LIDAR_PLACEMENT["height_m"], LIDAR_PLACEMENT["distance_m"]
+        lo, hi = math.degrees(math.atan2(h_lo, d_hi)), math.degrees(math.atan2(h_hi, d_lo))
+        return (lo, hi), (f"sensor {sensor.name}: atan(height / distance) over the lidar set's mount, heights {h_lo:g}-{h_hi:g} m, "
+                          f"distances {d_lo:g}-{d_hi:g} m")  # fmt: skip
+    raise InvalidInputError(f"no elevation range for a {type(sensor).__name__}: give the occluded set's elevations")
 
 
 @dataclass
