@@ -265,6 +265,39 @@ def test_the_occluded_elevation_help_gives_the_ranges_the_sensors_give(capsys: p
     assert f"{a_lo:g}:{a_hi:g} for dales-q1560" in text and f"{g_lo:.1f}:{g_hi:.1f}" in text and "30:80" not in text
 
 
+def _sets_found(n: int = 4):
+    """What prepare_sets finds, as little as _fix_settings reads: two classes of n/2 real scans, no mesh."""
+    from zbuf_occlude.experiments.sim2real import Sim2RealSets
+
+    y = np.repeat([0, 1], n // 2)
+    return Sim2RealSets(["car", "pole"], [], [], np.zeros((n, 8, 3), np.float32), y, [f"{i}.xyz" for i in range(n)],
+                        np.array([0, 2]), np.array([1, 3]))  # fmt: skip
+
+
+def test_settings_hold_the_sensor_in_full_and_only_the_placement_its_kind_uses(tmp_path: Path) -> None:
+    from zbuf_occlude.experiments.sim2real import Sim2RealConfig, _fix_settings
+    from zbuf_occlude.experiments.sim2real_data import LIDAR_PLACEMENT
+    from zbuf_occlude.sensors import lidar_preset
+    from zbuf_occlude.sensors.presets import sensor_from_name, sensor_to_json
+
+    airborne = Sim2RealConfig("m", "r", sensor="dales-q1560")
+    _fix_settings(airborne, _sets_found(), tmp_path / "als")
+    written = json.loads((tmp_path / "als" / "settings.json").read_text())
+    assert written["lidar_placement"] == {"distance_m": list(LIDAR_PLACEMENT["distance_m"])}  # no mount height: it flies at its altitude
+    assert written["sensor_spec"] == sensor_to_json(airborne.sensor) and written["sensor_spec"]["kind"] == "airborne"
+    (tmp_path / "als.json").write_text(json.dumps(written["sensor_spec"]))
+    assert sensor_from_name(str(tmp_path / "als.json")) == airborne.sensor  # the sensor itself, not just its name
+    ground = Sim2RealConfig("m", "r", sensor="hdl32e")
+    _fix_settings(ground, _sets_found(), tmp_path / "hdl")
+    written = json.loads((tmp_path / "hdl" / "settings.json").read_text())
+    assert written["lidar_placement"] == {k: list(v) for k, v in LIDAR_PLACEMENT.items()}
+    assert written["sensor_spec"] == sensor_to_json(lidar_preset("hdl32e"))
+    # a sensor file under the preset's name, with another field: another run, refused, naming what differs
+    (tmp_path / "noisy.json").write_text(json.dumps(sensor_to_json(lidar_preset("hdl32e", range_noise_m=0.1))))
+    with pytest.raises(InvalidInputError, match="other settings.*sensor_spec"):
+        _fix_settings(Sim2RealConfig("m", "r", sensor=str(tmp_path / "noisy.json")), _sets_found(), tmp_path / "hdl")
+
+
 def test_a_mesh_without_a_lidar_crop_is_skipped_before_the_work_naming_it(tmp_path: Path, monkeypatch, caplog) -> None:
     import zbuf_occlude.experiments.sim2real_data as data
     from zbuf_occlude.experiments.sim2real_data import check_lidar_meshes

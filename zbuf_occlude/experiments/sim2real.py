@@ -312,17 +312,22 @@ def _fitted_placement(config: Sim2RealConfig, placement: dict[str, dict]) -> dic
 
 
 def _fix_settings(config: Sim2RealConfig, sets: Sim2RealSets, out: Path) -> dict:
-    """Every setting of the run (``config.identity()`` and what :func:`prepare_sets` found), written
-    to ``out/settings.json`` before any real scan is scored, or compared with the settings there.
+    """Every setting of the run (``config.identity()``, the sensor in full as ``sensor_spec``, the
+    :func:`zbuf_occlude.sensors.presets.sensor_to_json` of a preset or a file alike, and what
+    :func:`prepare_sets` found), written to ``out/settings.json`` before any real scan is scored,
+    or compared with the settings there.
 
     Raises
     ------
     InvalidInputError
         ``out`` holds a run with other settings, or a ``settings.json`` that is not ours.
     """
+    from zbuf_occlude.sensors.presets import sensor_to_json
+
     names, real_y = sets.names, sets.real_labels
     settings = {
-        **config.identity(), "occluded_elevation_from": config.occluded_elevation_from, "classes": names, "meshes": {c: sum(m.class_name == c for m in sets.meshes) for c in names},
+        **config.identity(), "sensor_spec": sensor_to_json(config.sensor), "occluded_elevation_from": config.occluded_elevation_from,
+        "classes": names, "meshes": {c: sum(m.class_name == c for m in sets.meshes) for c in names},
         "mesh_up": {m.name: m.mesh.metadata["zbuf_occlude"].get("up_source") for m in sets.meshes},
         "real_scans": {c: int((real_y == i).sum()) for i, c in enumerate(names)},
     }  # fmt: skip

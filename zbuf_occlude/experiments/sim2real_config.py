@@ -277,14 +277,20 @@ class Sim2RealConfig:
         """The settings that make results differ, as ``settings.json`` holds them (JSON types).
 
         ``validate_on`` only when it is ``"fit-half"``, so that runs which validate on meshes
-        keep the settings they were written with; what the run finds in its inputs (classes,
-        meshes, scans, the fitted sensor) is added by the run."""
+        keep the settings they were written with; ``lidar_placement`` as far as it applies to
+        the sensor's kind (an airborne scanner flies at its own altitude: no mount height; the
+        distance sets the object's offset across track); what the run finds in its inputs
+        (classes, meshes, scans, the fitted sensor) and the sensor's every field are added by
+        the run (``sensor_spec``)."""
+        from zbuf_occlude.sensors.lidar import Lidar
+
+        placement = LIDAR_PLACEMENT if isinstance(self.sensor, Lidar) else {"distance_m": LIDAR_PLACEMENT["distance_m"]}
         return {
             "mesh_root": str(self.mesh_root), "real": str(self.real), "model": self.model, "sensor": self.sensor.name,
             "scale": self.scale, "scale_values": asdict(self.scale_values), "points": self.n_points, "seeds": int(self.seeds),
             "keep_scale": bool(self.keep_scale), "label_map": dict(self.label_map), "up": self.up, "up_map": dict(self.up_map),
             "sizes_m": {k: asdict(v) for k, v in self.sizes.items()}, "occluded_elevation_deg": list(self.occluded_elevation_deg),
-            "lidar_placement": LIDAR_PLACEMENT, "lidar_min_returns": int(self.min_returns), "keep_scale_unit_m": KEEP_SCALE_UNIT_M,
+            "lidar_placement": placement, "lidar_min_returns": int(self.min_returns), "keep_scale_unit_m": KEEP_SCALE_UNIT_M,
             "method": self.method, "train_config": self.train_config(0).identity(("seed", "device", "threads")),
             **({"validate_on": self.validate_on} if self.validates_on_fit_half else {}),
         }  # fmt: skip
