@@ -126,9 +126,12 @@ def test_sim2real_command_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixtu
         rows = list(csv.DictReader(fh))
     assert sorted((r["train_set"], r["seed"]) for r in rows) == sorted(
         (s, str(k)) for s in (*TRAINING_SETS, "real→real") for k in range(2))
-    for r in rows:
-        assert int(r["n_test"]) == (6 if r["train_set"] == "real→real" else 12)  # the other half / every scan
+    for r in rows:  # every row on the held-out half; the mesh-only sets on every scan as well, real→real not (it trained on half)
+        assert int(r["n_test"]) == 6 and int(r["n_test_all_scans"]) == (0 if r["train_set"] == "real→real" else 12)
         assert 0.0 <= float(r["mean_class_accuracy"]) <= 1.0
+        assert (r["train_set"] == "real→real") == (r["all_scans_mean_class_accuracy"] == "nan")
+    split = _rows(out / "real_split.csv")
+    assert sorted((r["class"], r["half"]) for r in split) == sorted([(c, h) for c in ("car", "pole") for h in ("train", "scored")] * 3)
     settings = json.loads((out / "settings.json").read_text())
     assert settings["classes"] == ["car", "pole"] and settings["real_scans"] == {"car": 6, "pole": 6}
     assert "fixed_at" in settings
@@ -136,7 +139,9 @@ def test_sim2real_command_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert settings["occluded_elevation_deg"] == pytest.approx([3.66, 21.80], abs=0.01) and "hdl32e" in settings["occluded_elevation_from"]
     table = (out / "table.md").read_text()
     assert "| complete | 2 |" in table and "| chance | 0 | 0.500" in table and "p vs complete" in table
+    assert "mean class acc., all scans" in table and "held-out half of the real scans (6 of 12 scans" in table
     summary = {r["train_set"]: r for r in csv.DictReader(open(out / "summary.csv", encoding="utf-8"))}
+    assert summary["complete"]["all_scans_mean_class_accuracy_mean"] != "" and summary["real→real"]["all_scans_mean_class_accuracy_mean"] == "nan"
     assert 1 / 6 - 1e-9 <= float(summary["occluded"]["p_vs_complete"]) <= 1.0  # C(4, 2) = 6 splits
     # a rerun resumes (no training) and other settings are refused with exit status 2
     before = (out / "runs.jsonl").read_bytes()
@@ -298,6 +303,18 @@ def test_settings_hold_the_sensor_in_full_and_only_the_placement_its_kind_uses(t
         _fix_settings(Sim2RealConfig("m", "r", sensor=str(tmp_path / "noisy.json")), _sets_found(), tmp_path / "hdl")
 
 
+def test_a_run_from_before_the_held_out_half_scores_is_refused_saying_so(tmp_path: Path) -> None:
+    from zbuf_occlude.experiments.sim2real import Sim2RealConfig, _fix_settings
+
+    config = Sim2RealConfig("m", "r")
+    _fix_settings(config, _sets_found(), tmp_path)
+    old = json.loads((tmp_path / "settings.json").read_text())
+    del old["real_split"]  # as written before every set was scored on real→real's held-out half
+    (tmp_path / "settings.json").write_text(json.dumps(old))
+    with pytest.raises(InvalidInputError, match="real_split differ; it was made before every set was scored on the same held-out half"):
+        _fix_settings(config, _sets_found(), tmp_path)
+
+
 def test_a_mesh_without_a_lidar_crop_is_skipped_before_the_work_naming_it(tmp_path: Path, monkeypatch, caplog) -> None:
     import zbuf_occlude.experiments.sim2real_data as data
     from zbuf_occlude.experiments.sim2real_data import check_lidar_meshes
@@ -369,6 +386,11 @@ def _test_clouds(monkeypatch: pytest.MonkeyPatch) -> list[np.ndarray]:
     return scored
 
 
+def _cloud_set(clouds: np.ndarray) -> list[bytes]:
+    """A stack of clouds as a sorted list of their bytes: the same clouds in any order compare equal."""
+    return sorted(np.ascontiguousarray(c).tobytes() for c in clouds)
+
+
 def _rows(path: Path) -> list[dict]:
     with open(path, encoding="utf-8") as fh:
         return list(csv.DictReader(fh))
@@ -393,15 +415,16 @@ def test_fit_sensor_fits_on_one_half_and_scores_every_row_on_the_other(tmp_path:
     held = {r["source"] for r in split if r["half"] == "scored"}
     assert len(split) == 12 and not fit & held and len(fit) == len(held) == 6
     assert sorted(r["class"] for r in split if r["half"] == "fit") == ["car"] * 3 + ["pole"] * 3  # stratified
-    assert fits == [sorted(fit, key=[r["source"] for r in split].index)]  # the fit saw the fit half, nothing else
+    assert len(fits) == 1 and sorted(fits[0]) == sorted(fit)  # the fit saw the fit half, nothing else
     assert json.loads((out / "fitted_sensor.json").read_text()) == {"name": "fitted-by-spy", "base": "hdl32e"}
-    # every row, the mesh-only sets and real→real alike, is scored on the held-out half, and only on it
+    # every row, the mesh-only sets and real→real alike, is scored on the held-out half; the mesh-only sets on every scan too
     pts, _, sources = real_clouds(load_real_scans(real), ["car", "pole"], {"Trunk": "pole"}, 32, 0)
-    expected = pts[[i for i, s in enumerate(sources) if s in held]]
+    expected = _cloud_set(pts[[i for i, s in enumerate(sources) if s in held]])
     results = _rows(out / "results.csv")
     assert sorted((r["train_set"], r["seed"]) for r in results) == sorted(
         (s, str(k)) for s in (*TRAINING_SETS, *FITTED_SETS, "real→real") for k in range(2))
-    assert len(scored) == len(results) and all(np.array_equal(x, expected) for x in scored)
+    assert [_cloud_set(x) for x in scored] == [c for r in results for c in
+                                               ([expected] if r["train_set"] == "real→real" else [expected, _cloud_set(pts)])]
     assert all(int(r["n_test"]) == 6 for r in results)
     summary = {r["train_set"]: r for r in _rows(out / "summary.csv")}
     for kind in FITTED_SETS:
@@ -418,6 +441,26 @@ def test_fit_sensor_fits_on_one_half_and_scores_every_row_on_the_other(tmp_path:
     first = [{k: v for k, v in r.items() if k not in timing} for r in map(json.loads, (out / "runs.jsonl").read_text().splitlines())]
     second = [{k: v for k, v in r.items() if k not in timing} for r in map(json.loads, (again / "runs.jsonl").read_text().splitlines())]
     assert second == [r for r in first if r["seed"] == 0]
+
+
+def test_the_held_out_half_and_the_real_clouds_depend_on_the_scans_content_not_their_file_names(tmp_path: Path) -> None:
+    import shutil
+
+    from zbuf_occlude.experiments.sim2real import Sim2RealConfig, prepare_sets
+
+    meshes, real = _mesh_root(tmp_path), _real_root(tmp_path)
+    renamed = tmp_path / "renamed"  # the same scans, their names in the other order (and other folder names)
+    for cls, new in (("Car", "Vehicle"), ("Trunk", "Stem")):
+        files = sorted((real / cls).iterdir())
+        (renamed / new).mkdir(parents=True)
+        for f, g in zip(files, reversed(files)):
+            shutil.copy(f, renamed / new / f"scan_{g.stem}.xyz")
+    found = [prepare_sets(Sim2RealConfig(meshes, root, label_map=labels, points=32))
+             for root, labels in ((real, {"Trunk": "pole"}), (renamed, {"Vehicle": "car", "Stem": "pole"}))]  # fmt: skip
+    for half in ("half_a", "half_b"):
+        a, b = ({(int(s.real_labels[i]), s.real_points[i].tobytes()) for i in getattr(s, half)} for s in found)
+        assert a == b and len(a) == 6, half  # the same scans in each half, and each the same cloud
+    assert sorted(np.bincount(found[0].real_labels[found[0].half_b]).tolist()) == [3, 3]  # stratified
 
 
 @pytest.mark.slow
@@ -452,15 +495,23 @@ def test_a_resumed_run_makes_only_the_sets_it_still_trains_and_they_come_out_the
     assert main(argv) == 0 and len(asked) == 4
 
 
-def test_without_fit_sensor_every_scan_is_scored_and_no_fitted_set(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    fits, out = _fit_spy(monkeypatch), tmp_path / "out"
+def test_without_fit_sensor_no_fitted_set_and_every_row_scored_on_real_to_reals_held_out_half(tmp_path: Path,
+                                                                                             monkeypatch: pytest.MonkeyPatch) -> None:  # fmt: skip
+    fits, scored, out = _fit_spy(monkeypatch), _test_clouds(monkeypatch), tmp_path / "out"
     argv = ["experiment", "sim2real", str(_mesh_root(tmp_path)), "--real", str(_real_root(tmp_path)), "--out", str(out),
             "--label-map", "Trunk=pole", "--points", "32", "--epochs", "1", "--per-class", "4", "--seeds", "1", "--threads", "1",
             "--no-progress"]  # fmt: skip
     assert main(argv) == 0 and fits == []
-    assert not (out / "fitted_sensor.json").exists() and not (out / "real_split.csv").exists()
-    assert {r["train_set"] for r in _rows(out / "results.csv")} == {*TRAINING_SETS, "real→real"}
-    assert "fit_sensor" not in json.loads((out / "settings.json").read_text())
+    assert not (out / "fitted_sensor.json").exists()
+    results = _rows(out / "results.csv")
+    assert [r["train_set"] for r in results] == [*TRAINING_SETS, "real→real"]
+    settings = json.loads((out / "settings.json").read_text())
+    assert "fit_sensor" not in settings and settings["real_split"]["scored_scans"] == {"car": 3, "pole": 3}
+    # the primary scores of a mesh-only set and of real→real: the same clouds, the half real→real did not train on
+    real_to_real_test = _cloud_set(scored[-1])
+    assert len(scored) == 2 * len(TRAINING_SETS) + 1 and all(_cloud_set(x) == real_to_real_test for x in scored[0:-1:2])
+    held = {r["source"] for r in _rows(out / "real_split.csv") if r["half"] == "scored"}
+    assert len(held) == 6 and len(scored[0]) == 6 and len(scored[1]) == 12
 
 
 def test_fit_sensor_needs_sensor_frame_points_and_a_spinning_lidar() -> None:
@@ -664,7 +715,7 @@ def test_validate_on_fit_half_validates_mesh_sets_on_the_fit_half_and_trains_on_
         if kind == "real→real":  # its own 10 % of the fit half, as without the option
             assert len(val) < len(expected) and all(any(np.array_equal(v, x) for x in expected) for v in val)
         else:  # every mesh trains; the whole fit half validates
-            assert np.array_equal(val, expected), kind
+            assert _cloud_set(val) == _cloud_set(expected), kind
             assert len(objects) == 4, (kind, objects)
     assert all(int(r["n_val"]) == 6 for r in results if r["train_set"] != "real→real")
     assert json.loads((out / "settings.json").read_text())["validate_on"] == "fit-half"

@@ -101,8 +101,9 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
         "sim2real", help="train only on clouds from meshes (complete / occluded / lidar / "
         "lidar+complete), test on real scans; several seeds, permutation tests",
         description="Make four training sets from the same meshes (complete, occluded, LiDAR crops, LiDAR + complete), "
-        "train a classifier on each with validation on held-out whole meshes, then score each on the real scans of "
-        "--real (never used for training or settings), over several seeds, with chance and real->real rows.",
+        "train a classifier on each with validation on held-out whole meshes, then score each on a fixed held-out half "
+        "of the real scans of --real (the half real->real is scored on; never used for training or settings) and on "
+        "all of them, over several seeds, with chance and real->real rows.",
     )  # fmt: skip
     p.add_argument("root", help=f"mesh files ({EXTENSIONS_TEXT}) in CLASS/ folders")
     p.add_argument("--real", required=True, help="folder of real object scans (one folder per class, or labelled files)")
@@ -110,9 +111,9 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--model", choices=("pointnet", "voxnet", "3dmfv"), default="pointnet", help="classifier (default: %(default)s)")
     p.add_argument("--sensor", default="hdl32e", help="scanner of the lidar training set (a LiDAR preset; default %(default)s)")
     p.add_argument("--fit-sensor", action="store_true",
-                   help="fit --sensor to a fixed half of the real scans (written to OUT/fitted_sensor.json), add training sets "
-                   "made with it ('fitted'; 'fitted+placed', also placed and sized as those scans; 'pooled', the three LiDAR "
-                   "sets in one), and score every row on the other half only")
+                   help="fit --sensor (a spinning LiDAR) to the fixed half of the real scans real->real trains on (written to "
+                   "OUT/fitted_sensor.json), and add training sets made with it ('fitted'; 'fitted+placed', also placed and "
+                   "sized as those scans; 'pooled', the three LiDAR sets in one)")
     p.add_argument("--validate-on", choices=VALIDATION_CHOICES, default="meshes",
                    help="what the mesh-only sets validate on (best epoch, early stopping): clouds of held-out whole meshes, "
                    "or, with --fit-sensor, the fit half's real scans (then every mesh trains; the scored half stays unseen) "

@@ -14,10 +14,16 @@ classifier to recognise real, partial scans?), asked on real data with the proto
   against ``complete`` (:mod:`zbuf_occlude.learn.stats`);
 * context rows: chance (``1/K``) and ``real→real`` (a fixed stratified half of the real scans
   trains, 10 % of that half validates, the other half tests);
+* **every row is scored on the same held-out half of the real scans** as real→real (the primary
+  columns: ``mean_class_accuracy`` and the rest), and the mesh-only sets also on every real scan
+  (``all_scans_mean_class_accuracy``, ``all_scans_overall_accuracy``; not real→real, which trained
+  on the other half).  The halves are fixed once, from the scans' content alone
+  (:func:`~zbuf_occlude.experiments.sim2real_data.real_halves`: each class's scans ordered by a
+  seeded hash of their points, a seed of its own, independent of the run's seeds), so that no
+  file name, no order of the reader and no other class moves a scan from one half to the other;
+  ``real_split.csv`` lists each scan's half;
 * with ``fit_sensor``, a sensor fitted to the real scans (:func:`zbuf_occlude.sensors.fit.fit_lidar`):
-  the real scans are split once into the same fixed stratified halves as ``real→real``'s (a seed
-  of its own, independent of the run's seeds; the split uses the class indices and the scans'
-  order only), the sensor is fitted on the first half (the half ``real→real`` trains on), and
+  the sensor is fitted on the first half (the half ``real→real`` trains on), and
   so are, per class, the crops' sensor distances, the objects' heights (their visible
   heights in the scans), their hidden bottoms and their widths across the line of sight
   (:func:`zbuf_occlude.sensors.fit.crop_placement_json`);
@@ -28,8 +34,8 @@ classifier to recognise real, partial scans?), asked on real data with the proto
   to the widths, :func:`zbuf_occlude.sensors.fit.fit_width_scale`, or partly hidden to them,
   :func:`zbuf_occlude.sensors.fit.fit_visible_across_sight`, and/or warped to the class's
   outline over the height, :func:`zbuf_occlude.sensors.fit.fit_width_profile`) and
-  :data:`~zbuf_occlude.experiments.sim2real_data.POOLED` (the three LiDAR sets in one), and
-  **every row is scored on the other half only**; the fitted sets are also tested against ``lidar``.  ``real_split.csv`` lists each scan's half;
+  :data:`~zbuf_occlude.experiments.sim2real_data.POOLED` (the three LiDAR sets in one); the
+  fitted sets are also tested against ``lidar`` (their all-scans column includes the fit half);
 * with ``validate_on="fit-half"`` (needs ``fit_sensor``), the mesh-only sets are validated on the
   real scans of the fit half instead of held-out meshes (best epoch and early stopping), and train
   on every mesh: the fit half is already what the sensor was fitted to, the scored half stays
@@ -42,7 +48,7 @@ Every run trains with one recipe (``recipe``, :data:`zbuf_occlude.learn.training
 gradient clipping) keeps a seed from losing a small class of an imbalanced set (real→real);
 ``plain`` is the models' own loop.
 
-Outputs in ``out``: ``settings.json``, (``fitted_sensor.json``, ``real_split.csv``), ``runs.jsonl`` (one line per training run, what a
+Outputs in ``out``: ``settings.json``, ``real_split.csv``, (``fitted_sensor.json``), ``runs.jsonl`` (one line per training run, what a
 rerun resumes from), ``results.csv`` (one row per run), ``summary.csv`` (mean ± std per
 training set), ``confusion_<set>.csv`` (summed over seeds), ``table.md``, ``run.json``.
 
@@ -81,6 +87,7 @@ from zbuf_occlude.experiments.sim2real_data import (
     fit_mesh_shapes,
     find_class_meshes,
     real_clouds,
+    real_halves,
     real_scan_rows,
     split_whole_meshes,
 )  # fmt: skip
@@ -92,14 +99,18 @@ from zbuf_occlude.learn.stats import mean_std, permutation_p
 from zbuf_occlude.mesh.sizes import SizeRange
 
 __all__ = ["Sim2RealConfig", "Sim2RealScale", "SIM2REAL_SCALES", "REAL_TO_REAL", "SIM2REAL_RECIPE", "VALIDATION_CHOICES", "FITTED_SHAPES",
-           "CHOSEN_ON_FIT_HALF", "Sim2RealSets", "run_sim2real", "prepare_sets", "run_seed", "write_outputs", "summarise"]
+           "CHOSEN_ON_FIT_HALF", "ALL_SCANS", "Sim2RealSets", "run_sim2real", "prepare_sets", "run_seed", "write_outputs", "summarise"]
 
 log = logging.getLogger(__name__)
 
 #: Name of the real→real context row.
 REAL_TO_REAL = "real→real"
-#: Seed of the fixed stratified half split of the real scans (real→real), the same for every run.
+#: Seed of the fixed stratified half split of the real scans (:func:`~zbuf_occlude.experiments.sim2real_data.real_halves`), the same for every run.
 _REAL_SPLIT_SEED = 20_231
+#: How the halves are drawn, as ``settings.json`` records it (a run split otherwise is another run).
+_REAL_SPLIT_BY = "content: each class's scans ordered by SHA-256 of the seed and their points, first half A"
+#: The scores of the mesh-only sets on every real scan (the second column), from each score of the held-out half.
+ALL_SCANS = {"all_scans_mean_class_accuracy": "mean_class_accuracy", "all_scans_overall_accuracy": "overall_accuracy"}
 #: Name of the row that takes, per seed, the mesh-only set with the best fit-half validation score.
 CHOSEN_ON_FIT_HALF = "chosen on fit half"
 #: Keys of ``settings.json`` that say when or how a setting was chosen, not what it is: a rerun
@@ -163,16 +174,6 @@ def _append_run(path: Path, done: dict, row: dict) -> None:
     write_text(path, "".join(json.dumps(r, default=float) + "\n" for r in done.values()))
 
 
-def _stratified_half(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    rng = np.random.default_rng(_REAL_SPLIT_SEED)
-    a = []
-    for c in np.unique(labels):
-        rows = rng.permutation(np.flatnonzero(labels == c))
-        a.extend(rows[: len(rows) // 2].tolist())
-    a = np.sort(np.asarray(a, np.int64))
-    return a, np.setdiff1d(np.arange(len(labels)), a)
-
-
 @dataclass(frozen=True)
 class Sim2RealSets:
     """What :func:`prepare_sets` finds and fits before any training: every seed's material.
@@ -185,9 +186,10 @@ class Sim2RealSets:
         The meshes the sensor (and the fitted sensor) sees; ``skipped`` those it does not, ``[name, reason]``.
     real_points : (R, n_points, 3) float32; real_labels : (R,) int64; sources : list of str
         The real scans as clouds, their classes and their files.
-    half_a, half_b : (R/2,) int64
-        The fixed stratified halves of the real scans (:func:`_stratified_half`): real→real
-        trains on ``half_a`` and is scored on ``half_b``; with ``fit_sensor``, ``half_a`` is the fit half.
+    half_a, half_b : (about R/2,) int64
+        The fixed stratified halves of the real scans, rows of ``real_labels`` in the order
+        :func:`~zbuf_occlude.experiments.sim2real_data.real_halves` gives: real→real trains on
+        ``half_a``, every row is scored on ``half_b``; with ``fit_sensor``, ``half_a`` is the fit half.
     fitted, fitted_placement, fitted_sizes, fit_json
         With ``fit_sensor``: the fitted Lidar, the crop keywords per class and per mesh
         (:func:`~zbuf_occlude.experiments.sim2real_data.build_set`'s ``placement``), the heights
@@ -278,11 +280,12 @@ def prepare_sets(config: Sim2RealConfig, *, say: Callable[[str], None] | None = 
     meshes, skipped = check_lidar_meshes(meshes, lidar, config.sizes, n_points, min_returns=int(config.min_returns))
     names = sorted({m.class_name for m in meshes})
     real_pts, real_y, sources = real_clouds(scans, names, label_map, n_points, 0, keep_scale=config.keep_scale)
-    half_a, half_b = _stratified_half(real_y)  # real→real trains on half_a; with fit_sensor, half_a is the fit half
+    kept = real_scan_rows(scans, names, label_map)
+    # real→real trains on half_a and every row is scored on half_b; with fit_sensor, half_a is the fit half
+    half_a, half_b = real_halves([scans[i].points for i in kept], real_y, _REAL_SPLIT_SEED)
     sets = Sim2RealSets(names, meshes, skipped, real_pts, real_y, sources, half_a, half_b)
     if not config.fit_sensor:
         return sets
-    kept = real_scan_rows(scans, names, label_map)
     n_returns = sum(len(scans[kept[i]].points) for i in half_a)
     say(f"fitting {lidar.name} to the sensor-frame points of the fit half: {len(half_a)} scans, {n_returns} returns "
         "(the longest stage before training)")  # fmt: skip
@@ -330,6 +333,8 @@ def _fix_settings(config: Sim2RealConfig, sets: Sim2RealSets, out: Path) -> dict
         "classes": names, "meshes": {c: sum(m.class_name == c for m in sets.meshes) for c in names},
         "mesh_up": {m.name: m.mesh.metadata["zbuf_occlude"].get("up_source") for m in sets.meshes},
         "real_scans": {c: int((real_y == i).sum()) for i, c in enumerate(names)},
+        "real_split": {"by": _REAL_SPLIT_BY, "seed": _REAL_SPLIT_SEED,
+                       "scored_scans": {c: int((real_y[sets.half_b] == i).sum()) for i, c in enumerate(names)}},
     }  # fmt: skip
     if sets.skipped:  # only then: the settings of runs without a skipped mesh stay as they were (resume)
         settings["meshes_skipped"] = sets.skipped
@@ -348,15 +353,16 @@ def _fix_settings(config: Sim2RealConfig, sets: Sim2RealSets, out: Path) -> dict
         old, new = ({k: v for k, v in d.items() if k not in _NOTES} for d in (old, json.loads(json.dumps(settings, default=float))))
         if old != new:
             differ = sorted(k for k in old.keys() | new.keys() if old.get(k, _MISSING) != new.get(k, _MISSING))
-            raise InvalidInputError(f"{out} holds a run with other settings ({path}: {', '.join(differ)} differ); choose another --out")
+            why = "" if "real_split" in old else "; it was made before every set was scored on the same held-out half of the scans"
+            raise InvalidInputError(f"{out} holds a run with other settings ({path}: {', '.join(differ)} differ{why}); choose another --out")
     else:
         # Every setting is fixed here, before any real scan is scored.
         write_text(path, json.dumps({**settings, "fixed_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}, indent=1, default=float))
     if config.fit_sensor:
         write_text(out / "fitted_sensor.json", json.dumps(sets.fit_json, indent=1, default=float))
-        halves = {int(i): "fit" for i in sets.half_a} | {int(i): "scored" for i in sets.half_b}
-        write_csv(out / "real_split.csv", [{"row": i, "source": src, "class": names[real_y[i]], "half": halves[i]}
-                                           for i, src in enumerate(sets.sources)])  # fmt: skip
+    halves = {int(i): "fit" if config.fit_sensor else "train" for i in sets.half_a} | {int(i): "scored" for i in sets.half_b}
+    write_csv(out / "real_split.csv", [{"row": i, "source": src, "class": names[real_y[i]], "half": halves[i]}
+                                       for i, src in enumerate(sets.sources)])  # fmt: skip
     return settings
 
 
@@ -367,15 +373,15 @@ def run_seed(config: Sim2RealConfig, sets: Sim2RealSets, seed: int, done: dict, 
 
     The mesh-only sets still to train are made at once (``lidar+complete`` reuses two), on a
     whole-mesh split of the seed (or every mesh, validated on the fit half); real→real trains on
-    the fit half (10 % of it validates) and every row is scored on the other half when the
-    sensor was fitted, on every real scan otherwise."""
+    the fit half (10 % of it validates); every row is scored on the other half, and the
+    mesh-only sets on every real scan as well (:data:`ALL_SCANS`)."""
     real_val, half_a, half_b = config.validates_on_fit_half, sets.half_a, sets.half_b
     real_pts, real_y = sets.real_points, sets.real_labels
     sc = config.scale_values
     # validated on the fit half's real scans, the sets train on every mesh
     train_meshes, val_meshes = (sets.meshes, []) if real_val else split_whole_meshes(sets.meshes, sc.val_mesh_fraction, seed)
     fit_half = CloudSet(real_pts[half_a], real_y[half_a], np.full(len(half_a), np.nan), half_a)
-    score = (real_pts[half_b], real_y[half_b]) if config.fit_sensor else (real_pts, real_y)
+    held_out, every_scan = (real_pts[half_b], real_y[half_b]), (real_pts, real_y)
     built: dict = {}
     for kind in (*_kinds(config), REAL_TO_REAL):
         if (kind, seed) in done:
@@ -383,13 +389,14 @@ def run_seed(config: Sim2RealConfig, sets: Sim2RealSets, seed: int, done: dict, 
         t0 = time.perf_counter()
         if kind == REAL_TO_REAL:
             tr_rows, val_rows = split_validation(len(half_a), 0.1, seed, labels=real_y[half_a])
-            tr, val, test = fit_half.subset(tr_rows), fit_half.subset(val_rows), (real_pts[half_b], real_y[half_b])
+            # not scored on every scan: half of them are its training scans
+            tr, val, tests = fit_half.subset(tr_rows), fit_half.subset(val_rows), (held_out, None)
         else:
             if not built:  # the sets this seed still trains, at once
                 built = _build_seed_sets(config, sets, seed, train_meshes, val_meshes, done)
-            tr, val, test = built["train"][kind], (fit_half if real_val else built["val"][kind]), score
+            tr, val, tests = built["train"][kind], (fit_half if real_val else built["val"][kind]), (held_out, every_scan)
         made = {"val_meshes": sorted(m.name for m in val_meshes) if kind != REAL_TO_REAL else [], "data_s": time.perf_counter() - t0}
-        row = _train_and_score(config, sets.names, kind, seed, (tr, val, test), made, out, device=device, threads=threads, progress=progress)
+        row = _train_and_score(config, sets.names, kind, seed, (tr, val, tests), made, out, device=device, threads=threads, progress=progress)
         _append_run(out / "runs.jsonl", done, row)
         log.info("%s seed %d: mean class accuracy %.3f", kind, seed, row["mean_class_accuracy"])
 
@@ -411,21 +418,26 @@ def _build_seed_sets(config: Sim2RealConfig, sets: Sim2RealSets, seed: int, trai
 
 def _train_and_score(config: Sim2RealConfig, names: list[str], kind: str, seed: int, data: tuple, made: dict, out: Path, *, device: str,
                      threads: int | None, progress: bool) -> dict:  # fmt: skip
-    """One training run of ``kind`` and ``seed`` on ``data`` ``(train CloudSet, validation CloudSet, (test points, test labels))``:
-    its row of ``runs.jsonl``, with ``made`` (``val_meshes``, ``data_s``) before its times and scores."""
+    """One training run of ``kind`` and ``seed`` on ``data`` ``(train CloudSet, validation CloudSet, (held_out, every_scan))``,
+    each test ``(points, labels)``: its row of ``runs.jsonl``, with ``made`` (``val_meshes``, ``data_s``) before its times,
+    the scores on ``held_out`` and those on ``every_scan`` (:data:`ALL_SCANS`; NaN where it is None)."""
     from zbuf_occlude.learn.training import predict, train
 
-    tr, val, test = data
+    tr, val, (test, every_scan) = data
     cfg = config.train_config(seed, device=device, threads=threads)
     res = train(tr, len(names), cfg, val_set=val, checkpoint_dir=out / "checkpoints" / kind.replace("→", "_to_") / f"seed{seed}",
                 progress=progress)  # fmt: skip
     test_x, test_y = test
     pred, _ = predict(res.model, test_x, batch_size=cfg.batch_size, device=cfg.device)
+    all_scans = {key: float("nan") for key in ALL_SCANS} | {"n_test_all_scans": 0}
+    if every_scan is not None:
+        every = _score(predict(res.model, every_scan[0], batch_size=cfg.batch_size, device=cfg.device)[0], every_scan[1], names)
+        all_scans = {key: every[score] for key, score in ALL_SCANS.items()} | {"n_test_all_scans": len(every_scan[1])}
     return {"train_set": kind, "seed": seed, "model": config.model, "n_train": len(tr), "n_val": len(val),
             "n_test": len(test_y), "best_epoch": res.best_epoch, "epochs_run": len(res.history),
             "best_val_accuracy": res.best_val_accuracy, "best_val_mean_class_accuracy": res.best_val_mean_class_accuracy,
             "final_train_accuracy": res.history[-1]["train_accuracy"] if res.history else float("nan"),
-            **made, "train_s": res.seconds, **_score(pred, test_y, names)}  # fmt: skip
+            **made, "train_s": res.seconds, **_score(pred, test_y, names), **all_scans}  # fmt: skip
 
 
 def write_outputs(config: Sim2RealConfig, sets: Sim2RealSets, settings: dict, done: dict, out: Path, *, wall_s: float) -> dict:
@@ -474,8 +486,9 @@ def _classes(classes, mesh_root, scans, label_map: dict[str, str]) -> list[str] 
 
 
 def summarise(runs: list[dict], names: list[str], *, chosen_on_fit_half: bool = False) -> list[dict]:
-    """Per training set: mean ± std over seeds of every score, and the one-sided permutation p
-    of its mean class accuracy against ``complete``; then the chance row (``1/K``).
+    """Per training set: mean ± std over seeds of every score (on the held-out half, and on every
+    scan, :data:`ALL_SCANS`, NaN for real→real), and the one-sided permutation p of its mean class
+    accuracy on the held-out half against ``complete``; then the chance row (``1/K``).
 
     The rows of :data:`~zbuf_occlude.experiments.sim2real_data.FITTED_SETS` also hold their
     difference from ``lidar`` (``diff_vs_lidar``) and both one-sided p-values: ``p_vs_lidar``
@@ -487,7 +500,7 @@ def summarise(runs: list[dict], names: list[str], *, chosen_on_fit_half: bool = 
     the chosen sets (``chosen_sets``, in seed order), and its difference from real→real
     (``diff_vs_real_to_real``) with the one-sided p that real→real is above (``p_real_to_real_above``)."""
     keys = ["mean_class_accuracy", "overall_accuracy", "car_precision", "car_recall", "car_f1",
-            *[f"acc_{n}" for n in names]]  # fmt: skip
+            *[f"acc_{n}" for n in names], *ALL_SCANS]  # fmt: skip
     ref = [r["mean_class_accuracy"] for r in runs if r["train_set"] == "complete"]
     lidar = [r["mean_class_accuracy"] for r in runs if r["train_set"] == "lidar"]
     rows = []
@@ -510,7 +523,8 @@ def summarise(runs: list[dict], names: list[str], *, chosen_on_fit_half: bool = 
         rows += _chosen_row(runs, keys, ref)
     k = len(names)
     rows.append({"train_set": "chance", "n_seeds": 0, "mean_class_accuracy_mean": 1.0 / k, "mean_class_accuracy_std": 0.0,
-                 "overall_accuracy_mean": 1.0 / k, "overall_accuracy_std": 0.0})  # fmt: skip
+                 "overall_accuracy_mean": 1.0 / k, "overall_accuracy_std": 0.0,
+                 **{f"{key}_{stat}": (1.0 / k if stat == "mean" else 0.0) for key in ALL_SCANS for stat in ("mean", "std")}})  # fmt: skip
     return rows
 
 

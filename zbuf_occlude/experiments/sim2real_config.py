@@ -115,9 +115,10 @@ class Sim2RealConfig:
         airborne scanner, e.g. 61° to 90°); :attr:`occluded_elevation_from` says which.
     fit_sensor : bool
         Fit ``sensor`` (a spinning LiDAR) to the sensor-frame points of the fixed first half of
-        the real scans, and each class's crop distances and heights to the same scans, add the
-        :data:`~zbuf_occlude.experiments.sim2real_data.FITTED_SETS`, and score every row on the
-        other half only (:mod:`~zbuf_occlude.experiments.sim2real`).
+        the real scans (the half real→real trains on), and each class's crop distances and
+        heights to the same scans, and add the
+        :data:`~zbuf_occlude.experiments.sim2real_data.FITTED_SETS` (every row is scored on the
+        other half with or without it; :mod:`~zbuf_occlude.experiments.sim2real`).
     recipe : {"stable", "plain"}
         Training recipe (:data:`zbuf_occlude.learn.training.RECIPES`).
     validate_on : {"meshes", "fit-half"}

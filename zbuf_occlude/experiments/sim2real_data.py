@@ -26,6 +26,7 @@ divided by :data:`KEEP_SCALE_UNIT_M` so that size stays a cue.
 from __future__ import annotations
 
 import fnmatch
+import hashlib
 import logging
 import math
 import os
@@ -50,7 +51,7 @@ __all__ = [
     "TRAINING_SETS", "GROUND_ELEVATION_DEG", "LIDAR_PLACEMENT", "MIN_RETURNS", "KEEP_SCALE_UNIT_M",
     "MeshEntry", "find_class_meshes", "check_lidar_meshes", "split_whole_meshes", "allocate", "build_set", "build_sets", "mix_sets",
     "real_clouds", "real_scan_rows", "FITTED", "FITTED_PLACED", "POOLED", "FITTED_SETS", "fit_mesh_shapes", "WIDTH_BY",
-    "sensor_elevation_deg",
+    "sensor_elevation_deg", "scan_key", "real_halves",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -517,18 +518,62 @@ def real_scan_rows(scans, names: list[str], label_map: dict[str, str]) -> list[i
     return [i for i, s in enumerate(scans) if _real_label(s, index, label_map) in index]
 
 
+def scan_key(points: NDArray, seed: int = 0) -> int:
+    """A 64-bit key of a scan's content: the first 8 bytes of the SHA-256 of ``seed`` and the
+    scan's ``(n, 3)`` points as float32, as an unsigned integer.
+
+    The same points give the same key whatever file they came from, its name or its place in
+    the data set; another ``seed`` gives an unrelated key (a seeded draw per scan).
+    """
+    pts = np.ascontiguousarray(points, dtype=np.float32)
+    digest = hashlib.sha256(int(seed).to_bytes(8, "little", signed=True) + np.asarray(pts.shape, np.int64).tobytes() + pts.tobytes())
+    return int.from_bytes(digest.digest()[:8], "little")
+
+
+def real_halves(points: Sequence[NDArray], labels: NDArray[np.integer], seed: int) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """A fixed stratified split of the real scans into two halves, from their content alone.
+
+    Each class's scans are ordered by :func:`scan_key` of their points with ``seed`` (a seeded
+    draw per scan: a random order that no file name, no position in the data set and no other
+    class changes); the first ``n // 2`` are half A, the rest half B.  Scans with the same
+    points, whose keys tie, keep their order in ``points`` (the reader's, sorted by path).
+
+    Parameters
+    ----------
+    points : sequence of (n_i, 3) arrays
+        The scans' points (``RealScan.points``), one per row of ``labels``.
+    labels : (S,) int
+    seed : int
+
+    Returns
+    -------
+    half_a, half_b : int64 arrays
+        Rows of ``labels``, class by class (in ``np.unique`` order), each class's rows in key order.
+    """
+    labels = np.asarray(labels)
+    keys = np.asarray([scan_key(p, seed) for p in points], dtype=np.uint64)
+    a, b = [], []
+    for c in np.unique(labels):
+        rows = np.flatnonzero(labels == c)
+        rows = rows[np.argsort(keys[rows], kind="stable")]
+        a += rows[: len(rows) // 2].tolist()
+        b += rows[len(rows) // 2 :].tolist()
+    return np.asarray(a, np.int64), np.asarray(b, np.int64)
+
+
 def real_clouds(scans, names: list[str], label_map: dict[str, str], n_points: int, seed: int, *,
                 keep_scale: bool = False) -> tuple[NDArray[np.float32], NDArray[np.int64], list[str]]:  # fmt: skip
     """Real scans as clouds of ``n_points`` (random subset, or all plus repeats) and label indices.
 
     Labels are renamed with ``label_map`` (then lower-cased when that matches a class); scans
-    of labels outside ``names`` are left out (logged).
+    of labels outside ``names`` are left out (logged).  Each scan's subset is drawn with
+    ``seed`` and its own :func:`scan_key`, so that it depends on its points only, not on where
+    the reader found it.
 
     Returns
     -------
     points : (S, n_points, 3) float32; labels : (S,) int64; sources : list of str
     """
-    rng = np.random.default_rng([seed, 0x2EA1])
     index = {n: i for i, n in enumerate(names)}
     pts, labels, sources, dropped = [], [], [], {}
     for s in scans:
@@ -536,6 +581,7 @@ def real_clouds(scans, names: list[str], label_map: dict[str, str], n_points: in
         if label not in index:
             dropped[s.label] = dropped.get(s.label, 0) + 1
             continue
+        rng = np.random.default_rng([seed, 0x2EA1, scan_key(s.points)])
         p = resample(np.asarray(s.points, np.float32)[None], n_points, rng)[0].astype(np.float64)
         if keep_scale:
             p = p * float(np.max(s.extent_m))

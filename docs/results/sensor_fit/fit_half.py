@@ -18,6 +18,22 @@ from zbuf_occlude.sensors.fit import across_sight_width
 from zbuf_occlude.sensors.presets import sensor_from_name
 
 
+#: The seed of the split these runs were made with.
+RECORDED_SPLIT_SEED = 20_231
+
+
+def recorded_fit_half(labels: np.ndarray) -> np.ndarray:
+    """The fit half of the recorded runs (their real_split.csv): per class, in the reader's order (sorted paths), a
+    seeded permutation's first half.  Runs made since split the scans by their content instead
+    (zbuf_occlude.experiments.sim2real_data.real_halves)."""
+    rng = np.random.default_rng(RECORDED_SPLIT_SEED)
+    half = []
+    for c in np.unique(labels):
+        rows = rng.permutation(np.flatnonzero(labels == c))
+        half.extend(rows[: len(rows) // 2].tolist())
+    return np.sort(np.asarray(half, np.int64))
+
+
 def load_fit_half(data: str) -> SimpleNamespace:
     """``scans``, ``kept`` (scan row per cloud), ``names``, ``real_y``, ``fit_half`` (cloud rows), ``fitted`` (the sensor),
     ``placement`` and ``sizes`` (per class) and ``meshes`` (those the fitted sensor sees), for the data folder ``data``."""
@@ -25,7 +41,7 @@ def load_fit_half(data: str) -> SimpleNamespace:
     meshes = find_class_meshes(f"{data}/street_objects", up_map={"bush/openglforest__*": "+y"})
     names = sorted({m.class_name for m in meshes})
     _, real_y, _ = real_clouds(scans, names, {}, 256, 0)
-    half, _ = S._stratified_half(real_y)
+    half = recorded_fit_half(real_y)
     kept = real_scan_rows(scans, names, {})
     fitted, placement, sizes, _ = S._fit_sensor([scans[kept[i]] for i in half], sensor_from_name("hdl32e"), real_y[half], names)
     meshes, _ = check_lidar_meshes(meshes, fitted, sizes, 256, placement=placement)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from zbuf_occlude.experiments import sim2real as S
+from fit_half import recorded_fit_half
 from zbuf_occlude.experiments.sim2real_data import real_clouds, real_scan_rows
 from zbuf_occlude.learn.training import load_model, predict
 from zbuf_occlude.real_scans import load_real_scans
@@ -23,7 +23,7 @@ kind = sys.argv[3] if len(sys.argv) > 3 else "fitted+placed"
 scans = load_real_scans(f"{data}/lidarnet_v2_partial")
 names = sorted(p.name for p in Path(f"{data}/street_objects").iterdir() if p.is_dir())
 pts, y, _ = real_clouds(scans, names, {}, 256, 0)
-half, _ = S._stratified_half(y)
+half = recorded_fit_half(y)
 kept = real_scan_rows(scans, names, {})
 x, truth = pts[half], y[half]
 preds = {}

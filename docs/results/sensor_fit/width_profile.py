@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from zbuf_occlude.experiments import sim2real as S
+from fit_half import recorded_fit_half
 from zbuf_occlude.experiments.sim2real_data import real_clouds, real_scan_rows
 from zbuf_occlude.real_scans.datasets import load_real_scans
 from zbuf_occlude.sensors.scan import read_scan_npz
@@ -33,7 +33,7 @@ data, realism_out, tag, *classes = sys.argv[1:]
 scans = load_real_scans(f"{data}/lidarnet_v2_partial")
 names = ["bush", "car", "pedestrian", "pole"]
 _, labels, _ = real_clouds(scans, names, {}, 256, 0)
-fit_half, _ = S._stratified_half(labels)
+fit_half = recorded_fit_half(labels)
 kept = real_scan_rows(scans, names, {})
 # the meshes in realism.sh's order (its shell's glob), which numbers their scan folders from 1
 LIST = 'for m in "$1"/*.{glb,gltf,dae,obj} "$1"/*/*.{glb,gltf,dae,obj}; do [ -f "$m" ] && echo "$m"; done; true'
