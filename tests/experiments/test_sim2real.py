@@ -127,6 +127,7 @@ def test_sim2real_command_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert sorted((r["train_set"], r["seed"]) for r in rows) == sorted(
         (s, str(k)) for s in (*TRAINING_SETS, "real→real") for k in range(2))
     for r in rows:  # every row on the held-out half; the mesh-only sets on every scan as well, real→real not (it trained on half)
+        assert r["best_epoch_by"] == "loss" and float(r["best_val_loss"]) >= 0.0  # the stable recipe's signal, recorded
         assert int(r["n_test"]) == 6 and int(r["n_test_all_scans"]) == (0 if r["train_set"] == "real→real" else 12)
         assert 0.0 <= float(r["mean_class_accuracy"]) <= 1.0
         assert (r["train_set"] == "real→real") == (r["all_scans_mean_class_accuracy"] == "nan")
@@ -883,6 +884,16 @@ def test_widen_is_never_narrower_whether_fitted_once_or_in_the_draw(tmp_path: Pa
 # -- Sim2RealConfig: checked once, and the identity settings.json holds ------------------------------
 
 
+def test_every_run_chooses_its_best_epoch_by_the_validation_loss_unless_told_otherwise() -> None:
+    from zbuf_occlude.experiments.sim2real import Sim2RealConfig
+
+    assert Sim2RealConfig("m", "r").train_config(0).select == "loss"
+    assert Sim2RealConfig("m", "r", recipe="plain").train_config(0).select == "accuracy"
+    told = Sim2RealConfig("m", "r", best_epoch_by="mean_class_accuracy")
+    assert told.train_config(0).select == "mean_class_accuracy" and told.identity()["train_config"]["select"] == "mean_class_accuracy"
+    assert Sim2RealConfig("m", "r").identity()["train_config"]["select"] == "loss"
+
+
 def test_config_messages_name_the_fields_or_the_flags_given() -> None:
     from zbuf_occlude.cli.sim2real import OPTION_NAMES
     from zbuf_occlude.experiments.sim2real import Sim2RealConfig
@@ -892,6 +903,7 @@ def test_config_messages_name_the_fields_or_the_flags_given() -> None:
              ({"fitted_shape": ("outline",)}, "fitted_shape needs fit_sensor", "--fitted-shape needs --fit-sensor"),
              ({"occluded_elevation_deg": (10.0, 95.0)}, "occluded_elevation_deg must be", "--occluded-elevation must be"),
              ({"seeds": 0}, "seeds must be >= 1", "--seeds must be >= 1"),
+             ({"best_epoch_by": "f1"}, "best_epoch_by must be one of", "--best-epoch-by must be one of"),
              ({"sensor": "kinect-v1"}, "sensor kinect-v1: the lidar training set needs", "--sensor kinect-v1: the lidar training set needs"),
              ({"sensor": "dales-q1560", "fit_sensor": True}, "fit_sensor fits a spinning LiDAR, but sensor dales-q1560",
               "--fit-sensor fits a spinning LiDAR, but --sensor dales-q1560")]  # fmt: skip
@@ -920,7 +932,8 @@ def test_the_identity_of_a_config_is_what_recorded_runs_hold_so_they_resume(path
         per_class=s["scale_values"]["per_class"], seeds=s["seeds"], keep_scale=s["keep_scale"], label_map=s["label_map"], up=s["up"],
         up_map=s["up_map"], sizes={k: SizeRange(**v) for k, v in s["sizes_m"].items()}, min_returns=s.get("lidar_min_returns", 30),
         method=s["method"], occluded_elevation_deg=tuple(s["occluded_elevation_deg"]), fit_sensor=bool(fit),
-        recipe="stable" if tc.get("balance") == "sampler" else "plain", validate_on=s.get("validate_on", "meshes"),
+        recipe="stable" if tc.get("balance") == "sampler" else "plain", best_epoch_by=tc.get("select", "accuracy"),
+        validate_on=s.get("validate_on", "meshes"),
         fitted_shape=tuple(fit.get("fitted_shape", ())), aspect=tc.get("aspect", False),
     )  # fmt: skip
     identity = json.loads(json.dumps(config.identity(), default=float))  # as run_sim2real compares it

@@ -75,6 +75,39 @@ def test_the_best_epoch_by_mean_class_accuracy_then_balanced_loss(monkeypatch, s
         assert res.history[0]["val_mean_class_accuracy"] == pytest.approx(0.5)
 
 
+def test_the_best_epoch_by_loss_where_accuracy_ties_at_one(monkeypatch) -> None:
+    """Every epoch classifies the validation set without a mistake (accuracy 1.0): by accuracy the
+    first one wins the tie; by loss, the epoch most confident in the right classes."""
+    val = _clouds([0] * 5 + [1] * 5)
+    right = [0] * 5 + [1] * 5
+    confidences = [0.6, 0.95, 0.8, 0.7]  # all right; the loss -log(p) is lowest in epoch 2
+    for select, best in (("accuracy", 1), ("mean_class_accuracy", 2), ("loss", 2)):
+        _scripted_predict(monkeypatch, [_probs(right, c) for c in confidences])
+        res = T.train(_clouds([0, 1] * 4), 2, _cfg(epochs=4, select=select), val_set=val, progress=False)
+        assert res.best_epoch == best, select
+        assert res.best_val_accuracy == res.best_val_mean_class_accuracy == 1.0
+    assert res.best_val_loss == pytest.approx(-np.log(0.95))
+    assert [r["val_balanced_nll"] for r in res.history] == pytest.approx([-np.log(c) for c in confidences])
+
+
+def test_the_loss_comes_first_and_mean_class_accuracy_breaks_its_ties(monkeypatch) -> None:
+    val = _clouds([0, 0, 1, 1])
+    # p(true class) per scan; -log 0.25 = 2 · -log 0.5 exactly in floating point, so both epochs' class losses are log 2
+    one_wrong_each = np.array([[1.0, 0.0], [0.25, 0.75], [0.0, 1.0], [0.75, 0.25]])  # mean class accuracy 0.5
+    one_wrong = np.array([[0.5, 0.5], [0.5, 0.5], [0.0, 1.0], [0.75, 0.25]])  # argmax of a tie: class 0; 0.75
+    worse = np.array([[0.2, 0.8], [0.2, 0.8], [0.0, 1.0], [0.0, 1.0]])  # a higher loss, whatever its accuracy
+    _scripted_predict(monkeypatch, [one_wrong_each, one_wrong, worse])
+    res = T.train(_clouds([0, 1] * 4), 2, _cfg(epochs=3, select="loss"), val_set=val, progress=False)
+    assert res.history[0]["val_balanced_nll"] == res.history[1]["val_balanced_nll"] < res.history[2]["val_balanced_nll"]
+    assert res.best_epoch == 2 and res.best_val_mean_class_accuracy == 0.75
+
+
+def test_the_stable_recipe_chooses_the_best_epoch_by_loss() -> None:
+    assert T.STABLE_RECIPE["select"] == "loss" and T.PLAIN_RECIPE["select"] == "accuracy"
+    assert T.TrainConfig(**T.STABLE_RECIPE).identity(())["select"] == "loss"
+    assert "select" not in T.TrainConfig(**T.PLAIN_RECIPE).identity(())  # the plain loop's identity as before
+
+
 def test_early_stopping_counts_epochs_without_a_better_mean_class_accuracy(monkeypatch) -> None:
     val = _clouds([0] * 9 + [1])
     good = _probs([0] * 7 + [1, 1, 1], 0.9)
@@ -145,7 +178,7 @@ def test_a_resumed_run_keeps_the_best_score_so_far(monkeypatch, tmp_path) -> Non
     assert res.best_epoch == 1 and len(res.history) == 3
 
 
-@pytest.mark.parametrize("field, value", [("balance", "oversample"), ("select", "loss"), ("warmup_epochs", -1), ("grad_clip", 0.0)])
+@pytest.mark.parametrize("field, value", [("balance", "oversample"), ("select", "f1"), ("warmup_epochs", -1), ("grad_clip", 0.0)])
 def test_bad_recipe_options_are_refused_naming_them(field, value) -> None:
     with pytest.raises(InvalidInputError, match=field):
         T.TrainConfig(**{field: value})

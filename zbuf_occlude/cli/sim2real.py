@@ -37,7 +37,7 @@ OPTION_NAMES = {
     "per_class": "--per-class", "seeds": "--seeds", "keep_scale": "--keep-scale", "label_map": "--label-map", "up": "--up",
     "up_map": "--up-map", "sizes": "--sizes", "min_returns": "--min-returns", "method": "--method", "classes": "--classes",
     "occluded_elevation_deg": "--occluded-elevation", "fit_sensor": "--fit-sensor", "recipe": "--recipe",
-    "validate_on": "--validate-on", "fitted_shape": "--fitted-shape", "aspect": "--augment aspect",
+    "validate_on": "--validate-on", "fitted_shape": "--fitted-shape", "aspect": "--augment aspect", "best_epoch_by": "--best-epoch-by",
 }  # fmt: skip
 
 
@@ -60,7 +60,7 @@ def _run(args: argparse.Namespace) -> int:
         method=args.method, classes=_classes_option(args.classes),
         occluded_elevation_deg=None if args.occluded_elevation is None else parse_interval(args.occluded_elevation, "--occluded-elevation"),
         fit_sensor=args.fit_sensor,
-        recipe=args.recipe, validate_on=args.validate_on,
+        recipe=args.recipe, best_epoch_by=args.best_epoch_by, validate_on=args.validate_on,
         fitted_shape=() if args.fitted_shape == "none" else tuple(v.strip() for v in args.fitted_shape.split(",")),
         aspect=args.augment == "aspect", option_names=OPTION_NAMES,
     )  # fmt: skip
@@ -125,8 +125,13 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
                    "show, where the mesh shows wider), outline (a warp to their outline over the height), one of the "
                    "first three with outline (widths,outline), or none (default: %(default)s)")
     p.add_argument("--recipe", choices=("stable", "plain"), default=SIM2REAL_RECIPE,
-                   help="training recipe: stable (class-balanced sampling, best epoch by validation mean class accuracy, "
-                   "warm-up, gradient clipping) or plain (the models' own loop) (default: %(default)s)")
+                   help="training recipe: stable (class-balanced sampling, best epoch by the class-balanced validation loss, "
+                   "warm-up, gradient clipping) or plain (the models' own loop, best epoch by validation accuracy) (default: %(default)s)")
+    # checked by Sim2RealConfig against learn.training.SELECT_CHOICES (importing it here would import torch)
+    p.add_argument("--best-epoch-by", metavar="loss|mean_class_accuracy|accuracy",
+                   help="what every run's best epoch and early stopping go by on its validation set: loss (class-balanced "
+                   "cross-entropy, lower is better; it does not saturate when the validation set is classified without a "
+                   "mistake), mean_class_accuracy or accuracy (default: the recipe's)")
     p.add_argument("--augment", choices=("standard", "aspect"), default="standard",
                    help="training augmentation of every run: standard (rotation about z, scaling, jitter) or aspect (also "
                    "random proportions: x, y, z stretched by independent factors in [2/3, 3/2]; not with --keep-scale) "

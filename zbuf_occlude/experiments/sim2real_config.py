@@ -121,6 +121,11 @@ class Sim2RealConfig:
         other half with or without it; :mod:`~zbuf_occlude.experiments.sim2real`).
     recipe : {"stable", "plain"}
         Training recipe (:data:`zbuf_occlude.learn.training.RECIPES`).
+    best_epoch_by : {"loss", "mean_class_accuracy", "accuracy"}, optional
+        What every run's best epoch (and early stopping) goes by on its validation set
+        (:class:`~zbuf_occlude.learn.training.TrainConfig`'s ``select``); default: the
+        recipe's (``stable``: the class-balanced validation loss, which does not saturate at
+        accuracy 1.0 as held-out meshes' accuracy often does; ``plain``: overall accuracy).
     validate_on : {"meshes", "fit-half"}
         What the mesh-only sets validate on (best epoch, early stopping): clouds of the same kind
         from held-out whole meshes, or, with ``fit_sensor``, the real scans of the fit half (the
@@ -180,6 +185,7 @@ class Sim2RealConfig:
     occluded_elevation_deg: tuple[float, float] | None = None
     fit_sensor: bool = False
     recipe: str = SIM2REAL_RECIPE
+    best_epoch_by: str | None = None
     validate_on: str = "meshes"
     fitted_shape: tuple[str, ...] = ()
     aspect: bool = False
@@ -187,7 +193,7 @@ class Sim2RealConfig:
     occluded_elevation_from: str = field(init=False, default="option")
 
     def __post_init__(self, option_names: Mapping[str, str] | None) -> None:
-        from zbuf_occlude.learn.training import OPTIMISER_DEFAULTS, RECIPES
+        from zbuf_occlude.learn.training import OPTIMISER_DEFAULTS, RECIPES, SELECT_CHOICES
 
         def n(name: str) -> str:
             return (option_names or {}).get(name, name)
@@ -204,6 +210,8 @@ class Sim2RealConfig:
             raise InvalidInputError(f"{n('scale')} must be one of {sorted(SIM2REAL_SCALES)}, got {self.scale!r}")
         if self.recipe not in RECIPES:
             raise InvalidInputError(f"{n('recipe')} must be one of {sorted(RECIPES)}, got {self.recipe!r}")
+        if self.best_epoch_by is not None and self.best_epoch_by not in SELECT_CHOICES:
+            raise InvalidInputError(f"{n('best_epoch_by')} must be one of {', '.join(SELECT_CHOICES)}, got {self.best_epoch_by!r}")
         if self.aspect and self.keep_scale:
             raise InvalidInputError(f"{n('aspect')} needs augmentation, which {n('keep_scale')} turns off")
         if int(self.seeds) < 1:
@@ -272,7 +280,7 @@ class Sim2RealConfig:
         sc = self.scale_values
         return TrainConfig(model=self.model, epochs=int(self.epochs or sc.epochs), patience=sc.patience, width=sc.width[self.model],
                            fv_grid=sc.fv_grid, seed=seed, device=device, threads=threads, augment=not self.keep_scale,
-                           aspect=bool(self.aspect), **RECIPES[self.recipe])  # fmt: skip
+                           aspect=bool(self.aspect), **{**RECIPES[self.recipe], **({"select": self.best_epoch_by} if self.best_epoch_by else {})})  # fmt: skip
 
     def identity(self) -> dict[str, Any]:
         """The settings that make results differ, as ``settings.json`` holds them (JSON types).

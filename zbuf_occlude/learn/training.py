@@ -18,6 +18,13 @@ runs are unchanged; ``experiment sim2real`` turns them on, :data:`STABLE_RECIPE`
   mean class accuracy (ties: the lower class-balanced validation cross-entropy,
   :func:`~zbuf_occlude.learn.metrics.balanced_nll`) instead of its overall accuracy, which a
   model that drops a small class barely loses;
+* ``select="loss"``: early stopping and the best epoch on the validation set's class-balanced
+  mean cross-entropy (:func:`~zbuf_occlude.learn.metrics.balanced_nll`, the plain mean
+  cross-entropy on a class-balanced validation set; ties: the higher mean class accuracy),
+  a signal that does not saturate: once a small validation set is classified without a
+  mistake (accuracy 1.0, as held-out meshes often are after a few epochs), every later epoch
+  ties on accuracy and the "best" epoch is only the tie-break, while the loss still tells
+  the epoch whose predictions are most confident where they are right;
 * ``warmup_epochs``: the learning rate rises linearly from ``lr / steps`` to ``lr`` over the
   first epochs' batches (Goyal et al. 2017, "Accurate, large minibatch SGD", §2.2);
 * ``grad_clip``: the gradient's global L2 norm is clipped (Pascanu et al., ICML 2013).
@@ -54,7 +61,7 @@ from zbuf_occlude.learn.models import build_model, check_model_config
 
 __all__ = [
     "TrainConfig", "OPTIMISER_DEFAULTS", "train", "predict", "TrainResult", "resolve_device", "seed_everything",
-    "load_checkpoint", "load_model", "PLAIN_RECIPE", "STABLE_RECIPE", "RECIPES",
+    "load_checkpoint", "load_model", "PLAIN_RECIPE", "STABLE_RECIPE", "RECIPES", "SELECT_CHOICES",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -70,9 +77,11 @@ OPTIMISER_DEFAULTS = {
 #: made before the options existed resumes with them.
 PLAIN_RECIPE = {"balance": "none", "select": "accuracy", "warmup_epochs": 0, "grad_clip": None}
 #: The recipe for small, imbalanced sets (module docstring): class-balanced sampling, selection
-#: on validation mean class accuracy, two epochs of warm-up, gradient norm clipped at 5 (a
+#: on the class-balanced validation loss, two epochs of warm-up, gradient norm clipped at 5 (a
 #: bound that normal steps of these models stay under and a diverging step does not).
-STABLE_RECIPE = {"balance": "sampler", "select": "mean_class_accuracy", "warmup_epochs": 2, "grad_clip": 5.0}
+STABLE_RECIPE = {"balance": "sampler", "select": "loss", "warmup_epochs": 2, "grad_clip": 5.0}
+#: What ``TrainConfig.select`` may choose the best epoch by (module docstring).
+SELECT_CHOICES = ("accuracy", "mean_class_accuracy", "loss")
 #: The recipes by name (``experiment sim2real --recipe``).
 RECIPES = {"plain": PLAIN_RECIPE, "stable": STABLE_RECIPE}
 #: Fields a run's identity leaves out at these values (:meth:`TrainConfig.identity`): options newer than some runs.
@@ -104,8 +113,11 @@ class TrainConfig:
         ``aspect``: x, y and z stretched by independent factors in [2/3, 3/2]).
     balance : {"none", "sampler"}
         ``sampler``: class-balanced epochs (module docstring).
-    select : {"accuracy", "mean_class_accuracy"}
-        What early stopping and the best epoch go by on the validation set.
+    select : {"accuracy", "mean_class_accuracy", "loss"}
+        What early stopping and the best epoch go by on the validation set: its overall
+        accuracy, its mean class accuracy (ties: the lower class-balanced loss) or its
+        class-balanced mean cross-entropy (lower is better; ties: the higher mean class
+        accuracy), the one that does not saturate at accuracy 1.0 (module docstring).
     warmup_epochs : int
         Epochs of linear learning-rate warm-up, per batch (0: none).
     grad_clip : float or None
@@ -149,8 +161,8 @@ class TrainConfig:
             raise InvalidInputError(f"optimizer must be adam or sgd, got {self.optimizer!r}")
         if self.balance not in ("none", "sampler"):
             raise InvalidInputError(f"balance must be none or sampler, got {self.balance!r}")
-        if self.select not in ("accuracy", "mean_class_accuracy"):
-            raise InvalidInputError(f"select must be accuracy or mean_class_accuracy, got {self.select!r}")
+        if self.select not in SELECT_CHOICES:
+            raise InvalidInputError(f"select must be one of {', '.join(SELECT_CHOICES)}, got {self.select!r}")
         if self.aspect and not self.augment:
             raise InvalidInputError("aspect is an augmentation: it needs augment=True")
         if self.warmup_epochs < 0 or (self.grad_clip is not None and not self.grad_clip > 0):
@@ -168,11 +180,17 @@ class TrainConfig:
 
 @dataclass
 class TrainResult:
+    """What :func:`train` returns: the model (best or last weights), one history row per epoch,
+    the best epoch (1-based) and its validation overall accuracy, mean class accuracy and
+    class-balanced cross-entropy (``best_val_loss``; NaN without a validation set), whichever
+    of them ``TrainConfig.select`` chose it by."""
+
     model: nn.Module
     history: list[dict] = field(default_factory=list)
     best_epoch: int = 0
     best_val_accuracy: float = float("nan")
     best_val_mean_class_accuracy: float = float("nan")
+    best_val_loss: float = float("nan")
     seconds: float = 0.0
     samples_per_second: float = float("nan")
 
@@ -258,6 +276,8 @@ def _val_score(select: str, prob: np.ndarray, labels: np.ndarray, n_classes: int
     pred = prob.argmax(axis=1)
     if select == "accuracy":
         return (float((pred == labels).mean()),)
+    if select == "loss":
+        return (-balanced_nll(prob, labels), mean_class_accuracy(labels, pred, n_classes))
     return (mean_class_accuracy(labels, pred, n_classes), -balanced_nll(prob, labels))
 
 
@@ -380,8 +400,8 @@ def train(
     n_classes : int
     config : TrainConfig
     val_set : CloudSet, optional
-        Early stopping and best-epoch selection on its overall accuracy (or what
-        ``config.select`` says); without it the last epoch is kept.
+        Early stopping and best-epoch selection on its overall accuracy, mean class accuracy
+        or class-balanced loss, as ``config.select`` says; without it the last epoch is kept.
     checkpoint_dir : path, optional
         ``last.pt`` (resume point) and ``best.pt`` (best validation weights) go here; a
         ``last.pt`` made with another config is refused.
@@ -431,6 +451,7 @@ def train(
         result.history, result.best_epoch = state["history"], state["best_epoch"]
         result.best_val_accuracy = state["best_val_accuracy"]
         result.best_val_mean_class_accuracy = state.get("best_val_mean_class_accuracy", float("nan"))
+        result.best_val_loss = state.get("best_val_loss", float("nan"))
         best_score = state.get("best_score", None if state["best_epoch"] == 0 else [result.best_val_accuracy])
         best_state = state["best_model"]
         shapes = {k: tuple(v.shape) for k, v in model.state_dict().items()}
@@ -489,11 +510,12 @@ def train(
             acc = float((pred == val_set.labels).mean())
             row["val_accuracy"] = acc
             score = _val_score(config.select, prob, val_set.labels, n_classes)
-            if config.select != "accuracy":
-                row["val_mean_class_accuracy"], row["val_balanced_nll"] = score[0], -score[1]
+            mca, loss = mean_class_accuracy(val_set.labels, pred, n_classes), balanced_nll(prob, val_set.labels)
+            if config.select != "accuracy":  # the plain loop's history keeps the rows it always had
+                row["val_mean_class_accuracy"], row["val_balanced_nll"] = mca, loss
             if _better(score, best_score):
                 result.best_val_accuracy, result.best_epoch, stale, best_score = acc, epoch + 1, 0, list(score)
-                result.best_val_mean_class_accuracy = mean_class_accuracy(val_set.labels, pred, n_classes)
+                result.best_val_mean_class_accuracy, result.best_val_loss = mca, loss
                 best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
             else:
                 stale += 1
@@ -514,7 +536,7 @@ def train(
                 "model": model.state_dict(), "optimizer": opt.state_dict(), "scheduler": sched.state_dict(),
                 "history": result.history, "best_epoch": result.best_epoch,
                 "best_val_accuracy": result.best_val_accuracy, "best_model": best_state, "best_score": best_score,
-                "best_val_mean_class_accuracy": result.best_val_mean_class_accuracy,
+                "best_val_mean_class_accuracy": result.best_val_mean_class_accuracy, "best_val_loss": result.best_val_loss,
             })  # fmt: skip
     if best_state is not None:
         model.load_state_dict(best_state)
