@@ -496,6 +496,7 @@ def test_a_resumed_run_makes_only_the_sets_it_still_trains_and_they_come_out_the
     assert main(argv) == 0 and len(asked) == 4
 
 
+@pytest.mark.slow
 def test_without_fit_sensor_no_fitted_set_and_every_row_scored_on_real_to_reals_held_out_half(tmp_path: Path,
                                                                                              monkeypatch: pytest.MonkeyPatch) -> None:  # fmt: skip
     fits, scored, out = _fit_spy(monkeypatch), _test_clouds(monkeypatch), tmp_path / "out"
