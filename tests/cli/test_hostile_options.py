@@ -41,6 +41,7 @@ COMMANDS = {
     "experiment elevation": ["experiment", "elevation", str(SAMPLES), "--out", "{out}"],
     "experiment augmentation": ["experiment", "augmentation", str(SAMPLES), "--out", "{out}"],
     "experiment sim2real": ["experiment", "sim2real", str(SAMPLES), "--real", str(SAMPLES), "--out", "{out}"],
+    "contact-sheet": ["contact-sheet", str(SAMPLES), "--out", "{out}/sheet.png"],
 }
 
 #: (command, counted option, its cap in zbuf_occlude.defaults or None, the lowest value taken).
@@ -64,11 +65,12 @@ COUNTS = [
       for opt, cap in (("--epochs", "MAX_EPOCHS"), ("--points", "MAX_POINTS"), ("--threads", "MAX_WORKERS"))],
     ("experiment sim2real", "--per-class", "MAX_SAMPLES", 1), ("experiment sim2real", "--seeds", "MAX_REPETITIONS", 1),
     ("experiment sim2real", "--min-returns", "MAX_POINTS", 1),
+    ("contact-sheet", "--per-class", None, 1), ("contact-sheet", "--poses", None, 1), ("contact-sheet", "--dpi", None, 1),
 ]  # fmt: skip
 
 #: Every command with --seed.
 SEEDED = ["generate", "validate", "compare", "elevation-profile", "farm", "scan", "fit-sensor", "experiment elevation",
-          "experiment augmentation"]  # fmt: skip
+          "experiment augmentation", "contact-sheet"]  # fmt: skip
 #: Every command whose --out is a folder.
 OUT_FOLDERS = ["generate", "compare", "farm", "farm-merge", "scan", "realism", "experiment elevation",
                "experiment augmentation", "experiment sim2real"]  # fmt: skip

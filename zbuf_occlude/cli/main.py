@@ -285,10 +285,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     # Subcommands whose options live beside their engines.
     from zbuf_occlude.cli.compare import add_compare_parser
+    from zbuf_occlude.cli.contact_sheet import add_contact_sheet_parser
     from zbuf_occlude.cli.elevation_profile import add_profile_parser
     from zbuf_occlude.cli.farm import add_farm_merge_parser, add_farm_parser
 
-    for add in (add_compare_parser, add_profile_parser, add_farm_parser, add_farm_merge_parser):
+    for add in (add_compare_parser, add_profile_parser, add_farm_parser, add_farm_merge_parser, add_contact_sheet_parser):
         add(sub)
     from zbuf_occlude.cli.learn import add_parser as add_experiment_parser  # zbuf-occlude experiment; torch only when it runs
     from zbuf_occlude.cli.sensors import add_fit_sensor_parser, add_realism_parser, add_scan_parser

@@ -359,6 +359,21 @@ class OccludedDataset(Sequence):
             "padded": n_visible < self.n_points,
         } | self._kind.placement(self._shards, obj, pose, int(self._row[i]))
 
+    def dense_points(self, i: int) -> NDArray[np.float32] | None:
+        """The complete cloud that sample ``i`` was drawn from, when the storage keeps it.
+
+        Returns
+        -------
+        (M, 3) float32 or None
+            The object's dense cloud (``compact`` storage: ``--dense-points`` points on its
+            surface), object frame, read once per object like the samples; None for the kinds
+            that store the samples only (``dense``, ``h5``, ``npz``, ``ply``, ``farm --sensor``).
+        """
+        i = self._check_index(i)
+        if not self._kind.redraws:  # only the kinds that redraw samples keep the cloud they redraw from
+            return None
+        return self._shards.arrays(int(self._obj[i]))[0]
+
     def _check_index(self, i: int) -> int:
         if isinstance(i, (bool, np.bool_)) or not isinstance(i, (int, np.integer)):
             raise TypeError(f"OccludedDataset indices must be integers, got {type(i).__name__}")
