@@ -223,7 +223,7 @@ def look_at_pose(eye: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1
     if np.linalg.norm(z) == 0:
         raise InvalidInputError("look_at_pose: eye and target coincide")
     z /= np.linalg.norm(z)
-    x = np.cross(z, -up)
+    x = np.cross(z, up)  # right of the view direction, with up above it: y = z × x points down
     if np.linalg.norm(x) < 1e-9:
         raise InvalidInputError(f"look_at_pose: up {up} is parallel to the view direction")
     x /= np.linalg.norm(x)
