@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from zbuf_occlude._version import install_hint
 from zbuf_occlude.defaults import DEFAULT_METHOD
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError, RegistryError, UnknownOptionError
 from zbuf_occlude.geometry.arguments import check_camera, check_face_index, check_mesh, check_points
@@ -126,7 +127,7 @@ class MethodInfo:
         across poses (uploaded to the GPU once); ``session(...).visible(camera, **options)``
         must equal the method's answer for that camera.  ``None``: call the method per pose.
     extra : str or None
-        The ``pip install 'zbuf-occlude[EXTRA]'`` extra the method needs, if any.
+        The extra of ``pyproject.toml`` the method needs, if any (:func:`~zbuf_occlude._version.install_hint`).
     exact : bool
         Decides the oracle's definition (Eq. 1-10 in float64, every occluder tested), not an
         approximation of it: the answer of ``"oracle-numpy"`` (``"oracle"`` up to Embree's
@@ -190,7 +191,7 @@ def unavailable_reason(name: str) -> str | None:
     try:
         importlib.import_module(EXTRA_MODULES.get(extra, extra))
     except (ImportError, OSError) as exc:  # a wheel whose shared libraries are missing fails with OSError
-        return f"method {name!r} needs the {extra} extra (pip install '.[{extra}]' from a checkout): {exc}"
+        return f"method {name!r} needs the {extra} extra ({install_hint(extra)}): {exc}"
     return None
 
 
