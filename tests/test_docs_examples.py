@@ -429,3 +429,33 @@ def test_the_documentation_site_builds_strict(tmp_path: Path) -> None:
     )
     assert r.returncode == 0, r.stdout + r.stderr
     assert (tmp_path / "site" / "api" / "index.html").is_file()
+
+
+def internal_imports_of_public_names(code: str) -> list[str]:
+    """``from zbuf_occlude.X import NAME`` in an example where ``zo.NAME`` exists (``zo.__all__``):
+    the examples show the public route, ``import zbuf_occlude as zo; zo.NAME``."""
+    import ast
+
+    import zbuf_occlude as zo
+
+    try:
+        tree = ast.parse(code)
+    except SyntaxError:
+        return []
+    return [
+        f"from {node.module} import {alias.name}"
+        for node in ast.walk(tree)
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("zbuf_occlude.")
+        for alias in node.names
+        if alias.name in zo.__all__
+    ]
+
+
+def test_internal_imports_of_public_names_are_found() -> None:
+    code = "import zbuf_occlude as zo\nfrom zbuf_occlude.geometry.cameras import camera_on_sphere\nfrom zbuf_occlude.protocols import project\n"
+    assert internal_imports_of_public_names(code) == ["from zbuf_occlude.geometry.cameras import camera_on_sphere"]
+
+
+@pytest.mark.parametrize("block", [b for b in RUNNABLE if b.language == "python"], ids=lambda b: b.id)
+def test_python_examples_use_the_public_name(block: Block) -> None:
+    assert not internal_imports_of_public_names(block.code), f"{block.id}: use zo.NAME (import zbuf_occlude as zo) for {internal_imports_of_public_names(block.code)}"
