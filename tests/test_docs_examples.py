@@ -428,7 +428,26 @@ def test_the_documentation_site_builds_strict(tmp_path: Path) -> None:
         cwd=ROOT, env=env, capture_output=True, text=True, timeout=600,
     )
     assert r.returncode == 0, r.stdout + r.stderr
-    assert (tmp_path / "site" / "api" / "index.html").is_file()
+    # every public name has an entry on the API page, or a link from it to its entry on a module's
+    # page (the listing leaves out a name that is also a module's, like ``scan``, and a constant
+    # without a docstring, like ``DEFAULT_RADIUS``)
+    import zbuf_occlude as zo
+
+    anchor = r'id="(zbuf_occlude\.[\w.]+)"'
+    every_entry = {a for page in (tmp_path / "site" / "api").rglob("*.html") for a in re.findall(anchor, page.read_text(encoding="utf-8"))}
+    html = (tmp_path / "site" / "api" / "index.html").read_text(encoding="utf-8")
+    reached = set(re.findall(anchor, html)) | (set(re.findall(r'href="[^"#]*#(zbuf_occlude\.[\w.]+)"', html)) & every_entry)
+    missing = [name for name in zo.__all__ if name != "__version__" and not any(a.split(".")[-1] == name for a in reached)]
+    assert not missing, f"public names without an entry on the API page: {missing}"
+
+
+def test_the_api_index_names_every_public_name() -> None:
+    """docs/api/index.md's table names every name of ``zo.__all__`` as ``zo.NAME``."""
+    import zbuf_occlude as zo
+
+    text = (ROOT / "docs" / "api" / "index.md").read_text(encoding="utf-8")
+    missing = [name for name in zo.__all__ if not re.search(rf"`zo\.{re.escape(name)}`", text)]
+    assert not missing, f"docs/api/index.md does not name {missing}"
 
 
 def internal_imports_of_public_names(code: str) -> list[str]:
