@@ -308,9 +308,12 @@ def visible_mask(
         The pose and intrinsics; points outside its frustum are not visible.
     method : str
         One of :func:`available_methods`: ``"auto"`` (default: ``"zbuffer-exact"`` or
-        ``"embree-fast"``, whichever is faster on this machine, both exact),
-        ``"zbuffer-exact"`` (GPU, complete candidate set from screen tiles),
-        ``"embree-fast"`` (threaded float32 Embree, float64 near-ties),
+        ``"embree-fast"``, whichever is faster on this machine; on a software renderer
+        ``"embree-fast"``), ``"zbuffer-exact"`` (GPU, complete candidate set from screen tiles;
+        exact: bit-identical to the oracle on every view measured), ``"embree-fast"`` (threaded
+        float32 Embree, float64 near-ties; near-exact: it agreed with the oracle on 99.9992 % of
+        points on average and 99.9944 % on the worst mesh, 31 meshes × 25 poses, see
+        docs/results/visibility.md; for exact answers use ``"zbuffer-exact"`` or ``"oracle"``),
         ``"zbuffer"`` (GPU, candidates from a triangle-id buffer, CPU fallback), ``"zbuffer-tolerance"`` (depth test with a slope-scaled
         tolerance), ``"oracle"`` (exact, Embree), ``"oracle-numpy"`` (exact, the paper's
         Eq. 1-10), and the paper's object-space methods.
