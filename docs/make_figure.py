@@ -13,7 +13,7 @@ Usage::
 
     .venv/bin/python docs/make_figure.py [MESH] [--out docs/figure.png] [--points 20000]
 
-Needs matplotlib (``pip install zbuf-occlude[plot]``).
+Needs matplotlib (``pip install -e '.[plot]'``).
 """
 
 from __future__ import annotations

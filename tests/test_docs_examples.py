@@ -428,4 +428,66 @@ def test_the_documentation_site_builds_strict(tmp_path: Path) -> None:
         cwd=ROOT, env=env, capture_output=True, text=True, timeout=600,
     )
     assert r.returncode == 0, r.stdout + r.stderr
-    assert (tmp_path / "site" / "api" / "index.html").is_file()
+    # every public name has an entry on the API page, or a link from it to its entry on a module's
+    # page (the listing leaves out a name that is also a module's, like ``scan``, and a constant
+    # without a docstring, like ``DEFAULT_RADIUS``)
+    import zbuf_occlude as zo
+
+    anchor = r'id="(zbuf_occlude\.[\w.]+)"'
+    every_entry = {a for page in (tmp_path / "site" / "api").rglob("*.html") for a in re.findall(anchor, page.read_text(encoding="utf-8"))}
+    html = (tmp_path / "site" / "api" / "index.html").read_text(encoding="utf-8")
+    reached = set(re.findall(anchor, html)) | (set(re.findall(r'href="[^"#]*#(zbuf_occlude\.[\w.]+)"', html)) & every_entry)
+    missing = [name for name in zo.__all__ if name != "__version__" and not any(a.split(".")[-1] == name for a in reached)]
+    assert not missing, f"public names without an entry on the API page: {missing}"
+
+
+def test_the_api_index_names_every_public_name() -> None:
+    """docs/api/index.md's table names every name of ``zo.__all__`` as ``zo.NAME``."""
+    import zbuf_occlude as zo
+
+    text = (ROOT / "docs" / "api" / "index.md").read_text(encoding="utf-8")
+    missing = [name for name in zo.__all__ if not re.search(rf"`zo\.{re.escape(name)}`", text)]
+    assert not missing, f"docs/api/index.md does not name {missing}"
+
+
+def internal_imports_of_public_names(code: str) -> list[str]:
+    """``from zbuf_occlude.X import NAME`` in an example where ``zo.NAME`` exists (``zo.__all__``):
+    the examples show the public route, ``import zbuf_occlude as zo; zo.NAME``."""
+    import ast
+
+    import zbuf_occlude as zo
+
+    try:
+        tree = ast.parse(code)
+    except SyntaxError:
+        return []
+    return [
+        f"from {node.module} import {alias.name}"
+        for node in ast.walk(tree)
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("zbuf_occlude.")
+        for alias in node.names
+        if alias.name in zo.__all__
+    ]
+
+
+def test_internal_imports_of_public_names_are_found() -> None:
+    code = "import zbuf_occlude as zo\nfrom zbuf_occlude.geometry.cameras import camera_on_sphere\nfrom zbuf_occlude.protocols import project\n"
+    assert internal_imports_of_public_names(code) == ["from zbuf_occlude.geometry.cameras import camera_on_sphere"]
+
+
+@pytest.mark.parametrize("block", [b for b in RUNNABLE if b.language == "python"], ids=lambda b: b.id)
+def test_python_examples_use_the_public_name(block: Block) -> None:
+    assert not internal_imports_of_public_names(block.code), f"{block.id}: use zo.NAME (import zbuf_occlude as zo) for {internal_imports_of_public_names(block.code)}"
+
+
+def test_visible_mask_quotes_embree_fasts_measured_agreement() -> None:
+    """``visible_mask``'s docstring calls ``embree-fast`` near-exact with the agreement of
+    docs/results/visibility.md's table (worst mesh, mean), not exact."""
+    from zbuf_occlude.visibility.registry import visible_mask
+
+    row = next(ln for ln in (ROOT / "docs" / "results" / "visibility.md").read_text(encoding="utf-8").splitlines()
+               if ln.startswith("| `embree-fast` (= `auto`"))  # fmt: skip
+    worst, mean = re.findall(r"(\d+\.\d+) %", row)[:2]
+    doc = " ".join(visible_mask.__doc__.split())
+    assert f"near-exact: it agreed with the oracle on {mean} % of points on average and {worst} % on the worst mesh" in doc, doc
+    assert "both exact" not in doc

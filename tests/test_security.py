@@ -58,7 +58,7 @@ class _Marker:
 
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory):
-    torch = pytest.importorskip("torch", reason="checkpoints need PyTorch: pip install 'zbuf-occlude[learn]'")
+    torch = pytest.importorskip("torch", reason="checkpoints need PyTorch: pip install -e '.[learn]'")
     import numpy as np
 
     from zbuf_occlude.learn.data import CloudSet

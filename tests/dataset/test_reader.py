@@ -5,6 +5,8 @@ from __future__ import annotations
 import collections.abc
 import json
 import pickle
+import re
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -143,6 +145,41 @@ def test_errors(datasets, tmp_path):
         OccludedDataset(datasets["dense"], split="val")
     with pytest.raises(InvalidInputError, match="elevation_deg"):
         OccludedDataset(datasets["dense"], elevation_deg=float("nan"))
+
+
+def test_a_folder_above_a_finished_data_set_names_it(datasets, tmp_path):
+    """Opening the folder that holds the data set (``runs/e/data`` for ``runs/e/data/occluded``)
+    says where it is, and the folder it names opens."""
+    parent = tmp_path / "runs" / "e" / "data"
+    shutil.copytree(datasets["dense"], parent / "occluded")
+    (parent / "meshes").mkdir()  # a folder that is not a data set is not named
+    with pytest.raises(InvalidInputError, match="not a finished farm data set") as err:
+        OccludedDataset(parent)
+    message = str(err.value)
+    assert message.endswith(f"did you mean {parent / 'occluded'}?") and "let `zbuf-occlude farm` finish" not in message, message
+    suggested = message.rsplit("did you mean ", 1)[1].rstrip("?")
+    assert len(OccludedDataset(suggested)) == len(OccludedDataset(datasets["dense"]))
+
+
+def test_several_finished_data_sets_below_are_named_up_to_three(tmp_path):
+    for name in ("e", "a", "d", "b", "c"):  # a card is all the suggestion looks for
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "dataset_card.json").write_text("{}")
+    (tmp_path / "shards").mkdir()
+    with pytest.raises(InvalidInputError) as err:
+        OccludedDataset(tmp_path)
+    shown = ", ".join(str(tmp_path / name) for name in ("a", "b", "c"))
+    assert str(err.value).endswith(f"did you mean one of {shown} (and 2 more)?"), err.value
+    for name in ("d", "e"):
+        shutil.rmtree(tmp_path / name)
+    with pytest.raises(InvalidInputError, match=rf"did you mean one of {re.escape(shown)}\?$"):
+        OccludedDataset(tmp_path)
+
+
+def test_an_unfinished_run_without_data_sets_below_says_to_let_farm_finish(tmp_path):
+    (tmp_path / "shards").mkdir()
+    with pytest.raises(InvalidInputError, match=r"no dataset_card.json\); let `zbuf-occlude farm` finish, or run `zbuf-occlude farm-merge`"):
+        OccludedDataset(tmp_path)
 
 
 def test_pickles_for_loader_workers(dataset):

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-torch = pytest.importorskip("torch", reason="zbuf_occlude.learn needs PyTorch: pip install 'zbuf-occlude[learn]'")
+torch = pytest.importorskip("torch", reason="zbuf_occlude.learn needs PyTorch: pip install -e '.[learn]'")
 
 from zbuf_occlude.errors import InvalidInputError  # noqa: E402
 from zbuf_occlude.farm.config import RunOptions

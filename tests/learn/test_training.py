@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-torch = pytest.importorskip("torch", reason="zbuf_occlude.learn needs PyTorch: pip install 'zbuf-occlude[learn]'")
+torch = pytest.importorskip("torch", reason="zbuf_occlude.learn needs PyTorch: pip install -e '.[learn]'")
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.learn import training as T

@@ -149,6 +149,27 @@ class _Shards:
         self.verified.add(path)
 
 
+#: How many finished data sets one folder down the "not a finished data set" message names.
+SUGGESTED_CHILDREN = 3
+
+
+def _where_it_may_be(root: Path) -> str:
+    """The end of the message for a folder without a card: the finished data sets one folder
+    down, if any (``generate --out runs/e`` writes its data set there; a user may open its
+    parent), else what finishes one (farm, or farm-merge after sharded runs)."""
+    try:
+        found = sorted(child for child in root.iterdir() if child.is_dir() and (child / CARD_FILE).is_file())
+    except OSError:  # unreadable: no suggestion
+        found = []
+    if not found:
+        return "let `zbuf-occlude farm` finish, or run `zbuf-occlude farm-merge` after sharded runs"
+    if len(found) == 1:
+        return f"did you mean {found[0]}?"
+    shown = ", ".join(str(child) for child in found[:SUGGESTED_CHILDREN])
+    more = f" (and {len(found) - SUGGESTED_CHILDREN} more)" if len(found) > SUGGESTED_CHILDREN else ""
+    return f"the folders below it are finished data sets: did you mean one of {shown}{more}?"
+
+
 class OccludedDataset(Sequence):
     """Occluded samples of a farm data set, as a sequence of ``(points, label, metadata)``.
 
@@ -247,10 +268,7 @@ class OccludedDataset(Sequence):
         if not self.root.is_dir():
             raise InvalidInputError(f"no such data set folder: {self.root}")
         if not card_path.is_file():
-            raise InvalidInputError(
-                f"{self.root} is not a finished farm data set (no {CARD_FILE}); let `zbuf-occlude farm` finish, "
-                "or run `zbuf-occlude farm-merge` after sharded runs"
-            )
+            raise InvalidInputError(f"{self.root} is not a finished farm data set (no {CARD_FILE}); {_where_it_may_be(self.root)}")
         from zbuf_occlude.dataset.schema import check_card_sha256, read_card, read_shape_names
 
         self.card, card = read_card(card_path)  # its schema first: a damaged field is named

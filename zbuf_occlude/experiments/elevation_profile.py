@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from zbuf_occlude._version import install_hint
 from zbuf_occlude.defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION
 from zbuf_occlude.errors import InvalidInputError, OutputError
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere
@@ -234,7 +235,7 @@ def elevation_profile(
     OutputError
         The output cannot be written.
     BackendUnavailable
-        matplotlib is missing (``pip install 'zbuf-occlude[plot]'``), or the method's
+        matplotlib is missing (the ``plot`` extra), or the method's
         backend is.
     """
     from zbuf_occlude.errors import BackendUnavailable
@@ -242,7 +243,7 @@ def elevation_profile(
     try:
         import matplotlib  # noqa: F401  (checked before the long run, used by _plot)
     except ImportError:
-        raise BackendUnavailable("elevation-profile needs matplotlib: pip install 'zbuf-occlude[plot]'") from None
+        raise BackendUnavailable(f"elevation-profile needs matplotlib: {install_hint('plot')}") from None
     from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported when a profile runs
 
     mesh = load_mesh(mesh_path)

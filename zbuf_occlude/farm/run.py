@@ -16,6 +16,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from zbuf_occlude._version import install_hint
 from zbuf_occlude.dataset.layout import (
     MANIFEST_FILE,
     PLAN_FILE,
@@ -67,7 +68,7 @@ def _dask(
     try:
         from dask.distributed import Client, LocalCluster, as_completed
     except ImportError as exc:
-        raise BackendUnavailable("the Dask executor needs dask.distributed: pip install 'zbuf-occlude[dask]'") from exc
+        raise BackendUnavailable(f"the Dask executor needs dask.distributed: {install_hint('dask')}") from exc
     with contextlib.ExitStack() as stack:
         if scheduler:
             try:

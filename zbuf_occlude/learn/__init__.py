@@ -1,6 +1,6 @@
 """Classifiers trained on generated clouds: the evidence of Sryamkin et al. 2023, Table 3.
 
-An optional part of zbuf_occlude (``pip install 'zbuf-occlude[learn]'``, PyTorch); the core
+An optional part of zbuf_occlude (the ``learn`` extra: ``pip install '.[learn]'`` from a checkout; PyTorch); the core
 package never imports it.  Modules:
 
 ``models``       PointNet, VoxNet, 3DmFV-Net (torch)
@@ -33,13 +33,14 @@ def __getattr__(name: str):
 
 def require_torch():
     """Import torch or raise :class:`~zbuf_occlude.errors.BackendUnavailable` saying how to install it."""
+    from zbuf_occlude._version import install_hint
     from zbuf_occlude.errors import BackendUnavailable
 
     try:
         import torch
     except ImportError:
         raise BackendUnavailable(
-            "zbuf_occlude.learn needs PyTorch: pip install 'zbuf-occlude[learn]' "
+            f"zbuf_occlude.learn needs PyTorch: {install_hint('learn')} "
             "(CPU build; for CUDA: pip install torch==2.13.0 --index-url https://download.pytorch.org/whl/cu126)"
         ) from None
     return torch

@@ -1,4 +1,4 @@
-"""Occlusion on the fly as a PyTorch Geometric transform (``pip install 'zbuf-occlude[pyg]'``).
+"""Occlusion on the fly as a PyTorch Geometric transform (the ``pyg`` extra: ``pip install '.[pyg]'`` from a checkout).
 
 :class:`OccludeMesh` takes PyG's mesh ``Data(pos=(V, 3), face=(3, F), y=...)`` — what
 ``torch_geometric.datasets.ModelNet`` yields — and returns ``Data(pos=(n_points, 3), y=...)``:
@@ -18,6 +18,7 @@ import hashlib
 import numpy as np
 import trimesh
 
+from zbuf_occlude._version import install_hint
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 from zbuf_occlude.learn import require_torch
 from zbuf_occlude.learn.on_the_fly import (
@@ -36,7 +37,7 @@ try:
     from torch_geometric.data import Data
     from torch_geometric.transforms import BaseTransform
 except ImportError as exc:  # pragma: no cover - exercised where PyG is absent
-    raise BackendUnavailable(f"zbuf_occlude.learn.pyg needs PyTorch Geometric: pip install 'zbuf-occlude[pyg]' ({exc})") from None
+    raise BackendUnavailable(f"zbuf_occlude.learn.pyg needs PyTorch Geometric: {install_hint('pyg')} ({exc})") from None
 
 _CACHE_SIZE = 64
 

@@ -24,6 +24,7 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
+from zbuf_occlude._version import install_hint
 from zbuf_occlude.errors import BackendUnavailable
 from zbuf_occlude.geometry.cameras import Camera
 
@@ -36,7 +37,7 @@ def _import_pyrender():
         import pyrender
     except Exception as exc:  # ImportError, or PyOpenGL failing to find EGL
         raise BackendUnavailable(
-            f"pyrender backend unavailable ({type(exc).__name__}: {exc}); pip install 'zbuf-occlude[pyrender]'"
+            f"pyrender backend unavailable ({type(exc).__name__}: {exc}); {install_hint('pyrender')}"
         ) from exc
     return pyrender
 

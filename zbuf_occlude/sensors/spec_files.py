@@ -23,6 +23,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from zbuf_occlude._version import install_hint
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.json_files import MAX_JSON_DEPTH, loads_json
 from zbuf_occlude.sensors.checks import located
@@ -47,7 +48,7 @@ def yaml_loader() -> type:
     try:
         import yaml
     except ImportError:
-        raise InvalidInputError("YAML files need PyYAML: pip install 'zbuf-occlude[yaml]'") from None
+        raise InvalidInputError(f"YAML files need PyYAML: {install_hint('yaml')}") from None
 
     class SpecYamlLoader(yaml.SafeLoader):
         """``yaml.SafeLoader`` that refuses aliases and deep nesting while composing (module docstring)."""

@@ -13,7 +13,7 @@
     exact-by-construction oracle, independent of ours, to cross-check it.
     :func:`open3d_raycast_visible`.
 
-The Open3D methods need ``pip install 'zbuf-occlude[open3d]'`` (Open3D's wheel also needs
+The Open3D methods need the ``open3d`` extra (``pip install '.[open3d]'`` from a checkout) (Open3D's wheel also needs
 the system's ``libusb-1.0``) and raise :class:`~zbuf_occlude.errors.BackendUnavailable`
 without it.
 """
@@ -27,6 +27,7 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
+from zbuf_occlude._version import install_hint
 from zbuf_occlude.defaults import DEFAULT_RESOLUTION
 from zbuf_occlude.errors import BackendUnavailable
 from zbuf_occlude.geometry.cameras import Camera
@@ -103,7 +104,7 @@ def import_open3d() -> Any:
         import open3d
     except ImportError as exc:  # also OSError-like failures of its shared libraries
         raise BackendUnavailable(
-            f"the open3d-* visibility methods need Open3D: pip install 'zbuf-occlude[open3d]' "
+            f"the open3d-* visibility methods need Open3D: {install_hint('open3d')} "
             f"(and the system library libusb-1.0, e.g. apt-get install libusb-1.0-0): {exc}"
         ) from None
     return open3d

@@ -92,7 +92,7 @@ def test_kernel_on_real_mesh_matches_oracle_numpy(backend: str) -> None:
 
 def test_kernel_backends_agree_with_exclusion_keys() -> None:
     if not face_scan.numba_available():
-        pytest.skip("numba not installed (pip install 'zbuf-occlude[fast]')")
+        pytest.skip("numba not installed (a core dependency: pip install -e .)")
     mesh = _real(SMALL[2])
     points, fi = zo.sample_surface(mesh, count=500, seed=2)
     planes = triangle_planes(mesh.triangles)

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from zbuf_occlude import io
+from zbuf_occlude._version import install_hint
 from zbuf_occlude.errors import OutputError
 from zbuf_occlude.experiments.compare.results import summarise, write_csv
 
@@ -102,7 +103,7 @@ def _plots(rows: Sequence[dict[str, Any]], out: Path) -> dict[str, str]:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError:
-        log.warning("matplotlib is not installed (pip install 'zbuf-occlude[plot]'): no PNG plots written")
+        log.warning("matplotlib is not installed (%s): no PNG plots written", install_hint("plot"))
         return {}
     written: dict[str, str] = {}
     main = summarise(rows)

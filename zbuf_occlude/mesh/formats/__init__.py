@@ -29,6 +29,7 @@ import importlib.util
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from zbuf_occlude._version import install_hint
 from zbuf_occlude.errors import MeshLoadError
 from zbuf_occlude.mesh.formats import collada, gltf, obj, off, ply, stl
 from zbuf_occlude.mesh.formats.base import Format
@@ -51,7 +52,7 @@ def _check_installed(fmt: Format, path: Path) -> None:
     if fmt.needs is not None:
         module, extra = fmt.needs
         if importlib.util.find_spec(module) is None:
-            raise MeshLoadError(f"{path}: reading {fmt.file_type.upper()} needs the {module!r} package: pip install 'zbuf-occlude[{extra}]'")
+            raise MeshLoadError(f"{path}: reading {fmt.file_type.upper()} needs the {module!r} package: {install_hint(extra)}")
 
 
 def read_trimesh(path: Path, file_type: str) -> trimesh.Trimesh:

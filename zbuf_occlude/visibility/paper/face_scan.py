@@ -13,7 +13,7 @@ Two backends run the same arithmetic (:func:`occluded_by_faces`):
     float64 kernel of :func:`~zbuf_occlude.visibility.segment_triangle.segment_hits_triangles`
     (same operations in the same order, no fused multiply-add), so it decides every
     (point, face) pair bit for bit as the numpy kernel does; ``tests/visibility/paper/test_object_space.py``
-    checks this.  Needs ``pip install 'zbuf-occlude[fast]'`` (numba).
+    checks this.  Needs numba (a core dependency).
 ``"numpy"``
     The kernel functions of :mod:`.segment_triangle` on blocks of (point, face) pairs, a block of faces
     at a time, dropping a point as soon as a block occludes it.  No dependency; memory
@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from zbuf_occlude._version import install_hint
 from zbuf_occlude.defaults import DEFAULT_SELF_HIT_TOLERANCE
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 from zbuf_occlude.visibility.oracle_numpy import DEFAULT_PAIRS_PER_CHUNK
@@ -92,7 +93,7 @@ def _numba_kernel() -> Any:
         import numba
     except ImportError as exc:
         raise BackendUnavailable(
-            f"backend='numba' needs numba: pip install 'zbuf-occlude[fast]' ({exc}); or use backend='numpy'"
+            f"backend='numba' needs numba: {install_hint('fast')} ({exc}); or use backend='numpy'"
         ) from None
     from zbuf_occlude.visibility.kernels import pair_occludes_one
 
