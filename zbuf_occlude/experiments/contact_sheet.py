@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from zbuf_occlude._version import install_hint
 from zbuf_occlude.dataset.layout import CARD_FILE
 from zbuf_occlude.defaults import DEFAULT_SEED
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
@@ -226,7 +227,7 @@ def contact_sheet(
         error of the reader (:class:`~zbuf_occlude.dataset.reader.OccludedDataset`) or of
         :func:`~zbuf_occlude.sensors.scan.read_scan_npz`, naming the file.
     BackendUnavailable
-        matplotlib is missing (``pip install 'zbuf-occlude[plot]'``).
+        matplotlib is missing (``pip install '.[plot]'``).
     OutputError
         ``out`` cannot be written.
     """
@@ -244,7 +245,7 @@ def contact_sheet(
     try:
         import matplotlib  # noqa: F401  (checked before any file is read)
     except ImportError:
-        raise BackendUnavailable("contact-sheet needs matplotlib: pip install 'zbuf-occlude[plot]'") from None
+        raise BackendUnavailable(f"contact-sheet needs matplotlib: {install_hint('plot')}") from None
     rng = np.random.default_rng(seed)
     fixed = camera_on_sphere(FIXED_ELEVATION_DEG, FIXED_AZIMUTH_DEG, DEFAULT_RADIUS, resolution=FIXED_RESOLUTION)
     if (root / CARD_FILE).is_file():
