@@ -806,6 +806,21 @@ def test_the_set_chosen_on_the_fit_half_is_the_best_validated_per_seed_never_the
     assert CHOSEN_ON_FIT_HALF not in {r["train_set"] for r in summarise(runs, ["car", "pole"])}
 
 
+def test_a_validation_accuracy_tie_goes_to_the_lower_validation_loss() -> None:
+    from zbuf_occlude.experiments.sim2real import CHOSEN_ON_FIT_HALF, summarise
+
+    def run(kind: str, val: float, loss: float | None, scored: float) -> dict:
+        return {"train_set": kind, "seed": 0, "best_val_mean_class_accuracy": val, "best_val_loss": loss, "mean_class_accuracy": scored}
+
+    both_saturated = [run("complete", 1.0, 0.40, 0.6), run("occluded", 1.0, 0.10, 0.8), run("lidar", 1.0, 0.25, 0.7),
+                      run("real→real", 1.0, 0.01, 0.9)]
+    rows = {r["train_set"]: r for r in summarise(both_saturated, ["car", "pole"], chosen_on_fit_half=True)}
+    assert rows[CHOSEN_ON_FIT_HALF]["chosen_sets"] == "occluded"
+    no_loss = [run("complete", 1.0, None, 0.6), run("lidar", 1.0, 0.3, 0.7)]  # an older record without a loss ranks last
+    rows = {r["train_set"]: r for r in summarise(no_loss, ["car", "pole"], chosen_on_fit_half=True)}
+    assert rows[CHOSEN_ON_FIT_HALF]["chosen_sets"] == "lidar"
+
+
 @pytest.mark.slow
 def test_a_class_outline_warps_each_mesh_then_stretches_it_under_the_warp(tmp_path: Path) -> None:
     from zbuf_occlude.experiments.sim2real_data import build_set, fit_mesh_shapes

@@ -62,6 +62,7 @@ once) given to :func:`run_sim2real`, in three stages: :func:`prepare_sets` (scan
 
 from __future__ import annotations
 
+import math
 import json
 import logging
 import os
@@ -500,7 +501,8 @@ def summarise(runs: list[dict], names: list[str], *, chosen_on_fit_half: bool = 
 
     With ``chosen_on_fit_half`` (runs validated on the fit half's real scans), a
     :data:`CHOSEN_ON_FIT_HALF` row follows real→real: per seed, the mesh-only run with the best
-    ``best_val_mean_class_accuracy`` (ties: the first in the sets' order), its scores as above,
+    ``best_val_mean_class_accuracy`` (ties: the lower ``best_val_loss``, then the first in the
+    sets' order), its scores as above,
     the chosen sets (``chosen_sets``, in seed order), and its difference from real→real
     (``diff_vs_real_to_real``) with the one-sided p that real→real is above (``p_real_to_real_above``)."""
     keys = ["mean_class_accuracy", "overall_accuracy", "car_precision", "car_recall", "car_f1",
@@ -532,6 +534,14 @@ def summarise(runs: list[dict], names: list[str], *, chosen_on_fit_half: bool = 
     return rows
 
 
+def _validation_rank(run: dict) -> tuple[float, float]:
+    """How well a run did on its validation scans, larger is better: the mean class accuracy, then
+    (accuracy often ties at 1.0 on a small fit half) the lower validation loss; a run recorded
+    without a loss ranks below one with a loss."""
+    loss = run.get("best_val_loss")
+    return run["best_val_mean_class_accuracy"], -loss if loss is not None and math.isfinite(loss) else -math.inf
+
+
 def _chosen_row(runs: list[dict], keys: list[str], ref: list[float]) -> list[dict]:
     """The :data:`CHOSEN_ON_FIT_HALF` row of :func:`summarise` (none when no seed has a mesh-only run)."""
     order = {k: i for i, k in enumerate((*TRAINING_SETS, *FITTED_SETS))}
@@ -539,7 +549,7 @@ def _chosen_row(runs: list[dict], keys: list[str], ref: list[float]) -> list[dic
     for seed in sorted({r["seed"] for r in runs}):
         mine = [r for r in runs if r["seed"] == seed and r["train_set"] in order]
         if mine:
-            chosen.append(max(sorted(mine, key=lambda r: order[r["train_set"]]), key=lambda r: r["best_val_mean_class_accuracy"]))
+            chosen.append(max(sorted(mine, key=lambda r: order[r["train_set"]]), key=_validation_rank))
     if not chosen:
         return []
     row = {"train_set": CHOSEN_ON_FIT_HALF, "n_seeds": len(chosen), "chosen_sets": " ".join(r["train_set"] for r in chosen)}
