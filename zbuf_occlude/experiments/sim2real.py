@@ -62,9 +62,9 @@ once) given to :func:`run_sim2real`, in three stages: :func:`prepare_sets` (scan
 
 from __future__ import annotations
 
-import math
 import json
 import logging
+import math
 import os
 import time
 from collections.abc import Callable
