@@ -51,6 +51,10 @@ SCANNERS = {
 }
 
 
+#: Where aerial crops lie in a user's files: projected coordinates (UTM-like eastings and northings, metres).
+_UTM_OFFSET = np.array([480_000.0, 5_400_000.0, 120.0])
+
+
 @pytest.fixture(scope="module", params=sorted(SCANNERS))
 def simulated(request):
     scanner = SCANNERS[request.param]
@@ -76,6 +80,14 @@ def test_each_crop_gets_its_own_scan_angle(simulated) -> None:
     told = np.isfinite(measured)
     assert told.sum() >= len(crops) // 2  # near nadir a box shows too little wall to tell
     assert np.median(np.abs(measured[told] - np.array(angle)[told])) <= 3.0
+
+
+def test_crops_in_projected_coordinates_fit_as_at_the_origin(simulated) -> None:
+    # aerial crops come in eastings and northings of 10^5 to 10^7 m: the same crops there give the same fit
+    scanner, crops, _, _, fit = simulated
+    far = fit_airborne([np.asarray(c, dtype=np.float64) + _UTM_OFFSET for c in crops], scanner, bootstrap=40)
+    for key in ("density_m2", "max_scan_angle_deg", "range_noise_m"):
+        assert far.estimates[key].value == pytest.approx(fit.estimates[key].value, rel=1e-3), key
 
 
 def test_the_fitted_sensor_file_loads_and_scans_at_the_measured_density(simulated, tmp_path) -> None:
@@ -211,3 +223,54 @@ def test_sensor_to_json_is_what_sensor_from_name_reads_back(name, tmp_path) -> N
     assert sensor_from_name(path) == sensor
     with pytest.raises(InvalidInputError, match="not a sensor: str"):
         sensor_to_json("hdl32e")
+
+
+# -- zbuf-occlude fit-sensor on aerial crops ------------------------------------------------------------
+
+
+def _crop_folder(root, crops) -> None:
+    """The crops as a user has them: a class folder of ``.xyz`` files in projected coordinates."""
+    (root / "car").mkdir(parents=True)
+    for i, c in enumerate(crops):
+        np.savetxt(root / "car" / f"{i:03d}.xyz", np.asarray(c, dtype=np.float64) + _UTM_OFFSET, fmt="%.3f")
+
+
+def test_fit_sensor_command_fits_an_airborne_scanner_to_aerial_crops(tmp_path, capsys) -> None:
+    """An airborne preset chooses the airborne fit: crops in, a sensor JSON that scan and sensor_from_name take out."""
+    from zbuf_occlude.cli.main import main
+    from zbuf_occlude.sensors.scan import read_scan_npz
+
+    scanner = SCANNERS["35 points/m², 500 m, 60°"]
+    crops, density, _ = _box_crops(scanner, 16, seed=3)
+    _crop_folder(tmp_path / "crops", crops)
+    out = tmp_path / "fitted.json"
+    assert main(["fit-sensor", str(tmp_path / "crops"), "--sensor", "riegl-q1560", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    first, second = printed.splitlines()[:2]  # what it reads and what it fits, before any number
+    assert first.startswith("reading the real scans under") and second.startswith("read 16 scans of 1 classes (car: 16); fitting an airborne scanner")
+    assert "| density_m2 | " in printed and " ± " in printed and "The fitted scanner riegl-q1560-fitted" in printed
+    fitted = sensor_from_name(out)  # the loader of scan, farm --sensor and experiment sim2real --sensor
+    assert isinstance(fitted, AirborneScanner) and fitted.name == "riegl-q1560-fitted"
+    assert fitted.survey_density_m2 == pytest.approx(np.mean(density), rel=0.10)
+    assert abs(fitted.swath_deg - scanner.swath_deg) <= 10.0
+    spec = json.loads(out.read_text())
+    assert spec["kind"] == "airborne" and spec["fit"]["n_crops"] == 16 and spec["fit"]["estimates"]["density_m2"]["std"] > 0
+    assert "| density_m2 | " in out.with_suffix(".md").read_text()
+    # the file scans
+    assert main(["scan", "box", "--sensor", str(out), "--crop", "--size", "4.5", "--out", str(tmp_path / "scans")]) == 0
+    (npz,) = (tmp_path / "scans").glob("*.npz")
+    assert len(read_scan_npz(npz).points) > 100
+
+
+def test_fit_sensor_command_refuses_a_spinning_fit_of_aerial_crops_in_one_line(tmp_path, capsys) -> None:
+    from zbuf_occlude.cli.main import main
+
+    crops, _, _ = _box_crops(SCANNERS["35 points/m², 500 m, 60°"], 6, seed=3)
+    _crop_folder(tmp_path / "crops", crops)
+    out = tmp_path / "fitted.json"
+    assert main(["fit-sensor", str(tmp_path / "crops"), "--sensor", "hdl32e", "--out", str(out)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out.startswith("reading the real scans under")  # said before the work, not silent
+    (line,) = captured.err.strip().splitlines()
+    assert "not scans in a spinning sensor's frame" in line and "fit-sensor --sensor dales-q1560" in line
+    assert "Traceback" not in captured.err and not out.exists()

@@ -18,7 +18,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.samples import derive_rng, object_key
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.mesh.sizes import DIMENSIONS, SizeRange, size_interval
-from zbuf_occlude.sensors.presets import sensor_from_name
+from zbuf_occlude.sensors.presets import preset_names, sensor_from_name
 
 __all__ = ["add_scan_parser", "add_realism_parser", "add_parser", "parse_interval"]
 
@@ -320,7 +320,7 @@ def add_realism_parser(sub) -> argparse.ArgumentParser:
 def cmd_fit_sensor(args: argparse.Namespace) -> int:
     from zbuf_occlude.experiments.sensor_fit import fit_sensor_to_scans
 
-    fit, json_path, md_path = fit_sensor_to_scans(args.real, args.sensor, args.out, seed=args.seed)
+    fit, json_path, md_path = fit_sensor_to_scans(args.real, args.sensor, args.out, seed=args.seed, say=lambda line: print(line, flush=True))
     print(fit.markdown(), end="")
     print(f"wrote {json_path} (use it as --sensor {json_path}), {md_path}")
     return 0
@@ -328,15 +328,23 @@ def cmd_fit_sensor(args: argparse.Namespace) -> int:
 
 def add_fit_sensor_parser(sub) -> argparse.ArgumentParser:
     """Add ``fit-sensor`` to the subparsers ``sub``."""
+    names = preset_names()
     p = sub.add_parser(
-        "fit-sensor", help="fit a spinning LiDAR's firing rate, range noise and dropout to your real object scans",
-        description="Estimate what the simulation can set from a folder of real segmented object scans "
-        "(sensor frame, metres): azimuth step, range noise, dropout; report ring spacing, the count-vs-range "
-        "law and ground returns, each with a bootstrap uncertainty. Writes a sensor JSON that scan, "
-        "farm --sensor and experiment sim2real --sensor take.",
+        "fit-sensor", help="fit a spinning LiDAR or an airborne scanner to your real object scans",
+        description="Estimate what the simulation can set from a folder of real segmented object scans (metres, z up), "
+        "each with a bootstrap uncertainty, and write a sensor JSON that scan, farm --sensor and experiment sim2real "
+        "--sensor take.  The --sensor to start from chooses the fit.  A spinning LiDAR: scans in the sensor's frame "
+        "(sensor at the origin); azimuth step, range noise, dropout, and the ring spacing, count-vs-range law and "
+        "ground returns.  An airborne scanner: aerial crops as they lie, no sensor position needed; point density, "
+        "scan angle and swath, range noise (altitude, speed and flight plan are the preset's).  Spinning fits refuse "
+        "aerial crops in one line.",
     )  # fmt: skip
-    p.add_argument("real", metavar="REAL_SCANS", help="folder of real object scans (LiDARNet CSVs, SUO, or class folders)")
-    p.add_argument("--sensor", required=True, help="the spinning-LiDAR preset or JSON file to start from (its beam table is kept)")
+    p.add_argument("real", metavar="REAL_SCANS", help="folder of real object scans (class folders of point files, LiDARNet CSVs, or SUO)")
+    p.add_argument(
+        "--sensor", required=True,
+        help=f"the preset or sensor JSON to start from: a spinning LiDAR ({', '.join(names['lidar'])}; its beam table is kept) "
+        f"fits scans in the sensor's frame; an airborne scanner ({', '.join(names['airborne'])}) fits aerial crops",
+    )  # fmt: skip
     p.add_argument("--out", required=True, help="the fitted sensor, a .json file (a .md table is written beside it)")
     p.add_argument("--seed", action=Checked, check=seed, default=DEFAULT_SEED, help="seed of the bootstrap (default: %(default)s)")
     p.set_defaults(func=cmd_fit_sensor)

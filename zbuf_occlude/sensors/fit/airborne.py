@@ -57,7 +57,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.airborne import AirborneScanner
-from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate
+from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate, estimates_markdown
 
 __all__ = [
     "AirborneFit", "CropFaces", "HORIZONTAL_DEG", "MIN_CROP_POINTS", "PLANE_NEIGHBOURS", "crop_faces",
@@ -202,6 +202,9 @@ def crop_faces(points: NDArray[np.floating]) -> CropFaces:
     p = _checked_crop(points)
     if len(p) < MIN_CROP_POINTS:
         raise InvalidInputError(f"a crop needs at least {MIN_CROP_POINTS} points, got {len(p)}")
+    # centred: in projected coordinates (eastings and northings of 10^5 to 10^7 m, as aerial crops
+    # come) Qhull's Delaunay triangulation loses the centimetres that the faces' densities rest on
+    p = p - p.mean(axis=0)
     normal, variance, idx = _local_planes(p)
     planar = np.isfinite(variance)
     top = planar & (np.abs(normal[:, 2]) >= math.cos(math.radians(HORIZONTAL_DEG)))
@@ -320,6 +323,16 @@ class AirborneFit:
             "estimates": {k: vars(e) for k, e in self.estimates.items()},
         }  # fmt: skip
         return spec
+
+    def markdown(self) -> str:
+        """The estimates as a table (value ± the bootstrap's std) and, below it, the fitted scanner in one paragraph."""
+        s, base = self.sensor, self.base
+        return estimates_markdown(self.estimates) + (
+            f"\nThe fitted scanner {s.name}: {s.survey_density_m2:.1f} points/m² on flat open ground (pulse rate "
+            f"{s.pulse_rate_hz:,.0f} Hz), swath {s.swath_deg:.1f}° ({s.swath_width_m:,.0f} m wide at {s.altitude_m:g} m), "
+            f"range noise {s.range_noise_m:.3f} m.  Its altitude, speed, line rate and scan pattern are {base.name}'s: crops "
+            "cannot tell them apart, only the density they give.\n"
+        )
 
 
 def fit_airborne(crops: Sequence[NDArray[np.floating]], base: AirborneScanner, *, seed: int = 0, bootstrap: int = BOOTSTRAP) -> AirborneFit:
