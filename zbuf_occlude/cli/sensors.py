@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -24,6 +25,10 @@ __all__ = ["add_scan_parser", "add_realism_parser", "add_parser", "parse_interva
 
 log = logging.getLogger(__name__)
 
+
+#: A mesh whose height is below this share of its largest side is flat in z: stood on the ground it
+#: lies in the ground plane, where a scan cannot tell it from the ground (scan refuses it).
+FLAT_SHARE = 1e-6
 
 #: Unit primitives ``scan`` takes instead of a mesh file (stretch them with ``--extents``).
 PRIMITIVES = {
@@ -116,7 +121,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
     from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
     from zbuf_occlude.sensors.lidar import Lidar
     from zbuf_occlude.sensors.scan import look_at_pose, scan
-    from zbuf_occlude.sensors.scene import load_scene
+    from zbuf_occlude.sensors.scene import GROUND_ID, load_scene
 
     sensor = _with_return_physics(sensor_from_name(args.sensor), args)
     if args.ground_margin is not None and not args.crop:
@@ -132,7 +137,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
     out = Path(args.out)
     formats = ("npz", "ply") if args.format == "both" else (args.format,)
     src = Path(args.mesh_or_scene)
-    written = []
+    written, empty = [], 0
     out.mkdir(parents=True, exist_ok=True)  # a refused run's empty --out is removed by cli.main
     if src.suffix.lower() in (".json", ".yaml", ".yml"):
         if args.crop:
@@ -168,6 +173,12 @@ def cmd_scan(args: argparse.Namespace) -> int:
             from zbuf_occlude.mesh.load import load_mesh
 
             mesh = load_mesh(src, up=args.up)  # once, not per sample
+            if not mesh.extents[2] > FLAT_SHARE * mesh.extents.max():
+                raise InvalidInputError(
+                    f"{src}: flat in z (no height once its up axis is turned to +z, --up {args.up}): stood on the ground it lies "
+                    "in the ground plane, where no scan can tell it from the ground; give --up the axis it should stand along "
+                    "(e.g. --up +y), or give it a thickness"
+                )
         dist = CropDistributions(
             distance_m=parse_interval(args.distance, "--distance"), height_m=parse_interval(args.height, "--height"),
             azimuth_deg=parse_interval(args.azimuth, "--azimuth"), yaw_deg=parse_interval(args.yaw, "--yaw"),
@@ -195,23 +206,37 @@ def cmd_scan(args: argparse.Namespace) -> int:
             s = crop.scan if args.crop else crop.full
             s.meta.update(placement.to_dict())
             stem = f"{src.stem}_{sensor.name}_s{k:03d}"
-            written += [getattr(s, f"to_{fmt}")(out / f"{stem}.{fmt}") for fmt in formats]
-            log.info("%s: %d returns at %.2f m", stem, len(s), placement.distance_m)
-    print(f"wrote {counted(len(written), 'file')} to {out}")
-    return 0
+            files = [getattr(s, f"to_{fmt}")(out / f"{stem}.{fmt}") for fmt in formats]
+            written += files
+            returns = int(np.count_nonzero(crop.scan.object_id != GROUND_ID))
+            if returns == 0:
+                empty += 1
+                print(f"EMPTY {files[0]}: no return of the object (edge-on, below the sensor's beams or beyond its range at "
+                      f"{placement.distance_m:.2f} m)", file=sys.stderr)  # fmt: skip
+            log.info("%s: %d returns of the object at %.2f m", stem, returns, placement.distance_m)
+    print(f"wrote {counted(len(written), 'file')} to {out}" + (f"; {empty} of {counted(args.samples, 'scan')} hold no return of the object" if empty else ""))
+    return 1 if empty else 0
 
 
 def add_scan_parser(sub) -> argparse.ArgumentParser:
     """Add ``scan`` to the subparsers ``sub``."""
     from zbuf_occlude.mesh.scene import UP_CHOICES
 
+    names = preset_names()
     p = sub.add_parser(
         "scan", help="LiDAR / depth-camera scan of a mesh on the ground, or of a scene file",
-        description="Stand a mesh on a ground plane at --distance from a simulated LiDAR and scan it (or scan a "
-        "scene file with any sensor); writes one point cloud per sample to --out.",
+        description="Stand a mesh on a ground plane at --distance from a simulated LiDAR and scan it (or fly an airborne "
+        "scanner over it, or scan a scene file with any sensor); writes one point cloud per sample to --out.  A mesh "
+        "flat in z (a single square, no height) is refused: on the ground it lies in the ground plane.  The exit "
+        "status is 1 when a scan of a mesh holds no return of the object (each such file is named on stderr: seen "
+        "edge-on, below the beams or out of range).",
     )  # fmt: skip
     p.add_argument("mesh_or_scene", metavar="MESH_OR_SCENE", help=f"mesh file ({EXTENSIONS_TEXT}; stood on the ground), 'cylinder' or 'box' (unit primitives), or a scene .json/.yaml")
-    p.add_argument("--sensor", default="hdl32e", help="vlp16 | hdl32e | hdl64e | os1-64 | riegl-q1560 (airborne) | kinect-v1 | sensor .json (default: %(default)s)")
+    p.add_argument(
+        "--sensor", default="hdl32e",
+        help=f"a spinning LiDAR ({', '.join(names['lidar'])}), an airborne scanner ({', '.join(names['airborne'])}), a depth "
+        f"camera ({', '.join(names['depth_camera'])}), or a sensor .json (fit-sensor writes one) (default: %(default)s)",
+    )  # fmt: skip
     p.add_argument("--distance", action=Checked, check=interval, default="10", help="horizontal sensor-object distance, metres (N or LO:HI, uniform per sample; at least half the object's size) (default: %(default)s)")
     p.add_argument("--height", action=Checked, check=interval, default="1.8", help="sensor height above the ground, metres (N or LO:HI) (default: %(default)s)")
     p.add_argument("--size", action=Checked, check=interval, default="4.5", help="the object's largest dimension, metres (N or LO:HI; see --size-of) (default: %(default)s)")
