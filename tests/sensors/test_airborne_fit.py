@@ -102,6 +102,57 @@ def test_the_fitted_sensor_file_loads_and_scans_at_the_measured_density(simulate
     assert refit.estimates["density_m2"].value == pytest.approx(np.mean(density), rel=0.12)
 
 
+def _top_scan_angles(folder) -> np.ndarray:
+    """Per scan file, the median incidence on the object's horizontal top: the scan angle at the object, degrees."""
+    from zbuf_occlude.sensors.scan import read_scan_npz
+
+    angles = []
+    for f in sorted(folder.glob("*.npz")):
+        s = read_scan_npz(f)
+        top = np.abs(s.normal[:, 2]) > 0.99
+        angles.append(float(np.median(s.incidence_deg[top])))
+    return np.array(angles)
+
+
+@pytest.mark.slow
+def test_scanning_with_the_fitted_sensor_file_reproduces_the_fitted_scan_angles(tmp_path) -> None:
+    """The fitted scanner chooses the flight plan: scan puts each object in one strip, anywhere across it, so
+    the scan angles at the objects span what the crops showed (0° to max_scan_angle_deg, tan θ uniform)."""
+    from zbuf_occlude.cli.main import main
+
+    scanner = SCANNERS["35 points/m², 500 m, 60°"]
+    crops, _, _ = _box_crops(scanner, 16, seed=3)
+    fit = fit_airborne(crops, scanner.with_(name="base"), bootstrap=10)
+    assert (fit.sensor.n_lines, fit.sensor.side_overlap) == (3, 0.0) and "strips abut" in fit.markdown()
+    path = tmp_path / "fitted.json"
+    path.write_text(json.dumps(fit.to_json()))
+    argv = ["scan", "box", "--extents", "4.5,1.8,1.5", "--yaw", "0:360", "--sensor", str(path), "--crop", "--samples", "40"]
+    assert main([*argv, "--out", str(tmp_path / "scans")]) == 0
+    angles = _top_scan_angles(tmp_path / "scans")
+    fitted_max = fit.estimates["max_scan_angle_deg"].value
+    assert np.min(angles) <= 5.0 and abs(np.max(angles) - fitted_max) <= 5.0
+    # tan θ uniform on [0, tan(fitted_max)]: its median at half the largest tangent
+    assert abs(np.median(angles) - math.degrees(math.atan(math.tan(math.radians(fitted_max)) / 2.0))) <= 5.0
+    # the scanner of the crops themselves (one line over the plan centre) sees every object at the nadir
+    path.write_text(json.dumps({**fit.to_json(), "n_lines": 1}))
+    assert main([*argv, "--out", str(tmp_path / "one_line")]) == 0
+    assert np.max(_top_scan_angles(tmp_path / "one_line")) < 2.0
+
+
+def test_crops_lit_from_both_sides_keep_the_base_flight_plan() -> None:
+    # inside a DALES-like block (strips overlapping by 85 %) every crop is lit from both sides: the plan cannot be told
+    base = _scanner("block", 20.0, 300.0, 60.0, 0.02).with_(n_lines=5, side_overlap=0.85)
+    crops = []
+    for i in range(6):
+        box = trimesh.creation.box(extents=[4.5, 2.0, 1.6])
+        box.apply_transform(trimesh.transformations.rotation_matrix(math.radians(90.0 * i), [0, 0, 1]))  # walls facing the lines
+        box.apply_translation([0.0, 0.0, 0.8])
+        crops.append(np.asarray(scan_airborne(box, base, half_size_m=4.0, seed=i).points, dtype=np.float64))  # the lines shifted at random
+    fit = fit_airborne(crops, base, bootstrap=5)
+    assert fit.estimates["two_sided_fraction"].value > 0.5
+    assert (fit.sensor.n_lines, fit.sensor.side_overlap) == (5, 0.85) and "lit from both sides" in fit.markdown()
+
+
 def test_the_density_follows_the_scanner_not_the_base() -> None:
     # crops of a scanner with twice the pulse rate are measured at twice the density, whatever base is given
     scanner = SCANNERS["35 points/m², 500 m, 60°"]

@@ -371,8 +371,8 @@ def add_fit_sensor_parser(sub) -> argparse.ArgumentParser:
         "--sensor take.  The --sensor to start from chooses the fit.  A spinning LiDAR: scans in the sensor's frame "
         "(sensor at the origin); azimuth step, range noise, dropout, and the ring spacing, count-vs-range law and "
         "ground returns.  An airborne scanner: aerial crops as they lie, no sensor position needed; point density, "
-        "scan angle and swath, range noise (altitude, speed and flight plan are the preset's).  Spinning fits refuse "
-        "aerial crops in one line.",
+        "scan angle and swath, range noise (altitude and speed are the preset's; the flight plan puts scanned objects at "
+        "the crops' scan angles).  Spinning fits refuse aerial crops in one line.",
     )  # fmt: skip
     p.add_argument("real", metavar="REAL_SCANS", help="folder of real object scans (class folders of point files, LiDARNet CSVs, or SUO)")
     p.add_argument(
