@@ -398,3 +398,15 @@ def test_scan_exits_1_naming_each_scan_without_a_return_of_the_object(tmp_path, 
     # turned to face the sensor, the same wall returns points and the scan succeeds
     assert main(["scan", edge_on, "--crop", "--yaw", "90", "--samples", "2", "--out", str(tmp_path / "facing")]) == 0
     assert "EMPTY" not in capsys.readouterr().err
+
+
+def test_scan_places_an_airborne_scanner_at_any_offset_and_names_a_missing_sensor_file(tmp_path, capsys) -> None:
+    from zbuf_occlude.cli.main import main
+
+    # the aircraft flies far above: an across-track offset below half the object cannot put it inside
+    argv = ["scan", "box", "--sensor", "dales-q1560", "--extents", "4.5,1.8,1.5", "--distance", "1", "--azimuth", "90", "--crop"]
+    assert main([*argv, "--out", str(tmp_path / "als")]) == 0
+    assert main([*argv[:3], "hdl32e", *argv[4:], "--out", str(tmp_path / "lidar")]) == 2  # a ground sensor would be
+    assert "may put the sensor inside the object" in capsys.readouterr().err
+    assert main(["scan", "box", "--sensor", str(tmp_path / "fitted.json"), "--out", str(tmp_path / "x")]) == 2
+    assert "fitted.json: no such file" in capsys.readouterr().err

@@ -198,7 +198,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
                                                     name=str(src)))  # fmt: skip
             log.info("%s: width_scale %s, visible_across_sight %s, width_profile %s", src.name, dist.width_scale, dist.visible_across_sight,
                      dist.width_profile)  # fmt: skip
-        check_outside(dist, None if isinstance(mesh, dict) else mesh.extents)
+        if not isinstance(sensor, AirborneScanner):  # an aircraft flies its altitude above the object
+            check_outside(dist, None if isinstance(mesh, dict) else mesh.extents)
         for k in range(args.samples):
             rng = derive_rng(args.seed, object_key(src.name), k)
             placement = draw_placement(dist, rng)
@@ -237,7 +238,11 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         help=f"a spinning LiDAR ({', '.join(names['lidar'])}), an airborne scanner ({', '.join(names['airborne'])}), a depth "
         f"camera ({', '.join(names['depth_camera'])}), or a sensor .json (fit-sensor writes one) (default: %(default)s)",
     )  # fmt: skip
-    p.add_argument("--distance", action=Checked, check=interval, default="10", help="horizontal sensor-object distance, metres (N or LO:HI, uniform per sample; at least half the object's size) (default: %(default)s)")
+    p.add_argument(
+        "--distance", action=Checked, check=interval, default="10",
+        help="horizontal sensor-object distance, metres (N or LO:HI, uniform per sample; at least half the object's size); "
+        "an airborne scanner flies over the object, distance · sin(azimuth) across track from its plan's centre (default: %(default)s)",
+    )  # fmt: skip
     p.add_argument("--height", action=Checked, check=interval, default="1.8", help="sensor height above the ground, metres (N or LO:HI) (default: %(default)s)")
     p.add_argument("--size", action=Checked, check=interval, default="4.5", help="the object's largest dimension, metres (N or LO:HI; see --size-of) (default: %(default)s)")
     p.add_argument(

@@ -122,7 +122,7 @@ def fit_sensor_to_scans(real: str | os.PathLike, sensor: str, out: str | os.Path
     scans = load_real_scans(real, dataset=dataset)
     counts = Counter(s.label for s in scans)
     kind = "an airborne scanner" if isinstance(base, AirborneScanner) else "a spinning LiDAR"
-    say(f"read {len(scans)} scans of {len(counts)} classes ({', '.join(f'{k}: {n}' for k, n in sorted(counts.items()))}); "
+    say(f"read {len(scans)} scans of {len(counts)} class{'' if len(counts) == 1 else 'es'} ({', '.join(f'{k}: {n}' for k, n in sorted(counts.items()))}); "
         f"fitting {kind}, {base.name}, with {BOOTSTRAP} bootstrap resamples ...")  # fmt: skip
     md = out.with_suffix(".md")
     if isinstance(base, AirborneScanner):

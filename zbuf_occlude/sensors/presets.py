@@ -39,7 +39,7 @@ def sensor_from_name(name: str | os.PathLike):
     Raises
     ------
     InvalidInputError
-        An unknown name, or a file that is not JSON, nests too deep, has an unknown kind or
+        An unknown name, a ``.json`` file that does not exist, or a file that is not JSON, nests too deep, has an unknown kind or
         key, or a field of the wrong type or range (the message names the file and the field).
     """
     from zbuf_occlude.sensors.airborne import AIRBORNE_PRESETS, AirborneScanner, airborne_preset
@@ -73,6 +73,8 @@ def sensor_from_name(name: str | os.PathLike):
             if "preset" in spec:
                 return airborne_preset(text(spec.pop("preset"), "preset")).with_(**spec)
             return cls(**_complete(spec, cls))
+    if path.suffix.lower() == ".json":
+        raise InvalidInputError(f"sensor file {path}: no such file (fit-sensor writes one; or name a preset)")
     raise InvalidInputError(f"unknown sensor {shown(name)}; use one of {[n for names in preset_names().values() for n in names]} or a .json file")
 
 
