@@ -71,7 +71,7 @@ def test_report_files_and_cli(tmp_path):
     assert set(np.unique(full.object_id)) == {0, 1} and np.allclose(full.sensor_position, [0, 0, 1.8])
     box = full.crop(1).points
     assert abs(box[:, 2].max() - 1.5) < 0.1 and box[:, 2].min() > -0.05  # stands on the ground, 1.5 m tall
-    rows = realism_report(out, out, tmp_path / "rep", figure=False)
+    rows, _ = realism_report(out, out, tmp_path / "rep", figure=False)
     assert (tmp_path / "rep" / "realism.md").read_text().count("|") > 20 and (tmp_path / "rep" / "realism.csv").exists()
     met = {row["metric"].split(",")[0]: row["met"] for row in rows}
     assert met["median ring spacing"] is True and met["count-vs-range exponent b (count ∝ r^b)"] is True
@@ -135,3 +135,90 @@ def test_ground_in_crops_leaves_a_scan_of_several_objects_as_it_is(tmp_path):
     for flag in (False, True):  # not a crop: each object alone, never the ground
         clouds = read_object_clouds(tmp_path, ground_in_crops=flag)
         assert sorted(len(c.points_m) for c in clouds) == sorted(int(np.sum(scan.object_id == i)) for i in (1, 2))
+
+
+# -- per class: points per crop, height / width, vertical distribution (aerial crops) --------------------
+def _shaft(rng, n: int = 60) -> np.ndarray:
+    """A pole as a tall shaft: points all the way up a 0.3 m wide, 8 m tall cylinder."""
+    a, z = rng.uniform(0, 2 * np.pi, n), rng.uniform(0.0, 8.0, n)
+    return np.column_stack([0.15 * np.cos(a), 0.15 * np.sin(a), z])
+
+
+def _squat_top(rng, n: int = 60) -> np.ndarray:
+    """A pole as aerial crops show it: a 1.2 m wide lamp head 0.6 m tall, three points on the shaft below."""
+    r, a = 0.6 * np.sqrt(rng.uniform(0, 1, n - 3)), rng.uniform(0, 2 * np.pi, n - 3)
+    head = np.column_stack([r * np.cos(a), r * np.sin(a), rng.uniform(7.4, 8.0, n - 3)])
+    return np.vstack([head, [[0.1, 0.0, 2.0], [0.1, 0.0, 4.0], [0.1, 0.0, 6.0]]])
+
+
+def test_shape_stats_of_a_shaft_and_a_squat_top() -> None:
+    from zbuf_occlude.experiments.realism import HEIGHT_BINS, shape_stats
+
+    rng = np.random.default_rng(0)
+    shaft, top = shape_stats(_shaft(rng)), shape_stats(_squat_top(rng))
+    assert shaft["height_to_width"] > 20 and 0.35 < shaft["median_normalised_height"] < 0.65
+    assert top["height_to_width"] < 8.0 / 1.0 and top["median_normalised_height"] > 0.9
+    assert top["height_shares"][-1] > 0.9 and top["height_shares"].sum() == pytest.approx(1.0)
+    assert len(shaft["height_shares"]) == HEIGHT_BINS and shaft["height_shares"].max() < 0.3
+    # the width is along the footprint's principal axis: a turned box measures the same
+    box = rng.uniform([-2.0, -0.5, 0.0], [2.0, 0.5, 1.5], (400, 3))
+    c, s_ = np.cos(0.7), np.sin(0.7)
+    turned = box @ np.array([[c, s_, 0], [-s_, c, 0], [0, 0, 1]])
+    assert shape_stats(turned)["width_m"] == pytest.approx(shape_stats(box)["width_m"], rel=1e-9)
+    assert shape_stats(box)["width_m"] == pytest.approx(4.0, abs=0.1)
+
+
+def test_compare_classes_reveals_tall_shafts_against_squat_tops() -> None:
+    from zbuf_occlude.experiments.realism import ObjectCloud, class_table, compare_classes
+
+    rng = np.random.default_rng(1)
+    generated = [ObjectCloud(_shaft(rng), "pole", f"g{i}") for i in range(6)]
+    real = [ObjectCloud(_squat_top(rng) + [480_000.0, 5_400_000.0, 95.0], "pole", f"r{i}") for i in range(6)]  # projected coordinates
+    rows, table = compare_classes(generated, real)
+    met = {row["metric"].split(" (")[0]: row["met"] for row in rows}
+    assert met["pole: median height / width"] is False and met["pole: median height above the crop's bottom, share of its height"] is False
+    assert met["pole: share of points in another tenth of the height"] is False
+    assert met["pole: median points per crop"] is True  # as many points: only the shape differs
+    assert table["pole"]["generated"]["height_to_width"] > 3 * table["pole"]["real"]["height_to_width"]
+    assert "| pole | generated | 6 |" in class_table(table) and "| pole | real | 6 |" in class_table(table)
+    # the same clouds against themselves meet every target; without a shared class every cloud is pooled as "all"
+    same_rows, _ = compare_classes(real, real)
+    assert all(row["met"] is True for row in same_rows)
+    pooled_rows, pooled = compare_classes([ObjectCloud(c.points_m, "object1", c.source) for c in generated], real)
+    assert list(pooled) == ["all"] and pooled_rows[0]["metric"].startswith("all: ")
+
+
+@pytest.mark.slow
+def test_realism_command_compares_airborne_crops_per_class(tmp_path, capsys) -> None:
+    """Simulated airborne crops of poles (tall shafts) and cars against 'real' class folders of .xyz crops:
+    squat lamp heads for the poles, other simulated cars for the cars. The table flags the poles, not the cars."""
+    import csv
+
+    from zbuf_occlude.cli.main import main
+
+    gen, real = tmp_path / "gen", tmp_path / "real"
+    common = ["--sensor", "dales-q1560", "--crop", "--samples", "4"]
+    assert main(["scan", "cylinder", "--extents", "0.3,=,8", *common, "--out", str(gen / "pole")]) == 0
+    assert main(["scan", "box", "--extents", "4.5,1.8,1.5", "--yaw", "0:360", *common, "--out", str(gen / "car")]) == 0
+    assert main(["scan", "box", "--extents", "4.5,1.8,1.5", "--yaw", "0:360", *common, "--seed", "9", "--out", str(tmp_path / "cars")]) == 0
+    rng = np.random.default_rng(2)
+    (real / "pole").mkdir(parents=True)
+    (real / "car").mkdir()
+    for i in range(4):
+        np.savetxt(real / "pole" / f"{i}.xyz", _squat_top(rng) + [480_000.0, 5_400_000.0, 95.0], fmt="%.3f")
+    for i, f in enumerate(sorted((tmp_path / "cars").glob("*.npz"))):
+        np.savetxt(real / "car" / f"{i}.xyz", S.read_scan_npz(f).points.astype(np.float64) + [480_000.0, 5_400_000.0, 95.0], fmt="%.3f")
+    capsys.readouterr()
+    assert main(["realism", str(gen), str(real), "--airborne", "--out", str(tmp_path / "rep")]) == 0
+    printed = capsys.readouterr().out
+    assert printed.startswith("reading ") and "| pole | generated | 4 |" in printed and "ring spacing" not in printed
+    with open(tmp_path / "rep" / "realism.csv", newline="", encoding="utf-8") as fh:
+        met = {row["metric"].split(" (")[0]: row["met"] for row in csv.DictReader(fh)}
+    assert met["pole: median height / width"] == "False" and met["car: median height / width"] == "True"
+    assert met["pole: median height above the crop's bottom, share of its height"] == "False"
+    assert met["car: median height above the crop's bottom, share of its height"] == "True"
+    with open(tmp_path / "rep" / "realism_classes.csv", newline="", encoding="utf-8") as fh:
+        classes = list(csv.DictReader(fh))
+    assert {(r["class"], r["set"]) for r in classes} == {(k, s) for k in ("car", "pole") for s in ("generated", "real")}
+    assert all(sum(float(r[f"share_{b / 10:g}_{(b + 1) / 10:g}"]) for b in range(10)) == pytest.approx(1.0) for r in classes)
+    assert (tmp_path / "rep" / "realism.png").stat().st_size > 0

@@ -51,6 +51,10 @@ SCANNERS = {
 }
 
 
+#: Where aerial crops lie in a user's files: projected coordinates (UTM-like eastings and northings, metres).
+_UTM_OFFSET = np.array([480_000.0, 5_400_000.0, 120.0])
+
+
 @pytest.fixture(scope="module", params=sorted(SCANNERS))
 def simulated(request):
     scanner = SCANNERS[request.param]
@@ -78,6 +82,14 @@ def test_each_crop_gets_its_own_scan_angle(simulated) -> None:
     assert np.median(np.abs(measured[told] - np.array(angle)[told])) <= 3.0
 
 
+def test_crops_in_projected_coordinates_fit_as_at_the_origin(simulated) -> None:
+    # aerial crops come in eastings and northings of 10^5 to 10^7 m: the same crops there give the same fit
+    scanner, crops, _, _, fit = simulated
+    far = fit_airborne([np.asarray(c, dtype=np.float64) + _UTM_OFFSET for c in crops], scanner, bootstrap=40)
+    for key in ("density_m2", "max_scan_angle_deg", "range_noise_m"):
+        assert far.estimates[key].value == pytest.approx(fit.estimates[key].value, rel=1e-3), key
+
+
 def test_the_fitted_sensor_file_loads_and_scans_at_the_measured_density(simulated, tmp_path) -> None:
     scanner, _, density, _, fit = simulated
     path = tmp_path / "fitted.json"
@@ -88,6 +100,57 @@ def test_the_fitted_sensor_file_loads_and_scans_at_the_measured_density(simulate
     again, density_again, _ = _box_crops(loaded, 10, seed=11)
     refit = fit_airborne(again, loaded, bootstrap=10)
     assert refit.estimates["density_m2"].value == pytest.approx(np.mean(density), rel=0.12)
+
+
+def _top_scan_angles(folder) -> np.ndarray:
+    """Per scan file, the median incidence on the object's horizontal top: the scan angle at the object, degrees."""
+    from zbuf_occlude.sensors.scan import read_scan_npz
+
+    angles = []
+    for f in sorted(folder.glob("*.npz")):
+        s = read_scan_npz(f)
+        top = np.abs(s.normal[:, 2]) > 0.99
+        angles.append(float(np.median(s.incidence_deg[top])))
+    return np.array(angles)
+
+
+@pytest.mark.slow
+def test_scanning_with_the_fitted_sensor_file_reproduces_the_fitted_scan_angles(tmp_path) -> None:
+    """The fitted scanner chooses the flight plan: scan puts each object in one strip, anywhere across it, so
+    the scan angles at the objects span what the crops showed (0° to max_scan_angle_deg, tan θ uniform)."""
+    from zbuf_occlude.cli.main import main
+
+    scanner = SCANNERS["35 points/m², 500 m, 60°"]
+    crops, _, _ = _box_crops(scanner, 16, seed=3)
+    fit = fit_airborne(crops, scanner.with_(name="base"), bootstrap=10)
+    assert (fit.sensor.n_lines, fit.sensor.side_overlap) == (3, 0.0) and "strips abut" in fit.markdown()
+    path = tmp_path / "fitted.json"
+    path.write_text(json.dumps(fit.to_json()))
+    argv = ["scan", "box", "--extents", "4.5,1.8,1.5", "--yaw", "0:360", "--sensor", str(path), "--crop", "--samples", "40"]
+    assert main([*argv, "--out", str(tmp_path / "scans")]) == 0
+    angles = _top_scan_angles(tmp_path / "scans")
+    fitted_max = fit.estimates["max_scan_angle_deg"].value
+    assert np.min(angles) <= 5.0 and abs(np.max(angles) - fitted_max) <= 5.0
+    # tan θ uniform on [0, tan(fitted_max)]: its median at half the largest tangent
+    assert abs(np.median(angles) - math.degrees(math.atan(math.tan(math.radians(fitted_max)) / 2.0))) <= 5.0
+    # the scanner of the crops themselves (one line over the plan centre) sees every object at the nadir
+    path.write_text(json.dumps({**fit.to_json(), "n_lines": 1}))
+    assert main([*argv, "--out", str(tmp_path / "one_line")]) == 0
+    assert np.max(_top_scan_angles(tmp_path / "one_line")) < 2.0
+
+
+def test_crops_lit_from_both_sides_keep_the_base_flight_plan() -> None:
+    # inside a DALES-like block (strips overlapping by 85 %) every crop is lit from both sides: the plan cannot be told
+    base = _scanner("block", 20.0, 300.0, 60.0, 0.02).with_(n_lines=5, side_overlap=0.85)
+    crops = []
+    for i in range(6):
+        box = trimesh.creation.box(extents=[4.5, 2.0, 1.6])
+        box.apply_transform(trimesh.transformations.rotation_matrix(math.radians(90.0 * i), [0, 0, 1]))  # walls facing the lines
+        box.apply_translation([0.0, 0.0, 0.8])
+        crops.append(np.asarray(scan_airborne(box, base, half_size_m=4.0, seed=i).points, dtype=np.float64))  # the lines shifted at random
+    fit = fit_airborne(crops, base, bootstrap=5)
+    assert fit.estimates["two_sided_fraction"].value > 0.5
+    assert (fit.sensor.n_lines, fit.sensor.side_overlap) == (5, 0.85) and "lit from both sides" in fit.markdown()
 
 
 def test_the_density_follows_the_scanner_not_the_base() -> None:
@@ -211,3 +274,54 @@ def test_sensor_to_json_is_what_sensor_from_name_reads_back(name, tmp_path) -> N
     assert sensor_from_name(path) == sensor
     with pytest.raises(InvalidInputError, match="not a sensor: str"):
         sensor_to_json("hdl32e")
+
+
+# -- zbuf-occlude fit-sensor on aerial crops ------------------------------------------------------------
+
+
+def _crop_folder(root, crops) -> None:
+    """The crops as a user has them: a class folder of ``.xyz`` files in projected coordinates."""
+    (root / "car").mkdir(parents=True)
+    for i, c in enumerate(crops):
+        np.savetxt(root / "car" / f"{i:03d}.xyz", np.asarray(c, dtype=np.float64) + _UTM_OFFSET, fmt="%.3f")
+
+
+def test_fit_sensor_command_fits_an_airborne_scanner_to_aerial_crops(tmp_path, capsys) -> None:
+    """An airborne preset chooses the airborne fit: crops in, a sensor JSON that scan and sensor_from_name take out."""
+    from zbuf_occlude.cli.main import main
+    from zbuf_occlude.sensors.scan import read_scan_npz
+
+    scanner = SCANNERS["35 points/m², 500 m, 60°"]
+    crops, density, _ = _box_crops(scanner, 16, seed=3)
+    _crop_folder(tmp_path / "crops", crops)
+    out = tmp_path / "fitted.json"
+    assert main(["fit-sensor", str(tmp_path / "crops"), "--sensor", "riegl-q1560", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    first, second = printed.splitlines()[:2]  # what it reads and what it fits, before any number
+    assert first.startswith("reading the real scans under") and second.startswith("read 16 scans of 1 class (car: 16); fitting an airborne scanner")
+    assert "| density_m2 | " in printed and " ± " in printed and "The fitted scanner riegl-q1560-fitted" in printed
+    fitted = sensor_from_name(out)  # the loader of scan, farm --sensor and experiment sim2real --sensor
+    assert isinstance(fitted, AirborneScanner) and fitted.name == "riegl-q1560-fitted"
+    assert fitted.survey_density_m2 == pytest.approx(np.mean(density), rel=0.10)
+    assert abs(fitted.swath_deg - scanner.swath_deg) <= 10.0
+    spec = json.loads(out.read_text())
+    assert spec["kind"] == "airborne" and spec["fit"]["n_crops"] == 16 and spec["fit"]["estimates"]["density_m2"]["std"] > 0
+    assert "| density_m2 | " in out.with_suffix(".md").read_text()
+    # the file scans
+    assert main(["scan", "box", "--sensor", str(out), "--crop", "--size", "4.5", "--out", str(tmp_path / "scans")]) == 0
+    (npz,) = (tmp_path / "scans").glob("*.npz")
+    assert len(read_scan_npz(npz).points) > 100
+
+
+def test_fit_sensor_command_refuses_a_spinning_fit_of_aerial_crops_in_one_line(tmp_path, capsys) -> None:
+    from zbuf_occlude.cli.main import main
+
+    crops, _, _ = _box_crops(SCANNERS["35 points/m², 500 m, 60°"], 6, seed=3)
+    _crop_folder(tmp_path / "crops", crops)
+    out = tmp_path / "fitted.json"
+    assert main(["fit-sensor", str(tmp_path / "crops"), "--sensor", "hdl32e", "--out", str(out)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out.startswith("reading the real scans under")  # said before the work, not silent
+    (line,) = captured.err.strip().splitlines()
+    assert "not scans in a spinning sensor's frame" in line and "fit-sensor --sensor dales-q1560" in line
+    assert "Traceback" not in captured.err and not out.exists()

@@ -349,3 +349,64 @@ def test_depth_camera_intrinsics_follow_opencv() -> None:
     directions, pixel = cam.rays()
     uvw = directions @ K.T
     np.testing.assert_allclose(uvw[:, :2] / uvw[:, 2:], pixel, atol=1e-9)
+
+
+# -- the scan command: its presets, and meshes it cannot see ----------------------------------------
+def test_scan_help_lists_every_preset_of_the_registries(capsys, monkeypatch) -> None:
+    from zbuf_occlude.cli.main import main
+    from zbuf_occlude.sensors.airborne import AIRBORNE_PRESETS
+
+    def help_text() -> str:
+        with pytest.raises(SystemExit):
+            main(["scan", "--help"])
+        return " ".join(capsys.readouterr().out.split())  # argparse wraps lines
+
+    text = help_text()
+    for name in [*S.LIDAR_PRESETS, *S.AIRBORNE_PRESETS, *S.DEPTH_CAMERA_PRESETS]:
+        assert name in text, name
+    assert "dales-q1560" in text
+    # a preset added to a registry shows up with no other change
+    monkeypatch.setitem(AIRBORNE_PRESETS, "my-survey", AIRBORNE_PRESETS["riegl-q1560"].with_(name="my-survey"))
+    assert "my-survey" in help_text()
+
+
+def _plane_mesh(path, corners) -> str:
+    trimesh.Trimesh(np.asarray(corners, float), [[0, 1, 2], [0, 2, 3]], process=False).export(path)
+    return str(path)
+
+
+def test_scan_refuses_a_mesh_flat_in_z_naming_it(tmp_path, capsys) -> None:
+    # a single square, zero height: on the ground it lies in the ground plane
+    from zbuf_occlude.cli.main import main
+
+    square = _plane_mesh(tmp_path / "square.obj", [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
+    assert main(["scan", square, "--crop", "--samples", "2", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "square.obj: flat in z" in err and "--up" in err and "\n" not in err and "Traceback" not in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_scan_exits_1_naming_each_scan_without_a_return_of_the_object(tmp_path, capsys) -> None:
+    # a wall (zero volume, but upright) seen edge-on: every ray passes it; the files are written and named
+    from zbuf_occlude.cli.main import main
+
+    edge_on = _plane_mesh(tmp_path / "wall.obj", [[0, 0, 0], [1, 0, 0], [1, 0, 1], [0, 0, 1]])
+    assert main(["scan", edge_on, "--crop", "--yaw", "0", "--samples", "2", "--out", str(tmp_path / "out")]) == 1
+    captured = capsys.readouterr()
+    assert captured.err.count("EMPTY ") == 2 and "no return of the object" in captured.err
+    assert "wrote 2 files" in captured.out and "2 of 2 scans hold no return of the object" in captured.out
+    # turned to face the sensor, the same wall returns points and the scan succeeds
+    assert main(["scan", edge_on, "--crop", "--yaw", "90", "--samples", "2", "--out", str(tmp_path / "facing")]) == 0
+    assert "EMPTY" not in capsys.readouterr().err
+
+
+def test_scan_places_an_airborne_scanner_at_any_offset_and_names_a_missing_sensor_file(tmp_path, capsys) -> None:
+    from zbuf_occlude.cli.main import main
+
+    # the aircraft flies far above: an across-track offset below half the object cannot put it inside
+    argv = ["scan", "box", "--sensor", "dales-q1560", "--extents", "4.5,1.8,1.5", "--distance", "1", "--azimuth", "90", "--crop"]
+    assert main([*argv, "--out", str(tmp_path / "als")]) == 0
+    assert main([*argv[:3], "hdl32e", *argv[4:], "--out", str(tmp_path / "lidar")]) == 2  # a ground sensor would be
+    assert "may put the sensor inside the object" in capsys.readouterr().err
+    assert main(["scan", "box", "--sensor", str(tmp_path / "fitted.json"), "--out", str(tmp_path / "x")]) == 2
+    assert "fitted.json: no such file" in capsys.readouterr().err

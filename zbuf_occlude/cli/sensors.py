@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -18,12 +19,16 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.samples import derive_rng, object_key
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.mesh.sizes import DIMENSIONS, SizeRange, size_interval
-from zbuf_occlude.sensors.presets import sensor_from_name
+from zbuf_occlude.sensors.presets import preset_names, sensor_from_name
 
 __all__ = ["add_scan_parser", "add_realism_parser", "add_parser", "parse_interval"]
 
 log = logging.getLogger(__name__)
 
+
+#: A mesh whose height is below this share of its largest side is flat in z: stood on the ground it
+#: lies in the ground plane, where a scan cannot tell it from the ground (scan refuses it).
+FLAT_SHARE = 1e-6
 
 #: Unit primitives ``scan`` takes instead of a mesh file (stretch them with ``--extents``).
 PRIMITIVES = {
@@ -116,7 +121,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
     from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
     from zbuf_occlude.sensors.lidar import Lidar
     from zbuf_occlude.sensors.scan import look_at_pose, scan
-    from zbuf_occlude.sensors.scene import load_scene
+    from zbuf_occlude.sensors.scene import GROUND_ID, load_scene
 
     sensor = _with_return_physics(sensor_from_name(args.sensor), args)
     if args.ground_margin is not None and not args.crop:
@@ -132,7 +137,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
     out = Path(args.out)
     formats = ("npz", "ply") if args.format == "both" else (args.format,)
     src = Path(args.mesh_or_scene)
-    written = []
+    written, empty = [], 0
     out.mkdir(parents=True, exist_ok=True)  # a refused run's empty --out is removed by cli.main
     if src.suffix.lower() in (".json", ".yaml", ".yml"):
         if args.crop:
@@ -168,6 +173,12 @@ def cmd_scan(args: argparse.Namespace) -> int:
             from zbuf_occlude.mesh.load import load_mesh
 
             mesh = load_mesh(src, up=args.up)  # once, not per sample
+            if not mesh.extents[2] > FLAT_SHARE * mesh.extents.max():
+                raise InvalidInputError(
+                    f"{src}: flat in z (no height once its up axis is turned to +z, --up {args.up}): stood on the ground it lies "
+                    "in the ground plane, where no scan can tell it from the ground; give --up the axis it should stand along "
+                    "(e.g. --up +y), or give it a thickness"
+                )
         dist = CropDistributions(
             distance_m=parse_interval(args.distance, "--distance"), height_m=parse_interval(args.height, "--height"),
             azimuth_deg=parse_interval(args.azimuth, "--azimuth"), yaw_deg=parse_interval(args.yaw, "--yaw"),
@@ -187,7 +198,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
                                                     name=str(src)))  # fmt: skip
             log.info("%s: width_scale %s, visible_across_sight %s, width_profile %s", src.name, dist.width_scale, dist.visible_across_sight,
                      dist.width_profile)  # fmt: skip
-        check_outside(dist, None if isinstance(mesh, dict) else mesh.extents)
+        if not isinstance(sensor, AirborneScanner):  # an aircraft flies its altitude above the object
+            check_outside(dist, None if isinstance(mesh, dict) else mesh.extents)
         for k in range(args.samples):
             rng = derive_rng(args.seed, object_key(src.name), k)
             placement = draw_placement(dist, rng)
@@ -195,24 +207,42 @@ def cmd_scan(args: argparse.Namespace) -> int:
             s = crop.scan if args.crop else crop.full
             s.meta.update(placement.to_dict())
             stem = f"{src.stem}_{sensor.name}_s{k:03d}"
-            written += [getattr(s, f"to_{fmt}")(out / f"{stem}.{fmt}") for fmt in formats]
-            log.info("%s: %d returns at %.2f m", stem, len(s), placement.distance_m)
-    print(f"wrote {counted(len(written), 'file')} to {out}")
-    return 0
+            files = [getattr(s, f"to_{fmt}")(out / f"{stem}.{fmt}") for fmt in formats]
+            written += files
+            returns = int(np.count_nonzero(crop.scan.object_id != GROUND_ID))
+            if returns == 0:
+                empty += 1
+                print(f"EMPTY {files[0]}: no return of the object (edge-on, below the sensor's beams or beyond its range at "
+                      f"{placement.distance_m:.2f} m)", file=sys.stderr)  # fmt: skip
+            log.info("%s: %d returns of the object at %.2f m", stem, returns, placement.distance_m)
+    print(f"wrote {counted(len(written), 'file')} to {out}" + (f"; {empty} of {counted(args.samples, 'scan')} hold no return of the object" if empty else ""))
+    return 1 if empty else 0
 
 
 def add_scan_parser(sub) -> argparse.ArgumentParser:
     """Add ``scan`` to the subparsers ``sub``."""
     from zbuf_occlude.mesh.scene import UP_CHOICES
 
+    names = preset_names()
     p = sub.add_parser(
         "scan", help="LiDAR / depth-camera scan of a mesh on the ground, or of a scene file",
-        description="Stand a mesh on a ground plane at --distance from a simulated LiDAR and scan it (or scan a "
-        "scene file with any sensor); writes one point cloud per sample to --out.",
+        description="Stand a mesh on a ground plane at --distance from a simulated LiDAR and scan it (or fly an airborne "
+        "scanner over it, or scan a scene file with any sensor); writes one point cloud per sample to --out.  A mesh "
+        "flat in z (a single square, no height) is refused: on the ground it lies in the ground plane.  The exit "
+        "status is 1 when a scan of a mesh holds no return of the object (each such file is named on stderr: seen "
+        "edge-on, below the beams or out of range).",
     )  # fmt: skip
     p.add_argument("mesh_or_scene", metavar="MESH_OR_SCENE", help=f"mesh file ({EXTENSIONS_TEXT}; stood on the ground), 'cylinder' or 'box' (unit primitives), or a scene .json/.yaml")
-    p.add_argument("--sensor", default="hdl32e", help="vlp16 | hdl32e | hdl64e | os1-64 | riegl-q1560 (airborne) | kinect-v1 | sensor .json (default: %(default)s)")
-    p.add_argument("--distance", action=Checked, check=interval, default="10", help="horizontal sensor-object distance, metres (N or LO:HI, uniform per sample; at least half the object's size) (default: %(default)s)")
+    p.add_argument(
+        "--sensor", default="hdl32e",
+        help=f"a spinning LiDAR ({', '.join(names['lidar'])}), an airborne scanner ({', '.join(names['airborne'])}), a depth "
+        f"camera ({', '.join(names['depth_camera'])}), or a sensor .json (fit-sensor writes one) (default: %(default)s)",
+    )  # fmt: skip
+    p.add_argument(
+        "--distance", action=Checked, check=interval, default="10",
+        help="horizontal sensor-object distance, metres (N or LO:HI, uniform per sample; at least half the object's size); "
+        "an airborne scanner flies over the object, distance · sin(azimuth) across track from its plan's centre (default: %(default)s)",
+    )  # fmt: skip
     p.add_argument("--height", action=Checked, check=interval, default="1.8", help="sensor height above the ground, metres (N or LO:HI) (default: %(default)s)")
     p.add_argument("--size", action=Checked, check=interval, default="4.5", help="the object's largest dimension, metres (N or LO:HI; see --size-of) (default: %(default)s)")
     p.add_argument(
@@ -287,30 +317,40 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
 
 
 def cmd_realism(args: argparse.Namespace) -> int:
-    from zbuf_occlude.experiments.realism import markdown_table, realism_report
+    from zbuf_occlude.experiments.realism import class_table, markdown_table, realism_report
 
     out_folder(args.out, "--out")  # the default's check; a given --out was checked while parsing
-    rows = realism_report(args.generated, args.real, args.out, min_points=args.min_points, figure=not args.no_figure, ground_in_crops=args.ground_in_crops)
-    print(markdown_table(rows), end="")
-    print(f"wrote {Path(args.out) / 'realism.md'}, realism.csv" + ("" if args.no_figure else ", realism.png"))
+    print(f"reading {args.generated} and {args.real} ...", flush=True)
+    rows, table = realism_report(args.generated, args.real, args.out, min_points=args.min_points, figure=not args.no_figure,
+                                 ground_in_crops=args.ground_in_crops, airborne=args.airborne)  # fmt: skip
+    print(markdown_table(rows) + "\n" + class_table(table), end="")
+    print(f"wrote {Path(args.out) / 'realism.md'}, realism.csv, realism_classes.csv" + ("" if args.no_figure else ", realism.png"))
     return 0
 
 
 def add_realism_parser(sub) -> argparse.ArgumentParser:
     """Add ``realism`` to the subparsers ``sub``."""
     p = sub.add_parser(
-        "realism", help="ring spacing, count-vs-range exponent, spacing, extent: generated vs real clouds",
-        description="Compare statistics of generated scans with real LiDAR clouds and write realism.md, "
-        "realism.csv and a figure to --out.",
+        "realism", help="generated vs real clouds: ring spacing, count-vs-range, spacing, extent; per class points, height/width, vertical profile",
+        description="Compare statistics of generated scans with real LiDAR clouds and write realism.md, realism.csv, "
+        "realism_classes.csv and a figure to --out.  Per class (the class folders both sets share, or all clouds pooled): "
+        "points per crop, height over width, and how the points spread over the height (the median height above the "
+        "crop's bottom and the share in each tenth of its height; a simulated pole that is a tall shaft where real crops "
+        "show a squat top differs there).  --airborne compares aerial crops by these alone.",
     )  # fmt: skip
-    p.add_argument("generated", metavar="GENERATED", help="scan .npz files or a folder of them (or LiDARNet CSVs)")
-    p.add_argument("real", metavar="REAL", help="LiDARNet v2 CSV folder (or scan .npz)")
-    p.add_argument("--out", action=Checked, check=out_folder, default="realism", help="folder for realism.md, realism.csv, realism.png (default: %(default)s)")
+    p.add_argument("generated", metavar="GENERATED", help="scan .npz files or a folder of them (in class folders, GENERATED/CLASS/*.npz, for the per-class table), or LiDARNet CSVs")
+    p.add_argument("real", metavar="REAL", help="real scans: class folders of point-cloud files (aerial crops, ...), LiDARNet v2 CSVs, or scan .npz")
+    p.add_argument("--out", action=Checked, check=out_folder, default="realism", help="folder for realism.md, realism.csv, realism_classes.csv, realism.png (default: %(default)s)")
     p.add_argument("--min-points", action=Checked, check=count("MAX_POINTS", lowest=0), default=1, help="ignore clouds with fewer points (default: %(default)s)")
     p.add_argument(
         "--ground-in-crops", action="store_true",
         help="a generated scan file holding one object (a crop made with scan --crop --ground-margin) counts its ground "
         "returns as part of it, as a real crop holds them (default: ground returns never count)",
+    )  # fmt: skip
+    p.add_argument(
+        "--airborne", action="store_true",
+        help="the clouds are aerial crops (no sensor position in the files): compare per class only (rings and ranges "
+        "need a sensor at the origin); the figure shows the height profiles",
     )  # fmt: skip
     p.add_argument("--no-figure", action="store_true", help="do not draw realism.png")
     p.set_defaults(func=cmd_realism)
@@ -320,7 +360,7 @@ def add_realism_parser(sub) -> argparse.ArgumentParser:
 def cmd_fit_sensor(args: argparse.Namespace) -> int:
     from zbuf_occlude.experiments.sensor_fit import fit_sensor_to_scans
 
-    fit, json_path, md_path = fit_sensor_to_scans(args.real, args.sensor, args.out, seed=args.seed)
+    fit, json_path, md_path = fit_sensor_to_scans(args.real, args.sensor, args.out, seed=args.seed, say=lambda line: print(line, flush=True))
     print(fit.markdown(), end="")
     print(f"wrote {json_path} (use it as --sensor {json_path}), {md_path}")
     return 0
@@ -328,15 +368,23 @@ def cmd_fit_sensor(args: argparse.Namespace) -> int:
 
 def add_fit_sensor_parser(sub) -> argparse.ArgumentParser:
     """Add ``fit-sensor`` to the subparsers ``sub``."""
+    names = preset_names()
     p = sub.add_parser(
-        "fit-sensor", help="fit a spinning LiDAR's firing rate, range noise and dropout to your real object scans",
-        description="Estimate what the simulation can set from a folder of real segmented object scans "
-        "(sensor frame, metres): azimuth step, range noise, dropout; report ring spacing, the count-vs-range "
-        "law and ground returns, each with a bootstrap uncertainty. Writes a sensor JSON that scan, "
-        "farm --sensor and experiment sim2real --sensor take.",
+        "fit-sensor", help="fit a spinning LiDAR or an airborne scanner to your real object scans",
+        description="Estimate what the simulation can set from a folder of real segmented object scans (metres, z up), "
+        "each with a bootstrap uncertainty, and write a sensor JSON that scan, farm --sensor and experiment sim2real "
+        "--sensor take.  The --sensor to start from chooses the fit.  A spinning LiDAR: scans in the sensor's frame "
+        "(sensor at the origin); azimuth step, range noise, dropout, and the ring spacing, count-vs-range law and "
+        "ground returns.  An airborne scanner: aerial crops as they lie, no sensor position needed; point density, "
+        "scan angle and swath, range noise (altitude and speed are the preset's; the flight plan puts scanned objects at "
+        "the crops' scan angles).  Spinning fits refuse aerial crops in one line.",
     )  # fmt: skip
-    p.add_argument("real", metavar="REAL_SCANS", help="folder of real object scans (LiDARNet CSVs, SUO, or class folders)")
-    p.add_argument("--sensor", required=True, help="the spinning-LiDAR preset or JSON file to start from (its beam table is kept)")
+    p.add_argument("real", metavar="REAL_SCANS", help="folder of real object scans (class folders of point files, LiDARNet CSVs, or SUO)")
+    p.add_argument(
+        "--sensor", required=True,
+        help=f"the preset or sensor JSON to start from: a spinning LiDAR ({', '.join(names['lidar'])}; its beam table is kept) "
+        f"fits scans in the sensor's frame; an airborne scanner ({', '.join(names['airborne'])}) fits aerial crops",
+    )  # fmt: skip
     p.add_argument("--out", required=True, help="the fitted sensor, a .json file (a .md table is written beside it)")
     p.add_argument("--seed", action=Checked, check=seed, default=DEFAULT_SEED, help="seed of the bootstrap (default: %(default)s)")
     p.set_defaults(func=cmd_fit_sensor)

@@ -12,9 +12,21 @@ For each object cloud, in a frame centred on the sensor with z up (metres):
 * across-sight width: how wide the cloud shows across the line of sight, metres
   (:func:`zbuf_occlude.sensors.fit.across_sight_width`).
 
-Two sets are compared by :func:`compare_sets`; :func:`realism_report` writes the table (Markdown
-and CSV) and a side-by-side figure.  Sets are read by :func:`read_object_clouds` from scan NPZ
-files (:meth:`Scan.to_npz`; each non-ground object is one cloud) or LiDARNet v2 CSVs.
+Per class (:func:`compare_classes`), for any sensor and the only comparison for airborne crops
+(which record no sensor position, so neither rings nor ranges): points per crop; height (``max z −
+min z``) over width (the x–y extent along the footprint's principal axis, so that a crop's heading
+does not matter); and how the points spread over the height, each point's height above the crop's
+lowest over the crop's height (0 at the bottom, 1 at the top): its median, and the share of points
+in each tenth of the height.  A pole simulated as a tall shaft has its points spread up the shaft
+(median near 0.5, height/width 10 or more), where an aerial crop of a real pole often shows a squat
+top (median near 1, height/width near 1): the table shows such a mismatch.
+
+Two sets are compared by :func:`compare_sets` and :func:`compare_classes`; :func:`realism_report`
+writes the tables (Markdown and CSV) and a side-by-side figure.  Sets are read by
+:func:`read_object_clouds` from scan NPZ files (:meth:`Scan.to_npz`; each non-ground object is one
+cloud), LiDARNet v2 CSVs, or class folders of point-cloud files of any format the real-scan
+reader takes (:func:`zbuf_occlude.real_scans.datasets.load_real_scans`).  A cloud's class is its
+class folder (the first folder under the path given; LiDARNet's ``object`` column).
 """
 
 from __future__ import annotations
@@ -36,7 +48,8 @@ from zbuf_occlude.sensors.scene import GROUND_ID
 
 __all__ = [
     "ObjectCloud", "read_object_clouds", "cloud_stats", "ring_spacings_deg", "fit_count_exponent",
-    "compare_sets", "markdown_table", "realism_report", "RING_GAP_DEG",
+    "compare_sets", "markdown_table", "realism_report", "RING_GAP_DEG", "HEIGHT_BINS", "RATIO_TARGET", "shape_stats",
+    "compare_classes", "class_table",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -44,6 +57,15 @@ log = logging.getLogger(__name__)
 #: Elevation gap that separates two rings, degrees: a third of the HDL-32E's 1.33° spacing,
 #: far above the elevation jitter of one ring (noise is along the beam).
 RING_GAP_DEG = 0.4
+#: Bins of a crop's height for its vertical profile: tenths.
+HEIGHT_BINS = 10
+#: A count (or a shape ratio) matches when generated / real lies within this factor either way.
+RATIO_TARGET = 1.5
+#: The median normalised height matches within a tenth of the object's height (one height bin).
+MEDIAN_HEIGHT_TARGET = 0.1
+#: The vertical profiles match when at most this share of the points would have to move to another
+#: tenth of the height (total variation distance of the class's mean profiles).
+PROFILE_TARGET = 0.1
 
 
 @dataclass
@@ -64,45 +86,51 @@ class ObjectCloud:
 
 
 # -- reading ------------------------------------------------------------------------------------
-def _from_npz(path: Path, ground_in_crops: bool = False) -> list[ObjectCloud]:
+def _from_npz(path: Path, ground_in_crops: bool = False, label: str | None = None) -> list[ObjectCloud]:
+    """The objects of one scan file, labelled ``label`` (None: ``object<id>``)."""
     s = read_scan_npz(path)
     pts = s.points.astype(np.float64) - s.sensor_position
     if s.frame == "sensor":
         pts = pts @ np.asarray(s.sensor_to_world, dtype=np.float64)[:3, :3].T  # world axes: z up
     objects = [oid for oid in np.unique(s.object_id) if oid != GROUND_ID]
     if ground_in_crops and len(objects) == 1:  # a crop: its ground returns are part of it
-        return [ObjectCloud(pts, f"object{objects[0]}", f"{path}#{objects[0]}")]
-    return [ObjectCloud(pts[s.object_id == oid], f"object{oid}", f"{path}#{oid}") for oid in objects]
+        return [ObjectCloud(pts, label or f"object{objects[0]}", f"{path}#{objects[0]}")]
+    return [ObjectCloud(pts[s.object_id == oid], label or f"object{oid}", f"{path}#{oid}") for oid in objects]
 
 
 def read_object_clouds(path: str | os.PathLike, *, min_points: int = 1, ground_in_crops: bool = False) -> list[ObjectCloud]:
-    """Object clouds under ``path``: scan ``.npz`` files and/or LiDARNet v2 ``.csv`` files
-    (a file or a folder, searched recursively; LiDARNet duplicates dropped).
+    """Object clouds under ``path`` (a file or a folder, searched recursively): scan ``.npz`` files
+    and/or LiDARNet v2 ``.csv`` files (duplicates dropped); or, when it holds no ``.npz``, any
+    real scans :func:`~zbuf_occlude.real_scans.datasets.load_real_scans` reads (class folders of
+    point-cloud files, such as aerial crops; LiDARNet; SUO), in metres as their files give them.
 
     Each object of a scan file is one cloud, its ground returns (object id 0) left out; with
     ``ground_in_crops``, a file holding one object (a crop made with a ground margin:
     ``scan --crop --ground-margin``) is one cloud with its ground returns, as a real crop that
-    a box segmentation cut holds them.
+    a box segmentation cut holds them.  A scan file in a folder under ``path`` takes that
+    folder's name as its class (``gen/pole/*.npz``: ``pole``), else ``object<id>``.
 
     Raises
     ------
     InvalidInputError
-        ``path`` missing or holding no cloud, or a ``.csv`` that is not UTF-8 (named).
+        ``path`` missing or holding no cloud, or a file that cannot be read (named).
     """
+    from zbuf_occlude.real_scans.datasets import load_real_scans
+
     root = Path(path)
     if not root.exists():
         raise InvalidInputError(f"realism: {root} does not exist")
     files = [root] if root.is_file() else sorted(p for p in root.rglob("*") if p.is_file() and p.suffix.lower() in (".npz", ".csv"))
     clouds: list[ObjectCloud] = []
+    npz = [f for f in files if f.suffix.lower() == ".npz"]
     csvs = [f for f in files if f.suffix.lower() == ".csv" and f.name != "MANIFEST.csv"]
-    if csvs:
-        from zbuf_occlude.real_scans.datasets import load_real_scans
-
-        for real in load_real_scans(root, dataset="lidarnet"):  # discovery, labels, de-duplication
+    if csvs or not npz and root.is_dir():
+        # discovery, labels, de-duplication; beside scan files only LiDARNet's CSVs
+        for real in load_real_scans(root, dataset="lidarnet" if npz else "auto"):
             clouds.append(ObjectCloud(real.points_sensor_m, real.label, real.source))
-    for f in files:
-        if f.suffix.lower() == ".npz":
-            clouds.extend(_from_npz(f, ground_in_crops))
+    for f in npz:
+        parts = f.relative_to(root).parts if f != root else ()
+        clouds.extend(_from_npz(f, ground_in_crops, parts[0] if len(parts) > 1 else None))
     clouds = [c for c in clouds if len(c.points_m) >= min_points]
     if not clouds:
         raise InvalidInputError(f"realism: no object clouds (scan .npz or LiDARNet .csv) under {root}")
@@ -137,6 +165,108 @@ def cloud_stats(cloud: ObjectCloud, *, ring_gap_deg: float = RING_GAP_DEG) -> di
         "vertical_extent_m": float(np.ptp(p[:, 2])) if len(p) else 0.0,
         "across_sight_width_m": across_sight_width(p),
     }
+
+
+def shape_stats(points_m: NDArray[np.floating]) -> dict:
+    """One crop's size and vertical distribution, in any frame with z up (module docstring).
+
+    Parameters
+    ----------
+    points_m : (N, 3) float
+        Metres, z up; no sensor position needed.
+
+    Returns
+    -------
+    dict
+        ``n_points``; ``height_m`` and ``width_m`` (x–y extent along the footprint's principal
+        axis), metres; ``height_to_width`` (NaN for a width of 0); ``median_normalised_height``
+        (NaN for a height of 0); ``height_shares``, ``(HEIGHT_BINS,) float64``, the share of the
+        points in each tenth of the height, bottom to top (all in the bottom bin for a height of 0).
+    """
+    p = np.asarray(points_m, dtype=np.float64)
+    z = p[:, 2]
+    height = float(np.ptp(z)) if len(p) else 0.0
+    xy = p[:, :2] - p[:, :2].mean(axis=0) if len(p) else np.zeros((0, 2))
+    width = 0.0
+    if len(p) > 1:
+        _, axes = np.linalg.eigh(xy.T @ xy)
+        width = float(np.ptp(xy @ axes[:, -1]))  # along the largest principal axis
+    u = (z - z.min()) / height if height > 0 else np.zeros(len(z))
+    shares = np.bincount(np.minimum((u * HEIGHT_BINS).astype(np.int64), HEIGHT_BINS - 1), minlength=HEIGHT_BINS) / max(len(z), 1)
+    return {
+        "n_points": len(p), "height_m": height, "width_m": width,
+        "height_to_width": height / width if width > 0 else math.nan,
+        "median_normalised_height": float(np.median(u)) if height > 0 else math.nan,
+        "height_shares": shares.astype(np.float64),
+    }  # fmt: skip
+
+
+def _class_summary(clouds: list[ObjectCloud]) -> dict:
+    """Medians over a class's crops of :func:`shape_stats`, and the mean of their height shares."""
+    stats = [shape_stats(c.points_m) for c in clouds]
+    summary = {"crops": len(stats)}
+    for key in ("n_points", "height_m", "width_m", "height_to_width", "median_normalised_height"):
+        values = np.array([st[key] for st in stats], dtype=np.float64)
+        summary[key] = float(np.nanmedian(values)) if np.isfinite(values).any() else math.nan
+    summary["height_shares"] = np.mean([st["height_shares"] for st in stats], axis=0)
+    return summary
+
+
+def compare_classes(generated: list[ObjectCloud], real: list[ObjectCloud]) -> tuple[list[dict], dict[str, dict[str, dict]]]:
+    """Per class, generated against real: points per crop, height over width and the vertical distribution.
+
+    Classes are the labels both sets have; when they share none, every cloud of each set is pooled
+    as one class, ``all``.
+
+    Returns
+    -------
+    rows : list of dict
+        As :func:`compare_sets`'s (``metric`` starts with the class), four per class: median points
+        per crop and median height / width (ratio generated / real, within :data:`RATIO_TARGET`),
+        median normalised height (difference within :data:`MEDIAN_HEIGHT_TARGET`), and the distance
+        between the mean height profiles (within :data:`PROFILE_TARGET`).
+    table : dict
+        ``{class: {"generated": summary, "real": summary}}``, each summary ``crops`` and the
+        medians of :func:`shape_stats`' values over the class's crops, ``height_shares`` their mean.
+    """
+    shared = sorted({c.label for c in generated} & {c.label for c in real})
+    groups = {k: ([c for c in generated if c.label == k], [c for c in real if c.label == k]) for k in shared} or {"all": (generated, real)}
+    rows, table = [], {}
+    for k, (g_clouds, r_clouds) in groups.items():
+        g, r = _class_summary(g_clouds), _class_summary(r_clouds)
+        table[k] = {"generated": g, "real": r}
+        for name, key in (("median points per crop", "n_points"), ("median height / width", "height_to_width")):
+            ratio = g[key] / r[key] if r[key] > 0 else math.nan
+            rows.append({"metric": f"{k}: {name} (n={g['crops']}, {r['crops']})", "generated": g[key], "real": r[key],
+                         "difference": ratio, "target": f"1/{RATIO_TARGET:g} <= ratio <= {RATIO_TARGET:g}",
+                         "met": bool(1 / RATIO_TARGET <= ratio <= RATIO_TARGET) if math.isfinite(ratio) else ""})  # fmt: skip
+        d = g["median_normalised_height"] - r["median_normalised_height"]
+        rows.append({"metric": f"{k}: median height above the crop's bottom, share of its height", "generated": g["median_normalised_height"],
+                     "real": r["median_normalised_height"], "difference": d, "target": f"abs(diff) <= {MEDIAN_HEIGHT_TARGET:g}",
+                     "met": bool(abs(d) <= MEDIAN_HEIGHT_TARGET) if math.isfinite(d) else ""})  # fmt: skip
+        tv = 0.5 * float(np.abs(g["height_shares"] - r["height_shares"]).sum())
+        rows.append({"metric": f"{k}: share of points in another tenth of the height (profile distance)", "generated": "", "real": "",
+                     "difference": tv, "target": f"<= {PROFILE_TARGET:g}", "met": bool(tv <= PROFILE_TARGET)})  # fmt: skip
+    return rows, table
+
+
+def class_table(table: dict[str, dict[str, dict]]) -> str:
+    """:func:`compare_classes`' table as Markdown: one row per class and set, the height profile in percent, bottom to top."""
+    lines = ["| class | set | crops | median points | median height, m | median width, m | median height / width | "
+             "median normalised height | % of points per tenth of the height, bottom to top |", "|" + "---|" * 9]  # fmt: skip
+    for k, sets in table.items():
+        for name, st in sets.items():
+            profile = " ".join(f"{100 * v:.0f}" for v in st["height_shares"])
+            lines.append(f"| {k} | {name} | {st['crops']} | {_fmt(st['n_points'])} | {_fmt(st['height_m'])} | {_fmt(st['width_m'])} | "
+                         f"{_fmt(st['height_to_width'])} | {_fmt(st['median_normalised_height'])} | {profile} |")  # fmt: skip
+    return "\n".join(lines) + "\n"
+
+
+def _class_rows(table: dict[str, dict[str, dict]]) -> list[dict]:
+    """:func:`compare_classes`' table as CSV rows: class, set, the medians and one column per tenth of the height."""
+    return [{"class": k, "set": name, **{key: v for key, v in st.items() if key != "height_shares"},
+             **{f"share_{b / HEIGHT_BINS:g}_{(b + 1) / HEIGHT_BINS:g}": float(v) for b, v in enumerate(st["height_shares"])}}
+            for k, sets in table.items() for name, st in sets.items()]  # fmt: skip
 
 
 def fit_count_exponent(range_m, count) -> tuple[float, float, float]:
@@ -209,7 +339,7 @@ def compare_sets(generated: list[ObjectCloud], real: list[ObjectCloud], *, ring_
         {"metric": f"count-vs-range exponent b (count ∝ r^b), common range {c_lo:.1f}-{c_hi:.1f} m (n={common['g'][2]}, {common['r'][2]})", "generated": common["g"][0], "real": common["r"][0], "difference": db, "target": "abs(diff) <= 0.2", "met": abs(db) <= 0.2},
         {"metric": "its standard error", "generated": common["g"][1], "real": common["r"][1], "difference": "", "target": "", "met": ""},
         {"metric": "exponent b over all clouds", "generated": g["count_exponent"], "real": r["count_exponent"], "difference": db_all, "target": "", "met": ""},
-        {"metric": f"count / real fit at matched range (n={g['count_ratio_n']})", "generated": ratio, "real": 1.0, "difference": "", "target": "1/1.5 <= ratio <= 1.5", "met": (1 / 1.5 <= ratio <= 1.5) if math.isfinite(ratio) else ""},
+        {"metric": f"count / real fit at matched range (n={g['count_ratio_n']})", "generated": ratio, "real": 1.0, "difference": "", "target": f"1/{RATIO_TARGET:g} <= ratio <= {RATIO_TARGET:g}", "met": (1 / RATIO_TARGET <= ratio <= RATIO_TARGET) if math.isfinite(ratio) else ""},
         {"metric": "median points per cloud", "generated": g["median_points"], "real": r["median_points"], "difference": "", "target": "", "met": ""},
         {"metric": "median nearest-neighbour spacing, m", "generated": g["median_nn_spacing_m"], "real": r["median_nn_spacing_m"], "difference": g["median_nn_spacing_m"] - r["median_nn_spacing_m"], "target": "", "met": ""},
         {"metric": "median vertical extent, m", "generated": g["median_vertical_extent_m"], "real": r["median_vertical_extent_m"], "difference": g["median_vertical_extent_m"] - r["median_vertical_extent_m"], "target": "", "met": ""},
@@ -260,11 +390,48 @@ def _figure(g: dict, r: dict, path: Path, labels: tuple[str, str]) -> None:
     plt.close(fig)
 
 
+def _profile_figure(table: dict[str, dict[str, dict]], path: Path) -> None:
+    """Per class, the share of points in each tenth of the height, generated beside real."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(table), figsize=(3.2 * len(table), 3.8), squeeze=False)
+    centres = (np.arange(HEIGHT_BINS) + 0.5) / HEIGHT_BINS
+    for ax, (k, sets) in zip(axes[0], table.items(), strict=True):
+        for (name, st), colour in zip(sets.items(), ("tab:blue", "tab:orange"), strict=True):
+            ax.plot(st["height_shares"], centres, "o-", color=colour, label=f"{name} ({st['crops']})")
+        ax.set(xlabel="share of points", ylabel="height above the bottom / height", title=k, ylim=(0, 1))
+        ax.legend(fontsize=8)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        fig.tight_layout()
+        fig.savefig(tmp, dpi=110, format=path.suffix.lstrip(".") or "png")
+    plt.close(fig)
+
+
 def realism_report(generated: str | os.PathLike, real: str | os.PathLike, out_dir: str | os.PathLike, *, ring_gap_deg: float = RING_GAP_DEG, min_points: int = 1, figure: bool = True,
-                   ground_in_crops: bool = False) -> list[dict]:  # fmt: skip
-    """Compare two sets of object clouds; write ``realism.md``, ``realism.csv`` and ``realism.png``
-    under ``out_dir``.  ``ground_in_crops``: the generated crops' ground returns count
-    (:func:`read_object_clouds`).
+                   ground_in_crops: bool = False, airborne: bool = False) -> tuple[list[dict], dict[str, dict[str, dict]]]:  # fmt: skip
+    """Compare two sets of object clouds; write ``realism.md``, ``realism.csv``,
+    ``realism_classes.csv`` and ``realism.png`` under ``out_dir``.
+
+    Parameters
+    ----------
+    generated, real : path
+        :func:`read_object_clouds`; ``ground_in_crops`` applies to ``generated``.
+    airborne : bool
+        The clouds are aerial crops (no sensor position): only the per-class comparison
+        (:func:`compare_classes`), whose height profiles the figure then shows; without it, the
+        ring, range and spacing rows (:func:`compare_sets`) come first.
+
+    Returns
+    -------
+    rows : list of dict
+        What ``realism.csv`` holds: :func:`compare_sets`' rows (but its first, the cloud counts,
+        alone with ``airborne``), then :func:`compare_classes`'.
+    table : dict
+        :func:`compare_classes`' table, as ``realism_classes.csv`` holds it.
 
     Raises
     ------
@@ -275,12 +442,21 @@ def realism_report(generated: str | os.PathLike, real: str | os.PathLike, out_di
     """
     gen_clouds = read_object_clouds(generated, min_points=min_points, ground_in_crops=ground_in_crops)
     real_clouds = read_object_clouds(real, min_points=min_points)
-    rows, g, r = compare_sets(gen_clouds, real_clouds, ring_gap_deg=ring_gap_deg)
+    if airborne:
+        rows = [{"metric": "clouds", "generated": len(gen_clouds), "real": len(real_clouds), "difference": "", "target": "", "met": ""}]
+    else:
+        rows, g, r = compare_sets(gen_clouds, real_clouds, ring_gap_deg=ring_gap_deg)
+    class_rows, table = compare_classes(gen_clouds, real_clouds)
+    rows += class_rows
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     header = f"Generated: {generated} ({len(gen_clouds)} clouds); real: {real} ({len(real_clouds)} clouds)\n\n"
-    write_text(out / "realism.md", header + markdown_table(rows))
+    write_text(out / "realism.md", header + markdown_table(rows) + "\n" + class_table(table))
     write_csv(out / "realism.csv", rows)
+    write_csv(out / "realism_classes.csv", _class_rows(table))
     if figure:
-        _figure(g, r, out / "realism.png", ("generated", "real"))
-    return rows
+        if airborne:
+            _profile_figure(table, out / "realism.png")
+        else:
+            _figure(g, r, out / "realism.png", ("generated", "real"))
+    return rows, table

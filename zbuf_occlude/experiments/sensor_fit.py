@@ -1,10 +1,18 @@
-"""``zbuf-occlude fit-sensor``: a spinning LiDAR fitted to a folder of the user's real object scans.
+"""``zbuf-occlude fit-sensor``: a sensor fitted to a folder of the user's real object scans.
 
 Reads the scans with :func:`zbuf_occlude.real_scans.datasets.load_real_scans` (any real-scan
-format it detects; the sensor-frame points), fits with :func:`zbuf_occlude.sensors.fit.fit_lidar`
-(and, per class of at least :data:`~zbuf_occlude.sensors.fit.MIN_PLACEMENT_SCANS` scans, the crops' sensor distances and object heights,
-:func:`zbuf_occlude.sensors.fit.crop_placement_json`) and writes the sensor JSON (which ``scan``, ``farm --sensor`` and ``experiment sim2real
---sensor`` read) and a Markdown table of the estimates beside it, both atomically.
+format it detects; each scan's points in metres, z up, as the file gives them).  The ``sensor``
+to start from chooses the fit:
+
+* a spinning LiDAR (``hdl32e``, ...): :func:`zbuf_occlude.sensors.fit.fit_lidar` on the scans in
+  the sensor's frame (sensor at the origin), and, per class of at least
+  :data:`~zbuf_occlude.sensors.fit.MIN_PLACEMENT_SCANS` scans, the crops' sensor distances and
+  object heights (:func:`zbuf_occlude.sensors.fit.crop_placement_json`);
+* an airborne scanner (``dales-q1560``, ``riegl-q1560``, or a file of ``"kind": "airborne"``):
+  :func:`zbuf_occlude.sensors.fit.fit_airborne` on the crops as they lie (no sensor position).
+
+Writes the sensor JSON (which ``scan``, ``farm --sensor`` and ``experiment sim2real --sensor``
+read) and a Markdown table of the estimates beside it, both atomically.
 """
 
 from __future__ import annotations
@@ -12,7 +20,7 @@ from __future__ import annotations
 import json
 import os
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +28,8 @@ import numpy as np
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.atomic import write_text
 from zbuf_occlude.real_scans.datasets import load_real_scans
-from zbuf_occlude.sensors.fit import MIN_PLACEMENT_SCANS, LidarFit, crop_placement_json, fit_lidar
+from zbuf_occlude.sensors.airborne import AirborneScanner
+from zbuf_occlude.sensors.fit import BOOTSTRAP, MIN_PLACEMENT_SCANS, AirborneFit, LidarFit, crop_placement_json, fit_airborne, fit_lidar
 from zbuf_occlude.sensors.lidar import Lidar
 from zbuf_occlude.sensors.presets import sensor_from_name
 
@@ -72,31 +81,60 @@ def fit_to_scans(scans: Sequence, base: Lidar, labels: Sequence[str], *, seed: i
     return fit, spec
 
 
-def fit_sensor_to_scans(real: str | os.PathLike, sensor: str, out: str | os.PathLike, *, seed: int = 0,
-                        dataset: str = "auto") -> tuple[LidarFit, Path, Path]:  # fmt: skip
-    """Fit ``sensor`` (a spinning-LiDAR preset name or JSON file) to the scans under ``real``.
+def fit_sensor_to_scans(real: str | os.PathLike, sensor: str, out: str | os.PathLike, *, seed: int = 0, dataset: str = "auto",
+                        say: Callable[[str], object] | None = None) -> tuple[LidarFit | AirborneFit, Path, Path]:  # fmt: skip
+    """Fit ``sensor`` (a preset name or JSON file: a spinning LiDAR or an airborne scanner) to the scans under ``real``.
+
+    Parameters
+    ----------
+    real : path
+        The real scans (:func:`~zbuf_occlude.real_scans.datasets.load_real_scans`, ``dataset``).
+    sensor : str
+        The sensor to start from; its kind chooses the fit (module docstring).
+    out : path
+        The fitted sensor's ``.json`` file; the table goes to the same name with ``.md``.
+    seed : int
+        Seeds the bootstrap.
+    say : callable, optional
+        Called with a one-line description of each step before it runs (what is read, how many
+        scans of which classes, what is fitted to them); the command line prints them.
 
     Returns
     -------
-    fit : LidarFit
+    fit : LidarFit or AirborneFit
     json_path, markdown_path : Path
-        ``out`` (a ``.json`` file) and the same name with ``.md``.
 
     Raises
     ------
     InvalidInputError
-        ``out`` does not end in ``.json``; an unknown or non-LiDAR sensor; unreadable scans or scans
-        without a sensor frame (:func:`~zbuf_occlude.sensors.fit.fit_lidar`), each naming the cause.
+        ``out`` does not end in ``.json``; an unknown sensor or one that is neither kind (both
+        before any scan is read); unreadable scans; what the fit refuses (spinning: scans not in a
+        spinning sensor's frame, such as airborne crops, in one line), each naming the cause.
     """
     out = Path(out)
     if out.suffix.lower() != ".json":
         raise InvalidInputError(f"--out {out}: the fitted sensor is written as a .json file")
     base = sensor_from_name(sensor)
+    if not isinstance(base, (Lidar, AirborneScanner)):
+        raise InvalidInputError(f"--sensor {sensor}: fit-sensor fits a spinning LiDAR or an airborne scanner, not a {type(base).__name__}")
+    say = say or (lambda _: None)
+    say(f"reading the real scans under {real} ...")
     scans = load_real_scans(real, dataset=dataset)
+    counts = Counter(s.label for s in scans)
+    kind = "an airborne scanner" if isinstance(base, AirborneScanner) else "a spinning LiDAR"
+    say(f"read {len(scans)} scans of {len(counts)} class{'' if len(counts) == 1 else 'es'} ({', '.join(f'{k}: {n}' for k, n in sorted(counts.items()))}); "
+        f"fitting {kind}, {base.name}, with {BOOTSTRAP} bootstrap resamples ...")  # fmt: skip
+    md = out.with_suffix(".md")
+    if isinstance(base, AirborneScanner):
+        missing = [s.source for s in scans if s.points_sensor_m is None]
+        if missing:
+            raise InvalidInputError(f"{missing[0]}: no points in metres to fit a scanner to ({len(missing)} such scans)")
+        fit = fit_airborne([s.points_sensor_m for s in scans], base, seed=seed)
+        write_text(out, json.dumps(fit.to_json(), indent=1, default=float) + "\n")
+        write_text(md, f"# {fit.sensor.name}: fitted to {fit.n_crops} crops under {Path(real).name}\n\n{fit.markdown()}")
+        return fit, out, md
     fit, spec = fit_to_scans(scans, base, [s.label for s in scans], seed=seed)
     crops = spec["fit"].get("crops")
-    counts = Counter(s.label for s in scans)
-    md = out.with_suffix(".md")
     write_text(out, json.dumps(spec, indent=1, default=float) + "\n")
     text = f"# {fit.sensor.name}: fitted to {fit.n_scans} scans under {Path(real).name}\n\n{fit.markdown()}"
     if crops is not None:

@@ -8,10 +8,20 @@ from pathlib import Path
 
 from zbuf_occlude.errors import InvalidInputError
 
-__all__ = ["SENSOR_KINDS", "sensor_from_name", "sensor_to_json"]
+__all__ = ["SENSOR_KINDS", "preset_names", "sensor_from_name", "sensor_to_json"]
 
 #: ``"kind"`` of a sensor file, and the class it makes (``"lidar"`` when the file has none).
 SENSOR_KINDS = ("lidar", "airborne", "depth_camera")
+
+
+def preset_names() -> dict[str, tuple[str, ...]]:
+    """Every preset name, sorted, by kind (the keys of :data:`SENSOR_KINDS`, in that order): the names
+    :func:`sensor_from_name` takes, for help texts and messages."""
+    from zbuf_occlude.sensors.airborne import AIRBORNE_PRESETS
+    from zbuf_occlude.sensors.depth_camera import DEPTH_CAMERA_PRESETS
+    from zbuf_occlude.sensors.lidar import LIDAR_PRESETS
+
+    return dict(zip(SENSOR_KINDS, (tuple(sorted(p)) for p in (LIDAR_PRESETS, AIRBORNE_PRESETS, DEPTH_CAMERA_PRESETS)), strict=True))
 
 
 def sensor_from_name(name: str | os.PathLike):
@@ -29,7 +39,7 @@ def sensor_from_name(name: str | os.PathLike):
     Raises
     ------
     InvalidInputError
-        An unknown name, or a file that is not JSON, nests too deep, has an unknown kind or
+        An unknown name, a ``.json`` file that does not exist, or a file that is not JSON, nests too deep, has an unknown kind or
         key, or a field of the wrong type or range (the message names the file and the field).
     """
     from zbuf_occlude.sensors.airborne import AIRBORNE_PRESETS, AirborneScanner, airborne_preset
@@ -63,7 +73,9 @@ def sensor_from_name(name: str | os.PathLike):
             if "preset" in spec:
                 return airborne_preset(text(spec.pop("preset"), "preset")).with_(**spec)
             return cls(**_complete(spec, cls))
-    raise InvalidInputError(f"unknown sensor {shown(name)}; use one of {sorted(LIDAR_PRESETS) + sorted(AIRBORNE_PRESETS) + sorted(DEPTH_CAMERA_PRESETS)} or a .json file")
+    if path.suffix.lower() == ".json":
+        raise InvalidInputError(f"sensor file {path}: no such file (fit-sensor writes one; or name a preset)")
+    raise InvalidInputError(f"unknown sensor {shown(name)}; use one of {[n for names in preset_names().values() for n in names]} or a .json file")
 
 
 def sensor_to_json(sensor) -> dict:

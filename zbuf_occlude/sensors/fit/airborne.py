@@ -42,6 +42,16 @@ density they give), dropout (it only lowers the density).  :func:`fit_airborne` 
 the base scanner and sets its pulse rate to give the measured density, its swath from
 ``max_scan_angle_deg`` (one-sided crops only) and its range noise.
 
+The flight plan follows the same model: when the swath was measured and most crops are lit from
+one side (``two_sided_fraction`` at most :data:`ONE_SIDED_SHARE`), the fitted scanner flies
+:data:`FITTED_LINES` parallel lines with no side overlap (strips that abut, at the survey density
+of one strip).  ``scan``, ``farm`` and ``experiment sim2real`` place an object near the plan
+centre and shift the lines across track by a uniform draw over one strip
+(:func:`~zbuf_occlude.sensors.airborne.scan_airborne`), so the object lies in one strip, anywhere
+across it: its scan angle is spread as the fit assumed, ``tan θ`` uniform on ``[0, tan(S/2)]``.
+Crops mostly lit from both sides (strips with a large overlap) cannot tell the plan: the base's
+is kept.
+
 Sources: the flat-ground density law is Baltsavias (1999), Eq. 17 (:mod:`zbuf_occlude.sensors.airborne`);
 the wall/top ratio is the projection of the same beam flux onto a vertical face.
 """
@@ -57,11 +67,11 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.airborne import AirborneScanner
-from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate
+from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate, estimates_markdown
 
 __all__ = [
-    "AirborneFit", "CropFaces", "HORIZONTAL_DEG", "MIN_CROP_POINTS", "PLANE_NEIGHBOURS", "crop_faces",
-    "fit_airborne",
+    "AirborneFit", "CropFaces", "FITTED_LINES", "HORIZONTAL_DEG", "MIN_CROP_POINTS", "ONE_SIDED_SHARE", "PLANE_NEIGHBOURS",
+    "crop_faces", "fit_airborne",
 ]  # fmt: skip
 
 #: Neighbours of the local plane fit.
@@ -70,6 +80,11 @@ PLANE_NEIGHBOURS = 16
 HORIZONTAL_DEG = 20.0
 #: Fewest points a crop needs to take part in the fit.
 MIN_CROP_POINTS = 40
+#: Parallel lines of a fitted plan: the line nearest an object and one either side, so that an
+#: object anywhere within a strip's width of the plan centre lies in one strip (module docstring).
+FITTED_LINES = 3
+#: The fitted plan's strips abut when at most this share of the crops is lit from both sides.
+ONE_SIDED_SHARE = 0.5
 #: Fewest points of a wall for its density to count.
 _MIN_WALL_POINTS = 15
 #: Largest ratio of the smallest to the middle eigenvalue of a planar neighbourhood.
@@ -202,6 +217,9 @@ def crop_faces(points: NDArray[np.floating]) -> CropFaces:
     p = _checked_crop(points)
     if len(p) < MIN_CROP_POINTS:
         raise InvalidInputError(f"a crop needs at least {MIN_CROP_POINTS} points, got {len(p)}")
+    # centred: in projected coordinates (eastings and northings of 10^5 to 10^7 m, as aerial crops
+    # come) Qhull's Delaunay triangulation loses the centimetres that the faces' densities rest on
+    p = p - p.mean(axis=0)
     normal, variance, idx = _local_planes(p)
     planar = np.isfinite(variance)
     top = planar & (np.abs(normal[:, 2]) >= math.cos(math.radians(HORIZONTAL_DEG)))
@@ -297,7 +315,9 @@ class AirborneFit:
     sensor : AirborneScanner
         ``base`` with ``pulse_rate_hz`` set to give the measured density over its flight plan
         (``survey_density_m2``), ``swath_deg`` twice ``max_scan_angle_deg`` (when one-sided crops
-        measured it, capped below 180°) and ``range_noise_m``; the rest as in ``base``.
+        measured it, capped below 180°) and then, where most crops are one-sided, a plan of
+        :data:`FITTED_LINES` abutting lines on ``base``'s first heading (module docstring), and
+        ``range_noise_m``; the rest as in ``base``.
     base : AirborneScanner
     estimates : dict of str to Estimate
     n_crops : int
@@ -320,6 +340,28 @@ class AirborneFit:
             "estimates": {k: vars(e) for k, e in self.estimates.items()},
         }  # fmt: skip
         return spec
+
+    def markdown(self) -> str:
+        """The estimates as a table (value ± the bootstrap's std) and, below it, the fitted scanner in one paragraph."""
+        s, base = self.sensor, self.base
+        return estimates_markdown(self.estimates) + (
+            f"\nThe fitted scanner {s.name}: {s.survey_density_m2:.1f} points/m² on flat open ground (pulse rate "
+            f"{s.pulse_rate_hz:,.0f} Hz), swath {s.swath_deg:.1f}° ({s.swath_width_m:,.0f} m wide at {s.altitude_m:g} m), "
+            f"range noise {s.range_noise_m:.3f} m.  Its altitude, speed, line rate and scan pattern are {base.name}'s: crops "
+            f"cannot tell them apart, only the density they give.  {self.plan_sentence()}\n"
+        )
+
+    def plan_sentence(self) -> str:
+        """What the fitted flight plan is and where it comes from, in one sentence."""
+        s, base = self.sensor, self.base
+        if _abutting(self.estimates["max_scan_angle_deg"].value, self.estimates["two_sided_fraction"].value):
+            return (f"It flies {s.n_lines} parallel lines whose strips abut ({s.flight_line_spacing_m:,.0f} m apart), so that "
+                    f"a scanned object lies in one strip, anywhere across it: scan angles 0° to {s.swath_deg / 2:.1f}°, as "
+                    "in the crops.")  # fmt: skip
+        if self.estimates["two_sided_fraction"].value > ONE_SIDED_SHARE:
+            return (f"Most crops are lit from both sides (overlapping strips), which does not tell the flight plan: it is "
+                    f"{base.name}'s ({s.n_lines} lines, side overlap {s.side_overlap:g}).")  # fmt: skip
+        return f"No crop told a scan angle: the swath and the flight plan are {base.name}'s ({s.n_lines} lines, side overlap {s.side_overlap:g})."
 
 
 def fit_airborne(crops: Sequence[NDArray[np.floating]], base: AirborneScanner, *, seed: int = 0, bootstrap: int = BOOTSTRAP) -> AirborneFit:
@@ -371,10 +413,17 @@ def fit_airborne(crops: Sequence[NDArray[np.floating]], base: AirborneScanner, *
     return AirborneFit(sensor=_fitted_scanner(base, best), base=base, estimates=estimates, n_crops=len(faces))
 
 
+def _abutting(max_scan_angle_deg: float, two_sided_fraction: float) -> bool:
+    """Whether the fitted plan is :data:`FITTED_LINES` abutting strips: a swath was measured and most crops are one-sided."""
+    return math.isfinite(max_scan_angle_deg) and max_scan_angle_deg > 0 and two_sided_fraction <= ONE_SIDED_SHARE
+
+
 def _fitted_scanner(base: AirborneScanner, best: dict[str, float]) -> AirborneScanner:
     changes: dict = {"name": f"{base.name}-fitted"}
     if math.isfinite(best["max_scan_angle_deg"]) and best["max_scan_angle_deg"] > 0:
         changes["swath_deg"] = min(2.0 * best["max_scan_angle_deg"], 170.0)
+    if _abutting(best["max_scan_angle_deg"], best["two_sided_fraction"]):
+        changes.update(n_lines=FITTED_LINES, side_overlap=0.0, headings_deg=base.headings_deg[:1])
     if math.isfinite(best["range_noise_m"]):
         changes["range_noise_m"] = best["range_noise_m"]
     scanner = base.with_(**changes)

@@ -44,7 +44,7 @@ replacement, seed given).  Nothing depends on file names or class labels.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -54,8 +54,11 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.lidar import Lidar
 
 __all__ = [
-    "BOOTSTRAP", "Estimate", "fit_lidar", "LidarFit", "MAX_DROPOUT_GAP", "MIN_RETURNS", "PLANE_NEIGHBOURS", "RING_SHARE",
+    "BOOTSTRAP", "Estimate", "estimates_markdown", "fit_lidar", "LidarFit", "MAX_DROPOUT_GAP", "MIN_RETURNS", "PLANE_NEIGHBOURS", "RING_SHARE",
 ]  # fmt: skip
+#: How a refusal of scans no spinning sensor made ends: what to fit instead, in the library and on the command line.
+_NOT_SPINNING = ("these are not scans in a spinning sensor's frame (airborne crops or world coordinates?); fit an airborne "
+                 "scanner to airborne crops instead (fit_airborne; fit-sensor --sensor dales-q1560 or riegl-q1560)")  # fmt: skip
 #: Bootstrap resamples of the scans for every uncertainty.
 BOOTSTRAP = 200
 #: Longest gap inside a ring, in azimuth steps, counted as lost returns (module docstring).
@@ -114,11 +117,16 @@ class LidarFit:
         return spec
 
     def markdown(self) -> str:
-        """A table of the estimates: quantity, value ± std, unit, n, set in the sensor, method."""
-        lines = ["| quantity | value ± std | unit | n | sets the sensor | how |", "|---|---|---|---|---|---|"]
-        for name, e in self.estimates.items():
-            lines.append(f"| {name} | {e.value:.4g} ± {e.std:.2g} | {e.unit} | {e.n} | {'yes' if e.set_in_sensor else 'no'} | {e.method} |")
-        return "\n".join(lines) + "\n"
+        """A table of the estimates (:func:`estimates_markdown`)."""
+        return estimates_markdown(self.estimates)
+
+
+def estimates_markdown(estimates: Mapping[str, Estimate]) -> str:
+    """A Markdown table of fitted quantities: quantity, value ± std (the bootstrap's), unit, n, whether it sets the sensor, how."""
+    lines = ["| quantity | value ± std | unit | n | sets the sensor | how |", "|---|---|---|---|---|---|"]
+    for name, e in estimates.items():
+        lines.append(f"| {name} | {e.value:.4g} ± {e.std:.2g} | {e.unit} | {e.n} | {'yes' if e.set_in_sensor else 'no'} | {e.method} |")
+    return "\n".join(lines) + "\n"
 
 
 @dataclass
@@ -280,8 +288,7 @@ def _check_rings(stats: Sequence[_ScanStats], base: Lidar) -> None:
     if np.median(ranges) > base.max_range_m:
         raise InvalidInputError(
             f"fit_lidar: the scans' objects lie a median {np.median(ranges):,.0f} m from the origin, beyond {base.name}'s "
-            f"{base.max_range_m:g} m range: these are not scans in a spinning sensor's frame (airborne crops or world "
-            "coordinates?); fit an airborne scanner to airborne crops (fit_airborne)"
+            f"{base.max_range_m:g} m range: {_NOT_SPINNING}"
         )
     beams = np.sort(np.asarray(base.elevations_deg, dtype=np.float64))
     spacing = float(np.median(np.diff(beams))) if len(beams) > 1 else math.inf
@@ -292,8 +299,7 @@ def _check_rings(stats: Sequence[_ScanStats], base: Lidar) -> None:
     if outside > 1.0 - RING_SHARE:
         raise InvalidInputError(
             f"fit_lidar: no sensor origin consistent with {base.name}'s rings: {outside:.0%} of the returns lie outside its "
-            f"beams' elevations ({beams[0]:g}° to {beams[-1]:g}°) seen from the origin; these are not scans in a spinning "
-            "sensor's frame (airborne crops or world coordinates?); fit an airborne scanner to airborne crops (fit_airborne)"
+            f"beams' elevations ({beams[0]:g}° to {beams[-1]:g}°) seen from the origin; {_NOT_SPINNING}"
         )
     # only scans over three rings or more tell: a short object far away may lie within one beam spacing
     telling = [c for st, c in zip(stats, centred, strict=True) if st.ring_spacings_deg.sum() >= 2.0 * spacing]
@@ -303,9 +309,7 @@ def _check_rings(stats: Sequence[_ScanStats], base: Lidar) -> None:
     if share < RING_SHARE:
         raise InvalidInputError(
             f"fit_lidar: no sensor origin consistent with {base.name}'s rings: {share:.0%} of the returns lie within an eighth "
-            f"of a beam spacing of a beam (a spinning scan puts nearly all there, unrelated elevations a quarter); these "
-            "are not scans in a spinning sensor's frame (airborne crops or world coordinates?); fit an airborne scanner "
-            "to airborne crops (fit_airborne)"
+            f"of a beam spacing of a beam (a spinning scan puts nearly all there, unrelated elevations a quarter); {_NOT_SPINNING}"
         )
 
 
