@@ -44,9 +44,12 @@ for tag in $tags; do
       i=$((i + 1))
       up=auto; case $mesh in */bush/openglforest__*) up=+y;; esac  # as sim2real's --up-map
       # a mesh stretched wider than twice the nearest distance is refused (the sensor could stand inside it): listed, left out
+      rc=0
       zbuf-occlude scan "$mesh" --sensor "$sensor" --distance "$distance" --height 1.6:2.0 --size "$size" --azimuth=-180:180 \
-        --yaw 0:360 --samples 4 --crop "${physics[@]}" --seed $i --up $up --size-of $size_of --out "$out/scans_${tag}_$cls/$i" > /dev/null \
-        || echo "left out: $tag $mesh" >> "$out/left_out.txt"
+        --yaw 0:360 --samples 4 --crop "${physics[@]}" --seed $i --up $up --size-of $size_of --out "$out/scans_${tag}_$cls/$i" > /dev/null || rc=$?
+      # 1: written, but some scans hold no return of the object (named on stderr); 2: refused
+      if [ $rc = 2 ]; then echo "left out: $tag $mesh" >> "$out/left_out.txt"; fi
+      if [ $rc = 1 ]; then echo "some scans empty: $tag $mesh" >> "$out/left_out.txt"; fi
     done
   done
 done
