@@ -162,12 +162,18 @@ def test_a_users_method_with_var_keywords_receives_every_option(monkeypatch):
         return np.ones(len(points), dtype=bool)
 
     monkeypatch.setitem(registry._METHODS, "user-any", fn)
-    method_keywords.cache_clear()
-    try:
-        assert method_keywords("user-any") is None
-        check_keywords("user-any", {"anything": 1})
-        mesh = trimesh.creation.icosphere(subdivisions=1)
-        zbuffer_mask = zbuf_occlude.visible_mask(mesh, mesh.vertices[:5], zbuf_occlude.camera_on_sphere(0.0, 0.0), "user-any", anything=1)
-        assert got == {"anything": 1} and zbuffer_mask.all()
-    finally:
-        method_keywords.cache_clear()
+    assert method_keywords("user-any") is None
+    check_keywords("user-any", {"anything": 1})
+    mesh = trimesh.creation.icosphere(subdivisions=1)
+    zbuffer_mask = zbuf_occlude.visible_mask(mesh, mesh.vertices[:5], zbuf_occlude.camera_on_sphere(0.0, 0.0), "user-any", anything=1)
+    assert got == {"anything": 1} and zbuffer_mask.all()
+
+
+def test_the_keywords_follow_the_function_a_name_is_bound_to(monkeypatch):
+    from zbuf_occlude.visibility.registry import method_keywords
+
+    assert "tolerance" in method_keywords("oracle")
+    monkeypatch.setitem(registry._METHODS, "oracle", lambda mesh, points, camera, **options: None)
+    assert method_keywords("oracle") is None
+    monkeypatch.undo()
+    assert "tolerance" in method_keywords("oracle")  # not the stand-in's, cached under the same name

@@ -246,7 +246,6 @@ def visible_in_frustum(
     return visible
 
 
-@functools.lru_cache(maxsize=None)
 def method_keywords(method: str) -> frozenset[str] | None:
     """The keywords ``method`` takes besides ``face_index`` (from its signature); ``None`` for
     a method that takes any (``**options``: a user's method may forward them elsewhere).
@@ -256,7 +255,14 @@ def method_keywords(method: str) -> frozenset[str] | None:
     InvalidInputError
         Unknown method.
     """
-    params = list(inspect.signature(get_method(method)).parameters.values())
+    return _keywords_of(get_method(method))
+
+
+@functools.lru_cache(maxsize=None)
+def _keywords_of(fn: VisibilityMethod) -> frozenset[str] | None:
+    """:func:`method_keywords` of a registered function, cached per function (not per name: a
+    name may be bound to another function, e.g. in a test's scratch registry)."""
+    params = list(inspect.signature(fn).parameters.values())
     if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
         return None
     named = (inspect.Parameter.KEYWORD_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
