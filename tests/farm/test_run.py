@@ -29,13 +29,14 @@ from zbuf_occlude.dataset.layout import CARD_FILE, FORMAT_VERSION, MANIFEST_FILE
 from zbuf_occlude.dataset.reader import OccludedDataset
 from zbuf_occlude.dataset.storage import unpack_visible
 from zbuf_occlude.errors import InvalidInputError, OutputError
-from zbuf_occlude.farm import FarmParams, merge_farm, parse_shard, run_farm, select_shard
+from zbuf_occlude.farm import FarmParams, SensorCropParams, merge_farm, parse_shard, run_farm, select_shard
 from zbuf_occlude.farm.config import RunOptions
 from zbuf_occlude.geometry.cameras import camera_on_sphere
 from zbuf_occlude.geometry.samples import object_key, pose_samples
 from zbuf_occlude.mesh.inputs import FarmObject, discover_objects
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.pipeline import dense_cloud, occlude_poses
+from zbuf_occlude.sensors.placement import CropDistributions
 from zbuf_occlude.visibility.registry import method_info, visible_mask
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -751,13 +752,13 @@ def test_worker_sensor_shard_is_the_crops_datasets_and_its_record(tmp_path):
     from zbuf_occlude.io.atomic import file_sha256
 
     obj = _box_object(tmp_path)
-    params = FarmParams(sensor="hdl32e", samples_per_view=3, n_points=64, seed=2, sensor_distance_m=(4.0, 6.0),
-                        sensor_height_m=(1.0, 1.5), sensor_size_m=(2.0, 3.0))  # fmt: skip
+    crops = CropDistributions(distance_m=(4.0, 6.0), height_m=(1.0, 1.5), size_m=(2.0, 3.0))
+    params = FarmParams(sensor=SensorCropParams("hdl32e", crops), samples_per_view=3, n_points=64, seed=2)
     out = tmp_path / "out"
     rec = process_object(obj, params, out)
     mesh = load_mesh(obj.source)
-    expected = farm_datasets(mesh, params.sensor_model(), name=obj.name, label=obj.label, object_index=obj.index, n_samples=3,
-                             n_points=64, seed=2, distributions=params.crop_distributions())  # fmt: skip
+    expected = farm_datasets(mesh, params.sensor.model(), name=obj.name, label=obj.label, object_index=obj.index, n_samples=3,
+                             n_points=64, seed=2, distributions=crops)  # fmt: skip
     n_visible = np.zeros(3, dtype=np.int64)
     n_visible[expected["pose_index"]] = expected["n_visible"]
     assert rec["status"] == "ok" and rec["shards"] == [shard_path(obj)] and rec["n_samples"] == len(expected["data"]) > 0
@@ -806,7 +807,8 @@ def test_worker_shards_store_no_times_and_compact_bits_are_one_gzip_chunk(tmp_pa
     with h5py.File(tmp_path / "compact" / shard_path(obj), "r") as f:
         assert f["visible_bits"].chunks == f["visible_bits"].shape and f["visible_bits"].compression_opts == COMPACT_GZIP_LEVEL
     calls.clear()
-    process_object(obj, FarmParams(sensor="hdl32e", samples_per_view=1, n_points=16, sensor_distance_m=(4.0, 5.0)), tmp_path / "sensor")
+    sensor = SensorCropParams("hdl32e", CropDistributions(distance_m=(4.0, 5.0)))
+    process_object(obj, FarmParams(sensor=sensor, samples_per_view=1, n_points=16), tmp_path / "sensor")
     assert calls and all(track is False for _, track in calls), calls
 
 

@@ -17,7 +17,7 @@ from zbuf_occlude.cli.main import main as cli_main
 from zbuf_occlude.dataset.layout import CARD_FILE
 from zbuf_occlude.dataset.reader import OccludedDataset
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.farm import FarmParams
+from zbuf_occlude.farm import FarmParams, SensorCropParams
 from zbuf_occlude.farm.sensor_crops import farm_datasets
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors import Lidar
@@ -151,17 +151,18 @@ def test_across_sight_width_stretches_each_object_to_the_asked_widths(tmp_path):
     card = json.loads((out / CARD_FILE).read_text())
     assert card["params"]["sensor_across_sight_width_m"] == [0.6, 0.9]
     # each scan's stretch is drawn from its own mesh's interval: the sensor package's fit for that mesh and seed
-    params = FarmParams(sensor="hdl32e", sensor_distance_m=(5.0, 20.0), sensor_size_m=(2.0, 4.5), sensor_across_sight_width_m=(0.6, 0.9))
+    crops = CropDistributions(distance_m=(5.0, 20.0), size_m=(2.0, 4.5))
+    params = FarmParams(sensor=SensorCropParams("hdl32e", crops, across_sight_width_m=(0.6, 0.9)))
     ds, fitted = OccludedDataset(out), {}
     for i in range(len(ds)):
         meta = ds.metadata(i)
         if meta["source"] not in fitted:
-            fitted[meta["source"]] = fit_width_scale(load_mesh(meta["source"]), params.sensor_model(), params.crop_distributions(), (0.6, 0.9))
+            fitted[meta["source"]] = fit_width_scale(load_mesh(meta["source"]), params.sensor.model(), crops, (0.6, 0.9))
         lo, hi = fitted[meta["source"]]
         assert lo <= meta["width_scale"] <= hi and hi == pytest.approx(1.5 * lo)
     assert len({round(lo, 6) for lo, _ in fitted.values()}) == len(fitted) > 1  # one interval per mesh
     assert "sensor_across_sight_width_m" not in FarmParams(sensor="hdl32e").to_dict()  # earlier sensor data sets keep their digest
-    assert params.digest() != FarmParams(sensor="hdl32e", sensor_distance_m=(5.0, 20.0), sensor_size_m=(2.0, 4.5)).digest()
+    assert params.digest() != FarmParams(sensor=SensorCropParams("hdl32e", crops)).digest()
     assert cli_main(["verify", str(out)]) == 0
 
 
@@ -214,7 +215,7 @@ def test_zbuffer_farm_parameters_keep_their_digest():
     assert FarmParams(storage="compact", seed=3, method="zbuffer").digest() == "f3f5104aab0cd7df"
     assert "sensor" not in FarmParams().to_dict()
     assert FarmParams(sensor="hdl32e").digest() != FarmParams(sensor="vlp16").digest()
-    assert FarmParams(sensor="hdl32e").digest() != FarmParams(sensor="hdl32e", sensor_size_m=(1.0, 2.0)).digest()
+    assert FarmParams(sensor="hdl32e").digest() != FarmParams(sensor=SensorCropParams("hdl32e", CropDistributions(size_m=(1.0, 2.0)))).digest()
 
 
 @pytest.mark.parametrize(
@@ -232,9 +233,9 @@ def test_zbuffer_farm_parameters_keep_their_digest():
         (["--sensor-ground-margin", "1"], "--sensor-ground-margin needs --sensor"),
         (["--sensor", "hdl32e", "--sensor-ground-margin", "-1"], "--sensor-ground-margin must be a number >= 0 metres, got -1"),
         (["--sensor-hidden-below", "0.5"], "--sensor-hidden-below needs --sensor"),
-        (["--sensor", "hdl32e", "--sensor-hidden-below=-0.5:1"], "--sensor-hidden-below must be LO:HI with 0 <= LO <= HI"),
+        (["--sensor", "hdl32e", "--sensor-hidden-below=-0.5:1"], "--sensor-hidden-below must be >= 0 metres above the ground, got (-0.5, 1.0)"),
         (["--sensor-across-sight-width", "0.5"], "--sensor-across-sight-width needs --sensor"),
-        (["--sensor", "hdl32e", "--sensor-across-sight-width", "0:0"], "--sensor-across-sight-width must be LO:HI with 0 <= LO <= HI, HI > 0"),
+        (["--sensor", "hdl32e", "--sensor-across-sight-width", "0:0"], "--sensor-across-sight-width must have HI > 0 metres"),
         (["--sensor", "kinect-v1", "--sensor-across-sight-width", "0.5"], "spinning LiDAR"),
     ],
 )
@@ -246,8 +247,59 @@ def test_bad_sensor_options_are_clear_errors(tmp_path, bad, words, capsys):
 
 
 def test_sensor_params_are_checked():
-    with pytest.raises(InvalidInputError, match="--sensor-height"):
-        FarmParams(sensor="hdl32e", sensor_height_m=(-1.0, 2.0))
+    with pytest.raises(InvalidInputError, match="--sensor-height must be >= 0 metres, got"):
+        FarmParams.from_dict({**FarmParams(sensor="hdl32e").to_dict(), "sensor_height_m": [-1.0, 2.0]})
+    with pytest.raises(InvalidInputError, match="farm --sensor draws no width_scale"):  # the card could not record it
+        SensorCropParams("hdl32e", CropDistributions(width_scale=(1.0, 2.0)))
+    with pytest.raises(InvalidInputError, match="not one"):
+        SensorCropParams("kinect-v1", CropDistributions(reflectivity=(0.1, 0.2)))
+    with pytest.raises(InvalidInputError, match="--sensor writes dense storage only"):
+        FarmParams(sensor="hdl32e", storage="compact")
+
+
+#: ``params`` of the plan of a ``farm --sensor`` run with every crop option set, as the farm wrote
+#: it when FarmParams held the settings as flat ``sensor_*`` fields, and that plan's ``params_digest``.
+EARLIER_SENSOR_PLAN_PARAMS = {
+    "dense_points": 32768, "density": None, "method": "auto", "n_points": 128, "radius": 4.0, "resolution": 512,
+    "samples_per_view": 3, "seed": 7, "sensor": "hdl32e", "sensor_across_sight_width_m": [1.0, 2.0],
+    "sensor_distance_m": [6.0, 18.0], "sensor_footprint": True, "sensor_ground_margin_m": 0.3, "sensor_height_m": [1.5, 2.1],
+    "sensor_hidden_below_m": [0.1, 0.5], "sensor_reflectivity": [0.2, 0.8], "sensor_size_m": [2.0, 4.0], "storage": "dense",
+    "views": "paper100",
+}  # fmt: skip
+EARLIER_SENSOR_PLAN_DIGEST = "846529b76e7de8d5"
+
+
+def test_a_plan_written_with_flat_sensor_keys_reads_back_as_the_same_parameters():
+    params = FarmParams.from_dict(EARLIER_SENSOR_PLAN_PARAMS)
+    crops = params.sensor.distributions
+    assert params.sensor.name == "hdl32e" and params.sensor.footprint is True and params.sensor.across_sight_width_m == (1.0, 2.0)
+    assert (crops.distance_m, crops.height_m, crops.size_m) == ((6.0, 18.0), (1.5, 2.1), (2.0, 4.0))
+    assert (crops.reflectivity, crops.ground_margin_m, crops.hidden_below_m) == ((0.2, 0.8), 0.3, (0.1, 0.5))
+    assert params.to_dict() == EARLIER_SENSOR_PLAN_PARAMS and params.digest() == EARLIER_SENSOR_PLAN_DIGEST
+    assert json.dumps(params.to_dict(), sort_keys=True) == json.dumps(EARLIER_SENSOR_PLAN_PARAMS, sort_keys=True)
+
+
+@pytest.mark.parametrize(
+    "params",
+    [
+        FarmParams(views="grid25", samples_per_view=2, n_points=64, storage="compact", seed=3),
+        FarmParams(up="+y", density=50.0),
+        FarmParams(sensor="vlp16"),
+        FarmParams(samples_per_view=4, n_points=256, seed=9, sensor=SensorCropParams(
+            "hdl32e", CropDistributions(distance_m=(6.0, 18.0), height_m=2.0, size_m=(2.0, 4.0), reflectivity=(0.2, 0.8),
+                                        ground_margin_m=0.3, hidden_below_m=(0.1, 0.5)),
+            footprint=True, across_sight_width_m=(1.0, 2.0))),
+    ],
+    ids=["compact", "density", "sensor-defaults", "sensor-every-setting"],
+)
+def test_farm_params_read_back_from_their_dict(params):
+    again = FarmParams.from_dict(json.loads(json.dumps(params.to_dict())))  # as a plan or card holds them
+    assert again == params and again.digest() == params.digest()
+
+
+def test_sensor_keys_without_a_sensor_are_refused():
+    with pytest.raises(TypeError, match="sensor_distance_m given without a sensor"):
+        FarmParams.from_dict({"views": "0:0", "sensor_distance_m": [1.0, 2.0]})
 
 
 @pytest.mark.slow

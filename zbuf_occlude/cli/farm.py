@@ -6,6 +6,7 @@ import argparse
 import logging
 import shlex
 import sys
+from dataclasses import replace
 
 from zbuf_occlude.cli.options import Checked, count, interval, out_folder, parse_interval, poses, real, seed
 from zbuf_occlude.dataset.layout import STORAGE_MODES
@@ -22,7 +23,15 @@ from zbuf_occlude.defaults import (
 from zbuf_occlude.defaults import DEFAULT_RESOLUTION as GENERATE_RESOLUTION
 from zbuf_occlude.defaults import DEFAULT_VIEWS as GENERATE_VIEWS
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.farm.config import DEFAULT_SENSOR_DISTANCE_M, DEFAULT_SENSOR_HEIGHT_M, DEFAULT_SENSOR_SIZE_M, FarmParams
+from zbuf_occlude.farm.config import (
+    CROP_OPTION_NAMES,
+    DEFAULT_SENSOR_DISTANCE_M,
+    DEFAULT_SENSOR_HEIGHT_M,
+    DEFAULT_SENSOR_SIZE_M,
+    FARM_CROP_DISTRIBUTIONS,
+    FarmParams,
+    SensorCropParams,
+)
 from zbuf_occlude.farm.shards import parse_shard
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
 from zbuf_occlude.mesh.discovery import SPLITS
@@ -88,27 +97,23 @@ def _farm_command(args: argparse.Namespace) -> int:
 
 
 def _sensor_params(args: argparse.Namespace) -> dict:
+    """``{"sensor": SensorCropParams}`` of the ``--sensor*`` options (``{}`` without ``--sensor``)."""
     if args.sensor is None:
         for option in ("sensor_distance", "sensor_height", "sensor_size", "sensor_reflectivity", "sensor_footprint", "sensor_ground_margin",
                        "sensor_hidden_below", "sensor_across_sight_width"):  # fmt: skip
             if getattr(args, option) not in (None, False):
                 raise InvalidInputError(f"--{option.replace('_', '-')} needs --sensor")
         return {}
-    out: dict = {"sensor": args.sensor}
-    for option in ("sensor_distance", "sensor_height", "sensor_size"):
-        text = getattr(args, option)
-        if text is not None:
-            out[f"{option}_m"] = parse_interval(text, f"--{option.replace('_', '-')}")
-    if args.sensor_reflectivity is not None:
-        out["sensor_reflectivity"] = parse_interval(args.sensor_reflectivity, "--sensor-reflectivity")
-    out["sensor_footprint"] = args.sensor_footprint
+    intervals = {"distance_m": args.sensor_distance, "height_m": args.sensor_height, "size_m": args.sensor_size,
+                 "reflectivity": args.sensor_reflectivity, "hidden_below_m": args.sensor_hidden_below}  # fmt: skip
+    crops = {field: parse_interval(text, CROP_OPTION_NAMES[field]) for field, text in intervals.items() if text is not None}
     if args.sensor_ground_margin is not None:
-        out["sensor_ground_margin_m"] = args.sensor_ground_margin
-    if args.sensor_hidden_below is not None:
-        out["sensor_hidden_below_m"] = parse_interval(args.sensor_hidden_below, "--sensor-hidden-below")
-    if args.sensor_across_sight_width is not None:
-        out["sensor_across_sight_width_m"] = parse_interval(args.sensor_across_sight_width, "--sensor-across-sight-width")
-    return out
+        crops["ground_margin_m"] = args.sensor_ground_margin
+    width = args.sensor_across_sight_width
+    return {"sensor": SensorCropParams(
+        args.sensor, replace(FARM_CROP_DISTRIBUTIONS, **crops, option_names=CROP_OPTION_NAMES), footprint=args.sensor_footprint,
+        across_sight_width_m=None if width is None else parse_interval(width, "--sensor-across-sight-width"),
+    )}  # fmt: skip
 
 
 def _interval_text(lo_hi: tuple[float, float]) -> str:

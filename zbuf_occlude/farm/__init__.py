@@ -42,6 +42,7 @@ __getattr__, __dir__, _stub_names = _lazy.attach_stub(__name__, __file__)
 # The same names as __init__.pyi's (a test checks), written out because the API docs read __all__ here.
 __all__ = [
     "FarmParams",
+    "SensorCropParams",
     "RunOptions",
     "FarmSummary",
     "DatasetBusy",

@@ -8,6 +8,7 @@ from .config import (
     PAPER_SAMPLES_PER_MB,
     FarmParams,
     RunOptions,
+    SensorCropParams,
     shard_path,
 )
 from .generate import generate

@@ -8,7 +8,7 @@ import hashlib
 import json
 import logging
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -32,6 +32,7 @@ from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, view_schedule
 from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.mesh.discovery import SPLITS
 from zbuf_occlude.mesh.scene import UP_CHOICES
+from zbuf_occlude.sensors.placement import CropDistributions, check_across_sight_width
 
 if TYPE_CHECKING:  # annotations only: inputs imports nothing from here
     from zbuf_occlude.mesh.inputs import FarmObject
@@ -70,13 +71,121 @@ OPTION_NAMES = {
 DEFAULT_SENSOR_DISTANCE_M = (5.0, 25.0)
 DEFAULT_SENSOR_HEIGHT_M = (1.6, 2.0)
 DEFAULT_SENSOR_SIZE_M = (4.5, 4.5)
-_SENSOR_FIELDS = ("sensor_distance_m", "sensor_height_m", "sensor_size_m")
-_SENSOR_OPTIONAL_INTERVALS = ("sensor_reflectivity", "sensor_hidden_below_m", "sensor_across_sight_width_m")
+#: The plan's and card's key of each :class:`SensorCropParams` setting, in the order they are written:
+#: flat ``sensor_*`` keys beside :class:`FarmParams`'s, so a data set's digest is the same however the
+#: settings are held.  ``distance_m`` ... ``hidden_below_m`` are :class:`CropDistributions` fields.
+SENSOR_KEYS = {
+    "distance_m": "sensor_distance_m", "height_m": "sensor_height_m", "size_m": "sensor_size_m",
+    "reflectivity": "sensor_reflectivity", "footprint": "sensor_footprint", "ground_margin_m": "sensor_ground_margin_m",
+    "hidden_below_m": "sensor_hidden_below_m", "across_sight_width_m": "sensor_across_sight_width_m",
+}  # fmt: skip
+#: The :class:`CropDistributions` fields the farm sets (and records); the others keep their defaults.
+FARM_CROP_FIELDS = ("distance_m", "height_m", "size_m", "reflectivity", "ground_margin_m", "hidden_below_m")
+#: Settings left out of the plan when None: the digest of sensor data sets made before they existed.
+_LEFT_OUT_WHEN_NONE = ("ground_margin_m", "hidden_below_m", "across_sight_width_m")
+#: The ``farm`` flag of each :class:`CropDistributions` field it sets, for the messages of its checks.
+CROP_OPTION_NAMES = {field: OPTION_NAMES[SENSOR_KEYS[field]] for field in FARM_CROP_FIELDS}
+#: ``farm --sensor``'s placement when no option changes it.
+FARM_CROP_DISTRIBUTIONS = CropDistributions(distance_m=DEFAULT_SENSOR_DISTANCE_M, height_m=DEFAULT_SENSOR_HEIGHT_M, size_m=DEFAULT_SENSOR_SIZE_M)
 
 GL_LOCK = threading.Lock()  # one GL context per process: threads of a Dask worker take turns
 
 
 # -- parameters ----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SensorCropParams:
+    """``farm --sensor``: the sensor that scans each object, and where each scan places it.
+
+    Parameters
+    ----------
+    name : str
+        A sensor preset (``hdl32e``...) or JSON file (:func:`~zbuf_occlude.sensors.presets.sensor_from_name`).
+    distributions : CropDistributions
+        Per scan, uniform draws of the horizontal sensor-object distance (``distance_m``), the
+        sensor height above the ground (``height_m``) and the object's largest dimension
+        (``size_m``), metres (default :data:`FARM_CROP_DISTRIBUTIONS`); the object's
+        direction and heading are uniform over 0–360°.  Return physics: ``reflectivity``
+        (the sensor's radiometric threshold applies).  ``ground_margin_m``: keep the ground
+        returns under each object; ``hidden_below_m``: hide each object's bottom.  The farm
+        sets and records these (:data:`FARM_CROP_FIELDS`); the other fields keep their defaults.
+    footprint : bool
+        Return physics: 7 rays per firing in the beam's divergence cone, strongest echo.
+    across_sight_width_m : (lo, hi) or None
+        Stretch each mesh horizontally so that its crops are, at the median, as wide across the
+        line of sight as this interval, metres, drawn per scan
+        (:func:`~zbuf_occlude.sensors.fit.fit_width_scale`, a spinning LiDAR only); ``None``: the
+        meshes' own proportions.
+
+    Raises
+    ------
+    InvalidInputError
+        An unknown sensor; ``footprint``, ``reflectivity`` or ``across_sight_width_m`` for a
+        sensor that is not a spinning LiDAR; a bad ``across_sight_width_m``; a
+        ``distributions`` field the farm does not record set to other than its default.  Each
+        crop setting's value is checked by :class:`CropDistributions`, the one checker of them.
+    """
+
+    name: str
+    distributions: CropDistributions = FARM_CROP_DISTRIBUTIONS
+    footprint: bool = False
+    across_sight_width_m: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.distributions, CropDistributions):
+            raise InvalidInputError(f"--sensor's distributions must be a CropDistributions, got {type(self.distributions).__name__}")
+        unset = CropDistributions()
+        for f in dataclasses.fields(CropDistributions):
+            if f.name not in FARM_CROP_FIELDS and getattr(self.distributions, f.name) != getattr(unset, f.name):
+                raise InvalidInputError(f"farm --sensor draws no {f.name} (its card could not say so): leave it at {getattr(unset, f.name)!r}")
+        object.__setattr__(self, "footprint", bool(self.footprint))
+        if self.across_sight_width_m is not None:
+            option = OPTION_NAMES["sensor_across_sight_width_m"]
+            object.__setattr__(self, "across_sight_width_m", check_across_sight_width(self.across_sight_width_m, option))
+        self.model()  # raises InvalidInputError naming an unknown sensor, or physics it has not
+
+    def model(self):
+        """The :class:`~zbuf_occlude.sensors.Lidar` or :class:`~zbuf_occlude.sensors.DepthCamera` of ``name``.
+
+        Raises
+        ------
+        InvalidInputError
+            Unknown sensor, or ``footprint``, ``reflectivity`` or ``across_sight_width_m``
+            for a depth camera or a LiDAR without a beam divergence.
+        """
+        from zbuf_occlude.sensors.lidar import Lidar
+        from zbuf_occlude.sensors.presets import sensor_from_name
+
+        sensor = sensor_from_name(self.name)
+        if (self.footprint or self.distributions.reflectivity is not None) and not isinstance(sensor, Lidar):
+            raise InvalidInputError(f"--sensor-footprint and --sensor-reflectivity model LiDARs; {self.name} is not one")
+        if self.across_sight_width_m is not None and not isinstance(sensor, Lidar):
+            raise InvalidInputError(f"--sensor-across-sight-width measures across a spinning LiDAR's line of sight; {self.name} is not one")
+        return sensor.with_(footprint_rays=7) if self.footprint else sensor
+
+    def to_dict(self) -> dict[str, Any]:
+        """``{"sensor": name, "sensor_distance_m": [lo, hi], ...}``: the flat keys of :data:`SENSOR_KEYS`."""
+        values = {**{f: getattr(self.distributions, f) for f in FARM_CROP_FIELDS}, "footprint": self.footprint,
+                  "across_sight_width_m": self.across_sight_width_m}  # fmt: skip
+        d: dict[str, Any] = {"sensor": self.name}
+        for field, key in SENSOR_KEYS.items():
+            if values[field] is not None or field not in _LEFT_OUT_WHEN_NONE:
+                d[key] = list(values[field]) if isinstance(values[field], tuple) else values[field]
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> SensorCropParams:
+        """The settings of :meth:`to_dict`'s flat keys (``d["sensor"]`` the name; a key left out: its default).
+
+        Raises
+        ------
+        InvalidInputError
+            A bad value, naming its ``farm`` flag.
+        """
+        values = {field: d[key] for field, key in SENSOR_KEYS.items() if key in d}
+        crops = {field: values.pop(field) for field in FARM_CROP_FIELDS if field in values}
+        return cls(d["sensor"], dataclasses.replace(FARM_CROP_DISTRIBUTIONS, **crops, option_names=CROP_OPTION_NAMES), **values)
+
+
 @dataclass(frozen=True)
 class FarmParams:
     """Everything that decides the content of a data set (a changed value means a new data set).
@@ -99,36 +208,14 @@ class FarmParams:
     storage : {"dense", "compact"}
     method : str
         Visibility method (registry name).
-    sensor : str or None
-        ``farm --sensor``: a sensor preset (``hdl32e``...) or JSON file
-        (:func:`zbuf_occlude.cli.sensors.sensor_from_name`).  Each object gets
-        ``samples_per_view`` scans, each from its own placement (see below), stored as the
-        dense layout's rows (dense storage only); ``views``, ``dense_points``, ``density``,
-        ``resolution``, ``radius`` and ``method`` do not apply.  ``None``: the z-buffer farm.
-    sensor_distance_m, sensor_height_m, sensor_size_m : (lo, hi)
-        Per scan, uniform draws of the horizontal sensor-object distance, the sensor height
-        above the ground and the object's largest dimension, metres; the object's direction
-        and heading are uniform over 0–360° (:class:`zbuf_occlude.sensors.placement.CropDistributions`).
-        Left out of :meth:`to_dict` and :meth:`digest` when ``sensor`` is ``None``, so data sets
-        made without a sensor keep their digest.
-    sensor_reflectivity : (lo, hi) or None
-        Return physics: the object's Lambertian reflectivity, drawn per scan; the sensor's
-        radiometric detection threshold then applies (:func:`zbuf_occlude.sensors.scan`).
-    sensor_footprint : bool
-        Return physics: 7 rays per firing in the beam's divergence cone, strongest echo.
-    sensor_ground_margin_m : float or None
-        Keep the ground returns under each object, inside its footprint grown by this margin,
-        metres (:class:`~zbuf_occlude.sensors.placement.CropDistributions` ``ground_margin_m``);
-        ``None``: the object's returns only.  Left out of :meth:`to_dict` when ``None``.
-    sensor_hidden_below_m : (lo, hi) or None
-        Hide each object's returns lower than a height drawn per scan, metres above the ground
-        (:class:`~zbuf_occlude.sensors.placement.CropDistributions` ``hidden_below_m``); ``None``:
-        nothing hidden.  Left out of :meth:`to_dict` when ``None``.
-    sensor_across_sight_width_m : (lo, hi) or None
-        Stretch each mesh horizontally so that its crops are, at the median, as wide across the
-        line of sight as this interval, metres, drawn per scan
-        (:func:`~zbuf_occlude.sensors.fit.fit_width_scale`, a spinning LiDAR only); ``None``: the
-        meshes' own proportions.  Left out of :meth:`to_dict` when ``None``.
+    sensor : SensorCropParams, str or None
+        ``farm --sensor``: the sensor and the placement of its scans (a name alone: a
+        :class:`SensorCropParams` of that sensor with the default placement).  Each object gets
+        ``samples_per_view`` scans, each from its own placement, stored as the dense layout's
+        rows (dense storage only); ``views``, ``dense_points``, ``density``, ``resolution``,
+        ``radius`` and ``method`` do not apply.  ``None``: the z-buffer farm.  Written by
+        :meth:`to_dict` as flat ``sensor_*`` keys (:data:`SENSOR_KEYS`), and left out when
+        ``None``, so data sets made without a sensor keep their digest.
     up : str
         The meshes' up axis (:data:`zbuf_occlude.mesh.scene.UP_CHOICES`), turned to +z by
         :func:`~zbuf_occlude.mesh.load.load_mesh`; ``"auto"``: per file, by its layout and
@@ -147,15 +234,7 @@ class FarmParams:
     radius: float = DEFAULT_RADIUS
     storage: str = "dense"
     method: str = DEFAULT_METHOD
-    sensor: str | None = None
-    sensor_distance_m: tuple[float, float] = DEFAULT_SENSOR_DISTANCE_M
-    sensor_height_m: tuple[float, float] = DEFAULT_SENSOR_HEIGHT_M
-    sensor_size_m: tuple[float, float] = DEFAULT_SENSOR_SIZE_M
-    sensor_reflectivity: tuple[float, float] | None = None
-    sensor_footprint: bool = False
-    sensor_ground_margin_m: float | None = None
-    sensor_hidden_below_m: tuple[float, float] | None = None
-    sensor_across_sight_width_m: tuple[float, float] | None = None
+    sensor: SensorCropParams | None = None
     up: str = "auto"
 
     def __post_init__(self) -> None:
@@ -181,68 +260,13 @@ class FarmParams:
         view_schedule(self.views)  # raises InvalidInputError on a bad spec
         if self.up not in UP_CHOICES:
             raise InvalidInputError(f"--up must be one of {', '.join(UP_CHOICES)}, got {self.up!r}")
+        if isinstance(self.sensor, str):
+            object.__setattr__(self, "sensor", SensorCropParams(self.sensor))
         if self.sensor is not None:
-            self._check_sensor()
-
-    def _check_sensor(self) -> None:
-        if self.storage != "dense":
-            raise InvalidInputError(f"--sensor writes dense storage only, got --storage {self.storage}")
-        self.sensor_model()  # raises InvalidInputError naming an unknown sensor
-        for field in _SENSOR_FIELDS:
-            value = getattr(self, field)
-            try:
-                lo, hi = (float(v) for v in value)
-            except (TypeError, ValueError):
-                raise InvalidInputError(f"{OPTION_NAMES[field]} must be an interval LO:HI of metres, got {value!r}") from None
-            if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi) or lo < 0 or (field != "sensor_height_m" and lo <= 0):
-                raise InvalidInputError(f"{OPTION_NAMES[field]} must be LO:HI with 0 < LO <= HI metres, got {value!r}")
-            object.__setattr__(self, field, (lo, hi))
-        for field in _SENSOR_OPTIONAL_INTERVALS:
-            value = getattr(self, field)
-            if value is not None:
-                try:
-                    lo, hi = (float(v) for v in value)
-                except (TypeError, ValueError):
-                    lo = hi = float("nan")
-                positive = field == "sensor_across_sight_width_m"  # a width of nothing cannot be fitted
-                if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo <= hi) or (positive and not hi > 0):
-                    raise InvalidInputError(f"{OPTION_NAMES[field]} must be LO:HI with 0 <= LO <= HI{', HI > 0' if positive else ''}, got {value!r}")
-                object.__setattr__(self, field, (lo, hi))
-        object.__setattr__(self, "sensor_footprint", bool(self.sensor_footprint))
-        if self.sensor_ground_margin_m is not None:
-            from zbuf_occlude.sensors.placement import check_ground_margin
-
-            object.__setattr__(self, "sensor_ground_margin_m", check_ground_margin(self.sensor_ground_margin_m, "--sensor-ground-margin"))
-        self.sensor_model()  # footprint needs a beam divergence
-
-    def sensor_model(self):
-        """The :class:`~zbuf_occlude.sensors.Lidar` or :class:`~zbuf_occlude.sensors.DepthCamera` of ``sensor``.
-
-        Raises
-        ------
-        InvalidInputError
-            Unknown sensor, or ``sensor_footprint``/``sensor_reflectivity`` for a depth camera
-            or a LiDAR without a beam divergence.
-        """
-        from zbuf_occlude.sensors.lidar import Lidar
-        from zbuf_occlude.sensors.presets import sensor_from_name
-
-        sensor = sensor_from_name(self.sensor)
-        if (self.sensor_footprint or self.sensor_reflectivity is not None) and not isinstance(sensor, Lidar):
-            raise InvalidInputError(f"--sensor-footprint and --sensor-reflectivity model LiDARs; {self.sensor} is not one")
-        if self.sensor_across_sight_width_m is not None and not isinstance(sensor, Lidar):
-            raise InvalidInputError(f"--sensor-across-sight-width measures across a spinning LiDAR's line of sight; {self.sensor} is not one")
-        return sensor.with_(footprint_rays=7) if self.sensor_footprint else sensor
-
-    def crop_distributions(self):
-        """``farm --sensor``'s per-scan placement, a :class:`~zbuf_occlude.sensors.placement.CropDistributions`."""
-        from zbuf_occlude.sensors.placement import CropDistributions
-
-        return CropDistributions(
-            distance_m=self.sensor_distance_m, height_m=self.sensor_height_m, azimuth_deg=(0.0, 360.0),
-            yaw_deg=(0.0, 360.0), size_m=self.sensor_size_m, reflectivity=self.sensor_reflectivity,
-            ground_margin_m=self.sensor_ground_margin_m, hidden_below_m=self.sensor_hidden_below_m,
-        )  # fmt: skip
+            if not isinstance(self.sensor, SensorCropParams):
+                raise InvalidInputError(f"--sensor must name a sensor, got {type(self.sensor).__name__} {self.sensor!r}")
+            if self.storage != "dense":
+                raise InvalidInputError(f"--sensor writes dense storage only, got --storage {self.storage}")
 
     @functools.cached_property
     def poses(self) -> list[tuple[float, float]]:
@@ -250,18 +274,34 @@ class FarmParams:
         return [] if self.sensor is not None else view_schedule(self.views)
 
     def to_dict(self) -> dict[str, Any]:
-        d = dataclasses.asdict(self)
-        if self.up == "auto":  # the digest of data sets made before --up existed
-            del d["up"]
-        if self.sensor is None:  # the z-buffer farm's parameters, and digest, as before --sensor existed
-            for field in ("sensor", *_SENSOR_FIELDS, "sensor_footprint", "sensor_ground_margin_m", *_SENSOR_OPTIONAL_INTERVALS):
-                del d[field]
-        else:
-            d.update({field: list(d[field]) for field in (*_SENSOR_FIELDS, *_SENSOR_OPTIONAL_INTERVALS) if d[field] is not None})
-            for field in ("sensor_ground_margin_m", "sensor_hidden_below_m", "sensor_across_sight_width_m"):  # the digest of sensor data sets made before they existed
-                if d[field] is None:
-                    del d[field]
+        """The parameters as plain JSON values, as the plan and the card record them (:meth:`from_dict` reads them back)."""
+        d: dict[str, Any] = {}
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if f.name == "sensor":
+                d.update({} if value is None else value.to_dict())
+            elif not (f.name == "up" and value == "auto"):  # "auto": the digest of data sets made before --up existed
+                d[f.name] = value
         return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> FarmParams:
+        """The parameters of a plan's or card's ``params`` (:meth:`to_dict`), flat ``sensor_*`` keys included.
+
+        Raises
+        ------
+        TypeError
+            A key that is no parameter, or ``sensor_*`` keys without a ``sensor``.
+        InvalidInputError
+            A bad value.
+        """
+        sensor_keys = {key for key in d if key in SENSOR_KEYS.values()}
+        rest = {key: value for key, value in d.items() if key != "sensor" and key not in sensor_keys}
+        if d.get("sensor") is None:
+            if sensor_keys:
+                raise TypeError(f"{', '.join(sorted(sensor_keys))} given without a sensor")
+            return cls(**rest)
+        return cls(**rest, sensor=SensorCropParams.from_dict(d))
 
     def digest(self) -> str:
         """Short hash of the parameters; records carry it so stale results are never mixed in."""

@@ -94,7 +94,7 @@ def read_plan(folder: Path) -> dict[str, Any] | None:
         raise InvalidInputError(f"{path} is not a farm plan: {describe_validation_error(exc)}") from None
     plan = loads_json(text, what=str(path))
     try:
-        FarmParams(**plan["params"])
+        FarmParams.from_dict(plan["params"])
     except TypeError as exc:
         raise InvalidInputError(f"{path}: field 'params' is not a farm's parameters ({exc})") from None
     return plan
@@ -235,7 +235,7 @@ def finalize(
     from zbuf_occlude.dataset.schema import CHECKSUM_ALGORITHM
 
     objects = objects_of(plan)
-    params = FarmParams(**plan["params"])
+    params = FarmParams.from_dict(plan["params"])
     write_text(out / MANIFEST_FILE, manifest_lines(objects, params, records))
     shape_names = shape_names_of(objects)
     write_text(out / SHAPE_NAMES_FILE, "".join(f"{n}\n" for n in shape_names))

@@ -391,6 +391,6 @@ def _merge_locked(folders: list[Path], out: Path, plan: dict[str, Any], *, progr
     finalize(out, plan, records, commands)
     n_ok = sum(r["status"] == "ok" for r in records.values())
     return FarmSummary.of_records(
-        out, records, FarmParams(**plan["params"]), objects=len(objects), resumed=n_ok, finished=True,
+        out, records, FarmParams.from_dict(plan["params"]), objects=len(objects), resumed=n_ok, finished=True,
         wall_s=time.perf_counter() - t0, workers="merge",
     )  # fmt: skip

@@ -88,13 +88,13 @@ def _scan(obj: FarmObject, params: FarmParams, out: Path, kind: SensorCrops) -> 
     mesh = load_mesh(obj.source, up=params.up)
     n_scans = int(params.samples_per_view)
     datasets = farm_datasets(
-        mesh, params.sensor_model(), name=obj.name, label=obj.label, object_index=obj.index, n_samples=n_scans,
-        n_points=params.n_points, seed=params.seed, distributions=params.crop_distributions(),
-        across_sight_width_m=params.sensor_across_sight_width_m,
+        mesh, params.sensor.model(), name=obj.name, label=obj.label, object_index=obj.index, n_samples=n_scans,
+        n_points=params.n_points, seed=params.seed, distributions=params.sensor.distributions,
+        across_sight_width_m=params.sensor.across_sight_width_m,
     )  # fmt: skip
     n_visible = np.zeros(n_scans, dtype=np.int64)
     n_visible[datasets["pose_index"]] = datasets["n_visible"]
-    kind.write_rows(out / shard_path(obj), datasets, {**_attrs(obj, params), "sensor": params.sensor})
+    kind.write_rows(out / shard_path(obj), datasets, {**_attrs(obj, params), "sensor": params.sensor.name})
     return {**_files_record(out, [shard_path(obj)], n_visible, len(datasets["data"]), params.n_points), "n_dense": 0, **_mesh_record(mesh)}
 
 

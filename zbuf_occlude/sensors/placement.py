@@ -17,7 +17,7 @@ import numpy as np
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.scene import check_width_profile
 
-__all__ = ["CropDistributions", "Placement", "DEFAULT_GROUND_REFLECTIVITY", "check_ground_margin", "draw_placement"]
+__all__ = ["CropDistributions", "Placement", "DEFAULT_GROUND_REFLECTIVITY", "check_across_sight_width", "check_ground_margin", "draw_placement"]
 
 #: ρ of the ground plane when a crop models reflectivity: asphalt and concrete in the near infrared, an assumption.
 DEFAULT_GROUND_REFLECTIVITY = 0.15
@@ -63,6 +63,22 @@ def check_ground_margin(value, option: str = "ground_margin_m") -> float:
     if not (math.isfinite(margin) and margin >= 0):
         raise InvalidInputError(f"{option} must be a number >= 0 metres, got {value!r}")
     return margin
+
+
+def check_across_sight_width(value, option: str = "across_sight_width_m") -> tuple[float, float]:
+    """``value`` (a number or ``(lo, hi)``) as the interval of widths across the line of sight that
+    :func:`~zbuf_occlude.sensors.fit.fit_width_scale` fits a mesh to, metres.
+
+    Raises
+    ------
+    InvalidInputError
+        Not ``0 <= lo <= hi`` with ``hi > 0`` (a width of nothing cannot be fitted), naming
+        ``option`` and the value.
+    """
+    lo, hi = _interval(option, value, 0.0, unit=" metres")
+    if not hi > 0:
+        raise InvalidInputError(f"{option} must have HI > 0 metres (a width of nothing cannot be fitted), got {value!r}")
+    return lo, hi
 
 
 @dataclass(frozen=True)
