@@ -83,6 +83,8 @@ class LineProgress(tqdm):
         super().__init__(*args, **kwargs)
         self._opening = False
         if not self.disable:
+            if not LineProgress._last_line_t:  # the first bar of the process: its first line comes after an interval
+                LineProgress._last_line_t = self.start_t
             self.last_print_t = LineProgress._last_line_t  # the interval runs from the last line of any bar
 
     def display(self, msg: str | None = None, pos: int | None = None) -> bool:

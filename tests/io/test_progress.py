@@ -1,0 +1,103 @@
+"""zbuf_occlude.io.progress: a tqdm bar when stderr is a terminal, newline-terminated lines when it
+is a file or a pipe, nothing when progress is off; the interval between lines and its variable."""
+
+from __future__ import annotations
+
+import io
+
+import pytest
+
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.io import progress as progress_module
+from zbuf_occlude.io.progress import PROGRESS_INTERVAL_ENV, LineProgress, progress, progress_interval_s
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def _stderr(monkeypatch, kind: str) -> io.StringIO:
+    """stderr as a file (``"log"``) or a terminal; set in the test itself, after pytest's capture has set its own."""
+    err = _Terminal() if kind == "terminal" else io.StringIO()
+    monkeypatch.setattr("sys.stderr", err)
+    return err
+
+
+def _run(n: int, **kwargs) -> None:
+    with progress(total=n, desc="generate", unit="obj", **kwargs) as bar:
+        for _ in range(n):
+            bar.update(1)
+
+
+def test_in_a_log_every_update_is_one_line_with_done_and_total_and_no_carriage_return(monkeypatch):
+    log = _stderr(monkeypatch, "log")
+    _run(4, interval_s=0)
+    text = log.getvalue()
+    assert "\r" not in text and text.endswith("\n")
+    lines = text.splitlines()
+    assert [line.split(",")[0] for line in lines] == [f"generate: {i}/4 obj" for i in range(1, 5)]
+    assert "ETA" in lines[0] and "obj/s" in lines[0]  # rate and time left while it runs
+    assert "ETA" not in lines[-1]
+
+
+def test_in_a_log_lines_are_spaced_by_the_interval_and_a_last_line_says_where_it_ended(monkeypatch):
+    log = _stderr(monkeypatch, "log")
+    _run(50, interval_s=3600)
+    assert log.getvalue().splitlines() == [log.getvalue().splitlines()[0]]
+    assert log.getvalue().startswith("generate: 50/50 obj, ")
+
+
+def test_in_a_log_a_transient_bar_writes_no_last_line(monkeypatch):
+    log = _stderr(monkeypatch, "log")
+    with progress(total=3, desc="epoch 1/2", unit="batch", leave=False, interval_s=3600) as bar:
+        bar.update(3)
+    assert log.getvalue() == ""
+
+
+def test_in_a_log_the_postfix_and_the_iterable_form_work(monkeypatch):
+    log = _stderr(monkeypatch, "log")
+    seen = []
+    bar = progress(range(3), desc="compare", unit="call", interval_s=0)
+    for i in bar:
+        seen.append(i)
+        bar.set_postfix(failed=0, refresh=False)
+    bar.close()
+    assert seen == [0, 1, 2]
+    assert log.getvalue().splitlines()[-1].startswith("compare: 3/3 call, ")
+    assert "failed=0" in log.getvalue()
+
+
+def test_on_a_terminal_it_is_a_tqdm_bar_redrawn_in_place(monkeypatch):
+    terminal = _stderr(monkeypatch, "terminal")
+    bar = progress(total=4, desc="generate", unit="obj")
+    assert not isinstance(bar, LineProgress)
+    bar.update(4)
+    bar.close()
+    assert "\r" in terminal.getvalue() and "4/4" in terminal.getvalue()
+
+
+@pytest.mark.parametrize("where", ["log", "terminal"])
+def test_disabled_progress_writes_nothing(where, monkeypatch):
+    err = _stderr(monkeypatch, where)
+    _run(4, enabled=False, interval_s=0)
+    for _ in progress(range(3), desc="x", enabled=False):
+        pass
+    assert err.getvalue() == ""
+
+
+def test_the_interval_comes_from_the_environment(monkeypatch):
+    log = _stderr(monkeypatch, "log")
+    monkeypatch.delenv(PROGRESS_INTERVAL_ENV, raising=False)
+    assert progress_interval_s() == progress_module.PROGRESS_INTERVAL_S
+    monkeypatch.setenv(PROGRESS_INTERVAL_ENV, "0")
+    assert progress_interval_s() == 0
+    _run(3)
+    assert len(log.getvalue().splitlines()) == 3
+
+
+@pytest.mark.parametrize("value", ["soon", "-1", "nan", "inf"])
+def test_a_bad_interval_in_the_environment_is_refused_naming_it(monkeypatch, value):
+    monkeypatch.setenv(PROGRESS_INTERVAL_ENV, value)
+    with pytest.raises(InvalidInputError, match=f"{PROGRESS_INTERVAL_ENV}='{value}'"):
+        progress_interval_s()
