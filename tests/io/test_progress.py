@@ -101,3 +101,21 @@ def test_a_bad_interval_in_the_environment_is_refused_naming_it(monkeypatch, val
     monkeypatch.setenv(PROGRESS_INTERVAL_ENV, value)
     with pytest.raises(InvalidInputError, match=f"{PROGRESS_INTERVAL_ENV}='{value}'"):
         progress_interval_s()
+
+
+@pytest.mark.slow
+def test_training_writes_lines_not_bars_into_a_log(monkeypatch):
+    # `experiment` and `experiment sim2real` train through learn.train: per epoch, lines in a log
+    pytest.importorskip("torch", reason="zbuf_occlude.learn needs PyTorch: pip install -e '.[learn]'")
+    import numpy as np
+
+    from zbuf_occlude.learn.data import CloudSet
+    from zbuf_occlude.learn.training import TrainConfig, train
+
+    rng = np.random.default_rng(0)
+    clouds = CloudSet(rng.normal(size=(8, 32, 3)).astype(np.float32), np.arange(8) % 2, np.full(8, np.nan), np.arange(8))
+    monkeypatch.setenv(PROGRESS_INTERVAL_ENV, "0")
+    log = _stderr(monkeypatch, "log")
+    train(clouds, 2, TrainConfig(model="pointnet", epochs=2, batch_size=4, width=0.125, seed=0, patience=0, threads=1))
+    assert "\r" not in log.getvalue()
+    assert any(line.startswith("pointnet epoch 2/2: 2/2 batch, ") for line in log.getvalue().splitlines()), log.getvalue()
