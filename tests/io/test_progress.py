@@ -119,3 +119,24 @@ def test_training_writes_lines_not_bars_into_a_log(monkeypatch):
     train(clouds, 2, TrainConfig(model="pointnet", epochs=2, batch_size=4, width=0.125, seed=0, patience=0, threads=1))
     assert "\r" not in log.getvalue()
     assert any(line.startswith("pointnet epoch 2/2: 2/2 batch, ") for line in log.getvalue().splitlines()), log.getvalue()
+
+
+@pytest.mark.slow
+def test_sim2real_shows_the_meshes_it_makes_a_set_from(monkeypatch, sample_meshes_dir, tmp_path):
+    # the stage that makes the training sets from the meshes (tens of seconds) reports as it goes
+    import shutil
+
+    from zbuf_occlude.experiments.sim2real_data import build_set, find_class_meshes
+
+    for cls, names in {"seat": ("chair", "sofa"), "top": ("stool", "table")}.items():  # two meshes a class
+        for name in names:
+            src = next((sample_meshes_dir / name).rglob("*.off"))
+            (tmp_path / cls).mkdir(exist_ok=True)
+            shutil.copyfile(src, tmp_path / cls / src.name)
+    meshes = find_class_meshes(tmp_path)
+    monkeypatch.setenv(PROGRESS_INTERVAL_ENV, "0")
+    log = _stderr(monkeypatch, "log")
+    build_set("complete", meshes, ["seat", "top"], 4, 16, 0, progress=True)
+    assert "\r" not in log.getvalue()
+    assert [line.split(",")[0] for line in log.getvalue().splitlines()] == [f"sim2real complete set: {i}/{len(meshes)} mesh"
+                                                                            for i in range(1, len(meshes) + 1)]  # fmt: skip
