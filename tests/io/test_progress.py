@@ -4,6 +4,7 @@ is a file or a pipe, nothing when progress is off; the interval between lines an
 from __future__ import annotations
 
 import io
+import time
 
 import pytest
 
@@ -140,3 +141,14 @@ def test_sim2real_shows_the_meshes_it_makes_a_set_from(monkeypatch, sample_meshe
     assert "\r" not in log.getvalue()
     assert [line.split(",")[0] for line in log.getvalue().splitlines()] == [f"sim2real complete set: {i}/{len(meshes)} mesh"
                                                                             for i in range(1, len(meshes) + 1)]  # fmt: skip
+
+
+def test_in_a_log_a_slow_run_gives_seconds_per_item_and_the_time_left(monkeypatch):
+    log = _stderr(monkeypatch, "log")
+    clock = [time.time()]
+    monkeypatch.setattr("tqdm.std.time", lambda: clock[0])  # the clock tqdm reads
+    with progress(total=4, desc="farm", unit="obj", interval_s=0) as bar:
+        for _ in range(2):
+            clock[0] += 300.0  # five minutes an object
+            bar.update(1)
+    assert log.getvalue().splitlines()[1] == "farm: 2/4 obj, 300 s/obj, ETA 10:00, 10:00 elapsed"

@@ -97,13 +97,14 @@ class LineProgress(tqdm):
         return True
 
     def line(self) -> str:
-        """The progress as one line: ``desc: done/total unit, rate unit/s, ETA h:mm:ss, elapsed, postfix``."""
+        """The progress as one line: ``desc: done/total unit, rate unit/s (or s/unit), ETA [h:]mm:ss, elapsed, postfix``."""
         d = self.format_dict
         n, total, unit, elapsed = d["n"], d["total"], d["unit"], d["elapsed"]
         parts = [f"{n}/{total} {unit}" if total else f"{n} {unit}"]
         rate = (n - d["initial"]) / elapsed if elapsed > 0 else 0.0
         if rate > 0:
-            parts.append(f"{self.format_sizeof(rate)} {unit}/s")
+            # as tqdm's bar: seconds per item when slower than one a second
+            parts.append(f"{self.format_sizeof(rate)} {unit}/s" if rate >= 1 else f"{self.format_sizeof(1 / rate)} s/{unit}")
             if total and n < total:
                 parts.append(f"ETA {self.format_interval((total - n) / rate)}")
         parts.append(f"{self.format_interval(elapsed)} elapsed")
