@@ -13,6 +13,12 @@ from zbuf_occlude.io import progress as progress_module
 from zbuf_occlude.io.progress import PROGRESS_INTERVAL_ENV, LineProgress, progress, progress_interval_s
 
 
+@pytest.fixture(autouse=True)
+def _no_line_yet(monkeypatch):
+    """Each test starts as a fresh process would: no progress line written yet."""
+    monkeypatch.setattr(LineProgress, "_last_line_t", 0.0)
+
+
 class _Terminal(io.StringIO):
     def isatty(self) -> bool:
         return True
@@ -152,3 +158,11 @@ def test_in_a_log_a_slow_run_gives_seconds_per_item_and_the_time_left(monkeypatc
             clock[0] += 300.0  # five minutes an object
             bar.update(1)
     assert log.getvalue().splitlines()[1] == "farm: 2/4 obj, 300 s/obj, ETA 10:00, 10:00 elapsed"
+
+
+def test_in_a_log_a_line_written_at_a_later_clock_time_does_not_silence_the_next_bar(monkeypatch):
+    # the clock set back (or a line stamped by another clock): the next bar still writes its lines
+    monkeypatch.setattr(LineProgress, "_last_line_t", time.time() + 3600)
+    log = _stderr(monkeypatch, "log")
+    _run(2, interval_s=0)
+    assert [line.split(",")[0] for line in log.getvalue().splitlines()] == ["generate: 1/2 obj", "generate: 2/2 obj"]

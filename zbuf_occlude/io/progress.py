@@ -85,7 +85,8 @@ class LineProgress(tqdm):
         if not self.disable:
             if not LineProgress._last_line_t:  # the first bar of the process: its first line comes after an interval
                 LineProgress._last_line_t = self.start_t
-            self.last_print_t = LineProgress._last_line_t  # the interval runs from the last line of any bar
+            # the interval runs from the last line of any bar (never from a time to come: a clock set back)
+            self.last_print_t = min(LineProgress._last_line_t, self.start_t)
 
     def display(self, msg: str | None = None, pos: int | None = None) -> bool:
         if self._opening or msg == "":  # tqdm opening or clearing a bar: nothing to show or clear in a log
