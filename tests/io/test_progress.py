@@ -160,6 +160,22 @@ def test_in_a_log_a_slow_run_gives_seconds_per_item_and_the_time_left(monkeypatc
     assert log.getvalue().splitlines()[1] == "farm: 2/4 obj, 300 s/obj, ETA 10:00, 10:00 elapsed"
 
 
+def test_table3_shows_the_meshes_its_visible_area_curve_is_made_of(monkeypatch, tmp_path):
+    # `experiment table3`'s Fig. 12 curve profiles every mesh in turn (seconds each): lines in a log
+    pytest.importorskip("torch", reason="zbuf_occlude.experiments.table3 needs PyTorch: pip install -e '.[learn]'")
+    from zbuf_occlude.experiments import elevation_profile, table3
+    from zbuf_occlude.mesh import load
+
+    monkeypatch.setattr(load, "load_mesh", lambda path: path)  # the profile itself is elevation_profile's tests' job
+    monkeypatch.setattr(elevation_profile, "profile_table", lambda mesh, **kw: [{"elevation_deg": 0.0, "area_visible": 1.0}])
+    monkeypatch.setenv(PROGRESS_INTERVAL_ENV, "0")
+    log = _stderr(monkeypatch, "log")
+    meshes = [{"path": f"m{i}.off"} for i in range(3)]
+    table3._visible_area_curve(meshes, tmp_path, table3.SCALES["quick"], "embree-fast", progress=True)
+    assert "\r" not in log.getvalue()
+    assert [line.split(",")[0] for line in log.getvalue().splitlines()] == [f"table3 visible area: {i}/3 mesh" for i in (1, 2, 3)]
+
+
 def test_in_a_log_a_line_written_at_a_later_clock_time_does_not_silence_the_next_bar(monkeypatch):
     # the clock set back (or a line stamped by another clock): the next bar still writes its lines
     monkeypatch.setattr(LineProgress, "_last_line_t", time.time() + 3600)
