@@ -160,6 +160,7 @@ def test_in_a_log_a_slow_run_gives_seconds_per_item_and_the_time_left(monkeypatc
     assert log.getvalue().splitlines()[1] == "farm: 2/4 obj, 300 s/obj, ETA 10:00, 10:00 elapsed"
 
 
+@pytest.mark.slow
 def test_table3_shows_the_meshes_its_visible_area_curve_is_made_of(monkeypatch, tmp_path):
     # `experiment table3`'s Fig. 12 curve profiles every mesh in turn (seconds each): lines in a log
     pytest.importorskip("torch", reason="zbuf_occlude.experiments.table3 needs PyTorch: pip install -e '.[learn]'")
