@@ -352,15 +352,15 @@ def test_an_out_inside_the_input_folder_is_refused_before_any_work(tmp_path, cap
 
 @pytest.mark.slow
 def test_generates_progress_bar_is_called_generate(tree, tmp_path, monkeypatch):
-    import tqdm.auto
+    from zbuf_occlude.io import progress
 
     names = []
-    real = tqdm.auto.tqdm
+    real = progress.progress
 
     def recording(*args, **kwargs):
         names.append(kwargs.get("desc"))
-        return real(*args, **{**kwargs, "disable": True})
+        return real(*args, **{**kwargs, "enabled": False})
 
-    monkeypatch.setattr(tqdm.auto, "tqdm", recording)
+    monkeypatch.setattr(progress, "progress", recording)
     assert main(["generate", str(tree), "--out", str(tmp_path / "out"), *ARGS]) == 0
     assert names == ["generate"]

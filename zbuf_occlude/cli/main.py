@@ -87,7 +87,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
     # generate's engine (farm.run_farm) checks the options, the memory, --out and the GL before loading a mesh
     t0 = time.perf_counter()
     summary, objects = generate(
-        paths, args.out, params=params, overwrite=args.overwrite, progress=True, isolate=True,
+        paths, args.out, params=params, overwrite=args.overwrite, progress=not args.no_progress, isolate=True,
         command=shlex.join(["zbuf-occlude", *sys.argv[1:]]) if sys.argv else None, class_from=args.class_from,
     )  # fmt: skip
     elapsed = time.perf_counter() - t0
@@ -246,6 +246,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--class-from", action=Checked, check=CLASS_FROM, metavar="N", help=CLASS_FROM_HELP)
     g.add_argument("--up", choices=UP_CHOICES, default="auto", help=UP_HELP)
     g.add_argument("--overwrite", action="store_true", help="start over (needed to change options in an existing --out)")
+    g.add_argument("--no-progress", action="store_true", help="no progress bar (or, when stderr is a file, no progress lines)")
     from zbuf_occlude.cli.protocols import add_protocol_arguments
 
     add_protocol_arguments(g)

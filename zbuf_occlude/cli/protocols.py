@@ -49,7 +49,7 @@ def run_protocol_command(args: argparse.Namespace, paths: list[str]) -> int:
         camera_frame=args.camera_frame, complete_points=args.complete_points, up=args.up,
     )  # fmt: skip
     t0 = time.perf_counter()
-    run = run_protocol(protocol, paths, args.out, options, overwrite=args.overwrite)
+    run = run_protocol(protocol, paths, args.out, options, overwrite=args.overwrite, progress=not args.no_progress)
     print(
         f"{args.protocol}: {counted(run.done, 'mesh', 'meshes')} done, {run.resumed} from an earlier run, {len(run.failures)} failed "
         f"in {time.perf_counter() - t0:.1f} s -> {args.out}"

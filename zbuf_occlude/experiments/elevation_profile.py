@@ -123,7 +123,7 @@ def profile_table(
     resolution, radius, seed
         Camera image size (px), camera distance (object units), sampling seed.
     progress : bool
-        tqdm progress bar.
+        Progress on stderr (:func:`zbuf_occlude.io.progress.progress`).
     **options
         Passed to the method.
 
@@ -139,7 +139,7 @@ def profile_table(
     InvalidInputError
         ``azimuths < 1`` or ``points < 1``.
     """
-    from tqdm.auto import tqdm  # deferred: only the run needs it
+    from zbuf_occlude.io.progress import progress as progress_bar
 
     if int(azimuths) < 1 or int(points) < 1:
         raise InvalidInputError(f"azimuths and points must be >= 1, got {azimuths} and {points}")
@@ -147,7 +147,7 @@ def profile_table(
     az_list = [k * 360.0 / int(azimuths) for k in range(int(azimuths))]
     method_options = {**resolution_option(method, resolution), **options}
     rows = []
-    for el in tqdm(list(elevations), desc="elevation profile", unit="elevation", disable=None if progress else True):  # None: only on a terminal
+    for el in progress_bar(list(elevations), desc="elevation-profile", unit="elevation", enabled=progress):
         samples = []
         for az in az_list:
             camera = camera_on_sphere(float(el), az, radius, resolution=resolution)

@@ -397,7 +397,7 @@ def run_seed(config: Sim2RealConfig, sets: Sim2RealSets, seed: int, done: dict, 
             tr, val, tests = fit_half.subset(tr_rows), fit_half.subset(val_rows), (held_out, None)
         else:
             if not built:  # the sets this seed still trains, at once
-                built = _build_seed_sets(config, sets, seed, train_meshes, val_meshes, done)
+                built = _build_seed_sets(config, sets, seed, train_meshes, val_meshes, done, progress=progress)
             tr, val, tests = built["train"][kind], (fit_half if real_val else built["val"][kind]), (held_out, every_scan)
         made = {"val_meshes": sorted(m.name for m in val_meshes) if kind != REAL_TO_REAL else [], "data_s": time.perf_counter() - t0}
         row = _train_and_score(config, sets.names, kind, seed, (tr, val, tests), made, out, device=device, threads=threads, progress=progress)
@@ -405,15 +405,16 @@ def run_seed(config: Sim2RealConfig, sets: Sim2RealSets, seed: int, done: dict, 
         log.info("%s seed %d: mean class accuracy %.3f", kind, seed, row["mean_class_accuracy"])
 
 
-def _build_seed_sets(config: Sim2RealConfig, sets: Sim2RealSets, seed: int, train_meshes, val_meshes, done: dict) -> dict:
+def _build_seed_sets(config: Sim2RealConfig, sets: Sim2RealSets, seed: int, train_meshes, val_meshes, done: dict, *,
+                     progress: bool = False) -> dict:  # fmt: skip
     """``{"train": {kind: CloudSet}, "val": ...}``: the mesh-only sets of ``seed`` not yet in ``done``
-    (no ``"val"`` when they validate on the fit half)."""
+    (no ``"val"`` when they validate on the fit half), with ``progress`` per set on stderr."""
     sc, n_points = config.scale_values, config.n_points
     kinds = _kinds(config)
     options = dict(sensor=config.sensor, sizes=config.sizes, keep_scale=config.keep_scale, dense_points=sc.dense_points,
                    min_returns=int(config.min_returns), resolution=sc.resolution, method=config.method,
                    elevation_deg=config.occluded_elevation_deg, fitted_sensor=sets.fitted, fitted_placement=sets.fitted_placement,
-                   fitted_sizes=sets.fitted_sizes, kinds=[k for k in kinds if (k, seed) not in done])  # fmt: skip
+                   fitted_sizes=sets.fitted_sizes, kinds=[k for k in kinds if (k, seed) not in done], progress=progress)  # fmt: skip
     built = {"train": build_sets(train_meshes, sets.names, sc.per_class, n_points, seed, **options)}
     if not config.validates_on_fit_half:
         built["val"] = build_sets(val_meshes, sets.names, sc.val_per_class, n_points, seed + 10_000, **options)

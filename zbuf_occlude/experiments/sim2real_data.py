@@ -388,7 +388,7 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
               sensor=None, sizes: dict[str, SizeRange] = CLASS_SIZES_M, keep_scale: bool = False,
               dense_points: int = 8192, resolution: int = 512, method: str = "auto",
               min_returns: int = MIN_RETURNS, elevation_deg: tuple[float, float] = GROUND_ELEVATION_DEG,
-              placement: dict[str, dict] | None = None) -> CloudSet:  # fmt: skip
+              placement: dict[str, dict] | None = None, progress: bool = False) -> CloudSet:  # fmt: skip
     """``per_class`` clouds of every class in ``names`` from ``meshes``, of one training set kind.
 
     Cloud counts are spread over each class's meshes (:func:`allocate`); ``lidar+complete``
@@ -406,6 +406,7 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
     (:func:`zbuf_occlude.sensors.fit.fit_visible_across_sight`; :data:`WIDTH_BY`), and its ``"across_sight_profile"`` warps
     them to that outline (:func:`zbuf_occlude.sensors.fit.fit_width_profile`), unless the
     mesh gives its ``width_scale`` (or ``visible_across_sight``) and ``width_profile`` (:func:`fit_mesh_shapes`).
+    ``progress`` shows the meshes done on stderr (:func:`zbuf_occlude.io.progress.progress`).
 
     Raises
     ------
@@ -415,19 +416,23 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
     if kind not in TRAINING_SETS:
         raise InvalidInputError(f"unknown training set {kind!r}; choose from {TRAINING_SETS}")
     if kind == "lidar+complete":
-        common = dict(sizes=sizes, keep_scale=keep_scale)
+        common = dict(sizes=sizes, keep_scale=keep_scale, progress=progress)
         lidar = build_set("lidar", meshes, names, per_class, n_points, seed, sensor=sensor, min_returns=min_returns,
                           placement=placement, **common)  # fmt: skip
         return mix_sets(lidar, build_set("complete", meshes, names, per_class, n_points, seed, **common), seed)
     missing = sorted({m.class_name for m in meshes} - set(sizes))
     if missing and (kind == "lidar" or keep_scale):
         raise InvalidInputError(f"no real size for classes {missing}; give them with --sizes CLASS=height:LO-HI")
+    from zbuf_occlude.io.progress import progress as progress_bar
+
     rng = np.random.default_rng([seed, TRAINING_SETS.index(kind), 0x52])
     clouds, sizes_m, labels, objs = [], [], [], []
+    bar = progress_bar(total=sum(m.class_name in names for m in meshes), desc=f"sim2real {kind} set", unit="mesh", enabled=progress)
     for label, cls in enumerate(names):
         rows = [i for i, m in enumerate(meshes) if m.class_name == cls]
         for i, k in zip(rows, allocate(len(rows), per_class, rng)):
             if k == 0:
+                bar.update(1)
                 continue
             entry = meshes[i]
             if kind == "complete":
@@ -446,6 +451,8 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
             clouds += got
             labels += [label] * len(got)
             objs += [i] * len(got)
+            bar.update(1)
+    bar.close()
     points = _finish(clouds, np.asarray(sizes_m), keep_scale, rng)
     n = len(labels)
     return CloudSet(points, np.asarray(labels, np.int64), np.full(n, np.nan), np.asarray(objs, np.int64))

@@ -129,6 +129,7 @@ def _visible_area_curve(meshes: list[dict], data_dir: Path, scale: Scale, method
     """Fig. 12: projected visible areas per elevation, averaged over the meshes (cached in data_dir)."""
     from zbuf_occlude.experiments.elevation_profile import profile_table
     from zbuf_occlude.io.atomic import write_csv as _w
+    from zbuf_occlude.io.progress import progress as progress_bar
     from zbuf_occlude.mesh.load import load_mesh
 
     cache = data_dir / "visible_area.csv"
@@ -142,7 +143,7 @@ def _visible_area_curve(meshes: list[dict], data_dir: Path, scale: Scale, method
     info = method_info(method)
     profile_method = DEFAULT_METHOD if (info.takes_grid or info.grid_of) else method
     per_mesh = []
-    for m in meshes:
+    for m in progress_bar(meshes, desc="table3 visible area", unit="mesh", enabled=progress):
         rows = profile_table(load_mesh(m["path"]), method=profile_method,
                              points=scale.profile_points, azimuths=scale.profile_azimuths,
                              resolution=scale.resolution, progress=False)  # fmt: skip

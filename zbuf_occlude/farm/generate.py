@@ -107,7 +107,8 @@ def generate(
     overwrite : bool
         Start over instead of resuming (needed when ``out`` holds other parameters).
     progress : bool
-        tqdm bar on stderr.
+        Progress on stderr (:func:`zbuf_occlude.io.progress.progress`): a bar on a terminal, a line
+        every few seconds in a log.
     class_from : int, optional
         Take each mesh's class from this folder level above it (``--class-from``).
     isolate : bool

@@ -248,9 +248,9 @@ def _run_locked(
     views = 0
     peak = 0.0
     last_manifest = time.monotonic()
-    from tqdm.auto import tqdm
+    from zbuf_occlude.io.progress import progress
 
-    bar = tqdm(total=len(mine), initial=resumed, unit="obj", desc=run.progress_label, disable=not run.progress or None, dynamic_ncols=True)
+    bar = progress(total=len(mine), initial=resumed, unit="obj", desc=run.progress_label, enabled=run.progress)
     t_render = time.perf_counter()
     try:
         for rec in records_iter:
@@ -259,9 +259,9 @@ def _run_locked(
             if rec["status"] == "ok":
                 views += len(rec["n_visible"])
             n_failed = sum(r["status"] != "ok" for r in records.values())
-            bar.update(1)
             rate = views / max(time.perf_counter() - t_render, 1e-9)
             bar.set_postfix(views_s=f"{rate:.1f}", failed=n_failed, refresh=False)
+            bar.update(1)  # after the postfix: a line written now shows this object's
             if time.monotonic() - last_manifest > MANIFEST_INTERVAL_S:
                 write_text(manifest, manifest_lines(mine, params, records))
                 last_manifest = time.monotonic()
@@ -298,7 +298,7 @@ def merge_farm(
         The data set folder (default: the first input).  Shards of other inputs are
         copied in (atomically); a merge can be rerun.
     progress : bool
-        tqdm bar over copied shards.
+        Progress on stderr (:func:`zbuf_occlude.io.progress.progress`): the objects read and copied.
 
     Raises
     ------
@@ -344,7 +344,7 @@ def _merge_locked(folders: list[Path], out: Path, plan: dict[str, Any], *, progr
     failed: dict[int, dict[str, Any]] = {}
     commands: list[str] = []
     task_docs: list[tuple[str, dict[str, Any]]] = []
-    from tqdm.auto import tqdm
+    from zbuf_occlude.io.progress import progress as progress_bar
 
     for folder in folders:
         for task_file in sorted((folder / TASK_DIR).glob("task-*.json")):
@@ -353,7 +353,7 @@ def _merge_locked(folders: list[Path], out: Path, plan: dict[str, Any], *, progr
                 commands.append(doc["command"])
             if doc and folder.resolve() != out.resolve():
                 task_docs.append((task_file.name, doc))
-        for o in tqdm(objects, desc=f"read {folder.name}", unit="obj", disable=not progress or None, leave=False):
+        for o in progress_bar(objects, desc=f"farm-merge: read {folder.name}", unit="obj", enabled=progress, leave=False):
             if o.index in found:
                 continue
             rec = finished_record(folder, o, digest)  # its files checked inside folder
@@ -376,7 +376,7 @@ def _merge_locked(folders: list[Path], out: Path, plan: dict[str, Any], *, progr
     for name, doc in task_docs:
         write_json(out / TASK_DIR / name, doc)
     records: dict[int, dict[str, Any]] = {}
-    for index, (folder, rec) in tqdm(sorted(found.items()), desc="merge", unit="obj", disable=not progress or None, leave=False):
+    for index, (folder, rec) in progress_bar(sorted(found.items()), desc="farm-merge", unit="obj", enabled=progress):
         if folder.resolve() != out.resolve():
             for rel in rec["shards"]:  # the copy stays inside out
                 with atomic_path(path_inside(out, rel, what=f"{record_path(folder, index)} field 'shards'")) as tmp:

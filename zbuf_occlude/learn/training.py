@@ -406,7 +406,8 @@ def train(
         ``last.pt`` (resume point) and ``best.pt`` (best validation weights) go here; a
         ``last.pt`` made with another config is refused.
     progress : bool
-        A tqdm bar per epoch on stderr.
+        Progress on stderr per epoch (:func:`zbuf_occlude.io.progress.progress`; in a log, a line
+        every few seconds).
 
     Returns
     -------
@@ -418,7 +419,7 @@ def train(
     InvalidInputError
         Empty training set, or a checkpoint from a different configuration.
     """
-    from tqdm.auto import tqdm
+    from zbuf_occlude.io.progress import progress as progress_bar
 
     if len(train_set) == 0:
         raise InvalidInputError("empty training set")
@@ -475,7 +476,7 @@ def train(
         warmup_steps = config.warmup_epochs * n_batches
         total_loss, correct = 0.0, 0
         batches = range(0, len(order), config.batch_size)
-        bar = tqdm(batches, desc=f"{config.model} epoch {epoch + 1}/{config.epochs}", disable=not progress, leave=False)
+        bar = progress_bar(batches, desc=f"{config.model} epoch {epoch + 1}/{config.epochs}", unit="batch", enabled=progress, leave=False)
         for i in bar:
             rows = order[i : i + config.batch_size]
             if len(rows) < 2:  # batch norm needs two samples

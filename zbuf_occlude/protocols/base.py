@@ -229,9 +229,9 @@ def run_protocol(
     _record_options(out, protocol, options, objects, overwrite)
     run = ProtocolRun(failures=[(s.path, s.reason) for s in skipped])
     shards: list[Path] = []
-    from tqdm import tqdm
+    from zbuf_occlude.io.progress import progress as progress_bar
 
-    for obj in tqdm(objects, desc=protocol.name, disable=None if progress else True):
+    for obj in progress_bar(objects, desc=protocol.name, unit="obj", enabled=progress):
         shard = _shard(out, protocol.name, obj.index)
         if shard.exists():
             run.resumed += 1

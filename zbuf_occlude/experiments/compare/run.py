@@ -256,7 +256,7 @@ def compare(
         so that one-off costs (numba compilation, Embree's BVH, uploading the mesh to the
         GPU) are not charged to a view.
     progress : bool
-        Show a tqdm progress bar.
+        Progress on stderr (:func:`zbuf_occlude.io.progress.progress`).
 
     Returns
     -------
@@ -269,8 +269,6 @@ def compare(
     InvalidInputError
         Unknown method names, bad point counts or a bad view schedule.
     """
-    from tqdm.auto import tqdm  # deferred: only the run needs it
-
     methods = parse_methods(methods)
     parse_methods([reference])
     counts = parse_int_list(points, "point counts")
@@ -291,7 +289,9 @@ def compare(
     # not load is reported in the table like any other failure
     paths = [f for p in paths for f in ([m for m, _ in find_meshes([p])] if Path(p).is_dir() else [p])]
     total = len(paths) * sum(len(poses) * (per_view + (len(sweeps) if n == sweep_n else 0)) for n in counts)
-    bar = tqdm(total=total, desc="compare", unit="call", disable=None if progress else True)  # None: only on a terminal
+    from zbuf_occlude.io.progress import progress as progress_bar
+
+    bar = progress_bar(total=total, desc="compare", unit="call", enabled=progress)
     for path in paths:
         name = Path(path).stem
         try:

@@ -1,0 +1,170 @@
+"""Progress of the long commands on stderr: a tqdm bar on a terminal, one line at a time in a log.
+
+Every command that runs longer than a few seconds (``generate``, ``farm``, ``farm-merge``, the
+experiments, ``compare``, ``elevation-profile``, the protocols) reports through :func:`progress`:
+
+- stderr is a terminal: a tqdm bar, redrawn in place;
+- stderr is a file or a pipe: :class:`LineProgress`, a tqdm whose every update is one
+  newline-terminated line (``generate: 12/40 obj, 3.10 obj/s, ETA 00:09, 00:04 elapsed``), at
+  most one every :data:`PROGRESS_INTERVAL_S` seconds (all bars together), and one more when a
+  bar that stays (``leave=True``) closes; never a carriage return;
+- ``enabled=False`` (the commands' ``--no-progress``): nothing.
+
+The interval can be set with the environment variable :data:`PROGRESS_INTERVAL_ENV` (seconds,
+≥ 0; 0 writes a line on every update).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Iterable
+from typing import Any
+
+from tqdm.std import tqdm
+
+from zbuf_occlude.errors import InvalidInputError
+
+__all__ = ["progress", "LineProgress", "progress_interval_s", "PROGRESS_INTERVAL_S", "PROGRESS_INTERVAL_ENV"]
+
+#: Seconds between two progress lines in a log: often enough to see a run move, rare enough that a
+#: day-long farm writes a few thousand lines.
+PROGRESS_INTERVAL_S = 10.0
+#: Environment variable that overrides :data:`PROGRESS_INTERVAL_S` (seconds).
+PROGRESS_INTERVAL_ENV = "ZBUF_OCCLUDE_PROGRESS_INTERVAL_S"
+
+
+def progress_interval_s() -> float:
+    """Seconds between two progress lines: :data:`PROGRESS_INTERVAL_ENV` if set, else :data:`PROGRESS_INTERVAL_S`.
+
+    Raises
+    ------
+    InvalidInputError
+        The variable is not a number ≥ 0.
+    """
+    text = os.environ.get(PROGRESS_INTERVAL_ENV, "").strip()
+    if not text:
+        return PROGRESS_INTERVAL_S
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not value >= 0 or value == float("inf"):
+        raise InvalidInputError(f"{PROGRESS_INTERVAL_ENV}={text!r}: give the seconds between two progress lines, a number >= 0")
+    return value
+
+
+def _stderr_is_terminal() -> bool:
+    try:
+        return bool(sys.stderr.isatty())
+    except (AttributeError, ValueError):  # no stderr (pythonw), or a closed one
+        return False
+
+
+class LineProgress(tqdm):
+    """A tqdm that writes newline-terminated lines to its ``file`` instead of redrawing a bar.
+
+    A line at most every ``mininterval`` seconds, counted across every :class:`LineProgress`
+    (so that nested or successive bars, such as one per training epoch, do not multiply the
+    lines), none when it opens, and a last one when it closes if it was made with ``leave=True``
+    and its last line does not already say so.
+    Its rate is the mean since it opened (``smoothing=0``), counting only what was done in this
+    run (``initial`` excluded), and the ETA follows from it.
+    """
+
+    #: ``time.time()`` of the last line any LineProgress wrote.
+    _last_line_t = 0.0
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        self._opening = True  # tqdm's __init__ displays the bar once: not here
+        self._stays = kwargs.get("leave", True)
+        self._shown_n: float | None = None  # n at this bar's last line
+        kwargs.update(miniters=1, smoothing=0, leave=False, dynamic_ncols=False)
+        super().__init__(*args, **kwargs)
+        self._opening = False
+        if not self.disable:
+            if not LineProgress._last_line_t:  # the first bar of the process: its first line comes after an interval
+                LineProgress._last_line_t = self.start_t
+            # the interval runs from the last line of any bar (never from a time to come: a clock set back)
+            self.last_print_t = min(LineProgress._last_line_t, self.start_t)
+
+    def display(self, msg: str | None = None, pos: int | None = None) -> bool:
+        if self._opening or msg == "":  # tqdm opening or clearing a bar: nothing to show or clear in a log
+            return False
+        self.fp.write((self.line() if msg is None else msg) + "\n")
+        self.fp.flush()
+        self._shown_n = self.n
+        LineProgress._last_line_t = self._time()
+        return True
+
+    def line(self) -> str:
+        """The progress as one line: ``desc: done/total unit, rate unit/s (or s/unit), ETA [h:]mm:ss, elapsed, postfix``."""
+        d = self.format_dict
+        n, total, unit, elapsed = d["n"], d["total"], d["unit"], d["elapsed"]
+        parts = [f"{n}/{total} {unit}" if total else f"{n} {unit}"]
+        rate = (n - d["initial"]) / elapsed if elapsed > 0 else 0.0
+        if rate > 0:
+            # as tqdm's bar: seconds per item when slower than one a second
+            parts.append(f"{self.format_sizeof(rate)} {unit}/s" if rate >= 1 else f"{self.format_sizeof(1 / rate)} s/{unit}")
+            if total and n < total:
+                parts.append(f"ETA {self.format_interval((total - n) / rate)}")
+        parts.append(f"{self.format_interval(elapsed)} elapsed")
+        if d["postfix"]:
+            parts.append(d["postfix"])
+        return f"{d['prefix']}: " + ", ".join(parts) if d["prefix"] else ", ".join(parts)
+
+    def close(self) -> None:
+        if not self.disable and self._stays and self._shown_n != self.n and getattr(self, "sp", None) is not None:
+            with self._lock:
+                self.display()
+        super().close()
+
+
+def progress(
+    iterable: Iterable | None = None,
+    *,
+    total: int | None = None,
+    desc: str,
+    unit: str = "it",
+    enabled: bool = True,
+    leave: bool = True,
+    initial: int = 0,
+    interval_s: float | None = None,
+) -> tqdm:
+    """A progress bar on stderr that suits where stderr goes (module docstring).
+
+    Parameters
+    ----------
+    iterable : iterable, optional
+        Wrapped as by tqdm: iterating the bar iterates it and counts each item.
+    total : int, optional
+        Items expected (default: ``len(iterable)`` where it has one).
+    desc : str
+        Name at the start of the bar or line, such as the command's name.
+    unit : str
+        What one item is (``"obj"``, ``"batch"``).
+    enabled : bool
+        False (``--no-progress``): a tqdm that shows nothing.
+    leave : bool
+        Whether the bar stays when it closes; in a log, whether it writes a last line.
+    initial : int
+        Items done before this run (a resumed farm); not counted in the rate.
+    interval_s : float, optional
+        Seconds between two lines in a log (default: :func:`progress_interval_s`).
+
+    Returns
+    -------
+    tqdm
+        Use it as any tqdm (``update``, ``set_postfix``, ``close``, a ``with`` block).
+
+    Raises
+    ------
+    InvalidInputError
+        :data:`PROGRESS_INTERVAL_ENV` is set to something other than seconds ≥ 0.
+    """
+    common = dict(total=total, desc=desc, unit=unit, leave=leave, initial=initial, file=sys.stderr)
+    if not enabled:
+        return tqdm(iterable, disable=True, **common)
+    if _stderr_is_terminal():
+        return tqdm(iterable, dynamic_ncols=True, **common)
+    return LineProgress(iterable, mininterval=progress_interval_s() if interval_s is None else interval_s, **common)
