@@ -114,6 +114,33 @@ def test_a_mesh_behind_the_camera_plane_gets_no_buffer():
     assert np.array_equal(status == cpu_zbuffer.UNDECIDED, cam.in_frustum(points))
 
 
+class _Bands:
+    """A ``run`` that rasterises its bands one after the other, recording the cuts."""
+
+    def __init__(self, bands: int):
+        self.bands, self.cuts = bands, []
+
+    def __call__(self, fn, args_list) -> None:
+        for args in args_list:
+            self.cuts.append((args[6], args[7]))  # row_lo, row_hi of _rasterise
+            fn(*args)
+
+
+def test_the_buffer_does_not_depend_on_the_raster_bands():
+    # A face within one cell's rows of the grid but reaching across a band's cut went down
+    # the one-cell path in each band (a looser bound than the face's own plane gives), so
+    # the buffer, and the points it settles, changed with the thread count.
+    mesh = trimesh.creation.icosphere(subdivisions=4)
+    for el, az in ((10.0, 30.0), (-35.0, 200.0)):
+        cam = zo.camera_on_sphere(el, az, resolution=256)
+        one = cpu_zbuffer.build_zbuffer(mesh, cam, 20000)
+        for bands in (2, 3, 7):
+            run = _Bands(bands)
+            split = cpu_zbuffer.build_zbuffer(mesh, cam, 20000, run=run)
+            assert [lo for lo, _ in run.cuts[1:]] == [hi for _, hi in run.cuts[:-1]]
+            assert np.array_equal(one.zbuf.view(np.uint32), split.zbuf.view(np.uint32)), (el, az, bands)
+
+
 def test_embree_fast_with_and_without_the_pre_pass_and_sorted_or_not():
     mesh = zo.load_mesh(SAMPLES / "chair/train/chair_0001.off")
     points, fi = zo.sample_surface(mesh, 5000, seed=3)

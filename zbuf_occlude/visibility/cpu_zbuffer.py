@@ -274,8 +274,11 @@ def _rasterise_py(cam, faces, face_ids, grid, ga, gb, row_lo, row_hi, zbuf, ids)
             v = faces[f, k]
             ca[k] = (cam[v, 3] - a0) * inv_sa
             cb[k] = (cam[v, 4] - b0) * inv_sb
-        lo_b = max(int(math.floor(min(cb[0], cb[1], cb[2]) - grow)), row_lo)
-        hi_b = min(int(math.floor(max(cb[0], cb[1], cb[2]) + grow)), row_hi - 1)
+        # The rows of the grid (not of this band) decide the one-cell case below, so that
+        # the buffer does not depend on where the bands are cut.
+        grid_lo_b = max(int(math.floor(min(cb[0], cb[1], cb[2]) - grow)), 0)
+        grid_hi_b = min(int(math.floor(max(cb[0], cb[1], cb[2]) + grow)), gb - 1)
+        lo_b, hi_b = max(grid_lo_b, row_lo), min(grid_hi_b, row_hi - 1)
         if lo_b > hi_b:
             continue
         lo_a = max(int(math.floor(min(ca[0], ca[1], ca[2]) - grow)), 0)
@@ -283,7 +286,7 @@ def _rasterise_py(cam, faces, face_ids, grid, ga, gb, row_lo, row_hi, zbuf, ids)
         if lo_a > hi_a:
             continue
         zmin = min(cam[i0, 2], cam[i1, 2], cam[i2, 2])
-        if lo_a == hi_a and lo_b == hi_b:
+        if lo_a == hi_a and grid_lo_b == grid_hi_b:
             # Inside one cell, grown bounding box and all: it touches that cell only (and
             # covers none), and its nearest vertex bounds its depth.
             _insert(zbuf, ids, lo_b * ga + lo_a, np.float32(_ROUND_UP / zmin), face_ids[f])
