@@ -102,10 +102,11 @@ def _manifest(out: Path) -> list[dict]:
     return [json.loads(line) for line in (out / MANIFEST_FILE).read_text().splitlines()]
 
 
-def _expected_object(rec: dict, params: FarmParams):
+def _expected_object(rec: dict, params: FarmParams, root: Path):
     """What a shard must hold, rebuilt from the public pieces: the dense cloud of the
-    object's *name* key and its visibility by the farm's method from every pose."""
-    mesh = load_mesh(rec["source"])
+    object's *name* key and its visibility by the farm's method from every pose (``root``:
+    the folder the farm was given, which ``source`` is relative to)."""
+    mesh = load_mesh(root / rec["source"])
     dense = dense_cloud(mesh, object_key(rec["name"]), seed=params.seed, count=params.dense_points)
     with method_info(params.method).session(mesh, dense.points, dense.face_index) as scene:
         visible = [
@@ -292,14 +293,14 @@ def test_compact_reconstructs_the_dense_output_exactly(compact_run, dense_run):
 
 
 # -- content: the samples are the named object's occluded points -----------------------------
-def test_dense_shards_hold_occluded_samples_of_the_named_objects_dense_cloud(dense_run):
+def test_dense_shards_hold_occluded_samples_of_the_named_objects_dense_cloud(dense_run, tree):
     # Every row is exactly the draw of (seed, object_key(name), pose, sample) from the
     # visible points of the dense cloud of object_key(name); and the oracle agrees that
     # the points are visible (a generator without occlusion samples ~half hidden points).
     out = dense_run[0]
     hidden = total = 0
     for rec in _manifest(out):
-        mesh, dense, visible = _expected_object(rec, PARAMS)
+        mesh, dense, visible = _expected_object(rec, PARAMS, tree)
         assert rec["n_visible"] == [int(v.sum()) for v in visible]
         with h5py.File(out / rec["shards"][0], "r") as f:
             data, pose_index, sample_index = f["data"][()], f["pose_index"][()], f["sample_index"][()]
@@ -320,12 +321,12 @@ def test_dense_shards_hold_occluded_samples_of_the_named_objects_dense_cloud(den
     assert hidden <= 0.01 * total, (hidden, total)
 
 
-def test_compact_shards_hold_the_named_dense_cloud_and_its_visibility_bits(compact_run):
+def test_compact_shards_hold_the_named_dense_cloud_and_its_visibility_bits(compact_run, tree):
     # the documented layout: dense_points of the object's name key, and per pose the
     # visibility mask packed by numpy.packbits (big bit order: point 0 is bit 7 of byte 0)
     out = compact_run[0]
     for rec in _manifest(out):
-        _, dense, visible = _expected_object(rec, PARAMS)
+        _, dense, visible = _expected_object(rec, PARAMS, tree)
         with h5py.File(out / rec["shards"][0], "r") as f:
             assert np.array_equal(f["dense_points"][()], dense.points.astype(np.float32)), rec["name"]
             bits, n_visible = f["visible_bits"][()], f["n_visible"][()]
@@ -366,7 +367,7 @@ def test_topped_up_poses_through_the_farm_and_the_reader(tree, tmp_path):
     assert all(np.array_equal(x, y) for x, y in zip(dense_ds.to_arrays(), compact_ds.to_arrays()))
     by_name = {}
     for rec in _manifest(tmp_path / "dense"):
-        _, dense, visible = _expected_object(rec, params)
+        _, dense, visible = _expected_object(rec, params, tree)
         by_name[rec["name"]] = (dense.points.astype(np.float32), visible)
     for i in range(len(dense_ds)):
         (a, _, meta), (b, _, meta_b) = dense_ds[i], compact_ds[i]
@@ -539,7 +540,7 @@ def test_cli_farm_and_farm_merge_run_with_their_options(tree, tmp_path):
     assert len(ds) == 2 * 2 * 3
     manifest = _manifest(tmp_path / "m")
     for rec in manifest:  # --density 2000: about 2000 points per unit area of the normalised mesh
-        area = load_mesh(rec["source"]).area
+        area = load_mesh(tree / rec["source"]).area
         with h5py.File(tmp_path / "m" / rec["shards"][0], "r") as f:
             assert abs(int(f.attrs["n_dense"]) - 2000 * area) < 5 * np.sqrt(2000 * area) + 1
     # --seed 7 and the same object in a seed-0 run: other samples

@@ -47,7 +47,7 @@ def sensor_run(tmp_path_factory) -> Path:
 def _sensor_position(meta: dict) -> np.ndarray:
     """The sensor in the sample's normalised mesh frame, from the recorded direction and radius."""
     el, az = np.radians(meta["elevation_deg"]), np.radians(meta["azimuth_deg"])
-    centre = load_mesh(meta["source"]).bounds.mean(axis=0)
+    centre = load_mesh(SAMPLES / meta["source"]).bounds.mean(axis=0)
     return centre + meta["radius"] * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
 
 
@@ -70,8 +70,8 @@ def test_points_lie_on_the_hdl32e_rings_seen_from_the_recorded_sensor(sensor_run
         assert nearest.max() < 2e-3, (meta["name"], nearest.max())
         rings_seen |= set(np.abs(elevation[:, None] - table[None]).argmin(axis=1).tolist())
         # the sensor stands sensor_height_m above the ground (the mesh's lowest point), in mesh units
-        metres_per_unit = meta["size_m"] / np.ptp(load_mesh(meta["source"]).bounds, axis=0).max()
-        ground = load_mesh(meta["source"]).bounds[0, 2]
+        metres_per_unit = meta["size_m"] / np.ptp(load_mesh(SAMPLES / meta["source"]).bounds, axis=0).max()
+        ground = load_mesh(SAMPLES / meta["source"]).bounds[0, 2]
         assert abs((_sensor_position(meta)[2] - ground) * metres_per_unit - meta["sensor_height_m"]) < 1e-6
     assert len(rings_seen) >= 5  # not one ring repeated
 
@@ -115,7 +115,7 @@ def test_ground_margin_keeps_the_ground_under_each_object(tmp_path):
     outside = 0
     for i in range(len(ds)):
         points, _, meta = ds[i]
-        mesh = load_mesh(meta["source"])
+        mesh = load_mesh(SAMPLES / meta["source"])
         per_m = np.ptp(mesh.bounds, axis=0).max() / meta["size_m"]  # mesh units per metre
         lo, hi = mesh.bounds[:, :2]
         beyond = np.maximum(lo - points[:, :2], points[:, :2] - hi).max(axis=1)  # > 0: outside the mesh's outline
@@ -136,7 +136,7 @@ def test_hidden_below_hides_each_objects_bottom(tmp_path):
     ds = OccludedDataset(out)
     for i in range(len(ds)):
         points, _, meta = ds[i]
-        mesh = load_mesh(meta["source"])
+        mesh = load_mesh(SAMPLES / meta["source"])
         per_m = np.ptp(mesh.bounds, axis=0).max() / meta["size_m"]  # mesh units per metre
         assert 0.6 <= meta["hidden_below_m"] <= 0.8
         # every return lies at least the drawn height above the object's foot (range noise: 2 cm)
@@ -157,7 +157,7 @@ def test_across_sight_width_stretches_each_object_to_the_asked_widths(tmp_path):
     for i in range(len(ds)):
         meta = ds.metadata(i)
         if meta["source"] not in fitted:
-            fitted[meta["source"]] = fit_width_scale(load_mesh(meta["source"]), params.sensor.model(), crops, (0.6, 0.9))
+            fitted[meta["source"]] = fit_width_scale(load_mesh(SAMPLES / meta["source"]), params.sensor.model(), crops, (0.6, 0.9))
         lo, hi = fitted[meta["source"]]
         assert lo <= meta["width_scale"] <= hi and hi == pytest.approx(1.5 * lo)
     assert len({round(lo, 6) for lo, _ in fitted.values()}) == len(fitted) > 1  # one interval per mesh

@@ -357,7 +357,11 @@ class OccludedDataset(Sequence):
         return self._kind.read(self._shards, obj, self._pose[start:stop], self._sample[start:stop], self._row[start:stop])
 
     def metadata(self, i: int) -> dict[str, Any]:
-        """The metadata of sample ``i`` (the third item of ``self[i]``) without its points."""
+        """The metadata of sample ``i`` (the third item of ``self[i]``) without its points.
+
+        ``source`` is the mesh file relative to the input root, the folder the farm was given,
+        which the card's ``source`` names (data sets made by earlier versions: its absolute path).
+        """
         i = self._check_index(i)
         obj = int(self._obj[i])
         rec = self._shards.record(obj)

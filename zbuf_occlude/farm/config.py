@@ -7,6 +7,7 @@ import functools
 import hashlib
 import json
 import logging
+import os
 import threading
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -363,7 +364,11 @@ class RunOptions:
     command : str, optional
         Command line for the data set card (default: this process's ``sys.argv``).
     source_text : str, optional
-        What the card names as the source of a ready plan.
+        What the card names as the source (default: the input root's name,
+        :func:`~zbuf_occlude.farm.journal.input_root`).
+    inputs : sequence of str or PathLike
+        A ready plan: the files and folders its objects were found in, which the input root
+        holds (default: the folders of its objects' meshes).
     on_finished : callable, optional
         Called with the data set folder, still under the lock, once an unsharded run has
         written its card (``generate --format h5`` joins its parts there).
@@ -395,6 +400,7 @@ class RunOptions:
     progress: bool = True
     command: str | None = None
     source_text: str | None = None
+    inputs: Sequence[str | os.PathLike] = ()
     on_finished: Callable[[Path], Any] | None = None
     skipped: Sequence[tuple[str, str]] = ()
     class_from: int | None = None

@@ -137,7 +137,7 @@ def generate(
     out = Path(out)
     options = RunOptions(
         workers=1, overwrite=overwrite, progress=progress, command=command,
-        source_text=", ".join(str(Path(p).resolve()) for p in paths),
+        inputs=tuple(paths),
         on_finished=lambda folder: _merge_h5(folder, objects if params.storage == "h5" else []),
         skipped=tuple((s.path, s.reason) for s in skipped), layout=scan.layout, isolate=isolate,
         progress_label="generate",

@@ -5,7 +5,8 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-from collections.abc import Sequence
+import os
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -147,6 +148,37 @@ def remove_stale_temps(out: Path, objects: Sequence[FarmObject], everything: boo
             tmp.unlink(missing_ok=True)
             removed += 1
     return removed
+
+
+def input_root(inputs: Iterable[str | os.PathLike], objects: Sequence[FarmObject]) -> Path:
+    """The input root: the folder a data set names its meshes relative to.
+
+    The deepest folder holding every input given (a folder: itself; a mesh or list file: the
+    folder holding it) and every object's mesh.  A folder given alone is the root, however
+    deep its meshes lie; a list file's root is its folder, or the folder above both it and
+    meshes it names elsewhere; several inputs: the deepest folder holding them all; a ready
+    plan given without its inputs: the deepest folder holding its meshes.  Paths are made
+    absolute and ``..`` removed, symlinks are not resolved.
+
+    Returns
+    -------
+    Path
+        Absolute (the working folder when there is neither an input nor an object).
+    """
+    folders = [os.path.abspath(p) if os.path.isdir(p) else os.path.dirname(os.path.abspath(p)) for p in inputs]
+    folders += [os.path.dirname(os.path.abspath(o.source)) for o in objects]
+    return Path(os.path.commonpath(folders)) if folders else Path.cwd()
+
+
+def relative_objects(objects: Sequence[FarmObject], root: Path) -> list[FarmObject]:
+    """``objects`` with each ``source`` relative to ``root`` (:func:`input_root`), POSIX: what the plan,
+    the records and the shards write, so that a data set holds no absolute path of its author's."""
+    return [dataclasses.replace(o, source=Path(os.path.abspath(o.source)).relative_to(root).as_posix()) for o in objects]
+
+
+def root_name(root: Path) -> str:
+    """What the plan and the card call the input root (their ``source``): its name, never its path."""
+    return root.name or root.anchor  # the file system's root has no name
 
 
 def plan_doc(objects: Sequence[FarmObject], params: FarmParams, source: str, layout: str | None = None) -> dict[str, Any]:

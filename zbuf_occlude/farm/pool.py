@@ -41,7 +41,7 @@ log = logging.getLogger(__name__)
 STOP_GRACE_S = 2.0
 
 
-def _serve(conn: Connection, parent_pid: int, params: FarmParams, out: str) -> None:
+def _serve(conn: Connection, parent_pid: int, params: FarmParams, out: str, root: str | None) -> None:
     """A worker's loop: receive an object, send back its record (or the fatal error it raised)."""
     die_with_parent(parent_pid)
     # Ctrl-C reaches the whole process group: the parent decides and stops us (SIGTERM).
@@ -54,7 +54,7 @@ def _serve(conn: Connection, parent_pid: int, params: FarmParams, out: str) -> N
         if obj is None:
             return
         try:
-            reply: tuple[str, Any] = ("record", process_object(obj, params, out))
+            reply: tuple[str, Any] = ("record", process_object(obj, params, out, root))
         except BaseException as exc:  # fatal for the run (OutputError, BackendUnavailable): the parent raises it
             reply = ("error", exc)
         try:
@@ -82,9 +82,10 @@ class _Worker:
     obj: FarmObject | None = None
 
 
-def _start(ctx, params: FarmParams, out: Path) -> _Worker:
+def _start(ctx, params: FarmParams, out: Path, root: Path | None) -> _Worker:
     mine, theirs = ctx.Pipe()
-    proc = ctx.Process(target=_serve, args=(theirs, os.getpid(), params, str(out)), name="zbuf-farm-worker")
+    args = (theirs, os.getpid(), params, str(out), None if root is None else str(root))
+    proc = ctx.Process(target=_serve, args=args, name="zbuf-farm-worker")
     proc.start()
     theirs.close()
     return _Worker(proc, mine)
@@ -112,7 +113,9 @@ def _died(w: _Worker, params: FarmParams, out: Path) -> dict[str, Any]:
     return write_record(out, w.obj, record)
 
 
-def run_in_workers(todo: Sequence[FarmObject], params: FarmParams, out: Path, workers: int) -> Iterator[dict[str, Any]]:
+def run_in_workers(
+    todo: Sequence[FarmObject], params: FarmParams, out: Path, workers: int, root: Path | None = None
+) -> Iterator[dict[str, Any]]:
     """Yield the record of each object of ``todo``, rendered by ``workers`` worker processes.
 
     Workers are ``spawn``ed (a forked child would inherit the parent's GL state; each makes
@@ -128,6 +131,8 @@ def run_in_workers(todo: Sequence[FarmObject], params: FarmParams, out: Path, wo
         The data set folder (absolute: the workers' working folder is ours, but be explicit).
     workers : int
         Worker processes (at most ``len(todo)`` are started).
+    root : Path, optional
+        The input root the objects' sources are relative to (:func:`~.worker.process_object`).
 
     Raises
     ------
@@ -147,7 +152,7 @@ def run_in_workers(todo: Sequence[FarmObject], params: FarmParams, out: Path, wo
                 w.conn.close()
                 pool.remove(w)
             while queue and len(pool) < workers:
-                pool.append(_start(ctx, params, out))
+                pool.append(_start(ctx, params, out, root))
             for w in pool:
                 if w.obj is None and queue:
                     w.obj = queue.pop()

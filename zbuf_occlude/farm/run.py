@@ -36,12 +36,15 @@ from zbuf_occlude.farm.journal import (
     check_out_layout,
     finalize,
     finished_record,
+    input_root,
     manifest_lines,
     objects_of,
     plan_doc,
     read_json,
     read_plan,
+    relative_objects,
     remove_stale_temps,
+    root_name,
 )
 from zbuf_occlude.farm.lifecycle import sigterm_as_interrupt
 from zbuf_occlude.farm.lock import farm_lock
@@ -57,13 +60,13 @@ log = logging.getLogger(__name__)
 
 
 # -- executors -----------------------------------------------------------------------------
-def _serial(todo: Sequence[FarmObject], params: FarmParams, out: Path) -> Iterator[dict[str, Any]]:
+def _serial(todo: Sequence[FarmObject], params: FarmParams, out: Path, root: Path) -> Iterator[dict[str, Any]]:
     for obj in todo:
-        yield process_object(obj, params, out)
+        yield process_object(obj, params, out, root)
 
 
 def _dask(
-    todo: Sequence[FarmObject], params: FarmParams, out: Path, scheduler: str | None, dask_local: int | None
+    todo: Sequence[FarmObject], params: FarmParams, out: Path, root: Path, scheduler: str | None, dask_local: int | None
 ) -> Iterator[dict[str, Any]]:
     try:
         from dask.distributed import Client, LocalCluster, as_completed
@@ -84,7 +87,7 @@ def _dask(
         # a fresh token per run: a long-lived scheduler may still know the keys of an earlier run
         token = f"{params.digest()}-{os.getpid()}-{time.time_ns()}"
         futures = [
-            client.submit(process_object, obj, params, str(out), key=f"zbuf-farm-{token}-{obj.index}", pure=False)
+            client.submit(process_object, obj, params, str(out), str(root), key=f"zbuf-farm-{token}-{obj.index}", pure=False)
             for obj in todo
         ]
         try:
@@ -137,7 +140,11 @@ def run_farm(
     Parameters
     ----------
     source : str, PathLike or sequence of FarmObject
-        Mesh tree, flat folder or list file (:func:`scan_objects`), or a ready plan.
+        Mesh tree, flat folder or list file (:func:`scan_objects`), or a ready plan.  The data
+        set names each mesh by its path relative to the input root
+        (:func:`~zbuf_occlude.farm.journal.input_root`: the folder given; for a list file, the
+        deepest folder holding it and its meshes), and the root by its name (the card's
+        ``source``), never by absolute paths.
     out : str or PathLike
         Data set folder (layout: :mod:`zbuf_occlude.dataset.reader`).
     params : FarmParams, optional
@@ -179,27 +186,29 @@ def run_farm(
     # the memory only for processes of this machine (not those of a --scheduler's cluster)
     check_before_work(params, out, gl=not (scheduler or dask_local), workers=None if scheduler else dask_local or workers)
     if isinstance(source, (str, os.PathLike)):
-        source_text = source_text or str(Path(source).resolve())
         scan = scan_objects(source, classes=o.classes, per_class=o.per_class, splits=o.splits, class_from=o.class_from)
         objects, skipped = scan.objects, [*skipped, *((s.path, s.reason) for s in scan.skipped)]
-        layout = scan.layout
+        layout, inputs = scan.layout, [source]
     else:
-        objects, source_text = list(source), source_text or "<objects given by the caller>"
+        objects, inputs = list(source), o.inputs
         if [o.index for o in objects] != list(range(len(objects))):
             raise InvalidInputError("a ready plan must number its objects 0, 1, 2, ... in order")
     check_inputs_outside_out(out, (o.source for o in objects))  # before anything in out is touched
+    root = input_root(inputs, objects)
+    objects, source_text = relative_objects(objects, root), source_text or root_name(root)
     mine = select_shard(objects, task, n_tasks)
     out = Path(out)
     check_out_layout(out)  # every write and delete below stays inside out
     with sigterm_as_interrupt(), farm_lock(out, shard):
         run = dataclasses.replace(o, source_text=source_text, layout=layout, skipped=tuple((str(p), str(r)) for p, r in skipped))
-        return _run_locked(out, objects, mine, params, run, t0)
+        return _run_locked(out, objects, mine, params, run, t0, root)
 
 
 def _run_locked(
-    out: Path, objects: list[FarmObject], mine: list[FarmObject], params: FarmParams, run: RunOptions, t0: float
+    out: Path, objects: list[FarmObject], mine: list[FarmObject], params: FarmParams, run: RunOptions, t0: float, root: Path
 ) -> FarmSummary:
-    """:func:`run_farm` once the lock of ``out`` (or of this task) is held."""
+    """:func:`run_farm` once the lock of ``out`` (or of this task) is held; ``root``: the input
+    root the objects' sources are relative to."""
     task, n_tasks = run.shard
     workers, scheduler, dask_local, skipped = run.workers, run.scheduler, run.dask_local, run.skipped
     plan = plan_doc(objects, params, run.source_text, layout=run.layout)
@@ -235,13 +244,13 @@ def _run_locked(
 
     out = out.resolve()  # workers (Dask: possibly on other machines) may not share our working folder
     if scheduler or dask_local:
-        records_iter = _dask(todo, params, out, scheduler, dask_local)
+        records_iter = _dask(todo, params, out, root, scheduler, dask_local)
         workers_text = f"dask {scheduler or f'LocalCluster({dask_local})'}"
     elif (workers > 1 and len(todo) > 1) or (run.isolate and todo):
-        records_iter = run_in_workers(todo, params, out, min(workers, len(todo)))
+        records_iter = run_in_workers(todo, params, out, min(workers, len(todo)), root)
         workers_text = f"{min(workers, len(todo))} processes" if workers > 1 else "1 worker process"
     else:
-        records_iter = _serial(todo, params, out)
+        records_iter = _serial(todo, params, out, root)
         workers_text = "1 process"
 
     manifest = out / (MANIFEST_FILE if n_tasks == 1 else f"{TASK_DIR}/manifest-{task}-of-{n_tasks}.jsonl")

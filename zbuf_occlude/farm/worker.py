@@ -74,7 +74,7 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * scale / 2**20
 
 
-def _scan(obj: FarmObject, params: FarmParams, out: Path, kind: SensorCrops) -> dict[str, Any]:
+def _scan(obj: FarmObject, params: FarmParams, out: Path, kind: SensorCrops, mesh_path: Path) -> dict[str, Any]:
     """``farm --sensor``: ``samples_per_view`` LiDAR crops of one object into a dense shard.
 
     Row ``i`` of the shard is scan ``pose_index[i]`` (scans without a return are left out);
@@ -85,7 +85,7 @@ def _scan(obj: FarmObject, params: FarmParams, out: Path, kind: SensorCrops) -> 
     from zbuf_occlude.farm.sensor_crops import farm_datasets
     from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported by the work, not by modules that only read records
 
-    mesh = load_mesh(obj.source, up=params.up)
+    mesh = load_mesh(mesh_path, up=params.up)
     n_scans = int(params.samples_per_view)
     datasets = farm_datasets(
         mesh, params.sensor.model(), name=obj.name, label=obj.label, object_index=obj.index, n_samples=n_scans,
@@ -98,12 +98,12 @@ def _scan(obj: FarmObject, params: FarmParams, out: Path, kind: SensorCrops) -> 
     return {**_files_record(out, [shard_path(obj)], n_visible, len(datasets["data"]), params.n_points), "n_dense": 0, **_mesh_record(mesh)}
 
 
-def _occlude(obj: FarmObject, params: FarmParams, out: Path, kind: StorageKind) -> dict[str, Any]:
+def _occlude(obj: FarmObject, params: FarmParams, out: Path, kind: StorageKind, mesh_path: Path) -> dict[str, Any]:
     """The z-buffer poses of one object, written by its storage kind."""
     kind.check_name(obj.name, what=f"the name of {obj.source}")  # before any work
     from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported by the work, not by modules that only read records
 
-    mesh = load_mesh(obj.source, up=params.up)
+    mesh = load_mesh(mesh_path, up=params.up)
     dense = dense_cloud(mesh, obj.key, seed=params.seed, count=params.dense_points, density=params.density)
     poses = params.poses
     common = dict(
@@ -137,10 +137,10 @@ def _occlude(obj: FarmObject, params: FarmParams, out: Path, kind: StorageKind) 
 _PRODUCERS = {"poses": _occlude, "scans": _scan}
 
 
-def _render(obj: FarmObject, params: FarmParams, out: Path) -> dict[str, Any]:
+def _render(obj: FarmObject, params: FarmParams, out: Path, mesh_path: Path) -> dict[str, Any]:
     """Render one object and write its files; the record's fields that say what was written."""
     kind = storage_kind(params.storage, sensor=params.sensor is not None)
-    return _PRODUCERS[kind.made_from](obj, params, out, kind)
+    return _PRODUCERS[kind.made_from](obj, params, out, kind, mesh_path)
 
 
 def _files_record(out: Path, files: list[str], n_visible: NDArray[np.int64], n_samples: int, n_points: int) -> dict[str, Any]:
@@ -185,11 +185,15 @@ def base_record(obj: FarmObject, params: FarmParams) -> dict[str, Any]:
     }
 
 
-def process_object(obj: FarmObject, params: FarmParams, out: str | os.PathLike) -> dict[str, Any]:
+def process_object(obj: FarmObject, params: FarmParams, out: str | os.PathLike, root: str | os.PathLike | None = None) -> dict[str, Any]:
     """Render one object, write its shard and record (atomically), return the record.
 
     The function every executor runs (it must be importable by Dask workers).  A mesh
     that fails gets ``status="failed"`` and its error in the record; the farm goes on.
+    The record (and a shard's ``source`` column) holds ``obj.source`` as it is; with
+    ``root`` (the input root, :func:`~zbuf_occlude.farm.journal.input_root`), ``obj.source``
+    is relative to it, the mesh is read from ``root / obj.source`` and the root is cut
+    from the paths in the error, so that the record holds no absolute path.
 
     Raises
     ------
@@ -199,18 +203,20 @@ def process_object(obj: FarmObject, params: FarmParams, out: str | os.PathLike) 
         No OpenGL context: fatal, no object could be rendered.
     """
     out = Path(out)
+    mesh_path = Path(obj.source) if root is None else Path(root, obj.source)
     record = base_record(obj, params)
     t0 = time.perf_counter()
     try:
         with GL_LOCK:
-            record.update(_render(obj, params, out))
+            record.update(_render(obj, params, out, mesh_path))
         record["status"] = "ok"
     except FATAL_ERRORS:
         raise
     except Exception as exc:  # a bad mesh must not stop a farm of thousands; the manifest keeps why
-        record.update(status="failed", error=f"{type(exc).__name__}: {exc}")
-        log.warning("object %s (%s) failed: %s", obj.index, obj.source, record["error"])
-        log.debug("traceback of %s", obj.source, exc_info=True)
+        error = f"{type(exc).__name__}: {exc}"
+        record.update(status="failed", error=error if root is None else error.replace(f"{Path(root)}{os.sep}", ""))
+        log.warning("object %s (%s) failed: %s", obj.index, mesh_path, error)
+        log.debug("traceback of %s", mesh_path, exc_info=True)
     record.update(
         time_s=round(time.perf_counter() - t0, 4),
         finished_at=datetime.now(timezone.utc).isoformat(timespec="seconds"),
