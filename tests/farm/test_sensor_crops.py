@@ -186,7 +186,7 @@ def test_a_sensor_file_with_mixed_pixels_changes_the_scans(sensor_run, tmp_path)
 
 @pytest.mark.slow
 def test_same_seed_same_bytes_and_worker_count_changes_nothing(sensor_run, tmp_path):
-    again = _farm(tmp_path / "again")
+    again = _farm(tmp_path / "again", "--workers", "1")
     two = _farm(tmp_path / "two", "--workers", "2")
     assert _shard_hashes(again) == _shard_hashes(sensor_run) == _shard_hashes(two)
     assert len(_shard_hashes(sensor_run)) == 5

@@ -19,6 +19,7 @@ from zbuf_occlude.defaults import (
     DEFAULT_N_POINTS,
     DEFAULT_SAMPLES_PER_VIEW,
     DEFAULT_SEED,
+    MAX_WORKERS,
 )
 from zbuf_occlude.defaults import DEFAULT_RESOLUTION as GENERATE_RESOLUTION
 from zbuf_occlude.defaults import DEFAULT_VIEWS as GENERATE_VIEWS
@@ -31,6 +32,7 @@ from zbuf_occlude.farm.config import (
     FARM_CROP_DISTRIBUTIONS,
     FarmParams,
     SensorCropParams,
+    usable_cpus,
 )
 from zbuf_occlude.farm.shards import parse_shard
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
@@ -222,7 +224,10 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
         "metres, drawn per scan (posts as thick as real trunks; fit-sensor fits it per class) (default: the meshes' proportions)",
     )  # fmt: skip
     ex = p.add_argument_group("execution")
-    ex.add_argument("--workers", action=Checked, check=count("MAX_WORKERS"), default=1, help="worker processes on this machine (default: 1)")
+    ex.add_argument(
+        "--workers", action=Checked, check=count("MAX_WORKERS"), default=min(usable_cpus(), MAX_WORKERS),
+        help=f"worker processes on this machine (default: %(default)s; the CPU cores this process may use, at most {MAX_WORKERS:,})",
+    )  # fmt: skip
     ex.add_argument(
         "--shard", help="I/N: render the I-th of N partitions (SLURM array, Kubernetes indexed job); then farm-merge"
     )

@@ -92,6 +92,12 @@ FARM_CROP_DISTRIBUTIONS = CropDistributions(distance_m=DEFAULT_SENSOR_DISTANCE_M
 GL_LOCK = threading.Lock()  # one GL context per process: threads of a Dask worker take turns
 
 
+def usable_cpus() -> int:
+    """The CPU cores this process may run on: its affinity mask where the system has one
+    (``taskset``, a container's or a batch job's CPU set), else every core; at least 1."""
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+
+
 # -- parameters ----------------------------------------------------------------------------
 @dataclass(frozen=True)
 class SensorCropParams:

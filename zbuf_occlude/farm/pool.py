@@ -109,7 +109,7 @@ def _died(w: _Worker, params: FarmParams, out: Path) -> dict[str, Any]:
     w.process.join()
     record = base_record(w.obj, params)
     record.update(status="failed", error=worker_death_error(w.process.exitcode), pid=w.process.pid)
-    log.warning("object %s (%s) failed: %s", w.obj.index, w.obj.source, record["error"])
+    log.info("object %s (%s) failed: %s", w.obj.index, w.obj.source, record["error"])  # the summary names it
     return write_record(out, w.obj, record)
 
 

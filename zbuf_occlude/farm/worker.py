@@ -215,7 +215,8 @@ def process_object(obj: FarmObject, params: FarmParams, out: str | os.PathLike, 
     except Exception as exc:  # a bad mesh must not stop a farm of thousands; the manifest keeps why
         error = f"{type(exc).__name__}: {exc}"
         record.update(status="failed", error=error if root is None else error.replace(f"{Path(root)}{os.sep}", ""))
-        log.warning("object %s (%s) failed: %s", obj.index, mesh_path, error)
+        # info, not a warning: the run's summary names each failed object once, and the progress bar counts them
+        log.info("object %s (%s) failed: %s", obj.index, mesh_path, error)
         log.debug("traceback of %s", mesh_path, exc_info=True)
     record.update(
         time_s=round(time.perf_counter() - t0, 4),

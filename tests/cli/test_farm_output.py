@@ -1,0 +1,29 @@
+"""What ``farm`` prints: its summary names each failed mesh once."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from zbuf_occlude.cli.main import main as cli_main
+
+SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("command", ["farm", "generate"])
+def test_a_failed_mesh_is_named_once(tmp_path, capfd, command):
+    meshes = tmp_path / "meshes"
+    (meshes / "chair").mkdir(parents=True)
+    (meshes / "broken").mkdir()
+    shutil.copy(SAMPLES / "chair" / "train" / "chair_0001.off", meshes / "chair" / "chair_0001.off")
+    (meshes / "broken" / "garbage_0001.off").write_text("OFF\nnot a count line\n")
+    args = [command, str(meshes), "--out", str(tmp_path / "out"), "--views", "0:0", "--samples-per-view", "1", "--points", "32",
+            "--dense-points", "500", "--resolution", "64", *(["--no-progress"] if command == "farm" else [])]  # fmt: skip
+    assert cli_main(args) == 1
+    captured = capfd.readouterr()  # the worker process's output too
+    printed = captured.out + captured.err
+    assert len([line for line in printed.splitlines() if "garbage_0001" in line]) == 1, printed  # the error names the file too
+    assert "FAILED" in printed and "not a count line" in printed
