@@ -366,7 +366,8 @@ class RunOptions:
     overwrite : bool
         Start over: remove this run's earlier results (all of them, or this task's objects).
     progress : bool
-        Show a tqdm bar (objects, views/s, ETA) on stderr.
+        Show progress on stderr (objects, views/s, ETA): a bar on a terminal, a line every 10 s in a
+        log (:mod:`zbuf_occlude.io.progress`).
     command : str, optional
         Command line for the data set card (default: this process's ``sys.argv``).
     source_text : str, optional
