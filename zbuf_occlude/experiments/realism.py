@@ -383,6 +383,13 @@ def _figure(g: dict, r: dict, path: Path, labels: tuple[str, str]) -> None:
     ax[2].set(xlabel="range, m", ylabel="median nearest-neighbour spacing, m", title="point spacing vs range")
     for a in ax:
         a.legend(fontsize=8)
+    _save(fig, path)
+
+
+def _save(fig, path: Path) -> None:
+    """Write ``fig`` to ``path`` atomically (its format from the suffix, PNG by default) and close it."""
+    import matplotlib.pyplot as plt
+
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
         fig.tight_layout()
@@ -404,11 +411,7 @@ def _profile_figure(table: dict[str, dict[str, dict]], path: Path) -> None:
             ax.plot(st["height_shares"], centres, "o-", color=colour, label=f"{name} ({st['crops']})")
         ax.set(xlabel="share of points", ylabel="height above the bottom / height", title=k, ylim=(0, 1))
         ax.legend(fontsize=8)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        fig.tight_layout()
-        fig.savefig(tmp, dpi=110, format=path.suffix.lstrip(".") or "png")
-    plt.close(fig)
+    _save(fig, path)
 
 
 def realism_report(generated: str | os.PathLike, real: str | os.PathLike, out_dir: str | os.PathLike, *, ring_gap_deg: float = RING_GAP_DEG, min_points: int = 1, figure: bool = True,
