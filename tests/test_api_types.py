@@ -68,3 +68,26 @@ def test_right_kinds_with_wrong_values_stay_value_errors():
         zo.visible_mask(MESH, POINTS[:, :2], CAMERA, method="oracle")
     with pytest.raises(InvalidInputError, match="NaN/inf"):
         zo.visible_mask(MESH, np.full((2, 3), np.nan), CAMERA, method="oracle")
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(*[st.floats(allow_nan=True, allow_infinity=True)] * 3), min_size=1, max_size=6))
+def test_points_are_refused_exactly_when_a_coordinate_is_not_finite(rows):
+    # (the check sums the points first: huge finite values whose sum overflows must still pass)
+    from zbuf_occlude.geometry.arguments import check_points
+
+    pts = np.array(rows, dtype=np.float64)
+    bad = int((~np.isfinite(pts)).any(axis=1).sum())
+    if bad:
+        with pytest.raises(InvalidInputError, match=f"contain {bad} rows with NaN/inf"):
+            check_points(pts)
+    else:
+        assert np.array_equal(check_points(pts), pts)
+
+
+def test_points_whose_sum_overflows_are_finite():
+    from zbuf_occlude.geometry.arguments import check_points
+
+    pts = np.full((4, 3), 1.5e308)
+    pts[0, 0] = -1.7e308
+    assert np.array_equal(check_points(pts), pts)

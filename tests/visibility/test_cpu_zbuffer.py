@@ -141,6 +141,57 @@ def test_the_buffer_does_not_depend_on_the_raster_bands():
             assert np.array_equal(one.zbuf.view(np.uint32), split.zbuf.view(np.uint32)), (el, az, bands)
 
 
+def test_the_grouped_points_do_not_depend_on_the_gather_slices():
+    rng = np.random.default_rng(0)
+    points = rng.normal(size=(1001, 3))
+    face_index = rng.integers(0, 37, 1001)
+    perm, grouped, faces = cpu_zbuffer.group_by_face(points, face_index, 37)
+    assert np.array_equal(perm, np.argsort(face_index, kind="stable"))
+    assert np.array_equal(grouped, points[perm]) and np.array_equal(faces, face_index[perm])
+    for bands in (2, 3, 7):
+        run = _Slices(bands)
+        split = cpu_zbuffer.group_by_face(points, face_index, 37, run=run)
+        assert len(run.calls) == bands
+        assert all(np.array_equal(a, b) for a, b in zip(split, (perm, grouped, faces)))
+
+
+class _Slices:
+    """A ``run`` that calls each slice in this thread, counting them."""
+
+    def __init__(self, bands: int):
+        self.bands, self.calls = bands, []
+
+    def __call__(self, fn, args_list) -> None:
+        for args in args_list:
+            self.calls.append(args)
+            fn(*args)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(1, 4), st.lists(st.integers(-5, 5), max_size=12))
+def test_the_shared_runner_returns_every_result_in_order(threads, values):
+    import threading
+
+    seen = set()
+
+    def square(x):
+        seen.add(threading.get_ident())
+        return x * x
+
+    assert embree_fast._run_shared(threads, square, [(v,) for v in values]) == [v * v for v in values]
+    assert len(seen) <= max(threads, 1)
+
+
+def test_the_shared_runner_raises_what_a_task_raises():
+    def fail_on_three(x):
+        if x == 3:
+            raise ValueError("three")
+        return x
+
+    with pytest.raises(ValueError, match="three"):
+        embree_fast._run_shared(2, fail_on_three, [(k,) for k in range(6)])
+
+
 def test_embree_fast_with_and_without_the_pre_pass_and_sorted_or_not():
     mesh = zo.load_mesh(SAMPLES / "chair/train/chair_0001.off")
     points, fi = zo.sample_surface(mesh, 5000, seed=3)

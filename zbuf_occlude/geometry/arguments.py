@@ -91,7 +91,10 @@ def check_points(points: Any, name: str = "points") -> NDArray[np.float64]:
     pts = np.ascontiguousarray(_numeric(points, name, "fiu"), dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise InvalidInputError(f"{name} must have shape (N, 3), got {pts.shape}")
-    if not np.all(np.isfinite(pts)):
+    # (a sum of finite values is finite unless it overflows: the full test only then)
+    with np.errstate(over="ignore", invalid="ignore"):
+        finite = bool(np.isfinite(pts.sum())) or bool(np.all(np.isfinite(pts)))
+    if not finite:
         raise InvalidInputError(f"{name} contain {int((~np.isfinite(pts)).any(axis=1).sum())} rows with NaN/inf")
     return pts
 

@@ -374,9 +374,8 @@ def _classify_py(points, face_index, lo, hi, rt, intr, eye, grid, ga, gb, zbuf, 
         status[k] = state
 
 
-def _group_by_face_py(points, face_index, n_faces):
-    """Counting sort of the points by face (stable, ``O(N + F)``): the permutation and the
-    points and faces gathered in its order."""
+def _face_order_py(face_index, n_faces):
+    """Counting sort of the points by face (stable, ``O(N + F)``): the permutation."""
     start = np.zeros(n_faces + 1, dtype=np.int64)
     for k in range(len(face_index)):
         start[face_index[k] + 1] += 1
@@ -387,16 +386,19 @@ def _group_by_face_py(points, face_index, n_faces):
         f = face_index[k]
         perm[start[f]] = k
         start[f] += 1
-    out = np.empty_like(points)
-    faces = np.empty_like(face_index)
-    for j in range(len(perm)):
+    return perm
+
+
+def _gather_py(points, face_index, perm, lo, hi, out, faces):
+    """``out[j] = points[perm[j]]``, ``faces[j] = face_index[perm[j]]`` for ``j`` in ``lo:hi``."""
+    for j in range(lo, hi):
         k = perm[j]
         out[j, 0], out[j, 1], out[j, 2] = points[k, 0], points[k, 1], points[k, 2]
         faces[j] = face_index[k]
-    return perm, out, faces
 
 
-_group_by_face = numba.njit(cache=True, nogil=True)(_group_by_face_py)
+_face_order = numba.njit(cache=True, nogil=True)(_face_order_py)
+_gather = numba.njit(cache=True, nogil=True)(_gather_py)
 _insert = numba.njit(cache=True, nogil=True, inline="always")(_insert_py)
 _to_camera = numba.njit(cache=True, nogil=True, error_model="numpy")(_to_camera_py)
 _clear_rows = numba.njit(cache=True, nogil=True, inline="always")(_clear_rows_py)
@@ -559,10 +561,18 @@ def cell_of(points: NDArray[np.float64], camera: Camera, zb: ZBuffer) -> NDArray
     return np.clip(cb, 0, gb - 1).astype(np.int64) * ga + np.clip(ca, 0, ga - 1).astype(np.int64)
 
 
-def group_by_face(points: NDArray[np.float64], face_index: NDArray[np.int64], n_faces: int):
+def group_by_face(points: NDArray[np.float64], face_index: NDArray[np.int64], n_faces: int, *, run=None):
     """The points grouped by face (a stable counting sort, ``O(N + F)``): the pre-pass then
     reads each face's planes and cells together, as for a sorted point set, for the price of
     one gather.
+
+    Parameters
+    ----------
+    points : (N, 3) float64, C-contiguous
+    face_index : (N,) int64
+    n_faces : int
+    run : callable, optional
+        As in :func:`build_zbuffer` (the gather is split in slices).
 
     Returns
     -------
@@ -573,4 +583,15 @@ def group_by_face(points: NDArray[np.float64], face_index: NDArray[np.int64], n_
     face_index : (N,) int64
         ``face_index[perm]``.
     """
-    return _group_by_face(points, np.ascontiguousarray(face_index, dtype=np.int64), int(n_faces))
+    face_index = np.ascontiguousarray(face_index, dtype=np.int64)
+    perm = _face_order(face_index, int(n_faces))
+    out, faces = np.empty_like(points), np.empty_like(face_index)
+    n = len(perm)
+    parts = max(1, getattr(run, "bands", 1)) if run is not None else 1
+    cuts = [n * k // parts for k in range(parts + 1)]
+    args = [(points, face_index, perm, cuts[k], cuts[k + 1], out, faces) for k in range(parts)]
+    if run is None:
+        _gather(*args[0])
+    else:
+        run(_gather, args)
+    return perm, out, faces

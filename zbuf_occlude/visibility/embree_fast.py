@@ -34,6 +34,7 @@ buffer; it does not sort the points either (the kept :class:`FastScene` does, on
 
 from __future__ import annotations
 
+import itertools
 import logging
 import os
 from concurrent.futures import ThreadPoolExecutor
@@ -289,18 +290,38 @@ _crease = numba.njit(cache=True, nogil=True, error_model="numpy")(_crease_py)
 
 
 class _Runner:
-    """``run(fn, args_list)`` for :mod:`.cpu_zbuffer`: one call per argument tuple on the
-    thread pool (the compiled kernels release the GIL); ``bands`` is how many to make."""
+    """``run(fn, args_list)`` for :mod:`.cpu_zbuffer`: ``fn(*args)`` for each argument tuple,
+    pulled in turn by the calling thread and ``threads - 1`` threads of the pool (the compiled
+    kernels release the GIL), so that a late thread only takes fewer; ``bands`` is how many
+    tuples to make."""
 
     def __init__(self, threads: int):
         self.bands = threads
 
-    def __call__(self, fn, args_list) -> None:
-        if self.bands > 1 and len(args_list) > 1:
-            list(_executor(self.bands).map(lambda args: fn(*args), args_list))
-        else:
-            for args in args_list:
-                fn(*args)
+    def __call__(self, fn, args_list) -> list:
+        return _run_shared(self.bands, fn, args_list)
+
+
+def _run_shared(threads: int, fn, args_list) -> list:
+    """``[fn(*args) for args in args_list]``, computed by the calling thread and up to
+    ``threads - 1`` threads of the pool, each taking the next undone tuple."""
+    n = len(args_list)
+    out = [None] * n
+    if threads <= 1 or n <= 1:
+        for k, args in enumerate(args_list):
+            out[k] = fn(*args)
+        return out
+    taken = itertools.count()
+
+    def drain() -> None:
+        while (k := next(taken)) < n:  # (next() on a count is atomic under the GIL)
+            out[k] = fn(*args_list[k])
+
+    helpers = [_executor(threads - 1).submit(drain) for _ in range(min(threads, n) - 1)]
+    drain()
+    for h in helpers:
+        h.result()
+    return out
 
 
 class FastScene(SessionBase):
@@ -354,7 +375,7 @@ class FastScene(SessionBase):
             points = np.ascontiguousarray(points[self._perm])
             face_index = None if face_index is None else face_index[self._perm]
         elif face_index is not None and len(points):
-            self._perm, points, face_index = cpu_zbuffer.group_by_face(points, face_index, len(mesh.faces))
+            self._perm, points, face_index = cpu_zbuffer.group_by_face(points, face_index, len(mesh.faces), run=self._run)
         self.points, self.face_index = points, face_index
         self._x_order: NDArray[np.int64] | None = None
         #: Fraction of the points the last call re-decided in float64 (near-ties).
@@ -401,10 +422,7 @@ class FastScene(SessionBase):
         m = len(rays)
         step = min(_CHUNK, -(-m // self.threads))  # at least one chunk per thread
         bounds = [(lo, min(lo + step, m)) for lo in range(0, m, step)]
-        if self.threads > 1 and len(bounds) > 1:
-            parts = list(_executor(self.threads).map(lambda b: self._chunk(b[0], b[1], sub, camera, eye_c), bounds))
-        else:
-            parts = [self._chunk(lo, hi, sub, camera, eye_c) for lo, hi in bounds]
+        parts = _run_shared(self.threads, self._chunk, [(lo, hi, sub, camera, eye_c) for lo, hi in bounds])
         vis = np.concatenate([v for v, _, _ in parts])
         tie = np.concatenate([t for _, t, _ in parts])
         status = np.concatenate([st for _, _, st in parts])
