@@ -90,6 +90,24 @@ def test_numpy_and_embree_agree_exactly_on_real_meshes(path):
     assert all(0.05 < f < 0.95 for f in hidden_fractions), hidden_fractions
 
 
+@pytest.mark.parametrize("n_points", [40, 300])  # the few rays' box scan, and the image-plane cull
+@pytest.mark.parametrize("path", [SAMPLES / r for r in SHIPPED_SMALL[2:]], ids=_mesh_id)
+def test_rays_embree_cannot_decide_get_the_numpy_oracle_answer(path, n_points, monkeypatch):
+    # No cast allowed: every ray in the bounding sphere goes to the exact fallback.
+    mesh = load_normalised(path)
+    points, face_index = trimesh.sample.sample_surface(mesh, n_points, seed=11)
+    monkeypatch.setattr(oracle, "_EMBREE_MAX_CASTS", 0)
+    for k, (el, az) in enumerate(POSES[:3]):
+        eye = camera_on_sphere(el, az, RADIUS).eye
+        fi = face_index if k != 1 else None
+        stats = {}
+        got = occluded_embree(mesh, points, eye, face_index=fi, stats=stats)
+        assert stats["exact_fallback"] == stats["rays"] > 0.9 * n_points
+        truth = occluded_numpy(mesh.triangles, points, eye, face_index=fi)
+        assert np.array_equal(got, truth), (path, el, az, np.flatnonzero(got != truth))
+        assert 0 < truth.sum() < n_points
+
+
 def test_registered_methods_agree_and_apply_the_frustum():
     mesh = load_normalised(SMALL_MESHES[0])
     points, face_index = trimesh.sample.sample_surface(mesh, 2000, seed=3)

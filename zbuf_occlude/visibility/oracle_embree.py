@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 
+import numba
 import numpy as np
 import trimesh
 from numpy.typing import ArrayLike, NDArray
@@ -20,6 +21,7 @@ from zbuf_occlude.defaults import DEFAULT_SELF_HIT_TOLERANCE
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 from zbuf_occlude.geometry.grouping import exact_face_groups
 from zbuf_occlude.mesh.cache import MeshCache
+from zbuf_occlude.visibility.kernels import pair_occludes_one
 from zbuf_occlude.visibility.oracle_numpy import DEFAULT_PAIRS_PER_CHUNK, occluded_unchecked
 from zbuf_occlude.visibility.registry import check_face_index, check_points
 from zbuf_occlude.visibility.segment_triangle import (
@@ -139,6 +141,34 @@ class _EmbreeScene:
         )
         prim = out["primID"].astype(np.int64)
         return np.where(prim >= 0, self.listed[np.maximum(prim, 0)], -1), out["tfar"].astype(np.float64)
+
+
+def _occluded_few_py(idx, pts, seg, seg_len, eye, face_lo, face_hi, listed, packed, own, tolerance, occluded):
+    """``occluded[k]`` for ``k`` in ``idx``: a listed face whose bounding box meets the segment's
+    box (grown by ``tolerance``) occludes point ``k`` by the exact pair test (``own``: the
+    points' faces, never their occluders; empty: none)."""
+    has_own = len(own) > 0
+    for j in range(len(idx)):
+        k = idx[j]
+        lo0, hi0 = min(pts[k, 0], eye[0]) - tolerance, max(pts[k, 0], eye[0]) + tolerance
+        lo1, hi1 = min(pts[k, 1], eye[1]) - tolerance, max(pts[k, 1], eye[1]) + tolerance
+        lo2, hi2 = min(pts[k, 2], eye[2]) - tolerance, max(pts[k, 2], eye[2]) + tolerance
+        hit = False
+        for q in range(len(listed)):
+            if not (face_lo[q, 0] <= hi0 and face_lo[q, 1] <= hi1 and face_lo[q, 2] <= hi2
+                    and face_hi[q, 0] >= lo0 and face_hi[q, 1] >= lo1 and face_hi[q, 2] >= lo2):
+                continue
+            g = listed[q]
+            if has_own and g == own[k]:
+                continue
+            if pair_occludes_one(pts[k, 0], pts[k, 1], pts[k, 2], seg[k, 0], seg[k, 1], seg[k, 2], seg_len[k], packed[g],
+                                 tolerance):
+                hit = True
+                break
+        occluded[k] = hit
+
+
+_occluded_few = numba.njit(cache=True, nogil=True, error_model="numpy")(_occluded_few_py)
 
 
 # _EmbreeScene is looked up at build time (tests count the builds by patching it).
@@ -332,12 +362,10 @@ def occluded_embree(
         if len(idx) <= _FEW_FALLBACK_RAYS:
             # A few rays: faces whose bounding box meets the segment's are the only
             # candidates; cheaper than the image-plane cull, which projects every face.
-            for k in idx:
-                lo, hi = np.minimum(pts[k], e) - tol, np.maximum(pts[k], e) + tol
-                g = scene.listed[np.all((scene.face_lo <= hi) & (scene.face_hi >= lo), axis=1)]
-                kk = np.full(len(g), k)
-                hit = pair_occludes(pts[kk], seg[kk], seg_len[kk], scene.planes, g, None if fi is None else fi[kk], tol)
-                occluded[k] = bool(hit.any())
+            _occluded_few(
+                idx, pts, seg, seg_len, e, scene.face_lo, scene.face_hi, scene.listed, scene.packed_planes,
+                fi if fi is not None else np.zeros(0, dtype=np.int64), tol, occluded,
+            )  # fmt: skip
         else:
             occluded[idx] = occluded_unchecked(
                 scene.listed_planes, pts[idx], e, scene.listed_pos[fi[idx]] if fi is not None else None, tol,
