@@ -383,24 +383,17 @@ class FastScene(SessionBase):
         #: Fraction of the points the last call cast as rays (the pre-pass settled the rest).
         self.last_ray_fraction = 0.0
 
-    def _chunk(self, lo: int, hi: int, sub, camera: Camera, eye_c: NDArray[np.float32]) -> tuple[NDArray, NDArray, NDArray]:
-        """(in frustum and not occluded by pass 1, near-tie, status) for rays ``lo:hi`` of ``sub``."""
-        sorted_points, p32, pp, n32, boundary = sub
+    def _chunk(self, rays: NDArray[np.int64], view: tuple) -> tuple[NDArray, NDArray, NDArray]:
+        """(in frustum and not occluded by pass 1, near-tie, status) for points ``rays``;
+        ``view = (camera, eye_c, frame, intrinsics, ray settings)`` (:meth:`_cast`)."""
+        camera, eye_c, frame, cam, settings = view
         sc = self._scene
-        rt = camera.extrinsics  # world -> OpenCV camera frame
-        frame = np.empty((3, 4), dtype=np.float32)
-        frame[:, :3] = rt[:, :3]
-        frame[:, 3] = rt[:, :3] @ sc.centre + rt[:, 3]
-        cam = _Intrinsics(*np.array(
-            [camera.focal_px, camera.width, camera.height, camera.znear, camera.zfar,
-             _BORDER_PX + _BORDER_PER_PX * max(camera.width, camera.height)], dtype=np.float32))
-        rays = _RaySettings(*np.array([sc.radius, _START, _MAX_START, _BAND_LO, EDGE_ON_SIN + _EDGE_ON_SLACK], dtype=np.float32))
-        normals = n32[lo:hi] if self.face_index is not None else np.zeros((0, 3), dtype=np.float32)
-        bound = boundary[lo:hi] if self.face_index is not None else np.zeros(0, dtype=np.float32)
-        status, org1, len1, org2, len2, dirs = _prepare(p32[lo:hi], pp[lo:hi], normals, bound, eye_c, frame, cam, rays)
+        fi = self.face_index if self.face_index is not None else np.zeros(0, dtype=np.int64)
+        sorted_points, p32, pp, normals, bound = _setup(self.points, rays, fi, sc.centre, sc.unit_normals, sc.edge_planes)
+        status, org1, len1, org2, len2, dirs = _prepare(p32, pp, normals, bound, eye_c, frame, cam, settings)
         border = np.flatnonzero(status & FRUSTUM_BORDER)
         if len(border):  # within a hair of the frustum's border: Camera.in_frustum decides
-            inside = camera.in_frustum(sorted_points[lo + border])
+            inside = camera.in_frustum(sorted_points[border])
             status[border[~inside]] = 0
         hit = np.asarray(sc.scene.run(org1, dirs, dists=len1, query="OCCLUDED")) >= 0  # -1: nothing hit
         inside = (status & IN_FRUSTUM).astype(bool)
@@ -416,13 +409,19 @@ class FastScene(SessionBase):
         """Decide points ``rays`` (in a coherent order) with Embree and float64 re-checks
         (module docstring) into ``visible``."""
         sc = self._scene
-        fi = self.face_index if self.face_index is not None else np.zeros(0, dtype=np.int64)
-        sub = _setup(self.points, rays, fi, sc.centre, sc.unit_normals, sc.edge_planes)
         eye_c = (np.asarray(camera.eye, dtype=np.float64) - sc.centre).astype(np.float32)
+        rt = camera.extrinsics  # world -> OpenCV camera frame
+        frame = np.empty((3, 4), dtype=np.float32)
+        frame[:, :3] = rt[:, :3]
+        frame[:, 3] = rt[:, :3] @ sc.centre + rt[:, 3]
+        cam = _Intrinsics(*np.array(
+            [camera.focal_px, camera.width, camera.height, camera.znear, camera.zfar,
+             _BORDER_PX + _BORDER_PER_PX * max(camera.width, camera.height)], dtype=np.float32))
+        settings = _RaySettings(*np.array([sc.radius, _START, _MAX_START, _BAND_LO, EDGE_ON_SIN + _EDGE_ON_SLACK], dtype=np.float32))
+        view = (camera, eye_c, frame, cam, settings)
         m = len(rays)
         step = min(_CHUNK, -(-m // self.threads))  # at least one chunk per thread
-        bounds = [(lo, min(lo + step, m)) for lo in range(0, m, step)]
-        parts = _run_shared(self.threads, self._chunk, [(lo, hi, sub, camera, eye_c) for lo, hi in bounds])
+        parts = _run_shared(self.threads, self._chunk, [(rays[lo:lo + step], view) for lo in range(0, m, step)])
         vis = np.concatenate([v for v, _, _ in parts])
         tie = np.concatenate([t for _, t, _ in parts])
         status = np.concatenate([st for _, _, st in parts])
