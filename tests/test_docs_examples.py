@@ -450,34 +450,48 @@ def test_the_api_index_names_every_public_name() -> None:
     assert not missing, f"docs/api/index.md does not name {missing}"
 
 
-def internal_imports_of_public_names(code: str) -> list[str]:
-    """``from zbuf_occlude.X import NAME`` in an example where ``zo.NAME`` exists (``zo.__all__``):
-    the examples show the public route, ``import zbuf_occlude as zo; zo.NAME``."""
-    import ast
+def _exported(package: str) -> set[str]:
+    """The names ``package`` exports (its ``__all__``; ``zbuf_occlude``'s: the ``zo.NAME`` names)."""
+    import importlib
 
-    import zbuf_occlude as zo
+    return set(getattr(importlib.import_module(package), "__all__", ()))
+
+
+def internal_imports_of_public_names(code: str) -> list[str]:
+    """``from zbuf_occlude.X.Y import NAME`` in an example where a package above the module exports
+    NAME (``zo.NAME`` of ``zo.__all__``, or ``zbuf_occlude.X``'s ``__all__``): the examples show the
+    public route, ``zo.NAME`` or ``from zbuf_occlude.X import NAME``; each found import is given with it."""
+    import ast
 
     try:
         tree = ast.parse(code)
     except SyntaxError:
         return []
-    return [
-        f"from {node.module} import {alias.name}"
-        for node in ast.walk(tree)
-        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("zbuf_occlude.")
-        for alias in node.names
-        if alias.name in zo.__all__
-    ]
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("zbuf_occlude."):
+            parents = [node.module.rsplit(".", depth)[0] for depth in range(node.module.count("."), 0, -1)]  # shallowest first
+            for alias in node.names:
+                public = next((p for p in parents if alias.name in _exported(p)), None)
+                if public:
+                    found.append(f"from {node.module} import {alias.name} -> " + (f"zo.{alias.name}" if public == "zbuf_occlude" else f"from {public} import {alias.name}"))
+    return found
 
 
 def test_internal_imports_of_public_names_are_found() -> None:
-    code = "import zbuf_occlude as zo\nfrom zbuf_occlude.geometry.cameras import camera_on_sphere\nfrom zbuf_occlude.protocols import project\n"
-    assert internal_imports_of_public_names(code) == ["from zbuf_occlude.geometry.cameras import camera_on_sphere"]
+    code = (
+        "import zbuf_occlude as zo\nfrom zbuf_occlude.geometry.cameras import camera_on_sphere\nfrom zbuf_occlude.protocols import project\n"
+        "from zbuf_occlude.io.clouds import read_npz\nfrom zbuf_occlude.io import write_npz\nfrom zbuf_occlude.learn.models import PointNet\n"
+    )
+    assert internal_imports_of_public_names(code) == [
+        "from zbuf_occlude.geometry.cameras import camera_on_sphere -> zo.camera_on_sphere",
+        "from zbuf_occlude.io.clouds import read_npz -> from zbuf_occlude.io import read_npz",
+    ]
 
 
 @pytest.mark.parametrize("block", [b for b in RUNNABLE if b.language == "python"], ids=lambda b: b.id)
 def test_python_examples_use_the_public_name(block: Block) -> None:
-    assert not internal_imports_of_public_names(block.code), f"{block.id}: use zo.NAME (import zbuf_occlude as zo) for {internal_imports_of_public_names(block.code)}"
+    assert not internal_imports_of_public_names(block.code), f"{block.id}: use the public names: {internal_imports_of_public_names(block.code)}"
 
 
 def test_visible_mask_quotes_embree_fasts_measured_agreement() -> None:

@@ -64,6 +64,14 @@ def test_the_farms_all_lists_the_names_its_stub_imports():
     assert all(getattr(farm, name) is not None for name in farm.__all__)
 
 
+def test_the_learn_extras_dense_cloud_is_the_pipelines_and_needs_no_torch():
+    import zbuf_occlude.learn as learn
+    from zbuf_occlude.pipeline import DenseCloud
+
+    assert "DenseCloud" in learn.__all__ and learn.DenseCloud is DenseCloud
+    assert "torch" not in _loaded_after("from zbuf_occlude.learn import DenseCloud")
+
+
 @pytest.mark.slow
 def test_cpu_visibility_methods_load_no_opengl():
     # Embree, the CPU z-buffer and the paper's methods run where no GL driver exists

@@ -64,7 +64,19 @@ NORMALISED_ATOL = 1e-9
 
 @dataclass
 class DenseCloud:
-    """The per-object dense cloud (sampled once, reused for every pose, paper §3.4)."""
+    """The per-object dense cloud (sampled once, reused for every pose, paper §3.4).
+
+    What :func:`dense_cloud` gives, and what :class:`zbuf_occlude.learn.RandomOcclusion` takes;
+    ``DenseCloud(*sample_surface(mesh, count=8192, seed=0))`` makes one of any mesh
+    (:func:`~zbuf_occlude.geometry.sampling.sample_surface`).
+
+    Attributes
+    ----------
+    points : (M, 3) float64
+        Points on the mesh's surface, in its frame (object units).
+    face_index : (M,) int64
+        Index into ``mesh.faces`` of the face each point lies on.
+    """
 
     points: NDArray[np.float64]
     face_index: NDArray[np.int64]

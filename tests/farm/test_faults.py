@@ -271,11 +271,13 @@ def test_skipped_inputs_are_recorded_in_the_card_and_give_status_1(tree, tmp_pat
     from zbuf_occlude.mesh.inputs import discover_objects
 
     out = tmp_path / "ds"
-    summary = run_farm(discover_objects(tree), out, params=PARAMS, options=RunOptions(progress=False, skipped=[("in/locked", "permission denied")]))
+    locked = str(tree / "locked")  # a ready plan's caller's skip: a folder of the input root
+    options = RunOptions(progress=False, skipped=[(locked, "permission denied")])
+    summary = run_farm(discover_objects(tree), out, params=PARAMS, options=options)
     assert summary.done == len(MESHES) and summary.exit_status == 1
-    assert "SKIPPED   in/locked: permission denied" in summary.format()
+    assert f"SKIPPED   {locked}: permission denied" in summary.format()  # for the person running it: as given
     card = json.loads((out / CARD_FILE).read_text())
-    assert card["skipped_inputs"] == [{"path": "in/locked", "reason": "permission denied"}]
+    assert card["skipped_inputs"] == [{"path": "locked", "reason": "permission denied"}]  # the data set's: relative
     assert run_farm(discover_objects(tree), out, params=PARAMS, options=RunOptions(progress=False)).exit_status == 0
 
 

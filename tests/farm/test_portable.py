@@ -111,6 +111,23 @@ def test_a_list_files_meshes_are_named_as_the_list_names_them(tmp_path):
     assert all(r["status"] == "ok" for r in records) and meshes.is_dir()
 
 
+@pytest.mark.slow
+def test_skipped_inputs_are_named_relative_to_the_root_also_after_a_merge(tmp_path):
+    import os
+
+    meshes = _copy_meshes(tmp_path / "meshes")
+    shutil.copy(SAMPLES / MESHES[0], os.fsdecode(bytes(meshes / "chair" / "train") + b"/caf\xe9.off"))  # not UTF-8
+    whole, tasks = tmp_path / "whole", tmp_path / "tasks"
+    assert cli_main(["farm", str(meshes), "--out", str(whole), *ARGS, "--no-progress"]) == 1
+    for task in ("0/2", "1/2"):
+        assert cli_main(["farm", str(meshes), "--out", str(tasks), "--shard", task, *ARGS, "--no-progress"]) == 1
+    assert cli_main(["farm-merge", str(tasks), "--no-progress"]) == 1  # the merged data set misses that input too
+    for out in (whole, tasks):
+        card = json.loads((out / CARD_FILE).read_text())
+        assert [s["path"] for s in card["skipped_inputs"]] == ["chair/train/caf\\xe9.off"], out
+        _no_path_of(tmp_path, out)
+
+
 def _obj(source: str) -> FarmObject:
     return FarmObject(0, "x", source, "c", "train", 0)
 

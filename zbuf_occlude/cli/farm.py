@@ -127,7 +127,7 @@ def _merge_command(args: argparse.Namespace) -> int:
 
     summary = merge_farm(args.inputs, args.out, progress=not args.no_progress)
     print(summary.format())
-    return 1 if summary.failed else 0
+    return summary.exit_status  # 1: objects failed, or the tasks skipped inputs
 
 
 def add_farm_parser(subparsers) -> argparse.ArgumentParser:

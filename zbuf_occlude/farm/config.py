@@ -382,7 +382,8 @@ class RunOptions:
     skipped : sequence of (path, reason)
         Inputs the caller's discovery could not take (a ready plan), added to those
         :func:`scan_objects` skips in a folder (unreadable folders, names that are not
-        UTF-8); recorded in the card and the summary, so the run ends with status 1.
+        UTF-8); recorded in the card (relative to the input root) and the summary (as given),
+        so the run ends with status 1.
     class_from : int, optional
         A folder ``source``: the folder level above each mesh that names its class
         (:func:`scan_objects`).

@@ -33,7 +33,7 @@ from zbuf_occlude.geometry.samples import count_padded
 from zbuf_occlude.io.atomic import file_sha256, size_mismatch, temp_is_orphan, temp_owner, write_text
 from zbuf_occlude.io.json_files import loads_json
 from zbuf_occlude.io.safe_paths import check_line_text, path_inside
-from zbuf_occlude.mesh.discovery import SPLITS
+from zbuf_occlude.mesh.discovery import SPLITS, printable_path
 from zbuf_occlude.mesh.inputs import FarmObject
 
 log = logging.getLogger(__name__)
@@ -170,10 +170,32 @@ def input_root(inputs: Iterable[str | os.PathLike], objects: Sequence[FarmObject
     return Path(os.path.commonpath(folders)) if folders else Path.cwd()
 
 
+def root_relative(path: str | os.PathLike, root: Path) -> str:
+    """``path`` relative to ``root`` (:func:`input_root`), POSIX and printable: how a data set names
+    a file it was given, so that it holds no absolute path of its author's.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        A mesh, folder or list-file line; relative paths are taken from the working folder.
+        Bytes that are not UTF-8 may be raw or already printable (``\\xNN``,
+        :func:`~zbuf_occlude.mesh.discovery.printable_path`): both give the same text.
+    root : Path
+        The input root, absolute.
+
+    Returns
+    -------
+    str
+        E.g. ``"chair/train/chair_0001.off"``; ``"."`` for the root itself, ``"../x"`` for a path
+        outside it (a list file may name inputs anywhere).
+    """
+    return Path(os.path.relpath(printable_path(os.path.abspath(path)), printable_path(root))).as_posix()
+
+
 def relative_objects(objects: Sequence[FarmObject], root: Path) -> list[FarmObject]:
-    """``objects`` with each ``source`` relative to ``root`` (:func:`input_root`), POSIX: what the plan,
-    the records and the shards write, so that a data set holds no absolute path of its author's."""
-    return [dataclasses.replace(o, source=Path(os.path.abspath(o.source)).relative_to(root).as_posix()) for o in objects]
+    """``objects`` with each ``source`` relative to ``root`` (:func:`root_relative`): what the plan,
+    the records and the shards write."""
+    return [dataclasses.replace(o, source=root_relative(o.source, root)) for o in objects]
 
 
 def root_name(root: Path) -> str:
@@ -262,7 +284,8 @@ def finalize(
     """Write manifest, shape names, file lists and (last: it marks the data set finished) the card.
 
     ``skipped``: ``(path, reason)`` of inputs discovery could not take (unreadable folders,
-    names that are not UTF-8), recorded in the card as ``skipped_inputs``.
+    names that are not UTF-8), each path relative to the input root (:func:`root_relative`),
+    recorded in the card as ``skipped_inputs`` (:func:`skipped_inputs_doc`).
     """
     from zbuf_occlude.dataset.schema import CHECKSUM_ALGORITHM
 
@@ -307,7 +330,7 @@ def finalize(
         "n_objects": len(objects),
         "n_objects_ok": len(ok),
         "n_objects_failed": len(objects) - len(ok),
-        "skipped_inputs": [{"path": p, "reason": r} for p, r in skipped],
+        "skipped_inputs": skipped_inputs_doc(skipped),
         "up": params.up,
         # how many objects were read with each up axis, and why (ShapeNetCore layout, glTF, as stored...)
         "up_axes": up_axes(ok),
@@ -324,6 +347,21 @@ def finalize(
         "A method to create real-like point clouds for 3D object classification",
     }
     write_card(out, card)
+
+
+def skipped_inputs_doc(skipped: Iterable[tuple[str, str]]) -> list[dict[str, str]]:
+    """``skipped`` (``(path, reason)`` pairs) as the card and a task's file record them:
+    ``[{"path": ..., "reason": ...}, ...]``."""
+    return [{"path": p, "reason": r} for p, r in skipped]
+
+
+def skipped_inputs_of(doc: dict[str, Any]) -> list[tuple[str, str]]:
+    """The ``(path, reason)`` pairs of a task file's ``skipped_inputs`` (:func:`skipped_inputs_doc`);
+    entries that are not two strings (a damaged or older file) are left out."""
+    items = doc.get("skipped_inputs")
+    return [
+        (i["path"], i["reason"]) for i in items if isinstance(i, dict) and isinstance(i.get("path"), str) and isinstance(i.get("reason"), str)
+    ] if isinstance(items, list) else []  # fmt: skip
 
 
 def write_card(out: Path, card: dict[str, Any]) -> None:
@@ -358,7 +396,8 @@ class FarmSummary:
     workers: str = "1 process"
     peak_rss_mb: float = 0.0
     failures: list[tuple[str, str]] = field(default_factory=list)
-    #: ``(path, reason)`` of inputs that could not even be planned (unreadable folder, non-UTF-8 name).
+    #: ``(path, reason)`` of inputs that could not even be planned (unreadable folder, non-UTF-8 name):
+    #: paths as given to a run, relative to the input root in a merge (as its tasks recorded them).
     skipped: list[tuple[str, str]] = field(default_factory=list)
     #: Samples holding repeated points because fewer than ``n_points`` were visible (the card's ``n_padded_samples``).
     padded: int = 0

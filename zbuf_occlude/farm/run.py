@@ -45,6 +45,9 @@ from zbuf_occlude.farm.journal import (
     relative_objects,
     remove_stale_temps,
     root_name,
+    root_relative,
+    skipped_inputs_doc,
+    skipped_inputs_of,
 )
 from zbuf_occlude.farm.lifecycle import sigterm_as_interrupt
 from zbuf_occlude.farm.lock import farm_lock
@@ -144,7 +147,8 @@ def run_farm(
         set names each mesh by its path relative to the input root
         (:func:`~zbuf_occlude.farm.journal.input_root`: the folder given; for a list file, the
         deepest folder holding it and its meshes), and the root by its name (the card's
-        ``source``), never by absolute paths.
+        ``source``), never by absolute paths; so are the inputs that had to be skipped (the
+        card's ``skipped_inputs``; the summary keeps them as given, for the person running it).
     out : str or PathLike
         Data set folder (layout: :mod:`zbuf_occlude.dataset.reader`).
     params : FarmParams, optional
@@ -221,10 +225,12 @@ def _run_locked(
         # tasks of one array share plan.json; it is written once, the same for all (checked above)
         write_json(out / PLAN_FILE, plan)
     command = run.command or shlex.join(sys.argv)
+    recorded_skips = [(root_relative(p, root), r) for p, r in skipped]  # the data set's, relative as its sources
     write_json(
         out / TASK_DIR / f"task-{task}-of-{n_tasks}.json",
         {"shard": [task, n_tasks], "command": command, "version": package_version(), "host": socket.gethostname(),
-         "started": datetime.now(timezone.utc).isoformat(timespec="seconds"), "objects": [o.index for o in mine]},
+         "started": datetime.now(timezone.utc).isoformat(timespec="seconds"), "objects": [o.index for o in mine],
+         "skipped_inputs": skipped_inputs_doc(recorded_skips)},
     )  # fmt: skip
     remove_stale_temps(out, mine, everything=n_tasks == 1)
 
@@ -282,7 +288,7 @@ def _run_locked(
 
     finished = False
     if n_tasks == 1:
-        finalize(out, plan, records, [command], skipped or ())
+        finalize(out, plan, records, [command], recorded_skips)
         finished = True
         if run.on_finished is not None:
             run.on_finished(out)
@@ -305,7 +311,8 @@ def merge_farm(
         Task output folders (the same folder for tasks that shared one ``--out``).
     out : str or PathLike, optional
         The data set folder (default: the first input).  Shards of other inputs are
-        copied in (atomically); a merge can be rerun.
+        copied in (atomically); a merge can be rerun.  The card's ``skipped_inputs`` are those
+        the tasks recorded (each once), and the summary's ``skipped`` too.
     progress : bool
         Progress on stderr (:func:`zbuf_occlude.io.progress.progress`): the objects read and copied.
 
@@ -352,6 +359,7 @@ def _merge_locked(folders: list[Path], out: Path, plan: dict[str, Any], *, progr
     found: dict[int, tuple[Path, dict[str, Any]]] = {}
     failed: dict[int, dict[str, Any]] = {}
     commands: list[str] = []
+    skipped: list[tuple[str, str]] = []  # every task scanned the same inputs: each skip once
     task_docs: list[tuple[str, dict[str, Any]]] = []
     from zbuf_occlude.io.progress import progress as progress_bar
 
@@ -360,6 +368,7 @@ def _merge_locked(folders: list[Path], out: Path, plan: dict[str, Any], *, progr
             doc = read_json(task_file)
             if doc and isinstance(doc.get("command"), str) and doc["command"] not in commands:
                 commands.append(doc["command"])
+            skipped += [s for s in skipped_inputs_of(doc or {}) if s not in skipped]
             if doc and folder.resolve() != out.resolve():
                 task_docs.append((task_file.name, doc))
         for o in progress_bar(objects, desc=f"farm-merge: read {folder.name}", unit="obj", enabled=progress, leave=False):
@@ -397,9 +406,9 @@ def _merge_locked(folders: list[Path], out: Path, plan: dict[str, Any], *, progr
             records[index] = rec
             write_json(record_path(out, index), rec)
     commands.append(shlex.join(sys.argv))
-    finalize(out, plan, records, commands)
+    finalize(out, plan, records, commands, skipped)
     n_ok = sum(r["status"] == "ok" for r in records.values())
     return FarmSummary.of_records(
         out, records, FarmParams.from_dict(plan["params"]), objects=len(objects), resumed=n_ok, finished=True,
-        wall_s=time.perf_counter() - t0, workers="merge",
+        wall_s=time.perf_counter() - t0, workers="merge", skipped=skipped,
     )  # fmt: skip

@@ -11,15 +11,20 @@ package never imports it.  Modules:
 ``sim2real``     trained on clouds from meshes, tested on real scans (``sim2real_data``: the
                  training sets; ``stats``: mean ± std, permutation test; ``sim2real_report``)
 ``cli``          ``zbuf-occlude experiment elevation|augmentation|sim2real``
-``on_the_fly``   occlusion as a training-time transform: ``RandomOcclusion``, ``OnTheFlyOccludedDataset``
+``on_the_fly``   occlusion as a training-time transform: ``RandomOcclusion`` (of a ``DenseCloud``:
+                 :class:`zbuf_occlude.pipeline.DenseCloud`, re-exported here), ``OnTheFlyOccludedDataset``
 ``pyg``          the same as a PyTorch Geometric transform (``pip install '.[pyg]'``)
 """
 
 from __future__ import annotations
 
-__all__ = ["require_torch", "RandomOcclusion", "OnTheFlyOccludedDataset", "PoseDistribution", "EpochSampler"]
+__all__ = ["require_torch", "RandomOcclusion", "OnTheFlyOccludedDataset", "PoseDistribution", "EpochSampler", "DenseCloud"]
 
-_LAZY = {name: "on_the_fly" for name in ("RandomOcclusion", "OnTheFlyOccludedDataset", "PoseDistribution", "EpochSampler")}
+#: Where each lazily imported public name lives.
+_LAZY = {
+    **{name: "zbuf_occlude.learn.on_the_fly" for name in ("RandomOcclusion", "OnTheFlyOccludedDataset", "PoseDistribution", "EpochSampler")},
+    "DenseCloud": "zbuf_occlude.pipeline",  # what RandomOcclusion takes; needs no torch
+}
 
 
 def __getattr__(name: str):
@@ -27,7 +32,7 @@ def __getattr__(name: str):
     if name in _LAZY:
         import importlib
 
-        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+        return getattr(importlib.import_module(_LAZY[name]), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
