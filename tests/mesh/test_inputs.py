@@ -221,6 +221,8 @@ def test_broken_links_and_link_loops_are_skipped_reported_and_recorded(tmp_path:
     skipped = {s["path"]: s["reason"] for s in _card(out)["skipped_inputs"]}  # relative to the input root
     assert skipped["chair/train/gone.off"].startswith("dangling symbolic link")
     assert skipped["chair/train/loop.off"].startswith("symbolic link loop")
+    # nothing of the builder's machine: not the input root, nor the link's (absolute) target
+    assert str(tmp_path) not in json.dumps(_card(out))
     assert _card(out)["n_objects_ok"] == 2
 
 

@@ -102,9 +102,10 @@ def unusable_entry_reason(path: str | PathLike[str]) -> str | None:
         st = os.stat(path)
     except OSError as exc:
         if os.path.islink(path):
+            # (the target is not named: the reason goes into a data set's card, and a link's
+            # target may be an absolute path of the machine; `ls -l` on the link shows it)
             what = "symbolic link loop" if exc.errno == errno.ELOOP else "dangling symbolic link"
-            target = printable_path(os.readlink(path))
-            return f"{what} (-> {target}): {exc.strerror or exc}; fix or remove the link"
+            return f"{what}: {exc.strerror or exc}; fix or remove the link"
         return None  # gone since it was listed: nothing to report
     if stat.S_ISREG(st.st_mode) or stat.S_ISDIR(st.st_mode):
         return None
