@@ -201,7 +201,7 @@ def test_huge_lists_of_other_commands_are_refused(tmp_path, capsys, nothing_runs
 @pytest.mark.parametrize("value", ["-1", str(2**63), str(2**64), "1e3", "nan"])
 def test_every_seed_is_checked_by_one_rule(tmp_path, capsys, nothing_runs, command, value) -> None:
     err = refused(capsys, [*COMMANDS[command], "--seed", value], tmp_path / "out")
-    assert f"--seed must be" in err and f"got {value}" in err, err
+    assert "--seed must be" in err and f"got {value}" in err, err
 
 
 def test_the_seed_rule_takes_its_whole_range() -> None:

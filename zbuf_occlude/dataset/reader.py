@@ -18,9 +18,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude.dataset.index import PoseFilter, PoseFilters, SampleIndex, sample_index, samples_per_pose
+from zbuf_occlude.dataset.index import PoseFilter, PoseFilters, SampleIndex, sample_index
 from zbuf_occlude.dataset.layout import CARD_FILE, FORMAT_VERSION, MANIFEST_FILE
-from zbuf_occlude.dataset.storage import StorageKind, reconstruct_samples, storage_kind, unpack_visible
+from zbuf_occlude.dataset.storage import StorageKind, storage_kind
 from zbuf_occlude.errors import InvalidInputError, ShardChecksumError
 from zbuf_occlude.io.safe_paths import path_inside
 from zbuf_occlude.mesh.discovery import SPLITS, name_set
