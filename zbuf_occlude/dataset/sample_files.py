@@ -13,11 +13,11 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
-from numpy.lib import format as npy_format
 from numpy.typing import NDArray
 
 from zbuf_occlude.dataset.layout import SAMPLE_FILE_FORMATS
 from zbuf_occlude.errors import DatasetFormatError, InvalidInputError
+from zbuf_occlude.io.arrays import npz_member_header
 
 __all__ = ["read_sample_points"]
 
@@ -27,12 +27,7 @@ def _npz_points(path: Path, n_points: int) -> NDArray:
         if "points" not in z.files:
             raise KeyError(f"no array 'points' (it holds {sorted(z.files)[:5]})")
         # the shape and dtype the member declares, before it is inflated: a small member may inflate to GBs
-        with z.zip.open("points.npy") as member:
-            read_header = {(1, 0): npy_format.read_array_header_1_0, (2, 0): npy_format.read_array_header_2_0}
-            version = npy_format.read_magic(member)
-            if version not in read_header:
-                raise ValueError(f"'points' has .npy format version {version}, not one numpy writes for it")
-            shape, _, dtype = read_header[version](member)
+        shape, dtype = npz_member_header(z.zip, "points")
         if shape != (n_points, 3) or dtype.kind != "f":
             raise ValueError(f"'points' is declared {shape} {dtype}, not ({n_points}, 3) floats")
         return z["points"]

@@ -10,8 +10,6 @@ a folder of scans names itself.  Every such name is opened here, so that one set
   check and the open cannot slip through;
 * its **size is checked before it is read**, against a cap the caller gives (the error names
   the file, its size and the cap);
-* arrays (``.npy``, ``.npz``) are checked against the sizes their headers and zip directory
-  declare (:func:`check_array_sizes`): a zip member of zeros inflates 1000:1;
 * a name a file gives is resolved **inside that file's folder**, symlinks resolved, by the
   project's one rule (:func:`zbuf_occlude.io.safe_paths.path_inside`): ``../../secret`` is refused.
 
@@ -24,18 +22,15 @@ from __future__ import annotations
 import hashlib
 import os
 import stat
-import zipfile
 from functools import lru_cache
 from os import PathLike
 from pathlib import Path
 from typing import Any, BinaryIO
 
-import numpy as np
-
 from zbuf_occlude.errors import MeshLoadError, UnsafePathError, ZbufOccludeError
 from zbuf_occlude.io.safe_paths import path_inside
 
-__all__ = ["MAX_NAMED_FILE_BYTES", "check_array_sizes", "file_digest", "folder_resolver", "read_regular_file", "regular_file_size"]
+__all__ = ["MAX_NAMED_FILE_BYTES", "file_digest", "folder_resolver", "read_regular_file", "regular_file_size"]
 
 #: Largest file a mesh may name (a glTF buffer, an OBJ material, a texture): 2 GiB.  glTF
 #: buffers are addressed with 32-bit byte lengths and a GLB is at most 4 GiB by its uint32
@@ -125,57 +120,6 @@ def file_digest(path: str | PathLike[str], *, max_bytes: int, error: type[ZbufOc
         while chunk := fh.read(_HASH_CHUNK_BYTES):
             digest.update(chunk)
     return digest.hexdigest()
-
-
-def _npy_declared_bytes(fh) -> int:
-    """Bytes the ``.npy`` header at ``fh`` declares (shape x itemsize); reads the header only."""
-    from numpy.lib import format as npy_format
-
-    version = npy_format.read_magic(fh)
-    read_header = npy_format.read_array_header_1_0 if version == (1, 0) else npy_format.read_array_header_2_0
-    shape, _, dtype = read_header(fh)
-    return int(np.prod(shape, dtype=object)) * dtype.itemsize
-
-
-def check_array_sizes(path: str | PathLike[str], *, max_bytes: int, error: type[ZbufOccludeError] = MeshLoadError) -> None:
-    """Refuse a ``.npy``/``.npz`` whose arrays would inflate past ``max_bytes``, reading only headers.
-
-    For ``.npz``, the zip directory's uncompressed sizes (what inflating costs) and each
-    member's ``.npy`` header (what numpy allocates) are both checked; a header declaring more
-    than its member holds is refused too.
-
-    Raises
-    ------
-    ``error``
-        Naming the file (and member), the declared bytes and the cap.
-    """
-    path = Path(path)
-    try:
-        _check_array_sizes(path, max_bytes, error)
-    except ZbufOccludeError:
-        raise
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise error(f"{path}: cannot read its array headers ({type(exc).__name__}: {exc})") from None
-
-
-def _check_array_sizes(path: Path, max_bytes: int, error: type[ZbufOccludeError]) -> None:
-    if path.suffix.lower() == ".npy":
-        with open(path, "rb") as fh:
-            declared = _npy_declared_bytes(fh)
-        if declared > min(max_bytes, path.stat().st_size):
-            raise error(f"{path}: its header declares {declared:,} bytes of array, more than the file "
-                        f"({path.stat().st_size:,} bytes) or the {max_bytes:,} accepted")  # fmt: skip
-        return
-    with zipfile.ZipFile(path) as zf:
-        members = zf.infolist()
-        inflated = sum(m.file_size for m in members)
-        if inflated > max_bytes:
-            raise error(f"{path}: its members inflate to {inflated:,} bytes, more than the {max_bytes:,} accepted")
-        for m in members:
-            with zf.open(m) as fh:
-                declared = _npy_declared_bytes(fh)
-            if declared > m.file_size:
-                raise error(f"{path}: member {m.filename} declares {declared:,} bytes of array but holds {m.file_size:,}")
 
 
 @lru_cache(maxsize=1)

@@ -1,0 +1,52 @@
+"""Array headers of .npy/.npz files from anyone: read before a byte of array is inflated."""
+
+from __future__ import annotations
+
+import io
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from zbuf_occlude.errors import InvalidInputError, MeshLoadError
+from zbuf_occlude.io.arrays import check_array_sizes, npy_header, npz_member_header
+
+
+def _forged_npz(path: Path, shape: tuple[int, ...], descr: str = "<f8", payload: bytes = b"\x00" * 72) -> Path:
+    """A zip whose ``points.npy`` header declares ``shape`` over a few bytes of data."""
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": descr, "fortran_order": False, "shape": shape})
+    with zipfile.ZipFile(path, "w") as zf:
+        zf.writestr("points.npy", header.getvalue() + payload)
+    return path
+
+
+def test_a_member_header_gives_the_declared_shape_and_dtype_without_inflating(tmp_path):
+    path = _forged_npz(tmp_path / "forged.npz", (10**9, 3))  # 24 GB declared, 72 bytes held
+    with zipfile.ZipFile(path) as zf:
+        assert npz_member_header(zf, "points") == ((10**9, 3), np.dtype("<f8"))
+
+
+def test_a_member_header_of_a_written_file_matches_its_array(tmp_path):
+    np.savez_compressed(tmp_path / "x.npz", points=np.zeros((7, 3), np.float32), face_index=np.arange(7))
+    with np.load(tmp_path / "x.npz", allow_pickle=False) as z:
+        assert npz_member_header(z.zip, "points") == ((7, 3), np.dtype(np.float32))
+        assert npz_member_header(z.zip, "face_index") == ((7,), np.dtype(np.int64))
+        with pytest.raises(KeyError):
+            npz_member_header(z.zip, "normal")
+
+
+def test_a_header_of_a_format_version_numpy_does_not_read_is_refused():
+    with pytest.raises(ValueError, match="version 9.0"):
+        npy_header(io.BytesIO(b"\x93NUMPY\x09\x00" + b"\x00" * 16))
+
+
+@pytest.mark.parametrize("error", [InvalidInputError, MeshLoadError])
+def test_check_array_sizes_raises_the_callers_error_naming_the_file(tmp_path, error):
+    path = _forged_npz(tmp_path / "forged.npz", (10**9, 3))
+    with pytest.raises(error, match=r"forged\.npz: member points\.npy declares 24,000,000,000 bytes of array but holds 200"):
+        check_array_sizes(path, max_bytes=1 << 40, error=error)
+    (tmp_path / "junk.npz").write_bytes(b"PK\x03\x04 not a zip")
+    with pytest.raises(error, match=r"junk\.npz: cannot read its array headers \(BadZipFile"):
+        check_array_sizes(tmp_path / "junk.npz", max_bytes=1 << 20, error=error)

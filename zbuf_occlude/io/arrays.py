@@ -1,0 +1,143 @@
+""".npy and .npz files from anyone: shapes, dtypes and sizes read from their headers, before inflating.
+
+A ``.npz`` is a zip of ``.npy`` members, and both say what reading them will cost before a
+byte of array is read: the zip directory gives each member's uncompressed size, and each
+member's ``.npy`` header its shape and dtype.  A small file may declare gigabytes (a member of
+zeros inflates 1000:1, a header may declare ``(10**9, 3)`` over a few bytes), so every reader of
+such a file from outside asks here first: :func:`check_array_sizes` refuses a file that would
+inflate past a cap, :func:`npz_member_header` gives one member's declared shape and dtype.
+Only headers are read (numpy's own parser, :mod:`numpy.lib.format`); nothing is unpickled.
+"""
+
+from __future__ import annotations
+
+import zipfile
+from os import PathLike
+from pathlib import Path
+from typing import BinaryIO
+
+import numpy as np
+from numpy.lib import format as npy_format
+
+from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
+
+__all__ = ["check_array_sizes", "npy_header", "npz_member_header"]
+
+#: ``.npy`` format versions numpy reads: 1.0 (2-byte header length), 2.0 and 3.0 (4-byte
+#: header length; 3.0 only allows UTF-8 field names, its header reads as 2.0's).
+_HEADER_READERS = {
+    (1, 0): npy_format.read_array_header_1_0,
+    (2, 0): npy_format.read_array_header_2_0,
+    (3, 0): npy_format.read_array_header_2_0,
+}
+
+
+def npy_header(fh: BinaryIO) -> tuple[tuple[int, ...], np.dtype]:
+    """The shape and dtype the ``.npy`` header at ``fh`` declares; reads the header only.
+
+    Parameters
+    ----------
+    fh : binary file
+        Positioned at the start of a ``.npy`` file or ``.npz`` member.
+
+    Returns
+    -------
+    shape : tuple of int
+    dtype : numpy.dtype
+
+    Raises
+    ------
+    ValueError
+        Not a ``.npy`` header, a format version numpy does not write, or a malformed header
+        (numpy's messages).
+    EOFError
+        The header is cut short.
+    """
+    version = npy_format.read_magic(fh)
+    if version not in _HEADER_READERS:
+        raise ValueError(f".npy format version {version[0]}.{version[1]}, not one numpy reads")
+    shape, _, dtype = _HEADER_READERS[version](fh)
+    return tuple(int(s) for s in shape), dtype
+
+
+def npz_member_header(zf: zipfile.ZipFile, key: str) -> tuple[tuple[int, ...], np.dtype]:
+    """The shape and dtype array ``key`` of an open ``.npz`` declares, before it is inflated.
+
+    Parameters
+    ----------
+    zf : zipfile.ZipFile
+        The ``.npz`` (``numpy.load(path).zip`` for an open :class:`numpy.lib.npyio.NpzFile`).
+    key : str
+        The array's name (its member is ``key + ".npy"``).
+
+    Returns
+    -------
+    shape : tuple of int
+    dtype : numpy.dtype
+
+    Raises
+    ------
+    KeyError
+        No member ``key.npy``.
+    ValueError, EOFError, zipfile.BadZipFile
+        The member's header is not a ``.npy`` header numpy reads, or the zip is damaged.
+    """
+    with zf.open(f"{key}.npy") as member:
+        return npy_header(member)
+
+
+def _declared_bytes(fh: BinaryIO) -> int:
+    shape, dtype = npy_header(fh)
+    return int(np.prod(shape, dtype=object)) * dtype.itemsize
+
+
+def check_array_sizes(path: str | PathLike[str], *, max_bytes: int, error: type[ZbufOccludeError] = InvalidInputError) -> None:
+    """Refuse a ``.npy``/``.npz`` whose arrays would inflate past ``max_bytes``, reading only headers.
+
+    For ``.npz``, the zip directory's uncompressed sizes (what inflating costs) and each
+    member's ``.npy`` header (what numpy allocates) are both checked; a header declaring more
+    than its member holds is refused too.
+
+    Parameters
+    ----------
+    path : path
+        A ``.npy`` (by its suffix) or a ``.npz`` (anything else).
+    max_bytes : int
+        The cap on the bytes the arrays inflate to.
+    error : type
+        The exception raised (:class:`~zbuf_occlude.errors.MeshLoadError` for files a mesh
+        names, :class:`~zbuf_occlude.errors.InvalidInputError` for scans and clouds).
+
+    Raises
+    ------
+    ``error``
+        Naming the file (and member), the declared bytes and the cap; or that its headers
+        cannot be read (not a zip, damaged, not ``.npy``).
+    """
+    path = Path(path)
+    try:
+        _check_array_sizes(path, max_bytes, error)
+    except ZbufOccludeError:
+        raise
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise error(f"{path}: cannot read its array headers ({type(exc).__name__}: {exc})") from None
+
+
+def _check_array_sizes(path: Path, max_bytes: int, error: type[ZbufOccludeError]) -> None:
+    if path.suffix.lower() == ".npy":
+        with open(path, "rb") as fh:
+            declared = _declared_bytes(fh)
+        if declared > min(max_bytes, path.stat().st_size):
+            raise error(f"{path}: its header declares {declared:,} bytes of array, more than the file "
+                        f"({path.stat().st_size:,} bytes) or the {max_bytes:,} accepted")  # fmt: skip
+        return
+    with zipfile.ZipFile(path) as zf:
+        members = zf.infolist()
+        inflated = sum(m.file_size for m in members)
+        if inflated > max_bytes:
+            raise error(f"{path}: its members inflate to {inflated:,} bytes, more than the {max_bytes:,} accepted")
+        for m in members:
+            with zf.open(m) as fh:
+                declared = _declared_bytes(fh)
+            if declared > m.file_size:
+                raise error(f"{path}: member {m.filename} declares {declared:,} bytes of array but holds {m.file_size:,}")
