@@ -50,3 +50,29 @@ def test_check_array_sizes_raises_the_callers_error_naming_the_file(tmp_path, er
     (tmp_path / "junk.npz").write_bytes(b"PK\x03\x04 not a zip")
     with pytest.raises(error, match=r"junk\.npz: cannot read its array headers \(BadZipFile"):
         check_array_sizes(tmp_path / "junk.npz", max_bytes=1 << 20, error=error)
+
+
+def _damaged(path: Path, how: str) -> Path:
+    """A one-member .npz damaged as ``how`` says, its zip directory intact."""
+    data = io.BytesIO()
+    np.lib.format.write_array(data, np.arange(4096.0))
+    info = zipfile.ZipInfo("points.npy")
+    info.compress_type = zipfile.ZIP_DEFLATED
+    with zipfile.ZipFile(path, "w") as zf:
+        zf.writestr(info, data.getvalue())
+    raw = bytearray(path.read_bytes())
+    if how == "deflate":
+        start = 30 + len("points.npy")  # the member's data, after its local header
+        raw[start : start + 8] = b"\xff" * 8
+    else:  # a field of the local header and the central directory: flags, or compression method
+        central, at = zipfile.ZipFile(path).start_dir, {"encrypted": 6, "method": 8}[how]
+        raw[at : at + 2] = raw[central + at + 2 : central + at + 4] = (1 if how == "encrypted" else 99).to_bytes(2, "little")
+    path.write_bytes(bytes(raw))
+    return path
+
+
+@pytest.mark.parametrize(("how", "raised"), [("deflate", "error"), ("encrypted", "RuntimeError"), ("method", "NotImplementedError")])
+def test_check_array_sizes_names_the_file_of_a_damaged_zip(tmp_path, how, raised):
+    path = _damaged(tmp_path / "damaged.npz", how)
+    with pytest.raises(InvalidInputError, match=rf"^{path}: cannot read its array headers \({raised}: "):
+        check_array_sizes(path, max_bytes=1 << 20, error=InvalidInputError)

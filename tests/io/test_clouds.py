@@ -3,14 +3,20 @@
 from __future__ import annotations
 
 import errno
+import io
 import os
+import tempfile
+import zipfile
+from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
 import trimesh
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
-from zbuf_occlude.errors import OutputError
+from zbuf_occlude.errors import DatasetFormatError, OutputError
 from zbuf_occlude.geometry.samples import OccludedCloud
 from zbuf_occlude.io.atomic import atomic_path
 from zbuf_occlude.io.clouds import read_h5, read_npz, write_h5, write_npz, write_ply
@@ -367,3 +373,156 @@ def test_concat_h5_joins_parts_row_wise_and_fills_missing_columns(tmp_path):
     with pytest.raises(OutputError, match="c.h5"):
         concat_h5(tmp_path / "ac.h5", [tmp_path / "a.h5", tmp_path / "c.h5"])
     assert not (tmp_path / "ac.h5").exists() and not list(tmp_path.glob(".ac.h5*"))
+
+
+# -- read_npz: a cloud file from anyone ----------------------------------------------------------------
+def _cloud_arrays(n: int = 8) -> dict[str, np.ndarray]:
+    """The arrays write_npz writes for ``_cloud(n)``."""
+    path = write_npz(Path(tempfile.mkdtemp()) / "x.npz", _cloud(n))
+    with np.load(path) as z:
+        return {k: z[k] for k in z.files}
+
+
+def _npz_with(path: Path, **members: np.ndarray | bytes | None) -> Path:
+    """A cloud .npz of ``_cloud(8)`` whose members ``members`` are replaced (raw ``.npy`` bytes
+    written as given, ``None`` left out)."""
+    arrays = _cloud_arrays()
+    with zipfile.ZipFile(path, "w") as zf:
+        for key in dict.fromkeys([*arrays, *members]):
+            value = members.get(key, arrays.get(key))
+            if value is None:
+                continue
+            if not isinstance(value, bytes):
+                buf = io.BytesIO()
+                np.lib.format.write_array(buf, np.asanyarray(value), allow_pickle=True)
+                value = buf.getvalue()
+            zf.writestr(f"{key}.npy", value)
+    return path
+
+
+def _forged_npy(shape: tuple[int, ...], descr: str = "<f4") -> bytes:
+    """A .npy header declaring ``shape`` over 96 bytes of data."""
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": descr, "fortran_order": False, "shape": shape})
+    return header.getvalue() + bytes(96)
+
+
+def _refuses(path: Path, message: str) -> None:
+    """read_npz raises one DatasetFormatError, one line opening with the file's name, saying ``message``."""
+    with pytest.raises(DatasetFormatError, match=message) as info:
+        read_npz(path)
+    assert str(info.value).startswith(f"{path}:") and "\n" not in str(info.value)
+
+
+def test_npz_round_trip_of_a_file_without_split_reads_an_empty_split(tmp_path):
+    back = read_npz(_npz_with(tmp_path / "old.npz", split=None))
+    assert back.split == "" and np.array_equal(back.points, _cloud(8).points)
+
+
+@pytest.mark.parametrize(
+    ("members", "message"),
+    [
+        ({"label": None}, r"not a cloud of write_npz: no array 'label'"),
+        ({"points": None, "source": None}, r"no array 'points', 'source'"),
+        ({"points": np.zeros((8, 2), np.float32)}, r"points is declared \(8, 2\), not \(n, 3\)"),
+        ({"points": np.zeros(24, np.float32)}, r"points is declared \(24,\) float32, not a \(n, 3\) array of floats"),
+        ({"points": np.zeros((8, 3), np.int64)}, r"points is declared \(8, 3\) int64, not a \(n, 3\) array of floats"),
+        ({"points": np.array([[None] * 3] * 8, dtype=object)}, r"points is declared \(8, 3\) object"),
+        ({"face_index": np.arange(7)}, r"face_index is declared \(7,\), not \(8,\) like points"),
+        ({"face_index": np.zeros(8)}, r"face_index is declared \(8,\) float64, not a \(n,\) array of integers"),
+        ({"label": np.arange(2)}, r"label is declared \(2,\) int64, not a 0-d array of integers"),
+        ({"n_visible": np.float64(3.5)}, r"n_visible is declared \(\) float64, not a 0-d array of integers"),
+        ({"elevation_deg": np.str_("high")}, r"elevation_deg is declared \(\) <U4, not a 0-d array of numbers"),
+        ({"class_name": np.int64(3)}, r"class_name is declared \(\) int64, not a 0-d array of text"),
+        ({"split": np.array({"a": 1}, dtype=object)}, r"split is declared \(\) object, not a 0-d array of text"),
+    ],
+    ids=["no label", "no points", "points (n, 2)", "points flat", "points ints", "points pickled", "face_index short",
+         "face_index floats", "label 1-d", "n_visible float", "elevation text", "class_name number", "split pickled"],
+)  # fmt: skip
+def test_read_npz_refuses_a_cloud_file_of_another_layout_naming_the_file(tmp_path, members, message):
+    _refuses(_npz_with(tmp_path / "bad.npz", **members), message)
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [(b"", "cannot read its array headers"), (b"PK\x03\x04 not a zip", r"BadZipFile"), (b"\x93NUMPY\x01\x00", "BadZipFile"),
+     (b"\x80\x04K\x01.", "BadZipFile")],
+    ids=["empty", "damaged zip", "npy", "pickle"],
+)  # fmt: skip
+def test_read_npz_refuses_a_file_that_is_not_an_npz_naming_the_file(tmp_path, content, message):
+    path = tmp_path / "junk.npz"
+    path.write_bytes(content)
+    _refuses(path, message)
+
+
+def test_read_npz_refuses_a_truncated_file(tmp_path):
+    path = write_npz(tmp_path / "cut.npz", _cloud())
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    _refuses(path, "cannot read its array headers")
+
+
+def _no_inflating(monkeypatch) -> None:
+    """From here on, any array numpy reads fails the test: a refusal must come from the headers alone."""
+
+    def read_array(*args, **kwargs):
+        raise AssertionError("an array was inflated")
+
+    monkeypatch.setattr(np.lib.format, "read_array", read_array)
+
+
+def test_read_npz_refuses_a_member_declaring_gigabytes_before_inflating_it(tmp_path, monkeypatch):
+    path = _npz_with(tmp_path / "bomb.npz", points=_forged_npy((10**9, 3)))  # 12 GB declared over 96 bytes
+    _no_inflating(monkeypatch)
+    _refuses(path, r"member points\.npy declares 12,000,000,000 bytes of array but holds 224")
+
+
+def test_read_npz_refuses_zeros_inflating_past_the_cap_before_inflating_them(tmp_path, monkeypatch):
+    import zbuf_occlude.io.clouds as clouds
+
+    path = tmp_path / "zeros.npz"
+    np.savez_compressed(path, **{**_cloud_arrays(), "points": np.zeros((1_000_000, 3), np.float32), "face_index": np.zeros(1_000_000, np.int64)})
+    assert path.stat().st_size < 100_000  # 20 MB inflated
+    monkeypatch.setattr(clouds, "MAX_NPZ_BYTES", 1 << 20)  # stands for the 3.2 GB cap
+    _no_inflating(monkeypatch)
+    _refuses(path, r"its members inflate to 20,00\d,\d+ bytes, more than the 1,048,576 accepted")
+
+
+def test_the_npz_cap_holds_the_largest_cloud_the_cli_writes():
+    from zbuf_occlude.defaults import MAX_POINTS
+    from zbuf_occlude.io.clouds import MAX_NPZ_BYTES, MAX_NPZ_POINTS
+
+    assert MAX_NPZ_POINTS == MAX_POINTS and MAX_NPZ_BYTES >= MAX_POINTS * (3 * 8 + 8)
+
+
+_VALID_NPZ = None
+
+
+def _valid_npz_bytes() -> bytes:
+    global _VALID_NPZ
+    if _VALID_NPZ is None:
+        _VALID_NPZ = write_npz(Path(tempfile.mkdtemp()) / "x.npz", _cloud(8)).read_bytes()
+    return _VALID_NPZ
+
+
+@pytest.mark.slow
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_read_npz_of_a_damaged_file_raises_dataset_format_error_or_reads_a_valid_cloud(tmp_path, data):
+    raw = bytearray(_valid_npz_bytes())
+    if data.draw(st.booleans(), label="truncate"):
+        raw = raw[: data.draw(st.integers(0, len(raw) - 1), label="length")]
+    for _ in range(data.draw(st.integers(0 if len(raw) < len(_valid_npz_bytes()) else 1, 4), label="flips")):
+        if raw:
+            i = data.draw(st.integers(0, len(raw) - 1), label="at")
+            raw[i] ^= data.draw(st.integers(1, 255), label="xor")
+    path = tmp_path / "damaged.npz"
+    path.write_bytes(bytes(raw))
+    try:
+        cloud = read_npz(path)
+    except DatasetFormatError as exc:
+        assert str(exc).startswith(f"{path}:") and "\n" not in str(exc)
+        return
+    n = len(cloud.points)
+    assert cloud.points.shape == (n, 3) and cloud.points.dtype.kind == "f"
+    assert cloud.face_index.shape == (n,) and cloud.face_index.dtype.kind in "iu"
+    assert all(isinstance(getattr(cloud, k), str) for k in ("class_name", "source", "split"))

@@ -12,6 +12,7 @@ Only headers are read (numpy's own parser, :mod:`numpy.lib.format`); nothing is 
 from __future__ import annotations
 
 import zipfile
+import zlib
 from os import PathLike
 from pathlib import Path
 from typing import BinaryIO
@@ -21,7 +22,13 @@ from numpy.lib import format as npy_format
 
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
 
-__all__ = ["check_array_sizes", "npy_header", "npz_member_header"]
+__all__ = ["check_array_sizes", "npy_header", "npz_member_header", "DAMAGED_NPZ_ERRORS"]
+
+#: What numpy and zipfile raise on a damaged ``.npy``/``.npz``: besides ``OSError``,
+#: ``ValueError``, ``EOFError`` and ``BadZipFile``, ``zlib.error`` (damaged deflate data),
+#: ``NotImplementedError`` (a compression method zipfile lacks) and ``RuntimeError`` (a member
+#: flagged encrypted).
+DAMAGED_NPZ_ERRORS = (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError, RuntimeError)
 
 #: ``.npy`` format versions numpy reads: 1.0 (2-byte header length), 2.0 and 3.0 (4-byte
 #: header length; 3.0 only allows UTF-8 field names, its header reads as 2.0's).
@@ -119,7 +126,7 @@ def check_array_sizes(path: str | PathLike[str], *, max_bytes: int, error: type[
         _check_array_sizes(path, max_bytes, error)
     except ZbufOccludeError:
         raise
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+    except DAMAGED_NPZ_ERRORS as exc:
         raise error(f"{path}: cannot read its array headers ({type(exc).__name__}: {exc})") from None
 
 

@@ -15,8 +15,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from zbuf_occlude.errors import OutputError
+from zbuf_occlude.defaults import MAX_POINTS
+from zbuf_occlude.errors import DatasetFormatError, OutputError
 from zbuf_occlude.geometry.samples import OccludedCloud
+from zbuf_occlude.io.arrays import DAMAGED_NPZ_ERRORS, check_array_sizes, npz_member_header
 from zbuf_occlude.io.atomic import atomic_h5, atomic_path
 from zbuf_occlude.io.hdf5 import Column, open_hdf5
 
@@ -30,10 +32,31 @@ __all__ = [
     "read_h5_clouds",
     "clouds_of_h5",
     "FORMATS",
+    "MAX_NPZ_POINTS",
+    "MAX_NPZ_BYTES",
 ]
 
 #: File formats :func:`write_clouds` knows.
 FORMATS = ("npz", "ply", "h5")
+
+#: Points one ``.npz`` cloud may hold (:func:`read_npz`): the most ``--points`` takes
+#: (:data:`zbuf_occlude.defaults.MAX_POINTS`).
+MAX_NPZ_POINTS = MAX_POINTS
+#: Bytes a cloud ``.npz``'s arrays may inflate to (:func:`read_npz`): :data:`MAX_NPZ_POINTS`
+#: points of float64 coordinates (24 bytes) and an int64 ``face_index`` (8 bytes), and 1 MiB
+#: for the scalars (the class name and the source path are text of any length).
+MAX_NPZ_BYTES = MAX_NPZ_POINTS * (3 * 8 + 8) + (1 << 20)
+
+#: The arrays of :func:`write_npz`'s files: name → (dtype kinds accepted, rank).
+_NPZ_ARRAYS: dict[str, tuple[str, int]] = {
+    "points": ("f", 2), "face_index": ("iu", 1),
+    "elevation_deg": ("fiu", 0), "azimuth_deg": ("fiu", 0), "radius": ("fiu", 0),
+    "label": ("iu", 0), "sample_index": ("iu", 0), "n_visible": ("iu", 0),
+    "class_name": ("U", 0), "source": ("U", 0), "split": ("U", 0),
+}  # fmt: skip
+#: Arrays files of older versions lack.
+_NPZ_OPTIONAL = ("split",)
+_KIND_NAMES = {"f": "floats", "iu": "integers", "fiu": "numbers", "U": "text"}
 
 
 def write_npz(path: str | os.PathLike, cloud: OccludedCloud) -> Path:
@@ -61,21 +84,76 @@ def write_npz(path: str | os.PathLike, cloud: OccludedCloud) -> Path:
 
 
 def read_npz(path: str | os.PathLike) -> OccludedCloud:
-    """Read a cloud written by :func:`write_npz`."""
-    with np.load(path) as z:
-        return OccludedCloud(
-            points=z["points"],
-            face_index=z["face_index"],
-            elevation_deg=float(z["elevation_deg"]),
-            azimuth_deg=float(z["azimuth_deg"]),
-            radius=float(z["radius"]),
-            label=int(z["label"]),
-            class_name=str(z["class_name"]),
-            source=str(z["source"]),
-            sample_index=int(z["sample_index"]),
-            n_visible=int(z["n_visible"]),
-            split=str(z["split"]) if "split" in z.files else "",  # files of older versions have none
+    """Read a cloud written by :func:`write_npz`, checking the file before anything is inflated.
+
+    The file may come from anyone: its arrays' sizes are read from the zip directory and the
+    ``.npy`` headers first (:func:`zbuf_occlude.io.arrays.check_array_sizes`, cap
+    :data:`MAX_NPZ_BYTES`), then every array's declared shape and dtype; nothing is unpickled.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        A ``.npz`` of :func:`write_npz`.
+
+    Returns
+    -------
+    OccludedCloud
+        ``points (n, 3)`` in the file's float dtype (float32 as written), ``face_index (n,)``
+        in its integer dtype; ``split`` is ``""`` in files that have none (older versions).
+
+    Raises
+    ------
+    DatasetFormatError
+        Naming the file and what is wrong: not a zip or damaged, arrays inflating past
+        :data:`MAX_NPZ_BYTES` or a header declaring more than its member holds, an object
+        (pickled) array, a missing array, ``points`` not ``(n, 3)`` floats with ``n`` at most
+        :data:`MAX_NPZ_POINTS`, ``face_index`` not ``(n,)`` integers, or a scalar that is not
+        0-d of its kind (numbers for the pose and counts, text for the names).
+    """
+    path = Path(path)
+    check_array_sizes(path, max_bytes=MAX_NPZ_BYTES, error=DatasetFormatError)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            keys = [k for k in _NPZ_ARRAYS if k in z.files or k not in _NPZ_OPTIONAL]
+            missing = [k for k in keys if k not in z.files]
+            if missing:
+                raise DatasetFormatError(f"{path}: not a cloud of write_npz: no array {', '.join(map(repr, missing))}")
+            declared = {key: npz_member_header(z.zip, key) for key in keys}
+            for key, (shape, dtype) in declared.items():
+                _check_declared(path, key, shape, dtype)
+            n = declared["points"][0][0]
+            if declared["face_index"][0] != (n,):
+                raise DatasetFormatError(f"{path}: face_index is declared {declared['face_index'][0]}, not ({n},) like points")
+            a = {key: z[key] for key in keys}
+    except DatasetFormatError:
+        raise
+    except (*DAMAGED_NPZ_ERRORS, KeyError) as exc:
+        raise DatasetFormatError(f"{path}: cannot read as a cloud .npz ({type(exc).__name__}: {exc})") from None
+    return OccludedCloud(
+        points=a["points"],
+        face_index=a["face_index"],
+        elevation_deg=float(a["elevation_deg"]),
+        azimuth_deg=float(a["azimuth_deg"]),
+        radius=float(a["radius"]),
+        label=int(a["label"]),
+        class_name=str(a["class_name"]),
+        source=str(a["source"]),
+        sample_index=int(a["sample_index"]),
+        n_visible=int(a["n_visible"]),
+        split=str(a["split"]) if "split" in a else "",  # files of older versions have none
+    )
+
+
+def _check_declared(path: Path, key: str, shape: tuple[int, ...], dtype: np.dtype) -> None:
+    """Refuse array ``key`` of a cloud ``.npz`` whose header declares another rank or kind."""
+    kinds, rank = _NPZ_ARRAYS[key]
+    if dtype.kind not in kinds or len(shape) != rank:
+        expected = {1: "(n,)", 2: "(n, 3)"}.get(rank, "0-d")
+        raise DatasetFormatError(
+            f"{path}: {key} is declared {shape} {dtype}, not a {expected} array of {_KIND_NAMES[kinds]}"
         )
+    if key == "points" and (shape[1] != 3 or shape[0] > MAX_NPZ_POINTS):
+        raise DatasetFormatError(f"{path}: points is declared {shape}, not (n, 3) with n at most {MAX_NPZ_POINTS:,}")
 
 
 def write_ply(path: str | os.PathLike, cloud: OccludedCloud) -> Path:
