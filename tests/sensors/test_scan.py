@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import shutil
+import zipfile
 
 import numpy as np
 import pytest
@@ -322,6 +323,20 @@ def test_read_scan_npz_checks_shapes_and_dtypes(tmp_path, change, match):
         S.read_scan_npz(path)
     with pytest.raises(InvalidInputError, match=rf"scan\.npz: {match}"):  # realism reads through it
         read_object_clouds(path)
+
+
+def test_read_scan_npz_names_the_file_of_damaged_compressed_data(tmp_path):
+    # the headers inflate fine (the size check passes); the damage is further into a member
+    path = tmp_path / "scan.npz"
+    np.savez_compressed(path, **_scan_arrays(20000))
+    raw = bytearray(path.read_bytes())
+    with zipfile.ZipFile(path) as zf:
+        info = zf.getinfo("points.npy")
+    middle = info.header_offset + 30 + len(info.filename) + len(info.extra) + info.compress_size // 2
+    raw[middle : middle + 64] = bytes(64)
+    path.write_bytes(bytes(raw))
+    with pytest.raises(InvalidInputError, match=r"scan\.npz: cannot read scan NPZ \("):
+        S.read_scan_npz(path)
 
 
 def test_read_scan_npz_refuses_inflation_past_the_cap(tmp_path, monkeypatch):

@@ -10,7 +10,6 @@ default (LiDAR: x forward, z up; camera: OpenCV), like real scans.
 from __future__ import annotations
 
 import os
-import zipfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -19,7 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.io.arrays import check_array_sizes
+from zbuf_occlude.io.arrays import DAMAGED_NPZ_ERRORS, check_array_sizes
 from zbuf_occlude.io.atomic import atomic_path
 from zbuf_occlude.mesh.named_files import regular_file_size
 from zbuf_occlude.sensors.depth_camera import DepthCamera
@@ -195,10 +194,10 @@ def read_scan_npz(path: str | os.PathLike) -> Scan:
         check_array_sizes(path, max_bytes=MAX_SCAN_NPZ_BYTES, error=InvalidInputError)
         with np.load(path, allow_pickle=False) as z:
             d = {k: z[k] for k in z.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+    except DAMAGED_NPZ_ERRORS as exc:  # (damaged deflate data past the headers shows only here)
         if isinstance(exc, InvalidInputError):
             raise
-        raise InvalidInputError(f"{path}: cannot read scan NPZ ({exc})") from exc
+        raise InvalidInputError(f"{path}: cannot read scan NPZ ({type(exc).__name__}: {exc})") from exc
     missing = {"points", "range_m", "face_index", "object_id", "normal", "incidence_deg", "sensor_position"} - set(d)
     if missing:
         raise InvalidInputError(f"{path}: not a scan NPZ, missing keys {sorted(missing)}")
