@@ -1,4 +1,4 @@
-"""Files a mesh names (glTF buffers, OBJ materials) are read only when regular: a FIFO never blocks."""
+"""Files a mesh names (glTF buffers, OBJ materials) are read only when regular and inside its folder: a FIFO never blocks."""
 
 from __future__ import annotations
 
@@ -10,12 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from zbuf_occlude.errors import InvalidInputError, MeshLoadError
-from zbuf_occlude.mesh.named_files import (
-    file_digest,
-    folder_resolver,
-    read_regular_file,
-)
+from zbuf_occlude.errors import MeshLoadError
+from zbuf_occlude.mesh.named_files import folder_resolver
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs os.mkfifo")
 
@@ -72,20 +68,6 @@ def test_the_mesh_file_itself_may_not_be_a_fifo(tmp_path: Path) -> None:
     os.mkfifo(tmp_path / "pipe.obj")
     out = _load_in_child(tmp_path / "pipe.obj")
     assert "MeshLoadError" in out and "FIFO" in out, out
-
-
-def test_read_regular_file_refuses_fifos_and_sizes_past_the_cap(tmp_path: Path) -> None:
-    os.mkfifo(tmp_path / "pipe")
-    with pytest.raises(MeshLoadError, match="pipe: is a FIFO"):
-        read_regular_file(tmp_path / "pipe")
-    with pytest.raises(InvalidInputError, match="pipe: is a FIFO"):
-        file_digest(tmp_path / "pipe", max_bytes=10, error=InvalidInputError)
-    (tmp_path / "big").write_bytes(b"x" * 11)
-    with pytest.raises(MeshLoadError, match=r"big: 11 bytes, more than the 10"):
-        read_regular_file(tmp_path / "big", max_bytes=10)
-    with pytest.raises(MeshLoadError, match=r"big: 11 bytes, more than the 10"):
-        file_digest(tmp_path / "big", max_bytes=10)
-    assert read_regular_file(tmp_path / "big", max_bytes=11) == b"x" * 11
 
 
 def test_resolver_keeps_names_inside_the_folder(tmp_path: Path) -> None:

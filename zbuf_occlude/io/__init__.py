@@ -3,7 +3,9 @@
 :mod:`.atomic` (every write of the package goes through it), :mod:`.clouds` (one sample per
 ``.npz``/``.ply`` file, many per ``.h5``), :mod:`.safe_paths` (paths a file names stay inside
 its folder), :mod:`.hdf5` (HDF5 files from anyone: only data stored inside them), :mod:`.arrays`
-(``.npy``/``.npz`` files from anyone: shapes and sizes read from their headers before inflating).
+(``.npy``/``.npz`` files from anyone: shapes and sizes read from their headers before inflating),
+:mod:`.regular_files` (a file a user or another file names: regular files only, opened without
+blocking, sizes checked before reading).
 """
 
 from zbuf_occlude.geometry.samples import OccludedCloud

@@ -47,7 +47,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.atomic import atomic_path
-from zbuf_occlude.mesh.named_files import read_regular_file, regular_file_size
+from zbuf_occlude.io.regular_files import read_regular_file, regular_file_size
 from zbuf_occlude.real_scans.files import (
     MAX_FILE_BYTES,
     MAX_LINE_BYTES,

@@ -46,8 +46,8 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InsufficientMemoryError, InvalidInputError
 from zbuf_occlude.io.arrays import check_array_sizes
+from zbuf_occlude.io.regular_files import file_digest, read_regular_file, regular_file_size
 from zbuf_occlude.mesh.formats.ply import ply_declared_counts
-from zbuf_occlude.mesh.named_files import file_digest, read_regular_file, regular_file_size
 from zbuf_occlude.mesh.scene import up_rotation
 from zbuf_occlude.real_scans.records import RealScan, normalize_points
 from zbuf_occlude.resources import check_memory

@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.arrays import DAMAGED_NPZ_ERRORS, check_array_sizes
 from zbuf_occlude.io.atomic import atomic_path
-from zbuf_occlude.mesh.named_files import regular_file_size
+from zbuf_occlude.io.regular_files import regular_file_size
 from zbuf_occlude.sensors.depth_camera import DepthCamera
 from zbuf_occlude.sensors.lidar import Lidar
 from zbuf_occlude.sensors.raycast import BACKENDS, cast_embree, cast_zbuffer

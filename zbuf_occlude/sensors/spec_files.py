@@ -26,6 +26,7 @@ from typing import Any
 from zbuf_occlude._version import install_hint
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.json_files import MAX_JSON_DEPTH, loads_json
+from zbuf_occlude.io.regular_files import read_regular_file
 from zbuf_occlude.sensors.checks import located
 
 __all__ = ["MAX_SPEC_FILE_BYTES", "read_spec_file", "yaml_loader"]
@@ -101,8 +102,6 @@ def read_spec_file(path: str | os.PathLike, *, what: str = "file", yaml_ok: bool
         Naming the file: missing, not a regular file, over :data:`MAX_SPEC_FILE_BYTES`, not
         UTF-8, an unknown suffix, not JSON/YAML, nested too deep, or a YAML alias.
     """
-    from zbuf_occlude.mesh.named_files import read_regular_file  # regular files only, size checked first
-
     path = Path(path)
     suffix = path.suffix.lower()
     formats = (".json", ".yaml", ".yml") if yaml_ok else (".json",)

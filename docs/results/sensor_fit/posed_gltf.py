@@ -20,7 +20,9 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from zbuf_occlude.mesh.named_files import folder_resolver, read_regular_file
+from zbuf_occlude.errors import MeshLoadError
+from zbuf_occlude.io.regular_files import read_regular_file
+from zbuf_occlude.mesh.named_files import folder_resolver
 
 _COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
@@ -28,8 +30,9 @@ _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 
 def read_gltf(path: Path) -> tuple[dict, list[bytes]]:
     """The JSON and the buffers of a .gltf (buffers beside it, or data URIs) or .glb file, read as the
-    mesh loader reads them (regular files only, inside the file's folder: ``zbuf_occlude.mesh.named_files``)."""
-    raw = read_regular_file(path)
+    mesh loader reads them (regular files only, inside the file's folder: ``zbuf_occlude.io.regular_files`` and
+    ``zbuf_occlude.mesh.named_files``)."""
+    raw = read_regular_file(path, error=MeshLoadError)
     if raw[:4] == b"glTF":
         n = struct.unpack_from("<I", raw, 12)[0]
         doc = json.loads(raw[20 : 20 + n])

@@ -9,7 +9,7 @@ module and one line in :data:`FORMATS`.
 
 Every file goes through the same steps, in this order (:func:`read_trimesh`):
 
-1. the file is read once (:func:`zbuf_occlude.mesh.named_files.read_regular_file`: a regular
+1. the file is read once (:func:`zbuf_occlude.io.regular_files.read_regular_file`: a regular
    file, size capped), and every later step gets these bytes;
 2. ``needs``: the optional package the format needs is importable (COLLADA: pycollada);
 3. ``check``: what the bytes declare, before trimesh parses them (OFF: header and counts; STL:
@@ -31,9 +31,9 @@ from typing import TYPE_CHECKING
 
 from zbuf_occlude._version import install_hint
 from zbuf_occlude.errors import MeshLoadError
+from zbuf_occlude.io.regular_files import read_regular_file
 from zbuf_occlude.mesh.formats import collada, gltf, obj, off, ply, stl
 from zbuf_occlude.mesh.formats.base import Format
-from zbuf_occlude.mesh.named_files import read_regular_file
 
 if TYPE_CHECKING:
     import trimesh
@@ -86,7 +86,7 @@ def read_trimesh(path: Path, file_type: str) -> trimesh.Trimesh:
         :func:`zbuf_occlude.mesh.load.load_mesh` reports it with the file name.
     """
     fmt = FORMATS[file_type]
-    raw = read_regular_file(path)
+    raw = read_regular_file(path, error=MeshLoadError)
     _check_installed(fmt, path)
     if fmt.check is not None:
         fmt.check(raw, path)
