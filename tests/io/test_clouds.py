@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import io
 import os
+import subprocess
+import sys
 import tempfile
+import threading
 import zipfile
 from pathlib import Path
 
@@ -459,6 +463,65 @@ def test_read_npz_refuses_a_truncated_file(tmp_path):
     path = write_npz(tmp_path / "cut.npz", _cloud())
     path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
     _refuses(path, "cannot read its array headers")
+
+
+#: A guard, not a measurement: a refusal is immediate, a reader blocked on a FIFO waits forever.
+_BLOCKED_SECONDS = 10
+
+
+def _refuses_without_blocking(path: Path, message: str) -> None:
+    """As :func:`_refuses`, in a thread given :data:`_BLOCKED_SECONDS`: a read that blocks fails the test."""
+    raised: list[BaseException] = []
+
+    def read() -> None:
+        try:
+            _refuses(path, message)
+        except BaseException as exc:  # noqa: BLE001 - handed to the test's thread
+            raised.append(exc)
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    reader.join(_BLOCKED_SECONDS)
+    if reader.is_alive():
+        with contextlib.suppress(OSError):  # a writer that comes and goes unblocks the reader
+            os.close(os.open(path, os.O_WRONLY | os.O_NONBLOCK))
+        pytest.fail(f"read_npz({path.name}) blocked for {_BLOCKED_SECONDS} s")
+    if raised:
+        raise raised[0]
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs os.mkfifo")
+def test_read_npz_of_a_fifo_is_refused_at_once_naming_the_file(tmp_path):
+    os.mkfifo(tmp_path / "cloud.npz")
+    _refuses_without_blocking(tmp_path / "cloud.npz", "is a FIFO; only regular files are read")
+
+
+_READ_IN_CHILD = """
+import resource, sys
+resource.setrlimit(resource.RLIMIT_AS, (2 << 30, 2 << 30))
+from zbuf_occlude.errors import DatasetFormatError
+from zbuf_occlude.io.clouds import read_npz
+try:
+    read_npz(sys.argv[1])
+except DatasetFormatError as exc:
+    print("DatasetFormatError:", exc)
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.path.exists("/dev/zero"), reason="needs /dev/zero")
+def test_read_npz_of_a_device_is_refused_naming_the_file(tmp_path):
+    # In a child under a memory limit: a reader of /dev/zero reads without end (zipfile reads to
+    # the end of the file looking for the zip directory), which a thread could not stop.
+    (tmp_path / "zero.npz").symlink_to("/dev/zero")
+    try:
+        done = subprocess.run([sys.executable, "-c", _READ_IN_CHILD, str(tmp_path / "zero.npz")], capture_output=True,
+                              text=True, timeout=60, check=False)  # fmt: skip
+    except subprocess.TimeoutExpired:
+        pytest.fail("read_npz(zero.npz) read /dev/zero for 60 s")
+    assert done.stdout.strip() == f"DatasetFormatError: {tmp_path / 'zero.npz'}: is not a regular file; only regular files are read", (
+        done.stdout + done.stderr[-2000:]
+    )
 
 
 def _no_inflating(monkeypatch) -> None:

@@ -21,6 +21,7 @@ from zbuf_occlude.geometry.samples import OccludedCloud
 from zbuf_occlude.io.arrays import DAMAGED_NPZ_ERRORS, check_array_sizes, npz_member_header
 from zbuf_occlude.io.atomic import atomic_h5, atomic_path
 from zbuf_occlude.io.hdf5 import Column, open_hdf5
+from zbuf_occlude.io.regular_files import regular_file_size
 
 __all__ = [
     "write_npz",
@@ -86,8 +87,10 @@ def write_npz(path: str | os.PathLike, cloud: OccludedCloud) -> Path:
 def read_npz(path: str | os.PathLike) -> OccludedCloud:
     """Read a cloud written by :func:`write_npz`, checking the file before anything is inflated.
 
-    The file may come from anyone: its arrays' sizes are read from the zip directory and the
-    ``.npy`` headers first (:func:`zbuf_occlude.io.arrays.check_array_sizes`, cap
+    The file may come from anyone: only a regular file is opened (a FIFO or a device named
+    ``x.npz`` is refused at once instead of blocking or reading without end,
+    :func:`zbuf_occlude.io.regular_files.regular_file_size`), its arrays' sizes are read from
+    the zip directory and the ``.npy`` headers first (:func:`zbuf_occlude.io.arrays.check_array_sizes`, cap
     :data:`MAX_NPZ_BYTES`), then every array's declared shape and dtype; nothing is unpickled.
 
     Parameters
@@ -104,13 +107,15 @@ def read_npz(path: str | os.PathLike) -> OccludedCloud:
     Raises
     ------
     DatasetFormatError
-        Naming the file and what is wrong: not a zip or damaged, arrays inflating past
+        Naming the file and what is wrong: missing or unreadable, not a regular file (a FIFO,
+        a device, a folder), not a zip or damaged, arrays inflating past
         :data:`MAX_NPZ_BYTES` or a header declaring more than its member holds, an object
         (pickled) array, a missing array, ``points`` not ``(n, 3)`` floats with ``n`` at most
         :data:`MAX_NPZ_POINTS`, ``face_index`` not ``(n,)`` integers, or a scalar that is not
         0-d of its kind (numbers for the pose and counts, text for the names).
     """
     path = Path(path)
+    regular_file_size(path, error=DatasetFormatError)  # numpy and zipfile would block on a FIFO
     check_array_sizes(path, max_bytes=MAX_NPZ_BYTES, error=DatasetFormatError)
     try:
         with np.load(path, allow_pickle=False) as z:
