@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import sys
 from pathlib import Path
 
 import h5py
@@ -16,7 +17,7 @@ import pytest
 from zbuf_occlude.cli.main import main as cli_main
 from zbuf_occlude.dataset.layout import CARD_FILE, MANIFEST_FILE, PLAN_FILE
 from zbuf_occlude.dataset.reader import OccludedDataset
-from zbuf_occlude.farm.journal import input_root
+from zbuf_occlude.farm.journal import input_root, portable_command
 from zbuf_occlude.mesh.inputs import FarmObject
 from zbuf_occlude.mesh.load import load_mesh
 
@@ -59,19 +60,29 @@ def _no_path_of(folder: Path, out: Path) -> None:
     for path in out.rglob("*"):
         if path.is_file():
             assert str(folder).encode() not in path.read_bytes(), path
+            if path.suffix in (".json", ".jsonl"):  # nor the machine's name
+                assert b'"host"' not in path.read_bytes(), path
+
+
+def _cli(monkeypatch, args: list[str]) -> int:
+    """``zbuf-occlude ARGS`` as typed in a shell: the card records ``sys.argv``, with the absolute
+    paths given here and the program's own (a virtual environment's)."""
+    monkeypatch.setattr(sys, "argv", [str(Path(sys.prefix) / "bin" / "zbuf-occlude"), *args])
+    return cli_main(args)
 
 
 @pytest.mark.slow
-def test_a_farm_of_the_same_meshes_in_two_places_is_the_same_bytes(tmp_path):
+def test_a_farm_of_the_same_meshes_in_two_places_is_the_same_bytes(tmp_path, monkeypatch):
     outs = []
     for place in ("a", "b/deeper"):
         meshes = _copy_meshes(tmp_path / place / "meshes")
-        assert cli_main(["farm", str(meshes), "--out", str(tmp_path / place / "out"), *ARGS, "--no-progress"]) == 0
+        assert _cli(monkeypatch, ["farm", str(meshes), "--out", str(tmp_path / place / "out"), *ARGS, "--no-progress"]) == 0
         outs.append(tmp_path / place / "out")
         _no_path_of(tmp_path / place, outs[-1])
     assert _contents(outs[0]) == _contents(outs[1])
     card, plan = (json.loads((outs[0] / name).read_text()) for name in (CARD_FILE, PLAN_FILE))
     assert card["source"] == plan["source"] == "meshes"  # the root's name, once
+    assert card["commands"] == [f"zbuf-occlude farm meshes --out out {' '.join(ARGS)} --no-progress"]
     assert sorted(o["source"] for o in plan["objects"]) == sorted(MESHES)
     ds = OccludedDataset(outs[1])
     for i in range(len(ds)):  # the input root joined with a sample's source is its mesh
@@ -81,18 +92,21 @@ def test_a_farm_of_the_same_meshes_in_two_places_is_the_same_bytes(tmp_path):
 
 
 @pytest.mark.slow
-def test_generate_of_mesh_files_in_two_places_is_the_same_bytes(tmp_path):
+def test_generate_of_mesh_files_in_two_places_is_the_same_bytes(tmp_path, monkeypatch):
     # several files given: the root is the deepest folder holding them; h5 rows carry each sample's source
     outs = []
     for place in ("a", "b/deeper"):
         meshes = _copy_meshes(tmp_path / place / "meshes")
-        assert cli_main(["generate", *(str(meshes / rel) for rel in MESHES), "--out", str(tmp_path / place / "out"), *ARGS]) == 0
+        args = ["generate", *(str(meshes / rel) for rel in MESHES), "--out", str(tmp_path / place / "out"), *ARGS]
+        assert _cli(monkeypatch, args) == 0
         outs.append(tmp_path / place / "out")
         _no_path_of(tmp_path / place, outs[-1])
     assert _contents(outs[0]) == _contents(outs[1])
     with h5py.File(outs[0] / "occluded_train.h5", "r") as f:
         assert set(f["source"].asstr()[()]) == {"chair/train/chair_0001.off"}
-    assert json.loads((outs[0] / CARD_FILE).read_text())["source"] == "meshes"
+    card = json.loads((outs[0] / CARD_FILE).read_text())
+    assert card["source"] == "meshes"
+    assert card["commands"] == [f"zbuf-occlude generate {' '.join(f'meshes/{rel}' for rel in MESHES)} --out out {' '.join(ARGS)}"]
 
 
 @pytest.mark.slow
@@ -112,20 +126,42 @@ def test_a_list_files_meshes_are_named_as_the_list_names_them(tmp_path):
 
 
 @pytest.mark.slow
-def test_skipped_inputs_are_named_relative_to_the_root_also_after_a_merge(tmp_path):
+def test_skipped_inputs_are_named_relative_to_the_root_also_after_a_merge(tmp_path, monkeypatch):
     import os
 
     meshes = _copy_meshes(tmp_path / "meshes")
     shutil.copy(SAMPLES / MESHES[0], os.fsdecode(bytes(meshes / "chair" / "train") + b"/caf\xe9.off"))  # not UTF-8
     whole, tasks = tmp_path / "whole", tmp_path / "tasks"
-    assert cli_main(["farm", str(meshes), "--out", str(whole), *ARGS, "--no-progress"]) == 1
+    assert _cli(monkeypatch, ["farm", str(meshes), "--out", str(whole), *ARGS, "--no-progress"]) == 1
     for task in ("0/2", "1/2"):
-        assert cli_main(["farm", str(meshes), "--out", str(tasks), "--shard", task, *ARGS, "--no-progress"]) == 1
-    assert cli_main(["farm-merge", str(tasks), "--no-progress"]) == 1  # the merged data set misses that input too
+        assert _cli(monkeypatch, ["farm", str(meshes), "--out", str(tasks), "--shard", task, *ARGS, "--no-progress"]) == 1
+    assert _cli(monkeypatch, ["farm-merge", str(tasks), "--no-progress"]) == 1  # the merged data set misses that input too
     for out in (whole, tasks):
         card = json.loads((out / CARD_FILE).read_text())
         assert [s["path"] for s in card["skipped_inputs"]] == ["chair/train/caf\\xe9.off"], out
+        assert card["commands"][0].startswith("zbuf-occlude farm meshes --out "), card["commands"]
         _no_path_of(tmp_path, out)
+
+
+def test_a_recorded_command_names_paths_by_the_data_set_the_input_root_or_the_file_name(tmp_path, monkeypatch):
+    root, out, sensor = tmp_path / "in" / "meshes", tmp_path / "runs" / "set", tmp_path / "elsewhere" / "lidar.json"
+    for folder in (root / "chair", out / "shards", sensor.parent):
+        folder.mkdir(parents=True)
+    sensor.write_text("{}")
+    monkeypatch.chdir(tmp_path / "in")
+    argv = [
+        "/home/someone/.venv/bin/zbuf-occlude", "farm", str(root), "meshes/chair", "--out", str(out),
+        f"--list={out / 'shards'}", "--sensor", str(sensor), "--views", "0:0,30:90", "--seed=7", "chair", "",
+    ]  # fmt: skip
+    assert portable_command(argv, out=out, root=root) == (
+        "zbuf-occlude farm meshes meshes/chair --out set --list=set/shards --sensor lidar.json --views 0:0,30:90 "
+        "--seed=7 chair ''"  # a relative word naming nothing here is kept as typed
+    )
+    # a merge has no input root: the folders it reads are named by their own names
+    assert portable_command(["zbuf-occlude", "farm-merge", str(root), "--out", str(out)], out=out) == (
+        "zbuf-occlude farm-merge meshes --out set"
+    )
+    assert portable_command(["zbuf-occlude", "farm", "/"], out=out) == "zbuf-occlude farm /"
 
 
 def _obj(source: str) -> FarmObject:

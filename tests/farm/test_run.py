@@ -590,7 +590,6 @@ def _worker_truth(obj: FarmObject, params: FarmParams):
 
 def _check_record(rec: dict, obj: FarmObject, params: FarmParams, out: Path, mesh, dense, visible) -> None:
     import os
-    import socket
 
     from zbuf_occlude.io.atomic import file_sha256
 
@@ -607,7 +606,7 @@ def _check_record(rec: dict, obj: FarmObject, params: FarmParams, out: Path, mes
     assert rec["n_dense"] == len(dense.points) == params.dense_points and rec["n_faces"] == len(mesh.faces) == 12
     assert rec["sha256"] == [file_sha256(out / s) for s in rec["shards"]]
     assert rec["bytes"] == sum((out / s).stat().st_size for s in rec["shards"]) > 0
-    assert rec["host"] == socket.gethostname() and rec["pid"] == os.getpid() and rec["time_s"] >= 0 and rec["peak_rss_mb"] > 1
+    assert "host" not in rec and rec["pid"] == os.getpid() and rec["time_s"] >= 0 and rec["peak_rss_mb"] > 1
     assert isinstance(rec["renderer"], str) and rec["renderer"]
     from zbuf_occlude.farm.config import record_path
 

@@ -141,10 +141,11 @@ class ObjectRecord(_Model):
     #: The up axis the mesh was read with (``+x`` … ``-z``) and why (the file, the layout, or the option).
     up: str | None = None
     up_source: str | None = None
-    #: Wall seconds, when it finished (ISO 8601, UTC), the OpenGL renderer, the host, the process.
+    #: Wall seconds, when it finished (ISO 8601, UTC), the OpenGL renderer, the process.
     time_s: float | None = None
     finished_at: str | None = None
     renderer: str | None = None
+    #: The machine's name: written by earlier versions only (a data set names no machine), still read.
     host: str | None = None
     pid: int | None = None
     peak_rss_mb: float | None = None

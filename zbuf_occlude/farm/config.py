@@ -369,7 +369,9 @@ class RunOptions:
         Show progress on stderr (objects, views/s, ETA): a bar on a terminal, a line every 10 s in a
         log (:mod:`zbuf_occlude.io.progress`).
     command : str, optional
-        Command line for the data set card (default: this process's ``sys.argv``).
+        Command line for the data set card (default: this process's ``sys.argv``), recorded with
+        its paths relative to the data set or the input root
+        (:func:`~zbuf_occlude.farm.journal.portable_command`).
     source_text : str, optional
         What the card names as the source (default: the input root's name,
         :func:`~zbuf_occlude.farm.journal.input_root`).

@@ -203,6 +203,53 @@ def root_name(root: Path) -> str:
     return root.name or root.anchor  # the file system's root has no name
 
 
+def portable_command(argv: Sequence[str], *, out: Path, root: Path | None = None) -> str:
+    """A command line as a data set records it (the card's ``commands``): each argument that
+    names a path is written without the author's folders, so the record reveals nothing of the
+    machine and is the same wherever the data set was built.
+
+    An argument names a path when it is absolute or names something that exists (relative to
+    the working folder); ``--option=value`` is read as its value.  Such a path is written as
+    ``out``'s name (and the path below it) when it lies in ``out``, else as ``root``'s name
+    (:func:`root_name`) and the path below it when it lies in the input root, else as its file
+    name alone (a sensor file, a program).  Other arguments are kept as typed.
+
+    Parameters
+    ----------
+    argv : sequence of str
+        The command line, the program first (``["zbuf-occlude", "farm", ...]``).
+    out : Path
+        The data set's folder.
+    root : Path, optional
+        The input root (:func:`input_root`); None for a merge, which has none.
+
+    Returns
+    -------
+    str
+        The command, shell-quoted (:func:`shlex.join`).
+    """
+    import shlex
+
+    bases = [(Path(os.path.abspath(out)), root_name(Path(os.path.abspath(out))))]
+    if root is not None:
+        bases.append((Path(os.path.abspath(root)), root_name(root)))
+
+    def portable(arg: str) -> str:
+        if not arg or not (os.path.isabs(arg) or os.path.lexists(arg)):
+            return arg
+        path = Path(os.path.abspath(arg))
+        for base, name in bases:
+            if path == base or base in path.parents:
+                return printable_path(Path(name, path.relative_to(base)).as_posix())
+        return printable_path(path.name or path.anchor)
+
+    words = []
+    for arg in argv:
+        option, eq, value = arg.partition("=")
+        words.append(f"{option}={portable(value)}" if eq and option.startswith("-") else portable(arg))
+    return shlex.join(words)
+
+
 def plan_doc(objects: Sequence[FarmObject], params: FarmParams, source: str, layout: str | None = None) -> dict[str, Any]:
     """The plan of a run (``plan.json``); class names that would break ``shape_names.txt`` are refused here, before any work.
 

@@ -8,7 +8,6 @@ import logging
 import os
 import shlex
 import shutil
-import socket
 import sys
 import time
 from collections.abc import Iterator, Sequence
@@ -40,6 +39,7 @@ from zbuf_occlude.farm.journal import (
     manifest_lines,
     objects_of,
     plan_doc,
+    portable_command,
     read_json,
     read_plan,
     relative_objects,
@@ -224,11 +224,11 @@ def _run_locked(
     if n_tasks == 1 or read_json(out / PLAN_FILE) != plan:
         # tasks of one array share plan.json; it is written once, the same for all (checked above)
         write_json(out / PLAN_FILE, plan)
-    command = run.command or shlex.join(sys.argv)
+    command = portable_command(shlex.split(run.command) if run.command else sys.argv, out=out, root=root)
     recorded_skips = [(root_relative(p, root), r) for p, r in skipped]  # the data set's, relative as its sources
     write_json(
         out / TASK_DIR / f"task-{task}-of-{n_tasks}.json",
-        {"shard": [task, n_tasks], "command": command, "version": package_version(), "host": socket.gethostname(),
+        {"shard": [task, n_tasks], "command": command, "version": package_version(),
          "started": datetime.now(timezone.utc).isoformat(timespec="seconds"), "objects": [o.index for o in mine],
          "skipped_inputs": skipped_inputs_doc(recorded_skips)},
     )  # fmt: skip
@@ -405,7 +405,7 @@ def _merge_locked(folders: list[Path], out: Path, plan: dict[str, Any], *, progr
         if index not in records:
             records[index] = rec
             write_json(record_path(out, index), rec)
-    commands.append(shlex.join(sys.argv))
+    commands.append(portable_command(sys.argv, out=out))
     finalize(out, plan, records, commands, skipped)
     n_ok = sum(r["status"] == "ok" for r in records.values())
     return FarmSummary.of_records(

@@ -7,7 +7,6 @@ import json
 import logging
 import os
 import resource
-import socket
 import sys
 import time
 from collections.abc import Iterable, Iterator
@@ -222,7 +221,6 @@ def process_object(obj: FarmObject, params: FarmParams, out: str | os.PathLike, 
         time_s=round(time.perf_counter() - t0, 4),
         finished_at=datetime.now(timezone.utc).isoformat(timespec="seconds"),
         renderer=_renderer_name() if record["status"] == "ok" else None,
-        host=socket.gethostname(),
         pid=os.getpid(),
         peak_rss_mb=round(_peak_rss_mb(), 1),
     )
