@@ -31,3 +31,25 @@ def test_an_option_like_none_of_them_gets_no_guess(capsys) -> None:
         main(["info", "--qqqqqq"])
     err = capsys.readouterr().err
     assert "usage: zbuf-occlude info" in err and "unrecognized arguments: --qqqqqq" in err and "did you mean" not in err
+
+
+@pytest.mark.parametrize(
+    ("argv", "nearest"),
+    [(["generate", "--veiws", "0:0"], "--views"), (["generate", "data/samples", "--otu", "OUT"], "--out")],
+)
+def test_a_typo_is_named_before_a_missing_required_option(argv, nearest, tmp_path, capsys) -> None:
+    # argparse alone says only "the following arguments are required: --out"
+    argv = [str(tmp_path / "o") if a == "OUT" else a for a in argv]
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and "usage: zbuf-occlude generate " in err
+    assert "unrecognized arguments: " in err and f"did you mean {nearest}?" in err and "required" not in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_missing_required_option_alone_is_named_and_stays_required(capsys) -> None:
+    for _ in range(2):  # the first look for typos leaves every option as required as it was
+        with pytest.raises(SystemExit) as info:
+            main(["generate", "data/samples"])
+        assert info.value.code == 2 and "the following arguments are required: --out" in capsys.readouterr().err

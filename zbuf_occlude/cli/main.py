@@ -370,7 +370,8 @@ def _remove_if_empty(folders: list[Path]) -> None:
 
 def parse_command_line(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> argparse.Namespace:
     """``parser.parse_args(argv)``, but an unknown option is refused by the sub-command it was given to:
-    its usage, and the nearest of its options (``--veiws``: "did you mean --views?").
+    its usage, and the nearest of its options (``--veiws``: "did you mean --views?"), also when a
+    required option is missing (a mistyped ``--otu`` is named, not only the missing ``--out``).
 
     Raises
     ------
@@ -379,9 +380,10 @@ def parse_command_line(parser: argparse.ArgumentParser, argv: Sequence[str] | No
     """
     import difflib
 
-    args, extras = parser.parse_known_args(argv)
+    with _nothing_required(parser):  # a first look for unknown options, which argparse reports last
+        args, extras = parser.parse_known_args(argv)
     if not extras:
-        return args
+        return parser.parse_args(argv)
     chosen = parser
     while True:  # down the sub-commands given (``experiment sim2real``)
         subs = [a for a in chosen._actions if isinstance(a, argparse._SubParsersAction)]
@@ -395,6 +397,26 @@ def parse_command_line(parser: argparse.ArgumentParser, argv: Sequence[str] | No
             near = difflib.get_close_matches(extra.split("=", 1)[0], list(chosen._option_string_actions), n=1, cutoff=0.6)
             hints += [f"did you mean {near[0]}?"] if near else []
     chosen.error(f"unrecognized arguments: {' '.join(extras)}" + (f" ({'; '.join(hints)})" if hints else ""))
+
+
+@contextlib.contextmanager
+def _nothing_required(parser: argparse.ArgumentParser):
+    """Every argument (and group of exclusive ones) of ``parser`` and its sub-commands optional
+    while the block runs."""
+    actions, stack = [], [parser]
+    while stack:
+        p = stack.pop()
+        for action in [*p._actions, *p._mutually_exclusive_groups]:
+            actions.append((action, action.required))
+            if isinstance(action, argparse._SubParsersAction):
+                stack += list(dict.fromkeys(action.choices.values()))  # aliases name one parser
+    try:
+        for action, _ in actions:
+            action.required = False
+        yield
+    finally:
+        for action, required in actions:
+            action.required = required
 
 
 def _run(argv: Sequence[str] | None) -> int:
