@@ -68,3 +68,22 @@ def test_farm_merge_progress_in_a_log(tree, tmp_path):
     text = _stderr_to_file(tmp_path, "farm-merge", str(tmp_path / "out"))
     assert "\r" not in text
     assert _progress_lines(text, "farm-merge")[-1].startswith("farm-merge: 2/2 obj, "), text
+
+
+@pytest.mark.slow
+def test_verify_progress_in_a_log(tree, tmp_path):
+    _stderr_to_file(tmp_path, "farm", str(tree), "--out", str(tmp_path / "out"), *TINY, "--no-progress")
+    text = _stderr_to_file(tmp_path, "verify", str(tmp_path / "out"))
+    assert "\r" not in text
+    assert [line.split(" obj,")[0] for line in _progress_lines(text, "verify")] == ["verify: 1/2", "verify: 2/2"], text
+    quiet = _stderr_to_file(tmp_path, "verify", str(tmp_path / "out"), "--no-progress")
+    assert _progress_lines(quiet, "verify") == [], quiet
+
+
+def test_scan_progress_in_a_log(tmp_path):
+    args = ["scan", "box", "--sensor", "vlp16", "--samples", "2", "--out", str(tmp_path / "scans")]
+    text = _stderr_to_file(tmp_path, *args)
+    assert "\r" not in text
+    assert [line.split(" scan")[0] for line in _progress_lines(text, "scan")] == ["scan: 1/2", "scan: 2/2"], text
+    quiet = _stderr_to_file(tmp_path, *args, "--no-progress")
+    assert _progress_lines(quiet, "scan") == [], quiet

@@ -121,6 +121,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
     from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
     from zbuf_occlude.sensors.lidar import Lidar
     from zbuf_occlude.sensors.scan import look_at_pose, scan
+    from zbuf_occlude.io.progress import progress as progress_bar
     from zbuf_occlude.sensors.scene import GROUND_ID, load_scene
 
     sensor = _with_return_physics(sensor_from_name(args.sensor), args)
@@ -148,7 +149,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
         else:  # a camera looks at the first object from the sensor position
             target = scene.build().local_to_world[1][:3, 3] if scene.objects else np.array([1.0, 0.0, scene.ground_z_m])
             pose = look_at_pose(scene.default_sensor_pose()[:3, 3], target + [0, 0, 0.5])
-        for k in range(args.samples):
+        for k in progress_bar(range(args.samples), desc="scan", unit="scan", enabled=not args.no_progress):
             if isinstance(sensor, AirborneScanner):  # a flight over the scene's ground (world frame)
                 from zbuf_occlude.sensors.airborne import scan_airborne
 
@@ -200,7 +201,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
                      dist.width_profile)  # fmt: skip
         if not isinstance(sensor, AirborneScanner):  # an aircraft flies its altitude above the object
             check_outside(dist, None if isinstance(mesh, dict) else mesh.extents)
-        for k in range(args.samples):
+        for k in progress_bar(range(args.samples), desc="scan", unit="scan", enabled=not args.no_progress):
             rng = derive_rng(args.seed, object_key(src.name), k)
             placement = draw_placement(dist, rng)
             crop = object_crop(mesh, sensor, placement, seed=int(rng.integers(2**63)), backend=args.backend, frame=args.frame)
@@ -272,6 +273,7 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--azimuth", action=Checked, check=interval, default="0", help="direction of the object from the sensor, degrees (N or LO:HI) (default: %(default)s)")
     p.add_argument("--yaw", action=Checked, check=interval, default="0", help="the object's heading, degrees (N or LO:HI) (default: %(default)s)")
     p.add_argument("--samples", action=Checked, check=count("MAX_SAMPLES"), default=1, help="scans, each with its own draws (default: %(default)s)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar (or, when stderr is a file, no progress lines)")
     p.add_argument("--crop", action="store_true", help="write only the object's returns; default: the object and the ground in the object's azimuth sector (±5°)")
     p.add_argument(
         "--ground-margin", metavar="M", action=Checked, check=real(0.0, unit="metres"),

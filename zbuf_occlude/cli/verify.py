@@ -13,7 +13,7 @@ def cmd_verify(args: argparse.Namespace) -> int:
     """Print every problem (exit 1) or a one-line summary (exit 0)."""
     import sys
 
-    report = verify_dataset(args.path)
+    report = verify_dataset(args.path, progress=not args.no_progress)
     for problem in report.problems:
         print(f"PROBLEM {problem}", file=sys.stderr)
     if not report.ok:
@@ -33,4 +33,5 @@ def add_verify_parser(sub: argparse._SubParsersAction) -> None:
         "inside the folder, every file's SHA-256, every shard's datasets. Exit 0 when clean, 1 naming every problem.",
     )
     p.add_argument("path", metavar="DIR", help="the data set folder")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar (or, when stderr is a file, no progress lines)")
     p.set_defaults(func=cmd_verify)

@@ -134,13 +134,15 @@ def _check_sample_file(path: Path, card: Card) -> str | None:
     return None
 
 
-def verify_dataset(path: str | os.PathLike) -> VerifyReport:
+def verify_dataset(path: str | os.PathLike, *, progress: bool = False) -> VerifyReport:
     """Check a data set folder and list every problem found.
 
     Parameters
     ----------
     path : str or PathLike
         The data set folder (``farm --out``, ``generate --out``).
+    progress : bool
+        Show the objects checked on stderr (:func:`zbuf_occlude.io.progress.progress`).
 
     Returns
     -------
@@ -203,7 +205,9 @@ def verify_dataset(path: str | os.PathLike) -> VerifyReport:
     listed: dict[str, list[str]] = {}
     split_bytes: dict[str, int] = {}  # the shards' recorded sizes, which bound the joined files
     missing_checksums = 0
-    for lineno, _, rec in rows:
+    from zbuf_occlude.io.progress import progress as progress_bar
+
+    for lineno, _, rec in progress_bar(rows, desc="verify", unit="obj", enabled=progress):
         if rec is None:
             continue
         report.objects += 1

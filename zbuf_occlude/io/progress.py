@@ -1,7 +1,8 @@
 """Progress of the long commands on stderr: a tqdm bar on a terminal, one line at a time in a log.
 
 Every command that runs longer than a few seconds (``generate``, ``farm``, ``farm-merge``, the
-experiments, ``compare``, ``elevation-profile``, the protocols) reports through :func:`progress`:
+experiments, ``compare``, ``elevation-profile``, the protocols, ``scan``, ``verify``) reports
+through :func:`progress`:
 
 - stderr is a terminal: a tqdm bar, redrawn in place;
 - stderr is a file or a pipe: :class:`LineProgress`, a tqdm whose every update is one
