@@ -7,6 +7,7 @@ Shipped meshes (``data/samples``) copied into two folders, one pose, 32-point sa
 from __future__ import annotations
 
 import json
+import shlex
 import shutil
 import sys
 from pathlib import Path
@@ -162,6 +163,9 @@ def test_a_recorded_command_names_paths_by_the_data_set_the_input_root_or_the_fi
         "zbuf-occlude farm-merge meshes --out set"
     )
     assert portable_command(["zbuf-occlude", "farm", "/"], out=out) == "zbuf-occlude farm /"
+    # a command given as text (RunOptions.command) is split as a shell would; one it cannot split, at white space
+    assert portable_command(f"my-script --out '{out}' --note 'a b'", out=out) == "my-script --out set --note 'a b'"
+    assert portable_command(f"my-script {out} 'unclosed", out=out) == shlex.join(["my-script", "set", "'unclosed"])
 
 
 def _obj(source: str) -> FarmObject:

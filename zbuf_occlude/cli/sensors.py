@@ -116,12 +116,12 @@ def _largest_side(args: argparse.Namespace, mesh) -> tuple[float, float]:
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
+    from zbuf_occlude.io.progress import progress as progress_bar
     from zbuf_occlude.sensors.airborne import AirborneScanner
     from zbuf_occlude.sensors.crops import object_crop
     from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
     from zbuf_occlude.sensors.lidar import Lidar
     from zbuf_occlude.sensors.scan import look_at_pose, scan
-    from zbuf_occlude.io.progress import progress as progress_bar
     from zbuf_occlude.sensors.scene import GROUND_ID, load_scene
 
     sensor = _with_return_physics(sensor_from_name(args.sensor), args)

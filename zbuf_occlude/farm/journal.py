@@ -203,7 +203,7 @@ def root_name(root: Path) -> str:
     return root.name or root.anchor  # the file system's root has no name
 
 
-def portable_command(argv: Sequence[str], *, out: Path, root: Path | None = None) -> str:
+def portable_command(argv: str | Sequence[str], *, out: Path, root: Path | None = None) -> str:
     """A command line as a data set records it (the card's ``commands``): each argument that
     names a path is written without the author's folders, so the record reveals nothing of the
     machine and is the same wherever the data set was built.
@@ -216,8 +216,9 @@ def portable_command(argv: Sequence[str], *, out: Path, root: Path | None = None
 
     Parameters
     ----------
-    argv : sequence of str
-        The command line, the program first (``["zbuf-occlude", "farm", ...]``).
+    argv : str or sequence of str
+        The command line, the program first (``["zbuf-occlude", "farm", ...]``); a text is split
+        as a shell would (one that cannot be, such as one with an unclosed quote, at white space).
     out : Path
         The data set's folder.
     root : Path, optional
@@ -230,6 +231,11 @@ def portable_command(argv: Sequence[str], *, out: Path, root: Path | None = None
     """
     import shlex
 
+    if isinstance(argv, str):
+        try:
+            argv = shlex.split(argv)
+        except ValueError:  # an unclosed quote: its words, so that each path is still rewritten
+            argv = argv.split()
     bases = [(Path(os.path.abspath(out)), root_name(Path(os.path.abspath(out))))]
     if root is not None:
         bases.append((Path(os.path.abspath(root)), root_name(root)))

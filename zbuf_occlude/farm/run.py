@@ -224,7 +224,7 @@ def _run_locked(
     if n_tasks == 1 or read_json(out / PLAN_FILE) != plan:
         # tasks of one array share plan.json; it is written once, the same for all (checked above)
         write_json(out / PLAN_FILE, plan)
-    command = portable_command(shlex.split(run.command) if run.command else sys.argv, out=out, root=root)
+    command = portable_command(run.command or sys.argv, out=out, root=root)
     recorded_skips = [(root_relative(p, root), r) for p, r in skipped]  # the data set's, relative as its sources
     write_json(
         out / TASK_DIR / f"task-{task}-of-{n_tasks}.json",
