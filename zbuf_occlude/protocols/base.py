@@ -24,6 +24,7 @@ import numpy as np
 from zbuf_occlude.dataset.layout import PROTOCOL_FILE
 from zbuf_occlude.errors import InvalidInputError, OutputError, ZbufOccludeError
 from zbuf_occlude.geometry.samples import PROTOCOL_STREAM, derive_rng
+from zbuf_occlude.farm.journal import input_root, relative_objects, root_name, root_relative
 from zbuf_occlude.farm.ownership import check_inputs_outside_out
 from zbuf_occlude.io.atomic import atomic_h5, write_text
 from zbuf_occlude.io.json_files import read_json_file
@@ -183,18 +184,31 @@ def _earlier_options(out: Path) -> dict[str, Any] | None:
     return old
 
 
-def _record_options(out: Path, protocol: Protocol, options: ProtocolOptions, objects: Sequence[FarmObject], overwrite: bool) -> None:
+def _record_options(
+    out: Path, protocol: Protocol, options: ProtocolOptions, objects: Sequence[FarmObject], root: Path, overwrite: bool
+) -> None:
+    """Write ``protocol.json``: the options and the meshes, each named relative to the input root
+    ``root`` (which is named by its name only); refuse an earlier run's other options or meshes."""
     recorded = {"protocol": protocol.name, **asdict(options)}
     recorded["extra"] = dict(options.extra)
     # shards are named by plan index: another set of meshes must not resume from them
-    recorded["objects"] = [[o.name, o.source] for o in objects]
+    recorded["objects"] = [[o.name, root_relative(o.source, root)] for o in objects]
+    recorded["source"] = root_name(root)
     old = _earlier_options(out)
-    if old is not None and not overwrite and old != json.loads(json.dumps(recorded)):
+    if old is not None and not overwrite and old != json.loads(json.dumps(recorded)) and old != _as_written_before(recorded, objects):
         raise InvalidInputError(f"{out} holds a run with other options or meshes ({out / PROTOCOL_FILE}); use --overwrite or another --out")
     if old is not None and overwrite:
         for index in range(len(old["objects"])):  # the shards that run wrote, by its own names; nothing else
             _shard(out, old["protocol"], index).unlink(missing_ok=True)
     write_text(out / PROTOCOL_FILE, json.dumps(recorded, indent=1, sort_keys=True) + "\n")
+
+
+def _as_written_before(recorded: dict[str, Any], objects: Sequence[FarmObject]) -> dict[str, Any]:
+    """``recorded`` as earlier versions wrote it (each mesh by the path it was found at, no
+    ``source``): their runs resume rather than being refused."""
+    before = {k: v for k, v in recorded.items() if k != "source"}
+    before["objects"] = [[o.name, o.source] for o in objects]
+    return json.loads(json.dumps(before))
 
 
 def run_protocol(
@@ -226,12 +240,14 @@ def run_protocol(
     if out.exists() and not out.is_dir():
         raise InvalidInputError(f"--out {out} exists and is not a folder")
     check_inputs_outside_out(out, (*paths, *(o.source for o in objects)))  # before anything in out is touched
-    _record_options(out, protocol, options, objects, overwrite)
+    root = input_root(paths, objects)
+    _record_options(out, protocol, options, objects, root, overwrite)
+    named = relative_objects(objects, root)  # what the outputs write: no absolute path of the author's
     run = ProtocolRun(failures=[(s.path, s.reason) for s in skipped])
     shards: list[Path] = []
     from zbuf_occlude.io.progress import progress as progress_bar
 
-    for obj in progress_bar(objects, desc=protocol.name, unit="obj", enabled=progress):
+    for found, obj in progress_bar(list(zip(objects, named)), desc=protocol.name, unit="obj", enabled=progress):
         shard = _shard(out, protocol.name, obj.index)
         if shard.exists():
             run.resumed += 1
@@ -240,12 +256,12 @@ def run_protocol(
         try:
             from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported when a protocol runs
 
-            mesh = load_mesh(obj.source, up=options.up)
+            mesh = load_mesh(found.source, up=options.up)
             rng = derive_rng(options.seed, obj.key, PROTOCOL_STREAM)
             arrays = protocol.make(mesh, obj, options, rng)
         except ZbufOccludeError as exc:
-            run.failures.append((obj.source, str(exc)))
-            log.warning("%s: %s", obj.source, exc)
+            run.failures.append((found.source, str(exc)))
+            log.warning("%s: %s", found.source, exc)
             continue
         attrs = {"protocol": protocol.name, "name": obj.name, "source": obj.source, "class_name": obj.class_name,
                  "split": obj.split, "label": obj.label, "object_index": obj.index}  # fmt: skip
@@ -254,5 +270,5 @@ def run_protocol(
         shards.append(shard)
     if protocol.finish is not None and shards:
         done = {int(p.stem.rsplit("_", 1)[1]) for p in shards}
-        run.files = protocol.finish(out, [o for o in objects if o.index in done], shards, options)
+        run.files = protocol.finish(out, [o for o in named if o.index in done], shards, options)
     return run
