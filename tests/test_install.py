@@ -72,6 +72,14 @@ class TestInstallScript:
         assert installs == ["-m pip install -q --upgrade pip", "-m pip install -q -e ."]
         assert not any("torch" in c for c in calls)
 
+    @pytest.mark.parametrize("args", [[], ["--test"]])
+    def test_the_package_is_compiled_after_it_is_installed(self, fake_checkout, args):
+        # installed in place, pip compiles none of it; with PYTHONDONTWRITEBYTECODE each start would
+        rc, calls, out = _install(fake_checkout, *args, CPU_INDEX_OK="1")
+        assert rc == 0, out
+        last_install = max(i for i, c in enumerate(calls) if c.startswith("-m pip install"))
+        assert calls[last_install + 1:] == ["-m compileall -q zbuf_occlude"], calls
+
     def test_test_install_takes_the_cpu_build_first_without_a_gpu(self, fake_checkout):
         rc, calls, out = _install(fake_checkout, "--test", CPU_INDEX_OK="1")
         assert rc == 0, out
