@@ -236,17 +236,16 @@ def portable_command(argv: str | Sequence[str], *, out: Path, root: Path | None 
             argv = shlex.split(argv)
         except ValueError:  # an unclosed quote: its words, so that each path is still rewritten
             argv = argv.split()
-    bases = [(Path(os.path.abspath(out)), root_name(Path(os.path.abspath(out))))]
-    if root is not None:
-        bases.append((Path(os.path.abspath(root)), root_name(root)))
+    bases = [Path(os.path.abspath(base)) for base in (out, root) if base is not None]
 
     def portable(arg: str) -> str:
         if not arg or not (os.path.isabs(arg) or os.path.lexists(arg)):
             return arg
+        for base in bases:
+            rel = root_relative(arg, base)
+            if rel != ".." and not rel.startswith("../"):
+                return printable_path(Path(root_name(base), rel).as_posix())
         path = Path(os.path.abspath(arg))
-        for base, name in bases:
-            if path == base or base in path.parents:
-                return printable_path(Path(name, path.relative_to(base)).as_posix())
         return printable_path(path.name or path.anchor)
 
     words = []
