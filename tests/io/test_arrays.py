@@ -76,3 +76,14 @@ def test_check_array_sizes_names_the_file_of_a_damaged_zip(tmp_path, how, raised
     path = _damaged(tmp_path / "damaged.npz", how)
     with pytest.raises(InvalidInputError, match=rf"^{path}: cannot read its array headers \({raised}: "):
         check_array_sizes(path, max_bytes=1 << 20, error=InvalidInputError)
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "mkfifo"), reason="needs os.mkfifo")
+@pytest.mark.parametrize("name", ["pipe.npz", "pipe.npy"])
+def test_check_array_sizes_refuses_a_fifo_before_reading_it(tmp_path, name):
+    # zipfile and numpy would wait for a writer forever; every reader of arrays relies on this check
+    import os
+
+    os.mkfifo(tmp_path / name)
+    with pytest.raises(InvalidInputError, match=rf"{name}: is a FIFO; only regular files are read"):
+        check_array_sizes(tmp_path / name, max_bytes=1 << 20, error=InvalidInputError)

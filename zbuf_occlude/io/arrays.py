@@ -21,6 +21,7 @@ import numpy as np
 from numpy.lib import format as npy_format
 
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
+from zbuf_occlude.io.regular_files import open_regular_file
 
 __all__ = ["check_array_sizes", "npy_header", "npz_member_header", "DAMAGED_NPZ_ERRORS"]
 
@@ -118,8 +119,10 @@ def check_array_sizes(path: str | PathLike[str], *, max_bytes: int, error: type[
     Raises
     ------
     ``error``
-        Naming the file (and member), the declared bytes and the cap; or that its headers
-        cannot be read (not a zip, damaged, not ``.npy``).
+        Naming the file (and member), the declared bytes and the cap; that it is not a regular
+        file (a FIFO or a device is refused before it is read:
+        :func:`zbuf_occlude.io.regular_files.open_regular_file`); or that its headers cannot be
+        read (not a zip, damaged, not ``.npy``).
     """
     path = Path(path)
     try:
@@ -131,14 +134,19 @@ def check_array_sizes(path: str | PathLike[str], *, max_bytes: int, error: type[
 
 
 def _check_array_sizes(path: Path, max_bytes: int, error: type[ZbufOccludeError]) -> None:
-    if path.suffix.lower() == ".npy":
-        with open(path, "rb") as fh:
+    fh, size = open_regular_file(path, error=error)  # zipfile and numpy would block on a FIFO
+    with fh:
+        if path.suffix.lower() == ".npy":
             declared = _declared_bytes(fh)
-        if declared > min(max_bytes, path.stat().st_size):
-            raise error(f"{path}: its header declares {declared:,} bytes of array, more than the file "
-                        f"({path.stat().st_size:,} bytes) or the {max_bytes:,} accepted")  # fmt: skip
-        return
-    with zipfile.ZipFile(path) as zf:
+            if declared > min(max_bytes, size):
+                raise error(f"{path}: its header declares {declared:,} bytes of array, more than the file "
+                            f"({size:,} bytes) or the {max_bytes:,} accepted")  # fmt: skip
+            return
+        _check_npz_sizes(path, fh, max_bytes, error)
+
+
+def _check_npz_sizes(path: Path, fh: BinaryIO, max_bytes: int, error: type[ZbufOccludeError]) -> None:
+    with zipfile.ZipFile(fh) as zf:
         members = zf.infolist()
         inflated = sum(m.file_size for m in members)
         if inflated > max_bytes:

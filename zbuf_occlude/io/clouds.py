@@ -21,7 +21,6 @@ from zbuf_occlude.geometry.samples import OccludedCloud
 from zbuf_occlude.io.arrays import DAMAGED_NPZ_ERRORS, check_array_sizes, npz_member_header
 from zbuf_occlude.io.atomic import atomic_h5, atomic_path
 from zbuf_occlude.io.hdf5 import Column, open_hdf5
-from zbuf_occlude.io.regular_files import regular_file_size
 
 __all__ = [
     "write_npz",
@@ -87,11 +86,11 @@ def write_npz(path: str | os.PathLike, cloud: OccludedCloud) -> Path:
 def read_npz(path: str | os.PathLike) -> OccludedCloud:
     """Read a cloud written by :func:`write_npz`, checking the file before anything is inflated.
 
-    The file may come from anyone: only a regular file is opened (a FIFO or a device named
-    ``x.npz`` is refused at once instead of blocking or reading without end,
-    :func:`zbuf_occlude.io.regular_files.regular_file_size`), its arrays' sizes are read from
-    the zip directory and the ``.npy`` headers first (:func:`zbuf_occlude.io.arrays.check_array_sizes`, cap
-    :data:`MAX_NPZ_BYTES`), then every array's declared shape and dtype; nothing is unpickled.
+    The file may come from anyone: :func:`zbuf_occlude.io.arrays.check_array_sizes` opens only a
+    regular file (a FIFO or a device named ``x.npz`` is refused at once instead of blocking or
+    reading without end) and reads its arrays' sizes from the zip directory and the ``.npy``
+    headers (cap :data:`MAX_NPZ_BYTES`); then every array's declared shape and dtype is
+    checked; nothing is unpickled.
 
     Parameters
     ----------
@@ -115,8 +114,7 @@ def read_npz(path: str | os.PathLike) -> OccludedCloud:
         0-d of its kind (numbers for the pose and counts, text for the names).
     """
     path = Path(path)
-    regular_file_size(path, error=DatasetFormatError)  # numpy and zipfile would block on a FIFO
-    check_array_sizes(path, max_bytes=MAX_NPZ_BYTES, error=DatasetFormatError)
+    check_array_sizes(path, max_bytes=MAX_NPZ_BYTES, error=DatasetFormatError)  # a regular file, sizes first
     try:
         with np.load(path, allow_pickle=False) as z:
             keys = [k for k in _NPZ_ARRAYS if k in z.files or k not in _NPZ_OPTIONAL]

@@ -28,7 +28,7 @@ from typing import BinaryIO
 
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
 
-__all__ = ["MAX_NAMED_FILE_BYTES", "file_digest", "read_regular_file", "regular_file_size"]
+__all__ = ["MAX_NAMED_FILE_BYTES", "file_digest", "open_regular_file", "read_regular_file", "regular_file_size"]
 
 #: Largest file :func:`read_regular_file` reads unless given another cap: 2 GiB, the most a
 #: mesh may name (a glTF buffer, an OBJ material, a texture).  glTF buffers are addressed with
@@ -44,8 +44,37 @@ def _nonblocking(name: str, flags: int) -> int:
     return os.open(name, flags | getattr(os, "O_NONBLOCK", 0))
 
 
-def _open_regular(path: Path, error: type[ZbufOccludeError]) -> tuple[BinaryIO, int]:
-    """(binary file, size) of ``path`` opened for reading; refuses anything but a regular file."""
+def open_regular_file(
+    path: str | PathLike[str], *, max_bytes: int | None = None, error: type[ZbufOccludeError] = InvalidInputError
+) -> tuple[BinaryIO, int]:
+    """``path`` opened for reading in binary, when it is a regular file (of at most ``max_bytes``).
+
+    The one opener of this module's rules (module docstring): opened without blocking, its type
+    checked on the open file, its size checked before a byte is read.
+
+    Parameters
+    ----------
+    path : str or PathLike
+    max_bytes : int, optional
+        The cap on the file's size (default: none).
+    error : type
+        The exception raised (:class:`~zbuf_occlude.errors.MeshLoadError` for meshes,
+        :class:`~zbuf_occlude.errors.InvalidInputError` or a subclass for scans and clouds).
+
+    Returns
+    -------
+    file : binary file
+        Open: the caller closes it (``with file:``).
+    size : int
+        The file's size in bytes when it was opened.
+
+    Raises
+    ------
+    ``error``
+        Naming the file: missing, unreadable, a FIFO, socket, device or folder, or larger than
+        ``max_bytes`` (both numbers given).
+    """
+    path = Path(path)
     try:
         fh = open(path, "rb", opener=_nonblocking)  # noqa: SIM115 - closed by the callers
     except OSError as exc:
@@ -55,6 +84,9 @@ def _open_regular(path: Path, error: type[ZbufOccludeError]) -> tuple[BinaryIO, 
         fh.close()
         kind = "a FIFO" if stat.S_ISFIFO(info.st_mode) else "a folder" if stat.S_ISDIR(info.st_mode) else "not a regular file"
         raise error(f"{path}: is {kind}; only regular files are read")
+    if max_bytes is not None and info.st_size > max_bytes:
+        fh.close()
+        raise error(f"{path}: {info.st_size:,} bytes, more than the {max_bytes:,} a file read here may have")
     return fh, int(info.st_size)
 
 
@@ -78,7 +110,7 @@ def regular_file_size(path: str | PathLike[str], *, error: type[ZbufOccludeError
     ``error``
         Naming the file: missing, unreadable, or a FIFO, socket, device or folder.
     """
-    fh, size = _open_regular(Path(path), error)
+    fh, size = open_regular_file(path, error=error)
     fh.close()
     return size
 
@@ -108,14 +140,11 @@ def read_regular_file(
         Naming the file: missing, unreadable, not a regular file (a FIFO would block), or
         larger than ``max_bytes`` (both numbers given).
     """
-    path = Path(path)
-    fh, size = _open_regular(path, error)
+    fh, _ = open_regular_file(path, max_bytes=max_bytes, error=error)
     with fh:
-        if size > max_bytes:
-            raise error(f"{path}: {size:,} bytes, more than the {max_bytes:,} a file named here may have")
         data = fh.read(max_bytes + 1)  # the file may grow after fstat: never read past the cap
     if len(data) > max_bytes:
-        raise error(f"{path}: more than the {max_bytes:,} bytes a file named here may have")
+        raise error(f"{path}: more than the {max_bytes:,} bytes a file read here may have")
     return data
 
 
@@ -140,11 +169,8 @@ def file_digest(path: str | PathLike[str], *, max_bytes: int, error: type[ZbufOc
     ``error``
         As :func:`read_regular_file`.
     """
-    path = Path(path)
-    fh, size = _open_regular(path, error)
+    fh, _ = open_regular_file(path, max_bytes=max_bytes, error=error)
     with fh:
-        if size > max_bytes:
-            raise error(f"{path}: {size:,} bytes, more than the {max_bytes:,} a file read here may have")
         digest = hashlib.md5(usedforsecurity=False)
         while chunk := fh.read(_HASH_CHUNK_BYTES):
             digest.update(chunk)

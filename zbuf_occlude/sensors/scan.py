@@ -20,7 +20,6 @@ from numpy.typing import ArrayLike, NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.arrays import DAMAGED_NPZ_ERRORS, check_array_sizes
 from zbuf_occlude.io.atomic import atomic_path
-from zbuf_occlude.io.regular_files import regular_file_size
 from zbuf_occlude.sensors.depth_camera import DepthCamera
 from zbuf_occlude.sensors.lidar import Lidar
 from zbuf_occlude.sensors.raycast import BACKENDS, cast_embree, cast_zbuffer
@@ -190,8 +189,7 @@ def read_scan_npz(path: str | os.PathLike) -> Scan:
     """
     path = Path(path)
     try:
-        regular_file_size(path, error=InvalidInputError)
-        check_array_sizes(path, max_bytes=MAX_SCAN_NPZ_BYTES, error=InvalidInputError)
+        check_array_sizes(path, max_bytes=MAX_SCAN_NPZ_BYTES, error=InvalidInputError)  # a regular file, sizes first
         with np.load(path, allow_pickle=False) as z:
             d = {k: z[k] for k in z.files}
     except DAMAGED_NPZ_ERRORS as exc:  # (damaged deflate data past the headers shows only here)
