@@ -306,18 +306,17 @@ def _run_shared(threads: int, fn, args_list) -> list:
     """``[fn(*args) for args in args_list]``, computed by the calling thread and up to
     ``threads - 1`` threads of the pool, each taking the next undone tuple."""
     n = len(args_list)
-    out = [None] * n
     if threads <= 1 or n <= 1:
-        for k, args in enumerate(args_list):
-            out[k] = fn(*args)
-        return out
+        return [fn(*args) for args in args_list]
+    out = [None] * n
     taken = itertools.count()
 
     def drain() -> None:
         while (k := next(taken)) < n:  # (next() on a count is atomic under the GIL)
             out[k] = fn(*args_list[k])
 
-    helpers = [_executor(threads - 1).submit(drain) for _ in range(min(threads, n) - 1)]
+    pool = _executor(threads - 1)
+    helpers = [pool.submit(drain) for _ in range(min(threads, n) - 1)]
     drain()
     for h in helpers:
         h.result()
