@@ -24,7 +24,7 @@ import numpy as np
 from zbuf_occlude.dataset.layout import PROTOCOL_FILE
 from zbuf_occlude.errors import InvalidInputError, OutputError, ZbufOccludeError
 from zbuf_occlude.geometry.samples import PROTOCOL_STREAM, derive_rng
-from zbuf_occlude.farm.journal import input_root, relative_objects, root_name, root_relative
+from zbuf_occlude.farm.journal import input_root, relative_objects, root_name
 from zbuf_occlude.farm.ownership import check_inputs_outside_out
 from zbuf_occlude.io.atomic import atomic_h5, write_text
 from zbuf_occlude.io.json_files import read_json_file
@@ -186,13 +186,15 @@ def _earlier_options(out: Path) -> dict[str, Any] | None:
 
 def _record_options(
     out: Path, protocol: Protocol, options: ProtocolOptions, objects: Sequence[FarmObject], root: Path, overwrite: bool
-) -> None:
+) -> list[FarmObject]:
     """Write ``protocol.json``: the options and the meshes, each named relative to the input root
-    ``root`` (which is named by its name only); refuse an earlier run's other options or meshes."""
+    ``root`` (which is named by its name only); refuse an earlier run's other options or meshes.
+    Returns ``objects`` as the outputs name them (:func:`~zbuf_occlude.farm.journal.relative_objects`)."""
+    named = relative_objects(objects, root)
     recorded = {"protocol": protocol.name, **asdict(options)}
     recorded["extra"] = dict(options.extra)
     # shards are named by plan index: another set of meshes must not resume from them
-    recorded["objects"] = [[o.name, root_relative(o.source, root)] for o in objects]
+    recorded["objects"] = [[o.name, o.source] for o in named]
     recorded["source"] = root_name(root)
     old = _earlier_options(out)
     if old is not None and not overwrite and old != json.loads(json.dumps(recorded)) and old != _as_written_before(recorded, objects):
@@ -201,6 +203,7 @@ def _record_options(
         for index in range(len(old["objects"])):  # the shards that run wrote, by its own names; nothing else
             _shard(out, old["protocol"], index).unlink(missing_ok=True)
     write_text(out / PROTOCOL_FILE, json.dumps(recorded, indent=1, sort_keys=True) + "\n")
+    return named
 
 
 def _as_written_before(recorded: dict[str, Any], objects: Sequence[FarmObject]) -> dict[str, Any]:
@@ -240,9 +243,8 @@ def run_protocol(
     if out.exists() and not out.is_dir():
         raise InvalidInputError(f"--out {out} exists and is not a folder")
     check_inputs_outside_out(out, (*paths, *(o.source for o in objects)))  # before anything in out is touched
-    root = input_root(paths, objects)
-    _record_options(out, protocol, options, objects, root, overwrite)
-    named = relative_objects(objects, root)  # what the outputs write: no absolute path of the author's
+    # what the outputs write: each mesh relative to the input root, no absolute path of the author's
+    named = _record_options(out, protocol, options, objects, input_root(paths, objects), overwrite)
     run = ProtocolRun(failures=[(s.path, s.reason) for s in skipped])
     shards: list[Path] = []
     from zbuf_occlude.io.progress import progress as progress_bar
