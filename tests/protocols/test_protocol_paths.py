@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from zbuf_occlude.dataset.layout import PROTOCOL_FILE
+from zbuf_occlude.io.owned import LEDGER_FILE
 from zbuf_occlude.protocols import ProtocolOptions, get_protocol, read_arrays_h5, run_protocol
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
@@ -64,5 +65,6 @@ def test_a_run_recorded_with_absolute_paths_resumes(tmp_path):
     del recorded["source"]
     recorded["objects"] = [["chair/train/chair_0001", str(meshes / MESH)]]  # as earlier versions wrote it
     (out / PROTOCOL_FILE).write_text(json.dumps(recorded))
+    (out / LEDGER_FILE).unlink()  # earlier versions kept no ledger
     again = run_protocol(protocol, [meshes], out, options, progress=False)
     assert (again.resumed, again.done) == (1, 0)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -26,7 +27,8 @@ from zbuf_occlude.errors import InvalidInputError, OutputError, ZbufOccludeError
 from zbuf_occlude.geometry.samples import PROTOCOL_STREAM, derive_rng
 from zbuf_occlude.farm.journal import input_root, relative_objects, root_name
 from zbuf_occlude.farm.ownership import check_inputs_outside_out
-from zbuf_occlude.io.atomic import atomic_h5, write_text
+from zbuf_occlude.io.atomic import atomic_h5
+from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.io.json_files import read_json_file
 from zbuf_occlude.mesh.inputs import FarmObject, scan_paths
 
@@ -95,8 +97,11 @@ class Protocol:
         One line for ``--help``.
     make : callable ``(mesh, obj, options, rng) -> dict[str, ndarray]``
         One object's arrays (``mesh`` as :func:`zbuf_occlude.load_mesh` gives it).
-    finish : callable ``(out, objects, shards, options) -> list[Path]``, optional
-        Writes the recipe's own files from the shards (in plan order).
+    finish : callable ``(folder, objects, shards, options) -> list[Path]``, optional
+        Writes the recipe's own files from the shards (in plan order), each through ``folder``
+        (:class:`~zbuf_occlude.io.owned.OwnedFolder`: ``folder.write(name)``).
+    outputs : tuple of str
+        Regular expressions of the names ``finish`` writes in ``--out`` (the only ones it may).
     check : callable ``(options) -> None``, optional
         Raises InvalidInputError naming a bad option value.
     """
@@ -104,7 +109,8 @@ class Protocol:
     name: str
     summary: str
     make: Callable[[trimesh.Trimesh, FarmObject, ProtocolOptions, np.random.Generator], dict[str, np.ndarray]]
-    finish: Callable[[Path, list[FarmObject], list[Path], ProtocolOptions], list[Path]] | None = None
+    finish: Callable[[OwnedFolder, list[FarmObject], list[Path], ProtocolOptions], list[Path]] | None = None
+    outputs: tuple[str, ...] = ()
     check: Callable[[ProtocolOptions], None] | None = None
 
 
@@ -122,12 +128,13 @@ class ProtocolRun:
         return 1 if self.failures else 0
 
 
-def write_arrays_h5(path: str | os.PathLike, arrays: Mapping[str, Any], attrs: Mapping[str, Any] | None = None) -> Path:
-    """Write named arrays (strings as UTF-8) to one HDF5 file, atomically (:func:`zbuf_occlude.io.clouds.atomic_h5`)."""
+def write_arrays_h5(path: str | os.PathLike, arrays: Mapping[str, Any], attrs: Mapping[str, Any] | None = None, *, atomic: bool = True) -> Path:
+    """Write named arrays (strings as UTF-8) to one HDF5 file, atomically (:func:`zbuf_occlude.io.atomic.atomic_h5`);
+    ``atomic=False``: straight to ``path``, a temporary the caller renames (:meth:`~zbuf_occlude.io.owned.OwnedFolder.write`)."""
     import h5py
 
     text = h5py.string_dtype("utf-8")
-    with atomic_h5(path) as f:
+    with atomic_h5(path) if atomic else h5py.File(path, "w") as f:
         for key, value in arrays.items():
             a = np.asarray(value)
             f.create_dataset(key, data=a, dtype=text if a.dtype.kind in "UO" else None, track_times=False)
@@ -154,19 +161,39 @@ def read_arrays_h5(path: str | os.PathLike) -> dict[str, Any]:
     return out
 
 
-def _shard(out: Path, protocol: str, index: int) -> Path:
-    return out / SHARDS_DIR / f"{protocol}_{index:06d}.h5"
+#: What a protocol's name may be: it becomes part of its shards' file names.
+_PROTOCOL_NAME = r"[a-z0-9][a-z0-9-]*"
+#: The shards of any protocol run, as the folder's ledger names them.
+_SHARD_NAMES = rf"{SHARDS_DIR}/{_PROTOCOL_NAME}_\d{{6}}\.h5"
 
 
-def _earlier_options(out: Path) -> dict[str, Any] | None:
-    """The options an earlier protocol run recorded in ``out`` (``None`` when there is none).
+def _shard(protocol: str, index: int) -> str:
+    """The shard of object ``index``, relative to ``--out``."""
+    return f"{SHARDS_DIR}/{protocol}_{index:06d}.h5"
+
+
+def _owned(out: Path, protocol: Protocol) -> OwnedFolder:
+    """``out`` as a protocol run owns it: ``protocol.json``, the shards, and the files ``finish`` writes."""
+    return OwnedFolder(
+        out, names=[re.escape(PROTOCOL_FILE), _SHARD_NAMES, *protocol.outputs], subfolders=[SHARDS_DIR],
+        what=f"the {protocol.name} run",
+    )  # fmt: skip
+
+
+def _earlier_options(folder: OwnedFolder, protocol: Protocol) -> dict[str, Any] | None:
+    """The options an earlier protocol run recorded in the folder (``None`` when there is none).
+
+    A run of an earlier version kept no ledger: its ``protocol.json``, its shards (by the names
+    its own options give, checked against the shard pattern) and the files of ``finish`` are
+    recorded as they are.
 
     Raises
     ------
     InvalidInputError
-        ``out/protocol.json`` exists but is not ours, or ``out/shards/`` holds files and no
+        ``protocol.json`` exists but is not ours, or ``shards/`` holds files and no
         ``protocol.json`` says they are ours: a run would replace or delete them.
     """
+    out = folder.root
     path, shards = out / PROTOCOL_FILE, out / SHARDS_DIR
     if not os.path.lexists(path):
         if shards.is_dir() and any(shards.iterdir()) or os.path.lexists(shards) and not shards.is_dir():
@@ -179,30 +206,43 @@ def _earlier_options(out: Path) -> dict[str, Any] | None:
         old = read_json_file(path)
     except InvalidInputError as exc:
         old = exc
-    if not isinstance(old, dict) or not isinstance(old.get("protocol"), str) or not isinstance(old.get("objects"), list):
+    if (
+        not isinstance(old, dict) or not isinstance(old.get("protocol"), str) or not isinstance(old.get("objects"), list)
+        or not re.fullmatch(_PROTOCOL_NAME, old["protocol"])
+    ):  # fmt: skip
         raise InvalidInputError(f"{path} was not written by zbuf_occlude; move it away, or choose another --out")
+    if not os.path.lexists(folder.ledger_path):
+        earlier = [_shard(old["protocol"], i) for i in range(len(old["objects"]))]
+        outputs = [p.name for p in out.iterdir() if any(re.fullmatch(rx, p.name) for rx in protocol.outputs)]
+        folder.adopt([PROTOCOL_FILE, *earlier, *outputs])
     return old
 
 
 def _record_options(
-    out: Path, protocol: Protocol, options: ProtocolOptions, objects: Sequence[FarmObject], root: Path, overwrite: bool
+    folder: OwnedFolder, protocol: Protocol, options: ProtocolOptions, objects: Sequence[FarmObject], root: Path, overwrite: bool
 ) -> list[FarmObject]:
     """Write ``protocol.json``: the options and the meshes, each named relative to the input root
     ``root`` (which is named by its name only); refuse an earlier run's other options or meshes.
     Returns ``objects`` as the outputs name them (:func:`~zbuf_occlude.farm.journal.relative_objects`)."""
+    out = folder.root
     named = relative_objects(objects, root)
     recorded = {"protocol": protocol.name, **asdict(options)}
     recorded["extra"] = dict(options.extra)
     # shards are named by plan index: another set of meshes must not resume from them
     recorded["objects"] = [[o.name, o.source] for o in named]
     recorded["source"] = root_name(root)
-    old = _earlier_options(out)
+    old = _earlier_options(folder, protocol)
     if old is not None and not overwrite and old != json.loads(json.dumps(recorded)) and old != _as_written_before(recorded, objects):
         raise InvalidInputError(f"{out} holds a run with other options or meshes ({out / PROTOCOL_FILE}); use --overwrite or another --out")
     if old is not None and overwrite:
-        for index in range(len(old["objects"])):  # the shards that run wrote, by its own names; nothing else
-            _shard(out, old["protocol"], index).unlink(missing_ok=True)
-    write_text(out / PROTOCOL_FILE, json.dumps(recorded, indent=1, sort_keys=True) + "\n")
+        folder.delete(folder.written(_SHARD_NAMES))  # the shards the ledger records, checked; nothing else
+    for path in sorted(out.iterdir()):  # before any work: finish would refuse to replace them at the end
+        if any(re.fullmatch(rx, path.name) for rx in protocol.outputs) and not folder.check_unchanged(path.name):
+            raise InvalidInputError(
+                f"{path} was not written by a run of ours (or was changed since), and this run would replace it: "
+                "move it away, or choose another --out"
+            )
+    folder.write_text(PROTOCOL_FILE, json.dumps(recorded, indent=1, sort_keys=True) + "\n")
     return named
 
 
@@ -243,15 +283,26 @@ def run_protocol(
     if out.exists() and not out.is_dir():
         raise InvalidInputError(f"--out {out} exists and is not a folder")
     check_inputs_outside_out(out, (*paths, *(o.source for o in objects)))  # before anything in out is touched
+    with _owned(out, protocol) as folder:
+        return _run_owned(protocol, folder, objects, skipped, paths, options, overwrite=overwrite, progress=progress)
+
+
+def _run_owned(
+    protocol: Protocol, folder: OwnedFolder, objects: list[FarmObject], skipped: Sequence[Any], paths: Sequence[str | os.PathLike],
+    options: ProtocolOptions, *, overwrite: bool, progress: bool,
+) -> ProtocolRun:
+    """:func:`run_protocol` once ``--out`` is held."""
+    out = folder.root
     # what the outputs write: each mesh relative to the input root, no absolute path of the author's
-    named = _record_options(out, protocol, options, objects, input_root(paths, objects), overwrite)
+    named = _record_options(folder, protocol, options, objects, input_root(paths, objects), overwrite)
     run = ProtocolRun(failures=[(s.path, s.reason) for s in skipped])
     shards: list[Path] = []
     from zbuf_occlude.io.progress import progress as progress_bar
 
     for found, obj in progress_bar(list(zip(objects, named)), desc=protocol.name, unit="obj", enabled=progress):
-        shard = _shard(out, protocol.name, obj.index)
-        if shard.exists():
+        rel = _shard(protocol.name, obj.index)
+        shard = out / rel
+        if folder.holds(rel):
             run.resumed += 1
             shards.append(shard)
             continue
@@ -267,10 +318,11 @@ def run_protocol(
             continue
         attrs = {"protocol": protocol.name, "name": obj.name, "source": obj.source, "class_name": obj.class_name,
                  "split": obj.split, "label": obj.label, "object_index": obj.index}  # fmt: skip
-        write_arrays_h5(shard, arrays, attrs)
+        with folder.write(rel) as tmp:
+            write_arrays_h5(tmp, arrays, attrs, atomic=False)
         run.done += 1
         shards.append(shard)
     if protocol.finish is not None and shards:
         done = {int(p.stem.rsplit("_", 1)[1]) for p in shards}
-        run.files = protocol.finish(out, [o for o in named if o.index in done], shards, options)
+        run.files = protocol.finish(folder, [o for o in named if o.index in done], shards, options)
     return run

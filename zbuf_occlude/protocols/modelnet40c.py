@@ -48,7 +48,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.io.atomic import atomic_path, write_text
+from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.mesh.inputs import FarmObject
 from zbuf_occlude.protocols.base import Protocol, ProtocolOptions, read_arrays_h5
 from zbuf_occlude.protocols.depth import PinholeView, back_project, render_depth_image
@@ -266,8 +266,13 @@ def _maker(sample):
     return make
 
 
+def _outputs(corruption: str) -> tuple[str, ...]:
+    """The names ``finish`` writes: ModelNet40-C's files for each severity, and the sources of their rows."""
+    return (rf"data_{corruption}_[1-5]\.npy", r"label\.npy", r"shape_names\.txt", rf"data_{corruption}_[1-5]_sources\.txt")
+
+
 def _finisher(corruption: str):
-    def finish(out, objects: list[FarmObject], shards, options: ProtocolOptions):
+    def finish(folder: OwnedFolder, objects: list[FarmObject], shards, options: ProtocolOptions):
         data = np.stack([read_arrays_h5(s)["points"] for s in shards]).astype(np.float32)
         classes = sorted({o.class_name for o in objects})
         names = list(MODELNET40_CLASSES) if set(classes) <= set(MODELNET40_CLASSES) else classes
@@ -281,11 +286,11 @@ def _finisher(corruption: str):
         labels = np.array([[names.index(o.class_name)] for o in objects], dtype=np.uint8 if len(names) < 256 else np.int64)
         files = []
         for name, array in ((f"data_{corruption}_{options.severity}.npy", data), ("label.npy", labels)):
-            with atomic_path(out / name) as tmp, open(tmp, "wb") as fh:
+            with folder.write(name) as tmp, open(tmp, "wb") as fh:
                 np.save(fh, array)  # a file object: np.save would add ".npy" to the temporary's name
-            files.append(out / name)
-        files.append(write_text(out / "shape_names.txt", "\n".join(names) + "\n"))
-        files.append(write_text(out / f"data_{corruption}_{options.severity}_sources.txt", "".join(o.source + "\n" for o in objects)))
+            files.append(folder.root / name)
+        files.append(folder.write_text("shape_names.txt", "\n".join(names) + "\n"))
+        files.append(folder.write_text(f"data_{corruption}_{options.severity}_sources.txt", "".join(o.source + "\n" for o in objects)))
         return files
 
     return finish
@@ -294,10 +299,10 @@ def _finisher(corruption: str):
 #: ``--protocol modelnet40-c-occlusion --severity 1..5``: ``data_occlusion_<s>.npy`` (N, 1024, 3) float32 + ``label.npy``.
 OCCLUSION = Protocol(
     name="modelnet40-c-occlusion", summary="ModelNet40-C occlusion (Sun et al. 2022): data_occlusion_<s>.npy, label.npy",
-    make=_maker(occlusion_sample), finish=_finisher("occlusion"), check=_check,
+    make=_maker(occlusion_sample), finish=_finisher("occlusion"), check=_check, outputs=_outputs("occlusion"),
 )  # fmt: skip
 #: ``--protocol modelnet40-c-lidar --severity 1..5``: ``data_lidar_<s>.npy`` (N, 768, 3) float32 + ``label.npy``.
 LIDAR = Protocol(
     name="modelnet40-c-lidar", summary="ModelNet40-C LiDAR (Sun et al. 2022): data_lidar_<s>.npy, label.npy",
-    make=_maker(lidar_sample), finish=_finisher("lidar"), check=_check,
+    make=_maker(lidar_sample), finish=_finisher("lidar"), check=_check, outputs=_outputs("lidar"),
 )  # fmt: skip

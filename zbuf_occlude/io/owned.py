@@ -1,0 +1,502 @@
+"""The one way the package writes into, replaces in and deletes from a user's folder.
+
+A folder a command writes (``--out``) is *owned* while the command runs: :class:`OwnedFolder`
+
+* takes the folder's lock (:func:`acquire_lock`: a :class:`filelock.SoftFileLock`, which works on
+  the network file systems clusters share, and is broken when its owner is a dead process of
+  this host, whatever the lock file holds);
+* checks the layout (:func:`check_layout`): no subfolder it writes into leads out through a link;
+* writes atomically (:func:`~zbuf_occlude.io.atomic.atomic_path`) and records each file it wrote
+  in the folder's ledger (:data:`LEDGER_FILE`, one JSON line per file: its name, size and
+  SHA-256), *before* the file takes its name, so a run killed at any instant leaves a ledger that
+  names every file of ours;
+* replaces or deletes only a file it recorded, whose size and SHA-256 still match, under a name
+  a run of its kind writes (its ``names``); a name read from a file (a ledger, a record, a
+  ``protocol.json``) is never deleted without these checks (:func:`delete_recorded`);
+* removes the temporary files and locks that dead writers left (:func:`remove_dead_temps`).
+
+A refusal is one line that names the file and says what to do
+(:class:`~zbuf_occlude.errors.UnsafePathError` or :class:`~zbuf_occlude.errors.InvalidInputError`).
+The farm keeps its ledger in its per-object records (their SHA-256s) and takes task-scoped
+locks, so it calls the same functions (:func:`acquire_lock`, :func:`check_layout`,
+:func:`delete_recorded`, :func:`remove_dead_temps`) rather than the class.  A test walks the
+package's syntax trees: no other module unlinks, renames, replaces or removes a path.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import re
+from collections.abc import Iterable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from zbuf_occlude.errors import DatasetBusy, InvalidInputError, OutputError, UnsafePathError
+from zbuf_occlude.io.atomic import atomic_path, file_sha256, temp_is_orphan, temp_owner
+from zbuf_occlude.io.safe_paths import path_inside
+
+__all__ = [
+    "LEDGER_FILE",
+    "LOCK_FILE",
+    "FileRecord",
+    "OwnedFolder",
+    "acquire_lock",
+    "check_layout",
+    "delete_recorded",
+    "make_folder",
+    "remove_dead_temps",
+    "remove_empty_folders",
+]
+
+log = logging.getLogger(__name__)
+
+#: The lock file of an owned folder (a farm's ``--shard`` tasks add their own under ``tasks/``).
+LOCK_FILE = ".zbuf_occlude.lock"
+#: The ledger: one JSON line per file written (``{"path", "size", "sha256"}``) or deleted
+#: (``{"path", "deleted": true}``); the last line about a path holds.
+LEDGER_FILE = ".zbuf_occlude-written.jsonl"
+#: Seconds an acquire keeps trying: long enough for filelock to break a dead owner's lock
+#: (checked on each try) or for a concurrent peek to end, short enough to refuse at once.
+ACQUIRE_TIMEOUT_S = 2.0
+POLL_INTERVAL_S = 0.05
+#: A ledger line longer than this is damaged (a path is at most a few hundred bytes).
+_MAX_LEDGER_LINE = 8192
+
+
+@dataclass(frozen=True)
+class FileRecord:
+    """What a run recorded of a file it wrote.
+
+    Attributes
+    ----------
+    sha256 : str
+        Hex SHA-256 of the file's bytes.
+    size : int or None
+        Its size in bytes (``None``: not recorded, as in a farm record of several files).
+    """
+
+    sha256: str
+    size: int | None = None
+
+
+def make_folder(folder: str | os.PathLike, *, option: str = "--out") -> Path:
+    """Create ``folder`` (and its parents) and check it can be written.
+
+    Raises
+    ------
+    OutputError
+        It is a file, or it cannot be created or written (one line naming it and ``option``).
+    """
+    folder = Path(folder)
+    if os.path.lexists(folder) and not folder.is_dir():
+        raise OutputError(f"{option} {folder} exists and is not a folder; choose another {option}")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create the folder {folder} ({option}): {exc.strerror or exc}; choose a writable {option}") from None
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise OutputError(f"the folder {folder} ({option}) is not writable; choose a writable {option}")
+    return folder
+
+
+def _lock_holder(path: Path) -> str:
+    try:
+        lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError:
+        return "a process that has just released it"
+    pid = lines[0] if lines and lines[0].isdigit() else "?"
+    host = lines[1] if len(lines) > 1 else "?"
+    return f"pid {pid} on host {host}"
+
+
+def _break_dead_lock(path: Path) -> None:
+    """Remove a lock file whose owner is known to be gone: a dead process of this host, or a
+    file that names no process at all (garbage, empty: a writer killed before it wrote its pid).
+
+    filelock breaks a dead owner's lock only when it can parse the file, and checks it only
+    while it polls; under load a damaged lock file was refused where a quiet machine took it
+    over.  This decides it once, before the first try.
+    """
+    import socket
+
+    try:
+        lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError:
+        return
+    pid = int(lines[0]) if lines and lines[0].strip().isdigit() else None
+    host = lines[1].strip() if len(lines) > 1 else None
+    if pid is not None and host not in (None, socket.gethostname()):
+        return  # another host's: its owner may be alive there
+    if pid is not None:
+        try:
+            os.kill(pid, 0)
+            return  # alive (or someone else's live process)
+        except ProcessLookupError:
+            pass
+        except PermissionError:
+            return
+    log.info("removing the lock %s of a process that is gone", path)
+    path.unlink(missing_ok=True)
+
+
+def acquire_lock(path: str | os.PathLike, what: str, *, timeout: float = ACQUIRE_TIMEOUT_S):
+    """Take the lock file ``path``; return the held :class:`filelock.SoftFileLock` (``release()`` it).
+
+    Raises
+    ------
+    DatasetBusy
+        A live process holds it (named: pid and host), or one of another host that cannot be
+        checked from here; the message says which file to delete once it is known to be gone.
+    OutputError
+        The lock file cannot be created.
+    """
+    from filelock import SoftFileLock, Timeout
+
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create {path.parent}: {exc.strerror or exc}; choose a writable --out") from None
+    if os.path.lexists(path):
+        _break_dead_lock(path)
+    lock = SoftFileLock(str(path), timeout=timeout, poll_interval=POLL_INTERVAL_S, is_singleton=False, thread_local=False)
+    try:
+        lock.acquire()
+    except Timeout:
+        raise DatasetBusy(
+            f"{what} is being written by {_lock_holder(path)} (lock file {path}); wait for it to finish, "
+            f"or, if that process is gone (another host cannot be checked from here), delete {path} and run again"
+        ) from None
+    except OSError as exc:
+        raise OutputError(f"cannot create the lock file {path}: {exc.strerror or exc}; choose a writable --out") from None
+    return lock
+
+
+def check_layout(root: str | os.PathLike, subfolders: Iterable[str] = ()) -> None:
+    """Refuse a folder whose ``subfolders`` (those a run writes into) lead out through a link.
+
+    Raises
+    ------
+    UnsafePathError
+        A subfolder is a symlink, is not a folder, or resolves outside ``root`` (named, with what
+        to do).
+    """
+    root = Path(root)
+    for name in subfolders:
+        sub = root / name
+        if sub.is_symlink():
+            raise UnsafePathError(
+                f"{sub} is a link (to {os.path.realpath(sub)}); a run writes and deletes files in it: "
+                "replace it with a plain folder, or choose another --out"
+            )
+        if os.path.lexists(sub) and not sub.is_dir():
+            raise UnsafePathError(f"{sub} is not a folder; a run writes its files in it: move it away, or choose another --out")
+        path_inside(root, name, what=f"the folder {name} of {root}")
+
+
+def remove_dead_temps(folder: str | os.PathLike, targets: Iterable[str] | None = None) -> int:
+    """Remove the temporary files of :func:`~zbuf_occlude.io.atomic.atomic_path` whose writer is
+    gone (:func:`~zbuf_occlude.io.atomic.temp_is_orphan`); return how many.
+
+    Parameters
+    ----------
+    folder : str or PathLike
+        Where to look (not below it).
+    targets : iterable of str, optional
+        Only temporaries of these file names (a ``--shard`` task's own); default: all.
+    """
+    folder = Path(folder)
+    if not folder.is_dir() or folder.is_symlink():
+        return 0
+    names = None if targets is None else set(targets)
+    removed = 0
+    for tmp in folder.glob(".*.tmp"):
+        owner = temp_owner(tmp.name)
+        if owner is None or (names is not None and owner.target not in names) or not temp_is_orphan(owner):
+            continue
+        if tmp.is_file() or tmp.is_symlink():
+            tmp.unlink(missing_ok=True)
+            removed += 1
+    return removed
+
+
+def remove_empty_folders(root: str | os.PathLike, rel: str, *, keep: Sequence[str] = ()) -> None:
+    """Remove ``root/rel`` and its parents below ``root`` while they are empty folders, stopping
+    at any name in ``keep`` (folders other writers may be writing into).  Nothing else goes:
+    ``rmdir`` removes only an empty folder."""
+    root = Path(root)
+    for folder in (Path(rel), *list(Path(rel).parents)[:-1]):
+        if str(folder) in keep:
+            break
+        path = root / folder
+        if path.is_symlink() or not path.is_dir():
+            break
+        try:
+            path.rmdir()
+        except OSError:
+            break
+
+
+def _name_allowed(rel: str, names: Sequence[re.Pattern[str]]) -> bool:
+    return any(p.fullmatch(rel) for p in names)
+
+
+def _check_deletable(root: Path, rel: object, names: Sequence[re.Pattern[str]], expected: FileRecord | None, what: str) -> Path | None:
+    """The path of ``root/rel`` once every check of :func:`delete_recorded` passes; ``None`` when
+    there is nothing to delete."""
+    if not isinstance(rel, str) or not _name_allowed(rel, names):
+        raise UnsafePathError(
+            f"{what} names {rel!r} in {root}, which is no file a run of ours writes there; nothing was deleted: "
+            "the record is not ours (a copied or edited data set) — delete the folder's files yourself, or choose another --out"
+        )
+    path = path_inside(root, rel, what=what)
+    if not os.path.lexists(path):
+        return None
+    if path.is_symlink() or not path.is_file():
+        raise UnsafePathError(f"{path} is a link or not a regular file, where a run of ours wrote a file; move it away, or choose another --out")
+    if expected is None:
+        raise UnsafePathError(
+            f"{path} was not recorded by a run of ours ({what}); it is left as it is: move it away, or choose another --out"
+        )
+    if expected.size is not None and path.stat().st_size != expected.size:
+        raise UnsafePathError(
+            f"{path} holds {path.stat().st_size:,} bytes where {what} says {expected.size:,}: it was changed since a run "
+            "of ours wrote it, and is left as it is; move it away, or choose another --out"
+        )
+    if file_sha256(path) != expected.sha256:
+        raise UnsafePathError(
+            f"{path} does not match its SHA-256 in {what}: it was changed since a run of ours wrote it, and is left "
+            "as it is; move it away, or choose another --out"
+        )
+    return path
+
+
+def delete_recorded(
+    root: str | os.PathLike,
+    files: Iterable[tuple[object, FileRecord | None]],
+    *,
+    names: Sequence[re.Pattern[str]],
+    what: str,
+) -> list[Path]:
+    """Delete files a run of ours recorded, after checking every one of them.
+
+    All are checked first, then deleted: a refusal deletes nothing.
+
+    Parameters
+    ----------
+    root : str or PathLike
+        The owned folder.
+    files : iterable of (str, FileRecord or None)
+        Each file's path relative to ``root``, as a record names it, and what was recorded of it.
+    names : sequence of compiled patterns
+        The names (relative to ``root``) a run of this kind writes; any other name is refused.
+    what : str
+        The record the names come from, for messages.
+
+    Returns
+    -------
+    list of Path
+        The files deleted (a missing file is skipped).
+
+    Raises
+    ------
+    UnsafePathError
+        A name a run of this kind does not write, one leading outside ``root``, a link or folder
+        where a file is recorded, or a file whose size or SHA-256 differ from the record.
+    """
+    root = Path(root)
+    checked = [_check_deletable(root, rel, names, rec, what) for rel, rec in files]
+    deleted = []
+    for path in checked:
+        if path is not None:
+            path.unlink(missing_ok=True)
+            deleted.append(path)
+    return deleted
+
+
+class OwnedFolder:
+    """An output folder held for one run: the lock, the layout, atomic recorded writes, checked deletes.
+
+    Use it as a context manager; the module docstring states the rules.
+
+    Parameters
+    ----------
+    root : str or PathLike
+        The folder (created, with a one-line error when it cannot be).
+    names : sequence of str
+        Regular expressions (full match, ``/``-separated, relative to ``root``) of every file a
+        run of this kind writes; nothing else is written, replaced or deleted.
+    subfolders : sequence of str
+        The folders below ``root`` it writes into (checked by :func:`check_layout`).
+    what : str
+        What the folder holds, for messages (``"the protocol run"``).
+    option : str
+        The option that named it, for messages.
+
+    Raises
+    ------
+    OutputError, DatasetBusy, UnsafePathError
+        On entering: the folder cannot be made, another live process holds it, or its layout
+        leads out.
+    """
+
+    def __init__(self, root: str | os.PathLike, *, names: Sequence[str], subfolders: Sequence[str] = (), what: str = "the run", option: str = "--out"):
+        self.root = Path(root)
+        self.names = [re.compile(n) for n in names]
+        self.subfolders = tuple(subfolders)
+        self.what = what
+        self.option = option
+        self._lock: Any = None
+        self._ledger: dict[str, FileRecord] = {}
+
+    # -- holding ----------------------------------------------------------------------------
+    def __enter__(self) -> OwnedFolder:
+        make_folder(self.root, option=self.option)
+        self._lock = acquire_lock(self.root / LOCK_FILE, f"{self.what} in {self.root}")
+        try:
+            check_layout(self.root, self.subfolders)
+            for folder in (".", *self.subfolders):
+                remove_dead_temps(self.root / folder)
+            self._ledger = self._read_ledger()
+        except BaseException:
+            self._lock.release()
+            raise
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._lock.release()
+
+    @property
+    def ledger_path(self) -> Path:
+        return self.root / LEDGER_FILE
+
+    def _read_ledger(self) -> dict[str, FileRecord]:
+        """The ledger's files; lines that are damaged or not ours (a torn last line) are skipped."""
+        ledger: dict[str, FileRecord] = {}
+        path = self.ledger_path
+        if path.is_symlink() or (os.path.lexists(path) and not path.is_file()):
+            raise UnsafePathError(f"{path} is a link or not a file; move it away, or choose another --out")
+        if not path.exists():
+            return ledger
+        with open(path, "rb") as fh:
+            for line in fh:
+                if len(line) > _MAX_LEDGER_LINE:
+                    continue
+                try:
+                    entry = json.loads(line)
+                except ValueError:
+                    continue
+                rel = entry.get("path") if isinstance(entry, dict) else None
+                if not isinstance(rel, str):
+                    continue
+                if entry.get("deleted") is True:
+                    ledger.pop(rel, None)
+                elif isinstance(entry.get("sha256"), str) and isinstance(entry.get("size"), int):
+                    ledger[rel] = FileRecord(entry["sha256"], entry["size"])
+        return ledger
+
+    def _append(self, entry: dict[str, Any]) -> None:
+        line = (json.dumps(entry, sort_keys=True) + "\n").encode("utf-8")
+        try:
+            fd = os.open(self.ledger_path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o666)
+            try:
+                os.write(fd, line)
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+        except OSError as exc:
+            raise OutputError(f"cannot write {self.ledger_path}: {exc.strerror or exc}; choose a writable {self.option}") from None
+
+    # -- names ------------------------------------------------------------------------------
+    def recorded(self, rel: str) -> FileRecord | None:
+        """What the ledger says of ``root/rel`` (``None``: not a file of ours)."""
+        return self._ledger.get(rel)
+
+    def holds(self, rel: str) -> bool:
+        """True if ``root/rel`` is a file of ours that is still as it was written (its size matches;
+        the bytes are compared by :meth:`check_unchanged`)."""
+        rec = self._ledger.get(rel)
+        path = self.root / rel
+        return rec is not None and path.is_file() and not path.is_symlink() and path.stat().st_size == rec.size
+
+    def check_unchanged(self, rel: str) -> bool:
+        """True if ``root/rel`` is a file of ours whose size and SHA-256 match the ledger."""
+        return self.holds(rel) and file_sha256(self.root / rel) == self._ledger[rel].sha256
+
+    def path(self, rel: str) -> Path:
+        """``root/rel`` once ``rel`` is a name this kind of run writes and stays inside ``root``.
+
+        Raises
+        ------
+        UnsafePathError
+            Any other name.
+        """
+        if not _name_allowed(rel, self.names):
+            raise UnsafePathError(f"{rel!r} is no file {self.what} writes in {self.root}; refused")
+        return path_inside(self.root, rel, what=f"{self.what} in {self.root}")
+
+    def adopt(self, rels: Iterable[str]) -> None:
+        """Record files of ``names`` that a run of ours wrote before the ledger existed (an earlier
+        version's run, recognised by its own record), as they are now."""
+        for rel in rels:
+            path = self.path(rel)
+            if rel not in self._ledger and path.is_file() and not path.is_symlink():
+                rec = FileRecord(file_sha256(path), path.stat().st_size)
+                self._append({"path": rel, "sha256": rec.sha256, "size": rec.size})
+                self._ledger[rel] = rec
+
+    # -- writing and deleting -----------------------------------------------------------------
+    def _check_replaceable(self, rel: str, path: Path) -> None:
+        if not os.path.lexists(path):
+            return
+        _check_deletable(self.root, rel, self.names, self._ledger.get(rel), f"the ledger {self.ledger_path}")
+
+    @contextmanager
+    def write(self, rel: str) -> Iterator[Path]:
+        """Yield a temporary path; on success it is recorded in the ledger and renamed to ``root/rel``.
+
+        Raises
+        ------
+        UnsafePathError
+            ``rel`` is no name of this kind, or a file of that name exists that is not ours or was
+            changed since (it is left as it is).
+        OutputError
+            The file cannot be written.
+        """
+        path = self.path(rel)
+        self._check_replaceable(rel, path)
+
+        def record(tmp: Path) -> None:
+            rec = FileRecord(file_sha256(tmp), tmp.stat().st_size)
+            self._append({"path": rel, "sha256": rec.sha256, "size": rec.size})
+            self._ledger[rel] = rec
+
+        with atomic_path(path, before_replace=record) as tmp:
+            yield tmp
+
+    def write_text(self, rel: str, text: str) -> Path:
+        """Write UTF-8 ``text`` to ``root/rel`` (:meth:`write`)."""
+        with self.write(rel) as tmp:
+            tmp.write_text(text, encoding="utf-8")
+        return self.root / rel
+
+    def delete(self, rels: Iterable[str]) -> list[Path]:
+        """Delete files of ours (:func:`delete_recorded` against the ledger); a refusal deletes nothing."""
+        rels = list(rels)
+        deleted = delete_recorded(
+            self.root, [(rel, self._ledger.get(rel)) for rel in rels], names=self.names, what=f"the ledger {self.ledger_path}"
+        )
+        for rel in rels:
+            if rel in self._ledger and not os.path.lexists(self.root / rel):
+                self._append({"path": rel, "deleted": True})
+                del self._ledger[rel]
+        return deleted
+
+    def written(self, pattern: str | None = None) -> list[str]:
+        """The ledger's files (those matching ``pattern`` when given), sorted."""
+        rx = re.compile(pattern) if pattern is not None else None
+        return sorted(r for r in self._ledger if rx is None or rx.fullmatch(r))
