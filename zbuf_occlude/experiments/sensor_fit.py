@@ -12,7 +12,9 @@ to start from chooses the fit:
   :func:`zbuf_occlude.sensors.fit.fit_airborne` on the crops as they lie (no sensor position).
 
 Writes the sensor JSON (which ``scan``, ``farm --sensor`` and ``experiment sim2real --sensor``
-read) and a Markdown table of the estimates beside it, both atomically.
+read) and a Markdown table of the estimates beside it, both atomically.  The JSON is strict (no
+``NaN``, which strict readers refuse): an estimate the scans do not tell is ``null``, and the table
+says it was not measured and why.
 """
 
 from __future__ import annotations
@@ -34,6 +36,11 @@ from zbuf_occlude.sensors.lidar import Lidar
 from zbuf_occlude.sensors.presets import sensor_from_name
 
 __all__ = ["fit_to_scans", "fit_sensor_to_scans"]
+
+
+def _strict_json(spec: dict) -> str:
+    """``spec`` as strict JSON text (numpy scalars as numbers); a NaN left in it is our bug, so it raises ValueError."""
+    return json.dumps(spec, indent=1, default=float, allow_nan=False) + "\n"
 
 
 def fit_to_scans(scans: Sequence, base: Lidar, labels: Sequence[str], *, seed: int = 0,
@@ -130,12 +137,12 @@ def fit_sensor_to_scans(real: str | os.PathLike, sensor: str, out: str | os.Path
         if missing:
             raise InvalidInputError(f"{missing[0]}: no points in metres to fit a scanner to ({len(missing)} such scans)")
         fit = fit_airborne([s.points_sensor_m for s in scans], base, seed=seed)
-        write_text(out, json.dumps(fit.to_json(), indent=1, default=float) + "\n")
+        write_text(out, _strict_json(fit.to_json()))
         write_text(md, f"# {fit.sensor.name}: fitted to {fit.n_crops} crops under {Path(real).name}\n\n{fit.markdown()}")
         return fit, out, md
     fit, spec = fit_to_scans(scans, base, [s.label for s in scans], seed=seed)
     crops = spec["fit"].get("crops")
-    write_text(out, json.dumps(spec, indent=1, default=float) + "\n")
+    write_text(out, _strict_json(spec))
     text = f"# {fit.sensor.name}: fitted to {fit.n_scans} scans under {Path(real).name}\n\n{fit.markdown()}"
     if crops is not None:
         lo_q, hi_q = crops["quantiles"]

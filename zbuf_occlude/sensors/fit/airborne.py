@@ -35,7 +35,10 @@ top but too little wall to tell count as 0: they lie near the nadir; the median,
 largest angle, is not pulled up by one noisy crop); the mean top density, the median noise,
 ``two_sided_fraction``.
 Uncertainties: the standard deviation over :data:`BOOTSTRAP` resamples of the crops (with
-replacement, seed given).  Nothing depends on file names or class labels.
+replacement, seed given).  Nothing depends on file names or class labels.  A crop of more than
+:data:`MAX_CROP_POINTS` points is measured on a seeded random subsample of that many, its
+densities scaled back by ``N / MAX_CROP_POINTS`` (:func:`crop_faces`): memory and time stay
+bounded for crops of millions of points.
 
 What cannot be told from crops: flying height, speed and pulse rate separately (only the
 density they give), dropout (it only lowers the density).  :func:`fit_airborne` keeps those of
@@ -70,7 +73,8 @@ from zbuf_occlude.sensors.airborne import AirborneScanner
 from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate, estimates_markdown
 
 __all__ = [
-    "AirborneFit", "CropFaces", "FITTED_LINES", "HORIZONTAL_DEG", "MIN_CROP_POINTS", "ONE_SIDED_SHARE", "PLANE_NEIGHBOURS",
+    "AirborneFit", "CropFaces", "FITTED_LINES", "HORIZONTAL_DEG", "MAX_CROP_POINTS", "MIN_CROP_POINTS", "ONE_SIDED_SHARE",
+    "PLANE_NEIGHBOURS",
     "crop_faces", "fit_airborne",
 ]  # fmt: skip
 
@@ -80,6 +84,10 @@ PLANE_NEIGHBOURS = 16
 HORIZONTAL_DEG = 20.0
 #: Fewest points a crop needs to take part in the fit.
 MIN_CROP_POINTS = 40
+#: Most points of a crop its faces are measured on: a larger crop is measured on a seeded random
+#: subsample of this many (the local planes hold ``(n, PLANE_NEIGHBOURS, 3) float64``, 384 bytes a
+#: point: 2 GB for a crop of 5·10⁶; 200,000 points tell a crop's density, angle and noise as well).
+MAX_CROP_POINTS = 200_000
 #: Parallel lines of a fitted plan: the line nearest an object and one either side, so that an
 #: object anywhere within a strip's width of the plan centre lies in one strip (module docstring).
 FITTED_LINES = 3
@@ -104,6 +112,7 @@ class CropFaces:
     Attributes
     ----------
     n_points : int
+        Points of the crop (all of them, also where a subsample was measured).
     top_density_m2 : float
         NaN when the crop has no top with enough interior cells.
     wall_normals : (W, 2) float64
@@ -135,7 +144,8 @@ def _local_planes(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDA
 
     k = min(PLANE_NEIGHBOURS, len(points))
     _, idx = cKDTree(points).query(points, k=k)
-    nb = points[idx] - points[idx].mean(axis=1, keepdims=True)
+    nb = points[idx]  # (n, k, 3): crop_faces caps n (MAX_CROP_POINTS)
+    nb -= nb.mean(axis=1, keepdims=True)
     cov = np.einsum("nki,nkj->nij", nb, nb) / k
     w, v = np.linalg.eigh(cov)  # ascending
     planar = w[:, 0] <= _PLANARITY * np.maximum(w[:, 1], 1e-300)
@@ -201,29 +211,48 @@ def _checked_crop(points, where: str = "") -> NDArray[np.float64]:
     return p
 
 
-def crop_faces(points: NDArray[np.floating]) -> CropFaces:
+def crop_faces(points: NDArray[np.floating], *, max_points: int = MAX_CROP_POINTS, seed: int = 0) -> CropFaces:
     """Split one crop into its top and walls and measure them (module docstring).
+
+    A crop of more than ``max_points`` points is measured on a random subsample of ``max_points``
+    of them (drawn without replacement, seeded): a uniform thinning keeps the faces, their
+    normals and the noise about them, and scales every density by ``max_points / N``, which is
+    undone.  The footprint is the hull of every point.  Memory and time so stay bounded whatever
+    the crop's size (the local planes alone take 384 bytes a point).
 
     Parameters
     ----------
     points : (N, 3) float
         World frame, z up, metres.
+    max_points : int
+        Most points measured (:data:`MAX_CROP_POINTS`), at least :data:`MIN_CROP_POINTS`.
+    seed : int
+        Seeds the subsample; the same seed gives the same figures.
 
     Raises
     ------
     InvalidInputError
-        Not finite ``(N, 3)`` points, or fewer than :data:`MIN_CROP_POINTS`.
+        Not finite ``(N, 3)`` points, fewer than :data:`MIN_CROP_POINTS`, or ``max_points`` below it.
     """
     p = _checked_crop(points)
     if len(p) < MIN_CROP_POINTS:
         raise InvalidInputError(f"a crop needs at least {MIN_CROP_POINTS} points, got {len(p)}")
+    if int(max_points) < MIN_CROP_POINTS:
+        raise InvalidInputError(f"max_points must be at least MIN_CROP_POINTS = {MIN_CROP_POINTS}, got {max_points!r}")
+    n_points = len(p)
     # centred: in projected coordinates (eastings and northings of 10^5 to 10^7 m, as aerial crops
     # come) Qhull's Delaunay triangulation loses the centimetres that the faces' densities rest on
     p = p - p.mean(axis=0)
+    footprint = _hull_area(p[:, :2])
+    thinning = 1.0
+    if n_points > int(max_points):
+        keep = np.sort(np.random.default_rng(seed).choice(n_points, size=int(max_points), replace=False))
+        p = p[keep]
+        thinning = n_points / len(p)  # each density of the subsample is this much below the crop's
     normal, variance, idx = _local_planes(p)
     planar = np.isfinite(variance)
     top = planar & (np.abs(normal[:, 2]) >= math.cos(math.radians(HORIZONTAL_DEG)))
-    top_density = _face_density(p[top, :2])
+    top_density = _face_density(p[top, :2]) * thinning
     # the top's noise from points whose neighbours are all top points (not across an edge)
     inner_top = top & top[idx].all(axis=1)
     dof = max(idx.shape[1] - 3, 1)
@@ -244,7 +273,7 @@ def crop_faces(points: NDArray[np.floating]) -> CropFaces:
             mean = m[group].mean(axis=0)
             mean /= max(float(np.linalg.norm(mean)), 1e-300)
             along = np.array([-mean[1], mean[0]])
-            density = _face_density(np.column_stack([wall_points[group, :2] @ along, wall_points[group, 2]]))
+            density = _face_density(np.column_stack([wall_points[group, :2] @ along, wall_points[group, 2]])) * thinning
             if np.isfinite(density):
                 normals.append(mean)
                 densities.append(density)
@@ -256,8 +285,8 @@ def crop_faces(points: NDArray[np.floating]) -> CropFaces:
         b, *_ = np.linalg.lstsq(wall_normals, wall_density, rcond=None)
         incidence = math.degrees(math.atan2(float(np.linalg.norm(b)), top_density))
     return CropFaces(
-        n_points=len(p), top_density_m2=top_density, wall_normals=wall_normals, wall_density_m2=wall_density,
-        incidence_deg=incidence, two_sided=two_sided, plane_variance_m2=plane_variance, footprint_m2=_hull_area(p[:, :2]),
+        n_points=n_points, top_density_m2=top_density, wall_normals=wall_normals, wall_density_m2=wall_density,
+        incidence_deg=incidence, two_sided=two_sided, plane_variance_m2=plane_variance, footprint_m2=footprint,
     )  # fmt: skip
 
 
@@ -304,6 +333,15 @@ _METHODS = {
 }
 #: The estimates the fitted scanner takes.
 _SET_IN_SENSOR = ("density_m2", "max_scan_angle_deg", "range_noise_m")
+#: Why an estimate can be NaN, for the table (:func:`~zbuf_occlude.sensors.fit.lidar.estimates_markdown`).
+_WHY_NOT_MEASURED = {
+    "density_m2": "no crop has a top large enough to count its points",
+    "max_scan_angle_deg": "no crop tells the scan angle",
+    "median_incidence_deg": "no crop tells the scan angle",
+    "vertical_noise_m": "no crop has a top large enough to fit planes to",
+    "range_noise_m": "no crop has a top large enough to fit planes to",
+    "points_per_footprint_m2": "no crop has a footprint of nonzero area",
+}
 
 
 @dataclass(frozen=True)
@@ -331,20 +369,22 @@ class AirborneFit:
 
     def to_json(self) -> dict:
         """A sensor file that ``scan``, ``farm --sensor`` and ``experiment sim2real --sensor`` take: the
-        scanner's fields with ``"kind": "airborne"`` and, under ``"fit"``, the estimates (metadata)."""
+        scanner's fields with ``"kind": "airborne"`` and, under ``"fit"``, the estimates (metadata); an estimate
+        nothing measured (the scan angle when no crop tells one) is ``null`` (:meth:`Estimate.to_json`)."""
         from zbuf_occlude.sensors.presets import sensor_to_json
 
         spec = sensor_to_json(self.sensor)
         spec["fit"] = {
             "base": self.base.name, "n_crops": self.n_crops,
-            "estimates": {k: vars(e) for k, e in self.estimates.items()},
+            "estimates": {k: e.to_json() for k, e in self.estimates.items()},
         }  # fmt: skip
         return spec
 
     def markdown(self) -> str:
-        """The estimates as a table (value ± the bootstrap's std) and, below it, the fitted scanner in one paragraph."""
+        """The estimates as a table (value ± the bootstrap's std, or why it was not measured) and, below it, the fitted
+        scanner in one paragraph."""
         s, base = self.sensor, self.base
-        return estimates_markdown(self.estimates) + (
+        return estimates_markdown(self.estimates, _WHY_NOT_MEASURED) + (
             f"\nThe fitted scanner {s.name}: {s.survey_density_m2:.1f} points/m² on flat open ground (pulse rate "
             f"{s.pulse_rate_hz:,.0f} Hz), swath {s.swath_deg:.1f}° ({s.swath_width_m:,.0f} m wide at {s.altitude_m:g} m), "
             f"range noise {s.range_noise_m:.3f} m.  Its altitude, speed, line rate and scan pattern are {base.name}'s: crops "
@@ -364,7 +404,8 @@ class AirborneFit:
         return f"No crop told a scan angle: the swath and the flight plan are {base.name}'s ({s.n_lines} lines, side overlap {s.side_overlap:g})."
 
 
-def fit_airborne(crops: Sequence[NDArray[np.floating]], base: AirborneScanner, *, seed: int = 0, bootstrap: int = BOOTSTRAP) -> AirborneFit:
+def fit_airborne(crops: Sequence[NDArray[np.floating]], base: AirborneScanner, *, seed: int = 0, bootstrap: int = BOOTSTRAP,
+                 max_crop_points: int = MAX_CROP_POINTS) -> AirborneFit:  # fmt: skip
     """Fit an airborne scanner to segmented aerial object crops (module docstring).
 
     Parameters
@@ -374,9 +415,12 @@ def fit_airborne(crops: Sequence[NDArray[np.floating]], base: AirborneScanner, *
     base : AirborneScanner
         Supplies what crops cannot tell: flying height, speed, line rate, pattern, flight plan.
     seed : int
-        Seeds the bootstrap.
+        Seeds the bootstrap and the subsample of each crop above ``max_crop_points``.
     bootstrap : int
         Resamples of the crops, at least 2.
+    max_crop_points : int
+        A crop of more points is measured on a seeded random subsample of this many
+        (:data:`MAX_CROP_POINTS`, :func:`crop_faces`), so that memory stays bounded.
 
     Returns
     -------
@@ -386,7 +430,8 @@ def fit_airborne(crops: Sequence[NDArray[np.floating]], base: AirborneScanner, *
     ------
     InvalidInputError
         A crop that is not finite ``(N, 3)`` points (naming its index), fewer than 2 usable crops, no
-        crop with a measurable top (the density cannot be told), ``bootstrap < 2``.
+        crop with a measurable top (the density cannot be told), ``bootstrap < 2``, ``max_crop_points`` below
+        :data:`MIN_CROP_POINTS`.
     """
     if int(bootstrap) < 2:
         raise InvalidInputError(f"bootstrap must be >= 2, got {bootstrap!r}")
@@ -394,7 +439,7 @@ def fit_airborne(crops: Sequence[NDArray[np.floating]], base: AirborneScanner, *
     for i, crop in enumerate(crops):
         p = _checked_crop(crop, f"crop {i}: ")
         if len(p) >= MIN_CROP_POINTS:
-            faces.append(crop_faces(p))
+            faces.append(crop_faces(p, max_points=max_crop_points, seed=seed))
     if len(faces) < 2:
         raise InvalidInputError(f"an airborne fit needs at least 2 crops of {MIN_CROP_POINTS}+ points, got {len(faces)}")
     if not any(np.isfinite(f.top_density_m2) for f in faces):

@@ -78,7 +78,12 @@ _GROUND_NORMAL_COS = math.cos(math.radians(25.0))
 
 @dataclass(frozen=True)
 class Estimate:
-    """One fitted quantity: ``value ± std`` (bootstrap over scans), from ``n`` returns or scans."""
+    """One fitted quantity: ``value ± std`` (bootstrap over scans), from ``n`` returns or scans.
+
+    ``value`` (or ``std``) is NaN where the scans do not tell it (nothing to measure it on, or
+    too few resamples that measured it): :meth:`to_json` writes ``null`` for it and
+    :func:`estimates_markdown` says it was not measured.
+    """
 
     value: float
     std: float
@@ -86,6 +91,13 @@ class Estimate:
     method: str
     unit: str = ""
     set_in_sensor: bool = False
+
+    def to_json(self) -> dict:
+        """The fields as a strict-JSON object: ``value`` and ``std`` are ``None`` (``null``) where not measured (NaN or infinite)."""
+        out = dict(vars(self))
+        for key in ("value", "std"):
+            out[key] = float(out[key]) if math.isfinite(out[key]) else None
+        return out
 
 
 @dataclass(frozen=True)
@@ -113,7 +125,7 @@ class LidarFit:
 
         spec = sensor_to_json(self.sensor)
         spec["fit"] = {"base": self.base.name, "n_scans": self.n_scans,
-                       "estimates": {k: vars(e) for k, e in self.estimates.items()}}  # fmt: skip
+                       "estimates": {k: e.to_json() for k, e in self.estimates.items()}}  # fmt: skip
         return spec
 
     def markdown(self) -> str:
@@ -121,11 +133,28 @@ class LidarFit:
         return estimates_markdown(self.estimates)
 
 
-def estimates_markdown(estimates: Mapping[str, Estimate]) -> str:
-    """A Markdown table of fitted quantities: quantity, value ± std (the bootstrap's), unit, n, whether it sets the sensor, how."""
+def estimates_markdown(estimates: Mapping[str, Estimate], why_not_measured: Mapping[str, str] | None = None) -> str:
+    """A Markdown table of fitted quantities: quantity, value ± std (the bootstrap's), unit, n, whether it sets the sensor, how.
+
+    Parameters
+    ----------
+    estimates : mapping of str to Estimate
+    why_not_measured : mapping of str to str, optional
+        Per quantity, why the scans cannot tell it: a value that is NaN reads "not measured (<why>)",
+        or just "not measured" where no reason is given.  A measured value whose spread is NaN (too
+        few resamples measured it) reads "<value> (spread not measured)".
+    """
+    why_not_measured = why_not_measured or {}
     lines = ["| quantity | value ± std | unit | n | sets the sensor | how |", "|---|---|---|---|---|---|"]
     for name, e in estimates.items():
-        lines.append(f"| {name} | {e.value:.4g} ± {e.std:.2g} | {e.unit} | {e.n} | {'yes' if e.set_in_sensor else 'no'} | {e.method} |")
+        if not math.isfinite(e.value):
+            why = why_not_measured.get(name)
+            value = f"not measured ({why})" if why else "not measured"
+        elif not math.isfinite(e.std):
+            value = f"{e.value:.4g} (spread not measured)"
+        else:
+            value = f"{e.value:.4g} ± {e.std:.2g}"
+        lines.append(f"| {name} | {value} | {e.unit} | {e.n} | {'yes' if e.set_in_sensor else 'no'} | {e.method} |")
     return "\n".join(lines) + "\n"
 
 
