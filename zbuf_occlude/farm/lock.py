@@ -1,6 +1,6 @@
 """One writer per data set: the lock a farm run, a ``--shard`` task or a merge holds on ``--out``.
 
-The lock is :class:`filelock.SoftFileLock`, a file created with ``O_CREAT | O_EXCL`` that holds
+The lock is :func:`zbuf_occlude.io.owned.acquire_lock`'s :class:`filelock.SoftFileLock`, a file created with ``O_CREAT | O_EXCL`` that holds
 the owner's pid, host name and process start token.  Unlike ``flock``/``fcntl`` locks it works
 on the network file systems clusters share (NFS, Lustre, GPFS), where advisory locks may be
 missing or local to one node.  filelock removes a lock whose owner is a dead process on the
@@ -22,23 +22,15 @@ at the same instant at least one sees the other.
 from __future__ import annotations
 
 import contextlib
-import logging
 import os
 from collections.abc import Iterator
-from datetime import datetime, timezone
 from pathlib import Path
 
 from zbuf_occlude.dataset.layout import LOCK_FILE, TASK_DIR, task_lock_name
-from zbuf_occlude.errors import DatasetBusy, OutputError
+from zbuf_occlude.errors import DatasetBusy
+from zbuf_occlude.io.owned import acquire_lock
 
-__all__ = ["farm_lock", "lock_holder", "task_lock_path"]
-
-log = logging.getLogger(__name__)
-
-#: Seconds an acquire keeps trying: long enough for filelock to break a dead owner's lock
-#: (checked on each try) or for a concurrent peek to end, short enough to refuse at once.
-ACQUIRE_TIMEOUT_S = 2.0
-POLL_INTERVAL_S = 0.05
+__all__ = ["DatasetBusy", "farm_lock", "task_lock_path"]
 
 
 def task_lock_path(out: Path, shard: tuple[int, int]) -> Path:
@@ -46,42 +38,10 @@ def task_lock_path(out: Path, shard: tuple[int, int]) -> Path:
     return out / task_lock_name(*shard)
 
 
-def lock_holder(path: Path) -> str:
-    """``pid P on host H since T`` of the process holding lock file ``path`` (what it says)."""
-    try:
-        lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
-        since = datetime.fromtimestamp(path.stat().st_mtime, timezone.utc).isoformat(timespec="seconds")
-    except OSError:
-        return "a process that has just released it"
-    pid = lines[0] if lines else "?"
-    host = lines[1] if len(lines) > 1 else "?"
-    return f"pid {pid} on host {host} since {since}"
-
-
-def _acquire(path: Path, what: str, timeout: float = ACQUIRE_TIMEOUT_S):
-    from filelock import SoftFileLock, Timeout
-
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"cannot create {path.parent}: {exc.strerror or exc}; choose a writable --out") from exc
-    lock = SoftFileLock(str(path), timeout=timeout, poll_interval=POLL_INTERVAL_S, is_singleton=False, thread_local=False)
-    try:
-        lock.acquire()
-    except Timeout:
-        raise DatasetBusy(
-            f"{what} is being written by {lock_holder(path)} (lock file {path}); wait for it to finish, "
-            f"or, if that process is gone (another host cannot be checked from here), delete {path} and run again"
-        ) from None
-    except OSError as exc:
-        raise OutputError(f"cannot create the lock file {path}: {exc.strerror or exc}; choose a writable --out") from exc
-    return lock
-
-
 def _refuse_if_held(path: Path, what: str) -> None:
     # taking and dropping the lock at once also breaks it if its owner died
     if path.exists():
-        _acquire(path, what).release()
+        acquire_lock(path, what).release()
 
 
 @contextlib.contextmanager
@@ -112,9 +72,9 @@ def farm_lock(out: str | os.PathLike, shard: tuple[int, int] = (0, 1)) -> Iterat
     dataset_path = out / LOCK_FILE
     whole = shard[1] == 1
     if whole:
-        lock = _acquire(dataset_path, f"the data set {out}")
+        lock = acquire_lock(dataset_path, f"the data set {out}")
     else:
-        lock = _acquire(task_lock_path(out, shard), f"task {shard[0]}/{shard[1]} of {out}")
+        lock = acquire_lock(task_lock_path(out, shard), f"task {shard[0]}/{shard[1]} of {out}")
     try:
         if whole:
             for task in sorted((out / TASK_DIR).glob("lock-*.lock")):

@@ -13,7 +13,9 @@ The rule, for ``farm``, ``generate`` and ``farm-merge`` (``--overwrite`` or not)
 * ``--overwrite`` over an earlier run of ours deletes only the files that run recorded: each
   object's record and the files its record names, the object's shard, the plan, card, manifest,
   class names, file lists and joined files, and the task journal's own files.  Anything else
-  under ``--out``, inside ``shards/`` or ``records/`` too, is left where it is.
+  under ``--out``, inside ``shards/`` or ``records/`` too, is left where it is.  A record may
+  name only its own object's shard or sample files, each still matching its recorded SHA-256
+  (:mod:`zbuf_occlude.io.owned`); every file is checked before the first is deleted.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from zbuf_occlude.dataset.layout import (
     MANIFEST_FILE,
     PLAN_FILE,
     RECORD_DIR,
+    SAMPLE_FILE_FORMATS,
     SHAPE_NAMES_FILE,
     SHARD_DIR,
     TASK_DIR,
@@ -39,7 +42,7 @@ from zbuf_occlude.dataset.layout import (
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.farm.config import record_path, shard_path
 from zbuf_occlude.farm.journal import objects_of, read_json, read_plan
-from zbuf_occlude.io.safe_paths import path_inside
+from zbuf_occlude.io.owned import FileRecord, check_deletable, delete_checked, delete_recorded, remove_empty_folders
 from zbuf_occlude.mesh.discovery import SPLITS
 from zbuf_occlude.mesh.inputs import FarmObject
 
@@ -127,21 +130,41 @@ def check_no_foreign_files(out: Path, objects: Sequence[FarmObject] = (), storag
             )
 
 
-def _unlink_inside(out: Path, rel: str, what: str) -> None:
-    """Delete ``out/rel`` (kept inside ``out``), then the folders of ``generate``'s sample files
-    that it leaves empty (never ``shards/`` or ``records/``, which other tasks may be writing into)."""
-    path_inside(out, rel, what=what).unlink(missing_ok=True)
-    for folder in list(Path(rel).parents)[:-1]:
-        if str(folder) in (SHARD_DIR, RECORD_DIR):
-            break
-        try:
-            (out / folder).rmdir()  # only an empty folder goes
-        except OSError:
-            break
+def _own_names(o: FarmObject) -> list[re.Pattern[str]]:
+    """The only files an object's record may name: its shard, or ``generate``'s sample files of it
+    (:func:`~zbuf_occlude.dataset.layout.sample_file_name`)."""
+    stem = o.name.rsplit("/", 1)[-1]
+    samples = rf"{re.escape(o.name)}/{re.escape(stem)}_v\d{{3}}_el[+-]\d{{3}}_az\d{{3}}_s\d{{2}}\.({'|'.join(SAMPLE_FILE_FORMATS)})"
+    return [re.compile(re.escape(shard_path(o))), re.compile(samples)]
+
+
+def _record_files(out: Path, o: FarmObject) -> list[Path | None]:
+    """The files of object ``o`` that ``--overwrite`` deletes, each checked (:func:`check_deletable`):
+    those its record names (name, size and SHA-256 as recorded), its shard and its record."""
+    where = record_path(out, o.index)
+    what = f"the record {where}"
+    rec = read_json(where)
+    names = _own_names(o)
+    shards = (rec or {}).get("shards")
+    shards = shards if isinstance(shards, list) else []
+    digests = (rec or {}).get("sha256")
+    digests = digests if isinstance(digests, list) and len(digests) == len(shards) else [None] * len(shards)
+    checked = [
+        check_deletable(out, rel, names, FileRecord(d if isinstance(d, str) else None), what) for rel, d in zip(shards, digests)
+    ]
+    if shard_path(o) not in shards:  # a shard written before its record, by a run stopped in between
+        checked.append(check_deletable(out, shard_path(o), names, FileRecord(None), f"the shard of object {o.index}"))
+    record = os.path.relpath(where, out)
+    checked.append(check_deletable(out, record, [re.compile(re.escape(record))], FileRecord(None), f"the record of object {o.index}"))
+    return checked
 
 
 def wipe_earlier_run(out: Path, objects: Sequence[FarmObject] | None = None) -> None:
     """``--overwrite``: delete what the earlier run of ours in ``out`` recorded (module docstring).
+
+    Every file is checked before any is deleted (:func:`~zbuf_occlude.io.owned.check_deletable`):
+    a record may name only its object's shard or sample files, inside ``out``, each still matching
+    its recorded SHA-256; a refusal deletes nothing.
 
     Parameters
     ----------
@@ -156,35 +179,30 @@ def wipe_earlier_run(out: Path, objects: Sequence[FarmObject] | None = None) -> 
     InvalidInputError
         The earlier plan is not ours (:func:`earlier_plan`).
     UnsafePathError
-        A record names a file outside ``out``.
+        A record names a file that is not its object's, one outside ``out``, a link or folder, or
+        a file changed since it was recorded; nothing was deleted.
     """
     plan = earlier_plan(out)
     if plan is None:
         return
+    everything = objects is None
+    doomed: list[Path | None] = []
     for o in objects_of(plan) if objects is None else objects:
-        where = record_path(out, o.index)
-        rec = read_json(where)
-        shards = (rec or {}).get("shards")
-        for rel in shards if isinstance(shards, list) else ():
-            if isinstance(rel, str):
-                _unlink_inside(out, rel, what=f"{where} field 'shards'")
-        _unlink_inside(out, shard_path(o), what=f"the shard of object {o.index}")
-        _unlink_inside(out, os.path.relpath(where, out), what=f"the record of object {o.index}")
-    for name in (CARD_FILE, CARD_SHA256_FILE):
-        (out / name).unlink(missing_ok=True)
-    if objects is not None:
+        doomed += _record_files(out, o)
+    fixed = [CARD_SHA256_FILE, CARD_FILE]  # names of our own, never read from a file
+    if everything:
+        tasks = out / TASK_DIR
+        if tasks.is_dir() and not tasks.is_symlink():
+            fixed += [f"{TASK_DIR}/{p.name}" for p in tasks.iterdir() if _TASK_FILE.fullmatch(p.name)]
+        splits = {o.split for o in objects_of(plan)}
+        fixed += [MANIFEST_FILE, SHAPE_NAMES_FILE, *(f for s in sorted({*SPLITS, *splits}) for f in (file_list_name(s), split_file_name(s)))]
+    for name in fixed:
+        doomed.append(check_deletable(out, name, [re.compile(re.escape(name))], FileRecord(None), f"the earlier run's {name}"))
+    delete_checked(doomed)
+    for o in objects_of(plan) if objects is None else objects:
+        remove_empty_folders(out, o.name, keep=(SHARD_DIR, RECORD_DIR))  # generate's per-mesh folders it emptied
+    if not everything:
         return
-    tasks = out / TASK_DIR
-    if tasks.is_dir() and not tasks.is_symlink():
-        for path in tasks.iterdir():
-            if _TASK_FILE.fullmatch(path.name) and path.is_file():
-                path.unlink()
-    splits = {o.split for o in objects_of(plan)}
-    for name in (MANIFEST_FILE, SHAPE_NAMES_FILE, *(f for s in {*SPLITS, *splits} for f in (file_list_name(s), split_file_name(s)))):
-        (out / name).unlink(missing_ok=True)
     for name in (SHARD_DIR, RECORD_DIR, TASK_DIR):
-        try:
-            (out / name).rmdir()  # only when nothing else is left in it
-        except OSError:
-            pass
-    (out / PLAN_FILE).unlink()
+        remove_empty_folders(out, name)
+    delete_recorded(out, [(PLAN_FILE, FileRecord(None))], names=[re.compile(re.escape(PLAN_FILE))], what="the earlier plan")

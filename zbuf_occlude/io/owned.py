@@ -45,7 +45,9 @@ __all__ = [
     "FileRecord",
     "OwnedFolder",
     "acquire_lock",
+    "check_deletable",
     "check_layout",
+    "delete_checked",
     "delete_recorded",
     "make_folder",
     "remove_dead_temps",
@@ -73,13 +75,14 @@ class FileRecord:
 
     Attributes
     ----------
-    sha256 : str
-        Hex SHA-256 of the file's bytes.
+    sha256 : str or None
+        Hex SHA-256 of the file's bytes (``None``: a record of an older version, which names
+        the file by a name only a run writes but kept no digest).
     size : int or None
         Its size in bytes (``None``: not recorded, as in a farm record of several files).
     """
 
-    sha256: str
+    sha256: str | None
     size: int | None = None
 
 
@@ -104,13 +107,17 @@ def make_folder(folder: str | os.PathLike, *, option: str = "--out") -> Path:
 
 
 def _lock_holder(path: Path) -> str:
+    """``pid P on host H since T`` of the process holding lock file ``path`` (what it says)."""
+    from datetime import datetime, timezone
+
     try:
         lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
+        since = datetime.fromtimestamp(path.stat().st_mtime, timezone.utc).isoformat(timespec="seconds")
     except OSError:
         return "a process that has just released it"
     pid = lines[0] if lines and lines[0].isdigit() else "?"
     host = lines[1] if len(lines) > 1 else "?"
-    return f"pid {pid} on host {host}"
+    return f"pid {pid} on host {host} since {since}"
 
 
 def _break_dead_lock(path: Path) -> None:
@@ -233,7 +240,7 @@ def remove_empty_folders(root: str | os.PathLike, rel: str, *, keep: Sequence[st
         if str(folder) in keep:
             break
         path = root / folder
-        if path.is_symlink() or not path.is_dir():
+        if path.is_symlink() or not path.is_dir() or not Path(os.path.realpath(path)).is_relative_to(Path(os.path.realpath(root))):
             break
         try:
             path.rmdir()
@@ -245,9 +252,16 @@ def _name_allowed(rel: str, names: Sequence[re.Pattern[str]]) -> bool:
     return any(p.fullmatch(rel) for p in names)
 
 
-def _check_deletable(root: Path, rel: object, names: Sequence[re.Pattern[str]], expected: FileRecord | None, what: str) -> Path | None:
+def check_deletable(root: str | os.PathLike, rel: object, names: Sequence[re.Pattern[str]], expected: FileRecord | None, what: str) -> Path | None:
     """The path of ``root/rel`` once every check of :func:`delete_recorded` passes; ``None`` when
-    there is nothing to delete."""
+    there is nothing to delete.  Check every file first, then :func:`delete_checked` them.
+
+    Raises
+    ------
+    UnsafePathError
+        As :func:`delete_recorded`.
+    """
+    root = Path(root)
     if not isinstance(rel, str) or not _name_allowed(rel, names):
         raise UnsafePathError(
             f"{what} names {rel!r} in {root}, which is no file a run of ours writes there; nothing was deleted: "
@@ -267,7 +281,7 @@ def _check_deletable(root: Path, rel: object, names: Sequence[re.Pattern[str]], 
             f"{path} holds {path.stat().st_size:,} bytes where {what} says {expected.size:,}: it was changed since a run "
             "of ours wrote it, and is left as it is; move it away, or choose another --out"
         )
-    if file_sha256(path) != expected.sha256:
+    if expected.sha256 is not None and file_sha256(path) != expected.sha256:
         raise UnsafePathError(
             f"{path} does not match its SHA-256 in {what}: it was changed since a run of ours wrote it, and is left "
             "as it is; move it away, or choose another --out"
@@ -308,10 +322,14 @@ def delete_recorded(
         A name a run of this kind does not write, one leading outside ``root``, a link or folder
         where a file is recorded, or a file whose size or SHA-256 differ from the record.
     """
-    root = Path(root)
-    checked = [_check_deletable(root, rel, names, rec, what) for rel, rec in files]
+    checked = [check_deletable(root, rel, names, rec, what) for rel, rec in files]
+    return delete_checked(checked)
+
+
+def delete_checked(paths: Iterable[Path | None]) -> list[Path]:
+    """Delete the files :func:`check_deletable` returned (``None`` entries are skipped); return them."""
     deleted = []
-    for path in checked:
+    for path in paths:
         if path is not None:
             path.unlink(missing_ok=True)
             deleted.append(path)
@@ -453,7 +471,7 @@ class OwnedFolder:
     def _check_replaceable(self, rel: str, path: Path) -> None:
         if not os.path.lexists(path):
             return
-        _check_deletable(self.root, rel, self.names, self._ledger.get(rel), f"the ledger {self.ledger_path}")
+        check_deletable(self.root, rel, self.names, self._ledger.get(rel), f"the ledger {self.ledger_path}")
 
     @contextmanager
     def write(self, rel: str) -> Iterator[Path]:
