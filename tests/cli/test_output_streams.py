@@ -9,6 +9,7 @@ from __future__ import annotations
 import errno
 import io
 import os
+import shlex
 import shutil
 import subprocess
 import sys
@@ -151,3 +152,41 @@ def test_another_files_oserror_is_a_bug_with_its_traceback(monkeypatch) -> None:
     monkeypatch.setattr(cli_main, "cmd_info", disk_full)
     with pytest.raises(OSError, match="shard.h5"):
         cli_main.main(["info"])
+
+
+# -- no stdout at all (a shell's ``>&-``): the result cannot be reported, so the command fails ----------------
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory) -> Path:
+    from conftest import tiny_dataset
+
+    return tiny_dataset(tmp_path_factory.mktemp("tiny") / "ds")
+
+
+def _closed_stdout(argv: list[str]) -> subprocess.CompletedProcess:
+    """``zbuf-occlude ARGV >&-``: started with file descriptor 1 closed (Python's sys.stdout is then None)."""
+    command = shlex.join([sys.executable, "-m", "zbuf_occlude", *argv]) + " >&-"
+    return subprocess.run(["bash", "-c", command], stderr=subprocess.PIPE, text=True, cwd=REPO_ROOT, timeout=300)
+
+
+@pytest.mark.parametrize("command", ["verify", "contact-sheet"])
+def test_a_closed_stdout_fails_the_command_in_one_line(tiny, tmp_path, command) -> None:
+    argv = ["verify", str(tiny), "--no-progress"] if command == "verify" else [
+        "contact-sheet", str(tiny), "--out", str(tmp_path / "sheet.png"), "--per-class", "1", "--poses", "1", "--dpi", "20"]  # fmt: skip
+    done = _closed_stdout(argv)
+    _clean(done.stderr)
+    assert done.returncode == 1, done.stderr
+    assert done.stderr.splitlines() == ["zbuf-occlude: error: could not write to standard output (standard output is closed); "
+                                        "the command finished its work; what it printed is lost"], done.stderr  # fmt: skip
+
+
+@pytest.mark.parametrize("stream", [None, "closed"])
+def test_main_fails_when_stdout_is_none_or_closed(monkeypatch, capsys, stream) -> None:
+    monkeypatch.setattr(cli_main, "cmd_info", lambda args: print("report") or 0)
+    if stream is None:
+        monkeypatch.setattr(sys, "stdout", None)
+    else:
+        closed = io.StringIO()
+        closed.close()  # a write raises ValueError: I/O operation on closed file
+        monkeypatch.setattr(sys, "stdout", closed)
+    assert cli_main.main(["info"]) == 1
+    assert "could not write to standard output (standard output is closed)" in capsys.readouterr().err

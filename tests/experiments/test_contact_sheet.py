@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +14,8 @@ from zbuf_occlude.cli.main import main
 from zbuf_occlude.dataset.reader import OccludedDataset
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.contact_sheet import (
+    MAX_DPI,
+    MAX_SHEET_PIXELS,
     MAX_SHEET_ROWS,
     PANEL_INCHES,
     contact_sheet,
@@ -182,3 +186,75 @@ def test_the_command_writes_the_png(compact: Path, tmp_path: Path, capsys) -> No
     assert main(["contact-sheet", str(compact), "--out", str(out), "--per-class", "1", "--poses", "1", "--dpi", str(DPI)]) == 0
     assert capsys.readouterr().out == f"2 rows (dataset) -> {out}\n"
     assert _png(out).shape[:2] == (2 * _panel_px(), 3 * _panel_px())
+
+
+def test_a_scan_with_a_non_finite_point_is_refused_naming_the_file(scans: Path, tmp_path: Path, capsys) -> None:
+    folder = tmp_path / "damaged"
+    folder.mkdir()
+    name = sorted(p.name for p in scans.glob("*.npz"))[0]
+    with np.load(scans / name) as z:
+        arrays = {k: z[k] for k in z.files}
+    for bad in (np.nan, np.inf):
+        arrays["points"][3, 1] = bad
+        np.savez(folder / name, **arrays)
+        with pytest.raises(InvalidInputError, match=rf"{name}: 1 point has NaN or inf coordinates"):
+            contact_sheet(folder, tmp_path / "a.png", dpi=DPI)
+        assert main(["contact-sheet", str(folder), "--out", str(tmp_path / "a.png"), "--dpi", str(DPI)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and str(folder / name) in err and "Traceback" not in err
+    assert not list(tmp_path.glob("*.png"))
+
+
+def _unread_scans(folder: Path, meshes: int) -> Path:
+    """A folder of ``meshes`` one-scan groups that are not scans at all: a sheet's size is checked before a file is read."""
+    folder.mkdir()
+    for k in range(meshes):
+        (folder / f"mesh_{k:04d}_vlp16_s000.npz").write_bytes(b"not read")
+    return folder
+
+
+def test_the_sheet_s_pixels_are_capped_before_any_scan_is_read(tmp_path: Path, capsys) -> None:
+    # 60 rows at 600 dpi: 60 x 3 panels of 1,320 pixels a side, 314 M pixels; refused up front, naming the values
+    folder = _unread_scans(tmp_path / "many", 60)
+    with pytest.raises(InvalidInputError, match=r"60 rows at 600 dpi.*MAX_SHEET_PIXELS.*lower dpi to 271 or less"):
+        contact_sheet(folder, tmp_path / "a.png", dpi=MAX_DPI)
+    assert main(["contact-sheet", str(folder), "--out", str(tmp_path / "a.png"), "--dpi", str(MAX_DPI)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "MAX_SHEET_PIXELS" in err and "Traceback" not in err
+    assert not list(tmp_path.glob("*.png"))
+
+
+def test_the_largest_sheet_the_cap_allows_is_under_pils_bomb_limits(tmp_path: Path) -> None:
+    from PIL import Image
+
+    # the PNG is read back by PIL to make its palette: under PIL's own limit (a
+    # DecompressionBombWarning past it, an error at twice), whatever the rows; and under Agg's
+    # 2**16 pixels a side at MAX_SHEET_ROWS (a 12-row sheet at MAX_DPI, 63 M pixels, was drawn
+    # once with the warning as an error: 13 s, too slow to repeat here)
+    assert MAX_SHEET_PIXELS < Image.MAX_IMAGE_PIXELS
+    assert math.sqrt(MAX_SHEET_ROWS * MAX_SHEET_PIXELS / 3) < 2**16
+    rows = int(MAX_SHEET_PIXELS // (3 * (PANEL_INCHES * MAX_DPI) ** 2))  # the most rows at MAX_DPI
+    assert rows == 12 and int(3 * PANEL_INCHES * MAX_DPI) * int(rows * PANEL_INCHES * MAX_DPI) <= MAX_SHEET_PIXELS
+    with pytest.raises(InvalidInputError, match=r"13 rows at 600 dpi.*lower dpi to 582 or less"):
+        contact_sheet(_unread_scans(tmp_path / "more", rows + 1), tmp_path / "a.png", per_class=1, poses=1, dpi=MAX_DPI)
+
+
+def test_a_card_without_a_radius_is_refused_naming_it(tmp_path: Path, capsys) -> None:
+    import json
+
+    from zbuf_occlude.dataset.schema import card_sha256_line
+    from zbuf_occlude.io.atomic import file_sha256
+
+    ds = tiny_dataset(tmp_path / "ds", "dense")
+    card_file = ds / "dataset_card.json"
+    card = json.loads(card_file.read_text())
+    assert card["params"]["radius"] == 4.0  # every farm and generate card has it
+    del card["params"]["radius"]
+    card_file.write_text(json.dumps(card))
+    (ds / "dataset_card.json.sha256").write_text(card_sha256_line(file_sha256(card_file)))
+    with pytest.raises(InvalidInputError, match=r"dataset_card.json field 'params.radius' is missing"):
+        contact_sheet(ds, tmp_path / "a.png", per_class=1, poses=1, dpi=DPI)
+    assert main(["contact-sheet", str(ds), "--out", str(tmp_path / "a.png"), "--dpi", str(DPI)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and str(card_file) in err and "params.radius" in err
+    assert not list(tmp_path.glob("*.png"))

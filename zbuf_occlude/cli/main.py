@@ -4,9 +4,9 @@ Thin: parse arguments, call the library, print.  Every option is checked while t
 is parsed (:mod:`zbuf_occlude.cli.options`: counts against their caps, seeds, reals, pose lists,
 output folders), before any work.  A :class:`ZbufOccludeError` is printed on one line and the
 exit status is 2; running out of memory (a ``MemoryError`` anywhere) is one line naming the
-command, what it was doing and the file when known, exit status 1; a closed stdout exits 141
-quietly and an unwritable one is one line, exit 1 (:func:`main`); any other exception is a bug
-and shows a traceback.
+command, what it was doing and the file when known, exit status 1; a closed pipe on stdout
+exits 141 quietly and an unwritable or missing stdout (``>&-``) is one line, exit 1
+(:func:`main`); any other exception is a bug and shows a traceback.
 """
 
 from __future__ import annotations
@@ -445,6 +445,30 @@ def _run(argv: Sequence[str] | None) -> int:
         return 128 + getattr(exc, "signum", signal.SIGINT)
 
 
+class _NoStdout:
+    """What stands for a missing ``sys.stdout`` (started with ``>&-``; pythonw): every write fails,
+    so that a result the command cannot report is a failure, not a silent exit 0."""
+
+    def write(self, text: str) -> int:
+        raise OSError(errno.EBADF, "standard output is closed")
+
+    def flush(self) -> None:
+        pass
+
+
+def _hold_fd_1() -> None:
+    """Point a closed file descriptor 1 at ``os.devnull``, so that no file the command opens takes
+    its number, where a library's or a child process's output would then be written."""
+    try:
+        os.fstat(1)
+    except OSError:
+        with contextlib.suppress(OSError):
+            fd = os.open(os.devnull, os.O_WRONLY)
+            if fd != 1:
+                os.dup2(fd, 1)
+                os.close(fd)
+
+
 class _WatchedStdout:
     """``sys.stdout`` while a command runs: the same stream, keeping the first OSError a write raised.
 
@@ -469,6 +493,10 @@ class _WatchedStdout:
                 return self.stream.write(text)
             except OSError as exc:
                 self._failed(exc)
+            except ValueError:  # a closed file object; any other ValueError (an encoding) stays a bug
+                if not getattr(self.stream, "closed", False):
+                    raise
+                self._failed(OSError(errno.EBADF, "standard output is closed"))
         return len(text)  # stdout is lost: the text is dropped, the command goes on
 
     def writelines(self, lines: Iterable[str]) -> None:
@@ -476,7 +504,7 @@ class _WatchedStdout:
             self.write(line)
 
     def flush(self) -> None:
-        if self.error is None:
+        if self.error is None and not getattr(self.stream, "closed", False):  # a closed one: write says so
             try:
                 self.stream.flush()
             except OSError as exc:
@@ -516,11 +544,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     the folders it created for ``--out`` are removed again when nothing was written in them.
     Standard output is watched and flushed here, not at exit, for every command: a reader that
     went away (``| head``) ends the command quietly with exit status 141; a stdout that cannot be
-    written (``> /dev/full``) lets the command finish, then is one line on stderr and exit 1.
+    written (``> /dev/full``), is closed or is missing (``>&-``: ``sys.stdout`` is None) lets the
+    command finish, then is one line on stderr (when there is one) and exit 1.
     """
-    if sys.stdout is None:  # no stdout at all (pythonw): nothing to watch
-        return _run(argv)
-    stdout = sys.stdout = _WatchedStdout(sys.stdout)
+    original = sys.stdout
+    if original is None:
+        _hold_fd_1()
+    stdout = sys.stdout = _WatchedStdout(_NoStdout() if original is None else original)
     try:
         try:
             status = _run(argv)
@@ -539,7 +569,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return status if stdout.error is None else _stdout_lost(stdout, status)
     finally:
         if sys.stdout is stdout:
-            sys.stdout = stdout.stream
+            sys.stdout = original
 
 
 if __name__ == "__main__":

@@ -56,6 +56,7 @@ __all__ = [
     "DEFAULT_POSES",
     "DEFAULT_DPI",
     "MAX_SHEET_ROWS",
+    "MAX_SHEET_PIXELS",
     "MAX_DPI",
 ]
 
@@ -77,9 +78,14 @@ DEFAULT_DPI = 72
 MAX_DPI = 600
 #: Side of one panel, inches.
 PANEL_INCHES = 2.2
-#: Rows at most: Agg draws at most 2**16 pixels a side, and a longer sheet is no longer read;
-#: ask for fewer per class (or poses) on data sets of many classes.
+#: Rows at most: a longer sheet is no longer read; ask for fewer per class (or poses) on data
+#: sets of many classes.
 MAX_SHEET_ROWS = 200
+#: Pixels of the PNG at most, ``rows * 3 * (PANEL_INCHES * dpi) ** 2``: under PIL's
+#: ``Image.MAX_IMAGE_PIXELS`` (89.5 M; the PNG is read back to make its palette, and PIL refuses
+#: twice that as a decompression bomb), a 256 MB RGBA canvas; with :data:`MAX_SHEET_ROWS` it also
+#: keeps a sheet under Agg's 2**16 pixels a side (at most ``sqrt(200 * 64 M / 3)`` = 65,320 tall).
+MAX_SHEET_PIXELS = 64_000_000
 #: Points drawn per panel at most (a seeded subsample beyond it); titles give the full counts.
 MAX_DRAWN_POINTS = 8192
 #: Marker area, points², small enough that thousands of points stay legible in a small panel.
@@ -211,7 +217,9 @@ def contact_sheet(
         :data:`MAX_DRAWN_POINTS`); the same seed draws the same sheet.
     dpi : int
         Pixels per inch; a panel is :data:`PANEL_INCHES` wide, so the PNG is
-        ``3 * PANEL_INCHES * dpi`` by ``rows * PANEL_INCHES * dpi`` pixels.
+        ``3 * PANEL_INCHES * dpi`` by ``rows * PANEL_INCHES * dpi`` pixels, at most
+        :data:`MAX_SHEET_PIXELS` in all (12 rows at :data:`MAX_DPI`; at the default
+        :data:`MAX_SHEET_ROWS` is reached first).
 
     Returns
     -------
@@ -223,8 +231,12 @@ def contact_sheet(
     InvalidInputError
         ``path`` is neither a data set nor a folder of scans; ``per_class``, ``poses`` or
         ``dpi`` below 1; ``dpi`` above :data:`MAX_DPI`; a negative ``seed``; more rows than
-        :data:`MAX_SHEET_ROWS`; ``out`` not a ``.png`` file; a data set whose card lacks a usable ``params.radius`` or ``params.resolution``; or any
-        error of the reader (:class:`~zbuf_occlude.dataset.reader.OccludedDataset`) or of
+        :data:`MAX_SHEET_ROWS`, or rows and ``dpi`` that make more pixels than
+        :data:`MAX_SHEET_PIXELS` (both checked before any sample is read); ``out`` not a ``.png``
+        file; a data set whose card lacks a usable ``params.radius`` or ``params.resolution``
+        (unless it is a ``farm --sensor`` data set, whose samples hold their own radius); a scan
+        with a NaN or infinite point; or any error of the reader
+        (:class:`~zbuf_occlude.dataset.reader.OccludedDataset`) or of
         :func:`~zbuf_occlude.sensors.scan.read_scan_npz`, naming the file.
     BackendUnavailable
         matplotlib is missing (``pip install '.[plot]'``).
@@ -249,9 +261,9 @@ def contact_sheet(
     rng = np.random.default_rng(seed)
     fixed = camera_on_sphere(FIXED_ELEVATION_DEG, FIXED_AZIMUTH_DEG, DEFAULT_RADIUS, resolution=FIXED_RESOLUTION)
     if (root / CARD_FILE).is_file():
-        source, rows = "dataset", _dataset_rows(root, int(per_class), int(poses), rng, fixed)
+        source, rows = "dataset", _dataset_rows(root, int(per_class), int(poses), int(dpi), rng, fixed)
     elif root.is_dir() and any(p.suffix.lower() == ".npz" for p in root.iterdir()):
-        source, rows = "scans", _scan_rows(root, int(per_class) * int(poses), rng, fixed)
+        source, rows = "scans", _scan_rows(root, int(per_class) * int(poses), int(dpi), rng, fixed)
     else:
         raise InvalidInputError(
             f"{root} is neither a data set (no {CARD_FILE}) nor a folder of scans (no .npz files of "
@@ -262,18 +274,34 @@ def contact_sheet(
     return ContactSheet(path=out, source=source, rows=rows, fixed_camera=fixed, figure=figure)
 
 
-def _check_rows(n_rows: int, what: str) -> None:
+def _check_size(n_rows: int, dpi: int, what: str) -> None:
+    """Refuse a sheet of more than :data:`MAX_SHEET_ROWS` rows or :data:`MAX_SHEET_PIXELS` pixels, before it is drawn."""
     if n_rows > MAX_SHEET_ROWS:
         raise InvalidInputError(
             f"a contact sheet of {what} would have up to {n_rows} rows, more than {MAX_SHEET_ROWS} (MAX_SHEET_ROWS): "
             "ask for fewer per class or fewer poses"
         )
+    panel = PANEL_INCHES * dpi  # pixels a side
+    pixels = n_rows * 3 * panel**2
+    if pixels > MAX_SHEET_PIXELS:
+        most_dpi = math.floor(math.sqrt(MAX_SHEET_PIXELS / (n_rows * 3)) / PANEL_INCHES)
+        raise InvalidInputError(
+            f"a contact sheet of {what} would be up to {n_rows} rows at {dpi} dpi, {pixels / 1e6:.0f} M pixels "
+            f"({3 * panel:.0f} x {n_rows * panel:.0f}), more than {MAX_SHEET_PIXELS / 1e6:.0f} M (MAX_SHEET_PIXELS): "
+            f"lower dpi to {most_dpi} or less, or ask for fewer per class or fewer poses"
+        )
 
 
 # -- data sets ----------------------------------------------------------------------------------------
-def _card_number(ds: OccludedDataset, key: str, default: float | None = None) -> float:
-    """A number of the card's ``params`` (the card is data: a string or a bool is refused by name)."""
-    value = ds.card.get("params", {}).get(key, default)
+def _card_number(ds: OccludedDataset, key: str) -> float:
+    """A number of the card's ``params`` (the card is data: a missing one, a string or a bool is refused by name)."""
+    params = ds.card.get("params", {})
+    if key not in params:  # no default: a camera guessed for a data set made with another one would mislead
+        raise InvalidInputError(
+            f"{ds.root / CARD_FILE} field 'params.{key}' is missing: the sheet's camera view needs the data set's "
+            "camera; give the folder that `zbuf-occlude farm` or `generate` wrote, with its card"
+        )
+    value = params[key]
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
         raise InvalidInputError(f"{ds.root / CARD_FILE} field 'params.{key}' must be a positive number, got {value!r}")
     return float(value)
@@ -301,14 +329,16 @@ def _choose_samples(ds: OccludedDataset, per_class: int, poses: int, rng: np.ran
     return chosen
 
 
-def _dataset_rows(root: Path, per_class: int, poses: int, rng: np.random.Generator, fixed: Camera) -> list[SheetRow]:
+def _dataset_rows(
+    root: Path, per_class: int, poses: int, dpi: int, rng: np.random.Generator, fixed: Camera
+) -> list[SheetRow]:
     from zbuf_occlude.dataset.reader import OccludedDataset
 
     ds = OccludedDataset(root)
-    _check_rows(len(np.unique(ds.labels)) * per_class * poses, str(root))
+    _check_size(len(np.unique(ds.labels)) * per_class * poses, dpi, str(root))
     sensor = ds.sensor
-    if sensor is None:
-        radius, resolution = _card_number(ds, "radius", DEFAULT_RADIUS), _card_number(ds, "resolution")
+    if sensor is None:  # a sensor's samples each hold their own radius (meta["radius"]), the card's is not used
+        radius, resolution = _card_number(ds, "radius"), _card_number(ds, "resolution")
     rows = []
     for i in _choose_samples(ds, per_class, poses, rng):
         points, _, meta = ds[i]
@@ -349,7 +379,7 @@ def _dataset_rows(root: Path, per_class: int, poses: int, rng: np.random.Generat
 
 
 # -- scan folders -------------------------------------------------------------------------------------
-def _scan_rows(root: Path, per_group: int, rng: np.random.Generator, fixed: Camera) -> list[SheetRow]:
+def _scan_rows(root: Path, per_group: int, dpi: int, rng: np.random.Generator, fixed: Camera) -> list[SheetRow]:
     from zbuf_occlude.sensors.scan import read_scan_npz
 
     groups: dict[str, list[Path]] = {}
@@ -357,12 +387,23 @@ def _scan_rows(root: Path, per_group: int, rng: np.random.Generator, fixed: Came
         if p.suffix.lower() == ".npz":
             m = SCAN_NAME.match(p.stem)
             groups.setdefault(m["group"] if m else p.stem, []).append(p)
-    _check_rows(sum(min(len(files), per_group) for files in groups.values()), str(root))
+    _check_size(sum(min(len(files), per_group) for files in groups.values()), dpi, str(root))
     rows = []
     for group, files in groups.items():
         for p in sorted(files[k] for k in rng.permutation(len(files))[:per_group]):
-            rows.append(_scan_row(read_scan_npz(p), group, p.name, fixed))
+            rows.append(_scan_row(_finite_scan(read_scan_npz(p), p), group, p.name, fixed))
     return rows
+
+
+def _finite_scan(s: Any, path: Path) -> Any:
+    """``s`` when every point is finite; a scan holding NaN or inf is damaged and refused, naming ``path``."""
+    bad = int((~np.isfinite(np.asarray(s.points, dtype=np.float64))).any(axis=1).sum())
+    if bad:
+        raise InvalidInputError(
+            f"{path}: {bad} point{' has' if bad == 1 else 's have'} NaN or inf coordinates: the scan is damaged; "
+            "write it again with `zbuf-occlude scan` or move it out of the folder"
+        )
+    return s
 
 
 def _scan_row(s: Any, group: str, name: str, fixed: Camera) -> SheetRow:
