@@ -190,3 +190,30 @@ def test_main_fails_when_stdout_is_none_or_closed(monkeypatch, capsys, stream) -
         monkeypatch.setattr(sys, "stdout", closed)
     assert cli_main.main(["info"]) == 1
     assert "could not write to standard output (standard output is closed)" in capsys.readouterr().err
+
+
+# -- no stderr (``2>&-``): messages and progress are lost, the run is not -----------------------------------
+@pytest.mark.parametrize("progress", [[], ["--no-progress"]], ids=["progress", "no-progress"])
+def test_a_farm_with_stderr_closed_finishes_its_data_set(tmp_path, progress) -> None:
+    root = tmp_path / "in" / "chair" / "train"
+    root.mkdir(parents=True)
+    shutil.copy(CHAIR, root / CHAIR.name)
+    out = tmp_path / "ds"
+    argv = ["farm", str(tmp_path / "in"), "--out", str(out), "--views", "0:0", "--dense-points", "500", "--samples-per-view", "1",
+            "--points", "64", "--resolution", "64", *progress]  # fmt: skip
+    command = shlex.join([sys.executable, "-m", "zbuf_occlude", *argv]) + " 2>&-"
+    done = subprocess.run(["bash", "-c", command], stdout=subprocess.PIPE, text=True, cwd=REPO_ROOT, timeout=300)
+    assert done.returncode == 0 and "(finished)" in done.stdout, done.stdout
+    from zbuf_occlude.dataset.verify import verify_dataset
+
+    assert verify_dataset(out).ok
+
+
+def test_progress_without_stderr_is_a_bar_that_shows_nothing(monkeypatch) -> None:
+    from zbuf_occlude.io.progress import progress
+
+    monkeypatch.setattr(sys, "stderr", None)
+    assert list(progress(range(3), desc="x")) == [0, 1, 2]
+    with progress(total=3, desc="x", interval_s=0) as bar:
+        bar.update(3)
+    assert bar.disable

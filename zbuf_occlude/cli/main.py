@@ -456,16 +456,16 @@ class _NoStdout:
         pass
 
 
-def _hold_fd_1() -> None:
-    """Point a closed file descriptor 1 at ``os.devnull``, so that no file the command opens takes
-    its number, where a library's or a child process's output would then be written."""
+def _hold_fd(number: int) -> None:
+    """Point a closed file descriptor (1 or 2) at ``os.devnull``, so that no file the command opens
+    takes its number, where a library's or a child process's output would then be written."""
     try:
-        os.fstat(1)
+        os.fstat(number)
     except OSError:
         with contextlib.suppress(OSError):
             fd = os.open(os.devnull, os.O_WRONLY)
-            if fd != 1:
-                os.dup2(fd, 1)
+            if fd != number:
+                os.dup2(fd, number)
                 os.close(fd)
 
 
@@ -545,11 +545,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     Standard output is watched and flushed here, not at exit, for every command: a reader that
     went away (``| head``) ends the command quietly with exit status 141; a stdout that cannot be
     written (``> /dev/full``), is closed or is missing (``>&-``: ``sys.stdout`` is None) lets the
-    command finish, then is one line on stderr (when there is one) and exit 1.
+    command finish, then is one line on stderr (when there is one) and exit 1.  A missing stderr
+    (``2>&-``) loses the messages and progress, not the run.
     """
-    original = sys.stdout
+    original, original_err = sys.stdout, sys.stderr
     if original is None:
-        _hold_fd_1()
+        _hold_fd(1)
+    if original_err is None:  # stderr closed (2>&-): its messages are the user's to lose, the run goes on
+        _hold_fd(2)
+        sys.stderr = open(os.devnull, "w", encoding="utf-8")  # noqa: SIM115 - closed in the finally below
     stdout = sys.stdout = _WatchedStdout(_NoStdout() if original is None else original)
     try:
         try:
@@ -570,6 +574,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         if sys.stdout is stdout:
             sys.stdout = original
+        if original_err is None:
+            sys.stderr.close()
+            sys.stderr = None
 
 
 if __name__ == "__main__":

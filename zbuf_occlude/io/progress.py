@@ -145,7 +145,8 @@ def progress(
     unit : str
         What one item is (``"obj"``, ``"batch"``).
     enabled : bool
-        False (``--no-progress``): a tqdm that shows nothing.
+        False (``--no-progress``): a tqdm that shows nothing; so is the bar where there is no
+        stderr (``sys.stderr`` is None).
     leave : bool
         Whether the bar stays when it closes; in a log, whether it writes a last line.
     initial : int
@@ -164,7 +165,7 @@ def progress(
         :data:`PROGRESS_INTERVAL_ENV` is set to something other than seconds ≥ 0.
     """
     common = dict(total=total, desc=desc, unit=unit, leave=leave, initial=initial, file=sys.stderr)
-    if not enabled:
+    if not enabled or sys.stderr is None:  # no stderr (closed, pythonw): nowhere to show it
         return tqdm(iterable, disable=True, **common)
     if _stderr_is_terminal():
         return tqdm(iterable, dynamic_ncols=True, **common)
