@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -17,6 +18,7 @@ from zbuf_occlude.cli.options import Checked, count, counted, interval, out_fold
 from zbuf_occlude.defaults import DEFAULT_SEED
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.samples import derive_rng, object_key
+from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.mesh.sizes import DIMENSIONS, SizeRange, size_interval
 from zbuf_occlude.sensors.presets import preset_names, sensor_from_name
@@ -116,14 +118,6 @@ def _largest_side(args: argparse.Namespace, mesh) -> tuple[float, float]:
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
-    from zbuf_occlude.io.progress import progress as progress_bar
-    from zbuf_occlude.sensors.airborne import AirborneScanner
-    from zbuf_occlude.sensors.crops import object_crop
-    from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
-    from zbuf_occlude.sensors.lidar import Lidar
-    from zbuf_occlude.sensors.scan import look_at_pose, scan
-    from zbuf_occlude.sensors.scene import GROUND_ID, load_scene
-
     sensor = _with_return_physics(sensor_from_name(args.sensor), args)
     if args.ground_margin is not None and not args.crop:
         raise InvalidInputError("--ground-margin chooses the ground kept in a crop: it needs --crop")
@@ -135,11 +129,39 @@ def cmd_scan(args: argparse.Namespace) -> int:
         raise InvalidInputError("--outline gives the object's crops the outline of real scans: it needs --crop")
     if args.occlude and args.across_sight_width is None:
         raise InvalidInputError("--occlude meets --across-sight-width with a side occluder: it needs --across-sight-width")
-    out = Path(args.out)
     formats = ("npz", "ply") if args.format == "both" else (args.format,)
+    # a refused run's empty --out is removed by cli.main
+    with OwnedFolder(args.out, names=[SCAN_FILE_NAMES], what="the scan") as folder:
+        return _scan_into(folder, args, sensor, formats)
+
+
+#: The files ``scan`` writes in ``--out``: ``<stem>_<sensor>_sNNN.npz|ply``.
+SCAN_FILE_NAMES = r"[^/]+_s\d{3,}\.(npz|ply)"
+
+
+def _save(folder: OwnedFolder, s, stem: str, formats: Sequence[str]) -> list[Path]:
+    """Write scan ``s`` as ``<stem>.<fmt>`` for each format, through the owned folder."""
+    files = []
+    for fmt in formats:
+        with folder.write(f"{stem}.{fmt}") as tmp:
+            getattr(s, f"to_{fmt}")(tmp)
+        files.append(folder.root / f"{stem}.{fmt}")
+    return files
+
+
+def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: Sequence[str]) -> int:
+    """:func:`cmd_scan` once ``--out`` is held."""
+    from zbuf_occlude.io.progress import progress as progress_bar
+    from zbuf_occlude.sensors.airborne import AirborneScanner
+    from zbuf_occlude.sensors.crops import object_crop
+    from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
+    from zbuf_occlude.sensors.lidar import Lidar
+    from zbuf_occlude.sensors.scan import look_at_pose, scan
+    from zbuf_occlude.sensors.scene import GROUND_ID, load_scene
+
+    out = folder.root
     src = Path(args.mesh_or_scene)
     written, empty = [], 0
-    out.mkdir(parents=True, exist_ok=True)  # a refused run's empty --out is removed by cli.main
     if src.suffix.lower() in (".json", ".yaml", ".yml"):
         if args.crop:
             raise InvalidInputError(f"--crop keeps one mesh's returns; {src.name} is a scene file, scanned whole")
@@ -156,7 +178,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
                 s = scan_airborne(scene, sensor, (0.0, 0.0), scene.ground_half_extent_m, seed=args.seed + k)
             else:
                 s = scan(scene, sensor, pose, seed=args.seed + k, backend=args.backend, frame=args.frame)
-            written += [getattr(s, f"to_{fmt}")(out / f"{src.stem}_{sensor.name}_s{k:03d}.{fmt}") for fmt in formats]
+            written += _save(folder, s, f"{src.stem}_{sensor.name}_s{k:03d}", formats)
     else:
         if not isinstance(sensor, (Lidar, AirborneScanner)):
             raise InvalidInputError("scan of a mesh file places a LiDAR; use a scene file for depth cameras")
@@ -208,7 +230,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
             s = crop.scan if args.crop else crop.full
             s.meta.update(placement.to_dict())
             stem = f"{src.stem}_{sensor.name}_s{k:03d}"
-            files = [getattr(s, f"to_{fmt}")(out / f"{stem}.{fmt}") for fmt in formats]
+            files = _save(folder, s, stem, formats)
             written += files
             returns = int(np.count_nonzero(crop.scan.object_id != GROUND_ID))
             if returns == 0:
