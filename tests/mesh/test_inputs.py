@@ -148,6 +148,65 @@ def test_a_list_file_is_recorded_as_its_layout(tmp_path: Path) -> None:
         scan_objects(tmp_path / "list.txt", class_from=1)
 
 
+# a mesh in a folder of its own (a glTF with its buffer), or in any folder below its class folder
+NESTED = ["car/van.obj", "car/sedan.obj", "pedestrian/man.obj", "pedestrian/walker/scene.obj", "pedestrian/walker/scene.bin"]
+
+
+@pytest.mark.parametrize("entry", ["farm", "generate"])
+def test_a_mesh_in_a_folder_of_its_own_takes_the_class_folder_above(tmp_path: Path, entry: str) -> None:
+    from zbuf_occlude.mesh.inputs import scan_inputs, scan_objects
+
+    for k, rel in enumerate(NESTED):
+        if rel.endswith(".bin"):
+            (tmp_path / "root" / rel).write_bytes(b"\0" * 8)  # beside the mesh, not a mesh
+        else:
+            _box(tmp_path / "root" / rel, k)
+    scan = scan_objects(tmp_path / "root") if entry == "farm" else scan_inputs([tmp_path / "root"])
+    assert scan.layout == "class-folders" and scan.skipped == []
+    assert {o.name: (o.class_name, o.split) for o in scan.objects} == {
+        "car/sedan": ("car", "train"), "car/van": ("car", "train"),
+        "pedestrian/man": ("pedestrian", "train"), "pedestrian/walker/scene": ("pedestrian", "train"),  # not "walker"
+    }  # fmt: skip
+
+
+def test_the_split_of_a_nested_mesh_is_the_split_folder_below_its_class(tmp_path: Path) -> None:
+    from zbuf_occlude.mesh.inputs import scan_objects
+
+    for k, rel in enumerate(["car/train/van.obj", "car/test/beetle/scene.obj", "pole/lamp.obj"]):
+        _box(tmp_path / "root" / rel, k)
+    scan = scan_objects(tmp_path / "root")
+    assert {o.name: (o.class_name, o.split) for o in scan.objects} == {
+        "car/train/van": ("car", "train"), "car/test/beetle/scene": ("car", "test"), "pole/lamp": ("pole", "train"),
+    }  # fmt: skip
+
+
+@pytest.mark.parametrize("command", ["farm", "generate"])
+def test_meshes_loose_beside_class_folders_exit_2_naming_them(tmp_path: Path, capsys, command: str) -> None:
+    # the folder's own name is no class of the others: which class "stray.obj" is in, no folder says
+    for k, rel in enumerate(["stray.obj", "car/van.obj", "pole/lamp.obj"]):
+        _box(tmp_path / "root" / rel, k)
+    assert _run(command, tmp_path / "root", tmp_path / "out") == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("zbuf-occlude: error:") and "\n" not in err, err
+    assert "stray.obj" in err and "class folder" in err and "list file" in err
+    assert not (tmp_path / "out" / "records").exists()
+
+
+def test_a_sub_folder_of_several_meshes_is_part_of_its_class_and_said_so(tmp_path: Path, caplog) -> None:
+    # vehicle/car/ may be a class of its own or a group inside "vehicle": the class is the
+    # folder below the root, and the run says which folders it took as part of their class
+    from zbuf_occlude.mesh.inputs import scan_objects
+
+    for k, rel in enumerate(["vehicle/car/a.obj", "vehicle/car/b.obj", "vehicle/bus.obj", "plant/tree.obj"]):
+        _box(tmp_path / "root" / rel, k)
+    with caplog.at_level("WARNING", logger="zbuf_occlude.mesh.layouts"):
+        scan = scan_objects(tmp_path / "root")
+    assert {o.name: o.class_name for o in scan.objects} == {
+        "vehicle/car/a": "vehicle", "vehicle/car/b": "vehicle", "vehicle/bus": "vehicle", "plant/tree": "plant",
+    }  # fmt: skip
+    assert "vehicle/car" in caplog.text and "--class-from" in caplog.text
+
+
 # -- refused labels and --class-from -----------------------------------------------------------
 DEGENERATE = {
     # ShapeNet-like but not ShapeNetCore's file names: ModelNet's rule gives "models" to all

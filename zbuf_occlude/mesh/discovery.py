@@ -1,9 +1,13 @@
 """Finding mesh files: folders searched recursively, names, ModelNet's class and split.
 
-Nothing is lost silently: a folder that cannot be read and a file whose path is not
-valid UTF-8 are reported (:class:`SkippedInput`, logged as warnings) and returned by
-:func:`scan_meshes`, so that a run can say so and exit non-zero.  The farm's discovery
-(:mod:`zbuf_occlude.mesh.inputs`) walks with :func:`walk_mesh_files` too.
+Nothing is lost silently: a folder that cannot be read, a file whose path is not valid
+UTF-8 and a file of a 3D format that is not read (``.fbx``, ``.blend``, ...:
+:data:`~zbuf_occlude.mesh.formats.UNREAD_FORMATS`) are reported (:class:`SkippedInput`,
+logged as warnings) and returned by :func:`scan_meshes`, so that a run can say so and exit
+non-zero.  Files that sit beside meshes (a glTF's buffers and textures, an OBJ's materials,
+notes) are no 3D format and are passed over.  A format whose optional package is missing is
+refused once, when its files are found, before any work (:func:`check_readers_installed`).
+The farm's discovery (:mod:`zbuf_occlude.mesh.inputs`) walks with :func:`walk_mesh_files` too.
 """
 
 from __future__ import annotations
@@ -19,8 +23,9 @@ from os import PathLike
 from pathlib import Path
 from typing import NamedTuple
 
-from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS
+from zbuf_occlude._version import install_hint
+from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
+from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT, FORMATS, SUPPORTED_EXTENSIONS, UNREAD_FORMATS, missing_package
 
 __all__ = [
     "SkippedInput",
@@ -28,7 +33,9 @@ __all__ = [
     "printable_path",
     "non_utf8_reason",
     "unusable_entry_reason",
+    "unread_format_reason",
     "check_mesh_extension",
+    "check_readers_installed",
     "collect_inputs",
     "no_meshes_error",
     "walk_mesh_files",
@@ -114,6 +121,18 @@ def unusable_entry_reason(path: str | PathLike[str]) -> str | None:
     return None
 
 
+def unread_format_reason(path: str | PathLike[str]) -> str | None:
+    """Why a file is skipped although it holds a 3D model (its format is not read), or None.
+
+    None for the formats read (:data:`~zbuf_occlude.mesh.formats.SUPPORTED_EXTENSIONS`) and
+    for anything that is no 3D format (textures, a glTF's ``.bin``, an OBJ's ``.mtl``, notes).
+    """
+    name = UNREAD_FORMATS.get(Path(path).suffix.lower())
+    if name is None:
+        return None
+    return f"{name}: a 3D format zbuf-occlude does not read; convert it to one of {EXTENSIONS_TEXT} (e.g. with Blender or assimp)"
+
+
 def _file_kind(mode: int) -> str:
     for test, kind in ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device")):
         if test(mode):
@@ -128,7 +147,9 @@ def walk_mesh_files(root: str | PathLike[str], *, skip_hidden: bool = False) -> 
     folder that cannot be listed (permissions, I/O error), a dangling symbolic link, a
     loop of links and a FIFO or device with a mesh's extension
     (:func:`unusable_entry_reason`) are reported instead of being left out silently, and
-    files whose path is not valid UTF-8 are reported and left out.
+    files whose path is not valid UTF-8 and files of a 3D format that is not read
+    (:func:`unread_format_reason`) are reported and left out.  Other files (textures,
+    buffers, materials, notes) are passed over.
 
     Parameters
     ----------
@@ -144,8 +165,8 @@ def walk_mesh_files(root: str | PathLike[str], *, skip_hidden: bool = False) -> 
         Regular files (or links to them) with an extension of :data:`SUPPORTED_EXTENSIONS`
         (any case), sorted.
     skipped : list of SkippedInput
-        Folders that could not be read, broken links, non-regular mesh-named entries and
-        files with non-UTF-8 paths; each is also logged as a warning.
+        Folders that could not be read, broken links, non-regular mesh-named entries, files
+        with non-UTF-8 paths and files of 3D formats not read; each is also logged as a warning.
     """
     root = Path(root)
     files: list[Path] = []
@@ -166,7 +187,12 @@ def walk_mesh_files(root: str | PathLike[str], *, skip_hidden: bool = False) -> 
             if problem:
                 skipped.append(SkippedInput(printable_path(path), problem))
                 continue
-            if path.suffix.lower() not in SUPPORTED_EXTENSIONS or not path.is_file():
+            if not path.is_file():
+                continue
+            if path.suffix.lower() not in SUPPORTED_EXTENSIONS:
+                problem = unread_format_reason(path)
+                if problem:
+                    skipped.append(SkippedInput(printable_path(path), problem))
                 continue
             problem = non_utf8_reason(path)
             if problem:
@@ -188,9 +214,10 @@ def scan_meshes(paths: Sequence[str | PathLike[str]]) -> MeshScan:
     Returns
     -------
     MeshScan
-        ``meshes``: ``(file, name)`` sorted per folder; ``skipped``: unreadable folders
-        and non-UTF-8 file names (each logged as a warning).  A caller that must not
-        lose inputs silently exits non-zero when ``skipped`` is not empty.
+        ``meshes``: ``(file, name)`` sorted per folder; ``skipped``: unreadable folders,
+        non-UTF-8 file names and files of 3D formats not read (each logged as a warning).
+        A caller that must not lose inputs silently exits non-zero when ``skipped`` is not
+        empty.
 
     Raises
     ------
@@ -198,6 +225,9 @@ def scan_meshes(paths: Sequence[str | PathLike[str]]) -> MeshScan:
         A path does not exist, a file given is not a mesh by its extension
         (:func:`check_mesh_extension`), or no mesh was found (the message lists what was
         skipped).
+    BackendUnavailable
+        A format found needs an optional package that is not installed
+        (:func:`check_readers_installed`).
     """
     inputs, skipped = collect_inputs(paths)
     found: list[tuple[Path, str]] = []
@@ -208,6 +238,7 @@ def scan_meshes(paths: Sequence[str | PathLike[str]]) -> MeshScan:
             found.extend((f, f.relative_to(path).with_suffix("").as_posix()) for f in files)
     if not found:
         raise no_meshes_error(paths, skipped)
+    check_readers_installed(f for f, _ in found)
     return MeshScan(found, skipped)
 
 
@@ -259,17 +290,50 @@ def no_meshes_error(paths: Sequence[str | PathLike[str]], skipped: Sequence[Skip
 
 
 def check_mesh_extension(path: str | PathLike[str]) -> None:
-    """Refuse a file given by name that is no mesh by its extension (``notes.txt``).
+    """Refuse a file given by name that is no mesh by its extension (``notes.txt``, ``car.fbx``).
 
     Raises
     ------
     InvalidInputError
-        The extension is not one of :data:`SUPPORTED_EXTENSIONS`; the message names the file.
+        The extension is not one of :data:`SUPPORTED_EXTENSIONS`; the message names the file
+        (and the format, for a 3D format that is not read: :func:`unread_format_reason`).
     """
+    unread = unread_format_reason(path)
+    if unread:
+        raise InvalidInputError(f"{printable_path(path)}: {unread}")
     if Path(path).suffix.lower() not in SUPPORTED_EXTENSIONS:
         raise InvalidInputError(
             f"{printable_path(path)} is not a mesh file: its extension is not one of {', '.join(SUPPORTED_EXTENSIONS)}"
         )
+
+
+def check_readers_installed(files: Iterable[str | PathLike[str]]) -> None:
+    """Refuse mesh files whose format needs an optional package that is not installed.
+
+    Checked once per format (not per file), when the files are found and before any work,
+    so that a run does not fail file by file after it has done the rest.  Files without a
+    mesh extension are passed over (the loader reports them).
+
+    Raises
+    ------
+    BackendUnavailable
+        One line per missing package: the format, how many of its files, one of them, and
+        the extra to install (``3 COLLADA files (.dae) need the 'collada' package, ...``).
+    """
+    by_format: dict[str, list[str]] = {}
+    for f in files:
+        file_type = SUPPORTED_EXTENSIONS.get(Path(f).suffix.lower())
+        if file_type is not None and FORMATS[file_type].needs is not None:
+            by_format.setdefault(file_type, []).append(printable_path(f))
+    problems = []
+    for file_type, found in by_format.items():
+        fmt = FORMATS[file_type]
+        if missing_package(fmt):
+            module, extra = fmt.needs
+            n = f"{len(found)} {fmt.title} file{'s' if len(found) > 1 else ''} ({', '.join(fmt.extensions)})"
+            problems.append(f"{n} need{'' if len(found) > 1 else 's'} the {module!r} package, not installed (e.g. {found[0]}): {install_hint(extra)}")
+    if problems:
+        raise BackendUnavailable("; ".join(problems) + "; nothing was done")
 
 
 def find_meshes(paths: Sequence[str | PathLike[str]]) -> list[tuple[Path, str]]:

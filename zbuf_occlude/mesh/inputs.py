@@ -17,6 +17,7 @@ from zbuf_occlude.mesh.discovery import (
     DEFAULT_SPLIT,
     SPLITS,
     SkippedInput,
+    check_readers_installed,
     name_set,
     non_utf8_reason,
     printable_path,
@@ -131,8 +132,8 @@ class ObjectScan(NamedTuple):
 
     #: The farm's plan, as :func:`discover_objects` returns it.
     objects: list[FarmObject]
-    #: Unreadable folders, broken links, FIFOs, files with non-UTF-8 names, undecodable
-    #: list lines: not in the plan.  A run that must not lose inputs silently exits
+    #: Unreadable folders, broken links, FIFOs, files with non-UTF-8 names, files of 3D
+    #: formats not read, undecodable list lines: not in the plan.  A run that must not lose inputs silently exits
     #: non-zero when not empty.
     skipped: list[SkippedInput]
     #: How names, classes and splits were found (:data:`~zbuf_occlude.mesh.layouts.LAYOUTS`).
@@ -199,6 +200,9 @@ def scan_objects(
         ``source`` missing, nothing found, labels refused by the layout checks
         (:mod:`zbuf_occlude.mesh.layouts`), ``class_from`` with a list file, an unknown
         class, or ``per_class < 1``.
+    BackendUnavailable
+        A format of the meshes kept needs an optional package that is not installed
+        (:func:`~zbuf_occlude.mesh.discovery.check_readers_installed`).
     """
     source = Path(source).absolute()  # the manifest's source paths must not depend on the working folder
     if source.is_dir():
@@ -242,6 +246,7 @@ def scan_objects(
         found = kept
     if not found:
         raise InvalidInputError(f"no meshes left under {source} after the class/split selection")
+    check_readers_installed(f[1] for f in found)  # the meshes kept only: a class left out needs nothing
     return ObjectScan(number_objects(found), skipped, layout)
 
 
@@ -255,6 +260,8 @@ def scan_inputs(paths: Sequence[str | os.PathLike], *, class_from: int | None = 
     InvalidInputError
         A path is missing or not a mesh file, nothing was found, labels are refused by the
         layout checks, or two files have one name.
+    BackendUnavailable
+        A format found needs an optional package that is not installed.
     """
     found = scan_labelled(paths, class_from=class_from)
     objects = number_objects([(m.name, str(m.path), m.class_name, m.split) for m in found.meshes])
@@ -312,8 +319,9 @@ def scan_paths(
     -------
     objects : list of FarmObject
     skipped : list of SkippedInput
-        Unreadable folders, broken links and files whose names are not UTF-8
-        (:func:`~zbuf_occlude.mesh.discovery.walk_mesh_files`); the run records them and exits 1.
+        Unreadable folders, broken links, files whose names are not UTF-8 and files of 3D
+        formats not read (:func:`~zbuf_occlude.mesh.discovery.walk_mesh_files`); the run
+        records them and exits 1.
 
     Raises
     ------

@@ -25,12 +25,17 @@ under it fits:
     every file directly in the folder, ``CLASS_NNNN.ext``: the class is the name without
     its number (ModelNet's file names), split ``train``.
 ``class-folders``
-    otherwise: the class is the folder holding the file (``CLASS/NAME.ext``), or the one
-    above it when that is ``train``/``test``.
+    otherwise: the class is the folder directly below the one given, whatever lies below it
+    (``CLASS/NAME.ext``, ``CLASS/train/NAME.ext``, ``CLASS/OBJECT/scene.gltf``: a mesh in a
+    folder of its own, with its buffers and textures, belongs to the class above); the split
+    is a ``train``/``test`` folder below the class.  A folder below a class folder that
+    holds several meshes may be a class of its own or a group of the class: it is taken as
+    part of its class, and a warning names it.
 
 Refused (:class:`~zbuf_occlude.errors.InvalidInputError`, exit 2) unless
 ``class_from`` is given: a class named like a container (:data:`CONTAINER_NAMES`:
-``models``, ``meshes``, ``train`` ...), and, for ``class-folders``, one class for
+``models``, ``meshes``, ``train`` ...), and, for ``class-folders``, meshes directly in the
+folder given beside its class folders (no folder names their class), one class for
 several meshes (all in one sub-folder: the folder given is probably one level too
 high) or one file name for every mesh (``ID/mesh.obj``: the folders are objects, not
 classes).  ``class_from=N`` takes the class from the N-th folder above each file
@@ -53,6 +58,7 @@ from zbuf_occlude.mesh.discovery import (
     DEFAULT_SPLIT,
     SPLITS,
     SkippedInput,
+    check_readers_installed,
     class_and_split,
     collect_inputs,
     no_meshes_error,
@@ -81,7 +87,7 @@ LAYOUTS: dict[str, str] = {
     "shapenetcore-v1": "SYNSET/MODEL_ID/model.obj",
     "modelnet": "CLASS/train|test/NAME.ext",
     "flat": "CLASS_NNNN.ext in one folder",
-    "class-folders": "CLASS/NAME.ext",
+    "class-folders": "CLASS/NAME.ext, CLASS/.../NAME.ext",
     "files": "mesh files given one by one (class from the folders above each)",
     "list-file": "PATH LABEL [SPLIT] lines",
     "class-from:N": "--class-from N: the N-th folder above each file",
@@ -210,6 +216,51 @@ def _refuse(where: str, layout: str, why: str) -> None:
     )
 
 
+#: How many files or folders a message names (the count is given in full).
+_NAMED = 3
+
+
+def _some(names: Sequence[str]) -> str:
+    return ", ".join(names[:_NAMED]) + (", ..." if len(names) > _NAMED else "")
+
+
+def _label_class_folders(root: Path, paths: Sequence[Path]) -> list[LabelledMesh]:
+    """Layout ``class-folders``: the class is the first folder below ``root`` (module docstring).
+
+    Raises
+    ------
+    InvalidInputError
+        A mesh lies in ``root`` itself, beside the class folders.
+    """
+    loose = [p.name for p in paths if p.parent == root]
+    if loose:
+        _refuse(
+            printable_path(root), "class-folders",
+            f"{len(loose)} of its {len(paths)} meshes ({_some(loose)}) {'lies' if len(loose) == 1 else 'lie'} in the "
+            "folder itself, beside its sub-folders, in no class folder: move each into the folder of its class",
+        )  # fmt: skip
+    meshes: list[LabelledMesh] = []
+    per_folder: dict[str, int] = {}  # meshes in each folder below a class folder (split folders aside)
+    for p in paths:
+        rel = p.relative_to(root)
+        between = rel.parts[1:-1]
+        split = next((d for d in between if d in SPLITS), DEFAULT_SPLIT)
+        meshes.append(LabelledMesh(rel.with_suffix("").as_posix(), p, rel.parts[0], split))
+        if any(d not in SPLITS for d in between):
+            folder = rel.parent.as_posix()
+            per_folder[folder] = per_folder.get(folder, 0) + 1
+    # one mesh in a folder of its own (a glTF with its buffers) is an object; several may be a sub-class
+    crowded = [f"{folder} ({n})" for folder, n in per_folder.items() if n > 1]
+    if crowded:
+        log.warning(
+            "%s: %d folders below a class folder hold several meshes each (%s): each is taken as part of the class "
+            "above it, the folder directly below %s; if they are classes, say which folder names the class with "
+            "--class-from N (1: the folder holding each file) or give a list file",
+            printable_path(root), len(crowded), _some(crowded), printable_path(root),
+        )  # fmt: skip
+    return meshes
+
+
 def _check_labels(where: str, layout: str, meshes: Sequence[LabelledMesh]) -> None:
     """Refuse labels that a known mistake produces (module docstring)."""
     classes = {m.class_name for m in meshes}
@@ -274,7 +325,7 @@ def label_tree(root: str | PathLike[str], files: Sequence[Path], *, class_from: 
         meshes = [LabelledMesh(name_of(p), p, *class_and_split(p.name)) for p in paths]
     else:
         layout = "class-folders"
-        meshes = [LabelledMesh(name_of(p), p, *class_and_split(p)) for p in paths]
+        meshes = _label_class_folders(root, paths)
     _check_labels(printable_path(root), layout, meshes)
     return layout, meshes
 
@@ -316,6 +367,9 @@ def scan_labelled(
     InvalidInputError
         A path is missing or not a mesh file, nothing was found (the message lists what
         was skipped), or labels are refused (:func:`label_tree`).
+    BackendUnavailable
+        A format found needs an optional package that is not installed
+        (:func:`~zbuf_occlude.mesh.discovery.check_readers_installed`).
     """
     _check_class_from(class_from)
     inputs, skipped = collect_inputs(paths, skip_hidden=skip_hidden)
@@ -333,5 +387,6 @@ def scan_labelled(
         meshes.extend(found)
     if not meshes:
         raise no_meshes_error(paths, skipped)
+    check_readers_installed(m.path for m in meshes)
     return LabelledScan(meshes, skipped, layout_text(layouts))
 

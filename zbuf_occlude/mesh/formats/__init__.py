@@ -20,7 +20,9 @@ Every file goes through the same steps, in this order (:func:`read_trimesh`):
    checked there (PLY: the header's counts; OFF: faces read vs declared).
 
 The first step that fails ends the load with a :class:`~zbuf_occlude.errors.MeshLoadError`
-naming the file.
+naming the file.  Discovery checks step 2 once per format before any file is read
+(:func:`zbuf_occlude.mesh.discovery.check_readers_installed`), and reports the files of
+:data:`UNREAD_FORMATS`, 3D formats that no entry reads, instead of passing over them.
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ from zbuf_occlude.mesh.formats.base import Format
 if TYPE_CHECKING:
     import trimesh
 
-__all__ = ["EXTENSIONS_TEXT", "FORMATS", "SUPPORTED_EXTENSIONS", "read_trimesh"]
+__all__ = ["EXTENSIONS_TEXT", "FORMATS", "SUPPORTED_EXTENSIONS", "UNREAD_FORMATS", "missing_package", "read_trimesh"]
 
 #: Every format, by trimesh's file type, in the order the help lists their extensions.
 FORMATS: dict[str, Format] = {fmt.file_type: fmt for module in (off, obj, ply, stl, gltf, collada) for fmt in module.FORMATS}
@@ -47,12 +49,36 @@ SUPPORTED_EXTENSIONS: dict[str, str] = {ext: fmt.file_type for fmt in FORMATS.va
 #: The extensions as the help of every command lists them (".off, .obj, ...").
 EXTENSIONS_TEXT = ", ".join(SUPPORTED_EXTENSIONS)
 
+#: 3D model and scene formats that no entry of :data:`FORMATS` reads, by lower-case extension:
+#: the format's name.  Discovery reports such a file as skipped (a folder of FBX files is not
+#: an empty folder); files that sit beside meshes (a glTF's ``.bin`` and textures, an OBJ's
+#: ``.mtl``, notes) are no 3D format and are not listed.  Extensions that other kinds of files
+#: share (``.x``, ``.abc``, ``.mesh``) are left out: a wrong report is noise on every run.
+UNREAD_FORMATS: dict[str, str] = {
+    ".fbx": "FBX", ".blend": "Blender", ".3ds": "3ds Max (3DS)", ".max": "3ds Max", ".ma": "Maya ASCII",
+    ".mb": "Maya binary", ".c4d": "Cinema 4D", ".lwo": "LightWave", ".lxo": "Modo", ".skp": "SketchUp",
+    ".usd": "USD", ".usda": "USD", ".usdc": "USD", ".usdz": "USDZ", ".x3d": "X3D", ".x3dv": "X3D",
+    ".x3db": "X3D", ".wrl": "VRML", ".vrml": "VRML", ".3mf": "3MF", ".amf": "AMF", ".ifc": "IFC",
+    ".step": "STEP", ".stp": "STEP", ".iges": "IGES", ".igs": "IGES", ".dxf": "DXF", ".dwg": "DWG",
+    ".vtk": "VTK", ".vtp": "VTK", ".vtu": "VTK", ".ztl": "ZBrush", ".pmx": "MikuMikuDance",
+    ".vrm": "VRM",
+}  # fmt: skip
+
+
+def missing_package(fmt: Format) -> bool:
+    """Whether the optional package ``fmt`` needs (:attr:`Format.needs`) cannot be imported."""
+    if fmt.needs is None:
+        return False
+    try:
+        return importlib.util.find_spec(fmt.needs[0]) is None
+    except (ImportError, ValueError):  # a parent package missing; a module without its spec
+        return True
+
 
 def _check_installed(fmt: Format, path: Path) -> None:
-    if fmt.needs is not None:
+    if fmt.needs is not None and missing_package(fmt):
         module, extra = fmt.needs
-        if importlib.util.find_spec(module) is None:
-            raise MeshLoadError(f"{path}: reading {fmt.file_type.upper()} needs the {module!r} package: {install_hint(extra)}")
+        raise MeshLoadError(f"{path}: reading {fmt.file_type.upper()} needs the {module!r} package: {install_hint(extra)}")
 
 
 def read_trimesh(path: Path, file_type: str) -> trimesh.Trimesh:

@@ -58,7 +58,10 @@ class Format:
         :class:`~zbuf_occlude.errors.MeshLoadError` naming ``path``.
     needs : (module, extra) or None
         The optional package the reader needs beyond trimesh and the extra that installs it;
-        checked after the file is read and before ``check``.
+        checked once per format when the files are found, and again after each file is read
+        and before ``check``.
+    name : str
+        The format's name in messages (``"COLLADA"``); empty: ``file_type`` in capitals.
     """
 
     file_type: str
@@ -66,6 +69,12 @@ class Format:
     read: Callable[[bytes, Path, str], trimesh.Trimesh]
     check: Callable[[bytes, Path], None] | None = None
     needs: tuple[str, str] | None = None
+    name: str = ""
+
+    @property
+    def title(self) -> str:
+        """The format's name in messages: :attr:`name`, else ``file_type`` in capitals."""
+        return self.name or self.file_type.upper()
 
 
 def parse(raw: bytes, path: Path, file_type: str, **kwargs: Any) -> trimesh.Trimesh:
