@@ -354,18 +354,13 @@ def _missing_folders(out: object) -> list[Path]:
 
 
 def _remove_if_empty(folders: list[Path]) -> None:
-    """Remove the folders a refused run created, deepest first, if nothing was written in them.
+    """Remove the folders a refused run created, deepest first, if nothing was written in them
+    (:func:`zbuf_occlude.io.owned.remove_empty_tree`)."""
+    from zbuf_occlude.io.owned import remove_empty_tree
 
-    ``os.rmdir`` removes only empty folders, so a file anywhere inside (or a link) keeps the folder.
-    """
     for folder in folders:
-        if not folder.is_dir() or folder.is_symlink():
-            continue
-        for below, _, _ in os.walk(folder, topdown=False):
-            try:
-                os.rmdir(below)
-            except OSError:
-                return
+        if not remove_empty_tree(folder) and folder.is_dir() and not folder.is_symlink():
+            return
 
 
 def parse_command_line(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> argparse.Namespace:

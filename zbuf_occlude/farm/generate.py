@@ -31,6 +31,7 @@ from zbuf_occlude.farm.journal import FarmSummary, read_json, shape_names_of, wr
 from zbuf_occlude.farm.run import run_farm
 from zbuf_occlude.io.atomic import file_sha256, write_text
 from zbuf_occlude.io.clouds import concat_h5
+from zbuf_occlude.io.owned import delete_own_files
 from zbuf_occlude.io.safe_paths import path_inside
 from zbuf_occlude.mesh.discovery import SPLITS
 from zbuf_occlude.mesh.inputs import FarmObject, scan_inputs
@@ -62,7 +63,7 @@ def _merge_h5(out: Path, objects: Sequence[FarmObject]) -> list[Path]:
     for split in sorted({*SPLITS, *(o.split for o in objects)}):
         target = out / split_file_name(split)
         if not parts.get(split):
-            target.unlink(missing_ok=True)
+            delete_own_files(out, [split_file_name(split)], what="an earlier run's joined file")
             if any(o.split == split for o in objects):
                 write_text(out / file_list_name(split), "")
             continue

@@ -30,8 +30,9 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.farm.config import BYTES_PER_MB, PAPER_SAMPLES_PER_MB, FarmParams, plan_digest, record_path, shard_path
 from zbuf_occlude.farm.worker import base_record, package_version, write_json
 from zbuf_occlude.geometry.samples import count_padded
-from zbuf_occlude.io.atomic import file_sha256, size_mismatch, temp_is_orphan, temp_owner, write_text
+from zbuf_occlude.io.atomic import file_sha256, size_mismatch, write_text
 from zbuf_occlude.io.json_files import loads_json
+from zbuf_occlude.io.owned import delete_own_files, remove_dead_temps
 from zbuf_occlude.io.safe_paths import check_line_text, path_inside
 from zbuf_occlude.mesh.discovery import SPLITS, printable_path
 from zbuf_occlude.mesh.inputs import FarmObject
@@ -130,23 +131,21 @@ def finished_record(out: Path, obj: FarmObject, digest: str) -> dict[str, Any] |
 def remove_stale_temps(out: Path, objects: Sequence[FarmObject], everything: bool) -> int:
     """Remove the temporary files that dead writers left in ``out``; return how many.
 
-    :func:`~zbuf_occlude.io.clouds.atomic_path` leaves ``.<name>.<pid>-<host>-<random>.tmp`` behind
+    :func:`~zbuf_occlude.io.atomic.atomic_path` leaves ``.<name>.<pid>-<host>-<random>.tmp`` behind
     when a run is SIGKILLed mid-write.  Only temps of dead processes on this host go
-    (:func:`~zbuf_occlude.io.clouds.temp_is_orphan`), and a sharded task (``everything=False``)
-    touches only those of its own objects: other tasks may be writing theirs right now.
-    Call it while holding the lock (:func:`~zbuf_occlude.farm.lock.farm_lock`).
+    (:func:`~zbuf_occlude.io.owned.remove_dead_temps`), in every folder a run writes into
+    (``shards/``, ``records/``, ``tasks/``, ``--out`` and ``generate``'s per-mesh folders), and a
+    sharded task (``everything=False``) touches only those of its own objects: other tasks may
+    be writing theirs right now.  Call it while holding the lock
+    (:func:`~zbuf_occlude.farm.lock.farm_lock`).
     """
     names = None if everything else {Path(shard_path(o)).name for o in objects} | {f"{o.index:06d}.json" for o in objects}
-    removed = 0
-    for folder in (out / SHARD_DIR, out / RECORD_DIR, out):
-        if not folder.is_dir():
-            continue
-        for tmp in folder.glob(".*.tmp"):
-            owner = temp_owner(tmp.name)
-            if owner is None or (names is not None and owner.target not in names) or not temp_is_orphan(owner):
-                continue
-            tmp.unlink(missing_ok=True)
-            removed += 1
+    removed = sum(remove_dead_temps(out / folder, names) for folder in (SHARD_DIR, RECORD_DIR, "."))
+    if everything:
+        removed += remove_dead_temps(out / TASK_DIR)
+    for o in objects:  # generate --format npz|ply: an object's sample files are all its own
+        if (out / o.name).is_dir():
+            removed += remove_dead_temps(path_inside(out, o.name, what=f"the folder of object {o.index}"))
     return removed
 
 
@@ -424,7 +423,7 @@ def write_card(out: Path, card: dict[str, Any]) -> None:
     """
     from zbuf_occlude.dataset.schema import card_sha256_line
 
-    (out / CARD_SHA256_FILE).unlink(missing_ok=True)
+    delete_own_files(out, [CARD_SHA256_FILE], what="the card's checksum")
     write_json(out / CARD_FILE, card)
     write_text(out / CARD_SHA256_FILE, card_sha256_line(file_sha256(out / CARD_FILE)))
 

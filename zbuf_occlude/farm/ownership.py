@@ -42,7 +42,7 @@ from zbuf_occlude.dataset.layout import (
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.farm.config import record_path, shard_path
 from zbuf_occlude.farm.journal import objects_of, read_json, read_plan
-from zbuf_occlude.io.owned import FileRecord, check_deletable, delete_checked, delete_recorded, remove_empty_folders
+from zbuf_occlude.io.owned import FileRecord, check_deletable, check_own_name, delete_checked, delete_own_files, remove_empty_folders
 from zbuf_occlude.mesh.discovery import SPLITS
 from zbuf_occlude.mesh.inputs import FarmObject
 
@@ -154,8 +154,7 @@ def _record_files(out: Path, o: FarmObject) -> list[Path | None]:
     ]
     if shard_path(o) not in shards:  # a shard written before its record, by a run stopped in between
         checked.append(check_deletable(out, shard_path(o), names, FileRecord(None), f"the shard of object {o.index}"))
-    record = os.path.relpath(where, out)
-    checked.append(check_deletable(out, record, [re.compile(re.escape(record))], FileRecord(None), f"the record of object {o.index}"))
+    checked.append(check_own_name(out, os.path.relpath(where, out), what=f"the record of object {o.index}"))
     return checked
 
 
@@ -196,8 +195,7 @@ def wipe_earlier_run(out: Path, objects: Sequence[FarmObject] | None = None) -> 
             fixed += [f"{TASK_DIR}/{p.name}" for p in tasks.iterdir() if _TASK_FILE.fullmatch(p.name)]
         splits = {o.split for o in objects_of(plan)}
         fixed += [MANIFEST_FILE, SHAPE_NAMES_FILE, *(f for s in sorted({*SPLITS, *splits}) for f in (file_list_name(s), split_file_name(s)))]
-    for name in fixed:
-        doomed.append(check_deletable(out, name, [re.compile(re.escape(name))], FileRecord(None), f"the earlier run's {name}"))
+    doomed += [check_own_name(out, name, what="the earlier run") for name in fixed]
     delete_checked(doomed)
     for o in objects_of(plan) if objects is None else objects:
         remove_empty_folders(out, o.name, keep=(SHARD_DIR, RECORD_DIR))  # generate's per-mesh folders it emptied
@@ -205,4 +203,4 @@ def wipe_earlier_run(out: Path, objects: Sequence[FarmObject] | None = None) -> 
         return
     for name in (SHARD_DIR, RECORD_DIR, TASK_DIR):
         remove_empty_folders(out, name)
-    delete_recorded(out, [(PLAN_FILE, FileRecord(None))], names=[re.compile(re.escape(PLAN_FILE))], what="the earlier plan")
+    delete_own_files(out, [PLAN_FILE], what="the earlier plan")

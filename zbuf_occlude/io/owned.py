@@ -47,11 +47,14 @@ __all__ = [
     "acquire_lock",
     "check_deletable",
     "check_layout",
+    "check_own_name",
     "delete_checked",
+    "delete_own_files",
     "delete_recorded",
     "make_folder",
     "remove_dead_temps",
     "remove_empty_folders",
+    "remove_empty_tree",
 ]
 
 log = logging.getLogger(__name__)
@@ -248,6 +251,21 @@ def remove_empty_folders(root: str | os.PathLike, rel: str, *, keep: Sequence[st
             break
 
 
+def remove_empty_tree(folder: str | os.PathLike) -> bool:
+    """Remove ``folder`` and the folders below it, deepest first, if no file or link lies anywhere
+    in them (a refused run's own empty ``--out``); return whether it is gone.  ``rmdir`` removes
+    only an empty folder, so anything written there keeps it."""
+    folder = Path(folder)
+    if not folder.is_dir() or folder.is_symlink():
+        return False
+    for below, _, _ in os.walk(folder, topdown=False):
+        try:
+            os.rmdir(below)
+        except OSError:
+            return False
+    return True
+
+
 def _name_allowed(rel: str, names: Sequence[re.Pattern[str]]) -> bool:
     return any(p.fullmatch(rel) for p in names)
 
@@ -324,6 +342,17 @@ def delete_recorded(
     """
     checked = [check_deletable(root, rel, names, rec, what) for rel, rec in files]
     return delete_checked(checked)
+
+
+def check_own_name(root: str | os.PathLike, name: str, *, what: str) -> Path | None:
+    """:func:`check_deletable` for a file of a fixed name of ours (``plan.json``, a card), a name
+    the code gives, never one read from a file: it must be a regular file inside ``root``."""
+    return check_deletable(root, name, [re.compile(re.escape(name))], FileRecord(None), what)
+
+
+def delete_own_files(root: str | os.PathLike, names: Iterable[str], *, what: str) -> list[Path]:
+    """Delete files of fixed names of ours (:func:`check_own_name`), all checked first."""
+    return delete_checked([check_own_name(root, name, what=what) for name in names])
 
 
 def delete_checked(paths: Iterable[Path | None]) -> list[Path]:
