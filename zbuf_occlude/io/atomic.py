@@ -223,14 +223,14 @@ def write_text(path: str | os.PathLike, text: str) -> Path:
     return path
 
 
-def write_csv(path: str | os.PathLike, rows: Sequence[dict], fieldnames: Sequence[str] | None = None) -> Path:
+def write_csv(path: str | os.PathLike, rows: Sequence[dict], fieldnames: Sequence[str] | None = None, *, atomic: bool = True) -> Path:
     """Write dict rows as CSV atomically; columns ``fieldnames`` (default: the first row's keys),
-    keys outside them are left out."""
+    keys outside them are left out.  ``atomic=False``: straight to ``path``, a temporary of the caller's."""
     import csv
 
     path = Path(path)
     fields = list(fieldnames) if fieldnames is not None else list(rows[0]) if rows else []
-    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
+    with atomic_path(path) if atomic else contextlib.nullcontext(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
         writer = csv.DictWriter(fh, fieldnames=fields, extrasaction="ignore")
         writer.writeheader()
         writer.writerows(rows)

@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from zbuf_occlude.errors import DatasetBusy, InvalidInputError, OutputError, UnsafePathError
-from zbuf_occlude.io.atomic import atomic_path, file_sha256, temp_is_orphan, temp_owner
+from zbuf_occlude.io.atomic import atomic_path, file_sha256, temp_is_orphan, temp_owner, write_csv
 from zbuf_occlude.io.safe_paths import path_inside
 
 __all__ = [
@@ -52,6 +52,7 @@ __all__ = [
     "delete_own_files",
     "delete_recorded",
     "make_folder",
+    "owned_file",
     "remove_dead_temps",
     "remove_empty_folders",
     "remove_empty_tree",
@@ -365,6 +366,26 @@ def delete_checked(paths: Iterable[Path | None]) -> list[Path]:
     return deleted
 
 
+@contextmanager
+def owned_file(path: str | os.PathLike, *, option: str = "--out") -> Iterator[Path]:
+    """Write one output file that a command names (``contact-sheet --out sheet.png``) through the
+    layer: its folder is held (:class:`OwnedFolder`, with only this name), and the file is written
+    atomically and recorded; an existing file of that name is replaced only if a run of ours wrote
+    it and it is unchanged since.  Yields the temporary path to write.
+
+    Raises
+    ------
+    OutputError, DatasetBusy, UnsafePathError
+        As :class:`OwnedFolder` and :meth:`OwnedFolder.write`.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise OutputError(f"{option} {path} is a folder; name the file to write")
+    with OwnedFolder(path.parent, names=[re.escape(path.name)], what=f"the file {path.name}", option=option) as folder:
+        with folder.write(path.name) as tmp:
+            yield tmp
+
+
 class OwnedFolder:
     """An output folder held for one run: the lock, the layout, atomic recorded writes, checked deletes.
 
@@ -529,6 +550,12 @@ class OwnedFolder:
         """Write UTF-8 ``text`` to ``root/rel`` (:meth:`write`)."""
         with self.write(rel) as tmp:
             tmp.write_text(text, encoding="utf-8")
+        return self.root / rel
+
+    def write_csv(self, rel: str, rows: Sequence[dict], fieldnames: Sequence[str] | None = None) -> Path:
+        """Write dict rows as CSV to ``root/rel`` (:meth:`write`; columns as :func:`~zbuf_occlude.io.atomic.write_csv`)."""
+        with self.write(rel) as tmp:
+            write_csv(tmp, rows, fieldnames, atomic=False)
         return self.root / rel
 
     def delete(self, rels: Iterable[str]) -> list[Path]:
