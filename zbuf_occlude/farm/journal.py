@@ -32,7 +32,7 @@ from zbuf_occlude.farm.worker import base_record, package_version, write_json
 from zbuf_occlude.geometry.samples import count_padded
 from zbuf_occlude.io.atomic import file_sha256, size_mismatch, write_text
 from zbuf_occlude.io.json_files import loads_json
-from zbuf_occlude.io.owned import delete_own_files, remove_dead_temps
+from zbuf_occlude.io.owned import check_layout, delete_own_files, remove_dead_temps
 from zbuf_occlude.io.safe_paths import check_line_text, path_inside
 from zbuf_occlude.mesh.discovery import SPLITS, printable_path
 from zbuf_occlude.mesh.inputs import FarmObject
@@ -45,9 +45,9 @@ def check_out_layout(out: Path) -> None:
     """Check that every folder and file the farm writes or deletes directly under ``out`` stays inside it.
 
     The one check behind every write and delete of a run, ``generate``, ``--overwrite``
-    (:func:`~zbuf_occlude.farm.run._wipe`) and ``farm-merge``: ``shards/``, ``records/``,
+    (:func:`~zbuf_occlude.farm.ownership.wipe_earlier_run`) and ``farm-merge``: ``shards/``, ``records/``,
     ``tasks/`` (locks included), the plan, card, manifest, class names, file lists, joined
-    files and the lock, once symlinks are resolved (:func:`~zbuf_occlude.io.safe_paths.path_inside`).
+    files and the lock, once symlinks are resolved (:func:`~zbuf_occlude.io.owned.check_layout`).
     Files named by records (generate's ``npz``/``ply`` samples) are checked where they are
     written or deleted.  A symlink to elsewhere is refused, not followed: ``OUT/shards`` linked
     to another folder would have the run overwrite, or ``--overwrite`` delete, the files there.
@@ -58,8 +58,7 @@ def check_out_layout(out: Path) -> None:
         One of them leads outside ``out`` (the message names it and where it leads).
     """
     names = (SHARD_DIR, RECORD_DIR, TASK_DIR, PLAN_FILE, CARD_FILE, CARD_SHA256_FILE, MANIFEST_FILE, SHAPE_NAMES_FILE, LOCK_FILE)
-    for name in (*names, *map(file_list_name, SPLITS), *map(split_file_name, SPLITS)):
-        path_inside(out, name, what=f"the output folder {out}")
+    check_layout(out, (*names, *map(file_list_name, SPLITS), *map(split_file_name, SPLITS)))
 
 
 def read_json(path: Path) -> dict[str, Any] | None:

@@ -5,7 +5,7 @@ A folder a command writes (``--out``) is *owned* while the command runs: :class:
 * takes the folder's lock (:func:`acquire_lock`: a :class:`filelock.SoftFileLock`, which works on
   the network file systems clusters share, and is broken when its owner is a dead process of
   this host, whatever the lock file holds);
-* checks the layout (:func:`check_layout`): no subfolder it writes into leads out through a link;
+* checks the layout (:func:`check_layout`): no subfolder or file it writes leads out through a link;
 * writes atomically (:func:`~zbuf_occlude.io.atomic.atomic_path`) and records each file it wrote
   in the folder's ledger (:data:`LEDGER_FILE`, one JSON line per file: its name, size and
   SHA-256), *before* the file takes its name, so a run killed at any instant leaves a ledger that
@@ -187,26 +187,21 @@ def acquire_lock(path: str | os.PathLike, what: str, *, timeout: float = ACQUIRE
     return lock
 
 
-def check_layout(root: str | os.PathLike, subfolders: Iterable[str] = ()) -> None:
-    """Refuse a folder whose ``subfolders`` (those a run writes into) lead out through a link.
+def check_layout(root: str | os.PathLike, names: Iterable[str] = ()) -> None:
+    """Refuse a folder where a name a run writes or deletes (a subfolder, a file) leads out of it.
+
+    Each of ``names`` must stay inside ``root`` once symlinks are resolved
+    (:func:`~zbuf_occlude.io.safe_paths.path_inside`): a link to elsewhere is refused, not
+    followed (``OUT/shards`` linked to another folder would have a run replace, or
+    ``--overwrite`` delete, the files there).
 
     Raises
     ------
     UnsafePathError
-        A subfolder is a symlink, is not a folder, or resolves outside ``root`` (named, with what
-        to do).
+        One of them leads outside ``root`` (the message names it and where it leads).
     """
-    root = Path(root)
-    for name in subfolders:
-        sub = root / name
-        if sub.is_symlink():
-            raise UnsafePathError(
-                f"{sub} is a link (to {os.path.realpath(sub)}); a run writes and deletes files in it: "
-                "replace it with a plain folder, or choose another --out"
-            )
-        if os.path.lexists(sub) and not sub.is_dir():
-            raise UnsafePathError(f"{sub} is not a folder; a run writes its files in it: move it away, or choose another --out")
-        path_inside(root, name, what=f"the folder {name} of {root}")
+    for name in names:
+        path_inside(root, name, what=f"the output folder {root}")
 
 
 def remove_dead_temps(folder: str | os.PathLike, targets: Iterable[str] | None = None) -> int:
