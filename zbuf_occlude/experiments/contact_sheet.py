@@ -39,7 +39,7 @@ from zbuf_occlude.defaults import DEFAULT_SEED
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, Camera, camera_on_sphere
 from zbuf_occlude.geometry.sampling import check_seed
-from zbuf_occlude.io.atomic import atomic_path
+from zbuf_occlude.io.owned import owned_file
 
 if TYPE_CHECKING:  # matplotlib is imported when a sheet is drawn
     from matplotlib.figure import Figure
@@ -241,7 +241,12 @@ def contact_sheet(
     BackendUnavailable
         matplotlib is missing (``pip install '.[plot]'``).
     OutputError
-        ``out`` cannot be written.
+        ``out``'s folder cannot be made, or ``out`` cannot be written.
+    UnsafePathError
+        A file ``out`` exists that a run of ours did not write, or that was changed since; it is
+        left as it is (:func:`~zbuf_occlude.io.owned.owned_file`).
+    DatasetBusy
+        Another live process holds ``out``'s folder.
     """
     for name, value in (("per_class", per_class), ("poses", poses), ("dpi", dpi)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
@@ -508,7 +513,9 @@ def _draw(rows: list[SheetRow], fixed: Camera, dpi: int, rng: np.random.Generato
 
 
 def _write_png(figure: Figure, out: Path, dpi: int) -> None:
-    """The figure as a palette PNG (:data:`PALETTE_COLORS`), written atomically."""
+    """The figure as a palette PNG (:data:`PALETTE_COLORS`), written through the output layer
+    (:func:`~zbuf_occlude.io.owned.owned_file`: atomic, recorded, and replacing only a sheet a run
+    of ours wrote)."""
     import io
 
     from PIL import Image  # a dependency of matplotlib
@@ -518,7 +525,7 @@ def _write_png(figure: Figure, out: Path, dpi: int) -> None:
     buffer.seek(0)
     with Image.open(buffer) as image:
         palette = image.convert("RGB").quantize(PALETTE_COLORS)
-    with atomic_path(out) as tmp:
+    with owned_file(out) as tmp:
         palette.save(tmp, format="PNG", optimize=True)
 
 

@@ -34,6 +34,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -41,7 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.io.atomic import atomic_path, write_csv, write_text
+from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.sensors.fit import across_sight_width
 from zbuf_occlude.sensors.scan import read_scan_npz
 from zbuf_occlude.sensors.scene import GROUND_ID
@@ -49,7 +50,7 @@ from zbuf_occlude.sensors.scene import GROUND_ID
 __all__ = [
     "ObjectCloud", "read_object_clouds", "cloud_stats", "ring_spacings_deg", "fit_count_exponent",
     "compare_sets", "markdown_table", "realism_report", "RING_GAP_DEG", "HEIGHT_BINS", "RATIO_TARGET", "shape_stats",
-    "compare_classes", "class_table",
+    "compare_classes", "class_table", "REPORT_FILES",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -364,7 +365,8 @@ def markdown_table(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _figure(g: dict, r: dict, path: Path, labels: tuple[str, str]) -> None:
+def _figure(g: dict, r: dict, labels: tuple[str, str]):
+    """Ring spacing, count against range and spacing against range, generated beside real."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -383,21 +385,20 @@ def _figure(g: dict, r: dict, path: Path, labels: tuple[str, str]) -> None:
     ax[2].set(xlabel="range, m", ylabel="median nearest-neighbour spacing, m", title="point spacing vs range")
     for a in ax:
         a.legend(fontsize=8)
-    _save(fig, path)
+    return fig
 
 
-def _save(fig, path: Path) -> None:
-    """Write ``fig`` to ``path`` atomically (its format from the suffix, PNG by default) and close it."""
+def _save(fig, folder: OwnedFolder, name: str) -> None:
+    """Write ``fig`` as the PNG ``name`` in ``folder`` (:meth:`OwnedFolder.write`) and close it."""
     import matplotlib.pyplot as plt
 
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
+    with folder.write(name) as tmp:
         fig.tight_layout()
-        fig.savefig(tmp, dpi=110, format=path.suffix.lstrip(".") or "png")
+        fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
 
 
-def _profile_figure(table: dict[str, dict[str, dict]], path: Path) -> None:
+def _profile_figure(table: dict[str, dict[str, dict]]):
     """Per class, the share of points in each tenth of the height, generated beside real."""
     import matplotlib
 
@@ -411,7 +412,11 @@ def _profile_figure(table: dict[str, dict[str, dict]], path: Path) -> None:
             ax.plot(st["height_shares"], centres, "o-", color=colour, label=f"{name} ({st['crops']})")
         ax.set(xlabel="share of points", ylabel="height above the bottom / height", title=k, ylim=(0, 1))
         ax.legend(fontsize=8)
-    _save(fig, path)
+    return fig
+
+
+#: The files :func:`realism_report` writes in its folder (the figure unless ``figure=False``).
+REPORT_FILES = ("realism.md", "realism.csv", "realism_classes.csv", "realism.png")
 
 
 def realism_report(generated: str | os.PathLike, real: str | os.PathLike, out_dir: str | os.PathLike, *, ring_gap_deg: float = RING_GAP_DEG, min_points: int = 1, figure: bool = True,
@@ -441,8 +446,23 @@ def realism_report(generated: str | os.PathLike, real: str | os.PathLike, out_di
     InvalidInputError
         A set is missing or empty.
     OutputError
-        ``out_dir`` cannot be written.
+        ``out_dir`` cannot be made or written.
+    UnsafePathError
+        A file of a name it writes is in ``out_dir`` and was not written by a run of ours, or
+        was changed since (checked before any cloud is read; nothing is written).
+    DatasetBusy
+        Another live process holds ``out_dir``.
     """
+    files = REPORT_FILES if figure else REPORT_FILES[:-1]
+    with OwnedFolder(out_dir, names=[re.escape(name) for name in REPORT_FILES], what="the realism report") as folder:
+        folder.check_writable(files)  # every file before any work: a refusal writes nothing
+        return _report_into(folder, generated, real, ring_gap_deg=ring_gap_deg, min_points=min_points, figure=figure,
+                            ground_in_crops=ground_in_crops, airborne=airborne)  # fmt: skip
+
+
+def _report_into(folder: OwnedFolder, generated: str | os.PathLike, real: str | os.PathLike, *, ring_gap_deg: float, min_points: int, figure: bool,
+                 ground_in_crops: bool, airborne: bool) -> tuple[list[dict], dict[str, dict[str, dict]]]:  # fmt: skip
+    """:func:`realism_report` once its folder is held."""
     gen_clouds = read_object_clouds(generated, min_points=min_points, ground_in_crops=ground_in_crops)
     real_clouds = read_object_clouds(real, min_points=min_points)
     if airborne:
@@ -451,15 +471,10 @@ def realism_report(generated: str | os.PathLike, real: str | os.PathLike, out_di
         rows, g, r = compare_sets(gen_clouds, real_clouds, ring_gap_deg=ring_gap_deg)
     class_rows, table = compare_classes(gen_clouds, real_clouds)
     rows += class_rows
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     header = f"Generated: {generated} ({len(gen_clouds)} clouds); real: {real} ({len(real_clouds)} clouds)\n\n"
-    write_text(out / "realism.md", header + markdown_table(rows) + "\n" + class_table(table))
-    write_csv(out / "realism.csv", rows)
-    write_csv(out / "realism_classes.csv", _class_rows(table))
+    folder.write_text("realism.md", header + markdown_table(rows) + "\n" + class_table(table))
+    folder.write_csv("realism.csv", rows)
+    folder.write_csv("realism_classes.csv", _class_rows(table))
     if figure:
-        if airborne:
-            _profile_figure(table, out / "realism.png")
-        else:
-            _figure(g, r, out / "realism.png", ("generated", "real"))
+        _save(_profile_figure(table) if airborne else _figure(g, r, ("generated", "real")), folder, "realism.png")
     return rows, table

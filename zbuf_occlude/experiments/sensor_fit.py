@@ -12,7 +12,9 @@ to start from chooses the fit:
   :func:`zbuf_occlude.sensors.fit.fit_airborne` on the crops as they lie (no sensor position).
 
 Writes the sensor JSON (which ``scan``, ``farm --sensor`` and ``experiment sim2real --sensor``
-read) and a Markdown table of the estimates beside it, both atomically.  The JSON is strict (no
+read) and a Markdown table of the estimates beside it, both through the output layer
+(:class:`~zbuf_occlude.io.owned.OwnedFolder` on their folder: atomic, recorded, and replacing
+only files a run of ours wrote).  The JSON is strict (no
 ``NaN``, which strict readers refuse): an estimate the scans do not tell is ``null``, and the table
 says it was not measured and why.
 """
@@ -21,14 +23,15 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from collections import Counter
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
 
-from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.io.atomic import write_text
+from zbuf_occlude.errors import InvalidInputError, OutputError
+from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.real_scans.datasets import load_real_scans
 from zbuf_occlude.sensors.airborne import AirborneScanner
 from zbuf_occlude.sensors.fit import BOOTSTRAP, MIN_PLACEMENT_SCANS, AirborneFit, LidarFit, crop_placement_json, fit_airborne, fit_lidar
@@ -117,32 +120,50 @@ def fit_sensor_to_scans(real: str | os.PathLike, sensor: str, out: str | os.Path
         ``out`` does not end in ``.json``; an unknown sensor or one that is neither kind (both
         before any scan is read); unreadable scans; what the fit refuses (spinning: scans not in a
         spinning sensor's frame, such as airborne crops, in one line), each naming the cause.
+    OutputError
+        ``out`` is a folder, or its folder cannot be made or written.
+    UnsafePathError
+        ``out`` or the ``.md`` beside it exists and was not written by a run of ours, or was
+        changed since (checked before any scan is read; nothing is written).
+    DatasetBusy
+        Another live process holds the folder of ``out``.
     """
     out = Path(out)
     if out.suffix.lower() != ".json":
         raise InvalidInputError(f"--out {out}: the fitted sensor is written as a .json file")
+    if out.is_dir():
+        raise OutputError(f"--out {out} is a folder; name the file to write")
     base = sensor_from_name(sensor)
     if not isinstance(base, (Lidar, AirborneScanner)):
         raise InvalidInputError(f"--sensor {sensor}: fit-sensor fits a spinning LiDAR or an airborne scanner, not a {type(base).__name__}")
-    say = say or (lambda _: None)
+    md = out.with_suffix(".md")
+    names = (out.name, md.name)
+    with OwnedFolder(out.parent, names=[re.escape(name) for name in names], what="the fitted sensor") as folder:
+        folder.check_writable(names)  # both before any scan is read: a refusal writes nothing
+        fit = _fit_into(folder, real, base, out.name, md.name, seed=seed, dataset=dataset, say=say or (lambda _: None))
+    return fit, out, md
+
+
+def _fit_into(folder: OwnedFolder, real: str | os.PathLike, base: Lidar | AirborneScanner, json_name: str, md_name: str, *, seed: int,
+              dataset: str, say: Callable[[str], object]) -> LidarFit | AirborneFit:  # fmt: skip
+    """:func:`fit_sensor_to_scans` once the folder of its files is held: fit, write ``json_name`` and ``md_name``."""
     say(f"reading the real scans under {real} ...")
     scans = load_real_scans(real, dataset=dataset)
     counts = Counter(s.label for s in scans)
     kind = "an airborne scanner" if isinstance(base, AirborneScanner) else "a spinning LiDAR"
     say(f"read {len(scans)} scans of {len(counts)} class{'' if len(counts) == 1 else 'es'} ({', '.join(f'{k}: {n}' for k, n in sorted(counts.items()))}); "
         f"fitting {kind}, {base.name}, with {BOOTSTRAP} bootstrap resamples ...")  # fmt: skip
-    md = out.with_suffix(".md")
     if isinstance(base, AirborneScanner):
         missing = [s.source for s in scans if s.points_sensor_m is None]
         if missing:
             raise InvalidInputError(f"{missing[0]}: no points in metres to fit a scanner to ({len(missing)} such scans)")
         fit = fit_airborne([s.points_sensor_m for s in scans], base, seed=seed)
-        write_text(out, _strict_json(fit.to_json()))
-        write_text(md, f"# {fit.sensor.name}: fitted to {fit.n_crops} crops under {Path(real).name}\n\n{fit.markdown()}")
-        return fit, out, md
+        folder.write_text(json_name, _strict_json(fit.to_json()))
+        folder.write_text(md_name, f"# {fit.sensor.name}: fitted to {fit.n_crops} crops under {Path(real).name}\n\n{fit.markdown()}")
+        return fit
     fit, spec = fit_to_scans(scans, base, [s.label for s in scans], seed=seed)
     crops = spec["fit"].get("crops")
-    write_text(out, _strict_json(spec))
+    folder.write_text(json_name, _strict_json(spec))
     text = f"# {fit.sensor.name}: fitted to {fit.n_scans} scans under {Path(real).name}\n\n{fit.markdown()}"
     if crops is not None:
         lo_q, hi_q = crops["quantiles"]
@@ -163,5 +184,5 @@ def fit_sensor_to_scans(real: str | os.PathLike, sensor: str, out: str | os.Path
                  "| class | " + " | ".join(f"{b / bins:.3g}–{(b + 1) / bins:.3g}" for b in range(bins)) + " |\n|---|" + "---|" * bins + "\n")  # fmt: skip
         for k, values in profiles.items():
             text += f"| {k} | " + " | ".join(f"{v:.2f}" for v in values) + " |\n"
-    write_text(md, text)
-    return fit, out, md
+    folder.write_text(md_name, text)
+    return fit

@@ -518,6 +518,18 @@ class OwnedFolder:
             return
         check_deletable(self.root, rel, self.names, self._ledger.get(rel), f"the ledger {self.ledger_path}")
 
+    def check_writable(self, rels: Iterable[str]) -> None:
+        """Check, before any work, that :meth:`write` may write each of ``rels`` (a refusal then writes nothing).
+
+        Raises
+        ------
+        UnsafePathError
+            As :meth:`write`: no name of this kind, or a file of that name that is not ours or
+            was changed since.
+        """
+        for rel in rels:
+            self._check_replaceable(rel, self.path(rel))
+
     @contextmanager
     def write(self, rel: str) -> Iterator[Path]:
         """Yield a temporary path; on success it is recorded in the ledger and renamed to ``root/rel``.
