@@ -26,14 +26,14 @@ from zbuf_occlude.dataset.layout import (
     file_list_name,
     split_file_name,
 )  # fmt: skip
-from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.errors import InvalidInputError, UnsafePathError
 from zbuf_occlude.farm.config import BYTES_PER_MB, PAPER_SAMPLES_PER_MB, FarmParams, plan_digest, record_path, shard_path
 from zbuf_occlude.farm.worker import base_record, package_version, write_json
 from zbuf_occlude.geometry.samples import count_padded
 from zbuf_occlude.io.atomic import file_sha256, size_mismatch, write_text
 from zbuf_occlude.io.json_files import loads_json
 from zbuf_occlude.io.owned import check_layout, delete_own_files, remove_dead_temps
-from zbuf_occlude.io.safe_paths import check_line_text, path_inside
+from zbuf_occlude.io.safe_paths import check_line_text, check_relative_name, path_inside
 from zbuf_occlude.mesh.discovery import SPLITS, printable_path
 from zbuf_occlude.mesh.inputs import FarmObject
 
@@ -143,8 +143,11 @@ def remove_stale_temps(out: Path, objects: Sequence[FarmObject], everything: boo
     if everything:
         removed += remove_dead_temps(out / TASK_DIR)
     for o in objects:  # generate --format npz|ply: an object's sample files are all its own
-        if (out / o.name).is_dir():
-            removed += remove_dead_temps(path_inside(out, o.name, what=f"the folder of object {o.index}"))
+        try:  # a name that cannot be a folder inside out ("..") is refused where its object is made
+            folder = path_inside(out, check_relative_name(o.name, what="a mesh's name"), what=f"the folder of object {o.index}")
+        except UnsafePathError:
+            continue
+        removed += remove_dead_temps(folder)
     return removed
 
 
