@@ -2,7 +2,7 @@
 
 The layers, lowest first (one per package or base module, so no two packages can lean on each
 other unseen): _version → errors → defaults → resources → geometry → io → mesh → render →
-visibility → pipeline → dataset → real_scans → sensors → farm → protocols → learn → experiments →
+visibility → pipeline → dataset → real_scans → sensors → farm → protocols → export → learn → experiments →
 cli → __main__ → the package's ``__init__``.  Deferred imports inside functions count too.  Also
 here: no import cycle between modules, argparse and ``cli`` only in ``cli``, moderngl only in
 ``render``, and the architecture page names every package.
@@ -38,11 +38,12 @@ LAYERS: dict[str, int] = {
     "sensors": 13,
     "farm": 14,
     "protocols": 15,
-    "learn": 16,
-    "experiments": 17,
-    "cli": 18,
-    "__main__": 19,
-    "__init__": 20,     # the public API
+    "export": 16,       # data sets in the layouts other code reads
+    "learn": 17,
+    "experiments": 18,
+    "cli": 19,
+    "__main__": 20,
+    "__init__": 21,     # the public API
 }  # fmt: skip
 
 #: Known exceptions, each with its reason; the list may only shrink.

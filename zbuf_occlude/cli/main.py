@@ -295,8 +295,9 @@ def build_parser() -> argparse.ArgumentParser:
     from zbuf_occlude.cli.learn import add_parser as add_experiment_parser  # zbuf-occlude experiment; torch only when it runs
     from zbuf_occlude.cli.sensors import add_fit_sensor_parser, add_realism_parser, add_scan_parser
     from zbuf_occlude.cli.verify import add_verify_parser  # zbuf-occlude verify DIR: schema, paths, checksums of a data set
+    from zbuf_occlude.cli.export import add_export_parser  # zbuf-occlude export DATASET --to TARGET
 
-    for add in (add_scan_parser, add_realism_parser, add_fit_sensor_parser, add_experiment_parser, add_verify_parser):
+    for add in (add_scan_parser, add_realism_parser, add_fit_sensor_parser, add_experiment_parser, add_verify_parser, add_export_parser):
         add(sub)
     return parser
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import itertools
 import os
 from collections import OrderedDict
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -429,10 +429,23 @@ class OccludedDataset(Sequence):
             hint="select fewer samples (split, classes, poses) or read them one at a time (ds[i])",
         )  # fmt: skip
         data = np.empty((len(self), self.n_points, 3), dtype=np.float32)
+        for start, block in self.iter_arrays():
+            data[start : start + len(block)] = block
+        return data, self.labels
+
+    def iter_arrays(self) -> Iterator[tuple[int, NDArray[np.float32]]]:
+        """Every selected sample in this sequence's order, one object at a time: memory for one object's samples, not the set's.
+
+        Yields
+        ------
+        start : int
+            Index of the block's first sample in this sequence.
+        data : (k, n, 3) float32
+            The points of samples ``start .. start + k - 1``, all of one object, object frame.
+        """
         bounds = np.flatnonzero(np.diff(self._obj, prepend=-1, append=-1))
         for start, stop in itertools.pairwise(bounds):  # object after object
-            data[start:stop] = self._read(int(start), int(stop))
-        return data, self.labels
+            yield int(start), self._read(int(start), int(stop))
 
     @property
     def labels(self) -> NDArray[np.int64]:
