@@ -2,7 +2,7 @@
 
 The layers, lowest first (one per package or base module, so no two packages can lean on each
 other unseen): _version → errors → defaults → resources → geometry → io → mesh → render →
-visibility → pipeline → dataset → real_scans → sensors → farm → protocols → export → learn → experiments →
+visibility → pipeline → dataset → real_scans → sensors → farm → protocols → exporters → learn → experiments →
 cli → __main__ → the package's ``__init__``.  Deferred imports inside functions count too.  Also
 here: no import cycle between modules, argparse and ``cli`` only in ``cli``, moderngl only in
 ``render``, and the architecture page names every package.
@@ -38,7 +38,7 @@ LAYERS: dict[str, int] = {
     "sensors": 13,
     "farm": 14,
     "protocols": 15,
-    "export": 16,       # data sets in the layouts other code reads
+    "exporters": 16,       # data sets in the layouts other code reads
     "learn": 17,
     "experiments": 18,
     "cli": 19,

@@ -63,6 +63,7 @@ __all__ = [
     "OccludedCloud",
     "OccludedDataset",
     "run_farm",
+    "export",
     "merge_farm",
     "Lidar", "DepthCamera", "ScanScene", "SceneObject", "load_scene", "look_at_pose", "Scan", "scan",
 ]

@@ -40,6 +40,7 @@ from .errors import (
     UnsafePathError,
     ZbufOccludeError,
 )
+from .exporters import export
 from .farm import merge_farm, run_farm
 from .geometry.cameras import DEFAULT_RADIUS, Camera, camera_on_sphere, cameras_from_schedule, view_schedule
 from .geometry.samples import OccludedCloud

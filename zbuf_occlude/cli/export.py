@@ -1,4 +1,4 @@
-"""``zbuf-occlude export DATASET --to TARGET --out DIR``: the argparse face of :func:`zbuf_occlude.export.export`."""
+"""``zbuf-occlude export DATASET --to TARGET --out DIR``: the argparse face of :func:`zbuf_occlude.exporters.export`."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ LABEL_SET_NAMES = ("own", "modelnet40", "modelnet10", "shapenet55")
 
 def cmd_export(args: argparse.Namespace) -> int:
     """Export, then print the samples per split and the files a user opens first."""
-    from zbuf_occlude.export import export
+    from zbuf_occlude.exporters import export
 
     result = export(args.dataset, args.to, args.out, label_set_name=args.label_set, seed=args.seed, list_prefix=args.list_prefix)
     per_split = ", ".join(f"{split} {counted(n, 'sample')}" for split, n in sorted(result.samples.items()))

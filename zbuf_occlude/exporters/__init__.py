@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.export.label_sets import LABEL_SETS, label_set
+from zbuf_occlude.exporters.label_sets import LABEL_SETS, label_set
 from zbuf_occlude.io.owned import OwnedFolder
 
 __all__ = ["TARGETS", "LABEL_SETS", "ExportResult", "export"]
@@ -48,14 +48,14 @@ class _Target:
 
 
 def _pointnet(folder: OwnedFolder, splits, labels, names, *, seed: int, list_prefix: str | None, set_name: str) -> list[Path]:
-    from zbuf_occlude.export.pointnet_h5 import write_pointnet_h5
+    from zbuf_occlude.exporters.pointnet_h5 import write_pointnet_h5
 
     prefix = list_prefix if list_prefix is not None else f"data/{folder.root.resolve().name}"
     return write_pointnet_h5(folder, splits, labels, names, seed=seed, list_prefix=prefix.rstrip("/"))
 
 
 def _modelnet_txt(folder: OwnedFolder, splits, labels, names, *, seed: int, list_prefix: str | None, set_name: str) -> list[Path]:
-    from zbuf_occlude.export.modelnet_txt import write_modelnet_txt
+    from zbuf_occlude.exporters.modelnet_txt import write_modelnet_txt
 
     if list_prefix is not None:
         raise InvalidInputError("--list-prefix applies to --to pointnet-h5 (its file lists name paths); modelnet-txt's name ids")
@@ -65,7 +65,7 @@ def _modelnet_txt(folder: OwnedFolder, splits, labels, names, *, seed: int, list
 def _names(module: str) -> tuple[str, ...]:
     import importlib
 
-    return importlib.import_module(f"zbuf_occlude.export.{module}").FILE_NAMES
+    return importlib.import_module(f"zbuf_occlude.exporters.{module}").FILE_NAMES
 
 
 #: ``--to``: each target's one line, the names it writes and its writer.
@@ -98,7 +98,7 @@ def export(
     out : str or PathLike
         The export's folder (made; it holds only the export: a run replaces only its own files).
     label_set_name : {"own", "modelnet40", "modelnet10", "shapenet55"}
-        Whose label ids to write (:mod:`zbuf_occlude.export.label_sets`).
+        Whose label ids to write (:mod:`zbuf_occlude.exporters.label_sets`).
     seed : int
         Seed of ``pointnet-h5``'s shuffle across files.
     list_prefix : str, optional

@@ -60,7 +60,7 @@ def write_pointnet_h5(
     splits : mapping of str to OccludedDataset
         The source's samples of each split (an empty one gets an empty file list).
     labels : mapping of str to int
-        The label of each class name (:meth:`~zbuf_occlude.export.label_sets.LabelSet.labels`).
+        The label of each class name (:meth:`~zbuf_occlude.exporters.label_sets.LabelSet.labels`).
     names : sequence of str
         The label set's class names (``shape_names.txt``).
     seed : int

@@ -17,8 +17,8 @@ from conftest import SAMPLE_MESHES
 from zbuf_occlude.cli.main import main as cli_main
 from zbuf_occlude.dataset.reader import OccludedDataset
 from zbuf_occlude.errors import InvalidInputError, UnsafePathError
-from zbuf_occlude.export import export
-from zbuf_occlude.export.label_sets import MODELNET10_CLASSES
+from zbuf_occlude.exporters import export
+from zbuf_occlude.exporters.label_sets import MODELNET10_CLASSES
 from zbuf_occlude.protocols.modelnet40c import MODELNET40_CLASSES
 
 #: Six train meshes of five classes and three test meshes: enough rows for several files of 64.
@@ -81,7 +81,7 @@ def test_pointnet_h5_reads_back_the_source_as_pointnet_reads_it(sources, tmp_pat
 
 
 def test_files_hold_at_most_rows_per_file_and_batches_mix_classes(sources, tmp_path, monkeypatch):
-    import zbuf_occlude.export.pointnet_h5 as writer
+    import zbuf_occlude.exporters.pointnet_h5 as writer
 
     out = tmp_path / "modelnet40_ply_hdf5_2048"
     monkeypatch.setattr(writer, "ROWS_PER_FILE", 64)  # small files, as 2048 are to a large set
