@@ -9,7 +9,6 @@ from pathlib import Path
 
 import pytest
 
-from zbuf_occlude.dataset.layout import PROTOCOL_FILE
 from zbuf_occlude.errors import DatasetBusy, InvalidInputError, UnsafePathError, ZbufOccludeError
 from zbuf_occlude.io.owned import LEDGER_FILE, LOCK_FILE, acquire_lock
 from zbuf_occlude.protocols import ProtocolOptions, get_protocol, run_protocol
@@ -17,6 +16,8 @@ from zbuf_occlude.protocols import ProtocolOptions, get_protocol, run_protocol
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 MESH = "chair/train/chair_0001.off"
 PROTOCOL, OPTIONS = get_protocol("modelnet40-c-occlusion"), ProtocolOptions(severity=1)
+#: The run's record and shards: ModelNet40-C's runs share a folder, one record per corruption and severity.
+RECORD, SHARD = "protocol_modelnet40-c-occlusion-s1.json", "modelnet40-c-occlusion-s1_000000.h5"
 
 
 @pytest.fixture(scope="module")
@@ -47,9 +48,9 @@ def test_a_protocol_name_from_the_file_never_names_a_file_to_delete(copied, name
     victim.mkdir()
     for i in range(2):
         (victim / f"keep_{i:06d}.h5").write_text("mine")
-    recorded = json.loads((copied / "out" / PROTOCOL_FILE).read_text())
+    recorded = json.loads((copied / "out" / RECORD).read_text())
     recorded["protocol"] = name.format(victim=victim)
-    (copied / "out" / PROTOCOL_FILE).write_text(json.dumps(recorded))
+    (copied / "out" / RECORD).write_text(json.dumps(recorded))
     with pytest.raises(InvalidInputError, match="was not written by zbuf_occlude"):
         _run(copied, overwrite=True)
     assert sorted(p.read_text() for p in victim.iterdir()) == ["mine", "mine"]
@@ -60,7 +61,7 @@ def test_shards_a_link_to_a_folder_outside_is_refused(tmp_path):
     shutil.copyfile(SAMPLES / MESH, tmp_path / "meshes" / MESH)
     outside = tmp_path / "outside"
     outside.mkdir()
-    (outside / "modelnet40-c-occlusion_000000.h5").write_text("mine")
+    (outside / SHARD).write_text("mine")
     (tmp_path / "out").mkdir()
     (tmp_path / "out" / "shards").symlink_to(outside)
     with pytest.raises(UnsafePathError, match="leads outside"):
@@ -79,7 +80,7 @@ def test_a_ledger_naming_a_user_file_deletes_nothing(copied):
 
 
 def test_an_edited_shard_is_not_deleted_and_nothing_is(copied):
-    shard = copied / "out" / "shards" / "modelnet40-c-occlusion_000000.h5"
+    shard = copied / "out" / "shards" / SHARD
     data = bytearray(shard.read_bytes())
     data[len(data) // 2] ^= 0xFF  # same size, other bytes
     shard.write_bytes(bytes(data))
@@ -120,6 +121,38 @@ def test_a_dead_or_damaged_lock_is_taken_over(copied, content):
 
 
 def test_every_refusal_is_one_of_ours(copied):
-    (copied / "out" / PROTOCOL_FILE).write_text("{not json")
+    (copied / "out" / RECORD).write_text("{not json")
     with pytest.raises(ZbufOccludeError):
         _run(copied)
+
+
+# -- ModelNet40-C: its corruptions and severities share one folder, as its evaluation reads them ------------
+def test_corruptions_and_severities_share_one_folder_without_overwrite(first_run, tmp_path):
+    import numpy as np
+
+    shutil.copytree(first_run / "meshes", tmp_path / "meshes")
+    out = tmp_path / "out"
+    runs = [("modelnet40-c-occlusion", 1), ("modelnet40-c-occlusion", 2), ("modelnet40-c-lidar", 1)]
+    for name, severity in runs:
+        run = run_protocol(get_protocol(name), [tmp_path / "meshes"], out, ProtocolOptions(severity=severity), progress=False)
+        assert run.done == 1 and not run.failures
+    label = np.load(out / "label.npy")  # ModelNet40-C's loader: data_<corruption>_<severity>.npy beside one label.npy
+    for corruption, severity, n_points in (("occlusion", 1, 1024), ("occlusion", 2, 1024), ("lidar", 1, 768)):
+        data = np.load(out / f"data_{corruption}_{severity}.npy")
+        assert data.shape == (1, n_points, 3) and data.dtype == np.float32 and label.shape == (1, 1)
+    again = run_protocol(PROTOCOL, [tmp_path / "meshes"], out, OPTIONS, progress=False)
+    assert (again.resumed, again.done) == (1, 0)
+    before = (out / "data_occlusion_2.npy").read_bytes()
+    run_protocol(PROTOCOL, [tmp_path / "meshes"], out, OPTIONS, progress=False, overwrite=True)  # only severity 1 starts over
+    assert (out / "data_occlusion_2.npy").read_bytes() == before
+    assert (out / "shards" / "modelnet40-c-occlusion-s2_000000.h5").is_file()
+
+
+def test_a_run_of_other_meshes_into_a_shared_folder_is_refused(first_run, tmp_path):
+    shutil.copytree(first_run / "out", tmp_path / "out")
+    (tmp_path / "other" / "desk" / "test").mkdir(parents=True)
+    shutil.copyfile(SAMPLES / "desk/test/desk_0201.off", tmp_path / "other" / "desk" / "test" / "desk_0201.off")
+    before = (tmp_path / "out" / "label.npy").read_bytes()
+    with pytest.raises(InvalidInputError, match="label.npy holds the labels of other meshes"):
+        run_protocol(PROTOCOL, [tmp_path / "other"], tmp_path / "out", ProtocolOptions(severity=2), progress=False)
+    assert (tmp_path / "out" / "label.npy").read_bytes() == before

@@ -102,6 +102,10 @@ class Protocol:
         (:class:`~zbuf_occlude.io.owned.OwnedFolder`: ``folder.write(name)``).
     outputs : tuple of str
         Regular expressions of the names ``finish`` writes in ``--out`` (the only ones it may).
+    run_key : callable ``(options) -> str``, optional
+        For a protocol whose runs share one folder (ModelNet40-C's corruptions and severities):
+        the name of a run's record (``protocol_<key>.json``) and shards (``shards/<key>_<index>.h5``),
+        so that each run owns its own files; default: one run per folder, ``protocol.json``.
     check : callable ``(options) -> None``, optional
         Raises InvalidInputError naming a bad option value.
     """
@@ -111,6 +115,7 @@ class Protocol:
     make: Callable[[trimesh.Trimesh, FarmObject, ProtocolOptions, np.random.Generator], dict[str, np.ndarray]]
     finish: Callable[[OwnedFolder, list[FarmObject], list[Path], ProtocolOptions], list[Path]] | None = None
     outputs: tuple[str, ...] = ()
+    run_key: Callable[[ProtocolOptions], str] | None = None
     check: Callable[[ProtocolOptions], None] | None = None
 
 
@@ -167,41 +172,39 @@ _PROTOCOL_NAME = r"[a-z0-9][a-z0-9-]*"
 _SHARD_NAMES = rf"{SHARDS_DIR}/{_PROTOCOL_NAME}_\d{{6}}\.h5"
 
 
-def _shard(protocol: str, index: int) -> str:
-    """The shard of object ``index``, relative to ``--out``."""
-    return f"{SHARDS_DIR}/{protocol}_{index:06d}.h5"
+#: A run's record: ``protocol.json``, or ``protocol_<key>.json`` for a protocol whose runs share a folder.
+_RECORD_NAMES = rf"protocol(_{_PROTOCOL_NAME})?\.json"
+
+
+def _shard(key: str, index: int) -> str:
+    """The shard of object ``index`` of run ``key``, relative to ``--out``."""
+    return f"{SHARDS_DIR}/{key}_{index:06d}.h5"
+
+
+def _run_key(protocol: Protocol, options: ProtocolOptions) -> str:
+    """What names a run's record and shards: the protocol's name, or its ``run_key`` (several runs, one folder)."""
+    return protocol.name if protocol.run_key is None else protocol.run_key(options)
+
+
+def _record_name(protocol: Protocol, key: str) -> str:
+    return PROTOCOL_FILE if key == protocol.name else f"protocol_{key}.json"
 
 
 def _owned(out: Path, protocol: Protocol) -> OwnedFolder:
-    """``out`` as a protocol run owns it: ``protocol.json``, the shards, and the files ``finish`` writes."""
+    """``out`` as a protocol run owns it: the runs' records, the shards, and the files ``finish`` writes."""
     return OwnedFolder(
-        out, names=[re.escape(PROTOCOL_FILE), _SHARD_NAMES, *protocol.outputs], subfolders=[SHARDS_DIR],
-        what=f"the {protocol.name} run",
+        out, names=[_RECORD_NAMES, _SHARD_NAMES, *protocol.outputs], subfolders=[SHARDS_DIR], what=f"the {protocol.name} run",
     )  # fmt: skip
 
 
-def _earlier_options(folder: OwnedFolder, protocol: Protocol) -> dict[str, Any] | None:
-    """The options an earlier protocol run recorded in the folder (``None`` when there is none).
-
-    A run of an earlier version kept no ledger: its ``protocol.json``, its shards (by the names
-    its own options give, checked against the shard pattern) and the files of ``finish`` are
-    recorded as they are.
+def _read_record(path: Path) -> dict[str, Any]:
+    """A run's record, checked to be ours.
 
     Raises
     ------
     InvalidInputError
-        ``protocol.json`` exists but is not ours, or ``shards/`` holds files and no
-        ``protocol.json`` says they are ours: a run would replace or delete them.
+        It is not JSON, or not a record of ours (its protocol name could not name a shard).
     """
-    out = folder.root
-    path, shards = out / PROTOCOL_FILE, out / SHARDS_DIR
-    if not os.path.lexists(path):
-        if shards.is_dir() and any(shards.iterdir()) or os.path.lexists(shards) and not shards.is_dir():
-            raise InvalidInputError(
-                f"{shards} was not written by zbuf_occlude ({out} holds no earlier run: no {PROTOCOL_FILE}), and a run "
-                "would replace or delete what it holds: move it away, or choose an empty --out"
-            )
-        return None
     try:
         old = read_json_file(path)
     except InvalidInputError as exc:
@@ -211,11 +214,47 @@ def _earlier_options(folder: OwnedFolder, protocol: Protocol) -> dict[str, Any] 
         or not re.fullmatch(_PROTOCOL_NAME, old["protocol"])
     ):  # fmt: skip
         raise InvalidInputError(f"{path} was not written by zbuf_occlude; move it away, or choose another --out")
-    if not os.path.lexists(folder.ledger_path):
+    return old
+
+
+def _earlier_options(folder: OwnedFolder, protocol: Protocol, key: str) -> dict[str, Any] | None:
+    """The options an earlier run of ``key`` recorded in the folder (``None`` when there is none).
+
+    A run of an earlier version kept no ledger: its ``protocol.json``, its shards (by the names
+    its own record gives, checked against the shard pattern) and the files of ``finish`` are
+    recorded as they are.
+
+    Raises
+    ------
+    InvalidInputError
+        A record exists but is not ours, or ``shards/`` holds files and no record says they are
+        ours: a run would replace or delete them.
+    """
+    out = folder.root
+    legacy, shards = out / PROTOCOL_FILE, out / SHARDS_DIR
+    if os.path.lexists(legacy) and not os.path.lexists(folder.ledger_path):
+        old = _read_record(legacy)
         earlier = [_shard(old["protocol"], i) for i in range(len(old["objects"]))]
         outputs = [p.name for p in out.iterdir() if any(re.fullmatch(rx, p.name) for rx in protocol.outputs)]
         folder.adopt([PROTOCOL_FILE, *earlier, *outputs])
-    return old
+    path = out / _record_name(protocol, key)
+    if os.path.lexists(path):
+        return _read_record(path)
+    if os.path.lexists(shards) and not shards.is_dir():
+        raise InvalidInputError(f"{shards} is not a folder; a run writes its shards there: move it away, or choose another --out")
+    ours = re.compile(rf"{re.escape(key)}_\d{{6}}\.h5")
+    recorded = set(folder.written())
+    # a shard of this run's name that nothing records, or anything in shards/ of a folder that holds no run of ours
+    foreign = [
+        p for p in (sorted(shards.iterdir()) if shards.is_dir() else [])
+        if f"{SHARDS_DIR}/{p.name}" not in recorded and (ours.fullmatch(p.name) or not recorded)
+    ]  # fmt: skip
+    if foreign:
+        raise InvalidInputError(
+            f"{foreign[0]} was not written by zbuf_occlude ({out} holds no record of it: no {path.name}), and a run "
+            "would replace or delete it: move it away, or choose an empty --out"
+        )
+    return None
 
 
 def _record_options(
@@ -225,24 +264,26 @@ def _record_options(
     ``root`` (which is named by its name only); refuse an earlier run's other options or meshes.
     Returns ``objects`` as the outputs name them (:func:`~zbuf_occlude.farm.journal.relative_objects`)."""
     out = folder.root
+    key = _run_key(protocol, options)
+    record = _record_name(protocol, key)
     named = relative_objects(objects, root)
     recorded = {"protocol": protocol.name, **asdict(options)}
     recorded["extra"] = dict(options.extra)
     # shards are named by plan index: another set of meshes must not resume from them
     recorded["objects"] = [[o.name, o.source] for o in named]
     recorded["source"] = root_name(root)
-    old = _earlier_options(folder, protocol)
+    old = _earlier_options(folder, protocol, key)
     if old is not None and not overwrite and old != json.loads(json.dumps(recorded)) and old != _as_written_before(recorded, objects):
-        raise InvalidInputError(f"{out} holds a run with other options or meshes ({out / PROTOCOL_FILE}); use --overwrite or another --out")
-    if old is not None and overwrite:
-        folder.delete(folder.written(_SHARD_NAMES))  # the shards the ledger records, checked; nothing else
+        raise InvalidInputError(f"{out} holds a run with other options or meshes ({out / record}); use --overwrite or another --out")
+    if old is not None and overwrite:  # this run's shards as the ledger records them, checked; nothing else
+        folder.delete(folder.written(rf"{SHARDS_DIR}/{re.escape(key)}_\d{{6}}\.h5"))
     for path in sorted(out.iterdir()):  # before any work: finish would refuse to replace them at the end
         if any(re.fullmatch(rx, path.name) for rx in protocol.outputs) and not folder.check_unchanged(path.name):
             raise InvalidInputError(
                 f"{path} was not written by a run of ours (or was changed since), and this run would replace it: "
                 "move it away, or choose another --out"
             )
-    folder.write_text(PROTOCOL_FILE, json.dumps(recorded, indent=1, sort_keys=True) + "\n")
+    folder.write_text(record, json.dumps(recorded, indent=1, sort_keys=True) + "\n")
     return named
 
 
@@ -300,7 +341,7 @@ def _run_owned(
     from zbuf_occlude.io.progress import progress as progress_bar
 
     for found, obj in progress_bar(list(zip(objects, named)), desc=protocol.name, unit="obj", enabled=progress):
-        rel = _shard(protocol.name, obj.index)
+        rel = _shard(_run_key(protocol, options), obj.index)
         shard = out / rel
         if folder.holds(rel):
             run.resumed += 1

@@ -41,6 +41,7 @@ degenerate faces and unreferenced vertices before the normalisation, which Open3
 
 from __future__ import annotations
 
+import io
 import logging
 from typing import TYPE_CHECKING
 
@@ -266,6 +267,29 @@ def _maker(sample):
     return make
 
 
+def _npy_bytes(array: np.ndarray) -> bytes:
+    buffer = io.BytesIO()
+    np.save(buffer, array)
+    return buffer.getvalue()
+
+
+def _check_shared(folder: OwnedFolder, name: str, content: bytes) -> None:
+    """Refuse to replace a file that the folder's other runs share (``label.npy``, ``shape_names.txt``)
+    with other content: their ``data_*.npy`` rows follow it.
+
+    Raises
+    ------
+    InvalidInputError
+        ``name`` exists with other content (another run in this folder has other meshes).
+    """
+    path = folder.root / name
+    if path.is_file() and path.read_bytes() != content:
+        raise InvalidInputError(
+            f"{path} holds the labels of other meshes (another corruption or severity in {folder.root}); the runs of one "
+            "folder share it, as ModelNet40-C's do: run these meshes into another --out"
+        )
+
+
 def _outputs(corruption: str) -> tuple[str, ...]:
     """The names ``finish`` writes: ModelNet40-C's files for each severity, and the sources of their rows."""
     return (rf"data_{corruption}_[1-5]\.npy", r"label\.npy", r"shape_names\.txt", rf"data_{corruption}_[1-5]_sources\.txt")
@@ -284,12 +308,15 @@ def _finisher(corruption: str):
         else:
             log.info("label.npy holds ModelNet40's class indices (shape_names.txt: its 40 classes)")
         labels = np.array([[names.index(o.class_name)] for o in objects], dtype=np.uint8 if len(names) < 256 else np.int64)
+        label_bytes, names_text = _npy_bytes(labels), "\n".join(names) + "\n"
+        _check_shared(folder, "label.npy", label_bytes)  # the corruptions and severities of one folder share them
+        _check_shared(folder, "shape_names.txt", names_text.encode("utf-8"))
         files = []
-        for name, array in ((f"data_{corruption}_{options.severity}.npy", data), ("label.npy", labels)):
-            with folder.write(name) as tmp, open(tmp, "wb") as fh:
-                np.save(fh, array)  # a file object: np.save would add ".npy" to the temporary's name
+        for name, content in ((f"data_{corruption}_{options.severity}.npy", _npy_bytes(data)), ("label.npy", label_bytes)):
+            with folder.write(name) as tmp:
+                tmp.write_bytes(content)
             files.append(folder.root / name)
-        files.append(folder.write_text("shape_names.txt", "\n".join(names) + "\n"))
+        files.append(folder.write_text("shape_names.txt", names_text))
         files.append(folder.write_text(f"data_{corruption}_{options.severity}_sources.txt", "".join(o.source + "\n" for o in objects)))
         return files
 
@@ -300,9 +327,11 @@ def _finisher(corruption: str):
 OCCLUSION = Protocol(
     name="modelnet40-c-occlusion", summary="ModelNet40-C occlusion (Sun et al. 2022): data_occlusion_<s>.npy, label.npy",
     make=_maker(occlusion_sample), finish=_finisher("occlusion"), check=_check, outputs=_outputs("occlusion"),
+    run_key=lambda options: f"modelnet40-c-occlusion-s{options.severity}",
 )  # fmt: skip
 #: ``--protocol modelnet40-c-lidar --severity 1..5``: ``data_lidar_<s>.npy`` (N, 768, 3) float32 + ``label.npy``.
 LIDAR = Protocol(
     name="modelnet40-c-lidar", summary="ModelNet40-C LiDAR (Sun et al. 2022): data_lidar_<s>.npy, label.npy",
     make=_maker(lidar_sample), finish=_finisher("lidar"), check=_check, outputs=_outputs("lidar"),
+    run_key=lambda options: f"modelnet40-c-lidar-s{options.severity}",
 )  # fmt: skip
