@@ -396,19 +396,8 @@ def _scan_rows(root: Path, per_group: int, dpi: int, rng: np.random.Generator, f
     rows = []
     for group, files in groups.items():
         for p in sorted(files[k] for k in rng.permutation(len(files))[:per_group]):
-            rows.append(_scan_row(_finite_scan(read_scan_npz(p), p), group, p.name, fixed))
+            rows.append(_scan_row(read_scan_npz(p), group, p.name, fixed))
     return rows
-
-
-def _finite_scan(s: Any, path: Path) -> Any:
-    """``s`` when every point is finite; a scan holding NaN or inf is damaged and refused, naming ``path``."""
-    bad = int((~np.isfinite(np.asarray(s.points, dtype=np.float64))).any(axis=1).sum())
-    if bad:
-        raise InvalidInputError(
-            f"{path}: {bad} point{' has' if bad == 1 else 's have'} NaN or inf coordinates: the scan is damaged; "
-            "write it again with `zbuf-occlude scan` or move it out of the folder"
-        )
-    return s
 
 
 def _scan_row(s: Any, group: str, name: str, fixed: Camera) -> SheetRow:

@@ -173,6 +173,13 @@ def _checked_npz(path: Path, d: dict[str, np.ndarray]) -> None:
             raise InvalidInputError(f"{path}: {key} must be a string, got shape {d[key].shape} dtype {d[key].dtype}")
     if "frame" in d and str(d["frame"]) not in FRAMES:
         raise InvalidInputError(f"{path}: frame must be one of {FRAMES}, got {str(d['frame'])!r}")
+    if "points" in d and d["points"].ndim == 2:
+        bad = int((~np.isfinite(d["points"].astype(np.float64, copy=False))).any(axis=1).sum())
+        if bad:
+            raise InvalidInputError(
+                f"{path}: {bad} point{' has' if bad == 1 else 's have'} NaN or inf coordinates: the scan is damaged; "
+                "write it again with `zbuf-occlude scan` or move it out of the folder"
+            )
 
 
 def read_scan_npz(path: str | os.PathLike) -> Scan:
@@ -183,7 +190,7 @@ def read_scan_npz(path: str | os.PathLike) -> Scan:
     InvalidInputError
         Naming the file: missing, not a regular file, inflating past
         :data:`MAX_SCAN_NPZ_BYTES`, missing keys, or an array of the wrong shape or dtype
-        (per-point arrays of N rows, ``points``/``normal`` (N, 3) numbers, indices integers,
+        (per-point arrays of N rows, ``points`` (N, 3) finite numbers, ``normal`` (N, 3) numbers, indices integers,
         ``sensor_position`` a finite (3,), ``sensor_to_world`` a finite (4, 4), ``frame`` one
         of :data:`FRAMES`).
     """
