@@ -4,7 +4,7 @@ What yanx27/Pointnet_Pointnet2_pytorch's ``ModelNetDataLoader`` reads:
 
 * ``<class>/<class>_<NNNN>.txt``: one sample a file, ``x,y,z,nx,ny,nz`` per line (``%.6f``),
   numbered per class from 1 across the splits; the normals are estimated from the sample's points
-  and face its sensor (:func:`~zbuf_occlude.exporters.normals.estimate_normals`), as a real scan's are;
+  and face its sensor (:func:`~zbuf_occlude.geometry.normals.estimate_normals`), as a real scan's are;
 * ``modelnet40_shape_names.txt`` (``modelnet10_...`` for ``--label-set modelnet10``, which that loader
   opens when ``num_category`` is 10): the label set's classes, one per label;
 * ``modelnet40_<split>.txt``: the ids of a split, one a line; the loader takes an id's class from
@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from zbuf_occlude.exporters.normals import estimate_normals
+from zbuf_occlude.geometry.normals import estimate_normals
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.sensors.lidar import beam_directions

@@ -13,7 +13,9 @@ __all__ = ["NORMAL_NEIGHBOURS", "estimate_normals"]
 NORMAL_NEIGHBOURS = 16
 
 
-def estimate_normals(points: NDArray[np.floating], eye: NDArray[np.floating], *, k: int = NORMAL_NEIGHBOURS) -> NDArray[np.float32]:
+def estimate_normals(
+    points: NDArray[np.floating], eye: NDArray[np.floating], *, k: int = NORMAL_NEIGHBOURS, neighbours: NDArray[np.integer] | None = None
+) -> NDArray[np.float32]:
     """Unit normals of ``points``, each facing ``eye``.
 
     Parameters
@@ -25,6 +27,8 @@ def estimate_normals(points: NDArray[np.floating], eye: NDArray[np.floating], *,
         sensor saw lies on a surface facing it).
     k : int
         Neighbours per point (the point itself included); fewer points than ``k``: all of them.
+    neighbours : (n, k) int, optional
+        Each point's neighbours when the caller has them (``cKDTree.query``); else found here.
 
     Returns
     -------
@@ -40,7 +44,7 @@ def estimate_normals(points: NDArray[np.floating], eye: NDArray[np.floating], *,
         normal = np.zeros_like(p)
         normal[:, 2] = 1.0
         return normal.astype(np.float32)
-    _, idx = cKDTree(p).query(p, k=k)
+    idx = cKDTree(p).query(p, k=k)[1] if neighbours is None else np.asarray(neighbours)
     nb = p[idx] - p[idx].mean(axis=1, keepdims=True)
     _, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", nb, nb))
     normal = vectors[:, :, 0]  # eigh sorts eigenvalues ascending
