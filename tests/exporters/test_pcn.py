@@ -96,7 +96,7 @@ def _pointr_file_list(root: Path, subset: str) -> list[dict]:
 def test_pointr_reads_the_export_as_its_pcn_dataset_does(source, tmp_path):
     out = tmp_path / "PCN"
     result = export(source, "pcn", out)
-    assert result.samples == {"train": 1, "test": 1} and result.files == [out / "PCN.json"]
+    assert result.samples == {"train": 1, "test": 1} and result.unit == "model" and result.files == [out / "PCN.json"]
     categories = json.loads((out / "PCN.json").read_text())
     assert categories == [
         {"taxonomy_id": "03001627", "taxonomy_name": "chair", "train": ["chair_0001"], "val": [], "test": []},
@@ -201,3 +201,21 @@ def test_refusals_are_one_line_and_make_no_folder(source, tmp_path, capsys):
 
 def test_the_cli_names_every_target():
     assert TARGET_NAMES == tuple(TARGETS)
+
+
+def test_a_foreign_pcn_json_is_refused_before_any_file_is_written(tmp_path):
+    """A clone of PoinTr ships data/PCN/PCN.json: exporting into it is refused, and nothing is written there."""
+    from zbuf_occlude.errors import UnsafePathError
+    from zbuf_occlude.exporters import export
+    from zbuf_occlude.protocols import get_protocol, run_protocol
+
+    (tmp_path / "meshes" / "chair" / "train").mkdir(parents=True)
+    shutil.copy(SAMPLE_MESHES / "chair/train/chair_0001.off", tmp_path / "meshes" / "chair" / "train" / "chair_0001.off")
+    run_protocol(get_protocol("pcn"), [tmp_path / "meshes"], tmp_path / "run", progress=False)
+    out = tmp_path / "PCN"
+    out.mkdir()
+    (out / "PCN.json").write_text("[]\n")
+    with pytest.raises(UnsafePathError, match="PCN.json"):
+        export(tmp_path / "run", "pcn", out)
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == ["PCN.json"]
+    assert not any(out.rglob("*.pcd"))

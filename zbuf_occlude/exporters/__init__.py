@@ -32,15 +32,18 @@ class ExportResult:
         The export's folder.
     target : str
     samples : dict of str to int
-        Samples written per split.
+        Samples written per split (``unit`` each).
     files : list of Path
         The files a user opens first (class list, file lists); sample files are in the folder's ledger.
+    unit : str
+        What one of ``samples`` is: ``"sample"`` (a cloud), or ``"model"`` (``pcn``: an object's views and complete cloud).
     """
 
     out: Path
     target: str
     samples: dict[str, int]
     files: list[Path]
+    unit: str = "sample"
 
 
 #: What a target reads: a farm or generate data set (``None``), or a ``generate --protocol NAME`` folder (``NAME``).
@@ -65,6 +68,7 @@ class _Target:
     protocol: str | None = DATASET
     options: tuple[str, ...] = ()
     label_sets: tuple[str, ...] = LABEL_SETS
+    unit: str = "sample"
 
 
 @dataclass(frozen=True)
@@ -132,7 +136,7 @@ TARGETS: dict[str, Callable[[], _Target]] = {
     "modelnet-txt": lambda: _Target("Pointnet_Pointnet2_pytorch's modelnet40_normal_resampled", _names("modelnet_txt"),
                                     _open_dataset, _modelnet_txt),
     "pcn": lambda: _Target("PCN's completion layout, PCN.json and .pcd (PCN, PoinTr, SnowflakeNet, SeedFormer)", _names("pcn"),
-                           _open_pcn, _pcn, protocol="pcn", label_sets=("own", "shapenet55")),
+                           _open_pcn, _pcn, protocol="pcn", label_sets=("own", "shapenet55"), unit="model"),
 }  # fmt: skip
 
 
@@ -229,4 +233,4 @@ def export(
         raise InvalidInputError(f"--out {out} lies inside the data set {source}; choose a folder outside it")
     with OwnedFolder(out, names=target.names, what=f"the {to} export") as folder:
         files, samples = target.write(folder, opened, seed=seed, list_prefix=list_prefix)
-    return ExportResult(out, to, samples, files)
+    return ExportResult(out, to, samples, files, target.unit)

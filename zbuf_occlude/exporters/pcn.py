@@ -134,7 +134,9 @@ def _read_record(source: Path) -> list:
     """The objects ``source/protocol.json`` lists, once it is a pcn run's."""
     path = source / PROTOCOL_FILE
     if not path.is_file():
-        raise InvalidInputError(f"{source} holds no {PROTOCOL_FILE}: export --to pcn reads a `generate --protocol {PROTOCOL}` folder; {_MAKE_SOURCE}")
+        raise InvalidInputError(
+            f"{source} holds no {PROTOCOL_FILE}: export --to pcn reads a `generate --protocol {PROTOCOL}` folder; {_MAKE_SOURCE}"
+        )
     record = read_json_file(path)
     protocol = record.get("protocol") if isinstance(record, dict) else None
     if protocol != PROTOCOL or not isinstance(record.get("objects"), list):
@@ -159,6 +161,11 @@ def _taxonomy(classes: list[str], label_set_name: str) -> dict[str, str]:
         ids[c] = shapenet_synset(c) or c
         if "/" in ids[c] or ids[c] in ("", ".", ".."):
             raise InvalidInputError(f"the class {c!r} cannot name a folder of PCN's layout; rename it in the mesh folder or list file")
+    if other := sorted(c for c in classes if ids[c] == c and shapenet_synset(c) is None):
+        log.warning(
+            "classes %s are not ShapeNet's: their taxonomy_id is the class name; PoinTr's runner looks each taxonomy_id up "
+            "in its data/shapenet_synset_dict.json (a KeyError at validation): add these ids there", other,
+        )  # fmt: skip
     return ids
 
 
@@ -281,6 +288,7 @@ def write_pcn(folder: OwnedFolder, plan: PcnPlan) -> list[Path]:
     UnsafePathError, OutputError
         As :meth:`~zbuf_occlude.io.owned.OwnedFolder.write`.
     """
+    folder.check_writable([CATEGORY_FILE])  # a foreign PCN.json (a clone of PoinTr ships one) is refused before any file is written
     splits = list(SUBSETS) + sorted({m.split for m in plan.models} - set(SUBSETS))
     lists = {t: {s: [] for s in splits} for t in plan.taxonomy_names}
     written, empty = set(), 0
