@@ -13,7 +13,9 @@ N uniform surface samples (Algorithms 1-2): each visible sample stands for ``A /
 surface, weighted by ``|n · e_k|`` of its face, and the estimate is averaged over
 ``azimuths`` evenly spaced camera azimuths at each elevation.
 
-:func:`elevation_profile` writes the CSV and PNG; :func:`add_profile_parser` adds the
+:func:`elevation_profile` writes the CSV and PNG through the output layer (their folder held,
+:class:`~zbuf_occlude.io.owned.OwnedFolder`; an existing file of either name replaced only if a run
+of ours wrote it and it is unchanged since); :func:`add_profile_parser` adds the
 ``zbuf-occlude elevation-profile`` subcommand.
 """
 
@@ -21,6 +23,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -30,10 +33,10 @@ from numpy.typing import NDArray
 
 from zbuf_occlude._version import install_hint
 from zbuf_occlude.defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION
-from zbuf_occlude.errors import InvalidInputError, OutputError
+from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere
 from zbuf_occlude.geometry.sampling import sample_surface
-from zbuf_occlude.io.atomic import write_csv
+from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.visibility.registry import resolution_option, visible_mask
 
 if TYPE_CHECKING:  # trimesh is imported where it is used
@@ -44,6 +47,8 @@ __all__ = [
     "DEFAULT_ELEVATIONS",
     "DEFAULT_AZIMUTHS",
     "DEFAULT_PROFILE_POINTS",
+    "PROFILE_PNG",
+    "profile_outputs",
     "projected_areas",
     "profile_table",
     "elevation_profile",
@@ -61,6 +66,8 @@ DEFAULT_AZIMUTHS = 8
 #: projected area is about sqrt((1 - f) / (f N)) for a visible fraction f, i.e. ~1 % at
 #: N = 20 000 and f = 0.3.
 DEFAULT_PROFILE_POINTS = 20_000
+#: The PNG :func:`elevation_profile` writes when ``out`` names a folder.
+PROFILE_PNG = "elevation_profile.png"
 
 
 def projected_areas(
@@ -163,6 +170,16 @@ def profile_table(
     return rows
 
 
+def profile_outputs(out: str | os.PathLike) -> tuple[Path, Path]:
+    """The PNG and the CSV :func:`elevation_profile` writes for ``out``: ``out`` itself, or
+    :data:`PROFILE_PNG` inside it when it is a folder (existing, or without suffix); the CSV beside
+    the PNG with the suffix ``.csv``.  These two are every name it writes."""
+    png = Path(out)
+    if png.is_dir() or png.suffix == "":
+        png = png / PROFILE_PNG
+    return png, png.with_suffix(".csv")
+
+
 def _plot(rows: list[dict[str, float]], path: Path, title: str) -> None:
     import matplotlib
 
@@ -181,8 +198,10 @@ def _plot(rows: list[dict[str, float]], path: Path, title: str) -> None:
     ax.grid(True, alpha=0.3)
     ax.legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    try:
+        fig.savefig(path, dpi=120, format="png")  # path: a temporary, whose name says nothing of the format
+    finally:
+        plt.close(fig)
 
 
 def elevation_profile(
@@ -234,6 +253,11 @@ def elevation_profile(
         Bad arguments.
     OutputError
         The output cannot be written.
+    UnsafePathError
+        The PNG or the CSV exists and was not written by a run of ours, or was changed since
+        (checked before the profile is computed; nothing is written).
+    DatasetBusy
+        Another live process holds the folder of the output.
     BackendUnavailable
         matplotlib is missing (the ``plot`` extra), or the method's
         backend is.
@@ -247,29 +271,24 @@ def elevation_profile(
     from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported when a profile runs
 
     mesh = load_mesh(mesh_path)
-    out = Path(out)
-    if out.is_dir() or out.suffix == "":
-        out = out / "elevation_profile.png"
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"cannot create {out.parent}: {exc}") from None
-    rows = profile_table(
-        mesh,
-        method=method,
-        points=points,
-        elevations=elevations,
-        azimuths=azimuths,
-        resolution=resolution,
-        seed=seed,
-        progress=progress,
-    )
-    try:
-        write_csv(out.with_suffix(".csv"), rows)
-        _plot(rows, out, f"Projected visible area vs elevation: {Path(mesh_path).stem} ({method}, {points} points)")
-    except OSError as exc:
-        raise OutputError(f"cannot write {out}: {exc}") from None
-    log.info("elevation profile written to %s", out)
-    return out
+    png, csv = profile_outputs(out)
+    names = (png.name, csv.name)
+    with OwnedFolder(png.parent, names=[re.escape(name) for name in names], what="the elevation profile") as folder:
+        folder.check_writable(names)  # both before the profile is computed: a refusal writes nothing
+        rows = profile_table(
+            mesh,
+            method=method,
+            points=points,
+            elevations=elevations,
+            azimuths=azimuths,
+            resolution=resolution,
+            seed=seed,
+            progress=progress,
+        )
+        folder.write_csv(csv.name, rows)
+        with folder.write(png.name) as tmp:
+            _plot(rows, tmp, f"Projected visible area vs elevation: {Path(mesh_path).stem} ({method}, {points} points)")
+    log.info("elevation profile written to %s", png)
+    return png
 
 

@@ -53,7 +53,12 @@ ties; ``best_epoch_by`` chooses otherwise, and each row of ``runs.jsonl`` says w
 
 Outputs in ``out``: ``settings.json``, ``real_split.csv``, (``fitted_sensor.json``), ``runs.jsonl`` (one line per training run, what a
 rerun resumes from), ``results.csv`` (one row per run), ``summary.csv`` (mean ± std per
-training set), ``confusion_<set>.csv`` (summed over seeds), ``table.md``, ``run.json``.
+training set), ``confusion_<set>.csv`` (summed over seeds), ``table.md``, ``run.json``, and each
+run's ``checkpoints/<set>/seed<N>/`` (:data:`SIM2REAL_OUTPUTS`).  They go through the output layer
+(:class:`~zbuf_occlude.io.owned.OwnedFolder`): ``out`` is held for the run, every file is checked
+before any work, and a file is replaced only if a run of ours wrote it and it is unchanged since;
+the files of a run made before the layer kept its ledger are taken as ours once its
+``settings.json`` matches (it resumes as before).
 
 A run is a :class:`~zbuf_occlude.experiments.sim2real_config.Sim2RealConfig` (every setting, checked
 once) given to :func:`run_sim2real`, in three stages: :func:`prepare_sets` (scans, meshes, the fit),
@@ -66,6 +71,7 @@ import json
 import logging
 import math
 import os
+import re
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -95,15 +101,17 @@ from zbuf_occlude.experiments.sim2real_data import (
     real_scan_rows,
     split_whole_meshes,
 )  # fmt: skip
-from zbuf_occlude.io.atomic import write_csv, write_text
+from zbuf_occlude.experiments.table3 import CHECKPOINT_FILES
 from zbuf_occlude.io.json_files import loads_json, read_json_file
+from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.learn.data import CloudSet, split_validation
 from zbuf_occlude.learn.metrics import classification_report
 from zbuf_occlude.learn.stats import mean_std, permutation_p
 from zbuf_occlude.mesh.sizes import SizeRange
 
 __all__ = ["Sim2RealConfig", "Sim2RealScale", "SIM2REAL_SCALES", "REAL_TO_REAL", "SIM2REAL_RECIPE", "VALIDATION_CHOICES", "FITTED_SHAPES",
-           "CHOSEN_ON_FIT_HALF", "ALL_SCANS", "Sim2RealSets", "run_sim2real", "prepare_sets", "run_seed", "write_outputs", "summarise"]
+           "CHOSEN_ON_FIT_HALF", "ALL_SCANS", "Sim2RealSets", "run_sim2real", "prepare_sets", "run_seed", "write_outputs", "summarise",
+           "SIM2REAL_FILES", "SIM2REAL_OUTPUTS"]
 
 log = logging.getLogger(__name__)
 
@@ -121,6 +129,33 @@ CHOSEN_ON_FIT_HALF = "chosen on fit half"
 #: does not compare them (the same elevations given as an option or derived from the sensor make the same run).
 _NOTES = ("fixed_at", "occluded_elevation_from")
 _MISSING = object()
+
+
+def _set_folder(kind: str) -> str:
+    """The folder of ``kind``'s checkpoints below ``checkpoints/`` (real→real: ``real_to_real``)."""
+    return kind.replace("→", "_to_")
+
+
+def _confusion_name(kind: str) -> str:
+    """The file of ``kind``'s confusion matrix, summed over seeds (``confusion_lidar_complete.csv``)."""
+    return f"confusion_{kind.replace('→', '_to_').replace('+', '_')}.csv"
+
+
+#: Every set a run may train, in report order: the mesh-only sets, the fitted ones, real→real.
+_EVERY_SET = (*TRAINING_SETS, *FITTED_SETS, REAL_TO_REAL)
+#: The files ``experiment sim2real`` writes at the top of ``--out`` (``fitted_sensor.json`` with
+#: ``fit_sensor``; a ``confusion_<set>.csv`` per set trained).
+SIM2REAL_FILES = (
+    "settings.json", "fitted_sensor.json", "real_split.csv", "runs.jsonl", "results.csv", "summary.csv",
+    *(_confusion_name(kind) for kind in _EVERY_SET), "run.json", "table.md",
+)  # fmt: skip
+#: Every name it writes in ``--out`` (full-match regular expressions): :data:`SIM2REAL_FILES` and
+#: the checkpoints of each training run, ``checkpoints/<set>/seed<N>/`` (:data:`~zbuf_occlude.experiments.table3.CHECKPOINT_FILES`).
+_SET_FOLDERS = "|".join(re.escape(_set_folder(kind)) for kind in _EVERY_SET)
+SIM2REAL_OUTPUTS = (
+    *(re.escape(name) for name in SIM2REAL_FILES),
+    rf"checkpoints/({_SET_FOLDERS})/seed\d+/({'|'.join(re.escape(name) for name in CHECKPOINT_FILES)})",
+)  # fmt: skip
 
 
 def _fit_sensor(scans: list, base, labels: np.ndarray, names: list[str]):
@@ -173,9 +208,9 @@ def _load_runs(path: Path) -> dict:
     return done
 
 
-def _append_run(path: Path, done: dict, row: dict) -> None:
+def _append_run(folder: OwnedFolder, done: dict, row: dict) -> None:
     done[(row["train_set"], row["seed"])] = row
-    write_text(path, "".join(json.dumps(r, default=float) + "\n" for r in done.values()))
+    folder.write_text("runs.jsonl", "".join(json.dumps(r, default=float) + "\n" for r in done.values()))
 
 
 @dataclass(frozen=True)
@@ -219,6 +254,23 @@ def _kinds(config: Sim2RealConfig) -> tuple[str, ...]:
     return (*TRAINING_SETS, *FITTED_SETS) if config.fit_sensor else TRAINING_SETS
 
 
+def _owned(out: str | os.PathLike, config: Sim2RealConfig) -> OwnedFolder:
+    """``out`` as a run of ``config`` holds it: :data:`SIM2REAL_OUTPUTS`, in the checkpoint folders of its sets and seeds."""
+    seeds = range(int(config.seeds))
+    folders = [f"checkpoints/{_set_folder(kind)}/seed{seed}" for kind in (*_kinds(config), REAL_TO_REAL) for seed in seeds]
+    return OwnedFolder(out, names=SIM2REAL_OUTPUTS, subfolders=["checkpoints", *folders], what="the sim2real run")
+
+
+def _writes(config: Sim2RealConfig) -> list[str]:
+    """The files a run of ``config`` writes: those of :data:`SIM2REAL_FILES` (``settings.json`` is
+    compared when it is there) and the checkpoints of each set and seed."""
+    kinds = (*_kinds(config), REAL_TO_REAL)
+    checkpoints = [f"checkpoints/{_set_folder(kind)}/seed{seed}/{name}" for kind in kinds for seed in range(int(config.seeds))
+                   for name in CHECKPOINT_FILES]  # fmt: skip
+    return ["real_split.csv", "runs.jsonl", "results.csv", "summary.csv", "run.json", "table.md",
+            *(["fitted_sensor.json"] if config.fit_sensor else []), *(_confusion_name(kind) for kind in kinds), *checkpoints]  # fmt: skip
+
+
 def run_sim2real(config: Sim2RealConfig, out: str | os.PathLike, *, device: str = "cpu", threads: int | None = None,
                  progress: bool = True, say: Callable[[str], None] | None = None) -> dict:  # fmt: skip
     """Train on each synthetic training set and on real scans, ``config.seeds`` times; score on the real scans.
@@ -250,15 +302,26 @@ def run_sim2real(config: Sim2RealConfig, out: str | os.PathLike, *, device: str 
     InvalidInputError
         Unusable meshes or scans (with ``fit_sensor``: scans without sensor-frame points, or an
         airborne ``sensor``), or an ``out`` made with other settings.
+    UnsafePathError
+        A file it writes in ``out`` was not written by a run of ours, or was changed since
+        (checked before any work; in a run of an earlier version, once its settings match).
+    DatasetBusy
+        Another live process holds ``out``.
     """
     t_start = time.perf_counter()
-    out = Path(out)
-    sets = prepare_sets(config, say=say)
-    settings = _fix_settings(config, sets, out)
-    done = _load_runs(out / "runs.jsonl")
-    for seed in range(int(config.seeds)):
-        run_seed(config, sets, seed, done, out, device=device, threads=threads, progress=progress)
-    return write_outputs(config, sets, settings, done, out, wall_s=time.perf_counter() - t_start)
+    with _owned(out, config) as folder:
+        # every file before any work, unless out holds an earlier version's run (no ledger): its
+        # files are taken as ours once its settings match, and checked then, still before training
+        settings_path = folder.root / "settings.json"
+        if not os.path.lexists(settings_path) or folder.recorded("settings.json") is not None:
+            folder.check_writable(_writes(config))
+        sets = prepare_sets(config, say=say)
+        settings = _fix_settings(config, sets, folder)
+        folder.check_writable(_writes(config))
+        done = _load_runs(folder.root / "runs.jsonl")
+        for seed in range(int(config.seeds)):
+            run_seed(config, sets, seed, done, folder, device=device, threads=threads, progress=progress)
+        return write_outputs(config, sets, settings, done, folder, wall_s=time.perf_counter() - t_start)
 
 
 def prepare_sets(config: Sim2RealConfig, *, say: Callable[[str], None] | None = None) -> Sim2RealSets:
@@ -318,18 +381,27 @@ def _fitted_placement(config: Sim2RealConfig, placement: dict[str, dict]) -> dic
     return placement
 
 
-def _fix_settings(config: Sim2RealConfig, sets: Sim2RealSets, out: Path) -> dict:
+def _fix_settings(config: Sim2RealConfig, sets: Sim2RealSets, out: OwnedFolder | str | os.PathLike) -> dict:
     """Every setting of the run (``config.identity()``, the sensor in full as ``sensor_spec``, the
     :func:`zbuf_occlude.sensors.presets.sensor_to_json` of a preset or a file alike, and what
     :func:`prepare_sets` found), written to ``out/settings.json`` before any real scan is scored,
-    or compared with the settings there.
+    or compared with the settings there; then ``fitted_sensor.json`` and ``real_split.csv``.
+
+    ``out`` is the held folder of the run, or a path held for this call.  When the settings match
+    those of a run made before the folder kept its ledger, that run's files are taken as ours
+    (:meth:`~zbuf_occlude.io.owned.OwnedFolder.adopt`): it resumes.
 
     Raises
     ------
     InvalidInputError
         ``out`` holds a run with other settings, or a ``settings.json`` that is not ours.
     """
+    if not isinstance(out, OwnedFolder):
+        with _owned(out, config) as folder:
+            return _fix_settings(config, sets, folder)
     from zbuf_occlude.sensors.presets import sensor_to_json
+
+    folder = out
 
     names, real_y = sets.names, sets.real_labels
     settings = {
@@ -348,7 +420,7 @@ def _fix_settings(config: Sim2RealConfig, sets: Sim2RealSets, out: Path) -> dict
             "fit_scans": {c: int((real_y[sets.half_a] == i).sum()) for i, c in enumerate(names)},
             "scored_scans": {c: int((real_y[sets.half_b] == i).sum()) for i, c in enumerate(names)},
         }  # fmt: skip
-    out.mkdir(parents=True, exist_ok=True)
+    out = folder.root
     path = out / "settings.json"
     if path.is_file():
         old = read_json_file(path)
@@ -359,21 +431,37 @@ def _fix_settings(config: Sim2RealConfig, sets: Sim2RealSets, out: Path) -> dict
             differ = sorted(k for k in old.keys() | new.keys() if old.get(k, _MISSING) != new.get(k, _MISSING))
             why = "" if "real_split" in old else "; it was made before every set was scored on the same held-out half of the scans"
             raise InvalidInputError(f"{out} holds a run with other settings ({path}: {', '.join(differ)} differ{why}); choose another --out")
+        if folder.recorded("settings.json") is None:  # a run of ours from before the ledger: its files are ours
+            _adopt_earlier_run(folder)
     else:
         # Every setting is fixed here, before any real scan is scored.
-        write_text(path, json.dumps({**settings, "fixed_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}, indent=1, default=float))
+        folder.write_text("settings.json", json.dumps({**settings, "fixed_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
+                                                      indent=1, default=float))  # fmt: skip
     if config.fit_sensor:
-        write_text(out / "fitted_sensor.json", json.dumps(sets.fit_json, indent=1, default=float))
+        folder.write_text("fitted_sensor.json", json.dumps(sets.fit_json, indent=1, default=float))
     halves = {int(i): "fit" if config.fit_sensor else "train" for i in sets.half_a} | {int(i): "scored" for i in sets.half_b}
-    write_csv(out / "real_split.csv", [{"row": i, "source": src, "class": names[real_y[i]], "half": halves[i]}
-                                       for i, src in enumerate(sets.sources)])  # fmt: skip
+    folder.write_csv("real_split.csv", [{"row": i, "source": src, "class": names[real_y[i]], "half": halves[i]}
+                                        for i, src in enumerate(sets.sources)])  # fmt: skip
     return settings
 
 
-def run_seed(config: Sim2RealConfig, sets: Sim2RealSets, seed: int, done: dict, out: Path, *, device: str = "cpu",
+def _adopt_earlier_run(folder: OwnedFolder) -> None:
+    """Record, as they are, the files of :data:`SIM2REAL_OUTPUTS` in ``folder``: those of a run whose
+    ``settings.json`` matched this run's, made before the folder kept a ledger."""
+    ours = []
+    for below, dirs, files in os.walk(folder.root):  # links are not followed
+        dirs[:] = [d for d in dirs if not d.startswith(".")]
+        for name in files:
+            rel = Path(below, name).relative_to(folder.root).as_posix()
+            if any(rx.fullmatch(rel) for rx in folder.names):
+                ours.append(rel)
+    folder.adopt(sorted(ours))
+
+
+def run_seed(config: Sim2RealConfig, sets: Sim2RealSets, seed: int, done: dict, folder: OwnedFolder, *, device: str = "cpu",
              threads: int | None = None, progress: bool = True) -> None:  # fmt: skip
     """Train and score every set of ``seed`` not in ``done`` (``{(train_set, seed): row}``), each
-    row appended to ``out/runs.jsonl`` and ``done`` as soon as it is scored.
+    row appended to ``runs.jsonl`` in the run's held folder and to ``done`` as soon as it is scored.
 
     The mesh-only sets still to train are made at once (``lidar+complete`` reuses two), on a
     whole-mesh split of the seed (or every mesh, validated on the fit half); real→real trains on
@@ -400,8 +488,9 @@ def run_seed(config: Sim2RealConfig, sets: Sim2RealSets, seed: int, done: dict, 
                 built = _build_seed_sets(config, sets, seed, train_meshes, val_meshes, done, progress=progress)
             tr, val, tests = built["train"][kind], (fit_half if real_val else built["val"][kind]), (held_out, every_scan)
         made = {"val_meshes": sorted(m.name for m in val_meshes) if kind != REAL_TO_REAL else [], "data_s": time.perf_counter() - t0}
-        row = _train_and_score(config, sets.names, kind, seed, (tr, val, tests), made, out, device=device, threads=threads, progress=progress)
-        _append_run(out / "runs.jsonl", done, row)
+        row = _train_and_score(config, sets.names, kind, seed, (tr, val, tests), made, folder, device=device, threads=threads,
+                               progress=progress)  # fmt: skip
+        _append_run(folder, done, row)
         log.info("%s seed %d: mean class accuracy %.3f", kind, seed, row["mean_class_accuracy"])
 
 
@@ -421,8 +510,8 @@ def _build_seed_sets(config: Sim2RealConfig, sets: Sim2RealSets, seed: int, trai
     return built
 
 
-def _train_and_score(config: Sim2RealConfig, names: list[str], kind: str, seed: int, data: tuple, made: dict, out: Path, *, device: str,
-                     threads: int | None, progress: bool) -> dict:  # fmt: skip
+def _train_and_score(config: Sim2RealConfig, names: list[str], kind: str, seed: int, data: tuple, made: dict, folder: OwnedFolder, *,
+                     device: str, threads: int | None, progress: bool) -> dict:  # fmt: skip
     """One training run of ``kind`` and ``seed`` on ``data`` ``(train CloudSet, validation CloudSet, (held_out, every_scan))``,
     each test ``(points, labels)``: its row of ``runs.jsonl``, with ``made`` (``val_meshes``, ``data_s``) before its times,
     the scores on ``held_out`` and those on ``every_scan`` (:data:`ALL_SCANS`; NaN where it is None)."""
@@ -430,8 +519,9 @@ def _train_and_score(config: Sim2RealConfig, names: list[str], kind: str, seed: 
 
     tr, val, (test, every_scan) = data
     cfg = config.train_config(seed, device=device, threads=threads)
-    res = train(tr, len(names), cfg, val_set=val, checkpoint_dir=out / "checkpoints" / kind.replace("→", "_to_") / f"seed{seed}",
-                progress=progress)  # fmt: skip
+    checkpoints = f"checkpoints/{_set_folder(kind)}/seed{seed}"
+    res = train(tr, len(names), cfg, val_set=val, checkpoint_dir=folder.root / checkpoints,
+                checkpoint_writer=lambda name: folder.write(f"{checkpoints}/{name}"), progress=progress)  # fmt: skip
     test_x, test_y = test
     pred, _ = predict(res.model, test_x, batch_size=cfg.batch_size, device=cfg.device)
     all_scans = {key: float("nan") for key in ALL_SCANS} | {"n_test_all_scans": 0}
@@ -446,27 +536,27 @@ def _train_and_score(config: Sim2RealConfig, names: list[str], kind: str, seed: 
             **made, "train_s": res.seconds, **_score(pred, test_y, names), **all_scans}  # fmt: skip
 
 
-def write_outputs(config: Sim2RealConfig, sets: Sim2RealSets, settings: dict, done: dict, out: Path, *, wall_s: float) -> dict:
+def write_outputs(config: Sim2RealConfig, sets: Sim2RealSets, settings: dict, done: dict, folder: OwnedFolder, *, wall_s: float) -> dict:
     """Write ``results.csv``, ``summary.csv``, the ``confusion_<set>.csv`` files (summed over seeds),
-    ``run.json`` and ``table.md`` from every run in ``done``; return the ``run.json`` summary."""
+    ``run.json`` and ``table.md`` from every run in ``done`` into the run's held folder; return the ``run.json`` summary."""
     from zbuf_occlude.experiments.sim2real_report import table_md
     from zbuf_occlude.experiments.table3 import _machine
 
     names = sets.names
     summary_rows = summarise(list(done.values()), names, chosen_on_fit_half=config.validates_on_fit_half)
-    write_csv(out / "results.csv", [{k: v for k, v in r.items() if k not in ("confusion", "val_meshes")} for r in done.values()])
-    write_csv(out / "summary.csv", summary_rows, fieldnames=list(dict.fromkeys(k for r in summary_rows for k in r)))
+    folder.write_csv("results.csv", [{k: v for k, v in r.items() if k not in ("confusion", "val_meshes")} for r in done.values()])
+    folder.write_csv("summary.csv", summary_rows, fieldnames=list(dict.fromkeys(k for r in summary_rows for k in r)))
     for kind in (*_kinds(config), REAL_TO_REAL):
         cms = [np.asarray(r["confusion"]) for r in done.values() if r["train_set"] == kind]
         if cms:
-            write_csv(out / f"confusion_{kind.replace('→', '_to_').replace('+', '_')}.csv",
-                      [{"true": n, **{f"pred_{m}": int(v) for m, v in zip(names, row)}} for n, row in zip(names, sum(cms))])  # fmt: skip
+            folder.write_csv(_confusion_name(kind),
+                             [{"true": n, **{f"pred_{m}": int(v) for m, v in zip(names, row)}} for n, row in zip(names, sum(cms))])  # fmt: skip
     summary = {"experiment": "sim2real", **settings, "machine": _machine(), "n_runs": len(done),
                "summary": summary_rows, "wall_s": {"total": wall_s,
                                                    "data": sum(r["data_s"] for r in done.values()),
                                                    "train": sum(r["train_s"] for r in done.values())}}  # fmt: skip
-    write_text(out / "run.json", json.dumps(summary, indent=1, default=float))
-    write_text(out / "table.md", table_md(summary_rows, settings))
+    folder.write_text("run.json", json.dumps(summary, indent=1, default=float))
+    folder.write_text("table.md", table_md(summary_rows, settings))
     return summary
 
 

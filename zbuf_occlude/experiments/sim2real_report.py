@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from zbuf_occlude.io.owned import owned_file
+
 __all__ = ["table_md", "plot_examples"]
 
 
@@ -65,9 +67,16 @@ def table_md(rows: list[dict], settings: dict) -> str:
 
 def plot_examples(path: str | Path, rows: dict[str, dict[str, np.ndarray]], title: str = "") -> Path:
     """A grid of 3-D scatter plots: one row per ``{row label: {column label: (n, 3) cloud}}``,
-    the same view and limits for each (normalised clouds, max extent 1).
+    the same view and limits for each (normalised clouds, max extent 1), written as the PNG ``path``
+    through the output layer (:func:`~zbuf_occlude.io.owned.owned_file`: an existing file of that
+    name is replaced only if a run of ours wrote it and it is unchanged since).
 
     Needs matplotlib (the ``learn`` or ``plot`` extra).
+
+    Raises
+    ------
+    UnsafePathError
+        ``path`` exists and was not written by a run of ours, or was changed since.
     """
     import matplotlib
 
@@ -91,7 +100,9 @@ def plot_examples(path: str | Path, rows: dict[str, dict[str, np.ndarray]], titl
         fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    try:
+        with owned_file(path, option="path") as tmp:
+            fig.savefig(tmp, dpi=100, format="png")
+    finally:
+        plt.close(fig)
     return path

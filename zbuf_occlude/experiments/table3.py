@@ -5,6 +5,13 @@ Sryamkin et al. 2023, §4.4, Table 3.  Data are rendered with the farm
 :class:`zbuf_occlude.OccludedDataset`; each experiment writes ``results.csv``,
 ``table.md`` (our numbers beside the paper's), ``run.json`` (parameters, wall times) and
 plots into its output folder.
+
+Every file goes through the output layer (:class:`~zbuf_occlude.io.owned.OwnedFolder`): the
+output folder is held for the run, each name it writes (:data:`ELEVATION_OUTPUTS`,
+:data:`AUGMENTATION_OUTPUTS`, :data:`COMBINED_OUTPUTS`) is checked before any work, and a file
+is replaced only if a run of ours wrote it and it is unchanged since.  The data folder (``--data``,
+default ``OUT/data``) is held apart while its own files are written (:data:`DATA_OUTPUTS`); the
+farm's data set inside it (``dataset/``) is the farm's.
 """
 
 from __future__ import annotations
@@ -13,6 +20,7 @@ import json
 import logging
 import os
 import platform
+import re
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -23,16 +31,60 @@ import numpy as np
 from zbuf_occlude.defaults import DEFAULT_METHOD
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.paper import MODELNET8, PAPER_3A, PAPER_3B, TEST_ELEVATIONS, TRAIN_ELEVATIONS
-from zbuf_occlude.experiments.table3_report import plot_augmentation, plot_elevation, table_3a, table_3b, write_confusion
-from zbuf_occlude.io.atomic import write_csv, write_text
+from zbuf_occlude.experiments.table3_report import confusion_rows, plot_augmentation, plot_elevation, table_3a, table_3b
 from zbuf_occlude.io.json_files import read_json_file
+from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.learn.data import CloudSet, dedupe_meshes, from_meshes, from_occluded, split_validation
 from zbuf_occlude.learn.metrics import accuracy_by_elevation, classification_report
 from zbuf_occlude.visibility.registry import method_info
 
-__all__ = ["SCALES", "Scale", "plan_meshes", "run_elevation", "run_augmentation", "combine_elevation"]
+__all__ = [
+    "SCALES", "Scale", "plan_meshes", "run_elevation", "run_augmentation", "combine_elevation", "CHECKPOINT_FILES",
+    "AUGMENTATION_SETS", "ELEVATION_OUTPUTS", "AUGMENTATION_OUTPUTS", "COMBINED_OUTPUTS", "DATA_OUTPUTS",
+]  # fmt: skip
 
 log = logging.getLogger(__name__)
+
+#: The files of one training run, :data:`zbuf_occlude.learn.training.CHECKPOINT_FILES` (named here:
+#: importing learn.training imports torch, which importing this module must not).
+CHECKPOINT_FILES = ("last.pt", "best.pt", "history.json")
+#: Table 3B's training sets: occluded (C1), complete (C2), both (C3); each trains in ``checkpoints/<set>/``.
+AUGMENTATION_SETS = ("C1", "C2", "C3")
+#: Every file ``experiment elevation`` writes in ``--out`` (:func:`run_elevation`).
+ELEVATION_OUTPUTS = (
+    "results.csv", "per_class.csv", "confusion.csv", "accuracy_vs_elevation.png", "run.json", "table.md",
+    *(f"checkpoints/{name}" for name in CHECKPOINT_FILES),
+)  # fmt: skip
+#: Every file ``experiment augmentation`` writes in ``--out`` (:func:`run_augmentation`; ``test3.csv``
+#: only with real scans).
+AUGMENTATION_OUTPUTS = (
+    "results.csv", "test3.csv", "augmentation.png", "run.json", "table.md",
+    *(f"checkpoints/{s}/{name}" for s in AUGMENTATION_SETS for name in CHECKPOINT_FILES),
+)  # fmt: skip
+#: Every file :func:`combine_elevation` writes in its ``out``.
+COMBINED_OUTPUTS = ("results.csv", "table.md", "accuracy_vs_elevation.png")
+#: The files the experiments write in their data folder, beside the farm's data set ``dataset/``:
+#: the farm's list of meshes and the cache of Fig. 12's curve.
+DATA_OUTPUTS = ("meshes.txt", "visible_area.csv")
+
+
+def _owned(folder: str | os.PathLike, names: Sequence[str], what: str, *, option: str = "--out") -> OwnedFolder:
+    """``folder`` held for a run that writes exactly the files ``names`` (and the folders they lie in)."""
+    subfolders = sorted({str(Path(n).parent) for n in names} - {"."})
+    return OwnedFolder(folder, names=[re.escape(n) for n in names], subfolders=subfolders, what=what, option=option)
+
+
+def _write_mesh_list(data_dir: Path, text: str) -> Path:
+    """Write the farm's list of meshes, ``data_dir/meshes.txt``, through the data folder's layer.
+
+    A list an earlier version wrote (no ledger then) is taken as ours when it holds exactly this
+    run's meshes, so that a data folder shared across models is reused as before.
+    """
+    with _owned(data_dir, DATA_OUTPUTS, "the experiment's data folder", option="--data") as folder:
+        path = folder.root / "meshes.txt"
+        if folder.recorded("meshes.txt") is None and path.is_file() and not path.is_symlink() and path.read_bytes() == text.encode("utf-8"):
+            folder.adopt(["meshes.txt"])
+        return folder.write_text("meshes.txt", text)
 
 @dataclass(frozen=True)
 class Scale:
@@ -99,9 +151,7 @@ def _render(meshes: list[dict], data_dir: Path, views: str, scale: Scale, points
     """Farm the meshes (compact storage) into ``data_dir`` (resumes; reuses a finished run)."""
     from zbuf_occlude.farm import FarmParams, RunOptions, run_farm
 
-    data_dir.mkdir(parents=True, exist_ok=True)
-    list_file = data_dir / "meshes.txt"
-    write_text(list_file, "".join(f"{m['path']} {m['class_name']} {m['split']}\n" for m in meshes))
+    list_file = _write_mesh_list(data_dir, "".join(f"{m['path']} {m['class_name']} {m['split']}\n" for m in meshes))
     params = FarmParams(views=views, samples_per_view=scale.samples_per_view, n_points=points,
                         dense_points=scale.dense_points, resolution=scale.resolution, seed=seed,
                         storage="compact", method=method)  # fmt: skip
@@ -128,7 +178,6 @@ def _machine() -> str:
 def _visible_area_curve(meshes: list[dict], data_dir: Path, scale: Scale, method: str, progress: bool) -> list[dict]:
     """Fig. 12: projected visible areas per elevation, averaged over the meshes (cached in data_dir)."""
     from zbuf_occlude.experiments.elevation_profile import profile_table
-    from zbuf_occlude.io.atomic import write_csv as _w
     from zbuf_occlude.io.progress import progress as progress_bar
     from zbuf_occlude.mesh.load import load_mesh
 
@@ -155,7 +204,8 @@ def _visible_area_curve(meshes: list[dict], data_dir: Path, scale: Scale, method
         for k in keys:
             r[k] = float(np.mean([pm[i][k] for pm in per_mesh]))
         out.append(r)
-    _w(cache, out)
+    with _owned(data_dir, DATA_OUTPUTS, "the experiment's data folder", option="--data") as folder:
+        folder.write_csv(cache.name, out)
     return out
 
 
@@ -187,7 +237,7 @@ def run_elevation(
     out : path
         Output folder: ``results.csv`` (accuracy per test elevation, ours and the paper's),
         ``table.md``, ``per_class.csv``, ``confusion.csv``, ``run.json``, ``accuracy_vs_elevation.png``,
-        ``checkpoints/``.
+        ``checkpoints/`` (:data:`ELEVATION_OUTPUTS`, each checked before any work).
     model : {"pointnet", "voxnet", "3dmfv"}
     scale : {"quick", "paper"}
     epochs, points : int, optional
@@ -208,13 +258,32 @@ def run_elevation(
     -------
     dict
         The run summary written to ``run.json``.
+
+    Raises
+    ------
+    UnsafePathError
+        A file of :data:`ELEVATION_OUTPUTS` in ``out`` was not written by a run of ours, or was
+        changed since (checked before any work; nothing is written).
+    DatasetBusy
+        Another live process holds ``out``.
     """
+    t_start = time.perf_counter()
+    with _owned(out, ELEVATION_OUTPUTS, "the elevation run (Table 3A)") as folder:
+        folder.check_writable(ELEVATION_OUTPUTS)  # every file before any work: a refusal writes nothing
+        return _elevation_into(folder, root, t_start, model=model, scale=scale, epochs=epochs, points=points, method=method,
+                               classes=classes, data_dir=data_dir, seed=seed, device=device, threads=threads, profile=profile,
+                               progress=progress)  # fmt: skip
+
+
+def _elevation_into(folder: OwnedFolder, root: str | os.PathLike, t_start: float, *, model: str, scale: str, epochs: int | None,
+                    points: int | None, method: str, classes: Sequence[str] | None, data_dir: str | os.PathLike | None, seed: int,
+                    device: str, threads: int | None, profile: bool, progress: bool) -> dict:  # fmt: skip
+    """:func:`run_elevation` once ``--out`` is held."""
     from zbuf_occlude.learn.training import predict, train
 
-    t_start = time.perf_counter()
     sc = SCALES[scale]
     n_points = points or sc.points
-    out = Path(out)
+    out = folder.root
     data_dir = Path(data_dir) if data_dir else out / "data"
     meshes = plan_meshes(root, classes)
     t0 = time.perf_counter()
@@ -230,8 +299,8 @@ def run_elevation(
     tr_rows, val_rows = split_validation(len(full), sc.val_fraction, seed, labels=full.labels)
     config = _config(model, sc, epochs, seed, device, threads)
     t0 = time.perf_counter()
-    result = train(full.subset(tr_rows), len(names), config, val_set=full.subset(val_rows),
-                   checkpoint_dir=out / "checkpoints", progress=progress)  # fmt: skip
+    result = train(full.subset(tr_rows), len(names), config, val_set=full.subset(val_rows), checkpoint_dir=out / "checkpoints",
+                   checkpoint_writer=lambda name: folder.write(f"checkpoints/{name}"), progress=progress)  # fmt: skip
     t_train = time.perf_counter() - t0
     t0 = time.perf_counter()
     pred, _ = predict(result.model, test.points, batch_size=config.batch_size, device=config.device)
@@ -241,12 +310,12 @@ def run_elevation(
     paper = dict(zip(TEST_ELEVATIONS, PAPER_3A[model]))
     rows = [{"model": model, "elevation_deg": r["elevation_deg"], "n_test": r["n"], "accuracy": r["accuracy"],
              "paper_accuracy": paper.get(r["elevation_deg"], float("nan")) / 100} for r in by_el]  # fmt: skip
-    out.mkdir(parents=True, exist_ok=True)
-    write_csv(out / "results.csv", rows)
-    write_csv(out / "per_class.csv", [{"class": k, "accuracy": v} for k, v in report["per_class"].items()])
-    write_confusion(out / "confusion.csv", report["confusion"], names)
+    folder.write_csv("results.csv", rows)
+    folder.write_csv("per_class.csv", [{"class": k, "accuracy": v} for k, v in report["per_class"].items()])
+    folder.write_csv("confusion.csv", confusion_rows(report["confusion"], names))
     curve = _visible_area_curve(meshes, data_dir, sc, method, progress) if profile else None
-    plot_elevation(out / "accuracy_vs_elevation.png", {model: rows}, curve)
+    with folder.write("accuracy_vs_elevation.png") as tmp:
+        plot_elevation(tmp, {model: rows}, curve)
     summary = {
         "experiment": "elevation (Table 3A)", "model": model, "scale": scale, "root": str(root),
         "data_dir": str(data_dir),
@@ -258,8 +327,8 @@ def run_elevation(
         "wall_s": {"render": t_render, "train": t_train, "test": t_test, "total": time.perf_counter() - t_start},
         "train_samples_per_s": result.samples_per_second,
     }  # fmt: skip
-    write_text(out / "run.json", json.dumps(summary, indent=1, default=float))
-    write_text(out / "table.md", table_3a({model: rows}, {model: summary}))
+    folder.write_text("run.json", json.dumps(summary, indent=1, default=float))
+    folder.write_text("table.md", table_3a({model: rows}, {model: summary}))
     return summary
 
 
@@ -316,14 +385,40 @@ def run_augmentation(
     (default: SUO car types → ``car``); :func:`zbuf_occlude.real_scans.datasets.car_scores`
     gives per-class accuracy, TP/FP/F1 and the mean F1 when the model has a ``car`` class,
     otherwise only the distribution of predictions is reported.
+
+    Writes :data:`AUGMENTATION_OUTPUTS` in ``out`` (``test3.csv`` only with ``real_scans``), each
+    checked before any work.
+
+    Raises
+    ------
+    InvalidInputError
+        Fewer than two classes with two meshes each.
+    UnsafePathError
+        A file it writes in ``out`` was not written by a run of ours, or was changed since
+        (checked before any work; nothing is written).
+    DatasetBusy
+        Another live process holds ``out``.
     """
+    t_start = time.perf_counter()
+    writes = [n for n in AUGMENTATION_OUTPUTS if real_scans or n != "test3.csv"]
+    with _owned(out, AUGMENTATION_OUTPUTS, "the augmentation run (Table 3B)") as folder:
+        folder.check_writable(writes)  # every file before any work: a refusal writes nothing
+        return _augmentation_into(folder, root, t_start, model=model, scale=scale, epochs=epochs, points=points, method=method,
+                                  classes=classes, real_scans=real_scans, label_map=label_map, data_dir=data_dir, seed=seed,
+                                  device=device, threads=threads, progress=progress)  # fmt: skip
+
+
+def _augmentation_into(folder: OwnedFolder, root: str | os.PathLike, t_start: float, *, model: str, scale: str, epochs: int | None,
+                       points: int | None, method: str, classes: Sequence[str] | None, real_scans: str | os.PathLike | None,
+                       label_map: dict[str, str] | None, data_dir: str | os.PathLike | None, seed: int, device: str,
+                       threads: int | None, progress: bool) -> dict:  # fmt: skip
+    """:func:`run_augmentation` once ``--out`` is held."""
     from zbuf_occlude.dataset.reader import OccludedDataset
     from zbuf_occlude.learn.training import predict, train
 
-    t_start = time.perf_counter()
     sc = SCALES[scale]
     n_points = points or sc.points
-    out = Path(out)
+    out = folder.root
     data_dir = Path(data_dir) if data_dir else out / "data"
     meshes = plan_meshes(root, classes)
     if classes is None and set(MODELNET8) <= {m["class_name"] for m in meshes}:
@@ -346,14 +441,14 @@ def run_augmentation(
     test1 = from_meshes([m["path"] for m in test_meshes], [label[m["class_name"]] for m in test_meshes], n_points,
                         per_mesh=max(1, sc.complete_per_mesh // 2), seed=seed + 1)  # fmt: skip
     scans = _load_scans(real_scans, n_points, seed) if real_scans else None
-    sets = {"C1": c1, "C2": c2, "C3": CloudSet.concat([c1, c2])}
+    sets = dict(zip(AUGMENTATION_SETS, (c1, c2, CloudSet.concat([c1, c2]))))
     rows, test3, timings, summaries = [], [], {}, {}
     for name, data in sets.items():
         tr_rows, val_rows = split_validation(len(data), sc.val_fraction, seed, labels=data.labels)
         config = _config(model, sc, epochs, seed, device, threads)
         t0 = time.perf_counter()
-        res = train(data.subset(tr_rows), len(names), config, val_set=data.subset(val_rows),
-                    checkpoint_dir=out / "checkpoints" / name, progress=progress)  # fmt: skip
+        res = train(data.subset(tr_rows), len(names), config, val_set=data.subset(val_rows), checkpoint_dir=out / "checkpoints" / name,
+                    checkpoint_writer=lambda file, name=name: folder.write(f"checkpoints/{name}/{file}"), progress=progress)  # fmt: skip
         timings[f"train_{name}"] = time.perf_counter() - t0
         summaries[name] = {"best_epoch": res.best_epoch, "epochs_run": len(res.history), "n_train": len(tr_rows),
                            "n_val": len(val_rows), "history": res.history}  # fmt: skip
@@ -366,11 +461,11 @@ def run_augmentation(
                          "paper_accuracy": paper / 100})  # fmt: skip
         if scans is not None:
             test3.extend(_test3(res.model, scans, names, name, config, label_map))
-    out.mkdir(parents=True, exist_ok=True)
-    write_csv(out / "results.csv", rows)
+    folder.write_csv("results.csv", rows)
     if test3:
-        write_csv(out / "test3.csv", test3)
-    plot_augmentation(out / "augmentation.png", rows, model)
+        folder.write_csv("test3.csv", test3)
+    with folder.write("augmentation.png") as tmp:
+        plot_augmentation(tmp, rows, model)
     summary = {
         "experiment": "augmentation (Table 3B)", "model": model, "scale": scale, "root": str(root),
         "classes": names, "train_meshes": [m["name"] for m in train_meshes],
@@ -381,8 +476,8 @@ def run_augmentation(
         "machine": _machine(), "real_scans": str(real_scans) if real_scans else None,
         "wall_s": {"render": t_render, **timings, "total": time.perf_counter() - t_start},
     }  # fmt: skip
-    write_text(out / "run.json", json.dumps(summary, indent=1, default=float))
-    write_text(out / "table.md", table_3b(rows, test3, model))
+    folder.write_text("run.json", json.dumps(summary, indent=1, default=float))
+    folder.write_text("table.md", table_3b(rows, test3, model))
     return summary
 
 
@@ -423,10 +518,25 @@ def _test3(model, scans, names, train_set: str, config, label_map) -> list[dict]
 
 def combine_elevation(run_dirs: Sequence[str | os.PathLike], out: str | os.PathLike) -> Path:
     """Join the ``experiment elevation`` runs of several models: ``results.csv``, ``table.md`` and
-    ``accuracy_vs_elevation.png`` (all models, Fig. 12's curve from the first run's data folder) in ``out``."""
+    ``accuracy_vs_elevation.png`` (all models, Fig. 12's curve from the first run's data folder) in ``out``
+    (:data:`COMBINED_OUTPUTS`, each checked before any run is read).
+
+    Raises
+    ------
+    UnsafePathError
+        A file it writes in ``out`` was not written by a run of ours, or was changed since.
+    DatasetBusy
+        Another live process holds ``out``.
+    """
+    with _owned(out, COMBINED_OUTPUTS, "the combined elevation table") as folder:
+        folder.check_writable(COMBINED_OUTPUTS)  # every file before any run is read: a refusal writes nothing
+        return _combine_into(folder, run_dirs)
+
+
+def _combine_into(folder: OwnedFolder, run_dirs: Sequence[str | os.PathLike]) -> Path:
+    """:func:`combine_elevation` once its ``out`` is held."""
     import csv
 
-    out = Path(out)
     rows_by_model, summaries, all_rows, curve = {}, {}, [], None
     for d in map(Path, run_dirs):
         summary = read_json_file(d / "run.json")
@@ -440,8 +550,8 @@ def combine_elevation(run_dirs: Sequence[str | os.PathLike], out: str | os.PathL
             if curve is None and candidate.is_file():
                 with open(candidate, encoding="utf-8") as fh:
                     curve = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(fh)]
-    out.mkdir(parents=True, exist_ok=True)
-    write_csv(out / "results.csv", all_rows)
-    write_text(out / "table.md", table_3a(rows_by_model, summaries))
-    plot_elevation(out / "accuracy_vs_elevation.png", rows_by_model, curve)
-    return out
+    folder.write_csv("results.csv", all_rows)
+    folder.write_text("table.md", table_3a(rows_by_model, summaries))
+    with folder.write("accuracy_vs_elevation.png") as tmp:
+        plot_elevation(tmp, rows_by_model, curve)
+    return folder.root

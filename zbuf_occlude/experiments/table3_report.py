@@ -1,4 +1,9 @@
-"""Tables (Markdown, ours beside the paper's), CSV of a confusion matrix, and plots of the Table 3 experiments."""
+"""Tables (Markdown, ours beside the paper's), rows of a confusion matrix, and plots of the Table 3 experiments.
+
+Nothing here chooses where a file goes: the plots are drawn into the path they are given (the
+temporary of :meth:`zbuf_occlude.io.owned.OwnedFolder.write`, whose name says nothing of the format:
+they are PNG), and :mod:`zbuf_occlude.experiments.table3` writes every file through its output folder.
+"""
 
 from __future__ import annotations
 
@@ -8,17 +13,17 @@ from pathlib import Path
 import numpy as np
 
 from zbuf_occlude.experiments.paper import PAPER_3A, PAPER_3B_MEAN_F1, TEST_ELEVATIONS
-from zbuf_occlude.io.atomic import write_csv
 
-__all__ = ["table_3a", "table_3b", "plot_elevation", "plot_augmentation", "write_confusion"]
+__all__ = ["table_3a", "table_3b", "plot_elevation", "plot_augmentation", "confusion_rows"]
 
 
 def _fmt(x: float) -> str:
     return "" if x is None or not np.isfinite(x) else f"{100 * x:.1f}"
 
 
-def write_confusion(path: Path, cm: np.ndarray, names: Sequence[str]) -> None:
-    write_csv(path, [{"true\\pred": n, **{m: int(v) for m, v in zip(names, row)}} for n, row in zip(names, cm)])
+def confusion_rows(cm: np.ndarray, names: Sequence[str]) -> list[dict]:
+    """The rows of ``confusion.csv``: one per true class, a column per predicted class (``cm``: (K, K) counts)."""
+    return [{"true\\pred": n, **{m: int(v) for m, v in zip(names, row)}} for n, row in zip(names, cm)]
 
 
 def table_3a(rows_by_model: dict, summaries: dict) -> str:
@@ -37,6 +42,7 @@ def table_3a(rows_by_model: dict, summaries: dict) -> str:
 
 
 def plot_elevation(path: Path, rows_by_model: dict, curve: list[dict] | None) -> None:
+    """Accuracy vs elevation per model, ours and the paper's, with Fig. 12's curve when given; a PNG at ``path``."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -63,7 +69,7 @@ def plot_elevation(path: Path, rows_by_model: dict, curve: list[dict] | None) ->
         ax2.set_ylabel("projected visible area, mean over meshes (object units²)")
     ax.legend(handles, labels, fontsize=7, loc="lower left")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=120, format="png")
     plt.close(fig)
 
 
@@ -89,6 +95,7 @@ def table_3b(rows: list[dict], test3: list[dict], model: str) -> str:
 
 
 def plot_augmentation(path: Path, rows: list[dict], model: str) -> None:
+    """Accuracy per training set and test set, ours beside the paper's; a PNG at ``path``."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -105,5 +112,5 @@ def plot_augmentation(path: Path, rows: list[dict], model: str) -> None:
     ax.set(ylabel="overall accuracy (%)", ylim=(0, 100), title=f"{model}: training set vs test set (Table 3B protocol)")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=120, format="png")
     plt.close(fig)

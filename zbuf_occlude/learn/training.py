@@ -45,6 +45,7 @@ import pickle
 import time
 import zipfile
 from collections.abc import Callable
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -61,7 +62,8 @@ from zbuf_occlude.learn.models import build_model, check_model_config
 
 __all__ = [
     "TrainConfig", "OPTIMISER_DEFAULTS", "train", "predict", "TrainResult", "resolve_device", "seed_everything",
-    "load_checkpoint", "load_model", "PLAIN_RECIPE", "STABLE_RECIPE", "RECIPES", "SELECT_CHOICES",
+    "load_checkpoint", "load_model", "PLAIN_RECIPE", "STABLE_RECIPE", "RECIPES", "SELECT_CHOICES", "CHECKPOINT_FILES",
+    "CheckpointWriter",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -317,9 +319,16 @@ def predict(model: nn.Module, points: np.ndarray, *, batch_size: int = 64, devic
     return prob.argmax(axis=1).astype(np.int64), prob
 
 
-def _save(path: Path, state: dict) -> None:
+#: The files :func:`train` writes in its ``checkpoint_dir``: the resume point, the best weights, the history.
+CHECKPOINT_FILES = ("last.pt", "best.pt", "history.json")
+#: How :func:`train` writes a file of :data:`CHECKPOINT_FILES`: called with its name, it returns a
+#: context manager that yields the temporary path to write and gives the file its name on exit.
+CheckpointWriter = Callable[[str], AbstractContextManager[Path]]
+
+
+def _save(write: CheckpointWriter, name: str, state: dict) -> None:
     # only tensors, numbers, strings, None, lists and dicts: what load_checkpoint's weights-only load takes
-    with atomic_path(path) as tmp:
+    with write(name) as tmp:
         torch.save(state, tmp)
 
 
@@ -390,6 +399,7 @@ def train(
     checkpoint_dir: str | os.PathLike | None = None,
     progress: bool = True,
     on_epoch: Callable[[dict], None] | None = None,
+    checkpoint_writer: CheckpointWriter | None = None,
 ) -> TrainResult:
     """Train one model; with ``checkpoint_dir`` save after every epoch and resume from there.
 
@@ -403,8 +413,13 @@ def train(
         Early stopping and best-epoch selection on its overall accuracy, mean class accuracy
         or class-balanced loss, as ``config.select`` says; without it the last epoch is kept.
     checkpoint_dir : path, optional
-        ``last.pt`` (resume point) and ``best.pt`` (best validation weights) go here; a
-        ``last.pt`` made with another config is refused.
+        ``last.pt`` (resume point), ``best.pt`` (best validation weights) and ``history.json``
+        (:data:`CHECKPOINT_FILES`) go here; a ``last.pt`` made with another config is refused.
+    checkpoint_writer : callable, optional
+        How those files are written (:data:`CheckpointWriter`), for a ``checkpoint_dir`` inside
+        an output folder a command holds (``lambda name: folder.write(f"checkpoints/{name}")``,
+        :meth:`zbuf_occlude.io.owned.OwnedFolder.write`); default: atomically in
+        ``checkpoint_dir`` (:func:`~zbuf_occlude.io.atomic.atomic_path`).
     progress : bool
         Progress on stderr per epoch (:func:`zbuf_occlude.io.progress.progress`; in a log, a line
         every few seconds).
@@ -438,6 +453,7 @@ def train(
     cfg = config.to_dict()
     cfg_key = config.identity(("device", "threads", "epochs", "patience"))  # older checkpoints resume
     ckpt_dir = Path(checkpoint_dir) if checkpoint_dir is not None else None
+    write = checkpoint_writer or (lambda name: atomic_path(ckpt_dir / name))
     if ckpt_dir is not None and (ckpt_dir / "last.pt").is_file():
         last = ckpt_dir / "last.pt"
         state = load_checkpoint(last, keys=RESUME_KEYS, device=device)
@@ -528,11 +544,12 @@ def train(
         if on_epoch is not None:
             on_epoch(row)
         if ckpt_dir is not None:
-            try:
-                ckpt_dir.mkdir(parents=True, exist_ok=True)
-            except OSError as exc:
-                raise OutputError(f"cannot create {ckpt_dir}: {exc}") from None
-            _save(ckpt_dir / "last.pt", {
+            if checkpoint_writer is None:
+                try:
+                    ckpt_dir.mkdir(parents=True, exist_ok=True)
+                except OSError as exc:
+                    raise OutputError(f"cannot create {ckpt_dir}: {exc}") from None
+            _save(write, "last.pt", {
                 "config": cfg, "config_key": cfg_key, "n_train": n, "epoch": epoch, "stale": stale,
                 "model": model.state_dict(), "optimizer": opt.state_dict(), "scheduler": sched.state_dict(),
                 "history": result.history, "best_epoch": result.best_epoch,
@@ -542,9 +559,9 @@ def train(
     if best_state is not None:
         model.load_state_dict(best_state)
     if ckpt_dir is not None:
-        _save(ckpt_dir / "best.pt", {"config": cfg, "n_classes": n_classes, "model": model.state_dict(),
-                                     "best_epoch": result.best_epoch})  # fmt: skip
-        with atomic_path(ckpt_dir / "history.json") as tmp:
+        _save(write, "best.pt", {"config": cfg, "n_classes": n_classes, "model": model.state_dict(),
+                                 "best_epoch": result.best_epoch})  # fmt: skip
+        with write("history.json") as tmp:
             tmp.write_text(json.dumps(result.history, indent=1))
     result.seconds = time.perf_counter() - t0
     result.samples_per_second = seen / result.seconds if result.seconds > 0 and seen else float("nan")

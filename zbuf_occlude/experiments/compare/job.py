@@ -7,7 +7,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from zbuf_occlude.defaults import DEFAULT_RESOLUTION, DEFAULT_VIEWS
-from zbuf_occlude.experiments.compare.report import write_results
+from zbuf_occlude.experiments.compare.report import compare_folder, compare_writes, write_results_into
 from zbuf_occlude.experiments.compare.run import (
     DEFAULT_METHODS,
     DEFAULT_POINTS,
@@ -38,7 +38,10 @@ def run_compare(
     progress: bool = True,
     command: str | None = None,
 ) -> Path:
-    """``zbuf-occlude compare``: run :func:`compare` and :func:`write_results`; return the report path.
+    """``zbuf-occlude compare``: run :func:`compare` and write its results into ``out``; return the report path.
+
+    ``out`` is held for the run (:func:`~zbuf_occlude.experiments.compare.report.compare_folder`) and
+    every file it writes is checked before any work (:data:`~zbuf_occlude.experiments.compare.report.COMPARE_OUTPUTS`).
 
     Parameters
     ----------
@@ -53,7 +56,7 @@ def run_compare(
     resolution : int
         Z-buffer image size, pixels.
     out : path
-        Output folder: ``results.csv``, ``report.md``, ``*.png``.
+        Output folder: ``results.csv``, ``report.md``, the plots (``*.png``).
     seed : int
         Sampling seed.
     reference : str
@@ -82,20 +85,31 @@ def run_compare(
         Bad methods, counts or views.
     OutputError
         ``out`` not writable.
+    UnsafePathError
+        A file of a name it writes is in ``out`` and was not written by a run of ours, or was
+        changed since (checked before any work; nothing is written).
+    DatasetBusy
+        Another live process holds ``out``.
     """
-    rows = compare(
-        paths,
-        parse_methods(methods),
-        parse_int_list(points, "point counts"),
-        views,
-        int(resolution),
-        int(seed),
-        reference=reference,
-        resolution_sweep=parse_int_list(resolution_sweep, "resolutions"),
-        grid_sweep=parse_int_list(grid_sweep, "grid sizes"),
-        sweep_points=sweep_points,
-        memory=memory,
-        method_budget_s=method_budget_s,
-        progress=progress,
-    )
-    return write_results(rows, out, command=command)
+    method_list = parse_methods(methods)
+    counts = parse_int_list(points, "point counts")
+    resolutions, grids = parse_int_list(resolution_sweep, "resolutions"), parse_int_list(grid_sweep, "grid sizes")
+    with compare_folder(out) as folder:
+        sweeps = [sweep for sweep, values in (("resolution", resolutions), ("grid", grids)) if values]
+        folder.check_writable(compare_writes(sweeps=sweeps))  # every file before any work: a refusal writes nothing
+        rows = compare(
+            paths,
+            method_list,
+            counts,
+            views,
+            int(resolution),
+            int(seed),
+            reference=reference,
+            resolution_sweep=resolutions,
+            grid_sweep=grids,
+            sweep_points=sweep_points,
+            memory=memory,
+            method_budget_s=method_budget_s,
+            progress=progress,
+        )
+        return write_results_into(folder, rows, command=command)

@@ -1,22 +1,36 @@
-"""The comparison's Markdown report and PNG plots."""
+"""The comparison's Markdown report and PNG plots, written with ``results.csv`` through the output layer.
+
+:func:`compare_folder` holds the output folder (:class:`~zbuf_occlude.io.owned.OwnedFolder`: every
+file atomic and recorded, a file replaced only if a run of ours wrote it and it is unchanged since);
+:func:`write_results_into` writes into it, :func:`write_results` does both.
+"""
 
 from __future__ import annotations
 
 import logging
 import math
 import os
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from zbuf_occlude import io
 from zbuf_occlude._version import install_hint
-from zbuf_occlude.errors import OutputError
 from zbuf_occlude.experiments.compare.results import summarise, write_csv
+from zbuf_occlude.io.owned import OwnedFolder
 
-__all__ = ["write_results", "format_or_dash", "method_order"]
+__all__ = ["write_results", "write_results_into", "compare_folder", "compare_writes", "format_or_dash", "method_order", "COMPARE_OUTPUTS"]
 
 log = logging.getLogger(__name__)
+
+#: The report's default name.
+REPORT_NAME = "report.md"
+#: The plots, one per kind of row: time vs points, and one per sweep that has rows.
+TIME_PLOT = "time_vs_points.png"
+SWEEP_PLOTS = {"resolution": "agreement_vs_resolution.png", "grid": "agreement_vs_grid.png"}
+#: Every file ``compare`` writes in ``--out``: the rows, the report and the plots (a sweep's plot only with
+#: that sweep; no plot without matplotlib).  :func:`write_results` with another ``report_name`` writes that one instead.
+COMPARE_OUTPUTS = ("results.csv", REPORT_NAME, TIME_PLOT, *SWEEP_PLOTS.values())
 
 
 def format_or_dash(value: float, spec: str) -> str:
@@ -96,7 +110,18 @@ def _markdown_report(rows: Sequence[dict[str, Any]], plots: dict[str, str], titl
     return "\n".join(lines) + "\n"
 
 
-def _plots(rows: Sequence[dict[str, Any]], out: Path) -> dict[str, str]:
+def _save(fig: Any, folder: OwnedFolder, name: str) -> None:
+    """Write ``fig`` as the PNG ``name`` in ``folder`` (:meth:`OwnedFolder.write`) and close it."""
+    import matplotlib.pyplot as plt
+
+    try:
+        with folder.write(name) as tmp:
+            fig.savefig(tmp, dpi=120, format="png")
+    finally:
+        plt.close(fig)
+
+
+def _plots(rows: Sequence[dict[str, Any]], folder: OwnedFolder) -> dict[str, str]:
     try:
         import matplotlib
 
@@ -117,12 +142,11 @@ def _plots(rows: Sequence[dict[str, Any]], out: Path) -> dict[str, str]:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(out / "time_vs_points.png", dpi=120)
-    plt.close(fig)
-    written["time per view vs points"] = "time_vs_points.png"
+    _save(fig, folder, TIME_PLOT)
+    written["time per view vs points"] = TIME_PLOT
     for sweep, xlabel, fname in (
-        ("resolution", "z-buffer resolution (px)", "agreement_vs_resolution.png"),
-        ("grid", "occupancy grid size (cells per axis)", "agreement_vs_grid.png"),
+        ("resolution", "z-buffer resolution (px)", SWEEP_PLOTS["resolution"]),
+        ("grid", "occupancy grid size (cells per axis)", SWEEP_PLOTS["grid"]),
     ):
         sw = summarise(rows, by=("method", "param"), sweep=sweep)
         if not sw:
@@ -140,10 +164,48 @@ def _plots(rows: Sequence[dict[str, Any]], out: Path) -> dict[str, str]:
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7)
         fig.tight_layout()
-        fig.savefig(out / fname, dpi=120)
-        plt.close(fig)
+        _save(fig, folder, fname)
         written[f"agreement vs {sweep}"] = fname
     return written
+
+
+def compare_folder(out: str | os.PathLike, *, report_name: str = REPORT_NAME) -> OwnedFolder:
+    """``out`` as a comparison holds it (not yet entered): the files of :data:`COMPARE_OUTPUTS`, the report named ``report_name``."""
+    names = ("results.csv", report_name, TIME_PLOT, *SWEEP_PLOTS.values())
+    return OwnedFolder(out, names=[re.escape(name) for name in names], what="the comparison")
+
+
+def compare_writes(*, report_name: str = REPORT_NAME, sweeps: Sequence[str] = ("resolution", "grid")) -> list[str]:
+    """The files a comparison with ``sweeps`` writes, to check before any work (:meth:`OwnedFolder.check_writable`)."""
+    return ["results.csv", report_name, TIME_PLOT, *(SWEEP_PLOTS[s] for s in sweeps)]
+
+
+def write_results_into(
+    folder: OwnedFolder,
+    rows: Sequence[dict[str, Any]],
+    *,
+    title: str = "HSR methods compared with the exact oracle",
+    command: str | None = None,
+    report_name: str = REPORT_NAME,
+) -> Path:
+    """Write ``results.csv``, the Markdown report and the PNG plots into a held :func:`compare_folder`.
+
+    Returns
+    -------
+    Path
+        The report's path.
+
+    Raises
+    ------
+    UnsafePathError
+        A file of a name it writes is there and was not written by a run of ours, or was changed since.
+    OutputError
+        A file cannot be written.
+    """
+    with folder.write("results.csv") as tmp:
+        write_csv(rows, tmp, atomic=False)
+    plots = _plots(rows, folder)
+    return folder.write_text(report_name, _markdown_report(rows, plots, title, command))
 
 
 def write_results(
@@ -152,9 +214,10 @@ def write_results(
     *,
     title: str = "HSR methods compared with the exact oracle",
     command: str | None = None,
-    report_name: str = "report.md",
+    report_name: str = REPORT_NAME,
 ) -> Path:
-    """Write ``results.csv``, the Markdown report and the PNG plots into ``out``.
+    """Write ``results.csv``, the Markdown report and the PNG plots into ``out`` (:func:`compare_folder`,
+    every file checked before the first is written).
 
     Returns
     -------
@@ -165,12 +228,13 @@ def write_results(
     ------
     OutputError
         When ``out`` cannot be created or written.
+    UnsafePathError
+        A file of a name it writes is in ``out`` and was not written by a run of ours, or was
+        changed since (nothing is written).
+    DatasetBusy
+        Another live process holds ``out``.
     """
-    out = Path(out)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"cannot create output folder {out}: {exc}") from None
-    write_csv(rows, out / "results.csv")
-    plots = _plots(rows, out)
-    return io.write_text(out / report_name, _markdown_report(rows, plots, title, command))
+    with compare_folder(out, report_name=report_name) as folder:
+        sweeps = [sweep for sweep in SWEEP_PLOTS if any(r.get("sweep") == sweep for r in rows)]
+        folder.check_writable(compare_writes(report_name=report_name, sweeps=sweeps))
+        return write_results_into(folder, rows, title=title, command=command, report_name=report_name)

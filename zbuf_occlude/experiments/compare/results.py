@@ -40,9 +40,10 @@ RESULT_FIELDS = (
 )
 
 
-def write_csv(rows: Sequence[dict[str, Any]], path: str | os.PathLike) -> Path:
-    """Write rows with the columns of :data:`RESULT_FIELDS` (atomically) and return the path."""
-    return io.write_csv(path, [{k: _fmt_csv(row.get(k, "")) for k in RESULT_FIELDS} for row in rows], RESULT_FIELDS)
+def write_csv(rows: Sequence[dict[str, Any]], path: str | os.PathLike, *, atomic: bool = True) -> Path:
+    """Write rows with the columns of :data:`RESULT_FIELDS` (atomically) and return the path;
+    ``atomic=False``: straight to ``path``, a temporary the caller renames (:meth:`~zbuf_occlude.io.owned.OwnedFolder.write`)."""
+    return io.write_csv(path, [{k: _fmt_csv(row.get(k, "")) for k in RESULT_FIELDS} for row in rows], RESULT_FIELDS, atomic=atomic)
 
 
 def _fmt_csv(value: Any) -> Any:
