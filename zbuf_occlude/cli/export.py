@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from zbuf_occlude.cli.options import Checked, counted, seed
+from zbuf_occlude.cli.options import Checked, counted, out_folder, seed
 from zbuf_occlude.defaults import DEFAULT_SEED
 
 __all__ = ["add_export_parser"]
@@ -39,7 +39,7 @@ def add_export_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("dataset", metavar="DATASET", help="a data set folder (--out of farm or generate; for --to pcn, of generate --protocol pcn)")
     p.add_argument("--to", required=True, choices=TARGET_NAMES, help="the layout to write")
-    p.add_argument("--out", required=True, help="the export's folder")
+    p.add_argument("--out", required=True, action=Checked, check=out_folder, help="the export's folder")
     p.add_argument("--label-set", default="own", choices=LABEL_SET_NAMES,
                    help="whose label ids: own (the data set's classes, default) or a pretrained network's set; "
                    "a class the set lacks is refused. pcn: own (ShapeNet's synset id for a ShapeNet class, else the "
