@@ -13,9 +13,10 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-from zbuf_occlude.errors import BackendUnavailable, CameraError, InvalidInputError, OutputError
+from zbuf_occlude.errors import BackendUnavailable, CameraError, InvalidInputError
 from zbuf_occlude.farm.config import FarmParams
 from zbuf_occlude.geometry.cameras import camera_on_sphere
+from zbuf_occlude.io.owned import make_folder
 from zbuf_occlude.resources import check_memory, estimate_job_memory
 from zbuf_occlude.visibility.registry import get_method
 
@@ -57,7 +58,7 @@ def check_out_outside_inputs(out: str | os.PathLike, inputs: Sequence[str | os.P
 
 
 def prepare_out(out: Path) -> None:
-    """Create ``out`` and check it is writable.
+    """Create ``out`` and check it is writable (:func:`zbuf_occlude.io.owned.make_folder`).
 
     Raises
     ------
@@ -65,14 +66,7 @@ def prepare_out(out: Path) -> None:
         It is a file, or it cannot be created or written (the message says: choose a
         writable ``--out``).
     """
-    if out.exists() and not out.is_dir():
-        raise OutputError(f"the output folder {out} is a file, not a folder; choose another --out")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"cannot create the output folder {out}: {exc.strerror or exc}; choose a writable --out") from exc
-    if not os.access(out, os.W_OK | os.X_OK):
-        raise OutputError(f"the output folder {out} is not writable; choose a writable --out")
+    make_folder(out)
 
 
 def check_gl(resolution: int) -> None:

@@ -96,17 +96,18 @@ def make_folder(folder: str | os.PathLike, *, option: str = "--out") -> Path:
     Raises
     ------
     OutputError
-        It is a file, or it cannot be created or written (one line naming it and ``option``).
+        It is a file, or it cannot be created or written (one line naming it and saying: choose
+        a writable ``option``).
     """
     folder = Path(folder)
     if os.path.lexists(folder) and not folder.is_dir():
-        raise OutputError(f"{option} {folder} exists and is not a folder; choose another {option}")
+        raise OutputError(f"the output folder {folder} is a file, not a folder; choose another {option}")
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise OutputError(f"cannot create the folder {folder} ({option}): {exc.strerror or exc}; choose a writable {option}") from None
+        raise OutputError(f"cannot create the output folder {folder}: {exc.strerror or exc}; choose a writable {option}") from None
     if not os.access(folder, os.W_OK | os.X_OK):
-        raise OutputError(f"the folder {folder} ({option}) is not writable; choose a writable {option}")
+        raise OutputError(f"the output folder {folder} is not writable; choose a writable {option}")
     return folder
 
 
