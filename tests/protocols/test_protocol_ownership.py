@@ -156,3 +156,17 @@ def test_a_run_of_other_meshes_into_a_shared_folder_is_refused(first_run, tmp_pa
     with pytest.raises(InvalidInputError, match="label.npy holds the labels of other meshes"):
         run_protocol(PROTOCOL, [tmp_path / "other"], tmp_path / "out", ProtocolOptions(severity=2), progress=False)
     assert (tmp_path / "out" / "label.npy").read_bytes() == before
+
+
+def test_an_earlier_versions_protocol_json_naming_files_outside_deletes_nothing(copied):
+    """A folder as earlier versions wrote it (protocol.json, no ledger) is adopted only when its record is ours."""
+    victim = copied / "victim"
+    victim.mkdir()
+    (victim / "keep_000000.h5").write_text("mine")
+    recorded = json.loads((copied / "out" / RECORD).read_text())
+    recorded["protocol"] = "../victim/keep"
+    (copied / "out" / "protocol.json").write_text(json.dumps(recorded))
+    (copied / "out" / LEDGER_FILE).unlink()
+    with pytest.raises(InvalidInputError, match="protocol.json was not written by zbuf_occlude"):
+        _run(copied, overwrite=True)
+    assert (victim / "keep_000000.h5").read_text() == "mine"
