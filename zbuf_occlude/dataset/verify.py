@@ -49,19 +49,21 @@ JOINED_BYTES_SLACK = 1 << 20
 
 
 def _protocol_of(root: Path) -> str | None:
-    """The ``protocol`` field of ``root/protocol.json`` (``generate --protocol``), or None.
+    """The ``protocol`` field of a run's record in ``root`` (``generate --protocol``: ``protocol.json``,
+    or ``protocol_<run>.json`` where runs share the folder, as ModelNet40-C's do), or None.
 
     The folder is untrusted: a file that is too large, not JSON or without a string field gives None.
     """
-
-    path = root / PROTOCOL_FILE
-    try:
-        if not path.is_file() or path.stat().st_size > _PROTOCOL_FILE_MAX_BYTES:
-            return None
-        name = loads_json(path.read_bytes(), what=str(path)).get("protocol")
-    except (OSError, InvalidInputError, AttributeError):
-        return None
-    return name if isinstance(name, str) else None
+    for path in (root / PROTOCOL_FILE, *sorted(root.glob("protocol_*.json"))):
+        try:
+            if not path.is_file() or path.stat().st_size > _PROTOCOL_FILE_MAX_BYTES:
+                continue
+            name = loads_json(path.read_bytes(), what=str(path)).get("protocol")
+        except (OSError, InvalidInputError, AttributeError):
+            continue
+        if isinstance(name, str):
+            return name
+    return None
 
 
 def _not_a_data_set(root: Path) -> str:
