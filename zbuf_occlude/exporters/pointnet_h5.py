@@ -12,14 +12,15 @@ DGCNN (``glob(ply_data_%s*.h5)``), PCT, PointMLP and CurveNet:
 * ``<split>_files.txt``: one line per file, ``<list prefix>/ply_data_<split><k>.h5``, relative to
   the client repository's root as PointNet's are (default prefix ``data/<folder's name>``).
 
-The set is streamed: each object's samples are read once, in the source's order, and written to
-the rows the shuffle gave them, so memory holds one object's samples, not the set's.
+The set is streamed: each object's samples are read once, in the source's order, and each row is
+written straight to the place the shuffle gave it, so memory holds one object's samples, not the set's.
 """
 
 from __future__ import annotations
 
 import contextlib
 import json
+import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -35,6 +36,31 @@ ROWS_PER_FILE = 2048
 MAX_OPEN_FILES = 256
 #: The names this target writes (regular expressions, for the owned folder).
 FILE_NAMES = (r"ply_data_[a-z]+\d+\.h5", r"ply_data_[a-z]+_\d+_id2file\.json", r"shape_names\.txt", r"[a-z]+_files\.txt")
+
+
+def _create_file(path: Path, rows: int, n_points: int, label: np.ndarray) -> int:
+    """Make ``path`` a PointNet file: ``label`` written, ``data (rows, n_points, 3) float32`` allocated
+    contiguous and not filled; return the byte offset of ``data``'s first row.
+
+    The rows are then written straight to that offset, in any order (``os.pwrite``): a contiguous,
+    uncompressed HDF5 dataset is a C-order array at one place in the file (h5py's
+    ``DatasetID.get_offset``), and a row written there costs what a plain write costs, where
+    h5py's writes of scattered rows cost 5-30 times more.
+    """
+    import h5py
+
+    with h5py.File(path, "w") as f:
+        dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
+        dcpl.set_layout(h5py.h5d.CONTIGUOUS)
+        dcpl.set_alloc_time(h5py.h5d.ALLOC_TIME_EARLY)  # the space exists (and has its offset) now
+        dcpl.set_fill_time(h5py.h5d.FILL_TIME_NEVER)  # every row is written below
+        space = h5py.h5s.create_simple((rows, n_points, 3))
+        data = h5py.h5d.create(f.id, b"data", h5py.h5t.IEEE_F32LE, space, dcpl=dcpl)
+        offset = data.get_offset()
+        f.create_dataset("label", data=label)
+    if offset is None:  # an empty dataset has no storage
+        return 0
+    return int(offset)
 
 
 def _label_dtype(n_classes: int) -> np.dtype:
@@ -75,8 +101,6 @@ def write_pointnet_h5(
     list of Path
         The class list and the file lists (the data files are in the folder's ledger).
     """
-    import h5py
-
     rows_per_file = ROWS_PER_FILE if rows_per_file is None else int(rows_per_file)
     written = [folder.write_text("shape_names.txt", "".join(f"{n}\n" for n in names))]
     dtype = _label_dtype(len(names))
@@ -92,24 +116,22 @@ def write_pointnet_h5(
         for first in range(0, n_files, MAX_OPEN_FILES):
             group = range(first, min(first + MAX_OPEN_FILES, n_files))
             with contextlib.ExitStack() as stack:
-                data = {}
+                fds, offsets = {}, {}
                 for f in group:
                     tmp = stack.enter_context(folder.write(files[f]))
-                    h5 = stack.enter_context(h5py.File(tmp, "w"))
                     rows = min(rows_per_file, n - f * rows_per_file)
-                    data[f] = h5.create_dataset("data", (rows, ds.n_points, 3), dtype=np.float32)
                     mine = order[f * rows_per_file : f * rows_per_file + rows]
-                    h5.create_dataset("label", data=all_labels[mine].astype(dtype)[:, None])
+                    offsets[f] = _create_file(tmp, rows, ds.n_points, all_labels[mine].astype(dtype)[:, None])
+                    fds[f] = os.open(tmp, os.O_WRONLY)
+                    stack.callback(os.close, fds[f])
+                row_bytes = ds.n_points * 3 * 4
                 for start, block in ds.iter_arrays():
                     where = position[start : start + len(block)]
-                    file_of = where // rows_per_file
-                    for f in np.unique(file_of):
-                        if int(f) not in data:
-                            continue
-                        pick = np.flatnonzero(file_of == f)
-                        rows = where[pick] - f * rows_per_file
-                        sort = np.argsort(rows)
-                        data[int(f)][rows[sort]] = block[pick[sort]]  # h5py writes rows in increasing order
+                    rows_le = np.ascontiguousarray(block, dtype="<f4")
+                    for j, pos in enumerate(where):  # each row to its place: HDF5's contiguous layout is a plain array
+                        f, row = divmod(int(pos), rows_per_file)
+                        if f in fds:
+                            os.pwrite(fds[f], rows_le[j].tobytes(), offsets[f] + row * row_bytes)
         for f in range(n_files):
             mine = order[f * rows_per_file : (f + 1) * rows_per_file]
             ids = []
