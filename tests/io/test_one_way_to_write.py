@@ -1,5 +1,6 @@
-"""One way to delete or rename: only the owned-folder layer (zbuf_occlude.io.owned) and its atomic
-write (zbuf_occlude.io.atomic) unlink, remove, rename or replace a path.  Any other module must
+"""One way to delete or rename: only the owned-folder layer (zbuf_occlude.io.owned), its atomic
+write (zbuf_occlude.io.atomic) and its lock (zbuf_occlude.io.locks, which removes a dead writer's
+lock) unlink, remove, rename or replace a path.  Any other module must
 call the layer, whose checks (lock, layout, names, recorded size and SHA-256) a direct call would skip."""
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import zbuf_occlude
 
 PACKAGE = Path(zbuf_occlude.__file__).parent
 #: The layer: the only modules that may delete or rename.
-LAYER = {"io/owned.py", "io/atomic.py"}
+LAYER = {"io/owned.py", "io/atomic.py", "io/locks.py"}
 #: Module functions that delete or rename a path.
 _MODULE_CALLS = {
     "os": {"remove", "unlink", "rmdir", "removedirs", "rename", "renames", "replace"},

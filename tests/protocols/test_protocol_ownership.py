@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 from zbuf_occlude.errors import DatasetBusy, InvalidInputError, UnsafePathError, ZbufOccludeError
-from zbuf_occlude.io.owned import LEDGER_FILE, LOCK_FILE, acquire_lock
+from zbuf_occlude.io.locks import LOCK_FILE, acquire_lock
+from zbuf_occlude.io.owned import LEDGER_FILE
 from zbuf_occlude.protocols import ProtocolOptions, get_protocol, run_protocol
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"

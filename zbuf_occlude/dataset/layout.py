@@ -50,6 +50,8 @@ Integrity: every file of an object has its SHA-256 in the object's record and th
 
 from __future__ import annotations
 
+from zbuf_occlude.io.locks import LOCK_FILE  # the data-set lock (zbuf_occlude.farm.lock): the output layer's
+
 __all__ = [
     "FORMAT_VERSION",
     "CARD_FILE",
@@ -92,8 +94,6 @@ SHARD_DIR = "shards"
 RECORD_DIR, TASK_DIR, PLAN_FILE = "records", "tasks", "plan.json"
 #: The options of a ``generate --protocol`` folder (zbuf_occlude.protocols), which is not a data set of this layout.
 PROTOCOL_FILE = "protocol.json"
-#: The data-set lock (zbuf_occlude.farm.lock).
-LOCK_FILE = ".zbuf_occlude.lock"
 #: ``generate --format h5``'s joined files, one per split: ``occluded_<split>.h5``.
 SPLIT_FILE_PREFIX = "occluded_"
 #: The farm's storage modes, which :class:`~zbuf_occlude.dataset.reader.OccludedDataset` reads.

@@ -1,6 +1,6 @@
 """One writer per data set: the lock a farm run, a ``--shard`` task or a merge holds on ``--out``.
 
-The lock is :func:`zbuf_occlude.io.owned.acquire_lock`'s :class:`filelock.SoftFileLock`, a file created with ``O_CREAT | O_EXCL`` that holds
+The lock is :func:`zbuf_occlude.io.locks.acquire_lock`'s :class:`filelock.SoftFileLock`, a file created with ``O_CREAT | O_EXCL`` that holds
 the owner's pid, host name and process start token.  Unlike ``flock``/``fcntl`` locks it works
 on the network file systems clusters share (NFS, Lustre, GPFS), where advisory locks may be
 missing or local to one node.  filelock removes a lock whose owner is a dead process on the
@@ -28,7 +28,7 @@ from pathlib import Path
 
 from zbuf_occlude.dataset.layout import LOCK_FILE, TASK_DIR, task_lock_name
 from zbuf_occlude.errors import DatasetBusy
-from zbuf_occlude.io.owned import acquire_lock
+from zbuf_occlude.io.locks import acquire_lock
 
 __all__ = ["DatasetBusy", "farm_lock", "task_lock_path"]
 

@@ -2,9 +2,7 @@
 
 A folder a command writes (``--out``) is *owned* while the command runs: :class:`OwnedFolder`
 
-* takes the folder's lock (:func:`acquire_lock`: a :class:`filelock.SoftFileLock`, which works on
-  the network file systems clusters share, and is broken when its owner is a dead process of
-  this host, whatever the lock file holds);
+* takes the folder's lock (:func:`zbuf_occlude.io.locks.acquire_lock`);
 * checks the layout (:func:`check_layout`): no subfolder or file it writes leads out through a link;
 * writes atomically (:func:`~zbuf_occlude.io.atomic.atomic_path`) and records each file it wrote
   in the folder's ledger (:data:`LEDGER_FILE`, one JSON line per file: its name, size and
@@ -18,7 +16,7 @@ A folder a command writes (``--out``) is *owned* while the command runs: :class:
 A refusal is one line that names the file and says what to do
 (:class:`~zbuf_occlude.errors.UnsafePathError` or :class:`~zbuf_occlude.errors.InvalidInputError`).
 The farm keeps its ledger in its per-object records (their SHA-256s) and takes task-scoped
-locks, so it calls the same functions (:func:`acquire_lock`, :func:`check_layout`,
+locks, so it calls the same functions (:func:`~zbuf_occlude.io.locks.acquire_lock`, :func:`check_layout`,
 :func:`delete_recorded`, :func:`remove_dead_temps`) rather than the class.  A test walks the
 package's syntax trees: no other module unlinks, renames, replaces or removes a path.
 """
@@ -35,16 +33,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from zbuf_occlude.errors import DatasetBusy, InvalidInputError, OutputError, UnsafePathError
+from zbuf_occlude.errors import OutputError, UnsafePathError
 from zbuf_occlude.io.atomic import atomic_path, file_sha256, temp_is_orphan, temp_owner, write_csv
+from zbuf_occlude.io.locks import LOCK_FILE, acquire_lock
 from zbuf_occlude.io.safe_paths import path_inside
 
 __all__ = [
     "LEDGER_FILE",
-    "LOCK_FILE",
     "FileRecord",
     "OwnedFolder",
-    "acquire_lock",
     "check_deletable",
     "check_layout",
     "check_own_name",
@@ -60,15 +57,9 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-#: The lock file of an owned folder (a farm's ``--shard`` tasks add their own under ``tasks/``).
-LOCK_FILE = ".zbuf_occlude.lock"
 #: The ledger: one JSON line per file written (``{"path", "size", "sha256"}``) or deleted
 #: (``{"path", "deleted": true}``); the last line about a path holds.
 LEDGER_FILE = ".zbuf_occlude-written.jsonl"
-#: Seconds an acquire keeps trying: long enough for filelock to break a dead owner's lock
-#: (checked on each try) or for a concurrent peek to end, short enough to refuse at once.
-ACQUIRE_TIMEOUT_S = 2.0
-POLL_INTERVAL_S = 0.05
 #: A ledger line longer than this is damaged (a path is at most a few hundred bytes).
 _MAX_LEDGER_LINE = 8192
 
@@ -109,83 +100,6 @@ def make_folder(folder: str | os.PathLike, *, option: str = "--out") -> Path:
     if not os.access(folder, os.W_OK | os.X_OK):
         raise OutputError(f"the output folder {folder} is not writable; choose a writable {option}")
     return folder
-
-
-def _lock_holder(path: Path) -> str:
-    """``pid P on host H since T`` of the process holding lock file ``path`` (what it says)."""
-    from datetime import datetime, timezone
-
-    try:
-        lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
-        since = datetime.fromtimestamp(path.stat().st_mtime, timezone.utc).isoformat(timespec="seconds")
-    except OSError:
-        return "a process that has just released it"
-    pid = lines[0] if lines and lines[0].isdigit() else "?"
-    host = lines[1] if len(lines) > 1 else "?"
-    return f"pid {pid} on host {host} since {since}"
-
-
-def _break_dead_lock(path: Path) -> None:
-    """Remove a lock file whose owner is known to be gone: a dead process of this host, or a
-    file that names no process at all (garbage, empty: a writer killed before it wrote its pid).
-
-    filelock breaks a dead owner's lock only when it can parse the file, and checks it only
-    while it polls; under load a damaged lock file was refused where a quiet machine took it
-    over.  This decides it once, before the first try.
-    """
-    import socket
-
-    try:
-        lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
-    except OSError:
-        return
-    pid = int(lines[0]) if lines and lines[0].strip().isdigit() else None
-    host = lines[1].strip() if len(lines) > 1 else None
-    if pid is not None and host not in (None, socket.gethostname()):
-        return  # another host's: its owner may be alive there
-    if pid is not None:
-        try:
-            os.kill(pid, 0)
-            return  # alive (or someone else's live process)
-        except ProcessLookupError:
-            pass
-        except PermissionError:
-            return
-    log.info("removing the lock %s of a process that is gone", path)
-    path.unlink(missing_ok=True)
-
-
-def acquire_lock(path: str | os.PathLike, what: str, *, timeout: float = ACQUIRE_TIMEOUT_S):
-    """Take the lock file ``path``; return the held :class:`filelock.SoftFileLock` (``release()`` it).
-
-    Raises
-    ------
-    DatasetBusy
-        A live process holds it (named: pid and host), or one of another host that cannot be
-        checked from here; the message says which file to delete once it is known to be gone.
-    OutputError
-        The lock file cannot be created.
-    """
-    from filelock import SoftFileLock, Timeout
-
-    path = Path(path)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"cannot create {path.parent}: {exc.strerror or exc}; choose a writable --out") from None
-    if os.path.lexists(path):
-        _break_dead_lock(path)
-    lock = SoftFileLock(str(path), timeout=timeout, poll_interval=POLL_INTERVAL_S, is_singleton=False, thread_local=False)
-    try:
-        lock.acquire()
-    except Timeout:
-        raise DatasetBusy(
-            f"{what} is being written by {_lock_holder(path)} (lock file {path}); wait for it to finish, "
-            f"or, if that process is gone (another host cannot be checked from here), delete {path} and run again"
-        ) from None
-    except OSError as exc:
-        raise OutputError(f"cannot create the lock file {path}: {exc.strerror or exc}; choose a writable --out") from None
-    return lock
 
 
 def check_layout(root: str | os.PathLike, names: Iterable[str] = ()) -> None:
