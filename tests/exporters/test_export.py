@@ -30,7 +30,7 @@ FARM = ["--views", "grid25", "--dense-points", "1024", "--samples-per-view", "2"
 
 @pytest.fixture(scope="module")
 def sources(tmp_path_factory):
-    """The same meshes as a farm's dense and compact data sets and as generate's h5 and npz."""
+    """The same meshes as a farm's dense and compact data sets and as generate's h5, npz and ply."""
     root = tmp_path_factory.mktemp("sources")
     for rel in MESHES:
         (root / "meshes" / rel).parent.mkdir(parents=True, exist_ok=True)
@@ -38,7 +38,7 @@ def sources(tmp_path_factory):
     made = {}
     for kind, argv in {
         "dense": ["farm", "--storage", "dense"], "compact": ["farm", "--storage", "compact"],
-        "h5": ["generate", "--format", "h5"], "npz": ["generate", "--format", "npz"],
+        "h5": ["generate", "--format", "h5"], "npz": ["generate", "--format", "npz"], "ply": ["generate", "--format", "ply"],
     }.items():  # fmt: skip
         assert cli_main([argv[0], str(root / "meshes"), "--out", str(root / kind), *argv[1:], *FARM]) == 0
         made[kind] = root / kind
@@ -57,7 +57,7 @@ def _pointnet_read(client: Path, list_file: str) -> tuple[np.ndarray, np.ndarray
     return np.concatenate(data), np.concatenate(label)
 
 
-@pytest.mark.parametrize("kind", ["dense", "compact", "h5", "npz"])
+@pytest.mark.parametrize("kind", ["dense", "compact", "h5", "npz", "ply"])
 def test_pointnet_h5_reads_back_the_source_as_pointnet_reads_it(sources, tmp_path, kind):
     client = tmp_path / "pointnet"
     out = client / "data" / "modelnet40_ply_hdf5_2048"
