@@ -72,3 +72,23 @@ def test_the_walker_finds_every_way_to_delete(code):
 )
 def test_the_walker_lets_other_replaces_be(code):
     assert not deleting_calls(code)
+
+
+def test_an_owned_folder_removes_only_its_own_dead_writers_temporaries(tmp_path):
+    """A user's folder may hold other programs' ``.x.tmp`` files: only a dead writer's temporary
+    of a name the run writes goes."""
+    import subprocess
+    import sys
+
+    from zbuf_occlude.io.atomic import _host_tag
+    from zbuf_occlude.io.owned import OwnedFolder
+
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    child.wait()
+    dead = f"{child.pid}-{_host_tag()}-abc"
+    ours, other, legacy = f".a.csv.{dead}.tmp", f".notes.md.{dead}.tmp", ".editor.swap.tmp"
+    for name in (ours, other, legacy):
+        (tmp_path / name).write_text("x")
+    with OwnedFolder(tmp_path, names=[r"a\.csv"]):
+        pass
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.endswith(".tmp")) == sorted([other, legacy])

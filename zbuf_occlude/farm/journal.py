@@ -139,7 +139,9 @@ def remove_stale_temps(out: Path, objects: Sequence[FarmObject], everything: boo
     (:func:`~zbuf_occlude.farm.lock.farm_lock`).
     """
     names = None if everything else {Path(shard_path(o)).name for o in objects} | {f"{o.index:06d}.json" for o in objects}
-    removed = sum(remove_dead_temps(out / folder, names) for folder in (SHARD_DIR, RECORD_DIR, "."))
+    removed = sum(remove_dead_temps(out / folder, names) for folder in (SHARD_DIR, RECORD_DIR))
+    # --out itself may hold the user's files: only temporaries that name their (dead) writer
+    removed += remove_dead_temps(out, names, ours=lambda name: True)
     if everything:
         removed += remove_dead_temps(out / TASK_DIR)
     for o in objects:  # generate --format npz|ply: an object's sample files are all its own

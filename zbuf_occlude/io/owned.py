@@ -27,7 +27,7 @@ import json
 import logging
 import os
 import re
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -119,7 +119,9 @@ def check_layout(root: str | os.PathLike, names: Iterable[str] = ()) -> None:
         path_inside(root, name, what=f"the output folder {root}")
 
 
-def remove_dead_temps(folder: str | os.PathLike, targets: Iterable[str] | None = None) -> int:
+def remove_dead_temps(
+    folder: str | os.PathLike, targets: Iterable[str] | None = None, *, ours: Callable[[str], bool] | None = None
+) -> int:
     """Remove the temporary files of :func:`~zbuf_occlude.io.atomic.atomic_path` whose writer is
     gone (:func:`~zbuf_occlude.io.atomic.temp_is_orphan`); return how many.
 
@@ -129,6 +131,11 @@ def remove_dead_temps(folder: str | os.PathLike, targets: Iterable[str] | None =
         Where to look (not below it).
     targets : iterable of str, optional
         Only temporaries of these file names (a ``--shard`` task's own); default: all.
+    ours : callable ``(file name) -> bool``, optional
+        For a folder that is the user's (an owned folder's root, the folder of a named output
+        file): only temporaries whose target passes it, and only those that name their writer
+        (a ``.x.tmp`` of another program, or of a version that named no writer, is left alone).
+        Default: the folder is ours (the farm's ``shards/``, ``records/``), every such temporary.
     """
     folder = Path(folder)
     if not folder.is_dir() or folder.is_symlink():
@@ -138,6 +145,8 @@ def remove_dead_temps(folder: str | os.PathLike, targets: Iterable[str] | None =
     for tmp in folder.glob(".*.tmp"):
         owner = temp_owner(tmp.name)
         if owner is None or (names is not None and owner.target not in names) or not temp_is_orphan(owner):
+            continue
+        if ours is not None and (owner.pid is None or not ours(owner.target)):
             continue
         if tmp.is_file() or tmp.is_symlink():
             tmp.unlink(missing_ok=True)
@@ -338,7 +347,8 @@ class OwnedFolder:
         try:
             check_layout(self.root, self.subfolders)
             for folder in (".", *self.subfolders):
-                remove_dead_temps(self.root / folder)
+                prefix = "" if folder == "." else f"{folder}/"
+                remove_dead_temps(self.root / folder, ours=lambda name, prefix=prefix: _name_allowed(prefix + name, self.names))
             self._ledger = self._read_ledger()
         except BaseException:
             self._lock.release()
