@@ -260,7 +260,7 @@ def _earlier_options(folder: OwnedFolder, protocol: Protocol, key: str) -> dict[
 def _record_options(
     folder: OwnedFolder, protocol: Protocol, options: ProtocolOptions, objects: Sequence[FarmObject], root: Path, overwrite: bool
 ) -> list[FarmObject]:
-    """Write ``protocol.json``: the options and the meshes, each named relative to the input root
+    """Write the run's record (``protocol.json``, or ``protocol_<run>.json``: :func:`_record_name`): the options and the meshes, each named relative to the input root
     ``root`` (which is named by its name only); refuse an earlier run's other options or meshes.
     Returns ``objects`` as the outputs name them (:func:`~zbuf_occlude.farm.journal.relative_objects`)."""
     out = folder.root
