@@ -4,7 +4,9 @@ whatever a copied folder's ``protocol.json``, ledger or links say."""
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import time
 from pathlib import Path
 
 import pytest
@@ -117,8 +119,17 @@ def test_a_second_writer_is_refused_while_the_lock_is_held(copied):
 
 @pytest.mark.parametrize("content", ["", "garbage\n", "999999999\n", "not a pid\nhost\n"])
 def test_a_dead_or_damaged_lock_is_taken_over(copied, content):
-    (copied / "out" / LOCK_FILE).write_text(content)
+    lock = copied / "out" / LOCK_FILE
+    lock.write_text(content)
+    os.utime(lock, (time.time() - 60, time.time() - 60))  # left by a run killed a minute ago
     assert _run(copied).resumed == 1
+
+
+def test_a_fresh_empty_lock_is_a_writer_starting_and_is_not_broken(copied):
+    """A writer creates its lock file, then writes its pid: an empty file that young may be one."""
+    (copied / "out" / LOCK_FILE).write_text("")
+    with pytest.raises(DatasetBusy):
+        _run(copied)
 
 
 def test_every_refusal_is_one_of_ours(copied):

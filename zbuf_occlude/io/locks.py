@@ -2,18 +2,18 @@
 
 The lock is a :class:`filelock.SoftFileLock`, a file created with ``O_CREAT | O_EXCL`` that holds
 the owner's pid and host name.  Unlike ``flock``/``fcntl`` locks it works on the network file
-systems clusters share (NFS, Lustre, GPFS).  A lock whose owner is known to be gone (a dead
-process of this host, or a file that names no process at all: garbage, or empty because its
-writer was killed before it wrote) is removed before the first try, whatever the load; a lock of
-another host is never broken (its owner may be alive there): the error names the host and pid
-and says which file to delete once that process is known to be gone.
+systems clusters share (NFS, Lustre, GPFS).  filelock breaks the lock of a dead process of this
+host and, after watching it unchanged for 2 s, a malformed one; an acquire keeps trying long
+enough for that whatever the load (:data:`ACQUIRE_TIMEOUT_S`).  An empty or unreadable lock file
+older than :data:`ABANDONED_MARKER_AGE_S` (a writer killed before it wrote its pid) is removed
+first.  A lock of another host is never broken (its owner may be alive there): the error names
+the host and pid and says which file to delete once that process is known to be gone.
 """
 
 from __future__ import annotations
 
 import logging
 import os
-import socket
 from pathlib import Path
 
 from zbuf_occlude.errors import DatasetBusy, OutputError
@@ -24,9 +24,13 @@ log = logging.getLogger(__name__)
 
 #: The lock file of an owned folder (a farm's ``--shard`` tasks add their own under ``tasks/``).
 LOCK_FILE = ".zbuf_occlude.lock"
-#: Seconds an acquire keeps trying: long enough for filelock to break a dead owner's lock
-#: (checked on each try) or for a concurrent peek to end, short enough to refuse at once.
-ACQUIRE_TIMEOUT_S = 2.0
+#: Seconds an acquire keeps trying: longer than filelock watches a malformed lock before it
+#: breaks it (2 s), with room for a loaded machine's sparse polls (at 2 s the two ran out together,
+#: and a garbage lock was refused under load where a quiet machine took it over); long enough for
+#: a dead owner's lock to be broken or a concurrent peek to end; short enough to refuse soon.
+ACQUIRE_TIMEOUT_S = 5.0
+#: Seconds after which a lock file that names no process is abandoned (:func:`_break_abandoned_marker`).
+ABANDONED_MARKER_AGE_S = 30.0
 POLL_INTERVAL_S = 0.05
 
 
@@ -44,32 +48,32 @@ def _lock_holder(path: Path) -> str:
     return f"pid {pid} on host {host} since {since}"
 
 
-def _break_dead_lock(path: Path) -> None:
-    """Remove a lock file whose owner is known to be gone: a dead process of this host, or a
-    file that names no process at all (garbage, empty: a writer killed before it wrote its pid).
+def _break_abandoned_marker(path: Path) -> None:
+    """Remove a lock file that names no process and has not changed for :data:`ABANDONED_MARKER_AGE_S`.
 
-    filelock breaks a dead owner's lock only when it can parse the file, and checks it only
-    while it polls; under load a damaged lock file was refused where a quiet machine took it
-    over.  This decides it once, before the first try.
+    filelock breaks a dead owner's lock itself (it reads the pid and host, and swaps the marker
+    out only if it is still the one it read), and a malformed one once it has watched it unchanged
+    for 2 s.  An *empty* marker it takes for a holder's and never breaks: a writer killed between
+    creating the file and writing its pid leaves one for good.  A live writer fills its marker
+    within microseconds of creating it, so an empty or unreadable marker that old is abandoned.
+    The marker is removed only if it is still that file (same inode and modification time).
     """
+    import time
+
     try:
+        before = path.lstat()
         lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
     except OSError:
         return
-    pid = int(lines[0]) if lines and lines[0].strip().isdigit() else None
-    host = lines[1].strip() if len(lines) > 1 else None
-    if pid is not None and host not in (None, socket.gethostname()):
-        return  # another host's: its owner may be alive there
-    if pid is not None:
-        try:
-            os.kill(pid, 0)
-            return  # alive (or someone else's live process)
-        except ProcessLookupError:
-            pass
-        except PermissionError:
-            return
-    log.info("removing the lock %s of a process that is gone", path)
-    path.unlink(missing_ok=True)
+    if lines and lines[0].strip().isdigit() or time.time() - before.st_mtime < ABANDONED_MARKER_AGE_S:
+        return  # a holder's pid (filelock's to judge), or a marker a writer may still be filling
+    try:
+        now = path.lstat()
+        if (now.st_ino, now.st_mtime_ns) == (before.st_ino, before.st_mtime_ns):
+            log.info("removing the abandoned lock %s (no process named in it for %.0f s)", path, time.time() - now.st_mtime)
+            path.unlink()
+    except OSError:
+        return
 
 
 def acquire_lock(path: str | os.PathLike, what: str, *, timeout: float = ACQUIRE_TIMEOUT_S):
@@ -91,7 +95,7 @@ def acquire_lock(path: str | os.PathLike, what: str, *, timeout: float = ACQUIRE
     except OSError as exc:
         raise OutputError(f"cannot create {path.parent}: {exc.strerror or exc}; choose a writable --out") from None
     if os.path.lexists(path):
-        _break_dead_lock(path)
+        _break_abandoned_marker(path)
     lock = SoftFileLock(str(path), timeout=timeout, poll_interval=POLL_INTERVAL_S, is_singleton=False, thread_local=False)
     try:
         lock.acquire()
