@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import shutil
 import statistics
 import subprocess
 import sys
@@ -39,7 +38,7 @@ for split in ("train", "test"):
 print(json.dumps({"wall_s": time.perf_counter() - t0, "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "samples": n}))
 """
 _EXPORT = """
-import json, resource, shutil, sys, time
+import json, resource, sys, time
 from zbuf_occlude.exporters import export
 t0 = time.perf_counter()
 export(sys.argv[1], "pointnet-h5", sys.argv[2])
@@ -73,11 +72,10 @@ def main(argv: list[str] | None = None) -> int:
         source = Path(args.dataset) if args.dataset else _build(args.objects, Path(tmp) / "dataset")
         print(f"# source {source}; load average before: {os.getloadavg()[0]:.2f}", flush=True)
         reads, exports = [], []
-        for k in range(args.repeats):
+        for _ in range(args.repeats):
             reads.append(_measure(_READ, str(source)))
-            target = Path(tmp) / f"export{k}"
-            exports.append(_measure(_EXPORT, str(source), str(target)))
-            shutil.rmtree(target)
+            with tempfile.TemporaryDirectory(prefix="export_", dir=tmp) as target:  # each export into a new folder
+                exports.append(_measure(_EXPORT, str(source), str(Path(target) / "out")))
         read_s = statistics.median(r["wall_s"] for r in reads)
         export_s = statistics.median(e["wall_s"] for e in exports)
         print(f"# load average after: {os.getloadavg()[0]:.2f}")

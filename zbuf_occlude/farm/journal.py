@@ -146,10 +146,11 @@ def remove_stale_temps(out: Path, objects: Sequence[FarmObject], everything: boo
         removed += remove_dead_temps(out / TASK_DIR)
     for o in objects:  # generate --format npz|ply: an object's sample files are all its own
         try:  # a name that cannot be a folder inside out ("..") is refused where its object is made
-            folder = path_inside(out, check_relative_name(o.name, what="a mesh's name"), what=f"the folder of object {o.index}")
+            check_relative_name(o.name, what="a mesh's name")
+            if (out / o.name).is_dir():  # one stat an object; only generate's sample files make these folders
+                removed += remove_dead_temps(path_inside(out, o.name, what=f"the folder of object {o.index}"))
         except UnsafePathError:
             continue
-        removed += remove_dead_temps(folder)
     return removed
 
 
