@@ -185,3 +185,15 @@ def test_an_export_replaces_only_its_own_files(sources, tmp_path):
 def test_an_export_inside_its_source_is_refused(sources, tmp_path):
     with pytest.raises(InvalidInputError, match="inside the data set"):
         export(sources["dense"], "pointnet-h5", sources["dense"] / "export")
+
+
+def test_a_modelnet40c_folder_is_named_as_a_protocol_folder(tmp_path):
+    """Its runs are recorded per corruption and severity (protocol_<run>.json), and it is still told apart from a data set."""
+    from zbuf_occlude.protocols import ProtocolOptions, get_protocol, run_protocol
+
+    (tmp_path / "meshes" / "chair" / "train").mkdir(parents=True)
+    shutil.copy(SAMPLE_MESHES / "chair/train/chair_0001.off", tmp_path / "meshes" / "chair" / "train" / "chair_0001.off")
+    run_protocol(get_protocol("modelnet40-c-occlusion"), [tmp_path / "meshes"], tmp_path / "mn40c", ProtocolOptions(severity=1), progress=False)
+    with pytest.raises(InvalidInputError, match=r"`generate --protocol` folder \(--protocol modelnet40-c-occlusion\)"):
+        export(tmp_path / "mn40c", "pointnet-h5", tmp_path / "out")
+    assert not (tmp_path / "out").exists()

@@ -28,7 +28,7 @@ from zbuf_occlude.io.safe_paths import path_inside
 if TYPE_CHECKING:  # the schema (pydantic) is imported when a data set is verified
     from zbuf_occlude.dataset.schema import Card
 
-__all__ = ["VerifyReport", "verify_dataset"]
+__all__ = ["VerifyReport", "protocol_of", "verify_dataset"]
 
 #: What a ``generate --protocol NAME`` folder is, and what reads it (docs/guide/protocols.md).
 PROTOCOL_FOLDERS: dict[str, tuple[str, str]] = {
@@ -48,7 +48,7 @@ JOINED_BYTES_FACTOR = 2
 JOINED_BYTES_SLACK = 1 << 20
 
 
-def _protocol_of(root: Path) -> str | None:
+def protocol_of(root: Path) -> str | None:
     """The ``protocol`` field of a run's record in ``root`` (``generate --protocol``: ``protocol.json``,
     or ``protocol_<run>.json`` where runs share the folder, as ModelNet40-C's do), or None.
 
@@ -165,7 +165,7 @@ def verify_dataset(path: str | os.PathLike, *, progress: bool = False) -> Verify
         raise InvalidInputError(f"verify: no such folder: {path}")
     if not root.is_dir():
         raise InvalidInputError(f"verify: {path} is a file, not a data set folder")
-    if not (root / CARD_FILE).exists() and (protocol := _protocol_of(root)) is not None:
+    if not (root / CARD_FILE).exists() and (protocol := protocol_of(root)) is not None:
         folder, reader = PROTOCOL_FOLDERS.get(protocol, (f"a `--protocol {protocol}` folder", "see docs/guide/protocols.md"))
         raise InvalidInputError(
             f"verify: {path} is {folder}, not a farm data set: it was written by `zbuf-occlude generate --protocol "

@@ -152,13 +152,14 @@ def _check_options(to: str, target: _Target, given: dict[str, object], label_set
 
 def _check_source(source: Path, to: str, target: _Target) -> None:
     """Refuse a source of the other kind (a protocol folder for a data-set target, or the reverse) in one line."""
-    from zbuf_occlude.dataset.layout import CARD_FILE, PROTOCOL_FILE
+    from zbuf_occlude.dataset.layout import CARD_FILE
+    from zbuf_occlude.dataset.verify import protocol_of
 
-    is_protocol_run = (source / PROTOCOL_FILE).is_file() and not (source / CARD_FILE).exists()
-    if target.protocol is DATASET and is_protocol_run:
+    protocol = None if (source / CARD_FILE).exists() else protocol_of(source)
+    if target.protocol is DATASET and protocol is not None:
         readers = [f"--to {name} (a --protocol {t.protocol} folder)" for name, t in ((n, make()) for n, make in TARGETS.items()) if t.protocol]
         raise InvalidInputError(
-            f"{source} is a `generate --protocol` folder ({PROTOCOL_FILE}), not the farm or generate data set --to {to} reads; "
+            f"{source} is a `generate --protocol` folder (--protocol {protocol}), not the farm or generate data set --to {to} reads; "
             f"export it with {', '.join(readers)}, or make a data set with `zbuf-occlude farm` or `generate` without --protocol"
         )
     if target.protocol is not DATASET and (source / CARD_FILE).exists():
