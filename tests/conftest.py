@@ -134,6 +134,26 @@ def tiny_dataset(out: Path, storage: str = "dense") -> Path:
     return out
 
 
+def aerial_slab_crops(root: Path, offset=(0.0, 0.0, 0.0)) -> Path:
+    """Four aerial crops (``dales-q1560``) of a flat car-sized slab under the plan centre, one class
+    ``car``, written as ``root/car/NNN.xyz`` (shifted by ``offset``, metres): a top and no wall, so
+    no crop tells a scan angle.  Returns ``root``."""
+    import numpy as np
+    import trimesh
+
+    from zbuf_occlude.sensors.airborne import scan_airborne
+    from zbuf_occlude.sensors.presets import sensor_from_name
+
+    base = sensor_from_name("dales-q1560")
+    (root / "car").mkdir(parents=True)
+    for i in range(4):
+        slab = trimesh.creation.box(extents=[4.5, 2.0, 0.3])
+        slab.apply_translation([0.0, 0.0, 0.15])
+        points = np.asarray(scan_airborne(slab, base, half_size_m=4.0, seed=i, lateral_shift_m=0.0).points, dtype=np.float64)
+        np.savetxt(root / "car" / f"{i:03d}.xyz", points + np.asarray(offset), fmt="%.3f")
+    return root
+
+
 def shingles_mesh(cards: int = 60, step: float = 0.01, gap: float = 0.01):
     """A deck of ``cards`` unit squares facing ±x, each ``gap`` behind the one before and shifted
     ``step`` along y, normalised: from ``el=0, az=0`` (the camera on +x) every card but the first

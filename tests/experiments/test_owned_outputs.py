@@ -11,15 +11,12 @@ import os
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
-import trimesh
+from conftest import aerial_slab_crops
 
 from zbuf_occlude.cli.main import main
 from zbuf_occlude.experiments.realism import REPORT_FILES
 from zbuf_occlude.io.owned import LEDGER_FILE
-from zbuf_occlude.sensors.airborne import scan_airborne
-from zbuf_occlude.sensors.presets import sensor_from_name
 
 pytestmark = pytest.mark.slow  # the realism runs draw figures; the fixtures scan
 
@@ -40,16 +37,8 @@ def scans(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def crops(tmp_path_factory) -> Path:
-    """Four aerial crops of a flat slab, one class (as test_sensor_fit makes them for ``--sensor dales-q1560``)."""
-    base = sensor_from_name("dales-q1560")
-    root = tmp_path_factory.mktemp("crops")
-    (root / "car").mkdir()
-    for i in range(4):
-        slab = trimesh.creation.box(extents=[4.5, 2.0, 0.3])
-        slab.apply_translation([0.0, 0.0, 0.15])
-        points = np.asarray(scan_airborne(slab, base, half_size_m=4.0, seed=i, lateral_shift_m=0.0).points, dtype=np.float64)
-        np.savetxt(root / "car" / f"{i:03d}.xyz", points, fmt="%.3f")
-    return root
+    """Four aerial crops of a flat slab, one class (``--sensor dales-q1560``)."""
+    return aerial_slab_crops(tmp_path_factory.mktemp("crops"))
 
 
 def _argv(command: str, out: Path, scans: Path, crops: Path) -> list[str]:

@@ -7,10 +7,9 @@ import math
 
 import numpy as np
 import pytest
-import trimesh
+from conftest import aerial_slab_crops
 
 from zbuf_occlude.experiments.sensor_fit import fit_sensor_to_scans
-from zbuf_occlude.sensors.airborne import scan_airborne
 from zbuf_occlude.sensors.presets import sensor_from_name
 
 #: Where aerial crops lie in a user's files: projected coordinates (UTM-like eastings and northings, metres).
@@ -29,14 +28,7 @@ def _strict_loads(text: str):
 @pytest.fixture(scope="module")
 def fitted_without_a_scan_angle(tmp_path_factory):
     """``fit-sensor --sensor dales-q1560`` on flat slabs under the plan centre: a top, no wall, so no crop tells a scan angle."""
-    base = sensor_from_name("dales-q1560")
-    root = tmp_path_factory.mktemp("crops")
-    (root / "car").mkdir()
-    for i in range(4):
-        slab = trimesh.creation.box(extents=[4.5, 2.0, 0.3])
-        slab.apply_translation([0.0, 0.0, 0.15])
-        points = np.asarray(scan_airborne(slab, base, half_size_m=4.0, seed=i, lateral_shift_m=0.0).points, dtype=np.float64)
-        np.savetxt(root / "car" / f"{i:03d}.xyz", points + _UTM_OFFSET, fmt="%.3f")
+    root = aerial_slab_crops(tmp_path_factory.mktemp("crops"), offset=_UTM_OFFSET)
     out = root.parent / f"{root.name}-fitted.json"
     fit, json_path, md_path = fit_sensor_to_scans(root, "dales-q1560", out)
     assert math.isnan(fit.estimates["max_scan_angle_deg"].value)  # the case at hand: nothing to tell the angle by
