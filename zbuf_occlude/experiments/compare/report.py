@@ -171,7 +171,7 @@ def _plots(rows: Sequence[dict[str, Any]], folder: OwnedFolder) -> dict[str, str
 
 def compare_folder(out: str | os.PathLike, *, report_name: str = REPORT_NAME) -> OwnedFolder:
     """``out`` as a comparison holds it (not yet entered): the files of :data:`COMPARE_OUTPUTS`, the report named ``report_name``."""
-    names = ("results.csv", report_name, TIME_PLOT, *SWEEP_PLOTS.values())
+    names = compare_writes(report_name=report_name, sweeps=tuple(SWEEP_PLOTS))
     return OwnedFolder(out, names=[re.escape(name) for name in names], what="the comparison")
 
 
