@@ -121,3 +121,18 @@ def test_dense_rows_read_one_row_alone_and_several_from_the_whole_dataset():
     assert one.shape == (1, 2, 3) and np.array_equal(one[0], data.array[3]) and data.calls == [3]
     rows = np.array([1, 2, 4])
     assert np.array_equal(kind.read(_Rows(data), 0, rows, rows, rows), data.array[rows]) and data.calls[1:] == [()]
+
+
+def test_the_table_says_what_each_command_writes():
+    assert storage.storages("farm") == STORAGE_MODES and storage.storages("generate") == GENERATE_STORAGES
+    assert storage.storages() == (*STORAGE_MODES, *GENERATE_STORAGES)
+    assert [k.name for k in STORAGE_KINDS.values() if k.joins_splits] == ["h5"]
+
+
+def test_every_kind_of_the_table_states_its_estimates_and_names():
+    size = storage.ObjectSize(n_poses=3, samples_per_view=2, n_points=16, dense_points=100)
+    for kind in STORAGE_KINDS.values():
+        points, held = kind.memory_held(size)
+        assert min(points, held, kind.disk_bytes(size)) >= 0, kind
+    assert storage_kind("npz").top_names(["chair/train/a", "..", "lamp/b"]) == ["chair", "lamp"]
+    assert storage_kind("dense").top_names(["chair/train/a"]) == []

@@ -381,3 +381,17 @@ def test_a_storage_no_kind_reads_is_refused_by_the_reader_and_a_problem_for_veri
         OccludedDataset(ds)
     problems = verify_dataset(ds).problems
     assert any(f"unknown storage '{storage}'" in p for p in problems), problems
+
+
+@pytest.mark.parametrize("storage", ["dense", "compact"])
+def test_verify_checks_each_file_as_its_storage_kind_says(farmed, monkeypatch, storage):
+    # the kind answers for its files: verify holds no check of its own per storage
+    from zbuf_occlude.dataset.storage import storage_kind
+    from zbuf_occlude.errors import DatasetFormatError
+
+    def refuse(path, expect):
+        raise DatasetFormatError(f"{path.name}: {expect.rows} rows of {expect.n_points} points, refused by the kind")
+
+    monkeypatch.setattr(storage_kind(storage), "check_file", refuse)
+    problems = verify_dataset(farmed[storage]).problems
+    assert problems and all(p.endswith("refused by the kind") for p in problems), problems

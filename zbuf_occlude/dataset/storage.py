@@ -15,13 +15,17 @@ A kind says what the farm's worker (:mod:`zbuf_occlude.farm.worker`) needs to wr
 (the options of :func:`~zbuf_occlude.pipeline.occlude_poses`, how its poses are packed into files),
 and what :class:`~zbuf_occlude.dataset.reader.OccludedDataset`, :mod:`~zbuf_occlude.dataset.schema`
 and ``verify`` need to read it back (the datasets a shard must hold, the samples each pose of a
-record gives, how to read samples and their placement).  Names and columns are in
-:mod:`zbuf_occlude.dataset.layout`.  A new kind is one class and one entry of :data:`STORAGE_KINDS`.
+record gives, how to read samples and their placement, how to check a file).  It also answers for
+the farm's plans: the command that writes it, the memory a worker holds and the disk an object
+takes (:class:`ObjectSize`), and the names its files take in the output folder.  Names and columns
+are in :mod:`zbuf_occlude.dataset.layout`.  A new kind is one class and one entry of
+:data:`STORAGE_KINDS`; no other module switches on a kind's name.
 """
 
 from __future__ import annotations
 
 import itertools
+import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -46,9 +50,13 @@ __all__ = [
     "SensorCrops",
     "STORAGE_KINDS",
     "storage_kind",
+    "storages",
     "ShardTarget",
     "ShardSource",
+    "ObjectSize",
+    "FileCheck",
     "SENSOR_ROW_FIELDS",
+    "BYTES_PER_POINT",
     "write_datasets",
     "write_compact",
     "reconstruct_samples",
@@ -61,6 +69,8 @@ SENSOR_ROW_FIELDS = (
     "elevation_deg", "azimuth_deg", "radius", "distance_m", "sensor_height_m", "object_azimuth_deg", "yaw_deg", "size_m",
     "hidden_below_m", "width_scale",
 )  # fmt: skip
+#: Bytes of one stored point, ``(3,) float32``.
+BYTES_PER_POINT = 12
 
 
 # -- what the writer and the reader hand a kind -------------------------------------------------
@@ -121,6 +131,43 @@ class ShardSource(Protocol):
         """Object ``obj``'s :meth:`Compact.load_arrays`, cached."""
 
 
+@dataclass(frozen=True)
+class ObjectSize:
+    """The sizes of one object of a run, which a kind turns into its memory and disk estimates.
+
+    Attributes
+    ----------
+    n_poses : int
+        Poses per object (0 for ``farm --sensor``, whose scans carry their own).
+    samples_per_view, n_points : int
+        Samples drawn per pose, points per sample.
+    dense_points : int
+        Dense cloud per object (0: unknown, as with ``--density``).
+    """
+
+    n_poses: int
+    samples_per_view: int
+    n_points: int
+    dense_points: int = 0
+
+
+class FileCheck(Protocol):
+    """What a kind checks one of an object's files against (``verify``: the manifest's record and
+    the reader's checks)."""
+
+    #: Points per sample (the card's), samples the record's ``n_visible`` implies, files the record names.
+    n_points: int
+    rows: int
+    n_files: int
+    #: The record's ``n_visible`` and ``n_topped_up`` (``None``: none recorded).
+    n_visible: Sequence[int]
+    n_topped_up: Sequence[int] | None
+
+    def open_shard(self, path: Path) -> Any:
+        """The shard ``path`` opened by :func:`~zbuf_occlude.dataset.schema.open_shard` against the record
+        (an ``h5py.File``, used as a context manager)."""
+
+
 def write_datasets(path: Path, datasets: Mapping[str, NDArray], attrs: Mapping[str, Any], *, gzip: Mapping[str, int] | None = None) -> None:
     """One HDF5 shard of named arrays, atomically (insertion order, no modification times: same inputs, same bytes).
 
@@ -165,6 +212,11 @@ class StorageKind:
     made_from : {"poses", "scans"}
         What the farm feeds it: the z-buffer poses of :func:`~zbuf_occlude.pipeline.occlude_poses`
         (:meth:`write_poses`) or ``farm --sensor``'s scans (:meth:`SensorCrops.write_rows`).
+    written_by : {"farm", "generate"}
+        The command that writes it (:func:`storages`).
+    joins_splits : bool
+        At the end of a run its shards are joined into one file per split (``generate``'s ``h5``:
+        PointNet's ``occluded_<split>.h5`` and file lists).
     """
 
     name: str = ""
@@ -173,6 +225,8 @@ class StorageKind:
     redraws = False
     rows_placed = False
     made_from = "poses"
+    written_by = "farm"
+    joins_splits = False
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.name!r})"
@@ -185,6 +239,39 @@ class StorageKind:
     def rows_per_pose(self, n_visible: NDArray[np.integer], samples_per_view: int) -> NDArray[np.int64]:
         """``(P,) int64``: samples each pose of a record stores (``n_visible``: the record's, per pose)."""
         return samples_per_pose(n_visible, samples_per_view)
+
+    # -- the farm's estimates and names (each kind states its own: a wrong guess would go unnoticed)
+    def memory_held(self, size: ObjectSize) -> tuple[int, int]:
+        """What a worker holds of one object's samples until they are written, as
+        :func:`~zbuf_occlude.resources.estimate_job_memory` counts it: ``(points, samples_held)``,
+        the points of a sample and how many samples are held at once.
+
+        Raises
+        ------
+        NotImplementedError
+            The kind states no estimate (every kind of :data:`STORAGE_KINDS` must).
+        """
+        raise NotImplementedError(f"{self!r} states no memory estimate")
+
+    def disk_bytes(self, size: ObjectSize) -> int:
+        """Bytes one object's files take, about (the farm warns when the disk holds less).
+
+        Raises
+        ------
+        NotImplementedError
+            The kind states no estimate (every kind of :data:`STORAGE_KINDS` must).
+        """
+        raise NotImplementedError(f"{self!r} states no disk estimate")
+
+    def top_names(self, object_names: Iterable[str]) -> list[str]:
+        """Names directly under the output folder that its files take besides ``shards/``, sorted
+        (none: every file of an HDF5 kind is a shard)."""
+        return []
+
+    def own_files(self, name: str, shard: str) -> list[str]:
+        """Regular expressions of the files a record of object ``name`` (shard ``shard``) may name,
+        relative to the output folder: its shard."""
+        return [re.escape(shard)]
 
     # -- writing
     def check_name(self, name: str, *, what: str) -> None:
@@ -228,6 +315,28 @@ class StorageKind:
         """The sensor direction of a sample, degrees (the card's pose)."""
         return {"elevation_deg": float(src.poses[pose, 0]), "azimuth_deg": float(src.poses[pose, 1])}
 
+    # -- checking (verify)
+    def check_file(self, path: Path, expect: FileCheck) -> None:
+        """Refuse what the reader would refuse in ``path``, one of an object's files.
+
+        An HDF5 kind's record names its one shard: opened as the reader opens it
+        (``expect.open_shard``), then :meth:`check_opened`; a record naming other files is
+        checked by their sizes and hashes alone.
+
+        Raises
+        ------
+        ZbufOccludeError
+            What the reader would raise (a :class:`~zbuf_occlude.errors.DatasetFormatError` mostly).
+        """
+        if expect.n_files != 1:
+            return
+        with expect.open_shard(path) as f:
+            self.check_opened(f, path, expect)
+
+    def check_opened(self, f: Any, path: Path, expect: FileCheck) -> None:
+        """What the reader checks in an open shard ``f`` beyond :func:`~zbuf_occlude.dataset.schema.open_shard`
+        when it reads it (nothing: its rows are read as they are)."""
+
 
 class DenseRows(StorageKind):
     """PointNet's rows, ``data (B, n, 3) float32`` and one row per sample of the other columns
@@ -235,9 +344,16 @@ class DenseRows(StorageKind):
 
     shard_datasets = ("data",)
 
-    def __init__(self, name: str, *, provenance: bool):
+    def __init__(self, name: str, *, provenance: bool, written_by: str = "farm", joins_splits: bool = False):
         self.name = self.storage = name
         self.provenance = provenance
+        self.written_by, self.joins_splits = written_by, joins_splits
+
+    def memory_held(self, size: ObjectSize) -> tuple[int, int]:
+        return size.n_points, size.n_poses * size.samples_per_view  # one file per object: all its samples
+
+    def disk_bytes(self, size: ObjectSize) -> int:
+        return size.n_poses * size.samples_per_view * size.n_points * BYTES_PER_POINT
 
     def write_poses(self, target: ShardTarget, poses: Iterable[PoseResult]) -> list[str]:
         from zbuf_occlude.io.clouds import write_h5
@@ -305,6 +421,18 @@ class Compact(StorageKind):
         # the masks and the top-up points are all it keeps: the reader draws the samples
         return {"samples_per_view": 0, "topped_up": True}
 
+    def memory_held(self, size: ObjectSize) -> tuple[int, int]:
+        return 0, size.samples_per_view  # it draws no sample: the masks are counted with the dense cloud
+
+    def disk_bytes(self, size: ObjectSize) -> int:
+        # the dense cloud once and one bit per dense point and pose (top-up points are few)
+        return size.dense_points * BYTES_PER_POINT + size.n_poses * (size.dense_points + 7) // 8
+
+    def check_opened(self, f: Any, path: Path, expect: FileCheck) -> None:
+        """The masks against the record's ``n_visible`` and ``n_topped_up`` (:func:`check_visible_bits`),
+        as :meth:`load_arrays` checks them."""
+        check_visible_bits(path, f["visible_bits"][()], len(f["dense_points"]), expect.n_visible, expect.n_topped_up)
+
     def write_poses(self, target: ShardTarget, poses: Iterable[PoseResult]) -> list[str]:
         n_poses, n_dense = len(target.poses), len(target.dense_points)
         bits = np.zeros((n_poses, (n_dense + 7) // 8), dtype=np.uint8)
@@ -352,8 +480,32 @@ class SampleFiles(StorageKind):
     """``generate --format npz|ply``: one file per sample under ``DATASET/<name>/``
     (:func:`~zbuf_occlude.dataset.layout.sample_file_name`), listed in the record's ``shards``."""
 
+    written_by = "generate"
+
     def __init__(self, name: str):
         self.name = self.storage = name
+
+    def memory_held(self, size: ObjectSize) -> tuple[int, int]:
+        return size.n_points, size.samples_per_view  # written pose by pose: one pose's samples
+
+    def disk_bytes(self, size: ObjectSize) -> int:
+        return size.n_poses * size.samples_per_view * size.n_points * BYTES_PER_POINT
+
+    def top_names(self, object_names: Iterable[str]) -> list[str]:
+        """The first folder of each object's name (a name that is no folder name, ``..``, is
+        refused where names are checked)."""
+        return sorted({name.split("/")[0] for name in object_names} - {"", ".", ".."})
+
+    def own_files(self, name: str, shard: str) -> list[str]:
+        """Its sample files of the object (:func:`~zbuf_occlude.dataset.layout.sample_file_name`)."""
+        stem = name.rsplit("/", 1)[-1]
+        return [rf"{re.escape(name)}/{re.escape(stem)}_v\d{{3}}_el[+-]\d{{3}}_az\d{{3}}_s\d{{2}}\.{re.escape(self.name)}"]
+
+    def check_file(self, path: Path, expect: FileCheck) -> None:
+        """Read the file's points as the reader does (:func:`~zbuf_occlude.dataset.sample_files.read_sample_points`)."""
+        from zbuf_occlude.dataset.sample_files import read_sample_points
+
+        read_sample_points(path, self.name, expect.n_points)
 
     def check_name(self, name: str, *, what: str) -> None:
         from zbuf_occlude.io.safe_paths import check_relative_name
@@ -381,8 +533,11 @@ class SampleFiles(StorageKind):
 #: Every kind by name; :func:`storage_kind` is the lookup from a card.
 STORAGE_KINDS: dict[str, StorageKind] = {
     kind.name: kind
-    for kind in (DenseRows("dense", provenance=False), Compact(), SensorCrops(), DenseRows("h5", provenance=True), SampleFiles("npz"), SampleFiles("ply"))
-}
+    for kind in (
+        DenseRows("dense", provenance=False), Compact(), SensorCrops(),
+        DenseRows("h5", provenance=True, written_by="generate", joins_splits=True), SampleFiles("npz"), SampleFiles("ply"),
+    )
+}  # fmt: skip
 
 
 def storage_kind(storage: str, *, sensor: bool = False) -> StorageKind:
@@ -400,6 +555,12 @@ def storage_kind(storage: str, *, sensor: bool = False) -> StorageKind:
             f"unknown storage {storage!r}{' for farm --sensor' if sensor else ''}; this zbuf_occlude reads {readable}"
         )
     return kind
+
+
+def storages(written_by: str | None = None) -> tuple[str, ...]:
+    """The storages a card may name, in the order of :data:`STORAGE_KINDS`: all of them, or those
+    the command ``written_by`` (``"farm"``, ``"generate"``) writes."""
+    return tuple(dict.fromkeys(k.storage for k in STORAGE_KINDS.values() if written_by in (None, k.written_by)))
 
 
 # -- compact storage's arrays ---------------------------------------------------------------------
@@ -476,16 +637,16 @@ def reconstruct_samples(
     return np.stack([pool_take(dense_points, topup_points, c) for c in chosen]).astype(np.float32, copy=False)
 
 
-def check_visible_bits(path: Path, bits: Any, n_dense: int, n_visible: list[int], n_topped_up: list[int] | None = None) -> None:
+def check_visible_bits(path: Path, bits: Any, n_dense: int, n_visible: Sequence[int], n_topped_up: Sequence[int] | None = None) -> None:
     """Check a compact shard's visibility masks against the manifest's ``n_visible`` and ``n_topped_up``.
 
     Parameters
     ----------
     bits : (P, ceil(n_dense / 8)) uint8
         The shard's ``visible_bits``.
-    n_visible : list of int
+    n_visible : sequence of int
         The manifest's distinct visible points per pose (dense and topped up).
-    n_topped_up : list of int, optional
+    n_topped_up : sequence of int, optional
         The manifest's top-up points per pose (``None``: none).
 
     Raises

@@ -13,6 +13,7 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
+from zbuf_occlude.dataset.storage import ObjectSize, StorageKind, storage_kind
 from zbuf_occlude.errors import BackendUnavailable, CameraError, InvalidInputError
 from zbuf_occlude.farm.config import FarmParams
 from zbuf_occlude.geometry.cameras import camera_on_sphere
@@ -21,7 +22,7 @@ from zbuf_occlude.resources import check_memory, estimate_job_memory
 from zbuf_occlude.visibility.registry import get_method
 
 __all__ = ["check_before_work", "check_memory_up_front", "check_out_option", "check_out_outside_inputs", "check_radius",
-           "prepare_out", "check_gl"]
+           "prepare_out", "check_gl", "storage_of", "object_size"]
 
 log = logging.getLogger(__name__)
 
@@ -91,25 +92,37 @@ def check_gl(resolution: int) -> None:
     check_image_size(resolution, ctx=ctx, name="--resolution")
 
 
+def storage_of(params: FarmParams) -> StorageKind:
+    """The storage kind a run of ``params`` writes (:func:`~zbuf_occlude.dataset.storage.storage_kind`;
+    ``farm --sensor``: its scans)."""
+    return storage_kind(params.storage, sensor=params.sensor is not None)
+
+
+def object_size(params: FarmParams) -> ObjectSize:
+    """The sizes of one object of a run of ``params``, which its storage kind estimates from
+    (``dense_points`` 0 with ``--density``: unknown before the mesh is read)."""
+    return ObjectSize(len(params.poses), params.samples_per_view, params.n_points, params.dense_points or 0)
+
+
 def check_memory_up_front(params: FarmParams, *, workers: int = 1) -> None:
     """Refuse a run whose objects cannot fit in memory, naming the option that costs most.
 
     Each of ``workers`` processes holds one object at a time: its dense cloud
     (``--dense-points``; unknown with ``--density``, then not counted), its image
-    (``--resolution``) and its samples (``--points``), all of an object's samples for the
-    writers that write one file per object (``dense``, ``h5``), one pose's for ``npz`` and
-    ``ply``, none for ``compact`` (it stores visibility bits).
+    (``--resolution``) and the samples its storage kind holds until they are written
+    (:meth:`~zbuf_occlude.dataset.storage.StorageKind.memory_held`: all of an object's samples
+    for one file per object, ``dense`` and ``h5``; one pose's for ``npz`` and ``ply``; none for
+    ``compact``, which stores visibility bits).
 
     Raises
     ------
     InsufficientMemoryError
         The estimate exceeds the memory available (:func:`~zbuf_occlude.resources.check_memory`).
     """
-    per_object = {"dense": len(params.poses) * params.samples_per_view, "h5": len(params.poses) * params.samples_per_view}
-    held = per_object.get(params.storage, params.samples_per_view)
+    points, held = storage_of(params).memory_held(object_size(params))
     estimate = estimate_job_memory(
-        points=0 if params.storage == "compact" else params.n_points, samples_per_view=params.samples_per_view,
-        samples_held=held, dense_points=params.dense_points or 0, resolution=params.resolution, workers=workers,
+        points=points, samples_per_view=params.samples_per_view, samples_held=held, dense_points=params.dense_points or 0,
+        resolution=params.resolution, workers=workers,
     )  # fmt: skip
     check_memory(estimate)
 

@@ -16,7 +16,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from zbuf_occlude.dataset.layout import GENERATE_STORAGES, STORAGE_MODES, record_name, shard_name
+from zbuf_occlude.dataset.layout import STORAGE_MODES, record_name, shard_name
+from zbuf_occlude.dataset.storage import storages
 from zbuf_occlude.defaults import (
     DEFAULT_DENSE_POINTS,
     DEFAULT_FARM_DENSE_POINTS,
@@ -246,7 +247,7 @@ class FarmParams:
 
     def __post_init__(self) -> None:
         # messages name the command-line options (OPTION_NAMES), not the fields
-        if self.storage not in (*STORAGE_MODES, *GENERATE_STORAGES):
+        if self.storage not in storages():
             raise InvalidInputError(f"--storage must be one of {STORAGE_MODES}, got {self.storage!r}")
         seed = check_seed(self.seed, name=OPTION_NAMES["seed"])
         if not isinstance(seed, int):  # None or a Generator: a run must be reproducible from its card

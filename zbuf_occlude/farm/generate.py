@@ -23,9 +23,10 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-from zbuf_occlude.dataset.layout import CARD_FILE, GENERATE_STORAGES, file_list_name, split_file_name
+from zbuf_occlude.dataset.layout import CARD_FILE, file_list_name, split_file_name
+from zbuf_occlude.dataset.storage import storages
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.farm.checks import check_out_outside_inputs
+from zbuf_occlude.farm.checks import check_out_outside_inputs, storage_of
 from zbuf_occlude.farm.config import GENERATE_DEFAULTS, FarmParams, RunOptions, record_path
 from zbuf_occlude.farm.journal import FarmSummary, read_json, shape_names_of, write_card
 from zbuf_occlude.farm.run import run_farm
@@ -130,8 +131,9 @@ def generate(
     OutputError, BackendUnavailable
         As :func:`~zbuf_occlude.farm.run_farm` (the lock held by another run included).
     """
-    if params.storage not in GENERATE_STORAGES:
-        raise InvalidInputError(f"generate writes one of {GENERATE_STORAGES}, not {params.storage!r}")
+    kind = storage_of(params)
+    if kind.written_by != "generate":
+        raise InvalidInputError(f"generate writes one of {storages('generate')}, not {params.storage!r}")
     check_out_outside_inputs(out, paths)
     scan = scan_inputs(paths, class_from=class_from)
     objects, skipped = scan.objects, scan.skipped
@@ -139,7 +141,7 @@ def generate(
     options = RunOptions(
         workers=1, overwrite=overwrite, progress=progress, command=command,
         inputs=tuple(paths),
-        on_finished=lambda folder: _merge_h5(folder, objects if params.storage == "h5" else []),
+        on_finished=lambda folder: _merge_h5(folder, objects if kind.joins_splits else []),
         skipped=tuple((s.path, s.reason) for s in skipped), layout=scan.layout, isolate=isolate,
         progress_label="generate",
     )  # fmt: skip

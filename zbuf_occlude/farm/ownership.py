@@ -32,13 +32,13 @@ from zbuf_occlude.dataset.layout import (
     MANIFEST_FILE,
     PLAN_FILE,
     RECORD_DIR,
-    SAMPLE_FILE_FORMATS,
     SHAPE_NAMES_FILE,
     SHARD_DIR,
     TASK_DIR,
     file_list_name,
     split_file_name,
 )
+from zbuf_occlude.dataset.storage import STORAGE_KINDS, storage_kind
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.farm.config import record_path, shard_path
 from zbuf_occlude.farm.journal import objects_of, read_json, read_plan
@@ -74,13 +74,19 @@ def check_inputs_outside_out(out: str | os.PathLike, inputs: Iterable[str | os.P
 
 def written_names(objects: Sequence[FarmObject] = (), storage: str | None = None) -> list[str]:
     """The names directly under the output folder that a run writes: the journal, the data set's
-    files, and for ``generate --format npz|ply`` the first folder of each object's name."""
+    files, and those the files of its storage take (:meth:`~zbuf_occlude.dataset.storage.StorageKind.top_names`:
+    for ``generate --format npz|ply`` the first folder of each object's name).
+
+    Raises
+    ------
+    InvalidInputError
+        No storage kind is ``storage`` (:func:`~zbuf_occlude.dataset.storage.storage_kind`).
+    """
     names = [SHARD_DIR, RECORD_DIR, TASK_DIR, CARD_FILE, CARD_SHA256_FILE, MANIFEST_FILE, SHAPE_NAMES_FILE]
     splits = sorted({*SPLITS, *(o.split for o in objects)})
     names += [file_list_name(s) for s in splits] + [split_file_name(s) for s in splits]
-    if storage in ("npz", "ply"):
-        # a name that is no folder name ("..") is refused later, where names are checked
-        names += sorted({o.name.split("/")[0] for o in objects} - {"", ".", ".."})
+    if storage is not None:
+        names += storage_kind(storage).top_names(o.name for o in objects)
     return names
 
 
@@ -131,11 +137,10 @@ def check_no_foreign_files(out: Path, objects: Sequence[FarmObject] = (), storag
 
 
 def _own_names(o: FarmObject) -> list[re.Pattern[str]]:
-    """The only files an object's record may name: its shard, or ``generate``'s sample files of it
-    (:func:`~zbuf_occlude.dataset.layout.sample_file_name`)."""
-    stem = o.name.rsplit("/", 1)[-1]
-    samples = rf"{re.escape(o.name)}/{re.escape(stem)}_v\d{{3}}_el[+-]\d{{3}}_az\d{{3}}_s\d{{2}}\.({'|'.join(SAMPLE_FILE_FORMATS)})"
-    return [re.compile(re.escape(shard_path(o))), re.compile(samples)]
+    """The only files an object's record may name: those a storage kind writes for it, its shard or
+    ``generate``'s sample files of it (:meth:`~zbuf_occlude.dataset.storage.StorageKind.own_files`)."""
+    patterns = dict.fromkeys(p for kind in STORAGE_KINDS.values() for p in kind.own_files(o.name, shard_path(o)))
+    return [re.compile(p) for p in patterns]
 
 
 def _record_files(out: Path, o: FarmObject) -> list[Path | None]:

@@ -21,7 +21,7 @@ from zbuf_occlude.dataset.layout import (
     TASK_DIR,
 )
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError, OutputError
-from zbuf_occlude.farm.checks import check_before_work, check_out_outside_inputs, prepare_out
+from zbuf_occlude.farm.checks import check_before_work, check_out_outside_inputs, object_size, prepare_out, storage_of
 from zbuf_occlude.farm.config import (
     MANIFEST_INTERVAL_S,
     OPTION_NAMES,
@@ -124,11 +124,8 @@ def _check_compatible(out: Path, plan: dict[str, Any]) -> None:
 
 
 def _estimate_bytes(params: FarmParams) -> int:
-    poses = len(params.poses)
-    dense = params.dense_points or 0
-    if params.storage == "compact":
-        return dense * 12 + poses * (dense + 7) // 8
-    return poses * params.samples_per_view * params.n_points * 12
+    """Bytes one object's files take, as its storage kind estimates them."""
+    return storage_of(params).disk_bytes(object_size(params))
 
 
 def run_farm(
