@@ -31,7 +31,7 @@ import sys
 import time
 from pathlib import Path
 
-from zbuf_occlude.experiments.compare import compare, read_csv, table_1a, table_1b, write_results
+from zbuf_occlude.experiments.compare import CompareConfig, compare, read_csv, table_1a, table_1b, write_results
 from zbuf_occlude.visibility import available_methods
 
 MODELNET = Path(__file__).resolve().parents[2] / "shared" / "data" / "modelnet_subset"
@@ -101,8 +101,7 @@ def main(argv: list[str] | None = None) -> int:
     start = time.perf_counter()
     if args.part == "1a":
         meshes = args.meshes.split(",") if args.meshes else list(LARGEST)
-        rows = compare(
-            _paths(meshes),
+        config = CompareConfig(
             _methods(METHODS_1A),
             [int(n) for n in (args.points or "10000").split(",")],
             args.views or "fibonacci:4",
@@ -112,6 +111,7 @@ def main(argv: list[str] | None = None) -> int:
             grid_sweep=(16, 32, 64, 128),
             memory=True,
         )
+        rows = compare(_paths(meshes), config)
         sub = out / "table1a"
         write_results(rows, sub, title="Table 1A run: every method at one point count", command=command)
         elapsed = time.perf_counter() - start
@@ -128,14 +128,14 @@ def main(argv: list[str] | None = None) -> int:
         print(text + table_1a(rows))
     else:
         meshes = args.meshes.split(",") if args.meshes else list(LARGEST[:2])
-        rows = compare(
-            _paths(meshes),
+        config = CompareConfig(
             _methods(METHODS_1B),
             [int(n) for n in (args.points or "1000,10000,50000,100000").split(",")],
             args.views or "fibonacci:2",
             args.resolution,
             args.seed,
         )
+        rows = compare(_paths(meshes), config)
         sub = out / "table1b"
         write_results(rows, sub, title="Table 1B run: point counts 1k-100k", command=command)
         elapsed = time.perf_counter() - start

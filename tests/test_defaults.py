@@ -7,7 +7,7 @@ import inspect
 import pytest
 
 from zbuf_occlude import defaults
-from zbuf_occlude.experiments.compare import compare, run_compare
+from zbuf_occlude.experiments.compare import CompareConfig
 from zbuf_occlude.farm.config import FarmParams
 from zbuf_occlude.geometry.cameras import camera_on_sphere, cameras_from_schedule
 from zbuf_occlude.pipeline import occlude_poses
@@ -24,7 +24,7 @@ def _default(fn, name):
 @pytest.mark.parametrize(
     "fn",
     [camera_on_sphere, cameras_from_schedule, occlude_poses, zbuffer_visible, zbuffer_tolerance_visible,
-     naive_zbuffer_visible, compare, run_compare],
+     naive_zbuffer_visible, CompareConfig],
 )  # fmt: skip
 def test_resolution_default(fn) -> None:
     assert _default(fn, "resolution") == defaults.DEFAULT_RESOLUTION

@@ -64,19 +64,17 @@ def test_compare_end_to_end_on_tiny_input(tmp_path: Path) -> None:
     _gl_or_skip()
     path = _tiny_path()
     out = tmp_path / "cmp"
-    report = cmp.run_compare(
-        [path, tmp_path / "missing.off"],
+    config = cmp.CompareConfig(
         "zbuffer,oracle,paper-exact,paper-pruned,paper-vertex,og32,og64,naive-zbuffer",
         "200,400",
         "30:45,-40:200",
         256,
-        out,
         0,
         resolution_sweep="128,256",
         grid_sweep="16,32",
         memory=True,
-        progress=False,
     )
+    report = cmp.run_compare([path, tmp_path / "missing.off"], out, config, progress=False)
     assert report == out / "report.md"
     for name in ("results.csv", "report.md", "time_vs_points.png", "agreement_vs_resolution.png", "agreement_vs_grid.png"):
         assert (out / name).is_file(), name
@@ -102,7 +100,7 @@ def test_failing_method_is_reported_not_fatal(tmp_path: Path, monkeypatch: pytes
     from zbuf_occlude.visibility import registry
 
     monkeypatch.setitem(registry._METHODS, "paper-vertex", boom)
-    rows = cmp.compare([path], ["oracle", "paper-vertex", "og32"], [300], "10:20", 128, 0, progress=False)
+    rows = cmp.compare([path], cmp.CompareConfig(["oracle", "paper-vertex", "og32"], [300], "10:20", 128, 0), progress=False)
     by_method = {r["method"]: r for r in rows}
     assert "kaboom" in by_method["paper-vertex"]["error"]
     assert by_method["og32"]["error"] == "" and by_method["og32"]["accuracy"] > 0.8
@@ -110,7 +108,8 @@ def test_failing_method_is_reported_not_fatal(tmp_path: Path, monkeypatch: pytes
 
 def test_method_budget_skips_larger_counts(tmp_path: Path) -> None:
     path = _tiny_path()
-    rows = cmp.compare([path], ["oracle", "paper-exact"], [100, 200], "10:20", 128, 0, method_budget_s=0.0, progress=False)
+    config = cmp.CompareConfig(["oracle", "paper-exact"], [100, 200], "10:20", 128, 0, method_budget_s=0.0)
+    rows = cmp.compare([path], config, progress=False)
     exact = {r["n_points"]: r for r in rows if r["method"] == "paper-exact"}
     assert exact[100]["error"] == ""
     assert exact[200]["error"].startswith("skipped")
@@ -123,9 +122,8 @@ def _cells(table: str, mesh: str) -> list[str]:
 
 def test_tables_1a_1b_hold_the_measured_values() -> None:
     path = _tiny_path()
-    rows = cmp.compare(
-        [path], ["oracle", "paper-exact", "paper-pruned", "og32", "og64"], [300], "20:30,-10:200", 128, 0, progress=False
-    )
+    config = cmp.CompareConfig(["oracle", "paper-exact", "paper-pruned", "og32", "og64"], [300], "20:30,-10:200", 128, 0)
+    rows = cmp.compare([path], config, progress=False)
     by = {m: [r for r in rows if r["method"] == m] for m in ("paper-exact", "paper-pruned", "og32", "og64")}
     mean = {m: {k: np.mean([r[k] for r in rs]) for k in ("time_s", "accuracy", "false_hidden_rate")} for m, rs in by.items()}
     n_faces = len(zo.load_mesh(path).faces)
@@ -182,6 +180,51 @@ def test_cli_compare_handler_runs(tmp_path: Path) -> None:
     assert args.func(args) == 0
     with open(tmp_path / "o" / "results.csv") as fh:
         assert len(list(csv.DictReader(fh))) == 2
+
+
+@pytest.mark.parametrize(
+    "argv, flag",
+    [(["--methods", "oracle,no-such-method"], "--methods"), (["--reference", "no-such-method"], "--reference"),
+     (["--methods", " , "], "--methods")],
+)  # fmt: skip
+def test_a_bad_method_is_refused_naming_its_flag_before_anything_is_written(tmp_path: Path, capsys, argv, flag) -> None:
+    from zbuf_occlude.cli.main import main
+
+    out = tmp_path / "out"
+    assert main(["compare", str(_tiny_path()), *argv, "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("zbuf-occlude: error:") and "\n" not in err and flag in err, err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [("methods", "oracle,nope"), ("reference", "nope"), ("points", ""), ("points", "10,abc"), ("resolution", 0),
+     ("resolution", 2.5), ("resolution_sweep", "0"), ("grid_sweep", [-4]), ("sweep_points", 0), ("seed", -1),
+     ("views", "nope"), ("views", [(1.0,)]), ("radius", 0.0), ("radius", float("inf")), ("method_budget_s", -1.0)],
+)  # fmt: skip
+def test_the_config_is_checked_when_made_naming_the_field_or_its_option(field, value) -> None:
+    with pytest.raises(InvalidInputError, match=field):
+        cmp.CompareConfig(**{field: value})
+    with pytest.raises(InvalidInputError, match="--the-flag"):
+        cmp.CompareConfig(**{field: value}, option_names={field: "--the-flag"})
+
+
+def test_the_config_holds_its_values_parsed() -> None:
+    config = cmp.CompareConfig("oracle, og32,oracle", "1000,2k", "10:20,30:40", 128.0, 3, resolution_sweep="64",
+                               method_options={"og32": {"grid": 32}})  # fmt: skip
+    assert config.methods == ("oracle", "og32") and config.points == (1000, 2000) and config.resolution == 128
+    assert config.poses == ((10.0, 20.0), (30.0, 40.0)) and config.resolution_sweep == (64,) and config.grid_sweep == ()
+    assert config.sweeps == ["resolution"] and config.seed == 3 and config.method_options == {"og32": {"grid": 32}}
+    assert cmp.CompareConfig(views=[(10, 20)]).poses == ((10.0, 20.0),)
+
+
+def test_compare_and_run_compare_take_a_config_not_a_keyword_list() -> None:
+    import inspect
+
+    for fn in (cmp.compare, cmp.run_compare):
+        assert len(inspect.signature(fn).parameters) <= 12, fn
+        assert len(inspect.getsource(fn).splitlines()) < 150, fn
 
 
 # -----------------------------------------------------------------------------------------

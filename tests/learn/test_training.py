@@ -182,3 +182,23 @@ def test_a_resumed_run_keeps_the_best_score_so_far(monkeypatch, tmp_path) -> Non
 def test_bad_recipe_options_are_refused_naming_them(field, value) -> None:
     with pytest.raises(InvalidInputError, match=field):
         T.TrainConfig(**{field: value})
+
+
+def test_a_checkpoint_from_before_the_recipe_options_resumes_as_if_the_run_never_stopped(tmp_path) -> None:
+    data, val = _clouds([0] * 6 + [1] * 6, seed=1), _clouds([0, 1] * 3, seed=2)
+    whole = T.train(data, 2, _cfg(epochs=3), val_set=val, progress=False)
+    T.train(data, 2, _cfg(epochs=1), val_set=val, checkpoint_dir=tmp_path, progress=False)
+    state = torch.load(tmp_path / "last.pt", weights_only=True)
+    for key in ("best_score", "best_val_mean_class_accuracy", "best_val_loss"):  # what last.pt held before the options
+        del state[key]
+    torch.save(state, tmp_path / "last.pt")
+    resumed = T.train(data, 2, _cfg(epochs=3), val_set=val, checkpoint_dir=tmp_path, progress=False)
+    assert resumed.history == whole.history and resumed.best_epoch == whole.best_epoch
+    for k, v in whole.model.state_dict().items():
+        assert torch.equal(v, resumed.model.state_dict()[k]), k
+
+
+def test_train_is_short_enough_to_read() -> None:
+    import inspect
+
+    assert len(inspect.getsource(T.train).splitlines()) < 150

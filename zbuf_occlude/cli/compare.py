@@ -7,11 +7,19 @@ from typing import Any
 
 from zbuf_occlude.cli.options import Checked, count, count_list, out_folder, poses, real, seed
 from zbuf_occlude.defaults import DEFAULT_RESOLUTION, DEFAULT_VIEWS
+from zbuf_occlude.experiments.compare.config import DEFAULT_METHODS, DEFAULT_POINTS, DEFAULT_REFERENCE, CompareConfig
 from zbuf_occlude.experiments.compare.job import run_compare
-from zbuf_occlude.experiments.compare.run import DEFAULT_METHODS, DEFAULT_POINTS, DEFAULT_REFERENCE
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 
 __all__ = ["add_compare_parser"]
+
+
+#: The flag of each CompareConfig field, named in its messages.
+COMPARE_OPTIONS = {
+    "methods": "--methods", "points": "--dense-points", "views": "--views", "resolution": "--resolution", "seed": "--seed",
+    "reference": "--reference", "resolution_sweep": "--resolution-sweep", "grid_sweep": "--grid-sweep",
+    "sweep_points": "--sweep-points", "method_budget_s": "--method-budget",
+}  # fmt: skip
 
 
 def _cli_compare(args: argparse.Namespace) -> int:
@@ -19,23 +27,13 @@ def _cli_compare(args: argparse.Namespace) -> int:
     import sys
 
     out_folder(args.out, "--out")  # the default's check; a given --out was checked while parsing
-    report = run_compare(
-        args.paths,
-        args.methods,
-        args.dense_points,
-        args.views,
-        args.resolution,
-        args.out,
-        args.seed,
-        reference=args.reference,
-        resolution_sweep=args.resolution_sweep,
-        grid_sweep=args.grid_sweep,
-        sweep_points=args.sweep_points,
-        memory=args.memory,
-        method_budget_s=args.method_budget,
-        progress=not args.no_progress,
-        command="zbuf-occlude " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
-    )
+    config = CompareConfig(
+        methods=args.methods, points=args.dense_points, views=args.views, resolution=args.resolution, seed=args.seed,
+        reference=args.reference, resolution_sweep=args.resolution_sweep, grid_sweep=args.grid_sweep,
+        sweep_points=args.sweep_points, memory=args.memory, method_budget_s=args.method_budget, option_names=COMPARE_OPTIONS,
+    )  # fmt: skip
+    command = "zbuf-occlude " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    report = run_compare(args.paths, args.out, config, progress=not args.no_progress, command=command)
     sys.stdout.write(f"{report}\n")  # the command's output: where the report went
     return 0
 

@@ -11,6 +11,7 @@ from typing import Any
 from zbuf_occlude.cli.options import Checked, check_device, count, out_folder, seed
 from zbuf_occlude.cli.sim2real import parse_pairs, print_table
 from zbuf_occlude.defaults import DEFAULT_METHOD
+from zbuf_occlude.experiments.table3_config import AUGMENTATION_MODEL, ELEVATION_MODEL, SCALES, Table3Config
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 
 __all__ = ["add_parser"]
@@ -21,7 +22,7 @@ def _common(p: argparse.ArgumentParser) -> None:
         "root", help=f"mesh tree in ModelNet's layout, CLASS/SPLIT/NAME.ext with files {EXTENSIONS_TEXT}; duplicate meshes are dropped"
     )
     p.add_argument("--out", required=True, action=Checked, check=out_folder, help="output folder (results.csv, table.md, run.json, plots, checkpoints)")
-    p.add_argument("--scale", choices=("quick", "paper"), default="quick",
+    p.add_argument("--scale", choices=tuple(SCALES), default="quick",
                    help="quick: fits a 2-core CPU; paper: the paper's sizes (ModelNet40 and a GPU) (default: %(default)s)")
     p.add_argument("--epochs", action=Checked, check=count("MAX_EPOCHS"), help="override the scale's epoch count")
     p.add_argument("--points", action=Checked, check=count("MAX_POINTS"), help="points per cloud (override the scale's)")
@@ -34,20 +35,24 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
+#: The flag of each Table3Config field, named in its messages.
+TABLE3_OPTIONS = {name: f"--{name}" for name in ("model", "scale", "epochs", "points", "method", "classes", "seed", "device", "threads")}
+
+
 def _run(args: argparse.Namespace) -> int:
     # the counts, --seed and --out were checked while parsing (cli.options); the device before any rendering
     check_device(args.device)
     from zbuf_occlude.experiments.table3 import run_augmentation, run_elevation
 
     classes = [c.strip() for c in args.classes.split(",")] if args.classes else None
-    common = dict(model=args.model, scale=args.scale, epochs=args.epochs, points=args.points, method=args.method,
-                  classes=classes, data_dir=args.data, seed=args.seed, device=args.device, threads=args.threads,
-                  progress=not args.no_progress)  # fmt: skip
+    config = Table3Config(model=args.model, scale=args.scale, epochs=args.epochs, points=args.points, method=args.method,
+                          classes=classes, seed=args.seed, device=args.device, threads=args.threads, option_names=TABLE3_OPTIONS)  # fmt: skip
+    progress = not args.no_progress
     if args.experiment == "elevation":
-        summary = run_elevation(args.root, args.out, profile=not args.no_profile, **common)
+        summary = run_elevation(args.root, args.out, config, data_dir=args.data, profile=not args.no_profile, progress=progress)
     else:
-        summary = run_augmentation(args.root, args.out, real_scans=args.real_scans,
-                                   label_map=parse_pairs(args.label_map, "--label-map"), **common)  # fmt: skip
+        summary = run_augmentation(args.root, args.out, config, data_dir=args.data, real_scans=args.real_scans,
+                                   label_map=parse_pairs(args.label_map, "--label-map"), progress=progress)  # fmt: skip
     return print_table(args.out, summary)
 
 
@@ -64,7 +69,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         description="Table 3A: train on clouds seen from elevations ±90, ±70, ±50, ±20 degrees and test on ±80..0.",
     )  # fmt: skip
     _common(e)
-    e.add_argument("--model", choices=("pointnet", "voxnet", "3dmfv"), default="pointnet", help="classifier (default: %(default)s)")
+    e.add_argument("--model", choices=("pointnet", "voxnet", "3dmfv"), default=ELEVATION_MODEL, help="classifier (default: %(default)s)")
     e.add_argument("--no-profile", action="store_true", help="skip Fig. 12's visible-area curve in the plot")
     e.set_defaults(func=_run)
     a = sub.add_parser(
@@ -73,7 +78,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         "(and on real scans with --real-scans).",
     )  # fmt: skip
     _common(a)
-    a.add_argument("--model", choices=("voxnet", "3dmfv", "pointnet"), default="3dmfv", help="classifier (default: %(default)s)")
+    a.add_argument("--model", choices=("voxnet", "3dmfv", "pointnet"), default=AUGMENTATION_MODEL, help="classifier (default: %(default)s)")
     a.add_argument("--real-scans", help="Test 3: SUO objects/ folder or LiDARNet v2 folder")
     a.add_argument("--label-map", help="rename real labels, REAL=MODEL,... (e.g. Car=car,4wd=car)")
     a.set_defaults(func=_run)

@@ -4,7 +4,8 @@ Sryamkin et al. 2023, §4.4, Table 3.  Data are rendered with the farm
 (:func:`zbuf_occlude.run_farm`, compact storage) and read back with
 :class:`zbuf_occlude.OccludedDataset`; each experiment writes ``results.csv``,
 ``table.md`` (our numbers beside the paper's), ``run.json`` (parameters, wall times) and
-plots into its output folder.
+plots into its output folder.  Both take their settings as one
+:class:`~zbuf_occlude.experiments.table3_config.Table3Config`, checked when it is made.
 
 Every file goes through the output layer (:class:`~zbuf_occlude.io.owned.OwnedFolder`): the
 output folder is held for the run, each name it writes (:data:`ELEVATION_OUTPUTS`,
@@ -19,18 +20,18 @@ from __future__ import annotations
 import json
 import logging
 import os
-import platform
 import re
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from zbuf_occlude.defaults import DEFAULT_METHOD
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.experiments.machine import machine_description
 from zbuf_occlude.experiments.paper import MODELNET8, PAPER_3A, PAPER_3B, TEST_ELEVATIONS, TRAIN_ELEVATIONS
+from zbuf_occlude.experiments.table3_config import AUGMENTATION_MODEL, ELEVATION_MODEL, SCALES, Scale, Table3Config
 from zbuf_occlude.experiments.table3_report import confusion_rows, plot_augmentation, plot_elevation, table_3a, table_3b
 from zbuf_occlude.io.json_files import read_json_file
 from zbuf_occlude.io.owned import OwnedFolder
@@ -39,7 +40,7 @@ from zbuf_occlude.learn.metrics import accuracy_by_elevation, classification_rep
 from zbuf_occlude.visibility.registry import method_info
 
 __all__ = [
-    "SCALES", "Scale", "plan_meshes", "run_elevation", "run_augmentation", "combine_elevation", "CHECKPOINT_FILES",
+    "SCALES", "Scale", "Table3Config", "plan_meshes", "run_elevation", "run_augmentation", "combine_elevation", "CHECKPOINT_FILES",
     "AUGMENTATION_SETS", "ELEVATION_OUTPUTS", "AUGMENTATION_OUTPUTS", "COMBINED_OUTPUTS", "DATA_OUTPUTS",
 ]  # fmt: skip
 
@@ -86,34 +87,6 @@ def _write_mesh_list(data_dir: Path, text: str) -> Path:
             folder.adopt(["meshes.txt"])
         return folder.write_text("meshes.txt", text)
 
-@dataclass(frozen=True)
-class Scale:
-    """Sizes of a run (``quick`` fits a 2-core CPU; ``paper`` is the paper's data and our full-size models)."""
-
-    points: int
-    samples_per_view: int
-    dense_points: int
-    resolution: int
-    epochs: int
-    patience: int
-    width: dict
-    fv_grid: int
-    complete_per_mesh: int  # uniform clouds per mesh for C2 / Test 1
-    val_fraction: float
-    profile_points: int
-    profile_azimuths: int
-
-
-SCALES = {
-    "quick": Scale(points=256, samples_per_view=1, dense_points=8192, resolution=512, epochs=30, patience=10,
-                   width={"pointnet": 0.25, "voxnet": 0.5, "3dmfv": 0.25}, fv_grid=5, complete_per_mesh=25,
-                   val_fraction=0.1, profile_points=4000, profile_azimuths=4),
-    "paper": Scale(points=1024, samples_per_view=10, dense_points=100_000, resolution=1024, epochs=100, patience=20,
-                   width={"pointnet": 1.0, "voxnet": 1.0, "3dmfv": 1.0}, fv_grid=8, complete_per_mesh=1,
-                   val_fraction=0.1, profile_points=20_000, profile_azimuths=8),
-}  # fmt: skip
-
-
 def _natural(text: str) -> list:
     import re
 
@@ -146,32 +119,17 @@ def plan_meshes(root: str | os.PathLike, classes: Sequence[str] | None = None) -
     return rows
 
 
-def _render(meshes: list[dict], data_dir: Path, views: str, scale: Scale, points: int, method: str, seed: int,
-            progress: bool) -> Path:  # fmt: skip
+def _render(meshes: list[dict], data_dir: Path, views: str, config: Table3Config, progress: bool) -> Path:
     """Farm the meshes (compact storage) into ``data_dir`` (resumes; reuses a finished run)."""
     from zbuf_occlude.farm import FarmParams, RunOptions, run_farm
 
     list_file = _write_mesh_list(data_dir, "".join(f"{m['path']} {m['class_name']} {m['split']}\n" for m in meshes))
-    params = FarmParams(views=views, samples_per_view=scale.samples_per_view, n_points=points,
-                        dense_points=scale.dense_points, resolution=scale.resolution, seed=seed,
-                        storage="compact", method=method)  # fmt: skip
+    scale = config.scale_values
+    params = FarmParams(views=views, samples_per_view=scale.samples_per_view, n_points=config.n_points,
+                        dense_points=scale.dense_points, resolution=scale.resolution, seed=config.seed,
+                        storage="compact", method=config.method)  # fmt: skip
     run_farm(list_file, data_dir / "dataset", params, RunOptions(progress=progress))
     return data_dir / "dataset"
-
-
-def _config(model: str, scale: Scale, epochs: int | None, seed: int, device: str, threads: int | None):
-    from zbuf_occlude.learn.training import TrainConfig
-
-    return TrainConfig(model=model, epochs=epochs or scale.epochs, patience=scale.patience,
-                       width=scale.width[model], fv_grid=scale.fv_grid, seed=seed, device=device,
-                       threads=threads)  # fmt: skip
-
-
-def _machine() -> str:
-    import torch
-
-    cpu = platform.processor() or platform.machine()
-    return f"{platform.node()} {cpu}, {os.cpu_count()} CPUs, torch {torch.__version__}, {platform.python_version()}"
 
 
 # -- Table 3A ------------------------------------------------------------------------------
@@ -212,17 +170,9 @@ def _visible_area_curve(meshes: list[dict], data_dir: Path, scale: Scale, method
 def run_elevation(
     root: str | os.PathLike,
     out: str | os.PathLike,
+    config: Table3Config | None = None,
     *,
-    model: str = "pointnet",
-    scale: str = "quick",
-    epochs: int | None = None,
-    points: int | None = None,
-    method: str = DEFAULT_METHOD,
-    classes: Sequence[str] | None = None,
     data_dir: str | os.PathLike | None = None,
-    seed: int = 0,
-    device: str = "cpu",
-    threads: int | None = None,
     profile: bool = True,
     progress: bool = True,
 ) -> dict:
@@ -238,19 +188,12 @@ def run_elevation(
         Output folder: ``results.csv`` (accuracy per test elevation, ours and the paper's),
         ``table.md``, ``per_class.csv``, ``confusion.csv``, ``run.json``, ``accuracy_vs_elevation.png``,
         ``checkpoints/`` (:data:`ELEVATION_OUTPUTS`, each checked before any work).
-    model : {"pointnet", "voxnet", "3dmfv"}
-    scale : {"quick", "paper"}
-    epochs, points : int, optional
-        Override the scale's values.
-    method : str
-        HSR method of the farm (``zbuffer``; ``og32`` is the paper's).
-    classes : sequence of str, optional
+    config : Table3Config, optional
+        Model, scale, epochs, points per cloud, HSR method, classes, seed, device and threads
+        (:class:`~zbuf_occlude.experiments.table3_config.Table3Config`, checked when made);
+        default: its defaults with the model :data:`~zbuf_occlude.experiments.table3_config.ELEVATION_MODEL`.
     data_dir : path, optional
         Where the farm's data set goes (default ``out/data``); share it between models.
-    seed : int
-    device : {"cpu", "cuda"}
-    threads : int, optional
-        torch CPU threads.
     profile : bool
         Compute Fig. 12's visible-area curve for the plot's second axis.
 
@@ -268,26 +211,23 @@ def run_elevation(
         Another live process holds ``out``.
     """
     t_start = time.perf_counter()
+    config = config if config is not None else Table3Config(ELEVATION_MODEL)
     with _owned(out, ELEVATION_OUTPUTS, "the elevation run (Table 3A)") as folder:
         folder.check_writable(ELEVATION_OUTPUTS)  # every file before any work: a refusal writes nothing
-        return _elevation_into(folder, root, t_start, model=model, scale=scale, epochs=epochs, points=points, method=method,
-                               classes=classes, data_dir=data_dir, seed=seed, device=device, threads=threads, profile=profile,
-                               progress=progress)  # fmt: skip
+        return _elevation_into(folder, root, t_start, config, data_dir=data_dir, profile=profile, progress=progress)
 
 
-def _elevation_into(folder: OwnedFolder, root: str | os.PathLike, t_start: float, *, model: str, scale: str, epochs: int | None,
-                    points: int | None, method: str, classes: Sequence[str] | None, data_dir: str | os.PathLike | None, seed: int,
-                    device: str, threads: int | None, profile: bool, progress: bool) -> dict:  # fmt: skip
+def _elevation_into(folder: OwnedFolder, root: str | os.PathLike, t_start: float, config: Table3Config, *,
+                    data_dir: str | os.PathLike | None, profile: bool, progress: bool) -> dict:  # fmt: skip
     """:func:`run_elevation` once ``--out`` is held."""
     from zbuf_occlude.learn.training import predict, train
 
-    sc = SCALES[scale]
-    n_points = points or sc.points
+    sc, n_points, model, seed = config.scale_values, config.n_points, config.model, config.seed
     out = folder.root
     data_dir = Path(data_dir) if data_dir else out / "data"
-    meshes = plan_meshes(root, classes)
+    meshes = plan_meshes(root, config.classes)
     t0 = time.perf_counter()
-    ds_path = _render(meshes, data_dir, "paper100", sc, n_points, method, seed, progress)
+    ds_path = _render(meshes, data_dir, "paper100", config, progress)
     t_render = time.perf_counter() - t0
     from zbuf_occlude.dataset.reader import OccludedDataset
 
@@ -297,13 +237,13 @@ def _elevation_into(folder: OwnedFolder, root: str | os.PathLike, t_start: float
     full = from_occluded(train_ds, n_points, seed)
     test = from_occluded(test_ds, n_points, seed + 1)
     tr_rows, val_rows = split_validation(len(full), sc.val_fraction, seed, labels=full.labels)
-    config = _config(model, sc, epochs, seed, device, threads)
+    train_config = config.train_config()
     t0 = time.perf_counter()
-    result = train(full.subset(tr_rows), len(names), config, val_set=full.subset(val_rows), checkpoint_dir=out / "checkpoints",
+    result = train(full.subset(tr_rows), len(names), train_config, val_set=full.subset(val_rows), checkpoint_dir=out / "checkpoints",
                    checkpoint_writer=lambda name: folder.write(f"checkpoints/{name}"), progress=progress)  # fmt: skip
     t_train = time.perf_counter() - t0
     t0 = time.perf_counter()
-    pred, _ = predict(result.model, test.points, batch_size=config.batch_size, device=config.device)
+    pred, _ = predict(result.model, test.points, batch_size=train_config.batch_size, device=train_config.device)
     t_test = time.perf_counter() - t0
     report = classification_report(test.labels, pred, names)
     by_el = accuracy_by_elevation(test.labels, pred, test.elevation_deg)
@@ -313,17 +253,17 @@ def _elevation_into(folder: OwnedFolder, root: str | os.PathLike, t_start: float
     folder.write_csv("results.csv", rows)
     folder.write_csv("per_class.csv", [{"class": k, "accuracy": v} for k, v in report["per_class"].items()])
     folder.write_csv("confusion.csv", confusion_rows(report["confusion"], names))
-    curve = _visible_area_curve(meshes, data_dir, sc, method, progress) if profile else None
+    curve = _visible_area_curve(meshes, data_dir, sc, config.method, progress) if profile else None
     with folder.write("accuracy_vs_elevation.png") as tmp:
         plot_elevation(tmp, {model: rows}, curve)
     summary = {
-        "experiment": "elevation (Table 3A)", "model": model, "scale": scale, "root": str(root),
+        "experiment": "elevation (Table 3A)", "model": model, "scale": config.scale, "root": str(root),
         "data_dir": str(data_dir),
-        "meshes": len(meshes), "classes": names, "points": n_points, "method": method,
+        "meshes": len(meshes), "classes": names, "points": n_points, "method": config.method,
         "n_train": len(tr_rows), "n_val": len(val_rows), "n_test": len(test),
         "overall_accuracy": report["overall_accuracy"], "mean_class_accuracy": report["mean_class_accuracy"],
-        "best_epoch": result.best_epoch, "epochs_run": len(result.history), "config": config.to_dict(),
-        "history": result.history, "machine": _machine(),
+        "best_epoch": result.best_epoch, "epochs_run": len(result.history), "config": train_config.to_dict(),
+        "history": result.history, "machine": machine_description(),
         "wall_s": {"render": t_render, "train": t_train, "test": t_test, "total": time.perf_counter() - t_start},
         "train_samples_per_s": result.samples_per_second,
     }  # fmt: skip
@@ -356,19 +296,11 @@ def _split_3b(meshes: list[dict]) -> list[dict]:
 def run_augmentation(
     root: str | os.PathLike,
     out: str | os.PathLike,
+    config: Table3Config | None = None,
     *,
-    model: str = "3dmfv",
-    scale: str = "quick",
-    epochs: int | None = None,
-    points: int | None = None,
-    method: str = DEFAULT_METHOD,
-    classes: Sequence[str] | None = None,
+    data_dir: str | os.PathLike | None = None,
     real_scans: str | os.PathLike | None = None,
     label_map: dict[str, str] | None = None,
-    data_dir: str | os.PathLike | None = None,
-    seed: int = 0,
-    device: str = "cpu",
-    threads: int | None = None,
     progress: bool = True,
 ) -> dict:
     """Table 3B: training sets C1 (occluded), C2 (complete), C3 (both) × Test 1 (complete test
@@ -389,6 +321,30 @@ def run_augmentation(
     Writes :data:`AUGMENTATION_OUTPUTS` in ``out`` (``test3.csv`` only with ``real_scans``), each
     checked before any work.
 
+    Parameters
+    ----------
+    root : path
+        Mesh tree (ModelNet layout); content duplicates are dropped.
+    out : path
+        Output folder.
+    config : Table3Config, optional
+        Model, scale, epochs, points per cloud, HSR method, classes, seed, device and threads
+        (:class:`~zbuf_occlude.experiments.table3_config.Table3Config`, checked when made);
+        default: its defaults with the model :data:`~zbuf_occlude.experiments.table3_config.AUGMENTATION_MODEL`.
+    data_dir : path, optional
+        Where the farm's data set goes (default ``out/data``).
+    real_scans : path, optional
+        Test 3's scans: an SUO ``objects/`` folder or a LiDARNet v2 folder.
+    label_map : dict, optional
+        Real label → model class (default: SUO car types → ``car``).
+    progress : bool
+        Progress bars.
+
+    Returns
+    -------
+    dict
+        The run summary written to ``run.json``.
+
     Raises
     ------
     InvalidInputError
@@ -400,34 +356,32 @@ def run_augmentation(
         Another live process holds ``out``.
     """
     t_start = time.perf_counter()
+    config = config if config is not None else Table3Config(AUGMENTATION_MODEL)
     writes = [n for n in AUGMENTATION_OUTPUTS if real_scans or n != "test3.csv"]
     with _owned(out, AUGMENTATION_OUTPUTS, "the augmentation run (Table 3B)") as folder:
         folder.check_writable(writes)  # every file before any work: a refusal writes nothing
-        return _augmentation_into(folder, root, t_start, model=model, scale=scale, epochs=epochs, points=points, method=method,
-                                  classes=classes, real_scans=real_scans, label_map=label_map, data_dir=data_dir, seed=seed,
-                                  device=device, threads=threads, progress=progress)  # fmt: skip
+        return _augmentation_into(folder, root, t_start, config, data_dir=data_dir, real_scans=real_scans, label_map=label_map,
+                                  progress=progress)  # fmt: skip
 
 
-def _augmentation_into(folder: OwnedFolder, root: str | os.PathLike, t_start: float, *, model: str, scale: str, epochs: int | None,
-                       points: int | None, method: str, classes: Sequence[str] | None, real_scans: str | os.PathLike | None,
-                       label_map: dict[str, str] | None, data_dir: str | os.PathLike | None, seed: int, device: str,
-                       threads: int | None, progress: bool) -> dict:  # fmt: skip
+def _augmentation_into(folder: OwnedFolder, root: str | os.PathLike, t_start: float, config: Table3Config, *,
+                       data_dir: str | os.PathLike | None, real_scans: str | os.PathLike | None, label_map: dict[str, str] | None,
+                       progress: bool) -> dict:  # fmt: skip
     """:func:`run_augmentation` once ``--out`` is held."""
     from zbuf_occlude.dataset.reader import OccludedDataset
     from zbuf_occlude.learn.training import predict, train
 
-    sc = SCALES[scale]
-    n_points = points or sc.points
+    sc, n_points, model, seed = config.scale_values, config.n_points, config.model, config.seed
     out = folder.root
     data_dir = Path(data_dir) if data_dir else out / "data"
-    meshes = plan_meshes(root, classes)
-    if classes is None and set(MODELNET8) <= {m["class_name"] for m in meshes}:
+    meshes = plan_meshes(root, config.classes)
+    if config.classes is None and set(MODELNET8) <= {m["class_name"] for m in meshes}:
         meshes = [m for m in meshes if m["class_name"] in MODELNET8]
     meshes = _split_3b(meshes)
     if len({m["class_name"] for m in meshes}) < 2:
         raise InvalidInputError(f"augmentation needs two classes with two meshes each under {root}")
     t0 = time.perf_counter()
-    ds_path = _render(meshes, data_dir, "grid25", sc, n_points, method, seed, progress)
+    ds_path = _render(meshes, data_dir, "grid25", config, progress)
     t_render = time.perf_counter() - t0
     tr_ds, te_ds = OccludedDataset(ds_path, split="train"), OccludedDataset(ds_path, split="test")
     names = tr_ds.shape_names
@@ -443,37 +397,37 @@ def _augmentation_into(folder: OwnedFolder, root: str | os.PathLike, t_start: fl
     scans = _load_scans(real_scans, n_points, seed) if real_scans else None
     sets = dict(zip(AUGMENTATION_SETS, (c1, c2, CloudSet.concat([c1, c2]))))
     rows, test3, timings, summaries = [], [], {}, {}
+    train_config = config.train_config()
     for name, data in sets.items():
         tr_rows, val_rows = split_validation(len(data), sc.val_fraction, seed, labels=data.labels)
-        config = _config(model, sc, epochs, seed, device, threads)
         t0 = time.perf_counter()
-        res = train(data.subset(tr_rows), len(names), config, val_set=data.subset(val_rows), checkpoint_dir=out / "checkpoints" / name,
+        res = train(data.subset(tr_rows), len(names), train_config, val_set=data.subset(val_rows), checkpoint_dir=out / "checkpoints" / name,
                     checkpoint_writer=lambda file, name=name: folder.write(f"checkpoints/{name}/{file}"), progress=progress)  # fmt: skip
         timings[f"train_{name}"] = time.perf_counter() - t0
         summaries[name] = {"best_epoch": res.best_epoch, "epochs_run": len(res.history), "n_train": len(tr_rows),
                            "n_val": len(val_rows), "history": res.history}  # fmt: skip
         for test_name, test in (("Test1", test1), ("Test2", test2)):
-            pred, _ = predict(res.model, test.points, batch_size=config.batch_size, device=config.device)
+            pred, _ = predict(res.model, test.points, batch_size=train_config.batch_size, device=train_config.device)
             rep = classification_report(test.labels, pred, names)
             paper = PAPER_3B.get(model, {}).get(name, (float("nan"),) * 2)[0 if test_name == "Test1" else 1]
             rows.append({"model": model, "train_set": name, "test": test_name, "n_test": rep["n"],
                          "overall_accuracy": rep["overall_accuracy"], "mean_class_accuracy": rep["mean_class_accuracy"],
                          "paper_accuracy": paper / 100})  # fmt: skip
         if scans is not None:
-            test3.extend(_test3(res.model, scans, names, name, config, label_map))
+            test3.extend(_test3(res.model, scans, names, name, train_config, label_map))
     folder.write_csv("results.csv", rows)
     if test3:
         folder.write_csv("test3.csv", test3)
     with folder.write("augmentation.png") as tmp:
         plot_augmentation(tmp, rows, model)
     summary = {
-        "experiment": "augmentation (Table 3B)", "model": model, "scale": scale, "root": str(root),
+        "experiment": "augmentation (Table 3B)", "model": model, "scale": config.scale, "root": str(root),
         "classes": names, "train_meshes": [m["name"] for m in train_meshes],
-        "test_meshes": [m["name"] for m in test_meshes], "points": n_points, "method": method,
+        "test_meshes": [m["name"] for m in test_meshes], "points": n_points, "method": config.method,
         "n": {"C1": len(c1), "C2": len(c2), "Test1": len(test1), "Test2": len(test2),
               "Test3": len(scans[0]) if scans else 0},
-        "training": summaries, "config": _config(model, sc, epochs, seed, device, threads).to_dict(),
-        "machine": _machine(), "real_scans": str(real_scans) if real_scans else None,
+        "training": summaries, "config": train_config.to_dict(),
+        "machine": machine_description(), "real_scans": str(real_scans) if real_scans else None,
         "wall_s": {"render": t_render, **timings, "total": time.perf_counter() - t_start},
     }  # fmt: skip
     folder.write_text("run.json", json.dumps(summary, indent=1, default=float))

@@ -390,6 +390,193 @@ def _load_state(path: Path, target, state_dict, what: str) -> None:
         raise CheckpointError(f"{path}: its {what} does not fit this model ({type(exc).__name__}: {exc})") from None
 
 
+#: TrainConfig fields a run may change and still resume from its ``last.pt``: where and how fast it
+#: runs, and how long (more epochs, another patience).
+_MAY_CHANGE_ON_RESUME = ("device", "threads", "epochs", "patience")
+
+
+def _from_older_checkpoint(state: dict) -> dict:
+    """A ``last.pt`` an earlier version wrote, with the keys this version adds, as that version meant them.
+
+    The one place that knows older checkpoints: before the recipe options (:data:`PLAIN_RECIPE`),
+    ``last.pt`` held no ``best_val_mean_class_accuracy``, ``best_val_loss`` (unknown: NaN) or
+    ``best_score`` (the best epoch went by overall accuracy: the best one's, none before a best
+    epoch).  Its ``config_key`` compares equal to this version's, which leaves the recipe options out
+    at their plain values (:meth:`TrainConfig.identity`).
+    """
+    state = dict(state)
+    state.setdefault("best_val_mean_class_accuracy", float("nan"))
+    state.setdefault("best_val_loss", float("nan"))
+    state.setdefault("best_score", None if state["best_epoch"] == 0 else [state["best_val_accuracy"]])
+    return state
+
+
+@dataclass
+class _Run:
+    """One training run's moving parts, carried from epoch to epoch: what ``last.pt`` holds."""
+
+    model: nn.Module
+    opt: torch.optim.Optimizer
+    sched: torch.optim.lr_scheduler.LRScheduler
+    result: TrainResult
+    config_key: dict
+    n_train: int
+    start_epoch: int = 0
+    stale: int = 0
+    best_score: list[float] | None = None
+    best_state: dict | None = None
+    seen: int = 0
+
+
+def _start(config: TrainConfig, n_classes: int, n_train: int, device: torch.device) -> _Run:
+    """The model, optimiser and scheduler of a new run, seeded (:func:`seed_everything`) before the model is built."""
+    seed_everything(config.seed)
+    model = build_model(config.model, n_classes, width=config.width, fv_grid=config.fv_grid).to(device)
+    if config.optimizer == "adam":
+        opt = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    else:
+        opt = torch.optim.SGD(model.parameters(), lr=config.lr, momentum=0.9, weight_decay=config.weight_decay)
+    sched = torch.optim.lr_scheduler.StepLR(opt, step_size=config.lr_step, gamma=config.lr_gamma)
+    return _Run(model, opt, sched, TrainResult(model), config.identity(_MAY_CHANGE_ON_RESUME), n_train)
+
+
+def _resume(run: _Run, last: Path, device: torch.device) -> None:
+    """Continue ``run`` from ``last`` (a ``last.pt``): the epoch after its last, its weights, optimiser,
+    scheduler, history and best so far; refused when it was made with another configuration or data."""
+    state = _from_older_checkpoint(load_checkpoint(last, keys=RESUME_KEYS, device=device))
+    if state["config_key"] != run.config_key or state["n_train"] != run.n_train:
+        raise InvalidInputError(
+            f"{last} was made with another configuration or data "
+            f"({state['config_key']}, {state['n_train']} samples); remove it or choose another --out"
+        )
+    for target, key in ((run.model, "model"), (run.opt, "optimizer"), (run.sched, "scheduler")):
+        _load_state(last, target, state[key], key)
+    run.start_epoch, run.stale, run.best_score, run.best_state = state["epoch"] + 1, state["stale"], state["best_score"], state["best_model"]
+    result = run.result
+    result.history, result.best_epoch, result.best_val_accuracy = state["history"], state["best_epoch"], state["best_val_accuracy"]
+    result.best_val_mean_class_accuracy, result.best_val_loss = state["best_val_mean_class_accuracy"], state["best_val_loss"]
+    shapes = {k: tuple(v.shape) for k, v in run.model.state_dict().items()}
+    best = run.best_state
+    if best is not None and (not isinstance(best, dict) or {k: tuple(getattr(v, "shape", ())) for k, v in best.items()} != shapes):
+        raise CheckpointError(f"{last}: its best_model does not fit this model")
+
+
+def _train_epoch(run: _Run, train_set: CloudSet, config: TrainConfig, epoch: int, device: torch.device, progress: bool) -> dict:
+    """One epoch over ``train_set``; its shuffle and augmentation come from ``(seed, epoch)``.
+
+    The learning rate warms up per batch over the first ``warmup_epochs`` (module docstring); the
+    scheduler then steps from the epoch's own rate.  Returns the epoch's row of history (its
+    training loss, accuracy and the rate after the step).
+    """
+    from zbuf_occlude.io.progress import progress as progress_bar
+
+    model, opt = run.model, run.opt
+    rng = np.random.default_rng([config.seed, epoch])
+    torch.manual_seed(config.seed * 100_003 + epoch)
+    order = balanced_epoch_rows(train_set.labels, rng) if config.balance == "sampler" else rng.permutation(len(train_set))
+    model.train()
+    epoch_lr = [g["lr"] for g in opt.param_groups]
+    n_batches = -(-len(order) // config.batch_size)  # ceil
+    warmup_steps = config.warmup_epochs * n_batches
+    total_loss, correct = 0.0, 0
+    batches = range(0, len(order), config.batch_size)
+    bar = progress_bar(batches, desc=f"{config.model} epoch {epoch + 1}/{config.epochs}", unit="batch", enabled=progress, leave=False)
+    for i in bar:
+        rows = order[i : i + config.batch_size]
+        if len(rows) < 2:  # batch norm needs two samples
+            continue
+        pts = train_set.points[rows]
+        if config.augment:
+            pts = augment(pts, rng, aspect=config.aspect)
+        x = torch.from_numpy(np.ascontiguousarray(pts)).to(device)
+        y = torch.from_numpy(train_set.labels[rows]).to(device)
+        step = epoch * n_batches + i // config.batch_size
+        if step < warmup_steps:
+            for g, lr in zip(opt.param_groups, epoch_lr):
+                g["lr"] = lr * (step + 1) / warmup_steps
+        logits, loss = _step(model, opt, x, y, config.grad_clip)
+        total_loss += loss.item() * len(rows)
+        correct += int((logits.argmax(1) == y).sum())
+        run.seen += len(rows)
+        bar.set_postfix(loss=f"{loss.item():.3f}")
+    for g, lr in zip(opt.param_groups, epoch_lr):  # the scheduler steps from the epoch's own rate
+        g["lr"] = lr
+    run.sched.step()
+    return {"epoch": epoch + 1, "train_loss": total_loss / len(order), "train_accuracy": correct / len(order),
+            "lr": opt.param_groups[0]["lr"]}  # fmt: skip
+
+
+def _step(model: nn.Module, opt: torch.optim.Optimizer, x: torch.Tensor, y: torch.Tensor, grad_clip: float | None
+          ) -> tuple[torch.Tensor, torch.Tensor]:  # fmt: skip
+    """One optimiser step on the batch ``(x, y)``, the gradient's norm clipped at ``grad_clip``; its logits and loss."""
+    opt.zero_grad()
+    logits = model(x)
+    loss = _loss(model, logits, y)
+    loss.backward()
+    if grad_clip is not None:
+        torch.nn.utils.clip_grad_norm_(model.parameters(), grad_clip)
+    opt.step()
+    return logits, loss
+
+
+def _validate(run: _Run, row: dict, val_set: CloudSet | None, config: TrainConfig, n_classes: int, epoch: int,
+              device: torch.device) -> None:  # fmt: skip
+    """Score the epoch on ``val_set`` into ``row`` and keep it as the best (or count it stale), by
+    ``config.select``; without a validation set every epoch is the best so far."""
+    result = run.result
+    if val_set is None or not len(val_set):
+        result.best_epoch, run.best_state = epoch + 1, None
+        return
+    pred, prob = predict(run.model, val_set.points, batch_size=config.batch_size, device=device)
+    acc = float((pred == val_set.labels).mean())
+    row["val_accuracy"] = acc
+    score = _val_score(config.select, prob, val_set.labels, n_classes)
+    mca, loss = mean_class_accuracy(val_set.labels, pred, n_classes), balanced_nll(prob, val_set.labels)
+    if config.select != "accuracy":  # the plain loop's history keeps the rows it always had
+        row["val_mean_class_accuracy"], row["val_balanced_nll"] = mca, loss
+    if _better(score, run.best_score):
+        result.best_val_accuracy, result.best_epoch, run.stale, run.best_score = acc, epoch + 1, 0, list(score)
+        result.best_val_mean_class_accuracy, result.best_val_loss = mca, loss
+        run.best_state = {k: v.detach().clone() for k, v in run.model.state_dict().items()}
+    else:
+        run.stale += 1
+
+
+def _save_resume_point(write: CheckpointWriter, run: _Run, config: TrainConfig, epoch: int) -> None:
+    """``last.pt`` after ``epoch``: everything :func:`_resume` needs to continue as if the run never stopped."""
+    result = run.result
+    _save(write, "last.pt", {
+        "config": config.to_dict(), "config_key": run.config_key, "n_train": run.n_train, "epoch": epoch, "stale": run.stale,
+        "model": run.model.state_dict(), "optimizer": run.opt.state_dict(), "scheduler": run.sched.state_dict(),
+        "history": result.history, "best_epoch": result.best_epoch,
+        "best_val_accuracy": result.best_val_accuracy, "best_model": run.best_state, "best_score": run.best_score,
+        "best_val_mean_class_accuracy": result.best_val_mean_class_accuracy, "best_val_loss": result.best_val_loss,
+    })  # fmt: skip
+
+
+def _save_final(write: CheckpointWriter, run: _Run, config: TrainConfig, n_classes: int) -> None:
+    """``best.pt`` (the weights :func:`train` returns, :func:`load_model`) and ``history.json``."""
+    _save(write, "best.pt", {"config": config.to_dict(), "n_classes": n_classes, "model": run.model.state_dict(),
+                             "best_epoch": run.result.best_epoch})  # fmt: skip
+    with write("history.json") as tmp:
+        tmp.write_text(json.dumps(run.result.history, indent=1))
+
+
+def _checkpoint_writer(checkpoint_dir: Path, writer: CheckpointWriter | None) -> CheckpointWriter:
+    """``writer``, or atomic writes into ``checkpoint_dir``, made when the first file is written."""
+    if writer is not None:
+        return writer
+
+    def write(name: str) -> AbstractContextManager[Path]:
+        try:
+            checkpoint_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise OutputError(f"cannot create {checkpoint_dir}: {exc}") from None
+        return atomic_path(checkpoint_dir / name)
+
+    return write
+
+
 def train(
     train_set: CloudSet,
     n_classes: int,
@@ -423,6 +610,8 @@ def train(
     progress : bool
         Progress on stderr per epoch (:func:`zbuf_occlude.io.progress.progress`; in a log, a line
         every few seconds).
+    on_epoch : callable, optional
+        Called with each epoch's row of history once the epoch is scored, before it is saved.
 
     Returns
     -------
@@ -433,139 +622,42 @@ def train(
     ------
     InvalidInputError
         Empty training set, or a checkpoint from a different configuration.
+    CheckpointError
+        A ``last.pt`` that is damaged or does not fit the model.
+    OutputError
+        ``checkpoint_dir`` cannot be made.
     """
-    from zbuf_occlude.io.progress import progress as progress_bar
-
     if len(train_set) == 0:
         raise InvalidInputError("empty training set")
     device = resolve_device(config.device)
     if config.threads and device.type == "cpu":
         torch.set_num_threads(config.threads)
-    seed_everything(config.seed)
-    model = build_model(config.model, n_classes, width=config.width, fv_grid=config.fv_grid).to(device)
-    if config.optimizer == "adam":
-        opt = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
-    else:
-        opt = torch.optim.SGD(model.parameters(), lr=config.lr, momentum=0.9, weight_decay=config.weight_decay)
-    sched = torch.optim.lr_scheduler.StepLR(opt, step_size=config.lr_step, gamma=config.lr_gamma)
-    result = TrainResult(model)
-    start_epoch, best_state, stale, best_score = 0, None, 0, None
-    cfg = config.to_dict()
-    cfg_key = config.identity(("device", "threads", "epochs", "patience"))  # older checkpoints resume
+    run = _start(config, n_classes, len(train_set), device)
     ckpt_dir = Path(checkpoint_dir) if checkpoint_dir is not None else None
-    write = checkpoint_writer or (lambda name: atomic_path(ckpt_dir / name))
     if ckpt_dir is not None and (ckpt_dir / "last.pt").is_file():
-        last = ckpt_dir / "last.pt"
-        state = load_checkpoint(last, keys=RESUME_KEYS, device=device)
-        if state["config_key"] != cfg_key or state["n_train"] != len(train_set):
-            raise InvalidInputError(
-                f"{last} was made with another configuration or data "
-                f"({state['config_key']}, {state['n_train']} samples); remove it or choose another --out"
-            )
-        for target, key in ((model, "model"), (opt, "optimizer"), (sched, "scheduler")):
-            _load_state(last, target, state[key], key)
-        start_epoch, stale = state["epoch"] + 1, state["stale"]
-        result.history, result.best_epoch = state["history"], state["best_epoch"]
-        result.best_val_accuracy = state["best_val_accuracy"]
-        result.best_val_mean_class_accuracy = state.get("best_val_mean_class_accuracy", float("nan"))
-        result.best_val_loss = state.get("best_val_loss", float("nan"))
-        best_score = state.get("best_score", None if state["best_epoch"] == 0 else [result.best_val_accuracy])
-        best_state = state["best_model"]
-        shapes = {k: tuple(v.shape) for k, v in model.state_dict().items()}
-        if best_state is not None and (
-            not isinstance(best_state, dict)
-            or {k: tuple(getattr(v, "shape", ())) for k, v in best_state.items()} != shapes
-        ):
-            raise CheckpointError(f"{last}: its best_model does not fit this model")
-        log.info("resuming %s from epoch %d", config.model, start_epoch)
-    t0, seen = time.perf_counter(), 0
-    n = len(train_set)
-    for epoch in range(start_epoch, config.epochs):
-        if config.patience and stale >= config.patience:
+        _resume(run, ckpt_dir / "last.pt", device)
+        log.info("resuming %s from epoch %d", config.model, run.start_epoch)
+    write = _checkpoint_writer(ckpt_dir, checkpoint_writer) if ckpt_dir is not None else None
+    t0 = time.perf_counter()
+    for epoch in range(run.start_epoch, config.epochs):
+        if config.patience and run.stale >= config.patience:
             break
-        rng = np.random.default_rng([config.seed, epoch])
-        torch.manual_seed(config.seed * 100_003 + epoch)
-        order = balanced_epoch_rows(train_set.labels, rng) if config.balance == "sampler" else rng.permutation(n)
-        model.train()
-        epoch_lr = [g["lr"] for g in opt.param_groups]
-        n_batches = -(-len(order) // config.batch_size)  # ceil
-        warmup_steps = config.warmup_epochs * n_batches
-        total_loss, correct = 0.0, 0
-        batches = range(0, len(order), config.batch_size)
-        bar = progress_bar(batches, desc=f"{config.model} epoch {epoch + 1}/{config.epochs}", unit="batch", enabled=progress, leave=False)
-        for i in bar:
-            rows = order[i : i + config.batch_size]
-            if len(rows) < 2:  # batch norm needs two samples
-                continue
-            pts = train_set.points[rows]
-            if config.augment:
-                pts = augment(pts, rng, aspect=config.aspect)
-            x = torch.from_numpy(np.ascontiguousarray(pts)).to(device)
-            y = torch.from_numpy(train_set.labels[rows]).to(device)
-            step = epoch * n_batches + i // config.batch_size
-            if step < warmup_steps:
-                for g, lr in zip(opt.param_groups, epoch_lr):
-                    g["lr"] = lr * (step + 1) / warmup_steps
-            opt.zero_grad()
-            logits = model(x)
-            loss = _loss(model, logits, y)
-            loss.backward()
-            if config.grad_clip is not None:
-                torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
-            opt.step()
-            total_loss += loss.item() * len(rows)
-            correct += int((logits.argmax(1) == y).sum())
-            seen += len(rows)
-            bar.set_postfix(loss=f"{loss.item():.3f}")
-        for g, lr in zip(opt.param_groups, epoch_lr):  # the scheduler steps from the epoch's own rate
-            g["lr"] = lr
-        sched.step()
-        row = {"epoch": epoch + 1, "train_loss": total_loss / len(order), "train_accuracy": correct / len(order),
-               "lr": opt.param_groups[0]["lr"]}  # fmt: skip
-        if val_set is not None and len(val_set):
-            pred, prob = predict(model, val_set.points, batch_size=config.batch_size, device=device)
-            acc = float((pred == val_set.labels).mean())
-            row["val_accuracy"] = acc
-            score = _val_score(config.select, prob, val_set.labels, n_classes)
-            mca, loss = mean_class_accuracy(val_set.labels, pred, n_classes), balanced_nll(prob, val_set.labels)
-            if config.select != "accuracy":  # the plain loop's history keeps the rows it always had
-                row["val_mean_class_accuracy"], row["val_balanced_nll"] = mca, loss
-            if _better(score, best_score):
-                result.best_val_accuracy, result.best_epoch, stale, best_score = acc, epoch + 1, 0, list(score)
-                result.best_val_mean_class_accuracy, result.best_val_loss = mca, loss
-                best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
-            else:
-                stale += 1
-        else:
-            result.best_epoch = epoch + 1
-            best_state = None
-        result.history.append(row)
+        row = _train_epoch(run, train_set, config, epoch, device, progress)
+        _validate(run, row, val_set, config, n_classes, epoch, device)
+        run.result.history.append(row)
         log.info("%s epoch %d: %s", config.model, epoch + 1, row)
         if on_epoch is not None:
             on_epoch(row)
-        if ckpt_dir is not None:
-            if checkpoint_writer is None:
-                try:
-                    ckpt_dir.mkdir(parents=True, exist_ok=True)
-                except OSError as exc:
-                    raise OutputError(f"cannot create {ckpt_dir}: {exc}") from None
-            _save(write, "last.pt", {
-                "config": cfg, "config_key": cfg_key, "n_train": n, "epoch": epoch, "stale": stale,
-                "model": model.state_dict(), "optimizer": opt.state_dict(), "scheduler": sched.state_dict(),
-                "history": result.history, "best_epoch": result.best_epoch,
-                "best_val_accuracy": result.best_val_accuracy, "best_model": best_state, "best_score": best_score,
-                "best_val_mean_class_accuracy": result.best_val_mean_class_accuracy, "best_val_loss": result.best_val_loss,
-            })  # fmt: skip
-    if best_state is not None:
-        model.load_state_dict(best_state)
-    if ckpt_dir is not None:
-        _save(write, "best.pt", {"config": cfg, "n_classes": n_classes, "model": model.state_dict(),
-                                 "best_epoch": result.best_epoch})  # fmt: skip
-        with write("history.json") as tmp:
-            tmp.write_text(json.dumps(result.history, indent=1))
+        if write is not None:
+            _save_resume_point(write, run, config, epoch)
+    if run.best_state is not None:
+        run.model.load_state_dict(run.best_state)
+    if write is not None:
+        _save_final(write, run, config, n_classes)
+    result = run.result
     result.seconds = time.perf_counter() - t0
-    result.samples_per_second = seen / result.seconds if result.seconds > 0 and seen else float("nan")
-    model.eval()
+    result.samples_per_second = run.seen / result.seconds if result.seconds > 0 and run.seen else float("nan")
+    run.model.eval()
     return result
 
 

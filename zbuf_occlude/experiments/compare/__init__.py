@@ -24,30 +24,30 @@ reproduction of Sryamkin et al. 2023, Table 1A/1B.  :func:`run_compare` is the w
 A method that raises on a mesh is recorded in its row's ``error`` column and in the
 report, and the run goes on.
 
-The package: :mod:`.run` (the timed, scored run), :mod:`.results` (``results.csv`` and
+The package: :mod:`.config` (:class:`CompareConfig`, every setting of a run, checked once),
+:mod:`.run` (the timed, scored run), :mod:`.results` (``results.csv`` and
 summaries), :mod:`.report` (Markdown report and plots), :mod:`.tables` (the paper's
 Table 1A/1B) and :mod:`.job` (:func:`run_compare`, the whole command; its argparse face is
 :mod:`zbuf_occlude.cli.compare`).
 """
 
 from zbuf_occlude.defaults import DEFAULT_VIEWS
-from zbuf_occlude.experiments.compare.job import run_compare
-from zbuf_occlude.experiments.compare.report import write_results
-from zbuf_occlude.experiments.compare.results import RESULT_FIELDS, read_csv, summarise, write_csv
-from zbuf_occlude.experiments.compare.run import (
+from zbuf_occlude.experiments.compare.config import (
     DEFAULT_METHODS,
     DEFAULT_POINTS,
     DEFAULT_REFERENCE,
-    GRID_SWEEP,
-    RESOLUTION_SWEEP,
-    chamfer_distance,
-    compare,
+    CompareConfig,
     parse_int_list,
     parse_methods,
 )
+from zbuf_occlude.experiments.compare.job import run_compare
+from zbuf_occlude.experiments.compare.report import write_results
+from zbuf_occlude.experiments.compare.results import RESULT_FIELDS, read_csv, summarise, write_csv
+from zbuf_occlude.experiments.compare.run import GRID_SWEEP, RESOLUTION_SWEEP, chamfer_distance, compare
 from zbuf_occlude.experiments.compare.tables import PAPER_TABLE_1A_REDUCTION, PAPER_TABLE_1B_REDUCTION, table_1a, table_1b
 
 __all__ = [
+    "CompareConfig",
     "chamfer_distance",
     "parse_methods",
     "parse_int_list",

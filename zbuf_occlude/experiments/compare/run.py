@@ -10,55 +10,28 @@ import math
 import os
 import time
 import tracemalloc
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude.defaults import DEFAULT_RESOLUTION, DEFAULT_VIEWS
-from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
+from zbuf_occlude.errors import ZbufOccludeError
+from zbuf_occlude.experiments.compare.config import CompareConfig
 from zbuf_occlude.experiments.compare.results import RESULT_FIELDS
-from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
+from zbuf_occlude.geometry.cameras import camera_on_sphere
 from zbuf_occlude.geometry.sampling import sample_surface
 from zbuf_occlude.mesh.discovery import find_meshes
 from zbuf_occlude.visibility import available_methods, visible_mask
 from zbuf_occlude.visibility.metrics import agreement
 from zbuf_occlude.visibility.registry import method_info
 
-__all__ = [
-    "chamfer_distance",
-    "parse_methods",
-    "parse_int_list",
-    "compare",
-    "DEFAULT_METHODS",
-    "DEFAULT_POINTS",
-    "DEFAULT_REFERENCE",
-    "RESOLUTION_SWEEP",
-    "GRID_SWEEP",
-    "IMAGE_SPACE_METHODS",
-    "GRID_METHODS",
-]
+__all__ = ["chamfer_distance", "compare", "RESOLUTION_SWEEP", "GRID_SWEEP", "IMAGE_SPACE_METHODS", "GRID_METHODS"]
 
 log = logging.getLogger(__name__)
 
-#: Methods compared by default (the issue's list; open3d-* are added when asked for).
-DEFAULT_METHODS = (
-    "zbuffer",
-    "oracle",
-    "paper-vertex",
-    "paper-exact",
-    "paper-pruned",
-    "og32",
-    "og64",
-    "naive-zbuffer",
-)
-#: Point counts of Table 1B of Sryamkin et al. 2023.
-DEFAULT_POINTS = (1000, 10000, 50000, 100000)
-#: Pose schedule (see :func:`zbuf_occlude.geometry.cameras.view_schedule`).
-#: The method every other is scored against: exact (Embree candidates, float64 decisions).
-DEFAULT_REFERENCE = "oracle"
 #: Z-buffer resolutions of the agreement-vs-resolution sweep, pixels.
 RESOLUTION_SWEEP = (128, 256, 512, 1024, 2048)
 #: Occupancy-grid sizes of the agreement-vs-grid sweep, cells per axis.
@@ -79,6 +52,8 @@ def __getattr__(name: str):
     if name in _METHOD_GROUPS:
         return tuple(m for m in available_methods() if _METHOD_GROUPS[name](method_info(m)))
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 #: Bytes per mebibyte, for the ``peak_mib`` column.
 _MIB = float(1 << 20)
 
@@ -109,55 +84,28 @@ def chamfer_distance(a: NDArray[np.floating], b: NDArray[np.floating]) -> float:
     return float((d_ab.mean() + d_ba.mean()) / 2.0)
 
 
-def parse_methods(spec: str | Sequence[str]) -> list[str]:
-    """Method names from ``"a,b,c"`` or a sequence; :class:`InvalidInputError` on unknown ones."""
-    names = [m.strip() for m in spec.split(",")] if isinstance(spec, str) else [str(m).strip() for m in spec]
-    names = [m for m in names if m]
-    if not names:
-        raise InvalidInputError("no visibility method given; e.g. --methods zbuffer,oracle,paper-exact")
-    known = set(available_methods())
-    unknown = [m for m in names if m not in known]
-    if unknown:
-        raise InvalidInputError(f"unknown visibility method(s) {', '.join(unknown)}; available: {', '.join(sorted(known))}")
-    return list(dict.fromkeys(names))
+class _View(NamedTuple):
+    """The inputs of one timed call but the method: the mesh, its samples and their faces, a camera."""
+
+    mesh: Any
+    points: NDArray[np.float64]
+    face_index: NDArray[np.int64]
+    camera: Any
 
 
-def parse_int_list(spec: str | Iterable[int], what: str = "values") -> list[int]:
-    """Positive integers from ``"1000,10000"`` (``k`` suffix allowed: ``"50k"``) or an iterable."""
-    items = spec.split(",") if isinstance(spec, str) else list(spec)
-    out = []
-    for item in items:
-        text = str(item).strip().lower()
-        if not text:
-            continue
-        scale = 1000 if text.endswith("k") else 1
-        try:
-            value = int(float(text.rstrip("k")) * scale)
-        except ValueError:
-            raise InvalidInputError(f"bad {what} {spec!r}: {item!r} is not an integer") from None
-        if value < 1:
-            raise InvalidInputError(f"bad {what} {spec!r}: {value} < 1")
-        out.append(value)
-    return out
-
-
-def _run_once(
-    mesh: Any, points: NDArray[np.float64], face_index: NDArray[np.int64], camera: Any, method: str, options: dict
-) -> tuple[NDArray[np.bool_], float]:
+def _run_once(view: _View, method: str, options: dict) -> tuple[NDArray[np.bool_], float]:
     start = time.perf_counter()
-    mask = visible_mask(mesh, points, camera, method, face_index=face_index, **options)
+    mask = visible_mask(view.mesh, view.points, view.camera, method, face_index=view.face_index, **options)
     return np.asarray(mask, dtype=bool), time.perf_counter() - start
 
 
-def _peak_mib(
-    mesh: Any, points: NDArray[np.float64], face_index: NDArray[np.int64], camera: Any, method: str, options: dict
-) -> float:
+def _peak_mib(view: _View, method: str, options: dict) -> float:
     # tracemalloc sees numpy's and Python's allocations (not Embree's, OpenGL's or numba's
     # thread stacks); run untimed, after the timed call, so tracing never slows a timing.
     tracemalloc.start()
     try:
         tracemalloc.reset_peak()
-        visible_mask(mesh, points, camera, method, face_index=face_index, **options)
+        visible_mask(view.mesh, view.points, view.camera, method, face_index=view.face_index, **options)
         return tracemalloc.get_traced_memory()[1] / _MIB
     finally:
         tracemalloc.stop()
@@ -182,9 +130,12 @@ def _score(row: dict[str, Any], mask: NDArray[np.bool_], ref: NDArray[np.bool_],
     )
 
 
-def _sweep_jobs(
-    methods: Sequence[str], resolution_sweep: Sequence[int], grid_sweep: Sequence[int]
-) -> list[tuple[str, str, int, dict]]:
+#: One call of a comparison but the reference: method, sweep (``""``, ``"resolution"`` or ``"grid"``),
+#: the swept value (``""`` when none) and the keywords it adds.
+_Job = tuple[str, str, Any, dict]
+
+
+def _sweep_jobs(methods: Sequence[str], resolution_sweep: Sequence[int], grid_sweep: Sequence[int]) -> list[_Job]:
     jobs = []
     for m in methods:
         if method_info(m).takes_resolution:
@@ -196,65 +147,121 @@ def _sweep_jobs(
     return jobs
 
 
-def compare(
-    paths: Sequence[str | os.PathLike],
-    methods: Sequence[str] = DEFAULT_METHODS,
-    points: Sequence[int] = DEFAULT_POINTS,
-    views: str | Sequence[tuple[float, float]] = DEFAULT_VIEWS,
-    resolution: int = DEFAULT_RESOLUTION,
-    seed: int = 0,
-    *,
-    reference: str = DEFAULT_REFERENCE,
-    resolution_sweep: Sequence[int] = (),
-    grid_sweep: Sequence[int] = (),
-    sweep_points: int | None = None,
-    radius: float = DEFAULT_RADIUS,
-    method_options: dict[str, dict[str, Any]] | None = None,
-    memory: bool = False,
-    method_budget_s: float | None = None,
-    warmup: bool = True,
-    progress: bool = True,
-) -> list[dict[str, Any]]:
+@dataclass(frozen=True)
+class _Plan:
+    """What runs on every mesh: the point counts (the sweeps' count added when it is not asked
+    for), the count the sweeps run at, and the calls at each count."""
+
+    config: CompareConfig
+    counts: list[int]
+    sweep_n: int
+    sweeps: list[_Job]
+
+    @classmethod
+    def of(cls, config: CompareConfig) -> _Plan:
+        counts = list(config.points)
+        sweep_n = config.sweep_points if config.sweep_points is not None else min(counts)
+        if sweep_n not in counts:
+            counts = sorted(set(counts) | {sweep_n})
+        return cls(config, counts, sweep_n, _sweep_jobs(config.methods, config.resolution_sweep, config.grid_sweep))
+
+    def jobs(self, n: int) -> list[_Job]:
+        """The calls at ``n`` points but the reference's (only the sweeps at a count added for them)."""
+        if n not in self.config.points:
+            return self.sweeps
+        return [(m, "", "", {}) for m in self.config.methods] + (self.sweeps if n == self.sweep_n else [])
+
+    def calls_per_mesh(self) -> int:
+        per_view = len(self.config.methods) + 1
+        return sum(len(self.config.poses) * (per_view + (len(self.sweeps) if n == self.sweep_n else 0)) for n in self.counts)
+
+
+@dataclass
+class _MeshState:
+    """What the run on one mesh remembers: the methods over budget (and why), the calls warmed up,
+    the methods whose memory was measured at the current point count."""
+
+    over_budget: dict[str, str] = field(default_factory=dict)
+    warmed: set[tuple[str, str, Any]] = field(default_factory=set)
+    measured_memory: set[str] = field(default_factory=set)
+
+
+def _method_row(view: _View, job: _Job, ref: NDArray[np.bool_], base: dict[str, Any], config: CompareConfig, state: _MeshState
+                ) -> dict[str, Any]:  # fmt: skip
+    """The row of one method (or sweep value) on one view, scored against the reference's mask ``ref``."""
+    method, sweep, param, extra = job
+    row = _row(**base, method=method, sweep=sweep, param=param)
+    if method in state.over_budget and not sweep:
+        row["error"] = state.over_budget[method]
+        return row
+    opts = {**config.method_options.get(method, {}), **extra}
+    try:
+        if config.warmup and (method, sweep, param) not in state.warmed:
+            # Untimed first call per mesh: JIT compilation (numba), the
+            # Embree BVH and the GL upload of the mesh are one-off costs.
+            _run_once(view, method, opts)
+            state.warmed.add((method, sweep, param))
+        mask, dt = _run_once(view, method, opts)
+        row["time_s"] = dt
+        _score(row, mask, ref, view.points)
+        if config.memory and not sweep and method not in state.measured_memory:
+            row["peak_mib"] = _peak_mib(view, method, opts)
+            state.measured_memory.add(method)
+        if config.method_budget_s is not None and not sweep and dt > config.method_budget_s:
+            state.over_budget[method] = (
+                f"skipped: {dt:.1f} s per view at {base['n_points']} points exceeded the budget of {config.method_budget_s:g} s"
+            )
+    except Exception as exc:  # noqa: BLE001 - reported in the table, not fatal
+        log.warning("compare: %s failed on %s (%d points): %s", method, base["mesh"], base["n_points"], exc)
+        row["error"] = f"{type(exc).__name__}: {exc}"
+    return row
+
+
+def _compare_mesh(mesh: Any, name: str, plan: _Plan, bar: Any) -> list[dict[str, Any]]:
+    """Every row of one loaded mesh: per point count and view, the reference's, then each job's."""
+    config, reference = plan.config, plan.config.reference
+    ref_options = config.method_options.get(reference, {})
+    rows: list[dict[str, Any]] = []
+    state = _MeshState()
+    for n in sorted(plan.counts):
+        pts, fi = sample_surface(mesh, count=n, seed=config.seed)
+        jobs = plan.jobs(n)
+        state.measured_memory = set()
+        for v, (el, az) in enumerate(config.poses):
+            view = _View(mesh, pts, fi, camera_on_sphere(el, az, config.radius, resolution=config.resolution))
+            base = dict(mesh=name, n_faces=len(mesh.faces), n_points=n, view=v, elevation_deg=el, azimuth_deg=az)
+            try:
+                if config.warmup and v == 0 and n == min(plan.counts):
+                    _run_once(view, reference, ref_options)
+                ref, ref_time = _run_once(view, reference, ref_options)
+            except Exception as exc:  # noqa: BLE001 - reported in the table, not fatal
+                log.warning("compare: reference %s failed on %s: %s", reference, name, exc)
+                rows.append(_row(**base, method=reference, error=f"reference failed: {exc}"))
+                bar.update(1 + len(jobs))
+                continue
+            row = _row(**base, method=reference, time_s=ref_time)
+            _score(row, ref, ref, pts)
+            rows.append(row)
+            bar.update(1)
+            for job in jobs:
+                if job[0] != reference or job[1]:  # the reference itself is its row above
+                    rows.append(_method_row(view, job, ref, base, config, state))
+                bar.update(1)
+    return rows
+
+
+def compare(paths: Sequence[str | os.PathLike], config: CompareConfig | None = None, *, progress: bool = True) -> list[dict[str, Any]]:
     """Time every method and score it against the reference, mesh × points × view.
 
     Parameters
     ----------
     paths : sequence of path
-        Mesh files (normalised by :func:`zbuf_occlude.load_mesh`).
-    methods : sequence of str
-        Registered method names (see :func:`zbuf_occlude.available_methods`).
-    points : sequence of int
-        Sample counts; the same ``seed`` gives the same samples for every method.
-    views : str or sequence of (elevation_deg, azimuth_deg)
-        A :func:`zbuf_occlude.view_schedule` spec (``"grid25"``, ``"paper100"``,
-        ``"fibonacci:N"``, ``"EL:AZ,..."``) or explicit poses.
-    resolution : int
-        Image size of the cameras, pixels (the z-buffer methods' resolution).
-    seed : int
-        Sampling seed.
-    reference : str
-        Method that defines the truth (default ``"oracle"``).  Its time is recorded too.
-    resolution_sweep, grid_sweep : sequence of int
-        Extra rows (``sweep="resolution"``/``"grid"``) for the image-space methods among
-        ``methods`` at each resolution, and for ``og`` at each grid size, at
-        ``sweep_points`` points.
-    sweep_points : int, optional
-        Point count of the sweeps (default: the smallest of ``points``).
-    radius : float
-        Camera distance, object units (default 4, the paper's §4.1).
-    method_options : dict, optional
-        Per-method keyword options, e.g. ``{"paper-vertex": {"max_edge": 0.05}}``.
-    memory : bool
-        Also record each method's peak traced memory (``peak_mib``, MiB) from one extra,
-        untimed call per mesh × point count (first view).
-    method_budget_s : float, optional
-        A method whose call took longer than this is skipped for the larger point counts
-        of that mesh (rows say so in ``error``), so one slow O(N·F) method cannot stall a
-        run.
-    warmup : bool
-        Call every method once, untimed, on the first view of each mesh before timing it,
-        so that one-off costs (numba compilation, Embree's BVH, uploading the mesh to the
-        GPU) are not charged to a view.
+        Mesh files (normalised by :func:`zbuf_occlude.load_mesh`), or folders, searched
+        recursively; a file that does not load is reported in the rows (``method="*"``).
+    config : CompareConfig, optional
+        The methods, point counts, poses, reference, sweeps and options
+        (:class:`~zbuf_occlude.experiments.compare.config.CompareConfig`, checked when made);
+        default: its defaults.
     progress : bool
         Progress on stderr (:func:`zbuf_occlude.io.progress.progress`).
 
@@ -262,36 +269,24 @@ def compare(
     -------
     rows : list of dict
         One per (mesh, points, view, method[, sweep value]) with the keys of
-        :data:`RESULT_FIELDS`; metrics are floats, ``error`` is empty on success.
+        :data:`RESULT_FIELDS`; metrics are floats (``time_s``: wall seconds per view; ``chamfer``:
+        object units), ``error`` is empty on success.  A method that raises is recorded in its
+        row's ``error`` and the run goes on.
 
     Raises
     ------
     InvalidInputError
-        Unknown method names, bad point counts or a bad view schedule.
+        From the default :class:`CompareConfig` only (a config is checked when it is made).
     """
-    methods = parse_methods(methods)
-    parse_methods([reference])
-    counts = parse_int_list(points, "point counts")
-    if not counts:
-        raise InvalidInputError("no point count given; e.g. --points 1000,10000")
-    poses = view_schedule(views) if isinstance(views, str) else [(float(e), float(a)) for e, a in views]
-    sweep_n = int(sweep_points) if sweep_points is not None else min(counts)
-    requested = set(counts)
-    if sweep_n not in counts:
-        counts = sorted(set(counts) | {sweep_n})
-    sweeps = _sweep_jobs(methods, resolution_sweep, grid_sweep)
+    from zbuf_occlude.io.progress import progress as progress_bar
     from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported when a comparison runs
 
-    options = method_options or {}
-    rows: list[dict[str, Any]] = []
-    per_view = len(methods) + 1
+    plan = _Plan.of(config if config is not None else CompareConfig())
     # folders are searched recursively, as by `generate` and `validate`; a file that does
     # not load is reported in the table like any other failure
     paths = [f for p in paths for f in ([m for m, _ in find_meshes([p])] if Path(p).is_dir() else [p])]
-    total = len(paths) * sum(len(poses) * (per_view + (len(sweeps) if n == sweep_n else 0)) for n in counts)
-    from zbuf_occlude.io.progress import progress as progress_bar
-
-    bar = progress_bar(total=total, desc="compare", unit="call", enabled=progress)
+    bar = progress_bar(total=len(paths) * plan.calls_per_mesh(), desc="compare", unit="call", enabled=progress)
+    rows: list[dict[str, Any]] = []
     for path in paths:
         name = Path(path).stem
         try:
@@ -299,66 +294,8 @@ def compare(
         except ZbufOccludeError as exc:
             log.warning("compare: %s", exc)
             rows.append(_row(mesh=name, method="*", error=str(exc)))
-            bar.update(sum(len(poses) * (per_view + (len(sweeps) if n == sweep_n else 0)) for n in counts))
+            bar.update(plan.calls_per_mesh())
             continue
-        over_budget: dict[str, str] = {}
-        warmed: set[tuple[str, str, Any]] = set()
-        for n in sorted(counts):
-            pts, fi = sample_surface(mesh, count=n, seed=seed)
-            jobs = [(m, "", "", {}) for m in methods] + (sweeps if n == sweep_n else [])
-            if n not in requested:
-                jobs = sweeps  # the sweep count was added only for the sweeps
-            measured_memory: set[str] = set()
-            for v, (el, az) in enumerate(poses):
-                camera = camera_on_sphere(el, az, radius, resolution=resolution)
-                base = dict(
-                    mesh=name, n_faces=len(mesh.faces), n_points=n, view=v, elevation_deg=el, azimuth_deg=az
-                )
-                try:
-                    if warmup and v == 0 and n == min(counts):
-                        _run_once(mesh, pts, fi, camera, reference, options.get(reference, {}))
-                    ref, ref_time = _run_once(mesh, pts, fi, camera, reference, options.get(reference, {}))
-                except Exception as exc:  # noqa: BLE001 - reported in the table, not fatal
-                    log.warning("compare: reference %s failed on %s: %s", reference, name, exc)
-                    rows.append(_row(**base, method=reference, error=f"reference failed: {exc}"))
-                    bar.update(1 + len(jobs))
-                    continue
-                row = _row(**base, method=reference, time_s=ref_time)
-                _score(row, ref, ref, pts)
-                rows.append(row)
-                bar.update(1)
-                for method, sweep, param, extra in jobs:
-                    if method == reference and not sweep:
-                        bar.update(1)
-                        continue
-                    row = _row(**base, method=method, sweep=sweep, param=param)
-                    if method in over_budget and not sweep:
-                        row["error"] = over_budget[method]
-                        rows.append(row)
-                        bar.update(1)
-                        continue
-                    opts = {**options.get(method, {}), **extra}
-                    try:
-                        if warmup and (method, sweep, param) not in warmed:
-                            # Untimed first call per mesh: JIT compilation (numba), the
-                            # Embree BVH and the GL upload of the mesh are one-off costs.
-                            _run_once(mesh, pts, fi, camera, method, opts)
-                            warmed.add((method, sweep, param))
-                        mask, dt = _run_once(mesh, pts, fi, camera, method, opts)
-                        row["time_s"] = dt
-                        _score(row, mask, ref, pts)
-                        if memory and not sweep and method not in measured_memory:
-                            row["peak_mib"] = _peak_mib(mesh, pts, fi, camera, method, opts)
-                            measured_memory.add(method)
-                        if method_budget_s is not None and not sweep and dt > method_budget_s:
-                            over_budget[method] = (
-                                f"skipped: {dt:.1f} s per view at {n} points exceeded the budget of "
-                                f"{method_budget_s:g} s"
-                            )
-                    except Exception as exc:  # noqa: BLE001 - reported in the table, not fatal
-                        log.warning("compare: %s failed on %s (%d points): %s", method, name, n, exc)
-                        row["error"] = f"{type(exc).__name__}: {exc}"
-                    rows.append(row)
-                    bar.update(1)
+        rows += _compare_mesh(mesh, name, plan, bar)
     bar.close()
     return rows
