@@ -19,12 +19,14 @@ from zbuf_occlude.experiments.sim2real_data import (  # noqa: E402
     FITTED_SETS,
     KEEP_SCALE_UNIT_M,
     TRAINING_SETS,
+    SetRecipe,
     build_set,
     build_sets,
     find_class_meshes,
     mix_sets,
     split_whole_meshes,
 )
+from zbuf_occlude.experiments.sim2real_placement import ClassPlacement, CropPlacement, MeshShape  # noqa: E402
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange, parse_sizes, size_interval  # noqa: E402
 
 
@@ -81,10 +83,10 @@ def test_training_sets_have_equal_class_counts_and_real_sizes(tmp_path: Path) ->
     meshes = find_class_meshes(_mesh_root(tmp_path))
     names = ["car", "pole"]
     for kind in TRAINING_SETS:
-        s = build_set(kind, meshes, names, 6, 48, 0, sensor=lidar_preset("hdl32e"), resolution=128, dense_points=2000)
+        s = build_set(kind, meshes, names, 6, 48, 0, SetRecipe(sensor=lidar_preset("hdl32e"), resolution=128, dense_points=2000))
         assert s.points.shape == (12, 48, 3) and np.bincount(s.labels).tolist() == [6, 6], kind
         np.testing.assert_allclose((s.points.max(axis=1) - s.points.min(axis=1)).max(axis=1), 1.0, atol=1e-5)
-    metric = build_set("complete", meshes, names, 6, 200, 1, keep_scale=True)
+    metric = build_set("complete", meshes, names, 6, 200, 1, SetRecipe(keep_scale=True))
     height = (metric.points[:, :, 2].max(axis=1) - metric.points[:, :, 2].min(axis=1)) * KEEP_SCALE_UNIT_M
     poles = height[metric.labels == 1]
     assert (poles > 2.5 * 0.95).all() and (poles < 9.0 * 1.001).all()  # CLASS_SIZES_M's pole heights
@@ -192,10 +194,10 @@ def test_an_airborne_lidar_set(tmp_path: Path) -> None:
 
     meshes = find_class_meshes(_mesh_root(tmp_path))
     als = airborne_preset("riegl-q1560", altitude_m=300.0)  # ~33 points/m²: a few returns on a pole's top
-    s = build_set("lidar", meshes, ["car", "pole"], 4, 32, 0, sensor=als, min_returns=2)
+    s = build_set("lidar", meshes, ["car", "pole"], 4, 32, 0, SetRecipe(sensor=als, min_returns=2))
     assert np.bincount(s.labels).tolist() == [4, 4]
     with pytest.raises(InvalidInputError, match="min-returns"):
-        build_set("lidar", meshes, ["car", "pole"], 2, 32, 0, sensor=als, min_returns=10_000)
+        build_set("lidar", meshes, ["car", "pole"], 2, 32, 0, SetRecipe(sensor=als, min_returns=10_000))
 
 
 # -- --classes, --occluded-elevation, the LiDAR pre-check ----------------------------------------
@@ -230,10 +232,10 @@ def test_occluded_set_draws_its_elevations_in_the_range_given(tmp_path: Path, mo
         return real(mesh, poses, **kw)
 
     monkeypatch.setattr(pipeline, "occlude_object", spy)
-    build_set("occluded", meshes, ["car", "pole"], 2, 32, 0, dense_points=500, resolution=64, elevation_deg=(60.0, 80.0))
+    build_set("occluded", meshes, ["car", "pole"], 2, 32, 0, SetRecipe(dense_points=500, resolution=64, elevation_deg=(60.0, 80.0)))
     assert seen and min(seen) >= 60.0 and max(seen) <= 80.0
     seen.clear()
-    build_set("occluded", meshes, ["car", "pole"], 2, 32, 0, dense_points=500, resolution=64)
+    build_set("occluded", meshes, ["car", "pole"], 2, 32, 0, SetRecipe(dense_points=500, resolution=64))
     assert seen and min(seen) >= -5.0 and max(seen) <= 30.0  # the ground sensor's default
 
 
@@ -640,10 +642,10 @@ def test_the_fitted_placed_set_draws_the_fitted_distances_and_the_others_the_pre
     meshes = find_class_meshes(_mesh_root(tmp_path))
     fitted = lidar_preset("hdl32e").with_(name="fitted")
     heights = {"car": SizeRange("height", 1.0, 1.0), "pole": SizeRange("height", 2.0, 2.0)}
-    sets = build_sets(meshes, ["car", "pole"], 2, 32, 0, sensor=lidar_preset("hdl32e"), resolution=128, dense_points=2000, keep_scale=True,
-                      fitted_sensor=fitted, fitted_placement={"car": {"distance_m": (6.0, 7.0), "hidden_below_m": (0.2, 0.4)},
-                                        "pole": {"distance_m": (8.0, 9.0), "across_sight_width_m": (0.4, 0.8)}},
-                      fitted_sizes=heights)  # fmt: skip
+    placed = CropPlacement.from_keywords({"car": {"distance_m": (6.0, 7.0), "hidden_below_m": (0.2, 0.4)},
+                                          "pole": {"distance_m": (8.0, 9.0), "across_sight_width_m": (0.4, 0.8)}})  # fmt: skip
+    sets = build_sets(meshes, ["car", "pole"], 2, 32, 0, SetRecipe(sensor=lidar_preset("hdl32e"), resolution=128, dense_points=2000, keep_scale=True),
+                      fitted_sensor=fitted, fitted_placement=placed, fitted_sizes=heights)  # fmt: skip
     assert sets[FITTED].points.shape == sets[FITTED_PLACED].points.shape == (4, 32, 3)
     # kept in metres: the placed crops are as tall as the fitted heights at most, the others' poles taller (2.5-9 m)
     tall = lambda s, label: float(np.ptp(s.points[s.labels == label][..., 2], axis=1).max()) * KEEP_SCALE_UNIT_M  # noqa: E731
@@ -662,14 +664,14 @@ def test_build_sets_makes_the_sets_asked_for_and_refuses_one_it_cannot_make(tmp_
     from zbuf_occlude.sensors import lidar_preset
 
     meshes = find_class_meshes(_mesh_root(tmp_path))
-    options = dict(sensor=lidar_preset("hdl32e"), resolution=128, dense_points=2000)
-    every = build_sets(meshes, ["car", "pole"], 2, 32, 0, **options)
+    recipe = SetRecipe(sensor=lidar_preset("hdl32e"), resolution=128, dense_points=2000)
+    every = build_sets(meshes, ["car", "pole"], 2, 32, 0, recipe)
     assert list(every) == list(TRAINING_SETS)
-    some = build_sets(meshes, ["car", "pole"], 2, 32, 0, kinds=["lidar+complete", "occluded"], **options)
+    some = build_sets(meshes, ["car", "pole"], 2, 32, 0, recipe, kinds=["lidar+complete", "occluded"])
     assert list(some) == ["occluded", "lidar+complete"]  # in report order
     assert all(np.array_equal(some[k].points, every[k].points) and np.array_equal(some[k].labels, every[k].labels) for k in some)
     with pytest.raises(InvalidInputError, match=r"\['fitted\+placed'\]"):
-        build_sets(meshes, ["car", "pole"], 2, 32, 0, kinds=[FITTED_PLACED], **options)
+        build_sets(meshes, ["car", "pole"], 2, 32, 0, recipe, kinds=[FITTED_PLACED])
 
 
 def test_the_pooled_set_is_the_three_lidar_sets_of_its_seed_in_one(tmp_path: Path) -> None:
@@ -677,12 +679,13 @@ def test_the_pooled_set_is_the_three_lidar_sets_of_its_seed_in_one(tmp_path: Pat
     from zbuf_occlude.sensors import lidar_preset
 
     meshes = find_class_meshes(_mesh_root(tmp_path))
-    options = dict(sensor=lidar_preset("hdl32e"), fitted_sensor=lidar_preset("hdl32e", range_noise_m=0.0).with_(name="fitted"),
-                   fitted_placement={"car": {"distance_m": (6.0, 7.0)}, "pole": {"distance_m": (8.0, 9.0)}},
+    recipe = SetRecipe(sensor=lidar_preset("hdl32e"))
+    options = dict(fitted_sensor=lidar_preset("hdl32e", range_noise_m=0.0).with_(name="fitted"),
+                   fitted_placement=CropPlacement.from_keywords({"car": {"distance_m": (6.0, 7.0)}, "pole": {"distance_m": (8.0, 9.0)}}),
                    fitted_sizes={"car": SizeRange("height", 1.0, 1.5), "pole": SizeRange("height", 2.0, 3.0)})  # fmt: skip
-    every = build_sets(meshes, ["car", "pole"], 3, 32, 0, **options)
+    every = build_sets(meshes, ["car", "pole"], 3, 32, 0, recipe, **options)
     assert list(every) == [*TRAINING_SETS, FITTED, FITTED_PLACED, POOLED]
-    pooled = build_sets(meshes, ["car", "pole"], 3, 32, 0, kinds=[POOLED], **options)[POOLED]
+    pooled = build_sets(meshes, ["car", "pole"], 3, 32, 0, recipe, kinds=[POOLED], **options)[POOLED]
     parts = [every[k] for k in ("lidar", FITTED, FITTED_PLACED)]
     assert np.array_equal(pooled.points, np.concatenate([s.points for s in parts]))
     assert np.array_equal(pooled.labels, np.concatenate([s.labels for s in parts])) and np.bincount(pooled.labels).tolist() == [9, 9]
@@ -753,7 +756,8 @@ def test_fitted_shape_gives_the_placed_meshes_the_fitted_widths_or_outline_or_ne
     real_fit = sim2real.fit_mesh_shapes
 
     def spy(meshes, sensor, sizes, placement):
-        asked.append({key for kw in placement.values() for key in kw})
+        asked.append({key for c in placement.per_class.values() for key in ("across_sight_width_m", "across_sight_profile")
+                      if getattr(c, key) is not None})  # fmt: skip
         return real_fit(meshes, sensor, sizes, placement)
 
     monkeypatch.setattr(sim2real, "fit_mesh_shapes", spy)
@@ -765,8 +769,8 @@ def test_fitted_shape_gives_the_placed_meshes_the_fitted_widths_or_outline_or_ne
     shares = []
 
     def build_sets(*a, fitted_placement=None, **kw):  # the stretches and visible shares the fitted+placed set is given
-        scales.append({name: v["width_scale"] for name, v in fitted_placement.items() if "width_scale" in v})
-        shares.append({name: v["visible_across_sight"] for name, v in fitted_placement.items() if "visible_across_sight" in v})
+        scales.append({name: v.width_scale for name, v in fitted_placement.per_mesh.items() if v.width_scale is not None})
+        shares.append({name: v.visible_across_sight for name, v in fitted_placement.per_mesh.items() if v.visible_across_sight is not None})
         return real_build(*a, fitted_placement=fitted_placement, **kw)
 
     monkeypatch.setattr(sim2real, "build_sets", build_sets)
@@ -827,7 +831,7 @@ def test_a_validation_accuracy_tie_goes_to_the_lower_validation_loss() -> None:
 
 @pytest.mark.slow
 def test_a_class_outline_warps_each_mesh_then_stretches_it_under_the_warp(tmp_path: Path) -> None:
-    from zbuf_occlude.experiments.sim2real_data import build_set, fit_mesh_shapes
+    from zbuf_occlude.experiments.sim2real_placement import fit_mesh_shapes
     from zbuf_occlude.sensors import lidar_preset
 
     meshes = [m for m in find_class_meshes(_mesh_root(tmp_path)) if m.class_name == "pole"]
@@ -835,58 +839,59 @@ def test_a_class_outline_warps_each_mesh_then_stretches_it_under_the_warp(tmp_pa
     sizes = {"pole": SizeRange("height", 3.0, 4.0)}
     widths = {"distance_m": (5.0, 9.0), "across_sight_width_m": (0.3, 0.5)}
     outline = (0.5, 0.5, 1.0, 1.0, 1.0, 1.0, 2.0, 2.0)
-    plain = fit_mesh_shapes(meshes, sensor, sizes, {"pole": widths})
-    warped = fit_mesh_shapes(meshes, sensor, sizes, {"pole": {**widths, "across_sight_profile": outline}})
+    placement = CropPlacement.from_keywords({"pole": {**widths, "across_sight_profile": outline}})
+    plain = fit_mesh_shapes(meshes, sensor, sizes, CropPlacement.from_keywords({"pole": widths}))
+    warped = fit_mesh_shapes(meshes, sensor, sizes, placement)
     for m in meshes:
-        assert "width_profile" not in plain[m.name] and len(warped[m.name]["width_profile"]) == len(outline)
-        assert warped[m.name]["width_profile"][0] < warped[m.name]["width_profile"][-1]  # narrower at the foot than at the top
-        assert warped[m.name]["width_scale"] != plain[m.name]["width_scale"]  # stretched again under the warp
-    only = fit_mesh_shapes(meshes, sensor, sizes, {"pole": {"distance_m": (5.0, 9.0), "across_sight_profile": outline}})
-    assert all(set(v) == {"width_profile"} for v in only.values()) and len(only) == len(meshes)  # a warp without a stretch
-    placement = {"pole": {**widths, "across_sight_profile": outline}}
-    every_draw = build_set("lidar", meshes, ["pole"], 2, 64, 3, sensor=sensor, sizes=sizes, placement=placement)
-    once = build_set("lidar", meshes, ["pole"], 2, 64, 3, sensor=sensor, sizes=sizes, placement={**placement, **warped})
+        assert plain[m.name].width_profile is None and len(warped[m.name].width_profile) == len(outline)
+        assert warped[m.name].width_profile[0] < warped[m.name].width_profile[-1]  # narrower at the foot than at the top
+        assert warped[m.name].width_scale != plain[m.name].width_scale  # stretched again under the warp
+    only = fit_mesh_shapes(meshes, sensor, sizes, CropPlacement.from_keywords({"pole": {"distance_m": (5.0, 9.0), "across_sight_profile": outline}}))
+    assert all(set(v.keywords) == {"width_profile"} for v in only.values()) and len(only) == len(meshes)  # a warp without a stretch
+    recipe = SetRecipe(sensor=sensor, sizes=sizes, placement=placement)
+    every_draw = build_set("lidar", meshes, ["pole"], 2, 64, 3, recipe)
+    once = build_set("lidar", meshes, ["pole"], 2, 64, 3, SetRecipe(sensor=sensor, sizes=sizes, placement=placement.with_mesh_shapes(warped)))
     np.testing.assert_array_equal(once.points, every_draw.points)
-    unwarped = build_set("lidar", meshes, ["pole"], 2, 64, 3, sensor=sensor, sizes=sizes, placement={"pole": widths, **plain})
-    assert not np.array_equal(once.points, unwarped.points)
+    unwarped = CropPlacement.from_keywords({"pole": widths}).with_mesh_shapes(plain)
+    assert not np.array_equal(once.points, build_set("lidar", meshes, ["pole"], 2, 64, 3, SetRecipe(sensor=sensor, sizes=sizes, placement=unwarped)).points)
 
 
 @pytest.mark.slow
 def test_width_scales_fitted_once_give_the_crops_of_fitting_them_in_every_draw(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from zbuf_occlude.experiments.sim2real_data import build_set, fit_mesh_shapes
+    from zbuf_occlude.experiments.sim2real_placement import fit_mesh_shapes
     from zbuf_occlude.sensors import lidar_preset
     from zbuf_occlude.sensors.fit import shapes
 
     meshes = find_class_meshes(_mesh_root(tmp_path))
     sensor = lidar_preset("hdl32e")
     sizes = {"car": SizeRange("height", 1.5, 1.5), "pole": SizeRange("height", 3.0, 4.0)}
-    placement = {"car": {"distance_m": (6.0, 8.0)}, "pole": {"distance_m": (5.0, 9.0), "across_sight_width_m": (0.3, 0.5)}}
-    every_draw = build_set("lidar", meshes, ["car", "pole"], 4, 64, 3, sensor=sensor, sizes=sizes, placement=placement)
+    placement = CropPlacement.from_keywords({"car": {"distance_m": (6.0, 8.0)}, "pole": {"distance_m": (5.0, 9.0), "across_sight_width_m": (0.3, 0.5)}})
+    every_draw = build_set("lidar", meshes, ["car", "pole"], 4, 64, 3, SetRecipe(sensor=sensor, sizes=sizes, placement=placement))
     once = fit_mesh_shapes(meshes, sensor, sizes, placement)
     assert sorted(once) == sorted(m.name for m in meshes if m.class_name == "pole")  # the classes that give widths
     assert once["pole/post"] != once["pole/lamp"]  # each mesh its own stretch
     calls = []
     monkeypatch.setattr(shapes, "fit_width_scale", lambda *a, **k: calls.append(a) or (1.0, 1.0))
-    merged = build_set("lidar", meshes, ["car", "pole"], 4, 64, 3, sensor=sensor, sizes=sizes, placement={**placement, **once})
+    merged = build_set("lidar", meshes, ["car", "pole"], 4, 64, 3, SetRecipe(sensor=sensor, sizes=sizes, placement=placement.with_mesh_shapes(once)))
     np.testing.assert_array_equal(merged.points, every_draw.points)
     assert calls == []  # not fitted again
-
 
 
 @pytest.mark.slow
 def test_widen_is_never_narrower_whether_fitted_once_or_in_the_draw(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """``across_sight_width_by: widen`` raises each stretch below 1 to 1, in fit_mesh_shapes and in a set's own fit alike."""
-    from zbuf_occlude.experiments.sim2real_data import fit_mesh_shapes
+    from zbuf_occlude.experiments.sim2real_placement import fit_mesh_shapes
     from zbuf_occlude.sensors import crops, lidar_preset
 
     meshes = [m for m in find_class_meshes(_mesh_root(tmp_path)) if m.class_name == "pole"]
     sensor = lidar_preset("hdl32e")
     sizes = {"pole": SizeRange("height", 3.0, 4.0)}
     narrow = {"distance_m": (5.0, 9.0), "across_sight_width_m": (0.05, 0.08)}  # narrower than every pole mesh
-    stretched = fit_mesh_shapes(meshes, sensor, sizes, {"pole": narrow})
-    widened = fit_mesh_shapes(meshes, sensor, sizes, {"pole": {**narrow, "across_sight_width_by": "widen"}})
-    assert all(lo < 1.0 for lo, _ in (v["width_scale"] for v in stretched.values()))
-    assert all(v["width_scale"] == (1.0, 1.0) for v in widened.values())
+    widen = CropPlacement.from_keywords({"pole": {**narrow, "across_sight_width_by": "widen"}})
+    stretched = fit_mesh_shapes(meshes, sensor, sizes, CropPlacement.from_keywords({"pole": narrow}))
+    widened = fit_mesh_shapes(meshes, sensor, sizes, widen)
+    assert all(v.width_scale[0] < 1.0 for v in stretched.values())
+    assert all(v.width_scale == (1.0, 1.0) for v in widened.values())
     seen = []
     real = crops.lidar_object_samples
 
@@ -895,10 +900,50 @@ def test_widen_is_never_narrower_whether_fitted_once_or_in_the_draw(tmp_path: Pa
         return real(mesh, sensor, **kw)
 
     monkeypatch.setattr(crops, "lidar_object_samples", spy)
-    build_set("lidar", meshes, ["pole"], 2, 32, 0, sensor=sensor, sizes=sizes, placement={"pole": {**narrow, "across_sight_width_by": "widen"}})
+    build_set("lidar", meshes, ["pole"], 2, 32, 0, SetRecipe(sensor=sensor, sizes=sizes, placement=widen))
     assert seen and all(s == (1.0, 1.0) for s in seen)
-    with pytest.raises(InvalidInputError, match="across_sight_width_by"):
-        fit_mesh_shapes(meshes, sensor, sizes, {"pole": {**narrow, "across_sight_width_by": "squeeze"}})
+
+
+# -- CropPlacement: class placements and mesh shapes in two typed tables, checked once -----------
+
+
+def test_a_placement_keeps_classes_and_meshes_apart_and_checks_each_value_once() -> None:
+    placement = CropPlacement.from_keywords({"pole": {"distance_m": [5, 9], "hidden_below_m": 0.2, "across_sight_width_m": (0.3, 0.5)}},
+                                            {"pole/post": {"width_scale": (1.5, 2.0)}})  # fmt: skip
+    pole = placement.per_class["pole"]
+    assert pole == ClassPlacement(distance_m=(5.0, 9.0), hidden_below_m=(0.2, 0.2), across_sight_width_m=(0.3, 0.5))
+    assert pole.crop_keywords == {"distance_m": (5.0, 9.0), "hidden_below_m": (0.2, 0.2)} and pole.shapes_meshes
+    assert placement.per_mesh == {"pole/post": MeshShape(width_scale=(1.5, 2.0))} and "pole/post" not in placement.per_class
+    assert placement.of_class("car") == ClassPlacement()  # a class not given: the published placement, its own shapes
+    merged = placement.with_mesh_shapes({"pole/lamp": MeshShape(width_profile=(1.0, 2.0))})
+    assert set(merged.per_mesh) == {"pole/post", "pole/lamp"} and set(placement.per_mesh) == {"pole/post"}
+    with pytest.raises(AttributeError):
+        pole.distance_m = (1.0, 2.0)  # frozen
+    # each bad value refused where the placement is made, naming the class or mesh and the key
+    for per_class, per_mesh, match in (
+        ({"pole": {"across_sight_width_by": "squeeze"}}, None, r"class 'pole'.*across_sight_width_by"),
+        ({"pole": {"distance_m": (9.0, 5.0)}}, None, r"class 'pole'.*distance_m"),
+        ({"pole": {"across_sight_profile": (1.0,)}}, None, r"class 'pole'.*across_sight_profile"),
+        ({"pole": {"width_scale": (1.0, 2.0)}}, None, r"class 'pole'.*unknown keys \['width_scale'\]"),
+        ({}, {"pole/post": {"distance_m": (5.0, 9.0)}}, r"mesh 'pole/post'.*unknown keys \['distance_m'\]"),
+        ({}, {"pole/post": {"width_scale": (-1.0, 2.0)}}, r"mesh 'pole/post'.*width_scale"),
+    ):  # fmt: skip
+        with pytest.raises(InvalidInputError, match=match):
+            CropPlacement.from_keywords(per_class, per_mesh)
+    with pytest.raises(TypeError, match="ClassPlacement"):  # a dict where a typed placement goes
+        CropPlacement({"pole": {"distance_m": (5.0, 9.0)}})
+    with pytest.raises(TypeError, match="CropPlacement"):
+        SetRecipe(placement={"pole": {"distance_m": (5.0, 9.0)}})
+
+
+def test_build_set_takes_its_settings_as_one_recipe() -> None:
+    import inspect
+
+    from zbuf_occlude.experiments import sim2real_data
+
+    for fn in (sim2real_data.build_set, sim2real_data.build_sets, sim2real_data.check_lidar_meshes):
+        assert len(inspect.signature(fn).parameters) <= 12, fn.__name__
+    assert SetRecipe().sizes is CLASS_SIZES_M and SetRecipe().placement is None
 
 
 # -- Sim2RealConfig: checked once, and the identity settings.json holds ------------------------------

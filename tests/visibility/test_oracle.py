@@ -611,3 +611,12 @@ def test_kernel_shapes_one_triangle_and_bad_points():
         segment_hits_triangles(np.zeros(3), np.zeros(2), one)  # eye bad, p fine
     with pytest.raises(InvalidInputError):
         triangle_planes(np.zeros((3,)))
+
+
+def test_the_embree_oracle_is_a_few_named_steps():
+    """``occluded_embree`` reads as its steps (sightlines, casts, crease pass, exact fallback), each under 150 lines."""
+    import inspect
+
+    steps = (occluded_embree, oracle._sightlines, oracle._clip_to_sphere, oracle._cast, oracle._crease_pass, oracle._decide_exactly)
+    assert all(len(inspect.getsource(step).splitlines()) < 150 for step in steps)
+    assert [name for name in ("_sightlines", "_cast", "_crease_pass", "_decide_exactly") if name not in inspect.getsource(occluded_embree)] == []

@@ -92,6 +92,8 @@ from zbuf_occlude.experiments.sim2real_config import (
 from zbuf_occlude.experiments.sim2real_data import (
     FITTED_SETS,
     TRAINING_SETS,
+    CropPlacement,
+    SetRecipe,
     build_sets,
     check_lidar_meshes,
     find_class_meshes,
@@ -230,8 +232,8 @@ class Sim2RealSets:
         :func:`~zbuf_occlude.experiments.sim2real_data.real_halves` gives: real→real trains on
         ``half_a``, every row is scored on ``half_b``; with ``fit_sensor``, ``half_a`` is the fit half.
     fitted, fitted_placement, fitted_sizes, fit_json
-        With ``fit_sensor``: the fitted Lidar, the crop keywords per class and per mesh
-        (:func:`~zbuf_occlude.experiments.sim2real_data.build_set`'s ``placement``), the heights
+        With ``fit_sensor``: the fitted Lidar, the crops' placement per class and shape per mesh
+        (:class:`~zbuf_occlude.experiments.sim2real_placement.CropPlacement`), the heights
         per class and the sensor's JSON; None otherwise.
     """
 
@@ -244,7 +246,7 @@ class Sim2RealSets:
     half_a: np.ndarray
     half_b: np.ndarray
     fitted: object = None
-    fitted_placement: dict | None = None
+    fitted_placement: CropPlacement | None = None
     fitted_sizes: dict | None = None
     fit_json: dict | None = None
 
@@ -360,9 +362,9 @@ def prepare_sets(config: Sim2RealConfig, *, say: Callable[[str], None] | None = 
     fitted, placement, fitted_sizes, fit_json = _fit_sensor([scans[kept[i]] for i in half_a], lidar, real_y[half_a], names)
     say(f"fitted {fitted.name} in {time.perf_counter() - t0:.0f} s; trying each mesh with it")
     meshes, skipped_fitted = check_lidar_meshes(meshes, fitted, config.sizes, n_points, min_returns=int(config.min_returns))
-    placement = _fitted_placement(config, placement)
+    placement = CropPlacement.from_keywords(_fitted_placement(config, placement))
     # each mesh's stretch and warp to its class's scans, fitted once for every seed (seed 0: the same every run)
-    placement = {**placement, **fit_mesh_shapes(meshes, fitted, fitted_sizes, placement)}
+    placement = placement.with_mesh_shapes(fit_mesh_shapes(meshes, fitted, fitted_sizes, placement))
     meshes, skipped_placed = check_lidar_meshes(meshes, fitted, fitted_sizes, n_points, min_returns=int(config.min_returns),
                                                 placement=placement)  # fmt: skip
     if sorted({m.class_name for m in meshes}) != names:
@@ -500,13 +502,14 @@ def _build_seed_sets(config: Sim2RealConfig, sets: Sim2RealSets, seed: int, trai
     (no ``"val"`` when they validate on the fit half), with ``progress`` per set on stderr."""
     sc, n_points = config.scale_values, config.n_points
     kinds = _kinds(config)
-    options = dict(sensor=config.sensor, sizes=config.sizes, keep_scale=config.keep_scale, dense_points=sc.dense_points,
-                   min_returns=int(config.min_returns), resolution=sc.resolution, method=config.method,
-                   elevation_deg=config.occluded_elevation_deg, fitted_sensor=sets.fitted, fitted_placement=sets.fitted_placement,
-                   fitted_sizes=sets.fitted_sizes, kinds=[k for k in kinds if (k, seed) not in done], progress=progress)  # fmt: skip
-    built = {"train": build_sets(train_meshes, sets.names, sc.per_class, n_points, seed, **options)}
+    recipe = SetRecipe(sensor=config.sensor, sizes=config.sizes, keep_scale=config.keep_scale, min_returns=int(config.min_returns),
+                       dense_points=sc.dense_points, resolution=sc.resolution, method=config.method,
+                       elevation_deg=config.occluded_elevation_deg)  # fmt: skip
+    options = dict(fitted_sensor=sets.fitted, fitted_placement=sets.fitted_placement, fitted_sizes=sets.fitted_sizes,
+                   kinds=[k for k in kinds if (k, seed) not in done], progress=progress)  # fmt: skip
+    built = {"train": build_sets(train_meshes, sets.names, sc.per_class, n_points, seed, recipe, **options)}
     if not config.validates_on_fit_half:
-        built["val"] = build_sets(val_meshes, sets.names, sc.val_per_class, n_points, seed + 10_000, **options)
+        built["val"] = build_sets(val_meshes, sets.names, sc.val_per_class, n_points, seed + 10_000, recipe, **options)
     return built
 
 
@@ -540,7 +543,7 @@ def write_outputs(config: Sim2RealConfig, sets: Sim2RealSets, settings: dict, do
     """Write ``results.csv``, ``summary.csv``, the ``confusion_<set>.csv`` files (summed over seeds),
     ``run.json`` and ``table.md`` from every run in ``done`` into the run's held folder; return the ``run.json`` summary."""
     from zbuf_occlude.experiments.sim2real_report import table_md
-    from zbuf_occlude.experiments.table3 import _machine
+    from zbuf_occlude.experiments.machine import machine_description
 
     names = sets.names
     summary_rows = summarise(list(done.values()), names, chosen_on_fit_half=config.validates_on_fit_half)
@@ -551,7 +554,7 @@ def write_outputs(config: Sim2RealConfig, sets: Sim2RealSets, settings: dict, do
         if cms:
             folder.write_csv(_confusion_name(kind),
                              [{"true": n, **{f"pred_{m}": int(v) for m, v in zip(names, row)}} for n, row in zip(names, sum(cms))])  # fmt: skip
-    summary = {"experiment": "sim2real", **settings, "machine": _machine(), "n_runs": len(done),
+    summary = {"experiment": "sim2real", **settings, "machine": machine_description(), "n_runs": len(done),
                "summary": summary_rows, "wall_s": {"total": wall_s,
                                                    "data": sum(r["data_s"] for r in done.values()),
                                                    "train": sum(r["train_s"] for r in done.values())}}  # fmt: skip

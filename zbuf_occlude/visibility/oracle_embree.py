@@ -11,6 +11,7 @@ function.  The driver lives in its own module, as trimesh keeps ``ray/ray_pyembr
 from __future__ import annotations
 
 import logging
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -271,38 +272,69 @@ def occluded_embree(
     fi = check_face_index(face_index, len(pts), scene.n_faces)
     e = check_eye(eye)
     tol = check_tolerance(tolerance)
-    counters = dict.fromkeys(
-        ("rays", "casts", "accepted", "rejected_self", "rejected_miss", "crease", "exact_fallback"), 0
-    )
+    counters = dict.fromkeys(("rays", "casts", "accepted", "rejected_self", "rejected_miss", "crease", "exact_fallback"), 0)
     occluded = np.zeros(len(pts), dtype=bool)
-    if scene.n_faces == 0 or len(pts) == 0:
-        if stats is not None:
-            stats.update(counters)
-        return occluded
+    if scene.n_faces and len(pts):
+        rays = _sightlines(pts, e, fi, tol)
+        fallback = _cast(scene, rays, occluded, counters)
+        if fi is not None:
+            _crease_pass(scene, rays, occluded, fallback, counters)
+        if fallback.any():
+            _decide_exactly(scene, rays, np.flatnonzero(fallback), occluded, counters)
+        log.debug("occluded_embree: %s", counters)
+    if stats is not None:
+        stats.update(counters)
+    return occluded
 
-    seg = e - pts
+
+class _Sightlines(NamedTuple):
+    """The segments of one :func:`occluded_embree` call, from each point to the eye (float64)."""
+
+    pts: NDArray[np.float64]  # (N, 3) the points, object frame
+    eye: NDArray[np.float64]  # (3,) the camera centre
+    seg: NDArray[np.float64]  # (N, 3) eye - point
+    seg_len: NDArray[np.float64]  # (N,) |seg|
+    direction: NDArray[np.float64]  # (N, 3) unit, camera → point
+    face_index: NDArray[np.int64] | None  # (N,) each point's face, or None
+    tolerance: float
+
+
+def _sightlines(pts: NDArray[np.float64], eye: NDArray[np.float64], fi: NDArray[np.int64] | None, tol: float) -> _Sightlines:
+    seg = eye - pts
     seg_len = np.sqrt(dot3(seg, seg))
     with np.errstate(divide="ignore", invalid="ignore"):
         direction = -seg / seg_len[:, None]  # unit, camera → point
-    # Ray parameter s = distance from the camera.  Occluders lie at s in [0, L - tol) and
-    # inside the bounding sphere: clip the cast to that, which keeps float32 coordinates
-    # small (origins near the mesh, not at the camera) and the cast short.
+    return _Sightlines(pts, eye, seg, seg_len, direction, fi, tol)
+
+
+def _clip_to_sphere(scene: _EmbreeScene, rays: _Sightlines) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+    """``(s_lo, s_hi, live)``: each ray's cast, as distances from the camera, and the rays with one to cast.
+
+    Occluders lie at ``s`` in ``[0, L - tol)`` and inside the bounding sphere: the cast is
+    clipped to that, which keeps float32 coordinates small (origins near the mesh, not at the
+    camera) and the cast short."""
     margin = _EMBREE_SPHERE_MARGIN * scene.radius
-    to_centre = e - scene.centre
-    b = dot3(direction, to_centre)
+    to_centre = rays.eye - scene.centre
+    b = dot3(rays.direction, to_centre)
     # r² - (squared distance from the centre to the line), from the perpendicular vector: the
     # textbook b² - (|c|² - r²) cancels two terms of size R² and loses the sphere entirely
     # for a far camera (R = 1e7: eps · R² ≈ 0.02, the size of r² itself).
-    perp = to_centre - b[:, None] * direction
+    perp = to_centre - b[:, None] * rays.direction
     disc = (scene.radius + margin) ** 2 - dot3(perp, perp)
     root = np.sqrt(np.maximum(disc, 0.0))
     s_lo = np.maximum(-b - root, 0.0)
-    s_hi = np.minimum(seg_len - tol, -b + root)
-    live = np.flatnonzero((seg_len > tol) & (disc > 0.0) & (s_hi > s_lo))
-    counters["rays"] = len(live)
+    s_hi = np.minimum(rays.seg_len - rays.tolerance, -b + root)
+    live = np.flatnonzero((rays.seg_len > rays.tolerance) & (disc > 0.0) & (s_hi > s_lo))
+    return s_lo, s_hi, live
 
+
+def _cast(scene: _EmbreeScene, rays: _Sightlines, occluded: NDArray[np.bool_], counters: dict[str, int]) -> NDArray[np.bool_]:
+    """Cast every ray with Embree, re-deciding each hit exactly, into ``occluded``; return the
+    (N,) rays left for the exact fallback (an edge grazed, or ``_EMBREE_MAX_CASTS`` spent)."""
+    pts, seg, seg_len, fi, tol = rays.pts, rays.seg, rays.seg_len, rays.face_index, rays.tolerance
+    s_lo, s_hi, live = _clip_to_sphere(scene, rays)
+    counters["rays"] = len(live)
     first_step = _EMBREE_FIRST_STEP * scene.radius
-    crease_band = _EMBREE_CREASE_BAND * scene.radius
     step = np.full(len(pts), first_step)
     last_face = np.full(len(pts), -1, dtype=np.int64)
     fallback = np.zeros(len(pts), dtype=bool)
@@ -310,7 +342,7 @@ def occluded_embree(
         if len(live) == 0:
             break
         counters["casts"] += len(live)
-        face, t_hit = scene.first_hits(e + s_lo[live, None] * direction[live], direction[live], s_hi[live] - s_lo[live])
+        face, t_hit = scene.first_hits(rays.eye + s_lo[live, None] * rays.direction[live], rays.direction[live], s_hi[live] - s_lo[live])
         hit = face >= 0
         live, face, t_hit = live[hit], face[hit], t_hit[hit]  # rays that hit nothing are done
         if len(live) == 0:
@@ -339,39 +371,44 @@ def occluded_embree(
         live = live[s_hi[live] > s_lo[live]]
     else:
         fallback[live] = True
+    return fallback
 
-    if fi is not None:
-        # Creases at the point's own face: the segment can cross a face adjacent to it
-        # within float32 noise eps of their shared boundary, where Embree's ray passes on
-        # the own face's side and reports nothing.  The crossing X is then within eps of the
-        # own face's plane and boundary, so with d = |X - p|, c = |cos(segment, own normal)|
-        # and b = distance from p to its face's boundary: d c <= eps and b <= d + eps, hence
-        # b c <= 2 eps.  Those points get the faces around their own face decided exactly.
-        idx = np.flatnonzero(~occluded & ~fallback)
-        idx = idx[boundary_times_cos(scene.planes.take(fi[idx]), pts[idx], direction[idx]) <= crease_band]
-        k, g = scene.faces_around(fi[idx])
-        for c0 in range(0, len(k), DEFAULT_PAIRS_PER_CHUNK):
-            kc, gc = idx[k[c0 : c0 + DEFAULT_PAIRS_PER_CHUNK]], g[c0 : c0 + DEFAULT_PAIRS_PER_CHUNK]
-            crease = pair_occludes(pts[kc], seg[kc], seg_len[kc], scene.planes, gc, fi[kc], tol)
-            counters["crease"] += int(np.count_nonzero(crease & ~occluded[kc]))
-            occluded[kc[crease]] = True
 
-    if fallback.any():
-        idx = np.flatnonzero(fallback)
-        counters["exact_fallback"] = len(idx)
-        if len(idx) <= _FEW_FALLBACK_RAYS:
-            # A few rays: faces whose bounding box meets the segment's are the only
-            # candidates; cheaper than the image-plane cull, which projects every face.
-            _occluded_few(
-                idx, pts, seg, seg_len, e, scene.face_lo, scene.face_hi, scene.listed, scene.packed_planes,
-                fi if fi is not None else np.zeros(0, dtype=np.int64), tol, occluded,
-            )  # fmt: skip
-        else:
-            occluded[idx] = occluded_unchecked(
-                scene.listed_planes, pts[idx], e, scene.listed_pos[fi[idx]] if fi is not None else None, tol,
-                DEFAULT_PAIRS_PER_CHUNK,
-            )  # fmt: skip
-    log.debug("occluded_embree: %s", counters)
-    if stats is not None:
-        stats.update(counters)
-    return occluded
+def _crease_pass(scene: _EmbreeScene, rays: _Sightlines, occluded: NDArray[np.bool_], fallback: NDArray[np.bool_],
+                 counters: dict[str, int]) -> None:  # fmt: skip
+    """Creases at the point's own face (needs ``face_index``), into ``occluded``.
+
+    The segment can cross a face adjacent to the own face within float32 noise eps of their
+    shared boundary, where Embree's ray passes on the own face's side and reports nothing.
+    The crossing X is then within eps of the own face's plane and boundary, so with
+    d = |X - p|, c = |cos(segment, own normal)| and b = distance from p to its face's
+    boundary: d c <= eps and b <= d + eps, hence b c <= 2 eps.  Those points get the faces
+    around their own face decided exactly."""
+    pts, seg, seg_len, fi, tol = rays.pts, rays.seg, rays.seg_len, rays.face_index, rays.tolerance
+    idx = np.flatnonzero(~occluded & ~fallback)
+    idx = idx[boundary_times_cos(scene.planes.take(fi[idx]), pts[idx], rays.direction[idx]) <= _EMBREE_CREASE_BAND * scene.radius]
+    k, g = scene.faces_around(fi[idx])
+    for c0 in range(0, len(k), DEFAULT_PAIRS_PER_CHUNK):
+        kc, gc = idx[k[c0 : c0 + DEFAULT_PAIRS_PER_CHUNK]], g[c0 : c0 + DEFAULT_PAIRS_PER_CHUNK]
+        crease = pair_occludes(pts[kc], seg[kc], seg_len[kc], scene.planes, gc, fi[kc], tol)
+        counters["crease"] += int(np.count_nonzero(crease & ~occluded[kc]))
+        occluded[kc[crease]] = True
+
+
+def _decide_exactly(scene: _EmbreeScene, rays: _Sightlines, idx: NDArray[np.int64], occluded: NDArray[np.bool_],
+                    counters: dict[str, int]) -> None:  # fmt: skip
+    """The rays ``idx`` Embree could not settle, decided against every face, into ``occluded``."""
+    fi = rays.face_index
+    counters["exact_fallback"] = len(idx)
+    if len(idx) <= _FEW_FALLBACK_RAYS:
+        # A few rays: faces whose bounding box meets the segment's are the only
+        # candidates; cheaper than the image-plane cull, which projects every face.
+        _occluded_few(
+            idx, rays.pts, rays.seg, rays.seg_len, rays.eye, scene.face_lo, scene.face_hi, scene.listed, scene.packed_planes,
+            fi if fi is not None else np.zeros(0, dtype=np.int64), rays.tolerance, occluded,
+        )  # fmt: skip
+    else:
+        occluded[idx] = occluded_unchecked(
+            scene.listed_planes, rays.pts[idx], rays.eye, scene.listed_pos[fi[idx]] if fi is not None else None, rays.tolerance,
+            DEFAULT_PAIRS_PER_CHUNK,
+        )  # fmt: skip

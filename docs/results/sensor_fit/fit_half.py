@@ -10,6 +10,7 @@ import numpy as np
 
 from zbuf_occlude.experiments import sim2real as S
 from zbuf_occlude.experiments.sim2real_data import LIDAR_PLACEMENT, check_lidar_meshes, find_class_meshes, real_clouds, real_scan_rows
+from zbuf_occlude.experiments.sim2real_placement import CropPlacement
 from zbuf_occlude.mesh.sizes import size_interval
 from zbuf_occlude.real_scans.datasets import load_real_scans
 from zbuf_occlude.sensors.crops import object_crop
@@ -36,7 +37,8 @@ def recorded_fit_half(labels: np.ndarray) -> np.ndarray:
 
 def load_fit_half(data: str) -> SimpleNamespace:
     """``scans``, ``kept`` (scan row per cloud), ``names``, ``real_y``, ``fit_half`` (cloud rows), ``fitted`` (the sensor),
-    ``placement`` and ``sizes`` (per class) and ``meshes`` (those the fitted sensor sees), for the data folder ``data``."""
+    ``placement`` (per class, plain dicts: ``CropPlacement.from_keywords`` types them) and ``sizes`` (per class) and ``meshes``
+    (those the fitted sensor sees), for the data folder ``data``."""
     scans = load_real_scans(f"{data}/lidarnet_v2_partial")
     meshes = find_class_meshes(f"{data}/street_objects", up_map={"bush/openglforest__*": "+y"})
     names = sorted({m.class_name for m in meshes})
@@ -44,7 +46,7 @@ def load_fit_half(data: str) -> SimpleNamespace:
     half = recorded_fit_half(real_y)
     kept = real_scan_rows(scans, names, {})
     fitted, placement, sizes, _ = S._fit_sensor([scans[kept[i]] for i in half], sensor_from_name("hdl32e"), real_y[half], names)
-    meshes, _ = check_lidar_meshes(meshes, fitted, sizes, 256, placement=placement)
+    meshes, _ = check_lidar_meshes(meshes, fitted, sizes, 256, placement=CropPlacement.from_keywords(placement))
     return SimpleNamespace(scans=scans, kept=kept, names=names, real_y=real_y, fit_half=half, fitted=fitted, placement=placement,
                            sizes=sizes, meshes=meshes)  # fmt: skip
 

@@ -14,7 +14,7 @@ import sys
 import numpy as np
 
 from fit_half import load_fit_half
-from zbuf_occlude.experiments.sim2real_data import _distributions, _placement_of, fit_mesh_shapes
+from zbuf_occlude.experiments.sim2real_placement import CropPlacement, fit_mesh_shapes
 from zbuf_occlude.sensors.crops import object_crop
 from zbuf_occlude.sensors.placement import draw_placement
 from zbuf_occlude.sensors.fit import across_sight_width, width_profile
@@ -24,9 +24,9 @@ scans, kept, names, real_y, fit_half, fitted, placement, sizes, meshes = (f.scan
                                                                            f.placement, f.sizes, f.meshes)  # fmt: skip
 
 
-def without(*keys: str) -> dict:
-    shaped = {c: {k: v for k, v in kw.items() if k not in keys} for c, kw in placement.items()}
-    return {**shaped, **fit_mesh_shapes(meshes, fitted, sizes, shaped)}
+def without(*keys: str) -> CropPlacement:
+    shaped = CropPlacement.from_keywords({c: {k: v for k, v in kw.items() if k not in keys} for c, kw in placement.items()})
+    return shaped.with_mesh_shapes(fit_mesh_shapes(meshes, fitted, sizes, shaped))
 
 
 # --fitted-shape none, widths and outline
@@ -40,7 +40,7 @@ for i in fit_half:
 for tag, place in variants.items():
     rng = np.random.default_rng(1)
     for m in meshes:
-        dist, _ = _distributions(m, sizes[m.class_name], _placement_of(place, m))
+        dist, _ = place.crop_distributions(m, sizes[m.class_name])
         for k in range(12):
             c = object_crop(m.mesh, fitted, draw_placement(dist, rng), seed=k).scan.points.astype(np.float64)
             if len(c) >= 30:  # sim2real's MIN_RETURNS
@@ -60,5 +60,6 @@ print("|---|---|---|---|")
 for m in meshes:
     d = [np.nanmean(np.abs(np.nanmedian(np.array(per_mesh[t, m.name]), axis=0) - real_profile[m.class_name])) if per_mesh[t, m.name] else np.nan
          for t in ("placed", "outline")]  # fmt: skip
-    warp = variants["outline"].get(m.name, {}).get("width_profile")
+    shape = variants["outline"].per_mesh.get(m.name)
+    warp = shape.width_profile if shape else None
     print(f"| {m.class_name} | {m.name} | {d[0]:.2f} → {d[1]:.2f} | " + (" ".join(f"{v:.2f}" for v in warp) if warp else "") + " |")

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from zbuf_occlude.experiments.sim2real_data import TRAINING_SETS, build_sets, find_class_meshes, real_clouds
+from zbuf_occlude.experiments.sim2real_data import TRAINING_SETS, SetRecipe, build_sets, find_class_meshes, real_clouds
 from zbuf_occlude.experiments.sim2real_report import plot_examples
 from zbuf_occlude.real_scans.datasets import load_real_scans
 from zbuf_occlude.sensors import lidar_preset
@@ -28,7 +28,7 @@ MESHES = {"car": "car/pgdrive__beetle_scene", "pedestrian": "pedestrian/hw3dmode
 
 meshes = [m for m in find_class_meshes(SHARED / "street_objects", up_map={"bush/openglforest__*": "+y"}) if m.name in MESHES.values()]
 names = sorted(MESHES)
-sets = build_sets(meshes, names, 1, 256, 0, sensor=lidar_preset("hdl32e"))
+sets = build_sets(meshes, names, 1, 256, 0, SetRecipe(sensor=lidar_preset("hdl32e")))
 real_pts, real_y, _ = real_clouds(load_real_scans(SHARED / "lidarnet_v2_partial"), names, {}, 256, 0)
 rows = {}
 for i, cls in enumerate(names):
