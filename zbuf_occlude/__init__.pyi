@@ -50,4 +50,5 @@ from .pipeline import occlude
 from .render import ModernGLRenderer, context_info, render_depth
 from .sensors import DepthCamera, Lidar, Scan, ScanScene, SceneObject, load_scene, look_at_pose, scan
 from .visibility import MethodInfo, available_methods, method_info, register, visible_mask
+from .visibility.point_splats import PointSurfels, point_surfels, visible_mask_points
 from .visibility.session import VisibilitySession

@@ -22,6 +22,15 @@ __all__ = [
     "DEFAULT_DEPTH_TOLERANCE",
     "DEFAULT_SLOPE_SCALE",
     "DEFAULT_MAX_SLOPE",
+    "DEFAULT_POINT_NEIGHBOURS",
+    "DEFAULT_SPLAT_SCALE",
+    "DEFAULT_SPLAT_TOLERANCE",
+    "DEFAULT_POINT_NORMAL_NEIGHBOURS",
+    "DEFAULT_CREASE_COS",
+    "SPLAT_PIXELS_PER_RADIUS",
+    "MAX_SPLAT_PIXELS",
+    "MAX_POINT_SET_POINTS",
+    "MAX_POINT_SET_BYTES",
     "MAX_VIEWS",
     "MAX_POINTS",
     "MAX_SAMPLES",
@@ -119,6 +128,37 @@ DEFAULT_SLOPE_SCALE = 1.0
 #: ``min(tan θ, 4)``.
 DEFAULT_MAX_SLOPE = 4.0
 
+
+# -- visibility of bare point clouds (``visible_mask_points``, method ``point-splat``) ---------------
+# Chosen by a grid search against the exact mesh oracle on 18 ModelNet meshes that are not shipped
+# (16 poses, 2,048 and 10,000 points; docs/results/point_visibility.md), never on the meshes the
+# results page reports.
+#: Each point's spacing is the distance to its k-th nearest neighbour: k = 4 (k = 6 is within
+#: 0.3 points of it; larger k give larger splats that hide the points just beyond every edge).
+DEFAULT_POINT_NEIGHBOURS = 4
+#: Splat (surfel) radius, in spacings: 1.0 (0.8 leaves holes that show hidden points, up to -1.7
+#: points of accuracy at 2,048 points; 1.25 hides points beyond edges, -0.4 to -1.3 points).
+DEFAULT_SPLAT_SCALE = 1.0
+#: A point is on the winning surfel's sheet within this distance of its tangent plane, in
+#: spacings (plus the curvature allowance): 0.05 (with normals 0.02 is 0.4 points better and 0.1
+#: 0.6 worse, without normals 0.1 is 0.3 better; 0 loses 8 to 12 points everywhere).
+DEFAULT_SPLAT_TOLERANCE = 0.05
+#: Neighbours (the point included) whose covariance gives a normal where none are given: 9.
+DEFAULT_POINT_NORMAL_NEIGHBOURS = 9
+#: Normals within this |cos| (30°) are one smooth sheet; across a sharper crease no curvature
+#: allowance is made.
+DEFAULT_CREASE_COS = 0.87
+#: Splat pixels across the median splat radius: 3 (the image is sized from the splats, not set).
+SPLAT_PIXELS_PER_RADIUS = 3.0
+#: Most pixels of one splat image (two 4-byte buffers and one 8-byte: 64 MB); a larger image
+#: gets coarser pixels.
+MAX_SPLAT_PIXELS = 4_000_000
+#: Points one cloud of a point-set file may hold (:func:`zbuf_occlude.io.point_sets.read_point_sets`'s
+#: ``max_points``): 10⁷, 240 MB as float64 coordinates, far above an object's scan or PointNet's 2,048.
+MAX_POINT_SET_POINTS = 10_000_000
+#: Bytes one read of a point-set file may take, as float64 coordinates and normals, and the largest
+#: ``.ply`` point cloud read: 2 GiB (``modelnet40_ply_hdf5_2048``'s largest file is 100 MB so read).
+MAX_POINT_SET_BYTES = 2 << 30
 
 # -- caps of the counted options --------------------------------------------------------------------
 # The largest value each counted option of the command line takes (zbuf_occlude.cli.options checks

@@ -70,7 +70,7 @@ _INFO: dict[str, MethodInfo] = {}
 #: auto.  They are imported the first time a method is looked up, not with the package, so that
 #: a program pays for numba, moderngl and Embree only when it asks for visibility.
 BUILTIN_MODULES = (
-    "auto", "embree_fast", "gpu_exact", "oracle", "peers", "zbuffer",
+    "auto", "embree_fast", "gpu_exact", "oracle", "peers", "point_splats", "zbuffer",
     "paper.object_space", "paper.occupancy", "paper.vertex",
 )  # fmt: skip
 _builtins_loaded = False

@@ -1,0 +1,228 @@
+"""The numba kernels of point-only visibility: surfel splatting into a depth/id buffer, and the
+per-point decision (:mod:`zbuf_occlude.visibility.point_splats` states the method and its sources).
+
+Both work in the OpenCV camera frame (x right, y down, z = linear depth forward, object units) on
+an image plane at z = 1: pixel ``(i, j)`` is the square ``[x0 + i·pix, x0 + (i+1)·pix) ×
+[y0 + j·pix, y0 + (j+1)·pix)`` of normalised coordinates ``(x/z, y/z)``, sampled at its centre.
+The GPU path (:mod:`zbuf_occlude.render.point_sprites`) fills the same buffers with the same
+formulas in float32; :func:`decide` then runs on either.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+__all__ = ["splat_surfels", "decide"]
+
+#: A surfel seen closer than this to edge-on (|cos| between its normal and a pixel's ray) covers
+#: nothing there: its footprint is a line of zero area (and the ray-plane depth is unbounded).
+EDGE_ON_COS = 1e-6
+#: The curvature allowance is this many times the tangent plane's height at the neighbour's
+#: distance (the pixel's ray meets the plane up to half a pixel off the point, and the estimate
+#: of the curvature from two normals is first order).
+CURVATURE_SLACK = 1.0
+
+
+@numba.njit(cache=True, nogil=True)
+def splat_surfels(cam, normal, radius, pix, x0, y0, width, height):  # pragma: no cover - numba
+    """Rasterise oriented disks (surfels) into a z-buffer and a surfel-id buffer.
+
+    Each surfel ``k`` is the disk of radius ``radius[k]`` centred on ``cam[k]`` in the plane of
+    normal ``normal[k]``.  A pixel is covered when its central ray meets the plane at a point
+    within the radius of the centre; the depth stored there is that ray-plane intersection's
+    (exact perspective depth of the disk, as Botsch et al. 2005's per-pixel depth correction),
+    and the nearest surfel wins.
+
+    Parameters
+    ----------
+    cam : (N, 3) float64
+        Surfel centres, OpenCV camera frame, object units.
+    normal : (N, 3) float64
+        Unit normals, same frame (either sign).
+    radius : (N,) float64
+        Disk radii, object units.
+    pix, x0, y0 : float
+        Pixel side and the image's top-left corner, normalised image coordinates (module docstring).
+    width, height : int
+        Image size, pixels.
+
+    Returns
+    -------
+    depth : (height, width) float64
+        Nearest covering depth, ``inf`` where no surfel covers the pixel.
+    ids : (height, width) int32
+        Index of that surfel, −1 where none.
+    """
+    n = cam.shape[0]
+    depth = np.full((height, width), np.inf)
+    ids = np.full((height, width), -1, np.int32)
+    for k in range(n):
+        qx, qy, qz = cam[k, 0], cam[k, 1], cam[k, 2]
+        r = radius[k]
+        if qz - r <= 0.0 or r <= 0.0:
+            continue
+        # the disk lies inside the sphere of radius r: its projection inside this angular box
+        rho = r / (qz - r)
+        cx, cy = qx / qz, qy / qz
+        i0 = max(int(np.floor((cx - rho - x0) / pix)), 0)
+        i1 = min(int(np.floor((cx + rho - x0) / pix)), width - 1)
+        j0 = max(int(np.floor((cy - rho - y0) / pix)), 0)
+        j1 = min(int(np.floor((cy + rho - y0) / pix)), height - 1)
+        nx, ny, nz = normal[k, 0], normal[k, 1], normal[k, 2]
+        nq = nx * qx + ny * qy + nz * qz
+        r2 = r * r
+        for j in range(j0, j1 + 1):
+            y = y0 + (j + 0.5) * pix
+            for i in range(i0, i1 + 1):
+                x = x0 + (i + 0.5) * pix
+                den = nx * x + ny * y + nz
+                if abs(den) < EDGE_ON_COS * np.sqrt(x * x + y * y + 1.0):
+                    continue
+                t = nq / den
+                hx = x * t - qx
+                hy = y * t - qy
+                hz = t - qz
+                if hx * hx + hy * hy + hz * hz <= r2 and t < depth[j, i]:
+                    depth[j, i] = t
+                    ids[j, i] = k
+    return depth, ids
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _curvature_allowance(p, q, cam, normal, radius, crease_cos, reach_factor):  # pragma: no cover - numba
+    """How far ``q``'s tangent plane may stand off ``p``'s on one smooth sheet: for neighbours
+    (``|p - q| <= reach_factor · (r_p + r_q)``) whose normals differ by less than the crease, the height of a
+    tangent plane over a surface of curvature ``|n_p -/+ n_q| / |p - q|`` at distance ``|p - q|``,
+    ``0.5 |n_p -/+ n_q| |p - q|``; else 0."""
+    cos_pq = normal[p, 0] * normal[q, 0] + normal[p, 1] * normal[q, 1] + normal[p, 2] * normal[q, 2]
+    if abs(cos_pq) < crease_cos:
+        return 0.0
+    dx, dy, dz = cam[p, 0] - cam[q, 0], cam[p, 1] - cam[q, 1], cam[p, 2] - cam[q, 2]
+    d2 = dx * dx + dy * dy + dz * dz
+    reach = reach_factor * (radius[p] + radius[q])
+    if d2 > reach * reach:
+        return 0.0
+    s = 1.0 if cos_pq >= 0.0 else -1.0
+    ex = normal[p, 0] - s * normal[q, 0]
+    ey = normal[p, 1] - s * normal[q, 1]
+    ez = normal[p, 2] - s * normal[q, 2]
+    return CURVATURE_SLACK * 0.5 * np.sqrt((ex * ex + ey * ey + ez * ez) * d2)
+
+
+#: Directions searched around a point that wins its own pixel (:func:`_in_a_gap`).
+_GAP_DIRECTIONS = np.array([[1, 0], [1, 1], [0, 1], [-1, 1], [-1, 0], [-1, -1], [0, -1], [1, -1]])
+#: How far they are searched, in the point's own splat radii.
+GAP_REACH = 2.0
+
+
+@numba.njit(cache=True, nogil=True)
+def _in_a_gap(p, i, j, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented):  # pragma: no cover - numba
+    """True when a point whose pixel its own sheet holds is seen through a gap of a surface in
+    front: in each of 8 directions, within :data:`GAP_REACH` of its splat radius, the first pixel
+    that its own sheet does not hold shows a surface in front of its tangent plane.  Random
+    sampling leaves gaps wider than the splats (a few back points of a sampled sphere or cube
+    show through them without this test)."""
+    px, py, pz = cam[p, 0], cam[p, 1], cam[p, 2]
+    height, width = depth.shape
+    toward = -(normal[p, 0] * px + normal[p, 1] * py + normal[p, 2] * pz)
+    side = 1.0 if toward >= 0.0 else -1.0
+    p_faces = toward > 0.0
+    allowance = tolerance * spacing[p]
+    reach = int(np.ceil(GAP_REACH * radius[p] / pz / pix))
+    if reach < 1:
+        return False
+    for d in range(8):
+        di, dj = _GAP_DIRECTIONS[d, 0], _GAP_DIRECTIONS[d, 1]
+        blocked = False
+        for step in range(1, reach + 1):
+            ii, jj = i + di * step, j + dj * step
+            if ii < 0 or jj < 0 or ii >= width or jj >= height or ids[jj, ii] < 0:
+                break
+            q = ids[jj, ii]
+            if q == p:
+                continue
+            # the winner's centre, not the pixel's surface point: a neighbour's disk on a convex
+            # sheet rises above p's tangent plane, its centre never does
+            rise = side * ((cam[q, 0] - px) * normal[p, 0] + (cam[q, 1] - py) * normal[p, 1] + (cam[q, 2] - pz) * normal[p, 2])
+            if oriented and not p_faces and normal[q, 0] * cam[q, 0] + normal[q, 1] * cam[q, 1] + normal[q, 2] * cam[q, 2] < 0.0:
+                blocked = True
+                break
+            if rise > allowance + _curvature_allowance(p, q, cam, normal, radius, crease_cos, GAP_REACH + 1.0):
+                blocked = True
+                break
+            if rise < -allowance:
+                break
+        if not blocked:
+            return False
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def decide(cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented):  # pragma: no cover - numba
+    """Per point: does the surfel that wins its pixel lie on the point's own surface?
+
+    Point ``p`` is a candidate when nothing covers its pixel, when its own surfel wins, when the
+    winner ``q``'s centre lies behind ``p``'s tangent plane as seen from the camera (its disk
+    only cuts that plane, as past a convex crease), or when the winner's surface point ``h``
+    (where the pixel's ray meets its disk) lies within ``tolerance · spacing[p]`` of ``p``'s
+    tangent plane, widened by :func:`_curvature_allowance`.  A candidate is visible unless it
+    is seen through a gap of a surface in front (:func:`_in_a_gap`).  With ``oriented``
+    normals, a point facing away from the camera whose pixel a surfel facing it wins is hidden
+    (the back of a closed surface).  With exact normals of a convex shape, every point facing
+    the camera is visible: no other point lies in front of its tangent plane.
+
+    Parameters
+    ----------
+    cam, normal, radius, depth, ids, pix, x0, y0
+        As :func:`splat_surfels` (its output for these surfels).
+    spacing : (N,) float64
+        Local sampling spacing of each point, object units.
+    tolerance : float
+        Distance to the tangent plane, in spacings.
+    crease_cos : float
+        Normals closer than this (|cos|) are one smooth sheet.
+    oriented : bool
+        The normals point out of the surface consistently.
+
+    Returns
+    -------
+    visible : (N,) bool
+        Before the frustum test (points behind the camera are False).
+    """
+    n = cam.shape[0]
+    height, width = depth.shape
+    visible = np.zeros(n, dtype=np.bool_)
+    for p in range(n):
+        px, py, pz = cam[p, 0], cam[p, 1], cam[p, 2]
+        if pz <= 0.0:
+            continue
+        i = int(np.floor((px / pz - x0) / pix))
+        j = int(np.floor((py / pz - y0) / pix))
+        if i < 0 or j < 0 or i >= width or j >= height:
+            continue
+        q = ids[j, i]
+        if q < 0 or q == p:
+            visible[p] = not _in_a_gap(p, i, j, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented)
+            continue
+        if oriented:
+            q_faces = normal[q, 0] * cam[q, 0] + normal[q, 1] * cam[q, 1] + normal[q, 2] * cam[q, 2] < 0.0
+            p_faces = normal[p, 0] * px + normal[p, 1] * py + normal[p, 2] * pz < 0.0
+            if q_faces and not p_faces:
+                continue
+        dx, dy, dz = px - cam[q, 0], py - cam[q, 1], pz - cam[q, 2]
+        # the winner's centre behind p's tangent plane (seen from the camera): its disk only
+        # passes through that plane, as past a convex crease, and hides nothing of p's sheet
+        toward = -(normal[p, 0] * px + normal[p, 1] * py + normal[p, 2] * pz)  # n_p · (eye - p)
+        rise = -(dx * normal[p, 0] + dy * normal[p, 1] + dz * normal[p, 2])  # n_p · (q - p)
+        if rise * toward < 0.0:
+            visible[p] = not _in_a_gap(p, i, j, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented)
+            continue
+        x = x0 + (i + 0.5) * pix
+        y = y0 + (j + 0.5) * pix
+        t = depth[j, i]
+        dist = abs((x * t - px) * normal[p, 0] + (y * t - py) * normal[p, 1] + (t - pz) * normal[p, 2])
+        allowance = tolerance * spacing[p] + _curvature_allowance(p, q, cam, normal, radius, crease_cos, 1.0)
+        if dist <= allowance:
+            visible[p] = not _in_a_gap(p, i, j, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented)
+    return visible
