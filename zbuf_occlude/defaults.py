@@ -25,7 +25,6 @@ __all__ = [
     "DEFAULT_POINT_NEIGHBOURS",
     "DEFAULT_SPLAT_SCALE",
     "DEFAULT_SPLAT_TOLERANCE",
-    "DEFAULT_POINT_NORMAL_NEIGHBOURS",
     "DEFAULT_CREASE_COS",
     "SPLAT_PIXELS_PER_RADIUS",
     "MAX_SPLAT_PIXELS",
@@ -143,8 +142,6 @@ DEFAULT_SPLAT_SCALE = 1.0
 #: spacings (plus the curvature allowance): 0.05 (with normals 0.02 is 0.4 points better and 0.1
 #: 0.6 worse, without normals 0.1 is 0.3 better; 0 loses 8 to 12 points everywhere).
 DEFAULT_SPLAT_TOLERANCE = 0.05
-#: Neighbours (the point included) whose covariance gives a normal where none are given: 9.
-DEFAULT_POINT_NORMAL_NEIGHBOURS = 9
 #: Normals within this |cos| (30°) are one smooth sheet; across a sharper crease no curvature
 #: allowance is made.
 DEFAULT_CREASE_COS = 0.87

@@ -7,7 +7,10 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from zbuf_occlude.geometry.normals import estimate_normals
+import trimesh
+
+import zbuf_occlude as zo
+from zbuf_occlude.geometry.normals import estimate_normals, robust_normals
 
 unit = st.tuples(*[st.floats(-1, 1, allow_nan=False)] * 3).filter(lambda v: np.linalg.norm(v) > 0.1)
 
@@ -39,3 +42,32 @@ def test_a_sphere_s_normals_point_out_toward_a_sensor_outside():
 
 def test_too_few_points_still_give_unit_normals():
     assert np.allclose(np.linalg.norm(estimate_normals(np.zeros((2, 3)), np.ones(3)), axis=1), 1.0)
+
+
+def _angle_deg(a, b):
+    return np.degrees(np.arccos(np.clip(np.abs(np.einsum("ij,ij->i", a, b)), 0.0, 1.0)))
+
+
+def test_robust_normals_stay_on_their_face_next_to_a_cube_s_edges():
+    cube = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    points, face_index = zo.sample_surface(cube, 4_000, seed=3)
+    truth = cube.face_normals[face_index]
+    own = estimate_normals(points, np.array([5.0, 4.0, 3.0]), k=9).astype(np.float64)
+    robust = robust_normals(points)
+    # the point's own neighbourhood bends over an edge, the shifted ones mostly do not (measured
+    # 19 % and 4.8 % of the points more than 5 degrees off)
+    assert np.mean(_angle_deg(own, truth) > 5.0) > 0.15
+    assert np.mean(_angle_deg(robust, truth) > 5.0) < 0.06
+    assert np.allclose(np.linalg.norm(robust, axis=1), 1.0)
+
+
+def test_robust_normals_of_a_smooth_sphere_are_its_own():
+    sphere = trimesh.creation.icosphere(subdivisions=4, radius=0.5)
+    points, _ = zo.sample_surface(sphere, 4_000, seed=4)
+    outward = points / np.linalg.norm(points, axis=1, keepdims=True)
+    assert np.percentile(_angle_deg(robust_normals(points), outward), 95) < 3.0
+
+
+def test_robust_normals_of_too_few_points_are_defined():
+    assert robust_normals(np.zeros((0, 3))).shape == (0, 3)
+    assert np.array_equal(robust_normals(np.zeros((2, 3))), [[0.0, 0.0, 1.0]] * 2)

@@ -8,7 +8,8 @@ normals, where given), with the z-buffer test the mesh methods use:
    Zwicker et al. 2001, *Surface splatting*).  The radius follows the local sampling density, the
    distance to the k-th nearest neighbour (:data:`~zbuf_occlude.defaults.DEFAULT_POINT_NEIGHBOURS`),
    so sparse and dense parts of a cloud are both closed.  The normal is the given one, or the
-   covariance normal of the point's neighbourhood (:func:`~zbuf_occlude.geometry.normals.estimate_normals`).
+   flattest covariance normal among neighbourhoods near the point
+   (:func:`~zbuf_occlude.geometry.normals.robust_normals`).
 2. **Splatting.**  The disks are rasterised into a depth buffer and an id buffer; each pixel holds
    the depth where its central ray meets the nearest disk (per-pixel ray-plane depth as in Botsch
    et al. 2005), :func:`~zbuf_occlude.visibility.point_kernels.splat_surfels`.  The pixel size is
@@ -41,7 +42,6 @@ from numpy.typing import NDArray
 from zbuf_occlude.defaults import (
     DEFAULT_CREASE_COS,
     DEFAULT_POINT_NEIGHBOURS,
-    DEFAULT_POINT_NORMAL_NEIGHBOURS,
     DEFAULT_SPLAT_SCALE,
     DEFAULT_SPLAT_TOLERANCE,
     MAX_SPLAT_PIXELS,
@@ -229,9 +229,9 @@ def point_surfels(
     points : (N, 3) float
         World frame, object units.
     normals : (N, 3) float, optional
-        Surface normals (any length but zero).  Without them each point's normal is the
-        covariance normal of its :data:`~zbuf_occlude.defaults.DEFAULT_POINT_NORMAL_NEIGHBOURS`
-        nearest points.
+        Surface normals (any length but zero).  Without them each point's normal is estimated
+        from its neighbours, robustly next to sharp edges
+        (:func:`~zbuf_occlude.geometry.normals.robust_normals`).
     oriented : bool
         ``normals`` point out of a closed surface consistently (a watertight mesh wound
         consistently); then a point facing away whose pixel is won by a surface facing the camera
@@ -268,14 +268,12 @@ def point_surfels(
         return PointSurfels(pts, nrm, spacing, spacing.copy(), bool(oriented))
     from scipy.spatial import cKDTree
 
-    from zbuf_occlude.geometry.normals import estimate_normals
+    from zbuf_occlude.geometry.normals import robust_normals
 
-    kq = min(max(k, DEFAULT_POINT_NORMAL_NEIGHBOURS - 1), n - 1)
-    distance, index = cKDTree(pts).query(pts, k=kq + 1)
-    spacing = np.ascontiguousarray(distance[:, min(k, n - 1)])
+    distance, _ = cKDTree(pts).query(pts, k=min(k, n - 1) + 1)
+    spacing = np.ascontiguousarray(distance[:, -1])
     if nrm is None:
-        kn = min(DEFAULT_POINT_NORMAL_NEIGHBOURS, n)
-        nrm = estimate_normals(pts, pts.mean(axis=0) + 1.0, neighbours=index[:, :kn]).astype(np.float64)
+        nrm = robust_normals(pts)
     return PointSurfels(pts, np.ascontiguousarray(nrm), spacing, scale * spacing, bool(oriented))
 
 
