@@ -27,3 +27,13 @@ def test_a_failed_mesh_is_named_once(tmp_path, capfd, command):
     printed = captured.out + captured.err
     assert len([line for line in printed.splitlines() if "garbage_0001" in line]) == 1, printed  # the error names the file too
     assert "FAILED" in printed and "not a count line" in printed
+
+
+@pytest.mark.slow
+def test_the_summary_gives_samples_per_mb_without_the_papers_figure(tmp_path, capsys):
+    # the comparison with the paper's data set (Table 2) is the benchmark's (benchmarks/bench_farm.py), not every run's
+    args = ["farm", str(SAMPLES / "chair"), "--out", str(tmp_path / "out"), "--views", "0:0", "--samples-per-view", "1", "--points", "32",
+            "--dense-points", "500", "--resolution", "64", "--workers", "1", "--no-progress"]  # fmt: skip
+    assert cli_main(args) == 0
+    printed = capsys.readouterr().out
+    assert "samples/MB" in printed and "Table 2" not in printed and "paper" not in printed, printed

@@ -14,6 +14,7 @@ from zbuf_occlude.cli.main import main
 from zbuf_occlude.dataset.reader import OccludedDataset
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.contact_sheet import (
+    DEFAULT_DPI,
     MAX_DPI,
     MAX_SHEET_PIXELS,
     MAX_SHEET_ROWS,
@@ -147,6 +148,35 @@ def test_a_depth_camera_scan_is_drawn_at_its_pixels(tmp_path: Path) -> None:
     assert row.camera_units == "pixels" and row.camera_bounds == ((-0.5, camera.width - 0.5), (-0.5, camera.height - 0.5))
     keep = scan.object_id > 0 if np.any(scan.object_id > 0) else slice(None)
     assert np.array_equal(row.camera_view, scan.pixel[keep])
+
+
+def test_titles_are_readable_and_a_long_name_fits_its_panel(scans: Path, compact: Path, tmp_path: Path) -> None:
+    import shutil
+
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    folder = tmp_path / "long"
+    folder.mkdir()
+    long_stem = "a_mesh_named_as_a_catalogue_names_it_street_furniture_bench_with_backrest_model_42"
+    shutil.copy(next(scans.glob("*_s000.npz")), folder / f"{long_stem}_vlp16_s000.npz")
+    sheet = contact_sheet(folder, tmp_path / "sheet.png", dpi=DEFAULT_DPI)
+    assert long_stem in sheet.rows[0].titles[0]  # the row keeps the whole name; the panel shows what fits
+    for figure in (sheet.figure, contact_sheet(compact, tmp_path / "ds.png", per_class=1, poses=1, dpi=DEFAULT_DPI).figure):
+        canvas = FigureCanvasAgg(figure)
+        canvas.draw()
+        renderer = canvas.get_renderer()
+        column = figure.bbox.width / 3
+        for k, ax in enumerate(figure.axes):
+            title = ax.title
+            # capitals at least 9 pixels tall at the default dpi: the font's size in pixels, and an "H" as Agg draws it
+            assert title.get_fontsize() * DEFAULT_DPI / 72 >= 12.0
+            _, height, descent = renderer.get_text_width_height_descent("H", title.get_fontproperties(), ismath=False)
+            assert height - descent >= 8.5
+            box = title.get_window_extent(renderer)
+            assert (k % 3) * column <= box.x0 and box.x1 <= (k % 3 + 1) * column, (title.get_text(), box)
+            assert "…" not in title.get_text().split("\n", 1)[-1]  # counts are wrapped, never cut
+    shown = sheet.figure.axes[0].title.get_text()
+    assert "…" in shown and shown.startswith("a_mesh") and "s000.npz" in shown  # its start and its end
 
 
 def test_the_same_seed_draws_the_same_sheet(scans: Path, tmp_path: Path) -> None:

@@ -6,9 +6,9 @@ import argparse
 import logging
 import shlex
 import sys
-from dataclasses import replace
 
-from zbuf_occlude.cli.options import Checked, count, interval, out_folder, parse_interval, poses, real, seed
+from zbuf_occlude.cli.crops import add_crop_arguments, crop_settings, given_crop_options
+from zbuf_occlude.cli.options import Checked, count, out_folder, poses, real, seed
 from zbuf_occlude.dataset.layout import STORAGE_MODES
 from zbuf_occlude.defaults import DEFAULT_DENSE_POINTS as GENERATE_DENSE_POINTS
 from zbuf_occlude.defaults import (
@@ -25,10 +25,6 @@ from zbuf_occlude.defaults import DEFAULT_RESOLUTION as GENERATE_RESOLUTION
 from zbuf_occlude.defaults import DEFAULT_VIEWS as GENERATE_VIEWS
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.farm.config import (
-    CROP_OPTION_NAMES,
-    DEFAULT_SENSOR_DISTANCE_M,
-    DEFAULT_SENSOR_HEIGHT_M,
-    DEFAULT_SENSOR_SIZE_M,
     FARM_CROP_DISTRIBUTIONS,
     FarmParams,
     SensorCropParams,
@@ -99,27 +95,14 @@ def _farm_command(args: argparse.Namespace) -> int:
 
 
 def _sensor_params(args: argparse.Namespace) -> dict:
-    """``{"sensor": SensorCropParams}`` of the ``--sensor*`` options (``{}`` without ``--sensor``)."""
+    """``{"sensor": SensorCropParams}`` of ``--sensor`` and the crop options (``{}`` without ``--sensor``)."""
     if args.sensor is None:
-        for option in ("sensor_distance", "sensor_height", "sensor_size", "sensor_reflectivity", "sensor_footprint", "sensor_ground_margin",
-                       "sensor_hidden_below", "sensor_across_sight_width"):  # fmt: skip
-            if getattr(args, option) not in (None, False):
-                raise InvalidInputError(f"--{option.replace('_', '-')} needs --sensor")
+        for flag, _ in given_crop_options(args):
+            raise InvalidInputError(f"{flag} needs --sensor")
         return {}
-    intervals = {"distance_m": args.sensor_distance, "height_m": args.sensor_height, "size_m": args.sensor_size,
-                 "reflectivity": args.sensor_reflectivity, "hidden_below_m": args.sensor_hidden_below}  # fmt: skip
-    crops = {field: parse_interval(text, CROP_OPTION_NAMES[field]) for field, text in intervals.items() if text is not None}
-    if args.sensor_ground_margin is not None:
-        crops["ground_margin_m"] = args.sensor_ground_margin
-    width = args.sensor_across_sight_width
-    return {"sensor": SensorCropParams(
-        args.sensor, replace(FARM_CROP_DISTRIBUTIONS, **crops, option_names=CROP_OPTION_NAMES), footprint=args.sensor_footprint,
-        across_sight_width_m=None if width is None else parse_interval(width, "--sensor-across-sight-width"),
-    )}  # fmt: skip
-
-
-def _interval_text(lo_hi: tuple[float, float]) -> str:
-    return f"{lo_hi[0]:g}" if lo_hi[0] == lo_hi[1] else f"{lo_hi[0]:g}:{lo_hi[1]:g}"
+    crops = crop_settings(args, FARM_CROP_DISTRIBUTIONS)
+    return {"sensor": SensorCropParams(args.sensor, crops.distributions, footprint=crops.footprint,
+                                       across_sight_width_m=crops.across_sight_width_m)}  # fmt: skip
 
 
 def _merge_command(args: argparse.Namespace) -> int:
@@ -184,45 +167,11 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
         "object's largest dimension (--sensor-size), its direction from the sensor and its heading (0-360 deg). "
         "The object stands on a ground plane; its returns (normalised mesh frame) are the rows of a dense "
         "shard, with the sensor's elevation/azimuth seen from the object and the placement per row. "
-        "--views, --dense-points, --density, --resolution and --radius do not apply.",
+        "--views, --dense-points, --density, --resolution and --radius do not apply. The crop options are "
+        "scan's, each with both its names (--sensor-distance or --distance, ...).",
     )
     s.add_argument("--sensor", help="LiDAR or depth-camera preset (hdl32e, vlp16, hdl64e, os1-64, kinect-v1) or a JSON file (default: none, z-buffer poses)")
-    s.add_argument(
-        "--sensor-distance", metavar="LO:HI", action=Checked, check=interval,
-        help=f"horizontal sensor-object distance, metres (default: {_interval_text(DEFAULT_SENSOR_DISTANCE_M)})",
-    )  # fmt: skip
-    s.add_argument(
-        "--sensor-height", metavar="LO:HI", action=Checked, check=interval,
-        help=f"sensor height above the ground, metres (default: {_interval_text(DEFAULT_SENSOR_HEIGHT_M)})",
-    )  # fmt: skip
-    s.add_argument(
-        "--sensor-size", metavar="LO:HI", action=Checked, check=interval,
-        help=f"the object's largest dimension, metres (default: {_interval_text(DEFAULT_SENSOR_SIZE_M)})",
-    )  # fmt: skip
-    s.add_argument(
-        "--sensor-reflectivity", metavar="LO:HI", action=Checked, check=interval,
-        help="return physics: the object's Lambertian reflectivity, drawn per scan; returns must clear the sensor's "
-        "radiometric threshold (default: every hit returns)",
-    )  # fmt: skip
-    s.add_argument(
-        "--sensor-footprint", action="store_true",
-        help="return physics: 7 rays per firing inside the beam divergence cone, strongest echo",
-    )  # fmt: skip
-    s.add_argument(
-        "--sensor-ground-margin", metavar="M", action=Checked, check=real(0.0, unit="metres"),
-        help="keep the ground returns under each object, inside its footprint grown by M metres, as a box "
-        "segmentation of a street scan leaves them (default: the object's returns only)",
-    )  # fmt: skip
-    s.add_argument(
-        "--sensor-hidden-below", metavar="LO:HI", action=Checked, check=interval,
-        help="hide each object's returns lower than a height drawn per scan, metres above the ground (a bottom hidden "
-        "by parked cars or kerbs, or removed with the ground; fit-sensor fits it per class) (default: nothing hidden)",
-    )  # fmt: skip
-    s.add_argument(
-        "--sensor-across-sight-width", metavar="LO:HI", action=Checked, check=interval,
-        help="stretch each object horizontally so that its crops are, at the median, this wide across the line of sight, "
-        "metres, drawn per scan (posts as thick as real trunks; fit-sensor fits it per class) (default: the meshes' proportions)",
-    )  # fmt: skip
+    add_crop_arguments(s, FARM_CROP_DISTRIBUTIONS, prefixed=True)
     ex = p.add_argument_group("execution")
     ex.add_argument(
         "--workers", action=Checked, check=count("MAX_WORKERS"), default=min(usable_cpus(), MAX_WORKERS),

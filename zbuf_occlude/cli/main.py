@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from zbuf_occlude._version import __version__
-from zbuf_occlude.cli.options import Checked, count, counted, out_folder, poses, real, seed
+from zbuf_occlude.cli.options import Checked, Parser, count, counted, out_folder, poses, real, seed
 from zbuf_occlude.defaults import DEFAULT_DENSE_POINTS, DEFAULT_METHOD, DEFAULT_RESOLUTION, DEFAULT_SEED, DEFAULT_VIEWS
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
@@ -198,6 +198,15 @@ PATHS_HELP = (
 
 
 
+#: Other names ``--format`` takes: ``hdf5``, the format's own name, is ``h5``, its files' extension.
+FORMAT_ALIASES = {"hdf5": "h5"}
+
+
+def _format(text: str) -> str:
+    """``--format``'s value: an alias of :data:`FORMAT_ALIASES` as the name it stands for (argparse checks the choice)."""
+    return FORMAT_ALIASES.get(text, text)
+
+
 def _add_paths(p: argparse.ArgumentParser) -> None:
     p.add_argument("paths", nargs="*", metavar="PATH", help=PATHS_HELP)
 
@@ -210,7 +219,7 @@ def build_parser() -> argparse.ArgumentParser:
     from zbuf_occlude.farm.config import GENERATE_DEFAULTS as gd  # generate's defaults, taken from zbuf_occlude.defaults
     from zbuf_occlude.mesh.scene import UP_CHOICES
 
-    parser = argparse.ArgumentParser(prog="zbuf-occlude", description="Real-like occluded point clouds from meshes (headless z-buffer HSR).")
+    parser = Parser(prog="zbuf-occlude", description="Real-like occluded point clouds from meshes (headless z-buffer HSR).")
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -241,7 +250,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--seed", action=Checked, check=seed, default=gd.seed,
         help="global seed: the same seed and options give the same samples (default: %(default)s)",
     )  # fmt: skip
-    g.add_argument("--format", choices=FORMATS, help=f"npz or ply: one file per sample; h5: PointNet's layout (default: {gd.storage})")
+    g.add_argument(
+        "--format", type=_format, choices=FORMATS, metavar=f"{{{','.join([*FORMATS, *FORMAT_ALIASES])}}}",
+        help=f"npz or ply: one file per sample; h5 (or hdf5): PointNet's layout (default: {gd.storage})",
+    )  # fmt: skip
     g.add_argument("--method", help=f"visibility method (see `zbuf-occlude info`) (default: {gd.method})")
     g.add_argument("--class-from", action=Checked, check=CLASS_FROM, metavar="N", help=CLASS_FROM_HELP)
     g.add_argument("--up", choices=UP_CHOICES, default="auto", help=UP_HELP)
@@ -368,14 +380,19 @@ def parse_command_line(parser: argparse.ArgumentParser, argv: Sequence[str] | No
     """``parser.parse_args(argv)``, but an unknown option is refused by the sub-command it was given to:
     its usage, and the nearest of its options (``--veiws``: "did you mean --views?"), also when a
     required option is missing (a mistyped ``--otu`` is named, not only the missing ``--out``).
+    Options are taken only as spelled (:class:`~zbuf_occlude.cli.options.Parser`): an abbreviation
+    is refused, naming the options it starts (``--sample``: "did you mean --samples-per-view?").
+    A command line asking for ``--help`` is parsed as it is, so that the help shows the required
+    options as required.
 
     Raises
     ------
     SystemExit
         Exit 2, as argparse does, for any bad command line.
     """
-    import difflib
-
+    words = list(sys.argv[1:] if argv is None else argv)
+    if any(word in ("-h", "--help") for word in words[: words.index("--") if "--" in words else None]):
+        return parser.parse_args(argv)  # the help as it is: required options without brackets
     with _nothing_required(parser):  # a first look for unknown options, which argparse reports last
         args, extras = parser.parse_known_args(argv)
     if not extras:
@@ -390,9 +407,21 @@ def parse_command_line(parser: argparse.ArgumentParser, argv: Sequence[str] | No
     hints = []
     for extra in extras:
         if extra.startswith("-"):
-            near = difflib.get_close_matches(extra.split("=", 1)[0], list(chosen._option_string_actions), n=1, cutoff=0.6)
-            hints += [f"did you mean {near[0]}?"] if near else []
+            near = _nearest(extra.split("=", 1)[0], list(chosen._option_string_actions))
+            hints += [f"did you mean {' or '.join(near)}?"] if near else []
     chosen.error(f"unrecognized arguments: {' '.join(extras)}" + (f" ({'; '.join(hints)})" if hints else ""))
+
+
+#: Options named at most in a hint for an abbreviation (``--s``: ``--samples-per-view or --seed or ...``).
+HINTED_OPTIONS = 3
+
+
+def _nearest(typed: str, options: list[str]) -> list[str]:
+    """The options ``typed`` may mean: those it abbreviates (``--sample``: ``--samples-per-view``), else the closest spelling."""
+    import difflib
+
+    longer = sorted(o for o in options if o.startswith(typed) and o != typed)
+    return longer[:HINTED_OPTIONS] or difflib.get_close_matches(typed, options, n=1, cutoff=0.6)
 
 
 @contextlib.contextmanager

@@ -21,7 +21,7 @@ from zbuf_occlude import defaults
 from zbuf_occlude.errors import InvalidInputError
 
 __all__ = [
-    "Checked", "counted", "count", "count_list", "seed", "real", "elevations", "interval", "parse_interval", "out_folder", "poses",
+    "Parser", "Checked", "counted", "count", "count_list", "seed", "real", "elevations", "interval", "parse_interval", "out_folder", "poses",
     "check_device", "shown",
 ]  # fmt: skip
 
@@ -42,6 +42,15 @@ def shown(text: object) -> str:
         return f"{text[:SHOWN_CHARS]!r}... ({len(text):,} characters)"
     plain = text and text.isprintable() and not any(c.isspace() for c in text)
     return text if plain else repr(text)
+
+
+class Parser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` that takes options only as spelled (no abbreviations: ``--sample`` is not
+    ``--samples-per-view``); its sub-commands are made of this class too (``add_subparsers``' default),
+    and so take no abbreviation either, which argparse does not pass down by itself."""
+
+    def __init__(self, *args: Any, allow_abbrev: bool = False, **kwargs: Any) -> None:
+        super().__init__(*args, allow_abbrev=allow_abbrev, **kwargs)
 
 
 class Checked(argparse.Action):

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from zbuf_occlude.cli.crops import FLAGS, CropSettings, add_crop_arguments, crop_settings, given_crop_options
 from zbuf_occlude.cli.options import Checked, count, counted, interval, out_folder, parse_interval, real, seed
 from zbuf_occlude.defaults import DEFAULT_SEED
 from zbuf_occlude.errors import InvalidInputError
@@ -21,6 +22,7 @@ from zbuf_occlude.geometry.samples import derive_rng, object_key
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.mesh.sizes import DIMENSIONS, SizeRange, size_interval
+from zbuf_occlude.sensors.placement import CropDistributions
 from zbuf_occlude.sensors.presets import preset_names, sensor_from_name
 
 __all__ = ["add_scan_parser", "add_realism_parser", "add_parser", "parse_interval"]
@@ -97,38 +99,39 @@ def _with_return_physics(sensor, args: argparse.Namespace):
                         echo_separation_m=args.echo_separation or sensor.echo_separation_m)  # fmt: skip
 
 
-#: The flag of each :class:`~zbuf_occlude.sensors.placement.CropDistributions` field ``scan`` sets, for its messages.
-CROP_OPTION_NAMES = {
-    "distance_m": "--distance", "height_m": "--height", "azimuth_deg": "--azimuth", "yaw_deg": "--yaw", "size_m": "--size",
-    "extents_m": "--extents", "reflectivity": "--reflectivity", "ground_reflectivity": "--ground-reflectivity",
-    "ground_margin_m": "--ground-margin", "hidden_below_m": "--hidden-below",
-}  # fmt: skip
+#: ``scan``'s placement when no option changes it: a car (4.5 m) 10 m ahead of a LiDAR on a car roof.
+SCAN_CROP_DISTRIBUTIONS = CropDistributions(distance_m=10.0, height_m=1.8, size_m=4.5, azimuth_deg=0.0, yaw_deg=0.0)
+#: ``scan``'s own option of each other :class:`~zbuf_occlude.sensors.placement.CropDistributions` field it sets, for
+#: messages (the crop options of :mod:`zbuf_occlude.cli.crops` name theirs).
+SCAN_OPTION_NAMES = {"azimuth_deg": "--azimuth", "yaw_deg": "--yaw", "extents_m": "--extents", "ground_reflectivity": "--ground-reflectivity"}
+#: What ``scan`` adds to the help of a crop option.
+SCAN_NOTES = {
+    "distance_m": "at least half the object's size; an airborne scanner flies over the object, distance · sin(azimuth) "
+    "across track from its plan's centre",
+    "size_m": "see --size-of",
+    **{field: "with --crop" for field in ("ground_margin_m", "hidden_below_m", "across_sight_width_m")},
+}
 
 
-def _largest_side(args: argparse.Namespace, mesh) -> tuple[float, float]:
-    """``--size`` as the interval of the object's largest side, metres (``--size-of`` a mesh's height or length converted)."""
-    lo, hi = parse_interval(args.size, "--size")
-    if args.size_of == "max":
-        return lo, hi
+def _largest_side(crops: CropSettings, size_of: str, mesh) -> CropSettings:
+    """``crops`` with its size the interval of the object's largest side, metres: ``--size-of`` a mesh's height or length converted."""
+    if size_of == "max":
+        return crops
     if isinstance(mesh, dict):
-        raise InvalidInputError(f"--size-of {args.size_of} measures a mesh file; a primitive takes --size (its largest dimension) or --extents")
-    if not 0 < lo:
-        raise InvalidInputError(f"--size must be > 0 metres, got {args.size!r}")
-    return size_interval(mesh.extents, SizeRange(args.size_of, lo, hi))
+        raise InvalidInputError(f"--size-of {size_of} measures a mesh file; a primitive takes --size (its largest dimension) or --extents")
+    return crops.with_fields(size_m=size_interval(mesh.extents, SizeRange(size_of, *crops.distributions.size_m)))
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
     sensor = _with_return_physics(sensor_from_name(args.sensor), args)
-    if args.ground_margin is not None and not args.crop:
-        raise InvalidInputError("--ground-margin chooses the ground kept in a crop: it needs --crop")
-    if args.hidden_below is not None and not args.crop:
-        raise InvalidInputError("--hidden-below hides the bottom of the object in a crop: it needs --crop")
-    if args.across_sight_width is not None and not args.crop:
-        raise InvalidInputError("--across-sight-width makes the object's crops as wide as real scans: it needs --crop")
-    if args.outline is not None and not args.crop:
-        raise InvalidInputError("--outline gives the object's crops the outline of real scans: it needs --crop")
+    if not args.crop:
+        for flag, option in given_crop_options(args, in_crop=True):
+            raise InvalidInputError(f"{flag} {option.in_crop}: it needs --crop")
+        if args.outline is not None:
+            raise InvalidInputError("--outline gives the object's crops the outline of real scans: it needs --crop")
     if args.occlude and args.across_sight_width is None:
-        raise InvalidInputError("--occlude meets --across-sight-width with a side occluder: it needs --across-sight-width")
+        width = getattr(args, FLAGS)["across_sight_width_m"]
+        raise InvalidInputError(f"--occlude meets {width} with a side occluder: it needs {width}")
     formats = ("npz", "ply") if args.format == "both" else (args.format,)
     # a refused run's empty --out is removed by cli.main
     with OwnedFolder(args.out, names=[SCAN_FILE_NAMES], what="the scan") as folder:
@@ -154,7 +157,7 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
     from zbuf_occlude.io.progress import progress as progress_bar
     from zbuf_occlude.sensors.airborne import AirborneScanner
     from zbuf_occlude.sensors.crops import object_crop
-    from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
+    from zbuf_occlude.sensors.placement import draw_placement
     from zbuf_occlude.sensors.lidar import Lidar
     from zbuf_occlude.sensors.scan import look_at_pose, scan
     from zbuf_occlude.sensors.scene import GROUND_ID, load_scene
@@ -202,23 +205,15 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
                     "in the ground plane, where no scan can tell it from the ground; give --up the axis it should stand along "
                     "(e.g. --up +y), or give it a thickness"
                 )
-        dist = CropDistributions(
-            distance_m=parse_interval(args.distance, "--distance"), height_m=parse_interval(args.height, "--height"),
-            azimuth_deg=parse_interval(args.azimuth, "--azimuth"), yaw_deg=parse_interval(args.yaw, "--yaw"),
-            size_m=_largest_side(args, mesh), extents_m=extents, round_xy=round_xy,
-            reflectivity=None if args.reflectivity is None else parse_interval(args.reflectivity, "--reflectivity"),
-            ground_reflectivity=args.ground_reflectivity, ground_margin_m=args.ground_margin,
-            hidden_below_m=None if args.hidden_below is None else parse_interval(args.hidden_below, "--hidden-below"),
-            option_names=CROP_OPTION_NAMES,
-        )  # fmt: skip
-        if args.across_sight_width is not None or args.outline is not None:
+        crops = crop_settings(args, SCAN_CROP_DISTRIBUTIONS, azimuth_deg=parse_interval(args.azimuth, "--azimuth"),
+                              yaw_deg=parse_interval(args.yaw, "--yaw"), extents_m=extents, round_xy=round_xy,
+                              ground_reflectivity=args.ground_reflectivity)  # fmt: skip
+        dist = _largest_side(crops, args.size_of, mesh).distributions
+        if crops.across_sight_width_m is not None or args.outline is not None:
             from zbuf_occlude.sensors.fit import fit_object_shape
 
-            width_m = None if args.across_sight_width is None else parse_interval(args.across_sight_width, "--across-sight-width")
-            if width_m is not None and (width_m[0] < 0 or not width_m[1] > 0):
-                raise InvalidInputError(f"--across-sight-width must be >= 0 metres, and HI > 0, got {args.across_sight_width!r}")
-            dist = replace(dist, **fit_object_shape(mesh, sensor, dist, width_m, _outline(args.outline), occlude=args.occlude, seed=args.seed,
-                                                    name=str(src)))  # fmt: skip
+            dist = replace(dist, **fit_object_shape(mesh, sensor, dist, crops.across_sight_width_m, _outline(args.outline), occlude=args.occlude,
+                                                    seed=args.seed, name=str(src)))  # fmt: skip
             log.info("%s: width_scale %s, visible_across_sight %s, width_profile %s", src.name, dist.width_scale, dist.visible_across_sight,
                      dist.width_profile)  # fmt: skip
         if not isinstance(sensor, AirborneScanner):  # an aircraft flies its altitude above the object
@@ -261,13 +256,12 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         help=f"a spinning LiDAR ({', '.join(names['lidar'])}), an airborne scanner ({', '.join(names['airborne'])}), a depth "
         f"camera ({', '.join(names['depth_camera'])}), or a sensor .json (fit-sensor writes one) (default: %(default)s)",
     )  # fmt: skip
-    p.add_argument(
-        "--distance", action=Checked, check=interval, default="10",
-        help="horizontal sensor-object distance, metres (N or LO:HI, uniform per sample; at least half the object's size); "
-        "an airborne scanner flies over the object, distance · sin(azimuth) across track from its plan's centre (default: %(default)s)",
-    )  # fmt: skip
-    p.add_argument("--height", action=Checked, check=interval, default="1.8", help="sensor height above the ground, metres (N or LO:HI) (default: %(default)s)")
-    p.add_argument("--size", action=Checked, check=interval, default="4.5", help="the object's largest dimension, metres (N or LO:HI; see --size-of) (default: %(default)s)")
+    c = p.add_argument_group(
+        "placement and crops (as farm --sensor's)",
+        "Where the object stands and what a crop keeps: a number N, or LO:HI drawn uniformly per scan. Each option "
+        "has two names, scan's and farm's (--distance or --sensor-distance, ...).",
+    )
+    add_crop_arguments(c, SCAN_CROP_DISTRIBUTIONS, prefixed=False, names=SCAN_OPTION_NAMES, notes=SCAN_NOTES)
     p.add_argument(
         "--size-of", choices=DIMENSIONS, default="max",
         help="what --size measures: max (the largest dimension), height, or length (the larger horizontal side); the mesh keeps "
@@ -278,14 +272,8 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         help="X,Y,Z: stretch the mesh to these extents, metres, each N or LO:HI drawn per sample (instead of --size); "
         "Y '=' takes the drawn X (a round pole: --extents 0.1:0.4,=,3:9)",
     )
-    r = p.add_argument_group("return physics (LiDAR)")
-    r.add_argument(
-        "--reflectivity", metavar="RHO or LO:HI", action=Checked, check=interval,
-        help="the object's Lambertian reflectivity, drawn per sample: keep only returns whose received power "
-        "rho*cos(incidence)*footprint/R^2 clears the sensor's threshold (default: every hit returns)",
-    )  # fmt: skip
+    r = p.add_argument_group("return physics (LiDAR)", "with --reflectivity and --footprint above")
     r.add_argument("--ground-reflectivity", action=Checked, check=real(0.0), default=0.15, help="the ground's reflectivity with --reflectivity (default: %(default)s)")
-    r.add_argument("--footprint", action="store_true", help="beam footprint: 7 rays per firing in the divergence cone, strongest echo")
     r.add_argument("--power-noise", action=Checked, check=real(0.0), default=0.0, help="sigma of ln(received power) per firing; 0: a sharp threshold (default: %(default)s)")
     r.add_argument(
         "--echo-separation", metavar="M", action=Checked, check=real(0.0, unit="metres"), default=0.0,
@@ -297,21 +285,6 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--samples", action=Checked, check=count("MAX_SAMPLES"), default=1, help="scans, each with its own draws (default: %(default)s)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (or, when stderr is a file, no progress lines)")
     p.add_argument("--crop", action="store_true", help="write only the object's returns; default: the object and the ground in the object's azimuth sector (±5°)")
-    p.add_argument(
-        "--ground-margin", metavar="M", action=Checked, check=real(0.0, unit="metres"),
-        help="with --crop: also keep the ground returns under the object, inside its footprint grown by M metres, as a "
-        "box segmentation of a street scan leaves them",
-    )  # fmt: skip
-    p.add_argument(
-        "--hidden-below", metavar="M or LO:HI", action=Checked, check=interval,
-        help="with --crop: drop the object's returns lower than this height above the ground, metres, drawn per sample "
-        "(a bottom hidden by parked cars or kerbs, or removed with the ground; fit-sensor fits it per class)",
-    )  # fmt: skip
-    p.add_argument(
-        "--across-sight-width", metavar="M or LO:HI", action=Checked, check=interval,
-        help="with --crop: stretch the object horizontally so that its crops are, at the median, this wide across the "
-        "line of sight, metres, drawn per sample (posts as thick as real trunks; fit-sensor fits it per class)",
-    )  # fmt: skip
     p.add_argument(
         "--occlude", action="store_true",
         help="with --across-sight-width: instead of the stretch, hide one side of the object behind panels between it "

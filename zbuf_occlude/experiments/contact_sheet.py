@@ -26,6 +26,7 @@ import logging
 import math
 import os
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -74,6 +75,8 @@ DEFAULT_PER_CLASS = 2
 DEFAULT_POSES = 2
 #: Dots per inch of the PNG: a panel of :data:`PANEL_INCHES` is then 158 pixels wide.
 DEFAULT_DPI = 72
+#: Points (the unit of font sizes) in an inch.
+POINTS_PER_INCH = 72.0
 #: Dots per inch at most: a print needs 300; past this the panels only cost memory.
 MAX_DPI = 600
 #: Side of one panel, inches.
@@ -92,8 +95,23 @@ MAX_DRAWN_POINTS = 8192
 MARKER_SIZE = 1.0
 #: Degrees added around the returns of a sensor view, so the outermost ones are not on the frame.
 ANGLE_MARGIN_DEG = 1.0
-#: Title font size, points.
+#: Title font size, points, at least (a print at 300 dpi shows it 25 pixels tall) ...
 TITLE_FONT_SIZE = 6.0
+#: ... and larger where the dpi asks for it: capital letters at least this tall, pixels, read on a screen.
+MIN_TITLE_CAP_PX = 9.0
+#: Cap height of DejaVu Sans, matplotlib's default font, as a share of the font size.
+CAP_HEIGHT_EM = 0.73
+#: A title's font is at most this share of its panel's side: its up to four lines then take at most
+#: about a third of the panel, also at a dpi too low for :data:`MIN_TITLE_CAP_PX` (below 68).
+MAX_TITLE_PANEL_SHARE = 1 / 12
+#: Share of a panel's width a title line may take: the rest keeps it clear of the next panel's ...
+TITLE_WIDTH_SHARE = 0.95
+#: ... and of a panel with tick labels, which shift its axes, and so its title, off the panel's centre.
+TICKED_TITLE_WIDTH_SHARE = 0.8
+#: Tick labels of the sensor views, as a share of the title size.
+TICK_LABEL_SHARE = 0.8
+#: What stands for the middle of a line too long for its panel.
+ELLIPSIS = "…"
 COLORMAP = "viridis"
 #: Colours of the PNG's palette: a colour map and black text need no more, and the file is then
 #: about a third of an RGBA one.
@@ -480,10 +498,18 @@ def _angle_bounds(view: NDArray[np.float64], elevations_deg: Any) -> tuple[tuple
 
 # -- drawing ---------------------------------------------------------------------------------------------
 def _draw(rows: list[SheetRow], fixed: Camera, dpi: int, rng: np.random.Generator) -> Figure:
+    from matplotlib.backends.backend_agg import RendererAgg
     from matplotlib.figure import Figure  # the Agg canvas: no display, no pyplot state
+    from matplotlib.font_manager import FontProperties
 
-    # constrained layout keeps the two-line titles inside the figure and off the panel above
+    # constrained layout keeps the titles of several lines inside the figure and off the panel above
     figure = Figure(figsize=(3 * PANEL_INCHES, max(1, len(rows)) * PANEL_INCHES), dpi=dpi, layout="constrained")
+    size = _title_size(dpi)
+    font, renderer = FontProperties(size=size), RendererAgg(1, 1, dpi)  # measures text in pixels, as Agg draws it
+
+    def measure(text: str) -> float:
+        return renderer.get_text_width_height_descent(text, font, ismath=False)[0]
+
     axes = figure.subplots(max(1, len(rows)), 3, squeeze=False)
     fixed_bounds = _image_bounds(fixed.width, fixed.height)
     for row, (ax_fixed, ax_camera, ax_complete) in zip(rows, axes, strict=False):
@@ -491,14 +517,78 @@ def _draw(rows: list[SheetRow], fixed: Camera, dpi: int, rng: np.random.Generato
         _scatter(ax_camera, row.camera_view, row.camera_depth, row.camera_bounds, rng, image=row.camera_units == "pixels")
         if row.camera_units == "degrees":
             ax_camera.invert_xaxis()  # azimuth grows to the left, as the sensor sees it
-            ax_camera.tick_params(labelsize=TITLE_FONT_SIZE - 1, length=2, pad=1)
+            ax_camera.tick_params(labelsize=TICK_LABEL_SHARE * size, length=2, pad=1)
         if row.complete_view is not None:
             _scatter(ax_complete, row.complete_view, fixed.project(row.complete)[1], fixed_bounds, rng, image=True)
         else:
             ax_complete.set_axis_off()
-        for ax, title in zip((ax_fixed, ax_camera, ax_complete), row.titles, strict=True):
-            ax.set_title(title, fontsize=TITLE_FONT_SIZE, pad=2)
+        for k, (ax, title) in enumerate(zip((ax_fixed, ax_camera, ax_complete), row.titles, strict=True)):
+            share = TICKED_TITLE_WIDTH_SHARE if k == 1 and row.camera_units == "degrees" else TITLE_WIDTH_SHARE
+            ax.set_title(_fit_title(title, share * PANEL_INCHES * dpi, measure, name_first=k == 0), fontsize=size, pad=2)
     return figure
+
+
+def _title_size(dpi: int) -> float:
+    """The titles' font size, points: :data:`TITLE_FONT_SIZE`, or more where its capitals would be
+    less than :data:`MIN_TITLE_CAP_PX` pixels tall at ``dpi``; at most :data:`MAX_TITLE_PANEL_SHARE` of a panel."""
+    readable = max(TITLE_FONT_SIZE, MIN_TITLE_CAP_PX / CAP_HEIGHT_EM * POINTS_PER_INCH / dpi)
+    return min(readable, MAX_TITLE_PANEL_SHARE * PANEL_INCHES * POINTS_PER_INCH)
+
+
+def _fit_title(title: str, width_px: float, measure: Callable[[str], float], *, name_first: bool = False) -> str:
+    """``title`` in lines of at most ``width_px`` pixels (``measure``: a text's width, pixels).
+
+    A line too wide is broken after its commas, then at its spaces (:func:`_wrap`), so that no
+    number is cut; with ``name_first`` the first line is a name, kept on one line; whatever is
+    still too wide is cut in the middle (:func:`_shorten`), keeping a long name's start and end.
+    """
+    out = []
+    for k, line in enumerate(title.split("\n")):
+        pieces = [line] if k == 0 and name_first else _wrap(line, width_px, measure)
+        out += [_shorten(piece, width_px, measure) for piece in pieces]
+    return "\n".join(out)
+
+
+def _wrap(line: str, width_px: float, measure: Callable[[str], float]) -> list[str]:
+    """``line`` broken after its commas into pieces of at most ``width_px`` pixels, and a piece still wider at its spaces."""
+    pieces = []
+    for piece in _greedy(line.split(", "), ", ", ",", width_px, measure):
+        pieces += _greedy(piece.split(" "), " ", "", width_px, measure) if measure(piece) > width_px else [piece]
+    return pieces
+
+
+def _greedy(words: list[str], sep: str, mark: str, width_px: float, measure: Callable[[str], float]) -> list[str]:
+    """``words`` joined by ``sep`` into as few lines of at most ``width_px`` pixels as the words allow;
+    a line broken after a word ends in ``mark`` (a comma)."""
+    lines, current = [], words[0]
+    for i, word in enumerate(words[1:], start=2):
+        end = mark if i < len(words) else ""
+        if measure(f"{current}{sep}{word}{end}") <= width_px:
+            current = f"{current}{sep}{word}"
+        else:
+            lines.append(current + mark)
+            current = word
+    return [*lines, current]
+
+
+def _shorten(line: str, width_px: float, measure: Callable[[str], float]) -> str:
+    """``line``, or the most of its start and end with :data:`ELLIPSIS` between them that fits ``width_px``."""
+    if measure(line) <= width_px:
+        return line
+    lo, hi = 0, len(line) - 1  # characters kept: lo fits (an ellipsis alone), hi does not
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if measure(_middle_cut(line, mid)) <= width_px:
+            lo = mid
+        else:
+            hi = mid
+    return _middle_cut(line, lo)
+
+
+def _middle_cut(line: str, keep: int) -> str:
+    """``keep`` characters of ``line``, its first ``ceil(keep / 2)`` and last ``floor(keep / 2)``, around :data:`ELLIPSIS`."""
+    head = (keep + 1) // 2
+    return line[:head] + ELLIPSIS + line[len(line) - (keep - head):]
 
 
 def _write_png(figure: Figure, out: Path, dpi: int) -> None:

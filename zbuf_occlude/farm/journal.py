@@ -27,7 +27,7 @@ from zbuf_occlude.dataset.layout import (
     split_file_name,
 )  # fmt: skip
 from zbuf_occlude.errors import InvalidInputError, UnsafePathError
-from zbuf_occlude.farm.config import BYTES_PER_MB, PAPER_SAMPLES_PER_MB, FarmParams, plan_digest, record_path, shard_path
+from zbuf_occlude.farm.config import BYTES_PER_MB, FarmParams, plan_digest, record_path, shard_path
 from zbuf_occlude.farm.worker import base_record, package_version, write_json
 from zbuf_occlude.geometry.samples import count_padded
 from zbuf_occlude.io.atomic import file_sha256, size_mismatch, write_text
@@ -272,8 +272,17 @@ def plan_doc(objects: Sequence[FarmObject], params: FarmParams, source: str, lay
         "plan_digest": plan_digest(objects),
         "source": source,
         "layout": layout,
-        "objects": [dataclasses.asdict(o) for o in objects],
+        "objects": [plan_object(o) for o in objects],
     }
+
+
+def plan_object(obj: FarmObject) -> dict[str, Any]:
+    """One object as the plan records it: its fields, ``cloud`` only for a point-set input (a
+    mesh's entry is the same as before point sets were taken)."""
+    doc = dataclasses.asdict(obj)
+    if doc.get("cloud") is None:
+        doc.pop("cloud", None)
+    return doc
 
 
 def objects_of(plan: dict[str, Any]) -> list[FarmObject]:
@@ -363,6 +372,8 @@ def finalize(
     if n_padded:
         # a sensor's scan has the points its beams return; a pose already took the top-up (geometry.samples.top_up)
         remedy = "move the sensor closer or lower --points" if params.sensor else "lower --points: topped up, still too few"
+        if any(o.is_point_set for o in objects):  # a cloud has no faces to top up on: about half its points face a camera
+            remedy = "lower --points: a point-set file's cloud is not topped up; about half of it faces a camera"
         log.warning(
             "%d of %d samples hold repeated points: fewer than --points %d points were visible from their poses "
             "(each sample's n_visible says how many; %s); recorded as n_padded_samples in %s",
@@ -393,6 +404,8 @@ def finalize(
         "n_samples": n_samples,
         "n_padded_samples": n_padded,
         "shard_bytes": int(sum(r["bytes"] for r in ok)),
+        # point-set inputs: where visibility came from and how their objects were made (absent for meshes only)
+        **point_set_card(objects, ok),
         # the reader refuses a manifest without them (unless verify=False): removing them cannot hide a change
         "checksums": CHECKSUM_ALGORITHM if every_file_hashed else None,
         "renderers": sorted({r["renderer"] for r in ok if r.get("renderer")}),
@@ -403,6 +416,35 @@ def finalize(
         "A method to create real-like point clouds for 3D object classification",
     }
     write_card(out, card)
+
+
+def point_set_card(objects: Sequence[FarmObject], ok: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """The card's ``visibility_from`` and ``point_sets`` (:class:`~zbuf_occlude.dataset.schema.PointSetCard`)
+    of a plan that holds clouds of point-set files; ``{}`` for a plan of meshes only.
+
+    ``visibility_from`` is ``"points"`` when every object is a cloud, ``"points and meshes"``
+    when some are; ``point_sets`` counts them and those of them (finished) whose file gave normals,
+    and states the method, its settings, the dense cloud and ``face_index``.  Each object's record
+    says the same of it (``visibility``, ``visibility_from``, ``normals``).
+    """
+    from zbuf_occlude.defaults import DEFAULT_POINT_NEIGHBOURS, DEFAULT_SPLAT_SCALE, DEFAULT_SPLAT_TOLERANCE
+    from zbuf_occlude.pipeline import NO_FACE, POINT_SET_METHOD
+
+    n_clouds = sum(o.is_point_set for o in objects)
+    if not n_clouds:
+        return {}
+    return {
+        "visibility_from": "points" if n_clouds == len(objects) else "points and meshes",
+        "point_sets": {
+            "n_objects": n_clouds,
+            "n_with_normals": sum(bool(r.get("normals")) for r in ok if r.get("visibility_from") == "points"),
+            "visibility": POINT_SET_METHOD,
+            "settings": {"neighbours": DEFAULT_POINT_NEIGHBOURS, "splat_scale": DEFAULT_SPLAT_SCALE, "tolerance": DEFAULT_SPLAT_TOLERANCE},
+            "dense_cloud": "the cloud's own points, normalised as a mesh (bounding-box centre at 0, largest side 1); "
+            "nothing sampled, nothing topped up; normals from the file where it has them, else estimated",
+            "face_index": NO_FACE,
+        },
+    }
 
 
 def skipped_inputs_doc(skipped: Iterable[tuple[str, str]]) -> list[dict[str, str]]:
@@ -519,8 +561,7 @@ class FarmSummary:
             f"{self.objects} planned",
             f"  samples   {self.samples:,}  ({self.storage} storage)"
             + (f", {self.padded:,} padded with repeated points" if self.padded else ""),
-            f"  bytes     {self.bytes:,} ({self.bytes / BYTES_PER_MB:.1f} MB)  ->  {self.samples_per_mb:,.1f} samples/MB "
-            f"(paper, Table 2: {PAPER_SAMPLES_PER_MB})",
+            f"  bytes     {self.bytes:,} ({self.bytes / BYTES_PER_MB:.1f} MB)  ->  {self.samples_per_mb:,.1f} samples/MB",
             f"  wall      {self.wall_s:.1f} s, {self.views} views rendered, {self.views_per_s:.1f} views/s, "
             f"{self.workers}, peak RSS per worker {self.peak_rss_mb:.0f} MB",
         ]
