@@ -64,4 +64,9 @@ fi
 # The package is installed in place, so pip compiles none of it: compile it here, or where
 # PYTHONDONTWRITEBYTECODE is set every command compiles it anew (0.4 s a start on 2 cores).
 .venv/bin/python -m compileall -q zbuf_occlude
+# numba compiles the kernels on their first call (seconds on the first mesh): compile them now
+# into numba's on-disk cache, which every later process loads (zbuf_occlude/visibility/warmup.py).
+echo "compiling the numba kernels (once, into numba's cache)"
+.venv/bin/python -m zbuf_occlude.visibility.warmup -q \
+    || echo "warning: the numba kernels were not all compiled now; they compile on first use" >&2
 .venv/bin/zbuf-occlude info

@@ -275,3 +275,37 @@ def test_an_edited_card_is_caught_by_its_checksum_and_an_old_one_still_reads(tmp
     assert len(OccludedDataset(old)) == 4
     assert main(["verify", str(old)]) == 0
     assert "has no SHA-256 file" in capsys.readouterr().out
+
+
+def test_the_default_object_cache_holds_a_small_data_set_and_a_share_of_the_memory():
+    from zbuf_occlude.dataset.reader import OBJECT_CACHE_UNKNOWN_MEMORY, default_object_cache, object_cache_bytes
+
+    # the farm's default object: 32,768 dense points (12 B each), a bit per point for 100 poses
+    per_object = object_cache_bytes(32_768, 100, 0)
+    assert per_object == 12 * 32_768 + 100 * 4096
+    assert object_cache_bytes(9, 2, 5) == 12 * 9 + 2 * 2 + 12 * 5  # bits rounded up to whole bytes
+    assert default_object_cache(200, per_object, 16 * 2**30) == 200  # small data set: every object
+    bounded = default_object_cache(1_000_000, per_object, 2**30)  # large data set: 5 % of 1 GiB
+    assert bounded == int(0.05 * 2**30) // per_object and 1 < bounded < 1_000_000
+    assert default_object_cache(200, per_object, 10 * per_object) == 1  # tiny memory: one object
+    assert default_object_cache(0, per_object, 2**30) == 1
+    assert default_object_cache(10, per_object, None) == 10  # memory unknown: a fixed count
+    assert default_object_cache(10**6, per_object, None) == OBJECT_CACHE_UNKNOWN_MEMORY
+
+
+def test_a_shuffled_pass_reads_each_object_once_when_the_default_cache_holds_them(datasets, monkeypatch):
+    import zbuf_occlude.dataset.reader as reader
+    from zbuf_occlude.dataset.storage import Compact
+
+    loads = []
+    original = Compact.load_arrays
+    monkeypatch.setattr(Compact, "load_arrays", lambda self, f, path, rec: loads.append(path) or original(self, f, path, rec))
+    ds = OccludedDataset(datasets["compact"])
+    assert ds.object_cache == len(MESHES)
+    order = np.random.default_rng(0).permutation(len(ds))
+    for i in np.concatenate([order, order]):
+        ds[int(i)]
+    assert len(loads) == len(MESHES)  # once per object, whatever the order
+    assert OccludedDataset(datasets["compact"], object_cache=2).object_cache == 2  # as given
+    monkeypatch.setattr(reader, "available_memory", lambda: (1000, "test"))  # less than one object's 5 %
+    assert OccludedDataset(datasets["compact"]).object_cache == 1

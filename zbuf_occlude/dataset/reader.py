@@ -21,24 +21,84 @@ from numpy.typing import NDArray
 from zbuf_occlude.dataset.index import PoseFilter, PoseFilters, SampleIndex, sample_index
 from zbuf_occlude.dataset.layout import CARD_FILE, FORMAT_VERSION, MANIFEST_FILE
 from zbuf_occlude.dataset.storage import StorageKind, storage_kind
+from zbuf_occlude.defaults import DEFAULT_FARM_DENSE_POINTS
 from zbuf_occlude.errors import InvalidInputError, ShardChecksumError
 from zbuf_occlude.io.safe_paths import path_inside
 from zbuf_occlude.mesh.discovery import SPLITS, name_set
-from zbuf_occlude.resources import check_memory
+from zbuf_occlude.resources import available_memory, check_memory
 
 if TYPE_CHECKING:  # the schema (pydantic) is imported when a data set is opened, not with the package
     from zbuf_occlude.dataset.schema import Card
 
-__all__ = ["OccludedDataset"]
+__all__ = ["OccludedDataset", "default_object_cache", "object_cache_bytes"]
 
-#: Objects whose compact arrays (dense cloud and bitmasks, ~1 MB each) the reader keeps.
-DEFAULT_OBJECT_CACHE = 8
+#: Share of the memory available, when a data set is opened, that the compact reader's object
+#: cache may fill by default (:func:`default_object_cache`).  Small, because every process that
+#: reads keeps its own cache: a ``DataLoader`` with 4 workers may fill 4 × 5 %.
+OBJECT_CACHE_MEMORY_FRACTION = 0.05
+#: Objects the compact reader keeps by default where the memory available is unknown: a shuffled
+#: pass over a data set of this many objects or fewer reads each object's shard once.
+OBJECT_CACHE_UNKNOWN_MEMORY = 64
 #: HDF5 files the reader keeps open (dense storage), least recently used closed first.
 DEFAULT_OPEN_FILES = 16
 
 #: Bytes one point of one sample costs while it is read or redrawn: float32 xyz in the result
 #: (12), its index into the dense cloud (int64, 8) and the gathered copy (12), rounded up.
 BYTES_PER_SAMPLE_POINT = 40
+
+
+def object_cache_bytes(n_dense: int, n_poses: int, n_topup: int) -> int:
+    """Bytes the reader's object cache holds for one object of compact storage.
+
+    Parameters
+    ----------
+    n_dense : int
+        Points of the object's dense cloud (``dense_points (M, 3) float32``: 12 B each).
+    n_poses : int
+        Poses of the data set (``visible_bits (P, ceil(M/8)) uint8``: a bit per dense point and pose).
+    n_topup : int
+        Top-up points of all its poses together (``topup_points (T, 3) float32``: 12 B each).
+
+    Returns
+    -------
+    int
+        ``12 M + P ceil(M / 8) + 12 T`` bytes.
+    """
+    point = 3 * np.dtype(np.float32).itemsize
+    return point * int(n_dense) + int(n_poses) * -(-int(n_dense) // 8) + point * int(n_topup)
+
+
+def default_object_cache(
+    n_objects: int, bytes_per_object: int, available: int | None, *, fraction: float = OBJECT_CACHE_MEMORY_FRACTION
+) -> int:
+    """How many objects the compact reader keeps in memory when ``object_cache`` is not given.
+
+    Every object when they fit in ``fraction`` of the memory available, else as many as fit
+    there, at least one.  A shuffled pass reads each object's shard (and unpacks its bitmasks)
+    once per object while the cache holds every object, and up to once per sample otherwise.
+
+    Parameters
+    ----------
+    n_objects : int
+        Objects the data set serves (after its split and class filters).
+    bytes_per_object : int
+        Bytes one object takes in the cache (:func:`object_cache_bytes`; the largest object's).
+    available : int or None
+        Bytes of memory available (:func:`zbuf_occlude.resources.available_memory`); None:
+        unknown, and the cache holds up to :data:`OBJECT_CACHE_UNKNOWN_MEMORY` objects.
+    fraction : float
+        Share of ``available`` the cache may fill (default :data:`OBJECT_CACHE_MEMORY_FRACTION`).
+
+    Returns
+    -------
+    int
+        ``min(n_objects, fraction * available // bytes_per_object)``, at least 1.
+    """
+    if available is None:
+        fit = OBJECT_CACHE_UNKNOWN_MEMORY
+    else:
+        fit = int(fraction * available) // max(int(bytes_per_object), 1)
+    return max(1, min(int(n_objects), fit))
 
 
 class _Shards:
@@ -194,8 +254,16 @@ class OccludedDataset(Sequence):
         (Sryamkin et al. 2023, Table 3A trains and tests on different elevations).
         ``farm --sensor`` data sets: each scan's own sensor direction seen from the object
         (read from the shards), e.g. ``elevation_deg=lambda el: el < 10``.
-    object_cache : int
-        Compact storage: objects whose dense cloud and bitmasks stay in memory.
+    object_cache : int, optional
+        Compact storage: objects whose dense cloud and bitmasks stay in memory, the least
+        recently read dropped first (0 or 1: only the last object read).  Default: sized when
+        the data set is opened, every selected object if they fit in 5 % of the memory
+        available, else as many as fit there (:func:`default_object_cache`; each object takes
+        12 B per dense point, a bit per dense point and pose, 12 B per top-up point,
+        :func:`object_cache_bytes`), at least 1; 64 where the memory available is unknown.
+        Each process that reads (each ``DataLoader`` worker) keeps its own.  A shuffled read
+        costs an unpack of the object's shard when its object is not kept, and a redraw of
+        the sample always (docs/farm.md gives measured times).
     verify : bool
         Check every shard against its SHA-256 in the manifest before reading it (default).
         A data set whose manifest lacks the checksums is refused unless ``verify=False``:
@@ -211,6 +279,8 @@ class OccludedDataset(Sequence):
         The card's storage (:mod:`zbuf_occlude.dataset.storage`; ``farm --sensor`` data sets are ``dense``).
     n_points : int
         Points per sample.
+    object_cache : int
+        Objects the compact reader keeps in memory (``object_cache`` as given, or as sized).
 
     Raises
     ------
@@ -247,7 +317,7 @@ class OccludedDataset(Sequence):
         elevation_deg: PoseFilter = None,
         azimuth_deg: PoseFilter = None,
         *,
-        object_cache: int = DEFAULT_OBJECT_CACHE,
+        object_cache: int | None = None,
         verify: bool = True,
     ):
         self.root = Path(path)
@@ -255,8 +325,11 @@ class OccludedDataset(Sequence):
         card = self._read_card()
         filters = PoseFilters(elevation_deg, azimuth_deg)
         pose_keep = self._pose_keep(filters)
-        self._shards = _Shards(self.root, self._kind, card, object_cache=object_cache)
+        self._shards = _Shards(self.root, self._kind, card, object_cache=1 if object_cache is None else object_cache)
         rows_per_pose = self._select(card, split, classes)
+        if object_cache is None and self._kind.redraws:
+            self._shards.object_cache = self._default_object_cache()
+        self.object_cache: int = self._shards.object_cache
         keep = [self._kind.row_keep(self._shards, obj, rows, pose_keep, filters) for obj, rows in enumerate(rows_per_pose)]
         index = sample_index(rows_per_pose, keep)
         self._check_filtered(index, filters)
@@ -293,6 +366,18 @@ class OccludedDataset(Sequence):
         self.shape_names: list[str] = read_shape_names(self.root, card)
         self._poses = np.asarray(card.poses, dtype=np.float64).reshape(-1, 2)
         return card
+
+    def _default_object_cache(self) -> int:
+        """:func:`default_object_cache` for the selected objects, sized by the largest of them;
+        a record without ``n_dense`` (earlier writers) counts the farm's default dense cloud."""
+        n_poses = len(self._poses)
+        largest = max(
+            (object_cache_bytes(rec.get("n_dense") or DEFAULT_FARM_DENSE_POINTS, n_poses, sum(rec.get("n_topped_up") or ()))
+             for rec in self._shards.records),
+            default=0,
+        )  # fmt: skip
+        found = available_memory()
+        return default_object_cache(len(self._shards.records), largest, None if found is None else found[0])
 
     def _pose_keep(self, filters: PoseFilters) -> NDArray[np.bool_]:
         """``(P,) bool``: the card's poses the filters keep; none of them is a typo, not an empty data set."""

@@ -11,6 +11,12 @@ through :func:`progress`:
   bar that stays (``leave=True``) closes; never a carriage return;
 - ``enabled=False`` (the commands' ``--no-progress``): nothing.
 
+Either way the rate, and the ETA that follows from it, count from the moment the first item of
+the run was done (:class:`RateAfterFirst`): the first item carries the start-up (a worker
+process starting, numba loading or compiling its kernels, an Embree scene built), so a rate
+that counted it would promise minutes for a job of seconds.  Until a second item is done the
+rate and the ETA are unknown and not shown; the elapsed time counts from the start.
+
 The interval can be set with the environment variable :data:`PROGRESS_INTERVAL_ENV` (seconds,
 ≥ 0; 0 writes a line on every update).
 """
@@ -26,7 +32,8 @@ from tqdm.std import tqdm
 
 from zbuf_occlude.errors import InvalidInputError
 
-__all__ = ["progress", "LineProgress", "progress_interval_s", "PROGRESS_INTERVAL_S", "PROGRESS_INTERVAL_ENV"]
+__all__ = ["progress", "LineProgress", "RateAfterFirst", "TerminalProgress", "progress_interval_s", "PROGRESS_INTERVAL_S",
+           "PROGRESS_INTERVAL_ENV"]
 
 #: Seconds between two progress lines in a log: often enough to see a run move, rare enough that a
 #: day-long farm writes a few thousand lines.
@@ -62,15 +69,55 @@ def _stderr_is_terminal() -> bool:
         return False
 
 
-class LineProgress(tqdm):
+class RateAfterFirst(tqdm):
+    """A tqdm whose rate (and so its ETA) leaves out the time to the first item of the run.
+
+    The rate is the items done after the first one over the time since the first one was
+    counted (the mean, no smoothing); 0, which tqdm shows as ``?``, until then.  Items counted
+    by iterating the bar are seen when the bar is next drawn (tqdm calls no :meth:`update` for
+    them), so the time from the first item to that drawing is left out too.
+    """
+
+    #: ``(time, n)`` when the first item of this run was counted; None before.
+    _first: tuple[float, float] | None = None
+
+    def update(self, n: float | None = 1) -> bool | None:
+        if self._first is None and n and not self.disable:
+            self._first = (self._time(), self.n + n)
+        return super().update(n)
+
+    def reset(self, total: float | None = None) -> None:
+        self._first = None
+        super().reset(total)
+
+    def rate_after_first(self) -> float:
+        """Items per second since the first item of this run was counted; 0 while unknown."""
+        if self._first is None:
+            if getattr(self, "n", 0) > getattr(self, "initial", 0):  # counted by iteration: first seen now
+                self._first = (self._time(), self.n)
+            return 0.0
+        t_first, n_first = self._first
+        dt = self._time() - t_first
+        return (self.n - n_first) / dt if self.n > n_first and dt > 0 else 0.0
+
+    @property
+    def format_dict(self) -> dict[str, Any]:
+        return {**super().format_dict, "rate": self.rate_after_first()}
+
+
+class TerminalProgress(RateAfterFirst):
+    """The bar on a terminal: tqdm's, redrawn in place, with the rate of :class:`RateAfterFirst`."""
+
+
+class LineProgress(RateAfterFirst):
     """A tqdm that writes newline-terminated lines to its ``file`` instead of redrawing a bar.
 
     A line at most every ``mininterval`` seconds, counted across every :class:`LineProgress`
     (so that nested or successive bars, such as one per training epoch, do not multiply the
     lines), none when it opens, and a last one when it closes if it was made with ``leave=True``
     and its last line does not already say so.
-    Its rate is the mean since it opened (``smoothing=0``), counting only what was done in this
-    run (``initial`` excluded), and the ETA follows from it.
+    Its rate is :class:`RateAfterFirst`'s, counting only what was done in this run
+    (``initial`` excluded), and the ETA follows from it.
     """
 
     #: ``time.time()`` of the last line any LineProgress wrote.
@@ -99,11 +146,11 @@ class LineProgress(tqdm):
         return True
 
     def line(self) -> str:
-        """The progress as one line: ``desc: done/total unit, rate unit/s (or s/unit), ETA [h:]mm:ss, elapsed, postfix``."""
+        """The progress as one line: ``desc: done/total unit, rate unit/s (or s/unit), ETA [h:]mm:ss, elapsed, postfix``
+        (no rate and no ETA before a second item is done)."""
         d = self.format_dict
-        n, total, unit, elapsed = d["n"], d["total"], d["unit"], d["elapsed"]
+        n, total, unit, elapsed, rate = d["n"], d["total"], d["unit"], d["elapsed"], d["rate"]
         parts = [f"{n}/{total} {unit}" if total else f"{n} {unit}"]
-        rate = (n - d["initial"]) / elapsed if elapsed > 0 else 0.0
         if rate > 0:
             # as tqdm's bar: seconds per item when slower than one a second
             parts.append(f"{self.format_sizeof(rate)} {unit}/s" if rate >= 1 else f"{self.format_sizeof(1 / rate)} s/{unit}")
@@ -168,5 +215,5 @@ def progress(
     if not enabled or sys.stderr is None:  # no stderr (closed, pythonw): nowhere to show it
         return tqdm(iterable, disable=True, **common)
     if _stderr_is_terminal():
-        return tqdm(iterable, dynamic_ncols=True, **common)
+        return TerminalProgress(iterable, dynamic_ncols=True, **common)
     return LineProgress(iterable, mininterval=progress_interval_s() if interval_s is None else interval_s, **common)

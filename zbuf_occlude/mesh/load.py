@@ -39,6 +39,7 @@ zero-area faces.
 from __future__ import annotations
 
 import logging
+import re
 from os import PathLike
 from pathlib import Path
 from typing import Any
@@ -73,6 +74,10 @@ DEGENERATE_AREA_RTOL = 1e-14
 #: methods work in float32, and beyond it areas and squared extents overflow float64 too
 #: (1e200 squared); such files are corrupt or in absurd units.
 MAX_ABS_COORDINATE = float(np.finfo(np.float32).max)
+
+#: The package that installs a module trimesh may import while parsing, where the names differ
+#: (named in the message when it is missing).
+_PACKAGE_OF_MODULE = {"PIL": "pillow", "charset_normalizer": "charset-normalizer"}
 
 #: Key of this package's provenance dictionary in ``trimesh.Trimesh.metadata``.
 METADATA_KEY = "zbuf_occlude"
@@ -380,7 +385,8 @@ def load_mesh(
         coincide) or only degenerate faces; declared sizes past the caps of
         :mod:`zbuf_occlude.mesh.limits` or of the file's format (:mod:`zbuf_occlude.mesh.formats`)
         or more than the memory there is; a file it names that is not a regular file in its
-        folder (a FIFO); never a ``MemoryError``.
+        folder (a FIFO); a Python module the parser needs that is not installed (named, with
+        the package to install); never a ``MemoryError``.
     InvalidInputError
         If ``area_rtol`` is negative or not finite, or ``up`` is not an axis.
     """
@@ -409,6 +415,14 @@ def load_mesh(
         raise MeshLoadError(f"{path}: not enough memory to load it; the file declares more than this machine can hold") from None
     except MeshLoadError:
         raise
+    except ImportError as exc:  # a module trimesh imports for this file (Pillow: an OBJ's textures) is missing: not the file's fault
+        # trimesh re-raises a failed optional import later, from its message alone (no exc.name)
+        named = re.search(r"No module named '([^'.]+)", str(exc))
+        module = (exc.name or (named.group(1) if named else str(exc))).partition(".")[0]
+        raise MeshLoadError(
+            f"{path}: reading this {file_type.upper()} file needs the Python module {module!r}, which is not installed; "
+            f"install zbuf-occlude's dependencies again (pip install {_PACKAGE_OF_MODULE.get(module, module)})"
+        ) from exc
     except Exception as exc:  # trimesh raises a zoo of types (ValueError, IndexError, NameError, KeyError, ...)
         raise MeshLoadError(
             f"{path}: cannot parse as {file_type.upper()} ({type(exc).__name__}: {exc})"
