@@ -13,15 +13,46 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["splat_surfels", "decide"]
+__all__ = ["camera_frame", "splat_surfels", "decide"]
 
 #: A surfel seen closer than this to edge-on (|cos| between its normal and a pixel's ray) covers
 #: nothing there: its footprint is a line of zero area (and the ray-plane depth is unbounded).
 EDGE_ON_COS = 1e-6
+EDGE_ON_COS2 = EDGE_ON_COS * EDGE_ON_COS
+#: A winner's centre within this many spacings of a point's tangent plane lies in that plane
+#: (float64 rounding of coplanar points is ~1e-16 of the object; a millionth of a spacing is
+#: far above it and far below any real offset).
+COPLANAR = 1e-6
 #: The curvature allowance is this many times the tangent plane's height at the neighbour's
 #: distance (the pixel's ray meets the plane up to half a pixel off the point, and the estimate
 #: of the curvature from two normals is first order).
 CURVATURE_SLACK = 1.0
+
+
+@numba.njit(cache=True, nogil=True)
+def camera_frame(points, normals, rotation, translation):  # pragma: no cover - numba
+    """Points and normals in the OpenCV camera frame: ``R p + t`` and ``R n``.
+
+    Parameters
+    ----------
+    points, normals : (N, 3) float64
+        World frame.
+    rotation : (3, 3) float64
+    translation : (3,) float64
+        ``Camera.extrinsics`` split (world -> OpenCV camera).
+
+    Returns
+    -------
+    cam, normal : (N, 3) float64
+    """
+    n = points.shape[0]
+    cam = np.empty((n, 3))
+    normal = np.empty((n, 3))
+    for k in range(n):
+        for r in range(3):
+            cam[k, r] = rotation[r, 0] * points[k, 0] + rotation[r, 1] * points[k, 1] + rotation[r, 2] * points[k, 2] + translation[r]
+            normal[k, r] = rotation[r, 0] * normals[k, 0] + rotation[r, 1] * normals[k, 1] + rotation[r, 2] * normals[k, 2]
+    return cam, normal
 
 
 @numba.njit(cache=True, nogil=True)
@@ -54,21 +85,28 @@ def splat_surfels(cam, normal, radius, pix, x0, y0, width, height):  # pragma: n
     ids : (height, width) int32
         Index of that surfel, −1 where none.
     """
-    n = cam.shape[0]
     depth = np.full((height, width), np.inf)
     ids = np.full((height, width), -1, np.int32)
-    for k in range(n):
+    _splat_band(cam, normal, radius, pix, x0, y0, width, 0, height, depth, ids)
+    return depth, ids
+
+
+@numba.njit(cache=True, nogil=True)
+def _splat_band(cam, normal, radius, pix, x0, y0, width, row0, row1, depth, ids):  # pragma: no cover - numba
+    """:func:`splat_surfels` for the image rows ``row0 <= j < row1``."""
+    for k in range(cam.shape[0]):
         qx, qy, qz = cam[k, 0], cam[k, 1], cam[k, 2]
         r = radius[k]
         if qz - r <= 0.0 or r <= 0.0:
             continue
-        # the disk lies inside the sphere of radius r: its projection inside this angular box
-        rho = r / (qz - r)
-        cx, cy = qx / qz, qy / qz
-        i0 = max(int(np.floor((cx - rho - x0) / pix)), 0)
-        i1 = min(int(np.floor((cx + rho - x0) / pix)), width - 1)
-        j0 = max(int(np.floor((cy - rho - y0) / pix)), 0)
-        j1 = min(int(np.floor((cy + rho - y0) / pix)), height - 1)
+        # the disk lies inside the cube q ± r, whose projection (x/z, y/z) is extreme at corners
+        near, far = qz - r, qz + r
+        j0 = max(int(np.floor((min((qy - r) / near, (qy - r) / far) - y0) / pix)), row0)
+        j1 = min(int(np.floor((max((qy + r) / near, (qy + r) / far) - y0) / pix)), row1 - 1)
+        if j0 > j1:
+            continue
+        i0 = max(int(np.floor((min((qx - r) / near, (qx - r) / far) - x0) / pix)), 0)
+        i1 = min(int(np.floor((max((qx + r) / near, (qx + r) / far) - x0) / pix)), width - 1)
         nx, ny, nz = normal[k, 0], normal[k, 1], normal[k, 2]
         nq = nx * qx + ny * qy + nz * qz
         r2 = r * r
@@ -77,16 +115,19 @@ def splat_surfels(cam, normal, radius, pix, x0, y0, width, height):  # pragma: n
             for i in range(i0, i1 + 1):
                 x = x0 + (i + 0.5) * pix
                 den = nx * x + ny * y + nz
-                if abs(den) < EDGE_ON_COS * np.sqrt(x * x + y * y + 1.0):
+                if den * den < EDGE_ON_COS2 * (x * x + y * y + 1.0):
+                    continue
+                # the ray (x, y, 1) meets the plane at t = nq / den; within the disk iff
+                # |t (x, y, 1) - q|^2 <= r^2, here multiplied by den^2 to spare the division
+                wx = nq * x - den * qx
+                wy = nq * y - den * qy
+                wz = nq - den * qz
+                if wx * wx + wy * wy + wz * wz > r2 * den * den:
                     continue
                 t = nq / den
-                hx = x * t - qx
-                hy = y * t - qy
-                hz = t - qz
-                if hx * hx + hy * hy + hz * hz <= r2 and t < depth[j, i]:
+                if t < depth[j, i]:
                     depth[j, i] = t
                     ids[j, i] = k
-    return depth, ids
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -215,7 +256,9 @@ def decide(cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, cre
         # passes through that plane, as past a convex crease, and hides nothing of p's sheet
         toward = -(normal[p, 0] * px + normal[p, 1] * py + normal[p, 2] * pz)  # n_p · (eye - p)
         rise = -(dx * normal[p, 0] + dy * normal[p, 1] + dz * normal[p, 2])  # n_p · (q - p)
-        if rise * toward < 0.0:
+        # (a winner in p's plane, as among coplanar surfels that tie for the pixel, is decided
+        # by the distance below, whichever of them won)
+        if rise * toward < -COPLANAR * spacing[p] * abs(toward):
             visible[p] = not _in_a_gap(p, i, j, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented)
             continue
         x = x0 + (i + 0.5) * pix

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -91,8 +91,21 @@ class PointSurfels:
     spacing: NDArray[np.float64]
     radius: NDArray[np.float64]
     oriented: bool
+    #: (N,) int64: the Morton order of the points (:func:`~zbuf_occlude.geometry.grouping.morton_order`),
+    #: in which each view is splatted and decided: neighbours in space are neighbours in memory
+    #: (about 2x faster at 100,000 points than the order given).
+    order: NDArray[np.int64] = field(default=None, repr=False)  # type: ignore[assignment]
 
-    def visible(self, camera: Camera, *, tolerance: float = DEFAULT_SPLAT_TOLERANCE, backend: str = "cpu") -> NDArray[np.bool_]:
+    def __post_init__(self) -> None:
+        if self.order is None:
+            from zbuf_occlude.geometry.grouping import morton_order
+
+            order = morton_order(self.points) if len(self.points) else np.zeros(0, dtype=np.int64)
+            object.__setattr__(self, "order", order)
+
+    def visible(
+        self, camera: Camera, *, tolerance: float = DEFAULT_SPLAT_TOLERANCE, backend: str = "cpu"
+    ) -> NDArray[np.bool_]:
         """(N,) bool: the points ``camera`` sees (module docstring), inside its frustum.
 
         Parameters
@@ -104,8 +117,9 @@ class PointSurfels:
         backend : {"cpu", "gpu"}
             Who rasterises the splats: ``"cpu"`` (numba, float64) or ``"gpu"`` (OpenGL point
             sprites, float32, :mod:`zbuf_occlude.render.point_sprites`); the decision runs on
-            the CPU either way.  The two agree on all but near-ties (masks equal on at least
-            99.9 % of points of the shipped meshes).
+            the CPU either way.  They differ where surfels tie at a point's pixel (masks equal
+            on 99.6-99.8 % of point-views of the shipped meshes, fewer differences than the CPU
+            makes itself when its ties go the other way).
 
         Raises
         ------
@@ -116,7 +130,7 @@ class PointSurfels:
         BackendUnavailable
             ``backend="gpu"`` and no OpenGL 4.3 context can be created.
         """
-        from zbuf_occlude.visibility.point_kernels import decide
+        from zbuf_occlude.visibility.point_kernels import camera_frame, decide
 
         check_camera(camera)
         tol = _check_nonnegative(tolerance, "tolerance")
@@ -125,15 +139,17 @@ class PointSurfels:
         in_frustum = camera.in_frustum(self.points)
         if n == 0 or not in_frustum.any():
             return in_frustum
-        rotation, translation = camera.extrinsics[:, :3], camera.extrinsics[:, 3]
-        cam = self.points @ rotation.T + translation
-        normal = self.normals @ rotation.T
-        image = splat_image(cam, self.radius, in_frustum, camera)
-        depth, ids = splat_surfels(cam, normal, self.radius, image.pix, image.x0, image.y0, image.width, image.height)
-        visible = decide(
-            cam, normal, self.radius, self.spacing, depth, ids, image.pix, image.x0, image.y0, tol,
-            DEFAULT_CREASE_COS, self.oriented,
+        extrinsics = camera.extrinsics
+        order = self.order
+        radius, spacing = self.radius[order], self.spacing[order]
+        cam, normal = camera_frame(self.points[order], self.normals[order], np.ascontiguousarray(extrinsics[:, :3]), extrinsics[:, 3].copy())
+        image = splat_image(cam, radius, in_frustum[order], camera)
+        depth, ids = splat_surfels(cam, normal, radius, image.pix, image.x0, image.y0, image.width, image.height)
+        decided = decide(
+            cam, normal, radius, spacing, depth, ids, image.pix, image.x0, image.y0, tol, DEFAULT_CREASE_COS, self.oriented,
         )  # fmt: skip
+        visible = np.empty_like(decided)
+        visible[order] = decided
         return visible & in_frustum
 
 
@@ -175,7 +191,8 @@ def splat_image(
     rho = r / np.maximum(z - r, 0.5 * z)
     half_h = math.tan(math.radians(camera.yfov_deg) / 2.0)
     half_w = half_h * camera.width / camera.height
-    pad = float(rho.max())
+    # a disk off the axis projects wider than rho, by up to a factor 1 + |x/z| (the kernel's box)
+    pad = float(rho.max()) * (1.0 + float(np.abs(xy).max()))
     x0 = max(float(xy[:, 0].min()), -half_w) - pad
     x1 = min(float(xy[:, 0].max()), half_w) + pad
     y0 = max(float(xy[:, 1].min()), -half_h) - pad
