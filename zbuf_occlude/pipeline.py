@@ -7,6 +7,11 @@ fewer than ``n_points`` dense points is topped up with more visible points drawn
 it sees (:func:`~zbuf_occlude.geometry.samples.top_up`), so its samples hold distinct points
 unless its visible surface is truly too small.
 
+A point-set input (a cloud of a PointNet HDF5, ``.npy`` or ``.ply`` point file) has no faces:
+its dense cloud is its own points, its visibility per pose comes from the points alone (the
+z-buffer test over surfel splats, :mod:`zbuf_occlude.visibility.point_splats`), nothing is
+topped up and its samples' ``face_index`` is :data:`NO_FACE` (:func:`occlude_point_set`).
+
 :func:`occlude` is the one-call version, ``zbuf_occlude.occlude(...)``.
 """
 
@@ -52,7 +57,10 @@ from zbuf_occlude.visibility.registry import check_keywords, method_info, resolu
 if TYPE_CHECKING:  # trimesh (and scipy) is imported by occlude(), which takes files and meshes
     import trimesh
 
-__all__ = ["DenseCloud", "dense_cloud", "PoseResult", "occlude_poses", "occlude_object", "occlude"]
+__all__ = [
+    "DenseCloud", "dense_cloud", "PoseResult", "occlude_poses", "occlude_object", "occlude", "occlude_point_set",
+    "NO_FACE", "POINT_SET_METHOD",
+]  # fmt: skip
 
 log = logging.getLogger(__name__)
 
@@ -60,6 +68,13 @@ log = logging.getLogger(__name__)
 #: largest side 1 within this (object units): normalising again is not bit-exact, and the
 #: samples must equal those ``generate`` writes from the same file.
 NORMALISED_ATOL = 1e-9
+#: ``face_index`` of a sample point that lies on no face: the points of a point-set input.
+NO_FACE = -1
+#: The registered name of the method that decides a point-set input's visibility
+#: (:func:`~zbuf_occlude.visibility.point_splats.point_surfels`, the z-buffer test over surfel splats).
+POINT_SET_METHOD = "point-splat"
+#: What a point-set input's samples may copy from its object (:class:`OccludedCloud` fields).
+_CLOUD_FIELDS = frozenset({"label", "class_name", "source", "split"})
 
 
 @dataclass
@@ -258,6 +273,91 @@ def occlude_poses(
     finally:
         if scene is not None:
             scene.release()
+
+
+def occlude_point_set(
+    points: NDArray[np.floating],
+    poses: Sequence[tuple[float, float]],
+    *,
+    key: int,
+    normals: NDArray[np.floating] | None = None,
+    n_points: int = DEFAULT_N_POINTS,
+    samples_per_view: int = DEFAULT_SAMPLES_PER_VIEW,
+    seed: int = DEFAULT_SEED,
+    radius: float = DEFAULT_RADIUS,
+    resolution: int = DEFAULT_RESOLUTION,
+    **cloud_fields,
+) -> Iterator[PoseResult]:
+    """Yield a :class:`PoseResult` for each pose of one point-set object, as :func:`occlude_poses` does for a mesh.
+
+    The object's dense cloud is ``points`` itself (nothing is sampled).  Its surfels are made
+    once (:func:`~zbuf_occlude.visibility.point_splats.point_surfels`, with ``normals`` where
+    given, else normals estimated from the points) and tested from the camera of every pose
+    (:meth:`~zbuf_occlude.visibility.point_splats.PointSurfels.visible`); the samples are drawn
+    from the visible points as a mesh's are (:func:`~zbuf_occlude.geometry.samples.pose_samples`,
+    the same seeds), so a compact data set redraws them.  A point set has no faces: nothing is
+    topped up (a pose that sees fewer than ``n_points`` gives samples padded with repeats) and
+    every sample's ``face_index`` is :data:`NO_FACE`.
+
+    Parameters
+    ----------
+    points : (M, 3) float
+        The object's points, normalised as a mesh is (largest side 1), world frame.
+    poses : sequence of (elevation_deg, azimuth_deg)
+    key : int
+        The object's seed key (:func:`object_key` of a stable name).
+    normals : (M, 3) float, optional
+        The points' normals (any sign; their length is ignored).
+    n_points, samples_per_view : int
+        Points per sample and samples drawn per pose.
+    seed : int
+    radius : float
+        Camera distance, object units.
+    resolution : int
+        The cameras' image size, pixels (the splat image is sized from the splats, not from it).
+    **cloud_fields
+        ``label``, ``class_name``, ``source``, ``split``: copied into every cloud.
+
+    Raises
+    ------
+    InvalidInputError
+        ``n_points < 1``, ``samples_per_view < 0``, bad points or normals (shape, NaN/inf, zero
+        normals), or a field other than those of ``cloud_fields``.
+    InsufficientMemoryError
+        The object's job would not fit in the memory available, checked before any allocation.
+    """
+    from zbuf_occlude.visibility.point_splats import point_surfels
+
+    if n_points < 1 or samples_per_view < 0:
+        raise InvalidInputError(f"need n_points >= 1 and samples_per_view >= 0, got {n_points}, {samples_per_view}")
+    unknown = sorted(set(cloud_fields) - _CLOUD_FIELDS)
+    if unknown:
+        raise InvalidInputError(f"occlude_point_set copies only {sorted(_CLOUD_FIELDS)} into its clouds, got {unknown}")
+    check_memory(
+        estimate_job_memory(points=int(n_points), samples_per_view=int(samples_per_view), dense_points=len(points), resolution=resolution)
+    )
+    surfels = point_surfels(points, normals)
+    n_dense = len(surfels.points)
+    no_face = np.full(n_dense, NO_FACE, dtype=np.int64)
+    for pose_index, (el, az) in enumerate(poses):
+        camera = camera_on_sphere(el, az, radius, resolution=resolution)
+        visible = surfels.visible(camera)
+        visible_index = np.flatnonzero(visible)
+        if len(visible_index) == 0 and samples_per_view:
+            log.warning("%s: nothing visible from el=%g az=%g; no sample", cloud_fields.get("source") or "point set", el, az)
+        chosen = pose_samples(
+            visible_index, n_points, seed=seed, key=key, pose_index=pose_index, sample_indices=range(samples_per_view),
+            n_dense=n_dense,
+        )  # fmt: skip
+        clouds = [
+            OccludedCloud(
+                points=surfels.points[c].astype(np.float32), face_index=no_face[c], elevation_deg=float(el),
+                azimuth_deg=float(az), radius=float(radius), sample_index=sample_index, n_visible=len(visible_index),
+                **cloud_fields,
+            )  # fmt: skip
+            for sample_index, c in enumerate(chosen)
+        ]
+        yield PoseResult(pose_index, visible, TopUp(), clouds)
 
 
 def occlude_object(

@@ -142,7 +142,7 @@ def test_pyg_transform():
     t.set_epoch(1)
     assert not torch.equal(t(data).pos, out.pos)
     with pytest.raises(InvalidInputError, match="mesh Data"):
-        t(Data(pos=torch.zeros(4, 3)))
+        t(Data(pos=torch.zeros(4, 2)))
 
 
 @pytest.mark.slow
@@ -188,3 +188,231 @@ def test_a_copied_data_set_keeps_its_epoch_but_not_the_link():
     assert twin.occlusion.epoch == 3
     ds.set_epoch(4)
     assert (ds.occlusion.epoch, twin.occlusion.epoch) == (4, 3)
+
+
+# -- point sets: clouds without a mesh -------------------------------------------------------------
+from zbuf_occlude.io.point_sets import PointSet, read_point_sets  # noqa: E402
+
+SPHERE_CENTRE, SPHERE_RADIUS = np.array([2.0, -1.0, 5.0]), 3.0
+
+
+def _sphere_points(n: int = 4000, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Points uniform on a sphere of radius 3 around (2, -1, 5) (any frame and units), and their normals."""
+    normals = np.random.default_rng(seed).normal(size=(n, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    return SPHERE_CENTRE + SPHERE_RADIUS * normals, normals
+
+
+def _truly_visible(points: np.ndarray, eye: np.ndarray) -> np.ndarray:
+    """The visible cap of the sphere, in the poses' frame (bounding box centred, maximum extent 1: radius 0.5)."""
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    q = (points - (lo + hi) / 2) / (hi - lo).max()
+    return q @ eye > 0.25  # p · eye > r²: the tangent cone from the eye
+
+
+@pytest.mark.parametrize("with_normals", [True, False])
+def test_a_sphere_point_set_keeps_the_visible_cap(with_normals):
+    points, normals = _sphere_points()
+    cloud = PointSet(points, normals if with_normals else None, None, "sphere")
+    t = RandomOcclusion(len(points), seed=5, normalize=False)
+    for index in range(4):
+        s = t(cloud, index=index)
+        eye = camera_on_sphere(s["elevation_deg"], s["azimuth_deg"], t.poses.radius, resolution=64).eye
+        truth = _truly_visible(points, eye)
+        assert abs(s["n_visible"] - truth.sum()) <= 0.05 * len(points), (s["n_visible"], truth.sum())
+        kept = np.unique(s["point_index"])  # n_points = N: every visible point is drawn
+        seen = np.isin(np.arange(len(points)), kept)
+        assert len(kept) == s["n_visible"] and (seen == truth).mean() >= 0.95  # the splats' reach at the silhouette
+        back = (points - SPHERE_CENTRE) @ eye / np.linalg.norm(eye) < -0.5 * SPHERE_RADIUS  # far behind the horizon
+        assert seen[back].mean() < 0.01
+        # the sample is rows of the cloud, in its own frame, with their normals
+        assert np.array_equal(s["points"], points[s["point_index"]].astype(np.float32))
+        if with_normals:
+            assert np.array_equal(s["normals"], normals[s["point_index"]].astype(np.float32))
+        else:
+            assert "normals" not in s and "face_index" not in s
+
+
+def test_a_point_set_sample_is_determined_by_seed_epoch_and_index():
+    points, normals = _sphere_points(2000, seed=1)
+    cloud = PointSet(points, normals, None, "sphere")
+    a, b = RandomOcclusion(256, seed=3), RandomOcclusion(256, seed=3)
+    s1, s2 = a(cloud, index=5), b(PointSet(points.copy(), normals.copy(), None, "copy"), index=5)
+    assert np.array_equal(s1["points"], s2["points"]) and np.array_equal(s1["point_index"], s2["point_index"])
+    assert s1["points"].shape == (256, 3) and s1["points"].dtype == np.float32
+    # normalised as the mesh samples are: bounding box centred on 0, maximum extent 1
+    assert np.isclose(np.ptp(s1["points"], axis=0).max(), 1.0) and np.allclose(s1["points"].min(0) + s1["points"].max(0), 0, atol=1e-6)
+    assert not np.array_equal(a(cloud, index=6)["point_index"], s1["point_index"])
+    a.set_epoch(1)
+    assert not np.array_equal(a(cloud, index=5)["point_index"], s1["point_index"])
+    assert np.array_equal(a(cloud, index=5, epoch=0)["point_index"], s1["point_index"])
+    # an array is a point set without normals
+    assert a(points, index=0)["points"].shape == (256, 3)
+
+
+def test_the_up_axis_of_a_point_set_sets_where_elevation_is_measured():
+    points, normals = _sphere_points(3000, seed=2)
+    top = PoseDistribution((89.0, 90.0), (0.0, 360.0))
+    t = RandomOcclusion(500, poses=top, seed=0, normalize=False)
+    for up, axis in (("+z", 2), ("+y", 1)):
+        s = t(PointSet(points, normals, None, "sphere"), index=0, up=up)
+        assert (s["points"][:, axis] > SPHERE_CENTRE[axis]).mean() > 0.99, up  # seen from the top: the upper cap
+    with pytest.raises(InvalidInputError, match="up must be one of"):
+        t(points, index=0, up="sideways")
+
+
+def test_random_occlusion_refuses_mixed_up_calls(chair):
+    mesh, dense = chair
+    t = RandomOcclusion(64)
+    with pytest.raises(InvalidInputError, match="a mesh with its dense cloud, or a point set alone"):
+        t(mesh, index=0)
+    with pytest.raises(InvalidInputError, match="a mesh with its dense cloud, or a point set alone"):
+        t(PointSet(dense.points, None, None, "x"), dense, 0)
+    with pytest.raises(InvalidInputError, match="needs the sample's index"):
+        t(dense.points)
+    with pytest.raises(InvalidInputError, match=r"\(N, 3\)"):
+        t(np.zeros((10, 2)), index=0)
+    with pytest.raises(InvalidInputError, match="normals must have the shape of the points"):
+        t(PointSet(dense.points, dense.points[:, :2], None, "x"), index=0)
+
+
+def _npy_class_folders(root: Path) -> dict[str, np.ndarray]:
+    """Two classes of .npy clouds (xyz + normals) sampled from the shipped meshes: CLASS/NAME.npy."""
+    import zbuf_occlude as zo
+
+    clouds = {}
+    for mesh_file in [CHAIR, SAMPLES / "stool" / "train" / "stool_0002.off", SAMPLES / "table" / "test" / "table_0393.off"]:
+        mesh = load_mesh(mesh_file)
+        points, face_index = zo.sample_surface(mesh, count=3000, seed=0)
+        cloud = np.hstack([points * 10.0, mesh.face_normals[face_index]])  # any units
+        name = f"{mesh_file.parents[1].name}/{mesh_file.parent.name}/{mesh_file.stem}"
+        (root / name).parent.mkdir(parents=True, exist_ok=True)
+        np.save(root / f"{name}.npy", cloud)
+        clouds[name] = cloud
+    return clouds
+
+
+def test_a_data_set_of_point_sets_gives_subsets_of_each_cloud(tmp_path):
+    from zbuf_occlude.mesh.point_inputs import load_cloud
+
+    clouds = _npy_class_folders(tmp_path)
+    ds = OnTheFlyOccludedDataset(tmp_path, n_points=200, seed=7, views_per_object=2, normalize=False)
+    assert [o.name for o in ds.objects] == sorted(clouds) and ds.shape_names == sorted({n.split("/")[0] for n in clouds})
+    assert [o.label for o in ds.objects] == [ds.shape_names.index(n.split("/")[0]) for n in sorted(clouds)]
+    assert "point-splat" in repr(ds) and len(ds) == 2 * len(clouds)
+    for i in range(len(ds)):
+        s = ds.sample(i)
+        cloud = load_cloud(tmp_path / f"{s['name']}.npy", 0)  # the farm's frame: largest side 1
+        assert s["points"].shape == (200, 3) and s["n_visible"] > 200 and len(np.unique(s["point_index"])) == 200
+        assert np.array_equal(s["points"], cloud.points[s["point_index"]].astype(np.float32))
+        assert np.array_equal(s["normals"], cloud.normals[s["point_index"]].astype(np.float32))
+        assert np.array_equal(ds.sample(i)["points"], s["points"])  # same (seed, epoch, index), same sample
+    x, y = ds[0]
+    assert tuple(x.shape) == (200, 3) and x.dtype == torch.float32 and y == ds.objects[0].label
+    first = ds.sample(0)["point_index"]
+    ds.set_epoch(1)
+    assert not np.array_equal(ds.sample(0)["point_index"], first)
+    twin = OnTheFlyOccludedDataset(tmp_path, n_points=200, seed=7, views_per_object=2, normalize=False)
+    assert np.array_equal(twin.sample(0, epoch=0)["point_index"], first)  # a new data set, a new process: the same
+    test_only = OnTheFlyOccludedDataset(tmp_path, split="test", n_points=32)
+    assert [o.name for o in test_only.objects] == ["table/test/table_0393"]
+
+
+def _pointnet_folder(root: Path) -> list:
+    """``modelnet40_ply_hdf5_2048``'s layout in small: two files, labels, shape_names.txt, the file lists."""
+    import h5py
+
+    root.mkdir()
+    points, _ = _sphere_points(512, seed=3)
+    y_up = points[:, [0, 2, 1]] * [1.0, 0.5, 1.0]  # an ellipsoid, flat along y (its up axis)
+    for split, labels in (("train", [1, 0, 1]), ("test", [0, 1])):
+        with h5py.File(root / f"ply_data_{split}0.h5", "w") as f:
+            f["data"] = np.stack([y_up * (1 + 0.1 * i) for i in range(len(labels))]).astype(np.float32)
+            f["label"] = np.array(labels, np.uint8)[:, None]
+        (root / f"{split}_files.txt").write_text(f"data/{root.name}/ply_data_{split}0.h5\n")
+    (root / "shape_names.txt").write_text("bowl\ncup\n")
+    return read_point_sets(root / "ply_data_train0.h5")
+
+
+def test_a_data_set_of_pointnet_hdf5_takes_the_files_labels_and_splits(tmp_path):
+    rows = _pointnet_folder(tmp_path / "modelnet40_ply_hdf5_2048")
+    top = PoseDistribution((80.0, 90.0))
+    ds = OnTheFlyOccludedDataset(tmp_path / "modelnet40_ply_hdf5_2048", split="train", n_points=128, normalize=False,
+                                 poses=top, up="+y")  # fmt: skip
+    assert ds.shape_names == ["bowl", "cup"]
+    assert [(o.name, o.label, o.class_name, o.cloud) for o in ds.objects] == [
+        ("ply_data_train0_0000", 1, "cup", 0), ("ply_data_train0_0001", 0, "bowl", 1), ("ply_data_train0_0002", 1, "cup", 2)]
+    assert ds.labels.tolist() == [1, 0, 1]
+    s = ds.sample(1)
+    assert len(np.unique(s["point_index"])) == 128
+    # +y turned to +z: seen from the top, the sample is the cloud's upper (+y) half, now its +z half
+    height = rows[1].points[:, 1] - (rows[1].points[:, 1].min() + rows[1].points[:, 1].max()) / 2
+    assert (height[s["point_index"]] > 0).mean() > 0.9 and s["points"][:, 2].min() > -0.05
+    test = OnTheFlyOccludedDataset(tmp_path / "modelnet40_ply_hdf5_2048", split="test", n_points=128)
+    assert [o.label for o in test.objects] == [0, 1] and len(test) == 2
+
+
+def test_point_set_inputs_that_are_refused_name_the_file(tmp_path):
+    bad = tmp_path / "bad"
+    (bad / "chair").mkdir(parents=True)
+    (bad / "stool").mkdir()
+    np.save(bad / "chair" / "a.npy", np.zeros((10, 4)))  # neither (N, 3) nor (N, 6)
+    np.save(bad / "stool" / "b.npy", np.ones((10, 3)))
+    with pytest.raises(InvalidInputError, match=r"a\.npy: holds float64 values of shape .10, 4.") as exc:
+        OnTheFlyOccludedDataset(bad)
+    assert "\n" not in str(exc.value)
+    nan = tmp_path / "nan"
+    (nan / "chair").mkdir(parents=True)
+    (nan / "stool").mkdir()
+    np.save(nan / "chair" / "a.npy", np.full((10, 3), np.nan))  # found by its header; refused when read
+    np.save(nan / "stool" / "b.npy", np.random.default_rng(0).random((10, 3)))
+    ds = OnTheFlyOccludedDataset(nan, n_points=4)
+    with pytest.raises(InvalidInputError, match=r"a\.npy: cloud 'a': 10 points have NaN or inf") as exc:
+        ds.sample(0)
+    assert str(nan / "chair" / "a.npy") in str(exc.value) and "\n" not in str(exc.value)
+    with pytest.raises(InvalidInputError, match="up must be one of"):
+        OnTheFlyOccludedDataset(nan, up="+w")
+
+
+def test_meshes_and_point_sets_together(tmp_path):
+    import shutil
+
+    import zbuf_occlude as zo
+
+    shutil.copytree(SAMPLES, tmp_path / "samples")
+    mesh = load_mesh(SAMPLES / "sofa" / "test" / "sofa_0681.off")
+    points, face_index = zo.sample_surface(mesh, count=2000, seed=0)
+    np.save(tmp_path / "samples" / "sofa" / "test" / "sofa_9999.npy", points)
+    mixed = OnTheFlyOccludedDataset(tmp_path / "samples", n_points=64, dense_points=1024)
+    meshes = OnTheFlyOccludedDataset(SAMPLES, n_points=64, dense_points=1024)
+    assert [o.name for o in mixed.objects if not o.is_point_set] == [o.name for o in meshes.objects]
+    assert mixed.shape_names == meshes.shape_names and "embree-fast and point-splat" in repr(mixed)
+    (cloud,) = [i for i, o in enumerate(mixed.objects) if o.is_point_set]
+    assert mixed.sample(cloud)["points"].shape == (64, 3) and mixed.objects[cloud].label == mixed.shape_names.index("sofa")
+    for i in range(cloud):  # the meshes before it keep their index: the same samples as without it
+        assert np.array_equal(mixed.sample(i)["points"], meshes.sample(i)["points"])
+
+
+
+def test_pyg_transform_of_a_point_cloud():
+    pytest.importorskip("torch_geometric")
+    from torch_geometric.data import Data
+
+    from zbuf_occlude.learn.pyg import OccludeMesh
+
+    points, normals = _sphere_points(3000, seed=4)
+    data = Data(pos=torch.tensor(points, dtype=torch.float32), normal=torch.tensor(normals, dtype=torch.float32), y=torch.tensor([2]))
+    t = OccludeMesh(300, seed=1, normalize=False)
+    out = t(data)
+    assert out.pos.shape == (300, 3) and out.normal.shape == (300, 3) and out.y.tolist() == [2]
+    rows = {tuple(p) for p in np.hstack([data.pos.numpy(), data.normal.numpy()])}
+    assert all(tuple(p) in rows for p in np.hstack([out.pos.numpy(), out.normal.numpy()]))  # rows of the input
+    assert torch.equal(t(data).pos, out.pos)  # (seed, epoch, content) decide the view
+    bare = t(Data(pos=data.pos))
+    assert bare.pos.shape == (300, 3) and getattr(bare, "normal", None) is None
+    t.set_epoch(1)
+    assert not torch.equal(t(data).pos, out.pos)
+    with pytest.raises(InvalidInputError, match="normal must be"):
+        t(Data(pos=data.pos, normal=data.normal[:10]))
+    with pytest.raises(InvalidInputError, match="up must be one of"):
+        OccludeMesh(up="auto")

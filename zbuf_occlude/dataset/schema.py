@@ -15,7 +15,7 @@ Numbers must be JSON numbers (``"2048"`` is refused), poses pairs of numbers.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
@@ -31,6 +31,8 @@ from zbuf_occlude.resources import check_memory
 __all__ = [
     "CardParams",
     "Card",
+    "PointSetCard",
+    "VISIBILITY_FROM",
     "ManifestRecord",
     "ObjectRecord",
     "OkRecord",
@@ -42,6 +44,7 @@ __all__ = [
     "read_manifest",
     "read_shape_names",
     "check_records",
+    "check_point_set_records",
     "checked_shards",
     "check_shard",
     "open_shard",
@@ -81,6 +84,31 @@ class JoinedFile(_Model):
     split: str
 
 
+#: Where a card's objects were seen from (``visibility_from``): point-set inputs only, or both.
+VISIBILITY_FROM = ("points", "points and meshes")
+
+
+class PointSetCard(_Model):
+    """The card's ``point_sets``: how the clouds of point-set files became objects (written only
+    when the data set has some; :func:`zbuf_occlude.farm.journal.point_set_card`)."""
+
+    #: Objects that are clouds of point-set files, and how many of them had normals in their file.
+    n_objects: NonNegativeInt
+    n_with_normals: NonNegativeInt
+    #: The registered visibility method of their poses (``"point-splat"``) and its settings.
+    visibility: str
+    settings: dict[str, float | int]
+    #: What each object's dense cloud is, and the ``face_index`` of its samples.
+    dense_cloud: str
+    face_index: int
+
+    @model_validator(mode="after")
+    def _counts(self) -> PointSetCard:
+        if self.n_with_normals > self.n_objects:
+            raise ValueError(f"n_with_normals {self.n_with_normals} exceeds n_objects {self.n_objects}")
+        return self
+
+
 class Card(_Model):
     """``dataset_card.json``."""
 
@@ -95,6 +123,17 @@ class Card(_Model):
     checksums: str | None = None
     #: Files joined from the shards (PointNet's layout), each with its SHA-256; ``None``: none.
     joined_files: list[JoinedFile] | None = None
+    #: ``"points"``: every object is a cloud of a point-set file, its visibility decided from its
+    #: points; ``"points and meshes"``: some are; ``None``: every object is a mesh.
+    visibility_from: Literal[VISIBILITY_FROM] | None = None
+    #: How the point-set objects were made (:class:`PointSetCard`); ``None``: there are none.
+    point_sets: PointSetCard | None = None
+
+    @model_validator(mode="after")
+    def _point_sets_said(self) -> Card:
+        if (self.visibility_from is None) != (self.point_sets is None):
+            raise ValueError("'visibility_from' and 'point_sets' go together: both or neither")
+        return self
 
 
 class ManifestRecord(_Model):
@@ -141,6 +180,13 @@ class ObjectRecord(_Model):
     #: The up axis the mesh was read with (``+x`` … ``-z``) and why (the file, the layout, or the option).
     up: str | None = None
     up_source: str | None = None
+    #: A cloud of a point-set file: its row there; its visibility method (``"point-splat"``),
+    #: ``visibility_from`` ``"points"``, and whether the file's normals were used (else they were
+    #: estimated from the points).  ``None``: a mesh.
+    cloud: NonNegativeInt | None = None
+    visibility: str | None = None
+    visibility_from: Literal["points"] | None = None
+    normals: bool | None = None
     #: Wall seconds, when it finished (ISO 8601, UTC), the OpenGL renderer, the process.
     time_s: float | None = None
     finished_at: str | None = None
@@ -182,6 +228,8 @@ class PlanObject(_Model):
     class_name: str
     split: str
     label: NonNegativeInt
+    #: A cloud of a point-set file: its row there (absent for a mesh).
+    cloud: NonNegativeInt | None = None
 
 
 class Plan(_Model):
@@ -348,9 +396,11 @@ def check_records(
     DatasetFormatError
         A label with no line in ``shape_names.txt`` (or another name there), or
         ``n_visible`` with another count than the card's poses (scans for ``--sensor``), or
-        ``n_topped_up`` with another count than ``n_visible`` or an entry above its pose's.
+        ``n_topped_up`` with another count than ``n_visible`` or an entry above its pose's, or
+        point-set objects the card does not account for (:func:`check_point_set_records`).
     """
     n_poses = card.params.samples_per_view if card.params.sensor else len(card.poses)
+    check_point_set_records(manifest, rows, card, problems)
     for lineno, _, rec in rows:
         if rec is None:
             continue
@@ -375,6 +425,47 @@ def check_records(
         if found and problems is None:
             raise DatasetFormatError(found[0])
         (problems if problems is not None else []).extend(found)
+
+
+def check_point_set_records(
+    manifest: Path, rows: list[tuple[int, dict[str, Any], OkRecord | None]], card: Card, problems: list[str] | None = None
+) -> None:
+    """The clouds of point-set files among the manifest's objects against the card's ``point_sets``.
+
+    Every line with a ``cloud`` (a point-set input, whatever its status) is counted in the card's
+    ``point_sets.n_objects``; a finished one says ``visibility_from`` ``"points"`` and a mesh does
+    not; the finished ones whose file gave normals are the card's ``n_with_normals``.  With
+    ``problems``, each problem is appended there instead of raising.
+
+    Raises
+    ------
+    DatasetFormatError
+        A count or a record that does not fit the card (the message names the line or the field).
+    """
+    found = []
+    for lineno, doc, rec in rows:
+        said = rec.visibility_from if rec is not None else None
+        if rec is not None and (rec.cloud is not None) != (said == "points"):
+            found.append(
+                f"{manifest}:{lineno}: field 'visibility_from' is {said!r} for "
+                f"{'a cloud of a point-set file' if rec.cloud is not None else 'a mesh'} (field 'cloud' {rec.cloud!r})"
+            )
+    clouds = sum(isinstance(doc.get("cloud"), int) for _, doc, _ in rows)
+    with_normals = sum(rec.normals is True for _, _, rec in rows if rec is not None and rec.cloud is not None)
+    said_clouds = card.point_sets.n_objects if card.point_sets is not None else 0
+    if clouds != said_clouds:
+        found.append(
+            f"{manifest}: {clouds} objects are clouds of point-set files (field 'cloud'), the card's field "
+            f"'point_sets' says {said_clouds}; the data set was changed after it was written"
+        )
+    elif card.point_sets is not None and with_normals != card.point_sets.n_with_normals:
+        found.append(
+            f"{manifest}: {with_normals} finished clouds used their file's normals (field 'normals'), the card's field "
+            f"'point_sets.n_with_normals' says {card.point_sets.n_with_normals}"
+        )
+    if found and problems is None:
+        raise DatasetFormatError(found[0])
+    (problems if problems is not None else []).extend(found)
 
 
 def checked_shards(root: Path, where: str, rec: OkRecord, card: Card, *, verify: bool) -> tuple[list[Path], dict[Path, str]]:

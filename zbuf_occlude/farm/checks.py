@@ -14,15 +14,19 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from zbuf_occlude.dataset.storage import ObjectSize, StorageKind, storage_kind
+from zbuf_occlude.defaults import DEFAULT_METHOD
 from zbuf_occlude.errors import BackendUnavailable, CameraError, InvalidInputError
-from zbuf_occlude.farm.config import FarmParams
+from zbuf_occlude.farm.config import OPTION_NAMES, FarmParams
+from zbuf_occlude.mesh.discovery import printable_path
+from zbuf_occlude.mesh.inputs import FarmObject
+from zbuf_occlude.pipeline import POINT_SET_METHOD
 from zbuf_occlude.geometry.cameras import camera_on_sphere
 from zbuf_occlude.io.owned import make_folder
 from zbuf_occlude.resources import check_memory, estimate_job_memory
 from zbuf_occlude.visibility.registry import get_method
 
 __all__ = ["check_before_work", "check_memory_up_front", "check_out_option", "check_out_outside_inputs", "check_radius",
-           "prepare_out", "check_gl", "storage_of", "object_size"]
+           "prepare_out", "check_gl", "storage_of", "object_size", "check_point_set_options"]
 
 log = logging.getLogger(__name__)
 
@@ -169,3 +173,34 @@ def check_before_work(params: FarmParams, out: str | os.PathLike, *, gl: bool = 
         check_gl(params.resolution)
     if workers is not None:
         check_memory_up_front(params, workers=workers)
+
+
+def check_point_set_options(objects: Sequence[FarmObject], params: FarmParams) -> None:
+    """Refuse options that cannot apply to the clouds of point-set files among ``objects``, before any work.
+
+    A point-set input is seen from its points alone, by :data:`~zbuf_occlude.pipeline.POINT_SET_METHOD`:
+    ``--method`` may be left at its default (which then picks per input: the points' method for
+    clouds, ``auto``'s for meshes) or name that method, which then decides the meshes too.  Any
+    other method decides from a mesh, which a point set has not; ``farm --sensor`` scans meshes.
+    ``--dense-points`` and ``--density`` size the clouds sampled on meshes; a point set's dense
+    cloud is its own points.
+
+    Raises
+    ------
+    InvalidInputError
+        ``--method`` other than the default or :data:`~zbuf_occlude.pipeline.POINT_SET_METHOD`,
+        or ``--sensor``, with point-set inputs (naming the value and one of the files).
+    """
+    clouds = [o for o in objects if o.is_point_set]
+    if not clouds:
+        return
+    files = len({o.source for o in clouds})
+    which = f"{len(clouds)} cloud{'s' if len(clouds) > 1 else ''} of {files} point-set file{'s' if files > 1 else ''}, e.g. {printable_path(clouds[0].source)}"
+    if params.sensor is not None:
+        raise InvalidInputError(f"{OPTION_NAMES['sensor']} {params.sensor.name} scans meshes, and the inputs hold {which}: leave those out")
+    if params.method not in (DEFAULT_METHOD, POINT_SET_METHOD):
+        raise InvalidInputError(
+            f"{OPTION_NAMES['method']} {params.method} decides visibility from a mesh, and the inputs hold {which}, whose "
+            f"visibility comes from their points alone ({POINT_SET_METHOD}): leave {OPTION_NAMES['method']} out or give "
+            f"{OPTION_NAMES['method']} {POINT_SET_METHOD}"
+        )

@@ -99,8 +99,10 @@ def generate(
     Parameters
     ----------
     paths : sequence of str or PathLike
-        Mesh files and folders (:func:`scan_paths`); unreadable folders and names that
-        are not UTF-8 are skipped, recorded in the card and ``summary.skipped`` (exit 1).
+        Mesh files, point-set files and folders (:func:`~zbuf_occlude.mesh.inputs.scan_inputs`;
+        each cloud of a point-set file is one object, seen from its points alone); unreadable
+        folders, names that are not UTF-8 and point-set files that cannot be read are skipped,
+        recorded in the card and ``summary.skipped`` (exit 1).
     out : str or PathLike
         Output folder.
     params : FarmParams
@@ -135,7 +137,7 @@ def generate(
     if kind.written_by != "generate":
         raise InvalidInputError(f"generate writes one of {storages('generate')}, not {params.storage!r}")
     check_out_outside_inputs(out, paths)
-    scan = scan_inputs(paths, class_from=class_from)
+    scan = scan_inputs(paths, class_from=class_from, point_sets=True)
     objects, skipped = scan.objects, scan.skipped
     out = Path(out)
     options = RunOptions(

@@ -21,7 +21,14 @@ from zbuf_occlude.dataset.layout import (
     TASK_DIR,
 )
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError, OutputError
-from zbuf_occlude.farm.checks import check_before_work, check_out_outside_inputs, object_size, prepare_out, storage_of
+from zbuf_occlude.farm.checks import (
+    check_before_work,
+    check_out_outside_inputs,
+    check_point_set_options,
+    object_size,
+    prepare_out,
+    storage_of,
+)
 from zbuf_occlude.farm.config import (
     MANIFEST_INTERVAL_S,
     OPTION_NAMES,
@@ -139,7 +146,8 @@ def run_farm(
     Parameters
     ----------
     source : str, PathLike or sequence of FarmObject
-        Mesh tree, flat folder or list file (:func:`scan_objects`), or a ready plan.  The data
+        Mesh tree, flat folder or list file (:func:`scan_objects`; point-set files among the
+        meshes too, one object per cloud, seen from its points alone), or a ready plan.  The data
         set names each mesh by its path relative to the input root
         (:func:`~zbuf_occlude.farm.journal.input_root`: the folder given; for a list file, the
         deepest folder holding it and its meshes), and the root by its name (the card's
@@ -161,7 +169,8 @@ def run_farm(
     Raises
     ------
     InvalidInputError
-        Bad parameters or selection; ``out`` holds a run with other parameters.
+        Bad parameters or selection; ``out`` holds a run with other parameters; ``--method``
+        or ``--sensor`` with point-set inputs (:func:`~zbuf_occlude.farm.checks.check_point_set_options`).
     OutputError
         ``out`` cannot be created or written, or the disk is full (finished objects are kept).
     BackendUnavailable
@@ -186,13 +195,16 @@ def run_farm(
     # the memory only for processes of this machine (not those of a --scheduler's cluster)
     check_before_work(params, out, gl=not (scheduler or dask_local), workers=None if scheduler else dask_local or workers)
     if isinstance(source, (str, os.PathLike)):
-        scan = scan_objects(source, classes=o.classes, per_class=o.per_class, splits=o.splits, class_from=o.class_from)
+        scan = scan_objects(
+            source, classes=o.classes, per_class=o.per_class, splits=o.splits, class_from=o.class_from, point_sets=True
+        )  # fmt: skip
         objects, skipped = scan.objects, [*skipped, *((s.path, s.reason) for s in scan.skipped)]
         layout, inputs = scan.layout, [source]
     else:
         objects, inputs = list(source), o.inputs
         if [o.index for o in objects] != list(range(len(objects))):
             raise InvalidInputError("a ready plan must number its objects 0, 1, 2, ... in order")
+    check_point_set_options(objects, params)
     check_inputs_outside_out(out, (o.source for o in objects))  # before anything in out is touched
     root = input_root(inputs, objects)
     objects, source_text = relative_objects(objects, root), source_text or root_name(root)

@@ -24,7 +24,7 @@ from zbuf_occlude.dataset.storage import SensorCrops, ShardTarget, StorageKind, 
 from zbuf_occlude.farm.config import COMPACT_GZIP_LEVEL, FATAL_ERRORS, GL_LOCK, FarmParams, record_path, shard_path
 from zbuf_occlude.io.atomic import file_sha256, write_text
 from zbuf_occlude.mesh.inputs import FarmObject
-from zbuf_occlude.pipeline import PoseResult, dense_cloud, occlude_poses
+from zbuf_occlude.pipeline import POINT_SET_METHOD, PoseResult, dense_cloud, occlude_point_set, occlude_poses
 
 log = logging.getLogger(__name__)
 
@@ -100,16 +100,48 @@ def _scan(obj: FarmObject, params: FarmParams, out: Path, kind: SensorCrops, mes
 def _occlude(obj: FarmObject, params: FarmParams, out: Path, kind: StorageKind, mesh_path: Path) -> dict[str, Any]:
     """The z-buffer poses of one object, written by its storage kind."""
     kind.check_name(obj.name, what=f"the name of {obj.source}")  # before any work
+    if obj.is_point_set:
+        return _occlude_points(obj, params, out, kind, mesh_path)
     from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported by the work, not by modules that only read records
 
     mesh = load_mesh(mesh_path, up=params.up)
     dense = dense_cloud(mesh, obj.key, seed=params.seed, count=params.dense_points, density=params.density)
-    poses = params.poses
     common = dict(
         key=obj.key, n_points=params.n_points, seed=params.seed, dense=dense, method=params.method,
         resolution=params.resolution, radius=params.radius, label=obj.label, class_name=obj.class_name,
         source=obj.source, split=obj.split,
     )  # fmt: skip
+    results = occlude_poses(mesh, params.poses, **kind.occlude_options(params.samples_per_view), **common)
+    return {**_write_poses(obj, params, out, kind, dense.points, results), **_mesh_record(mesh)}
+
+
+def _occlude_points(obj: FarmObject, params: FarmParams, out: Path, kind: StorageKind, path: Path) -> dict[str, Any]:
+    """The poses of one cloud of a point-set file: its points are the dense cloud (nothing is
+    sampled: ``--dense-points`` and ``--density`` do not apply), their visibility comes from the
+    points alone (:func:`~zbuf_occlude.pipeline.occlude_point_set`), written by the storage kind
+    as a mesh's are.  The record says so (``visibility``, ``visibility_from``, ``normals``)."""
+    from zbuf_occlude.mesh.point_inputs import load_cloud
+
+    cloud = load_cloud(path, int(obj.cloud), up=params.up)
+    samples_per_view = kind.occlude_options(params.samples_per_view)["samples_per_view"]  # compact: 0, it redraws
+    results = occlude_point_set(
+        cloud.points, params.poses, key=obj.key, normals=cloud.normals, n_points=params.n_points,
+        samples_per_view=samples_per_view, seed=params.seed, radius=params.radius, resolution=params.resolution,
+        label=obj.label, class_name=obj.class_name, source=obj.source, split=obj.split,
+    )  # fmt: skip
+    return {
+        **_write_poses(obj, params, out, kind, cloud.points, results),
+        "up": cloud.up, "up_source": cloud.up_source,
+        "visibility": POINT_SET_METHOD, "visibility_from": "points", "normals": cloud.normals is not None,
+    }  # fmt: skip
+
+
+def _write_poses(
+    obj: FarmObject, params: FarmParams, out: Path, kind: StorageKind, dense_points: NDArray[np.float64], results: Iterable[PoseResult]
+) -> dict[str, Any]:
+    """Write one object's poses with its storage kind; the record's fields of what was written
+    (files, visible and topped-up points per pose, the dense cloud's size)."""
+    poses = params.poses
     n_visible = np.zeros(len(poses), dtype=np.int64)  # distinct visible points per pose, top-up included
     n_topped_up = np.zeros(len(poses), dtype=np.int64)
 
@@ -120,15 +152,14 @@ def _occlude(obj: FarmObject, params: FarmParams, out: Path, kind: StorageKind, 
 
     target = ShardTarget(
         out=out, name=obj.name, source=obj.source, shard=shard_path(obj), object_index=obj.index, n_points=params.n_points,
-        poses=poses, attrs=_attrs(obj, params), dense_points=dense.points, gzip_level=COMPACT_GZIP_LEVEL,
+        poses=poses, attrs=_attrs(obj, params), dense_points=dense_points, gzip_level=COMPACT_GZIP_LEVEL,
     )  # fmt: skip
-    files = kind.write_poses(target, counted(occlude_poses(mesh, poses, **kind.occlude_options(params.samples_per_view), **common)))
+    files = kind.write_poses(target, counted(results))
     n_samples = int(kind.rows_per_pose(n_visible, params.samples_per_view).sum())
     return {
         **_files_record(out, files, n_visible, n_samples, params.n_points),
         "n_topped_up": n_topped_up.tolist(),
-        "n_dense": int(len(dense.points)),
-        **_mesh_record(mesh),
+        "n_dense": int(len(dense_points)),
     }
 
 
@@ -181,6 +212,8 @@ def base_record(obj: FarmObject, params: FarmParams) -> dict[str, Any]:
         "n_visible": [],
         "n_samples": 0,
         "bytes": 0,
+        # a point-set input's cloud: its row in the file (a mesh's record has no such field)
+        **({"cloud": obj.cloud} if obj.is_point_set else {}),
     }
 
 
@@ -220,7 +253,8 @@ def process_object(obj: FarmObject, params: FarmParams, out: str | os.PathLike, 
     record.update(
         time_s=round(time.perf_counter() - t0, 4),
         finished_at=datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        renderer=_renderer_name() if record["status"] == "ok" else None,
+        # a point set's visibility is decided on the CPU from its points (the record's 'visibility'): no renderer
+        renderer=_renderer_name() if record["status"] == "ok" and not obj.is_point_set else None,
         pid=os.getpid(),
         peak_rss_mb=round(_peak_rss_mb(), 1),
     )

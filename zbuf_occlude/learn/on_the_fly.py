@@ -9,6 +9,12 @@ session of the method, CPU ``embree-fast`` by default), and ``n_points`` of them
 splits ``generate`` and the farm give them and the farm's dense clouds
 (:func:`zbuf_occlude.pipeline.dense_cloud`, same seed, same points).
 
+Point sets (clouds without a mesh: PointNet-layout HDF5, ``.npy``, ``.ply`` point clouds,
+:mod:`zbuf_occlude.io.point_sets`) take the same path, with visibility decided from the points
+alone (:func:`zbuf_occlude.visibility.point_splats.point_surfels`, once per object, and its
+``visible`` per view) and every sample a subset of the cloud; the data set reads them as the
+farm does (:func:`zbuf_occlude.mesh.point_inputs.load_cloud`).
+
 Determinism: sample ``index`` of epoch ``epoch`` uses the generator ``(seed, 3, epoch, index)``
 (:func:`zbuf_occlude.geometry.samples.derive_rng`), whatever the worker, the order or the batch size.
 
@@ -24,6 +30,7 @@ writes it to shared memory (:class:`SharedEpoch`) that every worker reads, persi
 from __future__ import annotations
 
 import functools
+import hashlib
 import math
 import multiprocessing
 import multiprocessing.context
@@ -31,19 +38,25 @@ import os
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.geometry.arguments import check_points
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere
 from zbuf_occlude.geometry.samples import derive_rng, draw_sample
+from zbuf_occlude.io.point_sets import POINT_SET_SUFFIXES, PointSet
 from zbuf_occlude.learn import require_torch
 from zbuf_occlude.learn.data import normalize_batch
-from zbuf_occlude.mesh.inputs import FarmObject, scan_paths
+from zbuf_occlude.mesh.inputs import FarmObject, scan_inputs
 from zbuf_occlude.mesh.load import load_mesh
+from zbuf_occlude.mesh.point_inputs import load_cloud
+from zbuf_occlude.mesh.scene import UP_CHOICES, up_rotation
 from zbuf_occlude.pipeline import DenseCloud, dense_cloud
+from zbuf_occlude.visibility.point_splats import PointSurfels, point_surfels
 from zbuf_occlude.visibility.registry import method_info, resolution_option, visible_mask
 
 __all__ = ["PoseDistribution", "RandomOcclusion", "OnTheFlyOccludedDataset", "EpochSampler", "SharedEpoch", "ProcessCache", "DEFAULT_ON_THE_FLY_METHOD", "DEFAULT_DENSE_ON_THE_FLY"]
@@ -175,6 +188,13 @@ class ProcessCache(OrderedDict):
 class RandomOcclusion:
     """One random occluded view of an object, as a transform.
 
+    The object is a mesh with its dense cloud, or a point set (a
+    :class:`~zbuf_occlude.io.point_sets.PointSet`, or an ``(N, 3)`` array): then visibility is
+    decided from the points alone, with their normals where given
+    (:func:`~zbuf_occlude.visibility.point_splats.point_surfels`, prepared once per object and
+    cached like the sessions, :meth:`~zbuf_occlude.visibility.point_splats.PointSurfels.visible`
+    per view).
+
     Parameters
     ----------
     n_points : int
@@ -182,7 +202,8 @@ class RandomOcclusion:
     poses : PoseDistribution
     seed : int
     method : str
-        Visibility method (default :data:`DEFAULT_ON_THE_FLY_METHOD`, CPU, exact).
+        Visibility method of meshes (default :data:`DEFAULT_ON_THE_FLY_METHOD`, CPU, exact);
+        point sets always use the point splats (the ``point-splat`` method, with normals).
     normalize : bool
         Centre each sample's bounding box and scale it to maximum extent 1, as the learn
         extra's training data (:func:`zbuf_occlude.learn.data.normalize_batch`).
@@ -219,32 +240,68 @@ class RandomOcclusion:
         session = self._sessions.get_or_build(key, lambda: session_of(mesh, dense.points, dense.face_index))
         return session.visible(camera)
 
-    def __call__(self, mesh: trimesh.Trimesh, dense: DenseCloud, index: int, *, key: object = None, epoch: int | None = None) -> dict:
+    def _surfels(self, key, cloud: PointSet, up: str) -> PointSurfels:
+        """The point set's surfels in the poses' frame: its bounding box centred on 0 with maximum
+        extent 1 (as a loaded mesh), its ``up`` axis turned to +z."""
+
+        def build() -> PointSurfels:
+            rotation = up_rotation(up)[:3, :3]
+            lo, hi = cloud.points.min(axis=0), cloud.points.max(axis=0)
+            extent = float((hi - lo).max())
+            frame = ((cloud.points - (lo + hi) / 2) / (extent if extent > 0 else 1.0)) @ rotation.T
+            return point_surfels(frame, None if cloud.normals is None else cloud.normals @ rotation.T)
+
+        return self._sessions.get_or_build(("point set", key, up), build)
+
+    def __call__(self, mesh: trimesh.Trimesh | PointSet | NDArray[np.floating], dense: DenseCloud | None = None,
+                 index: int | None = None, *, key: object = None, epoch: int | None = None, up: str = "+z") -> dict:  # fmt: skip
         """The occluded sample ``index`` of the current epoch.
 
         Parameters
         ----------
-        mesh : trimesh.Trimesh
-            Normalised (maximum extent 1), world frame.
+        mesh : trimesh.Trimesh, PointSet or (N, 3) float array
+            A mesh, normalised (maximum extent 1), world frame, with its ``dense`` cloud; or a
+            point set alone (any units and frame: the poses are taken around its bounding
+            box normalised to maximum extent 1).
         dense : DenseCloud
-            Points on ``mesh`` and their ``face_index``.
+            Points on ``mesh`` and their ``face_index``; None for a point set.
         index : int
             The sample's index in its data set (with ``seed`` and the epoch, its generator).
+            Required.
         key : hashable, optional
-            Identifies ``(mesh, dense)`` for the per-process session cache (default: ``id``s).
+            Identifies the object for the per-process session cache (default: ``id``s of a
+            mesh and its dense cloud, the content of a point set).
         epoch : int, optional
             Default: the one of :meth:`set_epoch`.
+        up : str
+            A point set's up axis (``+z``, ``+y``, ...: :data:`zbuf_occlude.mesh.scene.UP_AXES`),
+            from which the elevation of the poses is measured; meshes are z up already.
 
         Returns
         -------
         dict
-            ``points (n_points, 3) float32``, ``face_index (n_points,) int64``,
-            ``elevation_deg``, ``azimuth_deg`` (float), ``n_visible`` (int; 0: nothing
-            visible, the sample is then all zeros).
+            ``points (n_points, 3) float32``, ``elevation_deg``, ``azimuth_deg`` (float),
+            ``n_visible`` (int; 0: nothing visible, the sample is then all zeros), and
+            ``face_index (n_points,) int64`` for a mesh, or for a point set
+            ``point_index (n_points,) int64`` (rows of its cloud, −1 when nothing is visible)
+            and, where it has normals, ``normals (n_points, 3) float32``.  Without
+            ``normalize``, a point set's sample is in its own frame and units.
+
+        Raises
+        ------
+        InvalidInputError
+            No ``index``, a mesh without its dense cloud or a point set with one, an unknown
+            ``up`` axis, or bad points (:func:`~zbuf_occlude.visibility.point_splats.point_surfels`).
         """
+        if index is None:
+            raise InvalidInputError("RandomOcclusion needs the sample's index (with the seed and the epoch, it draws the view)")
         rng = derive_rng(self.seed, _ON_THE_FLY_STREAM, self.epoch if epoch is None else int(epoch), int(index))
         el, az = self.poses.draw(rng)
         camera = camera_on_sphere(el, az, self.poses.radius, resolution=_RESOLUTION)
+        if isinstance(mesh, trimesh.Trimesh) if dense is None else isinstance(mesh, PointSet):
+            raise InvalidInputError("RandomOcclusion takes a mesh with its dense cloud, or a point set alone (no dense cloud)")
+        if dense is None:
+            return self._occlude_points(mesh, camera, rng, key, up, (el, az))
         visible = self._visible(key if key is not None else (id(mesh), id(dense)), mesh, dense, camera)
         chosen, n_visible = draw_sample(np.flatnonzero(visible), self.n_points, rng)
         if n_visible == 0:
@@ -255,24 +312,60 @@ class RandomOcclusion:
                 points = normalize_batch(points[None])[0]
         return {"points": points, "face_index": face, "elevation_deg": el, "azimuth_deg": az, "n_visible": n_visible}
 
+    def _occlude_points(self, cloud: PointSet | NDArray[np.floating], camera, rng: np.random.Generator, key: object, up: str,
+                        pose: tuple[float, float]) -> dict:  # fmt: skip
+        """:meth:`__call__`'s sample of a point set, its pose ``(elevation_deg, azimuth_deg)`` drawn already."""
+        if up not in UP_CHOICES[1:]:
+            raise InvalidInputError(f"up must be one of {', '.join(UP_CHOICES[1:])}, got {up!r}")
+        if not isinstance(cloud, PointSet):
+            cloud = PointSet(check_points(cloud), None, None, "points")
+        check_points(cloud.points)  # a point set made by hand: (N, 3), finite
+        if cloud.normals is not None and np.shape(cloud.normals) != cloud.points.shape:
+            raise InvalidInputError(f"normals must have the shape of the points {cloud.points.shape}, got {np.shape(cloud.normals)}")
+        if key is None:  # the content, not an id: a freed cloud's id is reused by the next one
+            key = hashlib.blake2b(cloud.points.tobytes() + (b"" if cloud.normals is None else cloud.normals.tobytes())).digest()
+        visible = self._surfels(key, cloud, up).visible(camera)
+        chosen, n_visible = draw_sample(np.flatnonzero(visible), self.n_points, rng)
+        if n_visible == 0:
+            points, index = np.zeros((self.n_points, 3), np.float32), np.full(self.n_points, -1, np.int64)
+            normals = None if cloud.normals is None else np.zeros((self.n_points, 3), np.float32)
+        else:
+            points, index = cloud.points[chosen].astype(np.float32), np.asarray(chosen, dtype=np.int64)
+            normals = None if cloud.normals is None else cloud.normals[chosen].astype(np.float32)
+            if self.normalize:
+                points = normalize_batch(points[None])[0]
+        out = {"points": points, "point_index": index, "elevation_deg": pose[0], "azimuth_deg": pose[1], "n_visible": n_visible}
+        return out if normals is None else out | {"normals": normals}
+
 
 class OnTheFlyOccludedDataset(require_torch().utils.data.Dataset):
-    """Meshes in, a new occluded view of each per epoch out (a ``torch.utils.data.Dataset``).
+    """Meshes or point sets in, a new occluded view of each per epoch out (a ``torch.utils.data.Dataset``).
 
     Parameters
     ----------
     mesh_root : path or sequence of paths
-        Mesh files and folders, found, named, labelled and split as ``generate`` and the
-        farm do (:func:`zbuf_occlude.farm.generate.scan_paths`).
+        Mesh files, point-set files (PointNet-layout HDF5, ``.npy``, ``.ply`` point clouds:
+        :mod:`zbuf_occlude.io.point_sets`) and folders of them, found, named, labelled and split
+        as ``generate`` and the farm do (:func:`zbuf_occlude.mesh.inputs.scan_inputs`; each
+        cloud of a point-set file is one object, labelled by the file's labels and class list
+        where it has them, else by its folders: :mod:`zbuf_occlude.mesh.point_inputs`).
     split : str, optional
-        Keep the objects of this split (``train``/``test`` from ModelNet's layout).
+        Keep the objects of this split (``train``/``test`` from ModelNet's layout, or from
+        PointNet's ``train_files.txt``/``test_files.txt``).
     n_points, poses, seed, method, normalize
-        As :class:`RandomOcclusion`.
+        As :class:`RandomOcclusion` (``method`` applies to meshes).
     dense_points : int
-        Dense cloud per object (:func:`zbuf_occlude.pipeline.dense_cloud`, the farm's seed
-        stream, so the same points the farm would use with ``--seed``).
+        Dense cloud per mesh (:func:`zbuf_occlude.pipeline.dense_cloud`, the farm's seed
+        stream, so the same points the farm would use with ``--seed``).  A point set's dense
+        cloud is its own points, read as the farm reads them
+        (:func:`zbuf_occlude.mesh.point_inputs.load_cloud`: up axis turned to +z, bounding box
+        centred, largest side 1), and its samples are rows of them.
     views_per_object : int
         Samples per object and epoch (the data set's length is objects × this).
+    up : str
+        The point sets' up axis (:data:`zbuf_occlude.mesh.scene.UP_CHOICES`; ``auto``: as
+        stored, +z); PointNet's and ShapeNetPart's HDF5 files are +y up.  Meshes find theirs as
+        :func:`~zbuf_occlude.mesh.load.load_mesh` does.
 
     Notes
     -----
@@ -282,24 +375,31 @@ class OnTheFlyOccludedDataset(require_torch().utils.data.Dataset):
     Raises
     ------
     InvalidInputError
-        Nothing found, or no object in ``split``.
+        Nothing found, no object in ``split``, an unknown ``up``, or a point-set file refused
+        by its header or labels (:func:`zbuf_occlude.io.point_sets.point_set_labels`, naming
+        it); a file whose cloud is damaged is refused when its sample is drawn, naming it.
     """
 
     def __init__(self, mesh_root: str | os.PathLike | Sequence[str | os.PathLike], *, split: str | None = None,
                  n_points: int = 2048, poses: PoseDistribution = PoseDistribution(), seed: int = 0,
                  method: str = DEFAULT_ON_THE_FLY_METHOD, normalize: bool = True,
-                 dense_points: int = DEFAULT_DENSE_ON_THE_FLY, views_per_object: int = 1):  # fmt: skip
+                 dense_points: int = DEFAULT_DENSE_ON_THE_FLY, views_per_object: int = 1, up: str = "auto"):  # fmt: skip
         roots = [mesh_root] if isinstance(mesh_root, (str, os.PathLike)) else list(mesh_root)
-        objects, _ = scan_paths(roots)
-        names = {o.label: o.class_name for o in objects}
+        if up not in UP_CHOICES:
+            raise InvalidInputError(f"up must be one of {', '.join(UP_CHOICES)}, got {up!r}")
+        scan = scan_inputs(roots, point_sets=True)
+        refused = [s for s in scan.skipped if Path(s.path).suffix.lower() in POINT_SET_SUFFIXES]
+        if refused:  # generate and the farm record them and exit 1; a training set would silently lack them
+            raise InvalidInputError(str(refused[0]) + (f" (and {len(refused) - 1} more point-set files)" if len(refused) > 1 else ""))
+        names = {o.label: o.class_name for o in scan.objects}
         #: Class names by label (``shape_names.txt`` of the farm).
         self.shape_names = [names[i] for i in sorted(names)]
-        self.objects: list[FarmObject] = [o for o in objects if split is None or o.split == split]
+        self.objects: list[FarmObject] = [o for o in scan.objects if split is None or o.split == split]
         if not self.objects:
-            raise InvalidInputError(f"no meshes of split {split!r} under {', '.join(map(str, roots))}")
+            raise InvalidInputError(f"no meshes or point sets of split {split!r} under {', '.join(map(str, roots))}")
         if int(views_per_object) < 1 or int(dense_points) < 1:
             raise InvalidInputError(f"need views_per_object >= 1 and dense_points >= 1, got {views_per_object}, {dense_points}")
-        self.views_per_object, self.dense_points, self.seed = int(views_per_object), int(dense_points), int(seed)
+        self.views_per_object, self.dense_points, self.seed, self.up = int(views_per_object), int(dense_points), int(seed), up
         self.occlusion = RandomOcclusion(n_points, poses=poses, seed=seed, method=method, normalize=normalize)
         self._objects_cache = ProcessCache(_CACHE_SIZE, per_process=False)  # numpy only: safe across fork
 
@@ -322,11 +422,22 @@ class OnTheFlyOccludedDataset(require_torch().utils.data.Dataset):
 
         return self._objects_cache.get_or_build(obj.index, build)
 
+    def _point_set(self, obj: FarmObject) -> PointSet:
+        def build() -> PointSet:
+            cloud = load_cloud(obj.source, int(obj.cloud), up=self.up)  # the farm's frame: z up, largest side 1
+            return PointSet(cloud.points, cloud.normals, obj.label, obj.name)
+
+        return self._objects_cache.get_or_build(obj.index, build)
+
     def sample(self, index: int, epoch: int | None = None) -> dict:
         """Sample ``index`` of ``epoch`` (default: :meth:`set_epoch`'s): :class:`RandomOcclusion`'s dict plus ``label``, ``name``."""
         if not 0 <= index < len(self):
             raise IndexError(f"index {index} out of range for {len(self)} samples")
         obj = self.objects[index // self.views_per_object]
+        if obj.is_point_set:
+            out = self.occlusion(self._point_set(obj), None, index, key=obj.index, epoch=epoch)
+            out.update(label=obj.label, name=obj.name)
+            return out
         mesh, dense = self._object(obj)
         out = self.occlusion(mesh, dense, index, key=obj.index, epoch=epoch)
         out.update(label=obj.label, name=obj.name)
@@ -340,7 +451,9 @@ class OnTheFlyOccludedDataset(require_torch().utils.data.Dataset):
         return torch.from_numpy(s["points"]), s["label"]
 
     def __repr__(self) -> str:
-        return f"OnTheFlyOccludedDataset({len(self.objects)} objects, {len(self)} samples/epoch, {self.occlusion.method})"
+        clouds = sum(o.is_point_set for o in self.objects)
+        method = self.occlusion.method if not clouds else "point-splat" if clouds == len(self.objects) else f"{self.occlusion.method} and point-splat"
+        return f"OnTheFlyOccludedDataset({len(self.objects)} objects, {len(self)} samples/epoch, {method})"
 
 
 class EpochSampler(require_torch().utils.data.Sampler):

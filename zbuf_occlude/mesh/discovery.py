@@ -8,6 +8,11 @@ non-zero.  Files that sit beside meshes (a glTF's buffers and textures, an OBJ's
 notes) are no 3D format and are passed over.  A format whose optional package is missing is
 refused once, when its files are found, before any work (:func:`check_readers_installed`).
 The farm's discovery (:mod:`zbuf_occlude.mesh.inputs`) walks with :func:`walk_mesh_files` too.
+
+``generate`` and ``farm`` also take point-set files (``point_sets=True``): ``.npy``, HDF5 files
+(``.h5``, ``.hdf5``) that hold a PointNet-layout ``data`` dataset, and ``.ply`` files with
+vertices and no faces (:func:`is_point_set_input`; :mod:`zbuf_occlude.mesh.point_inputs` makes
+their objects).  An HDF5 file of another layout is no point set and is passed over, as notes are.
 """
 
 from __future__ import annotations
@@ -35,9 +40,11 @@ __all__ = [
     "unusable_entry_reason",
     "unread_format_reason",
     "check_mesh_extension",
+    "is_point_set_input",
     "check_readers_installed",
     "collect_inputs",
     "no_meshes_error",
+    "input_kinds_text",
     "walk_mesh_files",
     "scan_meshes",
     "find_meshes",
@@ -140,7 +147,9 @@ def _file_kind(mode: int) -> str:
     return "not a file"
 
 
-def walk_mesh_files(root: str | PathLike[str], *, skip_hidden: bool = False) -> tuple[list[Path], list[SkippedInput]]:
+def walk_mesh_files(
+    root: str | PathLike[str], *, skip_hidden: bool = False, point_sets: bool = False
+) -> tuple[list[Path], list[SkippedInput]]:
     """Mesh files under a folder, recursively, and the inputs that had to be skipped.
 
     Like ``Path(root).rglob("*")`` (symbolic links to folders are not followed) but a
@@ -158,12 +167,15 @@ def walk_mesh_files(root: str | PathLike[str], *, skip_hidden: bool = False) -> 
     skip_hidden : bool
         Leave out files and folders whose name starts with ``.`` (not searched, not
         reported).
+    point_sets : bool
+        Also find point-set files (:func:`is_point_set_input`: ``.npy``, PointNet-layout
+        HDF5); a FIFO or device with such a name is reported as a mesh-named one is.
 
     Returns
     -------
     files : list of Path
         Regular files (or links to them) with an extension of :data:`SUPPORTED_EXTENSIONS`
-        (any case), sorted.
+        (any case), and with ``point_sets`` the point-set files, sorted.
     skipped : list of SkippedInput
         Folders that could not be read, broken links, non-regular mesh-named entries, files
         with non-UTF-8 paths and files of 3D formats not read; each is also logged as a warning.
@@ -187,9 +199,16 @@ def walk_mesh_files(root: str | PathLike[str], *, skip_hidden: bool = False) -> 
             if problem:
                 skipped.append(SkippedInput(printable_path(path), problem))
                 continue
+            extra = point_sets and _point_set_suffix(path)
+            if extra and not _is_regular(path):
+                skipped.append(SkippedInput(printable_path(path), "not a regular file; never opened"))
+                continue
             if not path.is_file():
                 continue
-            if path.suffix.lower() not in SUPPORTED_EXTENSIONS:
+            if extra:
+                if not is_point_set_input(path):
+                    continue  # an HDF5 file of another layout: no 3D format, passed over
+            elif path.suffix.lower() not in SUPPORTED_EXTENSIONS:
                 problem = unread_format_reason(path)
                 if problem:
                     skipped.append(SkippedInput(printable_path(path), problem))
@@ -243,9 +262,14 @@ def scan_meshes(paths: Sequence[str | PathLike[str]]) -> MeshScan:
 
 
 def collect_inputs(
-    paths: Sequence[str | PathLike[str]], *, skip_hidden: bool = False
+    paths: Sequence[str | PathLike[str]], *, skip_hidden: bool = False, point_sets: bool = False
 ) -> tuple[list[tuple[Path, list[Path] | None]], list[SkippedInput]]:
     """The paths given, each a folder with its mesh files or a mesh file, and what was skipped.
+
+    Parameters
+    ----------
+    point_sets : bool
+        Take point-set files too (:func:`is_point_set_input`), in folders and given by name.
 
     Returns
     -------
@@ -258,18 +282,19 @@ def collect_inputs(
     ------
     InvalidInputError
         A path does not exist, is no regular file or folder, or a file given is not a
-        mesh by its extension (:func:`check_mesh_extension`).
+        mesh by its extension (:func:`check_mesh_extension`) nor, with ``point_sets``, a
+        point-set file.
     """
     inputs: list[tuple[Path, list[Path] | None]] = []
     skipped: list[SkippedInput] = []
     for raw in paths:
         path = Path(raw)
         if path.is_dir():
-            files, missed = walk_mesh_files(path, skip_hidden=skip_hidden)
+            files, missed = walk_mesh_files(path, skip_hidden=skip_hidden, point_sets=point_sets)
             skipped.extend(missed)
             inputs.append((path, files))
         elif path.is_file():
-            check_mesh_extension(path)
+            check_mesh_extension(path, point_sets=point_sets)
             problem = non_utf8_reason(path)
             if problem:
                 skipped.append(SkippedInput(printable_path(path), problem))
@@ -282,22 +307,45 @@ def collect_inputs(
     return inputs, skipped
 
 
-def no_meshes_error(paths: Sequence[str | PathLike[str]], skipped: Sequence[SkippedInput]) -> InvalidInputError:
-    """The error of a search that found no mesh under ``paths`` (naming what was skipped)."""
+def no_meshes_error(
+    paths: Sequence[str | PathLike[str]], skipped: Sequence[SkippedInput], *, point_sets: bool = False
+) -> InvalidInputError:
+    """The error of a search that found no mesh (with ``point_sets``: nor point-set file) under
+    ``paths`` (naming what was skipped)."""
     where = ", ".join(printable_path(p) for p in paths)
     missed = f"; skipped {len(skipped)}: " + "; ".join(map(str, skipped[:3])) if skipped else ""
-    return InvalidInputError(f"no mesh files ({', '.join(SUPPORTED_EXTENSIONS)}) under {where}{missed}")
+    return InvalidInputError(f"no {input_kinds_text(point_sets)} under {where}{missed}")
 
 
-def check_mesh_extension(path: str | PathLike[str]) -> None:
+def input_kinds_text(point_sets: bool = False) -> str:
+    """``"mesh files (.off, ...)"``, and with ``point_sets`` the point-set files too, for messages."""
+    meshes = f"mesh files ({', '.join(SUPPORTED_EXTENSIONS)})"
+    return f"{meshes} or point-set files ({', '.join(_point_set_suffixes())})" if point_sets else meshes
+
+
+def check_mesh_extension(path: str | PathLike[str], *, point_sets: bool = False) -> None:
     """Refuse a file given by name that is no mesh by its extension (``notes.txt``, ``car.fbx``).
+
+    Parameters
+    ----------
+    point_sets : bool
+        Also accept a point-set file (:func:`is_point_set_input`).
 
     Raises
     ------
     InvalidInputError
-        The extension is not one of :data:`SUPPORTED_EXTENSIONS`; the message names the file
-        (and the format, for a 3D format that is not read: :func:`unread_format_reason`).
+        The extension is not one of :data:`SUPPORTED_EXTENSIONS` (nor, with ``point_sets``, a
+        point-set file's); the message names the file (and the format, for a 3D format that
+        is not read: :func:`unread_format_reason`; what is missing, for an HDF5 file that
+        holds no PointNet-layout ``data``).
     """
+    if point_sets and _point_set_suffix(path):
+        if not is_point_set_input(path):
+            raise InvalidInputError(
+                f"{printable_path(path)} is not a point-set file: an HDF5 point-set file holds a dataset 'data' of "
+                "shape (clouds, points, 3), PointNet's layout"
+            )
+        return
     unread = unread_format_reason(path)
     if unread:
         raise InvalidInputError(f"{printable_path(path)}: {unread}")
@@ -305,6 +353,40 @@ def check_mesh_extension(path: str | PathLike[str]) -> None:
         raise InvalidInputError(
             f"{printable_path(path)} is not a mesh file: its extension is not one of {', '.join(SUPPORTED_EXTENSIONS)}"
         )
+
+
+def _point_set_suffixes() -> tuple[str, ...]:
+    from zbuf_occlude.io.point_sets import POINT_SET_SUFFIXES
+
+    return tuple(POINT_SET_SUFFIXES)
+
+
+def _point_set_suffix(path: str | PathLike[str]) -> bool:
+    """A point-set file's extension that no mesh format shares (``.npy``, ``.h5``, ``.hdf5``;
+    a ``.ply`` is found as a mesh file and told apart by :func:`is_point_set_input`)."""
+    suffix = Path(path).suffix.lower()
+    return suffix not in SUPPORTED_EXTENSIONS and suffix in _point_set_suffixes()
+
+
+def _is_regular(path: Path) -> bool:
+    try:
+        return stat.S_ISREG(os.stat(path).st_mode)
+    except OSError:
+        return False
+
+
+def is_point_set_input(path: str | PathLike[str]) -> bool:
+    """Whether ``generate`` and ``farm`` take the regular file ``path`` as a point-set file.
+
+    ``.npy``; HDF5 (``.h5``, ``.hdf5``) with a PointNet-layout ``data`` dataset; ``.ply`` with
+    vertices and no faces (:func:`zbuf_occlude.io.point_sets.is_point_set_file`; a PLY with
+    faces is a mesh).  Only the head of a file is read.
+    """
+    if Path(path).suffix.lower() not in _point_set_suffixes() or not _is_regular(Path(path)):
+        return False
+    from zbuf_occlude.io.point_sets import is_point_set_file
+
+    return bool(is_point_set_file(path))
 
 
 def check_readers_installed(files: Iterable[str | PathLike[str]]) -> None:

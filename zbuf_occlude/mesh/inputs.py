@@ -1,4 +1,8 @@
-"""The objects of a data set: the meshes of a tree, a flat folder or a list file, numbered and labelled."""
+"""The objects of a data set: the meshes of a tree, a flat folder or a list file, numbered and labelled.
+
+``generate`` and ``farm`` also plan point-set files (``point_sets=True``): each cloud of one is
+an object, named, labelled and split as :mod:`zbuf_occlude.mesh.point_inputs` says.
+"""
 
 from __future__ import annotations
 
@@ -18,14 +22,19 @@ from zbuf_occlude.mesh.discovery import (
     SPLITS,
     SkippedInput,
     check_readers_installed,
+    collect_inputs,
+    input_kinds_text,
+    is_point_set_input,
     name_set,
+    no_meshes_error,
     non_utf8_reason,
     printable_path,
     unusable_entry_reason,
     walk_mesh_files,
 )
 from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS
-from zbuf_occlude.mesh.layouts import label_tree, scan_labelled
+from zbuf_occlude.mesh.layouts import label_file, label_tree, layout_text, scan_labelled
+from zbuf_occlude.mesh.point_inputs import POINT_SET_LAYOUT, CloudEntry, point_set_clouds, pointnet_split
 
 __all__ = [
     "FarmObject", "ObjectScan", "discover_objects", "scan_objects", "scan_inputs", "number_objects",
@@ -48,10 +57,14 @@ class FarmObject:
         Path relative to the input root (or as written in the list file), POSIX, without
         suffix; the seed key is :func:`~zbuf_occlude.geometry.samples.object_key` ``(name)``.
     source : str
-        The mesh file.
+        The mesh file, or the point-set file holding the cloud.
     class_name, split : str
     label : int
         Line of ``shape_names.txt``.
+    cloud : int or None
+        A point-set input: the cloud's row in ``source`` (0 for a ``.npy`` or ``.ply`` file);
+        None for a mesh.  Its object's dense cloud is the cloud's points, and its visibility is
+        decided from them (:func:`zbuf_occlude.pipeline.occlude_point_set`).
     """
 
     index: int
@@ -60,6 +73,12 @@ class FarmObject:
     class_name: str
     split: str
     label: int
+    cloud: int | None = None
+
+    @property
+    def is_point_set(self) -> bool:
+        """The object is a cloud of a point-set file, not a mesh."""
+        return self.cloud is not None
 
     @property
     def key(self) -> int:
@@ -72,13 +91,97 @@ def _natural_key(text: str) -> list:
     return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", text)]
 
 
-def _scan_tree(root: Path, class_from: int | None) -> tuple[list[tuple[str, str, str, str]], list[SkippedInput], str]:
+#: A row of the plan before it is numbered: ``(name, source, class_name, split)``, and for a cloud
+#: of a point-set file its row there (:attr:`FarmObject.cloud`).
+Row = tuple  # (str, str, str, str) or (str, str, str, str, int)
+
+
+def _scan_tree(root: Path, class_from: int | None, point_sets: bool = False) -> tuple[list[Row], list[SkippedInput], str]:
     # Hidden folders and temporary files are left out, not reported.
-    files, skipped = walk_mesh_files(root, skip_hidden=True)
+    files, skipped = walk_mesh_files(root, skip_hidden=True, point_sets=point_sets)
     if not files:
         return [], skipped, ""
+    if point_sets:
+        rows, layouts = _label_with_point_sets(root, files, class_from, skipped)
+        return rows, skipped, layout_text(layouts)
     layout, meshes = label_tree(root, files, class_from=class_from)
     return [(m.name, str(m.path), m.class_name, m.split) for m in meshes], skipped, layout
+
+
+def _clouds_or_skip(path: Path, skipped: list[SkippedInput]) -> list[CloudEntry] | None:
+    """The clouds of a point-set file, or None after recording why it cannot be read (it is
+    skipped like an unreadable folder: the run records it and exits 1)."""
+    try:
+        return point_set_clouds(path)
+    except InvalidInputError as exc:
+        reason = str(exc)
+        for prefix in (f"{path}: ", f"{printable_path(path)}: "):
+            reason = reason.removeprefix(prefix)
+        skipped.append(SkippedInput(printable_path(path), reason))
+        log.warning("skipped %s", skipped[-1])
+        return None
+
+
+def _cloud_rows(name: str, path: Path, class_name: str, split: str, clouds: Sequence[CloudEntry] | None) -> list[Row]:
+    """The plan's rows of one file: a mesh's one row, or one per cloud of a point-set file (whose
+    own labels, where it has them, name the class)."""
+    if clouds is None:
+        return [(name, str(path), class_name, split)]
+    return [(name + c.suffix, str(path), c.class_name or class_name, split, c.cloud) for c in clouds]
+
+
+def _split_of(rel: Path, path: Path, split: str) -> str:
+    """A point-set file's split: a split folder in its path, else PointNet's file lists beside it, else ``split``."""
+    if any(part in SPLITS for part in rel.parts[:-1]):
+        return split
+    return pointnet_split(path) or split
+
+
+def _label_with_point_sets(
+    root: Path | None, files: Sequence[Path], class_from: int | None, skipped: list[SkippedInput]
+) -> tuple[list[Row], list[str]]:
+    """Rows and layouts of mesh and point-set ``files`` found under the folder ``root`` (None: one
+    file given by name).
+
+    Meshes and point-set files without labels are labelled together by their layout
+    (:func:`~zbuf_occlude.mesh.layouts.label_tree`, :func:`~zbuf_occlude.mesh.layouts.label_file`);
+    point-set files with labels name their clouds' classes themselves (layout
+    :data:`~zbuf_occlude.mesh.point_inputs.POINT_SET_LAYOUT`), so no folder check applies to them.
+    Point-set files that cannot be read are added to ``skipped``.
+    """
+    clouds: dict[Path, list[CloudEntry]] = {}
+    by_layout: list[Path] = []
+    labelled: list[Path] = []
+    for f in files:
+        f = Path(f).absolute()
+        if not is_point_set_input(f):
+            by_layout.append(f)
+            continue
+        entries = _clouds_or_skip(f, skipped)
+        if entries is None:
+            continue
+        clouds[f] = entries
+        (by_layout if entries[0].class_name is None else labelled).append(f)
+    rows: list[Row] = []
+    layouts: list[str] = []
+    if by_layout:
+        if root is None:
+            layout, mesh = label_file(by_layout[0], class_from=class_from)
+            meshes = [mesh]
+        else:
+            layout, meshes = label_tree(root, by_layout, class_from=class_from)
+        layouts.append(layout)
+        for m in meshes:
+            rel = Path(m.path.name) if root is None else m.path.relative_to(root.absolute())
+            split = _split_of(rel, m.path, m.split) if m.path in clouds else m.split
+            rows += _cloud_rows(m.name, m.path, m.class_name, split, clouds.get(m.path))
+    if labelled:
+        layouts.append(POINT_SET_LAYOUT)
+        for f in labelled:
+            rel = Path(f.name) if root is None else f.relative_to(root.absolute())
+            folder_split = next((part for part in rel.parts[:-1] if part in SPLITS), DEFAULT_SPLIT)
+            rows += _cloud_rows(rel.with_suffix("").as_posix(), f, "", _split_of(rel, f, folder_split), clouds[f])
+    return rows, layouts
 
 
 def _not_regular(path: Path) -> str | None:
@@ -93,7 +196,7 @@ def _not_regular(path: Path) -> str | None:
     return None if stat.S_ISREG(st.st_mode) else unusable_entry_reason(path) or "not a regular file; never opened"
 
 
-def _read_list_file(list_file: Path) -> tuple[list[tuple[str, str, str, str]], list[SkippedInput]]:
+def _read_list_file(list_file: Path, point_sets: bool = False) -> tuple[list[Row], list[SkippedInput]]:
     found, skipped = [], []
     base = list_file.parent
     for lineno, raw_bytes in enumerate(list_file.read_bytes().splitlines(), start=1):
@@ -122,6 +225,11 @@ def _read_list_file(list_file: Path) -> tuple[list[tuple[str, str, str, str]], l
         if problem:
             skipped.append(SkippedInput(printable_path(source), problem))
             log.warning("skipped %s", skipped[-1])
+            continue
+        if point_sets and is_point_set_input(source):
+            clouds = _clouds_or_skip(source, skipped)
+            if clouds is not None:
+                found += _cloud_rows(name, source, label, split, clouds)
             continue
         found.append((name, str(source), label, split))
     return found, skipped
@@ -160,6 +268,7 @@ def scan_objects(
     per_class: int | None = None,
     splits: Sequence[str] | str = SPLITS,
     class_from: int | None = None,
+    point_sets: bool = False,
 ) -> ObjectScan:
     """The farm's plan: meshes under ``source``, filtered, labelled and numbered, and the
     inputs that had to be skipped.
@@ -184,6 +293,10 @@ def scan_objects(
     class_from : int, optional
         A folder: take each mesh's class from this folder level above it (1: the folder
         holding it) instead of the detected layout (``--class-from``).
+    point_sets : bool
+        Also plan point-set files (``.npy``, PointNet-layout HDF5, ``.ply`` without faces;
+        :mod:`zbuf_occlude.mesh.point_inputs`): one object per cloud, whose ``cloud`` is its row.
+        A point-set file that cannot be read is skipped (``skipped``), as an unreadable folder is.
 
     Returns
     -------
@@ -206,8 +319,13 @@ def scan_objects(
     """
     source = Path(source).absolute()  # the manifest's source paths must not depend on the working folder
     if source.is_dir():
-        found, skipped, layout = _scan_tree(source, class_from)
+        found, skipped, layout = _scan_tree(source, class_from, point_sets)
     elif source.is_file():
+        if point_sets and is_point_set_input(source):
+            raise InvalidInputError(
+                f"{printable_path(source)} is a point-set file; farm takes a folder or a list file: give the folder "
+                f"holding it ({printable_path(source.parent)}), or run: zbuf-occlude generate {printable_path(source)}"
+            )
         if source.suffix.lower() in SUPPORTED_EXTENSIONS:
             raise InvalidInputError(
                 f"{printable_path(source)} is a mesh file; farm takes a folder of meshes or a list file "
@@ -215,14 +333,12 @@ def scan_objects(
             )
         if class_from is not None:
             raise InvalidInputError(f"--class-from applies to folders; the list file {printable_path(source)} names each class")
-        (found, skipped), layout = _read_list_file(source), "list-file"
+        (found, skipped), layout = _read_list_file(source, point_sets), "list-file"
     else:
         raise InvalidInputError(f"no such mesh folder or list file: {printable_path(source)}")
     if not found:
         missed = f"; skipped {len(skipped)}: " + "; ".join(map(str, skipped[:3])) if skipped else ""
-        raise InvalidInputError(
-            f"no mesh files ({', '.join(tuple(SUPPORTED_EXTENSIONS))}) under {printable_path(source)}{missed}"
-        )
+        raise InvalidInputError(f"no {input_kinds_text(point_sets)} under {printable_path(source)}{missed}")
     if classes is not None:
         wanted = name_set(classes)
         unknown = wanted - {f[2] for f in found}
@@ -250,26 +366,45 @@ def scan_objects(
     return ObjectScan(number_objects(found), skipped, layout)
 
 
-def scan_inputs(paths: Sequence[str | os.PathLike], *, class_from: int | None = None) -> ObjectScan:
+def scan_inputs(
+    paths: Sequence[str | os.PathLike], *, class_from: int | None = None, point_sets: bool = False
+) -> ObjectScan:
     """The plan of ``generate``: mesh files and folders (searched recursively), labelled by
     their layout (:func:`~zbuf_occlude.mesh.layouts.scan_labelled`) and numbered
     (:func:`number_objects`), and the inputs that had to be skipped.
 
+    With ``point_sets``, point-set files too, in folders and given by name: one object per
+    cloud (:func:`scan_objects`; a file that cannot be read is skipped).
+
     Raises
     ------
     InvalidInputError
-        A path is missing or not a mesh file, nothing was found, labels are refused by the
-        layout checks, or two files have one name.
+        A path is missing or not a mesh file (nor, with ``point_sets``, a point-set file),
+        nothing was found, labels are refused by the layout checks, or two files have one name.
     BackendUnavailable
         A format found needs an optional package that is not installed.
     """
-    found = scan_labelled(paths, class_from=class_from)
-    objects = number_objects([(m.name, str(m.path), m.class_name, m.split) for m in found.meshes])
-    return ObjectScan(objects, found.skipped, found.layout)
+    if not point_sets:
+        found = scan_labelled(paths, class_from=class_from)
+        objects = number_objects([(m.name, str(m.path), m.class_name, m.split) for m in found.meshes])
+        return ObjectScan(objects, found.skipped, found.layout)
+    inputs, skipped = collect_inputs(paths, point_sets=True)
+    rows: list[Row] = []
+    layouts: list[str] = []
+    for path, files in inputs:
+        if files is None or files:
+            found_rows, found_layouts = _label_with_point_sets(None if files is None else path, files or [path], class_from, skipped)
+            rows += found_rows
+            layouts += found_layouts
+    if not rows:
+        raise no_meshes_error(paths, skipped, point_sets=True)
+    check_readers_installed(r[1] for r in rows)
+    return ObjectScan(number_objects(rows), skipped, layout_text(layouts))
 
 
-def number_objects(found: Sequence[tuple[str, str, str, str]]) -> list[FarmObject]:
-    """The plan: ``(name, source, class_name, split)`` rows numbered in the order given.
+def number_objects(found: Sequence[Row]) -> list[FarmObject]:
+    """The plan: ``(name, source, class_name, split)`` rows numbered in the order given (a fifth
+    entry: the row of a point-set file's cloud, :attr:`FarmObject.cloud`).
 
     Labels number the class names in natural order (``chair_2`` before ``chair_10``), the
     lines of ``shape_names.txt``.  Used by :func:`scan_objects` and ``generate``.
@@ -281,7 +416,7 @@ def number_objects(found: Sequence[tuple[str, str, str, str]]) -> list[FarmObjec
         the samples and names the outputs, so one would overwrite the other.
     """
     by_name: dict[str, list[str]] = {}
-    for name, src, _, _ in found:
+    for name, src, *_ in found:
         by_name.setdefault(name, []).append(src)
     clashes = {n: p for n, p in by_name.items() if len(p) > 1}
     if clashes:
@@ -291,7 +426,7 @@ def number_objects(found: Sequence[tuple[str, str, str, str]]) -> list[FarmObjec
             "rename or move one of each"
         )
     labels = {c: i for i, c in enumerate(sorted({f[2] for f in found}, key=_natural_key))}
-    objects = [FarmObject(i, name, src, cls, split, labels[cls]) for i, (name, src, cls, split) in enumerate(found)]
+    objects = [FarmObject(i, name, src, cls, split, labels[cls], *cloud) for i, (name, src, cls, split, *cloud) in enumerate(found)]
     keys: dict[int, str] = {}
     for o in objects:
         if o.key in keys:

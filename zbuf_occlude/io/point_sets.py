@@ -1,0 +1,424 @@
+"""Point sets from files: PointNet-layout HDF5, ``.npy`` arrays and ``.ply`` point clouds.
+
+Most point-cloud data sets hold points and no mesh.  This module reads the files they come in,
+every cloud of a file as a :class:`PointSet` (points, normals where the file has them, the
+file's label where it has one):
+
+``.h5``, ``.hdf5``
+    PointNet's ``modelnet40_ply_hdf5_2048`` layout (Qi et al. 2017, and the loaders of DGCNN,
+    PointNet++ and their successors): ``data (B, N, 3)`` floats, one cloud a row, ``label
+    (B, 1)`` or ``(B,)`` integers, optional ``normal (B, N, 3)``; ShapeNetPart's files add
+    ``pid`` (per-point parts, not read here).  ``data (B, N, 6)`` is read as coordinates and
+    normals.  The class names are the lines of ``shape_names.txt`` beside the file
+    (:func:`shape_names`).
+``.npy``
+    One cloud, ``(N, 3)`` coordinates or ``(N, 6)`` coordinates and normals, memory-mapped, never
+    unpickled.
+``.ply``
+    One cloud: the ``vertex`` element of a PLY with no faces (ASCII or binary; read by trimesh),
+    its ``nx ny nz`` properties as normals where all three are present.  A PLY with faces is a
+    mesh (:func:`zbuf_occlude.mesh.load.load_mesh` reads it).
+
+Every file is untrusted.  Nothing is executed or unpickled; an HDF5 file is read only after
+:func:`zbuf_occlude.io.hdf5.check_hdf5` has found no link to another file, no virtual dataset
+and no external storage; sizes are checked from headers before anything is read
+(:data:`~zbuf_occlude.defaults.MAX_POINT_SET_POINTS` points a cloud,
+:data:`~zbuf_occlude.defaults.MAX_POINT_SET_BYTES` a read); NaN or infinite coordinates or
+normals and zero normals are refused.  Each error is one
+:class:`~zbuf_occlude.errors.InvalidInputError` (:class:`~zbuf_occlude.errors.DatasetFormatError`
+for HDF5 files) naming the file.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from zbuf_occlude.defaults import MAX_POINT_SET_BYTES, MAX_POINT_SET_POINTS
+from zbuf_occlude.errors import DatasetFormatError, InvalidInputError
+from zbuf_occlude.io.arrays import check_array_sizes, npy_header
+from zbuf_occlude.io.hdf5 import open_hdf5
+from zbuf_occlude.io.regular_files import open_regular_file, read_regular_file
+
+__all__ = [
+    "POINT_SET_SUFFIXES", "SHAPE_NAME_FILES", "PointSet", "is_point_set_file", "read_point_sets",
+    "point_set_labels", "shape_names",
+]  # fmt: skip
+
+#: Suffixes of the files read here (any case).
+POINT_SET_SUFFIXES: tuple[str, ...] = (".h5", ".hdf5", ".npy", ".ply")
+#: Class lists looked for beside an HDF5 file, in this order: PointNet's, PointNet++'s, and
+#: ShapeNetPart's (``Airplane<TAB>02691156``: the first field).
+SHAPE_NAME_FILES = ("shape_names.txt", "modelnet40_shape_names.txt", "all_object_categories.txt")
+_HDF5 = (".h5", ".hdf5")
+#: Columns of a cloud: coordinates, or coordinates and normals.
+_COLUMNS = (3, 6)
+#: Bytes of a PLY header read to find its elements (a header is a few hundred bytes).
+_PLY_HEADER_BYTES = 1 << 16
+_PLY_CHUNK_BYTES = 1 << 10
+#: Largest class list read: 1 MiB (ModelNet40's is 300 bytes).
+_NAMES_BYTES = 1 << 20
+
+
+@dataclass(frozen=True)
+class PointSet:
+    """One cloud of a point-set file.
+
+    Attributes
+    ----------
+    points : (N, 3) float64
+        Coordinates, as stored (file units and frame).
+    normals : (N, 3) float64 or None
+        Unit normals where the file has them.
+    label : int or None
+        The file's label of the cloud (PointNet HDF5 ``label``), else None.
+    name : str
+        The file's stem, or ``<stem>_<row:04d>`` for the rows of an HDF5 file.
+    """
+
+    points: NDArray[np.float64]
+    normals: NDArray[np.float64] | None
+    label: int | None
+    name: str
+
+
+def _suffix(path: Path) -> str:
+    suffix = path.suffix.lower()
+    if suffix not in POINT_SET_SUFFIXES:
+        raise InvalidInputError(f"{path}: not a point-set file; its extension is not one of {', '.join(POINT_SET_SUFFIXES)}")
+    return suffix
+
+
+def _check_max_points(max_points: object) -> int:
+    if isinstance(max_points, bool) or not isinstance(max_points, (int, np.integer)) or int(max_points) < 1:
+        raise InvalidInputError(f"max_points must be an integer >= 1, got {max_points!r}")
+    return int(max_points)
+
+
+def _point_set(path: Path, name: str, cloud: NDArray, normals: NDArray | None, label: int | None) -> PointSet:
+    """A checked :class:`PointSet` of ``cloud (N, 3 or 6)`` (``normals`` given separately or in columns 3:6)."""
+    if len(cloud) == 0:
+        raise InvalidInputError(f"{path}: cloud {name!r} holds no points")
+    points = np.ascontiguousarray(cloud[:, :3], dtype=np.float64)
+    bad = int((~np.isfinite(points)).any(axis=1).sum())
+    if bad:
+        raise InvalidInputError(f"{path}: cloud {name!r}: {bad} points have NaN or inf coordinates")
+    if normals is None and cloud.shape[1] == 6:
+        normals = cloud[:, 3:6]
+    if normals is not None:
+        normals = np.asarray(normals, dtype=np.float64)
+        length = np.linalg.norm(normals, axis=1)
+        bad = int((~np.isfinite(length) | (length == 0)).sum())
+        if bad:
+            raise InvalidInputError(f"{path}: cloud {name!r}: {bad} normals are zero, NaN or inf")
+        normals = np.ascontiguousarray(normals / length[:, None])
+    return PointSet(points, normals, label, name)
+
+
+# -- HDF5 -------------------------------------------------------------------------------------------
+def _hdf5_layout(f: Any, path: Path) -> tuple[Any, Any | None]:
+    """``data`` and ``normal`` (or None) of a checked, open PointNet-layout file."""
+    import h5py
+
+    data = f.get("data")
+    if not isinstance(data, h5py.Dataset):
+        raise DatasetFormatError(f"{path}: no 'data' dataset; a PointNet-layout HDF5 file holds data (B, N, 3)")
+    if data.dtype.kind != "f" or data.ndim != 3 or data.shape[2] not in _COLUMNS:
+        raise DatasetFormatError(f"{path}: 'data' holds {data.dtype} values of shape {data.shape}, not (B, N, 3) or (B, N, 6) floats")
+    if data.shape[0] * 8 > MAX_POINT_SET_BYTES:  # its labels alone would pass the cap
+        raise DatasetFormatError(f"{path}: 'data' declares {data.shape[0]:,} clouds; refused")
+    normal = f.get("normal")
+    if normal is not None and (not isinstance(normal, h5py.Dataset) or normal.dtype.kind != "f" or normal.shape != data.shape[:2] + (3,)):
+        shape = getattr(normal, "shape", "a group")
+        raise DatasetFormatError(f"{path}: 'normal' is {shape}, not (B, N, 3) floats like 'data' {data.shape}")
+    return data, normal
+
+
+def _hdf5_labels(f: Any, path: Path, rows: int) -> NDArray[np.int64] | None:
+    """The ``label`` of every row, or None without one."""
+    import h5py
+
+    label = f.get("label")
+    if label is None:
+        return None
+    if not isinstance(label, h5py.Dataset) or label.dtype.kind not in "iu" or label.shape not in ((rows,), (rows, 1)):
+        raise DatasetFormatError(f"{path}: 'label' is {getattr(label, 'shape', 'a group')}, not ({rows},) or ({rows}, 1) integers")
+    values = np.asarray(label[()], dtype=np.int64).reshape(rows)
+    if values.size and values.min() < 0:
+        raise DatasetFormatError(f"{path}: 'label' holds negative values ({int(values.min())}); labels number the classes from 0")
+    return values
+
+
+def _row_list(path: Path, rows: Sequence[int] | None, count: int) -> list[int]:
+    if rows is None:
+        return list(range(count))
+    out = []
+    for r in rows:
+        if isinstance(r, bool) or not isinstance(r, (int, np.integer)) or not 0 <= int(r) < count:
+            raise InvalidInputError(f"{path}: row {r!r} out of range; the file holds {count} clouds")
+        out.append(int(r))
+    return out
+
+
+def _read_hdf5(path: Path, max_points: int, rows: Sequence[int] | None) -> list[PointSet]:
+    with open_hdf5(path) as f:
+        data, normal = _hdf5_layout(f, path)
+        count, n, columns = data.shape
+        if count == 0:
+            raise DatasetFormatError(f"{path}: 'data' holds no clouds")
+        if n > max_points:
+            raise InvalidInputError(f"{path}: its clouds hold {n:,} points each, more than the {max_points:,} accepted")
+        labels = _hdf5_labels(f, path, count)
+        wanted = _row_list(path, rows, count)
+        if len(wanted) * n * 6 * 8 > MAX_POINT_SET_BYTES:
+            raise InvalidInputError(
+                f"{path}: {len(wanted):,} clouds of {n:,} points are more than the {MAX_POINT_SET_BYTES:,} bytes one read "
+                "may take; read fewer rows at a time"
+            )
+        whole = rows is None
+        clouds = data[()] if whole else None
+        normals = normal[()] if whole and normal is not None else None
+        out = []
+        for r in wanted:
+            cloud = clouds[r] if whole else data[r]
+            nrm = None if normal is None else (normals[r] if whole else normal[r])
+            out.append(_point_set(path, f"{path.stem}_{r:04d}", cloud, nrm, None if labels is None else int(labels[r])))
+        return out
+
+
+# -- .npy -------------------------------------------------------------------------------------------
+def _npy_shape(path: Path, max_points: int) -> tuple[int, int]:
+    """``(N, columns)`` of a ``.npy`` cloud, from its header (the file's sizes checked first)."""
+    check_array_sizes(path, max_bytes=MAX_POINT_SET_BYTES, error=InvalidInputError)
+    fh, _ = open_regular_file(path, error=InvalidInputError)
+    with fh:
+        shape, dtype = npy_header(fh)
+    if dtype.kind not in "fiu" or dtype.fields is not None or len(shape) != 2 or shape[1] not in _COLUMNS:
+        raise InvalidInputError(f"{path}: holds {dtype} values of shape {shape}, not (N, 3) or (N, 6) numbers (coordinates, normals)")
+    if shape[0] > max_points:
+        raise InvalidInputError(f"{path}: {shape[0]:,} points, more than the {max_points:,} accepted")
+    return shape[0], shape[1]
+
+
+def _read_npy(path: Path, max_points: int) -> list[PointSet]:
+    _npy_shape(path, max_points)
+    array = np.load(path, mmap_mode="r", allow_pickle=False)  # a large file is paged in, not read whole
+    return [_point_set(path, path.stem, np.asarray(array), None, None)]
+
+
+# -- .ply -------------------------------------------------------------------------------------------
+def _ply_elements(path: Path) -> dict[str, int]:
+    """The element counts a PLY header declares (``{"vertex": 2048}``)."""
+    fh, _ = open_regular_file(path, error=InvalidInputError)
+    head = b""
+    with fh:  # a header is a few hundred bytes: read a little at a time, not the cap at once
+        while b"end_header" not in head and len(head) < _PLY_HEADER_BYTES and (chunk := fh.read(_PLY_CHUNK_BYTES)):
+            head += chunk
+    end = head.find(b"end_header")
+    if not head.startswith(b"ply") or end < 0:
+        raise InvalidInputError(f"{path}: not a PLY file (no 'ply' ... 'end_header' header in its first {_PLY_HEADER_BYTES:,} bytes)")
+    text = head[:end].decode("ascii", "replace")
+    return {m[1]: int(m[2]) for m in re.finditer(r"^element\s+(\S+)\s+(\d+)\s*$", text, re.MULTILINE)}
+
+
+def _ply_vertex_count(path: Path, max_points: int) -> int:
+    counts = _ply_elements(path)
+    n, faces = counts.get("vertex", 0), counts.get("face", 0)
+    if faces:
+        raise InvalidInputError(f"{path}: a mesh ({faces:,} faces), not a point cloud; give it as a mesh")
+    if n == 0:
+        raise InvalidInputError(f"{path}: its PLY header declares no vertices")
+    if n > max_points:
+        raise InvalidInputError(f"{path}: its PLY header declares {n:,} points, more than the {max_points:,} accepted")
+    return n
+
+
+def _read_ply(path: Path, max_points: int) -> list[PointSet]:
+    from trimesh.exchange.ply import load_ply
+
+    n = _ply_vertex_count(path, max_points)
+    raw = read_regular_file(path, max_bytes=MAX_POINT_SET_BYTES, error=InvalidInputError)
+    vertex = load_ply(io.BytesIO(raw), skip_materials=True)["metadata"]["_ply_raw"]["vertex"]["data"]
+    if vertex is None or any(c not in _fields(vertex) for c in "xyz"):
+        raise InvalidInputError(f"{path}: its vertices have no x, y, z properties")
+    xyz = np.stack([np.asarray(vertex[c], dtype=np.float64).reshape(-1) for c in "xyz"], axis=1)
+    if len(xyz) != n:
+        raise InvalidInputError(f"{path}: its PLY header declares {n:,} vertices but it holds {len(xyz):,}; the file is cut short")
+    normals = None
+    if all(c in _fields(vertex) for c in ("nx", "ny", "nz")):
+        normals = np.stack([np.asarray(vertex[c], dtype=np.float64).reshape(-1) for c in ("nx", "ny", "nz")], axis=1)
+    return [_point_set(path, path.stem, xyz, normals, None)]
+
+
+def _fields(vertex: Any) -> tuple[str, ...]:
+    # trimesh gives a structured array for binary PLY and a dict of columns for ASCII
+    return tuple(vertex.keys()) if isinstance(vertex, dict) else tuple(vertex.dtype.names or ())
+
+
+# -- the public functions ---------------------------------------------------------------------------
+def is_point_set_file(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is a point-set file by its extension and head (nothing else is read).
+
+    A ``.npy``; an ``.h5``/``.hdf5`` with a ``data`` entry of shape ``(B, N, 3)`` or ``(B, N, 6)``
+    (or one that points elsewhere: :func:`read_point_sets` then says why it is refused); a
+    ``.ply`` whose header declares vertices and no faces.  False for anything else, files that
+    are not regular files or cannot be opened included.
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in POINT_SET_SUFFIXES or not path.is_file():  # is_file: a regular file (a FIFO would block)
+        return False
+    if suffix == ".npy":
+        return True
+    if suffix == ".ply":
+        try:
+            counts = _ply_elements(path)
+        except InvalidInputError:
+            return False
+        return counts.get("vertex", 0) > 0 and counts.get("face", 0) == 0
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            link = f.get("data", getlink=True)  # the link itself: nothing is followed
+            if link is None:
+                return False
+            if not isinstance(link, h5py.HardLink):
+                return True
+            data = f.get("data")
+            return isinstance(data, h5py.Dataset) and data.ndim == 3 and data.shape[2] in _COLUMNS
+    except (OSError, ValueError):
+        return False
+
+
+def read_point_sets(
+    path: str | os.PathLike, *, max_points: int = MAX_POINT_SET_POINTS, rows: Sequence[int] | None = None
+) -> list[PointSet]:
+    """Every cloud of one point-set file (module docstring), in file order.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        A ``.h5``/``.hdf5``, ``.npy`` or ``.ply`` file (:data:`POINT_SET_SUFFIXES`).
+    max_points : int
+        The most points a cloud may hold (default :data:`~zbuf_occlude.defaults.MAX_POINT_SET_POINTS`).
+    rows : sequence of int, optional
+        HDF5 files: read only these rows, in this order (the other formats hold one cloud, row 0).
+
+    Returns
+    -------
+    list of PointSet
+        ``points (N, 3) float64`` as stored, ``normals (N, 3) float64`` unit length or None,
+        ``label`` the file's (HDF5 ``label``) or None, ``name`` the stem (``<stem>_<row:04d>``
+        for HDF5 rows).
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the file: missing, not a regular file, an unknown extension, another shape or
+        dtype than the format's, no points, more points than ``max_points`` or more bytes than
+        :data:`~zbuf_occlude.defaults.MAX_POINT_SET_BYTES`, NaN/inf coordinates, zero or
+        non-finite normals, a PLY with faces or cut short, a row out of range, damaged bytes.
+        :class:`~zbuf_occlude.errors.DatasetFormatError` (a subclass) for HDF5 files that are
+        not HDF5, link or map to other files (:func:`zbuf_occlude.io.hdf5.check_hdf5`), or lack
+        ``data (B, N, 3)``, and for a ``label`` that is not one non-negative integer per row.
+    """
+    path = Path(path)
+    suffix = _suffix(path)
+    max_points = _check_max_points(max_points)
+    try:
+        if suffix in _HDF5:
+            return _read_hdf5(path, max_points, rows)
+        _row_list(path, rows, 1)
+        return _read_npy(path, max_points) if suffix == ".npy" else _read_ply(path, max_points)
+    except InvalidInputError:
+        raise
+    except MemoryError:
+        raise InvalidInputError(f"{path}: not enough memory to read it") from None
+    except Exception as exc:  # numpy, h5py and trimesh raise many types on damaged or hostile bytes
+        raise InvalidInputError(f"{path}: cannot read as a {suffix[1:].upper()} point set ({type(exc).__name__}: {exc})") from None
+
+
+def point_set_labels(path: str | os.PathLike, *, max_points: int = MAX_POINT_SET_POINTS) -> list[int | None]:
+    """The label of every cloud of a point-set file, in file order, reading headers and labels only.
+
+    Its length is the number of clouds :func:`read_point_sets` returns; an entry is the file's
+    label (HDF5 ``label``) or None.
+
+    Raises
+    ------
+    InvalidInputError
+        As :func:`read_point_sets`, for what headers and labels show.
+    """
+    path = Path(path)
+    suffix = _suffix(path)
+    max_points = _check_max_points(max_points)
+    try:
+        if suffix == ".npy":
+            _npy_shape(path, max_points)
+            return [None]
+        if suffix == ".ply":
+            _ply_vertex_count(path, max_points)
+            return [None]
+        with open_hdf5(path) as f:
+            data, _ = _hdf5_layout(f, path)
+            if data.shape[0] == 0:
+                raise DatasetFormatError(f"{path}: 'data' holds no clouds")
+            if data.shape[1] > max_points:
+                raise InvalidInputError(f"{path}: its clouds hold {data.shape[1]:,} points each, more than the {max_points:,} accepted")
+            labels = _hdf5_labels(f, path, data.shape[0])
+            return [None] * data.shape[0] if labels is None else [int(v) for v in labels]
+    except InvalidInputError:
+        raise
+    except Exception as exc:  # as read_point_sets
+        raise InvalidInputError(f"{path}: cannot read as a {suffix[1:].upper()} point set ({type(exc).__name__}: {exc})") from None
+
+
+def shape_names(path: str | os.PathLike) -> list[str] | None:
+    """The class names of an HDF5 point-set file's labels, from the class list beside it.
+
+    The first of :data:`SHAPE_NAME_FILES` in the file's folder: one class a line, label ``i``
+    on line ``i`` (blank lines skipped; ShapeNetPart's ``all_object_categories.txt``: the first
+    field of each line).
+
+    Returns
+    -------
+    list of str or None
+        None for a file that is not HDF5 or has no class list beside it.
+
+    Raises
+    ------
+    InvalidInputError
+        The class list is larger than 1 MiB, not UTF-8, or holds a name that is not printable
+        (naming it and the line).
+    """
+    path = Path(path)
+    if path.suffix.lower() not in _HDF5:
+        return None
+    for file_name in SHAPE_NAME_FILES:
+        names_file = path.parent / file_name
+        if names_file.is_file():
+            break
+    else:
+        return None
+    try:
+        text = read_regular_file(names_file, max_bytes=_NAMES_BYTES, error=InvalidInputError).decode("utf-8")
+    except UnicodeDecodeError:
+        raise InvalidInputError(f"{names_file}: not UTF-8 text; save it as UTF-8, one class name a line") from None
+    names = []
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        name = line.split("\t")[0].split()[0] if file_name == "all_object_categories.txt" and line.strip() else line.strip()
+        if not name:
+            continue
+        if not name.isprintable():
+            raise InvalidInputError(f"{names_file}:{lineno}: class name {name!r} is not printable text")
+        names.append(name)
+    return names
