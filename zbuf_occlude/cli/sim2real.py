@@ -38,6 +38,7 @@ OPTION_NAMES = {
     "up_map": "--up-map", "sizes": "--sizes", "min_returns": "--min-returns", "method": "--method", "classes": "--classes",
     "occluded_elevation_deg": "--occluded-elevation", "fit_sensor": "--fit-sensor", "recipe": "--recipe",
     "validate_on": "--validate-on", "fitted_shape": "--fitted-shape", "aspect": "--augment aspect", "best_epoch_by": "--best-epoch-by",
+    "occluded_points": "--occluded-points",
 }  # fmt: skip
 
 
@@ -62,7 +63,7 @@ def _run(args: argparse.Namespace) -> int:
         fit_sensor=args.fit_sensor,
         recipe=args.recipe, best_epoch_by=args.best_epoch_by, validate_on=args.validate_on,
         fitted_shape=() if args.fitted_shape == "none" else tuple(v.strip() for v in args.fitted_shape.split(",")),
-        aspect=args.augment == "aspect", option_names=OPTION_NAMES,
+        aspect=args.augment == "aspect", occluded_points=args.occluded_points, option_names=OPTION_NAMES,
     )  # fmt: skip
     summary = run_sim2real(config, args.out, device=args.device, threads=args.threads, progress=not args.no_progress, say=_say)
     return print_table(args.out, summary)
@@ -161,6 +162,9 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--min-returns", action=Checked, check=count("MAX_POINTS"), default=MIN_RETURNS,
                    help="redraw LiDAR crops with fewer returns (default %(default)s; lower it for airborne or sparse sensors)")
     p.add_argument("--method", default=DEFAULT_METHOD, help="HSR method of the occluded set (default: %(default)s)")
+    p.add_argument("--occluded-points", action="store_true",
+                   help="also train on 'occluded-points': the occluded set's clouds (the same dense samples and poses) with "
+                   "visibility decided from the points alone (point-splat, normals estimated, no mesh), tested against occluded")
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="torch device (default: %(default)s)")
     p.add_argument("--threads", action=Checked, check=count("MAX_WORKERS"), help="torch CPU threads")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")

@@ -22,6 +22,10 @@ classifier to recognise real, partial scans?), asked on real data with the proto
   seeded hash of their points, a seed of its own, independent of the run's seeds), so that no
   file name, no order of the reader and no other class moves a scan from one half to the other;
   ``real_split.csv`` lists each scan's half;
+* with ``occluded_points``, one more mesh-only set,
+  :data:`~zbuf_occlude.experiments.sim2real_data.OCCLUDED_POINTS`: the ``occluded`` set's clouds
+  with visibility decided from the dense points alone (point splats, no mesh), tested against
+  ``occluded`` (both one-sided p-values);
 * with ``fit_sensor``, a sensor fitted to the real scans (:func:`zbuf_occlude.sensors.fit.fit_lidar`):
   the sensor is fitted on the first half (the half ``real→real`` trains on), and
   so are, per class, the crops' sensor distances, the objects' heights (their visible
@@ -91,6 +95,7 @@ from zbuf_occlude.experiments.sim2real_config import (
 )
 from zbuf_occlude.experiments.sim2real_data import (
     FITTED_SETS,
+    OCCLUDED_POINTS,
     TRAINING_SETS,
     CropPlacement,
     SetRecipe,
@@ -143,8 +148,10 @@ def _confusion_name(kind: str) -> str:
     return f"confusion_{kind.replace('→', '_to_').replace('+', '_')}.csv"
 
 
-#: Every set a run may train, in report order: the mesh-only sets, the fitted ones, real→real.
-_EVERY_SET = (*TRAINING_SETS, *FITTED_SETS, REAL_TO_REAL)
+#: Every mesh-only set a run may train, in report order.
+_MESH_SETS = (*TRAINING_SETS, OCCLUDED_POINTS, *FITTED_SETS)
+#: Every set a run may train, in report order: the mesh-only sets, real→real.
+_EVERY_SET = (*_MESH_SETS, REAL_TO_REAL)
 #: The files ``experiment sim2real`` writes at the top of ``--out`` (``fitted_sensor.json`` with
 #: ``fit_sensor``; a ``confusion_<set>.csv`` per set trained).
 SIM2REAL_FILES = (
@@ -253,7 +260,7 @@ class Sim2RealSets:
 
 def _kinds(config: Sim2RealConfig) -> tuple[str, ...]:
     """The mesh-only training sets of a run, in report order."""
-    return (*TRAINING_SETS, *FITTED_SETS) if config.fit_sensor else TRAINING_SETS
+    return (*TRAINING_SETS, *((OCCLUDED_POINTS,) if config.occluded_points else ()), *(FITTED_SETS if config.fit_sensor else ()))
 
 
 def _owned(out: str | os.PathLike, config: Sim2RealConfig) -> OwnedFolder:
@@ -591,7 +598,9 @@ def summarise(runs: list[dict], names: list[str], *, chosen_on_fit_half: bool = 
 
     The rows of :data:`~zbuf_occlude.experiments.sim2real_data.FITTED_SETS` also hold their
     difference from ``lidar`` (``diff_vs_lidar``) and both one-sided p-values: ``p_vs_lidar``
-    (the fitted set above lidar) and ``p_lidar_above`` (lidar above it).
+    (the fitted set above lidar) and ``p_lidar_above`` (lidar above it); the
+    :data:`~zbuf_occlude.experiments.sim2real_data.OCCLUDED_POINTS` row likewise against
+    ``occluded`` (``diff_vs_occluded``, ``p_vs_occluded``, ``p_occluded_above``).
 
     With ``chosen_on_fit_half`` (runs validated on the fit half's real scans), a
     :data:`CHOSEN_ON_FIT_HALF` row follows real→real: per seed, the mesh-only run with the best
@@ -603,8 +612,9 @@ def summarise(runs: list[dict], names: list[str], *, chosen_on_fit_half: bool = 
             *[f"acc_{n}" for n in names], *ALL_SCANS]  # fmt: skip
     ref = [r["mean_class_accuracy"] for r in runs if r["train_set"] == "complete"]
     lidar = [r["mean_class_accuracy"] for r in runs if r["train_set"] == "lidar"]
+    occluded = [r["mean_class_accuracy"] for r in runs if r["train_set"] == "occluded"]
     rows = []
-    for kind in (*TRAINING_SETS, *FITTED_SETS, REAL_TO_REAL):
+    for kind in _EVERY_SET:
         mine = [r for r in runs if r["train_set"] == kind]
         if not mine:
             continue
@@ -618,6 +628,9 @@ def summarise(runs: list[dict], names: list[str], *, chosen_on_fit_half: bool = 
         if kind in FITTED_SETS and lidar:
             row["diff_vs_lidar"] = row["mean_class_accuracy_mean"] - float(np.mean(lidar))
             row["p_vs_lidar"], row["p_lidar_above"] = permutation_p(mca, lidar), permutation_p(lidar, mca)
+        if kind == OCCLUDED_POINTS and occluded:
+            row["diff_vs_occluded"] = row["mean_class_accuracy_mean"] - float(np.mean(occluded))
+            row["p_vs_occluded"], row["p_occluded_above"] = permutation_p(mca, occluded), permutation_p(occluded, mca)
         rows.append(row)
     if chosen_on_fit_half:
         rows += _chosen_row(runs, keys, ref)
@@ -638,7 +651,7 @@ def _validation_rank(run: dict) -> tuple[float, float]:
 
 def _chosen_row(runs: list[dict], keys: list[str], ref: list[float]) -> list[dict]:
     """The :data:`CHOSEN_ON_FIT_HALF` row of :func:`summarise` (none when no seed has a mesh-only run)."""
-    order = {k: i for i, k in enumerate((*TRAINING_SETS, *FITTED_SETS))}
+    order = {k: i for i, k in enumerate(_MESH_SETS)}
     chosen = []
     for seed in sorted({r["seed"] for r in runs}):
         mine = [r for r in runs if r["seed"] == seed and r["train_set"] in order]

@@ -15,7 +15,14 @@ from dataclasses import InitVar, asdict, dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.experiments.sim2real_data import KEEP_SCALE_UNIT_M, LIDAR_PLACEMENT, MIN_RETURNS, sensor_elevation_deg
+from zbuf_occlude.experiments.sim2real_data import (
+    KEEP_SCALE_UNIT_M,
+    LIDAR_PLACEMENT,
+    MIN_RETURNS,
+    OCCLUDED_POINTS,
+    POINT_VISIBILITY,
+    sensor_elevation_deg,
+)
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
 
 if TYPE_CHECKING:  # torch is imported when a run trains
@@ -140,6 +147,12 @@ class Sim2RealConfig:
         narrower); ``"outline"``, a warp to its outline over the height, alone or with one of
         the three.  Empty (default): the meshes' own shapes.  Each is fitted per mesh once
         (:func:`~zbuf_occlude.experiments.sim2real_data.fit_mesh_shapes`).
+    occluded_points : bool
+        Also train on the :data:`~zbuf_occlude.experiments.sim2real_data.OCCLUDED_POINTS` set:
+        the ``occluded`` set's clouds (the same dense samples, poses and draws) with visibility
+        decided from the points alone (:data:`~zbuf_occlude.experiments.sim2real_data.POINT_VISIBILITY`),
+        tested against ``occluded``.  Not with a ``method`` that already decides from the points
+        alone (nothing to compare).
     aspect : bool
         Every run's augmentation also draws random proportions (x, y and z stretched by
         independent factors in [2/3, 3/2], DGCNN's range; :func:`zbuf_occlude.learn.data.augment`),
@@ -158,7 +171,8 @@ class Sim2RealConfig:
     ------
     InvalidInputError
         A bad setting (an unknown scale, recipe, model or validation choice, seeds below 1,
-        ``aspect`` with ``keep_scale``, ``validate_on="fit-half"`` or ``fitted_shape`` without
+        ``aspect`` with ``keep_scale``, ``occluded_points`` with ``method`` point-splat,
+        ``validate_on="fit-half"`` or ``fitted_shape`` without
         ``fit_sensor``, an unknown shape or two that meet the widths, elevations outside
         [-90, 90] degrees, a sensor that is no LiDAR, ``fit_sensor`` with an airborne
         ``sensor``), naming the field or its option.
@@ -189,6 +203,7 @@ class Sim2RealConfig:
     validate_on: str = "meshes"
     fitted_shape: tuple[str, ...] = ()
     aspect: bool = False
+    occluded_points: bool = False
     option_names: InitVar[Mapping[str, str] | None] = None
     occluded_elevation_from: str = field(init=False, default="option")
 
@@ -217,6 +232,7 @@ class Sim2RealConfig:
         if int(self.seeds) < 1:
             raise InvalidInputError(f"{n('seeds')} must be >= 1, got {self.seeds}")
         self._check_validation(n)
+        self._check_occluded_points(n)
         self._check_fitted_shape(n)
         self._check_sensor(n)
         if self.occluded_elevation_deg is None:  # derived from the sensor, which is checked by now
@@ -231,6 +247,20 @@ class Sim2RealConfig:
         if self.validate_on == "fit-half" and not self.fit_sensor:
             raise InvalidInputError(f"{n('validate_on')} fit-half needs {n('fit_sensor')} (which splits the real scans into the fit half "
                                     "and the scored half)")  # fmt: skip
+
+    def _check_occluded_points(self, n) -> None:
+        if not self.occluded_points:
+            return
+        from zbuf_occlude.visibility.registry import method_info
+
+        try:
+            method = method_info(self.method).name  # the canonical name of an alias
+        except InvalidInputError as exc:  # an unknown method: refused here too, before any work
+            raise InvalidInputError(f"{n('method')}: {exc}") from None
+        if method == POINT_VISIBILITY:
+            raise InvalidInputError(f"{n('occluded_points')} compares {POINT_VISIBILITY} visibility with the occluded set's method, "
+                                    f"but {n('method')} {self.method} is {POINT_VISIBILITY} already: give a mesh method or drop "
+                                    f"{n('occluded_points')}")  # fmt: skip
 
     def _check_fitted_shape(self, n) -> None:
         shapes = self.fitted_shape
@@ -286,7 +316,9 @@ class Sim2RealConfig:
         """The settings that make results differ, as ``settings.json`` holds them (JSON types).
 
         ``validate_on`` only when it is ``"fit-half"``, so that runs which validate on meshes
-        keep the settings they were written with; ``lidar_placement`` as far as it applies to
+        keep the settings they were written with, and likewise ``occluded_points`` only when it is
+        set (the visibility of the :data:`~zbuf_occlude.experiments.sim2real_data.OCCLUDED_POINTS`
+        set); ``lidar_placement`` as far as it applies to
         the sensor's kind (an airborne scanner flies at its own altitude: no mount height; the
         distance sets the object's offset across track); what the run finds in its inputs
         (classes, meshes, scans, the fitted sensor) and the sensor's every field are added by
@@ -302,6 +334,8 @@ class Sim2RealConfig:
             "lidar_placement": placement, "lidar_min_returns": int(self.min_returns), "keep_scale_unit_m": KEEP_SCALE_UNIT_M,
             "method": self.method, "train_config": self.train_config(0).identity(("seed", "device", "threads")),
             **({"validate_on": self.validate_on} if self.validates_on_fit_half else {}),
+            **({"occluded_points": {"set": OCCLUDED_POINTS, "method": POINT_VISIBILITY, "normals": "estimated", "topped_up": False}}
+               if self.occluded_points else {}),
         }  # fmt: skip
 
 

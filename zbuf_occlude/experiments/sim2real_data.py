@@ -17,6 +17,13 @@ Everything a training set holds is made from meshes only:
     drawn from :data:`LIDAR_PLACEMENT` (published geometry, never the real test scans).
 ``lidar+complete``
     Half of each (the paper's C3 analogue at the same size).
+``occluded-points`` (:data:`OCCLUDED_POINTS`, made only when asked for)
+    The ``occluded`` set's clouds with visibility decided from the dense surface sample alone,
+    without the mesh: the same dense sample, poses and draws, each point kept where the z-buffer
+    test over point splats keeps it (:func:`zbuf_occlude.visibility.point_splats.point_surfels`
+    of the points, normals estimated, then ``.visible(camera)``; the registered method
+    ``"point-splat"``).  A pose that sees fewer than ``n_points`` points is not topped up (that
+    samples the mesh's faces): its cloud repeats points.
 
 Every cloud ends ``(n_points, 3) float32`` in the pipeline's frame (z up) and is normalised
 like the paper's (bounding-box centre 0, max extent 1), or, with ``keep_scale``, centred and
@@ -52,13 +59,19 @@ if TYPE_CHECKING:  # trimesh is imported where it is used
 
 __all__ = [
     "TRAINING_SETS", "GROUND_ELEVATION_DEG", "MIN_RETURNS", "FITTED", "FITTED_PLACED", "POOLED", "FITTED_SETS",
-    "SetRecipe", "sensor_elevation_deg", "check_lidar_meshes", "allocate", "build_set", "build_sets", "mix_sets",
+    "OCCLUDED_POINTS", "POINT_VISIBILITY", "SetRecipe", "sensor_elevation_deg", "check_lidar_meshes", "allocate", "build_set", "build_sets", "mix_sets",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
 
 #: The training sets, in report order (``complete`` is the reference of the permutation tests).
 TRAINING_SETS = ("complete", "occluded", "lidar", "lidar+complete")
+#: The ``occluded`` set with visibility decided from its dense points alone, no mesh (module
+#: docstring): made only when asked for (``Sim2RealConfig(occluded_points=True)``, or ``kinds`` of
+#: :func:`build_sets`), from the ``occluded`` set's random stream, so the same poses and draws.
+OCCLUDED_POINTS = "occluded-points"
+#: The visibility method of :data:`OCCLUDED_POINTS`: the points alone, normals estimated.
+POINT_VISIBILITY = "point-splat"
 #: The set made with a sensor fitted to the real scans (``Sim2RealConfig(fit_sensor=True)``): LiDAR
 #: crops like ``lidar``'s, from the same placements and sizes, only the sensor differs.
 FITTED = "fitted"
@@ -227,18 +240,25 @@ def _complete(entry: MeshEntry, k: int, n_points: int, rng: np.random.Generator)
     return [sample_surface(entry.mesh, count=n_points, seed=rng)[0] for _ in range(k)]
 
 
-def _occluded(entry: MeshEntry, k: int, n_points: int, seed: int, rng: np.random.Generator, recipe: SetRecipe) -> list[NDArray]:
+def _occluded(entry: MeshEntry, k: int, n_points: int, seed: int, rng: np.random.Generator, recipe: SetRecipe, *,
+              from_points: bool = False) -> list[NDArray]:  # fmt: skip
+    """``k`` occluded clouds of one mesh; ``from_points``: visibility from the dense points alone
+    (:data:`POINT_VISIBILITY`, no top-up from the mesh's faces), the same poses and draws otherwise."""
     from zbuf_occlude.geometry.samples import object_key
     from zbuf_occlude.pipeline import dense_cloud, occlude_object
 
     key = object_key(entry.name)
     poses = list(zip(rng.uniform(*recipe.elevation_deg, 2 * k + 2), rng.uniform(0.0, 360.0, 2 * k + 2)))
     dense = dense_cloud(entry.mesh, key, seed=seed, count=recipe.dense_points)
+    how = {"method": POINT_VISIBILITY, "topped_up": False} if from_points else {"method": recipe.method}
     out = []
-    for _, _, clouds in occlude_object(entry.mesh, poses, key=key, n_points=n_points, samples_per_view=1, seed=seed,
-                                       dense=dense, method=recipe.method, resolution=recipe.resolution):  # fmt: skip
+    for pose_index, _, clouds in occlude_object(entry.mesh, poses, key=key, n_points=n_points, samples_per_view=1, seed=seed,
+                                                dense=dense, resolution=recipe.resolution, **how):  # fmt: skip
         if clouds:
             out.append(clouds[0].points.astype(np.float64))
+            if from_points and clouds[0].n_visible < n_points:
+                log.warning("%s: pose %d shows %d of the %d points of a cloud from the points alone; the cloud repeats points",
+                            entry.name, pose_index, clouds[0].n_visible, n_points)  # fmt: skip
         if len(out) == k:
             break
     if len(out) < k:
@@ -303,7 +323,8 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
     Parameters
     ----------
     kind : str
-        One of :data:`TRAINING_SETS`.
+        One of :data:`TRAINING_SETS`, or :data:`OCCLUDED_POINTS` (``occluded``'s random stream:
+        the same poses and draws as ``occluded`` of the same seed).
     meshes : list of MeshEntry
     names : list of str
         The classes, in label order (label ``i`` is ``names[i]``).
@@ -326,8 +347,8 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
         Unknown kind, a class without a size range, or a mesh no pose or crop sees.
     """
     recipe = recipe or SetRecipe()
-    if kind not in TRAINING_SETS:
-        raise InvalidInputError(f"unknown training set {kind!r}; choose from {TRAINING_SETS}")
+    if kind not in (*TRAINING_SETS, OCCLUDED_POINTS):
+        raise InvalidInputError(f"unknown training set {kind!r}; choose from {(*TRAINING_SETS, OCCLUDED_POINTS)}")
     if kind == "lidar+complete":
         lidar = build_set("lidar", meshes, names, per_class, n_points, seed, recipe, progress=progress)
         return mix_sets(lidar, build_set("complete", meshes, names, per_class, n_points, seed, recipe, progress=progress), seed)
@@ -337,7 +358,9 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
         raise InvalidInputError(f"no real size for classes {missing}; give them with --sizes CLASS=height:LO-HI")
     from zbuf_occlude.io.progress import progress as progress_bar
 
-    rng = np.random.default_rng([seed, TRAINING_SETS.index(kind), 0x52])
+    # occluded-points draws from occluded's stream: the same clouds per mesh, poses and samples
+    stream = TRAINING_SETS.index("occluded" if kind == OCCLUDED_POINTS else kind)
+    rng = np.random.default_rng([seed, stream, 0x52])
     clouds, sizes_m, labels, objs = [], [], [], []
     bar = progress_bar(total=sum(m.class_name in names for m in meshes), desc=f"sim2real {kind} set", unit="mesh", enabled=progress)
     for label, cls in enumerate(names):
@@ -349,8 +372,8 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
             entry = meshes[i]
             if kind == "complete":
                 got = _complete(entry, int(k), n_points, rng)
-            elif kind == "occluded":
-                got = _occluded(entry, int(k), n_points, seed, rng, recipe)
+            elif kind in ("occluded", OCCLUDED_POINTS):
+                got = _occluded(entry, int(k), n_points, seed, rng, recipe, from_points=kind == OCCLUDED_POINTS)
             else:
                 got, size_k = _lidar(entry, int(k), n_points, seed, recipe.sensor, sizes[cls], recipe.min_returns, recipe.placement)
             if kind == "lidar":
@@ -393,7 +416,7 @@ def build_sets(meshes: list[MeshEntry], names: list[str], per_class: int, n_poin
     ``3 · per_class`` clouds per class).
 
     ``kinds`` (default: all of those) names the sets wanted, and only those (and the two that
-    ``lidar+complete`` mixes) are made: each set draws from its own random stream, so a set is
+    ``lidar+complete`` mixes) are made; :data:`OCCLUDED_POINTS` is made only when ``kinds`` names it: each set draws from its own random stream, so a set is
     the same whichever others are made with it (a resumed run makes only what it still needs).
 
     Raises
@@ -402,12 +425,12 @@ def build_sets(meshes: list[MeshEntry], names: list[str], per_class: int, n_poin
         A kind in ``kinds`` that these arguments cannot make, and :func:`build_set`'s errors.
     """
     recipe = recipe or SetRecipe()
-    available = [*TRAINING_SETS]
+    available = [*TRAINING_SETS, OCCLUDED_POINTS]
     if fitted_sensor is not None:
         available.append(FITTED)
         if fitted_placement is not None and fitted_sizes is not None:
             available += [FITTED_PLACED, POOLED]
-    wanted = list(available if kinds is None else kinds)
+    wanted = [k for k in available if k != OCCLUDED_POINTS] if kinds is None else list(kinds)
     unknown = [k for k in wanted if k not in available]
     if unknown:
         raise InvalidInputError(f"cannot make training sets {unknown} with these arguments; these can be made: {available}")
@@ -415,6 +438,8 @@ def build_sets(meshes: list[MeshEntry], names: list[str], per_class: int, n_poin
     out = {kind: build_set(kind, meshes, names, per_class, n_points, seed, recipe, progress=progress) for kind in TRAINING_SETS[:3] if kind in made}
     if "lidar+complete" in made:
         out["lidar+complete"] = mix_sets(out["lidar"], out["complete"], seed)
+    if OCCLUDED_POINTS in made:
+        out[OCCLUDED_POINTS] = build_set(OCCLUDED_POINTS, meshes, names, per_class, n_points, seed, recipe, progress=progress)
     if FITTED in made:
         out[FITTED] = build_set("lidar", meshes, names, per_class, n_points, seed, replace(recipe, sensor=fitted_sensor), progress=progress)
     if FITTED_PLACED in made:

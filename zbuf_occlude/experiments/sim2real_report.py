@@ -46,6 +46,11 @@ def table_md(rows: list[dict], settings: dict) -> str:
             lines += ["", (f"{r['train_set']} vs lidar: Δ {r['diff_vs_lidar']:+.3f} mean class accuracy, one-sided p "
                            f"{_p(r['p_vs_lidar'])} ({r['train_set']} above lidar), {_p(r['p_lidar_above'])} (lidar above {r['train_set']})")]  # fmt: skip
     for r in rows:
+        if "p_vs_occluded" in r:
+            lines += ["", (f"{r['train_set']} vs occluded (visibility from the points alone vs from the mesh): Δ {r['diff_vs_occluded']:+.3f} "
+                           f"mean class accuracy, one-sided p {_p(r['p_vs_occluded'])} ({r['train_set']} above occluded), "
+                           f"{_p(r['p_occluded_above'])} (occluded above {r['train_set']})")]  # fmt: skip
+    for r in rows:
         if "chosen_sets" in r:
             lines += ["", (f"{r['train_set']}: per seed, the mesh-only set with the best fit-half validation score "
                            f"({r['chosen_sets']}); Δ {r['diff_vs_real_to_real']:+.3f} mean class accuracy against real→real, "
