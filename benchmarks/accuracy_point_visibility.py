@@ -9,7 +9,9 @@ the point-only methods on the points alone:
 * ``point-splat +o``: with those normals taken as oriented (``oriented=True``);
 * ``HPR best``: Open3D's hidden point removal (Katz et al. 2007) at the radius factor that is best
   for this mesh and N (searched with the oracle: a flattering baseline no user could choose);
-* ``HPR 100``: at Open3D's example factor 100, the default of the ``open3d-hpr`` method.
+* ``HPR ×F``: at each radius factor F of the search (one row each in the CSV); the summary shows
+  the factor that is best on average over the tuning meshes (``--hpr-factor``, chosen there), the
+  fair baseline, beside Open3D's example factor 100 (the ``open3d-hpr`` method's default).
 
 Also printed: the **boundary share**, the fraction of points with one of their 4 nearest neighbours
 on the other side of the oracle's visible/hidden boundary: what no method that reads only point
@@ -39,7 +41,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "data"
 MESH_SUFFIXES = (".off", ".obj", ".glb", ".gltf", ".dae")
 HPR_FACTORS = (2.0, 10.0, 100.0, 1000.0, 10000.0)
-METHODS = ("point-splat", "point-splat +n", "point-splat +o", "HPR best", "HPR 100")
+OURS = ("point-splat", "point-splat +n", "point-splat +o")
 
 
 def mesh_sets() -> dict[str, list[Path]]:
@@ -48,8 +50,11 @@ def mesh_sets() -> dict[str, list[Path]]:
     shipped = sorted((ROOT / "data" / "samples").rglob("*.off"))
     names = {p.name for p in shipped}
     street = sorted(p for p in (SHARED / "street_objects").rglob("*") if p.suffix.lower() in MESH_SUFFIXES)
-    tune = sorted(p for p in (SHARED / "modelnet_subset").rglob("*.off") if p.name not in names)
-    return {"samples": shipped, "street": street, "tune": tune}
+    tune: dict[str, Path] = {}  # ModelNet10 and ModelNet40 hold copies of some meshes: each once
+    for p in sorted((SHARED / "modelnet_subset").rglob("*.off")):
+        if p.name not in names:
+            tune.setdefault(p.name, p)
+    return {"samples": shipped, "street": street, "tune": sorted(tune.values())}
 
 
 def hpr(points: np.ndarray, camera: zo.Camera, factor: float) -> np.ndarray:
@@ -75,7 +80,7 @@ def boundary_share(points: np.ndarray, truth: np.ndarray) -> float:
     return float(np.mean([(t[idx[:, 1:]] != t[:, None]).any(axis=1).mean() for t in truth]))
 
 
-def measure(path: Path, n: int, cameras: list[zo.Camera]) -> list[dict]:
+def measure(path: Path, n: int, cameras: list[zo.Camera], factors: tuple[float, ...] = HPR_FACTORS) -> list[dict]:
     mesh = zo.load_mesh(path)
     points, face_index = zo.sample_surface(mesh, n, seed=0)
     normals = mesh.face_normals[face_index]
@@ -85,9 +90,9 @@ def measure(path: Path, n: int, cameras: list[zo.Camera]) -> list[dict]:
         surfels, prep_s = timed(zo.point_surfels, points, nrm, oriented=oriented)
         masks, times = zip(*(timed(surfels.visible, c) for c in cameras))
         rows.append(_row(path, n, name, masks, truth, times, prep_s))
-    hpr_masks = {f: [timed(hpr, points, c, f) for c in cameras] for f in HPR_FACTORS}
-    best = max(HPR_FACTORS, key=lambda f: np.mean([(m == t).mean() for (m, _), t in zip(hpr_masks[f], truth)]))
-    for name, factor in (("HPR best", best), ("HPR 100", 100.0)):
+    hpr_masks = {f: [timed(hpr, points, c, f) for c in cameras] for f in factors}
+    best = max(factors, key=lambda f: np.mean([(m == t).mean() for (m, _), t in zip(hpr_masks[f], truth)]))
+    for name, factor in (("HPR best", best), *((f"HPR ×{f:g}", f) for f in factors)):
         masks, times = zip(*hpr_masks[factor])
         rows.append(_row(path, n, name, masks, truth, times, 0.0, factor=factor))
     share = boundary_share(points, truth)
@@ -106,11 +111,11 @@ def _row(path, n, method, masks, truth, times, prep_s, factor=None) -> dict:
     return row
 
 
-def summary(rows: list[dict], n: int) -> None:
+def summary(rows: list[dict], n: int, hpr_factor: float) -> None:
     print(f"\n### N = {n:,} points ({len({r['mesh'] for r in rows if r['n'] == n})} meshes, mean over meshes and poses)\n")
     print("| method | accuracy | visible IoU | false visible | false hidden | worst view | ms / view | prepare ms |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|")
-    for method in METHODS:
+    for method in dict.fromkeys((*OURS, "HPR best", f"HPR ×{hpr_factor:g}", "HPR ×100")):
         sel = [r for r in rows if r["n"] == n and r["method"] == method]
         if not sel:
             continue
@@ -118,15 +123,18 @@ def summary(rows: list[dict], n: int) -> None:
         print(f"| {method} | {mean['accuracy']:.3f} | {mean['iou']:.3f} | {mean['false_visible']:.3f} | "
               f"{mean['false_hidden']:.3f} | {min(r['worst_view_accuracy'] for r in sel):.3f} | "
               f"{np.median([r['ms_per_view'] for r in sel]):.1f} | {mean['prepare_ms']:.0f} |")  # fmt: skip
-    share = np.mean([r["boundary_share"] for r in rows if r["n"] == n and r["method"] == METHODS[0]])
+    share = np.mean([r["boundary_share"] for r in rows if r["n"] == n and r["method"] == OURS[0]])
     print(f"\nboundary share (points with a 4-neighbour on the other side of the visible/hidden boundary): {share:.3f}")
     by_mesh: dict[str, dict[str, float]] = {}
     for r in rows:
         if r["n"] == n:
             by_mesh.setdefault(r["mesh"], {})[r["method"]] = r["accuracy"]
-    for ours in METHODS[:3]:
-        below = sorted(m for m, acc in by_mesh.items() if acc.get(ours, 1.0) < acc.get("HPR best", 0.0))
-        print(f"{ours} below HPR best on {len(below)} of {len(by_mesh)} meshes" + (f": {', '.join(below)}" if below else ""))
+    for ours in OURS:
+        for hpr_name in ("HPR best", f"HPR ×{hpr_factor:g}"):
+            below = sorted(m for m, acc in by_mesh.items() if acc.get(ours, 1.0) < acc.get(hpr_name, 0.0))
+            print(f"{ours} below {hpr_name} on {len(below)} of {len(by_mesh)} meshes" + (f": {', '.join(below)}" if below else ""))
+    means = {f: np.mean(acc) for f in HPR_FACTORS if (acc := [r["accuracy"] for r in rows if r["n"] == n and r["method"] == f"HPR ×{f:g}"])}
+    print("HPR mean accuracy per radius factor: " + ", ".join(f"×{f:g} {a:.3f}" for f, a in means.items()))
 
 
 def main() -> int:
@@ -134,6 +142,8 @@ def main() -> int:
     p.add_argument("--sets", nargs="+", default=["samples", "street"], choices=["samples", "street", "tune"])
     p.add_argument("--points", nargs="+", type=int, default=[2048, 10000, 100000])
     p.add_argument("--views", default="fibonacci:16")
+    p.add_argument("--hpr-factors", type=float, nargs="+", default=list(HPR_FACTORS), help="the radius factors HPR is searched over")
+    p.add_argument("--hpr-factor", type=float, default=100.0, help="the fixed HPR radius factor shown (choose it on --sets tune)")
     p.add_argument("--csv", type=Path, help="write one row per mesh, N and method")
     args = p.parse_args()
     sets = mesh_sets()
@@ -144,8 +154,8 @@ def main() -> int:
     rows: list[dict] = []
     for n in args.points:
         for path in paths:
-            rows.extend(measure(path, n, cameras))
-        summary(rows, n)
+            rows.extend(measure(path, n, cameras, tuple(args.hpr_factors)))
+        summary(rows, n, args.hpr_factor)
     print("#", subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip())
     if args.csv:
         args.csv.parent.mkdir(parents=True, exist_ok=True)
