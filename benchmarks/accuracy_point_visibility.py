@@ -57,15 +57,9 @@ def mesh_sets() -> dict[str, list[Path]]:
     return {"samples": shipped, "street": street, "tune": sorted(tune.values())}
 
 
-def hpr(points: np.ndarray, camera: zo.Camera, factor: float) -> np.ndarray:
-    import open3d as o3d
-
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    diameter = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
-    _, kept = cloud.hidden_point_removal(camera.eye, diameter * factor)
-    visible = np.zeros(len(points), dtype=bool)
-    visible[np.asarray(kept, dtype=np.int64)] = True
-    return visible & camera.in_frustum(points)
+def hpr(mesh, points: np.ndarray, camera: zo.Camera, factor: float) -> np.ndarray:
+    """Open3D's hidden point removal through the registered ``open3d-hpr`` method (the mesh unused)."""
+    return zo.visible_mask(mesh, points, camera, method="open3d-hpr", hpr_radius_factor=factor)
 
 
 def timed(fn, *args, **kwargs):
@@ -90,7 +84,7 @@ def measure(path: Path, n: int, cameras: list[zo.Camera], factors: tuple[float, 
         surfels, prep_s = timed(zo.point_surfels, points, nrm, oriented=oriented)
         masks, times = zip(*(timed(surfels.visible, c) for c in cameras))
         rows.append(_row(path, n, name, masks, truth, times, prep_s))
-    hpr_masks = {f: [timed(hpr, points, c, f) for c in cameras] for f in factors}
+    hpr_masks = {f: [timed(hpr, mesh, points, c, f) for c in cameras] for f in factors}
     best = max(factors, key=lambda f: np.mean([(m == t).mean() for (m, _), t in zip(hpr_masks[f], truth)]))
     for name, factor in (("HPR best", best), *((f"HPR ×{f:g}", f) for f in factors)):
         masks, times = zip(*hpr_masks[factor])
