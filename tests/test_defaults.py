@@ -10,7 +10,7 @@ from zbuf_occlude import defaults
 from zbuf_occlude.experiments.compare import CompareConfig
 from zbuf_occlude.farm.config import FarmParams
 from zbuf_occlude.geometry.cameras import camera_on_sphere, cameras_from_schedule
-from zbuf_occlude.pipeline import occlude_poses
+from zbuf_occlude.pipeline import CameraSphere, occlude_point_set, occlude_poses
 from zbuf_occlude.render.moderngl_backend import ModernGLRenderer
 from zbuf_occlude.visibility.peers import naive_zbuffer_visible
 from zbuf_occlude.visibility.registry import visible_mask
@@ -23,11 +23,16 @@ def _default(fn, name):
 
 @pytest.mark.parametrize(
     "fn",
-    [camera_on_sphere, cameras_from_schedule, occlude_poses, zbuffer_visible, zbuffer_tolerance_visible,
+    [camera_on_sphere, cameras_from_schedule, CameraSphere, zbuffer_visible, zbuffer_tolerance_visible,
      naive_zbuffer_visible, CompareConfig],
 )  # fmt: skip
 def test_resolution_default(fn) -> None:
     assert _default(fn, "resolution") == defaults.DEFAULT_RESOLUTION
+
+
+def test_the_pipeline_takes_its_cameras_defaults_from_camera_on_sphere() -> None:
+    for fn in (occlude_poses, occlude_point_set):
+        assert _default(fn, "cameras") == CameraSphere() == CameraSphere(_default(camera_on_sphere, "radius"), defaults.DEFAULT_RESOLUTION)
 
 
 def test_method_default() -> None:

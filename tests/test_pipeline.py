@@ -21,8 +21,8 @@ from hypothesis import strategies as st
 import zbuf_occlude as zo
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
-from zbuf_occlude.geometry.samples import derive_rng, draw_sample, object_key, pose_samples, sample_rng
-from zbuf_occlude.pipeline import DenseCloud, dense_cloud, occlude_object, occlude_poses
+from zbuf_occlude.geometry.samples import ObjectProvenance, derive_rng, draw_sample, object_key, pose_samples, sample_rng
+from zbuf_occlude.pipeline import CameraSphere, DenseCloud, dense_cloud, occlude_object, occlude_poses
 
 #: The oracle hides at most this fraction of the points the default ``zbuffer`` method
 #: samples.  Measured on the shipped sofa (20k dense points, 256²): 1 of 1536 sampled
@@ -122,13 +122,15 @@ _BALL_DENSE = dense_cloud(_BALL, object_key("ball"), seed=0, count=4000)
 def test_occlude_object_labels_each_sample_with_its_pose_and_object():
     poses = [(10.0, 20.0), (-30.0, 200.0)]
     out = list(occlude_object(_BALL, poses, key=object_key("ball"), n_points=64, samples_per_view=2, dense=_BALL_DENSE,
-                              method="oracle", radius=2.5, label=3, class_name="ball", source="ball.off"))  # fmt: skip
+                              method="oracle", cameras=CameraSphere(radius=2.5),
+                              provenance=ObjectProvenance(label=3, class_name="ball", source="ball.off", split="test")))  # fmt: skip
     assert [pose_index for pose_index, _, _ in out] == [0, 1]
     for (pose_index, visible, clouds), (el, az) in zip(out, poses):
         assert visible.shape == (4000,) and [c.sample_index for c in clouds] == [0, 1]
         for c in clouds:
             assert (c.elevation_deg, c.azimuth_deg, c.radius) == (el, az, 2.5)
-            assert (c.label, c.class_name, c.source) == (3, "ball", "ball.off")
+            assert (c.label, c.class_name, c.source, c.split) == (3, "ball", "ball.off", "test")
+            assert c.provenance == ObjectProvenance(3, "ball", "ball.off", "test")
             assert c.n_visible == int(visible.sum()) and not c.padded and c.points.dtype == np.float32
             idx = _dense_indices(_BALL_DENSE, c)
             assert visible[idx].all()
@@ -147,7 +149,8 @@ def test_occlude_object_labels_each_sample_with_its_pose_and_object():
 def test_the_camera_distance_sets_the_visible_cap_of_a_sphere(radius):
     # from distance d a sphere of radius r shows the cap cos(theta) > r/d: a fraction
     # (1 - r/d)/2 of its area (icosphere and sampling noise: 0.03)
-    (_, visible, _), = occlude_object(_BALL, [(20.0, 30.0)], key=1, samples_per_view=0, dense=_BALL_DENSE, method="oracle", radius=radius)
+    (_, visible, _), = occlude_object(_BALL, [(20.0, 30.0)], key=1, samples_per_view=0, dense=_BALL_DENSE, method="oracle",
+                                      cameras=CameraSphere(radius=radius))  # fmt: skip
     assert abs(visible.mean() - (1 - 0.5 / radius) / 2) < 0.03, visible.mean()
 
 
@@ -178,7 +181,7 @@ def sofa_dense(small_mesh):
 def _run(mesh, poses, seed, **kw):
     kw.setdefault("n_points", 256)
     kw.setdefault("samples_per_view", 3)
-    return list(occlude_object(mesh, poses, key=object_key("sofa"), seed=seed, resolution=256, **kw))
+    return list(occlude_object(mesh, poses, key=object_key("sofa"), seed=seed, cameras=CameraSphere(resolution=256), **kw))
 
 
 def _dense_indices(dense: DenseCloud, cloud) -> np.ndarray:
@@ -392,7 +395,7 @@ def test_a_closed_convex_mesh_shows_its_front_faces(el, az):
     for method, allowed in (("oracle", 0), ("zbuffer", MAX_ZBUFFER_OFF_LAW)):
         [(_, visible, clouds)] = occlude_object(
             _SPHERE, [(el, az)], key=object_key("sphere"), n_points=512, samples_per_view=2, dense=_SPHERE_DENSE,
-            resolution=256, method=method,
+            cameras=CameraSphere(resolution=256), method=method,
         )  # fmt: skip
         assert np.count_nonzero(visible[decided] != front[decided]) <= allowed, method
         # about half the area: a sphere of radius 0.5 seen from 4 shows (1 - 0.5/4)/2 = 0.4375
@@ -445,7 +448,8 @@ def test_the_memory_check_counts_this_objects_job_before_allocating(monkeypatch)
     monkeypatch.setattr(occlude_module, "check_memory", refuse)
     for dense, n_dense in ((_BALL_DENSE, 4000), (None, DEFAULT_DENSE_POINTS)):
         with pytest.raises(InvalidInputError, match="refused"):
-            next(occlude_object(_BALL, [(0.0, 0.0)], key=1, n_points=33, samples_per_view=4, dense=dense, resolution=96))
+            next(occlude_object(_BALL, [(0.0, 0.0)], key=1, n_points=33, samples_per_view=4, dense=dense,
+                                cameras=CameraSphere(resolution=96)))  # fmt: skip
         assert checked.pop() == estimate_job_memory(points=33, samples_per_view=4, dense_points=n_dense, resolution=96, faces=len(_BALL.faces))
 
 
@@ -467,7 +471,7 @@ def test_occlude_object_defaults_to_seed_0_and_an_empty_source():
     a = list(occlude_object(_BALL, [(10.0, 20.0)], key=1, n_points=16, samples_per_view=1, dense=_BALL_DENSE, method="oracle"))
     b = list(occlude_object(_BALL, [(10.0, 20.0)], key=1, n_points=16, samples_per_view=1, dense=_BALL_DENSE, method="oracle", seed=0))
     assert np.array_equal(a[0][2][0].points, b[0][2][0].points)
-    assert a[0][2][0].source == "" and a[0][2][0].class_name == "" and a[0][2][0].label == -1
+    assert a[0][2][0].provenance == ObjectProvenance() == ObjectProvenance(label=-1, class_name="", source="", split="")
 
 
 def test_occlude_object_passes_its_camera_and_options_to_the_method(monkeypatch):
@@ -488,7 +492,8 @@ def test_occlude_object_passes_its_camera_and_options_to_the_method(monkeypatch)
 
     monkeypatch.setattr(occlude_module, "visible_mask", spy)
     poses = [(10.0, 20.0), (-5.0, 90.0)]
-    list(occlude_object(_BALL, poses, key=1, samples_per_view=0, dense=_BALL_DENSE, method="oracle", resolution=96, radius=3.0, tolerance=0.5))
+    list(occlude_object(_BALL, poses, key=1, samples_per_view=0, dense=_BALL_DENSE, method="oracle", cameras=CameraSphere(3.0, 96),
+                        tolerance=0.5))  # fmt: skip
     assert [(c.elevation_deg, c.azimuth_deg, c.radius, c.resolution) for c, _, _ in calls] == [(10.0, 20.0, 3.0, (96, 96)), (-5.0, 90.0, 3.0, (96, 96))]
     for _, method, kw in calls:
         # the camera carries the resolution; "oracle" takes no resolution keyword
@@ -510,7 +515,8 @@ def test_occlude_object_passes_its_camera_and_options_to_the_method(monkeypatch)
 
     info = method_info("zbuffer")
     monkeypatch.setattr(occlude_module, "method_info", lambda name: type(info)(**{**vars(info), "session": Scene}) if name == "zbuffer" else info)
-    list(occlude_object(_BALL, poses, key=1, samples_per_view=1, dense=_BALL_DENSE, method="zbuffer", resolution=96, neighborhood=2))
+    list(occlude_object(_BALL, poses, key=1, samples_per_view=1, dense=_BALL_DENSE, method="zbuffer", cameras=CameraSphere(resolution=96),
+                        neighborhood=2))  # fmt: skip
     assert events == [("built", 4000, True), ("pose", (96, 96), {"neighborhood": 2}), ("pose", (96, 96), {"neighborhood": 2}), ("released",)]
 
 

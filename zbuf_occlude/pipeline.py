@@ -42,6 +42,7 @@ from zbuf_occlude.errors import InvalidInputError, PaddedSamplesWarning
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, Camera, camera_on_sphere, view_schedule
 from zbuf_occlude.geometry.samples import (
     DENSE_STREAM,
+    ObjectProvenance,
     OccludedCloud,
     TopUp,
     derive_rng,
@@ -58,7 +59,7 @@ if TYPE_CHECKING:  # trimesh (and scipy) is imported by occlude(), which takes f
     import trimesh
 
 __all__ = [
-    "DenseCloud", "dense_cloud", "PoseResult", "occlude_poses", "occlude_object", "occlude", "occlude_point_set",
+    "DenseCloud", "dense_cloud", "CameraSphere", "PoseResult", "occlude_poses", "occlude_object", "occlude", "occlude_point_set",
     "NO_FACE", "POINT_SET_METHOD",
 ]  # fmt: skip
 
@@ -73,8 +74,6 @@ NO_FACE = -1
 #: The registered name of the method that decides a point-set input's visibility
 #: (:func:`~zbuf_occlude.visibility.point_splats.point_surfels`, the z-buffer test over surfel splats).
 POINT_SET_METHOD = "point-splat"
-#: What a point-set input's samples may copy from its object (:class:`OccludedCloud` fields).
-_CLOUD_FIELDS = frozenset({"label", "class_name", "source", "split"})
 
 
 @dataclass
@@ -110,6 +109,33 @@ def dense_cloud(
     else:
         points, face_index = sample_surface(mesh, count=count, seed=rng)
     return DenseCloud(points, face_index)
+
+
+@dataclass(frozen=True)
+class CameraSphere:
+    """The cameras of an object's poses: on a sphere of ``radius`` around it, looking at its centre.
+
+    Attributes
+    ----------
+    radius : float
+        Camera distance from the centre, object units (the object's largest side is 1).
+    resolution : int or (width, height)
+        Image size, pixels (the z-buffer of image-space methods).
+    """
+
+    radius: float = DEFAULT_RADIUS
+    resolution: int | tuple[int, int] = DEFAULT_RESOLUTION
+
+    def camera(self, elevation_deg: float, azimuth_deg: float) -> Camera:
+        """The camera of one pose (:func:`~zbuf_occlude.geometry.cameras.camera_on_sphere`).
+
+        Raises
+        ------
+        CameraError
+            A non-finite pose, an elevation outside [−90, 90], or a radius inside the object's
+            bounding sphere or too far to decide visibility.
+        """
+        return camera_on_sphere(elevation_deg, azimuth_deg, self.radius, resolution=self.resolution)
 
 
 @dataclass
@@ -149,12 +175,8 @@ def occlude_poses(
     seed: int = DEFAULT_SEED,
     dense: DenseCloud | None = None,
     method: str = DEFAULT_METHOD,
-    resolution: int = DEFAULT_RESOLUTION,
-    radius: float = DEFAULT_RADIUS,
-    label: int = -1,
-    class_name: str = "",
-    source: str = "",
-    split: str = "",
+    cameras: CameraSphere = CameraSphere(),
+    provenance: ObjectProvenance = ObjectProvenance(),
     topped_up: bool = True,
     **method_options,
 ) -> Iterator[PoseResult]:
@@ -181,9 +203,11 @@ def occlude_poses(
         Default: :func:`dense_cloud` ``(mesh, key, seed=seed)``.
     method : str
         Visibility method; image-space methods keep the points on the GPU across poses.
-    resolution, radius : camera image size (pixels) and distance (object units).
-    label, class_name, source, split
-        Copied into every cloud (:class:`OccludedCloud`).
+    cameras : CameraSphere
+        The poses' camera distance (object units) and image size (pixels).
+    provenance : ObjectProvenance
+        The object's ``label``, ``class_name``, ``source`` and ``split``, copied into every cloud
+        (:class:`OccludedCloud`).
     topped_up : bool
         Top up the poses that see too few dense points (default); ``False`` draws from the
         visible dense points alone (padding with repeats when they are too few).
@@ -197,6 +221,8 @@ def occlude_poses(
     InsufficientMemoryError
         (an InvalidInputError) The object's job would not fit in the memory available
         (:func:`zbuf_occlude.resources.check_memory`), checked before any allocation.
+    CameraError
+        A pose or ``cameras`` gives no valid camera (:meth:`CameraSphere.camera`).
     """
     if n_points < 1 or samples_per_view < 0:
         raise InvalidInputError(f"need n_points >= 1 and samples_per_view >= 0, got {n_points}, {samples_per_view}")
@@ -206,14 +232,14 @@ def occlude_poses(
         estimate_job_memory(
             points=int(n_points), samples_per_view=int(samples_per_view),
             dense_points=len(dense.points) if dense is not None else DEFAULT_DENSE_POINTS,
-            resolution=resolution, faces=len(mesh.faces),
+            resolution=cameras.resolution, faces=len(mesh.faces),
         )
     )  # fmt: skip
     dense = dense or dense_cloud(mesh, key, seed=seed)
     n_dense = len(dense.points)
     session = method_info(method).session
     scene = session(mesh, dense.points, dense.face_index) if session is not None else None
-    one_shot_options = {**resolution_option(method, resolution), **method_options}
+    one_shot_options = {**resolution_option(method, cameras.resolution), **method_options}
     triangles: NDArray[np.float64] | None = None  # the mesh's corners, once, for the first pose topped up
 
     def candidates_visible(camera: Camera, points: NDArray[np.float64], face_index: NDArray[np.int64]) -> NDArray[np.bool_]:
@@ -228,14 +254,14 @@ def occlude_poses(
 
     try:
         for pose_index, (el, az) in enumerate(poses):
-            camera: Camera = camera_on_sphere(el, az, radius, resolution=resolution)
+            camera = cameras.camera(el, az)
             if scene is not None:
                 visible = scene.visible(camera, **method_options)
             else:
                 visible = visible_mask(mesh, dense.points, camera, method, face_index=dense.face_index, **one_shot_options)
             visible_index = np.flatnonzero(visible)
             if len(visible_index) == 0 and samples_per_view:
-                log.warning("%s: nothing visible from el=%g az=%g; no sample", source or "mesh", el, az)
+                log.warning("%s: nothing visible from el=%g az=%g; no sample", provenance.source or "mesh", el, az)
             extra = TopUp()
             if topped_up and 0 < len(visible_index) < n_points:
                 triangles = triangles_of(mesh) if triangles is None else triangles
@@ -258,13 +284,13 @@ def occlude_poses(
                     face_index=pool_take(dense.face_index, extra.face_index, c),
                     elevation_deg=float(el),
                     azimuth_deg=float(az),
-                    radius=float(radius),
-                    label=label,
-                    class_name=class_name,
-                    source=source,
+                    radius=float(cameras.radius),
+                    label=provenance.label,
+                    class_name=provenance.class_name,
+                    source=provenance.source,
                     sample_index=sample_index,
                     n_visible=n_visible,
-                    split=split,
+                    split=provenance.split,
                     n_topped_up=len(extra),
                 )
                 for sample_index, c in enumerate(chosen)
@@ -284,9 +310,8 @@ def occlude_point_set(
     n_points: int = DEFAULT_N_POINTS,
     samples_per_view: int = DEFAULT_SAMPLES_PER_VIEW,
     seed: int = DEFAULT_SEED,
-    radius: float = DEFAULT_RADIUS,
-    resolution: int = DEFAULT_RESOLUTION,
-    **cloud_fields,
+    cameras: CameraSphere = CameraSphere(),
+    provenance: ObjectProvenance = ObjectProvenance(),
 ) -> Iterator[PoseResult]:
     """Yield a :class:`PoseResult` for each pose of one point-set object, as :func:`occlude_poses` does for a mesh.
 
@@ -311,40 +336,40 @@ def occlude_point_set(
     n_points, samples_per_view : int
         Points per sample and samples drawn per pose.
     seed : int
-    radius : float
-        Camera distance, object units.
-    resolution : int
-        The cameras' image size, pixels (the splat image is sized from the splats, not from it).
-    **cloud_fields
-        ``label``, ``class_name``, ``source``, ``split``: copied into every cloud.
+    cameras : CameraSphere
+        The poses' camera distance (object units) and image size (pixels; the splat image is
+        sized from the splats, not from it).
+    provenance : ObjectProvenance
+        The object's ``label``, ``class_name``, ``source`` and ``split``, copied into every cloud.
 
     Raises
     ------
     InvalidInputError
-        ``n_points < 1``, ``samples_per_view < 0``, bad points or normals (shape, NaN/inf, zero
-        normals), or a field other than those of ``cloud_fields``.
+        ``n_points < 1``, ``samples_per_view < 0``, or bad points or normals (shape, NaN/inf,
+        zero normals).
     InsufficientMemoryError
         The object's job would not fit in the memory available, checked before any allocation.
+    CameraError
+        A pose or ``cameras`` gives no valid camera (:meth:`CameraSphere.camera`).
     """
     from zbuf_occlude.visibility.point_splats import point_surfels
 
     if n_points < 1 or samples_per_view < 0:
         raise InvalidInputError(f"need n_points >= 1 and samples_per_view >= 0, got {n_points}, {samples_per_view}")
-    unknown = sorted(set(cloud_fields) - _CLOUD_FIELDS)
-    if unknown:
-        raise InvalidInputError(f"occlude_point_set copies only {sorted(_CLOUD_FIELDS)} into its clouds, got {unknown}")
     check_memory(
-        estimate_job_memory(points=int(n_points), samples_per_view=int(samples_per_view), dense_points=len(points), resolution=resolution)
+        estimate_job_memory(
+            points=int(n_points), samples_per_view=int(samples_per_view), dense_points=len(points), resolution=cameras.resolution
+        )
     )
     surfels = point_surfels(points, normals)
     n_dense = len(surfels.points)
     no_face = np.full(n_dense, NO_FACE, dtype=np.int64)
     for pose_index, (el, az) in enumerate(poses):
-        camera = camera_on_sphere(el, az, radius, resolution=resolution)
+        camera = cameras.camera(el, az)
         visible = surfels.visible(camera)
         visible_index = np.flatnonzero(visible)
         if len(visible_index) == 0 and samples_per_view:
-            log.warning("%s: nothing visible from el=%g az=%g; no sample", cloud_fields.get("source") or "point set", el, az)
+            log.warning("%s: nothing visible from el=%g az=%g; no sample", provenance.source or "point set", el, az)
         chosen = pose_samples(
             visible_index, n_points, seed=seed, key=key, pose_index=pose_index, sample_indices=range(samples_per_view),
             n_dense=n_dense,
@@ -352,8 +377,8 @@ def occlude_point_set(
         clouds = [
             OccludedCloud(
                 points=surfels.points[c].astype(np.float32), face_index=no_face[c], elevation_deg=float(el),
-                azimuth_deg=float(az), radius=float(radius), sample_index=sample_index, n_visible=len(visible_index),
-                **cloud_fields,
+                azimuth_deg=float(az), radius=float(cameras.radius), sample_index=sample_index, n_visible=len(visible_index),
+                label=provenance.label, class_name=provenance.class_name, source=provenance.source, split=provenance.split,
             )  # fmt: skip
             for sample_index, c in enumerate(chosen)
         ]
@@ -493,7 +518,7 @@ def occlude(
         c
         for _, _, pose_clouds in occlude_object(
             mesh, poses, key=key, n_points=n_points, samples_per_view=samples_per_view, seed=seed, dense=dense,
-            method=method, resolution=resolution, radius=radius, source=source,
+            method=method, cameras=CameraSphere(radius, resolution), provenance=ObjectProvenance(source=source),
         )  # fmt: skip
         for c in pose_clouds
     ]

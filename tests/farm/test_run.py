@@ -32,10 +32,10 @@ from zbuf_occlude.errors import InvalidInputError, OutputError
 from zbuf_occlude.farm import FarmParams, SensorCropParams, merge_farm, parse_shard, run_farm, select_shard
 from zbuf_occlude.farm.config import RunOptions
 from zbuf_occlude.geometry.cameras import camera_on_sphere
-from zbuf_occlude.geometry.samples import object_key, pose_samples
+from zbuf_occlude.geometry.samples import ObjectProvenance, object_key, pose_samples
 from zbuf_occlude.mesh.inputs import FarmObject, discover_objects
 from zbuf_occlude.mesh.load import load_mesh
-from zbuf_occlude.pipeline import dense_cloud, occlude_poses
+from zbuf_occlude.pipeline import CameraSphere, dense_cloud, occlude_poses
 from zbuf_occlude.sensors.placement import CropDistributions
 from zbuf_occlude.visibility.registry import method_info, visible_mask
 
@@ -646,7 +646,7 @@ def test_worker_compact_shard_holds_the_dense_cloud_bits_and_poses(tmp_path):
     assert attrs == {**_shard_attrs(obj, params), "n_dense": 1000}
     # the top-up points of each pose, pose after pose, as float32: those occlude_poses draws
     poses = list(occlude_poses(mesh, params.poses, key=obj.key, n_points=150, samples_per_view=0, seed=5, dense=dense,
-                               method="oracle", resolution=32))  # fmt: skip
+                               method="oracle", cameras=CameraSphere(resolution=32)))  # fmt: skip
     expected = np.concatenate([p.topped_up.points for p in poses]).astype(np.float32)
     assert topup.dtype == np.float32 and len(topup) == sum(rec["n_topped_up"]) and np.array_equal(topup, expected)
 
@@ -673,7 +673,7 @@ def test_worker_dense_shard_holds_each_poses_samples(tmp_path):
     assert {k: attrs[k] for k in _shard_attrs(obj, params)} == _shard_attrs(obj, params)
     # exactly the draws of (seed, key, pose, sample) from the pose's visible and top-up points
     poses = list(occlude_poses(mesh, params.poses, key=obj.key, n_points=150, samples_per_view=0, seed=5, dense=dense,
-                               method="oracle", resolution=32))  # fmt: skip
+                               method="oracle", cameras=CameraSphere(resolution=32)))  # fmt: skip
     for pose in (0, 1):
         extra = poses[pose].topped_up
         chosen = pose_samples(np.flatnonzero(visible[pose]), 150, seed=5, key=obj.key, pose_index=pose, sample_indices=range(3),
@@ -698,6 +698,8 @@ def test_worker_sample_files_one_per_sample(tmp_path, storage):
     if storage == "npz":
         clouds = [read_npz(out / s) for s in rec["shards"]]
         assert sorted((c.elevation_deg, c.sample_index) for c in clouds) == [(0.0, 0), (0.0, 1), (0.0, 2), (90.0, 0), (90.0, 1), (90.0, 2)]
+        # each sample carries its object's provenance and its camera's distance
+        assert {(c.provenance, c.radius) for c in clouds} == {(ObjectProvenance(2, "box", obj.source, "train"), params.radius)}
 
 
 def test_worker_records_a_failed_object_and_raises_fatal_errors(tmp_path, monkeypatch):

@@ -22,9 +22,10 @@ from zbuf_occlude.dataset.layout import FORMAT_VERSION
 from zbuf_occlude.dataset.schema import ObjectRecord
 from zbuf_occlude.dataset.storage import SensorCrops, ShardTarget, StorageKind, storage_kind
 from zbuf_occlude.farm.config import COMPACT_GZIP_LEVEL, FATAL_ERRORS, GL_LOCK, FarmParams, record_path, shard_path
+from zbuf_occlude.geometry.samples import ObjectProvenance
 from zbuf_occlude.io.atomic import file_sha256, write_text
 from zbuf_occlude.mesh.inputs import FarmObject
-from zbuf_occlude.pipeline import POINT_SET_METHOD, PoseResult, dense_cloud, occlude_point_set, occlude_poses
+from zbuf_occlude.pipeline import POINT_SET_METHOD, CameraSphere, PoseResult, dense_cloud, occlude_point_set, occlude_poses
 
 log = logging.getLogger(__name__)
 
@@ -73,6 +74,11 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * scale / 2**20
 
 
+def _provenance(obj: FarmObject) -> ObjectProvenance:
+    """What each sample of ``obj`` copies from it."""
+    return ObjectProvenance(label=obj.label, class_name=obj.class_name, source=obj.source, split=obj.split)
+
+
 def _scan(obj: FarmObject, params: FarmParams, out: Path, kind: SensorCrops, mesh_path: Path) -> dict[str, Any]:
     """``farm --sensor``: ``samples_per_view`` LiDAR crops of one object into a dense shard.
 
@@ -106,12 +112,11 @@ def _occlude(obj: FarmObject, params: FarmParams, out: Path, kind: StorageKind, 
 
     mesh = load_mesh(mesh_path, up=params.up)
     dense = dense_cloud(mesh, obj.key, seed=params.seed, count=params.dense_points, density=params.density)
-    common = dict(
-        key=obj.key, n_points=params.n_points, seed=params.seed, dense=dense, method=params.method,
-        resolution=params.resolution, radius=params.radius, label=obj.label, class_name=obj.class_name,
-        source=obj.source, split=obj.split,
+    results = occlude_poses(
+        mesh, params.poses, key=obj.key, n_points=params.n_points, seed=params.seed, dense=dense, method=params.method,
+        cameras=CameraSphere(params.radius, params.resolution), provenance=_provenance(obj),
+        **kind.occlude_options(params.samples_per_view),
     )  # fmt: skip
-    results = occlude_poses(mesh, params.poses, **kind.occlude_options(params.samples_per_view), **common)
     return {**_write_poses(obj, params, out, kind, dense.points, results), **_mesh_record(mesh)}
 
 
@@ -126,8 +131,8 @@ def _occlude_points(obj: FarmObject, params: FarmParams, out: Path, kind: Storag
     samples_per_view = kind.occlude_options(params.samples_per_view)["samples_per_view"]  # compact: 0, it redraws
     results = occlude_point_set(
         cloud.points, params.poses, key=obj.key, normals=cloud.normals, n_points=params.n_points,
-        samples_per_view=samples_per_view, seed=params.seed, radius=params.radius, resolution=params.resolution,
-        label=obj.label, class_name=obj.class_name, source=obj.source, split=obj.split,
+        samples_per_view=samples_per_view, seed=params.seed, cameras=CameraSphere(params.radius, params.resolution),
+        provenance=_provenance(obj),
     )  # fmt: skip
     return {
         **_write_poses(obj, params, out, kind, cloud.points, results),

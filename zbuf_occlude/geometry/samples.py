@@ -32,7 +32,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.sampling import check_seed, points_from_barycentric, sample_faces
 
 __all__ = [
-    "OccludedCloud", "object_key", "derive_rng", "sample_rng", "topup_rng", "draw_sample", "pose_samples",
+    "OccludedCloud", "ObjectProvenance", "object_key", "derive_rng", "sample_rng", "topup_rng", "draw_sample", "pose_samples",
     "count_padded", "TopUp", "top_up", "pool_index", "pool_take", "DENSE_STREAM", "DRAW_STREAM", "PROTOCOL_STREAM", "TOPUP_STREAM",
     "TOPUP_MAX_ROUNDS", "TOPUP_MAX_CANDIDATES_FACTOR", "TOPUP_MARGIN",
 ]  # fmt: skip
@@ -52,6 +52,28 @@ TOPUP_MAX_CANDIDATES_FACTOR = 8
 #: A round draws this many times the candidates expected to give the missing points (a
 #: margin for the spread of the visible fraction, so a second round is rarely needed).
 TOPUP_MARGIN = 1.25
+
+
+@dataclass(frozen=True)
+class ObjectProvenance:
+    """Where an object comes from: what each of its samples copies (:class:`OccludedCloud`'s fields of the same names).
+
+    Attributes
+    ----------
+    label : int
+        Class index (−1 if unknown).
+    class_name : str
+        Class name (``""`` if unknown).
+    source : str
+        The source mesh or point-set file (``""`` if none).
+    split : str
+        The data-set split of the source (``"train"``, ``"test"``; ``""`` if unknown).
+    """
+
+    label: int = -1
+    class_name: str = ""
+    source: str = ""
+    split: str = ""
 
 
 @dataclass
@@ -101,6 +123,11 @@ class OccludedCloud:
     def padded(self) -> bool:
         """True if fewer distinct visible points (top-up included) were available than the sample holds (repeats added)."""
         return self.n_visible < len(self.points)
+
+    @property
+    def provenance(self) -> ObjectProvenance:
+        """The sample's ``label``, ``class_name``, ``source`` and ``split``, as one value."""
+        return ObjectProvenance(self.label, self.class_name, self.source, self.split)
 
 
 def object_key(name: str) -> int:
