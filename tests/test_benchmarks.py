@@ -60,3 +60,17 @@ def test_peer_benchmark_refuses_a_loaded_machine_and_bad_points(monkeypatch, cap
     assert "exceeds" in capsys.readouterr().err
     assert bench.main(["--points", "10,abc"]) == 2
     assert "'10,abc'" in capsys.readouterr().err
+
+
+def test_peer_benchmark_sets_each_of_ours_beside_the_fastest_peer_call():
+    import bench_visibility_peers as bench
+
+    def row(name, walls):
+        return {"method": name, "setup_ms": 0.0, "wall": walls, "cpu": walls, "agree": 0, "fv": 0, "fh": 0, "n": 0}
+
+    rows = [row("`zo.visible_mask` one-shot", [0.010, 0.012]), row("Open3D `RaycastingScene.test_occlusions`", [0.030, 0.030]),
+            row("Open3D `RaycastingScene.cast_rays`", [0.020, 0.024])]
+    text = "\n".join(bench.against_fastest_peer(rows))
+    assert "fastest peer call, Open3D `RaycastingScene.cast_rays` (22.0 ms per view)" in text
+    assert "| `zo.visible_mask` one-shot | 11.0 | 22.0 | **2.00×** | 2.00× (2.00–2.00) |" in text
+    assert "test_occlusions` 1.36×" in text

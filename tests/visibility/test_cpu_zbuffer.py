@@ -265,3 +265,116 @@ def test_a_forked_child_gets_its_own_thread_pool():
         child.kill()
     assert not hung, "the forked child's view never finished"
     assert child.exitcode == 0 and queue.get(timeout=5) == expected
+
+
+# -- the one-shot call's steps: raster bands cut by work, the grouping beside them ----------------
+
+
+def _tower() -> trimesh.Trimesh:
+    """A dense sphere (20,480 faces) on top of a 12-face box: seen from the side, nearly all the
+    raster's work is in the rows of the sphere."""
+    sphere = trimesh.creation.icosphere(subdivisions=5, radius=0.2)
+    sphere.apply_translation((0.0, 0.0, 0.3))
+    box = trimesh.creation.box(extents=(0.8, 0.8, 0.3))
+    box.apply_translation((0.0, 0.0, -0.3))
+    return trimesh.util.concatenate([sphere, box])
+
+
+def _row_work(mesh: trimesh.Trimesh, cam, zb) -> np.ndarray:
+    """(rows,) int: the (face, row) pairs of each row of the grid, plus one (numpy, from scratch)."""
+    rt = cam.extrinsics
+    v = np.asarray(mesh.vertices) @ rt[:, :3].T + rt[:, 3]
+    row = ((v[:, 1] / v[:, 2] - zb.grid[1]) * zb.grid[3])[np.asarray(mesh.faces)]
+    lo = np.clip(np.floor(row.min(axis=1) - 1e-3), 0, None).astype(int)
+    hi = np.clip(np.floor(row.max(axis=1) + 1e-3), None, zb.shape[1] - 1).astype(int)
+    diff = np.zeros(zb.shape[1] + 1, dtype=int)
+    np.add.at(diff, lo[lo <= hi], 1)
+    np.add.at(diff, hi[lo <= hi] + 1, -1)
+    return np.cumsum(diff)[:-1] + 1
+
+
+def test_the_raster_bands_are_cut_by_work_not_by_rows():
+    # Cut in equal numbers of rows, the band with the sphere had all the work and the other
+    # thread waited for it.
+    mesh = _tower()
+    cam = zo.camera_on_sphere(0.0, 30.0, resolution=256)
+    for bands in (2, 3, 4):
+        run = _Bands(bands)
+        zb = cpu_zbuffer.build_zbuffer(mesh, cam, 50_000, run=run)
+        work = _row_work(mesh, cam, zb)
+        per_band = [work[lo:hi].sum() for lo, hi in run.cuts]
+        assert max(per_band) <= 1.1 * work.sum() / bands + work.max(), (bands, per_band)
+
+
+def test_the_buffer_does_not_depend_on_the_bands_or_on_a_grouping_beside_them():
+    mesh = _tower()
+    for el, az in ((0.0, 30.0), (50.0, 200.0)):
+        cam = zo.camera_on_sphere(el, az, resolution=256)
+        one = cpu_zbuffer.build_zbuffer(mesh, cam, 30_000)
+        for bands in (1, 2, 3, 5):
+            for grouping in (0, 30_000, 10**7):  # a grouping heavier than a band leaves the last one empty
+                zb, tasks = cpu_zbuffer.zbuffer_tasks(mesh, cam, 30_000, bands=bands, grouping=grouping)
+                rows = [(args[6], args[7]) for _, args in tasks]
+                assert rows[0][0] == 0 and rows[-1][1] == zb.shape[1] and all(a[1] == b[0] for a, b in zip(rows, rows[1:]))
+                for fn, args in reversed(tasks):  # any order
+                    fn(*args)
+                assert np.array_equal(one.zbuf.view(np.uint32), zb.zbuf.view(np.uint32)), (el, az, bands, grouping)
+
+
+def test_the_view_extent_is_numpys_over_the_vertices_the_faces_use():
+    rng = np.random.default_rng(5)
+    mesh = _tower()
+    # many unused vertices far from the faces (more than three per face): they must not count
+    cloud = trimesh.Trimesh(np.concatenate([mesh.vertices, rng.normal(size=(3 * len(mesh.faces) + 10, 3)) * 0.3 + 0.1]),
+                            mesh.faces, process=False)
+    for m in (mesh, cloud):
+        data = cpu_zbuffer._mesh_data(m)
+        rt = np.ascontiguousarray(zo.camera_on_sphere(20.0, 40.0).extrinsics)
+        cam, extent = cpu_zbuffer._to_camera(data.vertices, rt, data.used)
+        used = cam[np.unique(m.faces)]
+        expected = [used[:, 2].min(), np.abs(used[:, 2]).max(), used[:, 3].min(), used[:, 3].max(), used[:, 4].min(), used[:, 4].max()]
+        assert extent.tolist() == expected
+
+
+def test_the_grouping_task_gives_group_by_faces_arrays():
+    rng = np.random.default_rng(1)
+    points = rng.normal(size=(1001, 3))
+    face_index = rng.integers(0, 37, 1001)
+    *arrays, (fn, args) = cpu_zbuffer.group_task(points, face_index, 37)
+    fn(*args)
+    assert all(np.array_equal(a, b) for a, b in zip(arrays, cpu_zbuffer.group_by_face(points, face_index, 37)))
+
+
+def test_a_one_shot_scene_gives_the_same_masks_whatever_the_threads_and_groups_its_points_when_read():
+    mesh = zo.load_mesh(SAMPLES / "chair/train/chair_0001.off")
+    points, fi = zo.sample_surface(mesh, 20_000, seed=6)
+    cams = [zo.camera_on_sphere(el, az, radius) for el, az, radius in ((15.0, 20.0, 4.0), (-40.0, 250.0, 1.2))]
+    for cam in cams:
+        masks = [embree_fast.embree_fast_visible(mesh, points, cam, face_index=fi, threads=t) for t in (1, 2, 3)]
+        assert all(np.array_equal(masks[0], m) for m in masks[1:])
+        scene = FastScene(mesh, points, fi, sort=False, threads=2)
+        assert np.array_equal(scene.visible(cam), masks[0])
+        assert np.array_equal(scene.visible(cam), masks[0])  # a second view: the points already grouped
+    unread = FastScene(mesh, points, fi, sort=False)
+    perm, grouped, faces = cpu_zbuffer.group_by_face(points, fi, len(mesh.faces))
+    assert np.array_equal(unread.points, grouped) and np.array_equal(unread.face_index, faces)
+
+
+def test_a_view_computes_the_cameras_extrinsics_once():
+    import dataclasses
+
+    mesh = zo.load_mesh(SAMPLES / "chair/train/chair_0001.off")
+    points, fi = zo.sample_surface(mesh, 5000, seed=7)
+    cam = zo.camera_on_sphere(25.0, 60.0)
+    calls = []
+
+    class Counting(type(cam)):
+        @property
+        def extrinsics(self):
+            calls.append(1)
+            return super().extrinsics
+
+    counting = Counting(**{f.name: getattr(cam, f.name) for f in dataclasses.fields(cam) if f.init})
+    expected = FastScene(mesh, points, fi, sort=False, threads=1).visible(cam)
+    got = FastScene(mesh, points, fi, sort=False, threads=1).visible(counting)
+    assert np.array_equal(got, expected) and len(calls) == 1

@@ -620,3 +620,24 @@ def test_the_embree_oracle_is_a_few_named_steps():
     steps = (occluded_embree, oracle._sightlines, oracle._clip_to_sphere, oracle._cast, oracle._crease_pass, oracle._decide_exactly)
     assert all(len(inspect.getsource(step).splitlines()) < 150 for step in steps)
     assert [name for name in ("_sightlines", "_cast", "_crease_pass", "_decide_exactly") if name not in inspect.getsource(occluded_embree)] == []
+
+
+def test_no_re_check_runs_once_every_ray_has_an_accepted_occluder(monkeypatch):
+    """Near-ties of embree-fast come to the oracle a few dozen at a time, nearly all hidden by the
+    first face their ray meets: once every ray is settled, no step after the casts runs (each one
+    cost tens of microseconds on empty arrays)."""
+    quad_below = np.concatenate([QUAD, QUAD - [0.0, 0.0, 2.0]])  # a second square under the first
+    mesh = trimesh.Trimesh(quad_below.reshape(-1, 3), np.arange(12).reshape(-1, 3), process=False)
+    rng = np.random.default_rng(0)
+    points = np.column_stack([rng.uniform(-0.5, 0.5, (40, 2)), np.full(40, -2.0)])
+    face_index = np.where(points[:, 0] > points[:, 1], 2, 3)  # on the lower square
+
+    def never(*args, **kwargs):
+        raise AssertionError("called with nothing left to decide")
+
+    expected = occluded_embree(mesh, points, EYE_ABOVE, face_index=face_index)
+    monkeypatch.setattr(oracle, "near_own_surface", never)
+    monkeypatch.setattr(oracle, "boundary_times_cos", never)
+    stats = {}
+    assert np.array_equal(occluded_embree(mesh, points, EYE_ABOVE, face_index=face_index, stats=stats), expected)
+    assert expected.all() and stats["accepted"] == 40

@@ -70,8 +70,12 @@ _MAX_START = 2e-2
 #: Pass 2 starts this far from the point (relative, over ``cos``): float32 rounding of the
 #: point and the own face (a few ulps of the radius) stays below it.
 _BAND_LO = 2e-6
-#: Rays per chunk of the thread pool.
+#: Rays per chunk of the thread pool (one chunk per thread below that).
 _CHUNK = 65536
+#: Slices of points per thread in the pre-pass's classification: taken in turn by the threads, so
+#: that a slow slice (many faces in front of its points, a thread the system runs late) leaves the
+#: other threads the rest instead of being waited for; each slice costs a call.
+_SLICES_PER_THREAD = 4
 #: Depth slack of the frustum test, relative to the depth: float32 points within it of the near or
 #: far plane are settled by the float64 frustum test of the oracle (``FRUSTUM_BORDER``).
 _DEPTH_REL_MARGIN = 1e-5
@@ -149,6 +153,15 @@ class _Scene:
             edge = np.concatenate([planes.edge_normals * scale[..., None], (planes.edge_offsets * scale)[..., None]], axis=2)
         self.unit_normals = np.nan_to_num(unit).astype(np.float32)
         self.edge_planes = np.nan_to_num(edge)  # degenerate faces: distance 0 (always a crease)
+        #: The face normals of the edge-on rule (float64, :func:`mesh_planes`'s).
+        self.normals = planes.normal
+        self._oracle = None
+
+    def oracle(self, mesh: trimesh.Trimesh):
+        """The oracle's scene of ``mesh`` (this scene's mesh), looked up once (crease re-checks)."""
+        if self._oracle is None:
+            self._oracle = oracle_scene(mesh)
+        return self._oracle
 
 
 _scenes: MeshCache[_Scene] = MeshCache(_Scene, 8)
@@ -293,33 +306,43 @@ class _Runner:
     """``run(fn, args_list)`` for :mod:`.cpu_zbuffer`: ``fn(*args)`` for each argument tuple,
     pulled in turn by the calling thread and ``threads - 1`` threads of the pool (the compiled
     kernels release the GIL), so that a late thread only takes fewer; ``bands`` is how many
-    tuples to make."""
+    tuples to make (``per_thread`` per thread)."""
 
-    def __init__(self, threads: int):
-        self.bands = threads
+    def __init__(self, threads: int, per_thread: int = 1):
+        self.threads = threads
+        self.bands = threads * per_thread if threads > 1 else 1
 
     def __call__(self, fn, args_list) -> list:
-        return _run_shared(self.bands, fn, args_list)
+        return _run_shared(self.threads, fn, args_list)
 
 
 def _run_shared(threads: int, fn, args_list) -> list:
     """``[fn(*args) for args in args_list]``, computed by the calling thread and up to
     ``threads - 1`` threads of the pool, each taking the next undone tuple."""
-    n = len(args_list)
+    return _run_tasks(threads, [(fn, args) for args in args_list])
+
+
+def _run_tasks(threads: int, tasks: list) -> list:
+    """``[fn(*args) for fn, args in tasks]``, computed by the calling thread and up to
+    ``threads - 1`` threads of the pool, each taking the next undone task (in list order)."""
+    n = len(tasks)
     if threads <= 1 or n <= 1:
-        return [fn(*args) for args in args_list]
+        return [fn(*args) for fn, args in tasks]
     out = [None] * n
     taken = itertools.count()
 
     def drain() -> None:
         while (k := next(taken)) < n:  # (next() on a count is atomic under the GIL)
-            out[k] = fn(*args_list[k])
+            fn, args = tasks[k]
+            out[k] = fn(*args)
 
     pool = _executor(threads - 1)
     helpers = [pool.submit(drain) for _ in range(min(threads, n) - 1)]
-    drain()
-    for h in helpers:
-        h.result()
+    try:
+        drain()
+    finally:
+        for h in helpers:
+            h.result()
     return out
 
 
@@ -363,6 +386,7 @@ class FastScene(SessionBase):
         self.threads = int(threads or DEFAULT_THREADS)
         self._scene = _scenes(mesh)
         self._run = _Runner(self.threads)
+        self._slices = _Runner(self.threads, _SLICES_PER_THREAD)
         self._prepass = True if prepass is None else bool(prepass)
         # Rays in Z-order (Morton) of their points traverse the same BVH nodes, and the
         # pre-pass reads the buffer in order: worth a sort for many views, or when every
@@ -373,14 +397,34 @@ class FastScene(SessionBase):
             self._perm = morton_order(points)
             points = np.ascontiguousarray(points[self._perm])
             face_index = None if face_index is None else face_index[self._perm]
-        elif face_index is not None and len(points):
-            self._perm, points, face_index = cpu_zbuffer.group_by_face(points, face_index, len(mesh.faces), run=self._run)
-        self.points, self.face_index = points, face_index
+        # The grouping is left to the first view, which runs it beside the buffer's raster bands.
+        self._grouping = None
+        if face_index is not None and len(points) and self._perm is None:
+            self._perm, points, face_index, self._grouping = cpu_zbuffer.group_task(points, face_index, len(mesh.faces))
+        self._points, self._face_index = points, face_index
         self._x_order: NDArray[np.int64] | None = None
         #: Fraction of the points the last call re-decided in float64 (near-ties).
         self.last_cpu_fraction = 0.0
         #: Fraction of the points the last call cast as rays (the pre-pass settled the rest).
         self.last_ray_fraction = 0.0
+
+    def _group_now(self) -> None:
+        if self._grouping is not None:
+            fn, args = self._grouping
+            fn(*args)
+            self._grouping = None
+
+    @property
+    def points(self) -> NDArray[np.float64]:
+        """(N, 3) float64: the points in the scene's order (see ``_perm``; grouped by face on the first view)."""
+        self._group_now()
+        return self._points
+
+    @property
+    def face_index(self) -> NDArray[np.int64] | None:
+        """(N,) int64 or None: the points' faces, in the order of :attr:`points`."""
+        self._group_now()
+        return self._face_index
 
     def _chunk(self, rays: NDArray[np.int64], view: tuple) -> tuple[NDArray, NDArray, NDArray]:
         """(in frustum and not occluded by pass 1, near-tie, status) for points ``rays``;
@@ -404,12 +448,11 @@ class FastScene(SessionBase):
             tie[idx[near]] = True
         return visible, tie, status
 
-    def _cast(self, rays: NDArray[np.int64], camera: Camera, tolerance: float, visible: NDArray[np.bool_]) -> None:
-        """Decide points ``rays`` (in a coherent order) with Embree and float64 re-checks
-        (module docstring) into ``visible``."""
+    def _view(self, camera: Camera, rt: NDArray[np.float64]) -> tuple:
+        """``(camera, eye_c, frame, intrinsics, ray settings)`` of :meth:`_chunk` (float32, mesh-centred);
+        ``rt``: ``camera.extrinsics`` (world → OpenCV camera frame)."""
         sc = self._scene
         eye_c = (np.asarray(camera.eye, dtype=np.float64) - sc.centre).astype(np.float32)
-        rt = camera.extrinsics  # world -> OpenCV camera frame
         frame = np.empty((3, 4), dtype=np.float32)
         frame[:, :3] = rt[:, :3]
         frame[:, 3] = rt[:, :3] @ sc.centre + rt[:, 3]
@@ -417,7 +460,13 @@ class FastScene(SessionBase):
             [camera.focal_px, camera.width, camera.height, camera.znear, camera.zfar,
              _BORDER_PX + _BORDER_PER_PX * max(camera.width, camera.height)], dtype=np.float32))
         settings = _RaySettings(*np.array([sc.radius, _START, _MAX_START, _BAND_LO, EDGE_ON_SIN + _EDGE_ON_SLACK], dtype=np.float32))
-        view = (camera, eye_c, frame, cam, settings)
+        return camera, eye_c, frame, cam, settings
+
+    def _cast(self, rays: NDArray[np.int64], camera: Camera, tolerance: float, visible: NDArray[np.bool_],
+              rt: NDArray[np.float64]) -> None:
+        """Decide points ``rays`` (in a coherent order) with Embree and float64 re-checks
+        (module docstring) into ``visible``; ``rt``: ``camera.extrinsics``."""
+        view = self._view(camera, rt)
         m = len(rays)
         step = min(_CHUNK, -(-m // self.threads))  # at least one chunk per thread
         parts = _run_shared(self.threads, self._chunk, [(rays[lo:lo + step], view) for lo in range(0, m, step)])
@@ -426,26 +475,42 @@ class FastScene(SessionBase):
         status = np.concatenate([st for _, _, st in parts])
         at = np.flatnonzero(vis & ~tie & ((status & CREASE) != 0))
         crease = rays[at]
+        eye = np.asarray(camera.eye, dtype=np.float64)
         if len(crease):
             # Within pass 2's start of its face's boundary, the point may be hidden by a
             # neighbouring face closer than that start: test the faces around its own
             # face exactly (as the oracle's crease pass does).
-            scene = oracle_scene(self.mesh)
-            hidden = _crease(
-                crease, self.points, self.face_index, np.asarray(camera.eye, dtype=np.float64), scene.packed_planes,
-                scene.corner_vertex, scene.vertex_start, scene.vertex_faces, float(tolerance),
-            )
+            scene = self._scene.oracle(self.mesh)
+            hidden = _crease(crease, self.points, self.face_index, eye, scene.packed_planes, scene.corner_vertex,
+                             scene.vertex_start, scene.vertex_faces, float(tolerance))
             vis[at[hidden]] = False
         idx = rays[tie]
         self.last_cpu_fraction = len(idx) / max(len(self.points), 1)
         if len(idx):
             fi_t = None if self.face_index is None else self.face_index[idx]
-            vis[tie] = ~occluded_embree(self.mesh, self.points[idx], camera.eye, face_index=fi_t, tolerance=tolerance)
+            vis[tie] = ~occluded_embree(self.mesh, self.points[idx], eye, face_index=fi_t, tolerance=tolerance)
         if self.face_index is not None:
             edge = np.flatnonzero(vis & ((status & MAYBE_EDGE_ON) != 0))
             pts = self.points[rays[edge]]
-            vis[edge[edge_on_own(mesh_planes(self.mesh).normal[self.face_index[rays[edge]]], pts, camera.eye)]] = False
+            vis[edge[edge_on_own(self._scene.normals[self.face_index[rays[edge]]], pts, camera.eye)]] = False
         visible[rays] = vis
+
+    def _prepass_view(self, camera: Camera, tolerance: float) -> tuple[NDArray[np.bool_], NDArray[np.int64], NDArray[np.float64]]:
+        """The pre-pass (:mod:`.cpu_zbuffer`): ``(visible, rays, extrinsics)``, the points it settled
+        visible, those left to the rays, and ``camera.extrinsics``.  The first view also groups the
+        points by face, on the pool beside the buffer's raster bands."""
+        n = len(self._points)
+        grouping = [] if self._grouping is None else [self._grouping]
+        zb, tasks = cpu_zbuffer.zbuffer_tasks(self.mesh, camera, n, bands=self._run.bands, grouping=n if grouping else 0)
+        _run_tasks(self.threads, grouping + tasks)  # (the grouping first: its thread then takes the lighter last band)
+        self._grouping = None
+        status = cpu_zbuffer.classify(self.mesh, self.points, self.face_index, camera, zb, tolerance, run=self._slices)
+        visible = status == cpu_zbuffer.VISIBLE
+        rays = np.flatnonzero(status == cpu_zbuffer.UNDECIDED)
+        if self._perm is None and len(rays):
+            # rays in the order of their cells (rows of the image plane): coherent enough
+            rays = rays[np.argsort(cpu_zbuffer.cell_of(self.points[rays], camera, zb), kind="stable")]
+        return visible, rays, zb.view_extrinsics(camera)
 
     def visible(self, camera: Camera, *, tolerance: float = TOLERANCE) -> NDArray[np.bool_]:
         """Visibility of the points from ``camera`` (see the module docstring).
@@ -455,22 +520,15 @@ class FastScene(SessionBase):
         visible : (N,) bool
             In the order of the points given to the constructor.
         """
-        n = len(self.points)
+        n = len(self._points)
         if self._prepass:
-            zb = cpu_zbuffer.build_zbuffer(self.mesh, camera, n, run=self._run)
-            status = cpu_zbuffer.classify(self.mesh, self.points, self.face_index, camera, zb, tolerance, run=self._run)
-            visible = status == cpu_zbuffer.VISIBLE
-            rays = np.flatnonzero(status == cpu_zbuffer.UNDECIDED)
-            if self._perm is None and len(rays):
-                # rays in the order of their cells (rows of the image plane): coherent enough
-                rays = rays[np.argsort(cpu_zbuffer.cell_of(self.points[rays], camera, zb), kind="stable")]
+            visible, rays, rt = self._prepass_view(camera, tolerance)
         else:
-            visible = np.zeros(n, dtype=bool)
-            rays = np.arange(n)
+            visible, rays, rt = np.zeros(n, dtype=bool), np.arange(n), camera.extrinsics
         self.last_ray_fraction = len(rays) / max(n, 1)
         self.last_cpu_fraction = 0.0
         if len(rays):
-            self._cast(rays, camera, float(tolerance), visible)
+            self._cast(rays, camera, float(tolerance), visible, rt)
         if self.face_index is None:  # rule (b) without face_index, for every point
             if self._x_order is None:
                 self._x_order = np.argsort(self.points[:, 0], kind="stable")

@@ -352,6 +352,8 @@ def _cast(scene: _EmbreeScene, rays: _Sightlines, occluded: NDArray[np.bool_], c
         occluded[live[accept]] = True
         counters["accepted"] += int(accept.sum())
         live, face, t_hit = live[~accept], face[~accept], t_hit[~accept]
+        if len(live) == 0:  # (the common end: every hit accepted)
+            break
         # Why was each hit rejected?  Own face, or the exact line meets the closed face
         # within tolerance of the point (either side): the point's own surface, step past
         # it.  Otherwise the exact segment misses the face: float32 grazed an edge, and a
@@ -386,6 +388,8 @@ def _crease_pass(scene: _EmbreeScene, rays: _Sightlines, occluded: NDArray[np.bo
     around their own face decided exactly."""
     pts, seg, seg_len, fi, tol = rays.pts, rays.seg, rays.seg_len, rays.face_index, rays.tolerance
     idx = np.flatnonzero(~occluded & ~fallback)
+    if len(idx) == 0:
+        return
     idx = idx[boundary_times_cos(scene.planes.take(fi[idx]), pts[idx], rays.direction[idx]) <= _EMBREE_CREASE_BAND * scene.radius]
     k, g = scene.faces_around(fi[idx])
     for c0 in range(0, len(k), DEFAULT_PAIRS_PER_CHUNK):
