@@ -17,14 +17,16 @@ normals, where given), with the z-buffer test the mesh methods use:
 3. **The test.**  A point is visible when the surface point that wins its pixel lies on the
    point's own sheet: within a tolerance of its tangent plane, measured along the normal, so
    that grazing views do not magnify it, plus the curvature between the two when they are
-   neighbours on one smooth sheet (:func:`~zbuf_occlude.visibility.point_kernels.decide`).
+   neighbours on one smooth sheet; a winner whose centre lies behind that plane (past a convex
+   crease) does not hide the point, and a point seen through a gap of a surface in front is
+   hidden (:func:`~zbuf_occlude.visibility.point_kernels.decide`).
 
 Compared with hidden point removal (HPR, Katz et al. 2007, Open3D's ``hidden_point_removal``) it
-needs no radius, and with screen-space operators (Pintus et al. 2011) and variable-density
-visibility (Biasutti et al. 2019) it shares the idea of sizing the test from the local density;
-docs/results/point_visibility.md measures all of them against the exact mesh oracle.
+needs no radius; with screen-space operators (Pintus et al. 2011) and variable-density visibility
+(Biasutti et al. 2019) it shares the idea of sizing the test from the local density.
+docs/results/point_visibility.md measures it and HPR against the exact mesh oracle.
 
-What points alone cannot tell: a wall thinner than the tolerance (a tenth of the spacing) has both
+What points alone cannot tell: a wall thinner than the tolerance (a twentieth of the spacing) has both
 faces visible unless the normals are oriented (``oriented=True``: a closed, consistently wound
 surface), and points within about one spacing of an occluding edge are decided by the splat's
 reach, not by the surface, which does not show.
