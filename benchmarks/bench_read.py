@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import shutil
 import statistics
 import sys
 import tempfile
@@ -77,43 +76,47 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--scratch", type=Path, help="the data set folder, reused when finished (default: a temporary one, removed)")
     args = p.parse_args(argv)
 
-    out = args.scratch or Path(tempfile.mkdtemp(prefix="bench_read_"))
-    try:
-        if not (out / CARD_FILE).is_file():
-            params = FarmParams(views=args.views, samples_per_view=args.samples_per_view, n_points=args.points,
-                                dense_points=args.dense_points, resolution=DEFAULT_FARM_RESOLUTION, storage="compact")  # fmt: skip
-            t0 = time.perf_counter()
-            run_farm(repeated_objects(args.root, args.objects), out, params,
-                     RunOptions(workers=args.workers, progress=False, command="benchmarks/bench_read.py"))  # fmt: skip
-            print(f"# built {out} in {time.perf_counter() - t0:.0f} s")
-        settings = args.caches.split(",")
-        sets = {s: OccludedDataset(out, object_cache=_setting(s)) for s in settings}
-        first = next(iter(sets.values()))
-        n_objects = len({first.metadata(i)["object_index"] for i in range(len(first))})
-        found = available_memory()
-        print(f"# {n_objects} objects × {len(first) // max(n_objects, 1)} samples of {first.n_points} points, compact; "
-              f"{args.reads} shuffled reads × {args.repeats} repeats, interleaved")  # fmt: skip
-        print(f"# machine: {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}; memory available "
-              f"{format_bytes(found[0]) if found else 'unknown'}")  # fmt: skip
-        print(f"# before: {_load()}", flush=True)
-        for ds in sets.values():  # not timed: every object's shard checked and opened once
-            for obj_first in np.unique([ds.metadata(i)["object_index"] for i in range(len(ds))], return_index=True)[1]:
-                ds[int(obj_first)]
-        rng = np.random.default_rng(0)
-        ms: dict[str, list[float]] = {s: [] for s in settings}
-        for _ in range(args.repeats):
-            indices = rng.integers(0, len(first), args.reads)
-            for s, ds in sets.items():
-                ms[s].append(_read_ms(ds, indices))
-        print(f"# after: {_load()}")
-        print()
-        print("| object_cache | objects it keeps at most | ms/item (median) | range |")
-        print("|---|---:|---:|---:|")
+    if args.scratch is not None:
+        return _measure(args, args.scratch)
+    # a data set of its own, which tempfile removes when the measurement ends
+    with tempfile.TemporaryDirectory(prefix="bench_read_") as scratch:
+        return _measure(args, Path(scratch))
+
+
+def _measure(args: argparse.Namespace, out: Path) -> int:
+    """Build the compact data set in ``out`` unless it is there, then time shuffled reads."""
+    if not (out / CARD_FILE).is_file():
+        params = FarmParams(views=args.views, samples_per_view=args.samples_per_view, n_points=args.points,
+                            dense_points=args.dense_points, resolution=DEFAULT_FARM_RESOLUTION, storage="compact")  # fmt: skip
+        t0 = time.perf_counter()
+        run_farm(repeated_objects(args.root, args.objects), out, params,
+                 RunOptions(workers=args.workers, progress=False, command="benchmarks/bench_read.py"))  # fmt: skip
+        print(f"# built {out} in {time.perf_counter() - t0:.0f} s")
+    settings = args.caches.split(",")
+    sets = {s: OccludedDataset(out, object_cache=_setting(s)) for s in settings}
+    first = next(iter(sets.values()))
+    n_objects = len({first.metadata(i)["object_index"] for i in range(len(first))})
+    found = available_memory()
+    print(f"# {n_objects} objects × {len(first) // max(n_objects, 1)} samples of {first.n_points} points, compact; "
+          f"{args.reads} shuffled reads × {args.repeats} repeats, interleaved")  # fmt: skip
+    print(f"# machine: {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}; memory available "
+          f"{format_bytes(found[0]) if found else 'unknown'}")  # fmt: skip
+    print(f"# before: {_load()}", flush=True)
+    for ds in sets.values():  # not timed: every object's shard checked and opened once
+        for obj_first in np.unique([ds.metadata(i)["object_index"] for i in range(len(ds))], return_index=True)[1]:
+            ds[int(obj_first)]
+    rng = np.random.default_rng(0)
+    ms: dict[str, list[float]] = {s: [] for s in settings}
+    for _ in range(args.repeats):
+        indices = rng.integers(0, len(first), args.reads)
         for s, ds in sets.items():
-            print(f"| {s} | {ds.object_cache} | {statistics.median(ms[s]):.2f} | {min(ms[s]):.2f}–{max(ms[s]):.2f} |")
-    finally:
-        if args.scratch is None:
-            shutil.rmtree(out, ignore_errors=True)
+            ms[s].append(_read_ms(ds, indices))
+    print(f"# after: {_load()}")
+    print()
+    print("| object_cache | objects it keeps at most | ms/item (median) | range |")
+    print("|---|---:|---:|---:|")
+    for s, ds in sets.items():
+        print(f"| {s} | {ds.object_cache} | {statistics.median(ms[s]):.2f} | {min(ms[s]):.2f}–{max(ms[s]):.2f} |")
     return 0
 
 
