@@ -126,3 +126,33 @@ def test_usage_errors_are_one_line_and_exit_2(tmp_path, capsys, command, make, s
     assert err.startswith("zbuf-occlude: error: ") and "\n" not in err and "Traceback" not in err
     assert re.search(said, err), err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("command", ["generate", "farm"])
+def test_a_users_files_in_out_survive_point_set_runs_and_overwrite(tmp_path, command) -> None:
+    root = tmp_path / "in"
+    (root / "a").mkdir(parents=True)
+    np.save(root / "a" / "cloud.npy", GOOD)
+    out = tmp_path / "out"
+    (out / "mine").mkdir(parents=True)
+    (out / "notes.md").write_text("mine")
+    (out / "mine" / "keep_000000.h5").write_bytes(b"mine")
+    assert main([command, str(root), "--out", str(out), *TINY]) == 0
+    np.save(root / "a" / "cloud.npy", GOOD[:300])  # a changed input: the rerun replaces its own files
+    assert main([command, str(root), "--out", str(out), *TINY, "--overwrite"]) == 0
+    assert (out / "notes.md").read_text() == "mine"
+    assert (out / "mine" / "keep_000000.h5").read_bytes() == b"mine"
+    assert main(["verify", str(out)]) == 0
+
+
+def test_a_users_file_where_generate_writes_is_refused_and_kept(tmp_path, capsys) -> None:
+    root = tmp_path / "in"
+    (root / "a").mkdir(parents=True)
+    np.save(root / "a" / "cloud.npy", GOOD)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "dataset_card.json").write_text("mine")
+    assert main(["generate", str(root), "--out", str(out), *TINY, "--overwrite"]) != 0
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "dataset_card.json" in err
+    assert (out / "dataset_card.json").read_text() == "mine"
