@@ -165,6 +165,29 @@ class PoseResult:
         return int(np.count_nonzero(self.visible)) + len(self.topped_up)
 
 
+def _check_counts(n_points: int, samples_per_view: int) -> None:
+    if n_points < 1 or samples_per_view < 0:
+        raise InvalidInputError(f"need n_points >= 1 and samples_per_view >= 0, got {n_points}, {samples_per_view}")
+
+
+def _pose_clouds(
+    points: NDArray[np.float64], face_index: NDArray[np.int64], extra: TopUp, chosen: Sequence[NDArray[np.int64]],
+    pose: tuple[float, float], n_visible_dense: int, cameras: CameraSphere, provenance: ObjectProvenance,
+) -> list[OccludedCloud]:
+    """One pose's samples: pool indices ``chosen`` (:func:`~zbuf_occlude.geometry.samples.pose_samples`) taken
+    from the dense ``points``/``face_index`` and the pose's top-up ``extra``, with the pose and provenance."""
+    el, az = pose
+    return [
+        OccludedCloud(
+            points=pool_take(points, extra.points, c).astype(np.float32), face_index=pool_take(face_index, extra.face_index, c),
+            elevation_deg=float(el), azimuth_deg=float(az), radius=float(cameras.radius), label=provenance.label,
+            class_name=provenance.class_name, source=provenance.source, sample_index=sample_index,
+            n_visible=n_visible_dense + len(extra), split=provenance.split, n_topped_up=len(extra),
+        )  # fmt: skip
+        for sample_index, c in enumerate(chosen)
+    ]
+
+
 def occlude_poses(
     mesh: trimesh.Trimesh,
     poses: Sequence[tuple[float, float]],
@@ -224,8 +247,7 @@ def occlude_poses(
     CameraError
         A pose or ``cameras`` gives no valid camera (:meth:`CameraSphere.camera`).
     """
-    if n_points < 1 or samples_per_view < 0:
-        raise InvalidInputError(f"need n_points >= 1 and samples_per_view >= 0, got {n_points}, {samples_per_view}")
+    _check_counts(n_points, samples_per_view)
     check_keywords(method, method_options)  # a misspelt option must not run with the default
     # Refuse before allocating what cannot fit (the OOM killer gives no message).
     check_memory(
@@ -277,24 +299,7 @@ def occlude_poses(
                 visible_index, n_points, seed=seed, key=key, pose_index=pose_index,
                 sample_indices=range(samples_per_view), n_dense=n_dense, n_topped_up=len(extra),
             )  # fmt: skip
-            n_visible = len(visible_index) + len(extra)
-            clouds = [
-                OccludedCloud(
-                    points=pool_take(dense.points, extra.points, c).astype(np.float32),
-                    face_index=pool_take(dense.face_index, extra.face_index, c),
-                    elevation_deg=float(el),
-                    azimuth_deg=float(az),
-                    radius=float(cameras.radius),
-                    label=provenance.label,
-                    class_name=provenance.class_name,
-                    source=provenance.source,
-                    sample_index=sample_index,
-                    n_visible=n_visible,
-                    split=provenance.split,
-                    n_topped_up=len(extra),
-                )
-                for sample_index, c in enumerate(chosen)
-            ]
+            clouds = _pose_clouds(dense.points, dense.face_index, extra, chosen, (el, az), len(visible_index), cameras, provenance)
             yield PoseResult(pose_index, visible, extra, clouds)
     finally:
         if scene is not None:
@@ -354,8 +359,7 @@ def occlude_point_set(
     """
     from zbuf_occlude.visibility.point_splats import point_surfels
 
-    if n_points < 1 or samples_per_view < 0:
-        raise InvalidInputError(f"need n_points >= 1 and samples_per_view >= 0, got {n_points}, {samples_per_view}")
+    _check_counts(n_points, samples_per_view)
     check_memory(
         estimate_job_memory(
             points=int(n_points), samples_per_view=int(samples_per_view), dense_points=len(points), resolution=cameras.resolution
@@ -374,14 +378,7 @@ def occlude_point_set(
             visible_index, n_points, seed=seed, key=key, pose_index=pose_index, sample_indices=range(samples_per_view),
             n_dense=n_dense,
         )  # fmt: skip
-        clouds = [
-            OccludedCloud(
-                points=surfels.points[c].astype(np.float32), face_index=no_face[c], elevation_deg=float(el),
-                azimuth_deg=float(az), radius=float(cameras.radius), sample_index=sample_index, n_visible=len(visible_index),
-                label=provenance.label, class_name=provenance.class_name, source=provenance.source, split=provenance.split,
-            )  # fmt: skip
-            for sample_index, c in enumerate(chosen)
-        ]
+        clouds = _pose_clouds(surfels.points, no_face, TopUp(), chosen, (el, az), len(visible_index), cameras, provenance)
         yield PoseResult(pose_index, visible, TopUp(), clouds)
 
 

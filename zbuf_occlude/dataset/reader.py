@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.dataset.index import PoseFilter, PoseFilters, SampleIndex, sample_index
 from zbuf_occlude.dataset.layout import CARD_FILE, FORMAT_VERSION, MANIFEST_FILE
-from zbuf_occlude.dataset.storage import StorageKind, storage_kind
+from zbuf_occlude.dataset.storage import BYTES_PER_POINT, StorageKind, storage_kind
 from zbuf_occlude.defaults import DEFAULT_FARM_DENSE_POINTS
 from zbuf_occlude.errors import InvalidInputError, ShardChecksumError
 from zbuf_occlude.io.safe_paths import path_inside
@@ -64,8 +64,7 @@ def object_cache_bytes(n_dense: int, n_poses: int, n_topup: int) -> int:
     int
         ``12 M + P ceil(M / 8) + 12 T`` bytes.
     """
-    point = 3 * np.dtype(np.float32).itemsize
-    return point * int(n_dense) + int(n_poses) * -(-int(n_dense) // 8) + point * int(n_topup)
+    return BYTES_PER_POINT * (int(n_dense) + int(n_topup)) + int(n_poses) * -(-int(n_dense) // 8)
 
 
 def default_object_cache(

@@ -124,8 +124,9 @@ def _point_set(path: Path, name: str, cloud: NDArray, normals: NDArray | None, l
 
 
 # -- HDF5 -------------------------------------------------------------------------------------------
-def _hdf5_layout(f: Any, path: Path) -> tuple[Any, Any | None]:
-    """``data`` and ``normal`` (or None) of a checked, open PointNet-layout file."""
+def _hdf5_layout(f: Any, path: Path, max_points: int) -> tuple[Any, Any | None]:
+    """``data`` (at least one cloud of at most ``max_points`` points) and ``normal`` (or None) of a
+    checked, open PointNet-layout file."""
     import h5py
 
     data = f.get("data")
@@ -139,6 +140,10 @@ def _hdf5_layout(f: Any, path: Path) -> tuple[Any, Any | None]:
     if normal is not None and (not isinstance(normal, h5py.Dataset) or normal.dtype.kind != "f" or normal.shape != data.shape[:2] + (3,)):
         shape = getattr(normal, "shape", "a group")
         raise DatasetFormatError(f"{path}: 'normal' is {shape}, not (B, N, 3) floats like 'data' {data.shape}")
+    if data.shape[0] == 0:
+        raise DatasetFormatError(f"{path}: 'data' holds no clouds")
+    if data.shape[1] > max_points:
+        raise InvalidInputError(f"{path}: its clouds hold {data.shape[1]:,} points each, more than the {max_points:,} accepted")
     return data, normal
 
 
@@ -170,12 +175,8 @@ def _row_list(path: Path, rows: Sequence[int] | None, count: int) -> list[int]:
 
 def _read_hdf5(path: Path, max_points: int, rows: Sequence[int] | None) -> list[PointSet]:
     with open_hdf5(path) as f:
-        data, normal = _hdf5_layout(f, path)
-        count, n, columns = data.shape
-        if count == 0:
-            raise DatasetFormatError(f"{path}: 'data' holds no clouds")
-        if n > max_points:
-            raise InvalidInputError(f"{path}: its clouds hold {n:,} points each, more than the {max_points:,} accepted")
+        data, normal = _hdf5_layout(f, path, max_points)
+        count, n, _ = data.shape
         labels = _hdf5_labels(f, path, count)
         wanted = _row_list(path, rows, count)
         if len(wanted) * n * 6 * 8 > MAX_POINT_SET_BYTES:
@@ -369,11 +370,7 @@ def point_set_labels(path: str | os.PathLike, *, max_points: int = MAX_POINT_SET
             _ply_vertex_count(path, max_points)
             return [None]
         with open_hdf5(path) as f:
-            data, _ = _hdf5_layout(f, path)
-            if data.shape[0] == 0:
-                raise DatasetFormatError(f"{path}: 'data' holds no clouds")
-            if data.shape[1] > max_points:
-                raise InvalidInputError(f"{path}: its clouds hold {data.shape[1]:,} points each, more than the {max_points:,} accepted")
+            data, _ = _hdf5_layout(f, path, max_points)
             labels = _hdf5_labels(f, path, data.shape[0])
             return [None] * data.shape[0] if labels is None else [int(v) for v in labels]
     except InvalidInputError:
