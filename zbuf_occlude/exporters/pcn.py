@@ -52,7 +52,7 @@ from zbuf_occlude.errors import DatasetFormatError, InvalidInputError
 from zbuf_occlude.exporters.label_sets import SHAPENET55, label_set, shapenet_synset
 from zbuf_occlude.io.json_files import read_json_file
 from zbuf_occlude.io.owned import OwnedFolder, remove_empty_folders
-from zbuf_occlude.protocols.base import SHARDS_DIR, read_arrays_h5
+from zbuf_occlude.protocols.base import read_arrays_h5, shard_name
 
 __all__ = ["CATEGORY_FILE", "FILE_NAMES", "PROTOCOL", "SUBSETS", "PcnModel", "PcnPlan", "plan_pcn", "write_pcn"]
 
@@ -156,12 +156,12 @@ def _taxonomy(classes: list[str], label_set_name: str) -> dict[str, str]:
     """
     if label_set_name == "shapenet55":
         label_set("shapenet55", classes).labels(classes)  # refuses, naming them, classes ShapeNet lacks
-    ids = {}
-    for c in classes:
-        ids[c] = shapenet_synset(c) or c
-        if "/" in ids[c] or ids[c] in ("", ".", ".."):
+    synsets = {c: shapenet_synset(c) for c in classes}
+    ids = {c: synsets[c] or c for c in classes}
+    for c, taxonomy_id in ids.items():
+        if "/" in taxonomy_id or taxonomy_id in ("", ".", ".."):
             raise InvalidInputError(f"the class {c!r} cannot name a folder of PCN's layout; rename it in the mesh folder or list file")
-    if other := sorted(c for c in classes if ids[c] == c and shapenet_synset(c) is None):
+    if other := sorted(c for c in classes if synsets[c] is None):
         log.warning(
             "classes %s are not ShapeNet's: their taxonomy_id is the class name; PoinTr's runner looks each taxonomy_id up "
             "in its data/shapenet_synset_dict.json (a KeyError at validation): add these ids there", other,
@@ -202,7 +202,7 @@ def plan_pcn(source: str | os.PathLike, label_set_name: str = "own") -> PcnPlan:
     objects = _read_record(source)
     found, missing = [], 0
     for index, entry in enumerate(objects):
-        shard = source / SHARDS_DIR / f"{PROTOCOL}_{index:06d}.h5"  # the engine's name of object `index`
+        shard = source / shard_name(PROTOCOL, index)
         if not shard.is_file():
             missing += 1  # generate could not make it (its failures are reported there)
             continue

@@ -32,7 +32,7 @@ from tqdm.std import tqdm
 
 from zbuf_occlude.errors import InvalidInputError
 
-__all__ = ["progress", "LineProgress", "RateAfterFirst", "TerminalProgress", "progress_interval_s", "PROGRESS_INTERVAL_S",
+__all__ = ["progress", "LineProgress", "RateAfterFirst", "progress_interval_s", "PROGRESS_INTERVAL_S",
            "PROGRESS_INTERVAL_ENV"]
 
 #: Seconds between two progress lines in a log: often enough to see a run move, rare enough that a
@@ -103,10 +103,6 @@ class RateAfterFirst(tqdm):
     @property
     def format_dict(self) -> dict[str, Any]:
         return {**super().format_dict, "rate": self.rate_after_first()}
-
-
-class TerminalProgress(RateAfterFirst):
-    """The bar on a terminal: tqdm's, redrawn in place, with the rate of :class:`RateAfterFirst`."""
 
 
 class LineProgress(RateAfterFirst):
@@ -215,5 +211,5 @@ def progress(
     if not enabled or sys.stderr is None:  # no stderr (closed, pythonw): nowhere to show it
         return tqdm(iterable, disable=True, **common)
     if _stderr_is_terminal():
-        return TerminalProgress(iterable, dynamic_ncols=True, **common)
+        return RateAfterFirst(iterable, dynamic_ncols=True, **common)  # the bar, redrawn in place
     return LineProgress(iterable, mininterval=progress_interval_s() if interval_s is None else interval_s, **common)

@@ -35,7 +35,7 @@ from zbuf_occlude.mesh.inputs import FarmObject, scan_paths
 if TYPE_CHECKING:
     import trimesh
 
-__all__ = ["Protocol", "ProtocolOptions", "ProtocolRun", "run_protocol", "write_arrays_h5", "read_arrays_h5", "SHARDS_DIR"]
+__all__ = ["Protocol", "ProtocolOptions", "ProtocolRun", "run_protocol", "write_arrays_h5", "read_arrays_h5", "SHARDS_DIR", "shard_name"]
 
 log = logging.getLogger(__name__)
 
@@ -176,9 +176,14 @@ _SHARD_NAMES = rf"{SHARDS_DIR}/{_PROTOCOL_NAME}_\d{{6}}\.h5"
 _RECORD_NAMES = rf"protocol(_{_PROTOCOL_NAME})?\.json"
 
 
-def _shard(key: str, index: int) -> str:
-    """The shard of object ``index`` of run ``key``, relative to ``--out``."""
+def shard_name(key: str, index: int) -> str:
+    """The shard of object ``index`` of run ``key`` (the protocol's name, or its ``run_key``), relative to ``--out``."""
     return f"{SHARDS_DIR}/{key}_{index:06d}.h5"
+
+
+def _run_shards(key: str) -> str:
+    """The names (a regular expression, relative to ``--out``) of run ``key``'s shards (:func:`shard_name`)."""
+    return rf"{SHARDS_DIR}/{re.escape(key)}_\d{{6}}\.h5"
 
 
 def _run_key(protocol: Protocol, options: ProtocolOptions) -> str:
@@ -234,7 +239,7 @@ def _earlier_options(folder: OwnedFolder, protocol: Protocol, key: str) -> dict[
     legacy, shards = out / PROTOCOL_FILE, out / SHARDS_DIR
     if os.path.lexists(legacy) and not os.path.lexists(folder.ledger_path):
         old = _read_record(legacy)
-        earlier = [_shard(old["protocol"], i) for i in range(len(old["objects"]))]
+        earlier = [shard_name(old["protocol"], i) for i in range(len(old["objects"]))]
         outputs = [p.name for p in out.iterdir() if any(re.fullmatch(rx, p.name) for rx in protocol.outputs)]
         folder.adopt([PROTOCOL_FILE, *earlier, *outputs])
     path = out / _record_name(protocol, key)
@@ -242,12 +247,12 @@ def _earlier_options(folder: OwnedFolder, protocol: Protocol, key: str) -> dict[
         return _read_record(path)
     if os.path.lexists(shards) and not shards.is_dir():
         raise InvalidInputError(f"{shards} is not a folder; a run writes its shards there: move it away, or choose another --out")
-    ours = re.compile(rf"{re.escape(key)}_\d{{6}}\.h5")
+    ours = re.compile(_run_shards(key))
     recorded = set(folder.written())
     # a shard of this run's name that nothing records, or anything in shards/ of a folder that holds no run of ours
     foreign = [
         p for p in (sorted(shards.iterdir()) if shards.is_dir() else [])
-        if f"{SHARDS_DIR}/{p.name}" not in recorded and (ours.fullmatch(p.name) or not recorded)
+        if (rel := f"{SHARDS_DIR}/{p.name}") not in recorded and (ours.fullmatch(rel) or not recorded)
     ]  # fmt: skip
     if foreign:
         raise InvalidInputError(
@@ -276,7 +281,7 @@ def _record_options(
     if old is not None and not overwrite and old != json.loads(json.dumps(recorded)) and old != _as_written_before(recorded, objects):
         raise InvalidInputError(f"{out} holds a run with other options or meshes ({out / record}); use --overwrite or another --out")
     if old is not None and overwrite:  # this run's shards as the ledger records them, checked; nothing else
-        folder.delete(folder.written(rf"{SHARDS_DIR}/{re.escape(key)}_\d{{6}}\.h5"))
+        folder.delete(folder.written(_run_shards(key)))
     for path in sorted(out.iterdir()):  # before any work: finish would refuse to replace them at the end
         if any(re.fullmatch(rx, path.name) for rx in protocol.outputs) and not folder.check_unchanged(path.name):
             raise InvalidInputError(
@@ -338,10 +343,11 @@ def _run_owned(
     named = _record_options(folder, protocol, options, objects, input_root(paths, objects), overwrite)
     run = ProtocolRun(failures=[(s.path, s.reason) for s in skipped])
     shards: list[Path] = []
+    key = _run_key(protocol, options)
     from zbuf_occlude.io.progress import progress as progress_bar
 
     for found, obj in progress_bar(list(zip(objects, named)), desc=protocol.name, unit="obj", enabled=progress):
-        rel = _shard(_run_key(protocol, options), obj.index)
+        rel = shard_name(key, obj.index)
         shard = out / rel
         if folder.holds(rel):
             run.resumed += 1
