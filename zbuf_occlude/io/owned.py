@@ -14,7 +14,7 @@ A folder a command writes (``--out``) is *owned* while the command runs: :class:
 * removes the temporary files and locks that dead writers left (:func:`remove_dead_temps`).
 
 A refusal is one line that names the file and says what to do
-(:class:`~zbuf_occlude.errors.UnsafePathError` or :class:`~zbuf_occlude.errors.InvalidInputError`).
+(:class:`~zbuf_occlude.errors.UnsafePathError` or :class:`~zbuf_occlude.errors.OutputError`).
 The farm keeps its ledger in its per-object records (their SHA-256s) and takes task-scoped
 locks, so it calls the same functions (:func:`~zbuf_occlude.io.locks.acquire_lock`, :func:`check_layout`,
 :func:`delete_recorded`, :func:`remove_dead_temps`) rather than the class.  A test walks the
