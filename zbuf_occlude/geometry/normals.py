@@ -84,7 +84,12 @@ def covariance_normals(points: NDArray[np.float64], neighbours: NDArray[np.integ
     variation : (n,) float64
         ``λ0 / (λ0 + λ1 + λ2)``, 0 on a plane, 1/3 for an isotropic blob (Pauly et al. 2002).
     """
-    nb = points[neighbours] - points[neighbours].mean(axis=1, keepdims=True)
+    return _plane_fit(points[neighbours])
+
+
+def _plane_fit(neighbourhoods: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`covariance_normals` of the ``(n, k, 3)`` points of each neighbourhood, gathered."""
+    nb = neighbourhoods - neighbourhoods.mean(axis=1, keepdims=True)
     values, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", nb, nb))
     total = values.sum(axis=1)
     variation = np.where(total > 0, values[:, 0] / np.where(total > 0, total, 1.0), 0.0)
@@ -139,10 +144,14 @@ def robust_normals(
     rows = np.arange(n)
     best = np.full(n, np.inf)
     normal = np.zeros_like(p)
-    offset = p[:, None, :] - p[centres]
+    gathered = p[idx]  # the largest neighbourhood: its first k rows are the neighbourhood of size k
+    offset = p[:, None, :] - gathered[:, : centres.shape[1]]
     shift = shift_penalty * np.linalg.norm(offset, axis=2) / np.maximum(spacing, 1e-300)[:, None]
+    middle = sizes[len(sizes) // 2]
     for k in sizes:
-        candidate, variation = covariance_normals(p, idx[:, :k])
+        candidate, variation = _plane_fit(gathered[:, :k])
+        if k == middle:
+            own = candidate
         off = np.abs(np.einsum("nkj,nkj->nk", offset, candidate[centres]))
         score = np.where(off <= plane_tolerance * spacing[:, None], variation[centres] + shift, np.inf)
         j = score.argmin(axis=1)
@@ -152,5 +161,5 @@ def robust_normals(
     # no neighbourhood passed near the point (an isolated spike): its own at the middle scale
     lost = ~np.isfinite(best)
     if lost.any():
-        normal[lost] = covariance_normals(p, idx[:, : sizes[len(sizes) // 2]])[0][lost]
+        normal[lost] = own[lost]
     return normal

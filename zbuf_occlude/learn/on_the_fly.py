@@ -54,7 +54,7 @@ from zbuf_occlude.learn.data import normalize_batch
 from zbuf_occlude.mesh.inputs import FarmObject, scan_inputs
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.mesh.point_inputs import load_cloud
-from zbuf_occlude.mesh.scene import UP_CHOICES, up_rotation
+from zbuf_occlude.mesh.scene import UP_AXES, UP_CHOICES, up_rotation
 from zbuf_occlude.pipeline import DenseCloud, dense_cloud
 from zbuf_occlude.visibility.point_splats import PointSurfels, point_surfels
 from zbuf_occlude.visibility.registry import method_info, resolution_option, visible_mask
@@ -315,8 +315,8 @@ class RandomOcclusion:
     def _occlude_points(self, cloud: PointSet | NDArray[np.floating], camera, rng: np.random.Generator, key: object, up: str,
                         pose: tuple[float, float]) -> dict:  # fmt: skip
         """:meth:`__call__`'s sample of a point set, its pose ``(elevation_deg, azimuth_deg)`` drawn already."""
-        if up not in UP_CHOICES[1:]:
-            raise InvalidInputError(f"up must be one of {', '.join(UP_CHOICES[1:])}, got {up!r}")
+        if up not in UP_AXES:
+            raise InvalidInputError(f"up must be one of {', '.join(UP_AXES)}, got {up!r}")
         if not isinstance(cloud, PointSet):
             cloud = PointSet(check_points(cloud), None, None, "points")
         check_points(cloud.points)  # a point set made by hand: (N, 3), finite

@@ -87,13 +87,6 @@ def splat_surfels(cam, normal, radius, pix, x0, y0, width, height):  # pragma: n
     """
     depth = np.full((height, width), np.inf)
     ids = np.full((height, width), -1, np.int32)
-    _splat_band(cam, normal, radius, pix, x0, y0, width, 0, height, depth, ids)
-    return depth, ids
-
-
-@numba.njit(cache=True, nogil=True)
-def _splat_band(cam, normal, radius, pix, x0, y0, width, row0, row1, depth, ids):  # pragma: no cover - numba
-    """:func:`splat_surfels` for the image rows ``row0 <= j < row1``."""
     for k in range(cam.shape[0]):
         qx, qy, qz = cam[k, 0], cam[k, 1], cam[k, 2]
         r = radius[k]
@@ -101,8 +94,8 @@ def _splat_band(cam, normal, radius, pix, x0, y0, width, row0, row1, depth, ids)
             continue
         # the disk lies inside the cube q ± r, whose projection (x/z, y/z) is extreme at corners
         near, far = qz - r, qz + r
-        j0 = max(int(np.floor((min((qy - r) / near, (qy - r) / far) - y0) / pix)), row0)
-        j1 = min(int(np.floor((max((qy + r) / near, (qy + r) / far) - y0) / pix)), row1 - 1)
+        j0 = max(int(np.floor((min((qy - r) / near, (qy - r) / far) - y0) / pix)), 0)
+        j1 = min(int(np.floor((max((qy + r) / near, (qy + r) / far) - y0) / pix)), height - 1)
         if j0 > j1:
             continue
         i0 = max(int(np.floor((min((qx - r) / near, (qx - r) / far) - x0) / pix)), 0)
@@ -128,6 +121,7 @@ def _splat_band(cam, normal, radius, pix, x0, y0, width, row0, row1, depth, ids)
                 if t < depth[j, i]:
                     depth[j, i] = t
                     ids[j, i] = k
+    return depth, ids
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

@@ -105,6 +105,12 @@ class PointSurfels:
             order = morton_order(self.points) if len(self.points) else np.zeros(0, dtype=np.int64)
             object.__setattr__(self, "order", order)
 
+    @functools.cached_property
+    def _in_order(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """``points``, ``normals``, ``radius``, ``spacing`` in :attr:`order`: gathered once, not per view."""
+        order = self.order
+        return self.points[order], self.normals[order], self.radius[order], self.spacing[order]
+
     def visible(
         self, camera: Camera, *, tolerance: float = DEFAULT_SPLAT_TOLERANCE, backend: str = "cpu"
     ) -> NDArray[np.bool_]:
@@ -143,8 +149,8 @@ class PointSurfels:
             return in_frustum
         extrinsics = camera.extrinsics
         order = self.order
-        radius, spacing = self.radius[order], self.spacing[order]
-        cam, normal = camera_frame(self.points[order], self.normals[order], np.ascontiguousarray(extrinsics[:, :3]), extrinsics[:, 3].copy())
+        points, normals, radius, spacing = self._in_order
+        cam, normal = camera_frame(points, normals, np.ascontiguousarray(extrinsics[:, :3]), extrinsics[:, 3].copy())
         image = splat_image(cam, radius, in_frustum[order], camera)
         depth, ids = splat_surfels(cam, normal, radius, image.pix, image.x0, image.y0, image.width, image.height)
         decided = decide(
