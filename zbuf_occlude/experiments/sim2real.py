@@ -18,7 +18,7 @@ classifier to recognise real, partial scans?), asked on real data with the proto
   columns: ``mean_class_accuracy`` and the rest), and the mesh-only sets also on every real scan
   (``all_scans_mean_class_accuracy``, ``all_scans_overall_accuracy``; not real→real, which trained
   on the other half).  The halves are fixed once, from the scans' content alone
-  (:func:`~zbuf_occlude.experiments.sim2real_data.real_halves`: each class's scans ordered by a
+  (:func:`~zbuf_occlude.experiments.sim2real_real.real_halves`: each class's scans ordered by a
   seeded hash of their points, a seed of its own, independent of the run's seeds), so that no
   file name, no order of the reader and no other class moves a scan from one half to the other;
   ``real_split.csv`` lists each scan's half;
@@ -93,21 +93,10 @@ from zbuf_occlude.experiments.sim2real_config import (
     Sim2RealConfig,
     Sim2RealScale,
 )
-from zbuf_occlude.experiments.sim2real_data import (
-    FITTED_SETS,
-    OCCLUDED_POINTS,
-    TRAINING_SETS,
-    CropPlacement,
-    SetRecipe,
-    build_sets,
-    check_lidar_meshes,
-    find_class_meshes,
-    fit_mesh_shapes,
-    real_clouds,
-    real_halves,
-    real_scan_rows,
-    split_whole_meshes,
-)  # fmt: skip
+from zbuf_occlude.experiments.sim2real_data import FITTED_SETS, OCCLUDED_POINTS, TRAINING_SETS, SetRecipe, build_sets, check_lidar_meshes
+from zbuf_occlude.experiments.sim2real_meshes import find_class_meshes, split_whole_meshes
+from zbuf_occlude.experiments.sim2real_placement import CropPlacement, fit_mesh_shapes
+from zbuf_occlude.experiments.sim2real_real import real_clouds, real_halves, real_scan_rows
 from zbuf_occlude.experiments.table3 import CHECKPOINT_FILES
 from zbuf_occlude.io.json_files import loads_json, read_json_file
 from zbuf_occlude.io.owned import OwnedFolder
@@ -124,7 +113,7 @@ log = logging.getLogger(__name__)
 
 #: Name of the real→real context row.
 REAL_TO_REAL = "real→real"
-#: Seed of the fixed stratified half split of the real scans (:func:`~zbuf_occlude.experiments.sim2real_data.real_halves`), the same for every run.
+#: Seed of the fixed stratified half split of the real scans (:func:`~zbuf_occlude.experiments.sim2real_real.real_halves`), the same for every run.
 _REAL_SPLIT_SEED = 20_231
 #: How the halves are drawn, as ``settings.json`` records it (a run split otherwise is another run).
 _REAL_SPLIT_BY = "content: each class's scans ordered by SHA-256 of the seed and their points, first half A"
@@ -236,7 +225,7 @@ class Sim2RealSets:
         The real scans as clouds, their classes and their files.
     half_a, half_b : (about R/2,) int64
         The fixed stratified halves of the real scans, rows of ``real_labels`` in the order
-        :func:`~zbuf_occlude.experiments.sim2real_data.real_halves` gives: real→real trains on
+        :func:`~zbuf_occlude.experiments.sim2real_real.real_halves` gives: real→real trains on
         ``half_a``, every row is scored on ``half_b``; with ``fit_sensor``, ``half_a`` is the fit half.
     fitted, fitted_placement, fitted_sizes, fit_json
         With ``fit_sensor``: the fitted Lidar, the crops' placement per class and shape per mesh

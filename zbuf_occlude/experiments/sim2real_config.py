@@ -15,14 +15,9 @@ from dataclasses import InitVar, asdict, dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.experiments.sim2real_data import (
-    KEEP_SCALE_UNIT_M,
-    LIDAR_PLACEMENT,
-    MIN_RETURNS,
-    OCCLUDED_POINTS,
-    POINT_VISIBILITY,
-    sensor_elevation_deg,
-)
+from zbuf_occlude.experiments.sim2real_data import MIN_RETURNS, OCCLUDED_POINTS, POINT_VISIBILITY, sensor_elevation_deg
+from zbuf_occlude.experiments.sim2real_placement import LIDAR_PLACEMENT
+from zbuf_occlude.experiments.sim2real_real import KEEP_SCALE_UNIT_M
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
 
 if TYPE_CHECKING:  # torch is imported when a run trains
@@ -41,7 +36,7 @@ VALIDATION_CHOICES = ("meshes", "fit-half")
 FITTED_SHAPES = {"widths": "across_sight_width_m", "widen": "across_sight_width_m", "occlude": "across_sight_width_m",
                  "outline": "across_sight_profile"}  # fmt: skip
 #: The shapes that meet the widths, of which a run takes one, and how each meets them
-#: (:data:`~zbuf_occlude.experiments.sim2real_data.WIDTH_BY`).
+#: (:data:`~zbuf_occlude.experiments.sim2real_placement.WIDTH_BY`).
 WIDTH_SHAPES = {"widths": "stretch", "widen": "widen", "occlude": "occluder"}
 
 
@@ -95,11 +90,11 @@ class Sim2RealConfig:
         Repetitions (≥ 2 for a standard deviation; 5 or more for a permutation test able to
         reach p < 0.05).
     keep_scale : bool
-        Keep metres (centred, divided by :data:`~zbuf_occlude.experiments.sim2real_data.KEEP_SCALE_UNIT_M`;
+        Keep metres (centred, divided by :data:`~zbuf_occlude.experiments.sim2real_real.KEEP_SCALE_UNIT_M`;
         augmentation off, random yaw drawn once per cloud) instead of the paper's normalisation.
     label_map : mapping, optional
         Real label → class folder name (labels equal to a class up to case need none).
-    up, up_map : mesh up axis and per-file overrides (:func:`~zbuf_occlude.experiments.sim2real_data.find_class_meshes`).
+    up, up_map : mesh up axis and per-file overrides (:func:`~zbuf_occlude.experiments.sim2real_meshes.find_class_meshes`).
     sizes : mapping of str to SizeRange, optional
         Real sizes per class (default :data:`zbuf_occlude.mesh.sizes.CLASS_SIZES_M`).
     real_options : mapping, optional
@@ -146,7 +141,7 @@ class Sim2RealConfig:
         the widths show where its crops are wider (a partial view; nothing hidden where they are
         narrower); ``"outline"``, a warp to its outline over the height, alone or with one of
         the three.  Empty (default): the meshes' own shapes.  Each is fitted per mesh once
-        (:func:`~zbuf_occlude.experiments.sim2real_data.fit_mesh_shapes`).
+        (:func:`~zbuf_occlude.experiments.sim2real_placement.fit_mesh_shapes`).
     occluded_points : bool
         Also train on the :data:`~zbuf_occlude.experiments.sim2real_data.OCCLUDED_POINTS` set:
         the ``occluded`` set's clouds (the same dense samples, poses and draws) with visibility

@@ -87,9 +87,8 @@ def _write_mesh_list(data_dir: Path, text: str) -> Path:
             folder.adopt(["meshes.txt"])
         return folder.write_text("meshes.txt", text)
 
-def _natural(text: str) -> list:
-    import re
 
+def _natural(text: str) -> list:
     return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", text)]
 
 

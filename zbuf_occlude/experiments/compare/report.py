@@ -171,11 +171,11 @@ def _plots(rows: Sequence[dict[str, Any]], folder: OwnedFolder) -> dict[str, str
 
 def compare_folder(out: str | os.PathLike, *, report_name: str = REPORT_NAME) -> OwnedFolder:
     """``out`` as a comparison holds it (not yet entered): the files of :data:`COMPARE_OUTPUTS`, the report named ``report_name``."""
-    names = compare_writes(report_name=report_name, sweeps=tuple(SWEEP_PLOTS))
+    names = compare_writes(report_name=report_name)  # every sweep's plot
     return OwnedFolder(out, names=[re.escape(name) for name in names], what="the comparison")
 
 
-def compare_writes(*, report_name: str = REPORT_NAME, sweeps: Sequence[str] = ("resolution", "grid")) -> list[str]:
+def compare_writes(*, report_name: str = REPORT_NAME, sweeps: Sequence[str] = tuple(SWEEP_PLOTS)) -> list[str]:
     """The files a comparison with ``sweeps`` writes, to check before any work (:meth:`OwnedFolder.check_writable`)."""
     return ["results.csv", report_name, TIME_PLOT, *(SWEEP_PLOTS[s] for s in sweeps)]
 
