@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import logging
 import os
-import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -273,7 +272,7 @@ def elevation_profile(
     mesh = load_mesh(mesh_path)
     png, csv = profile_outputs(out)
     names = (png.name, csv.name)
-    with OwnedFolder(png.parent, names=[re.escape(name) for name in names], what="the elevation profile") as folder:
+    with OwnedFolder(png.parent, files=names, what="the elevation profile") as folder:
         folder.check_writable(names)  # both before the profile is computed: a refusal writes nothing
         rows = profile_table(
             mesh,

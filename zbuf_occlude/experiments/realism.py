@@ -34,7 +34,6 @@ from __future__ import annotations
 import logging
 import math
 import os
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -454,7 +453,7 @@ def realism_report(generated: str | os.PathLike, real: str | os.PathLike, out_di
         Another live process holds ``out_dir``.
     """
     files = REPORT_FILES if figure else REPORT_FILES[:-1]
-    with OwnedFolder(out_dir, names=[re.escape(name) for name in REPORT_FILES], what="the realism report") as folder:
+    with OwnedFolder(out_dir, files=REPORT_FILES, what="the realism report") as folder:
         folder.check_writable(files)  # every file before any work: a refusal writes nothing
         return _report_into(folder, generated, real, ring_gap_deg=ring_gap_deg, min_points=min_points, figure=figure,
                             ground_in_crops=ground_in_crops, airborne=airborne)  # fmt: skip

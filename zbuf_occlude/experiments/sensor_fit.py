@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 from collections import Counter
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -138,7 +137,7 @@ def fit_sensor_to_scans(real: str | os.PathLike, sensor: str, out: str | os.Path
         raise InvalidInputError(f"--sensor {sensor}: fit-sensor fits a spinning LiDAR or an airborne scanner, not a {type(base).__name__}")
     md = out.with_suffix(".md")
     names = (out.name, md.name)
-    with OwnedFolder(out.parent, names=[re.escape(name) for name in names], what="the fitted sensor") as folder:
+    with OwnedFolder(out.parent, files=names, what="the fitted sensor") as folder:
         folder.check_writable(names)  # both before any scan is read: a refusal writes nothing
         fit = _fit_into(folder, real, base, out.name, md.name, seed=seed, dataset=dataset, say=say or (lambda _: None))
     return fit, out, md

@@ -72,7 +72,7 @@ DATA_OUTPUTS = ("meshes.txt", "visible_area.csv")
 def _owned(folder: str | os.PathLike, names: Sequence[str], what: str, *, option: str = "--out") -> OwnedFolder:
     """``folder`` held for a run that writes exactly the files ``names`` (and the folders they lie in)."""
     subfolders = sorted({str(Path(n).parent) for n in names} - {"."})
-    return OwnedFolder(folder, names=[re.escape(n) for n in names], subfolders=subfolders, what=what, option=option)
+    return OwnedFolder(folder, files=names, subfolders=subfolders, what=what, option=option)
 
 
 def _write_mesh_list(data_dir: Path, text: str) -> Path:

@@ -300,7 +300,7 @@ def owned_file(path: str | os.PathLike, *, option: str = "--out") -> Iterator[Pa
     path = Path(path)
     if path.is_dir():
         raise OutputError(f"{option} {path} is a folder; name the file to write")
-    with OwnedFolder(path.parent, names=[re.escape(path.name)], what=f"the file {path.name}", option=option) as folder:
+    with OwnedFolder(path.parent, files=[path.name], what=f"the file {path.name}", option=option) as folder:
         with folder.write(path.name) as tmp:
             yield tmp
 
@@ -317,6 +317,8 @@ class OwnedFolder:
     names : sequence of str
         Regular expressions (full match, ``/``-separated, relative to ``root``) of every file a
         run of this kind writes; nothing else is written, replaced or deleted.
+    files : sequence of str
+        File names the run writes, taken literally (beside ``names``).
     subfolders : sequence of str
         The folders below ``root`` it writes into (checked by :func:`check_layout`).
     what : str
@@ -331,9 +333,10 @@ class OwnedFolder:
         leads out.
     """
 
-    def __init__(self, root: str | os.PathLike, *, names: Sequence[str], subfolders: Sequence[str] = (), what: str = "the run", option: str = "--out"):
+    def __init__(self, root: str | os.PathLike, *, names: Sequence[str] = (), files: Sequence[str] = (),
+                 subfolders: Sequence[str] = (), what: str = "the run", option: str = "--out"):  # fmt: skip
         self.root = Path(root)
-        self.names = [re.compile(n) for n in names]
+        self.names = [re.compile(n) for n in (*names, *map(re.escape, files))]
         self.subfolders = tuple(subfolders)
         self.what = what
         self.option = option

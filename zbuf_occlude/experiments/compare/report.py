@@ -10,7 +10,6 @@ from __future__ import annotations
 import logging
 import math
 import os
-import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -172,7 +171,7 @@ def _plots(rows: Sequence[dict[str, Any]], folder: OwnedFolder) -> dict[str, str
 def compare_folder(out: str | os.PathLike, *, report_name: str = REPORT_NAME) -> OwnedFolder:
     """``out`` as a comparison holds it (not yet entered): the files of :data:`COMPARE_OUTPUTS`, the report named ``report_name``."""
     names = compare_writes(report_name=report_name)  # every sweep's plot
-    return OwnedFolder(out, names=[re.escape(name) for name in names], what="the comparison")
+    return OwnedFolder(out, files=names, what="the comparison")
 
 
 def compare_writes(*, report_name: str = REPORT_NAME, sweeps: Sequence[str] = tuple(SWEEP_PLOTS)) -> list[str]:
