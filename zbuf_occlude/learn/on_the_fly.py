@@ -53,8 +53,8 @@ from zbuf_occlude.learn import require_torch
 from zbuf_occlude.learn.data import normalize_batch
 from zbuf_occlude.mesh.inputs import FarmObject, scan_inputs
 from zbuf_occlude.mesh.load import load_mesh
-from zbuf_occlude.mesh.point_inputs import load_cloud
-from zbuf_occlude.mesh.scene import UP_AXES, UP_CHOICES, up_rotation
+from zbuf_occlude.mesh.point_inputs import cloud_frame, load_cloud
+from zbuf_occlude.mesh.scene import UP_AXES, UP_CHOICES
 from zbuf_occlude.pipeline import DenseCloud, dense_cloud
 from zbuf_occlude.visibility.point_splats import PointSurfels, point_surfels
 from zbuf_occlude.visibility.registry import method_info, resolution_option, visible_mask
@@ -245,11 +245,7 @@ class RandomOcclusion:
         extent 1 (as a loaded mesh), its ``up`` axis turned to +z."""
 
         def build() -> PointSurfels:
-            rotation = up_rotation(up)[:3, :3]
-            lo, hi = cloud.points.min(axis=0), cloud.points.max(axis=0)
-            extent = float((hi - lo).max())
-            frame = ((cloud.points - (lo + hi) / 2) / (extent if extent > 0 else 1.0)) @ rotation.T
-            return point_surfels(frame, None if cloud.normals is None else cloud.normals @ rotation.T)
+            return point_surfels(*cloud_frame(cloud.points, cloud.normals, up, what=f"the point set {cloud.name!r}"))
 
         return self._sessions.get_or_build(("point set", key, up), build)
 

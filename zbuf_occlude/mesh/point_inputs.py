@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.discovery import SPLITS, printable_path
 
-__all__ = ["POINT_SET_LAYOUT", "CloudEntry", "LoadedCloud", "point_set_clouds", "pointnet_split", "load_cloud"]
+__all__ = ["POINT_SET_LAYOUT", "CloudEntry", "LoadedCloud", "point_set_clouds", "pointnet_split", "load_cloud", "cloud_frame"]
 
 #: The card's ``layout`` of point-set files whose clouds are labelled by the files themselves.
 POINT_SET_LAYOUT = "point-set labels"
@@ -156,7 +156,7 @@ def load_cloud(path: str | os.PathLike, cloud: int, *, up: str = "auto") -> Load
         or the cloud's points all coincide (it has no extent to normalise).
     """
     from zbuf_occlude.io.point_sets import read_point_sets
-    from zbuf_occlude.mesh.scene import UP_CHOICES, up_rotation
+    from zbuf_occlude.mesh.scene import UP_CHOICES
 
     if up not in UP_CHOICES:
         raise InvalidInputError(f"up axis must be one of {', '.join(UP_CHOICES)}, got {up!r}")
@@ -164,18 +164,47 @@ def load_cloud(path: str | os.PathLike, cloud: int, *, up: str = "auto") -> Load
     (point_set,) = read_point_sets(path, rows=[int(cloud)])
     points, normals = point_set.points, point_set.normals
     axis, why = ("+z", "as stored (+z)") if up == "auto" else (up, "explicit")
-    if axis != "+z":
-        rotation = up_rotation(axis)[:3, :3]
+    points, normals = cloud_frame(points, normals, axis, what=f"{printable_path(path)}: cloud {point_set.name!r}")
+    return LoadedCloud(points, normals, axis, why)
+
+
+def cloud_frame(
+    points: NDArray[np.float64], normals: NDArray[np.float64] | None, up: str, *, what: str
+) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+    """A cloud in the frame a loaded mesh has: its ``up`` axis turned to +z, then its bounding box
+    centred on 0 with maximum extent 1 (as :func:`zbuf_occlude.mesh.load.normalize_mesh`,
+    Sryamkin et al. 2023, §4.1).
+
+    Parameters
+    ----------
+    points : (N, 3) float64
+    normals : (N, 3) float64 or None
+        Turned with the points (a rotation keeps them unit).
+    up : str
+        ``"+x"``, ``"-y"``, ...: the cloud's up axis.
+    what : str
+        The cloud, for the message.
+
+    Returns
+    -------
+    points : (N, 3) float64
+    normals : (N, 3) float64 or None
+        C-contiguous.
+
+    Raises
+    ------
+    InvalidInputError
+        Every point coincides (no extent to normalise).
+    """
+    if up != "+z":
+        from zbuf_occlude.mesh.scene import up_rotation
+
+        rotation = up_rotation(up)[:3, :3]
         points = points @ rotation.T
         normals = None if normals is None else normals @ rotation.T
     lo, hi = points.min(axis=0), points.max(axis=0)
     extent = float((hi - lo).max())
     if not extent > 0.0:
-        raise InvalidInputError(
-            f"{printable_path(path)}: cloud {point_set.name!r}: its {len(points):,} points all coincide; a cloud needs an "
-            "extent to be seen from around it"
-        )
-    # as a mesh is normalised (zbuf_occlude.mesh.load.normalize_mesh, Sryamkin et al. 2023, §4.1)
-    center = (lo + hi) / 2.0
-    points = (points - center) * (1.0 / extent)
-    return LoadedCloud(np.ascontiguousarray(points), None if normals is None else np.ascontiguousarray(normals), axis, why)
+        raise InvalidInputError(f"{what}: its {len(points):,} points all coincide; a cloud needs an extent to be seen from around it")
+    points = (points - (lo + hi) / 2.0) * (1.0 / extent)
+    return np.ascontiguousarray(points), None if normals is None else np.ascontiguousarray(normals)
