@@ -251,9 +251,31 @@ def test_absurd_sizes_are_refused_from_headers(tmp_path):
     _one_line_naming(exc, tmp_path / "huge.ply")
     with h5py.File(tmp_path / "sparse.h5", "w") as f:  # declares 10^12 rows, stores none (chunks never written)
         f.create_dataset("data", shape=(10**12, 64, 3), dtype=np.float32, chunks=(1, 64, 3))
-    with pytest.raises(DatasetFormatError, match="declares 1,000,000,000,000 clouds") as exc:
+    with pytest.raises(DatasetFormatError, match=r"declares shape \(1000000000000, 64, 3\).*stores 0 bytes") as exc:
         point_set_labels(tmp_path / "sparse.h5")
     _one_line_naming(exc, tmp_path / "sparse.h5")
+
+
+@pytest.mark.parametrize("chunks", [None, (1, 2048, 3)])
+def test_a_point_set_that_declares_what_it_does_not_store_is_refused(tmp_path, chunks):
+    """(100000, 2048, 3) declared in a file of a few kB, data never written: no plan of 100,000 objects."""
+    path = tmp_path / "empty.h5"
+    with h5py.File(path, "w") as f:
+        f.create_dataset("data", shape=(100_000, 2048, 3), dtype=np.float32, chunks=chunks)
+        f["label"] = np.zeros((100_000, 1), np.int64)
+    assert path.stat().st_size < 1_000_000
+    with pytest.raises(DatasetFormatError, match=r"'/data' declares shape \(100000, 2048, 3\).*stores 0 bytes") as exc:
+        point_set_labels(path)
+    _one_line_naming(exc, path)
+
+
+def test_a_compressed_point_set_that_stores_its_data_is_read(tmp_path):
+    """The stored-size check leaves real compression alone: zeros compress about 1000:1 under gzip."""
+    path = tmp_path / "zeros.h5"
+    with h5py.File(path, "w") as f:
+        f.create_dataset("data", data=np.zeros((64, 2048, 3), np.float32), compression="gzip", compression_opts=9)
+        f["label"] = np.zeros((64, 1), np.int64)
+    assert len(point_set_labels(path)) == 64
 
 
 def test_bad_arguments(tmp_path):

@@ -17,7 +17,12 @@ from a data set is checked by :func:`check_hdf5` before a byte of data is read:
 * every dataset holds numbers, booleans or UTF-8/ASCII strings (no references, compound or
   opaque types), and, for the columns of a schema, the kind and the number of dimensions
   the schema says (:data:`Column`): a string or integer ``data`` where float32 is written is
-  an error naming the file and the dataset.
+  an error naming the file and the dataset;
+* every dataset **stores the bytes its shape declares**: a dataset that declares
+  ``(100000, 2048, 3)`` in a file of a few kB (its data never written, so a read returns the
+  fill value) would make a reader plan, or allocate, what the file does not hold.  Stored
+  uncompressed, a dataset must occupy at least its declared size; compressed, at least
+  1/:data:`MAX_COMPRESSION_RATIO` of it (deflate cannot do better than about 1032:1).
 """
 
 from __future__ import annotations
@@ -29,11 +34,15 @@ from typing import Any, NamedTuple
 
 from zbuf_occlude.errors import DatasetFormatError
 
-__all__ = ["Column", "KNOWN_FILTERS", "MAX_OBJECTS", "check_hdf5", "open_hdf5", "declared_nbytes"]
+__all__ = ["Column", "KNOWN_FILTERS", "MAX_COMPRESSION_RATIO", "MAX_OBJECTS", "check_hdf5", "open_hdf5", "declared_nbytes"]
 
 #: HDF5 filter ids h5py writes and zbuf_occlude accepts: deflate (gzip) 1, shuffle 2,
 #: fletcher32 3, lzf 32000.  Any other filter is a plugin we do not vouch for.
 KNOWN_FILTERS = {1: "gzip", 2: "shuffle", 3: "fletcher32", 32000: "lzf"}
+#: Most bytes a compressed dataset may declare per byte it stores: deflate's limit is about
+#: 1032:1 (a 258-byte match in under two bits), lzf's far lower; a larger ratio is a dataset
+#: whose data was never written.
+MAX_COMPRESSION_RATIO = 1100
 #: Groups and datasets walked in one file before it is refused: a shard holds about ten.
 MAX_OBJECTS = 10_000
 #: numpy kinds of the dtype classes a data set may hold (``"T"``: an HDF5 string).
@@ -84,6 +93,7 @@ def _check_dataset(ds: Any, path: Path, name: str, columns: Mapping[str, Column]
             raise DatasetFormatError(
                 f"{where} uses the HDF5 filter {code}; only {', '.join(KNOWN_FILTERS.values())} are read"
             )
+    _check_stored_size(ds, where, compressed=dcpl.get_nfilters() > 0)
     kind = _kind(ds.dtype)
     if kind is None:
         raise DatasetFormatError(f"{where} holds {ds.dtype} values (not numbers or strings); refused")
@@ -95,6 +105,18 @@ def _check_dataset(ds: Any, path: Path, name: str, columns: Mapping[str, Column]
         raise DatasetFormatError(
             f"{where} holds {_KIND_NAMES[kind]} values of shape {ds.shape}; the schema says {wanted} with "
             f"{column.ndim} dimensions: the file is not a zbuf_occlude data set file"
+        )
+
+
+def _check_stored_size(ds: Any, where: str, *, compressed: bool) -> None:
+    """Refuse a dataset that declares more bytes than it stores (module docstring)."""
+    if ds.shape is None:  # an empty (null) dataspace holds nothing and declares nothing
+        return
+    declared, stored = declared_nbytes(ds), int(ds.id.get_storage_size())
+    if declared > stored * (MAX_COMPRESSION_RATIO if compressed else 1):
+        raise DatasetFormatError(
+            f"{where} declares shape {ds.shape} ({declared:,} bytes) but stores {stored:,} bytes; its data was never "
+            "written or the file is damaged: refused"
         )
 
 
@@ -116,7 +138,8 @@ def check_hdf5(f: Any, path: str | os.PathLike, columns: Mapping[str, Column] | 
     DatasetFormatError
         A soft or external link, a committed datatype, a virtual dataset, external raw
         storage, an unknown filter, a dataset of references, compound or opaque values,
-        a dataset of another kind or rank than its column, or more than
+        a dataset of another kind or rank than its column, a dataset that stores fewer bytes
+        than its shape declares (:func:`_check_stored_size`), or more than
         :data:`MAX_OBJECTS` objects; the message names the file and the dataset.
     """
     import h5py

@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import json
 import os
-from pathlib import Path
 from typing import Any
 
-from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
+from zbuf_occlude.io.regular_files import MAX_METADATA_BYTES, read_regular_file
 
 __all__ = ["MAX_JSON_DEPTH", "json_depth", "loads_json", "read_json_file"]
 
@@ -73,16 +73,41 @@ def loads_json(text: str | bytes, *, what: str, max_depth: int = MAX_JSON_DEPTH)
     return doc
 
 
-def read_json_file(path: str | os.PathLike, *, max_depth: int = MAX_JSON_DEPTH) -> Any:
-    """:func:`loads_json` of a UTF-8 file.
+def read_json_file(
+    path: str | os.PathLike,
+    *,
+    max_depth: int = MAX_JSON_DEPTH,
+    max_bytes: int = MAX_METADATA_BYTES,
+    within: str | os.PathLike | None = None,
+    error: type[ZbufOccludeError] = InvalidInputError,
+) -> Any:
+    """:func:`loads_json` of a UTF-8 file, read as :func:`~zbuf_occlude.io.regular_files.read_regular_file` reads.
+
+    Parameters
+    ----------
+    path : str or PathLike
+    max_depth : int
+        Deepest nesting accepted (:data:`MAX_JSON_DEPTH`).
+    max_bytes : int
+        The cap on the file's size, checked before a byte is read
+        (:data:`~zbuf_occlude.io.regular_files.MAX_METADATA_BYTES`).
+    within : str or PathLike, optional
+        The folder ``path`` was named from: it must stay inside it, links resolved.
+    error : type
+        The exception raised for a file that cannot be read (default
+        :class:`~zbuf_occlude.errors.InvalidInputError`).
 
     Raises
     ------
     InvalidInputError
-        The file cannot be read or decoded, is not JSON, or nests too deep (the message names it).
+        The file cannot be read or decoded, is not a regular file (a FIFO), is larger than
+        ``max_bytes``, is not JSON, or nests too deep (the message names it).
+    UnsafePathError
+        ``within`` is given and ``path`` leads outside it.
     """
+    data = read_regular_file(path, max_bytes=max_bytes, error=error, within=within)
     try:
-        text = Path(path).read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InvalidInputError(f"cannot read {path}: {getattr(exc, 'strerror', None) or exc}") from None
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise error(f"cannot read {path}: not UTF-8 (byte {exc.start})") from None
     return loads_json(text, what=str(path), max_depth=max_depth)

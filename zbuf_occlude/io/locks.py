@@ -14,9 +14,11 @@ from __future__ import annotations
 
 import logging
 import os
+import stat
 from pathlib import Path
 
-from zbuf_occlude.errors import DatasetBusy, OutputError
+from zbuf_occlude.errors import DatasetBusy, OutputError, UnsafePathError, ZbufOccludeError
+from zbuf_occlude.io.regular_files import MAX_LOCK_BYTES, read_text_file
 
 __all__ = ["LOCK_FILE", "ACQUIRE_TIMEOUT_S", "acquire_lock"]
 
@@ -39,9 +41,9 @@ def _lock_holder(path: Path) -> str:
     from datetime import datetime, timezone
 
     try:
-        lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
+        lines = read_text_file(path, max_bytes=MAX_LOCK_BYTES, errors="replace").splitlines()
         since = datetime.fromtimestamp(path.stat().st_mtime, timezone.utc).isoformat(timespec="seconds")
-    except OSError:
+    except (OSError, ZbufOccludeError):
         return "a process that has just released it"
     pid = lines[0] if lines and lines[0].isdigit() else "?"
     host = lines[1] if len(lines) > 1 else "?"
@@ -62,8 +64,8 @@ def _break_abandoned_marker(path: Path) -> None:
 
     try:
         before = path.lstat()
-        lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
-    except OSError:
+        lines = read_text_file(path, max_bytes=MAX_LOCK_BYTES, errors="replace").splitlines()
+    except (OSError, ZbufOccludeError):  # gone, or not a lock of ours (too large): filelock judges it
         return
     if lines and lines[0].strip().isdigit() or time.time() - before.st_mtime < ABANDONED_MARKER_AGE_S:
         return  # a holder's pid (filelock's to judge), or a marker a writer may still be filling
@@ -76,11 +78,25 @@ def _break_abandoned_marker(path: Path) -> None:
         return
 
 
+def _check_lock_kind(path: Path) -> None:
+    """Refuse a lock file that is a link, a FIFO, a device or a folder: reading a FIFO would block
+    every command on the folder, and a link would make the lock another file."""
+    try:
+        mode = path.lstat().st_mode
+    except OSError:
+        return  # released meanwhile
+    if not stat.S_ISREG(mode):
+        kind = "a link" if stat.S_ISLNK(mode) else "a FIFO" if stat.S_ISFIFO(mode) else "a folder" if stat.S_ISDIR(mode) else "not a regular file"
+        raise UnsafePathError(f"the lock file {path} is {kind}, not a lock of ours; move it away and run again")
+
+
 def acquire_lock(path: str | os.PathLike, what: str, *, timeout: float = ACQUIRE_TIMEOUT_S):
     """Take the lock file ``path``; return the held :class:`filelock.SoftFileLock` (``release()`` it).
 
     Raises
     ------
+    UnsafePathError
+        The lock file is a link, a FIFO, a device or a folder (never opened, so never blocks).
     DatasetBusy
         A live process holds it (named: pid and host), or one of another host that cannot be
         checked from here; the message says which file to delete once it is known to be gone.
@@ -95,6 +111,7 @@ def acquire_lock(path: str | os.PathLike, what: str, *, timeout: float = ACQUIRE
     except OSError as exc:
         raise OutputError(f"cannot create {path.parent}: {exc.strerror or exc}; choose a writable --out") from None
     if os.path.lexists(path):
+        _check_lock_kind(path)
         _break_abandoned_marker(path)
     lock = SoftFileLock(str(path), timeout=timeout, poll_interval=POLL_INTERVAL_S, is_singleton=False, thread_local=False)
     try:

@@ -27,15 +27,18 @@ import json
 import logging
 import os
 import re
+import stat
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from zbuf_occlude.errors import OutputError, UnsafePathError
+from zbuf_occlude.errors import InvalidInputError, OutputError, UnsafePathError
 from zbuf_occlude.io.atomic import atomic_path, file_sha256, temp_is_orphan, temp_owner, write_csv
+from zbuf_occlude.io.json_files import loads_json
 from zbuf_occlude.io.locks import LOCK_FILE, acquire_lock
+from zbuf_occlude.io.regular_files import open_regular_file
 from zbuf_occlude.io.safe_paths import path_inside
 
 __all__ = [
@@ -62,6 +65,8 @@ log = logging.getLogger(__name__)
 LEDGER_FILE = ".zbuf_occlude-written.jsonl"
 #: A ledger line longer than this is damaged (a path is at most a few hundred bytes).
 _MAX_LEDGER_LINE = 8192
+#: Largest ledger read: 256 MiB, some two million files of ours (a line is about 130 bytes).
+MAX_LEDGER_BYTES = 256 << 20
 
 
 @dataclass(frozen=True)
@@ -349,10 +354,10 @@ class OwnedFolder:
         self._lock = acquire_lock(self.root / LOCK_FILE, f"{self.what} in {self.root}")
         try:
             check_layout(self.root, self.subfolders)
-            for folder in (".", *self.subfolders):
+            self._ledger = self._read_ledger()
+            for folder in self._written_folders():
                 prefix = "" if folder == "." else f"{folder}/"
                 remove_dead_temps(self.root / folder, ours=lambda name, prefix=prefix: _name_allowed(prefix + name, self.names))
-            self._ledger = self._read_ledger()
         except BaseException:
             self._lock.release()
             raise
@@ -360,6 +365,24 @@ class OwnedFolder:
 
     def __exit__(self, *exc: object) -> None:
         self._lock.release()
+
+    def _written_folders(self) -> list[str]:
+        """Folders a dead writer of ours may have left a temporary in: the root, the declared
+        subfolders, the root's folders one level down (a class folder) and every folder the
+        ledger names, each inside ``root`` (links resolved)."""
+        found = {".", *self.subfolders, *(Path(rel).parent.as_posix() for rel in self._ledger)}
+        try:
+            found.update(e.name for e in os.scandir(self.root) if e.is_dir(follow_symlinks=False))
+        except OSError:
+            pass
+        folders = []
+        for folder in sorted(found):
+            try:
+                path_inside(self.root, folder, what=f"the output folder {self.root}")
+            except UnsafePathError:
+                continue  # a folder that leads out is never cleaned
+            folders.append(folder)
+        return folders
 
     @property
     def ledger_path(self) -> Path:
@@ -369,17 +392,17 @@ class OwnedFolder:
         """The ledger's files; lines that are damaged or not ours (a torn last line) are skipped."""
         ledger: dict[str, FileRecord] = {}
         path = self.ledger_path
-        if path.is_symlink() or (os.path.lexists(path) and not path.is_file()):
-            raise UnsafePathError(f"{path} is a link or not a file; move it away, or choose another --out")
-        if not path.exists():
+        if not os.path.lexists(path):
             return ledger
-        with open(path, "rb") as fh:
+        self._check_ledger_file(path)
+        fh, _ = open_regular_file(path, max_bytes=MAX_LEDGER_BYTES, error=UnsafePathError)
+        with fh:
             for line in fh:
                 if len(line) > _MAX_LEDGER_LINE:
                     continue
                 try:
-                    entry = json.loads(line)
-                except ValueError:
+                    entry = loads_json(line, what=str(path))
+                except InvalidInputError:  # damaged, torn or nested past any line of ours
                     continue
                 rel = entry.get("path") if isinstance(entry, dict) else None
                 if not isinstance(rel, str):
@@ -390,11 +413,26 @@ class OwnedFolder:
                     ledger[rel] = FileRecord(entry["sha256"], entry["size"])
         return ledger
 
+    def _check_ledger_file(self, path: Path) -> None:
+        """Refuse a ledger that is a link, not a regular file, or has another name (a hard link):
+        it is appended in place, so a second name would make us write into a file outside ``root``."""
+        info = path.lstat()
+        if stat.S_ISLNK(info.st_mode) or not stat.S_ISREG(info.st_mode):
+            raise UnsafePathError(f"{path} is a link or not a file; move it away, or choose another {self.option}")
+        if info.st_nlink > 1:
+            raise UnsafePathError(
+                f"{path} has {info.st_nlink} names (a hard link to a file elsewhere); it is appended in place, so it "
+                f"is refused: move it away, or choose another {self.option}"
+            )
+
     def _append(self, entry: dict[str, Any]) -> None:
         line = (json.dumps(entry, sort_keys=True) + "\n").encode("utf-8")
         try:
             fd = os.open(self.ledger_path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o666)
             try:
+                info = os.fstat(fd)
+                if not stat.S_ISREG(info.st_mode) or info.st_nlink > 1:  # swapped in since it was read
+                    raise UnsafePathError(f"{self.ledger_path} is not a file of one name; move it away, or choose another {self.option}")
                 os.write(fd, line)
                 os.fsync(fd)
             finally:

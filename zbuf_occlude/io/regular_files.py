@@ -9,7 +9,12 @@ its files.  Every such file is opened here, so that one set of rules holds:
   writer), and its type is checked on the open file (``fstat``), so a name swapped between a
   check and the open cannot slip through;
 * its **size is checked before it is read**, against a cap the caller gives (the error names
-  the file, its size and the cap).
+  the file, its size and the cap): :data:`MAX_LIST_BYTES` for text lists,
+  :data:`MAX_METADATA_BYTES` for JSON metadata, :data:`MAX_LOCK_BYTES` for lock files;
+* when the caller names the folder the file was found in (``within=``), the file must still
+  lie **inside that folder once links are resolved**: a list, a shard or a ``shape_names.txt``
+  that is a symlink to a file elsewhere is refused
+  (:class:`~zbuf_occlude.errors.UnsafePathError`, naming both).
 
 Each function takes the ``error`` class it raises, so that a mesh reader raises
 :class:`~zbuf_occlude.errors.MeshLoadError` and a scan or cloud reader
@@ -26,15 +31,26 @@ from os import PathLike
 from pathlib import Path
 from typing import BinaryIO
 
-from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
+from zbuf_occlude.errors import InvalidInputError, UnsafePathError, ZbufOccludeError
 
-__all__ = ["MAX_NAMED_FILE_BYTES", "file_digest", "open_regular_file", "read_regular_file", "regular_file_size"]
+__all__ = [
+    "MAX_LIST_BYTES", "MAX_LOCK_BYTES", "MAX_METADATA_BYTES", "MAX_NAMED_FILE_BYTES", "check_within", "file_digest",
+    "open_regular_file", "read_regular_file", "read_text_file", "regular_file_size",
+]  # fmt: skip
 
 #: Largest file :func:`read_regular_file` reads unless given another cap: 2 GiB, the most a
 #: mesh may name (a glTF buffer, an OBJ material, a texture).  glTF buffers are addressed with
 #: 32-bit byte lengths and a GLB is at most 4 GiB by its uint32 length field; a buffer larger
 #: than this is not an object's mesh.
 MAX_NAMED_FILE_BYTES = 2 << 30
+#: Largest text list read (``shape_names.txt``, split lists, ``--list`` files, file lists of a data
+#: set): 64 MiB, some 500,000 paths of 128 bytes; ShapeNetCore's largest list is under 3 MiB.
+MAX_LIST_BYTES = 64 << 20
+#: Largest JSON metadata file read whole (a card, a plan, a record, a protocol record, a layout's
+#: index): 256 MiB; a data-set card of 200,000 samples is a few MiB.
+MAX_METADATA_BYTES = 256 << 20
+#: Largest lock file read: a lock holds a pid and a host name, a few dozen bytes.
+MAX_LOCK_BYTES = 512
 #: Bytes read at a time when a file is hashed (bounded memory, whatever the file's size).
 _HASH_CHUNK_BYTES = 1 << 20
 
@@ -44,8 +60,42 @@ def _nonblocking(name: str, flags: int) -> int:
     return os.open(name, flags | getattr(os, "O_NONBLOCK", 0))
 
 
+def check_within(path: str | PathLike[str], within: str | PathLike[str]) -> Path:
+    """``path``, after checking that it lies inside the folder ``within`` once links are resolved.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        A file found in (or named from) ``within``.
+    within : str or PathLike
+        The folder the file was named from (a data set, a point set's folder, a source).
+
+    Returns
+    -------
+    Path
+        ``path`` resolved (every link followed): open this one, not ``path``.
+
+    Raises
+    ------
+    UnsafePathError
+        ``path``, or a folder on the way to it, is a link that leads outside ``within``, or it
+        cannot be resolved (a link loop); the message names both.
+    """
+    try:
+        real, root = Path(path).resolve(), Path(within).resolve()
+    except (OSError, RuntimeError) as exc:  # a link loop (RuntimeError before Python 3.13)
+        raise UnsafePathError(f"{path}: cannot be resolved inside {within} ({exc})") from None
+    if real != root and root not in real.parents:
+        raise UnsafePathError(f"{path} leads outside {within} (to {real}, through a link); refused")
+    return real
+
+
 def open_regular_file(
-    path: str | PathLike[str], *, max_bytes: int | None = None, error: type[ZbufOccludeError] = InvalidInputError
+    path: str | PathLike[str],
+    *,
+    max_bytes: int | None = None,
+    error: type[ZbufOccludeError] = InvalidInputError,
+    within: str | PathLike[str] | None = None,
 ) -> tuple[BinaryIO, int]:
     """``path`` opened for reading in binary, when it is a regular file (of at most ``max_bytes``).
 
@@ -60,6 +110,9 @@ def open_regular_file(
     error : type
         The exception raised (:class:`~zbuf_occlude.errors.MeshLoadError` for meshes,
         :class:`~zbuf_occlude.errors.InvalidInputError` or a subclass for scans and clouds).
+    within : str or PathLike, optional
+        The folder ``path`` was named from: it must stay inside it, links resolved
+        (:func:`check_within`).
 
     Returns
     -------
@@ -73,10 +126,13 @@ def open_regular_file(
     ``error``
         Naming the file: missing, unreadable, a FIFO, socket, device or folder, or larger than
         ``max_bytes`` (both numbers given).
+    UnsafePathError
+        ``within`` is given and ``path`` leads outside it.
     """
     path = Path(path)
+    target = path if within is None else check_within(path, within)
     try:
-        fh = open(path, "rb", opener=_nonblocking)  # noqa: SIM115 - closed by the callers
+        fh = open(target, "rb", opener=_nonblocking)  # noqa: SIM115 - closed by the callers
     except OSError as exc:
         raise error(f"{path}: cannot read file ({exc.strerror or exc})") from None
     info = os.fstat(fh.fileno())
@@ -116,7 +172,11 @@ def regular_file_size(path: str | PathLike[str], *, error: type[ZbufOccludeError
 
 
 def read_regular_file(
-    path: str | PathLike[str], *, max_bytes: int = MAX_NAMED_FILE_BYTES, error: type[ZbufOccludeError] = InvalidInputError
+    path: str | PathLike[str],
+    *,
+    max_bytes: int = MAX_NAMED_FILE_BYTES,
+    error: type[ZbufOccludeError] = InvalidInputError,
+    within: str | PathLike[str] | None = None,
 ) -> bytes:
     """The bytes of ``path``, when it is a regular file of at most ``max_bytes`` bytes.
 
@@ -129,6 +189,9 @@ def read_regular_file(
         The exception raised (:class:`~zbuf_occlude.errors.MeshLoadError` for meshes,
         :class:`~zbuf_occlude.errors.InvalidInputError` or a subclass for scans and clouds).
 
+    within : str or PathLike, optional
+        The folder ``path`` was named from (:func:`check_within`).
+
     Returns
     -------
     bytes
@@ -139,13 +202,57 @@ def read_regular_file(
     ``error``
         Naming the file: missing, unreadable, not a regular file (a FIFO would block), or
         larger than ``max_bytes`` (both numbers given).
+    UnsafePathError
+        ``within`` is given and ``path`` leads outside it.
     """
-    fh, _ = open_regular_file(path, max_bytes=max_bytes, error=error)
+    fh, _ = open_regular_file(path, max_bytes=max_bytes, error=error, within=within)
     with fh:
         data = fh.read(max_bytes + 1)  # the file may grow after fstat: never read past the cap
     if len(data) > max_bytes:
         raise error(f"{path}: more than the {max_bytes:,} bytes a file read here may have")
     return data
+
+
+def read_text_file(
+    path: str | PathLike[str],
+    *,
+    max_bytes: int = MAX_LIST_BYTES,
+    error: type[ZbufOccludeError] = InvalidInputError,
+    within: str | PathLike[str] | None = None,
+    errors: str = "strict",
+) -> str:
+    """The UTF-8 text of ``path`` (a list, a lock, a table), read by :func:`read_regular_file`'s rules.
+
+    Parameters
+    ----------
+    path : str or PathLike
+    max_bytes : int
+        The cap (default :data:`MAX_LIST_BYTES`), checked before anything is read.
+    error : type
+        The exception raised, as for :func:`read_regular_file`.
+    within : str or PathLike, optional
+        The folder ``path`` was named from (:func:`check_within`).
+    errors : str
+        How undecodable bytes are handled (``"strict"``: refused, naming the file;
+        ``"replace"``: U+FFFD, for text only shown to a person, such as a lock's holder).
+
+    Returns
+    -------
+    str
+        The whole file, decoded.
+
+    Raises
+    ------
+    ``error``
+        As :func:`read_regular_file`, or the bytes are not UTF-8 (with ``errors="strict"``).
+    UnsafePathError
+        ``within`` is given and ``path`` leads outside it.
+    """
+    data = read_regular_file(path, max_bytes=max_bytes, error=error, within=within)
+    try:
+        return data.decode("utf-8", errors)
+    except UnicodeDecodeError as exc:
+        raise error(f"{path}: not UTF-8 text (byte {exc.start}); refused") from None
 
 
 def file_digest(path: str | PathLike[str], *, max_bytes: int, error: type[ZbufOccludeError] = InvalidInputError) -> str:
