@@ -32,6 +32,7 @@ __all__ = [
     "file_sha256",
     "size_mismatch",
     "write_text",
+    "write_bytes",
     "write_csv",
 ]
 
@@ -220,6 +221,14 @@ def write_text(path: str | os.PathLike, text: str) -> Path:
     path = Path(path)
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
+    return path
+
+
+def write_bytes(path: str | os.PathLike, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (:func:`atomic_path`)."""
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
     return path
 
 

@@ -525,6 +525,13 @@ class OwnedFolder:
             tmp.write_text(text, encoding="utf-8")
         return self.root / rel
 
+    def write_bytes(self, rel: str, data: bytes) -> Path:
+        """Write ``data`` to ``root/rel`` (:meth:`write`): an encoded array, a PNG
+        (:mod:`zbuf_occlude.io.encodings`)."""
+        with self.write(rel) as tmp:
+            tmp.write_bytes(data)
+        return self.root / rel
+
     def write_csv(self, rel: str, rows: Sequence[dict], fieldnames: Sequence[str] | None = None) -> Path:
         """Write dict rows as CSV to ``root/rel`` (:meth:`write`; columns as :func:`~zbuf_occlude.io.atomic.write_csv`)."""
         with self.write(rel) as tmp:
