@@ -38,3 +38,59 @@ def test_regular_file_size_names_what_is_not_a_regular_file_and_raises_invalid_i
         read_regular_file(tmp_path / "folder")
     with pytest.raises(InvalidInputError, match=r"missing: cannot read file \(No such file or directory\)"):
         file_digest(tmp_path / "missing", max_bytes=10)
+
+
+def test_within_refuses_a_file_or_folder_that_links_out_and_reads_links_that_stay(tmp_path: Path) -> None:
+    from zbuf_occlude.errors import UnsafePathError
+    from zbuf_occlude.io.regular_files import read_text_file
+
+    (tmp_path / "secret").write_text("root:x:0:0\n")
+    data = tmp_path / "data"
+    (data / "sub").mkdir(parents=True)
+    (data / "names.txt").symlink_to(tmp_path / "secret")
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "elsewhere" / "names.txt").write_text("x\n")
+    (data / "linked").symlink_to(tmp_path / "elsewhere")
+    (data / "sub" / "real.txt").write_text("chair\n")
+    (data / "inside.txt").symlink_to(data / "sub" / "real.txt")
+    for name in ("names.txt", "linked/names.txt", "sub/../../secret"):
+        with pytest.raises(UnsafePathError, match="leads outside"):
+            read_text_file(data / name, within=data)
+    assert read_text_file(data / "inside.txt", within=data) == "chair\n"
+    assert read_text_file(data / "names.txt") == "root:x:0:0\n"  # no folder named: the user named the file
+
+
+def test_read_text_file_is_capped_refuses_fifos_and_names_bytes_that_are_not_utf8(tmp_path: Path) -> None:
+    from zbuf_occlude.io.regular_files import MAX_LIST_BYTES, read_text_file
+
+    os.mkfifo(tmp_path / "pipe")
+    with pytest.raises(InvalidInputError, match="pipe: is a FIFO"):
+        read_text_file(tmp_path / "pipe", within=tmp_path)
+    (tmp_path / "bad.txt").write_bytes(b"ok\n\xff\xfe\n")
+    with pytest.raises(InvalidInputError, match=r"bad.txt: not UTF-8 text \(byte 3\)"):
+        read_text_file(tmp_path / "bad.txt")
+    assert read_text_file(tmp_path / "bad.txt", errors="replace") == "ok\n\ufffd\ufffd\n"
+    with open(tmp_path / "big.txt", "wb") as fh:  # sparse: declares its size without using the disk
+        fh.truncate(MAX_LIST_BYTES + 1)
+    with pytest.raises(InvalidInputError, match=rf"big.txt: {MAX_LIST_BYTES + 1:,} bytes, more than the {MAX_LIST_BYTES:,}"):
+        read_text_file(tmp_path / "big.txt")
+
+
+def test_read_json_file_is_capped_refuses_fifos_links_out_and_deep_nesting(tmp_path: Path) -> None:
+    from zbuf_occlude.errors import UnsafePathError
+    from zbuf_occlude.io.json_files import read_json_file
+
+    os.mkfifo(tmp_path / "pipe.json")
+    with pytest.raises(InvalidInputError, match="pipe.json: is a FIFO"):
+        read_json_file(tmp_path / "pipe.json")
+    (tmp_path / "big.json").write_text('{"a": "' + "x" * 100 + '"}')
+    with pytest.raises(InvalidInputError, match="big.json: 109 bytes, more than the 100"):
+        read_json_file(tmp_path / "big.json", max_bytes=100)
+    (tmp_path / "deep.json").write_text("[" * 5000 + "]" * 5000)
+    with pytest.raises(InvalidInputError, match="deep.json nests arrays or objects deeper than 64"):
+        read_json_file(tmp_path / "deep.json")
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "card.json").symlink_to(tmp_path / "big.json")
+    with pytest.raises(UnsafePathError, match="leads outside"):
+        read_json_file(tmp_path / "run" / "card.json", within=tmp_path / "run")
+    assert read_json_file(tmp_path / "big.json") == {"a": "x" * 100}

@@ -1,0 +1,196 @@
+"""The owned-folder layer on its own (zbuf_occlude.io.owned): what a run writes, records, replaces
+and deletes in a user's folder, and what a hostile folder cannot make it do."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from zbuf_occlude.errors import DatasetBusy, OutputError, UnsafePathError
+from zbuf_occlude.io.atomic import _host_tag, file_sha256
+from zbuf_occlude.io.locks import LOCK_FILE
+from zbuf_occlude.io.owned import LEDGER_FILE, OwnedFolder
+
+
+def _ledger(root: Path) -> list[dict]:
+    return [json.loads(line) for line in (root / LEDGER_FILE).read_text().splitlines()]
+
+
+def _dead_pid() -> int:
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    child.wait()
+    return child.pid
+
+
+def test_a_write_is_recorded_with_its_size_and_sha256_before_it_takes_its_name(tmp_path):
+    with OwnedFolder(tmp_path, names=[r"a\.txt", r"cls/.*\.bin"]) as folder:
+        folder.write_text("a.txt", "hello\n")
+        folder.write_bytes("cls/x.bin", b"\x00\x01")
+        assert folder.holds("a.txt") and folder.check_unchanged("cls/x.bin")
+        assert folder.written() == ["a.txt", "cls/x.bin"] and folder.written(r"cls/.*") == ["cls/x.bin"]
+    entries = {e["path"]: e for e in _ledger(tmp_path)}
+    assert entries["a.txt"]["size"] == 6 and entries["a.txt"]["sha256"] == file_sha256(tmp_path / "a.txt")
+    assert (tmp_path / "cls" / "x.bin").read_bytes() == b"\x00\x01"
+    assert not (tmp_path / LOCK_FILE).exists()  # released on exit
+
+
+def test_a_name_outside_the_kinds_names_is_refused_and_nothing_written(tmp_path):
+    with OwnedFolder(tmp_path, names=[r"a\.txt"]) as folder:
+        for rel in ("b.txt", "../a.txt", "/etc/a.txt", "sub/a.txt"):
+            with pytest.raises(UnsafePathError):
+                folder.write_text(rel, "x")
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # no ledger line either: nothing was written
+
+
+def test_a_users_file_is_never_replaced_or_deleted(tmp_path):
+    (tmp_path / "a.txt").write_text("mine")
+    with OwnedFolder(tmp_path, names=[r"a\.txt"]) as folder:
+        with pytest.raises(UnsafePathError, match="a.txt"):
+            folder.write_text("a.txt", "ours")
+        with pytest.raises(UnsafePathError, match="a.txt"):
+            folder.delete(["a.txt"])
+    assert (tmp_path / "a.txt").read_text() == "mine"
+
+
+def test_a_file_of_ours_changed_since_is_kept(tmp_path):
+    with OwnedFolder(tmp_path, names=[r"a\.txt"]) as folder:
+        folder.write_text("a.txt", "ours")
+    (tmp_path / "a.txt").write_text("edited by the user")
+    with OwnedFolder(tmp_path, names=[r"a\.txt"]) as folder:
+        assert not folder.check_unchanged("a.txt")
+        with pytest.raises(UnsafePathError):
+            folder.delete(["a.txt"])
+    assert (tmp_path / "a.txt").read_text() == "edited by the user"
+
+
+def test_delete_removes_a_file_of_ours_and_records_it(tmp_path):
+    with OwnedFolder(tmp_path, names=[r"a\.txt"]) as folder:
+        folder.write_text("a.txt", "ours")
+    with OwnedFolder(tmp_path, names=[r"a\.txt"]) as folder:
+        assert folder.delete(["a.txt"]) == [tmp_path / "a.txt"]
+        assert not folder.holds("a.txt")
+    assert not (tmp_path / "a.txt").exists()
+    assert _ledger(tmp_path)[-1] == {"deleted": True, "path": "a.txt"}
+    with OwnedFolder(tmp_path, names=[r"a\.txt"]) as folder:  # the ledger read again agrees
+        assert folder.written() == []
+
+
+def test_a_second_writer_is_refused_while_the_first_holds_the_folder(tmp_path):
+    with OwnedFolder(tmp_path, names=[r"a\.txt"]):
+        with pytest.raises(DatasetBusy, match=str(os.getpid())):
+            with OwnedFolder(tmp_path, names=[r"a\.txt"]):
+                pass
+
+
+@pytest.mark.parametrize("kind", ["fifo", "symlink", "folder"])
+def test_a_lock_file_that_is_not_a_file_is_refused_without_blocking(tmp_path, kind):
+    """A FIFO as the lock would block every command on the folder (reading it waits for a writer)."""
+    lock = tmp_path / LOCK_FILE
+    if kind == "fifo":
+        os.mkfifo(lock)
+    elif kind == "symlink":
+        lock.symlink_to(tmp_path.parent / "elsewhere")
+    else:
+        lock.mkdir()
+    with pytest.raises(UnsafePathError, match=rf"{LOCK_FILE} is a (FIFO|link|folder)"):
+        with OwnedFolder(tmp_path, names=[r"a\.txt"]):
+            pass
+
+
+def test_a_huge_lock_is_never_read_whole(tmp_path, monkeypatch):
+    """The holder's text is read capped: a lock of a few MB is not a lock of ours."""
+    import zbuf_occlude.io.locks as locks
+    import zbuf_occlude.io.regular_files as regular_files
+
+    reads = []
+    real = regular_files.open_regular_file
+    monkeypatch.setattr(regular_files, "open_regular_file", lambda *a, **k: reads.append(k.get("max_bytes")) or real(*a, **k))
+    (tmp_path / LOCK_FILE).write_bytes(b"1\n" + b"x" * (4 << 20))
+    assert locks._lock_holder(tmp_path / LOCK_FILE) == "a process that has just released it"
+    assert reads == [locks.MAX_LOCK_BYTES]
+
+
+def test_a_ledger_past_its_cap_is_refused_before_it_is_read(tmp_path, monkeypatch):
+    import zbuf_occlude.io.owned as owned
+
+    with OwnedFolder(tmp_path, names=[r"a\.txt"]) as folder:
+        folder.write_text("a.txt", "ours")
+    monkeypatch.setattr(owned, "MAX_LEDGER_BYTES", 10)
+    with pytest.raises(UnsafePathError, match=rf"{LEDGER_FILE}: \d+ bytes, more than the 10"):
+        with OwnedFolder(tmp_path, names=[r"a\.txt"]):
+            pass
+
+
+def test_a_hard_linked_ledger_is_refused_and_the_file_elsewhere_unchanged(tmp_path):
+    """The ledger is appended in place: a second name would make us write outside --out."""
+    outside = tmp_path / "outside.txt"
+    outside.write_text("secret\n")
+    out = tmp_path / "out"
+    out.mkdir()
+    os.link(outside, out / LEDGER_FILE)
+    with pytest.raises(UnsafePathError, match="2 names"):
+        with OwnedFolder(out, names=[r"a\.txt"]) as folder:
+            folder.write_text("a.txt", "x")
+    assert outside.read_text() == "secret\n" and not (out / "a.txt").exists()
+
+
+@pytest.mark.parametrize("kind", ["symlink", "fifo"])
+def test_a_ledger_that_is_a_link_or_fifo_is_refused(tmp_path, kind):
+    ledger = tmp_path / LEDGER_FILE
+    if kind == "symlink":
+        (tmp_path / "elsewhere.jsonl").write_text("")
+        ledger.symlink_to(tmp_path / "elsewhere.jsonl")
+    else:
+        os.mkfifo(ledger)
+    with pytest.raises(UnsafePathError, match="link or not a file"):
+        with OwnedFolder(tmp_path, names=[r"a\.txt"]):
+            pass
+
+
+def test_damaged_and_deeply_nested_ledger_lines_are_skipped_not_a_traceback(tmp_path):
+    with OwnedFolder(tmp_path, names=[r"a\.txt", r"b\.txt"]) as folder:
+        folder.write_text("a.txt", "ours")
+    with open(tmp_path / LEDGER_FILE, "a") as fh:
+        fh.write("[" * 4000 + "]" * 4000 + "\n")  # nested past the JSON reader's depth
+        fh.write('{"path": "b.txt", "size": "x", "sha256": 1}\n')  # wrong kinds
+        fh.write("not json\n" + '{"path": "b.txt", "sha2')  # a torn last line
+    with OwnedFolder(tmp_path, names=[r"a\.txt", r"b\.txt"]) as folder:
+        assert folder.written() == ["a.txt"] and folder.check_unchanged("a.txt")
+
+
+def test_a_dead_writers_temporary_below_the_root_is_removed_and_others_kept(tmp_path):
+    dead = f"{_dead_pid()}-{_host_tag()}-abc"
+    (tmp_path / "cls").mkdir()
+    ours = tmp_path / "cls" / f".x.txt.{dead}.tmp"
+    theirs = tmp_path / "cls" / f".notes.md.{dead}.tmp"
+    for path in (ours, theirs):
+        path.write_text("x")
+    with OwnedFolder(tmp_path, names=[r"cls/.*\.txt"]):
+        pass
+    assert not ours.exists() and theirs.exists()
+
+
+def test_a_subfolder_that_leads_out_is_never_cleaned(tmp_path):
+    dead = f"{_dead_pid()}-{_host_tag()}-abc"
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    tmp = outside / f".x.txt.{dead}.tmp"
+    tmp.write_text("x")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "cls").symlink_to(outside)
+    with OwnedFolder(out, names=[r"cls/.*\.txt"]):
+        pass
+    assert tmp.exists()
+
+
+def test_a_folder_that_cannot_be_made_is_one_output_error(tmp_path):
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(OutputError, match="file"):
+        with OwnedFolder(tmp_path / "file" / "out", names=[r"a\.txt"]):
+            pass
