@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from zbuf_occlude.errors import DatasetFormatError, InvalidInputError
+from zbuf_occlude.errors import DatasetFormatError, InsufficientMemoryError, InvalidInputError, UnsafePathError
 from zbuf_occlude.io.point_sets import (
     POINT_SET_SUFFIXES,
     PointSet,
@@ -298,3 +298,106 @@ def test_a_class_list_that_is_not_text(tmp_path):
     with pytest.raises(InvalidInputError, match="not UTF-8") as exc:
         shape_names(path)
     _one_line_naming(exc, tmp_path / "shape_names.txt")
+
+
+# -- a hostile shared folder: the class list, declared sizes, normals, headers ------------------------
+def test_a_class_list_that_links_out_of_the_folder_is_refused_not_read(tmp_path):
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "elsewhere" / "secret.txt").write_text("SECRET_A\nSECRET_B\nSECRET_C\n")
+    (tmp_path / "set").mkdir()
+    path = _pointnet(tmp_path / "set" / "x.h5")
+    os.symlink(tmp_path / "elsewhere" / "secret.txt", tmp_path / "set" / "shape_names.txt")
+    with pytest.raises(UnsafePathError, match="leads outside") as exc:
+        shape_names(path)
+    _one_line_naming(exc, tmp_path / "set" / "shape_names.txt")
+    assert "SECRET" not in str(exc.value)
+    (tmp_path / "set" / "shape_names.txt").unlink()  # a FIFO would block: refused at once, not passed over
+    os.mkfifo(tmp_path / "set" / "shape_names.txt")
+    with pytest.raises(InvalidInputError, match="FIFO") as exc:
+        shape_names(path)
+    _one_line_naming(exc, tmp_path / "set" / "shape_names.txt")
+
+
+@pytest.mark.parametrize("name", ["../../etc", "a/b", "..", "a\\b"])
+def test_a_class_name_that_is_no_plain_name_is_refused(tmp_path, name):
+    path = _pointnet(tmp_path / "x.h5")
+    (tmp_path / "shape_names.txt").write_text(f"chair\n{name}\n")
+    with pytest.raises(InvalidInputError, match="not a plain name") as exc:
+        shape_names(path)
+    _one_line_naming(exc, tmp_path / "shape_names.txt")
+
+
+@pytest.mark.parametrize(
+    ("normal", "said"),
+    [((1e300, 0.0, 0.0), "have lengths float64 cannot divide by"), ((1e-300, 1e-300, 0.0), "have lengths float64 cannot divide"),
+     ((0.0, 0.0, 0.0), "are zero"), ((np.inf, 0.0, 0.0), "hold NaN or inf")],
+    ids=["1e300", "1e-300", "zero", "inf"],
+)  # fmt: skip
+def test_normals_that_cannot_be_made_unit_are_refused_naming_the_row(tmp_path, normal, said):
+    """A normal of length 1e300 overflowed to a length of inf and divided to 0: seen from everywhere."""
+    normals = np.tile([0.0, 0.0, 1.0], (64, 1))
+    normals[7] = normal
+    np.save(tmp_path / "c.npy", np.hstack([CLOUDS[0], normals]))
+    with pytest.raises(InvalidInputError, match=f"1 normals {said}.*first row 7") as exc:
+        read_point_sets(tmp_path / "c.npy")
+    _one_line_naming(exc, tmp_path / "c.npy")
+    normals[7] = (1e150, -1e150, 0.0)  # long, but float64 divides by it: a direction like any other
+    np.save(tmp_path / "c.npy", np.hstack([CLOUDS[0], normals]))
+    (cloud,) = read_point_sets(tmp_path / "c.npy")
+    assert np.allclose(cloud.normals[7], [2**-0.5, -(2**-0.5), 0.0])
+
+
+def test_a_read_that_would_exhaust_memory_is_refused_before_it_allocates(tmp_path, monkeypatch):
+    from zbuf_occlude import resources
+
+    big = np.random.default_rng(2).random((2, 3000, 3)).astype(np.float32)
+    with h5py.File(tmp_path / "big.h5", "w") as f:
+        f["data"] = big
+        f["label"] = np.zeros((2, 1), np.uint8)
+        f["normal"] = big + 1.0
+    np.save(tmp_path / "big.npy", big[0])
+    trimesh.PointCloud(big[0]).export(tmp_path / "big.ply")
+    monkeypatch.setattr(resources, "available_memory", lambda: (2**16, "test budget"))
+    monkeypatch.setattr(resources, "MIN_CHECKED_BYTES", 0)  # small files, a smaller budget
+    for name, said in (("big.h5", "2 clouds of 3,000 points"), ("big.npy", "1 cloud of 3,000 points"), ("big.ply", "3,000 points")):
+        with pytest.raises(InsufficientMemoryError, match=said) as exc:
+            read_point_sets(tmp_path / name)
+        _one_line_naming(exc, tmp_path / name)
+    monkeypatch.undo()
+    assert len(read_point_sets(tmp_path / "big.h5")) == 2
+
+
+def test_labels_of_more_clouds_than_memory_holds_are_refused_before_they_are_read(tmp_path, monkeypatch):
+    from zbuf_occlude import resources
+
+    with h5py.File(tmp_path / "rows.h5", "w") as f:
+        f["data"] = np.zeros((20_000, 1, 3), np.float32)
+        f["label"] = np.zeros((20_000, 1), np.uint8)
+    monkeypatch.setattr(resources, "available_memory", lambda: (2**16, "test budget"))
+    monkeypatch.setattr(resources, "MIN_CHECKED_BYTES", 0)  # a small file, a smaller budget
+    with pytest.raises(InsufficientMemoryError, match="20,000 clouds") as exc:
+        point_set_labels(tmp_path / "rows.h5")
+    _one_line_naming(exc, tmp_path / "rows.h5")
+
+
+def test_a_ply_header_with_a_count_python_cannot_parse_is_refused(tmp_path):
+    """Python refuses integers of over 4,300 digits with a ValueError: named here, and no point set."""
+    path = tmp_path / "huge.ply"
+    path.write_bytes(b"ply\nformat ascii 1.0\nelement vertex " + b"9" * 5000 + b"\nproperty float x\nend_header\n0\n")
+    assert not is_point_set_file(path)
+    with pytest.raises(InvalidInputError, match="a count of 5,000 digits") as exc:
+        read_point_sets(path)
+    _one_line_naming(exc, path)
+
+
+def test_an_npy_is_read_from_the_file_its_header_was_checked_in(tmp_path):
+    """Fortran order and a big-endian dtype are read as numpy writes them, through the one open file."""
+    array = np.asfortranarray(CLOUDS[0].astype(">f8"))
+    np.save(tmp_path / "f.npy", array)
+    (cloud,) = read_point_sets(tmp_path / "f.npy")
+    assert np.array_equal(cloud.points, CLOUDS[0].astype(np.float64))
+    np.save(tmp_path / "short.npy", CLOUDS[0])
+    (tmp_path / "short.npy").write_bytes((tmp_path / "short.npy").read_bytes()[:-40])  # its body cut short
+    with pytest.raises(InvalidInputError, match="cannot read as a NPY") as exc:
+        read_point_sets(tmp_path / "short.npy")
+    _one_line_naming(exc, tmp_path / "short.npy")

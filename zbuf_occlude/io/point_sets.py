@@ -23,8 +23,12 @@ Every file is untrusted.  Nothing is executed or unpickled; an HDF5 file is read
 :func:`zbuf_occlude.io.hdf5.check_hdf5` has found no link to another file, no virtual dataset
 and no external storage; sizes are checked from headers before anything is read
 (:data:`~zbuf_occlude.defaults.MAX_POINT_SET_POINTS` points a cloud,
-:data:`~zbuf_occlude.defaults.MAX_POINT_SET_BYTES` a read); NaN or infinite coordinates or
-normals and zero normals are refused.  Each error is one
+:data:`~zbuf_occlude.defaults.MAX_POINT_SET_BYTES` a read), and what a read will allocate is
+checked against the memory available (:func:`zbuf_occlude.resources.check_memory`) before it
+allocates; NaN or infinite coordinates are refused, and so are normals that cannot be made unit
+(:func:`unit_normals`).  A class list beside a file is read only when it is a regular file inside
+the file's folder, links resolved (a ``shape_names.txt`` that links elsewhere is refused).  Each
+error is one
 :class:`~zbuf_occlude.errors.InvalidInputError` (:class:`~zbuf_occlude.errors.DatasetFormatError`
 for HDF5 files) naming the file.
 """
@@ -46,11 +50,12 @@ from zbuf_occlude.defaults import MAX_POINT_SET_BYTES, MAX_POINT_SET_POINTS
 from zbuf_occlude.errors import DatasetFormatError, InvalidInputError
 from zbuf_occlude.io.arrays import check_array_sizes, npy_header
 from zbuf_occlude.io.hdf5 import open_hdf5
-from zbuf_occlude.io.regular_files import open_regular_file, read_regular_file
+from zbuf_occlude.io.regular_files import MAX_LIST_BYTES, open_regular_file, read_regular_file, read_text_file
+from zbuf_occlude.resources import check_memory
 
 __all__ = [
     "POINT_SET_SUFFIXES", "SHAPE_NAME_FILES", "PointSet", "is_point_set_file", "read_point_sets",
-    "point_set_labels", "shape_names",
+    "point_set_labels", "shape_names", "unit_normals", "BYTES_PER_READ_POINT", "BYTES_PER_LABEL",
 ]  # fmt: skip
 
 #: Suffixes of the files read here (any case).
@@ -64,8 +69,22 @@ _COLUMNS = (3, 6)
 #: Bytes of a PLY header read to find its elements (a header is a few hundred bytes).
 _PLY_HEADER_BYTES = 1 << 16
 _PLY_CHUNK_BYTES = 1 << 10
-#: Largest class list read: 1 MiB (ModelNet40's is 300 bytes).
-_NAMES_BYTES = 1 << 20
+#: Most digits of an element count in a PLY header: 18 (below int64's 9.2e18, and far past every
+#: cap); Python refuses to parse an integer of over 4,300 digits with a bare ValueError.
+_PLY_COUNT_DIGITS = 18
+#: Bytes a read allocates per point beyond the file's own values: the float64 coordinates and
+#: unit normals a :class:`PointSet` keeps (24 + 24), and the float64 copy of the normals and
+#: their lengths while they are made unit (24 + 8).
+BYTES_PER_READ_POINT = 80
+#: Bytes per cloud of reading a file's labels (:func:`point_set_labels`): the int64 array, and
+#: the list of Python ints returned (an 8-byte slot and a 32-byte int each).
+BYTES_PER_LABEL = 48
+#: Shortest and longest normal made unit in float64: its squared length, summed by
+#: ``numpy.linalg.norm``, must be a normal float64 (from ``finfo.tiny``, 2.2e-308, to ``finfo.max``,
+#: 1.8e308).  Past the top it overflows to inf and every normal divides to 0; below the bottom
+#: it loses its digits in subnormals and the quotient is no longer unit.
+_MIN_NORMAL_LENGTH = float(np.sqrt(np.finfo(np.float64).tiny))
+_MAX_NORMAL_LENGTH = float(np.sqrt(np.finfo(np.float64).max))
 
 
 @dataclass(frozen=True)
@@ -114,13 +133,54 @@ def _point_set(path: Path, name: str, cloud: NDArray, normals: NDArray | None, l
     if normals is None and cloud.shape[1] == 6:
         normals = cloud[:, 3:6]
     if normals is not None:
-        normals = np.asarray(normals, dtype=np.float64)
-        length = np.linalg.norm(normals, axis=1)
-        bad = int((~np.isfinite(length) | (length == 0)).sum())
-        if bad:
-            raise InvalidInputError(f"{path}: cloud {name!r}: {bad} normals are zero, NaN or inf")
-        normals = np.ascontiguousarray(normals / length[:, None])
+        normals = unit_normals(normals, what=f"{path}: cloud {name!r}")
     return PointSet(points, normals, label, name)
+
+
+def unit_normals(normals: NDArray[np.floating], *, what: str) -> NDArray[np.float64]:
+    """``normals (N, 3)`` divided by their lengths, after checking that each can be.
+
+    A normal is a direction: its length does not matter, as long as float64 can divide by it.
+    That holds when its length lies from 1.5e-154 to 1.3e154 (its squared length, summed by
+    ``numpy.linalg.norm``, is then a normal float64: module constants).  A normal of length
+    1e300 would overflow to a length of inf and divide to 0 (a point facing no way, seen from
+    everywhere); one of 1e-300 underflows to 0.
+
+    Parameters
+    ----------
+    normals : (N, 3) float
+    what : str
+        The cloud, first words of the message.
+
+    Returns
+    -------
+    (N, 3) float64
+        Unit, C-contiguous.
+
+    Raises
+    ------
+    InvalidInputError
+        Naming ``what``, how many normals are zero, hold NaN or inf, or are too long or too
+        short to divide by, and the first such row.
+    """
+    normals = np.asarray(normals, dtype=np.float64)
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        length = np.linalg.norm(normals, axis=1)
+    finite = np.isfinite(normals).all(axis=1)
+    zero = finite & ~normals.any(axis=1)
+    out_of_range = finite & ~zero & ~((length >= _MIN_NORMAL_LENGTH) & (length <= _MAX_NORMAL_LENGTH))
+    problems = [
+        (zero, "are zero"),
+        (~finite, "hold NaN or inf"),
+        (out_of_range, f"have lengths float64 cannot divide by (outside {_MIN_NORMAL_LENGTH:.2g} to {_MAX_NORMAL_LENGTH:.2g})"),
+    ]
+    found = [(int(np.count_nonzero(bad)), int(np.argmax(bad)), said) for bad, said in problems if bad.any()]
+    if found:
+        count, row, said = found[0]
+        raise InvalidInputError(
+            f"{what}: {count:,} normals {said}, first row {row} {normals[row].tolist()}; a normal gives the direction a surface faces"
+        )
+    return np.ascontiguousarray(normals / length[:, None])
 
 
 # -- HDF5 -------------------------------------------------------------------------------------------
@@ -145,6 +205,16 @@ def _hdf5_layout(f: Any, path: Path, max_points: int) -> tuple[Any, Any | None]:
     if data.shape[1] > max_points:
         raise InvalidInputError(f"{path}: its clouds hold {data.shape[1]:,} points each, more than the {max_points:,} accepted")
     return data, normal
+
+
+def _check_read_memory(path: Path, clouds: int, points: int, stored_bytes_per_point: int) -> None:
+    """Refuse a read of ``clouds`` clouds of ``points`` points that would exhaust memory, before it
+    allocates: the file's values (``stored_bytes_per_point``) and :data:`BYTES_PER_READ_POINT`."""
+    check_memory(
+        clouds * points * (stored_bytes_per_point + BYTES_PER_READ_POINT),
+        option=f"reading {path} ({clouds:,} {'cloud' if clouds == 1 else 'clouds'} of {points:,} points)",
+        hint="read fewer rows at a time, or free memory",
+    )
 
 
 def _hdf5_labels(f: Any, path: Path, rows: int) -> NDArray[np.int64] | None:
@@ -184,6 +254,8 @@ def _read_hdf5(path: Path, max_points: int, rows: Sequence[int] | None) -> list[
                 f"{path}: {len(wanted):,} clouds of {n:,} points are more than the {MAX_POINT_SET_BYTES:,} bytes one read "
                 "may take; read fewer rows at a time"
             )
+        stored = data.dtype.itemsize * data.shape[2] + (0 if normal is None else normal.dtype.itemsize * 3)
+        _check_read_memory(path, len(wanted), n, stored)
         whole = rows is None
         clouds = data[()] if whole else None
         normals = normal[()] if whole and normal is not None else None
@@ -196,23 +268,33 @@ def _read_hdf5(path: Path, max_points: int, rows: Sequence[int] | None) -> list[
 
 
 # -- .npy -------------------------------------------------------------------------------------------
-def _npy_shape(path: Path, max_points: int) -> tuple[int, int]:
-    """``(N, columns)`` of a ``.npy`` cloud, from its header (the file's sizes checked first)."""
+def _npy_shape(path: Path, max_points: int) -> tuple[int, int, np.dtype]:
+    """``(N, columns, dtype)`` of a ``.npy`` cloud, from its header (the file's sizes checked first)."""
     check_array_sizes(path, max_bytes=MAX_POINT_SET_BYTES, error=InvalidInputError)
     fh, _ = open_regular_file(path, error=InvalidInputError)
     with fh:
-        shape, dtype = npy_header(fh)
+        return _npy_layout(fh, path, max_points)
+
+
+def _npy_layout(fh: Any, path: Path, max_points: int) -> tuple[int, int, np.dtype]:
+    """``(N, columns, dtype)`` of the ``.npy`` cloud open at ``fh`` (at its start), from its header."""
+    shape, dtype = npy_header(fh)
     if dtype.kind not in "fiu" or dtype.fields is not None or len(shape) != 2 or shape[1] not in _COLUMNS:
         raise InvalidInputError(f"{path}: holds {dtype} values of shape {shape}, not (N, 3) or (N, 6) numbers (coordinates, normals)")
     if shape[0] > max_points:
         raise InvalidInputError(f"{path}: {shape[0]:,} points, more than the {max_points:,} accepted")
-    return shape[0], shape[1]
+    return shape[0], shape[1], dtype
 
 
 def _read_npy(path: Path, max_points: int) -> list[PointSet]:
-    _npy_shape(path, max_points)
-    array = np.load(path, mmap_mode="r", allow_pickle=False)  # a large file is paged in, not read whole
-    return [_point_set(path, path.stem, np.asarray(array), None, None)]
+    check_array_sizes(path, max_bytes=MAX_POINT_SET_BYTES, error=InvalidInputError)
+    fh, _ = open_regular_file(path, error=InvalidInputError)
+    with fh:  # the array is read from the file whose header was checked, not opened again by name
+        n, columns, dtype = _npy_layout(fh, path, max_points)
+        _check_read_memory(path, 1, n, dtype.itemsize * columns)
+        fh.seek(0)
+        array = np.lib.format.read_array(fh, allow_pickle=False)
+    return [_point_set(path, path.stem, array, None, None)]
 
 
 # -- .ply -------------------------------------------------------------------------------------------
@@ -227,7 +309,11 @@ def _ply_elements(path: Path) -> dict[str, int]:
     if not head.startswith(b"ply") or end < 0:
         raise InvalidInputError(f"{path}: not a PLY file (no 'ply' ... 'end_header' header in its first {_PLY_HEADER_BYTES:,} bytes)")
     text = head[:end].decode("ascii", "replace")
-    return {m[1]: int(m[2]) for m in re.finditer(r"^element\s+(\S+)\s+(\d+)\s*$", text, re.MULTILINE)}
+    counts = {m[1]: m[2] for m in re.finditer(r"^element\s+(\S+)\s+(\d+)\s*$", text, re.MULTILINE)}
+    for element, digits in counts.items():
+        if len(digits.lstrip("0")) > _PLY_COUNT_DIGITS:
+            raise InvalidInputError(f"{path}: its PLY header gives its {element[:40]!r} element a count of {len(digits):,} digits; refused")
+    return {element: int(digits) for element, digits in counts.items()}
 
 
 def _ply_vertex_count(path: Path, max_points: int) -> int:
@@ -246,6 +332,10 @@ def _read_ply(path: Path, max_points: int) -> list[PointSet]:
     from trimesh.exchange.ply import load_ply
 
     n = _ply_vertex_count(path, max_points)
+    fh, size = open_regular_file(path, max_bytes=MAX_POINT_SET_BYTES, error=InvalidInputError)
+    fh.close()
+    # the file's bytes, trimesh's columns of them (at most as many), and the float64 x, y, z and normals
+    check_memory(2 * size + n * BYTES_PER_READ_POINT, option=f"reading {path} ({size:,} bytes, {n:,} points)", hint="free memory")
     raw = read_regular_file(path, max_bytes=MAX_POINT_SET_BYTES, error=InvalidInputError)
     vertex = load_ply(io.BytesIO(raw), skip_materials=True)["metadata"]["_ply_raw"]["vertex"]["data"]
     if vertex is None or any(c not in _fields(vertex) for c in "xyz"):
@@ -331,6 +421,9 @@ def read_point_sets(
         :class:`~zbuf_occlude.errors.DatasetFormatError` (a subclass) for HDF5 files that are
         not HDF5, link or map to other files (:func:`zbuf_occlude.io.hdf5.check_hdf5`), or lack
         ``data (B, N, 3)``, and for a ``label`` that is not one non-negative integer per row.
+    InsufficientMemoryError
+        The read (the file's values and :data:`BYTES_PER_READ_POINT` a point) would need more
+        memory than is available; checked before it allocates (naming the file and the clouds).
     """
     path = Path(path)
     suffix = _suffix(path)
@@ -358,6 +451,9 @@ def point_set_labels(path: str | os.PathLike, *, max_points: int = MAX_POINT_SET
     ------
     InvalidInputError
         As :func:`read_point_sets`, for what headers and labels show.
+    InsufficientMemoryError
+        Reading the labels (:data:`BYTES_PER_LABEL` a cloud) would need more memory than is
+        available (naming the number of clouds).
     """
     path = Path(path)
     suffix = _suffix(path)
@@ -371,6 +467,11 @@ def point_set_labels(path: str | os.PathLike, *, max_points: int = MAX_POINT_SET
             return [None]
         with open_hdf5(path) as f:
             data, _ = _hdf5_layout(f, path, max_points)
+            check_memory(
+                data.shape[0] * BYTES_PER_LABEL,
+                option=f"the labels of {path} ({data.shape[0]:,} clouds)",
+                hint="split the file, or free memory",
+            )
             labels = _hdf5_labels(f, path, data.shape[0])
             return [None] * data.shape[0] if labels is None else [int(v) for v in labels]
     except InvalidInputError:
@@ -384,7 +485,11 @@ def shape_names(path: str | os.PathLike) -> list[str] | None:
 
     The first of :data:`SHAPE_NAME_FILES` in the file's folder: one class a line, label ``i``
     on line ``i`` (blank lines skipped; ShapeNetPart's ``all_object_categories.txt``: the first
-    field of each line).
+    field of each line).  The list is read by
+    :func:`~zbuf_occlude.io.regular_files.read_text_file`'s rules: a regular file (a FIFO is
+    refused unopened), inside the point-set file's folder once links are resolved (one that
+    links elsewhere would name the classes with another file's lines), of at most
+    :data:`~zbuf_occlude.io.regular_files.MAX_LIST_BYTES`.
 
     Returns
     -------
@@ -394,22 +499,24 @@ def shape_names(path: str | os.PathLike) -> list[str] | None:
     Raises
     ------
     InvalidInputError
-        The class list is larger than 1 MiB, not UTF-8, or holds a name that is not printable
-        (naming it and the line).
+        The class list is not a regular file (a FIFO, a folder, a dangling link), larger than
+        :data:`~zbuf_occlude.io.regular_files.MAX_LIST_BYTES`, not UTF-8, or holds a name that is
+        not printable or not a plain name (``/``, ``\\``, ``.``, ``..``: exports name folders by
+        class, as a mesh's class is its folder's name), naming it and the line.
+    UnsafePathError
+        The class list leads outside the point-set file's folder (a link); a subclass of
+        InvalidInputError.
     """
     path = Path(path)
     if path.suffix.lower() not in _HDF5:
         return None
     for file_name in SHAPE_NAME_FILES:
         names_file = path.parent / file_name
-        if names_file.is_file():
+        if os.path.lexists(names_file):  # whatever it is: a FIFO or a link is refused, not passed over
             break
     else:
         return None
-    try:
-        text = read_regular_file(names_file, max_bytes=_NAMES_BYTES, error=InvalidInputError).decode("utf-8")
-    except UnicodeDecodeError:
-        raise InvalidInputError(f"{names_file}: not UTF-8 text; save it as UTF-8, one class name a line") from None
+    text = read_text_file(names_file, max_bytes=MAX_LIST_BYTES, error=InvalidInputError, within=path.parent)
     names = []
     for lineno, line in enumerate(text.splitlines(), start=1):
         name = line.split("\t")[0].split()[0] if file_name == "all_object_categories.txt" and line.strip() else line.strip()
@@ -417,5 +524,7 @@ def shape_names(path: str | os.PathLike) -> list[str] | None:
             continue
         if not name.isprintable():
             raise InvalidInputError(f"{names_file}:{lineno}: class name {name!r} is not printable text")
+        if name in (".", "..") or "/" in name or "\\" in name:  # a class names a folder where meshes' classes do
+            raise InvalidInputError(f"{names_file}:{lineno}: class name {name!r} is not a plain name (no '/', '\\', '.' or '..')")
         names.append(name)
     return names

@@ -16,11 +16,17 @@ with no faces) holds one cloud or many; each cloud is one object of the plan, as
   reads a point set as stored, +z, since no point-set format declares its up axis: PointNet's
   HDF5 files hold ModelNet +y up, so pass ``up="+y"`` there), then normalised as a mesh is
   (centre of the bounding box to the origin, largest side 1; Sryamkin et al. 2023, §4.1).  The
-  cloud's points are the object's dense cloud as they are: nothing is sampled.
+  cloud's points are the object's dense cloud as they are: nothing is sampled.  A cloud that
+  float64 cannot normalise (:func:`cloud_frame`) is refused in one line.
+
+The lists beside a file (the class list, the split lists) are read as a shared folder's files
+are (:mod:`zbuf_occlude.io.regular_files`): regular files only, inside the file's folder once
+links are resolved, of at most :data:`~zbuf_occlude.io.regular_files.MAX_LIST_BYTES`.
 """
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,14 +35,28 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.io.regular_files import MAX_LIST_BYTES, read_text_file
 from zbuf_occlude.mesh.discovery import SPLITS, printable_path
+from zbuf_occlude.resources import check_memory
 
-__all__ = ["POINT_SET_LAYOUT", "CloudEntry", "LoadedCloud", "point_set_clouds", "pointnet_split", "load_cloud", "cloud_frame"]
+__all__ = [
+    "POINT_SET_LAYOUT", "BYTES_PER_PLANNED_CLOUD", "MIN_KEPT_DISTINCT", "CloudEntry", "LoadedCloud", "point_set_clouds",
+    "pointnet_split", "load_cloud", "cloud_frame",
+]  # fmt: skip
 
 #: The card's ``layout`` of point-set files whose clouds are labelled by the files themselves.
 POINT_SET_LAYOUT = "point-set labels"
-#: Largest ``train_files.txt``/``test_files.txt`` read (PointNet's are a few hundred bytes).
-_FILE_LIST_BYTES = 1 << 20
+#: Bytes one cloud of a point-set file costs the plan of discovery: its :class:`CloudEntry`, the
+#: plan's row and object, and their names (589 B at the peak of ``scan_inputs`` over a file of
+#: 100,000 one-point clouds, by tracemalloc; rounded up).
+BYTES_PER_PLANNED_CLOUD = 640
+#: The least share of a cloud's distinct points that must stay distinct once it is scaled to
+#: extent 1 and rounded to float32, the dtype its samples are written in (:func:`cloud_frame`):
+#: a half.  Points closer than float32's resolution of the extent (about 6e-8 of it) merge, as
+#: near-duplicates may, a few at a time; a cloud that loses more than half of them is one whose
+#: extent is set by points so far from the rest that the rest rounds to a few points, and every
+#: sample of it would repeat them.
+MIN_KEPT_DISTINCT = 0.5
 _HDF5 = (".h5", ".hdf5")
 
 
@@ -87,12 +107,21 @@ def point_set_clouds(path: str | os.PathLike) -> list[CloudEntry]:
     ------
     InvalidInputError
         The file is refused by :func:`zbuf_occlude.io.point_sets.point_set_labels` (naming it
-        and why), or a label has no line in its class list.
+        and why), its class list by :func:`zbuf_occlude.io.point_sets.shape_names` (a link out
+        of its folder: :class:`~zbuf_occlude.errors.UnsafePathError`), or a label has no line
+        in its class list.
+    InsufficientMemoryError
+        Planning its clouds (:data:`BYTES_PER_PLANNED_CLOUD` each) would need more memory than
+        is available (naming the number of clouds).
     """
     from zbuf_occlude.io.point_sets import point_set_labels, shape_names
 
     path = Path(path)
     labels = point_set_labels(path)
+    check_memory(
+        len(labels) * BYTES_PER_PLANNED_CLOUD, option=f"planning the {len(labels):,} clouds of {printable_path(path)}",
+        hint="split the file, or free memory",
+    )  # fmt: skip
     names = shape_names(path) if any(label is not None for label in labels) else None
     if names is not None:
         beyond = [label for label in labels if label is not None and label >= len(names)]
@@ -115,19 +144,27 @@ def pointnet_split(path: str | os.PathLike) -> str | None:
     """The split of a point-set file listed in PointNet's ``<split>_files.txt`` beside it, or None.
 
     PointNet's ``modelnet40_ply_hdf5_2048`` lists its files there by a path whose last part is
-    the file's name (``data/modelnet40_ply_hdf5_2048/ply_data_test0.h5``).  A list that is
-    missing, larger than 1 MiB or unreadable counts as absent; a file listed in two splits has none.
+    the file's name (``data/modelnet40_ply_hdf5_2048/ply_data_test0.h5``).  A missing list counts
+    as absent; a file listed in two splits has none.  A list that is there is read by
+    :func:`~zbuf_occlude.io.regular_files.read_text_file`'s rules (undecodable bytes replaced:
+    a line that is not UTF-8 names no file here).
+
+    Raises
+    ------
+    InvalidInputError
+        A list that is not a regular file (a FIFO, a folder, a dangling link: refused
+        unopened), cannot be read, or is larger than
+        :data:`~zbuf_occlude.io.regular_files.MAX_LIST_BYTES` (naming it).
+    UnsafePathError
+        A list that leads outside the file's folder (a link to a file elsewhere).
     """
     path = Path(path)
     found = []
     for split in SPLITS:
         listing = path.parent / f"{split}_files.txt"
-        try:
-            if not listing.is_file() or listing.stat().st_size > _FILE_LIST_BYTES:
-                continue
-            text = listing.read_bytes().decode("utf-8", "replace")
-        except OSError:
+        if not os.path.lexists(listing):
             continue
+        text = read_text_file(listing, max_bytes=MAX_LIST_BYTES, within=path.parent, errors="replace")
         if any(line.strip().replace("\\", "/").rsplit("/", 1)[-1] == path.name for line in text.splitlines()):
             found.append(split)
     return found[0] if len(found) == 1 else None
@@ -153,7 +190,8 @@ def load_cloud(path: str | os.PathLike, cloud: int, *, up: str = "auto") -> Load
     ------
     InvalidInputError
         As :func:`zbuf_occlude.io.point_sets.read_point_sets` (naming the file), ``up`` unknown,
-        or the cloud's points all coincide (it has no extent to normalise).
+        or the cloud cannot be normalised (:func:`cloud_frame`: its points all coincide, its
+        extent overflows float64, or scaling it merges most of its points).
     """
     from zbuf_occlude.io.point_sets import read_point_sets
     from zbuf_occlude.mesh.scene import UP_CHOICES
@@ -175,6 +213,21 @@ def cloud_frame(
     centred on 0 with maximum extent 1 (as :func:`zbuf_occlude.mesh.load.normalize_mesh`,
     Sryamkin et al. 2023, §4.1).
 
+    The rule of a cloud that can be normalised, checked in float64, where it is done:
+
+    * its **extent** (the largest side of its bounding box) is finite and above 0: a cloud
+      from -1.5e308 to 1.5e308 has an extent of inf (the subtraction overflows), and dividing
+      by it would put every point at 0; a cloud whose points all coincide has none;
+    * its **scale** ``1 / extent`` is finite (an extent below 5.6e-309, subnormal, is refused);
+    * scaling **keeps its points apart** where they are written: at least
+      :data:`MIN_KEPT_DISTINCT` of its distinct points stay distinct once scaled and rounded to
+      float32, the dtype of every sample.  One outlier at 1e200 beside a cloud of unit size sets
+      an extent against which the rest spans 1e-200: scaled, the whole cloud but the outlier is
+      one repeated point.  Near-duplicates (points within ~6e-8 of the extent of each other)
+      may merge; they are the same point in every output.
+
+    The centre is ``(lo + hi) / 2``, or ``lo / 2 + hi / 2`` where that sum overflows.
+
     Parameters
     ----------
     points : (N, 3) float64
@@ -194,7 +247,8 @@ def cloud_frame(
     Raises
     ------
     InvalidInputError
-        Every point coincides (no extent to normalise).
+        One line naming ``what`` and the numbers: every point coincides (no extent), the
+        extent overflows or its scale does, or scaling merges most distinct points (above).
     """
     if up != "+z":
         from zbuf_occlude.mesh.scene import up_rotation
@@ -203,8 +257,41 @@ def cloud_frame(
         points = points @ rotation.T
         normals = None if normals is None else normals @ rotation.T
     lo, hi = points.min(axis=0), points.max(axis=0)
-    extent = float((hi - lo).max())
+    with np.errstate(over="ignore", invalid="ignore"):
+        extent = float((hi - lo).max())
+        centre = (lo + hi) / 2.0
+    span = f"coordinates from {float(lo.min()):.3g} to {float(hi.max()):.3g}"
+    if not math.isfinite(extent):
+        raise InvalidInputError(f"{what}: its extent overflows float64 ({span}); a cloud is normalised by its extent: scale it down")
     if not extent > 0.0:
         raise InvalidInputError(f"{what}: its {len(points):,} points all coincide; a cloud needs an extent to be seen from around it")
-    points = (points - (lo + hi) / 2.0) * (1.0 / extent)
-    return np.ascontiguousarray(points), None if normals is None else np.ascontiguousarray(normals)
+    scale = 1.0 / extent
+    if not math.isfinite(scale):
+        raise InvalidInputError(f"{what}: its extent {extent:.3g} is too small to scale to 1 in float64; scale it up")
+    if not np.isfinite(centre).all():
+        centre = lo / 2.0 + hi / 2.0
+    scaled = (points - centre) * scale
+    _check_kept_apart(points, scaled, what=what, span=span)
+    return np.ascontiguousarray(scaled), None if normals is None else np.ascontiguousarray(normals)
+
+
+def _distinct_rows(points: NDArray[np.floating]) -> int:
+    """Distinct rows of ``points`` (N, 3): its values' bytes, with -0.0 made +0.0."""
+    rows = np.ascontiguousarray(points + 0.0).view(np.dtype((np.void, points.dtype.itemsize * 3))).ravel()
+    return len(np.unique(rows))
+
+
+def _check_kept_apart(points: NDArray[np.float64], scaled: NDArray[np.float64], *, what: str, span: str) -> None:
+    """Refuse a scaling that merged more than :data:`MIN_KEPT_DISTINCT` of the distinct points,
+    as float32 keeps them (:func:`cloud_frame`); sorts the scaled cloud, and the cloud itself only
+    when that could be so."""
+    n = len(points)
+    kept = _distinct_rows(scaled.astype(np.float32))
+    if kept >= MIN_KEPT_DISTINCT * n:  # the cloud has at most n distinct points: no need to count them
+        return
+    distinct = _distinct_rows(points)
+    if kept < MIN_KEPT_DISTINCT * distinct:
+        raise InvalidInputError(
+            f"{what}: scaled to extent 1, its {distinct:,} distinct points become {kept:,} in float32 ({span}): points far "
+            "from the rest set its extent, and the rest rounds together; remove the outliers"
+        )
