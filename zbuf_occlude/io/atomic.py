@@ -15,6 +15,7 @@ import hashlib
 import os
 import re
 import socket
+import stat
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -26,6 +27,8 @@ from zbuf_occlude.errors import OutputError
 __all__ = [
     "atomic_path",
     "atomic_h5",
+    "temp_h5",
+    "positional_writer",
     "TempOwner",
     "temp_owner",
     "temp_is_orphan",
@@ -198,7 +201,16 @@ def atomic_path(path: str | os.PathLike, *, before_replace: Callable[[Path], Non
 
 @contextlib.contextmanager
 def atomic_h5(path: str | os.PathLike) -> Iterator[Any]:
-    """An ``h5py.File`` open for writing at a temporary beside ``path`` (:func:`atomic_path`).
+    """An ``h5py.File`` open for writing at a temporary beside ``path`` (:func:`atomic_path`,
+    :func:`temp_h5`)."""
+    with atomic_path(path) as tmp, temp_h5(tmp) as f:
+        yield f
+
+
+@contextlib.contextmanager
+def temp_h5(tmp: str | os.PathLike) -> Iterator[Any]:
+    """An ``h5py.File`` open for writing at ``tmp``, the temporary of an atomic write that is under
+    way (:func:`atomic_path`, :meth:`~zbuf_occlude.io.owned.OwnedFolder.write`), which renames it.
 
     HDF5 reports a full disk in its message, not always in ``errno``: such an error is
     re-raised as ``ENOSPC`` so that :func:`atomic_path` turns it into the disk-full
@@ -206,14 +218,40 @@ def atomic_h5(path: str | os.PathLike) -> Iterator[Any]:
     """
     import h5py
 
-    with atomic_path(path) as tmp:
-        try:
-            with h5py.File(tmp, "w") as f:
-                yield f
-        except OSError as exc:
-            if exc.errno is None and "No space left" in str(exc):
-                raise OSError(errno.ENOSPC, str(exc)) from exc
-            raise
+    try:
+        with h5py.File(tmp, "w") as f:
+            yield f
+    except OSError as exc:
+        if exc.errno is None and "No space left" in str(exc):
+            raise OSError(errno.ENOSPC, str(exc)) from exc
+        raise
+
+
+@contextlib.contextmanager
+def positional_writer(tmp: str | os.PathLike) -> Iterator[Callable[[int, bytes], None]]:
+    """Yield ``write(offset, data)``, which writes ``data`` at byte ``offset`` of ``tmp`` (``os.pwrite``),
+    for a temporary of an atomic write that is under way and already holds its layout (a contiguous
+    HDF5 dataset made by :func:`temp_h5`, whose rows are then written in any order).
+
+    ``tmp`` is opened without following a link and must be a regular file; an ``OSError`` (a full
+    disk) reaches :func:`atomic_path`, which raises :class:`OutputError`.
+    """
+    fd = os.open(tmp, os.O_WRONLY | getattr(os, "O_NOFOLLOW", 0))
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError(errno.EINVAL, f"{tmp} is not a regular file")
+
+        def write(offset: int, data: bytes) -> None:
+            view = memoryview(data)
+            while view:  # a regular file takes all of it at once, but pwrite may write fewer bytes
+                done = os.pwrite(fd, view, offset)
+                if done <= 0:
+                    raise OSError(errno.ENOSPC, f"no byte written to {tmp}")
+                view, offset = view[done:], offset + done
+
+        yield write
+    finally:
+        os.close(fd)
 
 
 def write_text(path: str | os.PathLike, text: str) -> Path:
