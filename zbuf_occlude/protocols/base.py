@@ -3,10 +3,10 @@
 A protocol is a :class:`Protocol`: a function making one object's arrays (``make``) and an
 optional ``finish`` that assembles the shards into the recipe's own layout.  The engine
 discovers the meshes as ``generate`` does (:func:`zbuf_occlude.farm.generate.scan_paths`:
-same names, labels and splits), writes ``OUT/shards/<protocol>_<index>.h5`` atomically
-(:func:`zbuf_occlude.io.clouds.atomic_h5`), and resumes: a shard that exists is not redone.  The
-options are recorded in ``OUT/protocol.json`` with the meshes; a rerun with other options or meshes is
-refused unless ``overwrite``.
+same names, labels and splits), writes ``OUT/shards/<protocol>_<index>.h5`` through the owned
+folder (:meth:`~zbuf_occlude.io.owned.OwnedFolder.write`: atomic, recorded), and resumes: a
+shard that exists is not redone.  The options are recorded in ``OUT/protocol.json`` with the
+meshes; a rerun with other options or meshes is refused unless ``overwrite``.
 """
 
 from __future__ import annotations
@@ -23,19 +23,25 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from zbuf_occlude.dataset.layout import PROTOCOL_FILE
-from zbuf_occlude.errors import InvalidInputError, OutputError, ZbufOccludeError
+from zbuf_occlude.errors import DatasetFormatError, InvalidInputError, ZbufOccludeError
 from zbuf_occlude.geometry.samples import PROTOCOL_STREAM, derive_rng
 from zbuf_occlude.farm.journal import input_root, relative_objects, root_name
 from zbuf_occlude.farm.ownership import check_inputs_outside_out
-from zbuf_occlude.io.atomic import atomic_h5
-from zbuf_occlude.io.owned import OwnedFolder
+from zbuf_occlude.io.atomic import atomic_h5, temp_h5
+from zbuf_occlude.io.hdf5 import declared_nbytes, open_hdf5
 from zbuf_occlude.io.json_files import read_json_file
+from zbuf_occlude.io.owned import OwnedFolder
+from zbuf_occlude.io.regular_files import open_regular_file
 from zbuf_occlude.mesh.inputs import FarmObject, scan_paths
+from zbuf_occlude.resources import check_memory
 
 if TYPE_CHECKING:
     import trimesh
 
-__all__ = ["Protocol", "ProtocolOptions", "ProtocolRun", "run_protocol", "write_arrays_h5", "read_arrays_h5", "SHARDS_DIR", "shard_name"]
+__all__ = [
+    "Protocol", "ProtocolOptions", "ProtocolRun", "run_protocol", "write_arrays_h5", "read_arrays_h5", "open_arrays_h5",
+    "SHARDS_DIR", "shard_name",
+]  # fmt: skip
 
 log = logging.getLogger(__name__)
 
@@ -133,36 +139,97 @@ class ProtocolRun:
         return 1 if self.failures else 0
 
 
-def write_arrays_h5(path: str | os.PathLike, arrays: Mapping[str, Any], attrs: Mapping[str, Any] | None = None, *, atomic: bool = True) -> Path:
-    """Write named arrays (strings as UTF-8) to one HDF5 file, atomically (:func:`zbuf_occlude.io.atomic.atomic_h5`);
-    ``atomic=False``: straight to ``path``, a temporary the caller renames (:meth:`~zbuf_occlude.io.owned.OwnedFolder.write`)."""
+def _fill_h5(f: Any, arrays: Mapping[str, Any], attrs: Mapping[str, Any] | None) -> None:
+    """Write named arrays (strings as UTF-8) and attributes into the open ``h5py.File`` ``f``."""
     import h5py
 
     text = h5py.string_dtype("utf-8")
-    with atomic_h5(path) if atomic else h5py.File(path, "w") as f:
-        for key, value in arrays.items():
-            a = np.asarray(value)
-            f.create_dataset(key, data=a, dtype=text if a.dtype.kind in "UO" else None, track_times=False)
-        f.attrs.update(dict(attrs or {}))
-    return Path(path)
+    for key, value in arrays.items():
+        a = np.asarray(value)
+        if a.dtype.kind == "U":  # h5py writes str objects as UTF-8, not numpy's fixed-width UTF-32
+            a = a.astype(object)
+        f.create_dataset(key, data=a, dtype=text if a.dtype.kind == "O" else None, track_times=False)
+    f.attrs.update(dict(attrs or {}))
 
 
-def read_arrays_h5(path: str | os.PathLike) -> dict[str, Any]:
-    """Every dataset (strings decoded) and attribute of a file of :func:`write_arrays_h5`.
+def write_arrays_h5(path: str | os.PathLike, arrays: Mapping[str, Any], attrs: Mapping[str, Any] | None = None) -> Path:
+    """Write named arrays (strings as UTF-8) to one HDF5 file, atomically (:func:`zbuf_occlude.io.atomic.atomic_h5`).
 
     Raises
     ------
     OutputError
-        The file is damaged or not HDF5 (message names it).
+        ``path`` cannot be written (its folder, a full disk).
+    """
+    with atomic_h5(path) as f:
+        _fill_h5(f, arrays, attrs)
+    return Path(path)
+
+
+def open_arrays_h5(path: str | os.PathLike, *, within: str | os.PathLike | None = None) -> Any:
+    """``path``, a file of :func:`write_arrays_h5`, open for reading once it is checked: a regular file
+    (a FIFO would block), inside the folder ``within`` when given (links resolved), then by the checked
+    HDF5 opener (:func:`~zbuf_occlude.io.hdf5.open_hdf5`: no links, virtual datasets or external
+    storage; every dataset stores the bytes its shape declares).  Close it (or use ``with``).
+
+    Raises
+    ------
+    DatasetFormatError
+        Not a regular file, not HDF5, or refused by the checks (the message names the file).
+    UnsafePathError
+        ``within`` is given and ``path`` leads outside it.
+    """
+    fh, _ = open_regular_file(path, within=within, error=DatasetFormatError)
+    fh.close()
+    return open_hdf5(path)
+
+
+def read_arrays_h5(
+    path: str | os.PathLike, *, within: str | os.PathLike | None = None, names: Sequence[str] | None = None
+) -> dict[str, Any]:
+    """Every dataset (strings decoded) and attribute of a file of :func:`write_arrays_h5`, opened by
+    :func:`open_arrays_h5`; the bytes the datasets declare are checked against the memory available
+    before any is read.
+
+    Parameters
+    ----------
+    path : str or PathLike
+    within : str or PathLike, optional
+        The folder ``path`` was found in: it must stay inside it, links resolved.
+    names : sequence of str, optional
+        Only these datasets (each must be there); default: every one at the file's root.
+
+    Returns
+    -------
+    dict
+        Each dataset's array by name, and ``"attrs"``: the file's attributes.
+
+    Raises
+    ------
+    DatasetFormatError
+        The file is damaged, not HDF5, refused by :func:`open_arrays_h5`, or lacks one of ``names``
+        (the message names it).
+    UnsafePathError
+        ``within`` is given and ``path`` leads outside it.
+    InsufficientMemoryError
+        The datasets declare more bytes than the memory available.
     """
     import h5py
 
-    try:
-        with h5py.File(path, "r") as f:
-            out: dict[str, Any] = {k: (d.asstr()[()] if d.dtype.kind == "O" else d[()]) for k, d in f.items()}
+    with open_arrays_h5(path, within=within) as f:
+        try:
+            datasets = [k for k in f if f.get(k, getclass=True) is h5py.Dataset]
+            keys = datasets if names is None else list(names)
+            missing = [k for k in keys if k not in datasets]
+            if missing:
+                raise DatasetFormatError(f"{path} has no dataset {', '.join(map(repr, missing))}; it is not a shard of ours")
+            declared = sum(declared_nbytes(f[k]) for k in keys)
+            check_memory(declared, option=f"reading {path} ({declared:,} bytes declared)", hint="it is no shard a protocol run writes")
+            out: dict[str, Any] = {k: (f[k].asstr()[()] if f[k].dtype.kind == "O" else f[k][()]) for k in keys}
             out["attrs"] = dict(f.attrs)
-    except (OSError, KeyError, ValueError) as exc:
-        raise OutputError(f"cannot read {path}: {exc}") from None
+        except ZbufOccludeError:
+            raise
+        except (OSError, KeyError, ValueError, TypeError) as exc:
+            raise DatasetFormatError(f"cannot read {path}: {exc}") from None
     return out
 
 
@@ -211,7 +278,7 @@ def _read_record(path: Path) -> dict[str, Any]:
         It is not JSON, or not a record of ours (its protocol name could not name a shard).
     """
     try:
-        old = read_json_file(path)
+        old = read_json_file(path, within=path.parent)
     except InvalidInputError as exc:
         old = exc
     if (
@@ -365,8 +432,8 @@ def _run_owned(
             continue
         attrs = {"protocol": protocol.name, "name": obj.name, "source": obj.source, "class_name": obj.class_name,
                  "split": obj.split, "label": obj.label, "object_index": obj.index}  # fmt: skip
-        with folder.write(rel) as tmp:
-            write_arrays_h5(tmp, arrays, attrs, atomic=False)
+        with folder.write(rel) as tmp, temp_h5(tmp) as f:
+            _fill_h5(f, arrays, attrs)
         run.done += 1
         shards.append(shard)
     if protocol.finish is not None and shards:

@@ -41,18 +41,20 @@ degenerate faces and unreferenced vertices before the normalisation, which Open3
 
 from __future__ import annotations
 
-import io
 import logging
 from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.errors import DatasetFormatError, InvalidInputError
+from zbuf_occlude.io.encodings import npy_bytes
 from zbuf_occlude.io.owned import OwnedFolder
+from zbuf_occlude.io.regular_files import read_regular_file
 from zbuf_occlude.mesh.inputs import FarmObject
 from zbuf_occlude.protocols.base import Protocol, ProtocolOptions, read_arrays_h5
 from zbuf_occlude.protocols.depth import PinholeView, back_project, render_depth_image
+from zbuf_occlude.resources import check_memory
 
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
@@ -267,12 +269,6 @@ def _maker(sample):
     return make
 
 
-def _npy_bytes(array: np.ndarray) -> bytes:
-    buffer = io.BytesIO()
-    np.save(buffer, array)
-    return buffer.getvalue()
-
-
 def _check_shared(folder: OwnedFolder, name: str, content: bytes) -> None:
     """Refuse to replace a file that the folder's other runs share (``label.npy``, ``shape_names.txt``)
     with other content: their ``data_*.npy`` rows follow it.
@@ -281,9 +277,14 @@ def _check_shared(folder: OwnedFolder, name: str, content: bytes) -> None:
     ------
     InvalidInputError
         ``name`` exists with other content (another run in this folder has other meshes).
+    UnsafePathError
+        ``name`` leads outside the folder (a link).
     """
     path = folder.root / name
-    if path.is_file() and path.read_bytes() != content:
+    if not path.is_file():
+        return  # nothing there, or no regular file: the owned folder refuses to replace it
+    # a file of another size differs: it is not read (a file of any size may stand there)
+    if path.stat().st_size != len(content) or read_regular_file(path, max_bytes=len(content), within=folder.root) != content:
         raise InvalidInputError(
             f"{path} holds the labels of other meshes (another corruption or severity in {folder.root}); the runs of one "
             "folder share it, as ModelNet40-C's do: run these meshes into another --out"
@@ -295,9 +296,21 @@ def _outputs(corruption: str) -> tuple[str, ...]:
     return (rf"data_{corruption}_[1-5]\.npy", r"label\.npy", r"shape_names\.txt", rf"data_{corruption}_[1-5]_sources\.txt")
 
 
-def _finisher(corruption: str):
+def _finisher(corruption: str, n_points: int):
     def finish(folder: OwnedFolder, objects: list[FarmObject], shards, options: ProtocolOptions):
-        data = np.stack([read_arrays_h5(s)["points"] for s in shards]).astype(np.float32)
+        row_bytes = n_points * 3 * np.dtype(np.float32).itemsize
+        check_memory(  # the rows, and their .npy bytes
+            2 * len(shards) * row_bytes, option=f"data_{corruption}_{options.severity}.npy ({len(shards):,} clouds of {n_points:,} points)",
+            hint="run fewer meshes into one --out",
+        )  # fmt: skip
+        data = np.empty((len(shards), n_points, 3), dtype=np.float32)
+        for i, shard in enumerate(shards):
+            points = read_arrays_h5(shard, within=folder.root, names=("points",))["points"]
+            if points.shape != (n_points, 3):
+                raise DatasetFormatError(
+                    f"{shard} holds points of shape {points.shape}, not ({n_points}, 3); move it away and run again to redo it"
+                )
+            data[i] = points
         classes = sorted({o.class_name for o in objects})
         names = list(MODELNET40_CLASSES) if set(classes) <= set(MODELNET40_CLASSES) else classes
         if names is classes:  # said out loud: a ModelNet40-C model's outputs do not index these labels
@@ -308,16 +321,15 @@ def _finisher(corruption: str):
         else:
             log.info("label.npy holds ModelNet40's class indices (shape_names.txt: its 40 classes)")
         labels = np.array([[names.index(o.class_name)] for o in objects], dtype=np.uint8 if len(names) < 256 else np.int64)
-        label_bytes, names_text = _npy_bytes(labels), "\n".join(names) + "\n"
+        label_bytes, names_text = npy_bytes(labels), "\n".join(names) + "\n"
         _check_shared(folder, "label.npy", label_bytes)  # the corruptions and severities of one folder share them
         _check_shared(folder, "shape_names.txt", names_text.encode("utf-8"))
-        files = []
-        for name, content in ((f"data_{corruption}_{options.severity}.npy", _npy_bytes(data)), ("label.npy", label_bytes)):
-            with folder.write(name) as tmp:
-                tmp.write_bytes(content)
-            files.append(folder.root / name)
-        files.append(folder.write_text("shape_names.txt", names_text))
-        files.append(folder.write_text(f"data_{corruption}_{options.severity}_sources.txt", "".join(o.source + "\n" for o in objects)))
+        files = [
+            folder.write_bytes(f"data_{corruption}_{options.severity}.npy", npy_bytes(data)),
+            folder.write_bytes("label.npy", label_bytes),
+            folder.write_text("shape_names.txt", names_text),
+            folder.write_text(f"data_{corruption}_{options.severity}_sources.txt", "".join(o.source + "\n" for o in objects)),
+        ]
         return files
 
     return finish
@@ -326,12 +338,12 @@ def _finisher(corruption: str):
 #: ``--protocol modelnet40-c-occlusion --severity 1..5``: ``data_occlusion_<s>.npy`` (N, 1024, 3) float32 + ``label.npy``.
 OCCLUSION = Protocol(
     name="modelnet40-c-occlusion", summary="ModelNet40-C occlusion (Sun et al. 2022): data_occlusion_<s>.npy, label.npy",
-    make=_maker(occlusion_sample), finish=_finisher("occlusion"), check=_check, outputs=_outputs("occlusion"),
+    make=_maker(occlusion_sample), finish=_finisher("occlusion", N_POINTS), check=_check, outputs=_outputs("occlusion"),
     run_key=lambda options: f"modelnet40-c-occlusion-s{options.severity}",
 )  # fmt: skip
 #: ``--protocol modelnet40-c-lidar --severity 1..5``: ``data_lidar_<s>.npy`` (N, 768, 3) float32 + ``label.npy``.
 LIDAR = Protocol(
     name="modelnet40-c-lidar", summary="ModelNet40-C LiDAR (Sun et al. 2022): data_lidar_<s>.npy, label.npy",
-    make=_maker(lidar_sample), finish=_finisher("lidar"), check=_check, outputs=_outputs("lidar"),
+    make=_maker(lidar_sample), finish=_finisher("lidar", LIDAR_POINTS), check=_check, outputs=_outputs("lidar"),
     run_key=lambda options: f"modelnet40-c-lidar-s{options.severity}",
 )  # fmt: skip
