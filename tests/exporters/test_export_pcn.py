@@ -182,13 +182,15 @@ def test_refusals_are_one_line_and_make_no_folder(source, tmp_path, capsys):
     other = tmp_path / "depth_run"
     other.mkdir()
     (other / "protocol.json").write_text(json.dumps({"protocol": "depth", "objects": []}))
+    empty = tmp_path / "empty"
+    empty.mkdir()
     out = str(tmp_path / "out")
     cases = [
         ([str(dataset), "--to", "pcn"], "holds no complete clouds.*generate MESHES --protocol pcn"),
         ([str(source), "--to", "pointnet-h5"], "`generate --protocol` folder.*--to pcn"),
         ([str(source), "--to", "modelnet-txt"], "`generate --protocol` folder.*--to pcn"),
         ([str(other), "--to", "pcn"], re.escape(str(other / "protocol.json")) + r" is a `generate --protocol depth` run.*--protocol pcn"),
-        ([str(tmp_path), "--to", "pcn"], "holds no protocol.json: export --to pcn reads a `generate --protocol pcn` folder"),
+        ([str(empty), "--to", "pcn"], "holds no protocol.json: export --to pcn reads a `generate --protocol pcn` folder"),
         ([str(source), "--to", "pcn", "--seed", "1"], "--seed applies to --to pointnet-h5, not to --to pcn"),
         ([str(source), "--to", "pcn", "--list-prefix", "data/PCN"], "--list-prefix applies to --to pointnet-h5, not to --to pcn"),
         ([str(source), "--to", "pcn", "--label-set", "modelnet40"], "--to pcn takes --label-set own or shapenet55"),

@@ -15,19 +15,23 @@ Samples are read one object at a time (memory for one object's samples).
 
 from __future__ import annotations
 
-import io
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
-from zbuf_occlude.geometry.normals import estimate_normals
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
+from zbuf_occlude.geometry.normals import estimate_normals
+from zbuf_occlude.io.encodings import text_table_bytes
 from zbuf_occlude.io.owned import OwnedFolder
+from zbuf_occlude.resources import check_memory
 from zbuf_occlude.sensors.lidar import beam_directions
 
 __all__ = ["FILE_NAMES", "write_modelnet_txt"]
 
+#: Bytes per point of one sample while it is written: six float64 columns, and their text
+#: (``-0.123456,`` : at most 11 characters a value for coordinates in [-1, 1] and unit normals, some more for others).
+BYTES_PER_POINT = 6 * 8 + 6 * 16
 #: The names this target writes (regular expressions, for the owned folder).
 FILE_NAMES = (r"[^/]+/[^/]+_\d{4,}\.txt", r"modelnet(10|40)_(shape_names|[a-z]+)\.txt")
 
@@ -54,7 +58,16 @@ def write_modelnet_txt(
     -------
     list of Path
         The class list and id lists (the sample files are many; they are in the folder's ledger).
+
+    Raises
+    ------
+    InsufficientMemoryError
+        One sample's text (:data:`BYTES_PER_POINT` per point) would not fit in memory.
+    OutputError, UnsafePathError
+        As :meth:`~zbuf_occlude.io.owned.OwnedFolder.write`.
     """
+    n_points = max((ds.n_points for ds in splits.values()), default=0)  # before any file is written
+    check_memory(n_points * BYTES_PER_POINT, option=f"one sample's text ({n_points:,} points)", hint="free memory")
     written = [folder.write_text(f"{prefix}_shape_names.txt", "".join(f"{n}\n" for n in names))]
     counter: dict[str, int] = {}
     for split, ds in sorted(splits.items()):
@@ -67,9 +80,8 @@ def write_modelnet_txt(
                 counter[cls] = counter.get(cls, 0) + 1
                 sample_id = f"{cls}_{counter[cls]:04d}"
                 eye = beam_directions(meta["elevation_deg"], meta["azimuth_deg"]) * float(meta.get("radius", radius))
-                text = io.StringIO()
-                np.savetxt(text, np.hstack([points, estimate_normals(points, eye)]), fmt="%.6f", delimiter=",")
-                folder.write_text(f"{cls}/{sample_id}.txt", text.getvalue())
+                table = text_table_bytes(np.hstack([points, estimate_normals(points, eye)]), fmt="%.6f", delimiter=",")
+                folder.write_bytes(f"{cls}/{sample_id}.txt", table)
                 ids.append(sample_id)
         written.append(folder.write_text(f"{prefix}_{split}.txt", "".join(f"{i}\n" for i in ids)))
     return written

@@ -30,13 +30,19 @@ Names:
   ``chair_0001``; ShapeNetCore's ``SYNSET/MODEL_ID`` → ``MODEL_ID``).  Two objects of one taxonomy
   with the same model id are refused before anything is written.
 
-The source is read one object at a time: a first pass over the shards' attributes (names, classes,
-splits, checked), then one shard at a time.  Objects that ``generate`` could not make (no shard)
-are left out, with a warning.
+The source is checked whole before anything is written (:func:`plan_pcn`): ``protocol.json``
+read capped and inside the folder, each shard inside the folder (links resolved), a regular
+file, opened by the checked HDF5 opener (no links, virtual datasets or external storage; each
+dataset stores the bytes it declares), its attributes and the shapes its arrays declare those
+of a pcn shard (the complete cloud as many points as the run recorded), its view offsets read
+and checked, and the largest shard checked against the memory available.  Then the shards are
+read one at a time.  Objects that ``generate`` could not make (no shard) are left out, with a
+warning.
 """
 
 from __future__ import annotations
 
+import io
 import json
 import logging
 import os
@@ -44,17 +50,22 @@ import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
+from typing import Any
 
 import numpy as np
 
 from zbuf_occlude.dataset.layout import PROTOCOL_FILE
+from zbuf_occlude.defaults import MAX_POINTS
 from zbuf_occlude.errors import DatasetFormatError, InvalidInputError
 from zbuf_occlude.exporters.label_sets import SHAPENET55, label_set, shapenet_synset
 from zbuf_occlude.io.json_files import read_json_file
-from zbuf_occlude.io.owned import OwnedFolder, remove_empty_folders
-from zbuf_occlude.protocols.base import read_arrays_h5, shard_name
+from zbuf_occlude.io.owned import OwnedFolder
+from zbuf_occlude.io.safe_paths import path_inside
+from zbuf_occlude.protocols.base import open_arrays_h5, read_arrays_h5, shard_name
+from zbuf_occlude.protocols.pcn import COMPLETE_POINTS, HEIGHT, N_VIEWS, WIDTH
+from zbuf_occlude.resources import check_memory
 
-__all__ = ["CATEGORY_FILE", "FILE_NAMES", "PROTOCOL", "SUBSETS", "PcnModel", "PcnPlan", "plan_pcn", "write_pcn"]
+__all__ = ["ARRAYS", "CATEGORY_FILE", "FILE_NAMES", "PROTOCOL", "SUBSETS", "PcnModel", "PcnPlan", "pcd_bytes", "plan_pcn", "write_pcn"]
 
 log = logging.getLogger(__name__)
 
@@ -66,6 +77,13 @@ CATEGORY_FILE = "PCN.json"
 SUBSETS = ("train", "val", "test")
 #: The names this target writes (regular expressions, for the owned folder).
 FILE_NAMES = (re.escape(CATEGORY_FILE), r"[^/]+/partial/[^/]+/[^/]+/\d{2,}\.pcd", r"[^/]+/complete/[^/]+/[^/]+\.pcd")
+#: The arrays of a shard the export reads.
+ARRAYS = ("partial", "partial_offsets", "complete")
+#: Most partial points a shard may declare: every pixel of every view.
+MAX_PARTIAL_POINTS = N_VIEWS * WIDTH * HEIGHT
+#: Bytes in memory per point of a shard while it is exported: the array as read (float64 at
+#: most), its float32 copy, pypcd4's record array, the PCD's bytes and their copy.
+BYTES_PER_EXPORTED_POINT = 3 * 8 + 4 * 12
 #: How the command that makes a source is named in refusals.
 _MAKE_SOURCE = f"run `zbuf-occlude generate MESHES --protocol {PROTOCOL} --out DIR` and export DIR"
 
@@ -119,30 +137,95 @@ class PcnPlan:
         return counts
 
 
-def _shard_attrs(path: Path) -> Mapping[str, object]:
-    """The attributes of one shard, without reading its arrays (the plan's pass)."""
+def _redo(source: Path) -> str:
+    return f"run `generate --protocol {PROTOCOL}` again into {source}"
+
+
+def _attr(f: Any, key: str, shard: Path) -> object:
+    """The scalar attribute ``key`` of an open shard (``None`` when it has none)."""
+    if key not in f.attrs:
+        return None
+    if f.attrs.get_id(key).shape != ():  # read only once it is one value, whatever it declares
+        raise DatasetFormatError(f"{shard}: the attribute {key!r} is not one value; it is not a pcn shard")
+    return f.attrs[key]
+
+
+def _check_declared(f: Any, shard: Path, complete_points: int | None) -> int:
+    """Check the shapes and kinds the shard's arrays declare (nothing is read); return their points.
+
+    Raises
+    ------
+    DatasetFormatError
+        An array is missing or is not what a pcn shard holds (the message names it and its shape).
+    """
     import h5py
 
-    try:
-        with h5py.File(path, "r") as f:
-            return dict(f.attrs)
-    except (OSError, ValueError) as exc:
-        raise DatasetFormatError(f"cannot read {path}: {exc}; run `generate --protocol {PROTOCOL}` again into that folder") from None
+    shapes = {}
+    for key in ARRAYS:
+        if f.get(key, getclass=True) is not h5py.Dataset:
+            raise DatasetFormatError(f"{shard} has no array {key!r}; it is not a pcn shard")
+        ds = f[key]
+        kind = "iu" if key == "partial_offsets" else "f"
+        if ds.dtype.kind not in kind or ds.dtype.itemsize > 8 or ds.shape is None:
+            raise DatasetFormatError(f"{shard}: {key!r} holds {ds.dtype} values; it is not a pcn shard")
+        shapes[key] = ds.shape
+    partial, offsets, complete = (shapes[k] for k in ARRAYS)
+    why = None
+    if len(partial) != 2 or partial[1] != 3 or partial[0] > MAX_PARTIAL_POINTS:
+        why = f"'partial' declares {partial}, where a pcn shard holds (M, 3), M <= {MAX_PARTIAL_POINTS:,} ({N_VIEWS} views of {WIDTH} x {HEIGHT})"
+    elif len(offsets) != 1 or not 2 <= offsets[0] <= N_VIEWS + 1:
+        why = f"'partial_offsets' declares {offsets}, where a pcn shard holds (V + 1,), V <= {N_VIEWS} views"
+    elif len(complete) != 2 or complete[1] != 3 or complete[0] > MAX_POINTS:
+        why = f"'complete' declares {complete}, where a pcn shard holds (C, 3), C <= {MAX_POINTS:,}"
+    elif complete_points is not None and complete[0] != complete_points:
+        why = f"'complete' declares {complete}, where the run recorded {complete_points:,} points"
+    if why is not None:
+        raise DatasetFormatError(f"{shard}: {why}; it is not a pcn shard")
+    return int(partial[0]) + int(complete[0])
 
 
-def _read_record(source: Path) -> list:
-    """The objects ``source/protocol.json`` lists, once it is a pcn run's."""
+def _check_offsets(offsets: np.ndarray, n_partial: int, shard: Path) -> None:
+    """Refuse view offsets that do not cut ``partial`` into views in order."""
+    if not (offsets[0] == 0 and offsets[-1] == n_partial and np.all(np.diff(offsets) >= 0)):
+        raise DatasetFormatError(
+            f"{shard}: partial_offsets {offsets.tolist()} do not cut its {n_partial:,} partial points into views; it is not a pcn shard"
+        )
+
+
+def _check_shard(shard: Path, source: Path, complete_points: int | None) -> tuple[dict[str, object], int]:
+    """One shard's attributes and points, checked (module docstring); nothing but its offsets is read."""
+    with open_arrays_h5(shard, within=source) as f:
+        attrs = {key: _attr(f, key, shard) for key in ("name", "class_name", "split")}
+        points = _check_declared(f, shard, complete_points)
+        try:
+            offsets = np.asarray(f["partial_offsets"][()])
+        except (OSError, ValueError) as exc:
+            raise DatasetFormatError(f"cannot read {shard}: {exc}") from None
+        _check_offsets(offsets, f["partial"].shape[0], shard)
+    return attrs, points
+
+
+def _read_record(source: Path) -> dict:
+    """``source/protocol.json`` (read capped, inside ``source``), once it is a pcn run's."""
     path = source / PROTOCOL_FILE
-    if not path.is_file():
+    if not os.path.lexists(path):
         raise InvalidInputError(
             f"{source} holds no {PROTOCOL_FILE}: export --to pcn reads a `generate --protocol {PROTOCOL}` folder; {_MAKE_SOURCE}"
         )
-    record = read_json_file(path)
+    record = read_json_file(path, within=source)
     protocol = record.get("protocol") if isinstance(record, dict) else None
     if protocol != PROTOCOL or not isinstance(record.get("objects"), list):
         what = f"a `generate --protocol {protocol}` run" if isinstance(protocol, str) else "no protocol run of ours"
         raise InvalidInputError(f"{path} is {what}: export --to pcn reads a `generate --protocol {PROTOCOL}` folder; {_MAKE_SOURCE}")
-    return record["objects"]
+    return record
+
+
+def _complete_points(record: dict) -> int | None:
+    """The complete cloud's points the run recorded (``--complete-points``, 0: the default); ``None`` if it recorded none."""
+    value = record.get("complete_points")
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        return None
+    return value or COMPLETE_POINTS
 
 
 def _taxonomy(classes: list[str], label_set_name: str) -> dict[str, str]:
@@ -176,7 +259,8 @@ def _taxonomy_name(taxonomy_id: str, classes: list[str]) -> str:
 
 def plan_pcn(source: str | os.PathLike, label_set_name: str = "own") -> PcnPlan:
     """Read and check what ``source`` (a ``generate --protocol pcn`` folder) exports to, reading
-    only ``protocol.json`` and the shards' attributes; nothing is written.
+    only ``protocol.json``, the shards' attributes and their view offsets (the module docstring
+    lists the checks); nothing is written.
 
     Parameters
     ----------
@@ -196,27 +280,39 @@ def plan_pcn(source: str | os.PathLike, label_set_name: str = "own") -> PcnPlan:
         ``source`` is no pcn run (no ``protocol.json``, or another protocol's), two objects of
         one taxonomy share a model id, or a class is refused (``shapenet55``).
     DatasetFormatError
-        A shard is damaged or is not the object ``protocol.json`` lists at its place.
+        A shard is damaged, not a regular file (a FIFO), refused by the checked HDF5 opener
+        (links, virtual datasets, external storage, data it does not store), declares arrays
+        that are not a pcn shard's, or is not the object ``protocol.json`` lists at its place.
+    UnsafePathError
+        ``protocol.json``, ``shards/`` or a shard leads outside ``source`` (a link).
+    InsufficientMemoryError
+        The largest shard would not fit in memory while it is exported.
     """
     source = Path(source)
-    objects = _read_record(source)
-    found, missing = [], 0
+    record = _read_record(source)
+    objects, complete_points = record["objects"], _complete_points(record)
+    found, missing, largest, largest_shard = [], 0, 0, None
     for index, entry in enumerate(objects):
-        shard = source / shard_name(PROTOCOL, index)
-        if not shard.is_file():
+        shard = path_inside(source, shard_name(PROTOCOL, index), what=f"the shard of object {index} of {source / PROTOCOL_FILE}")
+        if not os.path.lexists(shard):
             missing += 1  # generate could not make it (its failures are reported there)
             continue
-        attrs = _shard_attrs(shard)
-        name, class_name, split = (attrs.get(k) for k in ("name", "class_name", "split"))
+        attrs, points = _check_shard(shard, source, complete_points)
+        if points > largest:
+            largest, largest_shard = points, shard
+        name, class_name, split = (attrs[k] for k in ("name", "class_name", "split"))
         listed = entry[0] if isinstance(entry, list) and entry else None
         if not all(isinstance(v, str) and v for v in (name, class_name, split)) or name != listed:
             raise DatasetFormatError(
-                f"{shard} is not the object {source / PROTOCOL_FILE} lists at place {index} ({listed!r}); "
-                f"run `generate --protocol {PROTOCOL}` again into that folder"
+                f"{shard} is not the object {source / PROTOCOL_FILE} lists at place {index} ({listed!r}); {_redo(source)}"
             )
         if "/" in split or split in (".", ".."):
-            raise DatasetFormatError(f"{shard} has the split {split!r}, which cannot name a folder; run `generate` again into that folder")
+            raise DatasetFormatError(f"{shard} has the split {split!r}, which cannot name a folder; {_redo(source)}")
         found.append((shard, name, class_name, split))
+    check_memory(
+        largest * BYTES_PER_EXPORTED_POINT, option=f"exporting the shard {largest_shard} ({largest:,} points)",
+        hint="free memory, or run `generate --protocol pcn` with fewer --complete-points",
+    )  # fmt: skip
     if missing:
         log.warning("%s: %d of %d objects have no shard (generate could not make them); they are left out", source, missing, len(objects))
     if not found:
@@ -239,35 +335,29 @@ def plan_pcn(source: str | os.PathLike, label_set_name: str = "own") -> PcnPlan:
 
 
 def _views(arrays: Mapping[str, np.ndarray], shard: Path) -> tuple[list[np.ndarray], np.ndarray]:
-    """The partial views and the complete cloud of one shard, checked."""
-    try:
-        partial, offsets, complete = (np.asarray(arrays[k]) for k in ("partial", "partial_offsets", "complete"))
-    except KeyError as exc:
-        raise DatasetFormatError(f"{shard} has no array {exc}; run `generate --protocol {PROTOCOL}` again into that folder") from None
-    ok = (
-        partial.ndim == 2 and partial.shape[1] == 3 and complete.ndim == 2 and complete.shape[1] == 3 and offsets.ndim == 1
-        and len(offsets) >= 2 and offsets[0] == 0 and offsets[-1] == len(partial) and np.all(np.diff(offsets) >= 0)
-    )  # fmt: skip
+    """The partial views and the complete cloud of one shard, checked (again: it is read now)."""
+    partial, offsets, complete = (np.asarray(arrays[k]) for k in ARRAYS)
+    ok = partial.ndim == 2 and partial.shape[1] == 3 and complete.ndim == 2 and complete.shape[1] == 3 and offsets.ndim == 1 and len(offsets) >= 2
     if not ok:
         raise DatasetFormatError(
             f"{shard}: partial {partial.shape}, partial_offsets {offsets.shape}, complete {complete.shape} are not "
             f"a pcn shard's; run `generate --protocol {PROTOCOL}` again into that folder"
         )
+    _check_offsets(offsets, len(partial), shard)
     return [partial[a:b] for a, b in zip(offsets[:-1], offsets[1:])], complete
 
 
-def _write_pcd(folder: OwnedFolder, rel: str, points: np.ndarray) -> None:
-    """One binary (uncompressed) PCD of ``points`` as float32 ``x y z``."""
+def pcd_bytes(points: np.ndarray) -> bytes:
+    """``points (N, 3)`` as the bytes of a binary (uncompressed) PCD file of float32 ``x y z`` (pypcd4)."""
     from pypcd4 import Encoding, PointCloud
 
-    cloud = PointCloud.from_xyz_points(np.ascontiguousarray(points, dtype=np.float32))
-    with folder.write(rel) as tmp:
-        cloud.save(tmp, encoding=Encoding.BINARY)
+    buffer = io.BytesIO()
+    PointCloud.from_xyz_points(np.ascontiguousarray(points, dtype=np.float32)).save(buffer, encoding=Encoding.BINARY)
+    return buffer.getvalue()
 
 
 def write_pcn(folder: OwnedFolder, plan: PcnPlan) -> list[Path]:
-    """Write ``plan``'s models in PCN's layout (module docstring), one shard read at a time; then
-    remove the ``.pcd`` files an earlier export into ``folder`` wrote that this one does not.
+    """Write ``plan``'s models in PCN's layout (module docstring), one shard read at a time.
 
     Parameters
     ----------
@@ -283,33 +373,23 @@ def write_pcn(folder: OwnedFolder, plan: PcnPlan) -> list[Path]:
 
     Raises
     ------
-    DatasetFormatError, OutputError
-        A shard is damaged (:func:`~zbuf_occlude.protocols.base.read_arrays_h5`, or arrays that are not a pcn shard's).
+    DatasetFormatError
+        A shard was changed since :func:`plan_pcn` checked it (:func:`~zbuf_occlude.protocols.base.read_arrays_h5`).
     UnsafePathError, OutputError
         As :meth:`~zbuf_occlude.io.owned.OwnedFolder.write`.
     """
     folder.check_writable([CATEGORY_FILE])  # a foreign PCN.json (a clone of PoinTr ships one) is refused before any file is written
     splits = list(SUBSETS) + sorted({m.split for m in plan.models} - set(SUBSETS))
     lists = {t: {s: [] for s in splits} for t in plan.taxonomy_names}
-    written, empty = set(), 0
+    empty = 0
     for model in plan.models:
-        views, complete = _views(read_arrays_h5(model.shard), model.shard)
+        views, complete = _views(read_arrays_h5(model.shard, within=plan.source, names=ARRAYS), model.shard)
         for v, points in enumerate(views):
-            rel = f"{model.split}/partial/{model.taxonomy_id}/{model.model_id}/{v:02d}.pcd"
-            _write_pcd(folder, rel, points)
-            written.add(rel)
+            folder.write_bytes(f"{model.split}/partial/{model.taxonomy_id}/{model.model_id}/{v:02d}.pcd", pcd_bytes(points))
             empty += not len(points)
-        rel = f"{model.split}/complete/{model.taxonomy_id}/{model.model_id}.pcd"
-        _write_pcd(folder, rel, complete)
-        written.add(rel)
+        folder.write_bytes(f"{model.split}/complete/{model.taxonomy_id}/{model.model_id}.pcd", pcd_bytes(complete))
         lists[model.taxonomy_id][model.split].append(model.model_id)
     if empty:
         log.warning("%d partial views saw nothing and are empty clouds (PoinTr's PCN pads a view to 2,048 points with zeros)", empty)
     entries = [{"taxonomy_id": t, "taxonomy_name": name, **lists[t]} for t, name in plan.taxonomy_names.items()]
-    files = [folder.write_text(CATEGORY_FILE, json.dumps(entries, indent=1) + "\n")]
-    clouds = re.compile("|".join(f"(?:{n})" for n in FILE_NAMES[1:]))
-    stale = [rel for rel in folder.written() if clouds.fullmatch(rel) and rel not in written]
-    folder.delete(stale)  # an earlier export's models: checked as ours and unchanged first
-    for rel in stale:
-        remove_empty_folders(folder.root, PurePosixPath(rel).parent.as_posix())
-    return files
+    return [folder.write_text(CATEGORY_FILE, json.dumps(entries, indent=1) + "\n")]

@@ -20,13 +20,14 @@ from __future__ import annotations
 
 import contextlib
 import json
-import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
+from zbuf_occlude.io.atomic import positional_writer, temp_h5
 from zbuf_occlude.io.owned import OwnedFolder
+from zbuf_occlude.resources import check_memory
 
 __all__ = ["ROWS_PER_FILE", "FILE_NAMES", "write_pointnet_h5"]
 
@@ -34,6 +35,8 @@ __all__ = ["ROWS_PER_FILE", "FILE_NAMES", "write_pointnet_h5"]
 ROWS_PER_FILE = 2048
 #: Files open at once while rows are scattered; a larger split is written in passes over the source.
 MAX_OPEN_FILES = 256
+#: Bytes per sample of a split's bookkeeping: its place in the shuffle, its position, its label (int64 each).
+BYTES_PER_SAMPLE = 3 * 8
 #: The names this target writes (regular expressions, for the owned folder).
 FILE_NAMES = (r"ply_data_[a-z]+\d+\.h5", r"ply_data_[a-z]+_\d+_id2file\.json", r"shape_names\.txt", r"[a-z]+_files\.txt")
 
@@ -42,14 +45,14 @@ def _create_file(path: Path, rows: int, n_points: int, label: np.ndarray) -> int
     """Make ``path`` a PointNet file: ``label`` written, ``data (rows, n_points, 3) float32`` allocated
     contiguous and not filled; return the byte offset of ``data``'s first row.
 
-    The rows are then written straight to that offset, in any order (``os.pwrite``): a contiguous,
-    uncompressed HDF5 dataset is a C-order array at one place in the file (h5py's
-    ``DatasetID.get_offset``), and a row written there costs what a plain write costs, where
-    h5py's writes of scattered rows cost 5-30 times more.
+    The rows are then written straight to that offset, in any order
+    (:func:`~zbuf_occlude.io.atomic.positional_writer`): a contiguous, uncompressed HDF5 dataset is
+    a C-order array at one place in the file (h5py's ``DatasetID.get_offset``), and a row written
+    there costs what a plain write costs, where h5py's writes of scattered rows cost 5-30 times more.
     """
     import h5py
 
-    with h5py.File(path, "w") as f:
+    with temp_h5(path) as f:
         dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
         dcpl.set_layout(h5py.h5d.CONTIGUOUS)
         dcpl.set_alloc_time(h5py.h5d.ALLOC_TIME_EARLY)  # the space exists (and has its offset) now
@@ -100,8 +103,17 @@ def write_pointnet_h5(
     -------
     list of Path
         The class list and the file lists (the data files are in the folder's ledger).
+
+    Raises
+    ------
+    InsufficientMemoryError
+        A split's bookkeeping (:data:`BYTES_PER_SAMPLE` per sample) would not fit in memory.
+    OutputError, UnsafePathError
+        As :meth:`~zbuf_occlude.io.owned.OwnedFolder.write`.
     """
     rows_per_file = ROWS_PER_FILE if rows_per_file is None else int(rows_per_file)
+    largest = max((len(ds) for ds in splits.values()), default=0)  # one split at a time, before any file is written
+    check_memory(largest * BYTES_PER_SAMPLE, option=f"the shuffle of a split of {largest:,} samples", hint="free memory")
     written = [folder.write_text("shape_names.txt", "".join(f"{n}\n" for n in names))]
     dtype = _label_dtype(len(names))
     for k, (split, ds) in enumerate(sorted(splits.items())):
@@ -116,22 +128,21 @@ def write_pointnet_h5(
         for first in range(0, n_files, MAX_OPEN_FILES):
             group = range(first, min(first + MAX_OPEN_FILES, n_files))
             with contextlib.ExitStack() as stack:
-                fds, offsets = {}, {}
+                writers, offsets = {}, {}
                 for f in group:
                     tmp = stack.enter_context(folder.write(files[f]))
                     rows = min(rows_per_file, n - f * rows_per_file)
                     mine = order[f * rows_per_file : f * rows_per_file + rows]
                     offsets[f] = _create_file(tmp, rows, ds.n_points, all_labels[mine].astype(dtype)[:, None])
-                    fds[f] = os.open(tmp, os.O_WRONLY)
-                    stack.callback(os.close, fds[f])
+                    writers[f] = stack.enter_context(positional_writer(tmp))
                 row_bytes = ds.n_points * 3 * 4
                 for start, block in ds.iter_arrays():
                     where = position[start : start + len(block)]
                     rows_le = np.ascontiguousarray(block, dtype="<f4")
                     for j, pos in enumerate(where):  # each row to its place: HDF5's contiguous layout is a plain array
                         f, row = divmod(int(pos), rows_per_file)
-                        if f in fds:
-                            os.pwrite(fds[f], rows_le[j].tobytes(), offsets[f] + row * row_bytes)
+                        if f in writers:
+                            writers[f](offsets[f] + row * row_bytes, rows_le[j].tobytes())
         for f in range(n_files):
             mine = order[f * rows_per_file : (f + 1) * rows_per_file]
             ids = []
