@@ -88,7 +88,7 @@ def test_a_list_that_is_no_regular_file_is_refused_unopened(tmp_path, listing, k
 
 
 def test_a_list_larger_than_the_cap_is_refused_before_it_is_read(tmp_path, monkeypatch) -> None:
-    import zbuf_occlude.mesh.point_inputs as point_inputs
+    from zbuf_occlude.mesh import point_inputs
 
     h5 = _pointnet(tmp_path / "set")
     (tmp_path / "set" / "train_files.txt").write_text("ply_data_train0.h5\n" * 10)
