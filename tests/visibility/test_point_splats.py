@@ -184,13 +184,13 @@ def test_a_camera_inside_the_cloud_sees_only_what_is_in_front_of_it(sphere):
     [
         ({"points": np.array([[0.0, np.nan, 0.0]] * 5)}, "NaN"),
         ({"points": np.zeros((4, 2))}, r"shape \(N, 3\)"),
-        ({"normals": np.zeros((100, 3))}, "zero rows"),
+        ({"normals": np.zeros((100, 3))}, "100 normals are zero"),
         ({"normals": np.ones((99, 3))}, "one row per point"),
         ({"oriented": True}, "needs normals"),
         ({"tolerance": -1.0}, "tolerance"),
         ({"tolerance": float("nan")}, "tolerance"),
         ({"neighbours": 0}, "neighbours"),
-        ({"splat_scale": "big"}, "splat_scale"),
+        ({"splat_scale": -1.0}, "splat_scale"),
     ],
 )
 def test_bad_inputs_are_refused_in_one_line(kwargs, message):

@@ -29,6 +29,18 @@ COPLANAR = 1e-6
 CURVATURE_SLACK = 1.0
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _cell(v, n):  # pragma: no cover - numba
+    """``floor(v)`` as an int, ``v`` clamped to ``[-1, n]`` first (NaN: -1).  A pixel coordinate far
+    off the image (the box of a disk that nearly reaches the camera plane, a point near it) stays
+    off it; converting a float beyond int64 to an int is undefined.  Inside, the same ``floor``."""
+    if not v >= -1.0:
+        return -1
+    if v >= n:
+        return n
+    return int(np.floor(v))
+
+
 @numba.njit(cache=True, nogil=True)
 def camera_frame(points, normals, rotation, translation):  # pragma: no cover - numba
     """Points and normals in the OpenCV camera frame: ``R p + t`` and ``R n``.
@@ -94,12 +106,12 @@ def splat_surfels(cam, normal, radius, pix, x0, y0, width, height):  # pragma: n
             continue
         # the disk lies inside the cube q ± r, whose projection (x/z, y/z) is extreme at corners
         near, far = qz - r, qz + r
-        j0 = max(int(np.floor((min((qy - r) / near, (qy - r) / far) - y0) / pix)), 0)
-        j1 = min(int(np.floor((max((qy + r) / near, (qy + r) / far) - y0) / pix)), height - 1)
+        j0 = max(_cell((min((qy - r) / near, (qy - r) / far) - y0) / pix, height), 0)
+        j1 = min(_cell((max((qy + r) / near, (qy + r) / far) - y0) / pix, height), height - 1)
         if j0 > j1:
             continue
-        i0 = max(int(np.floor((min((qx - r) / near, (qx - r) / far) - x0) / pix)), 0)
-        i1 = min(int(np.floor((max((qx + r) / near, (qx + r) / far) - x0) / pix)), width - 1)
+        i0 = max(_cell((min((qx - r) / near, (qx - r) / far) - x0) / pix, width), 0)
+        i1 = min(_cell((max((qx + r) / near, (qx + r) / far) - x0) / pix, width), width - 1)
         nx, ny, nz = normal[k, 0], normal[k, 1], normal[k, 2]
         nq = nx * qx + ny * qy + nz * qz
         r2 = r * r
@@ -164,7 +176,8 @@ def _in_a_gap(p, i, j, cam, normal, radius, spacing, depth, ids, pix, x0, y0, to
     side = 1.0 if toward >= 0.0 else -1.0
     p_faces = toward > 0.0
     allowance = tolerance * spacing[p]
-    reach = int(np.ceil(GAP_REACH * radius[p] / pz / pix))
+    steps = GAP_REACH * radius[p] / pz / pix
+    reach = width + height if steps >= width + height else int(np.ceil(steps))  # the image's end stops the search
     if reach < 1:
         return False
     for d in range(8):
@@ -232,8 +245,8 @@ def decide(cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, cre
         px, py, pz = cam[p, 0], cam[p, 1], cam[p, 2]
         if pz <= 0.0:
             continue
-        i = int(np.floor((px / pz - x0) / pix))
-        j = int(np.floor((py / pz - y0) / pix))
+        i = _cell((px / pz - x0) / pix, width)
+        j = _cell((py / pz - y0) / pix, height)
         if i < 0 or j < 0 or i >= width or j >= height:
             continue
         q = ids[j, i]
