@@ -200,6 +200,28 @@ def test_a_hard_link_to_an_exported_file_keeps_its_bytes(sets, tmp_path):
     assert {name: link.read_bytes() for name, link in kept.items()} == before
 
 
+def test_an_earlier_folder_that_now_links_out_is_refused_and_nothing_outside_is_removed(sets, tmp_path):
+    out = tmp_path / "out"
+    export(sets["both"], "modelnet-txt", out)
+    elsewhere = tmp_path / "elsewhere"
+    shutil.move(out / "desk", elsewhere)  # the same bytes, the ledger's names, but outside --out now
+    (out / "desk").symlink_to(elsewhere)
+    before = _listing(out)
+    with pytest.raises(UnsafePathError, match="leads outside"):
+        export(sets["train"], "modelnet-txt", out)
+    assert (elsewhere / "desk_0001.txt").is_file() and _listing(out) == before
+
+
+def test_a_fifo_where_the_earlier_export_wrote_a_file_is_refused_unopened(sets, tmp_path):
+    out = tmp_path / "out"
+    export(sets["both"], "pointnet-h5", out)
+    (out / "test_files.txt").unlink()
+    os.mkfifo(out / "test_files.txt")
+    with pytest.raises(UnsafePathError, match=r"test_files\.txt is a link or not a regular file"):
+        export(sets["train"], "pointnet-h5", out)
+    assert (out / "ply_data_test0.h5").is_file()
+
+
 # -- the Python API's arguments ----------------------------------------------------------------
 @pytest.mark.parametrize(
     "kwargs, error, message",
