@@ -25,6 +25,14 @@ context.  The epoch reaches the workers in one of two ways: :class:`EpochSampler
 ``(epoch, index)`` with every index, or ``set_epoch`` on the data set before each epoch, which
 writes it to shared memory (:class:`SharedEpoch`) that every worker reads, persistent workers
 (``persistent_workers=True``, which keep the caches warm across epochs) included.
+
+Arguments are checked where they are given, as the rest of the API's are: a wrong kind (text
+where a count goes, a tuple where a :class:`PoseDistribution` goes) is an
+:class:`~zbuf_occlude.errors.ArgumentTypeError`, a wrong value (``n_points=2.7``, a negative
+index) an :class:`~zbuf_occlude.errors.InvalidInputError` naming it, never truncated to a
+neighbour; a count whose samples would not fit in memory
+(:data:`BYTES_PER_ON_THE_FLY_POINT`) is refused when it is given
+(:class:`~zbuf_occlude.errors.InsufficientMemoryError`), not when a sample asks for it.
 """
 
 from __future__ import annotations
@@ -34,9 +42,10 @@ import hashlib
 import math
 import multiprocessing
 import multiprocessing.context
+import numbers
 import os
 from collections import OrderedDict
-from collections.abc import Sequence
+from collections.abc import Hashable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -44,8 +53,9 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.geometry.arguments import check_points
+from zbuf_occlude.defaults import MAX_POINTS, MAX_SAMPLES, MAX_SEED
+from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
+from zbuf_occlude.geometry.arguments import check_points, described
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere
 from zbuf_occlude.geometry.samples import derive_rng, draw_sample
 from zbuf_occlude.io.point_sets import POINT_SET_SUFFIXES, PointSet
@@ -56,10 +66,12 @@ from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.mesh.point_inputs import cloud_frame, load_cloud
 from zbuf_occlude.mesh.scene import UP_AXES, UP_CHOICES
 from zbuf_occlude.pipeline import DenseCloud, dense_cloud
+from zbuf_occlude.resources import BYTES_PER_DENSE_POINT, check_memory
+from zbuf_occlude.sensors.checks import count, is_number, real, reals
 from zbuf_occlude.visibility.point_splats import PointSurfels, point_surfels
 from zbuf_occlude.visibility.registry import method_info, resolution_option, visible_mask
 
-__all__ = ["PoseDistribution", "RandomOcclusion", "OnTheFlyOccludedDataset", "EpochSampler", "SharedEpoch", "ProcessCache", "DEFAULT_ON_THE_FLY_METHOD", "DEFAULT_DENSE_ON_THE_FLY"]
+__all__ = ["PoseDistribution", "RandomOcclusion", "OnTheFlyOccludedDataset", "EpochSampler", "SharedEpoch", "ProcessCache", "DEFAULT_ON_THE_FLY_METHOD", "DEFAULT_DENSE_ON_THE_FLY", "BYTES_PER_ON_THE_FLY_POINT"]
 
 #: The CPU method: exact, threaded Embree, no GL context to carry into forked workers.
 DEFAULT_ON_THE_FLY_METHOD = "embree-fast"
@@ -69,6 +81,28 @@ DEFAULT_DENSE_ON_THE_FLY = 32_768
 _RESOLUTION = 512
 _ON_THE_FLY_STREAM = 3  # occlude.py uses streams 0 and 1, the protocols 2
 _CACHE_SIZE = 64  # objects per process: meshes, dense clouds and sessions
+#: Bytes one point of a sample costs while it is drawn: the draw's indices and their padding,
+#: the float64 gather of the points, normalize_batch's float64 copies and the float32 result,
+#: the face or point index kept.  100 B measured at the peak of a 2,000,000-point sample of a
+#: mesh and of a point set (tracemalloc); rounded up.
+BYTES_PER_ON_THE_FLY_POINT = 128
+#: Largest index or epoch: both are keys of the sample's generator, int64 wherever they are kept.
+_MAX_KEY = 2**63 - 1
+
+
+def _whole(value: object, name: str, *, low: int, high: int) -> int:
+    """``value`` as an int: a whole number from ``low`` to ``high`` (``3`` or ``3.0``, never ``2.7``
+    taken as 2: :func:`zbuf_occlude.sensors.checks.count`); what is no number at all (text,
+    None, a bool) is an ArgumentTypeError."""
+    if not is_number(value):
+        raise ArgumentTypeError(f"{name} must be an integer, got {described(value)}")
+    return count(value, name, low=low, high=high)
+
+
+def _flag(value: object, name: str) -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise ArgumentTypeError(f"{name} must be True or False, got {described(value)}")
+    return bool(value)
 
 
 class SharedEpoch:
@@ -119,7 +153,10 @@ class PoseDistribution:
     Raises
     ------
     InvalidInputError
-        Bounds out of order or out of range, or a radius inside the object's bounding sphere.
+        A bound or the radius that is not a finite number (naming it), bounds that are not a
+        pair, out of order or out of range, or a radius inside the object's bounding sphere.
+    ArgumentTypeError
+        ``uniform_area`` not a bool.
     """
 
     elevation_deg: tuple[float, float] = (-90.0, 90.0)
@@ -128,6 +165,11 @@ class PoseDistribution:
     uniform_area: bool = True
 
     def __post_init__(self) -> None:
+        # kinds first, each named; then the pairs as floats (a list given compares and hashes as the tuple)
+        object.__setattr__(self, "elevation_deg", reals(self.elevation_deg, "elevation_deg", lengths=(2,)))
+        object.__setattr__(self, "azimuth_deg", reals(self.azimuth_deg, "azimuth_deg", lengths=(2,)))
+        object.__setattr__(self, "radius", real(self.radius, "radius", low=0.0, low_open=True))
+        object.__setattr__(self, "uniform_area", _flag(self.uniform_area, "uniform_area"))
         (el0, el1), (az0, az1) = self.elevation_deg, self.azimuth_deg
         if not (-90.0 <= el0 <= el1 <= 90.0) or not (az0 <= az1) or not all(map(math.isfinite, (az0, az1, self.radius))):
             raise InvalidInputError(f"bad pose distribution: elevation {self.elevation_deg}, azimuth {self.azimuth_deg}, radius {self.radius}")
@@ -141,9 +183,7 @@ class PoseDistribution:
         the camera at elevation ``angle_x − 90°`` ∈ [30°, 60°] and azimuth ``angle_z + 90°``,
         3 units from an object of maximum extent 2: radius 1.5 here (maximum extent 1).
         """
-        if not 1 <= int(severity) <= 5:
-            raise InvalidInputError(f"ModelNet40-C severity must be 1..5, got {severity!r}")
-        theta = 72.0 * int(severity)
+        theta = 72.0 * _whole(severity, "ModelNet40-C severity", low=1, high=5)
         return cls((30.0, 60.0), (theta + 90.0 - 36.0, theta + 90.0 + 36.0), 1.5, uniform_area=False)
 
     def draw(self, rng: np.random.Generator) -> tuple[float, float]:
@@ -211,14 +251,27 @@ class RandomOcclusion:
     Raises
     ------
     InvalidInputError
-        ``n_points < 1`` or an unknown method.
+        ``n_points`` not a whole number from 1 to :data:`~zbuf_occlude.defaults.MAX_POINTS`
+        (``2.7`` is refused, not taken as 2), ``seed`` not one from 0 to
+        :data:`~zbuf_occlude.defaults.MAX_SEED`, or an unknown method (each naming the value).
+    ArgumentTypeError
+        An argument of the wrong kind: text or None for ``n_points`` or ``seed``, anything but
+        a :class:`PoseDistribution` for ``poses``, a str for ``method``, a bool for ``normalize``.
+    InsufficientMemoryError
+        A sample of ``n_points`` (:data:`BYTES_PER_ON_THE_FLY_POINT` each) would need more
+        memory than is available.
     """
 
     def __init__(self, n_points: int = 2048, *, poses: PoseDistribution = PoseDistribution(), seed: int = 0,
                  method: str = DEFAULT_ON_THE_FLY_METHOD, normalize: bool = True):  # fmt: skip
-        if int(n_points) < 1:
-            raise InvalidInputError(f"n_points must be >= 1, got {n_points}")
-        self.n_points, self.poses, self.seed, self.normalize = int(n_points), poses, int(seed), normalize
+        n_points = _whole(n_points, "n_points", low=1, high=MAX_POINTS)
+        check_memory(n_points * BYTES_PER_ON_THE_FLY_POINT, option=f"n_points={n_points:,}", hint="lower n_points")
+        if not isinstance(poses, PoseDistribution):
+            raise ArgumentTypeError(f"poses must be a PoseDistribution, got {described(poses)}")
+        if not isinstance(method, str):
+            raise ArgumentTypeError(f"method must be the name of a visibility method, got {described(method)}")
+        self.n_points, self.poses, self.normalize = n_points, poses, _flag(normalize, "normalize")
+        self.seed = _whole(seed, "seed", low=0, high=MAX_SEED)
         self.method = method_info(method).name
         self._epoch = SharedEpoch()
         self._sessions = ProcessCache(_CACHE_SIZE)
@@ -230,8 +283,14 @@ class RandomOcclusion:
 
     def set_epoch(self, epoch: int) -> None:
         """Draw the views of ``epoch`` from now on, in this process and in every DataLoader worker
-        made from it, persistent ones included (the epoch lives in shared memory)."""
-        self._epoch.value = int(epoch)
+        made from it, persistent ones included (the epoch lives in shared memory).
+
+        Raises
+        ------
+        InvalidInputError, ArgumentTypeError
+            ``epoch`` not a whole number >= 0.
+        """
+        self._epoch.value = _whole(epoch, "epoch", low=0, high=_MAX_KEY)
 
     def _visible(self, key, mesh: trimesh.Trimesh, dense: DenseCloud, camera) -> NDArray[np.bool_]:
         session_of = method_info(self.method).session
@@ -286,16 +345,31 @@ class RandomOcclusion:
         Raises
         ------
         InvalidInputError
-            No ``index``, a mesh without its dense cloud or a point set with one, an unknown
-            ``up`` axis, or bad points (:func:`~zbuf_occlude.visibility.point_splats.point_surfels`).
+            No ``index``, a mesh without its dense cloud or a point set with one, an ``index``
+            or ``epoch`` that is not a whole number >= 0, an unknown ``up`` axis, or bad points
+            (:func:`~zbuf_occlude.visibility.point_splats.point_surfels`, or a cloud that
+            cannot be normalised: :func:`~zbuf_occlude.mesh.point_inputs.cloud_frame`).
+        ArgumentTypeError
+            A wrong kind: a dense cloud that is not a :class:`~zbuf_occlude.pipeline.DenseCloud`
+            beside a mesh that is not a ``trimesh.Trimesh``, text where points or an index go,
+            a ``key`` that cannot be hashed.
         """
         if index is None:
             raise InvalidInputError("RandomOcclusion needs the sample's index (with the seed and the epoch, it draws the view)")
-        rng = derive_rng(self.seed, _ON_THE_FLY_STREAM, self.epoch if epoch is None else int(epoch), int(index))
-        el, az = self.poses.draw(rng)
-        camera = camera_on_sphere(el, az, self.poses.radius, resolution=_RESOLUTION)
+        index = _whole(index, "index", low=0, high=_MAX_KEY)
+        epoch = self.epoch if epoch is None else _whole(epoch, "epoch", low=0, high=_MAX_KEY)
+        if key is not None and not isinstance(key, Hashable):
+            raise ArgumentTypeError(f"key must be hashable (it keys the session cache), got {described(key)}")
         if isinstance(mesh, trimesh.Trimesh) if dense is None else isinstance(mesh, PointSet):
             raise InvalidInputError("RandomOcclusion takes a mesh with its dense cloud, or a point set alone (no dense cloud)")
+        if dense is not None and not (isinstance(mesh, trimesh.Trimesh) and isinstance(dense, DenseCloud)):
+            raise ArgumentTypeError(
+                f"RandomOcclusion takes a trimesh.Trimesh and its DenseCloud (zbuf_occlude.pipeline.dense_cloud), got "
+                f"{described(mesh)} and {described(dense)}"
+            )
+        rng = derive_rng(self.seed, _ON_THE_FLY_STREAM, epoch, index)
+        el, az = self.poses.draw(rng)
+        camera = camera_on_sphere(el, az, self.poses.radius, resolution=_RESOLUTION)
         if dense is None:
             return self._occlude_points(mesh, camera, rng, key, up, (el, az))
         visible = self._visible(key if key is not None else (id(mesh), id(dense)), mesh, dense, camera)
@@ -311,7 +385,7 @@ class RandomOcclusion:
     def _occlude_points(self, cloud: PointSet | NDArray[np.floating], camera, rng: np.random.Generator, key: object, up: str,
                         pose: tuple[float, float]) -> dict:  # fmt: skip
         """:meth:`__call__`'s sample of a point set, its pose ``(elevation_deg, azimuth_deg)`` drawn already."""
-        if up not in UP_AXES:
+        if not isinstance(up, str) or up not in UP_AXES:
             raise InvalidInputError(f"up must be one of {', '.join(UP_AXES)}, got {up!r}")
         if not isinstance(cloud, PointSet):
             cloud = PointSet(check_points(cloud), None, None, "points")
@@ -371,19 +445,37 @@ class OnTheFlyOccludedDataset(require_torch().utils.data.Dataset):
     Raises
     ------
     InvalidInputError
-        Nothing found, no object in ``split``, an unknown ``up``, or a point-set file refused
-        by its header or labels (:func:`zbuf_occlude.io.point_sets.point_set_labels`, naming
-        it); a file whose cloud is damaged is refused when its sample is drawn, naming it.
+        Nothing found, no object in ``split``, an unknown ``up``, counts that are not whole
+        numbers >= 1 (``views_per_object`` at most :data:`~zbuf_occlude.defaults.MAX_SAMPLES`,
+        ``dense_points`` at most :data:`~zbuf_occlude.defaults.MAX_POINTS`), arguments
+        :class:`RandomOcclusion` refuses, or a point-set file refused by its header, labels or
+        the lists beside it (:func:`zbuf_occlude.io.point_sets.point_set_labels`,
+        :func:`~zbuf_occlude.io.point_sets.shape_names`, naming it; a class or split list that
+        links outside the file's folder is an :class:`~zbuf_occlude.errors.UnsafePathError`); a
+        file whose cloud is damaged is refused when its sample is drawn, naming it.
+    ArgumentTypeError
+        ``mesh_root`` not a path or a sequence of paths, ``split`` or ``up`` not a str, and the
+        wrong kinds :class:`RandomOcclusion` refuses.
+    InsufficientMemoryError
+        A mesh's dense cloud of ``dense_points`` would need more memory than is available.
     """
 
     def __init__(self, mesh_root: str | os.PathLike | Sequence[str | os.PathLike], *, split: str | None = None,
                  n_points: int = 2048, poses: PoseDistribution = PoseDistribution(), seed: int = 0,
                  method: str = DEFAULT_ON_THE_FLY_METHOD, normalize: bool = True,
                  dense_points: int = DEFAULT_DENSE_ON_THE_FLY, views_per_object: int = 1, up: str = "auto"):  # fmt: skip
-        roots = [mesh_root] if isinstance(mesh_root, (str, os.PathLike)) else list(mesh_root)
-        if up not in UP_CHOICES:
+        roots = [mesh_root] if isinstance(mesh_root, (str, os.PathLike)) else mesh_root
+        if not isinstance(roots, (list, tuple)) or not roots or not all(isinstance(r, (str, os.PathLike)) for r in roots):
+            raise ArgumentTypeError(f"mesh_root must be a path or a list of paths, got {described(mesh_root)}")
+        if not isinstance(up, str) or up not in UP_CHOICES:
             raise InvalidInputError(f"up must be one of {', '.join(UP_CHOICES)}, got {up!r}")
-        scan = scan_inputs(roots, point_sets=True)
+        if split is not None and not isinstance(split, str):
+            raise ArgumentTypeError(f"split must be a str ('train', 'test') or None, got {described(split)}")
+        views_per_object = _whole(views_per_object, "views_per_object", low=1, high=MAX_SAMPLES)
+        dense_points = _whole(dense_points, "dense_points", low=1, high=MAX_POINTS)
+        check_memory(dense_points * BYTES_PER_DENSE_POINT, option=f"dense_points={dense_points:,}", hint="lower dense_points")
+        self.occlusion = RandomOcclusion(n_points, poses=poses, seed=seed, method=method, normalize=normalize)
+        scan = scan_inputs(list(roots), point_sets=True)
         refused = [s for s in scan.skipped if Path(s.path).suffix.lower() in POINT_SET_SUFFIXES]
         if refused:  # generate and the farm record them and exit 1; a training set would silently lack them
             raise InvalidInputError(str(refused[0]) + (f" (and {len(refused) - 1} more point-set files)" if len(refused) > 1 else ""))
@@ -393,10 +485,7 @@ class OnTheFlyOccludedDataset(require_torch().utils.data.Dataset):
         self.objects: list[FarmObject] = [o for o in scan.objects if split is None or o.split == split]
         if not self.objects:
             raise InvalidInputError(f"no meshes or point sets of split {split!r} under {', '.join(map(str, roots))}")
-        if int(views_per_object) < 1 or int(dense_points) < 1:
-            raise InvalidInputError(f"need views_per_object >= 1 and dense_points >= 1, got {views_per_object}, {dense_points}")
-        self.views_per_object, self.dense_points, self.seed, self.up = int(views_per_object), int(dense_points), int(seed), up
-        self.occlusion = RandomOcclusion(n_points, poses=poses, seed=seed, method=method, normalize=normalize)
+        self.views_per_object, self.dense_points, self.seed, self.up = views_per_object, dense_points, self.occlusion.seed, up
         self._objects_cache = ProcessCache(_CACHE_SIZE, per_process=False)  # numpy only: safe across fork
 
     def __len__(self) -> int:
@@ -426,7 +515,17 @@ class OnTheFlyOccludedDataset(require_torch().utils.data.Dataset):
         return self._objects_cache.get_or_build(obj.index, build)
 
     def sample(self, index: int, epoch: int | None = None) -> dict:
-        """Sample ``index`` of ``epoch`` (default: :meth:`set_epoch`'s): :class:`RandomOcclusion`'s dict plus ``label``, ``name``."""
+        """Sample ``index`` of ``epoch`` (default: :meth:`set_epoch`'s): :class:`RandomOcclusion`'s dict plus ``label``, ``name``.
+
+        Raises
+        ------
+        IndexError
+            ``index`` outside ``[0, len)`` (a Dataset's end).
+        ArgumentTypeError
+            ``index`` not an integer (a float is not taken as its floor).
+        """
+        if not isinstance(index, numbers.Integral) or isinstance(index, (bool, np.bool_)):
+            raise ArgumentTypeError(f"index must be an integer, got {described(index)}")
         if not 0 <= index < len(self):
             raise IndexError(f"index {index} out of range for {len(self)} samples")
         obj = self.objects[index // self.views_per_object]
@@ -442,8 +541,8 @@ class OnTheFlyOccludedDataset(require_torch().utils.data.Dataset):
     def __getitem__(self, index: int | tuple[int, int]):
         """``(points, label)`` of ``index``, or of ``(epoch, index)`` (:class:`EpochSampler`)."""
         torch = require_torch()
-        epoch, index = index if isinstance(index, tuple) else (None, index)
-        s = self.sample(int(index), epoch)
+        epoch, index = index if isinstance(index, tuple) and len(index) == 2 else (None, index)
+        s = self.sample(index, epoch)
         return torch.from_numpy(s["points"]), s["label"]
 
     def __repr__(self) -> str:
@@ -460,10 +559,11 @@ class EpochSampler(require_torch().utils.data.Sampler):
     """
 
     def __init__(self, data_source, *, shuffle: bool = False, seed: int = 0):
-        self.n, self.shuffle, self.seed, self.epoch = len(data_source), shuffle, int(seed), 0
+        self.n, self.shuffle, self.epoch = len(data_source), _flag(shuffle, "shuffle"), 0
+        self.seed = _whole(seed, "seed", low=0, high=MAX_SEED)
 
     def set_epoch(self, epoch: int) -> None:
-        self.epoch = int(epoch)
+        self.epoch = _whole(epoch, "epoch", low=0, high=_MAX_KEY)
 
     def __len__(self) -> int:
         return self.n
