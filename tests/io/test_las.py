@@ -1,0 +1,279 @@
+"""LAS/LAZ through the reading layer: las_bytes round-trips through laspy, read_las refuses what a file cannot hold.
+
+The hostile files are forged from valid ones by patching the fields the ASPRS LAS 1.4 R15 header,
+the VLRs and the LAZ chunks declare; each must be one InvalidInputError naming the file, never a
+traceback, a hang (a FIFO) or an allocation the file does not back (lazrs reserves what a LAZ
+chunk table or layer header declares).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import struct
+from pathlib import Path
+
+import laspy
+import numpy as np
+import pytest
+
+from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError, UnsafePathError
+from zbuf_occlude.io.las import MAX_VLRS, SCAN_ANGLE_STEP_DEG, LasPoints, las_bytes, read_las
+
+#: The real airborne scans (research-only, next to the repository; skipped when absent).
+ALS_RETURNS = (
+    Path(os.environ.get("ZBUF_OCCLUDE_SHARED_DATA", Path(__file__).resolve().parents[3] / "shared" / "data")) / "als_returns"
+)
+N = 600
+
+
+def _fields(n: int = N, seed: int = 0) -> dict:
+    rng = np.random.default_rng(seed)
+    count = rng.integers(1, 6, n)
+    return {
+        "points": rng.uniform(-40.0, 40.0, (n, 3)) + [652_000.0, 6_862_000.0, 120.0],
+        "intensity": rng.integers(0, 65_536, n),
+        "return_number": np.minimum(rng.integers(1, 6, n), count),
+        "number_of_returns": count,
+        "gps_time": 3e5 + np.arange(n) * 1e-5,
+        "scan_angle_deg": rng.uniform(-30.0, 30.0, n),
+        "point_source_id": rng.integers(0, 65_536, n),
+        "classification": rng.integers(0, 256, n),
+    }
+
+
+def _write(tmp_path: Path, data: bytes, name: str = "scan.las") -> Path:
+    (tmp_path / name).write_bytes(data)
+    return tmp_path / name
+
+
+def _offset_to_points(data: bytes) -> int:
+    return struct.unpack_from("<I", data, 96)[0]
+
+
+@pytest.mark.parametrize("compress", [False, True])
+@pytest.mark.parametrize("colour", [False, True])
+def test_las_bytes_round_trips_through_laspy_and_read_las(tmp_path: Path, compress: bool, colour: bool) -> None:
+    f = _fields()
+    rgb = np.random.default_rng(1).integers(0, 65_536, (N, 3)) if colour else None
+    data = las_bytes(f["points"], **{k: v for k, v in f.items() if k != "points"}, rgb=rgb, scale=0.001, compress=compress)
+    back = laspy.read(io.BytesIO(data))
+    assert back.header.version == "1.4" and back.header.point_format.id == (7 if colour else 6)
+    assert back.header.are_points_compressed == compress
+    assert not back.header.vlrs.get("WktCoordinateSystemVlr") and not back.header.vlrs.get("GeoKeyDirectoryVlr")  # CRS-free
+    assert back.header.global_encoding.wkt  # formats 6-10 must use WKT (R15): set, with no WKT record
+    xyz = np.stack([back.x, back.y, back.z], axis=1)
+    assert np.abs(xyz - f["points"]).max() <= 0.0005 + 1e-9
+    for key in ("intensity", "return_number", "number_of_returns", "point_source_id", "classification"):
+        assert np.array_equal(np.asarray(back[key]), f[key]), key
+    assert np.array_equal(np.asarray(back.gps_time), f["gps_time"])
+    assert np.abs(np.asarray(back.scan_angle) * SCAN_ANGLE_STEP_DEG - f["scan_angle_deg"]).max() <= SCAN_ANGLE_STEP_DEG / 2 + 1e-9
+    if colour:
+        assert np.array_equal(np.stack([back.red, back.green, back.blue], axis=1), rgb)
+    read = read_las(_write(tmp_path, data, "scan.laz" if compress else "scan.las"))
+    assert isinstance(read, LasPoints) and len(read) == N and read.point_format_id == (7 if colour else 6) and read.has_gps_time
+    assert np.array_equal(read.points, xyz) and np.array_equal(read.gps_time, f["gps_time"])
+    assert np.array_equal(read.return_number, f["return_number"]) and read.return_number.dtype == np.uint8
+    assert np.allclose(read.scan_angle_deg, np.asarray(back.scan_angle) * SCAN_ANGLE_STEP_DEG, atol=1e-4)
+    assert not read.points.flags.writeable and not read.intensity.flags.writeable
+    assert np.isnan(read.linear_unit_m)  # no CRS, no unit
+
+
+def test_a_scan_of_no_points_and_a_file_of_another_scale_round_trip(tmp_path: Path) -> None:
+    empty = read_las(_write(tmp_path, las_bytes(np.zeros((0, 3)), intensity=[], return_number=[], number_of_returns=[],
+                                                gps_time=[], scan_angle_deg=[])))  # fmt: skip
+    assert len(empty) == 0 and empty.points.shape == (0, 3)
+    f = _fields(50)
+    data = las_bytes(f["points"] * 1000, intensity=f["intensity"], return_number=f["return_number"],
+                     number_of_returns=f["number_of_returns"], gps_time=f["gps_time"], scan_angle_deg=f["scan_angle_deg"], scale=1.0)  # fmt: skip
+    assert np.abs(read_las(_write(tmp_path, data)).points - f["points"] * 1000).max() <= 0.5
+
+
+def test_older_point_formats_read_with_their_scan_angle_rank_and_without_gps_time(tmp_path: Path) -> None:
+    header = laspy.LasHeader(version="1.2", point_format=2)
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = np.arange(4.0), np.zeros(4), np.ones(4)
+    las.scan_angle_rank = np.array([-20, -1, 0, 15], np.int8)
+    las.classification = np.array([1, 2, 5, 31], np.uint8)
+    buffer = io.BytesIO()
+    las.write(buffer)
+    read = read_las(_write(tmp_path, buffer.getvalue()))
+    assert not read.has_gps_time and np.array_equal(read.gps_time, np.zeros(4)) and read.version == "1.2"
+    assert np.array_equal(read.scan_angle_deg, [-20, -1, 0, 15]) and np.array_equal(read.classification, [1, 2, 5, 31])
+
+
+@pytest.mark.parametrize(
+    ("wkt", "metres"),
+    [
+        ('PROJCS["x",GEOGCS["g",UNIT["degree",0.0174532925199433]],PROJECTION["LCC"],UNIT["foot",0.3048,AUTHORITY["EPSG","9002"]]]', 0.3048),
+        (('PROJCRS["RGF93 / Lambert-93",BASEGEOGCRS["RGF93",DATUM["d",ELLIPSOID["GRS 1980",6378137,298.25,LENGTHUNIT["metre",1]]]],'
+          'CS[Cartesian,2],AXIS["Easting (X)",east],LENGTHUNIT["metre",1],ID["EPSG",2154]]'), 1.0),
+        ('COMPD_CS["c",PROJCS["p",UNIT["US survey foot",0.304800609601219]],VERT_CS["v",UNIT["metre",1]]]', 0.304800609601219),
+        ('GEOGCS["WGS 84",UNIT["degree",0.0174532925199433]]', float("nan")),
+        ('PROJCS["broken",UNIT["metre",', float("nan")),
+        ("[" * 200 + "]" * 200, float("nan")),
+    ],
+)  # fmt: skip
+def test_the_coordinate_unit_comes_from_the_projected_crs_of_the_wkt(tmp_path: Path, wkt: str, metres: float) -> None:
+    header = laspy.LasHeader(version="1.4", point_format=6)
+    header.vlrs.append(laspy.vlrs.known.WktCoordinateSystemVlr(wkt))
+    las = laspy.LasData(header)
+    las.x = las.y = las.z = np.zeros(2)
+    buffer = io.BytesIO()
+    las.write(buffer)
+    assert read_las(_write(tmp_path, buffer.getvalue())).linear_unit_m == pytest.approx(metres, nan_ok=True)
+
+
+# -- las_bytes refuses what a LAS 1.4 file cannot hold, naming the argument ------------------------------------------------
+
+
+def _encode(**changes) -> bytes:
+    f = _fields(20)
+    f.update(changes)
+    return las_bytes(f.pop("points"), **f)
+
+
+@pytest.mark.parametrize(
+    ("changes", "error", "match"),
+    [
+        ({"points": "cloud.npy"}, ArgumentTypeError, "points must be a numeric array"),
+        ({"intensity": np.full(20, 3.5)}, ArgumentTypeError, r"intensity must be integers \(round first\)"),
+        ({"gps_time": "now"}, ArgumentTypeError, "gps_time must be a numeric array"),
+        ({"classification": np.full(20, True)}, ArgumentTypeError, "classification must be integers"),
+        ({"compress": "yes"}, ArgumentTypeError, "compress must be True or False"),
+        ({"scale": "1mm"}, ArgumentTypeError, "scale must be a number"),
+        ({"points": np.zeros((20, 2))}, InvalidInputError, r"points must have shape \(N, 3\)"),
+        ({"intensity": np.zeros(19, int)}, InvalidInputError, r"intensity must have shape \(20,\)"),
+        ({"intensity": np.full(20, 70_000)}, InvalidInputError, r"intensity must be finite and within \[0, 65535\]"),
+        ({"return_number": np.zeros(20, int)}, InvalidInputError, r"return_number must be finite and within \[1, 15\]"),
+        ({"number_of_returns": np.full(20, 16)}, InvalidInputError, r"number_of_returns must be finite and within \[1, 15\]"),
+        ({"return_number": np.full(20, 3), "number_of_returns": np.full(20, 2)}, InvalidInputError,
+         "return_number exceeds number_of_returns at 20 points"),
+        ({"scan_angle_deg": np.full(20, 181.0)}, InvalidInputError, r"scan_angle_deg must be finite and within \[-180, 180\]"),
+        ({"gps_time": np.full(20, np.nan)}, InvalidInputError, "gps_time must be finite"),
+        ({"rgb": np.zeros((20, 4), int)}, InvalidInputError, r"rgb must have shape \(20, 3\)"),
+        ({"scale": 0.0}, InvalidInputError, "scale must be finite and > 0"),
+        ({"points": np.array([[0.0, 0, 0], [5e6, 0, 0]] * 10)}, InvalidInputError, "points span 5e.06 units.*use a larger scale"),
+    ],
+)  # fmt: skip
+def test_las_bytes_refuses_wrong_kinds_shapes_and_ranges(changes: dict, error: type, match: str) -> None:
+    with pytest.raises(error, match=match):
+        _encode(**changes)
+
+
+# -- read_las: hostile files, each one line naming the file -------------------------------------------------------------
+
+
+def test_read_las_refuses_wrong_kinds_from_python() -> None:
+    for bad in (123, None, b"scan.las", ["scan.las"]):
+        with pytest.raises(ArgumentTypeError, match="path must be a LAS/LAZ file's path"):
+            read_las(bad)  # type: ignore[arg-type]
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs os.mkfifo")
+def test_a_fifo_is_refused_without_blocking(tmp_path: Path) -> None:
+    os.mkfifo(tmp_path / "scan.laz")
+    with pytest.raises(InvalidInputError, match=r"scan\.laz: is a FIFO"):
+        read_las(tmp_path / "scan.laz")
+
+
+def test_a_link_out_of_the_folder_it_was_named_from_is_refused(tmp_path: Path) -> None:
+    (tmp_path / "outside").mkdir()
+    (tmp_path / "tiles").mkdir()
+    real = _write(tmp_path / "outside", _encode())
+    (tmp_path / "tiles" / "scan.las").symlink_to(real)
+    with pytest.raises(UnsafePathError, match="leads outside"):
+        read_las(tmp_path / "tiles" / "scan.las", within=tmp_path / "tiles")
+    assert len(read_las(tmp_path / "tiles" / "scan.las")) == 20  # named by the user: read
+
+
+def _patched(data: bytes, offset: int, fmt: str, value: int) -> bytes:
+    out = bytearray(data)
+    struct.pack_into(fmt, out, offset, value)
+    return bytes(out)
+
+
+def _laz() -> bytes:
+    return _encode(compress=True)
+
+
+def _laz_chunk_table(data: bytes) -> int:
+    return struct.unpack_from("<q", data, _offset_to_points(data))[0]
+
+
+HOSTILE = {
+    "not LAS": (lambda: b"ply\nformat ascii 1.0\n" * 40, "not a LAS/LAZ file"),
+    "empty": (lambda: b"", "not a LAS/LAZ file"),
+    "truncated header": (lambda: _encode()[:150], "truncated LAS header"),
+    "truncated points": (lambda: _encode()[:-7], "declares 20 points of 30 bytes.*truncated or forged"),
+    "10^10 points": (lambda: _patched(_encode(), 247, "<Q", 10**10), "declares 10,000,000,000 points, more than max_points"),
+    "10^7 points": (lambda: _patched(_encode(), 247, "<Q", 10**7), "declares 10,000,000 points of 30 bytes"),
+    "LAZ 10^7 points": (lambda: _patched(_laz(), 247, "<Q", 10**7), "more than 1000 per byte"),
+    "too many VLRs": (lambda: _patched(_encode(), 100, "<I", MAX_VLRS + 1), f"declares {MAX_VLRS + 1:,} VLRs"),
+    "VLR past the points": (lambda: _patched(_encode(), 100, "<I", 3), "VLR 1 of 3 does not fit before the points"),
+    "huge offset to points": (lambda: _patched(_encode(), 96, "<I", 2**32 - 1), "header size 375 and offset to points"),
+    "version 2.0": (lambda: _patched(_encode(), 24, "<B", 2), "LAS version 2.4; versions 1.0 to 1.4"),
+    "point format 11": (lambda: _patched(_encode(), 104, "<B", 11), "point format 11 is not a format of LAS 1.4"),
+    "short records": (lambda: _patched(_encode(), 105, "<H", 20), "records of 20 bytes, fewer than point format 6's 30"),
+    "zero scale": (lambda: _patched(_encode(), 131, "<d", 0.0), "scale factors .* not finite and non-zero"),
+    "EVLRs past the end": (lambda: _patched(_patched(_encode(), 243, "<I", 2), 235, "<Q", 10**6), "EVLR 1 of 2 lies past the end"),
+    "too many EVLRs": (lambda: _patched(_encode(), 243, "<I", 10**6), "1,000,000 EVLRs"),
+    "NaN GPS time": (lambda: _patched(_encode(), 375 + 22, "<Q", 0x7FF8000000000000), "1 points have a NaN or infinite gps_time"),
+    "LAZ cut short": (lambda: _laz()[:900], "LAZ chunk 0 declares .* past the end of the file \\(truncated or forged\\)"),
+    "LAZ chunk table of 2^20 chunks": (
+        lambda: _patched(_laz(), _laz_chunk_table(_laz()) + 4, "<I", 1 << 20), "chunk table declares 1,048,576 chunks for 20 points"),
+    "LAZ layer of 64 MiB": (
+        lambda: _patched(_laz(), _offset_to_points(_laz()) + 8 + 30 + 4, "<I", 64 << 20), "LAZ chunk 0 declares .* bytes of layers"),
+    "LAZ without its LASzip VLR": (lambda: _patched(_laz(), 100, "<I", 0), "compressed points but no LASzip VLR"),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("case", sorted(HOSTILE))
+def test_a_hostile_file_is_one_line_naming_it(tmp_path: Path, case: str) -> None:
+    make, match = HOSTILE[case]
+    path = _write(tmp_path, make(), "tile 7.laz")
+    with pytest.raises(InvalidInputError, match=match) as caught:
+        read_las(path)
+    message = str(caught.value)
+    assert message.startswith(str(path)) and "\n" not in message
+
+
+def test_caps_on_points_and_bytes_are_the_callers(tmp_path: Path) -> None:
+    path = _write(tmp_path, _encode())
+    with pytest.raises(InvalidInputError, match="declares 20 points, more than max_points=19"):
+        read_las(path, max_points=19)
+    with pytest.raises(InvalidInputError, match="more than the 900 a file read here may have"):
+        read_las(path, max_bytes=900)
+    assert len(read_las(path, max_points=20)) == 20
+
+
+def test_las_points_built_by_hand_are_checked() -> None:
+    arrays = {k: np.zeros(3) for k in LasPoints._DTYPES}
+    with pytest.raises(InvalidInputError, match=r"intensity must have shape \(2,\)"):
+        LasPoints(points=np.zeros((2, 3)), **arrays)
+    arrays = {k: np.zeros(2) for k in LasPoints._DTYPES} | {"gps_time": [0.0, np.inf]}
+    with pytest.raises(InvalidInputError, match="gps_time holds 1 NaN/inf"):
+        LasPoints(points=np.zeros((2, 3)), **arrays)
+
+
+# -- the shared real scans -------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.skipif(not ALS_RETURNS.is_dir(), reason="../shared/data/als_returns not present")
+@pytest.mark.parametrize(
+    ("name", "count", "point_format", "version", "metres"),
+    [("ign_lidarhd_sample.laz", 37_805, 8, "1.4", 1.0), ("autzen_trim.laz", 110_000, 3, "1.2", 0.3048)],
+)
+def test_the_shared_scans_read_as_laspy_reads_them(name: str, count: int, point_format: int, version: str, metres: float) -> None:
+    read = read_las(ALS_RETURNS / name, within=ALS_RETURNS)
+    assert (len(read), read.point_format_id, read.version, read.linear_unit_m) == (count, point_format, version, metres)
+    ref = laspy.read(ALS_RETURNS / name)
+    assert np.array_equal(read.points, np.stack([ref.x, ref.y, ref.z], axis=1))
+    for key in ("intensity", "return_number", "number_of_returns", "classification", "point_source_id", "gps_time"):
+        assert np.array_equal(getattr(read, key), np.asarray(ref[key])), key
+
+
+def test_a_scale_that_overflows_the_coordinates_is_refused_naming_the_file(tmp_path: Path) -> None:
+    path = _write(tmp_path, _patched(_encode(), 131, "<d", 1e305))
+    with pytest.raises(InvalidInputError, match=r"scan\.las: \d+ points have a NaN or infinite coordinate"):
+        read_las(path)
