@@ -1,0 +1,308 @@
+"""Per-pulse return statistics of a real scan: the figures a return model is fitted to.
+
+Measured on the points of a LAS/LAZ file (:class:`~zbuf_occlude.io.las.LasPoints`), with the fields
+of the ASPRS LAS 1.4 specification R15 (§2.6: return number, number of returns, GPS time, point
+source id, scanner channel, classification, intensity):
+
+* a **pulse** is the set of points that share a GPS time within one point source (flight line)
+  and one scanner channel: the returns of one pulse carry its emission time;
+* a pulse is **complete** when it holds ``number_of_returns`` points that all say so, with the
+  return numbers 1 to n, each once.  Thinned or cropped files lose returns of some pulses; the
+  shares of returns per pulse are measured on complete pulses only;
+* **returns per pulse**: the shares of complete pulses with 1, 2, 3, 4 and 5 or more returns;
+* **multi-return points**: the share of points whose ``number_of_returns`` is above 1 (the
+  scanner's count, which every point keeps, so a thinned pulse counts too), over the file, per
+  class, and on a class set (:data:`VEGETATION_CLASSES` by default);
+* **gaps**: the 3D distance between returns k and k + 1 of one pulse, for every pulse that holds
+  both (complete or not); its minimum (the receiver's range resolution shows there), 5th
+  percentile, median and count.  In metres where the file states its unit
+  (:attr:`~zbuf_occlude.io.las.LasPoints.linear_unit_m`, applied to z too), else in its coordinate unit;
+* **intensity**: the median intensity of single returns (``number_of_returns`` 1) and of
+  first-of-several returns (return 1 of a pulse of more), and their ratio, over the file and on
+  the class set.
+
+Uncertainties: the shares of complete pulses are binomial (pulses are independent draws): the
+standard deviation ``√(p(1 − p)/n)``.  Every other figure pools points of one pulse, which are not
+independent, so its standard deviation is a bootstrap over pulses (:data:`BOOTSTRAP` resamples,
+seeded): each resample draws pulses with replacement and weighs every point by its pulse's draws;
+quantiles of a resample are its weighted inverted-CDF quantiles.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
+from zbuf_occlude.geometry.arguments import described
+from zbuf_occlude.io.las import LasPoints
+from zbuf_occlude.resources import check_memory
+from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate
+
+__all__ = ["BYTES_PER_POINT", "GAP_QUANTILE", "MAX_RETURNS_BIN", "VEGETATION_CLASSES", "ReturnStatistics", "return_statistics"]
+
+#: ASPRS classes of low, medium and high vegetation (R15, Table 17): the default class set.
+VEGETATION_CLASSES = (3, 4, 5)
+#: Returns per pulse counted apart; pulses with more share the last bin ("5+").
+MAX_RETURNS_BIN = 5
+#: The low quantile of the gaps reported beside the minimum (the minimum alone rests on one pair).
+GAP_QUANTILE = 0.05
+#: Bytes per point this measure holds at once (sort orders, sorted copies, weights): checked first.
+BYTES_PER_POINT = 160
+
+
+@dataclass(frozen=True)
+class ReturnStatistics:
+    """The per-pulse figures of one scan (module docstring), each an :class:`~zbuf_occlude.sensors.fit.Estimate`.
+
+    Attributes
+    ----------
+    estimates : dict of str to Estimate
+        ``returns_1`` to ``returns_4`` and ``returns_5+`` (shares of complete pulses, binomial sd);
+        ``multi_return_points``, ``multi_return_points_class_<c>`` for each class in the file and
+        ``multi_return_points_<set>`` on the class set; ``gap_min``, ``gap_p05``, ``gap_median``,
+        ``gap_count``; ``intensity_single``, ``intensity_first_of_several``, ``intensity_ratio``
+        and the same on the class set (``..._<set>``, e.g. ``intensity_ratio_classes_3_4_5``).
+        Shares have unit ``"share"`` (0 to 1); NaN where nothing was there to measure.
+    n_points, n_pulses, n_complete_pulses : int
+    classes : tuple of int
+        The class set.
+    gap_unit : str
+        ``"m"``, or ``"coordinate unit"`` where the file does not state its unit.
+    seed, bootstrap : int
+        Of the bootstrap.
+    """
+
+    estimates: dict[str, Estimate]
+    n_points: int
+    n_pulses: int
+    n_complete_pulses: int
+    classes: tuple[int, ...]
+    gap_unit: str
+    seed: int
+    bootstrap: int
+
+    def markdown(self) -> str:
+        """A Markdown table: figure, value ± standard deviation (shares in %), unit, n, how the uncertainty was found."""
+        lines = [
+            (
+                f"{self.n_points:,} points, {self.n_pulses:,} pulses, {self.n_complete_pulses:,} complete; "
+                f"class set {', '.join(map(str, self.classes)) or 'none'}"
+            ),
+            "",
+            "| figure | value ± sd | unit | n | uncertainty |",
+            "|---|---|---|---|---|",
+        ]
+        for name, e in self.estimates.items():
+            scale, unit = (100.0, "%") if e.unit == "share" else (1.0, e.unit)
+            if not math.isfinite(e.value):
+                value = "not measured"
+            elif e.method == "count":
+                value = f"{e.value:,.0f}"
+            else:
+                value = f"{scale * e.value:.4g} ± {scale * e.std:.2g}"
+            lines.append(f"| {name} | {value} | {unit} | {e.n:,} | {e.method} |")
+        return "\n".join(lines) + "\n"
+
+    def to_json(self) -> dict[str, Any]:
+        """The figures as a strict-JSON object (``null`` where not measured)."""
+        return {
+            "n_points": self.n_points, "n_pulses": self.n_pulses, "n_complete_pulses": self.n_complete_pulses,
+            "classes": list(self.classes), "gap_unit": self.gap_unit, "seed": self.seed, "bootstrap": self.bootstrap,
+            "estimates": {name: e.to_json() for name, e in self.estimates.items()},
+        }  # fmt: skip
+
+
+@dataclass(frozen=True)
+class _Pulses:
+    """Points sorted by pulse, then return number."""
+
+    order: NDArray[np.int64]  # sorted position -> point
+    pulse: NDArray[np.int64]  # sorted position -> pulse
+    count: int
+    complete: NDArray[np.bool_]  # per pulse
+    returns: NDArray[np.int64]  # per pulse: its smallest number_of_returns
+
+
+def _pulses(las: LasPoints) -> _Pulses:
+    order = np.lexsort((las.return_number, las.gps_time, las.scanner_channel, las.point_source_id))
+    t, source, channel = las.gps_time[order], las.point_source_id[order], las.scanner_channel[order]
+    new = np.ones(len(order), dtype=bool)
+    new[1:] = (t[1:] != t[:-1]) | (source[1:] != source[:-1]) | (channel[1:] != channel[:-1])
+    starts = np.flatnonzero(new)
+    size = np.diff(np.append(starts, len(order)))
+    number = las.number_of_returns[order].astype(np.int64)
+    fewest, most = np.minimum.reduceat(number, starts), np.maximum.reduceat(number, starts)
+    # each return number as one bit: a complete pulse of n returns holds exactly bits 1..n
+    bits = np.bitwise_or.reduceat(np.left_shift(1, las.return_number[order].astype(np.int64)), starts)
+    complete = (size == fewest) & (fewest == most) & (bits == np.left_shift(1, fewest + 1) - 2)
+    return _Pulses(order, np.cumsum(new) - 1, len(starts), complete, fewest)
+
+
+class _Resampled:
+    """Values with the pulse of each, sorted once, for point estimates and weighted bootstrap quantiles."""
+
+    def __init__(self, values: NDArray[np.float64], pulses: NDArray[np.int64]) -> None:
+        order = np.argsort(values, kind="stable")
+        self.values, self.pulses = values[order], pulses[order]
+
+    def quantile(self, q: float, weights: NDArray[np.float64] | None = None) -> float:
+        if len(self.values) == 0:
+            return math.nan
+        if weights is None:
+            return float(np.quantile(self.values, q))
+        cumulative = np.cumsum(weights[self.pulses])
+        if cumulative[-1] == 0:
+            return math.nan
+        # inverted CDF: the smallest value whose cumulative weight reaches q (q = 0: the first drawn)
+        index = np.searchsorted(cumulative, q * cumulative[-1], side="right" if q == 0 else "left")
+        return float(self.values[min(index, len(self.values) - 1)])
+
+
+def _binomial(hits: int, n: int, what: str) -> Estimate:
+    if n == 0:
+        return Estimate(math.nan, math.nan, 0, f"binomial, over {what}", "share")
+    p = hits / n
+    return Estimate(p, math.sqrt(p * (1.0 - p) / n), n, f"binomial, over {what}", "share")
+
+
+def _figures(las: LasPoints, pulses: _Pulses, classes: tuple[int, ...], unit_m: float) -> dict[str, tuple]:
+    """Every bootstrapped figure as ``(kind, data, n, unit)``: kind ``share`` (per-pulse counts),
+    ``quantile`` (a :class:`_Resampled` and q) or ``ratio`` (two medians)."""
+    order, pulse = pulses.order, pulses.pulse
+    number, first = las.number_of_returns[order], las.return_number[order] == 1
+    cls, intensity = las.classification[order], las.intensity[order].astype(np.float64)
+    suffix = "classes_" + "_".join(map(str, classes))
+    multi = number > 1
+
+    def share(mask: NDArray[np.bool_]) -> tuple:
+        counts = np.stack([np.bincount(pulse[mask], minlength=pulses.count),
+                           np.bincount(pulse[mask & multi], minlength=pulses.count)], axis=1)  # fmt: skip
+        return ("share", counts.astype(np.float64), int(mask.sum()), "share")
+
+    out = {"multi_return_points": share(np.ones(len(order), dtype=bool))}
+    present = np.unique(cls)
+    if len(present) > 1 or present.tolist() not in ([], [0]):  # a file that never classified holds class 0 only
+        out.update({f"multi_return_points_class_{c}": share(cls == c) for c in present.tolist()})
+    in_set = np.isin(cls, classes)
+    if classes:
+        out[f"multi_return_points_{suffix}"] = share(in_set)
+    # consecutive returns k, k + 1 of one pulse: neighbours in the sorted order
+    points = las.points[order]
+    pair = (pulse[1:] == pulse[:-1]) & (las.return_number[order][1:].astype(np.int64) == las.return_number[order][:-1] + 1)
+    gaps = _Resampled(np.linalg.norm(points[1:][pair] - points[:-1][pair], axis=1) * unit_m, pulse[:-1][pair])
+    gap_unit = "m" if math.isfinite(las.linear_unit_m) else "coordinate unit"
+    out |= {"gap_min": ("quantile", (gaps, 0.0), len(gaps.values), gap_unit),
+            "gap_p05": ("quantile", (gaps, GAP_QUANTILE), len(gaps.values), gap_unit),
+            "gap_median": ("quantile", (gaps, 0.5), len(gaps.values), gap_unit)}  # fmt: skip
+    subsets = {"": np.ones(len(order), dtype=bool)} | ({f"_{suffix}": in_set} if classes else {})
+    for name, where in subsets.items():
+        single = _Resampled(intensity[where & ~multi], pulse[where & ~multi])
+        several = _Resampled(intensity[where & multi & first], pulse[where & multi & first])
+        out |= {f"intensity_single{name}": ("quantile", (single, 0.5), len(single.values), ""),
+                f"intensity_first_of_several{name}": ("quantile", (several, 0.5), len(several.values), ""),
+                f"intensity_ratio{name}": ("ratio", (several, single), min(len(several.values), len(single.values)), "")}  # fmt: skip
+    return out
+
+
+def _value(kind: str, data: Any, weights: NDArray[np.float64] | None) -> float:
+    if kind == "share":
+        totals = data.sum(axis=0) if weights is None else weights @ data
+        return float(totals[1] / totals[0]) if totals[0] else math.nan
+    if kind == "quantile":
+        resampled, q = data
+        return resampled.quantile(q, weights)
+    numerator, denominator = (d.quantile(0.5, weights) for d in data)
+    return numerator / denominator if denominator else math.nan
+
+
+def _checked(las: Any, classes: Any, seed: Any, bootstrap: Any) -> tuple[int, ...]:
+    if not isinstance(las, LasPoints):
+        raise ArgumentTypeError(f"las must be a LasPoints (read one with zbuf_occlude.io.las.read_las), got {described(las)}")
+    if not las.has_gps_time:
+        raise InvalidInputError(
+            f"point format {las.point_format_id} has no GPS time: the returns of one pulse cannot be told apart"
+        )
+    if len(las) == 0:
+        raise InvalidInputError("return_statistics needs points; the scan holds none")
+    for name, value, low in (("seed", seed, 0), ("bootstrap", bootstrap, 2)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise ArgumentTypeError(f"{name} must be an integer, got {described(value)}")
+        if value < low:
+            raise InvalidInputError(f"{name} must be >= {low}, got {value}")
+    if classes is None:
+        return ()
+    if isinstance(classes, (str, bytes)) or not isinstance(classes, Sequence):
+        raise ArgumentTypeError(f"classes must be a sequence of ASPRS class codes, got {described(classes)}")
+    if not all(isinstance(c, (int, np.integer)) and not isinstance(c, bool) and 0 <= c <= 255 for c in classes):
+        raise InvalidInputError(f"classes must be ASPRS class codes 0 to 255, got {list(classes)}")
+    return tuple(sorted({int(c) for c in classes}))
+
+
+def return_statistics(
+    las: LasPoints,
+    *,
+    classes: Sequence[int] | None = VEGETATION_CLASSES,
+    seed: int = 0,
+    bootstrap: int = BOOTSTRAP,
+) -> ReturnStatistics:
+    """The per-pulse return statistics of a scan: returns per pulse, multi-return points, gaps, intensities (module docstring).
+
+    Parameters
+    ----------
+    las : LasPoints
+        A scan with GPS times (point formats 1 and 3 to 10), from
+        :func:`~zbuf_occlude.io.las.read_las`.
+    classes : sequence of int, optional
+        The class set of the ``..._classes_...`` figures (default :data:`VEGETATION_CLASSES`);
+        None or empty: none.  Per-class shares are given for every class in the file anyway.
+    seed : int
+        Seed of the bootstrap over pulses.
+    bootstrap : int
+        Resamples (default :data:`~zbuf_occlude.sensors.fit.BOOTSTRAP`), at least 2.
+
+    Returns
+    -------
+    ReturnStatistics
+
+    Raises
+    ------
+    ArgumentTypeError
+        ``las`` is not a :class:`~zbuf_occlude.io.las.LasPoints`, or ``classes``, ``seed`` or
+        ``bootstrap`` of the wrong kind.
+    InvalidInputError
+        A scan without GPS times (its pulses cannot be told apart) or without points; class codes
+        outside 0 to 255; ``bootstrap`` below 2 or a negative ``seed``.
+    InsufficientMemoryError
+        The scan is too large for the memory available.
+    """
+    classes = _checked(las, classes, seed, bootstrap)
+    check_memory(len(las) * BYTES_PER_POINT, option=f"the return statistics of {len(las):,} points", hint="measure a crop")
+    pulses = _pulses(las)
+    unit_m = las.linear_unit_m if math.isfinite(las.linear_unit_m) else 1.0
+    estimates: dict[str, Estimate] = {}
+    returns = np.minimum(pulses.returns[pulses.complete], MAX_RETURNS_BIN)
+    what = f"{len(returns):,} complete pulses"
+    for k in range(1, MAX_RETURNS_BIN + 1):
+        name = f"returns_{k}" + ("+" if k == MAX_RETURNS_BIN else "")
+        estimates[name] = _binomial(int(np.count_nonzero(returns == k)), len(returns), what)
+    figures = _figures(las, pulses, classes, unit_m)
+    rng = np.random.default_rng(int(seed))
+    resampled = np.empty((int(bootstrap), len(figures)))
+    for b in range(int(bootstrap)):
+        weights = np.bincount(rng.integers(0, pulses.count, pulses.count), minlength=pulses.count).astype(np.float64)
+        resampled[b] = [_value(kind, data, weights) for kind, data, _, _ in figures.values()]
+    method = f"bootstrap over pulses ({int(bootstrap)}, seed {int(seed)})"
+    for j, (name, (kind, data, n, unit)) in enumerate(figures.items()):
+        spread = resampled[:, j][np.isfinite(resampled[:, j])]
+        std = float(np.std(spread, ddof=1)) if len(spread) > 1 else math.nan
+        estimates[name] = Estimate(_value(kind, data, None), std, n, method, unit)
+        if name == "gap_median":
+            estimates["gap_count"] = Estimate(float(n), 0.0, n, "count", "")
+    return ReturnStatistics(estimates, len(las), pulses.count, int(pulses.complete.sum()), classes,
+                            estimates["gap_min"].unit, int(seed), int(bootstrap))  # fmt: skip
