@@ -168,6 +168,9 @@ def test_read_las_refuses_wrong_kinds_from_python() -> None:
     for bad in (123, None, b"scan.las", ["scan.las"]):
         with pytest.raises(ArgumentTypeError, match="path must be a LAS/LAZ file's path"):
             read_las(bad)  # type: ignore[arg-type]
+    for cap in ({"max_points": "10"}, {"max_bytes": 1.5}, {"max_points": -1}, {"max_bytes": True}):
+        with pytest.raises(ArgumentTypeError, match="must be a whole number >= 0"):
+            read_las("scan.las", **cap)
 
 
 @pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs os.mkfifo")
