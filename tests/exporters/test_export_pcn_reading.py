@@ -202,7 +202,7 @@ def test_a_large_attribute_is_not_read(source, tmp_path):
 
 
 def test_the_largest_shard_is_checked_against_the_memory_available(source, tmp_path, monkeypatch):
-    import zbuf_occlude.resources as resources
+    from zbuf_occlude import resources
 
     monkeypatch.setattr(resources, "MIN_CHECKED_BYTES", 0)
     monkeypatch.setattr(resources, "available_memory", lambda: (1 << 20, "a test"))

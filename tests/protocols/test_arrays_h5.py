@@ -67,7 +67,7 @@ def test_an_external_link_is_refused(tmp_path):
 
 
 def test_declared_bytes_are_checked_against_the_memory_available(tmp_path, monkeypatch):
-    import zbuf_occlude.resources as resources
+    from zbuf_occlude import resources
 
     with h5py.File(tmp_path / "s.h5", "w") as f:  # stored compressed: 8 MB declared in a few kB
         f.create_dataset("points", data=np.zeros((1 << 21, 1), "f4"), compression="gzip")
