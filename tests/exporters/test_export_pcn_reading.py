@@ -227,3 +227,14 @@ def test_no_pcd_holds_another_files_bytes_when_an_attack_is_refused(source, tmp_
         export(source, "pcn", tmp_path / "out")
     record = json.loads((source / "protocol.json").read_text())
     assert record["protocol"] == "pcn" and not (tmp_path / "out").exists()
+
+
+def test_a_shard_changed_after_the_plan_is_checked_again_when_it_is_read(source, tmp_path):
+    from zbuf_occlude.exporters.pcn import FILE_NAMES, plan_pcn, write_pcn
+    from zbuf_occlude.io.owned import OwnedFolder
+
+    plan = plan_pcn(source)
+    _replace_complete(_chair(source), lambda f: f.create_dataset("complete", data=np.zeros((COMPLETE_POINTS * 4, 3), "f4"), compression="gzip"))
+    with OwnedFolder(tmp_path / "out", names=FILE_NAMES) as folder, pytest.raises(DatasetFormatError, match=r"pcn_000000\.h5: 'complete' declares"):
+        write_pcn(folder, plan)
+    assert not list((tmp_path / "out").rglob("*.pcd"))

@@ -43,11 +43,11 @@ warning.
 from __future__ import annotations
 
 import io
+import itertools
 import json
 import logging
 import os
 import re
-from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import Any
@@ -61,7 +61,7 @@ from zbuf_occlude.exporters.label_sets import SHAPENET55, label_set, shapenet_sy
 from zbuf_occlude.io.json_files import read_json_file
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.io.safe_paths import path_inside
-from zbuf_occlude.protocols.base import open_arrays_h5, read_arrays_h5, shard_name
+from zbuf_occlude.protocols.base import open_arrays_h5, shard_name
 from zbuf_occlude.protocols.pcn import COMPLETE_POINTS, HEIGHT, N_VIEWS, WIDTH
 from zbuf_occlude.resources import check_memory
 
@@ -122,11 +122,14 @@ class PcnPlan:
     models : tuple of PcnModel
     taxonomy_names : dict of str to str
         ``taxonomy_name`` of each ``taxonomy_id``, in ``PCN.json``'s order (sorted by id).
+    complete_points : int or None
+        Points of every complete cloud, as the run recorded them (``None``: it recorded none).
     """
 
     source: Path
     models: tuple[PcnModel, ...]
     taxonomy_names: dict[str, str]
+    complete_points: int | None = None
 
     @property
     def samples(self) -> dict[str, int]:
@@ -331,20 +334,20 @@ def plan_pcn(source: str | os.PathLike, label_set_name: str = "own") -> PcnPlan:
     by_id: dict[str, list[str]] = {}
     for c, t in ids.items():
         by_id.setdefault(t, []).append(c)
-    return PcnPlan(source, tuple(models), {t: _taxonomy_name(t, by_id[t]) for t in sorted(by_id)})
+    return PcnPlan(source, tuple(models), {t: _taxonomy_name(t, by_id[t]) for t in sorted(by_id)}, complete_points)
 
 
-def _views(arrays: Mapping[str, np.ndarray], shard: Path) -> tuple[list[np.ndarray], np.ndarray]:
-    """The partial views and the complete cloud of one shard, checked (again: it is read now)."""
-    partial, offsets, complete = (np.asarray(arrays[k]) for k in ARRAYS)
-    ok = partial.ndim == 2 and partial.shape[1] == 3 and complete.ndim == 2 and complete.shape[1] == 3 and offsets.ndim == 1 and len(offsets) >= 2
-    if not ok:
-        raise DatasetFormatError(
-            f"{shard}: partial {partial.shape}, partial_offsets {offsets.shape}, complete {complete.shape} are not "
-            f"a pcn shard's; run `generate --protocol {PROTOCOL}` again into that folder"
-        )
-    _check_offsets(offsets, len(partial), shard)
-    return [partial[a:b] for a, b in zip(offsets[:-1], offsets[1:])], complete
+def _views(model: PcnModel, plan: PcnPlan) -> tuple[list[np.ndarray], np.ndarray]:
+    """The partial views and the complete cloud of one shard, checked again as :func:`plan_pcn` checked
+    it (the file may have changed since), then read."""
+    with open_arrays_h5(model.shard, within=plan.source) as f:
+        _check_declared(f, model.shard, plan.complete_points)
+        try:
+            partial, offsets, complete = (np.asarray(f[k][()]) for k in ARRAYS)
+        except (OSError, ValueError) as exc:
+            raise DatasetFormatError(f"cannot read {model.shard}: {exc}") from None
+    _check_offsets(offsets, len(partial), model.shard)
+    return [partial[a:b] for a, b in itertools.pairwise(offsets)], complete
 
 
 def pcd_bytes(points: np.ndarray) -> bytes:
@@ -374,7 +377,7 @@ def write_pcn(folder: OwnedFolder, plan: PcnPlan) -> list[Path]:
     Raises
     ------
     DatasetFormatError
-        A shard was changed since :func:`plan_pcn` checked it (:func:`~zbuf_occlude.protocols.base.read_arrays_h5`).
+        A shard was changed since :func:`plan_pcn` checked it, and fails its checks now.
     UnsafePathError, OutputError
         As :meth:`~zbuf_occlude.io.owned.OwnedFolder.write`.
     """
@@ -383,7 +386,7 @@ def write_pcn(folder: OwnedFolder, plan: PcnPlan) -> list[Path]:
     lists = {t: {s: [] for s in splits} for t in plan.taxonomy_names}
     empty = 0
     for model in plan.models:
-        views, complete = _views(read_arrays_h5(model.shard, within=plan.source, names=ARRAYS), model.shard)
+        views, complete = _views(model, plan)
         for v, points in enumerate(views):
             folder.write_bytes(f"{model.split}/partial/{model.taxonomy_id}/{model.model_id}/{v:02d}.pcd", pcd_bytes(points))
             empty += not len(points)
