@@ -69,12 +69,13 @@ __all__ = [
     "MAX_SPLAT_COORDINATE", "MAX_SPLAT_SCALE",
 ]  # fmt: skip
 
-#: Bytes per point of :func:`point_surfels` with normals given, at its peak: the float64 points
-#: (24), the k-d tree's copy of them and its indices (32, and its nodes), the distances and
-#: indices of the k + 1 nearest neighbours (80 at k = 4), the spacing and the radius (16), the
-#: unit normals (24), the Morton codes, their sort and the order (24), and the copies gathered
-#: in that order once (64).  168 B measured (tracemalloc and peak RSS agree within 3 %, at
-#: 200,000 and 800,000 points on a sphere); rounded up.
+#: Bytes per point of :func:`point_surfels` with normals given, at its peak.  It allocates the
+#: float64 points (24), the k-d tree's copy of them and its indices (32, and its nodes), the
+#: distances and indices of the k + 1 nearest neighbours (80 at k = 4), the spacing and the
+#: radius (16), the unit normals (24), the Morton codes, their sort and the order (24), and the
+#: copies gathered in that order once (64), not all alive at once: 168 B at the peak, measured
+#: (tracemalloc and peak RSS agree within 3 %, at 200,000 and 800,000 points on a sphere);
+#: rounded up.
 BYTES_PER_SURFEL = 192
 #: Bytes per point the normals' estimate adds when none are given
 #: (:func:`~zbuf_occlude.geometry.normals.robust_normals`): the 14 nearest neighbours' distances
