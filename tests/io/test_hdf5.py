@@ -103,3 +103,26 @@ def test_compound_and_reference_types_are_refused(tmp_path: Path):
         f["refs"] = np.array([f["data"].ref], dtype=h5py.ref_dtype)
     with h5py.File(path, "r") as f, pytest.raises(DatasetFormatError, match="'/refs' holds"):
         check_hdf5(f, path)
+
+
+def test_open_hdf5_refuses_a_fifo_unopened_and_a_file_that_links_out(tmp_path):
+    """h5py's open of a FIFO waits for a writer forever: the layer refuses it before HDF5 sees it."""
+    import os
+
+    import h5py
+    import numpy as np
+
+    from zbuf_occlude.errors import DatasetFormatError, UnsafePathError
+    from zbuf_occlude.io.hdf5 import open_hdf5
+
+    os.mkfifo(tmp_path / "pipe.h5")
+    with pytest.raises(DatasetFormatError, match="pipe.h5: is a FIFO"):
+        open_hdf5(tmp_path / "pipe.h5")
+    with h5py.File(tmp_path / "real.h5", "w") as f:
+        f["data"] = np.zeros((2, 3), np.float32)
+    (tmp_path / "ds").mkdir()
+    (tmp_path / "ds" / "shard.h5").symlink_to(tmp_path / "real.h5")
+    with pytest.raises(UnsafePathError, match="leads outside"):
+        open_hdf5(tmp_path / "ds" / "shard.h5", within=tmp_path / "ds")
+    with open_hdf5(tmp_path / "ds" / "shard.h5") as f:  # no folder named: read where it is
+        assert f["data"].shape == (2, 3)

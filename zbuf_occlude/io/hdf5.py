@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from zbuf_occlude.errors import DatasetFormatError
+from zbuf_occlude.io.regular_files import check_within, open_regular_file
 
 __all__ = ["Column", "KNOWN_FILTERS", "MAX_COMPRESSION_RATIO", "MAX_OBJECTS", "check_hdf5", "open_hdf5", "declared_nbytes"]
 
@@ -171,18 +172,37 @@ def check_hdf5(f: Any, path: str | os.PathLike, columns: Mapping[str, Column] | 
                 raise DatasetFormatError(f"the HDF5 file {path}: {full!r} is not a group or a dataset; refused")
 
 
-def open_hdf5(path: str | os.PathLike, columns: Mapping[str, Column] | None = None) -> Any:
+def open_hdf5(
+    path: str | os.PathLike, columns: Mapping[str, Column] | None = None, *, within: str | os.PathLike | None = None
+) -> Any:
     """``h5py.File(path, "r")`` after :func:`check_hdf5`; close it (or use ``with``).
+
+    The file must be a regular file (a FIFO would block HDF5's open; it is refused unopened, by
+    :func:`~zbuf_occlude.io.regular_files.open_regular_file`), inside ``within`` when given.
+
+    Parameters
+    ----------
+    path : str or PathLike
+    columns : mapping of str to Column, optional
+        As :func:`check_hdf5`.
+    within : str or PathLike, optional
+        The folder ``path`` was named from: it must stay inside it, links resolved.
 
     Raises
     ------
     DatasetFormatError
-        Not a readable HDF5 file, or :func:`check_hdf5` refuses it (the file is closed).
+        Not a regular file, not a readable HDF5 file, or :func:`check_hdf5` refuses it (the
+        file is closed).
+    UnsafePathError
+        ``within`` is given and ``path`` leads outside it.
     """
     import h5py
 
+    target = Path(path) if within is None else check_within(path, within)
+    fh, _ = open_regular_file(target, error=DatasetFormatError)
+    fh.close()
     try:
-        f = h5py.File(path, "r")
+        f = h5py.File(target, "r")
     except OSError as exc:  # h5py says "file signature not found" for a file that is not HDF5
         raise DatasetFormatError(f"{path} is not a readable HDF5 file ({exc})") from None
     try:
