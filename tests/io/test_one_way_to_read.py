@@ -43,7 +43,8 @@ ALLOWED = {
     "resources.py: .read_text()": "reads the kernel's /proc and /sys/fs/cgroup memory files, never a user's",
     "render/shaders/__init__.py: .read_text()": "reads the package's own GLSL files, shipped beside it",
     "visibility/warmup.py: .read_text()": "reads an installed module's source (numba's), not a user's file",
-    "cli/main.py: open()": "opens os.devnull to silence stderr",
+    "cli/main.py: open()": "opens os.devnull as stderr when the real one is closed (no file of a user's)",
+    "cli/main.py: os.open()": "points a closed stdout or stderr descriptor at os.devnull (no file of a user's)",
 }
 
 
