@@ -5,7 +5,9 @@
 its folder), :mod:`.hdf5` (HDF5 files from anyone: only data stored inside them), :mod:`.arrays`
 (``.npy``/``.npz`` files from anyone: shapes and sizes read from their headers before inflating),
 :mod:`.regular_files` (a file a user or another file names: regular files only, opened without
-blocking, sizes checked before reading).
+blocking, sizes checked before reading),
+:mod:`.las` (LAS/LAZ point clouds from anyone, with their per-return fields; LAS/LAZ bytes written),
+:mod:`.las_layout` (a LAS/LAZ file's header, records and LAZ chunks, checked before laspy reads them).
 """
 
 from zbuf_occlude.geometry.samples import OccludedCloud
@@ -13,5 +15,6 @@ from zbuf_occlude.io import atomic, clouds
 from zbuf_occlude.io.atomic import *  # noqa: F403  (each module's __all__, re-exported whole)
 from zbuf_occlude.io.clouds import *  # noqa: F403
 from zbuf_occlude.io.hdf5 import check_hdf5, open_hdf5
+from zbuf_occlude.io.las import LasPoints, las_bytes, read_las
 
-__all__ = ["OccludedCloud", *atomic.__all__, *clouds.__all__, "check_hdf5", "open_hdf5"]
+__all__ = ["OccludedCloud", *atomic.__all__, *clouds.__all__, "check_hdf5", "open_hdf5", "LasPoints", "las_bytes", "read_las"]

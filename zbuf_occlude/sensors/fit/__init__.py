@@ -12,6 +12,9 @@
     (:func:`crop_placement_json`).
 ``shapes``
     The meshes made to show that, fitted on their own simulated crops (:func:`fit_object_shape`).
+``returns``
+    The returns of each pulse of a LAS/LAZ scan: returns per pulse, multi-return shares, gaps
+    between returns, intensities (:func:`return_statistics`).
 
 Every name is imported from here (``from zbuf_occlude.sensors.fit import fit_lidar``).
 """
@@ -29,6 +32,7 @@ from zbuf_occlude.sensors.fit.lidar import (
     LidarFit,
     fit_lidar,
 )
+from zbuf_occlude.sensors.fit.returns import VEGETATION_CLASSES, ReturnStatistics, return_statistics
 from zbuf_occlude.sensors.fit.scans import (
     DISTANCE_QUANTILES,
     MIN_PLACEMENT_SCANS,
@@ -59,5 +63,5 @@ __all__ = [
     "fit_crop_distances", "fit_crop_heights", "fit_crop_width_profile", "fit_crop_widths", "fit_lidar", "fit_object_shape",
     "fit_sensor_height", "fit_visible_across_sight", "fit_width_profile", "fit_width_scale", "LidarFit",
     "MAX_DROPOUT_GAP", "MIN_PLACEMENT_SCANS", "MIN_RETURNS", "PLANE_NEIGHBOURS", "SENSOR_HEIGHT_QUANTILE", "WIDTH_BAND_M",
-    "width_profile", "WIDTH_PROFILE_BINS", "WIDTH_SAMPLES",
+    "width_profile", "WIDTH_PROFILE_BINS", "WIDTH_SAMPLES", "return_statistics", "ReturnStatistics", "VEGETATION_CLASSES",
 ]  # fmt: skip
