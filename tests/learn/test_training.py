@@ -2,12 +2,21 @@
 
 from __future__ import annotations
 
+import json
+import os
+import stat
+
 import numpy as np
 import pytest
 
 torch = pytest.importorskip("torch", reason="zbuf_occlude.learn needs PyTorch: pip install -e '.[learn]'")
 
-from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.errors import (
+    CheckpointError,
+    InvalidInputError,
+    OutputError,
+    UnsafePathError,
+)
 from zbuf_occlude.learn import training as T
 from zbuf_occlude.learn.data import CloudSet
 
@@ -202,3 +211,36 @@ def test_train_is_short_enough_to_read() -> None:
     import inspect
 
     assert len(inspect.getsource(T.train).splitlines()) < 150
+
+
+# -- the checkpoint folder, read and written through zbuf_occlude.io ---------------------------------
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs os.mkfifo")
+def test_a_last_pt_that_is_a_fifo_is_refused_not_skipped_and_left_as_it_is(tmp_path) -> None:
+    os.mkfifo(tmp_path / "last.pt")
+    with pytest.raises(CheckpointError, match=r"last\.pt: is a FIFO"):
+        T.train(_clouds([0, 1] * 4), 2, _cfg(epochs=1), checkpoint_dir=tmp_path, progress=False)
+    assert stat.S_ISFIFO(os.lstat(tmp_path / "last.pt").st_mode) and not (tmp_path / "best.pt").exists()
+
+
+def test_a_last_pt_linked_out_of_the_checkpoint_folder_is_refused(tmp_path) -> None:
+    data = _clouds([0, 1] * 4)
+    T.train(data, 2, _cfg(epochs=1), checkpoint_dir=tmp_path / "other", progress=False)
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "last.pt").symlink_to(tmp_path / "other" / "last.pt")
+    with pytest.raises(UnsafePathError, match=r"last\.pt leads outside .*run"):
+        T.train(data, 2, _cfg(epochs=2), checkpoint_dir=run, progress=False)
+
+
+def test_the_checkpoint_folder_is_made_and_written_atomically_with_the_same_files(tmp_path) -> None:
+    ckpt = tmp_path / "a" / "b"
+    res = T.train(_clouds([0, 1] * 4), 2, _cfg(epochs=1), checkpoint_dir=ckpt, progress=False)
+    assert sorted(p.name for p in ckpt.iterdir()) == sorted(T.CHECKPOINT_FILES)  # no temporary left
+    assert json.loads((ckpt / "history.json").read_text()) == res.history
+    assert T.load_checkpoint(ckpt / "best.pt", keys=T.MODEL_KEYS)["n_classes"] == 2
+
+
+def test_a_checkpoint_folder_that_cannot_be_made_is_one_output_error(tmp_path) -> None:
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(OutputError, match=r"cannot write .*file"):
+        T.train(_clouds([0, 1] * 4), 2, _cfg(epochs=1), checkpoint_dir=tmp_path / "file" / "ckpt", progress=False)

@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.errors import InvalidInputError, MeshLoadError
+from zbuf_occlude.io.regular_files import read_regular_file
 
 __all__ = [
     "CloudSet",
@@ -205,8 +206,14 @@ def mesh_content_key(path: str | os.PathLike) -> str:
 
     ModelNet40's ``OFF3514 3546 0`` and ModelNet10's ``OFF\\n3514 3546 0`` copies of the
     same mesh (and CRLF/LF variants) get the same key; other formats hash their bytes.
+
+    Raises
+    ------
+    MeshLoadError
+        The file is missing, not a regular file (a FIFO would block), or larger than
+        :data:`~zbuf_occlude.io.regular_files.MAX_NAMED_FILE_BYTES` (2 GiB); the message names it.
     """
-    raw = Path(path).read_bytes()
+    raw = read_regular_file(path, error=MeshLoadError)
     if Path(path).suffix.lower() == ".off":
         text = raw.decode("latin-1")
         text = re.sub(r"^\s*OFF", "", text, count=1)
@@ -222,6 +229,11 @@ def dedupe_meshes(paths: Sequence[str | os.PathLike]) -> tuple[list[Path], list[
     kept : list of Path
         In input order.
     dropped : list of (duplicate, kept original)
+
+    Raises
+    ------
+    MeshLoadError
+        A file that cannot be read, as :func:`mesh_content_key` says.
     """
     seen: dict[str, Path] = {}
     kept, dropped = [], []

@@ -41,11 +41,8 @@ import dataclasses
 import json
 import logging
 import os
-import pickle
 import time
-import zipfile
 from collections.abc import Callable
-from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -54,8 +51,9 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from zbuf_occlude.errors import CheckpointError, InvalidInputError, OutputError
-from zbuf_occlude.io.atomic import atomic_path
+from zbuf_occlude.errors import CheckpointError, InvalidInputError
+from zbuf_occlude.io import atomic
+from zbuf_occlude.io.checkpoints import checkpoint_bytes, load_checkpoint
 from zbuf_occlude.learn.data import CloudSet, augment, balanced_epoch_rows
 from zbuf_occlude.learn.metrics import balanced_nll, mean_class_accuracy
 from zbuf_occlude.learn.models import build_model, check_model_config
@@ -321,65 +319,21 @@ def predict(model: nn.Module, points: np.ndarray, *, batch_size: int = 64, devic
 
 #: The files :func:`train` writes in its ``checkpoint_dir``: the resume point, the best weights, the history.
 CHECKPOINT_FILES = ("last.pt", "best.pt", "history.json")
-#: How :func:`train` writes a file of :data:`CHECKPOINT_FILES`: called with its name, it returns a
-#: context manager that yields the temporary path to write and gives the file its name on exit.
-CheckpointWriter = Callable[[str], AbstractContextManager[Path]]
+#: How :func:`train` writes a file of :data:`CHECKPOINT_FILES`: called with its name and its bytes,
+#: it writes them atomically under that name (:meth:`zbuf_occlude.io.owned.OwnedFolder.write_bytes`,
+#: :func:`zbuf_occlude.io.atomic.write_bytes`).
+CheckpointWriter = Callable[[str, bytes], object]
 
 
 def _save(write: CheckpointWriter, name: str, state: dict) -> None:
     # only tensors, numbers, strings, None, lists and dicts: what load_checkpoint's weights-only load takes
-    with write(name) as tmp:
-        torch.save(state, tmp)
+    write(name, checkpoint_bytes(state))
 
 
 #: Keys of ``last.pt`` (resume point) and ``best.pt`` (:func:`load_model`).
 RESUME_KEYS = ("config_key", "n_train", "epoch", "stale", "model", "optimizer", "scheduler", "history",
                "best_epoch", "best_val_accuracy", "best_model")  # fmt: skip
 MODEL_KEYS = ("config", "n_classes", "model")
-
-
-def load_checkpoint(path: str | os.PathLike, *, keys: tuple[str, ...] = (), device: str | torch.device = "cpu") -> dict:
-    """A checkpoint of :func:`train`, loaded as weights only: it never runs code.
-
-    ``torch.load(weights_only=True)`` unpickles tensors, numbers, strings, ``None``, lists
-    and dicts only; a checkpoint that needs anything else (pickled objects, which could run
-    code) is refused.
-
-    Parameters
-    ----------
-    path : str or PathLike
-    keys : tuple of str
-        Keys the checkpoint's dict must hold.
-    device : str or torch.device
-        Where tensors are loaded (``map_location``).
-
-    Raises
-    ------
-    CheckpointError
-        The file is missing, damaged, truncated, not a PyTorch checkpoint, needs more than
-        weights to load, or lacks one of ``keys`` (the message names the file).
-    """
-    path = Path(path)
-    try:
-        state = torch.load(path, map_location=device, weights_only=True)
-    except pickle.UnpicklingError as exc:
-        if "weights only" in str(exc).lower() or "weights_only" in str(exc):
-            raise CheckpointError(
-                f"{path} needs more than weights to load (pickled objects that could run code); refused: "
-                "zbuf_occlude loads only tensors and plain data from checkpoints"
-            ) from None
-        raise CheckpointError(f"{path} is damaged or not a PyTorch checkpoint ({exc})") from None
-    except OSError as exc:
-        raise CheckpointError(f"cannot read the checkpoint {path}: {exc.strerror or exc}") from None
-    except (RuntimeError, EOFError, ValueError, zipfile.BadZipFile, KeyError, AttributeError, TypeError) as exc:
-        # torch reports a truncated or foreign file as a RuntimeError of its zip reader, an empty one as EOFError
-        raise CheckpointError(f"{path} is damaged, truncated or not a PyTorch checkpoint ({type(exc).__name__}: {exc})") from None
-    if not isinstance(state, dict):
-        raise CheckpointError(f"{path} is not a zbuf_occlude checkpoint (a {type(state).__name__}, not a dict)")
-    missing = [k for k in keys if k not in state]
-    if missing:
-        raise CheckpointError(f"{path} is not a zbuf_occlude checkpoint of this kind: it lacks {', '.join(missing)}")
-    return state
 
 
 def _load_state(path: Path, target, state_dict, what: str) -> None:
@@ -442,8 +396,9 @@ def _start(config: TrainConfig, n_classes: int, n_train: int, device: torch.devi
 
 def _resume(run: _Run, last: Path, device: torch.device) -> None:
     """Continue ``run`` from ``last`` (a ``last.pt``): the epoch after its last, its weights, optimiser,
-    scheduler, history and best so far; refused when it was made with another configuration or data."""
-    state = _from_older_checkpoint(load_checkpoint(last, keys=RESUME_KEYS, device=device))
+    scheduler, history and best so far; refused when it was made with another configuration or data,
+    or when it leads out of its checkpoint folder."""
+    state = _from_older_checkpoint(load_checkpoint(last, keys=RESUME_KEYS, device=device, within=last.parent))
     if state["config_key"] != run.config_key or state["n_train"] != run.n_train:
         raise InvalidInputError(
             f"{last} was made with another configuration or data "
@@ -558,21 +513,17 @@ def _save_final(write: CheckpointWriter, run: _Run, config: TrainConfig, n_class
     """``best.pt`` (the weights :func:`train` returns, :func:`load_model`) and ``history.json``."""
     _save(write, "best.pt", {"config": config.to_dict(), "n_classes": n_classes, "model": run.model.state_dict(),
                              "best_epoch": run.result.best_epoch})  # fmt: skip
-    with write("history.json") as tmp:
-        tmp.write_text(json.dumps(run.result.history, indent=1))
+    write("history.json", json.dumps(run.result.history, indent=1).encode("utf-8"))
 
 
 def _checkpoint_writer(checkpoint_dir: Path, writer: CheckpointWriter | None) -> CheckpointWriter:
-    """``writer``, or atomic writes into ``checkpoint_dir``, made when the first file is written."""
+    """``writer``, or atomic writes into ``checkpoint_dir`` (:func:`~zbuf_occlude.io.atomic.write_bytes`,
+    which makes the folder when the first file is written)."""
     if writer is not None:
         return writer
 
-    def write(name: str) -> AbstractContextManager[Path]:
-        try:
-            checkpoint_dir.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise OutputError(f"cannot create {checkpoint_dir}: {exc}") from None
-        return atomic_path(checkpoint_dir / name)
+    def write(name: str, data: bytes) -> None:
+        atomic.write_bytes(checkpoint_dir / name, data)
 
     return write
 
@@ -604,9 +555,10 @@ def train(
         (:data:`CHECKPOINT_FILES`) go here; a ``last.pt`` made with another config is refused.
     checkpoint_writer : callable, optional
         How those files are written (:data:`CheckpointWriter`), for a ``checkpoint_dir`` inside
-        an output folder a command holds (``lambda name: folder.write(f"checkpoints/{name}")``,
-        :meth:`zbuf_occlude.io.owned.OwnedFolder.write`); default: atomically in
-        ``checkpoint_dir`` (:func:`~zbuf_occlude.io.atomic.atomic_path`).
+        an output folder a command holds
+        (``lambda name, data: folder.write_bytes(f"checkpoints/{name}", data)``,
+        :meth:`zbuf_occlude.io.owned.OwnedFolder.write_bytes`); default: atomically in
+        ``checkpoint_dir`` (:func:`~zbuf_occlude.io.atomic.write_bytes`).
     progress : bool
         Progress on stderr per epoch (:func:`zbuf_occlude.io.progress.progress`; in a log, a line
         every few seconds).
@@ -623,9 +575,12 @@ def train(
     InvalidInputError
         Empty training set, or a checkpoint from a different configuration.
     CheckpointError
-        A ``last.pt`` that is damaged or does not fit the model.
+        A ``last.pt`` that is damaged, not a regular file (a FIFO), or does not fit the model
+        (:func:`~zbuf_occlude.io.checkpoints.load_checkpoint`).
+    UnsafePathError
+        A ``last.pt`` that is a link leading out of ``checkpoint_dir``.
     OutputError
-        ``checkpoint_dir`` cannot be made.
+        ``checkpoint_dir`` cannot be made or written.
     """
     if len(train_set) == 0:
         raise InvalidInputError("empty training set")
@@ -634,7 +589,7 @@ def train(
         torch.set_num_threads(config.threads)
     run = _start(config, n_classes, len(train_set), device)
     ckpt_dir = Path(checkpoint_dir) if checkpoint_dir is not None else None
-    if ckpt_dir is not None and (ckpt_dir / "last.pt").is_file():
+    if ckpt_dir is not None and os.path.lexists(ckpt_dir / "last.pt"):  # a FIFO or a link is refused, not skipped
         _resume(run, ckpt_dir / "last.pt", device)
         log.info("resuming %s from epoch %d", config.model, run.start_epoch)
     write = _checkpoint_writer(ckpt_dir, checkpoint_writer) if ckpt_dir is not None else None
@@ -669,7 +624,9 @@ def load_model(path: str | os.PathLike, device: str = "cpu") -> tuple[nn.Module,
     Raises
     ------
     CheckpointError
-        Damaged, not a ``best.pt`` of :func:`train`, it needs more than weights to load, or a
+        Damaged, not a regular file (a FIFO), larger than
+        :data:`~zbuf_occlude.io.checkpoints.MAX_CHECKPOINT_BYTES`, not a ``best.pt`` of :func:`train`,
+        it needs more than weights to load, or a
         config field out of the bounds of :func:`zbuf_occlude.learn.models.check_model_config`
         (``width`` <= 8, ``n_classes`` <= 1,000, ``fv_grid`` <= 16; the message names the field),
         checked before the model is built.
