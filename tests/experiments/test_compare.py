@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import csv
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +14,7 @@ import trimesh
 from conftest import real_mesh
 
 import zbuf_occlude as zo
-from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
+from zbuf_occlude.errors import BackendUnavailable, InvalidInputError, UnsafePathError
 from zbuf_occlude.experiments import compare as cmp
 from zbuf_occlude.experiments import elevation_profile as prof
 
@@ -253,3 +254,40 @@ def test_elevation_profile_writes_png_and_csv(tmp_path: Path) -> None:
         rows = list(csv.DictReader(fh))
     assert [float(r["elevation_deg"]) for r in rows] == [-90.0, 0.0, 90.0]
     assert all(0.0 < float(r["area_visible"]) < float(r["surface_area"]) for r in rows)
+
+
+# -----------------------------------------------------------------------------------------
+# results.csv read back through zbuf_occlude.io
+# -----------------------------------------------------------------------------------------
+_ROW = {"mesh": "m", "n_faces": 12, "n_points": 200, "view": 0, "elevation_deg": 30.0, "azimuth_deg": 45.0,
+        "method": "zbuffer", "sweep": "", "param": "", "time_s": 0.25, "accuracy": 1.0, "error": ""}  # fmt: skip
+
+
+def test_results_read_back_as_written(tmp_path: Path) -> None:
+    cmp.write_csv([_ROW, {**_ROW, "sweep": "resolution", "param": 64, "accuracy": float("nan")}], tmp_path / "results.csv")
+    rows = cmp.read_csv(tmp_path / "results.csv", within=tmp_path)
+    assert rows[0]["n_points"] == 200 and rows[0]["time_s"] == 0.25 and rows[0]["param"] == "" and rows[0]["peak_mib"] == ""
+    assert rows[1]["param"] == 64 and math.isnan(rows[1]["accuracy"])
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs os.mkfifo")
+def test_a_results_csv_that_is_a_fifo_is_refused_without_blocking(tmp_path: Path) -> None:
+    os.mkfifo(tmp_path / "results.csv")
+    with pytest.raises(InvalidInputError, match=r"results\.csv: is a FIFO"):
+        cmp.read_csv(tmp_path / "results.csv")
+
+
+def test_a_results_csv_linked_out_of_its_folder_is_refused(tmp_path: Path) -> None:
+    cmp.write_csv([_ROW], tmp_path / "elsewhere.csv")
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "results.csv").symlink_to(tmp_path / "elsewhere.csv")
+    with pytest.raises(UnsafePathError, match=r"results\.csv leads outside"):
+        cmp.read_csv(tmp_path / "run" / "results.csv", within=tmp_path / "run")
+
+
+@pytest.mark.parametrize("value", ["many", "inf"])
+def test_a_results_csv_with_a_word_for_a_count_is_one_line(tmp_path: Path, value: str) -> None:
+    with open(tmp_path / "results.csv", "w", newline="", encoding="utf-8") as fh:
+        csv.writer(fh).writerows([["mesh", "n_points"], ["m", value]])
+    with pytest.raises(InvalidInputError, match=r"results\.csv: not a results table of ours"):
+        cmp.read_csv(tmp_path / "results.csv")

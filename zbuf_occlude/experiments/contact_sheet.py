@@ -40,7 +40,7 @@ from zbuf_occlude.defaults import DEFAULT_SEED
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, Camera, camera_on_sphere
 from zbuf_occlude.geometry.sampling import check_seed
-from zbuf_occlude.io.owned import owned_file
+from zbuf_occlude.io.owned import OwnedFolder
 
 if TYPE_CHECKING:  # matplotlib is imported when a sheet is drawn
     from matplotlib.figure import Figure
@@ -262,7 +262,7 @@ def contact_sheet(
         ``out``'s folder cannot be made, or ``out`` cannot be written.
     UnsafePathError
         A file ``out`` exists that a run of ours did not write, or that was changed since; it is
-        left as it is (:func:`~zbuf_occlude.io.owned.owned_file`).
+        left as it is (:class:`~zbuf_occlude.io.owned.OwnedFolder`).
     DatasetBusy
         Another live process holds ``out``'s folder.
     """
@@ -293,7 +293,7 @@ def contact_sheet(
             "`zbuf-occlude scan --format npz`): give the --out folder of farm, generate or scan"
         )
     figure = _draw(rows, fixed, int(dpi), rng)
-    _write_png(figure, out, int(dpi))
+    _write_png(figure, out)
     return ContactSheet(path=out, source=source, rows=rows, fixed_camera=fixed, figure=figure)
 
 
@@ -591,21 +591,26 @@ def _middle_cut(line: str, keep: int) -> str:
     return line[:head] + ELLIPSIS + line[len(line) - (keep - head):]
 
 
-def _write_png(figure: Figure, out: Path, dpi: int) -> None:
+def _write_png(figure: Figure, out: Path) -> None:
     """The figure as a palette PNG (:data:`PALETTE_COLORS`), written through the output layer
-    (:func:`~zbuf_occlude.io.owned.owned_file`: atomic, recorded, and replacing only a sheet a run
-    of ours wrote)."""
+    (:meth:`~zbuf_occlude.io.owned.OwnedFolder.write_bytes` into ``out``'s folder, held for this one
+    name: atomic, recorded, and replacing only a sheet a run of ours wrote).
+
+    The figure is drawn on matplotlib's Agg canvas at its own dpi, and its pixels quantised in
+    memory: the pixels ``savefig`` would have encoded, with no PNG written and read back.
+    """
     import io
 
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from PIL import Image  # a dependency of matplotlib
 
+    canvas = FigureCanvasAgg(figure)
+    canvas.draw()
+    palette = Image.fromarray(np.asarray(canvas.buffer_rgba())).convert("RGB").quantize(PALETTE_COLORS)
     buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=dpi)
-    buffer.seek(0)
-    with Image.open(buffer) as image:
-        palette = image.convert("RGB").quantize(PALETTE_COLORS)
-    with owned_file(out) as tmp:
-        palette.save(tmp, format="PNG", optimize=True)
+    palette.save(buffer, format="PNG", optimize=True)
+    with OwnedFolder(out.parent, files=[out.name], what=f"the file {out.name}") as folder:
+        folder.write_bytes(out.name, buffer.getvalue())
 
 
 def _scatter(ax: Any, xy: NDArray[np.float64], colour: NDArray[np.float64], bounds: tuple, rng: np.random.Generator, *, image: bool) -> None:

@@ -35,6 +35,7 @@ from zbuf_occlude.defaults import DEFAULT_METHOD, DEFAULT_RESOLUTION
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere
 from zbuf_occlude.geometry.sampling import sample_surface
+from zbuf_occlude.io.encodings import png_bytes
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.visibility.registry import resolution_option, visible_mask
 
@@ -179,7 +180,8 @@ def profile_outputs(out: str | os.PathLike) -> tuple[Path, Path]:
     return png, png.with_suffix(".csv")
 
 
-def _plot(rows: list[dict[str, float]], path: Path, title: str) -> None:
+def _plot(rows: list[dict[str, float]], title: str) -> bytes:
+    """The profile's three areas against elevation, each with its spread: the bytes of a PNG."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -198,7 +200,7 @@ def _plot(rows: list[dict[str, float]], path: Path, title: str) -> None:
     ax.legend()
     fig.tight_layout()
     try:
-        fig.savefig(path, dpi=120, format="png")  # path: a temporary, whose name says nothing of the format
+        return png_bytes(fig, dpi=120)
     finally:
         plt.close(fig)
 
@@ -285,8 +287,8 @@ def elevation_profile(
             progress=progress,
         )
         folder.write_csv(csv.name, rows)
-        with folder.write(png.name) as tmp:
-            _plot(rows, tmp, f"Projected visible area vs elevation: {Path(mesh_path).stem} ({method}, {points} points)")
+        title = f"Projected visible area vs elevation: {Path(mesh_path).stem} ({method}, {points} points)"
+        folder.write_bytes(png.name, _plot(rows, title))
     log.info("elevation profile written to %s", png)
     return png
 

@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.io.encodings import png_bytes
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.sensors.fit import across_sight_width
 from zbuf_occlude.sensors.scan import read_scan_npz
@@ -388,13 +389,14 @@ def _figure(g: dict, r: dict, labels: tuple[str, str]):
 
 
 def _save(fig, folder: OwnedFolder, name: str) -> None:
-    """Write ``fig`` as the PNG ``name`` in ``folder`` (:meth:`OwnedFolder.write`) and close it."""
+    """Write ``fig`` as the PNG ``name`` in ``folder`` (:meth:`OwnedFolder.write_bytes`) and close it."""
     import matplotlib.pyplot as plt
 
-    with folder.write(name) as tmp:
+    try:
         fig.tight_layout()
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+        folder.write_bytes(name, png_bytes(fig, dpi=110))
+    finally:
+        plt.close(fig)
 
 
 def _profile_figure(table: dict[str, dict[str, dict]]):

@@ -100,6 +100,7 @@ from zbuf_occlude.experiments.sim2real_real import real_clouds, real_halves, rea
 from zbuf_occlude.experiments.table3 import CHECKPOINT_FILES
 from zbuf_occlude.io.json_files import loads_json, read_json_file
 from zbuf_occlude.io.owned import OwnedFolder
+from zbuf_occlude.io.regular_files import MAX_METADATA_BYTES, read_text_file
 from zbuf_occlude.learn.data import CloudSet, split_validation
 from zbuf_occlude.learn.metrics import classification_report
 from zbuf_occlude.learn.stats import mean_std, permutation_p
@@ -197,11 +198,24 @@ def _score(pred: np.ndarray, labels: np.ndarray, names: list[str]) -> dict:
 
 
 def _load_runs(path: Path) -> dict:
+    """The runs an earlier run of this folder recorded in ``runs.jsonl``, by ``(train_set, seed)``:
+    a rerun resumes from them.  Read inside the output folder, as a regular file of at most
+    :data:`~zbuf_occlude.io.regular_files.MAX_METADATA_BYTES`.
+
+    Raises
+    ------
+    InvalidInputError
+        ``runs.jsonl`` is not a regular file (a FIFO), too large, or a line is not a run of ours.
+    UnsafePathError
+        It is a link that leads out of the output folder.
+    """
     done = {}
-    if path.is_file():
-        for line in path.read_text(encoding="utf-8").splitlines():
+    if os.path.lexists(path):  # a FIFO or a link out of the folder is refused, not skipped
+        for number, line in enumerate(read_text_file(path, max_bytes=MAX_METADATA_BYTES, within=path.parent).splitlines(), 1):
             if line.strip():
                 r = loads_json(line, what=str(path))
+                if not isinstance(r, dict) or not isinstance(r.get("train_set"), str) or not isinstance(r.get("seed"), int):
+                    raise InvalidInputError(f"{path}: line {number} is not a run of ours (no train_set and seed)")
                 done[(r["train_set"], r["seed"])] = r
     return done
 
@@ -520,7 +534,7 @@ def _train_and_score(config: Sim2RealConfig, names: list[str], kind: str, seed: 
     cfg = config.train_config(seed, device=device, threads=threads)
     checkpoints = f"checkpoints/{_set_folder(kind)}/seed{seed}"
     res = train(tr, len(names), cfg, val_set=val, checkpoint_dir=folder.root / checkpoints,
-                checkpoint_writer=lambda name: folder.write(f"{checkpoints}/{name}"), progress=progress)  # fmt: skip
+                checkpoint_writer=lambda name, data: folder.write_bytes(f"{checkpoints}/{name}", data), progress=progress)  # fmt: skip
     test_x, test_y = test
     pred, _ = predict(res.model, test_x, batch_size=cfg.batch_size, device=cfg.device)
     all_scans = {key: float("nan") for key in ALL_SCANS} | {"n_test_all_scans": 0}

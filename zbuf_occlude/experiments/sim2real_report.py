@@ -6,7 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from zbuf_occlude.io.owned import owned_file
+from zbuf_occlude.io.encodings import png_bytes
+from zbuf_occlude.io.owned import OwnedFolder
 
 __all__ = ["table_md", "plot_examples"]
 
@@ -73,15 +74,17 @@ def table_md(rows: list[dict], settings: dict) -> str:
 def plot_examples(path: str | Path, rows: dict[str, dict[str, np.ndarray]], title: str = "") -> Path:
     """A grid of 3-D scatter plots: one row per ``{row label: {column label: (n, 3) cloud}}``,
     the same view and limits for each (normalised clouds, max extent 1), written as the PNG ``path``
-    through the output layer (:func:`~zbuf_occlude.io.owned.owned_file`: an existing file of that
-    name is replaced only if a run of ours wrote it and it is unchanged since).
+    through the output layer (:meth:`~zbuf_occlude.io.owned.OwnedFolder.write_bytes` into its folder,
+    held for this one name: an existing file of that name is replaced only if a run of ours wrote it
+    and it is unchanged since).
 
     Needs matplotlib (the ``learn`` or ``plot`` extra).
 
     Raises
     ------
     UnsafePathError
-        ``path`` exists and was not written by a run of ours, or was changed since.
+        ``path`` exists and was not written by a run of ours, was changed since, or is a folder
+        or a link.
     """
     import matplotlib
 
@@ -106,8 +109,8 @@ def plot_examples(path: str | Path, rows: dict[str, dict[str, np.ndarray]], titl
     fig.tight_layout()
     path = Path(path)
     try:
-        with owned_file(path, option="path") as tmp:
-            fig.savefig(tmp, dpi=100, format="png")
+        data = png_bytes(fig, dpi=100)
     finally:
         plt.close(fig)
-    return path
+    with OwnedFolder(path.parent, files=[path.name], what=f"the file {path.name}", option="path") as folder:
+        return folder.write_bytes(path.name, data)

@@ -35,6 +35,8 @@ from zbuf_occlude.experiments.table3_config import AUGMENTATION_MODEL, ELEVATION
 from zbuf_occlude.experiments.table3_report import confusion_rows, plot_augmentation, plot_elevation, table_3a, table_3b
 from zbuf_occlude.io.json_files import read_json_file
 from zbuf_occlude.io.owned import OwnedFolder
+from zbuf_occlude.io.regular_files import read_regular_file
+from zbuf_occlude.io.tables import read_csv_rows
 from zbuf_occlude.learn.data import CloudSet, dedupe_meshes, from_meshes, from_occluded, split_validation
 from zbuf_occlude.learn.metrics import accuracy_by_elevation, classification_report
 from zbuf_occlude.visibility.registry import method_info
@@ -81,11 +83,32 @@ def _write_mesh_list(data_dir: Path, text: str) -> Path:
     A list an earlier version wrote (no ledger then) is taken as ours when it holds exactly this
     run's meshes, so that a data folder shared across models is reused as before.
     """
+    data = text.encode("utf-8")
     with _owned(data_dir, DATA_OUTPUTS, "the experiment's data folder", option="--data") as folder:
         path = folder.root / "meshes.txt"
-        if folder.recorded("meshes.txt") is None and path.is_file() and not path.is_symlink() and path.read_bytes() == text.encode("utf-8"):
+        if (folder.recorded("meshes.txt") is None and path.is_file() and not path.is_symlink() and path.stat().st_size == len(data)
+                and read_regular_file(path, max_bytes=len(data), within=folder.root) == data):  # fmt: skip
             folder.adopt(["meshes.txt"])
         return folder.write_text("meshes.txt", text)
+
+
+def _number_rows(path: Path, within: Path, *, text: Sequence[str] = ()) -> list[dict]:
+    """The rows of a CSV table of ours (:func:`~zbuf_occlude.io.tables.read_csv_rows`, held inside
+    ``within``), every column but those in ``text`` a float.
+
+    Raises
+    ------
+    InvalidInputError
+        The file cannot be read (a FIFO, past the cap, not CSV), or holds a value that is not a
+        number; the message names it.
+    UnsafePathError
+        It leads outside ``within``.
+    """
+    rows = read_csv_rows(path, within=within)
+    try:
+        return [{k: (v if k in text else float(v)) for k, v in r.items()} for r in rows]
+    except (TypeError, ValueError) as exc:  # a short or long row, a word where a number belongs
+        raise InvalidInputError(f"{path}: not a table of ours, a value is not a number ({exc})") from None
 
 
 def _natural(text: str) -> list:
@@ -139,11 +162,8 @@ def _visible_area_curve(meshes: list[dict], data_dir: Path, scale: Scale, method
     from zbuf_occlude.mesh.load import load_mesh
 
     cache = data_dir / "visible_area.csv"
-    if cache.is_file():
-        import csv
-
-        with open(cache, encoding="utf-8") as fh:
-            return [{k: float(v) for k, v in r.items()} for r in csv.DictReader(fh)]
+    if os.path.lexists(cache):  # a FIFO or a link out of the data folder is refused, not skipped
+        return _number_rows(cache, data_dir)
     # Fig. 12's areas need a sharp visible set: an occupancy-grid method (the paper's HSR for
     # the data) would blur them, so those fall back to the default method.
     info = method_info(method)
@@ -239,7 +259,7 @@ def _elevation_into(folder: OwnedFolder, root: str | os.PathLike, t_start: float
     train_config = config.train_config()
     t0 = time.perf_counter()
     result = train(full.subset(tr_rows), len(names), train_config, val_set=full.subset(val_rows), checkpoint_dir=out / "checkpoints",
-                   checkpoint_writer=lambda name: folder.write(f"checkpoints/{name}"), progress=progress)  # fmt: skip
+                   checkpoint_writer=lambda name, data: folder.write_bytes(f"checkpoints/{name}", data), progress=progress)  # fmt: skip
     t_train = time.perf_counter() - t0
     t0 = time.perf_counter()
     pred, _ = predict(result.model, test.points, batch_size=train_config.batch_size, device=train_config.device)
@@ -253,8 +273,7 @@ def _elevation_into(folder: OwnedFolder, root: str | os.PathLike, t_start: float
     folder.write_csv("per_class.csv", [{"class": k, "accuracy": v} for k, v in report["per_class"].items()])
     folder.write_csv("confusion.csv", confusion_rows(report["confusion"], names))
     curve = _visible_area_curve(meshes, data_dir, sc, config.method, progress) if profile else None
-    with folder.write("accuracy_vs_elevation.png") as tmp:
-        plot_elevation(tmp, {model: rows}, curve)
+    folder.write_bytes("accuracy_vs_elevation.png", plot_elevation({model: rows}, curve))
     summary = {
         "experiment": "elevation (Table 3A)", "model": model, "scale": config.scale, "root": str(root),
         "data_dir": str(data_dir),
@@ -400,8 +419,9 @@ def _augmentation_into(folder: OwnedFolder, root: str | os.PathLike, t_start: fl
     for name, data in sets.items():
         tr_rows, val_rows = split_validation(len(data), sc.val_fraction, seed, labels=data.labels)
         t0 = time.perf_counter()
-        res = train(data.subset(tr_rows), len(names), train_config, val_set=data.subset(val_rows), checkpoint_dir=out / "checkpoints" / name,
-                    checkpoint_writer=lambda file, name=name: folder.write(f"checkpoints/{name}/{file}"), progress=progress)  # fmt: skip
+        ckpt = f"checkpoints/{name}"
+        res = train(data.subset(tr_rows), len(names), train_config, val_set=data.subset(val_rows), checkpoint_dir=out / ckpt,
+                    checkpoint_writer=lambda file, blob, ckpt=ckpt: folder.write_bytes(f"{ckpt}/{file}", blob), progress=progress)  # fmt: skip
         timings[f"train_{name}"] = time.perf_counter() - t0
         summaries[name] = {"best_epoch": res.best_epoch, "epochs_run": len(res.history), "n_train": len(tr_rows),
                            "n_val": len(val_rows), "history": res.history}  # fmt: skip
@@ -417,8 +437,7 @@ def _augmentation_into(folder: OwnedFolder, root: str | os.PathLike, t_start: fl
     folder.write_csv("results.csv", rows)
     if test3:
         folder.write_csv("test3.csv", test3)
-    with folder.write("augmentation.png") as tmp:
-        plot_augmentation(tmp, rows, model)
+    folder.write_bytes("augmentation.png", plot_augmentation(rows, model))
     summary = {
         "experiment": "augmentation (Table 3B)", "model": model, "scale": config.scale, "root": str(root),
         "classes": names, "train_meshes": [m["name"] for m in train_meshes],
@@ -477,7 +496,12 @@ def combine_elevation(run_dirs: Sequence[str | os.PathLike], out: str | os.PathL
     Raises
     ------
     UnsafePathError
-        A file it writes in ``out`` was not written by a run of ours, or was changed since.
+        A file it writes in ``out`` was not written by a run of ours, or was changed since; or a
+        run's ``run.json``, ``results.csv`` or ``data/visible_area.csv`` is a link that leads out
+        of the folder it was named from.
+    InvalidInputError
+        A run's file is missing, not a regular file (a FIFO), larger than its cap, or not a file
+        of ours (a ``run.json`` without a model, a value that is not a number); the message names it.
     DatasetBusy
         Another live process holds ``out``.
     """
@@ -487,24 +511,23 @@ def combine_elevation(run_dirs: Sequence[str | os.PathLike], out: str | os.PathL
 
 
 def _combine_into(folder: OwnedFolder, run_dirs: Sequence[str | os.PathLike]) -> Path:
-    """:func:`combine_elevation` once its ``out`` is held."""
-    import csv
-
+    """:func:`combine_elevation` once its ``out`` is held; each run's files are read inside its folder."""
     rows_by_model, summaries, all_rows, curve = {}, {}, [], None
     for d in map(Path, run_dirs):
-        summary = read_json_file(d / "run.json")
-        with open(d / "results.csv", encoding="utf-8") as fh:
-            rows = [{k: (v if k == "model" else float(v)) for k, v in r.items()} for r in csv.DictReader(fh)]
+        summary = read_json_file(d / "run.json", within=d)
+        if not isinstance(summary, dict) or not isinstance(summary.get("model"), str):
+            raise InvalidInputError(f"{d / 'run.json'} is not the run.json of an elevation run (it names no model)")
+        rows = _number_rows(d / "results.csv", d, text=("model",))
         rows_by_model[summary["model"]] = rows
         summaries[summary["model"]] = summary
         all_rows += rows
-        cache = d / "data" / "visible_area.csv"
-        for candidate in (cache, Path(summary.get("data_dir", "")) / "visible_area.csv"):
-            if curve is None and candidate.is_file():
-                with open(candidate, encoding="utf-8") as fh:
-                    curve = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(fh)]
+        data_dirs = [d / "data"]
+        if isinstance(summary.get("data_dir"), str) and summary["data_dir"]:
+            data_dirs.append(Path(summary["data_dir"]))
+        for data_dir in data_dirs:
+            if curve is None and os.path.lexists(data_dir / "visible_area.csv"):
+                curve = _number_rows(data_dir / "visible_area.csv", data_dir)
     folder.write_csv("results.csv", all_rows)
     folder.write_text("table.md", table_3a(rows_by_model, summaries))
-    with folder.write("accuracy_vs_elevation.png") as tmp:
-        plot_elevation(tmp, rows_by_model, curve)
+    folder.write_bytes("accuracy_vs_elevation.png", plot_elevation(rows_by_model, curve))
     return folder.root

@@ -1,18 +1,18 @@
 """Tables (Markdown, ours beside the paper's), rows of a confusion matrix, and plots of the Table 3 experiments.
 
-Nothing here chooses where a file goes: the plots are drawn into the path they are given (the
-temporary of :meth:`zbuf_occlude.io.owned.OwnedFolder.write`, whose name says nothing of the format:
-they are PNG), and :mod:`zbuf_occlude.experiments.table3` writes every file through its output folder.
+Nothing here writes a file: the plots are returned as the bytes of a PNG
+(:func:`zbuf_occlude.io.encodings.png_bytes`), and :mod:`zbuf_occlude.experiments.table3` writes
+every file through its output folder (:meth:`zbuf_occlude.io.owned.OwnedFolder.write_bytes`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from pathlib import Path
 
 import numpy as np
 
 from zbuf_occlude.experiments.paper import PAPER_3A, PAPER_3B_MEAN_F1, TEST_ELEVATIONS
+from zbuf_occlude.io.encodings import png_bytes
 
 __all__ = ["table_3a", "table_3b", "plot_elevation", "plot_augmentation", "confusion_rows"]
 
@@ -41,8 +41,8 @@ def table_3a(rows_by_model: dict, summaries: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def plot_elevation(path: Path, rows_by_model: dict, curve: list[dict] | None) -> None:
-    """Accuracy vs elevation per model, ours and the paper's, with Fig. 12's curve when given; a PNG at ``path``."""
+def plot_elevation(rows_by_model: dict, curve: list[dict] | None) -> bytes:
+    """Accuracy vs elevation per model, ours and the paper's, with Fig. 12's curve when given: the bytes of a PNG."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -69,8 +69,10 @@ def plot_elevation(path: Path, rows_by_model: dict, curve: list[dict] | None) ->
         ax2.set_ylabel("projected visible area, mean over meshes (object units²)")
     ax.legend(handles, labels, fontsize=7, loc="lower left")
     fig.tight_layout()
-    fig.savefig(path, dpi=120, format="png")
-    plt.close(fig)
+    try:
+        return png_bytes(fig, dpi=120)
+    finally:
+        plt.close(fig)
 
 
 def table_3b(rows: list[dict], test3: list[dict], model: str) -> str:
@@ -94,8 +96,8 @@ def table_3b(rows: list[dict], test3: list[dict], model: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def plot_augmentation(path: Path, rows: list[dict], model: str) -> None:
-    """Accuracy per training set and test set, ours beside the paper's; a PNG at ``path``."""
+def plot_augmentation(rows: list[dict], model: str) -> bytes:
+    """Accuracy per training set and test set, ours beside the paper's: the bytes of a PNG."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -112,5 +114,7 @@ def plot_augmentation(path: Path, rows: list[dict], model: str) -> None:
     ax.set(ylabel="overall accuracy (%)", ylim=(0, 100), title=f"{model}: training set vs test set (Table 3B protocol)")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=120, format="png")
-    plt.close(fig)
+    try:
+        return png_bytes(fig, dpi=120)
+    finally:
+        plt.close(fig)

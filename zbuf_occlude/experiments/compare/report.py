@@ -16,6 +16,7 @@ from typing import Any
 
 from zbuf_occlude._version import install_hint
 from zbuf_occlude.experiments.compare.results import summarise, write_csv
+from zbuf_occlude.io.encodings import png_bytes
 from zbuf_occlude.io.owned import OwnedFolder
 
 __all__ = ["write_results", "write_results_into", "compare_folder", "compare_writes", "format_or_dash", "method_order", "COMPARE_OUTPUTS"]
@@ -110,12 +111,11 @@ def _markdown_report(rows: Sequence[dict[str, Any]], plots: dict[str, str], titl
 
 
 def _save(fig: Any, folder: OwnedFolder, name: str) -> None:
-    """Write ``fig`` as the PNG ``name`` in ``folder`` (:meth:`OwnedFolder.write`) and close it."""
+    """Write ``fig`` as the PNG ``name`` in ``folder`` (:meth:`OwnedFolder.write_bytes`) and close it."""
     import matplotlib.pyplot as plt
 
     try:
-        with folder.write(name) as tmp:
-            fig.savefig(tmp, dpi=120, format="png")
+        folder.write_bytes(name, png_bytes(fig, dpi=120))
     finally:
         plt.close(fig)
 

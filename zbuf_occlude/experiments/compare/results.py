@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 import math
 import os
 from collections import defaultdict
@@ -13,6 +12,8 @@ from typing import Any
 import numpy as np
 
 from zbuf_occlude import io
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.io.tables import read_csv_rows
 
 __all__ = ["RESULT_FIELDS", "write_csv", "read_csv", "summarise", "ok_rows"]
 
@@ -59,18 +60,33 @@ _NUMERIC = {
 }  # fmt: skip
 
 
-def read_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
-    """Rows of a ``results.csv`` written by :func:`write_csv`, numbers parsed back."""
+def read_csv(path: str | os.PathLike, *, within: str | os.PathLike | None = None) -> list[dict[str, Any]]:
+    """Rows of a ``results.csv`` written by :func:`write_csv`, numbers parsed back.
+
+    Read by :func:`~zbuf_occlude.io.tables.read_csv_rows`: a regular file of at most
+    :data:`~zbuf_occlude.io.tables.MAX_TABLE_BYTES`, inside ``within`` (the comparison's output
+    folder) once links are resolved, when given.
+
+    Raises
+    ------
+    InvalidInputError
+        The file is missing, not a regular file (a FIFO), too large, not UTF-8 CSV, or holds a
+        value that is not a number where one belongs; the message names it.
+    UnsafePathError
+        ``within`` is given and ``path`` leads outside it.
+    """
     rows = []
-    with open(path, newline="") as fh:
-        for raw in csv.DictReader(fh):
-            row: dict[str, Any] = dict(raw)
+    for raw in read_csv_rows(path, within=within):
+        row: dict[str, Any] = dict(raw)
+        try:
             for key, typ in _NUMERIC.items():
                 if row.get(key, "") != "":
                     row[key] = typ(float(row[key])) if typ is int else typ(row[key])
             if row.get("param", "") != "":
                 row["param"] = int(row["param"])
-            rows.append(row)
+        except (TypeError, ValueError, OverflowError) as exc:  # a word, a short row, int(float('inf'))
+            raise InvalidInputError(f"{path}: not a results table of ours, a value is not a number ({exc})") from None
+        rows.append(row)
     return rows
 
 
