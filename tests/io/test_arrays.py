@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from zbuf_occlude.errors import InvalidInputError, MeshLoadError
-from zbuf_occlude.io.arrays import check_array_sizes, npy_header, npz_member_header
+from zbuf_occlude.errors import InvalidInputError, MeshLoadError, UnsafePathError
+from zbuf_occlude.io.arrays import check_array_sizes, load_npy, load_npz, npy_header, npz_member_header
 
 
 def _forged_npz(path: Path, shape: tuple[int, ...], descr: str = "<f8", payload: bytes = b"\x00" * 72) -> Path:
@@ -87,3 +87,80 @@ def test_check_array_sizes_refuses_a_fifo_before_reading_it(tmp_path, name):
     os.mkfifo(tmp_path / name)
     with pytest.raises(InvalidInputError, match=rf"{name}: is a FIFO; only regular files are read"):
         check_array_sizes(tmp_path / name, max_bytes=1 << 20, error=InvalidInputError)
+
+
+# -- load_npy, load_npz: the one way to load arrays from anyone ---------------------------------
+def test_load_npy_and_load_npz_read_what_numpy_wrote(tmp_path):
+    points = np.arange(12, dtype=np.float32).reshape(4, 3)
+    np.save(tmp_path / "p.npy", points)
+    np.savez_compressed(tmp_path / "p.npz", points=points, face_index=np.arange(4))
+    loaded = load_npy(tmp_path / "p.npy", max_bytes=1 << 20)
+    assert loaded.dtype == np.float32 and np.array_equal(loaded, points)
+    arrays = load_npz(tmp_path / "p.npz", max_bytes=1 << 20)
+    assert list(arrays) == ["points", "face_index"] and np.array_equal(arrays["points"], points)
+    assert list(load_npz(tmp_path / "p.npz", max_bytes=1 << 20, keys=("face_index", "normal"))) == ["face_index"]
+
+
+def test_load_npy_refuses_a_header_declaring_more_than_the_file_before_allocating(tmp_path):
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": "<f8", "fortran_order": False, "shape": (10**9, 3)})
+    (tmp_path / "forged.npy").write_bytes(header.getvalue() + b"\x00" * 72)
+    with pytest.raises(InvalidInputError, match=r"forged\.npy: its header declares 24,000,000,000 bytes of array, more than the file"):
+        load_npy(tmp_path / "forged.npy", max_bytes=1 << 40)
+
+
+def test_load_npz_asks_check_with_the_declared_shapes_before_inflating(tmp_path):
+    path = _forged_npz(tmp_path / "forged.npz", (3, 3))  # 72 bytes declared, 72 held: passes the size checks
+    seen = []
+
+    def check(declared):
+        seen.append(declared)
+        raise MeshLoadError("refused by the caller")
+
+    with pytest.raises(MeshLoadError, match="refused by the caller"):
+        load_npz(path, max_bytes=1 << 20, check=check)
+    assert seen == [{"points": ((3, 3), np.dtype("<f8"))}]
+
+
+@pytest.mark.parametrize("suffix", [".npy", ".npz"])
+def test_loading_never_unpickles(tmp_path, suffix):
+    objects = np.array([{"a": 1}], dtype=object)
+    path = tmp_path / f"objects{suffix}"
+    if suffix == ".npy":
+        np.save(path, objects, allow_pickle=True)
+    else:
+        np.savez(path, points=objects)
+    load = load_npy if suffix == ".npy" else load_npz
+    with pytest.raises(InvalidInputError, match=rf"^{path}: cannot read its arrays? \(ValueError: .*allow_pickle"):
+        load(path, max_bytes=1 << 20)
+
+
+@pytest.mark.parametrize("how", ["deflate", "encrypted", "method"])
+def test_load_npz_names_the_file_of_a_damaged_zip_in_one_line(tmp_path, how):
+    path = _damaged(tmp_path / "damaged.npz", how)
+    with pytest.raises(InvalidInputError, match=rf"^{path}: cannot read its array") as info:
+        load_npz(path, max_bytes=1 << 20)
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "mkfifo"), reason="needs os.mkfifo")
+@pytest.mark.parametrize("name", ["pipe.npz", "pipe.npy"])
+def test_loading_refuses_a_fifo_at_once(tmp_path, name):
+    import os
+
+    os.mkfifo(tmp_path / name)
+    load = load_npy if name.endswith(".npy") else load_npz
+    with pytest.raises(InvalidInputError, match=rf"{name}: is a FIFO; only regular files are read"):
+        load(tmp_path / name, max_bytes=1 << 20)
+
+
+@pytest.mark.parametrize("name", ["p.npz", "p.npy"])
+def test_loading_refuses_a_link_out_of_its_folder(tmp_path, name):
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "data").mkdir()
+    outside = tmp_path / "elsewhere" / name
+    np.save(outside, np.zeros((2, 3))) if name.endswith(".npy") else np.savez(outside, points=np.zeros((2, 3)))
+    (tmp_path / "data" / name).symlink_to(outside)
+    load = load_npy if name.endswith(".npy") else load_npz
+    with pytest.raises(UnsafePathError, match=rf"{name} leads outside {tmp_path / 'data'}"):
+        load(tmp_path / "data" / name, max_bytes=1 << 20, within=tmp_path / "data")

@@ -7,12 +7,19 @@ zeros inflates 1000:1, a header may declare ``(10**9, 3)`` over a few bytes), so
 such a file from outside asks here first: :func:`check_array_sizes` refuses a file that would
 inflate past a cap, :func:`npz_member_header` gives one member's declared shape and dtype.
 Only headers are read (numpy's own parser, :mod:`numpy.lib.format`); nothing is unpickled.
+
+:func:`load_npy` and :func:`load_npz` are the one way to load such a file: a regular file
+(inside the folder it was named from, links resolved:
+:func:`~zbuf_occlude.io.regular_files.open_regular_file`), its sizes checked from the headers
+as :func:`check_array_sizes` checks them, then its arrays read from that same open file with
+``allow_pickle=False``; every error names the file in one line.
 """
 
 from __future__ import annotations
 
 import zipfile
 import zlib
+from collections.abc import Callable, Iterable
 from os import PathLike
 from pathlib import Path
 from typing import BinaryIO
@@ -23,7 +30,7 @@ from numpy.lib import format as npy_format
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
 from zbuf_occlude.io.regular_files import open_regular_file
 
-__all__ = ["check_array_sizes", "npy_header", "npz_member_header", "DAMAGED_NPZ_ERRORS"]
+__all__ = ["check_array_sizes", "load_npy", "load_npz", "npy_header", "npz_member_header", "DAMAGED_NPZ_ERRORS"]
 
 #: What numpy and zipfile raise on a damaged ``.npy``/``.npz``: besides ``OSError``,
 #: ``ValueError``, ``EOFError`` and ``BadZipFile``, ``zlib.error`` (damaged deflate data),
@@ -125,24 +132,133 @@ def check_array_sizes(path: str | PathLike[str], *, max_bytes: int, error: type[
         read (not a zip, damaged, not ``.npy``).
     """
     path = Path(path)
-    try:
-        _check_array_sizes(path, max_bytes, error)
-    except ZbufOccludeError:
-        raise
-    except DAMAGED_NPZ_ERRORS as exc:
-        raise error(f"{path}: cannot read its array headers ({type(exc).__name__}: {exc})") from None
-
-
-def _check_array_sizes(path: Path, max_bytes: int, error: type[ZbufOccludeError]) -> None:
     fh, size = open_regular_file(path, error=error)  # zipfile and numpy would block on a FIFO
     with fh:
-        if path.suffix.lower() == ".npy":
+        _check_sizes(path, fh, size, max_bytes, error, npy=path.suffix.lower() == ".npy")
+
+
+def load_npy(
+    path: str | PathLike[str],
+    *,
+    max_bytes: int,
+    error: type[ZbufOccludeError] = InvalidInputError,
+    within: str | PathLike[str] | None = None,
+) -> np.ndarray:
+    """The array of a ``.npy`` file from anyone, its header checked before its body is read.
+
+    Parameters
+    ----------
+    path : str or PathLike
+    max_bytes : int
+        The cap on the bytes the header may declare (it may not declare more than the file holds
+        either), checked before the array is allocated.
+    error : type
+        The exception raised (:class:`~zbuf_occlude.errors.InvalidInputError` or a subclass).
+    within : str or PathLike, optional
+        The folder ``path`` was named from: it must stay inside it, links resolved.
+
+    Returns
+    -------
+    numpy.ndarray
+        The shape and dtype its header declares; never an object array (nothing is unpickled).
+
+    Raises
+    ------
+    ``error``
+        Naming the file: missing, not a regular file (a FIFO), a header that cannot be read or
+        that declares more than the file or ``max_bytes``, a body cut short, or an object array.
+    UnsafePathError
+        ``within`` is given and ``path`` leads outside it.
+    """
+    path = Path(path)
+    fh, size = open_regular_file(path, error=error, within=within)
+    with fh:
+        _check_sizes(path, fh, size, max_bytes, error, npy=True)
+        try:
+            return npy_format.read_array(fh, allow_pickle=False)
+        except DAMAGED_NPZ_ERRORS as exc:
+            raise error(f"{path}: cannot read its array ({type(exc).__name__}: {exc})") from None
+
+
+def load_npz(
+    path: str | PathLike[str],
+    *,
+    max_bytes: int,
+    error: type[ZbufOccludeError] = InvalidInputError,
+    within: str | PathLike[str] | None = None,
+    keys: Iterable[str] | None = None,
+    check: Callable[[dict[str, tuple[tuple[int, ...], np.dtype]]], None] | None = None,
+) -> dict[str, np.ndarray]:
+    """The arrays of a ``.npz`` file from anyone, its sizes checked from the headers before a member is inflated.
+
+    Parameters
+    ----------
+    path : str or PathLike
+    max_bytes : int
+        The cap on the bytes all its members inflate to (:func:`check_array_sizes`).
+    error : type
+        The exception raised (:class:`~zbuf_occlude.errors.InvalidInputError` or a subclass).
+    within : str or PathLike, optional
+        The folder ``path`` was named from: it must stay inside it, links resolved.
+    keys : iterable of str, optional
+        The arrays to read (those of them the file holds); default: every ``.npy`` member.
+    check : callable, optional
+        Called with ``{name: (shape, dtype)}``, what each array to be read declares, before any
+        is inflated; it raises to refuse the file (a shape or dtype that is not the caller's).
+
+    Returns
+    -------
+    dict of str to numpy.ndarray
+        Array name (its member's name without ``.npy``) to array, in the zip's order; never an
+        object array (nothing is unpickled).
+
+    Raises
+    ------
+    ``error``
+        Naming the file: missing, not a regular file (a FIFO), not a zip, members inflating past
+        ``max_bytes`` or declaring more than they hold, damaged data, or an object array.
+    ZbufOccludeError
+        What ``check`` raises.
+    UnsafePathError
+        ``within`` is given and ``path`` leads outside it.
+    """
+    path = Path(path)
+    wanted = None if keys is None else set(keys)
+    fh, size = open_regular_file(path, error=error, within=within)
+    with fh:
+        _check_sizes(path, fh, size, max_bytes, error, npy=False)
+        try:
+            with zipfile.ZipFile(fh) as zf:
+                names = [n.removesuffix(".npy") for n in zf.namelist() if n.endswith(".npy")]
+                names = [key for key in names if wanted is None or key in wanted]
+                if check is not None:
+                    check({key: npz_member_header(zf, key) for key in names})
+                arrays = {}
+                for key in names:
+                    with zf.open(f"{key}.npy") as member:
+                        arrays[key] = npy_format.read_array(member, allow_pickle=False)
+                return arrays
+        except ZbufOccludeError:
+            raise
+        except DAMAGED_NPZ_ERRORS as exc:
+            raise error(f"{path}: cannot read its arrays ({type(exc).__name__}: {exc})") from None
+
+
+def _check_sizes(path: Path, fh: BinaryIO, size: int, max_bytes: int, error: type[ZbufOccludeError], *, npy: bool) -> None:
+    """:func:`check_array_sizes` on the open file ``fh`` (rewound after)."""
+    try:
+        if npy:
             declared = _declared_bytes(fh)
             if declared > min(max_bytes, size):
                 raise error(f"{path}: its header declares {declared:,} bytes of array, more than the file "
                             f"({size:,} bytes) or the {max_bytes:,} accepted")  # fmt: skip
-            return
-        _check_npz_sizes(path, fh, max_bytes, error)
+        else:
+            _check_npz_sizes(path, fh, max_bytes, error)
+    except ZbufOccludeError:
+        raise
+    except DAMAGED_NPZ_ERRORS as exc:
+        raise error(f"{path}: cannot read its array headers ({type(exc).__name__}: {exc})") from None
+    fh.seek(0)
 
 
 def _check_npz_sizes(path: Path, fh: BinaryIO, max_bytes: int, error: type[ZbufOccludeError]) -> None:
