@@ -176,7 +176,7 @@ class _Shards:
         rel = self.records[obj]["shards"][row]
         path = path_inside(self.root, rel, what=f"{self.root / MANIFEST_FILE} field 'shards'")  # checked on open too
         self.verify(path)
-        return read_sample_points(path, self.kind.storage, self.n_points)
+        return read_sample_points(path, self.kind.storage, self.n_points, within=self.root)
 
     def arrays(self, obj: int) -> Any:
         hit = self.cache.get(obj)

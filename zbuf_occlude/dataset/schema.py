@@ -25,6 +25,7 @@ from zbuf_occlude.errors import DatasetFormatError
 from zbuf_occlude.io.hdf5 import Column, declared_nbytes, open_hdf5
 from zbuf_occlude.io.atomic import size_mismatch
 from zbuf_occlude.io.json_files import loads_json
+from zbuf_occlude.io.regular_files import MAX_LIST_BYTES, MAX_METADATA_BYTES, read_text_file
 from zbuf_occlude.io.safe_paths import control_character, path_inside
 from zbuf_occlude.resources import check_memory
 
@@ -55,6 +56,12 @@ __all__ = [
 CHECKSUM_ALGORITHM = "sha256"
 #: Problems listed per validation error before "and N more".
 MAX_LISTED = 5
+#: Largest ``manifest.jsonl`` read: 4 GiB.  One line per object, of a few kB (a ``generate
+#: --format npz`` object lists each sample file with its SHA-256: some 40 kB), so 100,000 such
+#: objects or a million HDF5 ones; a larger file is not a manifest of ours.
+MAX_MANIFEST_BYTES = 4 << 30
+#: Largest ``card.sha256`` read: its one line is 64 hex digits, two spaces and the card's name.
+_SHA256_LINE_MAX_BYTES = 200
 
 NonNegativeInt = Annotated[int, Field(ge=0)]
 PositiveInt = Annotated[int, Field(ge=1)]
@@ -253,13 +260,12 @@ def describe_validation_error(exc: ValidationError) -> str:
     return "; ".join(parts) + more
 
 
-def _read_text(path: Path, what: str) -> str:
-    try:
-        return path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise DatasetFormatError(f"{path} is missing: this data set has no {what}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DatasetFormatError(f"cannot read {path}: {exc}") from None
+def _read_text(path: Path, what: str, max_bytes: int) -> str:
+    """The UTF-8 text of a data set's metadata file ``path`` (a regular file of at most ``max_bytes``,
+    inside the data set's folder once links are resolved: :func:`~zbuf_occlude.io.regular_files.read_text_file`)."""
+    if not path.exists():
+        raise DatasetFormatError(f"{path} is missing: this data set has no {what}")
+    return read_text_file(path, max_bytes=max_bytes, error=DatasetFormatError, within=path.parent)
 
 
 def read_card(path: Path) -> tuple[dict[str, Any], Card]:
@@ -270,7 +276,7 @@ def read_card(path: Path) -> tuple[dict[str, Any], Card]:
     DatasetFormatError
         Unreadable, not JSON, or a field missing or of the wrong type (named).
     """
-    text = _read_text(path, "card")
+    text = _read_text(path, "card", MAX_METADATA_BYTES)
     try:
         card = Card.model_validate_json(text)
     except ValidationError as exc:
@@ -303,9 +309,9 @@ def check_card_sha256(root: Path) -> bool:
     sidecar = root / CARD_SHA256_FILE
     if not sidecar.exists():
         return False
-    text = _read_text(sidecar, "card checksum")
+    text = _read_text(sidecar, "card checksum", _SHA256_LINE_MAX_BYTES)
     digest = text.split(" ", 1)[0]
-    if len(text) > 200 or text != card_sha256_line(digest) or len(digest) != 64:
+    if text != card_sha256_line(digest) or len(digest) != 64:
         raise DatasetFormatError(f"{sidecar} is not a SHA-256 line for {CARD_FILE} ('<64 hex digits>  {CARD_FILE}')")
     try:
         actual = file_sha256(root / CARD_FILE)
@@ -333,7 +339,7 @@ def read_manifest(path: Path, problems: list[str] | None = None) -> list[tuple[i
         or mistyped field (the message names the line and the field).
     """
     rows = []
-    for lineno, line in enumerate(_read_text(path, "manifest").splitlines(), start=1):
+    for lineno, line in enumerate(_read_text(path, "manifest", MAX_MANIFEST_BYTES).splitlines(), start=1):
         if not line.strip():
             continue
         where = f"{path}:{lineno}"
@@ -363,7 +369,7 @@ def read_shape_names(root: Path, card: Card) -> list[str]:
         from the card's ``shape_names``.
     """
     path = root / SHAPE_NAMES_FILE
-    text = _read_text(path, "class names")
+    text = _read_text(path, "class names", MAX_LIST_BYTES)
     # split on "\n" only: str.splitlines would also split on \x85, \u2028, ... inside a name
     names = text.split("\n")
     if names and names[-1] == "":

@@ -22,9 +22,10 @@ from typing import TYPE_CHECKING, Any
 from zbuf_occlude.dataset.index import samples_per_pose
 from zbuf_occlude.dataset.layout import CARD_FILE, CARD_SHA256_FILE, MANIFEST_FILE, PLAN_FILE, PROTOCOL_FILE, file_list_name
 from zbuf_occlude.dataset.storage import StorageKind, storage_kind
-from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
+from zbuf_occlude.errors import DatasetFormatError, InvalidInputError, ZbufOccludeError
 from zbuf_occlude.io.atomic import file_sha256, size_mismatch
-from zbuf_occlude.io.json_files import loads_json
+from zbuf_occlude.io.json_files import read_json_file
+from zbuf_occlude.io.regular_files import read_text_file
 from zbuf_occlude.io.safe_paths import path_inside
 
 if TYPE_CHECKING:  # the schema (pydantic) is imported when a data set is verified
@@ -61,10 +62,8 @@ def protocol_of(root: Path) -> str | None:
     """
     for path in (root / PROTOCOL_FILE, *sorted(root.glob("protocol_*.json"))):
         try:
-            if not path.is_file() or path.stat().st_size > _PROTOCOL_FILE_MAX_BYTES:
-                continue
-            name = loads_json(path.read_bytes(), what=str(path)).get("protocol")
-        except (OSError, InvalidInputError, AttributeError):
+            name = read_json_file(path, max_bytes=_PROTOCOL_FILE_MAX_BYTES, within=root).get("protocol")
+        except (OSError, InvalidInputError, AttributeError):  # missing, a FIFO, a link out, too large, not JSON
             continue
         if isinstance(name, str):
             return name
@@ -293,9 +292,9 @@ def _check_file_lists(root: Path, card: Card, listed: dict[str, list[str]], prob
         if not list_file.is_file():
             continue
         try:
-            lines = [s for s in list_file.read_text(encoding="utf-8").split("\n") if s]
-        except (OSError, UnicodeDecodeError) as exc:
-            problems.append(f"cannot read {list_file}: {exc}")
+            lines = [s for s in read_text_file(list_file, error=DatasetFormatError, within=root).split("\n") if s]
+        except InvalidInputError as exc:  # a FIFO, larger than MAX_LIST_BYTES, not UTF-8, a link out of the folder
+            problems.append(str(exc))
             continue
         for n, rel in enumerate(lines, start=1):
             try:
