@@ -54,7 +54,7 @@ def _merge_h5(out: Path, objects: Sequence[FarmObject]) -> list[Path]:
     """
     parts: dict[str, list[Path]] = {}
     for o in objects:
-        rec = read_json(record_path(out, o.index))
+        rec = read_json(record_path(out, o.index), within=out)
         if rec and rec.get("status") == "ok":
             parts.setdefault(o.split, []).extend(
                 path_inside(out, rel, what=f"{record_path(out, o.index)} field 'shards'") for rel in rec["shards"]
@@ -73,7 +73,7 @@ def _merge_h5(out: Path, objects: Sequence[FarmObject]) -> list[Path]:
         written.append(concat_h5(target, parts[split], fill={"split": split}, attrs={"shape_names": shape_names}))
         write_text(out / file_list_name(split), f"{split_file_name(split)}\n")
     if objects:
-        card = read_json(out / CARD_FILE)
+        card = read_json(out / CARD_FILE, within=out)
         card["joined_files"] = [
             {"path": name, "sha256": file_sha256(out / name), "split": split}
             for split in sorted({o.split for o in objects})

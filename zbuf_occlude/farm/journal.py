@@ -31,8 +31,9 @@ from zbuf_occlude.farm.config import BYTES_PER_MB, FarmParams, plan_digest, reco
 from zbuf_occlude.farm.worker import base_record, package_version, write_json
 from zbuf_occlude.geometry.samples import count_padded
 from zbuf_occlude.io.atomic import file_sha256, size_mismatch, write_text
-from zbuf_occlude.io.json_files import loads_json
+from zbuf_occlude.io.json_files import loads_json, read_json_file
 from zbuf_occlude.io.owned import check_layout, delete_own_files, remove_dead_temps
+from zbuf_occlude.io.regular_files import MAX_METADATA_BYTES, read_text_file
 from zbuf_occlude.io.safe_paths import check_line_text, check_relative_name, path_inside
 from zbuf_occlude.mesh.discovery import SPLITS, printable_path
 from zbuf_occlude.mesh.inputs import FarmObject
@@ -61,11 +62,13 @@ def check_out_layout(out: Path) -> None:
     check_layout(out, (*names, *map(file_list_name, SPLITS), *map(split_file_name, SPLITS)))
 
 
-def read_json(path: Path) -> dict[str, Any] | None:
-    """A JSON object of the journal (plan, record, task); ``None`` if missing, damaged or not an object."""
+def read_json(path: Path, *, within: Path) -> dict[str, Any] | None:
+    """A JSON object of the journal (plan, record, task, card) in the folder ``within``; ``None`` if
+    missing, damaged, not an object, not a regular file (a FIFO), larger than
+    :data:`~zbuf_occlude.io.regular_files.MAX_METADATA_BYTES` or a link out of ``within``."""
     try:
-        doc = loads_json(path.read_bytes(), what=str(path))
-    except (OSError, InvalidInputError):  # nested too deep, not JSON: damaged, as far as the journal goes
+        doc = read_json_file(path, within=within)
+    except (OSError, InvalidInputError):  # nested too deep, not JSON, a FIFO, a link out: damaged, as far as the journal goes
         return None
     return doc if isinstance(doc, dict) else None
 
@@ -76,19 +79,20 @@ def read_plan(folder: Path) -> dict[str, Any] | None:
     Raises
     ------
     InvalidInputError
-        The plan is not JSON, a field is missing or mistyped, or its parameters are not a farm's.
+        The plan is not a regular file (a FIFO), is larger than
+        :data:`~zbuf_occlude.io.regular_files.MAX_METADATA_BYTES`, is not UTF-8 JSON, a field is
+        missing or mistyped, or its parameters are not a farm's.
+    UnsafePathError
+        The plan is a link that leads outside ``folder``.
     """
     from pydantic import ValidationError
 
     from zbuf_occlude.dataset.schema import Plan, describe_validation_error
 
     path = folder / PLAN_FILE
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
+    if not path.exists():
         return None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InvalidInputError(f"cannot read {path}: {exc}") from None
+    text = read_text_file(path, within=folder, max_bytes=MAX_METADATA_BYTES)
     try:
         Plan.model_validate_json(text)
     except ValidationError as exc:
@@ -110,7 +114,7 @@ def finished_record(out: Path, obj: FarmObject, digest: str) -> dict[str, Any] |
         The record names a file outside ``out`` (absolute, ``..``, through a symlink).
     """
     where = record_path(out, obj.index)
-    rec = read_json(where)
+    rec = read_json(where, within=out)
     if not isinstance(rec, dict) or rec.get("params_digest") != digest or rec.get("name") != obj.name:
         return None
     if rec.get("status") != "ok" or not isinstance(rec.get("shards"), list) or not isinstance(rec.get("bytes"), int):

@@ -148,7 +148,7 @@ def _record_files(out: Path, o: FarmObject) -> list[Path | None]:
     those its record names (name, size and SHA-256 as recorded), its shard and its record."""
     where = record_path(out, o.index)
     what = f"the record {where}"
-    rec = read_json(where)
+    rec = read_json(where, within=out)
     names = _own_names(o)
     shards = (rec or {}).get("shards")
     shards = shards if isinstance(shards, list) else []

@@ -61,7 +61,8 @@ from zbuf_occlude.farm.ownership import check_inputs_outside_out, check_no_forei
 from zbuf_occlude.farm.pool import run_in_workers
 from zbuf_occlude.farm.shards import select_shard
 from zbuf_occlude.farm.worker import package_version, process_object, write_json
-from zbuf_occlude.io.atomic import atomic_path, write_text
+from zbuf_occlude.io.atomic import write_text
+from zbuf_occlude.io.copies import copy_regular_file
 from zbuf_occlude.io.safe_paths import path_inside
 from zbuf_occlude.mesh.inputs import FarmObject, scan_objects
 
@@ -108,7 +109,7 @@ def _dask(
 
 # -- the farm ----------------------------------------------------------------------------------
 def _check_compatible(out: Path, plan: dict[str, Any]) -> None:
-    old = read_json(out / PLAN_FILE)
+    old = read_json(out / PLAN_FILE, within=out)
     if old is None:
         if (out / PLAN_FILE).exists():
             raise OutputError(f"{out / PLAN_FILE} is unreadable; use --overwrite to start over")
@@ -229,7 +230,7 @@ def _run_locked(
         wipe_earlier_run(out, None if n_tasks == 1 else mine)
     else:
         _check_compatible(out, plan)
-    if n_tasks == 1 or read_json(out / PLAN_FILE) != plan:
+    if n_tasks == 1 or read_json(out / PLAN_FILE, within=out) != plan:
         # tasks of one array share plan.json; it is written once, the same for all (checked above)
         write_json(out / PLAN_FILE, plan)
     command = portable_command(run.command or sys.argv, out=out, root=root)
@@ -373,7 +374,7 @@ def _merge_locked(folders: list[Path], out: Path, plan: dict[str, Any], *, progr
 
     for folder in folders:
         for task_file in sorted((folder / TASK_DIR).glob("task-*.json")):
-            doc = read_json(task_file)
+            doc = read_json(task_file, within=folder)
             if doc and isinstance(doc.get("command"), str) and doc["command"] not in commands:
                 commands.append(doc["command"])
             skipped += [s for s in skipped_inputs_of(doc or {}) if s not in skipped]
@@ -386,7 +387,7 @@ def _merge_locked(folders: list[Path], out: Path, plan: dict[str, Any], *, progr
             if rec is not None:
                 found[o.index] = (folder, rec)
                 continue
-            other = read_json(record_path(folder, o.index))
+            other = read_json(record_path(folder, o.index), within=folder)
             if other and other.get("params_digest") == digest and other.get("status") == "failed":
                 failed.setdefault(o.index, other)
     missing = [o for o in objects if o.index not in found and o.index not in failed]
@@ -405,8 +406,8 @@ def _merge_locked(folders: list[Path], out: Path, plan: dict[str, Any], *, progr
     for index, (folder, rec) in progress_bar(sorted(found.items()), desc="farm-merge", unit="obj", enabled=progress):
         if folder.resolve() != out.resolve():
             for rel in rec["shards"]:  # the copy stays inside out
-                with atomic_path(path_inside(out, rel, what=f"{record_path(folder, index)} field 'shards'")) as tmp:
-                    shutil.copyfile(folder / rel, tmp)
+                target = path_inside(out, rel, what=f"{record_path(folder, index)} field 'shards'")
+                copy_regular_file(folder / rel, target, within=folder)  # a regular file, inside its task folder
             write_json(record_path(out, index), rec)
         records[index] = rec
     for index, rec in failed.items():
