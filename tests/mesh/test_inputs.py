@@ -344,3 +344,14 @@ def test_generate_refuses_a_file_that_is_no_mesh_before_making_out(tmp_path: Pat
     err = capsys.readouterr().err
     assert f"{notes} is not a mesh file" in err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_list_file_larger_than_the_cap_is_refused_before_it_is_read(tmp_path: Path, monkeypatch) -> None:
+    from zbuf_occlude.mesh import inputs
+    from zbuf_occlude.mesh.inputs import scan_objects
+
+    _box(tmp_path / "a.off")
+    (tmp_path / "list.txt").write_text("a.off chair\n" * 10, encoding="utf-8")  # 120 bytes
+    monkeypatch.setattr(inputs, "MAX_LIST_BYTES", 100)  # stands for 64 MiB
+    with pytest.raises(InvalidInputError, match=r"list\.txt: 120 bytes, more than the 100 a file read here may have"):
+        scan_objects(tmp_path / "list.txt")

@@ -255,3 +255,17 @@ def test_collada_textures_are_not_loaded_and_log_nothing(tmp_path: Path, caplog:
     assert len(mesh.faces) == 1 and mesh.bounds[1][2] == pytest.approx(2.0)  # the geometry, Z_UP as stored
     noisy = [r for r in caplog.records if r.levelno >= 30 or r.exc_info]
     assert not noisy, [r.getMessage() for r in noisy]  # no warning, no traceback per material
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs os.mkfifo")
+@pytest.mark.parametrize(("name", "file_type"), [("pipe.obj", "obj"), ("pipe.glb", "glb"), ("pipe.dae", "dae")])
+def test_the_head_of_a_fifo_is_never_waited_for(tmp_path: Path, name: str, file_type: str) -> None:
+    # the up axis and units read a file's head: a FIFO would block until a writer came
+    from zbuf_occlude.mesh.scene import declared_units_m, resolve_up
+
+    os.mkfifo(tmp_path / name)
+    with pytest.raises(MeshLoadError, match=rf"{name}: is a FIFO; only regular files are read"):
+        resolve_up(tmp_path / name, file_type, "auto")
+    if file_type == "dae":
+        with pytest.raises(MeshLoadError, match=rf"{name}: is a FIFO"):
+            declared_units_m(tmp_path / name, file_type)

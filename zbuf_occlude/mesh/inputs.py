@@ -17,6 +17,7 @@ from typing import NamedTuple
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.samples import object_key
+from zbuf_occlude.io.regular_files import MAX_LIST_BYTES, read_regular_file
 from zbuf_occlude.mesh.discovery import (
     DEFAULT_SPLIT,
     SPLITS,
@@ -199,7 +200,9 @@ def _not_regular(path: Path) -> str | None:
 def _read_list_file(list_file: Path, point_sets: bool = False) -> tuple[list[Row], list[SkippedInput]]:
     found, skipped = [], []
     base = list_file.parent
-    for lineno, raw_bytes in enumerate(list_file.read_bytes().splitlines(), start=1):
+    # a regular file (a FIFO would block) of at most MAX_LIST_BYTES; named on the command line, so no folder holds it
+    data = read_regular_file(list_file, max_bytes=MAX_LIST_BYTES, error=InvalidInputError)
+    for lineno, raw_bytes in enumerate(data.splitlines(), start=1):
         try:
             raw = raw_bytes.decode("utf-8")
         except UnicodeDecodeError:
@@ -311,8 +314,9 @@ def scan_objects(
     ------
     InvalidInputError
         ``source`` missing, nothing found, labels refused by the layout checks
-        (:mod:`zbuf_occlude.mesh.layouts`), ``class_from`` with a list file, an unknown
-        class, or ``per_class < 1``.
+        (:mod:`zbuf_occlude.mesh.layouts`), ``class_from`` with a list file, a list file larger
+        than :data:`~zbuf_occlude.io.regular_files.MAX_LIST_BYTES`, an unknown class, or
+        ``per_class < 1``.
     BackendUnavailable
         A format of the meshes kept needs an optional package that is not installed
         (:func:`~zbuf_occlude.mesh.discovery.check_readers_installed`).

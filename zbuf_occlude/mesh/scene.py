@@ -43,7 +43,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.errors import InvalidInputError, MeshLoadError
+from zbuf_occlude.io.regular_files import open_regular_file
 from zbuf_occlude.mesh.layouts import shapenet_path
 
 __all__ = ["UP_AXES", "UP_CHOICES", "resolve_up", "up_rotation", "declared_units_m", "collada_asset", "gltf_generator"]
@@ -128,7 +129,9 @@ def gltf_generator(head: bytes) -> str | None:
 
 
 def _head(path: Path, n: int) -> bytes:
-    with open(path, "rb") as fh:
+    """The first ``n`` bytes of the mesh file ``path`` (a regular file: a FIFO is refused, not waited on)."""
+    fh, _ = open_regular_file(path, error=MeshLoadError)
+    with fh:
         return fh.read(n)
 
 
@@ -155,8 +158,10 @@ def resolve_up(path: Path, file_type: str, up: str) -> tuple[str, str]:
     ------
     InvalidInputError
         ``up`` not one of :data:`UP_CHOICES`.
+    MeshLoadError
+        The file is missing, cannot be read or is not a regular file (a FIFO), naming it.
     OSError
-        The file cannot be read.
+        Reading the file fails once it is open.
     """
     if up not in UP_CHOICES:
         raise InvalidInputError(f"up axis must be one of {', '.join(UP_CHOICES)}, got {up!r}")
@@ -183,7 +188,13 @@ def resolve_up(path: Path, file_type: str, up: str) -> tuple[str, str]:
 
 def declared_units_m(path: Path, file_type: str) -> float | None:
     """Metres per file unit when the format declares it: glTF 1.0 (the metre by
-    specification), COLLADA's ``<unit meter>`` (1.0 when absent, its default); None otherwise."""
+    specification), COLLADA's ``<unit meter>`` (1.0 when absent, its default); None otherwise.
+
+    Raises
+    ------
+    MeshLoadError
+        A COLLADA file that is missing, unreadable or not a regular file (a FIFO), naming it.
+    """
     if file_type in ("gltf", "glb"):
         return 1.0
     if file_type == "dae":
