@@ -337,7 +337,7 @@ def test_read_scan_npz_names_the_file_of_damaged_compressed_data(tmp_path):
     middle = info.header_offset + 30 + len(info.filename) + len(info.extra) + info.compress_size // 2
     raw[middle : middle + 64] = bytes(64)
     path.write_bytes(bytes(raw))
-    with pytest.raises(InvalidInputError, match=r"scan\.npz: cannot read scan NPZ \("):
+    with pytest.raises(InvalidInputError, match=r"scan\.npz: cannot read its arrays \("):
         S.read_scan_npz(path)
 
 

@@ -46,8 +46,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.io.atomic import atomic_path
-from zbuf_occlude.io.regular_files import read_regular_file, regular_file_size
+from zbuf_occlude.io.atomic import write_bytes
+from zbuf_occlude.io.regular_files import open_regular_file, read_regular_file
 from zbuf_occlude.real_scans.files import (
     MAX_FILE_BYTES,
     MAX_LINE_BYTES,
@@ -109,12 +109,6 @@ def read_suo_bin(path: str | os.PathLike) -> NDArray[np.void]:
     return np.frombuffer(raw, dtype=SUO_DTYPE).copy()
 
 
-def _check_file_size(path: Path) -> None:
-    """InvalidInputError naming ``path`` when it is missing, not a regular file or past :data:`MAX_FILE_BYTES`."""
-    if regular_file_size(path, error=InvalidInputError) > MAX_FILE_BYTES:
-        raise InvalidInputError(f"{path}: more than the {MAX_FILE_BYTES:,} bytes a scan may have")
-
-
 def read_suo_csv(path: str | os.PathLike) -> NDArray[np.void]:
     """SUO CSV object file (9 comma-separated fields per line, no header) → structured array.
 
@@ -128,9 +122,9 @@ def read_suo_csv(path: str | os.PathLike) -> NDArray[np.void]:
         numeric fields (its line number is given).
     """
     path = Path(path)
-    _check_file_size(path)
+    fh, _ = open_regular_file(path, max_bytes=MAX_FILE_BYTES, error=InvalidInputError)
     try:
-        with open(path, "rb") as fh:
+        with fh:
             # streamed into one structured array: memory is the records, not a Python tuple per line
             capacity = row_capacity(path, fh, bytes_per_point=SUO_DTYPE.itemsize)
             out, n = np.empty(capacity, dtype=SUO_DTYPE), 0
@@ -150,14 +144,9 @@ def read_suo_csv(path: str | os.PathLike) -> NDArray[np.void]:
     return out[:n].copy() if n < capacity else out
 
 
-def _atomic_write(path: Path, data: bytes) -> None:
-    with atomic_path(path) as tmp:
-        tmp.write_bytes(data)
-
-
 def write_suo_bin(path: str | os.PathLike, records: NDArray[np.void]) -> None:
     """Write :data:`SUO_DTYPE` records in SUO's binary format (atomically)."""
-    _atomic_write(Path(path), np.asarray(records, dtype=SUO_DTYPE).tobytes())
+    write_bytes(path, np.asarray(records, dtype=SUO_DTYPE).tobytes())
 
 
 def write_suo_csv(path: str | os.PathLike, records: NDArray[np.void]) -> None:
@@ -168,7 +157,7 @@ def write_suo_csv(path: str | os.PathLike, records: NDArray[np.void]) -> None:
                  + [f"{float(r[k]):.9g}" for k in ("x", "y", "z", "azimuth", "range")] + [str(int(r["pid"]))])
         for r in rec
     ]  # fmt: skip
-    _atomic_write(Path(path), ("\n".join(lines) + ("\n" if lines else "")).encode())
+    write_bytes(path, ("\n".join(lines) + ("\n" if lines else "")).encode())
 
 
 def read_suo_object(path: str | os.PathLike) -> RealScan:
@@ -201,9 +190,9 @@ def read_lidarnet_csv(path: str | os.PathLike) -> RealScan:
         number is given), or fewer than one point.
     """
     path = Path(path)
-    _check_file_size(path)
+    fh, _ = open_regular_file(path, max_bytes=MAX_FILE_BYTES, error=InvalidInputError)
     try:
-        with open(path, "rb") as fh:
+        with fh:
             # streamed into one (N, 3) float64 array, lines bounded: memory is the points, not Python rows
             capacity = row_capacity(path, fh)
             rows = ((i, next(csv.reader([line]), [])) for i, line in read_lines(path, fh, errors="strict"))
@@ -248,9 +237,10 @@ def _scan_files(root: Path) -> list[Path]:
 def _is_lidarnet_csv(path: Path) -> bool:
     """Whether a CSV's first line is LiDARNet's header (read with a bounded ``readline``)."""
     try:
-        with open(path, "rb") as fh:
+        fh, _ = open_regular_file(path, error=InvalidInputError)
+        with fh:
             first = fh.readline(MAX_LINE_BYTES)
-    except OSError:
+    except (OSError, InvalidInputError):  # unreadable, a FIFO: not LiDARNet's (its reader names the problem)
         return False
     return first.decode("utf-8", errors="replace").startswith(",".join(_LIDARNET_HEADER))
 

@@ -45,8 +45,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InsufficientMemoryError, InvalidInputError
-from zbuf_occlude.io.arrays import check_array_sizes
-from zbuf_occlude.io.regular_files import file_digest, read_regular_file, regular_file_size
+from zbuf_occlude.io.arrays import load_npy, load_npz
+from zbuf_occlude.io.ply import parse_ply_vertices
+from zbuf_occlude.io.regular_files import file_digest, open_regular_file, read_regular_file, regular_file_size
 from zbuf_occlude.mesh.formats.ply import ply_declared_counts
 from zbuf_occlude.mesh.scene import up_rotation
 from zbuf_occlude.real_scans.records import RealScan, normalize_points
@@ -166,7 +167,8 @@ def row_capacity(path: Path, fh: io.BufferedReader, bytes_per_point: int = 24) -
 
 def _read_text_table(path: Path) -> NDArray[np.float64]:
     """Rows of a CSV/TXT/XYZ/PTS file, streamed: memory is the (N, 3) float64 result, not Python strings."""
-    with open(path, "rb") as fh:
+    fh, _ = open_regular_file(path, max_bytes=MAX_FILE_BYTES, error=InvalidInputError)
+    with fh:
         capacity = row_capacity(path, fh)
         content = ((i, ln) for i, ln in read_lines(path, fh) if ln.strip() and not ln.lstrip().startswith(("#", "//")))
         head = next(content, None)
@@ -270,12 +272,11 @@ def _from_array(path: Path, arr: np.ndarray) -> NDArray[np.float64]:
 
 
 def _read_npz(path: Path) -> NDArray[np.float64]:
-    with np.load(path, allow_pickle=False) as z:
-        for key in ("points", "xyz", "data"):
-            if key in z.files:
-                return _from_array(path, z[key])
-        arrays = [z[k] for k in z.files]
-    fits = [a for a in arrays if a.ndim == 2 and a.shape[1] >= 3]
+    arrays = load_npz(path, max_bytes=MAX_ARRAY_BYTES, error=InvalidInputError)
+    for key in ("points", "xyz", "data"):
+        if key in arrays:
+            return _from_array(path, arrays[key])
+    fits = [a for a in arrays.values() if a.ndim == 2 and a.shape[1] >= 3]
     if len(fits) != 1:
         raise InvalidInputError(f"{path}: no array named points/xyz/data and {len(fits)} (N, >=3) arrays; name one 'points'")
     return _from_array(path, fits[0])
@@ -283,13 +284,11 @@ def _read_npz(path: Path) -> NDArray[np.float64]:
 
 def _read_ply(path: Path, raw: bytes) -> NDArray[np.float64]:
     """Vertices of a PLY, exactly as many as its header declares."""
-    import trimesh
-
     declared = ply_declared_counts(raw).get("vertex")
     if declared is None:
         raise InvalidInputError(f"{path}: PLY header declares no vertex element")
     _check_points(path, declared)
-    pts = np.asarray(trimesh.load(io.BytesIO(raw), file_type="ply", process=False).vertices, dtype=np.float64)
+    pts = parse_ply_vertices(raw, path, error=InvalidInputError)
     if len(pts) != declared:
         raise InvalidInputError(f"{path}: PLY declares {declared:,} vertices but holds {len(pts):,}; the file is cut short")
     return pts
@@ -328,9 +327,10 @@ def read_points(path: str | os.PathLike) -> NDArray[np.float64]:
         size = regular_file_size(path, error=InvalidInputError)
         if size > MAX_FILE_BYTES:
             raise InvalidInputError(f"{path}: {size:,} bytes, more than the {MAX_FILE_BYTES:,} a scan may have")
-        if suffix in (".npy", ".npz"):
-            check_array_sizes(path, max_bytes=MAX_ARRAY_BYTES, error=InvalidInputError)
-            pts = _from_array(path, np.load(path, allow_pickle=False)) if suffix == ".npy" else _read_npz(path)
+        if suffix == ".npy":
+            pts = _from_array(path, load_npy(path, max_bytes=MAX_ARRAY_BYTES, error=InvalidInputError))
+        elif suffix == ".npz":
+            pts = _read_npz(path)
         elif suffix == ".ply":
             pts = _read_ply(path, read_regular_file(path, max_bytes=MAX_FILE_BYTES, error=InvalidInputError))
         elif suffix in (".csv", ".txt", ".xyz", ".pts"):

@@ -18,8 +18,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.io.arrays import DAMAGED_NPZ_ERRORS, check_array_sizes
-from zbuf_occlude.io.atomic import atomic_path
+from zbuf_occlude.io.arrays import load_npz
+from zbuf_occlude.io.atomic import write_bytes
+from zbuf_occlude.io.encodings import npz_bytes
 from zbuf_occlude.sensors.depth_camera import DepthCamera
 from zbuf_occlude.sensors.lidar import Lidar
 from zbuf_occlude.sensors.raycast import BACKENDS, cast_embree, cast_zbuffer
@@ -102,11 +103,7 @@ class Scan:
 
     def to_npz(self, path: str | os.PathLike) -> Path:
         """Write :meth:`arrays` to ``path`` (atomic, uncompressed)."""
-        path = Path(path)
-        with atomic_path(path) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, **self.arrays())
-        return path
+        return write_bytes(path, npz_bytes(self.arrays()))
 
     def to_ply(self, path: str | os.PathLike) -> Path:
         """Write binary little-endian PLY: x y z, nx ny nz (float32), range_m, incidence_deg
@@ -129,12 +126,7 @@ class Scan:
         header = ["ply", "format binary_little_endian 1.0", f"comment zbuf_occlude scan sensor {self.sensor or '-'} frame {self.frame}",
                   "comment sensor_position " + " ".join(f"{v:.9g}" for v in self.sensor_position), f"element vertex {len(self)}"]  # fmt: skip
         header += [f"property {kind[t]} {name}" for name, t in cols] + ["end_header"]
-        path = Path(path)
-        with atomic_path(path) as tmp:
-            with open(tmp, "wb") as fh:
-                fh.write(("\n".join(header) + "\n").encode("ascii"))
-                fh.write(rows.tobytes())
-        return path
+        return write_bytes(path, ("\n".join(header) + "\n").encode("ascii") + rows.tobytes())
 
 
 #: Largest scan ``.npz`` read, inflated: 4 GiB (a 128-beam sweep of a street is ~2.6 M returns,
@@ -195,14 +187,7 @@ def read_scan_npz(path: str | os.PathLike) -> Scan:
         of :data:`FRAMES`).
     """
     path = Path(path)
-    try:
-        check_array_sizes(path, max_bytes=MAX_SCAN_NPZ_BYTES, error=InvalidInputError)  # a regular file, sizes first
-        with np.load(path, allow_pickle=False) as z:
-            d = {k: z[k] for k in z.files}
-    except DAMAGED_NPZ_ERRORS as exc:  # (damaged deflate data past the headers shows only here)
-        if isinstance(exc, InvalidInputError):
-            raise
-        raise InvalidInputError(f"{path}: cannot read scan NPZ ({type(exc).__name__}: {exc})") from exc
+    d = load_npz(path, max_bytes=MAX_SCAN_NPZ_BYTES, error=InvalidInputError)  # a regular file, sizes first
     missing = {"points", "range_m", "face_index", "object_id", "normal", "incidence_deg", "sensor_position"} - set(d)
     if missing:
         raise InvalidInputError(f"{path}: not a scan NPZ, missing keys {sorted(missing)}")
