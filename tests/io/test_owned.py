@@ -194,3 +194,11 @@ def test_a_folder_that_cannot_be_made_is_one_output_error(tmp_path):
     with pytest.raises(OutputError, match="file"):
         with OwnedFolder(tmp_path / "file" / "out", names=[r"a\.txt"]):
             pass
+
+
+def test_file_sha256_refuses_a_fifo_without_waiting_on_it(tmp_path):
+    os.mkfifo(tmp_path / "pipe")
+    with pytest.raises(OSError, match="not a regular file"):
+        file_sha256(tmp_path / "pipe")
+    (tmp_path / "f").write_bytes(b"abc")
+    assert file_sha256(tmp_path / "f") == "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"

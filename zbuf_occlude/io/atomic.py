@@ -149,9 +149,19 @@ def size_mismatch(files: Sequence[Path], recorded_bytes: int | None) -> str | No
 
 
 def file_sha256(path: str | os.PathLike, *, chunk_bytes: int = 1 << 20) -> str:
-    """Hex SHA-256 of a file's bytes, read in ``chunk_bytes`` pieces."""
+    """Hex SHA-256 of a regular file's bytes, read in ``chunk_bytes`` pieces (never whole).
+
+    Raises
+    ------
+    OSError
+        The file cannot be opened, or it is not a regular file: a FIFO is opened without
+        blocking and refused (``EINVAL``), never waited on; a device is never read without end.
+    """
     h = hashlib.sha256()
-    with open(path, "rb") as fh:
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    with os.fdopen(fd, "rb") as fh:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError(errno.EINVAL, f"{path} is not a regular file (a FIFO, device or folder); not read")
         while block := fh.read(chunk_bytes):
             h.update(block)
     return h.hexdigest()
