@@ -58,9 +58,8 @@ def _ring_counts(n_subrays: int) -> list[int]:
     while 1 + 3 * n_rings * (n_rings + 1) < n_subrays:
         n_rings += 1
     share = np.arange(1, n_rings + 1, dtype=np.float64)
-    ideal = (
-        1.0 + (outer - n_rings) * share / share.sum()
-    )  # one each, the rest in proportion to j
+    # one cell each, the rest in proportion to j
+    ideal = 1.0 + (outer - n_rings) * share / share.sum()
     counts = np.floor(ideal).astype(np.int64)
     # largest remainders; ties go to the outer ring (it is the longest)
     left = outer - int(counts.sum())
