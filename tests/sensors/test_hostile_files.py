@@ -281,7 +281,7 @@ def test_every_numeric_sensor_field_is_covered() -> None:
     names = {(cls.__name__, name) for cls, name in SENSOR_NUMBERS}
     assert {("Lidar", "elevations_deg"), ("Lidar", "detection_range_m"), ("AirborneScanner", "headings_deg"), ("AirborneScanner", "n_lines"),
             ("DepthCamera", "K"), ("DepthCamera", "width"), ("DepthCamera", "noise")} <= names  # fmt: skip
-    assert len(names) == 15 + 10 + 9
+    assert len(names) == 17 + 10 + 9  # Lidar: 15, then max_returns and range_resolution_m (several returns per pulse)
 
 
 @pytest.mark.parametrize("cls", list(VALID_SENSORS))
@@ -319,7 +319,7 @@ def test_any_unknown_key_of_a_sensor_file_is_refused_naming_it(tmp_path: Path, k
         (Lidar, {"elevations_deg": [0.0] * 64, "firing_rate_hz": 1e300, "rotation_hz": 1e-300}, "rays per revolution"),
         (Lidar, {"min_range_m": -1.0}, "min_range_m"), (Lidar, {"max_range_m": -5.0}, "max_range_m"),
         (Lidar, {"detection_range_m": 1e300}, "detection_range_m"), (Lidar, {"footprint_rays": 10**400}, "footprint_rays"),
-        (Lidar, {"footprint_rays": 3}, "footprint_rays"), (Lidar, {"elevations_deg": []}, "elevations_deg"),
+        (Lidar, {"footprint_rays": 1025}, "footprint_rays"), (Lidar, {"elevations_deg": []}, "elevations_deg"),
         (Lidar, {"elevations_deg": [90.0]}, "elevations_deg[0]"), (Lidar, {"dropout": 1.0}, "dropout"),
         (AirborneScanner, {"n_lines": 10**400}, "n_lines"), (AirborneScanner, {"n_lines": 2.5}, "n_lines"),
         (AirborneScanner, {"altitude_m": -1.0}, "altitude_m"), (AirborneScanner, {"pulse_rate_hz": 1e300}, "pulses per line"),

@@ -15,6 +15,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.checks import MAX_RANGE_M, MAX_SENSOR_RAYS, count, located, real, reals, sensor_name, shown, text
+from zbuf_occlude.sensors.echoes import MAX_RETURNS
+from zbuf_occlude.sensors.footprint import MAX_SUBRAYS, PROFILES, footprint_offsets, subray_directions
 
 __all__ = ["Lidar", "LIDAR_PRESETS", "lidar_preset", "beam_directions"]
 
@@ -48,16 +50,21 @@ class Lidar:
         :func:`~zbuf_occlude.sensors.fit.fit_lidar` measures on real scans (weak far returns
         drop out more often); 0 (default): one rate at every range.
     beam_divergence_deg : float
-        Full-angle beam divergence, degrees.  Used when ``footprint_rays`` is 7: the beam is
-        then a cone of this full angle (a top-hat profile, an assumption) sampled by 7 rays.
-    footprint_rays : {1, 7}
-        1: every return is the centre ray's first hit.  7: the centre ray and 6 rays at
-        0.756 of the cone's half-angle (7 equal-area cells of the footprint disc); the
-        return is the strongest echo: the surface (object id) that receives the most
-        energy, at the energy-weighted range of its rays, along the centre direction.  A
-        thin pole then returns on azimuths where only part of the footprint hits it.
+        Full-angle beam divergence, degrees.  Used when ``footprint_rays`` is above 1: the beam
+        is then a cone of this full angle sampled by ``footprint_rays`` sub-rays
+        (:func:`~zbuf_occlude.sensors.footprint.footprint_offsets`).
+    footprint_rays : int
+        K, 1 to :data:`~zbuf_occlude.sensors.footprint.MAX_SUBRAYS` sub-rays per pulse.
+        1: every return is the centre ray's first hit.  K > 1: the centre ray and K − 1 rays
+        over the cone, one per equal-area cell of the footprint disc (K = 7: 6 rays at 0.756
+        of the cone's half-angle, :meth:`footprint_directions`).  With ``max_returns`` 1 the
+        return is the strongest echo: the surface (object id) that receives the most energy,
+        at the energy-weighted range of its rays, along the centre direction.  A thin pole
+        then returns on azimuths where only part of the footprint hits it.  With
+        ``max_returns`` above 1: several returns per pulse (``max_returns``).
     echo_separation_m : float
-        Range resolution of the receiver, metres, used when ``footprint_rays`` is 7: the echoes
+        Range resolution of the receiver, metres, used when ``footprint_rays`` is above 1 and
+        ``max_returns`` is 1: the echoes
         of one footprint that lie within this range of the strongest echo are not resolved
         apart and merge into one return at their energy-weighted range.  Where the footprint
         straddles a depth edge whose two sides are closer than this, the return lies between
@@ -82,6 +89,27 @@ class Lidar:
         Azimuth of the first firing of a revolution, degrees.
     source : str
         Data sheet the numbers come from.
+    max_returns : int
+        Most returns recorded per pulse, 1 to 15 (the LAS 1.4 limit,
+        :data:`~zbuf_occlude.sensors.echoes.MAX_RETURNS`).  1 (default): one return per
+        pulse, as above.  Above 1, the multi-return model: the K sub-rays of each pulse are
+        cast, each hit sends back ``hit_energy(w_k, ρ, |cos θ|, R)`` (w_k the sub-ray's share
+        of the beam, ρ the object's ``reflectivity`` given to
+        :func:`~zbuf_occlude.sensors.scan.scan`, 1 when none is given), and the hits of a pulse
+        are resolved into discrete echoes (:func:`~zbuf_occlude.sensors.echoes.resolve_echoes`:
+        merged within ``range_resolution_m``, kept above ``detection_threshold`` when
+        ``reflectivity`` is given, the first ``max_returns`` in range order).  Each echo is one
+        point on the pulse's centre direction at the echo's range.  Only each sub-ray's
+        first hit is cast: scene surfaces are opaque meshes, so nothing behind a sub-ray's
+        first hit is lit by it (several returns come from sub-rays meeting different
+        surfaces: an edge, a thin pole, a branch over the ground).
+    range_resolution_m : float
+        Least range between two returns of one pulse, metres (``c·τ/2``, half the pulse
+        length; a 5 ns pulse: 0.75 m).  Needed (> 0) when ``max_returns`` is above 1, and
+        only then.
+    beam_profile : {"tophat", "gaussian"}
+        Energy across the footprint cone (:func:`~zbuf_occlude.sensors.footprint.footprint_offsets`);
+        "tophat" (default): every sub-ray carries ``1/K``.
 
     Raises
     ------
@@ -92,7 +120,11 @@ class Lidar:
         (``elevations × firing_rate_hz / rotation_hz``); ``min_range_m >= max_range_m`` or a
         range or noise beyond :data:`~zbuf_occlude.sensors.checks.MAX_RANGE_M`;
         negative noise; dropout outside [0, 1); a divergence outside [0°, 90°];
-        ``echo_separation_m`` without a 7-ray footprint; a name that cannot name files.
+        ``footprint_rays`` outside 1..MAX_SUBRAYS, or above 1 without a divergence;
+        ``echo_separation_m`` without a footprint or with ``max_returns`` above 1;
+        ``max_returns`` outside 1..15; ``range_resolution_m`` negative, 0 with
+        ``max_returns`` above 1, or given with ``max_returns`` 1; an unknown
+        ``beam_profile``; a name that cannot name files.
     """
 
     name: str
@@ -112,6 +144,9 @@ class Lidar:
     detection_range_m: float = 100.0
     power_noise: float = 0.0
     source: str = ""
+    max_returns: int = 1
+    range_resolution_m: float = 0.0
+    beam_profile: str = "tophat"
     _elev: NDArray[np.float64] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -138,13 +173,22 @@ class Lidar:
         for name, bounds in numbers.items():
             object.__setattr__(self, name, real(getattr(self, name), name, **bounds))
         text(self.source, "source")
-        object.__setattr__(self, "footprint_rays", count(self.footprint_rays, "footprint_rays", low=1, high=7))
-        if self.footprint_rays not in (1, 7):
-            raise InvalidInputError(f"footprint_rays must be 1 or 7, got {self.footprint_rays!r}")
-        if self.footprint_rays == 7 and self.beam_divergence_deg <= 0:
-            raise InvalidInputError("footprint_rays 7 needs beam_divergence_deg > 0")
-        if self.echo_separation_m > 0 and self.footprint_rays != 7:
-            raise InvalidInputError(f"echo_separation_m {self.echo_separation_m} needs footprint_rays 7 (mixed pixels come from a wide footprint)")
+        object.__setattr__(self, "footprint_rays", count(self.footprint_rays, "footprint_rays", low=1, high=MAX_SUBRAYS))
+        k = self.footprint_rays
+        if k > 1 and self.beam_divergence_deg <= 0:
+            raise InvalidInputError(f"footprint_rays {k} needs beam_divergence_deg > 0")
+        text(self.beam_profile, "beam_profile", choices=PROFILES)
+        object.__setattr__(self, "max_returns", count(self.max_returns, "max_returns", low=1, high=MAX_RETURNS))
+        object.__setattr__(self, "range_resolution_m", real(self.range_resolution_m, "range_resolution_m", low=0.0, high=MAX_RANGE_M))
+        if self.echo_separation_m > 0 and k == 1:
+            raise InvalidInputError(f"echo_separation_m {self.echo_separation_m} needs footprint_rays above 1 (a footprint of several rays, e.g. footprint_rays 7: mixed pixels come from a wide footprint)")
+        if self.max_returns > 1:
+            if self.range_resolution_m <= 0:
+                raise InvalidInputError(f"max_returns {self.max_returns} needs range_resolution_m > 0 (the least range between two returns, c·τ/2)")
+            if self.echo_separation_m > 0:
+                raise InvalidInputError(f"echo_separation_m {self.echo_separation_m} is for one return per pulse; with max_returns {self.max_returns} use range_resolution_m")
+        elif self.range_resolution_m > 0:
+            raise InvalidInputError(f"range_resolution_m {self.range_resolution_m} needs max_returns above 1 (one return per pulse merges echoes by echo_separation_m)")
         if self.min_range_m >= self.max_range_m:
             raise InvalidInputError(f"need min_range_m < max_range_m, got {self.min_range_m} >= {self.max_range_m}")
         if self.firing_rate_hz < self.rotation_hz:
@@ -192,16 +236,32 @@ class Lidar:
             return np.full(r.shape, float(self.dropout))
         return np.clip(self.dropout + self.dropout_range_per_m * r, 0.0, 0.95)
 
+    @property
+    def multi_return(self) -> bool:
+        """Whether the multi-return model is on (``max_returns`` above 1)."""
+        return self.max_returns > 1
+
+    def footprint_weights(self) -> NDArray[np.float64]:
+        """(K,) float64: each sub-ray's share of the pulse's energy, summing to 1 (``beam_profile``)."""
+        if self.footprint_rays == 1:
+            return np.ones(1)
+        return footprint_offsets(self.footprint_rays, self.beam_divergence_deg, profile=self.beam_profile)[1]
+
     def footprint_directions(self, directions: ArrayLike) -> NDArray[np.float64]:
         """(N, K, 3) float64: the K = ``footprint_rays`` unit rays of each beam ``directions (N, 3)``.
 
-        Ray 0 is the centre; rays 1–6 lie at ``sqrt(4/7)`` of the half-divergence, 60° apart
-        around it (the mean-area radius of the annulus outside the centre cell, so the 7
-        cells of the footprint disc have equal areas).
+        Ray 0 is the centre.  K = 7: rays 1–6 lie at ``sqrt(4/7)`` of the half-divergence, 60°
+        apart around it (the mean-area radius of the annulus outside the centre cell, so the 7
+        cells of the footprint disc have equal areas).  Other K > 1:
+        :func:`~zbuf_occlude.sensors.footprint.subray_directions` of
+        :func:`~zbuf_occlude.sensors.footprint.footprint_offsets` (the same cells; K = 7 there
+        gives these rays bit for bit).
         """
         d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
         if self.footprint_rays == 1:
             return d[:, None, :].copy()
+        if self.footprint_rays != 7:
+            return subray_directions(d, footprint_offsets(self.footprint_rays, self.beam_divergence_deg)[0])
         helper = np.where(np.abs(d[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
         u = np.cross(d, helper)
         u /= np.linalg.norm(u, axis=1, keepdims=True)

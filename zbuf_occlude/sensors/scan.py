@@ -22,6 +22,7 @@ from zbuf_occlude.io.arrays import load_npz
 from zbuf_occlude.io.atomic import write_bytes
 from zbuf_occlude.io.encodings import npz_bytes
 from zbuf_occlude.sensors.depth_camera import DepthCamera
+from zbuf_occlude.sensors.echoes import hit_energy, resolve_echoes
 from zbuf_occlude.sensors.lidar import Lidar
 from zbuf_occlude.sensors.raycast import BACKENDS, cast_embree, cast_zbuffer
 from zbuf_occlude.sensors.scene import BuiltScene, ScanScene, SceneObject
@@ -63,6 +64,29 @@ class Scan:
     sensor_to_world : (4, 4) float64
     sensor : str
         Sensor name.
+    meta : dict
+        Backend, ray counts and the like (not written to files).
+    return_number : (N,) uint8 or None
+        LiDAR: 1..n, the point's position among its pulse's returns in range order (LAS
+        "Return Number").  1 everywhere with one return per pulse (``Lidar.max_returns`` 1).
+    number_of_returns : (N,) uint8 or None
+        LiDAR: n, the returns its pulse recorded, the same on every point of the pulse.
+    intensity : (N,) float32 or None
+        LiDAR: received energy, ``ρ cos θ f / R²`` in m⁻² (:func:`~.echoes.hit_energy`, the
+        units of ``Lidar.detection_threshold``), power noise included.  With the multi-return
+        model, the echo's energy; with one return per pulse, the received power the detection
+        test uses when ``reflectivity`` is given, and 1.0 when it is not (no radiometry).
+    pulse_id : (N,) int64 or None
+        LiDAR: ``ring · Lidar.n_azimuths + azimuth index``, unique per pulse of one scan; the
+        returns of one pulse share it.
+    gps_time : (N,) float64 or None
+        LiDAR: firing time of the pulse, seconds from the revolution's first firing
+        (``azimuth index / (n_azimuths · rotation_hz)``; every beam of a firing cycle at once);
+        the returns of one pulse share it.
+    scan_angle_deg : (N,) float32 or None
+        LiDAR: the beam's elevation, degrees (the spinning scanner's scan angle).
+
+    The LiDAR-only arrays are None for depth cameras and airborne scans.
     """
 
     points: NDArray[np.float32]
@@ -78,8 +102,18 @@ class Scan:
     sensor_to_world: NDArray[np.float64] = field(default_factory=lambda: np.eye(4))
     sensor: str = ""
     meta: dict = field(default_factory=dict)
+    return_number: NDArray[np.uint8] | None = None
+    number_of_returns: NDArray[np.uint8] | None = None
+    intensity: NDArray[np.float32] | None = None
+    pulse_id: NDArray[np.int64] | None = None
+    gps_time: NDArray[np.float64] | None = None
+    scan_angle_deg: NDArray[np.float32] | None = None
 
-    _PER_POINT = ("points", "ring", "pixel", "range_m", "face_index", "object_id", "normal", "incidence_deg")
+    #: Per-point arrays of every scan, in file order.
+    _BASE = ("points", "ring", "pixel", "range_m", "face_index", "object_id", "normal", "incidence_deg")
+    #: Per-point arrays of a LiDAR's returns (None for other sensors), written after the rest.
+    _RETURNS = ("return_number", "number_of_returns", "intensity", "pulse_id", "gps_time", "scan_angle_deg")
+    _PER_POINT = _BASE + _RETURNS
 
     def __len__(self) -> int:
         return len(self.points)
@@ -94,11 +128,13 @@ class Scan:
         return self.select(self.object_id == int(object_id))
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """The NPZ content: every present per-point field, ``sensor_position``, ``sensor_to_world``,
-        ``frame`` and ``sensor`` (0-d strings)."""
-        out = {k: getattr(self, k) for k in self._PER_POINT if getattr(self, k) is not None}
+        """The NPZ content: every present per-point field of the base set, ``sensor_position``,
+        ``sensor_to_world``, ``frame`` and ``sensor`` (0-d strings), then the present return fields
+        (``return_number`` ... ``scan_angle_deg``)."""
+        out = {k: getattr(self, k) for k in self._BASE if getattr(self, k) is not None}
         out.update(sensor_position=np.asarray(self.sensor_position, np.float64), sensor_to_world=self.sensor_to_world,
                    frame=np.array(self.frame), sensor=np.array(self.sensor))  # fmt: skip
+        out.update({k: getattr(self, k) for k in self._RETURNS if getattr(self, k) is not None})
         return out
 
     def to_npz(self, path: str | os.PathLike) -> Path:
@@ -136,7 +172,9 @@ MAX_SCAN_NPZ_BYTES = 4 << 30
 #: Per-point arrays of a scan NPZ: (columns or None for (N,), dtype kinds accepted); "f" = any
 #: real number (integers too), "i" = integers only.
 _NPZ_PER_POINT = {"points": (3, "f"), "range_m": (None, "f"), "face_index": (None, "i"), "object_id": (None, "i"),
-                  "normal": (3, "f"), "incidence_deg": (None, "f"), "ring": (None, "i"), "pixel": (2, "i")}  # fmt: skip
+                  "normal": (3, "f"), "incidence_deg": (None, "f"), "ring": (None, "i"), "pixel": (2, "i"),
+                  "return_number": (None, "i"), "number_of_returns": (None, "i"), "intensity": (None, "f"),
+                  "pulse_id": (None, "i"), "gps_time": (None, "f"), "scan_angle_deg": (None, "f")}  # fmt: skip
 _KINDS = {"f": "fiu", "i": "iu"}
 
 
@@ -185,6 +223,12 @@ def read_scan_npz(path: str | os.PathLike) -> Scan:
         (per-point arrays of N rows, ``points`` (N, 3) finite numbers, ``normal`` (N, 3) numbers, indices integers,
         ``sensor_position`` a finite (3,), ``sensor_to_world`` a finite (4, 4), ``frame`` one
         of :data:`FRAMES`).
+
+    Notes
+    -----
+    A file written before scans had return fields reads with ``return_number`` and
+    ``number_of_returns`` 1 and ``intensity`` 1.0 (one return per pulse, no radiometry), and
+    ``pulse_id``, ``gps_time``, ``scan_angle_deg`` None.
     """
     path = Path(path)
     d = load_npz(path, max_bytes=MAX_SCAN_NPZ_BYTES, error=InvalidInputError)  # a regular file, sizes first
@@ -192,10 +236,17 @@ def read_scan_npz(path: str | os.PathLike) -> Scan:
     if missing:
         raise InvalidInputError(f"{path}: not a scan NPZ, missing keys {sorted(missing)}")
     _checked_npz(path, d)
+    n = len(d["points"])
     return Scan(
         d["points"], d.get("ring"), d.get("pixel"), d["range_m"], d["face_index"], d["object_id"], d["normal"],
         d["incidence_deg"], str(d.get("frame", "sensor")), d["sensor_position"].astype(np.float64),
         d.get("sensor_to_world", np.eye(4)).astype(np.float64), str(d.get("sensor", "")),
+        return_number=d["return_number"].astype(np.uint8) if "return_number" in d else np.ones(n, np.uint8),
+        number_of_returns=d["number_of_returns"].astype(np.uint8) if "number_of_returns" in d else np.ones(n, np.uint8),
+        intensity=d["intensity"].astype(np.float32) if "intensity" in d else np.ones(n, np.float32),
+        pulse_id=d["pulse_id"].astype(np.int64) if "pulse_id" in d else None,
+        gps_time=d["gps_time"].astype(np.float64) if "gps_time" in d else None,
+        scan_angle_deg=d["scan_angle_deg"].astype(np.float32) if "scan_angle_deg" in d else None,
     )  # fmt: skip
 
 
@@ -267,10 +318,11 @@ def _reflectivity_table(reflectivity, n_ids: int) -> NDArray[np.float64]:
     return rho
 
 
-def _strongest_echo(built: BuiltScene, rays, face, t, k: int, rho, separation: float = 0.0) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+def _strongest_echo(built: BuiltScene, rays, face, t, k: int, rho, separation: float = 0.0, weights=None) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
     """Resolve each beam's ``k`` footprint rays into one return: the strongest echo.
 
-    Each ray carries ``1/k`` of the beam's energy; a ray hitting a surface of reflectivity ρ at
+    Each ray carries ``1/k`` of the beam's energy (``weights`` (k,) instead, when given: a
+    Gaussian ``beam_profile``); a ray hitting a surface of reflectivity ρ at
     incidence θ and range R sends back ``ρ |cos θ| / (k R²)`` (ρ = 1 without ``rho``).  The
     echoes of one object id add up; the object with the most energy is the return (ties: the
     lower ray index, the centre first).  Its range is the energy-weighted mean of its rays'
@@ -294,7 +346,8 @@ def _strongest_echo(built: BuiltScene, rays, face, t, k: int, rho, separation: f
     normal = np.cross(tri[..., 1, :] - tri[..., 0, :], tri[..., 2, :] - tri[..., 0, :])
     normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-300)
     cos = np.abs(np.einsum("nkj,nkj->nk", normal, rays.reshape(n, k, 3)))
-    weight = np.where(hit, cos * (1.0 if rho is None else rho[np.maximum(obj, 0)]) / k, 0.0)
+    reflected = cos * (1.0 if rho is None else rho[np.maximum(obj, 0)])
+    weight = np.where(hit, reflected / k if weights is None else reflected * weights[None, :], 0.0)
     energy = np.where(hit, weight / np.maximum(t, 1e-9) ** 2, 0.0)
     same = (obj[:, :, None] == obj[:, None, :]) & hit[:, :, None] & hit[:, None, :]
     total = np.einsum("nij,nj->ni", same, energy)
@@ -310,6 +363,51 @@ def _strongest_echo(built: BuiltScene, rays, face, t, k: int, rho, separation: f
         w = np.where(mine, energy, 0.0)
         t_out = np.einsum("nk,nk->n", w, np.where(mine, t, 0.0)) / np.maximum(w.sum(axis=1), 1e-300)
     return face_out, np.where(hit.any(axis=1), t_out, np.inf), np.where(mine, weight, 0.0).sum(axis=1)
+
+
+def _run_starts(keys: NDArray) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """For sorted ``keys`` (n,): each row's rank in its run of equal keys (0 first) and its run's length."""
+    n = len(keys)
+    new = np.ones(n, bool)
+    new[1:] = keys[1:] != keys[:-1]
+    starts = np.flatnonzero(new)
+    lengths = np.diff(starts, append=n)
+    return np.arange(n) - np.repeat(starts, lengths), np.repeat(lengths, lengths)
+
+
+def _echo_returns(built: BuiltScene, sensor: Lidar, rays, face, t, rho, rng) -> tuple[NDArray[np.int64], ...]:
+    """The multi-return model: resolve each pulse's sub-ray first hits into discrete returns.
+
+    ``rays`` (P·K, 3) are the sub-rays of P pulses, pulse-major; ``face`` (P·K,) int64 (−1: no
+    hit) and ``t`` (P·K,) float64 their first hits.  Hits nearer than ``min_range_m`` or beyond
+    ``max_range_m`` give no echo (the receiver's blind zone and reach).  Energies are
+    :func:`~.echoes.hit_energy` of the sub-ray's weight, ρ of the object (1 without ``rho``),
+    ``|cos θ|`` and the range; with ``rho`` and ``power_noise`` σ, every hit of a pulse is
+    scaled by one ``exp(σ z)``, z ~ N(0, 1) per pulse (drawn from ``rng`` for all P pulses).
+
+    Returns
+    -------
+    pulse : (E,) int64, row of the pulse; face : (E,) int64; range : (E,) float64, metres;
+    energy : (E,) float64, m⁻²: sorted by pulse, then range (:class:`~.echoes.Echoes`).
+    """
+    k = sensor.footprint_rays
+    n_pulses = len(face) // k
+    hit = np.flatnonzero((face >= 0) & (t >= sensor.min_range_m) & (t <= sensor.max_range_m))
+    f, r = face[hit], t[hit]
+    obj = built.face_object[f].astype(np.int64)
+    tri = np.asarray(built.mesh.triangles, dtype=np.float64)[f]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    cos = np.abs(np.einsum("ij,ij->i", normal, rays[hit]))
+    pulse = hit // k
+    energy = hit_energy(sensor.footprint_weights()[hit % k], 1.0 if rho is None else rho[obj], cos, r)
+    if rho is not None and sensor.power_noise > 0:
+        energy = energy * np.exp(sensor.power_noise * rng.standard_normal(n_pulses))[pulse]
+    echoes = resolve_echoes(
+        pulse, r, energy, obj, range_resolution_m=sensor.range_resolution_m,
+        detection_threshold=sensor.detection_threshold if rho is not None else 0.0, max_returns=sensor.max_returns,
+    )  # fmt: skip
+    return echoes.pulse, f[echoes.hit], echoes.range_m, echoes.energy
 
 
 def scan(
@@ -350,11 +448,20 @@ def scan(
         the ground).  Given, a return is kept only when its received power clears the
         sensor's threshold, ``ρ · cos θ · f / R² · exp(σ z) ≥ τ`` (:class:`Lidar`
         ``detection_threshold``, ``power_noise`` σ, z ~ N(0, 1) per firing, ``f`` the
-        footprint fraction).  None: every hit returns (no radiometry).
+        footprint fraction).  None: every hit returns (no radiometry).  With the multi-return
+        model (``Lidar.max_returns`` above 1), ρ weighs each sub-ray's echo and the threshold
+        applies per echo (:class:`Lidar` ``max_returns``).
 
     Returns
     -------
     Scan
+        One point per return.  LiDAR scans carry the return fields (``return_number`` ...
+        ``scan_angle_deg``).  With the multi-return model, each echo of a pulse is one point on
+        the pulse's centre direction at the echo's range (then range noise and dropout per
+        echo, as for single returns); its object, face and normal are those of the echo's
+        strongest surface's strongest hit.  Echoes lost to the range limits or dropout leave
+        the pulse's other returns renumbered 1..n.  With ``max_returns`` 1 every array is
+        what it was before the return fields existed, bit for bit.
 
     Raises
     ------
@@ -375,7 +482,7 @@ def scan(
     m = _as_pose(pose)
     rot, origin = m[:3, :3], m[:3, 3]
     if isinstance(sensor, Lidar):
-        d_sensor, ring, _ = sensor.rays(azimuth_range_deg)
+        d_sensor, ring, azimuth = sensor.rays(azimuth_range_deg)
         pixel = None
         near, far = sensor.min_range_m, sensor.max_range_m
     elif isinstance(sensor, DepthCamera):
@@ -400,24 +507,32 @@ def scan(
         if not isinstance(sensor, Lidar):
             raise InvalidInputError("reflectivity (radiometric detection) is modelled for LiDARs only")
         rho = _reflectivity_table(reflectivity, len(built.objects) + 1)
-    if k > 1:
-        face, t, fraction = _strongest_echo(built, rays, face, t, k, rho, sensor.echo_separation_m)
-    hit = np.flatnonzero(face >= 0)
-    face, t, d_s, d_w = face[hit], t[hit], d_sensor[hit], d_world[hit]
+    multi = isinstance(sensor, Lidar) and sensor.multi_return
+    rng = np.random.default_rng(seed)
+    if multi:
+        hit, face, t, echo_energy = _echo_returns(built, sensor, rays, face, t, rho, rng)
+    else:
+        if k > 1:
+            face, t, fraction = _strongest_echo(built, rays, face, t, k, rho, sensor.echo_separation_m, sensor.footprint_weights() if sensor.beam_profile != "tophat" else None)
+        hit = np.flatnonzero(face >= 0)
+        face, t = face[hit], t[hit]
+    d_s, d_w = d_sensor[hit], d_world[hit]
     tri = np.asarray(built.mesh.triangles, dtype=np.float64)[face]
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
     cos_in = np.einsum("ij,ij->i", normal, d_w)
     normal[cos_in > 0] *= -1.0  # face the sensor
     incidence = np.degrees(np.arccos(np.clip(np.abs(cos_in), 0.0, 1.0)))
-    rng = np.random.default_rng(seed)
     gauss = rng.standard_normal(len(hit))  # drawn for every hit, so filters do not shift streams
     lost = rng.random(len(hit)) < (sensor.dropout_probability(t) if isinstance(sensor, Lidar) else sensor.dropout)
     # Limits apply to what the sensor measures (noise and quantisation included).
     if isinstance(sensor, Lidar):
         measured = t + sensor.range_noise_m * gauss
         keep = (measured >= sensor.min_range_m) & (measured <= sensor.max_range_m) & ~lost
-        if rho is not None:
+        power = np.ones(len(hit))
+        if multi:
+            power = echo_energy
+        elif rho is not None:
             # received power of an extended Lambertian target (Kashani et al. 2015, Eq. 4), up to a constant
             power = (fraction[hit] if k > 1 else rho[built.face_object[face]] * np.abs(cos_in)) / np.maximum(t, 1e-9) ** 2
             if sensor.power_noise > 0:
@@ -431,6 +546,9 @@ def scan(
         keep = (depth_measured >= sensor.min_depth_m) & (depth_measured <= sensor.max_depth_m) & (incidence <= sensor.max_incidence_deg) & ~lost
     keep &= measured > 0
     sel = np.flatnonzero(keep)
+    returns = {}
+    if isinstance(sensor, Lidar):
+        returns = _return_fields(sensor, hit[sel], ring, azimuth, power[sel], renumber=multi)
     points = d_s[sel] * measured[sel, None]
     normal_out = normal[sel] @ rot  # world → sensor
     sensor_position = np.zeros(3)
@@ -452,4 +570,31 @@ def scan(
         sensor_to_world=m,
         sensor=getattr(sensor, "name", ""),
         meta=meta,
+        **returns,
     )
+
+
+def _return_fields(sensor: Lidar, pulse, ring, azimuth, power, *, renumber: bool) -> dict[str, np.ndarray]:
+    """The :class:`Scan` return fields of the points of pulse rows ``pulse`` (sorted) of a LiDAR sweep.
+
+    ``ring`` (P,) int64 and ``azimuth`` (P,) float64 degrees are the pulses' beams and firing
+    azimuths (:meth:`Lidar.rays`), ``power`` (N,) the points' received energies.  With
+    ``renumber``, the points of a pulse (sorted by range) are numbered 1..n; otherwise each is
+    its pulse's only return.
+    """
+    n = len(pulse)
+    if renumber:
+        rank, length = _run_starts(pulse)
+        return_number, number_of_returns = (rank + 1).astype(np.uint8), length.astype(np.uint8)
+    else:
+        return_number = number_of_returns = np.ones(n, np.uint8)
+    n_az = sensor.n_azimuths
+    index = np.rint((azimuth[pulse] - sensor.azimuth_offset_deg) / (360.0 / n_az)).astype(np.int64) % n_az
+    return {
+        "return_number": return_number,
+        "number_of_returns": number_of_returns.copy(),
+        "intensity": np.asarray(power, dtype=np.float32),
+        "pulse_id": ring[pulse] * n_az + index,
+        "gps_time": index / (n_az * sensor.rotation_hz),
+        "scan_angle_deg": sensor._elev[ring[pulse]].astype(np.float32),
+    }
