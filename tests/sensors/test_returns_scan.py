@@ -297,3 +297,85 @@ def test_any_footprint_size_and_a_gaussian_profile_scan():
     assert w[0] > w[-1] and w.sum() == pytest.approx(1.0)
     two = _one_pulse(_plates(1.0), lidar.with_(max_returns=2, range_resolution_m=0.5))
     assert two.return_number.tolist() == [1, 2]
+
+
+@pytest.mark.parametrize("compress", [False, True])
+def test_las_round_trip_read_back_by_laspy(compress):
+    import io
+
+    laspy = pytest.importorskip("laspy")
+    if compress:
+        pytest.importorskip("lazrs")
+    scene = S.ScanScene().add({"box_m": [2.0, 2.0, 2.0]}, position_m=(6.0, 1.0))
+    lidar = S.Lidar.preset(
+        "vlp16",
+        footprint_rays=19,
+        beam_divergence_deg=1.0,
+        max_returns=4,
+        range_resolution_m=0.3,
+    )
+    s = S.scan(
+        scene,
+        lidar,
+        seed=1,
+        reflectivity=0.5,
+        azimuth_range_deg=(-60, 60),
+        frame="world",
+    )
+    assert (s.number_of_returns > 1).any()
+    las = laspy.read(io.BytesIO(s.to_las_bytes(compress)))
+    assert (
+        las.header.version.major == 1
+        and las.header.version.minor == 4
+        and las.header.point_format.id == 6
+    )
+    assert len(las) == len(s)
+    xyz = np.column_stack([las.x, las.y, las.z])
+    assert (
+        np.abs(xyz - s.points.astype(np.float64)).max() <= 0.0005 + 1e-6
+    )  # 1 mm steps
+    np.testing.assert_array_equal(np.asarray(las.return_number), s.return_number)
+    np.testing.assert_array_equal(
+        np.asarray(las.number_of_returns), s.number_of_returns
+    )
+    np.testing.assert_array_equal(np.asarray(las.gps_time), s.gps_time)
+    np.testing.assert_allclose(
+        np.asarray(las.scan_angle) * 0.006, s.scan_angle_deg, atol=0.003
+    )
+    want = np.rint(np.clip(s.intensity.astype(np.float64), 0, 1) * 65535).astype(
+        np.uint16
+    )
+    np.testing.assert_array_equal(np.asarray(las.intensity), want)
+
+
+def test_scan_command_writes_las_and_laz(tmp_path, capsys):
+    laspy = pytest.importorskip("laspy")
+    pytest.importorskip("lazrs")
+    from zbuf_occlude.cli.main import main
+
+    for fmt in ("las", "laz"):
+        out = tmp_path / fmt
+        assert (
+            main(
+                [
+                    "scan",
+                    "box",
+                    "--extents",
+                    "4.5,1.8,1.5",
+                    "--format",
+                    fmt,
+                    "--out",
+                    str(out),
+                ]
+            )
+            == 0
+        )
+        files = sorted(out.glob(f"*.{fmt}"))
+        assert len(files) == 1
+        las = laspy.read(files[0])
+        assert len(las) > 100 and las.header.point_format.id == 6
+        assert np.all(np.asarray(las.return_number) == 1) and np.all(
+            np.asarray(las.number_of_returns) == 1
+        )
+        assert np.ptp(np.asarray(las.gps_time)) > 0
+    capsys.readouterr()

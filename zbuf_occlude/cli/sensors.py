@@ -138,16 +138,19 @@ def cmd_scan(args: argparse.Namespace) -> int:
         return _scan_into(folder, args, sensor, formats)
 
 
-#: The files ``scan`` writes in ``--out``: ``<stem>_<sensor>_sNNN.npz|ply``.
-SCAN_FILE_NAMES = r"[^/]+_s\d{3,}\.(npz|ply)"
+#: The files ``scan`` writes in ``--out``: ``<stem>_<sensor>_sNNN.npz|ply|las|laz``.
+SCAN_FILE_NAMES = r"[^/]+_s\d{3,}\.(npz|ply|las|laz)"
 
 
 def _save(folder: OwnedFolder, s, stem: str, formats: Sequence[str]) -> list[Path]:
     """Write scan ``s`` as ``<stem>.<fmt>`` for each format, through the owned folder."""
     files = []
     for fmt in formats:
-        with folder.write(f"{stem}.{fmt}") as tmp:
-            getattr(s, f"to_{fmt}")(tmp)
+        if fmt in ("las", "laz"):  # LAS 1.4 point format 6, encoded in memory
+            folder.write_bytes(f"{stem}.{fmt}", s.to_las_bytes(compress=fmt == "laz"))
+        else:
+            with folder.write(f"{stem}.{fmt}") as tmp:
+                getattr(s, f"to_{fmt}")(tmp)
         files.append(folder.root / f"{stem}.{fmt}")
     return files
 
@@ -300,7 +303,9 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         help="frame of the written points: sensor (LiDAR at the origin, x forward, z up; cameras: OpenCV) or "
         "world (the scene's frame) (default: %(default)s)",
     )  # fmt: skip
-    p.add_argument("--format", choices=("npz", "ply", "both"), default="npz", help="file format of each scan (default: %(default)s)")
+    p.add_argument("--format", choices=("npz", "ply", "both", "las", "laz"), default="npz",
+                   help="file format of each scan: npz, ply, both (npz and ply), or LAS 1.4 / LAZ with return number, intensity, "
+                        "GPS time and scan angle per point (default: %(default)s)")
     p.add_argument(
         "--backend", choices=("embree", "zbuffer"), default="embree",
         help="ray casting: embree (exact, CPU) or zbuffer (OpenGL depth images) (default: %(default)s)",
