@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from zbuf_occlude.cli.crops import FLAGS, CropSettings, add_crop_arguments, crop_settings, given_crop_options
-from zbuf_occlude.cli.options import Checked, count, counted, interval, out_folder, parse_interval, real, seed
+from zbuf_occlude.cli.options import Checked, count, counted, interval, out_folder, parse_interval, real, seed, shown
 from zbuf_occlude.defaults import DEFAULT_SEED
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.samples import derive_rng, object_key
@@ -85,18 +85,54 @@ def check_outside(dist, extents=None) -> None:
         )
 
 
+def _max_returns(text: str, option: str) -> int:
+    """``--max-returns N``: a whole number from 1 to :data:`~zbuf_occlude.sensors.echoes.MAX_RETURNS` (LAS's return numbers)."""
+    from zbuf_occlude.sensors.echoes import MAX_RETURNS
+
+    n = count(None)(text, option)
+    if n > MAX_RETURNS:
+        raise InvalidInputError(f"{option} must be at most {MAX_RETURNS} (a LAS return number's range), got {shown(text)}")
+    return n
+
+
 def _with_return_physics(sensor, args: argparse.Namespace):
-    """``sensor`` with ``--footprint``, ``--power-noise`` and ``--echo-separation`` applied (a spinning LiDAR only)."""
+    """``sensor`` with ``--footprint``, ``--power-noise``, ``--echo-separation``, ``--max-returns`` and
+    ``--range-resolution`` applied (a spinning LiDAR only).
+
+    ``--footprint`` gives 7 sub-rays; without it the sensor's own ``footprint_rays`` stay (a sensor
+    file's K above 1 is a footprint for ``--echo-separation``).  ``--max-returns`` above 1 needs a
+    range resolution, from ``--range-resolution`` or the sensor's.
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the option and its value: one of them for a sensor that is not a spinning LiDAR,
+        ``--echo-separation`` without a footprint or with several returns, ``--range-resolution``
+        with one return per pulse, ``--max-returns`` above 1 without a range resolution.
+    """
     from zbuf_occlude.sensors.lidar import Lidar
 
-    if not (args.footprint or args.power_noise or args.echo_separation):
+    given = [f for f, v in (("--footprint", args.footprint), ("--power-noise", args.power_noise), ("--echo-separation", args.echo_separation),
+                            ("--max-returns", args.max_returns), ("--range-resolution", args.range_resolution)) if v]  # fmt: skip
+    if not given:
         return sensor
     if not isinstance(sensor, Lidar):
-        raise InvalidInputError(f"--footprint, --power-noise and --echo-separation model spinning LiDARs; {args.sensor} is not one")
-    if args.echo_separation and not (args.footprint or sensor.footprint_rays == 7):
+        raise InvalidInputError(f"--footprint, --power-noise, --echo-separation, --max-returns and --range-resolution model spinning LiDARs; "
+                                f"{args.sensor} is not one (given: {', '.join(given)})")  # fmt: skip
+    rays = 7 if args.footprint else sensor.footprint_rays
+    max_returns = args.max_returns or sensor.max_returns
+    resolution = args.range_resolution or sensor.range_resolution_m
+    if args.echo_separation and rays == 1:
         raise InvalidInputError(f"--echo-separation {args.echo_separation:g} needs --footprint (mixed pixels come from a wide footprint)")
-    return sensor.with_(footprint_rays=7 if args.footprint else sensor.footprint_rays, power_noise=args.power_noise,
-                        echo_separation_m=args.echo_separation or sensor.echo_separation_m)  # fmt: skip
+    if max_returns > 1 and args.echo_separation:
+        raise InvalidInputError(f"--echo-separation {args.echo_separation:g} merges echoes into one return; with --max-returns {max_returns} "
+                                "give --range-resolution instead")  # fmt: skip
+    if max_returns > 1 and not resolution > 0:
+        raise InvalidInputError(f"--max-returns {max_returns} needs --range-resolution M (metres: the least range between two returns)")
+    if args.range_resolution and max_returns == 1:
+        raise InvalidInputError(f"--range-resolution {args.range_resolution:g} separates several returns per pulse: it needs --max-returns above 1")
+    return sensor.with_(footprint_rays=rays, power_noise=args.power_noise, echo_separation_m=args.echo_separation or sensor.echo_separation_m,
+                        max_returns=max_returns, range_resolution_m=resolution if max_returns > 1 else sensor.range_resolution_m)  # fmt: skip
 
 
 #: ``scan``'s placement when no option changes it: a car (4.5 m) 10 m ahead of a LiDAR on a car roof.
@@ -283,6 +319,12 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         help="with --footprint: echoes within M metres of the strongest merge into one return at their energy-weighted "
         "range (mixed pixels at shallow depth edges; half the pulse length, ~0.75 m for 5 ns) (default: 0, never)",
     )  # fmt: skip
+    r.add_argument("--max-returns", metavar="N", action=Checked, check=_max_returns, default=None,
+                   help="with --footprint: up to N returns per pulse (1..15), the footprint's echoes resolved by --range-resolution, "
+                        "each with its return number, number of returns and intensity (default: the sensor's, 1 for presets)")  # fmt: skip
+    r.add_argument("--range-resolution", metavar="M", action=Checked, check=real(0.0, above=True, unit="metres"), default=None,
+                   help="with --max-returns above 1: echoes closer than M metres merge into one return (half the pulse length, "
+                        "~0.75 m for 5 ns) (default: the sensor's)")  # fmt: skip
     p.add_argument("--azimuth", action=Checked, check=interval, default="0", help="direction of the object from the sensor, degrees (N or LO:HI) (default: %(default)s)")
     p.add_argument("--yaw", action=Checked, check=interval, default="0", help="the object's heading, degrees (N or LO:HI) (default: %(default)s)")
     p.add_argument("--samples", action=Checked, check=count("MAX_SAMPLES"), default=1, help="scans, each with its own draws (default: %(default)s)")
