@@ -34,6 +34,15 @@ pulses of one line exactly once, so the mean density there is ``PRR / (v · s)``
 (:attr:`AirborneScanner.survey_density_m2`; ``W / s = 1 / (1 − side_overlap)`` strips cover
 a point on average).  This is Baltsavias' Eq. 17 with the swath width replaced by the line
 spacing, the rule flight planners use for multi-strip density.
+
+Returns
+-------
+With ``max_returns`` above 1, each pulse's beam is a cone of ``beam_divergence_deg`` sampled by
+``footprint_rays`` sub-rays (:mod:`.footprint`), and their first hits are resolved into up to
+``max_returns`` returns by the spinning LiDAR's own echo model
+(:func:`~zbuf_occlude.sensors.scan.echo_returns`: energy ``w · |cos θ| / R²`` per sub-ray, echoes
+within ``range_resolution_m`` merged): a pulse that meets a branch and the ground below records
+both.  With ``max_returns`` 1 (the default) each pulse is its centre ray's first hit, as always.
 """
 
 from __future__ import annotations
@@ -46,6 +55,8 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.checks import MAX_RANGE_M, MAX_SENSOR_RAYS, count, is_number, located, real, reals, sensor_name, shown, text
+from zbuf_occlude.sensors.echoes import MAX_RETURNS
+from zbuf_occlude.sensors.footprint import MAX_SUBRAYS, PROFILES
 
 __all__ = ["AIRBORNE_PRESETS", "MAX_FLIGHT_LINES", "AirborneScanner", "FlightLine", "airborne_preset", "scan_airborne"]
 
@@ -121,6 +132,20 @@ class AirborneScanner:
     headings_deg : tuple of float
         One block of ``n_lines`` lines per heading, degrees counter-clockwise from +x (two
         headings 90° apart: a cross-hatched survey).
+    beam_divergence_deg : float
+        Full-angle beam divergence, degrees in [0, 90]; the cone the ``footprint_rays`` sample
+        (RIEGL LMS-Q1560 data sheet: ≤ 0.25 mrad, 0.014°).
+    footprint_rays : int
+        K sub-rays per pulse, 1..:data:`~zbuf_occlude.sensors.footprint.MAX_SUBRAYS`; above 1 it
+        needs a divergence > 0 and ``max_returns`` above 1.
+    beam_profile : {"tophat", "gaussian"}
+        The sub-rays' energy weights (:func:`~zbuf_occlude.sensors.footprint.footprint_offsets`).
+    max_returns : int
+        Returns per pulse, 1..15 (LAS's return numbers); above 1 the multi-return model (module
+        docstring, *Returns*).
+    range_resolution_m : float
+        Least range between two returns of one pulse, metres (half the pulse length, c·τ/2);
+        needed (> 0) with ``max_returns`` above 1, refused with 1.
 
     Raises
     ------
@@ -130,7 +155,10 @@ class AirborneScanner:
         a swath outside (0°, 180°), an unknown pattern, fewer than one pulse per line or more
         than :data:`~zbuf_occlude.sensors.checks.MAX_SENSOR_RAYS`, ``n_lines`` not an integer ≥ 1,
         ``side_overlap`` outside [0, 1), no heading or a non-finite one, more than
-        :data:`MAX_FLIGHT_LINES` lines, a name that cannot name files.
+        :data:`MAX_FLIGHT_LINES` lines, a name that cannot name files; ``footprint_rays``
+        outside 1..MAX_SUBRAYS, or above 1 without a divergence or with ``max_returns`` 1;
+        ``max_returns`` outside 1..15; ``range_resolution_m`` negative, 0 with ``max_returns``
+        above 1, or given with ``max_returns`` 1; an unknown ``beam_profile``.
     """
 
     name: str
@@ -146,6 +174,11 @@ class AirborneScanner:
     n_lines: int = 1
     side_overlap: float = 0.0
     headings_deg: tuple[float, ...] = (0.0,)
+    beam_divergence_deg: float = 0.0
+    footprint_rays: int = 1
+    beam_profile: str = "tophat"
+    max_returns: int = 1
+    range_resolution_m: float = 0.0
 
     def __post_init__(self) -> None:
         sensor_name(self.name, "airborne scanner name")
@@ -160,6 +193,7 @@ class AirborneScanner:
             "speed_mps": positive, "swath_deg": {**positive, "high": 180.0, "high_open": True},
             "range_noise_m": {"low": 0.0, "high": MAX_RANGE_M}, "dropout": {"low": 0.0, "high": 1.0, "high_open": True},
             "side_overlap": {"low": 0.0, "high": 1.0, "high_open": True, "expected": "a fraction in [0, 1)"},
+            "beam_divergence_deg": {"low": 0.0, "high": 90.0}, "range_resolution_m": {"low": 0.0, "high": MAX_RANGE_M},
         }  # fmt: skip
         for name, bounds in numbers.items():
             object.__setattr__(self, name, real(getattr(self, name), name, **bounds))
@@ -174,6 +208,27 @@ class AirborneScanner:
         object.__setattr__(self, "headings_deg", headings)
         if self.n_lines * len(self.headings_deg) > MAX_FLIGHT_LINES:
             raise InvalidInputError(f"{self.n_lines} lines x {len(self.headings_deg)} headings is more than {MAX_FLIGHT_LINES} flight lines")
+        self._check_returns()
+
+    def _check_returns(self) -> None:
+        """The footprint and multi-return fields (class docstring), as the spinning :class:`~.lidar.Lidar` checks them."""
+        object.__setattr__(self, "footprint_rays", count(self.footprint_rays, "footprint_rays", low=1, high=MAX_SUBRAYS))
+        object.__setattr__(self, "max_returns", count(self.max_returns, "max_returns", low=1, high=MAX_RETURNS))
+        text(self.beam_profile, "beam_profile", choices=PROFILES)
+        k = self.footprint_rays
+        if k > 1 and self.beam_divergence_deg <= 0:
+            raise InvalidInputError(f"footprint_rays {k} needs beam_divergence_deg > 0")
+        if self.max_returns > 1 and self.range_resolution_m <= 0:
+            raise InvalidInputError(f"max_returns {self.max_returns} needs range_resolution_m > 0 (the least range between two returns, c·τ/2)")
+        if self.max_returns == 1 and self.range_resolution_m > 0:
+            raise InvalidInputError(f"range_resolution_m {shown(self.range_resolution_m)} needs max_returns above 1")
+        if self.max_returns == 1 and k > 1:
+            raise InvalidInputError(f"footprint_rays {k} needs max_returns above 1 (an airborne footprint is resolved into returns)")
+
+    @property
+    def multi_return(self) -> bool:
+        """Whether the multi-return model is on (``max_returns`` above 1)."""
+        return self.max_returns > 1
 
     @property
     def pulses_per_line(self) -> int:
@@ -268,7 +323,7 @@ class AirborneScanner:
         """A copy with some fields changed."""
         return replace(self, **changes)
 
-    def ground_rays(self, center_xy, half_size_m: float, phase_s: float = 0.0) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    def ground_rays(self, center_xy, half_size_m: float, phase_s: float = 0.0, *, with_time: bool = False) -> tuple[NDArray[np.float64], ...]:
         """The pulses whose flat-ground footprint falls in the square ``center ± half_size_m``.
 
         Parameters
@@ -287,6 +342,9 @@ class AirborneScanner:
             Unit beam directions ``(0, sin θ, −cos θ)``.
         scan_angle_deg : (N,) float64
             θ, degrees (negative: −y side).
+        time_s : (N,) float64
+            Only ``with_time``: each pulse's firing time, seconds (the aircraft is at x = 0 at
+            time 0; the first line starts at ``phase_s``).
 
         Raises
         ------
@@ -305,7 +363,7 @@ class AirborneScanner:
         ground_y = self.altitude_m * np.tan(theta_grid)
         columns = np.flatnonzero(np.abs(ground_y - cy) <= r)
         if len(columns) == 0:
-            return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
+            return (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)) + ((np.zeros(0),) if with_time else ())
         # lines whose pulses can land in [cx - r, cx + r] (a line spans speed · period along track)
         line_length = self.speed_mps * period
         n_k = 2.0 * r / line_length + 3.0 if line_length > 0 else math.inf
@@ -323,10 +381,10 @@ class AirborneScanner:
         x = self.speed_mps * t
         theta = np.broadcast_to(theta_grid[columns][None, :], x.shape)
         keep = np.abs(x - cx) <= r
-        x, theta = x[keep], theta[keep]
+        x, theta, t = x[keep], theta[keep], t[keep]
         origins = np.column_stack([x, np.zeros_like(x), np.full_like(x, self.altitude_m)])
         directions = np.column_stack([np.zeros_like(x), np.sin(theta), -np.cos(theta)])
-        return origins, directions, np.degrees(theta)
+        return (origins, directions, np.degrees(theta)) + ((t,) if with_time else ())
 
 
 # RIEGL LMS-Q1560 (the scanner of DALES: Varney, Asari & Graehling, "DALES: A Large-scale Aerial
@@ -410,6 +468,16 @@ def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_si
         (N,) int32 per return; ``phase_s`` (the first line's), ``line_phase_s`` (per line, by
         id), ``lateral_shift_m`` (per heading), ``n_rays``.  The same seed gives the same bytes;
         a single-line scanner draws exactly what it drew before flight plans existed.
+        The return fields: ``return_number`` and ``number_of_returns`` (N,) uint8 (1 of 1 with
+        ``max_returns`` 1; else 1..n in range order, n the same on every point of a pulse),
+        ``intensity`` (N,) float32 (the echo's energy, m⁻²; 1.0 with one return per pulse, no
+        radiometry), ``pulse_id`` (N,) int64 (the pulse's row among all the plan's pulses, line by
+        line), ``gps_time`` (N,) float64 (the pulse's firing time along its flight line, seconds;
+        the aircraft passes x = 0 of its line's frame at 0) and ``scan_angle_deg`` (N,) float32,
+        the across-track angle from nadir signed as ASPRS LAS 1.4 defines it (counter-clockwise
+        seen from behind the aircraft, facing along track, is positive: the right, −y, side of a
+        line flown along +x; ``−meta["scan_angle_deg"]``).  With ``max_returns`` 1 every other
+        array is what it was before these fields existed, bit for bit.
 
     Raises
     ------
@@ -419,7 +487,7 @@ def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_si
         before the rays are cast).
     """
     from zbuf_occlude.sensors.raycast import cast_embree
-    from zbuf_occlude.sensors.scan import Scan, build_scene
+    from zbuf_occlude.sensors.scan import Scan, build_scene, return_numbers
 
     built = build_scene(scene)
     rng = np.random.default_rng(seed)
@@ -438,30 +506,37 @@ def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_si
     parts = []
     for line in scanner.flight_lines(shifts):
         if line.is_reference:
-            o, d, a = scanner.ground_rays(center_xy, half_size_m, phases[line.line_id])
+            o, d, a, ts = scanner.ground_rays(center_xy, half_size_m, phases[line.line_id], with_time=True)
         else:
             c = line.to_line(np.asarray(center_xy, dtype=np.float64).reshape(2))
-            o, d, a = scanner.ground_rays(c, half_size_m, phases[line.line_id])
+            o, d, a, ts = scanner.ground_rays(c, half_size_m, phases[line.line_id], with_time=True)
             along, across = line.axes()
             o = np.column_stack([o[:, :1] * along + (line.offset_m + o[:, 1:2]) * across, o[:, 2]])
             d = np.column_stack([d[:, :1] * along + d[:, 1:2] * across, d[:, 2]])
-        parts.append((o, d, a, np.full(len(a), line.line_id, np.int32)))
+        parts.append((o, d, a, np.full(len(a), line.line_id, np.int32), ts))
         n_rays = sum(len(p[2]) for p in parts)
-        if n_rays > MAX_SENSOR_RAYS:  # every line is bounded on its own; the plan's lines add up
+        if n_rays * scanner.footprint_rays > MAX_SENSOR_RAYS:  # every line is bounded on its own; the plan's lines add up
             raise InvalidInputError(
-                f"airborne scanner {scanner.name!r}: {n_rays:,} pulses by line {line.line_id} of {n_total} over the square "
-                f"{2 * float(half_size_m):g} m wide, more than {MAX_SENSOR_RAYS:,}; scan a smaller square or fly fewer lines"
+                f"airborne scanner {scanner.name!r}: {n_rays:,} pulses{f' of {scanner.footprint_rays} sub-rays' if scanner.footprint_rays > 1 else ''} "
+                f"by line {line.line_id} of {n_total} over the square {2 * float(half_size_m):g} m wide, more than {MAX_SENSOR_RAYS:,} rays; "
+                "scan a smaller square, fly fewer lines or take fewer footprint_rays"
             )
     if len(parts) == 1:
-        origins, directions, angle, line_id = parts[0]
+        origins, directions, angle, line_id, fired = parts[0]
     else:
-        origins, directions, angle, line_id = (np.concatenate(arrays) for arrays in zip(*parts))
-    face, t = cast_embree(built.mesh, origins, directions) if len(origins) else (np.zeros(0, np.int64), np.zeros(0))
-    hit = np.flatnonzero(face >= 0)
-    face, t, o, d = face[hit], t[hit], origins[hit], directions[hit]
+        origins, directions, angle, line_id, fired = (np.concatenate(arrays) for arrays in zip(*parts))
+    if scanner.multi_return:
+        hit, face, t, energy = _echo_returns(built, scanner, origins, directions)
+    else:
+        face, t = cast_embree(built.mesh, origins, directions) if len(origins) else (np.zeros(0, np.int64), np.zeros(0))
+        hit = np.flatnonzero(face >= 0)
+        face, t = face[hit], t[hit]
+        energy = np.ones(len(hit))  # no radiometry: intensity 1.0, as a spinning scan without reflectivity
+    o, d = origins[hit], directions[hit]
     measured = t + scanner.range_noise_m * rng.standard_normal(len(hit))
     keep = (rng.random(len(hit)) >= scanner.dropout) & (measured > 0)
     face, measured, o, d = face[keep], measured[keep], o[keep], d[keep]
+    pulse = hit[keep]
     tri = np.asarray(built.mesh.triangles, dtype=np.float64)[face]
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
@@ -470,11 +545,44 @@ def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_si
     position = o.mean(axis=0) if len(o) else np.array([0.0, 0.0, scanner.altitude_m])
     pose = np.eye(4)
     pose[:3, 3] = position
-    meta = {"n_rays": len(origins), "phase_s": phases[0], "scan_angle_deg": angle[hit][keep], "line_id": line_id[hit][keep],
+    meta = {"n_rays": len(origins), "phase_s": phases[0], "scan_angle_deg": angle[pulse], "line_id": line_id[pulse],
             "line_phase_s": tuple(phases), "lateral_shift_m": tuple(float(v) for v in shifts)}  # fmt: skip
+    return_number, number_of_returns = return_numbers(pulse, renumber=scanner.multi_return)
     return Scan(
         points=(o + d * measured[:, None]).astype(np.float32), ring=None, pixel=None, range_m=measured.astype(np.float32),
         face_index=built.face_local[face], object_id=built.face_object[face], normal=normal.astype(np.float32),
         incidence_deg=np.degrees(np.arccos(np.clip(np.abs(cos_in), 0.0, 1.0))).astype(np.float32), frame="world",
         sensor_position=position, sensor_to_world=pose, sensor=scanner.name, meta=meta,
+        return_number=return_number, number_of_returns=number_of_returns, intensity=energy[keep].astype(np.float32),
+        pulse_id=pulse.astype(np.int64), gps_time=fired[pulse], scan_angle_deg=(-angle[pulse]).astype(np.float32),
     )  # fmt: skip
+
+
+def _echo_returns(built, scanner: AirborneScanner, origins, directions) -> tuple[NDArray, ...]:
+    """The multi-return model of an airborne scanner: each pulse's ``footprint_rays`` sub-rays cast
+    from its origin, resolved by :func:`~zbuf_occlude.sensors.scan.echo_returns` (no range limits,
+    no radiometric threshold: every echo returns).
+
+    Parameters
+    ----------
+    built : BuiltScene
+    scanner : AirborneScanner
+    origins, directions : (P, 3) float64
+        The pulses' aircraft positions (metres) and unit beam axes, world frame.
+
+    Returns
+    -------
+    pulse : (E,) int64, row of the pulse; face : (E,) int64; range : (E,) float64, metres;
+    energy : (E,) float64, m⁻²: sorted by pulse, then range.
+    """
+    from zbuf_occlude.sensors.footprint import footprint_offsets, subray_directions
+    from zbuf_occlude.sensors.raycast import cast_embree
+    from zbuf_occlude.sensors.scan import echo_returns
+
+    k = scanner.footprint_rays
+    if len(origins) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
+    offsets, weights = footprint_offsets(k, scanner.beam_divergence_deg, profile=scanner.beam_profile)
+    rays = subray_directions(directions, offsets).reshape(-1, 3)
+    face, t = cast_embree(built.mesh, np.repeat(origins, k, axis=0), rays)
+    return echo_returns(built, rays, face, t, weights, range_resolution_m=scanner.range_resolution_m, max_returns=scanner.max_returns)

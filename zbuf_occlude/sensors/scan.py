@@ -30,7 +30,7 @@ from zbuf_occlude.sensors.scene import BuiltScene, ScanScene, SceneObject
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
-__all__ = ["Scan", "scan", "look_at_pose", "read_scan_npz", "build_scene", "FRAMES", "MAX_SCAN_NPZ_BYTES"]
+__all__ = ["Scan", "scan", "look_at_pose", "read_scan_npz", "build_scene", "echo_returns", "return_numbers", "FRAMES", "MAX_SCAN_NPZ_BYTES"]
 
 #: Frames a scan's points can be given in.
 FRAMES = ("sensor", "world")
@@ -78,15 +78,17 @@ class Scan:
         test uses when ``reflectivity`` is given, and 1.0 when it is not (no radiometry).
     pulse_id : (N,) int64 or None
         LiDAR: ``ring · Lidar.n_azimuths + azimuth index``, unique per pulse of one scan; the
-        returns of one pulse share it.
+        returns of one pulse share it (airborne: the pulse's row among the plan's pulses).
     gps_time : (N,) float64 or None
         LiDAR: firing time of the pulse, seconds from the revolution's first firing
         (``azimuth index / (n_azimuths · rotation_hz)``; every beam of a firing cycle at once);
-        the returns of one pulse share it.
+        the returns of one pulse share it (airborne: the firing time along the flight line,
+        :func:`~zbuf_occlude.sensors.airborne.scan_airborne`).
     scan_angle_deg : (N,) float32 or None
-        LiDAR: the beam's elevation, degrees (the spinning scanner's scan angle).
+        LiDAR: the beam's elevation, degrees (the spinning scanner's scan angle); airborne: the
+        across-track angle from nadir, signed as ASPRS LAS 1.4 defines it.
 
-    The LiDAR-only arrays are None for depth cameras and airborne scans.
+    The LiDAR-only arrays are None for depth cameras.
     """
 
     points: NDArray[np.float32]
@@ -170,10 +172,11 @@ class Scan:
         Through :func:`zbuf_occlude.io.las.las_bytes`: coordinates in ``frame`` (the sensor's or
         the world's, as the scan holds them), metres, stored in steps of 1 mm; no coordinate
         reference system.  Per point: ``return_number``, ``number_of_returns``, ``gps_time``
-        (seconds from the sweep's first firing), ``scan_angle_deg`` (a spinning scanner: the
-        beam's elevation), and the intensity ``round(65535 · min(intensity /
-        intensity_full_scale, 1))``.  A scan without these fields (a depth camera's, an airborne
-        scan's) is written as one return per point, time 0, scan angle 0, intensity 0.
+        (seconds from the sweep's first firing; airborne: along the flight line), ``scan_angle_deg``
+        (a spinning scanner: the beam's elevation; airborne: the across-track angle), and the
+        intensity ``round(65535 · min(intensity / intensity_full_scale, 1))``.  A scan without
+        these fields (a depth camera's) is written as one return per point, time 0, scan angle
+        0, intensity 0.
 
         Parameters
         ----------
@@ -436,23 +439,60 @@ def _run_starts(keys: NDArray) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
 
 
 def _echo_returns(built: BuiltScene, sensor: Lidar, rays, face, t, rho, rng) -> tuple[NDArray[np.int64], ...]:
-    """The multi-return model: resolve each pulse's sub-ray first hits into discrete returns.
+    """The spinning LiDAR's multi-return model: :func:`echo_returns` with ``sensor``'s footprint,
+    range limits (the receiver's blind zone and reach), range resolution, maximum returns, and
+    detection threshold and power noise when ``rho`` is given."""
+    return echo_returns(
+        built, rays, face, t, sensor.footprint_weights(), range_resolution_m=sensor.range_resolution_m, max_returns=sensor.max_returns,
+        rho=rho, detection_threshold=sensor.detection_threshold, power_noise=sensor.power_noise, rng=rng,
+        min_range_m=sensor.min_range_m, max_range_m=sensor.max_range_m,
+    )  # fmt: skip
 
-    ``rays`` (P·K, 3) are the sub-rays of P pulses, pulse-major; ``face`` (P·K,) int64 (−1: no
-    hit) and ``t`` (P·K,) float64 their first hits.  Hits nearer than ``min_range_m`` or beyond
-    ``max_range_m`` give no echo (the receiver's blind zone and reach).  Energies are
-    :func:`~.echoes.hit_energy` of the sub-ray's weight, ρ of the object (1 without ``rho``),
-    ``|cos θ|`` and the range; with ``rho`` and ``power_noise`` σ, every hit of a pulse is
-    scaled by one ``exp(σ z)``, z ~ N(0, 1) per pulse (drawn from ``rng`` for all P pulses).
+
+def echo_returns(
+    built: BuiltScene, rays, face, t, weights, *, range_resolution_m: float, max_returns: int, rho=None, detection_threshold: float = 0.0,
+    power_noise: float = 0.0, rng: np.random.Generator | None = None, min_range_m: float = 0.0, max_range_m: float = np.inf,
+) -> tuple[NDArray[np.int64], ...]:  # fmt: skip
+    """The multi-return model of every scanner: resolve each pulse's sub-ray first hits into discrete returns.
+
+    One implementation for the spinning LiDAR (:func:`scan`) and the airborne scanner
+    (:func:`~zbuf_occlude.sensors.airborne.scan_airborne`).
+
+    Parameters
+    ----------
+    built : BuiltScene
+        The scene the rays were cast into (object of each face, triangles for the normals).
+    rays : (P·K, 3) float64
+        Unit sub-ray directions of P pulses, pulse-major (K sub-rays each).
+    face : (P·K,) int64
+        Face of each sub-ray's first hit in ``built.mesh``, −1 where it hits nothing.
+    t : (P·K,) float64
+        Range of that hit, metres.
+    weights : (K,) float64
+        Each sub-ray's share of the pulse's energy (:func:`~.footprint.footprint_offsets`).
+    range_resolution_m : float
+        Echoes of one pulse closer than this merge (:func:`~.echoes.resolve_echoes`), metres, > 0.
+    max_returns : int
+        The first this many echoes of a pulse in range order are kept.
+    rho : (n_objects + 1,) float, optional
+        Reflectivity per object id; None: 1 everywhere, and no detection threshold.
+    detection_threshold : float
+        Least echo energy kept when ``rho`` is given, m⁻².
+    power_noise : float
+        With ``rho``: every hit of a pulse is scaled by one ``exp(σ z)``, z ~ N(0, 1) per pulse
+        (P draws from ``rng``); nothing is drawn otherwise.
+    min_range_m, max_range_m : float
+        Hits nearer or farther than these give no echo (the receiver's blind zone and reach).
 
     Returns
     -------
     pulse : (E,) int64, row of the pulse; face : (E,) int64; range : (E,) float64, metres;
-    energy : (E,) float64, m⁻²: sorted by pulse, then range (:class:`~.echoes.Echoes`).
+    energy : (E,) float64, m⁻² (:func:`~.echoes.hit_energy`: weight · ρ · ``|cos θ|`` / R²): sorted
+    by pulse, then range (:class:`~.echoes.Echoes`).
     """
-    k = sensor.footprint_rays
+    k = len(weights)
     n_pulses = len(face) // k
-    hit = np.flatnonzero((face >= 0) & (t >= sensor.min_range_m) & (t <= sensor.max_range_m))
+    hit = np.flatnonzero((face >= 0) & (t >= min_range_m) & (t <= max_range_m))
     f, r = face[hit], t[hit]
     obj = built.face_object[f].astype(np.int64)
     tri = np.asarray(built.mesh.triangles, dtype=np.float64)[f]
@@ -460,12 +500,12 @@ def _echo_returns(built: BuiltScene, sensor: Lidar, rays, face, t, rho, rng) -> 
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
     cos = np.abs(np.einsum("ij,ij->i", normal, rays[hit]))
     pulse = hit // k
-    energy = hit_energy(sensor.footprint_weights()[hit % k], 1.0 if rho is None else rho[obj], cos, r)
-    if rho is not None and sensor.power_noise > 0:
-        energy = energy * np.exp(sensor.power_noise * rng.standard_normal(n_pulses))[pulse]
+    energy = hit_energy(np.asarray(weights)[hit % k], 1.0 if rho is None else rho[obj], cos, r)
+    if rho is not None and power_noise > 0:
+        energy = energy * np.exp(power_noise * rng.standard_normal(n_pulses))[pulse]
     echoes = resolve_echoes(
-        pulse, r, energy, obj, range_resolution_m=sensor.range_resolution_m,
-        detection_threshold=sensor.detection_threshold if rho is not None else 0.0, max_returns=sensor.max_returns,
+        pulse, r, energy, obj, range_resolution_m=range_resolution_m,
+        detection_threshold=detection_threshold if rho is not None else 0.0, max_returns=max_returns,
     )  # fmt: skip
     return echoes.pulse, f[echoes.hit], echoes.range_m, echoes.energy
 
@@ -634,6 +674,20 @@ def scan(
     )
 
 
+def return_numbers(pulse, *, renumber: bool) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
+    """``return_number`` and ``number_of_returns`` (N,) uint8 of points of pulse rows ``pulse`` (N,), sorted.
+
+    With ``renumber``, the points of one pulse (in range order) are numbered 1..n and each carries
+    n; otherwise every point is its pulse's only return (1 of 1).  Shared by the spinning and the
+    airborne scanners.
+    """
+    if renumber:
+        rank, length = _run_starts(pulse)
+        return (rank + 1).astype(np.uint8), length.astype(np.uint8)
+    ones = np.ones(len(pulse), np.uint8)
+    return ones, ones.copy()
+
+
 def _return_fields(sensor: Lidar, pulse, ring, azimuth, power, *, renumber: bool) -> dict[str, np.ndarray]:
     """The :class:`Scan` return fields of the points of pulse rows ``pulse`` (sorted) of a LiDAR sweep.
 
@@ -642,12 +696,7 @@ def _return_fields(sensor: Lidar, pulse, ring, azimuth, power, *, renumber: bool
     ``renumber``, the points of a pulse (sorted by range) are numbered 1..n; otherwise each is
     its pulse's only return.
     """
-    n = len(pulse)
-    if renumber:
-        rank, length = _run_starts(pulse)
-        return_number, number_of_returns = (rank + 1).astype(np.uint8), length.astype(np.uint8)
-    else:
-        return_number = number_of_returns = np.ones(n, np.uint8)
+    return_number, number_of_returns = return_numbers(pulse, renumber=renumber)
     n_az = sensor.n_azimuths
     index = np.rint((azimuth[pulse] - sensor.azimuth_offset_deg) / (360.0 / n_az)).astype(np.int64) % n_az
     return {
