@@ -51,7 +51,9 @@ def _run(argv: list[str], capsys) -> tuple[int, str]:
         (["--footprint", "--max-returns", "3"], r"--max-returns 3 needs --range-resolution"),
         (["--footprint", "--range-resolution", "0.5"], r"--range-resolution 0\.5 .* needs --max-returns above 1"),
         (["--footprint", "--max-returns", "3", "--range-resolution", "0.5", "--echo-separation", "0.5"], r"--echo-separation 0\.5 .*--max-returns 3"),
-        (["--sensor", "riegl-q1560", "--max-returns", "3"], r"model spinning LiDARs; riegl-q1560 is not one"),
+        (["--sensor", "riegl-q1560", "--footprint", "--max-returns", "3"], r"model spinning LiDARs; riegl-q1560 is not one"),
+        (["--sensor", "riegl-q1560", "--max-returns", "3"], r"--max-returns 3 needs --range-resolution"),
+        (["--sensor", "kinect-v1", "--max-returns", "3"], r"model spinning LiDARs; kinect-v1 is not one"),
     ],
 )
 def test_bad_return_options_are_one_line_usage_errors(tmp_path: Path, capsys, options: list, message: str) -> None:
@@ -96,3 +98,20 @@ def test_without_the_options_a_scan_is_unchanged(tmp_path: Path, capsys) -> None
         (npz,) = (tmp_path / name).glob("*.npz")
         outs.append(npz.read_bytes())
     assert outs[0] == outs[1]
+
+
+def test_max_returns_applies_to_an_airborne_scanner_file_with_a_footprint(tmp_path: Path, capsys) -> None:
+    laspy = pytest.importorskip("laspy")
+    from zbuf_occlude.sensors.airborne import AirborneScanner
+
+    als = AirborneScanner("test-als", swath_deg=20.0, pulse_rate_hz=2000.0, line_rate_hz=20.0, altitude_m=100.0, speed_mps=10.0,
+                          beam_divergence_deg=2.0, footprint_rays=19, max_returns=2, range_resolution_m=0.5)  # fmt: skip
+    sensor = _write_json(tmp_path / "als.json", sensor_to_json(als))
+    code, err = _run(["scan", "box", "--sensor", str(sensor), "--extents", "6,6,10", "--distance", "2", "--max-returns", "4",
+                      "--range-resolution", "1", "--format", "las", "--no-progress", "--out", str(tmp_path / "o")], capsys)  # fmt: skip
+    assert code == 0, err
+    (path,) = (tmp_path / "o").glob("*.las")
+    las = laspy.read(path)
+    n = np.asarray(las.number_of_returns)
+    assert n.max() >= 2 and n.max() <= 4, np.bincount(n)  # the box's roof edge over the ground
+    assert _run(["scan", "box", "--sensor", str(sensor), "--max-returns", "1", "--no-progress", "--out", str(tmp_path / "p")], capsys)[0] == 2

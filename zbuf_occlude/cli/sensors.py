@@ -97,7 +97,8 @@ def _max_returns(text: str, option: str) -> int:
 
 def _with_return_physics(sensor, args: argparse.Namespace):
     """``sensor`` with ``--footprint``, ``--power-noise``, ``--echo-separation``, ``--max-returns`` and
-    ``--range-resolution`` applied (a spinning LiDAR only).
+    ``--range-resolution`` applied: all five to a spinning LiDAR, the last two to an airborne
+    scanner (its footprint is the sensor file's ``footprint_rays``).
 
     ``--footprint`` gives 7 sub-rays; without it the sensor's own ``footprint_rays`` stay (a sensor
     file's K above 1 is a footprint for ``--echo-separation``).  ``--max-returns`` above 1 needs a
@@ -106,19 +107,25 @@ def _with_return_physics(sensor, args: argparse.Namespace):
     Raises
     ------
     InvalidInputError
-        Naming the option and its value: one of them for a sensor that is not a spinning LiDAR,
+        Naming the option and its value: one of them for a depth camera, ``--footprint``,
+        ``--power-noise`` or ``--echo-separation`` for an airborne scanner,
         ``--echo-separation`` without a footprint or with several returns, ``--range-resolution``
         with one return per pulse, ``--max-returns`` above 1 without a range resolution.
     """
+    from zbuf_occlude.sensors.airborne import AirborneScanner
     from zbuf_occlude.sensors.lidar import Lidar
 
     given = [f for f, v in (("--footprint", args.footprint), ("--power-noise", args.power_noise), ("--echo-separation", args.echo_separation),
                             ("--max-returns", args.max_returns), ("--range-resolution", args.range_resolution)) if v]  # fmt: skip
     if not given:
         return sensor
-    if not isinstance(sensor, Lidar):
+    airborne = isinstance(sensor, AirborneScanner) and not (args.footprint or args.power_noise or args.echo_separation)
+    if not (isinstance(sensor, Lidar) or airborne):
         raise InvalidInputError(f"--footprint, --power-noise, --echo-separation, --max-returns and --range-resolution model spinning LiDARs; "
                                 f"{args.sensor} is not one (given: {', '.join(given)})")  # fmt: skip
+    if airborne and args.max_returns == 1 and sensor.footprint_rays > 1:
+        raise InvalidInputError(f"--max-returns 1: {args.sensor} has a footprint of {sensor.footprint_rays} sub-rays, which an airborne scanner "
+                                "resolves into several returns; give --max-returns above 1")  # fmt: skip
     rays = 7 if args.footprint else sensor.footprint_rays
     max_returns = args.max_returns or sensor.max_returns
     resolution = args.range_resolution or sensor.range_resolution_m
@@ -131,6 +138,8 @@ def _with_return_physics(sensor, args: argparse.Namespace):
         raise InvalidInputError(f"--max-returns {max_returns} needs --range-resolution M (metres: the least range between two returns)")
     if args.range_resolution and max_returns == 1:
         raise InvalidInputError(f"--range-resolution {args.range_resolution:g} separates several returns per pulse: it needs --max-returns above 1")
+    if airborne:
+        return sensor.with_(max_returns=max_returns, range_resolution_m=resolution if max_returns > 1 else sensor.range_resolution_m)
     return sensor.with_(footprint_rays=rays, power_noise=args.power_noise, echo_separation_m=args.echo_separation or sensor.echo_separation_m,
                         max_returns=max_returns, range_resolution_m=resolution if max_returns > 1 else sensor.range_resolution_m)  # fmt: skip
 
@@ -320,8 +329,9 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         "range (mixed pixels at shallow depth edges; half the pulse length, ~0.75 m for 5 ns) (default: 0, never)",
     )  # fmt: skip
     r.add_argument("--max-returns", metavar="N", action=Checked, check=_max_returns, default=None,
-                   help="with --footprint: up to N returns per pulse (1..15), the footprint's echoes resolved by --range-resolution, "
-                        "each with its return number, number of returns and intensity (default: the sensor's, 1 for presets)")  # fmt: skip
+                   help="with --footprint (or a sensor file's footprint, airborne scanners too): up to N returns per pulse (1..15), the "
+                        "footprint's echoes resolved by --range-resolution, each with its return number, number of returns and "
+                        "intensity (default: the sensor's, 1 for presets)")  # fmt: skip
     r.add_argument("--range-resolution", metavar="M", action=Checked, check=real(0.0, above=True, unit="metres"), default=None,
                    help="with --max-returns above 1: echoes closer than M metres merge into one return (half the pulse length, "
                         "~0.75 m for 5 ns) (default: the sensor's)")  # fmt: skip
