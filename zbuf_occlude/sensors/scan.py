@@ -445,13 +445,13 @@ def _echo_returns(built: BuiltScene, sensor: Lidar, rays, face, t, rho, rng) -> 
     return echo_returns(
         built, rays, face, t, sensor.footprint_weights(), range_resolution_m=sensor.range_resolution_m, max_returns=sensor.max_returns,
         rho=rho, detection_threshold=sensor.detection_threshold, power_noise=sensor.power_noise, rng=rng,
-        min_range_m=sensor.min_range_m, max_range_m=sensor.max_range_m,
+        range_limits_m=(sensor.min_range_m, sensor.max_range_m),
     )  # fmt: skip
 
 
 def echo_returns(
     built: BuiltScene, rays, face, t, weights, *, range_resolution_m: float, max_returns: int, rho=None, detection_threshold: float = 0.0,
-    power_noise: float = 0.0, rng: np.random.Generator | None = None, min_range_m: float = 0.0, max_range_m: float = np.inf,
+    power_noise: float = 0.0, rng: np.random.Generator | None = None, range_limits_m: tuple[float, float] = (0.0, np.inf),
 ) -> tuple[NDArray[np.int64], ...]:  # fmt: skip
     """The multi-return model of every scanner: resolve each pulse's sub-ray first hits into discrete returns.
 
@@ -481,8 +481,8 @@ def echo_returns(
     power_noise : float
         With ``rho``: every hit of a pulse is scaled by one ``exp(σ z)``, z ~ N(0, 1) per pulse
         (P draws from ``rng``); nothing is drawn otherwise.
-    min_range_m, max_range_m : float
-        Hits nearer or farther than these give no echo (the receiver's blind zone and reach).
+    range_limits_m : (min, max) float
+        Hits nearer or farther than these give no echo (the receiver's blind zone and reach), metres.
 
     Returns
     -------
@@ -492,12 +492,11 @@ def echo_returns(
     """
     k = len(weights)
     n_pulses = len(face) // k
+    min_range_m, max_range_m = range_limits_m
     hit = np.flatnonzero((face >= 0) & (t >= min_range_m) & (t <= max_range_m))
     f, r = face[hit], t[hit]
     obj = built.face_object[f].astype(np.int64)
-    tri = np.asarray(built.mesh.triangles, dtype=np.float64)[f]
-    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    normal = _unit_normals(built, f)
     cos = np.abs(np.einsum("ij,ij->i", normal, rays[hit]))
     pulse = hit // k
     energy = hit_energy(np.asarray(weights)[hit % k], 1.0 if rho is None else rho[obj], cos, r)
@@ -508,6 +507,47 @@ def echo_returns(
         detection_threshold=detection_threshold if rho is not None else 0.0, max_returns=max_returns,
     )  # fmt: skip
     return echoes.pulse, f[echoes.hit], echoes.range_m, echoes.energy
+
+
+def _sensor_rays(sensor, azimuth_range_deg):
+    """``(d_sensor (N, 3) unit, ring or None, azimuth or None, pixel or None, (near, far) ranges along the ray)``."""
+    if isinstance(sensor, Lidar):
+        d_sensor, ring, azimuth = sensor.rays(azimuth_range_deg)
+        return d_sensor, ring, azimuth, None, (sensor.min_range_m, sensor.max_range_m)
+    if isinstance(sensor, DepthCamera):
+        d_cam, pixel = sensor.rays()
+        d_sensor = d_cam / np.linalg.norm(d_cam, axis=1, keepdims=True)
+        return d_sensor, None, None, pixel, (sensor.min_depth_m, sensor.max_depth_m / float(d_sensor[:, 2].min()))
+    raise InvalidInputError(f"sensor must be a Lidar or a DepthCamera, got {type(sensor).__name__}")
+
+
+def _cast(built: BuiltScene, origin, rays, backend: str, meta: dict, *, resolution: int, neighborhood: int, near_far):
+    """First hit ``(face, t)`` of every ray with ``backend``; the z-buffer's fallback count goes into ``meta``."""
+    if backend == "embree":
+        return cast_embree(built.mesh, origin, rays)
+    near, far = near_far
+    face, t, n_fallback = cast_zbuffer(built.mesh, origin, rays, resolution=resolution, neighborhood=neighborhood,
+                                       znear=max(min(0.05, near * 0.5), 1e-3), zfar=far * 1.5 + 1.0)  # fmt: skip
+    meta["n_fallback"] = n_fallback
+    return face, t
+
+
+def _unit_normals(built: BuiltScene, face) -> NDArray[np.float64]:
+    """(N, 3) float64 unit normals of faces ``face`` of ``built.mesh`` (right-hand winding), world frame."""
+    tri = np.asarray(built.mesh.triangles, dtype=np.float64)[face]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    return normal
+
+
+def _facing_normals(built: BuiltScene, face, d_world):
+    """Unit normals of the hit faces turned to face the sensor, ``cos`` of the ray with the face's own
+    normal, and the incidence angle in degrees."""
+    normal = _unit_normals(built, face)
+    cos_in = np.einsum("ij,ij->i", normal, d_world)
+    normal[cos_in > 0] *= -1.0  # face the sensor
+    incidence = np.degrees(np.arccos(np.clip(np.abs(cos_in), 0.0, 1.0)))
+    return normal, cos_in, incidence
 
 
 def scan(
@@ -581,27 +621,12 @@ def scan(
         pose = scene.default_sensor_pose()
     m = _as_pose(pose)
     rot, origin = m[:3, :3], m[:3, 3]
-    if isinstance(sensor, Lidar):
-        d_sensor, ring, azimuth = sensor.rays(azimuth_range_deg)
-        pixel = None
-        near, far = sensor.min_range_m, sensor.max_range_m
-    elif isinstance(sensor, DepthCamera):
-        d_cam, pixel = sensor.rays()
-        d_sensor = d_cam / np.linalg.norm(d_cam, axis=1, keepdims=True)
-        ring = None
-        near, far = sensor.min_depth_m, sensor.max_depth_m / float(d_sensor[:, 2].min())
-    else:
-        raise InvalidInputError(f"sensor must be a Lidar or a DepthCamera, got {type(sensor).__name__}")
+    d_sensor, ring, azimuth, pixel, (near, far) = _sensor_rays(sensor, azimuth_range_deg)
     d_world = d_sensor @ rot.T
     meta: dict = {"backend": backend, "n_rays": len(d_world)}
     k = sensor.footprint_rays if isinstance(sensor, Lidar) else 1
     rays = d_world if k == 1 else sensor.footprint_directions(d_world).reshape(-1, 3)
-    if backend == "embree":
-        face, t = cast_embree(built.mesh, origin, rays)
-    else:
-        face, t, n_fallback = cast_zbuffer(built.mesh, origin, rays, resolution=resolution, neighborhood=neighborhood,
-                                           znear=max(min(0.05, near * 0.5), 1e-3), zfar=far * 1.5 + 1.0)  # fmt: skip
-        meta["n_fallback"] = n_fallback
+    face, t = _cast(built, origin, rays, backend, meta, resolution=resolution, neighborhood=neighborhood, near_far=(near, far))
     rho = None
     if reflectivity is not None:
         if not isinstance(sensor, Lidar):
@@ -616,13 +641,8 @@ def scan(
             face, t, fraction = _strongest_echo(built, rays, face, t, k, rho, sensor.echo_separation_m, sensor.footprint_weights() if sensor.beam_profile != "tophat" else None)
         hit = np.flatnonzero(face >= 0)
         face, t = face[hit], t[hit]
-    d_s, d_w = d_sensor[hit], d_world[hit]
-    tri = np.asarray(built.mesh.triangles, dtype=np.float64)[face]
-    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
-    cos_in = np.einsum("ij,ij->i", normal, d_w)
-    normal[cos_in > 0] *= -1.0  # face the sensor
-    incidence = np.degrees(np.arccos(np.clip(np.abs(cos_in), 0.0, 1.0)))
+    d_s = d_sensor[hit]
+    normal, cos_in, incidence = _facing_normals(built, face, d_world[hit])
     gauss = rng.standard_normal(len(hit))  # drawn for every hit, so filters do not shift streams
     lost = rng.random(len(hit)) < (sensor.dropout_probability(t) if isinstance(sensor, Lidar) else sensor.dropout)
     # Limits apply to what the sensor measures (noise and quantisation included).
