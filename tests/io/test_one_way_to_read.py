@@ -95,7 +95,7 @@ def test_every_allowed_call_is_still_there():
     "code",
     [
         "h5py.File(p, 'r')", "h5py.File(p, 'w')", "np.load(p)", "np.save(p, a)", "np.savez(fh, **a)", "open(p)",
-        "open(p, 'w')", "json.load(fh)", "pickle.loads(b)", "torch.load(p)", "path.read_text()", "path.read_bytes()",
+        "open(p, 'w')", "json.load(fh)", "pickle.loads(b)", "torch.load(p, weights_only=True)", "path.read_text()", "path.read_bytes()",
         "Path(p).read_text(encoding='utf-8')", "fig.savefig(p)", "folder.mkdir(parents=True)", "os.makedirs(p)",
         "path.write_text('x')", "tmp.write_bytes(b)", "path.open('rb')", "trimesh.load(p)", "laspy.read(p)",
         "os.open(p, os.O_RDONLY)",
@@ -103,6 +103,38 @@ def test_every_allowed_call_is_still_there():
 )  # fmt: skip
 def test_the_walker_finds_every_way_to_read_or_write(code):
     assert io_calls(code)
+
+
+def unsafe_torch_loads(source: str) -> list[int]:
+    """Lines of ``torch.load`` calls in ``source`` without ``weights_only=True`` (an unpickler that runs code)."""
+    lines = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "load":
+            owner = node.func.value
+            if isinstance(owner, ast.Name) and owner.id == "torch":
+                safe = any(k.arg == "weights_only" and isinstance(k.value, ast.Constant) and k.value.value is True for k in node.keywords)
+                if not safe:
+                    lines.append(node.lineno)
+    return lines
+
+
+def test_every_torch_load_of_the_package_is_weights_only():
+    """io/ included: a checkpoint is unpickled by PyTorch's weights-only unpickler, never one that runs code."""
+    offenders = [
+        f"{path.relative_to(PACKAGE).as_posix()}:{line}"
+        for path in sorted(PACKAGE.rglob("*.py"))
+        for line in unsafe_torch_loads(path.read_text(encoding="utf-8"))
+    ]
+    assert not offenders, "torch.load(..., weights_only=True) only:\n" + "\n".join(offenders)
+
+
+@pytest.mark.parametrize("code", ["torch.load(p)", "torch.load(p, weights_only=False)", "torch.load(p, map_location='cpu')"])
+def test_the_torch_walker_finds_unsafe_loads(code):
+    assert unsafe_torch_loads(code)
+
+
+def test_the_torch_walker_passes_the_safe_load():
+    assert not unsafe_torch_loads("torch.load(fh, map_location=device, weights_only=True)")
 
 
 @pytest.mark.parametrize(
