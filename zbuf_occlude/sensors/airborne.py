@@ -486,7 +486,7 @@ def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_si
         :data:`~zbuf_occlude.sensors.checks.MAX_SENSOR_RAYS` pulses in all (counted line by line,
         before the rays are cast).
     """
-    from zbuf_occlude.sensors.raycast import cast_embree
+    from zbuf_occlude.sensors.raycast import cast_embree, face_normals
     from zbuf_occlude.sensors.scan import Scan, build_scene, return_numbers
 
     built = build_scene(scene)
@@ -537,9 +537,7 @@ def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_si
     keep = (rng.random(len(hit)) >= scanner.dropout) & (measured > 0)
     face, measured, o, d = face[keep], measured[keep], o[keep], d[keep]
     pulse = hit[keep]
-    tri = np.asarray(built.mesh.triangles, dtype=np.float64)[face]
-    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    normal = face_normals(built.mesh, face)
     cos_in = np.einsum("ij,ij->i", normal, d)
     normal[cos_in > 0] *= -1.0
     position = o.mean(axis=0) if len(o) else np.array([0.0, 0.0, scanner.altitude_m])

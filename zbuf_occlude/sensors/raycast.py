@@ -29,7 +29,7 @@ from zbuf_occlude.mesh.cache import MeshCache
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
-__all__ = ["ray_triangle_f64", "cast_embree", "cast_zbuffer", "BACKENDS"]
+__all__ = ["ray_triangle_f64", "cast_embree", "cast_zbuffer", "face_normals", "BACKENDS"]
 
 log = logging.getLogger(__name__)
 
@@ -39,6 +39,18 @@ BACKENDS = ("embree", "zbuffer")
 #: Barycentric widening of the exact test: float64 rounding is ~1e-16 relative; a ray through a
 #: shared edge must hit one of the two faces.
 EDGE_EPSILON = 1e-10
+
+
+def face_normals(mesh: trimesh.Trimesh, face: NDArray[np.int64]) -> NDArray[np.float64]:
+    """``face.shape + (3,)`` float64 unit normals of faces ``face`` (int, any shape) of ``mesh``.
+
+    Right-hand winding, ``(b − a) × (c − a)`` normalised; a degenerate face gives the zero vector.
+    The one normal of every scanner's hit faces (spinning, airborne, single and multi return).
+    """
+    tri = np.asarray(mesh.triangles, dtype=np.float64)[face]
+    normal = np.cross(tri[..., 1, :] - tri[..., 0, :], tri[..., 2, :] - tri[..., 0, :])
+    normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-300)
+    return normal
 
 
 def ray_triangle_f64(origin: NDArray[np.float64], directions: NDArray[np.float64], triangles: NDArray[np.float64], *, edge_epsilon: float = EDGE_EPSILON):

@@ -24,7 +24,12 @@ from zbuf_occlude.io.encodings import npz_bytes
 from zbuf_occlude.sensors.depth_camera import DepthCamera
 from zbuf_occlude.sensors.echoes import hit_energy, resolve_echoes
 from zbuf_occlude.sensors.lidar import Lidar
-from zbuf_occlude.sensors.raycast import BACKENDS, cast_embree, cast_zbuffer
+from zbuf_occlude.sensors.raycast import (
+    BACKENDS,
+    cast_embree,
+    cast_zbuffer,
+    face_normals,
+)
 from zbuf_occlude.sensors.scene import BuiltScene, ScanScene, SceneObject
 
 if TYPE_CHECKING:  # trimesh is imported where it is used
@@ -405,9 +410,7 @@ def _strongest_echo(built: BuiltScene, rays, face, t, k: int, rho, separation: f
     t = t.reshape(n, k)
     hit = face >= 0
     obj = np.where(hit, built.face_object[np.maximum(face, 0)], -1)
-    tri = np.asarray(built.mesh.triangles, dtype=np.float64)[np.maximum(face, 0)]
-    normal = np.cross(tri[..., 1, :] - tri[..., 0, :], tri[..., 2, :] - tri[..., 0, :])
-    normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-300)
+    normal = face_normals(built.mesh, np.maximum(face, 0))
     cos = np.abs(np.einsum("nkj,nkj->nk", normal, rays.reshape(n, k, 3)))
     reflected = cos * (1.0 if rho is None else rho[np.maximum(obj, 0)])
     weight = np.where(hit, reflected / k if weights is None else reflected * weights[None, :], 0.0)
@@ -496,7 +499,7 @@ def echo_returns(
     hit = np.flatnonzero((face >= 0) & (t >= min_range_m) & (t <= max_range_m))
     f, r = face[hit], t[hit]
     obj = built.face_object[f].astype(np.int64)
-    normal = _unit_normals(built, f)
+    normal = face_normals(built.mesh, f)
     cos = np.abs(np.einsum("ij,ij->i", normal, rays[hit]))
     pulse = hit // k
     energy = hit_energy(np.asarray(weights)[hit % k], 1.0 if rho is None else rho[obj], cos, r)
@@ -532,18 +535,10 @@ def _cast(built: BuiltScene, origin, rays, backend: str, meta: dict, *, resoluti
     return face, t
 
 
-def _unit_normals(built: BuiltScene, face) -> NDArray[np.float64]:
-    """(N, 3) float64 unit normals of faces ``face`` of ``built.mesh`` (right-hand winding), world frame."""
-    tri = np.asarray(built.mesh.triangles, dtype=np.float64)[face]
-    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
-    return normal
-
-
 def _facing_normals(built: BuiltScene, face, d_world):
     """Unit normals of the hit faces turned to face the sensor, ``cos`` of the ray with the face's own
     normal, and the incidence angle in degrees."""
-    normal = _unit_normals(built, face)
+    normal = face_normals(built.mesh, face)
     cos_in = np.einsum("ij,ij->i", normal, d_world)
     normal[cos_in > 0] *= -1.0  # face the sensor
     incidence = np.degrees(np.arccos(np.clip(np.abs(cos_in), 0.0, 1.0)))
