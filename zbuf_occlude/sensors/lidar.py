@@ -7,7 +7,6 @@ Sensor frame (right-handed, metres): x forward (azimuth 0°), y left (azimuth +9
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -252,26 +251,17 @@ class Lidar:
 
         Ray 0 is the centre.  K = 7: rays 1–6 lie at ``sqrt(4/7)`` of the half-divergence, 60°
         apart around it (the mean-area radius of the annulus outside the centre cell, so the 7
-        cells of the footprint disc have equal areas).  Other K > 1:
+        cells of the footprint disc have equal areas).  Every K:
         :func:`~zbuf_occlude.sensors.footprint.subray_directions` of
-        :func:`~zbuf_occlude.sensors.footprint.footprint_offsets` (the same cells; K = 7 there
-        gives these rays bit for bit).
+        :func:`~zbuf_occlude.sensors.footprint.footprint_offsets`.
+
+        Raises
+        ------
+        InvalidInputError
+            ``directions`` not finite.
         """
         d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
-        if self.footprint_rays == 1:
-            return d[:, None, :].copy()
-        if self.footprint_rays != 7:
-            return subray_directions(d, footprint_offsets(self.footprint_rays, self.beam_divergence_deg)[0])
-        helper = np.where(np.abs(d[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
-        u = np.cross(d, helper)
-        u /= np.linalg.norm(u, axis=1, keepdims=True)
-        v = np.cross(d, u)
-        half = math.radians(self.beam_divergence_deg) / 2.0 * math.sqrt(4.0 / 7.0)
-        phi = np.radians(np.arange(6) * 60.0)
-        off = math.tan(half) * (np.cos(phi)[None, :, None] * u[:, None, :] + np.sin(phi)[None, :, None] * v[:, None, :])
-        ring = d[:, None, :] + off
-        ring /= np.linalg.norm(ring, axis=2, keepdims=True)
-        return np.concatenate([d[:, None, :], ring], axis=1)
+        return subray_directions(d, footprint_offsets(self.footprint_rays, self.beam_divergence_deg)[0])
 
     @classmethod
     def preset(cls, name: str, **changes) -> Lidar:
