@@ -47,6 +47,7 @@ __all__ = [
     "Echoes",
     "attenuate_along_subray",
     "hit_energy",
+    "number_returns",
     "resolve_echoes",
 ]
 
@@ -181,6 +182,20 @@ def _rank_in_run(*keys: NDArray) -> NDArray[np.int64]:
     return np.arange(len(keys[0])) - np.repeat(
         starts, np.diff(starts, append=len(keys[0]))
     )
+
+
+def number_returns(pulse: NDArray) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
+    """``return_number`` and ``number_of_returns`` (N,) uint8 of returns of pulse rows ``pulse`` (N,).
+
+    ``pulse`` is sorted (each pulse's returns together, in range order): the returns of one pulse
+    are numbered 1..n and each carries n.  The one numbering of :func:`resolve_echoes` and of
+    the scans (:func:`~zbuf_occlude.sensors.scan.return_numbers`, after dropout).
+    """
+    pulse = np.asarray(pulse)
+    starts = _group_starts(pulse)
+    n_returns = np.diff(starts, append=len(pulse))
+    rank = np.arange(len(pulse)) - np.repeat(starts, n_returns)
+    return (rank + 1).astype(np.uint8), np.repeat(n_returns, n_returns).astype(np.uint8)
 
 
 def _sorted_order(*keys: NDArray) -> NDArray[np.int64]:
@@ -321,15 +336,15 @@ def resolve_echoes(
     rank = _rank_in_run(p[starts][detected])
     kept = detected[rank < keep_n]
     kept_pulse = p[starts][kept]
-    n_returns = np.diff(_group_starts(kept_pulse), append=len(kept))
+    return_number, number_of_returns = number_returns(kept_pulse)
     return Echoes(
         pulse=kept_pulse,
         range_m=echo_range[kept],
         energy=total[kept],
         surface=echo_surface[kept],
         hit=order[echo_hit[kept]],
-        return_number=(rank[rank < keep_n] + 1).astype(np.uint8),
-        number_of_returns=np.repeat(n_returns, n_returns).astype(np.uint8),
+        return_number=return_number,
+        number_of_returns=number_of_returns,
     )
 
 

@@ -22,7 +22,7 @@ from zbuf_occlude.io.arrays import load_npz
 from zbuf_occlude.io.atomic import write_bytes
 from zbuf_occlude.io.encodings import npz_bytes
 from zbuf_occlude.sensors.depth_camera import DepthCamera
-from zbuf_occlude.sensors.echoes import hit_energy, resolve_echoes
+from zbuf_occlude.sensors.echoes import hit_energy, number_returns, resolve_echoes
 from zbuf_occlude.sensors.lidar import Lidar
 from zbuf_occlude.sensors.raycast import (
     BACKENDS,
@@ -431,16 +431,6 @@ def _strongest_echo(built: BuiltScene, rays, face, t, k: int, rho, separation: f
     return face_out, np.where(hit.any(axis=1), t_out, np.inf), np.where(mine, weight, 0.0).sum(axis=1)
 
 
-def _run_starts(keys: NDArray) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """For sorted ``keys`` (n,): each row's rank in its run of equal keys (0 first) and its run's length."""
-    n = len(keys)
-    new = np.ones(n, bool)
-    new[1:] = keys[1:] != keys[:-1]
-    starts = np.flatnonzero(new)
-    lengths = np.diff(starts, append=n)
-    return np.arange(n) - np.repeat(starts, lengths), np.repeat(lengths, lengths)
-
-
 def _echo_returns(built: BuiltScene, sensor: Lidar, rays, face, t, rho, rng) -> tuple[NDArray[np.int64], ...]:
     """The spinning LiDAR's multi-return model: :func:`echo_returns` with ``sensor``'s footprint,
     range limits (the receiver's blind zone and reach), range resolution, maximum returns, and
@@ -693,12 +683,11 @@ def return_numbers(pulse, *, renumber: bool) -> tuple[NDArray[np.uint8], NDArray
     """``return_number`` and ``number_of_returns`` (N,) uint8 of points of pulse rows ``pulse`` (N,), sorted.
 
     With ``renumber``, the points of one pulse (in range order) are numbered 1..n and each carries
-    n; otherwise every point is its pulse's only return (1 of 1).  Shared by the spinning and the
+    n (:func:`~.echoes.number_returns`); otherwise every point is its pulse's only return (1 of 1).  Shared by the spinning and the
     airborne scanners.
     """
     if renumber:
-        rank, length = _run_starts(pulse)
-        return (rank + 1).astype(np.uint8), length.astype(np.uint8)
+        return number_returns(pulse)
     ones = np.ones(len(pulse), np.uint8)
     return ones, ones.copy()
 
@@ -716,7 +705,7 @@ def _return_fields(sensor: Lidar, pulse, ring, azimuth, power, *, renumber: bool
     index = np.rint((azimuth[pulse] - sensor.azimuth_offset_deg) / (360.0 / n_az)).astype(np.int64) % n_az
     return {
         "return_number": return_number,
-        "number_of_returns": number_of_returns.copy(),
+        "number_of_returns": number_of_returns,
         "intensity": np.asarray(power, dtype=np.float32),
         "pulse_id": ring[pulse] * n_az + index,
         "gps_time": index / (n_az * sensor.rotation_hz),
