@@ -17,9 +17,10 @@ as :func:`check_array_sizes` checks them, then its arrays read from that same op
 
 from __future__ import annotations
 
+import contextlib
 import zipfile
 import zlib
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from os import PathLike
 from pathlib import Path
 from typing import BinaryIO
@@ -102,7 +103,10 @@ def npz_member_header(zf: zipfile.ZipFile, key: str) -> tuple[tuple[int, ...], n
 
 
 def _declared_bytes(fh: BinaryIO) -> int:
-    shape, dtype = npy_header(fh)
+    return _nbytes(*npy_header(fh))
+
+
+def _nbytes(shape: tuple[int, ...], dtype: np.dtype) -> int:
     return int(np.prod(shape, dtype=object)) * dtype.itemsize
 
 
@@ -224,51 +228,61 @@ def load_npz(
     """
     path = Path(path)
     wanted = None if keys is None else set(keys)
-    fh, size = open_regular_file(path, error=error, within=within)
-    with fh:
-        _check_sizes(path, fh, size, max_bytes, error, npy=False)
+    fh, _ = open_regular_file(path, error=error, within=within)
+    with fh, _headers_read(path, error), zipfile.ZipFile(fh) as zf:
+        headers = _npz_headers(path, zf, max_bytes, error)  # every member's, read once
+        names = [n.removesuffix(".npy") for n in headers if n.endswith(".npy")]
+        names = [key for key in names if wanted is None or key in wanted]
+        if check is not None:
+            check({key: headers[f"{key}.npy"] for key in names})
         try:
-            with zipfile.ZipFile(fh) as zf:
-                names = [n.removesuffix(".npy") for n in zf.namelist() if n.endswith(".npy")]
-                names = [key for key in names if wanted is None or key in wanted]
-                if check is not None:
-                    check({key: npz_member_header(zf, key) for key in names})
-                arrays = {}
-                for key in names:
-                    with zf.open(f"{key}.npy") as member:
-                        arrays[key] = npy_format.read_array(member, allow_pickle=False)
-                return arrays
-        except ZbufOccludeError:
-            raise
+            arrays = {}
+            for key in names:
+                with zf.open(f"{key}.npy") as member:
+                    arrays[key] = npy_format.read_array(member, allow_pickle=False)
+            return arrays
         except DAMAGED_NPZ_ERRORS as exc:
             raise error(f"{path}: cannot read its arrays ({type(exc).__name__}: {exc})") from None
 
 
+@contextlib.contextmanager
+def _headers_read(path: Path, error: type[ZbufOccludeError]) -> Iterator[None]:
+    """Turn what numpy and zipfile raise on damaged headers into ``error`` naming ``path``."""
+    try:
+        yield
+    except ZbufOccludeError:
+        raise
+    except DAMAGED_NPZ_ERRORS as exc:
+        raise error(f"{path}: cannot read its array headers ({type(exc).__name__}: {exc})") from None
+
+
 def _check_sizes(path: Path, fh: BinaryIO, size: int, max_bytes: int, error: type[ZbufOccludeError], *, npy: bool) -> None:
     """:func:`check_array_sizes` on the open file ``fh`` (rewound after)."""
-    try:
+    with _headers_read(path, error):
         if npy:
             declared = _declared_bytes(fh)
             if declared > min(max_bytes, size):
                 raise error(f"{path}: its header declares {declared:,} bytes of array, more than the file "
                             f"({size:,} bytes) or the {max_bytes:,} accepted")  # fmt: skip
         else:
-            _check_npz_sizes(path, fh, max_bytes, error)
-    except ZbufOccludeError:
-        raise
-    except DAMAGED_NPZ_ERRORS as exc:
-        raise error(f"{path}: cannot read its array headers ({type(exc).__name__}: {exc})") from None
+            with zipfile.ZipFile(fh) as zf:
+                _npz_headers(path, zf, max_bytes, error)
     fh.seek(0)
 
 
-def _check_npz_sizes(path: Path, fh: BinaryIO, max_bytes: int, error: type[ZbufOccludeError]) -> None:
-    with zipfile.ZipFile(fh) as zf:
-        members = zf.infolist()
-        inflated = sum(m.file_size for m in members)
-        if inflated > max_bytes:
-            raise error(f"{path}: its members inflate to {inflated:,} bytes, more than the {max_bytes:,} accepted")
-        for m in members:
-            with zf.open(m) as fh:
-                declared = _declared_bytes(fh)
-            if declared > m.file_size:
-                raise error(f"{path}: member {m.filename} declares {declared:,} bytes of array but holds {m.file_size:,}")
+def _npz_headers(
+    path: Path, zf: zipfile.ZipFile, max_bytes: int, error: type[ZbufOccludeError]
+) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+    """Every member's declared ``(shape, dtype)``, by member name, once the sizes are checked."""
+    members = zf.infolist()
+    inflated = sum(m.file_size for m in members)
+    if inflated > max_bytes:
+        raise error(f"{path}: its members inflate to {inflated:,} bytes, more than the {max_bytes:,} accepted")
+    headers = {}
+    for m in members:
+        with zf.open(m) as member:
+            shape, dtype = headers[m.filename] = npy_header(member)
+        declared = _nbytes(shape, dtype)
+        if declared > m.file_size:
+            raise error(f"{path}: member {m.filename} declares {declared:,} bytes of array but holds {m.file_size:,}")
+    return headers
