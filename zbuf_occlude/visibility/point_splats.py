@@ -283,11 +283,9 @@ def _check_nonnegative(value: object, name: str, high: float = math.inf) -> floa
 
 
 def _check_count(value: object, name: str) -> int:
-    if not isinstance(value, numbers.Integral) or isinstance(value, (bool, np.bool_)):
-        if isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)):
-            raise InvalidInputError(f"{name} must be an integer >= 1, got {value!r}")
+    if not isinstance(value, numbers.Real) or isinstance(value, (bool, np.bool_)):
         raise ArgumentTypeError(f"{name} must be an integer, got {described(value)}")
-    if int(value) < 1:
+    if not isinstance(value, numbers.Integral) or int(value) < 1:
         raise InvalidInputError(f"{name} must be an integer >= 1, got {_shown(value)}")
     return int(value)
 
@@ -432,7 +430,6 @@ def visible_mask_points(
         points or a number go.
     InsufficientMemoryError
         As :func:`point_surfels`.
-    CameraError
     BackendUnavailable
         ``backend="gpu"`` and no OpenGL 4.3 context can be created.
     """
