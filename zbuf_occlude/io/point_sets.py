@@ -50,7 +50,7 @@ from zbuf_occlude.defaults import MAX_POINT_SET_BYTES, MAX_POINT_SET_POINTS
 from zbuf_occlude.errors import DatasetFormatError, InvalidInputError
 from zbuf_occlude.io.arrays import check_array_sizes, npy_header
 from zbuf_occlude.io.hdf5 import open_hdf5
-from zbuf_occlude.io.regular_files import MAX_LIST_BYTES, open_regular_file, read_regular_file, read_text_file
+from zbuf_occlude.io.regular_files import MAX_LIST_BYTES, open_regular_file, read_text_file
 from zbuf_occlude.resources import check_memory
 
 __all__ = [
@@ -333,10 +333,10 @@ def _read_ply(path: Path, max_points: int) -> list[PointSet]:
 
     n = _ply_vertex_count(path, max_points)
     fh, size = open_regular_file(path, max_bytes=MAX_POINT_SET_BYTES, error=InvalidInputError)
-    fh.close()
-    # the file's bytes, trimesh's columns of them (at most as many), and the float64 x, y, z and normals
-    check_memory(2 * size + n * BYTES_PER_READ_POINT, option=f"reading {path} ({size:,} bytes, {n:,} points)", hint="free memory")
-    raw = read_regular_file(path, max_bytes=MAX_POINT_SET_BYTES, error=InvalidInputError)
+    with fh:  # read from the file whose size was checked: the bytes the memory check counted, no more
+        # the file's bytes, trimesh's columns of them (at most as many), and the float64 x, y, z and normals
+        check_memory(2 * size + n * BYTES_PER_READ_POINT, option=f"reading {path} ({size:,} bytes, {n:,} points)", hint="free memory")
+        raw = fh.read(size)
     vertex = load_ply(io.BytesIO(raw), skip_materials=True)["metadata"]["_ply_raw"]["vertex"]["data"]
     if vertex is None or any(c not in _fields(vertex) for c in "xyz"):
         raise InvalidInputError(f"{path}: its vertices have no x, y, z properties")
