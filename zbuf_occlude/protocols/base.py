@@ -31,7 +31,6 @@ from zbuf_occlude.io.atomic import atomic_h5, temp_h5
 from zbuf_occlude.io.hdf5 import declared_nbytes, open_hdf5
 from zbuf_occlude.io.json_files import read_json_file
 from zbuf_occlude.io.owned import OwnedFolder
-from zbuf_occlude.io.regular_files import open_regular_file
 from zbuf_occlude.mesh.inputs import FarmObject, scan_paths
 from zbuf_occlude.resources import check_memory
 
@@ -178,9 +177,7 @@ def open_arrays_h5(path: str | os.PathLike, *, within: str | os.PathLike | None 
     UnsafePathError
         ``within`` is given and ``path`` leads outside it.
     """
-    fh, _ = open_regular_file(path, within=within, error=DatasetFormatError)
-    fh.close()
-    return open_hdf5(path)
+    return open_hdf5(path, within=within)
 
 
 def read_arrays_h5(
