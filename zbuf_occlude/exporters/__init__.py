@@ -253,7 +253,8 @@ def _check_places(source: Path, out: Path) -> None:
     """Refuse ``out`` inside the source, or the source inside ``out`` (links resolved)."""
     from zbuf_occlude.farm.ownership import check_inputs_outside_out
 
-    if out.resolve() == source.resolve() or source.resolve() in out.resolve().parents:
+    there, inside = source.resolve(), out.resolve()
+    if inside == there or there in inside.parents:
         raise InvalidInputError(f"--out {out} lies inside the data set {source}; choose a folder outside it")
     check_inputs_outside_out(out, [source])
 
