@@ -31,8 +31,9 @@ quantiles of a resample are its weighted inverted-CDF quantiles.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -44,7 +45,10 @@ from zbuf_occlude.io.las import LasPoints
 from zbuf_occlude.resources import check_memory
 from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate
 
-__all__ = ["BYTES_PER_POINT", "GAP_QUANTILE", "MAX_RETURNS_BIN", "VEGETATION_CLASSES", "ReturnStatistics", "return_statistics"]
+__all__ = [
+    "BYTES_PER_POINT", "GAP_QUANTILE", "MAX_RETURNS_BIN", "VEGETATION_CLASSES", "PulseValues", "Pulses", "ReturnStatistics",
+    "check_classes", "las_pulses", "pulse_bootstrap", "return_statistics",
+]  # fmt: skip
 
 #: ASPRS classes of low, medium and high vegetation (R15, Table 17): the default class set.
 VEGETATION_CLASSES = (3, 4, 5)
@@ -120,17 +124,32 @@ class ReturnStatistics:
 
 
 @dataclass(frozen=True)
-class _Pulses:
-    """Points sorted by pulse, then return number."""
+class Pulses:
+    """The points of a scan grouped into pulses (module docstring), sorted by pulse, then return number.
 
-    order: NDArray[np.int64]  # sorted position -> point
-    pulse: NDArray[np.int64]  # sorted position -> pulse
+    Attributes
+    ----------
+    order : (N,) int64
+        Sorted position -> point of the scan.
+    pulse : (N,) int64
+        Sorted position -> pulse, 0 to ``count - 1``, non-decreasing.
+    count : int
+        Pulses.
+    complete : (count,) bool
+        Whether each pulse is complete.
+    returns : (count,) int64
+        Each pulse's smallest ``number_of_returns``.
+    """
+
+    order: NDArray[np.int64]
+    pulse: NDArray[np.int64]
     count: int
-    complete: NDArray[np.bool_]  # per pulse
-    returns: NDArray[np.int64]  # per pulse: its smallest number_of_returns
+    complete: NDArray[np.bool_]
+    returns: NDArray[np.int64]
 
 
-def _pulses(las: LasPoints) -> _Pulses:
+def las_pulses(las: LasPoints) -> Pulses:
+    """The pulses of ``las``: points sharing a GPS time, point source and scanner channel (module docstring)."""
     order = np.lexsort((las.return_number, las.gps_time, las.scanner_channel, las.point_source_id))
     t, source, channel = las.gps_time[order], las.point_source_id[order], las.scanner_channel[order]
     new = np.ones(len(order), dtype=bool)
@@ -142,17 +161,30 @@ def _pulses(las: LasPoints) -> _Pulses:
     # each return number as one bit: a complete pulse of n returns holds exactly bits 1..n
     bits = np.bitwise_or.reduceat(np.left_shift(1, las.return_number[order].astype(np.int64)), starts)
     complete = (size == fewest) & (fewest == most) & (bits == np.left_shift(1, fewest + 1) - 2)
-    return _Pulses(order, np.cumsum(new) - 1, len(starts), complete, fewest)
+    return Pulses(order, np.cumsum(new) - 1, len(starts), complete, fewest)
 
 
-class _Resampled:
-    """Values with the pulse of each, sorted once, for point estimates and weighted bootstrap quantiles."""
+class PulseValues:
+    """Values with the pulse of each, sorted once, for point estimates and weighted bootstrap quantiles.
+
+    Parameters
+    ----------
+    values : (M,) float64
+        One value per point (or per pair of points, per pulse...).
+    pulses : (M,) int64
+        The pulse of each value (:attr:`Pulses.pulse`), which :func:`pulse_bootstrap`'s weights index.
+    """
 
     def __init__(self, values: NDArray[np.float64], pulses: NDArray[np.int64]) -> None:
         order = np.argsort(values, kind="stable")
         self.values, self.pulses = values[order], pulses[order]
 
+    def __len__(self) -> int:
+        return len(self.values)
+
     def quantile(self, q: float, weights: NDArray[np.float64] | None = None) -> float:
+        """The ``q`` quantile of the values (NaN if none); with ``weights`` (per pulse, the draws of a resample), the
+        weighted inverted-CDF quantile, each value weighed by its pulse's draws (NaN if no drawn pulse holds one)."""
         if len(self.values) == 0:
             return math.nan
         if weights is None:
@@ -172,9 +204,9 @@ def _binomial(hits: int, n: int, what: str) -> Estimate:
     return Estimate(p, math.sqrt(p * (1.0 - p) / n), n, f"binomial, over {what}", "share")
 
 
-def _figures(las: LasPoints, pulses: _Pulses, classes: tuple[int, ...], unit_m: float) -> dict[str, tuple]:
+def _figures(las: LasPoints, pulses: Pulses, classes: tuple[int, ...], unit_m: float) -> dict[str, tuple]:
     """Every bootstrapped figure as ``(kind, data, n, unit)``: kind ``share`` (per-pulse counts),
-    ``quantile`` (a :class:`_Resampled` and q) or ``ratio`` (two medians)."""
+    ``quantile`` (a :class:`PulseValues` and q) or ``ratio`` (two medians)."""
     order, pulse = pulses.order, pulses.pulse
     number, first = las.number_of_returns[order], las.return_number[order] == 1
     cls, intensity = las.classification[order], las.intensity[order].astype(np.float64)
@@ -196,15 +228,15 @@ def _figures(las: LasPoints, pulses: _Pulses, classes: tuple[int, ...], unit_m: 
     # consecutive returns k, k + 1 of one pulse: neighbours in the sorted order
     points = las.points[order]
     pair = (pulse[1:] == pulse[:-1]) & (las.return_number[order][1:].astype(np.int64) == las.return_number[order][:-1] + 1)
-    gaps = _Resampled(np.linalg.norm(points[1:][pair] - points[:-1][pair], axis=1) * unit_m, pulse[:-1][pair])
+    gaps = PulseValues(np.linalg.norm(points[1:][pair] - points[:-1][pair], axis=1) * unit_m, pulse[:-1][pair])
     gap_unit = "m" if math.isfinite(las.linear_unit_m) else "coordinate unit"
     out |= {"gap_min": ("quantile", (gaps, 0.0), len(gaps.values), gap_unit),
             "gap_p05": ("quantile", (gaps, GAP_QUANTILE), len(gaps.values), gap_unit),
             "gap_median": ("quantile", (gaps, 0.5), len(gaps.values), gap_unit)}  # fmt: skip
     subsets = {"": np.ones(len(order), dtype=bool)} | ({f"_{suffix}": in_set} if classes else {})
     for name, where in subsets.items():
-        single = _Resampled(intensity[where & ~multi], pulse[where & ~multi])
-        several = _Resampled(intensity[where & multi & first], pulse[where & multi & first])
+        single = PulseValues(intensity[where & ~multi], pulse[where & ~multi])
+        several = PulseValues(intensity[where & multi & first], pulse[where & multi & first])
         out |= {f"intensity_single{name}": ("quantile", (single, 0.5), len(single.values), ""),
                 f"intensity_first_of_several{name}": ("quantile", (several, 0.5), len(several.values), ""),
                 f"intensity_ratio{name}": ("ratio", (several, single), min(len(several.values), len(single.values)), "")}  # fmt: skip
@@ -222,7 +254,18 @@ def _value(kind: str, data: Any, weights: NDArray[np.float64] | None) -> float:
     return numerator / denominator if denominator else math.nan
 
 
-def _checked(las: Any, classes: Any, seed: Any, bootstrap: Any) -> tuple[int, ...]:
+def check_classes(las: Any, classes: Any, seed: Any, bootstrap: Any) -> tuple[int, ...]:
+    """Check the arguments every per-pulse measure takes; the class set, sorted, without repeats.
+
+    Raises
+    ------
+    ArgumentTypeError
+        ``las`` is not a :class:`~zbuf_occlude.io.las.LasPoints`, or ``classes``, ``seed`` or
+        ``bootstrap`` of the wrong kind.
+    InvalidInputError
+        A scan without GPS times or without points; class codes outside 0 to 255; ``bootstrap``
+        below 2 or a negative ``seed``.
+    """
     if not isinstance(las, LasPoints):
         raise ArgumentTypeError(f"las must be a LasPoints (read one with zbuf_occlude.io.las.read_las), got {described(las)}")
     if not las.has_gps_time:
@@ -230,7 +273,7 @@ def _checked(las: Any, classes: Any, seed: Any, bootstrap: Any) -> tuple[int, ..
             f"point format {las.point_format_id} has no GPS time: the returns of one pulse cannot be told apart"
         )
     if len(las) == 0:
-        raise InvalidInputError("return_statistics needs points; the scan holds none")
+        raise InvalidInputError("the scan holds no points: there are no returns to measure")
     for name, value, low in (("seed", seed, 0), ("bootstrap", bootstrap, 2)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
             raise ArgumentTypeError(f"{name} must be an integer, got {described(value)}")
@@ -243,6 +286,39 @@ def _checked(las: Any, classes: Any, seed: Any, bootstrap: Any) -> tuple[int, ..
     if not all(isinstance(c, (int, np.integer)) and not isinstance(c, bool) and 0 <= c <= 255 for c in classes):
         raise InvalidInputError(f"classes must be ASPRS class codes 0 to 255, got {list(classes)}")
     return tuple(sorted({int(c) for c in classes}))
+
+
+def pulse_bootstrap(
+    n_pulses: int, figures: Mapping[str, Callable[[NDArray[np.float64] | None], float]], *, seed: int, bootstrap: int
+) -> dict[str, tuple[float, float]]:
+    """Each figure's value and its standard deviation over a bootstrap over pulses (module docstring).
+
+    Parameters
+    ----------
+    n_pulses : int
+        Pulses of the scan (:attr:`Pulses.count`).
+    figures : mapping of str to callable
+        Each called with None (the scan as it is) and with ``(n_pulses,) float64`` weights (a
+        resample: how many times each pulse was drawn), returning a float, NaN where the
+        resample holds nothing to measure it on.
+    seed, bootstrap : int
+        Of the resamples (checked by :func:`check_classes`).
+
+    Returns
+    -------
+    dict of str to (value, std)
+        ``std`` (ddof 1) over the resamples whose value is finite; NaN when fewer than 2 are.
+    """
+    rng = np.random.default_rng(int(seed))
+    resampled = np.empty((int(bootstrap), len(figures)))
+    for b in range(int(bootstrap)):
+        weights = np.bincount(rng.integers(0, n_pulses, n_pulses), minlength=n_pulses).astype(np.float64)
+        resampled[b] = [figure(weights) for figure in figures.values()]
+    out = {}
+    for j, (name, figure) in enumerate(figures.items()):
+        spread = resampled[:, j][np.isfinite(resampled[:, j])]
+        out[name] = (figure(None), float(np.std(spread, ddof=1)) if len(spread) > 1 else math.nan)
+    return out
 
 
 def return_statistics(
@@ -282,9 +358,9 @@ def return_statistics(
     InsufficientMemoryError
         The scan is too large for the memory available.
     """
-    classes = _checked(las, classes, seed, bootstrap)
+    classes = check_classes(las, classes, seed, bootstrap)
     check_memory(len(las) * BYTES_PER_POINT, option=f"the return statistics of {len(las):,} points", hint="measure a crop")
-    pulses = _pulses(las)
+    pulses = las_pulses(las)
     unit_m = las.linear_unit_m if math.isfinite(las.linear_unit_m) else 1.0
     estimates: dict[str, Estimate] = {}
     returns = np.minimum(pulses.returns[pulses.complete], MAX_RETURNS_BIN)
@@ -293,16 +369,11 @@ def return_statistics(
         name = f"returns_{k}" + ("+" if k == MAX_RETURNS_BIN else "")
         estimates[name] = _binomial(int(np.count_nonzero(returns == k)), len(returns), what)
     figures = _figures(las, pulses, classes, unit_m)
-    rng = np.random.default_rng(int(seed))
-    resampled = np.empty((int(bootstrap), len(figures)))
-    for b in range(int(bootstrap)):
-        weights = np.bincount(rng.integers(0, pulses.count, pulses.count), minlength=pulses.count).astype(np.float64)
-        resampled[b] = [_value(kind, data, weights) for kind, data, _, _ in figures.values()]
+    spread = pulse_bootstrap(pulses.count, {name: partial(_value, kind, data) for name, (kind, data, _, _) in figures.items()},
+                             seed=seed, bootstrap=bootstrap)  # fmt: skip
     method = f"bootstrap over pulses ({int(bootstrap)}, seed {int(seed)})"
-    for j, (name, (kind, data, n, unit)) in enumerate(figures.items()):
-        spread = resampled[:, j][np.isfinite(resampled[:, j])]
-        std = float(np.std(spread, ddof=1)) if len(spread) > 1 else math.nan
-        estimates[name] = Estimate(_value(kind, data, None), std, n, method, unit)
+    for name, (_, _, n, unit) in figures.items():
+        estimates[name] = Estimate(*spread[name], n, method, unit)
         if name == "gap_median":
             estimates["gap_count"] = Estimate(float(n), 0.0, n, "count", "")
     return ReturnStatistics(estimates, len(las), pulses.count, int(pulses.complete.sum()), classes,
