@@ -5,6 +5,10 @@ face (Möller–Trumbore), so that the backends differ only in *which* face they
 
 * :func:`cast_embree`: Embree (embreex, through trimesh) finds the first face in float32;
   the distance is then recomputed in float64 on that face.
+* :func:`cast_embree_beyond`: every hit along each ray, not only the first: Embree cast again
+  from just beyond each hit on a surface that transmits (a leafy layer, a pane), up to
+  ``max_hits`` per ray.  The z-buffer keeps one face per pixel, the nearest, so only Embree
+  gives the hits behind it.
 * :func:`cast_zbuffer`: the scene is rasterised from the ray origin with moderngl (one
   perspective view for rays inside a cone, else the six faces of a cube map) into face-id
   images; each ray's candidates are the faces seen in the ``(2r+1)²`` pixels around its
@@ -29,7 +33,7 @@ from zbuf_occlude.mesh.cache import MeshCache
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
-__all__ = ["ray_triangle_f64", "cast_embree", "cast_zbuffer", "face_normals", "BACKENDS"]
+__all__ = ["BACKENDS", "MAX_HITS", "cast_embree", "cast_embree_beyond", "cast_zbuffer", "face_normals", "ray_triangle_f64"]
 
 log = logging.getLogger(__name__)
 
@@ -39,6 +43,21 @@ BACKENDS = ("embree", "zbuffer")
 #: Barycentric widening of the exact test: float64 rounding is ~1e-16 relative; a ray through a
 #: shared edge must hit one of the two faces.
 EDGE_EPSILON = 1e-10
+
+#: Most hits :func:`cast_embree_beyond` finds along one ray by default: one per LAS return number
+#: (:data:`~zbuf_occlude.sensors.echoes.MAX_RETURNS`, 15) and one more.
+MAX_HITS = 16
+
+#: :func:`cast_embree_beyond` starts each further cast this share of the scene's bounding-box
+#: diagonal beyond the last hit: Embree's float32 hit has a relative error of ~1e-7 of the
+#: coordinates, so a step 100× that never finds the same surface point again (a shared edge, the
+#: face just left), and stays far below any receiver's range resolution (2 mm in a 230 m scene).
+BEYOND_HIT_SHARE = 1e-5
+
+#: Bytes :func:`cast_embree_beyond` holds per ray still cast (origins, starts, directions,
+#: faces, ranges and masks) and per hit kept (ray, face, range), for the memory check.
+_BYTES_PER_ACTIVE_RAY = 160
+_BYTES_PER_HIT = 24
 
 
 def face_normals(mesh: trimesh.Trimesh, face: NDArray[np.int64]) -> NDArray[np.float64]:
@@ -143,6 +162,117 @@ def cast_embree(mesh: trimesh.Trimesh, origin: NDArray[np.float64], directions: 
     origins = np.broadcast_to(np.asarray(origin, dtype=np.float64), directions.shape)
     face = np.asarray(_intersector(mesh).intersects_first(origins, directions), dtype=np.int64)
     return face, _exact_distance(mesh, np.asarray(origin, np.float64), directions, face)
+
+
+def cast_embree_beyond(
+    mesh: trimesh.Trimesh,
+    origin: NDArray[np.float64],
+    directions: NDArray[np.float64],
+    face: NDArray[np.int64],
+    t: NDArray[np.float64],
+    face_transmits: NDArray[np.bool_],
+    *,
+    max_hits: int = MAX_HITS,
+    step_m: float | None = None,
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
+    """Every hit along each ray ``origin + t · directions[i]``, through the faces that transmit.
+
+    Starting from each ray's first hit ``(face, t)`` (:func:`cast_embree` or
+    :func:`cast_zbuffer`), a ray whose last hit lies on a face with ``face_transmits`` is cast
+    again (Embree) from ``step_m`` beyond that hit, and so on until it hits a face that does not
+    transmit, leaves the scene, or has ``max_hits`` hits.  Rays whose first hit does not
+    transmit are not cast again, so a scene without transmitting faces costs nothing more.  A
+    further hit must lie more than ``step_m / 2`` beyond the last one (else it is the surface
+    point just left, found again through float32 rounding, and the ray steps on); two surfaces
+    less than ``step_m`` apart along a ray give one hit.  Ranges are float64 on the hit face
+    from the ray's own origin, as :func:`cast_embree` gives them.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        World frame, metres.
+    origin : (3,) or (N, 3) float64
+        One origin for every ray, or one per ray.
+    directions : (N, 3) float64
+        Unit vectors.
+    face : (N,) int64
+        Each ray's first hit (row of ``mesh.faces``), −1 for none.
+    t : (N,) float64
+        Its range, metres (inf for none).
+    face_transmits : (F,) bool
+        Per row of ``mesh.faces``: a ray goes on through it.
+    max_hits : int
+        Most hits per ray, ≥ 1 (default :data:`MAX_HITS`).
+    step_m : float, optional
+        How far beyond a hit the next cast starts, metres, > 0; default
+        :data:`BEYOND_HIT_SHARE` of the mesh's bounding-box diagonal.
+
+    Returns
+    -------
+    ray : (H,) int64
+        Row of ``directions`` of each hit; sorted, each ray's hits in range order.
+    face : (H,) int64
+        Row of ``mesh.faces`` hit (≥ 0).
+    t : (H,) float64
+        Range of the hit along its ray, metres; increasing within a ray.  The first hits are
+        the given ones, bit for bit.
+
+    Raises
+    ------
+    InvalidInputError
+        ``face_transmits`` not one bool per face, ``max_hits`` below 1, ``step_m`` not > 0.
+    InsufficientMemoryError
+        The rays cast again and the hits kept would not fit in memory
+        (:func:`zbuf_occlude.resources.check_memory`), before they are allocated.
+    BackendUnavailable
+        embreex is not installed (only when a ray is cast again).
+    """
+    from zbuf_occlude.resources import check_memory
+
+    directions = np.asarray(directions, dtype=np.float64)
+    face = np.asarray(face, dtype=np.int64)
+    t = np.asarray(t, dtype=np.float64)
+    transmits = np.asarray(face_transmits)
+    if transmits.dtype != np.bool_ or transmits.shape != (len(mesh.faces),):
+        raise InvalidInputError(f"face_transmits must be ({len(mesh.faces)},) bool, one per face, got shape {transmits.shape} dtype {transmits.dtype}")
+    if int(max_hits) != max_hits or max_hits < 1:
+        raise InvalidInputError(f"max_hits must be a whole number >= 1, got {max_hits!r}")
+    if step_m is None:
+        step_m = BEYOND_HIT_SHARE * float(np.linalg.norm(np.ptp(np.asarray(mesh.vertices, np.float64), axis=0))) if len(mesh.vertices) else 1.0
+    if not (np.isfinite(step_m) and step_m > 0):
+        raise InvalidInputError(f"step_m must be a finite number of metres > 0, got {step_m!r}")
+    first = np.flatnonzero(face >= 0)
+    rays, faces, ranges = [first], [face[first]], [t[first]]
+    active = first[transmits[face[first]]] if max_hits > 1 else first[:0]
+    if len(active):
+        check_memory(len(active) * (_BYTES_PER_ACTIVE_RAY + (max_hits - 1) * _BYTES_PER_HIT), option=f"{len(active):,} transmitting rays x max_hits {max_hits}",
+                     hint="give fewer rays, fewer max_hits or fewer surfaces a transmittance")  # fmt: skip
+    origins = np.broadcast_to(np.asarray(origin, dtype=np.float64), directions.shape)
+    last, n_hits = t[active], np.ones(len(active), np.int64)
+    triangles = np.asarray(mesh.triangles, dtype=np.float64)
+    # a ray that keeps finding the surface point it left steps on; bounded so that it ends
+    for _ in range(2 * int(max_hits)):
+        if not len(active):
+            break
+        o, d = origins[active], directions[active]
+        start = o + (last + step_m)[:, None] * d
+        f = np.asarray(_intersector(mesh).intersects_first(start, d), dtype=np.int64)
+        got = f >= 0
+        r = np.full(len(active), np.inf)
+        if got.any():
+            r[got], _ = ray_triangle_f64(o[got], d[got], triangles[f[got]])
+        new = got & np.isfinite(r) & (r > last + 0.5 * step_m)
+        again = got & ~new
+        rays.append(active[new])
+        faces.append(f[new])
+        ranges.append(r[new])
+        n_hits += new
+        go_on = again | (new & transmits[np.maximum(f, 0)] & (n_hits < max_hits))
+        last = np.where(new, r, last + step_m)[go_on]
+        active, n_hits = active[go_on], n_hits[go_on]
+    ray = np.concatenate(rays)
+    order = np.argsort(ray, kind="stable")  # each ray's hits were found in range order
+    return ray[order], np.concatenate(faces)[order], np.concatenate(ranges)[order]
 
 
 # -- z-buffer (GPU) ----------------------------------------------------------------------------
