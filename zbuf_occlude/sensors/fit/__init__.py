@@ -15,6 +15,9 @@
 ``returns``
     The returns of each pulse of a LAS/LAZ scan: returns per pulse, multi-return shares, gaps
     between returns, intensities (:func:`return_statistics`).
+``return_model``
+    The return model fitted to a LAS/LAZ scan: range resolution, returns per pulse, detection
+    threshold and intensity scale, and the beam divergence by simulation (:func:`fit_return_model`).
 
 Every name is imported from here (``from zbuf_occlude.sensors.fit import fit_lidar``).
 """
@@ -32,7 +35,18 @@ from zbuf_occlude.sensors.fit.lidar import (
     LidarFit,
     fit_lidar,
 )
-from zbuf_occlude.sensors.fit.returns import VEGETATION_CLASSES, ReturnStatistics, return_statistics
+from zbuf_occlude.sensors.fit.return_model import (
+    ReturnModelFit,
+    divergence_from_shares,
+    fit_divergence,
+    fit_return_model,
+    merge_scans,
+)
+from zbuf_occlude.sensors.fit.returns import (
+    VEGETATION_CLASSES,
+    ReturnStatistics,
+    return_statistics,
+)
 from zbuf_occlude.sensors.fit.scans import (
     DISTANCE_QUANTILES,
     MIN_PLACEMENT_SCANS,
@@ -64,4 +78,5 @@ __all__ = [
     "fit_sensor_height", "fit_visible_across_sight", "fit_width_profile", "fit_width_scale", "LidarFit",
     "MAX_DROPOUT_GAP", "MIN_PLACEMENT_SCANS", "MIN_RETURNS", "PLANE_NEIGHBOURS", "SENSOR_HEIGHT_QUANTILE", "WIDTH_BAND_M",
     "width_profile", "WIDTH_PROFILE_BINS", "WIDTH_SAMPLES", "return_statistics", "ReturnStatistics", "VEGETATION_CLASSES",
+    "divergence_from_shares", "fit_divergence", "fit_return_model", "merge_scans", "ReturnModelFit",
 ]  # fmt: skip

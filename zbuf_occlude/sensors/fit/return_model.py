@@ -1,0 +1,617 @@
+"""The return model of a scanner fitted to the user's own LAS/LAZ scans: what the echo model can set, with its uncertainty.
+
+The echo model (:mod:`zbuf_occlude.sensors.echoes`) sends back from each surface a pulse's
+sub-ray meets the energy ``w · ρ · |cos θ| / R²`` (m⁻², :func:`~zbuf_occlude.sensors.echoes.hit_energy`),
+merges echoes closer than the range resolution, drops those below the detection threshold and
+keeps the first ``max_returns``.  Measured on the points of a scan
+(:class:`~zbuf_occlude.io.las.LasPoints`, grouped into pulses by
+:func:`~zbuf_occlude.sensors.fit.returns.las_pulses`):
+
+``range_resolution_m``
+    The least range between two returns of one pulse (``c·τ/2``): the lower end of the gaps
+    between consecutive returns of a pulse (3D distance, metres; a pulse's returns lie on its
+    beam axis, so that is their range difference), told from their 1st and 2nd percentiles
+    (:func:`lower_end`, :data:`RESOLUTION_QUANTILE`): not the minimum, which one pair of noisy
+    returns moves, and not the 1st percentile, which lies above the bound by the density there.
+    Gaps are measured where the pulse holds both returns, complete or not.
+``max_returns``
+    The most returns any pulse of the scan recorded (``number_of_returns``).
+``detection_threshold_counts``
+    The weakest echo detected, in intensity counts: the lower end (:func:`lower_end`,
+    :data:`DETECTION_QUANTILE`) of the intensities of every return, zeros left out (ASPRS LAS
+    1.4 R15 §2.6: an intensity of 0 means none was recorded).
+``intensity_scale``
+    Counts per unit of received energy, from single returns on the ground (class
+    :data:`GROUND_CLASS` when it holds :data:`MIN_CLASS_POINTS` single returns; else the lowest
+    single returns, those within :data:`LOWEST_SLAB_M` of the lowest return of their
+    :data:`LOWEST_CELL_M` cell): the median of ``I / E`` with ``E = hit_energy(1, ρ_g, cos θ,
+    H / cos θ)``, ``ρ_g`` the ground's reflectance (a parameter, :data:`GROUND_REFLECTANCE` by
+    default), ``θ`` the point's scan angle (flat ground: the incidence is the scan angle) and
+    ``H`` the flying height above the ground (a parameter: a LAS file records no sensor position).
+``detection_threshold``
+    ``detection_threshold_counts / intensity_scale``, m⁻², the model's threshold
+    (:func:`~zbuf_occlude.sensors.echoes.resolve_echoes`), each resample's ratio.
+``beam_divergence_deg``
+    **Not measurable from the points**: a scanner places every return of a pulse on the beam's
+    axis (the point is the origin plus range times the axis), so the returns of one pulse show
+    no lateral spread to read a footprint from (on the IGN LiDAR HD sample the middle return of
+    a three-return pulse lies a median 2 mm off the line of the other two: the coordinates' 1 mm
+    steps).  It is fitted by simulation instead (:func:`divergence_from_shares`): a simulated
+    multi-return share for each of several divergences, inverted at the measured share.  Without
+    such a curve it is reported not measured and the sensor keeps its own.
+``intensity_ratio_ground``, ``intensity_sum_ratio``
+    Checks of the energy model: the median intensity of first-of-several returns on the ground
+    over that of single returns there (the model gives the share of the footprint the first
+    surface takes), and the median summed intensity of a complete pulse of several returns over
+    the median single return (the model conserves the footprint's energy: 1 where every surface
+    has the ground's reflectance, incidence and range).
+Per class of the file with :data:`MIN_CLASS_POINTS` points: ``range_resolution_m_class_<c>``
+(gaps whose farther return is of class c), ``detection_threshold_counts_class_<c>``,
+``intensity_ratio_class_<c>`` and ``reflectance_class_<c>``, the apparent reflectance of the
+class's single returns against the ground's: ``ρ_g`` times the ratio of the medians of
+``I · R² / cos θ`` (no reflectance in the model is measured on its own; this is the class's
+reflectance where the footprint is filled).
+
+Uncertainties: the standard deviation over a bootstrap over pulses
+(:func:`~zbuf_occlude.sensors.fit.returns.pulse_bootstrap`, seeded), as the return statistics'
+(:func:`~zbuf_occlude.sensors.fit.returns.return_statistics`, which the fit reports beside).
+Coordinates are in metres where the file states its unit; where it does not (a file without a
+coordinate reference system, as ours), metres are assumed and the fit says so.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
+from zbuf_occlude.geometry.arguments import described
+from zbuf_occlude.io.las import LasPoints
+from zbuf_occlude.resources import check_memory
+from zbuf_occlude.sensors.echoes import MAX_RETURNS, hit_energy
+from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate, estimates_markdown
+from zbuf_occlude.sensors.fit.returns import (
+    BYTES_PER_POINT,
+    VEGETATION_CLASSES,
+    PulseValues,
+    ReturnStatistics,
+    check_classes,
+    las_pulses,
+    pulse_bootstrap,
+    return_statistics,
+)
+
+__all__ = [
+    "DETECTION_QUANTILE", "DIVERGENCE_GRID_DEG", "FOOTPRINT_RAYS", "GROUND_CLASS", "GROUND_REFLECTANCE", "LOWEST_CELL_M",
+    "LOWEST_SLAB_M", "MIN_CLASS_POINTS", "RESOLUTION_QUANTILE", "ReturnModelFit", "divergence_from_shares", "fit_divergence",
+    "fit_return_model", "lower_end", "merge_scans",
+]  # fmt: skip
+
+#: The low quantile q of the gaps between a pulse's returns whose line to 2q tells the range
+#: resolution (:func:`lower_end`; IGN LiDAR HD sample: Q(0.01) 0.87 m, Q(0.02) 0.90 m, its
+#: minimum 0.82 m rests on one pair).
+RESOLUTION_QUANTILE = 0.01
+#: The same q for the (non-zero) intensities: the weakest echo detected.
+DETECTION_QUANTILE = 0.01
+#: ASPRS class of the ground (R15, Table 17).
+GROUND_CLASS = 2
+#: The ground's reflectance at the scanner's wavelength when none is given: an ASSUMPTION for
+#: mixed open ground at 1064 nm (bare soil and dry grass lie between about 0.2 and 0.4; asphalt
+#: lower).  It scales ``intensity_scale`` and ``detection_threshold`` inversely: give your own.
+GROUND_REFLECTANCE = 0.25
+#: Fewest points of a class for its own figures (and single ground returns for the ground's).
+MIN_CLASS_POINTS = 100
+#: Without a ground class: the cell, metres, whose lowest return starts its ground...
+LOWEST_CELL_M = 10.0
+#: ... and the slab above that lowest return counted as ground, metres.
+LOWEST_SLAB_M = 0.5
+#: Sub-rays a sensor of one ray is given when a fitted divergence is applied (the ``--footprint`` ring of 7).
+FOOTPRINT_RAYS = 7
+#: Divergences, degrees, that :func:`fit_divergence` simulates by default: 0.05 to 3 mrad.
+DIVERGENCE_GRID_DEG = tuple(float(v) for v in np.degrees(np.geomspace(0.05e-3, 3e-3, 9)))
+#: Estimates :meth:`ReturnModelFit.apply` may set, and the sensor field of each.
+_SETS = {"range_resolution_m": "range_resolution_m", "max_returns": "max_returns", "beam_divergence_deg": "beam_divergence_deg",
+         "detection_threshold": "detection_threshold"}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class ReturnModelFit:
+    """The return model fitted to a scan (module docstring), with the scan's return statistics.
+
+    Attributes
+    ----------
+    estimates : dict of str to Estimate
+        The fitted quantities (module docstring), each ``value ± std`` with its unit, count and
+        how it was measured; NaN where the scan does not tell it.
+    statistics : ReturnStatistics
+        The per-pulse figures the fit rests on (:func:`~zbuf_occlude.sensors.fit.returns.return_statistics`).
+    altitude_m : float
+        The flying height above the ground assumed, metres.
+    ground_reflectance : float
+    ground : str
+        Which returns were the ground: ``"class 2"`` or ``"lowest returns"`` (or ``"none"``).
+    unit_m : float
+        Metres per coordinate unit used.
+    unit_assumed : bool
+        Whether the file did not state its unit (metres assumed).
+    why_not_measured : dict of str to str
+        Per estimate left NaN, why.
+    """
+
+    estimates: dict[str, Estimate]
+    statistics: ReturnStatistics
+    altitude_m: float
+    ground_reflectance: float
+    ground: str
+    unit_m: float
+    unit_assumed: bool
+    why_not_measured: dict[str, str]
+
+    def sets(self, sensor: Any) -> tuple[str, ...]:
+        """The estimates :meth:`apply` sets on ``sensor``: those measured whose field the sensor has (a
+        spinning LiDAR's threshold through ``detection_range_m``; an airborne scanner has none)."""
+        names = {f.name for f in fields(sensor)} if hasattr(sensor, "__dataclass_fields__") else set()
+        out = []
+        for name, field_name in _SETS.items():
+            value = self.estimates[name].value
+            if not (math.isfinite(value) and value > 0):
+                continue
+            if name == "detection_threshold":
+                if {"detection_reflectivity", "detection_range_m"} <= names or "detection_threshold" in names:
+                    out.append(name)
+            elif field_name in names:
+                out.append(name)
+        return tuple(out)
+
+    def apply(self, sensor: Any) -> Any:
+        """``sensor`` (a :class:`~zbuf_occlude.sensors.lidar.Lidar` or
+        :class:`~zbuf_occlude.sensors.airborne.AirborneScanner`) with the fitted return model.
+
+        Sets ``max_returns`` (at most :data:`~zbuf_occlude.sensors.echoes.MAX_RETURNS`) and, above 1,
+        ``range_resolution_m``; ``beam_divergence_deg`` where it was fitted (and then
+        ``footprint_rays`` :data:`FOOTPRINT_RAYS` where the sensor had one ray); the detection
+        threshold where the sensor has one: a spinning LiDAR's ``detection_range_m`` becomes
+        ``√(detection_reflectivity / τ)``.  One return per pulse: ``range_resolution_m`` 0 and,
+        airborne, one ray.  The name gains ``-fitted`` and the source says what was fitted.
+
+        Raises
+        ------
+        ArgumentTypeError
+            ``sensor`` is not a LiDAR or an airborne scanner.
+        InvalidInputError
+            The fitted values make a sensor its checks refuse (naming the field).
+        """
+        from zbuf_occlude.sensors.airborne import AirborneScanner
+        from zbuf_occlude.sensors.lidar import Lidar
+
+        if not isinstance(sensor, (Lidar, AirborneScanner)):
+            raise ArgumentTypeError(f"the return model applies to a Lidar or an AirborneScanner, got {described(sensor)}")
+        sets = self.sets(sensor)
+        e = {name: self.estimates[name].value for name in sets}
+        changes: dict[str, Any] = {}
+        if "max_returns" in e:
+            changes["max_returns"] = min(int(e["max_returns"]), MAX_RETURNS)
+        if changes.get("max_returns", sensor.max_returns) > 1:
+            if "range_resolution_m" in e:
+                changes["range_resolution_m"] = e["range_resolution_m"]
+        else:
+            changes["range_resolution_m"] = 0.0
+            if isinstance(sensor, AirborneScanner):
+                changes["footprint_rays"] = 1
+        if "beam_divergence_deg" in e:
+            changes["beam_divergence_deg"] = e["beam_divergence_deg"]
+            if sensor.footprint_rays == 1 and changes.get("max_returns", sensor.max_returns) > 1:
+                changes["footprint_rays"] = FOOTPRINT_RAYS
+        if "detection_threshold" in e:
+            if isinstance(sensor, Lidar):
+                changes["detection_range_m"] = math.sqrt(sensor.detection_reflectivity / e["detection_threshold"])
+            else:
+                changes["detection_threshold"] = e["detection_threshold"]
+        name = sensor.name if sensor.name.endswith("-fitted") else f"{sensor.name}-fitted"
+        what = f"returns fitted to {self.statistics.n_pulses:,} pulses ({', '.join(sets) or 'nothing measured'})"
+        return replace(sensor, **changes, name=name, source=f"{sensor.source}; {what}".lstrip("; "))
+
+    def markdown(self, sensor: Any = None) -> str:
+        """The fit's table (quantity, value ± std, unit, n, whether it sets ``sensor``, how measured), what was
+        assumed, then the return statistics' table."""
+        sets = set(self.sets(sensor)) if sensor is not None else set()
+        shown = {name: replace(e, set_in_sensor=name in sets) for name, e in self.estimates.items()}
+        unit = "metres assumed (the file states no unit)" if self.unit_assumed else f"{self.unit_m:g} m per coordinate unit"
+        return (
+            f"Flying height {self.altitude_m:g} m above the ground (given), ground reflectance {self.ground_reflectance:g} "
+            f"(given), ground: {self.ground}; coordinates: {unit}.\n\n"
+            + estimates_markdown(shown, self.why_not_measured)
+            + "\nThe return statistics the fit rests on:\n\n"
+            + self.statistics.markdown()
+        )
+
+    def to_json(self) -> dict[str, Any]:
+        """The fit as a strict-JSON object (``null`` where not measured), the statistics under ``"statistics"``."""
+        return {
+            "altitude_m": self.altitude_m, "ground_reflectance": self.ground_reflectance, "ground": self.ground,
+            "unit_m": self.unit_m, "unit_assumed": self.unit_assumed, "why_not_measured": dict(self.why_not_measured),
+            "estimates": {name: e.to_json() for name, e in self.estimates.items()}, "statistics": self.statistics.to_json(),
+        }  # fmt: skip
+
+
+def merge_scans(scans: Sequence[LasPoints], names: Sequence[str] | None = None) -> LasPoints:
+    """Several scans (tiles or crops of one survey) as one: their points, one after the other.
+
+    The returns of a pulse cut by a tile's edge come together again (pulses are keyed by GPS
+    time, point source and channel).  Every scan must state the same coordinate unit (or none).
+
+    Raises
+    ------
+    ArgumentTypeError
+        An item is not a :class:`~zbuf_occlude.io.las.LasPoints`.
+    InvalidInputError
+        No scans; scans of different units or of which some have GPS times and others not (naming them).
+    """
+    scans = list(scans)
+    names = list(names) if names is not None else [f"scan {i}" for i in range(len(scans))]
+    if not scans:
+        raise InvalidInputError("no scans to merge")
+    for s in scans:
+        if not isinstance(s, LasPoints):
+            raise ArgumentTypeError(f"scans must be LasPoints (read them with zbuf_occlude.io.las.read_las), got {described(s)}")
+    if len(scans) == 1:
+        return scans[0]
+    first = scans[0]
+    for s, name in zip(scans[1:], names[1:], strict=True):
+        same_unit = s.linear_unit_m == first.linear_unit_m or not (math.isfinite(s.linear_unit_m) or math.isfinite(first.linear_unit_m))
+        if not same_unit:
+            raise InvalidInputError(f"{name}: its coordinates are in {s.linear_unit_m:g} m units, {names[0]}'s in {first.linear_unit_m:g}: "
+                                    "fit scans of one unit together")  # fmt: skip
+        if s.has_gps_time != first.has_gps_time:
+            raise InvalidInputError(f"{name}: point format {s.point_format_id} {'has' if s.has_gps_time else 'has no'} GPS time, "
+                                    f"{names[0]}'s {first.point_format_id} {'has' if first.has_gps_time else 'has no'}")  # fmt: skip
+    arrays = {key: np.concatenate([getattr(s, key) for s in scans]) for key in ("points", *LasPoints._DTYPES)}
+    return LasPoints(**arrays, has_gps_time=first.has_gps_time, point_format_id=first.point_format_id, version=first.version,
+                     linear_unit_m=first.linear_unit_m)  # fmt: skip
+
+
+def _ground(las: LasPoints, order: NDArray[np.int64], single: NDArray[np.bool_], points_m: NDArray[np.float64]) -> tuple[NDArray[np.bool_], str]:
+    """Sorted positions of the ground's single returns, and which rule chose them (module docstring)."""
+    cls = las.classification[order]
+    on_class = single & (cls == GROUND_CLASS)
+    if np.count_nonzero(on_class) >= MIN_CLASS_POINTS:
+        return on_class, f"class {GROUND_CLASS}"
+    cell = np.floor(points_m[:, :2] / LOWEST_CELL_M).astype(np.int64)
+    _, key = np.unique(cell, axis=0, return_inverse=True)
+    key = key.reshape(-1)
+    lowest = np.full(key.max() + 1, np.inf)
+    np.minimum.at(lowest, key, points_m[:, 2])
+    low = single & (points_m[:, 2] <= lowest[key] + LOWEST_SLAB_M)
+    if np.count_nonzero(low) >= MIN_CLASS_POINTS:
+        return low, f"single returns within {LOWEST_SLAB_M:g} m of the lowest return of their {LOWEST_CELL_M:g} m cell"
+    return np.zeros(len(order), bool), "none"
+
+
+def _checked_positive(value: Any, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ArgumentTypeError(f"{name} must be a number, got {described(value)}")
+    if not (math.isfinite(value) and value > 0):
+        raise InvalidInputError(f"{name} must be a finite number > 0, got {value}")
+    return float(value)
+
+
+def fit_return_model(
+    las: LasPoints,
+    *,
+    altitude_m: float,
+    classes: Sequence[int] | None = VEGETATION_CLASSES,
+    ground_reflectance: float = GROUND_REFLECTANCE,
+    divergence_shares: tuple[ArrayLike, ArrayLike] | None = None,
+    divergence_share: str = "multi_return_points",
+    seed: int = 0,
+    bootstrap: int = BOOTSTRAP,
+) -> ReturnModelFit:
+    """Fit the return model to a scan: range resolution, returns per pulse, detection threshold, intensity scale (module docstring).
+
+    Parameters
+    ----------
+    las : LasPoints
+        A scan with GPS times (point formats 1 and 3 to 10), from
+        :func:`~zbuf_occlude.io.las.read_las` (tiles merged by :func:`merge_scans`).
+    altitude_m : float
+        Flying height above the ground, metres, > 0 (the range to the ground at nadir): a LAS
+        file records no sensor position.  IGN LiDAR HD flies about 1,500 m above the ground.
+    classes : sequence of int, optional
+        The class set of the return statistics' ``..._classes_...`` figures.
+    ground_reflectance : float
+        The ground's reflectance at the scanner's wavelength, in (0, 1] (default
+        :data:`GROUND_REFLECTANCE`, an assumption).
+    divergence_shares : ((M,) float, (M,) float), optional
+        Divergences, degrees, and the share ``divergence_share`` that a simulation of this
+        scanner over a scene like the scan's gives at each (:func:`fit_divergence` makes them);
+        the divergence is fitted by inverting it (:func:`divergence_from_shares`).  None: not
+        measured.
+    divergence_share : str
+        The return statistics' share the curve gives (``"multi_return_points"``,
+        ``"multi_return_points_classes_3_4_5"``, ``"multi_return_points_class_5"``, ...).
+    seed, bootstrap : int
+        Of the bootstrap over pulses (at least 2 resamples).
+
+    Returns
+    -------
+    ReturnModelFit
+
+    Raises
+    ------
+    ArgumentTypeError
+        An argument of the wrong kind.
+    InvalidInputError
+        What :func:`~zbuf_occlude.sensors.fit.returns.return_statistics` refuses (no GPS time, no
+        points, class codes outside 0..255); a non-positive or non-finite altitude, a reflectance
+        outside (0, 1]; a ``divergence_share`` the statistics do not hold; what
+        :func:`divergence_from_shares` refuses.
+    InsufficientMemoryError
+        The scan is too large for the memory available.
+    """
+    check_classes(las, classes, seed, bootstrap)
+    altitude_m = _checked_positive(altitude_m, "altitude_m")
+    rho_g = _checked_positive(ground_reflectance, "ground_reflectance")
+    if rho_g > 1:
+        raise InvalidInputError(f"ground_reflectance must be in (0, 1], got {ground_reflectance}")
+    stats = return_statistics(las, classes=classes, seed=seed, bootstrap=bootstrap)
+    if divergence_shares is not None and divergence_share not in stats.estimates:
+        raise InvalidInputError(f"divergence_share {divergence_share!r} is not a figure of the return statistics "
+                                f"(they hold {', '.join(k for k in stats.estimates if k.startswith('multi_return'))})")  # fmt: skip
+    check_memory(len(las) * BYTES_PER_POINT, option=f"the return model fit of {len(las):,} points", hint="fit a crop")
+    unit_assumed = not math.isfinite(las.linear_unit_m)
+    unit_m = 1.0 if unit_assumed else float(las.linear_unit_m)
+    pulses = las_pulses(las)
+    figures, units, counts, methods, why = _model_figures(las, pulses, unit_m, altitude_m, rho_g)
+    ground = why.pop("_ground")
+    spread = pulse_bootstrap(pulses.count, figures, seed=seed, bootstrap=bootstrap)
+    boot = f"bootstrap over pulses ({int(bootstrap)}, seed {int(seed)})"
+    estimates = {}
+    for name in figures:
+        value, std = spread[name]
+        estimates[name] = Estimate(value, std, counts[name], f"{methods[name]}; {boot}", units[name])
+    most = int(las.number_of_returns.max())
+    estimates = {"range_resolution_m": estimates.pop("range_resolution_m"),
+                 "max_returns": Estimate(float(most), 0.0, len(las), "the most returns a pulse recorded (number_of_returns)", "")} | estimates  # fmt: skip
+    if divergence_shares is None:
+        estimates["beam_divergence_deg"] = Estimate(math.nan, math.nan, 0, "not measurable from the points (module docstring)", "deg")
+        why["beam_divergence_deg"] = "returns lie on the beam axis; give simulated shares (divergence_from_shares)"
+    else:
+        estimates["beam_divergence_deg"] = divergence_from_shares(*divergence_shares, stats.estimates[divergence_share])
+    for name, e in estimates.items():
+        if not math.isfinite(e.value) and name not in why:
+            why[name] = "nothing to measure it on"
+    return ReturnModelFit(estimates, stats, altitude_m, rho_g, ground, unit_m, unit_assumed, why)
+
+
+def _model_figures(
+    las: LasPoints, pulses: Any, unit_m: float, altitude_m: float, rho_g: float
+) -> tuple[dict[str, Callable], dict[str, str], dict[str, int], dict[str, str], dict[str, str]]:
+    """Every bootstrapped figure of the fit as a function of the pulses' weights (None: the scan itself),
+    with its unit, count, how it is measured and, for the ground, which rule chose it (``why["_ground"]``)."""
+    order, pulse = pulses.order, pulses.pulse
+    number, rn = las.number_of_returns[order], las.return_number[order].astype(np.int64)
+    cls, intensity = las.classification[order], las.intensity[order].astype(np.float64)
+    points_m = las.points[order] * unit_m
+    single, first_of_several = number == 1, (number > 1) & (rn == 1)
+    pair = (pulse[1:] == pulse[:-1]) & (rn[1:] == rn[:-1] + 1)
+    gaps = np.linalg.norm(points_m[1:][pair] - points_m[:-1][pair], axis=1)
+    gap_pulse, gap_class = pulse[:-1][pair], cls[1:][pair]
+    cos = np.cos(np.radians(np.abs(las.scan_angle_deg[order].astype(np.float64))))
+    # the energy a white (ρ = 1) flat ground returns at the scan angle from the flying height: hit_energy's law
+    unit_energy = hit_energy(1.0, 1.0, cos, altitude_m / cos)
+    per_energy = intensity / unit_energy
+    ground, ground_rule = _ground(las, order, single, points_m)
+    recorded = intensity > 0
+
+    figures: dict[str, Callable] = {}
+    units: dict[str, str] = {}
+    counts: dict[str, int] = {}
+    methods: dict[str, str] = {}
+    why: dict[str, str] = {"_ground": ground_rule}
+
+    def add(name: str, figure: Callable, n: int, unit: str, method: str) -> None:
+        figures[name], units[name], counts[name], methods[name] = figure, unit, n, method
+
+    def quantile(mask: NDArray[np.bool_] | None, values: NDArray, pulses_of: NDArray, q: float) -> tuple[Callable, int]:
+        v = PulseValues(values if mask is None else values[mask], pulses_of if mask is None else pulses_of[mask])
+        return (lambda w: v.quantile(q, w)), len(v)
+
+    def least(mask: NDArray[np.bool_] | None, values: NDArray, pulses_of: NDArray, q: float) -> tuple[Callable, int]:
+        v = PulseValues(values if mask is None else values[mask], pulses_of if mask is None else pulses_of[mask])
+        return (lambda w: lower_end(v, q, w)), len(v)
+
+    def ratio(top: tuple[Callable, int], bottom: tuple[Callable, int], scale: float = 1.0) -> tuple[Callable, int]:
+        def figure(w: NDArray | None) -> float:
+            b = bottom[0](w)
+            return scale * top[0](w) / b if b and math.isfinite(b) else math.nan
+
+        return figure, min(top[1], bottom[1])
+
+    q_res, q_det = RESOLUTION_QUANTILE, DETECTION_QUANTILE
+    add("range_resolution_m", *least(None, gaps, gap_pulse, q_res), "m",
+        f"lower end of the gaps between consecutive returns of a pulse (2·Q({q_res:g}) − Q({2 * q_res:g}))")  # fmt: skip
+    threshold = least(recorded, intensity, pulse, q_det)
+    add("detection_threshold_counts", *threshold, "counts",
+        f"lower end of the intensity of every return, 0s left out (2·Q({q_det:g}) − Q({2 * q_det:g}))")  # fmt: skip
+    scale = quantile(ground & recorded, per_energy, pulse, 0.5)
+    scale = ((lambda w, f=scale[0]: f(w) / rho_g), scale[1])
+    add("intensity_scale", *scale, "counts·m²",
+        f"median of intensity / hit_energy(1, ρ_g, cos θ, H / cos θ), single returns of the ground ({ground_rule})")  # fmt: skip
+    add("detection_threshold", *ratio(threshold, scale), "m⁻²", "detection_threshold_counts / intensity_scale")
+    on_ground = cls == GROUND_CLASS if ground_rule.startswith("class") else ground
+    single_ground = quantile(on_ground & single & recorded, intensity, pulse, 0.5)
+    add("intensity_ratio_ground", *ratio(quantile(on_ground & first_of_several & recorded, intensity, pulse, 0.5), single_ground), "",
+        "median intensity of first-of-several over single returns, on the ground")  # fmt: skip
+    sums = np.bincount(pulse, weights=intensity, minlength=pulses.count)
+    several = np.flatnonzero(pulses.complete & (pulses.returns > 1))
+    summed = quantile(None, sums[several], several, 0.5)
+    add("intensity_sum_ratio", *ratio(summed, quantile(single & recorded, intensity, pulse, 0.5)), "",
+        "median summed intensity of complete pulses of several returns over the median single return")  # fmt: skip
+    if counts["intensity_scale"] == 0:
+        why.update({name: "no single returns on the ground" for name in ("intensity_scale", "detection_threshold")})
+    ground_per = quantile(ground & recorded, per_energy, pulse, 0.5)
+    present, sizes = np.unique(cls, return_counts=True)
+    for c in present[sizes >= MIN_CLASS_POINTS].tolist():
+        mine = cls == c
+        add(f"range_resolution_m_class_{c}", *least(gap_class == c, gaps, gap_pulse, q_res), "m",
+            f"lower end (as range_resolution_m) of the gaps whose farther return is of class {c}")  # fmt: skip
+        add(f"detection_threshold_counts_class_{c}", *least(mine & recorded, intensity, pulse, q_det), "counts",
+            f"lower end (as detection_threshold_counts) of the intensity of class {c}'s returns")  # fmt: skip
+        if c == GROUND_CLASS and ground_rule.startswith("class"):
+            continue  # the ground's ratio is intensity_ratio_ground, its reflectance the one given
+        add(f"intensity_ratio_class_{c}", *ratio(quantile(mine & first_of_several & recorded, intensity, pulse, 0.5),
+                                                 quantile(mine & single & recorded, intensity, pulse, 0.5)), "",
+            f"median intensity of first-of-several over single returns of class {c}")  # fmt: skip
+        add(f"reflectance_class_{c}", *ratio(quantile(mine & single & recorded, per_energy, pulse, 0.5), ground_per, rho_g), "",
+            f"ρ_g × median I·R²/cos θ of class {c}'s single returns over the ground's")  # fmt: skip
+    return figures, units, counts, methods, why
+
+
+def lower_end(values: PulseValues, q: float, weights: NDArray[np.float64] | None = None) -> float:
+    """The least value a law bounds from below, told robustly: ``max(2·Q(q) − Q(2q), min)``.
+
+    Where the density is about flat just above the bound ``a`` (gaps of a range resolution,
+    intensities above a detection threshold), the quantile function is ``Q(p) ≈ a + p / f``
+    for small ``p``, so its line through ``Q(q)`` and ``Q(2q)`` meets ``p = 0`` at ``a``: unbiased
+    to first order, where ``Q(q)`` alone lies ``q / f`` above.  The minimum rests on one value
+    (an outlier moves it); this on the lowest ``2q`` of them.  Never below the least value.
+
+    Parameters
+    ----------
+    values : PulseValues
+    q : float
+        In (0, 0.5].
+    weights : (n_pulses,) float64, optional
+        A bootstrap resample's draws per pulse (:func:`~zbuf_occlude.sensors.fit.returns.pulse_bootstrap`).
+
+    Returns
+    -------
+    float
+        NaN where there are no values.
+    """
+    low, high, least = values.quantile(q, weights), values.quantile(2 * q, weights), values.quantile(0.0, weights)
+    return max(2.0 * low - high, least) if math.isfinite(low) else math.nan
+
+
+def divergence_from_shares(divergences_deg: ArrayLike, simulated_shares: ArrayLike, measured: Estimate,
+                           simulated_std: ArrayLike | None = None) -> Estimate:  # fmt: skip
+    """The beam divergence at which a simulated multi-return share meets the measured one.
+
+    The share of multi-return points grows with the footprint: the wider the beam, the more
+    pulses meet two surfaces.  Given that share simulated at several divergences (a scanner of
+    the scan's flying height over a scene like the scan's: trees and ground), the divergence is
+    the curve's inverse at the measured share (linear between the simulated points), and its
+    uncertainty the measured share's ``± std`` (and the simulation's, added in quadrature)
+    carried through the curve's slope: half the divergence interval between the inverses of
+    ``share ± σ``.
+
+    Parameters
+    ----------
+    divergences_deg : (M,) float
+        Full-angle divergences, degrees, > 0, strictly increasing, M >= 2.
+    simulated_shares : (M,) float
+        The share in [0, 1] simulated at each.  It must grow with the divergence (non-decreasing;
+        ties are taken as the curve's flat parts) and rise somewhere.
+    measured : Estimate
+        The measured share (a :class:`~zbuf_occlude.sensors.fit.returns.ReturnStatistics` estimate,
+        unit ``"share"``).
+    simulated_std : (M,) float, optional
+        The simulated shares' standard deviations (e.g. binomial over the simulated points).
+
+    Returns
+    -------
+    Estimate
+        Degrees; NaN (not measured) where the measured share lies outside the simulated range
+        (simulate wider or narrower beams) or is NaN; its std is NaN where ``share ± σ`` leaves it.
+
+    Raises
+    ------
+    InvalidInputError
+        Arrays of other shapes or lengths, non-finite values, divergences not increasing or not
+        positive, shares outside [0, 1], decreasing or flat everywhere.
+    ArgumentTypeError
+        ``measured`` is not an :class:`~zbuf_occlude.sensors.fit.Estimate`.
+    """
+    if not isinstance(measured, Estimate):
+        raise ArgumentTypeError(f"measured must be an Estimate (a share of the return statistics), got {described(measured)}")
+    d = np.asarray(divergences_deg, dtype=np.float64)
+    s = np.asarray(simulated_shares, dtype=np.float64)
+    sd = np.zeros_like(s) if simulated_std is None else np.asarray(simulated_std, dtype=np.float64)
+    if d.ndim != 1 or len(d) < 2 or s.shape != d.shape or sd.shape != d.shape:
+        raise InvalidInputError(f"divergences_deg, simulated_shares and simulated_std must be (M,) arrays of one length M >= 2, "
+                                f"got shapes {d.shape}, {s.shape}, {sd.shape}")  # fmt: skip
+    if not (np.all(np.isfinite(d)) and np.all(np.isfinite(s)) and np.all(np.isfinite(sd))):
+        raise InvalidInputError("divergences_deg, simulated_shares and simulated_std must be finite")
+    if not (d[0] > 0 and np.all(np.diff(d) > 0)):
+        raise InvalidInputError(f"divergences_deg must be > 0 and strictly increasing, got {d.tolist()}")
+    if s.min() < 0 or s.max() > 1 or sd.min() < 0:
+        raise InvalidInputError(f"simulated_shares must be shares in [0, 1] (and simulated_std >= 0), got {s.tolist()}")
+    if np.any(np.diff(s) < 0) or s[-1] == s[0]:
+        raise InvalidInputError(f"simulated_shares must grow with the divergence (non-decreasing, rising somewhere), got {s.tolist()}")
+    method = (f"divergence whose simulated share meets the measured {measured.value:.4g} ± {measured.std:.2g} (linear between "
+              f"{len(d)} simulated divergences, {d[0]:.3g}° to {d[-1]:.3g}°)")  # fmt: skip
+
+    def inverse(share: float) -> float:
+        if not (math.isfinite(share) and s[0] <= share <= s[-1]):
+            return math.nan
+        # the rising parts only: on a flat part any divergence gives the share; take its middle
+        lo, hi = np.searchsorted(s, share, side="left"), np.searchsorted(s, share, side="right")
+        if lo < hi:
+            return float((d[lo] + d[hi - 1]) / 2.0)
+        return float(np.interp(share, s[lo - 1 : lo + 1], d[lo - 1 : lo + 1]))
+
+    value = inverse(measured.value)
+    if math.isfinite(value):
+        sim_sd = float(np.interp(value, d, sd))
+        sigma = math.hypot(measured.std, sim_sd) if math.isfinite(measured.std) else math.nan
+        lo, hi = inverse(measured.value - sigma), inverse(measured.value + sigma)
+        std = (hi - lo) / 2.0 if math.isfinite(lo) and math.isfinite(hi) else math.nan
+    else:
+        std = math.nan
+    return Estimate(value, std, measured.n, method, "deg")
+
+
+def fit_divergence(
+    simulate: Callable[[float], float | tuple[float, float]],
+    measured: Estimate,
+    *,
+    divergences_deg: Sequence[float] = DIVERGENCE_GRID_DEG,
+) -> tuple[Estimate, NDArray[np.float64], NDArray[np.float64]]:
+    """The divergence fitted by simulation: ``simulate`` at each divergence, inverted at ``measured`` (:func:`divergence_from_shares`).
+
+    Parameters
+    ----------
+    simulate : callable
+        ``simulate(divergence_deg) -> share`` or ``-> (share, std)``: the multi-return share of
+        a simulated scan of a scanner of that full-angle divergence (degrees), the same figure as
+        ``measured`` (e.g. ``return_statistics(read_las(simulated_laz)).estimates["multi_return_points"]``
+        of a scene like the scan's, flown at its height).
+    measured : Estimate
+        The measured share.
+    divergences_deg : sequence of float
+        Where to simulate, increasing (default :data:`DIVERGENCE_GRID_DEG`, 0.05 to 3 mrad).
+
+    Returns
+    -------
+    estimate : Estimate
+        Degrees.
+    divergences_deg, shares : (M,) float64
+        The simulated curve, to report.
+
+    Raises
+    ------
+    InvalidInputError
+        What :func:`divergence_from_shares` refuses (a simulated curve that does not grow with the divergence...).
+    """
+    d = np.asarray(divergences_deg, dtype=np.float64)
+    shares, stds = np.empty(len(d)), np.zeros(len(d))
+    for i, divergence in enumerate(d):
+        out = simulate(float(divergence))
+        shares[i], stds[i] = (out, 0.0) if np.ndim(out) == 0 else out
+    return divergence_from_shares(d, shares, measured, stds), d, shares
+
