@@ -1,0 +1,175 @@
+"""Ray table files (:mod:`zbuf_occlude.io.ray_tables`): CSV and ``.npy`` read back exactly, and hostile
+files refused in one line naming the file, the large ones before their rows are allocated."""
+
+from __future__ import annotations
+
+import io
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from numpy.lib import format as npy_format
+
+from zbuf_occlude.errors import InvalidInputError, UnsafePathError
+from zbuf_occlude.io.ray_tables import RAY_TABLE_COLUMNS, ray_table_bytes, read_ray_table
+
+HEADER = ",".join(RAY_TABLE_COLUMNS)
+
+
+def _write(path: Path, data: bytes | str) -> Path:
+    path.write_bytes(data.encode() if isinstance(data, str) else data)
+    return path
+
+
+def _refused(path: Path, match: str, *, max_rows: int = 100, error=InvalidInputError, **kw) -> str:
+    with pytest.raises(error, match=match) as info:
+        read_ray_table(path, max_rows=max_rows, **kw)
+    message = str(info.value)
+    assert "\n" not in message and str(path) in message, message
+    return message
+
+
+_finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(rows=st.lists(st.tuples(_finite, _finite, _finite), min_size=1, max_size=12), suffix=st.sampled_from([".csv", ".npy"]))
+def test_a_table_reads_back_bit_for_bit(tmp_path: Path, rows, suffix: str) -> None:
+    table = np.array(rows, dtype=np.float64)
+    path = _write(tmp_path / f"t{suffix}", ray_table_bytes(table[:, 0], table[:, 1], table[:, 2], suffix=suffix))
+    columns = read_ray_table(path, max_rows=len(rows))
+    for got, want in zip(columns, table.T, strict=True):
+        assert got.dtype == np.float64 and got.flags.c_contiguous
+        assert got.tobytes() == want.tobytes()  # -0.0 and subnormals included
+
+
+def test_csv_header_may_have_spaces_and_crlf_and_blank_lines(tmp_path: Path) -> None:
+    path = _write(tmp_path / "t.CSV", " time_s , azimuth_deg,elevation_deg \r\n0,1.5,-2\r\n\r\n0.25, 3 ,4e-1\r\n")
+    t, a, e = read_ray_table(path, max_rows=3)  # the blank line counts towards the cap
+    assert t.tolist() == [0.0, 0.25] and a.tolist() == [1.5, 3.0] and e.tolist() == [-2.0, 0.4]
+
+
+def test_npy_of_float32_reads_as_float64(tmp_path: Path) -> None:
+    table = np.array([[0.0, 1.0, 2.5], [1e-3, -3.0, 89.0]], np.float32)
+    path = _write(tmp_path / "t.npy", _npy(table))
+    t, a, e = read_ray_table(path, max_rows=2)
+    assert t.dtype == np.float64 and np.array_equal(np.column_stack([t, a, e]), table.astype(np.float64))
+
+
+def test_nan_is_a_number_here_the_sensor_refuses_it(tmp_path: Path) -> None:
+    # the reader checks the format; RayTable checks the values (tests/sensors/test_ray_table.py)
+    path = _write(tmp_path / "t.csv", f"{HEADER}\n0,nan,1\n")
+    assert np.isnan(read_ray_table(path, max_rows=1)[1][0])
+
+
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        ("0,1,2\n1,2,3\n", r"first line must be the header time_s,azimuth_deg,elevation_deg, got '0,1,2'"),
+        ("time,azimuth,elevation\n0,1,2\n", r"must be the header .*got 'time,azimuth,elevation'"),
+        ("azimuth_deg,time_s,elevation_deg\n0,1,2\n", r"must be the header"),
+        (f"{HEADER},intensity\n0,1,2,3\n", r"must be the header"),
+        ("", r"must be the header .*got ''"),
+        (f"{HEADER}\n", r"the ray table has no rows"),
+        (f"{HEADER}\n\n\n", r"the ray table has no rows"),
+        (f"{HEADER}\n0,1\n", r"each row must hold 3 numbers .*got 2"),
+        (f"{HEADER}\n0,1,2,3\n", r"each row must hold 3 numbers .*got 4"),
+        (f"{HEADER}\n0,1,2\n0,1\n", r"not a ray table of three numbers per row"),
+        (f"{HEADER}\n0,1,x\n", r"not a ray table of three numbers per row \(could not convert string 'x'"),
+        (f"{HEADER}\n# a comment\n0,1,2\n", r"not a ray table of three numbers per row"),
+        (f'{HEADER}\n"0","1","2"\n', r"not a ray table of three numbers per row"),
+    ],
+)
+def test_a_csv_that_is_not_a_ray_table_is_one_line(tmp_path: Path, text: str, match: str) -> None:
+    _refused(_write(tmp_path / "t.csv", text), match)
+
+
+def test_a_csv_that_is_not_utf8_is_one_line(tmp_path: Path) -> None:
+    _refused(_write(tmp_path / "t.csv", HEADER.encode() + b"\n0,1,\xff\n"), r"not UTF-8")
+
+
+def _npy(array: np.ndarray) -> bytes:
+    buffer = io.BytesIO()
+    np.save(buffer, array, allow_pickle=False)
+    return buffer.getvalue()
+
+
+@pytest.mark.parametrize(
+    "array, match",
+    [
+        (np.zeros((4, 3), np.int64), r"an \(N, 3\) floating-point array .*got shape \(4, 3\) dtype int64"),
+        (np.zeros((4, 3), bool), r"dtype bool"),
+        (np.zeros((4, 3), np.complex64), r"dtype complex64"),
+        (np.zeros((4, 2)), r"got shape \(4, 2\)"),
+        (np.zeros(12), r"got shape \(12,\)"),
+        (np.zeros((2, 2, 3)), r"got shape \(2, 2, 3\)"),
+        (np.zeros(4, dtype=[("time_s", "f8"), ("azimuth_deg", "f8"), ("elevation_deg", "f8")]), r"got shape \(4,\)"),
+        (np.zeros((0, 3)), r"the ray table has no rows"),
+    ],
+)
+def test_a_npy_that_is_not_an_n_by_3_float_array_is_one_line(tmp_path: Path, array: np.ndarray, match: str) -> None:
+    _refused(_write(tmp_path / "t.npy", _npy(array)), match)
+
+
+def test_a_huge_declared_npy_is_refused_from_its_header(tmp_path: Path, monkeypatch) -> None:
+    """A header declaring 10⁹ rows over a few bytes: refused before numpy reads (allocates) the body."""
+    buffer = io.BytesIO()
+    npy_format.write_array_header_1_0(buffer, {"descr": "<f8", "fortran_order": False, "shape": (10**9, 3)})
+    path = _write(tmp_path / "huge.npy", buffer.getvalue() + b"\0" * 48)
+
+    def no_body(*args, **kwargs):
+        raise AssertionError("the body was read")
+
+    monkeypatch.setattr(npy_format, "read_array", no_body)
+    _refused(path, r"its header declares 24,000,000,000 bytes of array", max_rows=4)
+
+
+def test_more_rows_than_the_cap_are_refused(tmp_path: Path) -> None:
+    t = np.arange(5.0)
+    _refused(_write(tmp_path / "t.npy", ray_table_bytes(t, t, t, suffix=".npy")), r"declares 120 bytes .* the 96 accepted", max_rows=4)
+    _refused(_write(tmp_path / "t.csv", ray_table_bytes(t, t, t)), r"more than 4 lines after the header", max_rows=4)
+    assert len(read_ray_table(tmp_path / "t.csv", max_rows=5)[0]) == 5
+
+
+def test_a_csv_larger_than_its_rows_may_take_is_refused_before_reading(tmp_path: Path) -> None:
+    path = _write(tmp_path / "t.csv", f"{HEADER}\n0,0,0\n" + " " * 10_000)
+    _refused(path, r"10,039 bytes, more than the 4,192 a file read here may have", max_rows=1)
+
+
+@pytest.mark.parametrize("suffix", [".txt", ".npz", ""])
+def test_other_suffixes_are_refused(tmp_path: Path, suffix: str) -> None:
+    _refused(_write(tmp_path / f"t{suffix}", f"{HEADER}\n0,0,0\n"), r"must be a \.csv or a \.npy file")
+
+
+def test_a_missing_file_is_one_line(tmp_path: Path) -> None:
+    _refused(tmp_path / "none.csv", r"none\.csv")
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs here")
+@pytest.mark.parametrize("suffix", [".csv", ".npy"])
+def test_a_fifo_is_refused_without_blocking(tmp_path: Path, suffix: str) -> None:
+    path = tmp_path / f"fifo{suffix}"
+    os.mkfifo(path)
+    _refused(path, r"is a FIFO; only regular files are read")
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".npy"])
+def test_a_link_out_of_the_folder_is_refused(tmp_path: Path, suffix: str) -> None:
+    outside, folder = tmp_path / "outside", tmp_path / "folder"
+    outside.mkdir()
+    folder.mkdir()
+    target = _write(outside / f"t{suffix}", ray_table_bytes([0.0], [1.0], [2.0], suffix=suffix))
+    link = folder / f"t{suffix}"
+    link.symlink_to(target)
+    assert read_ray_table(link, max_rows=1)[1].tolist() == [1.0]  # no folder named: the link is followed
+    _refused(link, r"outside", error=UnsafePathError, within=folder)
+
+
+def test_the_writer_refuses_ragged_columns_and_other_suffixes() -> None:
+    with pytest.raises(InvalidInputError, match="one length"):
+        ray_table_bytes([0.0, 1.0], [0.0], [0.0, 1.0])
+    with pytest.raises(InvalidInputError, match=r"\.csv or \.npy"):
+        ray_table_bytes([0.0], [0.0], [0.0], suffix=".las")
