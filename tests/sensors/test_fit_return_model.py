@@ -1,0 +1,246 @@
+"""The return model fitted to LAS scans: synthetic scans of known resolution, threshold and intensity scale give them back
+within the fit's stated uncertainty; the divergence's inversion of a simulated curve; applying the fit to sensors."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
+from zbuf_occlude.io.atomic import write_bytes
+from zbuf_occlude.io.las import LasPoints, las_bytes, read_las
+from zbuf_occlude.sensors.airborne import airborne_preset
+from zbuf_occlude.sensors.echoes import hit_energy
+from zbuf_occlude.sensors.fit import (
+    Estimate,
+    divergence_from_shares,
+    fit_divergence,
+    fit_return_model,
+    merge_scans,
+)
+from zbuf_occlude.sensors.fit.return_model import FOOTPRINT_RAYS, lower_end
+from zbuf_occlude.sensors.fit.returns import PulseValues
+from zbuf_occlude.sensors.presets import sensor_from_name
+
+#: The synthetic survey's truth: flying height, ground reflectance, intensity scale (counts·m²), range resolution (m),
+#: detection threshold (counts).
+H, RHO, SCALE, RESOLUTION, THRESHOLD = 1200.0, 0.3, 2.0e10, 0.9, 40
+
+
+def _survey(n_pulses: int = 4000, seed: int = 0, multi_share: float = 0.35, classes: bool = True) -> dict[str, np.ndarray]:
+    """Pulses fired from ``(x, 0, H)`` at scan angles within ±15°: single returns on flat ground (class 2) of intensity
+    ``SCALE · hit_energy(1, RHO, cos θ, H / cos θ)`` (lognormal noise, median 1); the rest 2 to 4 returns, the last on the
+    ground, the others in trees (class 5) at gaps ``RESOLUTION + Exp(2 m)`` above, of intensity ``THRESHOLD + Exp(60)``."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for i in range(n_pulses):
+        theta = math.radians(round(rng.uniform(-15, 15) / 0.006) * 0.006)
+        origin, axis = np.array([0.5 * i, 0.0, H]), np.array([0.0, math.sin(theta), -math.cos(theta)])
+        ground = H / math.cos(theta)
+        n = int(rng.integers(2, 5)) if rng.random() < multi_share else 1
+        ranges = ground - np.concatenate([np.cumsum(RESOLUTION + rng.exponential(2.0, n - 1))[::-1], [0.0]])
+        for k, r in enumerate(ranges, start=1):
+            on_ground = k == n
+            if n == 1:
+                intensity = SCALE * hit_energy(1.0, RHO, math.cos(theta), ground) * math.exp(0.1 * rng.standard_normal())
+            else:
+                intensity = THRESHOLD + rng.exponential(60.0)
+            rows.append((*(origin + r * axis), round(intensity), k, n, i * 1e-4, math.degrees(theta), 2 if on_ground or not classes else 5))
+    cols = [np.array(c) for c in zip(*rows, strict=True)]
+    return {"points": np.stack(cols[:3], axis=1), "intensity": cols[3].astype(np.int64), "return_number": cols[4].astype(np.int64),
+            "number_of_returns": cols[5].astype(np.int64), "gps_time": cols[6], "scan_angle_deg": cols[7],
+            "classification": (cols[8] if classes else np.zeros(len(rows))).astype(np.int64)}  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def survey_las(tmp_path_factory) -> LasPoints:
+    path = tmp_path_factory.mktemp("las") / "survey.laz"
+    write_bytes(path, las_bytes(**_survey(), compress=True))
+    return read_las(path)
+
+
+@pytest.fixture(scope="module")
+def survey_fit(survey_las):
+    return fit_return_model(survey_las, altitude_m=H, ground_reflectance=RHO, classes=(5,))
+
+
+def _within(e: Estimate, truth: float, slack: float = 0.0) -> bool:
+    return abs(e.value - truth) <= 3.0 * e.std + slack
+
+
+def test_a_synthetic_survey_gives_back_its_resolution_threshold_and_scale_within_the_stated_uncertainty(survey_fit) -> None:
+    e = survey_fit.estimates
+    assert _within(e["range_resolution_m"], RESOLUTION, 0.001) and e["range_resolution_m"].std < 0.05  # 1 mm coordinate steps
+    assert _within(e["detection_threshold_counts"], THRESHOLD, 0.5)  # whole counts
+    assert _within(e["intensity_scale"], SCALE) and e["intensity_scale"].std < 0.01 * SCALE
+    assert e["detection_threshold"].value == pytest.approx(e["detection_threshold_counts"].value / e["intensity_scale"].value)
+    assert _within(e["detection_threshold"], THRESHOLD / SCALE, 0.5 / SCALE)
+    assert e["max_returns"].value == 4 and e["max_returns"].std == 0
+    assert survey_fit.ground == "class 2" and survey_fit.unit_assumed and survey_fit.unit_m == 1.0
+    assert math.isnan(e["beam_divergence_deg"].value) and "beam axis" in survey_fit.why_not_measured["beam_divergence_deg"]
+    # per class: the trees' gaps and intensities hold the same bounds; their apparent reflectance is theirs over the ground's
+    assert _within(e["range_resolution_m_class_5"], RESOLUTION, 0.001) and _within(e["detection_threshold_counts_class_5"], THRESHOLD, 0.5)
+    assert "intensity_ratio_class_2" not in e and "reflectance_class_2" not in e  # the ground's are the given ones
+
+
+def test_the_lower_end_is_neither_the_minimum_nor_the_first_percentile() -> None:
+    rng = np.random.default_rng(1)
+    values = np.concatenate([[0.2], 1.0 + rng.uniform(0.0, 5.0, 20_000)])  # one outlier below a flat density from 1
+    v = PulseValues(values, np.arange(len(values)))
+    assert lower_end(v, 0.01) == pytest.approx(1.0, abs=0.01)
+    assert v.quantile(0.01) == pytest.approx(1.05, abs=0.01) and v.quantile(0.0) == 0.2
+    few = PulseValues(np.array([3.0, 4.0]), np.arange(2))
+    assert lower_end(few, 0.01) == 3.0  # never below the least value
+    assert math.isnan(lower_end(PulseValues(np.zeros(0), np.zeros(0, np.int64)), 0.01))
+
+
+@settings(max_examples=25, deadline=None)
+@given(altitude=st.floats(10.0, 5000.0), reflectance=st.floats(0.01, 1.0))
+def test_law_the_scale_grows_as_the_altitude_squared_over_the_reflectance_and_counts_do_not_move(survey_las, altitude, reflectance) -> None:
+    """E = ρ cos θ / R² with R = H / cos θ: the counts per unit energy are ∝ H² / ρ; what is in counts or metres stays."""
+    base = fit_return_model(survey_las, altitude_m=H, ground_reflectance=RHO, classes=None, bootstrap=2)
+    other = fit_return_model(survey_las, altitude_m=altitude, ground_reflectance=reflectance, classes=None, bootstrap=2)
+    factor = (altitude / H) ** 2 * RHO / reflectance
+    assert other.estimates["intensity_scale"].value == pytest.approx(factor * base.estimates["intensity_scale"].value, rel=1e-9)
+    assert other.estimates["detection_threshold"].value == pytest.approx(base.estimates["detection_threshold"].value / factor, rel=1e-9)
+    for name in ("range_resolution_m", "detection_threshold_counts", "max_returns", "intensity_sum_ratio", "detection_threshold_counts_class_5"):
+        assert other.estimates[name].value == pytest.approx(base.estimates[name].value, rel=1e-12)
+
+
+def test_the_files_unit_scales_the_gaps_and_tiles_merge_into_the_whole(survey_las) -> None:
+    fields = {k: getattr(survey_las, k) for k in ("points", *LasPoints._DTYPES)}
+    feet = LasPoints(**fields, linear_unit_m=0.3048)
+    whole = fit_return_model(survey_las, altitude_m=H, classes=None, bootstrap=2)
+    in_feet = fit_return_model(feet, altitude_m=H, classes=None, bootstrap=2)
+    assert in_feet.estimates["range_resolution_m"].value == pytest.approx(0.3048 * whole.estimates["range_resolution_m"].value)
+    assert not in_feet.unit_assumed and in_feet.unit_m == 0.3048
+    # two tiles cut through the middle of the survey, pulses split between them: merged, the figures are the whole's
+    west = survey_las.points[:, 0] < np.median(survey_las.points[:, 0])
+    tiles = [LasPoints(**{k: v[mask] for k, v in fields.items()}) for mask in (west, ~west)]
+    merged = fit_return_model(merge_scans(tiles, ["west.laz", "east.laz"]), altitude_m=H, classes=None, bootstrap=2)
+    assert {k: e.value for k, e in merged.estimates.items()} == pytest.approx({k: e.value for k, e in whole.estimates.items()}, nan_ok=True)
+    with pytest.raises(InvalidInputError, match=r"east\.laz: its coordinates are in 0\.3048 m units"):
+        merge_scans([tiles[0], replace(tiles[1], linear_unit_m=0.3048)], ["west.laz", "east.laz"])
+    with pytest.raises(ArgumentTypeError, match="LasPoints"):
+        merge_scans([tiles[0], "east.laz"])
+    with pytest.raises(InvalidInputError, match="no scans"):
+        merge_scans([])
+
+
+def test_without_a_ground_class_the_lowest_single_returns_are_the_ground() -> None:
+    columns = _survey(n_pulses=1500, classes=False)
+    n = len(columns["points"])
+    las = LasPoints(**columns, point_source_id=np.zeros(n, np.int64), scanner_channel=np.zeros(n, np.int64))
+    fit = fit_return_model(las, altitude_m=H, ground_reflectance=RHO, bootstrap=20)
+    assert fit.ground.startswith("single returns within 0.5 m of the lowest return")
+    assert _within(fit.estimates["intensity_scale"], SCALE)
+
+
+def test_applied_to_sensors(survey_fit) -> None:
+    e = survey_fit.estimates
+    airborne = survey_fit.apply(airborne_preset("riegl-q1560"))
+    assert (airborne.max_returns, airborne.range_resolution_m) == (4, e["range_resolution_m"].value)
+    assert airborne.name == "riegl-q1560-fitted" and "returns fitted to 4,000 pulses" in airborne.source
+    assert survey_fit.sets(airborne) == ("range_resolution_m", "max_returns")  # no divergence measured, no threshold field
+    lidar = survey_fit.apply(sensor_from_name("hdl32e"))
+    assert lidar.detection_range_m == pytest.approx(math.sqrt(lidar.detection_reflectivity / e["detection_threshold"].value))
+    assert lidar.detection_threshold == pytest.approx(e["detection_threshold"].value)
+    assert "| detection_threshold |" in survey_fit.markdown(lidar) and "| yes |" in survey_fit.markdown(lidar)
+    # a divergence fitted by simulation: the scanner gets it and a footprint
+    with_divergence = replace(survey_fit, estimates={**e, "beam_divergence_deg": Estimate(0.02, 0.002, 10, "simulated", "deg")})
+    fitted = with_divergence.apply(airborne_preset("riegl-q1560"))
+    assert fitted.beam_divergence_deg == 0.02 and fitted.footprint_rays == FOOTPRINT_RAYS
+    # one return per pulse: no resolution, one ray
+    single = replace(survey_fit, estimates={**with_divergence.estimates, "max_returns": Estimate(1.0, 0.0, 10, "count")})
+    one = single.apply(airborne_preset("riegl-q1560"))
+    assert (one.max_returns, one.range_resolution_m, one.footprint_rays) == (1, 0.0, 1)
+    with pytest.raises(ArgumentTypeError, match="Lidar or an AirborneScanner"):
+        survey_fit.apply("riegl-q1560")
+
+
+def test_the_fit_reads_as_strict_json_and_a_table(survey_fit) -> None:
+    out = json.loads(json.dumps(survey_fit.to_json(), allow_nan=False))
+    assert out["estimates"]["beam_divergence_deg"]["value"] is None and out["altitude_m"] == H
+    assert out["statistics"]["n_pulses"] == 4000 and out["ground"] == "class 2"
+    text = survey_fit.markdown()
+    assert "metres assumed" in text and "not measured (returns lie on the beam axis" in text and "| returns_1 |" in text
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "match"),
+    [
+        ({"altitude_m": 0.0}, InvalidInputError, "altitude_m must be a finite number > 0, got 0.0"),
+        ({"altitude_m": math.nan}, InvalidInputError, "altitude_m must be a finite number > 0"),
+        ({"altitude_m": True}, ArgumentTypeError, "altitude_m must be a number"),
+        ({"altitude_m": "1000"}, ArgumentTypeError, "altitude_m must be a number"),
+        ({"altitude_m": 1000.0, "ground_reflectance": 1.5}, InvalidInputError, r"ground_reflectance must be in \(0, 1\], got 1.5"),
+        ({"altitude_m": 1000.0, "divergence_shares": ([0.01, 0.02], [0.1, 0.2]), "divergence_share": "multi_return_points_class_9"},
+         InvalidInputError, "'multi_return_points_class_9' is not a figure"),
+        ({"altitude_m": 1000.0, "bootstrap": 1}, InvalidInputError, "bootstrap must be >= 2"),
+    ],
+)  # fmt: skip
+def test_bad_arguments_are_refused_naming_them(survey_las, kwargs, error, match) -> None:
+    with pytest.raises(error, match=match):
+        fit_return_model(survey_las, **kwargs)
+
+
+def test_a_scan_is_a_las_points_with_gps_times(survey_las) -> None:
+    with pytest.raises(ArgumentTypeError, match="LasPoints"):
+        fit_return_model(np.zeros((3, 3)), altitude_m=100.0)
+    with pytest.raises(InvalidInputError, match="no GPS time"):
+        fit_return_model(replace(survey_las, has_gps_time=False, point_format_id=0), altitude_m=100.0)
+
+
+def _share(d):
+    """A multi-return share that grows with the divergence (degrees) and saturates."""
+    return 1.0 - np.exp(-np.asarray(d) / 0.02)
+
+
+def test_the_divergence_is_the_simulated_curves_inverse_at_the_measured_share() -> None:
+    grid = np.linspace(0.005, 0.1, 60)
+    truth, sigma = 0.03, 0.005
+    e = divergence_from_shares(grid, _share(grid), Estimate(float(_share(truth)), sigma, 1000, "measured", "share"))
+    assert e.value == pytest.approx(truth, rel=1e-3) and e.unit == "deg"
+    slope = math.exp(-truth / 0.02) / 0.02  # d share / d divergence
+    assert e.std == pytest.approx(sigma / slope, rel=0.02)
+    # the simulation's own spread adds in quadrature
+    noisy = divergence_from_shares(grid, _share(grid), Estimate(float(_share(truth)), sigma, 1000, "m", "share"), np.full(60, sigma))
+    assert noisy.std == pytest.approx(math.sqrt(2) * e.std, rel=0.02)
+    # fit_divergence calls the simulation at each divergence
+    calls = []
+    fitted, simulated, shares = fit_divergence(lambda x: (calls.append(x), (float(_share(x)), 0.0))[1],
+                                       Estimate(float(_share(truth)), sigma, 1000, "m", "share"), divergences_deg=grid)  # fmt: skip
+    assert calls == pytest.approx(grid.tolist()) == simulated.tolist() and fitted.value == pytest.approx(truth, rel=1e-3) and shares == pytest.approx(_share(grid))
+    outside = divergence_from_shares(grid, _share(grid), Estimate(0.999, 0.01, 10, "m", "share"))
+    assert math.isnan(outside.value) and math.isnan(outside.std)
+
+
+@pytest.mark.parametrize(
+    ("d", "s", "match"),
+    [([0.01], [0.1], "M >= 2"), ([0.02, 0.01], [0.1, 0.2], "strictly increasing"), ([0.0, 0.01], [0.1, 0.2], "> 0"),
+     ([0.01, 0.02], [0.3, 0.2], "must grow"), ([0.01, 0.02], [0.2, 0.2], "must grow"), ([0.01, 0.02], [0.1, 1.2], r"\[0, 1\]"),
+     ([0.01, np.nan], [0.1, 0.2], "finite")],
+)  # fmt: skip
+def test_a_curve_that_cannot_be_inverted_is_refused(d, s, match) -> None:
+    with pytest.raises(InvalidInputError, match=match):
+        divergence_from_shares(d, s, Estimate(0.15, 0.01, 10, "m", "share"))
+
+
+@settings(max_examples=60, deadline=None)
+@given(steps=st.lists(st.floats(0.0, 0.2), min_size=2, max_size=12), where=st.floats(0.0, 1.0))
+def test_law_the_inverse_meets_the_curve(steps, where) -> None:
+    """Any non-decreasing curve that rises: the share at the fitted divergence (linear between the points) is the measured one."""
+    shares = np.minimum(np.cumsum(steps), 1.0)
+    if shares[-1] == shares[0]:
+        return
+    grid = np.linspace(0.01, 0.01 * len(shares), len(shares))
+    target = float(shares[0] + where * (shares[-1] - shares[0]))
+    e = divergence_from_shares(grid, shares, Estimate(target, 0.0, 1, "m", "share"))
+    assert grid[0] <= e.value <= grid[-1]
+    assert np.interp(e.value, grid, shares) == pytest.approx(target, abs=1e-9)
