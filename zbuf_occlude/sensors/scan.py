@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -24,6 +25,7 @@ from zbuf_occlude.io.encodings import npz_bytes
 from zbuf_occlude.sensors.depth_camera import DepthCamera
 from zbuf_occlude.sensors.echoes import hit_energy, number_returns, resolve_echoes
 from zbuf_occlude.sensors.lidar import Lidar
+from zbuf_occlude.sensors.ray_table import RayTable
 from zbuf_occlude.sensors.raycast import (
     BACKENDS,
     cast_embree,
@@ -502,16 +504,27 @@ def echo_returns(
     return echoes.pulse, f[echoes.hit], echoes.range_m, echoes.energy
 
 
+#: Sensors that fire pulses and record returns: a spinning LiDAR, or a table of its rays.
+_PULSED = (Lidar, RayTable)
+
+
 def _sensor_rays(sensor, azimuth_range_deg):
-    """``(d_sensor (N, 3) unit, ring or None, azimuth or None, pixel or None, (near, far) ranges along the ray)``."""
+    """``(d_sensor (N, 3) unit, ring or None, pulses or None, pixel or None, (near, far) ranges along the ray)``.
+
+    ``pulses(rows)``: the ``pulse_id``, ``gps_time`` and ``scan_angle_deg`` of the points of ray
+    rows ``rows`` (:func:`_return_fields`); None for a depth camera.
+    """
     if isinstance(sensor, Lidar):
         d_sensor, ring, azimuth = sensor.rays(azimuth_range_deg)
-        return d_sensor, ring, azimuth, None, (sensor.min_range_m, sensor.max_range_m)
+        return d_sensor, ring, partial(_sweep_pulses, sensor, ring, azimuth), None, (sensor.min_range_m, sensor.max_range_m)
+    if isinstance(sensor, RayTable):
+        d_sensor, row, _ = sensor.rays(azimuth_range_deg)
+        return d_sensor, None, partial(_table_pulses, sensor, row), None, (sensor.min_range_m, sensor.max_range_m)
     if isinstance(sensor, DepthCamera):
         d_cam, pixel = sensor.rays()
         d_sensor = d_cam / np.linalg.norm(d_cam, axis=1, keepdims=True)
         return d_sensor, None, None, pixel, (sensor.min_depth_m, sensor.max_depth_m / float(d_sensor[:, 2].min()))
-    raise InvalidInputError(f"sensor must be a Lidar or a DepthCamera, got {type(sensor).__name__}")
+    raise InvalidInputError(f"sensor must be a Lidar, a RayTable or a DepthCamera, got {type(sensor).__name__}")
 
 
 def _cast(built: BuiltScene, origin, rays, backend: str, meta: dict, *, resolution: int, neighborhood: int, near_far):
@@ -537,7 +550,7 @@ def _facing_normals(built: BuiltScene, face, d_world):
 
 def scan(
     scene: ScanScene | trimesh.Trimesh,
-    sensor: Lidar | DepthCamera,
+    sensor: Lidar | RayTable | DepthCamera,
     pose: ArrayLike | None = None,
     *,
     seed: int = 0,
@@ -554,7 +567,8 @@ def scan(
     ----------
     scene : ScanScene or trimesh.Trimesh
         A mesh is taken as one object (id 1) in metres, world frame, with no ground.
-    sensor : Lidar or DepthCamera
+    sensor : Lidar, RayTable or DepthCamera
+        A :class:`~.ray_table.RayTable` scans as a :class:`Lidar` whose rays are its rows.
     pose : (4, 4) or (3,) float, optional
         Sensor → world transform (LiDAR frame: x forward, z up; camera frame: OpenCV, see
         :func:`look_at_pose`), or just the position; default ``scene.default_sensor_pose()``.
@@ -606,18 +620,18 @@ def scan(
         pose = scene.default_sensor_pose()
     m = _as_pose(pose)
     rot, origin = m[:3, :3], m[:3, 3]
-    d_sensor, ring, azimuth, pixel, (near, far) = _sensor_rays(sensor, azimuth_range_deg)
+    d_sensor, ring, pulses, pixel, (near, far) = _sensor_rays(sensor, azimuth_range_deg)
     d_world = d_sensor @ rot.T
     meta: dict = {"backend": backend, "n_rays": len(d_world)}
-    k = sensor.footprint_rays if isinstance(sensor, Lidar) else 1
+    k = sensor.footprint_rays if isinstance(sensor, _PULSED) else 1
     rays = d_world if k == 1 else sensor.footprint_directions(d_world).reshape(-1, 3)
     face, t = _cast(built, origin, rays, backend, meta, resolution=resolution, neighborhood=neighborhood, near_far=(near, far))
     rho = None
     if reflectivity is not None:
-        if not isinstance(sensor, Lidar):
+        if not isinstance(sensor, _PULSED):
             raise InvalidInputError("reflectivity (radiometric detection) is modelled for LiDARs only")
         rho = _reflectivity_table(reflectivity, len(built.objects) + 1)
-    multi = isinstance(sensor, Lidar) and sensor.multi_return
+    multi = isinstance(sensor, _PULSED) and sensor.multi_return
     rng = np.random.default_rng(seed)
     if multi:
         hit, face, t, echo_energy = _echo_returns(built, sensor, rays, face, t, rho, rng)
@@ -629,9 +643,9 @@ def scan(
     d_s = d_sensor[hit]
     normal, cos_in, incidence = _facing_normals(built, face, d_world[hit])
     gauss = rng.standard_normal(len(hit))  # drawn for every hit, so filters do not shift streams
-    lost = rng.random(len(hit)) < (sensor.dropout_probability(t) if isinstance(sensor, Lidar) else sensor.dropout)
+    lost = rng.random(len(hit)) < (sensor.dropout_probability(t) if isinstance(sensor, _PULSED) else sensor.dropout)
     # Limits apply to what the sensor measures (noise and quantisation included).
-    if isinstance(sensor, Lidar):
+    if isinstance(sensor, _PULSED):
         measured = t + sensor.range_noise_m * gauss
         keep = (measured >= sensor.min_range_m) & (measured <= sensor.max_range_m) & ~lost
         power = np.ones(len(hit))
@@ -652,8 +666,8 @@ def scan(
     keep &= measured > 0
     sel = np.flatnonzero(keep)
     returns = {}
-    if isinstance(sensor, Lidar):
-        returns = _return_fields(sensor, hit[sel], ring, azimuth, power[sel], renumber=multi)
+    if pulses is not None:
+        returns = _return_fields(pulses, hit[sel], power[sel], renumber=multi)
     points = d_s[sel] * measured[sel, None]
     normal_out = normal[sel] @ rot  # world → sensor
     sensor_position = np.zeros(3)
@@ -692,22 +706,35 @@ def return_numbers(pulse, *, renumber: bool) -> tuple[NDArray[np.uint8], NDArray
     return ones, ones.copy()
 
 
-def _return_fields(sensor: Lidar, pulse, ring, azimuth, power, *, renumber: bool) -> dict[str, np.ndarray]:
-    """The :class:`Scan` return fields of the points of pulse rows ``pulse`` (sorted) of a LiDAR sweep.
+def _return_fields(pulses, pulse, power, *, renumber: bool) -> dict[str, np.ndarray]:
+    """The :class:`Scan` return fields of the points of pulse rows ``pulse`` (sorted) of a LiDAR sweep or a ray table.
 
-    ``ring`` (P,) int64 and ``azimuth`` (P,) float64 degrees are the pulses' beams and firing
-    azimuths (:meth:`Lidar.rays`), ``power`` (N,) the points' received energies.  With
-    ``renumber``, the points of a pulse (sorted by range) are numbered 1..n; otherwise each is
-    its pulse's only return.
+    ``pulses(pulse)`` gives the pulses' ids, times and scan angles (:func:`_sweep_pulses`,
+    :func:`_table_pulses`), ``power`` (N,) the points' received energies.  With ``renumber``,
+    the points of a pulse (sorted by range) are numbered 1..n; otherwise each is its pulse's
+    only return.
     """
     return_number, number_of_returns = return_numbers(pulse, renumber=renumber)
+    return {"return_number": return_number, "number_of_returns": number_of_returns, "intensity": np.asarray(power, dtype=np.float32), **pulses(pulse)}
+
+
+def _sweep_pulses(sensor: Lidar, ring, azimuth, pulse) -> dict[str, np.ndarray]:
+    """``pulse_id``, ``gps_time``, ``scan_angle_deg`` of pulse rows ``pulse`` of a spinning LiDAR's sweep.
+
+    ``ring`` (P,) int64 and ``azimuth`` (P,) float64 degrees are the pulses' beams and firing
+    azimuths (:meth:`Lidar.rays`).
+    """
     n_az = sensor.n_azimuths
     index = np.rint((azimuth[pulse] - sensor.azimuth_offset_deg) / (360.0 / n_az)).astype(np.int64) % n_az
     return {
-        "return_number": return_number,
-        "number_of_returns": number_of_returns,
-        "intensity": np.asarray(power, dtype=np.float32),
         "pulse_id": ring[pulse] * n_az + index,
         "gps_time": index / (n_az * sensor.rotation_hz),
         "scan_angle_deg": sensor._elev[ring[pulse]].astype(np.float32),
     }
+
+
+def _table_pulses(sensor: RayTable, row, pulse) -> dict[str, np.ndarray]:
+    """``pulse_id``, ``gps_time``, ``scan_angle_deg`` of pulse rows ``pulse`` of a ray table's scan: the table's
+    row, its time (exactly) and its elevation; ``row`` (P,) int64 is each ray's table row (:meth:`RayTable.rays`)."""
+    r = row[pulse]
+    return {"pulse_id": r, "gps_time": sensor.time_s[r], "scan_angle_deg": sensor.elevation_deg[r].astype(np.float32)}
