@@ -10,7 +10,7 @@ import argparse
 import sys
 from typing import Any
 
-from zbuf_occlude.cli.options import Checked, check_device, count, interval, out_folder, parse_interval
+from zbuf_occlude.cli.options import Checked, check_device, count, interval, out_folder, parse_interval, shown
 from zbuf_occlude.defaults import DEFAULT_METHOD
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.regular_files import read_text_file
@@ -39,7 +39,7 @@ OPTION_NAMES = {
     "up_map": "--up-map", "sizes": "--sizes", "min_returns": "--min-returns", "method": "--method", "classes": "--classes",
     "occluded_elevation_deg": "--occluded-elevation", "fit_sensor": "--fit-sensor", "recipe": "--recipe",
     "validate_on": "--validate-on", "fitted_shape": "--fitted-shape", "aspect": "--augment aspect", "best_epoch_by": "--best-epoch-by",
-    "occluded_points": "--occluded-points",
+    "occluded_points": "--occluded-points", "returns": "--returns",
 }  # fmt: skip
 
 
@@ -64,7 +64,8 @@ def _run(args: argparse.Namespace) -> int:
         fit_sensor=args.fit_sensor,
         recipe=args.recipe, best_epoch_by=args.best_epoch_by, validate_on=args.validate_on,
         fitted_shape=() if args.fitted_shape == "none" else tuple(v.strip() for v in args.fitted_shape.split(",")),
-        aspect=args.augment == "aspect", occluded_points=args.occluded_points, option_names=OPTION_NAMES,
+        aspect=args.augment == "aspect", occluded_points=args.occluded_points, returns=args.returns,
+        option_names=OPTION_NAMES,
     )  # fmt: skip
     summary = run_sim2real(config, args.out, device=args.device, threads=args.threads, progress=not args.no_progress, say=_say)
     return print_table(args.out, summary)
@@ -73,6 +74,16 @@ def _run(args: argparse.Namespace) -> int:
 def _say(line: str) -> None:
     """A stage of the run, one line on stderr as it starts (reading, the fit: minutes on a large data set)."""
     print(f"sim2real: {line}", file=sys.stderr, flush=True)
+
+
+def returns_per_pulse(text: str, option: str) -> int:
+    """``--returns N``: a whole number from 1 to :data:`~zbuf_occlude.sensors.echoes.MAX_RETURNS` (LAS's return numbers)."""
+    from zbuf_occlude.sensors.echoes import MAX_RETURNS
+
+    n = count(None)(text, option)
+    if n > MAX_RETURNS:
+        raise InvalidInputError(f"{option} must be at most {MAX_RETURNS} (returns per pulse, as LAS 1.4 numbers them), got {shown(text)}")
+    return n
 
 
 def _classes_option(text: str | None) -> str | list[str] | None:
@@ -166,6 +177,11 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--occluded-points", action="store_true",
                    help="also train on 'occluded-points': the occluded set's clouds (the same dense samples and poses) with "
                    "visibility decided from the points alone (point-splat, normals estimated, no mesh), tested against occluded")
+    p.add_argument("--returns", metavar="N", action=Checked, check=returns_per_pulse, default=1,
+                   help="most returns per pulse of the lidar set's scanner: 1 (default) one return per pulse; above 1 each "
+                   "pulse's footprint is cast as sub-rays (the sensor's own, or 7, over its beam divergence: 0.16 deg for "
+                   "hdl32e) and its echoes resolved by the sensor's range resolution (or 0.75 m) into up to N returns "
+                   "(settings.json: lidar_returns; not with --fit-sensor)")
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="torch device (default: %(default)s)")
     p.add_argument("--threads", action=Checked, check=count("MAX_WORKERS"), help="torch CPU threads")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")

@@ -24,7 +24,7 @@ if TYPE_CHECKING:  # torch is imported when a run trains
     from zbuf_occlude.learn.training import TrainConfig
 
 __all__ = ["Sim2RealScale", "SIM2REAL_SCALES", "SIM2REAL_RECIPE", "VALIDATION_CHOICES", "FITTED_SHAPES", "WIDTH_SHAPES",
-           "Sim2RealConfig"]  # fmt: skip
+           "RETURNS_FOOTPRINT_RAYS", "RETURNS_RANGE_RESOLUTION_M", "Sim2RealConfig", "with_returns"]  # fmt: skip
 
 #: The training recipe of every run (:data:`zbuf_occlude.learn.training.RECIPES`; :mod:`~zbuf_occlude.experiments.sim2real`).
 SIM2REAL_RECIPE = "stable"
@@ -38,6 +38,14 @@ FITTED_SHAPES = {"widths": "across_sight_width_m", "widen": "across_sight_width_
 #: The shapes that meet the widths, of which a run takes one, and how each meets them
 #: (:data:`~zbuf_occlude.experiments.sim2real_placement.WIDTH_BY`).
 WIDTH_SHAPES = {"widths": "stretch", "widen": "widen", "occlude": "occluder"}
+#: Sub-rays per pulse of the ``lidar`` set with ``returns`` above 1, where the sensor has no footprint
+#: of its own: ``scan --footprint``'s 7 (the centre ray and a ring of 6, one per equal-area cell of
+#: the divergence cone, :func:`~zbuf_occlude.sensors.footprint.footprint_offsets`).
+RETURNS_FOOTPRINT_RAYS = 7
+#: Least range between two returns of one pulse, metres, with ``returns`` above 1, where the sensor
+#: gives none: half the pulse length ``c·τ/2`` of a 5 ns pulse (an ASSUMPTION: the Velodyne HDL-32E
+#: data sheet 97-0038 and manual 63-9113 give no pulse length; the value of the sensors guide).
+RETURNS_RANGE_RESOLUTION_M = 0.75
 
 
 @dataclass(frozen=True)
@@ -142,6 +150,12 @@ class Sim2RealConfig:
         narrower); ``"outline"``, a warp to its outline over the height, alone or with one of
         the three.  Empty (default): the meshes' own shapes.  Each is fitted per mesh once
         (:func:`~zbuf_occlude.experiments.sim2real_placement.fit_mesh_shapes`).
+    returns : int
+        Most returns per pulse of the ``lidar`` set's scanner (:func:`with_returns`), 1 to
+        :data:`~zbuf_occlude.sensors.echoes.MAX_RETURNS`.  1 (default): the sensor as given, one
+        return per pulse (the clouds of every run before this option, bit for bit).  Above 1: the
+        multi-return model (each pulse's footprint cast as sub-rays, its hits resolved into up to
+        ``returns`` echoes; ``settings.json``: ``lidar_returns``).  Not with ``fit_sensor``.
     occluded_points : bool
         Also train on the :data:`~zbuf_occlude.experiments.sim2real_data.OCCLUDED_POINTS` set:
         the ``occluded`` set's clouds (the same dense samples, poses and draws) with visibility
@@ -170,7 +184,8 @@ class Sim2RealConfig:
         ``validate_on="fit-half"`` or ``fitted_shape`` without
         ``fit_sensor``, an unknown shape or two that meet the widths, elevations outside
         [-90, 90] degrees, a sensor that is no LiDAR, ``fit_sensor`` with an airborne
-        ``sensor``), naming the field or its option.
+        ``sensor``, ``returns`` outside 1..15, above 1 with ``fit_sensor`` or with a sensor
+        without a beam divergence), naming the field or its option.
     """
 
     mesh_root: str | os.PathLike
@@ -199,6 +214,7 @@ class Sim2RealConfig:
     fitted_shape: tuple[str, ...] = ()
     aspect: bool = False
     occluded_points: bool = False
+    returns: int = 1
     option_names: InitVar[Mapping[str, str] | None] = None
     occluded_elevation_from: str = field(init=False, default="option")
 
@@ -278,7 +294,11 @@ class Sim2RealConfig:
             # refused here, before any scan or mesh is read: the fit (sensors.fit.fit_lidar) fits a spinning LiDAR only
             raise InvalidInputError(f"{n('fit_sensor')} fits a spinning LiDAR, but {n('sensor')} {sensor.name} is an airborne scanner: "
                                     f"drop {n('fit_sensor')} or give {n('sensor')} a spinning LiDAR")  # fmt: skip
-        object.__setattr__(self, "sensor", sensor)
+        object.__setattr__(self, "sensor", with_returns(sensor, self.returns, n("returns")))
+        if self.returns > 1 and self.fit_sensor:
+            # the fit (sensors.fit.fit_lidar) fits a one-return sensor; its fitted sets would not have the returns
+            raise InvalidInputError(f"{n('returns')} {self.returns} is for the lidar set's preset or file; "
+                                    f"drop {n('fit_sensor')} or {n('returns')}")  # fmt: skip
 
     @functools.cached_property
     def scale_values(self) -> Sim2RealScale:
@@ -329,9 +349,50 @@ class Sim2RealConfig:
             "lidar_placement": placement, "lidar_min_returns": int(self.min_returns), "keep_scale_unit_m": KEEP_SCALE_UNIT_M,
             "method": self.method, "train_config": self.train_config(0).identity(("seed", "device", "threads")),
             **({"validate_on": self.validate_on} if self.validates_on_fit_half else {}),
+            **({"lidar_returns": _returns_spec(self.sensor)} if self.returns > 1 else {}),
             **({"occluded_points": {"set": OCCLUDED_POINTS, "method": POINT_VISIBILITY, "normals": "estimated", "topped_up": False}}
                if self.occluded_points else {}),
         }  # fmt: skip
+
+
+def with_returns(sensor, returns: int, option: str = "returns"):
+    """``sensor`` (a :class:`~zbuf_occlude.sensors.lidar.Lidar` or
+    :class:`~zbuf_occlude.sensors.airborne.AirborneScanner`) recording up to ``returns`` returns per pulse.
+
+    ``returns`` 1: ``sensor`` itself, unchanged (its scans are today's, bit for bit).  Above 1:
+    ``max_returns = returns``; the footprint is the sensor's own ``footprint_rays`` where above 1,
+    else :data:`RETURNS_FOOTPRINT_RAYS`, over the sensor's own ``beam_divergence_deg`` (the
+    HDL-32E preset: 0.16°, 2.79 mrad, Velodyne HDL-32E data sheet 97-0038); the range resolution is
+    the sensor's ``range_resolution_m`` where above 0, else :data:`RETURNS_RANGE_RESOLUTION_M`.
+
+    Raises
+    ------
+    InvalidInputError
+        ``returns`` not a whole number in 1..:data:`~zbuf_occlude.sensors.echoes.MAX_RETURNS`, or
+        above 1 for a sensor whose ``beam_divergence_deg`` is 0 (no footprint to sample), naming
+        ``option`` and the value.
+    """
+    from zbuf_occlude.sensors.echoes import MAX_RETURNS
+
+    if isinstance(returns, bool) or not isinstance(returns, int) or not 1 <= returns <= MAX_RETURNS:
+        raise InvalidInputError(f"{option} must be a whole number from 1 to {MAX_RETURNS} (returns per pulse), got {returns!r}")
+    if returns == 1:
+        return sensor
+    if not sensor.beam_divergence_deg > 0:
+        raise InvalidInputError(f"{option} {returns}: sensor {sensor.name} has no beam divergence (beam_divergence_deg 0) to sample "
+                                "a footprint over; give a sensor file with beam_divergence_deg")  # fmt: skip
+    rays = sensor.footprint_rays if sensor.footprint_rays > 1 else RETURNS_FOOTPRINT_RAYS
+    resolution = sensor.range_resolution_m if sensor.range_resolution_m > 0 else RETURNS_RANGE_RESOLUTION_M
+    # a one-return sensor's echo merging (a Lidar's echo_separation_m) gives way to the range resolution
+    merging = {"echo_separation_m": 0.0} if getattr(sensor, "echo_separation_m", 0.0) else {}
+    return sensor.with_(max_returns=returns, footprint_rays=rays, range_resolution_m=resolution, **merging)
+
+
+def _returns_spec(sensor) -> dict[str, Any]:
+    """What ``settings.json`` records of the multi-return model (the sensor's every field is there too, ``sensor_spec``)."""
+    return {"max_returns": int(sensor.max_returns), "footprint_rays": int(sensor.footprint_rays),
+            "beam_divergence_deg": float(sensor.beam_divergence_deg), "range_resolution_m": float(sensor.range_resolution_m),
+            "beam_profile": sensor.beam_profile}  # fmt: skip
 
 
 def _elevation_range(value, name: str) -> tuple[float, float]:

@@ -1,0 +1,128 @@
+"""``experiment sim2real --returns N``: the lidar set's scanner with several returns per pulse."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+pytest.importorskip("torch")
+
+from zbuf_occlude.cli.main import main
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.experiments.sim2real_config import (
+    RETURNS_FOOTPRINT_RAYS,
+    RETURNS_RANGE_RESOLUTION_M,
+    Sim2RealConfig,
+    with_returns,
+)
+from zbuf_occlude.experiments.sim2real_data import (
+    SetRecipe,
+    build_set,
+    find_class_meshes,
+)
+from zbuf_occlude.sensors import lidar_preset
+
+
+def _bush(seed: int = 0, leaves: int = 600) -> trimesh.Trimesh:
+    """A bush-like mesh: a trunk under a crown of small scattered leaves (triangles a few cm wide
+    spread through a ball), so that one footprint can meet leaves far apart along the beam."""
+    rng = np.random.default_rng(seed)
+    centres = rng.normal(size=(leaves, 3))
+    centres = centres / np.linalg.norm(centres, axis=1, keepdims=True) * rng.uniform(0.0, 1.0, (leaves, 1)) ** (1 / 3)
+    centres = centres * [1.0, 1.0, 0.8] + [0.0, 0.0, 1.6]
+    corners = centres[:, None, :] + rng.normal(scale=0.06, size=(leaves, 3, 3))
+    crown = trimesh.Trimesh(corners.reshape(-1, 3), np.arange(3 * leaves).reshape(-1, 3), process=False)
+    trunk = trimesh.creation.cylinder(radius=0.06, height=1.2, sections=10, transform=trimesh.transformations.translation_matrix([0, 0, 0.6]))
+    return trimesh.util.concatenate([trunk, crown])
+
+
+def _mesh_root(tmp_path: Path) -> Path:
+    root = tmp_path / "meshes"
+    for cls in ("bush", "pole"):
+        (root / cls).mkdir(parents=True)
+    _bush(0).export(root / "bush" / "shrub.obj")
+    _bush(1, leaves=300).export(root / "bush" / "sparse.obj")
+    trimesh.creation.cylinder(radius=0.08, height=4.0, sections=12).export(root / "pole" / "post.obj")
+    trimesh.creation.cylinder(radius=0.12, height=6.0, sections=12).export(root / "pole" / "mast.obj")
+    return root
+
+
+def test_one_return_per_pulse_is_the_sensor_as_given_and_todays_lidar_set(tmp_path: Path) -> None:
+    hdl = lidar_preset("hdl32e")
+    assert with_returns(hdl, 1) is hdl and Sim2RealConfig("m", "r", returns=1).sensor == hdl == Sim2RealConfig("m", "r").sensor
+    meshes = find_class_meshes(_mesh_root(tmp_path))
+    today = build_set("lidar", meshes, ["bush", "pole"], 3, 32, 7, SetRecipe(sensor=hdl))
+    one = build_set("lidar", meshes, ["bush", "pole"], 3, 32, 7, SetRecipe(sensor=Sim2RealConfig("m", "r", returns=1).sensor))
+    assert one.points.tobytes() == today.points.tobytes() and one.labels.tolist() == today.labels.tolist()
+    # pinned: the clouds of this set as made before --returns existed (one centre ray per pulse)
+    assert hashlib.sha256(one.points.tobytes()).hexdigest()[:16] == PINNED_ONE_RETURN
+    several = build_set("lidar", meshes, ["bush", "pole"], 3, 32, 7, SetRecipe(sensor=Sim2RealConfig("m", "r", returns=3).sensor))
+    assert several.points.shape == one.points.shape and several.points.tobytes() != one.points.tobytes()
+
+
+PINNED_ONE_RETURN = "8f0df6f70b7bf0d5"
+
+
+def test_several_returns_give_a_bush_points_after_the_first_return() -> None:
+    from zbuf_occlude.sensors.crops import object_crop
+    from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
+
+    sensor = with_returns(lidar_preset("hdl32e"), 3)
+    assert (sensor.max_returns, sensor.footprint_rays, sensor.range_resolution_m) == (3, RETURNS_FOOTPRINT_RAYS, RETURNS_RANGE_RESOLUTION_M)
+    assert sensor.beam_divergence_deg == lidar_preset("hdl32e").beam_divergence_deg == 0.16  # the preset's (HDL-32E data sheet)
+    bush, rng = _bush(1), np.random.default_rng(3)
+    dist = CropDistributions(distance_m=(5.0, 8.0), size_m=(2.0, 2.5))
+    later = []
+    for k in range(4):
+        placement = draw_placement(dist, rng)
+        crop = object_crop(bush, sensor, placement, seed=k)
+        s = crop.scan
+        assert len(s) > 0 and (s.return_number >= 1).all() and (s.return_number <= s.number_of_returns).all()
+        later.append(int((s.return_number > 1).sum()))
+        one = object_crop(bush, lidar_preset("hdl32e"), placement, seed=k).scan
+        assert (one.return_number == 1).all()  # today's: one return per pulse
+    assert sum(n > 0 for n in later) >= 2, later  # leaves behind leaves: later returns on the same bush
+
+
+@pytest.mark.parametrize("value", ["0", "16", "x", "2.5"])
+def test_bad_returns_exit_2_naming_the_value(tmp_path: Path, value: str, capsys: pytest.CaptureFixture) -> None:
+    status = main(["experiment", "sim2real", str(tmp_path), "--real", str(tmp_path), "--out", str(tmp_path / "o"), "--returns", value])
+    assert status == 2 and "--returns" in (err := capsys.readouterr().err) and value in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_several_returns_need_a_divergence_and_no_fit(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    assert lidar_preset("hdl64e").beam_divergence_deg == 0  # its data sheet gives none
+    argv = ["experiment", "sim2real", str(tmp_path), "--real", str(tmp_path), "--out", str(tmp_path / "o"), "--returns", "2"]
+    assert main([*argv, "--sensor", "hdl64e"]) == 2
+    assert "--returns 2" in (err := capsys.readouterr().err) and "hdl64e" in err and "beam_divergence_deg" in err
+    assert main([*argv, "--fit-sensor"]) == 2
+    assert "--returns 2" in (err := capsys.readouterr().err) and "--fit-sensor" in err
+    for bad in (0, 16, True, 2.0):
+        with pytest.raises(InvalidInputError, match="returns"):
+            Sim2RealConfig("m", "r", returns=bad)
+
+
+def test_settings_record_the_returns_only_when_above_one(tmp_path: Path) -> None:
+    from zbuf_occlude.experiments.sim2real import Sim2RealSets, _fix_settings
+    from zbuf_occlude.sensors.presets import sensor_to_json
+
+    def _sets_found():  # what prepare_sets finds, as little as _fix_settings reads (test_sim2real's)
+        return Sim2RealSets(["car", "pole"], [], [], np.zeros((4, 8, 3), np.float32), np.repeat([0, 1], 2), [f"{i}.xyz" for i in range(4)],
+                            np.array([0, 2]), np.array([1, 3]))  # fmt: skip
+
+    _fix_settings(Sim2RealConfig("m", "r", returns=2), _sets_found(), tmp_path / "two")
+    two = json.loads((tmp_path / "two" / "settings.json").read_text())
+    assert two["lidar_returns"] == {"max_returns": 2, "footprint_rays": 7, "beam_divergence_deg": 0.16, "range_resolution_m": 0.75,
+                                    "beam_profile": "tophat"}  # fmt: skip
+    assert two["sensor_spec"]["max_returns"] == 2 and two["sensor_spec"]["footprint_rays"] == 7
+    _fix_settings(Sim2RealConfig("m", "r", returns=1), _sets_found(), tmp_path / "one")
+    one = json.loads((tmp_path / "one" / "settings.json").read_text())
+    assert "lidar_returns" not in one and one["sensor_spec"] == sensor_to_json(lidar_preset("hdl32e"))  # the settings of runs before --returns
+    with pytest.raises(InvalidInputError, match="other settings"):  # a one-return run is not resumed with returns
+        _fix_settings(Sim2RealConfig("m", "r", returns=2), _sets_found(), tmp_path / "one")
