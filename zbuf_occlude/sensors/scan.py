@@ -23,12 +23,19 @@ from zbuf_occlude.io.arrays import load_npz
 from zbuf_occlude.io.atomic import write_bytes
 from zbuf_occlude.io.encodings import npz_bytes
 from zbuf_occlude.sensors.depth_camera import DepthCamera
-from zbuf_occlude.sensors.echoes import hit_energy, number_returns, resolve_echoes
+from zbuf_occlude.sensors.echoes import (
+    attenuate_along_subray,
+    hit_energy,
+    number_returns,
+    resolve_echoes,
+)
 from zbuf_occlude.sensors.lidar import Lidar
 from zbuf_occlude.sensors.ray_table import RayTable
 from zbuf_occlude.sensors.raycast import (
     BACKENDS,
+    MAX_HITS,
     cast_embree,
+    cast_embree_beyond,
     cast_zbuffer,
     face_normals,
 )
@@ -388,6 +395,56 @@ def _reflectivity_table(reflectivity, n_ids: int) -> NDArray[np.float64]:
     return rho
 
 
+def _surface_optics(built: BuiltScene, sensor, backend: str, reflectivity, transmittance):
+    """``scan``'s ``reflectivity`` and ``transmittance`` as (n_objects + 1,) float64 per object id (or None), checked.
+
+    ``"table"`` takes either from :func:`~.reflectance.scene_optics` at 905 nm.  A transmittance
+    above 0 needs the multi-return model and the "embree" backend (all hits along a sub-ray).
+    """
+    if reflectivity is None and transmittance is None:
+        return None, None
+    from zbuf_occlude.sensors.reflectance import SPINNING_WAVELENGTH_NM, scene_optics
+
+    what = "reflectivity (radiometric detection)" if reflectivity is not None else "transmittance (hits behind a surface)"
+    if not isinstance(sensor, _PULSED):
+        raise InvalidInputError(f"{what} is modelled for LiDARs only")
+    table = None
+    for name, value in (("reflectivity", reflectivity), ("transmittance", transmittance)):
+        if isinstance(value, str) and value != "table":
+            raise InvalidInputError(f"{name} must be a number, one per object id, or 'table', got {value!r}")
+        if isinstance(value, str) and table is None:
+            table = scene_optics(built, SPINNING_WAVELENGTH_NM)
+    n_ids = len(built.objects) + 1
+    rho = None
+    if reflectivity is not None:
+        rho = table.reflectivity if isinstance(reflectivity, str) else _reflectivity_table(reflectivity, n_ids)
+    tau = None
+    if transmittance is not None:
+        tau = table.transmittance if isinstance(transmittance, str) else _transmittance_table(transmittance, n_ids)
+        if not tau.any():
+            tau = None  # opaque everywhere: today's first hits
+        elif not sensor.multi_return:
+            raise InvalidInputError("transmittance above 0 gives hits behind a surface, which only the multi-return model resolves: "
+                                    "give the LiDAR max_returns above 1")  # fmt: skip
+        elif backend != "embree":
+            raise InvalidInputError(f"transmittance above 0 needs every hit along each sub-ray, which the {backend!r} backend cannot give "
+                                    "(it keeps the nearest face per pixel): use backend='embree'")  # fmt: skip
+    return rho, tau
+
+
+def _transmittance_table(transmittance, n_ids: int) -> NDArray[np.float64]:
+    """(n_ids,) float64 round-trip transmittance per object id from a scalar or a per-id sequence, each in [0, 1]."""
+    try:
+        tau = np.asarray(transmittance, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        tau = np.full(1, np.nan)
+    if tau.size == 1:
+        tau = np.full(n_ids, float(tau[0]))
+    if tau.size != n_ids or not np.all((tau >= 0) & (tau <= 1)):
+        raise InvalidInputError(f"transmittance must be one value in [0, 1] or {n_ids} (ground + objects), got {transmittance!r}")
+    return tau
+
+
 def _strongest_echo(built: BuiltScene, rays, face, t, k: int, rho, separation: float = 0.0, weights=None) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
     """Resolve each beam's ``k`` footprint rays into one return: the strongest echo.
 
@@ -433,25 +490,32 @@ def _strongest_echo(built: BuiltScene, rays, face, t, k: int, rho, separation: f
     return face_out, np.where(hit.any(axis=1), t_out, np.inf), np.where(mine, weight, 0.0).sum(axis=1)
 
 
-def _echo_returns(built: BuiltScene, sensor: Lidar, rays, face, t, rho, rng) -> tuple[NDArray[np.int64], ...]:
+def _echo_returns(built: BuiltScene, sensor: Lidar, rays, face, t, rho, rng, *, origin=None, transmittance=None) -> tuple[NDArray[np.int64], ...]:
     """The spinning LiDAR's multi-return model: :func:`echo_returns` with ``sensor``'s footprint,
     range limits (the receiver's blind zone and reach), range resolution, maximum returns, and
-    detection threshold and power noise when ``rho`` is given."""
+    detection threshold and power noise when ``rho`` is given; the hits behind surfaces of
+    ``transmittance`` above 0, cast from ``origin``."""
     return echo_returns(
         built, rays, face, t, sensor.footprint_weights(), range_resolution_m=sensor.range_resolution_m, max_returns=sensor.max_returns,
         rho=rho, detection_threshold=sensor.detection_threshold, power_noise=sensor.power_noise, rng=rng,
-        range_limits_m=(sensor.min_range_m, sensor.max_range_m),
+        range_limits_m=(sensor.min_range_m, sensor.max_range_m), origins=origin, transmittance=transmittance,
     )  # fmt: skip
 
 
 def echo_returns(
     built: BuiltScene, rays, face, t, weights, *, range_resolution_m: float, max_returns: int, rho=None, detection_threshold: float = 0.0,
     power_noise: float = 0.0, rng: np.random.Generator | None = None, range_limits_m: tuple[float, float] = (0.0, np.inf),
+    transmittance=None, origins=None, max_hits: int = MAX_HITS,
 ) -> tuple[NDArray[np.int64], ...]:  # fmt: skip
-    """The multi-return model of every scanner: resolve each pulse's sub-ray first hits into discrete returns.
+    """The multi-return model of every scanner: resolve each pulse's sub-ray hits into discrete returns.
 
     One implementation for the spinning LiDAR (:func:`scan`) and the airborne scanner
-    (:func:`~zbuf_occlude.sensors.airborne.scan_airborne`).
+    (:func:`~zbuf_occlude.sensors.airborne.scan_airborne`).  Each sub-ray's first hit is given;
+    where ``transmittance`` gives its surface a share above 0, the sub-ray is cast on through it
+    (:func:`~.raycast.cast_embree_beyond`, Embree) and each hit behind gets its energy times the
+    transmittances of the surfaces before it on the sub-ray (:func:`~.echoes.attenuate_along_subray`).
+    Without ``transmittance`` (or with 0 everywhere: opaque) only the first hits count, bit for
+    bit as without the argument.
 
     Parameters
     ----------
@@ -477,24 +541,50 @@ def echo_returns(
         With ``rho``: every hit of a pulse is scaled by one ``exp(σ z)``, z ~ N(0, 1) per pulse
         (P draws from ``rng``); nothing is drawn otherwise.
     range_limits_m : (min, max) float
-        Hits nearer or farther than these give no echo (the receiver's blind zone and reach), metres.
+        Hits nearer or farther than these give no echo (the receiver's blind zone and reach),
+        metres; a hit in the blind zone still shades the hits behind it.
+    transmittance : (n_objects + 1,) float, optional
+        Round-trip transmittance per object id, in [0, 1] (:func:`~.echoes.attenuate_along_subray`:
+        a gap fraction ``g`` is ``g``, a pane of one-way ``T`` is ``T²``); None: 0 everywhere.
+    origins : (3,) or (P·K, 3) float64, optional
+        The sub-rays' origin, world frame, metres: needed when ``transmittance`` is above 0 anywhere.
+    max_hits : int
+        Most hits cast along one sub-ray (:data:`~.raycast.MAX_HITS`).
 
     Returns
     -------
     pulse : (E,) int64, row of the pulse; face : (E,) int64; range : (E,) float64, metres;
-    energy : (E,) float64, m⁻² (:func:`~.echoes.hit_energy`: weight · ρ · ``|cos θ|`` / R²): sorted
-    by pulse, then range (:class:`~.echoes.Echoes`).
+    energy : (E,) float64, m⁻² (:func:`~.echoes.hit_energy`: weight · ρ · ``|cos θ|`` / R², times
+    the transmittance before the hit): sorted by pulse, then range (:class:`~.echoes.Echoes`).
+
+    Raises
+    ------
+    InvalidInputError
+        ``transmittance`` not one value in [0, 1] per object id, or above 0 without ``origins``.
     """
     k = len(weights)
     n_pulses = len(face) // k
     min_range_m, max_range_m = range_limits_m
-    hit = np.flatnonzero((face >= 0) & (t >= min_range_m) & (t <= max_range_m))
-    f, r = face[hit], t[hit]
+    tau = None if transmittance is None else np.asarray(transmittance, dtype=np.float64)
+    if tau is not None and tau.shape != (len(built.objects) + 1,):
+        raise InvalidInputError(f"transmittance must hold one value per object id ({len(built.objects) + 1}: ground + objects), got shape {tau.shape}")
+    if tau is not None and tau.any():
+        if origins is None:
+            raise InvalidInputError("transmittance above 0 casts the sub-rays on through the surfaces: it needs the rays' origins")
+        sub, f_all, r_all = cast_embree_beyond(built.mesh, origins, rays, face, t, tau[built.face_object] > 0, max_hits=max_hits)
+        share = attenuate_along_subray(sub, r_all, built.face_object[f_all].astype(np.int64), tau)
+        kept = np.flatnonzero((r_all >= min_range_m) & (r_all <= max_range_m))
+        ray, f, r, share = sub[kept], f_all[kept], r_all[kept], share[kept]
+    else:
+        ray = np.flatnonzero((face >= 0) & (t >= min_range_m) & (t <= max_range_m))
+        f, r, share = face[ray], t[ray], None
     obj = built.face_object[f].astype(np.int64)
     normal = face_normals(built.mesh, f)
-    cos = np.abs(np.einsum("ij,ij->i", normal, rays[hit]))
-    pulse = hit // k
-    energy = hit_energy(np.asarray(weights)[hit % k], 1.0 if rho is None else rho[obj], cos, r)
+    cos = np.abs(np.einsum("ij,ij->i", normal, rays[ray]))
+    pulse = ray // k
+    energy = hit_energy(np.asarray(weights)[ray % k], 1.0 if rho is None else rho[obj], cos, r)
+    if share is not None:
+        energy = energy * share
     if rho is not None and power_noise > 0:
         energy = energy * np.exp(power_noise * rng.standard_normal(n_pulses))[pulse]
     echoes = resolve_echoes(
@@ -559,7 +649,8 @@ def scan(
     azimuth_range_deg: tuple[float, float] | None = None,
     resolution: int = 2048,
     neighborhood: int = 1,
-    reflectivity: float | ArrayLike | None = None,
+    reflectivity: float | ArrayLike | str | None = None,
+    transmittance: float | ArrayLike | str | None = None,
 ) -> Scan:
     """Scan ``scene`` with ``sensor`` at ``pose``.
 
@@ -589,7 +680,17 @@ def scan(
         ``detection_threshold``, ``power_noise`` σ, z ~ N(0, 1) per firing, ``f`` the
         footprint fraction).  None: every hit returns (no radiometry).  With the multi-return
         model (``Lidar.max_returns`` above 1), ρ weighs each sub-ray's echo and the threshold
-        applies per echo (:class:`Lidar` ``max_returns``).
+        applies per echo (:class:`Lidar` ``max_returns``).  ``"table"``: each object's ρ from
+        its material at 905 nm (:func:`~.reflectance.scene_optics`; the ground: asphalt).
+    transmittance : float or (n_objects + 1,) float, optional
+        LiDAR with the multi-return model only: round-trip transmittance per object id, in
+        [0, 1] (a gap fraction for foliage, ``T²`` for a pane); sub-rays go on through such
+        surfaces (Embree: all hits along each sub-ray, :func:`~.raycast.cast_embree_beyond`) and
+        the hits behind return their energy times the transmittances before them.
+        ``"table"``: from each object's material (:func:`~.reflectance.scene_optics`: foliage
+        :data:`~.reflectance.FOLIAGE_GAP_FRACTION`).  None or 0 everywhere: opaque, first hits
+        only, bit for bit as without it.  The "zbuffer" backend keeps the nearest face per
+        pixel only and refuses a transmittance above 0.
 
     Returns
     -------
@@ -605,7 +706,8 @@ def scan(
     Raises
     ------
     InvalidInputError
-        Bad pose, frame, backend or scene.
+        Bad pose, frame, backend or scene; a bad ``reflectivity`` or ``transmittance``, or a
+        transmittance above 0 with the "zbuffer" backend or without the multi-return model.
     BackendUnavailable
         Embree or OpenGL missing for the chosen backend.
     """
@@ -626,15 +728,11 @@ def scan(
     k = sensor.footprint_rays if isinstance(sensor, _PULSED) else 1
     rays = d_world if k == 1 else sensor.footprint_directions(d_world).reshape(-1, 3)
     face, t = _cast(built, origin, rays, backend, meta, resolution=resolution, neighborhood=neighborhood, near_far=(near, far))
-    rho = None
-    if reflectivity is not None:
-        if not isinstance(sensor, _PULSED):
-            raise InvalidInputError("reflectivity (radiometric detection) is modelled for LiDARs only")
-        rho = _reflectivity_table(reflectivity, len(built.objects) + 1)
+    rho, tau = _surface_optics(built, sensor, backend, reflectivity, transmittance)
     multi = isinstance(sensor, _PULSED) and sensor.multi_return
     rng = np.random.default_rng(seed)
     if multi:
-        hit, face, t, echo_energy = _echo_returns(built, sensor, rays, face, t, rho, rng)
+        hit, face, t, echo_energy = _echo_returns(built, sensor, rays, face, t, rho, rng, origin=origin, transmittance=tau)
     else:
         if k > 1:
             face, t, fraction = _strongest_echo(built, rays, face, t, k, rho, sensor.echo_separation_m, sensor.footprint_weights() if sensor.beam_profile != "tophat" else None)
