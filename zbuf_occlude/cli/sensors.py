@@ -167,8 +167,34 @@ def _largest_side(crops: CropSettings, size_of: str, mesh) -> CropSettings:
     return crops.with_fields(size_m=size_interval(mesh.extents, SizeRange(size_of, *crops.distributions.size_m)))
 
 
+#: ``scan``'s sensor when neither ``--sensor`` nor ``--ray-table`` names one.
+SCAN_SENSOR = "hdl32e"
+
+
+def _scan_sensor(args: argparse.Namespace):
+    """The sensor ``scan`` fires: ``--sensor``'s (:data:`SCAN_SENSOR` by default) with the return physics options, or the
+    :class:`~zbuf_occlude.sensors.ray_table.RayTable` of ``--ray-table FILE``.
+
+    Raises
+    ------
+    InvalidInputError
+        ``--ray-table`` with ``--sensor`` (one sensor per scan) or with a return physics option (they model LiDAR
+        presets and sensor files), or a file :func:`~zbuf_occlude.sensors.ray_table.load_ray_table` refuses.
+    """
+    if args.ray_table is None:
+        args.sensor = args.sensor or SCAN_SENSOR
+        return _with_return_physics(sensor_from_name(args.sensor), args)
+    from zbuf_occlude.sensors.ray_table import load_ray_table
+
+    if args.sensor is not None:
+        raise InvalidInputError(f"--ray-table {args.ray_table} is the sensor: give --ray-table or --sensor {args.sensor}, not both")
+    table = load_ray_table(args.ray_table)
+    args.sensor = args.ray_table  # what the return physics options' messages name
+    return _with_return_physics(table, args)
+
+
 def cmd_scan(args: argparse.Namespace) -> int:
-    sensor = _with_return_physics(sensor_from_name(args.sensor), args)
+    sensor = _scan_sensor(args)
     if not args.crop:
         for flag, option in given_crop_options(args, in_crop=True):
             raise InvalidInputError(f"{flag} {option.in_crop}: it needs --crop")
@@ -207,6 +233,7 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
     from zbuf_occlude.sensors.crops import object_crop
     from zbuf_occlude.sensors.placement import draw_placement
     from zbuf_occlude.sensors.lidar import Lidar
+    from zbuf_occlude.sensors.ray_table import RayTable
     from zbuf_occlude.sensors.scan import look_at_pose, scan
     from zbuf_occlude.sensors.scene import GROUND_ID, load_scene
 
@@ -217,7 +244,7 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
         if args.crop:
             raise InvalidInputError(f"--crop keeps one mesh's returns; {src.name} is a scene file, scanned whole")
         scene = load_scene(src)
-        if isinstance(sensor, Lidar):
+        if isinstance(sensor, (Lidar, RayTable)):
             pose = scene.default_sensor_pose()
         else:  # a camera looks at the first object from the sensor position
             target = scene.build().local_to_world[1][:3, 3] if scene.objects else np.array([1.0, 0.0, scene.ground_z_m])
@@ -231,7 +258,7 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
                 s = scan(scene, sensor, pose, seed=args.seed + k, backend=args.backend, frame=args.frame)
             written += _save(folder, s, f"{src.stem}_{sensor.name}_s{k:03d}", formats)
     else:
-        if not isinstance(sensor, (Lidar, AirborneScanner)):
+        if not isinstance(sensor, (Lidar, RayTable, AirborneScanner)):
             raise InvalidInputError("scan of a mesh file places a LiDAR; use a scene file for depth cameras")
         extents, round_xy = None, False
         if args.extents and args.size_of != "max":
@@ -300,9 +327,16 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
     )  # fmt: skip
     p.add_argument("mesh_or_scene", metavar="MESH_OR_SCENE", help=f"mesh file ({EXTENSIONS_TEXT}; stood on the ground), 'cylinder' or 'box' (unit primitives), or a scene .json/.yaml")
     p.add_argument(
-        "--sensor", default="hdl32e",
+        "--sensor", default=None,
         help=f"a spinning LiDAR ({', '.join(names['lidar'])}), an airborne scanner ({', '.join(names['airborne'])}), a depth "
-        f"camera ({', '.join(names['depth_camera'])}), or a sensor .json (fit-sensor writes one) (default: %(default)s)",
+        f"camera ({', '.join(names['depth_camera'])}), or a sensor .json (fit-sensor writes one) (default: {SCAN_SENSOR})",
+    )  # fmt: skip
+    t = p.add_argument_group("ray table (instead of --sensor)", "a LiDAR that fires along your own table of directions, one row per pulse")
+    t.add_argument(
+        "--ray-table", metavar="FILE",
+        help="a .csv with the header time_s,azimuth_deg,elevation_deg (seconds; degrees in the LiDAR's frame: azimuth from x "
+        "forward towards y left, elevation above the xy plane) or an (N, 3) .npy of those columns, time non-decreasing: each "
+        "point gets its pulse's time (gps_time) and row (pulse_id); ranges 1-100 m, range noise 0.02 m",
     )  # fmt: skip
     c = p.add_argument_group(
         "placement and crops (as farm --sensor's)",
