@@ -146,7 +146,7 @@ def test_applied_to_sensors(survey_fit) -> None:
     e = survey_fit.estimates
     airborne = survey_fit.apply(airborne_preset("riegl-q1560"))
     assert (airborne.max_returns, airborne.range_resolution_m) == (4, e["range_resolution_m"].value)
-    assert airborne.name == "riegl-q1560-fitted" and "returns fitted to 4,000 pulses" in airborne.source
+    assert airborne.name == "riegl-q1560-fitted" and "returns fitted to 4,000 pulses" in airborne.source and airborne.altitude_m == H
     assert survey_fit.sets(airborne) == ("range_resolution_m", "max_returns")  # no divergence measured, no threshold field
     lidar = survey_fit.apply(sensor_from_name("hdl32e"))
     assert lidar.detection_range_m == pytest.approx(math.sqrt(lidar.detection_reflectivity / e["detection_threshold"].value))

@@ -85,9 +85,11 @@ from zbuf_occlude.sensors.fit.returns import (
     pulse_bootstrap,
     return_statistics,
 )
+from zbuf_occlude.sensors.reflectance import reflectance
 
 __all__ = [
-    "DETECTION_QUANTILE", "DIVERGENCE_GRID_DEG", "FOOTPRINT_RAYS", "GROUND_CLASS", "GROUND_REFLECTANCE", "LOWEST_CELL_M",
+    "ALS_WAVELENGTH_NM", "DETECTION_QUANTILE", "DIVERGENCE_GRID_DEG", "FOOTPRINT_RAYS", "GROUND_CLASS", "GROUND_MATERIAL",
+    "GROUND_REFLECTANCE", "LOWEST_CELL_M",
     "LOWEST_SLAB_M", "MIN_CLASS_POINTS", "RESOLUTION_QUANTILE", "ReturnModelFit", "divergence_from_shares", "fit_divergence",
     "fit_return_model", "lower_end", "merge_scans",
 ]  # fmt: skip
@@ -100,10 +102,14 @@ RESOLUTION_QUANTILE = 0.01
 DETECTION_QUANTILE = 0.01
 #: ASPRS class of the ground (R15, Table 17).
 GROUND_CLASS = 2
-#: The ground's reflectance at the scanner's wavelength when none is given: an ASSUMPTION for
-#: mixed open ground at 1064 nm (bare soil and dry grass lie between about 0.2 and 0.4; asphalt
-#: lower).  It scales ``intensity_scale`` and ``detection_threshold`` inversely: give your own.
-GROUND_REFLECTANCE = 0.25
+#: The ground's material when no reflectance is given, and the wavelength of airborne scanners
+#: (Nd:YAG, 1064 nm: RIEGL's LMS-Q and VQ series, Leica's ALS): open ground of a survey is a mix
+#: of soil (0.33), grass (0.50) and roads (0.17); soil is its middle.
+GROUND_MATERIAL, ALS_WAVELENGTH_NM = "soil", 1064.0
+#: The ground's reflectance when none is given: :data:`GROUND_MATERIAL` at :data:`ALS_WAVELENGTH_NM`
+#: in the cited table (:func:`~zbuf_occlude.sensors.reflectance.reflectance`, ASTER soils).  It
+#: scales ``intensity_scale`` and ``detection_threshold`` inversely: give your ground's.
+GROUND_REFLECTANCE = reflectance(GROUND_MATERIAL, ALS_WAVELENGTH_NM)
 #: Fewest points of a class for its own figures (and single ground returns for the ground's).
 MIN_CLASS_POINTS = 100
 #: Without a ground class: the cell, metres, whose lowest return starts its ground...
@@ -176,8 +182,9 @@ class ReturnModelFit:
         ``range_resolution_m``; ``beam_divergence_deg`` where it was fitted (and then
         ``footprint_rays`` :data:`FOOTPRINT_RAYS` where the sensor had one ray); the detection
         threshold where the sensor has one: a spinning LiDAR's ``detection_range_m`` becomes
-        ``√(detection_reflectivity / τ)``.  One return per pulse: ``range_resolution_m`` 0 and,
-        airborne, one ray.  The name gains ``-fitted`` and the source says what was fitted.
+        ``√(detection_reflectivity / τ)``; an airborne scanner's ``altitude_m`` becomes the flying
+        height the fit assumed.  One return per pulse: ``range_resolution_m`` 0 and, airborne, one
+        ray.  The name gains ``-fitted`` and the source says what was fitted.
 
         Raises
         ------
@@ -207,6 +214,8 @@ class ReturnModelFit:
             changes["beam_divergence_deg"] = e["beam_divergence_deg"]
             if sensor.footprint_rays == 1 and changes.get("max_returns", sensor.max_returns) > 1:
                 changes["footprint_rays"] = FOOTPRINT_RAYS
+        if isinstance(sensor, AirborneScanner):
+            changes["altitude_m"] = self.altitude_m  # the survey's height, at which the scale and threshold were fitted
         if "detection_threshold" in e:
             if isinstance(sensor, Lidar):
                 changes["detection_range_m"] = math.sqrt(sensor.detection_reflectivity / e["detection_threshold"])
@@ -222,10 +231,17 @@ class ReturnModelFit:
         sets = set(self.sets(sensor)) if sensor is not None else set()
         shown = {name: replace(e, set_in_sensor=name in sets) for name, e in self.estimates.items()}
         unit = "metres assumed (the file states no unit)" if self.unit_assumed else f"{self.unit_m:g} m per coordinate unit"
+        note = ""
+        if sensor is not None and sensor.footprint_rays == 1 and sensor.max_returns > 1:
+            note = (f"\n{sensor.name} casts one ray per pulse, which meets one surface: it records one return per pulse until it is "
+                    "given a beam_divergence_deg and footprint_rays above 1 (in its file), or a divergence fitted by simulation "
+                    "(fit_divergence).\n")  # fmt: skip
         return (
             f"Flying height {self.altitude_m:g} m above the ground (given), ground reflectance {self.ground_reflectance:g} "
-            f"(given), ground: {self.ground}; coordinates: {unit}.\n\n"
+            f"({'soil at 1064 nm, sensors.reflectance' if self.ground_reflectance == GROUND_REFLECTANCE else 'given'}), "
+            f"ground: {self.ground}; coordinates: {unit}.\n\n"
             + estimates_markdown(shown, self.why_not_measured)
+            + note
             + "\nThe return statistics the fit rests on:\n\n"
             + self.statistics.markdown()
         )
@@ -325,7 +341,7 @@ def fit_return_model(
         The class set of the return statistics' ``..._classes_...`` figures.
     ground_reflectance : float
         The ground's reflectance at the scanner's wavelength, in (0, 1] (default
-        :data:`GROUND_REFLECTANCE`, an assumption).
+        :data:`GROUND_REFLECTANCE`, soil at 1064 nm in the cited table).
     divergence_shares : ((M,) float, (M,) float), optional
         Divergences, degrees, and the share ``divergence_share`` that a simulation of this
         scanner over a scene like the scan's gives at each (:func:`fit_divergence` makes them);
