@@ -95,7 +95,118 @@ def _max_returns(text: str, option: str) -> int:
     return n
 
 
+#: Most ``CLASS=VALUE`` pairs ``--transmittance`` takes (a scene file holds at most this many objects' classes).
+MAX_TRANSMITTANCE_CLASSES = 256
+
+
+def _transmittance(text: str, option: str):
+    """``--transmittance``: ``table``, one number in [0, 1] (every object, not the ground), or ``CLASS=VALUE,...``.
+
+    Returns "table", a float, or a dict of class name → float.
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the option and the value: a number outside [0, 1] or not finite, a pair without a
+        class or a value, a class given twice, more than :data:`MAX_TRANSMITTANCE_CLASSES` pairs.
+    """
+    text = text.strip()
+    if text.lower() == "table":
+        return "table"
+
+    def fraction(value: str, what: str) -> float:
+        v = real(0.0)(value, option)
+        if v > 1.0:
+            raise InvalidInputError(f"{option} must be a transmittance in [0, 1], got {shown(what)}")
+        return v
+
+    if "=" not in text:
+        return fraction(text, text)
+    pairs = text.split(",")
+    if len(pairs) > MAX_TRANSMITTANCE_CLASSES:
+        raise InvalidInputError(f"{option} takes at most {MAX_TRANSMITTANCE_CLASSES} CLASS=VALUE pairs, got {len(pairs):,}")
+    out: dict[str, float] = {}
+    for pair in pairs:
+        name, _, value = (part.strip() for part in pair.partition("="))
+        if not name or not value:
+            raise InvalidInputError(f"{option} must be table, a number in [0, 1], or CLASS=VALUE,... (bush=0.3,tree=0.3), got {shown(pair)}")
+        if name.lower() in out:
+            raise InvalidInputError(f"{option} gives the class {shown(name)} twice")
+        out[name.lower()] = fraction(value, pair)
+    return out
+
+
 def _with_return_physics(sensor, args: argparse.Namespace):
+    """``sensor`` with the return physics options applied (:func:`_return_physics`), and
+    ``--reflectance-table`` and ``--transmittance`` checked against it (:func:`_surface_optics` applies them).
+
+    Raises
+    ------
+    InvalidInputError
+        As :func:`_return_physics`; and ``--reflectance-table`` or ``--transmittance`` for a scan
+        of a mesh file (they give each object of a scene file its own value), for a sensor other
+        than a spinning LiDAR or ray table; ``--transmittance`` above 0 without several returns per
+        pulse or with ``--backend zbuffer`` (one face per pixel), each naming the value.
+    """
+    out = _return_physics(sensor, args)
+    table, tau = getattr(args, "reflectance_table", False), getattr(args, "transmittance", None)
+    given = " and ".join(f for f, v in (("--reflectance-table", table), (f"--transmittance {_shown_tau(tau)}", tau is not None)) if v)
+    if not given:
+        return out
+    from zbuf_occlude.sensors.lidar import Lidar
+    from zbuf_occlude.sensors.ray_table import RayTable
+
+    if Path(args.mesh_or_scene).suffix.lower() not in (".json", ".yaml", ".yml"):
+        raise InvalidInputError(f"{given} give each object of a scene file its own value: scan a scene .json/.yaml "
+                                f"({args.mesh_or_scene} is a mesh; its crops take --reflectivity)")  # fmt: skip
+    if not isinstance(out, (Lidar, RayTable)):
+        raise InvalidInputError(f"{given} model spinning LiDARs and ray tables; {args.sensor} is not one")
+    opaque = tau is None or (not isinstance(tau, (str, dict)) and tau == 0) or (isinstance(tau, dict) and not any(tau.values()))
+    if not opaque and not out.multi_return:
+        raise InvalidInputError(f"--transmittance {_shown_tau(tau)} gives hits behind a surface, which only several returns per pulse "
+                                "resolve: give --max-returns above 1 (and --footprint)")  # fmt: skip
+    if not opaque and getattr(args, "backend", "embree") != "embree":
+        raise InvalidInputError(f"--transmittance {_shown_tau(tau)} needs every hit along each sub-ray, which --backend {args.backend} "
+                                "cannot give (one face per pixel): use --backend embree")  # fmt: skip
+    return out
+
+
+def _shown_tau(tau) -> str:
+    """``--transmittance``'s parsed value as the user wrote it, for messages."""
+    if isinstance(tau, dict):
+        return ",".join(f"{k}={v:g}" for k, v in tau.items())
+    return tau if isinstance(tau, str) else f"{tau:g}" if tau is not None else ""
+
+
+def _surface_optics(args: argparse.Namespace, scene) -> dict:
+    """``scan``'s ``reflectivity`` and ``transmittance`` keywords from ``--reflectance-table`` and
+    ``--transmittance`` for a :class:`~zbuf_occlude.sensors.scene.ScanScene` (none given: no keyword,
+    the scan as without them).
+
+    Raises
+    ------
+    InvalidInputError
+        A ``--transmittance CLASS=VALUE`` class that no object of the scene has, naming it.
+    """
+    from zbuf_occlude.sensors.reflectance import per_class
+
+    out: dict = {}
+    if getattr(args, "reflectance_table", False):
+        out["reflectivity"] = "table"
+    tau = getattr(args, "transmittance", None)
+    if isinstance(tau, dict):
+        try:
+            out["transmittance"] = per_class(scene.build(), tau)
+        except InvalidInputError as exc:
+            raise InvalidInputError(f"--transmittance {_shown_tau(tau)}: {exc}") from None
+    elif isinstance(tau, str):
+        out["transmittance"] = tau
+    elif tau is not None:  # every object, not the ground
+        out["transmittance"] = [0.0] + [tau] * (len(scene.build().objects))
+    return out
+
+
+def _return_physics(sensor, args: argparse.Namespace):
     """``sensor`` with ``--footprint``, ``--power-noise``, ``--echo-separation``, ``--max-returns`` and
     ``--range-resolution`` applied: all five to a spinning LiDAR, the last two to an airborne
     scanner (its footprint is the sensor file's ``footprint_rays``).
@@ -255,7 +366,7 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
 
                 s = scan_airborne(scene, sensor, (0.0, 0.0), scene.ground_half_extent_m, seed=args.seed + k)
             else:
-                s = scan(scene, sensor, pose, seed=args.seed + k, backend=args.backend, frame=args.frame)
+                s = scan(scene, sensor, pose, seed=args.seed + k, backend=args.backend, frame=args.frame, **_surface_optics(args, scene))
             written += _save(folder, s, f"{src.stem}_{sensor.name}_s{k:03d}", formats)
     else:
         if not isinstance(sensor, (Lidar, RayTable, AirborneScanner)):
@@ -369,6 +480,14 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
     r.add_argument("--range-resolution", metavar="M", action=Checked, check=real(0.0, above=True, unit="metres"), default=None,
                    help="with --max-returns above 1: echoes closer than M metres merge into one return (half the pulse length, "
                         "~0.75 m for 5 ns) (default: the sensor's)")  # fmt: skip
+    r.add_argument("--reflectance-table", action="store_true",
+                   help="a scene file's surfaces reflect as the cited table gives their material at 905 nm (by each object's "
+                        "material or class: leaves, bark, car paint, glass, metal, ...; the ground asphalt), and returns must clear "
+                        "the sensor's radiometric threshold")  # fmt: skip
+    r.add_argument("--transmittance", metavar="SPEC", action=Checked, check=_transmittance, default=None,
+                   help="with --max-returns above 1, a scene file: the share of each sub-ray that goes on through an object's "
+                        "surface and comes back, in [0, 1] (a leafy crown's gap fraction); table (foliage 0.3 from the reflectance "
+                        "table), one number (every object), or CLASS=VALUE,... (bush=0.3,tree=0.3) (default: 0, opaque)")  # fmt: skip
     p.add_argument("--azimuth", action=Checked, check=interval, default="0", help="direction of the object from the sensor, degrees (N or LO:HI) (default: %(default)s)")
     p.add_argument("--yaw", action=Checked, check=interval, default="0", help="the object's heading, degrees (N or LO:HI) (default: %(default)s)")
     p.add_argument("--samples", action=Checked, check=count("MAX_SAMPLES"), default=1, help="scans, each with its own draws (default: %(default)s)")
@@ -445,7 +564,110 @@ def add_realism_parser(sub) -> argparse.ArgumentParser:
     return p
 
 
+#: What ``fit-sensor`` reads as LAS/LAZ scans (the return model's fit) rather than object scans.
+LAS_EXTENSIONS = (".las", ".laz")
+#: Most resamples ``fit-sensor --bootstrap`` takes: each costs a pass over the scan's pulses.
+MAX_BOOTSTRAP = 10_000
+
+
+def _las_inputs(real: str) -> list[Path] | None:
+    """The LAS/LAZ files ``fit-sensor REAL`` fits the return model to: ``REAL`` itself when it is named ``.las``/``.laz``,
+    or the ``.las``/``.laz`` files directly inside the folder ``REAL`` (sorted by name); None when it names neither."""
+    path = Path(real)
+    if path.suffix.lower() in LAS_EXTENSIONS and not path.is_dir():
+        return [path]  # missing or damaged: read_las says so, naming it
+    if path.is_dir():
+        found = sorted(p for p in path.iterdir() if p.suffix.lower() in LAS_EXTENSIONS and not p.is_dir())
+        return found or None
+    return None
+
+
+def _classes(text: str, option: str) -> tuple[int, ...]:
+    """``--classes C,C,...``: ASPRS class codes 0 to 255 (``none``: no class set)."""
+    if text.strip().lower() == "none":
+        return ()
+    codes = [c.strip() for c in text.split(",")]
+    if not codes or len(codes) > 256 or not all(c.isdigit() and int(c) <= 255 for c in codes):
+        raise InvalidInputError(f"{option} must be ASPRS class codes 0 to 255, C,C,... (or none), got {shown(text)}")
+    return tuple(int(c) for c in codes)
+
+
+def _bootstrap(text: str, option: str) -> int:
+    """``--bootstrap N``: resamples, 2 to :data:`MAX_BOOTSTRAP`."""
+    n = count(None, lowest=2, hint="a spread needs two resamples")(text, option)
+    if n > MAX_BOOTSTRAP:
+        raise InvalidInputError(f"{option} must be at most {MAX_BOOTSTRAP:,}, got {shown(text)}")
+    return n
+
+
+def _read_scans(files: Sequence[Path], real: str):
+    """The LAS/LAZ ``files`` read (inside the folder ``real`` when it is one) and merged; one line naming a file that has no
+    GPS time or no points, or what :func:`~zbuf_occlude.io.las.read_las` refuses."""
+    from zbuf_occlude.defaults import MAX_POINTS
+    from zbuf_occlude.io.las import read_las
+    from zbuf_occlude.sensors.fit import merge_scans
+
+    within = real if Path(real).is_dir() else None
+    scans, total = [], 0
+    for f in files:
+        las = read_las(f, within=within, max_points=MAX_POINTS - total)
+        if not las.has_gps_time:
+            raise InvalidInputError(f"{f}: point format {las.point_format_id} has no GPS time: the returns of one pulse cannot be told apart")
+        if len(las) == 0:
+            raise InvalidInputError(f"{f}: holds no points")
+        scans.append(las)
+        total += len(las)
+    return merge_scans(scans, [str(f) for f in files])
+
+
+def _fit_returns(args: argparse.Namespace, files: Sequence[Path]) -> int:
+    """``fit-sensor`` on LAS/LAZ scans: the return model (:func:`~zbuf_occlude.sensors.fit.fit_return_model`) applied to
+    ``--sensor``, written as a sensor JSON with the fit under ``"fit"`` and a Markdown table beside it."""
+    import json
+
+    from zbuf_occlude.sensors.airborne import AirborneScanner
+    from zbuf_occlude.sensors.fit import BOOTSTRAP, VEGETATION_CLASSES, fit_return_model
+    from zbuf_occlude.sensors.lidar import Lidar
+    from zbuf_occlude.sensors.presets import sensor_to_json
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".json":
+        raise InvalidInputError(f"--out {out}: the fitted sensor is written as a .json file")
+    base = sensor_from_name(args.sensor)
+    if not isinstance(base, (Lidar, AirborneScanner)):
+        raise InvalidInputError(f"--sensor {args.sensor}: fit-sensor fits a spinning LiDAR or an airborne scanner, not a {type(base).__name__}")
+    altitude = args.altitude if args.altitude is not None else getattr(base, "altitude_m", None)
+    if altitude is None:
+        raise InvalidInputError(f"--sensor {args.sensor} is a spinning LiDAR: give --altitude M, the range to the ground in your scans, metres")
+    bootstrap = args.bootstrap or BOOTSTRAP
+    md = out.with_suffix(".md")
+    names = (out.name, md.name)
+    with OwnedFolder(out.parent, files=names, what="the fitted sensor") as folder:
+        folder.check_writable(names)  # before any scan is read: a refusal writes nothing
+        print(f"reading {counted(len(files), 'LAS/LAZ file')} from {args.real} ...", flush=True)
+        las = _read_scans(files, args.real)
+        print(f"read {len(las):,} points; fitting the return model to {base.name} at {altitude:g} m above the ground, "
+              f"{bootstrap} bootstrap resamples ...", flush=True)  # fmt: skip
+        fit = fit_return_model(las, altitude_m=altitude, classes=VEGETATION_CLASSES if args.classes is None else args.classes,
+                               seed=args.seed, bootstrap=bootstrap)  # fmt: skip
+        sensor = fit.apply(base)
+        spec = sensor_to_json(sensor)
+        spec["fit"] = {"base": base.name, "files": [f.name for f in files], "returns": fit.to_json()}
+        folder.write_text(out.name, json.dumps(spec, indent=1, default=float, allow_nan=False) + "\n")
+        table = fit.markdown(sensor)
+        folder.write_text(md.name, f"# {sensor.name}: the return model fitted to {', '.join(f.name for f in files)}\n\n{table}")
+    print(table, end="")
+    print(f"wrote {out} (use it as --sensor {out}), {md}")
+    return 0
+
+
 def cmd_fit_sensor(args: argparse.Namespace) -> int:
+    files = _las_inputs(args.real)
+    if files is not None:
+        return _fit_returns(args, files)
+    given = [flag for flag, value in (("--altitude", args.altitude), ("--classes", args.classes), ("--bootstrap", args.bootstrap)) if value is not None]
+    if given:
+        raise InvalidInputError(f"{', '.join(given)}: for LAS/LAZ scans, and {args.real} is neither a .las/.laz file nor a folder of them")
     from zbuf_occlude.experiments.sensor_fit import fit_sensor_to_scans
 
     fit, json_path, md_path = fit_sensor_to_scans(args.real, args.sensor, args.out, seed=args.seed, say=lambda line: print(line, flush=True))
@@ -456,18 +678,24 @@ def cmd_fit_sensor(args: argparse.Namespace) -> int:
 
 def add_fit_sensor_parser(sub) -> argparse.ArgumentParser:
     """Add ``fit-sensor`` to the subparsers ``sub``."""
+    from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP
+
     names = preset_names()
     p = sub.add_parser(
-        "fit-sensor", help="fit a spinning LiDAR or an airborne scanner to your real object scans",
+        "fit-sensor", help="fit a spinning LiDAR or an airborne scanner to your real object scans, or its return model to your LAS/LAZ scans",
         description="Estimate what the simulation can set from a folder of real segmented object scans (metres, z up), "
         "each with a bootstrap uncertainty, and write a sensor JSON that scan, farm --sensor and experiment sim2real "
         "--sensor take.  The --sensor to start from chooses the fit.  A spinning LiDAR: scans in the sensor's frame "
         "(sensor at the origin); azimuth step, range noise, dropout, and the ring spacing, count-vs-range law and "
         "ground returns.  An airborne scanner: aerial crops as they lie, no sensor position needed; point density, "
         "scan angle and swath, range noise (altitude and speed are the preset's; the flight plan puts scanned objects at "
-        "the crops' scan angles).  Spinning fits refuse aerial crops in one line.",
+        "the crops' scan angles).  Spinning fits refuse aerial crops in one line.  LAS/LAZ scans (a .las/.laz file, or a folder of them: tiles or "
+        "crops of one survey) fit the return model instead: the range resolution, the most returns per pulse, the detection "
+        "threshold and the intensity scale, per class too, beside the returns-per-pulse shares, gaps and intensities they "
+        "rest on; the beam divergence cannot be told from the points and stays the --sensor's.",
     )  # fmt: skip
-    p.add_argument("real", metavar="REAL_SCANS", help="folder of real object scans (class folders of point files, LiDARNet CSVs, or SUO)")
+    p.add_argument("real", metavar="REAL_SCANS", help="folder of real object scans (class folders of point files, LiDARNet CSVs, or SUO), "
+                   "or a .las/.laz scan or a folder of them (the return model)")
     p.add_argument(
         "--sensor", required=True,
         help=f"the preset or sensor JSON to start from: a spinning LiDAR ({', '.join(names['lidar'])}; its beam table is kept) "
@@ -475,6 +703,16 @@ def add_fit_sensor_parser(sub) -> argparse.ArgumentParser:
     )  # fmt: skip
     p.add_argument("--out", required=True, help="the fitted sensor, a .json file (a .md table is written beside it)")
     p.add_argument("--seed", action=Checked, check=seed, default=DEFAULT_SEED, help="seed of the bootstrap (default: %(default)s)")
+    r = p.add_argument_group("LAS/LAZ scans (the return model)")
+    r.add_argument("--altitude", metavar="M", action=Checked, check=real(0.0, above=True, unit="metres"), default=None,
+                   help="flying height above the ground, metres: a LAS file records no sensor position, and the intensity scale "
+                        "and the detection threshold in energy depend on the range (default: the airborne --sensor's altitude; "
+                        "IGN LiDAR HD flies about 1,500 m)")  # fmt: skip
+    r.add_argument("--classes", metavar="C,C,...", action=Checked, check=_classes, default=None,
+                   help="ASPRS classes of the class-set figures, or none (default: 3,4,5, vegetation); every class in the file "
+                        "gets its own figures anyway")  # fmt: skip
+    r.add_argument("--bootstrap", metavar="N", action=Checked, check=_bootstrap, default=None,
+                   help=f"resamples of the bootstrap over pulses, 2 to {MAX_BOOTSTRAP:,} (default: {BOOTSTRAP})")
     p.set_defaults(func=cmd_fit_sensor)
     return p
 
