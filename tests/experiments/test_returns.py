@@ -1,0 +1,203 @@
+"""The returns experiment (experiments/returns.py, returns_report.py) on tiny synthetic scenes: no ../shared data."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import trimesh
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.experiments.returns import (
+    IGN_DIVERGENCE_DEG,
+    PLOT_TREES,
+    ign_scanner,
+    invert_curve,
+    plot_scene,
+    pulse_subset,
+    simulate,
+    simulated_classes,
+)
+from zbuf_occlude.experiments.returns_report import ReturnsSettings, comparison_rows, recommend_k, run_returns
+from zbuf_occlude.io.atomic import write_bytes
+from zbuf_occlude.io.las import LasPoints, las_bytes
+from zbuf_occlude.io.regular_files import read_regular_file
+from zbuf_occlude.io.tables import read_csv_rows
+from zbuf_occlude.sensors.fit import Estimate
+from zbuf_occlude.sensors.fit.returns import ReturnStatistics, return_statistics
+
+#: A footprint 1.5 m across at 1,500 m: plate edges split many pulses.
+WIDE_DEG = math.degrees(1e-3)
+
+
+def _plot():
+    """A ground and two boxes: a 4 m tall post and a thin plate 2.5 m up (standing on a thin stem)."""
+    post = trimesh.creation.box(extents=(1.2, 1.2, 4.0))
+    plate = trimesh.util.concatenate([trimesh.creation.box(extents=(2.0, 2.0, 0.05)).apply_translation((0, 0, 2.5)),
+                                      trimesh.creation.box(extents=(0.1, 0.1, 2.5)).apply_translation((0, 0, 1.25))])  # fmt: skip
+    return plot_scene([post, plate], [4.0, 2.6], spacing_m=3.0, seed=0)
+
+
+def test_the_las_round_trip_measures_what_the_scan_holds() -> None:
+    scene, vegetation = _plot()
+    scanner = ign_scanner(WIDE_DEG, 7)
+    result = simulate(scene, scanner, vegetation, half_size_m=4.0, seeds=(0,), bootstrap=10)
+    scan = result.scan
+    assert result.statistics["vegetation"].estimates["returns_2"].value > 0.05  # the plates split pulses
+    # the figures of the scan's own arrays, without the file: equal shares, gaps within the 1 mm steps
+    full = 2.0 / scanner.altitude_m**2
+    own = LasPoints(points=scan.points.astype(np.float64), intensity=np.rint(np.clip(scan.intensity / full, 0, 1) * 65535),
+                    return_number=scan.return_number, number_of_returns=scan.number_of_returns, gps_time=scan.gps_time,
+                    scan_angle_deg=scan.scan_angle_deg, classification=simulated_classes(scan, vegetation),
+                    point_source_id=np.zeros(len(scan)), scanner_channel=np.zeros(len(scan)))  # fmt: skip
+    mine, theirs = return_statistics(own, bootstrap=10).estimates, result.statistics["all"].estimates
+    for name in ("returns_1", "returns_2", "returns_3", "multi_return_points", "multi_return_points_classes_3_4_5", "intensity_ratio"):
+        assert mine[name].value == theirs[name].value, name
+    for name in ("gap_min", "gap_median"):
+        assert abs(mine[name].value - theirs[name].value) <= 2e-3, name
+    assert theirs["gap_min"].value >= scanner.range_resolution_m - 5 * scanner.range_noise_m
+
+
+def test_pooled_seeds_are_flight_lines_of_their_own() -> None:
+    scene, vegetation = _plot()
+    one = simulate(scene, ign_scanner(WIDE_DEG, 7), vegetation, half_size_m=4.0, seeds=(0,), bootstrap=5)
+    two = simulate(scene, ign_scanner(WIDE_DEG, 7), vegetation, half_size_m=4.0, seeds=(0, 1), bootstrap=5)
+    assert set(two.las.point_source_id.tolist()) == {0, 1}
+    assert two.statistics["all"].n_pulses > one.statistics["all"].n_pulses
+    assert two.pulses > one.pulses
+
+
+def test_classes_follow_object_and_height() -> None:
+    scene, vegetation = _plot()
+    scan = simulate(scene, ign_scanner(WIDE_DEG, 7), vegetation, half_size_m=4.0, seeds=(0,), bootstrap=5).scan
+    classes = simulated_classes(scan, vegetation)
+    assert np.all(classes[scan.object_id == 0] == 2)
+    on = scan.object_id > 0
+    assert np.all(classes[on][scan.points[on, 2] >= 1.5] == 5)
+    assert np.all(simulated_classes(scan, ())[on] == 1)
+    # low, medium and high vegetation by height above the ground (0.5 and 1.5 m)
+    three = replace(scan.select(np.flatnonzero(on)[:4]), points=np.array([[0, 0, 0.2], [0, 0, 0.7], [0, 0, 1.6], [0, 0, 2.4]], np.float32))
+    assert simulated_classes(three, vegetation).tolist() == [3, 4, 5, 5]
+    assert simulated_classes(three, vegetation, ground_z_m=0.9).tolist() == [3, 3, 4, 5]
+
+
+def _las(classes, times, numbers) -> LasPoints:
+    n = len(classes)
+    return LasPoints(points=np.zeros((n, 3)), intensity=np.ones(n), return_number=[1] * n, number_of_returns=numbers, gps_time=times,
+                     scan_angle_deg=np.zeros(n), classification=classes, point_source_id=np.zeros(n), scanner_channel=np.zeros(n))  # fmt: skip
+
+
+def test_pulse_subset_takes_whole_pulses() -> None:
+    # pulse 0: vegetation then ground; pulse 1: ground only; pulse 2: building only
+    las = _las([5, 2, 2, 6], [0.0, 0.0, 1.0, 2.0], [2, 2, 1, 1])
+    assert pulse_subset(las, "vegetation").gps_time.tolist() == [0.0, 0.0]
+    assert pulse_subset(las, "ground").gps_time.tolist() == [1.0]
+    with pytest.raises(InvalidInputError, match="side"):
+        pulse_subset(las, "water")
+    with pytest.raises(InvalidInputError, match="no vegetation pulse"):
+        pulse_subset(_las([2], [0.0], [1]), "vegetation")
+
+
+def test_invert_curve_recovers_a_known_divergence() -> None:
+    x = np.linspace(0.005, 0.06, 12)
+    truth = 0.0314
+    curve = lambda d: 1.0 - np.exp(-d / 0.02)  # noqa: E731
+    fit = invert_curve(x, curve(x), float(curve(truth)), 0.005, seed=1)
+    assert abs(fit.value - truth) < 5e-4  # linear between grid points
+    assert fit.low < truth < fit.high and fit.inside == 1.0
+    exact = invert_curve(x, curve(x), float(curve(truth)), 0.0)
+    assert exact.low == exact.high == pytest.approx(exact.value)
+    falling = invert_curve(x, -curve(x), -float(curve(truth)), 0.0)
+    assert falling.value == pytest.approx(exact.value)
+    outside = invert_curve(x, curve(x), 0.99, 0.001)
+    assert math.isnan(outside.value) and outside.high == x[-1] and outside.inside == 0.0
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(0.0, 1.0), min_size=2, max_size=8), st.floats(0.0, 1.0))
+def test_invert_curve_is_the_inverse_of_the_piecewise_linear_curve(steps, where) -> None:
+    y = np.cumsum(np.asarray(steps) + 1e-3)  # strictly increasing
+    x = np.arange(len(y), dtype=np.float64)
+    target = y[0] + where * (y[-1] - y[0])
+    fit = invert_curve(x, y, float(target), 0.0)
+    assert np.interp(fit.value, x, y) == pytest.approx(target, abs=1e-9)
+
+
+@pytest.mark.parametrize(("x", "y", "message"), [([0.0], [0.0], "two or more"), ([0.0, 1.0, 2.0], [0.0, 1.0, 0.5], "monotone"),
+                                                  ([1.0, 0.0], [0.0, 1.0], "increasing"), ([0.0, 1.0], [0.0, math.nan], "finite")])  # fmt: skip
+def test_invert_curve_refuses_what_it_cannot_invert(x, y, message) -> None:
+    with pytest.raises(InvalidInputError, match=message):
+        invert_curve(x, y, 0.5, 0.1)
+
+
+def _row(k: int, shares, sd: float = 0.01) -> dict:
+    row = {"K": k}
+    for i, share in enumerate(shares, start=1):
+        row[f"returns_{i}"], row[f"returns_{i}_sd"] = share, sd
+    return row
+
+
+def test_recommend_k_is_the_smallest_within_the_largest_ks_uncertainty() -> None:
+    rows = [_row(1, (1.0, 0.0, 0.0, 0.0)), _row(7, (0.7, 0.25, 0.05, 0.0)), _row(19, (0.62, 0.3, 0.07, 0.01)),
+            _row(37, (0.61, 0.31, 0.07, 0.01)), _row(61, (0.6, 0.31, 0.08, 0.01))]  # fmt: skip
+    assert recommend_k(rows) == 19
+    assert recommend_k(list(reversed(rows))) == 19
+    assert recommend_k([_row(k, (0.6, 0.3, 0.1, 0.0), sd=0.0) for k in (7, 19)]) == 7
+    with pytest.raises(InvalidInputError):
+        recommend_k([])
+
+
+def _stats(values: dict[str, float]) -> ReturnStatistics:
+    estimates = {name: Estimate(v, 0.01, 100, "test", "share") for name, v in values.items()}
+    return ReturnStatistics(estimates, 100, 100, 100, (3, 4, 5), "m", 0, 2)
+
+
+def test_comparison_verdicts_hold_the_tolerances() -> None:
+    base = {"returns_1": 0.5, "returns_2": 0.4, "returns_3": 0.08, "returns_4": 0.02, "multi_return_points_classes_3_4_5": 0.6,
+            "multi_return_points_class_2": 0.1, "gap_min": 0.82, "gap_median": 2.5, "intensity_ratio_classes_3_4_5": 0.5}  # fmt: skip
+    real = {side: _stats(base) for side in ("all", "vegetation", "ground")}
+    sim_values = base | {"returns_1": 0.59, "returns_2": 0.25, "gap_min": 0.84, "gap_median": 3.4, "intensity_ratio_classes_3_4_5": 0.3}
+    sim = {side: _stats(sim_values) for side in ("all", "vegetation", "ground")}
+    rows = {r["figure"]: r["verdict"] for r in comparison_rows(real, sim, real_classes=(3, 4, 5), range_resolution_m=0.82, label="t")}
+    assert rows["vegetation pulses with 1 return"] == "PASS"  # +18 %
+    assert rows["vegetation pulses with 2 returns"] == "FAIL"  # −37.5 %
+    assert rows["smallest gap (m)"] == "PASS"  # +2.4 % of the resolution
+    assert rows["median gap (m)"] == "FAIL"  # +36 %
+    assert rows["intensity first-of-several / single, vegetation"] == "FAIL"
+
+
+def test_run_returns_writes_its_outputs(tmp_path) -> None:
+    meshes = tmp_path / "bush"
+    meshes.mkdir()
+    for i, tree in enumerate(PLOT_TREES):
+        box = trimesh.creation.box(extents=(1.0 + 0.2 * i, 1.0, 2.0))
+        write_bytes(meshes / (tree.file.rsplit(".", 1)[0] + ".obj"), box.export(file_type="obj").encode())
+    trees = [type(t)(t.file.rsplit(".", 1)[0] + ".obj", "+z", 3.0) for t in PLOT_TREES]
+    # a "real" file: the same kind of plot simulated at a wide beam, written with its classes
+    scene, vegetation = _plot()
+    real = simulate(scene, ign_scanner(WIDE_DEG, 7), vegetation, half_size_m=4.0, seeds=(0,), bootstrap=5).las
+    data = las_bytes(real.points, intensity=real.intensity, return_number=real.return_number, number_of_returns=real.number_of_returns,
+                     gps_time=real.gps_time, scan_angle_deg=real.scan_angle_deg, classification=real.classification)  # fmt: skip
+    real_path = write_bytes(tmp_path / "real.las", data)
+    import zbuf_occlude.experiments.returns_report as report
+
+    settings_ = ReturnsSettings(divergence_factors=(1.0, 8.0), sweep_rays=(7,), k_values=(1, 7), seeds=(0,), repeats=1, copies=1,
+                                spacing_m=4.0, bootstrap=5)  # fmt: skip
+    original = report.PLOT_TREES
+    report.PLOT_TREES = tuple(trees)
+    try:
+        summary = run_returns(tmp_path / "out", meshes, real_path, settings=settings_)
+    finally:
+        report.PLOT_TREES = original
+    out = tmp_path / "out"
+    assert summary["recommended_k"] in (1, 7)
+    assert summary["verdicts"]["PASS"] + summary["verdicts"]["FAIL"] + summary["verdicts"]["not measured"] == 2 * 13
+    assert read_regular_file(out / "returns.png", max_bytes=1 << 24)[:8] == b"\x89PNG\r\n\x1a\n"
+    sweep = read_csv_rows(out / "divergence_sweep.csv")
+    assert [float(r["divergence_deg"]) for r in sweep] == pytest.approx([IGN_DIVERGENCE_DEG, 8 * IGN_DIVERGENCE_DEG], rel=1e-5)
+    assert len(read_csv_rows(out / "k_sweep.csv")) == 2
+    assert len(read_csv_rows(out / "comparison.csv")) == 26
