@@ -85,4 +85,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     from zbuf_occlude.cli.sim2real import add_sim2real_parser
 
     add_sim2real_parser(sub)
+    from zbuf_occlude.cli.returns import add_returns_parser
+
+    add_returns_parser(sub)
     return p

@@ -1,0 +1,45 @@
+"""``zbuf-occlude experiment returns``: the argparse face of :func:`~zbuf_occlude.experiments.returns_report.run_returns`."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+from zbuf_occlude.cli.options import Checked, count, out_folder
+
+__all__ = ["add_returns_parser"]
+
+
+def _run(args: argparse.Namespace) -> int:
+    from zbuf_occlude.experiments.returns_report import ReturnsSettings, run_returns
+
+    settings = ReturnsSettings(bootstrap=args.bootstrap, seeds=tuple(range(args.seeds)))
+    if args.quick:
+        settings = ReturnsSettings(divergence_factors=(0.5, 1.0, 2.0, 4.0), sweep_rays=(7,), k_values=(1, 7, 19), seeds=(0,), repeats=1,
+                                   copies=1, bootstrap=args.bootstrap)  # fmt: skip
+    summary = run_returns(args.out, args.meshes, args.real, autzen_path=args.autzen, settings=settings)
+    fits = ", ".join(f"K {f['K']}: {f['divergence_mrad']:.3g} mrad" for f in summary["divergence_fits"])
+    sys.stdout.write(f"{summary['table']}\nfitted divergence {fits}; recommended K {summary['recommended_k']}; "
+                     f"{summary['seconds']:.0f} s -> {args.out}\n")  # fmt: skip
+    return 0
+
+
+def add_returns_parser(sub: Any) -> argparse.ArgumentParser:
+    """Add ``returns`` to ``experiment``'s argparse subparsers."""
+    p = sub.add_parser(
+        "returns", help="simulate an airborne scanner over tree meshes and measure its returns per pulse as a real LAS/LAZ file's",
+        description="Scan a plot of tree and bush meshes with the IGN LiDAR HD scanner's settings and several returns per pulse, "
+        "write it as LAS, read it back and measure it with the function that measures --real; fit the beam divergence by "
+        "simulation, choose the sub-ray count, and write the comparison with PASS/FAIL per target, the sweeps and a figure.",
+    )  # fmt: skip
+    p.add_argument("meshes", help="folder of the tree and bush meshes (street_objects/bush: the files of PLOT_TREES)")
+    p.add_argument("--real", required=True, help="the real LAS/LAZ file with vegetation classes 3-5 (the IGN LiDAR HD sample)")
+    p.add_argument("--autzen", help="a second real LAS/LAZ file for the cross-check (its class 1 taken as vegetation)")
+    p.add_argument("--out", required=True, action=Checked, check=out_folder,
+                   help="output folder (real.md, divergence_sweep.csv, k_sweep.csv, comparison.csv/.md, returns.png, run.json)")  # fmt: skip
+    p.add_argument("--bootstrap", action=Checked, check=count(None, lowest=2), default=200, help="bootstrap resamples (default: %(default)s)")
+    p.add_argument("--seeds", action=Checked, check=count(None), default=2, help="scans pooled per setting (default: %(default)s)")
+    p.add_argument("--quick", action="store_true", help="a small sweep (about 20 s): a check that the command runs, not the page's numbers")
+    p.set_defaults(func=_run)
+    return p
