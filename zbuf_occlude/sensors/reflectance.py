@@ -70,6 +70,7 @@ __all__ = [
     "SceneOptics",
     "material_named",
     "material_of",
+    "per_class",
     "reflectance",
     "scene_optics",
 ]
@@ -290,3 +291,22 @@ def scene_optics(
         material=tuple(keys),
         wavelength_nm=WAVELENGTHS_NM[column],
     )
+
+
+def per_class(built: BuiltScene, values: Mapping[str, float], default: float = 0.0) -> NDArray[np.float64]:
+    """(n_objects + 1,) float64: ``values[class]`` for each object id of ``built`` by its class name, ``default`` for the rest.
+
+    The ground (object id 0) is the class ``"ground"``; class names match case-insensitively.
+    ``scan(transmittance=per_class(built, {"bush": 0.3}))``: sub-rays go on through the bushes.
+
+    Raises
+    ------
+    InvalidInputError
+        A class that no object of the scene has (naming it and the scene's classes).
+    """
+    wanted = {str(k).lower(): float(v) for k, v in values.items()}
+    classes = ["ground"] + [obj.class_name.lower() for obj in built.objects]
+    missing = sorted(set(wanted) - set(classes))
+    if missing:
+        raise InvalidInputError(f"no object of the scene has the class {', '.join(map(repr, missing))}; its classes: {', '.join(sorted(set(classes)))}")
+    return np.array([wanted.get(c, float(default)) for c in classes])
