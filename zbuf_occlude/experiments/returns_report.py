@@ -17,7 +17,9 @@
 
 A target passes when the simulated figure lies within the stated relative tolerance of the real
 one (:data:`TOLERANCES`); the smallest gap is held to the range resolution the simulation was
-given (the real file's smallest gap), within :data:`GAP_MIN_TOLERANCE`.
+given, within :data:`GAP_MIN_TOLERANCE`.  The range resolution and the most returns per pulse are
+the real file's fitted ones (:func:`~zbuf_occlude.sensors.fit.return_model.fit_return_model`); the
+divergence is fitted by the sweep (:func:`~zbuf_occlude.sensors.fit.return_model.divergence_from_shares`).
 """
 
 from __future__ import annotations
@@ -37,24 +39,13 @@ import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.returns import (
-    GROUND_CLASS,
-    IGN_ALTITUDE_M,
-    IGN_DIVERGENCE_DEG,
-    PLOT_TREES,
-    ign_scanner,
-    invert_curve,
-    plot_scene,
-    pulse_subset,
-    simulate,
-)
+    GROUND_CLASS, IGN_ALTITUDE_M, IGN_DIVERGENCE_DEG, PLOT_TREES, ign_scanner, invert_curve, plot_scene, pulse_subset, simulate,
+)  # fmt: skip
 from zbuf_occlude.io.encodings import png_bytes
 from zbuf_occlude.io.las import LasPoints, read_las
 from zbuf_occlude.io.owned import OwnedFolder
-from zbuf_occlude.sensors.fit.returns import (
-    VEGETATION_CLASSES,
-    ReturnStatistics,
-    return_statistics,
-)
+from zbuf_occlude.sensors.fit import Estimate
+from zbuf_occlude.sensors.fit.returns import VEGETATION_CLASSES, ReturnStatistics, return_statistics
 
 __all__ = ["RETURNS_OUTPUTS", "TOLERANCES", "ReturnsSettings", "comparison_markdown", "comparison_rows", "recommend_k", "run_returns"]
 
@@ -225,12 +216,22 @@ def _sweep_row(result, divergence_deg: float, k: int, suffix: str) -> dict[str, 
     return row
 
 
-def _real(path: str | os.PathLike, classes: Sequence[int], bootstrap: int) -> tuple[dict[str, ReturnStatistics], LasPoints]:
+def _real(path: str | os.PathLike, classes: Sequence[int], bootstrap: int) -> tuple[dict[str, ReturnStatistics], LasPoints, dict[str, Any]]:
+    """The real file's figures per side, its points, and the echo model fitted to it
+    (:func:`~zbuf_occlude.sensors.fit.return_model.fit_return_model`: range resolution, most returns)."""
+    from zbuf_occlude.sensors.fit.return_model import fit_return_model
+
     las = read_las(path)
     out = {"all": return_statistics(las, classes=classes, bootstrap=bootstrap)}
     for side in ("vegetation", "ground"):
         out[side] = return_statistics(pulse_subset(las, side, classes=classes), classes=classes, bootstrap=bootstrap)
-    return out, las
+    fit = fit_return_model(las, altitude_m=IGN_ALTITUDE_M, classes=classes, bootstrap=bootstrap).estimates
+    model = {"range_resolution_m": fit["range_resolution_m"].value, "max_returns": int(fit["max_returns"].value)}
+    return out, las, model | {"range_resolution_sd_m": fit["range_resolution_m"].std}
+
+
+def _scanner(divergence_deg: float, k: int, model: dict[str, Any]):
+    return ign_scanner(divergence_deg, k, range_resolution_m=model["range_resolution_m"], max_returns=model["max_returns"])
 
 
 def _plot(mesh_root: str | os.PathLike, settings: ReturnsSettings):
@@ -248,45 +249,52 @@ def _plot(mesh_root: str | os.PathLike, settings: ReturnsSettings):
     return scene, vegetation, (0.0, y), side * settings.spacing_m / 2.0
 
 
-def _divergence_sweep(plot, settings: ReturnsSettings, resolution_m: float, ks: Sequence[int]) -> list[dict[str, Any]]:
+def _divergence_sweep(plot, settings: ReturnsSettings, model: dict[str, Any], ks: Sequence[int]) -> list[dict[str, Any]]:
     scene, vegetation, centre, half = plot
     rows = []
     for factor in settings.divergence_factors:
         for k in ks:
             divergence = IGN_DIVERGENCE_DEG * factor
-            result = simulate(scene, ign_scanner(divergence, k, range_resolution_m=resolution_m), vegetation, center_xy=centre,
-                              half_size_m=half, seeds=settings.seeds, bootstrap=settings.bootstrap)  # fmt: skip
-            rows.append(_sweep_row(result, divergence, k, _suffix(VEGETATION_CLASSES)) | {"resolution_m": resolution_m})
+            result = simulate(scene, _scanner(divergence, k, model), vegetation, center_xy=centre, half_size_m=half,
+                              seeds=settings.seeds, bootstrap=settings.bootstrap)  # fmt: skip
+            rows.append(_sweep_row(result, divergence, k, _suffix(VEGETATION_CLASSES)) | {"resolution_m": model["range_resolution_m"]})
             log.info("divergence %.4f° K %d: share %.3f", divergence, k, rows[-1]["multi_return_share"])
     return rows
 
 
-def _fit_divergence(rows: Sequence[dict[str, Any]], k: int, real_share: tuple[float, float], seed: int = 0) -> dict[str, Any]:
-    """Invert the K curve of the sweep at the real share; a curve that dips is made monotone by a
-    running maximum first (said in ``monotone_fix``)."""
+def _fit_divergence(rows: Sequence[dict[str, Any]], k: int, measured: Estimate, seed: int = 0) -> dict[str, Any]:
+    """Invert the K curve of the sweep at the real share: the value and ``± sd`` of
+    :func:`~zbuf_occlude.sensors.fit.return_model.divergence_from_shares` (the real share's sd and the
+    simulated shares' added in quadrature, through the curve), and the 95 % interval of
+    :func:`~.returns.invert_curve` (the real share's draws mapped through it).  A curve that dips is
+    made monotone by a running maximum first (``monotone_fix``)."""
+    from zbuf_occlude.sensors.fit.return_model import divergence_from_shares
+
     mine = sorted((r for r in rows if r["K"] == k), key=lambda r: r["divergence_deg"])
     x = np.array([r["divergence_deg"] for r in mine])
     y = np.array([r["multi_return_share"] for r in mine])
     fixed = np.maximum.accumulate(y)
-    fit = invert_curve(x, fixed, real_share[0], real_share[1], seed=seed)
-    return {"K": k, "divergence_deg": fit.value, "low_deg": fit.low, "high_deg": fit.high, "sd_deg": fit.std, "inside": fit.inside,
-            "divergence_mrad": math.radians(fit.value) * 1e3, "monotone_fix": bool(np.any(fixed != y))}  # fmt: skip
+    fit = divergence_from_shares(x, fixed, measured, np.array([r["multi_return_share_sd"] for r in mine]))
+    spread = invert_curve(x, fixed, measured.value, measured.std, seed=seed)
+    return {"K": k, "divergence_deg": fit.value, "sd_deg": fit.std, "low_deg": spread.low, "high_deg": spread.high,
+            "inside": spread.inside, "divergence_mrad": math.radians(fit.value) * 1e3, "sd_mrad": math.radians(fit.std) * 1e3,
+            "monotone_fix": bool(np.any(fixed != y))}  # fmt: skip
 
 
-def _k_sweep(plot, settings: ReturnsSettings, divergence_deg: float, resolution_m: float) -> list[dict[str, Any]]:
+def _k_sweep(plot, settings: ReturnsSettings, divergence_deg: float, model: dict[str, Any]) -> list[dict[str, Any]]:
     """Every K measured once, then timed in ``repeats`` interleaved rounds (the measured round included)."""
     from zbuf_occlude.sensors.airborne import scan_airborne
 
     scene, vegetation, centre, half = plot
     rows, times = {}, {k: [] for k in settings.k_values}
     for k in settings.k_values:
-        result = simulate(scene, ign_scanner(divergence_deg, k, range_resolution_m=resolution_m), vegetation, center_xy=centre,
-                          half_size_m=half, seeds=settings.seeds, bootstrap=settings.bootstrap)  # fmt: skip
+        result = simulate(scene, _scanner(divergence_deg, k, model), vegetation, center_xy=centre, half_size_m=half,
+                          seeds=settings.seeds, bootstrap=settings.bootstrap)  # fmt: skip
         rows[k] = _sweep_row(result, divergence_deg, k, _suffix(VEGETATION_CLASSES))
         times[k].append(result.seconds / result.pulses)
     for _ in range(settings.repeats - 1):
         for k in settings.k_values:
-            scanner = ign_scanner(divergence_deg, k, range_resolution_m=resolution_m)
+            scanner = _scanner(divergence_deg, k, model)
             start = time.perf_counter()
             scan = scan_airborne(scene, scanner, centre, half, seed=settings.seeds[0])
             times[k].append((time.perf_counter() - start) / scan.meta["n_rays"])
@@ -340,11 +348,11 @@ def _csv_rows(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     return [{k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()} for row in rows]
 
 
-def _compare(plot, real, real_classes, divergence_deg: float, k: int, resolution_m: float, settings: ReturnsSettings, label: str):
+def _compare(plot, real, real_classes, divergence_deg: float, k: int, model: dict[str, Any], settings: ReturnsSettings, label: str):
     scene, vegetation, centre, half = plot
-    result = simulate(scene, ign_scanner(divergence_deg, k, range_resolution_m=resolution_m), vegetation, center_xy=centre,
-                      half_size_m=half, seeds=settings.seeds, bootstrap=settings.bootstrap)  # fmt: skip
-    rows = comparison_rows(real, result.statistics, real_classes=real_classes, range_resolution_m=resolution_m, label=label)
+    result = simulate(scene, _scanner(divergence_deg, k, model), vegetation, center_xy=centre, half_size_m=half, seeds=settings.seeds,
+                      bootstrap=settings.bootstrap)  # fmt: skip
+    rows = comparison_rows(real, result.statistics, real_classes=real_classes, range_resolution_m=model["range_resolution_m"], label=label)
     return rows, result
 
 
@@ -352,13 +360,12 @@ def _autzen(path, plot, settings: ReturnsSettings, k: int) -> tuple[list[dict[st
     """Autzen alone: its smallest gap as the range resolution, its class 1 (trees and buildings: it
     has no vegetation class) as vegetation, the divergence fitted to its class-1 share."""
     classes = (1,)
-    real, _ = _real(path, classes, settings.bootstrap)
-    resolution = real["all"].estimates["gap_min"].value
-    sweep = _divergence_sweep(plot, settings, resolution, (k,))
-    fit = _fit_divergence(sweep, k, _side(real["all"], f"multi_return_points_{_suffix(classes)}"))
+    real, _, model = _real(path, classes, settings.bootstrap)
+    sweep = _divergence_sweep(plot, settings, model, (k,))
+    fit = _fit_divergence(sweep, k, real["all"].estimates[f"multi_return_points_{_suffix(classes)}"])
     divergence = fit["divergence_deg"] if math.isfinite(fit["divergence_deg"]) else IGN_DIVERGENCE_DEG
-    rows, _ = _compare(plot, real, classes, divergence, k, resolution, settings, "Autzen")
-    return rows, sweep, fit | {"resolution_m": resolution}, real["all"].markdown()
+    rows, _ = _compare(plot, real, classes, divergence, k, model, settings, "Autzen")
+    return rows, sweep, fit | model, real["all"].markdown()
 
 
 def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path: str | os.PathLike, *, autzen_path: str | os.PathLike | None = None,
@@ -392,18 +399,18 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
     started = time.perf_counter()
     with OwnedFolder(out, files=RETURNS_OUTPUTS, what="the returns experiment") as folder:
         folder.check_writable(RETURNS_OUTPUTS)
-        real, real_las = _real(real_path, VEGETATION_CLASSES, settings.bootstrap)
+        real, real_las, model = _real(real_path, VEGETATION_CLASSES, settings.bootstrap)
         plot = _plot(mesh_root, settings)
-        resolution = real["all"].estimates["gap_min"].value
-        sweep = _divergence_sweep(plot, settings, resolution, settings.sweep_rays)
-        real_share = _side(real["all"], f"multi_return_points_{_suffix(VEGETATION_CLASSES)}")
+        resolution = model["range_resolution_m"]
+        sweep = _divergence_sweep(plot, settings, model, settings.sweep_rays)
+        real_share = real["all"].estimates[f"multi_return_points_{_suffix(VEGETATION_CLASSES)}"]
         fits = [_fit_divergence(sweep, k, real_share) for k in settings.sweep_rays]
         fitted = fits[-1]["divergence_deg"]
         divergence = fitted if math.isfinite(fitted) else IGN_DIVERGENCE_DEG
-        k_rows = _k_sweep(plot, settings, divergence, resolution)
+        k_rows = _k_sweep(plot, settings, divergence, model)
         k_best = recommend_k(k_rows)
-        rows, fitted_result = _compare(plot, real, VEGETATION_CLASSES, divergence, k_best, resolution, settings, "IGN, fitted divergence")
-        nominal_rows, _ = _compare(plot, real, VEGETATION_CLASSES, IGN_DIVERGENCE_DEG, k_best, resolution, settings, "IGN, data-sheet divergence")
+        rows, fitted_result = _compare(plot, real, VEGETATION_CLASSES, divergence, k_best, model, settings, "IGN, fitted divergence")
+        nominal_rows, _ = _compare(plot, real, VEGETATION_CLASSES, IGN_DIVERGENCE_DEG, k_best, model, settings, "IGN, data-sheet divergence")
         rows += nominal_rows
         summary: dict[str, Any] = {}
         real_md = "## IGN LiDAR HD sample\n\n" + "\n\n".join(f"### {side}\n\n{s.markdown()}" for side, s in real.items())
@@ -418,7 +425,7 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
         png = _figure(fitted_result.las, tree.position_m[:2], 6.0, real_las, note)
         summary |= {
             "settings": {k: list(v) if isinstance(v, tuple) else v for k, v in settings.__dict__.items()},
-            "range_resolution_m": resolution, "divergence_fits": fits, "recommended_k": k_best,
+            "model": model, "divergence_fits": fits, "recommended_k": k_best,
             "verdicts": {v: sum(r["verdict"] == v for r in rows) for v in ("PASS", "FAIL", "not measured")},
             "machine": f"{platform.node()} {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}",
             "load_average": list(os.getloadavg()), "seconds": time.perf_counter() - started,
