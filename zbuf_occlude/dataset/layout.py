@@ -42,6 +42,10 @@ Storage modes of a shard (``storage`` in the card):
     float32``, and per pose a visibility bitmask ``visible_bits (P, ceil(M / 8)) uint8``
     (:func:`numpy.packbits`), plus ``n_visible``, ``elevation_deg``, ``azimuth_deg (P,)``;
     the reader redraws the samples bit-identically (:func:`zbuf_occlude.geometry.samples.pose_samples`).
+``dense`` of ``farm --sensor``
+    The dense columns, each scan's placement, ``ring (B, n) int16`` and, when the sensor records
+    several returns per pulse, :data:`POINT_COLUMNS`: a LiDAR's return fields, ``(B, n)`` each,
+    one value per point of ``data``, declared by the object's manifest record (``point_columns``).
 
 Row order inside a shard, and sample order of the reader: pose-major, then sample index.
 Integrity: every file of an object has its SHA-256 in the object's record and the manifest
@@ -49,6 +53,8 @@ Integrity: every file of an object has its SHA-256 in the object's record and th
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 from zbuf_occlude.io.locks import LOCK_FILE  # the data-set lock (zbuf_occlude.farm.lock): the output layer's
 
@@ -74,6 +80,9 @@ __all__ = [
     "PROVENANCE_COLUMNS",
     "COMPACT_DATASETS",
     "COLUMN_TYPES",
+    "POINT_COLUMNS",
+    "PointColumn",
+    "MAX_RETURN_NUMBER",
     "file_list_name",
     "shard_name",
     "record_name",
@@ -122,6 +131,38 @@ COLUMN_TYPES = {
     # farm --sensor rows (zbuf_occlude.sensors.crops.farm_datasets)
     "distance_m": ("f", 1), "sensor_height_m": ("f", 1), "object_azimuth_deg": ("f", 1), "yaw_deg": ("f", 1),
     "size_m": ("f", 1), "ring": ("iu", 2), "hidden_below_m": ("f", 1), "width_scale": ("f", 1),
+    # their return fields (POINT_COLUMNS)
+    "return_number": ("u", 2), "number_of_returns": ("u", 2), "intensity": ("f", 2), "pulse_id": ("i", 2),
+    "gps_time": ("f", 2), "scan_angle_deg": ("f", 2),
+}  # fmt: skip
+
+#: Most returns of one pulse: LAS 1.4 point formats 6-10 keep the return number and the number of
+#: returns in 4 bits each (ASPRS LAS 1.4 R15, Table 15), so 1 <= return_number <= number_of_returns <= 15.
+MAX_RETURN_NUMBER = 15
+
+
+class PointColumn(NamedTuple):
+    """One per-point column a shard may keep beside ``data``: ``(B, n)`` of ``dtype``, each value
+    in ``[low, high]`` (finite), in ``unit``."""
+
+    dtype: str
+    low: float
+    high: float
+    unit: str
+
+
+#: The per-point columns a ``farm --sensor`` shard keeps when its sensor records several returns per
+#: pulse: the return fields of :class:`zbuf_occlude.sensors.scan.Scan` (LAS 1.4's Return Number,
+#: Number of Returns, Intensity, GPS Time and Scan Angle, and the pulse each return came from), in
+#: this order, stored as the scan holds them.  ``return_number`` is also at most its point's
+#: ``number_of_returns``; ``scan_angle_deg`` spans LAS 1.4's ±180°.
+POINT_COLUMNS = {
+    "return_number": PointColumn("uint8", 1, MAX_RETURN_NUMBER, "position among its pulse's returns, range order"),
+    "number_of_returns": PointColumn("uint8", 1, MAX_RETURN_NUMBER, "returns its pulse recorded"),
+    "intensity": PointColumn("float32", 0.0, float("inf"), "received energy, m^-2"),
+    "pulse_id": PointColumn("int64", 0, 2**63 - 1, "the pulse, unique within its scan"),
+    "gps_time": PointColumn("float64", float("-inf"), float("inf"), "firing time of its pulse, seconds"),
+    "scan_angle_deg": PointColumn("float32", -180.0, 180.0, "scan angle, degrees"),
 }  # fmt: skip
 
 

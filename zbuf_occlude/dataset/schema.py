@@ -14,14 +14,16 @@ Numbers must be JSON numbers (``"2048"`` is refused), poses pairs of numbers.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from zbuf_occlude.dataset.layout import CARD_FILE, CARD_SHA256_FILE, COLUMN_TYPES, SHAPE_NAMES_FILE
+from zbuf_occlude.dataset.layout import CARD_FILE, CARD_SHA256_FILE, COLUMN_TYPES, POINT_COLUMNS, SHAPE_NAMES_FILE
 from zbuf_occlude.dataset.storage import check_visible_bits, storage_kind
-from zbuf_occlude.errors import DatasetFormatError
+from zbuf_occlude.errors import DatasetFormatError, InvalidInputError
 from zbuf_occlude.io.hdf5 import Column, declared_nbytes, open_hdf5
 from zbuf_occlude.io.atomic import size_mismatch
 from zbuf_occlude.io.json_files import loads_json
@@ -177,6 +179,9 @@ class ObjectRecord(_Model):
     n_visible: list[NonNegativeInt]
     n_samples: NonNegativeInt
     bytes: NonNegativeInt
+    #: Per-point columns its shard keeps beside ``data`` (``farm --sensor`` with a sensor that records
+    #: several returns per pulse: :data:`~zbuf_occlude.dataset.layout.POINT_COLUMNS`); ``None``: none.
+    point_columns: list[str] | None = None
     #: Poses with ``0 < n_visible < n_points`` (their samples repeat points), dense points, faces.
     n_padded_poses: NonNegativeInt | None = None
     #: Per pose, how many of its ``n_visible`` points were topped up on the faces it sees
@@ -202,6 +207,16 @@ class ObjectRecord(_Model):
     host: str | None = None
     pid: int | None = None
     peak_rss_mb: float | None = None
+
+    @field_validator("point_columns")
+    @classmethod
+    def _known_columns(cls, names: list[str] | None) -> list[str] | None:
+        unknown = [name for name in names or () if name not in POINT_COLUMNS]
+        if unknown:
+            raise ValueError(f"unknown per-point column {unknown[0]!r}; this zbuf_occlude reads {tuple(POINT_COLUMNS)}")
+        if names is not None and len(set(names)) != len(names):
+            raise ValueError(f"a per-point column is named twice in {names}")
+        return names
 
 
 class OkRecord(ObjectRecord):
@@ -403,9 +418,14 @@ def check_records(
         A label with no line in ``shape_names.txt`` (or another name there), or
         ``n_visible`` with another count than the card's poses (scans for ``--sensor``), or
         ``n_topped_up`` with another count than ``n_visible`` or an entry above its pose's, or
+        ``point_columns`` where the card's storage keeps none, or
         point-set objects the card does not account for (:func:`check_point_set_records`).
     """
     n_poses = card.params.samples_per_view if card.params.sensor else len(card.poses)
+    try:
+        keeps_columns = storage_kind(card.storage, sensor=card.params.sensor is not None).keeps_point_columns
+    except InvalidInputError:  # an unknown storage is refused where the card's storage is looked up
+        keeps_columns = True
     check_point_set_records(manifest, rows, card, problems)
     for lineno, _, rec in rows:
         if rec is None:
@@ -428,6 +448,8 @@ def check_records(
                 f"{where}: field 'n_topped_up' ({len(topped)} entries) does not fit 'n_visible' ({len(rec.n_visible)} "
                 "entries): one per pose, each at most the pose's visible points"
             )
+        if rec.point_columns and not keeps_columns:
+            found.append(f"{where}: field 'point_columns' {rec.point_columns}, but {card.storage} storage keeps no per-point columns")
         if found and problems is None:
             raise DatasetFormatError(found[0])
         (problems if problems is not None else []).extend(found)
@@ -511,7 +533,8 @@ def _shape(f: Any, key: str) -> tuple[int, ...] | None:
 
 
 def check_shard(
-    f: Any, path: Path, *, storage: str, n_points: int, rows: int, n_poses: int, sensor: bool, topup_rows: int = 0
+    f: Any, path: Path, *, storage: str, n_points: int, rows: int, n_poses: int, sensor: bool, topup_rows: int = 0,
+    point_columns: Sequence[str] = (),
 ) -> None:
     """Check an open shard (``h5py.File``) against what the manifest says of its object.
 
@@ -523,12 +546,15 @@ def check_shard(
         Entries of the object's ``n_visible``.
     topup_rows : int
         Compact storage: top-up points of all poses, the sum of the manifest's ``n_topped_up``.
+    point_columns : sequence of str
+        The per-point columns the manifest's record declares (``point_columns``): each must be
+        ``(rows, n_points)`` of its dtype in :data:`~zbuf_occlude.dataset.layout.POINT_COLUMNS`.
 
     Raises
     ------
     DatasetFormatError
-        A dataset is missing or has the wrong shape, or the shard holds another number of
-        rows (samples, or compact top-up points) than the manifest promises.
+        A dataset is missing or has the wrong shape (or dtype, for a per-point column), or the
+        shard holds another number of rows (samples, or compact top-up points) than the manifest promises.
     InvalidInputError
         No storage kind is ``storage`` (:func:`~zbuf_occlude.dataset.storage.storage_kind`).
     """
@@ -563,6 +589,13 @@ def check_shard(
             f"manifest's field 'n_visible' promises ({rows} samples; {wrong[0]!r} declares {_shape(f, wrong[0])[0]}); "
             "the data set is damaged"
         )
+    for name in point_columns:
+        shape, dtype = _shape(f, name), POINT_COLUMNS[name].dtype
+        if shape != (rows, n_points) or f[name].dtype != np.dtype(dtype):
+            raise DatasetFormatError(
+                f"the shard {path}: per-point column {name!r} is {'missing' if shape is None else f'{shape} {f[name].dtype}'}, "
+                f"its record declares it ({rows}, {n_points}) {dtype}; the data set is damaged"
+            )
 
 
 #: :data:`~zbuf_occlude.dataset.layout.COLUMN_TYPES` as :class:`~zbuf_occlude.io.hdf5.Column`.
@@ -570,7 +603,8 @@ SHARD_COLUMNS = {name: Column(*spec) for name, spec in COLUMN_TYPES.items()}
 
 
 def open_shard(
-    path: Path, *, storage: str, n_points: int, rows: int, n_poses: int, sensor: bool, topup_rows: int = 0
+    path: Path, *, storage: str, n_points: int, rows: int, n_poses: int, sensor: bool, topup_rows: int = 0,
+    point_columns: Sequence[str] = (),
 ) -> Any:
     """Open a shard for reading after every check that needs no data: the one door the reader
     and ``verify`` use.
@@ -596,7 +630,8 @@ def open_shard(
     f = open_hdf5(path, SHARD_COLUMNS)
     try:
         check_shard(
-            f, path, storage=storage, n_points=n_points, rows=rows, n_poses=n_poses, sensor=sensor, topup_rows=topup_rows
+            f, path, storage=storage, n_points=n_points, rows=rows, n_poses=n_poses, sensor=sensor, topup_rows=topup_rows,
+            point_columns=point_columns,
         )
         declared = sum(declared_nbytes(f[k]) for k in f.keys() if _shape(f, k) is not None)
         check_memory(declared, option=f"the shard {path}", hint="it declares datasets larger than the data set can hold")

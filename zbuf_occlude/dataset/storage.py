@@ -9,7 +9,9 @@ A data set's card names its ``storage``; :func:`storage_kind` finds the kind in 
 ``npz``, ``ply`` (``generate``): :class:`SampleFiles`
     One file per sample.
 ``farm --sensor``: :class:`SensorCrops`
-    ``dense`` on the card, a dense shard whose rows are scans, each with its own placement.
+    ``dense`` on the card, a dense shard whose rows are scans, each with its own placement, and
+    per point the LiDAR's return fields when its sensor records several returns per pulse
+    (:data:`~zbuf_occlude.dataset.layout.POINT_COLUMNS`, read by :meth:`DenseRows.read_columns`).
 
 A kind says what the farm's worker (:mod:`zbuf_occlude.farm.worker`) needs to write an object
 (the options of :func:`~zbuf_occlude.pipeline.occlude_poses`, how its poses are packed into files),
@@ -35,7 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.dataset.index import PoseFilters, samples_per_pose
-from zbuf_occlude.dataset.layout import sample_file_name
+from zbuf_occlude.dataset.layout import POINT_COLUMNS, sample_file_name
 from zbuf_occlude.errors import DatasetFormatError, InvalidInputError
 from zbuf_occlude.geometry.samples import pool_take, pose_samples
 
@@ -62,6 +64,7 @@ __all__ = [
     "reconstruct_samples",
     "unpack_visible",
     "check_visible_bits",
+    "check_point_column",
 ]
 
 #: Per-row datasets of a ``farm --sensor`` shard that :meth:`SensorCrops.placement` returns.
@@ -162,6 +165,8 @@ class FileCheck(Protocol):
     #: The record's ``n_visible`` and ``n_topped_up`` (``None``: none recorded).
     n_visible: Sequence[int]
     n_topped_up: Sequence[int] | None
+    #: The per-point columns the record declares (``point_columns``; empty: none).
+    point_columns: Sequence[str]
 
     def open_shard(self, path: Path) -> Any:
         """The shard ``path`` opened by :func:`~zbuf_occlude.dataset.schema.open_shard` against the record
@@ -217,6 +222,9 @@ class StorageKind:
     joins_splits : bool
         At the end of a run its shards are joined into one file per split (``generate``'s ``h5``:
         PointNet's ``occluded_<split>.h5`` and file lists).
+    keeps_point_columns : bool
+        Its shards may keep per-point columns beside the points
+        (:data:`~zbuf_occlude.dataset.layout.POINT_COLUMNS`, read by :meth:`read_columns`).
     """
 
     name: str = ""
@@ -227,6 +235,7 @@ class StorageKind:
     made_from = "poses"
     written_by = "farm"
     joins_splits = False
+    keeps_point_columns = False
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.name!r})"
@@ -302,6 +311,16 @@ class StorageKind:
         """``(k, n, 3)`` points of ``k`` samples of object ``obj`` (their pose, sample index and row; rows ascending)."""
         raise NotImplementedError
 
+    def read_columns(self, src: ShardSource, obj: int, names: Sequence[str], row: NDArray[np.int64]) -> NDArray[np.float32]:
+        """``(k, n, F) float32``: the per-point columns ``names`` (at least one) of rows ``row`` (ascending) of object ``obj``.
+
+        Raises
+        ------
+        NotImplementedError
+            The kind keeps no per-point columns (:attr:`keeps_point_columns`).
+        """
+        raise NotImplementedError(f"{self!r} keeps no per-point columns")
+
     def row_keep(self, src: ShardSource, obj: int, rows_per_pose: NDArray[np.int64], pose_keep: NDArray[np.bool_],
                  filters: PoseFilters) -> NDArray[np.bool_]:  # fmt: skip
         """``(B,) bool``: which rows of object ``obj`` the pose filters keep (``pose_keep``: the card's poses they keep)."""
@@ -343,6 +362,7 @@ class DenseRows(StorageKind):
     (the farm's ``dense``; ``generate``'s ``h5`` adds the provenance columns)."""
 
     shard_datasets = ("data",)
+    keeps_point_columns = True
 
     def __init__(self, name: str, *, provenance: bool, written_by: str = "farm", joins_splits: bool = False):
         self.name = self.storage = name
@@ -367,9 +387,31 @@ class DenseRows(StorageKind):
         return [target.shard]
 
     def read(self, src: ShardSource, obj: int, pose: NDArray[np.int64], sample: NDArray[np.int64], row: NDArray[np.int64]) -> NDArray:
-        data = src.shard(obj)["data"]
-        # one sample: one row read; more: the dataset at once (HDF5 point selections are slow)
-        return data[int(row[0])][None] if len(row) == 1 else data[()][row]
+        return _rows(src.shard(obj)["data"], row)
+
+    def read_columns(self, src: ShardSource, obj: int, names: Sequence[str], row: NDArray[np.int64]) -> NDArray[np.float32]:
+        """The columns as :class:`StorageKind`'s, each cast to float32 after :func:`check_point_column`
+        checked its values (exact for the integers up to 2**24 and the float32 columns; ``gps_time``
+        and a larger ``pulse_id`` round to float32's 24-bit significand).
+
+        Raises
+        ------
+        DatasetFormatError
+            A value out of its column's range (named with the file and the row).
+        """
+        f = src.shard(obj)
+        columns = {name: _rows(f[name], row) for name in names}
+        path = Path(f.filename)
+        for name, values in columns.items():
+            check_point_column(path, name, values, columns.get("number_of_returns") if name == "return_number" else None)
+        return np.stack([columns[name].astype(np.float32) for name in names], axis=-1)
+
+    def check_opened(self, f: Any, path: Path, expect: FileCheck) -> None:
+        """The values of the per-point columns the record declares (:func:`check_point_column`), as
+        :meth:`read_columns` checks them; their shapes and dtypes were checked on opening."""
+        for name in expect.point_columns:
+            paired = f["number_of_returns"][()] if name == "return_number" and "number_of_returns" in f else None
+            check_point_column(path, name, f[name][()], paired)
 
 
 class SensorCrops(DenseRows):
@@ -389,9 +431,19 @@ class SensorCrops(DenseRows):
     def rows_per_pose(self, n_visible: NDArray[np.integer], samples_per_view: int) -> NDArray[np.int64]:
         return samples_per_pose(n_visible, 1)  # a scan is a pose of one sample
 
-    def write_rows(self, path: Path, datasets: Mapping[str, NDArray], attrs: Mapping[str, Any]) -> None:
-        """Write one object's scans, the datasets of :func:`zbuf_occlude.farm.sensor_crops.farm_datasets`, as they are."""
+    def write_rows(self, path: Path, datasets: Mapping[str, NDArray], attrs: Mapping[str, Any]) -> dict[str, Any]:
+        """Write one object's scans, the datasets of :func:`zbuf_occlude.farm.sensor_crops.farm_datasets`, as they are.
+
+        Returns
+        -------
+        dict
+            The fields of the object's record that say what the shard holds: ``point_columns``,
+            the :data:`~zbuf_occlude.dataset.layout.POINT_COLUMNS` among ``datasets`` (in that
+            order), when there are some (nothing else: a record without them is as before).
+        """
         write_datasets(path, datasets, attrs)
+        columns = [name for name in POINT_COLUMNS if name in datasets]
+        return {"point_columns": columns} if columns else {}
 
     def row_directions(self, src: ShardSource, obj: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         f = src.shard(obj)
@@ -561,6 +613,49 @@ def storages(written_by: str | None = None) -> tuple[str, ...]:
     """The storages a card may name, in the order of :data:`STORAGE_KINDS`: all of them, or those
     the command ``written_by`` (``"farm"``, ``"generate"``) writes."""
     return tuple(dict.fromkeys(k.storage for k in STORAGE_KINDS.values() if written_by in (None, k.written_by)))
+
+
+def _rows(dataset: Any, row: NDArray[np.int64]) -> NDArray:
+    """Rows ``row`` (ascending) of an HDF5 dataset: one row read for one sample, else the dataset at
+    once (HDF5 point selections are slow)."""
+    return dataset[int(row[0])][None] if len(row) == 1 else dataset[()][row]
+
+
+def check_point_column(path: Path, name: str, values: NDArray, number_of_returns: NDArray | None = None) -> None:
+    """Check the values of a per-point column against :data:`~zbuf_occlude.dataset.layout.POINT_COLUMNS`.
+
+    Parameters
+    ----------
+    path : Path
+        The shard, for messages.
+    name : str
+        A key of ``POINT_COLUMNS``.
+    values : (B, n) array
+        Its rows.
+    number_of_returns : (B, n) array, optional
+        With ``return_number``: the same rows of ``number_of_returns``, which bound it.
+
+    Raises
+    ------
+    DatasetFormatError
+        A value that is not finite, or out of the column's ``[low, high]``, or a return number
+        above its point's number of returns (the message names the file, the column and the row).
+    """
+    spec = POINT_COLUMNS[name]
+    values = np.asarray(values)
+    bad = ~np.isfinite(values) if values.dtype.kind == "f" else np.zeros(values.shape, dtype=bool)
+    with np.errstate(invalid="ignore"):
+        bad |= (values < spec.low) | (values > spec.high)
+    said = f"in [{spec.low:g}, {spec.high:g}] ({spec.unit})"
+    if number_of_returns is not None and not bad.any():
+        bad = values > np.asarray(number_of_returns)
+        said = "at most the point's 'number_of_returns'"
+    if bad.any():
+        at = np.argwhere(bad)[0]
+        raise DatasetFormatError(
+            f"the shard {path}: dataset {name!r} holds {values[tuple(at)].item()!r} at row {int(at[0])}, point {int(at[-1])} "
+            f"({int(bad.sum())} values wrong); it must be {said}: the data set is damaged"
+        )
 
 
 # -- compact storage's arrays ---------------------------------------------------------------------

@@ -8,7 +8,8 @@ by the manifest and the file lists (inside the folder, symlinks resolved:
 :func:`~zbuf_occlude.io.safe_paths.path_inside`), every file's SHA-256, and every HDF5 shard's
 datasets and rows.  The file checks are the reader's own, as each storage kind states them
 (:meth:`~zbuf_occlude.dataset.storage.StorageKind.check_file`: :func:`~zbuf_occlude.dataset.schema.open_shard`,
-:func:`~zbuf_occlude.dataset.storage.check_visible_bits`, :func:`~zbuf_occlude.dataset.sample_files.read_sample_points`),
+:func:`~zbuf_occlude.dataset.storage.check_visible_bits`, :func:`~zbuf_occlude.dataset.storage.check_point_column`
+for the per-point columns a record declares, :func:`~zbuf_occlude.dataset.sample_files.read_sample_points`),
 so what ``verify`` passes the reader reads.
 """
 
@@ -120,6 +121,7 @@ class _RecordFiles:
     n_files: int
     n_visible: list[int]
     n_topped_up: list[int] | None
+    point_columns: list[str]
 
     @property
     def n_points(self) -> int:
@@ -130,7 +132,7 @@ class _RecordFiles:
 
         return open_shard(
             path, storage=self.card.storage, n_points=self.n_points, rows=self.rows, n_poses=len(self.n_visible),
-            sensor=self.card.params.sensor is not None, topup_rows=sum(self.n_topped_up or ()),
+            sensor=self.card.params.sensor is not None, topup_rows=sum(self.n_topped_up or ()), point_columns=self.point_columns,
         )  # fmt: skip
 
 
@@ -246,7 +248,7 @@ def _check_objects(root: Path, card: Card, kind: StorageKind | None, rows: Manif
         # a storage the reader refuses: its samples counted as a kind of samples_per_view per pose would
         n_rows = int((kind.rows_per_pose if kind else samples_per_pose)(rec.n_visible, card.params.samples_per_view).sum())
         report.samples += n_rows
-        check = _RecordFiles(card, n_rows, len(rec.shards), rec.n_visible, rec.n_topped_up)
+        check = _RecordFiles(card, n_rows, len(rec.shards), rec.n_visible, rec.n_topped_up, rec.point_columns or [])
         _check_record(root, f"{manifest}:{lineno}", rec, check, kind, report)
     if missing_checksums:
         said = " although the card's field 'checksums' says every file has one" if card.checksums else ""
