@@ -19,10 +19,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.dataset.index import PoseFilter, PoseFilters, SampleIndex, sample_index
-from zbuf_occlude.dataset.layout import CARD_FILE, FORMAT_VERSION, MANIFEST_FILE
+from zbuf_occlude.dataset.layout import CARD_FILE, FORMAT_VERSION, MANIFEST_FILE, POINT_COLUMNS
 from zbuf_occlude.dataset.storage import BYTES_PER_POINT, StorageKind, storage_kind
 from zbuf_occlude.defaults import DEFAULT_FARM_DENSE_POINTS
-from zbuf_occlude.errors import InvalidInputError, ShardChecksumError
+from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError, ShardChecksumError
 from zbuf_occlude.io.safe_paths import path_inside
 from zbuf_occlude.mesh.discovery import SPLITS, name_set
 from zbuf_occlude.resources import available_memory, check_memory
@@ -161,6 +161,7 @@ class _Shards:
             f = open_shard(
                 path, storage=self.kind.storage, n_points=self.n_points, rows=self.rows.get(path, 0), n_poses=len(self.poses),
                 sensor=self.sensor is not None, topup_rows=self.topup_rows.get(path, 0),
+                point_columns=self.records[obj].get("point_columns") or (),
             )  # fmt: skip
             self.files[path] = f
             while len(self.files) > DEFAULT_OPEN_FILES:
@@ -229,6 +230,24 @@ def _where_it_may_be(root: Path) -> str:
     return f"the folders below it are finished data sets: did you mean one of {shown}{more}?"
 
 
+def _feature_names(features: Sequence[str]) -> tuple[str, ...]:
+    """``features`` as a tuple of names, each once.
+
+    Raises
+    ------
+    ArgumentTypeError
+        Not a list or tuple of strings (a bare string would read as its letters).
+    InvalidInputError
+        A name given twice.
+    """
+    if not isinstance(features, (list, tuple)) or not all(isinstance(name, str) for name in features):
+        raise ArgumentTypeError(f"features must be a tuple of column names, e.g. ('intensity', 'return_number'), got {features!r}")
+    twice = [name for name in dict.fromkeys(features) if features.count(name) > 1]
+    if twice:
+        raise InvalidInputError(f"feature {twice[0]!r} is named twice in features={tuple(features)}")
+    return tuple(features)
+
+
 class OccludedDataset(Sequence):
     """Occluded samples of a farm data set, as a sequence of ``(points, label, metadata)``.
 
@@ -267,6 +286,16 @@ class OccludedDataset(Sequence):
         Check every shard against its SHA-256 in the manifest before reading it (default).
         A data set whose manifest lacks the checksums is refused unless ``verify=False``:
         without them a changed shard cannot be noticed.
+    features : sequence of str
+        Per-point columns returned beside xyz, in this order: each sample's points become
+        ``(n, 3 + F) float32``, columns ``x, y, z, features[0], ...`` (``ds[i]``,
+        :meth:`iter_arrays`, :meth:`to_arrays`).  The names are the LiDAR return fields a
+        ``farm --sensor`` data set keeps when its sensor records several returns per pulse
+        (:data:`~zbuf_occlude.dataset.layout.POINT_COLUMNS`: ``return_number``,
+        ``number_of_returns``, ``intensity``, ``pulse_id``, ``gps_time``, ``scan_angle_deg``;
+        :attr:`available_features` lists this data set's).  Each value is cast to float32:
+        exact for the return numbers, ``intensity`` and ``scan_angle_deg``; ``gps_time`` and a
+        ``pulse_id`` above 2**24 are rounded.  Default: none, xyz only, ``(n, 3)``.
 
     Attributes
     ----------
@@ -280,18 +309,28 @@ class OccludedDataset(Sequence):
         Points per sample.
     object_cache : int
         Objects the compact reader keeps in memory (``object_cache`` as given, or as sized).
+    features : tuple of str
+        The per-point columns each sample returns beside xyz, in order (``features`` as given).
+    available_features : tuple of str
+        The per-point columns every selected object keeps (its manifest record's ``point_columns``),
+        in :data:`~zbuf_occlude.dataset.layout.POINT_COLUMNS` order; empty for z-buffer data sets.
 
     Raises
     ------
+    ArgumentTypeError
+        ``features`` is not a sequence of names (a single string is refused: ``("intensity",)``).
     InvalidInputError
-        Not a finished farm data set, a newer format, an unknown split or class name, or an
-        ``elevation_deg``/``azimuth_deg`` filter that leaves none of the chosen samples.
+        Not a finished farm data set, a newer format, an unknown split or class name, an
+        ``elevation_deg``/``azimuth_deg`` filter that leaves none of the chosen samples, or a
+        feature that is named twice, unknown, or not kept by every selected object (the message
+        names it and the available ones).
     DatasetFormatError
         The card differs from its SHA-256 file (``dataset_card.json.sha256``; a data set
         without one still reads), the card, the manifest or ``shape_names.txt`` does not match its schema
         (:mod:`zbuf_occlude.dataset.schema`; the message names the file, line and field), checksums
         are missing (and ``verify`` is true); on access, a shard that is not HDF5 or
-        lacks a dataset or rows.
+        lacks a dataset or rows, or a per-point column of another shape, dtype or range than
+        the schema's (:func:`~zbuf_occlude.dataset.storage.check_point_column`).
     UnsafePathError
         A path in the manifest is absolute, has ``..`` or leads outside the folder
         (through a symlink): nothing outside the data set is read.
@@ -306,6 +345,8 @@ class OccludedDataset(Sequence):
     --------
     >>> ds = OccludedDataset("modelnet_occluded", split="train", elevation_deg=[0, 10, 20])
     >>> points, label, meta = ds[0]          # (2048, 3) float32, int, dict
+    >>> lidar = OccludedDataset("crops", features=("intensity", "return_number"))
+    >>> points, label, meta = lidar[0]       # (2048, 5) float32: x, y, z, intensity, return_number
     """
 
     def __init__(
@@ -318,9 +359,11 @@ class OccludedDataset(Sequence):
         *,
         object_cache: int | None = None,
         verify: bool = True,
+        features: Sequence[str] = (),
     ):
         self.root = Path(path)
         self.verify = bool(verify)
+        self.features: tuple[str, ...] = _feature_names(features)
         card = self._read_card()
         filters = PoseFilters(elevation_deg, azimuth_deg)
         pose_keep = self._pose_keep(filters)
@@ -329,6 +372,7 @@ class OccludedDataset(Sequence):
         if object_cache is None and self._kind.redraws:
             self._shards.object_cache = self._default_object_cache()
         self.object_cache: int = self._shards.object_cache
+        self._check_features()
         keep = [self._kind.row_keep(self._shards, obj, rows, pose_keep, filters) for obj, rows in enumerate(rows_per_pose)]
         index = sample_index(rows_per_pose, keep)
         self._check_filtered(index, filters)
@@ -413,6 +457,19 @@ class OccludedDataset(Sequence):
             rows_per_pose.append(spp)
         return rows_per_pose
 
+    def _check_features(self) -> None:
+        """:attr:`available_features` of the selected objects; each of :attr:`features` among them."""
+        kept = [set(rec.get("point_columns") or ()) for rec in self._shards.records]
+        common = set.intersection(*kept) if kept else set()
+        self.available_features: tuple[str, ...] = tuple(name for name in POINT_COLUMNS if name in common)
+        missing = [name for name in self.features if name not in common]
+        if missing:
+            what = "is not a per-point column of" if missing[0] not in POINT_COLUMNS else "is not kept by every selected object of"
+            has = f"it has {self.available_features}" if self.available_features else (
+                "it has none (farm --sensor keeps them when its sensor records several returns per pulse, max_returns > 1)"
+            )
+            raise InvalidInputError(f"feature {missing[0]!r} {what} {self.root}; {has}")
+
     def _check_filtered(self, index: SampleIndex, filters: PoseFilters) -> None:
         """A pose filter that leaves none of the chosen samples is a typo, not an empty data set."""
         if not filters.active or not index.n_unfiltered or len(index):
@@ -436,9 +493,13 @@ class OccludedDataset(Sequence):
         return len(self._obj)
 
     def _read(self, start: int, stop: int) -> NDArray:
-        """``(stop - start, n, 3)``: the points of samples ``start .. stop - 1``, all of one object."""
+        """``(stop - start, n, 3 + F)``: the points of samples ``start .. stop - 1``, all of one object, and their features."""
         obj = int(self._obj[start])
-        return self._kind.read(self._shards, obj, self._pose[start:stop], self._sample[start:stop], self._row[start:stop])
+        row = self._row[start:stop]
+        points = self._kind.read(self._shards, obj, self._pose[start:stop], self._sample[start:stop], row)
+        if not self.features:
+            return points
+        return np.concatenate([points, self._kind.read_columns(self._shards, obj, self.features, row)], axis=-1)
 
     def metadata(self, i: int) -> dict[str, Any]:
         """The metadata of sample ``i`` (the third item of ``self[i]``) without its points.
@@ -489,7 +550,7 @@ class OccludedDataset(Sequence):
         return int(i) % n
 
     def __getitem__(self, i: int) -> tuple[NDArray[np.float32], int, dict[str, Any]]:
-        """``(points (n, 3) float32, label int, metadata dict)`` of sample ``i``."""
+        """``(points (n, 3 + F) float32, label int, metadata dict)`` of sample ``i`` (F: ``len(features)``)."""
         i = self._check_index(i)
         rec = self._shards.record(int(self._obj[i]))
         return self._read(i, i + 1)[0], int(rec["label"]), self.metadata(i)
@@ -499,20 +560,22 @@ class OccludedDataset(Sequence):
 
         Returns
         -------
-        data : (B, n, 3) float32
+        data : (B, n, 3 + F) float32
+            xyz, then the :attr:`features` in order.
         label : (B,) int64
 
         Raises
         ------
         InsufficientMemoryError
-            ``B * n * 12`` bytes are more than the memory available (checked before allocating).
+            ``B * n * (3 + F) * 4`` bytes are more than the memory available (checked before allocating).
         """
+        width = 3 + len(self.features)
         check_memory(
-            len(self) * self.n_points * 3 * np.dtype(np.float32).itemsize,
+            len(self) * self.n_points * width * np.dtype(np.float32).itemsize,
             option=f"to_arrays() of {self.root} ({len(self):,} samples of {self.n_points:,} points)",
             hint="select fewer samples (split, classes, poses) or read them one at a time (ds[i])",
         )  # fmt: skip
-        data = np.empty((len(self), self.n_points, 3), dtype=np.float32)
+        data = np.empty((len(self), self.n_points, width), dtype=np.float32)
         for start, block in self.iter_arrays():
             data[start : start + len(block)] = block
         return data, self.labels
@@ -524,8 +587,9 @@ class OccludedDataset(Sequence):
         ------
         start : int
             Index of the block's first sample in this sequence.
-        data : (k, n, 3) float32
-            The points of samples ``start .. start + k - 1``, all of one object, object frame.
+        data : (k, n, 3 + F) float32
+            The points of samples ``start .. start + k - 1``, all of one object, object frame,
+            then their :attr:`features`.
         """
         bounds = np.flatnonzero(np.diff(self._obj, prepend=-1, append=-1))
         for start, stop in itertools.pairwise(bounds):  # object after object
