@@ -12,8 +12,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from zbuf_occlude.dataset.layout import POINT_COLUMNS
 from zbuf_occlude.mesh.load import load_mesh
-from zbuf_occlude.sensors.crops import lidar_object_samples
+from zbuf_occlude.sensors.crops import kept_return_fields, lidar_object_samples
 from zbuf_occlude.sensors.placement import CropDistributions
 from zbuf_occlude.sensors.fit import fit_object_shape
 
@@ -57,7 +58,10 @@ def farm_datasets(
         and the placement: ``radius`` (mesh units), ``distance_m``, ``sensor_height_m``,
         ``object_azimuth_deg``, ``yaw_deg``, ``size_m`` (float64), ``ring (B, n_points) int16``;
         ``hidden_below_m`` (float64, metres) when ``distributions`` hides the objects' bottoms;
-        ``width_scale`` (float64) when the object is stretched.
+        ``width_scale`` (float64) when the object is stretched; and, when ``sensor`` records
+        several returns per pulse (:func:`~zbuf_occlude.sensors.crops.kept_return_fields`), its
+        return fields per point, ``(B, n_points)`` of the dtypes of
+        :data:`~zbuf_occlude.dataset.layout.POINT_COLUMNS` (``return_number`` ... ``scan_angle_deg``).
 
     Raises
     ------
@@ -72,6 +76,9 @@ def farm_datasets(
     b = len(clouds)
     f64 = lambda values: np.asarray(values, dtype=np.float64).reshape(b)  # noqa: E731
     optional = {key: f64([c.extra[key] for c in clouds]) for key in ("hidden_below_m", "width_scale") if getattr(distributions, key) is not None}
+    for key in kept_return_fields(sensor):  # per point, as the scans hold them
+        dtype = POINT_COLUMNS[key].dtype
+        optional[key] = np.stack([c.extra["returns"][key] for c in clouds]).astype(dtype) if b else np.zeros((0, n_points), dtype)
     return {
         "data": np.stack([c.points for c in clouds]) if b else np.zeros((0, n_points, 3), np.float32),
         "label": np.full(b, label, dtype=np.int64),

@@ -85,7 +85,8 @@ def _scan(obj: FarmObject, params: FarmParams, out: Path, kind: SensorCrops, mes
     Row ``i`` of the shard is scan ``pose_index[i]`` (scans without a return are left out);
     besides the dense layout's datasets it holds the scan's placement (``distance_m``,
     ``sensor_height_m``, ``object_azimuth_deg``, ``yaw_deg``, ``size_m``, ``radius``) and
-    ``ring``.  The record's ``n_visible`` has one entry per scan (0: no return).
+    ``ring``, and the return fields of a sensor that records several returns per pulse, which
+    the record names (``point_columns``).  The record's ``n_visible`` has one entry per scan (0: no return).
     """
     from zbuf_occlude.farm.sensor_crops import farm_datasets
     from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported by the work, not by modules that only read records
@@ -99,8 +100,8 @@ def _scan(obj: FarmObject, params: FarmParams, out: Path, kind: SensorCrops, mes
     )  # fmt: skip
     n_visible = np.zeros(n_scans, dtype=np.int64)
     n_visible[datasets["pose_index"]] = datasets["n_visible"]
-    kind.write_rows(out / shard_path(obj), datasets, {**_attrs(obj, params), "sensor": params.sensor.name})
-    return {**_files_record(out, [shard_path(obj)], n_visible, len(datasets["data"]), params.n_points), "n_dense": 0, **_mesh_record(mesh)}
+    held = kind.write_rows(out / shard_path(obj), datasets, {**_attrs(obj, params), "sensor": params.sensor.name})  # its point_columns
+    return {**_files_record(out, [shard_path(obj)], n_visible, len(datasets["data"]), params.n_points), "n_dense": 0, **_mesh_record(mesh), **held}
 
 
 def _occlude(obj: FarmObject, params: FarmParams, out: Path, kind: StorageKind, mesh_path: Path) -> dict[str, Any]:

@@ -31,7 +31,7 @@ from zbuf_occlude.sensors.scene import ScanScene, SceneObject, sensor_pose
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
-__all__ = ["CropSample", "object_crop", "lidar_object_samples", "side_occluders", "SIDE_OCCLUDER_RANGE"]
+__all__ = ["CropSample", "object_crop", "lidar_object_samples", "kept_return_fields", "side_occluders", "SIDE_OCCLUDER_RANGE", "RETURN_FIELDS"]
 
 log = logging.getLogger(__name__)
 
@@ -257,6 +257,18 @@ def _airborne_crop(mesh, sensor: AirborneScanner, placement: Placement, *, seed:
     return _crop_object(scene, full, placement, full.sensor_position, per_return=("line_id", "scan_angle_deg"))
 
 
+#: A LiDAR scan's per-point return fields (:class:`~zbuf_occlude.sensors.scan.Scan`'s names, LAS 1.4's
+#: Return Number ... Scan Angle), which a crop keeps when its sensor records several returns per pulse.
+RETURN_FIELDS = ("return_number", "number_of_returns", "intensity", "pulse_id", "gps_time", "scan_angle_deg")
+
+
+def kept_return_fields(sensor: Lidar | DepthCamera | AirborneScanner) -> tuple[str, ...]:
+    """The return fields a crop of ``sensor`` keeps per point: :data:`RETURN_FIELDS` when it records
+    several returns per pulse (``max_returns`` above 1), none otherwise (one return per pulse, or a
+    depth camera): its crops, and the data sets made of them, are then as they were before these fields."""
+    return RETURN_FIELDS if getattr(sensor, "max_returns", 1) > 1 else ()
+
+
 def lidar_object_samples(
     mesh: trimesh.Trimesh | str,
     sensor: Lidar | DepthCamera,
@@ -295,7 +307,10 @@ def lidar_object_samples(
         mesh (−1: a ground return, with ``ground_margin_m``); ``elevation_deg, azimuth_deg, radius``: the sensor seen from the object's bounding
         box centre (degrees, degrees, mesh units); ``n_visible``: the returns;
         ``extra``: the placement (metres, degrees), ``n_returns``, ``sensor``, the per-point
-        ``ring``.  Samples with no return are left out (logged).
+        ``ring`` and, for a sensor that records several returns per pulse
+        (:func:`kept_return_fields`), the per-point ``returns``: a dict of each return field's
+        ``(n_points,)`` values at the sample's points (dtypes as :class:`~zbuf_occlude.sensors.scan.Scan`'s).
+        Samples with no return are left out (logged).
 
     Raises
     ------
@@ -309,6 +324,7 @@ def lidar_object_samples(
     if not isinstance(mesh, trimesh.Trimesh):
         mesh = load_mesh(mesh)
     key = object_key(name)
+    fields = kept_return_fields(sensor)
     out = []
     for k in range(int(n_samples)):
         rng = derive_rng(seed, key, _CROP_STREAM, k)
@@ -334,7 +350,8 @@ def lidar_object_samples(
                 source=name,
                 sample_index=k,
                 n_visible=n,
-                extra={**placement.to_dict(), "n_returns": n, "sensor": sensor.name, "ring": None if crop.scan.ring is None else crop.scan.ring[chosen]},
+                extra={**placement.to_dict(), "n_returns": n, "sensor": sensor.name, "ring": None if crop.scan.ring is None else crop.scan.ring[chosen],
+                       **({"returns": {f: getattr(crop.scan, f)[chosen] for f in fields}} if fields else {})},
             )
         )
     return out
