@@ -10,6 +10,12 @@ source outside each other), the names that go on list lines and the *whole* sour
 SHA-256, every path) are checked before ``out`` is made; in ``out``, every file an earlier export
 recorded is checked to be ours and unchanged before the first is written; once the export is
 written, the files of an earlier export that this one did not write again are removed.
+
+Every target writes xyz (and what it derives from xyz), as the networks that read it take it: a
+``farm --sensor`` data set's per-point columns (its LiDAR return fields,
+:data:`~zbuf_occlude.dataset.layout.POINT_COLUMNS`) are left out by design, since none of these
+layouts has a place for them; the files are the same, byte for byte, as an export of the same points
+without them.  Read them with ``OccludedDataset(..., features=...)``.
 """
 
 from __future__ import annotations

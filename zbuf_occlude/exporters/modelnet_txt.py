@@ -10,7 +10,9 @@ What yanx27/Pointnet_Pointnet2_pytorch's ``ModelNetDataLoader`` reads:
 * ``modelnet40_<split>.txt``: the ids of a split, one a line; the loader takes an id's class from
   the id (all but its last ``_`` part) and its label from the class list.
 
-Samples are read one object at a time (memory for one object's samples).
+Samples are read one object at a time (memory for one object's samples).  Each line holds xyz and
+normals only: a ``farm --sensor`` data set's per-point return fields are left out (the loader reads
+six columns).
 """
 
 from __future__ import annotations

@@ -14,6 +14,8 @@ DGCNN (``glob(ply_data_%s*.h5)``), PCT, PointMLP and CurveNet:
 
 The set is streamed: each object's samples are read once, in the source's order, and each row is
 written straight to the place the shuffle gave it, so memory holds one object's samples, not the set's.
+The files hold xyz only (a ``farm --sensor`` data set's per-point return fields are left out: PointNet's
+``data`` is ``(m, P, 3)``) and no modification times: the same data set gives the same bytes.
 """
 
 from __future__ import annotations
@@ -57,10 +59,11 @@ def _create_file(path: Path, rows: int, n_points: int, label: np.ndarray) -> int
         dcpl.set_layout(h5py.h5d.CONTIGUOUS)
         dcpl.set_alloc_time(h5py.h5d.ALLOC_TIME_EARLY)  # the space exists (and has its offset) now
         dcpl.set_fill_time(h5py.h5d.FILL_TIME_NEVER)  # every row is written below
+        dcpl.set_obj_track_times(False)  # no modification times: the same data set, the same bytes
         space = h5py.h5s.create_simple((rows, n_points, 3))
         data = h5py.h5d.create(f.id, b"data", h5py.h5t.IEEE_F32LE, space, dcpl=dcpl)
         offset = data.get_offset()
-        f.create_dataset("label", data=label)
+        f.create_dataset("label", data=label, track_times=False)
     if offset is None:  # an empty dataset has no storage
         return 0
     return int(offset)
