@@ -279,3 +279,14 @@ def test_rosette_arguments_are_checked() -> None:
 def test_a_scan_of_a_non_sensor_names_the_three_kinds(sphere) -> None:
     with pytest.raises(InvalidInputError, match="sensor must be a Lidar, a RayTable or a DepthCamera"):
         scan(sphere, object(), np.eye(4))
+
+
+def test_radiometric_detection_applies_to_a_table(sphere) -> None:
+    """With ``reflectivity``, a return is kept when ρ cos θ / R² clears the table's threshold, as for a LiDAR."""
+    time_s, az, el = _random_table(500)
+    seen = RayTable("t", time_s, az, el, range_noise_m=0.0, detection_reflectivity=0.5, detection_range_m=20.0)  # τ = 0.5 / 400
+    unseen = RayTable("t", time_s, az, el, detection_reflectivity=0.5, detection_range_m=5.0)  # τ = 0.5 / 25
+    assert len(scan(sphere, seen, np.eye(4), reflectivity=0.5)) == 500
+    assert len(scan(sphere, unseen, np.eye(4), reflectivity=0.5)) == 0  # 0.5 / 100 < 0.5 / 25
+    s = scan(sphere, seen, np.eye(4), reflectivity=0.5)
+    np.testing.assert_allclose(s.intensity, 0.5 * np.cos(np.radians(s.incidence_deg)) / s.range_m.astype(np.float64) ** 2, rtol=1e-3)
