@@ -143,3 +143,18 @@ def test_a_file_without_gps_times_or_points_is_named(tmp_path: Path, capsys) -> 
     assert len(read_las(tmp_path / "none.las")) == 0
     code, _, err = _run(["fit-sensor", str(tmp_path / "none.las"), "--sensor", "riegl-q1560", "--out", str(tmp_path / "f.json")], capsys)
     assert code == 2 and re.search(r"none\.las: holds no points", err), err
+
+
+def test_a_link_out_of_the_folder_and_a_fifo_are_refused_in_one_line(scans: Path, tmp_path: Path, capsys) -> None:
+    import os
+
+    laz = sorted(scans.glob("*.laz"))[0]
+    (tmp_path / "in").mkdir()
+    (tmp_path / "in" / "elsewhere.laz").symlink_to(laz)  # a readable LAZ, but outside the folder named
+    code, _, err = _run(["fit-sensor", str(tmp_path / "in"), "--sensor", "riegl-q1560", "--out", str(tmp_path / "f.json")], capsys)
+    assert code == 2 and "\n" not in err and "elsewhere.laz" in err, err
+    (tmp_path / "fifo").mkdir()
+    os.mkfifo(tmp_path / "fifo" / "pipe.las")  # never opened for reading: it would block
+    code, _, err = _run(["fit-sensor", str(tmp_path / "fifo"), "--sensor", "riegl-q1560", "--out", str(tmp_path / "f.json")], capsys)
+    assert code == 2 and "\n" not in err and "pipe.las" in err, err
+    assert not (tmp_path / "f.json").exists()
