@@ -59,7 +59,7 @@ def test_a_folder_of_our_own_laz_scans_gives_a_sensor_file_and_a_table(scans: Pa
 
 
 def test_one_file_and_a_spinning_lidar_that_needs_an_altitude(scans: Path, tmp_path: Path, capsys) -> None:
-    laz = sorted(scans.glob("*.laz"))[0]
+    laz = min(scans.glob("*.laz"))
     code, _, err = _run(["fit-sensor", str(laz), "--sensor", "hdl32e", "--out", str(tmp_path / "f.json")], capsys)
     assert code == 2 and "--sensor hdl32e is a spinning LiDAR: give --altitude M" in err and "\n" not in err
     assert not (tmp_path / "f.json").exists()
@@ -148,7 +148,7 @@ def test_a_file_without_gps_times_or_points_is_named(tmp_path: Path, capsys) -> 
 def test_a_link_out_of_the_folder_and_a_fifo_are_refused_in_one_line(scans: Path, tmp_path: Path, capsys) -> None:
     import os
 
-    laz = sorted(scans.glob("*.laz"))[0]
+    laz = min(scans.glob("*.laz"))
     (tmp_path / "in").mkdir()
     (tmp_path / "in" / "elsewhere.laz").symlink_to(laz)  # a readable LAZ, but outside the folder named
     code, _, err = _run(["fit-sensor", str(tmp_path / "in"), "--sensor", "riegl-q1560", "--out", str(tmp_path / "f.json")], capsys)
