@@ -92,15 +92,18 @@ class Scan:
         test uses when ``reflectivity`` is given, and 1.0 when it is not (no radiometry).
     pulse_id : (N,) int64 or None
         LiDAR: ``ring · Lidar.n_azimuths + azimuth index``, unique per pulse of one scan; the
-        returns of one pulse share it (airborne: the pulse's row among the plan's pulses).
+        returns of one pulse share it (airborne: the pulse's row among the plan's pulses; a ray
+        table: the pulse's row in the table).
     gps_time : (N,) float64 or None
         LiDAR: firing time of the pulse, seconds from the revolution's first firing
         (``azimuth index / (n_azimuths · rotation_hz)``; every beam of a firing cycle at once);
         the returns of one pulse share it (airborne: the firing time along the flight line,
-        :func:`~zbuf_occlude.sensors.airborne.scan_airborne`).
+        :func:`~zbuf_occlude.sensors.airborne.scan_airborne`; a ray table: its row's ``time_s``,
+        exactly).
     scan_angle_deg : (N,) float32 or None
-        LiDAR: the beam's elevation, degrees (the spinning scanner's scan angle); airborne: the
-        across-track angle from nadir, signed as ASPRS LAS 1.4 defines it.
+        LiDAR: the beam's elevation, degrees (the spinning scanner's scan angle; a ray table: its
+        row's elevation); airborne: the across-track angle from nadir, signed as ASPRS LAS 1.4
+        defines it.
 
     The LiDAR-only arrays are None for depth cameras.
     """
