@@ -103,6 +103,35 @@ def test_cast_embree_beyond_checks_its_arguments():
         cast_embree_beyond(built.mesh, np.zeros(3), d, face, t, np.ones(2, bool), step_m=-1.0)
 
 
+def test_the_memory_for_the_hits_is_checked_before_the_rounds():
+    from zbuf_occlude.errors import InsufficientMemoryError
+
+    built = _stack([R, R + 1.0])
+    d = np.array([[1.0, 0.0, 0.0]] * 4)
+    face, t = cast_embree(built.mesh, np.zeros(3), d)
+    with pytest.raises(InsufficientMemoryError, match="4 transmitting rays x max_hits"):
+        cast_embree_beyond(built.mesh, np.zeros(3), d, face, t, np.ones(4, bool), max_hits=10**15)
+
+
+def test_echo_returns_casts_on_from_each_rays_own_origin():
+    # an airborne-like pulse: one origin per sub-ray (the aircraft moves), plates below along -z
+    from zbuf_occlude.sensors.scan import echo_returns
+
+    built = _stack([R, R + 2.0])
+    origins = np.array([[0.0, 0.0, 0.0], [0.0, 1.0, 0.5]])
+    d = np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    face = np.empty(2, np.int64)
+    t = np.empty(2)
+    for i in range(2):
+        face[i : i + 1], t[i : i + 1] = cast_embree(built.mesh, origins[i], d[i : i + 1])
+    pulse, f, r, e = echo_returns(built, d, face, t, np.ones(1), range_resolution_m=0.5, max_returns=3, transmittance=[0.0, 0.5, 0.0], origins=origins)
+    assert pulse.tolist() == [0, 0, 1, 1] and built.face_object[f].tolist() == [1, 2, 1, 2]
+    np.testing.assert_allclose(r, [R, R + 2.0, R, R + 2.0], rtol=1e-12)
+    np.testing.assert_allclose(e, [1 / R**2, 0.5 / (R + 2.0) ** 2] * 2, rtol=1e-12)
+    with pytest.raises(InvalidInputError, match="needs the rays' origins"):
+        echo_returns(built, d, face, t, np.ones(1), range_resolution_m=0.5, max_returns=3, transmittance=[0.0, 0.5, 0.0])
+
+
 # -- scan(transmittance=...) ------------------------------------------------------------------
 
 
