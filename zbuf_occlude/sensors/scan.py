@@ -662,7 +662,6 @@ def scan(
     scene : ScanScene or trimesh.Trimesh
         A mesh is taken as one object (id 1) in metres, world frame, with no ground.
     sensor : Lidar, RayTable or DepthCamera
-        A :class:`~.ray_table.RayTable` scans as a :class:`Lidar` whose rays are its rows.
     pose : (4, 4) or (3,) float, optional
         Sensor → world transform (LiDAR frame: x forward, z up; camera frame: OpenCV, see
         :func:`look_at_pose`), or just the position; default ``scene.default_sensor_pose()``.
