@@ -201,3 +201,19 @@ def test_run_returns_writes_its_outputs(tmp_path) -> None:
     assert [float(r["divergence_deg"]) for r in sweep] == pytest.approx([IGN_DIVERGENCE_DEG, 8 * IGN_DIVERGENCE_DEG], rel=1e-5)
     assert len(read_csv_rows(out / "k_sweep.csv")) == 2
     assert len(read_csv_rows(out / "comparison.csv")) == 26
+
+
+def test_the_command_refuses_bad_options_in_one_line(tmp_path, capsys) -> None:
+    from zbuf_occlude.cli.main import main
+
+    def run(*extra: str) -> int:
+        try:
+            return main(["experiment", "returns", str(tmp_path), "--out", str(tmp_path / "out"), *extra])
+        except SystemExit as exc:
+            return int(exc.code)
+
+    assert run("--real", "x.laz", "--bootstrap", "1") == 2
+    assert "--bootstrap must be an integer >= 2, got 1" in capsys.readouterr().err
+    assert run("--real", str(tmp_path / "missing.laz"), "--bootstrap", "2") != 0
+    err = capsys.readouterr().err
+    assert "missing.laz" in err and "Traceback" not in err
