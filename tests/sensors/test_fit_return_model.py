@@ -275,3 +275,15 @@ def test_a_simulated_survey_gives_back_its_divergence_within_the_stated_uncertai
     fitted, _, shares = fit_divergence(simulate, measured, divergences_deg=np.linspace(0.5, 4.0, 6))
     assert np.all(np.diff(shares) > 0)  # a wider beam clips the box's edges on more pulses
     assert _within(fitted, 2.0) and 0 < fitted.std < 0.3, fitted
+
+
+def test_a_scan_too_large_for_the_memory_is_refused_before_the_fit(survey_las, monkeypatch) -> None:
+    from zbuf_occlude import resources
+    from zbuf_occlude.errors import InsufficientMemoryError
+    from zbuf_occlude.sensors.fit.return_model import FIT_BYTES_PER_POINT
+
+    # enough for the return statistics (256 bytes a point), not for the fit's
+    monkeypatch.setattr(resources, "MIN_CHECKED_BYTES", 0)
+    monkeypatch.setattr(resources, "available_memory", lambda: (len(survey_las) * (FIT_BYTES_PER_POINT - 64), "test budget"))
+    with pytest.raises(InsufficientMemoryError, match="the return model fit of 6,"):
+        fit_return_model(survey_las, altitude_m=H, bootstrap=2)
