@@ -158,3 +158,35 @@ def test_a_link_out_of_the_folder_and_a_fifo_are_refused_in_one_line(scans: Path
     code, _, err = _run(["fit-sensor", str(tmp_path / "fifo"), "--sensor", "riegl-q1560", "--out", str(tmp_path / "f.json")], capsys)
     assert code == 2 and "\n" not in err and "pipe.las" in err, err
     assert not (tmp_path / "f.json").exists()
+
+
+def test_divergence_shares_fit_the_divergence(scans: Path, tmp_path: Path, capsys) -> None:
+    (tmp_path / "curve.csv").write_text("divergence_deg,multi_return_points\n0.5,0.0\n4.0,1.0\n")  # divergence = 0.5 + 3.5 share
+    out = tmp_path / "fitted.json"
+    code, _, err = _run(["fit-sensor", str(scans), "--sensor", "riegl-q1560", "--bootstrap", "5", "--divergence-shares",
+                         str(tmp_path / "curve.csv"), "--out", str(out)], capsys)  # fmt: skip
+    assert code == 0, err
+    fit = json.loads(out.read_text())["fit"]["returns"]
+    share = fit["statistics"]["estimates"]["multi_return_points"]["value"]
+    sensor = sensor_from_name(str(out))
+    assert sensor.beam_divergence_deg == pytest.approx(0.5 + 3.5 * share) and sensor.footprint_rays == 7
+    assert fit["estimates"]["beam_divergence_deg"]["value"] == pytest.approx(0.5 + 3.5 * share)
+
+
+@pytest.mark.parametrize(
+    ("table", "message"),
+    [
+        ("divergence,multi_return_points\n0.5,0.1\n1,0.2\n", r"curve\.csv: the header must be divergence_deg,<a multi_return_points figure>"),
+        ("divergence_deg,returns_1\n0.5,0.1\n1,0.2\n", r"curve\.csv: the header must be"),
+        ("divergence_deg,multi_return_points\n0.5,0.1\n1,x\n", r"curve\.csv: row 3: multi_return_points is not a number: 'x'"),
+        ("divergence_deg,multi_return_points\n0.5,0.3\n1,0.2\n", r"curve\.csv: simulated_shares must grow with the divergence"),
+        ("divergence_deg,multi_return_points\n0.5,0.3\n", r"curve\.csv: .*M >= 2"),
+        ("divergence_deg,multi_return_points\n", r"curve\.csv: a table of simulated shares needs 2 to 1,000 rows, got 0"),
+    ],
+)
+def test_a_bad_table_of_shares_is_one_line_naming_it(scans: Path, tmp_path: Path, capsys, table: str, message: str) -> None:
+    (tmp_path / "curve.csv").write_text(table)
+    code, _, err = _run(["fit-sensor", str(scans), "--sensor", "riegl-q1560", "--divergence-shares", str(tmp_path / "curve.csv"),
+                         "--out", str(tmp_path / "f.json")], capsys)  # fmt: skip
+    assert code == 2 and "\n" not in err and re.search(message, err), err
+    assert not (tmp_path / "f.json").exists()

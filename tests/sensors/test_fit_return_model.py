@@ -287,3 +287,18 @@ def test_a_scan_too_large_for_the_memory_is_refused_before_the_fit(survey_las, m
     monkeypatch.setattr(resources, "available_memory", lambda: (len(survey_las) * (FIT_BYTES_PER_POINT - 64), "test budget"))
     with pytest.raises(InsufficientMemoryError, match="the return model fit of 6,"):
         fit_return_model(survey_las, altitude_m=H, bootstrap=2)
+
+
+def test_a_table_of_simulated_shares_reads_as_a_curve(survey_las) -> None:
+    from zbuf_occlude.sensors.fit import divergence_curve
+
+    rows = [{"divergence_deg": str(d), "multi_return_points": str(s), "std": "0.01"} for d, s in ((0.01, 0.1), (0.03, 0.9))]
+    figure, d, s, sd = divergence_curve(rows, "curve.csv")
+    assert figure == "multi_return_points" and d.tolist() == [0.01, 0.03] and s.tolist() == [0.1, 0.9] and sd.tolist() == [0.01] * 2
+    fit = fit_return_model(survey_las, altitude_m=H, divergence_shares=(d, s, sd), divergence_share=figure, bootstrap=5)
+    share = fit.statistics.estimates[figure]
+    assert 0.1 < share.value < 0.9
+    assert fit.estimates["beam_divergence_deg"].value == pytest.approx(0.01 + 0.02 * (share.value - 0.1) / 0.8)
+    assert fit.estimates["beam_divergence_deg"].std > 0.02 * 0.01 / 0.8  # the simulation's 0.01 adds to the share's spread
+    with pytest.raises(InvalidInputError, match=r"curve\.csv: row 2: std is not a number"):
+        divergence_curve([{**rows[0], "std": "n/a"}, rows[1]], "curve.csv")

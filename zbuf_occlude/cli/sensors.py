@@ -640,6 +640,13 @@ def _fit_returns(args: argparse.Namespace, files: Sequence[Path]) -> int:
     if altitude is None:
         raise InvalidInputError(f"--sensor {args.sensor} is a spinning LiDAR: give --altitude M, the range to the ground in your scans, metres")
     bootstrap = args.bootstrap or BOOTSTRAP
+    curve: dict = {}
+    if args.divergence_shares is not None:  # read first: a bad table is refused before the scans are
+        from zbuf_occlude.io.tables import read_csv_rows
+        from zbuf_occlude.sensors.fit import divergence_curve
+
+        figure, divergences, shares, stds = divergence_curve(read_csv_rows(args.divergence_shares), args.divergence_shares)
+        curve = {"divergence_shares": (divergences, shares, stds), "divergence_share": figure}
     md = out.with_suffix(".md")
     names = (out.name, md.name)
     with OwnedFolder(out.parent, files=names, what="the fitted sensor") as folder:
@@ -649,7 +656,7 @@ def _fit_returns(args: argparse.Namespace, files: Sequence[Path]) -> int:
         print(f"read {len(las):,} points; fitting the return model to {base.name} at {altitude:g} m above the ground, "
               f"{bootstrap} bootstrap resamples ...", flush=True)  # fmt: skip
         fit = fit_return_model(las, altitude_m=altitude, classes=VEGETATION_CLASSES if args.classes is None else args.classes,
-                               seed=args.seed, bootstrap=bootstrap)  # fmt: skip
+                               seed=args.seed, bootstrap=bootstrap, **curve)  # fmt: skip
         sensor = fit.apply(base)
         spec = sensor_to_json(sensor)
         spec["fit"] = {"base": base.name, "files": [f.name for f in files], "returns": fit.to_json()}
@@ -665,7 +672,8 @@ def cmd_fit_sensor(args: argparse.Namespace) -> int:
     files = _las_inputs(args.real)
     if files is not None:
         return _fit_returns(args, files)
-    given = [flag for flag, value in (("--altitude", args.altitude), ("--classes", args.classes), ("--bootstrap", args.bootstrap)) if value is not None]
+    given = [flag for flag, value in (("--altitude", args.altitude), ("--classes", args.classes), ("--bootstrap", args.bootstrap),
+                                      ("--divergence-shares", args.divergence_shares)) if value is not None]  # fmt: skip
     if given:
         raise InvalidInputError(f"{', '.join(given)}: for LAS/LAZ scans, and {args.real} is neither a .las/.laz file nor a folder of them")
     from zbuf_occlude.experiments.sensor_fit import fit_sensor_to_scans
@@ -692,7 +700,8 @@ def add_fit_sensor_parser(sub) -> argparse.ArgumentParser:
         "the crops' scan angles).  Spinning fits refuse aerial crops in one line.  LAS/LAZ scans (a .las/.laz file, or a folder of them: tiles or "
         "crops of one survey) fit the return model instead: the range resolution, the most returns per pulse, the detection "
         "threshold and the intensity scale, per class too, beside the returns-per-pulse shares, gaps and intensities they "
-        "rest on; the beam divergence cannot be told from the points and stays the --sensor's.",
+        "rest on; the beam divergence cannot be told from the points: it stays the --sensor's, or is fitted to shares "
+        "simulated at several divergences (--divergence-shares).",
     )  # fmt: skip
     p.add_argument("real", metavar="REAL_SCANS", help="folder of real object scans (class folders of point files, LiDARNet CSVs, or SUO), "
                    "or a .las/.laz scan or a folder of them (the return model)")
@@ -713,6 +722,10 @@ def add_fit_sensor_parser(sub) -> argparse.ArgumentParser:
                         "gets its own figures anyway")  # fmt: skip
     r.add_argument("--bootstrap", metavar="N", action=Checked, check=_bootstrap, default=None,
                    help=f"resamples of the bootstrap over pulses, 2 to {MAX_BOOTSTRAP:,} (default: {BOOTSTRAP})")
+    r.add_argument("--divergence-shares", metavar="CSV", default=None,
+                   help="the beam divergence fitted by simulation: a table with the header divergence_deg,<figure>[,std] (the "
+                        "figure a return statistic, e.g. multi_return_points_class_5) of the share simulated at each divergence "
+                        "(degrees, increasing), inverted at your scans' share (default: the divergence is not fitted)")  # fmt: skip
     p.set_defaults(func=cmd_fit_sensor)
     return p
 

@@ -37,6 +37,7 @@ from zbuf_occlude.sensors.fit.lidar import (
 )
 from zbuf_occlude.sensors.fit.return_model import (
     ReturnModelFit,
+    divergence_curve,
     divergence_from_shares,
     fit_divergence,
     fit_return_model,
@@ -78,5 +79,5 @@ __all__ = [
     "fit_sensor_height", "fit_visible_across_sight", "fit_width_profile", "fit_width_scale", "LidarFit",
     "MAX_DROPOUT_GAP", "MIN_PLACEMENT_SCANS", "MIN_RETURNS", "PLANE_NEIGHBOURS", "SENSOR_HEIGHT_QUANTILE", "WIDTH_BAND_M",
     "width_profile", "WIDTH_PROFILE_BINS", "WIDTH_SAMPLES", "return_statistics", "ReturnStatistics", "VEGETATION_CLASSES",
-    "divergence_from_shares", "fit_divergence", "fit_return_model", "merge_scans", "ReturnModelFit",
+    "divergence_curve", "divergence_from_shares", "fit_divergence", "fit_return_model", "merge_scans", "ReturnModelFit",
 ]  # fmt: skip

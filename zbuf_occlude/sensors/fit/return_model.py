@@ -64,7 +64,7 @@ coordinate reference system, as ours), metres are assumed and the fit says so.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, fields, replace
 from typing import Any
 
@@ -91,7 +91,8 @@ from zbuf_occlude.sensors.reflectance import reflectance
 __all__ = [
     "ALS_WAVELENGTH_NM", "DETECTION_QUANTILE", "DIVERGENCE_GRID_DEG", "FIT_BYTES_PER_POINT", "FOOTPRINT_RAYS", "GROUND_CLASS", "GROUND_MATERIAL",
     "GROUND_REFLECTANCE", "LOWEST_CELL_M",
-    "LOWEST_SLAB_M", "MIN_CLASS_POINTS", "RESOLUTION_QUANTILE", "ReturnModelFit", "divergence_from_shares", "fit_divergence",
+    "LOWEST_SLAB_M", "MAX_CURVE_ROWS", "MIN_CLASS_POINTS", "RESOLUTION_QUANTILE", "ReturnModelFit", "divergence_curve",
+    "divergence_from_shares", "fit_divergence",
     "fit_return_model", "lower_end", "merge_scans",
 ]  # fmt: skip
 
@@ -327,7 +328,7 @@ def fit_return_model(
     altitude_m: float,
     classes: Sequence[int] | None = VEGETATION_CLASSES,
     ground_reflectance: float = GROUND_REFLECTANCE,
-    divergence_shares: tuple[ArrayLike, ArrayLike] | None = None,
+    divergence_shares: tuple[ArrayLike, ...] | None = None,
     divergence_share: str = "multi_return_points",
     seed: int = 0,
     bootstrap: int = BOOTSTRAP,
@@ -347,11 +348,12 @@ def fit_return_model(
     ground_reflectance : float
         The ground's reflectance at the scanner's wavelength, in (0, 1] (default
         :data:`GROUND_REFLECTANCE`, soil at 1064 nm in the cited table).
-    divergence_shares : ((M,) float, (M,) float), optional
+    divergence_shares : ((M,) float, (M,) float[, (M,) float]), optional
         Divergences, degrees, and the share ``divergence_share`` that a simulation of this
-        scanner over a scene like the scan's gives at each (:func:`fit_divergence` makes them);
-        the divergence is fitted by inverting it (:func:`divergence_from_shares`).  None: not
-        measured.
+        scanner over a scene like the scan's gives at each, and optionally its standard
+        deviation (:func:`fit_divergence` makes them; :func:`divergence_curve` reads them from a
+        table); the divergence is fitted by inverting it (:func:`divergence_from_shares`).  None:
+        not measured.
     divergence_share : str
         The return statistics' share the curve gives (``"multi_return_points"``,
         ``"multi_return_points_classes_3_4_5"``, ``"multi_return_points_class_5"``, ...).
@@ -402,7 +404,8 @@ def fit_return_model(
         estimates["beam_divergence_deg"] = Estimate(math.nan, math.nan, 0, "not measurable from the points (module docstring)", "deg")
         why["beam_divergence_deg"] = "returns lie on the beam axis; give simulated shares (divergence_from_shares)"
     else:
-        estimates["beam_divergence_deg"] = divergence_from_shares(*divergence_shares, stats.estimates[divergence_share])
+        d, s, *sd = divergence_shares
+        estimates["beam_divergence_deg"] = divergence_from_shares(d, s, stats.estimates[divergence_share], sd[0] if sd else None)
     for name, e in estimates.items():
         if not math.isfinite(e.value) and name not in why:
             why[name] = "no first-of-several or no single returns there" if name.startswith("intensity_ratio") else "nothing to measure it on"
@@ -595,6 +598,58 @@ def divergence_from_shares(divergences_deg: ArrayLike, simulated_shares: ArrayLi
     else:
         std = math.nan
     return Estimate(value, std, measured.n, method, "deg")
+
+
+#: Most rows of a table of simulated shares (:func:`divergence_curve`).
+MAX_CURVE_ROWS = 1_000
+
+
+def divergence_curve(rows: Sequence[Mapping[str, Any]], name: str) -> tuple[str, NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """A simulated share curve from a table's rows: ``divergence_deg``, then the figure's name, then optionally ``std``.
+
+    The table a simulation writes for :func:`fit_return_model` (``fit-sensor --divergence-shares``):
+    a header ``divergence_deg,<figure>[,std]`` whose second column names the return statistics'
+    share it simulated (``multi_return_points``, ``multi_return_points_class_5``, ...), then one
+    row per simulated divergence (degrees), increasing.
+
+    Parameters
+    ----------
+    rows : sequence of mapping
+        The rows as :func:`~zbuf_occlude.io.tables.read_csv_rows` gives them (column -> text).
+    name : str
+        The table's file, for messages.
+
+    Returns
+    -------
+    figure : str
+    divergences_deg, shares, stds : (M,) float64
+        ``stds`` zeros without a ``std`` column.
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the file: no rows or more than :data:`MAX_CURVE_ROWS`, columns other than those,
+        a figure that is not a multi-return share, a value that is not a finite number, or a curve
+        :func:`divergence_from_shares` cannot invert.
+    """
+    if not rows or len(rows) > MAX_CURVE_ROWS:
+        raise InvalidInputError(f"{name}: a table of simulated shares needs 2 to {MAX_CURVE_ROWS:,} rows, got {len(rows):,}")
+    columns = list(rows[0])
+    if not (2 <= len(columns) <= 3 and columns[0] == "divergence_deg" and str(columns[1]).startswith("multi_return_points")
+            and columns[2:] in ([], ["std"])):  # fmt: skip
+        raise InvalidInputError(f"{name}: the header must be divergence_deg,<a multi_return_points figure>[,std], got {','.join(map(str, columns))}")
+    values = np.full((len(rows), 3), 0.0)
+    for i, row in enumerate(rows):
+        for j, column in enumerate(columns):
+            try:
+                values[i, j] = float(row[column])
+            except (TypeError, ValueError):
+                raise InvalidInputError(f"{name}: row {i + 2}: {column} is not a number: {str(row[column])[:40]!r}") from None
+    try:
+        divergence_from_shares(values[:, 0], values[:, 1], Estimate(math.nan, math.nan, 0, "", "share"), values[:, 2])
+    except InvalidInputError as exc:
+        raise InvalidInputError(f"{name}: {exc}") from None
+    return str(columns[1]), values[:, 0], values[:, 1], values[:, 2]
 
 
 def fit_divergence(
