@@ -40,7 +40,8 @@ keeps the first ``max_returns``.  Measured on the points of a scan
     0.37 m wide.  It is fitted by simulation instead (:func:`fit_divergence`,
     :func:`divergence_from_shares`): the multi-return share simulated at several divergences,
     inverted at the measured share (a simulated survey of a 2° beam over a box gives 2.01 ± 0.11°
-    back).  Without such a curve it is reported not measured and the sensor keeps its own.
+    back; ``fit-sensor --divergence-shares`` reads the curve from a table, :func:`divergence_curve`).
+    Without such a curve it is reported not measured and the sensor keeps its own.
 ``intensity_ratio_ground``, ``intensity_sum_ratio``
     Checks of the energy model: the median intensity of first-of-several returns on the ground
     over that of single returns there (the model gives the share of the footprint the first
@@ -52,7 +53,11 @@ Per class of the file with :data:`MIN_CLASS_POINTS` points: ``range_resolution_m
 ``intensity_ratio_class_<c>`` and ``reflectance_class_<c>``, the apparent reflectance of the
 class's single returns against the ground's: ``ρ_g`` times the ratio of the medians of
 ``I · R² / cos θ`` (no reflectance in the model is measured on its own; this is the class's
-reflectance where the footprint is filled).
+reflectance where the footprint is filled).  The ground's class has no ratio or reflectance of
+its own when it is the ground (``intensity_ratio_ground``; its reflectance is the one given).
+
+The intensity scale and the threshold in m⁻² depend on the flying height and the ground's
+reflectance given (the scale goes as ``H² / ρ_g``); nothing else does.
 
 Uncertainties: the standard deviation over a bootstrap over pulses
 (:func:`~zbuf_occlude.sensors.fit.returns.pulse_bootstrap`, seeded), as the return statistics'
