@@ -115,7 +115,7 @@ def test_the_memory_for_the_hits_is_checked_before_the_rounds():
 
 def test_echo_returns_casts_on_from_each_rays_own_origin():
     # an airborne-like pulse: one origin per sub-ray (the aircraft moves), plates below along -z
-    from zbuf_occlude.sensors.scan import echo_returns
+    from zbuf_occlude.sensors.scan import Transmission, echo_returns
 
     built = _stack([R, R + 2.0])
     origins = np.array([[0.0, 0.0, 0.0], [0.0, 1.0, 0.5]])
@@ -124,12 +124,13 @@ def test_echo_returns_casts_on_from_each_rays_own_origin():
     t = np.empty(2)
     for i in range(2):
         face[i : i + 1], t[i : i + 1] = cast_embree(built.mesh, origins[i], d[i : i + 1])
-    pulse, f, r, e = echo_returns(built, d, face, t, np.ones(1), range_resolution_m=0.5, max_returns=3, transmittance=[0.0, 0.5, 0.0], origins=origins)
+    through = Transmission([0.0, 0.5, 0.0], origins)
+    pulse, f, r, e = echo_returns(built, d, face, t, np.ones(1), range_resolution_m=0.5, max_returns=3, through=through)
     assert pulse.tolist() == [0, 0, 1, 1] and built.face_object[f].tolist() == [1, 2, 1, 2]
     np.testing.assert_allclose(r, [R, R + 2.0, R, R + 2.0], rtol=1e-12)
     np.testing.assert_allclose(e, [1 / R**2, 0.5 / (R + 2.0) ** 2] * 2, rtol=1e-12)
-    with pytest.raises(InvalidInputError, match="needs the rays' origins"):
-        echo_returns(built, d, face, t, np.ones(1), range_resolution_m=0.5, max_returns=3, transmittance=[0.0, 0.5, 0.0])
+    with pytest.raises(InvalidInputError, match="one value per object id"):
+        echo_returns(built, d, face, t, np.ones(1), range_resolution_m=0.5, max_returns=3, through=Transmission([0.5, 0.5], origins))
 
 
 # -- scan(transmittance=...) ------------------------------------------------------------------

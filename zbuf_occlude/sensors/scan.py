@@ -44,7 +44,7 @@ from zbuf_occlude.sensors.scene import BuiltScene, ScanScene, SceneObject
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
-__all__ = ["Scan", "scan", "look_at_pose", "read_scan_npz", "build_scene", "echo_returns", "return_numbers", "FRAMES", "MAX_SCAN_NPZ_BYTES"]
+__all__ = ["Radiometry", "Transmission", "Scan", "scan", "look_at_pose", "read_scan_npz", "build_scene", "echo_returns", "return_numbers", "FRAMES", "MAX_SCAN_NPZ_BYTES"]
 
 #: Frames a scan's points can be given in.
 FRAMES = ("sensor", "world")
@@ -498,27 +498,69 @@ def _echo_returns(built: BuiltScene, sensor: Lidar, rays, face, t, rho, rng, *, 
     range limits (the receiver's blind zone and reach), range resolution, maximum returns, and
     detection threshold and power noise when ``rho`` is given; the hits behind surfaces of
     ``transmittance`` above 0, cast from ``origin``."""
+    radiometry = None if rho is None else Radiometry(rho, sensor.detection_threshold, sensor.power_noise, rng)
     return echo_returns(
         built, rays, face, t, sensor.footprint_weights(), range_resolution_m=sensor.range_resolution_m, max_returns=sensor.max_returns,
-        rho=rho, detection_threshold=sensor.detection_threshold, power_noise=sensor.power_noise, rng=rng,
-        range_limits_m=(sensor.min_range_m, sensor.max_range_m), origins=origin, transmittance=transmittance,
+        radiometry=radiometry, range_limits_m=(sensor.min_range_m, sensor.max_range_m),
+        through=None if transmittance is None else Transmission(transmittance, origin),
     )  # fmt: skip
 
 
+@dataclass(frozen=True)
+class Radiometry:
+    """What weighs and thresholds the echoes of :func:`echo_returns`.
+
+    Attributes
+    ----------
+    reflectivity : (n_objects + 1,) float
+        Lambertian ρ per object id (index 0: the ground).
+    detection_threshold : float
+        Least echo energy kept, m⁻² (:func:`~.echoes.hit_energy`'s units).
+    power_noise : float
+        Every hit of a pulse is scaled by one ``exp(σ z)``, z ~ N(0, 1) per pulse (P draws from
+        ``rng``); 0: nothing is drawn.
+    rng : numpy.random.Generator, optional
+        Needed when ``power_noise`` is above 0.
+    """
+
+    reflectivity: ArrayLike
+    detection_threshold: float = 0.0
+    power_noise: float = 0.0
+    rng: np.random.Generator | None = None
+
+
+@dataclass(frozen=True)
+class Transmission:
+    """Sub-rays that go on through surfaces in :func:`echo_returns`: all hits along each, not only the first.
+
+    Attributes
+    ----------
+    transmittance : (n_objects + 1,) float
+        Round-trip transmittance per object id, in [0, 1] (:func:`~.echoes.attenuate_along_subray`:
+        a gap fraction ``g`` is ``g``, a pane of one-way ``T`` is ``T²``); 0 everywhere: opaque.
+    origins : (3,) or (P·K, 3) float
+        The sub-rays' origin, world frame, metres (one, or one per sub-ray).
+    max_hits : int
+        Most hits cast along one sub-ray (:func:`~.raycast.cast_embree_beyond`).
+    """
+
+    transmittance: ArrayLike
+    origins: ArrayLike
+    max_hits: int = MAX_HITS
+
+
 def echo_returns(
-    built: BuiltScene, rays, face, t, weights, *, range_resolution_m: float, max_returns: int, rho=None, detection_threshold: float = 0.0,
-    power_noise: float = 0.0, rng: np.random.Generator | None = None, range_limits_m: tuple[float, float] = (0.0, np.inf),
-    transmittance=None, origins=None, max_hits: int = MAX_HITS,
+    built: BuiltScene, rays, face, t, weights, *, range_resolution_m: float, max_returns: int, radiometry: Radiometry | None = None,
+    range_limits_m: tuple[float, float] = (0.0, np.inf), through: Transmission | None = None,
 ) -> tuple[NDArray[np.int64], ...]:  # fmt: skip
     """The multi-return model of every scanner: resolve each pulse's sub-ray hits into discrete returns.
 
     One implementation for the spinning LiDAR (:func:`scan`) and the airborne scanner
     (:func:`~zbuf_occlude.sensors.airborne.scan_airborne`).  Each sub-ray's first hit is given;
-    where ``transmittance`` gives its surface a share above 0, the sub-ray is cast on through it
+    where ``through`` gives its surface a transmittance above 0, the sub-ray is cast on through it
     (:func:`~.raycast.cast_embree_beyond`, Embree) and each hit behind gets its energy times the
     transmittances of the surfaces before it on the sub-ray (:func:`~.echoes.attenuate_along_subray`).
-    Without ``transmittance`` (or with 0 everywhere: opaque) only the first hits count, bit for
-    bit as without the argument.
+    Without ``through`` (or with 0 everywhere: opaque) only the first hits count, bit for bit.
 
     Parameters
     ----------
@@ -536,23 +578,14 @@ def echo_returns(
         Echoes of one pulse closer than this merge (:func:`~.echoes.resolve_echoes`), metres, > 0.
     max_returns : int
         The first this many echoes of a pulse in range order are kept.
-    rho : (n_objects + 1,) float, optional
-        Reflectivity per object id; None: 1 everywhere, and no detection threshold.
-    detection_threshold : float
-        Least echo energy kept when ``rho`` is given, m⁻².
-    power_noise : float
-        With ``rho``: every hit of a pulse is scaled by one ``exp(σ z)``, z ~ N(0, 1) per pulse
-        (P draws from ``rng``); nothing is drawn otherwise.
+    radiometry : Radiometry, optional
+        Reflectivity per object id, detection threshold and power noise; None: ρ 1 everywhere,
+        every echo detected, no noise.
     range_limits_m : (min, max) float
         Hits nearer or farther than these give no echo (the receiver's blind zone and reach),
         metres; a hit in the blind zone still shades the hits behind it.
-    transmittance : (n_objects + 1,) float, optional
-        Round-trip transmittance per object id, in [0, 1] (:func:`~.echoes.attenuate_along_subray`:
-        a gap fraction ``g`` is ``g``, a pane of one-way ``T`` is ``T²``); None: 0 everywhere.
-    origins : (3,) or (P·K, 3) float64, optional
-        The sub-rays' origin, world frame, metres: needed when ``transmittance`` is above 0 anywhere.
-    max_hits : int
-        Most hits cast along one sub-ray (:data:`~.raycast.MAX_HITS`).
+    through : Transmission, optional
+        Transmittance per object id and the sub-rays' origins; None: opaque, first hits only.
 
     Returns
     -------
@@ -563,18 +596,16 @@ def echo_returns(
     Raises
     ------
     InvalidInputError
-        ``transmittance`` not one value in [0, 1] per object id, or above 0 without ``origins``.
+        A transmittance that is not one value in [0, 1] per object id.
     """
     k = len(weights)
     n_pulses = len(face) // k
     min_range_m, max_range_m = range_limits_m
-    tau = None if transmittance is None else np.asarray(transmittance, dtype=np.float64)
+    tau = None if through is None else np.asarray(through.transmittance, dtype=np.float64)
     if tau is not None and tau.shape != (len(built.objects) + 1,):
         raise InvalidInputError(f"transmittance must hold one value per object id ({len(built.objects) + 1}: ground + objects), got shape {tau.shape}")
     if tau is not None and tau.any():
-        if origins is None:
-            raise InvalidInputError("transmittance above 0 casts the sub-rays on through the surfaces: it needs the rays' origins")
-        sub, f_all, r_all = cast_embree_beyond(built.mesh, origins, rays, face, t, tau[built.face_object] > 0, max_hits=max_hits)
+        sub, f_all, r_all = cast_embree_beyond(built.mesh, through.origins, rays, face, t, tau[built.face_object] > 0, max_hits=through.max_hits)
         share = attenuate_along_subray(sub, r_all, built.face_object[f_all].astype(np.int64), tau)
         kept = np.flatnonzero((r_all >= min_range_m) & (r_all <= max_range_m))
         ray, f, r, share = sub[kept], f_all[kept], r_all[kept], share[kept]
@@ -585,14 +616,15 @@ def echo_returns(
     normal = face_normals(built.mesh, f)
     cos = np.abs(np.einsum("ij,ij->i", normal, rays[ray]))
     pulse = ray // k
+    rho = None if radiometry is None else np.asarray(radiometry.reflectivity, dtype=np.float64)
     energy = hit_energy(np.asarray(weights)[ray % k], 1.0 if rho is None else rho[obj], cos, r)
     if share is not None:
         energy = energy * share
-    if rho is not None and power_noise > 0:
-        energy = energy * np.exp(power_noise * rng.standard_normal(n_pulses))[pulse]
+    if radiometry is not None and radiometry.power_noise > 0:
+        energy = energy * np.exp(radiometry.power_noise * radiometry.rng.standard_normal(n_pulses))[pulse]
     echoes = resolve_echoes(
         pulse, r, energy, obj, range_resolution_m=range_resolution_m,
-        detection_threshold=detection_threshold if rho is not None else 0.0, max_returns=max_returns,
+        detection_threshold=0.0 if radiometry is None else radiometry.detection_threshold, max_returns=max_returns,
     )  # fmt: skip
     return echoes.pulse, f[echoes.hit], echoes.range_m, echoes.energy
 
