@@ -376,6 +376,10 @@ def cast_zbuffer(
 ) -> tuple[NDArray[np.int64], NDArray[np.float64], int]:
     """First hit of each ray from one origin, from rasterised face-id images (module docstring).
 
+    Only the first: each pixel keeps the nearest face, so nothing behind it can be read back.
+    The hits behind a surface that transmits come from :func:`cast_embree_beyond` (Embree), and
+    :func:`~zbuf_occlude.sensors.scan.scan` refuses a transmittance above 0 with this backend.
+
     The views are rasterised and each ray's candidates tested on the GPU
     (``render/shaders/scan_candidates.comp``, float32); the distance on the chosen face is then
     recomputed in float64, and a ray goes to Embree when its window showed faces but none was
