@@ -17,7 +17,10 @@
     between returns, intensities (:func:`return_statistics`).
 ``return_model``
     The return model fitted to a LAS/LAZ scan: range resolution, returns per pulse, detection
-    threshold and intensity scale, and the beam divergence by simulation (:func:`fit_return_model`).
+    threshold and intensity scale (:func:`fit_return_model`).
+``divergence``
+    The beam divergence fitted by simulation: a simulated multi-return share curve inverted at a
+    scan's share (:func:`fit_divergence`, :func:`divergence_from_shares`).
 
 Every name is imported from here (``from zbuf_occlude.sensors.fit import fit_lidar``).
 """
@@ -25,6 +28,11 @@ Every name is imported from here (``from zbuf_occlude.sensors.fit import fit_lid
 from __future__ import annotations
 
 from zbuf_occlude.sensors.fit.airborne import AirborneFit, crop_faces, fit_airborne
+from zbuf_occlude.sensors.fit.divergence import (
+    divergence_curve,
+    divergence_from_shares,
+    fit_divergence,
+)
 from zbuf_occlude.sensors.fit.lidar import (
     BOOTSTRAP,
     MAX_DROPOUT_GAP,
@@ -37,9 +45,6 @@ from zbuf_occlude.sensors.fit.lidar import (
 )
 from zbuf_occlude.sensors.fit.return_model import (
     ReturnModelFit,
-    divergence_curve,
-    divergence_from_shares,
-    fit_divergence,
     fit_return_model,
     merge_scans,
 )
