@@ -37,10 +37,10 @@ keeps the first ``max_returns``.  Measured on the points of a scan
     no lateral spread to read a footprint from: in the IGN LiDAR HD sample the middle return of
     a three-return pulse lies a median 5 mm off the line through the other two (709 pulses; the
     coordinates are stored in 1 cm steps), where a 0.25 mrad beam's footprint at 1,500 m is
-    0.37 m wide.  It is fitted by simulation instead (:func:`fit_divergence`,
-    :func:`divergence_from_shares`, :mod:`.divergence`): the multi-return share simulated at several divergences,
+    0.37 m wide.  It is fitted by simulation instead (:func:`~zbuf_occlude.sensors.fit.divergence.fit_divergence`,
+    :func:`~zbuf_occlude.sensors.fit.divergence.divergence_from_shares`, :mod:`.divergence`): the multi-return share simulated at several divergences,
     inverted at the measured share (a simulated survey of a 2° beam over a box gives 2.01 ± 0.11°
-    back; ``fit-sensor --divergence-shares`` reads the curve from a table, :func:`divergence_curve`).
+    back; ``fit-sensor --divergence-shares`` reads the curve from a table, :func:`~zbuf_occlude.sensors.fit.divergence.divergence_curve`).
     Without such a curve it is reported not measured and the sensor keeps its own.
 ``intensity_ratio_ground``, ``intensity_sum_ratio``
     Checks of the energy model: the median intensity of first-of-several returns on the ground
@@ -353,8 +353,8 @@ def fit_return_model(
     divergence_shares : ((M,) float, (M,) float[, (M,) float]), optional
         Divergences, degrees, and the share ``divergence_share`` that a simulation of this
         scanner over a scene like the scan's gives at each, and optionally its standard
-        deviation (:func:`fit_divergence` makes them; :func:`divergence_curve` reads them from a
-        table); the divergence is fitted by inverting it (:func:`divergence_from_shares`).  None:
+        deviation (:func:`~zbuf_occlude.sensors.fit.divergence.fit_divergence` makes them; :func:`~zbuf_occlude.sensors.fit.divergence.divergence_curve` reads them from a
+        table); the divergence is fitted by inverting it (:func:`~zbuf_occlude.sensors.fit.divergence.divergence_from_shares`).  None:
         not measured.
     divergence_share : str
         The return statistics' share the curve gives (``"multi_return_points"``,
@@ -374,7 +374,7 @@ def fit_return_model(
         What :func:`~zbuf_occlude.sensors.fit.returns.return_statistics` refuses (no GPS time, no
         points, class codes outside 0..255); a non-positive or non-finite altitude, a reflectance
         outside (0, 1]; a ``divergence_share`` the statistics do not hold; what
-        :func:`divergence_from_shares` refuses.
+        :func:`~zbuf_occlude.sensors.fit.divergence.divergence_from_shares` refuses.
     InsufficientMemoryError
         The scan is too large for the memory available.
     """
