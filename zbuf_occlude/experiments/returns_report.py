@@ -46,8 +46,9 @@ from zbuf_occlude.io.las import LasPoints, read_las
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.sensors.fit import Estimate
 from zbuf_occlude.sensors.fit.returns import VEGETATION_CLASSES, ReturnStatistics, return_statistics
+from zbuf_occlude.sensors.scene import ScanScene
 
-__all__ = ["RETURNS_OUTPUTS", "TOLERANCES", "ReturnsSettings", "comparison_markdown", "comparison_rows", "recommend_k", "run_returns"]
+__all__ = ["RETURNS_OUTPUTS", "TOLERANCES", "ReturnsSettings", "comparison_markdown", "comparison_rows", "ign_plot", "recommend_k", "run_returns"]
 
 log = logging.getLogger(__name__)
 
@@ -234,7 +235,24 @@ def _scanner(divergence_deg: float, k: int, model: dict[str, Any]):
     return ign_scanner(divergence_deg, k, range_resolution_m=model["range_resolution_m"], max_returns=model["max_returns"])
 
 
-def _plot(mesh_root: str | os.PathLike, settings: ReturnsSettings):
+def ign_plot(mesh_root: str | os.PathLike, settings: ReturnsSettings) -> tuple[ScanScene, tuple[int, ...], tuple[float, float], float]:
+    """The experiment's plot: :data:`~.returns.PLOT_TREES` from ``mesh_root``, ``settings.copies`` of each,
+    on a grid ``settings.spacing_m`` apart, its centre ``settings.scan_angle_deg`` across track.
+
+    Returns
+    -------
+    scene, vegetation_ids
+        As :func:`~.returns.plot_scene`.
+    center_xy : (float, float)
+        The plot's centre, metres (world frame: the aircraft flies along +x over y = 0).
+    half_size_m : float
+        Half the side of the square of ground the scan covers, metres.
+
+    Raises
+    ------
+    MeshLoadError
+        A mesh file that is missing or unreadable (named).
+    """
     from zbuf_occlude.mesh.load import load_mesh
 
     root = Path(mesh_root)
@@ -324,20 +342,24 @@ def _figure(sim_las: LasPoints, tree_xy: tuple[float, float], tree_half_m: float
     fig, axes = plt.subplots(1, 2, figsize=(11, 5.2))
     colours = {1: "#1b9e77", 2: "#d95f02", 3: "#7570b3", 4: "#e7298a", 5: "#66a61e"}
     near = np.all(np.abs(sim_las.points[:, :2] - np.asarray(tree_xy)) <= tree_half_m, axis=1)
-    real_inside = _vegetation_patch(real_las, 2.0 * tree_half_m)
+    # the real cell's ground and vegetation only (its noise and other classes left out)
+    real_inside = _vegetation_patch(real_las, 2.0 * tree_half_m) & np.isin(real_las.classification, (GROUND_CLASS, *VEGETATION_CLASSES))
     for ax, las, mask, title in ((axes[0], sim_las, near, "simulated tree"), (axes[1], real_las, real_inside, "real vegetation patch (IGN LiDAR HD)")):
         p = las.points[mask]
         rn = las.return_number[mask]
-        # side view: x along the first axis, height above the lowest point
+        ground = las.classification[mask] == GROUND_CLASS
+        base = float(np.median(p[ground, 2])) if ground.any() else float(p[:, 2].min())
+        # side view: x along the first axis, height above the cell's median ground return
         for n in sorted(set(rn.tolist())):
             sel = rn == n
-            ax.scatter(p[sel, 0] - p[:, 0].min(), p[sel, 2] - p[:, 2].min(), s=4, c=colours.get(int(n), "k"), label=f"return {n}")
+            ax.scatter(p[sel, 0] - p[:, 0].min(), p[sel, 2] - base, s=4, c=colours.get(int(n), "k"), label=f"return {n}")
         ax.set_title(f"{title}: {mask.sum():,} points")
         ax.set_xlabel("x (m)")
-        ax.set_ylabel("height above the lowest point (m)")
+        ax.set_ylabel("height above the ground (m)")
         ax.set_aspect("equal")
         ax.legend(loc="upper right", fontsize=8, markerscale=2)
-    fig.suptitle(f"Returns by return number, {2 * tree_half_m:.0f} m squares seen from the side; {settings_note}", fontsize=9)
+    fig.suptitle(f"Returns by return number, {2 * tree_half_m:.0f} m squares seen from the side (ground and vegetation classes); "
+                 f"{settings_note}", fontsize=9)  # fmt: skip
     fig.tight_layout()
     data = png_bytes(fig, dpi=110)
     plt.close(fig)
@@ -400,7 +422,7 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
     with OwnedFolder(out, files=RETURNS_OUTPUTS, what="the returns experiment") as folder:
         folder.check_writable(RETURNS_OUTPUTS)
         real, real_las, model = _real(real_path, VEGETATION_CLASSES, settings.bootstrap)
-        plot = _plot(mesh_root, settings)
+        plot = ign_plot(mesh_root, settings)
         resolution = model["range_resolution_m"]
         sweep = _divergence_sweep(plot, settings, model, settings.sweep_rays)
         real_share = real["all"].estimates[f"multi_return_points_{_suffix(VEGETATION_CLASSES)}"]
