@@ -434,7 +434,7 @@ def airborne_preset(name: str, **changes) -> AirborneScanner:
 
 
 def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_size_m: float = 10.0, *, seed: int = 0,
-                  phase_s: float | None = None, lateral_shift_m=None):  # fmt: skip
+                  phase_s: float | None = None, lateral_shift_m=None, reflectivity=None, transmittance=None):  # fmt: skip
     """Scan the part of ``scene`` around ``center_xy`` from every line of the scanner's flight plan; world frame.
 
     Every line casts the pulses whose flat-ground footprint falls in the square ``center_xy ±
@@ -482,7 +482,8 @@ def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_si
     Raises
     ------
     InvalidInputError
-        A non-finite or non-positive square, a non-finite phase or shift, more than
+        A non-finite or non-positive square, a non-finite phase or shift, a reflectivity or
+        transmittance out of range or given to a scanner of one return per pulse, more than
         :data:`~zbuf_occlude.sensors.checks.MAX_SENSOR_RAYS` pulses in all (counted line by line,
         before the rays are cast).
     """
@@ -490,6 +491,7 @@ def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_si
     from zbuf_occlude.sensors.scan import Scan, build_scene, return_numbers
 
     built = build_scene(scene)
+    rho, tau = _surface_optics(built, scanner, reflectivity, transmittance)
     rng = np.random.default_rng(seed)
     n_total = scanner.n_lines * len(scanner.headings_deg)
     # draw order: phases (one per line), then shifts (one per heading, plans of > 1 line per
@@ -526,7 +528,7 @@ def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_si
     else:
         origins, directions, angle, line_id, fired = (np.concatenate(arrays) for arrays in zip(*parts))
     if scanner.multi_return:
-        hit, face, t, energy = _echo_returns(built, scanner, origins, directions)
+        hit, face, t, energy = _echo_returns(built, scanner, origins, directions, rho, tau)
     else:
         face, t = cast_embree(built.mesh, origins, directions) if len(origins) else (np.zeros(0, np.int64), np.zeros(0))
         hit = np.flatnonzero(face >= 0)
@@ -556,10 +558,24 @@ def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_si
     )  # fmt: skip
 
 
-def _echo_returns(built, scanner: AirborneScanner, origins, directions) -> tuple[NDArray, ...]:
+def _surface_optics(built, scanner: AirborneScanner, reflectivity, transmittance):
+    """``scan_airborne``'s ``reflectivity`` and ``transmittance`` per object id at 1064 nm, or None."""
+    if reflectivity is None and transmittance is None:
+        return None, None
+    from zbuf_occlude.sensors.reflectance import AIRBORNE_WAVELENGTH_NM
+    from zbuf_occlude.sensors.scan import surface_optics
+
+    if not scanner.multi_return:
+        raise InvalidInputError(f"airborne scanner {scanner.name!r}: reflectivity and transmittance weigh the echoes of the "
+                                "multi-return model: give the scanner max_returns above 1")  # fmt: skip
+    return surface_optics(built, reflectivity, transmittance, wavelength_nm=AIRBORNE_WAVELENGTH_NM, multi_return=True)
+
+
+def _echo_returns(built, scanner: AirborneScanner, origins, directions, rho=None, tau=None) -> tuple[NDArray, ...]:
     """The multi-return model of an airborne scanner: each pulse's ``footprint_rays`` sub-rays cast
     from its origin, resolved by :func:`~zbuf_occlude.sensors.scan.echo_returns` (no range limits,
-    no radiometric threshold: every echo returns).
+    no radiometric threshold: every echo returns), weighed by ``rho`` and cast on through surfaces
+    of ``tau`` above 0 when given (per object id).
 
     Parameters
     ----------
@@ -575,12 +591,16 @@ def _echo_returns(built, scanner: AirborneScanner, origins, directions) -> tuple
     """
     from zbuf_occlude.sensors.footprint import footprint_offsets, subray_directions
     from zbuf_occlude.sensors.raycast import cast_embree
-    from zbuf_occlude.sensors.scan import echo_returns
+    from zbuf_occlude.sensors.scan import Radiometry, Transmission, echo_returns
 
     k = scanner.footprint_rays
     if len(origins) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
     offsets, weights = footprint_offsets(k, scanner.beam_divergence_deg, profile=scanner.beam_profile)
     rays = subray_directions(directions, offsets).reshape(-1, 3)
-    face, t = cast_embree(built.mesh, np.repeat(origins, k, axis=0), rays)
-    return echo_returns(built, rays, face, t, weights, range_resolution_m=scanner.range_resolution_m, max_returns=scanner.max_returns)
+    sub_origins = np.repeat(origins, k, axis=0)
+    face, t = cast_embree(built.mesh, sub_origins, rays)
+    return echo_returns(
+        built, rays, face, t, weights, range_resolution_m=scanner.range_resolution_m, max_returns=scanner.max_returns,
+        radiometry=None if rho is None else Radiometry(rho), through=None if tau is None else Transmission(tau, sub_origins),
+    )  # fmt: skip

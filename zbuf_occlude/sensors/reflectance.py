@@ -59,6 +59,7 @@ if TYPE_CHECKING:
     from zbuf_occlude.sensors.scene import BuiltScene
 
 __all__ = [
+    "AIRBORNE_WAVELENGTH_NM",
     "CLASS_MATERIALS",
     "DEFAULT_MATERIAL",
     "FOLIAGE_GAP_FRACTION",
@@ -82,6 +83,8 @@ WAVELENGTHS_NM = (905.0, 1064.0, 1550.0)
 WAVELENGTH_TOLERANCE_NM = 100.0
 #: Wavelength of the spinning LiDAR presets, nm (Velodyne 903–905 nm; Ouster's 865 nm is the same column).
 SPINNING_WAVELENGTH_NM = 905.0
+#: Wavelength of airborne scanners, nm (Nd:YAG 1064 nm: Riegl VQ-1560, Leica ALS; Baltsavias 1999, Table 1).
+AIRBORNE_WAVELENGTH_NM = 1064.0
 #: Round-trip transmittance of a foliage surface: its gap fraction (module docstring; an assumption).
 FOLIAGE_GAP_FRACTION = 0.3
 

@@ -44,7 +44,7 @@ from zbuf_occlude.sensors.scene import BuiltScene, ScanScene, SceneObject
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
-__all__ = ["Radiometry", "Transmission", "Scan", "scan", "look_at_pose", "read_scan_npz", "build_scene", "echo_returns", "return_numbers", "FRAMES", "MAX_SCAN_NPZ_BYTES"]
+__all__ = ["Radiometry", "Transmission", "Scan", "scan", "look_at_pose", "read_scan_npz", "build_scene", "echo_returns", "return_numbers", "surface_optics", "FRAMES", "MAX_SCAN_NPZ_BYTES"]
 
 #: Frames a scan's points can be given in.
 FRAMES = ("sensor", "world")
@@ -399,24 +399,54 @@ def _reflectivity_table(reflectivity, n_ids: int) -> NDArray[np.float64]:
 
 
 def _surface_optics(built: BuiltScene, sensor, backend: str, reflectivity, transmittance):
-    """``scan``'s ``reflectivity`` and ``transmittance`` as (n_objects + 1,) float64 per object id (or None), checked.
-
-    ``"table"`` takes either from :func:`~.reflectance.scene_optics` at 905 nm.  A transmittance
-    above 0 needs the multi-return model and the "embree" backend (all hits along a sub-ray).
-    """
+    """``scan``'s ``reflectivity`` and ``transmittance`` for ``sensor`` (:func:`surface_optics` at 905 nm)."""
     if reflectivity is None and transmittance is None:
         return None, None
-    from zbuf_occlude.sensors.reflectance import SPINNING_WAVELENGTH_NM, scene_optics
-
-    what = "reflectivity (radiometric detection)" if reflectivity is not None else "transmittance (hits behind a surface)"
     if not isinstance(sensor, _PULSED):
+        what = "reflectivity (radiometric detection)" if reflectivity is not None else "transmittance (hits behind a surface)"
         raise InvalidInputError(f"{what} is modelled for LiDARs only")
+    from zbuf_occlude.sensors.reflectance import SPINNING_WAVELENGTH_NM
+
+    return surface_optics(built, reflectivity, transmittance, wavelength_nm=SPINNING_WAVELENGTH_NM, multi_return=sensor.multi_return, backend=backend)
+
+
+def surface_optics(built: BuiltScene, reflectivity, transmittance, *, wavelength_nm: float, multi_return: bool, backend: str = "embree"):
+    """Reflectivity and transmittance per object id of a scanner's scene, checked; one rule for every scanner.
+
+    Parameters
+    ----------
+    built : BuiltScene
+        The scene (its objects give the ids: 0 the ground, then the objects).
+    reflectivity, transmittance : None, float, (n_objects + 1,) float, or "table"
+        Lambertian ρ ≥ 0 and round-trip transmittance in [0, 1] per object id: one value for
+        all, one per id, or ``"table"``: :func:`~.reflectance.scene_optics` at ``wavelength_nm``
+        (the cited table, by material, class or file name).
+    wavelength_nm : float
+        The scanner's wavelength, nm (905 for the spinning presets, 1064 for airborne scanners).
+    multi_return : bool
+        Whether the scanner resolves several returns per pulse (a transmittance above 0 needs it).
+    backend : str
+        The ray caster; a transmittance above 0 needs "embree" (every hit along a sub-ray).
+
+    Returns
+    -------
+    rho : (n_objects + 1,) float64 or None
+    tau : (n_objects + 1,) float64 or None (None also where every value is 0: opaque, first hits only)
+
+    Raises
+    ------
+    InvalidInputError
+        A string other than "table", a value out of range or of the wrong length, a
+        transmittance above 0 with one return per pulse or another backend than "embree".
+    """
+    from zbuf_occlude.sensors.reflectance import scene_optics
+
     table = None
     for name, value in (("reflectivity", reflectivity), ("transmittance", transmittance)):
         if isinstance(value, str) and value != "table":
             raise InvalidInputError(f"{name} must be a number, one per object id, or 'table', got {value!r}")
         if isinstance(value, str) and table is None:
-            table = scene_optics(built, SPINNING_WAVELENGTH_NM)
+            table = scene_optics(built, wavelength_nm)
     n_ids = len(built.objects) + 1
     rho = None
     if reflectivity is not None:
@@ -426,9 +456,9 @@ def _surface_optics(built: BuiltScene, sensor, backend: str, reflectivity, trans
         tau = table.transmittance if isinstance(transmittance, str) else _transmittance_table(transmittance, n_ids)
         if not tau.any():
             tau = None  # opaque everywhere: today's first hits
-        elif not sensor.multi_return:
+        elif not multi_return:
             raise InvalidInputError("transmittance above 0 gives hits behind a surface, which only the multi-return model resolves: "
-                                    "give the LiDAR max_returns above 1")  # fmt: skip
+                                    "give the scanner max_returns above 1")  # fmt: skip
         elif backend != "embree":
             raise InvalidInputError(f"transmittance above 0 needs every hit along each sub-ray, which the {backend!r} backend cannot give "
                                     "(it keeps the nearest face per pixel): use backend='embree'")  # fmt: skip
