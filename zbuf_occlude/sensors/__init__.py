@@ -1,4 +1,4 @@
-"""Sensor scans of mesh scenes: spinning LiDARs, airborne scanners and depth cameras; a LiDAR fitted to real scans.
+"""Sensor scans of mesh scenes: spinning LiDARs, ray tables, airborne scanners and depth cameras; a LiDAR fitted to real scans.
 
 >>> import zbuf_occlude as zo
 >>> scene = zo.ScanScene().add("car.off", class_name="car", position_m=(10, 0), size_m=4.5)
@@ -10,11 +10,12 @@ from zbuf_occlude.sensors.airborne import AIRBORNE_PRESETS, AirborneScanner, air
 from zbuf_occlude.sensors.depth_camera import DEPTH_CAMERA_PRESETS, DepthCamera, depth_camera_preset, nguyen_axial_sigma_m
 from zbuf_occlude.sensors.fit import LidarFit, fit_lidar
 from zbuf_occlude.sensors.lidar import LIDAR_PRESETS, Lidar, beam_directions, lidar_preset
+from zbuf_occlude.sensors.ray_table import RayTable, load_ray_table, rosette_table
 from zbuf_occlude.sensors.scan import FRAMES, Scan, look_at_pose, read_scan_npz, scan
 from zbuf_occlude.sensors.scene import GROUND_ID, ScanScene, SceneObject, load_scene, sensor_pose
 
 __all__ = [
-    "Lidar", "LIDAR_PRESETS", "lidar_preset", "beam_directions",
+    "Lidar", "LIDAR_PRESETS", "lidar_preset", "beam_directions", "RayTable", "load_ray_table", "rosette_table",
     "AirborneScanner", "AIRBORNE_PRESETS", "airborne_preset", "scan_airborne",
     "DepthCamera", "DEPTH_CAMERA_PRESETS", "depth_camera_preset", "nguyen_axial_sigma_m",
     "ScanScene", "SceneObject", "load_scene", "sensor_pose", "GROUND_ID",
