@@ -217,3 +217,14 @@ def test_the_command_refuses_bad_options_in_one_line(tmp_path, capsys) -> None:
     assert run("--real", str(tmp_path / "missing.laz"), "--bootstrap", "2") != 0
     err = capsys.readouterr().err
     assert "missing.laz" in err and "Traceback" not in err
+
+
+def test_surfaces_that_transmit_give_hits_behind_them() -> None:
+    scene, vegetation = _plot()
+    kwargs = {"half_size_m": 4.0, "seeds": (0,), "bootstrap": 5}
+    one_ray = ign_scanner(IGN_DIVERGENCE_DEG, 1)  # one ray a pulse: one return, unless it goes on through
+    opaque = simulate(scene, one_ray, vegetation, **kwargs).statistics["vegetation"].estimates
+    through = simulate(scene, one_ray, vegetation, reflectivity=[0.3, 0.5, 0.5], transmittance=[0.0, 0.5, 0.5],
+                       **kwargs).statistics["vegetation"].estimates  # fmt: skip
+    assert opaque["returns_1"].value == 1.0
+    assert through["returns_2"].value > 0.5  # the boxes' pulses reach the ground below them too

@@ -251,7 +251,7 @@ def _concatenate(parts: Sequence[LasPoints]) -> LasPoints:
 
 
 def simulate(scene: ScanScene, scanner: AirborneScanner, vegetation_ids: Sequence[int], *, center_xy=(0.0, 0.0), half_size_m: float,
-             seeds: Sequence[int] = (0,), bootstrap: int = 200) -> SimulatedScan:  # fmt: skip
+             seeds: Sequence[int] = (0,), bootstrap: int = 200, reflectivity=None, transmittance=None) -> SimulatedScan:  # fmt: skip
     """Scan the plot, write each scan as LAS, read it back and measure them together (module docstring, steps 1–2).
 
     Parameters
@@ -268,6 +268,10 @@ def simulate(scene: ScanScene, scanner: AirborneScanner, vegetation_ids: Sequenc
         point source (flight line) in the pooled points; the first also seeds the bootstrap.
     bootstrap : int
         Resamples of :func:`~zbuf_occlude.sensors.fit.returns.return_statistics`.
+    reflectivity, transmittance : optional
+        Per object id (ground first) or ``"table"``, as
+        :func:`~zbuf_occlude.sensors.airborne.scan_airborne` takes them; None (default): every
+        surface reflects alike and stops the sub-ray.
 
     Returns
     -------
@@ -290,7 +294,7 @@ def simulate(scene: ScanScene, scanner: AirborneScanner, vegetation_ids: Sequenc
     with tempfile.TemporaryDirectory(prefix="zbuf-returns-") as folder:
         for source, seed in enumerate(seeds):
             start = time.perf_counter()
-            scan = scan_airborne(scene, scanner, center_xy, half_size_m, seed=int(seed))
+            scan = scan_airborne(scene, scanner, center_xy, half_size_m, seed=int(seed), reflectivity=reflectivity, transmittance=transmittance)
             seconds += time.perf_counter() - start
             pulses += int(scan.meta["n_rays"])
             first = scan if first is None else first
