@@ -92,3 +92,28 @@ def test_optics_need_the_multi_return_model() -> None:
     one = _scanner(footprint_rays=1, max_returns=1, beam_divergence_deg=0.0, range_resolution_m=0.0)
     with pytest.raises(InvalidInputError, match="max_returns above 1"):
         scan_airborne(_plate_over_ground(), one, (0.0, 0.0), 5.0, transmittance=0.5)
+
+
+def test_the_detection_threshold_drops_the_weak_echoes_and_frees_their_slot() -> None:
+    plain = _scan(transmittance=0.5)
+    ground = plain.intensity[plain.return_number == 2]
+    plate = plain.intensity[plain.return_number == 1]
+    between = float(ground.max() * 1.01)
+    assert between < plate.min()
+    s = scan_airborne(_plate_over_ground(), _scanner(detection_threshold=between), (0.0, 0.0), 5.0, seed=3, phase_s=0.0, transmittance=0.5)
+    assert len(s) == len(plate) and np.all(s.number_of_returns == 1) and np.all(s.return_number == 1)
+    np.testing.assert_array_equal(s.intensity, plate)
+    # without reflectivity the threshold weighs the echoes with rho 1; a threshold of 0 keeps every echo
+    np.testing.assert_array_equal(_scan(transmittance=0.5).intensity, scan_airborne(
+        _plate_over_ground(), _scanner(detection_threshold=0.0), (0.0, 0.0), 5.0, seed=3, phase_s=0.0, transmittance=0.5).intensity)
+
+
+@pytest.mark.parametrize("value", [-1e-9, float("nan"), float("inf"), "1e-6", True])
+def test_a_bad_detection_threshold_is_refused_naming_the_field(value) -> None:
+    with pytest.raises(InvalidInputError, match="detection_threshold"):
+        _scanner(detection_threshold=value)
+
+
+def test_a_detection_threshold_needs_several_returns() -> None:
+    with pytest.raises(InvalidInputError, match="detection_threshold 1e-06 needs max_returns above 1"):
+        _scanner(footprint_rays=1, max_returns=1, beam_divergence_deg=0.0, range_resolution_m=0.0, detection_threshold=1e-6)

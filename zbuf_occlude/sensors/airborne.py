@@ -146,6 +146,12 @@ class AirborneScanner:
     range_resolution_m : float
         Least range between two returns of one pulse, metres (half the pulse length, c·τ/2);
         needed (> 0) with ``max_returns`` above 1, refused with 1.
+    detection_threshold : float
+        Least echo energy the receiver records, m⁻² (:func:`~zbuf_occlude.sensors.echoes.hit_energy`'s
+        units: ``w · ρ · |cos θ| / R²``, ρ the scan's ``reflectivity``, 1 without one): weaker
+        echoes take no return slot (:func:`~zbuf_occlude.sensors.echoes.resolve_echoes`).  The
+        value :func:`~zbuf_occlude.sensors.fit.fit_return_model` measures on a LAS file.  0
+        (default): every echo returns.  Above 0 it needs ``max_returns`` above 1.
 
     Raises
     ------
@@ -158,7 +164,8 @@ class AirborneScanner:
         :data:`MAX_FLIGHT_LINES` lines, a name that cannot name files; ``footprint_rays``
         outside 1..MAX_SUBRAYS, or above 1 without a divergence or with ``max_returns`` 1;
         ``max_returns`` outside 1..15; ``range_resolution_m`` negative, 0 with ``max_returns``
-        above 1, or given with ``max_returns`` 1; an unknown ``beam_profile``.
+        above 1, or given with ``max_returns`` 1; an unknown ``beam_profile``; a
+        ``detection_threshold`` negative, not finite, or above 0 with ``max_returns`` 1.
     """
 
     name: str
@@ -179,6 +186,7 @@ class AirborneScanner:
     beam_profile: str = "tophat"
     max_returns: int = 1
     range_resolution_m: float = 0.0
+    detection_threshold: float = 0.0
 
     def __post_init__(self) -> None:
         sensor_name(self.name, "airborne scanner name")
@@ -194,6 +202,7 @@ class AirborneScanner:
             "range_noise_m": {"low": 0.0, "high": MAX_RANGE_M}, "dropout": {"low": 0.0, "high": 1.0, "high_open": True},
             "side_overlap": {"low": 0.0, "high": 1.0, "high_open": True, "expected": "a fraction in [0, 1)"},
             "beam_divergence_deg": {"low": 0.0, "high": 90.0}, "range_resolution_m": {"low": 0.0, "high": MAX_RANGE_M},
+            "detection_threshold": {"low": 0.0},
         }  # fmt: skip
         for name, bounds in numbers.items():
             object.__setattr__(self, name, real(getattr(self, name), name, **bounds))
@@ -224,6 +233,8 @@ class AirborneScanner:
             raise InvalidInputError(f"range_resolution_m {shown(self.range_resolution_m)} needs max_returns above 1")
         if self.max_returns == 1 and k > 1:
             raise InvalidInputError(f"footprint_rays {k} needs max_returns above 1 (an airborne footprint is resolved into returns)")
+        if self.max_returns == 1 and self.detection_threshold > 0:
+            raise InvalidInputError(f"detection_threshold {shown(self.detection_threshold)} needs max_returns above 1 (it drops the weak echoes of the multi-return model)")
 
     @property
     def multi_return(self) -> bool:
@@ -574,7 +585,7 @@ def _surface_optics(built, scanner: AirborneScanner, reflectivity, transmittance
 def _echo_returns(built, scanner: AirborneScanner, origins, directions, rho=None, tau=None) -> tuple[NDArray, ...]:
     """The multi-return model of an airborne scanner: each pulse's ``footprint_rays`` sub-rays cast
     from its origin, resolved by :func:`~zbuf_occlude.sensors.scan.echo_returns` (no range limits,
-    no radiometric threshold: every echo returns), weighed by ``rho`` and cast on through surfaces
+    echoes below the scanner's ``detection_threshold`` dropped), weighed by ``rho`` and cast on through surfaces
     of ``tau`` above 0 when given (per object id).
 
     Parameters
@@ -596,11 +607,13 @@ def _echo_returns(built, scanner: AirborneScanner, origins, directions, rho=None
     k = scanner.footprint_rays
     if len(origins) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
+    if rho is None and scanner.detection_threshold > 0:
+        rho = np.ones(len(built.objects) + 1)  # the threshold on w · |cos θ| / R²
     offsets, weights = footprint_offsets(k, scanner.beam_divergence_deg, profile=scanner.beam_profile)
     rays = subray_directions(directions, offsets).reshape(-1, 3)
     sub_origins = np.repeat(origins, k, axis=0)
     face, t = cast_embree(built.mesh, sub_origins, rays)
     return echo_returns(
         built, rays, face, t, weights, range_resolution_m=scanner.range_resolution_m, max_returns=scanner.max_returns,
-        radiometry=None if rho is None else Radiometry(rho), through=None if tau is None else Transmission(tau, sub_origins),
+        radiometry=None if rho is None else Radiometry(rho, scanner.detection_threshold), through=None if tau is None else Transmission(tau, sub_origins),
     )  # fmt: skip
