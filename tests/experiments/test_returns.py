@@ -8,27 +8,33 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import trimesh
-from hypothesis import given, settings
-from hypothesis import strategies as st
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.returns import (
+    IGN_ALTITUDE_M,
     IGN_DIVERGENCE_DEG,
     PLOT_TREES,
     ign_scanner,
-    invert_curve,
+    object_pulse_shares,
     plot_scene,
     pulse_subset,
     simulate,
     simulated_classes,
 )
-from zbuf_occlude.experiments.returns_report import ReturnsSettings, comparison_rows, recommend_k, run_returns
+from zbuf_occlude.experiments.returns_report import (
+    ReturnsSettings,
+    comparison_rows,
+    recommend_k,
+    run_returns,
+)
 from zbuf_occlude.io.atomic import write_bytes
-from zbuf_occlude.io.las import LasPoints, las_bytes
+from zbuf_occlude.io.las import LasPoints, las_bytes, read_las
 from zbuf_occlude.io.regular_files import read_regular_file
 from zbuf_occlude.io.tables import read_csv_rows
 from zbuf_occlude.sensors.fit import Estimate
+from zbuf_occlude.sensors.fit.return_model import GROUND_REFLECTANCE, fit_return_model
 from zbuf_occlude.sensors.fit.returns import ReturnStatistics, return_statistics
+from zbuf_occlude.sensors.reflectance import reflectance
 
 #: A footprint 1.5 m across at 1,500 m: plate edges split many pulses.
 WIDE_DEG = math.degrees(1e-3)
@@ -102,36 +108,20 @@ def test_pulse_subset_takes_whole_pulses() -> None:
         pulse_subset(_las([2], [0.0], [1]), "vegetation")
 
 
-def test_invert_curve_recovers_a_known_divergence() -> None:
-    x = np.linspace(0.005, 0.06, 12)
-    truth = 0.0314
-    curve = lambda d: 1.0 - np.exp(-d / 0.02)  # noqa: E731
-    fit = invert_curve(x, curve(x), float(curve(truth)), 0.005, seed=1)
-    assert abs(fit.value - truth) < 5e-4  # linear between grid points
-    assert fit.low < truth < fit.high and fit.inside == 1.0
-    exact = invert_curve(x, curve(x), float(curve(truth)), 0.0)
-    assert exact.low == exact.high == pytest.approx(exact.value)
-    falling = invert_curve(x, -curve(x), -float(curve(truth)), 0.0)
-    assert falling.value == pytest.approx(exact.value)
-    outside = invert_curve(x, curve(x), 0.99, 0.001)
-    assert math.isnan(outside.value) and outside.high == x[-1] and outside.inside == 0.0
-
-
-@settings(max_examples=60, deadline=None)
-@given(st.lists(st.floats(0.0, 1.0), min_size=2, max_size=8), st.floats(0.0, 1.0))
-def test_invert_curve_is_the_inverse_of_the_piecewise_linear_curve(steps, where) -> None:
-    y = np.cumsum(np.asarray(steps) + 1e-3)  # strictly increasing
-    x = np.arange(len(y), dtype=np.float64)
-    target = y[0] + where * (y[-1] - y[0])
-    fit = invert_curve(x, y, float(target), 0.0)
-    assert np.interp(fit.value, x, y) == pytest.approx(target, abs=1e-9)
-
-
-@pytest.mark.parametrize(("x", "y", "message"), [([0.0], [0.0], "two or more"), ([0.0, 1.0, 2.0], [0.0, 1.0, 0.5], "monotone"),
-                                                  ([1.0, 0.0], [0.0, 1.0], "increasing"), ([0.0, 1.0], [0.0, math.nan], "finite")])  # fmt: skip
-def test_invert_curve_refuses_what_it_cannot_invert(x, y, message) -> None:
-    with pytest.raises(InvalidInputError, match=message):
-        invert_curve(x, y, 0.5, 0.1)
+def test_object_pulse_shares_count_the_objects_pulses_as_the_las_measure_does() -> None:
+    scene, vegetation = _plot()
+    result = simulate(scene, ign_scanner(WIDE_DEG, 7), vegetation, half_size_m=4.0, seeds=(0,), bootstrap=5)
+    shares, n = object_pulse_shares(result.scan, vegetation, seed=0, bootstrap=200)
+    las_side = result.statistics["vegetation"]
+    assert n == las_side.n_complete_pulses  # a pulse with a return on the boxes is a vegetation pulse of the file
+    for k in (1, 2, 3, 4):
+        value, sd = shares[f"returns_{k}"]
+        assert value == pytest.approx(las_side.estimates[f"returns_{k}"].value, abs=1e-12)
+        binomial = math.sqrt(value * (1 - value) / n)
+        assert sd == pytest.approx(binomial, rel=0.35, abs=1e-9)  # a bootstrap over pulses of a share is binomial
+    assert sum(shares[f"returns_{k}"][0] for k in (1, 2, 3, 4)) == pytest.approx(1.0)
+    with pytest.raises(InvalidInputError, match="no pulse"):
+        object_pulse_shares(result.scan, [99])
 
 
 def _row(k: int, shares, sd: float = 0.01) -> dict:
@@ -170,7 +160,8 @@ def test_comparison_verdicts_hold_the_tolerances() -> None:
     assert rows["intensity first-of-several / single, vegetation"] == "FAIL"
 
 
-def test_run_returns_writes_its_outputs(tmp_path) -> None:
+@pytest.mark.parametrize("detection", [True, False])
+def test_run_returns_writes_its_outputs(tmp_path, detection) -> None:
     meshes = tmp_path / "bush"
     meshes.mkdir()
     for i, tree in enumerate(PLOT_TREES):
@@ -186,11 +177,12 @@ def test_run_returns_writes_its_outputs(tmp_path) -> None:
     import zbuf_occlude.experiments.returns_report as report
 
     settings_ = ReturnsSettings(divergence_factors=(1.0, 8.0), sweep_rays=(7,), k_values=(1, 7), seeds=(0,), repeats=1, copies=1,
-                                spacing_m=4.0, bootstrap=5)  # fmt: skip
+                                spacing_m=4.0, bootstrap=5, detection=detection)  # fmt: skip
     original = report.PLOT_TREES
     report.PLOT_TREES = tuple(trees)
     try:
         summary = run_returns(tmp_path / "out", meshes, real_path, settings=settings_)
+        scene, vegetation, centre, half = report.ign_plot(meshes, settings_)
     finally:
         report.PLOT_TREES = original
     out = tmp_path / "out"
@@ -201,6 +193,22 @@ def test_run_returns_writes_its_outputs(tmp_path) -> None:
     assert [float(r["divergence_deg"]) for r in sweep] == pytest.approx([IGN_DIVERGENCE_DEG, 8 * IGN_DIVERGENCE_DEG], rel=1e-5)
     assert len(read_csv_rows(out / "k_sweep.csv")) == 2
     assert len(read_csv_rows(out / "comparison.csv")) == 26
+    fitted = fit_return_model(read_las(real_path), altitude_m=IGN_ALTITUDE_M, bootstrap=5).estimates
+    model = summary["model"]
+    assert model["range_resolution_m"] == fitted["range_resolution_m"].value
+    if detection:  # the scanner as the fit sets it, the ground at the fit's reflectance, the boxes ("vegetation") foliage's at 1064 nm
+        assert model["detection_threshold"] == fitted["detection_threshold"].value > 0
+        assert model["reflectivity"] == [GROUND_REFLECTANCE] + [reflectance("foliage", 1064.0)] * len(PLOT_TREES)
+    else:
+        assert "detection_threshold" not in model and model["detection"] is False
+    assert "low_deg" not in summary["divergence_fits"][0]  # the fit's own ± sd only
+    # the sweep's first row is the fitted scanner over the plot with the model's reflectivity
+    scanner = fit_return_model(read_las(real_path), altitude_m=IGN_ALTITUDE_M, bootstrap=5).apply(ign_scanner(IGN_DIVERGENCE_DEG, 7))
+    if not detection:
+        scanner = replace(scanner, detection_threshold=0.0)
+    again = simulate(scene, scanner, vegetation, center_xy=centre, half_size_m=half, seeds=(0,), bootstrap=5,
+                     reflectivity=model.get("reflectivity")).statistics["all"].estimates["multi_return_points_classes_3_4_5"]  # fmt: skip
+    assert float(sweep[0]["multi_return_share"]) == pytest.approx(again.value, rel=1e-5)
 
 
 def test_the_command_refuses_bad_options_in_one_line(tmp_path, capsys) -> None:

@@ -14,10 +14,11 @@ __all__ = ["add_returns_parser"]
 def _run(args: argparse.Namespace) -> int:
     from zbuf_occlude.experiments.returns_report import ReturnsSettings, run_returns
 
-    settings = ReturnsSettings(bootstrap=args.bootstrap, seeds=tuple(range(args.seeds)))
+    detection = not args.without_threshold
+    settings = ReturnsSettings(bootstrap=args.bootstrap, seeds=tuple(range(args.seeds)), detection=detection)
     if args.quick:
-        settings = ReturnsSettings(divergence_factors=(0.5, 1.0, 2.0, 4.0), sweep_rays=(7,), k_values=(1, 7, 19), seeds=(0,), repeats=1,
-                                   copies=1, bootstrap=args.bootstrap)  # fmt: skip
+        settings = ReturnsSettings(divergence_factors=(0.5, 1.0, 2.0, 4.0, 8.0), sweep_rays=(7,), k_values=(1, 7, 19), seeds=(0,), repeats=1,
+                                   copies=1, bootstrap=args.bootstrap, detection=detection)  # fmt: skip
     summary = run_returns(args.out, args.meshes, args.real, autzen_path=args.autzen, settings=settings)
     fits = ", ".join(f"K {f['K']}: {f['divergence_mrad']:.3g} mrad" for f in summary["divergence_fits"])
     sys.stdout.write(f"{summary['table']}\nfitted divergence {fits}; recommended K {summary['recommended_k']}; "
@@ -40,6 +41,9 @@ def add_returns_parser(sub: Any) -> argparse.ArgumentParser:
                    help="output folder (real.md, divergence_sweep.csv, k_sweep.csv, comparison.csv/.md, returns.png, run.json)")  # fmt: skip
     p.add_argument("--bootstrap", action=Checked, check=count(None, lowest=2), default=200, help="bootstrap resamples (default: %(default)s)")
     p.add_argument("--seeds", action=Checked, check=count(None), default=2, help="scans pooled per setting (default: %(default)s)")
+    p.add_argument("--without-threshold", action="store_true",
+                   help="no detection threshold and every surface alike (every echo returns), instead of the threshold fitted to --real "
+                   "with the ground at the fit's reflectance and the meshes at their material's at 1064 nm")  # fmt: skip
     p.add_argument("--quick", action="store_true", help="a small sweep (about 20 s): a check that the command runs, not the page's numbers")
     p.set_defaults(func=_run)
     return p

@@ -12,10 +12,9 @@ The experiment behind ``zbuf-occlude experiment returns`` and docs/results/retur
    measures the real file.  Per side, the figures are taken on the **vegetation pulses** (a
    return on classes 3–5) and on the **ground pulses** (every return on class 2), selected by
    :func:`pulse_subset` the same way in both files.
-3. **The divergence by simulation** (:func:`invert_curve`): the multi-return share on
-   vegetation rises with the beam's divergence; the fitted divergence is where the simulated
-   curve meets the real share, its interval the real share's bootstrap draws mapped through the
-   curve.
+3. **The divergence by simulation**: the multi-return share on vegetation rises with the beam's
+   divergence; the fitted divergence is where the simulated curve meets the real share
+   (:func:`~zbuf_occlude.sensors.fit.divergence.divergence_from_shares`).
 
 The LAS file stores no classes for a simulated scan (point format 6, class 0); the classes are
 given after reading, point for point (LAS keeps the scan's order), from the scan's object ids:
@@ -39,15 +38,19 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.atomic import write_bytes
 from zbuf_occlude.io.las import LasPoints, read_las
 from zbuf_occlude.sensors.airborne import AirborneScanner, scan_airborne
-from zbuf_occlude.sensors.fit.returns import VEGETATION_CLASSES, ReturnStatistics, return_statistics
+from zbuf_occlude.sensors.fit.returns import (
+    VEGETATION_CLASSES,
+    ReturnStatistics,
+    return_statistics,
+)
 from zbuf_occlude.sensors.scene import GROUND_ID, ScanScene, SceneObject
 
 if TYPE_CHECKING:
     from zbuf_occlude.sensors.scan import Scan
 
 __all__ = [
-    "GROUND_CLASS", "IGN_ALTITUDE_M", "IGN_DIVERGENCE_DEG", "PLOT_TREES", "VEGETATION_HEIGHTS_M", "CurveFit", "PlotTree", "SimulatedScan",
-    "ign_scanner", "invert_curve", "plot_scene", "pulse_subset", "simulate", "simulated_classes",
+    "GROUND_CLASS", "IGN_ALTITUDE_M", "IGN_DIVERGENCE_DEG", "PLOT_TREES", "VEGETATION_HEIGHTS_M", "PlotTree", "SimulatedScan",
+    "ign_scanner", "object_pulse_shares", "plot_scene", "pulse_subset", "simulate", "simulated_classes",
 ]  # fmt: skip
 
 #: ASPRS class of the ground (LAS 1.4 R15, Table 17).
@@ -313,77 +316,52 @@ def simulate(scene: ScanScene, scanner: AirborneScanner, vegetation_ids: Sequenc
     return SimulatedScan(first, las, statistics, pulses, seconds)
 
 
-@dataclass(frozen=True)
-class CurveFit:
-    """A parameter read off a monotone simulated curve at a measured value (:func:`invert_curve`).
+def object_pulse_shares(scan: Scan, object_ids: Sequence[int], *, counts: Sequence[int] = (1, 2, 3, 4), seed: int = 0,
+                        bootstrap: int = 200) -> tuple[dict[str, tuple[float, float]], int]:  # fmt: skip
+    """The shares of a scan's pulses on some objects with 1, 2, ... returns, each with its bootstrap standard deviation.
 
-    ``value``: the parameter where the curve meets the measured value (NaN outside the curve's
-    range); ``low``/``high``: the 2.5th and 97.5th percentiles of the measured value's normal draws
-    mapped through the curve; ``std``: their standard deviation; ``inside``: the share of draws
-    within the curve's range (the rest are clipped to its ends).
-    """
-
-    value: float
-    low: float
-    high: float
-    std: float
-    inside: float
-
-
-def invert_curve(
-    x: Sequence[float],
-    y: Sequence[float],
-    target: float,
-    target_std: float,
-    *,
-    draws: int = 2000,
-    seed: int = 0,
-) -> CurveFit:
-    """The ``x`` where a monotone curve ``y(x)`` (piecewise linear through the points) equals ``target``.
-
-    The uncertainty: ``draws`` normal draws of the target (mean ``target``, sd ``target_std``: its
-    bootstrap sd) mapped through the inverse curve; draws beyond the curve's range take its ends.
+    For scans whose LAS file cannot tell their pulses apart (a spinning LiDAR's rings fire in one
+    column at one GPS time, on one scanner channel), read from the scan itself: a pulse is a
+    ``pulse_id``; it is on the objects when one of its returns is (``object_id``); its count is
+    its ``number_of_returns``.
 
     Parameters
     ----------
-    x, y : sequence of float
-        The swept parameter (increasing) and the simulated figure at each; ``y`` must be
-        monotone (not strictly: flat runs are allowed, rises and falls together are not).
-    target, target_std : float
-        The measured figure and its standard deviation (>= 0).
+    scan : Scan
+        With the return fields (a multi-return scan).
+    object_ids : sequence of int
+        The objects' ids (:class:`~zbuf_occlude.sensors.scene.ScanScene`: 1..n; the ground is 0).
+    counts : sequence of int
+        The return counts whose shares are given.
+    seed, bootstrap : int
+        Of the bootstrap over the objects' pulses
+        (:func:`~zbuf_occlude.sensors.fit.returns.pulse_bootstrap`).
 
     Returns
     -------
-    CurveFit
+    shares : dict of str to (float, float)
+        ``returns_<k>``: the share of the objects' pulses with k returns and its standard deviation.
+    n_pulses : int
+        The objects' pulses.
 
     Raises
     ------
     InvalidInputError
-        Fewer than two points, lengths that differ, ``x`` not increasing, ``y`` not monotone,
-        non-finite values, a negative ``target_std``.
+        A scan without return fields, or no pulse on the objects.
     """
-    xs, ys = np.asarray(x, np.float64), np.asarray(y, np.float64)
-    if xs.shape != ys.shape or xs.ndim != 1 or len(xs) < 2:
-        raise InvalidInputError(f"invert_curve needs two or more (x, y) points of one length, got {xs.shape} and {ys.shape}")
-    if not (np.all(np.isfinite(xs)) and np.all(np.isfinite(ys)) and math.isfinite(target) and math.isfinite(target_std)):
-        raise InvalidInputError("invert_curve needs finite x, y, target and target_std")
-    if np.any(np.diff(xs) <= 0):
-        raise InvalidInputError("invert_curve needs x increasing")
-    steps = np.diff(ys)
-    if np.any(steps > 0) and np.any(steps < 0):
-        raise InvalidInputError("invert_curve needs y monotone in x (the curve rises and falls)")
-    if target_std < 0:
-        raise InvalidInputError(f"target_std must be >= 0, got {target_std}")
-    if ys[-1] < ys[0]:
-        xs, ys = xs[::-1], ys[::-1]
+    from zbuf_occlude.sensors.fit.returns import pulse_bootstrap
 
-    def inverse(values: NDArray[np.float64]) -> NDArray[np.float64]:
-        return np.interp(values, ys, xs)  # ys non-decreasing; beyond the ends: the end's x
+    if scan.pulse_id is None or scan.number_of_returns is None:
+        raise InvalidInputError("object_pulse_shares needs a scan with the return fields (pulse_id, number_of_returns)")
+    on = np.isin(scan.object_id, np.asarray(object_ids, np.int64))
+    pulses, first = np.unique(scan.pulse_id[on], return_index=True)
+    if len(pulses) == 0:
+        raise InvalidInputError(f"no pulse of the scan meets the objects {list(object_ids)}")
+    n = scan.number_of_returns[on][first].astype(np.int64)
 
-    low_y, high_y = ys[0], ys[-1]
-    value = float(inverse(np.array([target]))[0]) if low_y <= target <= high_y else math.nan
-    sample = np.random.default_rng(seed).normal(target, target_std, draws)
-    mapped = inverse(sample)
-    lo, hi = np.percentile(mapped, [2.5, 97.5])
-    inside = float(np.mean((sample >= low_y) & (sample <= high_y)))
-    return CurveFit(value, float(lo), float(hi), float(np.std(mapped, ddof=1)), inside)
+    def share(k: int):
+        hit = (n == k).astype(np.float64)
+        return lambda w: float(hit.mean()) if w is None else float(np.dot(w, hit) / w.sum())
+
+    out = pulse_bootstrap(len(n), {f"returns_{k}": share(int(k)) for k in counts}, seed=seed, bootstrap=bootstrap)
+    return out, len(n)

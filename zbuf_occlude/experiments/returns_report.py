@@ -17,9 +17,15 @@
 
 A target passes when the simulated figure lies within the stated relative tolerance of the real
 one (:data:`TOLERANCES`); the smallest gap is held to the range resolution the simulation was
-given, within :data:`GAP_MIN_TOLERANCE`.  The range resolution and the most returns per pulse are
-the real file's fitted ones (:func:`~zbuf_occlude.sensors.fit.return_model.fit_return_model`); the
-divergence is fitted by the sweep (:func:`~zbuf_occlude.sensors.fit.return_model.divergence_from_shares`).
+given, within :data:`GAP_MIN_TOLERANCE`.  The scanner is the real file's fitted one
+(:func:`~zbuf_occlude.sensors.fit.return_model.fit_return_model`, applied by
+:meth:`~zbuf_occlude.sensors.fit.return_model.ReturnModelFit.apply`): its range resolution, most
+returns per pulse and detection threshold (m⁻²).  So that the simulated echoes' energies are in the
+threshold's units, the ground reflects with the fit's ground reflectance and every mesh with its
+material's at 1064 nm (:func:`~zbuf_occlude.sensors.reflectance.scene_optics`).  With
+``ReturnsSettings(detection=False)`` the threshold is 0 and every surface reflects alike: every
+echo returns.  The divergence is fitted by the sweep
+(:func:`~zbuf_occlude.sensors.fit.divergence.divergence_from_shares`).
 """
 
 from __future__ import annotations
@@ -31,7 +37,7 @@ import os
 import platform
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -39,13 +45,25 @@ import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.returns import (
-    GROUND_CLASS, IGN_ALTITUDE_M, IGN_DIVERGENCE_DEG, PLOT_TREES, ign_scanner, invert_curve, plot_scene, pulse_subset, simulate,
+    GROUND_CLASS,
+    IGN_ALTITUDE_M,
+    IGN_DIVERGENCE_DEG,
+    PLOT_TREES,
+    ign_scanner,
+    plot_scene,
+    pulse_subset,
+    simulate,
 )  # fmt: skip
 from zbuf_occlude.io.encodings import png_bytes
 from zbuf_occlude.io.las import LasPoints, read_las
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.sensors.fit import Estimate
-from zbuf_occlude.sensors.fit.returns import VEGETATION_CLASSES, ReturnStatistics, return_statistics
+from zbuf_occlude.sensors.fit.return_model import ReturnModelFit
+from zbuf_occlude.sensors.fit.returns import (
+    VEGETATION_CLASSES,
+    ReturnStatistics,
+    return_statistics,
+)
 from zbuf_occlude.sensors.scene import ScanScene
 
 __all__ = ["RETURNS_OUTPUTS", "TOLERANCES", "ReturnsSettings", "comparison_markdown", "comparison_rows", "ign_plot", "recommend_k", "run_returns"]
@@ -89,9 +107,12 @@ class ReturnsSettings:
         Across-track angle of the plot's centre (the IGN sample's median absolute scan angle is 13°).
     bootstrap : int
         Resamples of every measure.
+    detection : bool
+        The fitted detection threshold on, and the surfaces' reflectances (module docstring);
+        False: no threshold, every surface alike (every echo returns).
     """
 
-    divergence_factors: tuple[float, ...] = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0)
+    divergence_factors: tuple[float, ...] = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0)
     sweep_rays: tuple[int, ...] = (19, 37)
     k_values: tuple[int, ...] = (1, 7, 19, 37, 61, 91)
     seeds: tuple[int, ...] = (0, 1)
@@ -100,6 +121,46 @@ class ReturnsSettings:
     spacing_m: float = 14.0
     scan_angle_deg: float = 13.0
     bootstrap: int = 200
+    detection: bool = True
+
+
+@dataclass(frozen=True)
+class _Model:
+    """A real file's fitted return model as the simulation uses it: the scanner and the surfaces' reflectivity."""
+
+    fit: ReturnModelFit
+    reflectivity: tuple[float, ...] | None  # per object id, ground first; None: every surface alike
+    detection: bool
+
+    def scanner(self, divergence_deg: float, k: int):
+        scanner = self.fit.apply(ign_scanner(divergence_deg, k))
+        return scanner if self.detection else replace(scanner, detection_threshold=0.0)
+
+    @property
+    def range_resolution_m(self) -> float:
+        return self.fit.estimates["range_resolution_m"].value
+
+    def to_json(self) -> dict[str, Any]:
+        e = self.fit.estimates
+        out = {"range_resolution_m": e["range_resolution_m"].value, "range_resolution_sd_m": e["range_resolution_m"].std,
+               "max_returns": int(e["max_returns"].value), "detection": self.detection}  # fmt: skip
+        if self.detection:  # the threshold the simulated scanner holds
+            out |= {"detection_threshold": self.scanner(IGN_DIVERGENCE_DEG, 1).detection_threshold, "detection_threshold_sd": e["detection_threshold"].std,
+                    "detection_threshold_counts": e["detection_threshold_counts"].value, "intensity_scale": e["intensity_scale"].value,
+                    "ground_reflectance": self.fit.ground_reflectance, "reflectivity": list(self.reflectivity or ())}  # fmt: skip
+        return out
+
+
+def _model(fit: ReturnModelFit, scene: ScanScene, detection: bool) -> _Model:
+    """The fit's scanner over ``scene``: the ground at the fit's reflectance, each mesh at its material's at 1064 nm."""
+    if not detection:
+        return _Model(fit, None, False)
+    from zbuf_occlude.sensors.reflectance import AIRBORNE_WAVELENGTH_NM, scene_optics
+    from zbuf_occlude.sensors.scan import build_scene
+
+    rho = scene_optics(build_scene(scene), AIRBORNE_WAVELENGTH_NM).reflectivity.copy()
+    rho[0] = fit.ground_reflectance  # the threshold in m⁻² was measured against it
+    return _Model(fit, tuple(float(v) for v in rho), True)
 
 
 def _side(stats: ReturnStatistics, key: str) -> tuple[float, float]:
@@ -217,22 +278,17 @@ def _sweep_row(result, divergence_deg: float, k: int, suffix: str) -> dict[str, 
     return row
 
 
-def _real(path: str | os.PathLike, classes: Sequence[int], bootstrap: int) -> tuple[dict[str, ReturnStatistics], LasPoints, dict[str, Any]]:
-    """The real file's figures per side, its points, and the echo model fitted to it
-    (:func:`~zbuf_occlude.sensors.fit.return_model.fit_return_model`: range resolution, most returns)."""
+def _real(path: str | os.PathLike, classes: Sequence[int], bootstrap: int) -> tuple[dict[str, ReturnStatistics], LasPoints, ReturnModelFit]:
+    """The real file's figures per side, its points, and the return model fitted to it
+    (:func:`~zbuf_occlude.sensors.fit.return_model.fit_return_model` at the IGN flying height: the
+    threshold in m⁻² is the same share of a single ground return at any height the simulation flies)."""
     from zbuf_occlude.sensors.fit.return_model import fit_return_model
 
     las = read_las(path)
     out = {"all": return_statistics(las, classes=classes, bootstrap=bootstrap)}
     for side in ("vegetation", "ground"):
         out[side] = return_statistics(pulse_subset(las, side, classes=classes), classes=classes, bootstrap=bootstrap)
-    fit = fit_return_model(las, altitude_m=IGN_ALTITUDE_M, classes=classes, bootstrap=bootstrap).estimates
-    model = {"range_resolution_m": fit["range_resolution_m"].value, "max_returns": int(fit["max_returns"].value)}
-    return out, las, model | {"range_resolution_sd_m": fit["range_resolution_m"].std}
-
-
-def _scanner(divergence_deg: float, k: int, model: dict[str, Any]):
-    return ign_scanner(divergence_deg, k, range_resolution_m=model["range_resolution_m"], max_returns=model["max_returns"])
+    return out, las, fit_return_model(las, altitude_m=IGN_ALTITUDE_M, classes=classes, bootstrap=bootstrap)
 
 
 def ign_plot(mesh_root: str | os.PathLike, settings: ReturnsSettings) -> tuple[ScanScene, tuple[int, ...], tuple[float, float], float]:
@@ -267,54 +323,54 @@ def ign_plot(mesh_root: str | os.PathLike, settings: ReturnsSettings) -> tuple[S
     return scene, vegetation, (0.0, y), side * settings.spacing_m / 2.0
 
 
-def _divergence_sweep(plot, settings: ReturnsSettings, model: dict[str, Any], ks: Sequence[int]) -> list[dict[str, Any]]:
+def _divergence_sweep(plot, settings: ReturnsSettings, model: _Model, ks: Sequence[int]) -> list[dict[str, Any]]:
     scene, vegetation, centre, half = plot
     rows = []
     for factor in settings.divergence_factors:
         for k in ks:
             divergence = IGN_DIVERGENCE_DEG * factor
-            result = simulate(scene, _scanner(divergence, k, model), vegetation, center_xy=centre, half_size_m=half,
-                              seeds=settings.seeds, bootstrap=settings.bootstrap)  # fmt: skip
-            rows.append(_sweep_row(result, divergence, k, _suffix(VEGETATION_CLASSES)) | {"resolution_m": model["range_resolution_m"]})
+            result = simulate(scene, model.scanner(divergence, k), vegetation, center_xy=centre, half_size_m=half,
+                              seeds=settings.seeds, bootstrap=settings.bootstrap, reflectivity=model.reflectivity)  # fmt: skip
+            rows.append(_sweep_row(result, divergence, k, _suffix(VEGETATION_CLASSES)) | {"resolution_m": model.range_resolution_m})
             log.info("divergence %.4f° K %d: share %.3f", divergence, k, rows[-1]["multi_return_share"])
     return rows
 
 
-def _fit_divergence(rows: Sequence[dict[str, Any]], k: int, measured: Estimate, seed: int = 0) -> dict[str, Any]:
+def _fit_divergence(rows: Sequence[dict[str, Any]], k: int, measured: Estimate) -> dict[str, Any]:
     """Invert the K curve of the sweep at the real share: the value and ``± sd`` of
-    :func:`~zbuf_occlude.sensors.fit.return_model.divergence_from_shares` (the real share's sd and the
-    simulated shares' added in quadrature, through the curve), and the 95 % interval of
-    :func:`~.returns.invert_curve` (the real share's draws mapped through it).  A curve that dips is
-    made monotone by a running maximum first (``monotone_fix``)."""
-    from zbuf_occlude.sensors.fit.return_model import divergence_from_shares
+    :func:`~zbuf_occlude.sensors.fit.divergence.divergence_from_shares` (the real share's sd and the
+    simulated shares' added in quadrature, through the curve).  A curve that dips is made monotone
+    by a running maximum first (``monotone_fix``); one that never rises gives NaN."""
+    from zbuf_occlude.sensors.fit.divergence import divergence_from_shares
 
     mine = sorted((r for r in rows if r["K"] == k), key=lambda r: r["divergence_deg"])
     x = np.array([r["divergence_deg"] for r in mine])
     y = np.array([r["multi_return_share"] for r in mine])
     fixed = np.maximum.accumulate(y)
-    fit = divergence_from_shares(x, fixed, measured, np.array([r["multi_return_share_sd"] for r in mine]))
-    spread = invert_curve(x, fixed, measured.value, measured.std, seed=seed)
-    return {"K": k, "divergence_deg": fit.value, "sd_deg": fit.std, "low_deg": spread.low, "high_deg": spread.high,
-            "inside": spread.inside, "divergence_mrad": math.radians(fit.value) * 1e3, "sd_mrad": math.radians(fit.std) * 1e3,
+    value = std = math.nan
+    if fixed[-1] > fixed[0]:
+        fit = divergence_from_shares(x, fixed, measured, np.array([r["multi_return_share_sd"] for r in mine]))
+        value, std = fit.value, fit.std
+    return {"K": k, "divergence_deg": value, "sd_deg": std, "divergence_mrad": math.radians(value) * 1e3, "sd_mrad": math.radians(std) * 1e3,
             "monotone_fix": bool(np.any(fixed != y))}  # fmt: skip
 
 
-def _k_sweep(plot, settings: ReturnsSettings, divergence_deg: float, model: dict[str, Any]) -> list[dict[str, Any]]:
+def _k_sweep(plot, settings: ReturnsSettings, divergence_deg: float, model: _Model) -> list[dict[str, Any]]:
     """Every K measured once, then timed in ``repeats`` interleaved rounds (the measured round included)."""
     from zbuf_occlude.sensors.airborne import scan_airborne
 
     scene, vegetation, centre, half = plot
     rows, times = {}, {k: [] for k in settings.k_values}
     for k in settings.k_values:
-        result = simulate(scene, _scanner(divergence_deg, k, model), vegetation, center_xy=centre, half_size_m=half,
-                          seeds=settings.seeds, bootstrap=settings.bootstrap)  # fmt: skip
+        result = simulate(scene, model.scanner(divergence_deg, k), vegetation, center_xy=centre, half_size_m=half,
+                          seeds=settings.seeds, bootstrap=settings.bootstrap, reflectivity=model.reflectivity)  # fmt: skip
         rows[k] = _sweep_row(result, divergence_deg, k, _suffix(VEGETATION_CLASSES))
         times[k].append(result.seconds / result.pulses)
     for _ in range(settings.repeats - 1):
         for k in settings.k_values:
-            scanner = _scanner(divergence_deg, k, model)
+            scanner = model.scanner(divergence_deg, k)
             start = time.perf_counter()
-            scan = scan_airborne(scene, scanner, centre, half, seed=settings.seeds[0])
+            scan = scan_airborne(scene, scanner, centre, half, seed=settings.seeds[0], reflectivity=model.reflectivity)
             times[k].append((time.perf_counter() - start) / scan.meta["n_rays"])
     base = float(np.median(times[min(settings.k_values)]))
     for k, row in rows.items():
@@ -358,7 +414,7 @@ def _figure(sim_las: LasPoints, tree_xy: tuple[float, float], tree_half_m: float
         ax.set_ylabel("height above the ground (m)")
         ax.set_aspect("equal")
         ax.legend(loc="upper right", fontsize=8, markerscale=2)
-    fig.suptitle(f"Returns by return number, {2 * tree_half_m:.0f} m squares seen from the side (ground and vegetation classes); "
+    fig.suptitle(f"Returns by return number, {2 * tree_half_m:.0f} m squares seen from the side (ground and vegetation classes)\n"
                  f"{settings_note}", fontsize=9)  # fmt: skip
     fig.tight_layout()
     data = png_bytes(fig, dpi=110)
@@ -370,24 +426,26 @@ def _csv_rows(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     return [{k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()} for row in rows]
 
 
-def _compare(plot, real, real_classes, divergence_deg: float, k: int, model: dict[str, Any], settings: ReturnsSettings, label: str):
+def _compare(plot, real, real_classes, divergence_deg: float, k: int, model: _Model, settings: ReturnsSettings, label: str):
     scene, vegetation, centre, half = plot
-    result = simulate(scene, _scanner(divergence_deg, k, model), vegetation, center_xy=centre, half_size_m=half, seeds=settings.seeds,
-                      bootstrap=settings.bootstrap)  # fmt: skip
-    rows = comparison_rows(real, result.statistics, real_classes=real_classes, range_resolution_m=model["range_resolution_m"], label=label)
+    result = simulate(scene, model.scanner(divergence_deg, k), vegetation, center_xy=centre, half_size_m=half, seeds=settings.seeds,
+                      bootstrap=settings.bootstrap, reflectivity=model.reflectivity)  # fmt: skip
+    rows = comparison_rows(real, result.statistics, real_classes=real_classes, range_resolution_m=model.range_resolution_m, label=label)
     return rows, result
 
 
 def _autzen(path, plot, settings: ReturnsSettings, k: int) -> tuple[list[dict[str, Any]], list[dict[str, Any]], dict[str, Any], str]:
-    """Autzen alone: its smallest gap as the range resolution, its class 1 (trees and buildings: it
-    has no vegetation class) as vegetation, the divergence fitted to its class-1 share."""
+    """Autzen alone: its own fitted return model (range resolution, most returns, threshold), its
+    class 1 (trees and buildings: it has no vegetation class) as vegetation, the divergence fitted
+    to its class-1 share."""
     classes = (1,)
-    real, _, model = _real(path, classes, settings.bootstrap)
+    real, _, return_fit = _real(path, classes, settings.bootstrap)
+    model = _model(return_fit, plot[0], settings.detection)
     sweep = _divergence_sweep(plot, settings, model, (k,))
     fit = _fit_divergence(sweep, k, real["all"].estimates[f"multi_return_points_{_suffix(classes)}"])
     divergence = fit["divergence_deg"] if math.isfinite(fit["divergence_deg"]) else IGN_DIVERGENCE_DEG
     rows, _ = _compare(plot, real, classes, divergence, k, model, settings, "Autzen")
-    return rows, sweep, fit | model, real["all"].markdown()
+    return rows, sweep, fit | model.to_json(), real["all"].markdown()
 
 
 def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path: str | os.PathLike, *, autzen_path: str | os.PathLike | None = None,
@@ -418,12 +476,13 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
         A file that cannot be read, a folder that cannot be written.
     """
     settings = settings or ReturnsSettings()
-    started = time.perf_counter()
+    started, cpu_started, load_start = time.perf_counter(), time.process_time(), list(os.getloadavg())
     with OwnedFolder(out, files=RETURNS_OUTPUTS, what="the returns experiment") as folder:
         folder.check_writable(RETURNS_OUTPUTS)
-        real, real_las, model = _real(real_path, VEGETATION_CLASSES, settings.bootstrap)
+        real, real_las, fit = _real(real_path, VEGETATION_CLASSES, settings.bootstrap)
         plot = ign_plot(mesh_root, settings)
-        resolution = model["range_resolution_m"]
+        model = _model(fit, plot[0], settings.detection)
+        resolution = model.range_resolution_m
         sweep = _divergence_sweep(plot, settings, model, settings.sweep_rays)
         real_share = real["all"].estimates[f"multi_return_points_{_suffix(VEGETATION_CLASSES)}"]
         fits = [_fit_divergence(sweep, k, real_share) for k in settings.sweep_rays]
@@ -443,14 +502,16 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
             summary["autzen_fit"] = autzen_fit
             real_md += "\n\n## Autzen (class set: 1)\n\n" + autzen_md
         tree = plot[0].objects[0]
-        note = f"simulated: {math.radians(divergence) * 1e3:.3g} mrad, K = {k_best}, range resolution {resolution:.2f} m"
+        note = (f"simulated: {math.radians(divergence) * 1e3:.3g} mrad, K = {k_best}, range resolution {resolution:.2f} m, "
+                f"{'fitted detection threshold' if settings.detection else 'no detection threshold'}")  # fmt: skip
         png = _figure(fitted_result.las, tree.position_m[:2], 6.0, real_las, note)
         summary |= {
             "settings": {k: list(v) if isinstance(v, tuple) else v for k, v in settings.__dict__.items()},
-            "model": model, "divergence_fits": fits, "recommended_k": k_best,
+            "model": model.to_json(), "divergence_fits": fits, "recommended_k": k_best,
             "verdicts": {v: sum(r["verdict"] == v for r in rows) for v in ("PASS", "FAIL", "not measured")},
             "machine": f"{platform.node()} {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}",
-            "load_average": list(os.getloadavg()), "seconds": time.perf_counter() - started,
+            "load_average_start": load_start, "load_average": list(os.getloadavg()), "seconds": time.perf_counter() - started,
+            "cpu_seconds": time.process_time() - cpu_started,
         }  # fmt: skip
         folder.write_text("real.md", real_md)
         folder.write_csv("divergence_sweep.csv", _csv_rows(sweep), fieldnames=list(sweep[-1].keys()))

@@ -34,11 +34,10 @@ def main(out: str) -> None:
         for r in rows:
             shares = " / ".join(f"{100 * float(r[f'returns_{n}']):.1f}" for n in (1, 2, 3, 4))
             print(f"| {float(r['divergence_mrad']):.3g} | {r['K']} | {pct(r, 'multi_return_share')} | {shares} | {int(r['vegetation_pulses']):,} |")
-    print("\n| fit | K | divergence (mrad) | ± sd | 95 % interval (mrad) |\n|---|---|---|---|---|")
+    print("\n| fit | K | divergence (mrad) | ± sd (mrad) |\n|---|---|---|---|")
     fits = [("IGN", f) for f in run["divergence_fits"]] + ([("Autzen", run["autzen_fit"])] if "autzen_fit" in run else [])
     for name, f in fits:
-        low, high = (1e3 * 3.141592653589793 / 180 * f[key] for key in ("low_deg", "high_deg"))
-        print(f"| {name} | {f['K']} | {f['divergence_mrad']:.3f} | {f['sd_mrad']:.3f} | {low:.3f}–{high:.3f} |")
+        print(f"| {name} | {f['K']} | {f['divergence_mrad']:.3f} | {f['sd_mrad']:.3f} |")
     print("\n| K | vegetation pulses with 1 / 2 / 3 / 4 returns (%, ± sd) | vegetation points from multi-return pulses (%) | µs per pulse | cost / K = 1 |")
     print("|---|---|---|---|---|")
     for r in read_csv_rows(f"{out}/k_sweep.csv", within=out):
