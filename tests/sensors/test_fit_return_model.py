@@ -147,7 +147,8 @@ def test_applied_to_sensors(survey_fit) -> None:
     airborne = survey_fit.apply(airborne_preset("riegl-q1560"))
     assert (airborne.max_returns, airborne.range_resolution_m) == (4, e["range_resolution_m"].value)
     assert airborne.name == "riegl-q1560-fitted" and "returns fitted to 4,000 pulses" in airborne.source and airborne.altitude_m == H
-    assert survey_fit.sets(airborne) == ("range_resolution_m", "max_returns")  # no divergence measured, no threshold field
+    assert survey_fit.sets(airborne) == ("range_resolution_m", "max_returns", "detection_threshold")  # no divergence measured
+    assert airborne.detection_threshold == e["detection_threshold"].value
     lidar = survey_fit.apply(sensor_from_name("hdl32e"))
     assert lidar.detection_range_m == pytest.approx(math.sqrt(lidar.detection_reflectivity / e["detection_threshold"].value))
     assert lidar.detection_threshold == pytest.approx(e["detection_threshold"].value)
@@ -159,7 +160,7 @@ def test_applied_to_sensors(survey_fit) -> None:
     # one return per pulse: no resolution, one ray
     single = replace(survey_fit, estimates={**with_divergence.estimates, "max_returns": Estimate(1.0, 0.0, 10, "count")})
     one = single.apply(airborne_preset("riegl-q1560"))
-    assert (one.max_returns, one.range_resolution_m, one.footprint_rays) == (1, 0.0, 1)
+    assert (one.max_returns, one.range_resolution_m, one.footprint_rays, one.detection_threshold) == (1, 0.0, 1, 0.0)
     with pytest.raises(ArgumentTypeError, match="Lidar or an AirborneScanner"):
         survey_fit.apply("riegl-q1560")
 

@@ -168,7 +168,7 @@ class ReturnModelFit:
 
     def sets(self, sensor: Any) -> tuple[str, ...]:
         """The estimates :meth:`apply` sets on ``sensor``: those measured whose field the sensor has (a
-        spinning LiDAR's threshold through ``detection_range_m``; an airborne scanner has none)."""
+        spinning LiDAR's threshold through ``detection_range_m``, an airborne scanner's as ``detection_threshold``)."""
         names = {f.name for f in fields(sensor)} if hasattr(sensor, "__dataclass_fields__") else set()
         out = []
         for name, field_name in _SETS.items():
@@ -190,7 +190,8 @@ class ReturnModelFit:
         ``range_resolution_m``; ``beam_divergence_deg`` where it was fitted (and then
         ``footprint_rays`` :data:`FOOTPRINT_RAYS` where the sensor had one ray); the detection
         threshold where the sensor has one: a spinning LiDAR's ``detection_range_m`` becomes
-        ``√(detection_reflectivity / τ)``; an airborne scanner's ``altitude_m`` becomes the flying
+        ``√(detection_reflectivity / τ)``, an airborne scanner's ``detection_threshold`` τ (with
+        ``max_returns`` above 1); an airborne scanner's ``altitude_m`` becomes the flying
         height the fit assumed.  One return per pulse: ``range_resolution_m`` 0 and, airborne, one
         ray.  The name gains ``-fitted`` and the source says what was fitted.
 
@@ -227,7 +228,7 @@ class ReturnModelFit:
         if "detection_threshold" in e:
             if isinstance(sensor, Lidar):
                 changes["detection_range_m"] = math.sqrt(sensor.detection_reflectivity / e["detection_threshold"])
-            else:
+            elif changes.get("max_returns", sensor.max_returns) > 1:  # the airborne threshold drops echoes of several returns
                 changes["detection_threshold"] = e["detection_threshold"]
         name = sensor.name if sensor.name.endswith("-fitted") else f"{sensor.name}-fitted"
         what = f"returns fitted to {self.statistics.n_pulses:,} pulses ({', '.join(sets) or 'nothing measured'})"
