@@ -208,19 +208,64 @@ def _sorted_order(*keys: NDArray) -> NDArray[np.int64]:
     return order
 
 
-def _hit_order(p: NDArray, r: NDArray, e: NDArray, s: NDArray) -> NDArray[np.int64]:
-    """The rows sorted by pulse, range, energy, surface: by the first two, then the rare runs
-    of one pulse at one range by the other two (rows equal on all four are interchangeable)."""
-    order = _sorted_order(r, p)
-    tie = (p[order][1:] == p[order][:-1]) & (r[order][1:] == r[order][:-1])
+#: :func:`_pulse_range_order` sorts each pulse's rows in one (pulses, most hits of a pulse)
+#: table when it holds at most this many cells per row given (padding included): a scan's
+#: pulses have a few hits each; one pulse with many more sorts all rows at once instead.
+_MOST_CELLS_PER_ROW = 4
+
+
+def _pulse_range_order(p: NDArray, r: NDArray) -> NDArray[np.int64]:
+    """``np.lexsort((r, p))``: the rows by pulse, then range, ties in row order.
+
+    Rows already by pulse (a scan gives them so) are sorted pulse by pulse: each pulse's
+    ranges one row of a table padded with inf (the ranges are finite), sorted along the rows by
+    a stable sort, instead of a sort of all the ranges and another of all the pulses.
+    """
+    n = len(p)
+    if n > 1 and np.all(p[1:] >= p[:-1]):
+        starts = _group_starts(p)
+        counts = np.diff(starts, append=n)
+        width = int(counts.max())
+        if len(starts) * width <= _MOST_CELLS_PER_ROW * n:
+            table = np.full((len(starts), width), np.inf)
+            # row i of pulse j (from its first row starts[j]) goes to cell j · width + i − starts[j]
+            table.reshape(-1)[np.arange(n) + np.repeat(np.arange(len(starts)) * width - starts, counts)] = r
+            column = np.argsort(table, axis=1, kind="stable")
+            # the padding's columns (from the pulse's count on) are dropped wherever they sort
+            return (starts[:, None] + column)[column < counts[:, None]]
+    return _sorted_order(r, p)
+
+
+def _hit_order(p: NDArray, r: NDArray, e: NDArray, s: NDArray) -> tuple[NDArray[np.int64], ...]:
+    """The rows sorted by pulse, range, energy, surface: by the first two, then the runs of one
+    pulse at one range (common: sub-rays mirrored about a plane's slope hit it at one range) by
+    the other two (rows equal on all four are interchangeable).
+
+    Returns the order and the four columns in it."""
+    order = _pulse_range_order(p, r)
+    po, ro = p[order], r[order]
+    tie = (po[1:] == po[:-1]) & (ro[1:] == ro[:-1])
     if tie.any():
-        tied = np.zeros(len(order), bool)
-        tied[1:] |= tie
-        tied[:-1] |= tie
-        rows = np.flatnonzero(tied)
-        run = np.cumsum(np.concatenate([[True], ~tie]))[rows]  # the tied runs, in order
-        order[rows] = order[rows][np.lexsort((s[order[rows]], e[order[rows]], run))]
-    return order
+        # tie[i]: rows i and i + 1 tie; a link with a tied link before or after it is in a longer run
+        before = np.concatenate([[False], tie[:-1]])
+        after = np.concatenate([tie[1:], [False]])
+        # runs of two rows (mirror-image sub-rays hitting a plane at one range): swapped where
+        # the second is lower by (energy, surface), as the stable sort of the pair would
+        pair = np.flatnonzero(tie & ~before & ~after)
+        a, b = order[pair], order[pair + 1]
+        swap = (e[b] < e[a]) | ((e[b] == e[a]) & (s[b] < s[a]))
+        order[pair[swap]], order[pair[swap] + 1] = b[swap], a[swap]
+        ro[pair[swap]], ro[pair[swap] + 1] = r[b[swap]], r[a[swap]]  # (-0 ties with 0)
+        longer = tie & (before | after)  # links of runs of three rows or more
+        if longer.any():
+            tied = np.zeros(len(order), bool)
+            tied[:-1] |= longer
+            tied[1:] |= longer
+            rows = np.flatnonzero(tied)
+            run = np.cumsum(~np.concatenate([[False], tie])[rows])  # the runs, in order
+            order[rows] = order[rows][np.lexsort((s[order[rows]], e[order[rows]], run))]
+            ro[rows] = r[order[rows]]
+    return order, po, ro, e[order], s[order]
 
 
 def _first_max(
@@ -234,11 +279,44 @@ def _first_max(
 
 def _dominant_surface(
     echo: NDArray[np.int64],
+    starts: NDArray[np.int64],
     s: NDArray[np.int64],
     e: NDArray[np.float64],
 ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """Per echo (rows sorted by echo, then range): the surface with the most energy (ties: the
-    lower id) and the index of that surface's strongest row (ties: the nearer, then the first)."""
+    """Per echo (rows sorted by echo, then range; ``starts`` the first row of each echo): the
+    surface with the most energy (ties: the lower id) and the index of that surface's strongest
+    row (ties: the nearer, then the first).
+
+    An echo of one surface needs no grouping: that surface, and its first row of the greatest
+    energy.  Only the echoes of several surfaces (a footprint across an edge) go through
+    :func:`_dominant_surface_of_mixed`, which gives the one-surface echoes the same answer.
+    """
+    surface = s[starts]
+    hit = _first_max(e, starts, echo)
+    mixed = np.zeros(len(starts), bool)
+    mixed[echo[1:][(s[1:] != s[:-1]) & (echo[1:] == echo[:-1])]] = True
+    if mixed.any():
+        rows = np.flatnonzero(mixed[echo])
+        sub = echo[rows]
+        sub_surface, sub_hit = _dominant_surface_of_mixed(_rank_of_runs(sub), s[rows], e[rows])
+        surface[mixed], hit[mixed] = sub_surface, rows[sub_hit]
+    return surface, hit
+
+
+def _rank_of_runs(key: NDArray) -> NDArray[np.int64]:
+    """(n,) int64: the runs of equal sorted ``key`` numbered 0, 1, 2 ... in order."""
+    new = np.ones(len(key), bool)
+    new[1:] = key[1:] != key[:-1]
+    return np.cumsum(new) - 1
+
+
+def _dominant_surface_of_mixed(
+    echo: NDArray[np.int64],
+    s: NDArray[np.int64],
+    e: NDArray[np.float64],
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """:func:`_dominant_surface` for any echoes (``echo`` numbered 0, 1, ... in row order) by
+    grouping each echo's rows by surface."""
     lowest, span = int(s.min()), int(s.max()) - int(s.min()) + 1
     if (int(echo[-1]) + 1) * span < 2**62:  # one integer key (echo, surface)
         by_surface = np.argsort(echo * span + (s - lowest), kind="stable")
@@ -310,8 +388,7 @@ def resolve_echoes(
     keep_n = count(max_returns, "max_returns", low=1, high=MAX_RETURNS)
     cols = _columns(pulse=pulse, range_m=range_m, energy=energy, surface=surface)
     # one order for any input order: rows equal on all four keys are interchangeable
-    order = _hit_order(cols["pulse"], cols["range_m"], cols["energy"], cols["surface"])
-    p, r, e, s = (cols[k][order] for k in ("pulse", "range_m", "energy", "surface"))
+    order, p, r, e, s = _hit_order(cols["pulse"], cols["range_m"], cols["energy"], cols["surface"])
     if len(p) == 0:
         ids, counts = np.zeros(0, np.int64), np.zeros(0, np.uint8)
         return Echoes(ids, np.zeros(0), np.zeros(0), ids, ids, counts, counts)
@@ -330,7 +407,7 @@ def resolve_echoes(
     np.divide(np.add.reduceat(e * offset, starts), total, out=weighted, where=total > 0)
     mean = np.where(total > 0, weighted, np.add.reduceat(offset, starts) / n_hits)
     echo_range = np.where(n_hits == 1, first, np.clip(first + mean, first, last))
-    echo_surface, echo_hit = _dominant_surface(echo, s, e)
+    echo_surface, echo_hit = _dominant_surface(echo, starts, s, e)
     # detection, then the first max_returns detected echoes of each pulse
     detected = np.flatnonzero(total >= threshold)
     rank = _rank_in_run(p[starts][detected])

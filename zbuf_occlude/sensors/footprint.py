@@ -182,19 +182,33 @@ def subray_directions(directions: ArrayLike, offsets: ArrayLike) -> NDArray[np.f
     ring = np.flatnonzero(~centre)
     if ring.size == 0:
         return out
-    helper = np.where(np.abs(d[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
-    u = np.cross(d, helper)
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    v = np.cross(d, u)
+    # One coordinate at a time, on contiguous (N,) and (N, R) arrays: the products, sums and
+    # the norm's ((x² + y²) + z²) of np.cross and np.linalg.norm over (N, 3) rows, in their
+    # order, so the same bits, without their (N, R, 3) temporaries.
+    dx, dy, dz = (np.ascontiguousarray(d[:, i]) for i in range(3))
+    near_pole = np.abs(dz) >= 0.9
+    # helper h: z, or x near the poles; u = d × h (the products by h's zeros kept, for their signs)
+    hx, hz = near_pole.astype(np.float64), (~near_pole).astype(np.float64)
+    hy = np.zeros(len(d))
+    u = _unit(dy * hz - dz * hy, dz * hx - dx * hz, dx * hy - dy * hx)
+    v = (dy * u[2] - dz * u[1], dz * u[0] - dx * u[2], dx * u[1] - dy * u[0])
     # math.tan, as Lidar.footprint_directions calls it (numpy's tan may differ in the last bit)
     tan = np.array([math.tan(theta) for theta in off[ring, 0]])
     # a contiguous copy, as Lidar.footprint_directions's fresh array (numpy's cos and sin
     # take other paths over strided views)
     phi = off[ring, 1]
-    rays = d[:, None, :] + tan[None, :, None] * (
-        np.cos(phi)[None, :, None] * u[:, None, :]
-        + np.sin(phi)[None, :, None] * v[:, None, :]
-    )
-    rays /= np.linalg.norm(rays, axis=2, keepdims=True)
-    out[:, ring] = rays
+    cos, sin = np.cos(phi), np.sin(phi)
+    rays = [
+        dc[:, None] + tan * (cos * uc[:, None] + sin * vc[:, None])
+        for dc, uc, vc in zip((dx, dy, dz), u, v)
+    ]
+    for i, component in enumerate(_unit(*rays)):
+        out[:, ring, i] = component
     return out
+
+
+def _unit(x: NDArray[np.float64], y: NDArray[np.float64], z: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+    """The vectors of components ``x``, ``y``, ``z`` (arrays of one shape) over their norm,
+    ``sqrt((x² + y²) + z²)``: np.linalg.norm's sum over a last axis of 3, so the same bits."""
+    norm = np.sqrt((x * x + y * y) + z * z)
+    return x / norm, y / norm, z / norm

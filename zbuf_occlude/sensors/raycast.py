@@ -134,28 +134,66 @@ def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64
     return out
 
 
-def _ray_parameter(origin, directions, triangles) -> NDArray[np.float64]:
-    """The ``t`` of :func:`ray_triangle_f64` alone (the same operations, so the same bits), without
-    the barycentric test a known hit face does not need."""
-    a = triangles[..., 0, :] - origin
-    e1 = triangles[..., 1, :] - triangles[..., 0, :]
-    e2 = triangles[..., 2, :] - triangles[..., 0, :]
-    det = np.einsum("...i,...i->...", e1, _cross(directions, e2))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.einsum("...i,...i->...", e2, _cross(-a, e1)) * (1.0 / det)
+def _face_edges(mesh: trimesh.Trimesh) -> NDArray[np.float64]:
+    """(3, 3, F) float64: each face's first vertex ``a`` and edges ``b − a``, ``c − a``, then x, y, z,
+    then the face (:func:`ray_triangle_f64`'s subtractions, so the same bits): a hit gathers one
+    contiguous column per face instead of its triangle's strided rows."""
+    tri = np.asarray(mesh.triangles, dtype=np.float64)
+    edges = np.ascontiguousarray(np.stack([tri[:, 0], tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]]).transpose(0, 2, 1))
+    edges.flags.writeable = False
+    return edges
+
+
+#: :func:`_face_edges` of the scenes in use, once per mesh (rebuilt after an edit).
+_edges = MeshCache(_face_edges, 4)
+
+
+def _ray_parameter(mesh: trimesh.Trimesh, origin, directions, face) -> NDArray[np.float64]:
+    """(M,) float64: the ``t`` of :func:`ray_triangle_f64` of rays ``origin`` ((3,) or (M, 3)) +
+    t · ``directions`` (M, 3) on faces ``face`` (M,) of ``mesh``, without the barycentric test a
+    known hit face does not need.
+
+    The same operations, so the same bits: ``np.cross``'s products and differences, and the dot
+    products summed as ``(x + z) + y``, the order in which ``np.einsum("...i,...i->...")`` adds
+    the three products of contiguous (M, 3) rows; one coordinate at a time on contiguous (M,)
+    arrays instead of (M, 3) rows gathered from (M, 3, 3) triangles.  The numerator
+    ``e2 · ((o − a) × e1)`` depends on the face and the origin alone: from one origin, with
+    no more faces than hits, it is computed once per face and gathered.
+    """
+    edges = _edges(mesh)
+    o = np.asarray(origin, dtype=np.float64)
+    if o.ndim == 1 and edges.shape[2] <= len(face):
+        numerator = _plane_numerator(edges, o)[face]
+        (e1x, e1y, e1z), (e2x, e2y, e2z) = np.take(edges[1:], face, axis=2)
+    else:
+        mine = np.take(edges, face, axis=2)
+        numerator = _plane_numerator(mine, o)
+        (e1x, e1y, e1z), (e2x, e2y, e2z) = mine[1:]
+    dx, dy, dz = directions[:, 0], directions[:, 1], directions[:, 2]
+    # det = e1 · (d × e2)
+    det = (e1x * (dy * e2z - dz * e2y) + e1z * (dx * e2y - dy * e2x)) + e1y * (dz * e2x - dx * e2z)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        t = numerator * (1.0 / det)
         ok = np.isfinite(t) & (det != 0.0)
     return np.where(ok, t, np.inf)
 
 
+def _plane_numerator(edges: NDArray[np.float64], origin: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``e2 · (s × e1)`` with ``s = −(a − origin)``, per column of ``edges`` (3, 3, n) (:func:`_face_edges`);
+    ``origin`` (3,) or (n, 3)."""
+    (ax, ay, az), (e1x, e1y, e1z), (e2x, e2y, e2z) = edges
+    sx, sy, sz = -(ax - origin[..., 0]), -(ay - origin[..., 1]), -(az - origin[..., 2])
+    return (e2x * (sy * e1z - sz * e1y) + e2z * (sx * e1y - sy * e1x)) + e2y * (sz * e1x - sx * e1z)
+
+
 def _exact_distance(mesh: trimesh.Trimesh, origin, directions, face):
     """float64 ray parameter on the given (hit) faces; the plane's if rounding put the hit just outside."""
-    t = np.full(len(face), np.inf)
     hit = face >= 0
-    if hit.any():
-        tri = np.asarray(mesh.triangles, dtype=np.float64)[face[hit]]
-        origin = np.asarray(origin, dtype=np.float64)
-        t[hit] = _ray_parameter(origin[hit] if origin.ndim == 2 else origin, directions[hit], tri)
-    return t
+    if not hit.any():
+        return np.full(len(face), np.inf)
+    # every ray, a miss on face 0 and then dropped: cheaper than gathering the hits' rows (a
+    # scan's rays mostly hit), and each hit's t the same bits
+    return np.where(hit, _ray_parameter(mesh, origin, directions, np.where(hit, face, 0)), np.inf)
 
 
 def _build_intersector(mesh: trimesh.Trimesh):
@@ -287,7 +325,6 @@ def cast_embree_beyond(
                      hint="give fewer rays, fewer max_hits or fewer surfaces a transmittance")  # fmt: skip
     origins = np.broadcast_to(np.asarray(origin, dtype=np.float64), directions.shape)
     last, n_hits = t[active], np.ones(len(active), np.int64)
-    triangles = np.asarray(mesh.triangles, dtype=np.float64)
     # a ray that keeps finding the surface point it left steps on; bounded so that it ends
     for _ in range(2 * int(max_hits)):
         if not len(active):
@@ -298,7 +335,7 @@ def cast_embree_beyond(
         got = f >= 0
         r = np.full(len(active), np.inf)
         if got.any():
-            r[got] = _ray_parameter(o[got], d[got], triangles[f[got]])
+            r[got] = _ray_parameter(mesh, o[got], d[got], f[got])
         new = got & np.isfinite(r) & (r > last + 0.5 * step_m)
         again = got & ~new
         rays.append(active[new])
