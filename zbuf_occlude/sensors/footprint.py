@@ -182,7 +182,7 @@ def subray_directions(directions: ArrayLike, offsets: ArrayLike) -> NDArray[np.f
     ring = np.flatnonzero(~centre)
     if ring.size == 0:
         return out
-    # One coordinate at a time, on contiguous (N,) and (N, R) arrays: the products, sums and
+    # One coordinate at a time, on contiguous (N,) and (R, N) arrays: the products, sums and
     # the norm's ((x² + y²) + z²) of np.cross and np.linalg.norm over (N, 3) rows, in their
     # order, so the same bits, without their (N, R, 3) temporaries.
     dx, dy, dz = (np.ascontiguousarray(d[:, i]) for i in range(3))
@@ -198,12 +198,13 @@ def subray_directions(directions: ArrayLike, offsets: ArrayLike) -> NDArray[np.f
     # take other paths over strided views)
     phi = off[ring, 1]
     cos, sin = np.cos(phi), np.sin(phi)
+    # (R, N): the beams along the contiguous inner axis, so each operation is one long loop
     rays = [
-        dc[:, None] + tan * (cos * uc[:, None] + sin * vc[:, None])
+        dc + tan[:, None] * (cos[:, None] * uc + sin[:, None] * vc)
         for dc, uc, vc in zip((dx, dy, dz), u, v)
     ]
     for i, component in enumerate(_unit(*rays)):
-        out[:, ring, i] = component
+        out[:, ring, i] = component.T
     return out
 
 
