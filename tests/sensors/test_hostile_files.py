@@ -281,7 +281,7 @@ def test_every_numeric_sensor_field_is_covered() -> None:
     names = {(cls.__name__, name) for cls, name in SENSOR_NUMBERS}
     assert {("Lidar", "elevations_deg"), ("Lidar", "detection_range_m"), ("AirborneScanner", "headings_deg"), ("AirborneScanner", "n_lines"),
             ("DepthCamera", "K"), ("DepthCamera", "width"), ("DepthCamera", "noise")} <= names  # fmt: skip
-    assert len(names) == 17 + 14 + 9  # Lidar: 15, then max_returns and range_resolution_m; AirborneScanner: 10, then beam_divergence_deg, footprint_rays, max_returns and range_resolution_m (several returns per pulse)
+    assert len(names) == 17 + 15 + 9  # Lidar: 15, then max_returns and range_resolution_m; AirborneScanner: 10, then beam_divergence_deg, footprint_rays, max_returns, range_resolution_m and detection_threshold (several returns per pulse)
 
 
 @pytest.mark.parametrize("cls", list(VALID_SENSORS))

@@ -259,13 +259,17 @@ def test_gps_time_and_pulse_id_follow_the_firing():
     )
     index = np.rint(az / (360.0 / lidar.n_azimuths)).astype(np.int64) % lidar.n_azimuths
     np.testing.assert_array_equal(s.pulse_id, s.ring * lidar.n_azimuths + index)
+    # the beams of one firing cycle fire one after another, beam b at b / n_beams of the cycle
+    cycle_s = 1.0 / (lidar.n_azimuths * lidar.rotation_hz)
     np.testing.assert_allclose(
-        s.gps_time, index / (lidar.n_azimuths * lidar.rotation_hz), rtol=0, atol=1e-12
+        s.gps_time, (index + s.ring / lidar.n_beams) * cycle_s, rtol=0, atol=1e-12
     )
     np.testing.assert_array_equal(
         s.scan_angle_deg, np.asarray(lidar.elevations_deg, np.float32)[s.ring]
     )
     assert len(np.unique(s.pulse_id)) == len(s)
+    # every pulse its own time, so a LAS reader that groups returns by time tells them apart
+    assert len(np.unique(s.gps_time)) == len(s)
 
 
 @pytest.mark.parametrize(

@@ -234,7 +234,7 @@ class RayTable:
     def from_lidar(cls, lidar: Lidar, name: str | None = None) -> RayTable:
         """The table of one revolution of ``lidar``, in firing order: firing ``i`` of ring ``b`` is row ``i · n_beams + b``.
 
-        Each row is fired at ``i / (n_azimuths · rotation_hz)`` seconds, the LiDAR's own
+        Each row is fired at ``(i + b / n_beams) / (n_azimuths · rotation_hz)`` seconds, the LiDAR's own
         ``gps_time``, along the LiDAR's own direction
         (:func:`~zbuf_occlude.sensors.lidar.beam_directions` of the same angles).  The range,
         noise, dropout, footprint and return fields are the LiDAR's.  Without noise or dropout, a
@@ -256,7 +256,7 @@ class RayTable:
         fields = ("min_range_m", "max_range_m", "range_noise_m", "dropout", "beam_divergence_deg", "footprint_rays", "beam_profile",
                   "max_returns", "range_resolution_m", "detection_reflectivity", "detection_range_m", "power_noise", "source")  # fmt: skip
         return cls(
-            name or lidar.name, firing / (lidar.n_azimuths * lidar.rotation_hz), lidar.azimuths_deg[firing],
+            name or lidar.name, (firing + ring / lidar.n_beams) / (lidar.n_azimuths * lidar.rotation_hz), lidar.azimuths_deg[firing],
             np.asarray(lidar.elevations_deg)[ring], **{f: getattr(lidar, f) for f in fields},
         )  # fmt: skip
 

@@ -96,7 +96,8 @@ class Scan:
         table: the pulse's row in the table).
     gps_time : (N,) float64 or None
         LiDAR: firing time of the pulse, seconds from the revolution's first firing
-        (``azimuth index / (n_azimuths · rotation_hz)``; every beam of a firing cycle at once);
+        (``(azimuth index + b / n_beams) / (n_azimuths · rotation_hz)``, beam ``b`` firing
+        ``b / n_beams`` of a cycle after the cycle's first: every pulse a time of its own);
         the returns of one pulse share it (airborne: the firing time along the flight line,
         :func:`~zbuf_occlude.sensors.airborne.scan_airborne`; a ray table: its row's ``time_s``,
         exactly).
@@ -884,13 +885,17 @@ def _sweep_pulses(sensor: Lidar, ring, azimuth, pulse) -> dict[str, np.ndarray]:
     """``pulse_id``, ``gps_time``, ``scan_angle_deg`` of pulse rows ``pulse`` of a spinning LiDAR's sweep.
 
     ``ring`` (P,) int64 and ``azimuth`` (P,) float64 degrees are the pulses' beams and firing
-    azimuths (:meth:`Lidar.rays`).
+    azimuths (:meth:`Lidar.rays`).  The beams of one firing cycle fire one after another, beam
+    ``b`` (its index in ``elevations_deg``) ``b / B`` of a cycle (``1 / (n_azimuths · rotation_hz)``
+    seconds) after the cycle starts, so every pulse has a time of its own, as LAS readers that group returns into pulses
+    by time expect (Velodyne HDL-32E user manual: its 32 lasers fire 1.152 µs apart in a 46.08 µs
+    cycle; the model spreads the B beams evenly over the cycle).
     """
     n_az = sensor.n_azimuths
     index = np.rint((azimuth[pulse] - sensor.azimuth_offset_deg) / (360.0 / n_az)).astype(np.int64) % n_az
     return {
         "pulse_id": ring[pulse] * n_az + index,
-        "gps_time": index / (n_az * sensor.rotation_hz),
+        "gps_time": (index + ring[pulse] / sensor.n_beams) / (n_az * sensor.rotation_hz),
         "scan_angle_deg": sensor._elev[ring[pulse]].astype(np.float32),
     }
 
