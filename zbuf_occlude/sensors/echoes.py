@@ -381,7 +381,8 @@ def resolve_echoes(
 
     Notes
     -----
-    O(M log M): three sorts of the hits, no loop over pulses.
+    O(M log M), no loop over pulses: rows given by pulse (a scan's) are sorted pulse by pulse,
+    others by sorts of all rows; only the echoes of several surfaces are grouped by surface.
     """
     resolution = real(range_resolution_m, "range_resolution_m", low=0.0, low_open=True)
     threshold = real(detection_threshold, "detection_threshold", low=0.0)
