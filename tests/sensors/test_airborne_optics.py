@@ -1,5 +1,5 @@
 """An airborne scan's reflectivity and transmittance: the spinning LiDAR's surface optics and
-all-hits casting (one implementation, :func:`zbuf_occlude.sensors.scan.surface_optics`) on an
+all-hits casting (one implementation, :func:`zbuf_occlude.sensors.echo_model.surface_optics`) on an
 airborne scanner's footprint.
 
 Scene: flat ground at z = 0 under a thin plate (a 5 cm box: a top and a bottom face) at

@@ -115,7 +115,7 @@ def test_the_memory_for_the_hits_is_checked_before_the_rounds():
 
 def test_echo_returns_casts_on_from_each_rays_own_origin():
     # an airborne-like pulse: one origin per sub-ray (the aircraft moves), plates below along -z
-    from zbuf_occlude.sensors.scan import Transmission, echo_returns
+    from zbuf_occlude.sensors.echo_model import Transmission, echo_returns
 
     built = _stack([R, R + 2.0])
     origins = np.array([[0.0, 0.0, 0.0], [0.0, 1.0, 0.5]])

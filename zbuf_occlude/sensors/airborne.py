@@ -40,7 +40,7 @@ Returns
 With ``max_returns`` above 1, each pulse's beam is a cone of ``beam_divergence_deg`` sampled by
 ``footprint_rays`` sub-rays (:mod:`.footprint`), and their first hits are resolved into up to
 ``max_returns`` returns by the spinning LiDAR's own echo model
-(:func:`~zbuf_occlude.sensors.scan.echo_returns`: energy ``w · |cos θ| / R²`` per sub-ray, echoes
+(:func:`~zbuf_occlude.sensors.echo_model.echo_returns`: energy ``w · |cos θ| / R²`` per sub-ray, echoes
 within ``range_resolution_m`` merged): a pulse that meets a branch and the ground below records
 both.  With ``max_returns`` 1 (the default) each pulse is its centre ray's first hit, as always.
 """
@@ -574,7 +574,7 @@ def _surface_optics(built, scanner: AirborneScanner, reflectivity, transmittance
     if reflectivity is None and transmittance is None:
         return None, None
     from zbuf_occlude.sensors.reflectance import AIRBORNE_WAVELENGTH_NM
-    from zbuf_occlude.sensors.scan import surface_optics
+    from zbuf_occlude.sensors.echo_model import surface_optics
 
     if not scanner.multi_return:
         raise InvalidInputError(f"airborne scanner {scanner.name!r}: reflectivity and transmittance weigh the echoes of the "
@@ -584,7 +584,7 @@ def _surface_optics(built, scanner: AirborneScanner, reflectivity, transmittance
 
 def _echo_returns(built, scanner: AirborneScanner, origins, directions, rho=None, tau=None) -> tuple[NDArray, ...]:
     """The multi-return model of an airborne scanner: each pulse's ``footprint_rays`` sub-rays cast
-    from its origin, resolved by :func:`~zbuf_occlude.sensors.scan.echo_returns` (no range limits,
+    from its origin, resolved by :func:`~zbuf_occlude.sensors.echo_model.echo_returns` (no range limits,
     echoes below the scanner's ``detection_threshold`` dropped), weighed by ``rho`` and cast on through surfaces
     of ``tau`` above 0 when given (per object id).
 
@@ -602,7 +602,7 @@ def _echo_returns(built, scanner: AirborneScanner, origins, directions, rho=None
     """
     from zbuf_occlude.sensors.footprint import footprint_offsets, subray_directions
     from zbuf_occlude.sensors.raycast import cast_embree
-    from zbuf_occlude.sensors.scan import Radiometry, Transmission, echo_returns
+    from zbuf_occlude.sensors.echo_model import Radiometry, Transmission, echo_returns
 
     k = scanner.footprint_rays
     if len(origins) == 0:

@@ -61,7 +61,7 @@ class RayTable:
     beam_divergence_deg, footprint_rays, beam_profile, max_returns, range_resolution_m : float, int, str
         The footprint and multi-return model, as :class:`~zbuf_occlude.sensors.lidar.Lidar`'s;
         ``footprint_rays`` above 1 needs ``max_returns`` above 1 (a table's footprint is resolved
-        into returns by :func:`~zbuf_occlude.sensors.scan.echo_returns`, as the airborne
+        into returns by :func:`~zbuf_occlude.sensors.echo_model.echo_returns`, as the airborne
         scanner's is).
     detection_reflectivity, detection_range_m, power_noise : float
         The radiometric detection threshold and power noise, as

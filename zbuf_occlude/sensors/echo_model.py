@@ -1,0 +1,271 @@
+"""The multi-return model on a scene: the sub-ray hits of each pulse weighed and resolved into returns.
+
+One implementation for every scanner (the spinning LiDAR and ray tables of :func:`~.scan.scan`,
+the airborne scanner of :func:`~.airborne.scan_airborne`): :func:`surface_optics` turns a
+scanner's ``reflectivity`` and ``transmittance`` into values per object id (a number, one per id,
+or the cited table of :mod:`.reflectance`); :func:`echo_returns` casts each sub-ray on through
+the surfaces that transmit (:func:`~.raycast.cast_embree_beyond`), weighs every hit by
+:func:`~.echoes.hit_energy` and the transmittance before it (:func:`~.echoes.attenuate_along_subray`)
+and resolves a pulse's hits into returns (:func:`~.echoes.resolve_echoes`);
+:func:`strongest_echo` is the one-return footprint model (the strongest surface, mixed pixels).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.echoes import attenuate_along_subray, hit_energy, resolve_echoes
+from zbuf_occlude.sensors.raycast import MAX_HITS, cast_embree_beyond, face_normals
+from zbuf_occlude.sensors.scene import BuiltScene
+
+__all__ = ["Radiometry", "Transmission", "echo_returns", "strongest_echo", "surface_optics"]
+
+
+def surface_optics(built: BuiltScene, reflectivity, transmittance, *, wavelength_nm: float, multi_return: bool, backend: str = "embree"):
+    """Reflectivity and transmittance per object id of a scanner's scene, checked; one rule for every scanner.
+
+    Parameters
+    ----------
+    built : BuiltScene
+        The scene (its objects give the ids: 0 the ground, then the objects).
+    reflectivity, transmittance : None, float, (n_objects + 1,) float, or "table"
+        Lambertian ρ ≥ 0 and round-trip transmittance in [0, 1] per object id: one value for
+        all, one per id, or ``"table"``: :func:`~.reflectance.scene_optics` at ``wavelength_nm``
+        (the cited table, by material, class or file name).
+    wavelength_nm : float
+        The scanner's wavelength, nm (905 for the spinning presets, 1064 for airborne scanners).
+    multi_return : bool
+        Whether the scanner resolves several returns per pulse (a transmittance above 0 needs it).
+    backend : str
+        The ray caster; a transmittance above 0 needs "embree" (every hit along a sub-ray).
+
+    Returns
+    -------
+    rho : (n_objects + 1,) float64 or None
+    tau : (n_objects + 1,) float64 or None (None also where every value is 0: opaque, first hits only)
+
+    Raises
+    ------
+    InvalidInputError
+        A string other than "table", a value out of range or of the wrong length, a
+        transmittance above 0 with one return per pulse or another backend than "embree".
+    """
+    from zbuf_occlude.sensors.reflectance import scene_optics
+
+    table = None
+    for name, value in (("reflectivity", reflectivity), ("transmittance", transmittance)):
+        if isinstance(value, str) and value != "table":
+            raise InvalidInputError(f"{name} must be a number, one per object id, or 'table', got {value!r}")
+        if isinstance(value, str) and table is None:
+            table = scene_optics(built, wavelength_nm)
+    n_ids = len(built.objects) + 1
+    rho = None
+    if reflectivity is not None:
+        rho = table.reflectivity if isinstance(reflectivity, str) else reflectivity_table(reflectivity, n_ids)
+    tau = None
+    if transmittance is not None:
+        tau = table.transmittance if isinstance(transmittance, str) else transmittance_table(transmittance, n_ids)
+        if not tau.any():
+            tau = None  # opaque everywhere: today's first hits
+        elif not multi_return:
+            raise InvalidInputError("transmittance above 0 gives hits behind a surface, which only the multi-return model resolves: "
+                                    "give the scanner max_returns above 1")  # fmt: skip
+        elif backend != "embree":
+            raise InvalidInputError(f"transmittance above 0 needs every hit along each sub-ray, which the {backend!r} backend cannot give "
+                                    "(it keeps the nearest face per pixel): use backend='embree'")  # fmt: skip
+    return rho, tau
+
+
+def reflectivity_table(reflectivity, n_ids: int) -> NDArray[np.float64]:
+    """(n_ids,) float64 ρ per object id from a scalar or a per-id sequence."""
+    rho = np.asarray(reflectivity, dtype=np.float64).reshape(-1)
+    if rho.size == 1:
+        rho = np.full(n_ids, float(rho[0]))
+    if rho.size != n_ids or not np.all(np.isfinite(rho)) or np.any(rho < 0):
+        raise InvalidInputError(f"reflectivity must be one value >= 0 or {n_ids} (ground + objects), got {reflectivity!r}")
+    return rho
+
+
+def transmittance_table(transmittance, n_ids: int) -> NDArray[np.float64]:
+    """(n_ids,) float64 round-trip transmittance per object id from a scalar or a per-id sequence, each in [0, 1]."""
+    try:
+        tau = np.asarray(transmittance, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        tau = np.full(1, np.nan)
+    if tau.size == 1:
+        tau = np.full(n_ids, float(tau[0]))
+    if tau.size != n_ids or not np.all((tau >= 0) & (tau <= 1)):
+        raise InvalidInputError(f"transmittance must be one value in [0, 1] or {n_ids} (ground + objects), got {transmittance!r}")
+    return tau
+
+
+def strongest_echo(built: BuiltScene, rays, face, t, k: int, rho, separation: float = 0.0, weights=None) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+    """Resolve each beam's ``k`` footprint rays into one return: the strongest echo.
+
+    Each ray carries ``1/k`` of the beam's energy (``weights`` (k,) instead, when given: a
+    Gaussian ``beam_profile``); a ray hitting a surface of reflectivity ρ at
+    incidence θ and range R sends back ``ρ |cos θ| / (k R²)`` (ρ = 1 without ``rho``).  The
+    echoes of one object id add up; the object with the most energy is the return (ties: the
+    lower ray index, the centre first).  Its range is the energy-weighted mean of its rays'
+    ranges, its face the nearest of its rays' faces.  With ``separation > 0`` (the sensor's
+    ``echo_separation_m``), the rays of any surface within ``separation`` of that range join
+    the return, its range becomes the energy-weighted mean over all of them and its energy
+    their sum: a mixed pixel where the footprint straddles a shallow depth edge (its face and
+    object stay the strongest echo's).
+
+    Returns
+    -------
+    face : (N,) int64, −1 where no ray hit; t : (N,) float64; energy : (N,) float64
+        ``Σ ρ |cos θ| / k`` over the chosen object's rays (the footprint fraction times ρ cos θ).
+    """
+    n = len(face) // k
+    face = face.reshape(n, k)
+    t = t.reshape(n, k)
+    hit = face >= 0
+    obj = np.where(hit, built.face_object[np.maximum(face, 0)], -1)
+    normal = face_normals(built.mesh, np.maximum(face, 0))
+    cos = np.abs(np.einsum("nkj,nkj->nk", normal, rays.reshape(n, k, 3)))
+    reflected = cos * (1.0 if rho is None else rho[np.maximum(obj, 0)])
+    weight = np.where(hit, reflected / k if weights is None else reflected * weights[None, :], 0.0)
+    energy = np.where(hit, weight / np.maximum(t, 1e-9) ** 2, 0.0)
+    same = (obj[:, :, None] == obj[:, None, :]) & hit[:, :, None] & hit[:, None, :]
+    total = np.einsum("nij,nj->ni", same, energy)
+    best = np.argmax(total, axis=1)
+    rows = np.arange(n)
+    mine = same[rows, best]  # (n, k): the rays on the chosen object
+    w = np.where(mine, energy, 0.0)
+    t_out = np.einsum("nk,nk->n", w, np.where(mine, t, 0.0)) / np.maximum(w.sum(axis=1), 1e-300)
+    nearest = np.argmin(np.where(mine, t, np.inf), axis=1)
+    face_out = np.where(hit.any(axis=1), face[rows, nearest], -1)
+    if separation > 0.0:  # unresolved echoes of other surfaces merge into the return
+        mine = mine | (hit & (np.abs(t - t_out[:, None]) <= separation))
+        w = np.where(mine, energy, 0.0)
+        t_out = np.einsum("nk,nk->n", w, np.where(mine, t, 0.0)) / np.maximum(w.sum(axis=1), 1e-300)
+    return face_out, np.where(hit.any(axis=1), t_out, np.inf), np.where(mine, weight, 0.0).sum(axis=1)
+
+
+@dataclass(frozen=True)
+class Radiometry:
+    """What weighs and thresholds the echoes of :func:`echo_returns`.
+
+    Attributes
+    ----------
+    reflectivity : (n_objects + 1,) float
+        Lambertian ρ per object id (index 0: the ground).
+    detection_threshold : float
+        Least echo energy kept, m⁻² (:func:`~.echoes.hit_energy`'s units).
+    power_noise : float
+        Every hit of a pulse is scaled by one ``exp(σ z)``, z ~ N(0, 1) per pulse (P draws from
+        ``rng``); 0: nothing is drawn.
+    rng : numpy.random.Generator, optional
+        Needed when ``power_noise`` is above 0.
+    """
+
+    reflectivity: ArrayLike
+    detection_threshold: float = 0.0
+    power_noise: float = 0.0
+    rng: np.random.Generator | None = None
+
+
+@dataclass(frozen=True)
+class Transmission:
+    """Sub-rays that go on through surfaces in :func:`echo_returns`: all hits along each, not only the first.
+
+    Attributes
+    ----------
+    transmittance : (n_objects + 1,) float
+        Round-trip transmittance per object id, in [0, 1] (:func:`~.echoes.attenuate_along_subray`:
+        a gap fraction ``g`` is ``g``, a pane of one-way ``T`` is ``T²``); 0 everywhere: opaque.
+    origins : (3,) or (P·K, 3) float
+        The sub-rays' origin, world frame, metres (one, or one per sub-ray).
+    max_hits : int
+        Most hits cast along one sub-ray (:func:`~.raycast.cast_embree_beyond`).
+    """
+
+    transmittance: ArrayLike
+    origins: ArrayLike
+    max_hits: int = MAX_HITS
+
+
+def echo_returns(
+    built: BuiltScene, rays, face, t, weights, *, range_resolution_m: float, max_returns: int, radiometry: Radiometry | None = None,
+    range_limits_m: tuple[float, float] = (0.0, np.inf), through: Transmission | None = None,
+) -> tuple[NDArray[np.int64], ...]:  # fmt: skip
+    """The multi-return model of every scanner: resolve each pulse's sub-ray hits into discrete returns.
+
+    One implementation for the spinning LiDAR (:func:`scan`) and the airborne scanner
+    (:func:`~zbuf_occlude.sensors.airborne.scan_airborne`).  Each sub-ray's first hit is given;
+    where ``through`` gives its surface a transmittance above 0, the sub-ray is cast on through it
+    (:func:`~.raycast.cast_embree_beyond`, Embree) and each hit behind gets its energy times the
+    transmittances of the surfaces before it on the sub-ray (:func:`~.echoes.attenuate_along_subray`).
+    Without ``through`` (or with 0 everywhere: opaque) only the first hits count, bit for bit.
+
+    Parameters
+    ----------
+    built : BuiltScene
+        The scene the rays were cast into (object of each face, triangles for the normals).
+    rays : (P·K, 3) float64
+        Unit sub-ray directions of P pulses, pulse-major (K sub-rays each).
+    face : (P·K,) int64
+        Face of each sub-ray's first hit in ``built.mesh``, −1 where it hits nothing.
+    t : (P·K,) float64
+        Range of that hit, metres.
+    weights : (K,) float64
+        Each sub-ray's share of the pulse's energy (:func:`~.footprint.footprint_offsets`).
+    range_resolution_m : float
+        Echoes of one pulse closer than this merge (:func:`~.echoes.resolve_echoes`), metres, > 0.
+    max_returns : int
+        The first this many echoes of a pulse in range order are kept.
+    radiometry : Radiometry, optional
+        Reflectivity per object id, detection threshold and power noise; None: ρ 1 everywhere,
+        every echo detected, no noise.
+    range_limits_m : (min, max) float
+        Hits nearer or farther than these give no echo (the receiver's blind zone and reach),
+        metres; a hit in the blind zone still shades the hits behind it.
+    through : Transmission, optional
+        Transmittance per object id and the sub-rays' origins; None: opaque, first hits only.
+
+    Returns
+    -------
+    pulse : (E,) int64, row of the pulse; face : (E,) int64; range : (E,) float64, metres;
+    energy : (E,) float64, m⁻² (:func:`~.echoes.hit_energy`: weight · ρ · ``|cos θ|`` / R², times
+    the transmittance before the hit): sorted by pulse, then range (:class:`~.echoes.Echoes`).
+
+    Raises
+    ------
+    InvalidInputError
+        A transmittance that is not one value in [0, 1] per object id.
+    """
+    k = len(weights)
+    n_pulses = len(face) // k
+    min_range_m, max_range_m = range_limits_m
+    tau = None if through is None else np.asarray(through.transmittance, dtype=np.float64)
+    if tau is not None and tau.shape != (len(built.objects) + 1,):
+        raise InvalidInputError(f"transmittance must hold one value per object id ({len(built.objects) + 1}: ground + objects), got shape {tau.shape}")
+    if tau is not None and tau.any():
+        sub, f_all, r_all = cast_embree_beyond(built.mesh, through.origins, rays, face, t, tau[built.face_object] > 0, max_hits=through.max_hits)
+        share = attenuate_along_subray(sub, r_all, built.face_object[f_all].astype(np.int64), tau)
+        kept = np.flatnonzero((r_all >= min_range_m) & (r_all <= max_range_m))
+        ray, f, r, share = sub[kept], f_all[kept], r_all[kept], share[kept]
+    else:
+        ray = np.flatnonzero((face >= 0) & (t >= min_range_m) & (t <= max_range_m))
+        f, r, share = face[ray], t[ray], None
+    obj = built.face_object[f].astype(np.int64)
+    normal = face_normals(built.mesh, f)
+    cos = np.abs(np.einsum("ij,ij->i", normal, rays[ray]))
+    pulse = ray // k
+    rho = None if radiometry is None else np.asarray(radiometry.reflectivity, dtype=np.float64)
+    energy = hit_energy(np.asarray(weights)[ray % k], 1.0 if rho is None else rho[obj], cos, r)
+    if share is not None:
+        energy = energy * share
+    if radiometry is not None and radiometry.power_noise > 0:
+        energy = energy * np.exp(radiometry.power_noise * radiometry.rng.standard_normal(n_pulses))[pulse]
+    echoes = resolve_echoes(
+        pulse, r, energy, obj, range_resolution_m=range_resolution_m,
+        detection_threshold=0.0 if radiometry is None else radiometry.detection_threshold, max_returns=max_returns,
+    )  # fmt: skip
+    return echoes.pulse, f[echoes.hit], echoes.range_m, echoes.energy
