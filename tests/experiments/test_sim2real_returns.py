@@ -15,7 +15,6 @@ pytest.importorskip("torch")
 from zbuf_occlude.cli.main import main
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.sim2real_config import (
-    RETURNS_FOOTPRINT_RAYS,
     RETURNS_RANGE_RESOLUTION_M,
     Sim2RealConfig,
     with_returns,
@@ -26,6 +25,7 @@ from zbuf_occlude.experiments.sim2real_data import (
     find_class_meshes,
 )
 from zbuf_occlude.sensors import lidar_preset
+from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
 
 
 def _bush(seed: int = 0, leaves: int = 600) -> trimesh.Trimesh:
@@ -73,7 +73,7 @@ def test_several_returns_give_a_bush_points_after_the_first_return() -> None:
     from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
 
     sensor = with_returns(lidar_preset("hdl32e"), 3)
-    assert (sensor.max_returns, sensor.footprint_rays, sensor.range_resolution_m) == (3, RETURNS_FOOTPRINT_RAYS, RETURNS_RANGE_RESOLUTION_M)
+    assert (sensor.max_returns, sensor.footprint_rays, sensor.range_resolution_m) == (3, FOOTPRINT_RAYS, RETURNS_RANGE_RESOLUTION_M)
     assert sensor.beam_divergence_deg == lidar_preset("hdl32e").beam_divergence_deg == 0.16  # the preset's (HDL-32E data sheet)
     bush, rng = _bush(1), np.random.default_rng(3)
     dist = CropDistributions(distance_m=(5.0, 8.0), size_m=(2.0, 2.5))

@@ -24,7 +24,8 @@ from zbuf_occlude.sensors.fit import (
     fit_return_model,
     merge_scans,
 )
-from zbuf_occlude.sensors.fit.return_model import FOOTPRINT_RAYS, lower_end
+from zbuf_occlude.sensors.fit.return_model import lower_end
+from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
 from zbuf_occlude.sensors.fit.returns import PulseValues
 from zbuf_occlude.sensors.presets import sensor_from_name
 

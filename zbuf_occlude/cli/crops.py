@@ -21,6 +21,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from zbuf_occlude.cli.options import Check, interval, parse_interval, real
+from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
 from zbuf_occlude.sensors.placement import CropDistributions, check_across_sight_width
 
 __all__ = ["CropOption", "CropSettings", "CROP_OPTIONS", "FLAGS", "add_crop_arguments", "crop_settings", "given_crop_options"]
@@ -69,7 +70,8 @@ CROP_OPTIONS = (
         "return physics: the object's Lambertian reflectivity; returns must clear the sensor's radiometric threshold "
         "rho*cos(incidence)*footprint/R^2", unset="every hit returns",
     ),
-    CropOption("footprint", "footprint", None, None, "return physics: 7 rays per firing inside the beam divergence cone, strongest echo"),
+    CropOption("footprint", "footprint", None, None, f"return physics: {FOOTPRINT_RAYS} rays per firing inside the beam divergence cone, "
+               "the strongest echo (with --max-returns above 1, scan: several returns)"),
     CropOption(
         "ground_margin_m", "ground-margin", "M", real(0.0, unit="metres"),
         "also keep the ground returns under the object, inside its footprint grown by M metres, as a box segmentation "

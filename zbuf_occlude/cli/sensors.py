@@ -22,6 +22,7 @@ from zbuf_occlude.geometry.samples import derive_rng, object_key
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.mesh.sizes import DIMENSIONS, SizeRange, size_interval
+from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
 from zbuf_occlude.sensors.placement import CropDistributions
 from zbuf_occlude.sensors.presets import preset_names, sensor_from_name
 
@@ -211,7 +212,7 @@ def _return_physics(sensor, args: argparse.Namespace):
     ``--range-resolution`` applied: all five to a spinning LiDAR, the last two to an airborne
     scanner (its footprint is the sensor file's ``footprint_rays``).
 
-    ``--footprint`` gives 7 sub-rays; without it the sensor's own ``footprint_rays`` stay (a sensor
+    ``--footprint`` gives :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS` sub-rays; without it the sensor's own ``footprint_rays`` stay (a sensor
     file's K above 1 is a footprint for ``--echo-separation``).  ``--max-returns`` above 1 needs a
     range resolution, from ``--range-resolution`` or the sensor's.
 
@@ -237,7 +238,7 @@ def _return_physics(sensor, args: argparse.Namespace):
     if airborne and args.max_returns == 1 and sensor.footprint_rays > 1:
         raise InvalidInputError(f"--max-returns 1: {args.sensor} has a footprint of {sensor.footprint_rays} sub-rays, which an airborne scanner "
                                 "resolves into several returns; give --max-returns above 1")  # fmt: skip
-    rays = 7 if args.footprint else sensor.footprint_rays
+    rays = FOOTPRINT_RAYS if args.footprint else sensor.footprint_rays
     max_returns = args.max_returns or sensor.max_returns
     resolution = args.range_resolution or sensor.range_resolution_m
     if args.echo_separation and rays == 1:

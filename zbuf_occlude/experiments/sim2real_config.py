@@ -24,7 +24,7 @@ if TYPE_CHECKING:  # torch is imported when a run trains
     from zbuf_occlude.learn.training import TrainConfig
 
 __all__ = ["Sim2RealScale", "SIM2REAL_SCALES", "SIM2REAL_RECIPE", "VALIDATION_CHOICES", "FITTED_SHAPES", "WIDTH_SHAPES",
-           "RETURNS_FOOTPRINT_RAYS", "RETURNS_RANGE_RESOLUTION_M", "Sim2RealConfig", "with_returns"]  # fmt: skip
+           "RETURNS_RANGE_RESOLUTION_M", "Sim2RealConfig", "with_returns"]  # fmt: skip
 
 #: The training recipe of every run (:data:`zbuf_occlude.learn.training.RECIPES`; :mod:`~zbuf_occlude.experiments.sim2real`).
 SIM2REAL_RECIPE = "stable"
@@ -38,10 +38,6 @@ FITTED_SHAPES = {"widths": "across_sight_width_m", "widen": "across_sight_width_
 #: The shapes that meet the widths, of which a run takes one, and how each meets them
 #: (:data:`~zbuf_occlude.experiments.sim2real_placement.WIDTH_BY`).
 WIDTH_SHAPES = {"widths": "stretch", "widen": "widen", "occlude": "occluder"}
-#: Sub-rays per pulse of the ``lidar`` set with ``returns`` above 1, where the sensor has no footprint
-#: of its own: ``scan --footprint``'s 7 (the centre ray and a ring of 6, one per equal-area cell of
-#: the divergence cone, :func:`~zbuf_occlude.sensors.footprint.footprint_offsets`).
-RETURNS_FOOTPRINT_RAYS = 7
 #: Least range between two returns of one pulse, metres, with ``returns`` above 1, where the sensor
 #: gives none: half the pulse length ``c·τ/2`` of a 5 ns pulse (an ASSUMPTION: the Velodyne HDL-32E
 #: data sheet 97-0038 and manual 63-9113 give no pulse length; the value of the sensors guide).
@@ -361,7 +357,7 @@ def with_returns(sensor, returns: int, option: str = "returns"):
 
     ``returns`` 1: ``sensor`` itself, unchanged (its scans are today's, bit for bit).  Above 1:
     ``max_returns = returns``; the footprint is the sensor's own ``footprint_rays`` where above 1,
-    else :data:`RETURNS_FOOTPRINT_RAYS`, over the sensor's own ``beam_divergence_deg`` (the
+    else :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS`, over the sensor's own ``beam_divergence_deg`` (the
     HDL-32E preset: 0.16°, 2.79 mrad, Velodyne HDL-32E data sheet 97-0038); the range resolution is
     the sensor's ``range_resolution_m`` where above 0, else :data:`RETURNS_RANGE_RESOLUTION_M`.
 
@@ -373,6 +369,7 @@ def with_returns(sensor, returns: int, option: str = "returns"):
         ``option`` and the value.
     """
     from zbuf_occlude.sensors.echoes import MAX_RETURNS
+    from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
 
     if isinstance(returns, bool) or not isinstance(returns, int) or not 1 <= returns <= MAX_RETURNS:
         raise InvalidInputError(f"{option} must be a whole number from 1 to {MAX_RETURNS} (returns per pulse), got {returns!r}")
@@ -381,7 +378,7 @@ def with_returns(sensor, returns: int, option: str = "returns"):
     if not sensor.beam_divergence_deg > 0:
         raise InvalidInputError(f"{option} {returns}: sensor {sensor.name} has no beam divergence (beam_divergence_deg 0) to sample "
                                 "a footprint over; give a sensor file with beam_divergence_deg")  # fmt: skip
-    rays = sensor.footprint_rays if sensor.footprint_rays > 1 else RETURNS_FOOTPRINT_RAYS
+    rays = sensor.footprint_rays if sensor.footprint_rays > 1 else FOOTPRINT_RAYS
     resolution = sensor.range_resolution_m if sensor.range_resolution_m > 0 else RETURNS_RANGE_RESOLUTION_M
     # a one-return sensor's echo merging (a Lidar's echo_separation_m) gives way to the range resolution
     merging = {"echo_separation_m": 0.0} if getattr(sensor, "echo_separation_m", 0.0) else {}

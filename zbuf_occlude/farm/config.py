@@ -34,6 +34,7 @@ from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, view_schedule
 from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.mesh.discovery import SPLITS
 from zbuf_occlude.mesh.scene import UP_CHOICES
+from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
 from zbuf_occlude.sensors.placement import CropDistributions, check_across_sight_width
 
 if TYPE_CHECKING:  # annotations only: inputs imports nothing from here
@@ -168,7 +169,7 @@ class SensorCropParams:
             raise InvalidInputError(f"--sensor-footprint and --sensor-reflectivity model LiDARs; {self.name} is not one")
         if self.across_sight_width_m is not None and not isinstance(sensor, Lidar):
             raise InvalidInputError(f"--sensor-across-sight-width measures across a spinning LiDAR's line of sight; {self.name} is not one")
-        return sensor.with_(footprint_rays=7) if self.footprint else sensor
+        return sensor.with_(footprint_rays=FOOTPRINT_RAYS) if self.footprint else sensor
 
     def to_dict(self) -> dict[str, Any]:
         """``{"sensor": name, "sensor_distance_m": [lo, hi], ...}``: the flat keys of :data:`SENSOR_KEYS`."""

@@ -81,6 +81,7 @@ from zbuf_occlude.geometry.arguments import described
 from zbuf_occlude.io.las import LasPoints
 from zbuf_occlude.resources import check_memory
 from zbuf_occlude.sensors.echoes import MAX_RETURNS, hit_energy
+from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
 from zbuf_occlude.sensors.fit.divergence import divergence_from_shares
 from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate, estimates_markdown
 from zbuf_occlude.sensors.fit.returns import (
@@ -95,7 +96,7 @@ from zbuf_occlude.sensors.fit.returns import (
 from zbuf_occlude.sensors.reflectance import reflectance
 
 __all__ = [
-    "ALS_WAVELENGTH_NM", "DETECTION_QUANTILE", "FIT_BYTES_PER_POINT", "FOOTPRINT_RAYS", "GROUND_CLASS", "GROUND_MATERIAL",
+    "ALS_WAVELENGTH_NM", "DETECTION_QUANTILE", "FIT_BYTES_PER_POINT", "GROUND_CLASS", "GROUND_MATERIAL",
     "GROUND_REFLECTANCE", "LOWEST_CELL_M", "LOWEST_SLAB_M", "MIN_CLASS_POINTS", "RESOLUTION_QUANTILE", "ReturnModelFit",
     "fit_return_model", "lower_end", "merge_scans",
 ]  # fmt: skip
@@ -126,8 +127,6 @@ LOWEST_SLAB_M = 0.5
 #: a class's figures hold its points only): tracemalloc's peak was 279 on the IGN sample (7
 #: classes) and 198 on Autzen (2).
 FIT_BYTES_PER_POINT = 384
-#: Sub-rays a sensor of one ray is given when a fitted divergence is applied (the ``--footprint`` ring of 7).
-FOOTPRINT_RAYS = 7
 #: Estimates :meth:`ReturnModelFit.apply` may set, and the sensor field of each.
 _SETS = {"range_resolution_m": "range_resolution_m", "max_returns": "max_returns", "beam_divergence_deg": "beam_divergence_deg",
          "detection_threshold": "detection_threshold"}  # fmt: skip
@@ -188,7 +187,7 @@ class ReturnModelFit:
 
         Sets ``max_returns`` (at most :data:`~zbuf_occlude.sensors.echoes.MAX_RETURNS`) and, above 1,
         ``range_resolution_m``; ``beam_divergence_deg`` where it was fitted (and then
-        ``footprint_rays`` :data:`FOOTPRINT_RAYS` where the sensor had one ray); the detection
+        ``footprint_rays`` :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS` where the sensor had one ray); the detection
         threshold where the sensor has one: a spinning LiDAR's ``detection_range_m`` becomes
         ``√(detection_reflectivity / τ)``, an airborne scanner's ``detection_threshold`` τ (with
         ``max_returns`` above 1); an airborne scanner's ``altitude_m`` becomes the flying
