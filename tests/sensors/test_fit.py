@@ -39,6 +39,7 @@ def _box_scans(sensor, seed: int = 0) -> list[np.ndarray]:
 )  # fmt: skip
 @example(noise=0.03, dropout=0.25, firing=20_000.0, seed=1)
 @example(noise=0.046875, dropout=0.0, firing=29675.0, seed=0)
+@example(noise=0.03125, dropout=0.0, firing=29975.0, seed=1)
 def test_fit_recovers_the_sensor_that_made_the_scans(noise, dropout, firing, seed) -> None:
     truth = lidar_preset("hdl32e").with_(range_noise_m=noise, dropout=dropout, firing_rate_hz=firing)
     fit = fit_lidar(_box_scans(truth, seed), lidar_preset("hdl32e"), bootstrap=20)
@@ -51,8 +52,9 @@ def test_fit_recovers_the_sensor_that_made_the_scans(noise, dropout, firing, see
     assert abs(fit.sensor.dropout_range_per_m) < 0.008
     assert abs(fit.estimates["elevation_offset_deg"].value) < 0.01
     assert fit.estimates["ring_spacing_deg"].value == pytest.approx(1.33, abs=0.02)
-    # boxes without ground: only noisy returns at a box's foot that fit a plane within 25 degrees of level (2.1 % at 4.7 cm)
-    assert fit.estimates["ground_fraction"].value < 0.03
+    # boxes without ground: only noisy returns at a box's foot that fit a plane within 25 degrees of level (2.1 % at 4.7 cm,
+    # 3.1 % at 3.1 cm with seed 1, an estimate whose bootstrap std is 2 %); a crop with its ground holds tens of percent
+    assert fit.estimates["ground_fraction"].value < 0.06
     # the fitted sensor keeps the base's beam table and spin; every estimate has an uncertainty
     assert fit.sensor.elevations_deg == fit.base.elevations_deg
     assert all(np.isfinite(e.std) for e in fit.estimates.values())
