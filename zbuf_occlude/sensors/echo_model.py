@@ -65,10 +65,10 @@ def surface_optics(built: BuiltScene, reflectivity, transmittance, *, wavelength
     n_ids = len(built.objects) + 1
     rho = None
     if reflectivity is not None:
-        rho = table.reflectivity if isinstance(reflectivity, str) else reflectivity_table(reflectivity, n_ids)
+        rho = table.reflectivity if isinstance(reflectivity, str) else _reflectivity_table(reflectivity, n_ids)
     tau = None
     if transmittance is not None:
-        tau = table.transmittance if isinstance(transmittance, str) else transmittance_table(transmittance, n_ids)
+        tau = table.transmittance if isinstance(transmittance, str) else _transmittance_table(transmittance, n_ids)
         if not tau.any():
             tau = None  # opaque everywhere: today's first hits
         elif not multi_return:
@@ -80,7 +80,7 @@ def surface_optics(built: BuiltScene, reflectivity, transmittance, *, wavelength
     return rho, tau
 
 
-def reflectivity_table(reflectivity, n_ids: int) -> NDArray[np.float64]:
+def _reflectivity_table(reflectivity, n_ids: int) -> NDArray[np.float64]:
     """(n_ids,) float64 ρ per object id from a scalar or a per-id sequence."""
     rho = np.asarray(reflectivity, dtype=np.float64).reshape(-1)
     if rho.size == 1:
@@ -90,7 +90,7 @@ def reflectivity_table(reflectivity, n_ids: int) -> NDArray[np.float64]:
     return rho
 
 
-def transmittance_table(transmittance, n_ids: int) -> NDArray[np.float64]:
+def _transmittance_table(transmittance, n_ids: int) -> NDArray[np.float64]:
     """(n_ids,) float64 round-trip transmittance per object id from a scalar or a per-id sequence, each in [0, 1]."""
     try:
         tau = np.asarray(transmittance, dtype=np.float64).reshape(-1)
