@@ -55,8 +55,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.checks import MAX_RANGE_M, MAX_SENSOR_RAYS, count, is_number, located, real, reals, sensor_name, shown, text
-from zbuf_occlude.sensors.echoes import MAX_RETURNS
-from zbuf_occlude.sensors.footprint import MAX_SUBRAYS, PROFILES
+from zbuf_occlude.sensors.footprint import check_resolved_footprint
 
 __all__ = ["AIRBORNE_PRESETS", "MAX_FLIGHT_LINES", "AirborneScanner", "FlightLine", "airborne_preset", "scan_airborne"]
 
@@ -221,18 +220,7 @@ class AirborneScanner:
 
     def _check_returns(self) -> None:
         """The footprint and multi-return fields (class docstring), as the spinning :class:`~.lidar.Lidar` checks them."""
-        object.__setattr__(self, "footprint_rays", count(self.footprint_rays, "footprint_rays", low=1, high=MAX_SUBRAYS))
-        object.__setattr__(self, "max_returns", count(self.max_returns, "max_returns", low=1, high=MAX_RETURNS))
-        text(self.beam_profile, "beam_profile", choices=PROFILES)
-        k = self.footprint_rays
-        if k > 1 and self.beam_divergence_deg <= 0:
-            raise InvalidInputError(f"footprint_rays {k} needs beam_divergence_deg > 0")
-        if self.max_returns > 1 and self.range_resolution_m <= 0:
-            raise InvalidInputError(f"max_returns {self.max_returns} needs range_resolution_m > 0 (the least range between two returns, c·τ/2)")
-        if self.max_returns == 1 and self.range_resolution_m > 0:
-            raise InvalidInputError(f"range_resolution_m {shown(self.range_resolution_m)} needs max_returns above 1")
-        if self.max_returns == 1 and k > 1:
-            raise InvalidInputError(f"footprint_rays {k} needs max_returns above 1 (an airborne footprint is resolved into returns)")
+        check_resolved_footprint(self, "an airborne footprint")
         if self.max_returns == 1 and self.detection_threshold > 0:
             raise InvalidInputError(f"detection_threshold {shown(self.detection_threshold)} needs max_returns above 1 (it drops the weak echoes of the multi-return model)")
 

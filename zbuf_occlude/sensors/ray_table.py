@@ -25,8 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.ray_tables import read_ray_table
 from zbuf_occlude.sensors.checks import MAX_RANGE_M, MAX_SENSOR_RAYS, count, located, real, reals, sensor_name, shown, text
-from zbuf_occlude.sensors.echoes import MAX_RETURNS
-from zbuf_occlude.sensors.footprint import MAX_SUBRAYS, PROFILES, footprint_offsets, subray_directions
+from zbuf_occlude.sensors.footprint import check_resolved_footprint, footprint_offsets, subray_directions
 from zbuf_occlude.sensors.lidar import Lidar, beam_directions
 
 __all__ = ["ROSETTE_FOV_DEG", "ROSETTE_PRISM_HZ", "RayTable", "load_ray_table", "rosette_table"]
@@ -160,20 +159,9 @@ class RayTable:
         for name, bounds in numbers.items():
             object.__setattr__(self, name, real(getattr(self, name), name, **bounds))
         text(self.source, "source")
-        text(self.beam_profile, "beam_profile", choices=PROFILES)
-        object.__setattr__(self, "footprint_rays", count(self.footprint_rays, "footprint_rays", low=1, high=MAX_SUBRAYS))
-        object.__setattr__(self, "max_returns", count(self.max_returns, "max_returns", low=1, high=MAX_RETURNS))
-        k, m = self.footprint_rays, self.max_returns
         if self.min_range_m >= self.max_range_m:
             raise InvalidInputError(f"need min_range_m < max_range_m, got {self.min_range_m} >= {self.max_range_m}")
-        if k > 1 and self.beam_divergence_deg <= 0:
-            raise InvalidInputError(f"footprint_rays {k} needs beam_divergence_deg > 0")
-        if k > 1 and m == 1:
-            raise InvalidInputError(f"footprint_rays {k} needs max_returns above 1 (a ray table's footprint is resolved into returns)")
-        if m > 1 and self.range_resolution_m <= 0:
-            raise InvalidInputError(f"max_returns {m} needs range_resolution_m > 0 (the least range between two returns, c·τ/2)")
-        if m == 1 and self.range_resolution_m > 0:
-            raise InvalidInputError(f"range_resolution_m {self.range_resolution_m} needs max_returns above 1")
+        check_resolved_footprint(self, "a ray table's footprint")
 
     def __len__(self) -> int:
         """N, the table's rows (pulses)."""
