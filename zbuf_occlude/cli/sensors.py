@@ -18,7 +18,6 @@ from zbuf_occlude.cli.crops import FLAGS, CropSettings, add_crop_arguments, crop
 from zbuf_occlude.cli.options import Checked, count, counted, interval, out_folder, parse_interval, real, seed, shown
 from zbuf_occlude.defaults import DEFAULT_SEED
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.geometry.samples import derive_rng, object_key
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.mesh.sizes import DIMENSIONS, SizeRange, size_interval
@@ -342,8 +341,7 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
     """:func:`cmd_scan` once ``--out`` is held."""
     from zbuf_occlude.io.progress import progress as progress_bar
     from zbuf_occlude.sensors.airborne import AirborneScanner
-    from zbuf_occlude.sensors.crops import object_crop
-    from zbuf_occlude.sensors.placement import draw_placement
+    from zbuf_occlude.sensors.crops import object_crops
     from zbuf_occlude.sensors.lidar import Lidar
     from zbuf_occlude.sensors.ray_table import RayTable
     from zbuf_occlude.sensors.scan import look_at_pose, scan
@@ -405,10 +403,10 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
                      dist.width_profile)  # fmt: skip
         if not isinstance(sensor, AirborneScanner):  # an aircraft flies its altitude above the object
             check_outside(dist, None if isinstance(mesh, dict) else mesh.extents)
-        for k in progress_bar(range(args.samples), desc="scan", unit="scan", enabled=not args.no_progress):
-            rng = derive_rng(args.seed, object_key(src.name), k)
-            placement = draw_placement(dist, rng)
-            crop = object_crop(mesh, sensor, placement, seed=int(rng.integers(2**63)), backend=args.backend, frame=args.frame)
+        # the farm's loop and seeds: one seed gives the crops farm --sensor gives a folder holding this file
+        crops = object_crops(mesh, sensor, dist, name=src.stem, n_samples=args.samples, seed=args.seed, backend=args.backend, frame=args.frame)
+        for k, crop, _ in progress_bar(crops, total=args.samples, desc="scan", unit="scan", enabled=not args.no_progress):
+            placement = crop.placement
             s = crop.scan if args.crop else crop.full
             s.meta.update(placement.to_dict())
             stem = f"{src.stem}_{sensor.name}_s{k:03d}"
@@ -516,7 +514,8 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         "--backend", choices=("embree", "zbuffer"), default="embree",
         help="ray casting: embree (exact, CPU) or zbuffer (OpenGL depth images) (default: %(default)s)",
     )  # fmt: skip
-    p.add_argument("--seed", action=Checked, check=seed, default=0, help="seed of the placement draws and the sensor noise (default: %(default)s)")
+    p.add_argument("--seed", action=Checked, check=seed, default=0, help="seed of the placement draws and the sensor noise; one seed gives the crops farm --sensor gives "
+                   "the file in a folder of meshes (default: %(default)s)")
     p.add_argument("--up", choices=UP_CHOICES, default="auto", help="a mesh file's up axis, turned to +z; auto: by its path and format, as in generate and farm "
                    "(ShapeNetCore paths and glTF +y, ...) (default: %(default)s)")
     p.add_argument("--out", required=True, action=Checked, check=out_folder, help="output folder")

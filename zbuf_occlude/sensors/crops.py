@@ -13,7 +13,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,13 +29,19 @@ from zbuf_occlude.sensors.scan import Scan, scan
 from zbuf_occlude.sensors.scene import ScanScene, SceneObject, sensor_pose
 
 if TYPE_CHECKING:  # trimesh is imported where it is used
+    from collections.abc import Iterator
+
     import trimesh
 
-__all__ = ["CropSample", "object_crop", "lidar_object_samples", "kept_return_fields", "side_occluders", "SIDE_OCCLUDER_RANGE", "RETURN_FIELDS"]
+__all__ = [
+    "CropSample", "DrawnCrop", "object_crop", "object_crops", "lidar_object_samples", "kept_return_fields", "side_occluders",
+    "CROP_STREAM", "SIDE_OCCLUDER_RANGE", "RETURN_FIELDS",
+]  # fmt: skip
 
 log = logging.getLogger(__name__)
 
-_CROP_STREAM = 0x5C4E  # keeps crop draws apart from the farm's other streams of one seed
+#: The seed stream of object crops: keeps their draws apart from the other streams of one seed.
+CROP_STREAM = 0x5C4E
 
 
 @dataclass
@@ -129,6 +135,58 @@ def object_crop(
     full = scan(scene, sensor, pose, seed=seed, azimuth_range_deg=sector, backend=backend, frame=frame, reflectivity=rho)
     offset = pose[:3, 3] if frame == "sensor" else 0.0  # sensor axes = world axes (yaw 0)
     return _crop_object(scene, full, placement, pose[:3, 3], offset)
+
+
+class DrawnCrop(NamedTuple):
+    """One crop of :func:`object_crops`: its number, the crop, and its generator (for the sample's further draws)."""
+
+    index: int
+    crop: CropSample
+    rng: np.random.Generator
+
+
+def object_crops(
+    mesh,
+    sensor: Lidar | DepthCamera | AirborneScanner,
+    distributions: CropDistributions,
+    *,
+    name: str,
+    n_samples: int,
+    seed: int = 0,
+    class_name: str = "",
+    backend: str = "embree",
+    frame: str = "sensor",
+) -> Iterator[DrawnCrop]:
+    """The crops of one object, each with its own placement: the one loop of ``scan`` and ``farm --sensor``.
+
+    Crop ``k`` draws its placement (:func:`~zbuf_occlude.sensors.placement.draw_placement`) and then its
+    scan's seed from ``derive_rng(seed, object_key(name), CROP_STREAM, k)``, so that one seed, one
+    name and one mesh give the same crops through either command, and every crop is reproducible alone.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh or dict
+        The object (:func:`object_crop`).
+    name : str
+        The object's stable name, the seed key: the farm's is its path below the input root without
+        suffix, ``scan``'s the file's stem.
+    n_samples : int
+        Crops, ``k = 0 .. n_samples - 1``.
+    frame : str
+        ``sensor`` or ``world``, as :func:`object_crop`.
+
+    Yields
+    ------
+    DrawnCrop
+        ``(k, crop, rng)``: ``rng`` has drawn the placement and the scan's seed; a caller draws what
+        follows from it (the farm its subsample of the returns).
+    """
+    key = object_key(name)
+    for k in range(int(n_samples)):
+        rng = derive_rng(seed, key, CROP_STREAM, k)
+        placement = draw_placement(distributions, rng)
+        crop = object_crop(mesh, sensor, placement, seed=int(rng.integers(2**63)), class_name=class_name, backend=backend, frame=frame)
+        yield DrawnCrop(k, crop, rng)
 
 
 #: A side occluder stands at this share of the distance to the object's nearest vertex.
@@ -284,8 +342,8 @@ def lidar_object_samples(
 ) -> list[OccludedCloud]:
     """The farm's per-object function for ``--sensor``: ``n_samples`` LiDAR crops of one mesh.
 
-    Sample ``k`` draws its placement and its sensor noise from
-    ``derive_rng(seed, object_key(name), stream, k)``, so every sample is reproducible alone.
+    Sample ``k`` is crop ``k`` of :func:`object_crops` (its placement and sensor noise from
+    ``derive_rng(seed, object_key(name), CROP_STREAM, k)``), its points drawn from the same generator.
 
     Parameters
     ----------
@@ -323,13 +381,10 @@ def lidar_object_samples(
         raise InvalidInputError(f"n_samples and n_points must be >= 1, got {n_samples}, {n_points}")
     if not isinstance(mesh, trimesh.Trimesh):
         mesh = load_mesh(mesh)
-    key = object_key(name)
     fields = kept_return_fields(sensor)
     out = []
-    for k in range(int(n_samples)):
-        rng = derive_rng(seed, key, _CROP_STREAM, k)
-        placement = draw_placement(distributions, rng)
-        crop = object_crop(mesh, sensor, placement, seed=int(rng.integers(2**63)), class_name=class_name, backend=backend)
+    for k, crop, rng in object_crops(mesh, sensor, distributions, name=name, n_samples=n_samples, seed=seed, class_name=class_name, backend=backend):
+        placement = crop.placement
         n = len(crop.scan)
         if n == 0:
             log.info("%s sample %d: no return at %.1f m", name, k, placement.distance_m)
