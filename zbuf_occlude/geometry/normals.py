@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 __all__ = [
-    "NORMAL_NEIGHBOURS", "ROBUST_NORMAL_SCALES", "ROBUST_PLANE_TOLERANCE", "ROBUST_SHIFT_PENALTY",
+    "NORMAL_NEIGHBOURS", "ROBUST_NORMAL_SCALES", "ROBUST_PLANE_TOLERANCE", "ROBUST_SHIFT_PENALTY", "ROBUST_SPACING_NEIGHBOUR",
     "estimate_normals", "covariance_normals", "robust_normals",
 ]  # fmt: skip
 
@@ -23,6 +23,8 @@ ROBUST_NORMAL_SCALES = (6, 9, 14)
 #: A neighbourhood counts for a point only if its plane passes within this many spacings (the
 #: distance to the 4th neighbour) of the point: 0.1 (0.2 gives back half of the gain).
 ROBUST_PLANE_TOLERANCE = 0.1
+#: The spacing of :func:`robust_normals` is the distance to this neighbour (the point not counted).
+ROBUST_SPACING_NEIGHBOUR = 4
 #: Surface variation added per spacing a neighbourhood's centre lies from the point: 0.005.  On a
 #: curved surface a shifted neighbourhood is as flat as the point's own but tilted by the
 #: curvature; this keeps the own one there (a sampled sphere: 0.970 -> 0.981 accuracy at 10,000
@@ -139,7 +141,7 @@ def robust_normals(
         return np.tile([0.0, 0.0, 1.0], (n, 1))
     distance, idx = cKDTree(p).query(p, k=max(sizes))
     distance, idx = distance.reshape(n, -1), idx.reshape(n, -1)
-    spacing = distance[:, min(4, distance.shape[1] - 1)]
+    spacing = distance[:, min(ROBUST_SPACING_NEIGHBOUR, distance.shape[1] - 1)]
     centres = idx[:, : min(scales[1] if len(scales) > 1 else sizes[0], idx.shape[1])]
     rows = np.arange(n)
     best = np.full(n, np.inf)
