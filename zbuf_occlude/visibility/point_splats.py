@@ -324,8 +324,10 @@ def point_surfels(
         World frame, object units.
     normals : (N, 3) float, optional
         Surface normals (any length but zero).  Without them each point's normal is estimated
-        from its neighbours, robustly next to sharp edges
-        (:func:`~zbuf_occlude.geometry.normals.robust_normals`).
+        from its neighbours, robustly next to sharp edges (the normals of
+        :func:`~zbuf_occlude.geometry.normals.robust_normals`, computed by
+        :func:`~zbuf_occlude.visibility.point_preparation.surfel_geometry`, which also finds the
+        spacing in the same neighbour search).
     oriented : bool
         ``normals`` point out of a closed surface consistently (a watertight mesh wound
         consistently); then a point facing away whose pixel is won by a surface facing the camera
@@ -373,15 +375,11 @@ def point_surfels(
         if nrm is None:
             nrm = np.tile([0.0, 0.0, 1.0], (n, 1))
         return PointSurfels(pts, nrm, spacing, spacing.copy(), bool(oriented))
-    from scipy.spatial import cKDTree
+    from zbuf_occlude.visibility.point_preparation import surfel_geometry
 
-    from zbuf_occlude.geometry.normals import robust_normals
-
-    distance, _ = cKDTree(pts).query(pts, k=min(k, n - 1) + 1)
-    spacing = np.ascontiguousarray(distance[:, -1])
-    if nrm is None:
-        nrm = robust_normals(pts)
-    return PointSurfels(pts, np.ascontiguousarray(nrm), spacing, scale * spacing, bool(oriented))
+    spacing, estimated, order = surfel_geometry(pts, k, estimate_normals=nrm is None)
+    nrm = estimated if nrm is None else nrm
+    return PointSurfels(pts, np.ascontiguousarray(nrm), spacing, scale * spacing, bool(oriented), order=order)
 
 
 def visible_mask_points(
