@@ -10,10 +10,15 @@ formulas in float32; :func:`decide` then runs on either.
 
 from __future__ import annotations
 
+import contextlib
+import os
+import threading
+from collections.abc import Iterator
+
 import numba
 import numpy as np
 
-__all__ = ["camera_frame", "splat_surfels", "decide"]
+__all__ = ["camera_frame", "decide", "decide_threaded", "splat_surfels", "splat_surfels_threaded"]
 
 #: A surfel seen closer than this to edge-on (|cos| between its normal and a pixel's ray) covers
 #: nothing there: its footprint is a line of zero area (and the ray-plane depth is unbounded).
@@ -67,6 +72,34 @@ def camera_frame(points, normals, rotation, translation):  # pragma: no cover - 
     return cam, normal
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _row_span(nx, ny, nz, qx, qy, qz, nq, r2, y, xlo, xhi):  # pragma: no cover - numba
+    """The ``x`` interval of the row at ``y`` (normalised) where the ray ``(x, y, 1)`` meets the
+    disk, widened to hold every ``x`` the exact test of :func:`splat_surfels` might pass by
+    rounding; ``(xlo, xhi)`` where the interval cannot be told (a disk seen near edge-on)."""
+    # f(x) = |nq (x, y, 1) - den q|^2 - r^2 den^2 with den = nx x + d0: the disk test, a quadratic in x
+    d0 = ny * y + nz
+    ax, bx = nq - nx * qx, -d0 * qx
+    ay, by = -nx * qy, nq * y - d0 * qy
+    az, bz = -nx * qz, nq - d0 * qz
+    a = ax * ax + ay * ay + az * az - r2 * nx * nx
+    b = 2.0 * (ax * bx + ay * by + az * bz - r2 * nx * d0)
+    c = bx * bx + by * by + bz * bz - r2 * d0 * d0
+    scale = ax * ax + ay * ay + az * az + r2 * nx * nx
+    if not a > 1e-9 * scale:
+        return xlo, xhi
+    disc = b * b - 4.0 * a * c
+    mid = -b / (2.0 * a)
+    half = np.sqrt(disc) / (2.0 * a) if disc > 0.0 else 0.0
+    return max(mid - half, xlo), min(mid + half, xhi)
+
+
+#: Relative widening of a disk's bounding box (of its radius): rounding of the unit normal.
+BOX_MARGIN = 1e-6
+#: Disks whose box is at most this many pixels wide test every pixel of it, not the rows' spans.
+SPAN_MIN_PIXELS = 3
+
+
 @numba.njit(cache=True, nogil=True)
 def splat_surfels(cam, normal, radius, pix, x0, y0, width, height):  # pragma: no cover - numba
     """Rasterise oriented disks (surfels) into a z-buffer and a surfel-id buffer.
@@ -99,25 +132,47 @@ def splat_surfels(cam, normal, radius, pix, x0, y0, width, height):  # pragma: n
     """
     depth = np.full((height, width), np.inf)
     ids = np.full((height, width), -1, np.int32)
+    _splat_rows(cam, normal, radius, pix, x0, y0, width, height, 0, height, depth, ids)
+    return depth, ids
+
+
+@numba.njit(cache=True, nogil=True)
+def _splat_rows(cam, normal, radius, pix, x0, y0, width, height, row0, row1, depth, ids):  # pragma: no cover - numba
+    """:func:`splat_surfels` on the rows ``row0 <= j < row1`` of ``depth`` and ``ids``: every surfel
+    in order, so that a band's pixels are what the whole image's would be."""
     for k in range(cam.shape[0]):
         qx, qy, qz = cam[k, 0], cam[k, 1], cam[k, 2]
         r = radius[k]
         if qz - r <= 0.0 or r <= 0.0:
             continue
-        # the disk lies inside the cube q ± r, whose projection (x/z, y/z) is extreme at corners
-        near, far = qz - r, qz + r
-        j0 = max(_cell((min((qy - r) / near, (qy - r) / far) - y0) / pix, height), 0)
-        j1 = min(_cell((max((qy + r) / near, (qy + r) / far) - y0) / pix, height), height - 1)
+        nx, ny, nz = normal[k, 0], normal[k, 1], normal[k, 2]
+        # the disk lies inside the box q ± e, e_a = r sqrt(1 - n_a^2) (a little wider, for
+        # rounding), whose projection (x/z, y/z) is extreme at corners
+        ex = r * (np.sqrt(max(1.0 - nx * nx, 0.0)) + BOX_MARGIN)
+        ey = r * (np.sqrt(max(1.0 - ny * ny, 0.0)) + BOX_MARGIN)
+        ez = min(r * (np.sqrt(max(1.0 - nz * nz, 0.0)) + BOX_MARGIN), r)
+        near, far = qz - ez, qz + ez
+        j0 = max(_cell((min((qy - ey) / near, (qy - ey) / far) - y0) / pix, height), row0)
+        j1 = min(_cell((max((qy + ey) / near, (qy + ey) / far) - y0) / pix, height), row1 - 1)
         if j0 > j1:
             continue
-        i0 = max(_cell((min((qx - r) / near, (qx - r) / far) - x0) / pix, width), 0)
-        i1 = min(_cell((max((qx + r) / near, (qx + r) / far) - x0) / pix, width), width - 1)
-        nx, ny, nz = normal[k, 0], normal[k, 1], normal[k, 2]
+        xlo = min((qx - ex) / near, (qx - ex) / far)
+        xhi = max((qx + ex) / near, (qx + ex) / far)
+        i0 = max(_cell((xlo - x0) / pix, width), 0)
+        i1 = min(_cell((xhi - x0) / pix, width), width - 1)
+        if i0 > i1:
+            continue
         nq = nx * qx + ny * qy + nz * qz
         r2 = r * r
+        narrow = i1 - i0 <= SPAN_MIN_PIXELS
         for j in range(j0, j1 + 1):
             y = y0 + (j + 0.5) * pix
-            for i in range(i0, i1 + 1):
+            a, b = i0, i1
+            if not narrow:  # the row's span of the disk, one pixel wider each side for rounding
+                sx0, sx1 = _row_span(nx, ny, nz, qx, qy, qz, nq, r2, y, xlo, xhi)
+                a = max(_cell((sx0 - x0) / pix - 0.5, width), i0)
+                b = min(_cell((sx1 - x0) / pix - 0.5, width) + 1, i1)
+            for i in range(a, b + 1):
                 x = x0 + (i + 0.5) * pix
                 den = nx * x + ny * y + nz
                 if den * den < EDGE_ON_COS2 * (x * x + y * y + 1.0):
@@ -133,6 +188,18 @@ def splat_surfels(cam, normal, radius, pix, x0, y0, width, height):  # pragma: n
                 if t < depth[j, i]:
                     depth[j, i] = t
                     ids[j, i] = k
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def splat_surfels_threaded(cam, normal, radius, pix, x0, y0, width, height, bands):  # pragma: no cover - numba
+    """:func:`splat_surfels` on numba's threads, in ``bands`` bands of rows (a few per thread, for
+    the load's balance): the same buffers, bit for bit (each pixel sees the surfels in the same
+    order)."""
+    depth = np.full((height, width), np.inf)
+    ids = np.full((height, width), -1, np.int32)
+    bands = max(min(bands, height), 1)
+    for b in numba.prange(bands):
+        _splat_rows(cam, normal, radius, pix, x0, y0, width, height, b * height // bands, (b + 1) * height // bands, depth, ids)
     return depth, ids
 
 
@@ -238,41 +305,84 @@ def decide(cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, cre
     visible : (N,) bool
         Before the frustum test (points behind the camera are False).
     """
-    n = cam.shape[0]
-    height, width = depth.shape
-    visible = np.zeros(n, dtype=np.bool_)
-    for p in range(n):
-        px, py, pz = cam[p, 0], cam[p, 1], cam[p, 2]
-        if pz <= 0.0:
-            continue
-        i = _cell((px / pz - x0) / pix, width)
-        j = _cell((py / pz - y0) / pix, height)
-        if i < 0 or j < 0 or i >= width or j >= height:
-            continue
-        q = ids[j, i]
-        if q < 0 or q == p:
-            visible[p] = not _in_a_gap(p, i, j, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented)
-            continue
-        if oriented:
-            q_faces = normal[q, 0] * cam[q, 0] + normal[q, 1] * cam[q, 1] + normal[q, 2] * cam[q, 2] < 0.0
-            p_faces = normal[p, 0] * px + normal[p, 1] * py + normal[p, 2] * pz < 0.0
-            if q_faces and not p_faces:
-                continue
-        dx, dy, dz = px - cam[q, 0], py - cam[q, 1], pz - cam[q, 2]
-        # the winner's centre behind p's tangent plane (seen from the camera): its disk only
-        # passes through that plane, as past a convex crease, and hides nothing of p's sheet
-        toward = -(normal[p, 0] * px + normal[p, 1] * py + normal[p, 2] * pz)  # n_p · (eye - p)
-        rise = -(dx * normal[p, 0] + dy * normal[p, 1] + dz * normal[p, 2])  # n_p · (q - p)
-        # (a winner in p's plane, as among coplanar surfels that tie for the pixel, is decided
-        # by the distance below, whichever of them won)
-        if rise * toward < -COPLANAR * spacing[p] * abs(toward):
-            visible[p] = not _in_a_gap(p, i, j, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented)
-            continue
-        x = x0 + (i + 0.5) * pix
-        y = y0 + (j + 0.5) * pix
-        t = depth[j, i]
-        dist = abs((x * t - px) * normal[p, 0] + (y * t - py) * normal[p, 1] + (t - pz) * normal[p, 2])
-        allowance = tolerance * spacing[p] + _curvature_allowance(p, q, cam, normal, radius, crease_cos, 1.0)
-        if dist <= allowance:
-            visible[p] = not _in_a_gap(p, i, j, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented)
+    visible = np.zeros(cam.shape[0], dtype=np.bool_)
+    for p in range(cam.shape[0]):
+        visible[p] = _decide_point(p, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented)
     return visible
+
+
+@numba.njit(cache=True, nogil=True)
+def _decide_point(p, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented):  # pragma: no cover - numba
+    """:func:`decide` for point ``p``."""
+    height, width = depth.shape
+    px, py, pz = cam[p, 0], cam[p, 1], cam[p, 2]
+    if pz <= 0.0:
+        return False
+    i = _cell((px / pz - x0) / pix, width)
+    j = _cell((py / pz - y0) / pix, height)
+    if i < 0 or j < 0 or i >= width or j >= height:
+        return False
+    q = ids[j, i]
+    if q < 0 or q == p:
+        return not _in_a_gap(p, i, j, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented)
+    if oriented:
+        q_faces = normal[q, 0] * cam[q, 0] + normal[q, 1] * cam[q, 1] + normal[q, 2] * cam[q, 2] < 0.0
+        p_faces = normal[p, 0] * px + normal[p, 1] * py + normal[p, 2] * pz < 0.0
+        if q_faces and not p_faces:
+            return False
+    dx, dy, dz = px - cam[q, 0], py - cam[q, 1], pz - cam[q, 2]
+    # the winner's centre behind p's tangent plane (seen from the camera): its disk only
+    # passes through that plane, as past a convex crease, and hides nothing of p's sheet
+    toward = -(normal[p, 0] * px + normal[p, 1] * py + normal[p, 2] * pz)  # n_p · (eye - p)
+    rise = -(dx * normal[p, 0] + dy * normal[p, 1] + dz * normal[p, 2])  # n_p · (q - p)
+    # (a winner in p's plane, as among coplanar surfels that tie for the pixel, is decided
+    # by the distance below, whichever of them won)
+    if rise * toward < -COPLANAR * spacing[p] * abs(toward):
+        return not _in_a_gap(p, i, j, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented)
+    x = x0 + (i + 0.5) * pix
+    y = y0 + (j + 0.5) * pix
+    t = depth[j, i]
+    dist = abs((x * t - px) * normal[p, 0] + (y * t - py) * normal[p, 1] + (t - pz) * normal[p, 2])
+    allowance = tolerance * spacing[p] + _curvature_allowance(p, q, cam, normal, radius, crease_cos, 1.0)
+    if dist <= allowance:
+        return not _in_a_gap(p, i, j, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented)
+    return False
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def decide_threaded(cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented):  # pragma: no cover - numba
+    """:func:`decide` on numba's threads (the same answer: each point is decided alone)."""
+    visible = np.zeros(cam.shape[0], dtype=np.bool_)
+    for p in numba.prange(cam.shape[0]):
+        visible[p] = _decide_point(p, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented)
+    return visible
+
+
+#: Points from which one view runs on numba's threads (:func:`threads_for`): 50,000, where a view
+#: takes tens of milliseconds and starting the threads is negligible.  Smaller clouds (PointNet's
+#: 2,048, a data loader's items) stay on one thread: their callers run one process per core.
+THREADED_MIN_POINTS = 50_000
+#: Bands of rows per thread in :func:`splat_surfels_threaded` (objects fill the middle rows).
+BANDS_PER_THREAD = 4
+_threads = threading.Lock()
+_threads_pid: list[int] = []  # the process that first ran a threaded kernel
+
+
+@contextlib.contextmanager
+def threads_for(n: int) -> Iterator[int]:
+    """The number of numba threads a view of ``n`` points may use (1: the serial kernels).
+
+    More than 1 only for ``n >= THREADED_MIN_POINTS`` when ``numba.get_num_threads()`` (set by
+    ``NUMBA_NUM_THREADS`` or ``numba.set_num_threads``) is above 1, no other Python thread is in
+    a threaded view (numba's workqueue layer refuses concurrent calls), and this is not a forked
+    child of a process that ran them (GNU OpenMP is not safe across ``fork``)."""
+    count = numba.get_num_threads() if n >= THREADED_MIN_POINTS else 1
+    if count <= 1 or (_threads_pid and _threads_pid[0] != os.getpid()) or not _threads.acquire(blocking=False):
+        yield 1
+        return
+    try:
+        if not _threads_pid:
+            _threads_pid.append(os.getpid())
+        yield count
+    finally:
+        _threads.release()

@@ -1,0 +1,109 @@
+"""The point-splat kernels (zbuf_occlude.visibility.point_kernels): the splatting of each row's span
+of a disk equals testing every pixel of the image, and the threaded kernels equal the serial ones
+bit for bit."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numba
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import zbuf_occlude as zo
+from zbuf_occlude.visibility import point_kernels as kernels
+
+
+def _every_pixel(cam, normal, radius, pix, x0, y0, width, height):
+    """The z-buffer of :func:`splat_surfels` by its definition: every surfel against every pixel."""
+    depth = np.full((height, width), np.inf)
+    ids = np.full((height, width), -1, np.int32)
+    x = x0 + (np.arange(width) + 0.5) * pix
+    y = y0 + (np.arange(height) + 0.5) * pix
+    x, y = np.meshgrid(x, y)
+    for k in range(len(cam)):
+        q, n, r = cam[k], normal[k], radius[k]
+        if q[2] - r <= 0.0 or r <= 0.0:
+            continue
+        nq = n @ q
+        den = n[0] * x + n[1] * y + n[2]
+        w2 = (nq * x - den * q[0]) ** 2 + (nq * y - den * q[1]) ** 2 + (nq - den * q[2]) ** 2
+        hit = (den * den >= kernels.EDGE_ON_COS2 * (x * x + y * y + 1.0)) & (w2 <= r * r * den * den)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = nq / den
+        better = hit & (t < depth)
+        depth[better], ids[better] = t[better], k
+    return depth, ids
+
+
+@st.composite
+def disks(draw):
+    rng = np.random.default_rng(draw(st.integers(0, 2**31 - 1)))
+    n = draw(st.integers(1, 40))
+    cam = np.column_stack([rng.uniform(-0.5, 0.5, n), rng.uniform(-0.5, 0.5, n), rng.uniform(1.5, 3.0, n)])
+    normal = rng.normal(size=(n, 3))
+    if draw(st.booleans()):  # some nearly edge-on to their rays: the span's quadratic degenerates
+        normal[: n // 2] = np.cross(cam[: n // 2], rng.normal(size=(n // 2, 3))) + 1e-3 * rng.normal(size=(n // 2, 3))
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    radius = rng.uniform(0.002, 0.2, n) * draw(st.sampled_from([0.1, 1.0, 5.0]))
+    size = draw(st.integers(1, 60))
+    pix = 0.6 / size
+    return cam, normal, radius, pix, -0.3, -0.3 + draw(st.floats(-0.05, 0.05)), size, size + draw(st.integers(0, 7))
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(disks())
+def test_splatting_each_rows_span_covers_what_every_pixel_would(case):
+    depth, ids = kernels.splat_surfels(*case)
+    want_depth, want_ids = _every_pixel(*case)
+    np.testing.assert_array_equal(ids, want_ids)
+    np.testing.assert_array_equal(depth, want_depth)
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(disks(), st.integers(1, 9))
+def test_the_threaded_splatting_gives_the_same_buffers_in_any_number_of_bands(case, bands):
+    depth, ids = kernels.splat_surfels(*case)
+    threaded_depth, threaded_ids = kernels.splat_surfels_threaded(*case, bands)
+    np.testing.assert_array_equal(threaded_ids, ids)
+    np.testing.assert_array_equal(threaded_depth, depth)
+
+
+@pytest.fixture(scope="module")
+def chair():
+    mesh = zo.load_mesh(Path(__file__).resolve().parents[2] / "data" / "samples" / "chair" / "train" / "chair_0001.off")
+    points, _ = zo.sample_surface(mesh, 3_000, seed=0)
+    return zo.point_surfels(points)
+
+
+def test_a_view_on_threads_is_the_view_on_one(chair, monkeypatch):
+    cameras = [zo.camera_on_sphere(el, az) for el, az in zo.view_schedule("fibonacci:4")]
+    serial = [chair.visible(c) for c in cameras]
+    monkeypatch.setattr(kernels, "THREADED_MIN_POINTS", 1)
+    with kernels.threads_for(len(chair.points)) as threads:
+        assert threads == numba.get_num_threads()
+    for camera, mask in zip(cameras, serial):
+        np.testing.assert_array_equal(chair.visible(camera), mask)
+
+
+def test_threads_only_for_large_clouds_and_when_numba_has_them(monkeypatch):
+    with kernels.threads_for(kernels.THREADED_MIN_POINTS - 1) as threads:
+        assert threads == 1
+    monkeypatch.setattr(numba, "get_num_threads", lambda: 1)
+    with kernels.threads_for(10**6) as threads:
+        assert threads == 1
+
+
+def test_threads_are_not_shared_between_python_threads_nor_after_a_fork(monkeypatch):
+    monkeypatch.setattr(numba, "get_num_threads", lambda: 4)
+    # another caller while a threaded view runs
+    with kernels.threads_for(10**6) as outer, kernels.threads_for(10**6) as inner:
+        assert (outer, inner) == (4, 1)
+    with kernels.threads_for(10**6) as again:
+        assert again == 4  # released
+    monkeypatch.setattr(kernels, "_threads_pid", [os.getpid() + 1])  # a parent ran them, then forked
+    with kernels.threads_for(10**6) as child:
+        assert child == 1
