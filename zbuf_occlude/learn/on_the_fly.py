@@ -11,8 +11,8 @@ splits ``generate`` and the farm give them and the farm's dense clouds
 
 Point sets (clouds without a mesh: PointNet-layout HDF5, ``.npy``, ``.ply`` point clouds,
 :mod:`zbuf_occlude.io.point_sets`) take the same path, with visibility decided from the points
-alone (:func:`zbuf_occlude.visibility.point_splats.point_surfels`, once per object, and its
-``visible`` per view) and every sample a subset of the cloud; the data set reads them as the
+alone (:func:`zbuf_occlude.visibility.point_splats.point_surfels`, once per object and kept up
+to :data:`PREPARED_CACHE_BYTES` per process, and its ``visible`` per view) and every sample a subset of the cloud; the data set reads them as the
 farm does (:func:`zbuf_occlude.mesh.point_inputs.load_cloud`).
 
 Determinism: sample ``index`` of epoch ``epoch`` uses the generator ``(seed, 3, epoch, index)``
@@ -71,7 +71,7 @@ from zbuf_occlude.sensors.checks import count, is_number, real, reals
 from zbuf_occlude.visibility.point_splats import PointSurfels, point_surfels
 from zbuf_occlude.visibility.registry import method_info, resolution_option, visible_mask
 
-__all__ = ["PoseDistribution", "RandomOcclusion", "OnTheFlyOccludedDataset", "EpochSampler", "SharedEpoch", "ProcessCache", "DEFAULT_ON_THE_FLY_METHOD", "DEFAULT_DENSE_ON_THE_FLY", "BYTES_PER_ON_THE_FLY_POINT"]
+__all__ = ["PoseDistribution", "RandomOcclusion", "OnTheFlyOccludedDataset", "EpochSampler", "SharedEpoch", "ProcessCache", "DEFAULT_ON_THE_FLY_METHOD", "DEFAULT_DENSE_ON_THE_FLY", "BYTES_PER_ON_THE_FLY_POINT", "PREPARED_CACHE_BYTES", "prepared_bytes", "prepared_cache_bytes"]
 
 #: The CPU method: exact, threaded Embree, no GL context to carry into forked workers.
 DEFAULT_ON_THE_FLY_METHOD = "embree-fast"
@@ -81,6 +81,13 @@ DEFAULT_DENSE_ON_THE_FLY = 32_768
 _RESOLUTION = 512
 _ON_THE_FLY_STREAM = 3  # occlude.py uses streams 0 and 1, the protocols 2
 _CACHE_SIZE = 64  # objects per process: meshes, dense clouds and sessions
+#: Bytes of prepared point sets (:func:`~zbuf_occlude.visibility.point_splats.point_surfels`)
+#: each process keeps, 2 GiB: ModelNet40's 9,843 training clouds of 2,048 points take 2.7 GB
+#: (:func:`prepared_bytes`), so that most items of an epoch pay one view, not the preparation
+#: (about 4x a view's time at 2,048 points).  Half the available memory when that is less.
+PREPARED_CACHE_BYTES = 2 * 1024**3
+#: Prepared point sets kept per process at most, whatever their size.
+_PREPARED_CACHE_SIZE = 1_000_000
 #: Bytes one point of a sample costs while it is drawn: the draw's indices and their padding,
 #: the float64 gather of the points, normalize_batch's float64 copies and the float32 result,
 #: the face or point index kept.  100 B measured at the peak of a 2,000,000-point sample of a
@@ -198,11 +205,17 @@ class PoseDistribution:
 
 
 class ProcessCache(OrderedDict):
-    """A small LRU cache; with ``per_process`` it forgets what was made in another process (after a fork)."""
+    """A small LRU cache; with ``per_process`` it forgets what was made in another process (after a fork).
 
-    def __init__(self, size: int, *, per_process: bool = True):
+    It holds at most ``size`` entries and, with ``max_bytes``, at most that many bytes by
+    ``nbytes(value)`` (the newest entry is kept whatever its size): the least recently used go first.
+    """
+
+    def __init__(self, size: int, *, per_process: bool = True, max_bytes: int | None = None, nbytes=None):
         super().__init__()
         self.size, self.pid, self.per_process = size, os.getpid(), per_process
+        self.max_bytes, self.nbytes, self.held_bytes = max_bytes, nbytes, 0
+        self._sizes: dict = {}
 
     def get_or_build(self, key, build):
         if self.per_process and self.pid != os.getpid():  # inherited across fork: Embree/GL state of the parent
@@ -212,17 +225,42 @@ class ProcessCache(OrderedDict):
             self.move_to_end(key)
             return self[key]
         value = self[key] = build()
-        while len(self) > self.size:
-            _, old = self.popitem(last=False)
+        if self.max_bytes is not None:
+            self._sizes[key] = int(self.nbytes(value))
+            self.held_bytes += self._sizes[key]
+        while len(self) > self.size or (self.max_bytes is not None and len(self) > 1 and self.held_bytes > self.max_bytes):
+            old_key, old = self.popitem(last=False)
+            self.held_bytes -= self._sizes.pop(old_key, 0)
             if hasattr(old, "release"):
                 old.release()
         return value
+
+    def clear(self) -> None:
+        super().clear()
+        self._sizes.clear()
+        self.held_bytes = 0
 
     def __reduce__(self):
         # what a cache holds (Embree scenes, GL objects) belongs to its process: a copy -- a
         # spawned DataLoader worker's -- starts empty (OrderedDict's own pickling called
         # ProcessCache() without its size, and copied the entries)
-        return (functools.partial(type(self), self.size, per_process=self.per_process), ())
+        return (functools.partial(type(self), self.size, per_process=self.per_process, max_bytes=self.max_bytes, nbytes=self.nbytes), ())
+
+
+def prepared_bytes(surfels: PointSurfels) -> int:
+    """Bytes a prepared cloud holds once it has been viewed: its arrays and their copies in Morton
+    order (:attr:`~zbuf_occlude.visibility.point_splats.PointSurfels.order`), 136 B a point."""
+    arrays = (surfels.points, surfels.normals, surfels.spacing, surfels.radius)
+    return 2 * sum(a.nbytes for a in arrays) + surfels.order.nbytes
+
+
+def prepared_cache_bytes() -> int:
+    """The byte bound of each process's cache of prepared point sets: :data:`PREPARED_CACHE_BYTES`,
+    or half the memory available when the cache is made, if that is less."""
+    from zbuf_occlude.resources import available_memory
+
+    free = available_memory()
+    return PREPARED_CACHE_BYTES if free is None else min(PREPARED_CACHE_BYTES, free[0] // 2)
 
 
 class RandomOcclusion:
@@ -232,8 +270,9 @@ class RandomOcclusion:
     :class:`~zbuf_occlude.io.point_sets.PointSet`, or an ``(N, 3)`` array): then visibility is
     decided from the points alone, with their normals where given
     (:func:`~zbuf_occlude.visibility.point_splats.point_surfels`, prepared once per object and
-    cached like the sessions, :meth:`~zbuf_occlude.visibility.point_splats.PointSurfels.visible`
-    per view).
+    kept in a per-process cache bounded by bytes, :data:`PREPARED_CACHE_BYTES`, so that an epoch
+    over a data set of clouds pays one view per item;
+    :meth:`~zbuf_occlude.visibility.point_splats.PointSurfels.visible` per view).
 
     Parameters
     ----------
@@ -275,6 +314,8 @@ class RandomOcclusion:
         self.method = method_info(method).name
         self._epoch = SharedEpoch()
         self._sessions = ProcessCache(_CACHE_SIZE)
+        # numpy only, safe across fork; bounded by bytes, not count: a data set's worth of clouds
+        self._prepared = ProcessCache(_PREPARED_CACHE_SIZE, per_process=False, max_bytes=prepared_cache_bytes(), nbytes=prepared_bytes)
 
     @property
     def epoch(self) -> int:
@@ -306,7 +347,7 @@ class RandomOcclusion:
         def build() -> PointSurfels:
             return point_surfels(*cloud_frame(cloud.points, cloud.normals, up, what=f"the point set {cloud.name!r}"))
 
-        return self._sessions.get_or_build(("point set", key, up), build)
+        return self._prepared.get_or_build((key, up), build)
 
     def __call__(self, mesh: trimesh.Trimesh | PointSet | NDArray[np.floating], dense: DenseCloud | None = None,
                  index: int | None = None, *, key: object = None, epoch: int | None = None, up: str = "+z") -> dict:  # fmt: skip
