@@ -21,6 +21,11 @@ from zbuf_occlude.exporters import export
 from zbuf_occlude.exporters.label_sets import MODELNET10_CLASSES
 from zbuf_occlude.protocols.modelnet40c import MODELNET40_CLASSES
 
+
+def y_up(points: np.ndarray) -> np.ndarray:
+    """Our +z-up points in the +y-up frame of PointNet's files: ``(x, y, z) → (x, z, −y)``."""
+    return np.stack([points[..., 0], points[..., 2], -points[..., 1]], axis=-1)
+
 #: Six train meshes of five classes and three test meshes: enough rows for several files of 64.
 MESHES = ("bathtub/train/bathtub_0001.off", "bed/train/bed_0001.off", "chair/train/chair_0001.off",
           "monitor/train/monitor_0001.off", "stool/train/stool_0002.off", "desk/test/desk_0201.off",
@@ -76,7 +81,7 @@ def test_pointnet_h5_reads_back_the_source_as_pointnet_reads_it(sources, tmp_pat
         assert len(ids) == len(source) and set(ids) == set(by_id)
         for row, sample_id in enumerate(ids):
             points, lab, meta = source[by_id[sample_id]]
-            np.testing.assert_array_equal(data[row], points)
+            np.testing.assert_array_equal(data[row], y_up(points))  # in PointNet's frame, each value as it was
             assert names[int(label[row, 0])] == meta["class_name"]
 
 
@@ -152,7 +157,7 @@ def test_modelnet_txt_reads_back_as_pointnet2_pytorch_reads_it(sources, tmp_path
         for i, (points, label) in enumerate(read):  # in the source's order
             expected, _, meta = source[i]
             assert points.shape == (source.n_points, 6)
-            np.testing.assert_allclose(points[:, :3], expected, atol=5e-7)
+            np.testing.assert_allclose(points[:, :3], y_up(expected), atol=5e-7)
             np.testing.assert_allclose(np.linalg.norm(points[:, 3:], axis=1), 1.0, atol=1e-5)
             assert cat[label] == meta["class_name"]
 

@@ -96,7 +96,7 @@ def _pointr_file_list(root: Path, subset: str) -> list[dict]:
 def test_pointr_reads_the_export_as_its_pcn_dataset_does(source, tmp_path):
     out = tmp_path / "PCN"
     result = export(source, "pcn", out)
-    assert result.samples == {"train": 1, "test": 1} and result.unit == "model" and result.files == [out / "PCN.json"]
+    assert result.samples == {"train": 1, "test": 1} and result.unit == "model" and result.files == [out / "PCN.json", out / "export.json"]
     categories = json.loads((out / "PCN.json").read_text())
     assert categories == [
         {"taxonomy_id": "03001627", "taxonomy_name": "chair", "train": ["chair_0001"], "val": [], "test": []},
@@ -190,11 +190,11 @@ def test_refusals_are_one_line_and_make_no_folder(source, tmp_path, capsys):
         ([str(source), "--to", "pointnet-h5"], "`generate --protocol` folder.*--to pcn"),
         ([str(source), "--to", "modelnet-txt"], "`generate --protocol` folder.*--to pcn"),
         ([str(other), "--to", "pcn"], re.escape(str(other / "protocol.json")) + r" is a `generate --protocol depth` run.*--protocol pcn"),
-        ([str(empty), "--to", "pcn"], "holds no protocol.json: export --to pcn reads a `generate --protocol pcn` folder"),
-        ([str(source), "--to", "pcn", "--seed", "1"], "--seed applies to --to pointnet-h5, not to --to pcn"),
-        ([str(source), "--to", "pcn", "--list-prefix", "data/PCN"], "--list-prefix applies to --to pointnet-h5, not to --to pcn"),
-        ([str(source), "--to", "pcn", "--label-set", "modelnet40"], "--to pcn takes --label-set own or shapenet55"),
-        ([str(dataset), "--to", "modelnet-txt", "--seed", "1"], "--seed applies to --to pointnet-h5, not to --to modelnet-txt"),
+        ([str(empty), "--to", "pcn"], "holds no protocol.json: --to pcn reads a `generate --protocol pcn` folder"),
+        ([str(source), "--to", "pcn", "--seed", "1"], "--seed 1 applies to --to pointnet-h5, not to --to pcn; leave it out"),
+        ([str(source), "--to", "pcn", "--list-prefix", "data/PCN"], "--list-prefix data/PCN applies to --to pointnet-h5, not to --to pcn"),
+        ([str(source), "--to", "pcn", "--label-set", "modelnet40"], "--to pcn takes --label-set own or --label-set shapenet55, not --label-set modelnet40"),
+        ([str(dataset), "--to", "modelnet-txt", "--seed", "1"], "--seed 1 applies to --to pointnet-h5, not to --to modelnet-txt"),
     ]
     for argv, message in cases:
         assert re.search(message, _refused([*argv, "--out", out], capsys)), argv

@@ -95,7 +95,7 @@ def test_a_source_inside_out_is_refused_and_out_is_left_as_it_is(sets, tmp_path)
     shutil.copytree(sets["both"], outer / "ds")
     (outer / "notes.txt").write_text("mine\n")
     before = _listing(outer)
-    with pytest.raises(InvalidInputError, match=r"the input .*ds lies inside --out .*outer"):
+    with pytest.raises(InvalidInputError, match=r"the data set .*ds lies inside out='.*outer'"):
         export(outer / "ds", "pointnet-h5", outer)
     assert _listing(outer) == before and not (outer / ".zbuf_occlude-written.jsonl").exists()
 
@@ -113,14 +113,14 @@ def test_a_blank_out_is_refused_and_the_working_folder_is_left_alone(sets, tmp_p
     here = tmp_path / "cwd"
     here.mkdir()
     monkeypatch.chdir(here)
-    with pytest.raises(InvalidInputError, match=r"--out must name a folder, got "):
+    with pytest.raises(InvalidInputError, match=r"out='.*': name a folder"):
         export(sets["both"], "pointnet-h5", out)
     assert not list(here.iterdir())
 
 
 def test_a_blank_dataset_is_refused(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    with pytest.raises(InvalidInputError, match="DATASET must name a folder"):
+    with pytest.raises(InvalidInputError, match="dataset='': name a folder"):
         export("", "pointnet-h5", tmp_path / "out")
     assert not (tmp_path / "out").exists()
 
@@ -128,7 +128,7 @@ def test_a_blank_dataset_is_refused(tmp_path, monkeypatch):
 # -- names on list lines ---------------------------------------------------------------------------
 @pytest.mark.parametrize("bad", ["\r", "\n", "\x85", "\u2028", "\x0b", "\x1e"])
 def test_a_control_character_in_the_list_prefix_is_refused(sets, tmp_path, bad):
-    with pytest.raises(InvalidInputError, match=rf"--list-prefix .* holds the control character U\+{ord(bad):04X}"):
+    with pytest.raises(InvalidInputError, match=rf"list_prefix=.* holds the control character U\+{ord(bad):04X}"):
         export(sets["both"], "pointnet-h5", tmp_path / "out", list_prefix=f"data/a{bad}b")
     assert not (tmp_path / "out").exists()
 
@@ -136,7 +136,7 @@ def test_a_control_character_in_the_list_prefix_is_refused(sets, tmp_path, bad):
 @pytest.mark.parametrize("bad", ["\n", "\r", "\u2029"])
 def test_a_line_break_in_outs_name_is_refused_where_it_goes_on_list_lines(sets, tmp_path, bad):
     out = tmp_path / f"mine{bad}evil"
-    with pytest.raises(InvalidInputError, match=rf"--out's name .* holds the control character U\+{ord(bad):04X}.*--list-prefix"):
+    with pytest.raises(InvalidInputError, match=rf"out=.*: its name .* holds the control character U\+{ord(bad):04X}.*give list_prefix"):
         export(sets["both"], "pointnet-h5", out)
     assert not out.exists()
     export(sets["both"], "pointnet-h5", out, list_prefix="data/mine")  # the name is on no line then
@@ -231,17 +231,17 @@ def test_a_fifo_where_the_earlier_export_wrote_a_file_is_refused_unopened(sets, 
         ({"dataset": None}, ArgumentTypeError, "dataset must be a folder's path .*NoneType"),
         ({"to": None}, ArgumentTypeError, "to must be a str, got NoneType"),
         ({"to": ["pcn"]}, ArgumentTypeError, "to must be a str, got list"),
-        ({"to": "ply"}, InvalidInputError, "--to must be one of pointnet-h5, modelnet-txt, pcn, got 'ply'"),
+        ({"to": "ply"}, InvalidInputError, "to='ply': give one of 'pointnet-h5', 'modelnet-txt', 'pcn'"),
         ({"out": 5}, ArgumentTypeError, "out must be a folder's path .*got int 5"),
         ({"seed": "x"}, ArgumentTypeError, "seed must be a whole number >= 0 or None, got str 'x'"),
         ({"seed": 1.5}, ArgumentTypeError, "seed must be a whole number"),
         ({"seed": True}, ArgumentTypeError, "seed must be a whole number"),
-        ({"seed": -1}, InvalidInputError, "--seed must be a non-negative integer, got -1"),
-        ({"seed": 2**64}, InvalidInputError, "--seed must be at most"),
+        ({"seed": -1}, InvalidInputError, "^seed must be a non-negative integer, got -1"),
+        ({"seed": 2**64}, InvalidInputError, "^seed must be at most"),
         ({"list_prefix": 1}, ArgumentTypeError, "list_prefix must be a str or None, got int 1"),
-        ({"list_prefix": " "}, InvalidInputError, "--list-prefix ' ' is blank"),
+        ({"list_prefix": " "}, InvalidInputError, "list_prefix=' ' is blank"),
         ({"label_set_name": 3}, ArgumentTypeError, "label_set_name must be a str, got int 3"),
-        ({"label_set_name": "imagenet"}, InvalidInputError, "--label-set"),
+        ({"label_set_name": "imagenet"}, InvalidInputError, "not label_set_name='imagenet'"),
     ],
 )  # fmt: skip
 def test_wrong_kinds_and_values_from_python_raise_named_errors(sets, tmp_path, monkeypatch, kwargs, error, message):

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.protocols.modelnet40c import MODELNET40_CLASSES
 
-__all__ = ["LABEL_SETS", "LabelSet", "MODELNET10_CLASSES", "SHAPENET55", "label_set", "shapenet_synset"]
+__all__ = ["LABEL_SETS", "MODELNET10_CLASSES", "SHAPENET55", "LabelSet", "label_set", "shapenet_synset"]
 
 #: ModelNet10's ``modelnet10_shape_names.txt`` (Wu et al. 2015; Pointnet_Pointnet2_pytorch's list).
 MODELNET10_CLASSES = ("bathtub", "bed", "chair", "desk", "dresser", "monitor", "night_stand", "sofa", "table", "toilet")
@@ -89,13 +89,13 @@ class LabelSet:
         missing = sorted(set(classes) - set(mapped))
         if missing:
             raise InvalidInputError(
-                f"--label-set {self.name} has no class {', '.join(map(repr, missing))}; "
-                "use --label-set own (the data set's own classes) or a set that has them"
+                f"label_set_name={self.name!r} has no class {', '.join(map(repr, missing))}; "
+                "use label_set_name='own' (the data set's own classes) or a set that has them"
             )
         return mapped
 
 
-#: ``--label-set``: the sets a pretrained network's labels follow.
+#: ``label_set_name`` (``--label-set``): the sets a pretrained network's labels follow.
 LABEL_SETS = ("modelnet40", "modelnet10", "shapenet55", "own")
 
 
@@ -112,5 +112,5 @@ def label_set(name: str, own: Sequence[str]) -> LabelSet:
         "shapenet55": tuple(s for s, _ in SHAPENET55), "own": tuple(own),
     }  # fmt: skip
     if name not in sets:
-        raise InvalidInputError(f"--label-set must be one of {', '.join(LABEL_SETS)}, got {name!r}")
+        raise InvalidInputError(f"label_set_name={name!r}: give one of {', '.join(map(repr, LABEL_SETS))}")
     return LabelSet(name, sets[name])

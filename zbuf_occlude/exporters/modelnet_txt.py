@@ -2,44 +2,59 @@
 
 What yanx27/Pointnet_Pointnet2_pytorch's ``ModelNetDataLoader`` reads:
 
-* ``<class>/<class>_<NNNN>.txt``: one sample a file, ``x,y,z,nx,ny,nz`` per line (``%.6f``),
-  numbered per class from 1 across the splits; the normals are estimated from the sample's points
-  and face its sensor (:func:`~zbuf_occlude.geometry.normals.estimate_normals`), as a real scan's are;
-* ``modelnet40_shape_names.txt`` (``modelnet10_...`` for ``--label-set modelnet10``, which that loader
-  opens when ``num_category`` is 10): the label set's classes, one per label;
+* ``<class>/<class>_<NNNN>.txt``: one sample a file, ``x,y,z,nx,ny,nz`` per line (``%.6f``), +y up
+  as ModelNet's own files (``up`` turns them otherwise), numbered per class from 1 across the
+  splits; the normals are estimated from the sample's points and face its sensor
+  (:func:`~zbuf_occlude.geometry.normals.estimate_normals`), as a real scan's are;
+* ``modelnet40_shape_names.txt`` (``modelnet10_...`` for ``label_set_name="modelnet10"``, which that
+  loader opens when ``num_category`` is 10): the label set's classes, one per label;
 * ``modelnet40_<split>.txt``: the ids of a split, one a line; the loader takes an id's class from
-  the id (all but its last ``_`` part) and its label from the class list.
+  the id (all but its last ``_`` part) and its label from the class list;
+* ``modelnet40_<split>_id2file.json``: each id's mesh and view (``<name>/vPPP_sSS``), as
+  ``pointnet-h5``'s ``id2file.json`` (the loader does not open it).
 
-Samples are read one object at a time (memory for one object's samples).  Each line holds xyz and
-normals only: a ``farm --sensor`` data set's per-point return fields are left out (the loader reads
-six columns).
+Samples are read one object at a time (memory for one object's samples) and each line is made
+without a Python loop (:func:`~zbuf_occlude.exporters.text_table.fixed_point_table_bytes`, the bytes
+of ``np.savetxt``).  Each line holds xyz and normals only: a ``farm --sensor`` data set's per-point
+return fields are left out (the loader reads six columns).
 """
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
+from zbuf_occlude.exporters.base import ExportOptions, Target, Written, turn_up
+from zbuf_occlude.exporters.source import Splits, open_dataset, sample_file
+from zbuf_occlude.exporters.text_table import fixed_point_table_bytes
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
 from zbuf_occlude.geometry.normals import estimate_normals
-from zbuf_occlude.io.encodings import text_table_bytes
 from zbuf_occlude.io.owned import OwnedFolder
+from zbuf_occlude.io.progress import progress
 from zbuf_occlude.resources import check_memory
 from zbuf_occlude.sensors.lidar import beam_directions
 
-__all__ = ["FILE_NAMES", "write_modelnet_txt"]
+__all__ = ["FILE_NAMES", "TARGET", "write_modelnet_txt"]
 
-#: Bytes per point of one sample while it is written: six float64 columns, and their text
-#: (``-0.123456,`` : at most 11 characters a value for coordinates in [-1, 1] and unit normals, some more for others).
-BYTES_PER_POINT = 6 * 8 + 6 * 16
+#: Bytes per point of one sample while it is written: six float64 columns, their int64 digits, and
+#: their text (16 bytes a value while it is cut, 11 characters once written for coordinates in [-1, 1]).
+BYTES_PER_POINT = 6 * 8 * 3 + 6 * 16 * 2
 #: The names this target writes (regular expressions, for the owned folder).
-FILE_NAMES = (r"[^/]+/[^/]+_\d{4,}\.txt", r"modelnet(10|40)_(shape_names|[a-z]+)\.txt")
+FILE_NAMES = (r"[^/]+/[^/]+_\d{4,}\.txt", r"modelnet(10|40)_(shape_names|[a-z]+)\.txt", r"modelnet(10|40)_[a-z]+_id2file\.json")
 
 
 def write_modelnet_txt(
-    folder: OwnedFolder, splits: Mapping[str, object], labels: Mapping[str, int], names: Sequence[str], *, prefix: str
+    folder: OwnedFolder,
+    splits: Mapping[str, object],
+    labels: Mapping[str, int],
+    names: Sequence[str],
+    *,
+    prefix: str,
+    up: str = "+y",
+    show_progress: bool = False,
 ) -> list[Path]:
     """Write every sample of ``splits`` as one text file (module docstring).
 
@@ -48,18 +63,22 @@ def write_modelnet_txt(
     folder : OwnedFolder
         The export's folder, held.
     splits : mapping of str to OccludedDataset
-        The source's samples of each split.
+        The source's samples of each split (+z up).
     labels : mapping of str to int
         The label of each class name.
     names : sequence of str
         The label set's class names: the folders, the ids' class part and the class list.
     prefix : str
         ``modelnet40`` or ``modelnet10``: the class list's and id lists' names.
+    up : str
+        The export's up axis (:data:`~zbuf_occlude.exporters.base.UP_AXES`); points and normals turn together.
+    show_progress : bool
+        A progress bar of the samples written, on stderr.
 
     Returns
     -------
     list of Path
-        The class list and id lists (the sample files are many; they are in the folder's ledger).
+        The class list and id lists (the sample files and id maps are many; they are in the folder's ledger).
 
     Raises
     ------
@@ -72,18 +91,35 @@ def write_modelnet_txt(
     check_memory(n_points * BYTES_PER_POINT, option=f"one sample's text ({n_points:,} points)", hint="free memory")
     written = [folder.write_text(f"{prefix}_shape_names.txt", "".join(f"{n}\n" for n in names))]
     counter: dict[str, int] = {}
-    for split, ds in sorted(splits.items()):
-        ids = []
-        radius = float(ds.card.get("params", {}).get("radius") or DEFAULT_RADIUS)
-        for start, block in ds.iter_arrays():
-            for j, points in enumerate(block):
-                meta = ds.metadata(start + j)
-                cls = names[labels[meta["class_name"]]]
-                counter[cls] = counter.get(cls, 0) + 1
-                sample_id = f"{cls}_{counter[cls]:04d}"
-                eye = beam_directions(meta["elevation_deg"], meta["azimuth_deg"]) * float(meta.get("radius", radius))
-                table = text_table_bytes(np.hstack([points, estimate_normals(points, eye)]), fmt="%.6f", delimiter=",")
-                folder.write_bytes(f"{cls}/{sample_id}.txt", table)
-                ids.append(sample_id)
-        written.append(folder.write_text(f"{prefix}_{split}.txt", "".join(f"{i}\n" for i in ids)))
+    total = sum(len(ds) for ds in splits.values())
+    with progress(total=total, desc="export modelnet-txt", unit="sample", enabled=show_progress) as bar:
+        for split, ds in sorted(splits.items()):
+            ids = {}
+            radius = float(ds.card.get("params", {}).get("radius") or DEFAULT_RADIUS)
+            for start, block in ds.iter_arrays():
+                for j, points in enumerate(block):
+                    meta = ds.metadata(start + j)
+                    cls = names[labels[meta["class_name"]]]
+                    counter[cls] = counter.get(cls, 0) + 1
+                    sample_id = f"{cls}_{counter[cls]:04d}"
+                    eye = beam_directions(meta["elevation_deg"], meta["azimuth_deg"]) * float(meta.get("radius", radius))
+                    table = turn_up(np.hstack([points, estimate_normals(points, eye)]).reshape(-1, 2, 3), "+z", up)
+                    folder.write_bytes(f"{cls}/{sample_id}.txt", fixed_point_table_bytes(table.reshape(-1, 6)))
+                    ids[sample_id] = sample_file(meta)
+                bar.update(len(block))
+            folder.write_text(f"{prefix}_{split}_id2file.json", json.dumps(ids, indent=0) + "\n")
+            written.append(folder.write_text(f"{prefix}_{split}.txt", "".join(f"{i}\n" for i in ids)))
     return written
+
+
+def _write(folder: OwnedFolder, src: Splits, options: ExportOptions) -> Written:
+    prefix = "modelnet10" if src.set_name == "modelnet10" else "modelnet40"
+    files = write_modelnet_txt(folder, src.splits, src.labels, src.names, prefix=prefix, up=options.up, show_progress=options.progress)
+    return Written(files, src.samples)
+
+
+#: ``to="modelnet-txt"``.
+TARGET = Target(
+    "modelnet-txt", "Pointnet_Pointnet2_pytorch's modelnet40_normal_resampled", FILE_NAMES, open_dataset, _write,
+    up="+y", frame="as ModelNet's modelnet40_normal_resampled (PointNet-family augmentation turns about y)",
+)  # fmt: skip

@@ -16,13 +16,14 @@ data set holds no complete cloud, so it is no source of this target.  The export
   ``generate --complete-points`` said otherwise (PoinTr asserts its config's ``N_POINTS``).
 
 Each ``.pcd`` is binary, uncompressed (PoinTr's reader takes no compression), fields ``x y z``
-float32 (written with pypcd4), in PCN's frame (y up, bounding-box diagonal 1).
+float32 (written with pypcd4), in PCN's frame (+y up, bounding-box diagonal 1; ``up`` turns it to
+another up axis).
 
 Names:
 
 * ``taxonomy_id``: the ShapeNet synset id when the class is one of ShapeNet-55's, by id or name
   (:func:`~zbuf_occlude.exporters.label_sets.shapenet_synset`: ``chair`` → ``03001627``, as PCN's
-  own ``PCN.json``), else the class name itself (``--label-set shapenet55`` refuses such a class
+  own ``PCN.json``), else the class name itself (``label_set_name="shapenet55"`` refuses such a class
   instead).  Classes that give one id share its entry;
 * ``taxonomy_name``: the class name (several, ``,``-joined, as ShapeNet's ``taxonomy.json`` joins
   synonyms); a class named by a bare synset id gets ShapeNet's first name for it;
@@ -57,15 +58,19 @@ import numpy as np
 from zbuf_occlude.dataset.layout import PROTOCOL_FILE
 from zbuf_occlude.defaults import MAX_POINTS
 from zbuf_occlude.errors import DatasetFormatError, InvalidInputError
+from zbuf_occlude.exporters.base import ExportOptions, Target, Written, turn_up
 from zbuf_occlude.exporters.label_sets import SHAPENET55, label_set, shapenet_synset
 from zbuf_occlude.io.json_files import read_json_file
 from zbuf_occlude.io.owned import OwnedFolder
+from zbuf_occlude.io.progress import progress
 from zbuf_occlude.io.safe_paths import path_inside
 from zbuf_occlude.protocols.base import open_arrays_h5, shard_name
 from zbuf_occlude.protocols.pcn import COMPLETE_POINTS, HEIGHT, N_VIEWS, WIDTH
 from zbuf_occlude.resources import check_memory
 
-__all__ = ["ARRAYS", "CATEGORY_FILE", "FILE_NAMES", "PROTOCOL", "SUBSETS", "PcnModel", "PcnPlan", "pcd_bytes", "plan_pcn", "write_pcn"]
+__all__ = [
+    "ARRAYS", "CATEGORY_FILE", "FILE_NAMES", "PROTOCOL", "SUBSETS", "TARGET", "PcnModel", "PcnPlan", "pcd_bytes", "plan_pcn", "write_pcn",
+]  # fmt: skip
 
 log = logging.getLogger(__name__)
 
@@ -213,13 +218,13 @@ def _read_record(source: Path) -> dict:
     path = source / PROTOCOL_FILE
     if not os.path.lexists(path):
         raise InvalidInputError(
-            f"{source} holds no {PROTOCOL_FILE}: export --to pcn reads a `generate --protocol {PROTOCOL}` folder; {_MAKE_SOURCE}"
+            f"{source} holds no {PROTOCOL_FILE}: to='pcn' reads a `generate --protocol {PROTOCOL}` folder; {_MAKE_SOURCE}"
         )
     record = read_json_file(path, within=source)
     protocol = record.get("protocol") if isinstance(record, dict) else None
     if protocol != PROTOCOL or not isinstance(record.get("objects"), list):
         what = f"a `generate --protocol {protocol}` run" if isinstance(protocol, str) else "no protocol run of ours"
-        raise InvalidInputError(f"{path} is {what}: export --to pcn reads a `generate --protocol {PROTOCOL}` folder; {_MAKE_SOURCE}")
+        raise InvalidInputError(f"{path} is {what}: to='pcn' reads a `generate --protocol {PROTOCOL}` folder; {_MAKE_SOURCE}")
     return record
 
 
@@ -256,7 +261,7 @@ def _taxonomy(classes: list[str], label_set_name: str) -> dict[str, str]:
 
 
 def _taxonomy_name(taxonomy_id: str, classes: list[str]) -> str:
-    first_names = dict((synset, names[0]) for synset, names in SHAPENET55)
+    first_names = {synset: names[0] for synset, names in SHAPENET55}
     return ",".join(sorted(first_names[c] if c == taxonomy_id and c in first_names else c for c in classes))
 
 
@@ -359,7 +364,7 @@ def pcd_bytes(points: np.ndarray) -> bytes:
     return buffer.getvalue()
 
 
-def write_pcn(folder: OwnedFolder, plan: PcnPlan) -> list[Path]:
+def write_pcn(folder: OwnedFolder, plan: PcnPlan, *, up: str = "+y", show_progress: bool = False) -> list[Path]:
     """Write ``plan``'s models in PCN's layout (module docstring), one shard read at a time.
 
     Parameters
@@ -368,6 +373,10 @@ def write_pcn(folder: OwnedFolder, plan: PcnPlan) -> list[Path]:
         The export's folder, held (names :data:`FILE_NAMES`).
     plan : PcnPlan
         From :func:`plan_pcn`.
+    up : str
+        The export's up axis (:data:`~zbuf_occlude.exporters.base.UP_AXES`); the source is PCN's +y up.
+    show_progress : bool
+        A progress bar of the models written, on stderr.
 
     Returns
     -------
@@ -385,14 +394,26 @@ def write_pcn(folder: OwnedFolder, plan: PcnPlan) -> list[Path]:
     splits = list(SUBSETS) + sorted({m.split for m in plan.models} - set(SUBSETS))
     lists = {t: {s: [] for s in splits} for t in plan.taxonomy_names}
     empty = 0
-    for model in plan.models:
+    for model in progress(plan.models, desc="export pcn", unit="model", enabled=show_progress):
         views, complete = _views(model, plan)
         for v, points in enumerate(views):
-            folder.write_bytes(f"{model.split}/partial/{model.taxonomy_id}/{model.model_id}/{v:02d}.pcd", pcd_bytes(points))
+            folder.write_bytes(f"{model.split}/partial/{model.taxonomy_id}/{model.model_id}/{v:02d}.pcd", pcd_bytes(turn_up(points, "+y", up)))
             empty += not len(points)
-        folder.write_bytes(f"{model.split}/complete/{model.taxonomy_id}/{model.model_id}.pcd", pcd_bytes(complete))
+        folder.write_bytes(f"{model.split}/complete/{model.taxonomy_id}/{model.model_id}.pcd", pcd_bytes(turn_up(complete, "+y", up)))
         lists[model.taxonomy_id][model.split].append(model.model_id)
     if empty:
         log.warning("%d partial views saw nothing and are empty clouds (PoinTr's PCN pads a view to 2,048 points with zeros)", empty)
     entries = [{"taxonomy_id": t, "taxonomy_name": name, **lists[t]} for t, name in plan.taxonomy_names.items()]
     return [folder.write_text(CATEGORY_FILE, json.dumps(entries, indent=1) + "\n")]
+
+
+def _write(folder: OwnedFolder, plan: PcnPlan, options: ExportOptions) -> Written:
+    return Written(write_pcn(folder, plan, up=options.up, show_progress=options.progress), plan.samples)
+
+
+#: ``to="pcn"``.
+TARGET = Target(
+    "pcn", "PCN's completion layout, PCN.json and .pcd (PCN, PoinTr, SnowflakeNet, SeedFormer)", FILE_NAMES, plan_pcn, _write,
+    up="+y", frame="PCN's (ShapeNet's alignment, bounding-box diagonal 1)", protocol=PROTOCOL,
+    label_sets=("own", "shapenet55"), unit="model",
+)  # fmt: skip
