@@ -24,7 +24,9 @@ from zbuf_occlude.io.atomic import file_sha256
 REPO_ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = REPO_ROOT / "data" / "samples"
 CHAIR, SOFA, STOOL = (SAMPLES / rel for rel in ("chair/train/chair_0001.off", "sofa/test/sofa_0681.off", "stool/train/stool_0002.off"))
-ARGS = ["--views", "0:0,30:45,-30:200", "--points", "128", "--samples-per-view", "2", "--resolution", "128"]
+ARGS = ["--views", "0:0,30:45,-30:200", "--points", "128", "--samples-per-view", "2"]  # --resolution: meshes only
+#: z-up -> y-up, as PointNet's HDF5 files store ModelNet (read back +y up by default): exact in float32.
+Z_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 
 pytestmark = pytest.mark.slow
 
@@ -47,7 +49,7 @@ def make_point_sets(root: Path) -> dict[str, np.ndarray]:
     pointnet = root / "pointnet"
     pointnet.mkdir()
     with h5py.File(pointnet / "ply_data_train0.h5", "w") as f:
-        f["data"] = clouds
+        f["data"] = (clouds @ Z_TO_Y_UP.T.astype(np.float32)).astype(np.float32)  # +y up, as PointNet's files
         f["label"] = np.array([[0], [1], [2]], dtype=np.uint8)
     (pointnet / "shape_names.txt").write_text("chair\nsofa\nstool\n")
     for row in range(3):
@@ -129,7 +131,7 @@ def test_a_rerun_resumes_every_object(made, capsys) -> None:
     shards = {p: p.read_bytes() for p in sorted((out / "shards").iterdir())}
     capsys.readouterr()
     assert main(["generate", str(root), "--out", str(out), *ARGS, "--no-progress"]) == 0
-    assert "(5 meshes from an earlier run)" in capsys.readouterr().out
+    assert "(5 clouds from an earlier run)" in capsys.readouterr().out
     assert {p: p.read_bytes() for p in sorted((out / "shards").iterdir())} == shards
 
 
@@ -140,7 +142,7 @@ def test_meshes_and_point_sets_mix_and_the_card_says_so(tmp_path) -> None:
     (root / "sofa").mkdir()
     np.save(root / "sofa" / "scan.npy", _sampled(SOFA, 1000))
     out = tmp_path / "out"
-    assert main(["generate", str(root), "--out", str(out), *ARGS, "--dense-points", "3000", "--format", "npz"]) == 0
+    assert main(["generate", str(root), "--out", str(out), *ARGS, "--dense-points", "3000", "--resolution", "128", "--format", "npz"]) == 0
     assert main(["verify", str(out)]) == 0
     card = _card(out)
     assert card["visibility_from"] == "points and meshes" and card["point_sets"]["n_objects"] == 1

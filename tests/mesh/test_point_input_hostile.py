@@ -21,7 +21,7 @@ from zbuf_occlude.errors import DatasetFormatError, InsufficientMemoryError, Inv
 from zbuf_occlude.mesh.inputs import scan_inputs
 from zbuf_occlude.mesh.point_inputs import MIN_KEPT_DISTINCT, cloud_frame, load_cloud, point_set_clouds, pointnet_split
 
-TINY = ["--views", "0:0", "--points", "64", "--samples-per-view", "1", "--resolution", "64", "--no-progress"]
+TINY = ["--views", "0:0", "--points", "64", "--samples-per-view", "1", "--no-progress"]  # --resolution: meshes only
 CLOUD = np.random.default_rng(0).normal(size=(300, 3))
 #: What a file outside the point set's folder says: it must never become a class name.
 SECRET = "SECRET_FROM_OUTSIDE"

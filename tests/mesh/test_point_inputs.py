@@ -178,16 +178,18 @@ def test_load_cloud_normalises_as_a_mesh_and_turns_points_and_normals_up(tmp_pat
     normals = rng.normal(size=(200, 3))
     path = _h5(tmp_path / "c.h5", [points, points], normals=[normals, normals])
     stored = points.astype(np.float32).astype(np.float64)
-    cloud = load_cloud(path, 1)
+    cloud = load_cloud(path, 1, up="+z")  # as stored
     lo, hi = stored.min(axis=0), stored.max(axis=0)
     np.testing.assert_array_equal(cloud.points, (stored - (lo + hi) / 2) * (1.0 / (hi - lo).max()))
-    assert (cloud.up, cloud.up_source) == ("+z", "as stored (+z)")
-    turned = load_cloud(path, 1, up="+y")  # (x, y, z) -> (x, -z, y)
+    assert (cloud.up, cloud.up_source) == ("+z", "explicit")
+    turned = load_cloud(path, 1)  # PointNet's layout is +y up: (x, y, z) -> (x, -z, y)
     assert np.allclose(turned.points[:, 2] * (hi - lo).max(), stored[:, 1] - (lo[1] + hi[1]) / 2)
     unit = normals.astype(np.float32).astype(np.float64)
     unit /= np.linalg.norm(unit, axis=1, keepdims=True)
     assert np.allclose(turned.normals, unit[:, [0, 2, 1]] * [1, -1, 1])
-    assert turned.up_source == "explicit"
+    assert (turned.up, turned.up_source) == ("+y", "PointNet HDF5 layout (+y)")
+    npy = load_cloud(_npy(tmp_path / "c.npy", points), 0)  # a .npy declares no frame: as stored
+    assert (npy.up, npy.up_source) == ("+z", "as stored (+z)")
 
 
 @pytest.mark.parametrize("points", [np.ones((10, 3)), np.zeros((1, 3))], ids=["coincident", "one point"])

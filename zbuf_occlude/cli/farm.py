@@ -8,7 +8,7 @@ import shlex
 import sys
 
 from zbuf_occlude.cli.crops import add_crop_arguments, crop_settings, given_crop_options
-from zbuf_occlude.cli.options import Checked, count, out_folder, poses, real, seed
+from zbuf_occlude.cli.options import Checked, count, given_params, out_folder, poses, real, seed
 from zbuf_occlude.dataset.layout import STORAGE_MODES
 from zbuf_occlude.defaults import DEFAULT_DENSE_POINTS as GENERATE_DENSE_POINTS
 from zbuf_occlude.defaults import (
@@ -34,6 +34,7 @@ from zbuf_occlude.farm.shards import parse_shard
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
 from zbuf_occlude.mesh.discovery import SPLITS
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
+from zbuf_occlude.mesh.input_kinds import DEFAULT_POINT_SET_POINTS, POINT_SET_METHOD, POINT_SET_VISIBLE_SHARE
 from zbuf_occlude.mesh.scene import UP_CHOICES
 
 log = logging.getLogger(__name__)
@@ -54,6 +55,20 @@ CLASS_FROM_HELP = (
 CLASS_FROM = count(None, hint="1: the folder holding each file")
 
 
+#: What the CLI says of point-set inputs (``generate`` and ``farm``).
+POINT_SETS_HELP = (
+    "Point-set files are taken too (PointNet-layout HDF5 such as modelnet40_ply_hdf5_2048, read +y up; .npy and "
+    ".ply without faces, read as stored, +z up; --up overrides): each cloud is one object, its visibility decided "
+    f"from its points alone ({POINT_SET_METHOD}); see docs/guide/inputs.md"
+)
+#: Why point sets take fewer points per sample by default.
+POINT_SETS_POINTS_WHY = f"about {round(100 * POINT_SET_VISIBLE_SHARE)} %% of a cloud is visible per pose"  # %%: argparse's
+#: What the help of an option that point sets refuse adds.
+NOT_FOR_POINT_SETS = "meshes only: refused for point sets"
+#: ``FarmParams`` field -> ``args`` attribute of the options a point-set run refuses or defaults itself.
+GIVEN_PARAMS = {"n_points": "points", "dense_points": "dense_points", "density": "density", "resolution": "resolution"}
+
+
 # -- command line (called from zbuf_occlude.cli.main) -------------------------------------------------
 def _farm_command(args: argparse.Namespace) -> int:
     if args.density is not None and args.dense_points is not None:
@@ -61,10 +76,10 @@ def _farm_command(args: argparse.Namespace) -> int:
     params = FarmParams(
         views=args.views,
         samples_per_view=args.samples_per_view,
-        n_points=args.points,
+        n_points=args.points if args.points is not None else DEFAULT_N_POINTS,
         dense_points=args.dense_points if args.dense_points is not None else DEFAULT_FARM_DENSE_POINTS,
         density=args.density,
-        resolution=args.resolution,
+        resolution=args.resolution if args.resolution is not None else DEFAULT_FARM_RESOLUTION,
         seed=args.seed,
         radius=args.radius,
         storage=args.storage,
@@ -88,6 +103,7 @@ def _farm_command(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         isolate=True,  # a SIGTERM stops the run at once, even inside a long native call
         command=shlex.join(["zbuf-occlude", *sys.argv[1:]]) if sys.argv else None,
+        set_params=given_params(args, GIVEN_PARAMS),
     )
     summary = run_farm(args.root, args.out, params, options)
     print(summary.format())
@@ -118,14 +134,15 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser(
         "farm",
         help="build a whole occluded data set (parallel, resumable, sharded, Dask)",
-        description="Render every mesh of ROOT from every pose and write a PointNet-style HDF5 data set to --out. "
+        description="Render every mesh of ROOT from every pose and write a PointNet-style HDF5 data set to --out; "
+        "point-set files in ROOT (PointNet HDF5, .npy, .ply without faces) are seen from their points alone. "
         "Run the same command again to resume; objects already finished are skipped.",
     )
     p.add_argument(
         "root",
         help=f"a folder of mesh files ({EXTENSIONS_TEXT}): ModelNet CLASS/SPLIT/NAME.off, ShapeNetCore v1/v2 with its "
         "taxonomy.json, CLASS/NAME.ext or CLASS_NNNN.ext files (the layout used goes into the card; see docs/guide/inputs.md); "
-        "or a list file of 'PATH LABEL [SPLIT]' lines",
+        f"or a list file of 'PATH LABEL [SPLIT]' lines. {POINT_SETS_HELP}",
     )
     p.add_argument("--out", required=True, action=Checked, check=out_folder, help="data set folder")
     sel = p.add_argument_group("selection")
@@ -139,14 +156,17 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
     r.add_argument(
         "--samples-per-view", action=Checked, check=count("MAX_SAMPLES"), default=DEFAULT_SAMPLES_PER_VIEW, help="random samples drawn per pose (default: %(default)s)"
     )
-    r.add_argument("--points", action=Checked, check=count("MAX_POINTS"), default=DEFAULT_N_POINTS, help="points per sample (default: %(default)s)")
+    r.add_argument(
+        "--points", action=Checked, check=count("MAX_POINTS"),
+        help=f"points per sample (default: {DEFAULT_N_POINTS}; point sets: {DEFAULT_POINT_SET_POINTS}, {POINT_SETS_POINTS_WHY})",
+    )  # fmt: skip
     dense = r.add_mutually_exclusive_group()
     dense.add_argument(
-        "--dense-points", action=Checked, check=count("MAX_POINTS"), help=f"dense cloud per mesh, sampled once (default: {DEFAULT_FARM_DENSE_POINTS}; generate's: {GENERATE_DENSE_POINTS})"
+        "--dense-points", action=Checked, check=count("MAX_POINTS"), help=f"dense cloud per mesh, sampled once (default: {DEFAULT_FARM_DENSE_POINTS}; generate's: {GENERATE_DENSE_POINTS}; {NOT_FOR_POINT_SETS})"
     )
-    dense.add_argument("--density", action=Checked, check=real(0.0, above=True), help="dense cloud as points per unit area of the normalised mesh")
+    dense.add_argument("--density", action=Checked, check=real(0.0, above=True), help=f"dense cloud as points per unit area of the normalised mesh ({NOT_FOR_POINT_SETS})")
     r.add_argument(
-        "--resolution", action=Checked, check=count("MAX_RESOLUTION"), default=DEFAULT_FARM_RESOLUTION, help=f"z-buffer image size, pixels (default: %(default)s; generate's: {GENERATE_RESOLUTION})"
+        "--resolution", action=Checked, check=count("MAX_RESOLUTION"), help=f"z-buffer image size, pixels (default: {DEFAULT_FARM_RESOLUTION}; generate's: {GENERATE_RESOLUTION}; {NOT_FOR_POINT_SETS})"
     )
     r.add_argument(
         "--radius", action=Checked, check=real(), default=DEFAULT_RADIUS, help=f"{RADIUS_HELP} (default: %(default)s)"

@@ -27,13 +27,14 @@ from typing import Any
 import numpy as np
 
 from zbuf_occlude._version import __version__
-from zbuf_occlude.cli.options import Checked, Parser, count, counted, out_folder, poses, real, seed
+from zbuf_occlude.cli.options import Checked, Parser, count, counted, given_params, out_folder, poses, real, seed
 from zbuf_occlude.defaults import DEFAULT_DENSE_POINTS, DEFAULT_METHOD, DEFAULT_RESOLUTION, DEFAULT_SEED, DEFAULT_VIEWS
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere, view_schedule
 from zbuf_occlude.io.atomic import write_csv
 from zbuf_occlude.io.clouds import FORMATS
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
+from zbuf_occlude.mesh.input_kinds import plan_nouns
 from zbuf_occlude.resources import check_memory, estimate_job_memory
 from zbuf_occlude.visibility.metrics import agreement
 from zbuf_occlude.visibility.registry import (
@@ -65,23 +66,34 @@ def _default_paths(paths: list[str]) -> list[str]:
 
 
 # -- generate ------------------------------------------------------------------------------
+def _or(value: Any, default: Any) -> Any:
+    """An option's value, or ``default`` where it was not given (its parser default is None)."""
+    return default if value is None else value
+
+
 def cmd_generate(args: argparse.Namespace) -> int:
     """``generate`` runs on the farm's engine (:mod:`zbuf_occlude.farm.generate`)."""
     import shlex
 
+    from zbuf_occlude.cli.farm import GIVEN_PARAMS
     from zbuf_occlude.farm import FarmParams
+    from zbuf_occlude.farm.config import GENERATE_DEFAULTS
     from zbuf_occlude.farm.generate import generate
 
+    gd = GENERATE_DEFAULTS
     if args.protocol != "paper":  # the field's recipes (zbuf_occlude.protocols) have their own writers
         from zbuf_occlude.cli.protocols import run_protocol_command
+
+        for attr, default in (("points", gd.n_points), ("dense_points", gd.dense_points), ("resolution", gd.resolution)):
+            setattr(args, attr, _or(getattr(args, attr), default))  # meshes only: generate's defaults
 
         return run_protocol_command(args, _default_paths(args.paths))
     if args.severity is not None:
         raise InvalidInputError(f"--severity {args.severity} needs --protocol modelnet40-c-occlusion or modelnet40-c-lidar")
     params = FarmParams(
-        views=args.views, samples_per_view=args.samples_per_view, n_points=args.points, dense_points=args.dense_points,
-        resolution=args.resolution, seed=args.seed, radius=args.radius, storage=args.format, method=args.method,
-        up=args.up,
+        views=args.views, samples_per_view=args.samples_per_view, n_points=_or(args.points, gd.n_points),
+        dense_points=_or(args.dense_points, gd.dense_points), resolution=_or(args.resolution, gd.resolution), seed=args.seed,
+        radius=args.radius, storage=args.format, method=args.method, up=args.up,
     )  # fmt: skip
     paths = _default_paths(args.paths)
     # generate's engine (farm.run_farm) checks the options, the memory, --out and the GL before loading a mesh
@@ -89,11 +101,13 @@ def cmd_generate(args: argparse.Namespace) -> int:
     summary, objects = generate(
         paths, args.out, params=params, overwrite=args.overwrite, progress=not args.no_progress, isolate=True,
         command=shlex.join(["zbuf-occlude", *sys.argv[1:]]) if sys.argv else None, class_from=args.class_from,
+        set_params=given_params(args, GIVEN_PARAMS),
     )  # fmt: skip
     elapsed = time.perf_counter() - t0
+    nouns = plan_nouns(objects)  # "meshes", "clouds" (point-set inputs), or "objects" for both
     print(
-        f"{counted(summary.done, 'mesh', 'meshes')} done, {summary.failed} failed, {counted(summary.samples, 'sample')} "
-        f"({counted(summary.resumed, 'mesh', 'meshes')} from an earlier run) in {elapsed:.1f} s -> {args.out}"
+        f"{counted(summary.done, *nouns)} done, {summary.failed} failed, {counted(summary.samples, 'sample')} "
+        f"({counted(summary.resumed, *nouns)} from an earlier run) in {elapsed:.1f} s -> {args.out}"
     )
     source = {o.name: o.source for o in objects}
     for name, err in summary.failures:
@@ -213,7 +227,10 @@ def _add_paths(p: argparse.ArgumentParser) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``zbuf-occlude`` argument parser with every subcommand."""
-    from zbuf_occlude.cli.farm import CLASS_FROM, CLASS_FROM_HELP, RADIUS_HELP, UP_HELP, VIEWS_HELP
+    from zbuf_occlude.cli.farm import (
+        CLASS_FROM, CLASS_FROM_HELP, NOT_FOR_POINT_SETS, POINT_SETS_HELP, POINT_SETS_POINTS_WHY, RADIUS_HELP, UP_HELP, VIEWS_HELP,
+    )  # fmt: skip
+    from zbuf_occlude.mesh.input_kinds import DEFAULT_POINT_SET_POINTS
     from zbuf_occlude.defaults import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION
     from zbuf_occlude.defaults import DEFAULT_FARM_VIEWS as FARM_VIEWS
     from zbuf_occlude.farm.config import GENERATE_DEFAULTS as gd  # generate's defaults, taken from zbuf_occlude.defaults
@@ -225,25 +242,29 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     g = sub.add_parser(
-        "generate", help="occluded point clouds from a few meshes",
+        "generate", help="occluded point clouds from a few meshes or point-set files",
         description="Render each mesh from each pose, keep the points the camera sees, and write samples of "
-        "--points points to --out. Run it again to resume; `farm` builds large data sets.",
+        "--points points to --out; point-set files (PointNet HDF5, .npy, .ply without faces) are seen from "
+        "their points alone. Run it again to resume; `farm` builds large data sets.",
     )  # fmt: skip
-    _add_paths(g)
+    g.add_argument("paths", nargs="*", metavar="PATH", help=f"{PATHS_HELP}. {POINT_SETS_HELP}")
     g.add_argument("--out", required=True, action=Checked, check=out_folder, help="output folder (created; must not be a file)")
     g.add_argument("--views", action=Checked, check=poses, help=f"{VIEWS_HELP} (default: {gd.views}; the farm's: {FARM_VIEWS})")
-    g.add_argument("--points", action=Checked, check=count("MAX_POINTS"), help=f"points per sample (default: {gd.n_points})")
+    g.add_argument(
+        "--points", action=Checked, check=count("MAX_POINTS"),
+        help=f"points per sample (default: {gd.n_points}; point sets: {DEFAULT_POINT_SET_POINTS}, {POINT_SETS_POINTS_WHY})",
+    )  # fmt: skip
     g.add_argument(
         "--samples-per-view", action=Checked, check=count("MAX_SAMPLES"),
         help=f"random samples drawn per pose (default: {gd.samples_per_view})",
     )  # fmt: skip
     g.add_argument(
         "--dense-points", action=Checked, check=count("MAX_POINTS"),
-        help=f"dense cloud sampled once per mesh, drawn from per pose (default: {gd.dense_points}; the farm's: {DEFAULT_FARM_DENSE_POINTS})",
+        help=f"dense cloud sampled once per mesh, drawn from per pose (default: {gd.dense_points}; the farm's: {DEFAULT_FARM_DENSE_POINTS}; {NOT_FOR_POINT_SETS})",
     )  # fmt: skip
     g.add_argument(
         "--resolution", action=Checked, check=count("MAX_RESOLUTION"),
-        help=f"z-buffer image size, pixels (default: {gd.resolution}; the farm's: {DEFAULT_FARM_RESOLUTION})",
+        help=f"z-buffer image size, pixels (default: {gd.resolution}; the farm's: {DEFAULT_FARM_RESOLUTION}; {NOT_FOR_POINT_SETS})",
     )  # fmt: skip
     g.add_argument("--radius", action=Checked, check=real(), default=gd.radius, help=f"{RADIUS_HELP} (default: %(default)s)")
     g.add_argument(
@@ -263,8 +284,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_protocol_arguments(g)
     g.set_defaults(
-        func=cmd_generate, views=gd.views, points=gd.n_points, resolution=gd.resolution,
-        samples_per_view=gd.samples_per_view, dense_points=gd.dense_points, format=gd.storage, method=gd.method,
+        func=cmd_generate, views=gd.views,  # --points, --dense-points, --resolution: None, the defaults of the inputs' kind
+        samples_per_view=gd.samples_per_view, format=gd.storage, method=gd.method,
     )  # fmt: skip
 
     v = sub.add_parser(

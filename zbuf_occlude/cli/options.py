@@ -21,7 +21,7 @@ from zbuf_occlude import defaults
 from zbuf_occlude.errors import InvalidInputError
 
 __all__ = [
-    "Parser", "Checked", "counted", "count", "count_list", "seed", "real", "elevations", "interval", "parse_interval", "out_folder", "poses",
+    "Parser", "Checked", "counted", "given_params", "count", "count_list", "seed", "real", "elevations", "interval", "parse_interval", "out_folder", "poses",
     "check_device", "shown",
 ]  # fmt: skip
 
@@ -66,6 +66,13 @@ class Checked(argparse.Action):
 
     def __call__(self, parser, namespace, values, option_string=None) -> None:
         setattr(namespace, self.dest, self.check(values, option_string or self.dest))
+
+
+def given_params(args: argparse.Namespace, fields: dict[str, str]) -> frozenset[str]:
+    """The :class:`~zbuf_occlude.farm.FarmParams` fields whose option was given: ``fields`` maps a
+    field to its ``args`` attribute, whose parser default is None (the library then tells an option
+    that does nothing for the inputs from one left out, :attr:`~zbuf_occlude.farm.RunOptions.set_params`)."""
+    return frozenset(field for field, attr in fields.items() if getattr(args, attr, None) is not None)
 
 
 def counted(n: int, noun: str, plural: str | None = None) -> str:

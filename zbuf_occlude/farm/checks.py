@@ -8,6 +8,7 @@ that names the option or the environment variable; the CLI exits 2 on it.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 from collections.abc import Sequence
@@ -19,7 +20,7 @@ from zbuf_occlude.errors import BackendUnavailable, CameraError, InvalidInputErr
 from zbuf_occlude.farm.config import OPTION_NAMES, FarmParams
 from zbuf_occlude.mesh.discovery import printable_path
 from zbuf_occlude.mesh.inputs import FarmObject
-from zbuf_occlude.pipeline import POINT_SET_METHOD
+from zbuf_occlude.mesh.input_kinds import POINT_SET, POINT_SET_METHOD, plan_kind
 from zbuf_occlude.geometry.cameras import camera_on_sphere
 from zbuf_occlude.io.owned import make_folder
 from zbuf_occlude.resources import check_memory, estimate_job_memory
@@ -175,25 +176,44 @@ def check_before_work(params: FarmParams, out: str | os.PathLike, *, gl: bool = 
         check_memory_up_front(params, workers=workers)
 
 
-def check_point_set_options(objects: Sequence[FarmObject], params: FarmParams) -> None:
-    """Refuse options that cannot apply to the clouds of point-set files among ``objects``, before any work.
+def check_point_set_options(
+    objects: Sequence[FarmObject], params: FarmParams, defaults: FarmParams | None = None, set_params: frozenset[str] | None = None
+) -> FarmParams:
+    """Refuse options that cannot apply to the objects' input kinds (:mod:`zbuf_occlude.mesh.input_kinds`),
+    before any work; the parameters the plan runs with.
 
-    A point-set input is seen from its points alone, by :data:`~zbuf_occlude.pipeline.POINT_SET_METHOD`:
+    A point-set input is seen from its points alone, by :data:`~zbuf_occlude.mesh.input_kinds.POINT_SET_METHOD`:
     ``--method`` may be left at its default (which then picks per input: the points' method for
     clouds, ``auto``'s for meshes) or name that method, which then decides the meshes too.  Any
     other method decides from a mesh, which a point set has not; ``farm --sensor`` scans meshes.
-    ``--dense-points`` and ``--density`` size the clouds sampled on meshes; a point set's dense
-    cloud is its own points.
+    Where every object is of one kind, the options its kind does not use
+    (:attr:`~zbuf_occlude.mesh.input_kinds.InputKind.unused_params`: ``--dense-points``,
+    ``--density``, ``--resolution`` for point sets) are refused when set, the method recorded is
+    the kind's (``point-splat``), and ``--points`` left unset takes the kind's default
+    (:attr:`~zbuf_occlude.mesh.input_kinds.InputKind.default_points`).
+
+    Parameters
+    ----------
+    defaults : FarmParams, optional
+        The command's defaults (default :class:`FarmParams` ``()``, the farm's).
+    set_params : frozenset of str, optional
+        The fields the user set; None: those whose value differs from ``defaults``.
+
+    Returns
+    -------
+    FarmParams
+        ``params``, with the method (and unset ``n_points``) of the plan's one input kind where that kind has its own.
 
     Raises
     ------
     InvalidInputError
-        ``--method`` other than the default or :data:`~zbuf_occlude.pipeline.POINT_SET_METHOD`,
-        or ``--sensor``, with point-set inputs (naming the value and one of the files).
+        ``--method`` other than the default or :data:`~zbuf_occlude.mesh.input_kinds.POINT_SET_METHOD`,
+        or ``--sensor``, with point-set inputs (naming the value and one of the files); an
+        option the plan's one kind does not use, set (naming it).
     """
-    clouds = [o for o in objects if o.is_point_set]
+    clouds = [o for o in objects if o.kind is POINT_SET]
     if not clouds:
-        return
+        return params
     files = len({o.source for o in clouds})
     which = f"{len(clouds)} cloud{'s' if len(clouds) > 1 else ''} of {files} point-set file{'s' if files > 1 else ''}, e.g. {printable_path(clouds[0].source)}"
     if params.sensor is not None:
@@ -204,3 +224,22 @@ def check_point_set_options(objects: Sequence[FarmObject], params: FarmParams) -
             f"visibility comes from their points alone ({POINT_SET_METHOD}): leave {OPTION_NAMES['method']} out or give "
             f"{OPTION_NAMES['method']} {POINT_SET_METHOD}"
         )
+    kind = plan_kind(objects)
+    if kind is None:
+        return params
+    defaults = defaults or FarmParams()
+
+    def is_set(field: str) -> bool:
+        value = getattr(params, field)
+        return field in set_params if set_params is not None else value is not None and value != getattr(defaults, field)
+
+    for field in kind.unused_params:
+        if is_set(field):
+            raise InvalidInputError(
+                f"{OPTION_NAMES[field]} {getattr(params, field)} does nothing for {kind.name} inputs ({which}): their dense "
+                f"cloud is their own points and their visibility comes from them ({kind.method}); leave {OPTION_NAMES[field]} out"
+            )
+    changes = {"method": kind.method} if kind.method is not None else {}
+    if kind.default_points is not None and not is_set("n_points"):
+        changes["n_points"] = kind.default_points
+    return dataclasses.replace(params, **changes) if changes else params

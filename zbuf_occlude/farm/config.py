@@ -399,6 +399,14 @@ class RunOptions:
         native call (Embree, the GL driver), which an in-process run finishes first.
     progress_label : str
         The progress bar's name (``generate`` calls it after itself).
+    defaults : FarmParams, optional
+        The command's defaults (default :class:`FarmParams` ``()``, the farm's; ``generate``:
+        :data:`GENERATE_DEFAULTS`): an option that does nothing for the plan's input kind is
+        refused when it differs from them (:func:`~zbuf_occlude.farm.checks.check_point_set_options`).
+    set_params : frozenset of str, optional
+        The :class:`FarmParams` fields the user set (the command line's options given): those
+        are refused where the plan's input kind does not use them, and kept where it has its
+        own default (``n_points`` of point sets); None: the fields that differ from ``defaults``.
     """
 
     classes: Sequence[str] | str | None = None
@@ -419,4 +427,6 @@ class RunOptions:
     layout: str | None = None
     isolate: bool = False
     progress_label: str = "farm"
+    defaults: FarmParams | None = None
+    set_params: frozenset[str] | None = None
 

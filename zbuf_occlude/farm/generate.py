@@ -93,6 +93,7 @@ def generate(
     command: str | None = None,
     class_from: int | None = None,
     isolate: bool = False,
+    set_params: frozenset[str] | None = None,
 ) -> tuple[FarmSummary, list[FarmObject]]:
     """Occluded samples of a few meshes into ``out`` (``zbuf-occlude generate``).
 
@@ -117,6 +118,10 @@ def generate(
         Take each mesh's class from this folder level above it (``--class-from``).
     isolate : bool
         Render in a worker process that a SIGTERM stops at once (:func:`~.run.run_farm`).
+    set_params : frozenset of str, optional
+        The ``params`` fields the user set (:attr:`~zbuf_occlude.farm.config.RunOptions.set_params`):
+        point-set inputs refuse ``dense_points``, ``density`` and ``resolution`` set, and take
+        their own ``n_points`` where it is not; None: the fields that differ from :data:`GENERATE_DEFAULTS`.
 
     Returns
     -------
@@ -145,7 +150,7 @@ def generate(
         inputs=tuple(paths),
         on_finished=lambda folder: _merge_h5(folder, objects if kind.joins_splits else []),
         skipped=tuple((s.path, s.reason) for s in skipped), layout=scan.layout, isolate=isolate,
-        progress_label="generate",
+        progress_label="generate", defaults=GENERATE_DEFAULTS, set_params=set_params,
     )  # fmt: skip
     summary = run_farm(objects, out, params, options)
     return summary, objects

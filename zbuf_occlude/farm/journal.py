@@ -376,8 +376,10 @@ def finalize(
     if n_padded:
         # a sensor's scan has the points its beams return; a pose already took the top-up (geometry.samples.top_up)
         remedy = "move the sensor closer or lower --points" if params.sensor else "lower --points: topped up, still too few"
-        if any(o.is_point_set for o in objects):  # a cloud has no faces to top up on: about half its points face a camera
-            remedy = "lower --points: a point-set file's cloud is not topped up; about half of it faces a camera"
+        shares = sorted({o.kind.visible_share for o in objects if not o.kind.topped_up and o.kind.visible_share})
+        if shares:  # a cloud has no faces to top up on: a pose sees the measured share of it
+            remedy = (f"lower --points: a point-set file's cloud is not topped up, and a pose sees about "
+                      f"{round(100 * shares[0])} % of it (of a 2,048-point cloud, about {round(2048 * shares[0])} points)")  # fmt: skip
         log.warning(
             "%d of %d samples hold repeated points: fewer than --points %d points were visible from their poses "
             "(each sample's n_visible says how many; %s); recorded as n_padded_samples in %s",
@@ -432,9 +434,10 @@ def point_set_card(objects: Sequence[FarmObject], ok: Sequence[dict[str, Any]]) 
     says the same of it (``visibility``, ``visibility_from``, ``normals``).
     """
     from zbuf_occlude.defaults import DEFAULT_POINT_NEIGHBOURS, DEFAULT_SPLAT_SCALE, DEFAULT_SPLAT_TOLERANCE
-    from zbuf_occlude.pipeline import NO_FACE, POINT_SET_METHOD
+    from zbuf_occlude.mesh.input_kinds import POINT_SET
+    from zbuf_occlude.pipeline import NO_FACE
 
-    n_clouds = sum(o.is_point_set for o in objects)
+    n_clouds = sum(o.kind is POINT_SET for o in objects)
     if not n_clouds:
         return {}
     return {
@@ -442,7 +445,7 @@ def point_set_card(objects: Sequence[FarmObject], ok: Sequence[dict[str, Any]]) 
         "point_sets": {
             "n_objects": n_clouds,
             "n_with_normals": sum(bool(r.get("normals")) for r in ok if r.get("visibility_from") == "points"),
-            "visibility": POINT_SET_METHOD,
+            "visibility": POINT_SET.method,
             "settings": {"neighbours": DEFAULT_POINT_NEIGHBOURS, "splat_scale": DEFAULT_SPLAT_SCALE, "tolerance": DEFAULT_SPLAT_TOLERANCE},
             "dense_cloud": "the cloud's own points, normalised as a mesh (bounding-box centre at 0, largest side 1); "
             "nothing sampled, nothing topped up; normals from the file where it has them, else estimated",

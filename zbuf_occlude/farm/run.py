@@ -171,7 +171,8 @@ def run_farm(
     ------
     InvalidInputError
         Bad parameters or selection; ``out`` holds a run with other parameters; ``--method``
-        or ``--sensor`` with point-set inputs (:func:`~zbuf_occlude.farm.checks.check_point_set_options`).
+        or ``--sensor`` with point-set inputs, or an option their kind does not use (``--dense-points``,
+        ``--density``, ``--resolution``: :func:`~zbuf_occlude.farm.checks.check_point_set_options`).
     OutputError
         ``out`` cannot be created or written, or the disk is full (finished objects are kept).
     BackendUnavailable
@@ -205,7 +206,7 @@ def run_farm(
         objects, inputs = list(source), o.inputs
         if [o.index for o in objects] != list(range(len(objects))):
             raise InvalidInputError("a ready plan must number its objects 0, 1, 2, ... in order")
-    check_point_set_options(objects, params)
+    params = check_point_set_options(objects, params, o.defaults, o.set_params)  # a plan of clouds: their method, their --points
     check_inputs_outside_out(out, (o.source for o in objects))  # before anything in out is touched
     root = input_root(inputs, objects)
     objects, source_text = relative_objects(objects, root), source_text or root_name(root)

@@ -24,6 +24,7 @@ from zbuf_occlude.dataset.storage import SensorCrops, ShardTarget, StorageKind, 
 from zbuf_occlude.farm.config import COMPACT_GZIP_LEVEL, FATAL_ERRORS, GL_LOCK, FarmParams, record_path, shard_path
 from zbuf_occlude.geometry.samples import ObjectProvenance
 from zbuf_occlude.io.atomic import file_sha256, write_text
+from zbuf_occlude.mesh.input_kinds import MESH, POINT_SET
 from zbuf_occlude.mesh.inputs import FarmObject
 from zbuf_occlude.pipeline import POINT_SET_METHOD, CameraSphere, PoseResult, dense_cloud, occlude_point_set, occlude_poses
 
@@ -105,13 +106,14 @@ def _scan(obj: FarmObject, params: FarmParams, out: Path, kind: SensorCrops, mes
 
 
 def _occlude(obj: FarmObject, params: FarmParams, out: Path, kind: StorageKind, mesh_path: Path) -> dict[str, Any]:
-    """The z-buffer poses of one object, written by its storage kind."""
+    """The poses of one object, by its input kind (:attr:`~zbuf_occlude.mesh.inputs.FarmObject.kind`), written by its storage kind."""
     kind.check_name(obj.name, what=f"the name of {obj.source}")  # before any work
-    if obj.is_point_set:
-        return _occlude_points(obj, params, out, kind, mesh_path)
-    from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported by the work, not by modules that only read records
+    return _OCCLUDERS[obj.kind](obj, params, out, kind, mesh_path)
 
-    mesh = load_mesh(mesh_path, up=params.up)
+
+def _occlude_mesh(obj: FarmObject, params: FarmParams, out: Path, kind: StorageKind, mesh_path: Path) -> dict[str, Any]:
+    """The z-buffer poses of one mesh."""
+    mesh = obj.kind.read(mesh_path, obj.cloud, up=params.up)
     dense = dense_cloud(mesh, obj.key, seed=params.seed, count=params.dense_points, density=params.density)
     results = occlude_poses(
         mesh, params.poses, key=obj.key, n_points=params.n_points, seed=params.seed, dense=dense, method=params.method,
@@ -126,9 +128,7 @@ def _occlude_points(obj: FarmObject, params: FarmParams, out: Path, kind: Storag
     sampled: ``--dense-points`` and ``--density`` do not apply), their visibility comes from the
     points alone (:func:`~zbuf_occlude.pipeline.occlude_point_set`), written by the storage kind
     as a mesh's are.  The record says so (``visibility``, ``visibility_from``, ``normals``)."""
-    from zbuf_occlude.mesh.point_inputs import load_cloud
-
-    cloud = load_cloud(path, int(obj.cloud), up=params.up)
+    cloud = obj.kind.read(path, obj.cloud, up=params.up)
     samples_per_view = kind.occlude_options(params.samples_per_view)["samples_per_view"]  # compact: 0, it redraws
     results = occlude_point_set(
         cloud.points, params.poses, key=obj.key, normals=cloud.normals, n_points=params.n_points,
@@ -168,6 +168,9 @@ def _write_poses(
         "n_dense": int(len(dense_points)),
     }
 
+
+#: How the farm sees an object of each input kind (:mod:`zbuf_occlude.mesh.input_kinds`).
+_OCCLUDERS = {MESH: _occlude_mesh, POINT_SET: _occlude_points}
 
 #: How the farm makes the input of each kind (:attr:`~zbuf_occlude.dataset.storage.StorageKind.made_from`).
 _PRODUCERS = {"poses": _occlude, "scans": _scan}
@@ -219,7 +222,7 @@ def base_record(obj: FarmObject, params: FarmParams) -> dict[str, Any]:
         "n_samples": 0,
         "bytes": 0,
         # a point-set input's cloud: its row in the file (a mesh's record has no such field)
-        **({"cloud": obj.cloud} if obj.is_point_set else {}),
+        **({"cloud": obj.cloud} if obj.cloud is not None else {}),
     }
 
 
@@ -260,7 +263,7 @@ def process_object(obj: FarmObject, params: FarmParams, out: str | os.PathLike, 
         time_s=round(time.perf_counter() - t0, 4),
         finished_at=datetime.now(timezone.utc).isoformat(timespec="seconds"),
         # a point set's visibility is decided on the CPU from its points (the record's 'visibility'): no renderer
-        renderer=_renderer_name() if record["status"] == "ok" and not obj.is_point_set else None,
+        renderer=_renderer_name() if record["status"] == "ok" and obj.kind.renders else None,
         pid=os.getpid(),
         peak_rss_mb=round(_peak_rss_mb(), 1),
     )

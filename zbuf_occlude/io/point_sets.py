@@ -54,6 +54,7 @@ from zbuf_occlude.io.regular_files import MAX_LIST_BYTES, open_regular_file, rea
 from zbuf_occlude.resources import check_memory
 
 __all__ = [
+    "stored_up", "UP_AXES",
     "POINT_SET_SUFFIXES", "SHAPE_NAME_FILES", "PointSet", "is_point_set_file", "read_point_sets",
     "point_set_labels", "shape_names", "unit_normals", "BYTES_PER_READ_POINT", "BYTES_PER_LABEL",
 ]  # fmt: skip
@@ -388,6 +389,48 @@ def is_point_set_file(path: str | os.PathLike) -> bool:
             return isinstance(data, h5py.Dataset) and data.ndim == 3 and data.shape[2] in _COLUMNS
     except (OSError, ValueError):
         return False
+
+
+#: The up axes an HDF5 point-set file's ``up`` attribute may name (:data:`zbuf_occlude.mesh.scene.UP_CHOICES` less ``auto``).
+UP_AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
+#: Datasets that mark an HDF5 file as one of zbuf_occlude's own data sets (``generate``'s joined
+#: files, the farm's shards), written in its +z-up frame.
+_OWN_DATASETS = ("pose_index", "face_index")
+
+
+def stored_up(path: str | os.PathLike) -> tuple[str, str]:
+    """The up axis a point-set file's clouds are stored with, by its layout, and why.
+
+    * HDF5: the file's ``up`` attribute where it has one (``"+y"``...); else ``"+z"`` for one of
+      zbuf_occlude's own data sets (``pose_index`` and ``face_index`` beside ``data``); else
+      ``"+y"``, PointNet's layout: ``modelnet40_ply_hdf5_2048`` holds ModelNet's clouds +y up, as
+      PointNet, PointNet++ and DGCNN train on them (their augmentation turns about y: PointNet's
+      ``provider.rotate_point_cloud``, "along up direction").
+    * ``.npy`` and ``.ply``: no frame is declared; as stored, ``"+z"``.
+
+    Returns
+    -------
+    up : str
+        ``"+x"`` ... ``"-z"``.
+    why : str
+        For the records (``up_source``): ``"PointNet HDF5 layout (+y)"``, ``"as stored (+z)"``...
+
+    Raises
+    ------
+    DatasetFormatError
+        An HDF5 file that cannot be opened or is refused by :func:`~zbuf_occlude.io.hdf5.check_hdf5`.
+    """
+    path = Path(path)
+    if path.suffix.lower() not in (".h5", ".hdf5"):
+        return "+z", "as stored (+z)"
+    with open_hdf5(path) as f:
+        up = f.attrs.get("up")
+        up = up.decode("utf-8", "replace") if isinstance(up, bytes) else up
+        if isinstance(up, str) and up in UP_AXES:
+            return up, f"the file's 'up' attribute ({up})"
+        if all(name in f for name in _OWN_DATASETS):
+            return "+z", "a zbuf_occlude data set (+z)"
+    return "+y", "PointNet HDF5 layout (+y)"
 
 
 def read_point_sets(

@@ -34,6 +34,7 @@ from zbuf_occlude.mesh.discovery import (
     walk_mesh_files,
 )
 from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS
+from zbuf_occlude.mesh.input_kinds import MESH, POINT_SET, InputKind
 from zbuf_occlude.mesh.layouts import label_file, label_tree, layout_text, scan_labelled
 from zbuf_occlude.mesh.point_inputs import POINT_SET_LAYOUT, CloudEntry, point_set_clouds, pointnet_split
 
@@ -77,9 +78,15 @@ class FarmObject:
     cloud: int | None = None
 
     @property
+    def kind(self) -> InputKind:
+        """Its input kind (:mod:`zbuf_occlude.mesh.input_kinds`): :data:`~zbuf_occlude.mesh.input_kinds.POINT_SET`
+        for a cloud of a point-set file, else :data:`~zbuf_occlude.mesh.input_kinds.MESH`."""
+        return MESH if self.cloud is None else POINT_SET
+
+    @property
     def is_point_set(self) -> bool:
-        """The object is a cloud of a point-set file, not a mesh."""
-        return self.cloud is not None
+        """The object is a cloud of a point-set file (its :attr:`kind` is :data:`~zbuf_occlude.mesh.input_kinds.POINT_SET`)."""
+        return self.kind is POINT_SET
 
     @property
     def key(self) -> int:

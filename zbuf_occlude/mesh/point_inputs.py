@@ -13,8 +13,9 @@ with no faces) holds one cloud or many; each cloud is one object of the plan, as
   ``train_files.txt``/``test_files.txt`` beside it where they list its name
   (``modelnet40_ply_hdf5_2048``'s layout); else ``train``.
 * **Frame** (:func:`load_cloud`): the points turned so that the up axis is +z (``up``; ``"auto"``
-  reads a point set as stored, +z, since no point-set format declares its up axis: PointNet's
-  HDF5 files hold ModelNet +y up, so pass ``up="+y"`` there), then normalised as a mesh is
+  reads each layout in its own frame, :func:`zbuf_occlude.io.point_sets.stored_up`: PointNet's
+  HDF5 files +y up, as ModelNet's clouds are stored there, an HDF5 file's ``up`` attribute where it
+  has one, ``.npy`` and ``.ply`` as stored, +z), then normalised as a mesh is
   (centre of the bounding box to the origin, largest side 1; Sryamkin et al. 2023, §4.1).  The
   cloud's points are the object's dense cloud as they are: nothing is sampled.  A cloud that
   float64 cannot normalise (:func:`cloud_frame`) is refused in one line.
@@ -180,7 +181,8 @@ def load_cloud(path: str | os.PathLike, cloud: int, *, up: str = "auto") -> Load
     cloud : int
         Its row (:attr:`CloudEntry.cloud`).
     up : str
-        The file's up axis (:data:`zbuf_occlude.mesh.scene.UP_CHOICES`); ``"auto"``: as stored, +z.
+        The file's up axis (:data:`zbuf_occlude.mesh.scene.UP_CHOICES`); ``"auto"``: its layout's
+        (:func:`zbuf_occlude.io.point_sets.stored_up`: PointNet HDF5 +y, ``.npy`` and ``.ply`` +z).
 
     Returns
     -------
@@ -193,7 +195,7 @@ def load_cloud(path: str | os.PathLike, cloud: int, *, up: str = "auto") -> Load
         or the cloud cannot be normalised (:func:`cloud_frame`: its points all coincide, its
         extent overflows float64, or scaling it merges most of its points).
     """
-    from zbuf_occlude.io.point_sets import read_point_sets
+    from zbuf_occlude.io.point_sets import read_point_sets, stored_up
     from zbuf_occlude.mesh.scene import UP_CHOICES
 
     if up not in UP_CHOICES:
@@ -201,7 +203,7 @@ def load_cloud(path: str | os.PathLike, cloud: int, *, up: str = "auto") -> Load
     path = Path(path)
     (point_set,) = read_point_sets(path, rows=[int(cloud)])
     points, normals = point_set.points, point_set.normals
-    axis, why = ("+z", "as stored (+z)") if up == "auto" else (up, "explicit")
+    axis, why = stored_up(path) if up == "auto" else (up, "explicit")
     points, normals = cloud_frame(points, normals, axis, what=f"{printable_path(path)}: cloud {point_set.name!r}")
     return LoadedCloud(points, normals, axis, why)
 
