@@ -1,45 +1,49 @@
 """The surfel z-buffer of point-only visibility, rasterised by OpenGL as point sprites.
 
 :func:`zbuf_occlude.visibility.point_kernels.splat_surfels` (numba, float64) and
-:meth:`PointSpriteRenderer.splat` (GLSL, float32) fill the same two buffers over the same image:
+:meth:`PointSpriteRenderer.splat` (GLSL, float64) fill the same two buffers over the same image:
 normalised coordinates ``(x/z, y/z)`` of the OpenCV camera frame, pixel ``(i, j)`` sampled at
 ``(x0 + (i + ½)·pix, y0 + (j + ½)·pix)``; a surfel (a disk of radius ``r`` centred on ``q`` in
 the plane of normal ``n``) covers a pixel where the pixel's central ray meets that plane within
-``r`` of ``q``, at depth ``t`` (the intersection's z); the nearest surfel wins.
+``r`` of ``q``, at depth ``t`` (the intersection's z); the nearest surfel wins, and of surfels
+at the same ``t`` the lowest id.
 
 How the GPU draws it (``shaders/point_splat.vert``, ``shaders/point_splat.frag``):
 
 * the image rectangle is mapped orthographically onto clip space (it is already in normalised
-  coordinates); each surfel's pixel box is the kernel's (half side ``rho = r / (z − r)`` around
-  its centre's projection, clamped to the image), computed here in float64, and the fragment
-  shader covers no pixel outside it, so that both fill exactly the same pixels;
+  coordinates); each surfel's pixel box is the projection of the cube ``q ± r`` (which holds the
+  disk), clamped to the image, computed here in float64: every pixel the kernel's tests can pass;
 * one GL point per surfel, centred on its box, ``gl_PointSize`` = the box's longer side + 2 pixels;
-* the fragment shader computes the pixel's ray, the ray-plane ``t``, discards pixels outside the
-  disk or seen closer than ``edge_on_cos`` to edge-on, and writes ``t`` mapped linearly onto
-  ``[0, 1)`` as ``gl_FragDepth`` (depth test LESS; moderngl's depth buffer holds 24 bits), the id
-  into an R32I attachment and ``t`` itself into an R32F one.  It works from the pixel's offset
-  to the surfel's projected centre, so that float32 keeps ~1e-7 of the disk's radius, not of its
-  depth (the shader's comment);
+* the fragment shader reads the surfel in float64 and computes the pixel's ray, the edge-on and
+  the disk tests and ``t`` with the kernel's operations, in its order, ``precise`` (no fused or
+  reordered operation); the quotient gets one correction from its exact residual, so that a
+  division an ulp off the correctly rounded quotient gives the same ``t``;
+* the nearest surfel is chosen without a depth test, by image atomics in three stages over the
+  same fragments: the least high word of ``t``'s bits at each pixel, then the least low word
+  among the fragments with that high word, then the least id among those with both.  So each
+  pixel holds the least ``t`` and, of surfels at exactly that ``t``, the lowest id: the kernel's
+  rule (it draws surfels in id order and keeps a depth only if less), whatever order the GPU
+  runs the fragments in;
 * **the quad pass**: a surfel whose sprite would exceed the GL's largest point size
   (``GL_POINT_SIZE_RANGE``: 255 pixels on Mesa llvmpipe), or whose box centre falls outside the
   tile (GL drops a point whose centre is clipped, however large its sprite), is drawn as an
-  instanced quad over its box, after the sprites, by the same fragment shader;
+  instanced quad over its box by the same fragment shader;
 * an image larger than the GL's maximum image size (:func:`~zbuf_occlude.render.context.max_image_size`)
   is drawn in tiles.
 
-Where the two differ: the GPU computes in float32 and its depth buffer holds 24 bits over the
-view's depth range, so where two surfels' depths at a pixel differ by less than about 1e-7 of
-their depth, or a pixel centre lies within float32 rounding of a disk's rim, either may win.
-Exact ties go to the surfel drawn first: the lower id within a pass (as the kernel), the sprite
-before the quad.  A surfel whose sphere all but touches the camera's plane (centre projected
-beyond 2^30 pixels) is drawn with its centre clipped there.
+The buffers are the kernel's, bit for bit, where the GL's float64 addition and multiplication
+round to nearest as IEEE 754 says and its division is within an ulp of that (Mesa llvmpipe's are:
+tests/render/test_point_sprites*.py; no other GL measured yet).  Each stage runs the fragment
+shader over every fragment, in float64: on llvmpipe a view takes about 9 times as long as one
+float32 depth-tested pass over the same surfels (which decides near-ties either way).
 """
 
 from __future__ import annotations
 
 import os
 import threading
-from typing import Iterator
+from collections.abc import Iterator
+from typing import NamedTuple
 
 import moderngl
 import numpy as np
@@ -50,24 +54,30 @@ from zbuf_occlude.render.shaders import load_shader
 
 __all__ = ["PointSpriteRenderer", "shared_point_sprites"]
 
-#: One surfel as the vertex shader reads it (64 bytes): centre and radius, unit normal, id, the
-#: centre's projection in pixels of the image (whole part and fraction), its pixel box.
-_SURFEL = np.dtype([
-    ("centre_radius", "<f4", 4), ("normal", "<f4", 3), ("id", "<i4"),
-    ("centre_pixel", "<i4", 2), ("centre_fraction", "<f4", 2), ("box", "<i4", 4),
-])  # fmt: skip
-_SURFEL_FORMAT = "4f 3f 1i 2i 2f 4i"
-_SURFEL_ATTRIBUTES = ("in_centre_radius", "in_normal", "in_id", "in_centre_pixel", "in_centre_fraction", "in_box")
-#: Pixels: the whole part of a centre's projection is clipped to this (int32 in the shader); only
-#: a surfel whose sphere all but touches the camera's plane projects that far.
-_MAX_CENTRE_PIXEL = 2**30
+#: One surfel as the vertex shader reads it (20 bytes): its id and its pixel box.  The fragment
+#: shader reads the surfel itself from a storage buffer: 7 float64 (centre, normal, radius).
+_SURFEL = np.dtype([("id", "<i4"), ("box", "<i4", 4)])
+_SURFEL_FORMAT = "1i 4i"
+_SURFEL_ATTRIBUTES = ("in_id", "in_box")
+#: The fragment shader's bindings (storage buffer, images) and its stages (module docstring).
+_DEFINES = (
+    ("SPLAT_SURFELS", 0), ("SPLAT_KEY_HIGH", 0), ("SPLAT_KEY_LOW", 1), ("SPLAT_WINNER", 2),
+    ("SPLAT_STAGE_HIGH", 0), ("SPLAT_STAGE_LOW", 1), ("SPLAT_STAGE_ID", 2),
+)  # fmt: skip
+_STAGES = tuple(value for name, value in _DEFINES if name.startswith("SPLAT_STAGE_"))
 #: Pixels kept between a sprite's centre and the tile's border, where GL would clip the point.
 _SPRITE_MARGIN_PX = 1.0
 #: Pixels: the render target's sides grow in steps of this (it is kept across views).
 _TARGET_STEP = 256
-#: Share of the 24-bit depth range left above the farthest surfel: rounding of ``t`` in float32
-#: cannot reach the cleared depth 1.0, where LESS would drop it.
-_DEPTH_HEADROOM = 2.0**-10
+#: The images' clear value: no key, no winner (read as int32: id −1).
+_NONE = np.uint32(0xFFFFFFFF)
+
+
+class _Target(NamedTuple):
+    size: tuple[int, int]
+    images: tuple[moderngl.Texture, ...]
+    draw: moderngl.Framebuffer
+    read: moderngl.Framebuffer
 
 
 class PointSpriteRenderer:
@@ -103,13 +113,13 @@ class PointSpriteRenderer:
             self._programs = {
                 quads: self.ctx.program(
                     vertex_shader=load_shader("point_splat.vert", (("SPLAT_QUADS", 1),) if quads else ()),
-                    fragment_shader=load_shader("point_splat.frag"),
+                    fragment_shader=load_shader("point_splat.frag", _DEFINES),
                 )
                 for quads in (False, True)
             }
         self.max_point_size = float(self.ctx.info["GL_POINT_SIZE_RANGE"][1])
         self.max_tile = max_image_size(self.ctx)
-        self._target: tuple[tuple[int, int], moderngl.Framebuffer, tuple[moderngl.Texture, ...]] | None = None
+        self._target: _Target | None = None
         self._released = False
 
     def splat(
@@ -128,7 +138,8 @@ class PointSpriteRenderer:
         """Rasterise oriented disks (surfels) into a z-buffer and a surfel-id buffer on the GPU.
 
         Same arguments and buffers as :func:`zbuf_occlude.visibility.point_kernels.splat_surfels`,
-        computed in float32 (module docstring: where the two may differ).
+        computed with the same float64 operations: the same buffers, bit for bit, where the GL
+        rounds float64 as IEEE 754 says (module docstring).
 
         Parameters
         ----------
@@ -149,9 +160,9 @@ class PointSpriteRenderer:
         Returns
         -------
         depth : (height, width) float64
-            The float32 ``t`` of the nearest covering surfel, object units; ``inf`` where none.
+            ``t`` of the nearest covering surfel, object units; ``inf`` where none.
         ids : (height, width) int32
-            Index of that surfel, −1 where none.
+            Index of that surfel (the lowest of those at the same ``t``), −1 where none.
         """
         if self._released:
             raise RuntimeError("this PointSpriteRenderer was released")
@@ -162,77 +173,98 @@ class PointSpriteRenderer:
         boxes = _Boxes(cam, radius, pix, x0, y0, width, height)
         if not boxes.drawn.any():
             return depth, ids
-        records = _records(cam, normal, radius, boxes)
-        near, far = boxes.depth_range()
+        records = np.empty(len(cam), dtype=_SURFEL)
+        records["id"] = np.arange(len(cam), dtype=np.int32)
+        records["box"] = boxes.box
+        surfels64 = np.concatenate([cam, np.asarray(normal, dtype=np.float64).reshape(-1, 3), radius[:, None]], axis=1)
         uniforms = {
-            "pix": float(pix), "edge_on_cos": float(edge_on_cos),
-            "depth_near": near, "depth_scale": (1.0 - _DEPTH_HEADROOM) / (far - near),
+            "pix": float(pix), "x0": float(x0), "y0": float(y0),
+            "edge_on_cos2": float(edge_on_cos) * float(edge_on_cos),
         }  # fmt: skip
         with self.ctx:
-            for i0, j0, w, h in _tiles(width, height, self.max_tile):
-                sprites, quads = boxes.split(i0, j0, w, h, self.max_point_size)
-                tile_ids, tile_t = self._draw_tile(records[sprites], records[quads], (i0, j0), (w, h), uniforms)
-                ids[j0 : j0 + h, i0 : i0 + w] = tile_ids - 1
-                depth[j0 : j0 + h, i0 : i0 + w] = np.where(tile_ids > 0, tile_t, np.inf)
+            surfel_buffer = self.ctx.buffer(np.ascontiguousarray(surfels64).tobytes())
+            try:
+                surfel_buffer.bind_to_storage_buffer(dict(_DEFINES)["SPLAT_SURFELS"])
+                for i0, j0, w, h in _tiles(width, height, self.max_tile):
+                    sprites, quads = boxes.split(i0, j0, w, h, self.max_point_size)
+                    tile_ids, tile_t = self._draw_tile(records[sprites], records[quads], (i0, j0), (w, h), uniforms)
+                    ids[j0 : j0 + h, i0 : i0 + w] = tile_ids
+                    depth[j0 : j0 + h, i0 : i0 + w] = np.where(tile_ids >= 0, tile_t, np.inf)
+            finally:
+                surfel_buffer.release()
         return depth, ids
 
-    def _draw_tile(self, sprites, quads, offset, size, uniforms) -> tuple[NDArray[np.int32], NDArray[np.float32]]:
-        """Draw the sprites, then the quads, into a ``size`` tile whose first pixel is ``offset``;
-        read back the ids (+1, 0 none) and ``t``, rows of increasing ``j``."""
-        fbo = self._target_of(size)
+    def _draw_tile(self, sprites, quads, offset, size, uniforms) -> tuple[NDArray[np.int32], NDArray[np.float64]]:
+        """Draw the sprites and the quads, each stage in turn, into a ``size`` tile whose first
+        pixel is ``offset``; read back the winners' ids (−1 none) and their ``t``, rows of
+        increasing ``j``."""
+        target = self._target_of(size)
         viewport = (0, 0, *size)
-        fbo.use()
+        width, height = size
+        for texture in target.images:
+            texture.write(np.full((height, width), _NONE).tobytes(), viewport=viewport)
+        for unit, texture in enumerate(target.images):
+            texture.bind_to_image(unit, read=True, write=True)
+        target.draw.use()
         self.ctx.viewport = viewport
-        fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0, viewport=viewport)  # zero bits: id 0 ("none") in the R32I target
-        self.ctx.enable(moderngl.DEPTH_TEST | moderngl.PROGRAM_POINT_SIZE)
-        self.ctx.disable(moderngl.BLEND)
-        self.ctx.depth_func = "<"
-        for quads, records in ((False, sprites), (True, quads)):
-            if len(records) == 0:
-                continue
-            program = self._programs[quads]
-            for name, value in {**uniforms, "tile_offset": offset, "tile_size": tuple(float(v) for v in size)}.items():
-                if name in program:  # the compiler drops unused uniforms
-                    program[name].value = value
-            buffer = self.ctx.buffer(records.tobytes())
-            fmt = _SURFEL_FORMAT + ("/i" if quads else "")
-            vao = self.ctx.vertex_array(program, [(buffer, fmt, *_SURFEL_ATTRIBUTES)])
-            try:
-                if quads:
-                    vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(records))
-                else:
-                    vao.render(moderngl.POINTS, vertices=len(records))
-            finally:
-                vao.release()
+        self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+        self.ctx.enable(moderngl.PROGRAM_POINT_SIZE)
+        tile_uniforms = {**uniforms, "tile_offset": offset, "tile_size": tuple(float(v) for v in size)}
+        draws = [(as_quads, records) for as_quads, records in ((False, sprites), (True, quads)) if len(records)]
+        buffers = [self.ctx.buffer(records.tobytes()) for _, records in draws]
+        try:
+            for stage in _STAGES:
+                for (as_quads, records), buffer in zip(draws, buffers):
+                    self._draw(as_quads, records, buffer, {**tile_uniforms, "stage": stage})
+                self.ctx.memory_barrier()  # the next stage (and the read-back) sees this one's minima
+        finally:
+            for buffer in buffers:
                 buffer.release()
         self.ctx.disable(moderngl.PROGRAM_POINT_SIZE)
-        width, height = size
-        tile_ids = np.frombuffer(fbo.read(viewport=viewport, components=1, attachment=0, dtype="i4"), dtype=np.int32)
-        tile_t = np.frombuffer(fbo.read(viewport=viewport, components=1, attachment=1, dtype="f4"), dtype=np.float32)
-        return tile_ids.reshape(height, width), tile_t.reshape(height, width)
 
-    def _target_of(self, size: tuple[int, int]) -> moderngl.Framebuffer:
-        """A framebuffer (ids R32I, ``t`` R32F, depth) at least ``size``: kept and grown in steps of
-        :data:`_TARGET_STEP` pixels, since each view's image has its own size."""
-        have = self._target[0] if self._target is not None else (0, 0)
+        def read(attachment: int) -> NDArray[np.uint32]:
+            data = target.read.read(viewport=viewport, components=1, attachment=attachment, dtype="u4")
+            return np.frombuffer(data, dtype=np.uint32).reshape(height, width)
+
+        high, low, winner = (read(k) for k in range(3))
+        key = (high.astype(np.uint64) << np.uint64(32)) | low
+        # key64 in the shader, undone: the sign bit set held a positive t, every bit flipped a negative one
+        negative = (key >> np.uint64(63)) == 0
+        bits = np.where(negative, ~key, key ^ np.uint64(1 << 63))
+        return winner.view(np.int32), bits.view(np.float64)
+
+    def _draw(self, quads: bool, records: NDArray[np.void], buffer: moderngl.Buffer, uniforms: dict) -> None:
+        program = self._programs[quads]
+        for name, value in uniforms.items():
+            if name in program:  # the compiler drops unused uniforms
+                program[name].value = value
+        fmt = _SURFEL_FORMAT + ("/i" if quads else "")
+        vao = self.ctx.vertex_array(program, [(buffer, fmt, *_SURFEL_ATTRIBUTES)])
+        try:
+            if quads:
+                vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(records))
+            else:
+                vao.render(moderngl.POINTS, vertices=len(records))
+        finally:
+            vao.release()
+
+    def _target_of(self, size: tuple[int, int]) -> _Target:
+        """The images (key's high and low words, winner: R32UI) at least ``size``, with a
+        framebuffer without attachments to draw into and one over the images to read them: kept
+        and grown in steps of :data:`_TARGET_STEP` pixels, since each view's image has its own size."""
+        have = self._target.size if self._target is not None else (0, 0)
         if size[0] > have[0] or size[1] > have[1]:
             self._release_target()
             step = _TARGET_STEP
             grown = tuple(min(max(old, -(-need // step) * step), self.max_tile) for old, need in zip(have, size))
-            textures = (
-                self.ctx.texture(grown, 1, dtype="i4"),
-                self.ctx.texture(grown, 1, dtype="f4"),
-                self.ctx.depth_texture(grown),
-            )
-            self._target = (grown, self.ctx.framebuffer(list(textures[:2]), textures[2]), textures)
-        return self._target[1]
+            images = tuple(self.ctx.texture(grown, 1, dtype="u4") for _ in range(3))
+            self._target = _Target(grown, images, self.ctx.empty_framebuffer(grown), self.ctx.framebuffer(list(images)))
+        return self._target
 
     def _release_target(self) -> None:
         if self._target is not None:
-            _, fbo, textures = self._target
-            fbo.release()
-            for texture in textures:
-                texture.release()
+            for obj in (self._target.draw, self._target.read, *self._target.images):
+                obj.release()
             self._target = None
 
     def release(self) -> None:
@@ -253,19 +285,15 @@ class PointSpriteRenderer:
 
 
 class _Boxes:
-    """Each surfel's pixel box, by the formulas of the kernel (float64, clamped to the image), and
-    its sprite.  The kernel bounds a disk by the projection of the cube ``q ± r`` around it (extreme
-    at its corners); the GPU covers the same pixels, so the two fill the same buffers."""
+    """Each surfel's pixel box (float64, clamped to the image), and its sprite: the projection of
+    the cube ``q ± r`` around the disk (extreme at its corners), which holds every pixel the
+    kernel's tests can pass; the fragment shader tests no pixel outside it."""
 
     def __init__(self, cam, radius, pix, x0, y0, width, height):
         z = cam[:, 2]
         ok = (radius > 0.0) & (z - radius > 0.0)
-        safe_z = np.where(ok, z, 1.0)
         near = np.where(ok, z - radius, 1.0)
         far = np.where(ok, z + radius, 1.0)
-        #: the centre's projection, pixels of the whole image (continuous: pixel i spans [i, i+1))
-        self.centre_x = (cam[:, 0] / safe_z - x0) / pix
-        self.centre_y = (cam[:, 1] / safe_z - y0) / pix
         lo_x, hi_x = cam[:, 0] - radius, cam[:, 0] + radius
         lo_y, hi_y = cam[:, 1] - radius, cam[:, 1] + radius
         with np.errstate(invalid="ignore", over="ignore"):
@@ -278,14 +306,6 @@ class _Boxes:
         self.drawn = ok & (box[:, 2] >= 0) & (box[:, 0] <= width - 1) & (box[:, 3] >= 0) & (box[:, 1] <= height - 1)
         #: (N, 4) int64 (i0, j0, i1, j1), clamped to the image; meaningful where ``drawn``
         self.box = np.where(self.drawn[:, None], np.clip(box, 0, [width - 1, height - 1] * 2), 0).astype(np.int64)
-        self._near = z - radius
-        self._far = z + radius
-
-    def depth_range(self) -> tuple[float, float]:
-        """``(near, far)``, object units: the depths any drawn surfel can cover."""
-        near = float(self._near[self.drawn].min())
-        far = float(self._far[self.drawn].max())
-        return near, max(far, near * (1.0 + 1e-6))
 
     def split(self, i0: int, j0: int, w: int, h: int, max_size: float) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
         """Ids of the surfels drawn in the tile ``[i0, i0 + w) × [j0, j0 + h)``, ascending: as
@@ -301,20 +321,6 @@ class _Boxes:
         )  # fmt: skip
         sprite = touch & inside & (side + 2 <= max_size)
         return np.flatnonzero(sprite), np.flatnonzero(touch & ~sprite)
-
-
-def _records(cam, normal, radius, boxes: _Boxes) -> NDArray[np.void]:
-    records = np.empty(len(cam), dtype=_SURFEL)
-    records["centre_radius"][:, :3] = cam
-    records["centre_radius"][:, 3] = radius
-    records["normal"] = normal
-    records["id"] = np.arange(len(cam), dtype=np.int32)
-    centre = np.stack([boxes.centre_x, boxes.centre_y], axis=1)
-    whole = np.clip(np.floor(centre), -_MAX_CENTRE_PIXEL, _MAX_CENTRE_PIXEL)
-    records["centre_pixel"] = whole
-    records["centre_fraction"] = centre - whole
-    records["box"] = boxes.box
-    return records
 
 
 def _tiles(width: int, height: int, limit: int) -> Iterator[tuple[int, int, int, int]]:

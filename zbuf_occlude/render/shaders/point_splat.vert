@@ -1,24 +1,15 @@
 #version 430
-// One surfel (a disk in its tangent plane, OpenCV camera frame) per GL point sprite, or, where
-// SPLAT_QUADS is defined, per instanced quad (a 4-vertex triangle strip): the surfels whose
-// sprite GL cannot draw (larger than its largest point size, or centred outside the tile: GL
-// drops a point whose centre is clipped, however large).  Either covers the surfel's pixel box
-// (visibility/point_kernels.py's, clamped to the image) plus one pixel on each side.  The image
-// is mapped orthographically onto clip space, one tile at a time; the fragment stage decides
-// the coverage.
+// One surfel per GL point sprite, or, where SPLAT_QUADS is defined, per instanced quad (a
+// 4-vertex triangle strip): the surfels whose sprite GL cannot draw (larger than its largest
+// point size, or centred outside the tile: GL drops a point whose centre is clipped, however
+// large).  Either covers the surfel's pixel box (visibility/point_kernels.py's, clamped to the
+// image) plus one pixel on each side.  The image is mapped orthographically onto clip space, one
+// tile at a time; the fragment stage decides the coverage (point_splat.frag).
 uniform ivec2 tile_offset;     // first pixel (i, j) of the tile drawn
 uniform vec2 tile_size;        // pixels
-in vec4 in_centre_radius;      // centre q (object units, OpenCV camera frame), radius (object units)
-in vec3 in_normal;             // unit normal, same frame
 in int in_id;                  // the surfel's row in the caller's arrays
-in ivec2 in_centre_pixel;      // q's projection (x/z, y/z) in pixels of the image: whole part ...
-in vec2 in_centre_fraction;    // ... and fraction, so that a fragment's offset from it is exact
 in ivec4 in_box;               // first and last pixel (i0, j0, i1, j1) the surfel may cover
-flat out vec4 v_centre_radius;
-flat out vec3 v_normal;
 flat out int v_id;
-flat out ivec2 v_centre_pixel;
-flat out vec2 v_centre_fraction;
 flat out ivec4 v_box;
 
 void main() {
@@ -32,10 +23,6 @@ void main() {
     gl_Position = vec4(centre * 2.0 / tile_size - 1.0, 0.0, 1.0);
     gl_PointSize = max(side.x, side.y) + 2.0;
 #endif
-    v_centre_radius = in_centre_radius;
-    v_normal = in_normal;
     v_id = in_id;
-    v_centre_pixel = in_centre_pixel;
-    v_centre_fraction = in_centre_fraction;
     v_box = in_box;
 }

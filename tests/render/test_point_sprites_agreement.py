@@ -1,0 +1,118 @@
+"""The GPU surfel z-buffer breaks ties as the numba kernel does, and rounds as it does: surfels
+at the same depth go to the lowest id whichever pass draws them, a division that is not
+correctly rounded is corrected, and the masks of every shipped mesh are the CPU's.  These run on
+Mesa llvmpipe headless, as the other GL tests, and never skip.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import zbuf_occlude as zo
+from zbuf_occlude.render import point_sprites
+from zbuf_occlude.render.point_sprites import PointSpriteRenderer
+from zbuf_occlude.visibility.point_kernels import EDGE_ON_COS, splat_surfels
+
+#: Every surfel a sprite, every surfel a quad, 8-pixel tiles.
+PASSES = {"sprites": {}, "quads": {"max_point_size": 1.0}, "tiles": {"max_tile": 8}}
+#: A 40 × 30 image over the normalised square [-0.2, 0.2) × [-0.15, 0.15).
+IMAGE = (0.01, -0.2, -0.15, 40, 30)
+
+
+def _splat(cam, normal, radius, image=IMAGE, **settings):
+    with PointSpriteRenderer() as renderer:
+        for name, value in settings.items():
+            setattr(renderer, name, value)
+        return renderer.splat(cam, normal, radius, *image, edge_on_cos=EDGE_ON_COS)
+
+
+@pytest.mark.parametrize("setting", PASSES)
+def test_surfels_at_the_same_depth_go_to_the_lowest_id(setting):
+    # three copies of one disk facing the camera, with a smaller one in front of them
+    cam = np.array([[0.0, 0.0, 2.0], [0.05, 0.0, 1.5], [0.0, 0.0, 2.0], [0.0, 0.0, 2.0]])
+    normal = np.tile([0.0, 0.0, 1.0], (4, 1))
+    radius = np.array([0.6, 0.02, 0.6, 0.6])  # the image in full
+    depth, ids = _splat(cam, normal, radius, **PASSES[setting])
+    depth_cpu, ids_cpu = splat_surfels(cam, normal, radius, *IMAGE)
+    assert np.array_equal(ids, ids_cpu) and np.array_equal(depth, depth_cpu)
+    assert set(np.unique(ids)) == {0, 1}
+
+
+def test_the_tie_goes_to_the_lowest_id_when_it_is_a_quad_and_the_other_a_sprite():
+    # surfel 0 is too wide for a sprite of the GL's largest size, surfel 1 a sprite; both lie
+    # in the plane z = 2 with the same centre: every pixel of the smaller is a tie
+    cam = np.array([[0.0, 0.0, 2.0], [0.0, 0.0, 2.0]])
+    normal = np.tile([0.0, 0.0, 1.0], (2, 1))
+    with PointSpriteRenderer() as renderer:
+        side = int(renderer.max_point_size) + 16
+        image = (2.0 / side, -1.0, -1.0, side, side)
+        radius = np.array([1.5, 20.0 / side])
+        depth, ids = renderer.splat(cam, normal, radius, *image, edge_on_cos=EDGE_ON_COS)
+    assert np.array_equal(ids, splat_surfels(cam, normal, radius, *image)[1])
+    smaller = splat_surfels(cam[1:], normal[1:], radius[1:], *image)[1] == 0
+    assert smaller.sum() > 50 and np.all(ids[smaller] == 0) and np.all(depth[smaller] == 2.0)
+
+
+def test_coplanar_neighbours_tie_as_on_the_cpu():
+    # a tilted plane sampled on a grid, disks overlapping twice over: their depths at a pixel
+    # differ by float64 rounding only, and the kernel's rounding picks the winner
+    u, v = np.meshgrid(np.linspace(-0.3, 0.3, 25), np.linspace(-0.2, 0.2, 17))
+    normal_1 = np.array([0.3, -0.2, -1.0]) / np.linalg.norm([0.3, -0.2, -1.0])
+    e1 = np.cross(normal_1, [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(normal_1, e1)
+    cam = np.array([0.0, 0.0, 2.0]) + u.reshape(-1, 1) * e1 + v.reshape(-1, 1) * e2
+    normal = np.tile(normal_1, (len(cam), 1))
+    radius = np.full(len(cam), 0.05)
+    depth_cpu, ids_cpu = splat_surfels(cam, normal, radius, *IMAGE)
+    for setting in PASSES.values():
+        depth, ids = _splat(cam, normal, radius, **setting)
+        assert np.array_equal(ids, ids_cpu) and np.array_equal(depth, depth_cpu)
+
+
+def _with_division(monkeypatch, old: str, new: str) -> None:
+    """The fragment shader with ``old`` replaced by ``new`` (a division rounded otherwise)."""
+    load = point_sprites.load_shader
+
+    def patched(name, defines=()):
+        source = load(name, defines)
+        if name == "point_splat.frag":
+            assert old in source
+            source = source.replace(old, new)
+        return source
+
+    monkeypatch.setattr(point_sprites, "load_shader", patched)
+
+
+#: The shader's quotient, and one that is an ulp off where the reciprocal rounds.
+DIVISION, RECIPROCAL = "precise double t0 = nq / den;", "precise double t0 = nq * (1.0 / den);"
+CORRECTION, NONE = "t0 + residual(nq, t0, den) / den;", "t0;"
+
+
+@pytest.mark.parametrize("corrected", [True, False], ids=["corrected", "not-corrected"])
+def test_a_division_an_ulp_off_is_corrected(monkeypatch, corrected):
+    """A driver whose float64 division is not correctly rounded (here: by the reciprocal) gives
+    the kernel's depths after the shader's correction, and other depths without it."""
+    rng = np.random.default_rng(1)
+    n = 300
+    cam = np.stack([rng.uniform(-0.2, 0.2, n) * 3, rng.uniform(-0.15, 0.15, n) * 3, rng.uniform(2.5, 3.5, n)], axis=1)
+    normal = rng.normal(size=(n, 3)) + [0.0, 0.0, -2.0]
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    radius = rng.uniform(0.02, 0.1, n)
+    _with_division(monkeypatch, DIVISION, RECIPROCAL)
+    if not corrected:
+        _with_division(monkeypatch, CORRECTION, NONE)
+    depth, _ = _splat(cam, normal, radius)
+    depth_cpu, _ = splat_surfels(cam, normal, radius, *IMAGE)
+    assert np.array_equal(depth, depth_cpu) == corrected
+
+
+def test_masks_equal_on_every_shipped_mesh(sample_mesh_files):
+    """The GPU backend's masks are the CPU's on each shipped mesh (estimated normals, 2 poses)."""
+    cameras = [zo.camera_on_sphere(el, az) for el, az in zo.view_schedule("fibonacci:2")]
+    for path in sample_mesh_files:
+        mesh = zo.load_mesh(path)
+        surfels = zo.point_surfels(zo.sample_surface(mesh, 512, seed=0)[0])
+        for camera in cameras:
+            assert np.array_equal(surfels.visible(camera, backend="gpu"), surfels.visible(camera)), path.name
