@@ -62,6 +62,7 @@ __all__ = [
     "DatasetFormatError",
     "CheckpointError",
     "PaddedSamplesWarning",
+    "CameraPlacementWarning",
     "occlude",
     "OccludedCloud",
     "OccludedDataset",

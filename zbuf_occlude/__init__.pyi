@@ -26,6 +26,7 @@ from .errors import (
     ArgumentTypeError,
     BackendUnavailable,
     CameraError,
+    CameraPlacementWarning,
     CheckpointError,
     DatasetBusy,
     DatasetFormatError,

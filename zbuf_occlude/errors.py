@@ -17,6 +17,7 @@ __all__ = [
     "RegistryError",
     "UnknownOptionError",
     "PaddedSamplesWarning",
+    "CameraPlacementWarning",
     "UnsafePathError",
     "DatasetFormatError",
     "CheckpointError",
@@ -92,3 +93,9 @@ class ArgumentTypeError(ZbufOccludeError, TypeError):
 
 class PaddedSamplesWarning(UserWarning):
     """Some samples hold repeated points: fewer points were visible than a sample holds."""
+
+
+class CameraPlacementWarning(UserWarning):
+    """A camera where the CLI would not put one: inside the object's bounding box, or so far
+    that the object spans less than a pixel (a cloud in its file's units, a camera inside the
+    mesh); the message names the camera's distance and the object's extent."""

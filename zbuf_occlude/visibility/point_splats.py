@@ -60,6 +60,7 @@ from zbuf_occlude.defaults import (
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.geometry.arguments import check_camera, check_points, described
 from zbuf_occlude.geometry.cameras import Camera
+from zbuf_occlude.geometry.placement import warn_camera_placement
 from zbuf_occlude.io.point_sets import unit_normals
 from zbuf_occlude.resources import check_memory
 from zbuf_occlude.visibility.registry import register
@@ -433,6 +434,7 @@ def visible_mask_points(
     """
     check_camera(camera)
     surfels = point_surfels(points, normals, oriented=oriented, neighbours=neighbours, splat_scale=splat_scale)
+    warn_camera_placement(camera, surfels.points)
     return surfels.visible(camera, tolerance=tolerance, backend=backend)
 
 

@@ -34,6 +34,7 @@ from zbuf_occlude.defaults import DEFAULT_METHOD
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError, RegistryError, UnknownOptionError
 from zbuf_occlude.geometry.arguments import check_camera, check_face_index, check_mesh, check_points
 from zbuf_occlude.geometry.cameras import Camera
+from zbuf_occlude.geometry.placement import warn_camera_placement
 
 if TYPE_CHECKING:  # annotations only: trimesh (and scipy with it) is imported where meshes are made
     import trimesh
@@ -350,4 +351,5 @@ def visible_mask(
     check_camera(camera)
     pts = check_points(points)
     fi = check_face_index(face_index, len(pts), len(mesh.faces))
+    warn_camera_placement(camera, mesh)
     return fn(mesh, pts, camera, face_index=fi, **options)

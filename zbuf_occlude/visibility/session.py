@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.defaults import DEFAULT_METHOD
 from zbuf_occlude.geometry.arguments import check_camera, check_mesh
+from zbuf_occlude.geometry.placement import warn_camera_placement
 from zbuf_occlude.visibility.registry import (
     SessionBase,
     check_face_index,
@@ -88,6 +89,7 @@ class VisibilitySession(SessionBase):
     def visible(self, camera: Camera) -> NDArray[np.bool_]:
         """The visibility of every point from ``camera``: ``(N,) bool``, in the order given."""
         check_camera(camera)
+        warn_camera_placement(camera, self._mesh)
         if self._session is not None:
             return self._session.visible(camera, **self.options)
         return self._function(self._mesh, self._points, camera, face_index=self._face_index, **self.options)
