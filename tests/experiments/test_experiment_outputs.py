@@ -20,7 +20,7 @@ pytest.importorskip("torch")
 from zbuf_occlude.cli.main import main  # noqa: E402
 from zbuf_occlude.errors import BackendUnavailable  # noqa: E402
 from zbuf_occlude.experiments.compare.report import COMPARE_OUTPUTS  # noqa: E402
-from zbuf_occlude.experiments.table3 import AUGMENTATION_OUTPUTS, CHECKPOINT_FILES, ELEVATION_OUTPUTS  # noqa: E402
+from zbuf_occlude.experiments.table3.common import AUGMENTATION_OUTPUTS, CHECKPOINT_FILES, ELEVATION_OUTPUTS  # noqa: E402
 from zbuf_occlude.io.owned import LEDGER_FILE  # noqa: E402
 
 pytestmark = pytest.mark.slow  # the commands render, train or draw figures

@@ -20,8 +20,8 @@ pytest.importorskip("matplotlib")
 
 from zbuf_occlude.cli.sim2real import print_table
 from zbuf_occlude.errors import InvalidInputError, UnsafePathError
-from zbuf_occlude.experiments import table3
-from zbuf_occlude.experiments.table3_config import SCALES
+from zbuf_occlude.experiments.table3 import common, elevation
+from zbuf_occlude.experiments.table3.config import SCALES
 from zbuf_occlude.io.owned import LEDGER_FILE
 
 needs_fifo = pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs os.mkfifo")
@@ -49,7 +49,7 @@ def _run(root: Path, model: str, *, curve: bool = True) -> Path:
 
 def test_combine_reads_every_run_and_the_first_curve(tmp_path: Path) -> None:
     runs = [_run(tmp_path, "pointnet"), _run(tmp_path, "voxnet", curve=False)]
-    out = table3.combine_elevation(runs, tmp_path / "out")
+    out = elevation.combine_elevation(runs, tmp_path / "out")
     with open(out / "results.csv", encoding="utf-8") as fh:
         rows = list(csv.DictReader(fh))
     assert [r["model"] for r in rows] == ["pointnet"] * 3 + ["voxnet"] * 3 and float(rows[1]["accuracy"]) == 0.5
@@ -63,7 +63,7 @@ def test_combine_refuses_a_runs_file_that_is_a_fifo_without_blocking(tmp_path: P
     (run / name).unlink()
     os.mkfifo(run / name)
     with pytest.raises(InvalidInputError, match=rf"{name}: is a FIFO; only regular files are read"):
-        table3.combine_elevation([run], tmp_path / "out")
+        elevation.combine_elevation([run], tmp_path / "out")
     assert not (tmp_path / "out" / "results.csv").exists()
 
 
@@ -73,7 +73,7 @@ def test_combine_refuses_a_runs_file_linked_out_of_the_run(tmp_path: Path, name:
     (run / name).unlink()
     (run / name).symlink_to(other / name)
     with pytest.raises(UnsafePathError, match=rf"{name} leads outside"):
-        table3.combine_elevation([run], tmp_path / "out")
+        elevation.combine_elevation([run], tmp_path / "out")
 
 
 def test_combine_reads_the_curve_of_a_data_folder_the_run_names(tmp_path: Path, monkeypatch) -> None:
@@ -83,9 +83,9 @@ def test_combine_reads_the_curve_of_a_data_folder_the_run_names(tmp_path: Path, 
     _write_csv(shared / "visible_area.csv", CURVE)
     (run / "run.json").write_text(json.dumps({"model": "pointnet", "data_dir": str(shared)}))
     seen = []
-    real = table3.plot_elevation
-    monkeypatch.setattr(table3, "plot_elevation", lambda rows, curve: seen.append(curve) or real(rows, curve))
-    table3.combine_elevation([run], tmp_path / "out")
+    real = elevation.plot_elevation
+    monkeypatch.setattr(elevation, "plot_elevation", lambda rows, curve: seen.append(curve) or real(rows, curve))
+    elevation.combine_elevation([run], tmp_path / "out")
     assert seen == [CURVE]
 
 
@@ -96,7 +96,7 @@ def test_combine_does_not_read_a_curve_from_the_current_folder(tmp_path: Path, m
     cwd.mkdir()
     (cwd / "visible_area.csv").write_text("elevation_deg\nnot a number\n")
     monkeypatch.chdir(cwd)
-    table3.combine_elevation([run], tmp_path / "out")  # the stray file is not read: no error
+    elevation.combine_elevation([run], tmp_path / "out")  # the stray file is not read: no error
 
 
 @pytest.mark.parametrize(
@@ -111,44 +111,44 @@ def test_combine_names_a_file_that_is_not_ours_in_one_line(tmp_path: Path, damag
     run = _run(tmp_path, "pointnet")
     damage(run)
     with pytest.raises(InvalidInputError, match=message):
-        table3.combine_elevation([run], tmp_path / "out")
+        elevation.combine_elevation([run], tmp_path / "out")
 
 
 def test_the_cached_curve_is_read_back_and_a_link_out_of_the_data_folder_refused(tmp_path: Path) -> None:
     data = tmp_path / "data"
     data.mkdir()
     _write_csv(data / "visible_area.csv", CURVE)
-    assert table3._visible_area_curve([], data, SCALES["quick"], "zbuffer", False) == CURVE
+    assert elevation._visible_area_curve([], data, SCALES["quick"], "zbuffer", False) == CURVE
     (data / "visible_area.csv").unlink()
     _write_csv(tmp_path / "elsewhere.csv", CURVE)
     (data / "visible_area.csv").symlink_to(tmp_path / "elsewhere.csv")
     with pytest.raises(UnsafePathError, match=r"visible_area\.csv leads outside"):
-        table3._visible_area_curve([], data, SCALES["quick"], "zbuffer", False)
+        elevation._visible_area_curve([], data, SCALES["quick"], "zbuffer", False)
 
 
 @needs_fifo
 def test_a_cached_curve_that_is_a_fifo_is_refused_not_skipped(tmp_path: Path) -> None:
     os.mkfifo(tmp_path / "visible_area.csv")
     with pytest.raises(InvalidInputError, match=r"visible_area\.csv: is a FIFO"):
-        table3._visible_area_curve([], tmp_path, SCALES["quick"], "zbuffer", False)
+        elevation._visible_area_curve([], tmp_path, SCALES["quick"], "zbuffer", False)
 
 
 def test_a_mesh_list_an_earlier_version_wrote_is_adopted_only_when_it_holds_this_runs_meshes(tmp_path: Path) -> None:
     (tmp_path / "meshes.txt").write_text("a.off chair train\n")
-    table3._write_mesh_list(tmp_path, "a.off chair train\n")  # the same list: taken as ours, rewritten
+    common.write_mesh_list(tmp_path, "a.off chair train\n")  # the same list: taken as ours, rewritten
     assert "meshes.txt" in (tmp_path / LEDGER_FILE).read_text()
     other = tmp_path / "other"
     other.mkdir()
     (other / "meshes.txt").write_text("b.off chair train\n")
     with pytest.raises(UnsafePathError, match=r"meshes\.txt was not recorded by a run of ours"):
-        table3._write_mesh_list(other, "a.off chair train\n")
+        common.write_mesh_list(other, "a.off chair train\n")
     assert (other / "meshes.txt").read_text() == "b.off chair train\n"
 
 
 # -- sim2real's runs.jsonl, the CLI's table.md --------------------------------------------------
 def _load_runs(path: Path) -> dict:
     pytest.importorskip("torch")
-    from zbuf_occlude.experiments.sim2real import _load_runs as load
+    from zbuf_occlude.experiments.sim2real.outputs import load_runs as load
 
     return load(path)
 

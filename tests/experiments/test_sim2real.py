@@ -14,19 +14,10 @@ pytest.importorskip("torch")
 
 from zbuf_occlude.cli.main import main  # noqa: E402
 from zbuf_occlude.errors import InvalidInputError  # noqa: E402
-from zbuf_occlude.experiments.sim2real_data import (  # noqa: E402
-    FITTED_PLACED,
-    FITTED_SETS,
-    KEEP_SCALE_UNIT_M,
-    TRAINING_SETS,
-    SetRecipe,
-    build_set,
-    build_sets,
-    find_class_meshes,
-    mix_sets,
-    split_whole_meshes,
-)
-from zbuf_occlude.experiments.sim2real_placement import ClassPlacement, CropPlacement, MeshShape  # noqa: E402
+from zbuf_occlude.experiments.sim2real.data import FITTED_PLACED, FITTED_SETS, TRAINING_SETS, SetRecipe, build_set, build_sets, mix_sets
+from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes, split_whole_meshes
+from zbuf_occlude.experiments.sim2real.real import KEEP_SCALE_UNIT_M
+from zbuf_occlude.experiments.sim2real.placement import ClassPlacement, CropPlacement, MeshShape  # noqa: E402
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange, parse_sizes, size_interval  # noqa: E402
 
 
@@ -173,7 +164,7 @@ def test_bad_options_exit_2_naming_the_value(tmp_path: Path, option: str, value:
 
 
 def test_real_clouds_label_map_and_keep_scale() -> None:
-    from zbuf_occlude.experiments.sim2real_data import real_clouds
+    from zbuf_occlude.experiments.sim2real.real import real_clouds
     from zbuf_occlude.real_scans.records import RealScan, normalize_points
 
     tall = np.array([[0.0, 0.0, 0.0], [0.2, 0.1, 1.8], [0.1, 0.0, 0.9]])
@@ -206,7 +197,7 @@ def test_an_airborne_lidar_set(tmp_path: Path) -> None:
 def test_classes_real_trains_only_the_real_sets_classes(tmp_path: Path) -> None:
     from types import SimpleNamespace
 
-    from zbuf_occlude.experiments.sim2real import _classes
+    from zbuf_occlude.experiments.sim2real.run import _classes
 
     root = _mesh_root(tmp_path)
     (root / "bush").mkdir()  # a class the real scans do not have
@@ -242,8 +233,8 @@ def test_occluded_set_draws_its_elevations_in_the_range_given(tmp_path: Path, mo
 def test_the_occluded_sets_elevations_default_to_those_the_sensor_sees_objects_from(tmp_path: Path) -> None:
     """Airborne: 90° minus the flight plan's incidence angles (nadir to half the swath); spinning:
     atan(height / distance) over the lidar set's mount; given: as given."""
-    from zbuf_occlude.experiments.sim2real import Sim2RealConfig
-    from zbuf_occlude.experiments.sim2real_data import LIDAR_PLACEMENT
+    from zbuf_occlude.experiments.sim2real.config import Sim2RealConfig
+    from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT
     from zbuf_occlude.sensors import airborne_preset
     from zbuf_occlude.sensors.presets import sensor_to_json
 
@@ -262,7 +253,7 @@ def test_the_occluded_sets_elevations_default_to_those_the_sensor_sees_objects_f
 
 
 def test_the_occluded_elevation_help_gives_the_ranges_the_sensors_give(capsys: pytest.CaptureFixture) -> None:
-    from zbuf_occlude.experiments.sim2real_data import sensor_elevation_deg
+    from zbuf_occlude.experiments.sim2real.data import sensor_elevation_deg
     from zbuf_occlude.sensors import airborne_preset, lidar_preset
 
     with pytest.raises(SystemExit):
@@ -275,7 +266,7 @@ def test_the_occluded_elevation_help_gives_the_ranges_the_sensors_give(capsys: p
 
 def _sets_found(n: int = 4):
     """What prepare_sets finds, as little as _fix_settings reads: two classes of n/2 real scans, no mesh."""
-    from zbuf_occlude.experiments.sim2real import Sim2RealSets
+    from zbuf_occlude.experiments.sim2real.run import Sim2RealSets
 
     y = np.repeat([0, 1], n // 2)
     return Sim2RealSets(["car", "pole"], [], [], np.zeros((n, 8, 3), np.float32), y, [f"{i}.xyz" for i in range(n)],
@@ -283,8 +274,9 @@ def _sets_found(n: int = 4):
 
 
 def test_settings_hold_the_sensor_in_full_and_only_the_placement_its_kind_uses(tmp_path: Path) -> None:
-    from zbuf_occlude.experiments.sim2real import Sim2RealConfig, _fix_settings
-    from zbuf_occlude.experiments.sim2real_data import LIDAR_PLACEMENT
+    from zbuf_occlude.experiments.sim2real.config import Sim2RealConfig
+    from zbuf_occlude.experiments.sim2real.run import _fix_settings
+    from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT
     from zbuf_occlude.sensors import lidar_preset
     from zbuf_occlude.sensors.presets import sensor_from_name, sensor_to_json
 
@@ -307,7 +299,8 @@ def test_settings_hold_the_sensor_in_full_and_only_the_placement_its_kind_uses(t
 
 
 def test_a_run_from_before_the_held_out_half_scores_is_refused_saying_so(tmp_path: Path) -> None:
-    from zbuf_occlude.experiments.sim2real import Sim2RealConfig, _fix_settings
+    from zbuf_occlude.experiments.sim2real.config import Sim2RealConfig
+    from zbuf_occlude.experiments.sim2real.run import _fix_settings
 
     config = Sim2RealConfig("m", "r")
     _fix_settings(config, _sets_found(), tmp_path)
@@ -319,8 +312,8 @@ def test_a_run_from_before_the_held_out_half_scores_is_refused_saying_so(tmp_pat
 
 
 def test_a_mesh_without_a_lidar_crop_is_skipped_before_the_work_naming_it(tmp_path: Path, monkeypatch, caplog) -> None:
-    import zbuf_occlude.experiments.sim2real_data as data
-    from zbuf_occlude.experiments.sim2real_data import check_lidar_meshes
+    import zbuf_occlude.experiments.sim2real.data as data
+    from zbuf_occlude.experiments.sim2real.data import check_lidar_meshes
     from zbuf_occlude.sensors import lidar_preset
 
     root = _mesh_root(tmp_path)
@@ -350,7 +343,7 @@ def test_a_mesh_without_a_lidar_crop_is_skipped_before_the_work_naming_it(tmp_pa
 def _fit_spy(monkeypatch: pytest.MonkeyPatch) -> list[list[str]]:
     """Replace the fit by a spy that records the scans it is given and returns the HDL-32E preset,
     crops 15-20 m away and the default sizes."""
-    import zbuf_occlude.experiments.sim2real as s2r
+    import zbuf_occlude.experiments.sim2real.run as s2r
     from zbuf_occlude.sensors import lidar_preset
 
     calls: list[list[str]] = []
@@ -401,11 +394,8 @@ def _rows(path: Path) -> list[dict]:
 
 @pytest.mark.slow
 def test_fit_sensor_fits_on_one_half_and_scores_every_row_on_the_other(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from zbuf_occlude.experiments.sim2real_data import (
-        FITTED_PLACED,
-        FITTED_SETS,
-        real_clouds,
-    )
+    from zbuf_occlude.experiments.sim2real.data import FITTED_PLACED, FITTED_SETS
+    from zbuf_occlude.experiments.sim2real.real import real_clouds
     from zbuf_occlude.real_scans.datasets import load_real_scans
 
     meshes, real, out = _mesh_root(tmp_path), _real_root(tmp_path), tmp_path / "out"
@@ -449,7 +439,8 @@ def test_fit_sensor_fits_on_one_half_and_scores_every_row_on_the_other(tmp_path:
 def test_the_held_out_half_and_the_real_clouds_depend_on_the_scans_content_not_their_file_names(tmp_path: Path) -> None:
     import shutil
 
-    from zbuf_occlude.experiments.sim2real import Sim2RealConfig, prepare_sets
+    from zbuf_occlude.experiments.sim2real.config import Sim2RealConfig
+    from zbuf_occlude.experiments.sim2real.run import prepare_sets
 
     meshes, real = _mesh_root(tmp_path), _real_root(tmp_path)
     renamed = tmp_path / "renamed"  # the same scans, their names in the other order (and other folder names)
@@ -468,7 +459,7 @@ def test_the_held_out_half_and_the_real_clouds_depend_on_the_scans_content_not_t
 
 @pytest.mark.slow
 def test_a_resumed_run_makes_only_the_sets_it_still_trains_and_they_come_out_the_same(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from zbuf_occlude.experiments import sim2real
+    from zbuf_occlude.experiments.sim2real import outputs, run
 
     _fit_spy(monkeypatch)
     out = tmp_path / "out"
@@ -476,13 +467,13 @@ def test_a_resumed_run_makes_only_the_sets_it_still_trains_and_they_come_out_the
             "--label-map", "Trunk=pole", "--fit-sensor", "--points", "32", "--epochs", "1", "--per-class", "4", "--seeds", "1",
             "--threads", "1", "--no-progress"]  # fmt: skip
     asked: list[list[str]] = []
-    real_build = sim2real.build_sets
+    real_build = run.build_sets
 
     def build_sets(*a, kinds=None, **kw):
         asked.append(list(kinds))
         return real_build(*a, kinds=kinds, **kw)
 
-    monkeypatch.setattr(sim2real, "build_sets", build_sets)
+    monkeypatch.setattr(run, "build_sets", build_sets)
     assert main(argv) == 0
     timing = ("data_s", "train_s")
     rows = [{k: v for k, v in json.loads(line).items() if k not in timing} for line in (out / "runs.jsonl").read_text().splitlines()]
@@ -492,7 +483,7 @@ def test_a_resumed_run_makes_only_the_sets_it_still_trains_and_they_come_out_the
     # written as a run that stopped there wrote it, through the output layer (a file changed by hand is refused)
     from zbuf_occlude.io.owned import OwnedFolder
 
-    with OwnedFolder(out, names=sim2real.SIM2REAL_OUTPUTS) as folder:
+    with OwnedFolder(out, names=outputs.SIM2REAL_OUTPUTS) as folder:
         folder.write_text("runs.jsonl", "\n".join(kept) + "\n")
     assert main(argv) == 0 and asked[2:] == [["occluded", FITTED_PLACED]] * 2
     again = {r["train_set"]: r for r in ({k: v for k, v in json.loads(line).items() if k not in timing}
@@ -525,7 +516,7 @@ def test_without_fit_sensor_no_fitted_set_and_every_row_scored_on_real_to_reals_
 def test_fit_sensor_needs_sensor_frame_points_and_a_spinning_lidar() -> None:
     from types import SimpleNamespace
 
-    from zbuf_occlude.experiments.sim2real import _fit_sensor
+    from zbuf_occlude.experiments.sim2real.run import _fit_sensor
     from zbuf_occlude.sensors import airborne_preset, lidar_preset
 
     with pytest.raises(InvalidInputError, match="spinning LiDAR"):
@@ -536,7 +527,7 @@ def test_fit_sensor_needs_sensor_frame_points_and_a_spinning_lidar() -> None:
 
 def test_an_airborne_sensor_with_fit_sensor_is_refused_before_anything_is_read(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                                               capsys: pytest.CaptureFixture) -> None:  # fmt: skip
-    import zbuf_occlude.experiments.sim2real as s2r
+    import zbuf_occlude.experiments.sim2real.run as s2r
     import zbuf_occlude.real_scans.datasets as datasets
 
     read: list[str] = []
@@ -551,8 +542,9 @@ def test_an_airborne_sensor_with_fit_sensor_is_refused_before_anything_is_read(t
 
 
 def test_fit_sensor_says_what_it_reads_and_fits_before_and_after_the_fit(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    import zbuf_occlude.experiments.sim2real as s2r
-    from zbuf_occlude.experiments.sim2real import Sim2RealConfig, prepare_sets
+    import zbuf_occlude.experiments.sim2real.run as s2r
+    from zbuf_occlude.experiments.sim2real.config import Sim2RealConfig
+    from zbuf_occlude.experiments.sim2real.run import prepare_sets
 
     said: list[str] = []
     fits = _fit_spy(monkeypatch)
@@ -579,7 +571,7 @@ def test_fit_sensor_fits_crop_distances_and_heights_per_class() -> None:
     """Each class's crops are placed at the distances its own real scans were taken from, as tall as they look."""
     from types import SimpleNamespace
 
-    from zbuf_occlude.experiments.sim2real import _fit_sensor
+    from zbuf_occlude.experiments.sim2real.run import _fit_sensor
     from zbuf_occlude.sensors import lidar_preset
 
     near, far = [4.0, 5.0, 6.0, 7.0], [12.0, 14.0, 16.0, 18.0]
@@ -621,12 +613,8 @@ def test_fit_crop_distances_are_percentiles_of_the_horizontal_distances() -> Non
 
 @pytest.mark.slow
 def test_the_fitted_placed_set_draws_the_fitted_distances_and_the_others_the_preset_ones(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from zbuf_occlude.experiments.sim2real_data import (
-        FITTED,
-        FITTED_PLACED,
-        LIDAR_PLACEMENT,
-        build_sets,
-    )
+    from zbuf_occlude.experiments.sim2real.data import FITTED, FITTED_PLACED, build_sets
+    from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT
     from zbuf_occlude.sensors import crops, lidar_preset
 
     seen: list[tuple[str, tuple[float, float]]] = []
@@ -675,7 +663,7 @@ def test_build_sets_makes_the_sets_asked_for_and_refuses_one_it_cannot_make(tmp_
 
 
 def test_the_pooled_set_is_the_three_lidar_sets_of_its_seed_in_one(tmp_path: Path) -> None:
-    from zbuf_occlude.experiments.sim2real_data import FITTED, POOLED
+    from zbuf_occlude.experiments.sim2real.data import FITTED, POOLED
     from zbuf_occlude.sensors import lidar_preset
 
     meshes = find_class_meshes(_mesh_root(tmp_path))
@@ -695,7 +683,7 @@ def test_the_pooled_set_is_the_three_lidar_sets_of_its_seed_in_one(tmp_path: Pat
 
 @pytest.mark.slow
 def test_validate_on_fit_half_validates_mesh_sets_on_the_fit_half_and_trains_on_every_mesh(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from zbuf_occlude.experiments.sim2real_data import FITTED_SETS
+    from zbuf_occlude.experiments.sim2real.data import FITTED_SETS
     from zbuf_occlude.learn import training
 
     meshes, real, out = _mesh_root(tmp_path), _real_root(tmp_path), tmp_path / "out"
@@ -714,7 +702,7 @@ def test_validate_on_fit_half_validates_mesh_sets_on_the_fit_half_and_trains_on_
     results = _rows(out / "results.csv")
     kinds = [r["train_set"] for r in results]
     assert kinds == [*TRAINING_SETS, *FITTED_SETS, "real→real"]
-    from zbuf_occlude.experiments.sim2real_data import real_clouds
+    from zbuf_occlude.experiments.sim2real.real import real_clouds
     from zbuf_occlude.real_scans.datasets import load_real_scans
 
     pts, _, sources = real_clouds(load_real_scans(real), ["car", "pole"], {"Trunk": "pole"}, 32, 0)
@@ -741,7 +729,7 @@ def test_validate_on_fit_half_validates_mesh_sets_on_the_fit_half_and_trains_on_
 @pytest.mark.slow
 def test_fitted_shape_gives_the_placed_meshes_the_fitted_widths_or_outline_or_neither(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                                                        capsys: pytest.CaptureFixture) -> None:  # fmt: skip
-    from zbuf_occlude.experiments import sim2real
+    from zbuf_occlude.experiments.sim2real import run
 
     from zbuf_occlude.sensors import lidar_preset
 
@@ -751,20 +739,20 @@ def test_fitted_shape_gives_the_placed_meshes_the_fitted_widths_or_outline_or_ne
         shaped = {"distance_m": (6.0, 9.0), "across_sight_width_m": (0.3, 0.5), "across_sight_profile": (1.0,) * 8}
         return lidar_preset("hdl32e"), {n: dict(shaped) for n in names}, CLASS_SIZES_M, {"name": "fitted-by-spy", "base": base.name}
 
-    monkeypatch.setattr(sim2real, "_fit_sensor", fit)
+    monkeypatch.setattr(run, "_fit_sensor", fit)
     asked: list[set[str]] = []
-    real_fit = sim2real.fit_mesh_shapes
+    real_fit = run.fit_mesh_shapes
 
     def spy(meshes, sensor, sizes, placement):
         asked.append({key for c in placement.per_class.values() for key in ("across_sight_width_m", "across_sight_profile")
                       if getattr(c, key) is not None})  # fmt: skip
         return real_fit(meshes, sensor, sizes, placement)
 
-    monkeypatch.setattr(sim2real, "fit_mesh_shapes", spy)
+    monkeypatch.setattr(run, "fit_mesh_shapes", spy)
     argv = ["experiment", "sim2real", str(meshes), "--real", str(real), "--label-map", "Trunk=pole", "--fit-sensor", "--points", "32",
             "--epochs", "1", "--per-class", "4", "--threads", "1", "--no-progress", "--seeds", "1", "--validate-on", "fit-half"]  # fmt: skip
     scales = []
-    real_build = sim2real.build_sets
+    real_build = run.build_sets
 
     shares = []
 
@@ -773,7 +761,7 @@ def test_fitted_shape_gives_the_placed_meshes_the_fitted_widths_or_outline_or_ne
         shares.append({name: v.visible_across_sight for name, v in fitted_placement.per_mesh.items() if v.visible_across_sight is not None})
         return real_build(*a, fitted_placement=fitted_placement, **kw)
 
-    monkeypatch.setattr(sim2real, "build_sets", build_sets)
+    monkeypatch.setattr(run, "build_sets", build_sets)
     for shape, out in (("none", "o1"), ("outline", "o2"), ("widths,outline", "o3"), ("widen", "o6"), ("occlude", "o8")):
         assert main([*argv, "--out", str(tmp_path / out), "--fitted-shape", shape]) == 0
         assert json.loads((tmp_path / out / "settings.json").read_text())["fit_sensor"]["fitted_shape"] == ([] if shape == "none" else shape.split(","))
@@ -796,7 +784,8 @@ def test_fitted_shape_gives_the_placed_meshes_the_fitted_widths_or_outline_or_ne
 
 
 def test_the_set_chosen_on_the_fit_half_is_the_best_validated_per_seed_never_the_best_scored() -> None:
-    from zbuf_occlude.experiments.sim2real import CHOSEN_ON_FIT_HALF, summarise
+    from zbuf_occlude.experiments.sim2real.outputs import CHOSEN_ON_FIT_HALF
+    from zbuf_occlude.experiments.sim2real.report import summarise
 
     def run(kind: str, seed: int, val: float, scored: float) -> dict:
         return {"train_set": kind, "seed": seed, "best_val_mean_class_accuracy": val, "mean_class_accuracy": scored}
@@ -815,7 +804,8 @@ def test_the_set_chosen_on_the_fit_half_is_the_best_validated_per_seed_never_the
 
 
 def test_a_validation_accuracy_tie_goes_to_the_lower_validation_loss() -> None:
-    from zbuf_occlude.experiments.sim2real import CHOSEN_ON_FIT_HALF, summarise
+    from zbuf_occlude.experiments.sim2real.outputs import CHOSEN_ON_FIT_HALF
+    from zbuf_occlude.experiments.sim2real.report import summarise
 
     def run(kind: str, val: float, loss: float | None, scored: float) -> dict:
         return {"train_set": kind, "seed": 0, "best_val_mean_class_accuracy": val, "best_val_loss": loss, "mean_class_accuracy": scored}
@@ -831,7 +821,7 @@ def test_a_validation_accuracy_tie_goes_to_the_lower_validation_loss() -> None:
 
 @pytest.mark.slow
 def test_a_class_outline_warps_each_mesh_then_stretches_it_under_the_warp(tmp_path: Path) -> None:
-    from zbuf_occlude.experiments.sim2real_placement import fit_mesh_shapes
+    from zbuf_occlude.experiments.sim2real.placement import fit_mesh_shapes
     from zbuf_occlude.sensors import lidar_preset
 
     meshes = [m for m in find_class_meshes(_mesh_root(tmp_path)) if m.class_name == "pole"]
@@ -858,7 +848,7 @@ def test_a_class_outline_warps_each_mesh_then_stretches_it_under_the_warp(tmp_pa
 
 @pytest.mark.slow
 def test_width_scales_fitted_once_give_the_crops_of_fitting_them_in_every_draw(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from zbuf_occlude.experiments.sim2real_placement import fit_mesh_shapes
+    from zbuf_occlude.experiments.sim2real.placement import fit_mesh_shapes
     from zbuf_occlude.sensors import lidar_preset
     from zbuf_occlude.sensors.fit import shapes
 
@@ -880,7 +870,7 @@ def test_width_scales_fitted_once_give_the_crops_of_fitting_them_in_every_draw(t
 @pytest.mark.slow
 def test_widen_is_never_narrower_whether_fitted_once_or_in_the_draw(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """``across_sight_width_by: widen`` raises each stretch below 1 to 1, in fit_mesh_shapes and in a set's own fit alike."""
-    from zbuf_occlude.experiments.sim2real_placement import fit_mesh_shapes
+    from zbuf_occlude.experiments.sim2real.placement import fit_mesh_shapes
     from zbuf_occlude.sensors import crops, lidar_preset
 
     meshes = [m for m in find_class_meshes(_mesh_root(tmp_path)) if m.class_name == "pole"]
@@ -939,7 +929,7 @@ def test_a_placement_keeps_classes_and_meshes_apart_and_checks_each_value_once()
 def test_build_set_takes_its_settings_as_one_recipe() -> None:
     import inspect
 
-    from zbuf_occlude.experiments import sim2real_data
+    from zbuf_occlude.experiments.sim2real import data as sim2real_data
 
     for fn in (sim2real_data.build_set, sim2real_data.build_sets, sim2real_data.check_lidar_meshes):
         assert len(inspect.signature(fn).parameters) <= 12, fn.__name__
@@ -950,7 +940,7 @@ def test_build_set_takes_its_settings_as_one_recipe() -> None:
 
 
 def test_every_run_chooses_its_best_epoch_by_the_validation_loss_unless_told_otherwise() -> None:
-    from zbuf_occlude.experiments.sim2real import Sim2RealConfig
+    from zbuf_occlude.experiments.sim2real.config import Sim2RealConfig
 
     assert Sim2RealConfig("m", "r").train_config(0).select == "loss"
     assert Sim2RealConfig("m", "r", recipe="plain").train_config(0).select == "accuracy"
@@ -961,7 +951,7 @@ def test_every_run_chooses_its_best_epoch_by_the_validation_loss_unless_told_oth
 
 def test_config_messages_name_the_fields_or_the_flags_given() -> None:
     from zbuf_occlude.cli.sim2real import OPTION_NAMES
-    from zbuf_occlude.experiments.sim2real import Sim2RealConfig
+    from zbuf_occlude.experiments.sim2real.config import Sim2RealConfig
 
     cases = [({"validate_on": "fit-half"}, "validate_on fit-half needs fit_sensor", "--validate-on fit-half needs --fit-sensor"),
              ({"aspect": True, "keep_scale": True}, "aspect needs augmentation, which keep_scale", "--augment aspect needs augmentation, which --keep-scale"),
@@ -995,7 +985,7 @@ def test_recorded_runs_are_found():
 
 @pytest.mark.parametrize("path", RECORDED_SETTINGS, ids=lambda p: "/".join(p.parts[-3:-1]))
 def test_the_identity_of_a_config_is_what_recorded_runs_hold_so_they_resume(path: Path) -> None:
-    from zbuf_occlude.experiments.sim2real import SIM2REAL_SCALES, Sim2RealConfig
+    from zbuf_occlude.experiments.sim2real.config import SIM2REAL_SCALES, Sim2RealConfig
     from zbuf_occlude.mesh.sizes import SizeRange
 
     s = json.loads(path.read_text())

@@ -14,15 +14,9 @@ pytest.importorskip("torch")
 
 from zbuf_occlude.cli.main import main  # noqa: E402
 from zbuf_occlude.errors import InvalidInputError  # noqa: E402
-from zbuf_occlude.experiments import sim2real_data  # noqa: E402
-from zbuf_occlude.experiments.sim2real_data import (  # noqa: E402
-    OCCLUDED_POINTS,
-    TRAINING_SETS,
-    SetRecipe,
-    build_set,
-    build_sets,
-    find_class_meshes,
-)
+from zbuf_occlude.experiments.sim2real import data as sim2real_data  # noqa: E402
+from zbuf_occlude.experiments.sim2real.data import OCCLUDED_POINTS, TRAINING_SETS, SetRecipe, build_set, build_sets
+from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
 
 NAMES = ["car", "pole"]
 RECIPE = SetRecipe(resolution=128, dense_points=1500)
@@ -139,7 +133,7 @@ def test_build_set_names_the_occluded_points_set_among_those_it_makes() -> None:
 
 def test_occluded_points_with_a_point_method_or_an_unknown_one_is_refused_naming_the_flags() -> None:
     from zbuf_occlude.cli.sim2real import OPTION_NAMES
-    from zbuf_occlude.experiments.sim2real import Sim2RealConfig
+    from zbuf_occlude.experiments.sim2real.config import Sim2RealConfig
 
     with pytest.raises(InvalidInputError, match="occluded_points compares point-splat .* method point-splat is point-splat already"):
         Sim2RealConfig("m", "r", occluded_points=True, method="point-splat")
@@ -151,7 +145,7 @@ def test_occluded_points_with_a_point_method_or_an_unknown_one_is_refused_naming
 
 
 def test_the_identity_holds_the_occluded_points_set_only_when_it_is_made() -> None:
-    from zbuf_occlude.experiments.sim2real import Sim2RealConfig
+    from zbuf_occlude.experiments.sim2real.config import Sim2RealConfig
 
     plain, with_points = Sim2RealConfig("m", "r").identity(), Sim2RealConfig("m", "r", occluded_points=True).identity()
     assert "occluded_points" not in plain  # the runs made without it resume
@@ -161,8 +155,8 @@ def test_the_identity_holds_the_occluded_points_set_only_when_it_is_made() -> No
 
 
 def test_summary_and_table_compare_occluded_points_with_occluded() -> None:
-    from zbuf_occlude.experiments.sim2real import summarise
-    from zbuf_occlude.experiments.sim2real_report import table_md
+    from zbuf_occlude.experiments.sim2real.report import summarise
+    from zbuf_occlude.experiments.sim2real.report import table_md
 
     def run(kind: str, seed: int, score: float) -> dict:
         return {"train_set": kind, "seed": seed, "mean_class_accuracy": score, "overall_accuracy": score}

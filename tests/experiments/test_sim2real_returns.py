@@ -14,16 +14,9 @@ pytest.importorskip("torch")
 
 from zbuf_occlude.cli.main import main
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.experiments.sim2real_config import (
-    RETURNS_RANGE_RESOLUTION_M,
-    Sim2RealConfig,
-    with_returns,
-)
-from zbuf_occlude.experiments.sim2real_data import (
-    SetRecipe,
-    build_set,
-    find_class_meshes,
-)
+from zbuf_occlude.experiments.sim2real.config import RETURNS_RANGE_RESOLUTION_M, Sim2RealConfig, with_returns
+from zbuf_occlude.experiments.sim2real.data import SetRecipe, build_set
+from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
 from zbuf_occlude.sensors import lidar_preset
 from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
 
@@ -109,7 +102,7 @@ def test_several_returns_need_a_divergence_and_no_fit(tmp_path: Path, capsys: py
 
 
 def test_settings_record_the_returns_only_when_above_one(tmp_path: Path) -> None:
-    from zbuf_occlude.experiments.sim2real import Sim2RealSets, _fix_settings
+    from zbuf_occlude.experiments.sim2real.run import Sim2RealSets, _fix_settings
     from zbuf_occlude.sensors.presets import sensor_to_json
 
     def _sets_found():  # what prepare_sets finds, as little as _fix_settings reads (test_sim2real's)

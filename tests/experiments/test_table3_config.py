@@ -1,4 +1,4 @@
-"""zbuf_occlude.experiments.table3_config: the settings of ``experiment elevation|augmentation``, checked once."""
+"""zbuf_occlude.experiments.table3.config: the settings of ``experiment elevation|augmentation``, checked once."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import pytest
 
 from zbuf_occlude.cli.main import main
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.experiments import table3
-from zbuf_occlude.experiments.table3_config import SCALES, Table3Config
+from zbuf_occlude.experiments.table3 import augmentation, elevation
+from zbuf_occlude.experiments.table3.config import SCALES, Table3Config
 
 
 @pytest.mark.parametrize(
@@ -45,7 +45,7 @@ def test_an_unknown_method_is_refused_naming_the_flag_before_anything_is_written
 
 
 def test_the_experiments_take_a_config_not_a_keyword_list() -> None:
-    for fn in (table3.run_elevation, table3.run_augmentation, table3._elevation_into, table3._augmentation_into):
+    for fn in (elevation.run_elevation, augmentation.run_augmentation, elevation._elevation_into, augmentation._augmentation_into):
         params = inspect.signature(fn).parameters
         assert len(params) <= 12 and "config" in params, fn
         assert len(inspect.getsource(fn).splitlines()) < 150, fn

@@ -163,7 +163,8 @@ def test_sim2real_shows_the_meshes_it_makes_a_set_from(monkeypatch, sample_meshe
     # the stage that makes the training sets from the meshes (tens of seconds) reports as it goes
     import shutil
 
-    from zbuf_occlude.experiments.sim2real_data import build_set, find_class_meshes
+    from zbuf_occlude.experiments.sim2real.data import build_set
+    from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
 
     for cls, names in {"seat": ("chair", "sofa"), "top": ("stool", "table")}.items():  # two meshes a class
         for name in names:
@@ -194,7 +195,9 @@ def test_in_a_log_a_slow_run_gives_seconds_per_item_and_the_time_left(monkeypatc
 def test_table3_shows_the_meshes_its_visible_area_curve_is_made_of(monkeypatch, tmp_path):
     # `experiment table3`'s Fig. 12 curve profiles every mesh in turn (seconds each): lines in a log
     pytest.importorskip("torch", reason="zbuf_occlude.experiments.table3 needs PyTorch: pip install -e '.[learn]'")
-    from zbuf_occlude.experiments import elevation_profile, table3
+    from zbuf_occlude.experiments import elevation_profile
+    from zbuf_occlude.experiments.table3 import elevation
+    from zbuf_occlude.experiments.table3.config import SCALES
     from zbuf_occlude.mesh import load
 
     monkeypatch.setattr(load, "load_mesh", lambda path: path)  # the profile itself is elevation_profile's tests' job
@@ -202,7 +205,7 @@ def test_table3_shows_the_meshes_its_visible_area_curve_is_made_of(monkeypatch, 
     monkeypatch.setenv(PROGRESS_INTERVAL_ENV, "0")
     log = _stderr(monkeypatch, "log")
     meshes = [{"path": f"m{i}.off"} for i in range(3)]
-    table3._visible_area_curve(meshes, tmp_path, table3.SCALES["quick"], "embree-fast", progress=True)
+    elevation._visible_area_curve(meshes, tmp_path, SCALES["quick"], "embree-fast", progress=True)
     assert "\r" not in log.getvalue()
     assert [line.split(",")[0] for line in log.getvalue().splitlines()] == [f"table3 visible area: {i}/3 mesh" for i in (1, 2, 3)]
 

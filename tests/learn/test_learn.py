@@ -319,7 +319,7 @@ def test_from_occluded_reads_both_storage_modes(tmp_path, storage):
 
 
 def test_augmentation_split_rule():
-    from zbuf_occlude.experiments.table3 import _split_3b
+    from zbuf_occlude.experiments.table3.augmentation import _split_3b
 
     meshes = [
         {"name": "bathtub_1", "class_name": "bathtub", "split": "train"},

@@ -11,7 +11,7 @@ from typing import Any
 from zbuf_occlude.cli.options import Checked, check_device, count, out_folder, seed
 from zbuf_occlude.cli.sim2real import parse_pairs, print_table
 from zbuf_occlude.defaults import DEFAULT_METHOD
-from zbuf_occlude.experiments.table3_config import AUGMENTATION_MODEL, ELEVATION_MODEL, SCALES, Table3Config
+from zbuf_occlude.experiments.table3.config import AUGMENTATION_MODEL, ELEVATION_MODEL, SCALES, Table3Config
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 
 __all__ = ["add_parser"]

@@ -7,9 +7,9 @@ package never imports it.  Modules:
 ``data``         clouds from a farm data set or from meshes, augmentation (numpy)
 ``training``     one deterministic, resumable training loop with early stopping (torch)
 ``metrics``      overall / mean class / per-class accuracy, confusion, per elevation (numpy)
-``experiments``  the Table 3A (elevation) and Table 3B (augmentation) protocols
-``sim2real``     trained on clouds from meshes, tested on real scans (``sim2real_data``: the
-                 training sets; ``stats``: mean ± std, permutation test; ``sim2real_report``)
+``stats``        mean ± std over seeds, the exact permutation test (numpy)
+``experiments``  (:mod:`zbuf_occlude.experiments`) the Table 3A and 3B protocols (``table3``) and
+                 training on clouds from meshes, tested on real scans (``sim2real``)
 ``cli``          ``zbuf-occlude experiment elevation|augmentation|sim2real``
 ``on_the_fly``   occlusion as a training-time transform: ``RandomOcclusion`` (of a ``DenseCloud``:
                  :class:`zbuf_occlude.pipeline.DenseCloud`, re-exported here), ``OnTheFlyOccludedDataset``

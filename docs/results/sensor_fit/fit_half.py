@@ -8,9 +8,11 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from zbuf_occlude.experiments import sim2real as S
-from zbuf_occlude.experiments.sim2real_data import LIDAR_PLACEMENT, check_lidar_meshes, find_class_meshes, real_clouds, real_scan_rows
-from zbuf_occlude.experiments.sim2real_placement import CropPlacement
+from zbuf_occlude.experiments.sim2real import run as S
+from zbuf_occlude.experiments.sim2real.data import check_lidar_meshes
+from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
+from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT, CropPlacement
+from zbuf_occlude.experiments.sim2real.real import real_clouds, real_scan_rows
 from zbuf_occlude.mesh.sizes import size_interval
 from zbuf_occlude.real_scans.datasets import load_real_scans
 from zbuf_occlude.sensors.crops import object_crop
@@ -26,7 +28,7 @@ RECORDED_SPLIT_SEED = 20_231
 def recorded_fit_half(labels: np.ndarray) -> np.ndarray:
     """The fit half of the recorded runs (their real_split.csv): per class, in the reader's order (sorted paths), a
     seeded permutation's first half.  Runs made since split the scans by their content instead
-    (zbuf_occlude.experiments.sim2real_data.real_halves)."""
+    (zbuf_occlude.experiments.sim2real.real.real_halves)."""
     rng = np.random.default_rng(RECORDED_SPLIT_SEED)
     half = []
     for c in np.unique(labels):

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from fit_half import recorded_fit_half
-from zbuf_occlude.experiments.sim2real_data import real_clouds, real_scan_rows
+from zbuf_occlude.experiments.sim2real.real import real_clouds, real_scan_rows
 from zbuf_occlude.learn.training import load_model, predict
 from zbuf_occlude.real_scans import load_real_scans
 

@@ -16,8 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from zbuf_occlude.experiments.sim2real_data import TRAINING_SETS, SetRecipe, build_sets, find_class_meshes, real_clouds
-from zbuf_occlude.experiments.sim2real_report import plot_examples
+from zbuf_occlude.experiments.sim2real.data import TRAINING_SETS, SetRecipe, build_sets
+from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
+from zbuf_occlude.experiments.sim2real.real import real_clouds
+from zbuf_occlude.experiments.sim2real.report import plot_examples
 from zbuf_occlude.real_scans.datasets import load_real_scans
 from zbuf_occlude.sensors import lidar_preset
 

@@ -57,8 +57,8 @@ SCALES = {
 
 @dataclass(frozen=True)
 class Table3Config:
-    """Every setting of a Table 3 run (:func:`~zbuf_occlude.experiments.table3.run_elevation`,
-    :func:`~zbuf_occlude.experiments.table3.run_augmentation`), checked when made.
+    """Every setting of a Table 3 run (:func:`~zbuf_occlude.experiments.table3.elevation.run_elevation`,
+    :func:`~zbuf_occlude.experiments.table3.augmentation.run_augmentation`), checked when made.
 
     Parameters
     ----------

@@ -29,10 +29,8 @@ Every cloud ends ``(n_points, 3) float32`` in the pipeline's frame (z up) and is
 like the paper's (bounding-box centre 0, max extent 1), or, with ``keep_scale``, centred and
 divided by :data:`KEEP_SCALE_UNIT_M` so that size stays a cue.
 
-The modules beside this one hold the rest of the experiment's data, and this one imports their
-public names, so that ``from zbuf_occlude.experiments.sim2real_data import ...`` reaches all of
-it: the meshes (:mod:`.sim2real_meshes`), where the LiDAR crops are placed and how each mesh is
-shaped (:mod:`.sim2real_placement`), and the real scans (:mod:`.sim2real_real`).
+The meshes are found in :mod:`.meshes`, the crops placed and the meshes shaped in
+:mod:`.placement`, the real scans read in :mod:`.real`.
 """
 
 from __future__ import annotations
@@ -47,10 +45,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
-# the names of the modules beside this one that are not used here are imported for its callers (module docstring)
-from zbuf_occlude.experiments.sim2real_meshes import MeshEntry, check_classes, find_class_meshes, split_whole_meshes  # noqa: F401
-from zbuf_occlude.experiments.sim2real_placement import LIDAR_PLACEMENT, WIDTH_BY, CropPlacement, fit_mesh_shapes  # noqa: F401
-from zbuf_occlude.experiments.sim2real_real import KEEP_SCALE_UNIT_M, real_clouds, real_halves, real_scan_rows, scan_key  # noqa: F401
+from zbuf_occlude.experiments.sim2real.meshes import MeshEntry, check_classes
+from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT, CropPlacement
+from zbuf_occlude.experiments.sim2real.real import KEEP_SCALE_UNIT_M
 from zbuf_occlude.learn.data import CloudSet, normalize_batch
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange, size_interval
 
@@ -197,7 +194,7 @@ class SetRecipe:
         a few points per m² needs a much lower value for small objects).
     placement : CropPlacement, optional
         Where the LiDAR crops are placed and the shape each mesh is given, per class and per
-        mesh (:mod:`~zbuf_occlude.experiments.sim2real_placement`); None: :data:`LIDAR_PLACEMENT`
+        mesh (:mod:`~zbuf_occlude.experiments.sim2real.placement`); None: :data:`LIDAR_PLACEMENT`
         for every class, the meshes' own shapes.
     dense_points, resolution : int
         The ``occluded`` set's dense surface sample per mesh and its z-buffer's resolution, pixels.

@@ -3,7 +3,7 @@
 :class:`Sim2RealConfig` checks its settings when it is made, in one place; its messages name the
 fields, or the options of the caller's ``option_names`` (the command line passes its flags).
 :meth:`Sim2RealConfig.identity` is what of it ``settings.json`` holds, so that a rerun resumes
-only a run made with the same settings (:func:`zbuf_occlude.experiments.sim2real.run_sim2real`).
+only a run made with the same settings (:func:`zbuf_occlude.experiments.sim2real.run.run_sim2real`).
 """
 
 from __future__ import annotations
@@ -15,9 +15,9 @@ from dataclasses import InitVar, asdict, dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.experiments.sim2real_data import MIN_RETURNS, OCCLUDED_POINTS, POINT_VISIBILITY, sensor_elevation_deg
-from zbuf_occlude.experiments.sim2real_placement import LIDAR_PLACEMENT
-from zbuf_occlude.experiments.sim2real_real import KEEP_SCALE_UNIT_M
+from zbuf_occlude.experiments.sim2real.data import MIN_RETURNS, OCCLUDED_POINTS, POINT_VISIBILITY, sensor_elevation_deg
+from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT
+from zbuf_occlude.experiments.sim2real.real import KEEP_SCALE_UNIT_M
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
 
 if TYPE_CHECKING:  # torch is imported when a run trains
@@ -36,7 +36,7 @@ VALIDATION_CHOICES = ("meshes", "fit-half")
 FITTED_SHAPES = {"widths": "across_sight_width_m", "widen": "across_sight_width_m", "occlude": "across_sight_width_m",
                  "outline": "across_sight_profile"}  # fmt: skip
 #: The shapes that meet the widths, of which a run takes one, and how each meets them
-#: (:data:`~zbuf_occlude.experiments.sim2real_placement.WIDTH_BY`).
+#: (:data:`~zbuf_occlude.experiments.sim2real.placement.WIDTH_BY`).
 WIDTH_SHAPES = {"widths": "stretch", "widen": "widen", "occlude": "occluder"}
 #: Least range between two returns of one pulse, metres, with ``returns`` above 1, where the sensor
 #: gives none: half the pulse length ``c·τ/2`` of a 5 ns pulse (an ASSUMPTION: the Velodyne HDL-32E
@@ -94,17 +94,17 @@ class Sim2RealConfig:
         Repetitions (≥ 2 for a standard deviation; 5 or more for a permutation test able to
         reach p < 0.05).
     keep_scale : bool
-        Keep metres (centred, divided by :data:`~zbuf_occlude.experiments.sim2real_real.KEEP_SCALE_UNIT_M`;
+        Keep metres (centred, divided by :data:`~zbuf_occlude.experiments.sim2real.real.KEEP_SCALE_UNIT_M`;
         augmentation off, random yaw drawn once per cloud) instead of the paper's normalisation.
     label_map : mapping, optional
         Real label → class folder name (labels equal to a class up to case need none).
-    up, up_map : mesh up axis and per-file overrides (:func:`~zbuf_occlude.experiments.sim2real_meshes.find_class_meshes`).
+    up, up_map : mesh up axis and per-file overrides (:func:`~zbuf_occlude.experiments.sim2real.meshes.find_class_meshes`).
     sizes : mapping of str to SizeRange, optional
         Real sizes per class (default :data:`zbuf_occlude.mesh.sizes.CLASS_SIZES_M`).
     real_options : mapping, optional
         Keywords of :func:`~zbuf_occlude.real_scans.datasets.load_real_scans`.
     min_returns : int
-        LiDAR crops with fewer returns are redrawn (:data:`~zbuf_occlude.experiments.sim2real_data.MIN_RETURNS`).
+        LiDAR crops with fewer returns are redrawn (:data:`~zbuf_occlude.experiments.sim2real.data.MIN_RETURNS`).
         Before any set is made, every mesh is tried once with the sensor; one that gives no
         such crop is skipped with a warning naming it (``settings.json``: ``meshes_skipped``).
     method : str
@@ -116,14 +116,14 @@ class Sim2RealConfig:
     occluded_elevation_deg : (lo, hi), optional
         Camera elevations of the ``occluded`` set, degrees in [-90, 90], drawn uniformly.
         Default: the range ``sensor`` sees objects from
-        (:func:`~zbuf_occlude.experiments.sim2real_data.sensor_elevation_deg`: about 3.7° to
+        (:func:`~zbuf_occlude.experiments.sim2real.data.sensor_elevation_deg`: about 3.7° to
         21.8° for a spinning LiDAR on the ``lidar`` set's mount, ``90° − swath/2`` to 90° for an
         airborne scanner, e.g. 61° to 90°); :attr:`occluded_elevation_from` says which.
     fit_sensor : bool
         Fit ``sensor`` (a spinning LiDAR) to the sensor-frame points of the fixed first half of
         the real scans (the half real→real trains on), and each class's crop distances and
         heights to the same scans, and add the
-        :data:`~zbuf_occlude.experiments.sim2real_data.FITTED_SETS` (every row is scored on the
+        :data:`~zbuf_occlude.experiments.sim2real.data.FITTED_SETS` (every row is scored on the
         other half with or without it; :mod:`~zbuf_occlude.experiments.sim2real`).
     recipe : {"stable", "plain"}
         Training recipe (:data:`zbuf_occlude.learn.training.RECIPES`).
@@ -145,7 +145,7 @@ class Sim2RealConfig:
         the widths show where its crops are wider (a partial view; nothing hidden where they are
         narrower); ``"outline"``, a warp to its outline over the height, alone or with one of
         the three.  Empty (default): the meshes' own shapes.  Each is fitted per mesh once
-        (:func:`~zbuf_occlude.experiments.sim2real_placement.fit_mesh_shapes`).
+        (:func:`~zbuf_occlude.experiments.sim2real.placement.fit_mesh_shapes`).
     returns : int
         Most returns per pulse of the ``lidar`` set's scanner (:func:`with_returns`), 1 to
         :data:`~zbuf_occlude.sensors.echoes.MAX_RETURNS`.  1 (default): the sensor as given, one
@@ -153,9 +153,9 @@ class Sim2RealConfig:
         multi-return model (each pulse's footprint cast as sub-rays, its hits resolved into up to
         ``returns`` echoes; ``settings.json``: ``lidar_returns``).  Not with ``fit_sensor``.
     occluded_points : bool
-        Also train on the :data:`~zbuf_occlude.experiments.sim2real_data.OCCLUDED_POINTS` set:
+        Also train on the :data:`~zbuf_occlude.experiments.sim2real.data.OCCLUDED_POINTS` set:
         the ``occluded`` set's clouds (the same dense samples, poses and draws) with visibility
-        decided from the points alone (:data:`~zbuf_occlude.experiments.sim2real_data.POINT_VISIBILITY`),
+        decided from the points alone (:data:`~zbuf_occlude.experiments.sim2real.data.POINT_VISIBILITY`),
         tested against ``occluded``.  Not with a ``method`` that already decides from the points
         alone (nothing to compare).
     aspect : bool
@@ -328,7 +328,7 @@ class Sim2RealConfig:
 
         ``validate_on`` only when it is ``"fit-half"``, so that runs which validate on meshes
         keep the settings they were written with, and likewise ``occluded_points`` only when it is
-        set (the visibility of the :data:`~zbuf_occlude.experiments.sim2real_data.OCCLUDED_POINTS`
+        set (the visibility of the :data:`~zbuf_occlude.experiments.sim2real.data.OCCLUDED_POINTS`
         set); ``lidar_placement`` as far as it applies to
         the sensor's kind (an airborne scanner flies at its own altitude: no mount height; the
         distance sets the object's offset across track); what the run finds in its inputs

@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
 
+from zbuf_occlude.experiments.sim2real.data import FITTED_SETS, OCCLUDED_POINTS
+from zbuf_occlude.experiments.sim2real.outputs import ALL_SCANS, CHOSEN_ON_FIT_HALF, EVERY_SET, MESH_SETS, REAL_TO_REAL
 from zbuf_occlude.io.encodings import png_bytes
 from zbuf_occlude.io.owned import OwnedFolder
+from zbuf_occlude.learn.stats import mean_std, permutation_p
 
-__all__ = ["table_md", "plot_examples"]
+__all__ = ["summarise", "table_md", "plot_examples"]
 
 
 def _pm(row: dict, key: str) -> str:
@@ -114,3 +118,85 @@ def plot_examples(path: str | Path, rows: dict[str, dict[str, np.ndarray]], titl
         plt.close(fig)
     with OwnedFolder(path.parent, files=[path.name], what=f"the file {path.name}", option="path") as folder:
         return folder.write_bytes(path.name, data)
+
+
+def summarise(runs: list[dict], names: list[str], *, chosen_on_fit_half: bool = False) -> list[dict]:
+    """Per training set: mean ± std over seeds of every score (on the held-out half, and on every
+    scan, :data:`ALL_SCANS`, NaN for real→real), and the one-sided permutation p of its mean class
+    accuracy on the held-out half against ``complete``; then the chance row (``1/K``).
+
+    The rows of :data:`~zbuf_occlude.experiments.sim2real.data.FITTED_SETS` also hold their
+    difference from ``lidar`` (``diff_vs_lidar``) and both one-sided p-values: ``p_vs_lidar``
+    (the fitted set above lidar) and ``p_lidar_above`` (lidar above it); the
+    :data:`~zbuf_occlude.experiments.sim2real.data.OCCLUDED_POINTS` row likewise against
+    ``occluded`` (``diff_vs_occluded``, ``p_vs_occluded``, ``p_occluded_above``).
+
+    With ``chosen_on_fit_half`` (runs validated on the fit half's real scans), a
+    :data:`CHOSEN_ON_FIT_HALF` row follows real→real: per seed, the mesh-only run with the best
+    ``best_val_mean_class_accuracy`` (ties: the lower ``best_val_loss``, then the first in the
+    sets' order), its scores as above,
+    the chosen sets (``chosen_sets``, in seed order), and its difference from real→real
+    (``diff_vs_real_to_real``) with the one-sided p that real→real is above (``p_real_to_real_above``)."""
+    keys = ["mean_class_accuracy", "overall_accuracy", "car_precision", "car_recall", "car_f1",
+            *[f"acc_{n}" for n in names], *ALL_SCANS]  # fmt: skip
+    ref = [r["mean_class_accuracy"] for r in runs if r["train_set"] == "complete"]
+    lidar = [r["mean_class_accuracy"] for r in runs if r["train_set"] == "lidar"]
+    occluded = [r["mean_class_accuracy"] for r in runs if r["train_set"] == "occluded"]
+    rows = []
+    for kind in EVERY_SET:
+        mine = [r for r in runs if r["train_set"] == kind]
+        if not mine:
+            continue
+        row = {"train_set": kind, "n_seeds": len(mine)}
+        for k in keys:
+            if k in mine[0]:
+                row[f"{k}_mean"], row[f"{k}_std"] = mean_std([r[k] for r in mine])
+        mca = [r["mean_class_accuracy"] for r in mine]
+        row["p_vs_complete"] = permutation_p(mca, ref) if kind not in ("complete", REAL_TO_REAL) and ref else float("nan")
+        row["diff_vs_complete"] = (row["mean_class_accuracy_mean"] - float(np.mean(ref))) if ref else float("nan")
+        if kind in FITTED_SETS and lidar:
+            row["diff_vs_lidar"] = row["mean_class_accuracy_mean"] - float(np.mean(lidar))
+            row["p_vs_lidar"], row["p_lidar_above"] = permutation_p(mca, lidar), permutation_p(lidar, mca)
+        if kind == OCCLUDED_POINTS and occluded:
+            row["diff_vs_occluded"] = row["mean_class_accuracy_mean"] - float(np.mean(occluded))
+            row["p_vs_occluded"], row["p_occluded_above"] = permutation_p(mca, occluded), permutation_p(occluded, mca)
+        rows.append(row)
+    if chosen_on_fit_half:
+        rows += _chosen_row(runs, keys, ref)
+    k = len(names)
+    rows.append({"train_set": "chance", "n_seeds": 0, "mean_class_accuracy_mean": 1.0 / k, "mean_class_accuracy_std": 0.0,
+                 "overall_accuracy_mean": 1.0 / k, "overall_accuracy_std": 0.0,
+                 **{f"{key}_{stat}": (1.0 / k if stat == "mean" else 0.0) for key in ALL_SCANS for stat in ("mean", "std")}})  # fmt: skip
+    return rows
+
+
+def _validation_rank(run: dict) -> tuple[float, float]:
+    """How well a run did on its validation scans, larger is better: the mean class accuracy, then
+    (accuracy often ties at 1.0 on a small fit half) the lower validation loss; a run recorded
+    without a loss ranks below one with a loss."""
+    loss = run.get("best_val_loss")
+    return run["best_val_mean_class_accuracy"], -loss if loss is not None and math.isfinite(loss) else -math.inf
+
+
+def _chosen_row(runs: list[dict], keys: list[str], ref: list[float]) -> list[dict]:
+    """The :data:`CHOSEN_ON_FIT_HALF` row of :func:`summarise` (none when no seed has a mesh-only run)."""
+    order = {k: i for i, k in enumerate(MESH_SETS)}
+    chosen = []
+    for seed in sorted({r["seed"] for r in runs}):
+        mine = [r for r in runs if r["seed"] == seed and r["train_set"] in order]
+        if mine:
+            chosen.append(max(sorted(mine, key=lambda r: order[r["train_set"]]), key=_validation_rank))
+    if not chosen:
+        return []
+    row = {"train_set": CHOSEN_ON_FIT_HALF, "n_seeds": len(chosen), "chosen_sets": " ".join(r["train_set"] for r in chosen)}
+    for k in keys:
+        if k in chosen[0]:
+            row[f"{k}_mean"], row[f"{k}_std"] = mean_std([r[k] for r in chosen])
+    mca = [r["mean_class_accuracy"] for r in chosen]
+    row["p_vs_complete"] = permutation_p(mca, ref) if ref else float("nan")
+    row["diff_vs_complete"] = (row["mean_class_accuracy_mean"] - float(np.mean(ref))) if ref else float("nan")
+    real = [r["mean_class_accuracy"] for r in runs if r["train_set"] == REAL_TO_REAL]
+    if real:
+        row["diff_vs_real_to_real"] = row["mean_class_accuracy_mean"] - float(np.mean(real))
+        row["p_real_to_real_above"] = permutation_p(real, mca)
+    return [row]

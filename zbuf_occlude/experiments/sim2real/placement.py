@@ -11,7 +11,7 @@ before (:meth:`CropPlacement.crop_distributions`):
    to: the widths across the line of sight, the outline over the height, and how the widths
    are met (:data:`WIDTH_BY`);
 3. the mesh's own :class:`MeshShape` (:attr:`CropPlacement.per_mesh`, keyed by
-   :attr:`~zbuf_occlude.experiments.sim2real_meshes.MeshEntry.name`): the stretch, visible share
+   :attr:`~zbuf_occlude.experiments.sim2real.meshes.MeshEntry.name`): the stretch, visible share
    and warp fitted to those targets once for every set and seed (:func:`fit_mesh_shapes`).  A
    mesh without one, in a class that gives targets, is fitted in each set's draw
    (:meth:`ClassPlacement.fit_mesh`), to the same shape.
@@ -29,7 +29,7 @@ from dataclasses import dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any
 
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
-from zbuf_occlude.experiments.sim2real_meshes import MeshEntry
+from zbuf_occlude.experiments.sim2real.meshes import MeshEntry
 from zbuf_occlude.mesh.sizes import SizeRange, size_interval
 
 if TYPE_CHECKING:  # the sensors are imported where they are used
@@ -191,7 +191,7 @@ class CropPlacement:
     per_class : mapping of str to ClassPlacement
         Keyed by class name; a class not in it gets ``ClassPlacement()`` (:data:`LIDAR_PLACEMENT`, the meshes' own shapes).
     per_mesh : mapping of str to MeshShape
-        Keyed by mesh name (:attr:`~zbuf_occlude.experiments.sim2real_meshes.MeshEntry.name`): the shapes
+        Keyed by mesh name (:attr:`~zbuf_occlude.experiments.sim2real.meshes.MeshEntry.name`): the shapes
         fitted once (:func:`fit_mesh_shapes`, :meth:`with_mesh_shapes`).
 
     Raises
@@ -271,7 +271,7 @@ def fit_mesh_shapes(meshes: list[MeshEntry], sensor, sizes: Mapping[str, SizeRan
     placement (:meth:`CropPlacement.with_mesh_shapes`): a mesh's own shape is taken over its
     class's targets, so the crops are what fitting the shape in every draw would give, without
     fitting it again.  A mesh whose shape cannot be fitted is left out (logged; its crops then
-    raise, naming it, and :func:`~zbuf_occlude.experiments.sim2real_data.check_lidar_meshes` skips it).
+    raise, naming it, and :func:`~zbuf_occlude.experiments.sim2real.data.check_lidar_meshes` skips it).
 
     Raises
     ------

@@ -33,7 +33,7 @@ class MeshEntry:
     """One mesh of the experiment: file, class, stable name, the loaded (z-up, normalised) mesh.
 
     ``name`` is the file's path below the root without its suffix (``car/sedan``): the key of the
-    mesh's own shape in :attr:`~zbuf_occlude.experiments.sim2real_placement.CropPlacement.per_mesh`.
+    mesh's own shape in :attr:`~zbuf_occlude.experiments.sim2real.placement.CropPlacement.per_mesh`.
     """
 
     path: Path

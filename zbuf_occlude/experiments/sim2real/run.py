@@ -1,81 +1,20 @@
-"""``experiment sim2real``: classifiers trained only on clouds made from meshes, tested on real scans.
+"""``experiment sim2real``: train on clouds made from meshes only, score on real scans.
 
-The question of Sryamkin et al. 2023, Table 3B "Test 3" (do occluded training clouds teach a
-classifier to recognise real, partial scans?), asked on real data with the protocol of
-:mod:`zbuf_occlude.experiments.sim2real_data`:
-
-* four training sets from the same meshes, the same number of clouds per class and points
-  per cloud (``complete``, ``occluded``, ``lidar``, ``lidar+complete``);
-* validation (early stopping, best epoch) on clouds of the same kind made from **held-out
-  whole meshes**; no real scan is used for training, validation or any setting, and every
-  setting is written to ``settings.json`` before the first real scan is scored;
-* ``seeds`` repetitions, each redrawing the mesh split, the clouds and the initialisation;
-  mean ± standard deviation over seeds and an exact one-sided permutation test of each set
-  against ``complete`` (:mod:`zbuf_occlude.learn.stats`);
-* context rows: chance (``1/K``) and ``real→real`` (a fixed stratified half of the real scans
-  trains, 10 % of that half validates, the other half tests);
-* **every row is scored on the same held-out half of the real scans** as real→real (the primary
-  columns: ``mean_class_accuracy`` and the rest), and the mesh-only sets also on every real scan
-  (``all_scans_mean_class_accuracy``, ``all_scans_overall_accuracy``; not real→real, which trained
-  on the other half).  The halves are fixed once, from the scans' content alone
-  (:func:`~zbuf_occlude.experiments.sim2real_real.real_halves`: each class's scans ordered by a
-  seeded hash of their points, a seed of its own, independent of the run's seeds), so that no
-  file name, no order of the reader and no other class moves a scan from one half to the other;
-  ``real_split.csv`` lists each scan's half;
-* with ``occluded_points``, one more mesh-only set,
-  :data:`~zbuf_occlude.experiments.sim2real_data.OCCLUDED_POINTS`: the ``occluded`` set's clouds
-  with visibility decided from the dense points alone (point splats, no mesh), tested against
-  ``occluded`` (both one-sided p-values);
-* with ``fit_sensor``, a sensor fitted to the real scans (:func:`zbuf_occlude.sensors.fit.fit_lidar`):
-  the sensor is fitted on the first half (the half ``real→real`` trains on), and
-  so are, per class, the crops' sensor distances, the objects' heights (their visible
-  heights in the scans), their hidden bottoms and their widths across the line of sight
-  (:func:`zbuf_occlude.sensors.fit.crop_placement_json`);
-  both are written to ``fitted_sensor.json``; three more training sets are made,
-  :data:`~zbuf_occlude.experiments.sim2real_data.FITTED` (the fitted sensor, the ``lidar`` set's
-  placements and sizes), :data:`~zbuf_occlude.experiments.sim2real_data.FITTED_PLACED` (the
-  fitted sensor, distances, heights and bottoms; with ``fitted_shape``, each mesh also stretched
-  to the widths, :func:`zbuf_occlude.sensors.fit.fit_width_scale`, or partly hidden to them,
-  :func:`zbuf_occlude.sensors.fit.fit_visible_across_sight`, and/or warped to the class's
-  outline over the height, :func:`zbuf_occlude.sensors.fit.fit_width_profile`) and
-  :data:`~zbuf_occlude.experiments.sim2real_data.POOLED` (the three LiDAR sets in one); the
-  fitted sets are also tested against ``lidar`` (their all-scans column includes the fit half);
-* with ``validate_on="fit-half"`` (needs ``fit_sensor``), the mesh-only sets are validated on the
-  real scans of the fit half instead of held-out meshes (best epoch and early stopping), and train
-  on every mesh: the fit half is already what the sensor was fitted to, the scored half stays
-  unseen, and a small mesh library no longer loses a fifth of its meshes to validation; a row
-  :data:`CHOSEN_ON_FIT_HALF` takes, per seed, the set with the best fit-half score (a choice of
-  training set made without the scored half) and is tested against complete and real→real.
-
-Every run trains with one recipe (``recipe``, :data:`zbuf_occlude.learn.training.RECIPES`):
-``stable`` (class-balanced sampling, best epoch by the class-balanced validation loss, warm-up,
-gradient clipping) keeps a seed from losing a small class of an imbalanced set (real→real);
-``plain`` is the models' own loop.  The loss, not the accuracy, picks the best epoch because
-held-out meshes are often classified without a mistake after a few epochs, where accuracy
-ties; ``best_epoch_by`` chooses otherwise, and each row of ``runs.jsonl`` says which
-(``best_epoch_by``) beside the best epoch's validation accuracy, mean class accuracy and loss.
-
-Outputs in ``out``: ``settings.json``, ``real_split.csv``, (``fitted_sensor.json``), ``runs.jsonl`` (one line per training run, what a
-rerun resumes from), ``results.csv`` (one row per run), ``summary.csv`` (mean ± std per
-training set), ``confusion_<set>.csv`` (summed over seeds), ``table.md``, ``run.json``, and each
-run's ``checkpoints/<set>/seed<N>/`` (:data:`SIM2REAL_OUTPUTS`).  They go through the output layer
-(:class:`~zbuf_occlude.io.owned.OwnedFolder`): ``out`` is held for the run, every file is checked
-before any work, and a file is replaced only if a run of ours wrote it and it is unchanged since;
-the files of a run made before the layer kept its ledger are taken as ours once its
-``settings.json`` matches (it resumes as before).
-
-A run is a :class:`~zbuf_occlude.experiments.sim2real_config.Sim2RealConfig` (every setting, checked
-once) given to :func:`run_sim2real`, in three stages: :func:`prepare_sets` (scans, meshes, the fit),
-:func:`run_seed` (per seed) and :func:`write_outputs`.
+:func:`run_sim2real` runs a :class:`~zbuf_occlude.experiments.sim2real.config.Sim2RealConfig` (every setting,
+checked once) in three stages: :func:`prepare_sets` (the real scans, their fixed halves, the meshes the
+sensor sees and, with ``fit_sensor``, the sensor and crops fitted to the first half), :func:`run_seed`
+(each training set of one seed, trained and scored on the held-out half, the mesh-only sets also on
+every scan) and :func:`write_outputs` (the files of :mod:`.outputs`, the summary of :mod:`.report`).
+Every setting is written to ``settings.json`` before the first real scan is scored; a rerun with the
+same settings resumes from ``runs.jsonl``, one with others is refused.  The protocol and what it can
+show: docs/results/sim2real.md; the question is Sryamkin et al. 2023, Table 3B, "Test 3".
 """
 
 from __future__ import annotations
 
 import json
 import logging
-import math
 import os
-import re
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -84,77 +23,39 @@ from pathlib import Path
 import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.experiments.sim2real_config import (
-    FITTED_SHAPES,
-    SIM2REAL_RECIPE,
-    SIM2REAL_SCALES,
-    VALIDATION_CHOICES,
-    WIDTH_SHAPES,
-    Sim2RealConfig,
-    Sim2RealScale,
+from zbuf_occlude.experiments.sim2real.config import FITTED_SHAPES, WIDTH_SHAPES, Sim2RealConfig
+from zbuf_occlude.experiments.sim2real.data import FITTED_SETS, OCCLUDED_POINTS, TRAINING_SETS, SetRecipe, build_sets, check_lidar_meshes
+from zbuf_occlude.experiments.sim2real.outputs import (
+    ALL_SCANS,
+    REAL_TO_REAL,
+    SIM2REAL_OUTPUTS,
+    append_run,
+    confusion_name,
+    load_runs,
+    set_folder,
 )
-from zbuf_occlude.experiments.sim2real_data import FITTED_SETS, OCCLUDED_POINTS, TRAINING_SETS, SetRecipe, build_sets, check_lidar_meshes
-from zbuf_occlude.experiments.sim2real_meshes import find_class_meshes, split_whole_meshes
-from zbuf_occlude.experiments.sim2real_placement import CropPlacement, fit_mesh_shapes
-from zbuf_occlude.experiments.sim2real_real import real_clouds, real_halves, real_scan_rows
-from zbuf_occlude.experiments.table3 import CHECKPOINT_FILES
-from zbuf_occlude.io.json_files import loads_json, read_json_file
+from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes, split_whole_meshes
+from zbuf_occlude.experiments.sim2real.placement import CropPlacement, fit_mesh_shapes
+from zbuf_occlude.experiments.sim2real.real import real_clouds, real_halves, real_scan_rows
+from zbuf_occlude.experiments.table3.common import CHECKPOINT_FILES
+from zbuf_occlude.io.json_files import read_json_file
 from zbuf_occlude.io.owned import OwnedFolder
-from zbuf_occlude.io.regular_files import MAX_METADATA_BYTES, read_text_file
 from zbuf_occlude.learn.data import CloudSet, split_validation
 from zbuf_occlude.learn.metrics import classification_report
-from zbuf_occlude.learn.stats import mean_std, permutation_p
 from zbuf_occlude.mesh.sizes import SizeRange
 
-__all__ = ["Sim2RealConfig", "Sim2RealScale", "SIM2REAL_SCALES", "REAL_TO_REAL", "SIM2REAL_RECIPE", "VALIDATION_CHOICES", "FITTED_SHAPES",
-           "CHOSEN_ON_FIT_HALF", "ALL_SCANS", "Sim2RealSets", "run_sim2real", "prepare_sets", "run_seed", "write_outputs", "summarise",
-           "SIM2REAL_FILES", "SIM2REAL_OUTPUTS"]
+__all__ = ["Sim2RealSets", "run_sim2real", "prepare_sets", "run_seed", "write_outputs"]
 
 log = logging.getLogger(__name__)
 
-#: Name of the real→real context row.
-REAL_TO_REAL = "real→real"
-#: Seed of the fixed stratified half split of the real scans (:func:`~zbuf_occlude.experiments.sim2real_real.real_halves`), the same for every run.
+#: Seed of the fixed stratified half split of the real scans (:func:`~zbuf_occlude.experiments.sim2real.real.real_halves`), the same for every run.
 _REAL_SPLIT_SEED = 20_231
 #: How the halves are drawn, as ``settings.json`` records it (a run split otherwise is another run).
 _REAL_SPLIT_BY = "content: each class's scans ordered by SHA-256 of the seed and their points, first half A"
-#: The scores of the mesh-only sets on every real scan (the second column), from each score of the held-out half.
-ALL_SCANS = {"all_scans_mean_class_accuracy": "mean_class_accuracy", "all_scans_overall_accuracy": "overall_accuracy"}
-#: Name of the row that takes, per seed, the mesh-only set with the best fit-half validation score.
-CHOSEN_ON_FIT_HALF = "chosen on fit half"
 #: Keys of ``settings.json`` that say when or how a setting was chosen, not what it is: a rerun
 #: does not compare them (the same elevations given as an option or derived from the sensor make the same run).
 _NOTES = ("fixed_at", "occluded_elevation_from")
 _MISSING = object()
-
-
-def _set_folder(kind: str) -> str:
-    """The folder of ``kind``'s checkpoints below ``checkpoints/`` (real→real: ``real_to_real``)."""
-    return kind.replace("→", "_to_")
-
-
-def _confusion_name(kind: str) -> str:
-    """The file of ``kind``'s confusion matrix, summed over seeds (``confusion_lidar_complete.csv``)."""
-    return f"confusion_{kind.replace('→', '_to_').replace('+', '_')}.csv"
-
-
-#: Every mesh-only set a run may train, in report order.
-_MESH_SETS = (*TRAINING_SETS, OCCLUDED_POINTS, *FITTED_SETS)
-#: Every set a run may train, in report order: the mesh-only sets, real→real.
-_EVERY_SET = (*_MESH_SETS, REAL_TO_REAL)
-#: The files ``experiment sim2real`` writes at the top of ``--out`` (``fitted_sensor.json`` with
-#: ``fit_sensor``; a ``confusion_<set>.csv`` per set trained).
-SIM2REAL_FILES = (
-    "settings.json", "fitted_sensor.json", "real_split.csv", "runs.jsonl", "results.csv", "summary.csv",
-    *(_confusion_name(kind) for kind in _EVERY_SET), "run.json", "table.md",
-)  # fmt: skip
-#: Every name it writes in ``--out`` (full-match regular expressions): :data:`SIM2REAL_FILES` and
-#: the checkpoints of each training run, ``checkpoints/<set>/seed<N>/`` (:data:`~zbuf_occlude.experiments.table3.CHECKPOINT_FILES`).
-_SET_FOLDERS = "|".join(re.escape(_set_folder(kind)) for kind in _EVERY_SET)
-SIM2REAL_OUTPUTS = (
-    *(re.escape(name) for name in SIM2REAL_FILES),
-    rf"checkpoints/({_SET_FOLDERS})/seed\d+/({'|'.join(re.escape(name) for name in CHECKPOINT_FILES)})",
-)  # fmt: skip
 
 
 def _fit_sensor(scans: list, base, labels: np.ndarray, names: list[str]):
@@ -197,34 +98,6 @@ def _score(pred: np.ndarray, labels: np.ndarray, names: list[str]) -> dict:
     return row
 
 
-def _load_runs(path: Path) -> dict:
-    """The runs an earlier run of this folder recorded in ``runs.jsonl``, by ``(train_set, seed)``:
-    a rerun resumes from them.  Read inside the output folder, as a regular file of at most
-    :data:`~zbuf_occlude.io.regular_files.MAX_METADATA_BYTES`.
-
-    Raises
-    ------
-    InvalidInputError
-        ``runs.jsonl`` is not a regular file (a FIFO), too large, or a line is not a run of ours.
-    UnsafePathError
-        It is a link that leads out of the output folder.
-    """
-    done = {}
-    if os.path.lexists(path):  # a FIFO or a link out of the folder is refused, not skipped
-        for number, line in enumerate(read_text_file(path, max_bytes=MAX_METADATA_BYTES, within=path.parent).splitlines(), 1):
-            if line.strip():
-                r = loads_json(line, what=str(path))
-                if not isinstance(r, dict) or not isinstance(r.get("train_set"), str) or not isinstance(r.get("seed"), int):
-                    raise InvalidInputError(f"{path}: line {number} is not a run of ours (no train_set and seed)")
-                done[(r["train_set"], r["seed"])] = r
-    return done
-
-
-def _append_run(folder: OwnedFolder, done: dict, row: dict) -> None:
-    done[(row["train_set"], row["seed"])] = row
-    folder.write_text("runs.jsonl", "".join(json.dumps(r, default=float) + "\n" for r in done.values()))
-
-
 @dataclass(frozen=True)
 class Sim2RealSets:
     """What :func:`prepare_sets` finds and fits before any training: every seed's material.
@@ -239,11 +112,11 @@ class Sim2RealSets:
         The real scans as clouds, their classes and their files.
     half_a, half_b : (about R/2,) int64
         The fixed stratified halves of the real scans, rows of ``real_labels`` in the order
-        :func:`~zbuf_occlude.experiments.sim2real_real.real_halves` gives: real→real trains on
+        :func:`~zbuf_occlude.experiments.sim2real.real.real_halves` gives: real→real trains on
         ``half_a``, every row is scored on ``half_b``; with ``fit_sensor``, ``half_a`` is the fit half.
     fitted, fitted_placement, fitted_sizes, fit_json
         With ``fit_sensor``: the fitted Lidar, the crops' placement per class and shape per mesh
-        (:class:`~zbuf_occlude.experiments.sim2real_placement.CropPlacement`), the heights
+        (:class:`~zbuf_occlude.experiments.sim2real.placement.CropPlacement`), the heights
         per class and the sensor's JSON; None otherwise.
     """
 
@@ -269,7 +142,7 @@ def _kinds(config: Sim2RealConfig) -> tuple[str, ...]:
 def _owned(out: str | os.PathLike, config: Sim2RealConfig) -> OwnedFolder:
     """``out`` as a run of ``config`` holds it: :data:`SIM2REAL_OUTPUTS`, in the checkpoint folders of its sets and seeds."""
     seeds = range(int(config.seeds))
-    folders = [f"checkpoints/{_set_folder(kind)}/seed{seed}" for kind in (*_kinds(config), REAL_TO_REAL) for seed in seeds]
+    folders = [f"checkpoints/{set_folder(kind)}/seed{seed}" for kind in (*_kinds(config), REAL_TO_REAL) for seed in seeds]
     return OwnedFolder(out, names=SIM2REAL_OUTPUTS, subfolders=["checkpoints", *folders], what="the sim2real run")
 
 
@@ -277,10 +150,10 @@ def _writes(config: Sim2RealConfig) -> list[str]:
     """The files a run of ``config`` writes: those of :data:`SIM2REAL_FILES` (``settings.json`` is
     compared when it is there) and the checkpoints of each set and seed."""
     kinds = (*_kinds(config), REAL_TO_REAL)
-    checkpoints = [f"checkpoints/{_set_folder(kind)}/seed{seed}/{name}" for kind in kinds for seed in range(int(config.seeds))
+    checkpoints = [f"checkpoints/{set_folder(kind)}/seed{seed}/{name}" for kind in kinds for seed in range(int(config.seeds))
                    for name in CHECKPOINT_FILES]  # fmt: skip
     return ["real_split.csv", "runs.jsonl", "results.csv", "summary.csv", "run.json", "table.md",
-            *(["fitted_sensor.json"] if config.fit_sensor else []), *(_confusion_name(kind) for kind in kinds), *checkpoints]  # fmt: skip
+            *(["fitted_sensor.json"] if config.fit_sensor else []), *(confusion_name(kind) for kind in kinds), *checkpoints]  # fmt: skip
 
 
 def run_sim2real(config: Sim2RealConfig, out: str | os.PathLike, *, device: str = "cpu", threads: int | None = None,
@@ -330,7 +203,7 @@ def run_sim2real(config: Sim2RealConfig, out: str | os.PathLike, *, device: str 
         sets = prepare_sets(config, say=say)
         settings = _fix_settings(config, sets, folder)
         folder.check_writable(_writes(config))
-        done = _load_runs(folder.root / "runs.jsonl")
+        done = load_runs(folder.root / "runs.jsonl")
         for seed in range(int(config.seeds)):
             run_seed(config, sets, seed, done, folder, device=device, threads=threads, progress=progress)
         return write_outputs(config, sets, settings, done, folder, wall_s=time.perf_counter() - t_start)
@@ -502,7 +375,7 @@ def run_seed(config: Sim2RealConfig, sets: Sim2RealSets, seed: int, done: dict, 
         made = {"val_meshes": sorted(m.name for m in val_meshes) if kind != REAL_TO_REAL else [], "data_s": time.perf_counter() - t0}
         row = _train_and_score(config, sets.names, kind, seed, (tr, val, tests), made, folder, device=device, threads=threads,
                                progress=progress)  # fmt: skip
-        _append_run(folder, done, row)
+        append_run(folder, done, row)
         log.info("%s seed %d: mean class accuracy %.3f", kind, seed, row["mean_class_accuracy"])
 
 
@@ -532,7 +405,7 @@ def _train_and_score(config: Sim2RealConfig, names: list[str], kind: str, seed: 
 
     tr, val, (test, every_scan) = data
     cfg = config.train_config(seed, device=device, threads=threads)
-    checkpoints = f"checkpoints/{_set_folder(kind)}/seed{seed}"
+    checkpoints = f"checkpoints/{set_folder(kind)}/seed{seed}"
     res = train(tr, len(names), cfg, val_set=val, checkpoint_dir=folder.root / checkpoints,
                 checkpoint_writer=lambda name, data: folder.write_bytes(f"{checkpoints}/{name}", data), progress=progress)  # fmt: skip
     test_x, test_y = test
@@ -552,7 +425,7 @@ def _train_and_score(config: Sim2RealConfig, names: list[str], kind: str, seed: 
 def write_outputs(config: Sim2RealConfig, sets: Sim2RealSets, settings: dict, done: dict, folder: OwnedFolder, *, wall_s: float) -> dict:
     """Write ``results.csv``, ``summary.csv``, the ``confusion_<set>.csv`` files (summed over seeds),
     ``run.json`` and ``table.md`` from every run in ``done`` into the run's held folder; return the ``run.json`` summary."""
-    from zbuf_occlude.experiments.sim2real_report import table_md
+    from zbuf_occlude.experiments.sim2real.report import summarise, table_md
     from zbuf_occlude.experiments.machine import machine_description
 
     names = sets.names
@@ -562,7 +435,7 @@ def write_outputs(config: Sim2RealConfig, sets: Sim2RealSets, settings: dict, do
     for kind in (*_kinds(config), REAL_TO_REAL):
         cms = [np.asarray(r["confusion"]) for r in done.values() if r["train_set"] == kind]
         if cms:
-            folder.write_csv(_confusion_name(kind),
+            folder.write_csv(confusion_name(kind),
                              [{"true": n, **{f"pred_{m}": int(v) for m, v in zip(names, row)}} for n, row in zip(names, sum(cms))])  # fmt: skip
     summary = {"experiment": "sim2real", **settings, "machine": machine_description(), "n_runs": len(done),
                "summary": summary_rows, "wall_s": {"total": wall_s,
@@ -594,83 +467,3 @@ def _classes(classes, mesh_root, scans, label_map: dict[str, str]) -> list[str] 
     return wanted
 
 
-def summarise(runs: list[dict], names: list[str], *, chosen_on_fit_half: bool = False) -> list[dict]:
-    """Per training set: mean ± std over seeds of every score (on the held-out half, and on every
-    scan, :data:`ALL_SCANS`, NaN for real→real), and the one-sided permutation p of its mean class
-    accuracy on the held-out half against ``complete``; then the chance row (``1/K``).
-
-    The rows of :data:`~zbuf_occlude.experiments.sim2real_data.FITTED_SETS` also hold their
-    difference from ``lidar`` (``diff_vs_lidar``) and both one-sided p-values: ``p_vs_lidar``
-    (the fitted set above lidar) and ``p_lidar_above`` (lidar above it); the
-    :data:`~zbuf_occlude.experiments.sim2real_data.OCCLUDED_POINTS` row likewise against
-    ``occluded`` (``diff_vs_occluded``, ``p_vs_occluded``, ``p_occluded_above``).
-
-    With ``chosen_on_fit_half`` (runs validated on the fit half's real scans), a
-    :data:`CHOSEN_ON_FIT_HALF` row follows real→real: per seed, the mesh-only run with the best
-    ``best_val_mean_class_accuracy`` (ties: the lower ``best_val_loss``, then the first in the
-    sets' order), its scores as above,
-    the chosen sets (``chosen_sets``, in seed order), and its difference from real→real
-    (``diff_vs_real_to_real``) with the one-sided p that real→real is above (``p_real_to_real_above``)."""
-    keys = ["mean_class_accuracy", "overall_accuracy", "car_precision", "car_recall", "car_f1",
-            *[f"acc_{n}" for n in names], *ALL_SCANS]  # fmt: skip
-    ref = [r["mean_class_accuracy"] for r in runs if r["train_set"] == "complete"]
-    lidar = [r["mean_class_accuracy"] for r in runs if r["train_set"] == "lidar"]
-    occluded = [r["mean_class_accuracy"] for r in runs if r["train_set"] == "occluded"]
-    rows = []
-    for kind in _EVERY_SET:
-        mine = [r for r in runs if r["train_set"] == kind]
-        if not mine:
-            continue
-        row = {"train_set": kind, "n_seeds": len(mine)}
-        for k in keys:
-            if k in mine[0]:
-                row[f"{k}_mean"], row[f"{k}_std"] = mean_std([r[k] for r in mine])
-        mca = [r["mean_class_accuracy"] for r in mine]
-        row["p_vs_complete"] = permutation_p(mca, ref) if kind not in ("complete", REAL_TO_REAL) and ref else float("nan")
-        row["diff_vs_complete"] = (row["mean_class_accuracy_mean"] - float(np.mean(ref))) if ref else float("nan")
-        if kind in FITTED_SETS and lidar:
-            row["diff_vs_lidar"] = row["mean_class_accuracy_mean"] - float(np.mean(lidar))
-            row["p_vs_lidar"], row["p_lidar_above"] = permutation_p(mca, lidar), permutation_p(lidar, mca)
-        if kind == OCCLUDED_POINTS and occluded:
-            row["diff_vs_occluded"] = row["mean_class_accuracy_mean"] - float(np.mean(occluded))
-            row["p_vs_occluded"], row["p_occluded_above"] = permutation_p(mca, occluded), permutation_p(occluded, mca)
-        rows.append(row)
-    if chosen_on_fit_half:
-        rows += _chosen_row(runs, keys, ref)
-    k = len(names)
-    rows.append({"train_set": "chance", "n_seeds": 0, "mean_class_accuracy_mean": 1.0 / k, "mean_class_accuracy_std": 0.0,
-                 "overall_accuracy_mean": 1.0 / k, "overall_accuracy_std": 0.0,
-                 **{f"{key}_{stat}": (1.0 / k if stat == "mean" else 0.0) for key in ALL_SCANS for stat in ("mean", "std")}})  # fmt: skip
-    return rows
-
-
-def _validation_rank(run: dict) -> tuple[float, float]:
-    """How well a run did on its validation scans, larger is better: the mean class accuracy, then
-    (accuracy often ties at 1.0 on a small fit half) the lower validation loss; a run recorded
-    without a loss ranks below one with a loss."""
-    loss = run.get("best_val_loss")
-    return run["best_val_mean_class_accuracy"], -loss if loss is not None and math.isfinite(loss) else -math.inf
-
-
-def _chosen_row(runs: list[dict], keys: list[str], ref: list[float]) -> list[dict]:
-    """The :data:`CHOSEN_ON_FIT_HALF` row of :func:`summarise` (none when no seed has a mesh-only run)."""
-    order = {k: i for i, k in enumerate(_MESH_SETS)}
-    chosen = []
-    for seed in sorted({r["seed"] for r in runs}):
-        mine = [r for r in runs if r["seed"] == seed and r["train_set"] in order]
-        if mine:
-            chosen.append(max(sorted(mine, key=lambda r: order[r["train_set"]]), key=_validation_rank))
-    if not chosen:
-        return []
-    row = {"train_set": CHOSEN_ON_FIT_HALF, "n_seeds": len(chosen), "chosen_sets": " ".join(r["train_set"] for r in chosen)}
-    for k in keys:
-        if k in chosen[0]:
-            row[f"{k}_mean"], row[f"{k}_std"] = mean_std([r[k] for r in chosen])
-    mca = [r["mean_class_accuracy"] for r in chosen]
-    row["p_vs_complete"] = permutation_p(mca, ref) if ref else float("nan")
-    row["diff_vs_complete"] = (row["mean_class_accuracy_mean"] - float(np.mean(ref))) if ref else float("nan")
-    real = [r["mean_class_accuracy"] for r in runs if r["train_set"] == REAL_TO_REAL]
-    if real:
-        row["diff_vs_real_to_real"] = row["mean_class_accuracy_mean"] - float(np.mean(real))
-        row["p_real_to_real_above"] = permutation_p(real, mca)
-    return [row]
