@@ -95,6 +95,8 @@ def test_each_up_axis_reads_back_through_the_readers_up_rotation(dataset, tmp_pa
     out = tmp_path / "out"
     result = export(dataset, "pointnet-h5", out, up=up, progress=False)
     assert result.up == up and json.loads((out / "export.json").read_text())["up"] == up
+    with h5py.File(out / "ply_data_train0.h5", "r") as f:
+        assert f.attrs["up"] == up  # what the point-set readers take as the file's frame
     data, ids = _h5_rows(out)
     source = _source_points(dataset)
     rotation = up_rotation(up)[:3, :3]

@@ -4,7 +4,8 @@ What charlesq34/pointnet's ``provider.py`` and ``train.py`` read, and after them
 DGCNN (``glob(ply_data_%s*.h5)``), PCT, PointMLP and CurveNet:
 
 * ``ply_data_<split><k>.h5``: ``data (m, P, 3) float32`` (+y up, as ModelNet40's own files:
-  ``provider.rotate_point_cloud`` turns them about y, "along up direction") and ``label (m, 1) uint8`` (``uint16``
+  ``provider.rotate_point_cloud`` turns them about y, "along up direction"; the root's attribute
+  ``up`` says the axis, which the loaders do not read and the point-set readers do) and ``label (m, 1) uint8`` (``uint16``
   above 256 classes), at most :data:`ROWS_PER_FILE` rows a file.  The rows of every class are
   shuffled across the files with ``seed``: PointNet shuffles only inside a file, so files of one
   class would give batches of one class;
@@ -48,9 +49,10 @@ BYTES_PER_SAMPLE = 3 * 8
 FILE_NAMES = (r"ply_data_[a-z]+\d+\.h5", r"ply_data_[a-z]+_\d+_id2file\.json", r"shape_names\.txt", r"[a-z]+_files\.txt")
 
 
-def _create_file(path: Path, rows: int, n_points: int, label: np.ndarray) -> int:
+def _create_file(path: Path, rows: int, n_points: int, label: np.ndarray, up: str) -> int:
     """Make ``path`` a PointNet file: ``label`` written, ``data (rows, n_points, 3) float32`` allocated
-    contiguous and not filled; return the byte offset of ``data``'s first row.
+    contiguous and not filled, the root's attribute ``up`` set to the export's up axis (which the
+    point-set readers take); return the byte offset of ``data``'s first row.
 
     The rows are then written straight to that offset, in any order
     (:func:`~zbuf_occlude.io.atomic.positional_writer`): a contiguous, uncompressed HDF5 dataset is
@@ -69,6 +71,7 @@ def _create_file(path: Path, rows: int, n_points: int, label: np.ndarray) -> int
         data = h5py.h5d.create(f.id, b"data", h5py.h5t.IEEE_F32LE, space, dcpl=dcpl)
         offset = data.get_offset()
         f.create_dataset("label", data=label, track_times=False)
+        f.attrs["up"] = up
     if offset is None:  # an empty dataset has no storage
         return 0
     return int(offset)
@@ -165,7 +168,7 @@ def _write_split(
                 tmp = stack.enter_context(folder.write(files[f]))
                 rows = min(rows_per_file, n - f * rows_per_file)
                 mine = order[f * rows_per_file : f * rows_per_file + rows]
-                offsets[f] = _create_file(tmp, rows, ds.n_points, all_labels[mine].astype(dtype)[:, None])
+                offsets[f] = _create_file(tmp, rows, ds.n_points, all_labels[mine].astype(dtype)[:, None], up)
                 writers[f] = stack.enter_context(positional_writer(tmp))
             row_bytes = ds.n_points * 3 * 4
             for start, block in ds.iter_arrays():
