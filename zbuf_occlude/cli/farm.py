@@ -76,10 +76,10 @@ def _farm_command(args: argparse.Namespace) -> int:
     params = FarmParams(
         views=args.views,
         samples_per_view=args.samples_per_view,
-        n_points=args.points if args.points is not None else DEFAULT_N_POINTS,
+        n_points=args.points,
         dense_points=args.dense_points if args.dense_points is not None else DEFAULT_FARM_DENSE_POINTS,
         density=args.density,
-        resolution=args.resolution if args.resolution is not None else DEFAULT_FARM_RESOLUTION,
+        resolution=args.resolution,
         seed=args.seed,
         radius=args.radius,
         storage=args.storage,
@@ -157,8 +157,8 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
         "--samples-per-view", action=Checked, check=count("MAX_SAMPLES"), default=DEFAULT_SAMPLES_PER_VIEW, help="random samples drawn per pose (default: %(default)s)"
     )
     r.add_argument(
-        "--points", action=Checked, check=count("MAX_POINTS"),
-        help=f"points per sample (default: {DEFAULT_N_POINTS}; point sets: {DEFAULT_POINT_SET_POINTS}, {POINT_SETS_POINTS_WHY})",
+        "--points", action=Checked, check=count("MAX_POINTS"), default=DEFAULT_N_POINTS,
+        help=f"points per sample (default: %(default)s; point sets: {DEFAULT_POINT_SET_POINTS}, {POINT_SETS_POINTS_WHY})",
     )  # fmt: skip
     dense = r.add_mutually_exclusive_group()
     dense.add_argument(
@@ -166,7 +166,7 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
     )
     dense.add_argument("--density", action=Checked, check=real(0.0, above=True), help=f"dense cloud as points per unit area of the normalised mesh ({NOT_FOR_POINT_SETS})")
     r.add_argument(
-        "--resolution", action=Checked, check=count("MAX_RESOLUTION"), help=f"z-buffer image size, pixels (default: {DEFAULT_FARM_RESOLUTION}; generate's: {GENERATE_RESOLUTION}; {NOT_FOR_POINT_SETS})"
+        "--resolution", action=Checked, check=count("MAX_RESOLUTION"), default=DEFAULT_FARM_RESOLUTION, help=f"z-buffer image size, pixels (default: %(default)s; generate's: {GENERATE_RESOLUTION}; {NOT_FOR_POINT_SETS})"
     )
     r.add_argument(
         "--radius", action=Checked, check=real(), default=DEFAULT_RADIUS, help=f"{RADIUS_HELP} (default: %(default)s)"

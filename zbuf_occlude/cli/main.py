@@ -66,34 +66,24 @@ def _default_paths(paths: list[str]) -> list[str]:
 
 
 # -- generate ------------------------------------------------------------------------------
-def _or(value: Any, default: Any) -> Any:
-    """An option's value, or ``default`` where it was not given (its parser default is None)."""
-    return default if value is None else value
-
-
 def cmd_generate(args: argparse.Namespace) -> int:
     """``generate`` runs on the farm's engine (:mod:`zbuf_occlude.farm.generate`)."""
     import shlex
 
     from zbuf_occlude.cli.farm import GIVEN_PARAMS
     from zbuf_occlude.farm import FarmParams
-    from zbuf_occlude.farm.config import GENERATE_DEFAULTS
     from zbuf_occlude.farm.generate import generate
 
-    gd = GENERATE_DEFAULTS
     if args.protocol != "paper":  # the field's recipes (zbuf_occlude.protocols) have their own writers
         from zbuf_occlude.cli.protocols import run_protocol_command
-
-        for attr, default in (("points", gd.n_points), ("dense_points", gd.dense_points), ("resolution", gd.resolution)):
-            setattr(args, attr, _or(getattr(args, attr), default))  # meshes only: generate's defaults
 
         return run_protocol_command(args, _default_paths(args.paths))
     if args.severity is not None:
         raise InvalidInputError(f"--severity {args.severity} needs --protocol modelnet40-c-occlusion or modelnet40-c-lidar")
     params = FarmParams(
-        views=args.views, samples_per_view=args.samples_per_view, n_points=_or(args.points, gd.n_points),
-        dense_points=_or(args.dense_points, gd.dense_points), resolution=_or(args.resolution, gd.resolution), seed=args.seed,
-        radius=args.radius, storage=args.format, method=args.method, up=args.up,
+        views=args.views, samples_per_view=args.samples_per_view, n_points=args.points, dense_points=args.dense_points,
+        resolution=args.resolution, seed=args.seed, radius=args.radius, storage=args.format, method=args.method,
+        up=args.up,
     )  # fmt: skip
     paths = _default_paths(args.paths)
     # generate's engine (farm.run_farm) checks the options, the memory, --out and the GL before loading a mesh
@@ -284,8 +274,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_protocol_arguments(g)
     g.set_defaults(
-        func=cmd_generate, views=gd.views,  # --points, --dense-points, --resolution: None, the defaults of the inputs' kind
-        samples_per_view=gd.samples_per_view, format=gd.storage, method=gd.method,
+        func=cmd_generate, views=gd.views, points=gd.n_points, resolution=gd.resolution,
+        samples_per_view=gd.samples_per_view, dense_points=gd.dense_points, format=gd.storage, method=gd.method,
     )  # fmt: skip
 
     v = sub.add_parser(

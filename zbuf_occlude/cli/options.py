@@ -66,13 +66,20 @@ class Checked(argparse.Action):
 
     def __call__(self, parser, namespace, values, option_string=None) -> None:
         setattr(namespace, self.dest, self.check(values, option_string or self.dest))
+        # which options were given, beside their values (a default and a given equal value look alike)
+        setattr(namespace, GIVEN, frozenset({*getattr(namespace, GIVEN, ()), self.dest}))
+
+
+#: The ``args`` attribute that holds the destinations of the :class:`Checked` options given.
+GIVEN = "given_options"
 
 
 def given_params(args: argparse.Namespace, fields: dict[str, str]) -> frozenset[str]:
-    """The :class:`~zbuf_occlude.farm.FarmParams` fields whose option was given: ``fields`` maps a
-    field to its ``args`` attribute, whose parser default is None (the library then tells an option
+    """The :class:`~zbuf_occlude.farm.FarmParams` fields whose :class:`Checked` option was given on the
+    command line: ``fields`` maps a field to its ``args`` attribute (the library then tells an option
     that does nothing for the inputs from one left out, :attr:`~zbuf_occlude.farm.RunOptions.set_params`)."""
-    return frozenset(field for field, attr in fields.items() if getattr(args, attr, None) is not None)
+    given = getattr(args, GIVEN, frozenset())
+    return frozenset(field for field, attr in fields.items() if attr in given)
 
 
 def counted(n: int, noun: str, plural: str | None = None) -> str:
