@@ -52,6 +52,7 @@ from zbuf_occlude.geometry.samples import (
     top_up,
 )
 from zbuf_occlude.geometry.sampling import sample_surface, triangles_of
+from zbuf_occlude.mesh.input_kinds import POINT_SET_METHOD  # the point-set input kind's method, re-exported
 from zbuf_occlude.resources import check_memory, estimate_job_memory
 from zbuf_occlude.visibility.registry import check_keywords, method_info, resolution_option, visible_mask
 
@@ -71,9 +72,6 @@ log = logging.getLogger(__name__)
 NORMALISED_ATOL = 1e-9
 #: ``face_index`` of a sample point that lies on no face: the points of a point-set input.
 NO_FACE = -1
-#: The registered name of the method that decides a point-set input's visibility
-#: (:func:`~zbuf_occlude.visibility.point_splats.point_surfels`, the z-buffer test over surfel splats).
-POINT_SET_METHOD = "point-splat"
 
 
 @dataclass
