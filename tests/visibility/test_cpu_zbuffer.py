@@ -378,3 +378,48 @@ def test_a_view_computes_the_cameras_extrinsics_once():
     expected = FastScene(mesh, points, fi, sort=False, threads=1).visible(cam)
     got = FastScene(mesh, points, fi, sort=False, threads=1).visible(counting)
     assert np.array_equal(got, expected) and len(calls) == 1
+
+
+def test_embree_fast_casts_its_rays_in_the_oracles_bvh_and_groups_the_faces_once(monkeypatch):
+    """One Embree BVH and one grouping of identical faces per mesh, shared by the rays, the
+    pre-pass's raster and the oracle's re-checks; the masks are those of a fresh grouping."""
+    from zbuf_occlude.geometry.grouping import exact_face_groups
+    from zbuf_occlude.visibility import oracle_embree
+
+    base = zo.load_mesh(SAMPLES / "chair/train/chair_0001.off")
+    faces = np.concatenate([base.faces, base.faces[:50]])  # 50 stacked copies
+    mesh = trimesh.Trimesh(base.vertices, faces, process=False)
+    points, fi = zo.sample_surface(mesh, 3000, seed=8)
+    groupings = []
+    monkeypatch.setattr(cpu_zbuffer, "exact_face_groups", lambda t: groupings.append(1) or exact_face_groups(t))
+    oracles = _count_builds(monkeypatch, oracle_embree._EmbreeScene, oracle_embree._scenes)
+    embree_fast._scenes.clear()
+    cpu_zbuffer._mesh_data.clear()
+    cam = zo.camera_on_sphere(20.0, 30.0)
+    got = FastScene(mesh, points, fi, threads=1).visible(cam)
+    assert len(oracles) == 1 and not groupings
+    assert embree_fast._scenes(mesh).scene is oracle_embree.scene_for(mesh).scene
+    listed = np.flatnonzero(exact_face_groups(mesh.triangles) == np.arange(len(mesh.faces)))
+    assert embree_fast._scenes(mesh).n_faces_in_bvh == len(listed) == len(base.faces)
+    assert np.array_equal(cpu_zbuffer._mesh_data(mesh).raster_ids, listed)
+    assert (got == visible_mask(mesh, points, cam, "oracle", face_index=fi)).mean() >= 0.9995
+
+
+def test_the_default_threads_change_the_threads_not_the_masks():
+    mesh = zo.load_mesh(SAMPLES / "chair/train/chair_0001.off")
+    points, fi = zo.sample_surface(mesh, 5000, seed=9)
+    cam = zo.camera_on_sphere(-20.0, 140.0)
+    before = embree_fast.DEFAULT_THREADS
+    try:
+        masks = []
+        for threads in (1, 3):
+            embree_fast.set_default_threads(threads)
+            scene = FastScene(mesh, points, fi)
+            assert scene.threads == threads
+            masks.append(scene.visible(cam))
+        assert np.array_equal(masks[0], masks[1])
+        assert FastScene(mesh, points, fi, threads=2).threads == 2  # an explicit count wins
+        with pytest.raises(zo.InvalidInputError):
+            embree_fast.set_default_threads(0)
+    finally:
+        embree_fast.set_default_threads(before)

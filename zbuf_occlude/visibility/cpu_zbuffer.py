@@ -49,6 +49,7 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
+from zbuf_occlude.errors import BackendUnavailable
 from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.geometry.grouping import exact_face_groups
 from zbuf_occlude.mesh.cache import MeshCache
@@ -493,15 +494,25 @@ class _MeshData:
         self.faces = np.ascontiguousarray(mesh.faces, dtype=np.int64)
         # Rasterised: one face per group of identical faces (a stack of m copies would fill every
         # cell it covers m times; a copy of a point's own face never occludes it, within the tolerance).
-        self.raster_ids = (
-            np.flatnonzero(exact_face_groups(mesh.triangles) == np.arange(len(self.faces))) if len(self.faces) else
-            np.zeros(0, dtype=np.int64)
-        )  # fmt: skip
+        self.raster_ids = _listed_faces(mesh) if len(self.faces) else np.zeros(0, dtype=np.int64)
         self.raster_faces = np.ascontiguousarray(self.faces[self.raster_ids])
         #: The vertices the view's extent is taken over: those of a face when the file lists many
         #: more than the faces use (a point cloud with a few faces), else all (empty).
         self.used = np.unique(self.faces) if len(self.vertices) > 3 * len(self.faces) else np.zeros(0, dtype=np.int64)
         self.planes = pack_planes(mesh_planes(mesh))
+
+
+def _listed_faces(mesh: trimesh.Trimesh) -> NDArray[np.int64]:
+    """(K,) int64, ascending: the lowest index of each group of faces with bit-identical vertices
+    (:func:`~zbuf_occlude.geometry.grouping.exact_face_groups`).  Taken from the oracle's Embree
+    scene of the mesh where Embree is installed (``embree-fast``, the pre-pass's caller, builds
+    it anyway): grouping the faces is a sort of the whole mesh, once is enough."""
+    try:
+        from zbuf_occlude.visibility.oracle_embree import scene_for
+
+        return scene_for(mesh).listed
+    except BackendUnavailable:
+        return np.flatnonzero(exact_face_groups(mesh.triangles) == np.arange(len(mesh.faces)))
 
 
 _mesh_data: MeshCache[_MeshData] = MeshCache(_MeshData, SCENE_CACHE_SIZE)

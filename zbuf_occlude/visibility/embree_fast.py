@@ -45,9 +45,9 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from zbuf_occlude.errors import BackendUnavailable
+from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 from zbuf_occlude.geometry.cameras import Camera
-from zbuf_occlude.geometry.grouping import exact_face_groups, morton_order
+from zbuf_occlude.geometry.grouping import morton_order
 from zbuf_occlude.mesh.cache import MeshCache
 from zbuf_occlude.visibility import cpu_zbuffer
 from zbuf_occlude.visibility.definition import EDGE_ON_SIN, TOLERANCE, edge_on_any, edge_on_own
@@ -57,11 +57,11 @@ from zbuf_occlude.visibility.oracle_embree import scene_for as oracle_scene
 from zbuf_occlude.visibility.registry import SessionBase, check_face_index, check_points, register
 from zbuf_occlude.visibility.segment_triangle import mesh_planes
 
-__all__ = ["FastScene", "embree_fast_visible", "DEFAULT_THREADS"]
+__all__ = ["FastScene", "embree_fast_visible", "DEFAULT_THREADS", "set_default_threads"]
 
 log = logging.getLogger(__name__)
 
-#: Threads per view (default: the CPUs this process may run on).
+#: Threads per view (default: the CPUs this process may run on; :func:`set_default_threads` changes it).
 DEFAULT_THREADS = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
 #: Pass 1 starts this far from the point (relative to the bounding sphere's radius), over
 #: ``cos`` of the point's face (capped by ``_MAX_START``); without face_index, ``cos = 1``.
@@ -126,25 +126,20 @@ CREASE = 16
 class _Scene:
     def __init__(self, mesh: trimesh.Trimesh):
         try:
-            from embreex import rtcore_scene
-            from embreex.mesh_construction import TriangleMesh
+            import embreex  # noqa: F401
         except ImportError as exc:
             raise BackendUnavailable(f"'embree-fast' needs Embree: pip install embreex ({exc})") from None
         vertices = np.asarray(mesh.vertices, dtype=np.float64)
         used = vertices[np.asarray(mesh.faces)].reshape(-1, 3)
         self.centre = (used.min(axis=0) + used.max(axis=0)) / 2.0
         self.radius = float(np.sqrt(((used - self.centre) ** 2).sum(axis=1)).max()) * (1.0 + 1e-3)
-        self.scene = rtcore_scene.EmbreeScene(robust=True)
-        # One face per group of identical faces: the rays only ask whether anything blocks them, and
-        # a ray grazing m stacked copies would test all m (a mesh of 300,000 copies took minutes).
-        faces = np.asarray(mesh.faces)
-        listed = np.flatnonzero(exact_face_groups(mesh.triangles) == np.arange(len(faces))) if len(faces) else []
-        self.n_faces_in_bvh = len(listed)
-        TriangleMesh(
-            scene=self.scene,
-            vertices=np.ascontiguousarray(vertices - self.centre, dtype=np.float32),
-            indices=np.ascontiguousarray(faces[listed], dtype=np.int32),
-        )
+        # The oracle's scene (its crease and near-tie re-checks need it anyway) holds the BVH the
+        # rays need: float32 vertices around the same centre, one face per group of identical
+        # faces (a ray grazing m stacked copies would test all m; a mesh of 300,000 copies took
+        # minutes).  Built once, it serves both.
+        self._oracle = oracle_scene(mesh)
+        self.scene = self._oracle.scene
+        self.n_faces_in_bvh = len(self._oracle.listed)
         planes = mesh_planes(mesh)
         with np.errstate(invalid="ignore", divide="ignore"):
             unit = planes.normal / np.sqrt((planes.normal**2).sum(axis=1))[:, None]
@@ -155,16 +150,31 @@ class _Scene:
         self.edge_planes = np.nan_to_num(edge)  # degenerate faces: distance 0 (always a crease)
         #: The face normals of the edge-on rule (float64, :func:`mesh_planes`'s).
         self.normals = planes.normal
-        self._oracle = None
 
     def oracle(self, mesh: trimesh.Trimesh):
-        """The oracle's scene of ``mesh`` (this scene's mesh), looked up once (crease re-checks)."""
-        if self._oracle is None:
-            self._oracle = oracle_scene(mesh)
+        """The oracle's scene of ``mesh`` (this scene's mesh), which also holds this scene's BVH."""
         return self._oracle
 
 
 _scenes: MeshCache[_Scene] = MeshCache(_Scene, 8)
+
+
+def set_default_threads(threads: int) -> None:
+    """Threads per view of the sessions and calls made after this (those given no ``threads``).
+
+    The farm's worker processes, as many as there are cores, each take ``cores // workers``:
+    more threads than cores only wait for each other at every view's hand-over.  The masks
+    do not depend on it (each point is decided alone).
+
+    Raises
+    ------
+    InvalidInputError
+        ``threads < 1``.
+    """
+    global DEFAULT_THREADS
+    if int(threads) < 1:
+        raise InvalidInputError(f"threads must be >= 1, got {threads!r}")
+    DEFAULT_THREADS = int(threads)
 _pool: ThreadPoolExecutor | None = None
 
 
