@@ -16,10 +16,21 @@ from scipy.spatial import cKDTree
 import zbuf_occlude as zo
 from zbuf_occlude.geometry.grouping import morton_order
 from zbuf_occlude.geometry.normals import covariance_normals, robust_normals
-from zbuf_occlude.visibility.point_preparation import plane_fits, surfel_geometry
+from zbuf_occlude.visibility.point_preparation import (
+    nearest_neighbours,
+    surfel_geometry,
+)
+from zbuf_occlude.visibility.point_preparation import plane_fits as fit_planes
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 MESHES = sorted(SAMPLES.glob("*/*/*.off"))
+
+
+def plane_fits(points, neighbours, sizes):
+    """The kernel's fits of every point."""
+    normals, variation = np.empty((len(sizes), len(points), 3)), np.empty((len(sizes), len(points)))
+    fit_planes(points, neighbours, np.asarray(sizes, dtype=np.int64), 0, len(points), normals, variation)
+    return normals, variation
 
 
 def _angle_deg(a, b):
@@ -96,3 +107,45 @@ def test_a_line_and_a_single_place_give_defined_normals():
         np.testing.assert_allclose(variation, 0.0, atol=1e-12)
     normals, _ = plane_fits(line, neighbours, np.array([14]))
     assert np.all(np.abs(normals[0] @ np.array([1.0, 2.0, 3.0])) < 1e-9)  # across the line
+
+
+clouds = st.sampled_from(["sphere", "plane", "line", "clusters", "duplicates", "one place", "gaussian"])
+
+
+def _cloud(kind: str, n: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    if kind == "sphere":
+        p = rng.normal(size=(n, 3))
+        return p / np.linalg.norm(p, axis=1, keepdims=True)
+    if kind == "plane":
+        return np.column_stack([rng.uniform(-1, 1, size=(n, 2)), np.zeros(n)])
+    if kind == "line":
+        return np.outer(rng.uniform(0, 1, n), [1.0, -2.0, 0.5])
+    if kind == "clusters":  # two knots far apart: most of the box empty
+        return rng.normal(size=(n, 3)) * 1e-3 + np.where(rng.uniform(size=(n, 1)) < 0.5, 0.0, 1e3)
+    if kind == "duplicates":
+        return np.repeat(rng.normal(size=((n + 3) // 4, 3)), 4, axis=0)[:n]
+    if kind == "one place":
+        return np.full((n, 3), 2.5)
+    return rng.normal(size=(n, 3)) * [1.0, 10.0, 0.01]
+
+
+@settings(max_examples=40, deadline=None)
+@given(kind=clouds, n=st.integers(2, 3_000), k=st.integers(1, 20), seed=st.integers(0, 2**31))
+def test_the_grid_finds_the_k_d_tree_s_neighbours(kind, n, k, seed):
+    points = _cloud(kind, n, seed)
+    k = min(k, n)
+    distance, index = nearest_neighbours(points, k)
+    want_distance, want_index = cKDTree(points).query(points, k=k)
+    want_distance, want_index = want_distance.reshape(n, k), want_index.reshape(n, k)
+    np.testing.assert_array_equal(distance, want_distance)
+    # the same neighbours up to the order of equally far ones (duplicates)
+    got = np.linalg.norm(points[index] - points[:, None, :], axis=2)
+    np.testing.assert_array_equal(got, np.linalg.norm(points[want_index] - points[:, None, :], axis=2))
+
+
+def test_the_grid_s_threads_give_the_serial_answer():
+    points = _cloud("sphere", 20_000, 3)
+    one = nearest_neighbours(points, 9, workers=1)
+    many = nearest_neighbours(points, 9, workers=3)
+    assert all(np.array_equal(a, b) for a, b in zip(one, many))
