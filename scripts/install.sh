@@ -37,11 +37,16 @@ if [ ${#need_apt[@]} -gt 0 ]; then
 fi
 
 PYTHON=${PYTHON:-python3}
-[ -x .venv/bin/python ] || "$PYTHON" -m venv .venv
+if [ ! -x .venv/bin/python ]; then
+    echo "creating the virtual environment .venv ($("$PYTHON" --version 2>&1))"
+    "$PYTHON" -m venv .venv
+fi
 pip=(.venv/bin/python -m pip)
+echo "upgrading pip in .venv"
 "${pip[@]}" install -q --upgrade pip
 
 if [ "$mode" = core ]; then
+    echo "installing zbuf_occlude and its dependencies into .venv (numpy, trimesh, embreex, numba, moderngl, ...; a minute or more, quiet)"
     "${pip[@]}" install -q -e .
 else
     # The CPU build where PyTorch's index is out of reach (this version's CPU wheel may be in a local wheel folder).
@@ -59,14 +64,17 @@ else
             || { echo "PyTorch's CPU index is out of reach: installing torch==$TORCH_CPU_FALLBACK"
                  "${pip[@]}" install -q "torch==$TORCH_CPU_FALLBACK"; }
     fi
+    echo "installing zbuf_occlude with the test, learn and docs extras into .venv (several minutes, quiet)"
     "${pip[@]}" install -q -e ".[test,learn,docs]"
 fi
 # The package is installed in place, so pip compiles none of it: compile it here, or where
 # PYTHONDONTWRITEBYTECODE is set every command compiles it anew (0.4 s a start on 2 cores).
+echo "compiling the package's Python files"
 .venv/bin/python -m compileall -q zbuf_occlude
 # numba compiles the kernels on their first call (seconds on the first mesh): compile them now
 # into numba's on-disk cache, which every later process loads (zbuf_occlude/visibility/warmup.py).
-echo "compiling the numba kernels (once, into numba's cache)"
+echo "compiling the numba kernels (once, into numba's cache; a minute or two, quiet)"
 .venv/bin/python -m zbuf_occlude.visibility.warmup -q \
     || echo "warning: the numba kernels were not all compiled now; they compile on first use" >&2
+echo "checking the OpenGL context and the visibility methods (zbuf-occlude info)"
 .venv/bin/zbuf-occlude info

@@ -101,6 +101,18 @@ class TestInstallScript:
             installs = [c for c in calls if c.startswith("-m pip install")][1:]
             assert installs == ["-m pip install -q -e .[test,learn,docs]"], (env, gpu)
 
+    @pytest.mark.parametrize("args", [[], ["--test"]])
+    def test_each_long_step_is_announced_before_it_runs(self, fake_checkout, args):
+        """No silent minute: a line says what comes before each pip install, the compile and the numba warm-up."""
+        # the stand-in python writes each call into the script's own stdout, in order with its lines
+        rc, _, out = _install(fake_checkout, *args, CPU_INDEX_OK="1", CALLS="/dev/stdout")
+        assert rc == 0, out
+        lines = out.splitlines()
+        long_steps = [i for i, line in enumerate(lines) if line.startswith(("-m pip install", "-m compileall", "-m zbuf_occlude.visibility.warmup"))]
+        assert len(long_steps) >= 4, lines
+        for i in long_steps:
+            assert not lines[i - 1].startswith(("-m ", "-c ")), (lines[i], lines[:i])  # said before it, not after another call
+
     @pytest.mark.parametrize("args", [["--bogus"], ["--test", "--test"]])
     def test_bad_options_exit_2_before_any_work(self, fake_checkout, args):
         rc, calls, out = _install(fake_checkout, *args)

@@ -1,7 +1,8 @@
 """The install hint of an optional extra: the one way messages say it, naming commands that work.
 
-No package index serves zbuf-occlude, so ``pip install 'zbuf-occlude[EXTRA]'`` fails; every
-message builds its hint with :func:`zbuf_occlude._version.install_hint`, and every extra it
+No package index serves zbuf-occlude, so ``pip install 'zbuf-occlude[EXTRA]'`` fails, and
+``pip install '.[EXTRA]'`` works only in a checkout; every message builds its hint with
+:func:`zbuf_occlude._version.install_hint` (the extra's own packages, by name), and every extra it
 names is one of ``pyproject.toml``.  (tests/test_wheel.py checks that the wheel it names is the
 one ``pip wheel`` builds.)
 """
@@ -9,6 +10,10 @@ one ``pip wheel`` builds.)
 from __future__ import annotations
 
 import ast
+import re
+import shlex
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -31,12 +36,48 @@ def _sources() -> list[tuple[Path, ast.AST]]:
     return [(path, ast.parse(path.read_text(encoding="utf-8"))) for path in sorted(PACKAGE.rglob("*.py"))]
 
 
-def test_the_hint_names_a_checkout_and_this_versions_wheel() -> None:
+def _pyproject_extra(extra: str) -> list[str]:
+    tomllib = pytest.importorskip("tomllib")  # Python >= 3.11
+    return tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"][extra]
+
+
+def _spec(requirement: str) -> tuple[str, set[str]]:
+    """``("pycollada", {"<1", ">=0.8"})``: a requirement's name and version clauses, in any order."""
+    head = requirement.split(";")[0].strip()
+    name = re.split(r"[<>=!~ ]", head, maxsplit=1)[0]
+    return name.lower(), {c.strip() for c in head[len(name):].split(",") if c.strip()}
+
+
+@pytest.mark.parametrize("extra", ["collada", "learn", "pyg", "plot", "yaml"])
+def test_the_hint_installs_the_extras_own_packages_by_name(extra: str) -> None:
+    """No path, no '.': the command works from any directory, with the version ranges of pyproject's extra."""
+    hint = install_hint(extra)
+    assert hint.startswith("pip install '") and hint.endswith(f" (the {extra} extra)") and "'.[" not in hint and "dist/" not in hint, hint
+    named = sorted(_spec(r) for r in re.findall(r"'([^']+)'", hint))
+    assert named == sorted(_spec(r) for r in _pyproject_extra(extra))
+
+
+def test_the_collada_hint_works_from_another_directory(tmp_path: Path) -> None:
+    """The hint's command, run by pip (offline, --dry-run) outside the checkout: satisfied by what is installed."""
+    pytest.importorskip("collada", reason="pycollada is the collada extra's")
+    args = shlex.split(install_hint("collada").split(" (the ")[0])
+    run = subprocess.run([sys.executable, "-m", *args, "--dry-run", "--no-index", "--no-deps", "-q"], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert run.returncode == 0, run.stderr
+
+
+def test_a_hint_without_the_packages_metadata_names_a_checkout_and_this_versions_wheel(monkeypatch: pytest.MonkeyPatch) -> None:
+    from importlib import metadata
+
+    def missing(name):
+        raise metadata.PackageNotFoundError(name)
+
+    monkeypatch.setattr(metadata, "requires", missing)
     assert install_hint("learn") == (
         "pip install '.[learn]' from a checkout, or pip install 'dist/zbuf_occlude-"
         f"{__version__}-py3-none-any.whl[learn]' from a built wheel"
     )
-    assert WHEEL_NAME in install_hint("pyg")
+    assert WHEEL_NAME in install_hint("pyg") and WHEEL_NAME in install_hint("no-such-extra")
 
 
 def test_no_message_tells_users_to_install_from_an_index() -> None:

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from zbuf_occlude._version import __version__
+from zbuf_occlude.cli.first_run import say_if_cold
 from zbuf_occlude.cli.options import Checked, Parser, count, counted, given_params, out_folder, poses, real, seed
 from zbuf_occlude.defaults import DEFAULT_DENSE_POINTS, DEFAULT_METHOD, DEFAULT_RESOLUTION, DEFAULT_SEED, DEFAULT_VIEWS
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
@@ -465,6 +466,7 @@ def _run(argv: Sequence[str] | None) -> int:
         command = args.command
         logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
         created = _missing_folders(getattr(args, "out", None))
+        say_if_cold(command)  # a first run's numba compile is a minute of silence otherwise
         return int(args.func(args) or 0)
     except ZbufOccludeError as exc:
         print(f"zbuf-occlude: error: {exc}", file=sys.stderr)
