@@ -12,6 +12,7 @@ import pytest
 import zbuf_occlude as zo
 from zbuf_occlude.render import point_sprites
 from zbuf_occlude.render.point_sprites import PointSpriteRenderer
+from zbuf_occlude.visibility import point_kernels
 from zbuf_occlude.visibility.point_kernels import EDGE_ON_COS, splat_surfels
 
 #: Every surfel a sprite, every surfel a quad, 8-pixel tiles.
@@ -69,6 +70,10 @@ def test_coplanar_neighbours_tie_as_on_the_cpu():
     for setting in PASSES.values():
         depth, ids = _splat(cam, normal, radius, **setting)
         assert np.array_equal(ids, ids_cpu) and np.array_equal(depth, depth_cpu)
+
+
+def test_the_boxes_hold_what_the_kernels_boxes_hold():
+    assert point_sprites._BOX_MARGIN >= point_kernels.BOX_MARGIN
 
 
 def _with_division(monkeypatch, old: str, new: str) -> None:

@@ -11,8 +11,8 @@ at the same ``t`` the lowest id.
 How the GPU draws it (``shaders/point_splat.vert``, ``shaders/point_splat.frag``):
 
 * the image rectangle is mapped orthographically onto clip space (it is already in normalised
-  coordinates); each surfel's pixel box is the projection of the cube ``q ± r`` (which holds the
-  disk), clamped to the image, computed here in float64: every pixel the kernel's tests can pass;
+  coordinates); each surfel's pixel box is the kernel's (the projection of a box around the
+  disk, clamped to the image), computed here in float64: every pixel the kernel's tests can pass;
 * one GL point per surfel, centred on its box, ``gl_PointSize`` = the box's longer side + 2 pixels;
 * the fragment shader reads the surfel in float64 and computes the pixel's ray, the edge-on and
   the disk tests and ``t`` with the kernel's operations, in its order, ``precise`` (no fused or
@@ -34,7 +34,7 @@ How the GPU draws it (``shaders/point_splat.vert``, ``shaders/point_splat.frag``
 The buffers are the kernel's, bit for bit, where the GL's float64 addition and multiplication
 round to nearest as IEEE 754 says and its division is within an ulp of that (Mesa llvmpipe's are:
 tests/render/test_point_sprites*.py; no other GL measured yet).  Each stage runs the fragment
-shader over every fragment, in float64: on llvmpipe a view takes about 9 times as long as one
+shader over every fragment, in float64: on llvmpipe a view takes about 7 times as long as one
 float32 depth-tested pass over the same surfels (which decides near-ties either way).
 """
 
@@ -65,6 +65,10 @@ _DEFINES = (
     ("SPLAT_STAGE_HIGH", 0), ("SPLAT_STAGE_LOW", 1), ("SPLAT_STAGE_ID", 2),
 )  # fmt: skip
 _STAGES = tuple(value for name, value in _DEFINES if name.startswith("SPLAT_STAGE_"))
+#: Share of a disk's radius added to each side of its box, for rounding of the unit normal: at
+#: least :data:`zbuf_occlude.visibility.point_kernels.BOX_MARGIN` (the render layer cannot import
+#: it; tests/render/test_point_sprites_agreement.py holds the two together).
+_BOX_MARGIN = 1e-6
 #: Pixels kept between a sprite's centre and the tile's border, where GL would clip the point.
 _SPRITE_MARGIN_PX = 1.0
 #: Pixels: the render target's sides grow in steps of this (it is kept across views).
@@ -170,13 +174,14 @@ class PointSpriteRenderer:
         radius = np.asarray(radius, dtype=np.float64).reshape(-1)
         depth = np.full((height, width), np.inf)
         ids = np.full((height, width), -1, dtype=np.int32)
-        boxes = _Boxes(cam, radius, pix, x0, y0, width, height)
+        normal = np.asarray(normal, dtype=np.float64).reshape(-1, 3)
+        boxes = _Boxes(cam, normal, radius, pix, x0, y0, width, height)
         if not boxes.drawn.any():
             return depth, ids
         records = np.empty(len(cam), dtype=_SURFEL)
         records["id"] = np.arange(len(cam), dtype=np.int32)
         records["box"] = boxes.box
-        surfels64 = np.concatenate([cam, np.asarray(normal, dtype=np.float64).reshape(-1, 3), radius[:, None]], axis=1)
+        surfels64 = np.concatenate([cam, normal, radius[:, None]], axis=1)
         uniforms = {
             "pix": float(pix), "x0": float(x0), "y0": float(y0),
             "edge_on_cos2": float(edge_on_cos) * float(edge_on_cos),
@@ -285,17 +290,20 @@ class PointSpriteRenderer:
 
 
 class _Boxes:
-    """Each surfel's pixel box (float64, clamped to the image), and its sprite: the projection of
-    the cube ``q ± r`` around the disk (extreme at its corners), which holds every pixel the
-    kernel's tests can pass; the fragment shader tests no pixel outside it."""
+    """Each surfel's pixel box (float64, clamped to the image), and its sprite: the kernel's, the
+    projection of the box ``q ± e`` around the disk, ``e_a = r (sqrt(1 - n_a²) + margin)``
+    (``e_z`` at most ``r``; extreme at its corners), which holds every pixel the kernel's tests
+    can pass; the fragment shader tests no pixel outside it."""
 
-    def __init__(self, cam, radius, pix, x0, y0, width, height):
+    def __init__(self, cam, normal, radius, pix, x0, y0, width, height):
         z = cam[:, 2]
         ok = (radius > 0.0) & (z - radius > 0.0)
-        near = np.where(ok, z - radius, 1.0)
-        far = np.where(ok, z + radius, 1.0)
-        lo_x, hi_x = cam[:, 0] - radius, cam[:, 0] + radius
-        lo_y, hi_y = cam[:, 1] - radius, cam[:, 1] + radius
+        e = radius[:, None] * (np.sqrt(np.maximum(1.0 - normal * normal, 0.0)) + _BOX_MARGIN)
+        e[:, 2] = np.minimum(e[:, 2], radius)
+        near = np.where(ok, z - e[:, 2], 1.0)
+        far = np.where(ok, z + e[:, 2], 1.0)
+        lo_x, hi_x = cam[:, 0] - e[:, 0], cam[:, 0] + e[:, 0]
+        lo_y, hi_y = cam[:, 1] - e[:, 1], cam[:, 1] + e[:, 1]
         with np.errstate(invalid="ignore", over="ignore"):
             box = np.stack([
                 np.floor((np.minimum(lo_x / near, lo_x / far) - x0) / pix),
