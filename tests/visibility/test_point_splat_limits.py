@@ -104,10 +104,10 @@ def test_a_cloud_whose_preparation_would_exhaust_memory_is_refused_first(monkeyp
     """Under the 10-million-point cap, a cloud's splats can still need more memory than there is."""
     monkeypatch.setattr(resources, "available_memory", lambda: (2**16, "test budget"))
     monkeypatch.setattr(resources, "MIN_CHECKED_BYTES", 0)  # a small cloud, a smaller budget
-    with pytest.raises(InsufficientMemoryError, match=r"preparing the splats of 800 points needs about 1\.37 MiB.*or normals") as info:
+    with pytest.raises(InsufficientMemoryError, match=r"preparing the splats of 800 points needs about 400 KiB.*or normals") as info:
         point_surfels(SPHERE)
     assert "\n" not in str(info.value)
-    with pytest.raises(InsufficientMemoryError, match=r"800 points needs about 150 KiB"):
+    with pytest.raises(InsufficientMemoryError, match=r"800 points needs about 175 KiB"):
         point_surfels(SPHERE, SPHERE)
     monkeypatch.setattr(resources, "available_memory", lambda: (2**21, "test budget"))
     point_surfels(SPHERE)  # what fits is prepared

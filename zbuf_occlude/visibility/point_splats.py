@@ -70,20 +70,20 @@ __all__ = [
     "MAX_SPLAT_COORDINATE", "MAX_SPLAT_SCALE",
 ]  # fmt: skip
 
-#: Bytes per point of :func:`point_surfels` with normals given, at its peak.  It allocates the
-#: float64 points (24), the k-d tree's copy of them and its indices (32, and its nodes), the
-#: distances and indices of the k + 1 nearest neighbours (80 at k = 4), the spacing and the
-#: radius (16), the unit normals (24), the Morton codes, their sort and the order (24), and the
-#: copies gathered in that order once (64), not all alive at once: 168 B at the peak, measured
-#: (tracemalloc and peak RSS agree within 3 %, at 200,000 and 800,000 points on a sphere);
-#: rounded up.
-BYTES_PER_SURFEL = 192
+#: Bytes per point of :func:`point_surfels` with normals given, at its peak.  It holds the
+#: float64 points (24), the Morton order and the points in it (32), the uniform grid's cells
+#: (:func:`~zbuf_occlude.visibility.point_preparation.nearest_neighbours`: at most 4 cells a
+#: point, 40 B, in numba's allocator), the distances and indices of the k + 1 nearest neighbours
+#: (80 at k = 4), the spacing and the radius (16), the unit normals (24): 179 B at the peak by
+#: tracemalloc at 200,000 and 800,000 points on a sphere (peak RSS grew 166-175 B), plus the
+#: grid's 40 (which tracemalloc does not see); rounded up.
+BYTES_PER_SURFEL = 224
 #: Bytes per point the normals' estimate adds when none are given
-#: (:func:`~zbuf_occlude.geometry.normals.robust_normals`): the 14 nearest neighbours' distances
-#: and indices (224), their points gathered (336), the offsets to the candidate centres and
-#: their scores (9 each: 216 + 144), and each scale's centred neighbourhoods and plane fits (up
-#: to 336 + 216).  1,545 B more than with normals, measured as above; rounded up.
-BYTES_PER_ESTIMATED_NORMAL = 1_600
+#: (:func:`~zbuf_occlude.visibility.point_preparation.surfel_geometry`): the 14 nearest
+#: neighbours' distances and indices instead of 5 (+144), the plane fits of three sizes (72 +
+#: 24), the chosen normals and the spacing they use (32).  272 B more than with normals,
+#: measured as above (tracemalloc's peak 451 B a point; peak RSS grew 427-430 B); rounded up.
+BYTES_PER_ESTIMATED_NORMAL = 288
 #: Largest |coordinate| of a cloud, object units: 1e100.  The preparation sums squares of
 #: coordinate differences (the k-d tree's distances; a plane fit's covariance over 14
 #: neighbours, at most 14 · 3 · (2e100 · MAX_SPLAT_SCALE)² ≈ 2e207) and the splat test squares
