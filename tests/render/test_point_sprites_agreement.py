@@ -6,6 +6,8 @@ Mesa llvmpipe headless, as the other GL tests, and never skip.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -121,3 +123,12 @@ def test_masks_equal_on_every_shipped_mesh(sample_mesh_files):
         surfels = zo.point_surfels(zo.sample_surface(mesh, 512, seed=0)[0])
         for camera in cameras:
             assert np.array_equal(surfels.visible(camera, backend="gpu"), surfels.visible(camera)), path.name
+
+
+def test_the_agreement_benchmark_reports_equal_masks_and_buffers(sample_mesh_files, monkeypatch):
+    """benchmarks/agreement_point_sprites.py (run by benchmarks/gpu.sh), at a tiny size."""
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    from agreement_point_sprites import agreement
+
+    row = agreement(sample_mesh_files[:1], 256, [zo.camera_on_sphere(30.0, 45.0)], normals=False)
+    assert (row["masks"], row["ids"], row["depth"], row["point_views"]) == (1.0, 1.0, 0.0, 256)
