@@ -317,7 +317,8 @@ def build_parser() -> argparse.ArgumentParser:
     for add in (add_compare_parser, add_profile_parser, add_farm_parser, add_farm_merge_parser, add_contact_sheet_parser):
         add(sub)
     from zbuf_occlude.cli.learn import add_parser as add_experiment_parser  # zbuf-occlude experiment; torch only when it runs
-    from zbuf_occlude.cli.sensors import add_fit_sensor_parser, add_realism_parser, add_scan_parser
+    from zbuf_occlude.cli.fit_sensor import add_fit_sensor_parser
+    from zbuf_occlude.cli.sensors import add_realism_parser, add_scan_parser
     from zbuf_occlude.cli.verify import add_verify_parser  # zbuf-occlude verify DIR: schema, paths, checksums of a data set
     from zbuf_occlude.cli.export import add_export_parser  # zbuf-occlude export DATASET --to TARGET
 

@@ -1,6 +1,7 @@
 """``zbuf-occlude scan`` and ``zbuf-occlude realism``: options beside their engines.
 
-``cli.build_parser`` calls :func:`add_scan_parser` and :func:`add_realism_parser`.
+``cli.build_parser`` calls :func:`add_scan_parser` and :func:`add_realism_parser`; scan's return physics
+options are :mod:`zbuf_occlude.cli.return_physics`'s, ``fit-sensor`` is :mod:`zbuf_occlude.cli.fit_sensor`.
 """
 
 from __future__ import annotations
@@ -15,17 +16,16 @@ from pathlib import Path
 import numpy as np
 
 from zbuf_occlude.cli.crops import FLAGS, CropSettings, add_crop_arguments, crop_settings, given_crop_options
-from zbuf_occlude.cli.options import Checked, count, counted, interval, out_folder, parse_interval, real, seed, shown
-from zbuf_occlude.defaults import DEFAULT_SEED
+from zbuf_occlude.cli.options import Checked, count, counted, interval, out_folder, parse_interval, real, seed
+from zbuf_occlude.cli.return_physics import check_max_returns, check_transmittance, surface_optics, with_return_physics
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.mesh.sizes import DIMENSIONS, SizeRange, size_interval
-from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
 from zbuf_occlude.sensors.placement import CropDistributions
 from zbuf_occlude.sensors.presets import preset_names, sensor_from_name
 
-__all__ = ["add_scan_parser", "add_realism_parser", "add_parser", "parse_interval"]
+__all__ = ["add_scan_parser", "add_realism_parser", "check_outside", "SCAN_CROP_DISTRIBUTIONS"]
 
 log = logging.getLogger(__name__)
 
@@ -85,176 +85,6 @@ def check_outside(dist, extents=None) -> None:
         )
 
 
-def _max_returns(text: str, option: str) -> int:
-    """``--max-returns N``: a whole number from 1 to :data:`~zbuf_occlude.sensors.echoes.MAX_RETURNS` (LAS's return numbers)."""
-    from zbuf_occlude.sensors.echoes import MAX_RETURNS
-
-    n = count(None)(text, option)
-    if n > MAX_RETURNS:
-        raise InvalidInputError(f"{option} must be at most {MAX_RETURNS} (a LAS return number's range), got {shown(text)}")
-    return n
-
-
-#: Most ``CLASS=VALUE`` pairs ``--transmittance`` takes (a scene file holds at most this many objects' classes).
-MAX_TRANSMITTANCE_CLASSES = 256
-
-
-def _transmittance(text: str, option: str):
-    """``--transmittance``: ``table``, one number in [0, 1] (every object, not the ground), or ``CLASS=VALUE,...``.
-
-    Returns "table", a float, or a dict of class name → float.
-
-    Raises
-    ------
-    InvalidInputError
-        Naming the option and the value: a number outside [0, 1] or not finite, a pair without a
-        class or a value, a class given twice, more than :data:`MAX_TRANSMITTANCE_CLASSES` pairs.
-    """
-    text = text.strip()
-    if text.lower() == "table":
-        return "table"
-
-    def fraction(value: str, what: str) -> float:
-        v = real(0.0)(value, option)
-        if v > 1.0:
-            raise InvalidInputError(f"{option} must be a transmittance in [0, 1], got {shown(what)}")
-        return v
-
-    if "=" not in text:
-        return fraction(text, text)
-    pairs = text.split(",")
-    if len(pairs) > MAX_TRANSMITTANCE_CLASSES:
-        raise InvalidInputError(f"{option} takes at most {MAX_TRANSMITTANCE_CLASSES} CLASS=VALUE pairs, got {len(pairs):,}")
-    out: dict[str, float] = {}
-    for pair in pairs:
-        name, _, value = (part.strip() for part in pair.partition("="))
-        if not name or not value:
-            raise InvalidInputError(f"{option} must be table, a number in [0, 1], or CLASS=VALUE,... (bush=0.3,tree=0.3), got {shown(pair)}")
-        if name.lower() in out:
-            raise InvalidInputError(f"{option} gives the class {shown(name)} twice")
-        out[name.lower()] = fraction(value, pair)
-    return out
-
-
-def _with_return_physics(sensor, args: argparse.Namespace):
-    """``sensor`` with the return physics options applied (:func:`_return_physics`), and
-    ``--reflectance-table`` and ``--transmittance`` checked against it (:func:`_surface_optics` applies them).
-
-    Raises
-    ------
-    InvalidInputError
-        As :func:`_return_physics`; and ``--reflectance-table`` or ``--transmittance`` for a scan
-        of a mesh file (they give each object of a scene file its own value), for a sensor other
-        than a spinning LiDAR or ray table; ``--transmittance`` above 0 without several returns per
-        pulse or with ``--backend zbuffer`` (one face per pixel), each naming the value.
-    """
-    out = _return_physics(sensor, args)
-    table, tau = getattr(args, "reflectance_table", False), getattr(args, "transmittance", None)
-    given = " and ".join(f for f, v in (("--reflectance-table", table), (f"--transmittance {_shown_tau(tau)}", tau is not None)) if v)
-    if not given:
-        return out
-    from zbuf_occlude.sensors.lidar import Lidar
-    from zbuf_occlude.sensors.ray_table import RayTable
-
-    if Path(args.mesh_or_scene).suffix.lower() not in (".json", ".yaml", ".yml"):
-        raise InvalidInputError(f"{given} give each object of a scene file its own value: scan a scene .json/.yaml "
-                                f"({args.mesh_or_scene} is a mesh; its crops take --reflectivity)")  # fmt: skip
-    if not isinstance(out, (Lidar, RayTable)):
-        raise InvalidInputError(f"{given} model spinning LiDARs and ray tables; {args.sensor} is not one")
-    opaque = tau is None or (not isinstance(tau, (str, dict)) and tau == 0) or (isinstance(tau, dict) and not any(tau.values()))
-    if not opaque and not out.multi_return:
-        raise InvalidInputError(f"--transmittance {_shown_tau(tau)} gives hits behind a surface, which only several returns per pulse "
-                                "resolve: give --max-returns above 1 (and --footprint)")  # fmt: skip
-    if not opaque and getattr(args, "backend", "embree") != "embree":
-        raise InvalidInputError(f"--transmittance {_shown_tau(tau)} needs every hit along each sub-ray, which --backend {args.backend} "
-                                "cannot give (one face per pixel): use --backend embree")  # fmt: skip
-    return out
-
-
-def _shown_tau(tau) -> str:
-    """``--transmittance``'s parsed value as the user wrote it, for messages."""
-    if isinstance(tau, dict):
-        return ",".join(f"{k}={v:g}" for k, v in tau.items())
-    return tau if isinstance(tau, str) else f"{tau:g}" if tau is not None else ""
-
-
-def _surface_optics(args: argparse.Namespace, scene) -> dict:
-    """``scan``'s ``reflectivity`` and ``transmittance`` keywords from ``--reflectance-table`` and
-    ``--transmittance`` for a :class:`~zbuf_occlude.sensors.scene.ScanScene` (none given: no keyword,
-    the scan as without them).
-
-    Raises
-    ------
-    InvalidInputError
-        A ``--transmittance CLASS=VALUE`` class that no object of the scene has, naming it.
-    """
-    from zbuf_occlude.sensors.reflectance import per_class
-
-    out: dict = {}
-    if getattr(args, "reflectance_table", False):
-        out["reflectivity"] = "table"
-    tau = getattr(args, "transmittance", None)
-    if isinstance(tau, dict):
-        try:
-            out["transmittance"] = per_class(scene.build(), tau)
-        except InvalidInputError as exc:
-            raise InvalidInputError(f"--transmittance {_shown_tau(tau)}: {exc}") from None
-    elif isinstance(tau, str):
-        out["transmittance"] = tau
-    elif tau is not None:  # every object, not the ground
-        out["transmittance"] = [0.0] + [tau] * (len(scene.build().objects))
-    return out
-
-
-def _return_physics(sensor, args: argparse.Namespace):
-    """``sensor`` with ``--footprint``, ``--power-noise``, ``--echo-separation``, ``--max-returns`` and
-    ``--range-resolution`` applied: all five to a spinning LiDAR, the last two to an airborne
-    scanner (its footprint is the sensor file's ``footprint_rays``).
-
-    ``--footprint`` gives :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS` sub-rays; without it the sensor's own ``footprint_rays`` stay (a sensor
-    file's K above 1 is a footprint for ``--echo-separation``).  ``--max-returns`` above 1 needs a
-    range resolution, from ``--range-resolution`` or the sensor's.
-
-    Raises
-    ------
-    InvalidInputError
-        Naming the option and its value: one of them for a depth camera, ``--footprint``,
-        ``--power-noise`` or ``--echo-separation`` for an airborne scanner,
-        ``--echo-separation`` without a footprint or with several returns, ``--range-resolution``
-        with one return per pulse, ``--max-returns`` above 1 without a range resolution.
-    """
-    from zbuf_occlude.sensors.airborne import AirborneScanner
-    from zbuf_occlude.sensors.lidar import Lidar
-
-    given = [f for f, v in (("--footprint", args.footprint), ("--power-noise", args.power_noise), ("--echo-separation", args.echo_separation),
-                            ("--max-returns", args.max_returns), ("--range-resolution", args.range_resolution)) if v]  # fmt: skip
-    if not given:
-        return sensor
-    airborne = isinstance(sensor, AirborneScanner) and not (args.footprint or args.power_noise or args.echo_separation)
-    if not (isinstance(sensor, Lidar) or airborne):
-        raise InvalidInputError(f"--footprint, --power-noise, --echo-separation, --max-returns and --range-resolution model spinning LiDARs; "
-                                f"{args.sensor} is not one (given: {', '.join(given)})")  # fmt: skip
-    if airborne and args.max_returns == 1 and sensor.footprint_rays > 1:
-        raise InvalidInputError(f"--max-returns 1: {args.sensor} has a footprint of {sensor.footprint_rays} sub-rays, which an airborne scanner "
-                                "resolves into several returns; give --max-returns above 1")  # fmt: skip
-    rays = FOOTPRINT_RAYS if args.footprint else sensor.footprint_rays
-    max_returns = args.max_returns or sensor.max_returns
-    resolution = args.range_resolution or sensor.range_resolution_m
-    if args.echo_separation and rays == 1:
-        raise InvalidInputError(f"--echo-separation {args.echo_separation:g} needs --footprint (mixed pixels come from a wide footprint)")
-    if max_returns > 1 and args.echo_separation:
-        raise InvalidInputError(f"--echo-separation {args.echo_separation:g} merges echoes into one return; with --max-returns {max_returns} "
-                                "give --range-resolution instead")  # fmt: skip
-    if max_returns > 1 and not resolution > 0:
-        raise InvalidInputError(f"--max-returns {max_returns} needs --range-resolution M (metres: the least range between two returns)")
-    if args.range_resolution and max_returns == 1:
-        raise InvalidInputError(f"--range-resolution {args.range_resolution:g} separates several returns per pulse: it needs --max-returns above 1")
-    if airborne:
-        return sensor.with_(max_returns=max_returns, range_resolution_m=resolution if max_returns > 1 else sensor.range_resolution_m)
-    return sensor.with_(footprint_rays=rays, power_noise=args.power_noise, echo_separation_m=args.echo_separation or sensor.echo_separation_m,
-                        max_returns=max_returns, range_resolution_m=resolution if max_returns > 1 else sensor.range_resolution_m)  # fmt: skip
-
-
 #: ``scan``'s placement when no option changes it: a car (4.5 m) 10 m ahead of a LiDAR on a car roof.
 SCAN_CROP_DISTRIBUTIONS = CropDistributions(distance_m=10.0, height_m=1.8, size_m=4.5, azimuth_deg=0.0, yaw_deg=0.0)
 #: ``scan``'s own option of each other :class:`~zbuf_occlude.sensors.placement.CropDistributions` field it sets, for
@@ -294,14 +124,14 @@ def _scan_sensor(args: argparse.Namespace):
     """
     if args.ray_table is None:
         args.sensor = args.sensor or SCAN_SENSOR
-        return _with_return_physics(sensor_from_name(args.sensor), args)
+        return with_return_physics(sensor_from_name(args.sensor), args)
     from zbuf_occlude.sensors.ray_table import load_ray_table
 
     if args.sensor is not None:
         raise InvalidInputError(f"--ray-table {args.ray_table} is the sensor: give --ray-table or --sensor {args.sensor}, not both")
     table = load_ray_table(args.ray_table)
     args.sensor = args.ray_table  # what the return physics options' messages name
-    return _with_return_physics(table, args)
+    return with_return_physics(table, args)
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
@@ -365,7 +195,7 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
 
                 s = scan_airborne(scene, sensor, (0.0, 0.0), scene.ground_half_extent_m, seed=args.seed + k)
             else:
-                s = scan(scene, sensor, pose, seed=args.seed + k, backend=args.backend, frame=args.frame, **_surface_optics(args, scene))
+                s = scan(scene, sensor, pose, seed=args.seed + k, backend=args.backend, frame=args.frame, **surface_optics(args, scene))
             written += _save(folder, s, f"{src.stem}_{sensor.name}_s{k:03d}", formats)
     else:
         if not isinstance(sensor, (Lidar, RayTable, AirborneScanner)):
@@ -472,7 +302,7 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         help="with --footprint: echoes within M metres of the strongest merge into one return at their energy-weighted "
         "range (mixed pixels at shallow depth edges; half the pulse length, ~0.75 m for 5 ns) (default: 0, never)",
     )  # fmt: skip
-    r.add_argument("--max-returns", metavar="N", action=Checked, check=_max_returns, default=None,
+    r.add_argument("--max-returns", metavar="N", action=Checked, check=check_max_returns, default=None,
                    help="with --footprint (or a sensor file's footprint, airborne scanners too): up to N returns per pulse (1..15), the "
                         "footprint's echoes resolved by --range-resolution, each with its return number, number of returns and "
                         "intensity (default: the sensor's, 1 for presets)")  # fmt: skip
@@ -483,7 +313,7 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
                    help="a scene file's surfaces reflect as the cited table gives their material at 905 nm (by each object's "
                         "material or class: leaves, bark, car paint, glass, metal, ...; the ground asphalt), and returns must clear "
                         "the sensor's radiometric threshold")  # fmt: skip
-    r.add_argument("--transmittance", metavar="SPEC", action=Checked, check=_transmittance, default=None,
+    r.add_argument("--transmittance", metavar="SPEC", action=Checked, check=check_transmittance, default=None,
                    help="with --max-returns above 1, a scene file: the share of each sub-ray that goes on through an object's "
                         "surface and comes back, in [0, 1] (a leafy crown's gap fraction); table (foliage 0.3 from the reflectance "
                         "table), one number (every object), or CLASS=VALUE,... (bush=0.3,tree=0.3) (default: 0, opaque)")  # fmt: skip
@@ -562,176 +392,3 @@ def add_realism_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--no-figure", action="store_true", help="do not draw realism.png")
     p.set_defaults(func=cmd_realism)
     return p
-
-
-#: What ``fit-sensor`` reads as LAS/LAZ scans (the return model's fit) rather than object scans.
-LAS_EXTENSIONS = (".las", ".laz")
-#: Most resamples ``fit-sensor --bootstrap`` takes: each costs a pass over the scan's pulses.
-MAX_BOOTSTRAP = 10_000
-
-
-def _las_inputs(real: str) -> list[Path] | None:
-    """The LAS/LAZ files ``fit-sensor REAL`` fits the return model to: ``REAL`` itself when it is named ``.las``/``.laz``,
-    or the ``.las``/``.laz`` files directly inside the folder ``REAL`` (sorted by name); None when it names neither."""
-    path = Path(real)
-    if path.suffix.lower() in LAS_EXTENSIONS and not path.is_dir():
-        return [path]  # missing or damaged: read_las says so, naming it
-    if path.is_dir():
-        found = sorted(p for p in path.iterdir() if p.suffix.lower() in LAS_EXTENSIONS and not p.is_dir())
-        return found or None
-    return None
-
-
-def _classes(text: str, option: str) -> tuple[int, ...]:
-    """``--classes C,C,...``: ASPRS class codes 0 to 255 (``none``: no class set)."""
-    if text.strip().lower() == "none":
-        return ()
-    codes = [c.strip() for c in text.split(",")]
-    if not codes or len(codes) > 256 or not all(c.isdigit() and int(c) <= 255 for c in codes):
-        raise InvalidInputError(f"{option} must be ASPRS class codes 0 to 255, C,C,... (or none), got {shown(text)}")
-    return tuple(int(c) for c in codes)
-
-
-def _bootstrap(text: str, option: str) -> int:
-    """``--bootstrap N``: resamples, 2 to :data:`MAX_BOOTSTRAP`."""
-    n = count(None, lowest=2, hint="a spread needs two resamples")(text, option)
-    if n > MAX_BOOTSTRAP:
-        raise InvalidInputError(f"{option} must be at most {MAX_BOOTSTRAP:,}, got {shown(text)}")
-    return n
-
-
-def _read_scans(files: Sequence[Path], real: str):
-    """The LAS/LAZ ``files`` read (inside the folder ``real`` when it is one) and merged; one line naming a file that has no
-    GPS time or no points, or what :func:`~zbuf_occlude.io.las.read_las` refuses."""
-    from zbuf_occlude.defaults import MAX_POINTS
-    from zbuf_occlude.io.las import read_las
-    from zbuf_occlude.sensors.fit import merge_scans
-
-    within = real if Path(real).is_dir() else None
-    scans, total = [], 0
-    for f in files:
-        las = read_las(f, within=within, max_points=MAX_POINTS - total)
-        if not las.has_gps_time:
-            raise InvalidInputError(f"{f}: point format {las.point_format_id} has no GPS time: the returns of one pulse cannot be told apart")
-        if len(las) == 0:
-            raise InvalidInputError(f"{f}: holds no points")
-        scans.append(las)
-        total += len(las)
-    return merge_scans(scans, [str(f) for f in files])
-
-
-def _fit_returns(args: argparse.Namespace, files: Sequence[Path]) -> int:
-    """``fit-sensor`` on LAS/LAZ scans: the return model (:func:`~zbuf_occlude.sensors.fit.fit_return_model`) applied to
-    ``--sensor``, written as a sensor JSON with the fit under ``"fit"`` and a Markdown table beside it."""
-    import json
-
-    from zbuf_occlude.sensors.airborne import AirborneScanner
-    from zbuf_occlude.sensors.fit import BOOTSTRAP, VEGETATION_CLASSES, fit_return_model
-    from zbuf_occlude.sensors.lidar import Lidar
-    from zbuf_occlude.sensors.presets import sensor_to_json
-
-    out = Path(args.out)
-    if out.suffix.lower() != ".json":
-        raise InvalidInputError(f"--out {out}: the fitted sensor is written as a .json file")
-    base = sensor_from_name(args.sensor)
-    if not isinstance(base, (Lidar, AirborneScanner)):
-        raise InvalidInputError(f"--sensor {args.sensor}: fit-sensor fits a spinning LiDAR or an airborne scanner, not a {type(base).__name__}")
-    altitude = args.altitude if args.altitude is not None else getattr(base, "altitude_m", None)
-    if altitude is None:
-        raise InvalidInputError(f"--sensor {args.sensor} is a spinning LiDAR: give --altitude M, the range to the ground in your scans, metres")
-    bootstrap = args.bootstrap or BOOTSTRAP
-    curve: dict = {}
-    if args.divergence_shares is not None:  # read first: a bad table is refused before the scans are
-        from zbuf_occlude.io.tables import read_csv_rows
-        from zbuf_occlude.sensors.fit import divergence_curve
-
-        figure, divergences, shares, stds = divergence_curve(read_csv_rows(args.divergence_shares), args.divergence_shares)
-        curve = {"divergence_shares": (divergences, shares, stds), "divergence_share": figure}
-    md = out.with_suffix(".md")
-    names = (out.name, md.name)
-    with OwnedFolder(out.parent, files=names, what="the fitted sensor") as folder:
-        folder.check_writable(names)  # before any scan is read: a refusal writes nothing
-        print(f"reading {counted(len(files), 'LAS/LAZ file')} from {args.real} ...", flush=True)
-        las = _read_scans(files, args.real)
-        print(f"read {len(las):,} points; fitting the return model to {base.name} at {altitude:g} m above the ground, "
-              f"{bootstrap} bootstrap resamples ...", flush=True)  # fmt: skip
-        fit = fit_return_model(las, altitude_m=altitude, classes=VEGETATION_CLASSES if args.classes is None else args.classes,
-                               seed=args.seed, bootstrap=bootstrap, **curve)  # fmt: skip
-        sensor = fit.apply(base)
-        spec = sensor_to_json(sensor)
-        spec["fit"] = {"base": base.name, "files": [f.name for f in files], "returns": fit.to_json()}
-        folder.write_text(out.name, json.dumps(spec, indent=1, default=float, allow_nan=False) + "\n")
-        table = fit.markdown(sensor)
-        folder.write_text(md.name, f"# {sensor.name}: the return model fitted to {', '.join(f.name for f in files)}\n\n{table}")
-    print(table, end="")
-    print(f"wrote {out} (use it as --sensor {out}), {md}")
-    return 0
-
-
-def cmd_fit_sensor(args: argparse.Namespace) -> int:
-    files = _las_inputs(args.real)
-    if files is not None:
-        return _fit_returns(args, files)
-    given = [flag for flag, value in (("--altitude", args.altitude), ("--classes", args.classes), ("--bootstrap", args.bootstrap),
-                                      ("--divergence-shares", args.divergence_shares)) if value is not None]  # fmt: skip
-    if given:
-        raise InvalidInputError(f"{', '.join(given)}: for LAS/LAZ scans, and {args.real} is neither a .las/.laz file nor a folder of them")
-    from zbuf_occlude.experiments.sensor_fit import fit_sensor_to_scans
-
-    fit, json_path, md_path = fit_sensor_to_scans(args.real, args.sensor, args.out, seed=args.seed, say=lambda line: print(line, flush=True))
-    print(fit.markdown(), end="")
-    print(f"wrote {json_path} (use it as --sensor {json_path}), {md_path}")
-    return 0
-
-
-def add_fit_sensor_parser(sub) -> argparse.ArgumentParser:
-    """Add ``fit-sensor`` to the subparsers ``sub``."""
-    from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP
-
-    names = preset_names()
-    p = sub.add_parser(
-        "fit-sensor", help="fit a spinning LiDAR or an airborne scanner to your real object scans, or its return model to your LAS/LAZ scans",
-        description="Estimate what the simulation can set from a folder of real segmented object scans (metres, z up), "
-        "each with a bootstrap uncertainty, and write a sensor JSON that scan, farm --sensor and experiment sim2real "
-        "--sensor take.  The --sensor to start from chooses the fit.  A spinning LiDAR: scans in the sensor's frame "
-        "(sensor at the origin); azimuth step, range noise, dropout, and the ring spacing, count-vs-range law and "
-        "ground returns.  An airborne scanner: aerial crops as they lie, no sensor position needed; point density, "
-        "scan angle and swath, range noise (altitude and speed are the preset's; the flight plan puts scanned objects at "
-        "the crops' scan angles).  Spinning fits refuse aerial crops in one line.  LAS/LAZ scans (a .las/.laz file, or a folder of them: tiles or "
-        "crops of one survey) fit the return model instead: the range resolution, the most returns per pulse, the detection "
-        "threshold and the intensity scale, per class too, beside the returns-per-pulse shares, gaps and intensities they "
-        "rest on; the beam divergence cannot be told from the points: it stays the --sensor's, or is fitted to shares "
-        "simulated at several divergences (--divergence-shares).",
-    )  # fmt: skip
-    p.add_argument("real", metavar="REAL_SCANS", help="folder of real object scans (class folders of point files, LiDARNet CSVs, or SUO), "
-                   "or a .las/.laz scan or a folder of them (the return model)")
-    p.add_argument(
-        "--sensor", required=True,
-        help=f"the preset or sensor JSON to start from: a spinning LiDAR ({', '.join(names['lidar'])}; its beam table is kept) "
-        f"fits scans in the sensor's frame; an airborne scanner ({', '.join(names['airborne'])}) fits aerial crops",
-    )  # fmt: skip
-    p.add_argument("--out", required=True, help="the fitted sensor, a .json file (a .md table is written beside it)")
-    p.add_argument("--seed", action=Checked, check=seed, default=DEFAULT_SEED, help="seed of the bootstrap (default: %(default)s)")
-    r = p.add_argument_group("LAS/LAZ scans (the return model)")
-    r.add_argument("--altitude", metavar="M", action=Checked, check=real(0.0, above=True, unit="metres"), default=None,
-                   help="flying height above the ground, metres: a LAS file records no sensor position, and the intensity scale "
-                        "and the detection threshold in energy depend on the range (default: the airborne --sensor's altitude; "
-                        "IGN LiDAR HD flies about 1,500 m)")  # fmt: skip
-    r.add_argument("--classes", metavar="C,C,...", action=Checked, check=_classes, default=None,
-                   help="ASPRS classes of the class-set figures, or none (default: 3,4,5, vegetation); every class in the file "
-                        "gets its own figures anyway")  # fmt: skip
-    r.add_argument("--bootstrap", metavar="N", action=Checked, check=_bootstrap, default=None,
-                   help=f"resamples of the bootstrap over pulses, 2 to {MAX_BOOTSTRAP:,} (default: {BOOTSTRAP})")
-    r.add_argument("--divergence-shares", metavar="CSV", default=None,
-                   help="the beam divergence fitted by simulation: a table with the header divergence_deg,<figure>[,std] (the "
-                        "figure a return statistic, e.g. multi_return_points_class_5) of the share simulated at each divergence "
-                        "(degrees, increasing), inverted at your scans' share (default: the divergence is not fitted)")  # fmt: skip
-    p.set_defaults(func=cmd_fit_sensor)
-    return p
-
-
-def add_parser(sub) -> None:
-    """Add ``scan``, ``realism`` and ``fit-sensor``."""
-    add_scan_parser(sub)
-    add_realism_parser(sub)
-    add_fit_sensor_parser(sub)
