@@ -19,8 +19,19 @@ Measured, one run, interleaved (farm, on-the-fly, farm, on-the-fly, ...; medians
    farm's training epoch, what on-the-fly would add if its worker made nothing during steps
    (the steadier figure on a busy machine, where the wall-time ratio is noisy).
 
+``--point-sets`` measures instead what occlusion on the fly costs per item on point sets (clouds
+without a mesh: PointNet's 2,048-point clouds): each shipped mesh sampled once at ``--points``
+(``zo.sample_surface``, seed 0, no normals), one random view per item through
+:class:`zbuf_occlude.learn.RandomOcclusion`, interleaved item by item: ``fresh`` prepares the
+cloud for every item (a cache that never hits), ``cached`` finds the preparation in its
+per-process cache (an epoch after the first), and Open3D's ``hidden_point_removal`` (radius 100
+x the bounding-box diagonal, the cloud built inside the timing as a user's call builds it) on
+the same points and pose, when ``import open3d`` works.  Median ms per item over
+``--repeats`` x ``--views`` items per cloud.
+
     python benchmarks/bench_on_the_fly.py                       # shipped meshes, full-width PointNet
     python benchmarks/bench_on_the_fly.py --views 4 --width 0.25 --repeats 1   # a quick look
+    python benchmarks/bench_on_the_fly.py --point-sets          # ms per item from 2,048-point clouds
 """
 
 from __future__ import annotations
@@ -97,6 +108,61 @@ def _train_epoch(loader, sampler, model, opt, epoch: int) -> tuple[float, float,
     return time.perf_counter() - t0, time.process_time() - c0, steps
 
 
+def _hpr_ms(points: np.ndarray, eye: np.ndarray) -> float:
+    import open3d as o3d
+
+    start = time.perf_counter()
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    diameter = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+    cloud.hidden_point_removal(eye, diameter * 100.0)
+    return 1e3 * (time.perf_counter() - start)
+
+
+def point_sets(args) -> int:
+    """ms per item of occlusion on the fly from point sets: fresh preparation, cached, Open3D's HPR."""
+    import zbuf_occlude as zo
+    from zbuf_occlude.geometry.cameras import camera_on_sphere
+    from zbuf_occlude.learn import RandomOcclusion
+    from zbuf_occlude.mesh.point_inputs import cloud_frame
+
+    try:
+        import open3d  # noqa: F401
+    except ImportError:
+        with_hpr = False
+    else:
+        with_hpr = True
+    meshes = sorted(Path(args.meshes[0]).glob("*/*/*.off")) if len(args.meshes) == 1 and Path(args.meshes[0]).is_dir() else [Path(m) for m in args.meshes]
+    clouds = [np.asarray(zo.sample_surface(zo.load_mesh(m), args.points, seed=0)[0], dtype=np.float64) for m in meshes]
+    cached = RandomOcclusion(args.points, seed=0)
+    RandomOcclusion(args.points, seed=1)(clouds[0], index=0, epoch=0)  # numba's compilation is not an item
+    for i, cloud in enumerate(clouds):  # the first epoch fills the cache
+        cached(cloud, index=i, epoch=0)
+    times: dict[str, list[float]] = {"fresh": [], "cached": [], "hpr": []}
+    print(f"# {_load()}")
+    for epoch in range(1, 1 + args.repeats * args.views):
+        for i, cloud in enumerate(clouds):
+            runs = [("fresh", RandomOcclusion(args.points, seed=0)), ("cached", cached)]
+            for name, occlusion in runs if (epoch + i) % 2 else runs[::-1]:
+                start = time.perf_counter()
+                sample = occlusion(cloud, index=i, epoch=epoch)
+                times[name].append(1e3 * (time.perf_counter() - start))
+            if with_hpr:  # the same pose, in the frame RandomOcclusion views the cloud in
+                frame, _ = cloud_frame(cloud, None, "+z", what="cloud")
+                eye = camera_on_sphere(sample["elevation_deg"], sample["azimuth_deg"]).eye
+                times["hpr"].append(_hpr_ms(frame, eye))
+    print(f"# {_load()}")
+    print(f"# {len(clouds)} clouds of {args.points:,} points (shipped meshes, no normals), {args.repeats * args.views} items each, interleaved")
+    print()
+    print("| per item | ms (median) | / Open3D HPR |")
+    print("|---|---:|---:|")
+    hpr = statistics.median(times["hpr"]) if times["hpr"] else None
+    for name, label in (("fresh", "on the fly, preparation every item"), ("cached", "on the fly, preparation cached"), ("hpr", "Open3D HPR")):
+        if times[name]:
+            ms = statistics.median(times[name])
+            print(f"| {label} | {ms:.2f} | {'n/a' if hpr is None else f'{ms / hpr:.2f}×'} |")
+    return 0
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("meshes", nargs="*", default=[str(SAMPLES)])
@@ -108,7 +174,10 @@ def main() -> int:
     p.add_argument("--threads", type=int, default=1, help="torch threads of the training process")
     p.add_argument("--width", type=float, default=1.0, help="PointNet channel multiplier")
     p.add_argument("--repeats", type=int, default=2)
+    p.add_argument("--point-sets", action="store_true", help="ms per item from point sets against Open3D's HPR (no training)")
     args = p.parse_args()
+    if args.point_sets:
+        return point_sets(args)
     torch.set_num_threads(args.threads)
     print(f"# {_load()}")
     print(f"# python {sys.version.split()[0]}, torch {torch.__version__}, {os.cpu_count()} CPUs, workers={args.workers}, "
