@@ -1,6 +1,7 @@
 """The point-splat kernels (zbuf_occlude.visibility.point_kernels): the splatting of each row's span
-of a disk equals testing every pixel of the image, and the threaded kernels equal the serial ones
-bit for bit."""
+of a disk equals testing every pixel of the image, the threaded kernels equal the serial ones bit
+for bit, and a winner at a point's own depth is its own sheet (a plate thinner than the normals'
+neighbourhood)."""
 
 from __future__ import annotations
 
@@ -10,11 +11,13 @@ from pathlib import Path
 import numba
 import numpy as np
 import pytest
+import trimesh
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import zbuf_occlude as zo
 from zbuf_occlude.visibility import point_kernels as kernels
+from zbuf_occlude.visibility.metrics import agreement
 
 
 def _every_pixel(cam, normal, radius, pix, x0, y0, width, height):
@@ -107,3 +110,20 @@ def test_threads_are_not_shared_between_python_threads_nor_after_a_fork(monkeypa
     monkeypatch.setattr(kernels, "_threads_pid", [os.getpid() + 1])  # a parent ran them, then forked
     with kernels.threads_for(10**6) as child:
         assert child == 1
+
+
+def test_a_plate_thinner_than_the_normals_neighbourhood_shows_its_top_face():
+    # without normals, the two faces of a plate 0.005 thick (a third of the spacing) tilt the
+    # estimated normals by tens of degrees; a winner at the point's own depth is its own sheet
+    plate = trimesh.creation.box(extents=(1.0, 1.0, 0.005))
+    points, face_index = zo.sample_surface(plate, 10_000, seed=2)
+    top = plate.face_normals[face_index][:, 2] > 0.9
+    surfels = zo.point_surfels(points)
+    for elevation, least in ((30.0, 0.88), (60.0, 0.93)):
+        camera = zo.camera_on_sphere(elevation, 20.0)
+        # convex: a point is visible iff its face faces the eye
+        truth = np.einsum("ij,ij->i", plate.face_normals[face_index], camera.eye - points) > 0
+        visible = surfels.visible(camera)
+        # measured 0.897 and 0.943 of the top face (0.825 and 0.830 without the depth slack)
+        assert visible[top].mean() >= least
+        assert agreement(visible, truth)["accuracy"] >= least - 0.03  # measured 0.869 and 0.900

@@ -178,7 +178,7 @@ class PointSurfels:
         BackendUnavailable
             ``backend="gpu"`` and no OpenGL 4.3 context can be created.
         """
-        from zbuf_occlude.visibility.point_kernels import camera_frame, decide
+        from zbuf_occlude.visibility import point_kernels as kernels
 
         check_camera(camera)
         tol = _check_nonnegative(tolerance, "tolerance")
@@ -190,12 +190,17 @@ class PointSurfels:
         extrinsics = camera.extrinsics
         order = self.order
         points, normals, radius, spacing = self._in_order
-        cam, normal = camera_frame(points, normals, np.ascontiguousarray(extrinsics[:, :3]), extrinsics[:, 3].copy())
+        cam, normal = kernels.camera_frame(points, normals, np.ascontiguousarray(extrinsics[:, :3]), extrinsics[:, 3].copy())
         image = splat_image(cam, radius, in_frustum[order], camera)
-        depth, ids = splat_surfels(cam, normal, radius, image.pix, image.x0, image.y0, image.width, image.height)
-        decided = decide(
-            cam, normal, radius, spacing, depth, ids, image.pix, image.x0, image.y0, tol, DEFAULT_CREASE_COS, self.oriented,
-        )  # fmt: skip
+        box = (image.pix, image.x0, image.y0)
+        with kernels.threads_for(n) as threads:
+            if threads > 1 and splat_surfels is kernels.splat_surfels:
+                bands = kernels.BANDS_PER_THREAD * threads
+                depth, ids = kernels.splat_surfels_threaded(cam, normal, radius, *box, image.width, image.height, bands)
+            else:
+                depth, ids = splat_surfels(cam, normal, radius, *box, image.width, image.height)
+            decide = kernels.decide_threaded if threads > 1 else kernels.decide
+            decided = decide(cam, normal, radius, spacing, depth, ids, *box, tol, DEFAULT_CREASE_COS, self.oriented)
         visible = np.empty_like(decided)
         visible[order] = decided
         return visible & in_frustum
@@ -256,7 +261,7 @@ def splat_image(
     pix = min(pix, max(extent_x, extent_y))  # one pixel covers the image at most
     if extent_x * extent_y / (pix * pix) > MAX_SPLAT_PIXELS:
         pix = math.sqrt(extent_x * extent_y / MAX_SPLAT_PIXELS)
-    return SplatImage(pix, x0, y0, int(math.ceil(extent_x / pix)) + 1, int(math.ceil(extent_y / pix)) + 1)
+    return SplatImage(pix, x0, y0, math.ceil(extent_x / pix) + 1, math.ceil(extent_y / pix) + 1)
 
 
 def _shown(value: object) -> str:
