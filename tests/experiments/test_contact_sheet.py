@@ -18,9 +18,9 @@ from zbuf_occlude.experiments.contact_sheet import (
     MAX_DPI,
     MAX_SHEET_PIXELS,
     MAX_SHEET_ROWS,
-    PANEL_INCHES,
     contact_sheet,
 )
+from zbuf_occlude.experiments.sheet_drawing import PANEL_INCHES
 from zbuf_occlude.geometry.cameras import camera_on_sphere
 from zbuf_occlude.sensors.lidar import LIDAR_PRESETS
 from zbuf_occlude.sensors.scan import read_scan_npz
