@@ -72,7 +72,7 @@ def placement_problem(camera: Camera, obj: Any) -> str | None:
     ex, ey, ez = (float(v) for v in camera.eye)
     distance = math.dist((ex, ey, ez), (0.5 * (x0 + x1), 0.5 * (y0 + y1), 0.5 * (z0 + z1)))
     if x0 <= ex <= x1 and y0 <= ey <= y1 and z0 <= ez <= z1:
-        problem, place = "the camera is inside the object's bounding box, so almost nothing is visible", "outside it"
+        problem, place = "the camera is inside the object's bounding box, where the CLI never puts one", "outside it"
     else:
         radius = 0.5 * math.dist((x0, y0, z0), (x1, y1, z1))
         focal_px = 0.5 * camera.height / math.tan(math.radians(0.5 * camera.yfov_deg))
