@@ -1,5 +1,5 @@
-"""The point-splat kernels (zbuf_occlude.visibility.point_kernels): the splatting of each row's span
-of a disk equals testing every pixel of the image, the threaded kernels equal the serial ones bit
+"""The point-splat kernels (zbuf_occlude.visibility.point_kernels): the splatting of each disk in its
+box equals testing every pixel of the image, the threaded kernels equal the serial ones bit
 for bit, and a winner at a point's own depth is its own sheet (a plate thinner than the normals'
 neighbourhood)."""
 
@@ -59,7 +59,7 @@ def disks(draw):
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(disks())
-def test_splatting_each_rows_span_covers_what_every_pixel_would(case):
+def test_the_splatting_covers_what_every_pixel_would(case):
     depth, ids = kernels.splat_surfels(*case)
     want_depth, want_ids = _every_pixel(*case)
     np.testing.assert_array_equal(ids, want_ids)

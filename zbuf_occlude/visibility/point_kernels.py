@@ -80,6 +80,10 @@ def camera_frame(points, normals, rotation, translation):  # pragma: no cover - 
     return cam, normal
 
 
+#: Relative widening of a disk's bounding box (of its radius): rounding of the unit normal.
+BOX_MARGIN = 1e-6
+
+
 @numba.njit(cache=True, nogil=True)
 def splat_surfels(cam, normal, radius, pix, x0, y0, width, height):  # pragma: no cover - numba
     """Rasterise oriented disks (surfels) into a z-buffer and a surfel-id buffer.
@@ -125,15 +129,19 @@ def _splat_rows(cam, normal, radius, pix, x0, y0, width, height, row0, row1, dep
         r = radius[k]
         if qz - r <= 0.0 or r <= 0.0:
             continue
-        # the disk lies inside the cube q ± r, whose projection (x/z, y/z) is extreme at corners
-        near, far = qz - r, qz + r
-        j0 = max(_cell((min((qy - r) / near, (qy - r) / far) - y0) / pix, height), row0)
-        j1 = min(_cell((max((qy + r) / near, (qy + r) / far) - y0) / pix, height), row1 - 1)
+        nx, ny, nz = normal[k, 0], normal[k, 1], normal[k, 2]
+        # the disk lies inside the box q ± e, e_a = r sqrt(1 - n_a^2) (a little wider, for
+        # rounding), whose projection (x/z, y/z) is extreme at corners
+        ex = r * (np.sqrt(max(1.0 - nx * nx, 0.0)) + BOX_MARGIN)
+        ey = r * (np.sqrt(max(1.0 - ny * ny, 0.0)) + BOX_MARGIN)
+        ez = min(r * (np.sqrt(max(1.0 - nz * nz, 0.0)) + BOX_MARGIN), r)
+        near, far = qz - ez, qz + ez
+        j0 = max(_cell((min((qy - ey) / near, (qy - ey) / far) - y0) / pix, height), row0)
+        j1 = min(_cell((max((qy + ey) / near, (qy + ey) / far) - y0) / pix, height), row1 - 1)
         if j0 > j1:
             continue
-        i0 = max(_cell((min((qx - r) / near, (qx - r) / far) - x0) / pix, width), 0)
-        i1 = min(_cell((max((qx + r) / near, (qx + r) / far) - x0) / pix, width), width - 1)
-        nx, ny, nz = normal[k, 0], normal[k, 1], normal[k, 2]
+        i0 = max(_cell((min((qx - ex) / near, (qx - ex) / far) - x0) / pix, width), 0)
+        i1 = min(_cell((max((qx + ex) / near, (qx + ex) / far) - x0) / pix, width), width - 1)
         nq = nx * qx + ny * qy + nz * qz
         r2 = r * r
         for j in range(j0, j1 + 1):
