@@ -1,25 +1,25 @@
-"""Point-only visibility per view: the CPU rasteriser (numba) beside the GPU one (OpenGL point
-sprites), and Open3D's hidden point removal as the baseline (prints a Markdown table; not a test).
+"""Point-only visibility: the one call, its preparation and a prepared view, beside Open3D's hidden
+point removal (prints a Markdown table; not a test).
 
 One shipped mesh (default ``chair_0001``), N points sampled from it (``zo.sample_surface``, seed
-0), no normals (estimated, as the registered method ``point-splat``).  The surfels are prepared
-once per N (``zo.point_surfels``: the neighbour search and the normals; its time is reported
-apart, after a warm-up cloud), then each pose runs ``surfels.visible(camera, backend=...)`` for
-both backends, interleaved pose by pose (the order alternates, so that a shared machine's load
-hits both alike), after one warm-up pose (numba's and the shaders' compilation).  Reported per
-N: the median wall ms per view over the poses, and the share of point-views whose masks agree
-between the backends.
+0), no normals (estimated, as the registered method ``point-splat``).  For each pose, interleaved
+(the order reversed every other pose, so that a shared machine's load hits all alike), after a
+warm-up (numba's compilation): the one call users make (``zo.visible_mask_points(points,
+camera)``, preparation included), the preparation alone (``zo.point_surfels(points)``: the
+neighbour search and the normals), one view of a prepared cloud (``surfels.visible(camera)``),
+and Open3D's ``hidden_point_removal`` (Katz et al. 2007) at radius factor 100 (Open3D's
+example, the ``open3d-hpr`` method's default) when ``import open3d`` works.  Reported per N: the
+median wall ms over the poses and the ratios.  ``--gpu`` adds the GPU backend's view (OpenGL
+point sprites; on Mesa llvmpipe the "GPU" is the CPU too) and the share of point-views whose
+masks agree with the CPU's.
 
-Open3D's ``hidden_point_removal`` (Katz et al. 2007) at radius factor 100 (Open3D's example, the
-``open3d-hpr`` method's default) runs on the same points and poses when ``import open3d`` works.
-
-The load average is printed before and after: the numbers are indicative on a shared machine.
-On Mesa llvmpipe the "GPU" is the CPU too; the renderer is printed.
+The load average and numba's thread count are printed: the numbers are indicative on a shared
+machine.
 
 Usage::
 
     .venv/bin/python benchmarks/bench_point_visibility.py                    # 2,048 / 10,000 / 100,000 points, 16 poses
-    .venv/bin/python benchmarks/bench_point_visibility.py --points 2048 --poses fibonacci:4
+    .venv/bin/python benchmarks/bench_point_visibility.py --points 2048 --poses fibonacci:4 --gpu
 """
 
 from __future__ import annotations
@@ -31,6 +31,7 @@ import sys
 import time
 from pathlib import Path
 
+import numba
 import numpy as np
 
 import zbuf_occlude as zo
@@ -40,7 +41,6 @@ DEFAULT_MESH = REPO_ROOT / "data" / "samples" / "chair" / "train" / "chair_0001.
 WARMUP_POSE = (-40.0, 10.0)
 #: Open3D's example radius, in diameters of the cloud.
 HPR_FACTOR = 100.0
-BACKENDS = ("cpu", "gpu")
 
 
 def load_average() -> str:
@@ -61,30 +61,43 @@ def hpr_view(points: np.ndarray, camera: zo.Camera) -> tuple[float, np.ndarray]:
     return elapsed, mask
 
 
-def bench_n(mesh, n: int, cameras: list, with_hpr: bool) -> dict:
-    points, _ = zo.sample_surface(mesh, n, seed=0)
+def _timed(fn, *args, **kwargs) -> float:
     start = time.perf_counter()
+    fn(*args, **kwargs)
+    return 1e3 * (time.perf_counter() - start)
+
+
+def bench_n(mesh, n: int, cameras: list, with_hpr: bool, backends: tuple[str, ...]) -> dict:
+    """Median wall ms per pose of: the one call (``zo.visible_mask_points``, preparation included),
+    the preparation alone (``zo.point_surfels``), one prepared view per backend, and HPR; all
+    interleaved pose by pose, the order reversed every other pose."""
+    points, _ = zo.sample_surface(mesh, n, seed=0)
     surfels = zo.point_surfels(points)
-    prepare_ms = 1e3 * (time.perf_counter() - start)
     warm = zo.camera_on_sphere(*WARMUP_POSE)
-    for backend in BACKENDS:
+    for backend in backends:
         surfels.visible(warm, backend=backend)
-    times: dict[str, list[float]] = {b: [] for b in BACKENDS}
-    hpr_ms: list[float] = []
+    times: dict[str, list[float]] = {}
     agree = total = 0
     for index, camera in enumerate(cameras):
         masks = {}
-        for backend in BACKENDS if index % 2 == 0 else BACKENDS[::-1]:
+
+        def view(backend, camera=camera, masks=masks):
             start = time.perf_counter()
             masks[backend] = surfels.visible(camera, backend=backend)
-            times[backend].append(1e3 * (time.perf_counter() - start))
-        agree += int(np.count_nonzero(masks["cpu"] == masks["gpu"]))
-        total += n
+            return 1e3 * (time.perf_counter() - start)
+
+        tasks = {"one call": lambda camera=camera: _timed(zo.visible_mask_points, points, camera),
+                 "prepare": lambda: _timed(zo.point_surfels, points)}  # fmt: skip
+        tasks.update({b: (lambda b=b: view(b)) for b in backends})
         if with_hpr:
-            hpr_ms.append(hpr_view(points, camera)[0])
-    row = {"n": n, "prepare_ms": prepare_ms, "agree": agree / total}
-    row.update({b: statistics.median(times[b]) for b in BACKENDS})
-    row["hpr"] = statistics.median(hpr_ms) if hpr_ms else None
+            tasks["hpr"] = lambda camera=camera: hpr_view(points, camera)[0]
+        for name in list(tasks) if index % 2 == 0 else list(tasks)[::-1]:
+            times.setdefault(name, []).append(tasks[name]())
+        if "gpu" in masks:
+            agree += int(np.count_nonzero(masks["cpu"] == masks["gpu"]))
+            total += n
+    row = {name: statistics.median(values) for name, values in times.items()}
+    row.update(n=n, agree=agree / total if total else None)
     return row
 
 
@@ -94,6 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--points", type=int, nargs="+", default=[2048, 10_000, 100_000])
     parser.add_argument("--poses", default="fibonacci:16", help="a zo.view_schedule spec (default fibonacci:16)")
     parser.add_argument("--no-hpr", action="store_true", help="skip Open3D's hidden point removal")
+    parser.add_argument("--gpu", action="store_true", help="also the GPU backend (OpenGL point sprites) and its agreement")
     args = parser.parse_args(argv)
     try:
         import open3d  # noqa: F401
@@ -101,32 +115,36 @@ def main(argv: list[str] | None = None) -> int:
         with_hpr = False
     else:
         with_hpr = not args.no_hpr
-    from zbuf_occlude.render.context import context_info
-    from zbuf_occlude.render.point_sprites import shared_point_sprites
-
-    info = context_info()
-    sprites = shared_point_sprites()
+    backends = ("cpu", "gpu") if args.gpu else ("cpu",)
     mesh = zo.load_mesh(args.mesh)
     cameras = [zo.camera_on_sphere(el, az) for el, az in zo.view_schedule(args.poses)]
     zo.point_surfels(zo.sample_surface(mesh, 256, seed=1)[0])  # numba's compilation is not preparation
     print(f"mesh {args.mesh.name}, {len(cameras)} poses ({args.poses}), no normals (estimated)")
-    print(f"OpenGL: {info['renderer']} ({info['backend']}, {info['version']}); "
-          f"largest point size {sprites.max_point_size:g} px")
+    if args.gpu:
+        from zbuf_occlude.render.context import context_info
+        from zbuf_occlude.render.point_sprites import shared_point_sprites
+
+        info = context_info()
+        print(f"OpenGL: {info['renderer']} ({info['backend']}, {info['version']}); "
+              f"largest point size {shared_point_sprites().max_point_size:g} px")  # fmt: skip
     print(f"CPU cores: {len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count()}; "
-          f"load average (1, 5, 15 min) before: {load_average()}")
+          f"numba threads: {numba.get_num_threads()}; load average (1, 5, 15 min) before: {load_average()}")
     print()
-    print("| N | prepare (`zo.point_surfels`) ms | CPU ms/view | GPU ms/view | CPU / GPU | masks equal | "
-          "Open3D HPR ms/view | HPR / CPU | HPR / GPU |")
-    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    head = ["N", "one call ms", "its preparation ms", "one view, prepared (CPU) ms"]
+    if args.gpu:
+        head += ["GPU view ms", "masks equal, CPU vs GPU"]
+    if with_hpr:
+        head += ["HPR ×100 ms", "one call / HPR", "HPR / prepared view"]
+    print("| " + " | ".join(head) + " |")
+    print("|" + "---:|" * len(head))
     for n in args.points:
-        row = bench_n(mesh, n, cameras, with_hpr)
-        hpr = "n/a" if row["hpr"] is None else f"{row['hpr']:.1f}"
-        ratios = ("n/a", "n/a")
-        if row["hpr"] is not None:
-            ratios = (f"{row['hpr'] / row['cpu']:.1f}×", f"{row['hpr'] / row['gpu']:.1f}×")
-        print(f"| {n:,} | {row['prepare_ms']:.1f} | {row['cpu']:.1f} | {row['gpu']:.1f} | "
-              f"{row['cpu'] / row['gpu']:.2f}× | "
-              f"{row['agree']:.3%} | {hpr} | {ratios[0]} | {ratios[1]} |", flush=True)
+        row = bench_n(mesh, n, cameras, with_hpr, backends)
+        cells = [f"{n:,}", f"{row['one call']:.1f}", f"{row['prepare']:.1f}", f"{row['cpu']:.1f}"]
+        if args.gpu:
+            cells += [f"{row['gpu']:.1f}", f"{row['agree']:.3%}"]
+        if with_hpr:
+            cells += [f"{row['hpr']:.1f}", f"{row['one call'] / row['hpr']:.2f}×", f"{row['hpr'] / row['cpu']:.1f}×"]
+        print("| " + " | ".join(cells) + " |", flush=True)
     print()
     print(f"load average (1, 5, 15 min) after: {load_average()}")
     return 0
