@@ -168,3 +168,20 @@ def test_the_cli_says_the_frame_and_takes_up(dataset, tmp_path, capsys):
     assert "--up" in capsys.readouterr().err and not (tmp_path / "c").exists()
     with pytest.raises(InvalidInputError, match=r"up='y': give one of \+x"):
         export(dataset, "pointnet-h5", tmp_path / "d", up="y")
+
+
+def test_a_failure_while_a_sample_is_made_ahead_is_raised_not_lost(dataset, tmp_path, monkeypatch):
+    import zbuf_occlude.exporters.modelnet_txt as writer
+
+    calls = []
+
+    def failing(points, eye):
+        calls.append(1)
+        if len(calls) == 2:
+            raise MemoryError("the second sample's normals")
+        return np.tile(np.float32([0, 0, 1]), (len(points), 1))
+
+    monkeypatch.setattr(writer, "estimate_normals", failing)
+    with pytest.raises(MemoryError, match="second sample"):
+        export(dataset, "modelnet-txt", tmp_path / "out", progress=False)
+    assert not (tmp_path / "out" / "modelnet40_train.txt").exists()

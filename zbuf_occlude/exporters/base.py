@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.exporters.label_sets import LABEL_SETS
 
-__all__ = ["DATASET", "UP_AXES", "ExportOptions", "Target", "Written", "frame_of", "turn_up"]
+__all__ = ["DATASET", "OPTIONS", "UP_AXES", "ExportOptions", "Target", "Written", "check_up", "frame_of", "turn_up"]
 
 #: What a target reads: a farm or generate data set (``None``), or a ``generate --protocol NAME`` folder (``NAME``).
 DATASET = None

@@ -13,8 +13,8 @@ What yanx27/Pointnet_Pointnet2_pytorch's ``ModelNetDataLoader`` reads:
 * ``modelnet40_<split>_id2file.json``: each id's mesh and view (``<name>/vPPP_sSS``), as
   ``pointnet-h5``'s ``id2file.json`` (the loader does not open it).
 
-Samples are read one object at a time (memory for one object's samples) and each line is made
-without a Python loop (:func:`~zbuf_occlude.exporters.text_table.fixed_point_table_bytes`, the bytes
+Samples are read one object at a time (memory for one object's samples); a few threads make the
+next samples' files while one is written (:data:`MAX_THREADS`), each line without a Python loop (:func:`~zbuf_occlude.exporters.text_table.fixed_point_table_bytes`, the bytes
 of ``np.savetxt``).  Each line holds xyz and normals only: a ``farm --sensor`` data set's per-point
 return fields are left out (the loader reads six columns).
 """
@@ -22,7 +22,10 @@ return fields are left out (the loader reads six columns).
 from __future__ import annotations
 
 import json
+import os
+from collections import deque
 from collections.abc import Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -42,6 +45,11 @@ __all__ = ["FILE_NAMES", "TARGET", "write_modelnet_txt"]
 #: Bytes per point of one sample while it is written: six float64 columns, their int64 digits, and
 #: their text (16 bytes a value while it is cut, 11 characters once written for coordinates in [-1, 1]).
 BYTES_PER_POINT = 6 * 8 * 3 + 6 * 16 * 2
+#: Threads that make the samples' text while the files are written (the normals' numpy and scipy
+#: work and the writes' waits on the disk both run outside the GIL); at most the CPUs there are.
+MAX_THREADS = 4
+#: Samples made ahead per thread: the memory of (this + 1) samples' text, whatever the data set's size.
+LOOKAHEAD_PER_THREAD = 2
 #: The names this target writes (regular expressions, for the owned folder).
 FILE_NAMES = (r"[^/]+/[^/]+_\d{4,}\.txt", r"modelnet(10|40)_(shape_names|[a-z]+)\.txt", r"modelnet(10|40)_[a-z]+_id2file\.json")
 
@@ -83,19 +91,24 @@ def write_modelnet_txt(
     Raises
     ------
     InsufficientMemoryError
-        One sample's text (:data:`BYTES_PER_POINT` per point) would not fit in memory.
+        The samples made ahead (:data:`LOOKAHEAD_PER_THREAD` per thread, :data:`BYTES_PER_POINT` per
+        point) would not fit in memory.
     OutputError, UnsafePathError
         As :meth:`~zbuf_occlude.io.owned.OwnedFolder.write`.
     """
     n_points = max((ds.n_points for ds in splits.values()), default=0)  # before any file is written
-    check_memory(n_points * BYTES_PER_POINT, option=f"one sample's text ({n_points:,} points)", hint="free memory")
+    threads = min(MAX_THREADS, os.cpu_count() or 1)
+    in_flight = LOOKAHEAD_PER_THREAD * threads
+    check_memory((in_flight + 1) * n_points * BYTES_PER_POINT, option=f"{in_flight + 1} samples' text ({n_points:,} points each)", hint="free memory")
     written = [folder.write_text(f"{prefix}_shape_names.txt", "".join(f"{n}\n" for n in names))]
     counter: dict[str, int] = {}
     total = sum(len(ds) for ds in splits.values())
-    with progress(total=total, desc="export modelnet-txt", unit="sample", enabled=show_progress) as bar:
+    with progress(total=total, desc="export modelnet-txt", unit="sample", enabled=show_progress) as bar, \
+            ThreadPoolExecutor(max_workers=threads, thread_name_prefix="modelnet-txt") as pool:  # fmt: skip
         for split, ds in sorted(splits.items()):
             ids = {}
             radius = float(ds.card.get("params", {}).get("radius") or DEFAULT_RADIUS)
+            pending: deque = deque()  # (file, text to come), in the source's order: written in that order
             for start, block in ds.iter_arrays():
                 for j, points in enumerate(block):
                     meta = ds.metadata(start + j)
@@ -103,13 +116,28 @@ def write_modelnet_txt(
                     counter[cls] = counter.get(cls, 0) + 1
                     sample_id = f"{cls}_{counter[cls]:04d}"
                     eye = beam_directions(meta["elevation_deg"], meta["azimuth_deg"]) * float(meta.get("radius", radius))
-                    table = turn_up(np.hstack([points, estimate_normals(points, eye)]).reshape(-1, 2, 3), "+z", up)
-                    folder.write_bytes(f"{cls}/{sample_id}.txt", fixed_point_table_bytes(table.reshape(-1, 6)))
+                    pending.append((f"{cls}/{sample_id}.txt", pool.submit(_sample_text, points, eye, up)))
                     ids[sample_id] = sample_file(meta)
-                bar.update(len(block))
+                    while len(pending) > in_flight:
+                        _write_next(folder, pending, bar)
+            while pending:
+                _write_next(folder, pending, bar)
             folder.write_text(f"{prefix}_{split}_id2file.json", json.dumps(ids, indent=0) + "\n")
             written.append(folder.write_text(f"{prefix}_{split}.txt", "".join(f"{i}\n" for i in ids)))
     return written
+
+
+def _sample_text(points: np.ndarray, eye: np.ndarray, up: str) -> bytes:
+    """One sample's file: its points and their normals (estimated +z up, facing ``eye``), turned to ``up``, as text."""
+    table = turn_up(np.hstack([points, estimate_normals(points, eye)]).reshape(-1, 2, 3), "+z", up)
+    return fixed_point_table_bytes(table.reshape(-1, 6))
+
+
+def _write_next(folder: OwnedFolder, pending: deque, bar: object) -> None:
+    """Write the first of ``pending`` once its text is made (its error, if any, raised here)."""
+    rel, text = pending.popleft()
+    folder.write_bytes(rel, text.result())
+    bar.update(1)
 
 
 def _write(folder: OwnedFolder, src: Splits, options: ExportOptions) -> Written:
