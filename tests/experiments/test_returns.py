@@ -1,4 +1,4 @@
-"""The returns experiment (experiments/returns.py, returns_report.py) on tiny synthetic scenes: no ../shared data."""
+"""The returns experiment (experiments/returns.py, returns_comparison.py, returns_report.py) on tiny synthetic scenes: no ../shared data."""
 
 from __future__ import annotations
 
@@ -21,12 +21,8 @@ from zbuf_occlude.experiments.returns import (
     simulate,
     simulated_classes,
 )
-from zbuf_occlude.experiments.returns_report import (
-    ReturnsSettings,
-    comparison_rows,
-    recommend_k,
-    run_returns,
-)
+from zbuf_occlude.experiments.returns_comparison import comparison_rows, recommend_k
+from zbuf_occlude.experiments.returns_report import ReturnsSettings, run_returns
 from zbuf_occlude.io.atomic import write_bytes
 from zbuf_occlude.io.las import LasPoints, las_bytes, read_las
 from zbuf_occlude.io.regular_files import read_regular_file

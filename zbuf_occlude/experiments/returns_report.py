@@ -16,8 +16,8 @@
 * ``run.json``: the settings, the fitted divergences and the recommended K.
 
 A target passes when the simulated figure lies within the stated relative tolerance of the real
-one (:data:`TOLERANCES`); the smallest gap is held to the range resolution the simulation was
-given, within :data:`GAP_MIN_TOLERANCE`.  The scanner is the real file's fitted one
+one (:data:`~zbuf_occlude.experiments.returns_comparison.TOLERANCES`); the smallest gap is held to the range resolution the simulation was
+given, within :data:`~zbuf_occlude.experiments.returns_comparison.GAP_MIN_TOLERANCE`.  The scanner is the real file's fitted one
 (:func:`~zbuf_occlude.sensors.fit.return_model.fit_return_model`, applied by
 :meth:`~zbuf_occlude.sensors.fit.return_model.ReturnModelFit.apply`): its range resolution, most
 returns per pulse and detection threshold (m⁻²).  So that the simulated echoes' energies are in the
@@ -43,7 +43,6 @@ from typing import Any
 
 import numpy as np
 
-from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.returns import (
     GROUND_CLASS,
     IGN_ALTITUDE_M,
@@ -54,6 +53,14 @@ from zbuf_occlude.experiments.returns import (
     pulse_subset,
     simulate,
 )  # fmt: skip
+from zbuf_occlude.experiments.returns_comparison import (
+    RETURN_COUNTS,
+    class_suffix,
+    comparison_markdown,
+    comparison_rows,
+    estimate_of,
+    recommend_k,
+)
 from zbuf_occlude.io.encodings import png_bytes
 from zbuf_occlude.io.las import LasPoints, read_las
 from zbuf_occlude.io.owned import OwnedFolder
@@ -66,21 +73,11 @@ from zbuf_occlude.sensors.fit.returns import (
 )
 from zbuf_occlude.sensors.scene import ScanScene
 
-__all__ = ["RETURNS_OUTPUTS", "TOLERANCES", "ReturnsSettings", "comparison_markdown", "comparison_rows", "ign_plot", "recommend_k", "run_returns"]
+__all__ = ["RETURNS_OUTPUTS", "ReturnsSettings", "ign_plot", "run_returns"]
 
 log = logging.getLogger(__name__)
 
 RETURNS_OUTPUTS = ("real.md", "divergence_sweep.csv", "k_sweep.csv", "comparison.csv", "comparison.md", "returns.png", "run.json")
-#: Relative tolerances of the targets (the issue's): returns-per-pulse shares ±20 %, median gap
-#: ±30 %, intensity ratio of first-of-several to single returns ±20 %.
-TOLERANCES = {"returns": 0.20, "gap_median": 0.30, "intensity_ratio": 0.20}
-#: The smallest simulated gap "equals" the range resolution within this relative tolerance (the
-#: range noise, 2 cm, moves it either way).
-GAP_MIN_TOLERANCE = 0.05
-#: Shares of returns per pulse compared (5+ is below 0.01 % in the IGN sample).
-RETURN_COUNTS = (1, 2, 3, 4)
-#: Standard deviations within which a K's shares count as equal to the largest K's.
-K_AGREEMENT_SD = 1.96
 
 
 @dataclass(frozen=True)
@@ -163,117 +160,12 @@ def _model(fit: ReturnModelFit, scene: ScanScene, detection: bool) -> _Model:
     return _Model(fit, tuple(float(v) for v in rho), True)
 
 
-def _side(stats: ReturnStatistics, key: str) -> tuple[float, float]:
-    e = stats.estimates.get(key)
-    return (math.nan, math.nan) if e is None else (e.value, e.std)
-
-
-def _suffix(classes: Sequence[int]) -> str:
-    return "classes_" + "_".join(map(str, sorted(classes)))
-
-
-def _verdict(sim: float, real: float, tolerance: float) -> str:
-    if not (math.isfinite(sim) and math.isfinite(real)):
-        return "not measured"
-    if real == 0:
-        return "PASS" if sim == 0 else "FAIL"
-    return "PASS" if abs(sim / real - 1.0) <= tolerance else "FAIL"
-
-
-def comparison_rows(real: dict[str, ReturnStatistics], sim: dict[str, ReturnStatistics], *, real_classes: Sequence[int],
-                    range_resolution_m: float, label: str) -> list[dict[str, Any]]:  # fmt: skip
-    """The targets, real against simulated (module docstring): one row each.
-
-    Parameters
-    ----------
-    real, sim : dict of str to ReturnStatistics
-        ``"all"``, ``"vegetation"`` and ``"ground"`` of each side (:func:`~.returns.simulate`);
-        the real ``"all"`` measured with ``real_classes`` as its class set, the simulated with 3–5.
-    real_classes : sequence of int
-        The real file's vegetation classes.
-    range_resolution_m : float
-        The simulation's range resolution, the smallest gap's target.
-    label : str
-        The run's name in the rows (``"IGN"``).
-
-    Returns
-    -------
-    list of dict
-        ``run``, ``figure``, ``real``, ``real_sd``, ``simulated``, ``simulated_sd``, ``target``, ``verdict``.
-    """
-    rows = []
-
-    def add(figure: str, r: tuple[float, float], s: tuple[float, float], target: str, verdict: str) -> None:
-        rows.append({"run": label, "figure": figure, "real": r[0], "real_sd": r[1], "simulated": s[0], "simulated_sd": s[1],
-                     "target": target, "verdict": verdict})  # fmt: skip
-
-    for side in ("vegetation", "ground"):
-        for k in RETURN_COUNTS:
-            r, s = _side(real[side], f"returns_{k}"), _side(sim[side], f"returns_{k}")
-            add(f"{side} pulses with {k} return{'s' if k > 1 else ''}", r, s, "±20 %", _verdict(s[0], r[0], TOLERANCES["returns"]))
-    real_suffix, sim_suffix = _suffix(real_classes), _suffix(VEGETATION_CLASSES)
-    r, s = _side(real["all"], f"multi_return_points_{real_suffix}"), _side(sim["all"], f"multi_return_points_{sim_suffix}")
-    add("vegetation points from multi-return pulses", r, s, "±20 % (the divergence is fitted to it)", _verdict(s[0], r[0], TOLERANCES["returns"]))
-    r, s = _side(real["all"], f"multi_return_points_class_{GROUND_CLASS}"), _side(sim["all"], f"multi_return_points_class_{GROUND_CLASS}")
-    add("ground points from multi-return pulses", r, s, "±20 % (depends on the plot's tree cover)", _verdict(s[0], r[0], TOLERANCES["returns"]))
-    r, s = _side(real["all"], "gap_min"), _side(sim["all"], "gap_min")
-    add("smallest gap (m)", r, s, f"= range resolution {range_resolution_m:.3g} m ±{GAP_MIN_TOLERANCE:.0%}",
-        _verdict(s[0], range_resolution_m, GAP_MIN_TOLERANCE))  # fmt: skip
-    r, s = _side(real["all"], "gap_median"), _side(sim["all"], "gap_median")
-    add("median gap (m)", r, s, "±30 %", _verdict(s[0], r[0], TOLERANCES["gap_median"]))
-    r, s = _side(real["all"], f"intensity_ratio_{real_suffix}"), _side(sim["all"], f"intensity_ratio_{sim_suffix}")
-    add("intensity first-of-several / single, vegetation", r, s, "±20 %", _verdict(s[0], r[0], TOLERANCES["intensity_ratio"]))
-    return rows
-
-
-def _shown(value: float, figure: str) -> str:
-    if not math.isfinite(value):
-        return "–"
-    return f"{value:.3g}" if "(m)" in figure or "intensity" in figure else f"{100 * value:.2f} %"
-
-
-def comparison_markdown(rows: Sequence[dict[str, Any]]) -> str:
-    """:func:`comparison_rows` as a Markdown table: run, figure, real ± sd, simulated ± sd, target, verdict."""
-    lines = ["| run | figure | real | simulated | target | verdict |", "|---|---|---|---|---|---|"]
-    for r in rows:
-        real = f"{_shown(r['real'], r['figure'])} ± {_shown(r['real_sd'], r['figure'])}"
-        sim = f"{_shown(r['simulated'], r['figure'])} ± {_shown(r['simulated_sd'], r['figure'])}"
-        lines.append(f"| {r['run']} | {r['figure']} | {real} | {sim} | {r['target']} | **{r['verdict']}** |")
-    return "\n".join(lines) + "\n"
-
-
-def recommend_k(rows: Sequence[dict[str, Any]]) -> int:
-    """The smallest K whose vegetation shares of 1..4 returns per pulse all lie within
-    :data:`K_AGREEMENT_SD` combined standard deviations of the largest K's.
-
-    Parameters
-    ----------
-    rows : sequence of dict
-        One per K: ``K`` and ``returns_k`` / ``returns_k_sd`` for k in :data:`RETURN_COUNTS`.
-
-    Raises
-    ------
-    InvalidInputError
-        No row.
-    """
-    if not rows:
-        raise InvalidInputError("recommend_k needs one row per K")
-    rows = sorted(rows, key=lambda row: row["K"])
-    top = rows[-1]
-    for row in rows:
-        close = all(abs(row[f"returns_{k}"] - top[f"returns_{k}"]) <= K_AGREEMENT_SD * math.hypot(row[f"returns_{k}_sd"], top[f"returns_{k}_sd"])
-                    for k in RETURN_COUNTS)  # fmt: skip
-        if close:
-            return int(row["K"])
-    return int(top["K"])
-
-
 def _sweep_row(result, divergence_deg: float, k: int, suffix: str) -> dict[str, Any]:
-    share, share_sd = _side(result.statistics["all"], f"multi_return_points_{suffix}")
+    share, share_sd = estimate_of(result.statistics["all"], f"multi_return_points_{suffix}")
     row = {"divergence_deg": divergence_deg, "divergence_mrad": math.radians(divergence_deg) * 1e3, "K": k, "multi_return_share": share,
            "multi_return_share_sd": share_sd, "vegetation_pulses": result.statistics["vegetation"].n_complete_pulses}  # fmt: skip
     for n in RETURN_COUNTS:
-        row[f"returns_{n}"], row[f"returns_{n}_sd"] = _side(result.statistics["vegetation"], f"returns_{n}")
+        row[f"returns_{n}"], row[f"returns_{n}_sd"] = estimate_of(result.statistics["vegetation"], f"returns_{n}")
     row["seconds_per_mpulse"] = result.seconds / max(result.pulses, 1) * 1e6
     return row
 
@@ -331,7 +223,7 @@ def _divergence_sweep(plot, settings: ReturnsSettings, model: _Model, ks: Sequen
             divergence = IGN_DIVERGENCE_DEG * factor
             result = simulate(scene, model.scanner(divergence, k), vegetation, center_xy=centre, half_size_m=half,
                               seeds=settings.seeds, bootstrap=settings.bootstrap, reflectivity=model.reflectivity)  # fmt: skip
-            rows.append(_sweep_row(result, divergence, k, _suffix(VEGETATION_CLASSES)) | {"resolution_m": model.range_resolution_m})
+            rows.append(_sweep_row(result, divergence, k, class_suffix(VEGETATION_CLASSES)) | {"resolution_m": model.range_resolution_m})
             log.info("divergence %.4f° K %d: share %.3f", divergence, k, rows[-1]["multi_return_share"])
     return rows
 
@@ -364,7 +256,7 @@ def _k_sweep(plot, settings: ReturnsSettings, divergence_deg: float, model: _Mod
     for k in settings.k_values:
         result = simulate(scene, model.scanner(divergence_deg, k), vegetation, center_xy=centre, half_size_m=half,
                           seeds=settings.seeds, bootstrap=settings.bootstrap, reflectivity=model.reflectivity)  # fmt: skip
-        rows[k] = _sweep_row(result, divergence_deg, k, _suffix(VEGETATION_CLASSES))
+        rows[k] = _sweep_row(result, divergence_deg, k, class_suffix(VEGETATION_CLASSES))
         times[k].append(result.seconds / result.pulses)
     for _ in range(settings.repeats - 1):
         for k in settings.k_values:
@@ -442,7 +334,7 @@ def _autzen(path, plot, settings: ReturnsSettings, k: int) -> tuple[list[dict[st
     real, _, return_fit = _real(path, classes, settings.bootstrap)
     model = _model(return_fit, plot[0], settings.detection)
     sweep = _divergence_sweep(plot, settings, model, (k,))
-    fit = _fit_divergence(sweep, k, real["all"].estimates[f"multi_return_points_{_suffix(classes)}"])
+    fit = _fit_divergence(sweep, k, real["all"].estimates[f"multi_return_points_{class_suffix(classes)}"])
     divergence = fit["divergence_deg"] if math.isfinite(fit["divergence_deg"]) else IGN_DIVERGENCE_DEG
     rows, _ = _compare(plot, real, classes, divergence, k, model, settings, "Autzen")
     return rows, sweep, fit | model.to_json(), real["all"].markdown()
@@ -484,7 +376,7 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
         model = _model(fit, plot[0], settings.detection)
         resolution = model.range_resolution_m
         sweep = _divergence_sweep(plot, settings, model, settings.sweep_rays)
-        real_share = real["all"].estimates[f"multi_return_points_{_suffix(VEGETATION_CLASSES)}"]
+        real_share = real["all"].estimates[f"multi_return_points_{class_suffix(VEGETATION_CLASSES)}"]
         fits = [_fit_divergence(sweep, k, real_share) for k in settings.sweep_rays]
         fitted = fits[-1]["divergence_deg"]
         divergence = fitted if math.isfinite(fitted) else IGN_DIVERGENCE_DEG

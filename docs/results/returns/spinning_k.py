@@ -10,7 +10,7 @@ the smallest partial echoes count (the case that needs the most sub-rays).  Per 
 the pulses meeting a mesh with 1, 2, 3 and 4 returns (object_pulse_shares: a bootstrap over
 those pulses), and the cost of the scan per pulse (median of interleaved rounds, the order of
 the K rotated each round), against K = 1 with the multi-return model on and against today's
-scan (one ray, one return).  The recommended K: returns_report.recommend_k, the airborne sweep's
+scan (one ray, one return).  The recommended K: returns_comparison.recommend_k, the airborne sweep's
 rule (the smallest K whose four shares lie within 1.96 combined sd of the largest K's).
 """
 
@@ -24,7 +24,7 @@ import time
 import numpy as np
 
 from zbuf_occlude.experiments.returns import PLOT_TREES, object_pulse_shares
-from zbuf_occlude.experiments.returns_report import recommend_k
+from zbuf_occlude.experiments.returns_comparison import recommend_k
 from zbuf_occlude.io.atomic import write_csv
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors import Lidar, scan
