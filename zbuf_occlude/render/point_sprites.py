@@ -11,8 +11,10 @@ at the same ``t`` the lowest id.
 How the GPU draws it (``shaders/point_splat.vert``, ``shaders/point_splat.frag``):
 
 * the image rectangle is mapped orthographically onto clip space (it is already in normalised
-  coordinates); each surfel's pixel box is the kernel's (the projection of a box around the
-  disk, clamped to the image), computed here in float64: every pixel the kernel's tests can pass;
+  coordinates); each surfel's pixel box is the projection of the box that holds its disk
+  (``q ± r sqrt(1 − n_a²)`` per axis ``a``, a millionth of ``r`` wider), clamped to the image,
+  computed here in float64: every pixel the kernel's disk test can pass (the kernel bounds the
+  disk by the looser cube ``q ± r``);
 * one GL point per surfel, centred on its box, ``gl_PointSize`` = the box's longer side + 2 pixels;
 * the fragment shader reads the surfel in float64 and computes the pixel's ray, the edge-on and
   the disk tests and ``t`` with the kernel's operations, in its order, ``precise`` (no fused or
@@ -65,9 +67,8 @@ _DEFINES = (
     ("SPLAT_STAGE_HIGH", 0), ("SPLAT_STAGE_LOW", 1), ("SPLAT_STAGE_ID", 2),
 )  # fmt: skip
 _STAGES = tuple(value for name, value in _DEFINES if name.startswith("SPLAT_STAGE_"))
-#: Share of a disk's radius added to each side of its box, for rounding of the unit normal: at
-#: least :data:`zbuf_occlude.visibility.point_kernels.BOX_MARGIN` (the render layer cannot import
-#: it; tests/render/test_point_sprites_agreement.py holds the two together).
+#: Share of a disk's radius added to each side of its box (:class:`_Boxes`): far above the
+#: rounding of a unit normal and of the disk test (~1e-16), far below a pixel.
 _BOX_MARGIN = 1e-6
 #: Pixels kept between a sprite's centre and the tile's border, where GL would clip the point.
 _SPRITE_MARGIN_PX = 1.0
@@ -290,10 +291,10 @@ class PointSpriteRenderer:
 
 
 class _Boxes:
-    """Each surfel's pixel box (float64, clamped to the image), and its sprite: the kernel's, the
-    projection of the box ``q ± e`` around the disk, ``e_a = r (sqrt(1 - n_a²) + margin)``
-    (``e_z`` at most ``r``; extreme at its corners), which holds every pixel the kernel's tests
-    can pass; the fragment shader tests no pixel outside it."""
+    """Each surfel's pixel box (float64, clamped to the image), and its sprite: the projection of
+    the box ``q ± e`` that holds the disk, ``e_a = r (sqrt(1 - n_a²) + margin)`` for a unit normal
+    (``e_z`` at most ``r``; extreme at its corners), which holds every pixel the kernel's disk
+    test can pass; the fragment shader tests no pixel outside it."""
 
     def __init__(self, cam, normal, radius, pix, x0, y0, width, height):
         z = cam[:, 2]
