@@ -233,7 +233,7 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
                      dist.width_profile)  # fmt: skip
         if not isinstance(sensor, AirborneScanner):  # an aircraft flies its altitude above the object
             check_outside(dist, None if isinstance(mesh, dict) else mesh.extents)
-        # the farm's loop and seeds: one seed gives the crops farm --sensor gives a folder holding this file
+        # the farm's loop and seeds: one seed gives the crops farm --sensor gives this file lying directly in its input folder
         crops = object_crops(mesh, sensor, dist, name=src.stem, n_samples=args.samples, seed=args.seed, backend=args.backend, frame=args.frame)
         for k, crop, _ in progress_bar(crops, total=args.samples, desc="scan", unit="scan", enabled=not args.no_progress):
             placement = crop.placement
@@ -345,7 +345,7 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         help="ray casting: embree (exact, CPU) or zbuffer (OpenGL depth images) (default: %(default)s)",
     )  # fmt: skip
     p.add_argument("--seed", action=Checked, check=seed, default=0, help="seed of the placement draws and the sensor noise; one seed gives the crops farm --sensor gives "
-                   "the file in a folder of meshes (default: %(default)s)")
+                   "the file lying directly in its input folder (they key on the name without suffix) (default: %(default)s)")
     p.add_argument("--up", choices=UP_CHOICES, default="auto", help="a mesh file's up axis, turned to +z; auto: by its path and format, as in generate and farm "
                    "(ShapeNetCore paths and glTF +y, ...) (default: %(default)s)")
     p.add_argument("--out", required=True, action=Checked, check=out_folder, help="output folder")
