@@ -16,11 +16,9 @@ from scipy.spatial import cKDTree
 import zbuf_occlude as zo
 from zbuf_occlude.geometry.grouping import morton_order
 from zbuf_occlude.geometry.normals import covariance_normals, robust_normals
-from zbuf_occlude.visibility.point_preparation import (
-    nearest_neighbours,
-    surfel_geometry,
-)
+from zbuf_occlude.visibility.point_neighbours import nearest_neighbours
 from zbuf_occlude.visibility.point_preparation import plane_fits as fit_planes
+from zbuf_occlude.visibility.point_preparation import surfel_geometry
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 MESHES = sorted(SAMPLES.glob("*/*/*.off"))

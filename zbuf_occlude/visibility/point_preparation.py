@@ -6,10 +6,11 @@ robust choice of :func:`~zbuf_occlude.geometry.normals.robust_normals`.
 reference: :func:`surfel_geometry` gives the same normals (up to sign; the same neighbourhood is
 chosen wherever two candidates' scores are not within rounding of each other, and a closed-form
 3 x 3 eigensolver stands in for LAPACK's), which tests/visibility/test_point_preparation.py holds
-on the shipped meshes.  The neighbours come from a uniform grid (:func:`nearest_neighbours`:
-exactly ``cKDTree.query``'s, 1.5-2x faster on surface samples) searched in the points' Morton
-order; the work is split over threads (the kernels release the GIL) from
-:data:`_POINTS_PER_THREAD` points a thread.
+on the shipped meshes.  The neighbours come from a uniform grid
+(:mod:`zbuf_occlude.visibility.point_neighbours`: exactly ``cKDTree.query``'s, with 1.5-2x less
+CPU on surface samples) searched in the points' Morton order; the work is split over threads
+(the kernels release the GIL) from
+:data:`~zbuf_occlude.visibility.point_neighbours.POINTS_PER_THREAD` points a thread.
 
 Where the time went at 100,000 points (chair_0001, one process, load 10-12 on 2 cores): the numpy
 path spent 37 % in two single-threaded k-d tree queries, 39 % in the plane fits (covariances and
@@ -19,9 +20,6 @@ neighbourhoods and candidates; here about 60 % is the neighbour search, 20 % the
 """
 
 from __future__ import annotations
-
-import math
-import os
 
 import numba
 import numpy as np
@@ -33,6 +31,13 @@ from zbuf_occlude.geometry.normals import (
     ROBUST_SHIFT_PENALTY,
     ROBUST_SPACING_NEIGHBOUR,
 )
+from zbuf_occlude.visibility.point_neighbours import (
+    grid_neighbours,
+    run_in_threads,
+    thread_count,
+    tree_neighbours,
+    uniform_grid,
+)
 
 __all__ = ["plane_fits", "robust_choice", "surfel_geometry"]
 
@@ -41,16 +46,6 @@ _MAX_SWEEPS = 30
 #: The closed form's eigenvector errs by about 1e-16 / gap (radians), the gap between the two
 #: smallest eigenvalues as a share of the spread; below 1e-6 of it Jacobi's rotations take over.
 _CLOSED_FORM_GAP = 1e-6
-#: Points per grid cell :func:`nearest_neighbours` aims at: 14 neighbours then lie within the
-#: cell's ring of 26 on a surface (4 and 12 were slower on the shipped meshes at 10,000 and
-#: 100,000 points).
-_POINTS_PER_CELL = 8.0
-#: A cell holding more points than this (duplicates, a dense knot): the k-d tree instead.
-_MAX_CELL_POINTS = 2_048
-#: Points per thread at least: 2,048 to 100,000 points prepared no faster on 2 threads than on one
-#: at load 12 on 2 cores (starting the threads costs more than it saves while the cores are busy).
-_POINTS_PER_THREAD = 50_000
-
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _rotate(a, v, p, q):  # pragma: no cover - numba
@@ -280,7 +275,7 @@ def surfel_geometry(
     estimate_normals : bool
         Also the normals of :func:`~zbuf_occlude.geometry.normals.robust_normals` at its defaults.
     workers : int
-        Threads (-1: every core the process may use, from :data:`_POINTS_PER_THREAD` points a
+        Threads (-1: every core the process may use, from :data:`~zbuf_occlude.visibility.point_neighbours.POINTS_PER_THREAD` points a
         thread).
 
     Returns
@@ -299,9 +294,9 @@ def surfel_geometry(
     k = min(neighbours, n - 1) + 1
     sizes = sorted({min(int(s), n) for s in ROBUST_NORMAL_SCALES if min(int(s), n) >= 3}) if estimate_normals else []
     query = max([k, *sizes])
-    grid = _grid(ordered)
+    grid = uniform_grid(ordered)
     if grid is None:
-        distance, idx = _tree_neighbours(ordered, query, workers)
+        distance, idx = tree_neighbours(ordered, query, workers)
     else:
         distance, idx = np.empty((n, query)), np.empty((n, query), np.int64)
     fits, variation = np.empty((len(sizes), n, 3)), np.empty((len(sizes), n))
@@ -314,8 +309,8 @@ def surfel_geometry(
         if sizes:
             plane_fits(ordered, idx, size_array, first, last, fits, variation)
 
-    threads = _threads(n, workers)
-    _in_threads(neighbourhoods, n, threads)
+    threads = thread_count(n, workers)
+    run_in_threads(neighbourhoods, n, threads)
     spacing = np.empty(n)
     spacing[order] = distance[:, k - 1]
     if not estimate_normals:
@@ -333,166 +328,6 @@ def surfel_geometry(
         robust_choice(ordered, idx, own_spacing, fits, variation, centres, len(sizes) // 2, ROBUST_PLANE_TOLERANCE,
                       ROBUST_SHIFT_PENALTY, first, last, chosen)  # fmt: skip
 
-    _in_threads(choose, n, threads)
+    run_in_threads(choose, n, threads)
     normals[order] = chosen
     return spacing, normals, order
-
-
-def _threads(n: int, workers: int) -> int:
-    """Threads for ``n`` points: ``workers``, or with -1 every core, at least
-    :data:`_POINTS_PER_THREAD` points each."""
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    return max(min(cores, n // _POINTS_PER_THREAD), 1) if workers == -1 else max(int(workers), 1)
-
-
-def _in_threads(work, n: int, threads: int) -> None:
-    """``work(first, last)`` over ``range(n)`` split in ``threads`` parts, each in its own thread
-    (the numba kernels release the GIL)."""
-    bounds = np.linspace(0, n, threads + 1).astype(np.int64)
-    if threads == 1:
-        work(0, n)
-        return
-    from concurrent.futures import ThreadPoolExecutor
-
-    with ThreadPoolExecutor(threads) as pool:
-        list(pool.map(work, bounds[:-1], bounds[1:]))
-
-
-@numba.njit(cache=True, nogil=True)
-def grid_cells(points, lo, h, dims):  # pragma: no cover - numba
-    """The points bucketed into a uniform grid of cell side ``h`` from ``lo``, ``dims`` cells a
-    side: ``(start, members)``, the points of cell ``c`` being ``members[start[c]:start[c + 1]]``
-    (ascending; cell ``c = (cx·dims[1] + cy)·dims[2] + cz``)."""
-    n = points.shape[0]
-    cells = dims[0] * dims[1] * dims[2]
-    cell = np.empty(n, np.int64)
-    start = np.zeros(cells + 1, np.int64)
-    for i in range(n):
-        c = 0
-        for d in range(3):
-            q = int((points[i, d] - lo[d]) / h)
-            c = c * dims[d] + min(max(q, 0), dims[d] - 1)
-        cell[i] = c
-        start[c + 1] += 1
-    for c in range(cells):
-        start[c + 1] += start[c]
-    cursor = start[:-1].copy()
-    members = np.empty(n, np.int64)
-    for i in range(n):
-        members[cursor[cell[i]]] = i
-        cursor[cell[i]] += 1
-    return start, members
-
-
-@numba.njit(cache=True, nogil=True)
-def grid_neighbours(points, queries, k, lo, h, dims, start, members, distance, index):  # pragma: no cover - numba
-    """The ``k`` nearest of ``points`` to each of ``queries`` (rows of ``points``), nearest first,
-    into ``distance`` and ``index`` (``(len(queries), k)``): the grid's cells ring by ring around
-    the query's, until the k-th distance found is within the searched block (exact: a point
-    outside it lies farther than the block's nearest face)."""
-    best = np.empty(k)
-    at = np.empty(k, np.int64)
-    margin = 1e-9 * h  # a point bucketed by rounding just outside its cell
-    for row in range(queries.shape[0]):
-        i = queries[row]
-        x, y, z = points[i, 0], points[i, 1], points[i, 2]
-        cx = min(max(int((x - lo[0]) / h), 0), dims[0] - 1)
-        cy = min(max(int((y - lo[1]) / h), 0), dims[1] - 1)
-        cz = min(max(int((z - lo[2]) / h), 0), dims[2] - 1)
-        found = 0
-        r = 0
-        while True:
-            for ax in range(max(cx - r, 0), min(cx + r, dims[0] - 1) + 1):
-                edge_x = ax == cx - r or ax == cx + r
-                for ay in range(max(cy - r, 0), min(cy + r, dims[1] - 1) + 1):
-                    edge = edge_x or ay == cy - r or ay == cy + r
-                    step = 1 if edge else 2 * r
-                    az = cz - r
-                    while az <= cz + r:
-                        if 0 <= az < dims[2]:
-                            c = (ax * dims[1] + ay) * dims[2] + az
-                            for m in range(start[c], start[c + 1]):
-                                j = members[m]
-                                dx, dy, dz = points[j, 0] - x, points[j, 1] - y, points[j, 2] - z
-                                d2 = dx * dx + dy * dy + dz * dz
-                                if found == k and d2 >= best[k - 1]:
-                                    continue
-                                slot = found if found < k else k - 1
-                                while slot > 0 and best[slot - 1] > d2:
-                                    best[slot] = best[slot - 1]
-                                    at[slot] = at[slot - 1]
-                                    slot -= 1
-                                best[slot] = d2
-                                at[slot] = j
-                                if found < k:
-                                    found += 1
-                        az += step
-            # the searched block's nearest face; a side at the grid's edge has nothing beyond it
-            reach = np.inf
-            whole = True
-            for d, cd, coordinate in ((0, cx, x), (1, cy, y), (2, cz, z)):
-                if cd - r > 0:
-                    reach = min(reach, coordinate - (lo[d] + (cd - r) * h))
-                    whole = False
-                if cd + r < dims[d] - 1:
-                    reach = min(reach, lo[d] + (cd + r + 1) * h - coordinate)
-                    whole = False
-            reach -= margin
-            if whole or (found == k and reach > 0.0 and best[k - 1] <= reach * reach):
-                break
-            r += 1
-        for m in range(k):
-            distance[row, m] = np.sqrt(best[m])
-            index[row, m] = at[m]
-
-
-def nearest_neighbours(points: NDArray[np.float64], k: int, *, workers: int = -1) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    """``cKDTree(points).query(points, k)`` for a cloud, from a uniform grid (:func:`_grid`): (n, k)
-    distances and indices, nearest first (the point itself among them), on ``workers`` threads."""
-    grid = _grid(points)
-    if grid is None:
-        return _tree_neighbours(points, k, workers)
-    n = len(points)
-    distance, index = np.empty((n, k)), np.empty((n, k), np.int64)
-    rows = np.arange(n, dtype=np.int64)
-
-    def search(first: int, last: int) -> None:
-        grid_neighbours(points, rows[first:last], k, *grid, distance[first:last], index[first:last])
-
-    _in_threads(search, n, _threads(n, workers))
-    return distance, index
-
-
-def _grid(points: NDArray[np.float64]) -> tuple | None:
-    """``(lo, side, dims, start, members)`` of :func:`grid_neighbours`: cells of about
-    :data:`_POINTS_PER_CELL` points (a surface's density measured on a first grid), at most
-    4 per point; None where a cell would hold more than :data:`_MAX_CELL_POINTS` (duplicates, a
-    dense knot) or the points all coincide: then the k-d tree."""
-    n = len(points)
-    lo = points.min(axis=0)
-    extent = points.max(axis=0) - lo
-    span = float(extent.max())
-    if span == 0.0 or not np.isfinite(span):
-        return None
-    side = span / math.ceil(n ** (1 / 3))
-    start, _ = grid_cells(points, lo, side, _dims(extent, side))
-    per_cell = n / max(np.count_nonzero(np.diff(start)), 1)
-    side *= math.sqrt(_POINTS_PER_CELL / per_cell)  # a surface's points per cell grow as its side squared
-    while np.prod(_dims(extent, side).astype(np.float64)) > 4.0 * n + 64:
-        side *= 1.25
-    dims = _dims(extent, side)
-    start, members = grid_cells(points, lo, side, dims)
-    if np.diff(start).max() > _MAX_CELL_POINTS:
-        return None
-    return lo, side, dims, start, members
-
-
-def _dims(extent: NDArray[np.float64], side: float) -> NDArray[np.int64]:
-    return (np.floor(extent / side) + 1).astype(np.int64)
-
-
-def _tree_neighbours(points: NDArray[np.float64], k: int, workers: int) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    from scipy.spatial import cKDTree
-
-    distance, index = cKDTree(points).query(points, k=k, workers=workers)
-    return distance.reshape(len(points), -1), index.reshape(len(points), -1).astype(np.int64, copy=False)
