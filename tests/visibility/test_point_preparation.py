@@ -107,7 +107,7 @@ def test_a_line_and_a_single_place_give_defined_normals():
     assert np.all(np.abs(normals[0] @ np.array([1.0, 2.0, 3.0])) < 1e-9)  # across the line
 
 
-clouds = st.sampled_from(["sphere", "plane", "line", "clusters", "duplicates", "one place", "gaussian"])
+clouds = st.sampled_from(["sphere", "plane", "line", "clusters", "duplicates", "one place", "gaussian", "tiny", "huge"])
 
 
 def _cloud(kind: str, n: int, seed: int) -> np.ndarray:
@@ -125,6 +125,8 @@ def _cloud(kind: str, n: int, seed: int) -> np.ndarray:
         return np.repeat(rng.normal(size=((n + 3) // 4, 3)), 4, axis=0)[:n]
     if kind == "one place":
         return np.full((n, 3), 2.5)
+    if kind in ("tiny", "huge"):  # a span of subnormals; coordinates near MAX_SPLAT_COORDINATE
+        return rng.normal(size=(n, 3)) * (1e-320 if kind == "tiny" else 1e99)
     return rng.normal(size=(n, 3)) * [1.0, 10.0, 0.01]
 
 

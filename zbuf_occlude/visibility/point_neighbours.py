@@ -180,11 +180,15 @@ def uniform_grid(points: NDArray[np.float64]) -> tuple | None:
     if span == 0.0 or not np.isfinite(span):
         return None
     side = span / math.ceil(n ** (1 / 3))
+    if not side > 0.0:
+        return None
     start, _ = grid_cells(points, lo, side, _dims(extent, side))
     per_cell = n / max(np.count_nonzero(np.diff(start)), 1)
     side *= math.sqrt(_POINTS_PER_CELL / per_cell)  # a surface's points per cell grow as its side squared
     while np.prod(_dims(extent, side).astype(np.float64)) > 4.0 * n + 64:
         side *= 1.25
+    if not (side > 0.0 and math.isfinite(side)):  # a span near the smallest float64: no grid
+        return None
     dims = _dims(extent, side)
     start, members = grid_cells(points, lo, side, dims)
     if np.diff(start).max() > _MAX_CELL_POINTS:
