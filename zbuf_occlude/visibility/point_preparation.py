@@ -6,7 +6,9 @@ robust choice of :func:`~zbuf_occlude.geometry.normals.robust_normals`.
 reference: :func:`surfel_geometry` gives the same normals (up to sign; the same neighbourhood is
 chosen wherever two candidates' scores are not within rounding of each other, and a closed-form
 3 x 3 eigensolver stands in for LAPACK's), which tests/visibility/test_point_preparation.py holds
-on the shipped meshes.  The neighbours come from a uniform grid
+on the shipped meshes: at 2,048 and 10,000 points the largest difference is 8e-7 degrees, the
+median 1e-14.  The views decide near-ties between coplanar splats by rounding, so these
+differences flip 534 of 771,072 point-views (0.07 %; 8 poses), as the GPU's float32 does.  The neighbours come from a uniform grid
 (:mod:`zbuf_occlude.visibility.point_neighbours`: exactly ``cKDTree.query``'s, with 1.5-2x less
 CPU on surface samples) searched in the points' Morton order; the work is split over threads
 (the kernels release the GIL) from
