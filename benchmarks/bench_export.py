@@ -54,20 +54,26 @@ def _measure(code: str, *args: str, package_root: str | None = None) -> dict:
     env = dict(os.environ)
     if package_root is not None:  # another checkout's package first on the path
         env["PYTHONPATH"] = os.pathsep.join([package_root, env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
-    done = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, env=env, cwd=package_root)
+    done = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, env=env, cwd=package_root, check=False)
     if done.returncode:
         raise SystemExit(f"a measurement failed ({args}):\n{done.stderr[-2000:]}")
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def _build(objects: int, out: Path, samples_per_view: int = 10) -> Path:
-    from bench_farm import MODELNET_SUBSET, repeated_objects
-
-    from zbuf_occlude.farm import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION, FarmParams, RunOptions, run_farm
-
-    params = FarmParams(views="paper100", samples_per_view=samples_per_view, n_points=2048, dense_points=DEFAULT_FARM_DENSE_POINTS,
-                        resolution=DEFAULT_FARM_RESOLUTION, storage="compact")  # fmt: skip
-    run_farm(repeated_objects(MODELNET_SUBSET, objects), out, params=params, options=RunOptions(workers=2, progress=False))
+    """Build the source in a process of its own: the peak memory (``ru_maxrss``) a process starts with
+    is its parent's at the fork, so this one stays small and each measurement's figure is its own."""
+    code = f"""
+import sys
+sys.path.insert(0, {str(Path(__file__).resolve().parent)!r})
+from pathlib import Path
+from bench_farm import MODELNET_SUBSET, repeated_objects
+from zbuf_occlude.farm import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION, FarmParams, RunOptions, run_farm
+params = FarmParams(views="paper100", samples_per_view={samples_per_view}, n_points=2048, dense_points=DEFAULT_FARM_DENSE_POINTS,
+                    resolution=DEFAULT_FARM_RESOLUTION, storage="compact")
+run_farm(repeated_objects(MODELNET_SUBSET, {objects}), Path({str(out)!r}), params=params, options=RunOptions(workers=2, progress=False))
+"""
+    subprocess.run([sys.executable, "-c", code], check=True)
     return out
 
 
