@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 import zbuf_occlude as zo
 from zbuf_occlude.render import point_sprites
 from zbuf_occlude.render.point_sprites import PointSpriteRenderer
+from zbuf_occlude.visibility import point_kernels
 from zbuf_occlude.visibility.point_kernels import EDGE_ON_COS, splat_surfels
 
 #: Every surfel a sprite, every surfel a quad, 8-pixel tiles.
@@ -75,15 +76,19 @@ def test_coplanar_neighbours_tie_as_on_the_cpu():
         assert np.array_equal(ids, ids_cpu) and np.array_equal(depth, depth_cpu)
 
 
+def test_the_boxes_are_the_kernels():
+    assert point_sprites._BOX_MARGIN == point_kernels.BOX_MARGIN
+
+
 @settings(max_examples=25, deadline=None)
 @given(
     axis=st.integers(0, 2), tilt=st.one_of(st.floats(0.0, 1e-3), st.floats(0.0, 2.0)), turn=st.floats(0.0, 2 * np.pi),
     x=st.floats(-0.3, 0.3), y=st.floats(-0.2, 0.2), z=st.floats(1.2, 3.0), radius=st.floats(0.02, 0.5),
 )  # fmt: skip
 def test_a_disk_thin_along_an_axis_fills_what_the_kernel_fills(axis, tilt, turn, x, y, z, radius):
-    """The GPU's box of a disk is its own extent along each axis (``r sqrt(1 - n_a²)``), tighter
-    than the kernel's cube: every pixel the kernel covers is still covered, for any tilt of the
-    normal from an axis (a disk whose normal lies within 1e-3 of one is all but flat along it)."""
+    """The box of a disk is its own extent along each axis (``r sqrt(1 - n_a²)``): every pixel the
+    disk test passes is in it, for any tilt of the normal from an axis (a disk whose normal lies
+    within 1e-3 of one is all but flat along it)."""
     normal = np.zeros(3)
     normal[axis] = 1.0
     normal[(axis + 1) % 3] = tilt * np.cos(turn)

@@ -13,8 +13,7 @@ How the GPU draws it (``shaders/point_splat.vert``, ``shaders/point_splat.frag``
 * the image rectangle is mapped orthographically onto clip space (it is already in normalised
   coordinates); each surfel's pixel box is the projection of the box that holds its disk
   (``q ± r sqrt(1 − n_a²)`` per axis ``a``, a millionth of ``r`` wider), clamped to the image,
-  computed here in float64: every pixel the kernel's disk test can pass (the kernel bounds the
-  disk by the looser cube ``q ± r``);
+  computed here in float64 as the kernel computes its own: every pixel the disk test can pass;
 * one GL point per surfel, centred on its box, ``gl_PointSize`` = the box's longer side + 2 pixels;
 * the fragment shader reads the surfel in float64 and computes the pixel's ray, the edge-on and
   the disk tests and ``t`` with the kernel's operations, in its order, ``precise`` (no fused or
@@ -68,7 +67,9 @@ _DEFINES = (
 )  # fmt: skip
 _STAGES = tuple(value for name, value in _DEFINES if name.startswith("SPLAT_STAGE_"))
 #: Share of a disk's radius added to each side of its box (:class:`_Boxes`): far above the
-#: rounding of a unit normal and of the disk test (~1e-16), far below a pixel.
+#: rounding of a unit normal and of the disk test (~1e-16), far below a pixel; the kernel's
+#: :data:`~zbuf_occlude.visibility.point_kernels.BOX_MARGIN` (the render layer cannot import it;
+#: tests/render/test_point_sprites_agreement.py holds the two together).
 _BOX_MARGIN = 1e-6
 #: Pixels kept between a sprite's centre and the tile's border, where GL would clip the point.
 _SPRITE_MARGIN_PX = 1.0
