@@ -202,3 +202,117 @@ def test_file_sha256_refuses_a_fifo_without_waiting_on_it(tmp_path):
         file_sha256(tmp_path / "pipe")
     (tmp_path / "f").write_bytes(b"abc")
     assert file_sha256(tmp_path / "f") == "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
+
+
+# -- write_many: many small files, a few fsyncs a batch ----------------------------------------------
+
+
+def test_a_batch_records_every_file_once_with_its_size_and_sha256(tmp_path):
+    with OwnedFolder(tmp_path, names=[r"cls/x\d+\.txt"]) as folder:
+        with folder.write_many(batch_files=4) as batch:
+            for i in range(10):  # two full batches and one of two
+                batch.write_bytes(f"cls/x{i}.txt", f"{i}\n".encode() * (i + 1))
+        assert folder.written() == sorted(f"cls/x{i}.txt" for i in range(10))
+        assert all(folder.check_unchanged(f"cls/x{i}.txt") for i in range(10))
+    entries = _ledger(tmp_path)
+    assert [e["path"] for e in entries] == [f"cls/x{i}.txt" for i in range(10)]  # one line a file, in order
+    for e in entries:
+        assert e["size"] == (tmp_path / e["path"]).stat().st_size and e["sha256"] == file_sha256(tmp_path / e["path"])
+    assert sorted(p.name for p in (tmp_path / "cls").iterdir()) == sorted(f"x{i}.txt" for i in range(10))  # no temporary left
+
+
+def test_a_batch_appends_its_ledger_lines_in_one_write_before_any_file_takes_its_name(tmp_path, monkeypatch):
+    seen = []
+    real_replace = os.replace
+
+    def replace(src, dst):
+        seen.append((Path(dst).name, len(_ledger(tmp_path))))
+        real_replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", replace)
+    with OwnedFolder(tmp_path, names=[r"x\d\.txt"]) as folder, folder.write_many(batch_files=3) as batch:
+        for i in range(5):
+            batch.write_bytes(f"x{i}.txt", b"data")
+    assert sorted(seen) == [("x0.txt", 3), ("x1.txt", 3), ("x2.txt", 3), ("x3.txt", 5), ("x4.txt", 5)]
+
+
+def test_an_error_in_a_batch_keeps_the_batches_before_it_and_leaves_no_temporary(tmp_path):
+    with OwnedFolder(tmp_path, names=[r"x\d\.txt"]) as folder:
+        with pytest.raises(RuntimeError, match="boom"), folder.write_many(batch_files=2) as batch:
+            for i in range(3):
+                batch.write_bytes(f"x{i}.txt", b"data")
+            raise RuntimeError("boom")
+        assert folder.written() == ["x0.txt", "x1.txt"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [LEDGER_FILE, "x0.txt", "x1.txt"]
+    assert [e["path"] for e in _ledger(tmp_path)] == ["x0.txt", "x1.txt"]
+
+
+def test_a_batch_killed_after_its_ledger_lines_is_cleaned_and_rewritten_by_the_next_run(tmp_path):
+    # the writer dies between recording its batch and naming its files: recorded files that are
+    # absent, and temporaries of a dead writer; the next run removes those and writes every file
+    code = f"""
+import os, sys
+from zbuf_occlude.io.owned import OwnedFolder
+real = os.replace
+def die(src, dst):
+    if os.path.basename(dst) == "x2.txt":
+        os._exit(3)
+    real(src, dst)
+os.replace = die
+with OwnedFolder({str(tmp_path)!r}, names=[r"x\\d\\.txt"]) as folder, folder.write_many(batch_files=4) as batch:
+    for i in range(4):
+        batch.write_bytes(f"x{{i}}.txt", b"first")
+"""
+    assert subprocess.run([sys.executable, "-c", code], check=False).returncode == 3
+    named = {p.name for p in tmp_path.iterdir() if not p.name.startswith(".")}
+    recorded = {e["path"] for e in _ledger(tmp_path)}
+    assert named <= recorded == {f"x{i}.txt" for i in range(4)}  # no file of ours unrecorded
+    assert "x2.txt" not in named and any(p.name.endswith(".tmp") for p in tmp_path.iterdir())
+    with OwnedFolder(tmp_path, names=[r"x\d\.txt"]) as folder, folder.write_many() as batch:
+        for i in range(4):
+            batch.write_bytes(f"x{i}.txt", b"second")
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([LEDGER_FILE, *(f"x{i}.txt" for i in range(4))])
+    assert all((tmp_path / f"x{i}.txt").read_bytes() == b"second" for i in range(4))
+
+
+def test_a_batch_refuses_a_users_file_a_foreign_name_and_a_name_twice_writing_none_of_that_batch(tmp_path):
+    (tmp_path / "x1.txt").write_text("mine")
+    with OwnedFolder(tmp_path, names=[r"x\d\.txt"]) as folder:
+        for bad in (["x0.txt", "x1.txt"], ["x0.txt", "../x2.txt"], ["x0.txt", "y.txt"], ["x0.txt", "x0.txt"]):
+            with pytest.raises(UnsafePathError), folder.write_many() as batch:
+                for rel in bad:
+                    batch.write_bytes(rel, b"ours")
+            assert folder.written() == []
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x1.txt"] and (tmp_path / "x1.txt").read_text() == "mine"
+
+
+def test_a_batch_into_a_subfolder_linked_out_is_refused(tmp_path):
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    root = tmp_path / "out"
+    root.mkdir()
+    (root / "cls").symlink_to(elsewhere)
+    with OwnedFolder(root, names=[r"cls/x\d\.txt"]) as folder:
+        with pytest.raises(UnsafePathError), folder.write_many() as batch:
+            batch.write_bytes("cls/x0.txt", b"ours")
+    assert list(elsewhere.iterdir()) == []
+
+
+def test_a_full_disk_in_a_batch_is_one_output_error_and_leaves_no_temporary(tmp_path, monkeypatch):
+    import errno
+
+    calls = []
+    real = Path.write_bytes
+
+    def write_bytes(self, data):
+        calls.append(self)
+        if len(calls) == 2:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(self, data)
+
+    monkeypatch.setattr(Path, "write_bytes", write_bytes)
+    with OwnedFolder(tmp_path, names=[r"x\d\.txt"]) as folder:
+        with pytest.raises(OutputError, match="disk full"), folder.write_many() as batch:
+            for i in range(3):
+                batch.write_bytes(f"x{i}.txt", b"data")
+    assert sorted(p.name for p in tmp_path.iterdir()) == []

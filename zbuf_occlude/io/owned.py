@@ -13,6 +13,12 @@ A folder a command writes (``--out``) is *owned* while the command runs: :class:
   ``protocol.json``) is never deleted without these checks (:func:`delete_recorded`);
 * removes the temporary files and locks that dead writers left (:func:`remove_dead_temps`).
 
+Many small files (a text file per sample) go through :meth:`OwnedFolder.write_many`, with the
+same order per file at the cost of a few ``fsync`` calls per batch rather than two per file:
+every temporary of a batch is complete and synced (together, on threads, which the file system
+commits as one) before the batch's ledger lines are appended and synced in one write, and only
+then do the files take their names; each folder they went into is synced once at the end.
+
 A refusal is one line that names the file and says what to do
 (:class:`~zbuf_occlude.errors.UnsafePathError` or :class:`~zbuf_occlude.errors.OutputError`).
 The farm keeps its ledger in its per-object records (their SHA-256s) and takes task-scoped
@@ -23,19 +29,28 @@ package's syntax trees: no other module unlinks, renames, replaces or removes a 
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import os
 import re
 import stat
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from contextlib import contextmanager
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from zbuf_occlude.errors import InvalidInputError, OutputError, UnsafePathError
-from zbuf_occlude.io.atomic import atomic_path, file_sha256, temp_is_orphan, temp_owner, write_csv
+from zbuf_occlude.io.atomic import (
+    _raise_output_error,
+    atomic_path,
+    file_sha256,
+    temp_is_orphan,
+    temp_owner,
+    write_csv,
+)
 from zbuf_occlude.io.json_files import loads_json
 from zbuf_occlude.io.locks import LOCK_FILE, acquire_lock
 from zbuf_occlude.io.regular_files import open_regular_file
@@ -43,6 +58,7 @@ from zbuf_occlude.io.safe_paths import path_inside
 
 __all__ = [
     "LEDGER_FILE",
+    "BatchWriter",
     "FileRecord",
     "OwnedFolder",
     "check_deletable",
@@ -67,6 +83,11 @@ LEDGER_FILE = ".zbuf_occlude-written.jsonl"
 _MAX_LEDGER_LINE = 8192
 #: Largest ledger read: 256 MiB, some two million files of ours (a line is about 130 bytes).
 MAX_LEDGER_BYTES = 256 << 20
+#: Files per batch of :meth:`OwnedFolder.write_many`: at most this many temporaries at once.
+BATCH_FILES = 64
+#: Threads that sync a batch's temporaries: concurrent fsyncs are committed together (ext4's
+#: journal; 64 files of 150 kB: about 0.8 ms a file against 4 ms synced one after another).
+_SYNC_THREADS = 8
 
 
 @dataclass(frozen=True)
@@ -426,14 +447,20 @@ class OwnedFolder:
             )
 
     def _append(self, entry: dict[str, Any]) -> None:
-        line = (json.dumps(entry, sort_keys=True) + "\n").encode("utf-8")
+        self._append_lines([entry])
+
+    def _append_lines(self, entries: Sequence[dict[str, Any]]) -> None:
+        """Append ``entries`` to the ledger, one JSON line each, in one write and one fsync."""
+        line = "".join(json.dumps(entry, sort_keys=True) + "\n" for entry in entries).encode("utf-8")
         try:
             fd = os.open(self.ledger_path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o666)
             try:
                 info = os.fstat(fd)
                 if not stat.S_ISREG(info.st_mode) or info.st_nlink > 1:  # swapped in since it was read
                     raise UnsafePathError(f"{self.ledger_path} is not a file of one name; move it away, or choose another {self.option}")
-                os.write(fd, line)
+                view = memoryview(line)
+                while view:  # a regular file takes it at once, but write may take fewer bytes
+                    view = view[os.write(fd, view) :]
                 os.fsync(fd)
             finally:
                 os.close(fd)
@@ -519,6 +546,30 @@ class OwnedFolder:
         with atomic_path(path, before_replace=record) as tmp:
             yield tmp
 
+    @contextmanager
+    def write_many(self, *, batch_files: int = BATCH_FILES) -> Iterator[BatchWriter]:
+        """Yield a :class:`BatchWriter` for many small files: each is checked and written as by
+        :meth:`write`, and they are recorded and named ``batch_files`` at a time (module docstring).
+
+        The files of a batch appear once it is complete: when the writer fills, and on leaving the
+        block.  An error in the block (or in a write) removes the temporaries of the batch under
+        way; the batches before it stay, recorded and named.  A run killed at any instant leaves
+        no file of ours unrecorded and none torn under its name: before the ledger's lines only
+        temporaries (removed by the next run's sweep, :func:`remove_dead_temps`), after them files
+        recorded and not yet named, as :meth:`write` may.
+
+        Raises
+        ------
+        UnsafePathError, OutputError
+            As :meth:`write`; also a name written twice in one batch.
+        """
+        batch = BatchWriter(self, max(int(batch_files), 1))
+        try:
+            yield batch
+            batch.flush()
+        finally:
+            batch.discard()
+
     def write_text(self, rel: str, text: str) -> Path:
         """Write UTF-8 ``text`` to ``root/rel`` (:meth:`write`)."""
         with self.write(rel) as tmp:
@@ -554,3 +605,89 @@ class OwnedFolder:
         """The ledger's files (those matching ``pattern`` when given), sorted."""
         rx = re.compile(pattern) if pattern is not None else None
         return sorted(r for r in self._ledger if rx is None or rx.fullmatch(r))
+
+
+class BatchWriter:
+    """The files of :meth:`OwnedFolder.write_many` under way: :meth:`write_bytes` adds one."""
+
+    def __init__(self, folder: OwnedFolder, batch_files: int):
+        self._folder = folder
+        self._batch_files = batch_files
+        self._stack = ExitStack()
+        self._entries: dict[str, dict[str, Any]] = {}  # rel -> its ledger line, in the order written
+        self._temps: list[Path] = []
+        self._recorded = False
+
+    def write_bytes(self, rel: str, data: bytes) -> Path:
+        """Write ``data`` to ``root/rel`` with the batch; return that path (the file takes its name
+        once the batch is flushed).
+
+        Raises
+        ------
+        UnsafePathError
+            As :meth:`OwnedFolder.write`, or ``rel`` is already in this batch.
+        OutputError
+            The temporary cannot be written (the batch's temporaries are removed).
+        """
+        folder = self._folder
+        path = folder.path(rel)
+        if rel in self._entries:
+            raise UnsafePathError(f"{rel!r} is written twice in one batch in {folder.root}; refused")
+        folder._check_replaceable(rel, path)
+        tmp = self._stack.enter_context(atomic_path(path, before_replace=self._record))
+        try:
+            tmp.write_bytes(data)
+        except OSError as exc:
+            self.discard()
+            _raise_output_error(path, exc)
+        self._entries[rel] = {"path": rel, "sha256": hashlib.sha256(data).hexdigest(), "size": len(data)}
+        self._temps.append(tmp)
+        if len(self._entries) >= self._batch_files:
+            self.flush()
+        return path
+
+    def flush(self) -> None:
+        """Sync the batch's temporaries, record them all, name them, and sync their folders."""
+        if not self._entries:
+            return
+        with ThreadPoolExecutor(min(_SYNC_THREADS, len(self._temps)), thread_name_prefix="owned-sync") as pool:
+            list(pool.map(_sync_file, self._temps))  # atomic_path's own fsync then finds nothing to write
+        folders = {tmp.parent for tmp in self._temps}
+        self._recorded = False
+        self._stack.close()  # each file: fsync, _record (the batch's ledger lines, once), rename
+        self._entries, self._temps = {}, []
+        for path in sorted(folders):
+            _sync_file(path)
+
+    def _record(self, tmp: Path) -> None:
+        """``before_replace`` of every temporary: the first (the last written, as the stack unwinds)
+        appends the whole batch's lines; the files are renamed only after that."""
+        if not self._recorded:
+            folder = self._folder
+            folder._append_lines(list(self._entries.values()))
+            self._recorded = True
+            for entry in self._entries.values():
+                folder._ledger[entry["path"]] = FileRecord(entry["sha256"], entry["size"])
+
+    def discard(self) -> None:
+        """Remove the temporaries of the batch under way (after an error)."""
+        self._entries, self._temps = {}, []
+        self._stack.__exit__(_Discarded, _Discarded(), None)  # each atomic_path removes its temporary
+
+
+class _Discarded(Exception):
+    """Thrown into a discarded batch's temporaries (:func:`~zbuf_occlude.io.atomic.atomic_path` removes each)."""
+
+
+def _sync_file(path: Path) -> None:
+    """fsync a file or folder by path (a folder: the names it holds)."""
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_DIRECTORY", 0) * path.is_dir())
+    except OSError as exc:
+        raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from None
+    try:
+        os.fsync(fd)
+    except OSError as exc:
+        raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from None
+    finally:
+        os.close(fd)
