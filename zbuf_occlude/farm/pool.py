@@ -31,7 +31,7 @@ from typing import Any
 from zbuf_occlude.farm.config import FarmParams, usable_cpus
 from zbuf_occlude.farm.lifecycle import die_with_parent
 from zbuf_occlude.farm.worker import base_record, process_object, write_record
-from zbuf_occlude.mesh.inputs import FarmObject
+from zbuf_occlude.mesh.inputs.plan import FarmObject
 
 __all__ = ["run_in_workers", "STOP_GRACE_S", "worker_death_error", "worker_threads"]
 

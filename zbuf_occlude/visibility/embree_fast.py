@@ -160,11 +160,9 @@ _scenes: MeshCache[_Scene] = MeshCache(_Scene, 8)
 
 
 def set_default_threads(threads: int) -> None:
-    """Threads per view of the sessions and calls made after this (those given no ``threads``).
-
-    The farm's worker processes, as many as there are cores, each take ``cores // workers``:
-    more threads than cores only wait for each other at every view's hand-over.  The masks
-    do not depend on it (each point is decided alone).
+    """Threads per view of the sessions and calls made after this (those given no ``threads``),
+    e.g. 1 to time a view's stages in one thread.  The masks do not depend on it (each point is
+    decided alone).
 
     Raises
     ------
