@@ -28,12 +28,12 @@ from multiprocessing.connection import Connection, wait
 from pathlib import Path
 from typing import Any
 
-from zbuf_occlude.farm.config import FarmParams, usable_cpus
+from zbuf_occlude.farm.config import FarmParams
 from zbuf_occlude.farm.lifecycle import die_with_parent
 from zbuf_occlude.farm.worker import base_record, process_object, write_record
 from zbuf_occlude.mesh.inputs.plan import FarmObject
 
-__all__ = ["run_in_workers", "STOP_GRACE_S", "worker_death_error", "worker_threads"]
+__all__ = ["run_in_workers", "STOP_GRACE_S", "worker_death_error"]
 
 log = logging.getLogger(__name__)
 
@@ -41,15 +41,9 @@ log = logging.getLogger(__name__)
 STOP_GRACE_S = 2.0
 
 
-def _serve(conn: Connection, parent_pid: int, params: FarmParams, out: str, root: str | None, threads: int = 1) -> None:
-    """A worker's loop: receive an object, send back its record (or the fatal error it raised).
-
-    ``threads``: the worker's share of the cores, the threads of each view of ``embree-fast``
-    (more threads than cores only wait for each other; the masks are the same)."""
-    from zbuf_occlude.visibility.embree_fast import set_default_threads
-
+def _serve(conn: Connection, parent_pid: int, params: FarmParams, out: str, root: str | None) -> None:
+    """A worker's loop: receive an object, send back its record (or the fatal error it raised)."""
     die_with_parent(parent_pid)
-    set_default_threads(threads)
     # Ctrl-C reaches the whole process group: the parent decides and stops us (SIGTERM).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     while True:
@@ -67,14 +61,6 @@ def _serve(conn: Connection, parent_pid: int, params: FarmParams, out: str, root
             conn.send(reply)
         except Exception:  # an exception that cannot be pickled: its text still tells why
             conn.send(("error", RuntimeError(f"{type(reply[1]).__name__}: {reply[1]}")))
-
-
-def worker_threads(workers: int, cpus: int | None = None) -> int:
-    """Threads per view of each of ``workers`` worker processes: their share of the ``cpus``
-    (default :func:`~zbuf_occlude.farm.config.usable_cpus`), at least 1: more threads than
-    cores only wait for each other at every view's hand-overs (the masks are the same)."""
-    cpus = usable_cpus() if cpus is None else int(cpus)
-    return max(1, cpus // max(1, int(workers)))
 
 
 def worker_death_error(exitcode: int | None) -> str:
@@ -96,9 +82,9 @@ class _Worker:
     obj: FarmObject | None = None
 
 
-def _start(ctx, params: FarmParams, out: Path, root: Path | None, threads: int) -> _Worker:
+def _start(ctx, params: FarmParams, out: Path, root: Path | None) -> _Worker:
     mine, theirs = ctx.Pipe()
-    args = (theirs, os.getpid(), params, str(out), None if root is None else str(root), threads)
+    args = (theirs, os.getpid(), params, str(out), None if root is None else str(root))
     proc = ctx.Process(target=_serve, args=args, name="zbuf-farm-worker")
     proc.start()
     theirs.close()
@@ -158,7 +144,6 @@ def run_in_workers(
         temporary files are removed by the next run and their objects redone.
     """
     ctx = multiprocessing.get_context("spawn")
-    threads = worker_threads(min(workers, len(todo)))
     queue = list(reversed(todo))
     pool: list[_Worker] = []
     try:
@@ -167,7 +152,7 @@ def run_in_workers(
                 w.conn.close()
                 pool.remove(w)
             while queue and len(pool) < workers:
-                pool.append(_start(ctx, params, out, root, threads))
+                pool.append(_start(ctx, params, out, root))
             for w in pool:
                 if w.obj is None and queue:
                     w.obj = queue.pop()
