@@ -44,7 +44,7 @@ from zbuf_occlude.farm import (
     RunOptions,
     run_farm,
 )
-from zbuf_occlude.mesh.inputs import FarmObject, discover_objects
+from zbuf_occlude.mesh.inputs.plan import FarmObject, discover_objects
 
 #: The paper's data set: 5 meshes × 40 classes (§4.3).
 PAPER_OBJECTS = 200

@@ -123,7 +123,7 @@ def point_sets(args) -> int:
     import zbuf_occlude as zo
     from zbuf_occlude.geometry.cameras import camera_on_sphere
     from zbuf_occlude.learn import RandomOcclusion
-    from zbuf_occlude.mesh.point_inputs import cloud_frame
+    from zbuf_occlude.mesh.inputs.point_sets import cloud_frame
 
     try:
         import open3d  # noqa: F401

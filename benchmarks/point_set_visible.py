@@ -6,7 +6,7 @@ from the points alone (``point-splat``, normals estimated) from each pose of ``g
 default radius, and prints the visible share per pose (mean, median, 5th and 1st percentile,
 minimum) and, for each ``--points`` of a list, the share of poses that see fewer points than that
 (each of their samples repeats points).  The figures behind
-``zbuf_occlude.mesh.input_kinds.POINT_SET_VISIBLE_SHARE`` and ``DEFAULT_POINT_SET_POINTS``.
+``zbuf_occlude.mesh.inputs.kinds.POINT_SET_VISIBLE_SHARE`` and ``DEFAULT_POINT_SET_POINTS``.
 
 Usage::
 
@@ -21,7 +21,7 @@ import numpy as np
 
 from zbuf_occlude.geometry.cameras import view_schedule
 from zbuf_occlude.geometry.sampling import sample_surface
-from zbuf_occlude.mesh.discovery import find_meshes
+from zbuf_occlude.mesh.inputs.discovery import find_meshes
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.pipeline import CameraSphere
 from zbuf_occlude.visibility.point_splats import point_surfels

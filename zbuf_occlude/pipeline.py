@@ -53,7 +53,7 @@ from zbuf_occlude.geometry.samples import (
     top_up,
 )
 from zbuf_occlude.geometry.sampling import sample_surface, triangles_of
-from zbuf_occlude.mesh.input_kinds import POINT_SET_METHOD  # the point-set input kind's method, re-exported
+from zbuf_occlude.mesh.inputs.kinds import POINT_SET_METHOD  # the point-set input kind's method, re-exported
 from zbuf_occlude.resources import check_memory, estimate_job_memory
 from zbuf_occlude.visibility.registry import check_keywords, method_info, resolution_option, visible_mask
 

@@ -428,7 +428,7 @@ LATIN1_NAME = b"chair/train/caf\xe9_0002.off"
 
 
 def test_non_utf8_file_name_is_reported_and_the_others_are_found(tmp_path: Path) -> None:
-    from zbuf_occlude.mesh.discovery import find_meshes, scan_meshes
+    from zbuf_occlude.mesh.inputs.discovery import find_meshes, scan_meshes
 
     _tree(tmp_path, ["chair/train/chair_0001.off", LATIN1_NAME, "chair/test/chair_0003.off"])
     scan = scan_meshes([tmp_path])
@@ -443,7 +443,7 @@ def test_non_utf8_file_name_is_reported_and_the_others_are_found(tmp_path: Path)
 
 
 def test_non_utf8_name_given_as_a_file_is_reported(tmp_path: Path) -> None:
-    from zbuf_occlude.mesh.discovery import scan_meshes
+    from zbuf_occlude.mesh.inputs.discovery import scan_meshes
 
     _tree(tmp_path, [b"caf\xe9.off", "ok.off"])
     bad = tmp_path / b"caf\xe9.off".decode("utf-8", "surrogateescape")
@@ -454,7 +454,7 @@ def test_non_utf8_name_given_as_a_file_is_reported(tmp_path: Path) -> None:
 
 
 def test_farm_discovery_reports_non_utf8_names_and_plans_the_rest(tmp_path: Path) -> None:
-    from zbuf_occlude.mesh.inputs import discover_objects, scan_objects
+    from zbuf_occlude.mesh.inputs.plan import discover_objects, scan_objects
 
     _tree(tmp_path, ["chair/train/chair_0001.off", LATIN1_NAME, "table/train/table_0001.off"])
     scan = scan_objects(tmp_path)
@@ -465,7 +465,7 @@ def test_farm_discovery_reports_non_utf8_names_and_plans_the_rest(tmp_path: Path
 
 
 def test_farm_list_file_with_a_non_utf8_line(tmp_path: Path) -> None:
-    from zbuf_occlude.mesh.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs.plan import scan_objects
 
     _tree(tmp_path, ["a.off", "b.off"])
     listing = tmp_path / "list.txt"
@@ -515,7 +515,7 @@ def unreadable(monkeypatch):
 
 
 def test_unreadable_class_folder_is_reported_not_silently_lost(tmp_path: Path, unreadable) -> None:
-    from zbuf_occlude.mesh.discovery import find_meshes, scan_meshes
+    from zbuf_occlude.mesh.inputs.discovery import find_meshes, scan_meshes
 
     _tree(tmp_path, ["chair/train/chair_0001.off", "table/train/table_0001.off", "table/test/table_0002.off"])
     unreadable(tmp_path / "table")
@@ -526,7 +526,7 @@ def test_unreadable_class_folder_is_reported_not_silently_lost(tmp_path: Path, u
 
 
 def test_unreadable_root_folder_says_so(tmp_path: Path, unreadable) -> None:
-    from zbuf_occlude.mesh.discovery import scan_meshes
+    from zbuf_occlude.mesh.inputs.discovery import scan_meshes
 
     _tree(tmp_path, ["data/chair_0001.off"])
     unreadable(tmp_path / "data")
@@ -535,7 +535,7 @@ def test_unreadable_root_folder_says_so(tmp_path: Path, unreadable) -> None:
 
 
 def test_farm_discovery_reports_unreadable_folders_but_not_hidden_ones(tmp_path: Path, unreadable) -> None:
-    from zbuf_occlude.mesh.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs.plan import scan_objects
 
     _tree(tmp_path, ["chair/train/chair_0001.off", "table/train/table_0001.off", ".cache/x/chair_0009.off"])
     unreadable(tmp_path / "table" / "train")
@@ -549,8 +549,8 @@ def test_farm_discovery_reports_unreadable_folders_but_not_hidden_ones(tmp_path:
 def test_generate_and_farm_entry_points_survive_a_non_utf8_name(tmp_path: Path) -> None:
     # What `generate DIR` and `farm DIR` do first: find the meshes and key each name.
     from zbuf_occlude.geometry.samples import object_key
-    from zbuf_occlude.mesh.discovery import find_meshes
-    from zbuf_occlude.mesh.inputs import discover_objects
+    from zbuf_occlude.mesh.inputs.discovery import find_meshes
+    from zbuf_occlude.mesh.inputs.plan import discover_objects
 
     _tree(tmp_path, ["chair/train/chair_0001.off", LATIN1_NAME])
     meshes = find_meshes([tmp_path])
@@ -560,7 +560,7 @@ def test_generate_and_farm_entry_points_survive_a_non_utf8_name(tmp_path: Path) 
 
 
 def test_find_meshes_warns_about_an_unreadable_folder(tmp_path: Path, unreadable, caplog) -> None:
-    from zbuf_occlude.mesh.discovery import find_meshes
+    from zbuf_occlude.mesh.inputs.discovery import find_meshes
 
     _tree(tmp_path, ["chair/chair_0001.off", "table/table_0001.off"])
     unreadable(tmp_path / "table")
@@ -743,7 +743,7 @@ def test_empty_degenerate_and_nan_meshes_cannot_be_sampled_or_normalised(name: s
 
 
 def test_farm_list_file_in_a_non_utf8_folder_is_reported(tmp_path: Path) -> None:
-    from zbuf_occlude.mesh.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs.plan import scan_objects
 
     folder = tmp_path / b"caf\xe9".decode("utf-8", "surrogateescape")
     _tree(folder, ["a.off"])
@@ -895,7 +895,7 @@ def test_cli_skipped_inputs_exit_1_are_recorded_and_the_rest_is_done(
 
 
 def printable(path: str) -> str:
-    from zbuf_occlude.mesh.discovery import printable_path
+    from zbuf_occlude.mesh.inputs.names import printable_path
 
     return printable_path(path)
 
@@ -903,7 +903,7 @@ def printable(path: str) -> str:
 @pytest.mark.parametrize("entry", ["generate", "farm"])
 def test_two_files_with_one_name_are_refused_naming_both(tmp_path: Path, entry: str) -> None:
     # generate and the farm plan with one function (farm.inputs.number_objects)
-    from zbuf_occlude.mesh.inputs import scan_objects, scan_paths
+    from zbuf_occlude.mesh.inputs.plan import scan_objects, scan_paths
 
     _tree(tmp_path, ["chair/train/chair_0001.off", "chair/train/chair_0002.off"])
     (tmp_path / "chair/train/chair_0001.off").rename(tmp_path / "chair/train/chair_0001.obj")

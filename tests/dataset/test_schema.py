@@ -10,7 +10,7 @@ from pydantic import ValidationError
 from zbuf_occlude.dataset.schema import ObjectRecord, OkRecord
 from zbuf_occlude.farm.config import FarmParams, record_path
 from zbuf_occlude.farm.worker import base_record, write_record
-from zbuf_occlude.mesh.inputs import FarmObject
+from zbuf_occlude.mesh.inputs.plan import FarmObject
 
 
 def _object() -> FarmObject:

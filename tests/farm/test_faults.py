@@ -268,7 +268,7 @@ def test_workers_do_not_outlive_a_killed_parent(tree, tmp_path, sig):
 
 # -- skipped inputs are recorded and end the run with status 1 (defect 12's slot in the farm) ----
 def test_skipped_inputs_are_recorded_in_the_card_and_give_status_1(tree, tmp_path):
-    from zbuf_occlude.mesh.inputs import discover_objects
+    from zbuf_occlude.mesh.inputs.plan import discover_objects
 
     out = tmp_path / "ds"
     locked = str(tree / "locked")  # a ready plan's caller's skip: a folder of the input root

@@ -21,9 +21,9 @@ from zbuf_occlude.dataset.layout import CARD_FILE
 from zbuf_occlude.farm.checks import check_point_set_options
 from zbuf_occlude.farm.config import GENERATE_DEFAULTS, FarmParams
 from zbuf_occlude.io.point_sets import stored_up
-from zbuf_occlude.mesh.input_kinds import DEFAULT_POINT_SET_POINTS, MESH, POINT_SET, POINT_SET_METHOD, plan_nouns
-from zbuf_occlude.mesh.inputs import FarmObject
-from zbuf_occlude.mesh.point_inputs import load_cloud
+from zbuf_occlude.mesh.inputs.kinds import DEFAULT_POINT_SET_POINTS, MESH, POINT_SET, POINT_SET_METHOD, plan_nouns
+from zbuf_occlude.mesh.inputs.plan import FarmObject
+from zbuf_occlude.mesh.inputs.point_sets import load_cloud
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 CHAIR = REPO_ROOT / "data" / "samples" / "chair" / "train" / "chair_0001.off"

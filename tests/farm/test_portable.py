@@ -19,7 +19,7 @@ from zbuf_occlude.cli.main import main as cli_main
 from zbuf_occlude.dataset.layout import CARD_FILE, MANIFEST_FILE, PLAN_FILE
 from zbuf_occlude.dataset.reader import OccludedDataset
 from zbuf_occlude.farm.journal import input_root, portable_command
-from zbuf_occlude.mesh.inputs import FarmObject
+from zbuf_occlude.mesh.inputs.plan import FarmObject
 from zbuf_occlude.mesh.load import load_mesh
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"

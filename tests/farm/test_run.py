@@ -33,7 +33,7 @@ from zbuf_occlude.farm import FarmParams, SensorCropParams, merge_farm, parse_sh
 from zbuf_occlude.farm.config import RunOptions
 from zbuf_occlude.geometry.cameras import camera_on_sphere
 from zbuf_occlude.geometry.samples import ObjectProvenance, object_key, pose_samples
-from zbuf_occlude.mesh.inputs import FarmObject, discover_objects
+from zbuf_occlude.mesh.inputs.plan import FarmObject, discover_objects
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.pipeline import CameraSphere, dense_cloud, occlude_poses
 from zbuf_occlude.sensors.placement import CropDistributions
@@ -873,7 +873,7 @@ def test_merge_counts_padded_samples_as_one_run_does(tree, shingles_tree, tmp_pa
 
 
 def test_a_mesh_file_given_to_farm_points_to_generate(tmp_path, capsys):
-    from zbuf_occlude.mesh.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs.plan import scan_objects
 
     mesh = REPO_ROOT / "data" / "samples" / "chair" / "train" / "chair_0001.off"
     with pytest.raises(InvalidInputError, match="is a mesh file.*zbuf-occlude generate"):

@@ -12,7 +12,7 @@ from zbuf_occlude.farm.config import FarmParams
 from zbuf_occlude.farm.generate import generate
 from zbuf_occlude.farm.ownership import written_names
 from zbuf_occlude.farm.run import _estimate_bytes
-from zbuf_occlude.mesh.inputs import FarmObject
+from zbuf_occlude.mesh.inputs.plan import FarmObject
 from zbuf_occlude.resources import estimate_job_memory
 
 

@@ -14,6 +14,7 @@ from zbuf_occlude.geometry.cameras import camera_on_sphere  # noqa: E402
 from zbuf_occlude.geometry.samples import object_key
 from zbuf_occlude.learn import OnTheFlyOccludedDataset, PoseDistribution, RandomOcclusion  # noqa: E402
 from zbuf_occlude.learn.models import PointNet  # noqa: E402
+from zbuf_occlude.mesh.inputs.kinds import MESH, POINT_SET  # noqa: E402
 from zbuf_occlude.mesh.load import load_mesh  # noqa: E402
 from zbuf_occlude.pipeline import dense_cloud  # noqa: E402
 from zbuf_occlude.protocols import modelnet40c  # noqa: E402
@@ -80,7 +81,7 @@ def test_modelnet40c_distribution_covers_their_cameras(severity):
 
 
 def test_dataset_labels_and_splits_match_the_farm():
-    from zbuf_occlude.mesh.inputs import scan_paths
+    from zbuf_occlude.mesh.inputs.plan import scan_paths
 
     ds = OnTheFlyOccludedDataset(SAMPLES, split="test", n_points=128, dense_points=2048)
     objects, _ = scan_paths([SAMPLES])
@@ -293,7 +294,7 @@ def _npy_class_folders(root: Path) -> dict[str, np.ndarray]:
 
 
 def test_a_data_set_of_point_sets_gives_subsets_of_each_cloud(tmp_path):
-    from zbuf_occlude.mesh.point_inputs import load_cloud
+    from zbuf_occlude.mesh.inputs.point_sets import load_cloud
 
     clouds = _npy_class_folders(tmp_path)
     ds = OnTheFlyOccludedDataset(tmp_path, n_points=200, seed=7, views_per_object=2, normalize=False)
@@ -385,9 +386,9 @@ def test_meshes_and_point_sets_together(tmp_path):
     np.save(tmp_path / "samples" / "sofa" / "test" / "sofa_9999.npy", points)
     mixed = OnTheFlyOccludedDataset(tmp_path / "samples", n_points=64, dense_points=1024)
     meshes = OnTheFlyOccludedDataset(SAMPLES, n_points=64, dense_points=1024)
-    assert [o.name for o in mixed.objects if not o.is_point_set] == [o.name for o in meshes.objects]
+    assert [o.name for o in mixed.objects if o.kind is MESH] == [o.name for o in meshes.objects]
     assert mixed.shape_names == meshes.shape_names and "embree-fast and point-splat" in repr(mixed)
-    (cloud,) = [i for i, o in enumerate(mixed.objects) if o.is_point_set]
+    (cloud,) = [i for i, o in enumerate(mixed.objects) if o.kind is POINT_SET]
     assert mixed.sample(cloud)["points"].shape == (64, 3) and mixed.objects[cloud].label == mixed.shape_names.index("sofa")
     for i in range(cloud):  # the meshes before it keep their index: the same samples as without it
         assert np.array_equal(mixed.sample(i)["points"], meshes.sample(i)["points"])

@@ -48,8 +48,8 @@ def _tree_with_unread_formats(root: Path) -> Path:
 # -- 3D formats that are not read --------------------------------------------------------------
 @pytest.mark.parametrize("entry", ["walk", "farm", "generate"])
 def test_files_of_3d_formats_not_read_are_skipped_with_the_reason(tmp_path: Path, entry: str, caplog) -> None:
-    from zbuf_occlude.mesh.discovery import walk_mesh_files
-    from zbuf_occlude.mesh.inputs import scan_inputs, scan_objects
+    from zbuf_occlude.mesh.inputs.discovery import walk_mesh_files
+    from zbuf_occlude.mesh.inputs.plan import scan_inputs, scan_objects
 
     root = _tree_with_unread_formats(tmp_path / "root")
     if entry == "walk":
@@ -69,7 +69,7 @@ def test_files_of_3d_formats_not_read_are_skipped_with_the_reason(tmp_path: Path
 
 def test_files_beside_meshes_are_not_reported(tmp_path: Path) -> None:
     # a glTF's buffer and textures, an OBJ's materials, the notes of a collection: no meshes, no inputs
-    from zbuf_occlude.mesh.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs.plan import scan_objects
 
     root = tmp_path / "root"
     for name, data in trimesh.exchange.gltf.export_gltf(trimesh.Scene(trimesh.creation.box())).items():
@@ -86,10 +86,10 @@ def test_files_beside_meshes_are_not_reported(tmp_path: Path) -> None:
 
 
 def test_a_file_given_in_a_format_not_read_names_the_format(tmp_path: Path) -> None:
-    from zbuf_occlude.mesh.discovery import check_mesh_extension
+    from zbuf_occlude.mesh.inputs.discovery import check_input_file
 
     with pytest.raises(InvalidInputError, match=r"car\.fbx: FBX: a 3D format zbuf-occlude does not read.*convert"):
-        check_mesh_extension(tmp_path / "car.fbx")
+        check_input_file(tmp_path / "car.fbx")
 
 
 @pytest.mark.slow
@@ -121,8 +121,8 @@ def no_pycollada(monkeypatch: pytest.MonkeyPatch) -> None:
 
 @pytest.mark.parametrize("entry", ["farm", "generate", "validate"])
 def test_a_format_without_its_package_is_refused_at_discovery(tmp_path: Path, no_pycollada, entry: str) -> None:
-    from zbuf_occlude.mesh.discovery import scan_meshes
-    from zbuf_occlude.mesh.inputs import scan_inputs, scan_objects
+    from zbuf_occlude.mesh.inputs.discovery import scan_meshes
+    from zbuf_occlude.mesh.inputs.plan import scan_inputs, scan_objects
 
     root = _tree_with_collada(tmp_path / "root")
     scan = {"farm": scan_objects, "generate": lambda r: scan_inputs([r]), "validate": lambda r: scan_meshes([r])}[entry]
@@ -136,7 +136,7 @@ def test_a_format_without_its_package_is_refused_at_discovery(tmp_path: Path, no
 
 
 def test_the_package_is_checked_once_per_format_not_per_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from zbuf_occlude.mesh.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs.plan import scan_objects
 
     root = _tree_with_collada(tmp_path / "root")
     asked: list[str] = []
@@ -152,7 +152,7 @@ def test_the_package_is_checked_once_per_format_not_per_file(tmp_path: Path, mon
 
 
 def test_a_format_left_out_by_the_selection_needs_no_package(tmp_path: Path, no_pycollada) -> None:
-    from zbuf_occlude.mesh.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs.plan import scan_objects
 
     root = _tree_with_collada(tmp_path / "root")
     assert [o.name for o in scan_objects(root, classes="chair").objects] == ["chair/a"]

@@ -73,7 +73,7 @@ def test_a_shapenetcore_v2_tree_gets_its_real_class_names(tmp_path: Path, comman
 @pytest.mark.parametrize("version", [1, 2])
 @pytest.mark.parametrize("entry", ["farm", "generate"])
 def test_shapenetcore_without_taxonomy_is_labelled_by_synset_id(tmp_path: Path, version: int, entry: str) -> None:
-    from zbuf_occlude.mesh.inputs import scan_objects, scan_paths
+    from zbuf_occlude.mesh.inputs.plan import scan_objects, scan_paths
 
     root = shapenet_tree(tmp_path / "sn", version=version, taxonomy=False)
     objects = scan_objects(root).objects if entry == "farm" else scan_paths([root])[0]
@@ -84,7 +84,7 @@ def test_shapenetcore_without_taxonomy_is_labelled_by_synset_id(tmp_path: Path, 
 
 
 def test_one_synset_folder_given_takes_the_synset_from_its_own_name(tmp_path: Path) -> None:
-    from zbuf_occlude.mesh.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs.plan import scan_objects
 
     root = shapenet_tree(tmp_path / "sn", taxonomy=False)
     scan = scan_objects(root / CHAIR)
@@ -97,7 +97,7 @@ def test_one_synset_folder_given_takes_the_synset_from_its_own_name(tmp_path: Pa
      ('[{"synsetId": 3, "name": "x"}]', "entry 0 needs text fields"), ('[{"synsetId": "1", "name": "a\\nb"}]', "not printable")],
 )  # fmt: skip
 def test_a_broken_taxonomy_is_an_error_naming_the_file(tmp_path: Path, text: str, message: str) -> None:
-    from zbuf_occlude.mesh.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs.plan import scan_objects
 
     root = shapenet_tree(tmp_path / "sn", taxonomy=False)
     (root / "taxonomy.json").write_text(text, encoding="utf-8")
@@ -118,7 +118,7 @@ def test_a_broken_taxonomy_is_an_error_naming_the_file(tmp_path: Path, text: str
     ],
 )  # fmt: skip
 def test_each_layout_is_detected_and_labels_its_meshes(tmp_path: Path, files, layout, labels) -> None:
-    from zbuf_occlude.mesh.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs.plan import scan_objects
 
     for k, rel in enumerate(files):
         _box(tmp_path / "root" / rel, k)
@@ -129,7 +129,7 @@ def test_each_layout_is_detected_and_labels_its_meshes(tmp_path: Path, files, la
 
 def test_a_modelnet_class_folder_given_alone_keeps_its_class(tmp_path: Path) -> None:
     # the class folder is the root itself: its name is the class, not "train"
-    from zbuf_occlude.mesh.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs.plan import scan_objects
 
     _box(tmp_path / "chair" / "train" / "a.off")
     _box(tmp_path / "chair" / "test" / "b.off")
@@ -138,7 +138,7 @@ def test_a_modelnet_class_folder_given_alone_keeps_its_class(tmp_path: Path) -> 
 
 
 def test_a_list_file_is_recorded_as_its_layout(tmp_path: Path) -> None:
-    from zbuf_occlude.mesh.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs.plan import scan_objects
 
     _box(tmp_path / "a.off")
     (tmp_path / "list.txt").write_text("a.off chair test\n", encoding="utf-8")
@@ -154,7 +154,7 @@ NESTED = ["car/van.obj", "car/sedan.obj", "pedestrian/man.obj", "pedestrian/walk
 
 @pytest.mark.parametrize("entry", ["farm", "generate"])
 def test_a_mesh_in_a_folder_of_its_own_takes_the_class_folder_above(tmp_path: Path, entry: str) -> None:
-    from zbuf_occlude.mesh.inputs import scan_inputs, scan_objects
+    from zbuf_occlude.mesh.inputs.plan import scan_inputs, scan_objects
 
     for k, rel in enumerate(NESTED):
         if rel.endswith(".bin"):
@@ -170,7 +170,7 @@ def test_a_mesh_in_a_folder_of_its_own_takes_the_class_folder_above(tmp_path: Pa
 
 
 def test_the_split_of_a_nested_mesh_is_the_split_folder_below_its_class(tmp_path: Path) -> None:
-    from zbuf_occlude.mesh.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs.plan import scan_objects
 
     for k, rel in enumerate(["car/train/van.obj", "car/test/beetle/scene.obj", "pole/lamp.obj"]):
         _box(tmp_path / "root" / rel, k)
@@ -195,11 +195,11 @@ def test_meshes_loose_beside_class_folders_exit_2_naming_them(tmp_path: Path, ca
 def test_a_sub_folder_of_several_meshes_is_part_of_its_class_and_said_so(tmp_path: Path, caplog) -> None:
     # vehicle/car/ may be a class of its own or a group inside "vehicle": the class is the
     # folder below the root, and the run says which folders it took as part of their class
-    from zbuf_occlude.mesh.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs.plan import scan_objects
 
     for k, rel in enumerate(["vehicle/car/a.obj", "vehicle/car/b.obj", "vehicle/bus.obj", "plant/tree.obj"]):
         _box(tmp_path / "root" / rel, k)
-    with caplog.at_level("WARNING", logger="zbuf_occlude.mesh.layouts"):
+    with caplog.at_level("WARNING", logger="zbuf_occlude.mesh.inputs.layouts"):
         scan = scan_objects(tmp_path / "root")
     assert {o.name: o.class_name for o in scan.objects} == {
         "vehicle/car/a": "vehicle", "vehicle/car/b": "vehicle", "vehicle/bus": "vehicle", "plant/tree": "plant",
@@ -242,7 +242,7 @@ def test_class_from_names_the_class_folder(tmp_path: Path, command: str) -> None
 
 
 def test_class_from_confirms_one_class_and_takes_the_split_below_it(tmp_path: Path) -> None:
-    from zbuf_occlude.mesh.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs.plan import scan_objects
 
     for k, rel in enumerate(["chairs/a.obj", "chairs/b.obj"]):
         _box(tmp_path / "root" / rel, k)
@@ -286,7 +286,7 @@ def test_broken_links_and_link_loops_are_skipped_reported_and_recorded(tmp_path:
 
 
 def test_a_fifo_in_a_tree_is_reported_never_opened(tmp_path: Path) -> None:
-    from zbuf_occlude.mesh.discovery import walk_mesh_files
+    from zbuf_occlude.mesh.inputs.discovery import walk_mesh_files
 
     _box(tmp_path / "a.off")
     os.mkfifo(tmp_path / "pipe.off")
@@ -296,7 +296,7 @@ def test_a_fifo_in_a_tree_is_reported_never_opened(tmp_path: Path) -> None:
 
 
 def test_a_fifo_in_a_list_file_is_skipped_with_a_warning(tmp_path: Path, caplog) -> None:
-    from zbuf_occlude.mesh.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs.plan import scan_objects
 
     _box(tmp_path / "a.off")
     os.mkfifo(tmp_path / "pipe.off")
@@ -347,11 +347,11 @@ def test_generate_refuses_a_file_that_is_no_mesh_before_making_out(tmp_path: Pat
 
 
 def test_a_list_file_larger_than_the_cap_is_refused_before_it_is_read(tmp_path: Path, monkeypatch) -> None:
-    from zbuf_occlude.mesh import inputs
-    from zbuf_occlude.mesh.inputs import scan_objects
+    from zbuf_occlude.mesh.inputs import plan
+    from zbuf_occlude.mesh.inputs.plan import scan_objects
 
     _box(tmp_path / "a.off")
     (tmp_path / "list.txt").write_text("a.off chair\n" * 10, encoding="utf-8")  # 120 bytes
-    monkeypatch.setattr(inputs, "MAX_LIST_BYTES", 100)  # stands for 64 MiB
+    monkeypatch.setattr(plan, "MAX_LIST_BYTES", 100)  # stands for 64 MiB
     with pytest.raises(InvalidInputError, match=r"list\.txt: 120 bytes, more than the 100 a file read here may have"):
         scan_objects(tmp_path / "list.txt")

@@ -18,8 +18,9 @@ import pytest
 from zbuf_occlude import resources
 from zbuf_occlude.cli.main import main
 from zbuf_occlude.errors import DatasetFormatError, InsufficientMemoryError, InvalidInputError, UnsafePathError
-from zbuf_occlude.mesh.inputs import scan_inputs
-from zbuf_occlude.mesh.point_inputs import MIN_KEPT_DISTINCT, cloud_frame, load_cloud, point_set_clouds, pointnet_split
+from zbuf_occlude.mesh.inputs.kinds import INPUT_KINDS
+from zbuf_occlude.mesh.inputs.plan import scan_inputs
+from zbuf_occlude.mesh.inputs.point_sets import MIN_KEPT_DISTINCT, cloud_frame, load_cloud, point_set_clouds, pointnet_split
 
 TINY = ["--views", "0:0", "--points", "64", "--samples-per-view", "1", "--no-progress"]  # --resolution: meshes only
 CLOUD = np.random.default_rng(0).normal(size=(300, 3))
@@ -60,7 +61,7 @@ def test_a_list_that_links_out_of_the_folder_is_refused_naming_it(tmp_path, list
     # discovery, as generate, the farm and on-the-fly data sets run it: the file is skipped naming
     # why (a class list), or the scan refused (a split list: every file of the folder is in question)
     with pytest.raises(InvalidInputError, match=f"{listing} leads outside") as exc:
-        scan_inputs([tmp_path / "set"], point_sets=True)
+        scan_inputs([tmp_path / "set"], kinds=INPUT_KINDS)
     assert SECRET not in str(exc.value)
 
 
@@ -88,12 +89,12 @@ def test_a_list_that_is_no_regular_file_is_refused_unopened(tmp_path, listing, k
 
 
 def test_a_list_larger_than_the_cap_is_refused_before_it_is_read(tmp_path, monkeypatch) -> None:
-    from zbuf_occlude.mesh import point_inputs
+    from zbuf_occlude.mesh.inputs import point_sets
 
     h5 = _pointnet(tmp_path / "set")
     (tmp_path / "set" / "train_files.txt").write_text("ply_data_train0.h5\n" * 10)
     assert pointnet_split(h5) == "train"
-    monkeypatch.setattr(point_inputs, "MAX_LIST_BYTES", 100)
+    monkeypatch.setattr(point_sets, "MAX_LIST_BYTES", 100)
     with pytest.raises(InvalidInputError, match="190 bytes, more than the 100") as exc:
         pointnet_split(h5)
     _one_line(exc, "train_files.txt")
@@ -138,7 +139,7 @@ def test_a_file_that_declares_rows_it_does_not_store_is_refused_before_planning(
         point_set_clouds(path)
     _one_line(exc, str(path))
     with pytest.raises(InvalidInputError, match=r"empty\.h5: .*declares shape"):  # nothing else to plan
-        scan_inputs([tmp_path], point_sets=True)
+        scan_inputs([tmp_path], kinds=INPUT_KINDS)
 
 
 def test_planning_more_clouds_than_memory_holds_is_refused_naming_them(tmp_path, monkeypatch) -> None:

@@ -35,7 +35,7 @@ from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere, view
 from zbuf_occlude.io.atomic import write_csv
 from zbuf_occlude.io.clouds import FORMATS
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
-from zbuf_occlude.mesh.input_kinds import plan_nouns
+from zbuf_occlude.mesh.inputs.kinds import plan_nouns
 from zbuf_occlude.resources import check_memory, estimate_job_memory
 from zbuf_occlude.visibility.metrics import agreement
 from zbuf_occlude.visibility.registry import (
@@ -116,7 +116,7 @@ def _check_validate_memory(points: int, resolution: int) -> None:
 
 def cmd_validate(args: argparse.Namespace) -> int:
     from zbuf_occlude.geometry.sampling import sample_surface
-    from zbuf_occlude.mesh.discovery import scan_meshes
+    from zbuf_occlude.mesh.inputs.discovery import scan_meshes
     from zbuf_occlude.mesh.load import load_mesh  # trimesh (and scipy): imported by the commands that load meshes
 
     # the counts, --seed and --views were checked when the command line was parsed (cli.options)
@@ -221,7 +221,7 @@ def build_parser() -> argparse.ArgumentParser:
     from zbuf_occlude.cli.farm import (
         CLASS_FROM, CLASS_FROM_HELP, NOT_FOR_POINT_SETS, POINT_SETS_HELP, POINT_SETS_POINTS_WHY, RADIUS_HELP, UP_HELP, VIEWS_HELP,
     )  # fmt: skip
-    from zbuf_occlude.mesh.input_kinds import DEFAULT_POINT_SET_POINTS
+    from zbuf_occlude.mesh.inputs.kinds import DEFAULT_POINT_SET_POINTS
     from zbuf_occlude.defaults import DEFAULT_FARM_DENSE_POINTS, DEFAULT_FARM_RESOLUTION
     from zbuf_occlude.defaults import DEFAULT_FARM_VIEWS as FARM_VIEWS
     from zbuf_occlude.farm.config import GENERATE_DEFAULTS as gd  # generate's defaults, taken from zbuf_occlude.defaults

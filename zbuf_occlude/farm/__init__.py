@@ -30,7 +30,7 @@ Modules: ``inputs`` (discovering objects, shards), ``config`` (parameters, const
 journal paths), ``checks`` (up-front checks), ``worker`` (one object), ``journal`` (records,
 manifest, card, summary), ``lock``, ``lifecycle``, ``run`` (executors, :func:`run_farm`,
 :func:`merge_farm`), ``generate``, ``shards`` (``--shard I/N``).  The objects it renders come
-from :mod:`zbuf_occlude.mesh.inputs`; its commands are in :mod:`zbuf_occlude.cli.farm`.
+from :mod:`zbuf_occlude.mesh.inputs.plan`; its commands are in :mod:`zbuf_occlude.cli.farm`.
 """
 
 # Each name is imported from its module when first used (the imports are in __init__.pyi):

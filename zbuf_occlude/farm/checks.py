@@ -18,9 +18,9 @@ from zbuf_occlude.dataset.storage import ObjectSize, StorageKind, storage_kind
 from zbuf_occlude.defaults import DEFAULT_METHOD
 from zbuf_occlude.errors import BackendUnavailable, CameraError, InvalidInputError
 from zbuf_occlude.farm.config import OPTION_NAMES, FarmParams
-from zbuf_occlude.mesh.discovery import printable_path
-from zbuf_occlude.mesh.inputs import FarmObject
-from zbuf_occlude.mesh.input_kinds import POINT_SET, POINT_SET_METHOD, plan_kind
+from zbuf_occlude.mesh.inputs.names import printable_path
+from zbuf_occlude.mesh.inputs.plan import FarmObject
+from zbuf_occlude.mesh.inputs.kinds import POINT_SET, POINT_SET_METHOD, plan_kind
 from zbuf_occlude.geometry.cameras import camera_on_sphere
 from zbuf_occlude.io.owned import make_folder
 from zbuf_occlude.resources import check_memory, estimate_job_memory
@@ -179,18 +179,18 @@ def check_before_work(params: FarmParams, out: str | os.PathLike, *, gl: bool = 
 def check_point_set_options(
     objects: Sequence[FarmObject], params: FarmParams, defaults: FarmParams | None = None, set_params: frozenset[str] | None = None
 ) -> FarmParams:
-    """Refuse options that cannot apply to the objects' input kinds (:mod:`zbuf_occlude.mesh.input_kinds`),
+    """Refuse options that cannot apply to the objects' input kinds (:mod:`zbuf_occlude.mesh.inputs.kinds`),
     before any work; the parameters the plan runs with.
 
-    A point-set input is seen from its points alone, by :data:`~zbuf_occlude.mesh.input_kinds.POINT_SET_METHOD`:
+    A point-set input is seen from its points alone, by :data:`~zbuf_occlude.mesh.inputs.kinds.POINT_SET_METHOD`:
     ``--method`` may be left at its default (which then picks per input: the points' method for
     clouds, ``auto``'s for meshes) or name that method, which then decides the meshes too.  Any
     other method decides from a mesh, which a point set has not; ``farm --sensor`` scans meshes.
     Where every object is of one kind, the options its kind does not use
-    (:attr:`~zbuf_occlude.mesh.input_kinds.InputKind.unused_params`: ``--dense-points``,
+    (:attr:`~zbuf_occlude.mesh.inputs.kinds.InputKind.unused_params`: ``--dense-points``,
     ``--density``, ``--resolution`` for point sets) are refused when set, the method recorded is
     the kind's (``point-splat``), and ``--points`` left unset takes the kind's default
-    (:attr:`~zbuf_occlude.mesh.input_kinds.InputKind.default_points`).
+    (:attr:`~zbuf_occlude.mesh.inputs.kinds.InputKind.default_points`).
 
     Parameters
     ----------
@@ -207,7 +207,7 @@ def check_point_set_options(
     Raises
     ------
     InvalidInputError
-        ``--method`` other than the default or :data:`~zbuf_occlude.mesh.input_kinds.POINT_SET_METHOD`,
+        ``--method`` other than the default or :data:`~zbuf_occlude.mesh.inputs.kinds.POINT_SET_METHOD`,
         or ``--sensor``, with point-set inputs (naming the value and one of the files); an
         option the plan's one kind does not use, set (naming it).
     """

@@ -34,8 +34,9 @@ from zbuf_occlude.io.atomic import file_sha256, write_text
 from zbuf_occlude.io.clouds import concat_h5
 from zbuf_occlude.io.owned import delete_own_files
 from zbuf_occlude.io.safe_paths import path_inside
-from zbuf_occlude.mesh.discovery import SPLITS
-from zbuf_occlude.mesh.inputs import FarmObject, scan_inputs
+from zbuf_occlude.mesh.inputs.names import SPLITS
+from zbuf_occlude.mesh.inputs.kinds import INPUT_KINDS
+from zbuf_occlude.mesh.inputs.plan import FarmObject, scan_inputs
 
 __all__ = ["generate"]
 
@@ -142,7 +143,7 @@ def generate(
     if kind.written_by != "generate":
         raise InvalidInputError(f"generate writes one of {storages('generate')}, not {params.storage!r}")
     check_out_outside_inputs(out, paths)
-    scan = scan_inputs(paths, class_from=class_from, point_sets=True)
+    scan = scan_inputs(paths, class_from=class_from, kinds=INPUT_KINDS)
     objects, skipped = scan.objects, scan.skipped
     out = Path(out)
     options = RunOptions(

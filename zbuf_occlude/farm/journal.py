@@ -35,8 +35,8 @@ from zbuf_occlude.io.json_files import loads_json, read_json_file
 from zbuf_occlude.io.owned import check_layout, delete_own_files, remove_dead_temps
 from zbuf_occlude.io.regular_files import MAX_METADATA_BYTES, read_text_file
 from zbuf_occlude.io.safe_paths import check_line_text, check_relative_name, path_inside
-from zbuf_occlude.mesh.discovery import SPLITS, printable_path
-from zbuf_occlude.mesh.inputs import FarmObject
+from zbuf_occlude.mesh.inputs.names import SPLITS, printable_path
+from zbuf_occlude.mesh.inputs.plan import FarmObject
 
 log = logging.getLogger(__name__)
 
@@ -187,7 +187,7 @@ def root_relative(path: str | os.PathLike, root: Path) -> str:
     path : str or PathLike
         A mesh, folder or list-file line; relative paths are taken from the working folder.
         Bytes that are not UTF-8 may be raw or already printable (``\\xNN``,
-        :func:`~zbuf_occlude.mesh.discovery.printable_path`): both give the same text.
+        :func:`~zbuf_occlude.mesh.inputs.discovery.printable_path`): both give the same text.
     root : Path
         The input root, absolute.
 
@@ -266,7 +266,7 @@ def portable_command(argv: str | Sequence[str], *, out: Path, root: Path | None 
 def plan_doc(objects: Sequence[FarmObject], params: FarmParams, source: str, layout: str | None = None) -> dict[str, Any]:
     """The plan of a run (``plan.json``); class names that would break ``shape_names.txt`` are refused here, before any work.
 
-    ``layout`` says how classes and splits were found (zbuf_occlude.mesh.layouts), for the card.
+    ``layout`` says how classes and splits were found (zbuf_occlude.mesh.inputs.layouts), for the card.
     """
     shape_names_of(objects)
     return {
@@ -434,7 +434,7 @@ def point_set_card(objects: Sequence[FarmObject], ok: Sequence[dict[str, Any]]) 
     says the same of it (``visibility``, ``visibility_from``, ``normals``).
     """
     from zbuf_occlude.defaults import DEFAULT_POINT_NEIGHBOURS, DEFAULT_SPLAT_SCALE, DEFAULT_SPLAT_TOLERANCE
-    from zbuf_occlude.mesh.input_kinds import POINT_SET
+    from zbuf_occlude.mesh.inputs.kinds import POINT_SET
     from zbuf_occlude.pipeline import NO_FACE
 
     n_clouds = sum(o.kind is POINT_SET for o in objects)

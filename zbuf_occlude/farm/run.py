@@ -64,7 +64,8 @@ from zbuf_occlude.farm.worker import package_version, process_object, write_json
 from zbuf_occlude.io.atomic import write_text
 from zbuf_occlude.io.copies import copy_regular_file
 from zbuf_occlude.io.safe_paths import path_inside
-from zbuf_occlude.mesh.inputs import FarmObject, scan_objects
+from zbuf_occlude.mesh.inputs.kinds import INPUT_KINDS
+from zbuf_occlude.mesh.inputs.plan import FarmObject, scan_objects
 
 log = logging.getLogger(__name__)
 
@@ -198,7 +199,7 @@ def run_farm(
     check_before_work(params, out, gl=not (scheduler or dask_local), workers=None if scheduler else dask_local or workers)
     if isinstance(source, (str, os.PathLike)):
         scan = scan_objects(
-            source, classes=o.classes, per_class=o.per_class, splits=o.splits, class_from=o.class_from, point_sets=True
+            source, classes=o.classes, per_class=o.per_class, splits=o.splits, class_from=o.class_from, kinds=INPUT_KINDS
         )  # fmt: skip
         objects, skipped = scan.objects, [*skipped, *((s.path, s.reason) for s in scan.skipped)]
         layout, inputs = scan.layout, [source]

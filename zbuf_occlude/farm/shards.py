@@ -6,7 +6,7 @@ import re
 from collections.abc import Sequence
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.mesh.inputs import FarmObject
+from zbuf_occlude.mesh.inputs.plan import FarmObject
 
 __all__ = ["parse_shard", "select_shard"]
 

@@ -24,8 +24,8 @@ from zbuf_occlude.dataset.storage import SensorCrops, ShardTarget, StorageKind, 
 from zbuf_occlude.farm.config import COMPACT_GZIP_LEVEL, FATAL_ERRORS, GL_LOCK, FarmParams, record_path, shard_path
 from zbuf_occlude.geometry.samples import ObjectProvenance
 from zbuf_occlude.io.atomic import file_sha256, write_text
-from zbuf_occlude.mesh.input_kinds import MESH, POINT_SET
-from zbuf_occlude.mesh.inputs import FarmObject
+from zbuf_occlude.mesh.inputs.kinds import MESH, POINT_SET
+from zbuf_occlude.mesh.inputs.plan import FarmObject
 from zbuf_occlude.pipeline import POINT_SET_METHOD, CameraSphere, PoseResult, dense_cloud, occlude_point_set, occlude_poses
 
 log = logging.getLogger(__name__)
@@ -169,7 +169,7 @@ def _write_poses(
     }
 
 
-#: How the farm sees an object of each input kind (:mod:`zbuf_occlude.mesh.input_kinds`).
+#: How the farm sees an object of each input kind (:mod:`zbuf_occlude.mesh.inputs.kinds`).
 _OCCLUDERS = {MESH: _occlude_mesh, POINT_SET: _occlude_points}
 
 #: How the farm makes the input of each kind (:attr:`~zbuf_occlude.dataset.storage.StorageKind.made_from`).

@@ -13,7 +13,7 @@ Point sets (clouds without a mesh: PointNet-layout HDF5, ``.npy``, ``.ply`` poin
 :mod:`zbuf_occlude.io.point_sets`) take the same path, with visibility decided from the points
 alone (:func:`zbuf_occlude.visibility.point_splats.point_surfels`, once per object and kept up
 to :data:`PREPARED_CACHE_BYTES` per process, and its ``visible`` per view) and every sample a subset of the cloud; the data set reads them as the
-farm does (:func:`zbuf_occlude.mesh.point_inputs.load_cloud`).
+farm does (:func:`zbuf_occlude.mesh.inputs.point_sets.load_cloud`).
 
 Determinism: sample ``index`` of epoch ``epoch`` uses the generator ``(seed, 3, epoch, index)``
 (:func:`zbuf_occlude.geometry.samples.derive_rng`), whatever the worker, the order or the batch size.
@@ -61,9 +61,10 @@ from zbuf_occlude.geometry.samples import derive_rng, draw_sample
 from zbuf_occlude.io.point_sets import POINT_SET_SUFFIXES, PointSet
 from zbuf_occlude.learn import require_torch
 from zbuf_occlude.learn.data import normalize_batch
-from zbuf_occlude.mesh.inputs import FarmObject, scan_inputs
+from zbuf_occlude.mesh.inputs.kinds import INPUT_KINDS, POINT_SET
+from zbuf_occlude.mesh.inputs.plan import FarmObject, scan_inputs
+from zbuf_occlude.mesh.inputs.point_sets import cloud_frame, load_cloud
 from zbuf_occlude.mesh.load import load_mesh
-from zbuf_occlude.mesh.point_inputs import cloud_frame, load_cloud
 from zbuf_occlude.mesh.scene import UP_AXES, UP_CHOICES
 from zbuf_occlude.pipeline import DenseCloud, dense_cloud
 from zbuf_occlude.resources import BYTES_PER_DENSE_POINT, check_memory
@@ -389,7 +390,7 @@ class RandomOcclusion:
             No ``index``, a mesh without its dense cloud or a point set with one, an ``index``
             or ``epoch`` that is not a whole number >= 0, an unknown ``up`` axis, or bad points
             (:func:`~zbuf_occlude.visibility.point_splats.point_surfels`, or a cloud that
-            cannot be normalised: :func:`~zbuf_occlude.mesh.point_inputs.cloud_frame`).
+            cannot be normalised: :func:`~zbuf_occlude.mesh.inputs.point_sets.cloud_frame`).
         ArgumentTypeError
             A wrong kind: a dense cloud that is not a :class:`~zbuf_occlude.pipeline.DenseCloud`
             beside a mesh that is not a ``trimesh.Trimesh``, text where points or an index go,
@@ -459,7 +460,7 @@ class OnTheFlyOccludedDataset(require_torch().utils.data.Dataset):
         :mod:`zbuf_occlude.io.point_sets`) and folders of them, found, named, labelled and split
         as ``generate`` and the farm do (:func:`zbuf_occlude.mesh.inputs.scan_inputs`; each
         cloud of a point-set file is one object, labelled by the file's labels and class list
-        where it has them, else by its folders: :mod:`zbuf_occlude.mesh.point_inputs`).
+        where it has them, else by its folders: :mod:`zbuf_occlude.mesh.inputs.point_sets`).
     split : str, optional
         Keep the objects of this split (``train``/``test`` from ModelNet's layout, or from
         PointNet's ``train_files.txt``/``test_files.txt``).
@@ -469,7 +470,7 @@ class OnTheFlyOccludedDataset(require_torch().utils.data.Dataset):
         Dense cloud per mesh (:func:`zbuf_occlude.pipeline.dense_cloud`, the farm's seed
         stream, so the same points the farm would use with ``--seed``).  A point set's dense
         cloud is its own points, read as the farm reads them
-        (:func:`zbuf_occlude.mesh.point_inputs.load_cloud`: up axis turned to +z, bounding box
+        (:func:`zbuf_occlude.mesh.inputs.point_sets.load_cloud`: up axis turned to +z, bounding box
         centred, largest side 1), and its samples are rows of them.
     views_per_object : int
         Samples per object and epoch (the data set's length is objects × this).
@@ -516,7 +517,7 @@ class OnTheFlyOccludedDataset(require_torch().utils.data.Dataset):
         dense_points = _whole(dense_points, "dense_points", low=1, high=MAX_POINTS)
         check_memory(dense_points * BYTES_PER_DENSE_POINT, option=f"dense_points={dense_points:,}", hint="lower dense_points")
         self.occlusion = RandomOcclusion(n_points, poses=poses, seed=seed, method=method, normalize=normalize)
-        scan = scan_inputs(list(roots), point_sets=True)
+        scan = scan_inputs(list(roots), kinds=INPUT_KINDS)
         refused = [s for s in scan.skipped if Path(s.path).suffix.lower() in POINT_SET_SUFFIXES]
         if refused:  # generate and the farm record them and exit 1; a training set would silently lack them
             raise InvalidInputError(str(refused[0]) + (f" (and {len(refused) - 1} more point-set files)" if len(refused) > 1 else ""))
@@ -570,7 +571,7 @@ class OnTheFlyOccludedDataset(require_torch().utils.data.Dataset):
         if not 0 <= index < len(self):
             raise IndexError(f"index {index} out of range for {len(self)} samples")
         obj = self.objects[index // self.views_per_object]
-        if obj.is_point_set:
+        if obj.kind is POINT_SET:
             out = self.occlusion(self._point_set(obj), None, index, key=obj.index, epoch=epoch)
             out.update(label=obj.label, name=obj.name)
             return out
@@ -587,7 +588,7 @@ class OnTheFlyOccludedDataset(require_torch().utils.data.Dataset):
         return torch.from_numpy(s["points"]), s["label"]
 
     def __repr__(self) -> str:
-        clouds = sum(o.is_point_set for o in self.objects)
+        clouds = sum(o.kind is POINT_SET for o in self.objects)
         method = self.occlusion.method if not clouds else "point-splat" if clouds == len(self.objects) else f"{self.occlusion.method} and point-splat"
         return f"OnTheFlyOccludedDataset({len(self.objects)} objects, {len(self)} samples/epoch, {method})"
 

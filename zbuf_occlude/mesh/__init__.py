@@ -2,9 +2,9 @@
 
 :mod:`.load` (:func:`load_mesh`, :func:`normalize_mesh`), :mod:`.formats` (the table of formats,
 suffix → reader and checks, a module per format family), :mod:`.scene` (glTF/COLLADA scenes: units,
-up axes), :mod:`.discovery` (mesh files of a folder, names, splits), :mod:`.layouts` (ModelNet,
-ShapeNetCore and other trees → labels), :mod:`.inputs` (the numbered objects of a data set),
-:mod:`.sizes` (real object sizes per class), :mod:`.cache` (per-mesh caches of the renderers).
+up axes), :mod:`.inputs` (the input files of a run, meshes and point sets: their kinds, discovery,
+layouts → labels, the numbered objects of a data set), :mod:`.sizes` (real object sizes per class),
+:mod:`.cache` (per-mesh caches of the renderers).
 trimesh and pycollada do the parsing; each name is imported from its module when first used, so
 ``import zbuf_occlude.mesh`` loads no trimesh.
 """
@@ -17,9 +17,9 @@ __getattr__, __dir__, __all__ = _lazy.attach(
         "load": ["load_mesh", "normalize_mesh", "clean_mesh", "degenerate_faces",
                  "DEGENERATE_AREA_RTOL", "MAX_ABS_COORDINATE", "METADATA_KEY"],
         "formats": ["SUPPORTED_EXTENSIONS", "EXTENSIONS_TEXT"],
-        "discovery": ["find_meshes", "scan_meshes", "walk_mesh_files", "MeshScan", "SkippedInput", "printable_path",
-                      "non_utf8_reason", "class_and_split", "name_set", "SPLITS", "DEFAULT_SPLIT"],
-        "inputs": ["FarmObject", "ObjectScan", "scan_inputs", "scan_paths", "objects_from_paths", "discover_objects"],
+        "inputs.discovery": ["find_meshes", "scan_meshes", "walk_mesh_files", "MeshScan", "SkippedInput", "non_utf8_reason"],
+        "inputs.names": ["printable_path", "class_and_split", "name_set", "SPLITS", "DEFAULT_SPLIT"],
+        "inputs.plan": ["FarmObject", "ObjectScan", "scan_inputs", "scan_paths", "objects_from_paths", "discover_objects"],
         "scene": ["UP_CHOICES", "resolve_up", "up_rotation"],
     },
 )  # fmt: skip

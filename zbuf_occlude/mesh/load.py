@@ -26,7 +26,7 @@ Provenance is stored on every mesh this module returns, in
     unit the format declares (glTF, COLLADA), and that size in metres.
 
 Files cut short are errors, not partial meshes (:mod:`zbuf_occlude.mesh.formats`).
-The discovery of mesh files lives in :mod:`zbuf_occlude.mesh.discovery`; its names are
+The discovery of mesh files lives in :mod:`zbuf_occlude.mesh.inputs.discovery`; its names are
 re-exported here (``find_meshes``, ``scan_meshes``, ``class_and_split``, ...).
 
 ModelNet quirks handled (all verified on real files with trimesh 5.2): the malformed

@@ -31,7 +31,7 @@ from zbuf_occlude.io.atomic import atomic_h5, temp_h5
 from zbuf_occlude.io.hdf5 import declared_nbytes, open_hdf5
 from zbuf_occlude.io.json_files import read_json_file
 from zbuf_occlude.io.owned import OwnedFolder
-from zbuf_occlude.mesh.inputs import FarmObject, scan_paths
+from zbuf_occlude.mesh.inputs.plan import FarmObject, scan_paths
 from zbuf_occlude.resources import check_memory
 
 if TYPE_CHECKING:

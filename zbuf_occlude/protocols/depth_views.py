@@ -29,7 +29,7 @@ from zbuf_occlude.defaults import DEFAULT_N_POINTS
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.cameras import camera_on_sphere, view_schedule
 from zbuf_occlude.geometry.sampling import sample_surface
-from zbuf_occlude.mesh.inputs import FarmObject
+from zbuf_occlude.mesh.inputs.plan import FarmObject
 from zbuf_occlude.protocols.base import Protocol, ProtocolOptions
 from zbuf_occlude.protocols.depth import DOWNSAMPLERS, PinholeView, back_project, downsample, render_depth_image
 

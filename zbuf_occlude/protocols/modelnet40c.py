@@ -51,7 +51,7 @@ from zbuf_occlude.errors import DatasetFormatError, InvalidInputError
 from zbuf_occlude.io.encodings import npy_bytes
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.io.regular_files import read_regular_file
-from zbuf_occlude.mesh.inputs import FarmObject
+from zbuf_occlude.mesh.inputs.plan import FarmObject
 from zbuf_occlude.protocols.base import Protocol, ProtocolOptions, read_arrays_h5
 from zbuf_occlude.protocols.depth import PinholeView, back_project, render_depth_image
 from zbuf_occlude.resources import check_memory

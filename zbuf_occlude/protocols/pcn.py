@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.sampling import sample_surface
-from zbuf_occlude.mesh.inputs import FarmObject
+from zbuf_occlude.mesh.inputs.plan import FarmObject
 from zbuf_occlude.protocols.base import Protocol, ProtocolOptions
 from zbuf_occlude.protocols.depth import PinholeView, render_depth_image
 

@@ -23,7 +23,7 @@ from zbuf_occlude.experiments.compare.config import CompareConfig
 from zbuf_occlude.experiments.compare.results import RESULT_FIELDS
 from zbuf_occlude.geometry.cameras import camera_on_sphere
 from zbuf_occlude.geometry.sampling import sample_surface
-from zbuf_occlude.mesh.discovery import find_meshes
+from zbuf_occlude.mesh.inputs.discovery import find_meshes
 from zbuf_occlude.visibility import available_methods, visible_mask
 from zbuf_occlude.visibility.metrics import agreement
 from zbuf_occlude.visibility.registry import method_info

@@ -70,7 +70,7 @@ def find_class_meshes(root: str | os.PathLike, *, up: str = "auto", up_map: dict
     MeshLoadError
         A mesh that cannot be loaded (named).
     """
-    from zbuf_occlude.mesh.discovery import walk_mesh_files
+    from zbuf_occlude.mesh.inputs.discovery import walk_mesh_files
     from zbuf_occlude.mesh.load import load_mesh
 
     root = Path(root)

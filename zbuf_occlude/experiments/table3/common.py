@@ -110,7 +110,7 @@ def plan_meshes(root: str | os.PathLike, classes: Sequence[str] | None = None) -
     InvalidInputError
         Nothing found, or an unknown class.
     """
-    from zbuf_occlude.mesh.inputs import discover_objects
+    from zbuf_occlude.mesh.inputs.plan import discover_objects
 
     objs = discover_objects(root, classes=list(classes) if classes else None)
     by_path = {Path(o.source).resolve(): o for o in objs}

@@ -21,7 +21,7 @@ Every file goes through the same steps, in this order (:func:`read_trimesh`):
 
 The first step that fails ends the load with a :class:`~zbuf_occlude.errors.MeshLoadError`
 naming the file.  Discovery checks step 2 once per format before any file is read
-(:func:`zbuf_occlude.mesh.discovery.check_readers_installed`), and reports the files of
+(:func:`zbuf_occlude.mesh.inputs.discovery.check_readers_installed`), and reports the files of
 :data:`UNREAD_FORMATS`, 3D formats that no entry reads, instead of passing over them.
 """
 

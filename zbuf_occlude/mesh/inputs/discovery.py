@@ -1,4 +1,4 @@
-"""Finding mesh files: folders searched recursively, names, ModelNet's class and split.
+"""Finding input files: folders searched recursively, and what had to be skipped.
 
 Nothing is lost silently: a folder that cannot be read, a file whose path is not valid
 UTF-8 and a file of a 3D format that is not read (``.fbx``, ``.blend``, ...:
@@ -7,12 +7,14 @@ logged as warnings) and returned by :func:`scan_meshes`, so that a run can say s
 non-zero.  Files that sit beside meshes (a glTF's buffers and textures, an OBJ's materials,
 notes) are no 3D format and are passed over.  A format whose optional package is missing is
 refused once, when its files are found, before any work (:func:`check_readers_installed`).
-The farm's discovery (:mod:`zbuf_occlude.mesh.inputs`) walks with :func:`walk_mesh_files` too.
+The farm's discovery (:mod:`zbuf_occlude.mesh.inputs.plan`) walks with :func:`walk_mesh_files` too.
 
-``generate`` and ``farm`` also take point-set files (``point_sets=True``): ``.npy``, HDF5 files
-(``.h5``, ``.hdf5``) that hold a PointNet-layout ``data`` dataset, and ``.ply`` files with
-vertices and no faces (:func:`is_point_set_input`; :mod:`zbuf_occlude.mesh.point_inputs` makes
-their objects).  An HDF5 file of another layout is no point set and is passed over, as notes are.
+Each function looks for the input kinds it is given (``kinds``, :mod:`zbuf_occlude.mesh.inputs.kinds`;
+meshes unless told): ``generate`` and ``farm`` ask for point-set files too
+(:data:`~zbuf_occlude.mesh.inputs.kinds.INPUT_KINDS`): ``.npy``, HDF5 files (``.h5``, ``.hdf5``)
+that hold a PointNet-layout ``data`` dataset, and ``.ply`` files with vertices and no faces
+(:mod:`zbuf_occlude.mesh.inputs.point_sets` makes their objects).  An HDF5 file of another layout
+is no point set and is passed over, as notes are.
 """
 
 from __future__ import annotations
@@ -20,7 +22,6 @@ from __future__ import annotations
 import errno
 import logging
 import os
-import re
 import stat
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -31,27 +32,22 @@ from typing import NamedTuple
 from zbuf_occlude._version import install_hint
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT, FORMATS, SUPPORTED_EXTENSIONS, UNREAD_FORMATS, missing_package
+from zbuf_occlude.mesh.inputs.kinds import MESH, InputKind, kinds_text
+from zbuf_occlude.mesh.inputs.names import printable_path
 
 __all__ = [
     "SkippedInput",
     "MeshScan",
-    "printable_path",
     "non_utf8_reason",
     "unusable_entry_reason",
     "unread_format_reason",
-    "check_mesh_extension",
-    "is_point_set_input",
+    "check_input_file",
     "check_readers_installed",
     "collect_inputs",
-    "no_meshes_error",
-    "input_kinds_text",
+    "no_inputs_error",
     "walk_mesh_files",
     "scan_meshes",
     "find_meshes",
-    "SPLITS",
-    "DEFAULT_SPLIT",
-    "class_and_split",
-    "name_set",
 ]
 
 log = logging.getLogger(__name__)
@@ -83,11 +79,6 @@ class MeshScan(NamedTuple):
     meshes: list[tuple[Path, str]]
     #: Unreadable folders and files with names that are not UTF-8, in the order met.
     skipped: list[SkippedInput]
-
-
-def printable_path(path: str | PathLike[str]) -> str:
-    """``path`` as valid text: undecodable bytes of a file name become ``\\xNN``."""
-    return os.fsencode(path).decode("utf-8", "backslashreplace")
 
 
 def non_utf8_reason(path: str | PathLike[str]) -> str | None:
@@ -148,9 +139,9 @@ def _file_kind(mode: int) -> str:
 
 
 def walk_mesh_files(
-    root: str | PathLike[str], *, skip_hidden: bool = False, point_sets: bool = False
+    root: str | PathLike[str], *, skip_hidden: bool = False, kinds: Sequence[InputKind] = (MESH,)
 ) -> tuple[list[Path], list[SkippedInput]]:
-    """Mesh files under a folder, recursively, and the inputs that had to be skipped.
+    """Mesh files (the files of ``kinds``) under a folder, recursively, and the inputs that had to be skipped.
 
     Like ``Path(root).rglob("*")`` (symbolic links to folders are not followed) but a
     folder that cannot be listed (permissions, I/O error), a dangling symbolic link, a
@@ -167,15 +158,16 @@ def walk_mesh_files(
     skip_hidden : bool
         Leave out files and folders whose name starts with ``.`` (not searched, not
         reported).
-    point_sets : bool
-        Also find point-set files (:func:`is_point_set_input`: ``.npy``, PointNet-layout
-        HDF5); a FIFO or device with such a name is reported as a mesh-named one is.
+    kinds : sequence of InputKind
+        The kinds of file to find (:mod:`zbuf_occlude.mesh.inputs.kinds`): a file named by one of
+        them (its ``suffixes``) that it ``finds``; a FIFO or device with such a name is reported
+        as a mesh-named one is.
 
     Returns
     -------
     files : list of Path
-        Regular files (or links to them) with an extension of :data:`SUPPORTED_EXTENSIONS`
-        (any case), and with ``point_sets`` the point-set files, sorted.
+        Regular files (or links to them) of ``kinds`` (a mesh: an extension of
+        :data:`SUPPORTED_EXTENSIONS`, any case), sorted.
     skipped : list of SkippedInput
         Folders that could not be read, broken links, non-regular mesh-named entries, files
         with non-UTF-8 paths and files of 3D formats not read; each is also logged as a warning.
@@ -199,20 +191,18 @@ def walk_mesh_files(
             if problem:
                 skipped.append(SkippedInput(printable_path(path), problem))
                 continue
-            extra = point_sets and _point_set_suffix(path)
-            if extra and not _is_regular(path):
-                skipped.append(SkippedInput(printable_path(path), "not a regular file; never opened"))
+            named = [k for k in kinds if path.suffix.lower() in k.suffixes]
+            if not path.is_file():  # (a regular file, or a link to one)
+                if named:
+                    skipped.append(SkippedInput(printable_path(path), "not a regular file; never opened"))
                 continue
-            if not path.is_file():
-                continue
-            if extra:
-                if not is_point_set_input(path):
-                    continue  # an HDF5 file of another layout: no 3D format, passed over
-            elif path.suffix.lower() not in SUPPORTED_EXTENSIONS:
+            if not named:
                 problem = unread_format_reason(path)
                 if problem:
                     skipped.append(SkippedInput(printable_path(path), problem))
                 continue
+            if not any(k.finds(path) for k in named):
+                continue  # an HDF5 file of another layout: no 3D format, passed over
             problem = non_utf8_reason(path)
             if problem:
                 skipped.append(SkippedInput(printable_path(path), problem))
@@ -242,7 +232,7 @@ def scan_meshes(paths: Sequence[str | PathLike[str]]) -> MeshScan:
     ------
     InvalidInputError
         A path does not exist, a file given is not a mesh by its extension
-        (:func:`check_mesh_extension`), or no mesh was found (the message lists what was
+        (:func:`check_input_file`), or no mesh was found (the message lists what was
         skipped).
     BackendUnavailable
         A format found needs an optional package that is not installed
@@ -256,20 +246,20 @@ def scan_meshes(paths: Sequence[str | PathLike[str]]) -> MeshScan:
         else:
             found.extend((f, f.relative_to(path).with_suffix("").as_posix()) for f in files)
     if not found:
-        raise no_meshes_error(paths, skipped)
+        raise no_inputs_error(paths, skipped)
     check_readers_installed(f for f, _ in found)
     return MeshScan(found, skipped)
 
 
 def collect_inputs(
-    paths: Sequence[str | PathLike[str]], *, skip_hidden: bool = False, point_sets: bool = False
+    paths: Sequence[str | PathLike[str]], *, skip_hidden: bool = False, kinds: Sequence[InputKind] = (MESH,)
 ) -> tuple[list[tuple[Path, list[Path] | None]], list[SkippedInput]]:
     """The paths given, each a folder with its mesh files or a mesh file, and what was skipped.
 
     Parameters
     ----------
-    point_sets : bool
-        Take point-set files too (:func:`is_point_set_input`), in folders and given by name.
+    kinds : sequence of InputKind
+        The kinds of file taken (:func:`walk_mesh_files`), in folders and given by name.
 
     Returns
     -------
@@ -282,19 +272,18 @@ def collect_inputs(
     ------
     InvalidInputError
         A path does not exist, is no regular file or folder, or a file given is not a
-        mesh by its extension (:func:`check_mesh_extension`) nor, with ``point_sets``, a
-        point-set file.
+        file of ``kinds`` (:func:`check_input_file`).
     """
     inputs: list[tuple[Path, list[Path] | None]] = []
     skipped: list[SkippedInput] = []
     for raw in paths:
         path = Path(raw)
         if path.is_dir():
-            files, missed = walk_mesh_files(path, skip_hidden=skip_hidden, point_sets=point_sets)
+            files, missed = walk_mesh_files(path, skip_hidden=skip_hidden, kinds=kinds)
             skipped.extend(missed)
             inputs.append((path, files))
         elif path.is_file():
-            check_mesh_extension(path, point_sets=point_sets)
+            check_input_file(path, kinds)
             problem = non_utf8_reason(path)
             if problem:
                 skipped.append(SkippedInput(printable_path(path), problem))
@@ -307,86 +296,38 @@ def collect_inputs(
     return inputs, skipped
 
 
-def no_meshes_error(
-    paths: Sequence[str | PathLike[str]], skipped: Sequence[SkippedInput], *, point_sets: bool = False
+def no_inputs_error(
+    paths: Sequence[str | PathLike[str]], skipped: Sequence[SkippedInput], kinds: Sequence[InputKind] = (MESH,)
 ) -> InvalidInputError:
-    """The error of a search that found no mesh (with ``point_sets``: nor point-set file) under
-    ``paths`` (naming what was skipped)."""
+    """The error of a search that found no file of ``kinds`` under ``paths`` (naming what was skipped)."""
     where = ", ".join(printable_path(p) for p in paths)
     missed = f"; skipped {len(skipped)}: " + "; ".join(map(str, skipped[:3])) if skipped else ""
-    return InvalidInputError(f"no {input_kinds_text(point_sets)} under {where}{missed}")
+    return InvalidInputError(f"no {kinds_text(kinds)} under {where}{missed}")
 
 
-def input_kinds_text(point_sets: bool = False) -> str:
-    """``"mesh files (.off, ...)"``, and with ``point_sets`` the point-set files too, for messages."""
-    meshes = f"mesh files ({', '.join(SUPPORTED_EXTENSIONS)})"
-    return f"{meshes} or point-set files ({', '.join(_point_set_suffixes())})" if point_sets else meshes
-
-
-def check_mesh_extension(path: str | PathLike[str], *, point_sets: bool = False) -> None:
-    """Refuse a file given by name that is no mesh by its extension (``notes.txt``, ``car.fbx``).
-
-    Parameters
-    ----------
-    point_sets : bool
-        Also accept a point-set file (:func:`is_point_set_input`).
+def check_input_file(path: str | PathLike[str], kinds: Sequence[InputKind] = (MESH,)) -> None:
+    """Refuse a file given by name that is of none of ``kinds`` (``notes.txt``, ``car.fbx``, an HDF5
+    file of another layout).
 
     Raises
     ------
     InvalidInputError
-        The extension is not one of :data:`SUPPORTED_EXTENSIONS` (nor, with ``point_sets``, a
-        point-set file's); the message names the file (and the format, for a 3D format that
-        is not read: :func:`unread_format_reason`; what is missing, for an HDF5 file that
-        holds no PointNet-layout ``data``).
+        No kind names its extension (a mesh's: :data:`SUPPORTED_EXTENSIONS`), or none that does
+        finds it (:attr:`~zbuf_occlude.mesh.inputs.kinds.InputKind.refusal` says why); the
+        message names the file (and the format, for a 3D format that is not read:
+        :func:`unread_format_reason`).
     """
-    if point_sets and _point_set_suffix(path):
-        if not is_point_set_input(path):
-            raise InvalidInputError(
-                f"{printable_path(path)} is not a point-set file: an HDF5 point-set file holds a dataset 'data' of "
-                "shape (clouds, points, 3), PointNet's layout"
-            )
+    named = [k for k in kinds if Path(path).suffix.lower() in k.suffixes]
+    if named:
+        if not any(k.finds(path) for k in named):
+            raise InvalidInputError(f"{printable_path(path)} {named[0].refusal}")
         return
     unread = unread_format_reason(path)
     if unread:
         raise InvalidInputError(f"{printable_path(path)}: {unread}")
-    if Path(path).suffix.lower() not in SUPPORTED_EXTENSIONS:
-        raise InvalidInputError(
-            f"{printable_path(path)} is not a mesh file: its extension is not one of {', '.join(SUPPORTED_EXTENSIONS)}"
-        )
-
-
-def _point_set_suffixes() -> tuple[str, ...]:
-    from zbuf_occlude.io.point_sets import POINT_SET_SUFFIXES
-
-    return tuple(POINT_SET_SUFFIXES)
-
-
-def _point_set_suffix(path: str | PathLike[str]) -> bool:
-    """A point-set file's extension that no mesh format shares (``.npy``, ``.h5``, ``.hdf5``;
-    a ``.ply`` is found as a mesh file and told apart by :func:`is_point_set_input`)."""
-    suffix = Path(path).suffix.lower()
-    return suffix not in SUPPORTED_EXTENSIONS and suffix in _point_set_suffixes()
-
-
-def _is_regular(path: Path) -> bool:
-    try:
-        return stat.S_ISREG(os.stat(path).st_mode)
-    except OSError:
-        return False
-
-
-def is_point_set_input(path: str | PathLike[str]) -> bool:
-    """Whether ``generate`` and ``farm`` take the regular file ``path`` as a point-set file.
-
-    ``.npy``; HDF5 (``.h5``, ``.hdf5``) with a PointNet-layout ``data`` dataset; ``.ply`` with
-    vertices and no faces (:func:`zbuf_occlude.io.point_sets.is_point_set_file`; a PLY with
-    faces is a mesh).  Only the head of a file is read.
-    """
-    if Path(path).suffix.lower() not in _point_set_suffixes() or not _is_regular(Path(path)):
-        return False
-    from zbuf_occlude.io.point_sets import is_point_set_file
-
-    return bool(is_point_set_file(path))
+    raise InvalidInputError(
+        f"{printable_path(path)} is not a mesh file: its extension is not one of {', '.join(SUPPORTED_EXTENSIONS)}"
+    )
 
 
 def check_readers_installed(files: Iterable[str | PathLike[str]]) -> None:
@@ -431,34 +372,3 @@ def find_meshes(paths: Sequence[str | PathLike[str]]) -> list[tuple[Path, str]]:
         A path does not exist, or nothing was found.
     """
     return scan_meshes(paths).meshes
-
-
-#: ModelNet's split folders.
-SPLITS = ("train", "test")
-#: Split of a mesh whose path names none (flat folder, list file without a split column).
-DEFAULT_SPLIT = "train"
-
-
-def class_and_split(path: str | Path) -> tuple[str, str]:
-    """Class and split of a mesh from its path, ModelNet's layout.
-
-    ``.../<class>/<split>/<name>.off`` (split ``train`` or ``test``), else
-    ``.../<class>/<name>.off`` (split :data:`DEFAULT_SPLIT`), else, for a bare file name
-    ``<class>_<NNNN>.off`` (a flat folder), the name without its number.
-    """
-    path = Path(path)
-    parent = path.parent
-    if parent.name in SPLITS and parent.parent.name:
-        return parent.parent.name, parent.name
-    if parent.name:
-        return parent.name, DEFAULT_SPLIT
-    return re.sub(r"_\d+$", "", path.stem) or path.stem, DEFAULT_SPLIT
-
-
-def name_set(spec: str | Iterable[str] | None) -> set[str] | None:
-    """Names from a comma-separated string or a sequence (``None`` stays ``None``)."""
-    if spec is None:
-        return None
-    if isinstance(spec, str):
-        return {s.strip() for s in spec.split(",") if s.strip()}
-    return {str(s) for s in spec}

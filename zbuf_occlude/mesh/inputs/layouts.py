@@ -54,27 +54,17 @@ from typing import NamedTuple
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.json_files import read_json_file
-from zbuf_occlude.mesh.discovery import (
-    DEFAULT_SPLIT,
-    SPLITS,
-    SkippedInput,
-    check_readers_installed,
-    class_and_split,
-    collect_inputs,
-    no_meshes_error,
-    printable_path,
-)
+from zbuf_occlude.mesh.inputs.names import DEFAULT_SPLIT, SPLITS, class_and_split, printable_path
 
 __all__ = [
     "LAYOUTS",
     "CONTAINER_NAMES",
     "TAXONOMY_FILE",
     "LabelledMesh",
-    "LabelledScan",
     "read_taxonomy",
     "label_tree",
     "label_file",
-    "scan_labelled",
+    "check_class_from",
     "layout_text",
     "shapenet_path",
 ]
@@ -115,15 +105,6 @@ class LabelledMesh(NamedTuple):
     path: Path
     class_name: str
     split: str
-
-
-class LabelledScan(NamedTuple):
-    """What :func:`scan_labelled` found."""
-
-    meshes: list[LabelledMesh]
-    skipped: list[SkippedInput]
-    #: The layout used (one of :data:`LAYOUTS`; several, comma-separated, for several paths).
-    layout: str
 
 
 def layout_text(layouts: Sequence[str]) -> str:
@@ -203,7 +184,8 @@ def _class_from_level(path: Path, level: int) -> tuple[str, str]:
     return parents[level - 1].name, split
 
 
-def _check_class_from(class_from: int | None) -> None:
+def check_class_from(class_from: int | None) -> None:
+    """Refuse a ``class_from`` that is no folder level (an integer >= 1): :class:`~zbuf_occlude.errors.InvalidInputError`."""
     if class_from is not None and (isinstance(class_from, bool) or not isinstance(class_from, int) or class_from < 1):
         raise InvalidInputError(f"--class-from must be an integer >= 1 (1: the folder holding each file), got {class_from!r}")
 
@@ -284,7 +266,7 @@ def label_tree(root: str | PathLike[str], files: Sequence[Path], *, class_from: 
     root : str or PathLike
         The folder given (names are relative to it, POSIX, without suffix).
     files : sequence of Path
-        Mesh files under ``root`` (:func:`~zbuf_occlude.mesh.discovery.walk_mesh_files`).
+        Mesh files under ``root`` (:func:`~zbuf_occlude.mesh.inputs.discovery.walk_mesh_files`).
     class_from : int, optional
         Take the class from this folder level above each file (1: the folder holding it).
 
@@ -301,7 +283,7 @@ def label_tree(root: str | PathLike[str], files: Sequence[Path], *, class_from: 
         ``class_from`` below 1 or above the file system's root; labels refused by the
         checks of the module docstring; ``taxonomy.json`` unreadable.
     """
-    _check_class_from(class_from)
+    check_class_from(class_from)
     root = Path(root).absolute()
     paths = [Path(f).absolute() for f in files]
 
@@ -334,14 +316,14 @@ def label_file(path: str | PathLike[str], *, class_from: int | None = None) -> t
     """Name (the stem), class and split of one mesh file given by name (layout ``files``).
 
     The class comes from the folders above it: ShapeNetCore's synset id for its file
-    names, else :func:`~zbuf_occlude.mesh.discovery.class_and_split`; or from ``class_from``.
+    names, else :func:`~zbuf_occlude.mesh.inputs.discovery.class_and_split`; or from ``class_from``.
 
     Raises
     ------
     InvalidInputError
         The class would be a container name (``models``...) and no ``class_from`` is given.
     """
-    _check_class_from(class_from)
+    check_class_from(class_from)
     p = Path(path).absolute()
     if class_from is not None:
         return f"class-from:{class_from}", LabelledMesh(p.stem, p, *_class_from_level(p, class_from))
@@ -352,41 +334,3 @@ def label_file(path: str | PathLike[str], *, class_from: int | None = None) -> t
         mesh = LabelledMesh(p.stem, p, *class_and_split(p))
     _check_labels(printable_path(p), "files", [mesh])
     return "files", mesh
-
-
-def scan_labelled(
-    paths: Sequence[str | PathLike[str]], *, class_from: int | None = None, skip_hidden: bool = False
-) -> LabelledScan:
-    """Mesh files and folders, each labelled by its layout, and what had to be skipped.
-
-    Folders are searched recursively (:func:`~zbuf_occlude.mesh.discovery.walk_mesh_files`) and
-    labelled by :func:`label_tree`; files given by name by :func:`label_file`.
-
-    Raises
-    ------
-    InvalidInputError
-        A path is missing or not a mesh file, nothing was found (the message lists what
-        was skipped), or labels are refused (:func:`label_tree`).
-    BackendUnavailable
-        A format found needs an optional package that is not installed
-        (:func:`~zbuf_occlude.mesh.discovery.check_readers_installed`).
-    """
-    _check_class_from(class_from)
-    inputs, skipped = collect_inputs(paths, skip_hidden=skip_hidden)
-    meshes: list[LabelledMesh] = []
-    layouts: list[str] = []
-    for path, files in inputs:
-        if files is None:
-            layout, mesh = label_file(path, class_from=class_from)
-            found = [mesh]
-        elif files:
-            layout, found = label_tree(path, files, class_from=class_from)
-        else:
-            continue
-        layouts.append(layout)
-        meshes.extend(found)
-    if not meshes:
-        raise no_meshes_error(paths, skipped)
-    check_readers_installed(m.path for m in meshes)
-    return LabelledScan(meshes, skipped, layout_text(layouts))
-

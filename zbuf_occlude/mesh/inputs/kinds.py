@@ -4,14 +4,16 @@
   read and normalised by :func:`~zbuf_occlude.mesh.load.load_mesh` (``up="auto"``: per layout and
   format, :mod:`zbuf_occlude.mesh.scene`); its visibility by the run's ``method``; topped up.
 * **point set** (:data:`POINT_SET`): ``.npy``, PointNet-layout HDF5 and ``.ply`` without faces
-  (:func:`~zbuf_occlude.mesh.discovery.is_point_set_input`), one object per cloud, read and
-  normalised by :func:`~zbuf_occlude.mesh.point_inputs.load_cloud` (``up="auto"``: per layout,
+  (:func:`is_point_set_input`), one object per cloud (:func:`~zbuf_occlude.mesh.inputs.point_sets.point_set_clouds`),
+  read and normalised by :func:`~zbuf_occlude.mesh.inputs.point_sets.load_cloud` (``up="auto"``: per layout,
   :func:`~zbuf_occlude.io.point_sets.stored_up`: PointNet's HDF5 +y); its visibility from the
   points alone (:data:`POINT_SET_METHOD`, which the card records); ``dense_points``, ``density``
   and ``resolution`` change nothing for it and are refused; never topped up (no faces).
 
-A plan's object says its kind (:attr:`~zbuf_occlude.mesh.inputs.FarmObject.kind`); the farm asks
-the kind, never tests for one by name.
+Discovery (:mod:`zbuf_occlude.mesh.inputs.discovery`) takes the kinds a caller asks for
+(``kinds=(MESH,)``, or :data:`INPUT_KINDS` for both) and asks each file's kind of them
+(:func:`kind_of`).  A plan's object says its kind (:attr:`~zbuf_occlude.mesh.inputs.plan.FarmObject.kind`);
+the farm asks the kind, never tests for one by name.
 """
 
 from __future__ import annotations
@@ -22,11 +24,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from zbuf_occlude.io.point_sets import POINT_SET_SUFFIXES, is_point_set_file
 from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS
 
 __all__ = [
     "InputKind", "MESH", "POINT_SET", "INPUT_KINDS", "POINT_SET_METHOD", "DEFAULT_POINT_SET_POINTS", "POINT_SET_VISIBLE_SHARE",
-    "POINT_SET_VISIBLE_SHARE_P5", "plan_kind", "plan_nouns",
+    "POINT_SET_VISIBLE_SHARE_P5", "kind_of", "kinds_text", "is_point_set_input", "plan_kind", "plan_nouns",
 ]  # fmt: skip
 
 #: The visibility method of point-set inputs: the z-buffer test over surfel splats
@@ -41,19 +44,31 @@ def _read_mesh(path: str | os.PathLike, cloud: int | None, *, up: str) -> Any:
 
 
 def _read_cloud(path: str | os.PathLike, cloud: int | None, *, up: str) -> Any:
-    from zbuf_occlude.mesh.point_inputs import load_cloud
+    from zbuf_occlude.mesh.inputs.point_sets import load_cloud
 
     return load_cloud(path, int(cloud or 0), up=up)
+
+
+def _clouds(path: str | os.PathLike) -> list:
+    from zbuf_occlude.mesh.inputs.point_sets import point_set_clouds  # numpy and the memory checks: when a file is planned
+
+    return point_set_clouds(path)
 
 
 def _is_mesh_file(path: str | os.PathLike) -> bool:
     return Path(path).suffix.lower() in SUPPORTED_EXTENSIONS
 
 
-def _is_point_set_file(path: str | os.PathLike) -> bool:
-    from zbuf_occlude.mesh.discovery import is_point_set_input
+def is_point_set_input(path: str | os.PathLike) -> bool:
+    """Whether ``generate`` and ``farm`` take the regular file ``path`` as a point-set file.
 
-    return is_point_set_input(path)
+    ``.npy``; HDF5 (``.h5``, ``.hdf5``) with a PointNet-layout ``data`` dataset; ``.ply`` with
+    vertices and no faces (:func:`zbuf_occlude.io.point_sets.is_point_set_file`; a PLY with
+    faces is a mesh).  Only the head of a file is read.
+    """
+    if Path(path).suffix.lower() not in POINT_SET_SUFFIXES or not Path(path).is_file():  # a regular file (or a link to one)
+        return False
+    return bool(is_point_set_file(path))
 
 
 @dataclass(frozen=True)
@@ -87,7 +102,7 @@ class InputKind:
     read : callable
         ``read(path, cloud, *, up) -> object``: the file (or its cloud ``cloud``) read and
         normalised (largest side 1, bounding-box centre at 0, +z up): a ``trimesh.Trimesh``
-        or a :class:`~zbuf_occlude.mesh.point_inputs.LoadedCloud`.
+        or a :class:`~zbuf_occlude.mesh.inputs.point_sets.LoadedCloud`.
     """
 
     name: str
@@ -99,8 +114,12 @@ class InputKind:
     topped_up: bool
     default_points: int | None
     visible_share: float | None
+    suffixes: tuple[str, ...]
+    files: str
     finds: Callable[[str | os.PathLike], bool]
+    refusal: str
     read: Callable[..., Any]
+    objects: Callable[[str | os.PathLike], list] | None
 
 
 #: The share of a point set's points that one pose of ``grid25`` sees by
@@ -115,13 +134,34 @@ POINT_SET_VISIBLE_SHARE = 0.356
 #: repeated (512 pads 11 % of the poses, 1024 84 %).
 DEFAULT_POINT_SET_POINTS = 256
 
-MESH = InputKind("mesh", "mesh", "meshes", None, (), True, True, None, None, _is_mesh_file, _read_mesh)
+MESH = InputKind(
+    "mesh", "mesh", "meshes", None, (), True, True, None, None, tuple(SUPPORTED_EXTENSIONS),
+    f"mesh files ({', '.join(SUPPORTED_EXTENSIONS)})", _is_mesh_file, "", _read_mesh, None,
+)  # fmt: skip
 POINT_SET = InputKind(
     "point set", "cloud", "clouds", POINT_SET_METHOD, ("dense_points", "density", "resolution"), False, False,
-    DEFAULT_POINT_SET_POINTS, POINT_SET_VISIBLE_SHARE, _is_point_set_file, _read_cloud,
+    DEFAULT_POINT_SET_POINTS, POINT_SET_VISIBLE_SHARE, POINT_SET_SUFFIXES,
+    f"point-set files ({', '.join(POINT_SET_SUFFIXES)})", is_point_set_input,
+    "is not a point-set file: an HDF5 point-set file holds a dataset 'data' of shape (clouds, points, 3), PointNet's layout",
+    _read_cloud, _clouds,
 )  # fmt: skip
-#: Every input kind, in the order discovery asks them.
+#: Every input kind: ``kinds=INPUT_KINDS`` asks discovery for all of them.
 INPUT_KINDS = (MESH, POINT_SET)
+#: The order a file is asked its kind (:func:`kind_of`): a ``.ply`` is named by both, and is a
+#: point set where it has no faces, else a mesh.
+_ASKED = (POINT_SET, MESH)
+
+
+def kind_of(path: str | os.PathLike, kinds: Sequence[InputKind] = (MESH,)) -> InputKind | None:
+    """The kind of ``path`` among ``kinds``: the first, point set before mesh, whose ``suffixes``
+    hold its extension and that ``finds`` it (reading its head at most); None: none."""
+    suffix = Path(path).suffix.lower()
+    return next((k for k in _ASKED if k in kinds and suffix in k.suffixes and k.finds(path)), None)
+
+
+def kinds_text(kinds: Sequence[InputKind] = (MESH,)) -> str:
+    """``"mesh files (.off, ...) or point-set files (.h5, ...)"``: the files of ``kinds``, for messages."""
+    return " or ".join(k.files for k in kinds)
 
 
 def plan_kind(objects: Iterable[Any]) -> InputKind | None:

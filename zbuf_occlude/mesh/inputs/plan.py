@@ -1,7 +1,8 @@
 """The objects of a data set: the meshes of a tree, a flat folder or a list file, numbered and labelled.
 
-``generate`` and ``farm`` also plan point-set files (``point_sets=True``): each cloud of one is
-an object, named, labelled and split as :mod:`zbuf_occlude.mesh.point_inputs` says.
+Each function plans the input kinds it is given (``kinds``, :mod:`zbuf_occlude.mesh.inputs.kinds`;
+meshes unless told): ``generate`` and ``farm`` plan point-set files too, each cloud of one an
+object, named, labelled and split as :mod:`zbuf_occlude.mesh.inputs.point_sets` says.
 """
 
 from __future__ import annotations
@@ -18,25 +19,20 @@ from typing import NamedTuple
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.samples import object_key
 from zbuf_occlude.io.regular_files import MAX_LIST_BYTES, read_regular_file
-from zbuf_occlude.mesh.discovery import (
-    DEFAULT_SPLIT,
-    SPLITS,
+from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS
+from zbuf_occlude.mesh.inputs.discovery import (
     SkippedInput,
     check_readers_installed,
     collect_inputs,
-    input_kinds_text,
-    is_point_set_input,
-    name_set,
-    no_meshes_error,
+    no_inputs_error,
     non_utf8_reason,
-    printable_path,
     unusable_entry_reason,
     walk_mesh_files,
 )
-from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS
-from zbuf_occlude.mesh.input_kinds import MESH, POINT_SET, InputKind
-from zbuf_occlude.mesh.layouts import label_file, label_tree, layout_text, scan_labelled
-from zbuf_occlude.mesh.point_inputs import POINT_SET_LAYOUT, CloudEntry, point_set_clouds, pointnet_split
+from zbuf_occlude.mesh.inputs.kinds import MESH, POINT_SET, InputKind, kind_of, kinds_text
+from zbuf_occlude.mesh.inputs.layouts import check_class_from, label_file, label_tree, layout_text
+from zbuf_occlude.mesh.inputs.names import DEFAULT_SPLIT, SPLITS, name_set, printable_path
+from zbuf_occlude.mesh.inputs.point_sets import POINT_SET_LAYOUT, CloudEntry, pointnet_split
 
 __all__ = [
     "FarmObject", "ObjectScan", "discover_objects", "scan_objects", "scan_inputs", "number_objects",
@@ -79,14 +75,9 @@ class FarmObject:
 
     @property
     def kind(self) -> InputKind:
-        """Its input kind (:mod:`zbuf_occlude.mesh.input_kinds`): :data:`~zbuf_occlude.mesh.input_kinds.POINT_SET`
-        for a cloud of a point-set file, else :data:`~zbuf_occlude.mesh.input_kinds.MESH`."""
+        """Its input kind (:mod:`zbuf_occlude.mesh.inputs.kinds`): :data:`~zbuf_occlude.mesh.inputs.kinds.POINT_SET`
+        for a cloud of a point-set file, else :data:`~zbuf_occlude.mesh.inputs.kinds.MESH`."""
         return MESH if self.cloud is None else POINT_SET
-
-    @property
-    def is_point_set(self) -> bool:
-        """The object is a cloud of a point-set file (its :attr:`kind` is :data:`~zbuf_occlude.mesh.input_kinds.POINT_SET`)."""
-        return self.kind is POINT_SET
 
     @property
     def key(self) -> int:
@@ -104,23 +95,20 @@ def _natural_key(text: str) -> list:
 Row = tuple  # (str, str, str, str) or (str, str, str, str, int)
 
 
-def _scan_tree(root: Path, class_from: int | None, point_sets: bool = False) -> tuple[list[Row], list[SkippedInput], str]:
+def _scan_tree(root: Path, class_from: int | None, kinds: Sequence[InputKind]) -> tuple[list[Row], list[SkippedInput], str]:
     # Hidden folders and temporary files are left out, not reported.
-    files, skipped = walk_mesh_files(root, skip_hidden=True, point_sets=point_sets)
+    files, skipped = walk_mesh_files(root, skip_hidden=True, kinds=kinds)
     if not files:
         return [], skipped, ""
-    if point_sets:
-        rows, layouts = _label_with_point_sets(root, files, class_from, skipped)
-        return rows, skipped, layout_text(layouts)
-    layout, meshes = label_tree(root, files, class_from=class_from)
-    return [(m.name, str(m.path), m.class_name, m.split) for m in meshes], skipped, layout
+    rows, layouts = _label_files(root, files, class_from, skipped, kinds)
+    return rows, skipped, layout_text(layouts)
 
 
-def _clouds_or_skip(path: Path, skipped: list[SkippedInput]) -> list[CloudEntry] | None:
-    """The clouds of a point-set file, or None after recording why it cannot be read (it is
-    skipped like an unreadable folder: the run records it and exits 1)."""
+def _clouds_or_skip(path: Path, kind: InputKind, skipped: list[SkippedInput]) -> list[CloudEntry] | None:
+    """The clouds of a point-set file (``kind.objects``), or None after recording why it cannot be
+    read (it is skipped like an unreadable folder: the run records it and exits 1)."""
     try:
-        return point_set_clouds(path)
+        return kind.objects(path)
     except InvalidInputError as exc:
         reason = str(exc)
         for prefix in (f"{path}: ", f"{printable_path(path)}: "):
@@ -145,16 +133,16 @@ def _split_of(rel: Path, path: Path, split: str) -> str:
     return pointnet_split(path) or split
 
 
-def _label_with_point_sets(
-    root: Path | None, files: Sequence[Path], class_from: int | None, skipped: list[SkippedInput]
+def _label_files(
+    root: Path | None, files: Sequence[Path], class_from: int | None, skipped: list[SkippedInput], kinds: Sequence[InputKind]
 ) -> tuple[list[Row], list[str]]:
-    """Rows and layouts of mesh and point-set ``files`` found under the folder ``root`` (None: one
+    """Rows and layouts of the ``files`` of ``kinds`` found under the folder ``root`` (None: one
     file given by name).
 
     Meshes and point-set files without labels are labelled together by their layout
-    (:func:`~zbuf_occlude.mesh.layouts.label_tree`, :func:`~zbuf_occlude.mesh.layouts.label_file`);
+    (:func:`~zbuf_occlude.mesh.inputs.layouts.label_tree`, :func:`~zbuf_occlude.mesh.inputs.layouts.label_file`);
     point-set files with labels name their clouds' classes themselves (layout
-    :data:`~zbuf_occlude.mesh.point_inputs.POINT_SET_LAYOUT`), so no folder check applies to them.
+    :data:`~zbuf_occlude.mesh.inputs.point_sets.POINT_SET_LAYOUT`), so no folder check applies to them.
     Point-set files that cannot be read are added to ``skipped``.
     """
     clouds: dict[Path, list[CloudEntry]] = {}
@@ -162,10 +150,11 @@ def _label_with_point_sets(
     labelled: list[Path] = []
     for f in files:
         f = Path(f).absolute()
-        if not is_point_set_input(f):
+        kind = kind_of(f, kinds)
+        if kind is None or kind.objects is None:  # one object per file
             by_layout.append(f)
             continue
-        entries = _clouds_or_skip(f, skipped)
+        entries = _clouds_or_skip(f, kind, skipped)
         if entries is None:
             continue
         clouds[f] = entries
@@ -204,7 +193,7 @@ def _not_regular(path: Path) -> str | None:
     return None if stat.S_ISREG(st.st_mode) else unusable_entry_reason(path) or "not a regular file; never opened"
 
 
-def _read_list_file(list_file: Path, point_sets: bool = False) -> tuple[list[Row], list[SkippedInput]]:
+def _read_list_file(list_file: Path, kinds: Sequence[InputKind]) -> tuple[list[Row], list[SkippedInput]]:
     found, skipped = [], []
     base = list_file.parent
     # a regular file (a FIFO would block) of at most MAX_LIST_BYTES; named on the command line, so no folder holds it
@@ -236,8 +225,9 @@ def _read_list_file(list_file: Path, point_sets: bool = False) -> tuple[list[Row
             skipped.append(SkippedInput(printable_path(source), problem))
             log.warning("skipped %s", skipped[-1])
             continue
-        if point_sets and is_point_set_input(source):
-            clouds = _clouds_or_skip(source, skipped)
+        kind = kind_of(source, kinds)
+        if kind is not None and kind.objects is not None:
+            clouds = _clouds_or_skip(source, kind, skipped)
             if clouds is not None:
                 found += _cloud_rows(name, source, label, split, clouds)
             continue
@@ -254,7 +244,7 @@ class ObjectScan(NamedTuple):
     #: formats not read, undecodable list lines: not in the plan.  A run that must not lose inputs silently exits
     #: non-zero when not empty.
     skipped: list[SkippedInput]
-    #: How names, classes and splits were found (:data:`~zbuf_occlude.mesh.layouts.LAYOUTS`).
+    #: How names, classes and splits were found (:data:`~zbuf_occlude.mesh.inputs.layouts.LAYOUTS`).
     layout: str = ""
 
 
@@ -278,7 +268,7 @@ def scan_objects(
     per_class: int | None = None,
     splits: Sequence[str] | str = SPLITS,
     class_from: int | None = None,
-    point_sets: bool = False,
+    kinds: Sequence[InputKind] = (MESH,),
 ) -> ObjectScan:
     """The farm's plan: meshes under ``source``, filtered, labelled and numbered, and the
     inputs that had to be skipped.
@@ -286,7 +276,7 @@ def scan_objects(
     Parameters
     ----------
     source : str or PathLike
-        A folder in one of the layouts of :mod:`zbuf_occlude.mesh.layouts` (ModelNet
+        A folder in one of the layouts of :mod:`zbuf_occlude.mesh.inputs.layouts` (ModelNet
         ``ROOT/<class>/<split>/<name>.off``, ShapeNetCore v1/v2 with ``taxonomy.json``,
         class folders ``ROOT/<class>/<name>.off``, a flat folder ``ROOT/<class>_<NNNN>.off``),
         or a list file with one ``PATH LABEL [SPLIT]`` per line (paths relative to the list
@@ -303,10 +293,12 @@ def scan_objects(
     class_from : int, optional
         A folder: take each mesh's class from this folder level above it (1: the folder
         holding it) instead of the detected layout (``--class-from``).
-    point_sets : bool
-        Also plan point-set files (``.npy``, PointNet-layout HDF5, ``.ply`` without faces;
-        :mod:`zbuf_occlude.mesh.point_inputs`): one object per cloud, whose ``cloud`` is its row.
-        A point-set file that cannot be read is skipped (``skipped``), as an unreadable folder is.
+    kinds : sequence of InputKind
+        The kinds of input planned (:mod:`zbuf_occlude.mesh.inputs.kinds`; meshes unless told).
+        :data:`~zbuf_occlude.mesh.inputs.kinds.INPUT_KINDS` plans point-set files too (``.npy``,
+        PointNet-layout HDF5, ``.ply`` without faces; :mod:`zbuf_occlude.mesh.inputs.point_sets`):
+        one object per cloud, whose ``cloud`` is its row.  A point-set file that cannot be read is
+        skipped (``skipped``), as an unreadable folder is.
 
     Returns
     -------
@@ -314,25 +306,26 @@ def scan_objects(
         ``objects``: sorted by name; ``index`` is the position, ``label`` the position of
         the class in the sorted (natural order) list of kept classes.  ``skipped``:
         folders that could not be read, files whose path is not UTF-8 and list lines
-        that are not UTF-8 (:class:`~zbuf_occlude.mesh.discovery.SkippedInput`, each logged as a
+        that are not UTF-8 (:class:`~zbuf_occlude.mesh.inputs.discovery.SkippedInput`, each logged as a
         warning), whatever the class filter.  ``layout``: the layout used.
 
     Raises
     ------
     InvalidInputError
         ``source`` missing, nothing found, labels refused by the layout checks
-        (:mod:`zbuf_occlude.mesh.layouts`), ``class_from`` with a list file, a list file larger
+        (:mod:`zbuf_occlude.mesh.inputs.layouts`), ``class_from`` with a list file, a list file larger
         than :data:`~zbuf_occlude.io.regular_files.MAX_LIST_BYTES`, an unknown class, or
         ``per_class < 1``.
     BackendUnavailable
         A format of the meshes kept needs an optional package that is not installed
-        (:func:`~zbuf_occlude.mesh.discovery.check_readers_installed`).
+        (:func:`~zbuf_occlude.mesh.inputs.discovery.check_readers_installed`).
     """
     source = Path(source).absolute()  # the manifest's source paths must not depend on the working folder
     if source.is_dir():
-        found, skipped, layout = _scan_tree(source, class_from, point_sets)
+        found, skipped, layout = _scan_tree(source, class_from, kinds)
     elif source.is_file():
-        if point_sets and is_point_set_input(source):
+        kind = kind_of(source, kinds)
+        if kind is not None and kind.objects is not None:
             raise InvalidInputError(
                 f"{printable_path(source)} is a point-set file; farm takes a folder or a list file: give the folder "
                 f"holding it ({printable_path(source.parent)}), or run: zbuf-occlude generate {printable_path(source)}"
@@ -344,12 +337,12 @@ def scan_objects(
             )
         if class_from is not None:
             raise InvalidInputError(f"--class-from applies to folders; the list file {printable_path(source)} names each class")
-        (found, skipped), layout = _read_list_file(source, point_sets), "list-file"
+        (found, skipped), layout = _read_list_file(source, kinds), "list-file"
     else:
         raise InvalidInputError(f"no such mesh folder or list file: {printable_path(source)}")
     if not found:
         missed = f"; skipped {len(skipped)}: " + "; ".join(map(str, skipped[:3])) if skipped else ""
-        raise InvalidInputError(f"no {input_kinds_text(point_sets)} under {printable_path(source)}{missed}")
+        raise InvalidInputError(f"no {kinds_text(kinds)} under {printable_path(source)}{missed}")
     if classes is not None:
         wanted = name_set(classes)
         unknown = wanted - {f[2] for f in found}
@@ -378,37 +371,36 @@ def scan_objects(
 
 
 def scan_inputs(
-    paths: Sequence[str | os.PathLike], *, class_from: int | None = None, point_sets: bool = False
+    paths: Sequence[str | os.PathLike], *, class_from: int | None = None, kinds: Sequence[InputKind] = (MESH,)
 ) -> ObjectScan:
-    """The plan of ``generate``: mesh files and folders (searched recursively), labelled by
-    their layout (:func:`~zbuf_occlude.mesh.layouts.scan_labelled`) and numbered
-    (:func:`number_objects`), and the inputs that had to be skipped.
+    """The plan of ``generate``: the files of ``kinds`` given and under the folders given
+    (searched recursively), labelled by their layout (:mod:`~zbuf_occlude.mesh.inputs.layouts`: a
+    folder by :func:`~zbuf_occlude.mesh.inputs.layouts.label_tree`, a file by
+    :func:`~zbuf_occlude.mesh.inputs.layouts.label_file`) and numbered (:func:`number_objects`),
+    and the inputs that had to be skipped.
 
-    With ``point_sets``, point-set files too, in folders and given by name: one object per
-    cloud (:func:`scan_objects`; a file that cannot be read is skipped).
+    With :data:`~zbuf_occlude.mesh.inputs.kinds.INPUT_KINDS`, point-set files too: one object per
+    cloud (as :func:`scan_objects`; a file that cannot be read is skipped).
 
     Raises
     ------
     InvalidInputError
-        A path is missing or not a mesh file (nor, with ``point_sets``, a point-set file),
-        nothing was found, labels are refused by the layout checks, or two files have one name.
+        ``class_from`` is no folder level, a path is missing or of none of ``kinds``, nothing was
+        found, labels are refused by the layout checks, or two files have one name.
     BackendUnavailable
         A format found needs an optional package that is not installed.
     """
-    if not point_sets:
-        found = scan_labelled(paths, class_from=class_from)
-        objects = number_objects([(m.name, str(m.path), m.class_name, m.split) for m in found.meshes])
-        return ObjectScan(objects, found.skipped, found.layout)
-    inputs, skipped = collect_inputs(paths, point_sets=True)
+    check_class_from(class_from)
+    inputs, skipped = collect_inputs(paths, kinds=kinds)
     rows: list[Row] = []
     layouts: list[str] = []
     for path, files in inputs:
         if files is None or files:
-            found_rows, found_layouts = _label_with_point_sets(None if files is None else path, files or [path], class_from, skipped)
+            found_rows, found_layouts = _label_files(None if files is None else path, files or [path], class_from, skipped, kinds)
             rows += found_rows
             layouts += found_layouts
     if not rows:
-        raise no_meshes_error(paths, skipped, point_sets=True)
+        raise no_inputs_error(paths, skipped, kinds)
     check_readers_installed(r[1] for r in rows)
     return ObjectScan(number_objects(rows), skipped, layout_text(layouts))
 
@@ -457,7 +449,7 @@ def scan_paths(
 
     Each object's name is its path relative to the folder given (a file given alone: its
     stem; ShapeNetCore: ``SYNSET/MODEL_ID``), without the suffix; class and split come
-    from the folder's layout (:mod:`zbuf_occlude.mesh.layouts`, ``class_from``: the
+    from the folder's layout (:mod:`zbuf_occlude.mesh.inputs.layouts`, ``class_from``: the
     folder level that names the class); labels number the class names
     (:func:`~zbuf_occlude.mesh.inputs.number_objects`, as the farm does).
 
@@ -466,7 +458,7 @@ def scan_paths(
     objects : list of FarmObject
     skipped : list of SkippedInput
         Unreadable folders, broken links, files whose names are not UTF-8 and files of 3D
-        formats not read (:func:`~zbuf_occlude.mesh.discovery.walk_mesh_files`); the run
+        formats not read (:func:`~zbuf_occlude.mesh.inputs.discovery.walk_mesh_files`); the run
         records them and exits 1.
 
     Raises

@@ -8,7 +8,7 @@ with no faces) holds one cloud or many; each cloud is one object of the plan, as
 * **Class**: the file's own label of the cloud, named by the class list beside it
   (``shape_names.txt``, :func:`zbuf_occlude.io.point_sets.shape_names`); a label without a class
   list is its number as text (``"7"``), so that the file's labels are kept.  A file without
-  labels takes its class as a mesh would, from the folders (:mod:`zbuf_occlude.mesh.layouts`).
+  labels takes its class as a mesh would, from the folders (:mod:`zbuf_occlude.mesh.inputs.layouts`).
 * **Split**: a ``train``/``test`` folder as for meshes, or, for a file without one, PointNet's
   ``train_files.txt``/``test_files.txt`` beside it where they list its name
   (``modelnet40_ply_hdf5_2048``'s layout); else ``train``.
@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.regular_files import MAX_LIST_BYTES, read_text_file
-from zbuf_occlude.mesh.discovery import SPLITS, printable_path
+from zbuf_occlude.mesh.inputs.names import SPLITS, printable_path
 from zbuf_occlude.resources import check_memory
 
 __all__ = [
