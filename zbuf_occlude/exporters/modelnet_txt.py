@@ -35,7 +35,7 @@ from zbuf_occlude.exporters.source import Splits, open_dataset, sample_file
 from zbuf_occlude.exporters.text_table import fixed_point_table_bytes
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
 from zbuf_occlude.geometry.normals import estimate_normals
-from zbuf_occlude.io.owned import OwnedFolder
+from zbuf_occlude.io.owned import BatchWriter, OwnedFolder
 from zbuf_occlude.io.progress import progress
 from zbuf_occlude.resources import check_memory
 from zbuf_occlude.sensors.lidar import beam_directions
@@ -104,7 +104,8 @@ def write_modelnet_txt(
     counter: dict[str, int] = {}
     total = sum(len(ds) for ds in splits.values())
     with progress(total=total, desc="export modelnet-txt", unit="sample", enabled=show_progress) as bar, \
-            ThreadPoolExecutor(max_workers=threads, thread_name_prefix="modelnet-txt") as pool:  # fmt: skip
+            ThreadPoolExecutor(max_workers=threads, thread_name_prefix="modelnet-txt") as pool, \
+            folder.write_many() as batch:  # fmt: skip
         for split, ds in sorted(splits.items()):
             ids = {}
             radius = float(ds.card.get("params", {}).get("radius") or DEFAULT_RADIUS)
@@ -119,9 +120,10 @@ def write_modelnet_txt(
                     pending.append((f"{cls}/{sample_id}.txt", pool.submit(_sample_text, points, eye, up)))
                     ids[sample_id] = sample_file(meta)
                     while len(pending) > in_flight:
-                        _write_next(folder, pending, bar)
+                        _write_next(batch, pending, bar)
             while pending:
-                _write_next(folder, pending, bar)
+                _write_next(batch, pending, bar)
+            batch.flush()  # the split's files are named before its lists name them
             folder.write_text(f"{prefix}_{split}_id2file.json", json.dumps(ids, indent=0) + "\n")
             written.append(folder.write_text(f"{prefix}_{split}.txt", "".join(f"{i}\n" for i in ids)))
     return written
@@ -133,10 +135,10 @@ def _sample_text(points: np.ndarray, eye: np.ndarray, up: str) -> bytes:
     return fixed_point_table_bytes(table.reshape(-1, 6))
 
 
-def _write_next(folder: OwnedFolder, pending: deque, bar: object) -> None:
+def _write_next(batch: BatchWriter, pending: deque, bar: object) -> None:
     """Write the first of ``pending`` once its text is made (its error, if any, raised here)."""
     rel, text = pending.popleft()
-    folder.write_bytes(rel, text.result())
+    batch.write_bytes(rel, text.result())
     bar.update(1)
 
 

@@ -368,6 +368,8 @@ class OwnedFolder:
         self.option = option
         self._lock: Any = None
         self._ledger: dict[str, FileRecord] = {}
+        #: The files this run wrote (:meth:`write`, :meth:`write_many`), relative to ``root``.
+        self.this_run: set[str] = set()
 
     # -- holding ----------------------------------------------------------------------------
     def __enter__(self) -> OwnedFolder:
@@ -545,6 +547,7 @@ class OwnedFolder:
 
         with atomic_path(path, before_replace=record) as tmp:
             yield tmp
+        self.this_run.add(rel)
 
     @contextmanager
     def write_many(self, *, batch_files: int = BATCH_FILES) -> Iterator[BatchWriter]:
@@ -655,6 +658,7 @@ class BatchWriter:
         folders = {tmp.parent for tmp in self._temps}
         self._recorded = False
         self._stack.close()  # each file: fsync, _record (the batch's ledger lines, once), rename
+        self._folder.this_run.update(self._entries)
         self._entries, self._temps = {}, []
         for path in sorted(folders):
             _sync_file(path)
