@@ -895,7 +895,7 @@ def test_cli_skipped_inputs_exit_1_are_recorded_and_the_rest_is_done(
 
 
 def printable(path: str) -> str:
-    from zbuf_occlude.mesh.inputs.names import printable_path
+    from zbuf_occlude.mesh.paths import printable_path
 
     return printable_path(path)
 

@@ -393,7 +393,7 @@ def test_degenerate_area_tolerance_is_relative() -> None:
 
 
 def test_class_and_split_of_modelnet_layouts():
-    from zbuf_occlude.mesh.inputs.names import class_and_split
+    from zbuf_occlude.mesh.paths import class_and_split
 
     assert class_and_split("root/chair/train/chair_0001.off")[0] == "chair"
     assert class_and_split("root/chair/chair_0001.off")[0] == "chair"

@@ -32,7 +32,7 @@ from zbuf_occlude.farm.config import (
 )
 from zbuf_occlude.farm.shards import parse_shard
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
-from zbuf_occlude.mesh.inputs.names import SPLITS
+from zbuf_occlude.mesh.paths import SPLITS
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.mesh.inputs.kinds import DEFAULT_POINT_SET_POINTS, POINT_SET_METHOD, POINT_SET_VISIBLE_SHARE
 from zbuf_occlude.mesh.scene import UP_CHOICES

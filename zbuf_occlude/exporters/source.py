@@ -49,7 +49,7 @@ def open_dataset(source: Path, label_set_name: str) -> Splits:
         The first problem :func:`~zbuf_occlude.dataset.verify.verify_dataset` found, and how many more.
     """
     from zbuf_occlude.dataset.reader import OccludedDataset
-    from zbuf_occlude.mesh.inputs.names import SPLITS
+    from zbuf_occlude.mesh.paths import SPLITS
 
     whole = OccludedDataset(source)
     labels_set = label_set(label_set_name, whole.shape_names)

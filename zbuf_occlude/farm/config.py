@@ -32,7 +32,7 @@ from zbuf_occlude.defaults import DEFAULT_VIEWS as GENERATE_VIEWS
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError, OutputError
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, view_schedule
 from zbuf_occlude.geometry.sampling import check_seed
-from zbuf_occlude.mesh.inputs.names import SPLITS
+from zbuf_occlude.mesh.paths import SPLITS
 from zbuf_occlude.mesh.scene import UP_CHOICES
 from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
 from zbuf_occlude.sensors.placement import CropDistributions, check_across_sight_width

@@ -34,7 +34,7 @@ from zbuf_occlude.io.atomic import file_sha256, write_text
 from zbuf_occlude.io.clouds import concat_h5
 from zbuf_occlude.io.owned import delete_own_files
 from zbuf_occlude.io.safe_paths import path_inside
-from zbuf_occlude.mesh.inputs.names import SPLITS
+from zbuf_occlude.mesh.paths import SPLITS
 from zbuf_occlude.mesh.inputs.kinds import INPUT_KINDS
 from zbuf_occlude.mesh.inputs.plan import FarmObject, scan_inputs
 

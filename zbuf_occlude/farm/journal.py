@@ -35,7 +35,7 @@ from zbuf_occlude.io.json_files import loads_json, read_json_file
 from zbuf_occlude.io.owned import check_layout, delete_own_files, remove_dead_temps
 from zbuf_occlude.io.regular_files import MAX_METADATA_BYTES, read_text_file
 from zbuf_occlude.io.safe_paths import check_line_text, check_relative_name, path_inside
-from zbuf_occlude.mesh.inputs.names import SPLITS, printable_path
+from zbuf_occlude.mesh.paths import SPLITS, printable_path
 from zbuf_occlude.mesh.inputs.plan import FarmObject
 
 log = logging.getLogger(__name__)

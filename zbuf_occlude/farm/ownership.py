@@ -43,7 +43,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.farm.config import record_path, shard_path
 from zbuf_occlude.farm.journal import objects_of, read_json, read_plan
 from zbuf_occlude.io.owned import FileRecord, check_deletable, check_own_name, delete_checked, delete_own_files, remove_empty_folders
-from zbuf_occlude.mesh.inputs.names import SPLITS
+from zbuf_occlude.mesh.paths import SPLITS
 from zbuf_occlude.mesh.inputs.plan import FarmObject
 
 __all__ = ["check_inputs_outside_out", "check_no_foreign_files", "earlier_plan", "wipe_earlier_run", "written_names"]

@@ -3,8 +3,9 @@
 :mod:`.load` (:func:`load_mesh`, :func:`normalize_mesh`), :mod:`.formats` (the table of formats,
 suffix → reader and checks, a module per format family), :mod:`.scene` (glTF/COLLADA scenes: units,
 up axes), :mod:`.inputs` (the input files of a run, meshes and point sets: their kinds, discovery,
-layouts → labels, the numbered objects of a data set), :mod:`.sizes` (real object sizes per class),
-:mod:`.cache` (per-mesh caches of the renderers).
+layouts → labels, the numbered objects of a data set), :mod:`.paths` (what a path says: printable
+text, splits, class and split), :mod:`.sizes` (real object sizes per class), :mod:`.cache` (per-mesh
+caches of the renderers).
 trimesh and pycollada do the parsing; each name is imported from its module when first used, so
 ``import zbuf_occlude.mesh`` loads no trimesh.
 """
@@ -18,7 +19,7 @@ __getattr__, __dir__, __all__ = _lazy.attach(
                  "DEGENERATE_AREA_RTOL", "MAX_ABS_COORDINATE", "METADATA_KEY"],
         "formats": ["SUPPORTED_EXTENSIONS", "EXTENSIONS_TEXT"],
         "inputs.discovery": ["find_meshes", "scan_meshes", "walk_mesh_files", "MeshScan", "SkippedInput", "non_utf8_reason"],
-        "inputs.names": ["printable_path", "class_and_split", "name_set", "SPLITS", "DEFAULT_SPLIT"],
+        "paths": ["printable_path", "class_and_split", "name_set", "SPLITS", "DEFAULT_SPLIT"],
         "inputs.plan": ["FarmObject", "ObjectScan", "scan_inputs", "scan_paths", "objects_from_paths", "discover_objects"],
         "scene": ["UP_CHOICES", "resolve_up", "up_rotation"],
     },

@@ -22,7 +22,7 @@ Up axis, by format, when ``up="auto"``:
   **Y_UP when absent** (COLLADA 1.5 specification, *asset* element: "up_axis ... default
   Y_UP"); the unit is ``<unit meter="...">`` (default 1.0).
 * A file at a ShapeNetCore path (``SYNSET/MODEL_ID/models/model_normalized.obj``, v2, or
-  ``SYNSET/MODEL_ID/model.obj``, v1; :func:`zbuf_occlude.mesh.inputs.layouts.shapenet_path`):
+  ``SYNSET/MODEL_ID/model.obj``, v1; :func:`zbuf_occlude.mesh.paths.shapenet_path`):
   **+y**, ShapeNetCore's alignment (up ``(0, 1, 0)``, front ``(0, 0, -1)`` in v2), whatever
   wrote it.
 * Wavefront OBJ has no convention of its own; the exporter named in the file's first
@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError, MeshLoadError
 from zbuf_occlude.io.regular_files import open_regular_file
-from zbuf_occlude.mesh.inputs.layouts import shapenet_path
+from zbuf_occlude.mesh.paths import shapenet_path
 
 __all__ = ["UP_AXES", "UP_CHOICES", "resolve_up", "up_rotation", "declared_units_m", "collada_asset", "gltf_generator"]
 

@@ -33,7 +33,7 @@ from zbuf_occlude._version import install_hint
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT, FORMATS, SUPPORTED_EXTENSIONS, UNREAD_FORMATS, missing_package
 from zbuf_occlude.mesh.inputs.kinds import MESH, InputKind, kinds_text
-from zbuf_occlude.mesh.inputs.names import printable_path
+from zbuf_occlude.mesh.paths import printable_path
 
 __all__ = [
     "SkippedInput",

@@ -18,7 +18,7 @@ under it fits:
     object's name is ``SYNSET/MODEL_ID`` (a model id may appear in two synsets); split
     ``train``.  ShapeNetCore's models are **+y up** (its ``taxonomy``'s alignment: up
     ``(0, 1, 0)``), so a file at such a path is turned y → z unless told otherwise
-    (:func:`zbuf_occlude.mesh.scene.resolve_up`, :func:`shapenet_path`).
+    (:func:`zbuf_occlude.mesh.scene.resolve_up`, :func:`~zbuf_occlude.mesh.paths.shapenet_path`).
 ``modelnet``
     ``CLASS/SPLIT/NAME.ext`` with SPLIT ``train`` or ``test`` (ModelNet10/40).
 ``flat``
@@ -46,7 +46,6 @@ classes).  ``class_from=N`` takes the class from the N-th folder above each file
 from __future__ import annotations
 
 import logging
-import re
 from collections.abc import Sequence
 from os import PathLike
 from pathlib import Path
@@ -54,7 +53,7 @@ from typing import NamedTuple
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.json_files import read_json_file
-from zbuf_occlude.mesh.inputs.names import DEFAULT_SPLIT, SPLITS, class_and_split, printable_path
+from zbuf_occlude.mesh.paths import DEFAULT_SPLIT, SPLITS, class_and_split, printable_path, shapenet_path
 
 __all__ = [
     "LAYOUTS",
@@ -66,7 +65,6 @@ __all__ = [
     "label_file",
     "check_class_from",
     "layout_text",
-    "shapenet_path",
 ]
 
 log = logging.getLogger(__name__)
@@ -92,10 +90,6 @@ CONTAINER_NAMES = frozenset(
 #: ShapeNetCore's table of synsets: a JSON list of ``{"synsetId", "name", "children", ...}``.
 TAXONOMY_FILE = "taxonomy.json"
 
-_V2 = ("models", "model_normalized.obj")
-_V1 = "model.obj"
-#: A WordNet noun offset, the name of every ShapeNetCore synset folder.
-_SYNSET = re.compile(r"\d{8}")
 
 
 class LabelledMesh(NamedTuple):
@@ -157,21 +151,6 @@ def _synset_names(synsets: set[str], taxonomy: dict[str, str]) -> dict[str, str]
             log.warning("synsets share the name %r in %s; using the synset id %s as the class", n, TAXONOMY_FILE, s)
             names[s] = s
     return names
-
-
-def shapenet_path(path: str | PathLike[str]) -> tuple[str, str, str] | None:
-    """``(layout, synset, model_id)`` of a ShapeNetCore file path, else None.
-
-    The synset folder must be a WordNet offset (8 digits), as every ShapeNetCore synset is:
-    ``chairs/abc/model.obj`` is no ShapeNetCore path.  A relative path is made absolute
-    first (the synset folder may be the working folder's name).
-    """
-    parts = Path(path).absolute().parts
-    if tuple(parts[-2:]) == _V2 and len(parts) >= 5 and _SYNSET.fullmatch(parts[-4]):
-        return "shapenetcore-v2", parts[-4], parts[-3]
-    if parts[-1] == _V1 and len(parts) >= 4 and _SYNSET.fullmatch(parts[-3]):
-        return "shapenetcore-v1", parts[-3], parts[-2]
-    return None
 
 
 def _class_from_level(path: Path, level: int) -> tuple[str, str]:

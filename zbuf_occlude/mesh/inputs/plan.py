@@ -31,7 +31,7 @@ from zbuf_occlude.mesh.inputs.discovery import (
 )
 from zbuf_occlude.mesh.inputs.kinds import MESH, POINT_SET, InputKind, kind_of, kinds_text
 from zbuf_occlude.mesh.inputs.layouts import check_class_from, label_file, label_tree, layout_text
-from zbuf_occlude.mesh.inputs.names import DEFAULT_SPLIT, SPLITS, name_set, printable_path
+from zbuf_occlude.mesh.paths import DEFAULT_SPLIT, SPLITS, name_set, printable_path
 from zbuf_occlude.mesh.inputs.point_sets import POINT_SET_LAYOUT, CloudEntry, pointnet_split
 
 __all__ = [

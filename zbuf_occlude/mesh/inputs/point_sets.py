@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.regular_files import MAX_LIST_BYTES, read_text_file
-from zbuf_occlude.mesh.inputs.names import SPLITS, printable_path
+from zbuf_occlude.mesh.paths import SPLITS, printable_path
 from zbuf_occlude.resources import check_memory
 
 __all__ = [

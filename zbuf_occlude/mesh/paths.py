@@ -1,5 +1,7 @@
-"""Names the input code shares with every layer above it: printable paths, ModelNet's splits, a
-mesh's class and split from its path, and name sets of options (``--classes``, ``--splits``)."""
+"""What a mesh file's path says, for every layer above: the path as printable text, ModelNet's
+splits, a mesh's class and split from its path (ModelNet's layout), ShapeNetCore's synset and model
+(:func:`shapenet_path`, which also decides its up axis, :mod:`zbuf_occlude.mesh.scene`), and name
+sets of options (``--classes``, ``--splits``)."""
 
 from __future__ import annotations
 
@@ -9,7 +11,7 @@ from collections.abc import Iterable
 from os import PathLike
 from pathlib import Path
 
-__all__ = ["printable_path", "SPLITS", "DEFAULT_SPLIT", "class_and_split", "name_set"]
+__all__ = ["printable_path", "SPLITS", "DEFAULT_SPLIT", "class_and_split", "shapenet_path", "name_set"]
 
 
 def printable_path(path: str | PathLike[str]) -> str:
@@ -46,3 +48,24 @@ def name_set(spec: str | Iterable[str] | None) -> set[str] | None:
     if isinstance(spec, str):
         return {s.strip() for s in spec.split(",") if s.strip()}
     return {str(s) for s in spec}
+
+
+_V2 = ("models", "model_normalized.obj")
+_V1 = "model.obj"
+#: A WordNet noun offset, the name of every ShapeNetCore synset folder.
+_SYNSET = re.compile(r"\d{8}")
+
+
+def shapenet_path(path: str | PathLike[str]) -> tuple[str, str, str] | None:
+    """``(layout, synset, model_id)`` of a ShapeNetCore file path, else None.
+
+    The synset folder must be a WordNet offset (8 digits), as every ShapeNetCore synset is:
+    ``chairs/abc/model.obj`` is no ShapeNetCore path.  A relative path is made absolute
+    first (the synset folder may be the working folder's name).
+    """
+    parts = Path(path).absolute().parts
+    if tuple(parts[-2:]) == _V2 and len(parts) >= 5 and _SYNSET.fullmatch(parts[-4]):
+        return "shapenetcore-v2", parts[-4], parts[-3]
+    if parts[-1] == _V1 and len(parts) >= 4 and _SYNSET.fullmatch(parts[-3]):
+        return "shapenetcore-v1", parts[-3], parts[-2]
+    return None
