@@ -292,27 +292,40 @@ def test_a_batch_into_a_subfolder_linked_out_is_refused(tmp_path):
     root = tmp_path / "out"
     root.mkdir()
     (root / "cls").symlink_to(elsewhere)
-    with OwnedFolder(root, names=[r"cls/x\d\.txt"]) as folder:
-        with pytest.raises(UnsafePathError), folder.write_many() as batch:
-            batch.write_bytes("cls/x0.txt", b"ours")
+    with OwnedFolder(root, names=[r"cls/x\d\.txt"]) as folder, pytest.raises(UnsafePathError), folder.write_many() as batch:
+        batch.write_bytes("cls/x0.txt", b"ours")
     assert list(elsewhere.iterdir()) == []
 
 
 def test_a_full_disk_in_a_batch_is_one_output_error_and_leaves_no_temporary(tmp_path, monkeypatch):
     import errno
 
-    calls = []
-    real = Path.write_bytes
+    real_fdopen = os.fdopen
+    opened = []
 
-    def write_bytes(self, data):
-        calls.append(self)
-        if len(calls) == 2:
+    class Full:
+        def __init__(self, fh):
+            self.fh = fh
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.fh.close()
+
+        def fileno(self):
+            return self.fh.fileno()
+
+        def write(self, data):
             raise OSError(errno.ENOSPC, "No space left on device")
-        return real(self, data)
 
-    monkeypatch.setattr(Path, "write_bytes", write_bytes)
-    with OwnedFolder(tmp_path, names=[r"x\d\.txt"]) as folder:
-        with pytest.raises(OutputError, match="disk full"), folder.write_many() as batch:
-            for i in range(3):
-                batch.write_bytes(f"x{i}.txt", b"data")
+    def fdopen(fd, *args, **kwargs):
+        opened.append(fd)
+        fh = real_fdopen(fd, *args, **kwargs)
+        return Full(fh) if len(opened) == 2 else fh
+
+    monkeypatch.setattr(os, "fdopen", fdopen)
+    with OwnedFolder(tmp_path, names=[r"x\d\.txt"]) as folder, pytest.raises(OutputError, match="disk full"), folder.write_many() as batch:
+        for i in range(3):
+            batch.write_bytes(f"x{i}.txt", b"data")
     assert sorted(p.name for p in tmp_path.iterdir()) == []

@@ -5,7 +5,8 @@ What yanx27/Pointnet_Pointnet2_pytorch's ``ModelNetDataLoader`` reads:
 * ``<class>/<class>_<NNNN>.txt``: one sample a file, ``x,y,z,nx,ny,nz`` per line (``%.6f``), +y up
   as ModelNet's own files (``up`` turns them otherwise), numbered per class from 1 across the
   splits; the normals are estimated from the sample's points and face its sensor
-  (:func:`~zbuf_occlude.geometry.normals.estimate_normals`), as a real scan's are;
+  (:func:`estimate_normals`: :func:`~zbuf_occlude.geometry.normals.estimate_normals`' method on
+  numba kernels), as a real scan's are;
 * ``modelnet40_shape_names.txt`` (``modelnet10_...`` for ``label_set_name="modelnet10"``, which that
   loader opens when ``num_category`` is 10): the label set's classes, one per label;
 * ``modelnet40_<split>.txt``: the ids of a split, one a line; the loader takes an id's class from
@@ -15,7 +16,8 @@ What yanx27/Pointnet_Pointnet2_pytorch's ``ModelNetDataLoader`` reads:
 
 Samples are read one object at a time (memory for one object's samples); a few threads make the
 next samples' files while one is written (:data:`MAX_THREADS`), each line without a Python loop (:func:`~zbuf_occlude.exporters.text_table.fixed_point_table_bytes`, the bytes
-of ``np.savetxt``).  Each line holds xyz and normals only: a ``farm --sensor`` data set's per-point
+of ``np.savetxt``), the files recorded and synced 64 at a time
+(:meth:`~zbuf_occlude.io.owned.OwnedFolder.write_many`).  Each line holds xyz and normals only: a ``farm --sensor`` data set's per-point
 return fields are left out (the loader reads six columns).
 """
 
@@ -33,14 +35,14 @@ import numpy as np
 from zbuf_occlude.exporters.base import ExportOptions, Target, Written, turn_up
 from zbuf_occlude.exporters.source import Splits, open_dataset, sample_file
 from zbuf_occlude.exporters.text_table import fixed_point_table_bytes
+from zbuf_occlude.geometry import normals
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
-from zbuf_occlude.geometry.normals import estimate_normals
 from zbuf_occlude.io.owned import BatchWriter, OwnedFolder
 from zbuf_occlude.io.progress import progress
 from zbuf_occlude.resources import check_memory
 from zbuf_occlude.sensors.lidar import beam_directions
 
-__all__ = ["FILE_NAMES", "TARGET", "write_modelnet_txt"]
+__all__ = ["FILE_NAMES", "TARGET", "estimate_normals", "write_modelnet_txt"]
 
 #: Bytes per point of one sample while it is written: six float64 columns, their int64 digits, and
 #: their text (16 bytes a value while it is cut, 11 characters once written for coordinates in [-1, 1]).
@@ -133,6 +135,36 @@ def _sample_text(points: np.ndarray, eye: np.ndarray, up: str) -> bytes:
     """One sample's file: its points and their normals (estimated +z up, facing ``eye``), turned to ``up``, as text."""
     table = turn_up(np.hstack([points, estimate_normals(points, eye)]).reshape(-1, 2, 3), "+z", up)
     return fixed_point_table_bytes(table.reshape(-1, 6))
+
+
+def estimate_normals(points: np.ndarray, eye: np.ndarray) -> np.ndarray:
+    """Unit normals ``(n, 3) float32`` of one sample's ``points (n, 3)``, each facing ``eye (3,)``: the
+    method of :func:`~zbuf_occlude.geometry.normals.estimate_normals` (the plane of each point's
+    :data:`~zbuf_occlude.geometry.normals.NORMAL_NEIGHBOURS` nearest points, flipped toward the
+    sensor) on the numba kernels of point-only visibility: the k-d tree's neighbours from a grid
+    (:func:`~zbuf_occlude.visibility.point_neighbours.nearest_neighbours`) and a closed-form 3 x 3
+    plane fit (:func:`~zbuf_occlude.visibility.point_preparation.plane_fits`) for LAPACK's.
+
+    The two agree to float rounding (tests/exporters/test_modelnet_txt_normals.py): a value's
+    ``%.6f`` text may differ in its last digit, a component that is zero but for rounding may print
+    as ``-0.000000`` for ``0.000000``, and a point whose plane passes through ``eye`` (neither side
+    faces it) may face the other way.
+    """
+    # numba's kernels, imported by this target alone
+    from zbuf_occlude.visibility.point_neighbours import nearest_neighbours
+    from zbuf_occlude.visibility.point_preparation import plane_fits
+
+    p = np.asarray(points, dtype=np.float64)
+    n = len(p)
+    k = min(normals.NORMAL_NEIGHBOURS, n)
+    if k < 3:
+        return normals.estimate_normals(p, eye)
+    _, index = nearest_neighbours(p, k, workers=1)
+    fits, variation = np.empty((1, n, 3)), np.empty((1, n))
+    plane_fits(p, index, np.array([k], dtype=np.int64), 0, n, fits, variation)
+    normal = fits[0]
+    normal[np.einsum("ni,ni->n", normal, np.asarray(eye, dtype=np.float64) - p) < 0] *= -1.0
+    return normal.astype(np.float32)
 
 
 def _write_next(batch: BatchWriter, pending: deque, bar: object) -> None:

@@ -35,16 +35,19 @@ import logging
 import os
 import re
 import stat
+import tempfile
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import ExitStack, contextmanager
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from zbuf_occlude.errors import InvalidInputError, OutputError, UnsafePathError
 from zbuf_occlude.io.atomic import (
+    _host_tag,
     _raise_output_error,
+    _umask,
     atomic_path,
     file_sha256,
     temp_is_orphan,
@@ -571,7 +574,7 @@ class OwnedFolder:
             yield batch
             batch.flush()
         finally:
-            batch.discard()
+            batch.discard()  # after an error: the temporaries of the batch under way
 
     def write_text(self, rel: str, text: str) -> Path:
         """Write UTF-8 ``text`` to ``root/rel`` (:meth:`write`)."""
@@ -611,15 +614,18 @@ class OwnedFolder:
 
 
 class BatchWriter:
-    """The files of :meth:`OwnedFolder.write_many` under way: :meth:`write_bytes` adds one."""
+    """The files of :meth:`OwnedFolder.write_many` under way: :meth:`write_bytes` adds one.
+
+    Its temporaries are named as :func:`~zbuf_occlude.io.atomic.atomic_path`'s (their writer in
+    their name, for :func:`remove_dead_temps`), but synced once each, together, at :meth:`flush`:
+    a file's sync before its rename would flush the disk's cache once a file.
+    """
 
     def __init__(self, folder: OwnedFolder, batch_files: int):
         self._folder = folder
         self._batch_files = batch_files
-        self._stack = ExitStack()
         self._entries: dict[str, dict[str, Any]] = {}  # rel -> its ledger line, in the order written
-        self._temps: list[Path] = []
-        self._recorded = False
+        self._files: list[tuple[Path, Path]] = []  # (temporary, target)
 
     def write_bytes(self, rel: str, data: bytes) -> Path:
         """Write ``data`` to ``root/rel`` with the batch; return that path (the file takes its name
@@ -637,14 +643,21 @@ class BatchWriter:
         if rel in self._entries:
             raise UnsafePathError(f"{rel!r} is written twice in one batch in {folder.root}; refused")
         folder._check_replaceable(rel, path)
-        tmp = self._stack.enter_context(atomic_path(path, before_replace=self._record))
         try:
-            tmp.write_bytes(data)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fd, name = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}-{_host_tag()}-", suffix=".tmp", dir=path.parent)
+        except OSError as exc:
+            self.discard()
+            _raise_output_error(path, exc)
+        self._files.append((Path(name), path))
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                os.fchmod(fh.fileno(), 0o666 & ~_umask())  # as a plain open() would make it
+                fh.write(data)
         except OSError as exc:
             self.discard()
             _raise_output_error(path, exc)
         self._entries[rel] = {"path": rel, "sha256": hashlib.sha256(data).hexdigest(), "size": len(data)}
-        self._temps.append(tmp)
         if len(self._entries) >= self._batch_files:
             self.flush()
         return path
@@ -653,34 +666,34 @@ class BatchWriter:
         """Sync the batch's temporaries, record them all, name them, and sync their folders."""
         if not self._entries:
             return
-        with ThreadPoolExecutor(min(_SYNC_THREADS, len(self._temps)), thread_name_prefix="owned-sync") as pool:
-            list(pool.map(_sync_file, self._temps))  # atomic_path's own fsync then finds nothing to write
-        folders = {tmp.parent for tmp in self._temps}
-        self._recorded = False
-        self._stack.close()  # each file: fsync, _record (the batch's ledger lines, once), rename
-        self._folder.this_run.update(self._entries)
-        self._entries, self._temps = {}, []
-        for path in sorted(folders):
-            _sync_file(path)
-
-    def _record(self, tmp: Path) -> None:
-        """``before_replace`` of every temporary: the first (the last written, as the stack unwinds)
-        appends the whole batch's lines; the files are renamed only after that."""
-        if not self._recorded:
-            folder = self._folder
-            folder._append_lines(list(self._entries.values()))
-            self._recorded = True
+        folder = self._folder
+        parents = sorted({path.parent for _, path in self._files})
+        try:
+            with ThreadPoolExecutor(min(_SYNC_THREADS, len(self._files)), thread_name_prefix="owned-sync") as pool:
+                list(pool.map(_sync_file, [tmp for tmp, _ in self._files]))
+            folder._append_lines(list(self._entries.values()))  # recorded before any takes its name
             for entry in self._entries.values():
                 folder._ledger[entry["path"]] = FileRecord(entry["sha256"], entry["size"])
+            for named, (tmp, path) in enumerate(self._files):
+                try:
+                    os.replace(tmp, path)
+                except OSError as exc:
+                    del self._files[:named]
+                    _raise_output_error(path, exc)
+            self._files = []
+            for parent in parents:
+                _sync_file(parent)
+        except BaseException:
+            self.discard()
+            raise
+        folder.this_run.update(self._entries)
+        self._entries = {}
 
     def discard(self) -> None:
         """Remove the temporaries of the batch under way (after an error)."""
-        self._entries, self._temps = {}, []
-        self._stack.__exit__(_Discarded, _Discarded(), None)  # each atomic_path removes its temporary
-
-
-class _Discarded(Exception):
-    """Thrown into a discarded batch's temporaries (:func:`~zbuf_occlude.io.atomic.atomic_path` removes each)."""
+        for tmp, _ in self._files:
+            tmp.unlink(missing_ok=True)
+        self._entries, self._files = {}, []
 
 
 def _sync_file(path: Path) -> None:
