@@ -167,7 +167,10 @@ class PointSurfels:
             sprites, float32, :mod:`zbuf_occlude.render.point_sprites`); the decision runs on
             the CPU either way.  They differ where surfels tie at a point's pixel (masks equal
             on 99.6-99.8 % of point-views of the shipped meshes, fewer differences than the CPU
-            makes itself when its ties go the other way).
+            makes itself when its ties go the other way).  From
+            :data:`~zbuf_occlude.visibility.point_kernels.THREADED_MIN_POINTS` points the CPU
+            kernels run on numba's threads where allowed
+            (:func:`~zbuf_occlude.visibility.point_kernels.threads_for`), with the same masks.
 
         Raises
         ------
