@@ -6,7 +6,9 @@ meshes of ``../shared/data/modelnet_subset`` taken in turn (``bench_farm.repeate
 a data set you name with ``--dataset``.  Each measurement runs in a process of its own, so that
 its peak resident memory (``ru_maxrss``) is its own; the read and the exports (``--to``, each
 target in turn) are interleaved, ``--repeats`` times each, and the table gives each one's median
-wall time, its ratio to the read and to ``pointnet-h5``, and the peak memory.  ``--baseline SRC``
+wall time, its ratio to the read and to ``pointnet-h5``, its CPU time (all its threads; less
+dependent on the machine's load than the wall time, which a CPU-bound export loses more of to
+other work) and the peak memory.  ``--baseline SRC``
 adds the exports of another checkout's package (``SRC/zbuf_occlude``: the code before a change),
 interleaved too.  Run it at two sizes (``--objects 27`` and ``--objects 54``): memory that does not
 grow with the set stays the same.  The load average is printed before and after.
@@ -43,10 +45,11 @@ _EXPORT = """
 import inspect, json, os, resource, sys, time
 from zbuf_occlude.exporters import export
 quiet = {"progress": False} if "progress" in inspect.signature(export).parameters else {}
-t0 = time.perf_counter()
+t0, c0 = time.perf_counter(), time.process_time()
 export(sys.argv[1], sys.argv[3], sys.argv[2], **quiet)
+wall, cpu = time.perf_counter() - t0, time.process_time() - c0
 files = sum(len(f) for _, _, f in os.walk(sys.argv[2]))
-print(json.dumps({"wall_s": time.perf_counter() - t0, "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "files": files}))
+print(json.dumps({"wall_s": wall, "cpu_s": cpu, "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "files": files}))
 """
 
 
@@ -101,12 +104,14 @@ def main(argv: list[str] | None = None) -> int:
         first = statistics.median(e["wall_s"] for e in exports[runs[0]])
         print(f"# load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
         print(f"# {reads[0]['samples']:,} samples; read once: {read_s:.2f} s (median of {args.repeats}), peak {max(r['peak_mb'] for r in reads):.0f} MB")
-        print(f"| export | code | files | median s | / read | / {runs[0][0]} | peak MB |")
-        print("|---|---|---|---|---|---|---|")
+        first_cpu = statistics.median(e.get("cpu_s", float("nan")) for e in exports[runs[0]])
+        print(f"| export | code | files | median s | / read | / {runs[0][0]} | CPU s | CPU / {runs[0][0]} | peak MB |")
+        print("|---|---|---|---|---|---|---|---|---|")
         for (to, root), done in exports.items():
             wall = statistics.median(e["wall_s"] for e in done)
+            cpu = statistics.median(e.get("cpu_s", float("nan")) for e in done)
             print(f"| {to} | {root or 'this checkout'} | {done[0]['files']:,} | {wall:.2f} | {wall / read_s:.2f} | "
-                  f"{wall / first:.1f} | {max(e['peak_mb'] for e in done):.0f} |")  # fmt: skip
+                  f"{wall / first:.1f} | {cpu:.2f} | {cpu / first_cpu:.1f} | {max(e['peak_mb'] for e in done):.0f} |")  # fmt: skip
     return 0
 
 

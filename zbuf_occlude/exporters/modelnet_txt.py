@@ -34,7 +34,6 @@ import numpy as np
 
 from zbuf_occlude.exporters.base import ExportOptions, Target, Written, turn_up
 from zbuf_occlude.exporters.source import Splits, open_dataset, sample_file
-from zbuf_occlude.exporters.text_table import fixed_point_table_bytes
 from zbuf_occlude.geometry import normals
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
 from zbuf_occlude.io.owned import BatchWriter, OwnedFolder
@@ -133,6 +132,9 @@ def write_modelnet_txt(
 
 def _sample_text(points: np.ndarray, eye: np.ndarray, up: str) -> bytes:
     """One sample's file: its points and their normals (estimated +z up, facing ``eye``), turned to ``up``, as text."""
+    # numba: imported by this target alone
+    from zbuf_occlude.exporters.text_table import fixed_point_table_bytes
+
     table = turn_up(np.hstack([points, estimate_normals(points, eye)]).reshape(-1, 2, 3), "+z", up)
     return fixed_point_table_bytes(table.reshape(-1, 6))
 
