@@ -90,3 +90,21 @@ def test_the_warm_up_compiles_every_kernel_and_a_second_process_only_loads_them(
 def test_the_command_refuses_an_unknown_option(caplog):
     assert warmup.main(["--bogus"]) == 2
     assert "unknown option(s) --bogus" in caplog.text
+
+
+def test_compiling_the_threaded_kernels_keeps_forked_children_serial():
+    # compiling a parallel kernel starts numba's threads: the warm-up notes it, so that a process
+    # forked from one that warmed up never runs GNU OpenMP's threads (threads_for yields 1)
+    code = (
+        "import os, numpy as np\n"
+        "from zbuf_occlude.geometry.cameras import camera_on_sphere\n"
+        "from zbuf_occlude.visibility import point_kernels as k, warmup\n"
+        "from zbuf_occlude.visibility.point_splats import visible_mask_points\n"
+        "visible_mask_points(np.random.default_rng(0).normal(size=(300, 3)), camera_on_sphere(0, 0, 4))\n"
+        "warmup._compile_threaded()\n"
+        "assert k.splat_surfels_threaded.signatures and k.decide_threaded.signatures\n"
+        "assert k._threads_pid == [os.getpid()], k._threads_pid\n"
+        "print('ok')\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr[-2000:]

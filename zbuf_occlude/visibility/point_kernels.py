@@ -18,7 +18,7 @@ from collections.abc import Iterator
 import numba
 import numpy as np
 
-__all__ = ["camera_frame", "decide", "decide_threaded", "splat_surfels", "splat_surfels_threaded"]
+__all__ = ["camera_frame", "decide", "decide_threaded", "splat_surfels", "splat_surfels_threaded", "threads_for", "threads_started"]
 
 #: A surfel seen closer than this to edge-on (|cos| between its normal and a pixel's ray) covers
 #: nothing there: its footprint is a line of zero area (and the ray-plane depth is unbounded).
@@ -356,8 +356,14 @@ def threads_for(n: int) -> Iterator[int]:
         yield 1
         return
     try:
-        if not _threads_pid:
-            _threads_pid.append(os.getpid())
+        threads_started()
         yield count
     finally:
         _threads.release()
+
+
+def threads_started() -> None:
+    """Note that this process started numba's threads (ran or compiled a threaded kernel): a
+    process forked from it keeps to the serial kernels (:func:`threads_for`)."""
+    if not _threads_pid:
+        _threads_pid.append(os.getpid())

@@ -141,6 +141,22 @@ def _exercise() -> None:
                     visible_mask(mesh, few, camera, method, face_index=fi_few)
                 except BackendUnavailable as exc:
                     log.debug("warm-up: %s skipped: %s", method, exc)
+    _compile_threaded()
+
+
+def _compile_threaded() -> None:
+    """Compile point-splat's threaded kernels with the argument types their serial twins were
+    just called with (plus the bands' int64), without running them: a view takes them only from
+    :data:`~zbuf_occlude.visibility.point_kernels.THREADED_MIN_POINTS` points, and running them
+    here would start numba's threads in a process that may fork."""
+    from numba import types
+
+    from zbuf_occlude.visibility import point_kernels as k
+
+    k.threads_started()  # compiling a parallel kernel starts numba's threads
+    for serial, threaded, extra in ((k.splat_surfels, k.splat_surfels_threaded, (types.int64,)), (k.decide, k.decide_threaded, ())):
+        for signature in serial.signatures:
+            threaded.compile(tuple(signature) + extra)
 
 
 def warm_up() -> list[KernelReport]:
