@@ -60,7 +60,7 @@ def constructed_meshes(seed: int = 0) -> dict[str, trimesh.Trimesh]:
     tri = part.triangles.copy()
     tri += rng.uniform(-3e-8, 3e-8, size=tri.shape)
     out["stl-soup"] = trimesh.Trimesh(tri.reshape(-1, 3), np.arange(3 * len(tri)).reshape(-1, 3), process=False)
-    for name, m in out.items():
+    for m in out.values():
         m.apply_translation(-m.bounds.mean(axis=0))
         m.apply_scale(1.0 / m.extents.max())
     return out

@@ -193,7 +193,7 @@ def main() -> int:
                                                          views_per_object=args.views)}  # fmt: skip
         n = {k: len(v) for k, v in sources.items()}
         loaders = {k: _loader(ds, args) for k, ds in sources.items()}
-        for name, (loader, sampler) in loaders.items():  # warm-up (not timed): dense clouds, BVHs, JIT, file handles
+        for loader, sampler in loaders.values():  # warm-up (not timed): dense clouds, BVHs, JIT, file handles
             _pass(loader, sampler, 0)
         loader_s: dict[str, list[float]] = {k: [] for k in sources}
         train_s: dict[str, list[float]] = {k: [] for k in sources}

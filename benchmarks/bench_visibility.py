@@ -254,10 +254,10 @@ def run_config(job: dict[str, Any]) -> dict[str, Any]:
 
     for k, cam in enumerate(cameras):
         log.info("  pose %d/%d (el %g, az %g)", k + 1, len(cameras), cam.elevation_deg, cam.azimuth_deg)
-        z = timers["zbuffer"](lambda: scene.visible(cam, resolution=res))
-        g = timers["gpu_only"](lambda: scene.visible(cam, resolution=res, resolve="none"))
-        timers["render"](lambda: scene.renderer.render(cam))
-        o = timers["oracle"](lambda: zo.visible_mask(mesh, points, cam, method="oracle", face_index=face_index))
+        z = timers["zbuffer"](lambda cam=cam: scene.visible(cam, resolution=res))
+        g = timers["gpu_only"](lambda cam=cam: scene.visible(cam, resolution=res, resolve="none"))
+        timers["render"](lambda cam=cam: scene.renderer.render(cam))
+        o = timers["oracle"](lambda cam=cam: zo.visible_mask(mesh, points, cam, method="oracle", face_index=face_index))
         # Share of points the compute shader leaves to Embree (untimed; the private buffer is
         # the ResidentPoints' own upload, so this repeats exactly what scene.visible just did).
         uncertain.append(float(scene.renderer.visible(cam, scene._buffer)[1].mean()))
@@ -265,7 +265,7 @@ def run_config(job: dict[str, Any]) -> dict[str, Any]:
         agree["gpu_only"].append(_agreement_counts(g, o))
         if k < numpy_poses:
             n = timers["numpy"](
-                lambda: zo.visible_mask(mesh, points, cam, method="oracle-numpy", face_index=face_index)
+                lambda cam=cam: zo.visible_mask(mesh, points, cam, method="oracle-numpy", face_index=face_index)
             )
             agree["numpy"].append(_agreement_counts(n, o))
 

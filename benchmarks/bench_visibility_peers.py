@@ -220,7 +220,7 @@ def run(mesh, n_points: int, poses, args) -> list[dict]:
                 r["fv"] += int((got & ~truth).sum())
                 r["fh"] += int((~got & truth).sum())
                 r["n"] += len(points)
-    for name, s in state.items():
+    for s in state.values():
         if hasattr(s, "release"):
             s.release()
     out = list(rows.values())

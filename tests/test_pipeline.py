@@ -125,7 +125,7 @@ def test_occlude_object_labels_each_sample_with_its_pose_and_object():
                               method="oracle", cameras=CameraSphere(radius=2.5),
                               provenance=ObjectProvenance(label=3, class_name="ball", source="ball.off", split="test")))  # fmt: skip
     assert [pose_index for pose_index, _, _ in out] == [0, 1]
-    for (pose_index, visible, clouds), (el, az) in zip(out, poses):
+    for (_, visible, clouds), (el, az) in zip(out, poses):
         assert visible.shape == (4000,) and [c.sample_index for c in clouds] == [0, 1]
         for c in clouds:
             assert (c.elevation_deg, c.azimuth_deg, c.radius) == (el, az, 2.5)

@@ -72,6 +72,6 @@ __all__ = [
     "Lidar", "DepthCamera", "ScanScene", "SceneObject", "load_scene", "look_at_pose", "Scan", "scan",
 ]
 
-from zbuf_occlude import _llvm
+from zbuf_occlude import _llvm  # noqa: E402 (after __all__, before any OpenGL or Triton import)
 
 _llvm.install()  # Triton's LLVM binds to itself, whatever OpenGL context is made before or after (see _llvm)

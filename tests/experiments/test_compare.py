@@ -117,7 +117,7 @@ def test_method_budget_skips_larger_counts(tmp_path: Path) -> None:
 
 
 def _cells(table: str, mesh: str) -> list[str]:
-    [line] = [l for l in table.splitlines() if l.startswith(f"| {mesh} ")]
+    [line] = [row for row in table.splitlines() if row.startswith(f"| {mesh} ")]
     return [c.strip() for c in line.strip("|").split("|")]
 
 

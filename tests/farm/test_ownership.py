@@ -142,7 +142,7 @@ def test_overwrite_deletes_only_what_the_earlier_run_recorded(tmp_path, fmt):
 @pytest.mark.slow
 def test_overwrite_of_a_sharded_task_keeps_the_other_tasks_objects(tmp_path):
     src, out = tmp_path / "meshes", tmp_path / "out"
-    for i, rel in enumerate(["chair/train/chair_0001.off", "sofa/test/sofa_0681.off"]):
+    for rel in ["chair/train/chair_0001.off", "sofa/test/sofa_0681.off"]:
         (src / Path(rel).parent).mkdir(parents=True, exist_ok=True)
         shutil.copy(SAMPLE_MESHES / rel, src / rel)
     assert _farm(src, out, "--shard", "0/2") == 0 and _farm(src, out, "--shard", "1/2") == 0

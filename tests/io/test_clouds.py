@@ -354,8 +354,8 @@ def test_text_files_are_utf8_whatever_the_locale(tmp_path):
     env = {**os.environ, "LC_ALL": "C", "LANG": "C", "PYTHONUTF8": "0", "PYTHONCOERCECLOCALE": "0", "PYTHONIOENCODING": "ascii"}
     out = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True, env=env, timeout=120)
     assert out.returncode == 0, out.stderr
-    assert (tmp_path / "t.txt").read_bytes() == "chaise_é\n".encode("utf-8")
-    assert (tmp_path / "c.csv").read_bytes() == "class\r\nchaise_é\r\n".encode("utf-8")
+    assert (tmp_path / "t.txt").read_bytes() == "chaise_é\n".encode()
+    assert (tmp_path / "c.csv").read_bytes() == "class\r\nchaise_é\r\n".encode()
 
 
 def test_concat_h5_joins_parts_row_wise_and_fills_missing_columns(tmp_path):

@@ -110,7 +110,7 @@ def test_fisher_vector_matches_sklearn_gaussian_mixture():
 def _box_vs_sphere(n_per_class: int, n_points: int, seed: int) -> D.CloudSet:
     rng = np.random.default_rng(seed)
     clouds, labels = [], []
-    for i in range(n_per_class):
+    for _ in range(n_per_class):
         # box surface: a random face, uniform on it; the box's aspect varies a little
         half = rng.uniform(0.35, 0.5, 3)
         p = rng.uniform(-1, 1, (n_points, 3))

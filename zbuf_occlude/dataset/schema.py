@@ -22,7 +22,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from zbuf_occlude.dataset.layout import CARD_FILE, CARD_SHA256_FILE, COLUMN_TYPES, POINT_COLUMNS, SHAPE_NAMES_FILE
-from zbuf_occlude.dataset.storage import check_visible_bits, storage_kind
+from zbuf_occlude.dataset.storage import storage_kind
 from zbuf_occlude.errors import DatasetFormatError, InvalidInputError
 from zbuf_occlude.io.hdf5 import Column, declared_nbytes, open_hdf5
 from zbuf_occlude.io.atomic import size_mismatch
@@ -471,7 +471,7 @@ def check_point_set_records(
         A count or a record that does not fit the card (the message names the line or the field).
     """
     found = []
-    for lineno, doc, rec in rows:
+    for lineno, _doc, rec in rows:
         said = rec.visibility_from if rec is not None else None
         if rec is not None and (rec.cloud is not None) != (said == "points"):
             found.append(

@@ -259,7 +259,7 @@ def method_keywords(method: str) -> frozenset[str] | None:
     return _keywords_of(get_method(method))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _keywords_of(fn: VisibilityMethod) -> frozenset[str] | None:
     """:func:`method_keywords` of a registered function, cached per function (not per name: a
     name may be bound to another function, e.g. in a test's scratch registry)."""

@@ -7,7 +7,9 @@ the occluded-points set's mask (point-splat, points alone) on the same 8,192 den
 It wraps ``pipeline.occlude_object`` to record each mask while the two sets are built exactly as
 ``experiment sim2real --occluded-points`` builds them (needs ../shared/data/street_objects).
 """
-import sys, json, numpy as np
+import sys
+import json
+import numpy as np
 from zbuf_occlude import pipeline
 from zbuf_occlude.experiments.sim2real.data import OCCLUDED_POINTS, SetRecipe, build_set
 from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes, split_whole_meshes
@@ -25,13 +27,18 @@ def spy(mesh, poses, **kw):
 pipeline.occlude_object = spy
 recipe = SetRecipe(dense_points=8192, resolution=512, elevation_deg=(-5.0, 30.0))
 build_set("occluded", train, names, 100, 256, seed, recipe)
-mesh_calls = list(calls); calls.clear()
+mesh_calls = list(calls)
+calls.clear()
 build_set(OCCLUDED_POINTS, train, names, 100, 256, seed, recipe)
 assert len(calls) == len(mesh_calls)
 acc, iou, fv, fh, vm, vp = [], [], [], [], [], []
-for (_, a, na, ta), (_, b, nb, tb) in zip(mesh_calls, calls):
-    acc.append((a == b).mean()); iou.append((a & b).sum() / max((a | b).sum(), 1))
-    fv.append((b & ~a).mean()); fh.append((a & ~b).mean()); vm.append(a.mean()); vp.append(b.mean())
+for (_, a, _, _), (_, b, _, _) in zip(mesh_calls, calls):
+    acc.append((a == b).mean())
+    iou.append((a & b).sum() / max((a | b).sum(), 1))
+    fv.append((b & ~a).mean())
+    fh.append((a & ~b).mean())
+    vm.append(a.mean())
+    vp.append(b.mean())
 print(json.dumps({"seed": seed, "poses": len(calls), "accuracy_mean": float(np.mean(acc)), "accuracy_min": float(np.min(acc)),
                   "iou_mean": float(np.mean(iou)), "iou_min": float(np.min(iou)), "false_visible": float(np.mean(fv)),
                   "false_hidden": float(np.mean(fh)), "visible_share_mesh": float(np.mean(vm)), "visible_share_points": float(np.mean(vp)),

@@ -28,7 +28,7 @@ from zbuf_occlude.visibility import available_methods, visible_mask
 from zbuf_occlude.visibility.metrics import agreement
 from zbuf_occlude.visibility.registry import method_info
 
-__all__ = ["chamfer_distance", "compare", "RESOLUTION_SWEEP", "GRID_SWEEP", "IMAGE_SPACE_METHODS", "GRID_METHODS"]
+__all__ = ["chamfer_distance", "compare", "RESOLUTION_SWEEP", "GRID_SWEEP", "IMAGE_SPACE_METHODS", "GRID_METHODS"]  # noqa: F822 (module __getattr__)
 
 log = logging.getLogger(__name__)
 
