@@ -64,7 +64,10 @@ def procedural_meshes() -> list[Procedural]:
     plate = box(extents=(1.0, 0.8, 0.01), transform=rotation(np.radians(4.0), [1, 0, 0]))
     pair = [box(extents=(1.0, 0.6, 0.012), transform=move([0, y, z]) @ rotation(np.radians(a), [0, 1, 0]))
             for y, z, a in ((-0.25, 0.0, -7.0), (0.25, 0.15, 9.0))]  # fmt: skip
-    legs = [cylinder(radius=0.012, height=0.8, transform=move([x, y, 0.0])) for x, y in ((0.25, 0.25), (-0.25, 0.25), (0.25, -0.25), (-0.25, -0.25))]
+    legs = [
+        cylinder(radius=0.012, height=0.8, transform=move([x, y, 0.0]))
+        for x, y in ((0.25, 0.25), (-0.25, 0.25), (0.25, -0.25), (-0.25, -0.25))
+    ]
     rods = [cylinder(radius=0.01 + 0.004 * k, height=1.0, transform=move([0.15 * (k - 2.5), 0, 0]) @ rotation(np.radians(20 * k), [1, 0, 0]))
             for k in range(6)]  # fmt: skip
     made = {

@@ -115,8 +115,11 @@ def main(argv: list[str] | None = None) -> int:
             if hasattr(scene, "release"):
                 scene.release()
             rows.append((name, len(mesh.faces), label, agree / total, fv / total, cpu / total))
-            print(f"  {name} | {label} | agreement {agree / total:.4%} | false-visible {fv / total:.4%} "
-                  f"| CPU-settled {cpu / total:.3%}", file=sys.stderr, flush=True)
+            print(
+                f"  {name} | {label} | agreement {agree / total:.4%} | false-visible {fv / total:.4%} | CPU-settled {cpu / total:.3%}",
+                file=sys.stderr,
+                flush=True,
+            )
         print(f"{name}: {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
 
     labels = list(dict.fromkeys(r[2] for r in rows))
@@ -128,8 +131,10 @@ def main(argv: list[str] | None = None) -> int:
         worst = min(rs, key=lambda r: r[3])
         fvw = max(rs, key=lambda r: r[4])
         cpus = [r[5] for r in rs]
-        print(f"| {label} | {worst[0]} {worst[3]:.4%} | {np.mean([r[3] for r in rs]):.4%} | {np.mean([r[4] for r in rs]):.4%} "
-              f"| {fvw[0]} {fvw[4]:.4%} | {np.nanmean(cpus):.4%} / {np.nanmax(cpus):.4%} |")
+        print(
+            f"| {label} | {worst[0]} {worst[3]:.4%} | {np.mean([r[3] for r in rs]):.4%} | {np.mean([r[4] for r in rs]):.4%} "
+            f"| {fvw[0]} {fvw[4]:.4%} | {np.nanmean(cpus):.4%} / {np.nanmax(cpus):.4%} |"
+        )
     print("\nPer mesh (agreement / CPU-settled fraction):\n")
     print("| mesh | faces | " + " | ".join(labels) + " |")
     print("|---|---:|" + "---:|" * len(labels))

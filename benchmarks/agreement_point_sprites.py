@@ -78,8 +78,13 @@ def agreement(meshes: list[Path], n: int, cameras: list[zo.Camera], normals: boo
             if both.any():
                 rel = np.abs(depth_gpu[both] - depth_cpu[both]) / depth_cpu[both]
                 worst_depth = max(worst_depth, float(rel.max()))
-    return {"masks": masks_equal / point_views, "ids": ids_equal / max(covered, 1), "depth": worst_depth,
-            "point_views": point_views, **{b: 1e3 * statistics.median(v) for b, v in seconds.items()}}
+    return {
+        "masks": masks_equal / point_views,
+        "ids": ids_equal / max(covered, 1),
+        "depth": worst_depth,
+        "point_views": point_views,
+        **{b: 1e3 * statistics.median(v) for b, v in seconds.items()},
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -96,17 +101,24 @@ def main(argv: list[str] | None = None) -> int:
     meshes = meshes[: args.meshes] if args.meshes > 0 else meshes
     cameras = [zo.camera_on_sphere(el, az) for el, az in zo.view_schedule(args.poses)]
     info = context_info()
-    print(f"# {len(meshes)} meshes of {args.root.name}, {len(cameras)} poses ({args.poses}), "
-          f"normals {'of the faces' if args.normals else 'estimated'}")
+    print(
+        f"# {len(meshes)} meshes of {args.root.name}, {len(cameras)} poses ({args.poses}), "
+        f"normals {'of the faces' if args.normals else 'estimated'}"
+    )
     print(f"# OpenGL: {info['renderer']} ({info['backend']}, {info['version']}); load average before: {load_average()}")
     print()
-    print("| N | point-views | masks equal | winning surfel equal (covered pixels) | depth, largest relative difference "
-          "| CPU ms/view | GPU ms/view |")
+    print(
+        "| N | point-views | masks equal | winning surfel equal (covered pixels) | depth, largest relative difference "
+        "| CPU ms/view | GPU ms/view |"
+    )
     print("|---:|---:|---:|---:|---:|---:|---:|")
     for n in (int(v) for v in args.points.split(",")):
         row = agreement(meshes, n, cameras, args.normals)
-        print(f"| {n:,} | {row['point_views']:,} | {row['masks']:.4%} | {row['ids']:.4%} | {row['depth']:.1e} "
-              f"| {row['cpu']:.1f} | {row['gpu']:.1f} |", flush=True)
+        print(
+            f"| {n:,} | {row['point_views']:,} | {row['masks']:.4%} | {row['ids']:.4%} | {row['depth']:.1e} "
+            f"| {row['cpu']:.1f} | {row['gpu']:.1f} |",
+            flush=True,
+        )
     print()
     print(f"# load average after: {load_average()}")
     return 0

@@ -103,7 +103,9 @@ def main(argv: list[str] | None = None) -> int:
         read_s = statistics.median(r["wall_s"] for r in reads)
         first = statistics.median(e["wall_s"] for e in exports[runs[0]])
         print(f"# load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
-        print(f"# {reads[0]['samples']:,} samples; read once: {read_s:.2f} s (median of {args.repeats}), peak {max(r['peak_mb'] for r in reads):.0f} MB")
+        print(
+            f"# {reads[0]['samples']:,} samples; read once: {read_s:.2f} s (median of {args.repeats}), peak {max(r['peak_mb'] for r in reads):.0f} MB"
+        )
         first_cpu = statistics.median(e.get("cpu_s", float("nan")) for e in exports[runs[0]])
         print(f"| export | code | files | median s | / read | / {runs[0][0]} | CPU s | CPU / {runs[0][0]} | peak MB |")
         print("|---|---|---|---|---|---|---|---|---|")

@@ -114,6 +114,7 @@ def stage_times(objects: list[FarmObject], params: FarmParams, out: Path) -> tup
                 totals[stage] = totals.get(stage, 0.0) + elapsed - inner.pop()
                 if inner:
                     inner[-1] += elapsed
+
         return wrapper
 
     from zbuf_occlude.visibility import embree_fast
@@ -148,7 +149,9 @@ def print_stages(objects: list[FarmObject], params: FarmParams, out: Path) -> No
     totals, wall = stage_times(objects, params, out)
     after = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     views = len(objects) * len(params.poses)
-    print(f"# {len(objects)} objects, {wall:.1f} s ({wall / views * 1e3:.2f} ms per view), one thread; load average {load:.2f} before, {after:.2f} after")
+    print(
+        f"# {len(objects)} objects, {wall:.1f} s ({wall / views * 1e3:.2f} ms per view), one thread; load average {load:.2f} before, {after:.2f} after"
+    )
     total = sum(totals.values())
     print("| stage | s | % |\n|---|---:|---:|")
     for stage, seconds in sorted(totals.items(), key=lambda kv: -kv[1]):
@@ -179,10 +182,14 @@ def main(argv: list[str] | None = None) -> int:
     n_meshes = len(discover_objects(args.root))
     scratch = args.scratch or Path(tempfile.mkdtemp(prefix="bench_farm_"))
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    print(f"# {args.objects} objects ({n_meshes} real meshes repeated with distinct keys) × {args.views} × "
-          f"{args.samples_per_view} samples × {args.points} points; dense cloud {args.dense_points}, {args.resolution}² z-buffer")
-    print(f"# machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}, "
-          f"GL: {_gl_renderer()}; load average before: {load:.2f}")
+    print(
+        f"# {args.objects} objects ({n_meshes} real meshes repeated with distinct keys) × {args.views} × "
+        f"{args.samples_per_view} samples × {args.points} points; dense cloud {args.dense_points}, {args.resolution}² z-buffer"
+    )
+    print(
+        f"# machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}, "
+        f"GL: {_gl_renderer()}; load average before: {load:.2f}"
+    )
     if args.stages:
         params = FarmParams(
             views=args.views, samples_per_view=args.samples_per_view, n_points=args.points,

@@ -92,9 +92,7 @@ def main(argv: list[str] | None = None) -> int:
 
     if args.part == "merge":
         rows = read_csv(out / "table1a" / "results.csv") + read_csv(out / "table1b" / "results.csv")
-        report = write_results(
-            rows, out, title="All HSR methods vs the exact oracle (Table 1A and 1B runs together)", command=command
-        )
+        report = write_results(rows, out, title="All HSR methods vs the exact oracle (Table 1A and 1B runs together)", command=command)
         print(report)
         return 0
 
@@ -147,7 +145,12 @@ def main(argv: list[str] | None = None) -> int:
             "reported only the times (OG_32/OG_64 cut exact's time by 98.5–99.8 % at 50k–100k points), not the "
             "agreement.  All rows and the other methods: [table1b/report.md](table1b/report.md).",
         )
-        (out / "table1b.md").write_text(text + table_1b(rows) + "\n" + table_1b(rows, methods=("naive-zbuffer", "paper-vertex") + tuple(m for m in OPEN3D if any(r["method"] == m for r in rows))))
+        (out / "table1b.md").write_text(
+            text
+            + table_1b(rows)
+            + "\n"
+            + table_1b(rows, methods=("naive-zbuffer", "paper-vertex") + tuple(m for m in OPEN3D if any(r["method"] == m for r in rows)))
+        )
         print(text + table_1b(rows))
     return 0
 

@@ -92,8 +92,10 @@ def main(argv: list[str] | None = None) -> int:
         torch.set_num_threads(args.threads)
     name = torch.cuda.get_device_name() if device.type == "cuda" else (platform.processor() or platform.machine())
     print(f"device: {device.type} ({name}), torch {torch.__version__}, {torch.get_num_threads()} CPU threads\n")
-    print("| config | model | points | width | batch | parameters | train samples/s (wall) | train samples/CPU-s "
-          "| inference samples/s (wall) | inference samples/CPU-s |")
+    print(
+        "| config | model | points | width | batch | parameters | train samples/s (wall) | train samples/CPU-s "
+        "| inference samples/s (wall) | inference samples/CPU-s |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|")
     for cfg in args.configs.split(","):
         c = CONFIGS[cfg]

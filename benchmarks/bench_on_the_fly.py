@@ -131,7 +131,11 @@ def point_sets(args) -> int:
         with_hpr = False
     else:
         with_hpr = True
-    meshes = sorted(Path(args.meshes[0]).glob("*/*/*.off")) if len(args.meshes) == 1 and Path(args.meshes[0]).is_dir() else [Path(m) for m in args.meshes]
+    meshes = (
+        sorted(Path(args.meshes[0]).glob("*/*/*.off"))
+        if len(args.meshes) == 1 and Path(args.meshes[0]).is_dir()
+        else [Path(m) for m in args.meshes]
+    )
     clouds = [np.asarray(zo.sample_surface(zo.load_mesh(m), args.points, seed=0)[0], dtype=np.float64) for m in meshes]
     cached = RandomOcclusion(args.points, seed=0)
     RandomOcclusion(args.points, seed=1)(clouds[0], index=0, epoch=0)  # numba's compilation is not an item
@@ -151,12 +155,18 @@ def point_sets(args) -> int:
                 eye = camera_on_sphere(sample["elevation_deg"], sample["azimuth_deg"]).eye
                 times["hpr"].append(_hpr_ms(frame, eye))
     print(f"# {_load()}")
-    print(f"# {len(clouds)} clouds of {args.points:,} points (shipped meshes, no normals), {args.repeats * args.views} items each, interleaved")
+    print(
+        f"# {len(clouds)} clouds of {args.points:,} points (shipped meshes, no normals), {args.repeats * args.views} items each, interleaved"
+    )
     print()
     print("| per item | ms (median) | / Open3D HPR |")
     print("|---|---:|---:|")
     hpr = statistics.median(times["hpr"]) if times["hpr"] else None
-    for name, label in (("fresh", "on the fly, preparation every item"), ("cached", "on the fly, preparation cached"), ("hpr", "Open3D HPR")):
+    for name, label in (
+        ("fresh", "on the fly, preparation every item"),
+        ("cached", "on the fly, preparation cached"),
+        ("hpr", "Open3D HPR"),
+    ):
         if times[name]:
             ms = statistics.median(times[name])
             print(f"| {label} | {ms:.2f} | {'n/a' if hpr is None else f'{ms / hpr:.2f}×'} |")

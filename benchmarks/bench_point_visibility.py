@@ -127,8 +127,10 @@ def main(argv: list[str] | None = None) -> int:
         info = context_info()
         print(f"OpenGL: {info['renderer']} ({info['backend']}, {info['version']}); "
               f"largest point size {shared_point_sprites().max_point_size:g} px")  # fmt: skip
-    print(f"CPU cores: {len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count()}; "
-          f"numba threads: {numba.get_num_threads()}; load average (1, 5, 15 min) before: {load_average()}")
+    print(
+        f"CPU cores: {len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count()}; "
+        f"numba threads: {numba.get_num_threads()}; load average (1, 5, 15 min) before: {load_average()}"
+    )
     print()
     head = ["N", "one call ms", "its preparation ms", "one view, prepared (CPU) ms"]
     if args.gpu:

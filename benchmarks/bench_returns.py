@@ -64,7 +64,9 @@ def _cast_alone(scene: ScanScene, lidar: Lidar, sector) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--mesh", default=str(BUSH if BUSH.exists() else FALLBACK), help="the object (default: a shared bush mesh, else a shipped one)")
+    ap.add_argument(
+        "--mesh", default=str(BUSH if BUSH.exists() else FALLBACK), help="the object (default: a shared bush mesh, else a shipped one)"
+    )
     ap.add_argument("--ks", default="1,7,19,37", help="footprint sub-ray counts of the multi-return cases")
     ap.add_argument("--repeats", type=int, default=5, help="interleaved rounds after the warm-up")
     ap.add_argument("--sector", type=float, default=20.0, help="half-width of the fired azimuth sector, degrees")
@@ -98,14 +100,18 @@ def main() -> None:
                 times[name].append(wall)
                 cpu[name].append(used)
     ref, ref_cpu = statistics.median(times[cases[0][0]]), statistics.median(cpu[cases[0][0]])
-    print("| case | pulses | points | points with several returns | ms per scan (wall) | µs per pulse (wall) | × today (wall) | µs per pulse (CPU) | × today (CPU) |")
+    print(
+        "| case | pulses | points | points with several returns | ms per scan (wall) | µs per pulse (wall) | × today (wall) | µs per pulse (CPU) | × today (CPU) |"
+    )
     print("|---|---|---|---|---|---|---|---|---|")
     for name, lidar, kw in cases:
         s = None if kw is None else scan(scene, lidar, seed=0, azimuth_range_deg=sector, **kw)
         med, med_cpu = statistics.median(times[name]), statistics.median(cpu[name])
         points, several = ("–", "–") if s is None else (f"{len(s):,}", f"{int((s.number_of_returns > 1).sum()):,}")
-        print(f"| {name} | {pulses:,} | {points} | {several} | {1e3 * med:.1f} | {1e6 * med / pulses:.2f} | {med / ref:.2f} | "
-              f"{1e6 * med_cpu / pulses:.2f} | {med_cpu / ref_cpu:.2f} |")
+        print(
+            f"| {name} | {pulses:,} | {points} | {several} | {1e3 * med:.1f} | {1e6 * med / pulses:.2f} | {med / ref:.2f} | "
+            f"{1e6 * med_cpu / pulses:.2f} | {med_cpu / ref_cpu:.2f} |"
+        )
     print(f"\n{_load()} at the end; ratios are of medians from this run (default footprint: K = {DEFAULT_K}).")
     if args.profile:
         lidar = base.with_(footprint_rays=DEFAULT_K, **multi)

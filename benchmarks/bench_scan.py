@@ -51,7 +51,10 @@ def main() -> None:
                 wall.append(time.perf_counter() - t0)
                 cpu.append(time.process_time() - c0)
             w, c = statistics.median(wall), statistics.median(cpu)
-            print(f"| {name} | {backend} | {s.meta['n_rays']} | {len(s)} | {1e3 * w:.0f} | {1e3 * c:.0f} | {len(s) / w:,.0f} | {s.meta.get('n_fallback', '-')} |", flush=True)
+            print(
+                f"| {name} | {backend} | {s.meta['n_rays']} | {len(s)} | {1e3 * w:.0f} | {1e3 * c:.0f} | {len(s) / w:,.0f} | {s.meta.get('n_fallback', '-')} |",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

@@ -264,9 +264,7 @@ def run_config(job: dict[str, Any]) -> dict[str, Any]:
         agree["zbuffer"].append(_agreement_counts(z, o))
         agree["gpu_only"].append(_agreement_counts(g, o))
         if k < numpy_poses:
-            n = timers["numpy"](
-                lambda cam=cam: zo.visible_mask(mesh, points, cam, method="oracle-numpy", face_index=face_index)
-            )
+            n = timers["numpy"](lambda cam=cam: zo.visible_mask(mesh, points, cam, method="oracle-numpy", face_index=face_index))
             agree["numpy"].append(_agreement_counts(n, o))
 
     scene.release()
@@ -339,9 +337,7 @@ def _machine() -> dict[str, str]:
 
     def git(*args: str) -> str:
         try:
-            return subprocess.run(
-                ["git", *args], cwd=REPO_ROOT, capture_output=True, text=True, check=True
-            ).stdout.strip()
+            return subprocess.run(["git", *args], cwd=REPO_ROOT, capture_output=True, text=True, check=True).stdout.strip()
         except (OSError, subprocess.CalledProcessError):
             return "unknown"
 
@@ -372,8 +368,7 @@ def report(results: list[dict[str, Any]], throughput: dict[str, Any] | None, arg
         "## z-buffer HSR vs the exact oracles: per-view cost",
         "",
         f"- command: `{started['command']}`",
-        f"- date: {started['date']}; commit {machine['commit']}; measured sources (git blob ids): "
-        f"{machine['sources']}",
+        f"- date: {started['date']}; commit {machine['commit']}; measured sources (git blob ids): {machine['sources']}",
         f"- machine: {machine['cpu']}; OpenGL: {gl.get('renderer', '?')}, {gl.get('version', '?')} "
         f"via {gl.get('backend', '?').upper()}, vendor {gl.get('vendor', '?')}; Python {machine['python']}, "
         f"numpy {machine['numpy']}",
@@ -388,7 +383,7 @@ def report(results: list[dict[str, Any]], throughput: dict[str, Any] | None, arg
         "### Time per view, ms (median over poses)",
         "",
         "`zbuffer` = `scene.visible(camera, resolution=R)` (render + compute shader + Embree for "
-        "uncertain points); `GPU only` = `resolve=\"none\"`; `render` = `scene.renderer.render` "
+        'uncertain points); `GPU only` = `resolve="none"`; `render` = `scene.renderer.render` '
         "(rasterise + read back depth and face id, for scale); ratios = oracle time / `zbuffer` "
         "time, wall (CPU).",
         "",
@@ -521,34 +516,44 @@ def main(argv: list[str] | None = None) -> int:
         from bench_visibility_peers import main as peers_main
 
         return peers_main([a for a in argv if a != "--peers"])
-    parser = argparse.ArgumentParser(
-        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawTextHelpFormatter
-    )
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawTextHelpFormatter)
     parser.add_argument("--small", type=Path, default=DEFAULT_SMALL, help="small mesh (~2k faces)")
     parser.add_argument("--medium", type=Path, default=DEFAULT_MEDIUM, help="medium mesh (~20-30k faces)")
     parser.add_argument("--large", type=Path, default=None, help="mesh to subdivide for 'large' (default: --medium)")
-    parser.add_argument("--large-subdivisions", type=int, default=DEFAULT_LARGE_SUBDIVISIONS,
-                        help="1-to-4 subdivisions of --large (default %(default)s)")
+    parser.add_argument(
+        "--large-subdivisions", type=int, default=DEFAULT_LARGE_SUBDIVISIONS, help="1-to-4 subdivisions of --large (default %(default)s)"
+    )
     parser.add_argument("--sizes", default="small,medium,large", help="which meshes (default %(default)s)")
-    parser.add_argument("--points", default=",".join(str(n) for n in DEFAULT_POINTS),
-                        help="point counts, comma separated (default %(default)s)")
+    parser.add_argument(
+        "--points", default=",".join(str(n) for n in DEFAULT_POINTS), help="point counts, comma separated (default %(default)s)"
+    )
     parser.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION, help="image size (default %(default)s)")
-    parser.add_argument("--poses", default=DEFAULT_POSES,
-                        help="measured poses: EL:AZ,..., a schedule name, or a count N (the first N of the "
-                        "default, %(default)s)")
-    parser.add_argument("--numpy-max-s", type=float, default=DEFAULT_NUMPY_MAX_S,
-                        help="estimated seconds the numpy oracle may take per mesh and point count; it runs on as "
-                        "many poses as fit (default %(default)s)")
-    parser.add_argument("--numpy-poses", type=int, default=DEFAULT_NUMPY_POSES,
-                        help="poses the numpy oracle runs on, at most (default %(default)s)")
+    parser.add_argument(
+        "--poses",
+        default=DEFAULT_POSES,
+        help="measured poses: EL:AZ,..., a schedule name, or a count N (the first N of the default, %(default)s)",
+    )
+    parser.add_argument(
+        "--numpy-max-s",
+        type=float,
+        default=DEFAULT_NUMPY_MAX_S,
+        help="estimated seconds the numpy oracle may take per mesh and point count; it runs on as many poses as fit (default %(default)s)",
+    )
+    parser.add_argument(
+        "--numpy-poses", type=int, default=DEFAULT_NUMPY_POSES, help="poses the numpy oracle runs on, at most (default %(default)s)"
+    )
     parser.add_argument("--throughput-resolution", type=int, default=DEFAULT_THROUGHPUT_RESOLUTION)
     parser.add_argument("--throughput-points", type=int, default=DEFAULT_THROUGHPUT_POINTS)
-    parser.add_argument("--throughput-views", type=int, default=DEFAULT_THROUGHPUT_VIEWS,
-                        help="views timed for views/s; 0 skips the throughput measurement")
+    parser.add_argument(
+        "--throughput-views", type=int, default=DEFAULT_THROUGHPUT_VIEWS, help="views timed for views/s; 0 skips the throughput measurement"
+    )
     parser.add_argument("--seed", type=int, default=DEFAULT_SEED)
-    parser.add_argument("--blas-threads", type=int, default=DEFAULT_BLAS_THREADS,
-                        help="numpy BLAS threads in the measuring processes; 0 leaves the environment as it is "
-                        "(default %(default)s)")
+    parser.add_argument(
+        "--blas-threads",
+        type=int,
+        default=DEFAULT_BLAS_THREADS,
+        help="numpy BLAS threads in the measuring processes; 0 leaves the environment as it is (default %(default)s)",
+    )
     parser.add_argument("--timeout", type=float, default=DEFAULT_CONFIG_TIMEOUT_S, help="seconds per configuration")
     parser.add_argument("--worker", nargs=2, metavar=("KIND", "JOB"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -561,9 +566,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
 
     started = {
-        "command": shlex.join(
-            [_python_name(), "benchmarks/bench_visibility.py", *(sys.argv[1:] if argv is None else argv)]
-        ),
+        "command": shlex.join([_python_name(), "benchmarks/bench_visibility.py", *(sys.argv[1:] if argv is None else argv)]),
         "date": datetime.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z"),
         "load_start": os.getloadavg()[0],
     }
@@ -589,16 +592,24 @@ def main(argv: list[str] | None = None) -> int:
         for n in counts:
             log.info("%s mesh, %d points", s, n)
             job = {
-                "mesh": meshes[s], "points": n, "resolution": args.resolution, "poses": args.poses,
-                "seed": args.seed, "numpy_max_s": args.numpy_max_s, "numpy_poses": args.numpy_poses,
+                "mesh": meshes[s],
+                "points": n,
+                "resolution": args.resolution,
+                "poses": args.poses,
+                "seed": args.seed,
+                "numpy_max_s": args.numpy_max_s,
+                "numpy_poses": args.numpy_poses,
             }
             results.append(_spawn("config", job, args.timeout, args.blas_threads))
     throughput = None
     if args.throughput_views > 0:
         log.info("throughput: medium mesh, %d points, %d²", args.throughput_points, args.throughput_resolution)
         job = {
-            "mesh": meshes["medium"], "points": args.throughput_points, "resolution": args.throughput_resolution,
-            "views": args.throughput_views, "seed": args.seed,
+            "mesh": meshes["medium"],
+            "points": args.throughput_points,
+            "resolution": args.throughput_resolution,
+            "views": args.throughput_views,
+            "seed": args.seed,
         }
         throughput = _spawn("throughput", job, args.timeout, args.blas_threads)
     log.info("done in %.0f s", time.perf_counter() - t_start)

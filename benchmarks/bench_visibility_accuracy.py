@@ -57,8 +57,11 @@ def main(argv: list[str] | None = None) -> int:
     from zbuf_occlude.visibility.embree_fast import FastScene
 
     poses = zo.view_schedule(args.poses)
-    configs = [(f"embree-fast{'' if pre else ', rays only (prepass=False)'}, {'with' if fi else 'without'} face_index", pre, fi)
-               for pre in (True, False) for fi in (True, False)]
+    configs = [
+        (f"embree-fast{'' if pre else ', rays only (prepass=False)'}, {'with' if fi else 'without'} face_index", pre, fi)
+        for pre in (True, False)
+        for fi in (True, False)
+    ]
     stats = {c[0]: {"agree": [], "fv": 0, "fh": 0, "n": 0, "rays": []} for c in configs}
     worst = {c[0]: ("", 2.0) for c in configs}
     load = os.getloadavg()
@@ -83,14 +86,18 @@ def main(argv: list[str] | None = None) -> int:
             if rate < worst[label][1]:
                 worst[label] = (name, rate)
         print(f"  {name}: done", file=sys.stderr, flush=True)
-    print(f"Agreement with the oracle (with face_index): {len(all_meshes)} meshes, {args.points:,} points × "
-          f"{len(poses)} poses ({args.poses}) each; load average before {load[0]:.2f}, after {os.getloadavg()[0]:.2f}.\n")
+    print(
+        f"Agreement with the oracle (with face_index): {len(all_meshes)} meshes, {args.points:,} points × "
+        f"{len(poses)} poses ({args.poses}) each; load average before {load[0]:.2f}, after {os.getloadavg()[0]:.2f}.\n"
+    )
     print("| configuration | mean agreement | worst mesh | false-visible | false-hidden | cast as rays (mean) |")
     print("|---|---:|---|---:|---:|---:|")
     for label, _, _ in configs:
         s = stats[label]
-        print(f"| {label} | {np.mean(s['agree']):.5%} | {worst[label][0]} {worst[label][1]:.4%} | {s['fv'] / s['n']:.5%} "
-              f"| {s['fh'] / s['n']:.5%} | {np.mean(s['rays']):.1%} |")
+        print(
+            f"| {label} | {np.mean(s['agree']):.5%} | {worst[label][0]} {worst[label][1]:.4%} | {s['fv'] / s['n']:.5%} "
+            f"| {s['fh'] / s['n']:.5%} | {np.mean(s['rays']):.1%} |"
+        )
     return 0
 
 

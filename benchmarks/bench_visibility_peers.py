@@ -65,8 +65,9 @@ try:  # NVIDIA Warp: the kernel is defined at import (Warp compiles module-level
         wp.init()  # prints its banner here, not in the middle of a table
 
     @wp.kernel
-    def _warp_occluded(mesh: wp.uint64, points: wp.array(dtype=wp.vec3), eye: wp.vec3, offset: float,
-                       out: wp.array(dtype=wp.int32)):  # pragma: no cover - compiled by Warp
+    def _warp_occluded(
+        mesh: wp.uint64, points: wp.array(dtype=wp.vec3), eye: wp.vec3, offset: float, out: wp.array(dtype=wp.int32)
+    ):  # pragma: no cover - compiled by Warp
         i = wp.tid()
         p = points[i]
         d = eye - p
@@ -100,11 +101,17 @@ def methods(mesh, points, fi, args) -> dict:
     off = args.offset
     out = {
         f"`zo.visible_mask` one-shot (auto = {choose_method(one_shot=True)})": (
-            lambda: None, lambda s, c: zo.visible_mask(mesh, points, c, face_index=fi)),
+            lambda: None,
+            lambda s, c: zo.visible_mask(mesh, points, c, face_index=fi),
+        ),
         f"`VisibilitySession` once (auto = {choose_method()}), `session.visible` per view": (
-            lambda: zo.VisibilitySession(mesh, points, fi), lambda s, c: s.visible(c)),
+            lambda: zo.VisibilitySession(mesh, points, fi),
+            lambda s, c: s.visible(c),
+        ),
         "embree-fast one-shot, rays only (no z-buffer pre-pass)": (
-            lambda: None, lambda s, c: FastScene(mesh, points, fi, sort=False, prepass=False).visible(c)),
+            lambda: None,
+            lambda s, c: FastScene(mesh, points, fi, sort=False, prepass=False).visible(c),
+        ),
     }
     if args.gpu_methods:
         from zbuf_occlude.visibility.gpu_exact import ExactScene
@@ -118,8 +125,9 @@ def methods(mesh, points, fi, args) -> dict:
 
         def o3d_setup():
             scene = o3d.t.geometry.RaycastingScene()
-            scene.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, dtype=np.float32)),
-                                o3d.core.Tensor(np.asarray(mesh.faces, dtype=np.uint32)))
+            scene.add_triangles(
+                o3d.core.Tensor(np.asarray(mesh.vertices, dtype=np.float32)), o3d.core.Tensor(np.asarray(mesh.faces, dtype=np.uint32))
+            )
             return scene
 
         def o3d_occlusions(scene, cam):
@@ -144,10 +152,13 @@ def methods(mesh, points, fi, args) -> dict:
         # (Warp's CPU path runs one thread: skipped above --warp-cpu-max-points)
         devices = (["cpu"] if len(points) <= args.warp_cpu_max_points else []) + (["cuda:0"] if wp.is_cuda_available() else [])
         for device in devices:
+
             def warp_setup(device=device):
                 with contextlib.redirect_stdout(io.StringIO()):
-                    m = wp.Mesh(points=wp.array(np.asarray(mesh.vertices, dtype=np.float32), dtype=wp.vec3, device=device),
-                                indices=wp.array(np.asarray(mesh.faces, dtype=np.int32).ravel(), dtype=wp.int32, device=device))
+                    m = wp.Mesh(
+                        points=wp.array(np.asarray(mesh.vertices, dtype=np.float32), dtype=wp.vec3, device=device),
+                        indices=wp.array(np.asarray(mesh.faces, dtype=np.int32).ravel(), dtype=wp.int32, device=device),
+                    )
                 return m
 
             def warp_view(m, cam, device=device):
@@ -155,8 +166,9 @@ def methods(mesh, points, fi, args) -> dict:
                 pts = wp.array(points[inside].astype(np.float32), dtype=wp.vec3, device=device)
                 hit = wp.zeros(len(pts), dtype=wp.int32, device=device)
                 with contextlib.redirect_stdout(io.StringIO()):
-                    wp.launch(_warp_occluded, dim=len(pts), inputs=[m.id, pts, wp.vec3(*cam.eye.astype(np.float32)), off, hit],
-                              device=device)
+                    wp.launch(
+                        _warp_occluded, dim=len(pts), inputs=[m.id, pts, wp.vec3(*cam.eye.astype(np.float32)), off, hit], device=device
+                    )
                 inside[inside] = hit.numpy() == 0
                 return inside
 
@@ -195,8 +207,17 @@ def run(mesh, n_points: int, poses, args) -> list[dict]:
     for name, (setup, view) in table.items():
         t, c = time.perf_counter(), time.process_time()
         state[name] = setup()
-        rows[name] = {"method": name, "setup_ms": 1e3 * (time.perf_counter() - t), "setup_cpu_ms": 1e3 * (time.process_time() - c),
-                      "wall": [], "cpu": [], "agree": 0, "fv": 0, "fh": 0, "n": 0}
+        rows[name] = {
+            "method": name,
+            "setup_ms": 1e3 * (time.perf_counter() - t),
+            "setup_cpu_ms": 1e3 * (time.process_time() - c),
+            "wall": [],
+            "cpu": [],
+            "agree": 0,
+            "fv": 0,
+            "fh": 0,
+            "n": 0,
+        }
         view(state[name], warm)  # JIT, kernels, first-touch
     oracle = {"wall": [], "cpu": []}
     names = list(table)
@@ -209,7 +230,7 @@ def run(mesh, n_points: int, poses, args) -> list[dict]:
             truth = zo.visible_mask(mesh, points, cam, "oracle", face_index=fi)
             oracle["wall"].append(time.perf_counter() - t)
             oracle["cpu"].append(time.process_time() - c)
-        for name in names[k % len(names):] + names[: k % len(names)]:  # rotate the order
+        for name in names[k % len(names) :] + names[: k % len(names)]:  # rotate the order
             t, c = time.perf_counter(), time.process_time()
             got = table[name][1](state[name], cam)
             r = rows[name]
@@ -225,8 +246,18 @@ def run(mesh, n_points: int, poses, args) -> list[dict]:
             s.release()
     out = list(rows.values())
     if with_truth:
-        out.append({"method": "the project's exact `oracle` (truth)", "setup_ms": None, "wall": oracle["wall"],
-                    "cpu": oracle["cpu"], "agree": 1, "fv": 0, "fh": 0, "n": 1})
+        out.append(
+            {
+                "method": "the project's exact `oracle` (truth)",
+                "setup_ms": None,
+                "wall": oracle["wall"],
+                "cpu": oracle["cpu"],
+                "agree": 1,
+                "fv": 0,
+                "fh": 0,
+                "n": 1,
+            }
+        )
     return out
 
 
@@ -242,13 +273,18 @@ def _is_peer(row: dict) -> bool:
 
 
 def report(rows, n_points, desc) -> list[str]:
-    lines = [f"### {n_points:,} points, {desc}", "",
-             "| method | set-up ms | wall ms / view | CPU ms / view | agreement | false-visible | false-hidden |",
-             "|---|---:|---:|---:|---:|---:|---:|"]
+    lines = [
+        f"### {n_points:,} points, {desc}",
+        "",
+        "| method | set-up ms | wall ms / view | CPU ms / view | agreement | false-visible | false-hidden |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
     for r in rows:
         setup = "—" if r["setup_ms"] is None else f"{r['setup_ms']:.0f}"
-        lines.append(f"| {r['method']} | {setup} | {1e3 * statistics.median(r['wall']):.1f} | {1e3 * statistics.median(r['cpu']):.1f} "
-                     f"| {_fmt_rate(r, 'agree')} | {_fmt_rate(r, 'fv')} | {_fmt_rate(r, 'fh')} |")
+        lines.append(
+            f"| {r['method']} | {setup} | {1e3 * statistics.median(r['wall']):.1f} | {1e3 * statistics.median(r['cpu']):.1f} "
+            f"| {_fmt_rate(r, 'agree')} | {_fmt_rate(r, 'fv')} | {_fmt_rate(r, 'fh')} |"
+        )
     return lines + [""] + against_fastest_peer(rows)
 
 
@@ -261,20 +297,28 @@ def against_fastest_peer(rows) -> list[str]:
         return []
     fastest = min(peers, key=lambda r: statistics.median(r["wall"]))
     peer_ms = 1e3 * statistics.median(fastest["wall"])
-    lines = [f"Against the fastest peer call, {fastest['method']} ({peer_ms:.1f} ms per view), same run, "
-             "interleaved view by view (speed-up = its time / ours):", "",
-             "| ours | ours, ms / view | fastest peer, ms / view | speed-up (medians) | per-view speed-up: median (range) |",
-             "|---|---:|---:|---:|---:|"]
+    lines = [
+        f"Against the fastest peer call, {fastest['method']} ({peer_ms:.1f} ms per view), same run, "
+        "interleaved view by view (speed-up = its time / ours):",
+        "",
+        "| ours | ours, ms / view | fastest peer, ms / view | speed-up (medians) | per-view speed-up: median (range) |",
+        "|---|---:|---:|---:|---:|",
+    ]
     for o in ours:
         per = [p / q for p, q in zip(fastest["wall"], o["wall"])]
         ours_ms = 1e3 * statistics.median(o["wall"])
-        lines.append(f"| {o['method']} | {ours_ms:.1f} | {peer_ms:.1f} | **{peer_ms / ours_ms:.2f}×** "
-                     f"| {statistics.median(per):.2f}× ({min(per):.2f}–{max(per):.2f}) |")
+        lines.append(
+            f"| {o['method']} | {ours_ms:.1f} | {peer_ms:.1f} | **{peer_ms / ours_ms:.2f}×** "
+            f"| {statistics.median(per):.2f}× ({min(per):.2f}–{max(per):.2f}) |"
+        )
     others = sorted((r for r in peers if r is not fastest), key=lambda r: statistics.median(r["wall"]))
     if others:
-        lines += ["", "Other peer calls, time per view relative to the fastest: "
-                  + "; ".join(f"{r['method']} {statistics.median(r['wall']) / statistics.median(fastest['wall']):.2f}×" for r in others)
-                  + "."]
+        lines += [
+            "",
+            "Other peer calls, time per view relative to the fastest: "
+            + "; ".join(f"{r['method']} {statistics.median(r['wall']) / statistics.median(fastest['wall']):.2f}×" for r in others)
+            + ".",
+        ]
     return lines + [""]
 
 
@@ -297,8 +341,9 @@ def _versions() -> str:
     if wp is not None:
         out.append(f"warp {wp.__version__}")
     try:
-        commit = subprocess.run(["git", "-C", str(REPO_ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                timeout=10).stdout.strip()
+        commit = subprocess.run(
+            ["git", "-C", str(REPO_ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=10
+        ).stdout.strip()
     except Exception:  # noqa: BLE001
         commit = ""
     return ", ".join(out) + (f"; commit {commit}" if commit else "")
@@ -348,21 +393,32 @@ def main(argv: list[str] | None = None) -> int:
     load_before, n_cpu = os.getloadavg(), cores()
     loaded = load_before[0] > n_cpu
     if loaded and not args.force:
-        print(f"bench_visibility_peers: load average {load_before[0]:.2f} exceeds the {n_cpu} CPUs: timings would be "
-              "noise. Wait for a quiet machine, or pass --force (the output is then flagged).", file=sys.stderr)
+        print(
+            f"bench_visibility_peers: load average {load_before[0]:.2f} exceeds the {n_cpu} CPUs: timings would be "
+            "noise. Wait for a quiet machine, or pass --force (the output is then flagged).",
+            file=sys.stderr,
+        )
         return 3
-    lines = [f"## Visibility peers: {path.name}, {len(poses)} poses ({args.poses}) × {args.repeats}, one run"
-             + (" — ⚠ LOADED MACHINE, timings unreliable" if loaded else ""), "",
-             f"Machine: {_cpu_model()}, {n_cpu} CPUs, {platform.node()}; {_versions()}.",
-             f"Command: `{' '.join([Path(sys.executable).name, *sys.argv])}`", "",
-             f"Load average (1, 5, 15 min) before: {', '.join(f'{x:.2f}' for x in load_before)} (`{_uptime()}`).", ""]
+    lines = [
+        f"## Visibility peers: {path.name}, {len(poses)} poses ({args.poses}) × {args.repeats}, one run"
+        + (" — ⚠ LOADED MACHINE, timings unreliable" if loaded else ""),
+        "",
+        f"Machine: {_cpu_model()}, {n_cpu} CPUs, {platform.node()}; {_versions()}.",
+        f"Command: `{' '.join([Path(sys.executable).name, *sys.argv])}`",
+        "",
+        f"Load average (1, 5, 15 min) before: {', '.join(f'{x:.2f}' for x in load_before)} (`{_uptime()}`).",
+        "",
+    ]
     print("\n".join(lines), flush=True)
     for n in counts:
         rows = run(mesh, n, poses, args)
         print("\n".join(report(rows, n, f"{len(mesh.faces):,} faces, median of {len(poses) * args.repeats} views")), flush=True)
     load_after = os.getloadavg()
-    flag = " ⚠ load above the CPU count: absolute timings unreliable (the per-view ratios less so)" if max(
-        load_before[0], load_after[0]) > n_cpu else ""
+    flag = (
+        " ⚠ load above the CPU count: absolute timings unreliable (the per-view ratios less so)"
+        if max(load_before[0], load_after[0]) > n_cpu
+        else ""
+    )
     print(f"Load average (1, 5, 15 min) after: {', '.join(f'{x:.2f}' for x in load_after)} (`{_uptime()}`).{flag}")
     return 0
 

@@ -58,7 +58,9 @@ def main() -> None:
         ap.error("--occlude and --outline time different fits: give one")
     paths = sorted(p for p in args.root.rglob("*") if p.suffix.lower() in SUPPORTED_EXTENSIONS and p.is_file())
     sensor = Lidar.preset("hdl32e")
-    print(f"# bench_width_scale: {len(paths)} meshes under {args.root}, {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.2f} at the start\n")
+    print(
+        f"# bench_width_scale: {len(paths)} meshes under {args.root}, {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.2f} at the start\n"
+    )
     if args.occlude:
         print("| mesh | s | stretch | occluder fit, s | visible share | 16 crops whole, s | occluded, s |\n|---|---|---|---|---|---|---|")
     else:
@@ -89,15 +91,21 @@ def main() -> None:
             crops.append(pair)
             row += f" {shaped[-1]:.2f} | {share[0]:.2f}–{share[1]:.2f} | {pair[0]:.2f} | {pair[1]:.2f} |"
         print(row, flush=True)
-    print(f"\ntotal {sum(times):.1f} s, median {statistics.median(times):.2f} s, max {max(times):.2f} s per mesh; "
-          f"load {os.getloadavg()[0]:.2f} at the end")
+    print(
+        f"\ntotal {sum(times):.1f} s, median {statistics.median(times):.2f} s, max {max(times):.2f} s per mesh; "
+        f"load {os.getloadavg()[0]:.2f} at the end"
+    )
     if crops:
-        print(f"occluder fit: total {sum(shaped):.1f} s, median {statistics.median(shaped):.2f} s per mesh, median ratio to the "
-              f"stretch's {statistics.median(b / a for a, b in zip(times, shaped)):.2f}; 16 crops: whole {sum(a for a, _ in crops):.1f} s, "
-              f"occluded {sum(b for _, b in crops):.1f} s, median ratio {statistics.median(b / a for a, b in crops):.2f}")
+        print(
+            f"occluder fit: total {sum(shaped):.1f} s, median {statistics.median(shaped):.2f} s per mesh, median ratio to the "
+            f"stretch's {statistics.median(b / a for a, b in zip(times, shaped)):.2f}; 16 crops: whole {sum(a for a, _ in crops):.1f} s, "
+            f"occluded {sum(b for _, b in crops):.1f} s, median ratio {statistics.median(b / a for a, b in crops):.2f}"
+        )
     elif shaped:
-        print(f"with the outline: total {sum(shaped):.1f} s, median {statistics.median(shaped):.2f} s per mesh, "
-              f"median ratio {statistics.median(b / a for a, b in zip(times, shaped)):.2f}")
+        print(
+            f"with the outline: total {sum(shaped):.1f} s, median {statistics.median(shaped):.2f} s per mesh, "
+            f"median ratio {statistics.median(b / a for a, b in zip(times, shaped)):.2f}"
+        )
 
 
 if __name__ == "__main__":

@@ -82,17 +82,24 @@ def main(argv: list[str] | None = None) -> int:
     poses = zo.view_schedule(args.poses)
     rows = [profile(mesh, int(n), poses, args.resolution) for n in args.points.split(",")]
     info = shared_context().info
-    print(f"# zbuffer-exact, stage by stage\n\n{mesh_path.name} ({len(mesh.faces):,} faces), {len(poses)} poses, "
-          f"{args.resolution}² tile grid; OpenGL renderer {info['GL_RENDERER']}; {os.cpu_count()} CPUs; "
-          f"load average {os.getloadavg()[0]:.2f}.\n")
+    print(
+        f"# zbuffer-exact, stage by stage\n\n{mesh_path.name} ({len(mesh.faces):,} faces), {len(poses)} poses, "
+        f"{args.resolution}² tile grid; OpenGL renderer {info['GL_RENDERER']}; {os.cpu_count()} CPUs; "
+        f"load average {os.getloadavg()[0]:.2f}.\n"
+    )
     stages = list(rows[0]["stages_ms"])
-    print("| points | set-up ms | view ms (unprofiled) | " + " | ".join(f"{s} ms" for s in stages)
-          + " | decided on the CPU | tile entries | global faces |")
+    print(
+        "| points | set-up ms | view ms (unprofiled) | "
+        + " | ".join(f"{s} ms" for s in stages)
+        + " | decided on the CPU | tile entries | global faces |"
+    )
     print("|" + "---:|" * (len(stages) + 6))
     for r in rows:
         cells = " | ".join(f"{r['stages_ms'][s]:.2f}" for s in stages)
-        print(f"| {r['n_points']:,} | {r['setup_ms']:.0f} | {r['view_ms']:.2f} | {cells} | {100 * r['cpu_share']:.4f} % "
-              f"| {r['stats'].get('entries', 0):,} | {r['stats'].get('global_faces', 0)} |")
+        print(
+            f"| {r['n_points']:,} | {r['setup_ms']:.0f} | {r['view_ms']:.2f} | {cells} | {100 * r['cpu_share']:.4f} % "
+            f"| {r['stats'].get('entries', 0):,} | {r['stats'].get('global_faces', 0)} |"
+        )
     print(f"\nCommand: `python benchmarks/profile_gpu_exact.py {' '.join(argv if argv is not None else sys.argv[1:])}`")
     return 0
 

@@ -84,8 +84,15 @@ def _scatter(ax, points: np.ndarray, depth: np.ndarray, vmin: float, vmax: float
     # Draw far points first so near ones end on top (matplotlib paints in call order).
     order = np.argsort(-depth)
     ax.scatter(
-        *points[order].T, c=depth[order], cmap=COLORMAP, vmin=vmin, vmax=vmax, s=MARKER_SIZE,
-        linewidths=0, depthshade=False, rasterized=True,
+        *points[order].T,
+        c=depth[order],
+        cmap=COLORMAP,
+        vmin=vmin,
+        vmax=vmax,
+        s=MARKER_SIZE,
+        linewidths=0,
+        depthshade=False,
+        rasterized=True,
     )
 
 
@@ -96,8 +103,7 @@ def _camera_marker(ax, camera: zo.Camera) -> None:
     ax.quiver(*start, *(end - start), color="crimson", linewidth=1.5, arrow_length_ratio=0.35)
 
 
-def make_figure(mesh_path: Path, out: Path, *, n_points: int = DEFAULT_POINTS, resolution: int = DEFAULT_RESOLUTION,
-                seed: int = 0) -> None:
+def make_figure(mesh_path: Path, out: Path, *, n_points: int = DEFAULT_POINTS, resolution: int = DEFAULT_RESOLUTION, seed: int = 0) -> None:
     """Render the figure to ``out`` (PNG)."""
     mesh = zo.load_mesh(mesh_path)
     points, face_index = zo.sample_surface(mesh, count=n_points, seed=seed)
@@ -136,15 +142,17 @@ def make_figure(mesh_path: Path, out: Path, *, n_points: int = DEFAULT_POINTS, r
 
     row_x = grid[0, 1].get_position(fig).x0 + 0.005
     for row, label in enumerate(
-        (f"from a fixed viewpoint (el {FIXED_VIEW[0]:g}°, az {FIXED_VIEW[1]:g}°)\nred arrow: camera direction",
-         "from the camera's own viewpoint")
+        (
+            f"from a fixed viewpoint (el {FIXED_VIEW[0]:g}°, az {FIXED_VIEW[1]:g}°)\nred arrow: camera direction",
+            "from the camera's own viewpoint",
+        )
     ):
         box = grid[row, 1].get_position(fig)
         fig.text(row_x, (box.y0 + box.y1) / 2, label, rotation=90, ha="left", va="center", fontsize=10, color="0.3")
     fig.suptitle(
-        f"{mesh_path.name}: z-buffer hidden surface removal at {resolution}², colour = depth from each camera "
-        "(near: blue, far: yellow)",
-        fontsize=13, y=0.975,
+        f"{mesh_path.name}: z-buffer hidden surface removal at {resolution}², colour = depth from each camera (near: blue, far: yellow)",
+        fontsize=13,
+        y=0.975,
     )
     out.parent.mkdir(parents=True, exist_ok=True)
     buffer = io.BytesIO()

@@ -1,6 +1,6 @@
 """Draw docs/protocols_figure.png: ModelNet40-C's and PCN's depth images and clouds, exact vs the recipe's tool.
 
-    python docs/make_protocols_figure.py            # needs the [plot] extra (matplotlib)
+python docs/make_protocols_figure.py            # needs the [plot] extra (matplotlib)
 """
 
 from __future__ import annotations

@@ -22,12 +22,32 @@ POINTS = np.asarray(MESH.vertices[:8], dtype=np.float64)
 CAMERA = zo.camera_on_sphere(20.0, 30.0, resolution=64)
 
 CALLS = {
-    "visible_mask/mesh": (lambda: zo.visible_mask("chair.off", POINTS, CAMERA, method="oracle"), "mesh must be a trimesh.Trimesh", "zo.load_mesh"),
-    "visible_mask/camera": (lambda: zo.visible_mask(MESH, POINTS, (30, 45), method="oracle"), "camera must be a zbuf_occlude.Camera", "zo.camera_on_sphere"),
+    "visible_mask/mesh": (
+        lambda: zo.visible_mask("chair.off", POINTS, CAMERA, method="oracle"),
+        "mesh must be a trimesh.Trimesh",
+        "zo.load_mesh",
+    ),
+    "visible_mask/camera": (
+        lambda: zo.visible_mask(MESH, POINTS, (30, 45), method="oracle"),
+        "camera must be a zbuf_occlude.Camera",
+        "zo.camera_on_sphere",
+    ),
     "visible_mask/points": (lambda: zo.visible_mask(MESH, "points.npy", CAMERA, method="oracle"), "points must be a numeric array", "str"),
-    "visible_mask/face_index": (lambda: zo.visible_mask(MESH, POINTS, CAMERA, method="oracle", face_index="0"), "face_index must be a numeric array", "str"),
-    "visible_mask/complex": (lambda: zo.visible_mask(MESH, POINTS.astype(complex), CAMERA, method="oracle"), "points must be a numeric array", "complex"),
-    "visible_mask/objects": (lambda: zo.visible_mask(MESH, np.array([[0, 0, "x"]], dtype=object), CAMERA, method="oracle"), "points must be a numeric array", "not all numbers"),
+    "visible_mask/face_index": (
+        lambda: zo.visible_mask(MESH, POINTS, CAMERA, method="oracle", face_index="0"),
+        "face_index must be a numeric array",
+        "str",
+    ),
+    "visible_mask/complex": (
+        lambda: zo.visible_mask(MESH, POINTS.astype(complex), CAMERA, method="oracle"),
+        "points must be a numeric array",
+        "complex",
+    ),
+    "visible_mask/objects": (
+        lambda: zo.visible_mask(MESH, np.array([[0, 0, "x"]], dtype=object), CAMERA, method="oracle"),
+        "points must be a numeric array",
+        "not all numbers",
+    ),
     "sample_surface/mesh": (lambda: zo.sample_surface("chair.off", 100), "mesh must be a trimesh.Trimesh", "zo.load_mesh"),
     "render_depth/mesh": (lambda: zo.render_depth("chair.off", CAMERA), "mesh must be a trimesh.Trimesh", "chair.off"),
     "render_depth/camera": (lambda: zo.render_depth(MESH, [10.0, 20.0]), "camera must be a zbuf_occlude.Camera", "zo.camera_on_sphere"),

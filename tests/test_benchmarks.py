@@ -22,8 +22,9 @@ sys.path.insert(0, str(REPO_ROOT / "benchmarks"))
 def _gpu_sh(out: Path, *flags: str) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHON": sys.executable}
     env.pop("ZBUF_OCCLUDE_AUTO", None)
-    return subprocess.run(["bash", str(REPO_ROOT / "benchmarks" / "gpu.sh"), str(out), *flags], env=env,
-                          capture_output=True, text=True, timeout=600)
+    return subprocess.run(
+        ["bash", str(REPO_ROOT / "benchmarks" / "gpu.sh"), str(out), *flags], env=env, capture_output=True, text=True, timeout=600
+    )
 
 
 @pytest.mark.slow
@@ -68,8 +69,11 @@ def test_peer_benchmark_sets_each_of_ours_beside_the_fastest_peer_call():
     def row(name, walls):
         return {"method": name, "setup_ms": 0.0, "wall": walls, "cpu": walls, "agree": 0, "fv": 0, "fh": 0, "n": 0}
 
-    rows = [row("`zo.visible_mask` one-shot", [0.010, 0.012]), row("Open3D `RaycastingScene.test_occlusions`", [0.030, 0.030]),
-            row("Open3D `RaycastingScene.cast_rays`", [0.020, 0.024])]
+    rows = [
+        row("`zo.visible_mask` one-shot", [0.010, 0.012]),
+        row("Open3D `RaycastingScene.test_occlusions`", [0.030, 0.030]),
+        row("Open3D `RaycastingScene.cast_rays`", [0.020, 0.024]),
+    ]
     text = "\n".join(bench.against_fastest_peer(rows))
     assert "fastest peer call, Open3D `RaycastingScene.cast_rays` (22.0 ms per view)" in text
     assert "| `zo.visible_mask` one-shot | 11.0 | 22.0 | **2.00×** | 2.00× (2.00–2.00) |" in text

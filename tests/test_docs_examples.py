@@ -84,7 +84,7 @@ def extract_blocks(text: str, path: str) -> list[Block]:
             close = FENCE.match(lines[j])
             if close and close["fence"][0] == fence[0] and len(close["fence"]) >= len(fence) and not close["info"].strip():
                 break
-            body.append(lines[j][len(indent):] if lines[j].startswith(indent) else lines[j].lstrip())
+            body.append(lines[j][len(indent) :] if lines[j].startswith(indent) else lines[j].lstrip())
             j += 1
         if language in RUN_LANGUAGES:
             n = sum(1 for b in blocks if b.path == path)
@@ -106,9 +106,7 @@ def all_blocks() -> list[Block]:
 
 
 def is_install_block(block: Block) -> bool:
-    return block.language == "bash" and any(
-        line.strip().startswith(INSTALL) for line in block.code.splitlines()
-    )
+    return block.language == "bash" and any(line.strip().startswith(INSTALL) for line in block.code.splitlines())
 
 
 def repository_files() -> list[str]:
@@ -116,16 +114,14 @@ def repository_files() -> list[str]:
     try:
         out = subprocess.run(
             ["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
-            cwd=ROOT, check=True, capture_output=True,
+            cwd=ROOT,
+            check=True,
+            capture_output=True,
         ).stdout
         return [p for p in out.decode("utf-8", "surrogateescape").split("\0") if p and (ROOT / p).is_file()]
     except (OSError, subprocess.CalledProcessError):  # not a git checkout (an sdist): copy the tree
         skip = {".git", ".venv", "site", "__pycache__", ".pytest_cache", ".hypothesis", "out"}
-        return [
-            p.relative_to(ROOT).as_posix()
-            for p in ROOT.rglob("*")
-            if p.is_file() and not skip.intersection(p.relative_to(ROOT).parts)
-        ]
+        return [p.relative_to(ROOT).as_posix() for p in ROOT.rglob("*") if p.is_file() and not skip.intersection(p.relative_to(ROOT).parts)]
 
 
 def fresh_copy(dest: Path) -> Path:
@@ -138,8 +134,11 @@ def fresh_copy(dest: Path) -> Path:
     bin_dir.mkdir(parents=True)
     # wrappers, not symlinks: a symlinked venv interpreter would not find its pyvenv.cfg
     exe = shlex.quote(sys.executable)
-    for name, line in (("python", f'exec {exe} "$@"'), ("python3", f'exec {exe} "$@"'),
-                       ("zbuf-occlude", f'exec {exe} -m zbuf_occlude "$@"')):
+    for name, line in (
+        ("python", f'exec {exe} "$@"'),
+        ("python3", f'exec {exe} "$@"'),
+        ("zbuf-occlude", f'exec {exe} -m zbuf_occlude "$@"'),
+    ):
         (bin_dir / name).write_text(f"#!/bin/sh\n{line}\n")
         (bin_dir / name).chmod(0o755)
     return dest
@@ -163,9 +162,7 @@ def run_block(block: Block, copy: Path, scratch: Path) -> subprocess.CompletedPr
         script.write_text(block.code)
         cmd = [sys.executable, str(script)]
     try:
-        return subprocess.run(
-            cmd, cwd=copy, env=example_env(copy), capture_output=True, text=True, timeout=TIMEOUT_S
-        )
+        return subprocess.run(cmd, cwd=copy, env=example_env(copy), capture_output=True, text=True, timeout=TIMEOUT_S)
     except subprocess.TimeoutExpired as e:
         pytest.fail(f"{block.id}: still running after {TIMEOUT_S:.0f} s (keep examples small)\n{e.stdout or ''}{e.stderr or ''}")
 
@@ -231,8 +228,8 @@ def test_example_runs(block: Block, shared_copy: _SharedCopy) -> None:
 def documented_folder_tree(text: str) -> set[str]:
     """The entries of the folder tree under "## The folder" in docs/guide/outputs.md: the first
     word of each line indented by two spaces (``shards/``, ``<name>/``, ``plan.json``)."""
-    section = text[text.index("## The folder"):]
-    block = section[section.index("```text"):]
+    section = text[text.index("## The folder") :]
+    block = section[section.index("```text") :]
     block = block[: block.index("```", 3)]
     return {m[1] for m in re.finditer(r"^  (\S+)", block, re.MULTILINE)}
 
@@ -260,7 +257,9 @@ def test_the_documented_folder_tree_is_what_generate_and_farm_write(tmp_path: Pa
         names = {json.loads(line)["name"].split("/")[0] + "/" for line in (out / "manifest.jsonl").read_text().splitlines()}
         written = {p.name + "/" * p.is_dir() for p in out.iterdir() if not p.name.startswith(".")}
         written = (written - names) | ({"<name>/"} if written & names else set())
-        assert written == expected, f"{what}: written but not in the tree {sorted(written - expected)}, in the tree but not written {sorted(expected - written)}"
+        assert written == expected, (
+            f"{what}: written but not in the tree {sorted(written - expected)}, in the tree but not written {sorted(expected - written)}"
+        )
 
 
 def test_examples_write_under_runs_each_to_a_folder_of_its_own() -> None:
@@ -279,11 +278,7 @@ def test_examples_write_under_runs_each_to_a_folder_of_its_own() -> None:
 def _ci_commands() -> list[str]:
     """The commands of .ci/run, without comments, ``set`` and ``cd`` lines."""
     lines = (ROOT / ".ci" / "run").read_text().splitlines()
-    return [
-        step.strip() for ln in lines
-        if ln.strip() and not ln.lstrip().startswith(("#", "set ", "cd "))
-        for step in ln.split("&&")
-    ]
+    return [step.strip() for ln in lines if ln.strip() and not ln.lstrip().startswith(("#", "set ", "cd ")) for step in ln.split("&&")]
 
 
 @pytest.mark.parametrize("block", INSTALLS, ids=[b.id for b in INSTALLS])
@@ -399,7 +394,7 @@ def test_mesh_format_lists_name_every_format(path: Path) -> None:
 
 def test_the_examples_are_found() -> None:
     """The extractor sees the blocks (a broken parser must not pass by running nothing)."""
-    sample = "text\n```bash\necho a\n```\n\n  ```python title=\"x.py\"\n  print(1)\n  ```\n```text\nnot run\n```\n"
+    sample = 'text\n```bash\necho a\n```\n\n  ```python title="x.py"\n  print(1)\n  ```\n```text\nnot run\n```\n'
     got = extract_blocks(sample, "x.md")
     assert [(b.line, b.language, b.code) for b in got] == [(2, "bash", "echo a\n"), (6, "python", "print(1)\n")]
     assert any(b.path == "README.md" and b.language == "python" for b in BLOCKS)
@@ -423,9 +418,22 @@ def test_the_documentation_site_builds_strict(tmp_path: Path) -> None:
         pytest.skip(f"{missing} is not installed (pip install -e '.[docs]')")
     env = dict(os.environ, NO_MKDOCS_2_WARNING="1")
     r = subprocess.run(
-        [sys.executable, "-m", "mkdocs", "build", "--strict", "--config-file", str(ROOT / "mkdocs.yml"),
-         "--site-dir", str(tmp_path / "site")],
-        cwd=ROOT, env=env, capture_output=True, text=True, timeout=600,
+        [
+            sys.executable,
+            "-m",
+            "mkdocs",
+            "build",
+            "--strict",
+            "--config-file",
+            str(ROOT / "mkdocs.yml"),
+            "--site-dir",
+            str(tmp_path / "site"),
+        ],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     assert r.returncode == 0, r.stdout + r.stderr
     # every public name has an entry on the API page, or a link from it to its entry on a module's
@@ -474,7 +482,10 @@ def internal_imports_of_public_names(code: str) -> list[str]:
             for alias in node.names:
                 public = next((p for p in parents if alias.name in _exported(p)), None)
                 if public:
-                    found.append(f"from {node.module} import {alias.name} -> " + (f"zo.{alias.name}" if public == "zbuf_occlude" else f"from {public} import {alias.name}"))
+                    found.append(
+                        f"from {node.module} import {alias.name} -> "
+                        + (f"zo.{alias.name}" if public == "zbuf_occlude" else f"from {public} import {alias.name}")
+                    )
     return found
 
 
@@ -491,7 +502,9 @@ def test_internal_imports_of_public_names_are_found() -> None:
 
 @pytest.mark.parametrize("block", [b for b in RUNNABLE if b.language == "python"], ids=lambda b: b.id)
 def test_python_examples_use_the_public_name(block: Block) -> None:
-    assert not internal_imports_of_public_names(block.code), f"{block.id}: use the public names: {internal_imports_of_public_names(block.code)}"
+    assert not internal_imports_of_public_names(block.code), (
+        f"{block.id}: use the public names: {internal_imports_of_public_names(block.code)}"
+    )
 
 
 def test_visible_mask_quotes_embree_fasts_measured_agreement() -> None:

@@ -78,7 +78,7 @@ class TestInstallScript:
         rc, calls, out = _install(fake_checkout, *args, CPU_INDEX_OK="1")
         assert rc == 0, out
         last_install = max(i for i, c in enumerate(calls) if c.startswith("-m pip install"))
-        assert calls[last_install + 1:] == ["-m compileall -q zbuf_occlude", "-m zbuf_occlude.visibility.warmup -q"], calls
+        assert calls[last_install + 1 :] == ["-m compileall -q zbuf_occlude", "-m zbuf_occlude.visibility.warmup -q"], calls
 
     def test_test_install_takes_the_cpu_build_first_without_a_gpu(self, fake_checkout):
         rc, calls, out = _install(fake_checkout, "--test", CPU_INDEX_OK="1")
@@ -108,7 +108,9 @@ class TestInstallScript:
         rc, _, out = _install(fake_checkout, *args, CPU_INDEX_OK="1", CALLS="/dev/stdout")
         assert rc == 0, out
         lines = out.splitlines()
-        long_steps = [i for i, line in enumerate(lines) if line.startswith(("-m pip install", "-m compileall", "-m zbuf_occlude.visibility.warmup"))]
+        long_steps = [
+            i for i, line in enumerate(lines) if line.startswith(("-m pip install", "-m compileall", "-m zbuf_occlude.visibility.warmup"))
+        ]
         assert len(long_steps) >= 4, lines
         for i in long_steps:
             assert not lines[i - 1].startswith(("-m ", "-c ")), (lines[i], lines[:i])  # said before it, not after another call

@@ -100,9 +100,7 @@ def violations(sources: dict[str, tuple[str, bool]]) -> list[str]:
 
 
 def _package_sources() -> dict[str, tuple[str, bool]]:
-    return {
-        _module_name(p): (p.read_text(encoding="utf-8"), p.name == "__init__.py") for p in sorted(PACKAGE.rglob("*.py"))
-    }
+    return {_module_name(p): (p.read_text(encoding="utf-8"), p.name == "__init__.py") for p in sorted(PACKAGE.rglob("*.py"))}
 
 
 def test_every_module_has_a_layer() -> None:
@@ -119,9 +117,7 @@ def test_allowed_exceptions_still_exist() -> None:
     """An exception that no longer happens must leave ALLOWED, so it cannot come back silently."""
     sources = _package_sources()
     for here, there in ALLOWED:
-        imports = [
-            _top(t) for m, (src, pkg) in sources.items() if _top(m) == here for _, t in imported_modules(m, src, pkg)
-        ]
+        imports = [_top(t) for m, (src, pkg) in sources.items() if _top(m) == here for _, t in imported_modules(m, src, pkg)]
         assert there in imports, f"{here} no longer imports {there}: remove it from ALLOWED"
 
 

@@ -135,11 +135,11 @@ def test_occlude_object_labels_each_sample_with_its_pose_and_object():
             idx = _dense_indices(_BALL_DENSE, c)
             assert visible[idx].all()
     # one point and no samples are legal counts; a sample larger than the visible set is topped up
-    (_, visible, clouds), = occlude_object(_BALL, poses[:1], key=1, n_points=1, samples_per_view=1, dense=_BALL_DENSE, method="oracle")
+    ((_, visible, clouds),) = occlude_object(_BALL, poses[:1], key=1, n_points=1, samples_per_view=1, dense=_BALL_DENSE, method="oracle")
     assert len(clouds) == 1 and len(clouds[0].points) == 1 and not clouds[0].padded
-    (_, visible, clouds), = occlude_object(_BALL, poses[:1], key=1, samples_per_view=0, dense=_BALL_DENSE, method="oracle")
+    ((_, visible, clouds),) = occlude_object(_BALL, poses[:1], key=1, samples_per_view=0, dense=_BALL_DENSE, method="oracle")
     assert clouds == [] and visible.any()
-    (_, visible, clouds), = occlude_object(_BALL, poses[:1], key=1, n_points=4000, samples_per_view=1, dense=_BALL_DENSE, method="oracle")
+    ((_, visible, clouds),) = occlude_object(_BALL, poses[:1], key=1, n_points=4000, samples_per_view=1, dense=_BALL_DENSE, method="oracle")
     c = clouds[0]
     assert int(visible.sum()) < 4000 <= c.n_visible and c.n_topped_up == c.n_visible - int(visible.sum()) and not c.padded
     assert len(np.unique(c.points, axis=0)) == 4000
@@ -157,10 +157,13 @@ def test_the_camera_distance_sets_the_visible_cap_of_a_sphere(radius):
 def test_the_default_dense_cloud_is_the_seeded_one():
     # without ``dense``, the dense cloud is dense_cloud(mesh, key, seed=seed)
     tetra = trimesh.creation.icosphere(subdivisions=0, radius=0.5)
-    (_, visible, clouds), = occlude_object(tetra, [(0.0, 0.0)], key=5, seed=2, n_points=8, samples_per_view=1, method="oracle")
+    ((_, visible, clouds),) = occlude_object(tetra, [(0.0, 0.0)], key=5, seed=2, n_points=8, samples_per_view=1, method="oracle")
     dense = dense_cloud(tetra, 5, seed=2)
     assert len(visible) == len(dense.points)
-    assert np.array_equal(clouds[0].points, dense.points[pose_samples(np.flatnonzero(visible), 8, seed=2, key=5, pose_index=0, sample_indices=[0])[0]].astype(np.float32))
+    assert np.array_equal(
+        clouds[0].points,
+        dense.points[pose_samples(np.flatnonzero(visible), 8, seed=2, key=5, pose_index=0, sample_indices=[0])[0]].astype(np.float32),
+    )
     by_density = dense_cloud(tetra, 5, seed=2, density=1000.0)
     assert abs(len(by_density.points) - 1000.0 * tetra.area) <= 0.02 * 1000.0 * tetra.area + 1
 
@@ -450,7 +453,9 @@ def test_the_memory_check_counts_this_objects_job_before_allocating(monkeypatch)
         with pytest.raises(InvalidInputError, match="refused"):
             next(occlude_object(_BALL, [(0.0, 0.0)], key=1, n_points=33, samples_per_view=4, dense=dense,
                                 cameras=CameraSphere(resolution=96)))  # fmt: skip
-        assert checked.pop() == estimate_job_memory(points=33, samples_per_view=4, dense_points=n_dense, resolution=96, faces=len(_BALL.faces))
+        assert checked.pop() == estimate_job_memory(
+            points=33, samples_per_view=4, dense_points=n_dense, resolution=96, faces=len(_BALL.faces)
+        )
 
 
 def test_dense_cloud_is_sampled_with_the_generator_of_seed_key_and_the_dense_stream():
@@ -494,7 +499,10 @@ def test_occlude_object_passes_its_camera_and_options_to_the_method(monkeypatch)
     poses = [(10.0, 20.0), (-5.0, 90.0)]
     list(occlude_object(_BALL, poses, key=1, samples_per_view=0, dense=_BALL_DENSE, method="oracle", cameras=CameraSphere(3.0, 96),
                         tolerance=0.5))  # fmt: skip
-    assert [(c.elevation_deg, c.azimuth_deg, c.radius, c.resolution) for c, _, _ in calls] == [(10.0, 20.0, 3.0, (96, 96)), (-5.0, 90.0, 3.0, (96, 96))]
+    assert [(c.elevation_deg, c.azimuth_deg, c.radius, c.resolution) for c, _, _ in calls] == [
+        (10.0, 20.0, 3.0, (96, 96)),
+        (-5.0, 90.0, 3.0, (96, 96)),
+    ]
     for _, method, kw in calls:
         # the camera carries the resolution; "oracle" takes no resolution keyword
         assert method == "oracle" and "resolution" not in kw and kw["tolerance"] == 0.5
@@ -514,10 +522,17 @@ def test_occlude_object_passes_its_camera_and_options_to_the_method(monkeypatch)
             events.append(("released",))
 
     info = method_info("zbuffer")
-    monkeypatch.setattr(occlude_module, "method_info", lambda name: type(info)(**{**vars(info), "session": Scene}) if name == "zbuffer" else info)
+    monkeypatch.setattr(
+        occlude_module, "method_info", lambda name: type(info)(**{**vars(info), "session": Scene}) if name == "zbuffer" else info
+    )
     list(occlude_object(_BALL, poses, key=1, samples_per_view=1, dense=_BALL_DENSE, method="zbuffer", cameras=CameraSphere(resolution=96),
                         neighborhood=2))  # fmt: skip
-    assert events == [("built", 4000, True), ("pose", (96, 96), {"neighborhood": 2}), ("pose", (96, 96), {"neighborhood": 2}), ("released",)]
+    assert events == [
+        ("built", 4000, True),
+        ("pose", (96, 96), {"neighborhood": 2}),
+        ("pose", (96, 96), {"neighborhood": 2}),
+        ("released",),
+    ]
 
 
 def test_a_pose_with_nothing_visible_warns_once_only_if_samples_were_asked(caplog):

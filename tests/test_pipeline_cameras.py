@@ -16,7 +16,9 @@ def _same(a, b) -> bool:
     return all(np.array_equal(getattr(a, f.name), getattr(b, f.name)) for f in dataclasses.fields(a))
 
 
-@pytest.mark.parametrize(("el", "az", "radius", "resolution"), [(10.0, 20.0, 4.0, 512), (-90.0, 0.0, 2.5, (64, 48)), (33.0, 359.0, 4.0, 1024)])
+@pytest.mark.parametrize(
+    ("el", "az", "radius", "resolution"), [(10.0, 20.0, 4.0, 512), (-90.0, 0.0, 2.5, (64, 48)), (33.0, 359.0, 4.0, 1024)]
+)
 def test_a_pose_gives_camera_on_spheres_camera_made_once(el, az, radius, resolution):
     sphere = CameraSphere(radius, resolution)
     first = sphere.camera(el, az)

@@ -323,9 +323,7 @@ def _victim(tmp_path: Path, out: Path) -> dict[Path, bytes]:
 
 def _untouched(files: dict[Path, bytes]) -> bool:
     folders = {p.parent for p in files}
-    return all(p.is_file() and p.read_bytes() == b for p, b in files.items()) and sum(
-        len(list(f.iterdir())) for f in folders
-    ) == len(files)
+    return all(p.is_file() and p.read_bytes() == b for p, b in files.items()) and sum(len(list(f.iterdir())) for f in folders) == len(files)
 
 
 @pytest.mark.slow
@@ -396,7 +394,9 @@ def test_a_class_name_with_a_control_character_is_refused_before_any_work(tmp_pa
     shutil.copytree(SAMPLE_MESHES / "chair", tmp_path / "meshes" / "chair")
     monkeypatch.setattr(mesh, "load_mesh", lambda *a: pytest.fail("a mesh was loaded"))  # the worker imports it when it runs
     with pytest.raises(InvalidInputError, match=re.escape(f"class name {cls!r} holds the control character")):
-        run_farm(tmp_path / "meshes", tmp_path / "out", params=FarmParams(views="0:0", dense_points=256), options=RunOptions(progress=False))
+        run_farm(
+            tmp_path / "meshes", tmp_path / "out", params=FarmParams(views="0:0", dense_points=256), options=RunOptions(progress=False)
+        )
 
 
 def test_shape_names_with_a_control_character_are_refused_by_the_reader(ds: Path) -> None:

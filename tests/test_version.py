@@ -45,7 +45,7 @@ def _spec(requirement: str) -> tuple[str, set[str]]:
     """``("pycollada", {"<1", ">=0.8"})``: a requirement's name and version clauses, in any order."""
     head = requirement.split(";")[0].strip()
     name = re.split(r"[<>=!~ ]", head, maxsplit=1)[0]
-    return name.lower(), {c.strip() for c in head[len(name):].split(",") if c.strip()}
+    return name.lower(), {c.strip() for c in head[len(name) :].split(",") if c.strip()}
 
 
 @pytest.mark.parametrize("extra", ["collada", "learn", "pyg", "plot", "yaml"])

@@ -140,7 +140,11 @@ def test_the_readmes_pip_route_installs_a_wheel_that_generates_a_data_set_on_the
     out = work / "out"
     # zbuffer-exact: the binning and points shaders, then zbuffer: the rasteriser's and the candidates'
     for method in ("zbuffer-exact", "zbuffer"):
-        _run([str(venv / "bin" / "zbuf-occlude"), "generate", str(meshes), "--out", str(out / method), "--method", method, *GENERATE], cwd=work, env=env)
+        _run(
+            [str(venv / "bin" / "zbuf-occlude"), "generate", str(meshes), "--out", str(out / method), "--method", method, *GENERATE],
+            cwd=work,
+            env=env,
+        )
     for method in ("zbuffer-exact", "zbuffer"):
         package, shaders, samples = _run([str(python), "-c", CHECK, str(out / method)], cwd=work, env=env).stdout.split()
         assert Path(package).is_relative_to(purelib), package

@@ -69,7 +69,14 @@ __all__ = [
     "run_farm",
     "export",
     "merge_farm",
-    "Lidar", "DepthCamera", "ScanScene", "SceneObject", "load_scene", "look_at_pose", "Scan", "scan",
+    "Lidar",
+    "DepthCamera",
+    "ScanScene",
+    "SceneObject",
+    "load_scene",
+    "look_at_pose",
+    "Scan",
+    "scan",
 ]
 
 from zbuf_occlude import _llvm  # noqa: E402 (after __all__, before any OpenGL or Triton import)

@@ -180,19 +180,33 @@ def _check_counts(n_points: int, samples_per_view: int) -> None:
 
 
 def _pose_clouds(
-    points: NDArray[np.float64], face_index: NDArray[np.int64], extra: TopUp, chosen: Sequence[NDArray[np.int64]],
-    pose: tuple[float, float], n_visible_dense: int, cameras: CameraSphere, provenance: ObjectProvenance,
+    points: NDArray[np.float64],
+    face_index: NDArray[np.int64],
+    extra: TopUp,
+    chosen: Sequence[NDArray[np.int64]],
+    pose: tuple[float, float],
+    n_visible_dense: int,
+    cameras: CameraSphere,
+    provenance: ObjectProvenance,
 ) -> list[OccludedCloud]:
     """One pose's samples: pool indices ``chosen`` (:func:`~zbuf_occlude.geometry.samples.pose_samples`) taken
     from the dense ``points``/``face_index`` and the pose's top-up ``extra``, with the pose and provenance."""
     el, az = pose
     return [
         OccludedCloud(
-            points=pool_take(points, extra.points, c).astype(np.float32), face_index=pool_take(face_index, extra.face_index, c),
-            elevation_deg=float(el), azimuth_deg=float(az), radius=float(cameras.radius), label=provenance.label,
-            class_name=provenance.class_name, source=provenance.source, sample_index=sample_index,
-            n_visible=n_visible_dense + len(extra), split=provenance.split, n_topped_up=len(extra),
-        )  # fmt: skip
+            points=pool_take(points, extra.points, c).astype(np.float32),
+            face_index=pool_take(face_index, extra.face_index, c),
+            elevation_deg=float(el),
+            azimuth_deg=float(az),
+            radius=float(cameras.radius),
+            label=provenance.label,
+            class_name=provenance.class_name,
+            source=provenance.source,
+            sample_index=sample_index,
+            n_visible=n_visible_dense + len(extra),
+            split=provenance.split,
+            n_topped_up=len(extra),
+        )
         for sample_index, c in enumerate(chosen)
     ]
 
@@ -523,9 +537,17 @@ def occlude(
     clouds = [
         c
         for _, _, pose_clouds in occlude_object(
-            mesh, poses, key=key, n_points=n_points, samples_per_view=samples_per_view, seed=seed, dense=dense,
-            method=method, cameras=CameraSphere(radius, resolution), provenance=ObjectProvenance(source=source),
-        )  # fmt: skip
+            mesh,
+            poses,
+            key=key,
+            n_points=n_points,
+            samples_per_view=samples_per_view,
+            seed=seed,
+            dense=dense,
+            method=method,
+            cameras=CameraSphere(radius, resolution),
+            provenance=ObjectProvenance(source=source),
+        )
         for c in pose_clouds
     ]
     n_padded = sum(c.padded for c in clouds)

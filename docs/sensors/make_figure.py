@@ -39,7 +39,9 @@ def main() -> None:
     centre = real.points_m.mean(0)
     az_deg = math.degrees(math.atan2(centre[1], centre[0]))
     dist = float(np.hypot(centre[0], centre[1]))
-    placement = Placement(distance_m=dist, height_m=1.8, azimuth_deg=az_deg, yaw_deg=az_deg + 90.0 + 20.0, size_m=4.5, extents_m=(1.8, 4.5, 1.5))
+    placement = Placement(
+        distance_m=dist, height_m=1.8, azimuth_deg=az_deg, yaw_deg=az_deg + 90.0 + 20.0, size_m=4.5, extents_m=(1.8, 4.5, 1.5)
+    )
     sim = object_crop(str(MESH), S.Lidar.preset("hdl32e"), placement, seed=0).scan.points.astype(float)
     fig, ax = plt.subplots(2, 2, figsize=(11, 6.5))
     for col, (pts, title) in enumerate(((sim, f"simulated HDL-32E: {MESH.name} stretched to 4.5×1.8×1.5 m, {dist:.1f} m, {len(sim)} points"),

@@ -52,7 +52,7 @@ BAD_FILES = {
     "counts_missing_faces.off": (b"OFF\n4\n0 0 0\n", "count line"),
     "negative_counts.off": (b"OFF\n-4 4 0\n0 0 0\n", "negative"),
     "truncated_vertices.off": (b"OFF\n4 4 0\n0 0 0\n1 0 0\n", "declares 4 vertices and 4 faces but holds only 2 vertices"),
-    "truncated_faces.off": (tetra_off()[: -len("3 1 2 3\n3 0 3 2\n")] , "declares 4 faces but holds 2"),
+    "truncated_faces.off": (tetra_off()[: -len("3 1 2 3\n3 0 3 2\n")], "declares 4 faces but holds 2"),
     "cut_mid_face.off": (tetra_off()[: -len(" 3\n")] + b"\n", "face 3 lists 2 of its 3 corners"),
     "cut_mid_vertex.off": (b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1\n3 0 1 2\n", "vertex 2 has 2 coordinates"),
     "short_face_inside.off": (
@@ -217,9 +217,7 @@ def test_modelnet_header_quirks_still_load(tmp_path: Path, header: str, newline:
 def test_polygons_count_as_one_declared_face_each(tmp_path: Path) -> None:
     # A quad and a pentagon are 2 declared faces that become 1 + 2 + 3 triangles.
     path = tmp_path / "polygons.off"
-    path.write_bytes(
-        b"OFF\n6 3 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n0.5 1.5 0\n0 0 1\n3 0 1 5\n4 0 1 2 3\n5 0 1 2 4 3\n"
-    )
+    path.write_bytes(b"OFF\n6 3 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n0.5 1.5 0\n0 0 1\n3 0 1 5\n4 0 1 2 3\n5 0 1 2 4 3\n")
     assert len(load_mesh(path).faces) == 1 + 2 + 3
 
 
@@ -620,9 +618,7 @@ def _h5(path: Path, arrays: dict) -> None:
 
 DAMAGES = {
     "manifest line without split": (lambda ds: _edit_first_record(ds, lambda r: r.pop("split")), r"manifest\.jsonl:1.*'split'"),
-    "manifest line without n_visible": (
-        lambda ds: _edit_first_record(ds, lambda r: r.pop("n_visible")), r"manifest\.jsonl:1.*'n_visible'"
-    ),
+    "manifest line without n_visible": (lambda ds: _edit_first_record(ds, lambda r: r.pop("n_visible")), r"manifest\.jsonl:1.*'n_visible'"),
     "empty shards list": (lambda ds: _edit_first_record(ds, lambda r: r.update(shards=[])), r"manifest\.jsonl:1.*'shards'"),
     "missing shape_names.txt": (lambda ds: (ds / "shape_names.txt").unlink(), r"shape_names\.txt is missing"),
     "card without n_points": (
@@ -684,9 +680,7 @@ def chair_and_points():
 
 # The oracle's own check (visibility/oracle.py, another branch's) covers NaN/inf, not
 # coordinates beyond float32; meshes from load_mesh never have them (MAX_ABS_COORDINATE).
-@pytest.mark.parametrize(
-    "method, bad", [(m, b) for m in GPU_AND_EXACT for b in ("nan", "inf", "huge") if (m, b) != ("oracle", "huge")]
-)
+@pytest.mark.parametrize("method, bad", [(m, b) for m in GPU_AND_EXACT for b in ("nan", "inf", "huge") if (m, b) != ("oracle", "huge")])
 def test_visibility_of_a_non_finite_mesh_is_an_error_not_an_answer(chair_and_points, method: str, bad: str) -> None:
     import zbuf_occlude as zo
     from zbuf_occlude.geometry.cameras import camera_on_sphere
@@ -1009,7 +1003,10 @@ def test_cylinder_sections_are_checked_before_allocating(tmp_path: Path, section
     from zbuf_occlude.sensors.scene import MAX_CYLINDER_SECTIONS, load_scene
 
     spec = {"objects": [{"mesh": {"cylinder": {"radius_m": 0.5, "height_m": 1.0, "sections": sections}}, "position_m": [5, 0]}]}
-    with pytest.raises(InvalidInputError, match=rf"scene\.json: .*sections must be an integer from 3 to {MAX_CYLINDER_SECTIONS}, got {re.escape(repr(sections))}"):
+    with pytest.raises(
+        InvalidInputError,
+        match=rf"scene\.json: .*sections must be an integer from 3 to {MAX_CYLINDER_SECTIONS}, got {re.escape(repr(sections))}",
+    ):
         load_scene(_scene(tmp_path, spec)).build()
 
 
@@ -1080,7 +1077,9 @@ def test_return_physics_options_apply_to_a_scene_file_too(tmp_path: Path, capsys
     assert not (tmp_path / "o").exists()
 
     def returns(name: str, *options: str) -> int:
-        assert _main_exit(["scan", str(path), "--sensor", "vlp16", "--format", "npz", "--out", str(tmp_path / name), *options], capsys)[0] == 0
+        assert (
+            _main_exit(["scan", str(path), "--sensor", "vlp16", "--format", "npz", "--out", str(tmp_path / name), *options], capsys)[0] == 0
+        )
         (npz,) = (tmp_path / name).glob("*.npz")
         with np.load(npz) as data:
             return len(data["points"])

@@ -73,8 +73,14 @@ def test_farm_records_the_same_data_set_under_either_name() -> None:
         (["scan", "box", "--sensor-size", "0:2"], "--sensor-size must be > 0 metres"),
         (["farm", "MESHES", "--sensor", "hdl32e", "--hidden-below=-1"], "--hidden-below must be >= 0 metres above the ground"),
         (["farm", "MESHES", "--distance", "5:9"], "--distance needs --sensor"),
-        (["scan", "box", "--sensor-hidden-below", "0.5"], "--sensor-hidden-below hides the bottom of the object in a crop: it needs --crop"),
-        (["scan", "box", "--crop", "--occlude"], "--occlude meets --across-sight-width with a side occluder: it needs --across-sight-width"),
+        (
+            ["scan", "box", "--sensor-hidden-below", "0.5"],
+            "--sensor-hidden-below hides the bottom of the object in a crop: it needs --crop",
+        ),
+        (
+            ["scan", "box", "--crop", "--occlude"],
+            "--occlude meets --across-sight-width with a side occluder: it needs --across-sight-width",
+        ),
     ],
 )
 def test_refusals_name_the_option_as_typed(argv: list[str], message: str, tmp_path: Path, capsys) -> None:

@@ -90,7 +90,9 @@ def test_las_options_on_object_scans_are_refused(tmp_path: Path, capsys) -> None
     (tmp_path / "crops").mkdir()
     code, _, err = _run(["fit-sensor", str(tmp_path / "crops"), "--sensor", "hdl32e", "--altitude", "100", "--out",
                          str(tmp_path / "f.json")], capsys)  # fmt: skip
-    assert code == 2 and re.search(r"--altitude: for LAS/LAZ scans, and .*crops is neither a \.las/\.laz file nor a folder of them", err), err
+    assert code == 2 and re.search(r"--altitude: for LAS/LAZ scans, and .*crops is neither a \.las/\.laz file nor a folder of them", err), (
+        err
+    )
 
 
 def _valid_las(n: int = 6) -> bytes:
@@ -176,7 +178,10 @@ def test_divergence_shares_fit_the_divergence(scans: Path, tmp_path: Path, capsy
 @pytest.mark.parametrize(
     ("table", "message"),
     [
-        ("divergence,multi_return_points\n0.5,0.1\n1,0.2\n", r"curve\.csv: the header must be divergence_deg,<a multi_return_points figure>"),
+        (
+            "divergence,multi_return_points\n0.5,0.1\n1,0.2\n",
+            r"curve\.csv: the header must be divergence_deg,<a multi_return_points figure>",
+        ),
         ("divergence_deg,returns_1\n0.5,0.1\n1,0.2\n", r"curve\.csv: the header must be"),
         ("divergence_deg,multi_return_points\n0.5,0.1\n1,x\n", r"curve\.csv: row 3: multi_return_points is not a number: 'x'"),
         ("divergence_deg,multi_return_points\n0.5,0.3\n1,0.2\n", r"curve\.csv: simulated_shares must grow with the divergence"),

@@ -110,12 +110,20 @@ def test_one_meaning_per_option_name() -> None:
     for name in ("generate", "farm"):
         assert "per sample" in _option(SUBCOMMANDS[name], "--points").help
     for name in ("validate", "compare", "elevation-profile"):
-        assert "surface" in _option(SUBCOMMANDS[name], "--dense-points").help or "each mesh" in _option(SUBCOMMANDS[name], "--dense-points").help
+        assert (
+            "surface" in _option(SUBCOMMANDS[name], "--dense-points").help
+            or "each mesh" in _option(SUBCOMMANDS[name], "--dense-points").help
+        )
         assert "--points" not in SUBCOMMANDS[name]._option_string_actions  # one spelling: --dense-points
 
 
-@pytest.mark.parametrize("command", [["validate", "--views", "0:0", "--resolution", "64"], ["compare", "--methods", "oracle", "--views", "0:0",
-                                     "--resolution", "64", "--no-progress"]])
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["validate", "--views", "0:0", "--resolution", "64"],
+        ["compare", "--methods", "oracle", "--views", "0:0", "--resolution", "64", "--no-progress"],
+    ],
+)
 def test_dense_points_is_the_one_spelling(command, tmp_path, capsys) -> None:
     extra = ["--out", str(tmp_path / "c")] if command[0] == "compare" else []
     assert main([command[0], str(BOX), *command[1:], *extra, "--dense-points", "150"]) == 0
@@ -286,5 +294,7 @@ def test_scan_size_of_says_which_side_size_measures(tmp_path: Path) -> None:
         assert main([*base, "--size-of", size_of, "--out", str(tmp_path / size_of)]) == 0
         points = read_scan_npz(next((tmp_path / size_of).glob("*.npz"))).points
         assert float(points[:, 2].max()) + 2.0 == pytest.approx(top, abs=0.02)  # the top face above the ground, seen from above
-    assert main(["scan", "box", "--size", "1", "--size-of", "height", "--out", str(tmp_path / "p")]) == 2  # a primitive has no proportions here
+    assert (
+        main(["scan", "box", "--size", "1", "--size-of", "height", "--out", str(tmp_path / "p")]) == 2
+    )  # a primitive has no proportions here
     assert main([*base, "--size-of", "height", "--extents", "1,1,1", "--out", str(tmp_path / "e")]) == 2

@@ -65,7 +65,20 @@ def test_generate_h5_and_ply(tmp_path, two_meshes):
 
 def test_validate_prints_agreement_per_pose(two_meshes, tmp_path, capsys):
     csv_path = tmp_path / "v.csv"
-    code = main(["validate", str(two_meshes), "--views", "30:45", "--dense-points", "3000", "--methods", "zbuffer,zbuffer-tolerance", "--csv", str(csv_path)])
+    code = main(
+        [
+            "validate",
+            str(two_meshes),
+            "--views",
+            "30:45",
+            "--dense-points",
+            "3000",
+            "--methods",
+            "zbuffer,zbuffer-tolerance",
+            "--csv",
+            str(csv_path),
+        ]
+    )
     out = capsys.readouterr().out
     assert code == 0 and "zbuffer: mean agreement" in out and csv_path.exists()
     accuracy = [float(line.split()[4]) for line in out.splitlines() if " zbuffer " in line]
@@ -136,7 +149,9 @@ def test_python_dash_m_runs_the_cli_and_passes_its_exit_status(tmp_path):
     from zbuf_occlude import __version__
 
     def run(*argv):
-        return subprocess.run([sys.executable, "-m", "zbuf_occlude", *argv], check=False, capture_output=True, text=True, timeout=300, env=os.environ)
+        return subprocess.run(
+            [sys.executable, "-m", "zbuf_occlude", *argv], check=False, capture_output=True, text=True, timeout=300, env=os.environ
+        )
 
     out = run("--version")
     assert out.returncode == 0 and out.stdout.strip() == f"zbuf-occlude {__version__}"

@@ -45,8 +45,12 @@ def test_a_scene_scanned_by_a_ray_table_writes_las_with_the_times(tmp_path: Path
     laspy = pytest.importorskip("laspy")
     path, time_s = _table(tmp_path)
     scene = tmp_path / "scene.json"
-    scene.write_text(json.dumps({"ground": {"half_extent_m": 20.0}, "objects": [{"mesh": {"box_m": [1.0, 3.0, 3.0]}, "position_m": [8.0, 0.0]}]}))
-    code, err = _run(["scan", str(scene), "--ray-table", str(path), "--format", "las", "--no-progress", "--out", str(tmp_path / "o")], capsys)
+    scene.write_text(
+        json.dumps({"ground": {"half_extent_m": 20.0}, "objects": [{"mesh": {"box_m": [1.0, 3.0, 3.0]}, "position_m": [8.0, 0.0]}]})
+    )
+    code, err = _run(
+        ["scan", str(scene), "--ray-table", str(path), "--format", "las", "--no-progress", "--out", str(tmp_path / "o")], capsys
+    )
     assert code == 0, err
     las = laspy.read(tmp_path / "o" / "scene_avia_s000.las")
     assert len(las.points) > 100

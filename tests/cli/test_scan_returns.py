@@ -50,7 +50,10 @@ def _run(argv: list[str], capsys) -> tuple[int, str]:
         (["--range-resolution", "-0.5"], r"--range-resolution must be .*got '?-0\.5'?"),
         (["--footprint", "--max-returns", "3"], r"--max-returns 3 needs --range-resolution"),
         (["--footprint", "--range-resolution", "0.5"], r"--range-resolution 0\.5 .* needs --max-returns above 1"),
-        (["--footprint", "--max-returns", "3", "--range-resolution", "0.5", "--echo-separation", "0.5"], r"--echo-separation 0\.5 .*--max-returns 3"),
+        (
+            ["--footprint", "--max-returns", "3", "--range-resolution", "0.5", "--echo-separation", "0.5"],
+            r"--echo-separation 0\.5 .*--max-returns 3",
+        ),
         (["--sensor", "riegl-q1560", "--footprint", "--max-returns", "3"], r"model spinning LiDARs; riegl-q1560 is not one"),
         (["--sensor", "riegl-q1560", "--max-returns", "3"], r"--max-returns 3 needs --range-resolution"),
         (["--sensor", "kinect-v1", "--max-returns", "3"], r"model spinning LiDARs; kinect-v1 is not one"),
@@ -114,4 +117,6 @@ def test_max_returns_applies_to_an_airborne_scanner_file_with_a_footprint(tmp_pa
     las = laspy.read(path)
     n = np.asarray(las.number_of_returns)
     assert n.max() >= 2 and n.max() <= 4, np.bincount(n)  # the box's roof edge over the ground
-    assert _run(["scan", "box", "--sensor", str(sensor), "--max-returns", "1", "--no-progress", "--out", str(tmp_path / "p")], capsys)[0] == 2
+    assert (
+        _run(["scan", "box", "--sensor", str(sensor), "--max-returns", "1", "--no-progress", "--out", str(tmp_path / "p")], capsys)[0] == 2
+    )

@@ -31,7 +31,11 @@ def _run(argv: list[str], capsys) -> tuple[int, str]:
 def test_a_transmitting_bush_gives_returns_from_the_wall_behind_it(tmp_path: Path, capsys) -> None:
     scene = _scene(tmp_path)
     scans = {}
-    for name, extra in (("opaque", []), ("through", ["--transmittance", "bush=0.5"]), ("table", ["--transmittance", "table", "--reflectance-table"])):
+    for name, extra in (
+        ("opaque", []),
+        ("through", ["--transmittance", "bush=0.5"]),
+        ("table", ["--transmittance", "table", "--reflectance-table"]),
+    ):
         code, err = _run(["scan", str(scene), *RETURNS, *extra, "--out", str(tmp_path / name)], capsys)
         assert code == 0, err
         (npz,) = (tmp_path / name).glob("*.npz")

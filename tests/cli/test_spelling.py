@@ -52,9 +52,7 @@ def test_an_abbreviation_is_refused_naming_the_option_it_starts(argv, meant, tmp
     assert not (tmp_path / "o").exists()
 
 
-REQUIRES_OUT = sorted(
-    name for name, p in PARSERS.items() if any("--out" in a.option_strings and a.required for a in p._actions)
-)
+REQUIRES_OUT = sorted(name for name, p in PARSERS.items() if any("--out" in a.option_strings and a.required for a in p._actions))
 
 
 def test_the_commands_that_require_out_are_found() -> None:

@@ -28,9 +28,8 @@ MESHES = [
     ("desk/test/desk_0201.off", "desk", "test"),
 ]
 POSES = [(-30.0, 0.0), (0.0, 90.0), (30.0, 180.0), (60.0, 270.0)]
-PARAMS = FarmParams(
-    views=",".join(f"{el}:{az}" for el, az in POSES), samples_per_view=2, n_points=96, dense_points=1536, resolution=96
-)
+PARAMS = FarmParams(views=",".join(f"{el}:{az}" for el, az in POSES), samples_per_view=2, n_points=96, dense_points=1536, resolution=96)
+
 
 @pytest.fixture(scope="module")
 def datasets(tmp_path_factory) -> dict[str, Path]:
@@ -92,7 +91,9 @@ def test_compact_samples_come_from_visible_points(datasets):
     for pose in range(len(POSES)):
         visible = unpack_visible(bits[pose], len(dense_points))
         assert visible.sum() == n_visible[pose]
-        samples = reconstruct_samples(dense_points, visible, seed=seed, key=key, pose_index=pose, n_points=PARAMS.n_points, sample_indices=[0, 1])
+        samples = reconstruct_samples(
+            dense_points, visible, seed=seed, key=key, pose_index=pose, n_points=PARAMS.n_points, sample_indices=[0, 1]
+        )
         visible_set = {tuple(p) for p in dense_points[visible]}
         assert all(tuple(p) in visible_set for p in samples.reshape(-1, 3))
         assert not np.array_equal(samples[0], samples[1])
@@ -178,7 +179,9 @@ def test_several_finished_data_sets_below_are_named_up_to_three(tmp_path):
 
 def test_an_unfinished_run_without_data_sets_below_says_to_let_farm_finish(tmp_path):
     (tmp_path / "shards").mkdir()
-    with pytest.raises(InvalidInputError, match=r"no dataset_card.json\); let `zbuf-occlude farm` finish, or run `zbuf-occlude farm-merge`"):
+    with pytest.raises(
+        InvalidInputError, match=r"no dataset_card.json\); let `zbuf-occlude farm` finish, or run `zbuf-occlude farm-merge`"
+    ):
         OccludedDataset(tmp_path)
 
 

@@ -59,7 +59,15 @@ def test_write_datasets_keeps_order_and_compresses_only_what_it_is_told(tmp_path
 
 
 def test_same_inputs_give_the_same_bytes(tmp_path):
-    args = (np.random.default_rng(0).random((8, 3)), np.ones((1, 1), np.uint8), np.array([8]), np.array([0]), np.zeros((0, 3)), [(0.0, 0.0)], {})
+    args = (
+        np.random.default_rng(0).random((8, 3)),
+        np.ones((1, 1), np.uint8),
+        np.array([8]),
+        np.array([0]),
+        np.zeros((0, 3)),
+        [(0.0, 0.0)],
+        {},
+    )
     for name in ("a.h5", "b.h5"):
         storage.write_compact(tmp_path / name, *args, gzip_level=4)
     assert (tmp_path / "a.h5").read_bytes() == (tmp_path / "b.h5").read_bytes()

@@ -18,7 +18,7 @@ from zbuf_occlude.experiments.realism import (
     read_object_clouds,
     realism_report,
     ring_spacings_deg,
-)  # fmt: skip
+)
 
 LIDARNET = Path(__file__).resolve().parents[3] / "shared" / "data" / "lidarnet_v2_partial"
 
@@ -65,8 +65,45 @@ def test_report_files_and_cli(tmp_path):
     from zbuf_occlude.cli.main import main
 
     out = tmp_path / "gen"
-    assert main(["scan", "cylinder", "--extents", "0.3,0.3,6", "--distance", "4:12", "--azimuth", "0:360", "--samples", "4", "--crop", "--out", str(out)]) == 0
-    assert main(["scan", "box", "--extents", "4.5,1.8,1.5", "--distance", "8", "--out", str(tmp_path / "full"), "--format", "both", "--frame", "world"]) == 0
+    assert (
+        main(
+            [
+                "scan",
+                "cylinder",
+                "--extents",
+                "0.3,0.3,6",
+                "--distance",
+                "4:12",
+                "--azimuth",
+                "0:360",
+                "--samples",
+                "4",
+                "--crop",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "scan",
+                "box",
+                "--extents",
+                "4.5,1.8,1.5",
+                "--distance",
+                "8",
+                "--out",
+                str(tmp_path / "full"),
+                "--format",
+                "both",
+                "--frame",
+                "world",
+            ]
+        )
+        == 0
+    )
     full = S.read_scan_npz(next((tmp_path / "full").glob("*.npz")))
     assert set(np.unique(full.object_id)) == {0, 1} and np.allclose(full.sensor_position, [0, 0, 1.8])
     box = full.crop(1).points
@@ -89,7 +126,9 @@ def _synthetic_lidarnet(folder: Path) -> Path:
         origin = np.column_stack([p[:, 0], p[:, 2], -p[:, 1]]) * 5.0
         rel = origin - (origin.min(0) + origin.max(0)) / 2
         rows = [",".join([*(f"{v:.6g}" for v in (*o, *r)), "car", "1"]) for o, r in zip(origin, rel)]
-        (folder / f"car{k}.csv").write_text("origin_x,origin_y,origin_z,relative_x,relative_y,relative_z,object,complexity\n" + "\n".join(rows) + "\n")
+        (folder / f"car{k}.csv").write_text(
+            "origin_x,origin_y,origin_z,relative_x,relative_y,relative_z,object,complexity\n" + "\n".join(rows) + "\n"
+        )
     return folder
 
 
@@ -114,7 +153,9 @@ def test_ground_in_crops_counts_a_crops_ground_returns_and_nothing_else(tmp_path
     from zbuf_occlude.cli.main import main
 
     crops, full = tmp_path / "crops", tmp_path / "full"
-    assert main(["scan", "box", "--extents", "4.5,1.8,1.5", "--distance", "8", "--crop", "--ground-margin", "0.5", "--out", str(crops)]) == 0
+    assert (
+        main(["scan", "box", "--extents", "4.5,1.8,1.5", "--distance", "8", "--crop", "--ground-margin", "0.5", "--out", str(crops)]) == 0
+    )
     assert main(["scan", "box", "--extents", "4.5,1.8,1.5", "--distance", "8", "--out", str(full)]) == 0
     scan = S.read_scan_npz(next(crops.glob("*.npz")))
     n_object, n_ground = int(np.sum(scan.object_id == 1)), int(np.sum(scan.object_id == 0))

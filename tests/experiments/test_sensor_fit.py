@@ -52,4 +52,3 @@ def test_the_table_says_an_unmeasured_scan_angle_was_not_measured(fitted_without
         assert "not measured (no crop tells the scan angle)" in rows[key], rows[key]
     assert "nan" not in md_path.read_text().lower() and "not measured" in fit.markdown()
     assert " ± " in rows["density_m2"]  # measured values keep value ± std
-

@@ -31,7 +31,9 @@ def _mesh_root(tmp_path: Path) -> Path:
     # (relabelled as Blender's: trimesh's own glTF files are read as stored, zbuf_occlude.mesh.scene)
     glb = trimesh.creation.box(extents=(3.8, 1.4, 1.7)).export(file_type="glb")
     trimesh_generator = b'"https://github.com/mikedh/trimesh"'
-    (root / "car" / "hatch.glb").write_bytes(glb.replace(trimesh_generator, b'"Khronos glTF Blender I/O v4.1.63"'.ljust(len(trimesh_generator))))
+    (root / "car" / "hatch.glb").write_bytes(
+        glb.replace(trimesh_generator, b'"Khronos glTF Blender I/O v4.1.63"'.ljust(len(trimesh_generator)))
+    )
     trimesh.creation.cylinder(radius=0.08, height=4.0, sections=12).export(root / "pole" / "post.obj")
     lamp = trimesh.util.concatenate([trimesh.creation.cylinder(radius=0.1, height=6.0, sections=12),
                                      trimesh.creation.box(extents=(1.0, 0.2, 0.2), transform=trimesh.transformations.translation_matrix([0.4, 0, 3.0]))])  # fmt: skip
@@ -43,7 +45,10 @@ def _real_root(tmp_path: Path) -> Path:
     """A tiny "real" data set: half-visible boxes and poles as .xyz files in class folders (metres, z up)."""
     root = tmp_path / "real"
     rng = np.random.default_rng(0)
-    for cls, shape in (("Car", trimesh.creation.box(extents=(4.2, 1.7, 1.5))), ("Trunk", trimesh.creation.cylinder(radius=0.15, height=3.0))):
+    for cls, shape in (
+        ("Car", trimesh.creation.box(extents=(4.2, 1.7, 1.5))),
+        ("Trunk", trimesh.creation.cylinder(radius=0.15, height=3.0)),
+    ):
         (root / cls).mkdir(parents=True)
         for i in range(6):
             pts, _ = trimesh.sample.sample_surface(shape, 300, seed=int(rng.integers(1000)))
@@ -117,8 +122,7 @@ def test_sim2real_command_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixtu
         assert (out / name).is_file(), name
     with open(out / "results.csv", encoding="utf-8") as fh:
         rows = list(csv.DictReader(fh))
-    assert sorted((r["train_set"], r["seed"]) for r in rows) == sorted(
-        (s, str(k)) for s in (*TRAINING_SETS, "real→real") for k in range(2))
+    assert sorted((r["train_set"], r["seed"]) for r in rows) == sorted((s, str(k)) for s in (*TRAINING_SETS, "real→real") for k in range(2))
     for r in rows:  # every row on the held-out half; the mesh-only sets on every scan as well, real→real not (it trained on half)
         assert r["best_epoch_by"] == "loss" and float(r["best_val_loss"]) >= 0.0  # the stable recipe's signal, recorded
         assert int(r["n_test"]) == 6 and int(r["n_test_all_scans"]) == (0 if r["train_set"] == "real→real" else 12)
@@ -135,7 +139,10 @@ def test_sim2real_command_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert "| complete | 2 |" in table and "| chance | 0 | 0.500" in table and "p vs complete" in table
     assert "mean class acc., all scans" in table and "held-out half of the real scans (6 of 12 scans" in table
     summary = {r["train_set"]: r for r in csv.DictReader(open(out / "summary.csv", encoding="utf-8"))}
-    assert summary["complete"]["all_scans_mean_class_accuracy_mean"] != "" and summary["real→real"]["all_scans_mean_class_accuracy_mean"] == "nan"
+    assert (
+        summary["complete"]["all_scans_mean_class_accuracy_mean"] != ""
+        and summary["real→real"]["all_scans_mean_class_accuracy_mean"] == "nan"
+    )
     assert 1 / 6 - 1e-9 <= float(summary["occluded"]["p_vs_complete"]) <= 1.0  # C(4, 2) = 6 splits
     # a rerun resumes (no training) and other settings are refused with exit status 2
     before = (out / "runs.jsonl").read_bytes()
@@ -415,9 +422,11 @@ def test_fit_sensor_fits_on_one_half_and_scores_every_row_on_the_other(tmp_path:
     expected = _cloud_set(pts[[i for i, s in enumerate(sources) if s in held]])
     results = _rows(out / "results.csv")
     assert sorted((r["train_set"], r["seed"]) for r in results) == sorted(
-        (s, str(k)) for s in (*TRAINING_SETS, *FITTED_SETS, "real→real") for k in range(2))
-    assert [_cloud_set(x) for x in scored] == [c for r in results for c in
-                                               ([expected] if r["train_set"] == "real→real" else [expected, _cloud_set(pts)])]
+        (s, str(k)) for s in (*TRAINING_SETS, *FITTED_SETS, "real→real") for k in range(2)
+    )
+    assert [_cloud_set(x) for x in scored] == [
+        c for r in results for c in ([expected] if r["train_set"] == "real→real" else [expected, _cloud_set(pts)])
+    ]
     assert all(int(r["n_test"]) == 6 for r in results)
     summary = {r["train_set"]: r for r in _rows(out / "summary.csv")}
     for kind in FITTED_SETS:
@@ -458,7 +467,9 @@ def test_the_held_out_half_and_the_real_clouds_depend_on_the_scans_content_not_t
 
 
 @pytest.mark.slow
-def test_a_resumed_run_makes_only_the_sets_it_still_trains_and_they_come_out_the_same(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_resumed_run_makes_only_the_sets_it_still_trains_and_they_come_out_the_same(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     from zbuf_occlude.experiments.sim2real import outputs, run
 
     _fit_spy(monkeypatch)
@@ -479,7 +490,9 @@ def test_a_resumed_run_makes_only_the_sets_it_still_trains_and_they_come_out_the
     rows = [{k: v for k, v in json.loads(line).items() if k not in timing} for line in (out / "runs.jsonl").read_text().splitlines()]
     assert asked == [[*TRAINING_SETS, *FITTED_SETS]] * 2  # the training clouds and those of the held-out meshes
     # two rows lost (an interrupted run): only their sets are made again, and they train to the same rows
-    kept = [line for line in (out / "runs.jsonl").read_text().splitlines() if json.loads(line)["train_set"] not in ("occluded", FITTED_PLACED)]
+    kept = [
+        line for line in (out / "runs.jsonl").read_text().splitlines() if json.loads(line)["train_set"] not in ("occluded", FITTED_PLACED)
+    ]
     # written as a run that stopped there wrote it, through the output layer (a file changed by hand is refused)
     from zbuf_occlude.io.owned import OwnedFolder
 
@@ -612,7 +625,9 @@ def test_fit_crop_distances_are_percentiles_of_the_horizontal_distances() -> Non
 
 
 @pytest.mark.slow
-def test_the_fitted_placed_set_draws_the_fitted_distances_and_the_others_the_preset_ones(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_fitted_placed_set_draws_the_fitted_distances_and_the_others_the_preset_ones(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     from zbuf_occlude.experiments.sim2real.data import FITTED, FITTED_PLACED, build_sets
     from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT
     from zbuf_occlude.sensors import crops, lidar_preset
@@ -641,7 +656,11 @@ def test_the_fitted_placed_set_draws_the_fitted_distances_and_the_others_the_pre
     assert tall(sets["lidar"], 1) > 2.0 and tall(sets[FITTED], 1) > 2.0
     # the preset sensor and the fitted set at the preset's distances; the placed set at the fitted ones
     assert {(d, h) for name, d, h in seen if name == "hdl32e"} == {(LIDAR_PLACEMENT["distance_m"], None)}
-    assert {(d, h) for name, d, h in seen if name == "fitted"} == {(LIDAR_PLACEMENT["distance_m"], None), ((6.0, 7.0), (0.2, 0.4)), ((8.0, 9.0), None)}
+    assert {(d, h) for name, d, h in seen if name == "fitted"} == {
+        (LIDAR_PLACEMENT["distance_m"], None),
+        ((6.0, 7.0), (0.2, 0.4)),
+        ((8.0, 9.0), None),
+    }
     # only the placed poles are stretched, each pole mesh to the fitted widths (twice as wide at the top as at the bottom)
     stretched = [w for name, d, w in widths if w is not None]
     assert {d for name, d, w in widths if w is not None} == {(8.0, 9.0)} and all(hi == pytest.approx(2 * lo) for lo, hi in stretched)
@@ -682,7 +701,9 @@ def test_the_pooled_set_is_the_three_lidar_sets_of_its_seed_in_one(tmp_path: Pat
 
 
 @pytest.mark.slow
-def test_validate_on_fit_half_validates_mesh_sets_on_the_fit_half_and_trains_on_every_mesh(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_validate_on_fit_half_validates_mesh_sets_on_the_fit_half_and_trains_on_every_mesh(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     from zbuf_occlude.experiments.sim2real.data import FITTED_SETS
     from zbuf_occlude.learn import training
 
@@ -720,7 +741,9 @@ def test_validate_on_fit_half_validates_mesh_sets_on_the_fit_half_and_trains_on_
     chosen = {r["train_set"]: r for r in _rows(out / "summary.csv")}["chosen on fit half"]
     best = max((r for r in map(json.loads, (out / "runs.jsonl").read_text().splitlines()) if r["train_set"] != "real→real"),
                key=lambda r: (r["best_val_mean_class_accuracy"], -r["best_val_loss"]))  # ties: the lower loss  # fmt: skip
-    assert chosen["chosen_sets"] == best["train_set"] and float(chosen["mean_class_accuracy_mean"]) == pytest.approx(best["mean_class_accuracy"])
+    assert chosen["chosen_sets"] == best["train_set"] and float(chosen["mean_class_accuracy_mean"]) == pytest.approx(
+        best["mean_class_accuracy"]
+    )
     assert "| chosen on fit half | 1 |" in (out / "table.md").read_text()
     # without --fit-sensor there is no fit half: a usage error naming the option
     assert main([*argv[:7], *argv[8:], "--out", str(tmp_path / "o2"), "--validate-on", "fit-half"]) == 2
@@ -764,9 +787,16 @@ def test_fitted_shape_gives_the_placed_meshes_the_fitted_widths_or_outline_or_ne
     monkeypatch.setattr(run, "build_sets", build_sets)
     for shape, out in (("none", "o1"), ("outline", "o2"), ("widths,outline", "o3"), ("widen", "o6"), ("occlude", "o8")):
         assert main([*argv, "--out", str(tmp_path / out), "--fitted-shape", shape]) == 0
-        assert json.loads((tmp_path / out / "settings.json").read_text())["fit_sensor"]["fitted_shape"] == ([] if shape == "none" else shape.split(","))
+        assert json.loads((tmp_path / out / "settings.json").read_text())["fit_sensor"]["fitted_shape"] == (
+            [] if shape == "none" else shape.split(",")
+        )
     assert [{"across_sight_width_m", "across_sight_profile"} & keys for keys in asked] == [
-        set(), {"across_sight_profile"}, {"across_sight_width_m", "across_sight_profile"}, {"across_sight_width_m"}, {"across_sight_width_m"}]
+        set(),
+        {"across_sight_profile"},
+        {"across_sight_width_m", "across_sight_profile"},
+        {"across_sight_width_m"},
+        {"across_sight_width_m"},
+    ]
     assert scales[0] == scales[1] == scales[4] == {} and scales[2] and scales[3]
     # occlude: no stretch, a visible share per mesh, below 1 for the meshes wider than 0.3-0.5 m
     assert not any(shares[:4]) and set(shares[4]) == set(scales[2]) and any(lo < 1.0 for lo, _ in shares[4].values())
@@ -790,9 +820,16 @@ def test_the_set_chosen_on_the_fit_half_is_the_best_validated_per_seed_never_the
     def run(kind: str, seed: int, val: float, scored: float) -> dict:
         return {"train_set": kind, "seed": seed, "best_val_mean_class_accuracy": val, "mean_class_accuracy": scored}
 
-    runs = [run("complete", 0, 0.50, 0.60), run("lidar", 0, 0.80, 0.70), run("fitted", 0, 0.70, 0.95),
-            run("complete", 1, 0.60, 0.55), run("lidar", 1, 0.90, 0.99), run("occluded", 1, 0.90, 0.65),  # a tie: the first set
-            run("real→real", 0, 0.99, 0.90), run("real→real", 1, 0.99, 0.92)]  # its validation never counts
+    runs = [
+        run("complete", 0, 0.50, 0.60),
+        run("lidar", 0, 0.80, 0.70),
+        run("fitted", 0, 0.70, 0.95),
+        run("complete", 1, 0.60, 0.55),
+        run("lidar", 1, 0.90, 0.99),
+        run("occluded", 1, 0.90, 0.65),  # a tie: the first set
+        run("real→real", 0, 0.99, 0.90),
+        run("real→real", 1, 0.99, 0.92),
+    ]  # its validation never counts
     rows = {r["train_set"]: r for r in summarise(runs, ["car", "pole"], chosen_on_fit_half=True)}
     chosen = rows[CHOSEN_ON_FIT_HALF]
     assert chosen["chosen_sets"] == "lidar occluded" and chosen["n_seeds"] == 2
@@ -810,8 +847,12 @@ def test_a_validation_accuracy_tie_goes_to_the_lower_validation_loss() -> None:
     def run(kind: str, val: float, loss: float | None, scored: float) -> dict:
         return {"train_set": kind, "seed": 0, "best_val_mean_class_accuracy": val, "best_val_loss": loss, "mean_class_accuracy": scored}
 
-    both_saturated = [run("complete", 1.0, 0.40, 0.6), run("occluded", 1.0, 0.10, 0.8), run("lidar", 1.0, 0.25, 0.7),
-                      run("real→real", 1.0, 0.01, 0.9)]
+    both_saturated = [
+        run("complete", 1.0, 0.40, 0.6),
+        run("occluded", 1.0, 0.10, 0.8),
+        run("lidar", 1.0, 0.25, 0.7),
+        run("real→real", 1.0, 0.01, 0.9),
+    ]
     rows = {r["train_set"]: r for r in summarise(both_saturated, ["car", "pole"], chosen_on_fit_half=True)}
     assert rows[CHOSEN_ON_FIT_HALF]["chosen_sets"] == "occluded"
     no_loss = [run("complete", 1.0, None, 0.6), run("lidar", 1.0, 0.3, 0.7)]  # an older record without a loss ranks last
@@ -836,14 +877,20 @@ def test_a_class_outline_warps_each_mesh_then_stretches_it_under_the_warp(tmp_pa
         assert plain[m.name].width_profile is None and len(warped[m.name].width_profile) == len(outline)
         assert warped[m.name].width_profile[0] < warped[m.name].width_profile[-1]  # narrower at the foot than at the top
         assert warped[m.name].width_scale != plain[m.name].width_scale  # stretched again under the warp
-    only = fit_mesh_shapes(meshes, sensor, sizes, CropPlacement.from_keywords({"pole": {"distance_m": (5.0, 9.0), "across_sight_profile": outline}}))
+    only = fit_mesh_shapes(
+        meshes, sensor, sizes, CropPlacement.from_keywords({"pole": {"distance_m": (5.0, 9.0), "across_sight_profile": outline}})
+    )
     assert all(set(v.keywords) == {"width_profile"} for v in only.values()) and len(only) == len(meshes)  # a warp without a stretch
     recipe = SetRecipe(sensor=sensor, sizes=sizes, placement=placement)
     every_draw = build_set("lidar", meshes, ["pole"], 2, 64, 3, recipe)
-    once = build_set("lidar", meshes, ["pole"], 2, 64, 3, SetRecipe(sensor=sensor, sizes=sizes, placement=placement.with_mesh_shapes(warped)))
+    once = build_set(
+        "lidar", meshes, ["pole"], 2, 64, 3, SetRecipe(sensor=sensor, sizes=sizes, placement=placement.with_mesh_shapes(warped))
+    )
     np.testing.assert_array_equal(once.points, every_draw.points)
     unwarped = CropPlacement.from_keywords({"pole": widths}).with_mesh_shapes(plain)
-    assert not np.array_equal(once.points, build_set("lidar", meshes, ["pole"], 2, 64, 3, SetRecipe(sensor=sensor, sizes=sizes, placement=unwarped)).points)
+    assert not np.array_equal(
+        once.points, build_set("lidar", meshes, ["pole"], 2, 64, 3, SetRecipe(sensor=sensor, sizes=sizes, placement=unwarped)).points
+    )
 
 
 @pytest.mark.slow
@@ -855,14 +902,18 @@ def test_width_scales_fitted_once_give_the_crops_of_fitting_them_in_every_draw(t
     meshes = find_class_meshes(_mesh_root(tmp_path))
     sensor = lidar_preset("hdl32e")
     sizes = {"car": SizeRange("height", 1.5, 1.5), "pole": SizeRange("height", 3.0, 4.0)}
-    placement = CropPlacement.from_keywords({"car": {"distance_m": (6.0, 8.0)}, "pole": {"distance_m": (5.0, 9.0), "across_sight_width_m": (0.3, 0.5)}})
+    placement = CropPlacement.from_keywords(
+        {"car": {"distance_m": (6.0, 8.0)}, "pole": {"distance_m": (5.0, 9.0), "across_sight_width_m": (0.3, 0.5)}}
+    )
     every_draw = build_set("lidar", meshes, ["car", "pole"], 4, 64, 3, SetRecipe(sensor=sensor, sizes=sizes, placement=placement))
     once = fit_mesh_shapes(meshes, sensor, sizes, placement)
     assert sorted(once) == sorted(m.name for m in meshes if m.class_name == "pole")  # the classes that give widths
     assert once["pole/post"] != once["pole/lamp"]  # each mesh its own stretch
     calls = []
     monkeypatch.setattr(shapes, "fit_width_scale", lambda *a, **k: calls.append(a) or (1.0, 1.0))
-    merged = build_set("lidar", meshes, ["car", "pole"], 4, 64, 3, SetRecipe(sensor=sensor, sizes=sizes, placement=placement.with_mesh_shapes(once)))
+    merged = build_set(
+        "lidar", meshes, ["car", "pole"], 4, 64, 3, SetRecipe(sensor=sensor, sizes=sizes, placement=placement.with_mesh_shapes(once))
+    )
     np.testing.assert_array_equal(merged.points, every_draw.points)
     assert calls == []  # not fitted again
 
@@ -917,7 +968,7 @@ def test_a_placement_keeps_classes_and_meshes_apart_and_checks_each_value_once()
         ({"pole": {"width_scale": (1.0, 2.0)}}, None, r"class 'pole'.*unknown keys \['width_scale'\]"),
         ({}, {"pole/post": {"distance_m": (5.0, 9.0)}}, r"mesh 'pole/post'.*unknown keys \['distance_m'\]"),
         ({}, {"pole/post": {"width_scale": (-1.0, 2.0)}}, r"mesh 'pole/post'.*width_scale"),
-    ):  # fmt: skip
+    ):
         with pytest.raises(InvalidInputError, match=match):
             CropPlacement.from_keywords(per_class, per_mesh)
     with pytest.raises(TypeError, match="ClassPlacement"):  # a dict where a typed placement goes

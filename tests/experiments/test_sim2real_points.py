@@ -199,7 +199,10 @@ def test_the_occluded_points_flag_reaches_the_config_and_its_refusal_exits_2(tmp
 def test_a_run_with_occluded_points_trains_scores_and_reports_it(tmp_path: Path) -> None:
     root, real, out = _mesh_root(tmp_path), tmp_path / "real", tmp_path / "out"
     rng = np.random.default_rng(0)
-    for cls, shape in (("Car", trimesh.creation.box(extents=(4.2, 1.7, 1.5))), ("Trunk", trimesh.creation.cylinder(radius=0.15, height=3.0))):
+    for cls, shape in (
+        ("Car", trimesh.creation.box(extents=(4.2, 1.7, 1.5))),
+        ("Trunk", trimesh.creation.cylinder(radius=0.15, height=3.0)),
+    ):
         (real / cls).mkdir(parents=True)
         for i in range(4):
             pts, _ = trimesh.sample.sample_surface(shape, 300, seed=int(rng.integers(1000)))

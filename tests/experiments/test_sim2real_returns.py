@@ -30,7 +30,9 @@ def _bush(seed: int = 0, leaves: int = 600) -> trimesh.Trimesh:
     centres = centres * [1.0, 1.0, 0.8] + [0.0, 0.0, 1.6]
     corners = centres[:, None, :] + rng.normal(scale=0.06, size=(leaves, 3, 3))
     crown = trimesh.Trimesh(corners.reshape(-1, 3), np.arange(3 * leaves).reshape(-1, 3), process=False)
-    trunk = trimesh.creation.cylinder(radius=0.06, height=1.2, sections=10, transform=trimesh.transformations.translation_matrix([0, 0, 0.6]))
+    trunk = trimesh.creation.cylinder(
+        radius=0.06, height=1.2, sections=10, transform=trimesh.transformations.translation_matrix([0, 0, 0.6])
+    )
     return trimesh.util.concatenate([trunk, crown])
 
 
@@ -116,6 +118,8 @@ def test_settings_record_the_returns_only_when_above_one(tmp_path: Path) -> None
     assert two["sensor_spec"]["max_returns"] == 2 and two["sensor_spec"]["footprint_rays"] == 7
     _fix_settings(Sim2RealConfig("m", "r", returns=1), _sets_found(), tmp_path / "one")
     one = json.loads((tmp_path / "one" / "settings.json").read_text())
-    assert "lidar_returns" not in one and one["sensor_spec"] == sensor_to_json(lidar_preset("hdl32e"))  # the settings of runs before --returns
+    assert "lidar_returns" not in one and one["sensor_spec"] == sensor_to_json(
+        lidar_preset("hdl32e")
+    )  # the settings of runs before --returns
     with pytest.raises(InvalidInputError, match="other settings"):  # a one-return run is not resumed with returns
         _fix_settings(Sim2RealConfig("m", "r", returns=2), _sets_found(), tmp_path / "one")

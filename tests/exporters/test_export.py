@@ -26,6 +26,7 @@ def y_up(points: np.ndarray) -> np.ndarray:
     """Our +z-up points in the +y-up frame of PointNet's files: ``(x, y, z) → (x, z, −y)``."""
     return np.stack([points[..., 0], points[..., 2], -points[..., 1]], axis=-1)
 
+
 #: Six train meshes of five classes and three test meshes: enough rows for several files of 64.
 MESHES = ("bathtub/train/bathtub_0001.off", "bed/train/bed_0001.off", "chair/train/chair_0001.off",
           "monitor/train/monitor_0001.off", "stool/train/stool_0002.off", "desk/test/desk_0201.off",
@@ -123,7 +124,9 @@ def test_a_class_the_label_set_lacks_is_refused_by_name(sources, tmp_path, capsy
     with pytest.raises(InvalidInputError, match="'stool'"):
         export(sources["dense"], "pointnet-h5", tmp_path / "x", label_set_name="modelnet10")
     assert "stool" not in MODELNET10_CLASSES
-    assert cli_main(["export", str(sources["dense"]), "--to", "pointnet-h5", "--out", str(tmp_path / "y"), "--label-set", "modelnet10"]) == 2
+    assert (
+        cli_main(["export", str(sources["dense"]), "--to", "pointnet-h5", "--out", str(tmp_path / "y"), "--label-set", "modelnet10"]) == 2
+    )
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "'stool'" in err and "Traceback" not in err
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
@@ -198,7 +201,9 @@ def test_a_modelnet40c_folder_is_named_as_a_protocol_folder(tmp_path):
 
     (tmp_path / "meshes" / "chair" / "train").mkdir(parents=True)
     shutil.copy(SAMPLE_MESHES / "chair/train/chair_0001.off", tmp_path / "meshes" / "chair" / "train" / "chair_0001.off")
-    run_protocol(get_protocol("modelnet40-c-occlusion"), [tmp_path / "meshes"], tmp_path / "mn40c", ProtocolOptions(severity=1), progress=False)
+    run_protocol(
+        get_protocol("modelnet40-c-occlusion"), [tmp_path / "meshes"], tmp_path / "mn40c", ProtocolOptions(severity=1), progress=False
+    )
     with pytest.raises(InvalidInputError, match=r"`generate --protocol` folder \(--protocol modelnet40-c-occlusion\)"):
         export(tmp_path / "mn40c", "pointnet-h5", tmp_path / "out")
     assert not (tmp_path / "out").exists()

@@ -133,7 +133,9 @@ def test_modelnet_txt_is_y_up_normals_turned_with_points_and_each_file_maps_to_i
         in_z = np.loadtxt(z / cls / f"{sample_id}.txt", delimiter=",")
         np.testing.assert_allclose(in_z[:, :3], source[sample], atol=5e-7)  # this file is this sample
         for part in (slice(0, 3), slice(3, 6)):  # points and normals, each (x, y, z) -> (x, z, -y)
-            np.testing.assert_array_equal(in_y[:, part], np.stack([in_z[:, part][:, 0], in_z[:, part][:, 2], -in_z[:, part][:, 1]], 1) + 0.0)
+            np.testing.assert_array_equal(
+                in_y[:, part], np.stack([in_z[:, part][:, 0], in_z[:, part][:, 2], -in_z[:, part][:, 1]], 1) + 0.0
+            )
     record = json.loads((y / "export.json").read_text())
     assert record["up"] == "+y" and "+y up" in record["frame"] and record["data_files"] == result.data_files == len(ids) + 2
     ledger = [json.loads(line)["path"] for line in (y / LEDGER_FILE).read_text().splitlines()]

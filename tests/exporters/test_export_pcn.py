@@ -193,7 +193,10 @@ def test_refusals_are_one_line_and_make_no_folder(source, tmp_path, capsys):
         ([str(empty), "--to", "pcn"], "holds no protocol.json: --to pcn reads a `generate --protocol pcn` folder"),
         ([str(source), "--to", "pcn", "--seed", "1"], "--seed 1 applies to --to pointnet-h5, not to --to pcn; leave it out"),
         ([str(source), "--to", "pcn", "--list-prefix", "data/PCN"], "--list-prefix data/PCN applies to --to pointnet-h5, not to --to pcn"),
-        ([str(source), "--to", "pcn", "--label-set", "modelnet40"], "--to pcn takes --label-set own or --label-set shapenet55, not --label-set modelnet40"),
+        (
+            [str(source), "--to", "pcn", "--label-set", "modelnet40"],
+            "--to pcn takes --label-set own or --label-set shapenet55, not --label-set modelnet40",
+        ),
         ([str(dataset), "--to", "modelnet-txt", "--seed", "1"], "--seed 1 applies to --to pointnet-h5, not to --to modelnet-txt"),
     ]
     for argv, message in cases:

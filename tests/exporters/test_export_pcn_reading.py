@@ -116,8 +116,15 @@ def test_a_shard_of_a_few_kb_declaring_a_gb_cloud_is_refused_in_one_line(source,
 
 def test_a_complete_cloud_of_another_size_than_the_run_recorded_is_refused(source, tmp_path):
     """Stored (compressed, so the stored bytes allow it), but not what the run made."""
-    _replace_complete(_chair(source), lambda f: f.create_dataset("complete", data=np.zeros((COMPLETE_POINTS * 4, 3), "f4"), compression="gzip"))
-    _refused(source, tmp_path / "out", DatasetFormatError, rf"pcn_000000\.h5: 'complete' declares \({COMPLETE_POINTS * 4}, 3\), where the run recorded {COMPLETE_POINTS:,}")
+    _replace_complete(
+        _chair(source), lambda f: f.create_dataset("complete", data=np.zeros((COMPLETE_POINTS * 4, 3), "f4"), compression="gzip")
+    )
+    _refused(
+        source,
+        tmp_path / "out",
+        DatasetFormatError,
+        rf"pcn_000000\.h5: 'complete' declares \({COMPLETE_POINTS * 4}, 3\), where the run recorded {COMPLETE_POINTS:,}",
+    )
 
 
 @pytest.mark.parametrize(
@@ -128,7 +135,7 @@ def test_a_complete_cloud_of_another_size_than_the_run_recorded_is_refused(sourc
         ("partial_offsets", lambda f: f.create_dataset("partial_offsets", data=np.zeros(50, "i8")), r"'partial_offsets' declares \(50,\)"),
         ("partial_offsets", lambda f: f.create_dataset("partial_offsets", data=np.array([0, 5, 3, 1, 2, 3, 4, 5, 6])), "do not cut its"),
     ],
-)  # fmt: skip
+)
 def test_arrays_that_no_pcn_run_writes_are_refused(source, tmp_path, key, make, said):
     shard = _chair(source)
     with h5py.File(shard, "a") as f:
@@ -234,7 +241,12 @@ def test_a_shard_changed_after_the_plan_is_checked_again_when_it_is_read(source,
     from zbuf_occlude.io.owned import OwnedFolder
 
     plan = plan_pcn(source)
-    _replace_complete(_chair(source), lambda f: f.create_dataset("complete", data=np.zeros((COMPLETE_POINTS * 4, 3), "f4"), compression="gzip"))
-    with OwnedFolder(tmp_path / "out", names=FILE_NAMES) as folder, pytest.raises(DatasetFormatError, match=r"pcn_000000\.h5: 'complete' declares"):
+    _replace_complete(
+        _chair(source), lambda f: f.create_dataset("complete", data=np.zeros((COMPLETE_POINTS * 4, 3), "f4"), compression="gzip")
+    )
+    with (
+        OwnedFolder(tmp_path / "out", names=FILE_NAMES) as folder,
+        pytest.raises(DatasetFormatError, match=r"pcn_000000\.h5: 'complete' declares"),
+    ):
         write_pcn(folder, plan)
     assert not list((tmp_path / "out").rglob("*.pcd"))

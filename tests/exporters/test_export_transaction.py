@@ -243,7 +243,7 @@ def test_a_fifo_where_the_earlier_export_wrote_a_file_is_refused_unopened(sets, 
         ({"label_set_name": 3}, ArgumentTypeError, "label_set_name must be a str, got int 3"),
         ({"label_set_name": "imagenet"}, InvalidInputError, "not label_set_name='imagenet'"),
     ],
-)  # fmt: skip
+)
 def test_wrong_kinds_and_values_from_python_raise_named_errors(sets, tmp_path, monkeypatch, kwargs, error, message):
     monkeypatch.chdir(tmp_path)
     given = {"dataset": sets["both"], "to": "pointnet-h5", "out": tmp_path / "out", **kwargs}

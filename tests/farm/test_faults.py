@@ -261,7 +261,12 @@ def test_workers_do_not_outlive_a_killed_parent(tree, tmp_path, sig):
         assert rc == 143, proc.stderr.read()
         assert "interrupted; run the same command again to resume" in proc.stderr.read()
         assert not (out / LOCK_FILE).exists()
-        summary = run_farm(tree, out, params=FarmParams(**{**PARAMS.to_dict(), "views": VIEWS_LONG, "method": METHOD_LONG}), options=RunOptions(progress=False))
+        summary = run_farm(
+            tree,
+            out,
+            params=FarmParams(**{**PARAMS.to_dict(), "views": VIEWS_LONG, "method": METHOD_LONG}),
+            options=RunOptions(progress=False),
+        )
         assert summary.finished and summary.done == len(MESHES) and summary.failed == 0
         assert not list(out.rglob(".*.tmp"))
 

@@ -50,7 +50,9 @@ def _overwrite(cmd: str, src: Path, out: Path, *extra: str) -> int:
     return cli_main([cmd, str(src), "--out", str(out), *SMALL, "--overwrite", "--no-progress", *extra])
 
 
-@pytest.mark.parametrize("named", ["notes.md", ".", "plan.json", "records", "../outside.txt", "shards/../notes.md", "shards/train_000001.h5"])
+@pytest.mark.parametrize(
+    "named", ["notes.md", ".", "plan.json", "records", "../outside.txt", "shards/../notes.md", "shards/train_000001.h5"]
+)
 def test_a_record_naming_another_file_deletes_nothing(built, tmp_path, capsys, named):
     src, out = _copy(built, tmp_path, "farm")
     (out / "notes.md").write_text("mine")

@@ -51,6 +51,7 @@ SMALL_MESHES = [
 #: Few poses, points and pixels: enough to exercise every code path quickly.
 PARAMS = FarmParams(views="0:0,40:90,-40:200,85:300", samples_per_view=2, n_points=128, dense_points=2048, resolution=96)
 
+
 def make_tree(root: Path, meshes=SMALL_MESHES) -> Path:
     """A ModelNet-style tree ROOT/<class>/<split>/<name>.off of symlinks to the real meshes."""
     for rel, cls, split in meshes:
@@ -109,9 +110,7 @@ def _expected_object(rec: dict, params: FarmParams, root: Path):
     mesh = load_mesh(root / rec["source"])
     dense = dense_cloud(mesh, object_key(rec["name"]), seed=params.seed, count=params.dense_points)
     with method_info(params.method).session(mesh, dense.points, dense.face_index) as scene:
-        visible = [
-            scene.visible(camera_on_sphere(el, az, params.radius, resolution=params.resolution)) for el, az in params.poses
-        ]
+        visible = [scene.visible(camera_on_sphere(el, az, params.radius, resolution=params.resolution)) for el, az in params.poses]
     return mesh, dense, visible
 
 
@@ -148,9 +147,7 @@ def test_discover_flat_folder_and_list_file(tmp_path):
 
     listing = tmp_path / "list.txt"
     listing.write_text(
-        "# path label [split]\n"
-        f"{SAMPLE_MESHES / SMALL_MESHES[0][0]} couch test\n"
-        f"flat/{Path(SMALL_MESHES[2][0]).name}   seat\n\n"
+        f"# path label [split]\n{SAMPLE_MESHES / SMALL_MESHES[0][0]} couch test\nflat/{Path(SMALL_MESHES[2][0]).name}   seat\n\n"
     )
     objects = discover_objects(listing)
     # sorted by name: the absolute path ("/...") before "flat/..."
@@ -666,7 +663,7 @@ def test_worker_dense_shard_holds_each_poses_samples(tmp_path):
         data = f["data"][()]
         attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in f.attrs.items()}
     for row in data[3:]:  # the top pose: every point a dense point visible from it
-        hit = (np.abs(dense.points.astype(np.float32)[None] - row[:, None]).max(axis=2) == 0)
+        hit = np.abs(dense.points.astype(np.float32)[None] - row[:, None]).max(axis=2) == 0
         assert hit.any(axis=1).all() and visible[1][hit.argmax(axis=1)].all()
     for row in data[:3]:  # the end-on pose: 150 distinct points, its visible dense points among them
         assert len(np.unique(row, axis=0)) == 150

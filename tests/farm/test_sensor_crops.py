@@ -215,7 +215,9 @@ def test_zbuffer_farm_parameters_keep_their_digest():
     assert FarmParams(storage="compact", seed=3, method="zbuffer").digest() == "f3f5104aab0cd7df"
     assert "sensor" not in FarmParams().to_dict()
     assert FarmParams(sensor="hdl32e").digest() != FarmParams(sensor="vlp16").digest()
-    assert FarmParams(sensor="hdl32e").digest() != FarmParams(sensor=SensorCropParams("hdl32e", CropDistributions(size_m=(1.0, 2.0)))).digest()
+    assert (
+        FarmParams(sensor="hdl32e").digest() != FarmParams(sensor=SensorCropParams("hdl32e", CropDistributions(size_m=(1.0, 2.0)))).digest()
+    )
 
 
 @pytest.mark.parametrize(
@@ -233,7 +235,10 @@ def test_zbuffer_farm_parameters_keep_their_digest():
         (["--sensor-ground-margin", "1"], "--sensor-ground-margin needs --sensor"),
         (["--sensor", "hdl32e", "--sensor-ground-margin", "-1"], "--sensor-ground-margin must be a number >= 0 metres, got -1"),
         (["--sensor-hidden-below", "0.5"], "--sensor-hidden-below needs --sensor"),
-        (["--sensor", "hdl32e", "--sensor-hidden-below=-0.5:1"], "--sensor-hidden-below must be >= 0 metres above the ground, got (-0.5, 1.0)"),
+        (
+            ["--sensor", "hdl32e", "--sensor-hidden-below=-0.5:1"],
+            "--sensor-hidden-below must be >= 0 metres above the ground, got (-0.5, 1.0)",
+        ),
         (["--sensor-across-sight-width", "0.5"], "--sensor-across-sight-width needs --sensor"),
         (["--sensor", "hdl32e", "--sensor-across-sight-width", "0:0"], "--sensor-across-sight-width must have HI > 0 metres"),
         (["--sensor", "kinect-v1", "--sensor-across-sight-width", "0.5"], "spinning LiDAR"),
@@ -285,10 +290,24 @@ def test_a_plan_written_with_flat_sensor_keys_reads_back_as_the_same_parameters(
         FarmParams(views="grid25", samples_per_view=2, n_points=64, storage="compact", seed=3),
         FarmParams(up="+y", density=50.0),
         FarmParams(sensor="vlp16"),
-        FarmParams(samples_per_view=4, n_points=256, seed=9, sensor=SensorCropParams(
-            "hdl32e", CropDistributions(distance_m=(6.0, 18.0), height_m=2.0, size_m=(2.0, 4.0), reflectivity=(0.2, 0.8),
-                                        ground_margin_m=0.3, hidden_below_m=(0.1, 0.5)),
-            footprint=True, across_sight_width_m=(1.0, 2.0))),
+        FarmParams(
+            samples_per_view=4,
+            n_points=256,
+            seed=9,
+            sensor=SensorCropParams(
+                "hdl32e",
+                CropDistributions(
+                    distance_m=(6.0, 18.0),
+                    height_m=2.0,
+                    size_m=(2.0, 4.0),
+                    reflectivity=(0.2, 0.8),
+                    ground_margin_m=0.3,
+                    hidden_below_m=(0.1, 0.5),
+                ),
+                footprint=True,
+                across_sight_width_m=(1.0, 2.0),
+            ),
+        ),
     ],
     ids=["compact", "density", "sensor-defaults", "sensor-every-setting"],
 )

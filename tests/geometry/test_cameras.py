@@ -205,7 +205,9 @@ def test_schedules_have_their_exact_poses():
     assert zo.view_schedule(" grid25 ")[:2] == [(-80.0, 0.0), (-80.0, 72.0)]
     golden = math.pi * (3 - math.sqrt(5))
     fib = zo.view_schedule("fibonacci:3")
-    assert np.allclose(fib, [(math.degrees(math.asin(1 - 2 * (k + 0.5) / 3)), math.degrees((k * golden) % (2 * math.pi))) for k in range(3)])
+    assert np.allclose(
+        fib, [(math.degrees(math.asin(1 - 2 * (k + 0.5) / 3)), math.degrees((k * golden) % (2 * math.pi))) for k in range(3)]
+    )
     assert zo.view_schedule("fibonacci:1") == [(0.0, 0.0)]
     assert zo.view_schedule("90:0,-90:1,") == [(90.0, 0.0), (-90.0, 1.0)]
     for bad in ("fibonacci:-2", "30:inf", "-90.5:0", "a:b"):

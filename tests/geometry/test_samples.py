@@ -70,7 +70,7 @@ SQUARES = np.array(
     [[[x, 0.0, 0.0], [x + 1.0, 0.0, 0.0], [x + 1.0, 1.0, 0.0]] for x in range(4)]
     + [[[x, 0.0, 0.0], [x + 1.0, 1.0, 0.0], [x, 1.0, 0.0]] for x in range(4)],
     dtype=np.float64,
-)  # fmt: skip
+)
 
 
 def _window(x_max: float):

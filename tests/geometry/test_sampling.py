@@ -74,19 +74,17 @@ def test_points_lie_on_their_faces(real_mesh: trimesh.Trimesh, mode: dict) -> No
     triangles = triangles_of(real_mesh)[face_index]
     assert _plane_distance(triangles, points).max() < PLANE_TOL
     # Algorithm 2's form of the same point
-    manual = triangles[:, 0] + bary[:, 1:2] * (triangles[:, 1] - triangles[:, 0]) + bary[:, 2:3] * (
-        triangles[:, 2] - triangles[:, 0]
-    )
+    manual = triangles[:, 0] + bary[:, 1:2] * (triangles[:, 1] - triangles[:, 0]) + bary[:, 2:3] * (triangles[:, 2] - triangles[:, 0])
     np.testing.assert_allclose(points, manual, rtol=0, atol=1e-14)
 
 
-nondegenerate_triangle = arrays(
-    np.float64, (3, 3), elements=st.floats(-100.0, 100.0, allow_nan=False, allow_infinity=False)
-).filter(
+nondegenerate_triangle = arrays(np.float64, (3, 3), elements=st.floats(-100.0, 100.0, allow_nan=False, allow_infinity=False)).filter(
     # well-shaped enough that the independent barycentric recomputation is accurate:
     # area at least 1e-3 of the squared longest edge
-    lambda t: np.linalg.norm(np.cross(t[1] - t[0], t[2] - t[0]))
-    > 2e-3 * max(np.sum((t[1] - t[0]) ** 2), np.sum((t[2] - t[1]) ** 2), np.sum((t[0] - t[2]) ** 2))
+    lambda t: (
+        np.linalg.norm(np.cross(t[1] - t[0], t[2] - t[0]))
+        > 2e-3 * max(np.sum((t[1] - t[0]) ** 2), np.sum((t[2] - t[1]) ** 2), np.sum((t[0] - t[2]) ** 2))
+    )
 )
 
 
@@ -262,9 +260,7 @@ def test_points_from_barycentric_corners_and_mesh_or_triangles(sphere: trimesh.T
         (np.array([0]), np.array([[np.nan, 0.5, 0.5]]), "NaN"),
     ],
 )
-def test_points_from_barycentric_rejects_bad_input(
-    sphere: trimesh.Trimesh, face_index: np.ndarray, bary: np.ndarray, match: str
-) -> None:
+def test_points_from_barycentric_rejects_bad_input(sphere: trimesh.Trimesh, face_index: np.ndarray, bary: np.ndarray, match: str) -> None:
     with pytest.raises(InvalidInputError, match=match):
         points_from_barycentric(sphere, face_index, bary)
 

@@ -190,9 +190,7 @@ def test_written_files_get_the_mode_the_umask_gives(tmp_path):
     import subprocess
     import sys
 
-    out = subprocess.run(
-        [sys.executable, "-c", code, str(tmp_path / "strict.txt")], capture_output=True, text=True, timeout=120
-    )
+    out = subprocess.run([sys.executable, "-c", code, str(tmp_path / "strict.txt")], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "0o640"
 
@@ -543,7 +541,9 @@ def test_read_npz_refuses_zeros_inflating_past_the_cap_before_inflating_them(tmp
     import zbuf_occlude.io.clouds as clouds
 
     path = tmp_path / "zeros.npz"
-    np.savez_compressed(path, **{**_cloud_arrays(), "points": np.zeros((1_000_000, 3), np.float32), "face_index": np.zeros(1_000_000, np.int64)})
+    np.savez_compressed(
+        path, **{**_cloud_arrays(), "points": np.zeros((1_000_000, 3), np.float32), "face_index": np.zeros(1_000_000, np.int64)}
+    )
     assert path.stat().st_size < 100_000  # 20 MB inflated
     monkeypatch.setattr(clouds, "MAX_NPZ_BYTES", 1 << 20)  # stands for the 3.2 GB cap
     _no_inflating(monkeypatch)

@@ -21,9 +21,7 @@ from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError, UnsafePath
 from zbuf_occlude.io.las import MAX_VLRS, SCAN_ANGLE_STEP_DEG, LasPoints, las_bytes, read_las
 
 #: The real airborne scans (research-only, next to the repository; skipped when absent).
-ALS_RETURNS = (
-    Path(os.environ.get("ZBUF_OCCLUDE_SHARED_DATA", Path(__file__).resolve().parents[3] / "shared" / "data")) / "als_returns"
-)
+ALS_RETURNS = Path(os.environ.get("ZBUF_OCCLUDE_SHARED_DATA", Path(__file__).resolve().parents[3] / "shared" / "data")) / "als_returns"
 N = 600
 
 

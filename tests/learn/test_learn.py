@@ -96,11 +96,19 @@ def test_fisher_vector_matches_sklearn_gaussian_mixture():
         g_pi = (gamma - w) / (np.sqrt(w) * t)
         g_mu = gamma[..., None] * diff / (np.sqrt(w) * t)
         g_sig = gamma[..., None] * (diff**2 - 1) / (np.sqrt(2 * w) * t)
-        ref = np.concatenate([
-            g_pi.max(0)[:, None], g_pi.sum(0)[:, None],
-            g_mu.max(0), g_mu.min(0), g_mu.sum(0),
-            g_sig.max(0), g_sig.min(0), g_sig.sum(0),
-        ], axis=1)  # fmt: skip  (K, 20)
+        ref = np.concatenate(
+            [
+                g_pi.max(0)[:, None],
+                g_pi.sum(0)[:, None],
+                g_mu.max(0),
+                g_mu.min(0),
+                g_mu.sum(0),
+                g_sig.max(0),
+                g_sig.min(0),
+                g_sig.sum(0),
+            ],
+            axis=1,
+        )  # fmt: skip  (K, 20)
         np.testing.assert_allclose(fv[b].reshape(20, k).T, ref, rtol=1e-6, atol=1e-9)
     # the normalised layer: each group has unit L2 norm over the Gaussians
     normed = FisherVectorLayer(m)(torch.from_numpy(pts).float(), unit_sphere=True).reshape(2, 20, k)
@@ -345,8 +353,14 @@ def test_label_map_option():
 
 @pytest.mark.parametrize(
     ("field", "config", "n_classes"),
-    [("width", {"width": 1e9}, 2), ("n_classes", {}, 10**9), ("fv_grid", {"model": "3dmfv", "fv_grid": 100_000}, 2),
-     ("width", {"width": "wide"}, 2), ("n_classes", {}, 2.5), ("model", {"model": ["pointnet"]}, 2)],
+    [
+        ("width", {"width": 1e9}, 2),
+        ("n_classes", {}, 10**9),
+        ("fv_grid", {"model": "3dmfv", "fv_grid": 100_000}, 2),
+        ("width", {"width": "wide"}, 2),
+        ("n_classes", {}, 2.5),
+        ("model", {"model": ["pointnet"]}, 2),
+    ],
 )
 def test_load_model_bounds_every_config_field_before_building(tmp_path, field, config, n_classes):
     """A 1 KB checkpoint may not ask for a 768 GB model: the field is named before anything is built."""

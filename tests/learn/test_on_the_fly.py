@@ -117,8 +117,9 @@ def test_random_occlusion_trains_pointnet_for_one_epoch():
     before = [p.detach().clone() for p in model.parameters()]
     losses = []
     ds.set_epoch(0)
-    for x, y in torch.utils.data.DataLoader(ds, batch_size=4, shuffle=True, num_workers=2, drop_last=True,
-                                       multiprocessing_context="spawn", timeout=300):
+    for x, y in torch.utils.data.DataLoader(
+        ds, batch_size=4, shuffle=True, num_workers=2, drop_last=True, multiprocessing_context="spawn", timeout=300
+    ):
         loss = torch.nn.functional.cross_entropy(model(x), y) + model.regularizer
         opt.zero_grad()
         loss.backward()
@@ -152,8 +153,9 @@ def test_epoch_sampler_carries_the_epoch_to_persistent_workers():
 
     ds = OnTheFlyOccludedDataset(SAMPLES, n_points=128, dense_points=2048, seed=4)
     sampler = EpochSampler(ds)
-    loader = torch.utils.data.DataLoader(ds, batch_size=4, sampler=sampler, num_workers=2, persistent_workers=True,
-                                         multiprocessing_context="spawn", timeout=300)
+    loader = torch.utils.data.DataLoader(
+        ds, batch_size=4, sampler=sampler, num_workers=2, persistent_workers=True, multiprocessing_context="spawn", timeout=300
+    )
     epochs = []
     for epoch in (0, 1):
         sampler.set_epoch(epoch)
@@ -170,8 +172,9 @@ def test_epoch_sampler_carries_the_epoch_to_persistent_workers():
 def test_set_epoch_reaches_persistent_workers(context):
     """The usual pattern: ds.set_epoch(e) before each epoch, persistent workers, no special sampler."""
     ds = OnTheFlyOccludedDataset(SAMPLES, n_points=64, dense_points=1024, seed=2)
-    loader = torch.utils.data.DataLoader(ds, batch_size=4, num_workers=2, persistent_workers=True, multiprocessing_context=context,
-                                         timeout=300)
+    loader = torch.utils.data.DataLoader(
+        ds, batch_size=4, num_workers=2, persistent_workers=True, multiprocessing_context=context, timeout=300
+    )
     epochs = []
     for epoch in (0, 1):
         ds.set_epoch(epoch)
@@ -342,7 +345,10 @@ def test_a_data_set_of_pointnet_hdf5_takes_the_files_labels_and_splits(tmp_path)
                                  poses=top, up="+y")  # fmt: skip
     assert ds.shape_names == ["bowl", "cup"]
     assert [(o.name, o.label, o.class_name, o.cloud) for o in ds.objects] == [
-        ("ply_data_train0_0000", 1, "cup", 0), ("ply_data_train0_0001", 0, "bowl", 1), ("ply_data_train0_0002", 1, "cup", 2)]
+        ("ply_data_train0_0000", 1, "cup", 0),
+        ("ply_data_train0_0001", 0, "bowl", 1),
+        ("ply_data_train0_0002", 1, "cup", 2),
+    ]
     assert ds.labels.tolist() == [1, 0, 1]
     s = ds.sample(1)
     assert len(np.unique(s["point_index"])) == 128
@@ -392,7 +398,6 @@ def test_meshes_and_point_sets_together(tmp_path):
     assert mixed.sample(cloud)["points"].shape == (64, 3) and mixed.objects[cloud].label == mixed.shape_names.index("sofa")
     for i in range(cloud):  # the meshes before it keep their index: the same samples as without it
         assert np.array_equal(mixed.sample(i)["points"], meshes.sample(i)["points"])
-
 
 
 def test_pyg_transform_of_a_point_cloud():

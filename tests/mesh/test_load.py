@@ -174,10 +174,7 @@ def test_quad_and_pentagon_are_triangulated(tmp_path: Path) -> None:
     # unit square (quad) in z=0 and a convex pentagon of area 1.25 in z=1
     path = _write(
         tmp_path / "polygons.off",
-        "OFF\n9 2 0\n"
-        "0 0 0\n1 0 0\n1 1 0\n0 1 0\n"
-        "0 0 1\n1 0 1\n1 1 1\n0.5 1.5 1\n0 1 1\n"
-        "4 0 1 2 3\n5 4 5 6 7 8\n",
+        "OFF\n9 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n0 0 1\n1 0 1\n1 1 1\n0.5 1.5 1\n0 1 1\n4 0 1 2 3\n5 4 5 6 7 8\n",
     )
     mesh = load_mesh(path, normalize=False)
     assert mesh.faces.shape == (2 + 3, 3)
@@ -196,10 +193,7 @@ def test_degenerate_faces_are_dropped_and_counted(tmp_path: Path) -> None:
     assert 5e-17 < DEGENERATE_AREA_RTOL
     path = _write(
         tmp_path / "degenerate.off",
-        "OFF\n6 7 0\n"
-        "0 0 0\n1 0 0\n0 1 0\n0 0 1\n0.5 0 0\n0.5 1e-16 0\n"
-        "3 0 2 1\n3 0 1 3\n3 1 2 3\n3 0 3 2\n"
-        "3 0 0 3\n3 0 4 1\n3 0 1 5\n",
+        "OFF\n6 7 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n0.5 0 0\n0.5 1e-16 0\n3 0 2 1\n3 0 1 3\n3 1 2 3\n3 0 3 2\n3 0 0 3\n3 0 4 1\n3 0 1 5\n",
     )
     mesh = load_mesh(path, normalize=False)
     prov = mesh.metadata[METADATA_KEY]
@@ -406,7 +400,9 @@ _TRI_V = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0,
 
 
 def _raw(vertices, faces, **metadata):
-    return trimesh.Trimesh(vertices=np.asarray(vertices, dtype=np.float64), faces=np.asarray(faces), process=False, validate=False, metadata=metadata)
+    return trimesh.Trimesh(
+        vertices=np.asarray(vertices, dtype=np.float64), faces=np.asarray(faces), process=False, validate=False, metadata=metadata
+    )
 
 
 def test_checks_name_the_mesh_and_catch_each_bad_index_alone():

@@ -218,7 +218,11 @@ def test_the_kinds_asked_for_decide_what_discovery_finds(tmp_path: Path) -> None
     trimesh.PointCloud(_points(CHAIR, 64)).export(root / "chair" / "c.ply")
     trimesh.load(SOFA).export(root / "chair" / "d.ply")
     names = {kinds: [f.name for f in walk_mesh_files(root, kinds=kinds)[0]] for kinds in ((MESH,), (POINT_SET,), INPUT_KINDS)}
-    assert names == {(MESH,): ["a.off", "c.ply", "d.ply"], (POINT_SET,): ["b.npy", "c.ply"], INPUT_KINDS: ["a.off", "b.npy", "c.ply", "d.ply"]}
+    assert names == {
+        (MESH,): ["a.off", "c.ply", "d.ply"],
+        (POINT_SET,): ["b.npy", "c.ply"],
+        INPUT_KINDS: ["a.off", "b.npy", "c.ply", "d.ply"],
+    }
     assert [kind_of(root / "chair" / n, INPUT_KINDS) for n in ("a.off", "b.npy", "c.ply", "d.ply")] == [MESH, POINT_SET, POINT_SET, MESH]
     assert kind_of(root / "chair" / "c.ply") is MESH and kind_of(root / "chair" / "b.npy") is None
     clouds = scan_objects(root, class_from=1, kinds=(POINT_SET,)).objects

@@ -15,7 +15,9 @@ from zbuf_occlude.mesh.load import METADATA_KEY, load_mesh
 from zbuf_occlude.mesh.scene import collada_asset, gltf_generator, up_rotation
 
 #: The street-object meshes (research-only, next to the repository; skipped when absent).
-STREET_OBJECTS = Path(os.environ.get("ZBUF_OCCLUDE_SHARED_DATA", Path(__file__).resolve().parents[3] / "shared" / "data")) / "street_objects"
+STREET_OBJECTS = (
+    Path(os.environ.get("ZBUF_OCCLUDE_SHARED_DATA", Path(__file__).resolve().parents[3] / "shared" / "data")) / "street_objects"
+)
 needs_collada = pytest.mark.skipif(importlib.util.find_spec("collada") is None, reason="pycollada (extra 'collada') not installed")
 
 
@@ -196,6 +198,7 @@ def test_collada_asset_reads_only_what_is_declared() -> None:
 
 
 # -- the street-object meshes (research-only, next to the repository) ---------------------
+
 
 def _street_files() -> list[Path]:
     if not STREET_OBJECTS.is_dir():

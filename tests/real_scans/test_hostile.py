@@ -224,8 +224,11 @@ def test_ascii_ply_holding_fewer_vertices_than_declared_is_an_error(tmp_path: Pa
 
 @pytest.mark.parametrize(
     ("points", "width", "stored", "match"),
-    [(2, 10, 10, "header declares POINTS 2 but WIDTH x HEIGHT = 10"), (2, 2, 10, r"declares 2 points \(24 bytes\) but holds 120 bytes"),
-     (10, 10, 3, "declares 10 points")],
+    [
+        (2, 10, 10, "header declares POINTS 2 but WIDTH x HEIGHT = 10"),
+        (2, 2, 10, r"declares 2 points \(24 bytes\) but holds 120 bytes"),
+        (10, 10, 3, "declares 10 points"),
+    ],
 )
 def test_binary_pcd_points_must_match_width_height_and_body(tmp_path: Path, points, width, stored, match) -> None:
     path = tmp_path / "scan.pcd"

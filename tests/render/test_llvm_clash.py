@@ -59,8 +59,12 @@ def test_triton_after_a_gl_context_does_not_crash(then):
 
 @pytest.mark.slow
 def test_triton_before_a_gl_context_still_works():
-    _assert_survives(_run("import torch, triton\nfrom zbuf_occlude.render.context import shared_context\nshared_context()\n"
-                          "torch.use_deterministic_algorithms(True)\nprint('ok')"))
+    _assert_survives(
+        _run(
+            "import torch, triton\nfrom zbuf_occlude.render.context import shared_context\nshared_context()\n"
+            "torch.use_deterministic_algorithms(True)\nprint('ok')"
+        )
+    )
 
 
 @pytest.mark.slow

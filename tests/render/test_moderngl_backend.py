@@ -141,9 +141,7 @@ def _zbuffer(mesh, points, cam, **options):
 def test_gpu_self_hit_tolerance_is_a_distance_not_a_segment_parameter():
     """A quad hides points below it iff their distance to it exceeds the tolerance; the
     segments are ~4 long, so t = distance / 4 would let the 1.2e-3 and 2e-3 ones through."""
-    quad = trimesh.Trimesh(
-        vertices=[[-0.4, -0.4, 0.0], [0.4, -0.4, 0.0], [0.4, 0.4, 0.0], [-0.4, 0.4, 0.0]], faces=[[0, 1, 2], [0, 2, 3]]
-    )
+    quad = trimesh.Trimesh(vertices=[[-0.4, -0.4, 0.0], [0.4, -0.4, 0.0], [0.4, 0.4, 0.0], [-0.4, 0.4, 0.0]], faces=[[0, 1, 2], [0, 2, 3]])
     cam = zo.camera_on_sphere(90.0, 0.0, 4.0, resolution=128)
     tol = 1e-3
     d = np.array([0.5, 0.8, 1.3, 2.0]) * tol
@@ -252,9 +250,7 @@ def test_gpu_candidate_window_covers_the_rows_above_and_below():
 
 
 def _tolerance_rule(mesh, points, cam, face_index=None, **constants):
-    return zo.visible_mask(
-        mesh, points, cam, "zbuffer-tolerance", face_index=face_index, resolution=cam.resolution, **constants
-    )
+    return zo.visible_mask(mesh, points, cam, "zbuffer-tolerance", face_index=face_index, resolution=cam.resolution, **constants)
 
 
 def test_gpu_depth_rule_shows_points_on_the_background():
@@ -273,7 +269,9 @@ def test_gpu_depth_rule_slope_term_uses_the_angle_of_the_own_face():
     only the slope term (1 x footprint x tan θ) keeps the points visible."""
     tilt = np.radians(80.0)
     axis_u, axis_w = np.array([1.0, 0.0, 0.0]), np.array([0.0, np.cos(tilt), np.sin(tilt)])  # normal at 80° to z
-    corners = np.array([-0.3 * axis_u - 0.3 * axis_w, 0.3 * axis_u - 0.3 * axis_w, 0.3 * axis_u + 0.3 * axis_w, -0.3 * axis_u + 0.3 * axis_w])
+    corners = np.array(
+        [-0.3 * axis_u - 0.3 * axis_w, 0.3 * axis_u - 0.3 * axis_w, 0.3 * axis_u + 0.3 * axis_w, -0.3 * axis_u + 0.3 * axis_w]
+    )
     plane = trimesh.Trimesh(vertices=corners, faces=[[0, 1, 2], [0, 2, 3]])
     points, face_index = zo.sample_surface(plane, count=2000, seed=3)
     cam = zo.camera_on_sphere(90.0, 0.0, 4.0, resolution=128)

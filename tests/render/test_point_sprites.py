@@ -89,7 +89,7 @@ def test_a_surfel_beyond_the_largest_point_size_is_drawn_as_a_quad(monkeypatch):
         side = int(renderer.max_point_size) + 16
         image = (2.0 / side, -1.0, -1.0, side, side)
         depth, ids = renderer.splat(cam, normal, radius, *image, edge_on_cos=EDGE_ON_COS)
-    (sprites, quads), = routes
+    ((sprites, quads),) = routes
     assert list(quads) == [0] and list(sprites) == [1, 2, 3]
     depth_cpu, ids_cpu = splat_surfels(cam, normal, radius, *image)
     assert np.array_equal(ids, ids_cpu) and np.array_equal(depth, depth_cpu)

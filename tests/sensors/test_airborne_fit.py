@@ -298,7 +298,9 @@ def test_fit_sensor_command_fits_an_airborne_scanner_to_aerial_crops(tmp_path, c
     assert main(["fit-sensor", str(tmp_path / "crops"), "--sensor", "riegl-q1560", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     first, second = printed.splitlines()[:2]  # what it reads and what it fits, before any number
-    assert first.startswith("reading the real scans under") and second.startswith("read 16 scans of 1 class (car: 16); fitting an airborne scanner")
+    assert first.startswith("reading the real scans under") and second.startswith(
+        "read 16 scans of 1 class (car: 16); fitting an airborne scanner"
+    )
     assert "| density_m2 | " in printed and " ± " in printed and "The fitted scanner riegl-q1560-fitted" in printed
     fitted = sensor_from_name(out)  # the loader of scan, farm --sensor and experiment sim2real --sensor
     assert isinstance(fitted, AirborneScanner) and fitted.name == "riegl-q1560-fitted"

@@ -111,7 +111,8 @@ def test_survey_density_at_a_point_sums_the_strips_that_cover_it() -> None:
     assert single.survey_density_at_m2((5.0, single.swath_width_m / 2 + 1.0)) == 0.0
     assert single.survey_density_m2 == single.density_m2
     assert single.with_(headings_deg=(0.0, 90.0)).survey_density_at_m2((300.0, 250.0)) == pytest.approx(
-        single.density_at_m2(250.0) + single.density_at_m2(300.0))
+        single.density_at_m2(250.0) + single.density_at_m2(300.0)
+    )
 
 
 def test_flight_lines_geometry() -> None:
@@ -185,7 +186,9 @@ def test_the_single_line_preset_gives_the_bytes_it_gave_before_flight_plans() ->
     q = airborne_preset("riegl-q1560")
     for pattern in ("linear", "oscillating"):
         s = q.with_(pattern=pattern, altitude_m=400.0, dropout=0.1)
-        scene = ScanScene(objects=[SceneObject(trimesh.creation.box(extents=(1, 1, 1)), "box", (3.0, 40.0), 30.0, 4.5)], ground_half_extent_m=60.0)
+        scene = ScanScene(
+            objects=[SceneObject(trimesh.creation.box(extents=(1, 1, 1)), "box", (3.0, 40.0), 30.0, 4.5)], ground_half_extent_m=60.0
+        )
         out = scan_airborne(scene, s, (3.0, 40.0), 8.0, seed=11)
         for a in (out.points, out.range_m, out.face_index, out.object_id, out.normal, out.incidence_deg, out.meta["scan_angle_deg"]):
             h.update(np.ascontiguousarray(a).tobytes())

@@ -104,8 +104,12 @@ def test_the_detection_threshold_drops_the_weak_echoes_and_frees_their_slot() ->
     assert len(s) == len(plate) and np.all(s.number_of_returns == 1) and np.all(s.return_number == 1)
     np.testing.assert_array_equal(s.intensity, plate)
     # without reflectivity the threshold weighs the echoes with rho 1; a threshold of 0 keeps every echo
-    np.testing.assert_array_equal(_scan(transmittance=0.5).intensity, scan_airborne(
-        _plate_over_ground(), _scanner(detection_threshold=0.0), (0.0, 0.0), 5.0, seed=3, phase_s=0.0, transmittance=0.5).intensity)
+    np.testing.assert_array_equal(
+        _scan(transmittance=0.5).intensity,
+        scan_airborne(
+            _plate_over_ground(), _scanner(detection_threshold=0.0), (0.0, 0.0), 5.0, seed=3, phase_s=0.0, transmittance=0.5
+        ).intensity,
+    )
 
 
 @pytest.mark.parametrize("value", [-1e-9, float("nan"), float("inf"), "1e-6", True])

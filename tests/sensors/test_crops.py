@@ -20,7 +20,9 @@ MESH = Path(__file__).resolve().parents[2] / "data" / "samples" / "bed" / "train
 def test_samples_are_crops_in_the_mesh_frame():
     mesh = zo.load_mesh(MESH)
     dist = CropDistributions(distance_m=(6.0, 12.0), height_m=(1.7, 1.9), size_m=4.5)
-    clouds = lidar_object_samples(mesh, zo.Lidar.preset("hdl32e", range_noise_m=0.0), name="bed", n_samples=4, n_points=512, seed=3, distributions=dist)
+    clouds = lidar_object_samples(
+        mesh, zo.Lidar.preset("hdl32e", range_noise_m=0.0), name="bed", n_samples=4, n_points=512, seed=3, distributions=dist
+    )
     assert len(clouds) == 4
     lo, hi = mesh.bounds
     for c in clouds:
@@ -104,7 +106,9 @@ def test_ground_returns_have_no_face_of_the_mesh():
 
     box = trimesh.creation.box(extents=(2.0, 1.0, 1.0))
     dist = CropDistributions(distance_m=6.0, height_m=1.8, size_m=2.0, ground_margin_m=1.0)
-    (c,) = lidar_object_samples(box, zo.Lidar.preset("hdl32e", range_noise_m=0.0), name="box", n_samples=1, n_points=4096, distributions=dist)
+    (c,) = lidar_object_samples(
+        box, zo.Lidar.preset("hdl32e", range_noise_m=0.0), name="box", n_samples=1, n_points=4096, distributions=dist
+    )
     on_ground = np.abs(c.points[:, 2] + 0.5) < 1e-5
     assert on_ground.any() and np.all(c.face_index[on_ground & (c.face_index >= 0)] < len(box.faces))
     assert np.all(c.face_index[c.face_index < 0] == -1) and np.any(c.face_index == -1)

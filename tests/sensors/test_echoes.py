@@ -38,9 +38,7 @@ def _plates(
     on_a = rays[:, 1] >= 0
     plate_x = np.where(on_a, R, R + gap)
     range_m = plate_x / rays[:, 0]  # along each sub-ray to its plate
-    energy = hit_energy(
-        weights, np.where(on_a, reflectance[0], reflectance[1]), rays[:, 0], range_m
-    )
+    energy = hit_energy(weights, np.where(on_a, reflectance[0], reflectance[1]), rays[:, 0], range_m)
     return range_m, energy, np.where(on_a, 1, 2), weights, on_a
 
 
@@ -70,13 +68,9 @@ def test_two_plates_a_resolvable_gap_apart_give_two_returns(profile: str) -> Non
     # the sub-rays are within 1° of the axis: ranges R / cos θ differ from R by < R θ² / 2
     assert echoes.range_m == pytest.approx([R, R + gap], abs=R * math.radians(1.0) ** 2)
     # energies: ρ × the footprint share on each plate / R² (cos θ ≈ 1 to the same order)
-    expected = np.array(
-        [0.6 * weights[on_a].sum() / R**2, 0.3 * weights[~on_a].sum() / (R + gap) ** 2]
-    )
+    expected = np.array([0.6 * weights[on_a].sum() / R**2, 0.3 * weights[~on_a].sum() / (R + gap) ** 2])
     assert echoes.energy == pytest.approx(expected, rel=1e-3)
-    assert echoes.energy == pytest.approx(
-        [energy[on_a].sum(), energy[~on_a].sum()], rel=1e-14
-    )
+    assert echoes.energy == pytest.approx([energy[on_a].sum(), energy[~on_a].sum()], rel=1e-14)
     assert echoes.range_m[1] - echoes.range_m[0] >= RESOLUTION
     assert echoes.surface.tolist() == [1, 2] and echoes.pulse.tolist() == [0, 0]
     assert echoes.return_number.tolist() == [
@@ -84,34 +78,22 @@ def test_two_plates_a_resolvable_gap_apart_give_two_returns(profile: str) -> Non
         2,
     ] and echoes.number_of_returns.tolist() == [2, 2]
     assert echoes.return_number.dtype == echoes.number_of_returns.dtype == np.uint8
-    assert (
-        on_a[echoes.hit[0]] and not on_a[echoes.hit[1]]
-    )  # each return names a hit of its plate
+    assert on_a[echoes.hit[0]] and not on_a[echoes.hit[1]]  # each return names a hit of its plate
 
 
-def test_two_plates_closer_than_the_resolution_give_one_return_at_the_energy_weighted_range() -> (
-    None
-):
+def test_two_plates_closer_than_the_resolution_give_one_return_at_the_energy_weighted_range() -> None:
     gap = 0.3
     range_m, energy, surface, _, on_a = _plates(gap)
     echoes = _resolve(range_m, energy, surface)
-    assert (
-        len(echoes) == 1
-        and echoes.return_number.tolist() == [1]
-        and echoes.number_of_returns.tolist() == [1]
-    )
-    assert echoes.range_m[0] == pytest.approx(
-        np.sum(energy * range_m) / np.sum(energy), rel=1e-14
-    )
+    assert len(echoes) == 1 and echoes.return_number.tolist() == [1] and echoes.number_of_returns.tolist() == [1]
+    assert echoes.range_m[0] == pytest.approx(np.sum(energy * range_m) / np.sum(energy), rel=1e-14)
     assert R < echoes.range_m[0] < R + gap  # a mixed return, on neither plate
     assert echoes.energy[0] == pytest.approx(energy.sum(), rel=1e-14)
     stronger = 1 if energy[on_a].sum() > energy[~on_a].sum() else 2
     assert echoes.surface.tolist() == [stronger]
 
 
-def test_the_gap_is_measured_from_the_previous_hit_so_a_chain_of_close_hits_is_one_echo() -> (
-    None
-):
+def test_the_gap_is_measured_from_the_previous_hit_so_a_chain_of_close_hits_is_one_echo() -> None:
     # a slanted surface across the footprint: hits 0.5 m apart over 3 m, one smooth peak
     chain = np.arange(7) * 0.5 + R
     echoes = _resolve(chain, np.ones(7), np.zeros(7))
@@ -145,10 +127,7 @@ def test_at_most_max_returns_are_kept_the_first_in_range_order() -> None:
     echoes = _resolve(range_m[rows], energy[rows], np.arange(7)[rows], max_returns=5)
     assert echoes.range_m.tolist() == range_m[:5].tolist()
     assert echoes.surface.tolist() == [0, 1, 2, 3, 4]
-    assert (
-        echoes.return_number.tolist() == [1, 2, 3, 4, 5]
-        and echoes.number_of_returns.tolist() == [5] * 5
-    )
+    assert echoes.return_number.tolist() == [1, 2, 3, 4, 5] and echoes.number_of_returns.tolist() == [5] * 5
     # an undetected echo takes no slot
     echoes = _resolve(
         range_m,
@@ -171,23 +150,16 @@ def test_one_hit_per_pulse_gives_the_hits_themselves_bit_for_bit() -> None:
     echoes = _resolve(range_m, energy, surface, pulse=pulse, max_returns=1)
     order = np.argsort(pulse)
     assert np.array_equal(echoes.pulse, pulse[order])
-    assert np.array_equal(
-        echoes.range_m, range_m[order]
-    )  # not (e r) / e: the range itself
+    assert np.array_equal(echoes.range_m, range_m[order])  # not (e r) / e: the range itself
     assert np.array_equal(echoes.energy, energy[order])
-    assert np.array_equal(echoes.surface, surface[order]) and np.array_equal(
-        echoes.hit, order
-    )
+    assert np.array_equal(echoes.surface, surface[order]) and np.array_equal(echoes.hit, order)
     assert np.all(echoes.return_number == 1) and np.all(echoes.number_of_returns == 1)
 
 
 def test_rows_at_one_range_are_summed_in_one_order_whatever_their_input_order() -> None:
     # (1 + ε) + ε rounds to 1, (ε + ε) + 1 does not: a sum must not follow the input order
     energy = np.array([1.0, 2.0**-53, 2.0**-53])
-    sums = {
-        _resolve(np.full(3, R), energy[rows], np.zeros(3)).energy[0]
-        for rows in ([0, 1, 2], [1, 2, 0], [2, 0, 1])
-    }
+    sums = {_resolve(np.full(3, R), energy[rows], np.zeros(3)).energy[0] for rows in ([0, 1, 2], [1, 2, 0], [2, 0, 1])}
     assert len(sums) == 1
 
 
@@ -197,9 +169,7 @@ def test_surface_ids_of_any_size_name_the_returns() -> None:
     huge = np.where(surface == 1, 2**62, -(2**62))
     small, large = _resolve(range_m, energy, surface), _resolve(range_m, energy, huge)
     assert large.surface.tolist() == [2**62, -(2**62)]
-    assert np.array_equal(large.hit, small.hit) and np.array_equal(
-        large.range_m, small.range_m
-    )
+    assert np.array_equal(large.hit, small.hit) and np.array_equal(large.range_m, small.range_m)
 
 
 def test_hit_energy_is_the_range_equation_and_scans_one_ray_power_bit_for_bit() -> None:
@@ -209,13 +179,9 @@ def test_hit_energy_is_the_range_equation_and_scans_one_ray_power_bit_for_bit() 
         rng.uniform(0, 1, 200),
         rng.uniform(0.5, 100, 200),
     )
-    assert np.array_equal(
-        hit_energy(1.0, rho, cos, t), rho * np.abs(cos) / np.maximum(t, 1e-9) ** 2
-    )
+    assert np.array_equal(hit_energy(1.0, rho, cos, t), rho * np.abs(cos) / np.maximum(t, 1e-9) ** 2)
     assert hit_energy(0.25, 0.5, 0.8, 2.0) == pytest.approx(0.25 * 0.5 * 0.8 / 4.0)
-    assert hit_energy(1.0, 1.0, 1.0, 10.0) / hit_energy(
-        1.0, 1.0, 1.0, 20.0
-    ) == pytest.approx(4.0)
+    assert hit_energy(1.0, 1.0, 1.0, 10.0) / hit_energy(1.0, 1.0, 1.0, 20.0) == pytest.approx(4.0)
     assert np.isfinite(hit_energy(1.0, 1.0, 1.0, 0.0))
 
 
@@ -230,9 +196,7 @@ def test_opaque_surfaces_pass_nothing_and_partial_ones_their_transmittance() -> 
     # sub-ray 4: 1.0 (s1), 2.0 (s1), 3.0 (s0); sub-ray 9: 5.0 (s0 opaque) then nothing
     assert factor.tolist() == [0.25, 1.0, 0.5, 1.0, 0.0, 0.0, 0.0]
     factor = attenuate_along_subray(subray[3:], range_m[3:], np.array([1, 1, 2, 1]), t)
-    assert factor == pytest.approx(
-        [1.0, 0.5, 0.5, 0.5 * 0.5 * 0.25]
-    )  # equal ranges do not shade each other
+    assert factor == pytest.approx([1.0, 0.5, 0.5, 0.5 * 0.5 * 0.25])  # equal ranges do not shade each other
     with pytest.raises(InvalidInputError, match="surface ids"):
         attenuate_along_subray(subray, range_m, surface, np.zeros(2))
     with pytest.raises(InvalidInputError, match="surface_transmittance"):
@@ -288,9 +252,7 @@ def _reference(pulse, range_m, energy, surface, resolution, threshold, max_retur
 @st.composite
 def hits(draw, max_per_pulse: int = MAX_RETURNS):
     n = draw(st.integers(0, 40))
-    pulse = np.array(
-        draw(st.lists(st.integers(-3, 4), min_size=n, max_size=n)), np.int64
-    )
+    pulse = np.array(draw(st.lists(st.integers(-3, 4), min_size=n, max_size=n)), np.int64)
     keep = np.ones(n, bool)
     for p in np.unique(pulse):  # at most max_per_pulse hits per pulse
         keep[np.flatnonzero(pulse == p)[max_per_pulse:]] = False
@@ -302,13 +264,9 @@ def hits(draw, max_per_pulse: int = MAX_RETURNS):
         st.integers(0, 120).map(lambda i: i * 0.25),
     )
     range_m = np.array(draw(st.lists(ranges, min_size=n, max_size=n)), np.float64)
-    energies = st.one_of(
-        st.just(0.0), st.floats(1e-12, 10.0), st.sampled_from([0.5, 1.0])
-    )
+    energies = st.one_of(st.just(0.0), st.floats(1e-12, 10.0), st.sampled_from([0.5, 1.0]))
     energy = np.array(draw(st.lists(energies, min_size=n, max_size=n)), np.float64)
-    surface = np.array(
-        draw(st.lists(st.integers(0, 4), min_size=n, max_size=n)), np.int64
-    )
+    surface = np.array(draw(st.lists(st.integers(0, 4), min_size=n, max_size=n)), np.int64)
     return pulse, range_m, energy, surface
 
 
@@ -333,49 +291,31 @@ def test_echoes_follow_the_rules_for_any_hits(data, rule) -> None:
         detection_threshold=threshold,
         max_returns=max_returns,
     )
-    expected = _reference(
-        pulse, range_m, energy, surface, resolution, threshold, max_returns
-    )
+    expected = _reference(pulse, range_m, energy, surface, resolution, threshold, max_returns)
     assert len(echoes) == len(expected)
     for i, (p, r, e, best, group, n) in enumerate(expected):
-        assert (
-            echoes.pulse[i] == p
-            and echoes.surface[i] == best
-            and echoes.number_of_returns[i] == n
-        )
+        assert echoes.pulse[i] == p and echoes.surface[i] == best and echoes.number_of_returns[i] == n
         assert echoes.energy[i] == pytest.approx(e, rel=1e-12, abs=1e-300)
         assert echoes.range_m[i] == pytest.approx(r, rel=1e-12, abs=1e-12)
-        assert (
-            range_m[group].min() <= echoes.range_m[i] <= range_m[group].max()
-        )  # within its hits
+        assert range_m[group].min() <= echoes.range_m[i] <= range_m[group].max()  # within its hits
         assert echoes.hit[i] in group and surface[echoes.hit[i]] == best
         # the named hit: the strongest of that surface in the echo, the nearest on a tie
         candidates = [j for j in group if surface[j] == best]
         strongest = max(energy[candidates])
         assert energy[echoes.hit[i]] == strongest
-        assert range_m[echoes.hit[i]] == min(
-            range_m[j] for j in candidates if energy[j] == strongest
-        )
+        assert range_m[echoes.hit[i]] == min(range_m[j] for j in candidates if energy[j] == strongest)
     for p in np.unique(echoes.pulse):
         mine = echoes.pulse == p
         n = mine.sum()
-        assert np.all(
-            echoes.number_of_returns[mine] == n
-        )  # the same on every return of a pulse
-        assert echoes.return_number[mine].tolist() == list(
-            range(1, n + 1)
-        )  # 1..n, no gap
-        assert np.all(
-            np.diff(echoes.range_m[mine]) >= resolution
-        )  # returns a resolution apart, at least
+        assert np.all(echoes.number_of_returns[mine] == n)  # the same on every return of a pulse
+        assert echoes.return_number[mine].tolist() == list(range(1, n + 1))  # 1..n, no gap
+        assert np.all(np.diff(echoes.range_m[mine]) >= resolution)  # returns a resolution apart, at least
     assert np.all(np.diff(echoes.pulse) >= 0)
 
 
 @settings(max_examples=200, deadline=None)
 @given(hits(), st.floats(0.01, 10.0), st.randoms(use_true_random=False))
-def test_energy_is_conserved_and_the_order_of_rows_does_not_matter(
-    data, resolution, random
-) -> None:
+def test_energy_is_conserved_and_the_order_of_rows_does_not_matter(data, resolution, random) -> None:
     pulse, range_m, energy, surface = data
     rules = {
         "range_resolution_m": resolution,
@@ -383,17 +323,11 @@ def test_energy_is_conserved_and_the_order_of_rows_does_not_matter(
         "max_returns": MAX_RETURNS,
     }
     echoes = resolve_echoes(pulse, range_m, energy, surface, **rules)
-    for p in np.unique(
-        pulse
-    ):  # threshold 0 and room for every echo: all the energy comes back
-        assert echoes.energy[echoes.pulse == p].sum() == pytest.approx(
-            energy[pulse == p].sum(), rel=1e-12, abs=1e-300
-        )
+    for p in np.unique(pulse):  # threshold 0 and room for every echo: all the energy comes back
+        assert echoes.energy[echoes.pulse == p].sum() == pytest.approx(energy[pulse == p].sum(), rel=1e-12, abs=1e-300)
     assert set(echoes.pulse.tolist()) == set(pulse.tolist())
     rows = np.array(random.sample(range(len(pulse)), len(pulse)), np.int64)
-    again = resolve_echoes(
-        pulse[rows], range_m[rows], energy[rows], surface[rows], **rules
-    )
+    again = resolve_echoes(pulse[rows], range_m[rows], energy[rows], surface[rows], **rules)
     for field in (
         "pulse",
         "range_m",
@@ -402,9 +336,7 @@ def test_energy_is_conserved_and_the_order_of_rows_does_not_matter(
         "return_number",
         "number_of_returns",
     ):
-        assert np.array_equal(getattr(again, field), getattr(echoes, field)), (
-            field
-        )  # bit for bit
+        assert np.array_equal(getattr(again, field), getattr(echoes, field)), field  # bit for bit
     for column in (
         pulse,
         range_m,
@@ -416,9 +348,7 @@ def test_energy_is_conserved_and_the_order_of_rows_does_not_matter(
 
 @settings(max_examples=200, deadline=None)
 @given(hits(), st.lists(st.sampled_from([0.0, 0.25, 0.5, 1.0]), min_size=5, max_size=5))
-def test_attenuation_is_the_product_of_the_transmittances_nearer_along_the_subray(
-    data, transmittance
-) -> None:
+def test_attenuation_is_the_product_of_the_transmittances_nearer_along_the_subray(data, transmittance) -> None:
     subray, range_m, _, surface = data
     t = np.array(transmittance)
     factor = attenuate_along_subray(subray, range_m, surface, t)

@@ -143,7 +143,8 @@ def test_fit_sensor_command_on_lidarnet_style_csvs(tmp_path: Path, capsys) -> No
         y_up = np.stack([c[:, 0], c[:, 2], -c[:, 1]], axis=1) * LIDARNET_UNITS_PER_METRE  # the data set's axes and unit
         rows = "".join(f"{x},{y},{z},0,0,0,box,0\n" for x, y, z in y_up)
         (tmp_path / "scans" / "Box" / f"b{i}.csv").write_text(
-            "origin_x,origin_y,origin_z,relative_x,relative_y,relative_z,object,complexity\n" + rows)
+            "origin_x,origin_y,origin_z,relative_x,relative_y,relative_z,object,complexity\n" + rows
+        )
     out = tmp_path / "fitted.json"
     assert main(["fit-sensor", str(tmp_path / "scans"), "--sensor", "hdl32e", "--out", str(out)]) == 0
     assert "range_noise_m" in capsys.readouterr().out and out.with_suffix(".md").is_file()
@@ -158,7 +159,10 @@ def test_fit_sensor_command_on_lidarnet_style_csvs(tmp_path: Path, capsys) -> No
     assert 1.0 < h_lo <= h_hi <= 1.5 + 0.1  # 1.5 m boxes (range noise 2 cm)
     b_lo, b_hi = spec["fit"]["crops"]["hidden_below_m"][label]
     w_lo, w_hi = spec["fit"]["crops"]["across_sight_width_m"][label]
-    assert 0.0 <= b_lo <= b_hi and f"| {h_lo:.2f}–{h_hi:.2f} | {b_lo:.2f}–{b_hi:.2f} | {w_lo:.2f}–{w_hi:.2f} |" in out.with_suffix(".md").read_text()
+    assert (
+        0.0 <= b_lo <= b_hi
+        and f"| {h_lo:.2f}–{h_hi:.2f} | {b_lo:.2f}–{b_hi:.2f} | {w_lo:.2f}–{w_hi:.2f} |" in out.with_suffix(".md").read_text()
+    )
     outline = spec["fit"]["crops"]["across_sight_profile"][label]  # boxes: about as wide at every height
     assert len(outline) == 8 and max(abs(v - 1.0) for v in outline) < 0.35
     assert f"| {label} | " + " | ".join(f"{v:.2f}" for v in outline) + " |" in out.with_suffix(".md").read_text()

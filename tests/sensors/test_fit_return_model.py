@@ -110,7 +110,13 @@ def test_law_the_scale_grows_as_the_altitude_squared_over_the_reflectance_and_co
     factor = (altitude / H) ** 2 * RHO / reflectance
     assert other.estimates["intensity_scale"].value == pytest.approx(factor * base.estimates["intensity_scale"].value, rel=1e-9)
     assert other.estimates["detection_threshold"].value == pytest.approx(base.estimates["detection_threshold"].value / factor, rel=1e-9)
-    for name in ("range_resolution_m", "detection_threshold_counts", "max_returns", "intensity_sum_ratio", "detection_threshold_counts_class_5"):
+    for name in (
+        "range_resolution_m",
+        "detection_threshold_counts",
+        "max_returns",
+        "intensity_sum_ratio",
+        "detection_threshold_counts_class_5",
+    ):
         assert other.estimates[name].value == pytest.approx(base.estimates[name].value, rel=1e-12)
 
 
@@ -218,7 +224,11 @@ def test_the_divergence_is_the_simulated_curves_inverse_at_the_measured_share() 
     calls = []
     fitted, simulated, shares = fit_divergence(lambda x: (calls.append(x), (float(_share(x)), 0.0))[1],
                                        Estimate(float(_share(truth)), sigma, 1000, "m", "share"), divergences_deg=grid)  # fmt: skip
-    assert calls == pytest.approx(grid.tolist()) == simulated.tolist() and fitted.value == pytest.approx(truth, rel=1e-3) and shares == pytest.approx(_share(grid))
+    assert (
+        calls == pytest.approx(grid.tolist()) == simulated.tolist()
+        and fitted.value == pytest.approx(truth, rel=1e-3)
+        and shares == pytest.approx(_share(grid))
+    )
     outside = divergence_from_shares(grid, _share(grid), Estimate(0.999, 0.01, 10, "m", "share"))
     assert math.isnan(outside.value) and math.isnan(outside.std)
 

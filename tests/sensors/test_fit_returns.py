@@ -17,15 +17,11 @@ from zbuf_occlude.io.las import LasPoints, read_las
 from zbuf_occlude.sensors.fit.returns import return_statistics
 
 #: The real airborne scans (research-only, next to the repository; skipped when absent).
-ALS_RETURNS = (
-    Path(os.environ.get("ZBUF_OCCLUDE_SHARED_DATA", Path(__file__).resolve().parents[3] / "shared" / "data")) / "als_returns"
-)
+ALS_RETURNS = Path(os.environ.get("ZBUF_OCCLUDE_SHARED_DATA", Path(__file__).resolve().parents[3] / "shared" / "data")) / "als_returns"
 needs_shared = pytest.mark.skipif(not ALS_RETURNS.is_dir(), reason="../shared/data/als_returns not present")
 
 
-def _scan(
-    pulses: list[tuple[int, list[tuple[int, float, int, int]]]], *, unit_m: float = 1.0, shuffle: int | None = 0
-) -> LasPoints:
+def _scan(pulses: list[tuple[int, list[tuple[int, float, int, int]]]], *, unit_m: float = 1.0, shuffle: int | None = 0) -> LasPoints:
     """Pulse ``i`` at x = i, GPS time i ms: ``(number_of_returns, [(return_number, z, intensity, class), ...])``."""
     rows = [(i, count, *ret) for i, (count, returns) in enumerate(pulses) for ret in returns]
     i, count, number, z, intensity, cls = (np.array(c) for c in zip(*rows, strict=True))
@@ -44,7 +40,7 @@ HAND = [
     (2, [(1, 10.0, 70, 5), (2, 7.0, 30, 2)]),
     (3, [(1, 12.0, 60, 5), (2, 11.5, 20, 5), (3, 9.5, 10, 2)]),
     (2, [(1, 8.0, 80, 5)]),
-]  # fmt: skip
+]
 
 
 def test_pulses_built_by_hand_give_exactly_their_figures() -> None:
@@ -54,9 +50,7 @@ def test_pulses_built_by_hand_give_exactly_their_figures() -> None:
     assert [e[f"returns_{k}"] for k in ("1", "2", "3", "4", "5+")] == pytest.approx([4 / 7, 2 / 7, 1 / 7, 0, 0])
     assert e["multi_return_points"] == pytest.approx(8 / 12)
     assert e["multi_return_points_class_2"] == pytest.approx(3 / 7) and e["multi_return_points_class_5"] == 1.0
-    assert (e["gap_min"], e["gap_p05"], e["gap_median"], e["gap_count"]) == pytest.approx(
-        (0.5, np.percentile([0.5, 1, 2, 3], 5), 1.5, 4)
-    )
+    assert (e["gap_min"], e["gap_p05"], e["gap_median"], e["gap_count"]) == pytest.approx((0.5, np.percentile([0.5, 1, 2, 3], 5), 1.5, 4))
     assert (e["intensity_single"], e["intensity_first_of_several"], e["intensity_ratio"]) == (130.0, 65.0, 0.5)
     assert e["intensity_ratio_classes_2_5"] == 0.5 and e["multi_return_points_classes_2_5"] == pytest.approx(8 / 12)
     assert stats.estimates["returns_2"].std == pytest.approx(math.sqrt(2 / 7 * 5 / 7 / 7))  # binomial
@@ -143,9 +137,7 @@ def test_wrong_kinds_and_scans_without_times_are_refused() -> None:
         return_statistics(scan, bootstrap=1)
     with pytest.raises(ArgumentTypeError, match="seed must be an integer"):
         return_statistics(scan, seed=0.5)  # type: ignore[arg-type]
-    no_time = LasPoints(
-        **{f: getattr(scan, f) for f in LasPoints._DTYPES}, points=scan.points, has_gps_time=False, point_format_id=2
-    )
+    no_time = LasPoints(**{f: getattr(scan, f) for f in LasPoints._DTYPES}, points=scan.points, has_gps_time=False, point_format_id=2)
     with pytest.raises(InvalidInputError, match="point format 2 has no GPS time"):
         return_statistics(no_time)
 

@@ -44,24 +44,16 @@ def test_one_subray_is_the_beam_itself() -> None:
     d = _directions()
     offsets, weights = footprint_offsets(1, 0.3)
     assert np.array_equal(offsets, [[0.0, 0.0]]) and np.array_equal(weights, [1.0])
-    assert np.array_equal(
-        subray_directions(d, offsets), Lidar("t", (0.0,)).footprint_directions(d)
-    )
+    assert np.array_equal(subray_directions(d, offsets), Lidar("t", (0.0,)).footprint_directions(d))
     assert np.array_equal(subray_directions(d, offsets)[:, 0], d)
 
 
 @pytest.mark.parametrize("k", COUNTS)
 @pytest.mark.parametrize("profile", ["tophat", "gaussian"])
-def test_weights_sum_to_one_and_subrays_lie_inside_the_cone(
-    k: int, profile: str
-) -> None:
+def test_weights_sum_to_one_and_subrays_lie_inside_the_cone(k: int, profile: str) -> None:
     divergence = 2.0
     offsets, weights = footprint_offsets(k, divergence, profile=profile)
-    assert (
-        offsets.shape == (k, 2)
-        and weights.shape == (k,)
-        and offsets.dtype == weights.dtype == np.float64
-    )
+    assert offsets.shape == (k, 2) and weights.shape == (k,) and offsets.dtype == weights.dtype == np.float64
     assert weights.sum() == pytest.approx(1.0, abs=1e-12) and np.all(weights > 0)
     d = _directions()
     rays = subray_directions(d, offsets)
@@ -71,9 +63,7 @@ def test_weights_sum_to_one_and_subrays_lie_inside_the_cone(
     assert angle.max() < math.radians(divergence) / 2
     # each sub-ray sits at its offset: angle off the axis as given (to arccos's rounding near 0)
     assert np.allclose(angle, offsets[None, :, 0], atol=1e-7)
-    assert (
-        len(np.unique(np.round(rays[0], 12), axis=0)) == k
-    )  # no two sub-rays coincide
+    assert len(np.unique(np.round(rays[0], 12), axis=0)) == k  # no two sub-rays coincide
 
 
 @pytest.mark.parametrize("k", COUNTS)
@@ -84,27 +74,19 @@ def test_tophat_cells_have_equal_areas(k: int) -> None:
     offsets, weights = footprint_offsets(k, 3.0)
     assert np.allclose(weights, 1.0 / k, rtol=0, atol=1e-15)
     radius = offsets[:, 0] / half
-    assert (
-        radius[0] == 0.0 and np.all(radius[1:] > 0) and np.all(np.diff(radius) >= 0)
-    )  # centre, then rings outward
+    assert radius[0] == 0.0 and np.all(radius[1:] > 0) and np.all(np.diff(radius) >= 0)  # centre, then rings outward
     rings, n_per_ring = np.unique(np.round(radius[1:], 12), return_counts=True)
-    inside = 1 + np.concatenate(
-        [[0], np.cumsum(n_per_ring)]
-    )  # cells within each ring's edges
+    inside = 1 + np.concatenate([[0], np.cumsum(n_per_ring)])  # cells within each ring's edges
     assert inside[-1] == k
     assert np.allclose(rings**2, (inside[:-1] + inside[1:]) / (2 * k), rtol=1e-12)
     # Monte Carlo: the Voronoi cells of the sub-rays in the (tangent) footprint disc
     rng = np.random.default_rng(0)
     p = rng.uniform(-1, 1, (60_000, 2))
     p = p[np.hypot(*p.T) <= 1.0]
-    sub = np.column_stack(
-        [radius * np.cos(offsets[:, 1]), radius * np.sin(offsets[:, 1])]
-    )
+    sub = np.column_stack([radius * np.cos(offsets[:, 1]), radius * np.sin(offsets[:, 1])])
     nearest = np.argmin(((p[:, None, :] - sub[None, :, :]) ** 2).sum(axis=2), axis=1)
     share = np.bincount(nearest, minlength=k) / len(p)
-    if (
-        k >= 4
-    ):  # a centre ray and 1 or 2 more cannot split a disc evenly among nearest rays
+    if k >= 4:  # a centre ray and 1 or 2 more cannot split a disc evenly among nearest rays
         assert np.all(np.abs(share * k - 1) < 0.35), share * k
 
 
@@ -114,16 +96,12 @@ def test_gaussian_weights_are_the_beam_energy_in_each_cell(k: int) -> None:
     half = math.radians(1.0) / 2
     offsets, weights = footprint_offsets(k, 1.0, profile="gaussian")
     rng = np.random.default_rng(1)
-    rho = np.hypot(
-        *rng.normal(0.0, 0.5, (2, 400_000))
-    )  # exp(-2ρ²): σ = 1/2 in half-divergences
+    rho = np.hypot(*rng.normal(0.0, 0.5, (2, 400_000)))  # exp(-2ρ²): σ = 1/2 in half-divergences
     rho = rho[rho <= 1.0]
     radius = offsets[:, 0] / half
     # the centre cell (radius sqrt(1/K)) and ring by ring: energy between cell edges
     assert weights[0] == pytest.approx(np.mean(rho**2 <= 1.0 / k), abs=0.005)
-    assert np.all(
-        np.diff(weights[np.argsort(radius, kind="stable")]) <= 1e-15
-    )  # outward, never heavier
+    assert np.all(np.diff(weights[np.argsort(radius, kind="stable")]) <= 1e-15)  # outward, never heavier
     tophat = footprint_offsets(k, 1.0)[0]
     assert np.array_equal(offsets, tophat)  # the same cells; only the weights change
 
@@ -141,9 +119,7 @@ def test_bad_arguments_are_refused_naming_them() -> None:
         footprint_offsets(7, 0.0)
     with pytest.raises(InvalidInputError, match="profile"):
         footprint_offsets(7, 1.0, profile="flat")
-    assert np.array_equal(
-        footprint_offsets(1, 0.0)[0], [[0.0, 0.0]]
-    )  # one ray needs no cone
+    assert np.array_equal(footprint_offsets(1, 0.0)[0], [[0.0, 0.0]])  # one ray needs no cone
     with pytest.raises(InvalidInputError, match="directions"):
         subray_directions(np.zeros((4, 2)), footprint_offsets(7, 1.0)[0])
     with pytest.raises(InvalidInputError, match="offsets"):

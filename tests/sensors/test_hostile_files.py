@@ -70,10 +70,10 @@ BOX = {"box_m": [1.0, 2.0, 1.5]}
 def _valid_scene() -> dict:
     return {
         "ground": {"z_m": 0.0, "half_extent_m": 40.0},
-        "objects": [{"mesh": {"box_m": [1.0, 2.0, 1.5]}, "class": "car", "position_m": [10.0, 0.0, 0.5], "yaw_deg": 30.0, "size_m": [4.5, 1.8, 1.5]}],
-        "occluders": [
-            {"mesh": {"cylinder": {"radius_m": 0.2, "height_m": 3.0, "sections": 16}}, "position_m": [6.0, 1.0], "size_m": 3.0}
+        "objects": [
+            {"mesh": {"box_m": [1.0, 2.0, 1.5]}, "class": "car", "position_m": [10.0, 0.0, 0.5], "yaw_deg": 30.0, "size_m": [4.5, 1.8, 1.5]}
         ],
+        "occluders": [{"mesh": {"cylinder": {"radius_m": 0.2, "height_m": 3.0, "sections": 16}}, "position_m": [6.0, 1.0], "size_m": 3.0}],
         "sensor": {"height_m": 1.8, "position_m": [0.0, 0.5]},
     }
 
@@ -136,7 +136,13 @@ def test_the_billion_laughs_scene_is_refused_in_a_process_capped_at_1_gib(tmp_pa
         "from zbuf_occlude.cli.main import main\n"
         f"sys.exit(main(['scan', {str(path)!r}, '--out', {str(tmp_path / 'out')!r}]))\n"
     )
-    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env={**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"})
+    run = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"},
+    )
     assert run.returncode == 2, run.stderr[-2000:]
     assert "Traceback" not in run.stderr and "laughs.yaml" in run.stderr and "alias" in run.stderr
     assert len(run.stderr.strip().splitlines()) == 1
@@ -198,7 +204,9 @@ def test_unparsable_yaml_is_one_line_naming_the_file(tmp_path: Path, text: str) 
 @pytest.mark.parametrize("suffix", [".json", ".yaml"])
 def test_a_scene_nested_too_deep_is_refused_by_the_parsers_limit(tmp_path: Path, suffix: str) -> None:
     path = tmp_path / f"deep{suffix}"
-    path.write_text(("{\"objects\": " if suffix == ".json" else "objects: ") + "[" * 10_000 + "]" * 10_000 + ("}" if suffix == ".json" else ""))
+    path.write_text(
+        ('{"objects": ' if suffix == ".json" else "objects: ") + "[" * 10_000 + "]" * 10_000 + ("}" if suffix == ".json" else "")
+    )
     message = _refusal(load_scene, path)
     assert str(path) in message and "deeper than 64 levels" in message
 
@@ -281,7 +289,9 @@ def test_every_numeric_sensor_field_is_covered() -> None:
     names = {(cls.__name__, name) for cls, name in SENSOR_NUMBERS}
     assert {("Lidar", "elevations_deg"), ("Lidar", "detection_range_m"), ("AirborneScanner", "headings_deg"), ("AirborneScanner", "n_lines"),
             ("DepthCamera", "K"), ("DepthCamera", "width"), ("DepthCamera", "noise")} <= names  # fmt: skip
-    assert len(names) == 17 + 15 + 9  # Lidar: 15, then max_returns and range_resolution_m; AirborneScanner: 10, then beam_divergence_deg, footprint_rays, max_returns, range_resolution_m and detection_threshold (several returns per pulse)
+    assert (
+        len(names) == 17 + 15 + 9
+    )  # Lidar: 15, then max_returns and range_resolution_m; AirborneScanner: 10, then beam_divergence_deg, footprint_rays, max_returns, range_resolution_m and detection_threshold (several returns per pulse)
 
 
 @pytest.mark.parametrize("cls", list(VALID_SENSORS))
@@ -383,7 +393,9 @@ def test_a_mesh_outside_the_scene_folder_is_refused(tmp_path: Path, box_file: Pa
 def test_a_mesh_in_a_subfolder_of_the_scene_is_read(tmp_path: Path, box_file: Path) -> None:
     (tmp_path / "outside" / "sub").mkdir()
     box_file.rename(tmp_path / "outside" / "sub" / "box.off")
-    scene = load_scene(_write(tmp_path / "outside" / "scene.json", {"objects": [{"mesh": "sub/box.off", "position_m": [5, 0], "size_m": 2.0}]}))
+    scene = load_scene(
+        _write(tmp_path / "outside" / "scene.json", {"objects": [{"mesh": "sub/box.off", "position_m": [5, 0], "size_m": 2.0}]})
+    )
     assert np.ptp(scene.build().world_vertices(1), axis=0).max() == pytest.approx(2.0)
 
 

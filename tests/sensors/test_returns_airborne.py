@@ -132,7 +132,10 @@ def test_one_return_per_pulse_is_bit_identical_to_the_scans_before_returns(name:
     else:
         scanner = airborne_preset("dales-q1560", headings_deg=(0.0, 90.0), n_lines=3)
         s = scan_airborne(_box_scene(), scanner, (3.0, -2.0), 6.0, seed=11, phase_s=0.001)
-    got = {key: _digest(np.asarray(s.meta[key[5:]]), shape=False) if key.startswith("meta.") else _digest(getattr(s, key)) for key in _BEFORE[name]}
+    got = {
+        key: _digest(np.asarray(s.meta[key[5:]]), shape=False) if key.startswith("meta.") else _digest(getattr(s, key))
+        for key in _BEFORE[name]
+    }
     assert got == _BEFORE[name]
     assert np.all(s.return_number == 1) and np.all(s.number_of_returns == 1) and np.all(s.intensity == 1.0)
     assert len(np.unique(s.pulse_id)) == len(s)

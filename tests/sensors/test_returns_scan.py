@@ -58,27 +58,21 @@ def _lidar(**changes) -> S.Lidar:
 
 
 def _one_pulse(built: BuiltScene, lidar: S.Lidar, **kw) -> S.Scan:
-    return S.scan(
-        built, lidar, np.zeros(3), azimuth_range_deg=(-0.5, 0.5), **kw
-    )  # the firing at azimuth 0 only
+    return S.scan(built, lidar, np.zeros(3), azimuth_range_deg=(-0.5, 0.5), **kw)  # the firing at azimuth 0 only
 
 
 def _subray_hits(gap_m: float, k: int = 7):
     """Per sub-ray of the pulse along +x: on the near plate?, range, energy (ρ = 1, top hat)."""
     d = subray_directions([[1.0, 0.0, 0.0]], footprint_offsets(k, DIVERGENCE)[0])[0]
     near = d[:, 1] / d[:, 0] * R < -1e-3
-    r = (
-        np.where(near, R, R + gap_m) / d[:, 0]
-    )  # along the sub-ray to the plane x = const
+    r = np.where(near, R, R + gap_m) / d[:, 0]  # along the sub-ray to the plane x = const
     energy = d[:, 0] / k / r**2  # cos θ = d_x
     return near, r, energy
 
 
 def test_two_plates_further_apart_than_the_resolution_give_two_returns():
     near, r, e = _subray_hits(1.0)
-    assert (
-        0 < near.sum() < 7
-    )  # the near plate covers part of the footprint (3 of 7 sub-rays)
+    assert 0 < near.sum() < 7  # the near plate covers part of the footprint (3 of 7 sub-rays)
     s = _one_pulse(_plates(1.0), _lidar())
     assert len(s) == 2
     np.testing.assert_array_equal(s.return_number, [1, 2])
@@ -94,11 +88,7 @@ def test_two_plates_further_apart_than_the_resolution_give_two_returns():
     np.testing.assert_allclose(s.intensity, [e[near].sum(), e[~near].sum()], rtol=1e-6)
     # both on the pulse's centre direction, one pulse: one id, one time, the beam's elevation
     np.testing.assert_allclose(s.points[:, 1:], 0.0, atol=1e-6)
-    assert (
-        s.pulse_id[0] == s.pulse_id[1]
-        and s.gps_time[0] == s.gps_time[1]
-        and np.all(s.scan_angle_deg == 0.0)
-    )
+    assert s.pulse_id[0] == s.pulse_id[1] and s.gps_time[0] == s.gps_time[1] and np.all(s.scan_angle_deg == 0.0)
 
 
 def test_a_gap_below_the_resolution_gives_one_return_at_the_energy_weighted_range():
@@ -135,15 +125,9 @@ def test_max_returns_keeps_the_first_and_the_threshold_drops_weak_echoes():
     near, _, e = _subray_hits(1.0)
     weak, strong = sorted([e[near].sum(), e[~near].sum()])
     tau = np.sqrt(weak * strong)
-    lidar = _lidar(
-        detection_reflectivity=1.0, detection_range_m=float(1 / np.sqrt(tau))
-    )
+    lidar = _lidar(detection_reflectivity=1.0, detection_range_m=float(1 / np.sqrt(tau)))
     s = _one_pulse(_plates(1.0), lidar, reflectivity=1.0)
-    assert (
-        len(s) == 1
-        and s.number_of_returns[0] == 1
-        and s.intensity[0] == pytest.approx(strong, rel=1e-6)
-    )
+    assert len(s) == 1 and s.number_of_returns[0] == 1 and s.intensity[0] == pytest.approx(strong, rel=1e-6)
 
 
 @settings(max_examples=12, deadline=None)
@@ -155,9 +139,7 @@ def test_max_returns_keeps_the_first_and_the_threshold_drops_weak_echoes():
     noise=st.sampled_from([0.0, 0.05]),
     seed=st.integers(0, 3),
 )
-def test_returns_are_numbered_one_to_n_within_each_pulse(
-    k, max_returns, resolution, dropout, noise, seed
-):
+def test_returns_are_numbered_one_to_n_within_each_pulse(k, max_returns, resolution, dropout, noise, seed):
     scene = (S.ScanScene().add({"box_m": [2.0, 2.0, 2.0]}, position_m=(8.0, 0.0))
              .add_occluder({"cylinder": {"radius_m": 0.1, "height_m": 3.0}}, position_m=(4.0, 0.3)))  # fmt: skip
     lidar = S.Lidar.preset("vlp16", footprint_rays=k, beam_divergence_deg=1.5, max_returns=max_returns,
@@ -170,15 +152,9 @@ def test_returns_are_numbered_one_to_n_within_each_pulse(
         rows = slice(first, first + n)
         np.testing.assert_array_equal(s.return_number[rows], np.arange(1, n + 1))
         assert np.all(s.number_of_returns[rows] == n) and n <= max_returns
-        assert np.all(s.gps_time[rows] == s.gps_time[first]) and np.all(
-            s.ring[rows] == s.ring[first]
-        )
+        assert np.all(s.gps_time[rows] == s.gps_time[first]) and np.all(s.ring[rows] == s.ring[first])
     assert s.return_number.dtype == np.uint8 and s.number_of_returns.dtype == np.uint8
-    assert (
-        s.intensity.dtype == np.float32
-        and s.pulse_id.dtype == np.int64
-        and s.gps_time.dtype == np.float64
-    )
+    assert s.intensity.dtype == np.float32 and s.pulse_id.dtype == np.int64 and s.gps_time.dtype == np.float64
 
 
 # sha256 (first 16 hex digits) of scans taken before the return fields existed: the model off
@@ -205,12 +181,7 @@ def test_one_return_per_pulse_is_bit_identical_to_the_scans_before_returns(key):
     )
     scene = S.ScanScene().add({"box_m": [2.0, 2.0, 2.0]}, position_m=(6.0, 1.0))
     s = S.scan(scene, lidar, seed=3, reflectivity=rho, azimuth_range_deg=(-60, 60))
-    got = {
-        name: hashlib.sha256(
-            np.ascontiguousarray(getattr(s, name)).tobytes()
-        ).hexdigest()[:16]
-        for name in _BEFORE[key]
-    }
+    got = {name: hashlib.sha256(np.ascontiguousarray(getattr(s, name)).tobytes()).hexdigest()[:16] for name in _BEFORE[key]}
     assert got == _BEFORE[key]
     assert np.all(s.return_number == 1) and np.all(s.number_of_returns == 1)
     if rho is None:
@@ -231,20 +202,14 @@ def test_return_fields_survive_npz_and_old_files_read_with_defaults(tmp_path):
     r = S.read_scan_npz(tmp_path / "s.npz")
     for name in S.Scan._PER_POINT:
         got, want = getattr(r, name), getattr(s, name)
-        assert (got is None and want is None) or (
-            np.array_equal(got, want) and got.dtype == want.dtype
-        ), name
+        assert (got is None and want is None) or (np.array_equal(got, want) and got.dtype == want.dtype), name
     crop = s.select(s.return_number == 1)
     assert np.all(crop.return_number == 1) and len(crop.pulse_id) == len(crop)
     # a file written before the return fields: one return per pulse, no radiometry
     old = {k: v for k, v in s.arrays().items() if k not in S.Scan._RETURNS}
     np.savez(tmp_path / "old.npz", **old)
     r = S.read_scan_npz(tmp_path / "old.npz")
-    assert (
-        np.all(r.return_number == 1)
-        and np.all(r.number_of_returns == 1)
-        and np.all(r.intensity == 1.0)
-    )
+    assert np.all(r.return_number == 1) and np.all(r.number_of_returns == 1) and np.all(r.intensity == 1.0)
     assert r.pulse_id is None and r.gps_time is None and r.scan_angle_deg is None
 
 
@@ -253,20 +218,15 @@ def test_gps_time_and_pulse_id_follow_the_firing():
     scene = S.ScanScene().add({"box_m": [2.0, 8.0, 3.0]}, position_m=(6.0, 0.0))
     s = S.scan(scene, lidar, seed=0, azimuth_range_deg=(-20, 20))
     az = np.mod(
-        np.degrees(np.arctan2(s.points[:, 1], s.points[:, 0]))
-        - lidar.azimuth_offset_deg,
+        np.degrees(np.arctan2(s.points[:, 1], s.points[:, 0])) - lidar.azimuth_offset_deg,
         360.0,
     )
     index = np.rint(az / (360.0 / lidar.n_azimuths)).astype(np.int64) % lidar.n_azimuths
     np.testing.assert_array_equal(s.pulse_id, s.ring * lidar.n_azimuths + index)
     # the beams of one firing cycle fire one after another, beam b at b / n_beams of the cycle
     cycle_s = 1.0 / (lidar.n_azimuths * lidar.rotation_hz)
-    np.testing.assert_allclose(
-        s.gps_time, (index + s.ring / lidar.n_beams) * cycle_s, rtol=0, atol=1e-12
-    )
-    np.testing.assert_array_equal(
-        s.scan_angle_deg, np.asarray(lidar.elevations_deg, np.float32)[s.ring]
-    )
+    np.testing.assert_allclose(s.gps_time, (index + s.ring / lidar.n_beams) * cycle_s, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(s.scan_angle_deg, np.asarray(lidar.elevations_deg, np.float32)[s.ring])
     assert len(np.unique(s.pulse_id)) == len(s)
     # every pulse its own time, so a LAS reader that groups returns by time tells them apart
     assert len(np.unique(s.gps_time)) == len(s)
@@ -328,27 +288,15 @@ def test_las_round_trip_read_back_by_laspy(compress):
     )
     assert (s.number_of_returns > 1).any()
     las = laspy.read(io.BytesIO(s.to_las_bytes(compress)))
-    assert (
-        las.header.version.major == 1
-        and las.header.version.minor == 4
-        and las.header.point_format.id == 6
-    )
+    assert las.header.version.major == 1 and las.header.version.minor == 4 and las.header.point_format.id == 6
     assert len(las) == len(s)
     xyz = np.column_stack([las.x, las.y, las.z])
-    assert (
-        np.abs(xyz - s.points.astype(np.float64)).max() <= 0.0005 + 1e-6
-    )  # 1 mm steps
+    assert np.abs(xyz - s.points.astype(np.float64)).max() <= 0.0005 + 1e-6  # 1 mm steps
     np.testing.assert_array_equal(np.asarray(las.return_number), s.return_number)
-    np.testing.assert_array_equal(
-        np.asarray(las.number_of_returns), s.number_of_returns
-    )
+    np.testing.assert_array_equal(np.asarray(las.number_of_returns), s.number_of_returns)
     np.testing.assert_array_equal(np.asarray(las.gps_time), s.gps_time)
-    np.testing.assert_allclose(
-        np.asarray(las.scan_angle) * 0.006, s.scan_angle_deg, atol=0.003
-    )
-    want = np.rint(np.clip(s.intensity.astype(np.float64), 0, 1) * 65535).astype(
-        np.uint16
-    )
+    np.testing.assert_allclose(np.asarray(las.scan_angle) * 0.006, s.scan_angle_deg, atol=0.003)
+    want = np.rint(np.clip(s.intensity.astype(np.float64), 0, 1) * 65535).astype(np.uint16)
     np.testing.assert_array_equal(np.asarray(las.intensity), want)
 
 
@@ -378,8 +326,6 @@ def test_scan_command_writes_las_and_laz(tmp_path, capsys):
         assert len(files) == 1
         las = laspy.read(files[0])
         assert len(las) > 100 and las.header.point_format.id == 6
-        assert np.all(np.asarray(las.return_number) == 1) and np.all(
-            np.asarray(las.number_of_returns) == 1
-        )
+        assert np.all(np.asarray(las.return_number) == 1) and np.all(np.asarray(las.number_of_returns) == 1)
         assert np.ptp(np.asarray(las.gps_time)) > 0
     capsys.readouterr()

@@ -306,15 +306,19 @@ def _scan_arrays(n: int = 4) -> dict:
 
 @pytest.mark.parametrize(
     ("change", "match"),
-    [({"sensor_to_world": np.eye(2)}, r"sensor_to_world must be a finite \(4, 4\)"),
-     ({"points": np.zeros((4, 2), np.float32)}, r"points must be a \(N, 3\) number array, got shape \(4, 2\)"),
-     ({"sensor_position": np.array("here")}, r"sensor_position must be a finite \(3,\) number array"),
-     ({"sensor_to_world": np.full((4, 4), np.nan)}, "sensor_to_world must be a finite"),
-     ({"object_id": np.ones(4, np.float32)}, "object_id must be a \\(N,\\) integer array"),
-     ({"range_m": np.ones(3, np.float32)}, "range_m has 3 rows but points has 4"),
-     ({"frame": np.array("moon")}, "frame must be one of"),
-     ({"points": np.array([[0, 0, 0], [np.nan, 0, 0], [0, np.inf, 0], [1, 1, 1]], np.float32)},
-      "2 points have NaN or inf coordinates: the scan is damaged")],
+    [
+        ({"sensor_to_world": np.eye(2)}, r"sensor_to_world must be a finite \(4, 4\)"),
+        ({"points": np.zeros((4, 2), np.float32)}, r"points must be a \(N, 3\) number array, got shape \(4, 2\)"),
+        ({"sensor_position": np.array("here")}, r"sensor_position must be a finite \(3,\) number array"),
+        ({"sensor_to_world": np.full((4, 4), np.nan)}, "sensor_to_world must be a finite"),
+        ({"object_id": np.ones(4, np.float32)}, "object_id must be a \\(N,\\) integer array"),
+        ({"range_m": np.ones(3, np.float32)}, "range_m has 3 rows but points has 4"),
+        ({"frame": np.array("moon")}, "frame must be one of"),
+        (
+            {"points": np.array([[0, 0, 0], [np.nan, 0, 0], [0, np.inf, 0], [1, 1, 1]], np.float32)},
+            "2 points have NaN or inf coordinates: the scan is damaged",
+        ),
+    ],
 )
 def test_read_scan_npz_checks_shapes_and_dtypes(tmp_path, change, match):
     from zbuf_occlude.experiments.realism import read_object_clouds

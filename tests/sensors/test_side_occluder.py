@@ -144,7 +144,10 @@ def test_fit_visible_across_sight_makes_wide_crops_as_wide_as_asked_and_leaves_n
     # real scans wider than the crops: nothing hidden in any draw (shares of 1 or more)
     assert min(fit_visible_across_sight(CAR, lidar, dist, (6.0, 9.0))) > 1.0
     post = trimesh.creation.cylinder(radius=0.002, height=1.0, sections=16)  # thinner than the sensor resolves
-    assert fit_visible_across_sight(post, lidar, CropDistributions(distance_m=(5.0, 9.0), height_m=1.8, size_m=3.0), (0.1, 0.3)) == (1.0, 1.0)
+    assert fit_visible_across_sight(post, lidar, CropDistributions(distance_m=(5.0, 9.0), height_m=1.8, size_m=3.0), (0.1, 0.3)) == (
+        1.0,
+        1.0,
+    )
     for bad in ((0.6, 0.3), (0.0, 0.0), ("a", 1)):
         with pytest.raises(InvalidInputError, match="width_m"):
             fit_visible_across_sight(CAR, lidar, dist, bad)
@@ -155,7 +158,9 @@ def test_fit_visible_across_sight_makes_wide_crops_as_wide_as_asked_and_leaves_n
 def test_fit_object_shape_meets_the_widths_by_an_occluder_or_a_stretch() -> None:
     lidar = lidar_preset("hdl32e", range_noise_m=0.0)
     dist = CropDistributions(distance_m=(5.0, 9.0), height_m=1.8, size_m=4.5)
-    assert fit_object_shape(CAR, lidar, dist, (1.5, 2.5), occlude=True) == {"visible_across_sight": fit_visible_across_sight(CAR, lidar, dist, (1.5, 2.5))}
+    assert fit_object_shape(CAR, lidar, dist, (1.5, 2.5), occlude=True) == {
+        "visible_across_sight": fit_visible_across_sight(CAR, lidar, dist, (1.5, 2.5))
+    }
     assert fit_object_shape(CAR, lidar, dist, (1.5, 2.5)) == {"width_scale": fit_width_scale(CAR, lidar, dist, (1.5, 2.5))}
     assert fit_object_shape(CAR, lidar, dist, occlude=True) == {}
 
@@ -164,7 +169,25 @@ def test_scan_occlude_option(tmp_path) -> None:
     from zbuf_occlude.cli.main import main
     from zbuf_occlude.sensors.scan import read_scan_npz
 
-    base = ["scan", "box", "--size", "4.5", "--distance", "6:8", "--height", "1.8", "--azimuth", "0", "--yaw", "80:100", "--samples", "6", "--seed", "2", "--crop"]
+    base = [
+        "scan",
+        "box",
+        "--size",
+        "4.5",
+        "--distance",
+        "6:8",
+        "--height",
+        "1.8",
+        "--azimuth",
+        "0",
+        "--yaw",
+        "80:100",
+        "--samples",
+        "6",
+        "--seed",
+        "2",
+        "--crop",
+    ]
     box = str(tmp_path / "box.obj")
     CAR.export(box)
     base[1] = box
@@ -178,7 +201,9 @@ def test_scan_occlude_option(tmp_path) -> None:
     aside = {tag: np.median([abs(s.points[:, 1].mean()) for s in v]) for tag, v in scans.items()}
     assert aside["o"] > 0.8 and aside["s"] < 0.3 and aside["w"] < 0.3
     # hidden, not squeezed: as tall as the whole crops, with fewer returns
-    assert np.median([np.ptp(s.points[:, 2]) for s in scans["o"]]) == pytest.approx(np.median([np.ptp(s.points[:, 2]) for s in scans["w"]]), abs=0.1)
+    assert np.median([np.ptp(s.points[:, 2]) for s in scans["o"]]) == pytest.approx(
+        np.median([np.ptp(s.points[:, 2]) for s in scans["w"]]), abs=0.1
+    )
     assert main([*base, "--occlude", "--out", str(tmp_path / "x")]) == 2  # needs --across-sight-width
 
 

@@ -179,7 +179,9 @@ def test_scan_outline_option(tmp_path) -> None:
     outline = (0.5, 0.5, 1.0, 1.0, 1.0, 1.0, 1.5, 1.5)
     assert main([*base, "--crop", "--outline", ",".join(map(str, outline)), "--out", str(tmp_path / "o")]) == 0
     assert main([*base, "--crop", "--out", str(tmp_path / "p")]) == 0
-    shown = {tag: np.nanmedian([width_profile(read_scan_npz(p).points) for p in sorted((tmp_path / tag).glob("*.npz"))], axis=0) for tag in "op"}
+    shown = {
+        tag: np.nanmedian([width_profile(read_scan_npz(p).points) for p in sorted((tmp_path / tag).glob("*.npz"))], axis=0) for tag in "op"
+    }
     assert np.nanmax(np.abs(shown["p"] - 1.0)) < 0.15  # a cylinder: as wide at every height
     assert shown["o"][0] < 0.75 * shown["o"][4] and shown["o"][-1] > 1.2 * shown["o"][4]
     assert main([*base, "--crop", "--outline", "1,1", "--across-sight-width", "0.5", "--out", str(tmp_path / "b")]) == 0  # both

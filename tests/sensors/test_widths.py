@@ -75,7 +75,12 @@ def test_scene_object_stretches_its_horizontal_axes_only() -> None:
     for w in (0.25, 1.0, 3.0):
         local, to_world = SceneObject(box, size_m=4.0, yaw_deg=30.0, width_scale=w).build()
         world = trimesh.transform_points(local.vertices, to_world)
-        unturned = world @ np.array([[np.cos(np.radians(30)), np.sin(np.radians(30)), 0], [-np.sin(np.radians(30)), np.cos(np.radians(30)), 0], [0, 0, 1]]).T
+        unturned = (
+            world
+            @ np.array(
+                [[np.cos(np.radians(30)), np.sin(np.radians(30)), 0], [-np.sin(np.radians(30)), np.cos(np.radians(30)), 0], [0, 0, 1]]
+            ).T
+        )
         np.testing.assert_allclose(np.ptp(unturned, axis=0), [4.0 * w, 2.0 * w, 1.0], atol=1e-9)
         assert world[:, 2].min() == pytest.approx(0.0)  # still standing on the ground
     for bad in (0.0, -1.0, float("nan")):
@@ -106,7 +111,9 @@ def test_a_stretched_post_is_scanned_whole_and_as_wide_as_stretched() -> None:
         wide = object_crop(post, lidar, replace(placement, width_scale=w), seed=1)
         whole = object_crop(post, lidar, replace(placement, width_scale=w), seed=1, sector_margin_deg=180.0)
         assert len(wide.scan) == len(whole.scan) > len(thin.scan)
-        assert np.ptp(wide.scan.points[:, 2]) == pytest.approx(np.ptp(thin.scan.points[:, 2]), abs=0.1)  # as tall, within a ring (0.09 m at 4 m)
+        assert np.ptp(wide.scan.points[:, 2]) == pytest.approx(
+            np.ptp(thin.scan.points[:, 2]), abs=0.1
+        )  # as tall, within a ring (0.09 m at 4 m)
         if w == 6.0:  # (the 6 m box's near face is 1 m from the sensor: it shows only part of its width)
             assert across_sight_width(wide.scan.points) == pytest.approx(w * across_sight_width(thin.scan.points), rel=0.15)
 

@@ -325,8 +325,9 @@ def test_the_view_extent_is_numpys_over_the_vertices_the_faces_use():
     rng = np.random.default_rng(5)
     mesh = _tower()
     # many unused vertices far from the faces (more than three per face): they must not count
-    cloud = trimesh.Trimesh(np.concatenate([mesh.vertices, rng.normal(size=(3 * len(mesh.faces) + 10, 3)) * 0.3 + 0.1]),
-                            mesh.faces, process=False)
+    cloud = trimesh.Trimesh(
+        np.concatenate([mesh.vertices, rng.normal(size=(3 * len(mesh.faces) + 10, 3)) * 0.3 + 0.1]), mesh.faces, process=False
+    )
     for m in (mesh, cloud):
         data = cpu_zbuffer._mesh_data(m)
         rt = np.ascontiguousarray(zo.camera_on_sphere(20.0, 40.0).extrinsics)

@@ -42,9 +42,7 @@ def _plane_and_sliver(width: float, height: float, cam: zo.Camera):
     mid-line as seen from ``cam``, and floor points well beside it."""
     floor = trimesh.creation.box([2.0, 2.0, 1e-3])
     floor.apply_translation([0.0, 0.0, -5e-4])  # top face at z = 0
-    sliver = trimesh.Trimesh(
-        [[-0.3, -width / 2, height], [0.3, -width / 2, height], [0.0, width / 2, height]], [[0, 1, 2]]
-    )
+    sliver = trimesh.Trimesh([[-0.3, -width / 2, height], [0.3, -width / 2, height], [0.0, width / 2, height]], [[0, 1, 2]])
     mesh = trimesh.util.concatenate([floor, sliver])
     # Points of the sliver's middle third, on its mid-line, projected from the eye to z = 0.
     xs = np.linspace(-0.08, 0.08, 9)

@@ -46,9 +46,7 @@ SHARED_SMALL = [
 #: that a fresh clone runs each test below on real (non-dyadic) geometry without skipping.
 SMALL_MESHES = [SAMPLES / r for r in SHIPPED_SMALL] + [SHARED / r for r in SHARED_SMALL if (SHARED / r).is_file()]
 #: A large mesh: the shared 27 438-face sofa when present, else the shipped 7 608-face desk.
-LARGE_MESH = next(
-    p for p in (SHARED / "ModelNet10/sofa/train/sofa_0001.off", SAMPLES / "desk/test/desk_0201.off") if p.is_file()
-)
+LARGE_MESH = next(p for p in (SHARED / "ModelNet10/sofa/train/sofa_0001.off", SAMPLES / "desk/test/desk_0201.off") if p.is_file())
 POSES = [(0.0, 0.0), (30.0, 45.0), (-60.0, 200.0), (90.0, 0.0), (10.0, 300.0)]
 RADIUS = 4.0
 TOL = DEFAULT_SELF_HIT_TOLERANCE
@@ -619,7 +617,9 @@ def test_the_embree_oracle_is_a_few_named_steps():
 
     steps = (occluded_embree, oracle._sightlines, oracle._clip_to_sphere, oracle._cast, oracle._crease_pass, oracle._decide_exactly)
     assert all(len(inspect.getsource(step).splitlines()) < 150 for step in steps)
-    assert [name for name in ("_sightlines", "_cast", "_crease_pass", "_decide_exactly") if name not in inspect.getsource(occluded_embree)] == []
+    assert [
+        name for name in ("_sightlines", "_cast", "_crease_pass", "_decide_exactly") if name not in inspect.getsource(occluded_embree)
+    ] == []
 
 
 def test_no_re_check_runs_once_every_ray_has_an_accepted_occluder(monkeypatch):

@@ -4,4 +4,3 @@
 group: :mod:`.farm`, :mod:`.compare`, :mod:`.learn` (``experiment``), :mod:`.sim2real`,
 :mod:`.sensors` (``scan``, ``realism``), :mod:`.protocols`.  Nothing outside this package imports it.
 """
-

@@ -51,7 +51,9 @@ def add_contact_sheet_parser(subparsers: Any) -> argparse.ArgumentParser:
         help="objects per class (scan folders: scans per mesh, times --poses) (default: %(default)s)",
     )  # fmt: skip
     p.add_argument("--poses", action=Checked, check=count(None), default=DEFAULT_POSES, help="poses per object (default: %(default)s)")
-    p.add_argument("--seed", action=Checked, check=seed, default=DEFAULT_SEED, help="chooses the objects, poses and scans (default: %(default)s)")
+    p.add_argument(
+        "--seed", action=Checked, check=seed, default=DEFAULT_SEED, help="chooses the objects, poses and scans (default: %(default)s)"
+    )
     p.add_argument("--dpi", action=Checked, check=_dpi, default=DEFAULT_DPI, help="pixels per inch of the PNG (default: %(default)s)")
     p.set_defaults(func=_cli_contact_sheet)
     return p

@@ -80,7 +80,9 @@ def add_export_parser(sub: argparse._SubParsersAction) -> None:
         "Every target is written +y up, the frame these networks train in (their augmentation turns about y); "
         "--up chooses another. Streams the source; labels follow --label-set.",
     )
-    p.add_argument("dataset", metavar="DATASET", help="a data set folder (--out of farm or generate; for --to pcn, of generate --protocol pcn)")
+    p.add_argument(
+        "dataset", metavar="DATASET", help="a data set folder (--out of farm or generate; for --to pcn, of generate --protocol pcn)"
+    )
     p.add_argument("--to", required=True, choices=TARGET_NAMES, help="the layout to write")
     p.add_argument("--out", required=True, action=Checked, check=out_folder, help="the export's folder")
     p.add_argument("--label-set", default="own", choices=LABEL_SET_NAMES,
@@ -91,7 +93,9 @@ def add_export_parser(sub: argparse._SubParsersAction) -> None:
                    help="the axis that is up in the export (default: +y, the frame of every target's networks; "
                    "+z: the data set's own frame)")  # fmt: skip
     # default None: a target that does not shuffle refuses --seed when it is given
-    p.add_argument("--seed", action=Checked, check=seed, default=None, help=f"pointnet-h5: the shuffle across files (default: {DEFAULT_SEED})")
+    p.add_argument(
+        "--seed", action=Checked, check=seed, default=None, help=f"pointnet-h5: the shuffle across files (default: {DEFAULT_SEED})"
+    )
     p.add_argument("--list-prefix", help="pointnet-h5: what each line of <split>_files.txt starts with (default: data/<--out's name>)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_export)

@@ -147,14 +147,26 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, action=Checked, check=out_folder, help="data set folder")
     sel = p.add_argument_group("selection")
     sel.add_argument("--classes", help="comma-separated class names (default: all)")
-    sel.add_argument("--per-class", action=Checked, check=count(None), help="first K meshes (by name) of each class and split (default: all)")
+    sel.add_argument(
+        "--per-class", action=Checked, check=count(None), help="first K meshes (by name) of each class and split (default: all)"
+    )
     sel.add_argument("--splits", default=",".join(SPLITS), help="comma-separated splits (default: %(default)s)")
     sel.add_argument("--class-from", action=Checked, check=CLASS_FROM, metavar="N", help=CLASS_FROM_HELP)
     sel.add_argument("--up", choices=UP_CHOICES, default="auto", help=UP_HELP)
     r = p.add_argument_group("rendering")
-    r.add_argument("--views", action=Checked, check=poses, default=DEFAULT_FARM_VIEWS, help=f"{VIEWS_HELP} (default: %(default)s; generate's: {GENERATE_VIEWS})")
     r.add_argument(
-        "--samples-per-view", action=Checked, check=count("MAX_SAMPLES"), default=DEFAULT_SAMPLES_PER_VIEW, help="random samples drawn per pose (default: %(default)s)"
+        "--views",
+        action=Checked,
+        check=poses,
+        default=DEFAULT_FARM_VIEWS,
+        help=f"{VIEWS_HELP} (default: %(default)s; generate's: {GENERATE_VIEWS})",
+    )
+    r.add_argument(
+        "--samples-per-view",
+        action=Checked,
+        check=count("MAX_SAMPLES"),
+        default=DEFAULT_SAMPLES_PER_VIEW,
+        help="random samples drawn per pose (default: %(default)s)",
     )
     r.add_argument(
         "--points", action=Checked, check=count("MAX_POINTS"), default=DEFAULT_N_POINTS,
@@ -162,21 +174,37 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
     )  # fmt: skip
     dense = r.add_mutually_exclusive_group()
     dense.add_argument(
-        "--dense-points", action=Checked, check=count("MAX_POINTS"), help=f"dense cloud per mesh, sampled once (default: {DEFAULT_FARM_DENSE_POINTS}; generate's: {GENERATE_DENSE_POINTS}; {NOT_FOR_POINT_SETS})"
+        "--dense-points",
+        action=Checked,
+        check=count("MAX_POINTS"),
+        help=f"dense cloud per mesh, sampled once (default: {DEFAULT_FARM_DENSE_POINTS}; generate's: {GENERATE_DENSE_POINTS}; {NOT_FOR_POINT_SETS})",
     )
-    dense.add_argument("--density", action=Checked, check=real(0.0, above=True), help=f"dense cloud as points per unit area of the normalised mesh ({NOT_FOR_POINT_SETS})")
-    r.add_argument(
-        "--resolution", action=Checked, check=count("MAX_RESOLUTION"), default=DEFAULT_FARM_RESOLUTION, help=f"z-buffer image size, pixels (default: %(default)s; generate's: {GENERATE_RESOLUTION}; {NOT_FOR_POINT_SETS})"
-    )
-    r.add_argument(
-        "--radius", action=Checked, check=real(), default=DEFAULT_RADIUS, help=f"{RADIUS_HELP} (default: %(default)s)"
-    )
-    r.add_argument("--seed", action=Checked, check=seed, default=DEFAULT_SEED, help="global seed: the same seed and options give the same data set (default: %(default)s)")
-    r.add_argument(
-        "--method", default=DEFAULT_METHOD, help="visibility method (see `zbuf-occlude info`) (default: %(default)s)"
+    dense.add_argument(
+        "--density",
+        action=Checked,
+        check=real(0.0, above=True),
+        help=f"dense cloud as points per unit area of the normalised mesh ({NOT_FOR_POINT_SETS})",
     )
     r.add_argument(
-        "--storage", choices=STORAGE_MODES, default="dense",
+        "--resolution",
+        action=Checked,
+        check=count("MAX_RESOLUTION"),
+        default=DEFAULT_FARM_RESOLUTION,
+        help=f"z-buffer image size, pixels (default: %(default)s; generate's: {GENERATE_RESOLUTION}; {NOT_FOR_POINT_SETS})",
+    )
+    r.add_argument("--radius", action=Checked, check=real(), default=DEFAULT_RADIUS, help=f"{RADIUS_HELP} (default: %(default)s)")
+    r.add_argument(
+        "--seed",
+        action=Checked,
+        check=seed,
+        default=DEFAULT_SEED,
+        help="global seed: the same seed and options give the same data set (default: %(default)s)",
+    )
+    r.add_argument("--method", default=DEFAULT_METHOD, help="visibility method (see `zbuf-occlude info`) (default: %(default)s)")
+    r.add_argument(
+        "--storage",
+        choices=STORAGE_MODES,
+        default="dense",
         help="dense: PointNet HDF5; compact: dense cloud + visibility bits (default: %(default)s)",
     )
     s = p.add_argument_group(
@@ -190,19 +218,22 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
         "--views, --dense-points, --density, --resolution and --radius do not apply. The crop options are "
         "scan's, each with both its names (--sensor-distance or --distance, ...).",
     )
-    s.add_argument("--sensor", help="LiDAR or depth-camera preset (hdl32e, vlp16, hdl64e, os1-64, kinect-v1) or a JSON file (default: none, z-buffer poses)")
+    s.add_argument(
+        "--sensor",
+        help="LiDAR or depth-camera preset (hdl32e, vlp16, hdl64e, os1-64, kinect-v1) or a JSON file (default: none, z-buffer poses)",
+    )
     add_crop_arguments(s, FARM_CROP_DISTRIBUTIONS, prefixed=True)
     ex = p.add_argument_group("execution")
     ex.add_argument(
         "--workers", action=Checked, check=count("MAX_WORKERS"), default=min(usable_cpus(), MAX_WORKERS),
         help=f"worker processes on this machine (default: %(default)s; the CPU cores this process may use, at most {MAX_WORKERS:,})",
     )  # fmt: skip
-    ex.add_argument(
-        "--shard", help="I/N: render the I-th of N partitions (SLURM array, Kubernetes indexed job); then farm-merge"
-    )
+    ex.add_argument("--shard", help="I/N: render the I-th of N partitions (SLURM array, Kubernetes indexed job); then farm-merge")
     dask = ex.add_mutually_exclusive_group()
     dask.add_argument("--scheduler", help="Dask scheduler address tcp://HOST:PORT (out must be on a shared file system)")
-    dask.add_argument("--dask-local", action=Checked, check=count("MAX_WORKERS"), metavar="N", help="run on a local Dask cluster of N worker processes")
+    dask.add_argument(
+        "--dask-local", action=Checked, check=count("MAX_WORKERS"), metavar="N", help="run on a local Dask cluster of N worker processes"
+    )
     ex.add_argument("--overwrite", action="store_true", help="start over instead of resuming")
     ex.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_farm_command)

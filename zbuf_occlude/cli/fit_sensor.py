@@ -63,7 +63,9 @@ def _read_scans(files: Sequence[Path], real: str):
     for f in files:
         las = read_las(f, within=within, max_points=MAX_POINTS - total)
         if not las.has_gps_time:
-            raise InvalidInputError(f"{f}: point format {las.point_format_id} has no GPS time: the returns of one pulse cannot be told apart")
+            raise InvalidInputError(
+                f"{f}: point format {las.point_format_id} has no GPS time: the returns of one pulse cannot be told apart"
+            )
         if len(las) == 0:
             raise InvalidInputError(f"{f}: holds no points")
         scans.append(las)
@@ -86,10 +88,14 @@ def _fit_returns(args: argparse.Namespace, files: Sequence[Path]) -> int:
         raise InvalidInputError(f"--out {out}: the fitted sensor is written as a .json file")
     base = sensor_from_name(args.sensor)
     if not isinstance(base, (Lidar, AirborneScanner)):
-        raise InvalidInputError(f"--sensor {args.sensor}: fit-sensor fits a spinning LiDAR or an airborne scanner, not a {type(base).__name__}")
+        raise InvalidInputError(
+            f"--sensor {args.sensor}: fit-sensor fits a spinning LiDAR or an airborne scanner, not a {type(base).__name__}"
+        )
     altitude = args.altitude if args.altitude is not None else getattr(base, "altitude_m", None)
     if altitude is None:
-        raise InvalidInputError(f"--sensor {args.sensor} is a spinning LiDAR: give --altitude M, the range to the ground in your scans, metres")
+        raise InvalidInputError(
+            f"--sensor {args.sensor} is a spinning LiDAR: give --altitude M, the range to the ground in your scans, metres"
+        )
     bootstrap = args.bootstrap or BOOTSTRAP
     curve: dict = {}
     if args.divergence_shares is not None:  # read first: a bad table is refused before the scans are
@@ -129,7 +135,9 @@ def cmd_fit_sensor(args: argparse.Namespace) -> int:
         raise InvalidInputError(f"{', '.join(given)}: for LAS/LAZ scans, and {args.real} is neither a .las/.laz file nor a folder of them")
     from zbuf_occlude.experiments.sensor_fit import fit_sensor_to_scans
 
-    fit, json_path, md_path = fit_sensor_to_scans(args.real, args.sensor, args.out, seed=args.seed, say=lambda line: print(line, flush=True))
+    fit, json_path, md_path = fit_sensor_to_scans(
+        args.real, args.sensor, args.out, seed=args.seed, say=lambda line: print(line, flush=True)
+    )
     print(fit.markdown(), end="")
     print(f"wrote {json_path} (use it as --sensor {json_path}), {md_path}")
     return 0
@@ -154,8 +162,12 @@ def add_fit_sensor_parser(sub) -> argparse.ArgumentParser:
         "rest on; the beam divergence cannot be told from the points: it stays the --sensor's, or is fitted to shares "
         "simulated at several divergences (--divergence-shares).",
     )  # fmt: skip
-    p.add_argument("real", metavar="REAL_SCANS", help="folder of real object scans (class folders of point files, LiDARNet CSVs, or SUO), "
-                   "or a .las/.laz scan or a folder of them (the return model)")
+    p.add_argument(
+        "real",
+        metavar="REAL_SCANS",
+        help="folder of real object scans (class folders of point files, LiDARNet CSVs, or SUO), "
+        "or a .las/.laz scan or a folder of them (the return model)",
+    )
     p.add_argument(
         "--sensor", required=True,
         help=f"the preset or sensor JSON to start from: a spinning LiDAR ({', '.join(names['lidar'])}; its beam table is kept) "
@@ -171,8 +183,14 @@ def add_fit_sensor_parser(sub) -> argparse.ArgumentParser:
     r.add_argument("--classes", metavar="C,C,...", action=Checked, check=_classes, default=None,
                    help="ASPRS classes of the class-set figures, or none (default: 3,4,5, vegetation); every class in the file "
                         "gets its own figures anyway")  # fmt: skip
-    r.add_argument("--bootstrap", metavar="N", action=Checked, check=_bootstrap, default=None,
-                   help=f"resamples of the bootstrap over pulses, 2 to {MAX_BOOTSTRAP:,} (default: {BOOTSTRAP})")
+    r.add_argument(
+        "--bootstrap",
+        metavar="N",
+        action=Checked,
+        check=_bootstrap,
+        default=None,
+        help=f"resamples of the bootstrap over pulses, 2 to {MAX_BOOTSTRAP:,} (default: {BOOTSTRAP})",
+    )
     r.add_argument("--divergence-shares", metavar="CSV", default=None,
                    help="the beam divergence fitted by simulation: a table with the header divergence_deg,<figure>[,std] (the "
                         "figure a return statistic, e.g. multi_return_points_class_5) of the share simulated at each divergence "

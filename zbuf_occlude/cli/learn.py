@@ -21,15 +21,25 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "root", help=f"mesh tree in ModelNet's layout, CLASS/SPLIT/NAME.ext with files {EXTENSIONS_TEXT}; duplicate meshes are dropped"
     )
-    p.add_argument("--out", required=True, action=Checked, check=out_folder, help="output folder (results.csv, table.md, run.json, plots, checkpoints)")
-    p.add_argument("--scale", choices=tuple(SCALES), default="quick",
-                   help="quick: fits a 2-core CPU; paper: the paper's sizes (ModelNet40 and a GPU) (default: %(default)s)")
+    p.add_argument(
+        "--out", required=True, action=Checked, check=out_folder, help="output folder (results.csv, table.md, run.json, plots, checkpoints)"
+    )
+    p.add_argument(
+        "--scale",
+        choices=tuple(SCALES),
+        default="quick",
+        help="quick: fits a 2-core CPU; paper: the paper's sizes (ModelNet40 and a GPU) (default: %(default)s)",
+    )
     p.add_argument("--epochs", action=Checked, check=count("MAX_EPOCHS"), help="override the scale's epoch count")
     p.add_argument("--points", action=Checked, check=count("MAX_POINTS"), help="points per cloud (override the scale's)")
     p.add_argument("--method", default=DEFAULT_METHOD, help="HSR method of the farm (default: %(default)s; og32/og64 are the paper's)")
     p.add_argument("--classes", help="comma-separated class names to keep")
-    p.add_argument("--data", action=Checked, check=out_folder, help="folder for the farm's data set (default OUT/data); reuse it across models")
-    p.add_argument("--seed", action=Checked, check=seed, default=0, help="seed of the data set, the splits and the training (default: %(default)s)")
+    p.add_argument(
+        "--data", action=Checked, check=out_folder, help="folder for the farm's data set (default OUT/data); reuse it across models"
+    )
+    p.add_argument(
+        "--seed", action=Checked, check=seed, default=0, help="seed of the data set, the splits and the training (default: %(default)s)"
+    )
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="torch device of the training (default: %(default)s)")
     p.add_argument("--threads", action=Checked, check=count("MAX_WORKERS"), help="torch CPU threads")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")

@@ -202,7 +202,6 @@ PATHS_HELP = (
 )
 
 
-
 #: Other names ``--format`` takes: ``hdf5``, the format's own name, is ``h5``, its files' extension.
 FORMAT_ALIASES = {"hdf5": "h5"}
 
@@ -285,7 +284,9 @@ def build_parser() -> argparse.ArgumentParser:
         "and with the exact oracle, and print the agreement (false-visible, false-hidden) and the time per view.",
     )  # fmt: skip
     _add_paths(v)
-    v.add_argument("--methods", default=DEFAULT_METHOD, help="comma-separated methods to score (see `zbuf-occlude info`) (default: %(default)s)")
+    v.add_argument(
+        "--methods", default=DEFAULT_METHOD, help="comma-separated methods to score (see `zbuf-occlude info`) (default: %(default)s)"
+    )
     v.add_argument("--views", action=Checked, check=poses, default=DEFAULT_VIEWS, help=f"{VIEWS_HELP} (default: %(default)s)")
     v.add_argument(
         "--dense-points", action=Checked, check=count("MAX_POINTS"), default=DEFAULT_DENSE_POINTS,

@@ -229,7 +229,9 @@ def out_folder(text: str, option: str) -> str:
             kind = "a file" if os.path.exists(folder) else "a link to nothing"
             if folder == path:
                 raise InvalidInputError(f"{option} {text}: the output folder {path} is {kind}, not a folder; choose another {option}")
-            raise InvalidInputError(f"{option} {text}: {folder} is {kind}, not a folder, so no folder can be made in it; choose another {option}")
+            raise InvalidInputError(
+                f"{option} {text}: {folder} is {kind}, not a folder, so no folder can be made in it; choose another {option}"
+            )
     return text
 
 

@@ -29,7 +29,13 @@ def add_protocol_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--downsample", default="random", choices=DOWNSAMPLERS, help="depth protocol: random or farthest-point down-sampling")
     g.add_argument("--normals", action="store_true", help="depth protocol: also write per-point face normals")
     g.add_argument("--camera-frame", action="store_true", help="depth protocol: also write camera-frame coordinates")
-    g.add_argument("--complete-points", action=Checked, check=count("MAX_POINTS", lowest=0), default=0, help="depth protocol: complete cloud beside the partial ones (pcn: default 16384)")
+    g.add_argument(
+        "--complete-points",
+        action=Checked,
+        check=count("MAX_POINTS", lowest=0),
+        default=0,
+        help="depth protocol: complete cloud beside the partial ones (pcn: default 16384)",
+    )
 
 
 def run_protocol_command(args: argparse.Namespace, paths: list[str]) -> int:

@@ -62,7 +62,9 @@ def check_transmittance(text: str, option: str):
     for pair in pairs:
         name, _, value = (part.strip() for part in pair.partition("="))
         if not name or not value:
-            raise InvalidInputError(f"{option} must be table, a number in [0, 1], or CLASS=VALUE,... (bush=0.3,tree=0.3), got {shown(pair)}")
+            raise InvalidInputError(
+                f"{option} must be table, a number in [0, 1], or CLASS=VALUE,... (bush=0.3,tree=0.3), got {shown(pair)}"
+            )
         if name.lower() in out:
             raise InvalidInputError(f"{option} gives the class {shown(name)} twice")
         out[name.lower()] = fraction(value, pair)
@@ -181,7 +183,9 @@ def _return_physics(sensor, args: argparse.Namespace):
     if max_returns > 1 and not resolution > 0:
         raise InvalidInputError(f"--max-returns {max_returns} needs --range-resolution M (metres: the least range between two returns)")
     if args.range_resolution and max_returns == 1:
-        raise InvalidInputError(f"--range-resolution {args.range_resolution:g} separates several returns per pulse: it needs --max-returns above 1")
+        raise InvalidInputError(
+            f"--range-resolution {args.range_resolution:g} separates several returns per pulse: it needs --max-returns above 1"
+        )
     if airborne:
         return sensor.with_(max_returns=max_returns, range_resolution_m=resolution if max_returns > 1 else sensor.range_resolution_m)
     return sensor.with_(footprint_rays=rays, power_noise=args.power_noise, echo_separation_m=args.echo_separation or sensor.echo_separation_m,

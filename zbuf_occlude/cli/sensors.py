@@ -89,7 +89,12 @@ def check_outside(dist, extents=None) -> None:
 SCAN_CROP_DISTRIBUTIONS = CropDistributions(distance_m=10.0, height_m=1.8, size_m=4.5, azimuth_deg=0.0, yaw_deg=0.0)
 #: ``scan``'s own option of each other :class:`~zbuf_occlude.sensors.placement.CropDistributions` field it sets, for
 #: messages (the crop options of :mod:`zbuf_occlude.cli.crops` name theirs).
-SCAN_OPTION_NAMES = {"azimuth_deg": "--azimuth", "yaw_deg": "--yaw", "extents_m": "--extents", "ground_reflectivity": "--ground-reflectivity"}
+SCAN_OPTION_NAMES = {
+    "azimuth_deg": "--azimuth",
+    "yaw_deg": "--yaw",
+    "extents_m": "--extents",
+    "ground_reflectivity": "--ground-reflectivity",
+}
 #: What ``scan`` adds to the help of a crop option.
 SCAN_NOTES = {
     "distance_m": "at least half the object's size; an airborne scanner flies over the object, distance · sin(azimuth) "
@@ -234,7 +239,9 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
         if not isinstance(sensor, AirborneScanner):  # an aircraft flies its altitude above the object
             check_outside(dist, None if isinstance(mesh, dict) else mesh.extents)
         # the farm's loop and seeds: one seed gives the crops farm --sensor gives this file lying directly in its input folder
-        crops = object_crops(mesh, sensor, dist, name=src.stem, n_samples=args.samples, seed=args.seed, backend=args.backend, frame=args.frame)
+        crops = object_crops(
+            mesh, sensor, dist, name=src.stem, n_samples=args.samples, seed=args.seed, backend=args.backend, frame=args.frame
+        )
         for k, crop, _ in progress_bar(crops, total=args.samples, desc="scan", unit="scan", enabled=not args.no_progress):
             placement = crop.placement
             s = crop.scan if args.crop else crop.full
@@ -248,7 +255,10 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
                 print(f"EMPTY {files[0]}: no return of the object (edge-on, below the sensor's beams or beyond its range at "
                       f"{placement.distance_m:.2f} m)", file=sys.stderr)  # fmt: skip
             log.info("%s: %d returns of the object at %.2f m", stem, returns, placement.distance_m)
-    print(f"wrote {counted(len(written), 'file')} to {out}" + (f"; {empty} of {counted(args.samples, 'scan')} hold no return of the object" if empty else ""))
+    print(
+        f"wrote {counted(len(written), 'file')} to {out}"
+        + (f"; {empty} of {counted(args.samples, 'scan')} hold no return of the object" if empty else "")
+    )
     return 1 if empty else 0
 
 
@@ -265,7 +275,11 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         "status is 1 when a scan of a mesh holds no return of the object (each such file is named on stderr: seen "
         "edge-on, below the beams or out of range).",
     )  # fmt: skip
-    p.add_argument("mesh_or_scene", metavar="MESH_OR_SCENE", help=f"mesh file ({EXTENSIONS_TEXT}; stood on the ground), 'cylinder' or 'box' (unit primitives), or a scene .json/.yaml")
+    p.add_argument(
+        "mesh_or_scene",
+        metavar="MESH_OR_SCENE",
+        help=f"mesh file ({EXTENSIONS_TEXT}; stood on the ground), 'cylinder' or 'box' (unit primitives), or a scene .json/.yaml",
+    )
     p.add_argument(
         "--sensor", default=None,
         help=f"a spinning LiDAR ({', '.join(names['lidar'])}), an airborne scanner ({', '.join(names['airborne'])}), a depth "
@@ -295,8 +309,20 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         "Y '=' takes the drawn X (a round pole: --extents 0.1:0.4,=,3:9)",
     )
     r = p.add_argument_group("return physics (LiDAR)", "with --reflectivity and --footprint above")
-    r.add_argument("--ground-reflectivity", action=Checked, check=real(0.0), default=0.15, help="the ground's reflectivity with --reflectivity (default: %(default)s)")
-    r.add_argument("--power-noise", action=Checked, check=real(0.0), default=0.0, help="sigma of ln(received power) per firing; 0: a sharp threshold (default: %(default)s)")
+    r.add_argument(
+        "--ground-reflectivity",
+        action=Checked,
+        check=real(0.0),
+        default=0.15,
+        help="the ground's reflectivity with --reflectivity (default: %(default)s)",
+    )
+    r.add_argument(
+        "--power-noise",
+        action=Checked,
+        check=real(0.0),
+        default=0.0,
+        help="sigma of ln(received power) per firing; 0: a sharp threshold (default: %(default)s)",
+    )
     r.add_argument(
         "--echo-separation", metavar="M", action=Checked, check=real(0.0, unit="metres"), default=0.0,
         help="with --footprint: echoes within M metres of the strongest merge into one return at their energy-weighted "
@@ -317,11 +343,25 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
                    help="with --max-returns above 1, a scene file: the share of each sub-ray that goes on through an object's "
                         "surface and comes back, in [0, 1] (a leafy crown's gap fraction); table (foliage 0.3 from the reflectance "
                         "table), one number (every object), or CLASS=VALUE,... (bush=0.3,tree=0.3) (default: 0, opaque)")  # fmt: skip
-    p.add_argument("--azimuth", action=Checked, check=interval, default="0", help="direction of the object from the sensor, degrees (N or LO:HI) (default: %(default)s)")
-    p.add_argument("--yaw", action=Checked, check=interval, default="0", help="the object's heading, degrees (N or LO:HI) (default: %(default)s)")
-    p.add_argument("--samples", action=Checked, check=count("MAX_SAMPLES"), default=1, help="scans, each with its own draws (default: %(default)s)")
+    p.add_argument(
+        "--azimuth",
+        action=Checked,
+        check=interval,
+        default="0",
+        help="direction of the object from the sensor, degrees (N or LO:HI) (default: %(default)s)",
+    )
+    p.add_argument(
+        "--yaw", action=Checked, check=interval, default="0", help="the object's heading, degrees (N or LO:HI) (default: %(default)s)"
+    )
+    p.add_argument(
+        "--samples", action=Checked, check=count("MAX_SAMPLES"), default=1, help="scans, each with its own draws (default: %(default)s)"
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar (or, when stderr is a file, no progress lines)")
-    p.add_argument("--crop", action="store_true", help="write only the object's returns; default: the object and the ground in the object's azimuth sector (±5°)")
+    p.add_argument(
+        "--crop",
+        action="store_true",
+        help="write only the object's returns; default: the object and the ground in the object's azimuth sector (±5°)",
+    )
     p.add_argument(
         "--occlude", action="store_true",
         help="with --across-sight-width: instead of the stretch, hide one side of the object behind panels between it "
@@ -337,17 +377,32 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         help="frame of the written points: sensor (LiDAR at the origin, x forward, z up; cameras: OpenCV) or "
         "world (the scene's frame) (default: %(default)s)",
     )  # fmt: skip
-    p.add_argument("--format", choices=("npz", "ply", "both", "las", "laz"), default="npz",
-                   help="file format of each scan: npz, ply, both (npz and ply), or LAS 1.4 / LAZ with return number, intensity, "
-                        "GPS time and scan angle per point (default: %(default)s)")
+    p.add_argument(
+        "--format",
+        choices=("npz", "ply", "both", "las", "laz"),
+        default="npz",
+        help="file format of each scan: npz, ply, both (npz and ply), or LAS 1.4 / LAZ with return number, intensity, "
+        "GPS time and scan angle per point (default: %(default)s)",
+    )
     p.add_argument(
         "--backend", choices=("embree", "zbuffer"), default="embree",
         help="ray casting: embree (exact, CPU) or zbuffer (OpenGL depth images) (default: %(default)s)",
     )  # fmt: skip
-    p.add_argument("--seed", action=Checked, check=seed, default=0, help="seed of the placement draws and the sensor noise; one seed gives the crops farm --sensor gives "
-                   "the file lying directly in its input folder (they key on the name without suffix) (default: %(default)s)")
-    p.add_argument("--up", choices=UP_CHOICES, default="auto", help="a mesh file's up axis, turned to +z; auto: by its path and format, as in generate and farm "
-                   "(ShapeNetCore paths and glTF +y, ...) (default: %(default)s)")
+    p.add_argument(
+        "--seed",
+        action=Checked,
+        check=seed,
+        default=0,
+        help="seed of the placement draws and the sensor noise; one seed gives the crops farm --sensor gives "
+        "the file lying directly in its input folder (they key on the name without suffix) (default: %(default)s)",
+    )
+    p.add_argument(
+        "--up",
+        choices=UP_CHOICES,
+        default="auto",
+        help="a mesh file's up axis, turned to +z; auto: by its path and format, as in generate and farm "
+        "(ShapeNetCore paths and glTF +y, ...) (default: %(default)s)",
+    )
     p.add_argument("--out", required=True, action=Checked, check=out_folder, help="output folder")
     p.set_defaults(func=cmd_scan)
     return p
@@ -375,10 +430,28 @@ def add_realism_parser(sub) -> argparse.ArgumentParser:
         "crop's bottom and the share in each tenth of its height; a simulated pole that is a tall shaft where real crops "
         "show a squat top differs there).  --airborne compares aerial crops by these alone.",
     )  # fmt: skip
-    p.add_argument("generated", metavar="GENERATED", help="scan .npz files or a folder of them (in class folders, GENERATED/CLASS/*.npz, for the per-class table), or LiDARNet CSVs")
-    p.add_argument("real", metavar="REAL", help="real scans: class folders of point-cloud files (aerial crops, ...), LiDARNet v2 CSVs, or scan .npz")
-    p.add_argument("--out", action=Checked, check=out_folder, default="realism", help="folder for realism.md, realism.csv, realism_classes.csv, realism.png (default: %(default)s)")
-    p.add_argument("--min-points", action=Checked, check=count("MAX_POINTS", lowest=0), default=1, help="ignore clouds with fewer points (default: %(default)s)")
+    p.add_argument(
+        "generated",
+        metavar="GENERATED",
+        help="scan .npz files or a folder of them (in class folders, GENERATED/CLASS/*.npz, for the per-class table), or LiDARNet CSVs",
+    )
+    p.add_argument(
+        "real", metavar="REAL", help="real scans: class folders of point-cloud files (aerial crops, ...), LiDARNet v2 CSVs, or scan .npz"
+    )
+    p.add_argument(
+        "--out",
+        action=Checked,
+        check=out_folder,
+        default="realism",
+        help="folder for realism.md, realism.csv, realism_classes.csv, realism.png (default: %(default)s)",
+    )
+    p.add_argument(
+        "--min-points",
+        action=Checked,
+        check=count("MAX_POINTS", lowest=0),
+        default=1,
+        help="ignore clouds with fewer points (default: %(default)s)",
+    )
     p.add_argument(
         "--ground-in-crops", action="store_true",
         help="a generated scan file holding one object (a crop made with scan --crop --ground-margin) counts its ground "

@@ -120,68 +120,138 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     )  # fmt: skip
     p.add_argument("root", help=f"mesh files ({EXTENSIONS_TEXT}) in CLASS/ folders")
     p.add_argument("--real", required=True, help="folder of real object scans (one folder per class, or labelled files)")
-    p.add_argument("--out", required=True, action=Checked, check=out_folder, help="output folder (settings.json, runs.jsonl, results.csv, summary.csv, table.md, run.json)")
+    p.add_argument(
+        "--out",
+        required=True,
+        action=Checked,
+        check=out_folder,
+        help="output folder (settings.json, runs.jsonl, results.csv, summary.csv, table.md, run.json)",
+    )
     p.add_argument("--model", choices=("pointnet", "voxnet", "3dmfv"), default="pointnet", help="classifier (default: %(default)s)")
     p.add_argument("--sensor", default="hdl32e", help="scanner of the lidar training set (a LiDAR preset; default %(default)s)")
-    p.add_argument("--fit-sensor", action="store_true",
-                   help="fit --sensor (a spinning LiDAR) to the fixed half of the real scans real->real trains on (written to "
-                   "OUT/fitted_sensor.json), and add training sets made with it ('fitted'; 'fitted+placed', also placed and "
-                   "sized as those scans; 'pooled', the three LiDAR sets in one)")
-    p.add_argument("--validate-on", choices=VALIDATION_CHOICES, default="meshes",
-                   help="what the mesh-only sets validate on (best epoch, early stopping): clouds of held-out whole meshes, "
-                   "or, with --fit-sensor, the fit half's real scans (then every mesh trains; the scored half stays unseen) "
-                   "(default: %(default)s)")
-    p.add_argument("--fitted-shape", default="none", metavar="none|SHAPE[,outline]",
-                   help="with --fit-sensor, what the fitted+placed set changes in each mesh's shape to look like the fit "
-                   "half's scans: widths (a horizontal stretch to their widths across the line of sight), widen (the same, "
-                   "but never narrower than the mesh), occlude (a side occluder that leaves as much of it in view as they "
-                   "show, where the mesh shows wider), outline (a warp to their outline over the height), one of the "
-                   "first three with outline (widths,outline), or none (default: %(default)s)")
-    p.add_argument("--recipe", choices=("stable", "plain"), default=SIM2REAL_RECIPE,
-                   help="training recipe: stable (class-balanced sampling, best epoch by the class-balanced validation loss, "
-                   "warm-up, gradient clipping) or plain (the models' own loop, best epoch by validation accuracy) (default: %(default)s)")
+    p.add_argument(
+        "--fit-sensor",
+        action="store_true",
+        help="fit --sensor (a spinning LiDAR) to the fixed half of the real scans real->real trains on (written to "
+        "OUT/fitted_sensor.json), and add training sets made with it ('fitted'; 'fitted+placed', also placed and "
+        "sized as those scans; 'pooled', the three LiDAR sets in one)",
+    )
+    p.add_argument(
+        "--validate-on",
+        choices=VALIDATION_CHOICES,
+        default="meshes",
+        help="what the mesh-only sets validate on (best epoch, early stopping): clouds of held-out whole meshes, "
+        "or, with --fit-sensor, the fit half's real scans (then every mesh trains; the scored half stays unseen) "
+        "(default: %(default)s)",
+    )
+    p.add_argument(
+        "--fitted-shape",
+        default="none",
+        metavar="none|SHAPE[,outline]",
+        help="with --fit-sensor, what the fitted+placed set changes in each mesh's shape to look like the fit "
+        "half's scans: widths (a horizontal stretch to their widths across the line of sight), widen (the same, "
+        "but never narrower than the mesh), occlude (a side occluder that leaves as much of it in view as they "
+        "show, where the mesh shows wider), outline (a warp to their outline over the height), one of the "
+        "first three with outline (widths,outline), or none (default: %(default)s)",
+    )
+    p.add_argument(
+        "--recipe",
+        choices=("stable", "plain"),
+        default=SIM2REAL_RECIPE,
+        help="training recipe: stable (class-balanced sampling, best epoch by the class-balanced validation loss, "
+        "warm-up, gradient clipping) or plain (the models' own loop, best epoch by validation accuracy) (default: %(default)s)",
+    )
     # checked by Sim2RealConfig against learn.training.SELECT_CHOICES (importing it here would import torch)
-    p.add_argument("--best-epoch-by", metavar="loss|mean_class_accuracy|accuracy",
-                   help="what every run's best epoch and early stopping go by on its validation set: loss (class-balanced "
-                   "cross-entropy, lower is better; it does not saturate when the validation set is classified without a "
-                   "mistake), mean_class_accuracy or accuracy (default: the recipe's)")
-    p.add_argument("--augment", choices=("standard", "aspect"), default="standard",
-                   help="training augmentation of every run: standard (rotation about z, scaling, jitter) or aspect (also "
-                   "random proportions: x, y, z stretched by independent factors in [2/3, 3/2]; not with --keep-scale) "
-                   "(default: %(default)s)")
-    p.add_argument("--scale", choices=("quick", "paper"), default="quick",
-                   help="quick: 256 points, 100 clouds per class, 20 epochs (a 2-core CPU); paper: 1024, 1000, 100")
+    p.add_argument(
+        "--best-epoch-by",
+        metavar="loss|mean_class_accuracy|accuracy",
+        help="what every run's best epoch and early stopping go by on its validation set: loss (class-balanced "
+        "cross-entropy, lower is better; it does not saturate when the validation set is classified without a "
+        "mistake), mean_class_accuracy or accuracy (default: the recipe's)",
+    )
+    p.add_argument(
+        "--augment",
+        choices=("standard", "aspect"),
+        default="standard",
+        help="training augmentation of every run: standard (rotation about z, scaling, jitter) or aspect (also "
+        "random proportions: x, y, z stretched by independent factors in [2/3, 3/2]; not with --keep-scale) "
+        "(default: %(default)s)",
+    )
+    p.add_argument(
+        "--scale",
+        choices=("quick", "paper"),
+        default="quick",
+        help="quick: 256 points, 100 clouds per class, 20 epochs (a 2-core CPU); paper: 1024, 1000, 100",
+    )
     p.add_argument("--points", action=Checked, check=count("MAX_POINTS"), help="points per cloud (override the scale's)")
     p.add_argument("--epochs", action=Checked, check=count("MAX_EPOCHS"), help="epochs (override the scale's)")
     p.add_argument("--per-class", action=Checked, check=count("MAX_SAMPLES"), help="training clouds per class (override the scale's)")
-    p.add_argument("--seeds", action=Checked, check=count("MAX_REPETITIONS"), default=5, help="repetitions, each redrawing clouds and initialisation (default %(default)s)")
+    p.add_argument(
+        "--seeds",
+        action=Checked,
+        check=count("MAX_REPETITIONS"),
+        default=5,
+        help="repetitions, each redrawing clouds and initialisation (default %(default)s)",
+    )
     p.add_argument("--keep-scale", action="store_true", help="keep metres instead of normalising every cloud to max extent 1")
     p.add_argument("--label-map", help="real label to class folder, REAL=CLASS,... (e.g. Trunk=pole)")
-    p.add_argument("--classes", help="class folders to train on: 'real' (those the real scans have, after --label-map) "
-                   "or CLASS,CLASS,... (default: every class folder of ROOT)")
-    p.add_argument("--occluded-elevation", metavar="LO:HI", action=Checked, check=interval,
-                   help="camera elevations of the occluded set, degrees, drawn uniformly (default: those --sensor sees objects "
-                   "from: a spinning LiDAR on the lidar set's mount, atan(height/distance) over heights 1.6-2 m and distances "
-                   "5-25 m, about 3.7:21.8; an airborne scanner, 90 minus its incidence angles up to half its swath, 61:90 "
-                   "for dales-q1560; settings.json records which; a negative LO needs =, as in --occluded-elevation=-5:30)"),
-    p.add_argument("--up", choices=UP_CHOICES, default="auto", help="up axis of the mesh files; auto: each format's convention (default: %(default)s)")
+    p.add_argument(
+        "--classes",
+        help="class folders to train on: 'real' (those the real scans have, after --label-map) "
+        "or CLASS,CLASS,... (default: every class folder of ROOT)",
+    )
+    (
+        p.add_argument(
+            "--occluded-elevation",
+            metavar="LO:HI",
+            action=Checked,
+            check=interval,
+            help="camera elevations of the occluded set, degrees, drawn uniformly (default: those --sensor sees objects "
+            "from: a spinning LiDAR on the lidar set's mount, atan(height/distance) over heights 1.6-2 m and distances "
+            "5-25 m, about 3.7:21.8; an airborne scanner, 90 minus its incidence angles up to half its swath, 61:90 "
+            "for dales-q1560; settings.json records which; a negative LO needs =, as in --occluded-elevation=-5:30)",
+        ),
+    )
+    p.add_argument(
+        "--up", choices=UP_CHOICES, default="auto", help="up axis of the mesh files; auto: each format's convention (default: %(default)s)"
+    )
     p.add_argument("--up-map", help="per-file up axis, GLOB=AXIS,... (globs of paths relative to ROOT)")
     p.add_argument("--sizes", help="real sizes per class, CLASS=length|height|max:LO-HI,... metres (over the defaults)")
-    p.add_argument("--real-format", choices=("auto", "folder", "lidarnet", "suo"), default="auto",
-                   help="reader of --real: a folder of class folders (any point-cloud files), LiDARNet v2, Sydney Urban Objects; auto: detected (default: %(default)s)")
-    p.add_argument("--real-up", choices=UP_CHOICES[1:], default="+z", help="up axis of the real scans' files (folder reader; default %(default)s)")
+    p.add_argument(
+        "--real-format",
+        choices=("auto", "folder", "lidarnet", "suo"),
+        default="auto",
+        help="reader of --real: a folder of class folders (any point-cloud files), LiDARNet v2, Sydney Urban Objects; auto: detected (default: %(default)s)",
+    )
+    p.add_argument(
+        "--real-up", choices=UP_CHOICES[1:], default="+z", help="up axis of the real scans' files (folder reader; default %(default)s)"
+    )
     p.add_argument("--real-units", default="m", help="unit of the real scans' files: m, cm, mm, in, ft or metres per unit (folder reader)")
-    p.add_argument("--min-returns", action=Checked, check=count("MAX_POINTS"), default=MIN_RETURNS,
-                   help="redraw LiDAR crops with fewer returns (default %(default)s; lower it for airborne or sparse sensors)")
+    p.add_argument(
+        "--min-returns",
+        action=Checked,
+        check=count("MAX_POINTS"),
+        default=MIN_RETURNS,
+        help="redraw LiDAR crops with fewer returns (default %(default)s; lower it for airborne or sparse sensors)",
+    )
     p.add_argument("--method", default=DEFAULT_METHOD, help="HSR method of the occluded set (default: %(default)s)")
-    p.add_argument("--occluded-points", action="store_true",
-                   help="also train on 'occluded-points': the occluded set's clouds (the same dense samples and poses) with "
-                   "visibility decided from the points alone (point-splat, normals estimated, no mesh), tested against occluded")
-    p.add_argument("--returns", metavar="N", action=Checked, check=returns_per_pulse, default=1,
-                   help="most returns per pulse of the lidar set's scanner: 1 (default) one return per pulse; above 1 each "
-                   "pulse's footprint is cast as sub-rays (the sensor's own, or 7, over its beam divergence: 0.16 deg for "
-                   "hdl32e) and its echoes resolved by the sensor's range resolution (or 0.75 m) into up to N returns "
-                   "(settings.json: lidar_returns; not with --fit-sensor)")
+    p.add_argument(
+        "--occluded-points",
+        action="store_true",
+        help="also train on 'occluded-points': the occluded set's clouds (the same dense samples and poses) with "
+        "visibility decided from the points alone (point-splat, normals estimated, no mesh), tested against occluded",
+    )
+    p.add_argument(
+        "--returns",
+        metavar="N",
+        action=Checked,
+        check=returns_per_pulse,
+        default=1,
+        help="most returns per pulse of the lidar set's scanner: 1 (default) one return per pulse; above 1 each "
+        "pulse's footprint is cast as sub-rays (the sensor's own, or 7, over its beam divergence: 0.16 deg for "
+        "hdl32e) and its echoes resolved by the sensor's range resolution (or 0.75 m) into up to N returns "
+        "(settings.json: lidar_returns; not with --fit-sensor)",
+    )
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="torch device (default: %(default)s)")
     p.add_argument("--threads", action=Checked, check=count("MAX_WORKERS"), help="torch CPU threads")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")

@@ -163,7 +163,7 @@ POINT_COLUMNS = {
     "pulse_id": PointColumn("int64", 0, 2**63 - 1, "the pulse, unique within its scan"),
     "gps_time": PointColumn("float64", float("-inf"), float("inf"), "firing time of its pulse, seconds"),
     "scan_angle_deg": PointColumn("float32", -180.0, 180.0, "scan angle, degrees"),
-}  # fmt: skip
+}
 
 
 def file_list_name(split: str) -> str:

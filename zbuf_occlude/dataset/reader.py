@@ -427,9 +427,7 @@ class OccludedDataset(Sequence):
         keep = filters.mask(self._poses[:, 0], self._poses[:, 1])
         if not self._kind.rows_placed and len(keep) and not keep.any():
             elevations = ", ".join(f"{v:g}" for v in sorted(set(self._poses[:, 0].tolist())))
-            raise InvalidInputError(
-                f"no pose of {self.root} matches {filters}; its poses have elevations {elevations} (degrees)"
-            )
+            raise InvalidInputError(f"no pose of {self.root} matches {filters}; its poses have elevations {elevations} (degrees)")
         return keep
 
     def _select(self, card: Card, split: str | Sequence[str] | None, classes: str | Sequence[str] | None) -> list[NDArray[np.int64]]:
@@ -449,7 +447,9 @@ class OccludedDataset(Sequence):
         for lineno, rec, checked in manifest:
             if checked is None:  # failed or pending objects have no shard
                 continue
-            if (splits is not None and checked.split not in splits) or (wanted_classes is not None and checked.class_name not in wanted_classes):
+            if (splits is not None and checked.split not in splits) or (
+                wanted_classes is not None and checked.class_name not in wanted_classes
+            ):
                 continue
             shards, digests = checked_shards(self.root, f"{manifest_path}:{lineno}", checked, card, verify=self.verify)
             spp = self._kind.rows_per_pose(np.asarray(checked.n_visible, dtype=np.int64), card.params.samples_per_view)
@@ -465,8 +465,10 @@ class OccludedDataset(Sequence):
         missing = [name for name in self.features if name not in common]
         if missing:
             what = "is not a per-point column of" if missing[0] not in POINT_COLUMNS else "is not kept by every selected object of"
-            has = f"it has {self.available_features}" if self.available_features else (
-                "it has none (farm --sensor keeps them when its sensor records several returns per pulse, max_returns > 1)"
+            has = (
+                f"it has {self.available_features}"
+                if self.available_features
+                else ("it has none (farm --sensor keeps them when its sensor records several returns per pulse, max_returns > 1)")
             )
             raise InvalidInputError(f"feature {missing[0]!r} {what} {self.root}; {has}")
 
@@ -475,7 +477,9 @@ class OccludedDataset(Sequence):
         if not filters.active or not index.n_unfiltered or len(index):
             return
         if self._kind.rows_placed:
-            el, az = np.concatenate([np.column_stack(self._kind.row_directions(self._shards, obj)) for obj in range(len(self._shards.records))]).T
+            el, az = np.concatenate(
+                [np.column_stack(self._kind.row_directions(self._shards, obj)) for obj in range(len(self._shards.records))]
+            ).T
             seen = (
                 f"its scans' sensor elevations span {el.min():g} to {el.max():g} and azimuths {az.min():g} to {az.max():g} "
                 "(degrees, seen from the object)"
@@ -574,7 +578,7 @@ class OccludedDataset(Sequence):
             len(self) * self.n_points * width * np.dtype(np.float32).itemsize,
             option=f"to_arrays() of {self.root} ({len(self):,} samples of {self.n_points:,} points)",
             hint="select fewer samples (split, classes, poses) or read them one at a time (ds[i])",
-        )  # fmt: skip
+        )
         data = np.empty((len(self), self.n_points, width), dtype=np.float32)
         for start, block in self.iter_arrays():
             data[start : start + len(block)] = block

@@ -56,9 +56,7 @@ def _ply_points(path: Path, n_points: int, within: Path | None) -> NDArray:
     return parse_ply_vertices(raw, path, error=DatasetFormatError, points_only=True)  # float64 of the file's float32: exact
 
 
-def read_sample_points(
-    path: str | os.PathLike, fmt: str, n_points: int, *, within: str | os.PathLike | None = None
-) -> NDArray[np.float32]:
+def read_sample_points(path: str | os.PathLike, fmt: str, n_points: int, *, within: str | os.PathLike | None = None) -> NDArray[np.float32]:
     """The points of one sample file that ``generate --format npz|ply`` wrote.
 
     Parameters

@@ -533,7 +533,15 @@ def _shape(f: Any, key: str) -> tuple[int, ...] | None:
 
 
 def check_shard(
-    f: Any, path: Path, *, storage: str, n_points: int, rows: int, n_poses: int, sensor: bool, topup_rows: int = 0,
+    f: Any,
+    path: Path,
+    *,
+    storage: str,
+    n_points: int,
+    rows: int,
+    n_poses: int,
+    sensor: bool,
+    topup_rows: int = 0,
     point_columns: Sequence[str] = (),
 ) -> None:
     """Check an open shard (``h5py.File``) against what the manifest says of its object.
@@ -603,7 +611,14 @@ SHARD_COLUMNS = {name: Column(*spec) for name, spec in COLUMN_TYPES.items()}
 
 
 def open_shard(
-    path: Path, *, storage: str, n_points: int, rows: int, n_poses: int, sensor: bool, topup_rows: int = 0,
+    path: Path,
+    *,
+    storage: str,
+    n_points: int,
+    rows: int,
+    n_poses: int,
+    sensor: bool,
+    topup_rows: int = 0,
     point_columns: Sequence[str] = (),
 ) -> Any:
     """Open a shard for reading after every check that needs no data: the one door the reader
@@ -630,7 +645,14 @@ def open_shard(
     f = open_hdf5(path, SHARD_COLUMNS)
     try:
         check_shard(
-            f, path, storage=storage, n_points=n_points, rows=rows, n_poses=n_poses, sensor=sensor, topup_rows=topup_rows,
+            f,
+            path,
+            storage=storage,
+            n_points=n_points,
+            rows=rows,
+            n_poses=n_poses,
+            sensor=sensor,
+            topup_rows=topup_rows,
             point_columns=point_columns,
         )
         declared = sum(declared_nbytes(f[k]) for k in f.keys() if _shape(f, k) is not None)

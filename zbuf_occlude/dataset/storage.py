@@ -383,7 +383,9 @@ class DenseRows(StorageKind):
             clouds.extend(pose.clouds)
             pose_of.extend([pose.pose_index] * len(pose.clouds))
         columns = {"object_index": np.full(len(clouds), target.object_index, dtype=np.int64), "pose_index": np.asarray(pose_of, np.int64)}
-        write_h5(target.out / target.shard, clouds, n_points=target.n_points, provenance=self.provenance, columns=columns, attrs=target.attrs)
+        write_h5(
+            target.out / target.shard, clouds, n_points=target.n_points, provenance=self.provenance, columns=columns, attrs=target.attrs
+        )
         return [target.shard]
 
     def read(self, src: ShardSource, obj: int, pose: NDArray[np.int64], sample: NDArray[np.int64], row: NDArray[np.int64]) -> NDArray:
@@ -499,7 +501,9 @@ class Compact(StorageKind):
                       target.attrs, gzip_level=target.gzip_level)  # fmt: skip
         return [target.shard]
 
-    def load_arrays(self, f: Any, path: Path, rec: Mapping[str, Any]) -> tuple[NDArray[np.float32], NDArray[np.uint8], list[NDArray[np.float32]]]:
+    def load_arrays(
+        self, f: Any, path: Path, rec: Mapping[str, Any]
+    ) -> tuple[NDArray[np.float32], NDArray[np.uint8], list[NDArray[np.float32]]]:
         """An object's dense cloud, visibility bits and top-up points of each pose, checked against its record.
 
         Raises
@@ -603,9 +607,7 @@ def storage_kind(storage: str, *, sensor: bool = False) -> StorageKind:
     kind = STORAGE_KINDS["sensor_crops"] if sensor else STORAGE_KINDS.get(storage)
     if kind is None or kind.storage != storage:
         readable = tuple(dict.fromkeys(k.storage for k in STORAGE_KINDS.values() if k.rows_placed == sensor))
-        raise InvalidInputError(
-            f"unknown storage {storage!r}{' for farm --sensor' if sensor else ''}; this zbuf_occlude reads {readable}"
-        )
+        raise InvalidInputError(f"unknown storage {storage!r}{' for farm --sensor' if sensor else ''}; this zbuf_occlude reads {readable}")
     return kind
 
 
@@ -757,8 +759,10 @@ def check_visible_bits(path: Path, bits: Any, n_dense: int, n_visible: Sequence[
     wrong = np.flatnonzero(counts != dense_visible)
     if len(wrong):
         p = int(wrong[0])
-        said = f"'n_visible' minus 'n_topped_up' says {int(dense_visible[p])}" if n_topped_up is not None else (
-            f"'n_visible' says {int(n_visible[p])}"
+        said = (
+            f"'n_visible' minus 'n_topped_up' says {int(dense_visible[p])}"
+            if n_topped_up is not None
+            else (f"'n_visible' says {int(n_visible[p])}")
         )
         raise DatasetFormatError(
             f"the shard {path}: 'visible_bits' of pose {p} marks {int(counts[p])} visible points, the manifest's field "

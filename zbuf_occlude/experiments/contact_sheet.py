@@ -322,9 +322,7 @@ def _choose_samples(ds: OccludedDataset, per_class: int, poses: int, rng: np.ran
     return chosen
 
 
-def _dataset_rows(
-    root: Path, per_class: int, poses: int, dpi: int, rng: np.random.Generator, fixed: Camera
-) -> list[SheetRow]:
+def _dataset_rows(root: Path, per_class: int, poses: int, dpi: int, rng: np.random.Generator, fixed: Camera) -> list[SheetRow]:
     from zbuf_occlude.dataset.reader import OccludedDataset
 
     ds = OccludedDataset(root)

@@ -70,9 +70,7 @@ DEFAULT_PROFILE_POINTS = 20_000
 PROFILE_PNG = "elevation_profile.png"
 
 
-def projected_areas(
-    mesh: trimesh.Trimesh, face_index: NDArray[np.int64], visible: NDArray[np.bool_]
-) -> dict[str, float]:
+def projected_areas(mesh: trimesh.Trimesh, face_index: NDArray[np.int64], visible: NDArray[np.bool_]) -> dict[str, float]:
     """Projected areas of the visible surface onto the x-y, y-z and x-z planes.
 
     Parameters
@@ -291,5 +289,3 @@ def elevation_profile(
         folder.write_bytes(png.name, _plot(rows, title))
     log.info("elevation profile written to %s", png)
     return png
-
-

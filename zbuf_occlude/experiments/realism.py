@@ -300,7 +300,9 @@ def _summary(stats: list[dict]) -> dict:
     }  # fmt: skip
 
 
-def compare_sets(generated: list[ObjectCloud], real: list[ObjectCloud], *, ring_gap_deg: float = RING_GAP_DEG) -> tuple[list[dict], dict, dict]:
+def compare_sets(
+    generated: list[ObjectCloud], real: list[ObjectCloud], *, ring_gap_deg: float = RING_GAP_DEG
+) -> tuple[list[dict], dict, dict]:
     """Statistics of both sets and the table rows.
 
     The count ratio at matched range is ``count / (real fit at that range)`` per generated cloud

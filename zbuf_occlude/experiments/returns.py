@@ -297,7 +297,9 @@ def simulate(scene: ScanScene, scanner: AirborneScanner, vegetation_ids: Sequenc
     with tempfile.TemporaryDirectory(prefix="zbuf-returns-") as folder:
         for source, seed in enumerate(seeds):
             start = time.perf_counter()
-            scan = scan_airborne(scene, scanner, center_xy, half_size_m, seed=int(seed), reflectivity=reflectivity, transmittance=transmittance)
+            scan = scan_airborne(
+                scene, scanner, center_xy, half_size_m, seed=int(seed), reflectivity=reflectivity, transmittance=transmittance
+            )
             seconds += time.perf_counter() - start
             pulses += int(scan.meta["n_rays"])
             first = scan if first is None else first

@@ -16,8 +16,17 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.returns import GROUND_CLASS
 from zbuf_occlude.sensors.fit.returns import VEGETATION_CLASSES, ReturnStatistics
 
-__all__ = ["TOLERANCES", "GAP_MIN_TOLERANCE", "RETURN_COUNTS", "K_AGREEMENT_SD", "estimate_of", "class_suffix", "comparison_rows",
-           "comparison_markdown", "recommend_k"]
+__all__ = [
+    "TOLERANCES",
+    "GAP_MIN_TOLERANCE",
+    "RETURN_COUNTS",
+    "K_AGREEMENT_SD",
+    "estimate_of",
+    "class_suffix",
+    "comparison_rows",
+    "comparison_markdown",
+    "recommend_k",
+]
 
 #: Relative tolerances of the targets : returns-per-pulse shares ±20 %, median gap
 #: ±30 %, intensity ratio of first-of-several to single returns ±20 %.
@@ -81,9 +90,24 @@ def comparison_rows(real: dict[str, ReturnStatistics], sim: dict[str, ReturnStat
             add(f"{side} pulses with {k} return{'s' if k > 1 else ''}", r, s, "±20 %", _verdict(s[0], r[0], TOLERANCES["returns"]))
     real_suffix, sim_suffix = class_suffix(real_classes), class_suffix(VEGETATION_CLASSES)
     r, s = estimate_of(real["all"], f"multi_return_points_{real_suffix}"), estimate_of(sim["all"], f"multi_return_points_{sim_suffix}")
-    add("vegetation points from multi-return pulses", r, s, "±20 % (the divergence is fitted to it)", _verdict(s[0], r[0], TOLERANCES["returns"]))
-    r, s = estimate_of(real["all"], f"multi_return_points_class_{GROUND_CLASS}"), estimate_of(sim["all"], f"multi_return_points_class_{GROUND_CLASS}")
-    add("ground points from multi-return pulses", r, s, "±20 % (depends on the plot's tree cover)", _verdict(s[0], r[0], TOLERANCES["returns"]))
+    add(
+        "vegetation points from multi-return pulses",
+        r,
+        s,
+        "±20 % (the divergence is fitted to it)",
+        _verdict(s[0], r[0], TOLERANCES["returns"]),
+    )
+    r, s = (
+        estimate_of(real["all"], f"multi_return_points_class_{GROUND_CLASS}"),
+        estimate_of(sim["all"], f"multi_return_points_class_{GROUND_CLASS}"),
+    )
+    add(
+        "ground points from multi-return pulses",
+        r,
+        s,
+        "±20 % (depends on the plot's tree cover)",
+        _verdict(s[0], r[0], TOLERANCES["returns"]),
+    )
     r, s = estimate_of(real["all"], "gap_min"), estimate_of(sim["all"], "gap_min")
     add("smallest gap (m)", r, s, f"= range resolution {range_resolution_m:.3g} m ±{GAP_MIN_TOLERANCE:.0%}",
         _verdict(s[0], range_resolution_m, GAP_MIN_TOLERANCE))  # fmt: skip

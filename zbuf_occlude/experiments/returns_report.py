@@ -52,7 +52,7 @@ from zbuf_occlude.experiments.returns import (
     plot_scene,
     pulse_subset,
     simulate,
-)  # fmt: skip
+)
 from zbuf_occlude.experiments.returns_comparison import (
     RETURN_COUNTS,
     class_suffix,
@@ -292,7 +292,10 @@ def _figure(sim_las: LasPoints, tree_xy: tuple[float, float], tree_half_m: float
     near = np.all(np.abs(sim_las.points[:, :2] - np.asarray(tree_xy)) <= tree_half_m, axis=1)
     # the real cell's ground and vegetation only (its noise and other classes left out)
     real_inside = _vegetation_patch(real_las, 2.0 * tree_half_m) & np.isin(real_las.classification, (GROUND_CLASS, *VEGETATION_CLASSES))
-    for ax, las, mask, title in ((axes[0], sim_las, near, "simulated tree"), (axes[1], real_las, real_inside, "real vegetation patch (IGN LiDAR HD)")):
+    for ax, las, mask, title in (
+        (axes[0], sim_las, near, "simulated tree"),
+        (axes[1], real_las, real_inside, "real vegetation patch (IGN LiDAR HD)"),
+    ):
         p = las.points[mask]
         rn = las.return_number[mask]
         ground = las.classification[mask] == GROUND_CLASS
@@ -383,7 +386,9 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
         k_rows = _k_sweep(plot, settings, divergence, model)
         k_best = recommend_k(k_rows)
         rows, fitted_result = _compare(plot, real, VEGETATION_CLASSES, divergence, k_best, model, settings, "IGN, fitted divergence")
-        nominal_rows, _ = _compare(plot, real, VEGETATION_CLASSES, IGN_DIVERGENCE_DEG, k_best, model, settings, "IGN, data-sheet divergence")
+        nominal_rows, _ = _compare(
+            plot, real, VEGETATION_CLASSES, IGN_DIVERGENCE_DEG, k_best, model, settings, "IGN, data-sheet divergence"
+        )
         rows += nominal_rows
         summary: dict[str, Any] = {}
         real_md = "## IGN LiDAR HD sample\n\n" + "\n\n".join(f"### {side}\n\n{s.markdown()}" for side, s in real.items())

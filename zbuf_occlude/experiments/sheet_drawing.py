@@ -150,7 +150,7 @@ def _shorten(line: str, width_px: float, measure: Callable[[str], float]) -> str
 def _middle_cut(line: str, keep: int) -> str:
     """``keep`` characters of ``line``, its first ``ceil(keep / 2)`` and last ``floor(keep / 2)``, around :data:`ELLIPSIS`."""
     head = (keep + 1) // 2
-    return line[:head] + ELLIPSIS + line[len(line) - (keep - head):]
+    return line[:head] + ELLIPSIS + line[len(line) - (keep - head) :]
 
 
 def write_png(figure: Figure, out: Path) -> None:
@@ -175,7 +175,9 @@ def write_png(figure: Figure, out: Path) -> None:
         folder.write_bytes(out.name, buffer.getvalue())
 
 
-def _scatter(ax: Any, xy: NDArray[np.float64], colour: NDArray[np.float64], bounds: tuple, rng: np.random.Generator, *, image: bool) -> None:
+def _scatter(
+    ax: Any, xy: NDArray[np.float64], colour: NDArray[np.float64], bounds: tuple, rng: np.random.Generator, *, image: bool
+) -> None:
     """Points ``xy`` coloured by ``colour`` (near/low: dark) in the limits ``bounds``; image axes point down."""
     if len(xy) > MAX_DRAWN_POINTS:
         keep = rng.choice(len(xy), MAX_DRAWN_POINTS, replace=False)

@@ -100,7 +100,9 @@ def write_modelnet_txt(
     n_points = max((ds.n_points for ds in splits.values()), default=0)  # before any file is written
     threads = min(MAX_THREADS, os.cpu_count() or 1)
     in_flight = LOOKAHEAD_PER_THREAD * threads
-    check_memory((in_flight + 1) * n_points * BYTES_PER_POINT, option=f"{in_flight + 1} samples' text ({n_points:,} points each)", hint="free memory")
+    check_memory(
+        (in_flight + 1) * n_points * BYTES_PER_POINT, option=f"{in_flight + 1} samples' text ({n_points:,} points each)", hint="free memory"
+    )
     written = [folder.write_text(f"{prefix}_shape_names.txt", "".join(f"{n}\n" for n in names))]
     counter: dict[str, int] = {}
     total = sum(len(ds) for ds in splits.values())

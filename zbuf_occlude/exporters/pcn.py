@@ -397,7 +397,9 @@ def write_pcn(folder: OwnedFolder, plan: PcnPlan, *, up: str = "+y", show_progre
     for model in progress(plan.models, desc="export pcn", unit="model", enabled=show_progress):
         views, complete = _views(model, plan)
         for v, points in enumerate(views):
-            folder.write_bytes(f"{model.split}/partial/{model.taxonomy_id}/{model.model_id}/{v:02d}.pcd", pcd_bytes(turn_up(points, "+y", up)))
+            folder.write_bytes(
+                f"{model.split}/partial/{model.taxonomy_id}/{model.model_id}/{v:02d}.pcd", pcd_bytes(turn_up(points, "+y", up))
+            )
             empty += not len(points)
         folder.write_bytes(f"{model.split}/complete/{model.taxonomy_id}/{model.model_id}.pcd", pcd_bytes(turn_up(complete, "+y", up)))
         lists[model.taxonomy_id][model.split].append(model.model_id)

@@ -26,8 +26,18 @@ from zbuf_occlude.io.owned import make_folder
 from zbuf_occlude.resources import check_memory, estimate_job_memory
 from zbuf_occlude.visibility.registry import get_method
 
-__all__ = ["check_before_work", "check_memory_up_front", "check_out_option", "check_out_outside_inputs", "check_radius",
-           "prepare_out", "check_gl", "storage_of", "object_size", "check_point_set_options"]
+__all__ = [
+    "check_before_work",
+    "check_memory_up_front",
+    "check_out_option",
+    "check_out_outside_inputs",
+    "check_radius",
+    "prepare_out",
+    "check_gl",
+    "storage_of",
+    "object_size",
+    "check_point_set_options",
+]
 
 log = logging.getLogger(__name__)
 
@@ -58,8 +68,7 @@ def check_out_outside_inputs(out: str | os.PathLike, inputs: Sequence[str | os.P
         folder = Path(source).resolve()
         if folder.is_dir() and (target == folder or folder in target.parents):
             raise InvalidInputError(
-                f"--out {out} lies inside the input folder {source}: a rerun would read its outputs as inputs; "
-                "choose an --out outside it"
+                f"--out {out} lies inside the input folder {source}: a rerun would read its outputs as inputs; choose an --out outside it"
             )
 
 

@@ -89,7 +89,9 @@ _LEFT_OUT_WHEN_NONE = ("ground_margin_m", "hidden_below_m", "across_sight_width_
 #: The ``farm`` flag of each :class:`CropDistributions` field it sets, for the messages of its checks.
 CROP_OPTION_NAMES = {field: OPTION_NAMES[SENSOR_KEYS[field]] for field in FARM_CROP_FIELDS}
 #: ``farm --sensor``'s placement when no option changes it.
-FARM_CROP_DISTRIBUTIONS = CropDistributions(distance_m=DEFAULT_SENSOR_DISTANCE_M, height_m=DEFAULT_SENSOR_HEIGHT_M, size_m=DEFAULT_SENSOR_SIZE_M)
+FARM_CROP_DISTRIBUTIONS = CropDistributions(
+    distance_m=DEFAULT_SENSOR_DISTANCE_M, height_m=DEFAULT_SENSOR_HEIGHT_M, size_m=DEFAULT_SENSOR_SIZE_M
+)
 
 GL_LOCK = threading.Lock()  # one GL context per process: threads of a Dask worker take turns
 
@@ -145,7 +147,9 @@ class SensorCropParams:
         unset = CropDistributions()
         for f in dataclasses.fields(CropDistributions):
             if f.name not in FARM_CROP_FIELDS and getattr(self.distributions, f.name) != getattr(unset, f.name):
-                raise InvalidInputError(f"farm --sensor draws no {f.name} (its card could not say so): leave it at {getattr(unset, f.name)!r}")
+                raise InvalidInputError(
+                    f"farm --sensor draws no {f.name} (its card could not say so): leave it at {getattr(unset, f.name)!r}"
+                )
         object.__setattr__(self, "footprint", bool(self.footprint))
         if self.across_sight_width_m is not None:
             option = OPTION_NAMES["sensor_across_sight_width_m"]
@@ -429,4 +433,3 @@ class RunOptions:
     progress_label: str = "farm"
     defaults: FarmParams | None = None
     set_params: frozenset[str] | None = None
-

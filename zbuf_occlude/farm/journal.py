@@ -25,7 +25,7 @@ from zbuf_occlude.dataset.layout import (
     TASK_DIR,
     file_list_name,
     split_file_name,
-)  # fmt: skip
+)
 from zbuf_occlude.errors import InvalidInputError, UnsafePathError
 from zbuf_occlude.farm.config import BYTES_PER_MB, FarmParams, plan_digest, record_path, shard_path
 from zbuf_occlude.farm.worker import base_record, package_version, write_json
@@ -321,8 +321,6 @@ def manifest_lines(objects: Sequence[FarmObject], params: FarmParams, records: d
     return "".join(json.dumps(records.get(o.index) or base_record(o, params), sort_keys=True) + "\n" for o in objects)
 
 
-
-
 def padded_samples(records: Sequence[dict[str, Any]], params: FarmParams) -> int:
     """Samples of the finished ``records`` padded with repeated points (fewer visible than ``--points``)."""
     per_pose = 1 if params.sensor else params.samples_per_view  # --sensor: one sample per scan
@@ -418,8 +416,7 @@ def finalize(
         "seed_derivation": "numpy SeedSequence([seed, blake2b64(name), stream, pose_index, sample_index]), "
         "zbuf_occlude.geometry.samples.derive_rng; stream 0 = dense cloud, 1 = sample draws, "
         "3 = top-up candidates (pose_index, round)",
-        "reference": "Sryamkin, Msallam, Klestov 2023, "
-        "A method to create real-like point clouds for 3D object classification",
+        "reference": "Sryamkin, Msallam, Klestov 2023, A method to create real-like point clouds for 3D object classification",
     }
     write_card(out, card)
 
@@ -562,10 +559,8 @@ class FarmSummary:
     def format(self) -> str:
         """Multi-line human summary."""
         lines = [
-            f"zbuf-occlude farm: {self.out}  "
-            f"({'finished' if self.finished else 'this task done; run farm-merge when all tasks are'})",
-            f"  objects   {self.done} done ({self.resumed} from an earlier run), {self.failed} failed, "
-            f"{self.objects} planned",
+            f"zbuf-occlude farm: {self.out}  ({'finished' if self.finished else 'this task done; run farm-merge when all tasks are'})",
+            f"  objects   {self.done} done ({self.resumed} from an earlier run), {self.failed} failed, {self.objects} planned",
             f"  samples   {self.samples:,}  ({self.storage} storage)"
             + (f", {self.padded:,} padded with repeated points" if self.padded else ""),
             f"  bytes     {self.bytes:,} ({self.bytes / BYTES_PER_MB:.1f} MB)  ->  {self.samples_per_mb:,.1f} samples/MB",

@@ -102,8 +102,7 @@ def earlier_plan(out: Path) -> dict[str, Any] | None:
         return read_plan(out)
     except InvalidInputError as exc:
         raise InvalidInputError(
-            f"{out / PLAN_FILE} was not written by zbuf_occlude ({exc}); a run would replace it: "
-            "move it away, or choose another --out"
+            f"{out / PLAN_FILE} was not written by zbuf_occlude ({exc}); a run would replace it: move it away, or choose another --out"
         ) from None
 
 
@@ -154,9 +153,7 @@ def _record_files(out: Path, o: FarmObject) -> list[Path | None]:
     shards = shards if isinstance(shards, list) else []
     digests = (rec or {}).get("sha256")
     digests = digests if isinstance(digests, list) and len(digests) == len(shards) else [None] * len(shards)
-    checked = [
-        check_deletable(out, rel, names, FileRecord(d if isinstance(d, str) else None), what) for rel, d in zip(shards, digests)
-    ]
+    checked = [check_deletable(out, rel, names, FileRecord(d if isinstance(d, str) else None), what) for rel, d in zip(shards, digests)]
     if shard_path(o) not in shards:  # a shard written before its record, by a run stopped in between
         checked.append(check_deletable(out, shard_path(o), names, FileRecord(None), f"the shard of object {o.index}"))
     checked.append(check_own_name(out, os.path.relpath(where, out), what=f"the record of object {o.index}"))
@@ -199,7 +196,11 @@ def wipe_earlier_run(out: Path, objects: Sequence[FarmObject] | None = None) -> 
         if tasks.is_dir() and not tasks.is_symlink():
             fixed += [f"{TASK_DIR}/{p.name}" for p in tasks.iterdir() if _TASK_FILE.fullmatch(p.name)]
         splits = {o.split for o in objects_of(plan)}
-        fixed += [MANIFEST_FILE, SHAPE_NAMES_FILE, *(f for s in sorted({*SPLITS, *splits}) for f in (file_list_name(s), split_file_name(s)))]
+        fixed += [
+            MANIFEST_FILE,
+            SHAPE_NAMES_FILE,
+            *(f for s in sorted({*SPLITS, *splits}) for f in (file_list_name(s), split_file_name(s))),
+        ]
     doomed += [check_own_name(out, name, what="the earlier run") for name in fixed]
     delete_checked(doomed)
     for o in objects_of(plan) if objects is None else objects:

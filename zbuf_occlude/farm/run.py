@@ -91,9 +91,7 @@ def _dask(
                 raise BackendUnavailable(f"cannot reach the Dask scheduler {scheduler}: {exc}") from exc
         else:
             # one thread per worker process: each process owns one GL context
-            cluster = stack.enter_context(
-                LocalCluster(n_workers=dask_local, threads_per_worker=1, processes=True, dashboard_address=None)
-            )
+            cluster = stack.enter_context(LocalCluster(n_workers=dask_local, threads_per_worker=1, processes=True, dashboard_address=None))
             client = stack.enter_context(Client(cluster))
         # a fresh token per run: a long-lived scheduler may still know the keys of an earlier run
         token = f"{params.digest()}-{os.getpid()}-{time.time_ns()}"
@@ -117,13 +115,10 @@ def _check_compatible(out: Path, plan: dict[str, Any]) -> None:
         return
     if old.get("params_digest") != plan["params_digest"]:
         diff = ", ".join(
-            f"{OPTION_NAMES.get(k, k)} {old['params'].get(k)!r} -> {v!r}"
-            for k, v in plan["params"].items()
-            if old["params"].get(k) != v
+            f"{OPTION_NAMES.get(k, k)} {old['params'].get(k)!r} -> {v!r}" for k, v in plan["params"].items() if old["params"].get(k) != v
         )
         raise InvalidInputError(
-            f"{out} holds a run made with other parameters ({diff}; earlier -> now); use --overwrite to start over, "
-            "or another --out"
+            f"{out} holds a run made with other parameters ({diff}; earlier -> now); use --overwrite to start over, or another --out"
         )
     if old.get("plan_digest") != plan["plan_digest"]:
         raise InvalidInputError(
@@ -311,9 +306,7 @@ def _run_locked(
     )  # fmt: skip
 
 
-def merge_farm(
-    inputs: Sequence[str | os.PathLike], out: str | os.PathLike | None = None, *, progress: bool = True
-) -> FarmSummary:
+def merge_farm(inputs: Sequence[str | os.PathLike], out: str | os.PathLike | None = None, *, progress: bool = True) -> FarmSummary:
     """Join the outputs of ``--shard I/N`` tasks into one finished data set.
 
     Parameters

@@ -75,7 +75,9 @@ def farm_datasets(
                                   distributions=distributions, label=label, backend=backend)  # fmt: skip
     b = len(clouds)
     f64 = lambda values: np.asarray(values, dtype=np.float64).reshape(b)  # noqa: E731
-    optional = {key: f64([c.extra[key] for c in clouds]) for key in ("hidden_below_m", "width_scale") if getattr(distributions, key) is not None}
+    optional = {
+        key: f64([c.extra[key] for c in clouds]) for key in ("hidden_below_m", "width_scale") if getattr(distributions, key) is not None
+    }
     for key in kept_return_fields(sensor):  # per point, as the scans hold them
         dtype = POINT_COLUMNS[key].dtype
         optional[key] = np.stack([c.extra["returns"][key] for c in clouds]).astype(dtype) if b else np.zeros((0, n_points), dtype)

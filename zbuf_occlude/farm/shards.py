@@ -21,9 +21,7 @@ def parse_shard(text: str) -> tuple[int, int]:
     """
     m = re.fullmatch(r"\s*(\d+)\s*/\s*(\d+)\s*", text)
     if not m or not 0 <= int(m.group(1)) < int(m.group(2)):
-        raise InvalidInputError(
-            f"--shard must be I/N with 0 <= I < N (e.g. 3/16 for ${{SLURM_ARRAY_TASK_ID}}/16), got {text!r}"
-        )
+        raise InvalidInputError(f"--shard must be I/N with 0 <= I < N (e.g. 3/16 for ${{SLURM_ARRAY_TASK_ID}}/16), got {text!r}")
     return int(m.group(1)), int(m.group(2))
 
 

@@ -102,7 +102,12 @@ def _scan(obj: FarmObject, params: FarmParams, out: Path, kind: SensorCrops, mes
     n_visible = np.zeros(n_scans, dtype=np.int64)
     n_visible[datasets["pose_index"]] = datasets["n_visible"]
     held = kind.write_rows(out / shard_path(obj), datasets, {**_attrs(obj, params), "sensor": params.sensor.name})  # its point_columns
-    return {**_files_record(out, [shard_path(obj)], n_visible, len(datasets["data"]), params.n_points), "n_dense": 0, **_mesh_record(mesh), **held}
+    return {
+        **_files_record(out, [shard_path(obj)], n_visible, len(datasets["data"]), params.n_points),
+        "n_dense": 0,
+        **_mesh_record(mesh),
+        **held,
+    }
 
 
 def _occlude(obj: FarmObject, params: FarmParams, out: Path, kind: StorageKind, mesh_path: Path) -> dict[str, Any]:

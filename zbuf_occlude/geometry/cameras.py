@@ -376,15 +376,15 @@ def view_schedule(spec: str) -> list[tuple[float, float]]:
         return _fibonacci(n)
     listed = spec.count(",") + 1  # counted before the split: a list of 10⁷ poses is refused without making it
     if listed > MAX_VIEWS:
-        raise InvalidInputError(f"bad view schedule {_shown(spec)}: {listed:,} poses listed, more than the {MAX_VIEWS:,} accepted (MAX_VIEWS)")
+        raise InvalidInputError(
+            f"bad view schedule {_shown(spec)}: {listed:,} poses listed, more than the {MAX_VIEWS:,} accepted (MAX_VIEWS)"
+        )
     try:
         poses = [tuple(float(v) for v in item.split(":")) for item in spec.split(",") if item.strip()]
     except ValueError:
         poses = []
     if not poses or any(len(p) != 2 or not all(math.isfinite(v) for v in p) for p in poses):
-        raise InvalidInputError(
-            f"bad view schedule {_shown(spec)}: use paper100, grid25, fibonacci:N or EL:AZ,EL:AZ,... (degrees)"
-        )
+        raise InvalidInputError(f"bad view schedule {_shown(spec)}: use paper100, grid25, fibonacci:N or EL:AZ,EL:AZ,... (degrees)")
     for el, _ in poses:
         if not -90.0 <= el <= 90.0:
             raise InvalidInputError(f"bad view schedule {_shown(spec)}: elevation {el} outside [-90, 90]")

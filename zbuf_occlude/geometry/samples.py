@@ -167,9 +167,7 @@ def topup_rng(seed: int, key: int, pose_index: int, round_index: int) -> np.rand
     return derive_rng(seed, key, TOPUP_STREAM, pose_index, round_index)
 
 
-def draw_sample(
-    visible_index: NDArray[np.int64], n_points: int, rng: np.random.Generator
-) -> tuple[NDArray[np.int64], int]:
+def draw_sample(visible_index: NDArray[np.int64], n_points: int, rng: np.random.Generator) -> tuple[NDArray[np.int64], int]:
     """Draw ``n_points`` indices without replacement from ``visible_index``.
 
     If fewer are visible, all of them are taken once and the rest are repeats drawn

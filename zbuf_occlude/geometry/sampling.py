@@ -145,9 +145,7 @@ def check_seed(seed: object, *, name: str = "seed") -> SeedLike:
     if seed is None or isinstance(seed, np.random.Generator):
         return seed
     if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, numbers.Integral):
-        raise InvalidInputError(
-            f"{name} must be a non-negative integer (or None, or a numpy Generator), got {seed!r}"
-        )
+        raise InvalidInputError(f"{name} must be a non-negative integer (or None, or a numpy Generator), got {seed!r}")
     if seed < 0:
         raise InvalidInputError(f"{name} must be a non-negative integer, got {seed}")
     if seed > MAX_SEED:
@@ -214,8 +212,7 @@ def sample_faces(
     seed = check_seed(seed)
     if (count is None) == (density is None):
         raise InvalidInputError(
-            f"give exactly one of count (points) and density (points per unit area), got count={count!r}, "
-            f"density={density!r}"
+            f"give exactly one of count (points) and density (points per unit area), got count={count!r}, density={density!r}"
         )
     if count is not None:
         count = _check_count(count)
@@ -295,16 +292,12 @@ def points_from_barycentric(
     if face_index.ndim != 1 or (face_index.size and not np.issubdtype(face_index.dtype, np.integer)):
         raise InvalidInputError(f"face_index must be a (N,) integer array, got {face_index.dtype} {face_index.shape}")
     if barycentric.shape != (len(face_index), 3):
-        raise InvalidInputError(
-            f"barycentric must have shape ({len(face_index)}, 3) to match face_index, got {barycentric.shape}"
-        )
+        raise InvalidInputError(f"barycentric must have shape ({len(face_index)}, 3) to match face_index, got {barycentric.shape}")
     if not np.isfinite(barycentric).all():
         raise InvalidInputError("barycentric contains NaN or inf")
     face_index = face_index.astype(np.int64)
     if len(face_index) and (face_index.min() < 0 or face_index.max() >= len(triangles)):
-        raise InvalidInputError(
-            f"face_index spans [{face_index.min()}, {face_index.max()}] but the mesh has {len(triangles)} faces"
-        )
+        raise InvalidInputError(f"face_index spans [{face_index.min()}, {face_index.max()}] but the mesh has {len(triangles)} faces")
     corners = triangles[face_index]
     return np.einsum("nk,nkj->nj", barycentric, corners)
 

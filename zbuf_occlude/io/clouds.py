@@ -152,9 +152,7 @@ def _check_declared(path: Path, key: str, shape: tuple[int, ...], dtype: np.dtyp
     kinds, rank = _NPZ_ARRAYS[key]
     if dtype.kind not in kinds or len(shape) != rank:
         expected = {1: "(n,)", 2: "(n, 3)"}.get(rank, "0-d")
-        raise DatasetFormatError(
-            f"{path}: {key} is declared {shape} {dtype}, not a {expected} array of {_KIND_NAMES[kinds]}"
-        )
+        raise DatasetFormatError(f"{path}: {key} is declared {shape} {dtype}, not a {expected} array of {_KIND_NAMES[kinds]}")
     if key == "points" and (shape[1] != 3 or shape[0] > MAX_NPZ_POINTS):
         raise DatasetFormatError(f"{path}: points is declared {shape}, not (n, 3) with n at most {MAX_NPZ_POINTS:,}")
 

@@ -91,9 +91,7 @@ def _check_dataset(ds: Any, path: Path, name: str, columns: Mapping[str, Column]
     for i in range(dcpl.get_nfilters()):
         code = dcpl.get_filter(i)[0]
         if code not in KNOWN_FILTERS:
-            raise DatasetFormatError(
-                f"{where} uses the HDF5 filter {code}; only {', '.join(KNOWN_FILTERS.values())} are read"
-            )
+            raise DatasetFormatError(f"{where} uses the HDF5 filter {code}; only {', '.join(KNOWN_FILTERS.values())} are read")
     _check_stored_size(ds, where, compressed=dcpl.get_nfilters() > 0)
     kind = _kind(ds.dtype)
     if kind is None:
@@ -158,9 +156,7 @@ def check_hdf5(f: Any, path: str | os.PathLike, columns: Mapping[str, Column] | 
             link = group.id.links.get_info(name.encode("utf-8")).type
             if link != h5l.TYPE_HARD:
                 what = {h5l.TYPE_SOFT: "a soft link", h5l.TYPE_EXTERNAL: "an external link (to another file)"}
-                raise DatasetFormatError(
-                    f"the HDF5 file {path}: {full!r} is {what.get(link, f'a link of type {link}')}; links are refused"
-                )
+                raise DatasetFormatError(f"the HDF5 file {path}: {full!r} is {what.get(link, f'a link of type {link}')}; links are refused")
             cls = group.get(name, getclass=True)
             if cls is h5py.Group:
                 if full.count("/") > 1:  # a data set's files are flat; a deeper tree is not ours
@@ -172,9 +168,7 @@ def check_hdf5(f: Any, path: str | os.PathLike, columns: Mapping[str, Column] | 
                 raise DatasetFormatError(f"the HDF5 file {path}: {full!r} is not a group or a dataset; refused")
 
 
-def open_hdf5(
-    path: str | os.PathLike, columns: Mapping[str, Column] | None = None, *, within: str | os.PathLike | None = None
-) -> Any:
+def open_hdf5(path: str | os.PathLike, columns: Mapping[str, Column] | None = None, *, within: str | os.PathLike | None = None) -> Any:
     """``h5py.File(path, "r")`` after :func:`check_hdf5`; close it (or use ``with``).
 
     The file must be a regular file (a FIFO would block HDF5's open; it is refused unopened, by

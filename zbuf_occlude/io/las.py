@@ -281,9 +281,7 @@ def _per_point(value: Any, name: str, n: int, *, kinds: str, low: float, high: f
     if array.shape != shape:
         raise InvalidInputError(f"{name} must have shape {shape}, got {array.shape}")
     if array.size and not (np.all(np.isfinite(array)) and array.min() >= low and array.max() <= high):
-        raise InvalidInputError(
-            f"{name} must be finite and within [{low:g}, {high:g}], got values in [{array.min()}, {array.max()}]"
-        )
+        raise InvalidInputError(f"{name} must be finite and within [{low:g}, {high:g}], got values in [{array.min()}, {array.max()}]")
     return array.astype(dtype)
 
 

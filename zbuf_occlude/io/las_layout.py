@@ -178,25 +178,19 @@ def parse_header(fh: BinaryIO, size: int, name: str) -> LasLayout:
         raise InvalidInputError(f"{name}: records of {record_length} bytes, fewer than point format {point_format_id}'s "
                                 f"{_RECORD_SIZES[point_format_id]}")  # fmt: skip
     if not (np.all(np.isfinite(scales)) and np.all(scales != 0) and np.all(np.isfinite(offsets))):
-        raise InvalidInputError(
-            f"{name}: scale factors {scales.tolist()} or offsets {offsets.tolist()} are not finite and non-zero"
-        )
+        raise InvalidInputError(f"{name}: scale factors {scales.tolist()} or offsets {offsets.tolist()} are not finite and non-zero")
     evlrs = first_evlr = 0
     if minor >= 4:
         if len(head) < _HEADER_SIZES[4]:
             raise InvalidInputError(f"{name}: truncated LAS 1.4 header ({len(head)} bytes)")
         _, first_evlr, evlrs, count = _HEADER_14.unpack_from(head, _HEADER.size)
     if n_vlrs > MAX_VLRS or evlrs > MAX_EVLRS:
-        raise InvalidInputError(
-            f"{name}: declares {n_vlrs:,} VLRs and {evlrs:,} EVLRs; at most {MAX_VLRS} and {MAX_EVLRS} are read"
-        )
+        raise InvalidInputError(f"{name}: declares {n_vlrs:,} VLRs and {evlrs:,} EVLRs; at most {MAX_VLRS} and {MAX_EVLRS} are read")
     if offset > MAX_HEADER_BYTES:
         raise InvalidInputError(f"{name}: {offset:,} bytes before the first point, more than the {MAX_HEADER_BYTES:,} read")
     vlrs = _walk_vlrs(fh, name, header_size, offset, n_vlrs)
     _walk_evlrs(fh, name, size, offset, first_evlr, evlrs)
-    return LasLayout(
-        (major, minor), header_size, offset, point_format_id, compressed, record_length, count, vlrs, evlrs, first_evlr
-    )
+    return LasLayout((major, minor), header_size, offset, point_format_id, compressed, record_length, count, vlrs, evlrs, first_evlr)
 
 
 def _walk_vlrs(fh: BinaryIO, name: str, start: int, end: int, n: int) -> tuple[tuple[bytes, int, int, int], ...]:
@@ -262,9 +256,7 @@ def _laszip_items(fh: BinaryIO, layout: LasLayout, name: str) -> tuple[bytes, in
         raise InvalidInputError(f"{name}: the LASzip VLR is truncated")
     compressor, _, _, _, _, _, chunk_size, _, _, n_items = _LASZIP_VLR.unpack_from(body)
     if not 0 < n_items <= (len(body) - _LASZIP_VLR.size) // _LASZIP_ITEM.size:
-        raise InvalidInputError(
-            f"{name}: the LASzip VLR declares {n_items} items and holds {len(body) - _LASZIP_VLR.size} bytes of them"
-        )
+        raise InvalidInputError(f"{name}: the LASzip VLR declares {n_items} items and holds {len(body) - _LASZIP_VLR.size} bytes of them")
     items = [_LASZIP_ITEM.unpack_from(body, _LASZIP_VLR.size + i * _LASZIP_ITEM.size) for i in range(n_items)]
     # laz-rs picks the layered decompressor when the first item is of version 3 or 4, whatever the compressor says
     layered = items[0][2] in (3, 4)
@@ -337,9 +329,7 @@ def check_laz(fh: BinaryIO, layout: LasLayout, size: int, name: str) -> int:
     table = None if compressor == _POINTWISE else _chunk_table(fh, layout, size, name, vlr)
     variable = compressor != _POINTWISE and chunk_size == _VARIABLE_CHUNKS
     if variable and table is not None and sum(n for n, _ in table) < layout.count:
-        raise InvalidInputError(
-            f"{name}: its LAZ chunk table holds {sum(n for n, _ in table):,} points of the {layout.count:,} declared"
-        )
+        raise InvalidInputError(f"{name}: its LAZ chunk table holds {sum(n for n, _ in table):,} points of the {layout.count:,} declared")
     if items[0][2] not in (3, 4):
         return 0  # point-wise items: one arithmetic-coded stream per chunk, nothing allocated from the data
     # layered chunks: the first point raw, the chunk's point count, then every layer's size

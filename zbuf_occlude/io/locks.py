@@ -86,7 +86,15 @@ def _check_lock_kind(path: Path) -> None:
     except OSError:
         return  # released meanwhile
     if not stat.S_ISREG(mode):
-        kind = "a link" if stat.S_ISLNK(mode) else "a FIFO" if stat.S_ISFIFO(mode) else "a folder" if stat.S_ISDIR(mode) else "not a regular file"
+        kind = (
+            "a link"
+            if stat.S_ISLNK(mode)
+            else "a FIFO"
+            if stat.S_ISFIFO(mode)
+            else "a folder"
+            if stat.S_ISDIR(mode)
+            else "not a regular file"
+        )
         raise UnsafePathError(f"the lock file {path} is {kind}, not a lock of ours; move it away and run again")
 
 

@@ -148,9 +148,7 @@ def check_layout(root: str | os.PathLike, names: Iterable[str] = ()) -> None:
         path_inside(root, name, what=f"the output folder {root}")
 
 
-def remove_dead_temps(
-    folder: str | os.PathLike, targets: Iterable[str] | None = None, *, ours: Callable[[str], bool] | None = None
-) -> int:
+def remove_dead_temps(folder: str | os.PathLike, targets: Iterable[str] | None = None, *, ours: Callable[[str], bool] | None = None) -> int:
     """Remove the temporary files of :func:`~zbuf_occlude.io.atomic.atomic_path` whose writer is
     gone (:func:`~zbuf_occlude.io.atomic.temp_is_orphan`); return how many.
 
@@ -219,7 +217,9 @@ def _name_allowed(rel: str, names: Sequence[re.Pattern[str]]) -> bool:
     return any(p.fullmatch(rel) for p in names)
 
 
-def check_deletable(root: str | os.PathLike, rel: object, names: Sequence[re.Pattern[str]], expected: FileRecord | None, what: str) -> Path | None:
+def check_deletable(
+    root: str | os.PathLike, rel: object, names: Sequence[re.Pattern[str]], expected: FileRecord | None, what: str
+) -> Path | None:
     """The path of ``root/rel`` once every check of :func:`delete_recorded` passes; ``None`` when
     there is nothing to delete.  Check every file first, then :func:`delete_checked` them.
 
@@ -238,7 +238,9 @@ def check_deletable(root: str | os.PathLike, rel: object, names: Sequence[re.Pat
     if not os.path.lexists(path):
         return None
     if path.is_symlink() or not path.is_file():
-        raise UnsafePathError(f"{path} is a link or not a regular file, where a run of ours wrote a file; move it away, or choose another --out")
+        raise UnsafePathError(
+            f"{path} is a link or not a regular file, where a run of ours wrote a file; move it away, or choose another --out"
+        )
     if expected is None:
         raise UnsafePathError(
             f"{path} was not recorded by a run of ours ({what}); it is left as it is: move it away, or choose another --out"

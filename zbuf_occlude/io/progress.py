@@ -32,8 +32,7 @@ from tqdm.std import tqdm
 
 from zbuf_occlude.errors import InvalidInputError
 
-__all__ = ["progress", "LineProgress", "RateAfterFirst", "progress_interval_s", "PROGRESS_INTERVAL_S",
-           "PROGRESS_INTERVAL_ENV"]
+__all__ = ["progress", "LineProgress", "RateAfterFirst", "progress_interval_s", "PROGRESS_INTERVAL_S", "PROGRESS_INTERVAL_ENV"]
 
 #: Seconds between two progress lines in a log: often enough to see a run move, rare enough that a
 #: day-long farm writes a few thousand lines.

@@ -110,11 +110,15 @@ def _read_csv(path: Path, max_rows: int, within) -> NDArray[np.float64]:
             rows = np.loadtxt(io.StringIO(body), delimiter=",", dtype=np.float64, comments=None, ndmin=2, encoding=None)
     except ValueError as exc:  # numpy names the row (0-based after the header) and the column
         reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0].split(";")[0].rstrip(".")
-        raise InvalidInputError(f"{path}: not a ray table of three numbers per row ({reason}; rows count from 0 after the header)") from None
+        raise InvalidInputError(
+            f"{path}: not a ray table of three numbers per row ({reason}; rows count from 0 after the header)"
+        ) from None
     if rows.size == 0:
         return np.zeros((0, 3))
     if rows.shape[1] != len(RAY_TABLE_COLUMNS):
-        raise InvalidInputError(f"{path}: each row must hold {len(RAY_TABLE_COLUMNS)} numbers ({','.join(RAY_TABLE_COLUMNS)}), got {rows.shape[1]}")
+        raise InvalidInputError(
+            f"{path}: each row must hold {len(RAY_TABLE_COLUMNS)} numbers ({','.join(RAY_TABLE_COLUMNS)}), got {rows.shape[1]}"
+        )
     return rows
 
 

@@ -44,8 +44,7 @@ def check_line_text(text: object, *, what: str) -> str:
     bad = control_character(text)
     if bad is not None:
         raise InvalidInputError(
-            f"{what} {text!r} holds the control character U+{ord(bad):04X}; names are written one per line "
-            "(shape_names.txt): rename it"
+            f"{what} {text!r} holds the control character U+{ord(bad):04X}; names are written one per line (shape_names.txt): rename it"
         )
     return text
 

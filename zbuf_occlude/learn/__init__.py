@@ -22,7 +22,9 @@ __all__ = ["require_torch", "RandomOcclusion", "OnTheFlyOccludedDataset", "PoseD
 
 #: Where each lazily imported public name lives.
 _LAZY = {
-    **{name: "zbuf_occlude.learn.on_the_fly" for name in ("RandomOcclusion", "OnTheFlyOccludedDataset", "PoseDistribution", "EpochSampler")},
+    **{
+        name: "zbuf_occlude.learn.on_the_fly" for name in ("RandomOcclusion", "OnTheFlyOccludedDataset", "PoseDistribution", "EpochSampler")
+    },
     "DenseCloud": "zbuf_occlude.pipeline",  # what RandomOcclusion takes; needs no torch
 }
 

@@ -24,9 +24,7 @@ def confusion_matrix(y_true: NDArray[np.integer], y_pred: NDArray[np.integer], n
     return cm
 
 
-def classification_report(
-    y_true: NDArray[np.integer], y_pred: NDArray[np.integer], class_names: Sequence[str]
-) -> dict:
+def classification_report(y_true: NDArray[np.integer], y_pred: NDArray[np.integer], class_names: Sequence[str]) -> dict:
     """Overall accuracy, mean class accuracy (over classes present in ``y_true``), per-class accuracy, confusion.
 
     Returns
@@ -50,9 +48,7 @@ def classification_report(
     }
 
 
-def accuracy_by_elevation(
-    y_true: NDArray[np.integer], y_pred: NDArray[np.integer], elevation_deg: NDArray[np.floating]
-) -> list[dict]:
+def accuracy_by_elevation(y_true: NDArray[np.integer], y_pred: NDArray[np.integer], elevation_deg: NDArray[np.floating]) -> list[dict]:
     """Overall accuracy per camera elevation (rows sorted by elevation, degrees; NaN elevations skipped)."""
     y_true, y_pred, el = np.asarray(y_true), np.asarray(y_pred), np.asarray(elevation_deg, dtype=np.float64)
     rows = []

@@ -72,7 +72,20 @@ from zbuf_occlude.sensors.checks import count, is_number, real, reals
 from zbuf_occlude.visibility.point_splats import PointSurfels, point_surfels
 from zbuf_occlude.visibility.registry import method_info, resolution_option, visible_mask
 
-__all__ = ["PoseDistribution", "RandomOcclusion", "OnTheFlyOccludedDataset", "EpochSampler", "SharedEpoch", "ProcessCache", "DEFAULT_ON_THE_FLY_METHOD", "DEFAULT_DENSE_ON_THE_FLY", "BYTES_PER_ON_THE_FLY_POINT", "PREPARED_CACHE_BYTES", "prepared_bytes", "prepared_cache_bytes"]
+__all__ = [
+    "PoseDistribution",
+    "RandomOcclusion",
+    "OnTheFlyOccludedDataset",
+    "EpochSampler",
+    "SharedEpoch",
+    "ProcessCache",
+    "DEFAULT_ON_THE_FLY_METHOD",
+    "DEFAULT_DENSE_ON_THE_FLY",
+    "BYTES_PER_ON_THE_FLY_POINT",
+    "PREPARED_CACHE_BYTES",
+    "prepared_bytes",
+    "prepared_cache_bytes",
+]
 
 #: The CPU method: exact, threaded Embree, no GL context to carry into forked workers.
 DEFAULT_ON_THE_FLY_METHOD = "embree-fast"
@@ -180,7 +193,9 @@ class PoseDistribution:
         object.__setattr__(self, "uniform_area", _flag(self.uniform_area, "uniform_area"))
         (el0, el1), (az0, az1) = self.elevation_deg, self.azimuth_deg
         if not (-90.0 <= el0 <= el1 <= 90.0) or not (az0 <= az1) or not all(map(math.isfinite, (az0, az1, self.radius))):
-            raise InvalidInputError(f"bad pose distribution: elevation {self.elevation_deg}, azimuth {self.azimuth_deg}, radius {self.radius}")
+            raise InvalidInputError(
+                f"bad pose distribution: elevation {self.elevation_deg}, azimuth {self.azimuth_deg}, radius {self.radius}"
+            )
         camera_on_sphere(0.0, 0.0, self.radius, resolution=8)  # raises CameraError for a radius inside the object
 
     @classmethod
@@ -337,7 +352,9 @@ class RandomOcclusion:
     def _visible(self, key, mesh: trimesh.Trimesh, dense: DenseCloud, camera) -> NDArray[np.bool_]:
         session_of = method_info(self.method).session
         if session_of is None:
-            return visible_mask(mesh, dense.points, camera, self.method, face_index=dense.face_index, **resolution_option(self.method, _RESOLUTION))
+            return visible_mask(
+                mesh, dense.points, camera, self.method, face_index=dense.face_index, **resolution_option(self.method, _RESOLUTION)
+            )
         session = self._sessions.get_or_build(key, lambda: session_of(mesh, dense.points, dense.face_index))
         return session.visible(camera)
 
@@ -589,7 +606,13 @@ class OnTheFlyOccludedDataset(require_torch().utils.data.Dataset):
 
     def __repr__(self) -> str:
         clouds = sum(o.kind is POINT_SET for o in self.objects)
-        method = self.occlusion.method if not clouds else "point-splat" if clouds == len(self.objects) else f"{self.occlusion.method} and point-splat"
+        method = (
+            self.occlusion.method
+            if not clouds
+            else "point-splat"
+            if clouds == len(self.objects)
+            else f"{self.occlusion.method} and point-splat"
+        )
         return f"OnTheFlyOccludedDataset({len(self.objects)} objects, {len(self)} samples/epoch, {method})"
 
 

@@ -109,7 +109,9 @@ class OccludeMesh(BaseTransform):
         if pos is not None and face is None and pos.dim() == 2 and pos.shape[1] == 3:
             return self._forward_points(data, pos)
         if pos is None or face is None or pos.dim() != 2 or pos.shape[1] != 3 or face.dim() != 2 or face.shape[0] != 3:
-            raise InvalidInputError("OccludeMesh needs a mesh Data(pos=(V, 3), face=(3, F)) or a point cloud Data(pos=(N, 3)); got " + repr(data))
+            raise InvalidInputError(
+                "OccludeMesh needs a mesh Data(pos=(V, 3), face=(3, F)) or a point cloud Data(pos=(N, 3)); got " + repr(data)
+            )
         v = pos.detach().cpu().numpy().astype(np.float64)
         f = face.detach().cpu().numpy().T.astype(np.int64)
         key = int.from_bytes(hashlib.blake2b(v.tobytes() + f.tobytes(), digest_size=8).digest(), "little")

@@ -175,7 +175,9 @@ class TrainConfig:
         """The fields that make results differ, for a checkpoint's or a run's settings: all but
         ``exclude``, with recipe options at their :data:`PLAIN_RECIPE` values and ``aspect`` off
         left out (so a config from before those options existed compares equal)."""
-        return {k: v for k, v in self.to_dict().items() if k not in exclude and not (k in _IDENTITY_DEFAULTS and v == _IDENTITY_DEFAULTS[k])}
+        return {
+            k: v for k, v in self.to_dict().items() if k not in exclude and not (k in _IDENTITY_DEFAULTS and v == _IDENTITY_DEFAULTS[k])
+        }
 
 
 @dataclass
@@ -406,7 +408,12 @@ def _resume(run: _Run, last: Path, device: torch.device) -> None:
         )
     for target, key in ((run.model, "model"), (run.opt, "optimizer"), (run.sched, "scheduler")):
         _load_state(last, target, state[key], key)
-    run.start_epoch, run.stale, run.best_score, run.best_state = state["epoch"] + 1, state["stale"], state["best_score"], state["best_model"]
+    run.start_epoch, run.stale, run.best_score, run.best_state = (
+        state["epoch"] + 1,
+        state["stale"],
+        state["best_score"],
+        state["best_model"],
+    )
     result = run.result
     result.history, result.best_epoch, result.best_val_accuracy = state["history"], state["best_epoch"], state["best_val_accuracy"]
     result.best_val_mean_class_accuracy, result.best_val_loss = state["best_val_mean_class_accuracy"], state["best_val_loss"]

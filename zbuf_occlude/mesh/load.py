@@ -83,9 +83,7 @@ _PACKAGE_OF_MODULE = {"PIL": "pillow", "charset_normalizer": "charset-normalizer
 METADATA_KEY = "zbuf_occlude"
 
 
-def _referenced_extent(
-    vertices: NDArray[np.float64], faces: NDArray[np.int64]
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def _referenced_extent(vertices: NDArray[np.float64], faces: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(3,) min and max corner of the vertices used by ``faces``."""
     used = vertices[np.unique(faces)]
     return used.min(axis=0), used.max(axis=0)
@@ -97,9 +95,7 @@ def _face_areas(vertices: NDArray[np.float64], faces: NDArray[np.int64]) -> NDAr
     return 0.5 * np.sqrt(np.einsum("ij,ij->i", cross, cross))
 
 
-def _degenerate_mask(
-    vertices: NDArray[np.float64], faces: NDArray[np.int64], max_extent: float, area_rtol: float
-) -> NDArray[np.bool_]:
+def _degenerate_mask(vertices: NDArray[np.float64], faces: NDArray[np.int64], max_extent: float, area_rtol: float) -> NDArray[np.bool_]:
     repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
     return repeated | (_face_areas(vertices, faces) <= area_rtol * max_extent**2)
 
@@ -142,9 +138,7 @@ def _check(
     if faces.ndim != 2 or faces.shape[1] != 3:
         raise error(f"{what}: faces must be (F, 3) triangles, got shape {faces.shape}")
     if faces.min() < 0 or faces.max() >= len(vertices):
-        raise error(
-            f"{what}: face indices span [{faces.min()}, {faces.max()}] but there are only {len(vertices)} vertices"
-        )
+        raise error(f"{what}: face indices span [{faces.min()}, {faces.max()}] but there are only {len(vertices)} vertices")
     _check_coordinates(vertices, what=what, error=error)
     lo, hi = _referenced_extent(vertices, faces)
     max_extent = float((hi - lo).max())
@@ -152,10 +146,7 @@ def _check(
         raise error(f"{what}: all vertices coincide at {lo.tolist()} (zero extent); nothing to normalise or sample")
     degenerate = _degenerate_mask(vertices, faces, max_extent, area_rtol)
     if degenerate.all():
-        raise error(
-            f"{what}: all {len(faces)} faces are degenerate (repeated vertex index or zero area); "
-            "the mesh has no surface"
-        )
+        raise error(f"{what}: all {len(faces)} faces are degenerate (repeated vertex index or zero area); the mesh has no surface")
     return lo, hi, degenerate
 
 
@@ -207,9 +198,7 @@ def _as_arrays(mesh: trimesh.Trimesh) -> tuple[NDArray[np.float64], NDArray[np.i
     return vertices, faces
 
 
-def _make(
-    vertices: NDArray[np.float64], faces: NDArray[np.int64], metadata: dict[str, Any], provenance: dict[str, Any]
-) -> trimesh.Trimesh:
+def _make(vertices: NDArray[np.float64], faces: NDArray[np.int64], metadata: dict[str, Any], provenance: dict[str, Any]) -> trimesh.Trimesh:
     # process=False: merging duplicated vertices would change ModelNet's triangle soup,
     # and faces must stay in file order so that face_index means the same everywhere.
     out = trimesh.Trimesh(vertices=vertices, faces=faces, process=False, validate=False)
@@ -400,9 +389,7 @@ def load_mesh(
         raise MeshLoadError(f"{path}: is a directory, expected a mesh file")
     suffix = path.suffix.lower()
     if suffix not in SUPPORTED_EXTENSIONS:
-        raise MeshLoadError(
-            f"{path}: unsupported extension {path.suffix!r}; use one of {', '.join(SUPPORTED_EXTENSIONS)}"
-        )
+        raise MeshLoadError(f"{path}: unsupported extension {path.suffix!r}; use one of {', '.join(SUPPORTED_EXTENSIONS)}")
     file_type = SUPPORTED_EXTENSIONS[suffix]
     try:
         loaded = read_trimesh(path, file_type)
@@ -424,9 +411,7 @@ def load_mesh(
             f"install zbuf-occlude's dependencies again (pip install {_PACKAGE_OF_MODULE.get(module, module)})"
         ) from exc
     except Exception as exc:  # trimesh raises a zoo of types (ValueError, IndexError, NameError, KeyError, ...)
-        raise MeshLoadError(
-            f"{path}: cannot parse as {file_type.upper()} ({type(exc).__name__}: {exc})"
-        ) from exc
+        raise MeshLoadError(f"{path}: cannot parse as {file_type.upper()} ({type(exc).__name__}: {exc})") from exc
 
     if not isinstance(loaded, trimesh.Trimesh):
         raise MeshLoadError(f"{path}: trimesh returned a {type(loaded).__name__}, not a triangle mesh")

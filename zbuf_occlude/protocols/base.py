@@ -398,8 +398,15 @@ def run_protocol(
 
 
 def _run_owned(
-    protocol: Protocol, folder: OwnedFolder, objects: list[FarmObject], skipped: Sequence[Any], paths: Sequence[str | os.PathLike],
-    options: ProtocolOptions, *, overwrite: bool, progress: bool,
+    protocol: Protocol,
+    folder: OwnedFolder,
+    objects: list[FarmObject],
+    skipped: Sequence[Any],
+    paths: Sequence[str | os.PathLike],
+    options: ProtocolOptions,
+    *,
+    overwrite: bool,
+    progress: bool,
 ) -> ProtocolRun:
     """:func:`run_protocol` once ``--out`` is held."""
     out = folder.root

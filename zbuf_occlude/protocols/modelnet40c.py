@@ -197,7 +197,9 @@ def _cartesian(rpa: NDArray[np.float64]) -> NDArray[np.float64]:
     return out
 
 
-def simulate_lidar(points: NDArray[np.float64], pose: NDArray[np.float64], rs: np.random.RandomState, n_points: int = LIDAR_POINTS) -> NDArray[np.float64]:
+def simulate_lidar(
+    points: NDArray[np.float64], pose: NDArray[np.float64], rs: np.random.RandomState, n_points: int = LIDAR_POINTS
+) -> NDArray[np.float64]:
     """``generate_c.py::simulate_lidar``: 1° rings around the sensor, ``n_points`` drawn with replacement.
 
     Returns
@@ -238,7 +240,9 @@ def _their_mesh(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     return trimesh.Trimesh(normalize(np.asarray(mesh.vertices, dtype=np.float64)), np.asarray(mesh.faces), process=False)
 
 
-def occlusion_sample(mesh: trimesh.Trimesh, severity: int, rs: np.random.RandomState, *, cull_back_faces: bool = True) -> tuple[NDArray[np.float32], dict]:
+def occlusion_sample(
+    mesh: trimesh.Trimesh, severity: int, rs: np.random.RandomState, *, cull_back_faces: bool = True
+) -> tuple[NDArray[np.float32], dict]:
     """One ``data_occlusion_<severity>.npy`` row: (1024, 3) float32, and the camera it was seen from."""
     extrinsic = occlusion_pose(severity, rs)
     pts, n_visible = depth_cloud(_their_mesh(mesh), extrinsic, rs, cull_back_faces=cull_back_faces)
@@ -246,7 +250,9 @@ def occlusion_sample(mesh: trimesh.Trimesh, severity: int, rs: np.random.RandomS
     return out, {"extrinsics": extrinsic[:3], "K": intrinsics(), "n_visible": n_visible}
 
 
-def lidar_sample(mesh: trimesh.Trimesh, severity: int, rs: np.random.RandomState, *, cull_back_faces: bool = True) -> tuple[NDArray[np.float32], dict]:
+def lidar_sample(
+    mesh: trimesh.Trimesh, severity: int, rs: np.random.RandomState, *, cull_back_faces: bool = True
+) -> tuple[NDArray[np.float32], dict]:
     """One ``data_lidar_<severity>.npy`` row: (768, 3) float32, and the sensor pose."""
     extrinsic, pose = lidar_pose(severity, rs)
     pts, n_visible = depth_cloud(_their_mesh(mesh), extrinsic, rs, cull_back_faces=cull_back_faces)

@@ -80,9 +80,7 @@ log = logging.getLogger(__name__)
 #: Field names of an SUO point record, in file order.
 SUO_FIELDS = ("t", "intensity", "id", "x", "y", "z", "azimuth", "range", "pid")
 #: SUO binary record: packed (34 bytes), little-endian, the field order above.
-SUO_DTYPE = np.dtype(
-    {"names": list(SUO_FIELDS), "formats": ["<i8", "u1", "u1", "<f4", "<f4", "<f4", "<f4", "<f4", "<i4"]}
-)
+SUO_DTYPE = np.dtype({"names": list(SUO_FIELDS), "formats": ["<i8", "u1", "u1", "<f4", "<f4", "<f4", "<f4", "<f4", "<i4"]})
 #: SUO's six car-type classes (the paper: "every car type counts as car", 188 scans).
 SUO_CAR_CLASSES = ("4wd", "bus", "car", "truck", "ute", "van")
 #: LiDARNet v2 units per metre (SOURCE.md: about 5; median pedestrian ≈ 8.3 units).

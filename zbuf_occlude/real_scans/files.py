@@ -53,8 +53,20 @@ from zbuf_occlude.mesh.scene import up_rotation
 from zbuf_occlude.real_scans.records import RealScan, normalize_points
 from zbuf_occlude.resources import check_memory
 
-__all__ = ["POINT_EXTENSIONS", "UNITS_M", "MAX_FILE_BYTES", "MAX_SCAN_POINTS", "MAX_ARRAY_BYTES", "MAX_LINE_BYTES",
-           "row_capacity", "read_points", "read_lines", "scan_digest", "units_to_m", "load_scan_folder"]
+__all__ = [
+    "POINT_EXTENSIONS",
+    "UNITS_M",
+    "MAX_FILE_BYTES",
+    "MAX_SCAN_POINTS",
+    "MAX_ARRAY_BYTES",
+    "MAX_LINE_BYTES",
+    "row_capacity",
+    "read_points",
+    "read_lines",
+    "scan_digest",
+    "units_to_m",
+    "load_scan_folder",
+]
 
 log = logging.getLogger(__name__)
 
@@ -248,7 +260,9 @@ def _read_pcd(path: Path, raw: bytes) -> NDArray[np.float64]:
             raise InvalidInputError(f"{path}: PCD ascii rows are not numbers in the header's layout") from None
         return np.stack(cols, axis=1)
     if mode != "binary":
-        raise InvalidInputError(f"{path}: PCD DATA {mode or '(none)'} is not supported (ascii or binary; convert binary_compressed with pcl_convert_pcd_ascii_binary)")
+        raise InvalidInputError(
+            f"{path}: PCD DATA {mode or '(none)'} is not supported (ascii or binary; convert binary_compressed with pcl_convert_pcd_ascii_binary)"
+        )
     try:
         dtype = np.dtype([(f, _PCD_TYPES[(t.upper(), s)], (c,)) for f, s, t, c in zip(fields, sizes, types, counts)])
     except (KeyError, TypeError, ValueError):

@@ -9,7 +9,16 @@ from zbuf_occlude.render.context import context_info, create_context, shared_con
 from zbuf_occlude.render.moderngl_backend import DepthRender, ModernGLRenderer, PointBuffer
 from zbuf_occlude.render.renderer_cache import renderer_for
 
-__all__ = ["create_context", "shared_context", "context_info", "ModernGLRenderer", "DepthRender", "PointBuffer", "render_depth", "renderer_for"]
+__all__ = [
+    "create_context",
+    "shared_context",
+    "context_info",
+    "ModernGLRenderer",
+    "DepthRender",
+    "PointBuffer",
+    "render_depth",
+    "renderer_for",
+]
 
 
 def render_depth(mesh, camera, backend: str = "moderngl"):

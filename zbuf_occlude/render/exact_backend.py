@@ -202,13 +202,20 @@ class ExactMesh:
             self._stamp(stamps, "points")
             words, n_global = self._read_back(points)
             self._stamp(stamps, "read back")
-        self.last_stats = {"tiles": n_tiles, "entries": int(counts.sum()), "global_faces": n_global, "max_per_tile": int(counts.max(initial=0))}
+        self.last_stats = {
+            "tiles": n_tiles,
+            "entries": int(counts.sum()),
+            "global_faces": n_global,
+            "max_per_tile": int(counts.max(initial=0)),
+        }
         visible, cpu = _unpack(words, n)
         self._stamp(stamps, "unpack")
         self.last_timings = {stage: t - stamps[k][1] for k, (stage, t) in enumerate(stamps[1:])}
         return visible, cpu
 
-    def _uniforms(self, camera: Camera, points: ExactPoints, *, tolerance: float, edge_sin: float, tile: int, tiles: tuple[int, int]) -> dict:
+    def _uniforms(
+        self, camera: Camera, points: ExactPoints, *, tolerance: float, edge_sin: float, tile: int, tiles: tuple[int, int]
+    ) -> dict:
         """The uniforms of the three shaders (each takes the ones it declares)."""
         width, height = camera.resolution
         eye = np.asarray(camera.eye, dtype=np.float64)
@@ -303,8 +310,21 @@ class ExactMesh:
     def release(self) -> None:
         """Free the GL objects of this mesh."""
         with self.ctx:
-            for obj in (self._triangles, self._planes, self._bin_faces, self._global, self._global_read, self._params,
-                        self._count, self._count_read, self._starts, self._list, self._bin_count, self._bin_fill, self._points):
+            for obj in (
+                self._triangles,
+                self._planes,
+                self._bin_faces,
+                self._global,
+                self._global_read,
+                self._params,
+                self._count,
+                self._count_read,
+                self._starts,
+                self._list,
+                self._bin_count,
+                self._bin_fill,
+                self._points,
+            ):
                 if obj is not None:
                     obj.release()
 

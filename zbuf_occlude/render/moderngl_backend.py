@@ -142,9 +142,7 @@ class ModernGLRenderer:
         vertices = np.asarray(mesh.vertices)
         if not (np.isfinite(vertices).all() and np.abs(vertices).max(initial=0.0) <= MAX_ABS_COORDINATE):
             # float32 on the GPU: NaN, inf or |x| > 3.4e38 would be drawn as garbage, silently.
-            raise InvalidInputError(
-                f"cannot render a mesh with NaN, inf or beyond-float32 (> {MAX_ABS_COORDINATE:.3g}) vertex coordinates"
-            )
+            raise InvalidInputError(f"cannot render a mesh with NaN, inf or beyond-float32 (> {MAX_ABS_COORDINATE:.3g}) vertex coordinates")
         self.n_faces = len(faces)
         self.ctx = context or shared_context()
         triangles = np.asarray(mesh.triangles)
@@ -299,7 +297,9 @@ class ModernGLRenderer:
             points.visible_bits.clear()
             dispatch(shader, n, "point_offset")
             self.ctx.memory_barrier()
-            words = np.frombuffer(read_through(self.ctx, points.visible_bits, points.bits_read, points.bits_read.size), dtype=np.uint32).reshape(2, -1)
+            words = np.frombuffer(
+                read_through(self.ctx, points.visible_bits, points.bits_read, points.bits_read.size), dtype=np.uint32
+            ).reshape(2, -1)
         bits = np.unpackbits(words.view(np.uint8), axis=1, count=n, bitorder="little").view(bool)
         return bits[0], bits[1]
 

@@ -366,4 +366,3 @@ def shared_point_sprites() -> PointSpriteRenderer:
                 renderer.release()
             renderer = _shared[key] = PointSpriteRenderer(context=ctx)
         return renderer
-

@@ -36,9 +36,7 @@ def _import_pyrender():
     try:
         import pyrender
     except Exception as exc:  # ImportError, or PyOpenGL failing to find EGL
-        raise BackendUnavailable(
-            f"pyrender backend unavailable ({type(exc).__name__}: {exc}); {install_hint('pyrender')}"
-        ) from exc
+        raise BackendUnavailable(f"pyrender backend unavailable ({type(exc).__name__}: {exc}); {install_hint('pyrender')}") from exc
     return pyrender
 
 
@@ -93,9 +91,7 @@ class PyrenderRenderer:
         K = camera.K
         # pyrender's principal point counts from the image's corner (centred: W/2), K's from the
         # first pixel's centre (centred: (W - 1)/2, OpenCV): half a pixel apart
-        pr_camera = pr.IntrinsicsCamera(
-            fx=K[0, 0], fy=K[1, 1], cx=K[0, 2] + 0.5, cy=K[1, 2] + 0.5, znear=camera.znear, zfar=camera.zfar
-        )
+        pr_camera = pr.IntrinsicsCamera(fx=K[0, 0], fy=K[1, 1], cx=K[0, 2] + 0.5, cy=K[1, 2] + 0.5, znear=camera.znear, zfar=camera.zfar)
         if self._camera_node is not None:
             self._scene.remove_node(self._camera_node)
         # pyrender wants the camera-to-world pose in OpenGL's camera frame.

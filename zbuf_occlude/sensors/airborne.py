@@ -209,20 +209,26 @@ class AirborneScanner:
         text(self.source, "source")
         per_line = self.pulse_rate_hz / self.line_rate_hz  # checked before pulses_per_line rounds it
         if not per_line <= MAX_SENSOR_RAYS or self.pulses_per_line < 1:
-            raise InvalidInputError(f"pulse_rate_hz / line_rate_hz must give 1 to {MAX_SENSOR_RAYS:,} pulses per line, got {shown(per_line)}")
+            raise InvalidInputError(
+                f"pulse_rate_hz / line_rate_hz must give 1 to {MAX_SENSOR_RAYS:,} pulses per line, got {shown(per_line)}"
+            )
         object.__setattr__(self, "n_lines", count(self.n_lines, "n_lines", low=1, high=MAX_FLIGHT_LINES))
         headings = (self.headings_deg,) if is_number(self.headings_deg) else self.headings_deg
         headings = reals(headings, "headings_deg", max_length=MAX_FLIGHT_LINES, expected="one or more finite angles")
         object.__setattr__(self, "headings_deg", headings)
         if self.n_lines * len(self.headings_deg) > MAX_FLIGHT_LINES:
-            raise InvalidInputError(f"{self.n_lines} lines x {len(self.headings_deg)} headings is more than {MAX_FLIGHT_LINES} flight lines")
+            raise InvalidInputError(
+                f"{self.n_lines} lines x {len(self.headings_deg)} headings is more than {MAX_FLIGHT_LINES} flight lines"
+            )
         self._check_returns()
 
     def _check_returns(self) -> None:
         """The footprint and multi-return fields (class docstring), as the spinning :class:`~.lidar.Lidar` checks them."""
         check_resolved_footprint(self, "an airborne footprint")
         if self.max_returns == 1 and self.detection_threshold > 0:
-            raise InvalidInputError(f"detection_threshold {shown(self.detection_threshold)} needs max_returns above 1 (it drops the weak echoes of the multi-return model)")
+            raise InvalidInputError(
+                f"detection_threshold {shown(self.detection_threshold)} needs max_returns above 1 (it drops the weak echoes of the multi-return model)"
+            )
 
     @property
     def multi_return(self) -> bool:
@@ -322,7 +328,9 @@ class AirborneScanner:
         """A copy with some fields changed."""
         return replace(self, **changes)
 
-    def ground_rays(self, center_xy, half_size_m: float, phase_s: float = 0.0, *, with_time: bool = False) -> tuple[NDArray[np.float64], ...]:
+    def ground_rays(
+        self, center_xy, half_size_m: float, phase_s: float = 0.0, *, with_time: bool = False
+    ) -> tuple[NDArray[np.float64], ...]:
         """The pulses whose flat-ground footprint falls in the square ``center ± half_size_m``.
 
         Parameters
@@ -354,7 +362,9 @@ class AirborneScanner:
         cx, cy = (float(v) for v in center_xy)
         r = float(half_size_m)
         if not (math.isfinite(cx) and math.isfinite(cy) and math.isfinite(r) and r > 0 and math.isfinite(phase_s)):
-            raise InvalidInputError(f"ground_rays needs a finite centre, phase and half size > 0, got {shown(center_xy)}, {shown(phase_s)}, {shown(half_size_m)}")
+            raise InvalidInputError(
+                f"ground_rays needs a finite centre, phase and half size > 0, got {shown(center_xy)}, {shown(phase_s)}, {shown(half_size_m)}"
+            )
         m = self.pulses_per_line
         period = 1.0 / self.line_rate_hz
         s = math.radians(self.swath_deg)

@@ -112,7 +112,9 @@ def object_crop(
     reach = placement.size_m * max(1.0, width_scale) * (1.0 if profile is None else max(1.0, *profile))
     if isinstance(sensor, AirborneScanner):
         if placement.visible_share < 1.0:
-            raise InvalidInputError("visible_across_sight hides a side of the object from a sensor on the ground; an airborne scanner flies over it")
+            raise InvalidInputError(
+                "visible_across_sight hides a side of the object from a sensor on the ground; an airborne scanner flies over it"
+            )
         return _airborne_crop(mesh, sensor, placement, seed=seed, occluders=occluders, class_name=class_name, offset_m=d * math.sin(az), size=size,
                               reach=reach)  # fmt: skip
     obj = SceneObject(mesh, class_name, (d * math.cos(az), d * math.sin(az)), placement.yaw_deg, size, width_scale=width_scale,
@@ -262,7 +264,9 @@ def side_occluders(world_vertices: NDArray[np.floating], sensor_m, visible: floa
     return out
 
 
-def _crop_object(scene: ScanScene, full: Scan, placement: Placement, sensor_world, offset=None, per_return: tuple[str, ...] = ()) -> CropSample:
+def _crop_object(
+    scene: ScanScene, full: Scan, placement: Placement, sensor_world, offset=None, per_return: tuple[str, ...] = ()
+) -> CropSample:
     """The crop of object 1 from ``full`` (its points in the world frame, less ``offset`` when
     given): the object's returns (those at least ``hidden_below_m`` above the ground, when the
     placement gives it) and, with a ``ground_margin_m`` in the placement, the ground returns
@@ -383,7 +387,9 @@ def lidar_object_samples(
         mesh = load_mesh(mesh)
     fields = kept_return_fields(sensor)
     out = []
-    for k, crop, rng in object_crops(mesh, sensor, distributions, name=name, n_samples=n_samples, seed=seed, class_name=class_name, backend=backend):
+    for k, crop, rng in object_crops(
+        mesh, sensor, distributions, name=name, n_samples=n_samples, seed=seed, class_name=class_name, backend=backend
+    ):
         placement = crop.placement
         n = len(crop.scan)
         if n == 0:
@@ -405,10 +411,13 @@ def lidar_object_samples(
                 source=name,
                 sample_index=k,
                 n_visible=n,
-                extra={**placement.to_dict(), "n_returns": n, "sensor": sensor.name, "ring": None if crop.scan.ring is None else crop.scan.ring[chosen],
-                       **({"returns": {f: getattr(crop.scan, f)[chosen] for f in fields}} if fields else {})},
+                extra={
+                    **placement.to_dict(),
+                    "n_returns": n,
+                    "sensor": sensor.name,
+                    "ring": None if crop.scan.ring is None else crop.scan.ring[chosen],
+                    **({"returns": {f: getattr(crop.scan, f)[chosen] for f in fields}} if fields else {}),
+                },
             )
         )
     return out
-
-

@@ -108,12 +108,14 @@ class DepthCamera:
         if isinstance(self.noise, str):
             text(self.noise, "noise", choices=("nguyen2012", "none"))
         else:
-            object.__setattr__(self, "noise", real(self.noise, "noise", low=0.0, high=MAX_RANGE_M, expected="'nguyen2012', 'none' or a σ >= 0 metres"))
+            object.__setattr__(
+                self, "noise", real(self.noise, "noise", low=0.0, high=MAX_RANGE_M, expected="'nguyen2012', 'none' or a σ >= 0 metres")
+            )
         numbers = {
             "quantization_m_per_m2": {"low": 0.0, "high": 1.0, "high_open": True},
             "max_incidence_deg": {"low": 0.0, "low_open": True, "high": 90.0},
             "dropout": {"low": 0.0, "high": 1.0, "high_open": True},
-        }  # fmt: skip
+        }
         for name, bounds in numbers.items():
             object.__setattr__(self, name, real(getattr(self, name), name, **bounds))
         text(self.source, "source")

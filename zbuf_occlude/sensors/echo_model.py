@@ -103,7 +103,9 @@ def _transmittance_table(transmittance, n_ids: int) -> NDArray[np.float64]:
     return tau
 
 
-def strongest_echo(built: BuiltScene, rays, face, t, k: int, rho, separation: float = 0.0, weights=None) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+def strongest_echo(
+    built: BuiltScene, rays, face, t, k: int, rho, separation: float = 0.0, weights=None
+) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
     """Resolve each beam's ``k`` footprint rays into one return: the strongest echo.
 
     Each ray carries ``1/k`` of the beam's energy (``weights`` (k,) instead, when given: a
@@ -245,9 +247,13 @@ def echo_returns(
     min_range_m, max_range_m = range_limits_m
     tau = None if through is None else np.asarray(through.transmittance, dtype=np.float64)
     if tau is not None and tau.shape != (len(built.objects) + 1,):
-        raise InvalidInputError(f"transmittance must hold one value per object id ({len(built.objects) + 1}: ground + objects), got shape {tau.shape}")
+        raise InvalidInputError(
+            f"transmittance must hold one value per object id ({len(built.objects) + 1}: ground + objects), got shape {tau.shape}"
+        )
     if tau is not None and tau.any():
-        sub, f_all, r_all = cast_embree_beyond(built.mesh, through.origins, rays, face, t, tau[built.face_object] > 0, max_hits=through.max_hits)
+        sub, f_all, r_all = cast_embree_beyond(
+            built.mesh, through.origins, rays, face, t, tau[built.face_object] > 0, max_hits=through.max_hits
+        )
         share = attenuate_along_subray(sub, r_all, built.face_object[f_all].astype(np.int64), tau)
         kept = np.flatnonzero((r_all >= min_range_m) & (r_all <= max_range_m))
         ray, f, r, share = sub[kept], f_all[kept], r_all[kept], share[kept]

@@ -139,30 +139,20 @@ def _columns(**columns: ArrayLike) -> dict[str, np.ndarray]:
     for name, value in columns.items():
         a = np.asarray(value)
         integer = name in ("pulse", "surface", "subray")
-        if (
-            a.ndim != 1
-            or (integer and a.dtype.kind not in "iu")
-            or (not integer and a.dtype.kind not in "iuf")
-        ):
+        if a.ndim != 1 or (integer and a.dtype.kind not in "iu") or (not integer and a.dtype.kind not in "iuf"):
             kind = "an integer" if integer else "a number"
-            raise InvalidInputError(
-                f"{name} must be {kind} array of shape (M,), got shape {a.shape} dtype {a.dtype}"
-            )
+            raise InvalidInputError(f"{name} must be {kind} array of shape (M,), got shape {a.shape} dtype {a.dtype}")
         if integer:
             a = a.astype(np.int64, copy=False)
         else:
             a = a.astype(np.float64, copy=False)
             bad = int(np.sum(~(np.isfinite(a) & (a >= 0))))
             if bad:
-                raise InvalidInputError(
-                    f"{name} must be finite and >= 0, got {bad} values that are not"
-                )
+                raise InvalidInputError(f"{name} must be finite and >= 0, got {bad} values that are not")
         out[name] = a
     lengths = {name: len(a) for name, a in out.items()}
     if len(set(lengths.values())) > 1:
-        raise InvalidInputError(
-            f"the per-hit arrays must have one length, got {lengths}"
-        )
+        raise InvalidInputError(f"the per-hit arrays must have one length, got {lengths}")
     return out
 
 
@@ -179,9 +169,7 @@ def _group_starts(*keys: NDArray) -> NDArray[np.int64]:
 def _rank_in_run(*keys: NDArray) -> NDArray[np.int64]:
     """(n,) int64: the position of each row within its run of equal ``keys`` (0 for the first)."""
     starts = _group_starts(*keys)
-    return np.arange(len(keys[0])) - np.repeat(
-        starts, np.diff(starts, append=len(keys[0]))
-    )
+    return np.arange(len(keys[0])) - np.repeat(starts, np.diff(starts, append=len(keys[0])))
 
 
 def number_returns(pulse: NDArray) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
@@ -268,9 +256,7 @@ def _hit_order(p: NDArray, r: NDArray, e: NDArray, s: NDArray) -> tuple[NDArray[
     return order, po, ro, e[order], s[order]
 
 
-def _first_max(
-    values: NDArray, starts: NDArray[np.int64], group: NDArray[np.int64]
-) -> NDArray[np.int64]:
+def _first_max(values: NDArray, starts: NDArray[np.int64], group: NDArray[np.int64]) -> NDArray[np.int64]:
     """Per group (rows ``starts[g]`` to the next start, ``group`` the group of each row): the
     first row holding the group's greatest value."""
     at_max = np.flatnonzero(values == np.maximum.reduceat(values, starts)[group])
@@ -471,15 +457,11 @@ def attenuate_along_subray(
     except (TypeError, ValueError):
         t = np.full(1, np.nan)
     if t.ndim != 1 or not np.all((t >= 0) & (t <= 1)):
-        raise InvalidInputError(
-            f"surface_transmittance must be a (S,) array of values in [0, 1], got shape {t.shape}"
-        )
+        raise InvalidInputError(f"surface_transmittance must be a (S,) array of values in [0, 1], got shape {t.shape}")
     cols = _columns(subray=subray, range_m=range_m, surface=surface)
     ids = cols["surface"]
     if ids.size and (ids.min() < 0 or ids.max() >= len(t)):
-        raise InvalidInputError(
-            f"surface ids must lie in [0, {len(t)}) to index surface_transmittance, got {ids.min()}..{ids.max()}"
-        )
+        raise InvalidInputError(f"surface ids must lie in [0, {len(t)}) to index surface_transmittance, got {ids.min()}..{ids.max()}")
     order = _sorted_order(cols["range_m"], cols["subray"])
     ray, r, tr = cols["subray"][order], cols["range_m"][order], t[ids[order]]
     # products over the nearer hits of each sub-ray as sums over earlier rows: of log t for

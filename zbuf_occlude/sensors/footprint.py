@@ -108,9 +108,7 @@ def check_resolved_footprint(sensor, footprint: str) -> None:
         raise InvalidInputError(f"footprint_rays {k} needs max_returns above 1 ({footprint} is resolved into returns)")
 
 
-def footprint_offsets(
-    n_subrays: int, divergence_deg: float, *, profile: str = "tophat"
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def footprint_offsets(n_subrays: int, divergence_deg: float, *, profile: str = "tophat") -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The sub-rays of one pulse: angular offsets from its axis and their energy weights.
 
     Parameters
@@ -146,9 +144,7 @@ def footprint_offsets(
     divergence = real(divergence_deg, "divergence_deg", low=0.0, high=90.0)
     text(profile, "profile", choices=PROFILES)
     if k > 1 and divergence == 0.0:
-        raise InvalidInputError(
-            f"n_subrays {k} needs divergence_deg > 0 (the sub-rays would all be the centre ray)"
-        )
+        raise InvalidInputError(f"n_subrays {k} needs divergence_deg > 0 (the sub-rays would all be the centre ray)")
     radius = [0.0]
     azimuth = [np.zeros(1)]
     bounds = [1]  # cells inside each ring's outer radius, centre first
@@ -178,15 +174,8 @@ def _finite(value: ArrayLike, name: str, shape: str, n_min: int) -> NDArray[np.f
         a = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
         a = np.full((0, 0), np.nan)
-    if (
-        a.ndim != 2
-        or a.shape[1] != columns
-        or len(a) < n_min
-        or not np.all(np.isfinite(a))
-    ):
-        raise InvalidInputError(
-            f"{name} must be a finite {shape} number array, got {type(value).__name__} of shape {np.shape(a)}"
-        )
+    if a.ndim != 2 or a.shape[1] != columns or len(a) < n_min or not np.all(np.isfinite(a)):
+        raise InvalidInputError(f"{name} must be a finite {shape} number array, got {type(value).__name__} of shape {np.shape(a)}")
     return a
 
 
@@ -239,10 +228,7 @@ def subray_directions(directions: ArrayLike, offsets: ArrayLike) -> NDArray[np.f
     phi = off[ring, 1]
     cos, sin = np.cos(phi), np.sin(phi)
     # (R, N): the beams along the contiguous inner axis, so each operation is one long loop
-    rays = [
-        dc + tan[:, None] * (cos[:, None] * uc + sin[:, None] * vc)
-        for dc, uc, vc in zip((dx, dy, dz), u, v)
-    ]
+    rays = [dc + tan[:, None] * (cos[:, None] * uc + sin[:, None] * vc) for dc, uc, vc in zip((dx, dy, dz), u, v)]
     for i, component in enumerate(_unit(*rays)):
         out[:, ring, i] = component.T
     return out

@@ -180,14 +180,22 @@ class Lidar:
         object.__setattr__(self, "max_returns", count(self.max_returns, "max_returns", low=1, high=MAX_RETURNS))
         object.__setattr__(self, "range_resolution_m", real(self.range_resolution_m, "range_resolution_m", low=0.0, high=MAX_RANGE_M))
         if self.echo_separation_m > 0 and k == 1:
-            raise InvalidInputError(f"echo_separation_m {self.echo_separation_m} needs footprint_rays above 1 (a footprint of several rays, e.g. footprint_rays 7: mixed pixels come from a wide footprint)")
+            raise InvalidInputError(
+                f"echo_separation_m {self.echo_separation_m} needs footprint_rays above 1 (a footprint of several rays, e.g. footprint_rays 7: mixed pixels come from a wide footprint)"
+            )
         if self.max_returns > 1:
             if self.range_resolution_m <= 0:
-                raise InvalidInputError(f"max_returns {self.max_returns} needs range_resolution_m > 0 (the least range between two returns, c·τ/2)")
+                raise InvalidInputError(
+                    f"max_returns {self.max_returns} needs range_resolution_m > 0 (the least range between two returns, c·τ/2)"
+                )
             if self.echo_separation_m > 0:
-                raise InvalidInputError(f"echo_separation_m {self.echo_separation_m} is for one return per pulse; with max_returns {self.max_returns} use range_resolution_m")
+                raise InvalidInputError(
+                    f"echo_separation_m {self.echo_separation_m} is for one return per pulse; with max_returns {self.max_returns} use range_resolution_m"
+                )
         elif self.range_resolution_m > 0:
-            raise InvalidInputError(f"range_resolution_m {self.range_resolution_m} needs max_returns above 1 (one return per pulse merges echoes by echo_separation_m)")
+            raise InvalidInputError(
+                f"range_resolution_m {self.range_resolution_m} needs max_returns above 1 (one return per pulse merges echoes by echo_separation_m)"
+            )
         if self.min_range_m >= self.max_range_m:
             raise InvalidInputError(f"need min_range_m < max_range_m, got {self.min_range_m} >= {self.max_range_m}")
         if self.firing_rate_hz < self.rotation_hz:
@@ -272,7 +280,9 @@ class Lidar:
         """A copy with some fields changed (``lidar.with_(rotation_hz=20)``)."""
         return replace(self, **changes)
 
-    def rays(self, azimuth_range_deg: tuple[float, float] | None = None) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64]]:
+    def rays(
+        self, azimuth_range_deg: tuple[float, float] | None = None
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64]]:
         """Unit beam directions of one revolution, sensor frame.
 
         Parameters

@@ -17,7 +17,14 @@ import numpy as np
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.scene import check_width_profile
 
-__all__ = ["CropDistributions", "Placement", "DEFAULT_GROUND_REFLECTIVITY", "check_across_sight_width", "check_ground_margin", "draw_placement"]
+__all__ = [
+    "CropDistributions",
+    "Placement",
+    "DEFAULT_GROUND_REFLECTIVITY",
+    "check_across_sight_width",
+    "check_ground_margin",
+    "draw_placement",
+]
 
 #: ρ of the ground plane when a crop models reflectivity: asphalt and concrete in the near infrared, an assumption.
 DEFAULT_GROUND_REFLECTIVITY = 0.15
@@ -242,7 +249,9 @@ class CropDistributions:
         if self.extents_m is not None:
             if np.isscalar(self.extents_m) or len(self.extents_m) != 3:
                 raise InvalidInputError(f"{n('extents_m')} must be three values or intervals (x, y, z), got {self.extents_m!r}")
-            object.__setattr__(self, "extents_m", tuple(_interval(n("extents_m"), v, 0.0, above=True, unit=" metres") for v in self.extents_m))
+            object.__setattr__(
+                self, "extents_m", tuple(_interval(n("extents_m"), v, 0.0, above=True, unit=" metres") for v in self.extents_m)
+            )
         for name, unit in (("reflectivity", ""), ("hidden_below_m", " metres above the ground")):  # optional intervals of values >= 0
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, _interval(n(name), getattr(self, name), 0.0, unit=unit))
@@ -287,5 +296,3 @@ def draw_placement(dist: CropDistributions, rng: np.random.Generator) -> Placeme
         out["visible_across_sight"] = min(1.0, _draw(dist.visible_across_sight, rng))
         out["occluder_side"] = 1.0 if rng.uniform() < 0.5 else -1.0
     return Placement(**out)
-
-

@@ -63,7 +63,9 @@ def sensor_from_name(name: str | os.PathLike):
         spec = read_spec_file(path, what="sensor", yaml_ok=False)
         with located(str(path)):
             if not isinstance(spec, dict):
-                raise InvalidInputError(f"a sensor file must be a JSON object of the sensor's fields, got {type(spec).__name__} {shown(spec)}")
+                raise InvalidInputError(
+                    f"a sensor file must be a JSON object of the sensor's fields, got {type(spec).__name__} {shown(spec)}"
+                )
             kind = text(spec.get("kind", "lidar"), "kind", choices=SENSOR_KINDS)
             cls = {"lidar": Lidar, "airborne": AirborneScanner, "depth_camera": DepthCamera}[kind]
             extra = ("kind", "fit", "preset") if kind == "airborne" else ("kind", "fit")
@@ -75,7 +77,9 @@ def sensor_from_name(name: str | os.PathLike):
             return cls(**_complete(spec, cls))
     if path.suffix.lower() == ".json":
         raise InvalidInputError(f"sensor file {path}: no such file (fit-sensor writes one; or name a preset)")
-    raise InvalidInputError(f"unknown sensor {shown(name)}; use one of {[n for names in preset_names().values() for n in names]} or a .json file")
+    raise InvalidInputError(
+        f"unknown sensor {shown(name)}; use one of {[n for names in preset_names().values() for n in names]} or a .json file"
+    )
 
 
 def sensor_to_json(sensor) -> dict:

@@ -131,7 +131,9 @@ class RayTable:
             a = np.array(a, dtype=np.float64)  # a copy: the caller's array may change
             bad = np.flatnonzero(~np.isfinite(a))
             if len(bad):
-                raise InvalidInputError(f"{name}[{bad[0]}] must be a finite number, got {float(a[bad[0]])!r} ({len(bad):,} rows not finite)")
+                raise InvalidInputError(
+                    f"{name}[{bad[0]}] must be a finite number, got {float(a[bad[0]])!r} ({len(bad):,} rows not finite)"
+                )
             a.flags.writeable = False
             columns[name] = a
         lengths = {len(a) for a in columns.values()}
@@ -140,7 +142,9 @@ class RayTable:
         back = np.flatnonzero(np.diff(columns["time_s"]) < 0)
         if len(back):
             i = back[0] + 1
-            raise InvalidInputError(f"time_s must not decrease: time_s[{i}] = {float(columns['time_s'][i])!r} < time_s[{i - 1}] = {float(columns['time_s'][i - 1])!r}")
+            raise InvalidInputError(
+                f"time_s must not decrease: time_s[{i}] = {float(columns['time_s'][i])!r} < time_s[{i - 1}] = {float(columns['time_s'][i - 1])!r}"
+            )
         out = np.flatnonzero(np.abs(columns["elevation_deg"]) > 90.0)
         if len(out):
             raise InvalidInputError(f"elevation_deg[{out[0]}] must be in [-90, 90], got {float(columns['elevation_deg'][out[0]])!r}")
@@ -195,7 +199,9 @@ class RayTable:
         """A copy with some fields changed, checked again."""
         return replace(self, **changes)
 
-    def rays(self, azimuth_range_deg: tuple[float, float] | None = None) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64]]:
+    def rays(
+        self, azimuth_range_deg: tuple[float, float] | None = None
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64]]:
         """Unit pulse directions, sensor frame, in table order: the contract of :meth:`Lidar.rays <zbuf_occlude.sensors.lidar.Lidar.rays>`.
 
         Parameters

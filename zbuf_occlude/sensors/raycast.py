@@ -84,7 +84,9 @@ def face_normals(mesh: trimesh.Trimesh, face: NDArray[np.int64]) -> NDArray[np.f
     return _normals(mesh)[face]
 
 
-def ray_triangle_f64(origin: NDArray[np.float64], directions: NDArray[np.float64], triangles: NDArray[np.float64], *, edge_epsilon: float = EDGE_EPSILON):
+def ray_triangle_f64(
+    origin: NDArray[np.float64], directions: NDArray[np.float64], triangles: NDArray[np.float64], *, edge_epsilon: float = EDGE_EPSILON
+):
     """Möller–Trumbore ray–triangle test in float64, vectorised.
 
     Parameters
@@ -208,7 +210,9 @@ def _build_intersector(mesh: trimesh.Trimesh):
 _intersector = MeshCache(_build_intersector, 4)
 
 
-def cast_embree(mesh: trimesh.Trimesh, origin: NDArray[np.float64], directions: NDArray[np.float64]) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+def cast_embree(
+    mesh: trimesh.Trimesh, origin: NDArray[np.float64], directions: NDArray[np.float64]
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     """First hit of each ray ``origin + t · directions[i]``, Embree.
 
     Parameters
@@ -310,11 +314,15 @@ def cast_embree_beyond(
     t = np.asarray(t, dtype=np.float64)
     transmits = np.asarray(face_transmits)
     if transmits.dtype != np.bool_ or transmits.shape != (len(mesh.faces),):
-        raise InvalidInputError(f"face_transmits must be ({len(mesh.faces)},) bool, one per face, got shape {transmits.shape} dtype {transmits.dtype}")
+        raise InvalidInputError(
+            f"face_transmits must be ({len(mesh.faces)},) bool, one per face, got shape {transmits.shape} dtype {transmits.dtype}"
+        )
     if int(max_hits) != max_hits or max_hits < 1:
         raise InvalidInputError(f"max_hits must be a whole number >= 1, got {max_hits!r}")
     if step_m is None:
-        step_m = BEYOND_HIT_SHARE * float(np.linalg.norm(np.ptp(np.asarray(mesh.vertices, np.float64), axis=0))) if len(mesh.vertices) else 1.0
+        step_m = (
+            BEYOND_HIT_SHARE * float(np.linalg.norm(np.ptp(np.asarray(mesh.vertices, np.float64), axis=0))) if len(mesh.vertices) else 1.0
+        )
     if not (np.isfinite(step_m) and step_m > 0):
         raise InvalidInputError(f"step_m must be a finite number of metres > 0, got {step_m!r}")
     first = np.flatnonzero(face >= 0)

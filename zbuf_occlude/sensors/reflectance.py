@@ -146,7 +146,7 @@ CLASS_MATERIALS: dict[str, str] = {
     **dict.fromkeys(("grass", "lawn", "turf", "terrain"), "grass"),
     **dict.fromkeys(("soil", "dirt", "earth", "mud"), "soil"),
     **dict.fromkeys(("sand",), "sand"),
-}  # fmt: skip
+}
 
 #: Most characters of a name looked up (a name is a label, not a text).
 _MAX_NAME_CHARS = 256
@@ -311,5 +311,7 @@ def per_class(built: BuiltScene, values: Mapping[str, float], default: float = 0
     classes = ["ground"] + [obj.class_name.lower() for obj in built.objects]
     missing = sorted(set(wanted) - set(classes))
     if missing:
-        raise InvalidInputError(f"no object of the scene has the class {', '.join(map(repr, missing))}; its classes: {', '.join(sorted(set(classes)))}")
+        raise InvalidInputError(
+            f"no object of the scene has the class {', '.join(map(repr, missing))}; its classes: {', '.join(sorted(set(classes)))}"
+        )
     return np.array([wanted.get(c, float(default)) for c in classes])

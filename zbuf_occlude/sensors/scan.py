@@ -367,7 +367,9 @@ def _built(scene) -> BuiltScene:
     if isinstance(scene, trimesh.Trimesh):
         # A bare mesh: metres, world frame as given, object id 1, no ground.
         f = len(scene.faces)
-        return BuiltScene(scene, np.ones(f, np.int32), np.arange(f, dtype=np.int64), [SceneObject(scene)], [np.eye(4), np.eye(4)], [None, scene])
+        return BuiltScene(
+            scene, np.ones(f, np.int32), np.arange(f, dtype=np.int64), [SceneObject(scene)], [np.eye(4), np.eye(4)], [None, scene]
+        )
     if isinstance(scene, BuiltScene):
         return scene
     raise InvalidInputError(f"scan needs a ScanScene or a trimesh.Trimesh, got {type(scene).__name__}")
@@ -387,10 +389,14 @@ def _surface_optics(built: BuiltScene, sensor, backend: str, reflectivity, trans
         raise InvalidInputError(f"{what} is modelled for LiDARs only")
     from zbuf_occlude.sensors.reflectance import SPINNING_WAVELENGTH_NM
 
-    return surface_optics(built, reflectivity, transmittance, wavelength_nm=SPINNING_WAVELENGTH_NM, multi_return=sensor.multi_return, backend=backend)
+    return surface_optics(
+        built, reflectivity, transmittance, wavelength_nm=SPINNING_WAVELENGTH_NM, multi_return=sensor.multi_return, backend=backend
+    )
 
 
-def _echo_returns(built: BuiltScene, sensor: Lidar, rays, face, t, rho, rng, *, origin=None, transmittance=None) -> tuple[NDArray[np.int64], ...]:
+def _echo_returns(
+    built: BuiltScene, sensor: Lidar, rays, face, t, rho, rng, *, origin=None, transmittance=None
+) -> tuple[NDArray[np.int64], ...]:
     """The spinning LiDAR's multi-return model: :func:`~.echo_model.echo_returns` with ``sensor``'s footprint,
     range limits (the receiver's blind zone and reach), range resolution, maximum returns, and
     detection threshold and power noise when ``rho`` is given; the hits behind surfaces of
@@ -543,7 +549,16 @@ def scan(
         hit, face, t, echo_energy = _echo_returns(built, sensor, rays, face, t, rho, rng, origin=origin, transmittance=tau)
     else:
         if k > 1:
-            face, t, fraction = strongest_echo(built, rays, face, t, k, rho, sensor.echo_separation_m, sensor.footprint_weights() if sensor.beam_profile != "tophat" else None)
+            face, t, fraction = strongest_echo(
+                built,
+                rays,
+                face,
+                t,
+                k,
+                rho,
+                sensor.echo_separation_m,
+                sensor.footprint_weights() if sensor.beam_profile != "tophat" else None,
+            )
         hit = np.flatnonzero(face >= 0)
         face, t = face[hit], t[hit]
     d_s = d_sensor[hit]
@@ -568,7 +583,12 @@ def scan(
         depth = t * cos_axis
         depth_measured = sensor.quantize(depth + sensor.sigma_m(depth, incidence) * gauss)
         measured = depth_measured / cos_axis
-        keep = (depth_measured >= sensor.min_depth_m) & (depth_measured <= sensor.max_depth_m) & (incidence <= sensor.max_incidence_deg) & ~lost
+        keep = (
+            (depth_measured >= sensor.min_depth_m)
+            & (depth_measured <= sensor.max_depth_m)
+            & (incidence <= sensor.max_incidence_deg)
+            & ~lost
+        )
     keep &= measured > 0
     sel = np.flatnonzero(keep)
     returns = {}
@@ -621,7 +641,12 @@ def _return_fields(pulses, pulse, power, *, renumber: bool) -> dict[str, np.ndar
     only return.
     """
     return_number, number_of_returns = return_numbers(pulse, renumber=renumber)
-    return {"return_number": return_number, "number_of_returns": number_of_returns, "intensity": np.asarray(power, dtype=np.float32), **pulses(pulse)}
+    return {
+        "return_number": return_number,
+        "number_of_returns": number_of_returns,
+        "intensity": np.asarray(power, dtype=np.float32),
+        **pulses(pulse),
+    }
 
 
 def _sweep_pulses(sensor: Lidar, ring, azimuth, pulse) -> dict[str, np.ndarray]:

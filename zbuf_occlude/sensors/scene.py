@@ -49,7 +49,16 @@ from zbuf_occlude.sensors.checks import (
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
-__all__ = ["SceneObject", "ScanScene", "BuiltScene", "load_scene", "GROUND_ID", "sensor_pose", "check_width_profile", "width_profile_factors"]
+__all__ = [
+    "SceneObject",
+    "ScanScene",
+    "BuiltScene",
+    "load_scene",
+    "GROUND_ID",
+    "sensor_pose",
+    "check_width_profile",
+    "width_profile_factors",
+]
 
 #: Key of a warped object's local mesh ``metadata``: ``(F,) int64``, each face's row in the mesh as loaded.
 FACE_ROWS = "face_rows_as_loaded"
@@ -145,7 +154,9 @@ def _primitive_args(spec: Mapping) -> tuple[str, dict[str, Any]]:
     """
     spec = mapping(spec, "mesh", PRIMITIVE_KEYS)
     if len(spec) != 1:
-        raise InvalidInputError(f"mesh must be a primitive {{'box_m': [x, y, z]}} or {{'cylinder': {{'radius_m': r, 'height_m': h}}}}, got {shown(spec)}")
+        raise InvalidInputError(
+            f"mesh must be a primitive {{'box_m': [x, y, z]}} or {{'cylinder': {{'radius_m': r, 'height_m': h}}}}, got {shown(spec)}"
+        )
     size = {"low": 0.0, "low_open": True, "high": MAX_COORDINATE_M}
     if "box_m" in spec:
         extents = reals(spec["box_m"], "mesh.box_m", lengths=(3,), expected="3 sizes in metres", **size)
@@ -236,7 +247,9 @@ class SceneObject:
             except UnicodeError:  # a lone surrogate ("\ud800", which JSON's \u escapes can write) names no file
                 ok = False
             if not ok:
-                raise InvalidInputError(f"mesh must be a file path of 1 to {MAX_PATH_CHARS} characters, without NUL or lone surrogates, got {shown(mesh)}")
+                raise InvalidInputError(
+                    f"mesh must be a file path of 1 to {MAX_PATH_CHARS} characters, without NUL or lone surrogates, got {shown(mesh)}"
+                )
         elif isinstance(mesh, Mapping):
             _primitive_args(mesh)  # checked before anything is allocated
         elif not _is_trimesh(mesh):
@@ -300,7 +313,9 @@ class SceneObject:
                 scale = np.full(3, size_arr[0] / extents.max())
             else:
                 if np.any(extents <= 0):
-                    raise InvalidInputError(f"object {shown(self.class_name or self.mesh)}: a flat mesh cannot take three extents {shown(size)}")
+                    raise InvalidInputError(
+                        f"object {shown(self.class_name or self.mesh)}: a flat mesh cannot take three extents {shown(size)}"
+                    )
                 scale = size_arr / extents
         # The object's own shape, stretch and warp, is its local mesh; the transform only sizes, turns and places it.
         faces, rows = np.asarray(local.faces, dtype=np.int64), None
@@ -418,7 +433,12 @@ class ScanScene:
             raise InvalidInputError(f"ground must be true or false, got {shown(self.ground)}")
         self.ground_z_m = real(self.ground_z_m, "ground z_m", low=-MAX_GROUND_HALF_EXTENT_M, high=MAX_GROUND_HALF_EXTENT_M)
         self.ground_half_extent_m = real(
-            self.ground_half_extent_m, "ground half_extent_m", low=0.0, low_open=True, high=MAX_GROUND_HALF_EXTENT_M, expected=f"> 0 and {far}"
+            self.ground_half_extent_m,
+            "ground half_extent_m",
+            low=0.0,
+            low_open=True,
+            high=MAX_GROUND_HALF_EXTENT_M,
+            expected=f"> 0 and {far}",
         )
         # the same rule as the farm's --sensor-height and CropDistributions.height_m
         self.sensor_height_m = real(self.sensor_height_m, "sensor height_m", low=0.0, expected=">= 0 metres (above the ground)")
@@ -538,12 +558,16 @@ class ScanScene:
                 raise InvalidInputError(f"{key} must be a list of objects, got {type(items).__name__} {shown(items)}")
             lists[key] = items or []
         if len(lists["objects"]) + len(lists["occluders"]) > MAX_SCENE_OBJECTS:
-            raise InvalidInputError(f"the scene holds {len(lists['objects']) + len(lists['occluders']):,} objects and occluders, more than {MAX_SCENE_OBJECTS:,}")
+            raise InvalidInputError(
+                f"the scene holds {len(lists['objects']) + len(lists['occluders']):,} objects and occluders, more than {MAX_SCENE_OBJECTS:,}"
+            )
 
         def obj(d: object, where: str) -> SceneObject:
             with located(where):
                 d = mapping(d, "object", OBJECT_KEYS, required=("mesh",))
-                made = SceneObject(d["mesh"], d.get("class", ""), d.get("position_m", (0.0, 0.0)), d.get("yaw_deg", 0.0), d.get("size_m"), d.get("up", "z"))
+                made = SceneObject(
+                    d["mesh"], d.get("class", ""), d.get("position_m", (0.0, 0.0)), d.get("yaw_deg", 0.0), d.get("size_m"), d.get("up", "z")
+                )
                 if base_dir is not None and isinstance(made.mesh, str):  # a file named by a scene file stays in its folder
                     path_inside(base_dir, made.mesh, what="mesh")
             return made

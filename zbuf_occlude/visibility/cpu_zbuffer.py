@@ -217,8 +217,11 @@ def _inverse_depth_plane_py(cam, i0, i1, i2, a0, b0, sa, sb, grow, amax, bmax):
     ``(trusted, g_max, g_a, g_b, g_min)`` with ``g_max`` and ``g_min`` the plane at a cell's corner
     plus and minus its reach over the grown cell and the rounding slack (``trusted``: the plane is
     well conditioned, :data:`_MAX_PLANE_COND`; else only the vertices bound the depth)."""
-    pmax = max(abs(cam[i0, 0]) + abs(cam[i0, 1]) + abs(cam[i0, 2]), abs(cam[i1, 0]) + abs(cam[i1, 1]) + abs(cam[i1, 2]),
-               abs(cam[i2, 0]) + abs(cam[i2, 1]) + abs(cam[i2, 2]))
+    pmax = max(
+        abs(cam[i0, 0]) + abs(cam[i0, 1]) + abs(cam[i0, 2]),
+        abs(cam[i1, 0]) + abs(cam[i1, 1]) + abs(cam[i1, 2]),
+        abs(cam[i2, 0]) + abs(cam[i2, 1]) + abs(cam[i2, 2]),
+    )
     # 1/z = g0 + g_a * ca + g_b * cb on the face's plane n . X = d (camera frame).
     e1x, e1y, e1z = cam[i1, 0] - cam[i0, 0], cam[i1, 1] - cam[i0, 1], cam[i1, 2] - cam[i0, 2]
     e2x, e2y, e2z = cam[i2, 0] - cam[i0, 0], cam[i2, 1] - cam[i0, 1], cam[i2, 2] - cam[i0, 2]
@@ -383,8 +386,7 @@ def _rasterise_py(cam, faces, face_ids, grid, ga, gb, row_lo, row_hi, zbuf, ids,
                 _insert(zbuf, ids, row + i, np.float32(_ROUND_UP * inv), face_ids[f])
 
 
-def _classify_py(points, face_index, lo, hi, rt, intr, eye, grid, ga, gb, zbuf, ids, planes,
-                 tolerance, edge_on_sin, status):
+def _classify_py(points, face_index, lo, hi, rt, intr, eye, grid, ga, gb, zbuf, ids, planes, tolerance, edge_on_sin, status):
     """:data:`HIDDEN` (or outside the frustum), :data:`VISIBLE` or :data:`UNDECIDED` for
     points ``lo:hi`` into ``status``; ``intr = (f, width, height, znear, zfar)``; ``ga == 0``:
     no buffer."""
@@ -555,8 +557,7 @@ class ZBuffer:
         return np.ascontiguousarray(camera.extrinsics)
 
 
-def build_zbuffer(mesh: trimesh.Trimesh, camera: Camera, n_points: int, *,
-                  cells_per_point: float = CELLS_PER_POINT, run=None) -> ZBuffer:
+def build_zbuffer(mesh: trimesh.Trimesh, camera: Camera, n_points: int, *, cells_per_point: float = CELLS_PER_POINT, run=None) -> ZBuffer:
     """Rasterise ``mesh`` for ``camera`` on a grid of about ``cells_per_point × n_points``
     cells over the mesh's projection (module docstring).
 
@@ -588,8 +589,9 @@ def build_zbuffer(mesh: trimesh.Trimesh, camera: Camera, n_points: int, *,
     return zb
 
 
-def zbuffer_tasks(mesh: trimesh.Trimesh, camera: Camera, n_points: int, *, cells_per_point: float = CELLS_PER_POINT,
-                  bands: int = 1, grouping: int = 0) -> tuple[ZBuffer, list]:
+def zbuffer_tasks(
+    mesh: trimesh.Trimesh, camera: Camera, n_points: int, *, cells_per_point: float = CELLS_PER_POINT, bands: int = 1, grouping: int = 0
+) -> tuple[ZBuffer, list]:
     """:func:`build_zbuffer` in two steps: the view's buffer, not yet filled, and the calls that
     fill it, one per band of rows, to be run in any order or at once (a caller's thread pool
     may run other work beside them).
@@ -628,12 +630,23 @@ def zbuffer_tasks(mesh: trimesh.Trimesh, camera: Camera, n_points: int, *, cells
     zb = ZBuffer(grid, (ga, gb), zbuf, camera, rt, data)
     face_rows = _face_rows(cam, data.raster_faces, grid, gb)
     cuts = _band_cuts(face_rows, gb, max(1, int(bands)), _GROUP_WORK * grouping).tolist()
-    return zb, [(_rasterise, (cam, data.raster_faces, data.raster_ids, grid, ga, gb, lo, hi, zbuf, zb.ids, face_rows))
-                for lo, hi in zip(cuts[:-1], cuts[1:]) if hi > lo]
+    return zb, [
+        (_rasterise, (cam, data.raster_faces, data.raster_ids, grid, ga, gb, lo, hi, zbuf, zb.ids, face_rows))
+        for lo, hi in zip(cuts[:-1], cuts[1:])
+        if hi > lo
+    ]
 
 
-def classify(mesh: trimesh.Trimesh, points: NDArray[np.float64], face_index: NDArray[np.int64] | None,
-             camera: Camera, zb: ZBuffer, tolerance: float, *, run=None) -> NDArray[np.uint8]:
+def classify(
+    mesh: trimesh.Trimesh,
+    points: NDArray[np.float64],
+    face_index: NDArray[np.int64] | None,
+    camera: Camera,
+    zb: ZBuffer,
+    tolerance: float,
+    *,
+    run=None,
+) -> NDArray[np.uint8]:
     """Status of each point (:data:`HIDDEN`, :data:`VISIBLE`, :data:`UNDECIDED`).
 
     Parameters
@@ -660,8 +673,20 @@ def classify(mesh: trimesh.Trimesh, points: NDArray[np.float64], face_index: NDA
     status = np.empty(n, dtype=np.uint8)
     fi = face_index if face_index is not None else np.zeros(0, dtype=np.int64)
     intr = np.array([camera.focal_px, camera.width, camera.height, camera.znear, camera.zfar])
-    args = (zb.view_extrinsics(camera), intr, np.asarray(camera.eye, dtype=np.float64), zb.grid,
-            zb.shape[0], zb.shape[1], zb.zbuf, zb.ids, data.planes, float(tolerance), EDGE_ON_SIN, status)
+    args = (
+        zb.view_extrinsics(camera),
+        intr,
+        np.asarray(camera.eye, dtype=np.float64),
+        zb.grid,
+        zb.shape[0],
+        zb.shape[1],
+        zb.zbuf,
+        zb.ids,
+        data.planes,
+        float(tolerance),
+        EDGE_ON_SIN,
+        status,
+    )
     if run is None:
         _classify(points, fi, 0, n, *args)
     else:

@@ -56,9 +56,7 @@ def _dot3(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]
     return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
 
 
-def edge_on_own(
-    normal: NDArray[np.float64], points: NDArray[np.float64], eye: NDArray[np.float64]
-) -> NDArray[np.bool_]:
+def edge_on_own(normal: NDArray[np.float64], points: NDArray[np.float64], eye: NDArray[np.float64]) -> NDArray[np.bool_]:
     """(N,) bool: the face of normal ``normal[k]`` is seen from ``eye`` within
     :data:`EDGE_ON_DEGREES` of edge-on at ``points[k]`` (rule (b)).
 

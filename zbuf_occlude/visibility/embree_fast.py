@@ -87,6 +87,7 @@ _BORDER_PX, _BORDER_PER_PX = 1e-3, 1e-5
 #: Faces within this much more than the edge-on sine (float32 cosines) are re-checked in float64.
 _EDGE_ON_SLACK = 1e-3
 
+
 class _Intrinsics(NamedTuple):
     """The camera as _prepare reads it (float32): focal length and image size in pixels, depth
     range, and the frustum border (pixels) within which the float64 test decides."""
@@ -173,6 +174,8 @@ def set_default_threads(threads: int) -> None:
     if int(threads) < 1:
         raise InvalidInputError(f"threads must be >= 1, got {threads!r}")
     DEFAULT_THREADS = int(threads)
+
+
 _pool: ThreadPoolExecutor | None = None
 
 
@@ -386,8 +389,9 @@ class FastScene(SessionBase):
         Bad points or face index.
     """
 
-    def __init__(self, mesh: trimesh.Trimesh, points, face_index=None, *, threads: int | None = None,
-                 sort: bool = True, prepass: bool | None = None):
+    def __init__(
+        self, mesh: trimesh.Trimesh, points, face_index=None, *, threads: int | None = None, sort: bool = True, prepass: bool | None = None
+    ):
         self.mesh = mesh
         points = check_points(points)
         face_index = check_face_index(face_index, len(points), len(mesh.faces))
@@ -464,20 +468,29 @@ class FastScene(SessionBase):
         frame = np.empty((3, 4), dtype=np.float32)
         frame[:, :3] = rt[:, :3]
         frame[:, 3] = rt[:, :3] @ sc.centre + rt[:, 3]
-        cam = _Intrinsics(*np.array(
-            [camera.focal_px, camera.width, camera.height, camera.znear, camera.zfar,
-             _BORDER_PX + _BORDER_PER_PX * max(camera.width, camera.height)], dtype=np.float32))
+        cam = _Intrinsics(
+            *np.array(
+                [
+                    camera.focal_px,
+                    camera.width,
+                    camera.height,
+                    camera.znear,
+                    camera.zfar,
+                    _BORDER_PX + _BORDER_PER_PX * max(camera.width, camera.height),
+                ],
+                dtype=np.float32,
+            )
+        )
         settings = _RaySettings(*np.array([sc.radius, _START, _MAX_START, _BAND_LO, EDGE_ON_SIN + _EDGE_ON_SLACK], dtype=np.float32))
         return camera, eye_c, frame, cam, settings
 
-    def _cast(self, rays: NDArray[np.int64], camera: Camera, tolerance: float, visible: NDArray[np.bool_],
-              rt: NDArray[np.float64]) -> None:
+    def _cast(self, rays: NDArray[np.int64], camera: Camera, tolerance: float, visible: NDArray[np.bool_], rt: NDArray[np.float64]) -> None:
         """Decide points ``rays`` (in a coherent order) with Embree and float64 re-checks
         (module docstring) into ``visible``; ``rt``: ``camera.extrinsics``."""
         view = self._view(camera, rt)
         m = len(rays)
         step = min(_CHUNK, -(-m // self.threads))  # at least one chunk per thread
-        parts = _run_shared(self.threads, self._chunk, [(rays[lo:lo + step], view) for lo in range(0, m, step)])
+        parts = _run_shared(self.threads, self._chunk, [(rays[lo : lo + step], view) for lo in range(0, m, step)])
         vis = np.concatenate([v for v, _, _ in parts])
         tie = np.concatenate([t for _, t, _ in parts])
         status = np.concatenate([st for _, _, st in parts])
@@ -489,8 +502,17 @@ class FastScene(SessionBase):
             # neighbouring face closer than that start: test the faces around its own
             # face exactly (as the oracle's crease pass does).
             scene = self._scene.oracle(self.mesh)
-            hidden = _crease(crease, self.points, self.face_index, eye, scene.packed_planes, scene.corner_vertex,
-                             scene.vertex_start, scene.vertex_faces, float(tolerance))
+            hidden = _crease(
+                crease,
+                self.points,
+                self.face_index,
+                eye,
+                scene.packed_planes,
+                scene.corner_vertex,
+                scene.vertex_start,
+                scene.vertex_faces,
+                float(tolerance),
+            )
             vis[at[hidden]] = False
         idx = rays[tie]
         self.last_cpu_fraction = len(idx) / max(len(self.points), 1)

@@ -39,9 +39,7 @@ DEFAULT_RESOLUTION = 1024
 
 def _build(mesh: trimesh.Trimesh) -> ExactMesh:
     pl = mesh_planes(mesh)
-    planes = np.concatenate(
-        [pl.normal, pl.offset[:, None], pl.edge_normals.reshape(-1, 9), pl.edge_offsets], axis=1
-    )
+    planes = np.concatenate([pl.normal, pl.offset[:, None], pl.edge_normals.reshape(-1, 9), pl.edge_offsets], axis=1)
     return ExactMesh(shared_context(), np.asarray(mesh.triangles), planes)
 
 
@@ -132,7 +130,6 @@ class ExactScene(SessionBase):
             self._buffer = None
 
 
-
 @register("zbuffer-exact", takes_resolution=True, gpu=True, exact=True, session=ExactScene)
 def zbuffer_exact_visible(
     mesh: trimesh.Trimesh,
@@ -144,7 +141,6 @@ def zbuffer_exact_visible(
     tile: int = DEFAULT_TILE,
     tolerance: float = TOLERANCE,
 ) -> NDArray[np.bool_]:
-    """Exact GPU HSR with a complete candidate set; see :class:`ExactScene`.
-    """
+    """Exact GPU HSR with a complete candidate set; see :class:`ExactScene`."""
     with ExactScene(mesh, points, face_index) as scene:
         return scene.visible(camera, resolution=resolution, tile=tile, tolerance=tolerance)

@@ -80,9 +80,7 @@ def _visible(
     visible = visible_in_frustum(
         pts,
         camera,
-        lambda idx: occluded_fn(
-            occluders, pts[idx], camera.eye, face_index=None if fi is None else fi[idx], tolerance=tolerance
-        ),
+        lambda idx: occluded_fn(occluders, pts[idx], camera.eye, face_index=None if fi is None else fi[idx], tolerance=tolerance),
     )
     # Rule (b) of visibility.definition: own face seen edge-on (issue 11).
     return hide_edge_on(visible, mesh_planes(mesh), pts, camera.eye, fi, tolerance)
@@ -143,4 +141,3 @@ def oracle_numpy_visible(
     ignored options as :func:`oracle_visible`; raises :class:`InvalidInputError` on bad input.
     """
     return _visible(occluded_numpy, mesh_planes(mesh), points, camera, face_index, tolerance, mesh)
-

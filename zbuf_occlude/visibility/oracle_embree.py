@@ -66,16 +66,13 @@ _FEW_FALLBACK_RAYS = 64
 class _EmbreeScene:
     """An Embree BVH of one mesh plus its float64 planes (for re-deciding Embree's hits)."""
 
-    def __init__(
-        self, vertices: NDArray[np.float64], faces: NDArray[np.int64], planes: TrianglePlanes | None = None
-    ) -> None:
+    def __init__(self, vertices: NDArray[np.float64], faces: NDArray[np.int64], planes: TrianglePlanes | None = None) -> None:
         try:
             from embreex import rtcore_scene
             from embreex.mesh_construction import TriangleMesh
         except ImportError as exc:
             raise BackendUnavailable(
-                f"the 'oracle' visibility method needs Embree: pip install embreex ({exc}); "
-                "or use method='oracle-numpy'"
+                f"the 'oracle' visibility method needs Embree: pip install embreex ({exc}); or use method='oracle-numpy'"
             ) from None
         vertices = np.asarray(vertices, dtype=np.float64)
         faces = np.asarray(faces, dtype=np.int64)
@@ -175,14 +172,19 @@ def _occluded_few_py(idx, pts, seg, seg_len, eye, face_lo, face_hi, listed, pack
         lo2, hi2 = min(pts[k, 2], eye[2]) - tolerance, max(pts[k, 2], eye[2]) + tolerance
         hit = False
         for q in range(len(listed)):
-            if not (face_lo[q, 0] <= hi0 and face_lo[q, 1] <= hi1 and face_lo[q, 2] <= hi2
-                    and face_hi[q, 0] >= lo0 and face_hi[q, 1] >= lo1 and face_hi[q, 2] >= lo2):
+            if not (
+                face_lo[q, 0] <= hi0
+                and face_lo[q, 1] <= hi1
+                and face_lo[q, 2] <= hi2
+                and face_hi[q, 0] >= lo0
+                and face_hi[q, 1] >= lo1
+                and face_hi[q, 2] >= lo2
+            ):
                 continue
             g = listed[q]
             if has_own and g == own[k]:
                 continue
-            if pair_occludes_one(pts[k, 0], pts[k, 1], pts[k, 2], seg[k, 0], seg[k, 1], seg[k, 2], seg_len[k], packed[g],
-                                 tolerance):
+            if pair_occludes_one(pts[k, 0], pts[k, 1], pts[k, 2], seg[k, 0], seg[k, 1], seg[k, 2], seg_len[k], packed[g], tolerance):
                 hit = True
                 break
         occluded[k] = hit

@@ -38,9 +38,7 @@ _CULL_SLACK = 1e-9
 _CULL_MIN_DEPTH = 1e-6
 
 
-def _cull_frame(
-    planes: TrianglePlanes, points: NDArray[np.float64], eye: NDArray[np.float64]
-) -> tuple[NDArray[np.float64], float]:
+def _cull_frame(planes: TrianglePlanes, points: NDArray[np.float64], eye: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
     """Rows: an orthonormal camera frame ``(a, b, w)`` at ``eye``, ``w`` towards the mesh; and a length scale."""
     w = planes.vertices.reshape(-1, 3).mean(axis=0) - eye
     norm = float(np.sqrt(dot3(w, w)))
@@ -148,18 +146,14 @@ def occluded_unchecked(
     else:
         pairs = _all_pairs(n_faces, todo, chunk_size)
     for k, j in pairs:
-        hit = pair_occludes(
-            points[k], seg[k], seg_len[k], planes, j, None if face_index is None else face_index[k], tolerance
-        )
+        hit = pair_occludes(points[k], seg[k], seg_len[k], planes, j, None if face_index is None else face_index[k], tolerance)
         hidden = k[hit]
         occluded[hidden] = True
         todo[hidden] = False
     return occluded
 
 
-def _all_pairs(
-    n_faces: int, todo: NDArray[np.bool_], chunk_size: int
-) -> Iterator[tuple[NDArray[np.int64], NDArray[np.int64]]]:
+def _all_pairs(n_faces: int, todo: NDArray[np.bool_], chunk_size: int) -> Iterator[tuple[NDArray[np.int64], NDArray[np.int64]]]:
     """Every ``(point, face)`` pair, in blocks of about ``chunk_size`` (no cull)."""
     face_block = min(n_faces, chunk_size)
     point_block = max(1, chunk_size // face_block)
@@ -232,6 +226,4 @@ def occluded_numpy(
     fi = check_face_index(face_index, len(pts), planes.shape[0])
     if int(chunk_size) < 1:
         raise InvalidInputError(f"chunk_size must be >= 1, got {chunk_size!r}")
-    return occluded_unchecked(
-        planes, pts, check_eye(eye), fi, check_tolerance(tolerance), int(chunk_size), cull=bool(cull)
-    )
+    return occluded_unchecked(planes, pts, check_eye(eye), fi, check_tolerance(tolerance), int(chunk_size), cull=bool(cull))

@@ -13,7 +13,16 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["POINTS_PER_THREAD", "grid_cells", "grid_neighbours", "nearest_neighbours", "run_in_threads", "thread_count", "tree_neighbours", "uniform_grid"]
+__all__ = [
+    "POINTS_PER_THREAD",
+    "grid_cells",
+    "grid_neighbours",
+    "nearest_neighbours",
+    "run_in_threads",
+    "thread_count",
+    "tree_neighbours",
+    "uniform_grid",
+]
 
 #: Points per grid cell :func:`nearest_neighbours` aims at: 14 neighbours then lie within the
 #: cell's ring of 26 on a surface (4 and 12 were slower on the shipped meshes at 10,000 and
@@ -205,4 +214,3 @@ def tree_neighbours(points: NDArray[np.float64], k: int, workers: int) -> tuple[
 
     distance, index = cKDTree(points).query(points, k=k, workers=workers)
     return distance.reshape(len(points), -1), index.reshape(len(points), -1).astype(np.int64, copy=False)
-

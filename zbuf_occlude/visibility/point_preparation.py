@@ -49,6 +49,7 @@ _MAX_SWEEPS = 30
 #: smallest eigenvalues as a share of the spread; below 1e-6 of it Jacobi's rotations take over.
 _CLOSED_FORM_GAP = 1e-6
 
+
 @numba.njit(cache=True, nogil=True, inline="always")
 def _rotate(a, v, p, q):  # pragma: no cover - numba
     """One Jacobi rotation zeroing ``a[p, q]`` of the symmetric 3 x 3 ``a``, accumulated into
@@ -206,7 +207,9 @@ def plane_fits(points, neighbours, sizes, first, last, normals, variation):  # p
 
 
 @numba.njit(cache=True, nogil=True)
-def robust_choice(points, neighbours, spacing, normals, variation, centres, middle, tolerance, penalty, first, last, out):  # pragma: no cover - numba
+def robust_choice(
+    points, neighbours, spacing, normals, variation, centres, middle, tolerance, penalty, first, last, out
+):  # pragma: no cover - numba
     """Each point's normal: among the candidates of every size centred on its first ``centres``
     neighbours, the least ``variation`` plus ``penalty`` per spacing of shift whose plane passes
     within ``tolerance`` spacings of the point; the first such in size then neighbour order on a

@@ -151,9 +151,7 @@ class PointSurfels:
         order = self.order
         return self.points[order], self.normals[order], self.radius[order], self.spacing[order]
 
-    def visible(
-        self, camera: Camera, *, tolerance: float = DEFAULT_SPLAT_TOLERANCE, backend: str = "cpu"
-    ) -> NDArray[np.bool_]:
+    def visible(self, camera: Camera, *, tolerance: float = DEFAULT_SPLAT_TOLERANCE, backend: str = "cpu") -> NDArray[np.bool_]:
         """(N,) bool: the points ``camera`` sees (module docstring), inside its frustum.
 
         Parameters
@@ -227,9 +225,7 @@ def _splatter(backend: object):
 _MAX_PAD = 1e6
 
 
-def splat_image(
-    cam: NDArray[np.float64], radius: NDArray[np.float64], in_frustum: NDArray[np.bool_], camera: Camera
-) -> SplatImage:
+def splat_image(cam: NDArray[np.float64], radius: NDArray[np.float64], in_frustum: NDArray[np.bool_], camera: Camera) -> SplatImage:
     """The splat image of one view: the part of the frustum that holds points, with
     :data:`~zbuf_occlude.defaults.SPLAT_PIXELS_PER_RADIUS` pixels across the median splat radius
     (coarser if that exceeds :data:`~zbuf_occlude.defaults.MAX_SPLAT_PIXELS`).

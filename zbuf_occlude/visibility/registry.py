@@ -85,7 +85,6 @@ def _load_builtins() -> None:
             importlib.import_module(f"{__package__}.{module}")
 
 
-
 class PoseSession(Protocol):
     """Points kept resident (e.g. on the GPU) and tested from many cameras; see :attr:`MethodInfo.session`."""
 
@@ -217,9 +216,7 @@ def get_method(name: str) -> VisibilityMethod:
     try:
         return _METHODS[name]
     except KeyError:
-        raise InvalidInputError(
-            f"unknown visibility method {name!r}; available: {', '.join(available_methods())}"
-        ) from None
+        raise InvalidInputError(f"unknown visibility method {name!r}; available: {', '.join(available_methods())}") from None
 
 
 def method_info(name: str) -> MethodInfo:

@@ -278,9 +278,7 @@ def near_own_surface(
     return near
 
 
-def boundary_times_cos(
-    planes: TrianglePlanes, p: NDArray[np.float64], direction: NDArray[np.float64]
-) -> NDArray[np.float64]:
+def boundary_times_cos(planes: TrianglePlanes, p: NDArray[np.float64], direction: NDArray[np.float64]) -> NDArray[np.float64]:
     """(K,) ``b · |cos θ|``: ``b`` the distance from ``p[k]`` (on triangle k) to the triangle's
     edge lines, ``θ`` the angle between ``direction[k]`` (unit) and the triangle's normal."""
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -140,9 +140,7 @@ class ResidentPoints(SessionBase):
         visible : (N,) bool
         """
         camera = _at_resolution(camera, resolution)
-        visible, uncertain = self.renderer.visible(
-            camera, self._buffer, rule="candidates", neighborhood=neighborhood, tolerance=tolerance
-        )
+        visible, uncertain = self.renderer.visible(camera, self._buffer, rule="candidates", neighborhood=neighborhood, tolerance=tolerance)
         # The CPU decides with the one tolerance of every method (visibility.definition);
         # ``tolerance`` is the GPU's float32 band.
         visible = _resolve_uncertain(self.mesh, self.points, self.face_index, camera, visible, uncertain, resolve, TOLERANCE)
@@ -186,7 +184,6 @@ class ResidentPoints(SessionBase):
             self._buffer = None
 
 
-
 @register("zbuffer", takes_resolution=True, gpu=True, session=ResidentPoints)
 def zbuffer_visible(
     mesh: trimesh.Trimesh,
@@ -199,8 +196,7 @@ def zbuffer_visible(
     tolerance: float = DEFAULT_GPU_TOLERANCE,
     resolve: str = "embree",
 ) -> NDArray[np.bool_]:
-    """Default image-space HSR: id-buffer candidates + exact tests; see :meth:`ResidentPoints.visible`.
-    """
+    """Default image-space HSR: id-buffer candidates + exact tests; see :meth:`ResidentPoints.visible`."""
     with ResidentPoints(mesh, points, face_index) as scene:
         return scene.visible(camera, resolution=resolution, neighborhood=neighborhood, tolerance=tolerance, resolve=resolve)
 

@@ -40,8 +40,11 @@ def main(argv: list[str]) -> None:
     sensors = (argv[2] if len(argv) > 2 else "riegl-q1560,dales-q1560").split(",")
     sizes = parse_sizes(argv[3] if len(argv) > 3 else None)
     meshes = find_class_meshes(root, up_map=UP_MAP)
-    print(f"{len(meshes)} meshes, {per_mesh} crops each, seed 0; sizes: "
-          + ", ".join(f"{c} {s.dimension} {s.lo_m:g}–{s.hi_m:g} m" for c, s in sorted(sizes.items())) + "\n")
+    print(
+        f"{len(meshes)} meshes, {per_mesh} crops each, seed 0; sizes: "
+        + ", ".join(f"{c} {s.dimension} {s.lo_m:g}–{s.hi_m:g} m" for c, s in sorted(sizes.items()))
+        + "\n"
+    )
     print(f"| class | sensor | crops | median | 10th–90th pct | min–max | ≥ {MIN_RETURNS} returns | s / crop |")
     print("|---|---|---|---|---|---|---|---|")
     per_mesh_median: dict[str, dict[str, float]] = {}
@@ -59,8 +62,10 @@ def main(argv: list[str]) -> None:
             seconds = (time.perf_counter() - t0) / len(counts)
             c = np.asarray(counts)
             p10, p50, p90 = np.percentile(c, [10, 50, 90])
-            print(f"| {cls} | {sensor.name} | {len(c)} | {p50:.0f} | {p10:.0f}–{p90:.0f} | {c.min()}–{c.max()} | "
-                  f"{np.mean(c >= MIN_RETURNS):.0%} | {seconds:.3f} |")
+            print(
+                f"| {cls} | {sensor.name} | {len(c)} | {p50:.0f} | {p10:.0f}–{p90:.0f} | {c.min()}–{c.max()} | "
+                f"{np.mean(c >= MIN_RETURNS):.0%} | {seconds:.3f} |"
+            )
 
     names = [sensor_from_name(name).name for name in sensors]
     print("\n| mesh | " + " | ".join(f"median, {n}" for n in names) + " |")

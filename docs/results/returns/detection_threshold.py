@@ -49,15 +49,19 @@ def main(argv: list[str]) -> None:
                    center_xy=centre, half_size_m=half, seeds=settings.seeds, bootstrap=50).las  # fmt: skip
     ground_single = float(np.median(sim.intensity[(sim.number_of_returns == 1) & (sim.classification == 2)]))
     print(f"IGN sample: weakest return {counts:.0f} counts = {share:.3f} of its median single ground return\n")
-    print("| threshold (share of a single ground return) | vegetation pulses 1 / 2 / 3 / 4 returns (%) | vegetation points from multi-return pulses (%) | intensity first-of-several / single, vegetation |")
+    print(
+        "| threshold (share of a single ground return) | vegetation pulses 1 / 2 / 3 / 4 returns (%) | vegetation points from multi-return pulses (%) | intensity first-of-several / single, vegetation |"
+    )
     print("|---|---|---|---|")
     for f in (0.0, 0.05, share, 0.2):
         las = thresholded(sim, f * ground_single)
         every = return_statistics(las, bootstrap=50).estimates
         veg = return_statistics(pulse_subset(las, "vegetation"), bootstrap=50).estimates
         shares = " / ".join(f"{100 * veg[f'returns_{n}'].value:.1f}" for n in (1, 2, 3, 4))
-        print(f"| {f:.3f} | {shares} | {100 * every['multi_return_points_classes_3_4_5'].value:.1f} | "
-              f"{every['intensity_ratio_classes_3_4_5'].value:.3f} ± {every['intensity_ratio_classes_3_4_5'].std:.3f} |")
+        print(
+            f"| {f:.3f} | {shares} | {100 * every['multi_return_points_classes_3_4_5'].value:.1f} | "
+            f"{every['intensity_ratio_classes_3_4_5'].value:.3f} ± {every['intensity_ratio_classes_3_4_5'].std:.3f} |"
+        )
 
 
 if __name__ == "__main__":

@@ -22,8 +22,10 @@ from zbuf_occlude.sensors.reflectance import MATERIALS, WAVELENGTHS_NM
 
 def row(name: str, every, veg) -> str:
     shares = " / ".join(f"{100 * veg[f'returns_{n}'].value:.1f}" for n in (1, 2, 3, 4))
-    return (f"| {name} | {shares} | {100 * every['multi_return_points_classes_3_4_5'].value:.1f} | {every['gap_median'].value:.2f} | "
-            f"{every['intensity_ratio_classes_3_4_5'].value:.3f} ± {every['intensity_ratio_classes_3_4_5'].std:.3f} |")
+    return (
+        f"| {name} | {shares} | {100 * every['multi_return_points_classes_3_4_5'].value:.1f} | {every['gap_median'].value:.2f} | "
+        f"{every['intensity_ratio_classes_3_4_5'].value:.3f} ± {every['intensity_ratio_classes_3_4_5'].std:.3f} |"
+    )
 
 
 def main(argv: list[str]) -> None:
@@ -35,15 +37,25 @@ def main(argv: list[str]) -> None:
     rho = [soil.reflectance[column]] + [foliage.reflectance[column]] * len(vegetation)
     tau = [soil.transmittance] + [foliage.transmittance] * len(vegetation)
     print(f"soil ρ {rho[0]:.2f}; foliage ρ {rho[1]:.2f}, round-trip transmittance {tau[1]:.2f} (1064 nm)\n")
-    print("| run | vegetation pulses 1 / 2 / 3 / 4 returns (%) | vegetation points from multi-return pulses (%) | median gap (m) | intensity first-of-several / single, vegetation |")
+    print(
+        "| run | vegetation pulses 1 / 2 / 3 / 4 returns (%) | vegetation points from multi-return pulses (%) | median gap (m) | intensity first-of-several / single, vegetation |"
+    )
     print("|---|---|---|---|---|")
     scanner = ign_scanner(divergence, k, range_resolution_m=resolution)
-    for name, optics in (("opaque, ρ = 1 (the experiment)", {}), ("the table's ρ and foliage transmittance", {"reflectivity": rho, "transmittance": tau})):
+    for name, optics in (
+        ("opaque, ρ = 1 (the experiment)", {}),
+        ("the table's ρ and foliage transmittance", {"reflectivity": rho, "transmittance": tau}),
+    ):
         result = simulate(scene, scanner, vegetation, center_xy=centre, half_size_m=half, seeds=settings.seeds, bootstrap=50, **optics)
         print(row(name, result.statistics["all"].estimates, result.statistics["vegetation"].estimates))
     real = read_las(ign)
-    print(row("real (IGN sample)", return_statistics(real, bootstrap=50).estimates,
-              return_statistics(pulse_subset(real, "vegetation"), bootstrap=50).estimates))
+    print(
+        row(
+            "real (IGN sample)",
+            return_statistics(real, bootstrap=50).estimates,
+            return_statistics(pulse_subset(real, "vegetation"), bootstrap=50).estimates,
+        )
+    )
 
 
 if __name__ == "__main__":

@@ -66,7 +66,7 @@ def main(mesh_root: str, out_csv: str) -> None:
     times: dict = {k: [] for k in (None, *K_VALUES)}
     order = [None, *K_VALUES]
     for r in range(ROUNDS):
-        for k in order[r % len(order):] + order[: r % len(order)]:  # rotated: each K in another place each round
+        for k in order[r % len(order) :] + order[: r % len(order)]:  # rotated: each K in another place each round
             lidar = sensor(k)
             start = time.perf_counter()
             s = scan(plot, lidar, seed=r)
@@ -81,12 +81,16 @@ def main(mesh_root: str, out_csv: str) -> None:
     load_end = os.getloadavg()
     print(f"HDL-32E, {pulses:,} pulses a revolution; {len(plot.objects)} meshes at {', '.join(f'{d:g}' for d in DISTANCES_M)} m; "
           f"today's scan {median[None] * 1e6:.2f} µs per pulse\n")  # fmt: skip
-    print("| K | pulses on the meshes with 1 / 2 / 3 / 4 returns (%, ± sd) | pulses on the meshes | µs per pulse | cost / K = 1 | cost / today's scan |")
+    print(
+        "| K | pulses on the meshes with 1 / 2 / 3 / 4 returns (%, ± sd) | pulses on the meshes | µs per pulse | cost / K = 1 | cost / today's scan |"
+    )
     print("|---|---|---|---|---|---|")
     for k, row in rows.items():
         shares = " / ".join(f"{100 * row[f'returns_{j}']:.1f} ± {100 * row[f'returns_{j}_sd']:.1f}" for j in (1, 2, 3, 4))
         mark = " **(recommended)**" if k == best else ""
-        print(f"| {k}{mark} | {shares} | {row['pulses_on_meshes']:,} | {row['us_per_pulse']:.2f} | {row['cost_vs_K1']:.1f}× | {row['cost_vs_today']:.1f}× |")
+        print(
+            f"| {k}{mark} | {shares} | {row['pulses_on_meshes']:,} | {row['us_per_pulse']:.2f} | {row['cost_vs_K1']:.1f}× | {row['cost_vs_today']:.1f}× |"
+        )
     print(f"\nrecommended K {best}; load average {', '.join(f'{v:.2f}' for v in load_start)} at the start, "
           f"{', '.join(f'{v:.2f}' for v in load_end)} at the end; {time.process_time() - cpu_start:.0f} CPU seconds")  # fmt: skip
     write_csv(out_csv, list(rows.values()))

@@ -29,22 +29,30 @@ def main(out: str) -> None:
         if not rows:
             continue
         print(f"\n**{name}, {float(rows[0]['resolution_m']):.2f} m**\n")
-        print("| divergence (mrad) | K | vegetation points from multi-return pulses (%) | vegetation pulses with 1 / 2 / 3 / 4 returns (%) | vegetation pulses |")
+        print(
+            "| divergence (mrad) | K | vegetation points from multi-return pulses (%) | vegetation pulses with 1 / 2 / 3 / 4 returns (%) | vegetation pulses |"
+        )
         print("|---|---|---|---|---|")
         for r in rows:
             shares = " / ".join(f"{100 * float(r[f'returns_{n}']):.1f}" for n in (1, 2, 3, 4))
-            print(f"| {float(r['divergence_mrad']):.3g} | {r['K']} | {pct(r, 'multi_return_share')} | {shares} | {int(r['vegetation_pulses']):,} |")
+            print(
+                f"| {float(r['divergence_mrad']):.3g} | {r['K']} | {pct(r, 'multi_return_share')} | {shares} | {int(r['vegetation_pulses']):,} |"
+            )
     print("\n| fit | K | divergence (mrad) | ± sd (mrad) |\n|---|---|---|---|")
     fits = [("IGN", f) for f in run["divergence_fits"]] + ([("Autzen", run["autzen_fit"])] if "autzen_fit" in run else [])
     for name, f in fits:
         print(f"| {name} | {f['K']} | {f['divergence_mrad']:.3f} | {f['sd_mrad']:.3f} |")
-    print("\n| K | vegetation pulses with 1 / 2 / 3 / 4 returns (%, ± sd) | vegetation points from multi-return pulses (%) | µs per pulse | cost / K = 1 |")
+    print(
+        "\n| K | vegetation pulses with 1 / 2 / 3 / 4 returns (%, ± sd) | vegetation points from multi-return pulses (%) | µs per pulse | cost / K = 1 |"
+    )
     print("|---|---|---|---|---|")
     for r in read_csv_rows(f"{out}/k_sweep.csv", within=out):
         shares = " / ".join(pct(r, f"returns_{n}") for n in (1, 2, 3, 4))
         marker = " **(recommended)**" if int(r["K"]) == run["recommended_k"] else ""
-        print(f"| {r['K']}{marker} | {shares} | {pct(r, 'multi_return_share')} | {float(r['seconds_per_mpulse']):.1f} | "
-              f"{float(r['cost_vs_smallest_K']):.1f}× |")
+        print(
+            f"| {r['K']}{marker} | {shares} | {pct(r, 'multi_return_share')} | {float(r['seconds_per_mpulse']):.1f} | "
+            f"{float(r['cost_vs_smallest_K']):.1f}× |"
+        )
 
 
 if __name__ == "__main__":

@@ -46,5 +46,7 @@ for tag in ("placed", "hidden", "occluded"):
 bottom = np.array([c.points_m[:, 2].min() for c in real])
 distance = np.array([np.hypot(*c.points_m[:, :2].mean(axis=0)) for c in real])
 slope, _, lo, hi = theilslopes(bottom, distance)
-print(f"\nreal cars' lowest return over distance: Theil-Sen {slope:.3f} m/m (95 % {lo:.3f} to {hi:.3f}), "
-      f"least squares {np.polyfit(distance, bottom, 1)[0]:.3f} m/m, {len(real)} cars")
+print(
+    f"\nreal cars' lowest return over distance: Theil-Sen {slope:.3f} m/m (95 % {lo:.3f} to {hi:.3f}), "
+    f"least squares {np.polyfit(distance, bottom, 1)[0]:.3f} m/m, {len(real)} cars"
+)

@@ -38,8 +38,16 @@ for model in ("pointnet", "voxnet", "3dmfv"):
         preds[(model, path.parent.name)] = p
         np.add.at(cm, (truth, p), 1)
     acc = np.diag(cm) / cm.sum(1)
-    worst = sorted(((cm[i, j], f"{names[i]} → {names[j]} {cm[i, j]}") for i in range(len(names)) for j in range(len(names)) if i != j), reverse=True)
-    print(f"| {model} | {len(seeds)} | " + " | ".join(f"{a:.3f}" for a in acc) + f" | {acc.mean():.3f} | " + ", ".join(w for _, w in worst[:4]) + " |")
+    worst = sorted(
+        ((cm[i, j], f"{names[i]} → {names[j]} {cm[i, j]}") for i in range(len(names)) for j in range(len(names)) if i != j), reverse=True
+    )
+    print(
+        f"| {model} | {len(seeds)} | "
+        + " | ".join(f"{a:.3f}" for a in acc)
+        + f" | {acc.mean():.3f} | "
+        + ", ".join(w for _, w in worst[:4])
+        + " |"
+    )
 wrong = sum((p != truth).astype(int) for p in preds.values())
 print("\n| scan | class | wrong in | called | returns | extent x, y, z, m |\n|---|---|---|---|---|---|")
 for i in np.argsort(-wrong, kind="stable")[:20]:

@@ -30,8 +30,11 @@ def without(*keys: str) -> CropPlacement:
 
 
 # --fitted-shape none, widths and outline
-variants = {"placed": without("across_sight_width_m", "across_sight_profile"), "widths": without("across_sight_profile"),
-            "outline": without("across_sight_width_m")}
+variants = {
+    "placed": without("across_sight_width_m", "across_sight_profile"),
+    "widths": without("across_sight_profile"),
+    "outline": without("across_sight_width_m"),
+}
 stats = collections.defaultdict(list)  # (tag, class) -> [(profile, width, returns)]
 per_mesh = collections.defaultdict(list)  # (tag, mesh) -> [profile]
 for i in fit_half:
@@ -53,7 +56,11 @@ for c in names:
     for tag in ("real", *variants):
         rows = stats[tag, c]
         prof = np.nanmedian(np.array([r[0] for r in rows]), axis=0)
-        print(f"| {c} | {tag} | " + " | ".join(f"{v:.2f}" for v in prof) + f" | {np.median([r[1] for r in rows]):.2f} | {np.median([r[2] for r in rows]):.0f} |")
+        print(
+            f"| {c} | {tag} | "
+            + " | ".join(f"{v:.2f}" for v in prof)
+            + f" | {np.median([r[1] for r in rows]):.2f} | {np.median([r[2] for r in rows]):.0f} |"
+        )
 print()
 print("| class | mesh | outline distance, placed → outline | warp per bin (mesh height, bottom → top) |")
 print("|---|---|---|---|")

@@ -1,6 +1,6 @@
 """The table of docs/results/sim2real.md from the runs' summary.csv files (one folder per model).
 
-    python docs/results/sim2real/combine.py docs/results/sim2real/pointnet docs/results/sim2real/voxnet
+python docs/results/sim2real/combine.py docs/results/sim2real/pointnet docs/results/sim2real/voxnet
 """
 
 from __future__ import annotations
@@ -16,8 +16,10 @@ def cell(row: dict, key: str) -> str:
     return f"{float(m):.3f} ± {float(s):.3f}" if m not in ("", "nan") else ""
 
 
-print("| model | training set | mean class acc. | Δ vs complete | p vs complete | overall acc. | car F1 | "
-      "acc. bush | acc. car | acc. pedestrian | acc. pole |")
+print(
+    "| model | training set | mean class acc. | Δ vs complete | p vs complete | overall acc. | car F1 | "
+    "acc. bush | acc. car | acc. pedestrian | acc. pole |"
+)
 print("|---|---|---|---|---|---|---|---|---|---|---|")
 for folder in map(Path, sys.argv[1:]):
     model = json.loads((folder / "settings.json").read_text())["model"]
@@ -26,7 +28,10 @@ for folder in map(Path, sys.argv[1:]):
             p = r.get("p_vs_complete", "")
             d = r.get("diff_vs_complete", "")
             name = r["train_set"]
-            print(f"| {model} | {name} | {cell(r, 'mean_class_accuracy')} | "
-                  f"{'' if name in ('complete', 'chance') or d in ('', 'nan') else f'{float(d):+.3f}'} | "
-                  f"{'' if p in ('', 'nan') else f'{float(p):.3f}'} | {cell(r, 'overall_accuracy')} | {cell(r, 'car_f1')} | "
-                  + " | ".join(cell(r, f"acc_{c}") for c in ("bush", "car", "pedestrian", "pole")) + " |")
+            print(
+                f"| {model} | {name} | {cell(r, 'mean_class_accuracy')} | "
+                f"{'' if name in ('complete', 'chance') or d in ('', 'nan') else f'{float(d):+.3f}'} | "
+                f"{'' if p in ('', 'nan') else f'{float(p):.3f}'} | {cell(r, 'overall_accuracy')} | {cell(r, 'car_f1')} | "
+                + " | ".join(cell(r, f"acc_{c}") for c in ("bush", "car", "pedestrian", "pole"))
+                + " |"
+            )

@@ -79,7 +79,10 @@ def test_a_missing_package_is_named_before_the_file_is_checked(tmp_path: Path, f
     calls, _ = fake_format(needs=("no_such_module_zbuf", "extra-name"))
     path = tmp_path / "a.fake"
     path.write_bytes(b"x")
-    with pytest.raises(MeshLoadError, match=rf"^{re.escape(str(path))}: reading FAKE needs the 'no_such_module_zbuf' package: {re.escape(install_hint('extra-name'))}$"):
+    with pytest.raises(
+        MeshLoadError,
+        match=rf"^{re.escape(str(path))}: reading FAKE needs the 'no_such_module_zbuf' package: {re.escape(install_hint('extra-name'))}$",
+    ):
         read_trimesh(path, "fake")
     assert calls == []
 
@@ -88,7 +91,10 @@ def test_a_structure_that_contradicts_itself_is_named_with_the_format(tmp_path: 
     # a binary STL declaring 2 triangles and holding 1: the check of stl.py, through the table
     path = tmp_path / "cut.stl"
     path.write_bytes(b"\0" * 80 + (2).to_bytes(4, "little") + b"\0" * 50)
-    with pytest.raises(MeshLoadError, match=rf"^{re.escape(str(path))}: cannot parse as STL: binary STL declares 2 triangles \(184 bytes\) but holds 1 \(134 bytes\); the file is cut short$"):
+    with pytest.raises(
+        MeshLoadError,
+        match=rf"^{re.escape(str(path))}: cannot parse as STL: binary STL declares 2 triangles \(184 bytes\) but holds 1 \(134 bytes\); the file is cut short$",
+    ):
         read_trimesh(path, "stl")
 
 

@@ -88,7 +88,13 @@ def _markdown_report(rows: Sequence[dict[str, Any]], plots: dict[str, str], titl
         sw = summarise(rows, by=("method", "param"), sweep=sweep)
         if not sw:
             continue
-        lines += ["", f"## Agreement vs {label}", "", f"| method | {sweep} | time (s) | accuracy | false visible | false hidden | IoU |", "|---|---:|---:|---:|---:|---:|---:|"]
+        lines += [
+            "",
+            f"## Agreement vs {label}",
+            "",
+            f"| method | {sweep} | time (s) | accuracy | false visible | false hidden | IoU |",
+            "|---|---:|---:|---:|---:|---:|---:|",
+        ]
         for (m, p), s in sorted(sw.items()):
             lines.append(
                 f"| {m} | {p} | {format_or_dash(s['time_s'], '.4g')} | {format_or_dash(s['accuracy'], '.4f')} | {format_or_dash(s['false_visible_rate'], '.4f')} | "

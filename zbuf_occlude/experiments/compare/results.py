@@ -95,9 +95,7 @@ def ok_rows(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
     return [r for r in rows if not r.get("error") and r.get("time_s", "") != ""]
 
 
-def summarise(
-    rows: Sequence[dict[str, Any]], by: Sequence[str] = ("method", "n_points"), sweep: str = ""
-) -> dict[tuple, dict[str, float]]:
+def summarise(rows: Sequence[dict[str, Any]], by: Sequence[str] = ("method", "n_points"), sweep: str = "") -> dict[tuple, dict[str, float]]:
     """Mean of every metric over the rows (without errors) sharing the ``by`` keys.
 
     Returns

@@ -62,9 +62,7 @@ def table_1b(
     s = summarise(rows, by=("mesh", "n_faces", "n_points", "method"))
     keys = sorted({k[:3] for k in s}, key=lambda k: (-int(k[1]), k[2]))
     lo, hi = PAPER_TABLE_1B_REDUCTION
-    head = f"| mesh (faces) | points | views | {exact} (s) | " + " | ".join(
-        f"{m} (s) / reduction / accuracy" for m in methods
-    )
+    head = f"| mesh (faces) | points | views | {exact} (s) | " + " | ".join(f"{m} (s) / reduction / accuracy" for m in methods)
     lines = [head + " | paper: OG_32/OG_64 reduction |", "|---|---:|---:|---:|" + "---:|" * len(methods) + "---:|"]
     for mesh, faces, n in keys:
         e = s.get((mesh, faces, n, exact))
@@ -73,9 +71,7 @@ def table_1b(
         cells = []
         for m in methods:
             x = s.get((mesh, faces, n, m))
-            cells.append(
-                "–" if not x else f"{x['time_s']:.3g} / {_reduction(x['time_s'], e['time_s']):.1f} % / {x['accuracy']:.4f}"
-            )
+            cells.append("–" if not x else f"{x['time_s']:.3g} / {_reduction(x['time_s'], e['time_s']):.1f} % / {x['accuracy']:.4f}")
         paper = f"{lo:g}–{hi:g} %" if n >= 50_000 else "–"
         lines.append(f"| {mesh} ({faces}) | {n:,} | {e['views']} | {e['time_s']:.3g} | " + " | ".join(cells) + f" | {paper} |")
     return "\n".join(lines) + "\n"

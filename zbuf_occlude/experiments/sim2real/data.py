@@ -126,14 +126,16 @@ def sensor_elevation_deg(sensor) -> tuple[tuple[float, float], str]:
         return GROUND_ELEVATION_DEG, "no sensor: a ground sensor's default range"
     if isinstance(sensor, AirborneScanner):
         half = float(sensor.swath_deg) / 2.0
-        return (90.0 - half, 90.0), f"sensor {sensor.name}: 90° minus its incidence angles, 0° to half its {float(sensor.swath_deg):g}° swath"
+        return (
+            90.0 - half,
+            90.0,
+        ), f"sensor {sensor.name}: 90° minus its incidence angles, 0° to half its {float(sensor.swath_deg):g}° swath"
     if isinstance(sensor, Lidar):
         (h_lo, h_hi), (d_lo, d_hi) = LIDAR_PLACEMENT["height_m"], LIDAR_PLACEMENT["distance_m"]
         lo, hi = math.degrees(math.atan2(h_lo, d_hi)), math.degrees(math.atan2(h_hi, d_lo))
         return (lo, hi), (f"sensor {sensor.name}: atan(height / distance) over the lidar set's mount, heights {h_lo:g}-{h_hi:g} m, "
                           f"distances {d_lo:g}-{d_hi:g} m")  # fmt: skip
     raise InvalidInputError(f"no elevation range for a {type(sensor).__name__}: give the occluded set's elevations")
-
 
 
 def check_lidar_meshes(meshes: list[MeshEntry], sensor, sizes: Mapping[str, SizeRange], n_points: int, *,
@@ -283,8 +285,10 @@ def _lidar(entry: MeshEntry, k: int, n_points: int, seed: int, sensor, size: Siz
         if len(good) == k:
             break
     if not good:
-        raise InvalidInputError(f"{entry.path}: no LiDAR crop with {min_returns} returns in {_LIDAR_TRIES} rounds; "
-                                "lower --min-returns (a sparse or airborne sensor) or give larger --sizes")
+        raise InvalidInputError(
+            f"{entry.path}: no LiDAR crop with {min_returns} returns in {_LIDAR_TRIES} rounds; "
+            "lower --min-returns (a sparse or airborne sensor) or give larger --sizes"
+        )
     if len(good) < k:
         log.warning("%s: %d of %d LiDAR crops have >= %d returns; repeating them", entry.name, len(good), k, min_returns)
         good = [good[i % len(good)] for i in range(k)]
@@ -431,8 +435,16 @@ def build_sets(meshes: list[MeshEntry], names: list[str], per_class: int, n_poin
     unknown = [k for k in wanted if k not in available]
     if unknown:
         raise InvalidInputError(f"cannot make training sets {unknown} with these arguments; these can be made: {available}")
-    made = set(wanted) | ({"lidar", "complete"} if "lidar+complete" in wanted else set()) | ({"lidar", FITTED, FITTED_PLACED} if POOLED in wanted else set())
-    out = {kind: build_set(kind, meshes, names, per_class, n_points, seed, recipe, progress=progress) for kind in TRAINING_SETS[:3] if kind in made}
+    made = (
+        set(wanted)
+        | ({"lidar", "complete"} if "lidar+complete" in wanted else set())
+        | ({"lidar", FITTED, FITTED_PLACED} if POOLED in wanted else set())
+    )
+    out = {
+        kind: build_set(kind, meshes, names, per_class, n_points, seed, recipe, progress=progress)
+        for kind in TRAINING_SETS[:3]
+        if kind in made
+    }
     if "lidar+complete" in made:
         out["lidar+complete"] = mix_sets(out["lidar"], out["complete"], seed)
     if OCCLUDED_POINTS in made:

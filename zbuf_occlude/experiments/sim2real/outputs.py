@@ -14,8 +14,19 @@ from zbuf_occlude.io.json_files import loads_json
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.io.regular_files import MAX_METADATA_BYTES, read_text_file
 
-__all__ = ["REAL_TO_REAL", "ALL_SCANS", "CHOSEN_ON_FIT_HALF", "MESH_SETS", "EVERY_SET", "SIM2REAL_FILES", "SIM2REAL_OUTPUTS",
-           "set_folder", "confusion_name", "load_runs", "append_run"]
+__all__ = [
+    "REAL_TO_REAL",
+    "ALL_SCANS",
+    "CHOSEN_ON_FIT_HALF",
+    "MESH_SETS",
+    "EVERY_SET",
+    "SIM2REAL_FILES",
+    "SIM2REAL_OUTPUTS",
+    "set_folder",
+    "confusion_name",
+    "load_runs",
+    "append_run",
+]
 
 #: Name of the real→real context row.
 REAL_TO_REAL = "real→real"
@@ -51,7 +62,7 @@ _SET_FOLDERS = "|".join(re.escape(set_folder(kind)) for kind in EVERY_SET)
 SIM2REAL_OUTPUTS = (
     *(re.escape(name) for name in SIM2REAL_FILES),
     rf"checkpoints/({_SET_FOLDERS})/seed\d+/({'|'.join(re.escape(name) for name in CHECKPOINT_FILES)})",
-)  # fmt: skip
+)
 
 
 def load_runs(path: Path) -> dict:

@@ -287,4 +287,3 @@ def fit_mesh_shapes(meshes: list[MeshEntry], sensor, sizes: Mapping[str, SizeRan
             except InvalidInputError as exc:
                 log.warning("%s", exc)
     return out
-

@@ -315,7 +315,9 @@ def _fix_settings(config: Sim2RealConfig, sets: Sim2RealSets, out: OwnedFolder |
         if old != new:
             differ = sorted(k for k in old.keys() | new.keys() if old.get(k, _MISSING) != new.get(k, _MISSING))
             why = "" if "real_split" in old else "; it was made before every set was scored on the same held-out half of the scans"
-            raise InvalidInputError(f"{out} holds a run with other settings ({path}: {', '.join(differ)} differ{why}); choose another --out")
+            raise InvalidInputError(
+                f"{out} holds a run with other settings ({path}: {', '.join(differ)} differ{why}); choose another --out"
+            )
         if folder.recorded("settings.json") is None:  # a run of ours from before the ledger: its files are ours
             _adopt_earlier_run(folder)
     else:
@@ -465,5 +467,3 @@ def _classes(classes, mesh_root, scans, label_map: dict[str, str]) -> list[str] 
     if unknown:
         raise InvalidInputError(f"--classes: no class folder {unknown} in {mesh_root} (it has {folders})")
     return wanted
-
-

@@ -346,6 +346,4 @@ def read_collada(raw: bytes, path: Path, file_type: str) -> trimesh.Trimesh:
     return parse(raw, path, "dae", resolver=_no_textures_resolver())
 
 
-FORMATS = (
-    Format("dae", (".dae",), read=read_collada, check=check_collada_declared_sizes, needs=("collada", "collada"), name="COLLADA"),
-)
+FORMATS = (Format("dae", (".dae",), read=read_collada, check=check_collada_declared_sizes, needs=("collada", "collada"), name="COLLADA"),)

@@ -75,7 +75,9 @@ def _accessor_bytes(accessors: Sequence[Any]) -> int:
     total = 0
     for acc in accessors:
         if isinstance(acc, dict):
-            total += _count(acc.get("count")) * _TYPE_COMPONENTS.get(acc.get("type"), 16) * _COMPONENT_BYTES.get(acc.get("componentType"), 4)
+            total += (
+                _count(acc.get("count")) * _TYPE_COMPONENTS.get(acc.get("type"), 16) * _COMPONENT_BYTES.get(acc.get("componentType"), 4)
+            )
     return total
 
 
@@ -167,7 +169,9 @@ def check_gltf_declared_sizes(raw: bytes, path: str | PathLike[str]) -> Mapping[
         raise MeshLoadError(f"{path}: its node hierarchy has a cycle (a node is its own ancestor), which glTF forbids")
     n_bytes = _accessor_bytes(accessors)
     if n_bytes > MAX_ACCESSOR_BYTES:
-        raise MeshLoadError(f"{path}: its accessors declare {format_bytes(n_bytes)}, more than the {format_bytes(MAX_ACCESSOR_BYTES)} accepted")
+        raise MeshLoadError(
+            f"{path}: its accessors declare {format_bytes(n_bytes)}, more than the {format_bytes(MAX_ACCESSOR_BYTES)} accepted"
+        )
     faces_per_mesh, primitives_per_mesh = _mesh_faces(_list(doc, "meshes"), accessors)
     placed = [(instances[i], node["mesh"]) for i, node in enumerate(nodes)
               if isinstance(node, dict) and isinstance(node.get("mesh"), int) and 0 <= node["mesh"] < len(faces_per_mesh)]  # fmt: skip

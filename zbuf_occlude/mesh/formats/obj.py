@@ -29,7 +29,11 @@ def check_obj_indices(raw: bytes, path: Path) -> None:
             first = corner.split(b"/", 1)[0]
             if first.lstrip(b"+-").isdigit() and int(first) == 0:
                 line = raw.count(b"\n", 0, match.start()) + 1
-                raise malformed(path, "obj", f"line {line}: face {match.group(0).strip().decode('latin-1')[:60]!r} uses vertex index 0 (OBJ indices start at 1)")
+                raise malformed(
+                    path,
+                    "obj",
+                    f"line {line}: face {match.group(0).strip().decode('latin-1')[:60]!r} uses vertex index 0 (OBJ indices start at 1)",
+                )
 
 
 FORMATS = (Format("obj", (".obj",), read=read_with_named_files, check=check_obj_indices),)

@@ -318,7 +318,7 @@ def read_off(raw: bytes, path: Path, file_type: str) -> trimesh.Trimesh:
             path,
             "off",
             (problem or f"declares {n_faces:,} faces but only {len(mesh.faces):,} could be read")
-            + f" ({len(mesh.faces):,} of {n_faces:,} faces read)"
+            + f" ({len(mesh.faces):,} of {n_faces:,} faces read)",
         )
     return mesh
 

@@ -63,7 +63,7 @@ def read_ply(raw: bytes, path: Path, file_type: str) -> trimesh.Trimesh:
             path,
             "ply",
             f"declares {n_vertices or 0:,} vertices and {n_faces or 0:,} faces but holds {len(mesh.vertices):,} "
-            f"vertices and {len(mesh.faces):,} faces; the file is cut short"
+            f"vertices and {len(mesh.faces):,} faces; the file is cut short",
         )
     return mesh
 

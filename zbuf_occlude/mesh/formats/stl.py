@@ -35,7 +35,7 @@ def check_binary_stl_length(raw: bytes, path: Path) -> None:
             path,
             "stl",
             f"binary STL declares {n_triangles:,} triangles ({expected:,} bytes) but holds {found:,} "
-            f"({len(raw):,} bytes); the file is cut short"
+            f"({len(raw):,} bytes); the file is cut short",
         )
 
 

@@ -132,7 +132,12 @@ def unread_format_reason(path: str | PathLike[str]) -> str | None:
 
 
 def _file_kind(mode: int) -> str:
-    for test, kind in ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device")):
+    for test, kind in (
+        (stat.S_ISFIFO, "a FIFO"),
+        (stat.S_ISSOCK, "a socket"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+    ):
         if test(mode):
             return kind
     return "not a file"
@@ -325,9 +330,7 @@ def check_input_file(path: str | PathLike[str], kinds: Sequence[InputKind] = (ME
     unread = unread_format_reason(path)
     if unread:
         raise InvalidInputError(f"{printable_path(path)}: {unread}")
-    raise InvalidInputError(
-        f"{printable_path(path)} is not a mesh file: its extension is not one of {', '.join(SUPPORTED_EXTENSIONS)}"
-    )
+    raise InvalidInputError(f"{printable_path(path)} is not a mesh file: its extension is not one of {', '.join(SUPPORTED_EXTENSIONS)}")
 
 
 def check_readers_installed(files: Iterable[str | PathLike[str]]) -> None:
@@ -354,7 +357,9 @@ def check_readers_installed(files: Iterable[str | PathLike[str]]) -> None:
         if missing_package(fmt):
             module, extra = fmt.needs
             n = f"{len(found)} {fmt.title} file{'s' if len(found) > 1 else ''} ({', '.join(fmt.extensions)})"
-            problems.append(f"{n} need{'' if len(found) > 1 else 's'} the {module!r} package, not installed (e.g. {found[0]}): {install_hint(extra)}")
+            problems.append(
+                f"{n} need{'' if len(found) > 1 else 's'} the {module!r} package, not installed (e.g. {found[0]}): {install_hint(extra)}"
+            )
     if problems:
         raise BackendUnavailable("; ".join(problems) + "; nothing was done")
 

@@ -91,7 +91,6 @@ CONTAINER_NAMES = frozenset(
 TAXONOMY_FILE = "taxonomy.json"
 
 
-
 class LabelledMesh(NamedTuple):
     """One mesh file with its name (unique seed key), class and split."""
 

@@ -370,9 +370,7 @@ def scan_objects(
     return ObjectScan(number_objects(found), skipped, layout)
 
 
-def scan_inputs(
-    paths: Sequence[str | os.PathLike], *, class_from: int | None = None, kinds: Sequence[InputKind] = (MESH,)
-) -> ObjectScan:
+def scan_inputs(paths: Sequence[str | os.PathLike], *, class_from: int | None = None, kinds: Sequence[InputKind] = (MESH,)) -> ObjectScan:
     """The plan of ``generate``: the files of ``kinds`` given and under the folders given
     (searched recursively), labelled by their layout (:mod:`~zbuf_occlude.mesh.inputs.layouts`: a
     folder by :func:`~zbuf_occlude.mesh.inputs.layouts.label_tree`, a file by
@@ -425,8 +423,7 @@ def number_objects(found: Sequence[Row]) -> list[FarmObject]:
     if clashes:
         text = "; ".join(f"{' and '.join(p)} are both {n!r}" for n, p in sorted(clashes.items())[:5])
         raise InvalidInputError(
-            f"mesh names must be unique (the name seeds the samples and names the output files): {text}; "
-            "rename or move one of each"
+            f"mesh names must be unique (the name seeds the samples and names the output files): {text}; rename or move one of each"
         )
     labels = {c: i for i, c in enumerate(sorted({f[2] for f in found}, key=_natural_key))}
     objects = [FarmObject(i, name, src, cls, split, labels[cls], *cloud) for i, (name, src, cls, split, *cloud) in enumerate(found)]
@@ -441,9 +438,7 @@ def number_objects(found: Sequence[Row]) -> list[FarmObject]:
     return objects
 
 
-def scan_paths(
-    paths: Sequence[str | os.PathLike], *, class_from: int | None = None
-) -> tuple[list[FarmObject], list[SkippedInput]]:
+def scan_paths(paths: Sequence[str | os.PathLike], *, class_from: int | None = None) -> tuple[list[FarmObject], list[SkippedInput]]:
     """The plan of ``generate``: mesh files and folders (searched recursively), numbered,
     and the inputs that had to be skipped (:func:`~zbuf_occlude.mesh.inputs.scan_inputs`).
 

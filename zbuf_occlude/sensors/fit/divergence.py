@@ -108,7 +108,9 @@ def divergence_from_shares(divergences_deg: ArrayLike, simulated_shares: ArrayLi
     return Estimate(value, std, measured.n, method, "deg")
 
 
-def divergence_curve(rows: Sequence[Mapping[str, Any]], name: str) -> tuple[str, NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+def divergence_curve(
+    rows: Sequence[Mapping[str, Any]], name: str
+) -> tuple[str, NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """A simulated share curve from a table's rows: ``divergence_deg``, then the figure's name, then optionally ``std``.
 
     The table a simulation writes for :func:`fit_return_model` (``fit-sensor --divergence-shares``):
@@ -141,7 +143,9 @@ def divergence_curve(rows: Sequence[Mapping[str, Any]], name: str) -> tuple[str,
     columns = list(rows[0])
     if not (2 <= len(columns) <= 3 and columns[0] == "divergence_deg" and str(columns[1]).startswith("multi_return_points")
             and columns[2:] in ([], ["std"])):  # fmt: skip
-        raise InvalidInputError(f"{name}: the header must be divergence_deg,<a multi_return_points figure>[,std], got {','.join(map(str, columns))}")
+        raise InvalidInputError(
+            f"{name}: the header must be divergence_deg,<a multi_return_points figure>[,std], got {','.join(map(str, columns))}"
+        )
     values = np.full((len(rows), 3), 0.0)
     for i, row in enumerate(rows):
         for j, column in enumerate(columns):
@@ -194,4 +198,3 @@ def fit_divergence(
         out = simulate(float(divergence))
         shares[i], stds[i] = (out, 0.0) if np.ndim(out) == 0 else out
     return divergence_from_shares(d, shares, measured, stds), d, shares
-

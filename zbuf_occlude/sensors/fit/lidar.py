@@ -289,6 +289,8 @@ def _aggregate(stats: Sequence[_ScanStats]) -> dict[str, float]:
         "count_exponent": exponent,
         "ground_fraction": float(sum(s.ground for s in stats) / counts.sum()),
     }
+
+
 _METHODS = {
     "elevation_offset_deg": ("deg", "median of return elevation minus its nearest beam's"),
     "ring_spacing_deg": ("deg", "median spacing of occupied rings within a scan"),

@@ -299,7 +299,9 @@ def merge_scans(scans: Sequence[LasPoints], names: Sequence[str] | None = None) 
                      linear_unit_m=first.linear_unit_m)  # fmt: skip
 
 
-def _ground(las: LasPoints, order: NDArray[np.int64], single: NDArray[np.bool_], points_m: NDArray[np.float64]) -> tuple[NDArray[np.bool_], str]:
+def _ground(
+    las: LasPoints, order: NDArray[np.int64], single: NDArray[np.bool_], points_m: NDArray[np.float64]
+) -> tuple[NDArray[np.bool_], str]:
     """Sorted positions of the ground's single returns, and which rule chose them (module docstring)."""
     cls = las.classification[order]
     on_class = single & (cls == GROUND_CLASS)
@@ -410,7 +412,9 @@ def fit_return_model(
         estimates["beam_divergence_deg"] = divergence_from_shares(d, s, stats.estimates[divergence_share], sd[0] if sd else None)
     for name, e in estimates.items():
         if not math.isfinite(e.value) and name not in why:
-            why[name] = "no first-of-several or no single returns there" if name.startswith("intensity_ratio") else "nothing to measure it on"
+            why[name] = (
+                "no first-of-several or no single returns there" if name.startswith("intensity_ratio") else "nothing to measure it on"
+            )
     return ReturnModelFit(estimates, stats, altitude_m, rho_g, ground, unit_m, unit_assumed, why)
 
 

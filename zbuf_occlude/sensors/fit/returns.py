@@ -269,9 +269,7 @@ def check_classes(las: Any, classes: Any, seed: Any, bootstrap: Any) -> tuple[in
     if not isinstance(las, LasPoints):
         raise ArgumentTypeError(f"las must be a LasPoints (read one with zbuf_occlude.io.las.read_las), got {described(las)}")
     if not las.has_gps_time:
-        raise InvalidInputError(
-            f"point format {las.point_format_id} has no GPS time: the returns of one pulse cannot be told apart"
-        )
+        raise InvalidInputError(f"point format {las.point_format_id} has no GPS time: the returns of one pulse cannot be told apart")
     if len(las) == 0:
         raise InvalidInputError("the scan holds no points: there are no returns to measure")
     for name, value, low in (("seed", seed, 0), ("bootstrap", bootstrap, 2)):

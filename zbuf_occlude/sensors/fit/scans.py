@@ -53,7 +53,9 @@ def _per_scan(clouds: Sequence[NDArray[np.floating]], measure, what: str) -> NDA
     return np.asarray(values)
 
 
-def _percentiles_per_scan(clouds: Sequence[NDArray[np.floating]], quantiles: tuple[float, float], measure, what: str) -> tuple[float, float]:
+def _percentiles_per_scan(
+    clouds: Sequence[NDArray[np.floating]], quantiles: tuple[float, float], measure, what: str
+) -> tuple[float, float]:
     lo_q, hi_q = (float(q) for q in quantiles)
     if not 0.0 <= lo_q <= hi_q <= 100.0:
         raise InvalidInputError(f"quantiles must satisfy 0 <= lo <= hi <= 100, got {quantiles!r}")
@@ -328,7 +330,9 @@ def fit_crop_width_profile(clouds: Sequence[NDArray[np.floating]], n_bins: int =
     """
     if int(n_bins) < 2:
         raise InvalidInputError(f"n_bins must be >= 2, got {n_bins!r}")
-    rows = [row for i, c in enumerate(clouds) if len(p := _checked_scan(i, c)) and np.any(np.isfinite(row := _width_profile(p, int(n_bins))))]
+    rows = [
+        row for i, c in enumerate(clouds) if len(p := _checked_scan(i, c)) and np.any(np.isfinite(row := _width_profile(p, int(n_bins))))
+    ]
     if len(rows) < MIN_PLACEMENT_SCANS:
         raise InvalidInputError(f"fit_crop_width_profile needs at least {MIN_PLACEMENT_SCANS} scans that show a width, got {len(rows)}")
     return _nan_median_or_one(np.array(rows))

@@ -26,7 +26,7 @@ from zbuf_occlude.sensors.fit.scans import (
 )
 from zbuf_occlude.sensors.lidar import Lidar
 
-__all__ = ["fit_object_shape", "fit_visible_across_sight", "fit_width_profile", "fit_width_scale", "WIDTH_SAMPLES"]  # fmt: skip
+__all__ = ["fit_object_shape", "fit_visible_across_sight", "fit_width_profile", "fit_width_scale", "WIDTH_SAMPLES"]
 #: Simulated crops of a mesh that :func:`fit_width_scale` and :func:`fit_width_profile` measure.
 WIDTH_SAMPLES = 16
 _WIDTH_STREAM = 0x57D7  # fit_width_scale's crops
@@ -127,7 +127,9 @@ def fit_visible_across_sight(mesh, sensor, distributions, width_m: tuple[float, 
     middle = (lo + hi) / 2
     share = middle / w
     if share < 1.0:  # the correction: a side occluder's edge does not cut the band widths in proportion
-        share *= _correction(middle, _median_crop_width(mesh, sensor, replace(dist, visible_across_sight=(share, share)), int(n_samples), seed))
+        share *= _correction(
+            middle, _median_crop_width(mesh, sensor, replace(dist, visible_across_sight=(share, share)), int(n_samples), seed)
+        )
     return max(lo, 1e-3 * hi) * share / middle, hi * share / middle
 
 
@@ -158,7 +160,9 @@ def _check_measure(n_samples, sensor) -> None:
     if int(n_samples) < 1:
         raise InvalidInputError(f"n_samples must be >= 1, got {n_samples}")
     if not isinstance(sensor, Lidar):
-        raise InvalidInputError(f"widths are measured across a spinning LiDAR's line of sight; {getattr(sensor, 'name', sensor)!r} is not one")
+        raise InvalidInputError(
+            f"widths are measured across a spinning LiDAR's line of sight; {getattr(sensor, 'name', sensor)!r} is not one"
+        )
 
 
 def _median_crop_width(mesh, sensor, distributions, n: int, seed: int) -> float:

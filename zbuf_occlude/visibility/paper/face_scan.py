@@ -92,9 +92,7 @@ def _numba_kernel() -> Any:
     try:
         import numba
     except ImportError as exc:
-        raise BackendUnavailable(
-            f"backend='numba' needs numba: {install_hint('fast')} ({exc}); or use backend='numpy'"
-        ) from None
+        raise BackendUnavailable(f"backend='numba' needs numba: {install_hint('fast')} ({exc}); or use backend='numpy'") from None
     from zbuf_occlude.visibility.kernels import pair_occludes_one
 
     globals()["prange"] = numba.prange

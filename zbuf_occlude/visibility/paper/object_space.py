@@ -205,9 +205,7 @@ def paper_pruned_visible(
 
 
 @register("paper-pruned-plane", exact=True)
-def paper_pruned_plane_visible(
-    mesh: trimesh.Trimesh, points: NDArray[np.floating], camera: Camera, **options: Any
-) -> NDArray[np.bool_]:
+def paper_pruned_plane_visible(mesh: trimesh.Trimesh, points: NDArray[np.floating], camera: Camera, **options: Any) -> NDArray[np.bool_]:
     """``paper-pruned`` with the first suggestion of §3.6 only (exact): see :func:`paper_pruned_visible`."""
     options["prune"] = ("plane",)
     return paper_pruned_visible(mesh, points, camera, **options)

@@ -34,9 +34,7 @@ OG_GRIDS = (16, 32, 64, 128)
 DEFAULT_OG_REPRESENTATIVE = "point"
 
 
-def occupancy_grid(
-    points: NDArray[np.floating], grid: int
-) -> tuple[NDArray[np.float64], NDArray[np.int64], float]:
+def occupancy_grid(points: NDArray[np.floating], grid: int) -> tuple[NDArray[np.float64], NDArray[np.int64], float]:
     """Occupied cells of an ``grid``³ occupancy grid of the points (Sryamkin et al. 2023, §3.6).
 
     The grid spans the cube that bounds the points: centred on their bounding box, side
@@ -199,9 +197,7 @@ def og_visible(
     return visible & ~occluded_cell[cell_of]
 
 
-def _point_nearest_centre(
-    points: NDArray[np.float64], centres: NDArray[np.float64], cell_of: NDArray[np.int64]
-) -> NDArray[np.int64]:
+def _point_nearest_centre(points: NDArray[np.float64], centres: NDArray[np.float64], cell_of: NDArray[np.int64]) -> NDArray[np.int64]:
     """(M,) int64: per occupied cell, the index of its sampled point nearest its centre."""
     diff = points - centres[cell_of]
     order = np.lexsort((np.einsum("ij,ij->i", diff, diff), cell_of))

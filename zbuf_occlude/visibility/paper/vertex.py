@@ -34,9 +34,7 @@ def _subdivide(mesh: trimesh.Trimesh, max_edge: float) -> tuple[NDArray[np.float
     # Each pass halves every edge longer than max_edge, so log2(longest / max_edge) passes
     # are enough; one more absorbs rounding.
     passes = max(1, math.ceil(math.log2(max(longest / max_edge, 1.0))) + 1)
-    vertices, faces, parent = trimesh.remesh.subdivide_to_size(
-        mesh.vertices, mesh.faces, max_edge, max_iter=passes, return_index=True
-    )
+    vertices, faces, parent = trimesh.remesh.subdivide_to_size(mesh.vertices, mesh.faces, max_edge, max_iter=passes, return_index=True)
     return np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64), np.asarray(parent, dtype=np.int64)
 
 

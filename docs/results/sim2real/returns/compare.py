@@ -33,8 +33,11 @@ def ms(v: np.ndarray) -> str:
 without, with_ = runs(Path(sys.argv[1])), runs(Path(sys.argv[2]))
 sets = list(dict.fromkeys(k[0] for k in without))
 CLASSES = ("bush", "car", "pedestrian", "pole")
-print("| training set | seeds | mean class acc., one return | with returns | Δ (paired by seed) | seeds up / down | p (worse) | "
-      + " | ".join(f"Δ acc. {c}" for c in CLASSES) + " |")
+print(
+    "| training set | seeds | mean class acc., one return | with returns | Δ (paired by seed) | seeds up / down | p (worse) | "
+    + " | ".join(f"Δ acc. {c}" for c in CLASSES)
+    + " |"
+)
 print("|---|---|---|---|---|---|---|" + "---|" * len(CLASSES))
 per_class = []
 for s in sets:
@@ -49,8 +52,10 @@ for s in sets:
         print(f"| {s} | {len(seeds)} | {ms(a)} | {ms(b)} | identical (same clouds) | 0 / 0 |  |" + " |" * len(CLASSES))
         continue
     deltas = [pair(f"acc_{c}") for c in CLASSES]
-    print(f"| {s} | {len(seeds)} | {ms(a)} | {ms(b)} | {d.mean():+.3f} ± {d.std(ddof=1):.3f} | {(d > 0).sum()} / {(d < 0).sum()} | "
-          f"{sign_flip_p(d):.3f} | " + " | ".join(f"{(y - x).mean():+.3f}" for x, y in deltas) + " |")
+    print(
+        f"| {s} | {len(seeds)} | {ms(a)} | {ms(b)} | {d.mean():+.3f} ± {d.std(ddof=1):.3f} | {(d > 0).sum()} / {(d < 0).sum()} | "
+        f"{sign_flip_p(d):.3f} | " + " | ".join(f"{(y - x).mean():+.3f}" for x, y in deltas) + " |"
+    )
     per_class.append((s, deltas))
 print()
 print("| training set | returns | " + " | ".join(f"acc. {c}" for c in CLASSES) + " |")
