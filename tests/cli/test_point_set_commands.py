@@ -21,7 +21,7 @@ import trimesh
 
 from zbuf_occlude.cli.main import main
 
-TINY = ["--views", "0:0", "--points", "64", "--samples-per-view", "1", "--resolution", "64", "--no-progress"]
+TINY = ["--views", "0:0", "--points", "64", "--samples-per-view", "1", "--no-progress"]
 #: A usable cloud beside each hostile file: the run goes on with it.
 GOOD = np.random.default_rng(0).normal(size=(400, 3))
 

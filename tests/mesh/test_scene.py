@@ -160,7 +160,7 @@ def test_collada_without_pycollada_names_the_extra(tmp_path: Path, monkeypatch: 
     path.write_text('<COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" version="1.4.1"/>')
     real_find_spec = importlib.util.find_spec
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "collada" else real_find_spec(name, *a))
-    with pytest.raises(MeshLoadError, match=r"box\.dae.*'\.\[collada\]'"):
+    with pytest.raises(MeshLoadError, match=r"box\.dae.*pip install 'pycollada[^']*' \(the collada extra\)"):
         load_mesh(path)
 
 

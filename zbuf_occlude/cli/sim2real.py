@@ -200,33 +200,22 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
         help="class folders to train on: 'real' (those the real scans have, after --label-map) "
         "or CLASS,CLASS,... (default: every class folder of ROOT)",
     )
-    (
-        p.add_argument(
-            "--occluded-elevation",
-            metavar="LO:HI",
-            action=Checked,
-            check=interval,
-            help="camera elevations of the occluded set, degrees, drawn uniformly (default: those --sensor sees objects "
-            "from: a spinning LiDAR on the lidar set's mount, atan(height/distance) over heights 1.6-2 m and distances "
-            "5-25 m, about 3.7:21.8; an airborne scanner, 90 minus its incidence angles up to half its swath, 61:90 "
-            "for dales-q1560; settings.json records which; a negative LO needs =, as in --occluded-elevation=-5:30)",
-        ),
+    p.add_argument(
+        "--occluded-elevation",
+        metavar="LO:HI",
+        action=Checked,
+        check=interval,
+        help="camera elevations of the occluded set, degrees, drawn uniformly (default: those --sensor sees objects "
+        "from: a spinning LiDAR on the lidar set's mount, atan(height/distance) over heights 1.6-2 m and distances "
+        "5-25 m, about 3.7:21.8; an airborne scanner, 90 minus its incidence angles up to half its swath, 61:90 "
+        "for dales-q1560; settings.json records which; a negative LO needs =, as in --occluded-elevation=-5:30)",
     )
     p.add_argument(
         "--up", choices=UP_CHOICES, default="auto", help="up axis of the mesh files; auto: each format's convention (default: %(default)s)"
     )
     p.add_argument("--up-map", help="per-file up axis, GLOB=AXIS,... (globs of paths relative to ROOT)")
     p.add_argument("--sizes", help="real sizes per class, CLASS=length|height|max:LO-HI,... metres (over the defaults)")
-    p.add_argument(
-        "--real-format",
-        choices=("auto", "folder", "lidarnet", "suo"),
-        default="auto",
-        help="reader of --real: a folder of class folders (any point-cloud files), LiDARNet v2, Sydney Urban Objects; auto: detected (default: %(default)s)",
-    )
-    p.add_argument(
-        "--real-up", choices=UP_CHOICES[1:], default="+z", help="up axis of the real scans' files (folder reader; default %(default)s)"
-    )
-    p.add_argument("--real-units", default="m", help="unit of the real scans' files: m, cm, mm, in, ft or metres per unit (folder reader)")
+    _add_real_scan_options(p)
     p.add_argument(
         "--min-returns",
         action=Checked,
@@ -257,3 +246,19 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=_run)
     return p
+
+
+def _add_real_scan_options(p: argparse.ArgumentParser) -> None:
+    """The options of the reader of ``--real``: its format, up axis and units."""
+    from zbuf_occlude.mesh.scene import UP_CHOICES
+
+    p.add_argument(
+        "--real-format",
+        choices=("auto", "folder", "lidarnet", "suo"),
+        default="auto",
+        help="reader of --real: a folder of class folders (any point-cloud files), LiDARNet v2, Sydney Urban Objects; auto: detected (default: %(default)s)",
+    )
+    p.add_argument(
+        "--real-up", choices=UP_CHOICES[1:], default="+z", help="up axis of the real scans' files (folder reader; default %(default)s)"
+    )
+    p.add_argument("--real-units", default="m", help="unit of the real scans' files: m, cm, mm, in, ft or metres per unit (folder reader)")

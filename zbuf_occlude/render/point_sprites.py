@@ -50,6 +50,7 @@ import moderngl
 import numpy as np
 from numpy.typing import NDArray
 
+from zbuf_occlude.render import bindings
 from zbuf_occlude.render.context import max_image_size, shared_context
 from zbuf_occlude.render.shaders import load_shader
 
@@ -60,11 +61,10 @@ __all__ = ["PointSpriteRenderer", "shared_point_sprites"]
 _SURFEL = np.dtype([("id", "<i4"), ("box", "<i4", 4)])
 _SURFEL_FORMAT = "1i 4i"
 _SURFEL_ATTRIBUTES = ("in_id", "in_box")
-#: The fragment shader's bindings (storage buffer, images) and its stages (module docstring).
-_DEFINES = (
-    ("SPLAT_SURFELS", 0), ("SPLAT_KEY_HIGH", 0), ("SPLAT_KEY_LOW", 1), ("SPLAT_WINNER", 2),
-    ("SPLAT_STAGE_HIGH", 0), ("SPLAT_STAGE_LOW", 1), ("SPLAT_STAGE_ID", 2),
-)  # fmt: skip
+#: The fragment shader's stages (module docstring); its bindings are :mod:`~zbuf_occlude.render.bindings`' SPLAT_ names.
+_DEFINES = (("SPLAT_STAGE_HIGH", 0), ("SPLAT_STAGE_LOW", 1), ("SPLAT_STAGE_ID", 2))
+#: The image unit of each of a target's images, in :attr:`_Target.images`' order.
+_IMAGE_UNITS = (bindings.SPLAT_KEY_HIGH, bindings.SPLAT_KEY_LOW, bindings.SPLAT_WINNER)
 _STAGES = tuple(value for name, value in _DEFINES if name.startswith("SPLAT_STAGE_"))
 #: Share of a disk's radius added to each side of its box (:class:`_Boxes`): far above the
 #: rounding of a unit normal and of the disk test (~1e-16), far below a pixel; the kernel's
@@ -191,7 +191,7 @@ class PointSpriteRenderer:
         with self.ctx:
             surfel_buffer = self.ctx.buffer(np.ascontiguousarray(surfels64).tobytes())
             try:
-                surfel_buffer.bind_to_storage_buffer(dict(_DEFINES)["SPLAT_SURFELS"])
+                surfel_buffer.bind_to_storage_buffer(bindings.SPLAT_SURFELS)
                 for i0, j0, w, h in _tiles(width, height, self.max_tile):
                     sprites, quads = boxes.split(i0, j0, w, h, self.max_point_size)
                     tile_ids, tile_t = self._draw_tile(records[sprites], records[quads], (i0, j0), (w, h), uniforms)
@@ -210,7 +210,7 @@ class PointSpriteRenderer:
         width, height = size
         for texture in target.images:
             texture.write(np.full((height, width), _NONE).tobytes(), viewport=viewport)
-        for unit, texture in enumerate(target.images):
+        for unit, texture in zip(_IMAGE_UNITS, target.images):
             texture.bind_to_image(unit, read=True, write=True)
         target.draw.use()
         self.ctx.viewport = viewport

@@ -549,16 +549,8 @@ def scan(
         hit, face, t, echo_energy = _echo_returns(built, sensor, rays, face, t, rho, rng, origin=origin, transmittance=tau)
     else:
         if k > 1:
-            face, t, fraction = strongest_echo(
-                built,
-                rays,
-                face,
-                t,
-                k,
-                rho,
-                sensor.echo_separation_m,
-                sensor.footprint_weights() if sensor.beam_profile != "tophat" else None,
-            )
+            weights = sensor.footprint_weights() if sensor.beam_profile != "tophat" else None
+            face, t, fraction = strongest_echo(built, rays, face, t, k, rho, sensor.echo_separation_m, weights)
         hit = np.flatnonzero(face >= 0)
         face, t = face[hit], t[hit]
     d_s = d_sensor[hit]
@@ -569,10 +561,8 @@ def scan(
     if isinstance(sensor, _PULSED):
         measured = t + sensor.range_noise_m * gauss
         keep = (measured >= sensor.min_range_m) & (measured <= sensor.max_range_m) & ~lost
-        power = np.ones(len(hit))
-        if multi:
-            power = echo_energy
-        elif rho is not None:
+        power = echo_energy if multi else np.ones(len(hit))
+        if not multi and rho is not None:
             # received power of an extended Lambertian target (Kashani et al. 2015, Eq. 4), up to a constant
             power = (fraction[hit] if k > 1 else rho[built.face_object[face]] * np.abs(cos_in)) / np.maximum(t, 1e-9) ** 2
             if sensor.power_noise > 0:
@@ -583,12 +573,8 @@ def scan(
         depth = t * cos_axis
         depth_measured = sensor.quantize(depth + sensor.sigma_m(depth, incidence) * gauss)
         measured = depth_measured / cos_axis
-        keep = (
-            (depth_measured >= sensor.min_depth_m)
-            & (depth_measured <= sensor.max_depth_m)
-            & (incidence <= sensor.max_incidence_deg)
-            & ~lost
-        )
+        in_range = (depth_measured >= sensor.min_depth_m) & (depth_measured <= sensor.max_depth_m)
+        keep = in_range & (incidence <= sensor.max_incidence_deg) & ~lost
     keep &= measured > 0
     sel = np.flatnonzero(keep)
     returns = {}
