@@ -32,6 +32,7 @@ def test_the_kernels_are_cold_when_an_index_file_of_numbas_cache_is_missing(monk
 @pytest.mark.parametrize("cold", [True, False])
 def test_the_line_comes_before_the_work_of_a_visibility_command_only_when_cold(monkeypatch, capsys, tmp_path: Path, cold: bool) -> None:
     monkeypatch.setattr(first_run, "kernels_cold", lambda: cold)
+    monkeypatch.setattr(first_run, "interactive", lambda: True)
     assert main(["validate", str(tmp_path / "missing.off")]) == 2  # refused after parsing: the line comes first
     err = capsys.readouterr().err.splitlines()
     assert (err[0] == first_run.FIRST_RUN_LINE) is cold and len(err) == 1 + cold, err
@@ -46,3 +47,12 @@ def test_the_library_says_nothing() -> None:
     package = Path(zbuf_occlude.__file__).parent
     users = [p for p in package.rglob("*.py") if "first_run" in p.read_text(encoding="utf-8") and p.parent.name != "cli"]
     assert users == []
+
+
+def test_a_script_or_a_log_never_gets_the_line(monkeypatch, capsys, tmp_path: Path) -> None:
+    """Where stderr is not a terminal (a pipe, a log, a test) an error stays one line, cold or not."""
+    monkeypatch.setattr(first_run, "kernels_cold", lambda: True)
+    assert not first_run.interactive()  # capsys: not a terminal
+    assert main(["validate", str(tmp_path / "missing.off")]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and first_run.FIRST_RUN_LINE not in err[0], err

@@ -12,7 +12,7 @@ from __future__ import annotations
 import os
 import sys
 
-__all__ = ["VISIBILITY_COMMANDS", "FIRST_RUN_LINE", "kernels_cold", "say_if_cold"]
+__all__ = ["VISIBILITY_COMMANDS", "FIRST_RUN_LINE", "interactive", "kernels_cold", "say_if_cold"]
 
 #: The commands that compute visibility on the CPU, and so call the numba kernels.
 VISIBILITY_COMMANDS = frozenset({"generate", "validate", "compare", "elevation-profile", "farm", "experiment"})
@@ -40,10 +40,20 @@ def kernels_cold() -> bool:
     return bool(paths) and not all(os.path.isfile(p) for p in paths)
 
 
+def interactive() -> bool:
+    """Whether stderr is a terminal: a person waits on it.  A script, a pipe or a log reads the
+    command's own lines only (an error stays one line)."""
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):  # replaced or closed
+        return False
+
+
 def say_if_cold(command: str) -> bool:
-    """Print :data:`FIRST_RUN_LINE` on stderr before a command of :data:`VISIBILITY_COMMANDS` whose
-    kernels are not compiled yet (:func:`kernels_cold`); True when it printed."""
-    if command not in VISIBILITY_COMMANDS or not kernels_cold():
+    """Print :data:`FIRST_RUN_LINE` on stderr, when it is a terminal (:func:`interactive`), before a
+    command of :data:`VISIBILITY_COMMANDS` whose kernels are not compiled yet
+    (:func:`kernels_cold`); True when it printed."""
+    if command not in VISIBILITY_COMMANDS or not interactive() or not kernels_cold():
         return False
     print(FIRST_RUN_LINE, file=sys.stderr, flush=True)
     return True
