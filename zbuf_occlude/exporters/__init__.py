@@ -29,11 +29,8 @@ import json
 import numbers
 import os
 import re
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
-from typing import Any
 
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.exporters import modelnet_txt, pcn, pointnet_h5
@@ -115,21 +112,6 @@ def _check_source(source: Path, to: str, target: Target) -> None:
         )
 
 
-class _ExportFolder(OwnedFolder):
-    """The export's folder (:class:`~zbuf_occlude.io.owned.OwnedFolder`), which also keeps the names
-    this run wrote: an earlier export's other files are removed once the export is written."""
-
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        self.this_run: set[str] = set()
-
-    @contextmanager
-    def write(self, rel: str) -> Iterator[Path]:
-        with super().write(rel) as tmp:
-            yield tmp
-        self.this_run.add(rel)
-
-
 def _check_kinds(dataset: object, to: object, out: object, label_set_name: object, seed: object, list_prefix: object) -> None:
     """Refuse an argument of the wrong kind before any is used."""
     for name, value in (("dataset", dataset), ("out", out)):
@@ -178,7 +160,7 @@ def _check_places(source: Path, out: Path) -> None:
         )
 
 
-def _remove_earlier(folder: _ExportFolder, earlier: list[str]) -> None:
+def _remove_earlier(folder: OwnedFolder, earlier: list[str]) -> None:
     """Remove the files of an earlier export into ``folder`` that this one did not write (checked as ours
     and unchanged first), and the folders they leave empty."""
     stale = [rel for rel in earlier if rel not in folder.this_run]
@@ -285,7 +267,7 @@ def export(
     _check_places(source, out)
     opened = target.read(source, label_set_name)  # the whole source, checked: nothing is made before
     names = (*target.file_names, re.escape(RECORD_FILE))
-    with _ExportFolder(out, names=names, what=f"the {to} export") as folder:
+    with OwnedFolder(out, names=names, what=f"the {to} export") as folder:
         earlier = folder.written("|".join(f"(?:{n})" for n in names))
         folder.check_writable(earlier)  # what an earlier export wrote, ours and unchanged, before the first write
         written = target.write(folder, opened, ExportOptions(seed, list_prefix, up, bool(progress)))

@@ -26,6 +26,8 @@ from zbuf_occlude.errors import OutputError
 
 __all__ = [
     "atomic_path",
+    "new_temp",
+    "raise_output_error",
     "atomic_h5",
     "temp_h5",
     "positional_writer",
@@ -47,7 +49,8 @@ def _umask() -> int:
     return mask
 
 
-def _raise_output_error(path: Path, exc: OSError) -> None:
+def raise_output_error(path: Path, exc: OSError) -> None:
+    """Raise the :class:`~zbuf_occlude.errors.OutputError` that names ``path`` and what to do about ``exc``."""
     if exc.errno == errno.ENOSPC:
         raise OutputError(f"disk full while writing {path}; free space and run again (finished files are kept)") from exc
     if exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
@@ -167,6 +170,28 @@ def file_sha256(path: str | os.PathLike, *, chunk_bytes: int = 1 << 20) -> str:
     return h.hexdigest()
 
 
+def new_temp(path: str | os.PathLike) -> Path:
+    """Create an empty temporary beside ``path`` (its folder made if missing), named
+    ``.<name>.<pid>-<host tag>-<random>.tmp`` so that it records its writer (:func:`temp_owner`,
+    :func:`temp_is_orphan`), with the mode a plain ``open()`` gives (0666 less the umask;
+    ``mkstemp`` makes 0600).
+
+    Raises
+    ------
+    OutputError
+        The folder cannot be created or written, or the disk is full.
+    """
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}-{_host_tag()}-", suffix=".tmp", dir=path.parent)
+        os.close(fd)
+        os.chmod(tmp, 0o666 & ~_umask())
+    except OSError as exc:
+        raise_output_error(path, exc)
+    return Path(tmp)
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike, *, before_replace: Callable[[Path], None] | None = None) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success fsync and rename it to ``path``.
@@ -184,16 +209,7 @@ def atomic_path(path: str | os.PathLike, *, before_replace: Callable[[Path], Non
         The folder cannot be created or written, or the disk is full.
     """
     path = Path(path)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}-{_host_tag()}-", suffix=".tmp", dir=path.parent)
-        os.close(fd)
-        # mkstemp makes 0600 files; outputs are meant to be shared, so give them the mode a
-        # plain open() would (0666 less the umask)
-        os.chmod(tmp, 0o666 & ~_umask())
-    except OSError as exc:
-        _raise_output_error(path, exc)
-    tmp_path = Path(tmp)
+    tmp_path = new_temp(path)
     try:
         yield tmp_path
         with open(tmp_path, "rb+") as fh:
@@ -203,7 +219,7 @@ def atomic_path(path: str | os.PathLike, *, before_replace: Callable[[Path], Non
         os.replace(tmp_path, path)
     except OSError as exc:
         tmp_path.unlink(missing_ok=True)
-        _raise_output_error(path, exc)
+        raise_output_error(path, exc)
     except BaseException:
         tmp_path.unlink(missing_ok=True)
         raise

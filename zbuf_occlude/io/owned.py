@@ -35,7 +35,6 @@ import logging
 import os
 import re
 import stat
-import tempfile
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
@@ -44,16 +43,7 @@ from pathlib import Path
 from typing import Any
 
 from zbuf_occlude.errors import InvalidInputError, OutputError, UnsafePathError
-from zbuf_occlude.io.atomic import (
-    _host_tag,
-    _raise_output_error,
-    _umask,
-    atomic_path,
-    file_sha256,
-    temp_is_orphan,
-    temp_owner,
-    write_csv,
-)
+from zbuf_occlude.io.atomic import atomic_path, file_sha256, new_temp, raise_output_error, temp_is_orphan, temp_owner, write_csv
 from zbuf_occlude.io.json_files import loads_json
 from zbuf_occlude.io.locks import LOCK_FILE, acquire_lock
 from zbuf_occlude.io.regular_files import open_regular_file
@@ -618,8 +608,8 @@ class OwnedFolder:
 class BatchWriter:
     """The files of :meth:`OwnedFolder.write_many` under way: :meth:`write_bytes` adds one.
 
-    Its temporaries are named as :func:`~zbuf_occlude.io.atomic.atomic_path`'s (their writer in
-    their name, for :func:`remove_dead_temps`), but synced once each, together, at :meth:`flush`:
+    Its temporaries are :func:`~zbuf_occlude.io.atomic.new_temp`'s, as :func:`~zbuf_occlude.io.atomic.atomic_path`'s
+    (their writer in their name, for :func:`remove_dead_temps`), but synced once each, together, at :meth:`flush`:
     a file's sync before its rename would flush the disk's cache once a file.
     """
 
@@ -646,19 +636,17 @@ class BatchWriter:
             raise UnsafePathError(f"{rel!r} is written twice in one batch in {folder.root}; refused")
         folder._check_replaceable(rel, path)
         try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            fd, name = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}-{_host_tag()}-", suffix=".tmp", dir=path.parent)
-        except OSError as exc:
+            tmp = new_temp(path)
+        except OutputError:
             self.discard()
-            _raise_output_error(path, exc)
-        self._files.append((Path(name), path))
+            raise
+        self._files.append((tmp, path))
         try:
-            with os.fdopen(fd, "wb") as fh:
-                os.fchmod(fh.fileno(), 0o666 & ~_umask())  # as a plain open() would make it
+            with os.fdopen(os.open(tmp, os.O_WRONLY | getattr(os, "O_NOFOLLOW", 0)), "wb") as fh:
                 fh.write(data)
         except OSError as exc:
             self.discard()
-            _raise_output_error(path, exc)
+            raise_output_error(path, exc)
         self._entries[rel] = {"path": rel, "sha256": hashlib.sha256(data).hexdigest(), "size": len(data)}
         if len(self._entries) >= self._batch_files:
             self.flush()
@@ -681,7 +669,7 @@ class BatchWriter:
                     os.replace(tmp, path)
                 except OSError as exc:
                     del self._files[:named]
-                    _raise_output_error(path, exc)
+                    raise_output_error(path, exc)
             self._files = []
             for parent in parents:
                 _sync_file(parent)
