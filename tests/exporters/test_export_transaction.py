@@ -250,3 +250,20 @@ def test_wrong_kinds_and_values_from_python_raise_named_errors(sets, tmp_path, m
     with pytest.raises(error, match=message):
         export(given.pop("dataset"), given.pop("to"), given.pop("out"), **given)
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_a_users_files_in_a_modelnet_txt_out_are_refused_or_kept_never_replaced(sets, tmp_path):
+    # the batched writer replaces only files its ledger recorded: a user's file where a sample goes
+    # is refused and kept (files the export wrote before it stay, recorded), one beside the
+    # export's files is kept as it is
+    out = tmp_path / "out"
+    (out / "desk").mkdir(parents=True)
+    (out / "desk" / "desk_0001.txt").write_text("mine\n")
+    with pytest.raises(UnsafePathError, match="desk_0001.txt"):
+        export(sets["both"], "modelnet-txt", out)
+    assert (out / "desk" / "desk_0001.txt").read_text() == "mine\n"
+    (out / "desk" / "desk_0001.txt").unlink()
+    (out / "notes.md").write_text("mine\n")
+    export(sets["both"], "modelnet-txt", out)
+    export(sets["train"], "modelnet-txt", out)  # a re-export removes its own earlier files only
+    assert (out / "notes.md").read_text() == "mine\n"
