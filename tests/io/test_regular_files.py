@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from zbuf_occlude.errors import InvalidInputError, MeshLoadError
-from zbuf_occlude.io.regular_files import file_digest, read_regular_file, regular_file_size
+from zbuf_occlude.io.regular_files import file_digest, read_at_most, read_regular_file, regular_file_size
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs os.mkfifo")
 
@@ -94,3 +94,41 @@ def test_read_json_file_is_capped_refuses_fifos_links_out_and_deep_nesting(tmp_p
     with pytest.raises(UnsafePathError, match="leads outside"):
         read_json_file(tmp_path / "run" / "card.json", within=tmp_path / "run")
     assert read_json_file(tmp_path / "big.json") == {"a": "x" * 100}
+
+
+def test_a_small_file_under_a_huge_cap_reserves_its_size_not_the_cap(tmp_path: Path) -> None:
+    """``read(cap + 1)`` allocates the cap before reading: a 6-byte file under a 32 GiB cap raised
+    MemoryError on a 23 GiB machine.  In a child whose address space is 1 GiB above its footprint,
+    the read must succeed, which it cannot if it reserves anything near the cap."""
+    import subprocess
+    import sys
+    import textwrap
+
+    small = tmp_path / "small.txt"
+    small.write_bytes(b"hello\n")
+    code = textwrap.dedent(
+        """
+        import resource, sys
+        from zbuf_occlude.io.regular_files import read_regular_file
+        size = next(int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmSize:")) * 1024
+        resource.setrlimit(resource.RLIMIT_AS, (size + (1 << 30), resource.RLIM_INFINITY))
+        print(read_regular_file(sys.argv[1], max_bytes=32 << 30) == b"hello\\n")
+        """
+    )
+    done = subprocess.run([sys.executable, "-c", code, str(small)], capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 0 and done.stdout.strip() == "True", done.stderr[-2000:]
+
+
+@pytest.mark.parametrize("grow_by", [0, 1, 5000, (1 << 20) + 7])
+def test_read_at_most_reads_a_file_that_grew_after_fstat_up_to_one_byte_past_the_cap(tmp_path: Path, grow_by: int) -> None:
+    """The size passed in is what fstat said at open; bytes appended since are read in chunks, and the
+    read stops one byte past the cap (so the caller can refuse it) without reading the rest."""
+    path = tmp_path / "growing.bin"
+    path.write_bytes(b"a" * 100)
+    cap = 100 + 4096
+    with open(path, "rb") as fh:
+        with open(path, "ab") as writer:
+            writer.write(b"b" * grow_by)
+        data = read_at_most(fh, 100, cap)
+    assert data == (b"a" * 100 + b"b" * grow_by)[: cap + 1]
+    assert len(data) <= cap + 1

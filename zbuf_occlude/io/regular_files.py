@@ -35,7 +35,7 @@ from zbuf_occlude.errors import InvalidInputError, UnsafePathError, ZbufOccludeE
 
 __all__ = [
     "MAX_LIST_BYTES", "MAX_LOCK_BYTES", "MAX_METADATA_BYTES", "MAX_NAMED_FILE_BYTES", "check_within", "file_digest",
-    "open_regular_file", "read_regular_file", "read_text_file", "regular_file_size",
+    "open_regular_file", "read_at_most", "read_regular_file", "read_text_file", "regular_file_size",
 ]  # fmt: skip
 
 #: Largest file :func:`read_regular_file` reads unless given another cap: 2 GiB, the most a
@@ -53,6 +53,8 @@ MAX_METADATA_BYTES = 256 << 20
 MAX_LOCK_BYTES = 512
 #: Bytes read at a time when a file is hashed (bounded memory, whatever the file's size).
 _HASH_CHUNK_BYTES = 1 << 20
+#: Bytes read at a time from a file that grew after it was opened (its new size is unknown).
+_GROWTH_CHUNK_BYTES = 1 << 20
 
 
 def _nonblocking(name: str, flags: int) -> int:
@@ -205,12 +207,45 @@ def read_regular_file(
     UnsafePathError
         ``within`` is given and ``path`` leads outside it.
     """
-    fh, _ = open_regular_file(path, max_bytes=max_bytes, error=error, within=within)
+    fh, size = open_regular_file(path, max_bytes=max_bytes, error=error, within=within)
     with fh:
-        data = fh.read(max_bytes + 1)  # the file may grow after fstat: never read past the cap
+        data = read_at_most(fh, size, max_bytes)
     if len(data) > max_bytes:
         raise error(f"{path}: more than the {max_bytes:,} bytes a file read here may have")
     return data
+
+
+def read_at_most(fh: BinaryIO, size: int, max_bytes: int) -> bytes:
+    """The rest of the open file ``fh``, reserving memory for what it holds, never for the cap.
+
+    ``fh.read(n)`` allocates ``n`` bytes before it reads one, so reading "up to the cap" reserves
+    the cap (gigabytes for a 6-byte file), which fails under an address-space limit (``ulimit -v``,
+    a batch scheduler's memory limit).  This reads ``size + 1`` bytes (the size ``fstat`` gave
+    when the file was opened), then, only if the file grew since, the rest in chunks of
+    :data:`_GROWTH_CHUNK_BYTES`, stopping once more than ``max_bytes`` were read.
+
+    Parameters
+    ----------
+    fh : binary file
+        Open, positioned where reading starts.
+    size : int
+        The bytes it held when opened (``os.fstat``), at most ``max_bytes``.
+    max_bytes : int
+        The cap.
+
+    Returns
+    -------
+    bytes
+        At most ``max_bytes + 1`` bytes: more than ``max_bytes`` means the file grew past the cap
+        (the caller refuses it).
+    """
+    parts = [fh.read(min(size, max_bytes) + 1)]
+    read = len(parts[0])
+    if read > size:  # it grew after fstat: go on in bounded chunks, never past the cap
+        while read <= max_bytes and (chunk := fh.read(min(_GROWTH_CHUNK_BYTES, max_bytes + 1 - read))):
+            parts.append(chunk)
+            read += len(chunk)
+    return parts[0] if len(parts) == 1 else b"".join(parts)
 
 
 def read_text_file(
