@@ -7,8 +7,9 @@ allocation too.  The estimate is linear in each size, with per-item costs measur
 this code (peak resident memory of one object's job, see the constants); it is an
 estimate, so the check refuses only what clearly cannot fit.
 
-Memory available is the smallest of ``MemAvailable`` (``/proc/meminfo``) and the room
-left under this process's cgroup memory limit (v1 or v2), if one is set; elsewhere
+Memory available is the smallest of ``MemAvailable`` (``/proc/meminfo``), the room
+left under this process's cgroup memory limit (v1 or v2), if one is set, and the address
+space left under its ``RLIMIT_AS`` (``ulimit -v``, ``prlimit --as``), if one is set; elsewhere
 psutil's ``virtual_memory().available`` when psutil is installed; else unknown, and
 nothing is refused.
 """
@@ -233,14 +234,31 @@ def _cgroup_room(root: Path = Path("/sys/fs/cgroup"), proc_cgroup: Path = Path("
     return min(rooms) if rooms else None
 
 
+def _address_space_room(status: Path = Path("/proc/self/status")) -> int | None:
+    """Bytes of address space left under this process's ``RLIMIT_AS``; None if it has none.
+
+    ``ulimit -v``, ``prlimit --as`` and many batch schedulers limit the address space, not the
+    resident memory: what counts is the limit less what is mapped now (``VmSize``).
+    """
+    try:
+        import resource
+    except ImportError:  # not on POSIX
+        return None
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    if soft == resource.RLIM_INFINITY or soft >= _NO_LIMIT:
+        return None
+    return max(soft - _stat_value(status, "VmSize:") * 1024, 0)
+
+
 def available_memory() -> tuple[int, str] | None:
     """Memory this process can still allocate, and where the number comes from.
 
     Returns
     -------
     (bytes, source) or None
-        The smaller of ``MemAvailable`` and the room under the cgroup limit, with
-        ``source`` naming which; psutil's figure off Linux; None when unknown.
+        The smallest of ``MemAvailable``, the room under the cgroup limit and the address space
+        left under ``RLIMIT_AS`` (``ulimit -v``), with ``source`` naming which; psutil's figure
+        off Linux; None when unknown.
     """
     candidates = []
     meminfo = _stat_value(Path("/proc/meminfo"), "MemAvailable:")
@@ -249,6 +267,9 @@ def available_memory() -> tuple[int, str] | None:
     room = _cgroup_room()
     if room is not None:
         candidates.append((room, "room under the cgroup memory limit"))
+    address_room = _address_space_room()
+    if address_room is not None:
+        candidates.append((address_room, "address space left under the process's limit (ulimit -v)"))
     if not candidates:
         try:
             import psutil
