@@ -1,0 +1,197 @@
+"""Run the CLI or a Python snippet under an address-space limit, as ``prlimit --as`` and batch schedulers set it.
+
+``ulimit -v``, ``prlimit --as=N`` and many batch schedulers limit a process's *address space*
+(``RLIMIT_AS``): every mapping counts, used or not, so a read that reserves its cap instead of the
+file's size (``fh.read(4 << 30)`` for a 6-byte manifest) fails there although it would never touch
+the memory.  These helpers run a command in a child process whose limit is
+
+    footprint + headroom
+
+where the **footprint** is the child's ``VmSize`` (``/proc/self/status``) once the interpreter has
+imported what every ``zbuf-occlude`` command imports before it parses its command line: numpy, the
+package and its CLI module (:data:`FOOTPRINT_MODULES`).  Libraries a command imports later (h5py,
+numba, trimesh, torch), the threads it starts (a stack and, for a thread that allocates, a glibc
+malloc arena of 64 MiB reserved each) and its data all count against the **headroom**
+(:data:`HEADROOM_BYTES`, 1.5 GiB), as they count against a user's limit: a command that imports
+torch must still fit.  Soft and hard limits are both set, as ``prlimit --as`` does.
+
+What is measured, in the child's main process only (its own workers are limited alike, being
+forked from it, but not measured here):
+
+* ``peak_bytes``: ``VmPeak``, the largest address space it ever had mapped, which is what
+  ``RLIMIT_AS`` is checked against (the footprint included);
+* ``peak_rss_bytes``: ``VmHWM``, its largest resident set (``getrusage``'s ``ru_maxrss``);
+* ``footprint_bytes`` and ``limit_bytes``: the ``VmSize`` the limit was built on, and the limit.
+
+The child writes them to a file at exit (``atexit``), so that its stdout and stderr are the
+command's own; a child that was killed reports nothing and the numbers are None.
+
+Use::
+
+    from memory_limit import run_cli_limited
+    done = run_cli_limited(["verify", str(dataset)])
+    assert done.returncode == 0, done.stderr
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+__all__ = ["FOOTPRINT_MODULES", "HEADROOM_BYTES", "Limited", "run_cli_limited", "run_python_limited"]
+
+#: Address space a command may map beyond the interpreter's footprint: 1.5 GiB, what a small job
+#: (a few meshes, a 2-sample data set) needs with torch imported (about 0.9 GiB of mappings) and
+#: far less than the 4 GiB a read reserving the metadata or mesh cap used to take.
+HEADROOM_BYTES = 1536 << 20
+#: What the child imports before its footprint is measured: what ``zbuf-occlude`` imports before
+#: it parses a command line (the console script's module pulls in numpy and the package).
+FOOTPRINT_MODULES = ("numpy", "zbuf_occlude", "zbuf_occlude.cli.main")
+#: Seconds a child may run before the test fails (a hung command, not a slow machine).
+DEFAULT_TIMEOUT_S = 300
+
+# The child: import the footprint, set the limit, run, report at exit.  argv: report path, mode
+# ("cli" or "python"), then the CLI's arguments or the snippet.
+_CHILD = r"""
+import atexit, importlib, json, os, resource, sys
+
+def _status():
+    out = {}
+    with open("/proc/self/status") as fh:
+        for line in fh:
+            key, _, value = line.partition(":")
+            if key in ("VmSize", "VmPeak", "VmHWM"):
+                out[key] = int(value.split()[0]) * 1024
+    return out
+
+report, mode, headroom, modules, *rest = sys.argv[1:]
+for name in modules.split(","):
+    importlib.import_module(name)
+footprint = _status()["VmSize"]
+limit = footprint + int(headroom)
+resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+pid = os.getpid()
+
+def _report():
+    if os.getpid() != pid:  # a forked worker that exits through atexit: not the process measured
+        return
+    status = _status()
+    with open(report, "w") as fh:
+        json.dump({"footprint": footprint, "limit": limit, "peak": status["VmPeak"], "rss": status["VmHWM"]}, fh)
+
+atexit.register(_report)
+if mode == "cli":
+    from zbuf_occlude.cli.main import main
+    sys.argv = ["zbuf-occlude", *rest]
+    sys.exit(main(rest))
+sys.argv = ["-c"]
+exec(compile(rest[0], "<limited snippet>", "exec"), {"__name__": "__main__"})
+"""
+
+
+@dataclass(frozen=True)
+class Limited:
+    """A child run under an address-space limit (module docstring).
+
+    Attributes
+    ----------
+    returncode : int
+        The child's exit status (negative: killed by that signal).
+    stdout, stderr : str
+        Its output, decoded as UTF-8.
+    peak_bytes : int or None
+        ``VmPeak`` of its main process, bytes (None if it did not reach its exit).
+    limit_bytes : int or None
+        The ``RLIMIT_AS`` it ran under, bytes (footprint + headroom).
+    footprint_bytes : int or None
+        Its ``VmSize`` after importing :data:`FOOTPRINT_MODULES`, bytes.
+    peak_rss_bytes : int or None
+        ``VmHWM`` of its main process (its largest resident set), bytes.
+    """
+
+    returncode: int
+    stdout: str
+    stderr: str
+    peak_bytes: int | None
+    limit_bytes: int | None
+    footprint_bytes: int | None = None
+    peak_rss_bytes: int | None = None
+
+    def summary(self) -> str:
+        """One line: the peak, resident peak, footprint and limit in MiB (for a test's output)."""
+
+        def mib(value: int | None) -> str:
+            return "?" if value is None else f"{value / (1 << 20):.0f}"
+
+        return (
+            f"VmPeak {mib(self.peak_bytes)} MiB, max RSS {mib(self.peak_rss_bytes)} MiB, "
+            f"footprint {mib(self.footprint_bytes)} MiB, limit {mib(self.limit_bytes)} MiB"
+        )
+
+
+def _run_limited(mode: str, payload: list[str], *, cwd: str | os.PathLike[str] | None, timeout: float, headroom: int) -> Limited:
+    with tempfile.TemporaryDirectory(prefix="zo-memory-limit-") as folder:
+        report = Path(folder) / "report.json"
+        command = [sys.executable, "-c", _CHILD, str(report), mode, str(int(headroom)), ",".join(FOOTPRINT_MODULES), *payload]
+        done = subprocess.run(command, cwd=cwd, capture_output=True, timeout=timeout, check=False)
+        numbers = json.loads(report.read_text(encoding="utf-8")) if report.is_file() else {}
+    decode = lambda data: data.decode("utf-8", "replace")  # noqa: E731
+    return Limited(
+        returncode=done.returncode,
+        stdout=decode(done.stdout),
+        stderr=decode(done.stderr),
+        peak_bytes=numbers.get("peak"),
+        limit_bytes=numbers.get("limit"),
+        footprint_bytes=numbers.get("footprint"),
+        peak_rss_bytes=numbers.get("rss"),
+    )
+
+
+def run_cli_limited(
+    args: list[str], *, cwd: str | os.PathLike[str] | None = None, timeout: float = DEFAULT_TIMEOUT_S, headroom: int = HEADROOM_BYTES
+) -> Limited:
+    """``zbuf-occlude ARGS`` in a child limited to its footprint plus ``headroom`` bytes of address space.
+
+    Runs the console script's entry point (``zbuf_occlude.cli.main:main``) in a fresh interpreter.
+
+    Parameters
+    ----------
+    args : list of str
+        The command line after ``zbuf-occlude``.
+    cwd : path, optional
+        The child's working folder.
+    timeout : float
+        Seconds before ``subprocess.TimeoutExpired`` is raised.
+    headroom : int
+        Bytes of address space beyond the footprint (default :data:`HEADROOM_BYTES`).
+
+    Returns
+    -------
+    Limited
+    """
+    return _run_limited("cli", [str(a) for a in args], cwd=cwd, timeout=timeout, headroom=headroom)
+
+
+def run_python_limited(code: str, *, timeout: float = DEFAULT_TIMEOUT_S, headroom: int = HEADROOM_BYTES) -> Limited:
+    """Run the Python source ``code`` as ``__main__`` in a child limited as :func:`run_cli_limited`'s.
+
+    Parameters
+    ----------
+    code : str
+        A snippet; it may import anything (what it imports beyond :data:`FOOTPRINT_MODULES` counts
+        against the headroom) and exit with ``sys.exit``.
+    timeout : float
+        Seconds before ``subprocess.TimeoutExpired`` is raised.
+    headroom : int
+        Bytes of address space beyond the footprint (default :data:`HEADROOM_BYTES`).
+
+    Returns
+    -------
+    Limited
+    """
+    return _run_limited("python", [code], cwd=None, timeout=timeout, headroom=headroom)
