@@ -1,4 +1,5 @@
-"""One way to delete or rename: only the owned-folder layer (zbuf_occlude.io.owned), its atomic
+"""One way to delete or rename: only the owned-folder layer (zbuf_occlude.io.owned, its delete
+rules in zbuf_occlude.io.deletes), its atomic
 write (zbuf_occlude.io.atomic) and its lock (zbuf_occlude.io.locks, which removes a dead writer's
 lock) unlink, remove, rename or replace a path.  Any other module must
 call the layer, whose checks (lock, layout, names, recorded size and SHA-256) a direct call would skip."""
@@ -14,7 +15,7 @@ import zbuf_occlude
 
 PACKAGE = Path(zbuf_occlude.__file__).parent
 #: The layer: the only modules that may delete or rename.
-LAYER = {"io/owned.py", "io/atomic.py", "io/locks.py"}
+LAYER = {"io/owned.py", "io/deletes.py", "io/atomic.py", "io/locks.py"}
 #: Module functions that delete or rename a path.
 _MODULE_CALLS = {
     "os": {"remove", "unlink", "rmdir", "removedirs", "rename", "renames", "replace"},
