@@ -102,6 +102,87 @@ def test_a_lock_file_that_is_not_a_file_is_refused_without_blocking(tmp_path, ki
             pass
 
 
+#: A size no lock or ledger of ours reaches, made cheaply as a sparse file (nothing is written).
+HUGE_BYTES = 3 << 30
+
+#: Run in a child under an address-space limit: enter an OwnedFolder on argv[1]; print the
+#: refusal and exit 3, or print the files the ledger names.
+_ENTER_FOLDER = """
+import sys
+from zbuf_occlude.errors import ZbufOccludeError
+from zbuf_occlude.io.owned import OwnedFolder
+try:
+    with OwnedFolder(sys.argv[1], names=[r"a\\.txt"]) as folder:
+        print(folder.written())
+except ZbufOccludeError as exc:
+    print(exc)
+    sys.exit(3)
+"""
+
+
+def _enter_limited(folder: Path):
+    from memory_limit import run_python_limited
+
+    return run_python_limited(f"import sys; sys.argv[1:] = [{str(folder)!r}]\n" + _ENTER_FOLDER)
+
+
+def _sparse(path: Path, size: int) -> None:
+    with open(path, "wb") as fh:
+        fh.truncate(size)
+
+
+@pytest.mark.parametrize("kind", ["fifo", "huge"])
+def test_a_fifo_or_huge_lock_is_refused_in_one_line_plainly_and_under_a_memory_limit(tmp_path, kind):
+    """A 3 GB file at the lock's name is someone's data: refused, never read, never broken (deleted)."""
+    lock = tmp_path / LOCK_FILE
+    if kind == "fifo":
+        os.mkfifo(lock)
+    else:
+        _sparse(lock, HUGE_BYTES)
+    said = r"is a FIFO, not a lock of ours" if kind == "fifo" else rf"holds {HUGE_BYTES:,} bytes, more than the \d+ of a lock"
+    with pytest.raises(UnsafePathError, match=rf"the lock file {lock} {said}.*move it away") as caught:
+        with OwnedFolder(tmp_path, names=[r"a\.txt"]):
+            pass
+    assert "\n" not in str(caught.value)
+    done = _enter_limited(tmp_path)
+    assert done.returncode == 3, done.stderr
+    assert len(done.stdout.splitlines()) == 1 and str(lock) in done.stdout and not done.stderr, done.stdout + done.stderr
+    assert kind == "fifo" or lock.stat().st_size == HUGE_BYTES  # kept as it was
+    assert not (tmp_path / "a.txt").exists()
+
+
+def test_a_3_gb_ledger_is_refused_in_one_line_plainly_and_under_a_memory_limit(tmp_path):
+    ledger = tmp_path / LEDGER_FILE
+    _sparse(ledger, HUGE_BYTES)
+    with pytest.raises(
+        UnsafePathError, match=rf"{LEDGER_FILE}: {HUGE_BYTES:,} bytes, more than .* a ledger of ours.*move it away"
+    ) as caught:
+        with OwnedFolder(tmp_path, names=[r"a\.txt"]):
+            pass
+    assert "\n" not in str(caught.value)
+    done = _enter_limited(tmp_path)
+    assert done.returncode == 3 and not done.stderr, done.stderr
+    assert len(done.stdout.splitlines()) == 1 and str(ledger) in done.stdout and "a ledger of ours" in done.stdout
+
+
+def test_a_long_ledger_line_is_skipped_without_being_held(tmp_path):
+    """A 100 MiB line (no line of ours passes 8 kB) is read past in bounded pieces; the lines after it hold."""
+    with OwnedFolder(tmp_path, names=[r"a\.txt"]) as folder:
+        folder.write_text("a.txt", "ours")
+    ledger = tmp_path / LEDGER_FILE
+    ours = ledger.read_bytes()
+    long_line = 100 << 20
+    _sparse(ledger, long_line)  # zeros, no newline
+    with open(ledger, "ab") as fh:
+        fh.write(b"\n" + ours)
+    with OwnedFolder(tmp_path, names=[r"a\.txt"]) as folder:
+        assert folder.written() == ["a.txt"] and folder.check_unchanged("a.txt")
+    done = _enter_limited(tmp_path)
+    assert done.returncode == 0 and done.stdout.strip() == "['a.txt']", done.stdout + done.stderr
+    # the line held whole would map at least its 100 MiB above the interpreter's footprint
+    assert done.peak_bytes - done.footprint_bytes < long_line // 2, done.summary()
+
+
 def test_a_huge_lock_is_never_read_whole(tmp_path, monkeypatch):
     """The holder's text is read capped: a lock of a few MB is not a lock of ours."""
     import zbuf_occlude.io.locks as locks

@@ -6,7 +6,8 @@ systems clusters share (NFS, Lustre, GPFS).  filelock breaks the lock of a dead 
 host and, after watching it unchanged for 2 s, a malformed one; an acquire keeps trying long
 enough for that whatever the load (:data:`ACQUIRE_TIMEOUT_S`).  An empty or unreadable lock file
 older than :data:`ABANDONED_MARKER_AGE_S` (a writer killed before it wrote its pid) is removed
-first.  A lock of another host is never broken (its owner may be alive there): the error names
+first.  A lock file that is a link, a FIFO, a folder or larger than a lock (:data:`MAX_LOCK_BYTES`) is
+refused, never read nor broken.  A lock of another host is never broken (its owner may be alive there): the error names
 the host and pid and says which file to delete once that process is known to be gone.
 """
 
@@ -79,12 +80,15 @@ def _break_abandoned_marker(path: Path) -> None:
 
 
 def _check_lock_kind(path: Path) -> None:
-    """Refuse a lock file that is a link, a FIFO, a device or a folder: reading a FIFO would block
-    every command on the folder, and a link would make the lock another file."""
+    """Refuse a lock file that is a link, a FIFO, a device or a folder, or larger than any lock of
+    ours: reading a FIFO would block every command on the folder, a link would make the lock
+    another file, and a large file at the lock's name is someone's data, which filelock would
+    break (delete) as a malformed lock after watching it for 2 s."""
     try:
-        mode = path.lstat().st_mode
+        info = path.lstat()
     except OSError:
         return  # released meanwhile
+    mode = info.st_mode
     if not stat.S_ISREG(mode):
         kind = (
             "a link"
@@ -96,6 +100,11 @@ def _check_lock_kind(path: Path) -> None:
             else "not a regular file"
         )
         raise UnsafePathError(f"the lock file {path} is {kind}, not a lock of ours; move it away and run again")
+    if info.st_size > MAX_LOCK_BYTES:
+        raise UnsafePathError(
+            f"the lock file {path} holds {info.st_size:,} bytes, more than the {MAX_LOCK_BYTES} of a lock of ours (a pid "
+            "and a host name); it is not one: move it away and run again"
+        )
 
 
 def acquire_lock(path: str | os.PathLike, what: str, *, timeout: float = ACQUIRE_TIMEOUT_S):
@@ -104,7 +113,8 @@ def acquire_lock(path: str | os.PathLike, what: str, *, timeout: float = ACQUIRE
     Raises
     ------
     UnsafePathError
-        The lock file is a link, a FIFO, a device or a folder (never opened, so never blocks).
+        The lock file is a link, a FIFO, a device or a folder (never opened, so never blocks), or
+        larger than a lock of ours (never read, nor deleted).
     DatasetBusy
         A live process holds it (named: pid and host), or one of another host that cannot be
         checked from here; the message says which file to delete once it is known to be gone.

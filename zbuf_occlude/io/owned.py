@@ -42,7 +42,7 @@ from collections.abc import Iterable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 from zbuf_occlude.errors import InvalidInputError, OutputError, UnsafePathError
 from zbuf_occlude.io.atomic import atomic_path, file_sha256, new_temp, raise_output_error, write_csv
@@ -60,6 +60,7 @@ from zbuf_occlude.io.deletes import (
 )
 from zbuf_occlude.io.json_files import loads_json
 from zbuf_occlude.io.locks import LOCK_FILE, acquire_lock
+from zbuf_occlude.io.memory import check_memory
 from zbuf_occlude.io.regular_files import open_regular_file
 from zbuf_occlude.io.safe_paths import path_inside
 
@@ -91,6 +92,10 @@ LEDGER_FILE = ".zbuf_occlude-written.jsonl"
 _MAX_LEDGER_LINE = 8192
 #: Largest ledger read: 256 MiB, some two million files of ours (a line is about 130 bytes).
 MAX_LEDGER_BYTES = 256 << 20
+#: Bytes of memory the ledger's records take per byte of ledger read (a path, a SHA-256 and a
+#: size per line become a dict entry and a FileRecord: 2.3x measured on 156-byte lines by
+#: tracemalloc; shorter names cost more per byte), checked before the ledger is read.
+LEDGER_MEMORY_PER_BYTE = 4
 #: Files per batch of :meth:`OwnedFolder.write_many`: at most this many temporaries at once.
 BATCH_FILES = 64
 #: Threads that sync a batch's temporaries: concurrent fsyncs are committed together (ext4's
@@ -237,17 +242,36 @@ class OwnedFolder:
         return self.root / LEDGER_FILE
 
     def _read_ledger(self) -> dict[str, FileRecord]:
-        """The ledger's files; lines that are damaged or not ours (a torn last line) are skipped."""
+        """The ledger's files; lines that are damaged or not ours (a torn last line) are skipped.
+
+        Read in bounded memory: its size is checked before it is read (against
+        :data:`MAX_LEDGER_BYTES`, then the memory its records would take against the memory
+        available), and line by line, each at most :data:`_MAX_LEDGER_LINE` bytes held (a longer
+        line, never one of ours, is skipped without being held whole).
+
+        Raises
+        ------
+        UnsafePathError
+            It is a link, not a regular file, has another name, or is larger than any ledger of ours.
+        InsufficientMemoryError
+            Its records would take more memory than is available (names the ledger).
+        """
         ledger: dict[str, FileRecord] = {}
         path = self.ledger_path
         if not os.path.lexists(path):
             return ledger
         self._check_ledger_file(path)
-        fh, _ = open_regular_file(path, max_bytes=MAX_LEDGER_BYTES, error=UnsafePathError)
+        fh, size = open_regular_file(path, error=UnsafePathError)
         with fh:
-            for line in fh:
-                if len(line) > _MAX_LEDGER_LINE:
-                    continue
+            if size > MAX_LEDGER_BYTES:
+                raise UnsafePathError(
+                    f"{path}: {size:,} bytes, more than the {MAX_LEDGER_BYTES:,} a ledger of ours holds; it is damaged or "
+                    f"not ours: move it away, or choose another {self.option}"
+                )
+            check_memory(
+                size * LEDGER_MEMORY_PER_BYTE, f"the ledger {path} ({size:,} bytes)", hint=f"move it away, or choose another {self.option}"
+            )
+            for line in _bounded_lines(fh, _MAX_LEDGER_LINE):
                 try:
                     entry = loads_json(line, what=str(path))
                 except InvalidInputError:  # damaged, torn or nested past any line of ours
@@ -514,6 +538,17 @@ class BatchWriter:
         for tmp, _ in self._files:
             tmp.unlink(missing_ok=True)
         self._entries, self._files = {}, []
+
+
+def _bounded_lines(fh: BinaryIO, max_line: int) -> Iterator[bytes]:
+    """The lines of the open file ``fh`` of at most ``max_line`` bytes (newline included); longer
+    lines are skipped, read ``max_line + 1`` bytes at a time, so no more than that is ever held."""
+    while line := fh.readline(max_line + 1):
+        if len(line) <= max_line:
+            yield line
+            continue
+        while not line.endswith(b"\n") and (line := fh.readline(max_line + 1)):
+            pass  # the rest of a line too long to be ours
 
 
 def _sync_file(path: Path) -> None:
