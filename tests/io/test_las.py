@@ -169,6 +169,11 @@ def test_read_las_refuses_wrong_kinds_from_python() -> None:
     for cap in ({"max_points": "10"}, {"max_bytes": 1.5}, {"max_points": -1}, {"max_bytes": True}):
         with pytest.raises(ArgumentTypeError, match="must be a whole number >= 0"):
             read_las("scan.las", **cap)
+    for within in (123, b"tiles", ["tiles"]):
+        with pytest.raises(
+            ArgumentTypeError, match=r"within must be a folder's path \(str or os.PathLike\) or None, got (int 123|bytes|list)"
+        ):
+            read_las("scan.las", within=within)  # type: ignore[arg-type]
 
 
 @pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs os.mkfifo")
@@ -278,3 +283,148 @@ def test_a_scale_that_overflows_the_coordinates_is_refused_naming_the_file(tmp_p
     path = _write(tmp_path, _patched(_encode(), 131, "<d", 1e305))
     with pytest.raises(InvalidInputError, match=r"scan\.las: \d+ points have a NaN or infinite coordinate"):
         read_las(path)
+
+
+# -- forged LAZ chunks and items: refused from the bytes, before lazrs decompresses a point -------------------------------
+
+
+def _laszip_vlr(data: bytes) -> int:
+    """The byte where the LASzip VLR's body starts (compressor, coder, version, options, chunk size, ..., items)."""
+    position = struct.unpack_from("<H", data, 94)[0]
+    for _ in range(struct.unpack_from("<I", data, 100)[0]):
+        _, user_id, _, length, _ = struct.unpack_from("<H16sHH32s", data, position)
+        if user_id.rstrip(b"\0") == b"laszip encoded":
+            return position + 54
+        position += 54 + length
+    raise AssertionError("no LASzip VLR")
+
+
+#: Offsets in the LASzip VLR's body: chunk size (uint32), then each item's (type, size, version) uint16s.
+_CHUNK_SIZE_AT, _ITEMS_AT = 12, 34
+
+
+def _pointwise_laz(n: int = N) -> bytes:
+    """A LAS 1.2 point format 3 LAZ: point-wise LASzip items of version 2 (laz-rs writes them for formats 0 to 5)."""
+    f = _fields(n)
+    las = laspy.LasData(laspy.LasHeader(version="1.2", point_format=3))
+    las.x, las.y, las.z = f["points"].T
+    las.gps_time, las.intensity = f["gps_time"], f["intensity"]
+    buffer = io.BytesIO()
+    las.write(buffer, do_compress=True, laz_backend=laspy.LazBackend.Lazrs)
+    return buffer.getvalue()
+
+
+def _layered_laz(n: int = N) -> bytes:
+    f = _fields(n)
+    return las_bytes(f.pop("points"), **f, compress=True)
+
+
+def _with_count(data: bytes, count: int) -> bytes:
+    """``data`` declaring ``count`` points (the 1.4 64-bit count, or the legacy 32-bit one before 1.4)."""
+    return _patched(data, 247, "<Q", count) if data[25] == 4 else _patched(data, 107, "<I", count)
+
+
+@pytest.fixture
+def no_decompression(monkeypatch):
+    """lazrs's point decompressors fail the test if they are built: the refusal must come from the bytes alone."""
+    import lazrs
+
+    def never(*args, **kwargs):
+        raise AssertionError("lazrs was asked to decompress points")
+
+    for name in ("LasZipDecompressor", "ParLasZipDecompressor"):
+        monkeypatch.setattr(lazrs, name, never)
+
+
+def _chunk_size_1(data: bytes) -> bytes:
+    return _patched(data, _laszip_vlr(data) + _CHUNK_SIZE_AT, "<I", 1)
+
+
+def _table_chunks(data: bytes, n_chunks: int) -> bytes:
+    return _patched(data, _laz_chunk_table(data) + 4, "<I", n_chunks)
+
+
+FORGED_LAZ = {
+    # laz-rs starts a chunk (and rebuilds its models) every chunk-size points: 600 chunks, each its first point raw
+    "point-wise chunk size 1": (lambda: _chunk_size_1(_pointwise_laz()), r"declares 600 points in 600 LAZ chunks of at least 34 bytes"),
+    "layered chunk size 1": (lambda: _chunk_size_1(_layered_laz()), r"declares 600 points in 600 LAZ chunks of at least 70 bytes"),
+    # chunks of 100 points fit the bytes, but the table holds one chunk: 100 points
+    "point-wise chunk size 100": (lambda: _patched(_pointwise_laz(), _laszip_vlr(_pointwise_laz()) + _CHUNK_SIZE_AT, "<I", 100),
+                                  r"chunk table of 1 chunks holds at most 100 points of the 600 declared \(forged\)"),
+    "point-wise 10^5 points": (lambda: _with_count(_pointwise_laz(), 10**5),
+                               r"chunk table of 1 chunks holds at most 50,000 points of the 100,000 declared \(forged\)"),
+    "layered 10^5 points": (lambda: _with_count(_layered_laz(), 10**5),
+                            r"chunk table of 1 chunks holds at most 50,000 points of the 100,000 declared \(forged\)"),
+    "chunk table of 15 chunks": (lambda: _table_chunks(_layered_laz(20), 15),
+                                 r"chunk table declares 15 chunks of at least 70 bytes in \d+ bytes of LAZ data \(forged\)"),
+    # laz-rs decodes each item by its type, but slices the record by the VLR's sizes: a Rust panic
+    "point-wise item of 0 bytes": (lambda: _patched(_pointwise_laz(), _laszip_vlr(_pointwise_laz()) + _ITEMS_AT + 2, "<H", 0),
+                                   r"LASzip item 0 \(type 6\) declares 0 bytes; its type takes 20"),
+    "layered item of 0 bytes": (lambda: _patched(_layered_laz(), _laszip_vlr(_layered_laz()) + _ITEMS_AT + 2, "<H", 0),
+                                r"LASzip item 0 \(type 10\) declares 0 bytes; its type takes 30"),
+    "layered item of version 4": (lambda: _patched(_layered_laz(), _laszip_vlr(_layered_laz()) + _ITEMS_AT + 4, "<H", 4),
+                                  r"items \[\(10, 4\)\] \(type, version\) is not one lazrs reads"),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("case", sorted(FORGED_LAZ))
+def test_a_forged_laz_is_refused_before_decompression_with_nothing_on_stderr(tmp_path: Path, case: str, no_decompression, capfd) -> None:
+    make, match = FORGED_LAZ[case]
+    path = _write(tmp_path, make(), "tile 7.laz")
+    with pytest.raises(InvalidInputError, match=match) as caught:
+        read_las(path)
+    assert str(caught.value).startswith(str(path)) and "\n" not in str(caught.value)
+    assert capfd.readouterr().err == ""  # no Rust panic, no backtrace
+
+
+def test_the_shared_forms_of_laz_still_read_with_the_decompressor(tmp_path: Path) -> None:
+    for data in (_pointwise_laz(), _layered_laz()):
+        read = read_las(_write(tmp_path, data, "ok.laz"))
+        assert len(read) == N and np.array_equal(read.points, np.stack([laspy.read(io.BytesIO(data)).x, laspy.read(io.BytesIO(data)).y,
+                                                                        laspy.read(io.BytesIO(data)).z], axis=1))  # fmt: skip
+
+
+def test_a_chunk_table_of_10_8_chunks_is_refused_under_a_memory_limit(tmp_path: Path) -> None:
+    """lazrs reserves 16 bytes per chunk the table declares (1.6 GB for 10⁸) before decoding them: under a
+    1 GiB address-space limit it aborts the process; the table is refused from the bytes before it."""
+    from memory_limit import run_python_limited
+
+    data = _layered_laz(12_000)
+    path = _write(tmp_path, _table_chunks(_with_count(data, 10**8), 10**8), "tile.laz")
+    done = run_python_limited(
+        "from zbuf_occlude.errors import InvalidInputError\n"
+        "from zbuf_occlude.io.las import read_las\n"
+        f"try:\n    read_las({str(path)!r})\nexcept InvalidInputError as exc:\n    print(exc)\n",
+        headroom=1 << 30,
+    )
+    assert done.returncode == 0, done.stderr
+    assert "its LAZ chunk table declares 100,000,000 chunks of at least 70 bytes" in done.stdout, done.stdout + done.stderr
+
+
+@pytest.mark.parametrize("compress", [False, True])
+def test_points_read_in_many_small_reads_are_the_points(tmp_path: Path, monkeypatch, compress: bool) -> None:
+    """A LAZ's arrays grow as its points are decoded (doubling from READ_CHUNK_POINTS): the points are laspy's."""
+    import zbuf_occlude.io.las as las_module
+
+    monkeypatch.setattr(las_module, "READ_CHUNK_POINTS", 7)
+    data = _layered_laz() if compress else _encode()
+    ref = laspy.read(io.BytesIO(data))
+    read = read_las(_write(tmp_path, data, "scan.laz" if compress else "scan.las"))
+    assert np.array_equal(read.points, np.stack([ref.x, ref.y, ref.z], axis=1))
+    for key in ("intensity", "return_number", "number_of_returns", "classification", "point_source_id", "gps_time"):
+        assert np.array_equal(getattr(read, key), np.asarray(ref[key])), key
+
+
+def test_a_laz_declaring_more_points_than_it_decodes_reserves_what_it_decodes(tmp_path: Path, monkeypatch) -> None:
+    """One chunk of 2³¹ points holding 600, declaring 9·10⁶ (540 MB of arrays): refused as unreadable, having
+    reserved the arrays of the points decoded, not of the count (a LAS's count is bounded by its bytes)."""
+    import zbuf_occlude.io.las as las_module
+
+    reserved = []
+    real = las_module._reserve
+    monkeypatch.setattr(las_module, "_reserve", lambda out, n: reserved.append(n) or real(out, n))
+    data = _layered_laz()
+    data = _with_count(_patched(data, _laszip_vlr(data) + _CHUNK_SIZE_AT, "<I", 1 << 31), 9 * 10**6)
+    with pytest.raises(InvalidInputError, match="not a readable LAS/LAZ file"):
+        read_las(_write(tmp_path, data, "tile.laz"))
+    assert reserved and max(reserved) <= las_module.READ_CHUNK_POINTS

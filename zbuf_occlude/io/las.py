@@ -6,10 +6,13 @@ a LAZ file (the same, its points compressed by LASzip) as untrusted input:
 * the file is opened by :func:`~zbuf_occlude.io.regular_files.open_regular_file`: a regular file,
   of at most ``max_bytes``, inside ``within`` once links are resolved;
 * its structure is checked before laspy and lazrs (laz-rs) read it (:mod:`.las_layout`: the public
-  header, the VLRs and EVLRs, the declared point count, the LASzip VLR and chunks);
+  header, the VLRs and EVLRs, the declared point count, the LASzip VLR's items and the chunks
+  against the chunk table and the file's bytes), so that a forged count, chunk size or item is
+  refused before anything is decompressed, and nothing from Rust reaches stderr;
 * the memory the points will take is checked (:func:`~zbuf_occlude.resources.check_memory`)
-  before it is allocated; points are decoded :data:`READ_CHUNK_POINTS` at a time, and NaN or
-  infinite coordinates and GPS times are refused.
+  before it is allocated; points are decoded :data:`READ_CHUNK_POINTS` at a time, a LAZ file's
+  arrays grow as its points are decoded (its count is not backed by its bytes, a LAS file's is),
+  and NaN or infinite coordinates and GPS times are refused.
 
 Every failure, laspy's and lazrs's included, is one :class:`~zbuf_occlude.errors.InvalidInputError`
 line naming the file.  :func:`las_bytes` encodes points as LAS 1.4 (or LAZ) bytes in memory, for
@@ -160,13 +163,33 @@ class LasPoints:
         return len(self.points)
 
 
+def _reserve(out: dict[str, np.ndarray], n: int) -> dict[str, np.ndarray]:
+    """``out``'s arrays (or new ones) grown to ``n`` points, new entries zero (``ndarray.resize``: a realloc, no copy)."""
+    if not out:
+        return {"points": np.zeros((n, 3), np.float64), **{key: np.zeros(n, dtype) for key, dtype in LasPoints._DTYPES.items()}}
+    for key, array in out.items():
+        array.resize((n, 3) if key == "points" else (n,), refcheck=False)  # only this dict refers to them
+    return out
+
+
 def _read_points(reader: Any, layout: LasLayout, name: str) -> dict[str, np.ndarray]:
+    """The decoded fields of the file's points, reserved as the file backs them.
+
+    A LAS file's records fit its bytes (:func:`~zbuf_occlude.io.las_layout.check_count`): all are
+    reserved at once.  A LAZ file's declared count is bounded only by a compression ratio
+    (:data:`MAX_LAZ_POINTS_PER_BYTE`), so its arrays grow (doubling, up to the count) as points are
+    decoded: a forged count costs the memory of the points the file really decodes to.
+    """
     n = layout.count
-    out = {"points": np.empty((n, 3), np.float64), **{key: np.zeros(n, dtype) for key, dtype in LasPoints._DTYPES.items()}}
+    capacity = min(n, READ_CHUNK_POINTS) if layout.compressed else n
+    out = _reserve({}, capacity)
     dims = set(reader.header.point_format.dimension_names)
     done = 0
     while done < n:
-        rec = reader.read_points(min(READ_CHUNK_POINTS, n - done))
+        if done == capacity:
+            capacity = min(n, 2 * capacity)
+            out = _reserve(out, capacity)
+        rec = reader.read_points(min(READ_CHUNK_POINTS, capacity - done))
         got = len(rec)
         if got == 0:
             raise InvalidInputError(f"{name}: truncated: {done:,} of {n:,} points read")
@@ -219,7 +242,7 @@ def read_las(
     Raises
     ------
     ArgumentTypeError
-        ``path`` is not a path, or a cap is not a whole number.
+        ``path`` or ``within`` is not a path, or a cap is not a whole number.
     InvalidInputError
         Naming the file, in one line: missing, not a regular file, too large, not LAS/LAZ, a header,
         VLR, EVLR or LAZ chunk that declares more than the file holds, more points than
@@ -233,6 +256,8 @@ def read_las(
 
     if not isinstance(path, (str, PathLike)):
         raise ArgumentTypeError(f"path must be a LAS/LAZ file's path (str or os.PathLike), got {described(path)}")
+    if within is not None and not isinstance(within, (str, PathLike)):
+        raise ArgumentTypeError(f"within must be a folder's path (str or os.PathLike) or None, got {described(within)}")
     for cap, value in (("max_points", max_points), ("max_bytes", max_bytes)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
             raise ArgumentTypeError(f"{cap} must be a whole number >= 0, got {described(value)}")

@@ -19,10 +19,16 @@ So what they would read or allocate is checked here first, on the open file, wit
   declares must fit between the offset to the points and the first EVLR (or the end); compressed,
   at most :data:`MAX_LAZ_POINTS_PER_BYTE` per byte of compressed data;
 * the **LAZ chunks** (:func:`check_laz`): the LASzip VLR must name a compressor and items lazrs
-  reads, of the record length.  laz-rs allocates one entry per chunk the chunk table declares
-  (2³² − 1 chunks are 64 GiB, and the process aborts), and each layer a chunk header declares in
-  point formats 6 to 10 (up to 4 GiB each).  So the chunk table may declare no more chunks than
-  points, and the chunks are walked as laz-rs will read them: every layer must end inside the file.
+  reads, each of its type's size (laz-rs slices records by the VLR's sizes and decodes by the
+  types': a mismatch panics in Rust), of the record length.  laz-rs starts a chunk every chunk
+  size points whatever the chunk table says, rebuilding its models each time (half a millisecond
+  for point-wise items: a chunk size forged to 1 costs tens of seconds), and each chunk stores its
+  first point raw; so the chunks the count needs must fit the file's bytes, and the chunk table
+  must hold the declared points (chunks × chunk size, or the variable sizes' sum).  laz-rs
+  allocates one entry per chunk the chunk table declares (2³² − 1 chunks are 64 GiB, and the
+  process aborts), and each layer a chunk header declares in point formats 6 to 10 (up to 4 GiB
+  each).  So the chunk table may declare no more chunks than points, nor than the bytes before it
+  hold, and the chunks are walked as laz-rs will read them: every layer must end inside the file.
 
 Every failure is one :class:`~zbuf_occlude.errors.InvalidInputError` line naming the file.
 :func:`linear_unit_m` reads the coordinate unit from the header laspy parsed (the projected CRS of
@@ -81,6 +87,15 @@ _VARIABLE_CHUNKS = 0xFFFFFFFF
 _POINTWISE, _COMPRESSORS = 1, (1, 2, 3)
 #: Item types of each kind of decompressor (laz-rs ``LazItemType``).
 _POINTWISE_ITEMS, _LAYERED_ITEMS = (0, 6, 7, 8, 9), (10, 11, 12, 13, 14)
+#: Item versions laz-rs 0.12 decodes (``set_fields_from``): 1 and 2 point-wise, 3 layered; it
+#: picks the layered decompressor when the first item's version is 3 or 4 (4 it then refuses).
+_POINTWISE_VERSIONS, _LAYERED_VERSIONS, _LAYERED_PICKED = (1, 2), (3,), (3, 4)
+#: Extra-bytes item types, whose size the VLR gives (every other type has its own, :data:`_ITEM_SIZES`).
+_EXTRA_BYTES_ITEMS = (0, 14)
+#: Bytes of the chunk table's offset, at the start of the point data (LASzip; laz-rs ``ChunkTable::OFFSET_SIZE``).
+_CHUNK_TABLE_OFFSET_BYTES = 8
+#: Bytes of a layered chunk's point count and of each of its layer sizes (uint32, laz-rs ``LayeredPointRecordDecompressor``).
+_LAYER_FIELD_BYTES = 4
 #: Bytes of each LASzip item type (laz-rs ``LazItemType``: 0 and 14 are extra bytes, sized by the VLR).
 _ITEM_SIZES = {6: 20, 7: 8, 8: 6, 9: 29, 10: 30, 11: 6, 12: 8, 13: 29}
 #: Layers of each layered item (point14: 9, RGB: 1, RGB+NIR: 2, waveform: 1; extra bytes: one per byte).
@@ -259,12 +274,20 @@ def _laszip_items(fh: BinaryIO, layout: LasLayout, name: str) -> tuple[bytes, in
         raise InvalidInputError(f"{name}: the LASzip VLR declares {n_items} items and holds {len(body) - _LASZIP_VLR.size} bytes of them")
     items = [_LASZIP_ITEM.unpack_from(body, _LASZIP_VLR.size + i * _LASZIP_ITEM.size) for i in range(n_items)]
     # laz-rs picks the layered decompressor when the first item is of version 3 or 4, whatever the compressor says
-    layered = items[0][2] in (3, 4)
-    kinds, versions = (_LAYERED_ITEMS, (3, 4)) if layered else (_POINTWISE_ITEMS, (1, 2))
+    layered = items[0][2] in _LAYERED_PICKED
+    kinds, versions = (_LAYERED_ITEMS, _LAYERED_VERSIONS) if layered else (_POINTWISE_ITEMS, _POINTWISE_VERSIONS)
     if compressor not in _COMPRESSORS or any(k not in kinds or v not in versions for k, _, v in items):
         raise InvalidInputError(f"{name}: LASzip compressor {compressor} with items {[(k, v) for k, _, v in items]} (type, version) "
                                 "is not one lazrs reads")  # fmt: skip
-    item_bytes = sum(item_size if kind in (0, 14) else _ITEM_SIZES[kind] for kind, item_size, _ in items)
+    # laz-rs sizes each item's decoder by its type but slices the record by the VLR's sizes: a size
+    # other than the type's (or an extra-bytes item of 0 bytes) panics inside Rust, on stderr
+    for i, (kind, item_size, _) in enumerate(items):
+        if item_size != _ITEM_SIZES.get(kind, item_size) or item_size == 0:
+            want = "at least 1" if kind in _EXTRA_BYTES_ITEMS else str(_ITEM_SIZES[kind])
+            raise InvalidInputError(
+                f"{name}: LASzip item {i} (type {kind}) declares {item_size} bytes; its type takes {want} (damaged or forged)"
+            )
+    item_bytes = sum(item_size for _, item_size, _ in items)
     if item_bytes != layout.record_length:
         raise InvalidInputError(f"{name}: LASzip items of {item_bytes} bytes for records of {layout.record_length}")
     if compressor != _POINTWISE and chunk_size == 0:
@@ -272,12 +295,24 @@ def _laszip_items(fh: BinaryIO, layout: LasLayout, name: str) -> tuple[bytes, in
     return body, compressor, chunk_size, items
 
 
-def _chunk_table(fh: BinaryIO, layout: LasLayout, size: int, name: str, vlr: bytes) -> list[tuple[int, int]] | None:
-    """The chunk table lazrs will read, after checking that it declares no more chunks than points."""
+def _layers(items: list[tuple[int, int, int]]) -> int:
+    """Layers of a layered chunk: each item's (:data:`_ITEM_LAYERS`), one per byte of extra bytes."""
+    return sum(_ITEM_LAYERS.get(kind, item_size) for kind, item_size, _ in items)
+
+
+def _smallest_chunk(layout: LasLayout, items: list[tuple[int, int, int]]) -> int:
+    """The fewest bytes a chunk of points takes: its first point raw, and a layered chunk's point count and layer sizes."""
+    if items[0][2] not in _LAYERED_PICKED:
+        return layout.record_length
+    return layout.record_length + _LAYER_FIELD_BYTES * (1 + _layers(items))
+
+
+def _chunk_table(fh: BinaryIO, layout: LasLayout, size: int, name: str, vlr: bytes, smallest: int) -> list[tuple[int, int]] | None:
+    """The chunk table lazrs will read, after checking that the bytes before it can hold the chunks it declares."""
     import lazrs
 
     # where laz-rs looks for it (ChunkTable::read_offset): after the points, or at the file's end
-    (table,) = struct.unpack("<q", _read_at(fh, layout.offset, 8).ljust(8, b"\0"))
+    (table,) = struct.unpack("<q", _read_at(fh, layout.offset, _CHUNK_TABLE_OFFSET_BYTES).ljust(_CHUNK_TABLE_OFFSET_BYTES, b"\0"))
     if table <= layout.offset:
         (table,) = struct.unpack("<q", _read_at(fh, max(size - 8, 0), 8).ljust(8, b"\0"))
         if table <= layout.offset:
@@ -288,6 +323,12 @@ def _chunk_table(fh: BinaryIO, layout: LasLayout, size: int, name: str, vlr: byt
     _, n_chunks = struct.unpack("<II", head)
     if n_chunks > layout.count + 1:
         raise InvalidInputError(f"{name}: its LAZ chunk table declares {n_chunks:,} chunks for {layout.count:,} points (forged)")
+    # laz-rs reserves an entry per chunk before decoding them; every chunk but an empty last one
+    # takes at least ``smallest`` bytes before the table
+    chunk_bytes = table - layout.offset - _CHUNK_TABLE_OFFSET_BYTES
+    if (n_chunks - 1) * smallest > chunk_bytes:
+        raise InvalidInputError(f"{name}: its LAZ chunk table declares {n_chunks:,} chunks of at least {smallest} bytes in "
+                                f"{chunk_bytes:,} bytes of LAZ data (forged)")  # fmt: skip
     fh.seek(layout.offset)
     try:
         return list(lazrs.read_chunk_table(fh, lazrs.LazVlr(vlr)))
@@ -297,6 +338,9 @@ def _chunk_table(fh: BinaryIO, layout: LasLayout, size: int, name: str, vlr: byt
 
 def check_laz(fh: BinaryIO, layout: LasLayout, size: int, name: str) -> int:
     """Check the LASzip VLR and the chunks lazrs will decompress, before it allocates what they declare.
+
+    Everything checked costs a few reads of the file's bytes, at most one per chunk, and nothing is
+    decompressed: a forged chunk size or count is refused before laz-rs spends time or memory on it.
 
     Parameters
     ----------
@@ -318,24 +362,39 @@ def check_laz(fh: BinaryIO, layout: LasLayout, size: int, name: str) -> int:
     Raises
     ------
     InvalidInputError
-        Naming the file: no or a truncated LASzip VLR, a compressor or items lazrs does not read,
-        items that do not add up to the record length, chunks of 0 points, a chunk table that
-        declares more chunks than points or holds fewer points than declared, or a chunk whose
-        layers end past the end of the file.
+        Naming the file: no or a truncated LASzip VLR, a compressor or items lazrs does not read
+        (a type, size or version other than laz-rs's), items that do not add up to the record
+        length, chunks of 0 points, more chunks (points over the chunk size) than the file's bytes
+        can hold (each chunk stores its first point raw), a chunk table that declares more chunks
+        than points or than the bytes before it hold, or that holds fewer points than declared
+        (chunks × chunk size, or the sum of variable chunks), or a chunk whose layers end past the
+        end of the file.
     """
     vlr, compressor, chunk_size, items = _laszip_items(fh, layout, name)
     if layout.count == 0:
         return 0
-    table = None if compressor == _POINTWISE else _chunk_table(fh, layout, size, name, vlr)
+    smallest = _smallest_chunk(layout, items)
+    # the chunks start after the chunk table's offset; laz-rs reads none in point-wise (unchunked) data
+    start = layout.offset + (0 if compressor == _POINTWISE else _CHUNK_TABLE_OFFSET_BYTES)
+    data_bytes = max(size - start, 0)
     variable = compressor != _POINTWISE and chunk_size == _VARIABLE_CHUNKS
-    if variable and table is not None and sum(n for n, _ in table) < layout.count:
-        raise InvalidInputError(f"{name}: its LAZ chunk table holds {sum(n for n, _ in table):,} points of the {layout.count:,} declared")
-    if items[0][2] not in (3, 4):
+    # laz-rs starts a chunk every chunk_size points, reading on whether or not the table says so
+    chunks = 1 if compressor == _POINTWISE or variable else -(-layout.count // chunk_size)
+    if chunks * smallest > data_bytes:
+        raise InvalidInputError(f"{name}: declares {layout.count:,} points in {chunks:,} LAZ chunks of at least {smallest} bytes, more "
+                                f"than its {data_bytes:,} bytes of LAZ data (truncated or forged)")  # fmt: skip
+    table = None if compressor == _POINTWISE else _chunk_table(fh, layout, size, name, vlr, smallest)
+    if table is not None:
+        holds = sum(n for n, _ in table) if variable else len(table) * chunk_size
+        if holds < layout.count:
+            raise InvalidInputError(f"{name}: its LAZ chunk table of {len(table):,} chunks holds at most {holds:,} points of the "
+                                    f"{layout.count:,} declared (forged)")  # fmt: skip
+    if items[0][2] not in _LAYERED_PICKED:
         return 0  # point-wise items: one arithmetic-coded stream per chunk, nothing allocated from the data
     # layered chunks: the first point raw, the chunk's point count, then every layer's size
-    first, layers = layout.record_length, sum(_ITEM_LAYERS.get(kind, item_size) for kind, item_size, _ in items)
-    head = struct.Struct(f"<I{layers}I")
-    position, covered, largest, k = layout.offset + 8, 0, 0, 0
+    first = layout.record_length
+    head = struct.Struct(f"<I{_layers(items)}I")
+    position, covered, largest, k = start, 0, 0, 0
     while covered < layout.count:
         raw = _read_at(fh, position + first, head.size)
         if len(raw) < head.size:
