@@ -120,3 +120,49 @@ def test_a_disk_that_nearly_reaches_the_camera_plane_covers_the_image() -> None:
     cam, normal = np.array([[0.0, 0.0, 1.0]]), np.array([[0.0, 0.0, -1.0]])
     depth, ids = splat_surfels(cam, normal, np.array([radius]), 1e-4, -5e-4, -5e-4, 10, 10)
     assert (ids == 0).all() and np.allclose(depth, 1.0)
+
+
+#: Points of the cloud under the 10-million-point cap of a point-set file whose splats' estimated
+#: normals need an (N, 14) float64 array of 1.04 GiB (and as much again for the indices).
+_NEAR_CAP_POINTS = 9_900_000
+#: The address space of the child, as a user's ``ulimit -v`` of 3 GB (2 GB for the view).
+_PREPARE_LIMIT, _VIEW_LIMIT = 3 << 30, 2 << 30
+#: About the child's footprint, which the limit adds to the headroom (tests/memory_limit.py): 152 MiB measured.
+_FOOTPRINT = 160 << 20
+
+#: In a child under an address-space limit: prepare (or view, prepared by hand) 9.9 million
+#: points; print the refusal and exit 3.
+_NEAR_CAP = """
+import sys
+import numpy as np
+import zbuf_occlude as zo
+from zbuf_occlude.errors import ZbufOccludeError
+from zbuf_occlude.visibility.point_splats import PointSurfels, point_surfels
+n = {n}
+points = np.random.default_rng(0).normal(size=(n, 3))
+try:
+    if "{what}" == "prepare":
+        point_surfels(points)
+    else:
+        ones = np.ones(n)
+        surfels = PointSurfels(points, points, ones * 1e-3, ones * 1e-3, False, order=np.arange(n))
+        surfels.visible(zo.camera_on_sphere(30.0, 45.0))
+except ZbufOccludeError as exc:
+    print(exc)
+    sys.exit(3)
+"""
+
+
+@pytest.mark.parametrize("what", ["prepare", "view"])
+def test_a_cloud_near_the_point_cap_is_refused_before_the_work_under_a_memory_limit(what) -> None:
+    """9.9 million points fit the point-set cap; their preparation (5 GB with normals estimated)
+    or one view (2 GB) does not fit a 3 GB or 2 GB process: one line, before any of it is
+    allocated, never a MemoryError."""
+    from memory_limit import run_python_limited
+
+    headroom = (_PREPARE_LIMIT if what == "prepare" else _VIEW_LIMIT) - _FOOTPRINT
+    done = run_python_limited(_NEAR_CAP.format(n=_NEAR_CAP_POINTS, what=what), headroom=headroom)
+    assert done.returncode == 3 and not done.stderr, done.stdout + done.stderr[-2000:]
+    said = "preparing the splats of 9,900,000 points" if what == "prepare" else "a view of the splats of 9,900,000 points"
+    assert done.stdout.startswith(f"{said} needs about") and len(done.stdout.splitlines()) == 1, done.stdout
+    assert "ulimit -v" in done.stdout

@@ -35,8 +35,9 @@ What float64 cannot hold is refused before any work, in one line naming the valu
 beyond :data:`MAX_SPLAT_COORDINATE` (squared distances between them would overflow), a
 ``splat_scale`` beyond :data:`MAX_SPLAT_SCALE`, normals that cannot be made unit
 (:func:`~zbuf_occlude.io.point_sets.unit_normals`), and a cloud whose preparation would need more
-memory than is available (:data:`BYTES_PER_SURFEL`, :data:`BYTES_PER_ESTIMATED_NORMAL`;
-:func:`~zbuf_occlude.resources.check_memory`).
+memory than is available (:data:`BYTES_PER_SURFEL`, :data:`BYTES_PER_ESTIMATED_NORMAL` and
+:data:`BYTES_PER_THREAD` for each thread of its neighbour search; :func:`~zbuf_occlude.io.memory.check_memory`),
+and so is a view (:meth:`PointSurfels.visible`) whose arrays would (:data:`BYTES_PER_VIEW_POINT`).
 """
 
 from __future__ import annotations
@@ -62,12 +63,12 @@ from zbuf_occlude.geometry.arguments import check_camera, check_points, describe
 from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.geometry.placement import warn_camera_placement
 from zbuf_occlude.io.point_sets import unit_normals
-from zbuf_occlude.resources import check_memory
+from zbuf_occlude.io.memory import check_memory
 from zbuf_occlude.visibility.registry import register
 
 __all__ = [
     "PointSurfels", "point_surfels", "visible_mask_points", "SplatImage", "BYTES_PER_SURFEL", "BYTES_PER_ESTIMATED_NORMAL",
-    "MAX_SPLAT_COORDINATE", "MAX_SPLAT_SCALE",
+    "MAX_SPLAT_COORDINATE", "MAX_SPLAT_SCALE", "BYTES_PER_THREAD", "BYTES_PER_VIEW_POINT",
 ]  # fmt: skip
 
 #: Bytes per point of :func:`point_surfels` with normals given, at its peak.  It holds the
@@ -84,6 +85,20 @@ BYTES_PER_SURFEL = 224
 #: 24), the chosen normals and the spacing they use (32).  272 B more than with normals,
 #: measured as above (tracemalloc's peak 451 B a point; peak RSS grew 427-430 B); rounded up.
 BYTES_PER_ESTIMATED_NORMAL = 288
+#: Address space each thread of the neighbour search maps (from 2 threads, one per core and
+#: :data:`~zbuf_occlude.visibility.point_neighbours.POINTS_PER_THREAD` points): its stack (8 MiB,
+#: ``ulimit -s``) and the glibc malloc arena its first allocation reserves (64 MiB on 64-bit), which
+#: a limit on the address space (``ulimit -v``) counts although little of it is touched.
+BYTES_PER_THREAD = 72 << 20
+#: Bytes per point of one view (:meth:`PointSurfels.visible`) at its peak, beside the prepared
+#: cloud: the points, normals, radii and spacings gathered in Morton order once (64, kept), the
+#: camera-frame points and normals (48), the frustum test, the splat image's per-point
+#: temporaries and the masks: 150 B a point by tracemalloc on the first view at 200,000 and
+#: 800,000 points on a sphere (86 on later views), plus the camera frame's 48 that numba
+#: allocates (which tracemalloc does not see); rounded up.
+BYTES_PER_VIEW_POINT = 208
+#: Bytes per pixel of a view's splat image: its float64 depth and int64 ids.
+_BYTES_PER_SPLAT_PIXEL = 16
 #: Largest |coordinate| of a cloud, object units: 1e100.  The preparation sums squares of
 #: coordinate differences (the k-d tree's distances; a plane fit's covariance over 14
 #: neighbours, at most 14 · 3 · (2e100 · MAX_SPLAT_SCALE)² ≈ 2e207) and the splat test squares
@@ -176,6 +191,9 @@ class PointSurfels:
             ``tolerance`` negative or not finite; an unknown ``backend``.
         ArgumentTypeError
             ``camera`` not a :class:`Camera`, ``tolerance`` not a number.
+        InsufficientMemoryError
+            The view's arrays (:data:`BYTES_PER_VIEW_POINT` a point, and its splat image) would need
+            more memory than is available (naming the points), checked before any is allocated.
         BackendUnavailable
             ``backend="gpu"`` and no OpenGL 4.3 context can be created.
         """
@@ -185,6 +203,11 @@ class PointSurfels:
         tol = _check_nonnegative(tolerance, "tolerance")
         splat_surfels = _splatter(backend)
         n = len(self.points)
+        check_memory(
+            n * BYTES_PER_VIEW_POINT + MAX_SPLAT_PIXELS * _BYTES_PER_SPLAT_PIXEL,
+            f"a view of the splats of {n:,} points",
+            hint="give fewer points (a random subset), or run where more memory is available",
+        )
         in_frustum = camera.in_frustum(self.points)
         if n == 0 or not in_frustum.any():
             return in_frustum
@@ -328,7 +351,7 @@ def point_surfels(
     points : (N, 3) float
         World frame, object units.
     normals : (N, 3) float, optional
-        Surface normals (any length but zero).  Without them each point's normal is estimated
+        Surface normals (any finite length but zero, 5e-324 to 1.8e308).  Without them each point's normal is estimated
         from its neighbours, robustly next to sharp edges (the normals of
         :func:`~zbuf_occlude.geometry.normals.robust_normals`, computed by
         :func:`~zbuf_occlude.visibility.point_preparation.surfel_geometry`, which also finds the
@@ -358,7 +381,8 @@ def point_surfels(
         ``neighbours`` goes, anything but a bool for ``oriented``.
     InsufficientMemoryError
         The preparation (:data:`BYTES_PER_SURFEL` a point, and :data:`BYTES_PER_ESTIMATED_NORMAL`
-        without normals) would need more memory than is available (naming the points).
+        without normals, and :data:`BYTES_PER_THREAD` a thread) would need more memory than is
+        available (naming the points), checked before any of it is allocated.
     """
     pts = check_points(points)
     k = _check_count(neighbours, "neighbours")
@@ -370,9 +394,12 @@ def point_surfels(
     _check_coordinates(pts)
     n = len(pts)
     nrm = None if normals is None else _check_normals(normals, n)
+    from zbuf_occlude.visibility.point_neighbours import thread_count
+
+    threads = thread_count(n, -1)  # surfel_geometry's, each mapping its stack and malloc arena
     check_memory(
-        n * (BYTES_PER_SURFEL + (BYTES_PER_ESTIMATED_NORMAL if nrm is None else 0)),
-        option=f"preparing the splats of {n:,} points",
+        n * (BYTES_PER_SURFEL + (BYTES_PER_ESTIMATED_NORMAL if nrm is None else 0)) + (threads * BYTES_PER_THREAD if threads > 1 else 0),
+        f"preparing the splats of {n:,} points",
         hint="give fewer points" + ("" if nrm is not None else ", or normals (their estimate takes most of it)"),
     )
     if n < 2:
