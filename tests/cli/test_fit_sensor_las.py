@@ -78,6 +78,7 @@ def test_one_file_and_a_spinning_lidar_that_needs_an_altitude(scans: Path, tmp_p
         (["--classes", "256"], r"--classes must be ASPRS class codes .*got 256"),
         (["--bootstrap", "1"], r"--bootstrap must be an integer >= 2"),
         (["--bootstrap", "100001"], r"--bootstrap must be at most 10,000, got 100001"),
+        (["--altitude", "2e6"], r"^zbuf-occlude: error: --altitude must be at most 1e\+06 metres \(a sensor's largest range\), got 2e6$"),
     ],
 )
 def test_bad_options_are_one_line_usage_errors(scans: Path, tmp_path: Path, capsys, options: list, message: str) -> None:
@@ -187,11 +188,65 @@ def test_divergence_shares_fit_the_divergence(scans: Path, tmp_path: Path, capsy
         ("divergence_deg,multi_return_points\n0.5,0.3\n1,0.2\n", r"curve\.csv: simulated_shares must grow with the divergence"),
         ("divergence_deg,multi_return_points\n0.5,0.3\n", r"curve\.csv: .*M >= 2"),
         ("divergence_deg,multi_return_points\n", r"curve\.csv: a table of simulated shares needs 2 to 1,000 rows, got 0"),
+        (
+            "divergence_deg,multi_return_points\n0.5,0.1\n1e308,0.2\n",
+            r"^zbuf-occlude: error: --divergence-shares \S*curve\.csv: divergences_deg must be at most 90 degrees .*got 1e\+308$",
+        ),
     ],
 )
 def test_a_bad_table_of_shares_is_one_line_naming_it(scans: Path, tmp_path: Path, capsys, table: str, message: str) -> None:
     (tmp_path / "curve.csv").write_text(table)
-    code, _, err = _run(["fit-sensor", str(scans), "--sensor", "riegl-q1560", "--divergence-shares", str(tmp_path / "curve.csv"),
-                         "--out", str(tmp_path / "f.json")], capsys)  # fmt: skip
+    code, out, err = _run(["fit-sensor", str(scans), "--sensor", "riegl-q1560", "--divergence-shares", str(tmp_path / "curve.csv"),
+                           "--out", str(tmp_path / "f.json")], capsys)  # fmt: skip
     assert code == 2 and "\n" not in err and re.search(message, err), err
+    assert "reading" not in out  # refused before the scans are read
     assert not (tmp_path / "f.json").exists()
+
+
+def _rewritten(laz: Path, out: Path, change) -> Path:
+    """``laz`` written again to ``out`` after ``change(las)`` (laspy), which returns the LasData to write."""
+    import laspy
+
+    change(laspy.read(laz)).write(out)
+    return out
+
+
+def test_a_scan_of_first_returns_only_is_refused_naming_the_file_and_why(scans: Path, tmp_path: Path, capsys) -> None:
+    import laspy
+
+    def first_only(las):
+        kept = laspy.LasData(las.header)
+        kept.points = las.points[np.asarray(las.return_number) == 1]
+        return kept
+
+    laz = _rewritten(min(scans.glob("*.laz")), tmp_path / "first.laz", first_only)
+    assert read_las(laz).number_of_returns.max() > 1 and read_las(laz).return_number.max() == 1
+    code, out, err = _run(
+        ["fit-sensor", str(laz), "--sensor", "riegl-q1560", "--altitude", "100", "--out", str(tmp_path / "f.json")], capsys
+    )
+    assert code == 2 and "\n" not in err and "Traceback" not in err, err
+    assert re.search(rf"^zbuf-occlude: error: {re.escape(str(laz))}: holds first returns only \(return_number 1 on every point, though "
+                     r"its pulses recorded up to \d\): .*range resolution cannot be fitted; give the scan with all its returns$", err), err  # fmt: skip
+    assert "fitting" not in out and not (tmp_path / "f.json").exists()
+
+
+def test_a_scan_whose_gps_times_are_all_zero_is_refused_not_fitted_to_a_wrong_resolution(scans: Path, tmp_path: Path, capsys) -> None:
+    def zero_times(las):
+        las.gps_time = np.zeros(len(las.points))
+        return las
+
+    (tmp_path / "in").mkdir()
+    good = min(scans.glob("*.laz"))
+    zero = _rewritten(good, tmp_path / "in" / "zero.laz", zero_times)
+    code, out, err = _run(
+        ["fit-sensor", str(zero), "--sensor", "riegl-q1560", "--altitude", "100", "--out", str(tmp_path / "f.json")], capsys
+    )
+    assert code == 2 and "\n" not in err and "Traceback" not in err, err
+    assert re.search(rf"^zbuf-occlude: error: {re.escape(str(zero))}: its GPS times do not identify pulses \(all [\d,]+ points have GPS "
+                     r"time 0; .*give a scan whose points carry their pulse's GPS time", err), err  # fmt: skip
+    assert not (tmp_path / "f.json").exists()
+    # in a folder beside a good tile: the bad one is named
+    (tmp_path / "in" / "a_good.laz").write_bytes(good.read_bytes())
+    code, _, err = _run(["fit-sensor", str(tmp_path / "in"), "--sensor", "riegl-q1560", "--altitude", "100", "--out", str(tmp_path / "f.json")],
+                        capsys)  # fmt: skip
+    assert code == 2 and re.search(r"zero\.laz: its GPS times do not identify pulses", err), err

@@ -76,17 +76,21 @@ def test_the_figures_do_not_depend_on_the_order_of_the_points_and_the_seed_fixes
     }
 
 
-def test_an_incomplete_or_inconsistent_pulse_is_not_complete() -> None:
+#: Single pulses beside the two inconsistent ones, so that their 5 points are within MAX_AMBIGUOUS_SHARE of the scan's.
+SINGLES = 600
+
+
+def test_an_incomplete_or_inconsistent_pulse_is_not_complete_and_has_no_gaps() -> None:
     pulses = [
         (2, [(1, 0.0, 10, 1), (1, 1.0, 10, 1)]),  # return 1 twice
         (2, [(1, 0.0, 10, 1), (2, 1.0, 10, 1), (2, 2.0, 10, 1)]),  # three points for two returns
         (3, [(1, 0.0, 10, 1), (2, 1.0, 10, 1), (3, 2.0, 10, 1)]),
-        (1, [(1, 0.0, 10, 1)]),
+        *[(1, [(1, 0.0, 10, 1)])] * SINGLES,
     ]
     stats = return_statistics(_scan(pulses))
-    assert stats.n_complete_pulses == 2 and stats.estimates["returns_3"].value == 0.5
-    # 1->2 in the second pulse (once: its second 2 follows a 2), 1->2 and 2->3 in the third
-    assert stats.estimates["gap_count"].value == 3
+    assert stats.n_complete_pulses == 1 + SINGLES and stats.estimates["returns_3"].value == 1 / (1 + SINGLES)
+    # 1->2 and 2->3 in the third pulse; the second holds return 2 twice: not one pulse's returns, no gap
+    assert stats.estimates["gap_count"].value == 2
 
 
 @st.composite
@@ -135,7 +139,7 @@ def test_wrong_kinds_and_scans_without_times_are_refused() -> None:
         return_statistics(scan, classes=(5, 300))
     with pytest.raises(InvalidInputError, match="bootstrap must be >= 2"):
         return_statistics(scan, bootstrap=1)
-    with pytest.raises(ArgumentTypeError, match="seed must be an integer"):
+    with pytest.raises(InvalidInputError, match="seed must be a non-negative integer"):
         return_statistics(scan, seed=0.5)  # type: ignore[arg-type]
     no_time = LasPoints(**{f: getattr(scan, f) for f in LasPoints._DTYPES}, points=scan.points, has_gps_time=False, point_format_id=2)
     with pytest.raises(InvalidInputError, match="point format 2 has no GPS time"):

@@ -10,6 +10,8 @@ from zbuf_occlude.cli.options import Checked, count, counted, real, seed, shown
 from zbuf_occlude.defaults import DEFAULT_SEED
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.owned import OwnedFolder
+from zbuf_occlude.sensors.checks import MAX_RANGE_M
+from zbuf_occlude.sensors.fit.lidar import MAX_BOOTSTRAP
 from zbuf_occlude.sensors.presets import preset_names, sensor_from_name
 
 __all__ = ["add_fit_sensor_parser", "cmd_fit_sensor", "LAS_EXTENSIONS", "MAX_BOOTSTRAP"]
@@ -17,8 +19,6 @@ __all__ = ["add_fit_sensor_parser", "cmd_fit_sensor", "LAS_EXTENSIONS", "MAX_BOO
 
 #: What ``fit-sensor`` reads as LAS/LAZ scans (the return model's fit) rather than object scans.
 LAS_EXTENSIONS = (".las", ".laz")
-#: Most resamples ``fit-sensor --bootstrap`` takes: each costs a pass over the scan's pulses.
-MAX_BOOTSTRAP = 10_000
 
 
 def _las_inputs(real: str) -> list[Path] | None:
@@ -51,12 +51,22 @@ def _bootstrap(text: str, option: str) -> int:
     return n
 
 
+def _altitude(text: str, option: str) -> float:
+    """``--altitude M``: metres above the ground, > 0 and at most a sensor's largest range (:data:`~zbuf_occlude.sensors.checks.MAX_RANGE_M`)."""
+    value = real(0.0, above=True, unit="metres")(text, option)
+    if value > MAX_RANGE_M:
+        raise InvalidInputError(f"{option} must be at most {MAX_RANGE_M:g} metres (a sensor's largest range), got {shown(text)}")
+    return value
+
+
 def _read_scans(files: Sequence[Path], real: str):
     """The LAS/LAZ ``files`` read (inside the folder ``real`` when it is one) and merged; one line naming a file that has no
-    GPS time or no points, or what :func:`~zbuf_occlude.io.las.read_las` refuses."""
+    GPS time or no points, whose GPS times do not group its returns into pulses or that holds first returns only
+    (:func:`~zbuf_occlude.sensors.fit.returns.check_pulses`), or what :func:`~zbuf_occlude.io.las.read_las` refuses."""
     from zbuf_occlude.defaults import MAX_POINTS
     from zbuf_occlude.io.las import read_las
     from zbuf_occlude.sensors.fit import merge_scans
+    from zbuf_occlude.sensors.fit.returns import check_pulses, check_return_pairs, las_pulses
 
     within = real if Path(real).is_dir() else None
     scans, total = [], 0
@@ -68,6 +78,9 @@ def _read_scans(files: Sequence[Path], real: str):
             )
         if len(las) == 0:
             raise InvalidInputError(f"{f}: holds no points")
+        pulses = las_pulses(las)
+        check_pulses(las, pulses, name=str(f))  # times that group its returns into pulses
+        check_return_pairs(las, pulses, name=str(f))  # not first returns alone
         scans.append(las)
         total += len(las)
     return merge_scans(scans, [str(f) for f in files])
@@ -102,7 +115,9 @@ def _fit_returns(args: argparse.Namespace, files: Sequence[Path]) -> int:
         from zbuf_occlude.io.tables import read_csv_rows
         from zbuf_occlude.sensors.fit import divergence_curve
 
-        figure, divergences, shares, stds = divergence_curve(read_csv_rows(args.divergence_shares), args.divergence_shares)
+        figure, divergences, shares, stds = divergence_curve(
+            read_csv_rows(args.divergence_shares), f"--divergence-shares {args.divergence_shares}"
+        )
         curve = {"divergence_shares": (divergences, shares, stds), "divergence_share": figure}
     md = out.with_suffix(".md")
     names = (out.name, md.name)
@@ -176,7 +191,7 @@ def add_fit_sensor_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="the fitted sensor, a .json file (a .md table is written beside it)")
     p.add_argument("--seed", action=Checked, check=seed, default=DEFAULT_SEED, help="seed of the bootstrap (default: %(default)s)")
     r = p.add_argument_group("LAS/LAZ scans (the return model)")
-    r.add_argument("--altitude", metavar="M", action=Checked, check=real(0.0, above=True, unit="metres"), default=None,
+    r.add_argument("--altitude", metavar="M", action=Checked, check=_altitude, default=None,
                    help="flying height above the ground, metres: a LAS file records no sensor position, and the intensity scale "
                         "and the detection threshold in energy depend on the range (default: the airborne --sensor's altitude; "
                         "IGN LiDAR HD flies about 1,500 m)")  # fmt: skip

@@ -54,8 +54,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.sensors.checks import MAX_RANGE_M, MAX_SENSOR_RAYS, count, is_number, located, real, reals, sensor_name, shown, text
-from zbuf_occlude.sensors.footprint import check_resolved_footprint
+from zbuf_occlude.sensors.footprint import MAX_DIVERGENCE_DEG, check_resolved_footprint
 
 __all__ = ["AIRBORNE_PRESETS", "MAX_FLIGHT_LINES", "AirborneScanner", "FlightLine", "airborne_preset", "scan_airborne"]
 
@@ -200,7 +201,7 @@ class AirborneScanner:
             "speed_mps": positive, "swath_deg": {**positive, "high": 180.0, "high_open": True},
             "range_noise_m": {"low": 0.0, "high": MAX_RANGE_M}, "dropout": {"low": 0.0, "high": 1.0, "high_open": True},
             "side_overlap": {"low": 0.0, "high": 1.0, "high_open": True, "expected": "a fraction in [0, 1)"},
-            "beam_divergence_deg": {"low": 0.0, "high": 90.0}, "range_resolution_m": {"low": 0.0, "high": MAX_RANGE_M},
+            "beam_divergence_deg": {"low": 0.0, "high": MAX_DIVERGENCE_DEG}, "range_resolution_m": {"low": 0.0, "high": MAX_RANGE_M},
             "detection_threshold": {"low": 0.0},
         }  # fmt: skip
         for name, bounds in numbers.items():
@@ -491,7 +492,7 @@ def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_si
     Raises
     ------
     InvalidInputError
-        A non-finite or non-positive square, a non-finite phase or shift, a reflectivity or
+        A seed :func:`~zbuf_occlude.geometry.sampling.check_seed` refuses; a non-finite or non-positive square, a non-finite phase or shift, a reflectivity or
         transmittance out of range or given to a scanner of one return per pulse, more than
         :data:`~zbuf_occlude.sensors.checks.MAX_SENSOR_RAYS` pulses in all (counted line by line,
         before the rays are cast).
@@ -499,6 +500,7 @@ def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_si
     from zbuf_occlude.sensors.raycast import cast_embree, face_normals
     from zbuf_occlude.sensors.scan import Scan, build_scene, return_numbers
 
+    seed = check_seed(seed)  # before the scene is built: numpy would refuse -1 or 'a' only when drawing
     built = build_scene(scene)
     rho, tau = _surface_optics(built, scanner, reflectivity, transmittance)
     rng = np.random.default_rng(seed)

@@ -38,7 +38,15 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.checks import count, real, shown, text
 from zbuf_occlude.sensors.echoes import MAX_RETURNS
 
-__all__ = ["FOOTPRINT_RAYS", "MAX_SUBRAYS", "PROFILES", "check_resolved_footprint", "footprint_offsets", "subray_directions"]
+__all__ = [
+    "FOOTPRINT_RAYS",
+    "MAX_DIVERGENCE_DEG",
+    "MAX_SUBRAYS",
+    "PROFILES",
+    "check_resolved_footprint",
+    "footprint_offsets",
+    "subray_directions",
+]
 
 #: The footprint a scanner is given when none is named (``scan --footprint``, ``farm
 #: --sensor-footprint``, ``experiment sim2real --returns``, a fitted divergence): the centre ray
@@ -52,6 +60,9 @@ FOOTPRINT_RAYS = 7
 #: Most sub-rays per pulse: a scan casts ``pulses × K`` rays, so K multiplies the cost and the
 #: memory of every scan; 1024 cells already make each cell ~3 % of the footprint's diameter.
 MAX_SUBRAYS = 1024
+#: Widest full-angle beam divergence, degrees: the edge of the cone 45° off its axis, already
+#: thousands of times any scanner's (0.01–0.5°); a sensor's ``beam_divergence_deg`` above it is refused.
+MAX_DIVERGENCE_DEG = 90.0
 
 #: Beam profiles: "tophat" (uniform over the cone) and "gaussian" (TEM00, 1/e² diameter =
 #: the divergence).
@@ -141,7 +152,7 @@ def footprint_offsets(n_subrays: int, divergence_deg: float, *, profile: str = "
         finite number in [0, 90], or 0 with more than one sub-ray; an unknown ``profile``.
     """
     k = count(n_subrays, "n_subrays", low=1, high=MAX_SUBRAYS)
-    divergence = real(divergence_deg, "divergence_deg", low=0.0, high=90.0)
+    divergence = real(divergence_deg, "divergence_deg", low=0.0, high=MAX_DIVERGENCE_DEG)
     text(profile, "profile", choices=PROFILES)
     if k > 1 and divergence == 0.0:
         raise InvalidInputError(f"n_subrays {k} needs divergence_deg > 0 (the sub-rays would all be the centre ray)")

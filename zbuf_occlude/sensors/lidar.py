@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike, NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.checks import MAX_RANGE_M, MAX_SENSOR_RAYS, count, located, real, reals, sensor_name, shown, text
 from zbuf_occlude.sensors.echoes import MAX_RETURNS
-from zbuf_occlude.sensors.footprint import MAX_SUBRAYS, PROFILES, footprint_offsets, subray_directions
+from zbuf_occlude.sensors.footprint import MAX_DIVERGENCE_DEG, MAX_SUBRAYS, PROFILES, footprint_offsets, subray_directions
 
 __all__ = ["Lidar", "LIDAR_PRESETS", "lidar_preset", "beam_directions"]
 
@@ -165,7 +165,7 @@ class Lidar:
             "rotation_hz": positive, "firing_rate_hz": positive, "max_range_m": {**positive, **ranges},
             "min_range_m": {**at_least_0, **ranges}, "range_noise_m": {**at_least_0, **ranges},
             "dropout": {"low": 0.0, "high": 1.0, "high_open": True}, "dropout_range_per_m": {},
-            "beam_divergence_deg": {**at_least_0, "high": 90.0}, "azimuth_offset_deg": {},
+            "beam_divergence_deg": {**at_least_0, "high": MAX_DIVERGENCE_DEG}, "azimuth_offset_deg": {},
             "echo_separation_m": at_least_0, "detection_reflectivity": positive,
             "detection_range_m": {**positive, **ranges}, "power_noise": at_least_0,
         }  # fmt: skip

@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.io.arrays import load_npz
 from zbuf_occlude.io.atomic import write_bytes
 from zbuf_occlude.io.encodings import npz_bytes
@@ -477,8 +478,9 @@ def scan(
     pose : (4, 4) or (3,) float, optional
         Sensor → world transform (LiDAR frame: x forward, z up; camera frame: OpenCV, see
         :func:`look_at_pose`), or just the position; default ``scene.default_sensor_pose()``.
-    seed : int
+    seed : int, numpy.random.Generator or None
         Seeds noise and dropout (``numpy.random.default_rng(seed)``); same seed, same bytes.
+        Checked first (:func:`~zbuf_occlude.geometry.sampling.check_seed`).
     backend : {"embree", "zbuffer"}
         Ray casting (:mod:`.raycast`); "embree" is the reference.
     frame : {"sensor", "world"}
@@ -520,11 +522,12 @@ def scan(
     Raises
     ------
     InvalidInputError
-        Bad pose, frame, backend or scene; a bad ``reflectivity`` or ``transmittance``, or a
+        A negative, too large or non-integer ``seed``; bad pose, frame, backend or scene; a bad ``reflectivity`` or ``transmittance``, or a
         transmittance above 0 with the "zbuffer" backend or without the multi-return model.
     BackendUnavailable
         Embree or OpenGL missing for the chosen backend.
     """
+    seed = check_seed(seed)  # numpy's own refusals of -1, 'a' or 1.5 would come after the rays are cast
     if backend not in BACKENDS:
         raise InvalidInputError(f"unknown scan backend {backend!r}; use one of {BACKENDS}")
     if frame not in FRAMES:

@@ -69,8 +69,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.sensors.airborne import AirborneScanner
-from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate, estimates_markdown
+from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate, check_bootstrap, check_fit_seed, estimates_markdown
 
 __all__ = [
     "AirborneFit", "CropFaces", "FITTED_LINES", "HORIZONTAL_DEG", "MAX_CROP_POINTS", "MIN_CROP_POINTS", "ONE_SIDED_SHARE",
@@ -232,8 +233,10 @@ def crop_faces(points: NDArray[np.floating], *, max_points: int = MAX_CROP_POINT
     Raises
     ------
     InvalidInputError
-        Not finite ``(N, 3)`` points, fewer than :data:`MIN_CROP_POINTS`, or ``max_points`` below it.
+        Not finite ``(N, 3)`` points, fewer than :data:`MIN_CROP_POINTS`, or ``max_points`` below it; a seed
+        :func:`~zbuf_occlude.geometry.sampling.check_seed` refuses.
     """
+    seed = check_seed(seed)
     p = _checked_crop(points)
     if len(p) < MIN_CROP_POINTS:
         raise InvalidInputError(f"a crop needs at least {MIN_CROP_POINTS} points, got {len(p)}")
@@ -430,11 +433,13 @@ def fit_airborne(crops: Sequence[NDArray[np.floating]], base: AirborneScanner, *
     ------
     InvalidInputError
         A crop that is not finite ``(N, 3)`` points (naming its index), fewer than 2 usable crops, no
-        crop with a measurable top (the density cannot be told), ``bootstrap < 2``, ``max_crop_points`` below
+        crop with a measurable top (the density cannot be told), ``bootstrap`` outside 2 to
+        :data:`~zbuf_occlude.sensors.fit.lidar.MAX_BOOTSTRAP`, a negative or too large ``seed``, ``max_crop_points`` below
         :data:`MIN_CROP_POINTS`.
+    ArgumentTypeError
+        ``seed`` or ``bootstrap`` not an integer.
     """
-    if int(bootstrap) < 2:
-        raise InvalidInputError(f"bootstrap must be >= 2, got {bootstrap!r}")
+    seed, bootstrap = check_fit_seed(seed), check_bootstrap(bootstrap)
     faces = []
     for i, crop in enumerate(crops):
         p = _checked_crop(crop, f"crop {i}: ")

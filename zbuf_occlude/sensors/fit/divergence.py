@@ -20,9 +20,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.geometry.arguments import described
+from zbuf_occlude.sensors.checks import shown
 from zbuf_occlude.sensors.fit.lidar import Estimate
+from zbuf_occlude.sensors.footprint import MAX_DIVERGENCE_DEG
 
-__all__ = ["DIVERGENCE_GRID_DEG", "MAX_CURVE_ROWS", "divergence_curve", "divergence_from_shares", "fit_divergence"]
+__all__ = ["DIVERGENCE_GRID_DEG", "MAX_CURVE_ROWS", "check_curve", "divergence_curve", "divergence_from_shares", "fit_divergence"]
 
 #: Divergences, degrees, that :func:`fit_divergence` simulates by default: 0.05 to 3 mrad.
 DIVERGENCE_GRID_DEG = tuple(float(v) for v in np.degrees(np.geomspace(0.05e-3, 3e-3, 9)))
@@ -45,7 +47,8 @@ def divergence_from_shares(divergences_deg: ArrayLike, simulated_shares: ArrayLi
     Parameters
     ----------
     divergences_deg : (M,) float
-        Full-angle divergences, degrees, > 0, strictly increasing, M >= 2.
+        Full-angle divergences, degrees, > 0, strictly increasing, at most
+        :data:`~zbuf_occlude.sensors.footprint.MAX_DIVERGENCE_DEG`, M >= 2.
     simulated_shares : (M,) float
         The share in [0, 1] simulated at each.  It must grow with the divergence (non-decreasing;
         ties are taken as the curve's flat parts) and rise somewhere.
@@ -64,8 +67,9 @@ def divergence_from_shares(divergences_deg: ArrayLike, simulated_shares: ArrayLi
     Raises
     ------
     InvalidInputError
-        Arrays of other shapes or lengths, non-finite values, divergences not increasing or not
-        positive, shares outside [0, 1], decreasing or flat everywhere.
+        Arrays of other shapes or lengths, non-finite values, divergences not increasing, not
+        positive or above :data:`~zbuf_occlude.sensors.footprint.MAX_DIVERGENCE_DEG`, shares outside [0, 1], decreasing or
+        flat everywhere.
     ArgumentTypeError
         ``measured`` is not an :class:`~zbuf_occlude.sensors.fit.Estimate`.
     """
@@ -80,11 +84,15 @@ def divergence_from_shares(divergences_deg: ArrayLike, simulated_shares: ArrayLi
     if not (np.all(np.isfinite(d)) and np.all(np.isfinite(s)) and np.all(np.isfinite(sd))):
         raise InvalidInputError("divergences_deg, simulated_shares and simulated_std must be finite")
     if not (d[0] > 0 and np.all(np.diff(d) > 0)):
-        raise InvalidInputError(f"divergences_deg must be > 0 and strictly increasing, got {d.tolist()}")
+        raise InvalidInputError(f"divergences_deg must be > 0 and strictly increasing, got {shown(d.tolist())}")
+    if d[-1] > MAX_DIVERGENCE_DEG:
+        raise InvalidInputError(f"divergences_deg must be at most {MAX_DIVERGENCE_DEG:g} degrees (a sensor's widest beam), got {d[-1]:g}")
     if s.min() < 0 or s.max() > 1 or sd.min() < 0:
-        raise InvalidInputError(f"simulated_shares must be shares in [0, 1] (and simulated_std >= 0), got {s.tolist()}")
+        raise InvalidInputError(f"simulated_shares must be shares in [0, 1] (and simulated_std >= 0), got {shown(s.tolist())}")
     if np.any(np.diff(s) < 0) or s[-1] == s[0]:
-        raise InvalidInputError(f"simulated_shares must grow with the divergence (non-decreasing, rising somewhere), got {s.tolist()}")
+        raise InvalidInputError(
+            f"simulated_shares must grow with the divergence (non-decreasing, rising somewhere), got {shown(s.tolist())}"
+        )
     method = (f"divergence whose simulated share meets the measured {measured.value:.4g} ± {measured.std:.2g} (linear between "
               f"{len(d)} simulated divergences, {d[0]:.3g}° to {d[-1]:.3g}°)")  # fmt: skip
 
@@ -95,7 +103,10 @@ def divergence_from_shares(divergences_deg: ArrayLike, simulated_shares: ArrayLi
         lo, hi = np.searchsorted(s, share, side="left"), np.searchsorted(s, share, side="right")
         if lo < hi:
             return float((d[lo] + d[hi - 1]) / 2.0)
-        return float(np.interp(share, s[lo - 1 : lo + 1], d[lo - 1 : lo + 1]))
+        # the share's place between its two points, then the divergence there: not np.interp, whose slope
+        # (d1 - d0) / (s1 - s0) overflows to inf where the shares differ by a subnormal step
+        where = (share - s[lo - 1]) / (s[lo] - s[lo - 1])
+        return float(d[lo - 1] + (d[lo] - d[lo - 1]) * where)
 
     value = inverse(measured.value)
     if math.isfinite(value):
@@ -106,6 +117,46 @@ def divergence_from_shares(divergences_deg: ArrayLike, simulated_shares: ArrayLi
     else:
         std = math.nan
     return Estimate(value, std, measured.n, method, "deg")
+
+
+def check_curve(curve: object, name: str = "divergence_shares") -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """A simulated share curve ``(divergences_deg, shares[, stds])`` checked before any fit rests on it.
+
+    Parameters
+    ----------
+    curve : tuple of 2 or 3 array_like
+        As :func:`divergence_from_shares` takes them (:func:`divergence_curve` reads them from a table).
+    name : str
+        The argument named in messages.
+
+    Returns
+    -------
+    divergences_deg, shares, stds : (M,) float64
+        ``stds`` zeros when not given.
+
+    Raises
+    ------
+    ArgumentTypeError
+        Not a tuple or list of 2 or 3 arrays of numbers.
+    InvalidInputError
+        What :func:`divergence_from_shares` refuses (non-finite values, divergences not increasing or above
+        :data:`~zbuf_occlude.sensors.footprint.MAX_DIVERGENCE_DEG`, shares outside [0, 1] or not growing), naming ``name``.
+    """
+    if not (isinstance(curve, (tuple, list)) and len(curve) in (2, 3)):
+        raise ArgumentTypeError(f"{name} must be (divergences_deg, shares) or (divergences_deg, shares, stds), got {described(curve)}")
+    arrays = []
+    for part, item in zip(("divergences_deg", "shares", "stds"), curve, strict=False):
+        try:
+            arrays.append(np.asarray(item, dtype=np.float64))
+        except (TypeError, ValueError):
+            raise ArgumentTypeError(f"{name}: {part} must be an array of numbers, got {described(item)}") from None
+    d, s, *sd = arrays
+    sd = sd[0] if sd else np.zeros_like(s)
+    try:
+        divergence_from_shares(d, s, Estimate(math.nan, math.nan, 0, "", "share"), sd)
+    except InvalidInputError as exc:
+        raise InvalidInputError(f"{name}: {exc}") from None
+    return d, s, sd
 
 
 def divergence_curve(

@@ -50,17 +50,23 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
+from zbuf_occlude.geometry.arguments import described
+from zbuf_occlude.geometry.sampling import check_seed
+from zbuf_occlude.sensors.checks import shown
 from zbuf_occlude.sensors.lidar import Lidar
 
 __all__ = [
-    "BOOTSTRAP", "Estimate", "estimates_markdown", "fit_lidar", "LidarFit", "MAX_DROPOUT_GAP", "MIN_RETURNS", "PLANE_NEIGHBOURS", "RING_SHARE",
+    "BOOTSTRAP", "check_bootstrap", "check_fit_seed", "Estimate", "MAX_BOOTSTRAP", "estimates_markdown", "fit_lidar", "LidarFit", "MAX_DROPOUT_GAP", "MIN_RETURNS", "PLANE_NEIGHBOURS", "RING_SHARE",
 ]  # fmt: skip
 #: How a refusal of scans no spinning sensor made ends: what to fit instead, in the library and on the command line.
 _NOT_SPINNING = ("these are not scans in a spinning sensor's frame (airborne crops or world coordinates?); fit an airborne "
                  "scanner to airborne crops instead (fit_airborne; fit-sensor --sensor dales-q1560 or riegl-q1560)")  # fmt: skip
 #: Bootstrap resamples of the scans for every uncertainty.
 BOOTSTRAP = 200
+#: Most bootstrap resamples a fit takes (``fit-sensor --bootstrap`` too): each is a pass over the scans or pulses, and a
+#: standard deviation over 10,000 resamples is already within 1 % of its limit, ``1/√(2(B − 1))``.
+MAX_BOOTSTRAP = 10_000
 #: Longest gap inside a ring, in azimuth steps, counted as lost returns (module docstring).
 MAX_DROPOUT_GAP = 4
 #: Neighbours of the local plane fit (ground returns).
@@ -74,6 +80,42 @@ _OUTSIDE_BEAMS_DEG = 0.5
 _GROUND_SLICE_M = 0.15
 _PLANARITY = 0.3
 _GROUND_NORMAL_COS = math.cos(math.radians(25.0))
+
+
+def check_bootstrap(bootstrap: object, *, name: str = "bootstrap") -> int:
+    """``bootstrap`` as the number of resamples of a fit: an integer from 2 to :data:`MAX_BOOTSTRAP`.
+
+    Raises
+    ------
+    ArgumentTypeError
+        Not an integer (a bool, a float, text), naming ``name``.
+    InvalidInputError
+        Below 2 (a spread needs two resamples) or above :data:`MAX_BOOTSTRAP`.
+    """
+    if isinstance(bootstrap, (bool, np.bool_)) or not isinstance(bootstrap, (int, np.integer)):
+        raise ArgumentTypeError(f"{name} must be an integer, got {described(bootstrap)}")
+    if bootstrap < 2:
+        raise InvalidInputError(f"{name} must be >= 2 (a spread needs two resamples), got {shown(bootstrap)}")
+    if bootstrap > MAX_BOOTSTRAP:
+        raise InvalidInputError(f"{name} must be at most {MAX_BOOTSTRAP:,} (MAX_BOOTSTRAP), got {shown(bootstrap)}")
+    return int(bootstrap)
+
+
+def check_fit_seed(seed: object, *, name: str = "seed") -> int:
+    """``seed`` of a fit's bootstrap: :func:`~zbuf_occlude.geometry.sampling.check_seed`'s rule, and an integer, which
+    the fit records beside its figures (not None or a Generator).
+
+    Raises
+    ------
+    InvalidInputError
+        What :func:`~zbuf_occlude.geometry.sampling.check_seed` refuses (negative, above ``MAX_SEED``, not a number).
+    ArgumentTypeError
+        None or a numpy Generator.
+    """
+    checked = check_seed(seed, name=name)
+    if not isinstance(checked, int):
+        raise ArgumentTypeError(f"{name} must be a non-negative integer (a fit records its seed), got {described(seed)}")
+    return checked
 
 
 @dataclass(frozen=True)
@@ -367,12 +409,13 @@ def fit_lidar(clouds: Sequence[NDArray[np.floating]], base: Lidar, *, seed: int 
     InvalidInputError
         ``base`` is not a :class:`Lidar`, fewer than 3 scans have :data:`MIN_RETURNS` returns, a
         scan is not (N, 3) finite or is centred on its object (not in the sensor frame), or
-        nothing could be estimated.
+        nothing could be estimated; ``bootstrap`` outside 2 to :data:`MAX_BOOTSTRAP`, a negative or too large ``seed``.
+    ArgumentTypeError
+        ``seed`` or ``bootstrap`` not an integer.
     """
     if not isinstance(base, Lidar):
         raise InvalidInputError(f"fit_lidar fits a spinning LiDAR, got {type(base).__name__}")
-    if int(bootstrap) < 2:
-        raise InvalidInputError(f"bootstrap must be >= 2, got {bootstrap!r}")
+    seed, bootstrap = check_fit_seed(seed), check_bootstrap(bootstrap)
     beams = np.asarray(base.elevations_deg, dtype=np.float64)
     stats = []
     for i, c in enumerate(clouds):

@@ -82,13 +82,17 @@ from zbuf_occlude.io.las import LasPoints
 from zbuf_occlude.resources import check_memory
 from zbuf_occlude.sensors.echoes import MAX_RETURNS, hit_energy
 from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
-from zbuf_occlude.sensors.fit.divergence import divergence_from_shares
+from zbuf_occlude.sensors.checks import MAX_RANGE_M, real, shown, text
+from zbuf_occlude.sensors.fit.divergence import check_curve, divergence_from_shares
 from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate, estimates_markdown
 from zbuf_occlude.sensors.fit.returns import (
     VEGETATION_CLASSES,
     PulseValues,
     ReturnStatistics,
     check_classes,
+    check_pulses,
+    check_return_pairs,
+    multi_return_shares,
     las_pulses,
     pulse_bootstrap,
     return_statistics,
@@ -318,12 +322,11 @@ def _ground(
     return np.zeros(len(order), bool), "none"
 
 
-def _checked_positive(value: Any, name: str) -> float:
+def _checked_positive(value: Any, name: str, high: float) -> float:
+    """``value`` as a float in (0, ``high``]."""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise ArgumentTypeError(f"{name} must be a number, got {described(value)}")
-    if not (math.isfinite(value) and value > 0):
-        raise InvalidInputError(f"{name} must be a finite number > 0, got {value}")
-    return float(value)
+    return real(value, name, low=0.0, low_open=True, high=high, expected=f"in (0, {high:g}]")
 
 
 def fit_return_model(
@@ -373,26 +376,33 @@ def fit_return_model(
     ArgumentTypeError
         An argument of the wrong kind.
     InvalidInputError
-        What :func:`~zbuf_occlude.sensors.fit.returns.return_statistics` refuses (no GPS time, no
-        points, class codes outside 0..255); a non-positive or non-finite altitude, a reflectance
-        outside (0, 1]; a ``divergence_share`` the statistics do not hold; what
-        :func:`~zbuf_occlude.sensors.fit.divergence.divergence_from_shares` refuses.
+        Before any work: what :func:`~zbuf_occlude.sensors.fit.returns.return_statistics` refuses (no GPS time, no
+        points, class codes outside 0..255, a seed or bootstrap out of range, GPS times that do not identify pulses:
+        :func:`~zbuf_occlude.sensors.fit.returns.check_pulses`); a scan of first returns only
+        (:func:`~zbuf_occlude.sensors.fit.returns.check_return_pairs`); an altitude outside (0,
+        :data:`~zbuf_occlude.sensors.checks.MAX_RANGE_M`], a reflectance outside (0, 1]; a curve
+        :func:`~zbuf_occlude.sensors.fit.divergence.check_curve` refuses, a ``divergence_share`` the statistics
+        would not hold.
     InsufficientMemoryError
         The scan is too large for the memory available.
     """
+    # every argument before any work: a bad one is refused in the time it takes to read it
     check_classes(las, classes, seed, bootstrap)
-    altitude_m = _checked_positive(altitude_m, "altitude_m")
-    rho_g = _checked_positive(ground_reflectance, "ground_reflectance")
-    if rho_g > 1:
-        raise InvalidInputError(f"ground_reflectance must be in (0, 1], got {ground_reflectance}")
-    stats = return_statistics(las, classes=classes, seed=seed, bootstrap=bootstrap)
-    if divergence_shares is not None and divergence_share not in stats.estimates:
-        raise InvalidInputError(f"divergence_share {divergence_share!r} is not a figure of the return statistics "
-                                f"(they hold {', '.join(k for k in stats.estimates if k.startswith('multi_return'))})")  # fmt: skip
+    altitude_m = _checked_positive(altitude_m, "altitude_m", MAX_RANGE_M)
+    rho_g = _checked_positive(ground_reflectance, "ground_reflectance", 1.0)
+    curve = None if divergence_shares is None else check_curve(divergence_shares)
+    text(divergence_share, "divergence_share")
+    shares = multi_return_shares(las, classes)
+    if curve is not None and divergence_share not in shares:
+        raise InvalidInputError(f"divergence_share {shown(divergence_share)} is not a figure of the return statistics "
+                                f"(they hold {', '.join(shares)})")  # fmt: skip
     check_memory(len(las) * FIT_BYTES_PER_POINT, option=f"the return model fit of {len(las):,} points", hint="fit a crop")
+    pulses = las_pulses(las)
+    check_pulses(las, pulses)  # GPS times that group the returns into pulses
+    check_return_pairs(las, pulses)  # a first-returns-only scan has no gaps to fit the range resolution to
+    stats = return_statistics(las, classes=classes, seed=seed, bootstrap=bootstrap)
     unit_assumed = not math.isfinite(las.linear_unit_m)
     unit_m = 1.0 if unit_assumed else float(las.linear_unit_m)
-    pulses = las_pulses(las)
     figures, units, counts, methods, why = _model_figures(las, pulses, unit_m, altitude_m, rho_g)
     ground = why.pop("_ground")
     spread = pulse_bootstrap(pulses.count, figures, seed=seed, bootstrap=bootstrap)
@@ -408,8 +418,7 @@ def fit_return_model(
         estimates["beam_divergence_deg"] = Estimate(math.nan, math.nan, 0, "not measurable from the points (module docstring)", "deg")
         why["beam_divergence_deg"] = "returns lie on the beam axis; give simulated shares (divergence_from_shares)"
     else:
-        d, s, *sd = divergence_shares
-        estimates["beam_divergence_deg"] = divergence_from_shares(d, s, stats.estimates[divergence_share], sd[0] if sd else None)
+        estimates["beam_divergence_deg"] = divergence_from_shares(*curve[:2], stats.estimates[divergence_share], curve[2])
     for name, e in estimates.items():
         if not math.isfinite(e.value) and name not in why:
             why[name] = (
@@ -428,7 +437,7 @@ def _model_figures(
     cls, intensity = las.classification[order], las.intensity[order].astype(np.float64)
     points_m = las.points[order] * unit_m
     single, first_of_several = number == 1, (number > 1) & (rn == 1)
-    pair = (pulse[1:] == pulse[:-1]) & (rn[1:] == rn[:-1] + 1)
+    pair = pulses.pairs(las.return_number)
     gaps = np.linalg.norm(points_m[1:][pair] - points_m[:-1][pair], axis=1)
     gap_pulse, gap_class = pulse[:-1][pair], cls[1:][pair]
     cos = np.cos(np.radians(np.abs(las.scan_angle_deg[order].astype(np.float64))))

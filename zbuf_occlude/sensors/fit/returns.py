@@ -43,11 +43,11 @@ from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.geometry.arguments import described
 from zbuf_occlude.io.las import LasPoints
 from zbuf_occlude.resources import check_memory
-from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate
+from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate, check_bootstrap, check_fit_seed
 
 __all__ = [
-    "BYTES_PER_POINT", "GAP_QUANTILE", "MAX_RETURNS_BIN", "VEGETATION_CLASSES", "PulseValues", "Pulses", "ReturnStatistics",
-    "check_classes", "las_pulses", "pulse_bootstrap", "return_statistics",
+    "BYTES_PER_POINT", "GAP_QUANTILE", "MAX_AMBIGUOUS_SHARE", "MAX_RETURNS_BIN", "VEGETATION_CLASSES", "PulseValues", "Pulses", "ReturnStatistics",
+    "check_classes", "check_pulses", "check_return_pairs", "las_pulses", "multi_return_shares", "pulse_bootstrap", "return_statistics",
 ]  # fmt: skip
 
 #: ASPRS classes of low, medium and high vegetation (R15, Table 17): the default class set.
@@ -59,6 +59,11 @@ GAP_QUANTILE = 0.05
 #: Bytes per point this measure holds at once (sort orders, sorted copies, per-pulse counts of each
 #: class): tracemalloc's peak was 163 on Autzen (2 classes) and 254 on the IGN sample (7 classes).
 BYTES_PER_POINT = 256
+#: Largest share of a scan's points in groups that hold a return number twice (:func:`check_pulses`): real surveys
+#: hold none (the IGN LiDAR HD sample 0 of its 32,231 pulses, Autzen 0 of 99,331); a few are tolerated and left out.
+MAX_AMBIGUOUS_SHARE = 0.01
+#: Bytes of a float64 or int64.
+_FLOAT_BYTES = 8
 
 
 @dataclass(frozen=True)
@@ -139,6 +144,9 @@ class Pulses:
         Whether each pulse is complete.
     returns : (count,) int64
         Each pulse's smallest ``number_of_returns``.
+    ambiguous : (count,) bool
+        Whether a return number occurs twice in the group: its points share a GPS time but are not
+        one pulse's returns (module docstring; :func:`check_pulses`).  Never complete, no gaps.
     """
 
     order: NDArray[np.int64]
@@ -146,6 +154,14 @@ class Pulses:
     count: int
     complete: NDArray[np.bool_]
     returns: NDArray[np.int64]
+    ambiguous: NDArray[np.bool_]
+
+    def pairs(self, return_number: NDArray) -> NDArray[np.bool_]:
+        """(N - 1,) bool: sorted positions ``i`` whose points ``i`` and ``i + 1`` are returns k and k + 1 of one pulse
+        (``return_number``: the scan's, in its own order), ambiguous groups left out."""
+        rn = return_number[self.order].astype(np.int64)
+        same = self.pulse[1:] == self.pulse[:-1]
+        return same & (rn[1:] == rn[:-1] + 1) & ~self.ambiguous[self.pulse[1:]]
 
 
 def las_pulses(las: LasPoints) -> Pulses:
@@ -161,7 +177,80 @@ def las_pulses(las: LasPoints) -> Pulses:
     # each return number as one bit: a complete pulse of n returns holds exactly bits 1..n
     bits = np.bitwise_or.reduceat(np.left_shift(1, las.return_number[order].astype(np.int64)), starts)
     complete = (size == fewest) & (fewest == most) & (bits == np.left_shift(1, fewest + 1) - 2)
-    return Pulses(order, np.cumsum(new) - 1, len(starts), complete, fewest)
+    pulse = np.cumsum(new) - 1
+    rn = las.return_number[order]
+    repeated = (pulse[1:] == pulse[:-1]) & (rn[1:] == rn[:-1])  # sorted by return number within a group
+    ambiguous = np.zeros(len(starts), dtype=bool)
+    ambiguous[pulse[1:][repeated]] = True
+    return Pulses(order, pulse, len(starts), complete & ~ambiguous, fewest, ambiguous)
+
+
+def check_pulses(las: LasPoints, pulses: Pulses, name: str = "the scan") -> None:
+    """Refuse a scan whose GPS times do not tell its pulses apart.
+
+    A pulse is the points that share a GPS time (within a point source and channel); where the
+    times do not identify pulses (all 0, rounded to the second) every figure of the pulses would
+    be a silent wrong number: the gaps between returns of different pulses read as a range
+    resolution.  So a scan is refused when more than :data:`MAX_AMBIGUOUS_SHARE` of its points lie
+    in groups that hold a return number twice (fewer are left out of the gaps and of the complete
+    pulses: :attr:`Pulses.ambiguous`).
+
+    Parameters
+    ----------
+    las : LasPoints
+    pulses : Pulses
+        :func:`las_pulses` of ``las``.
+    name : str
+        The scan in messages (its file).
+
+    Raises
+    ------
+    InvalidInputError
+        One line naming ``name``, what is wrong and what to do.
+    """
+    in_ambiguous = int(np.count_nonzero(pulses.ambiguous[pulses.pulse]))
+    if in_ambiguous > MAX_AMBIGUOUS_SHARE * len(pulses.pulse):
+        times = np.unique(las.gps_time)
+        seen = f"all {len(las):,} points have GPS time {times[0]:g}" if len(times) == 1 else f"{len(times):,} distinct GPS times"
+        raise InvalidInputError(
+            f"{name}: its GPS times do not identify pulses ({seen}; {in_ambiguous:,} of {len(las):,} points share a time with "
+            "another return of the same number: duplicates, or times that are not the pulses'): the returns of one pulse cannot "
+            "be grouped; give a scan whose points carry their pulse's GPS time (remove duplicated points of overlapping tiles)"
+        )
+
+
+def check_return_pairs(las: LasPoints, pulses: Pulses, name: str = "the scan") -> None:
+    """Refuse a scan whose pulses had several returns but that holds no two returns of one pulse.
+
+    Its points say so (``number_of_returns`` above 1) but no pulse holds returns k and k + 1: a
+    scan filtered to first returns, or each return stamped with its own time.  The gaps between
+    a pulse's returns, and so the range resolution, cannot be measured on it.
+
+    Parameters
+    ----------
+    las : LasPoints
+    pulses : Pulses
+        :func:`las_pulses` of ``las``.
+    name : str
+        The scan in messages (its file).
+
+    Raises
+    ------
+    InvalidInputError
+        One line naming ``name``, what is wrong and what to do.
+    """
+    most = int(las.number_of_returns.max()) if len(las) else 0
+    if most <= 1 or np.any(pulses.pairs(las.return_number)):
+        return
+    if not np.any(las.return_number > 1):
+        raise InvalidInputError(
+            f"{name}: holds first returns only (return_number 1 on every point, though its pulses recorded up to {most}): "
+            "with no two returns of one pulse the range resolution cannot be fitted; give the scan with all its returns"
+        )
+    raise InvalidInputError(
+        f"{name}: no two returns of one pulse share a GPS time (its pulses recorded up to {most} returns): the gaps between "
+        "a pulse's returns, and so the range resolution, cannot be measured; give a scan whose points carry their pulse's GPS time"
+    )
 
 
 class PulseValues:
@@ -204,6 +293,21 @@ def _binomial(hits: int, n: int, what: str) -> Estimate:
     return Estimate(p, math.sqrt(p * (1.0 - p) / n), n, f"binomial, over {what}", "share")
 
 
+def _share_classes(classification: NDArray) -> list[int]:
+    """The classes with a multi-return share of their own: every class present, none in a file that never
+    classified (class 0 only)."""
+    present = np.unique(classification).tolist()
+    return [] if present in ([], [0]) else present
+
+
+def multi_return_shares(las: LasPoints, classes: Sequence[int] | None) -> list[str]:
+    """The names of the multi-return shares :func:`return_statistics` gives for ``las`` and the class set ``classes``
+    (checked by :func:`check_classes`), without measuring them."""
+    names = ["multi_return_points", *(f"multi_return_points_class_{c}" for c in _share_classes(las.classification))]
+    checked = tuple(sorted({int(c) for c in classes or ()}))
+    return names + ([f"multi_return_points_classes_{'_'.join(map(str, checked))}"] if checked else [])
+
+
 def _figures(las: LasPoints, pulses: Pulses, classes: tuple[int, ...], unit_m: float) -> dict[str, tuple]:
     """Every bootstrapped figure as ``(kind, data, n, unit)``: kind ``share`` (per-pulse counts),
     ``quantile`` (a :class:`PulseValues` and q) or ``ratio`` (two medians)."""
@@ -219,15 +323,13 @@ def _figures(las: LasPoints, pulses: Pulses, classes: tuple[int, ...], unit_m: f
         return ("share", counts.astype(np.float64), int(mask.sum()), "share")
 
     out = {"multi_return_points": share(np.ones(len(order), dtype=bool))}
-    present = np.unique(cls)
-    if len(present) > 1 or present.tolist() not in ([], [0]):  # a file that never classified holds class 0 only
-        out.update({f"multi_return_points_class_{c}": share(cls == c) for c in present.tolist()})
+    out.update({f"multi_return_points_class_{c}": share(cls == c) for c in _share_classes(cls)})
     in_set = np.isin(cls, classes)
     if classes:
         out[f"multi_return_points_{suffix}"] = share(in_set)
     # consecutive returns k, k + 1 of one pulse: neighbours in the sorted order
     points = las.points[order]
-    pair = (pulse[1:] == pulse[:-1]) & (las.return_number[order][1:].astype(np.int64) == las.return_number[order][:-1] + 1)
+    pair = pulses.pairs(las.return_number)
     gaps = PulseValues(np.linalg.norm(points[1:][pair] - points[:-1][pair], axis=1) * unit_m, pulse[:-1][pair])
     gap_unit = "m" if math.isfinite(las.linear_unit_m) else "coordinate unit"
     out |= {"gap_min": ("quantile", (gaps, 0.0), len(gaps.values), gap_unit),
@@ -264,7 +366,8 @@ def check_classes(las: Any, classes: Any, seed: Any, bootstrap: Any) -> tuple[in
         ``bootstrap`` of the wrong kind.
     InvalidInputError
         A scan without GPS times or without points; class codes outside 0 to 255; ``bootstrap``
-        below 2 or a negative ``seed``.
+        outside 2 to :data:`~zbuf_occlude.sensors.fit.lidar.MAX_BOOTSTRAP`; a seed
+        :func:`~zbuf_occlude.geometry.sampling.check_seed` refuses.
     """
     if not isinstance(las, LasPoints):
         raise ArgumentTypeError(f"las must be a LasPoints (read one with zbuf_occlude.io.las.read_las), got {described(las)}")
@@ -272,11 +375,8 @@ def check_classes(las: Any, classes: Any, seed: Any, bootstrap: Any) -> tuple[in
         raise InvalidInputError(f"point format {las.point_format_id} has no GPS time: the returns of one pulse cannot be told apart")
     if len(las) == 0:
         raise InvalidInputError("the scan holds no points: there are no returns to measure")
-    for name, value, low in (("seed", seed, 0), ("bootstrap", bootstrap, 2)):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-            raise ArgumentTypeError(f"{name} must be an integer, got {described(value)}")
-        if value < low:
-            raise InvalidInputError(f"{name} must be >= {low}, got {value}")
+    check_fit_seed(seed)
+    check_bootstrap(bootstrap)
     if classes is None:
         return ()
     if isinstance(classes, (str, bytes)) or not isinstance(classes, Sequence):
@@ -300,16 +400,28 @@ def pulse_bootstrap(
         resample: how many times each pulse was drawn), returning a float, NaN where the
         resample holds nothing to measure it on.
     seed, bootstrap : int
-        Of the resamples (checked by :func:`check_classes`).
+        Of the resamples (:func:`~zbuf_occlude.sensors.fit.lidar.check_fit_seed`,
+        :func:`~zbuf_occlude.sensors.fit.lidar.check_bootstrap`).
 
     Returns
     -------
     dict of str to (value, std)
         ``std`` (ddof 1) over the resamples whose value is finite; NaN when fewer than 2 are.
+
+    Raises
+    ------
+    ArgumentTypeError, InvalidInputError
+        A seed or bootstrap the checks refuse (above).
+    InsufficientMemoryError
+        The resamples' figures would not fit in the memory available.
     """
-    rng = np.random.default_rng(int(seed))
-    resampled = np.empty((int(bootstrap), len(figures)))
-    for b in range(int(bootstrap)):
+    seed, bootstrap = check_fit_seed(seed), check_bootstrap(bootstrap)
+    # the resamples' figures and one resample's draws and weights, before they are allocated
+    check_memory(bootstrap * len(figures) * _FLOAT_BYTES + 2 * n_pulses * _FLOAT_BYTES,
+                 option=f"bootstrap {bootstrap:,} over {n_pulses:,} pulses", hint="lower the bootstrap")  # fmt: skip
+    rng = np.random.default_rng(seed)
+    resampled = np.empty((bootstrap, len(figures)))
+    for b in range(bootstrap):
         weights = np.bincount(rng.integers(0, n_pulses, n_pulses), minlength=n_pulses).astype(np.float64)
         resampled[b] = [figure(weights) for figure in figures.values()]
     out = {}
@@ -351,14 +463,17 @@ def return_statistics(
         ``las`` is not a :class:`~zbuf_occlude.io.las.LasPoints`, or ``classes``, ``seed`` or
         ``bootstrap`` of the wrong kind.
     InvalidInputError
-        A scan without GPS times (its pulses cannot be told apart) or without points; class codes
-        outside 0 to 255; ``bootstrap`` below 2 or a negative ``seed``.
+        A scan without GPS times (its pulses cannot be told apart) or without points, or whose
+        times do not identify its pulses (:func:`check_pulses`); class codes outside 0 to 255;
+        ``bootstrap`` outside 2 to :data:`~zbuf_occlude.sensors.fit.lidar.MAX_BOOTSTRAP`; a seed
+        :func:`~zbuf_occlude.geometry.sampling.check_seed` refuses.
     InsufficientMemoryError
         The scan is too large for the memory available.
     """
     classes = check_classes(las, classes, seed, bootstrap)
     check_memory(len(las) * BYTES_PER_POINT, option=f"the return statistics of {len(las):,} points", hint="measure a crop")
     pulses = las_pulses(las)
+    check_pulses(las, pulses)
     unit_m = las.linear_unit_m if math.isfinite(las.linear_unit_m) else 1.0
     estimates: dict[str, Estimate] = {}
     returns = np.minimum(pulses.returns[pulses.complete], MAX_RETURNS_BIN)
