@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import struct
 import zipfile
 from pathlib import Path
 
@@ -71,11 +72,75 @@ def _damaged(path: Path, how: str) -> Path:
     return path
 
 
-@pytest.mark.parametrize(("how", "raised"), [("deflate", "error"), ("encrypted", "RuntimeError"), ("method", "NotImplementedError")])
-def test_check_array_sizes_names_the_file_of_a_damaged_zip(tmp_path, how, raised):
+@pytest.mark.parametrize(
+    ("how", "said"),
+    [("deflate", r"cannot read its array headers \(error: "), ("encrypted", r"cannot read its array headers \(RuntimeError: "),
+     ("method", r"member points\.npy is compressed with zip method 99; only stored or deflated members")],
+)  # fmt: skip
+def test_check_array_sizes_names_the_file_of_a_damaged_zip(tmp_path, how, said):
     path = _damaged(tmp_path / "damaged.npz", how)
-    with pytest.raises(InvalidInputError, match=rf"^{path}: cannot read its array headers \({raised}: "):
+    with pytest.raises(InvalidInputError, match=rf"^{path}: {said}"):
         check_array_sizes(path, max_bytes=1 << 20, error=InvalidInputError)
+
+
+def _lying_npz(path: Path, *, method: int = zipfile.ZIP_STORED, inflated: int | None = None, beyond: bool = False) -> Path:
+    """A .npz of one honest (1000, 3) float64 member whose zip directory (and local header) then
+    claims about ``inflated`` bytes once inflated (its .npy header declares as much array, so that
+    numpy would allocate what the zip claims), and as many stored when ``beyond``."""
+    header = io.BytesIO()
+    rows = ((inflated or 0) - 128) // 24 if inflated else 1000
+    np.lib.format.write_array_header_1_0(header, {"descr": "<f8", "fortran_order": False, "shape": (rows, 3)})
+    with zipfile.ZipFile(path, "w", compression=method) as zf:
+        zf.writestr("points.npy", header.getvalue() + np.zeros((1000, 3)).tobytes())
+    raw = bytearray(path.read_bytes())
+    for signature, sizes_at in ((b"PK\x03\x04", 18), (b"PK\x01\x02", 20)):  # compressed size, then inflated size
+        at = raw.find(signature) + sizes_at
+        old_compressed, old_inflated = struct.unpack_from("<II", raw, at)
+        claimed = len(header.getvalue()) + rows * 24 if inflated else old_inflated
+        struct.pack_into("<II", raw, at, claimed if beyond else old_compressed, claimed)
+    path.write_bytes(bytes(raw))
+    return path
+
+
+#: Bytes the lying members claim: more than a test child's address-space headroom (1.5 GiB), less than 4 GiB (no zip64).
+_CLAIMED = 2_100_000_000
+
+
+@pytest.mark.parametrize(
+    ("kind", "said"),
+    [("stored", r"member points\.npy declares [\d,]+ bytes inflated from [\d,]+, more than its compression can hold"),
+     ("deflated", r"member points\.npy declares [\d,]+ bytes inflated from [\d,]+, more than its compression can hold"),
+     ("beyond the file", r"its members declare [\d,]+ bytes of data in a file of [\d,]+; the file is damaged or forged")],
+)  # fmt: skip
+def test_a_member_claiming_more_than_the_file_can_hold_is_refused_before_numpy_allocates_it(tmp_path, kind, said):
+    # numpy allocates a header's whole array before it reads a byte: a few hundred bytes claiming 2 GB would reserve 2 GB
+    lie = {"stored": {"inflated": _CLAIMED}, "deflated": {"method": zipfile.ZIP_DEFLATED, "inflated": _CLAIMED},
+           "beyond the file": {"inflated": _CLAIMED, "beyond": True}}[kind]  # fmt: skip
+    path = _lying_npz(tmp_path / "lying.npz", **lie)
+    for read in (lambda: check_array_sizes(path, max_bytes=1 << 32), lambda: load_npz(path, max_bytes=1 << 32)):
+        with pytest.raises(InvalidInputError, match=rf"^{path}: {said}"):
+            read()
+
+
+@pytest.mark.slow
+def test_a_lying_npz_is_refused_in_one_line_under_an_address_space_limit(tmp_path):
+    # under prlimit --as numpy's allocation of the claimed 2 GB was a MemoryError, not the file's error
+    from memory_limit import run_python_limited
+
+    path = _lying_npz(tmp_path / "lying.npz", inflated=_CLAIMED)
+    done = run_python_limited(
+        "from zbuf_occlude.errors import InvalidInputError\nfrom zbuf_occlude.io.arrays import load_npz\n"
+        f"try:\n    load_npz({str(path)!r}, max_bytes=1 << 32)\nexcept InvalidInputError as exc:\n    print(exc)"
+    )
+    assert done.returncode == 0 and done.stdout.startswith(f"{path}: member points.npy declares"), done.stderr[-2000:]
+
+
+def test_a_deflated_member_of_zeros_inflating_near_deflates_limit_is_read(tmp_path):
+    # the bound is deflate's own (about 1032:1): savez_compressed's most compressible member stays readable
+    np.savez_compressed(tmp_path / "zeros.npz", points=np.zeros((400_000, 3)))
+    member = zipfile.ZipFile(tmp_path / "zeros.npz").getinfo("points.npy")
+    assert member.file_size > 900 * member.compress_size
+    assert load_npz(tmp_path / "zeros.npz", max_bytes=1 << 30)["points"].shape == (400_000, 3)
 
 
 @pytest.mark.skipif(not hasattr(__import__("os"), "mkfifo"), reason="needs os.mkfifo")
@@ -138,7 +203,9 @@ def test_loading_never_unpickles(tmp_path, suffix):
 @pytest.mark.parametrize("how", ["deflate", "encrypted", "method"])
 def test_load_npz_names_the_file_of_a_damaged_zip_in_one_line(tmp_path, how):
     path = _damaged(tmp_path / "damaged.npz", how)
-    with pytest.raises(InvalidInputError, match=rf"^{path}: cannot read its array") as info:
+    with pytest.raises(
+        InvalidInputError, match=rf"^{path}: (cannot read its array|member points\.npy is compressed with zip method 99)"
+    ) as info:
         load_npz(path, max_bytes=1 << 20)
     assert "\n" not in str(info.value)
 

@@ -8,6 +8,14 @@ such a file from outside asks here first: :func:`check_array_sizes` refuses a fi
 inflate past a cap, :func:`npz_member_header` gives one member's declared shape and dtype.
 Only headers are read (numpy's own parser, :mod:`numpy.lib.format`); nothing is unpickled.
 
+numpy allocates the whole array a header declares before it reads a byte of it, so the sizes
+the zip directory declares must also be sizes the file can hold: members stored or deflated
+(what ``numpy.savez`` and ``savez_compressed`` write), their compressed bytes inside the file, a
+stored member inflating to its compressed size and a deflated one to at most
+:data:`~zbuf_occlude.io.hdf5.MAX_COMPRESSION_RATIO` times it.  Otherwise a few hundred bytes
+that declare gigabytes would make numpy reserve them (a ``MemoryError`` under an address-space
+limit, ``ulimit -v``) before the read found the lie.
+
 :func:`load_npy` and :func:`load_npz` are the one way to load such a file: a regular file
 (inside the folder it was named from, links resolved:
 :func:`~zbuf_occlude.io.regular_files.open_regular_file`), its sizes checked from the headers
@@ -29,6 +37,7 @@ import numpy as np
 from numpy.lib import format as npy_format
 
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
+from zbuf_occlude.io.hdf5 import MAX_COMPRESSION_RATIO
 from zbuf_occlude.io.regular_files import open_regular_file
 
 __all__ = ["check_array_sizes", "load_npy", "load_npz", "npy_header", "npz_member_header", "DAMAGED_NPZ_ERRORS"]
@@ -38,6 +47,10 @@ __all__ = ["check_array_sizes", "load_npy", "load_npz", "npy_header", "npz_membe
 #: ``NotImplementedError`` (a compression method zipfile lacks) and ``RuntimeError`` (a member
 #: flagged encrypted).
 DAMAGED_NPZ_ERRORS = (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError, RuntimeError)
+#: How the members of a ``.npz`` may be compressed, with the most bytes each may inflate to per
+#: byte stored: numpy's ``savez`` stores them (1:1), ``savez_compressed`` deflates them (deflate's
+#: limit is about 1032:1).  bzip2 and LZMA, which numpy never writes, have no such bound.
+_INFLATE_RATIO = {zipfile.ZIP_STORED: 1, zipfile.ZIP_DEFLATED: MAX_COMPRESSION_RATIO}
 
 #: ``.npy`` format versions numpy reads: 1.0 (2-byte header length), 2.0 and 3.0 (4-byte
 #: header length; 3.0 only allows UTF-8 field names, its header reads as 2.0's).
@@ -228,9 +241,9 @@ def load_npz(
     """
     path = Path(path)
     wanted = None if keys is None else set(keys)
-    fh, _ = open_regular_file(path, error=error, within=within)
+    fh, size = open_regular_file(path, error=error, within=within)
     with fh, _headers_read(path, error), zipfile.ZipFile(fh) as zf:
-        headers = _npz_headers(path, zf, max_bytes, error)  # every member's, read once
+        headers = _npz_headers(path, zf, size, max_bytes, error)  # every member's, read once
         names = [n.removesuffix(".npy") for n in headers if n.endswith(".npy")]
         names = [key for key in names if wanted is None or key in wanted]
         if check is not None:
@@ -266,15 +279,27 @@ def _check_sizes(path: Path, fh: BinaryIO, size: int, max_bytes: int, error: typ
                             f"({size:,} bytes) or the {max_bytes:,} accepted")  # fmt: skip
         else:
             with zipfile.ZipFile(fh) as zf:
-                _npz_headers(path, zf, max_bytes, error)
+                _npz_headers(path, zf, size, max_bytes, error)
     fh.seek(0)
 
 
 def _npz_headers(
-    path: Path, zf: zipfile.ZipFile, max_bytes: int, error: type[ZbufOccludeError]
+    path: Path, zf: zipfile.ZipFile, size: int, max_bytes: int, error: type[ZbufOccludeError]
 ) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
-    """Every member's declared ``(shape, dtype)``, by member name, once the sizes are checked."""
+    """Every member's declared ``(shape, dtype)``, by member name, once the sizes are checked
+    (``size``: the bytes of the ``.npz``; module docstring)."""
     members = zf.infolist()
+    for m in members:
+        ratio = _INFLATE_RATIO.get(m.compress_type)
+        if ratio is None:
+            raise error(f"{path}: member {m.filename} is compressed with zip method {m.compress_type}; only stored or deflated "
+                        "members (numpy.savez, numpy.savez_compressed) are read")  # fmt: skip
+        if m.file_size > m.compress_size * ratio or (ratio == 1 and m.file_size != m.compress_size):
+            raise error(f"{path}: member {m.filename} declares {m.file_size:,} bytes inflated from {m.compress_size:,}, "
+                        "more than its compression can hold; the file is damaged or forged")  # fmt: skip
+    stored = sum(m.compress_size for m in members)
+    if stored > size:
+        raise error(f"{path}: its members declare {stored:,} bytes of data in a file of {size:,}; the file is damaged or forged")
     inflated = sum(m.file_size for m in members)
     if inflated > max_bytes:
         raise error(f"{path}: its members inflate to {inflated:,} bytes, more than the {max_bytes:,} accepted")
