@@ -31,7 +31,12 @@ def _every_pixel(cam, normal, radius, pix, x0, y0, width, height):
         q, n, r = cam[k], normal[k], radius[k]
         if q[2] - r <= 0.0 or r <= 0.0:
             continue
-        nq = n @ q
+        # the kernel's own arithmetic, term by term and in its order, in float64 elementwise numpy:
+        # `n @ q` is BLAS's ddot, which sums in another order (OpenBLAS's Prescott kernel) or fuses
+        # a multiply and an add into one rounding (FMA, its SkylakeX kernel), and a depth one ulp off
+        # moves a tie's winner. numba (fastmath=False) never fuses a*b + c: _splat_rows' assembly has
+        # no vfmadd on an AVX2+FMA host (znver3), nor compiled for skylake-avx512 (NUMBA_CPU_NAME).
+        nq = n[0] * q[0] + n[1] * q[1] + n[2] * q[2]
         den = n[0] * x + n[1] * y + n[2]
         w2 = (nq * x - den * q[0]) ** 2 + (nq * y - den * q[1]) ** 2 + (nq - den * q[2]) ** 2
         hit = (den * den >= kernels.EDGE_ON_COS2 * (x * x + y * y + 1.0)) & (w2 <= r * r * den * den)
