@@ -13,8 +13,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from numpy.lib import format as npy_format
 
-from zbuf_occlude.errors import InvalidInputError, UnsafePathError
+from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError, UnsafePathError
 from zbuf_occlude.io.ray_tables import RAY_TABLE_COLUMNS, ray_table_bytes, read_ray_table
+from zbuf_occlude.sensors.ray_table import load_ray_table
 
 HEADER = ",".join(RAY_TABLE_COLUMNS)
 
@@ -75,12 +76,15 @@ def test_nan_is_a_number_here_the_sensor_refuses_it(tmp_path: Path) -> None:
         ("", r"must be the header .*got ''"),
         (f"{HEADER}\n", r"the ray table has no rows"),
         (f"{HEADER}\n\n\n", r"the ray table has no rows"),
-        (f"{HEADER}\n0,1\n", r"each row must hold 3 numbers .*got 2"),
-        (f"{HEADER}\n0,1,2,3\n", r"each row must hold 3 numbers .*got 4"),
-        (f"{HEADER}\n0,1,2\n0,1\n", r"not a ray table of three numbers per row"),
-        (f"{HEADER}\n0,1,x\n", r"not a ray table of three numbers per row \(could not convert string 'x'"),
-        (f"{HEADER}\n# a comment\n0,1,2\n", r"not a ray table of three numbers per row"),
-        (f'{HEADER}\n"0","1","2"\n', r"not a ray table of three numbers per row"),
+        (f"{HEADER}\n0,1\n", r"line 2 holds 2 numbers; each row must hold 3 \(time_s,azimuth_deg,elevation_deg\)"),
+        (f"{HEADER}\n0,1,2,3\n", r"line 2 holds 4 numbers; each row must hold 3"),
+        (f"{HEADER}\n0,1,2\n0,1\n", r"line 3 holds 2 numbers"),
+        (f"{HEADER}\n0,1,x\n", r"line 2 is not a row of three numbers \(could not convert string 'x' to float64 in column 3\)"),
+        (f"{HEADER}\n0,1,2\n\n\r\n0,1,y\r\n", r"line 5 is not a row of three numbers \(could not convert string 'y"),
+        (f"{HEADER}\n0,1,2\n   \n0,1,2\n", r"line 3 is not a row of three numbers \(could not convert string '   '"),
+        (f"{HEADER}\n# a comment\n0,1,2\n", r"line 2 is not a row of three numbers \(could not convert string '# a comment'"),
+        (f'{HEADER}\n"0","1","2"\n', r"line 2 is not a row of three numbers"),
+        (f"{HEADER}\n0,1,2\n" + "0," * 600, r"line 3 is longer than 1,024 bytes"),
     ],
 )
 def test_a_csv_that_is_not_a_ray_table_is_one_line(tmp_path: Path, text: str, match: str) -> None:
@@ -88,7 +92,7 @@ def test_a_csv_that_is_not_a_ray_table_is_one_line(tmp_path: Path, text: str, ma
 
 
 def test_a_csv_that_is_not_utf8_is_one_line(tmp_path: Path) -> None:
-    _refused(_write(tmp_path / "t.csv", HEADER.encode() + b"\n0,1,\xff\n"), r"not UTF-8")
+    _refused(_write(tmp_path / "t.csv", HEADER.encode() + b"\n0,1,2\n0,1,\xff\n"), r"line 3 is not UTF-8 text")
 
 
 def _npy(array: np.ndarray) -> bytes:
@@ -173,3 +177,106 @@ def test_the_writer_refuses_ragged_columns_and_other_suffixes() -> None:
         ray_table_bytes([0.0, 1.0], [0.0], [0.0, 1.0])
     with pytest.raises(InvalidInputError, match=r"\.csv or \.npy"):
         ray_table_bytes([0.0], [0.0], [0.0], suffix=".las")
+
+
+# -- a CSV is read a block of lines at a time: what it holds beyond a block is never held whole -----------------------------
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    rows=st.lists(st.tuples(_finite, _finite, _finite), min_size=1, max_size=30),
+    block=st.one_of(st.integers(1, 300), st.just(1 << 20)),  # lines split across blocks, or all in one
+    blank=st.lists(st.booleans(), min_size=30, max_size=30),
+    bad=st.one_of(st.none(), st.integers(0, 29)),
+)
+def test_blocks_of_any_size_read_the_same_rows_and_name_the_same_line(tmp_path: Path, monkeypatch, rows, block, blank, bad) -> None:
+    """The law: the block size changes nothing, neither the rows read nor the line a refusal names
+    (blank lines, CRLF ends and lines split across blocks included)."""
+    import zbuf_occlude.io.ray_tables as ray_tables
+
+    monkeypatch.setattr(ray_tables, "CSV_BLOCK_BYTES", block)
+    lines, bad_line = [HEADER], None
+    for i, row in enumerate(rows):
+        if blank[i]:
+            lines.append("" if i % 2 else "\r")
+        if bad == i:
+            lines.append("0,1,nope")
+            bad_line = len(lines)
+        lines.append(",".join(f"{v!r}" for v in row) + ("\r" if i % 3 == 0 else ""))
+    path = _write(tmp_path / "t.csv", "\n".join(lines) + "\n")
+    if bad_line is not None:
+        _refused(path, rf"line {bad_line} is not a row of three numbers \(could not convert string 'nope'", max_rows=len(lines))
+        return
+    columns = read_ray_table(path, max_rows=len(lines))
+    assert np.column_stack(columns).tobytes() == np.array(rows, dtype=np.float64).tobytes()
+
+
+def test_one_endless_line_is_refused_after_a_block_under_a_memory_limit(tmp_path: Path) -> None:
+    """400 MB after the header and no line end (a sparse file: nothing on disk), within the 402 MB a
+    sensor's table may take: read whole it took 6.3 GB; refused from the first block, in 512 MiB."""
+    from memory_limit import run_python_limited
+
+    path = tmp_path / "endless.csv"
+    with path.open("wb") as fh:
+        fh.write(f"{HEADER}\n0".encode())
+        fh.truncate(400_000_000)
+    done = run_python_limited(
+        "from zbuf_occlude.errors import InvalidInputError\n"
+        "from zbuf_occlude.sensors.ray_table import load_ray_table\n"
+        f"try:\n    load_ray_table({str(path)!r})\nexcept InvalidInputError as exc:\n    print(exc)\n",
+        headroom=512 << 20,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == f"{path}: line 2 is longer than 1,024 bytes; a ray table's rows are three numbers ({HEADER})"
+
+
+def test_more_rows_than_the_cap_are_refused_before_the_rest_is_read(tmp_path: Path, monkeypatch) -> None:
+    """Short rows ("0,0,0": 6 bytes) fit 16 times the cap's rows in the size cap; reading stops a block after the cap."""
+    import zbuf_occlude.io.ray_tables as ray_tables
+
+    path = _write(tmp_path / "t.csv", f"{HEADER}\n" + "0,0,0\n" * 15_000)
+    read = []
+    opener = ray_tables.open_regular_file
+
+    class Counted:
+        def __init__(self, fh):
+            self.fh = fh
+
+        def read(self, n=-1):
+            read.append(len(data := self.fh.read(n)))
+            return data
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.fh.close()
+
+    def counted(*args, **kwargs):
+        fh, size = opener(*args, **kwargs)
+        return Counted(fh), size
+
+    monkeypatch.setattr(ray_tables, "open_regular_file", counted)
+    monkeypatch.setattr(ray_tables, "CSV_BLOCK_BYTES", 4096)
+    _refused(path, r"more than 1,000 lines after the header", max_rows=1_000)
+    assert sum(read) <= 1_000 * 6 + 2 * 4096 < path.stat().st_size / 4  # the cap's rows and a block, of 90 kB
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: read_ray_table(123, max_rows=4), r"path must be a ray table's path \(str or os.PathLike\), got int 123"),
+        (lambda: read_ray_table(None, max_rows=4), r"path must be a ray table's path .*got NoneType"),
+        (lambda: read_ray_table("t.csv", max_rows="4"), r"max_rows must be a whole number >= 1, got str '4'"),
+        (lambda: read_ray_table("t.csv", max_rows=True), r"max_rows must be a whole number >= 1, got bool True"),
+        (lambda: read_ray_table("t.csv", max_rows=0), r"max_rows must be a whole number >= 1, got int 0"),
+        (lambda: read_ray_table("t.csv", max_rows=4, within=1), r"within must be a folder's path .* or None, got int 1"),
+        (lambda: load_ray_table(123), r"path must be a ray table's path .*got int 123"),
+        (lambda: load_ray_table(None), r"path must be a ray table's path .*got NoneType"),
+        (lambda: load_ray_table("t.csv", within=b"tables"), r"within must be a folder's path .*got bytes b'tables'"),
+    ],
+)  # fmt: skip
+def test_wrong_kinds_name_the_argument_and_the_value(call, match: str) -> None:
+    with pytest.raises(ArgumentTypeError, match=match) as info:
+        call()
+    assert isinstance(info.value, TypeError) and "\n" not in str(info.value)

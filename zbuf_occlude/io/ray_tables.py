@@ -6,9 +6,12 @@ the directions it fires in, in order, with each pulse's time.  Two file formats:
 * **CSV**: a header line ``time_s,azimuth_deg,elevation_deg`` (those three names, in that order;
   spaces around them allowed), then one row per pulse of three numbers separated by commas.
   Blank lines are skipped (but count towards the cap on rows, except those at the end); nothing
-  else (comments, quotes, other columns) is accepted.  The file is read by
-  :func:`~zbuf_occlude.io.regular_files.read_text_file`'s rules (a regular file, at most
-  :data:`CSV_BYTES_PER_ROW` bytes per row allowed, UTF-8);
+  else (comments, quotes, other columns) is accepted.  The file is opened by
+  :func:`~zbuf_occlude.io.regular_files.open_regular_file` (a regular file, at most
+  :data:`CSV_BYTES_PER_ROW` bytes per row allowed) and read :data:`CSV_BLOCK_BYTES` at a time,
+  each line at most :data:`MAX_CSV_LINE_BYTES` long and UTF-8, each block's rows parsed by numpy:
+  a file of one endless line, or of more rows than the cap, is refused after a block, never held
+  whole;
 * **NumPy** ``.npy``: one ``(N, 3)`` floating-point array, columns in that order, read by
   :func:`~zbuf_occlude.io.arrays.load_npy` (its header's declared size checked against the row
   cap before the body is allocated, nothing unpickled).
@@ -16,25 +19,31 @@ the directions it fires in, in order, with each pulse's time.  Two file formats:
 Only the format is checked here (the columns, numbers, the number of rows); what the numbers
 mean (finite, time non-decreasing, elevations within ±90°) is checked by the sensor that takes
 them, :class:`~zbuf_occlude.sensors.ray_table.RayTable`.  Every error is one line naming the
-file.
+file (and, in a CSV, the line).
 """
 
 from __future__ import annotations
 
 import io
+import re
 import warnings
 from os import PathLike
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
+from zbuf_occlude.geometry.arguments import described
 from zbuf_occlude.io.arrays import load_npy
 from zbuf_occlude.io.encodings import npy_bytes
-from zbuf_occlude.io.regular_files import read_text_file
+from zbuf_occlude.io.regular_files import open_regular_file
 
-__all__ = ["CSV_BYTES_PER_ROW", "RAY_TABLE_COLUMNS", "RAY_TABLE_SUFFIXES", "ray_table_bytes", "read_ray_table"]
+__all__ = [
+    "CSV_BLOCK_BYTES", "CSV_BYTES_PER_ROW", "MAX_CSV_LINE_BYTES", "RAY_TABLE_COLUMNS", "RAY_TABLE_SUFFIXES", "ray_table_bytes",
+    "read_ray_table",
+]  # fmt: skip
 
 #: The columns of a ray table, in file order: seconds, degrees, degrees.
 RAY_TABLE_COLUMNS = ("time_s", "azimuth_deg", "elevation_deg")
@@ -45,6 +54,16 @@ RAY_TABLE_SUFFIXES = (".csv", ".npy")
 CSV_BYTES_PER_ROW = 96
 #: Room for the header line and blank lines on top of the rows' bytes.
 _CSV_SLACK_BYTES = 4096
+#: Longest line of a CSV ray table, line end included: a row written to round trip takes at most
+#: 76 bytes (:data:`CSV_BYTES_PER_ROW`); a kilobyte leaves room for spaces and padding.
+MAX_CSV_LINE_BYTES = 1024
+#: Bytes of a CSV read and parsed at a time: about 25,000 rows, so that what is held beside the
+#: rows read so far is a few MiB whatever the file holds.
+CSV_BLOCK_BYTES = 1 << 20
+#: Lines numpy skips: empty ones (a lone carriage return is the end of a CRLF line).
+_BLANK_LINES = ("", "\r")
+#: numpy's "... at row R, column C" (the row counted among the block's rows): the column is kept.
+_NUMPY_ROW = re.compile(r"\s+at row \d+(, column (\d+))?")
 
 
 def read_ray_table(
@@ -70,15 +89,23 @@ def read_ray_table(
 
     Raises
     ------
+    ArgumentTypeError
+        ``path`` or ``within`` is not a path, or ``max_rows`` not a whole number >= 1.
     InvalidInputError
         One line naming the file: another suffix; missing, not a regular file (a FIFO), larger
-        than the cap or not UTF-8; a CSV header other than ``time_s,azimuth_deg,elevation_deg``,
-        a row that is not three numbers (its line named), no rows, more than ``max_rows``;
-        a ``.npy`` that is not an ``(N, 3)`` floating-point array, or declares more bytes than
-        ``max_rows`` rows of float64.
+        than the cap; a CSV line longer than :data:`MAX_CSV_LINE_BYTES` or not UTF-8, a header
+        other than ``time_s,azimuth_deg,elevation_deg``, a row that is not three numbers (each
+        naming its line), no rows, more than ``max_rows``; a ``.npy`` that is not an ``(N, 3)``
+        floating-point array, or declares more bytes than ``max_rows`` rows of float64.
     UnsafePathError
         ``within`` is given and ``path`` leads outside it.
     """
+    if not isinstance(path, (str, PathLike)):
+        raise ArgumentTypeError(f"path must be a ray table's path (str or os.PathLike), got {described(path)}")
+    if within is not None and not isinstance(within, (str, PathLike)):
+        raise ArgumentTypeError(f"within must be a folder's path (str or os.PathLike) or None, got {described(within)}")
+    if isinstance(max_rows, bool) or not isinstance(max_rows, (int, np.integer)) or max_rows < 1:
+        raise ArgumentTypeError(f"max_rows must be a whole number >= 1, got {described(max_rows)}")
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix == ".csv":
@@ -95,31 +122,99 @@ def read_ray_table(
 
 
 def _read_csv(path: Path, max_rows: int, within) -> NDArray[np.float64]:
-    """The ``(N, 3)`` rows of a CSV ray table, its header checked first."""
-    text = read_text_file(path, max_bytes=max_rows * CSV_BYTES_PER_ROW + _CSV_SLACK_BYTES, error=InvalidInputError, within=within)
-    first, _, body = text.partition("\n")
+    """The ``(N, 3)`` rows of a CSV ray table, its header checked first, read a block of lines at a time."""
+    fh, _ = open_regular_file(path, max_bytes=max_rows * CSV_BYTES_PER_ROW + _CSV_SLACK_BYTES, error=InvalidInputError, within=within)
+    parts: list[NDArray[np.float64]] = []
+    with fh:
+        first_line, header = 1, None
+        for lines in _csv_blocks(fh, path):
+            if header is None:
+                header, lines = lines[0], lines[1:]
+                _check_header(path, header)
+                first_line = 2
+            parts.extend(_csv_rows(path, lines, first_line, max_rows))
+            first_line += len(lines)
+        if header is None:
+            _check_header(path, "")
+    rows = sum(len(part) for part in parts)
+    return np.concatenate(parts) if rows else np.zeros((0, 3))
+
+
+def _csv_blocks(fh: BinaryIO, path: Path):
+    """The file's lines, a list per :data:`CSV_BLOCK_BYTES` read (a CRLF line keeps its ``\\r``), each line checked for
+    its length (:data:`MAX_CSV_LINE_BYTES`, before more is read) and for UTF-8."""
+    pending, line = b"", 1
+    while True:
+        block = fh.read(CSV_BLOCK_BYTES)
+        data = pending + block
+        cut = data.rfind(b"\n") + 1  # the whole lines; after them, the start of the next (or the last, unended)
+        ends = np.flatnonzero(np.frombuffer(data[:cut], np.uint8) == ord("\n"))
+        long = np.flatnonzero(np.diff(ends, prepend=-1) > MAX_CSV_LINE_BYTES)
+        if len(long) or len(data) - cut > MAX_CSV_LINE_BYTES:
+            at = line + (int(long[0]) if len(long) else len(ends))
+            raise InvalidInputError(f"{path}: line {at:,} is longer than {MAX_CSV_LINE_BYTES:,} bytes; a ray table's rows are "
+                                    f"three numbers ({','.join(RAY_TABLE_COLUMNS)})")  # fmt: skip
+        whole, pending = (data[:cut], data[cut:]) if block else (data, b"")
+        if whole:
+            try:
+                text = whole.decode("utf-8")
+            except UnicodeDecodeError as exc:
+                at = line + whole.count(b"\n", 0, exc.start)
+                raise InvalidInputError(f"{path}: line {at:,} is not UTF-8 text; refused") from None
+            lines = text.split("\n")
+            if text.endswith("\n"):
+                lines.pop()  # the empty piece after the last line end
+            line += len(lines)
+            yield lines
+        if not block:
+            return
+
+
+def _check_header(path: Path, first: str) -> None:
+    """Refuse a first line other than the three column names (spaces around them allowed)."""
     header = tuple(name.strip() for name in first.strip().split(","))
     if header != RAY_TABLE_COLUMNS:
         shown = first.strip()[:80]
         raise InvalidInputError(f"{path}: a ray table's first line must be the header {','.join(RAY_TABLE_COLUMNS)}, got {shown!r}")
-    if body.rstrip().count("\n") >= max_rows:  # lines counted before parsing, blank ones among them (not those at the end)
+
+
+def _csv_rows(path: Path, lines: list[str], first_line: int, max_rows: int) -> list[NDArray[np.float64]]:
+    """The rows of ``lines`` (the first is line ``first_line`` of the file) as an ``(n, 3)`` array, or none if all are blank."""
+    last = len(lines) - 1
+    while last >= 0 and lines[last] in _BLANK_LINES:
+        last -= 1
+    if last < 0:
+        return []
+    if first_line + last - 1 > max_rows:  # lines after the header, blank ones among them (not those at the end)
         raise InvalidInputError(f"{path}: more than {max_rows:,} lines after the header, the most rays a sensor may cast")
+    rows = _parsed(lines[: last + 1])
+    if isinstance(rows, np.ndarray) and rows.shape[1] == len(RAY_TABLE_COLUMNS):
+        return [rows]
+    # the first line that breaks the block: the longest prefix that parses is found by halving
+    good, bad = 0, last + 1
+    while bad - good > 1:
+        middle = (good + bad) // 2
+        parsed = _parsed(lines[:middle])
+        good, bad = (middle, bad) if isinstance(parsed, np.ndarray) and parsed.shape[1] in (0, len(RAY_TABLE_COLUMNS)) else (good, middle)
+    at, alone = first_line + good, _parsed([lines[good]])
+    if isinstance(alone, str) or alone.shape[1] == len(RAY_TABLE_COLUMNS):  # the second: numpy refused it only after the rows before
+        raise InvalidInputError(
+            f"{path}: line {at:,} is not a row of three numbers ({alone if isinstance(alone, str) else 'after its rows'})"
+        )
+    raise InvalidInputError(f"{path}: line {at:,} holds {alone.shape[1]} numbers; each row must hold "
+                            f"{len(RAY_TABLE_COLUMNS)} ({','.join(RAY_TABLE_COLUMNS)})")  # fmt: skip
+
+
+def _parsed(lines: list[str]) -> NDArray[np.float64] | str:
+    """``lines`` parsed by numpy as rows of comma-separated numbers (``(n, k)``, ``(0, 0)`` if all are blank), or numpy's reason."""
     try:
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)  # "input contained no data": an empty table is refused below
-            rows = np.loadtxt(io.StringIO(body), delimiter=",", dtype=np.float64, comments=None, ndmin=2, encoding=None)
-    except ValueError as exc:  # numpy names the row (0-based after the header) and the column
+            warnings.simplefilter("ignore", UserWarning)  # "input contained no data": all blank
+            rows = np.loadtxt(lines, delimiter=",", dtype=np.float64, comments=None, ndmin=2, encoding=None)
+    except ValueError as exc:
         reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0].split(";")[0].rstrip(".")
-        raise InvalidInputError(
-            f"{path}: not a ray table of three numbers per row ({reason}; rows count from 0 after the header)"
-        ) from None
-    if rows.size == 0:
-        return np.zeros((0, 3))
-    if rows.shape[1] != len(RAY_TABLE_COLUMNS):
-        raise InvalidInputError(
-            f"{path}: each row must hold {len(RAY_TABLE_COLUMNS)} numbers ({','.join(RAY_TABLE_COLUMNS)}), got {rows.shape[1]}"
-        )
-    return rows
+        return _NUMPY_ROW.sub(lambda m: f" in column {m.group(2)}" if m.group(2) else "", reason)
+    return rows if rows.size else np.zeros((0, 0))
 
 
 def _read_npy(path: Path, max_rows: int, within) -> NDArray[np.float64]:

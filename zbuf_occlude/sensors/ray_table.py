@@ -270,6 +270,8 @@ def load_ray_table(path: str | os.PathLike, *, name: str | None = None, within: 
 
     Raises
     ------
+    ArgumentTypeError
+        ``path`` or ``within`` is not a path (naming the argument and the value).
     InvalidInputError
         One line naming the file: what :func:`~zbuf_occlude.io.ray_tables.read_ray_table`
         refuses (more rows than :data:`~zbuf_occlude.sensors.checks.MAX_SENSOR_RAYS` among
