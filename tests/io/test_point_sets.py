@@ -10,6 +10,8 @@ import h5py
 import numpy as np
 import pytest
 import trimesh
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from zbuf_occlude.errors import DatasetFormatError, InsufficientMemoryError, InvalidInputError, UnsafePathError
 from zbuf_occlude.io.point_sets import (
@@ -19,6 +21,7 @@ from zbuf_occlude.io.point_sets import (
     point_set_labels,
     read_point_sets,
     shape_names,
+    unit_normals,
 )
 
 RNG = np.random.default_rng(0)
@@ -329,22 +332,66 @@ def test_a_class_name_that_is_no_plain_name_is_refused(tmp_path, name):
 
 @pytest.mark.parametrize(
     ("normal", "said"),
-    [((1e300, 0.0, 0.0), "have lengths float64 cannot divide by"), ((1e-300, 1e-300, 0.0), "have lengths float64 cannot divide"),
-     ((0.0, 0.0, 0.0), "are zero"), ((np.inf, 0.0, 0.0), "hold NaN or inf")],
-    ids=["1e300", "1e-300", "zero", "inf"],
+    [((0.0, 0.0, 0.0), "are zero"), ((-0.0, 0.0, -0.0), "are zero"), ((np.inf, 0.0, 0.0), "hold NaN or inf"),
+     ((1.0, np.nan, 0.0), "hold NaN or inf")],
+    ids=["zero", "minus zero", "inf", "nan"],
 )  # fmt: skip
 def test_normals_that_cannot_be_made_unit_are_refused_naming_the_row(tmp_path, normal, said):
-    """A normal of length 1e300 overflowed to a length of inf and divided to 0: seen from everywhere."""
     normals = np.tile([0.0, 0.0, 1.0], (64, 1))
     normals[7] = normal
     np.save(tmp_path / "c.npy", np.hstack([CLOUDS[0], normals]))
-    with pytest.raises(InvalidInputError, match=f"1 normals {said}.*first row 7") as exc:
+    with pytest.raises(InvalidInputError, match=f"1 normals {said}, first row 7;") as exc:
         read_point_sets(tmp_path / "c.npy")
     _one_line_naming(exc, tmp_path / "c.npy")
-    normals[7] = (1e150, -1e150, 0.0)  # long, but float64 divides by it: a direction like any other
+
+
+@pytest.mark.parametrize("length", [1e300, 1e-300, 1e154, 1e-154, float(np.finfo(np.float64).max), 5e-324])
+def test_a_long_or_short_normal_is_a_direction_like_any_other(tmp_path, length):
+    """A normal of length 1e300 overflowed to a length of inf and divided to 0 (seen from everywhere);
+    one of 1e-300 underflowed to 0: both were refused although float64 holds them."""
+    normals = np.tile([0.0, 0.0, 1.0], (64, 1))
+    normals[7] = (length, -length, 0.0)
     np.save(tmp_path / "c.npy", np.hstack([CLOUDS[0], normals]))
     (cloud,) = read_point_sets(tmp_path / "c.npy")
-    assert np.allclose(cloud.normals[7], [2**-0.5, -(2**-0.5), 0.0])
+    assert np.allclose(cloud.normals[7], [2**-0.5, -(2**-0.5), 0.0], rtol=0, atol=4 * EPS)
+    assert np.array_equal(cloud.normals[np.arange(64) != 7], normals[np.arange(64) != 7])
+
+
+#: float64's machine epsilon: the rounding of one division and one square root, a few of which make a unit normal.
+EPS = float(np.finfo(np.float64).eps)
+#: Lengths to scale a direction to: every finite positive float64, subnormals included (hypothesis draws the
+#: exponent's ends as well as the middle).
+LENGTHS = st.floats(min_value=float(np.finfo(np.float64).smallest_subnormal), max_value=float(np.finfo(np.float64).max),
+                    allow_nan=False, allow_infinity=False)  # fmt: skip
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    direction=st.tuples(*[st.floats(-1, 1, allow_nan=False, allow_subnormal=False)] * 3).filter(lambda d: max(map(abs, d)) > 0.25),
+    length=LENGTHS,
+)
+def test_a_normal_of_any_finite_length_gives_the_unit_normal_of_its_direction(direction, length):
+    """The law: unit_normals(d * s) is d / |d| for every scale s from the smallest positive float64 to the
+    largest, as long as d * s holds d's direction (its largest component a normal float64)."""
+    d = np.asarray(direction, dtype=np.float64)
+    scaled = d / np.abs(d).max() * length  # the largest component ±length; the others at most that
+    expected = d / np.linalg.norm(d)
+    (got,) = unit_normals(scaled[None], what="n")
+    # a few roundings of eps each; a component that fell to a subnormal lost up to half the smallest subnormal
+    # on the way, which the division by the largest (length) magnifies
+    subnormal_loss = float(np.finfo(np.float64).smallest_subnormal) / length
+    assert np.allclose(got, expected, rtol=0, atol=8 * EPS + subnormal_loss)
+    assert abs(np.linalg.norm(got) - 1) <= 4 * EPS
+
+
+@settings(max_examples=200, deadline=None)
+@given(length=LENGTHS, axis=st.integers(0, 2), sign=st.sampled_from([-1.0, 1.0]))
+def test_a_normal_along_an_axis_of_any_finite_length_is_that_axis(length, axis, sign):
+    normal = np.zeros((1, 3))
+    normal[0, axis] = sign * length
+    expected = np.zeros((1, 3))
+    expected[0, axis] = sign
+    assert np.array_equal(unit_normals(normal, what="n"), expected)
 
 
 def test_a_read_that_would_exhaust_memory_is_refused_before_it_allocates(tmp_path, monkeypatch):

@@ -25,7 +25,7 @@ and no external storage; sizes are checked from headers before anything is read
 (:data:`~zbuf_occlude.defaults.MAX_POINT_SET_POINTS` points a cloud,
 :data:`~zbuf_occlude.defaults.MAX_POINT_SET_BYTES` a read), and what a read will allocate is
 checked against the memory available (:func:`zbuf_occlude.resources.check_memory`) before it
-allocates; NaN or infinite coordinates are refused, and so are normals that cannot be made unit
+allocates; NaN or infinite coordinates are refused, and so are normals that are zero or not finite
 (:func:`unit_normals`).  A class list beside a file is read only when it is a regular file inside
 the file's folder, links resolved (a ``shape_names.txt`` that links elsewhere is refused).  Each
 error is one
@@ -80,12 +80,6 @@ BYTES_PER_READ_POINT = 80
 #: Bytes per cloud of reading a file's labels (:func:`point_set_labels`): the int64 array, and
 #: the list of Python ints returned (an 8-byte slot and a 32-byte int each).
 BYTES_PER_LABEL = 48
-#: Shortest and longest normal made unit in float64: its squared length, summed by
-#: ``numpy.linalg.norm``, must be a normal float64 (from ``finfo.tiny``, 2.2e-308, to ``finfo.max``,
-#: 1.8e308).  Past the top it overflows to inf and every normal divides to 0; below the bottom
-#: it loses its digits in subnormals and the quotient is no longer unit.
-_MIN_NORMAL_LENGTH = float(np.sqrt(np.finfo(np.float64).tiny))
-_MAX_NORMAL_LENGTH = float(np.sqrt(np.finfo(np.float64).max))
 
 
 @dataclass(frozen=True)
@@ -139,13 +133,15 @@ def _point_set(path: Path, name: str, cloud: NDArray, normals: NDArray | None, l
 
 
 def unit_normals(normals: NDArray[np.floating], *, what: str) -> NDArray[np.float64]:
-    """``normals (N, 3)`` divided by their lengths, after checking that each can be.
+    """``normals (N, 3)`` made unit, after checking that each can be: finite and not zero.
 
-    A normal is a direction: its length does not matter, as long as float64 can divide by it.
-    That holds when its length lies from 1.5e-154 to 1.3e154 (its squared length, summed by
-    ``numpy.linalg.norm``, is then a normal float64: module constants).  A normal of length
-    1e300 would overflow to a length of inf and divide to 0 (a point facing no way, seen from
-    everywhere); one of 1e-300 underflows to 0.
+    A normal is a direction: its length does not matter.  Each row is first divided by its
+    largest absolute component (exact for a power of two, else one rounding per component), which
+    leaves components in [-1, 1] and one of them ±1, so that the squared length summed by
+    ``numpy.linalg.norm`` lies in [1, 3]: no length from the smallest positive float64 (5e-324,
+    a subnormal) to the largest (1.8e308, and rows whose every component is that large) overflows
+    to inf or underflows to 0 (dividing by the length directly would make a normal of length
+    1e300 divide to 0, a point facing no way).
 
     Parameters
     ----------
@@ -161,27 +157,20 @@ def unit_normals(normals: NDArray[np.floating], *, what: str) -> NDArray[np.floa
     Raises
     ------
     InvalidInputError
-        Naming ``what``, how many normals are zero, hold NaN or inf, or are too long or too
-        short to divide by, and the first such row.
+        Naming ``what``, how many normals are zero or hold NaN or inf, and the first such row.
     """
     normals = np.asarray(normals, dtype=np.float64)
-    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
-        length = np.linalg.norm(normals, axis=1)
     finite = np.isfinite(normals).all(axis=1)
-    zero = finite & ~normals.any(axis=1)
-    out_of_range = finite & ~zero & ~((length >= _MIN_NORMAL_LENGTH) & (length <= _MAX_NORMAL_LENGTH))
-    problems = [
-        (zero, "are zero"),
-        (~finite, "hold NaN or inf"),
-        (out_of_range, f"have lengths float64 cannot divide by (outside {_MIN_NORMAL_LENGTH:.2g} to {_MAX_NORMAL_LENGTH:.2g})"),
-    ]
+    with np.errstate(invalid="ignore"):
+        largest = np.abs(normals).max(axis=1) if len(normals) else np.zeros(0)
+    zero = finite & (largest == 0)
+    problems = [(zero, "are zero"), (~finite, "hold NaN or inf")]
     found = [(int(np.count_nonzero(bad)), int(np.argmax(bad)), said) for bad, said in problems if bad.any()]
     if found:
         count, row, said = found[0]
-        raise InvalidInputError(
-            f"{what}: {count:,} normals {said}, first row {row} {normals[row].tolist()}; a normal gives the direction a surface faces"
-        )
-    return np.ascontiguousarray(normals / length[:, None])
+        raise InvalidInputError(f"{what}: {count:,} normals {said}, first row {row}; a normal gives the direction a surface faces")
+    scaled = normals / largest[:, None]
+    return np.ascontiguousarray(scaled / np.linalg.norm(scaled, axis=1)[:, None])
 
 
 # -- HDF5 -------------------------------------------------------------------------------------------
