@@ -243,14 +243,13 @@ def test_a_card_declaring_huge_samples_is_refused_before_allocating(tmp_path, mo
 
 
 def test_to_arrays_checks_the_memory_before_allocating(datasets, monkeypatch):
-    from functools import partial
 
-    import zbuf_occlude.dataset.reader as reader
+    from zbuf_occlude import resources
     from zbuf_occlude.errors import InsufficientMemoryError
-    from zbuf_occlude.resources import check_memory
 
     ds = OccludedDataset(datasets["dense"])
-    monkeypatch.setattr(reader, "check_memory", partial(check_memory, available=1000))
+    monkeypatch.setattr(resources, "available_memory", lambda: (1000, "test budget"))
+    monkeypatch.setattr(resources, "MIN_CHECKED_BYTES", 0)  # a tiny data set, a tinier budget
     with pytest.raises(InsufficientMemoryError, match=r"to_arrays\(\) of .* samples of .* more than the 1000 B"):
         ds.to_arrays()
 

@@ -203,15 +203,94 @@ def test_a_dense_shard_declaring_more_rows_than_its_object_has_is_refused(farmed
     _reader_and_verify_refuse(ds, ds / rel, r"declares shape \(20000000.*but stores 0 bytes", capsys)
 
 
+def _huge_rows(f, key, value):
+    """A dataset declaring 2e7 rows in chunks never written: a few KB on disk."""
+    f.create_dataset(key, shape=(20_000_000, *value.shape[1:]), dtype=value.dtype, chunks=(1, *value.shape[1:]))
+
+
+def _resign_card(ds: Path, samples_per_view: int) -> None:
+    """The card with another ``samples_per_view``, and its SHA-256 file to match, as its author would."""
+    from zbuf_occlude.dataset.layout import CARD_FILE, CARD_SHA256_FILE
+    from zbuf_occlude.dataset.schema import card_sha256_line
+    from zbuf_occlude.io.atomic import file_sha256
+
+    card = json.loads((ds / CARD_FILE).read_text())
+    card["params"]["samples_per_view"] = samples_per_view
+    (ds / CARD_FILE).write_text(json.dumps(card))
+    (ds / CARD_SHA256_FILE).write_text(card_sha256_line(file_sha256(ds / CARD_FILE)))
+
+
+#: In a child under an address-space limit: open the data set argv[1]; print the refusal and exit 3.
+_OPEN_LIMITED = """
+import sys
+from zbuf_occlude import OccludedDataset
+from zbuf_occlude.errors import ZbufOccludeError
+try:
+    OccludedDataset(sys.argv[1])
+except ZbufOccludeError as exc:
+    print(exc)
+    sys.exit(3)
+"""
+#: The address space of the child: a user's ``ulimit -v`` of 3 GB, less the interpreter's footprint (152 MiB measured).
+_LIMIT_HEADROOM = (3 << 30) - (160 << 20)
+
+
+def _open_limited(ds: Path):
+    from memory_limit import run_python_limited
+
+    return run_python_limited(f"import sys; sys.argv[1:] = [{str(ds)!r}]\n" + _OPEN_LIMITED, headroom=_LIMIT_HEADROOM)
+
+
+def test_a_16_kb_shard_whose_card_promises_2e7_rows_is_refused_before_the_index(farmed, tmp_path, capsys):
+    """The card's samples_per_view (re-signed) promises 2e7 samples an object and the shard declares
+    them in a few KB: refused by its size before the reader's index of 4e7 samples is built (a
+    MemoryError under 3 GB before), plainly and under the limit, by the reader and by verify."""
+    from memory_limit import run_cli_limited
+
+    ds = _copy(farmed["dense"], tmp_path / "ds")
+    for line in (ds / "manifest.jsonl").read_text().splitlines():
+        rel = json.loads(line)["shards"][0]
+        _rewrite_shard(ds / rel, data=_huge_rows, label=_huge_rows, elevation_deg=_huge_rows, azimuth_deg=_huge_rows)
+        assert (ds / rel).stat().st_size < 16_000
+        _resign(ds, rel)
+    _resign_card(ds, 10_000_000)
+    said = r"its object's 20,000,000 samples of 64 points take 15,360,000,000 bytes, more than its shard"
+    _reader_and_verify_refuse(ds, ds / "manifest.jsonl", said, capsys)
+    done = _open_limited(ds)
+    assert done.returncode == 3 and not done.stderr, done.stdout + done.stderr[-2000:]
+    assert len(done.stdout.splitlines()) == 1 and re.search(said, done.stdout), done.stdout
+    checked = run_cli_limited(["verify", str(ds)], headroom=_LIMIT_HEADROOM)
+    assert checked.returncode == 1 and re.search(said, checked.stderr) and "Traceback" not in checked.stderr, checked.stderr[-2000:]
+
+
+def test_a_compact_card_promising_2e7_samples_an_object_is_refused_before_the_index(farmed, tmp_path, monkeypatch):
+    """Compact storage redraws its samples, so no shard bounds them: the memory of the index is
+    checked before it is built (4e7 samples, 3.6 GiB; a MemoryError under 3 GB before)."""
+    from zbuf_occlude import OccludedDataset, resources
+    from zbuf_occlude.errors import InsufficientMemoryError
+
+    ds = _copy(farmed["compact"], tmp_path / "ds")
+    _resign_card(ds, 10_000_000)
+    said = (
+        rf"the index of {re.escape(str(ds))} \(40,000,000 samples declared by its card's samples_per_view and manifest.jsonl\) needs about"
+    )
+    done = _open_limited(ds)
+    assert done.returncode == 3 and not done.stderr, done.stdout + done.stderr[-2000:]
+    assert len(done.stdout.splitlines()) == 1 and re.match(said, done.stdout) and "ulimit -v" in done.stdout, done.stdout
+    monkeypatch.setattr(resources, "available_memory", lambda: (1 << 30, "test budget"))  # plainly, as a 1 GiB machine
+    with pytest.raises(InsufficientMemoryError, match=said):
+        OccludedDataset(ds)
+
+
 def test_a_shard_declaring_more_than_the_memory_available_is_refused_before_reading(farmed, tmp_path, monkeypatch):
-    from functools import partial
 
     import zbuf_occlude.dataset.schema as schema
+    from zbuf_occlude import resources
     from zbuf_occlude.errors import InsufficientMemoryError
-    from zbuf_occlude.resources import check_memory
 
     shard = sorted((farmed["dense"] / "shards").glob("*.h5"))[0]
-    monkeypatch.setattr(schema, "check_memory", partial(check_memory, available=1000))
+    monkeypatch.setattr(resources, "available_memory", lambda: (1000, "test budget"))
+    monkeypatch.setattr(resources, "MIN_CHECKED_BYTES", 0)  # a small shard, a smaller budget
     with pytest.raises(InsufficientMemoryError, match=rf"the shard {shard} needs about .* more than the 1000 B"):
         schema.open_shard(shard, storage="dense", n_points=64, rows=2, n_poses=2, sensor=False)
 

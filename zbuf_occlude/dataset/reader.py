@@ -25,7 +25,8 @@ from zbuf_occlude.defaults import DEFAULT_FARM_DENSE_POINTS
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError, ShardChecksumError
 from zbuf_occlude.io.safe_paths import path_inside
 from zbuf_occlude.mesh.paths import SPLITS, name_set
-from zbuf_occlude.resources import available_memory, check_memory
+from zbuf_occlude.io.memory import check_memory
+from zbuf_occlude.resources import available_memory
 
 if TYPE_CHECKING:  # the schema (pydantic) is imported when a data set is opened, not with the package
     from zbuf_occlude.dataset.schema import Card
@@ -45,6 +46,12 @@ DEFAULT_OPEN_FILES = 16
 #: Bytes one point of one sample costs while it is read or redrawn: float32 xyz in the result
 #: (12), its index into the dense cloud (int64, 8) and the gathered copy (12), rounded up.
 BYTES_PER_SAMPLE_POINT = 40
+#: Bytes one sample costs in the index built when a data set is opened
+#: (:func:`~zbuf_occlude.dataset.index.sample_index`: four int64 columns per object, then joined,
+#: and the pose filter's mask): 89 B at the peak by tracemalloc with one object of 500,000
+#: samples (77 with four); rounded up.  Checked before it is built: a card's ``samples_per_view``
+#: is data.
+BYTES_PER_INDEX_ROW = 96
 
 
 def object_cache_bytes(n_dense: int, n_poses: int, n_topup: int) -> int:
@@ -403,7 +410,7 @@ class OccludedDataset(Sequence):
         self.n_points: int = card.params.n_points
         # the card is data: an n_points edited to 1e8 must not allocate GBs for one sample
         check_memory(
-            self.n_points * BYTES_PER_SAMPLE_POINT, option=f"{card_path} field 'params.n_points' ({self.n_points:,})",
+            self.n_points * BYTES_PER_SAMPLE_POINT, f"{card_path} field 'params.n_points' ({self.n_points:,})",
             hint="one sample of this data set would not fit in memory: check where the data set comes from",
         )  # fmt: skip
         self.shape_names: list[str] = read_shape_names(self.root, card)
@@ -432,7 +439,7 @@ class OccludedDataset(Sequence):
 
     def _select(self, card: Card, split: str | Sequence[str] | None, classes: str | Sequence[str] | None) -> list[NDArray[np.int64]]:
         """Add the finished objects of the chosen splits and classes to the files; their samples per pose."""
-        from zbuf_occlude.dataset.schema import check_records, checked_shards, read_manifest
+        from zbuf_occlude.dataset.schema import check_declared_rows, check_records, checked_shards, read_manifest
 
         splits, wanted_classes = name_set(split), name_set(classes)
         if wanted_classes is not None and (unknown := wanted_classes - set(self.shape_names)):
@@ -451,10 +458,18 @@ class OccludedDataset(Sequence):
                 wanted_classes is not None and checked.class_name not in wanted_classes
             ):
                 continue
-            shards, digests = checked_shards(self.root, f"{manifest_path}:{lineno}", checked, card, verify=self.verify)
+            where = f"{manifest_path}:{lineno}"
+            shards, digests = checked_shards(self.root, where, checked, card, verify=self.verify)
             spp = self._kind.rows_per_pose(np.asarray(checked.n_visible, dtype=np.int64), card.params.samples_per_view)
+            check_declared_rows(self._kind, shards, int(spp.sum()), self.n_points, where)
             self._shards.add(rec, shards, digests, rows=int(spp.sum()), topup_rows=int(sum(checked.n_topped_up or ())))
             rows_per_pose.append(spp)
+        declared = sum(int(spp.sum()) for spp in rows_per_pose)
+        check_memory(
+            declared * BYTES_PER_INDEX_ROW,
+            f"the index of {self.root} ({declared:,} samples declared by its card's samples_per_view and {MANIFEST_FILE})",
+            hint="select fewer samples (split, classes), or check where the data set comes from",
+        )
         return rows_per_pose
 
     def _check_features(self) -> None:
@@ -576,7 +591,7 @@ class OccludedDataset(Sequence):
         width = 3 + len(self.features)
         check_memory(
             len(self) * self.n_points * width * np.dtype(np.float32).itemsize,
-            option=f"to_arrays() of {self.root} ({len(self):,} samples of {self.n_points:,} points)",
+            f"to_arrays() of {self.root} ({len(self):,} samples of {self.n_points:,} points)",
             hint="select fewer samples (split, classes, poses) or read them one at a time (ds[i])",
         )
         data = np.empty((len(self), self.n_points, width), dtype=np.float32)

@@ -22,14 +22,14 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from zbuf_occlude.dataset.layout import CARD_FILE, CARD_SHA256_FILE, COLUMN_TYPES, POINT_COLUMNS, SHAPE_NAMES_FILE
-from zbuf_occlude.dataset.storage import storage_kind
+from zbuf_occlude.dataset.storage import StorageKind, storage_kind
 from zbuf_occlude.errors import DatasetFormatError, InvalidInputError
 from zbuf_occlude.io.hdf5 import Column, declared_nbytes, open_hdf5
 from zbuf_occlude.io.atomic import size_mismatch
 from zbuf_occlude.io.json_files import loads_json
+from zbuf_occlude.io.memory import check_memory
 from zbuf_occlude.io.regular_files import MAX_LIST_BYTES, MAX_METADATA_BYTES, read_text_file
 from zbuf_occlude.io.safe_paths import control_character, path_inside
-from zbuf_occlude.resources import check_memory
 
 __all__ = [
     "CardParams",
@@ -49,6 +49,7 @@ __all__ = [
     "check_records",
     "check_point_set_records",
     "checked_shards",
+    "check_declared_rows",
     "check_shard",
     "open_shard",
     "describe_validation_error",
@@ -527,6 +528,45 @@ def checked_shards(root: Path, where: str, rec: OkRecord, card: Card, *, verify:
     return shards, dict(zip(shards, rec.sha256))
 
 
+def check_declared_rows(kind: StorageKind, shards: Sequence[Path], rows: int, n_points: int, where: str) -> None:
+    """Refuse a record that promises more samples than its shard can hold, before anything of their
+    size is allocated (the reader's index of samples, ``verify``'s reads): the rule the reader and
+    ``verify`` share.
+
+    Parameters
+    ----------
+    kind : StorageKind
+        The data set's; only a kind whose samples are stored rows (``stored_bytes_per_point`` > 0)
+        bounds them by its shard's size.
+    shards : sequence of Path
+        The record's files (an HDF5 kind's: its one shard), inside the data set.
+    rows : int
+        Samples the record promises (its ``n_visible`` and the card's ``samples_per_view``).
+    n_points : int
+        Points per sample (the card's ``params.n_points``).
+    where : str
+        ``manifest.jsonl:LINE``, for messages.
+
+    Raises
+    ------
+    DatasetFormatError
+        ``rows * n_points * stored_bytes_per_point`` is more than the shard's size on disk (names
+        the record, the shard and both numbers).
+    """
+    if not kind.stored_bytes_per_point or len(shards) != 1:
+        return
+    try:
+        size = shards[0].stat().st_size
+    except OSError:  # missing: refused where it is opened, with what is wrong with it
+        return
+    need = int(rows) * int(n_points) * kind.stored_bytes_per_point
+    if need > size:
+        raise DatasetFormatError(
+            f"{where}: its object's {int(rows):,} samples of {int(n_points):,} points take {need:,} bytes, more than its shard "
+            f"{shards[0]} holds ({size:,} bytes); the data set was changed after it was written: get it again from its source"
+        )
+
+
 def _shape(f: Any, key: str) -> tuple[int, ...] | None:
     item = f.get(key)
     return tuple(item.shape) if item is not None and hasattr(item, "shape") else None
@@ -627,7 +667,7 @@ def open_shard(
     :func:`zbuf_occlude.io.hdf5.check_hdf5` against :data:`SHARD_COLUMNS` (data stored inside
     the file, no links, the schema's dtypes), :func:`check_shard` (datasets, shapes, rows), and
     the memory its datasets declare against the memory available
-    (:func:`zbuf_occlude.resources.check_memory`), so that a small file declaring 2e7 rows is
+    (:func:`zbuf_occlude.io.memory.check_memory`), so that a small file declaring 2e7 rows is
     refused before it is read.  Parameters as :func:`check_shard`.
 
     Returns
@@ -656,7 +696,7 @@ def open_shard(
             point_columns=point_columns,
         )
         declared = sum(declared_nbytes(f[k]) for k in f.keys() if _shape(f, k) is not None)
-        check_memory(declared, option=f"the shard {path}", hint="it declares datasets larger than the data set can hold")
+        check_memory(declared, f"the shard {path}", hint="it declares datasets larger than the data set can hold")
     except BaseException:
         f.close()
         raise

@@ -225,6 +225,11 @@ class StorageKind:
     keeps_point_columns : bool
         Its shards may keep per-point columns beside the points
         (:data:`~zbuf_occlude.dataset.layout.POINT_COLUMNS`, read by :meth:`read_columns`).
+    stored_bytes_per_point : int
+        Bytes each point of each sample takes in its shard at least (its rows are stored
+        uncompressed); 0: its samples are not stored as rows (redrawn, or files of their own).
+        A record promising more rows than its shard can hold is refused before anything of that
+        size is allocated (:func:`~zbuf_occlude.dataset.schema.check_declared_rows`).
     """
 
     name: str = ""
@@ -236,6 +241,7 @@ class StorageKind:
     written_by = "farm"
     joins_splits = False
     keeps_point_columns = False
+    stored_bytes_per_point = 0
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.name!r})"
@@ -363,6 +369,7 @@ class DenseRows(StorageKind):
 
     shard_datasets = ("data",)
     keeps_point_columns = True
+    stored_bytes_per_point = BYTES_PER_POINT  # 'data', float32 xyz, never compressed
 
     def __init__(self, name: str, *, provenance: bool, written_by: str = "farm", joins_splits: bool = False):
         self.name = self.storage = name

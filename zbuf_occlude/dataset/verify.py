@@ -215,6 +215,14 @@ def _check_record(root: Path, where: str, rec: OkRecord, check: _RecordFiles, ki
     if mismatch is not None:
         problems.append(f"{where}: {mismatch} (changed after it was written)")
         return
+    if kind is not None:
+        from zbuf_occlude.dataset.schema import check_declared_rows
+
+        try:  # as the reader checks it, before a byte is read
+            check_declared_rows(kind, files, check.rows, check.n_points, where)
+        except ZbufOccludeError as exc:
+            problems.append(str(exc))
+            return
     for i, (rel, file) in enumerate(zip(rec.shards, files)):
         report.files += 1
         if rec.sha256 is not None and file_sha256(file) != rec.sha256[i]:
