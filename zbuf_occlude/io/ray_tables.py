@@ -62,8 +62,9 @@ MAX_CSV_LINE_BYTES = 1024
 CSV_BLOCK_BYTES = 1 << 20
 #: Lines numpy skips: empty ones (a lone carriage return is the end of a CRLF line).
 _BLANK_LINES = ("", "\r")
-#: numpy's "... at row R, column C" (the row counted among the block's rows): the column is kept.
-_NUMPY_ROW = re.compile(r"\s+at row \d+(, column (\d+))?")
+#: The column in numpy's reason ("could not convert string '...' to float64 at row R, column C"): the
+#: only part of it shown, the quoted text being the file's.
+_NUMPY_COLUMN = re.compile(r"at row \d+, column (\d+)")
 
 
 def read_ray_table(
@@ -171,11 +172,13 @@ def _csv_blocks(fh: BinaryIO, path: Path):
 
 
 def _check_header(path: Path, first: str) -> None:
-    """Refuse a first line other than the three column names (spaces around them allowed)."""
+    """Refuse a first line other than the three column names (spaces around them allowed), without quoting it."""
     header = tuple(name.strip() for name in first.strip().split(","))
     if header != RAY_TABLE_COLUMNS:
-        shown = first.strip()[:80]
-        raise InvalidInputError(f"{path}: a ray table's first line must be the header {','.join(RAY_TABLE_COLUMNS)}, got {shown!r}")
+        found = "the file is empty" if not first.strip() else f"line 1 holds {len(header)} other fields"
+        if len(header) == len(RAY_TABLE_COLUMNS) and set(header) == set(RAY_TABLE_COLUMNS):
+            found = "line 1 names them in another order"
+        raise InvalidInputError(f"{path}: a ray table's first line must be the header {','.join(RAY_TABLE_COLUMNS)}; {found}")
 
 
 def _csv_rows(path: Path, lines: list[str], first_line: int, max_rows: int) -> list[NDArray[np.float64]]:
@@ -197,23 +200,23 @@ def _csv_rows(path: Path, lines: list[str], first_line: int, max_rows: int) -> l
         parsed = _parsed(lines[:middle])
         good, bad = (middle, bad) if isinstance(parsed, np.ndarray) and parsed.shape[1] in (0, len(RAY_TABLE_COLUMNS)) else (good, middle)
     at, alone = first_line + good, _parsed([lines[good]])
-    if isinstance(alone, str) or alone.shape[1] == len(RAY_TABLE_COLUMNS):  # the second: numpy refused it only after the rows before
-        raise InvalidInputError(
-            f"{path}: line {at:,} is not a row of three numbers ({alone if isinstance(alone, str) else 'after its rows'})"
-        )
-    raise InvalidInputError(f"{path}: line {at:,} holds {alone.shape[1]} numbers; each row must hold "
-                            f"{len(RAY_TABLE_COLUMNS)} ({','.join(RAY_TABLE_COLUMNS)})")  # fmt: skip
+    if isinstance(alone, np.ndarray) and alone.shape[1] != len(RAY_TABLE_COLUMNS):
+        raise InvalidInputError(f"{path}: line {at:,} holds {alone.shape[1]} numbers; each row must hold "
+                                f"{len(RAY_TABLE_COLUMNS)} ({','.join(RAY_TABLE_COLUMNS)})")  # fmt: skip
+    detail = f" ({alone})" if isinstance(alone, str) and alone else ""  # the column numpy names, if it does
+    raise InvalidInputError(f"{path}: line {at:,} is not a row of three numbers separated by commas{detail}")
 
 
 def _parsed(lines: list[str]) -> NDArray[np.float64] | str:
-    """``lines`` parsed by numpy as rows of comma-separated numbers (``(n, k)``, ``(0, 0)`` if all are blank), or numpy's reason."""
+    """``lines`` parsed by numpy as rows of comma-separated numbers (``(n, k)``, ``(0, 0)`` if all are blank), or where
+    numpy refused them: ``"column C is not a number"``, or ``""`` (numpy's own words quote the file, so they are not kept)."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # "input contained no data": all blank
             rows = np.loadtxt(lines, delimiter=",", dtype=np.float64, comments=None, ndmin=2, encoding=None)
     except ValueError as exc:
-        reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0].split(";")[0].rstrip(".")
-        return _NUMPY_ROW.sub(lambda m: f" in column {m.group(2)}" if m.group(2) else "", reason)
+        column = _NUMPY_COLUMN.search(str(exc))
+        return f"column {column.group(1)} is not a number" if column else ""
     return rows if rows.size else np.zeros((0, 0))
 
 
@@ -223,7 +226,7 @@ def _read_npy(path: Path, max_rows: int, within) -> NDArray[np.float64]:
     if array.dtype.kind != "f" or array.ndim != 2 or array.shape[1] != len(RAY_TABLE_COLUMNS):
         raise InvalidInputError(
             f"{path}: a ray table .npy must be an (N, 3) floating-point array ({', '.join(RAY_TABLE_COLUMNS)}), "
-            f"got shape {array.shape} dtype {array.dtype}"
+            f"got shape {array.shape} dtype {array.dtype.name}"  # the name: a structured dtype's str() holds its fields' names
         )
     return array.astype(np.float64)
 
