@@ -36,6 +36,7 @@ from zbuf_occlude._version import __version__
 from zbuf_occlude.defaults import MAX_POINTS
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError, ZbufOccludeError
 from zbuf_occlude.geometry.arguments import check_points, described
+from zbuf_occlude.io.las_crs import linear_unit_m
 from zbuf_occlude.io.las_layout import (
     MAX_EVLRS,
     MAX_HEADER_BYTES,
@@ -44,7 +45,6 @@ from zbuf_occlude.io.las_layout import (
     LasLayout,
     check_count,
     check_laz,
-    linear_unit_m,
     parse_header,
 )
 from zbuf_occlude.io.regular_files import open_regular_file

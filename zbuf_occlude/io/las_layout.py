@@ -31,25 +31,22 @@ So what they would read or allocate is checked here first, on the open file, wit
   hold, and the chunks are walked as laz-rs will read them: every layer must end inside the file.
 
 Every failure is one :class:`~zbuf_occlude.errors.InvalidInputError` line naming the file.
-:func:`linear_unit_m` reads the coordinate unit from the header laspy parsed (the projected CRS of
-its WKT, or GeoTIFF's ProjLinearUnitsGeoKey).  :mod:`zbuf_occlude.io.las` reads the points.
+:mod:`zbuf_occlude.io.las_crs` reads the coordinate unit from the header laspy parsed;
+:mod:`zbuf_occlude.io.las` reads the points.
 """
 
 from __future__ import annotations
 
-import math
-import re
 import struct
 from dataclasses import dataclass
-from typing import Any, BinaryIO
+from typing import BinaryIO
 
 import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
 
 __all__ = [
-    "MAX_EVLRS", "MAX_HEADER_BYTES", "MAX_LAZ_POINTS_PER_BYTE", "MAX_VLRS", "LasLayout", "check_count", "check_laz",
-    "linear_unit_m", "parse_header",
+    "MAX_EVLRS", "MAX_HEADER_BYTES", "MAX_LAZ_POINTS_PER_BYTE", "MAX_VLRS", "LasLayout", "check_count", "check_laz", "parse_header",
 ]  # fmt: skip
 
 #: Most VLRs a file may declare: room for the 255 waveform packet descriptors the specification
@@ -100,11 +97,6 @@ _LAYER_FIELD_BYTES = 4
 _ITEM_SIZES = {6: 20, 7: 8, 8: 6, 9: 29, 10: 30, 11: 6, 12: 8, 13: 29}
 #: Layers of each layered item (point14: 9, RGB: 1, RGB+NIR: 2, waveform: 1; extra bytes: one per byte).
 _ITEM_LAYERS = {10: 9, 11: 1, 12: 2, 13: 1}
-#: EPSG codes of ProjLinearUnitsGeoKey (3076) → metres (metre, international foot, US survey foot).
-_GEOKEY_UNITS_M = {9001: 1.0, 9002: 0.3048, 9003: 1200.0 / 3937.0}
-_PROJECTED_WKT = ("PROJCS", "PROJCRS", "PROJECTEDCRS")
-_WKT_MAX_DEPTH = 64
-_WKT_TOKEN = re.compile(r'"((?:[^"]|"")*)"|([A-Za-z_][A-Za-z0-9_]*)\s*[\[(]|([\])])|([^,\[\]()"\s]+)')
 
 
 @dataclass(frozen=True)
@@ -417,67 +409,3 @@ def check_laz(fh: BinaryIO, layout: LasLayout, size: int, name: str) -> int:
             raise InvalidInputError(f"{name}: LAZ chunk {k} holds no points")
         covered, largest, k = covered + points, max(largest, total), k + 1
     return largest
-
-
-def linear_unit_m(header: Any) -> float:
-    """Metres per coordinate unit from the WKT VLR (the projected CRS's unit) or GeoTIFF's ProjLinearUnitsGeoKey.
-
-    Parameters
-    ----------
-    header : laspy.LasHeader
-        The header laspy parsed.
-
-    Returns
-    -------
-    float
-        Metres per unit (0.3048 for international feet); NaN where the file does not say, or says
-        it in a form not read (a geographic CRS, a malformed WKT, a unit code not in the table).
-    """
-    for vlr in header.vlrs.get("WktCoordinateSystemVlr"):
-        found = _wkt_linear_unit_m(str(vlr.string))
-        if math.isfinite(found):
-            return found
-    for vlr in header.vlrs.get("GeoKeyDirectoryVlr"):
-        for key in vlr.geo_keys:
-            if key.id == 3076 and key.tiff_tag_location == 0:
-                return _GEOKEY_UNITS_M.get(int(key.value_offset), math.nan)
-    return math.nan
-
-
-def _wkt_tree(text: str) -> list | None:
-    """``[KEYWORD, children]`` of a WKT (1 or 2) string, children strings or nodes; None when malformed."""
-    root: list = ["", []]
-    stack = [root]
-    for quoted, keyword, close, bare in _WKT_TOKEN.findall(text):
-        if keyword:
-            node: list = [keyword.upper(), []]
-            stack[-1][1].append(node)
-            stack.append(node)
-            if len(stack) > _WKT_MAX_DEPTH:
-                return None
-        elif close:
-            if len(stack) == 1:
-                return None
-            stack.pop()
-        else:
-            stack[-1][1].append(quoted or bare)
-    first = root[1][0] if root[1] else None
-    return first if isinstance(first, list) else None
-
-
-def _wkt_linear_unit_m(text: str) -> float:
-    node = _wkt_tree(text)
-    if node is not None and node[0] in ("COMPD_CS", "COMPOUNDCRS"):
-        node = next((c for c in node[1] if isinstance(c, list) and c[0] in _PROJECTED_WKT), None)
-    if node is None or node[0] not in _PROJECTED_WKT:
-        return math.nan
-    axes = [c for c in node[1] if isinstance(c, list) and c[0] == "AXIS"]
-    for holder in [node, *axes]:  # WKT1 and WKT2 put the unit under the CRS; WKT2 may put it on each axis
-        for c in holder[1]:
-            if isinstance(c, list) and c[0] in ("UNIT", "LENGTHUNIT") and len(c[1]) > 1:
-                try:
-                    factor = float(c[1][1])
-                except (TypeError, ValueError):
-                    return math.nan
-                return factor if math.isfinite(factor) and factor > 0 else math.nan
-    return math.nan
