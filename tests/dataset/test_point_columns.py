@@ -298,3 +298,37 @@ def test_an_export_writes_the_same_xyz_with_or_without_the_columns(returns_set, 
     assert main(["export", str(stripped), "--to", target, "--out", str(tmp_path / "without" / "export")]) == 0
     with_columns, without = _tree_hashes(tmp_path / "with" / "export"), _tree_hashes(tmp_path / "without" / "export")
     assert with_columns and with_columns == without
+
+
+#: In a child under an address-space limit (tests/memory_limit.py): read argv[1] with the return
+#: number alone; print the refusal and exit 3.
+_READ_RETURN_NUMBER = """
+import sys
+from zbuf_occlude import OccludedDataset
+from zbuf_occlude.errors import ZbufOccludeError
+try:
+    OccludedDataset(sys.argv[1], features=("return_number",)).to_arrays()
+except ZbufOccludeError as exc:
+    print(exc)
+    sys.exit(3)
+"""
+
+
+def test_a_return_past_its_pulses_is_refused_when_the_return_number_is_read_alone(returns_set, tmp_path):
+    """verify refused it, and the reader did when both columns were asked for; asked alone, the
+    return number was served: the bound holds whenever the record declares number_of_returns."""
+    from memory_limit import run_python_limited
+
+    ds, shard = _corrupt(returns_set, tmp_path / "ds", return_number=_set(3, (1, 7)), number_of_returns=_set(2, (1, 7)))
+    said = re.escape(str(shard)) + r": dataset 'return_number' holds 3 at row 1, point 7 .*at most the point's 'number_of_returns'"
+    assert re.search(said, verify_dataset(ds).problems[0])
+    with pytest.raises(DatasetFormatError, match=said) as caught:
+        OccludedDataset(ds, features=("return_number",)).to_arrays()
+    assert "\n" not in str(caught.value)
+    rows = OccludedDataset(ds, features=("return_number",))
+    with pytest.raises(DatasetFormatError, match=said):
+        rows[1]  # one sample read on its own: the shard's row in the message
+    rows[0]  # the rows without a fault read as before
+    done = run_python_limited(f"import sys; sys.argv[1:] = [{str(ds)!r}]\n" + _READ_RETURN_NUMBER)
+    assert done.returncode == 3 and not done.stderr and re.search(said, done.stdout), done.stdout + done.stderr[-2000:]
+    assert len(done.stdout.splitlines()) == 1

@@ -65,6 +65,7 @@ __all__ = [
     "unpack_visible",
     "check_visible_bits",
     "check_point_column",
+    "read_point_columns",
 ]
 
 #: Per-row datasets of a ``farm --sensor`` shard that :meth:`SensorCrops.placement` returns.
@@ -409,18 +410,14 @@ class DenseRows(StorageKind):
             A value out of its column's range (named with the file and the row).
         """
         f = src.shard(obj)
-        columns = {name: _rows(f[name], row) for name in names}
-        path = Path(f.filename)
-        for name, values in columns.items():
-            check_point_column(path, name, values, columns.get("number_of_returns") if name == "return_number" else None)
+        declared = src.record(obj).get("point_columns") or ()
+        columns = read_point_columns(f, Path(f.filename), names, declared, row)
         return np.stack([columns[name].astype(np.float32) for name in names], axis=-1)
 
     def check_opened(self, f: Any, path: Path, expect: FileCheck) -> None:
-        """The values of the per-point columns the record declares (:func:`check_point_column`), as
+        """The values of the per-point columns the record declares (:func:`read_point_columns`), as
         :meth:`read_columns` checks them; their shapes and dtypes were checked on opening."""
-        for name in expect.point_columns:
-            paired = f["number_of_returns"][()] if name == "return_number" and "number_of_returns" in f else None
-            check_point_column(path, name, f[name][()], paired)
+        read_point_columns(f, path, expect.point_columns, expect.point_columns)
 
 
 class SensorCrops(DenseRows):
@@ -630,7 +627,54 @@ def _rows(dataset: Any, row: NDArray[np.int64]) -> NDArray:
     return dataset[int(row[0])][None] if len(row) == 1 else dataset[()][row]
 
 
-def check_point_column(path: Path, name: str, values: NDArray, number_of_returns: NDArray | None = None) -> None:
+def read_point_columns(
+    f: Any, path: Path, names: Sequence[str], declared: Sequence[str], row: NDArray[np.int64] | None = None
+) -> dict[str, NDArray]:
+    """The per-point columns ``names`` of an open shard, each checked by :func:`check_point_column`:
+    the one rule the reader (:meth:`DenseRows.read_columns`) and ``verify`` (:meth:`DenseRows.check_opened`) apply.
+
+    ``return_number`` is checked against the same rows of ``number_of_returns`` whenever the record
+    declares that column, whether or not it was asked for: a return number above its point's
+    number of returns is refused however the columns are chosen.
+
+    Parameters
+    ----------
+    f : h5py.File
+        The shard, opened by :func:`~zbuf_occlude.dataset.schema.open_shard` (the declared columns'
+        shapes and dtypes checked).
+    path : Path
+        The shard, for messages.
+    names : sequence of str
+        Columns to read, among ``declared``.
+    declared : sequence of str
+        The columns the record declares (its ``point_columns``).
+    row : (k,) int64, optional
+        Rows to read, ascending (default: all).
+
+    Returns
+    -------
+    dict of str to (k, n) array
+        Each of ``names``, in its stored dtype.
+
+    Raises
+    ------
+    DatasetFormatError
+        A value out of its column's range, or a return number above its number of returns (named
+        with the file, the column and the shard's row).
+    """
+    take = (lambda dataset: dataset[()]) if row is None else (lambda dataset: _rows(dataset, row))
+    columns = {name: take(f[name]) for name in names}
+    bound = None
+    if "return_number" in columns and "number_of_returns" in declared:
+        bound = columns["number_of_returns"] if "number_of_returns" in columns else take(f["number_of_returns"])
+    for name, values in columns.items():
+        check_point_column(path, name, values, bound if name == "return_number" else None, rows=row)
+    return columns
+
+
+def check_point_column(
+    path: Path, name: str, values: NDArray, number_of_returns: NDArray | None = None, *, rows: NDArray[np.int64] | None = None
+) -> None:
     """Check the values of a per-point column against :data:`~zbuf_occlude.dataset.layout.POINT_COLUMNS`.
 
     Parameters
@@ -643,6 +687,8 @@ def check_point_column(path: Path, name: str, values: NDArray, number_of_returns
         Its rows.
     number_of_returns : (B, n) array, optional
         With ``return_number``: the same rows of ``number_of_returns``, which bound it.
+    rows : (B,) int64, optional
+        The shard's row of each of ``values``' rows, for messages (default: ``0 .. B - 1``).
 
     Raises
     ------
@@ -661,8 +707,9 @@ def check_point_column(path: Path, name: str, values: NDArray, number_of_returns
         said = "at most the point's 'number_of_returns'"
     if bad.any():
         at = np.argwhere(bad)[0]
+        shard_row = int(at[0]) if rows is None else int(rows[int(at[0])])
         raise DatasetFormatError(
-            f"the shard {path}: dataset {name!r} holds {values[tuple(at)].item()!r} at row {int(at[0])}, point {int(at[-1])} "
+            f"the shard {path}: dataset {name!r} holds {values[tuple(at)].item()!r} at row {shard_row}, point {int(at[-1])} "
             f"({int(bad.sum())} values wrong); it must be {said}: the data set is damaged"
         )
 
