@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
+from zbuf_occlude.io.file_errors import parser_failure
 
 __all__ = ["parse_ply_vertices"]
 
@@ -47,8 +48,8 @@ def parse_ply_vertices(
     Raises
     ------
     ``error``
-        Naming ``path``: bytes trimesh cannot parse as PLY (the parser's exception type and
-        message), or with ``points_only``, a mesh.
+        Naming ``path``: bytes trimesh cannot parse as PLY (the parser's exception type, never
+        its message, which may quote the file), or with ``points_only``, a mesh.
     MemoryError
         What the file declares does not fit in memory (the caller caps it before).
     """
@@ -62,4 +63,4 @@ def parse_ply_vertices(
     except (ZbufOccludeError, MemoryError):
         raise
     except Exception as exc:  # noqa: BLE001 - trimesh raises a zoo of types on hostile bytes (ValueError, KeyError, ...)
-        raise error(f"{path}: cannot parse as PLY ({type(exc).__name__}: {exc})") from None
+        raise error(f"{path}: cannot parse as PLY ({parser_failure(exc)})") from None

@@ -41,14 +41,15 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.defaults import MAX_POINT_SET_BYTES, MAX_POINT_SET_POINTS
-from zbuf_occlude.errors import DatasetFormatError, InvalidInputError
+from zbuf_occlude.errors import DatasetFormatError, InvalidInputError, ZbufOccludeError
 from zbuf_occlude.io.arrays import check_array_sizes, npy_header
+from zbuf_occlude.io.file_errors import parser_failure
 from zbuf_occlude.io.hdf5 import open_hdf5
 from zbuf_occlude.io.regular_files import MAX_LIST_BYTES, open_regular_file, read_text_file
 from zbuf_occlude.resources import check_memory
@@ -56,7 +57,7 @@ from zbuf_occlude.resources import check_memory
 __all__ = [
     "stored_up", "UP_AXES",
     "POINT_SET_SUFFIXES", "SHAPE_NAME_FILES", "PointSet", "is_point_set_file", "read_point_sets",
-    "point_set_labels", "shape_names", "unit_normals", "BYTES_PER_READ_POINT", "BYTES_PER_LABEL",
+    "point_set_labels", "shape_names", "unit_normals", "check_npy_header", "MAX_NPY_HEADER_BYTES", "BYTES_PER_READ_POINT", "BYTES_PER_LABEL",
 ]  # fmt: skip
 
 #: Suffixes of the files read here (any case).
@@ -80,6 +81,13 @@ BYTES_PER_READ_POINT = 80
 #: Bytes per cloud of reading a file's labels (:func:`point_set_labels`): the int64 array, and
 #: the list of Python ints returned (an 8-byte slot and a 32-byte int each).
 BYTES_PER_LABEL = 48
+#: Longest ``.npy`` header read: numpy's own ``max_header_size`` default (``numpy.lib.format``),
+#: past which numpy refuses to parse a header as unsafe; an (N, 3) array's header is 128 bytes.
+MAX_NPY_HEADER_BYTES = 10_000
+#: A ``.npy`` file's first bytes: the magic string, the format version (major, minor), then the
+#: header's length, 2 bytes little-endian in version 1 and 4 in versions 2 and 3 (NEP 1).
+_NPY_MAGIC = b"\x93NUMPY"
+_NPY_LENGTH_BYTES = {1: 2, 2: 4, 3: 4}
 
 
 @dataclass(frozen=True)
@@ -260,10 +268,57 @@ def _read_hdf5(path: Path, max_points: int, rows: Sequence[int] | None) -> list[
 # -- .npy -------------------------------------------------------------------------------------------
 def _npy_shape(path: Path, max_points: int) -> tuple[int, int, np.dtype]:
     """``(N, columns, dtype)`` of a ``.npy`` cloud, from its header (the file's sizes checked first)."""
-    check_array_sizes(path, max_bytes=MAX_POINT_SET_BYTES, error=InvalidInputError)
     fh, _ = open_regular_file(path, error=InvalidInputError)
     with fh:
+        check_npy_header(fh, path)
+        check_array_sizes(path, max_bytes=MAX_POINT_SET_BYTES, error=InvalidInputError)
         return _npy_layout(fh, path, max_points)
+
+
+def check_npy_header(fh: BinaryIO, path: str | os.PathLike, *, error: type[ZbufOccludeError] = InvalidInputError) -> None:
+    """Refuse the ``.npy`` file open at ``fh`` (at its start; rewound after) unless numpy can read its header.
+
+    Checked before numpy reads it, so that the message is one line of ours: numpy's own
+    messages on a bad header run over several lines and quote the header.
+
+    Parameters
+    ----------
+    fh : binary file
+        Open at the start of the file.
+    path : str or PathLike
+        The file, named in the message.
+    error : type
+        The exception raised.
+
+    Raises
+    ------
+    ``error``
+        Naming ``path``: no ``.npy`` magic string, a format version numpy does not write, a header
+        longer than :data:`MAX_NPY_HEADER_BYTES` (its length given) or one numpy cannot parse
+        (the parser's exception type, never the header).
+    """
+    head = fh.read(len(_NPY_MAGIC) + 2 + max(_NPY_LENGTH_BYTES.values()))
+    fh.seek(0)
+    if not head.startswith(_NPY_MAGIC) or len(head) < len(_NPY_MAGIC) + 2:
+        raise error(f"{path}: not a .npy file (it does not start with numpy's magic string)")
+    major = head[len(_NPY_MAGIC)]
+    if major not in _NPY_LENGTH_BYTES:
+        raise error(f"{path}: .npy format version {major}, not one numpy writes (1, 2 or 3)")
+    start = len(_NPY_MAGIC) + 2
+    length_field = head[start : start + _NPY_LENGTH_BYTES[major]]
+    length = int.from_bytes(length_field, "little")
+    if len(length_field) < _NPY_LENGTH_BYTES[major]:
+        raise error(f"{path}: its .npy header is cut short")
+    if length > MAX_NPY_HEADER_BYTES:
+        raise error(
+            f"{path}: its .npy header is {length:,} bytes, more than the {MAX_NPY_HEADER_BYTES:,} numpy parses; save the array again"
+        )
+    try:
+        npy_header(fh)
+    except Exception as exc:  # numpy's messages quote the header, over several lines
+        raise error(f"{path}: its .npy header cannot be parsed ({parser_failure(exc)}); save the array again with numpy.save") from None
+    finally:
+        fh.seek(0)
 
 
 def _npy_layout(fh: Any, path: Path, max_points: int) -> tuple[int, int, np.dtype]:
@@ -277,9 +332,10 @@ def _npy_layout(fh: Any, path: Path, max_points: int) -> tuple[int, int, np.dtyp
 
 
 def _read_npy(path: Path, max_points: int) -> list[PointSet]:
-    check_array_sizes(path, max_bytes=MAX_POINT_SET_BYTES, error=InvalidInputError)
     fh, _ = open_regular_file(path, error=InvalidInputError)
     with fh:  # the array is read from the file whose header was checked, not opened again by name
+        check_npy_header(fh, path)
+        check_array_sizes(path, max_bytes=MAX_POINT_SET_BYTES, error=InvalidInputError)
         n, columns, dtype = _npy_layout(fh, path, max_points)
         _check_read_memory(path, 1, n, dtype.itemsize * columns)
         fh.seek(0)
@@ -300,9 +356,9 @@ def _ply_elements(path: Path) -> dict[str, int]:
         raise InvalidInputError(f"{path}: not a PLY file (no 'ply' ... 'end_header' header in its first {_PLY_HEADER_BYTES:,} bytes)")
     text = head[:end].decode("ascii", "replace")
     counts = {m[1]: m[2] for m in re.finditer(r"^element\s+(\S+)\s+(\d+)\s*$", text, re.MULTILINE)}
-    for element, digits in counts.items():
+    for digits in counts.values():
         if len(digits.lstrip("0")) > _PLY_COUNT_DIGITS:
-            raise InvalidInputError(f"{path}: its PLY header gives its {element[:40]!r} element a count of {len(digits):,} digits; refused")
+            raise InvalidInputError(f"{path}: its PLY header gives an element a count of {len(digits):,} digits; refused")
     return {element: int(digits) for element, digits in counts.items()}
 
 
@@ -470,7 +526,7 @@ def read_point_sets(
     except MemoryError:
         raise InvalidInputError(f"{path}: not enough memory to read it") from None
     except Exception as exc:  # numpy, h5py and trimesh raise many types on damaged or hostile bytes
-        raise InvalidInputError(f"{path}: cannot read as a {suffix[1:].upper()} point set ({type(exc).__name__}: {exc})") from None
+        raise InvalidInputError(f"{path}: cannot read as a {suffix[1:].upper()} point set ({parser_failure(exc)})") from None
 
 
 def point_set_labels(path: str | os.PathLike, *, max_points: int = MAX_POINT_SET_POINTS) -> list[int | None]:
@@ -509,7 +565,7 @@ def point_set_labels(path: str | os.PathLike, *, max_points: int = MAX_POINT_SET
     except InvalidInputError:
         raise
     except Exception as exc:  # as read_point_sets
-        raise InvalidInputError(f"{path}: cannot read as a {suffix[1:].upper()} point set ({type(exc).__name__}: {exc})") from None
+        raise InvalidInputError(f"{path}: cannot read as a {suffix[1:].upper()} point set ({parser_failure(exc)})") from None
 
 
 def shape_names(path: str | os.PathLike) -> list[str] | None:
@@ -555,8 +611,8 @@ def shape_names(path: str | os.PathLike) -> list[str] | None:
         if not name:
             continue
         if not name.isprintable():
-            raise InvalidInputError(f"{names_file}:{lineno}: class name {name!r} is not printable text")
+            raise InvalidInputError(f"{names_file}:{lineno}: the class name is not printable text")
         if name in (".", "..") or "/" in name or "\\" in name:  # a class names a folder where meshes' classes do
-            raise InvalidInputError(f"{names_file}:{lineno}: class name {name!r} is not a plain name (no '/', '\\', '.' or '..')")
+            raise InvalidInputError(f"{names_file}:{lineno}: the class name is not a plain name (no '/', '\\', '.' or '..')")
         names.append(name)
     return names

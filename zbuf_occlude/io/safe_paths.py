@@ -7,6 +7,12 @@ through :func:`path_inside`: it must be relative, without ``..``, and still insi
 folder once symlinks are resolved.  Names that become file or folder names (a mesh's
 name under ``generate --out``) go through :func:`check_relative_name`; names written one
 per line (class names in ``shape_names.txt``) through :func:`check_line_text`.
+
+A file found by walking a folder (meshes, point sets, real scans) goes through
+:func:`check_found_file`: a link in the folder that leads outside it is followed only to a file of
+its own kind (its target's name ends in the link's extension: a ModelNet subset made of links to
+``.off`` files); any other (``car/scan.xyz`` to ``~/.aws/credentials``) is refused before a byte of
+it is read.
 """
 
 from __future__ import annotations
@@ -17,7 +23,7 @@ from pathlib import Path, PurePosixPath
 
 from zbuf_occlude.errors import InvalidInputError, UnsafePathError
 
-__all__ = ["path_inside", "check_relative_name", "check_line_text", "control_character"]
+__all__ = ["path_inside", "check_relative_name", "check_line_text", "control_character", "check_found_file"]
 
 #: Unicode categories that break "one name per line" (``str.splitlines`` splits on
 #: ``\n``, ``\r``, ``\x0b``, ``\x0c``, ``\x1c``-``\x1e``, ``\x85``, U+2028, U+2029): control
@@ -115,3 +121,44 @@ def path_inside(root: str | os.PathLike, rel: object, *, what: str) -> Path:
     if real != real_root and real_root not in real.parents:
         raise UnsafePathError(f"{what}: {str(rel)!r} leads outside {root} (to {real}, through a symlink); refused")
     return path
+
+
+def check_found_file(path: str | os.PathLike, folder: str | os.PathLike) -> Path:
+    """``path``, a file found by walking ``folder``, after checking where its links lead.
+
+    A file inside ``folder`` once links are resolved is taken.  One that leads outside (the file
+    or a folder on the way is a link) is taken only when the file it leads to has the link's
+    extension (any case): ``chair/train/chair_0001.off`` linking to another tree's ``.off`` is a
+    data file followed on purpose; ``car/scan.xyz`` linking to ``~/.aws/credentials`` or
+    ``/etc/passwd`` is not a scan, and reading it could put its bytes into our outputs.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        A file under ``folder``, as the walk found it.
+    folder : str or PathLike
+        The folder the user gave.
+
+    Returns
+    -------
+    Path
+        ``path`` (not resolved).
+
+    Raises
+    ------
+    UnsafePathError
+        ``path`` leads outside ``folder`` to a file of another extension, or cannot be resolved
+        (a link loop); the message names the link and the folder, not the link's target (which
+        may be a private path) nor anything it holds.
+    """
+    path, folder = Path(path), Path(folder)
+    try:
+        real, root = path.resolve(), folder.resolve()
+    except (OSError, RuntimeError):  # a link loop (RuntimeError before Python 3.13)
+        raise UnsafePathError(f"{path}: a link in {folder} that cannot be resolved (a loop?); fix or remove it") from None
+    if real == root or root in real.parents or (path.suffix and real.suffix.lower() == path.suffix.lower()):
+        return path
+    raise UnsafePathError(
+        f"{path}: a link in {folder} to a file outside it that is not a {path.suffix or 'like-named'} file; "
+        "refused unread (replace the link by the file, or link to a file of its format)"
+    )

@@ -49,6 +49,7 @@ import trimesh
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError, MeshLoadError, ZbufOccludeError
+from zbuf_occlude.io.file_errors import parser_failure
 from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS, read_trimesh
 from zbuf_occlude.mesh.scene import UP_CHOICES, declared_units_m, resolve_up, up_rotation
 
@@ -411,7 +412,7 @@ def load_mesh(
             f"install zbuf-occlude's dependencies again (pip install {_PACKAGE_OF_MODULE.get(module, module)})"
         ) from exc
     except Exception as exc:  # trimesh raises a zoo of types (ValueError, IndexError, NameError, KeyError, ...)
-        raise MeshLoadError(f"{path}: cannot parse as {file_type.upper()} ({type(exc).__name__}: {exc})") from exc
+        raise MeshLoadError(f"{path}: cannot parse as {file_type.upper()} ({parser_failure(exc)})") from exc
 
     if not isinstance(loaded, trimesh.Trimesh):
         raise MeshLoadError(f"{path}: trimesh returned a {type(loaded).__name__}, not a triangle mesh")

@@ -47,11 +47,12 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.atomic import write_bytes
+from zbuf_occlude.io.file_errors import parser_failure
 from zbuf_occlude.io.regular_files import open_regular_file, read_regular_file
 from zbuf_occlude.real_scans.files import (
     MAX_FILE_BYTES,
     MAX_LINE_BYTES,
-    POINT_EXTENSIONS,
+    find_scan_files,
     row_capacity,
     load_scan_folder,
     read_lines,
@@ -135,10 +136,12 @@ def read_suo_csv(path: str | os.PathLike) -> NDArray[np.void]:
                 try:
                     out[n] = (int(parts[0]), int(parts[1]), int(parts[2]), *map(float, parts[3:8]), int(parts[8]))
                 except (ValueError, OverflowError):
-                    raise InvalidInputError(f"{path}:{lineno}: non-numeric field in {line.strip()!r}") from None
+                    raise InvalidInputError(
+                        f"{path}:{lineno}: a field is not a number (t, intensity, id, x, y, z, azimuth, range, pid)"
+                    ) from None
                 n += 1
     except OSError as exc:
-        raise InvalidInputError(f"cannot read SUO file {path}: {exc}") from None
+        raise InvalidInputError(f"cannot read SUO file {path}: {parser_failure(exc)}") from None
     return out[:n].copy() if n < capacity else out
 
 
@@ -166,7 +169,7 @@ def read_suo_object(path: str | os.PathLike) -> RealScan:
         raise InvalidInputError(f"{path}: no points")
     xyz = np.stack([rec["x"], rec["y"], rec["z"]], axis=1).astype(np.float64)
     return RealScan(
-        points=normalize_points(xyz), label=path.name.split(".")[0], source=str(path), dataset="suo",
+        points=normalize_points(xyz, what=str(path)), label=path.name.split(".")[0], source=str(path), dataset="suo",
         extent_m=xyz.max(axis=0) - xyz.min(axis=0), points_sensor_m=xyz,
     )  # fmt: skip
 
@@ -197,7 +200,9 @@ def read_lidarnet_csv(path: str | os.PathLike) -> RealScan:
             _, first = next(rows, (1, []))
             header = [h.strip() for h in first]
             if tuple(header[:3]) != _LIDARNET_HEADER or "object" not in header:
-                raise InvalidInputError(f"{path}: not a LiDARNet CSV (header {header[:8]})")
+                raise InvalidInputError(
+                    f"{path}: not a LiDARNet CSV (its first line is not the header {','.join(_LIDARNET_HEADER)},...,object)"
+                )
             obj = header.index("object")
             p, n, labels = np.empty((capacity, 3)), 0, set()
             for lineno, row in rows:
@@ -207,29 +212,24 @@ def read_lidarnet_csv(path: str | os.PathLike) -> RealScan:
                     p[n] = float(row[0]), float(row[1]), float(row[2])
                     labels.add(row[obj].strip())
                 except (ValueError, IndexError):
-                    raise InvalidInputError(f"{path}:{lineno}: bad row {row[:12]!r}") from None
+                    raise InvalidInputError(f"{path}:{lineno}: expected numbers x, y, z and an object label on the line") from None
                 if len(labels) > 1:  # one object per file: stop at the second label
-                    raise InvalidInputError(f"{path}:{lineno}: expected one object label, got {sorted(labels)}")
+                    raise InvalidInputError(f"{path}:{lineno}: a second object label; a LiDARNet CSV holds one object")
                 n += 1
     except UnicodeDecodeError as exc:
         raise InvalidInputError(f"{path} is not UTF-8 text ({exc.reason}); is it a LiDARNet CSV?") from None
-    except csv.Error as exc:  # a field longer than csv.field_size_limit(), a NUL byte
-        raise InvalidInputError(f"{path}: not a LiDARNet CSV ({exc})") from None
+    except csv.Error:  # a field longer than csv.field_size_limit(), a NUL byte
+        raise InvalidInputError(f"{path}: not a LiDARNet CSV (a field longer than the csv module reads, or a NUL byte)") from None
     except OSError as exc:
-        raise InvalidInputError(f"cannot read LiDARNet file {path}: {exc}") from None
+        raise InvalidInputError(f"cannot read LiDARNet file {path}: {parser_failure(exc)}") from None
     if n == 0:
         raise InvalidInputError(f"{path}: no points")
     p = p[:n]
     zup = np.stack([p[:, 0], -p[:, 2], p[:, 1]], axis=1) / LIDARNET_UNITS_PER_METRE  # y up → z up, metres
     return RealScan(
-        points=normalize_points(zup), label=labels.pop(), source=str(path), dataset="lidarnet",
+        points=normalize_points(zup, what=str(path)), label=labels.pop(), source=str(path), dataset="lidarnet",
         extent_m=zup.max(axis=0) - zup.min(axis=0), points_sensor_m=zup,
     )  # fmt: skip
-
-
-def _scan_files(root: Path) -> list[Path]:
-    """Every point-cloud file under ``root`` (any extension :func:`read_points` knows), but ``MANIFEST.csv``."""
-    return sorted(p for p in root.rglob("*") if p.is_file() and p.suffix.lower() in POINT_EXTENSIONS and p.name != "MANIFEST.csv")
 
 
 def _is_lidarnet_csv(path: Path) -> bool:
@@ -321,16 +321,20 @@ def load_real_scans(
     ------
     InvalidInputError
         ``path`` missing, an unknown ``dataset``, or no scan found.
+    UnsafePathError
+        A file under the folder ``path`` is a link leading outside it to a file of another
+        extension (:func:`~zbuf_occlude.real_scans.files.find_scan_files`), refused before any
+        file is read; a subclass of InvalidInputError.
     """
     root = Path(path)
     if not root.exists():
         raise InvalidInputError(f"real scans: {root} does not exist")
     if dataset not in ("auto", "suo", "lidarnet", "folder"):
         raise InvalidInputError(f"dataset must be auto, suo, lidarnet or folder, got {dataset!r}")
-    if dataset == "folder" or (dataset == "auto" and root.is_dir() and _detect(root, _scan_files(root)) == "folder"):
+    if dataset == "folder" or (dataset == "auto" and root.is_dir() and _detect(root, find_scan_files(root)) == "folder"):
         scans = load_scan_folder(root, label_map=label_map, up=up, units=units, min_points=min_points, dedupe=dedupe)
         return [s for s in scans if classes is None or s.label in set(classes)]
-    files = [root] if root.is_file() else _scan_files(root)
+    files = [root] if root.is_file() else find_scan_files(root)
     if dataset == "auto":
         dataset = _detect(root, files)
         if dataset == "folder":

@@ -46,7 +46,10 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InsufficientMemoryError, InvalidInputError
 from zbuf_occlude.io.arrays import load_npy, load_npz
+from zbuf_occlude.io.file_errors import parser_failure
 from zbuf_occlude.io.ply import parse_ply_vertices
+from zbuf_occlude.io.point_sets import check_npy_header
+from zbuf_occlude.io.safe_paths import check_found_file
 from zbuf_occlude.io.regular_files import file_digest, open_regular_file, read_regular_file, regular_file_size
 from zbuf_occlude.mesh.formats.ply import ply_declared_counts
 from zbuf_occlude.mesh.scene import up_rotation
@@ -65,6 +68,7 @@ __all__ = [
     "read_lines",
     "scan_digest",
     "units_to_m",
+    "find_scan_files",
     "load_scan_folder",
 ]
 
@@ -208,7 +212,7 @@ def _read_text_table(path: Path) -> NDArray[np.float64]:
                 if len(row) < 3:
                     raise IndexError
             except (ValueError, IndexError):
-                raise InvalidInputError(f"{path}:{lineno}: expected three numbers, got {row[:6]!r}") from None
+                raise InvalidInputError(f"{path}:{lineno}: expected three numbers (x y z) on the line") from None
             n += 1
     if n == 0:
         raise InvalidInputError(f"{path}: a header and no points")
@@ -238,14 +242,14 @@ def _read_pcd(path: Path, raw: bytes) -> NDArray[np.float64]:
         types = header.get("TYPE", ["F"] * len(fields))
         counts = [int(c) for c in header.get("COUNT", ["1"] * len(fields))]
     except (KeyError, ValueError, IndexError):
-        raise InvalidInputError(f"{path}: PCD header lacks FIELDS/POINTS or has non-numeric sizes ({header})") from None
+        raise InvalidInputError(f"{path}: PCD header lacks FIELDS/POINTS or has non-numeric WIDTH, HEIGHT, POINTS, SIZE or COUNT") from None
     if n is None:
         raise InvalidInputError(f"{path}: PCD header has neither POINTS nor WIDTH")
     if grid is not None and grid != n:
         raise InvalidInputError(f"{path}: PCD header declares POINTS {n:,} but WIDTH x HEIGHT = {grid:,}")
     _check_points(path, n)
     if not all(a in fields for a in "xyz"):
-        raise InvalidInputError(f"{path}: PCD fields {fields} have no x y z")
+        raise InvalidInputError(f"{path}: PCD header's FIELDS has no x y z")
     if not (len(sizes) == len(types) == len(counts) == len(fields)) or n < 0:
         raise InvalidInputError(f"{path}: PCD header's FIELDS, SIZE, TYPE and COUNT disagree")
     mode = header["DATA"][0].lower() if header["DATA"] else ""
@@ -260,13 +264,11 @@ def _read_pcd(path: Path, raw: bytes) -> NDArray[np.float64]:
             raise InvalidInputError(f"{path}: PCD ascii rows are not numbers in the header's layout") from None
         return np.stack(cols, axis=1)
     if mode != "binary":
-        raise InvalidInputError(
-            f"{path}: PCD DATA {mode or '(none)'} is not supported (ascii or binary; convert binary_compressed with pcl_convert_pcd_ascii_binary)"
-        )
+        raise InvalidInputError(f"{path}: PCD DATA is not ascii or binary (convert binary_compressed with pcl_convert_pcd_ascii_binary)")
     try:
         dtype = np.dtype([(f, _PCD_TYPES[(t.upper(), s)], (c,)) for f, s, t, c in zip(fields, sizes, types, counts)])
     except (KeyError, TypeError, ValueError):
-        raise InvalidInputError(f"{path}: PCD field types {list(zip(types, sizes))} not supported") from None
+        raise InvalidInputError(f"{path}: PCD header's TYPE and SIZE give a field type other than F 4/8, I or U 1/2/4/8") from None
     body = raw[pos:]
     if len(body) != n * dtype.itemsize:
         raise InvalidInputError(
@@ -342,6 +344,9 @@ def read_points(path: str | os.PathLike) -> NDArray[np.float64]:
         if size > MAX_FILE_BYTES:
             raise InvalidInputError(f"{path}: {size:,} bytes, more than the {MAX_FILE_BYTES:,} a scan may have")
         if suffix == ".npy":
+            fh, _ = open_regular_file(path, error=InvalidInputError)
+            with fh:  # one line of ours on a header numpy would refuse with several lines quoting it
+                check_npy_header(fh, path)
             pts = _from_array(path, load_npy(path, max_bytes=MAX_ARRAY_BYTES, error=InvalidInputError))
         elif suffix == ".npz":
             pts = _read_npz(path)
@@ -364,12 +369,28 @@ def read_points(path: str | os.PathLike) -> NDArray[np.float64]:
     except MemoryError:
         raise InvalidInputError(f"{path}: not enough memory to read it") from None
     except Exception as exc:  # numpy/trimesh raise many types on hostile bytes
-        raise InvalidInputError(f"{path}: cannot parse as {suffix[1:].upper()} ({type(exc).__name__}: {exc})") from None
+        raise InvalidInputError(f"{path}: cannot parse as {suffix[1:].upper()} ({parser_failure(exc)})") from None
     if len(pts) == 0:
         raise InvalidInputError(f"{path}: no points")
     if not np.isfinite(pts).all():
         raise InvalidInputError(f"{path}: {int((~np.isfinite(pts)).any(axis=1).sum())} points have NaN or inf coordinates")
     return pts
+
+
+def find_scan_files(root: Path) -> list[Path]:
+    """Every point-cloud file under ``root`` (any extension :func:`read_points` knows) but ``MANIFEST.csv``, sorted.
+
+    Links to folders are not followed (:meth:`pathlib.Path.rglob`); a file that is a link leading
+    outside ``root`` is refused unless it leads to a file of its own extension
+    (:func:`~zbuf_occlude.io.safe_paths.check_found_file`), before any file is read.
+
+    Raises
+    ------
+    UnsafePathError
+        A link in ``root`` to a file outside it of another extension (naming the link and ``root``).
+    """
+    found = sorted(p for p in root.rglob("*") if p.suffix.lower() in POINT_EXTENSIONS and p.is_file() and p.name != "MANIFEST.csv")
+    return [check_found_file(p, root) for p in found]
 
 
 def load_scan_folder(
@@ -410,6 +431,9 @@ def load_scan_folder(
     InvalidInputError
         ``root`` not a folder, no scan file in a class folder, a point-cloud file beside the
         class folders (named), a bad ``up``/``units``, or a file that cannot be read (named).
+    UnsafePathError
+        A file in ``root`` is a link leading outside it to a file of another extension
+        (:func:`find_scan_files`); a subclass of InvalidInputError.
     """
     root = Path(root)
     if not root.is_dir():
@@ -417,7 +441,7 @@ def load_scan_folder(
     rot = up_rotation(up)[:3, :3]
     scale = units_to_m(units)
     label_map = dict(label_map or {})
-    found = sorted(p for p in root.rglob("*") if p.suffix.lower() in POINT_EXTENSIONS and p.is_file() and p.name != "MANIFEST.csv")
+    found = find_scan_files(root)
     loose = [p.name for p in found if len(p.relative_to(root).parts) < 2]
     if loose:
         # Not silently left out: a file beside the class folders has no class.
@@ -438,10 +462,7 @@ def load_scan_folder(
             few += 1
             continue
         folder = f.relative_to(root).parts[0]
-        try:
-            normalised = normalize_points(pts)
-        except InvalidInputError as exc:
-            raise InvalidInputError(f"{f}: {exc}") from None
+        normalised = normalize_points(pts, what=str(f))
         scans.append(RealScan(points=normalised, label=label_map.get(folder, folder), source=str(f),
                               dataset=dataset, extent_m=pts.max(axis=0) - pts.min(axis=0),
                               points_sensor_m=np.asarray(pts, dtype=np.float64)))  # fmt: skip

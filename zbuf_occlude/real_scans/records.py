@@ -42,13 +42,15 @@ class RealScan:
     points_sensor_m: NDArray[np.float64] | None = None
 
 
-def normalize_points(points: NDArray[np.floating]) -> NDArray[np.float32]:
+def normalize_points(points: NDArray[np.floating], *, what: str = "") -> NDArray[np.float32]:
     """Centre the bounding box on the origin and scale the largest extent to 1.
 
     Parameters
     ----------
     points : (n, 3) float
         Any unit.
+    what : str
+        The scan (its file), first words of a message.
 
     Returns
     -------
@@ -57,15 +59,16 @@ def normalize_points(points: NDArray[np.floating]) -> NDArray[np.float32]:
     Raises
     ------
     InvalidInputError
-        Empty, not (n, 3), non-finite values, or zero extent.
+        Empty, not (n, 3), non-finite values, or zero extent (naming ``what``).
     """
+    said = f"{what}: " if what else ""
     p = np.asarray(points, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] != 3 or len(p) == 0:
-        raise InvalidInputError(f"need (n >= 1, 3) points, got shape {p.shape}")
+        raise InvalidInputError(f"{said}need (n >= 1, 3) points, got shape {p.shape}")
     if not np.isfinite(p).all():
-        raise InvalidInputError("points contain NaN or inf")
+        raise InvalidInputError(f"{said}points contain NaN or inf")
     lo, hi = p.min(axis=0), p.max(axis=0)
     extent = float((hi - lo).max())
     if extent == 0.0:
-        raise InvalidInputError("all points coincide (zero extent)")
+        raise InvalidInputError(f"{said}all {len(p):,} points coincide (zero extent); a scan needs an extent to be normalised")
     return ((p - (lo + hi) / 2.0) / extent).astype(np.float32)

@@ -65,7 +65,7 @@ def _off_layout(text: str) -> tuple[str, int, int, list[str]]:
     head = lines[0] if lines else ""
     end = head.upper().find("OFF")
     if end < 0:
-        raise _NotOff(f"no OFF header, first line is {head[:40]!r}" if head else "file is empty")
+        raise _NotOff("no OFF header: the first line that is not blank or a comment does not start with OFF" if head else "file is empty")
     end += len("OFF")
     if head[end:].strip():
         counts, body = head[end:].split(), lines[1:]
@@ -76,7 +76,7 @@ def _off_layout(text: str) -> tuple[str, int, int, list[str]]:
     try:
         n_vertices, n_faces = int(counts[0]), int(counts[1])
     except (IndexError, ValueError):
-        raise _Malformed(f"the OFF count line must be 'VERTICES FACES [EDGES]', got {' '.join(counts)[:60]!r}") from None
+        raise _Malformed("the OFF count line must be 'VERTICES FACES [EDGES]', two or three integers") from None
     if n_vertices < 0 or n_faces < 0:
         raise _Malformed(f"the OFF header declares negative counts ({n_vertices} vertices, {n_faces} faces)")
     return head[:end], n_vertices, n_faces, body
@@ -93,9 +93,12 @@ def _off_line_problem(body: list[str], index: int, n_vertices: int) -> str | Non
     try:
         n_corners = int(tokens[0])
     except ValueError:
-        return f"face {face} starts with {tokens[0]!r}, expected its corner count"
+        return f"face {face} does not start with its corner count (an integer)"
     if len(tokens) < 1 + n_corners:
         return f"face {face} lists {len(tokens) - 1} of its {n_corners} corners"
+    corners = [int(t) for t in tokens[1 : 1 + n_corners] if t.lstrip("+-").isdigit()]
+    if any(not 0 <= c < n_vertices for c in corners):
+        return f"face {face} names a vertex outside the range of the {n_vertices:,} vertices (0 to {n_vertices - 1:,})"
     return None
 
 
@@ -223,7 +226,7 @@ def _plain_off(raw: bytes) -> tuple[NDArray[np.float64], NDArray[np.int64]] | No
     try:
         vertices = np.array(tokens[: 3 * n_vertices], dtype=np.float64).reshape(n_vertices, 3)
         faces = np.array(tokens[3 * n_vertices :], dtype=np.int64).reshape(n_faces, 4)
-    except ValueError:
+    except (ValueError, OverflowError):  # an index past int64: the checks name its face
         return None
     if not (faces[:, 0] == 3).all() or faces[:, 1:].max() >= n_vertices or not np.isfinite(vertices).all():
         return None
@@ -273,7 +276,9 @@ def check_off(raw: bytes, path: Path) -> None:
     first = next((line for line in lines if line and not line.startswith("#")), "")
     try:
         if "OFF" not in first[: _OFF_HEADER_MAX_PREFIX + len("OFF")].upper():
-            raise _NotOff(f"no OFF header, first line is {first[:40]!r}" if first else "file is empty")
+            raise _NotOff(
+                "no OFF header: the first line that is not blank or a comment does not start with OFF" if first else "file is empty"
+            )
         _check_off_counts(text)
     except _NotOff as exc:
         raise MeshLoadError(f"{path}: not an OFF file ({exc})") from exc

@@ -11,6 +11,7 @@ import re
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from zbuf_occlude.errors import ZbufOccludeError
 from zbuf_occlude.mesh.formats.base import Format, malformed, parse
 
 if TYPE_CHECKING:
@@ -52,12 +53,25 @@ def read_ply(raw: bytes, path: Path, file_type: str) -> trimesh.Trimesh:
     ------
     MeshLoadError
         Naming ``path``: with both numbers, when the mesh read has fewer vertices or faces
-        than the header declares (the file is cut short); a point cloud and no faces.
+        than the header declares (the file is cut short), or a body trimesh cannot parse as what
+        the header declares (the parser's message is not quoted); a point cloud and no faces.
     """
     raw = _utf8_ply_header(raw)
-    mesh = parse(raw, path, "ply")
     declared = ply_declared_counts(raw)
     n_vertices, n_faces = declared.get("vertex"), declared.get("face")
+    try:
+        mesh = parse(raw, path, "ply")
+    except (ZbufOccludeError, MemoryError):
+        raise
+    except Exception:  # trimesh's message may quote the file: say what the header declares instead
+        if n_vertices is None:
+            raise
+        raise malformed(
+            path,
+            "ply",
+            f"its body does not hold the {n_vertices:,} vertices and {n_faces or 0:,} faces its header declares; "
+            "the file is cut short or damaged",
+        ) from None
     if (n_vertices is not None and len(mesh.vertices) < n_vertices) or (n_faces is not None and len(mesh.faces) < n_faces):
         raise malformed(
             path,

@@ -5,8 +5,11 @@ UTF-8 and a file of a 3D format that is not read (``.fbx``, ``.blend``, ...:
 :data:`~zbuf_occlude.mesh.formats.UNREAD_FORMATS`) are reported (:class:`SkippedInput`,
 logged as warnings) and returned by :func:`scan_meshes`, so that a run can say so and exit
 non-zero.  Files that sit beside meshes (a glTF's buffers and textures, an OBJ's materials,
-notes) are no 3D format and are passed over.  A format whose optional package is missing is
-refused once, when its files are found, before any work (:func:`check_readers_installed`).
+notes) are no 3D format and are passed over.  A file that is a link leading outside the folder
+searched is followed only to a file of its own extension (a ModelNet subset made of links); any
+other is refused (:class:`~zbuf_occlude.errors.UnsafePathError`) before it is opened.  A format
+whose optional package is missing is refused once, when its files are found, before any work
+(:func:`check_readers_installed`).
 The farm's discovery (:mod:`zbuf_occlude.mesh.inputs.plan`) walks with :func:`walk_mesh_files` too.
 
 Each function looks for the input kinds it is given (``kinds``, :mod:`zbuf_occlude.mesh.inputs.kinds`;
@@ -31,6 +34,7 @@ from typing import NamedTuple
 
 from zbuf_occlude._version import install_hint
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
+from zbuf_occlude.io.safe_paths import check_found_file
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT, FORMATS, SUPPORTED_EXTENSIONS, UNREAD_FORMATS, missing_package
 from zbuf_occlude.mesh.inputs.kinds import MESH, InputKind, kinds_text
 from zbuf_occlude.mesh.paths import printable_path
@@ -148,6 +152,10 @@ def walk_mesh_files(
 ) -> tuple[list[Path], list[SkippedInput]]:
     """Mesh files (the files of ``kinds``) under a folder, recursively, and the inputs that had to be skipped.
 
+    A file of ``kinds`` that is a link leading outside ``root`` is taken only when it leads to a
+    file of its own extension (another tree's ``.off``); any other is refused before it is opened
+    (:func:`~zbuf_occlude.io.safe_paths.check_found_file`).
+
     Like ``Path(root).rglob("*")`` (symbolic links to folders are not followed) but a
     folder that cannot be listed (permissions, I/O error), a dangling symbolic link, a
     loop of links and a FIFO or device with a mesh's extension
@@ -176,6 +184,12 @@ def walk_mesh_files(
     skipped : list of SkippedInput
         Folders that could not be read, broken links, non-regular mesh-named entries, files
         with non-UTF-8 paths and files of 3D formats not read; each is also logged as a warning.
+
+    Raises
+    ------
+    UnsafePathError
+        A file of ``kinds`` is a link leading outside ``root`` to a file of another extension
+        (``chair.off`` to ``~/.aws/credentials``): named with ``root``, nothing of it read.
     """
     root = Path(root)
     files: list[Path] = []
@@ -206,6 +220,7 @@ def walk_mesh_files(
                 if problem:
                     skipped.append(SkippedInput(printable_path(path), problem))
                 continue
+            check_found_file(path, root)  # before finds(), which opens an HDF5 file
             if not any(k.finds(path) for k in named):
                 continue  # an HDF5 file of another layout: no 3D format, passed over
             problem = non_utf8_reason(path)

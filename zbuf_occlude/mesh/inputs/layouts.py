@@ -134,7 +134,7 @@ def read_taxonomy(folder: str | PathLike[str]) -> dict[str, str]:
             raise InvalidInputError(f"{path}: entry {i} needs text fields 'synsetId' and 'name'")
         first = name.split(",", 1)[0].strip()
         if not (sid.isprintable() and first and first.isprintable()):
-            raise InvalidInputError(f"{path}: entry {i} ({sid!r}): 'name' {name!r} is not printable text")
+            raise InvalidInputError(f"{path}: entry {i}: its 'synsetId' or the first name of its 'name' is empty or not printable text")
         table[sid] = first
     return table
 

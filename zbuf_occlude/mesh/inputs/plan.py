@@ -214,7 +214,7 @@ def _read_list_file(list_file: Path, kinds: Sequence[InputKind]) -> tuple[list[R
         else:
             tokens = line.rsplit(maxsplit=1)
             if len(tokens) != 2:
-                raise InvalidInputError(f"{list_file}:{lineno}: expected 'PATH LABEL [train|test]', got {raw!r}")
+                raise InvalidInputError(f"{list_file}:{lineno}: expected 'PATH LABEL [train|test]', a path and a label")
             (path_text, label), split = tokens, DEFAULT_SPLIT
         path = Path(path_text)
         name = path.with_suffix("").as_posix()
