@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import io
 import os
+import struct
 import subprocess
 import sys
+import zipfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 torch = pytest.importorskip("torch", reason="checkpoints need PyTorch: pip install -e '.[learn]'")
@@ -101,3 +105,66 @@ def test_io_imports_without_torch() -> None:
     code = "import sys; sys.modules['torch'] = None\nimport zbuf_occlude.io.checkpoints\nprint('ok')"
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=False)
     assert done.stdout.strip() == "ok", done.stderr
+
+
+def _rezipped(data: bytes, method: int) -> bytes:
+    """The checkpoint ``data`` with every record compressed by zip ``method``."""
+    source, out = zipfile.ZipFile(io.BytesIO(data)), io.BytesIO()
+    with zipfile.ZipFile(out, "w", compression=method) as zf:
+        for name in source.namelist():
+            zf.writestr(name, source.read(name))
+    return out.getvalue()
+
+
+def _tensor_record(data: bytes) -> zipfile.ZipInfo:
+    """The zip entry of the checkpoint's first tensor (``<archive>/data/0``)."""
+    return next(i for i in zipfile.ZipFile(io.BytesIO(data)).infolist() if i.filename.endswith("/data/0"))
+
+
+def _claiming(data: bytes, inflated: int) -> bytes:
+    """``data``, a checkpoint, whose first tensor's record claims to inflate to ``inflated`` bytes
+    (in its local header and its directory entry)."""
+    raw, record = bytearray(data), _tensor_record(data)
+    struct.pack_into("<I", raw, record.header_offset + 22, inflated)  # the local header's uncompressed size
+    at = raw.find(b"PK\x01\x02")
+    while raw[at + 46 : at + 46 + len(record.filename)] != record.filename.encode():  # its directory entry
+        at = raw.find(b"PK\x01\x02", at + 4)
+    struct.pack_into("<I", raw, at + 24, inflated)
+    return bytes(raw)
+
+
+def test_a_deflated_checkpoint_reads_and_one_compressed_otherwise_is_refused_naming_the_method(tmp_path: Path) -> None:
+    data = checkpoint_bytes(_state())
+    (tmp_path / "deflated.pt").write_bytes(_rezipped(data, zipfile.ZIP_DEFLATED))
+    assert load_checkpoint(tmp_path / "deflated.pt")["epoch"] == 3
+    (tmp_path / "bzip2.pt").write_bytes(_rezipped(data, zipfile.ZIP_BZIP2))
+    with pytest.raises(
+        CheckpointError, match=r"bzip2\.pt: member .* is compressed with zip method 12; only stored or deflated members \(torch\.save\)"
+    ):
+        load_checkpoint(tmp_path / "bzip2.pt")
+
+
+def test_a_record_claiming_more_than_its_bytes_hold_is_refused_before_torch_allocates_it(tmp_path: Path) -> None:
+    # torch's zip reader allocates a record's declared size first: here 2 GB claimed by 24 bytes
+    data = checkpoint_bytes(_state())
+    (tmp_path / "lying.pt").write_bytes(_claiming(data, 2_100_000_000))
+    with pytest.raises(CheckpointError, match=r"lying\.pt: member .*/data/0 declares 2,100,000,000 bytes inflated from 24, more than its"):
+        load_checkpoint(tmp_path / "lying.pt")
+
+
+@pytest.mark.slow
+def test_a_deflated_checkpoint_inflating_past_the_memory_left_is_refused_naming_it(tmp_path: Path) -> None:
+    # in a child under an address-space limit (1.5 GiB above its footprint): a 2 MB file whose tensor
+    # inflates to 1,000 times that (deflate's own limit is about 1,032) is refused before torch allocates it
+    from memory_limit import run_python_limited
+
+    noise = torch.from_numpy(np.random.default_rng(0).random(500_000, dtype=np.float32))  # 2 MB that deflate hardly shrinks
+    data = _rezipped(checkpoint_bytes({"w": noise}), zipfile.ZIP_DEFLATED)
+    (tmp_path / "big.pt").write_bytes(_claiming(data, 1000 * _tensor_record(data).compress_size))
+    done = run_python_limited(
+        "from zbuf_occlude.errors import InsufficientMemoryError\nfrom zbuf_occlude.io.checkpoints import load_checkpoint\n"
+        f"try:\n    load_checkpoint({str(tmp_path / 'big.pt')!r})\nexcept InsufficientMemoryError as exc:\n    print(exc)"
+    )
+    assert done.returncode == 0 and done.stdout.startswith(f"the checkpoint {tmp_path / 'big.pt'} needs about"), (
+        done.stdout + done.stderr[-2000:]
+    )

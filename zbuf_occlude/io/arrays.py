@@ -40,16 +40,17 @@ from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
 from zbuf_occlude.io.hdf5 import MAX_COMPRESSION_RATIO
 from zbuf_occlude.io.regular_files import open_regular_file
 
-__all__ = ["check_array_sizes", "load_npy", "load_npz", "npy_header", "npz_member_header", "DAMAGED_NPZ_ERRORS"]
+__all__ = ["check_array_sizes", "load_npy", "load_npz", "npy_header", "npz_member_header", "zip_inflated_bytes", "DAMAGED_NPZ_ERRORS"]
 
 #: What numpy and zipfile raise on a damaged ``.npy``/``.npz``: besides ``OSError``,
 #: ``ValueError``, ``EOFError`` and ``BadZipFile``, ``zlib.error`` (damaged deflate data),
 #: ``NotImplementedError`` (a compression method zipfile lacks) and ``RuntimeError`` (a member
 #: flagged encrypted).
 DAMAGED_NPZ_ERRORS = (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError, RuntimeError)
-#: How the members of a ``.npz`` may be compressed, with the most bytes each may inflate to per
-#: byte stored: numpy's ``savez`` stores them (1:1), ``savez_compressed`` deflates them (deflate's
-#: limit is about 1032:1).  bzip2 and LZMA, which numpy never writes, have no such bound.
+#: How the members of a zip (a ``.npz``, a checkpoint) may be compressed, with the most bytes each
+#: may inflate to per byte stored: numpy's ``savez`` and ``torch.save`` store them (1:1),
+#: ``savez_compressed`` deflates them (deflate's limit is about 1032:1).  bzip2 and LZMA, which
+#: neither writes, have no such bound.
 _INFLATE_RATIO = {zipfile.ZIP_STORED: 1, zipfile.ZIP_DEFLATED: MAX_COMPRESSION_RATIO}
 
 #: ``.npy`` format versions numpy reads: 1.0 (2-byte header length), 2.0 and 3.0 (4-byte
@@ -258,6 +259,56 @@ def load_npz(
             raise error(f"{path}: cannot read its arrays ({type(exc).__name__}: {exc})") from None
 
 
+def zip_inflated_bytes(
+    path: str | PathLike[str], zf: zipfile.ZipFile, size: int, *, error: type[ZbufOccludeError] = InvalidInputError, writer: str = "numpy"
+) -> int:
+    """Bytes the members of the open zip ``zf`` inflate to, once checked to be bytes the file can hold.
+
+    A reader allocates each member's declared (inflated) size before it reads a byte of it
+    (numpy, torch's zip reader), so the directory's sizes are checked first: every member stored
+    or deflated, a stored one inflating to its compressed size, a deflated one to at most
+    :data:`~zbuf_occlude.io.hdf5.MAX_COMPRESSION_RATIO` times it, and all the compressed bytes
+    inside the file's ``size``.  Only the zip directory is read.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        The file, for the messages.
+    zf : zipfile.ZipFile
+        The file, open.
+    size : int
+        Its bytes (``os.fstat``).
+    error : type
+        The exception raised.
+    writer : str
+        What writes such files stored or deflated, named in the message for another method.
+
+    Returns
+    -------
+    int
+        The sum of the members' declared inflated sizes.
+
+    Raises
+    ------
+    ``error``
+        Naming the file (and the member): a member compressed another way, declaring more than
+        its compression can hold, or compressed bytes past the end of the file.
+    """
+    members = zf.infolist()
+    for m in members:
+        ratio = _INFLATE_RATIO.get(m.compress_type)
+        if ratio is None:
+            raise error(f"{path}: member {m.filename} is compressed with zip method {m.compress_type}; only stored or deflated "
+                        f"members ({writer}) are read")  # fmt: skip
+        if m.file_size > m.compress_size * ratio or (ratio == 1 and m.file_size != m.compress_size):
+            raise error(f"{path}: member {m.filename} declares {m.file_size:,} bytes inflated from {m.compress_size:,}, "
+                        "more than its compression can hold; the file is damaged or forged")  # fmt: skip
+    stored = sum(m.compress_size for m in members)
+    if stored > size:
+        raise error(f"{path}: its members declare {stored:,} bytes of data in a file of {size:,}; the file is damaged or forged")
+    return sum(m.file_size for m in members)
+
+
 @contextlib.contextmanager
 def _headers_read(path: Path, error: type[ZbufOccludeError]) -> Iterator[None]:
     """Turn what numpy and zipfile raise on damaged headers into ``error`` naming ``path``."""
@@ -289,18 +340,7 @@ def _npz_headers(
     """Every member's declared ``(shape, dtype)``, by member name, once the sizes are checked
     (``size``: the bytes of the ``.npz``; module docstring)."""
     members = zf.infolist()
-    for m in members:
-        ratio = _INFLATE_RATIO.get(m.compress_type)
-        if ratio is None:
-            raise error(f"{path}: member {m.filename} is compressed with zip method {m.compress_type}; only stored or deflated "
-                        "members (numpy.savez, numpy.savez_compressed) are read")  # fmt: skip
-        if m.file_size > m.compress_size * ratio or (ratio == 1 and m.file_size != m.compress_size):
-            raise error(f"{path}: member {m.filename} declares {m.file_size:,} bytes inflated from {m.compress_size:,}, "
-                        "more than its compression can hold; the file is damaged or forged")  # fmt: skip
-    stored = sum(m.compress_size for m in members)
-    if stored > size:
-        raise error(f"{path}: its members declare {stored:,} bytes of data in a file of {size:,}; the file is damaged or forged")
-    inflated = sum(m.file_size for m in members)
+    inflated = zip_inflated_bytes(path, zf, size, error=error, writer="numpy.savez, numpy.savez_compressed")
     if inflated > max_bytes:
         raise error(f"{path}: its members inflate to {inflated:,} bytes, more than the {max_bytes:,} accepted")
     headers = {}

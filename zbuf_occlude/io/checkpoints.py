@@ -7,7 +7,10 @@ strings, ``None``, lists and dicts only; one that needs anything else is refused
 by :func:`~zbuf_occlude.io.regular_files.open_regular_file`'s rules: a regular file (a FIFO
 would block the reader), inside the folder it was named from when the caller knows it
 (``within=``), of at most :data:`MAX_CHECKPOINT_BYTES`, and the memory it will take checked
-before it is loaded (:func:`zbuf_occlude.resources.check_memory`).
+before it is loaded (:func:`zbuf_occlude.resources.check_memory`): what its records inflate to,
+from the zip directory, which must hold (:func:`~zbuf_occlude.io.arrays.zip_inflated_bytes`:
+torch's zip reader allocates each record's declared size before it reads it, so a small file
+whose directory claims gigabytes would reserve them).
 
 Writing goes the other way: :func:`checkpoint_bytes` encodes the state in memory, and the
 caller hands the bytes to :meth:`zbuf_occlude.io.owned.OwnedFolder.write_bytes` or
@@ -26,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from zbuf_occlude.errors import CheckpointError
+from zbuf_occlude.io.arrays import zip_inflated_bytes
 from zbuf_occlude.io.regular_files import open_regular_file
 from zbuf_occlude.resources import check_memory
 
@@ -92,19 +96,20 @@ def load_checkpoint(
     ------
     CheckpointError
         The file is missing, not a regular file (a FIFO), larger than ``max_bytes``, damaged,
-        truncated, not a PyTorch checkpoint, needs more than weights to load, or lacks one of
-        ``keys`` (the message names the file).
+        truncated, not a PyTorch checkpoint, its zip directory claims more than the file can hold
+        or records compressed other than by deflate, needs more than weights to load, or lacks
+        one of ``keys`` (the message names the file).
     UnsafePathError
         ``within`` is given and ``path`` leads outside it.
     InsufficientMemoryError
-        The checkpoint's size is more than the memory available.
+        What its records inflate to is more than the memory available.
     """
     import torch
 
     path = Path(path)
     fh, size = open_regular_file(path, max_bytes=max_bytes, error=CheckpointError, within=within)
     with fh:
-        check_memory(size, option=f"the checkpoint {path}", hint="load it on a machine with more memory")
+        check_memory(_bytes_to_load(path, fh, size), option=f"the checkpoint {path}", hint="load it on a machine with more memory")
         try:
             state = torch.load(fh, map_location=device, weights_only=True)
         except pickle.UnpicklingError as exc:
@@ -125,3 +130,20 @@ def load_checkpoint(
     if missing:
         raise CheckpointError(f"{path} is not a zbuf_occlude checkpoint of this kind: it lacks {', '.join(missing)}")
     return state
+
+
+def _bytes_to_load(path: Path, fh: Any, size: int) -> int:
+    """Bytes torch allocates for the records of the open checkpoint ``fh`` of ``size`` bytes
+    (:func:`~zbuf_occlude.io.arrays.zip_inflated_bytes`); ``size`` for a file that is not a zip
+    (torch's legacy format, whose storages torch checks against the file itself, or a damaged
+    file, which ``torch.load`` names).  ``fh`` is rewound."""
+    try:
+        zf = zipfile.ZipFile(fh)
+    except (zipfile.BadZipFile, EOFError, OSError, ValueError):
+        fh.seek(0)
+        return size
+    try:
+        return max(size, zip_inflated_bytes(path, zf, size, error=CheckpointError, writer="torch.save"))
+    finally:
+        zf.close()  # leaves fh open: zipfile closes only the files it opened itself
+        fh.seek(0)
