@@ -24,7 +24,8 @@ So what they would read or allocate is checked here first, on the open file, wit
   size points whatever the chunk table says, rebuilding its models each time (half a millisecond
   for point-wise items: a chunk size forged to 1 costs tens of seconds), and each chunk stores its
   first point raw; so the chunks the count needs must fit the file's bytes, and the chunk table
-  must hold the declared points (chunks × chunk size, or the variable sizes' sum).  laz-rs
+  must be there and readable (laz-rs reads the points from the wrong place otherwise) and hold the
+  declared points (chunks × chunk size, or the variable sizes' sum).  laz-rs
   allocates one entry per chunk the chunk table declares (2³² − 1 chunks are 64 GiB, and the
   process aborts), and each layer a chunk header declares in point formats 6 to 10 (up to 4 GiB
   each).  So the chunk table may declare no more chunks than points, nor than the bytes before it
@@ -299,19 +300,26 @@ def _smallest_chunk(layout: LasLayout, items: list[tuple[int, int, int]]) -> int
     return layout.record_length + _LAYER_FIELD_BYTES * (1 + _layers(items))
 
 
-def _chunk_table(fh: BinaryIO, layout: LasLayout, size: int, name: str, vlr: bytes, smallest: int) -> list[tuple[int, int]] | None:
-    """The chunk table lazrs will read, after checking that the bytes before it can hold the chunks it declares."""
+def _chunk_table(fh: BinaryIO, layout: LasLayout, size: int, name: str, vlr: bytes, smallest: int) -> list[tuple[int, int]]:
+    """The chunk table lazrs will read, after checking that the bytes before it can hold the chunks it declares.
+
+    laz-rs 0.12 needs it to read chunked points from a file: without one it fails at once, and with
+    one it cannot read (past the end, or damaged) it reads the points from where reading the table
+    stopped, decoding (and reserving layers from) bytes no check here has seen.  So it must be read.
+    """
     import lazrs
 
-    # where laz-rs looks for it (ChunkTable::read_offset): after the points, or at the file's end
+    # where laz-rs looks for it (ChunkTable::read_offset): after the points' start, or at the file's end
     (table,) = struct.unpack("<q", _read_at(fh, layout.offset, _CHUNK_TABLE_OFFSET_BYTES).ljust(_CHUNK_TABLE_OFFSET_BYTES, b"\0"))
     if table <= layout.offset:
         (table,) = struct.unpack("<q", _read_at(fh, max(size - 8, 0), 8).ljust(8, b"\0"))
         if table <= layout.offset:
-            return None
+            raise InvalidInputError(f"{name}: its LAZ chunk table is missing (no offset to it after the points or at the end of the "
+                                    "file); lazrs cannot read chunked points without it (truncated or damaged)")  # fmt: skip
     head = _read_at(fh, table, 8) if table + 8 <= size else b""
     if len(head) < 8:
-        return None
+        raise InvalidInputError(f"{name}: its LAZ chunk table (byte {table:,}) lies past the end of the file ({size:,} bytes; "
+                                "truncated or forged)")  # fmt: skip
     _, n_chunks = struct.unpack("<II", head)
     if n_chunks > layout.count + 1:
         raise InvalidInputError(f"{name}: its LAZ chunk table declares {n_chunks:,} chunks for {layout.count:,} points (forged)")
@@ -324,8 +332,10 @@ def _chunk_table(fh: BinaryIO, layout: LasLayout, size: int, name: str, vlr: byt
     fh.seek(layout.offset)
     try:
         return list(lazrs.read_chunk_table(fh, lazrs.LazVlr(vlr)))
-    except lazrs.LazrsError:
-        return None  # lazrs reads on without it where it can, and refuses where it cannot
+    except lazrs.LazrsError as exc:
+        raise InvalidInputError(
+            f"{name}: its LAZ chunk table (byte {table:,}) is unreadable ({' '.join(str(exc).split())}; damaged)"
+        ) from None
 
 
 def check_laz(fh: BinaryIO, layout: LasLayout, size: int, name: str) -> int:
@@ -357,8 +367,9 @@ def check_laz(fh: BinaryIO, layout: LasLayout, size: int, name: str) -> int:
         Naming the file: no or a truncated LASzip VLR, a compressor or items lazrs does not read
         (a type, size or version other than laz-rs's), items that do not add up to the record
         length, chunks of 0 points, more chunks (points over the chunk size) than the file's bytes
-        can hold (each chunk stores its first point raw), a chunk table that declares more chunks
-        than points or than the bytes before it hold, or that holds fewer points than declared
+        can hold (each chunk stores its first point raw), a chunk table that is missing, past the
+        end or unreadable, that declares more chunks than points or than the bytes before it hold,
+        or that holds fewer points than declared
         (chunks × chunk size, or the sum of variable chunks), or a chunk whose layers end past the
         end of the file.
     """
