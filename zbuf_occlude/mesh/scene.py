@@ -33,12 +33,21 @@ Up axis, by format, when ``up="auto"``:
 
 ``auto`` is a rule, not a measurement: a file that breaks its format's convention needs an
 explicit ``up``.  The rule applied is kept in the mesh's metadata (``up_source``).
+
+Materials: each mesh of a scene has its own (trimesh keeps ``visual.material.name`` for OBJ/MTL's
+``usemtl`` groups, one mesh each, and for glTF's primitives), and flattening the scene into one
+mesh drops them.  :func:`face_materials` keeps them per face, in the flattened mesh's order
+(:func:`zbuf_occlude.mesh.flatten.flatten_scene`), for ``mesh.metadata[FACE_MATERIALS]``; a face
+of a mesh without a material has the name ``""``.  The reflectance lookup reads them first
+(:func:`zbuf_occlude.sensors.reflectance.scene_optics`).
 """
 
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -47,7 +56,18 @@ from zbuf_occlude.errors import InvalidInputError, MeshLoadError
 from zbuf_occlude.io.regular_files import open_regular_file
 from zbuf_occlude.mesh.paths import shapenet_path
 
-__all__ = ["UP_AXES", "UP_CHOICES", "resolve_up", "up_rotation", "declared_units_m", "collada_asset", "gltf_generator"]
+if TYPE_CHECKING:  # trimesh is imported by the readers, when a file is read
+    import trimesh
+
+__all__ = [
+    "FACE_MATERIALS", "MAX_MATERIAL_NAME_CHARS", "UP_AXES", "UP_CHOICES", "FaceMaterials", "collada_asset", "declared_units_m",
+    "face_materials", "face_materials_of", "gltf_generator", "resolve_up", "up_rotation",
+]  # fmt: skip
+
+#: Key of a mesh's ``metadata`` that holds its faces' materials (:class:`FaceMaterials`, module docstring).
+FACE_MATERIALS = "face_materials"
+#: Longest material name kept: a name is a label (MTL and glTF names are a few words), not a text.
+MAX_MATERIAL_NAME_CHARS = 256
 
 #: Axes a file may declare as up (the rotation sends it to +z).
 UP_AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
@@ -201,3 +221,76 @@ def declared_units_m(path: Path, file_type: str) -> float | None:
         _, meters = collada_asset(_head(path, _COLLADA_HEAD_BYTES))
         return 1.0 if meters is None else meters
     return None
+
+
+@dataclass(frozen=True)
+class FaceMaterials:
+    """The material name of each face of a mesh (module docstring).
+
+    Attributes
+    ----------
+    names : tuple of str
+        The distinct names, ``""`` for faces of a mesh that had none; each at most
+        :data:`MAX_MATERIAL_NAME_CHARS` characters.
+    index : (F,) int32
+        Each face's row in ``names``.
+    """
+
+    names: tuple[str, ...]
+    index: NDArray[np.int32]
+
+    def select(self, rows: NDArray[np.int64] | NDArray[np.bool_]) -> FaceMaterials:
+        """The materials of the faces ``rows`` (indices or a mask) of the mesh, for a mesh made of those faces."""
+        return FaceMaterials(self.names, self.index[rows])
+
+
+def _material_name(geometry: Any) -> str:
+    """``geometry.visual.material.name`` (trimesh's for OBJ/MTL and glTF), ``""`` without one, cut to a label's length."""
+    name = getattr(getattr(getattr(geometry, "visual", None), "material", None), "name", None)
+    return name[:MAX_MATERIAL_NAME_CHARS] if isinstance(name, str) else ""
+
+
+def face_materials(scene: trimesh.Scene) -> FaceMaterials:
+    """The material of every face of ``scene`` flattened, in :func:`~zbuf_occlude.mesh.flatten.flatten_scene`'s order.
+
+    Parameters
+    ----------
+    scene : trimesh.Scene
+        As a trimesh loader returns it: each mesh (geometry) with its own ``visual.material``.
+
+    Returns
+    -------
+    FaceMaterials
+        ``index`` (F,) int32 over the flattened mesh's F faces: mesh instances in the order of
+        ``scene.graph.nodes_geometry``, each mesh's faces in file order (points and paths have none).
+
+    Raises
+    ------
+    ValueError
+        A mesh node not below the root frame (as :func:`~zbuf_occlude.mesh.flatten.flatten_scene`).
+    """
+    import trimesh
+
+    from zbuf_occlude.mesh.flatten import node_transforms
+
+    graph = scene.graph
+    instances = [(node, graph.transforms.node_data[node]["geometry"]) for node in graph.nodes_geometry]
+    instances = [(node, name) for node, name in instances if isinstance(scene.geometry.get(name), trimesh.Trimesh)]
+    node_transforms(graph, {node for node, _ in instances})  # the same refusal as flatten_scene's
+    names: dict[str, int] = {}
+    parts = []
+    for _, geometry_name in instances:
+        geometry = scene.geometry[geometry_name]
+        code = names.setdefault(_material_name(geometry), len(names))
+        parts.append(np.full(len(geometry.faces), code, dtype=np.int32))
+    index = np.concatenate(parts) if parts else np.zeros(0, dtype=np.int32)
+    return FaceMaterials(tuple(names), index)
+
+
+def face_materials_of(mesh: Any) -> FaceMaterials | None:
+    """``mesh.metadata[FACE_MATERIALS]`` where it holds one material per face of ``mesh``, else None (a mesh
+    from a file without materials, or one made or changed since it was loaded)."""
+    found = (getattr(mesh, "metadata", None) or {}).get(FACE_MATERIALS)
+    if not isinstance(found, FaceMaterials) or len(found.index) != len(getattr(mesh, "faces", ())):
+        return None
+    return found

@@ -570,7 +570,7 @@ def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_si
 
 
 def _surface_optics(built, scanner: AirborneScanner, reflectivity, transmittance):
-    """``scan_airborne``'s ``reflectivity`` and ``transmittance`` per object id at 1064 nm, or None."""
+    """``scan_airborne``'s ``reflectivity`` and ``transmittance`` per face of the scene at 1064 nm, or None."""
     if reflectivity is None and transmittance is None:
         return None, None
     from zbuf_occlude.sensors.reflectance import AIRBORNE_WAVELENGTH_NM
@@ -586,7 +586,7 @@ def _echo_returns(built, scanner: AirborneScanner, origins, directions, rho=None
     """The multi-return model of an airborne scanner: each pulse's ``footprint_rays`` sub-rays cast
     from its origin, resolved by :func:`~zbuf_occlude.sensors.echo_model.echo_returns` (no range limits,
     echoes below the scanner's ``detection_threshold`` dropped), weighed by ``rho`` and cast on through surfaces
-    of ``tau`` above 0 when given (per object id).
+    of ``tau`` above 0 when given (per face of ``built.mesh``: :func:`~zbuf_occlude.sensors.echo_model.surface_optics`).
 
     Parameters
     ----------
@@ -608,7 +608,7 @@ def _echo_returns(built, scanner: AirborneScanner, origins, directions, rho=None
     if len(origins) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
     if rho is None and scanner.detection_threshold > 0:
-        rho = np.ones(len(built.objects) + 1)  # the threshold on w · |cos θ| / R²
+        rho = np.ones(len(built.face_object))  # the threshold on w · |cos θ| / R²
     offsets, weights = footprint_offsets(k, scanner.beam_divergence_deg, profile=scanner.beam_profile)
     rays = subray_directions(directions, offsets).reshape(-1, 3)
     sub_origins = np.repeat(origins, k, axis=0)

@@ -2,8 +2,9 @@
 
 One implementation for every scanner (the spinning LiDAR and ray tables of :func:`~.scan.scan`,
 the airborne scanner of :func:`~.airborne.scan_airborne`): :func:`surface_optics` turns a
-scanner's ``reflectivity`` and ``transmittance`` into values per object id (a number, one per id,
-or the cited table of :mod:`.reflectance`); :func:`echo_returns` casts each sub-ray on through
+scanner's ``reflectivity`` and ``transmittance`` (a number, one per object id, or the cited table
+of :mod:`.reflectance`, whose lookup gives each face its file's material) into values per face of
+the scene; :func:`echo_returns` casts each sub-ray on through
 the surfaces that transmit (:func:`~.raycast.cast_embree_beyond`), weighs every hit by
 :func:`~.echoes.hit_energy` and the transmittance before it (:func:`~.echoes.attenuate_along_subray`)
 and resolves a pulse's hits into returns (:func:`~.echoes.resolve_echoes`);
@@ -26,7 +27,7 @@ __all__ = ["Radiometry", "Transmission", "echo_returns", "strongest_echo", "surf
 
 
 def surface_optics(built: BuiltScene, reflectivity, transmittance, *, wavelength_nm: float, multi_return: bool, backend: str = "embree"):
-    """Reflectivity and transmittance per object id of a scanner's scene, checked; one rule for every scanner.
+    """Reflectivity and transmittance per face of a scanner's scene, checked; one rule for every scanner.
 
     Parameters
     ----------
@@ -35,7 +36,8 @@ def surface_optics(built: BuiltScene, reflectivity, transmittance, *, wavelength
     reflectivity, transmittance : None, float, (n_objects + 1,) float, or "table"
         Lambertian ρ ≥ 0 and round-trip transmittance in [0, 1] per object id: one value for
         all, one per id, or ``"table"``: :func:`~.reflectance.scene_optics` at ``wavelength_nm``
-        (the cited table, by material, class or file name).
+        (the cited table, by each face's material in its file, else its object's material, class
+        or file name).
     wavelength_nm : float
         The scanner's wavelength, nm (905 for the spinning presets, 1064 for airborne scanners).
     multi_return : bool
@@ -45,8 +47,10 @@ def surface_optics(built: BuiltScene, reflectivity, transmittance, *, wavelength
 
     Returns
     -------
-    rho : (n_objects + 1,) float64 or None
-    tau : (n_objects + 1,) float64 or None (None also where every value is 0: opaque, first hits only)
+    rho : (F,) float64 or None
+        Per face of ``built.mesh``.
+    tau : (F,) float64 or None
+        Per face of ``built.mesh``; None also where every value is 0 (opaque, first hits only).
 
     Raises
     ------
@@ -65,10 +69,10 @@ def surface_optics(built: BuiltScene, reflectivity, transmittance, *, wavelength
     n_ids = len(built.objects) + 1
     rho = None
     if reflectivity is not None:
-        rho = table.reflectivity if isinstance(reflectivity, str) else _reflectivity_table(reflectivity, n_ids)
+        rho = table.face_reflectivity if isinstance(reflectivity, str) else _reflectivity_table(reflectivity, n_ids)[built.face_object]
     tau = None
     if transmittance is not None:
-        tau = table.transmittance if isinstance(transmittance, str) else _transmittance_table(transmittance, n_ids)
+        tau = table.face_transmittance if isinstance(transmittance, str) else _transmittance_table(transmittance, n_ids)[built.face_object]
         if not tau.any():
             tau = None  # opaque everywhere: today's first hits
         elif not multi_return:
@@ -110,7 +114,8 @@ def strongest_echo(
 
     Each ray carries ``1/k`` of the beam's energy (``weights`` (k,) instead, when given: a
     Gaussian ``beam_profile``); a ray hitting a surface of reflectivity ρ at
-    incidence θ and range R sends back ``ρ |cos θ| / (k R²)`` (ρ = 1 without ``rho``).  The
+    incidence θ and range R sends back ``ρ |cos θ| / (k R²)`` (ρ = 1 without ``rho``, else ``rho``
+    (F,) per face of ``built.mesh``, :func:`surface_optics`).  The
     echoes of one object id add up; the object with the most energy is the return (ties: the
     lower ray index, the centre first).  Its range is the energy-weighted mean of its rays'
     ranges, its face the nearest of its rays' faces.  With ``separation > 0`` (the sensor's
@@ -131,7 +136,7 @@ def strongest_echo(
     obj = np.where(hit, built.face_object[np.maximum(face, 0)], -1)
     normal = face_normals(built.mesh, np.maximum(face, 0))
     cos = np.abs(np.einsum("nkj,nkj->nk", normal, rays.reshape(n, k, 3)))
-    reflected = cos * (1.0 if rho is None else rho[np.maximum(obj, 0)])
+    reflected = cos * (1.0 if rho is None else rho[np.maximum(face, 0)])
     weight = np.where(hit, reflected / k if weights is None else reflected * weights[None, :], 0.0)
     energy = np.where(hit, weight / np.maximum(t, 1e-9) ** 2, 0.0)
     same = (obj[:, :, None] == obj[:, None, :]) & hit[:, :, None] & hit[:, None, :]
@@ -156,8 +161,8 @@ class Radiometry:
 
     Attributes
     ----------
-    reflectivity : (n_objects + 1,) float
-        Lambertian ρ per object id (index 0: the ground).
+    reflectivity : (F,) float
+        Lambertian ρ per face of the built scene's mesh (:func:`surface_optics`).
     detection_threshold : float
         Least echo energy kept, m⁻² (:func:`~.echoes.hit_energy`'s units).
     power_noise : float
@@ -179,9 +184,10 @@ class Transmission:
 
     Attributes
     ----------
-    transmittance : (n_objects + 1,) float
-        Round-trip transmittance per object id, in [0, 1] (:func:`~.echoes.attenuate_along_subray`:
-        a gap fraction ``g`` is ``g``, a pane of one-way ``T`` is ``T²``); 0 everywhere: opaque.
+    transmittance : (F,) float
+        Round-trip transmittance per face of the built scene's mesh, in [0, 1]
+        (:func:`surface_optics`; :func:`~.echoes.attenuate_along_subray`: a gap fraction ``g`` is
+        ``g``, a pane of one-way ``T`` is ``T²``); 0 everywhere: opaque.
     origins : (3,) or (P·K, 3) float
         The sub-rays' origin, world frame, metres (one, or one per sub-ray).
     max_hits : int
@@ -223,13 +229,13 @@ def echo_returns(
     max_returns : int
         The first this many echoes of a pulse in range order are kept.
     radiometry : Radiometry, optional
-        Reflectivity per object id, detection threshold and power noise; None: ρ 1 everywhere,
+        Reflectivity per face, detection threshold and power noise; None: ρ 1 everywhere,
         every echo detected, no noise.
     range_limits_m : (min, max) float
         Hits nearer or farther than these give no echo (the receiver's blind zone and reach),
         metres; a hit in the blind zone still shades the hits behind it.
     through : Transmission, optional
-        Transmittance per object id and the sub-rays' origins; None: opaque, first hits only.
+        Transmittance per face and the sub-rays' origins; None: opaque, first hits only.
 
     Returns
     -------
@@ -240,21 +246,22 @@ def echo_returns(
     Raises
     ------
     InvalidInputError
-        A transmittance that is not one value in [0, 1] per object id.
+        A transmittance or reflectivity that is not one value per face of ``built.mesh``.
     """
     k = len(weights)
     n_pulses = len(face) // k
     min_range_m, max_range_m = range_limits_m
+    n_faces = len(built.face_object)
     tau = None if through is None else np.asarray(through.transmittance, dtype=np.float64)
-    if tau is not None and tau.shape != (len(built.objects) + 1,):
-        raise InvalidInputError(
-            f"transmittance must hold one value per object id ({len(built.objects) + 1}: ground + objects), got shape {tau.shape}"
-        )
+    rho = None if radiometry is None else np.asarray(radiometry.reflectivity, dtype=np.float64)
+    for name, values in (("transmittance", tau), ("reflectivity", rho)):
+        if values is not None and values.shape != (n_faces,):
+            raise InvalidInputError(
+                f"{name} must hold one value per face of the scene ({n_faces:,}; surface_optics), got shape {values.shape}"
+            )
     if tau is not None and tau.any():
-        sub, f_all, r_all = cast_embree_beyond(
-            built.mesh, through.origins, rays, face, t, tau[built.face_object] > 0, max_hits=through.max_hits
-        )
-        share = attenuate_along_subray(sub, r_all, built.face_object[f_all].astype(np.int64), tau)
+        sub, f_all, r_all = cast_embree_beyond(built.mesh, through.origins, rays, face, t, tau > 0, max_hits=through.max_hits)
+        share = attenuate_along_subray(sub, r_all, f_all.astype(np.int64), tau)
         kept = np.flatnonzero((r_all >= min_range_m) & (r_all <= max_range_m))
         ray, f, r, share = sub[kept], f_all[kept], r_all[kept], share[kept]
     else:
@@ -264,8 +271,7 @@ def echo_returns(
     normal = face_normals(built.mesh, f)
     cos = np.abs(np.einsum("ij,ij->i", normal, rays[ray]))
     pulse = ray // k
-    rho = None if radiometry is None else np.asarray(radiometry.reflectivity, dtype=np.float64)
-    energy = hit_energy(np.asarray(weights)[ray % k], 1.0 if rho is None else rho[obj], cos, r)
+    energy = hit_energy(np.asarray(weights)[ray % k], 1.0 if rho is None else rho[f], cos, r)
     if share is not None:
         energy = energy * share
     if radiometry is not None and radiometry.power_noise > 0:

@@ -36,7 +36,10 @@ footprint, and :data:`FOLIAGE_GAP_FRACTION` of each sub-ray's energy goes on thr
 itself scatters what it transmits, so the pulse goes on only through the gaps).  Measured crown
 porosities span ~0.1–0.5; fit it to real scans' returns per pulse where you have them.
 
-The scene's objects get their material from, in this order: the mesh's material name
+The scene's faces get their material from, in this order: the material the file gives that face
+(an OBJ's ``usemtl``, a glTF primitive's material: ``mesh.metadata[FACE_MATERIALS]``, kept per
+face by the loader, :func:`~zbuf_occlude.mesh.scene.face_materials`), where its name names one of
+the table ("Glass_window", "leaves"); else its object's: the mesh's material name
 (``mesh.visual.material.name``, where the file gave one), the object's class name
 (:data:`CLASS_MATERIALS`), the mesh's name (its file's), then :data:`DEFAULT_MATERIAL`
 (:func:`material_of`, :func:`scene_optics`).
@@ -54,6 +57,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.mesh.scene import face_materials_of
 
 if TYPE_CHECKING:
     from zbuf_occlude.sensors.scene import BuiltScene
@@ -236,12 +240,21 @@ class SceneOptics:
         Each object id's material.
     wavelength_nm : float
         The table column used, nm.
+    face_material : (F,) int32
+        Each face of the built scene's mesh: its material's row in :data:`MATERIALS` (its file's
+        material where it names one of the table, else its object's: module docstring).
+    face_reflectivity, face_transmittance : (F,) float64
+        ρ and round-trip transmittance of each face of the built scene's mesh, from ``face_material``;
+        what the scan weighs its hits by.
     """
 
     reflectivity: NDArray[np.float64]
     transmittance: NDArray[np.float64]
     material: tuple[str, ...]
     wavelength_nm: float
+    face_material: NDArray[np.int32]
+    face_reflectivity: NDArray[np.float64]
+    face_transmittance: NDArray[np.float64]
 
 
 def scene_optics(
@@ -257,14 +270,15 @@ def scene_optics(
     ----------
     built : BuiltScene
         :func:`~zbuf_occlude.sensors.scan.build_scene` of the scene; each object's material is
-        :func:`material_of` its local mesh and class name.
+        :func:`material_of` its local mesh and class name, each face's its file's where that names one
+        (module docstring).
     wavelength_nm : float
         The scanner's wavelength, nm; the nearest of :data:`WAVELENGTHS_NM` within
         :data:`WAVELENGTH_TOLERANCE_NM` is used.
     ground : str
         The ground's material (object id 0).
     materials : mapping of int to str, optional
-        Object id → material, overriding the lookup.
+        Object id → material, overriding the lookup (of every face of the object).
 
     Returns
     -------
@@ -288,11 +302,26 @@ def scene_optics(
         if key is None:
             raise InvalidInputError(f"unknown material {name!r}; the table holds {', '.join(MATERIALS)}")
         keys.append(key)
+    rows = list(MATERIALS)
+    face_material = np.array([rows.index(k) for k in keys], dtype=np.int32)[built.face_object]
+    for oid in range(1, n_ids):
+        found = None if oid in (materials or {}) else face_materials_of(built.local_meshes[oid])
+        if found is None:
+            continue
+        named = np.array([rows.index(k) if (k := material_named(n)) else -1 for n in found.names], dtype=np.int32)
+        if (named >= 0).any():  # the object's faces in its local mesh's order (build_scene)
+            own = np.flatnonzero(built.face_object == oid)
+            of_file = named[found.index]
+            face_material[own] = np.where(of_file >= 0, of_file, face_material[own])
+    table = np.array([MATERIALS[k].reflectance[column] for k in rows]), np.array([MATERIALS[k].transmittance for k in rows])
     return SceneOptics(
         reflectivity=np.array([MATERIALS[k].reflectance[column] for k in keys]),
         transmittance=np.array([MATERIALS[k].transmittance for k in keys]),
         material=tuple(keys),
         wavelength_nm=WAVELENGTHS_NM[column],
+        face_material=face_material,
+        face_reflectivity=table[0][face_material],
+        face_transmittance=table[1][face_material],
     )
 
 

@@ -454,6 +454,16 @@ def _facing_normals(built: BuiltScene, face, d_world):
     return normal, cos_in, incidence
 
 
+def _checked_arguments(seed, backend: str, frame: str):
+    """:func:`scan`'s seed (:func:`~zbuf_occlude.geometry.sampling.check_seed`), backend and frame, checked before any
+    work: numpy's own refusals of a seed of -1, 'a' or 1.5 came after the rays were cast, and named no argument."""
+    if backend not in BACKENDS:
+        raise InvalidInputError(f"unknown scan backend {backend!r}; use one of {BACKENDS}")
+    if frame not in FRAMES:
+        raise InvalidInputError(f"unknown frame {frame!r}; use one of {FRAMES}")
+    return check_seed(seed)
+
+
 def scan(
     scene: ScanScene | trimesh.Trimesh,
     sensor: Lidar | RayTable | DepthCamera,
@@ -480,7 +490,6 @@ def scan(
         :func:`look_at_pose`), or just the position; default ``scene.default_sensor_pose()``.
     seed : int, numpy.random.Generator or None
         Seeds noise and dropout (``numpy.random.default_rng(seed)``); same seed, same bytes.
-        Checked first (:func:`~zbuf_occlude.geometry.sampling.check_seed`).
     backend : {"embree", "zbuffer"}
         Ray casting (:mod:`.raycast`); "embree" is the reference.
     frame : {"sensor", "world"}
@@ -527,11 +536,7 @@ def scan(
     BackendUnavailable
         Embree or OpenGL missing for the chosen backend.
     """
-    seed = check_seed(seed)  # numpy's own refusals of -1, 'a' or 1.5 would come after the rays are cast
-    if backend not in BACKENDS:
-        raise InvalidInputError(f"unknown scan backend {backend!r}; use one of {BACKENDS}")
-    if frame not in FRAMES:
-        raise InvalidInputError(f"unknown frame {frame!r}; use one of {FRAMES}")
+    seed = _checked_arguments(seed, backend, frame)
     built = _built(scene)
     if pose is None:
         if not isinstance(scene, ScanScene):
@@ -567,7 +572,7 @@ def scan(
         power = echo_energy if multi else np.ones(len(hit))
         if not multi and rho is not None:
             # received power of an extended Lambertian target (Kashani et al. 2015, Eq. 4), up to a constant
-            power = (fraction[hit] if k > 1 else rho[built.face_object[face]] * np.abs(cos_in)) / np.maximum(t, 1e-9) ** 2
+            power = (fraction[hit] if k > 1 else rho[face] * np.abs(cos_in)) / np.maximum(t, 1e-9) ** 2
             if sensor.power_noise > 0:
                 power = power * np.exp(sensor.power_noise * rng.standard_normal(len(hit)))
             keep &= power >= sensor.detection_threshold

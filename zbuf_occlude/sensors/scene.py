@@ -42,6 +42,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.limits import MAX_MESH_FACES
+from zbuf_occlude.mesh.scene import FACE_MATERIALS, face_materials_of
 from zbuf_occlude.sensors.checks import (
     MAX_COORDINATE_M, MAX_PATH_CHARS, MAX_SCENE_OBJECTS, count, is_number, located, mapping, real, reals, shown, text,
 )  # fmt: skip
@@ -328,9 +329,12 @@ class SceneObject:
         if self.width_scale != 1.0:
             v = v * np.array([self.width_scale, self.width_scale, 1.0])
         if self.width_profile is not None or self.width_scale != 1.0:
+            materials = face_materials_of(local)
             local = trimesh.Trimesh(v @ rot_up, faces, process=False)  # rot_up is orthonormal: v @ rot_up undoes it
             if rows is not None:
                 local.metadata[FACE_ROWS] = rows
+            if materials is not None:  # each face keeps its file's material, a split face its parent's
+                local.metadata[FACE_MATERIALS] = materials if rows is None else materials.select(rows)
         pos = self.position_m
         c, s = math.cos(math.radians(self.yaw_deg)), math.sin(math.radians(self.yaw_deg))
         yaw = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
