@@ -385,3 +385,19 @@ def test_realism_refuses_a_scan_that_links_to_a_private_file(tmp_path: Path, cre
     err = captured.err.strip()
     assert code == 2 and "\n" not in err and str(root / "car" / "b.xyz") in err, err
     assert not _leaks(captured.out + err)
+
+
+def test_generate_skips_a_point_set_with_a_200_kb_npy_header_in_one_line(tmp_path: Path) -> None:
+    """numpy's refusal (three lines, naming max_header_size and allow_pickle) was the skip message as is."""
+    from memory_limit import run_cli_limited
+
+    root = tmp_path / "sets" / "chair"
+    root.mkdir(parents=True)
+    header = "{'descr': '<f8', 'fortran_order': False, 'shape': (64, 3), }" + " " * 200_000
+    (root / "big.npy").write_bytes(_npy(header, np.zeros((64, 3)).tobytes(), 2))
+    np.save(root / "good.npy", np.random.default_rng(0).uniform(size=(256, 3)))
+    done = run_cli_limited(["generate", str(root.parent), "--out", str(tmp_path / "out"), "--views", "0:0", "--points", "32"])
+    assert done.returncode == 1, done.stderr  # the good cloud is done; the other skipped
+    skipped = [line for line in done.stderr.splitlines() if str(root / "big.npy") in line]
+    assert skipped and all(f"its .npy header is {len(header) + 1:,} bytes" in line for line in skipped), done.stderr
+    assert "max_header_size" not in done.stderr and "allow_pickle" not in done.stderr, done.stderr
