@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 from pydantic import ValidationError
@@ -42,3 +43,54 @@ def test_readers_keep_fields_a_newer_writer_adds() -> None:
     assert OkRecord.model_validate({**fields, "newer": True}).model_extra == {"newer": True}
     with pytest.raises(ValidationError):
         ObjectRecord.model_validate({**fields, "newer": True})
+
+
+# -- the manifest read in bounded memory ------------------------------------------------------------
+#: A manifest under the 4 GiB cap whose records could not fit in 3 GB: made sparse (nothing written).
+_BIG_MANIFEST_BYTES = 3 << 30
+
+#: In a child under an address-space limit (tests/memory_limit.py): open the data set argv[1];
+#: print the refusal and exit 3.
+_OPEN = """
+import sys
+from zbuf_occlude import OccludedDataset
+from zbuf_occlude.errors import ZbufOccludeError
+try:
+    OccludedDataset(sys.argv[1])
+except ZbufOccludeError as exc:
+    print(exc)
+    sys.exit(3)
+"""
+
+
+def _big_manifest(tmp_path):
+    from conftest import tiny_dataset
+
+    ds = tiny_dataset(tmp_path / "ds")
+    with open(ds / "manifest.jsonl", "r+b") as fh:
+        fh.truncate(_BIG_MANIFEST_BYTES)  # its lines, then NUL bytes to 3 GiB
+    return ds
+
+
+def test_a_3_gib_manifest_is_refused_by_the_memory_its_records_need_before_it_is_read(tmp_path, monkeypatch):
+    """Read whole (and then as a list of its lines) it took 3 GiB and more: a MemoryError under a
+    3 GB limit; its records are checked against the memory available first."""
+    from memory_limit import run_cli_limited, run_python_limited
+
+    from zbuf_occlude import OccludedDataset, resources
+    from zbuf_occlude.errors import InsufficientMemoryError
+
+    ds = _big_manifest(tmp_path)
+    said = rf"^the manifest {ds / 'manifest.jsonl'} \(3,221,225,472 bytes\) needs about 48 GiB of memory"
+    monkeypatch.setattr(resources, "available_memory", lambda: (16 << 30, "test budget"))  # plainly, as a 16 GiB machine
+    with pytest.raises(InsufficientMemoryError, match=said) as caught:
+        OccludedDataset(ds)
+    assert "\n" not in str(caught.value)
+    monkeypatch.undo()
+    headroom = (3 << 30) - (160 << 20)  # a 3 GB process: its footprint (152 MiB measured) and the rest
+    done = run_python_limited(f"import sys; sys.argv[1:] = [{str(ds)!r}]\n" + _OPEN, headroom=headroom)
+    assert done.returncode == 3 and not done.stderr and re.search(said, done.stdout), done.stdout + done.stderr[-2000:]
+    assert len(done.stdout.splitlines()) == 1
+    checked = run_cli_limited(["verify", str(ds)], headroom=headroom)
+    assert checked.returncode == 1 and "Traceback" not in checked.stderr, checked.stderr[-2000:]
+    assert re.search(said[1:], checked.stderr), checked.stderr

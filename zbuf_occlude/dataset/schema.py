@@ -28,7 +28,7 @@ from zbuf_occlude.io.hdf5 import Column, declared_nbytes, open_hdf5
 from zbuf_occlude.io.atomic import size_mismatch
 from zbuf_occlude.io.json_files import loads_json
 from zbuf_occlude.io.memory import check_memory
-from zbuf_occlude.io.regular_files import MAX_LIST_BYTES, MAX_METADATA_BYTES, read_text_file
+from zbuf_occlude.io.regular_files import MAX_LIST_BYTES, MAX_METADATA_BYTES, open_regular_file, read_text_file
 from zbuf_occlude.io.safe_paths import control_character, path_inside
 
 __all__ = [
@@ -63,6 +63,10 @@ MAX_LISTED = 5
 #: --format npz`` object lists each sample file with its SHA-256: some 40 kB), so 100,000 such
 #: objects or a million HDF5 ones; a larger file is not a manifest of ours.
 MAX_MANIFEST_BYTES = 4 << 30
+#: Bytes of memory the manifest's records take per byte of manifest (each line held as a dict and
+#: a checked :class:`OkRecord`): 11.9 at the peak by tracemalloc over 20,000 of the farm's 734-byte
+#: records; rounded up.  Checked before the manifest is read.
+MANIFEST_MEMORY_PER_BYTE = 16
 #: Largest ``card.sha256`` read: its one line is 64 hex digits, two spaces and the card's name.
 _SHA256_LINE_MAX_BYTES = 200
 
@@ -348,30 +352,60 @@ def read_manifest(path: Path, problems: list[str] | None = None) -> list[tuple[i
     others (failed or pending objects, which the reader skips).  With ``problems``, a bad
     line is appended there (and left out) instead of raising.
 
+    The file is read one line at a time (never whole, nor as a list of its lines), after its size
+    is checked against :data:`MAX_MANIFEST_BYTES` and the memory its records will take
+    (:data:`MANIFEST_MEMORY_PER_BYTE`) against the memory available.
+
     Raises
     ------
     DatasetFormatError
-        Unreadable, a line that is not a JSON object, or an ``ok`` line with a missing
-        or mistyped field (the message names the line and the field).
+        Unreadable, larger than :data:`MAX_MANIFEST_BYTES`, a line that is not UTF-8 or not a JSON
+        object, or an ``ok`` line with a missing or mistyped field (the message names the line
+        and the field).
+    InsufficientMemoryError
+        Its records would take more memory than is available (names the manifest).
+    UnsafePathError
+        It leads outside the data set's folder through a link.
     """
+    if not path.exists():
+        raise DatasetFormatError(f"{path} is missing: this data set has no manifest")
+    fh, size = open_regular_file(path, max_bytes=MAX_MANIFEST_BYTES, error=DatasetFormatError, within=path.parent)
     rows = []
-    for lineno, line in enumerate(_read_text(path, "manifest", MAX_MANIFEST_BYTES).splitlines(), start=1):
-        if not line.strip():
-            continue
-        where = f"{path}:{lineno}"
-        try:
-            status = ManifestRecord.model_validate_json(line).status
-            ok = OkRecord.model_validate_json(line) if status == "ok" else None
-        except ValidationError as exc:
-            message = (
-                f"{where} is not a valid manifest record: {describe_validation_error(exc)}; the data set is damaged: "
-                "rerun the farm command (it rewrites the manifest from the records)"
-            )
-            if problems is None:
-                raise DatasetFormatError(message) from None
-            problems.append(message)
-            continue
-        rows.append((lineno, loads_json(line, what=where), ok))
+    with fh:
+        check_memory(
+            size * MANIFEST_MEMORY_PER_BYTE,
+            f"the manifest {path} ({size:,} bytes)",
+            hint="open it on a machine with more memory, or check where the data set comes from",
+        )
+        read = 0
+        for lineno, raw in enumerate(fh, start=1):  # one line held at a time
+            read += len(raw)
+            if read > MAX_MANIFEST_BYTES:  # it grew since it was opened
+                raise DatasetFormatError(f"{path}: more than the {MAX_MANIFEST_BYTES:,} bytes a manifest of ours holds; refused")
+            where = f"{path}:{lineno}"
+            try:
+                line = raw.decode("utf-8")
+            except UnicodeDecodeError as exc:
+                message = f"{where}: not UTF-8 text (byte {exc.start} of the line); the data set is damaged: get it again from its source"
+                if problems is None:
+                    raise DatasetFormatError(message) from None
+                problems.append(message)
+                continue
+            if not line.strip():
+                continue
+            try:
+                status = ManifestRecord.model_validate_json(line).status
+                ok = OkRecord.model_validate_json(line) if status == "ok" else None
+            except ValidationError as exc:
+                message = (
+                    f"{where} is not a valid manifest record: {describe_validation_error(exc)}; the data set is damaged: "
+                    "rerun the farm command (it rewrites the manifest from the records)"
+                )
+                if problems is None:
+                    raise DatasetFormatError(message) from None
+                problems.append(message)
+                continue
+            rows.append((lineno, loads_json(line, what=where), ok))
     return rows
 
 
