@@ -154,6 +154,10 @@ def size_mismatch(files: Sequence[Path], recorded_bytes: int | None) -> str | No
 def file_sha256(path: str | os.PathLike, *, chunk_bytes: int = 1 << 20) -> str:
     """Hex SHA-256 of a regular file's bytes, read in ``chunk_bytes`` pieces (never whole).
 
+    A piece is no larger than the file (its ``fstat`` size, plus one byte to see the end):
+    ``read(n)`` allocates ``n`` bytes first, which for a card or a record of a few hundred bytes
+    would be a thousand times what it holds.
+
     Raises
     ------
     OSError
@@ -163,9 +167,11 @@ def file_sha256(path: str | os.PathLike, *, chunk_bytes: int = 1 << 20) -> str:
     h = hashlib.sha256()
     fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     with os.fdopen(fd, "rb") as fh:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
             raise OSError(errno.EINVAL, f"{path} is not a regular file (a FIFO, device or folder); not read")
-        while block := fh.read(chunk_bytes):
+        piece = max(1, min(chunk_bytes, info.st_size + 1))
+        while block := fh.read(piece):
             h.update(block)
     return h.hexdigest()
 
