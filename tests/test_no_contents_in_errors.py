@@ -186,6 +186,31 @@ def test_a_point_set_reader_never_quotes_the_file(tmp_path: Path, name: str, dat
         _refused(point_set_labels, path)
 
 
+def _structured_npy() -> bytes:
+    buffer = io.BytesIO()
+    np.save(buffer, np.zeros(4, dtype=[(MARKER, "<f8"), ("b", "<f8")]))
+    return buffer.getvalue()
+
+
+def test_an_array_of_records_is_refused_without_naming_its_fields(tmp_path: Path) -> None:
+    from zbuf_occlude.io.point_sets import point_set_labels, read_point_sets
+    from zbuf_occlude.real_scans.files import read_points
+
+    path = tmp_path / "records.npy"
+    path.write_bytes(_structured_npy())
+    for read in (read_point_sets, point_set_labels, read_points):
+        _refused(read, path)
+
+
+@pytest.mark.xfail(strict=True, reason="io/hdf5.py's check_hdf5 (not this file's owner's) prints a compound dtype's field names")
+def test_an_hdf5_point_set_of_records_is_refused_without_naming_its_fields(tmp_path: Path) -> None:
+    from zbuf_occlude.io.point_sets import read_point_sets
+
+    with h5py.File(tmp_path / "records.h5", "w") as f:
+        f["data"] = np.zeros((1, 4), dtype=[(MARKER, "<f8"), ("b", "<f8")])
+    _refused(read_point_sets, tmp_path / "records.h5")
+
+
 def test_a_200_kb_npy_header_is_one_line_giving_its_length(tmp_path: Path) -> None:
     """numpy's refusal ran over three lines, quoted as is into the skip message."""
     from zbuf_occlude.io.point_sets import MAX_NPY_HEADER_BYTES, read_point_sets

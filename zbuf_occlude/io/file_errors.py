@@ -10,7 +10,14 @@ bytes; a parser's exception is summarised by :func:`parser_failure`, never print
 
 from __future__ import annotations
 
-__all__ = ["parser_failure"]
+__all__ = ["parser_failure", "dtype_text"]
+
+
+def dtype_text(dtype: object) -> str:
+    """A file's array dtype for a message: ``float32``, ``|S8``..., or ``structured records`` for one
+    with named fields, whose names come from the file (and are not quoted)."""
+    fields = getattr(dtype, "fields", None)
+    return "structured records" if fields else str(dtype)
 
 
 def parser_failure(exc: BaseException) -> str:

@@ -49,7 +49,7 @@ from numpy.typing import NDArray
 from zbuf_occlude.defaults import MAX_POINT_SET_BYTES, MAX_POINT_SET_POINTS
 from zbuf_occlude.errors import DatasetFormatError, InvalidInputError, ZbufOccludeError
 from zbuf_occlude.io.arrays import check_array_sizes, npy_header
-from zbuf_occlude.io.file_errors import parser_failure
+from zbuf_occlude.io.file_errors import dtype_text, parser_failure
 from zbuf_occlude.io.hdf5 import open_hdf5
 from zbuf_occlude.io.regular_files import MAX_LIST_BYTES, open_regular_file, read_text_file
 from zbuf_occlude.resources import check_memory
@@ -191,7 +191,9 @@ def _hdf5_layout(f: Any, path: Path, max_points: int) -> tuple[Any, Any | None]:
     if not isinstance(data, h5py.Dataset):
         raise DatasetFormatError(f"{path}: no 'data' dataset; a PointNet-layout HDF5 file holds data (B, N, 3)")
     if data.dtype.kind != "f" or data.ndim != 3 or data.shape[2] not in _COLUMNS:
-        raise DatasetFormatError(f"{path}: 'data' holds {data.dtype} values of shape {data.shape}, not (B, N, 3) or (B, N, 6) floats")
+        raise DatasetFormatError(
+            f"{path}: 'data' holds {dtype_text(data.dtype)} values of shape {data.shape}, not (B, N, 3) or (B, N, 6) floats"
+        )
     if data.shape[0] * 8 > MAX_POINT_SET_BYTES:  # its labels alone would pass the cap
         raise DatasetFormatError(f"{path}: 'data' declares {data.shape[0]:,} clouds; refused")
     normal = f.get("normal")
@@ -325,7 +327,9 @@ def _npy_layout(fh: Any, path: Path, max_points: int) -> tuple[int, int, np.dtyp
     """``(N, columns, dtype)`` of the ``.npy`` cloud open at ``fh`` (at its start), from its header."""
     shape, dtype = npy_header(fh)
     if dtype.kind not in "fiu" or dtype.fields is not None or len(shape) != 2 or shape[1] not in _COLUMNS:
-        raise InvalidInputError(f"{path}: holds {dtype} values of shape {shape}, not (N, 3) or (N, 6) numbers (coordinates, normals)")
+        raise InvalidInputError(
+            f"{path}: holds {dtype_text(dtype)} values of shape {shape}, not (N, 3) or (N, 6) numbers (coordinates, normals)"
+        )
     if shape[0] > max_points:
         raise InvalidInputError(f"{path}: {shape[0]:,} points, more than the {max_points:,} accepted")
     return shape[0], shape[1], dtype

@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InsufficientMemoryError, InvalidInputError
 from zbuf_occlude.io.arrays import load_npy, load_npz
-from zbuf_occlude.io.file_errors import parser_failure
+from zbuf_occlude.io.file_errors import dtype_text, parser_failure
 from zbuf_occlude.io.ply import parse_ply_vertices
 from zbuf_occlude.io.point_sets import check_npy_header
 from zbuf_occlude.io.safe_paths import check_found_file
@@ -283,7 +283,7 @@ def _from_array(path: Path, arr: np.ndarray) -> NDArray[np.float64]:
     if arr.dtype.names and all(a in arr.dtype.names for a in "xyz"):
         return np.stack([np.asarray(arr[a], np.float64).reshape(-1) for a in "xyz"], axis=1)
     if arr.ndim != 2 or arr.shape[1] < 3 or not np.issubdtype(arr.dtype, np.number):
-        raise InvalidInputError(f"{path}: expected an (N, >=3) numeric array, got shape {arr.shape} dtype {arr.dtype}")
+        raise InvalidInputError(f"{path}: expected an (N, >=3) numeric array, got shape {arr.shape} dtype {dtype_text(arr.dtype)}")
     return np.asarray(arr[:, :3], dtype=np.float64)
 
 
