@@ -314,3 +314,12 @@ def test_a_table_of_simulated_shares_reads_as_a_curve(survey_las) -> None:
     assert fit.estimates["beam_divergence_deg"].std > 0.02 * 0.01 / 0.8  # the simulation's 0.01 adds to the share's spread
     with pytest.raises(InvalidInputError, match=r"curve\.csv: row 2: std is not a number"):
         divergence_curve([{**rows[0], "std": "n/a"}, rows[1]], "curve.csv")
+
+
+def test_a_detection_range_beyond_any_sensor_names_the_altitude_it_rests_on(survey_las) -> None:
+    lidar = sensor_from_name("hdl32e")
+    fit = fit_return_model(survey_las, altitude_m=1e6, ground_reflectance=RHO, classes=(5,), bootstrap=5)
+    assert math.sqrt(lidar.detection_reflectivity / fit.estimates["detection_threshold"].value) > 1e6
+    with pytest.raises(InvalidInputError, match=r"^the fitted detection threshold .* puts hdl32e's detection range at .* beyond 1e\+06 m: "
+                                                r".*altitude_m 1e\+06 \(fit-sensor --altitude\) is likely not the scans' flying height$"):  # fmt: skip
+        fit.apply(lidar)

@@ -203,7 +203,8 @@ class ReturnModelFit:
         ArgumentTypeError
             ``sensor`` is not a LiDAR or an airborne scanner.
         InvalidInputError
-            The fitted values make a sensor its checks refuse (naming the field).
+            A spinning LiDAR's detection range beyond :data:`~zbuf_occlude.sensors.checks.MAX_RANGE_M` (naming the
+            altitude the threshold rests on); other fitted values that make a sensor its checks refuse (naming the field).
         """
         from zbuf_occlude.sensors.airborne import AirborneScanner
         from zbuf_occlude.sensors.lidar import Lidar
@@ -231,6 +232,12 @@ class ReturnModelFit:
         if "detection_threshold" in e:
             if isinstance(sensor, Lidar):
                 changes["detection_range_m"] = math.sqrt(sensor.detection_reflectivity / e["detection_threshold"])
+                if not changes["detection_range_m"] <= MAX_RANGE_M:  # the sensor would refuse it naming its field, not the cause
+                    raise InvalidInputError(
+                        f"the fitted detection threshold {e['detection_threshold']:.3g} m⁻² puts {sensor.name}'s detection range at "
+                        f"{changes['detection_range_m']:.3g} m, beyond {MAX_RANGE_M:g} m: the threshold scales as 1/altitude², so "
+                        f"altitude_m {self.altitude_m:g} (fit-sensor --altitude) is likely not the scans' flying height"
+                    )
             elif changes.get("max_returns", sensor.max_returns) > 1:  # the airborne threshold drops echoes of several returns
                 changes["detection_threshold"] = e["detection_threshold"]
         name = sensor.name if sensor.name.endswith("-fitted") else f"{sensor.name}-fitted"
