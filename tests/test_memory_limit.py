@@ -140,7 +140,7 @@ def test_the_data_set_through_torchs_dataloader_under_the_limit(dataset: Path) -
         import torch.utils.data
         import zbuf_occlude as zo
         ds = zo.OccludedDataset({str(dataset)!r})
-        loader = torch.utils.data.DataLoader(ds, batch_size=2, shuffle=True)
+        loader = torch.utils.data.DataLoader(ds, batch_size=2, shuffle=True, num_workers=2)  # workers forked under the limit
         seen = sum(len(points) for points, label, meta in loader)
         assert seen == len(ds) == 4, (seen, len(ds))
         """
