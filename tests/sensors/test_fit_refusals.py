@@ -176,3 +176,26 @@ def test_a_scan_of_first_returns_only_is_refused_naming_why(survey) -> None:
     own = replace(survey, gps_time=survey.gps_time + 1e-6 * survey.return_number)
     with pytest.raises(InvalidInputError, match=r"^the scan: no two returns of one pulse share a GPS time"):
         fit_return_model(own, altitude_m=H)
+
+
+def _subset(las: LasPoints, keep: np.ndarray) -> LasPoints:
+    return LasPoints(points=las.points[keep], linear_unit_m=las.linear_unit_m, **{k: getattr(las, k)[keep] for k in LasPoints._DTYPES})
+
+
+@pytest.mark.parametrize("angle", [89.99, 90.0, -180.0, 120.0])
+def test_returns_at_grazing_scan_angles_give_no_energy_figures_not_absurd_ones(survey, angle) -> None:
+    """Flat ground at 90° from nadir is infinitely far: the intensity scale would be 1e57 (or negative past 90°)."""
+    steep = replace(survey, scan_angle_deg=np.full(len(survey), angle))
+    fit = fit_return_model(steep, altitude_m=H, bootstrap=5)
+    assert math.isnan(fit.estimates["intensity_scale"].value) and math.isnan(fit.estimates["detection_threshold"].value)
+    assert "within 75° of nadir" in fit.why_not_measured["intensity_scale"]
+    assert (
+        fit.estimates["range_resolution_m"].value
+        == fit_return_model(survey, altitude_m=H, bootstrap=5).estimates["range_resolution_m"].value
+    )
+    # a pulse's half beyond the limit: the energy figures are those of the other half alone
+    pulse_of = np.round(survey.gps_time * 1e3).astype(int)
+    beyond = pulse_of % 2 == 1
+    mixed = replace(survey, scan_angle_deg=np.where(beyond, angle, 0.0))
+    scale = fit_return_model(mixed, altitude_m=H, bootstrap=5).estimates["intensity_scale"].value
+    assert scale == fit_return_model(_subset(survey, ~beyond), altitude_m=H, bootstrap=5).estimates["intensity_scale"].value

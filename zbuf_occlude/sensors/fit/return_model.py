@@ -24,7 +24,7 @@ keeps the first ``max_returns``.  Measured on the points of a scan
     Counts per unit of received energy, from single returns on the ground (class
     :data:`GROUND_CLASS` when it holds :data:`MIN_CLASS_POINTS` single returns; else the lowest
     single returns, those within :data:`LOWEST_SLAB_M` of the lowest return of their
-    :data:`LOWEST_CELL_M` cell): the median of ``I / E`` with ``E = hit_energy(1, ρ_g, cos θ,
+    :data:`LOWEST_CELL_M` cell; within :data:`MAX_SCAN_ANGLE_DEG` of nadir): the median of ``I / E`` with ``E = hit_energy(1, ρ_g, cos θ,
     H / cos θ)``, ``ρ_g`` the ground's reflectance (a parameter, :data:`GROUND_REFLECTANCE` by
     default), ``θ`` the point's scan angle (flat ground: the incidence is the scan angle) and
     ``H`` the flying height above the ground (a parameter: a LAS file records no sensor position).
@@ -101,7 +101,7 @@ from zbuf_occlude.sensors.reflectance import reflectance
 
 __all__ = [
     "ALS_WAVELENGTH_NM", "DETECTION_QUANTILE", "FIT_BYTES_PER_POINT", "GROUND_CLASS", "GROUND_MATERIAL",
-    "GROUND_REFLECTANCE", "LOWEST_CELL_M", "LOWEST_SLAB_M", "MIN_CLASS_POINTS", "RESOLUTION_QUANTILE", "ReturnModelFit",
+    "GROUND_REFLECTANCE", "LOWEST_CELL_M", "LOWEST_SLAB_M", "MAX_SCAN_ANGLE_DEG", "MIN_CLASS_POINTS", "RESOLUTION_QUANTILE", "ReturnModelFit",
     "fit_return_model", "lower_end", "merge_scans",
 ]  # fmt: skip
 
@@ -127,6 +127,10 @@ MIN_CLASS_POINTS = 100
 LOWEST_CELL_M = 10.0
 #: ... and the slab above that lowest return counted as ground, metres.
 LOWEST_SLAB_M = 0.5
+#: Largest scan angle from nadir, degrees, of the returns the energy figures (intensity scale, threshold in m⁻²,
+#: reflectances) use: they take the flat ground's range ``H / cos θ`` and incidence θ, which at grazing angles no longer
+#: hold (cos 75° = 0.26; airborne scanners sweep within ±40°: RIEGL VQ-1560 ±29°); a file's angles may reach ±180°.
+MAX_SCAN_ANGLE_DEG = 75.0
 #: Bytes per point the fit holds at once (sorted copies, per-figure sorted values and their pulses;
 #: a class's figures hold its points only): tracemalloc's peak was 279 on the IGN sample (7
 #: classes) and 198 on Autzen (2).
@@ -447,10 +451,13 @@ def _model_figures(
     pair = pulses.pairs(las.return_number)
     gaps = np.linalg.norm(points_m[1:][pair] - points_m[:-1][pair], axis=1)
     gap_pulse, gap_class = pulse[:-1][pair], cls[1:][pair]
-    cos = np.cos(np.radians(np.abs(las.scan_angle_deg[order].astype(np.float64))))
+    angle = np.abs(las.scan_angle_deg[order].astype(np.float64))
+    cos = np.cos(np.radians(angle))
     # the energy a white (ρ = 1) flat ground returns at the scan angle from the flying height: hit_energy's law
     unit_energy = hit_energy(1.0, 1.0, cos, altitude_m / cos)
-    per_energy = intensity / unit_energy
+    # past MAX_SCAN_ANGLE_DEG the flat ground's range H / cos θ and incidence θ are no longer the point's: no energy there
+    per_energy = np.where(angle <= MAX_SCAN_ANGLE_DEG, intensity / np.where(angle <= MAX_SCAN_ANGLE_DEG, unit_energy, 1.0), np.nan)
+    energy_known = np.isfinite(per_energy)
     ground, ground_rule = _ground(las, order, single, points_m)
     recorded = intensity > 0
 
@@ -484,7 +491,7 @@ def _model_figures(
     threshold = least(recorded, intensity, pulse, q_det)
     add("detection_threshold_counts", *threshold, "counts",
         f"lower end of the intensity of every return, 0s left out (2·Q({q_det:g}) − Q({2 * q_det:g}))")  # fmt: skip
-    scale = quantile(ground & recorded, per_energy, pulse, 0.5)
+    scale = quantile(ground & recorded & energy_known, per_energy, pulse, 0.5)
     scale = ((lambda w, f=scale[0]: f(w) / rho_g), scale[1])
     add("intensity_scale", *scale, "counts·m²",
         f"median of intensity / hit_energy(1, ρ_g, cos θ, H / cos θ), single returns of the ground ({ground_rule})")  # fmt: skip
@@ -499,8 +506,9 @@ def _model_figures(
     add("intensity_sum_ratio", *ratio(summed, quantile(single & recorded, intensity, pulse, 0.5)), "",
         "median summed intensity of complete pulses of several returns over the median single return")  # fmt: skip
     if counts["intensity_scale"] == 0:
-        why.update({name: "no single returns on the ground" for name in ("intensity_scale", "detection_threshold")})
-    ground_per = quantile(ground & recorded, per_energy, pulse, 0.5)
+        reason = f"no single returns on the ground within {MAX_SCAN_ANGLE_DEG:g}° of nadir (MAX_SCAN_ANGLE_DEG)"
+        why.update({name: reason for name in ("intensity_scale", "detection_threshold")})
+    ground_per = quantile(ground & recorded & energy_known, per_energy, pulse, 0.5)
     present, sizes = np.unique(cls, return_counts=True)
     for c in present[sizes >= MIN_CLASS_POINTS].tolist():
         mine = cls == c
@@ -513,7 +521,7 @@ def _model_figures(
         add(f"intensity_ratio_class_{c}", *ratio(quantile(mine & first_of_several & recorded, intensity, pulse, 0.5),
                                                  quantile(mine & single & recorded, intensity, pulse, 0.5)), "",
             f"median intensity of first-of-several over single returns of class {c}")  # fmt: skip
-        add(f"reflectance_class_{c}", *ratio(quantile(mine & single & recorded, per_energy, pulse, 0.5), ground_per, rho_g), "",
+        add(f"reflectance_class_{c}", *ratio(quantile(mine & single & recorded & energy_known, per_energy, pulse, 0.5), ground_per, rho_g), "",
             f"ρ_g × median I·R²/cos θ of class {c}'s single returns over the ground's")  # fmt: skip
     return figures, units, counts, methods, why
 
