@@ -66,7 +66,8 @@ def _read_scans(files: Sequence[Path], real: str):
     from zbuf_occlude.defaults import MAX_POINTS
     from zbuf_occlude.io.las import read_las
     from zbuf_occlude.sensors.fit import merge_scans
-    from zbuf_occlude.sensors.fit.returns import check_pulses, check_return_pairs, las_pulses
+    from zbuf_occlude.resources import check_memory
+    from zbuf_occlude.sensors.fit.returns import BYTES_PER_POINT, check_pulses, check_return_pairs, las_pulses
 
     within = real if Path(real).is_dir() else None
     scans, total = [], 0
@@ -78,6 +79,7 @@ def _read_scans(files: Sequence[Path], real: str):
             )
         if len(las) == 0:
             raise InvalidInputError(f"{f}: holds no points")
+        check_memory(len(las) * BYTES_PER_POINT, option=f"the pulses of {f} ({len(las):,} points)", hint="fit a crop")
         pulses = las_pulses(las)
         check_pulses(las, pulses, name=str(f))  # times that group its returns into pulses
         check_return_pairs(las, pulses, name=str(f))  # not first returns alone
