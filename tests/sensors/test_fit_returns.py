@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.io.las import LasPoints, read_las
-from zbuf_occlude.sensors.fit.returns import return_statistics
+from zbuf_occlude.sensors.fit.returns import MAX_AMBIGUOUS_SHARE, las_pulses, return_statistics
 
 #: The real airborne scans (research-only, next to the repository; skipped when absent).
 ALS_RETURNS = Path(os.environ.get("ZBUF_OCCLUDE_SHARED_DATA", Path(__file__).resolve().parents[3] / "shared" / "data")) / "als_returns"
@@ -127,6 +127,39 @@ def test_laws_shares_sum_to_one_and_points_and_pulses_add_up(case) -> None:
     if expected["pairs"]:
         assert e["gap_min"].value == 1.0  # consecutive returns are 1 apart in z
     json.dumps(stats.to_json(), allow_nan=False)
+
+
+@st.composite
+def _pulses_some_twice(draw):
+    """Pulses of 1 to 4 returns, some with a return number repeated (a duplicated point, or two pulses of one time), the
+    rest whole; what a grouping by time must find: the pulses holding a repeat, and the gaps of the others."""
+    pulses, repeated, pairs = [], [], 0
+    for i in range(draw(st.integers(1, 30))):
+        count = draw(st.integers(1, 4))
+        returns = [(r, float(-r), 10, 1) for r in range(1, count + 1)]
+        if draw(st.booleans()) and draw(st.booleans()):
+            returns.append(returns[draw(st.integers(0, count - 1))])
+            repeated.append(i)
+        else:
+            pairs += count - 1
+        pulses.append((count, returns))
+    return pulses, repeated, pairs
+
+
+@settings(max_examples=60, deadline=None)
+@given(_pulses_some_twice(), st.integers(0, 2**32 - 1))
+def test_law_a_pulse_holding_a_return_number_twice_is_ambiguous_and_gives_no_gap(case, shuffle) -> None:
+    pulses, repeated, pairs = case
+    scan = _scan(pulses, shuffle=shuffle)  # the order of the points in the file changes nothing
+    found = las_pulses(scan)
+    assert np.flatnonzero(found.ambiguous).tolist() == repeated and not (found.complete & found.ambiguous).any()
+    assert int(found.pairs(scan.return_number).sum()) == pairs
+    in_repeated = sum(len(pulses[i][1]) for i in repeated)
+    if in_repeated > MAX_AMBIGUOUS_SHARE * len(scan):
+        with pytest.raises(InvalidInputError, match="its GPS times do not identify pulses"):
+            return_statistics(scan, bootstrap=2)
+    else:
+        assert return_statistics(scan, bootstrap=2).estimates["gap_count"].value == pairs
 
 
 def test_wrong_kinds_and_scans_without_times_are_refused() -> None:
