@@ -200,7 +200,9 @@ def test_a_dense_shard_declaring_more_rows_than_its_object_has_is_refused(farmed
     _rewrite_shard(ds / rel, data=huge, label=huge, elevation_deg=huge, azimuth_deg=huge)
     assert (ds / rel).stat().st_size < 100_000
     _resign(ds, rel)
-    _reader_and_verify_refuse(ds, ds / rel, r"declares shape \(20000000.*but stores 0 bytes", capsys)
+    said = r"declares shape \(20000000.*but stores 0 bytes"
+    _reader_and_verify_refuse(ds, ds / rel, said, capsys)
+    _refused_under_a_limit(ds, re.escape(str(ds / rel)) + ".*" + said)
 
 
 def _huge_rows(f, key, value):
@@ -241,12 +243,23 @@ def _open_limited(ds: Path):
     return run_python_limited(f"import sys; sys.argv[1:] = [{str(ds)!r}]\n" + _OPEN_LIMITED, headroom=_LIMIT_HEADROOM)
 
 
+def _refused_under_a_limit(ds: Path, said: str) -> None:
+    """The reader (reading every sample) and ``verify`` refuse ``ds`` in one line matching ``said``
+    under a 3 GB address-space limit, never a MemoryError."""
+    from memory_limit import run_cli_limited, run_python_limited
+
+    code = _OPEN_LIMITED.replace("OccludedDataset(sys.argv[1])", "OccludedDataset(sys.argv[1]).to_arrays()")
+    done = run_python_limited(f"import sys; sys.argv[1:] = [{str(ds)!r}]\n" + code, headroom=_LIMIT_HEADROOM)
+    assert done.returncode == 3 and not done.stderr, done.stdout + done.stderr[-2000:]
+    assert len(done.stdout.splitlines()) == 1 and re.search(said, done.stdout), done.stdout
+    checked = run_cli_limited(["verify", str(ds)], headroom=_LIMIT_HEADROOM)
+    assert checked.returncode == 1 and re.search(said, checked.stderr) and "Traceback" not in checked.stderr, checked.stderr[-2000:]
+
+
 def test_a_16_kb_shard_whose_card_promises_2e7_rows_is_refused_before_the_index(farmed, tmp_path, capsys):
     """The card's samples_per_view (re-signed) promises 2e7 samples an object and the shard declares
     them in a few KB: refused by its size before the reader's index of 4e7 samples is built (a
     MemoryError under 3 GB before), plainly and under the limit, by the reader and by verify."""
-    from memory_limit import run_cli_limited
-
     ds = _copy(farmed["dense"], tmp_path / "ds")
     for line in (ds / "manifest.jsonl").read_text().splitlines():
         rel = json.loads(line)["shards"][0]
@@ -256,11 +269,7 @@ def test_a_16_kb_shard_whose_card_promises_2e7_rows_is_refused_before_the_index(
     _resign_card(ds, 10_000_000)
     said = r"its object's 20,000,000 samples of 64 points take 15,360,000,000 bytes, more than its shard"
     _reader_and_verify_refuse(ds, ds / "manifest.jsonl", said, capsys)
-    done = _open_limited(ds)
-    assert done.returncode == 3 and not done.stderr, done.stdout + done.stderr[-2000:]
-    assert len(done.stdout.splitlines()) == 1 and re.search(said, done.stdout), done.stdout
-    checked = run_cli_limited(["verify", str(ds)], headroom=_LIMIT_HEADROOM)
-    assert checked.returncode == 1 and re.search(said, checked.stderr) and "Traceback" not in checked.stderr, checked.stderr[-2000:]
+    _refused_under_a_limit(ds, said)
 
 
 def test_a_compact_card_promising_2e7_samples_an_object_is_refused_before_the_index(farmed, tmp_path, monkeypatch):
