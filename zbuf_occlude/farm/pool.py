@@ -64,15 +64,39 @@ def _serve(conn: Connection, parent_pid: int, params: FarmParams, out: str, root
 
 
 def worker_death_error(exitcode: int | None) -> str:
-    """The record's ``error`` for an object whose worker process died: names the signal."""
+    """The record's ``error`` for an object whose worker process died: names the signal, and the
+    address-space limit the worker ran under, if any (:func:`_address_space_hint`)."""
     if exitcode is not None and exitcode < 0:
         try:
             name = signal.Signals(-exitcode).name
         except ValueError:
             name = f"signal {-exitcode}"
         hint = " (the out-of-memory killer sends SIGKILL)" if -exitcode == signal.SIGKILL else ""
-        return f"WorkerDied: the worker process was killed by {name}{hint}"
-    return f"WorkerDied: the worker process exited with status {exitcode} without a result"
+        return f"WorkerDied: the worker process was killed by {name}{hint}{_address_space_hint()}"
+    return f"WorkerDied: the worker process exited with status {exitcode} without a result{_address_space_hint()}"
+
+
+def _address_space_hint() -> str:
+    """What to try when the workers run under an address-space limit (``ulimit -v``, ``prlimit --as``; they
+    inherit ours), else nothing.
+
+    Under such a limit a thread that cannot get its stack or its malloc arena does not raise
+    ``MemoryError``: Mesa's llvmpipe crashes (SIGSEGV), glibc aborts ("cannot allocate memory for
+    thread-local data", SIGABRT or status 127).  llvmpipe starts two threads per core for each
+    GL context and numba one per core, each reserving some 72 MiB of address space (an 8 MiB
+    stack and a 64 MiB arena), so on a many-core machine threads alone can fill the limit.
+    """
+    try:
+        import resource
+    except ImportError:  # not on POSIX
+        return ""
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    if soft == resource.RLIM_INFINITY:
+        return ""
+    return (
+        f"; it ran under an address-space limit of {soft / 2**30:.1f} GiB (ulimit -v), which the renderer's and numba's "
+        "threads, some per core, count against: raise the limit, or set LP_NUM_THREADS and NUMBA_NUM_THREADS lower"
+    )
 
 
 @dataclass
