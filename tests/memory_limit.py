@@ -26,6 +26,14 @@ forked from it, but not measured here):
 The child writes them to a file at exit (``atexit``), so that its stdout and stderr are the
 command's own; a child that was killed reports nothing and the numbers are None.
 
+Threads count, and some libraries start one per core: Mesa's llvmpipe two per GL context
+(``LP_NUM_THREADS``), numba one (``NUMBA_NUM_THREADS``), each reserving some 72 MiB of address
+space (an 8 MiB stack and, once it allocates, a 64 MiB glibc malloc arena).  On 2 cores
+``generate`` peaks at about 1.25 GiB here; with llvmpipe's threads at 16 (``LP_NUM_THREADS=16``,
+as on a 16-core machine) at 3.3 GiB, past this limit, where the worker crashes (SIGSEGV) instead
+of raising ``MemoryError``.  What a user under ``prlimit --as`` sees, so the limit is not raised
+to hide it.
+
 Use::
 
     from memory_limit import run_cli_limited
