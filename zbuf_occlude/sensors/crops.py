@@ -398,7 +398,10 @@ def lidar_object_samples(
         chosen, _ = draw_sample(np.arange(n), int(n_points), rng)
         # Sensor seen from the object's bounding-box centre, in the mesh frame.
         sensor_local = crop.sensor_local - np.asarray(mesh.bounds, dtype=np.float64).mean(axis=0)
-        r = float(np.linalg.norm(sensor_local))
+        # Written out, not np.linalg.norm: on a 1-D vector that is BLAS's dot product, whose rounding
+        # depends on the CPU's OpenBLAS kernel (FMA or not), and the radius goes into the records.
+        x, y, z = (float(v) for v in sensor_local)
+        r = math.sqrt(x * x + y * y + z * z)
         out.append(
             OccludedCloud(
                 points=crop.local_points[chosen].astype(np.float32),
