@@ -45,6 +45,26 @@ def test_npz_round_trip(tmp_path):
     assert not back.padded and _cloud(n_visible=10).padded
 
 
+def test_read_npz_reads_the_file_it_checked_even_if_the_name_is_swapped_after(tmp_path, monkeypatch):
+    # the sizes and headers are checked on one open file and the arrays read from it: a file put
+    # in the name's place once it is open (a link swapped, a file replaced) is never read
+    import zbuf_occlude.io.arrays as arrays
+
+    checked, swapped = _cloud(seed=1), _cloud(seed=2)
+    path = write_npz(tmp_path / "x.npz", checked)
+    write_npz(tmp_path / "other.npz", swapped)
+    opened = arrays.open_regular_file
+
+    def open_then_swap(*args, **kwargs):
+        result = opened(*args, **kwargs)
+        if (tmp_path / "other.npz").exists():
+            os.replace(tmp_path / "other.npz", path)
+        return result
+
+    monkeypatch.setattr(arrays, "open_regular_file", open_then_swap)
+    assert np.array_equal(read_npz(path).points, checked.points)
+
+
 def test_ply_opens_in_trimesh_with_the_points(tmp_path):
     c = _cloud()
     pc = trimesh.load(write_ply(tmp_path / "x.ply", c))

@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike
 from zbuf_occlude.defaults import MAX_POINTS
 from zbuf_occlude.errors import DatasetFormatError, OutputError
 from zbuf_occlude.geometry.samples import OccludedCloud
-from zbuf_occlude.io.arrays import DAMAGED_NPZ_ERRORS, check_array_sizes, npz_member_header
+from zbuf_occlude.io.arrays import load_npz
 from zbuf_occlude.io.atomic import atomic_h5, atomic_path
 from zbuf_occlude.io.hdf5 import Column, open_hdf5
 
@@ -86,11 +86,11 @@ def write_npz(path: str | os.PathLike, cloud: OccludedCloud) -> Path:
 def read_npz(path: str | os.PathLike) -> OccludedCloud:
     """Read a cloud written by :func:`write_npz`, checking the file before anything is inflated.
 
-    The file may come from anyone: :func:`zbuf_occlude.io.arrays.check_array_sizes` opens only a
-    regular file (a FIFO or a device named ``x.npz`` is refused at once instead of blocking or
-    reading without end) and reads its arrays' sizes from the zip directory and the ``.npy``
-    headers (cap :data:`MAX_NPZ_BYTES`); then every array's declared shape and dtype is
-    checked; nothing is unpickled.
+    The file may come from anyone: :func:`zbuf_occlude.io.arrays.load_npz` opens only a regular
+    file (a FIFO or a device named ``x.npz`` is refused at once instead of blocking or reading
+    without end), reads its arrays' sizes from the zip directory and the ``.npy`` headers (cap
+    :data:`MAX_NPZ_BYTES`), and every array's declared shape and dtype is checked here before
+    any is inflated, from that same open file; nothing is unpickled.
 
     Parameters
     ----------
@@ -114,24 +114,19 @@ def read_npz(path: str | os.PathLike) -> OccludedCloud:
         0-d of its kind (numbers for the pose and counts, text for the names).
     """
     path = Path(path)
-    check_array_sizes(path, max_bytes=MAX_NPZ_BYTES, error=DatasetFormatError)  # a regular file, sizes first
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            keys = [k for k in _NPZ_ARRAYS if k in z.files or k not in _NPZ_OPTIONAL]
-            missing = [k for k in keys if k not in z.files]
-            if missing:
-                raise DatasetFormatError(f"{path}: not a cloud of write_npz: no array {', '.join(map(repr, missing))}")
-            declared = {key: npz_member_header(z.zip, key) for key in keys}
-            for key, (shape, dtype) in declared.items():
-                _check_declared(path, key, shape, dtype)
-            n = declared["points"][0][0]
-            if declared["face_index"][0] != (n,):
-                raise DatasetFormatError(f"{path}: face_index is declared {declared['face_index'][0]}, not ({n},) like points")
-            a = {key: z[key] for key in keys}
-    except DatasetFormatError:
-        raise
-    except (*DAMAGED_NPZ_ERRORS, KeyError) as exc:
-        raise DatasetFormatError(f"{path}: cannot read as a cloud .npz ({type(exc).__name__}: {exc})") from None
+
+    def check(declared: dict[str, tuple[tuple[int, ...], np.dtype]]) -> None:
+        missing = [k for k in _NPZ_ARRAYS if k not in declared and k not in _NPZ_OPTIONAL]
+        if missing:
+            raise DatasetFormatError(f"{path}: not a cloud of write_npz: no array {', '.join(map(repr, missing))}")
+        for key, (shape, dtype) in declared.items():
+            _check_declared(path, key, shape, dtype)
+        n = declared["points"][0][0]
+        if declared["face_index"][0] != (n,):
+            raise DatasetFormatError(f"{path}: face_index is declared {declared['face_index'][0]}, not ({n},) like points")
+
+    # one open file: a regular file, its sizes and headers checked, then the arrays read from it
+    a = load_npz(path, max_bytes=MAX_NPZ_BYTES, error=DatasetFormatError, keys=_NPZ_ARRAYS, check=check)
     return OccludedCloud(
         points=a["points"],
         face_index=a["face_index"],
