@@ -146,11 +146,6 @@ def test_per_object_values_still_apply_to_every_face_of_the_object(box_obj: Path
     )
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="load_mesh drops the materials: mesh/formats/base.parse must put face_materials(scene) in the flattened mesh's "
-    "metadata[FACE_MATERIALS] and load_mesh keep it through its face drops (a change in files of the mesh loader)",
-)
 def test_a_scene_file_naming_an_obj_and_a_glb_scans_their_glass_and_foliage(box_obj: Path, tree_glb: Path) -> None:
     folder = box_obj.parent
     # a degenerate face among the glass ones, which the loader drops: the materials of the faces it keeps stay theirs

@@ -51,7 +51,7 @@ from numpy.typing import NDArray
 from zbuf_occlude.errors import InvalidInputError, MeshLoadError, ZbufOccludeError
 from zbuf_occlude.io.file_errors import parser_failure
 from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS, read_trimesh
-from zbuf_occlude.mesh.scene import UP_CHOICES, declared_units_m, resolve_up, up_rotation
+from zbuf_occlude.mesh.scene import FACE_MATERIALS, UP_CHOICES, declared_units_m, face_materials_of, resolve_up, up_rotation
 
 __all__ = [
     "DEGENERATE_AREA_RTOL",
@@ -423,7 +423,10 @@ def load_mesh(
     n_degenerate = int(degenerate.sum())
     if n_degenerate:
         log.debug("%s: dropping %d degenerate faces of %d", path, n_degenerate, len(faces))
+    materials = face_materials_of(loaded)
     vertices, faces, n_unref = _drop_faces(vertices, faces, ~degenerate)
+    if materials is not None and n_degenerate:  # the faces kept keep their materials
+        loaded.metadata[FACE_MATERIALS] = materials.select(~degenerate)
     prov = {
         "source": str(path),
         "n_degenerate_faces_dropped": n_degenerate,

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 from zbuf_occlude.errors import MeshLoadError
 from zbuf_occlude.mesh.flatten import flatten_scene
 from zbuf_occlude.mesh.named_files import folder_resolver
+from zbuf_occlude.mesh.scene import FACE_MATERIALS, face_materials
 
 if TYPE_CHECKING:  # trimesh (and scipy with it) is imported by the readers, when a file is read
     import trimesh
@@ -95,6 +96,9 @@ def parse(raw: bytes, path: Path, file_type: str, **kwargs: Any) -> trimesh.Trim
     # process=False at load keeps vertex and face order as in the file (no merging of
     # ModelNet's duplicated vertices).
     mesh = flatten_scene(scene)
+    materials = face_materials(scene)
+    if any(materials.names):  # the name of each face's material, for reflectance; none in OFF, STL, plain PLY
+        mesh.metadata[FACE_MATERIALS] = materials
     if len(mesh.faces) == 0:
         n_points = sum(len(g.vertices) for g in scene.geometry.values() if isinstance(g, trimesh.PointCloud))
         if n_points:
