@@ -323,3 +323,17 @@ def test_bad_triangles(triangles: object, match: str) -> None:
 def test_a_file_name_is_not_a_mesh() -> None:
     with pytest.raises(ArgumentTypeError, match=r"zo.load_mesh"):
         sample_surface("chair.off", 10)
+
+
+@pytest.mark.parametrize(
+    "seed", [10**5000, -(10**5000), 2**64, [0] * 1_000_000, "x" * 1_000_000], ids=["10**5000", "-10**5000", "2**64", "list", "str"]
+)
+def test_check_seed_refuses_huge_values_in_one_short_line(seed: object) -> None:
+    """Python will not write an int of over 4,300 digits as text (a bare ValueError while the
+    message was built); a huge list or string must not fill the message either."""
+    from zbuf_occlude.geometry.sampling import check_seed
+
+    with pytest.raises(InvalidInputError) as info:
+        check_seed(seed)
+    text = str(info.value)
+    assert "\n" not in text and len(text) < 200 and text.startswith("seed must be")

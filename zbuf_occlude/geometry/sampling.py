@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 import numbers
 import os
+import reprlib
 from typing import TYPE_CHECKING, TypeAlias
 
 import numpy as np
@@ -145,12 +146,27 @@ def check_seed(seed: object, *, name: str = "seed") -> SeedLike:
     if seed is None or isinstance(seed, np.random.Generator):
         return seed
     if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, numbers.Integral):
-        raise InvalidInputError(f"{name} must be a non-negative integer (or None, or a numpy Generator), got {seed!r}")
+        raise InvalidInputError(f"{name} must be a non-negative integer (or None, or a numpy Generator), got {reprlib.repr(seed)}")
     if seed < 0:
-        raise InvalidInputError(f"{name} must be a non-negative integer, got {seed}")
+        raise InvalidInputError(f"{name} must be a non-negative integer, got {_integer_text(seed)}")
     if seed > MAX_SEED:
-        raise InvalidInputError(f"{name} must be at most 2**63 - 1 = {MAX_SEED} (MAX_SEED: seeds are stored as int64), got {seed}")
+        raise InvalidInputError(
+            f"{name} must be at most 2**63 - 1 = {MAX_SEED} (MAX_SEED: seeds are stored as int64), got {_integer_text(seed)}"
+        )
     return int(seed)
+
+
+#: Integers longer than this (in bits) are described by their number of digits in messages: Python
+#: refuses to write an int of over 4,300 digits as text, and nobody reads one.
+_SHOWN_INTEGER_BITS = 256
+
+
+def _integer_text(value: numbers.Integral) -> str:
+    """``value`` as text for a one-line message, or "an integer of about N digits" when it is huge."""
+    bits = abs(int(value)).bit_length()
+    if bits <= _SHOWN_INTEGER_BITS:
+        return str(value)
+    return f"{'-' if value < 0 else ''}an integer of about {int(bits * math.log10(2)) + 1:,} digits"
 
 
 def _check_density(density: object) -> float:
