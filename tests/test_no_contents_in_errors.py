@@ -202,7 +202,6 @@ def test_an_array_of_records_is_refused_without_naming_its_fields(tmp_path: Path
         _refused(read, path)
 
 
-@pytest.mark.xfail(strict=True, reason="io/hdf5.py's check_hdf5 (not this file's owner's) prints a compound dtype's field names")
 def test_an_hdf5_point_set_of_records_is_refused_without_naming_its_fields(tmp_path: Path) -> None:
     from zbuf_occlude.io.point_sets import read_point_sets
 
@@ -240,7 +239,6 @@ def test_an_npy_header_numpy_reads_is_still_read(tmp_path: Path) -> None:
         assert np.array_equal(cloud.points, points)
 
 
-@pytest.mark.xfail(strict=True, reason="io/arrays.py (not this file's owner's) quotes numpy's and zipfile's messages and member names")
 def test_an_npz_scan_never_quotes_the_file(tmp_path: Path) -> None:
     from zbuf_occlude.real_scans.files import read_points
 

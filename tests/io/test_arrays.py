@@ -46,7 +46,7 @@ def test_a_header_of_a_format_version_numpy_does_not_read_is_refused():
 @pytest.mark.parametrize("error", [InvalidInputError, MeshLoadError])
 def test_check_array_sizes_raises_the_callers_error_naming_the_file(tmp_path, error):
     path = _forged_npz(tmp_path / "forged.npz", (10**9, 3))
-    with pytest.raises(error, match=r"forged\.npz: member points\.npy declares 24,000,000,000 bytes of array but holds 200"):
+    with pytest.raises(error, match=r"forged\.npz: member 1 declares 24,000,000,000 bytes of array but holds 200"):
         check_array_sizes(path, max_bytes=1 << 40, error=error)
     (tmp_path / "junk.npz").write_bytes(b"PK\x03\x04 not a zip")
     with pytest.raises(error, match=r"junk\.npz: cannot read its array headers \(BadZipFile"):
@@ -74,8 +74,8 @@ def _damaged(path: Path, how: str) -> Path:
 
 @pytest.mark.parametrize(
     ("how", "said"),
-    [("deflate", r"cannot read its array headers \(error: "), ("encrypted", r"cannot read its array headers \(RuntimeError: "),
-     ("method", r"member points\.npy is compressed with zip method 99; only stored or deflated members")],
+    [("deflate", r"cannot read its array headers \(error from the parser"), ("encrypted", r"cannot read its array headers \(RuntimeError from the parser"),
+     ("method", r"member 1 is compressed with zip method 99; only stored or deflated members")],
 )  # fmt: skip
 def test_check_array_sizes_names_the_file_of_a_damaged_zip(tmp_path, how, said):
     path = _damaged(tmp_path / "damaged.npz", how)
@@ -108,8 +108,8 @@ _CLAIMED = 2_100_000_000
 
 @pytest.mark.parametrize(
     ("kind", "said"),
-    [("stored", r"member points\.npy declares [\d,]+ bytes inflated from [\d,]+, more than its compression can hold"),
-     ("deflated", r"member points\.npy declares [\d,]+ bytes inflated from [\d,]+, more than its compression can hold"),
+    [("stored", r"member 1 declares [\d,]+ bytes inflated from [\d,]+, more than its compression can hold"),
+     ("deflated", r"member 1 declares [\d,]+ bytes inflated from [\d,]+, more than its compression can hold"),
      ("beyond the file", r"its members declare [\d,]+ bytes of data in a file of [\d,]+; the file is damaged or forged")],
 )  # fmt: skip
 def test_a_member_claiming_more_than_the_file_can_hold_is_refused_before_numpy_allocates_it(tmp_path, kind, said):
@@ -132,7 +132,7 @@ def test_a_lying_npz_is_refused_in_one_line_under_an_address_space_limit(tmp_pat
         "from zbuf_occlude.errors import InvalidInputError\nfrom zbuf_occlude.io.arrays import load_npz\n"
         f"try:\n    load_npz({str(path)!r}, max_bytes=1 << 32)\nexcept InvalidInputError as exc:\n    print(exc)"
     )
-    assert done.returncode == 0 and done.stdout.startswith(f"{path}: member points.npy declares"), done.stderr[-2000:]
+    assert done.returncode == 0 and done.stdout.startswith(f"{path}: member 1 declares"), done.stderr[-2000:]
 
 
 def test_a_deflated_member_of_zeros_inflating_near_deflates_limit_is_read(tmp_path):
@@ -196,16 +196,16 @@ def test_loading_never_unpickles(tmp_path, suffix):
     else:
         np.savez(path, points=objects)
     load = load_npy if suffix == ".npy" else load_npz
-    with pytest.raises(InvalidInputError, match=rf"^{path}: cannot read its arrays? \(ValueError: .*allow_pickle"):
+    with pytest.raises(
+        InvalidInputError, match=rf"^{path}: cannot read its arrays? \(it holds pickled Python objects, which are never loaded\)$"
+    ):
         load(path, max_bytes=1 << 20)
 
 
 @pytest.mark.parametrize("how", ["deflate", "encrypted", "method"])
 def test_load_npz_names_the_file_of_a_damaged_zip_in_one_line(tmp_path, how):
     path = _damaged(tmp_path / "damaged.npz", how)
-    with pytest.raises(
-        InvalidInputError, match=rf"^{path}: (cannot read its array|member points\.npy is compressed with zip method 99)"
-    ) as info:
+    with pytest.raises(InvalidInputError, match=rf"^{path}: (cannot read its array|member 1 is compressed with zip method 99)") as info:
         load_npz(path, max_bytes=1 << 20)
     assert "\n" not in str(info.value)
 

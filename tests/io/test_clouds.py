@@ -554,7 +554,7 @@ def _no_inflating(monkeypatch) -> None:
 def test_read_npz_refuses_a_member_declaring_gigabytes_before_inflating_it(tmp_path, monkeypatch):
     path = _npz_with(tmp_path / "bomb.npz", points=_forged_npy((10**9, 3)))  # 12 GB declared over 96 bytes
     _no_inflating(monkeypatch)
-    _refuses(path, r"member points\.npy declares 12,000,000,000 bytes of array but holds 224")
+    _refuses(path, r"member \d declares 12,000,000,000 bytes of array but holds 224")
 
 
 def test_read_npz_refuses_zeros_inflating_past_the_cap_before_inflating_them(tmp_path, monkeypatch):

@@ -37,6 +37,7 @@ import numpy as np
 from numpy.lib import format as npy_format
 
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
+from zbuf_occlude.io.file_errors import parser_failure
 from zbuf_occlude.io.hdf5 import MAX_COMPRESSION_RATIO
 from zbuf_occlude.io.regular_files import open_regular_file
 
@@ -195,7 +196,7 @@ def load_npy(
         try:
             return npy_format.read_array(fh, allow_pickle=False)
         except DAMAGED_NPZ_ERRORS as exc:
-            raise error(f"{path}: cannot read its array ({type(exc).__name__}: {exc})") from None
+            raise error(f"{path}: cannot read its array ({parser_failure(exc)})") from None
 
 
 def load_npz(
@@ -256,7 +257,7 @@ def load_npz(
                     arrays[key] = npy_format.read_array(member, allow_pickle=False)
             return arrays
         except DAMAGED_NPZ_ERRORS as exc:
-            raise error(f"{path}: cannot read its arrays ({type(exc).__name__}: {exc})") from None
+            raise error(f"{path}: cannot read its arrays ({parser_failure(exc)})") from None
 
 
 def zip_inflated_bytes(
@@ -295,13 +296,14 @@ def zip_inflated_bytes(
         its compression can hold, or compressed bytes past the end of the file.
     """
     members = zf.infolist()
-    for m in members:
+    # members are named by their place in the zip directory: their names come from the file
+    for number, m in enumerate(members, 1):
         ratio = _INFLATE_RATIO.get(m.compress_type)
         if ratio is None:
-            raise error(f"{path}: member {m.filename} is compressed with zip method {m.compress_type}; only stored or deflated "
+            raise error(f"{path}: member {number} is compressed with zip method {m.compress_type}; only stored or deflated "
                         f"members ({writer}) are read")  # fmt: skip
         if m.file_size > m.compress_size * ratio or (ratio == 1 and m.file_size != m.compress_size):
-            raise error(f"{path}: member {m.filename} declares {m.file_size:,} bytes inflated from {m.compress_size:,}, "
+            raise error(f"{path}: member {number} declares {m.file_size:,} bytes inflated from {m.compress_size:,}, "
                         "more than its compression can hold; the file is damaged or forged")  # fmt: skip
     stored = sum(m.compress_size for m in members)
     if stored > size:
@@ -317,7 +319,7 @@ def _headers_read(path: Path, error: type[ZbufOccludeError]) -> Iterator[None]:
     except ZbufOccludeError:
         raise
     except DAMAGED_NPZ_ERRORS as exc:
-        raise error(f"{path}: cannot read its array headers ({type(exc).__name__}: {exc})") from None
+        raise error(f"{path}: cannot read its array headers ({parser_failure(exc)})") from None
 
 
 def _check_sizes(path: Path, fh: BinaryIO, size: int, max_bytes: int, error: type[ZbufOccludeError], *, npy: bool) -> None:
@@ -344,10 +346,10 @@ def _npz_headers(
     if inflated > max_bytes:
         raise error(f"{path}: its members inflate to {inflated:,} bytes, more than the {max_bytes:,} accepted")
     headers = {}
-    for m in members:
+    for number, m in enumerate(members, 1):
         with zf.open(m) as member:
             shape, dtype = headers[m.filename] = npy_header(member)
         declared = _nbytes(shape, dtype)
         if declared > m.file_size:
-            raise error(f"{path}: member {m.filename} declares {declared:,} bytes of array but holds {m.file_size:,}")
+            raise error(f"{path}: member {number} declares {declared:,} bytes of array but holds {m.file_size:,}")
     return headers

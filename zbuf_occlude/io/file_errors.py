@@ -37,6 +37,8 @@ def parser_failure(exc: BaseException) -> str:
     """
     if isinstance(exc, OSError) and exc.strerror:
         return exc.strerror
+    if isinstance(exc, ValueError) and "allow_pickle" in str(exc):  # numpy's refusal of an object array
+        return "it holds pickled Python objects, which are never loaded"
     if isinstance(exc, UnicodeDecodeError):
         return f"byte {exc.start:,} is not {exc.encoding} text"
     return f"{type(exc).__name__} from the parser"

@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from zbuf_occlude.errors import DatasetFormatError
+from zbuf_occlude.io.file_errors import dtype_text
 from zbuf_occlude.io.regular_files import check_within, open_regular_file
 
 __all__ = ["Column", "KNOWN_FILTERS", "MAX_COMPRESSION_RATIO", "MAX_OBJECTS", "check_hdf5", "open_hdf5", "declared_nbytes"]
@@ -95,7 +96,7 @@ def _check_dataset(ds: Any, path: Path, name: str, columns: Mapping[str, Column]
     _check_stored_size(ds, where, compressed=dcpl.get_nfilters() > 0)
     kind = _kind(ds.dtype)
     if kind is None:
-        raise DatasetFormatError(f"{where} holds {ds.dtype} values (not numbers or strings); refused")
+        raise DatasetFormatError(f"{where} holds {dtype_text(ds.dtype)} values (not numbers or strings); refused")
     column = columns.get(name.lstrip("/"))
     if column is None:
         return
