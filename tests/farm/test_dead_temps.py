@@ -1,5 +1,5 @@
 """A resumed run removes the temporary files that dead writers left in every folder a run writes
-into (zbuf_occlude.io.owned.remove_dead_temps), and only those."""
+into (zbuf_occlude.io.deletes.remove_dead_temps), and only those."""
 
 from __future__ import annotations
 

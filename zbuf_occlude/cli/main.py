@@ -382,8 +382,8 @@ def _missing_folders(out: object) -> list[Path]:
 
 def _remove_if_empty(folders: list[Path]) -> None:
     """Remove the folders a refused run created, deepest first, if nothing was written in them
-    (:func:`zbuf_occlude.io.owned.remove_empty_tree`)."""
-    from zbuf_occlude.io.owned import remove_empty_tree
+    (:func:`zbuf_occlude.io.deletes.remove_empty_tree`)."""
+    from zbuf_occlude.io.deletes import remove_empty_tree
 
     for folder in folders:
         if not remove_empty_tree(folder) and folder.is_dir() and not folder.is_symlink():

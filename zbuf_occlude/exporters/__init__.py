@@ -38,7 +38,8 @@ from zbuf_occlude.exporters.base import DATASET, OPTIONS, ExportOptions, Target,
 from zbuf_occlude.exporters.label_sets import LABEL_SETS
 from zbuf_occlude.geometry.arguments import described
 from zbuf_occlude.geometry.sampling import check_seed
-from zbuf_occlude.io.owned import OwnedFolder, remove_empty_folders
+from zbuf_occlude.io.deletes import remove_empty_folders
+from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.io.safe_paths import control_character
 
 __all__ = ["LABEL_SETS", "RECORD_FILE", "TARGETS", "ExportResult", "Target", "export"]

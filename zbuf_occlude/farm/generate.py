@@ -32,7 +32,7 @@ from zbuf_occlude.farm.journal import FarmSummary, read_json, shape_names_of, wr
 from zbuf_occlude.farm.run import run_farm
 from zbuf_occlude.io.atomic import file_sha256, write_text
 from zbuf_occlude.io.clouds import concat_h5
-from zbuf_occlude.io.owned import delete_own_files
+from zbuf_occlude.io.deletes import delete_own_files
 from zbuf_occlude.io.safe_paths import path_inside
 from zbuf_occlude.mesh.paths import SPLITS
 from zbuf_occlude.mesh.inputs.kinds import INPUT_KINDS

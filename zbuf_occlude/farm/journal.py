@@ -32,7 +32,8 @@ from zbuf_occlude.farm.worker import base_record, package_version, write_json
 from zbuf_occlude.geometry.samples import count_padded
 from zbuf_occlude.io.atomic import file_sha256, size_mismatch, write_text
 from zbuf_occlude.io.json_files import loads_json, read_json_file
-from zbuf_occlude.io.owned import check_layout, delete_own_files, remove_dead_temps
+from zbuf_occlude.io.deletes import delete_own_files, remove_dead_temps
+from zbuf_occlude.io.owned import check_layout
 from zbuf_occlude.io.regular_files import MAX_METADATA_BYTES, read_text_file
 from zbuf_occlude.io.safe_paths import check_line_text, check_relative_name, path_inside
 from zbuf_occlude.mesh.paths import SPLITS, printable_path
@@ -136,7 +137,7 @@ def remove_stale_temps(out: Path, objects: Sequence[FarmObject], everything: boo
 
     :func:`~zbuf_occlude.io.atomic.atomic_path` leaves ``.<name>.<pid>-<host>-<random>.tmp`` behind
     when a run is SIGKILLed mid-write.  Only temps of dead processes on this host go
-    (:func:`~zbuf_occlude.io.owned.remove_dead_temps`), in every folder a run writes into
+    (:func:`~zbuf_occlude.io.deletes.remove_dead_temps`), in every folder a run writes into
     (``shards/``, ``records/``, ``tasks/``, ``--out`` and ``generate``'s per-mesh folders), and a
     sharded task (``everything=False``) touches only those of its own objects: other tasks may
     be writing theirs right now.  Call it while holding the lock

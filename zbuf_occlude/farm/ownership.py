@@ -42,7 +42,7 @@ from zbuf_occlude.dataset.storage import STORAGE_KINDS, storage_kind
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.farm.config import record_path, shard_path
 from zbuf_occlude.farm.journal import objects_of, read_json, read_plan
-from zbuf_occlude.io.owned import FileRecord, check_deletable, check_own_name, delete_checked, delete_own_files, remove_empty_folders
+from zbuf_occlude.io.deletes import FileRecord, check_deletable, check_own_name, delete_checked, delete_own_files, remove_empty_folders
 from zbuf_occlude.mesh.paths import SPLITS
 from zbuf_occlude.mesh.inputs.plan import FarmObject
 
@@ -163,7 +163,7 @@ def _record_files(out: Path, o: FarmObject) -> list[Path | None]:
 def wipe_earlier_run(out: Path, objects: Sequence[FarmObject] | None = None) -> None:
     """``--overwrite``: delete what the earlier run of ours in ``out`` recorded (module docstring).
 
-    Every file is checked before any is deleted (:func:`~zbuf_occlude.io.owned.check_deletable`):
+    Every file is checked before any is deleted (:func:`~zbuf_occlude.io.deletes.check_deletable`):
     a record may name only its object's shard or sample files, inside ``out``, each still matching
     its recorded SHA-256; a refusal deletes nothing.
 

@@ -14,7 +14,7 @@ A folder a command writes (``--out``) is *owned* while the command runs: :class:
 * removes the temporary files and locks that dead writers left (:func:`remove_dead_temps`).
 
 The delete rules themselves (what may be deleted or replaced, and the checks before) live in
-:mod:`zbuf_occlude.io.deletes`; their names are re-exported here, where callers import them.
+:mod:`zbuf_occlude.io.deletes`.
 
 Many small files (a text file per sample) go through :meth:`OwnedFolder.write_many`, with the
 same order per file at the cost of a few ``fsync`` calls per batch rather than two per file:
@@ -46,41 +46,20 @@ from typing import Any, BinaryIO
 
 from zbuf_occlude.errors import InvalidInputError, OutputError, UnsafePathError
 from zbuf_occlude.io.atomic import atomic_path, file_sha256, new_temp, raise_output_error, write_csv
-from zbuf_occlude.io.deletes import (
-    FileRecord,
-    check_deletable,
-    check_own_name,
-    delete_checked,
-    delete_own_files,
-    delete_recorded,
-    name_allowed,
-    remove_dead_temps,
-    remove_empty_folders,
-    remove_empty_tree,
-)
+from zbuf_occlude.io.deletes import FileRecord, check_deletable, delete_recorded, name_allowed, remove_dead_temps
 from zbuf_occlude.io.json_files import loads_json
 from zbuf_occlude.io.locks import LOCK_FILE, acquire_lock
 from zbuf_occlude.io.memory import check_memory
 from zbuf_occlude.io.regular_files import open_regular_file
 from zbuf_occlude.io.safe_paths import path_inside
 
-# the delete rules' names are re-exported: callers (the farm, the exporters) import them from here
 __all__ = [
     "LEDGER_FILE",
     "BatchWriter",
-    "FileRecord",
     "OwnedFolder",
-    "check_deletable",
     "check_layout",
-    "check_own_name",
-    "delete_checked",
-    "delete_own_files",
-    "delete_recorded",
     "make_folder",
     "owned_file",
-    "remove_dead_temps",
-    "remove_empty_folders",
-    "remove_empty_tree",
 ]
 
 log = logging.getLogger(__name__)
