@@ -166,3 +166,26 @@ def test_zbuf_occlude_gl_picks_the_backend_for_real():
     # forcing EGL where it cannot load: an error, no silent fallback
     got = _probe(ZBUF_OCCLUDE_GL="egl", **NO_EGL)
     assert not got["ok"] and "egl:" in got["error"] and "osmesa:" not in got["error"], got
+
+
+@pytest.mark.parametrize(
+    "limit, cpus, given, expected",
+    [(4 << 30, 16, None, "2"), (4 << 30, 1, None, "1"), (None, 16, None, None), (4 << 30, 16, "8", "8")],
+    ids=["limited-16-cores", "limited-1-core", "unlimited", "user-value-kept"],
+)
+def test_llvmpipe_threads_are_bounded_only_under_an_address_space_limit(monkeypatch, limit, cpus, given, expected) -> None:
+    """Mesa starts two llvmpipe threads a core, ~72 MiB of address space each: on 16 cores a context
+    took 2.3 GiB of a `prlimit --as` limit that holds the whole job on 2 cores."""
+    import resource
+
+    from zbuf_occlude.render import context
+
+    monkeypatch.setenv("LP_NUM_THREADS", "0")  # records the variable's state, so that what the call sets is undone
+    monkeypatch.delenv("LP_NUM_THREADS")
+    if given is not None:
+        monkeypatch.setenv("LP_NUM_THREADS", given)
+    soft = resource.RLIM_INFINITY if limit is None else limit
+    monkeypatch.setattr(resource, "getrlimit", lambda which: (soft, resource.RLIM_INFINITY))
+    monkeypatch.setattr(context.os, "cpu_count", lambda: cpus)
+    context.bound_llvmpipe_threads()
+    assert context.os.environ.get("LP_NUM_THREADS") == expected

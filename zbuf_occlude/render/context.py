@@ -9,6 +9,11 @@ The backend order can be forced with the environment variable ``ZBUF_OCCLUDE_GL`
 Mesa loads its llvmpipe driver and the ``libLLVM`` it links into the global symbol scope;
 :mod:`zbuf_occlude._llvm` (installed by ``import zbuf_occlude``) keeps Triton's own LLVM from
 binding to it, for our contexts and every other (pyrender's, a user's own).
+
+Under an address-space limit (``ulimit -v``, ``prlimit --as``, a batch scheduler's), llvmpipe's
+threads are bounded (:func:`bound_llvmpipe_threads`): Mesa starts two a core by default, and each
+maps about 72 MiB (an 8 MiB stack and a 64 MiB malloc arena), so on 16 cores a context alone would
+take 2.3 GiB of a limit that holds the job comfortably on 2.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ import numpy as np
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 
 __all__ = [
+    "bound_llvmpipe_threads",
     "create_context",
     "shared_context",
     "context_info",
@@ -148,6 +154,25 @@ def _backend_order(backend: str | None) -> list[str]:
     return order
 
 
+#: llvmpipe threads a context starts under an address-space limit unless ``LP_NUM_THREADS`` is set: a
+#: farm already runs a process per core, and each thread maps about 72 MiB of the limit.
+LIMITED_LLVMPIPE_THREADS = 2
+
+
+def bound_llvmpipe_threads() -> None:
+    """Set ``LP_NUM_THREADS`` to at most :data:`LIMITED_LLVMPIPE_THREADS` when this process has an
+    address-space limit (``RLIMIT_AS``) and the user set no value; otherwise change nothing.
+
+    Mesa reads the variable when a context's screen is made, so this runs before each context.
+    """
+    import resource
+
+    if "LP_NUM_THREADS" in os.environ or resource.getrlimit(resource.RLIMIT_AS)[0] == resource.RLIM_INFINITY:
+        return
+    os.environ["LP_NUM_THREADS"] = str(min(os.cpu_count() or 1, LIMITED_LLVMPIPE_THREADS))
+    log.debug("address-space limit: llvmpipe keeps to %s threads (LP_NUM_THREADS)", os.environ["LP_NUM_THREADS"])
+
+
 def create_context(backend: str | None = None) -> moderngl.Context:
     """A new headless moderngl context with OpenGL ≥ 4.3 core.
 
@@ -163,6 +188,7 @@ def create_context(backend: str | None = None) -> moderngl.Context:
         No backend gives an OpenGL 4.3 context; the message lists each backend's failure
         and what to install.
     """
+    bound_llvmpipe_threads()
     failures = []
     order = _backend_order(backend)
     for name in order:
