@@ -77,7 +77,7 @@ def test_one_file_and_a_spinning_lidar_that_needs_an_altitude(scans: Path, tmp_p
         (["--classes", "3,x"], r"--classes must be ASPRS class codes 0 to 255, C,C,\.\.\. \(or none\), got 3,x"),
         (["--classes", "256"], r"--classes must be ASPRS class codes .*got 256"),
         (["--bootstrap", "1"], r"--bootstrap must be an integer >= 2"),
-        (["--bootstrap", "100001"], r"--bootstrap must be at most 10,000, got 100001"),
+        (["--bootstrap", "100001"], r"--bootstrap must be at most 10,000 \(MAX_BOOTSTRAP\), got 100001"),
         (["--altitude", "2e6"], r"^zbuf-occlude: error: --altitude must be at most 1e\+06 metres \(a sensor's largest range\), got 2e6$"),
     ],
 )

@@ -217,7 +217,9 @@ def test_the_command_refuses_bad_options_in_one_line(tmp_path, capsys) -> None:
             return int(exc.code)
 
     assert run("--real", "x.laz", "--bootstrap", "1") == 2
-    assert "--bootstrap must be an integer >= 2, got 1" in capsys.readouterr().err
+    assert "--bootstrap must be an integer >= 2 (a spread needs two resamples), got 1" in capsys.readouterr().err
+    assert run("--real", "x.laz", "--bootstrap", "10001") == 2  # fit-sensor's cap, before the scans are read
+    assert "--bootstrap must be at most 10,000 (MAX_BOOTSTRAP), got 10001" in capsys.readouterr().err
     assert run("--real", str(tmp_path / "missing.laz"), "--bootstrap", "2") != 0
     err = capsys.readouterr().err
     assert "missing.laz" in err and "Traceback" not in err

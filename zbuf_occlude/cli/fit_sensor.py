@@ -6,7 +6,7 @@ import argparse
 from collections.abc import Sequence
 from pathlib import Path
 
-from zbuf_occlude.cli.options import Checked, count, counted, real, seed, shown
+from zbuf_occlude.cli.options import Checked, counted, real, resamples, seed, shown
 from zbuf_occlude.defaults import DEFAULT_SEED
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.owned import OwnedFolder
@@ -41,14 +41,6 @@ def _classes(text: str, option: str) -> tuple[int, ...]:
     if not codes or len(codes) > 256 or not all(c.isdigit() and int(c) <= 255 for c in codes):
         raise InvalidInputError(f"{option} must be ASPRS class codes 0 to 255, C,C,... (or none), got {shown(text)}")
     return tuple(int(c) for c in codes)
-
-
-def _bootstrap(text: str, option: str) -> int:
-    """``--bootstrap N``: resamples, 2 to :data:`MAX_BOOTSTRAP`."""
-    n = count(None, lowest=2, hint="a spread needs two resamples")(text, option)
-    if n > MAX_BOOTSTRAP:
-        raise InvalidInputError(f"{option} must be at most {MAX_BOOTSTRAP:,}, got {shown(text)}")
-    return n
 
 
 def _altitude(text: str, option: str) -> float:
@@ -204,7 +196,7 @@ def add_fit_sensor_parser(sub) -> argparse.ArgumentParser:
         "--bootstrap",
         metavar="N",
         action=Checked,
-        check=_bootstrap,
+        check=resamples,
         default=None,
         help=f"resamples of the bootstrap over pulses, 2 to {MAX_BOOTSTRAP:,} (default: {BOOTSTRAP})",
     )

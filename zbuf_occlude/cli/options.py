@@ -112,6 +112,13 @@ def _check_count(value: int | None, text: str, option: str, cap_name: str | None
     return value
 
 
+def resamples(text: str, option: str) -> int:
+    """``--bootstrap N``: bootstrap resamples, 2 to the fits' cap (:func:`~zbuf_occlude.sensors.fit.lidar.check_bootstrap`)."""
+    from zbuf_occlude.sensors.fit.lidar import check_bootstrap
+
+    return check_bootstrap(count(None, lowest=2, hint="a spread needs two resamples")(text, option), name=option)
+
+
 def count(cap_name: str | None, *, lowest: int = 1, hint: str = "") -> Check:
     """A count from ``lowest`` to the cap ``zbuf_occlude.defaults.<cap_name>`` (None: no cap, a selection
     such as ``--per-class`` that allocates nothing); ``hint`` says what ``lowest`` means."""

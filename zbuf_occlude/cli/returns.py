@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import Any
 
-from zbuf_occlude.cli.options import Checked, count, out_folder
+from zbuf_occlude.cli.options import Checked, count, out_folder, resamples
 
 __all__ = ["add_returns_parser"]
 
@@ -39,9 +39,7 @@ def add_returns_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--autzen", help="a second real LAS/LAZ file for the cross-check (its class 1 taken as vegetation)")
     p.add_argument("--out", required=True, action=Checked, check=out_folder,
                    help="output folder (real.md, divergence_sweep.csv, k_sweep.csv, comparison.csv/.md, returns.png, run.json)")  # fmt: skip
-    p.add_argument(
-        "--bootstrap", action=Checked, check=count(None, lowest=2), default=200, help="bootstrap resamples (default: %(default)s)"
-    )
+    p.add_argument("--bootstrap", action=Checked, check=resamples, default=200, help="bootstrap resamples (default: %(default)s)")
     p.add_argument("--seeds", action=Checked, check=count(None), default=2, help="scans pooled per setting (default: %(default)s)")
     p.add_argument("--without-threshold", action="store_true",
                    help="no detection threshold and every surface alike (every echo returns), instead of the threshold fitted to --real "
