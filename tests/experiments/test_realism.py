@@ -263,3 +263,21 @@ def test_realism_command_compares_airborne_crops_per_class(tmp_path, capsys) -> 
     assert {(r["class"], r["set"]) for r in classes} == {(k, s) for k in ("car", "pole") for s in ("generated", "real")}
     assert all(sum(float(r[f"share_{b / 10:g}_{(b + 1) / 10:g}"]) for b in range(10)) == pytest.approx(1.0) for r in classes)
     assert (tmp_path / "rep" / "realism.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize("name", ["scan.npz", "scan.csv"])
+def test_a_scan_file_linking_out_of_the_folder_is_refused_before_it_is_read(tmp_path, name) -> None:
+    """A shared folder's ``car/scan.npz`` that links to a private file elsewhere is not a scan:
+    refused naming the link and the folder, and the file's bytes appear in no message."""
+    from zbuf_occlude.errors import UnsafePathError
+
+    secret = tmp_path / "outside" / "credentials"
+    secret.parent.mkdir()
+    secret.write_text("aws_secret_access_key = SECRET-MARKER\n")
+    root = tmp_path / "scans"
+    (root / "car").mkdir(parents=True)
+    (root / "car" / name).symlink_to(secret)
+    with pytest.raises(UnsafePathError) as info:
+        read_object_clouds(root)
+    text = str(info.value)
+    assert str(root) in text and name in text and "SECRET-MARKER" not in text and "\n" not in text

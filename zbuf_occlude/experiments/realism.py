@@ -43,6 +43,7 @@ from numpy.typing import NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.encodings import png_bytes
 from zbuf_occlude.io.owned import OwnedFolder
+from zbuf_occlude.io.safe_paths import check_found_file
 from zbuf_occlude.sensors.fit import across_sight_width
 from zbuf_occlude.sensors.scan import read_scan_npz
 from zbuf_occlude.sensors.scene import GROUND_ID
@@ -121,7 +122,9 @@ def read_object_clouds(path: str | os.PathLike, *, min_points: int = 1, ground_i
     root = Path(path)
     if not root.exists():
         raise InvalidInputError(f"realism: {root} does not exist")
-    files = [root] if root.is_file() else sorted(p for p in root.rglob("*") if p.is_file() and p.suffix.lower() in (".npz", ".csv"))
+    # a found file linking outside the folder is refused as every scan folder's (io.safe_paths.check_found_file)
+    found = [] if root.is_file() else sorted(p for p in root.rglob("*") if p.is_file() and p.suffix.lower() in (".npz", ".csv"))
+    files = [root] if root.is_file() else [check_found_file(p, root) for p in found]
     clouds: list[ObjectCloud] = []
     npz = [f for f in files if f.suffix.lower() == ".npz"]
     csvs = [f for f in files if f.suffix.lower() == ".csv" and f.name != "MANIFEST.csv"]
