@@ -7,7 +7,11 @@ its folder), :mod:`.hdf5` (HDF5 files from anyone: only data stored inside them)
 :mod:`.regular_files` (a file a user or another file names: regular files only, opened without
 blocking, sizes checked before reading),
 :mod:`.las` (LAS/LAZ point clouds from anyone, with their per-return fields; LAS/LAZ bytes written),
-:mod:`.las_layout` (a LAS/LAZ file's header, records and LAZ chunks, checked before laspy reads them).
+:mod:`.las_layout` (a LAS/LAZ file's header, records and LAZ chunks, checked before laspy reads them),
+:mod:`.las_crs` (a LAS file's coordinate unit, from its CRS records), :mod:`.owned` (the one way a
+command writes into a user's folder) and :mod:`.deletes` (what it may delete or replace),
+:mod:`.memory` (memory checked before the work an input's size sets), :mod:`.file_errors` (errors
+that name a file, never quote it).
 """
 
 from zbuf_occlude.geometry.samples import OccludedCloud
