@@ -52,7 +52,7 @@ def _h5(**datasets) -> Callable[[Path], None]:
 HOSTILE = {
     "pickled objects": ("bad.npy", lambda p: np.save(p, np.array([{"a": 1}], dtype=object), allow_pickle=True), "skipped", "object values"),
     "four columns": ("bad.npy", lambda p: np.save(p, np.zeros((10, 4))), "skipped", r"shape \(10, 4\), not \(N, 3\)"),
-    "not npy": ("bad.npy", lambda p: p.write_bytes(b"\x93NUMPY garbage"), "skipped", "cannot read"),
+    "not npy": ("bad.npy", lambda p: p.write_bytes(b"\x93NUMPY garbage"), "skipped", "format version"),
     "negative label": ("bad.h5", _h5(data=np.zeros((2, 10, 3), np.float32), label=np.array([[-1], [0]], np.int8)), "skipped", "negative"),
     "integer data": ("bad.h5", _h5(data=np.zeros((2, 10, 3), np.int32)), "skipped", "int32 values"),
     "label beyond shape_names": ("bad.h5", _h5(data=np.ones((1, 10, 3), np.float32), label=np.array([[7]])), "skipped", "label 7 has no line"),
