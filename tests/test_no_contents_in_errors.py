@@ -212,7 +212,8 @@ def test_an_hdf5_point_set_of_records_is_refused_without_naming_its_fields(tmp_p
 
 def test_a_200_kb_npy_header_is_one_line_giving_its_length(tmp_path: Path) -> None:
     """numpy's refusal ran over three lines, quoted as is into the skip message."""
-    from zbuf_occlude.io.point_sets import MAX_NPY_HEADER_BYTES, read_point_sets
+    from zbuf_occlude.io.caps import MAX_NPY_HEADER_BYTES
+    from zbuf_occlude.io.point_sets import read_point_sets
     from zbuf_occlude.real_scans.files import read_points
 
     path = tmp_path / "big.npy"

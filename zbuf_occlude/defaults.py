@@ -29,7 +29,6 @@ __all__ = [
     "SPLAT_PIXELS_PER_RADIUS",
     "MAX_SPLAT_PIXELS",
     "MAX_POINT_SET_POINTS",
-    "MAX_POINT_SET_BYTES",
     "MAX_VIEWS",
     "MAX_POINTS",
     "MAX_SAMPLES",
@@ -153,9 +152,6 @@ MAX_SPLAT_PIXELS = 4_000_000
 #: Points one cloud of a point-set file may hold (:func:`zbuf_occlude.io.point_sets.read_point_sets`'s
 #: ``max_points``): 10⁷, 240 MB as float64 coordinates, far above an object's scan or PointNet's 2,048.
 MAX_POINT_SET_POINTS = 10_000_000
-#: Bytes one read of a point-set file may take, as float64 coordinates and normals, and the largest
-#: ``.ply`` point cloud read: 2 GiB (``modelnet40_ply_hdf5_2048``'s largest file is 100 MB so read).
-MAX_POINT_SET_BYTES = 2 << 30
 
 # -- caps of the counted options --------------------------------------------------------------------
 # The largest value each counted option of the command line takes (zbuf_occlude.cli.options checks

@@ -565,16 +565,16 @@ def test_read_npz_refuses_zeros_inflating_past_the_cap_before_inflating_them(tmp
         path, **{**_cloud_arrays(), "points": np.zeros((1_000_000, 3), np.float32), "face_index": np.zeros(1_000_000, np.int64)}
     )
     assert path.stat().st_size < 100_000  # 20 MB inflated
-    monkeypatch.setattr(clouds, "MAX_NPZ_BYTES", 1 << 20)  # stands for the 3.2 GB cap
+    monkeypatch.setattr(clouds, "MAX_CLOUD_NPZ_BYTES", 1 << 20)  # stands for the 3.2 GB cap
     _no_inflating(monkeypatch)
     _refuses(path, r"its members inflate to 20,00\d,\d+ bytes, more than the 1,048,576 accepted")
 
 
 def test_the_npz_cap_holds_the_largest_cloud_the_cli_writes():
     from zbuf_occlude.defaults import MAX_POINTS
-    from zbuf_occlude.io.clouds import MAX_NPZ_BYTES, MAX_NPZ_POINTS
+    from zbuf_occlude.io.caps import MAX_CLOUD_NPZ_BYTES, MAX_CLOUD_NPZ_POINTS
 
-    assert MAX_NPZ_POINTS == MAX_POINTS and MAX_NPZ_BYTES >= MAX_POINTS * (3 * 8 + 8)
+    assert MAX_CLOUD_NPZ_POINTS == MAX_POINTS and MAX_CLOUD_NPZ_BYTES >= MAX_POINTS * (3 * 8 + 8)
 
 
 _VALID_NPZ = None

@@ -16,7 +16,7 @@ pytestmark = pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs os.mkfi
 def test_read_regular_file_refuses_fifos_and_sizes_past_the_cap(tmp_path: Path) -> None:
     os.mkfifo(tmp_path / "pipe")
     with pytest.raises(MeshLoadError, match="pipe: is a FIFO"):
-        read_regular_file(tmp_path / "pipe", error=MeshLoadError)
+        read_regular_file(tmp_path / "pipe", max_bytes=10, error=MeshLoadError)
     with pytest.raises(InvalidInputError, match="pipe: is a FIFO"):
         file_digest(tmp_path / "pipe", max_bytes=10, error=InvalidInputError)
     (tmp_path / "big").write_bytes(b"x" * 11)
@@ -35,13 +35,14 @@ def test_regular_file_size_names_what_is_not_a_regular_file_and_raises_invalid_i
     with pytest.raises(InvalidInputError, match="pipe: is a FIFO; only regular files are read"):
         regular_file_size(tmp_path / "pipe")
     with pytest.raises(InvalidInputError, match=r"folder: cannot read file \(Is a directory\)"):
-        read_regular_file(tmp_path / "folder")
+        read_regular_file(tmp_path / "folder", max_bytes=10)
     with pytest.raises(InvalidInputError, match=r"missing: cannot read file \(No such file or directory\)"):
         file_digest(tmp_path / "missing", max_bytes=10)
 
 
 def test_within_refuses_a_file_or_folder_that_links_out_and_reads_links_that_stay(tmp_path: Path) -> None:
     from zbuf_occlude.errors import UnsafePathError
+    from zbuf_occlude.io.caps import MAX_LIST_BYTES
     from zbuf_occlude.io.regular_files import read_text_file
 
     (tmp_path / "secret").write_text("root:x:0:0\n")
@@ -55,25 +56,26 @@ def test_within_refuses_a_file_or_folder_that_links_out_and_reads_links_that_sta
     (data / "inside.txt").symlink_to(data / "sub" / "real.txt")
     for name in ("names.txt", "linked/names.txt", "sub/../../secret"):
         with pytest.raises(UnsafePathError, match="leads outside"):
-            read_text_file(data / name, within=data)
-    assert read_text_file(data / "inside.txt", within=data) == "chair\n"
-    assert read_text_file(data / "names.txt") == "root:x:0:0\n"  # no folder named: the user named the file
+            read_text_file(data / name, max_bytes=MAX_LIST_BYTES, within=data)
+    assert read_text_file(data / "inside.txt", max_bytes=MAX_LIST_BYTES, within=data) == "chair\n"
+    assert read_text_file(data / "names.txt", max_bytes=MAX_LIST_BYTES) == "root:x:0:0\n"  # no folder named: the user named the file
 
 
 def test_read_text_file_is_capped_refuses_fifos_and_names_bytes_that_are_not_utf8(tmp_path: Path) -> None:
-    from zbuf_occlude.io.regular_files import MAX_LIST_BYTES, read_text_file
+    from zbuf_occlude.io.caps import MAX_LIST_BYTES
+    from zbuf_occlude.io.regular_files import read_text_file
 
     os.mkfifo(tmp_path / "pipe")
     with pytest.raises(InvalidInputError, match="pipe: is a FIFO"):
-        read_text_file(tmp_path / "pipe", within=tmp_path)
+        read_text_file(tmp_path / "pipe", max_bytes=MAX_LIST_BYTES, within=tmp_path)
     (tmp_path / "bad.txt").write_bytes(b"ok\n\xff\xfe\n")
     with pytest.raises(InvalidInputError, match=r"bad.txt: not UTF-8 text \(byte 3\)"):
-        read_text_file(tmp_path / "bad.txt")
-    assert read_text_file(tmp_path / "bad.txt", errors="replace") == "ok\n\ufffd\ufffd\n"
+        read_text_file(tmp_path / "bad.txt", max_bytes=MAX_LIST_BYTES)
+    assert read_text_file(tmp_path / "bad.txt", max_bytes=MAX_LIST_BYTES, errors="replace") == "ok\n\ufffd\ufffd\n"
     with open(tmp_path / "big.txt", "wb") as fh:  # sparse: declares its size without using the disk
         fh.truncate(MAX_LIST_BYTES + 1)
     with pytest.raises(InvalidInputError, match=rf"big.txt: {MAX_LIST_BYTES + 1:,} bytes, more than the {MAX_LIST_BYTES:,}"):
-        read_text_file(tmp_path / "big.txt")
+        read_text_file(tmp_path / "big.txt", max_bytes=MAX_LIST_BYTES)
 
 
 def test_read_json_file_is_capped_refuses_fifos_links_out_and_deep_nesting(tmp_path: Path) -> None:

@@ -14,11 +14,10 @@ import numpy as np
 import pytest
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.io.caps import MAX_REAL_SCAN_BYTES, MAX_REAL_SCAN_LINE_BYTES
 from zbuf_occlude.real_scans import files
 from zbuf_occlude.real_scans.datasets import load_real_scans
 from zbuf_occlude.real_scans.files import (
-    MAX_FILE_BYTES,
-    MAX_LINE_BYTES,
     load_scan_folder,
     read_points,
 )
@@ -36,7 +35,7 @@ def test_npz_member_inflating_past_the_cap_is_refused_from_the_zip_directory(tmp
     path = tmp_path / "zeros.npz"
     np.savez_compressed(path, points=np.zeros((1_000_000, 3)))  # 24 MB inflated, ~25 KB stored
     assert path.stat().st_size < 100_000
-    monkeypatch.setattr(files, "MAX_ARRAY_BYTES", 1 << 20)  # stands for the 1 GiB cap
+    monkeypatch.setattr(files, "MAX_REAL_SCAN_ARRAY_BYTES", 1 << 20)  # stands for the 1 GiB cap
     with pytest.raises(InvalidInputError, match=r"zeros\.npz: its members inflate to 24,000,\d+ bytes, more than the 1,048,576 accepted"):
         read_points(path)
 
@@ -69,8 +68,8 @@ def test_a_csv_scan_takes_memory_like_its_points_not_like_python_strings(tmp_pat
 
 def test_a_one_line_csv_is_refused_by_its_line_length(tmp_path: Path) -> None:
     path = tmp_path / "one_line.csv"
-    path.write_bytes(b"1," * (MAX_LINE_BYTES * 4))  # no newline at all
-    with pytest.raises(InvalidInputError, match=rf"one_line\.csv:1: a line longer than {MAX_LINE_BYTES:,} bytes"):
+    path.write_bytes(b"1," * (MAX_REAL_SCAN_LINE_BYTES * 4))  # no newline at all
+    with pytest.raises(InvalidInputError, match=rf"one_line\.csv:1: a line longer than {MAX_REAL_SCAN_LINE_BYTES:,} bytes"):
         read_points(path)
 
 
@@ -85,9 +84,9 @@ def test_a_multi_gb_scan_is_refused_before_it_is_hashed(tmp_path: Path, monkeypa
     big = tmp_path / "car" / "big.xyz"
     big.parent.mkdir()
     with open(big, "wb") as fh:
-        fh.truncate(MAX_FILE_BYTES + 1)  # sparse: no disk, no memory
+        fh.truncate(MAX_REAL_SCAN_BYTES + 1)  # sparse: no disk, no memory
     _no_whole_reads(monkeypatch)
-    with pytest.raises(InvalidInputError, match=rf"big\.xyz: {MAX_FILE_BYTES + 1:,} bytes, more than the {MAX_FILE_BYTES:,}"):
+    with pytest.raises(InvalidInputError, match=rf"big\.xyz: {MAX_REAL_SCAN_BYTES + 1:,} bytes, more than the {MAX_REAL_SCAN_BYTES:,}"):
         load_scan_folder(tmp_path, dedupe=True)
 
 
@@ -133,8 +132,8 @@ def test_a_lidarnet_csv_with_a_line_past_the_cap_is_refused_naming_it(tmp_path: 
     from zbuf_occlude.real_scans.datasets import read_lidarnet_csv
 
     path = tmp_path / "car0.csv"
-    path.write_bytes(_LIDARNET_HEAD + b"1,2,3,0,0,0,car,1\n" + b"9" * (4 * MAX_LINE_BYTES))
-    with pytest.raises(InvalidInputError, match=rf"car0\.csv:3: a line longer than {MAX_LINE_BYTES:,} bytes"):
+    path.write_bytes(_LIDARNET_HEAD + b"1,2,3,0,0,0,car,1\n" + b"9" * (4 * MAX_REAL_SCAN_LINE_BYTES))
+    with pytest.raises(InvalidInputError, match=rf"car0\.csv:3: a line longer than {MAX_REAL_SCAN_LINE_BYTES:,} bytes"):
         read_lidarnet_csv(path)
 
 
@@ -162,16 +161,16 @@ def test_a_multi_gb_lidarnet_csv_is_refused_before_it_is_hashed(tmp_path: Path, 
     big.parent.mkdir()
     with open(big, "wb") as fh:
         fh.write(b"origin_x,origin_y,origin_z,object\n")
-        fh.truncate(MAX_FILE_BYTES + 1)
+        fh.truncate(MAX_REAL_SCAN_BYTES + 1)
     _no_whole_reads(monkeypatch)
-    with pytest.raises(InvalidInputError, match=rf"car1\.csv: {MAX_FILE_BYTES + 1:,} bytes, more than the {MAX_FILE_BYTES:,}"):
+    with pytest.raises(InvalidInputError, match=rf"car1\.csv: {MAX_REAL_SCAN_BYTES + 1:,} bytes, more than the {MAX_REAL_SCAN_BYTES:,}"):
         load_real_scans(tmp_path)
 
 
 def test_detection_reads_a_bounded_first_line(tmp_path: Path, monkeypatch) -> None:
     """A CSV with no newline: detection reads at most one line's cap, never the whole file."""
     (tmp_path / "Car").mkdir()
-    (tmp_path / "Car" / "a.csv").write_bytes(b"1" * (4 * MAX_LINE_BYTES))
+    (tmp_path / "Car" / "a.csv").write_bytes(b"1" * (4 * MAX_REAL_SCAN_LINE_BYTES))
     seen = []
     real_open = open
 
@@ -189,7 +188,7 @@ def test_detection_reads_a_bounded_first_line(tmp_path: Path, monkeypatch) -> No
     with pytest.raises(InvalidInputError):
         load_real_scans(tmp_path)
     # detection's read first; the reader's after it, one byte more to tell a line too long: every read bounded
-    assert seen and 0 < seen[0] <= MAX_LINE_BYTES and all(0 < s <= MAX_LINE_BYTES + 1 for s in seen), seen
+    assert seen and 0 < seen[0] <= MAX_REAL_SCAN_LINE_BYTES and all(0 < s <= MAX_REAL_SCAN_LINE_BYTES + 1 for s in seen), seen
 
 
 # -- silent losses ------------------------------------------------------------------------

@@ -13,6 +13,7 @@ from typing import Any
 from zbuf_occlude.cli.options import Checked, check_device, count, interval, out_folder, parse_interval, shown
 from zbuf_occlude.defaults import DEFAULT_METHOD
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.io.caps import MAX_TABLE_BYTES
 from zbuf_occlude.io.regular_files import read_text_file
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 
@@ -99,7 +100,7 @@ def print_table(out: str, summary: dict[str, Any]) -> int:
     """Print an experiment's ``OUT/table.md`` (read inside ``OUT``, :func:`~zbuf_occlude.io.regular_files.read_text_file`)
     and its wall time; exit status 0."""
     table = f"{out}/table.md"
-    sys.stdout.write(f"{table}\n{read_text_file(table, within=out)}")
+    sys.stdout.write(f"{table}\n{read_text_file(table, max_bytes=MAX_TABLE_BYTES, within=out)}")
     sys.stdout.write(f"wall time {summary['wall_s']['total']:.0f} s\n")
     return 0
 

@@ -24,11 +24,12 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from zbuf_occlude.dataset.layout import CARD_FILE, CARD_SHA256_FILE, COLUMN_TYPES, POINT_COLUMNS, SHAPE_NAMES_FILE
 from zbuf_occlude.dataset.storage import StorageKind, storage_kind
 from zbuf_occlude.errors import DatasetFormatError, InvalidInputError
+from zbuf_occlude.io.caps import MAX_CARD_CHECKSUM_BYTES, MAX_LIST_BYTES, MAX_MANIFEST_BYTES, MAX_METADATA_BYTES
 from zbuf_occlude.io.hdf5 import Column, declared_nbytes, open_hdf5
 from zbuf_occlude.io.atomic import size_mismatch
 from zbuf_occlude.io.json_files import loads_json
 from zbuf_occlude.io.memory import check_memory
-from zbuf_occlude.io.regular_files import MAX_LIST_BYTES, MAX_METADATA_BYTES, open_regular_file, read_text_file
+from zbuf_occlude.io.regular_files import open_regular_file, read_text_file
 from zbuf_occlude.io.safe_paths import control_character, path_inside
 
 __all__ = [
@@ -59,16 +60,10 @@ __all__ = [
 CHECKSUM_ALGORITHM = "sha256"
 #: Problems listed per validation error before "and N more".
 MAX_LISTED = 5
-#: Largest ``manifest.jsonl`` read: 4 GiB.  One line per object, of a few kB (a ``generate
-#: --format npz`` object lists each sample file with its SHA-256: some 40 kB), so 100,000 such
-#: objects or a million HDF5 ones; a larger file is not a manifest of ours.
-MAX_MANIFEST_BYTES = 4 << 30
 #: Bytes of memory the manifest's records take per byte of manifest (each line held as a dict and
 #: a checked :class:`OkRecord`): 11.9 at the peak by tracemalloc over 20,000 of the farm's 734-byte
 #: records; rounded up.  Checked before the manifest is read.
 MANIFEST_MEMORY_PER_BYTE = 16
-#: Largest ``card.sha256`` read: its one line is 64 hex digits, two spaces and the card's name.
-_SHA256_LINE_MAX_BYTES = 200
 
 NonNegativeInt = Annotated[int, Field(ge=0)]
 PositiveInt = Annotated[int, Field(ge=1)]
@@ -329,7 +324,7 @@ def check_card_sha256(root: Path) -> bool:
     sidecar = root / CARD_SHA256_FILE
     if not sidecar.exists():
         return False
-    text = _read_text(sidecar, "card checksum", _SHA256_LINE_MAX_BYTES)
+    text = _read_text(sidecar, "card checksum", MAX_CARD_CHECKSUM_BYTES)
     digest = text.split(" ", 1)[0]
     if text != card_sha256_line(digest) or len(digest) != 64:
         raise DatasetFormatError(f"{sidecar} is not a SHA-256 line for {CARD_FILE} ('<64 hex digits>  {CARD_FILE}')")
@@ -353,13 +348,13 @@ def read_manifest(path: Path, problems: list[str] | None = None) -> list[tuple[i
     line is appended there (and left out) instead of raising.
 
     The file is read one line at a time (never whole, nor as a list of its lines), after its size
-    is checked against :data:`MAX_MANIFEST_BYTES` and the memory its records will take
+    is checked against :data:`~zbuf_occlude.io.caps.MAX_MANIFEST_BYTES` and the memory its records will take
     (:data:`MANIFEST_MEMORY_PER_BYTE`) against the memory available.
 
     Raises
     ------
     DatasetFormatError
-        Unreadable, larger than :data:`MAX_MANIFEST_BYTES`, a line that is not UTF-8 or not a JSON
+        Unreadable, larger than :data:`~zbuf_occlude.io.caps.MAX_MANIFEST_BYTES`, a line that is not UTF-8 or not a JSON
         object, or an ``ok`` line with a missing or mistyped field (the message names the line
         and the field).
     InsufficientMemoryError

@@ -25,6 +25,7 @@ from zbuf_occlude.dataset.layout import CARD_FILE, CARD_SHA256_FILE, MANIFEST_FI
 from zbuf_occlude.dataset.storage import StorageKind, storage_kind
 from zbuf_occlude.errors import DatasetFormatError, InvalidInputError, ZbufOccludeError
 from zbuf_occlude.io.atomic import file_sha256, size_mismatch
+from zbuf_occlude.io.caps import MAX_LIST_BYTES, MAX_PROTOCOL_FILE_BYTES
 from zbuf_occlude.io.json_files import read_json_file
 from zbuf_occlude.io.regular_files import read_text_file
 from zbuf_occlude.io.safe_paths import path_inside
@@ -44,8 +45,6 @@ PROTOCOL_FOLDERS: dict[str, tuple[str, str]] = {
     "modelnet40-c-occlusion": ("a ModelNet40-C folder", "read its data_occlusion_<severity>.npy and label.npy with numpy.load"),
     "modelnet40-c-lidar": ("a ModelNet40-C folder", "read its data_lidar_<severity>.npy and label.npy with numpy.load"),
 }
-#: Longest protocol.json read to name the protocol (the file is small; a large one is not ours).
-_PROTOCOL_FILE_MAX_BYTES = 1 << 20
 
 
 #: A joined file (``occluded_<split>.h5``, a file list) holds its split's samples once more, in
@@ -63,7 +62,7 @@ def protocol_of(root: Path) -> str | None:
     """
     for path in (root / PROTOCOL_FILE, *sorted(root.glob("protocol_*.json"))):
         try:
-            name = read_json_file(path, max_bytes=_PROTOCOL_FILE_MAX_BYTES, within=root).get("protocol")
+            name = read_json_file(path, max_bytes=MAX_PROTOCOL_FILE_BYTES, within=root).get("protocol")
         except (OSError, InvalidInputError, AttributeError):  # missing, a FIFO, a link out, too large, not JSON
             continue
         if isinstance(name, str):
@@ -302,7 +301,7 @@ def _check_file_lists(root: Path, card: Card, listed: dict[str, list[str]], prob
         if not list_file.is_file():
             continue
         try:
-            lines = [s for s in read_text_file(list_file, error=DatasetFormatError, within=root).split("\n") if s]
+            lines = [s for s in read_text_file(list_file, max_bytes=MAX_LIST_BYTES, error=DatasetFormatError, within=root).split("\n") if s]
         except InvalidInputError as exc:  # a FIFO, larger than MAX_LIST_BYTES, not UTF-8, a link out of the folder
             problems.append(str(exc))
             continue

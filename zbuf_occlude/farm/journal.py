@@ -34,7 +34,8 @@ from zbuf_occlude.io.atomic import file_sha256, size_mismatch, write_text
 from zbuf_occlude.io.json_files import loads_json, read_json_file
 from zbuf_occlude.io.deletes import delete_own_files, remove_dead_temps
 from zbuf_occlude.io.owned import check_layout
-from zbuf_occlude.io.regular_files import MAX_METADATA_BYTES, read_text_file
+from zbuf_occlude.io.caps import MAX_METADATA_BYTES
+from zbuf_occlude.io.regular_files import read_text_file
 from zbuf_occlude.io.safe_paths import check_line_text, check_relative_name, path_inside
 from zbuf_occlude.mesh.paths import SPLITS, printable_path
 from zbuf_occlude.mesh.inputs.plan import FarmObject
@@ -66,7 +67,7 @@ def check_out_layout(out: Path) -> None:
 def read_json(path: Path, *, within: Path) -> dict[str, Any] | None:
     """A JSON object of the journal (plan, record, task, card) in the folder ``within``; ``None`` if
     missing, damaged, not an object, not a regular file (a FIFO), larger than
-    :data:`~zbuf_occlude.io.regular_files.MAX_METADATA_BYTES` or a link out of ``within``."""
+    :data:`~zbuf_occlude.io.caps.MAX_METADATA_BYTES` or a link out of ``within``."""
     try:
         doc = read_json_file(path, within=within)
     except (OSError, InvalidInputError):  # nested too deep, not JSON, a FIFO, a link out: damaged, as far as the journal goes
@@ -81,7 +82,7 @@ def read_plan(folder: Path) -> dict[str, Any] | None:
     ------
     InvalidInputError
         The plan is not a regular file (a FIFO), is larger than
-        :data:`~zbuf_occlude.io.regular_files.MAX_METADATA_BYTES`, is not UTF-8 JSON, a field is
+        :data:`~zbuf_occlude.io.caps.MAX_METADATA_BYTES`, is not UTF-8 JSON, a field is
         missing or mistyped, or its parameters are not a farm's.
     UnsafePathError
         The plan is a link that leads outside ``folder``.

@@ -5,7 +5,8 @@
 its folder), :mod:`.hdf5` (HDF5 files from anyone: only data stored inside them), :mod:`.arrays`
 (``.npy``/``.npz`` files from anyone: shapes and sizes read from their headers before inflating),
 :mod:`.regular_files` (a file a user or another file names: regular files only, opened without
-blocking, sizes checked before reading),
+blocking, sizes checked before reading), :mod:`.caps` (every cap on what a file read may hold,
+named for what it caps),
 :mod:`.las` (LAS/LAZ point clouds from anyone, with their per-return fields; LAS/LAZ bytes written),
 :mod:`.las_layout` (a LAS/LAZ file's header, records and LAZ chunks, checked before laspy reads them),
 :mod:`.las_crs` (a LAS file's coordinate unit, from its CRS records), :mod:`.owned` (the one way a

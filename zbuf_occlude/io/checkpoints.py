@@ -6,7 +6,7 @@ strings, ``None``, lists and dicts only; one that needs anything else is refused
 (:class:`~zbuf_occlude.errors.CheckpointError`) without running it.  The file itself is opened
 by :func:`~zbuf_occlude.io.regular_files.open_regular_file`'s rules: a regular file (a FIFO
 would block the reader), inside the folder it was named from when the caller knows it
-(``within=``), of at most :data:`MAX_CHECKPOINT_BYTES`, and the memory it will take checked
+(``within=``), of at most :data:`~zbuf_occlude.io.caps.MAX_CHECKPOINT_BYTES`, and the memory it will take checked
 before it is loaded (:func:`zbuf_occlude.resources.check_memory`): what its records inflate to,
 from the zip directory, which must hold (:func:`~zbuf_occlude.io.arrays.zip_inflated_bytes`:
 torch's zip reader allocates each record's declared size before it reads it, so a small file
@@ -30,16 +30,11 @@ from typing import Any
 
 from zbuf_occlude.errors import CheckpointError
 from zbuf_occlude.io.arrays import zip_inflated_bytes
+from zbuf_occlude.io.caps import MAX_CHECKPOINT_BYTES
 from zbuf_occlude.io.regular_files import open_regular_file
 from zbuf_occlude.resources import check_memory
 
-__all__ = ["MAX_CHECKPOINT_BYTES", "checkpoint_bytes", "load_checkpoint"]
-
-#: Largest checkpoint read: 32 GiB.  The largest model :func:`zbuf_occlude.learn.models.check_model_config`
-#: lets a checkpoint build (3DmFV-Net at width 8, ``fv_grid`` 16, 1,000 classes) holds 5.6 GiB of
-#: float32 weights, and a resume point (``last.pt``) holds them four times (the weights, the best
-#: weights and Adam's two moments): some 23 GiB.
-MAX_CHECKPOINT_BYTES = 32 << 30
+__all__ = ["checkpoint_bytes", "load_checkpoint"]
 
 
 def checkpoint_bytes(state: dict[str, Any]) -> bytes:
@@ -85,7 +80,7 @@ def load_checkpoint(
         The folder ``path`` was named from (a run's checkpoint folder): it must stay inside it,
         links resolved.
     max_bytes : int
-        The cap on the file's size (:data:`MAX_CHECKPOINT_BYTES`), checked before a byte is read.
+        The cap on the file's size (:data:`~zbuf_occlude.io.caps.MAX_CHECKPOINT_BYTES`), checked before a byte is read.
 
     Returns
     -------

@@ -15,11 +15,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from zbuf_occlude.defaults import MAX_POINTS
 from zbuf_occlude.errors import DatasetFormatError, OutputError
 from zbuf_occlude.geometry.samples import OccludedCloud
 from zbuf_occlude.io.arrays import load_npz
 from zbuf_occlude.io.atomic import atomic_h5, atomic_path
+from zbuf_occlude.io.caps import MAX_CLOUD_NPZ_BYTES, MAX_CLOUD_NPZ_POINTS
 from zbuf_occlude.io.hdf5 import Column, open_hdf5
 
 __all__ = [
@@ -32,20 +32,10 @@ __all__ = [
     "read_h5_clouds",
     "clouds_of_h5",
     "FORMATS",
-    "MAX_NPZ_POINTS",
-    "MAX_NPZ_BYTES",
 ]
 
 #: File formats :func:`write_clouds` knows.
 FORMATS = ("npz", "ply", "h5")
-
-#: Points one ``.npz`` cloud may hold (:func:`read_npz`): the most ``--points`` takes
-#: (:data:`zbuf_occlude.defaults.MAX_POINTS`).
-MAX_NPZ_POINTS = MAX_POINTS
-#: Bytes a cloud ``.npz``'s arrays may inflate to (:func:`read_npz`): :data:`MAX_NPZ_POINTS`
-#: points of float64 coordinates (24 bytes) and an int64 ``face_index`` (8 bytes), and 1 MiB
-#: for the scalars (the class name and the source path are text of any length).
-MAX_NPZ_BYTES = MAX_NPZ_POINTS * (3 * 8 + 8) + (1 << 20)
 
 #: The arrays of :func:`write_npz`'s files: name → (dtype kinds accepted, rank).
 _NPZ_ARRAYS: dict[str, tuple[str, int]] = {
@@ -89,7 +79,7 @@ def read_npz(path: str | os.PathLike) -> OccludedCloud:
     The file may come from anyone: :func:`zbuf_occlude.io.arrays.load_npz` opens only a regular
     file (a FIFO or a device named ``x.npz`` is refused at once instead of blocking or reading
     without end), reads its arrays' sizes from the zip directory and the ``.npy`` headers (cap
-    :data:`MAX_NPZ_BYTES`), and every array's declared shape and dtype is checked here before
+    :data:`~zbuf_occlude.io.caps.MAX_CLOUD_NPZ_BYTES`), and every array's declared shape and dtype is checked here before
     any is inflated, from that same open file; nothing is unpickled.
 
     Parameters
@@ -108,9 +98,9 @@ def read_npz(path: str | os.PathLike) -> OccludedCloud:
     DatasetFormatError
         Naming the file and what is wrong: missing or unreadable, not a regular file (a FIFO,
         a device, a folder), not a zip or damaged, arrays inflating past
-        :data:`MAX_NPZ_BYTES` or a header declaring more than its member holds, an object
+        :data:`~zbuf_occlude.io.caps.MAX_CLOUD_NPZ_BYTES` or a header declaring more than its member holds, an object
         (pickled) array, a missing array, ``points`` not ``(n, 3)`` floats with ``n`` at most
-        :data:`MAX_NPZ_POINTS`, ``face_index`` not ``(n,)`` integers, or a scalar that is not
+        :data:`~zbuf_occlude.io.caps.MAX_CLOUD_NPZ_POINTS`, ``face_index`` not ``(n,)`` integers, or a scalar that is not
         0-d of its kind (numbers for the pose and counts, text for the names).
     """
     path = Path(path)
@@ -126,7 +116,7 @@ def read_npz(path: str | os.PathLike) -> OccludedCloud:
             raise DatasetFormatError(f"{path}: face_index is declared {declared['face_index'][0]}, not ({n},) like points")
 
     # one open file: a regular file, its sizes and headers checked, then the arrays read from it
-    a = load_npz(path, max_bytes=MAX_NPZ_BYTES, error=DatasetFormatError, keys=_NPZ_ARRAYS, check=check)
+    a = load_npz(path, max_bytes=MAX_CLOUD_NPZ_BYTES, error=DatasetFormatError, keys=_NPZ_ARRAYS, check=check)
     return OccludedCloud(
         points=a["points"],
         face_index=a["face_index"],
@@ -148,8 +138,8 @@ def _check_declared(path: Path, key: str, shape: tuple[int, ...], dtype: np.dtyp
     if dtype.kind not in kinds or len(shape) != rank:
         expected = {1: "(n,)", 2: "(n, 3)"}.get(rank, "0-d")
         raise DatasetFormatError(f"{path}: {key} is declared {shape} {dtype}, not a {expected} array of {_KIND_NAMES[kinds]}")
-    if key == "points" and (shape[1] != 3 or shape[0] > MAX_NPZ_POINTS):
-        raise DatasetFormatError(f"{path}: points is declared {shape}, not (n, 3) with n at most {MAX_NPZ_POINTS:,}")
+    if key == "points" and (shape[1] != 3 or shape[0] > MAX_CLOUD_NPZ_POINTS):
+        raise DatasetFormatError(f"{path}: points is declared {shape}, not (n, 3) with n at most {MAX_CLOUD_NPZ_POINTS:,}")
 
 
 def write_ply(path: str | os.PathLike, cloud: OccludedCloud) -> Path:

@@ -14,7 +14,8 @@ import os
 from typing import Any
 
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
-from zbuf_occlude.io.regular_files import MAX_METADATA_BYTES, read_regular_file
+from zbuf_occlude.io.caps import MAX_METADATA_BYTES
+from zbuf_occlude.io.regular_files import read_regular_file
 
 __all__ = ["MAX_JSON_DEPTH", "json_depth", "loads_json", "read_json_file"]
 
@@ -90,7 +91,7 @@ def read_json_file(
         Deepest nesting accepted (:data:`MAX_JSON_DEPTH`).
     max_bytes : int
         The cap on the file's size, checked before a byte is read
-        (:data:`~zbuf_occlude.io.regular_files.MAX_METADATA_BYTES`).
+        (:data:`~zbuf_occlude.io.caps.MAX_METADATA_BYTES`).
     within : str or PathLike, optional
         The folder ``path`` was named from: it must stay inside it, links resolved.
     error : type

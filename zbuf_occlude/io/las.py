@@ -36,10 +36,10 @@ from zbuf_occlude._version import __version__
 from zbuf_occlude.defaults import MAX_POINTS
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError, ZbufOccludeError
 from zbuf_occlude.geometry.arguments import check_points, described
+from zbuf_occlude.io.caps import MAX_LAS_BYTES
 from zbuf_occlude.io.las_crs import linear_unit_m
 from zbuf_occlude.io.las_layout import (
     MAX_EVLRS,
-    MAX_HEADER_BYTES,
     MAX_LAZ_POINTS_PER_BYTE,
     MAX_VLRS,
     LasLayout,
@@ -51,14 +51,10 @@ from zbuf_occlude.io.regular_files import open_regular_file
 from zbuf_occlude.resources import check_memory
 
 __all__ = [
-    "BYTES_PER_POINT", "MAX_EVLRS", "MAX_HEADER_BYTES", "MAX_LAS_BYTES", "MAX_LAZ_POINTS_PER_BYTE", "MAX_VLRS",
+    "BYTES_PER_POINT", "MAX_EVLRS", "MAX_LAZ_POINTS_PER_BYTE", "MAX_VLRS",
     "READ_CHUNK_POINTS", "SCAN_ANGLE_STEP_DEG", "LasPoints", "las_bytes", "read_las",
 ]  # fmt: skip
 
-#: Largest LAS/LAZ file read: 16 GiB, :data:`~zbuf_occlude.defaults.MAX_POINTS` (10⁸) points of
-#: the largest standard record (67 bytes, format 10) and some extra bytes per point.  A 1 km² tile
-#: of a national survey holds 10 to 50 million points.
-MAX_LAS_BYTES = 16 << 30
 #: Points decoded at a time: bounds laspy's buffer of raw records (64 MiB of format-10 records).
 READ_CHUNK_POINTS = 1 << 20
 #: Degrees per unit of the scan angle of point formats 6 to 10 (R15, "Scan Angle").
@@ -232,7 +228,7 @@ def read_las(
     max_points : int
         Most points the header may declare (default :data:`~zbuf_occlude.defaults.MAX_POINTS`).
     max_bytes : int
-        Largest file read (default :data:`MAX_LAS_BYTES`).
+        Largest file read (default :data:`~zbuf_occlude.io.caps.MAX_LAS_BYTES`).
 
     Returns
     -------

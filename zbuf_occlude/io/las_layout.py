@@ -13,7 +13,7 @@ So what they would read or allocate is checked here first, on the open file, wit
   0 to 10 allowed by the version, a record length at least the format's, finite non-zero scales
   and finite offsets;
 * the **VLRs**: at most :data:`MAX_VLRS`, each inside the bytes before the points, which laspy reads
-  whole (at most :data:`MAX_HEADER_BYTES`); the **EVLRs**: at most :data:`MAX_EVLRS`, each inside
+  whole (at most :data:`~zbuf_occlude.io.caps.MAX_LAS_HEADER_BYTES`); the **EVLRs**: at most :data:`MAX_EVLRS`, each inside
   the file; their contents (waveforms, a WKT, a COPC hierarchy) are never read;
 * the **point count** (:func:`check_count`): at most ``max_points``; uncompressed, the records it
   declares must fit between the offset to the points and the first EVLR (or the end); compressed,
@@ -45,9 +45,10 @@ from typing import BinaryIO
 import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.io.caps import MAX_LAS_HEADER_BYTES
 
 __all__ = [
-    "MAX_EVLRS", "MAX_HEADER_BYTES", "MAX_LAZ_POINTS_PER_BYTE", "MAX_VLRS", "LasLayout", "check_count", "check_laz", "parse_header",
+    "MAX_EVLRS", "MAX_LAZ_POINTS_PER_BYTE", "MAX_VLRS", "LasLayout", "check_count", "check_laz", "parse_header",
 ]  # fmt: skip
 
 #: Most VLRs a file may declare: room for the 255 waveform packet descriptors the specification
@@ -57,10 +58,6 @@ MAX_VLRS = 512
 #: Most EVLRs a file may declare (a WKT, waveform data, a COPC hierarchy: a handful); only their
 #: 60-byte headers are read, to check that each lies inside the file.
 MAX_EVLRS = 1024
-#: Most bytes before the first point (header, VLRs and any gap), which laspy reads into memory:
-#: :data:`MAX_VLRS` records of at most 65,589 bytes (a 54-byte header and a uint16 length) are
-#: 33.6 MB.
-MAX_HEADER_BYTES = 64 << 20
 #: Most points a LAZ file may declare per byte of compressed data: laz-rs packs a million
 #: identical format-6 points into 10,463 bytes (96 per byte), real scans hold 0.1 to 1 point per
 #: byte (the shared IGN and Autzen samples: 0.20 and 0.18).
@@ -163,7 +160,7 @@ def parse_header(fh: BinaryIO, size: int, name: str) -> LasLayout:
         Naming the file: no ``LASF`` signature, a truncated header, a version other than 1.0 to
         1.4, sizes or offsets that do not fit the file, a point format or record length the version
         does not allow, non-finite or zero scales, more than :data:`MAX_VLRS` VLRs or
-        :data:`MAX_EVLRS` EVLRs, more than :data:`MAX_HEADER_BYTES` before the points, or a VLR or
+        :data:`MAX_EVLRS` EVLRs, more than :data:`~zbuf_occlude.io.caps.MAX_LAS_HEADER_BYTES` before the points, or a VLR or
         EVLR that runs past its bounds.
     """
     head = _read_at(fh, 0, _HEADER_SIZES[4])
@@ -194,8 +191,8 @@ def parse_header(fh: BinaryIO, size: int, name: str) -> LasLayout:
         _, first_evlr, evlrs, count = _HEADER_14.unpack_from(head, _HEADER.size)
     if n_vlrs > MAX_VLRS or evlrs > MAX_EVLRS:
         raise InvalidInputError(f"{name}: declares {n_vlrs:,} VLRs and {evlrs:,} EVLRs; at most {MAX_VLRS} and {MAX_EVLRS} are read")
-    if offset > MAX_HEADER_BYTES:
-        raise InvalidInputError(f"{name}: {offset:,} bytes before the first point, more than the {MAX_HEADER_BYTES:,} read")
+    if offset > MAX_LAS_HEADER_BYTES:
+        raise InvalidInputError(f"{name}: {offset:,} bytes before the first point, more than the {MAX_LAS_HEADER_BYTES:,} read")
     vlrs = _walk_vlrs(fh, name, header_size, offset, n_vlrs)
     _walk_evlrs(fh, name, size, offset, first_evlr, evlrs)
     return LasLayout((major, minor), header_size, offset, point_format_id, compressed, record_length, count, vlrs, evlrs, first_evlr)

@@ -6,7 +6,7 @@ systems clusters share (NFS, Lustre, GPFS).  filelock breaks the lock of a dead 
 host and, after watching it unchanged for 2 s, a malformed one; an acquire keeps trying long
 enough for that whatever the load (:data:`ACQUIRE_TIMEOUT_S`).  An empty or unreadable lock file
 older than :data:`ABANDONED_MARKER_AGE_S` (a writer killed before it wrote its pid) is removed
-first.  A lock file that is a link, a FIFO, a folder or larger than a lock (:data:`MAX_LOCK_BYTES`) is
+first.  A lock file that is a link, a FIFO, a folder or larger than a lock (:data:`~zbuf_occlude.io.caps.MAX_LOCK_BYTES`) is
 refused, never read nor broken.  A lock of another host is never broken (its owner may be alive there): the error names
 the host and pid and says which file to delete once that process is known to be gone.
 """
@@ -19,7 +19,8 @@ import stat
 from pathlib import Path
 
 from zbuf_occlude.errors import DatasetBusy, OutputError, UnsafePathError, ZbufOccludeError
-from zbuf_occlude.io.regular_files import MAX_LOCK_BYTES, read_text_file
+from zbuf_occlude.io.caps import MAX_LOCK_BYTES
+from zbuf_occlude.io.regular_files import read_text_file
 
 __all__ = ["LOCK_FILE", "ACQUIRE_TIMEOUT_S", "acquire_lock"]
 

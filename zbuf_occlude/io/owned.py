@@ -46,6 +46,7 @@ from typing import Any, BinaryIO
 
 from zbuf_occlude.errors import InvalidInputError, OutputError, UnsafePathError
 from zbuf_occlude.io.atomic import atomic_path, file_sha256, new_temp, raise_output_error, write_csv
+from zbuf_occlude.io.caps import MAX_LEDGER_BYTES, MAX_LEDGER_LINE_BYTES
 from zbuf_occlude.io.deletes import FileRecord, check_deletable, delete_recorded, name_allowed, remove_dead_temps
 from zbuf_occlude.io.json_files import loads_json
 from zbuf_occlude.io.locks import LOCK_FILE, acquire_lock
@@ -67,10 +68,6 @@ log = logging.getLogger(__name__)
 #: The ledger: one JSON line per file written (``{"path", "size", "sha256"}``) or deleted
 #: (``{"path", "deleted": true}``); the last line about a path holds.
 LEDGER_FILE = ".zbuf_occlude-written.jsonl"
-#: A ledger line longer than this is damaged (a path is at most a few hundred bytes).
-_MAX_LEDGER_LINE = 8192
-#: Largest ledger read: 256 MiB, some two million files of ours (a line is about 130 bytes).
-MAX_LEDGER_BYTES = 256 << 20
 #: Bytes of memory the ledger's records take per byte of ledger read (a path, a SHA-256 and a
 #: size per line become a dict entry and a FileRecord: 2.3x measured on 156-byte lines by
 #: tracemalloc; shorter names cost more per byte), checked before the ledger is read.
@@ -224,8 +221,8 @@ class OwnedFolder:
         """The ledger's files; lines that are damaged or not ours (a torn last line) are skipped.
 
         Read in bounded memory: its size is checked before it is read (against
-        :data:`MAX_LEDGER_BYTES`, then the memory its records would take against the memory
-        available), and line by line, each at most :data:`_MAX_LEDGER_LINE` bytes held (a longer
+        :data:`~zbuf_occlude.io.caps.MAX_LEDGER_BYTES`, then the memory its records would take against the memory
+        available), and line by line, each at most :data:`~zbuf_occlude.io.caps.MAX_LEDGER_LINE_BYTES` bytes held (a longer
         line, never one of ours, is skipped without being held whole).
 
         Raises
@@ -250,7 +247,7 @@ class OwnedFolder:
             check_memory(
                 size * LEDGER_MEMORY_PER_BYTE, f"the ledger {path} ({size:,} bytes)", hint=f"move it away, or choose another {self.option}"
             )
-            for line in _bounded_lines(fh, _MAX_LEDGER_LINE):
+            for line in _bounded_lines(fh, MAX_LEDGER_LINE_BYTES):
                 try:
                     entry = loads_json(line, what=str(path))
                 except InvalidInputError:  # damaged, torn or nested past any line of ours

@@ -23,7 +23,7 @@ Every file is untrusted.  Nothing is executed or unpickled; an HDF5 file is read
 :func:`zbuf_occlude.io.hdf5.check_hdf5` has found no link to another file, no virtual dataset
 and no external storage; sizes are checked from headers before anything is read
 (:data:`~zbuf_occlude.defaults.MAX_POINT_SET_POINTS` points a cloud,
-:data:`~zbuf_occlude.defaults.MAX_POINT_SET_BYTES` a read), and what a read will allocate is
+:data:`~zbuf_occlude.io.caps.MAX_POINT_SET_BYTES` a read), and what a read will allocate is
 checked against the memory available (:func:`zbuf_occlude.resources.check_memory`) before it
 allocates; NaN or infinite coordinates are refused, and so are normals that are zero or not finite
 (:func:`unit_normals`).  A class list beside a file is read only when it is a regular file inside
@@ -46,18 +46,19 @@ from typing import Any, BinaryIO
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude.defaults import MAX_POINT_SET_BYTES, MAX_POINT_SET_POINTS
+from zbuf_occlude.defaults import MAX_POINT_SET_POINTS
 from zbuf_occlude.errors import DatasetFormatError, InvalidInputError, ZbufOccludeError
 from zbuf_occlude.io.arrays import check_array_sizes, npy_header
+from zbuf_occlude.io.caps import MAX_LIST_BYTES, MAX_NPY_HEADER_BYTES, MAX_POINT_SET_BYTES, MAX_POINT_SET_PLY_HEADER_BYTES
 from zbuf_occlude.io.file_errors import dtype_text, parser_failure
 from zbuf_occlude.io.hdf5 import open_hdf5
-from zbuf_occlude.io.regular_files import MAX_LIST_BYTES, open_regular_file, read_text_file
+from zbuf_occlude.io.regular_files import open_regular_file, read_text_file
 from zbuf_occlude.resources import check_memory
 
 __all__ = [
     "stored_up", "UP_AXES",
     "POINT_SET_SUFFIXES", "SHAPE_NAME_FILES", "PointSet", "is_point_set_file", "read_point_sets",
-    "point_set_labels", "shape_names", "unit_normals", "check_npy_header", "MAX_NPY_HEADER_BYTES", "BYTES_PER_READ_POINT", "BYTES_PER_LABEL",
+    "point_set_labels", "shape_names", "unit_normals", "check_npy_header", "BYTES_PER_READ_POINT", "BYTES_PER_LABEL",
 ]  # fmt: skip
 
 #: Suffixes of the files read here (any case).
@@ -68,8 +69,6 @@ SHAPE_NAME_FILES = ("shape_names.txt", "modelnet40_shape_names.txt", "all_object
 _HDF5 = (".h5", ".hdf5")
 #: Columns of a cloud: coordinates, or coordinates and normals.
 _COLUMNS = (3, 6)
-#: Bytes of a PLY header read to find its elements (a header is a few hundred bytes).
-_PLY_HEADER_BYTES = 1 << 16
 _PLY_CHUNK_BYTES = 1 << 10
 #: Most digits of an element count in a PLY header: 18 (below int64's 9.2e18, and far past every
 #: cap); Python refuses to parse an integer of over 4,300 digits with a bare ValueError.
@@ -81,9 +80,6 @@ BYTES_PER_READ_POINT = 80
 #: Bytes per cloud of reading a file's labels (:func:`point_set_labels`): the int64 array, and
 #: the list of Python ints returned (an 8-byte slot and a 32-byte int each).
 BYTES_PER_LABEL = 48
-#: Longest ``.npy`` header read: numpy's own ``max_header_size`` default (``numpy.lib.format``),
-#: past which numpy refuses to parse a header as unsafe; an (N, 3) array's header is 128 bytes.
-MAX_NPY_HEADER_BYTES = 10_000
 #: A ``.npy`` file's first bytes: the magic string, the format version (major, minor), then the
 #: header's length, 2 bytes little-endian in version 1 and 4 in versions 2 and 3 (NEP 1).
 _NPY_MAGIC = b"\x93NUMPY"
@@ -296,7 +292,7 @@ def check_npy_header(fh: BinaryIO, path: str | os.PathLike, *, error: type[ZbufO
     ------
     ``error``
         Naming ``path``: no ``.npy`` magic string, a format version numpy does not write, a header
-        longer than :data:`MAX_NPY_HEADER_BYTES` (its length given) or one numpy cannot parse
+        longer than :data:`~zbuf_occlude.io.caps.MAX_NPY_HEADER_BYTES` (its length given) or one numpy cannot parse
         (the parser's exception type, never the header).
     """
     head = fh.read(len(_NPY_MAGIC) + 2 + max(_NPY_LENGTH_BYTES.values()))
@@ -353,11 +349,13 @@ def _ply_elements(path: Path) -> dict[str, int]:
     fh, _ = open_regular_file(path, error=InvalidInputError)
     head = b""
     with fh:  # a header is a few hundred bytes: read a little at a time, not the cap at once
-        while b"end_header" not in head and len(head) < _PLY_HEADER_BYTES and (chunk := fh.read(_PLY_CHUNK_BYTES)):
+        while b"end_header" not in head and len(head) < MAX_POINT_SET_PLY_HEADER_BYTES and (chunk := fh.read(_PLY_CHUNK_BYTES)):
             head += chunk
     end = head.find(b"end_header")
     if not head.startswith(b"ply") or end < 0:
-        raise InvalidInputError(f"{path}: not a PLY file (no 'ply' ... 'end_header' header in its first {_PLY_HEADER_BYTES:,} bytes)")
+        raise InvalidInputError(
+            f"{path}: not a PLY file (no 'ply' ... 'end_header' header in its first {MAX_POINT_SET_PLY_HEADER_BYTES:,} bytes)"
+        )
     text = head[:end].decode("ascii", "replace")
     counts = {m[1]: m[2] for m in re.finditer(r"^element\s+(\S+)\s+(\d+)\s*$", text, re.MULTILINE)}
     for digits in counts.values():
@@ -508,7 +506,7 @@ def read_point_sets(
     InvalidInputError
         Naming the file: missing, not a regular file, an unknown extension, another shape or
         dtype than the format's, no points, more points than ``max_points`` or more bytes than
-        :data:`~zbuf_occlude.defaults.MAX_POINT_SET_BYTES`, NaN/inf coordinates, zero or
+        :data:`~zbuf_occlude.io.caps.MAX_POINT_SET_BYTES`, NaN/inf coordinates, zero or
         non-finite normals, a PLY with faces or cut short, a row out of range, damaged bytes.
         :class:`~zbuf_occlude.errors.DatasetFormatError` (a subclass) for HDF5 files that are
         not HDF5, link or map to other files (:func:`zbuf_occlude.io.hdf5.check_hdf5`), or lack
@@ -581,7 +579,7 @@ def shape_names(path: str | os.PathLike) -> list[str] | None:
     :func:`~zbuf_occlude.io.regular_files.read_text_file`'s rules: a regular file (a FIFO is
     refused unopened), inside the point-set file's folder once links are resolved (one that
     links elsewhere would name the classes with another file's lines), of at most
-    :data:`~zbuf_occlude.io.regular_files.MAX_LIST_BYTES`.
+    :data:`~zbuf_occlude.io.caps.MAX_LIST_BYTES`.
 
     Returns
     -------
@@ -592,7 +590,7 @@ def shape_names(path: str | os.PathLike) -> list[str] | None:
     ------
     InvalidInputError
         The class list is not a regular file (a FIFO, a folder, a dangling link), larger than
-        :data:`~zbuf_occlude.io.regular_files.MAX_LIST_BYTES`, not UTF-8, or holds a name that is
+        :data:`~zbuf_occlude.io.caps.MAX_LIST_BYTES`, not UTF-8, or holds a name that is
         not printable or not a plain name (``/``, ``\\``, ``.``, ``..``: exports name folders by
         class, as a mesh's class is its folder's name), naming it and the line.
     UnsafePathError

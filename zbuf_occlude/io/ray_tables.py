@@ -9,7 +9,7 @@ the directions it fires in, in order, with each pulse's time.  Two file formats:
   else (comments, quotes, other columns) is accepted.  The file is opened by
   :func:`~zbuf_occlude.io.regular_files.open_regular_file` (a regular file, at most
   :data:`CSV_BYTES_PER_ROW` bytes per row allowed) and read :data:`CSV_BLOCK_BYTES` at a time,
-  each line at most :data:`MAX_CSV_LINE_BYTES` long and UTF-8, each block's rows parsed by numpy:
+  each line at most :data:`~zbuf_occlude.io.caps.MAX_RAY_TABLE_LINE_BYTES` long and UTF-8, each block's rows parsed by numpy:
   a file of one endless line, or of more rows than the cap, is refused after a block, never held
   whole;
 * **NumPy** ``.npy``: one ``(N, 3)`` floating-point array, columns in that order, read by
@@ -37,11 +37,12 @@ from numpy.typing import ArrayLike, NDArray
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.geometry.arguments import described
 from zbuf_occlude.io.arrays import load_npy
+from zbuf_occlude.io.caps import MAX_RAY_TABLE_LINE_BYTES
 from zbuf_occlude.io.encodings import npy_bytes
 from zbuf_occlude.io.regular_files import open_regular_file
 
 __all__ = [
-    "CSV_BLOCK_BYTES", "CSV_BYTES_PER_ROW", "MAX_CSV_LINE_BYTES", "RAY_TABLE_COLUMNS", "RAY_TABLE_SUFFIXES", "ray_table_bytes",
+    "CSV_BLOCK_BYTES", "CSV_BYTES_PER_ROW", "RAY_TABLE_COLUMNS", "RAY_TABLE_SUFFIXES", "ray_table_bytes",
     "read_ray_table",
 ]  # fmt: skip
 
@@ -54,9 +55,6 @@ RAY_TABLE_SUFFIXES = (".csv", ".npy")
 CSV_BYTES_PER_ROW = 96
 #: Room for the header line and blank lines on top of the rows' bytes.
 _CSV_SLACK_BYTES = 4096
-#: Longest line of a CSV ray table, line end included: a row written to round trip takes at most
-#: 76 bytes (:data:`CSV_BYTES_PER_ROW`); a kilobyte leaves room for spaces and padding.
-MAX_CSV_LINE_BYTES = 1024
 #: Bytes of a CSV read and parsed at a time: about 25,000 rows, so that what is held beside the
 #: rows read so far is a few MiB whatever the file holds.
 CSV_BLOCK_BYTES = 1 << 20
@@ -94,7 +92,7 @@ def read_ray_table(
         ``path`` or ``within`` is not a path, or ``max_rows`` not a whole number >= 1.
     InvalidInputError
         One line naming the file: another suffix; missing, not a regular file (a FIFO), larger
-        than the cap; a CSV line longer than :data:`MAX_CSV_LINE_BYTES` or not UTF-8, a header
+        than the cap; a CSV line longer than :data:`~zbuf_occlude.io.caps.MAX_RAY_TABLE_LINE_BYTES` or not UTF-8, a header
         other than ``time_s,azimuth_deg,elevation_deg``, a row that is not three numbers (each
         naming its line), no rows, more than ``max_rows``; a ``.npy`` that is not an ``(N, 3)``
         floating-point array, or declares more bytes than ``max_rows`` rows of float64.
@@ -143,17 +141,17 @@ def _read_csv(path: Path, max_rows: int, within) -> NDArray[np.float64]:
 
 def _csv_blocks(fh: BinaryIO, path: Path):
     """The file's lines, a list per :data:`CSV_BLOCK_BYTES` read (a CRLF line keeps its ``\\r``), each line checked for
-    its length (:data:`MAX_CSV_LINE_BYTES`, before more is read) and for UTF-8."""
+    its length (:data:`~zbuf_occlude.io.caps.MAX_RAY_TABLE_LINE_BYTES`, before more is read) and for UTF-8."""
     pending, line = b"", 1
     while True:
         block = fh.read(CSV_BLOCK_BYTES)
         data = pending + block
         cut = data.rfind(b"\n") + 1  # the whole lines; after them, the start of the next (or the last, unended)
         ends = np.flatnonzero(np.frombuffer(data[:cut], np.uint8) == ord("\n"))
-        long = np.flatnonzero(np.diff(ends, prepend=-1) > MAX_CSV_LINE_BYTES)
-        if len(long) or len(data) - cut > MAX_CSV_LINE_BYTES:
+        long = np.flatnonzero(np.diff(ends, prepend=-1) > MAX_RAY_TABLE_LINE_BYTES)
+        if len(long) or len(data) - cut > MAX_RAY_TABLE_LINE_BYTES:
             at = line + (int(long[0]) if len(long) else len(ends))
-            raise InvalidInputError(f"{path}: line {at:,} is longer than {MAX_CSV_LINE_BYTES:,} bytes; a ray table's rows are "
+            raise InvalidInputError(f"{path}: line {at:,} is longer than {MAX_RAY_TABLE_LINE_BYTES:,} bytes; a ray table's rows are "
                                     f"three numbers ({','.join(RAY_TABLE_COLUMNS)})")  # fmt: skip
         whole, pending = (data[:cut], data[cut:]) if block else (data, b"")
         if whole:

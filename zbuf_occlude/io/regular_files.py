@@ -8,9 +8,10 @@ its files.  Every such file is opened here, so that one set of rules holds:
   ``O_NONBLOCK`` (opening a FIFO for reading then returns at once instead of waiting for a
   writer), and its type is checked on the open file (``fstat``), so a name swapped between a
   check and the open cannot slip through;
-* its **size is checked before it is read**, against a cap the caller gives (the error names
-  the file, its size and the cap): :data:`MAX_LIST_BYTES` for text lists,
-  :data:`MAX_METADATA_BYTES` for JSON metadata, :data:`MAX_LOCK_BYTES` for lock files;
+* its **size is checked before it is read**, against the cap the caller names for what it reads
+  (every cap is in :mod:`zbuf_occlude.io.caps`: :data:`~zbuf_occlude.io.caps.MAX_LIST_BYTES` for
+  text lists, :data:`~zbuf_occlude.io.caps.MAX_METADATA_BYTES` for JSON metadata, ...); the error
+  names the file, its size and the cap;
 * when the caller names the folder the file was found in (``within=``), the file must still
   lie **inside that folder once links are resolved**: a list, a shard or a ``shape_names.txt``
   that is a symlink to a file elsewhere is refused
@@ -34,23 +35,9 @@ from typing import BinaryIO
 from zbuf_occlude.errors import InvalidInputError, UnsafePathError, ZbufOccludeError
 
 __all__ = [
-    "MAX_LIST_BYTES", "MAX_LOCK_BYTES", "MAX_METADATA_BYTES", "MAX_NAMED_FILE_BYTES", "check_within", "file_digest",
-    "open_regular_file", "read_at_most", "read_regular_file", "read_text_file", "regular_file_size",
+    "check_within", "file_digest", "open_regular_file", "read_at_most", "read_regular_file", "read_text_file", "regular_file_size",
 ]  # fmt: skip
 
-#: Largest file :func:`read_regular_file` reads unless given another cap: 2 GiB, the most a
-#: mesh may name (a glTF buffer, an OBJ material, a texture).  glTF buffers are addressed with
-#: 32-bit byte lengths and a GLB is at most 4 GiB by its uint32 length field; a buffer larger
-#: than this is not an object's mesh.
-MAX_NAMED_FILE_BYTES = 2 << 30
-#: Largest text list read (``shape_names.txt``, split lists, ``--list`` files, file lists of a data
-#: set): 64 MiB, some 500,000 paths of 128 bytes; ShapeNetCore's largest list is under 3 MiB.
-MAX_LIST_BYTES = 64 << 20
-#: Largest JSON metadata file read whole (a card, a plan, a record, a protocol record, a layout's
-#: index): 256 MiB; a data-set card of 200,000 samples is a few MiB.
-MAX_METADATA_BYTES = 256 << 20
-#: Largest lock file read: a lock holds a pid and a host name, a few dozen bytes.
-MAX_LOCK_BYTES = 512
 #: Bytes read at a time when a file is hashed (bounded memory, whatever the file's size).
 _HASH_CHUNK_BYTES = 1 << 20
 #: Bytes read at a time from a file that grew after it was opened (its new size is unknown).
@@ -176,7 +163,7 @@ def regular_file_size(path: str | PathLike[str], *, error: type[ZbufOccludeError
 def read_regular_file(
     path: str | PathLike[str],
     *,
-    max_bytes: int = MAX_NAMED_FILE_BYTES,
+    max_bytes: int,
     error: type[ZbufOccludeError] = InvalidInputError,
     within: str | PathLike[str] | None = None,
 ) -> bytes:
@@ -186,7 +173,8 @@ def read_regular_file(
     ----------
     path : str or PathLike
     max_bytes : int
-        The cap, checked against the file's size before anything is read.
+        The cap, checked against the file's size before anything is read: the one of
+        :mod:`zbuf_occlude.io.caps` named for the file read (no default).
     error : type
         The exception raised (:class:`~zbuf_occlude.errors.MeshLoadError` for meshes,
         :class:`~zbuf_occlude.errors.InvalidInputError` or a subclass for scans and clouds).
@@ -251,7 +239,7 @@ def read_at_most(fh: BinaryIO, size: int, max_bytes: int) -> bytes:
 def read_text_file(
     path: str | PathLike[str],
     *,
-    max_bytes: int = MAX_LIST_BYTES,
+    max_bytes: int,
     error: type[ZbufOccludeError] = InvalidInputError,
     within: str | PathLike[str] | None = None,
     errors: str = "strict",
@@ -262,7 +250,7 @@ def read_text_file(
     ----------
     path : str or PathLike
     max_bytes : int
-        The cap (default :data:`MAX_LIST_BYTES`), checked before anything is read.
+        The cap (:data:`~zbuf_occlude.io.caps.MAX_LIST_BYTES` for a list), checked before anything is read.
     error : type
         The exception raised, as for :func:`read_regular_file`.
     within : str or PathLike, optional

@@ -2,7 +2,7 @@
 
 The file is read by :func:`~zbuf_occlude.io.regular_files.read_text_file`'s rules (a regular
 file, inside the folder it was named from when the caller knows it, at most
-:data:`MAX_TABLE_BYTES`, UTF-8) and parsed in memory by :class:`csv.DictReader`; a file that is
+:data:`~zbuf_occlude.io.caps.MAX_TABLE_BYTES`, UTF-8) and parsed in memory by :class:`csv.DictReader`; a file that is
 not a CSV table is one line naming it.
 """
 
@@ -13,13 +13,10 @@ import io
 import os
 
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
+from zbuf_occlude.io.caps import MAX_TABLE_BYTES
 from zbuf_occlude.io.regular_files import read_text_file
 
-__all__ = ["MAX_TABLE_BYTES", "read_csv_rows"]
-
-#: Largest table read: 256 MiB, a million rows of 250 bytes; the comparison's ``results.csv`` of
-#: every method, size and view of a mesh set is a few MiB.
-MAX_TABLE_BYTES = 256 << 20
+__all__ = ["read_csv_rows"]
 
 
 def read_csv_rows(
@@ -38,7 +35,7 @@ def read_csv_rows(
         The folder ``path`` was named from (a run's output folder): it must stay inside it,
         links resolved.
     max_bytes : int
-        The cap on the file's size (:data:`MAX_TABLE_BYTES`), checked before a byte is read.
+        The cap on the file's size (:data:`~zbuf_occlude.io.caps.MAX_TABLE_BYTES`), checked before a byte is read.
     error : type
         The exception raised for a file that cannot be read or parsed.
 

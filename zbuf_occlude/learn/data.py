@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError, MeshLoadError
+from zbuf_occlude.io.caps import MAX_MESH_FILE_BYTES
 from zbuf_occlude.io.regular_files import read_regular_file
 
 __all__ = [
@@ -211,9 +212,9 @@ def mesh_content_key(path: str | os.PathLike) -> str:
     ------
     MeshLoadError
         The file is missing, not a regular file (a FIFO would block), or larger than
-        :data:`~zbuf_occlude.io.regular_files.MAX_NAMED_FILE_BYTES` (2 GiB); the message names it.
+        :data:`~zbuf_occlude.io.caps.MAX_MESH_FILE_BYTES` (2 GiB); the message names it.
     """
-    raw = read_regular_file(path, error=MeshLoadError)
+    raw = read_regular_file(path, max_bytes=MAX_MESH_FILE_BYTES, error=MeshLoadError)
     if Path(path).suffix.lower() == ".off":
         text = raw.decode("latin-1")
         text = re.sub(r"^\s*OFF", "", text, count=1)

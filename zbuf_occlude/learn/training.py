@@ -632,7 +632,7 @@ def load_model(path: str | os.PathLike, device: str = "cpu") -> tuple[nn.Module,
     ------
     CheckpointError
         Damaged, not a regular file (a FIFO), larger than
-        :data:`~zbuf_occlude.io.checkpoints.MAX_CHECKPOINT_BYTES`, not a ``best.pt`` of :func:`train`,
+        :data:`~zbuf_occlude.io.caps.MAX_CHECKPOINT_BYTES`, not a ``best.pt`` of :func:`train`,
         it needs more than weights to load, or a
         config field out of the bounds of :func:`zbuf_occlude.learn.models.check_model_config`
         (``width`` <= 8, ``n_classes`` <= 1,000, ``fv_grid`` <= 16; the message names the field),

@@ -7,7 +7,7 @@ COLLADA images).  Each such name is
   (:func:`zbuf_occlude.io.safe_paths.path_inside`): ``../../secret`` is refused;
 * read by :func:`zbuf_occlude.io.regular_files.read_regular_file`: only a **regular file**,
   opened without blocking (a FIFO, socket or device is refused), its size checked first
-  against :data:`zbuf_occlude.io.regular_files.MAX_NAMED_FILE_BYTES`.
+  against :data:`zbuf_occlude.io.caps.MAX_MESH_FILE_BYTES`.
 
 :func:`folder_resolver` is the trimesh resolver every mesh reader is given, so glTF buffers and
 images, OBJ materials and COLLADA images all go through it; errors are
@@ -22,6 +22,7 @@ from os import PathLike
 from typing import Any
 
 from zbuf_occlude.errors import MeshLoadError, UnsafePathError
+from zbuf_occlude.io.caps import MAX_MESH_FILE_BYTES
 from zbuf_occlude.io.regular_files import read_regular_file
 from zbuf_occlude.io.safe_paths import path_inside
 
@@ -50,7 +51,7 @@ def _resolver_class() -> type:
                     refused = refused or exc
                     continue
                 if os.path.lexists(path):
-                    return read_regular_file(path, error=MeshLoadError)
+                    return read_regular_file(path, max_bytes=MAX_MESH_FILE_BYTES, error=MeshLoadError)
             if refused is not None:
                 raise MeshLoadError(str(refused))
             raise FileNotFoundError(name)
@@ -65,7 +66,7 @@ def folder_resolver(path: str | PathLike[str]) -> Any:
     -------
     trimesh.resolvers.FilePathResolver
         Whose ``get`` reads through :func:`zbuf_occlude.io.regular_files.read_regular_file`
-        (cap :data:`zbuf_occlude.io.regular_files.MAX_NAMED_FILE_BYTES`) and raises
+        (cap :data:`zbuf_occlude.io.caps.MAX_MESH_FILE_BYTES`) and raises
         :class:`~zbuf_occlude.errors.MeshLoadError` naming the file.
     """
     return _resolver_class()(str(path))

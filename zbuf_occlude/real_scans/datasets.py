@@ -47,11 +47,10 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.atomic import write_bytes
+from zbuf_occlude.io.caps import MAX_REAL_SCAN_BYTES, MAX_REAL_SCAN_LINE_BYTES
 from zbuf_occlude.io.file_errors import parser_failure
 from zbuf_occlude.io.regular_files import open_regular_file, read_regular_file
 from zbuf_occlude.real_scans.files import (
-    MAX_FILE_BYTES,
-    MAX_LINE_BYTES,
     find_scan_files,
     row_capacity,
     load_scan_folder,
@@ -99,7 +98,7 @@ def read_suo_bin(path: str | os.PathLike) -> NDArray[np.void]:
         Missing file, or a size that is not a whole number of 34-byte records.
     """
     path = Path(path)
-    raw = read_regular_file(path, max_bytes=MAX_FILE_BYTES, error=InvalidInputError)
+    raw = read_regular_file(path, max_bytes=MAX_REAL_SCAN_BYTES, error=InvalidInputError)
     if len(raw) % SUO_DTYPE.itemsize:
         raise InvalidInputError(
             f"{path}: {len(raw)} bytes is not a multiple of the {SUO_DTYPE.itemsize}-byte SUO record "
@@ -121,7 +120,7 @@ def read_suo_csv(path: str | os.PathLike) -> NDArray[np.void]:
         numeric fields (its line number is given).
     """
     path = Path(path)
-    fh, _ = open_regular_file(path, max_bytes=MAX_FILE_BYTES, error=InvalidInputError)
+    fh, _ = open_regular_file(path, max_bytes=MAX_REAL_SCAN_BYTES, error=InvalidInputError)
     try:
         with fh:
             # streamed into one structured array: memory is the records, not a Python tuple per line
@@ -180,18 +179,18 @@ def read_lidarnet_csv(path: str | os.PathLike) -> RealScan:
 
     The rows are streamed into one ``(N, 3) float64`` array sized from the file's line count,
     which is checked first (:data:`~zbuf_occlude.real_scans.files.MAX_SCAN_POINTS` and the memory
-    available), and no line may pass :data:`~zbuf_occlude.real_scans.files.MAX_LINE_BYTES`.
+    available), and no line may pass :data:`~zbuf_occlude.io.caps.MAX_REAL_SCAN_LINE_BYTES`.
 
     Raises
     ------
     InvalidInputError
-        Missing file, more than :data:`~zbuf_occlude.real_scans.files.MAX_FILE_BYTES`, too many
+        Missing file, more than :data:`~zbuf_occlude.io.caps.MAX_REAL_SCAN_BYTES`, too many
         lines or a line too long, not UTF-8, a header without
         ``origin_x,origin_y,origin_z,...,object``, a bad row or a second object label (its line
         number is given), or fewer than one point.
     """
     path = Path(path)
-    fh, _ = open_regular_file(path, max_bytes=MAX_FILE_BYTES, error=InvalidInputError)
+    fh, _ = open_regular_file(path, max_bytes=MAX_REAL_SCAN_BYTES, error=InvalidInputError)
     try:
         with fh:
             # streamed into one (N, 3) float64 array, lines bounded: memory is the points, not Python rows
@@ -237,7 +236,7 @@ def _is_lidarnet_csv(path: Path) -> bool:
     try:
         fh, _ = open_regular_file(path, error=InvalidInputError)
         with fh:
-            first = fh.readline(MAX_LINE_BYTES)
+            first = fh.readline(MAX_REAL_SCAN_LINE_BYTES)
     except (OSError, InvalidInputError):  # unreadable, a FIFO: not LiDARNet's (its reader names the problem)
         return False
     return first.decode("utf-8", errors="replace").startswith(",".join(_LIDARNET_HEADER))

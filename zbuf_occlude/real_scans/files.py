@@ -46,6 +46,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InsufficientMemoryError, InvalidInputError
 from zbuf_occlude.io.arrays import load_npy, load_npz
+from zbuf_occlude.io.caps import MAX_REAL_SCAN_ARRAY_BYTES, MAX_REAL_SCAN_BYTES, MAX_REAL_SCAN_LINE_BYTES
 from zbuf_occlude.io.file_errors import dtype_text, parser_failure
 from zbuf_occlude.io.ply import parse_ply_vertices
 from zbuf_occlude.io.point_sets import check_npy_header
@@ -59,10 +60,7 @@ from zbuf_occlude.resources import check_memory
 __all__ = [
     "POINT_EXTENSIONS",
     "UNITS_M",
-    "MAX_FILE_BYTES",
     "MAX_SCAN_POINTS",
-    "MAX_ARRAY_BYTES",
-    "MAX_LINE_BYTES",
     "row_capacity",
     "read_points",
     "read_lines",
@@ -78,18 +76,9 @@ log = logging.getLogger(__name__)
 POINT_EXTENSIONS = (".csv", ".txt", ".xyz", ".pts", ".ply", ".pcd", ".npy", ".npz", ".bin")
 #: Unit names accepted by ``units`` (metres per unit).
 UNITS_M = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048, "km": 1000.0}
-#: Files larger than this are refused before reading (a scan of one object is kilobytes to megabytes).
-MAX_FILE_BYTES = 1 << 30
 #: Points one scan may hold: 50 million.  A segmented object is thousands to a million points;
 #: 5e7 is 1.2 GB as float64 (x, y, z), checked before the array is allocated.
 MAX_SCAN_POINTS = 50_000_000
-#: Bytes an ``.npy``/``.npz`` may declare once inflated: the same 1 GiB as a file.  A zip member
-#: compresses 1000:1 (zeros), so the cap is checked against the sizes the zip directory and
-#: the ``.npy`` header declare, before anything is read.
-MAX_ARRAY_BYTES = MAX_FILE_BYTES
-#: Longest line of a text scan: 4 KiB.  A row is a few numbers (x y z, intensity, a label);
-#: a longer line is not a row, and splitting a 1 GB line takes ~50x its size in Python strings.
-MAX_LINE_BYTES = 4096
 #: Rows parsed into Python objects at a time before they are stored as float64.
 _ROWS_PER_CHUNK = 65536
 _KITTI_RECORD = np.dtype("<f4")
@@ -124,7 +113,8 @@ def _split(line: str) -> list[str]:
 
 
 def read_lines(path: Path, fh: io.BufferedReader, errors: str = "replace"):
-    """``(line number, text)`` of a binary file handle, one line at a time, none longer than :data:`MAX_LINE_BYTES`.
+    """``(line number, text)`` of a binary file handle, one line at a time, none longer than
+    :data:`~zbuf_occlude.io.caps.MAX_REAL_SCAN_LINE_BYTES`.
 
     ``errors`` is the UTF-8 decoder's (``"strict"``: a ``UnicodeDecodeError`` for the caller to name).
 
@@ -133,9 +123,9 @@ def read_lines(path: Path, fh: io.BufferedReader, errors: str = "replace"):
     InvalidInputError
         Naming the file and the line, on a line longer than the cap (a file with no newline).
     """
-    for lineno, line in enumerate(iter(lambda: fh.readline(MAX_LINE_BYTES + 1), b""), 1):
-        if len(line) > MAX_LINE_BYTES:
-            raise InvalidInputError(f"{path}:{lineno}: a line longer than {MAX_LINE_BYTES:,} bytes is not a row of a point cloud")
+    for lineno, line in enumerate(iter(lambda: fh.readline(MAX_REAL_SCAN_LINE_BYTES + 1), b""), 1):
+        if len(line) > MAX_REAL_SCAN_LINE_BYTES:
+            raise InvalidInputError(f"{path}:{lineno}: a line longer than {MAX_REAL_SCAN_LINE_BYTES:,} bytes is not a row of a point cloud")
         yield lineno, line.decode("utf-8", errors=errors)
 
 
@@ -183,7 +173,7 @@ def row_capacity(path: Path, fh: io.BufferedReader, bytes_per_point: int = 24) -
 
 def _read_text_table(path: Path) -> NDArray[np.float64]:
     """Rows of a CSV/TXT/XYZ/PTS file, streamed: memory is the (N, 3) float64 result, not Python strings."""
-    fh, _ = open_regular_file(path, max_bytes=MAX_FILE_BYTES, error=InvalidInputError)
+    fh, _ = open_regular_file(path, max_bytes=MAX_REAL_SCAN_BYTES, error=InvalidInputError)
     with fh:
         capacity = row_capacity(path, fh)
         content = ((i, ln) for i, ln in read_lines(path, fh) if ln.strip() and not ln.lstrip().startswith(("#", "//")))
@@ -288,7 +278,7 @@ def _from_array(path: Path, arr: np.ndarray) -> NDArray[np.float64]:
 
 
 def _read_npz(path: Path) -> NDArray[np.float64]:
-    arrays = load_npz(path, max_bytes=MAX_ARRAY_BYTES, error=InvalidInputError)
+    arrays = load_npz(path, max_bytes=MAX_REAL_SCAN_ARRAY_BYTES, error=InvalidInputError)
     for key in ("points", "xyz", "data"):
         if key in arrays:
             return _from_array(path, arrays[key])
@@ -316,9 +306,9 @@ def scan_digest(path: Path) -> str:
     Raises
     ------
     InvalidInputError
-        Naming the file: larger than :data:`MAX_FILE_BYTES`, not a regular file, unreadable.
+        Naming the file: larger than :data:`~zbuf_occlude.io.caps.MAX_REAL_SCAN_BYTES`, not a regular file, unreadable.
     """
-    return file_digest(path, max_bytes=MAX_FILE_BYTES, error=InvalidInputError)
+    return file_digest(path, max_bytes=MAX_REAL_SCAN_BYTES, error=InvalidInputError)
 
 
 def read_points(path: str | os.PathLike) -> NDArray[np.float64]:
@@ -327,10 +317,10 @@ def read_points(path: str | os.PathLike) -> NDArray[np.float64]:
     Raises
     ------
     InvalidInputError
-        Naming the file: missing, not a regular file, larger than :data:`MAX_FILE_BYTES`,
+        Naming the file: missing, not a regular file, larger than :data:`~zbuf_occlude.io.caps.MAX_REAL_SCAN_BYTES`,
         declaring more than :data:`MAX_SCAN_POINTS` points or (``.npy``/``.npz``) more than
-        :data:`MAX_ARRAY_BYTES` inflated, a line longer than :data:`MAX_LINE_BYTES`, a PLY or
-        PCD holding more or fewer points than its header declares, unknown extension,
+        :data:`~zbuf_occlude.io.caps.MAX_REAL_SCAN_ARRAY_BYTES` inflated, a line longer than
+        :data:`~zbuf_occlude.io.caps.MAX_REAL_SCAN_LINE_BYTES`, a PLY or PCD holding more or fewer points than its header declares, unknown extension,
         malformed content, non-finite coordinates or no point.
     """
     path = Path(path)
@@ -341,21 +331,21 @@ def read_points(path: str | os.PathLike) -> NDArray[np.float64]:
         if not path.exists():
             raise InvalidInputError(f"{path}: no such file")
         size = regular_file_size(path, error=InvalidInputError)
-        if size > MAX_FILE_BYTES:
-            raise InvalidInputError(f"{path}: {size:,} bytes, more than the {MAX_FILE_BYTES:,} a scan may have")
+        if size > MAX_REAL_SCAN_BYTES:
+            raise InvalidInputError(f"{path}: {size:,} bytes, more than the {MAX_REAL_SCAN_BYTES:,} a scan may have")
         if suffix == ".npy":
             fh, _ = open_regular_file(path, error=InvalidInputError)
             with fh:  # one line of ours on a header numpy would refuse with several lines quoting it
                 check_npy_header(fh, path)
-            pts = _from_array(path, load_npy(path, max_bytes=MAX_ARRAY_BYTES, error=InvalidInputError))
+            pts = _from_array(path, load_npy(path, max_bytes=MAX_REAL_SCAN_ARRAY_BYTES, error=InvalidInputError))
         elif suffix == ".npz":
             pts = _read_npz(path)
         elif suffix == ".ply":
-            pts = _read_ply(path, read_regular_file(path, max_bytes=MAX_FILE_BYTES, error=InvalidInputError))
+            pts = _read_ply(path, read_regular_file(path, max_bytes=MAX_REAL_SCAN_BYTES, error=InvalidInputError))
         elif suffix in (".csv", ".txt", ".xyz", ".pts"):
             pts = _read_text_table(path)
         else:
-            raw = read_regular_file(path, max_bytes=MAX_FILE_BYTES, error=InvalidInputError)
+            raw = read_regular_file(path, max_bytes=MAX_REAL_SCAN_BYTES, error=InvalidInputError)
             if suffix == ".bin":
                 if len(raw) % (4 * _KITTI_RECORD.itemsize):
                     raise InvalidInputError(f"{path}: {len(raw)} bytes is not a whole number of 16-byte KITTI records (float32 x y z r)")

@@ -22,6 +22,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.io.arrays import load_npz
 from zbuf_occlude.io.atomic import write_bytes
+from zbuf_occlude.io.caps import MAX_SCAN_NPZ_BYTES
 from zbuf_occlude.io.encodings import npz_bytes
 from zbuf_occlude.sensors.depth_camera import DepthCamera
 from zbuf_occlude.sensors.echo_model import Radiometry, Transmission, echo_returns, strongest_echo, surface_optics
@@ -34,7 +35,7 @@ from zbuf_occlude.sensors.scene import BuiltScene, ScanScene, SceneObject
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
-__all__ = ["Scan", "scan", "look_at_pose", "read_scan_npz", "build_scene", "return_numbers", "FRAMES", "MAX_SCAN_NPZ_BYTES"]
+__all__ = ["Scan", "scan", "look_at_pose", "read_scan_npz", "build_scene", "return_numbers", "FRAMES"]
 
 #: Frames a scan's points can be given in.
 FRAMES = ("sensor", "world")
@@ -236,10 +237,6 @@ class Scan:
         return self.to_las(path, compress=True)
 
 
-#: Largest scan ``.npz`` read, inflated: 4 GiB (a 128-beam sweep of a street is ~2.6 M returns,
-#: ~0.1 GB in this layout); checked from the zip directory and the array headers before reading.
-MAX_SCAN_NPZ_BYTES = 4 << 30
-
 #: Per-point arrays of a scan NPZ: (columns or None for (N,), dtype kinds accepted); "f" = any
 #: real number (integers too), "i" = integers only.
 _NPZ_PER_POINT = {"points": (3, "f"), "range_m": (None, "f"), "face_index": (None, "i"), "object_id": (None, "i"),
@@ -290,7 +287,7 @@ def read_scan_npz(path: str | os.PathLike) -> Scan:
     ------
     InvalidInputError
         Naming the file: missing, not a regular file, inflating past
-        :data:`MAX_SCAN_NPZ_BYTES`, missing keys, or an array of the wrong shape or dtype
+        :data:`~zbuf_occlude.io.caps.MAX_SCAN_NPZ_BYTES`, missing keys, or an array of the wrong shape or dtype
         (per-point arrays of N rows, ``points`` (N, 3) finite numbers, ``normal`` (N, 3) numbers, indices integers,
         ``sensor_position`` a finite (3,), ``sensor_to_world`` a finite (4, 4), ``frame`` one
         of :data:`FRAMES`).

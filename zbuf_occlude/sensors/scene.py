@@ -600,7 +600,7 @@ def load_scene(path: str | Path) -> ScanScene:
     """Read a scene spec from ``.json``, ``.yaml`` or ``.yml`` (module docstring).
 
     The file is read by :func:`~zbuf_occlude.sensors.spec_files.read_spec_file` (a regular
-    file of at most :data:`~zbuf_occlude.sensors.spec_files.MAX_SPEC_FILE_BYTES`, nested at
+    file of at most :data:`~zbuf_occlude.io.caps.MAX_SPEC_FILE_BYTES`, nested at
     most 64 levels, no YAML aliases), then :meth:`ScanScene.from_dict` with the file's folder.
 
     Raises

@@ -5,7 +5,7 @@ A scene file (:func:`~zbuf_occlude.sensors.scene.load_scene`) or a sensor file
 is looked at (:mod:`zbuf_occlude.sensors.checks`), :func:`read_spec_file` makes sure that the
 file is small and that its parse is small:
 
-* only a regular file of at most :data:`MAX_SPEC_FILE_BYTES` is read (a FIFO would block);
+* only a regular file of at most :data:`~zbuf_occlude.io.caps.MAX_SPEC_FILE_BYTES` is read (a FIFO would block);
 * JSON goes through the project's one JSON reader (:func:`zbuf_occlude.io.json_files.loads_json`:
   nesting at most :data:`~zbuf_occlude.io.json_files.MAX_JSON_DEPTH` levels);
 * YAML is read by :class:`SpecYamlLoader`, a ``yaml.SafeLoader`` that refuses **aliases**
@@ -25,15 +25,12 @@ from typing import Any
 
 from zbuf_occlude._version import install_hint
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.io.caps import MAX_SPEC_FILE_BYTES
 from zbuf_occlude.io.json_files import MAX_JSON_DEPTH, loads_json
 from zbuf_occlude.io.regular_files import read_regular_file
 from zbuf_occlude.sensors.checks import located
 
-__all__ = ["MAX_SPEC_FILE_BYTES", "read_spec_file", "yaml_loader"]
-
-#: Largest scene or sensor file, bytes (16 MiB): a scene of the most objects a file may hold
-#: (:data:`~zbuf_occlude.sensors.checks.MAX_SCENE_OBJECTS`) takes about 2 MB.
-MAX_SPEC_FILE_BYTES = 16 << 20
+__all__ = ["read_spec_file", "yaml_loader"]
 
 
 @functools.cache
@@ -99,7 +96,7 @@ def read_spec_file(path: str | os.PathLike, *, what: str = "file", yaml_ok: bool
     Raises
     ------
     InvalidInputError
-        Naming the file: missing, not a regular file, over :data:`MAX_SPEC_FILE_BYTES`, not
+        Naming the file: missing, not a regular file, over :data:`~zbuf_occlude.io.caps.MAX_SPEC_FILE_BYTES`, not
         UTF-8, an unknown suffix, not JSON/YAML, nested too deep, or a YAML alias.
     """
     path = Path(path)

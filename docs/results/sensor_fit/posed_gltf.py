@@ -21,6 +21,7 @@ import numpy as np
 import trimesh
 
 from zbuf_occlude.errors import MeshLoadError
+from zbuf_occlude.io.caps import MAX_MESH_FILE_BYTES
 from zbuf_occlude.io.regular_files import read_regular_file
 from zbuf_occlude.mesh.named_files import folder_resolver
 
@@ -32,7 +33,7 @@ def read_gltf(path: Path) -> tuple[dict, list[bytes]]:
     """The JSON and the buffers of a .gltf (buffers beside it, or data URIs) or .glb file, read as the
     mesh loader reads them (regular files only, inside the file's folder: ``zbuf_occlude.io.regular_files`` and
     ``zbuf_occlude.mesh.named_files``)."""
-    raw = read_regular_file(path, error=MeshLoadError)
+    raw = read_regular_file(path, max_bytes=MAX_MESH_FILE_BYTES, error=MeshLoadError)
     if raw[:4] == b"glTF":
         n = struct.unpack_from("<I", raw, 12)[0]
         doc = json.loads(raw[20 : 20 + n])

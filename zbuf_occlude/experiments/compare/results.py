@@ -64,7 +64,7 @@ def read_csv(path: str | os.PathLike, *, within: str | os.PathLike | None = None
     """Rows of a ``results.csv`` written by :func:`write_csv`, numbers parsed back.
 
     Read by :func:`~zbuf_occlude.io.tables.read_csv_rows`: a regular file of at most
-    :data:`~zbuf_occlude.io.tables.MAX_TABLE_BYTES`, inside ``within`` (the comparison's output
+    :data:`~zbuf_occlude.io.caps.MAX_TABLE_BYTES`, inside ``within`` (the comparison's output
     folder) once links are resolved, when given.
 
     Raises

@@ -12,7 +12,8 @@ from zbuf_occlude.experiments.sim2real.data import FITTED_SETS, OCCLUDED_POINTS,
 from zbuf_occlude.experiments.table3.common import CHECKPOINT_FILES
 from zbuf_occlude.io.json_files import loads_json
 from zbuf_occlude.io.owned import OwnedFolder
-from zbuf_occlude.io.regular_files import MAX_METADATA_BYTES, read_text_file
+from zbuf_occlude.io.caps import MAX_METADATA_BYTES
+from zbuf_occlude.io.regular_files import read_text_file
 
 __all__ = [
     "REAL_TO_REAL",
@@ -68,7 +69,7 @@ SIM2REAL_OUTPUTS = (
 def load_runs(path: Path) -> dict:
     """The runs an earlier run of this folder recorded in ``runs.jsonl``, by ``(train_set, seed)``:
     a rerun resumes from them.  Read inside the output folder, as a regular file of at most
-    :data:`~zbuf_occlude.io.regular_files.MAX_METADATA_BYTES`.
+    :data:`~zbuf_occlude.io.caps.MAX_METADATA_BYTES`.
 
     Raises
     ------

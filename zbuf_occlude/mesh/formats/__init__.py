@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING
 
 from zbuf_occlude._version import install_hint
 from zbuf_occlude.errors import MeshLoadError
+from zbuf_occlude.io.caps import MAX_MESH_FILE_BYTES
 from zbuf_occlude.io.regular_files import read_regular_file
 from zbuf_occlude.mesh.formats import collada, gltf, obj, off, ply, stl
 from zbuf_occlude.mesh.formats.base import Format
@@ -112,7 +113,7 @@ def read_trimesh(path: Path, file_type: str) -> trimesh.Trimesh:
         :func:`zbuf_occlude.mesh.load.load_mesh` reports it with the file name.
     """
     fmt = FORMATS[file_type]
-    raw = read_regular_file(path, error=MeshLoadError)
+    raw = read_regular_file(path, max_bytes=MAX_MESH_FILE_BYTES, error=MeshLoadError)
     _check_installed(fmt, path)
     if fmt.check is not None:
         fmt.check(raw, path)

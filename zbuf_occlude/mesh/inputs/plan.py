@@ -18,7 +18,8 @@ from typing import NamedTuple
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.samples import object_key
-from zbuf_occlude.io.regular_files import MAX_LIST_BYTES, read_regular_file
+from zbuf_occlude.io.caps import MAX_LIST_BYTES
+from zbuf_occlude.io.regular_files import read_regular_file
 from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS
 from zbuf_occlude.mesh.inputs.discovery import (
     SkippedInput,
@@ -314,7 +315,7 @@ def scan_objects(
     InvalidInputError
         ``source`` missing, nothing found, labels refused by the layout checks
         (:mod:`zbuf_occlude.mesh.inputs.layouts`), ``class_from`` with a list file, a list file larger
-        than :data:`~zbuf_occlude.io.regular_files.MAX_LIST_BYTES`, an unknown class, or
+        than :data:`~zbuf_occlude.io.caps.MAX_LIST_BYTES`, an unknown class, or
         ``per_class < 1``.
     BackendUnavailable
         A format of the meshes kept needs an optional package that is not installed

@@ -22,7 +22,7 @@ with no faces) holds one cloud or many; each cloud is one object of the plan, as
 
 The lists beside a file (the class list, the split lists) are read as a shared folder's files
 are (:mod:`zbuf_occlude.io.regular_files`): regular files only, inside the file's folder once
-links are resolved, of at most :data:`~zbuf_occlude.io.regular_files.MAX_LIST_BYTES`.
+links are resolved, of at most :data:`~zbuf_occlude.io.caps.MAX_LIST_BYTES`.
 """
 
 from __future__ import annotations
@@ -36,7 +36,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.io.regular_files import MAX_LIST_BYTES, read_text_file
+from zbuf_occlude.io.caps import MAX_LIST_BYTES
+from zbuf_occlude.io.regular_files import read_text_file
 from zbuf_occlude.mesh.paths import SPLITS, printable_path
 from zbuf_occlude.resources import check_memory
 
@@ -155,7 +156,7 @@ def pointnet_split(path: str | os.PathLike) -> str | None:
     InvalidInputError
         A list that is not a regular file (a FIFO, a folder, a dangling link: refused
         unopened), cannot be read, or is larger than
-        :data:`~zbuf_occlude.io.regular_files.MAX_LIST_BYTES` (naming it).
+        :data:`~zbuf_occlude.io.caps.MAX_LIST_BYTES` (naming it).
     UnsafePathError
         A list that leads outside the file's folder (a link to a file elsewhere).
     """
