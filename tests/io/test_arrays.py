@@ -49,7 +49,7 @@ def test_check_array_sizes_raises_the_callers_error_naming_the_file(tmp_path, er
     with pytest.raises(error, match=r"forged\.npz: member 1 declares 24,000,000,000 bytes of array but holds 200"):
         check_array_sizes(path, max_bytes=1 << 40, error=error)
     (tmp_path / "junk.npz").write_bytes(b"PK\x03\x04 not a zip")
-    with pytest.raises(error, match=r"junk\.npz: cannot read its array headers \(BadZipFile"):
+    with pytest.raises(error, match=r"junk\.npz: cannot read its array headers \(not a zip file, or a damaged one\)"):
         check_array_sizes(tmp_path / "junk.npz", max_bytes=1 << 20, error=error)
 
 

@@ -148,7 +148,7 @@ def test_a_record_claiming_more_than_its_bytes_hold_is_refused_before_torch_allo
     # torch's zip reader allocates a record's declared size first: here 2 GB claimed by 24 bytes
     data = checkpoint_bytes(_state())
     (tmp_path / "lying.pt").write_bytes(_claiming(data, 2_100_000_000))
-    with pytest.raises(CheckpointError, match=r"lying\.pt: member .*/data/0 declares 2,100,000,000 bytes inflated from 24, more than its"):
+    with pytest.raises(CheckpointError, match=r"lying\.pt: member \d+ declares 2,100,000,000 bytes inflated from 24, more than its"):
         load_checkpoint(tmp_path / "lying.pt")
 
 

@@ -467,8 +467,8 @@ def test_read_npz_refuses_a_cloud_file_of_another_layout_naming_the_file(tmp_pat
 
 @pytest.mark.parametrize(
     ("content", "message"),
-    [(b"", "cannot read its array headers"), (b"PK\x03\x04 not a zip", r"BadZipFile"), (b"\x93NUMPY\x01\x00", "BadZipFile"),
-     (b"\x80\x04K\x01.", "BadZipFile")],
+    [(b"", "cannot read its array headers"), (b"PK\x03\x04 not a zip", "not a zip file"), (b"\x93NUMPY\x01\x00", "not a zip file"),
+     (b"\x80\x04K\x01.", "not a zip file")],
     ids=["empty", "damaged zip", "npy", "pickle"],
 )  # fmt: skip
 def test_read_npz_refuses_a_file_that_is_not_an_npz_naming_the_file(tmp_path, content, message):

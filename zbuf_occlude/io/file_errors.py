@@ -37,6 +37,10 @@ def parser_failure(exc: BaseException) -> str:
     """
     if isinstance(exc, OSError) and exc.strerror:
         return exc.strerror
+    import zipfile
+
+    if isinstance(exc, zipfile.BadZipFile):
+        return "not a zip file, or a damaged one"
     if isinstance(exc, ValueError) and "allow_pickle" in str(exc):  # numpy's refusal of an object array
         return "it holds pickled Python objects, which are never loaded"
     if isinstance(exc, UnicodeDecodeError):
