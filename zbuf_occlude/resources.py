@@ -281,19 +281,23 @@ def available_memory() -> tuple[int, str] | None:
 
 def check_memory(
     estimate: MemoryEstimate | int,
-    *,
     option: str | None = None,
+    *,
     available: int | None = None,
     hint: str | None = None,
 ) -> None:
     """Refuse a job that needs more memory than is available, before it allocates.
+
+    The one memory check of the package, made before the work wherever an option's value or an
+    input's size sets an allocation (a cloud's points, a shard's rows, a ledger's lines).
 
     Parameters
     ----------
     estimate : MemoryEstimate or int
         From :func:`estimate_job_memory`, or bytes.
     option : str, optional
-        The option or argument to name (default: the estimate's largest part).
+        The option, argument or input to name (``"--points"``, ``"the ledger L (3,000 bytes)"``;
+        default: the estimate's largest part).
     available : int, optional
         Bytes available (default :func:`available_memory`; unknown → no check).
     hint : str, optional

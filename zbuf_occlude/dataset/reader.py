@@ -25,7 +25,7 @@ from zbuf_occlude.defaults import DEFAULT_FARM_DENSE_POINTS
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError, ShardChecksumError
 from zbuf_occlude.io.safe_paths import path_inside
 from zbuf_occlude.mesh.paths import SPLITS, name_set
-from zbuf_occlude.io.memory import check_memory
+from zbuf_occlude.resources import check_memory
 from zbuf_occlude.resources import available_memory
 
 if TYPE_CHECKING:  # the schema (pydantic) is imported when a data set is opened, not with the package

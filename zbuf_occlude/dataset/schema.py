@@ -28,7 +28,7 @@ from zbuf_occlude.io.caps import MAX_CARD_CHECKSUM_BYTES, MAX_LIST_BYTES, MAX_MA
 from zbuf_occlude.io.hdf5 import Column, declared_nbytes, open_hdf5
 from zbuf_occlude.io.atomic import size_mismatch
 from zbuf_occlude.io.json_files import loads_json
-from zbuf_occlude.io.memory import check_memory
+from zbuf_occlude.resources import check_memory
 from zbuf_occlude.io.regular_files import open_regular_file, read_text_file
 from zbuf_occlude.io.safe_paths import control_character, path_inside
 
@@ -696,7 +696,7 @@ def open_shard(
     :func:`zbuf_occlude.io.hdf5.check_hdf5` against :data:`SHARD_COLUMNS` (data stored inside
     the file, no links, the schema's dtypes), :func:`check_shard` (datasets, shapes, rows), and
     the memory its datasets declare against the memory available
-    (:func:`zbuf_occlude.io.memory.check_memory`), so that a small file declaring 2e7 rows is
+    (:func:`zbuf_occlude.resources.check_memory`), so that a small file declaring 2e7 rows is
     refused before it is read.  Parameters as :func:`check_shard`.
 
     Returns

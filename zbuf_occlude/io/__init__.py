@@ -11,8 +11,7 @@ named for what it caps),
 :mod:`.las_layout` (a LAS/LAZ file's header, records and LAZ chunks, checked before laspy reads them),
 :mod:`.las_crs` (a LAS file's coordinate unit, from its CRS records), :mod:`.owned` (the one way a
 command writes into a user's folder) and :mod:`.deletes` (what it may delete or replace),
-:mod:`.memory` (memory checked before the work an input's size sets), :mod:`.file_errors` (errors
-that name a file, never quote it).
+:mod:`.file_errors` (errors that name a file, never quote it).
 """
 
 from zbuf_occlude.geometry.samples import OccludedCloud

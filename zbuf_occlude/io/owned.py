@@ -50,7 +50,7 @@ from zbuf_occlude.io.caps import MAX_LEDGER_BYTES, MAX_LEDGER_LINE_BYTES
 from zbuf_occlude.io.deletes import FileRecord, check_deletable, delete_recorded, name_allowed, remove_dead_temps
 from zbuf_occlude.io.json_files import loads_json
 from zbuf_occlude.io.locks import LOCK_FILE, acquire_lock
-from zbuf_occlude.io.memory import check_memory
+from zbuf_occlude.resources import check_memory
 from zbuf_occlude.io.regular_files import open_regular_file
 from zbuf_occlude.io.safe_paths import path_inside
 

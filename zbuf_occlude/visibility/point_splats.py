@@ -36,7 +36,7 @@ beyond :data:`MAX_SPLAT_COORDINATE` (squared distances between them would overfl
 ``splat_scale`` beyond :data:`MAX_SPLAT_SCALE`, normals that cannot be made unit
 (:func:`~zbuf_occlude.io.point_sets.unit_normals`), and a cloud whose preparation would need more
 memory than is available (:data:`BYTES_PER_SURFEL`, :data:`BYTES_PER_ESTIMATED_NORMAL` and
-:data:`BYTES_PER_THREAD` for each thread of its neighbour search; :func:`~zbuf_occlude.io.memory.check_memory`),
+:data:`BYTES_PER_THREAD` for each thread of its neighbour search; :func:`~zbuf_occlude.resources.check_memory`),
 and so is a view (:meth:`PointSurfels.visible`) whose arrays would (:data:`BYTES_PER_VIEW_POINT`).
 """
 
@@ -63,7 +63,7 @@ from zbuf_occlude.geometry.arguments import check_camera, check_points, describe
 from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.geometry.placement import warn_camera_placement
 from zbuf_occlude.io.point_sets import unit_normals
-from zbuf_occlude.io.memory import check_memory
+from zbuf_occlude.resources import check_memory
 from zbuf_occlude.visibility.registry import register
 
 __all__ = [
