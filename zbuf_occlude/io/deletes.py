@@ -13,8 +13,8 @@ The rules of :mod:`zbuf_occlude.io.owned`'s deletes, on their own:
   of ours (:func:`remove_dead_temps`); folders are removed only when empty (``rmdir``).
 
 A refusal is one line that names the file and says what to do
-(:class:`~zbuf_occlude.errors.UnsafePathError`).  :mod:`zbuf_occlude.io.owned` re-exports every
-name here, where callers import them from.
+(:class:`~zbuf_occlude.errors.UnsafePathError`).  Callers import these names from here;
+:mod:`zbuf_occlude.io.owned` uses them and does not re-export them.
 """
 
 from __future__ import annotations
