@@ -25,8 +25,7 @@ from zbuf_occlude.defaults import DEFAULT_FARM_DENSE_POINTS
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError, ShardChecksumError
 from zbuf_occlude.io.safe_paths import path_inside
 from zbuf_occlude.mesh.paths import SPLITS, name_set
-from zbuf_occlude.resources import check_memory
-from zbuf_occlude.resources import available_memory
+from zbuf_occlude.resources import available_memory, check_memory
 
 if TYPE_CHECKING:  # the schema (pydantic) is imported when a data set is opened, not with the package
     from zbuf_occlude.dataset.schema import Card
@@ -450,7 +449,7 @@ class OccludedDataset(Sequence):
         manifest_path = self.root / MANIFEST_FILE
         manifest = read_manifest(manifest_path)
         check_records(manifest_path, manifest, card, self.shape_names)
-        rows_per_pose = []
+        rows_per_pose, declared = [], 0
         for lineno, rec, checked in manifest:
             if checked is None:  # failed or pending objects have no shard
                 continue
@@ -461,10 +460,11 @@ class OccludedDataset(Sequence):
             where = f"{manifest_path}:{lineno}"
             shards, digests = checked_shards(self.root, where, checked, card, verify=self.verify)
             spp = self._kind.rows_per_pose(np.asarray(checked.n_visible, dtype=np.int64), card.params.samples_per_view)
-            check_declared_rows(self._kind, shards, int(spp.sum()), self.n_points, where)
-            self._shards.add(rec, shards, digests, rows=int(spp.sum()), topup_rows=int(sum(checked.n_topped_up or ())))
+            rows = int(spp.sum())
+            check_declared_rows(self._kind, shards, rows, self.n_points, where)
+            self._shards.add(rec, shards, digests, rows=rows, topup_rows=int(sum(checked.n_topped_up or ())))
             rows_per_pose.append(spp)
-        declared = sum(int(spp.sum()) for spp in rows_per_pose)
+            declared += rows
         check_memory(
             declared * BYTES_PER_INDEX_ROW,
             f"the index of {self.root} ({declared:,} samples declared by its card's samples_per_view and {MANIFEST_FILE})",
