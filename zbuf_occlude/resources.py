@@ -27,6 +27,7 @@ __all__ = [
     "MemoryEstimate",
     "estimate_job_memory",
     "available_memory",
+    "address_space_limit",
     "check_memory",
     "format_bytes",
     "BYTES_PER_DENSE_POINT",
@@ -234,20 +235,26 @@ def _cgroup_room(root: Path = Path("/sys/fs/cgroup"), proc_cgroup: Path = Path("
     return min(rooms) if rooms else None
 
 
+def address_space_limit() -> int | None:
+    """This process's soft ``RLIMIT_AS`` (``ulimit -v``, ``prlimit --as``), bytes; None if it has none or off POSIX."""
+    try:
+        import resource
+    except ImportError:  # not on POSIX
+        return None
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    return None if soft == resource.RLIM_INFINITY else soft
+
+
 def _address_space_room(status: Path = Path("/proc/self/status")) -> int | None:
     """Bytes of address space left under this process's ``RLIMIT_AS``; None if it has none.
 
     ``ulimit -v``, ``prlimit --as`` and many batch schedulers limit the address space, not the
     resident memory: what counts is the limit less what is mapped now (``VmSize``).
     """
-    try:
-        import resource
-    except ImportError:  # not on POSIX
+    limit = address_space_limit()
+    if limit is None or limit >= _NO_LIMIT:
         return None
-    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
-    if soft == resource.RLIM_INFINITY or soft >= _NO_LIMIT:
-        return None
-    return max(soft - _stat_value(status, "VmSize:") * 1024, 0)
+    return max(limit - _stat_value(status, "VmSize:") * 1024, 0)
 
 
 def available_memory() -> tuple[int, str] | None:

@@ -32,6 +32,7 @@ from zbuf_occlude.farm.config import FarmParams
 from zbuf_occlude.farm.lifecycle import die_with_parent
 from zbuf_occlude.farm.worker import base_record, process_object, write_record
 from zbuf_occlude.mesh.inputs.plan import FarmObject
+from zbuf_occlude.resources import address_space_limit
 
 __all__ = ["run_in_workers", "STOP_GRACE_S", "worker_death_error"]
 
@@ -86,15 +87,11 @@ def _address_space_hint() -> str:
     GL context and numba one per core, each reserving some 72 MiB of address space (an 8 MiB
     stack and a 64 MiB arena), so on a many-core machine threads alone can fill the limit.
     """
-    try:
-        import resource
-    except ImportError:  # not on POSIX
-        return ""
-    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
-    if soft == resource.RLIM_INFINITY:
+    limit = address_space_limit()
+    if limit is None:
         return ""
     return (
-        f"; it ran under an address-space limit of {soft / 2**30:.1f} GiB (ulimit -v), which the renderer's and numba's "
+        f"; it ran under an address-space limit of {limit / 2**30:.1f} GiB (ulimit -v), which the renderer's and numba's "
         "threads, some per core, count against: raise the limit, or set LP_NUM_THREADS and NUMBA_NUM_THREADS lower"
     )
 
