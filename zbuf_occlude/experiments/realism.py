@@ -122,9 +122,11 @@ def read_object_clouds(path: str | os.PathLike, *, min_points: int = 1, ground_i
     root = Path(path)
     if not root.exists():
         raise InvalidInputError(f"realism: {root} does not exist")
-    # a found file linking outside the folder is refused as every scan folder's (io.safe_paths.check_found_file)
-    found = [] if root.is_file() else sorted(p for p in root.rglob("*") if p.is_file() and p.suffix.lower() in (".npz", ".csv"))
-    files = [root] if root.is_file() else [check_found_file(p, root) for p in found]
+    if root.is_file():
+        files = [root]
+    else:  # a found file linking outside the folder is refused as every scan folder's (io.safe_paths.check_found_file)
+        found = sorted(p for p in root.rglob("*") if p.is_file() and p.suffix.lower() in (".npz", ".csv"))
+        files = [check_found_file(p, root) for p in found]
     clouds: list[ObjectCloud] = []
     npz = [f for f in files if f.suffix.lower() == ".npz"]
     csvs = [f for f in files if f.suffix.lower() == ".csv" and f.name != "MANIFEST.csv"]
