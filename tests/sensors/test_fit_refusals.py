@@ -76,7 +76,7 @@ def test_a_bad_argument_of_the_return_model_fit_is_one_line_naming_it_before_any
     def measured(*args, **kw):
         raise AssertionError("the scan was measured before the arguments were checked")
 
-    monkeypatch.setattr(module, "return_statistics", measured)
+    monkeypatch.setattr(module, "pulse_statistics", measured)
     monkeypatch.setattr(module, "las_pulses", measured)
     with pytest.raises(error, match=match):
         fit_return_model(survey, **({"altitude_m": H} | kwargs))

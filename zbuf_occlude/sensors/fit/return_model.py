@@ -95,7 +95,7 @@ from zbuf_occlude.sensors.fit.returns import (
     multi_return_shares,
     las_pulses,
     pulse_bootstrap,
-    return_statistics,
+    pulse_statistics,
 )
 from zbuf_occlude.sensors.reflectance import reflectance
 
@@ -398,7 +398,7 @@ def fit_return_model(
         The scan is too large for the memory available.
     """
     # every argument before any work: a bad one is refused in the time it takes to read it
-    check_classes(las, classes, seed, bootstrap)
+    checked_classes = check_classes(las, classes, seed, bootstrap)
     altitude_m = _checked_positive(altitude_m, "altitude_m", MAX_RANGE_M)
     rho_g = _checked_positive(ground_reflectance, "ground_reflectance", 1.0)
     curve = None if divergence_shares is None else check_curve(divergence_shares)
@@ -411,7 +411,7 @@ def fit_return_model(
     pulses = las_pulses(las)
     check_pulses(las, pulses)  # GPS times that group the returns into pulses
     check_return_pairs(las, pulses)  # a first-returns-only scan has no gaps to fit the range resolution to
-    stats = return_statistics(las, classes=classes, seed=seed, bootstrap=bootstrap)
+    stats = pulse_statistics(las, pulses, checked_classes, seed=seed, bootstrap=bootstrap)  # the pulses found above
     unit_assumed = not math.isfinite(las.linear_unit_m)
     unit_m = 1.0 if unit_assumed else float(las.linear_unit_m)
     figures, units, counts, methods, why = _model_figures(las, pulses, unit_m, altitude_m, rho_g)

@@ -47,7 +47,8 @@ from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate, check_bootstrap,
 
 __all__ = [
     "BYTES_PER_POINT", "GAP_QUANTILE", "MAX_AMBIGUOUS_SHARE", "MAX_RETURNS_BIN", "VEGETATION_CLASSES", "PulseValues", "Pulses", "ReturnStatistics",
-    "check_classes", "check_pulses", "check_return_pairs", "las_pulses", "multi_return_shares", "pulse_bootstrap", "return_statistics",
+    "check_classes", "check_pulses", "check_return_pairs", "las_pulses", "multi_return_shares", "pulse_bootstrap",
+    "pulse_statistics", "return_statistics",
 ]  # fmt: skip
 
 #: ASPRS classes of low, medium and high vegetation (R15, Table 17): the default class set.
@@ -474,6 +475,14 @@ def return_statistics(
     check_memory(len(las) * BYTES_PER_POINT, option=f"the return statistics of {len(las):,} points", hint="measure a crop")
     pulses = las_pulses(las)
     check_pulses(las, pulses)
+    return pulse_statistics(las, pulses, classes, seed=seed, bootstrap=bootstrap)
+
+
+def pulse_statistics(las: LasPoints, pulses: Pulses, classes: tuple[int, ...], *, seed: int, bootstrap: int) -> ReturnStatistics:
+    """:func:`return_statistics` of a scan whose pulses are found (:func:`las_pulses`) and checked
+    (:func:`check_pulses`) and whose arguments are checked (:func:`check_classes` gave ``classes``):
+    for a caller that holds them already (:func:`~zbuf_occlude.sensors.fit.return_model.fit_return_model`).
+    """
     unit_m = las.linear_unit_m if math.isfinite(las.linear_unit_m) else 1.0
     estimates: dict[str, Estimate] = {}
     returns = np.minimum(pulses.returns[pulses.complete], MAX_RETURNS_BIN)
