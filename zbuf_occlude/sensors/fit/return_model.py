@@ -403,8 +403,7 @@ def fit_return_model(
     rho_g = _checked_positive(ground_reflectance, "ground_reflectance", 1.0)
     curve = None if divergence_shares is None else check_curve(divergence_shares)
     text(divergence_share, "divergence_share")
-    shares = multi_return_shares(las, classes)
-    if curve is not None and divergence_share not in shares:
+    if curve is not None and divergence_share not in (shares := multi_return_shares(las, classes)):  # a pass over the classes
         raise InvalidInputError(f"divergence_share {shown(divergence_share)} is not a figure of the return statistics "
                                 f"(they hold {', '.join(shares)})")  # fmt: skip
     check_memory(len(las) * FIT_BYTES_PER_POINT, option=f"the return model fit of {len(las):,} points", hint="fit a crop")
