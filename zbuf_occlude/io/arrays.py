@@ -41,7 +41,10 @@ from zbuf_occlude.io.file_errors import parser_failure
 from zbuf_occlude.io.hdf5 import MAX_COMPRESSION_RATIO
 from zbuf_occlude.io.regular_files import open_regular_file
 
-__all__ = ["check_array_sizes", "load_npy", "load_npz", "npy_header", "npz_member_header", "zip_inflated_bytes", "DAMAGED_NPZ_ERRORS"]
+__all__ = [
+    "check_array_sizes", "check_npy_sizes", "load_npy", "load_npz", "npy_header", "npz_member_header", "zip_inflated_bytes",
+    "DAMAGED_NPZ_ERRORS",
+]  # fmt: skip
 
 #: What numpy and zipfile raise on a damaged ``.npy``/``.npz``: besides ``OSError``,
 #: ``ValueError``, ``EOFError`` and ``BadZipFile``, ``zlib.error`` (damaged deflate data),
@@ -154,6 +157,14 @@ def check_array_sizes(path: str | PathLike[str], *, max_bytes: int, error: type[
     fh, size = open_regular_file(path, error=error)  # zipfile and numpy would block on a FIFO
     with fh:
         _check_sizes(path, fh, size, max_bytes, error, npy=path.suffix.lower() == ".npy")
+
+
+def check_npy_sizes(
+    fh: BinaryIO, path: str | PathLike[str], size: int, *, max_bytes: int, error: type[ZbufOccludeError] = InvalidInputError
+) -> None:
+    """:func:`check_array_sizes` on the ``.npy`` already open at ``fh`` (at its start; rewound after),
+    of ``size`` bytes (``os.fstat``): the file checked is the file then read, not one opened again by name."""
+    _check_sizes(Path(path), fh, size, max_bytes, error, npy=True)
 
 
 def load_npy(

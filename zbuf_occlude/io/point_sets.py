@@ -48,7 +48,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.defaults import MAX_POINT_SET_POINTS
 from zbuf_occlude.errors import DatasetFormatError, InvalidInputError, ZbufOccludeError
-from zbuf_occlude.io.arrays import check_array_sizes, npy_header
+from zbuf_occlude.io.arrays import check_npy_sizes, npy_header
 from zbuf_occlude.io.caps import MAX_LIST_BYTES, MAX_NPY_HEADER_BYTES, MAX_POINT_SET_BYTES, MAX_POINT_SET_PLY_HEADER_BYTES
 from zbuf_occlude.io.file_errors import dtype_text, parser_failure
 from zbuf_occlude.io.hdf5 import open_hdf5
@@ -266,11 +266,16 @@ def _read_hdf5(path: Path, max_points: int, rows: Sequence[int] | None) -> list[
 # -- .npy -------------------------------------------------------------------------------------------
 def _npy_shape(path: Path, max_points: int) -> tuple[int, int, np.dtype]:
     """``(N, columns, dtype)`` of a ``.npy`` cloud, from its header (the file's sizes checked first)."""
-    fh, _ = open_regular_file(path, error=InvalidInputError)
+    fh, size = open_regular_file(path, error=InvalidInputError)
     with fh:
-        check_npy_header(fh, path)
-        check_array_sizes(path, max_bytes=MAX_POINT_SET_BYTES, error=InvalidInputError)
-        return _npy_layout(fh, path, max_points)
+        return _checked_npy_layout(fh, size, path, max_points)
+
+
+def _checked_npy_layout(fh: BinaryIO, size: int, path: Path, max_points: int) -> tuple[int, int, np.dtype]:
+    """:func:`_npy_layout` once the header and the sizes of the ``.npy`` open at ``fh`` (of ``size`` bytes) are checked."""
+    check_npy_header(fh, path)
+    check_npy_sizes(fh, path, size, max_bytes=MAX_POINT_SET_BYTES, error=InvalidInputError)
+    return _npy_layout(fh, path, max_points)
 
 
 def check_npy_header(fh: BinaryIO, path: str | os.PathLike, *, error: type[ZbufOccludeError] = InvalidInputError) -> None:
@@ -332,11 +337,9 @@ def _npy_layout(fh: Any, path: Path, max_points: int) -> tuple[int, int, np.dtyp
 
 
 def _read_npy(path: Path, max_points: int) -> list[PointSet]:
-    fh, _ = open_regular_file(path, error=InvalidInputError)
+    fh, size = open_regular_file(path, error=InvalidInputError)
     with fh:  # the array is read from the file whose header was checked, not opened again by name
-        check_npy_header(fh, path)
-        check_array_sizes(path, max_bytes=MAX_POINT_SET_BYTES, error=InvalidInputError)
-        n, columns, dtype = _npy_layout(fh, path, max_points)
+        n, columns, dtype = _checked_npy_layout(fh, size, path, max_points)
         _check_read_memory(path, 1, n, dtype.itemsize * columns)
         fh.seek(0)
         array = np.lib.format.read_array(fh, allow_pickle=False)
