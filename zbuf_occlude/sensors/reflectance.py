@@ -309,8 +309,8 @@ def scene_optics(
         if found is None:
             continue
         named = np.array([rows.index(k) if (k := material_named(n)) else -1 for n in found.names], dtype=np.int32)
-        if (named >= 0).any():  # the object's faces in its local mesh's order (build_scene)
-            own = np.flatnonzero(built.face_object == oid)
+        if (named >= 0).any():  # the object's faces: one run, in its local mesh's order (build_scene)
+            own = slice(*np.searchsorted(built.face_object, (oid, oid + 1)))
             of_file = named[found.index]
             face_material[own] = np.where(of_file >= 0, of_file, face_material[own])
     table = np.array([MATERIALS[k].reflectance[column] for k in rows]), np.array([MATERIALS[k].transmittance for k in rows])
