@@ -380,27 +380,23 @@ def read_manifest(path: Path, problems: list[str] | None = None) -> list[tuple[i
             where = f"{path}:{lineno}"
             try:
                 line = raw.decode("utf-8")
-            except UnicodeDecodeError as exc:
-                message = f"{where}: not UTF-8 text (byte {exc.start} of the line); the data set is damaged: get it again from its source"
-                if problems is None:
-                    raise DatasetFormatError(message) from None
-                problems.append(message)
-                continue
-            if not line.strip():
-                continue
-            try:
+                if not line.strip():
+                    continue
                 status = ManifestRecord.model_validate_json(line).status
                 ok = OkRecord.model_validate_json(line) if status == "ok" else None
+            except UnicodeDecodeError as exc:
+                message = f"{where}: not UTF-8 text (byte {exc.start} of the line); the data set is damaged: get it again from its source"
             except ValidationError as exc:
                 message = (
                     f"{where} is not a valid manifest record: {describe_validation_error(exc)}; the data set is damaged: "
                     "rerun the farm command (it rewrites the manifest from the records)"
                 )
-                if problems is None:
-                    raise DatasetFormatError(message) from None
-                problems.append(message)
+            else:
+                rows.append((lineno, loads_json(line, what=where), ok))
                 continue
-            rows.append((lineno, loads_json(line, what=where), ok))
+            if problems is None:
+                raise DatasetFormatError(message) from None
+            problems.append(message)
     return rows
 
 
