@@ -173,13 +173,12 @@ def las_pulses(las: LasPoints) -> Pulses:
     new[1:] = (t[1:] != t[:-1]) | (source[1:] != source[:-1]) | (channel[1:] != channel[:-1])
     starts = np.flatnonzero(new)
     size = np.diff(np.append(starts, len(order)))
-    number = las.number_of_returns[order].astype(np.int64)
+    number, rn = las.number_of_returns[order].astype(np.int64), las.return_number[order]
     fewest, most = np.minimum.reduceat(number, starts), np.maximum.reduceat(number, starts)
     # each return number as one bit: a complete pulse of n returns holds exactly bits 1..n
-    bits = np.bitwise_or.reduceat(np.left_shift(1, las.return_number[order].astype(np.int64)), starts)
+    bits = np.bitwise_or.reduceat(np.left_shift(1, rn.astype(np.int64)), starts)
     complete = (size == fewest) & (fewest == most) & (bits == np.left_shift(1, fewest + 1) - 2)
     pulse = np.cumsum(new) - 1
-    rn = las.return_number[order]
     repeated = (pulse[1:] == pulse[:-1]) & (rn[1:] == rn[:-1])  # sorted by return number within a group
     ambiguous = np.zeros(len(starts), dtype=bool)
     ambiguous[pulse[1:][repeated]] = True
