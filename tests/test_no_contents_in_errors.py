@@ -93,6 +93,14 @@ MESHES = [
     ),
 ]
 
+#: .npy files whose header numpy would quote: the same for the scan and the point-set readers.
+BAD_NPY = [
+    ("descr.npy", _npy("{'descr': '" + MARKER + "', 'fortran_order': False, 'shape': (1, 3), }")),
+    ("dict.npy", _npy("{'descr': '<f8', 'fortran_order': False, 'shape': (1, 3), '" + MARKER + "': 1}")),
+    ("not_a_dict.npy", _npy(MARKER)),
+    ("huge_header.npy", _npy("{'descr': '<f8', 'fortran_order': False, 'shape': (1, 3), }" + " " * 200_000 + MARKER, b"\0" * 24, 2)),
+]
+
 SCANS = [
     ("words.xyz", SECRET + b" 1 2\n"),
     ("second.xyz", b"1 2 3\n4 5 " + SECRET + b"\n"),
@@ -106,10 +114,7 @@ SCANS = [
     ("data.pcd", b"FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\nPOINTS 1\nDATA " + SECRET + b"\n"),
     ("rows.pcd", b"FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\nPOINTS 1\nDATA ascii\n1 " + SECRET + b" 3\n"),
     ("vertex_text.ply", PLY_HEAD + b"end_header\n0 0 0\n1 0 " + SECRET + b"\n0 1 0\n"),
-    ("descr.npy", _npy("{'descr': '" + MARKER + "', 'fortran_order': False, 'shape': (1, 3), }")),
-    ("dict.npy", _npy("{'descr': '<f8', 'fortran_order': False, 'shape': (1, 3), '" + MARKER + "': 1}")),
-    ("not_a_dict.npy", _npy(MARKER)),
-    ("huge_header.npy", _npy("{'descr': '<f8', 'fortran_order': False, 'shape': (1, 3), }" + " " * 200_000 + MARKER, b"\0" * 24, 2)),
+    *BAD_NPY,
 ]
 
 SUO_CSV = [("4wd.0.1.csv", b"1,2,3,4,5,6,7,8," + SECRET + b"\n"), ("car.0.2.csv", SECRET + b",2,3,4,5,6,7,8,9\n")]
@@ -124,10 +129,7 @@ LIDARNET = [
 #: Point sets whose header is malformed: refused by point_set_labels (which reads headers only) as well.
 BAD_HEADERS = ("descr.npy", "dict.npy", "not_a_dict.npy", "huge_header.npy", "count.ply")
 POINT_SETS = [
-    ("descr.npy", _npy("{'descr': '" + MARKER + "', 'fortran_order': False, 'shape': (1, 3), }")),
-    ("dict.npy", _npy("{'descr': '<f8', 'fortran_order': False, 'shape': (1, 3), '" + MARKER + "': 1}")),
-    ("not_a_dict.npy", _npy(MARKER)),
-    ("huge_header.npy", _npy("{'descr': '<f8', 'fortran_order': False, 'shape': (1, 3), }" + " " * 200_000 + MARKER, b"\0" * 24, 2)),
+    *BAD_NPY,
     ("count.ply", b"ply\nformat ascii 1.0\nelement " + SECRET + b" " + b"9" * 40 + b"\nelement vertex 1\nend_header\n"),
     ("vertex_text.ply", PLY_HEAD + b"end_header\n0 0 0\n1 0 " + SECRET + b"\n0 1 0\n"),
     ("format.ply", b"ply\nformat " + SECRET + b" 1.0\nelement vertex 1\nproperty float x\nend_header\n0\n"),
