@@ -48,15 +48,33 @@ import os
 import subprocess
 import sys
 import tempfile
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["FOOTPRINT_MODULES", "HEADROOM_BYTES", "Limited", "run_cli_limited", "run_python_limited"]
+__all__ = ["FOOTPRINT_MODULES", "HEADROOM_BYTES", "HEADROOM_3_GB", "OPEN_DATASET", "Limited", "run_cli_limited", "run_python_limited"]
 
 #: Address space a command may map beyond the interpreter's footprint: 1.5 GiB, what a small job
 #: (a few meshes, a 2-sample data set) needs with torch imported (about 0.9 GiB of mappings) and
 #: far less than the 4 GiB a read reserving the metadata or mesh cap used to take.
 HEADROOM_BYTES = 1536 << 20
+#: Address space beyond the footprint of a process under a user's ``ulimit -v`` of 3 GB: 3 GiB less
+#: the footprint (152 MiB measured).
+HEADROOM_3_GB = (3 << 30) - (160 << 20)
+#: A snippet for :func:`run_python_limited`: open the data set ``argv[1]`` (and read every sample,
+#: ``to_arrays()``, when ``argv[2]`` is ``"to_arrays"``); print the refusal and exit 3.
+OPEN_DATASET = """
+import sys
+from zbuf_occlude import OccludedDataset
+from zbuf_occlude.errors import ZbufOccludeError
+try:
+    ds = OccludedDataset(sys.argv[1])
+    if sys.argv[2:] == ["to_arrays"]:
+        ds.to_arrays()
+except ZbufOccludeError as exc:
+    print(exc)
+    sys.exit(3)
+"""
 #: What the child imports before its footprint is measured: what ``zbuf-occlude`` imports before
 #: it parses a command line (the console script's module pulls in numpy and the package).
 FOOTPRINT_MODULES = ("numpy", "zbuf_occlude", "zbuf_occlude.cli.main")
@@ -64,7 +82,7 @@ FOOTPRINT_MODULES = ("numpy", "zbuf_occlude", "zbuf_occlude.cli.main")
 DEFAULT_TIMEOUT_S = 300
 
 # The child: import the footprint, set the limit, run, report at exit.  argv: report path, mode
-# ("cli" or "python"), then the CLI's arguments or the snippet.
+# ("cli" or "python"), then the CLI's arguments or the snippet and its arguments.
 _CHILD = r"""
 import atexit, importlib, json, os, resource, sys
 
@@ -97,7 +115,7 @@ if mode == "cli":
     from zbuf_occlude.cli.main import main
     sys.argv = ["zbuf-occlude", *rest]
     sys.exit(main(rest))
-sys.argv = ["-c"]
+sys.argv = ["-c", *rest[1:]]
 exec(compile(rest[0], "<limited snippet>", "exec"), {"__name__": "__main__"})
 """
 
@@ -185,7 +203,9 @@ def run_cli_limited(
     return _run_limited("cli", [str(a) for a in args], cwd=cwd, timeout=timeout, headroom=headroom)
 
 
-def run_python_limited(code: str, *, timeout: float = DEFAULT_TIMEOUT_S, headroom: int = HEADROOM_BYTES) -> Limited:
+def run_python_limited(
+    code: str, *, args: Sequence[str | os.PathLike[str]] = (), timeout: float = DEFAULT_TIMEOUT_S, headroom: int = HEADROOM_BYTES
+) -> Limited:
     """Run the Python source ``code`` as ``__main__`` in a child limited as :func:`run_cli_limited`'s.
 
     Parameters
@@ -193,6 +213,8 @@ def run_python_limited(code: str, *, timeout: float = DEFAULT_TIMEOUT_S, headroo
     code : str
         A snippet; it may import anything (what it imports beyond :data:`FOOTPRINT_MODULES` counts
         against the headroom) and exit with ``sys.exit``.
+    args : sequence of str or path
+        Its ``sys.argv[1:]`` (as strings).
     timeout : float
         Seconds before ``subprocess.TimeoutExpired`` is raised.
     headroom : int
@@ -202,4 +224,4 @@ def run_python_limited(code: str, *, timeout: float = DEFAULT_TIMEOUT_S, headroo
     -------
     Limited
     """
-    return _run_limited("python", [code], cwd=None, timeout=timeout, headroom=headroom)
+    return _run_limited("python", [code, *map(str, args)], cwd=None, timeout=timeout, headroom=headroom)

@@ -329,6 +329,6 @@ def test_a_return_past_its_pulses_is_refused_when_the_return_number_is_read_alon
     with pytest.raises(DatasetFormatError, match=said):
         rows[1]  # one sample read on its own: the shard's row in the message
     rows[0]  # the rows without a fault read as before
-    done = run_python_limited(f"import sys; sys.argv[1:] = [{str(ds)!r}]\n" + _READ_RETURN_NUMBER)
+    done = run_python_limited(_READ_RETURN_NUMBER, args=[ds])
     assert done.returncode == 3 and not done.stderr and re.search(said, done.stdout), done.stdout + done.stderr[-2000:]
     assert len(done.stdout.splitlines()) == 1

@@ -49,19 +49,6 @@ def test_readers_keep_fields_a_newer_writer_adds() -> None:
 #: A manifest under the 4 GiB cap whose records could not fit in 3 GB: made sparse (nothing written).
 _BIG_MANIFEST_BYTES = 3 << 30
 
-#: In a child under an address-space limit (tests/memory_limit.py): open the data set argv[1];
-#: print the refusal and exit 3.
-_OPEN = """
-import sys
-from zbuf_occlude import OccludedDataset
-from zbuf_occlude.errors import ZbufOccludeError
-try:
-    OccludedDataset(sys.argv[1])
-except ZbufOccludeError as exc:
-    print(exc)
-    sys.exit(3)
-"""
-
 
 def _big_manifest(tmp_path):
     from conftest import tiny_dataset
@@ -75,7 +62,7 @@ def _big_manifest(tmp_path):
 def test_a_3_gib_manifest_is_refused_by_the_memory_its_records_need_before_it_is_read(tmp_path, monkeypatch):
     """Read whole (and then as a list of its lines) it took 3 GiB and more: a MemoryError under a
     3 GB limit; its records are checked against the memory available first."""
-    from memory_limit import run_cli_limited, run_python_limited
+    from memory_limit import HEADROOM_3_GB, OPEN_DATASET, run_cli_limited, run_python_limited
 
     from zbuf_occlude import OccludedDataset, resources
     from zbuf_occlude.errors import InsufficientMemoryError
@@ -87,10 +74,9 @@ def test_a_3_gib_manifest_is_refused_by_the_memory_its_records_need_before_it_is
         OccludedDataset(ds)
     assert "\n" not in str(caught.value)
     monkeypatch.undo()
-    headroom = (3 << 30) - (160 << 20)  # a 3 GB process: its footprint (152 MiB measured) and the rest
-    done = run_python_limited(f"import sys; sys.argv[1:] = [{str(ds)!r}]\n" + _OPEN, headroom=headroom)
+    done = run_python_limited(OPEN_DATASET, args=[ds], headroom=HEADROOM_3_GB)  # a 3 GB process
     assert done.returncode == 3 and not done.stderr and re.search(said, done.stdout), done.stdout + done.stderr[-2000:]
     assert len(done.stdout.splitlines()) == 1
-    checked = run_cli_limited(["verify", str(ds)], headroom=headroom)
+    checked = run_cli_limited(["verify", str(ds)], headroom=HEADROOM_3_GB)
     assert checked.returncode == 1 and "Traceback" not in checked.stderr, checked.stderr[-2000:]
     assert re.search(said[1:], checked.stderr), checked.stderr

@@ -222,37 +222,22 @@ def _resign_card(ds: Path, samples_per_view: int) -> None:
     (ds / CARD_SHA256_FILE).write_text(card_sha256_line(file_sha256(ds / CARD_FILE)))
 
 
-#: In a child under an address-space limit: open the data set argv[1]; print the refusal and exit 3.
-_OPEN_LIMITED = """
-import sys
-from zbuf_occlude import OccludedDataset
-from zbuf_occlude.errors import ZbufOccludeError
-try:
-    OccludedDataset(sys.argv[1])
-except ZbufOccludeError as exc:
-    print(exc)
-    sys.exit(3)
-"""
-#: The address space of the child: a user's ``ulimit -v`` of 3 GB, less the interpreter's footprint (152 MiB measured).
-_LIMIT_HEADROOM = (3 << 30) - (160 << 20)
-
-
 def _open_limited(ds: Path):
-    from memory_limit import run_python_limited
+    """Open ``ds`` in a child under a user's 3 GB address-space limit (tests/memory_limit.py)."""
+    from memory_limit import HEADROOM_3_GB, OPEN_DATASET, run_python_limited
 
-    return run_python_limited(f"import sys; sys.argv[1:] = [{str(ds)!r}]\n" + _OPEN_LIMITED, headroom=_LIMIT_HEADROOM)
+    return run_python_limited(OPEN_DATASET, args=[ds], headroom=HEADROOM_3_GB)
 
 
 def _refused_under_a_limit(ds: Path, said: str) -> None:
     """The reader (reading every sample) and ``verify`` refuse ``ds`` in one line matching ``said``
     under a 3 GB address-space limit, never a MemoryError."""
-    from memory_limit import run_cli_limited, run_python_limited
+    from memory_limit import HEADROOM_3_GB, OPEN_DATASET, run_cli_limited, run_python_limited
 
-    code = _OPEN_LIMITED.replace("OccludedDataset(sys.argv[1])", "OccludedDataset(sys.argv[1]).to_arrays()")
-    done = run_python_limited(f"import sys; sys.argv[1:] = [{str(ds)!r}]\n" + code, headroom=_LIMIT_HEADROOM)
+    done = run_python_limited(OPEN_DATASET, args=[ds, "to_arrays"], headroom=HEADROOM_3_GB)
     assert done.returncode == 3 and not done.stderr, done.stdout + done.stderr[-2000:]
     assert len(done.stdout.splitlines()) == 1 and re.search(said, done.stdout), done.stdout
-    checked = run_cli_limited(["verify", str(ds)], headroom=_LIMIT_HEADROOM)
+    checked = run_cli_limited(["verify", str(ds)], headroom=HEADROOM_3_GB)
     assert checked.returncode == 1 and re.search(said, checked.stderr) and "Traceback" not in checked.stderr, checked.stderr[-2000:]
 
 
