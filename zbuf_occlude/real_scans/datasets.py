@@ -330,14 +330,15 @@ def load_real_scans(
         raise InvalidInputError(f"real scans: {root} does not exist")
     if dataset not in ("auto", "suo", "lidarnet", "folder"):
         raise InvalidInputError(f"dataset must be auto, suo, lidarnet or folder, got {dataset!r}")
-    if dataset == "folder" or (dataset == "auto" and root.is_dir() and _detect(root, find_scan_files(root)) == "folder"):
+    if dataset != "folder":  # the files found, and each CSV's first line read, once
+        files = [root] if root.is_file() else find_scan_files(root)
+        if dataset == "auto":
+            dataset = _detect(root, files)
+            if dataset == "folder" and not root.is_dir():
+                raise InvalidInputError(f"{root}: neither a LiDARNet CSV nor an SUO object; give the folder of class folders")
+    if dataset == "folder":
         scans = load_scan_folder(root, label_map=label_map, up=up, units=units, min_points=min_points, dedupe=dedupe)
         return [s for s in scans if classes is None or s.label in set(classes)]
-    files = [root] if root.is_file() else find_scan_files(root)
-    if dataset == "auto":
-        dataset = _detect(root, files)
-        if dataset == "folder":
-            raise InvalidInputError(f"{root}: neither a LiDARNet CSV nor an SUO object; give the folder of class folders")
     _refuse_unreadable(root, files, dataset, "")
     if dataset == "suo":
         stems_with_bin = {p.with_suffix("") for p in files if p.suffix.lower() == ".bin"}
