@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import textwrap
 
 import pytest
@@ -16,16 +14,11 @@ _ROOM_BYTES = 1 << 30
 
 
 def _in_limited_child(body: str) -> str:
-    code = textwrap.dedent(
-        f"""
-        import resource
-        from zbuf_occlude import resources
-        from zbuf_occlude.errors import InsufficientMemoryError
-        size = next(int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmSize:")) * 1024
-        resource.setrlimit(resource.RLIMIT_AS, (size + {_ROOM_BYTES}, resource.RLIM_INFINITY))
-        """
-    ) + textwrap.dedent(body)
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=False)
+    """What ``body`` prints in a child whose address space is its footprint plus :data:`_ROOM_BYTES` (tests/memory_limit.py)."""
+    from memory_limit import run_python_limited
+
+    code = "from zbuf_occlude import resources\nfrom zbuf_occlude.errors import InsufficientMemoryError\n" + textwrap.dedent(body)
+    done = run_python_limited(code, timeout=120, headroom=_ROOM_BYTES)
     assert done.returncode == 0, done.stderr[-2000:]
     return done.stdout
 
