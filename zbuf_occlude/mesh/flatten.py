@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 if TYPE_CHECKING:  # trimesh is imported by the functions, when a file is read
     import trimesh
 
-__all__ = ["EXACT_PATH_TRANSFORMS", "IDENTITY_ATOL", "flatten_scene", "node_transforms"]
+__all__ = ["EXACT_PATH_TRANSFORMS", "IDENTITY_ATOL", "flatten_scene", "mesh_instances", "node_transforms"]
 
 #: Transforms on one root-to-node path multiplied exactly as trimesh does (from the right).
 #: Real assets have at most a handful (the 48 street meshes of the test data: 6); the bound
@@ -153,6 +153,16 @@ def node_transforms(graph: trimesh.scene.transforms.SceneGraph, nodes: set[Hasha
     return found
 
 
+def mesh_instances(scene: trimesh.Scene) -> list[tuple[Hashable, str]]:
+    """``(node, geometry name)`` of each triangle mesh instance of ``scene``, in the order of
+    ``scene.graph.nodes_geometry``: the meshes :func:`flatten_scene` concatenates, in its order."""
+    import trimesh
+
+    graph = scene.graph
+    instances = [(node, graph.transforms.node_data[node]["geometry"]) for node in graph.nodes_geometry]
+    return [(node, name) for node, name in instances if isinstance(scene.geometry.get(name), trimesh.Trimesh)]
+
+
 def flatten_scene(scene: trimesh.Scene) -> trimesh.Trimesh:
     """Every mesh of ``scene`` at its node, concatenated into one Trimesh (``Scene.to_mesh``, linear).
 
@@ -175,10 +185,8 @@ def flatten_scene(scene: trimesh.Scene) -> trimesh.Trimesh:
     """
     import trimesh
 
-    graph = scene.graph
-    instances = [(node, graph.transforms.node_data[node]["geometry"]) for node in graph.nodes_geometry]
-    instances = [(node, name) for node, name in instances if isinstance(scene.geometry.get(name), trimesh.Trimesh)]
-    transforms = node_transforms(graph, {node for node, _ in instances})
+    instances = mesh_instances(scene)
+    transforms = node_transforms(scene.graph, {node for node, _ in instances})
     meshes = []
     for node, name in instances:
         # what Scene.dump does for each instance: a copy, the transform applied, named

@@ -264,22 +264,17 @@ def face_materials(scene: trimesh.Scene) -> FaceMaterials:
         ``index`` (F,) int32 over the flattened mesh's F faces: mesh instances in the order of
         ``scene.graph.nodes_geometry``, each mesh's faces in file order (points and paths have none).
 
-    Raises
-    ------
-    ValueError
-        A mesh node not below the root frame (as :func:`~zbuf_occlude.mesh.flatten.flatten_scene`).
+    Notes
+    -----
+    The instances are :func:`~zbuf_occlude.mesh.flatten.mesh_instances`'s; a scene
+    :func:`~zbuf_occlude.mesh.flatten.flatten_scene` refuses (a mesh node not below the root
+    frame) is refused there, before its materials are asked for.
     """
-    import trimesh
+    from zbuf_occlude.mesh.flatten import mesh_instances
 
-    from zbuf_occlude.mesh.flatten import node_transforms
-
-    graph = scene.graph
-    instances = [(node, graph.transforms.node_data[node]["geometry"]) for node in graph.nodes_geometry]
-    instances = [(node, name) for node, name in instances if isinstance(scene.geometry.get(name), trimesh.Trimesh)]
-    node_transforms(graph, {node for node, _ in instances})  # the same refusal as flatten_scene's
     names: dict[str, int] = {}
     parts = []
-    for _, geometry_name in instances:
+    for _, geometry_name in mesh_instances(scene):
         geometry = scene.geometry[geometry_name]
         code = names.setdefault(_material_name(geometry), len(names))
         parts.append(np.full(len(geometry.faces), code, dtype=np.int32))
