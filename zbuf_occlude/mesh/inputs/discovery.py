@@ -220,7 +220,8 @@ def walk_mesh_files(
                 if problem:
                     skipped.append(SkippedInput(printable_path(path), problem))
                 continue
-            check_found_file(path, root)  # before finds(), which opens an HDF5 file
+            if path.is_symlink():  # the walk follows no folder link: only a file that is a link can lead outside root
+                check_found_file(path, root)  # before finds(), which opens an HDF5 file
             if not any(k.finds(path) for k in named):
                 continue  # an HDF5 file of another layout: no 3D format, passed over
             problem = non_utf8_reason(path)
