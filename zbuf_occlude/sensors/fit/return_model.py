@@ -455,7 +455,8 @@ def _model_figures(
     # the energy a white (ρ = 1) flat ground returns at the scan angle from the flying height: hit_energy's law
     unit_energy = hit_energy(1.0, 1.0, cos, altitude_m / cos)
     # past MAX_SCAN_ANGLE_DEG the flat ground's range H / cos θ and incidence θ are no longer the point's: no energy there
-    per_energy = np.where(angle <= MAX_SCAN_ANGLE_DEG, intensity / np.where(angle <= MAX_SCAN_ANGLE_DEG, unit_energy, 1.0), np.nan)
+    within = angle <= MAX_SCAN_ANGLE_DEG
+    per_energy = np.where(within, intensity / np.where(within, unit_energy, 1.0), np.nan)
     energy_known = np.isfinite(per_energy)
     ground, ground_rule = _ground(las, order, single, points_m)
     recorded = intensity > 0
@@ -490,8 +491,8 @@ def _model_figures(
     threshold = least(recorded, intensity, pulse, q_det)
     add("detection_threshold_counts", *threshold, "counts",
         f"lower end of the intensity of every return, 0s left out (2·Q({q_det:g}) − Q({2 * q_det:g}))")  # fmt: skip
-    scale = quantile(ground & recorded & energy_known, per_energy, pulse, 0.5)
-    scale = ((lambda w, f=scale[0]: f(w) / rho_g), scale[1])
+    ground_per = quantile(ground & recorded & energy_known, per_energy, pulse, 0.5)
+    scale = ((lambda w, f=ground_per[0]: f(w) / rho_g), ground_per[1])
     add("intensity_scale", *scale, "counts·m²",
         f"median of intensity / hit_energy(1, ρ_g, cos θ, H / cos θ), single returns of the ground ({ground_rule})")  # fmt: skip
     add("detection_threshold", *ratio(threshold, scale), "m⁻²", "detection_threshold_counts / intensity_scale")
@@ -507,7 +508,6 @@ def _model_figures(
     if counts["intensity_scale"] == 0:
         reason = f"no single returns on the ground within {MAX_SCAN_ANGLE_DEG:g}° of nadir (MAX_SCAN_ANGLE_DEG)"
         why.update({name: reason for name in ("intensity_scale", "detection_threshold")})
-    ground_per = quantile(ground & recorded & energy_known, per_energy, pulse, 0.5)
     present, sizes = np.unique(cls, return_counts=True)
     for c in present[sizes >= MIN_CLASS_POINTS].tolist():
         mine = cls == c
