@@ -286,7 +286,7 @@ def test_every_argument_that_takes_meshes_lists_every_mesh_format() -> None:
 def test_scan_size_of_says_which_side_size_measures(tmp_path: Path) -> None:
     import trimesh
 
-    from zbuf_occlude.sensors.scan import read_scan_npz
+    from zbuf_occlude.sensors.scan_data import read_scan_npz
 
     trimesh.creation.box(extents=(2.0, 1.0, 0.5)).export(tmp_path / "box.obj")
     base = ["scan", str(tmp_path / "box.obj"), "--size", "1", "--distance", "6", "--height", "2", "--yaw", "90", "--crop"]

@@ -14,7 +14,7 @@ import pytest
 from zbuf_occlude.cli.main import main as cli_main
 from zbuf_occlude.io.ray_tables import ray_table_bytes
 from zbuf_occlude.sensors.ray_table import rosette_table
-from zbuf_occlude.sensors.scan import read_scan_npz
+from zbuf_occlude.sensors.scan_data import read_scan_npz
 
 
 def _table(tmp_path: Path, suffix: str = ".csv", *, n: int = 4000) -> tuple[Path, np.ndarray]:

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from zbuf_occlude.cli.main import main as cli_main
-from zbuf_occlude.sensors.scan import read_scan_npz
+from zbuf_occlude.sensors.scan_data import read_scan_npz
 
 RETURNS = ["--sensor", "vlp16", "--footprint", "--max-returns", "3", "--range-resolution", "0.5", "--no-progress"]
 

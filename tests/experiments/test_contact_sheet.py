@@ -22,7 +22,7 @@ from zbuf_occlude.experiments.contact_sheet import (
 from zbuf_occlude.experiments.sheet_drawing import PANEL_INCHES
 from zbuf_occlude.geometry.cameras import camera_on_sphere
 from zbuf_occlude.sensors.lidar import LIDAR_PRESETS
-from zbuf_occlude.sensors.scan import read_scan_npz
+from zbuf_occlude.sensors.scan_data import read_scan_npz
 
 pytestmark = pytest.mark.slow  # each fixture renders a small data set or scans a mesh
 

@@ -104,7 +104,7 @@ def test_the_fitted_sensor_file_loads_and_scans_at_the_measured_density(simulate
 
 def _top_scan_angles(folder) -> np.ndarray:
     """Per scan file, the median incidence on the object's horizontal top: the scan angle at the object, degrees."""
-    from zbuf_occlude.sensors.scan import read_scan_npz
+    from zbuf_occlude.sensors.scan_data import read_scan_npz
 
     angles = []
     for f in sorted(folder.glob("*.npz")):
@@ -289,7 +289,7 @@ def _crop_folder(root, crops) -> None:
 def test_fit_sensor_command_fits_an_airborne_scanner_to_aerial_crops(tmp_path, capsys) -> None:
     """An airborne preset chooses the airborne fit: crops in, a sensor JSON that scan and sensor_from_name take out."""
     from zbuf_occlude.cli.main import main
-    from zbuf_occlude.sensors.scan import read_scan_npz
+    from zbuf_occlude.sensors.scan_data import read_scan_npz
 
     scanner = SCANNERS["35 points/m², 500 m, 60°"]
     crops, density, _ = _box_crops(scanner, 16, seed=3)

@@ -348,7 +348,7 @@ def test_read_scan_npz_names_the_file_of_damaged_compressed_data(tmp_path):
 def test_read_scan_npz_refuses_inflation_past_the_cap(tmp_path, monkeypatch):
     import importlib
 
-    scan_module = importlib.import_module("zbuf_occlude.sensors.scan")  # the package exports a function named scan
+    scan_module = importlib.import_module("zbuf_occlude.sensors.scan_data")
 
     path = tmp_path / "zeros.npz"
     np.savez_compressed(path, **{**_scan_arrays(), "normal": np.zeros((4, 3), np.float32), "pad": np.zeros(1_000_000)})

@@ -167,7 +167,7 @@ def test_fit_object_shape_meets_the_widths_by_an_occluder_or_a_stretch() -> None
 
 def test_scan_occlude_option(tmp_path) -> None:
     from zbuf_occlude.cli.main import main
-    from zbuf_occlude.sensors.scan import read_scan_npz
+    from zbuf_occlude.sensors.scan_data import read_scan_npz
 
     base = [
         "scan",

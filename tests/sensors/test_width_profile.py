@@ -173,7 +173,7 @@ def test_fit_width_profile_pulls_a_t_posed_persons_arms_in() -> None:
 def test_scan_outline_option(tmp_path) -> None:
     """`scan --crop --outline`: a cylinder narrowed at its foot and widened at its top shows that outline, and the option is checked."""
     from zbuf_occlude.cli.main import main
-    from zbuf_occlude.sensors.scan import read_scan_npz
+    from zbuf_occlude.sensors.scan_data import read_scan_npz
 
     base = ["scan", "cylinder", "--size", "2", "--distance", "6:8", "--height", "1.8", "--samples", "6", "--seed", "2"]
     outline = (0.5, 0.5, 1.0, 1.0, 1.0, 1.0, 1.5, 1.5)

@@ -152,7 +152,7 @@ class PointColumn(NamedTuple):
 
 
 #: The per-point columns a ``farm --sensor`` shard keeps when its sensor records several returns per
-#: pulse: the return fields of :class:`zbuf_occlude.sensors.scan.Scan` (LAS 1.4's Return Number,
+#: pulse: the return fields of :class:`zbuf_occlude.sensors.scan_data.Scan` (LAS 1.4's Return Number,
 #: Number of Returns, Intensity, GPS Time and Scan Angle, and the pulse each return came from), in
 #: this order, stored as the scan holds them.  ``return_number`` is also at most its point's
 #: ``number_of_returns``; ``scan_angle_deg`` spans LAS 1.4's ±180°.

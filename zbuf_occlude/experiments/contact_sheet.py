@@ -16,7 +16,7 @@ per object) and three panels per row:
 
 It reads the data sets that ``farm`` and ``generate`` write (every storage, ``farm --sensor``
 included, through :class:`~zbuf_occlude.dataset.reader.OccludedDataset`) and the folders of
-``.npz`` scans that ``zbuf-occlude scan`` writes (:func:`~zbuf_occlude.sensors.scan.read_scan_npz`).
+``.npz`` scans that ``zbuf-occlude scan`` writes (:func:`~zbuf_occlude.sensors.scan_data.read_scan_npz`).
 The drawing is :mod:`.sheet_drawing`'s (matplotlib's Agg canvas: no display, no pyplot state).
 """
 
@@ -225,7 +225,7 @@ def contact_sheet(
         (unless it is a ``farm --sensor`` data set, whose samples hold their own radius); a scan
         with a NaN or infinite point; or any error of the reader
         (:class:`~zbuf_occlude.dataset.reader.OccludedDataset`) or of
-        :func:`~zbuf_occlude.sensors.scan.read_scan_npz`, naming the file.
+        :func:`~zbuf_occlude.sensors.scan_data.read_scan_npz`, naming the file.
     BackendUnavailable
         matplotlib is missing (``pip install '.[plot]'``).
     OutputError
@@ -371,7 +371,7 @@ def _dataset_rows(root: Path, per_class: int, poses: int, dpi: int, rng: np.rand
 
 # -- scan folders -------------------------------------------------------------------------------------
 def _scan_rows(root: Path, per_group: int, dpi: int, rng: np.random.Generator, fixed: Camera) -> list[SheetRow]:
-    from zbuf_occlude.sensors.scan import read_scan_npz
+    from zbuf_occlude.sensors.scan_data import read_scan_npz
 
     groups: dict[str, list[Path]] = {}
     for p in sorted(root.iterdir()):
@@ -387,7 +387,7 @@ def _scan_rows(root: Path, per_group: int, dpi: int, rng: np.random.Generator, f
 
 
 def _scan_row(s: Any, group: str, name: str, fixed: Camera) -> SheetRow:
-    """One scan's row (``s``: a :class:`~zbuf_occlude.sensors.scan.Scan`)."""
+    """One scan's row (``s``: a :class:`~zbuf_occlude.sensors.scan_data.Scan`)."""
     keep = s.object_id > 0 if np.any(s.object_id > 0) else np.ones(len(s), dtype=bool)  # the object, not the ground
     pose = np.asarray(s.sensor_to_world, dtype=np.float64)
     rotation, origin = pose[:3, :3], pose[:3, 3]

@@ -45,7 +45,7 @@ from zbuf_occlude.io.encodings import png_bytes
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.io.safe_paths import check_found_file
 from zbuf_occlude.sensors.fit import across_sight_width
-from zbuf_occlude.sensors.scan import read_scan_npz
+from zbuf_occlude.sensors.scan_data import read_scan_npz
 from zbuf_occlude.sensors.scene import GROUND_ID
 
 __all__ = [

@@ -6,7 +6,7 @@ The experiment behind ``zbuf-occlude experiment returns`` and docs/results/retur
    scanned by an airborne scanner at a national survey's settings (:func:`ign_scanner`) with the
    multi-return model (:func:`~zbuf_occlude.sensors.airborne.scan_airborne`).
 2. **The same measure on both sides**: the simulated scan is written as LAS
-   (:meth:`~zbuf_occlude.sensors.scan.Scan.to_las_bytes`), read back by
+   (:meth:`~zbuf_occlude.sensors.scan_data.Scan.to_las_bytes`), read back by
    :func:`~zbuf_occlude.io.las.read_las`, given ASPRS classes (:func:`simulated_classes`) and
    measured by :func:`~zbuf_occlude.sensors.fit.returns.return_statistics`, the function that
    measures the real file.  Per side, the figures are taken on the **vegetation pulses** (a
@@ -46,7 +46,7 @@ from zbuf_occlude.sensors.fit.returns import (
 from zbuf_occlude.sensors.scene import GROUND_ID, ScanScene, SceneObject
 
 if TYPE_CHECKING:
-    from zbuf_occlude.sensors.scan import Scan
+    from zbuf_occlude.sensors.scan_data import Scan
 
 __all__ = [
     "GROUND_CLASS", "IGN_ALTITUDE_M", "IGN_DIVERGENCE_DEG", "PLOT_TREES", "VEGETATION_HEIGHTS_M", "PlotTree", "SimulatedScan",

@@ -96,7 +96,7 @@ MAX_LAS_HEADER_BYTES = 64 << 20
 
 # -- scans ------------------------------------------------------------------------------------------
 
-#: Largest scan ``.npz`` read (:func:`zbuf_occlude.sensors.scan.read_scan_npz`), inflated: 4 GiB (a
+#: Largest scan ``.npz`` read (:func:`zbuf_occlude.sensors.scan_data.read_scan_npz`), inflated: 4 GiB (a
 #: 128-beam sweep of a street is ~2.6 M returns, ~0.1 GB in this layout); checked from the zip
 #: directory and the array headers before reading.
 MAX_SCAN_NPZ_BYTES = 4 << 30

@@ -11,7 +11,8 @@ from zbuf_occlude.sensors.depth_camera import DEPTH_CAMERA_PRESETS, DepthCamera,
 from zbuf_occlude.sensors.fit import LidarFit, fit_lidar
 from zbuf_occlude.sensors.lidar import LIDAR_PRESETS, Lidar, beam_directions, lidar_preset
 from zbuf_occlude.sensors.ray_table import RayTable, load_ray_table, rosette_table
-from zbuf_occlude.sensors.scan import FRAMES, Scan, look_at_pose, read_scan_npz, scan
+from zbuf_occlude.sensors.scan import look_at_pose, scan
+from zbuf_occlude.sensors.scan_data import FRAMES, Scan, read_scan_npz
 from zbuf_occlude.sensors.scene import GROUND_ID, ScanScene, SceneObject, load_scene, sensor_pose
 
 __all__ = [

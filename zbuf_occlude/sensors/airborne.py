@@ -498,7 +498,8 @@ def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_si
         before the rays are cast).
     """
     from zbuf_occlude.sensors.raycast import cast_embree, face_normals
-    from zbuf_occlude.sensors.scan import Scan, build_scene, return_numbers
+    from zbuf_occlude.sensors.scan import build_scene, return_numbers
+    from zbuf_occlude.sensors.scan_data import Scan
 
     seed = check_seed(seed)  # before the scene is built: numpy would refuse -1 or 'a' only when drawing
     built = build_scene(scene)

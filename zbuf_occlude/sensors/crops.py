@@ -25,7 +25,8 @@ from zbuf_occlude.sensors.airborne import AirborneScanner
 from zbuf_occlude.sensors.depth_camera import DepthCamera
 from zbuf_occlude.sensors.lidar import Lidar
 from zbuf_occlude.sensors.placement import DEFAULT_GROUND_REFLECTIVITY, CropDistributions, Placement, draw_placement
-from zbuf_occlude.sensors.scan import Scan, scan
+from zbuf_occlude.sensors.scan import scan
+from zbuf_occlude.sensors.scan_data import Scan
 from zbuf_occlude.sensors.scene import ScanScene, SceneObject, sensor_pose
 
 if TYPE_CHECKING:  # trimesh is imported where it is used
@@ -319,7 +320,7 @@ def _airborne_crop(mesh, sensor: AirborneScanner, placement: Placement, *, seed:
     return _crop_object(scene, full, placement, full.sensor_position, per_return=("line_id", "scan_angle_deg"))
 
 
-#: A LiDAR scan's per-point return fields (:class:`~zbuf_occlude.sensors.scan.Scan`'s names, LAS 1.4's
+#: A LiDAR scan's per-point return fields (:class:`~zbuf_occlude.sensors.scan_data.Scan`'s names, LAS 1.4's
 #: Return Number ... Scan Angle), which a crop keeps when its sensor records several returns per pulse.
 RETURN_FIELDS = ("return_number", "number_of_returns", "intensity", "pulse_id", "gps_time", "scan_angle_deg")
 
@@ -371,7 +372,7 @@ def lidar_object_samples(
         ``extra``: the placement (metres, degrees), ``n_returns``, ``sensor``, the per-point
         ``ring`` and, for a sensor that records several returns per pulse
         (:func:`kept_return_fields`), the per-point ``returns``: a dict of each return field's
-        ``(n_points,)`` values at the sample's points (dtypes as :class:`~zbuf_occlude.sensors.scan.Scan`'s).
+        ``(n_points,)`` values at the sample's points (dtypes as :class:`~zbuf_occlude.sensors.scan_data.Scan`'s).
         Samples with no return are left out (logged).
 
     Raises

@@ -15,7 +15,7 @@ import numpy as np
 from fit_half import recorded_fit_half
 from zbuf_occlude.experiments.sim2real.real import real_clouds, real_scan_rows
 from zbuf_occlude.real_scans.datasets import load_real_scans
-from zbuf_occlude.sensors.scan import read_scan_npz
+from zbuf_occlude.sensors.scan_data import read_scan_npz
 
 BINS = 8
 
