@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 import zbuf_occlude.sensors as S
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.footprint import footprint_offsets, subray_directions
+from zbuf_occlude.sensors.scan_data import GPS_START_S
 from zbuf_occlude.sensors.scene import BuiltScene, SceneObject
 
 R = 10.0  # near plate, metres
@@ -294,7 +295,7 @@ def test_las_round_trip_read_back_by_laspy(compress):
     assert np.abs(xyz - s.points.astype(np.float64)).max() <= 0.0005 + 1e-6  # 1 mm steps
     np.testing.assert_array_equal(np.asarray(las.return_number), s.return_number)
     np.testing.assert_array_equal(np.asarray(las.number_of_returns), s.number_of_returns)
-    np.testing.assert_array_equal(np.asarray(las.gps_time), s.gps_time)
+    np.testing.assert_array_equal(np.asarray(las.gps_time), GPS_START_S + s.gps_time)  # adjusted standard GPS time
     np.testing.assert_allclose(np.asarray(las.scan_angle) * 0.006, s.scan_angle_deg, atol=0.003)
     want = np.rint(np.clip(s.intensity.astype(np.float64), 0, 1) * 65535).astype(np.uint16)
     np.testing.assert_array_equal(np.asarray(las.intensity), want)

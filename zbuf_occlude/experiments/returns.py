@@ -16,8 +16,8 @@ The experiment behind ``zbuf-occlude experiment returns`` and docs/results/retur
    divergence; the fitted divergence is where the simulated curve meets the real share
    (:func:`~zbuf_occlude.sensors.fit.divergence.divergence_from_shares`).
 
-The LAS file stores no classes for a simulated scan (point format 6, class 0); the classes are
-given after reading, point for point (LAS keeps the scan's order), from the scan's object ids:
+The classes the LAS file stores (by the objects' class names) are replaced after reading, point
+for point (LAS keeps the scan's order), by classes from the scan's object ids:
 the ground is 2, vegetation 3, 4 or 5 by its height above the ground (:data:`VEGETATION_HEIGHTS_M`),
 any other object 1.
 """
@@ -305,7 +305,7 @@ def simulate(scene: ScanScene, scanner: AirborneScanner, vegetation_ids: Sequenc
             first = scan if first is None else first
             path = write_bytes(
                 Path(folder) / f"simulated_{source}.las",
-                scan.to_las_bytes(intensity_full_scale=full_scale),
+                scan.to_las_bytes(intensity_scale=65535.0 / full_scale),
             )
             las = read_las(path)
             parts.append(replace(las, classification=simulated_classes(scan, vegetation_ids, scene.ground_z_m),

@@ -22,19 +22,21 @@ the layer's writers to write.
 from __future__ import annotations
 
 import io
+import json
 import math
 import os
 import struct
 from dataclasses import dataclass
 from os import PathLike
+from collections.abc import Sequence
 from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude._version import __version__
+from zbuf_occlude._version import __version__, install_hint
 from zbuf_occlude.defaults import MAX_POINTS
-from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError, ZbufOccludeError
+from zbuf_occlude.errors import ArgumentTypeError, BackendUnavailable, InvalidInputError, ZbufOccludeError
 from zbuf_occlude.geometry.arguments import check_points, described
 from zbuf_occlude.io.caps import MAX_LAS_BYTES
 from zbuf_occlude.io.las_crs import linear_unit_m
@@ -51,8 +53,8 @@ from zbuf_occlude.io.regular_files import open_regular_file
 from zbuf_occlude.resources import check_memory
 
 __all__ = [
-    "BYTES_PER_POINT", "MAX_EVLRS", "MAX_LAZ_POINTS_PER_BYTE", "MAX_VLRS",
-    "READ_CHUNK_POINTS", "SCAN_ANGLE_STEP_DEG", "LasPoints", "las_bytes", "read_las",
+    "BYTES_PER_POINT", "CLASS_NAMES_RECORD_ID", "CLASS_NAMES_USER_ID", "EXTRA_BYTES", "MAX_EVLRS", "MAX_LAZ_POINTS_PER_BYTE", "MAX_VLRS",
+    "READ_CHUNK_POINTS", "SCAN_ANGLE_STEP_DEG", "LasPoints", "epsg_crs", "las_bytes", "read_las",
 ]  # fmt: skip
 
 #: Points decoded at a time: bounds laspy's buffer of raw records (64 MiB of format-10 records).
@@ -324,6 +326,83 @@ def _scaled(points: NDArray[np.float64], scale: Any) -> tuple[np.ndarray, NDArra
     return offsets, stored.astype(np.int32)
 
 
+#: Extra bytes :func:`las_bytes` may add to each point record: name → (dtype, the Extra Bytes
+#: VLR's description, at most 32 characters).
+EXTRA_BYTES = {
+    "object_id": (np.dtype(np.int32), "scene object id (0: the ground)"),
+    "class_index": (np.dtype(np.uint16), "index into the class names VLR"),
+}
+#: The VLR that holds the class names ``class_index`` indexes: its user id and record id; its
+#: record is a UTF-8 JSON array of strings.
+CLASS_NAMES_USER_ID, CLASS_NAMES_RECORD_ID = "zbuf_occlude", 1
+#: Most bytes a VLR's record holds (its record length is a uint16, R15 §2.5).
+_VLR_MAX_BYTES = 65535
+
+
+def _extra_bytes(n: int, object_id: Any, class_index: Any, class_names: Sequence[str] | None) -> dict[str, np.ndarray]:
+    """The extra bytes of :func:`las_bytes`, checked: name → ``(n,)`` array of :data:`EXTRA_BYTES`' dtype."""
+    out = {}
+    if object_id is not None:
+        info = np.iinfo(np.int32)
+        out["object_id"] = _per_point(object_id, "object_id", n, kinds="iu", low=info.min, high=info.max, dtype=np.int32)
+    if (class_index is None) != (class_names is None):
+        raise InvalidInputError("class_index and class_names go together: give both or neither")
+    if class_names is not None:
+        if isinstance(class_names, (str, bytes)) or not all(isinstance(name, str) for name in class_names):
+            raise ArgumentTypeError(f"class_names must be a sequence of str, got {described(class_names)}")
+        high = min(len(class_names), 65536) - 1
+        if high < 0 and n:
+            raise InvalidInputError("class_names is empty: class_index has nothing to index")
+        out["class_index"] = _per_point(class_index, "class_index", n, kinds="iu", low=0, high=max(high, 0), dtype=np.uint16)
+    return out
+
+
+def _names_json(class_names: Sequence[str]) -> bytes:
+    """``class_names`` as the record of the class names VLR: a UTF-8 JSON array."""
+    data = json.dumps(list(class_names), ensure_ascii=False).encode("utf-8")
+    if len(data) > _VLR_MAX_BYTES:
+        raise InvalidInputError(f"class_names take {len(data):,} bytes as JSON; a VLR holds at most {_VLR_MAX_BYTES:,}")
+    return data
+
+
+def epsg_crs(crs: int | str) -> Any:
+    """The ``pyproj.CRS`` of an EPSG code (``2154`` or ``"EPSG:2154"``), checked to be in metres.
+
+    Raises
+    ------
+    ArgumentTypeError
+        ``crs`` neither an int nor a string.
+    InvalidInputError
+        Not ``EPSG:N``, a code PROJ does not know, or a CRS whose axes are not in metres (a
+        geographic CRS in degrees, a CRS in feet): a scan's coordinates are metres.
+    BackendUnavailable
+        pyproj is not installed (the ``crs`` extra).
+    """
+    if isinstance(crs, bool) or not isinstance(crs, (int, np.integer, str)):
+        raise ArgumentTypeError(f"crs must be an EPSG code (2154 or 'EPSG:2154'), got {described(crs)}")
+    text = str(crs).strip()
+    code = text[5:] if text[:5].upper() == "EPSG:" else text if isinstance(crs, (int, np.integer)) else ""
+    if not (code.isascii() and code.isdecimal() and 0 < len(code) <= _EPSG_DIGITS):
+        raise InvalidInputError(f"crs must be an EPSG code, EPSG:N (EPSG:2154), got {described(crs)}")
+    try:
+        import pyproj
+    except ImportError:
+        raise BackendUnavailable(f"writing a CRS (crs={text}) needs pyproj: {install_hint('crs')}") from None
+    try:
+        out = pyproj.CRS.from_epsg(int(code))
+    except pyproj.exceptions.CRSError:
+        raise InvalidInputError(f"crs EPSG:{int(code)} is not a coordinate reference system PROJ knows") from None
+    units = {(axis.unit_name, axis.unit_conversion_factor) for axis in out.axis_info}
+    if not units or any(factor != 1.0 for _, factor in units):
+        raise InvalidInputError(f"crs EPSG:{int(code)} ({out.name}) has axes in {', '.join(sorted(u for u, _ in units)) or 'no unit'}: "
+                                "a scan's coordinates are metres; use a projected CRS in metres")  # fmt: skip
+    return out
+
+
+#: Digits of an EPSG code at most (codes run to 6 digits; 10 bounds int() of what is typed).
+_EPSG_DIGITS = 10
+
+
 def las_bytes(
     points: Any,
     *,
@@ -337,16 +416,26 @@ def las_bytes(
     rgb: Any = None,
     scale: float = 0.001,
     compress: bool = False,
+    object_id: Any = None,
+    class_index: Any = None,
+    class_names: Sequence[str] | None = None,
+    adjusted_standard_gps_time: bool = False,
+    crs: int | str | None = None,
 ) -> bytes:
     """Points and their per-return fields as the bytes of a LAS 1.4 file (LAZ with ``compress``), in memory.
 
-    Point format 6, or 7 with ``rgb`` (ASPRS LAS 1.4 specification R15, §2.6).  The header holds no
-    coordinate reference system (no WKT or GeoTIFF VLR; the global encoding's WKT bit is set, as
-    formats 6 to 10 require, and its GPS time bit is not: times are GPS week time, seconds as
-    given, a simulated scan's seconds from its start).  The offsets are multiples of ``scale``
-    near the points' centre, so every coordinate reads back within ``scale / 2``.  The header's
-    creation date is today's.  Write the bytes through the layer
-    (:meth:`~zbuf_occlude.io.owned.OwnedFolder.write_bytes`).
+    Point format 6, or 7 with ``rgb`` (ASPRS LAS 1.4 specification R15, §2.6).  The global
+    encoding's WKT bit is set, as formats 6 to 10 require; the header holds a WKT VLR
+    (``LASF_Projection``, record 2112) with ``crs``, else no coordinate reference system.  The
+    global encoding's bit 0 (GPS time type) is set with ``adjusted_standard_gps_time``: the times
+    are then adjusted standard GPS time (GPS seconds − 10⁹); else GPS week time, seconds as given.
+    With ``object_id`` and ``class_index``, each point record carries extra bytes, described by the
+    Extra Bytes VLR (``LASF_Spec``, record 4) that laspy reads: ``object_id`` int32 and
+    ``class_index`` uint16, and a VLR :data:`CLASS_NAMES_USER_ID` / :data:`CLASS_NAMES_RECORD_ID`
+    holds ``class_names`` as a UTF-8 JSON array (``class_names[class_index]`` is a point's class).
+    The offsets are multiples of ``scale`` near the points' centre, so every coordinate reads back
+    within ``scale / 2``.  The header's creation date is today's.  Write the bytes through the
+    layer (:meth:`~zbuf_occlude.io.owned.OwnedFolder.write_bytes`).
 
     Parameters
     ----------
@@ -371,6 +460,19 @@ def las_bytes(
         Metres (units) per stored integer step, > 0 (default 1 mm).
     compress : bool
         LAZ (LASzip through lazrs) instead of LAS.
+    object_id : (N,) int, optional
+        Written as the extra bytes ``object_id`` (int32): the scene object each point lies on.
+    class_index : (N,) int, optional
+        Written as the extra bytes ``class_index`` (uint16), each ``< len(class_names)``; needs
+        ``class_names``.
+    class_names : sequence of str, optional
+        The names ``class_index`` indexes, written to the class names VLR (UTF-8 JSON, at most
+        65,535 bytes).
+    adjusted_standard_gps_time : bool
+        ``gps_time`` is adjusted standard GPS time (global encoding bit 0 set).
+    crs : int or str, optional
+        The coordinate reference system of ``points``: an EPSG code (``2154``, ``"EPSG:2154"``)
+        whose axes are in metres, written as OGC WKT (pyproj makes it: the ``crs`` extra).
 
     Returns
     -------
@@ -383,7 +485,11 @@ def las_bytes(
         An argument of the wrong kind (text, floats where integers go, a non-bool ``compress``).
     InvalidInputError
         A shape other than ``(N,)``/``(N, 3)``, a value out of range, ``return_number`` above
-        ``number_of_returns``, or points too far apart for int32 steps of ``scale``.
+        ``number_of_returns``, points too far apart for int32 steps of ``scale``, ``class_index``
+        without ``class_names`` (or beyond them), class names over a VLR's 65,535 bytes, a ``crs``
+        that is not an EPSG code of a CRS in metres.
+    BackendUnavailable
+        ``crs`` given and pyproj not installed (the extra to install is named).
     """
     import laspy
 
@@ -408,17 +514,33 @@ def las_bytes(
         "return_number": returns, "number_of_returns": count,
     }  # fmt: skip
     colours = None if rgb is None else _per_point(rgb, "rgb", n, kinds="iu", low=0, high=65535, dtype=np.uint16, width=3)
+    if not isinstance(adjusted_standard_gps_time, (bool, np.bool_)):
+        raise ArgumentTypeError(f"adjusted_standard_gps_time must be True or False, got {described(adjusted_standard_gps_time)}")
+    extra = _extra_bytes(n, object_id, class_index, class_names)
+    wkt_crs = None if crs is None else epsg_crs(crs)
     offsets, stored = _scaled(pts, scale)
     header = laspy.LasHeader(version="1.4", point_format=6 if colours is None else 7)
     header.scales, header.offsets = np.full(3, float(scale)), offsets
     header.global_encoding.wkt = True
+    if adjusted_standard_gps_time:
+        header.global_encoding.gps_time_type = laspy.header.GpsTimeType.STANDARD
     header.generating_software = f"zbuf_occlude {__version__}"
+    if wkt_crs is not None:
+        header.add_crs(wkt_crs)
+    if extra:
+        header.add_extra_dims([laspy.ExtraBytesParams(name=key, type=values.dtype, description=EXTRA_BYTES[key][1])
+                               for key, values in extra.items()])  # fmt: skip
+    if class_names is not None:
+        header.vlrs.append(laspy.VLR(CLASS_NAMES_USER_ID, CLASS_NAMES_RECORD_ID, "class names by class_index (JSON)",
+                                     _names_json(class_names)))  # fmt: skip
     las = laspy.LasData(header)
     las.X, las.Y, las.Z = stored[:, 0], stored[:, 1], stored[:, 2]
     for key, values in fields_.items():
         las[key] = values
     if colours is not None:
         las.red, las.green, las.blue = colours[:, 0], colours[:, 1], colours[:, 2]
+    for key, values in extra.items():
+        las[key] = values
     las.update_header()
     buffer = io.BytesIO()
     las.write(buffer, do_compress=bool(compress), laz_backend=laspy.LazBackend.Lazrs)

@@ -6,6 +6,7 @@ Written by :func:`zbuf_occlude.sensors.scan.scan`; read back by :func:`read_scan
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -17,11 +18,22 @@ from zbuf_occlude.io.arrays import load_npz
 from zbuf_occlude.io.atomic import write_bytes
 from zbuf_occlude.io.caps import MAX_SCAN_NPZ_BYTES
 from zbuf_occlude.io.encodings import npz_bytes
+from zbuf_occlude.sensors.checks import MAX_SCENE_OBJECTS
 
-__all__ = ["FRAMES", "Scan", "read_scan_npz"]
+__all__ = ["FRAMES", "GPS_START_S", "UNIT_INTENSITY_SCALE", "Scan", "read_scan_npz"]
 
 #: Frames a scan's points can be given in.
 FRAMES = ("sensor", "world")
+#: The adjusted standard GPS time (GPS seconds − 10⁹, ASPRS LAS 1.4 R15 global encoding bit 0) of
+#: 2026-01-01T00:00:00 UTC, seconds: the time 0 of a scan written as LAS.  GPS time counts from
+#: 1980-01-06T00:00:00 UTC without leap seconds: 16,797 days to 2026-01-01 (date(2026, 1, 1) −
+#: date(1980, 1, 6)) · 86,400 s = 1,451,260,800 s of UTC, plus the 18 leap seconds UTC took since
+#: (GPS − UTC = 18 s since 2017-01-01, IERS Bulletin C) = 1,451,260,818 s; minus 10⁹.  An airborne
+#: scan's times (a few minutes negative at most) stay far above 0.
+GPS_START_S = 451_260_818.0
+#: The intensity scale of a scan whose beam gives none, counts·m²: received energy 1 m⁻² (a white
+#: Lambertian target at normal incidence 1 m away, filling the beam) and above store 65535.
+UNIT_INTENSITY_SCALE = 65535.0
 
 
 @dataclass
@@ -79,6 +91,12 @@ class Scan:
         LiDAR: the beam's elevation, degrees (the spinning scanner's scan angle; a ray table: its
         row's elevation); airborne: the across-track angle from nadir, signed as ASPRS LAS 1.4
         defines it.
+    intensity_scale : float or None
+        Counts per unit of received energy (counts·m², :attr:`intensity` is m⁻²): the scanner's
+        beam's, which :meth:`to_las_bytes` stores intensities through; None: the beam gives none.
+    object_classes : tuple of str or None
+        Class name by object id (index 0: ``"ground"``, the objects, then the occluders, as the
+        scene numbers them); None: not known.  :meth:`to_las_bytes` classifies points by it.
 
     The LiDAR-only arrays are None for depth cameras.
     """
@@ -102,6 +120,8 @@ class Scan:
     pulse_id: NDArray[np.int64] | None = None
     gps_time: NDArray[np.float64] | None = None
     scan_angle_deg: NDArray[np.float32] | None = None
+    intensity_scale: float | None = None
+    object_classes: tuple[str, ...] | None = None
 
     #: Per-point arrays of every scan, in file order.
     _BASE = ("points", "ring", "pixel", "range_m", "face_index", "object_id", "normal", "incidence_deg")
@@ -124,11 +144,16 @@ class Scan:
     def arrays(self) -> dict[str, np.ndarray]:
         """The NPZ content: every present per-point field of the base set, ``sensor_position``,
         ``sensor_to_world``, ``frame`` and ``sensor`` (0-d strings), then the present return fields
-        (``return_number`` ... ``scan_angle_deg``)."""
+        (``return_number`` ... ``scan_angle_deg``), then, when known, ``intensity_scale`` (0-d
+        float64) and ``object_classes`` (``(K,)`` strings)."""
         out = {k: getattr(self, k) for k in self._BASE if getattr(self, k) is not None}
         out.update(sensor_position=np.asarray(self.sensor_position, np.float64), sensor_to_world=self.sensor_to_world,
                    frame=np.array(self.frame), sensor=np.array(self.sensor))  # fmt: skip
         out.update({k: getattr(self, k) for k in self._RETURNS if getattr(self, k) is not None})
+        if self.intensity_scale is not None:
+            out["intensity_scale"] = np.array(float(self.intensity_scale))
+        if self.object_classes is not None:
+            out["object_classes"] = np.array(list(self.object_classes), dtype=str).reshape(len(self.object_classes))
         return out
 
     def to_npz(self, path: str | os.PathLike) -> Path:
@@ -158,26 +183,62 @@ class Scan:
         header += [f"property {kind[t]} {name}" for name, t in cols] + ["end_header"]
         return write_bytes(path, ("\n".join(header) + "\n").encode("ascii") + rows.tobytes())
 
-    def to_las_bytes(self, compress: bool = False, *, intensity_full_scale: float = 1.0) -> bytes:
-        """The scan as the bytes of a LAS 1.4 file, point format 6 (LAZ with ``compress``), in memory.
+    def to_las_bytes(
+        self,
+        compress: bool = False,
+        *,
+        intensity_scale: float | None = None,
+        class_map: Mapping[str, int] | None = None,
+        ground_z_m: float = 0.0,
+        scan_number: int = 0,
+        gps_start_s: float = GPS_START_S,
+        crs: int | str | None = None,
+    ) -> bytes:
+        """The scan as the bytes of a LAS 1.4 file, point format 6 (LAZ with ``compress``), as a survey writes it.
 
         Through :func:`zbuf_occlude.io.las.las_bytes`: coordinates in ``frame`` (the sensor's or
-        the world's, as the scan holds them), metres, stored in steps of 1 mm; no coordinate
-        reference system.  Per point: ``return_number``, ``number_of_returns``, ``gps_time``
-        (seconds from the sweep's first firing; airborne: along the flight line), ``scan_angle_deg``
-        (a spinning scanner: the beam's elevation; airborne: the across-track angle), and the
-        intensity ``round(65535 · min(intensity / intensity_full_scale, 1))``.  A scan without
-        these fields (a depth camera's) is written as one return per point, time 0, scan angle
-        0, intensity 0.
+        the world's, as the scan holds them), metres, stored in steps of 1 mm.  Per point
+        (docs/guide/las_fields.md lists them):
+
+        * ``return_number``, ``number_of_returns``, ``scan_angle_deg`` (a spinning scanner: the
+          beam's elevation; airborne: the across-track angle) as the scan holds them;
+        * ``intensity``: ``clip(rint(intensity · scale), 0, 65535)`` counts, ``scale`` the
+          ``intensity_scale`` given, else the scan's :attr:`intensity_scale` (its beam's), else
+          65535 (:data:`UNIT_INTENSITY_SCALE`: a received energy of 1 m⁻² or more stores 65535);
+        * ``gps_time``: adjusted standard GPS time (global encoding bit 0 set), ``gps_start_s``
+          plus the scan's :attr:`gps_time` (seconds from its first firing; airborne: along the
+          flight line, a few minutes negative at most);
+        * ``classification``: the ASPRS class of the object hit
+          (:func:`~zbuf_occlude.sensors.las_classes.asprs_classification`: ground 2, vegetation
+          3/4/5 by height above ``ground_z_m`` in the world frame, building 6, others 1; a
+          ``class_map`` overrides it by class name);
+        * ``point_source_id``: the airborne flight line (``meta["line_id"]``, when it holds one
+          value per point), else ``scan_number``;
+        * extra bytes ``object_id`` (int32) and ``class_index`` (uint16), an index into the class
+          names VLR (:data:`~zbuf_occlude.io.las.CLASS_NAMES_USER_ID`, a JSON array): the distinct
+          :attr:`object_classes` in object order (objects of no known class: ``""``).
+
+        A scan without return fields (a depth camera's) is written as one return per point,
+        time ``gps_start_s``, scan angle 0, intensity 0.
 
         Parameters
         ----------
         compress : bool
             LAZ (LASzip through lazrs) instead of LAS.
-        intensity_full_scale : float
-            The received energy (m⁻², :attr:`intensity`) stored as 65535, > 0; 1.0 (default): a
-            white Lambertian target at normal incidence, 1 m away, filling the beam.  Scans with
-            one return per pulse and no ``reflectivity`` (intensity 1.0) store 65535.
+        intensity_scale : float, optional
+            Counts per unit of received energy (counts·m²), finite and > 0.
+        class_map : mapping of str to int, optional
+            Class name → ASPRS code (:func:`~zbuf_occlude.sensors.las_classes.load_class_map` reads one).
+        ground_z_m : float
+            The ground plane's height in the world frame, metres (a scene's ``ground_z_m``).
+        scan_number : int
+            The point source id of a scan without flight lines, 0 to 65535.
+        gps_start_s : float
+            The adjusted standard GPS time of the scan's time 0, seconds (default
+            :data:`GPS_START_S`, 2026-01-01T00:00:00 UTC); every time written must be >= 0.
+        crs : int or str, optional
+            An EPSG code of a CRS in metres (``"EPSG:2154"``), written as a WKT VLR; needs pyproj
+            (the ``crs`` extra) and a scan in the world frame.
 
         Returns
         -------
@@ -188,36 +249,70 @@ class Scan:
         Raises
         ------
         InvalidInputError
-            ``intensity_full_scale`` not a finite number > 0, or points too far apart for int32
-            steps of 1 mm (:func:`~zbuf_occlude.io.las.las_bytes`).
+            ``intensity_scale``, ``ground_z_m`` or ``gps_start_s`` not finite (scale > 0), a time
+            that would be negative, ``scan_number`` out of range, an object id beyond
+            :attr:`object_classes`, a bad class map, ``crs`` on a scan in the sensor frame or not
+            an EPSG code in metres, or points too far apart for int32 steps of 1 mm
+            (:func:`~zbuf_occlude.io.las.las_bytes`).
+        BackendUnavailable
+            ``crs`` without pyproj.
         """
         from zbuf_occlude.io.las import las_bytes
-        from zbuf_occlude.sensors.checks import real
+        from zbuf_occlude.sensors.checks import count, real
+        from zbuf_occlude.sensors.las_classes import asprs_classification
 
-        full = real(intensity_full_scale, "intensity_full_scale", low=0.0, low_open=True)
+        given = self.intensity_scale if intensity_scale is None else intensity_scale
+        scale = UNIT_INTENSITY_SCALE if given is None else real(given, "intensity_scale", low=0.0, low_open=True)
+        ground = real(ground_z_m, "ground_z_m")
+        start = real(gps_start_s, "gps_start_s")
+        source = count(scan_number, "scan_number", low=0, high=65535)
+        if crs is not None and self.frame != "world":
+            raise InvalidInputError(
+                f"crs {crs} labels world coordinates; this scan is in the {self.frame} frame (scan it with frame='world')"
+            )
         n = len(self)
         ones = np.ones(n, np.uint8)
-        if self.intensity is None:
-            intensity = np.zeros(n, np.uint16)
-        else:
-            share = np.clip(np.asarray(self.intensity, np.float64) / full, 0.0, 1.0)
-            intensity = np.rint(share * 65535.0).astype(np.uint16)
+        intensity = np.zeros(n, np.uint16)
+        if self.intensity is not None:
+            intensity = np.rint(np.clip(np.asarray(self.intensity, np.float64) * scale, 0.0, 65535.0)).astype(np.uint16)
+        times = start + (np.zeros(n) if self.gps_time is None else np.asarray(self.gps_time, np.float64))
+        if n and not times.min() >= 0.0:
+            raise InvalidInputError(f"gps_start_s {start:.9g} puts the scan's first time at {times.min():.9g} s: adjusted standard GPS "
+                                    "times must be >= 0; give a later start")  # fmt: skip
+        points = np.asarray(self.points, np.float64)
+        ids = np.asarray(self.object_id, np.int64)
+        classes = self._classes(ids)
+        m = np.asarray(self.sensor_to_world, np.float64)
+        world_z = points[:, 2] if self.frame == "world" else points @ m[2, :3] + m[2, 3]
+        classification = asprs_classification(ids, classes, world_z - ground, class_map)  # checks the ids against the classes
+        position = {name: k for k, name in enumerate(dict.fromkeys(classes))}
+        index_of = np.array([position[c] for c in classes], np.int64)
+        line = self.meta.get("line_id")
+        flight_lines = line is not None and np.shape(line) == (n,)
         return las_bytes(
-            np.asarray(self.points, np.float64), intensity=intensity,
+            points, intensity=intensity,
             return_number=ones if self.return_number is None else self.return_number,
             number_of_returns=ones if self.number_of_returns is None else self.number_of_returns,
-            gps_time=np.zeros(n) if self.gps_time is None else self.gps_time,
+            gps_time=times, adjusted_standard_gps_time=True,
             scan_angle_deg=np.zeros(n) if self.scan_angle_deg is None else np.asarray(self.scan_angle_deg, np.float64),
-            scale=0.001, compress=compress,
+            classification=classification,
+            point_source_id=np.asarray(line) if flight_lines else np.full(n, source, np.int64),
+            object_id=ids, class_index=index_of[ids], class_names=list(position), crs=crs, scale=0.001, compress=compress,
         )  # fmt: skip
 
-    def to_las(self, path: str | os.PathLike, compress: bool = False) -> Path:
-        """Write :meth:`to_las_bytes` to ``path`` (atomic); LAZ with ``compress``."""
-        return write_bytes(path, self.to_las_bytes(compress))
+    def _classes(self, ids: NDArray[np.int64]) -> tuple[str, ...]:
+        """:attr:`object_classes`, or, when None, ``"ground"`` then ``""`` (no known class) up to the largest id."""
+        if self.object_classes is not None:
+            return tuple(self.object_classes)
+        return ("ground",) + ("",) * (int(ids.max()) if len(ids) else 0)
 
-    def to_laz(self, path: str | os.PathLike) -> Path:
+    def to_las(self, path: str | os.PathLike, compress: bool = False, **las_options) -> Path:
+        """Write :meth:`to_las_bytes` to ``path`` (atomic); LAZ with ``compress``; ``las_options`` are its keywords."""
+        return write_bytes(path, self.to_las_bytes(compress, **las_options))
+
+    def to_laz(self, path: str | os.PathLike, **las_options) -> Path:
         """Write :meth:`to_las_bytes` compressed (LAZ) to ``path`` (atomic)."""
-        return self.to_las(path, compress=True)
+        return self.to_las(path, compress=True, **las_options)
 
 
 #: Per-point arrays of a scan NPZ: (columns or None for (N,), dtype kinds accepted); "f" = any
@@ -252,6 +347,15 @@ def _checked_npz(path: Path, d: dict[str, np.ndarray]) -> None:
     for key in ("frame", "sensor"):
         if key in d and (d[key].dtype.kind != "U" or d[key].ndim != 0):
             raise InvalidInputError(f"{path}: {key} must be a string, got shape {d[key].shape} dtype {d[key].dtype}")
+    if "intensity_scale" in d:
+        a = d["intensity_scale"]
+        if a.dtype.kind not in "fiu" or a.ndim != 0 or not (np.isfinite(a) and a > 0):
+            raise InvalidInputError(f"{path}: intensity_scale must be one finite number > 0, got shape {a.shape} dtype {a.dtype}")
+    if "object_classes" in d:
+        a = d["object_classes"]
+        if a.dtype.kind != "U" or a.ndim != 1 or len(a) > MAX_SCENE_OBJECTS + 1:
+            raise InvalidInputError(f"{path}: object_classes must be at most {MAX_SCENE_OBJECTS + 1:,} strings (N,), got shape {a.shape} "
+                                    f"dtype {a.dtype}")  # fmt: skip
     if "frame" in d and str(d["frame"]) not in FRAMES:
         raise InvalidInputError(f"{path}: frame must be one of {FRAMES}, got {str(d['frame'])!r}")
     if "points" in d and d["points"].ndim == 2:
@@ -273,7 +377,7 @@ def read_scan_npz(path: str | os.PathLike) -> Scan:
         :data:`~zbuf_occlude.io.caps.MAX_SCAN_NPZ_BYTES`, missing keys, or an array of the wrong shape or dtype
         (per-point arrays of N rows, ``points`` (N, 3) finite numbers, ``normal`` (N, 3) numbers, indices integers,
         ``sensor_position`` a finite (3,), ``sensor_to_world`` a finite (4, 4), ``frame`` one
-        of :data:`FRAMES`).
+        of :data:`FRAMES`, ``intensity_scale`` one finite number > 0, ``object_classes`` (K,) strings).
 
     Notes
     -----
@@ -298,4 +402,6 @@ def read_scan_npz(path: str | os.PathLike) -> Scan:
         pulse_id=d["pulse_id"].astype(np.int64) if "pulse_id" in d else None,
         gps_time=d["gps_time"].astype(np.float64) if "gps_time" in d else None,
         scan_angle_deg=d["scan_angle_deg"].astype(np.float32) if "scan_angle_deg" in d else None,
+        intensity_scale=float(d["intensity_scale"]) if "intensity_scale" in d else None,
+        object_classes=tuple(str(c) for c in d["object_classes"]) if "object_classes" in d else None,
     )  # fmt: skip
