@@ -141,8 +141,8 @@ def aerial_slab_crops(root: Path, offset=(0.0, 0.0, 0.0)) -> Path:
     import numpy as np
     import trimesh
 
-    from zbuf_occlude.sensors.airborne import scan_airborne
-    from zbuf_occlude.sensors.presets import sensor_from_name
+    from zbuf_occlude.sensors.scan import scan_airborne
+    from zbuf_occlude.sensors.kinds import sensor_from_name
 
     base = sensor_from_name("dales-q1560")
     (root / "car").mkdir(parents=True)

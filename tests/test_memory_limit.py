@@ -18,7 +18,7 @@ from conftest import SAMPLE_MESHES
 from memory_limit import HEADROOM_BYTES, Limited, run_cli_limited, run_python_limited
 
 from zbuf_occlude.sensors.airborne import AirborneScanner
-from zbuf_occlude.sensors.presets import sensor_to_json
+from zbuf_occlude.sensors.kinds import sensor_to_json
 
 #: The farm's meshes: two of the shipped samples, one a class.
 CLASSES = "chair,table"

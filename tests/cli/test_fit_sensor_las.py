@@ -13,7 +13,7 @@ import pytest
 from zbuf_occlude.cli.main import main as cli_main
 from zbuf_occlude.io.las import las_bytes, read_las
 from zbuf_occlude.sensors.airborne import AirborneScanner
-from zbuf_occlude.sensors.presets import sensor_from_name, sensor_to_json
+from zbuf_occlude.sensors.kinds import sensor_from_name, sensor_to_json
 
 #: The airborne scanner of the scans: a 2° beam of 19 sub-rays, up to 4 returns 1 m apart, 100 m above the ground.
 ALS = AirborneScanner("test-als", swath_deg=20.0, pulse_rate_hz=2000.0, line_rate_hz=20.0, altitude_m=100.0, speed_mps=10.0,

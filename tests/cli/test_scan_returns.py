@@ -12,7 +12,7 @@ import pytest
 
 from zbuf_occlude.cli.main import main as cli_main
 from zbuf_occlude.sensors.lidar import Lidar
-from zbuf_occlude.sensors.presets import sensor_to_json
+from zbuf_occlude.sensors.kinds import sensor_to_json
 
 
 def _write_json(path: Path, spec: dict) -> Path:

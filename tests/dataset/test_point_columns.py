@@ -28,7 +28,7 @@ from zbuf_occlude.farm.sensor_crops import farm_datasets
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors import Lidar
 from zbuf_occlude.sensors.crops import RETURN_FIELDS, kept_return_fields
-from zbuf_occlude.sensors.presets import sensor_to_json
+from zbuf_occlude.sensors.kinds import sensor_to_json
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 FARM = ["--samples-per-view", "2", "--points", "96", "--classes", "chair,table", "--per-class", "1", "--sensor-distance", "4:8",

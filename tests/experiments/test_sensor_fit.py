@@ -10,7 +10,7 @@ import pytest
 from conftest import aerial_slab_crops
 
 from zbuf_occlude.experiments.sensor_fit import fit_sensor_to_scans
-from zbuf_occlude.sensors.presets import sensor_from_name
+from zbuf_occlude.sensors.kinds import sensor_from_name
 
 #: Where aerial crops lie in a user's files: projected coordinates (UTM-like eastings and northings, metres).
 _UTM_OFFSET = np.array([480_000.0, 5_400_000.0, 120.0])

@@ -243,7 +243,7 @@ def test_the_occluded_sets_elevations_default_to_those_the_sensor_sees_objects_f
     from zbuf_occlude.experiments.sim2real.config import Sim2RealConfig
     from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT
     from zbuf_occlude.sensors import airborne_preset
-    from zbuf_occlude.sensors.presets import sensor_to_json
+    from zbuf_occlude.sensors.kinds import sensor_to_json
 
     dales = Sim2RealConfig("m", "r", sensor="dales-q1560")
     assert dales.occluded_elevation_deg == (61.0, 90.0) and "dales-q1560" in dales.occluded_elevation_from
@@ -285,7 +285,7 @@ def test_settings_hold_the_sensor_in_full_and_only_the_placement_its_kind_uses(t
     from zbuf_occlude.experiments.sim2real.run import _fix_settings
     from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT
     from zbuf_occlude.sensors import lidar_preset
-    from zbuf_occlude.sensors.presets import sensor_from_name, sensor_to_json
+    from zbuf_occlude.sensors.kinds import sensor_from_name, sensor_to_json
 
     airborne = Sim2RealConfig("m", "r", sensor="dales-q1560")
     _fix_settings(airborne, _sets_found(), tmp_path / "als")

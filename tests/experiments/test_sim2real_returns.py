@@ -105,7 +105,7 @@ def test_several_returns_need_a_divergence_and_no_fit(tmp_path: Path, capsys: py
 
 def test_settings_record_the_returns_only_when_above_one(tmp_path: Path) -> None:
     from zbuf_occlude.experiments.sim2real.run import Sim2RealSets, _fix_settings
-    from zbuf_occlude.sensors.presets import sensor_to_json
+    from zbuf_occlude.sensors.kinds import sensor_to_json
 
     def _sets_found():  # what prepare_sets finds, as little as _fix_settings reads (test_sim2real's)
         return Sim2RealSets(["car", "pole"], [], [], np.zeros((4, 8, 3), np.float32), np.repeat([0, 1], 2), [f"{i}.xyz" for i in range(4)],

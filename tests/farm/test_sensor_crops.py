@@ -23,7 +23,7 @@ from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors import Lidar
 from zbuf_occlude.sensors.placement import CropDistributions
 from zbuf_occlude.sensors.fit import fit_width_scale
-from zbuf_occlude.sensors.presets import sensor_to_json
+from zbuf_occlude.sensors.kinds import sensor_to_json
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 ARGS = ["--sensor", "hdl32e", "--samples-per-view", "2", "--points", "128", "--per-class", "1", "--splits", "train",

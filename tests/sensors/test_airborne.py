@@ -13,7 +13,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors import AirborneScanner, airborne_preset, scan_airborne
 from zbuf_occlude.sensors.crops import lidar_object_samples
 from zbuf_occlude.sensors.placement import CropDistributions
-from zbuf_occlude.sensors.presets import sensor_from_name
+from zbuf_occlude.sensors.kinds import sensor_from_name
 
 #: Relative tolerance of simulated vs analytic density (the lines' phase moves a few points in or out of a square).
 DENSITY_RTOL = 0.03

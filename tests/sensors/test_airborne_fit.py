@@ -12,9 +12,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.airborne import AirborneScanner, scan_airborne
+from zbuf_occlude.sensors.airborne import AirborneScanner
+from zbuf_occlude.sensors.scan import scan_airborne
 from zbuf_occlude.sensors.fit.airborne import _face_density, crop_faces, fit_airborne
-from zbuf_occlude.sensors.presets import sensor_from_name
+from zbuf_occlude.sensors.kinds import sensor_from_name
 
 
 def _scanner(name: str, density_m2: float, altitude_m: float, swath_deg: float, noise_m: float, dropout: float = 0.0) -> AirborneScanner:
@@ -266,7 +267,7 @@ def test_the_spinning_fit_still_takes_spinning_scans() -> None:
 
 @pytest.mark.parametrize("name", ["hdl32e", "dales-q1560", "riegl-q1560", "kinect-v1"])
 def test_sensor_to_json_is_what_sensor_from_name_reads_back(name, tmp_path) -> None:
-    from zbuf_occlude.sensors.presets import sensor_to_json
+    from zbuf_occlude.sensors.kinds import sensor_to_json
 
     sensor = sensor_from_name(name)
     path = tmp_path / "s.json"

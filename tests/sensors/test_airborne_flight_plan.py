@@ -20,7 +20,7 @@ from zbuf_occlude.sensors import AirborneScanner, airborne_preset, scan_airborne
 from zbuf_occlude.sensors.airborne import MAX_FLIGHT_LINES, FlightLine
 from zbuf_occlude.sensors.crops import lidar_object_samples, object_crop
 from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
-from zbuf_occlude.sensors.presets import sensor_from_name
+from zbuf_occlude.sensors.kinds import sensor_from_name
 from zbuf_occlude.sensors.scene import ScanScene, SceneObject
 
 #: Binomial tolerance of the dropout, in standard deviations (a false failure about once in 10^6 examples).

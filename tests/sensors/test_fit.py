@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.fit import fit_lidar
 from zbuf_occlude.sensors.lidar import lidar_preset
-from zbuf_occlude.sensors.presets import sensor_from_name
+from zbuf_occlude.sensors.kinds import sensor_from_name
 from zbuf_occlude.sensors.scan import scan
 
 PLACES = [(6.0, 0.0), (8.0, 20.0), (10.0, -15.0), (12.0, 5.0), (15.0, 30.0), (9.0, -30.0)]

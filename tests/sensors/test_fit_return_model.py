@@ -27,7 +27,7 @@ from zbuf_occlude.sensors.fit import (
 from zbuf_occlude.sensors.fit.return_model import lower_end
 from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
 from zbuf_occlude.sensors.fit.returns import PulseValues
-from zbuf_occlude.sensors.presets import sensor_from_name
+from zbuf_occlude.sensors.kinds import sensor_from_name
 
 #: The synthetic survey's truth: flying height, ground reflectance, intensity scale (counts·m²), range resolution (m),
 #: detection threshold (counts).

@@ -2,7 +2,7 @@
 
 Covers :mod:`zbuf_occlude.sensors.spec_files` (reading), :mod:`zbuf_occlude.sensors.checks`
 (fields) and their users: :func:`~zbuf_occlude.sensors.scene.load_scene`,
-:func:`~zbuf_occlude.sensors.presets.sensor_from_name` and the dataclasses' own checks.
+:func:`~zbuf_occlude.sensors.kinds.sensor_from_name` and the dataclasses' own checks.
 """
 
 from __future__ import annotations
@@ -23,11 +23,12 @@ from hypothesis import strategies as st
 
 from zbuf_occlude.errors import InvalidInputError, UnsafePathError
 from zbuf_occlude.sensors import scene as scene_module
-from zbuf_occlude.sensors.airborne import AirborneScanner, scan_airborne
+from zbuf_occlude.sensors.airborne import AirborneScanner
+from zbuf_occlude.sensors.scan import scan_airborne
 from zbuf_occlude.sensors.checks import MAX_SCENE_OBJECTS, MAX_SENSOR_RAYS, SHOWN_CHARS, shown
 from zbuf_occlude.sensors.depth_camera import DepthCamera
 from zbuf_occlude.sensors.lidar import Lidar, lidar_preset
-from zbuf_occlude.sensors.presets import sensor_from_name
+from zbuf_occlude.sensors.kinds import sensor_from_name
 from zbuf_occlude.sensors.scene import ScanScene, SceneObject, load_scene
 
 yaml = pytest.importorskip("yaml", reason="YAML scenes need the [yaml] extra (PyYAML)")

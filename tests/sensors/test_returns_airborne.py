@@ -163,7 +163,7 @@ def test_bad_return_fields_are_refused_naming_the_field(changes: dict, message: 
 def test_a_sensor_file_round_trips_the_return_fields(tmp_path) -> None:
     import json
 
-    from zbuf_occlude.sensors.presets import sensor_from_name, sensor_to_json
+    from zbuf_occlude.sensors.kinds import sensor_from_name, sensor_to_json
 
     scanner = _scanner(beam_profile="gaussian")
     path = tmp_path / "als.json"

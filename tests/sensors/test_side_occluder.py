@@ -26,7 +26,7 @@ from zbuf_occlude.sensors.fit import (
     fit_width_scale,
 )
 from zbuf_occlude.sensors.lidar import lidar_preset
-from zbuf_occlude.sensors.presets import sensor_from_name
+from zbuf_occlude.sensors.kinds import sensor_from_name
 
 CAR = trimesh.creation.box(extents=(1.0, 0.4, 0.33))  # a normalised car-like box: 4.5 m long at size_m 4.5
 PLACED = Placement(distance_m=7.0, height_m=1.8, azimuth_deg=30.0, yaw_deg=90.0, size_m=4.5)

@@ -12,7 +12,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.sensors.checks import MAX_RANGE_M
 from zbuf_occlude.sensors.fit.lidar import MAX_BOOTSTRAP
-from zbuf_occlude.sensors.presets import preset_names, sensor_from_name
+from zbuf_occlude.sensors.kinds import preset_names, sensor_from_name
 
 __all__ = ["add_fit_sensor_parser", "cmd_fit_sensor", "LAS_EXTENSIONS", "MAX_BOOTSTRAP"]
 
@@ -88,7 +88,7 @@ def _fit_returns(args: argparse.Namespace, files: Sequence[Path]) -> int:
     from zbuf_occlude.sensors.airborne import AirborneScanner
     from zbuf_occlude.sensors.fit import BOOTSTRAP, VEGETATION_CLASSES, fit_return_model
     from zbuf_occlude.sensors.lidar import Lidar
-    from zbuf_occlude.sensors.presets import sensor_to_json
+    from zbuf_occlude.sensors.kinds import sensor_to_json
 
     out = Path(args.out)
     if out.suffix.lower() != ".json":

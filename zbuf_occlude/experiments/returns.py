@@ -37,7 +37,8 @@ from numpy.typing import NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.atomic import write_bytes
 from zbuf_occlude.io.las import LasPoints, read_las
-from zbuf_occlude.sensors.airborne import AirborneScanner, scan_airborne
+from zbuf_occlude.sensors.airborne import AirborneScanner
+from zbuf_occlude.sensors.scan import scan_airborne
 from zbuf_occlude.sensors.fit.returns import (
     VEGETATION_CLASSES,
     ReturnStatistics,

@@ -249,7 +249,7 @@ def _fit_divergence(rows: Sequence[dict[str, Any]], k: int, measured: Estimate) 
 
 def _k_sweep(plot, settings: ReturnsSettings, divergence_deg: float, model: _Model) -> list[dict[str, Any]]:
     """Every K measured once, then timed in ``repeats`` interleaved rounds (the measured round included)."""
-    from zbuf_occlude.sensors.airborne import scan_airborne
+    from zbuf_occlude.sensors.scan import scan_airborne
 
     scene, vegetation, centre, half = plot
     rows, times = {}, {k: [] for k in settings.k_values}

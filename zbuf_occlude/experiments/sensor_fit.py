@@ -35,7 +35,7 @@ from zbuf_occlude.real_scans.datasets import load_real_scans
 from zbuf_occlude.sensors.airborne import AirborneScanner
 from zbuf_occlude.sensors.fit import BOOTSTRAP, MIN_PLACEMENT_SCANS, AirborneFit, LidarFit, crop_placement_json, fit_airborne, fit_lidar
 from zbuf_occlude.sensors.lidar import Lidar
-from zbuf_occlude.sensors.presets import sensor_from_name
+from zbuf_occlude.sensors.kinds import sensor_from_name
 
 __all__ = ["fit_to_scans", "fit_sensor_to_scans"]
 

@@ -49,19 +49,22 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.geometry.sampling import check_seed
+from zbuf_occlude.sensors.beam import IDEAL_BEAM, Beam, check_beam
 from zbuf_occlude.sensors.checks import MAX_RANGE_M, MAX_SENSOR_RAYS, count, is_number, located, real, reals, sensor_name, shown, text
-from zbuf_occlude.sensors.footprint import MAX_DIVERGENCE_DEG, check_resolved_footprint
+from zbuf_occlude.sensors.pulses import Pulses
 
-__all__ = ["AIRBORNE_PRESETS", "MAX_FLIGHT_LINES", "AirborneScanner", "FlightLine", "airborne_preset", "scan_airborne"]
+__all__ = ["AIRBORNE_IDEAL_BEAM", "AIRBORNE_PRESETS", "MAX_FLIGHT_LINES", "AirborneScanner", "FlightLine", "airborne_preset"]
 
 #: Scan patterns (module docstring).
 PATTERNS = ("linear", "oscillating")
+#: The beam of an airborne scanner given none: the ``ideal`` beam at the airborne wavelength, 1064 nm.
+AIRBORNE_IDEAL_BEAM = IDEAL_BEAM.with_(wavelength_nm=1064.0)
 #: Most flight lines one plan may hold (``n_lines · len(headings_deg)``): a sensor file is
 #: untrusted input, and each line costs a pass over the scanned square.
 MAX_FLIGHT_LINES = 256
@@ -119,10 +122,11 @@ class AirborneScanner:
     altitude_m, speed_mps : float
         Flying height above the ground, metres; ground speed, metres per second.
     pattern : {"linear", "oscillating"}
-    range_noise_m : float
-        σ of the Gaussian range error, metres.
-    dropout : float
-        Probability in [0, 1) that a return is lost.
+    beam : Beam
+        The pulse and its receiver (:class:`~zbuf_occlude.sensors.beam.Beam`): footprint, returns,
+        detection, range noise and dropout.  Its ``detection_threshold`` (the value
+        :func:`~zbuf_occlude.sensors.fit.fit_return_model` measures on a LAS file) applies with
+        ρ = 1 where the scan is given no reflectivity.  Default: the ``ideal`` beam at 1064 nm.
     source : str
     n_lines : int
         Flight lines per heading, parallel (module docstring, *Flight plans*); 1: one line.
@@ -132,26 +136,6 @@ class AirborneScanner:
     headings_deg : tuple of float
         One block of ``n_lines`` lines per heading, degrees counter-clockwise from +x (two
         headings 90° apart: a cross-hatched survey).
-    beam_divergence_deg : float
-        Full-angle beam divergence, degrees in [0, 90]; the cone the ``footprint_rays`` sample
-        (RIEGL LMS-Q1560 data sheet: ≤ 0.25 mrad, 0.014°).
-    footprint_rays : int
-        K sub-rays per pulse, 1..:data:`~zbuf_occlude.sensors.footprint.MAX_SUBRAYS`; above 1 it
-        needs a divergence > 0 and ``max_returns`` above 1.
-    beam_profile : {"tophat", "gaussian"}
-        The sub-rays' energy weights (:func:`~zbuf_occlude.sensors.footprint.footprint_offsets`).
-    max_returns : int
-        Returns per pulse, 1..15 (LAS's return numbers); above 1 the multi-return model (module
-        docstring, *Returns*).
-    range_resolution_m : float
-        Least range between two returns of one pulse, metres (half the pulse length, c·τ/2);
-        needed (> 0) with ``max_returns`` above 1, refused with 1.
-    detection_threshold : float
-        Least echo energy the receiver records, m⁻² (:func:`~zbuf_occlude.sensors.echoes.hit_energy`'s
-        units: ``w · ρ · |cos θ| / R²``, ρ the scan's ``reflectivity``, 1 without one): weaker
-        echoes take no return slot (:func:`~zbuf_occlude.sensors.echoes.resolve_echoes`).  The
-        value :func:`~zbuf_occlude.sensors.fit.fit_return_model` measures on a LAS file.  0
-        (default): every echo returns.  Above 0 it needs ``max_returns`` above 1.
 
     Raises
     ------
@@ -161,11 +145,7 @@ class AirborneScanner:
         a swath outside (0°, 180°), an unknown pattern, fewer than one pulse per line or more
         than :data:`~zbuf_occlude.sensors.checks.MAX_SENSOR_RAYS`, ``n_lines`` not an integer ≥ 1,
         ``side_overlap`` outside [0, 1), no heading or a non-finite one, more than
-        :data:`MAX_FLIGHT_LINES` lines, a name that cannot name files; ``footprint_rays``
-        outside 1..MAX_SUBRAYS, or above 1 without a divergence or with ``max_returns`` 1;
-        ``max_returns`` outside 1..15; ``range_resolution_m`` negative, 0 with ``max_returns``
-        above 1, or given with ``max_returns`` 1; an unknown ``beam_profile``; a
-        ``detection_threshold`` negative, not finite, or above 0 with ``max_returns`` 1.
+        :data:`MAX_FLIGHT_LINES` lines, a ``beam`` that is not a Beam, a name that cannot name files.
     """
 
     name: str
@@ -175,18 +155,14 @@ class AirborneScanner:
     altitude_m: float
     speed_mps: float
     pattern: str = "linear"
-    range_noise_m: float = 0.02
-    dropout: float = 0.0
+    beam: Beam = AIRBORNE_IDEAL_BEAM
     source: str = ""
     n_lines: int = 1
     side_overlap: float = 0.0
     headings_deg: tuple[float, ...] = (0.0,)
-    beam_divergence_deg: float = 0.0
-    footprint_rays: int = 1
-    beam_profile: str = "tophat"
-    max_returns: int = 1
-    range_resolution_m: float = 0.0
-    detection_threshold: float = 0.0
+
+    #: The kind of sensor (:mod:`~zbuf_occlude.sensors.kinds`).
+    kind: ClassVar[str] = "airborne"
 
     def __post_init__(self) -> None:
         sensor_name(self.name, "airborne scanner name")
@@ -199,10 +175,7 @@ class AirborneScanner:
         numbers = {
             "pulse_rate_hz": positive, "line_rate_hz": positive, "altitude_m": {**positive, "high": MAX_RANGE_M},
             "speed_mps": positive, "swath_deg": {**positive, "high": 180.0, "high_open": True},
-            "range_noise_m": {"low": 0.0, "high": MAX_RANGE_M}, "dropout": {"low": 0.0, "high": 1.0, "high_open": True},
             "side_overlap": {"low": 0.0, "high": 1.0, "high_open": True, "expected": "a fraction in [0, 1)"},
-            "beam_divergence_deg": {"low": 0.0, "high": MAX_DIVERGENCE_DEG}, "range_resolution_m": {"low": 0.0, "high": MAX_RANGE_M},
-            "detection_threshold": {"low": 0.0},
         }  # fmt: skip
         for name, bounds in numbers.items():
             object.__setattr__(self, name, real(getattr(self, name), name, **bounds))
@@ -221,20 +194,7 @@ class AirborneScanner:
             raise InvalidInputError(
                 f"{self.n_lines} lines x {len(self.headings_deg)} headings is more than {MAX_FLIGHT_LINES} flight lines"
             )
-        self._check_returns()
-
-    def _check_returns(self) -> None:
-        """The footprint and multi-return fields (class docstring), as the spinning :class:`~.lidar.Lidar` checks them."""
-        check_resolved_footprint(self, "an airborne footprint")
-        if self.max_returns == 1 and self.detection_threshold > 0:
-            raise InvalidInputError(
-                f"detection_threshold {shown(self.detection_threshold)} needs max_returns above 1 (it drops the weak echoes of the multi-return model)"
-            )
-
-    @property
-    def multi_return(self) -> bool:
-        """Whether the multi-return model is on (``max_returns`` above 1)."""
-        return self.max_returns > 1
+        check_beam(self.beam)
 
     @property
     def pulses_per_line(self) -> int:
@@ -325,6 +285,90 @@ class AirborneScanner:
             total = total + np.where(np.abs(y) <= half, rho, 0.0)
         return total
 
+    def pulses(self, center_xy, half_size_m: float, rng: np.random.Generator, *, phase_s: float | None = None,
+               lateral_shift_m=None) -> Pulses:  # fmt: skip
+        """The plan's pulses over the square ``center_xy ± half_size_m`` (metres, world frame), every line's merged.
+
+        Every line casts the pulses whose flat-ground footprint falls in the square of its own
+        frame (:meth:`ground_rays`; for a line at another heading a rotated square, which still
+        covers the disc of radius ``half_size_m``).
+
+        Parameters
+        ----------
+        center_xy, half_size_m
+            The square of flat ground whose pulses are cast, metres.
+        rng : numpy.random.Generator
+            Draws, in this order: one phase per line (when ``phase_s`` is None), then one shift per
+            heading (plans of more than one line per heading, when ``lateral_shift_m`` is None).
+        phase_s : float, optional
+            Time of every line's first pulse, seconds; None: drawn per line, uniformly over one
+            scan-line period.
+        lateral_shift_m : float or sequence of float, optional
+            Shift of each heading's block of lines across track, metres (:meth:`flight_lines`);
+            None: drawn per heading, uniformly in ``±s/2`` (s: the flight-line spacing), for plans
+            of more than one line per heading; 0 for one line (which then flies over ``y = 0``).
+
+        Returns
+        -------
+        Pulses
+            World frame, one origin per pulse (the aircraft's position); ``pulse_id`` the pulse's
+            row among all the plan's pulses, line by line; ``time_s`` its firing time along its
+            line (the aircraft passes x = 0 of its line's frame at 0); ``scan_angle_deg`` the
+            across-track angle from nadir signed as ASPRS LAS 1.4 defines it (counter-clockwise
+            seen from behind the aircraft is positive: the right, −y, side of a line flown along
+            +x); per point in ``meta``: ``scan_angle_deg`` (the angle θ, +y side positive) and
+            ``line_id``; the beam's detection threshold applies with ρ = 1 where no reflectivity
+            is given.
+
+        Raises
+        ------
+        InvalidInputError
+            A non-finite or non-positive square, a non-finite phase or shift, more than
+            :data:`~zbuf_occlude.sensors.checks.MAX_SENSOR_RAYS` rays in all (counted line by
+            line, sub-rays included, before the rays are cast).
+        """
+        scanner = self
+        n_total = scanner.n_lines * len(scanner.headings_deg)
+        # draw order: phases (one per line), then shifts (one per heading, plans of > 1 line per
+        # heading only), then the pipeline's noise and dropout; a single line draws one phase
+        if phase_s is None:
+            phases = [float(rng.uniform(0.0, 1.0 / scanner.line_rate_hz)) for _ in range(n_total)]
+        else:
+            phases = [real(phase_s, "phase_s")] * n_total
+        if lateral_shift_m is None:
+            s = scanner.flight_line_spacing_m
+            shifts = [float(rng.uniform(-s / 2.0, s / 2.0)) if scanner.n_lines > 1 else 0.0 for _ in scanner.headings_deg]
+        else:
+            shifts = np.broadcast_to(np.asarray(lateral_shift_m, dtype=np.float64), (len(scanner.headings_deg),)).tolist()
+        parts = []
+        for line in scanner.flight_lines(shifts):
+            if line.is_reference:
+                o, d, a, ts = scanner.ground_rays(center_xy, half_size_m, phases[line.line_id], with_time=True)
+            else:
+                c = line.to_line(np.asarray(center_xy, dtype=np.float64).reshape(2))
+                o, d, a, ts = scanner.ground_rays(c, half_size_m, phases[line.line_id], with_time=True)
+                along, across = line.axes()
+                o = np.column_stack([o[:, :1] * along + (line.offset_m + o[:, 1:2]) * across, o[:, 2]])
+                d = np.column_stack([d[:, :1] * along + d[:, 1:2] * across, d[:, 2]])
+            parts.append((o, d, a, np.full(len(a), line.line_id, np.int32), ts))
+            n_rays = sum(len(p[2]) for p in parts)
+            if n_rays * scanner.beam.footprint_rays > MAX_SENSOR_RAYS:  # every line is bounded on its own; the plan's lines add up
+                raise InvalidInputError(
+                    f"airborne scanner {scanner.name!r}: {n_rays:,} pulses{f' of {scanner.beam.footprint_rays} sub-rays' if scanner.beam.footprint_rays > 1 else ''} "
+                    f"by line {line.line_id} of {n_total} over the square {2 * float(half_size_m):g} m wide, more than {MAX_SENSOR_RAYS:,} rays; "
+                    "scan a smaller square, fly fewer lines or take fewer footprint_rays"
+                )
+        if len(parts) == 1:
+            origins, directions, angle, line_id, fired = parts[0]
+        else:
+            origins, directions, angle, line_id, fired = (np.concatenate(arrays) for arrays in zip(*parts))
+        meta = {"phase_s": phases[0], "line_phase_s": tuple(phases), "lateral_shift_m": tuple(float(v) for v in shifts)}
+        return Pulses(
+            directions, directions, origins, None, pulse_id=np.arange(len(origins), dtype=np.int64), time_s=fired,
+            scan_angle_deg=(-angle).astype(np.float32), per_pulse_meta={"scan_angle_deg": angle, "line_id": line_id}, meta=meta,
+            default_reflectivity=1.0, has_sensor_frame=False, home_m=np.array([0.0, 0.0, scanner.altitude_m]),
+        )  # fmt: skip
+
     def with_(self, **changes) -> AirborneScanner:
         """A copy with some fields changed."""
         return replace(self, **changes)
@@ -414,15 +458,16 @@ class AirborneScanner:
 # 0.85 (lines 216 m apart, 6 to 7 strips on every point) gives PRR / (v · s) = 51.4 points/m² on
 # flat open ground (single returns).  Nine lines: any object within ±250 m of the plan centre
 # lies where the block is unbounded (module docstring), wherever the lines' random shift puts them.
+_Q1560_BEAM = Beam("riegl-q1560", wavelength_nm=1064.0, range_noise_m=0.02, source="RIEGL LMS-Q1560 data sheet (2015): ranging accuracy 20 mm")
 AIRBORNE_PRESETS: dict[str, AirborneScanner] = {
     "riegl-q1560": AirborneScanner(
         "riegl-q1560", swath_deg=58.0, pulse_rate_hz=800_000.0, line_rate_hz=209.0, altitude_m=1300.0,
-        speed_mps=72.0, pattern="linear", range_noise_m=0.02,
+        speed_mps=72.0, pattern="linear", beam=_Q1560_BEAM,
         source="RIEGL LMS-Q1560 data sheet (2015); DALES (Varney et al., CVPRW 2020) flight altitude 1,300 m",
     ),
     "dales-q1560": AirborneScanner(
         "dales-q1560", swath_deg=58.0, pulse_rate_hz=800_000.0, line_rate_hz=209.0, altitude_m=1300.0,
-        speed_mps=72.0, pattern="linear", range_noise_m=0.02, n_lines=9, side_overlap=0.85,
+        speed_mps=72.0, pattern="linear", beam=_Q1560_BEAM, n_lines=9, side_overlap=0.85,
         source="riegl-q1560 flown as a survey block: 9 parallel lines, side overlap 0.85, 51.4 points/m² "
                "(DALES, Varney et al., CVPRW 2020: ~50 points/m² at 1,300 m; overlap and speed are assumptions)",
     ),
@@ -441,180 +486,3 @@ def airborne_preset(name: str, **changes) -> AirborneScanner:
     if key not in AIRBORNE_PRESETS:
         raise InvalidInputError(f"unknown airborne scanner {shown(name)}; choose one of {sorted(AIRBORNE_PRESETS)}")
     return replace(AIRBORNE_PRESETS[key], **changes)
-
-
-def scan_airborne(scene, scanner: AirborneScanner, center_xy=(0.0, 0.0), half_size_m: float = 10.0, *, seed: int = 0,
-                  phase_s: float | None = None, lateral_shift_m=None, reflectivity=None, transmittance=None):  # fmt: skip
-    """Scan the part of ``scene`` around ``center_xy`` from every line of the scanner's flight plan; world frame.
-
-    Every line casts the pulses whose flat-ground footprint falls in the square ``center_xy ±
-    half_size_m`` of its own frame (:meth:`AirborneScanner.ground_rays`; for a line at another
-    heading a rotated square, which still covers the disc of radius ``half_size_m``); the returns
-    of all lines are merged, each keeping its line id.
-
-    Parameters
-    ----------
-    scene : ScanScene or trimesh.Trimesh
-        World frame, metres, ground at z = 0 (a bare mesh: as given).
-    scanner : AirborneScanner
-    center_xy, half_size_m
-        The square of flat ground whose pulses are cast, metres.
-    seed : int
-        Noise, dropout and what is drawn (below).
-    phase_s : float, optional
-        Time of every line's first pulse, seconds; None: drawn per line, uniformly over one
-        scan-line period (each line its own phase).
-    lateral_shift_m : float or sequence of float, optional
-        Shift of each heading's block of lines across track, metres (:meth:`AirborneScanner.flight_lines`);
-        None: drawn per heading, uniformly in ``±s/2`` (s: the flight-line spacing), for plans of
-        more than one line per heading, so an object falls anywhere between the lines; 0 for one
-        line (which then flies over ``y = 0``).
-
-    Returns
-    -------
-    Scan
-        ``frame="world"``, ``ring`` and ``pixel`` None, ``sensor_position`` the mean aircraft
-        position of the returns.  ``meta``: ``scan_angle_deg`` (N,) float64 and ``line_id``
-        (N,) int32 per return; ``phase_s`` (the first line's), ``line_phase_s`` (per line, by
-        id), ``lateral_shift_m`` (per heading), ``n_rays``.  The same seed gives the same bytes;
-        a single-line scanner draws exactly what it drew before flight plans existed.
-        The return fields: ``return_number`` and ``number_of_returns`` (N,) uint8 (1 of 1 with
-        ``max_returns`` 1; else 1..n in range order, n the same on every point of a pulse),
-        ``intensity`` (N,) float32 (the echo's energy, m⁻²; 1.0 with one return per pulse, no
-        radiometry), ``pulse_id`` (N,) int64 (the pulse's row among all the plan's pulses, line by
-        line), ``gps_time`` (N,) float64 (the pulse's firing time along its flight line, seconds;
-        the aircraft passes x = 0 of its line's frame at 0) and ``scan_angle_deg`` (N,) float32,
-        the across-track angle from nadir signed as ASPRS LAS 1.4 defines it (counter-clockwise
-        seen from behind the aircraft, facing along track, is positive: the right, −y, side of a
-        line flown along +x; ``−meta["scan_angle_deg"]``).  With ``max_returns`` 1 every other
-        array is what it was before these fields existed, bit for bit.
-
-    Raises
-    ------
-    InvalidInputError
-        A seed :func:`~zbuf_occlude.geometry.sampling.check_seed` refuses; a non-finite or non-positive square, a non-finite phase or shift, a reflectivity or
-        transmittance out of range or given to a scanner of one return per pulse, more than
-        :data:`~zbuf_occlude.sensors.checks.MAX_SENSOR_RAYS` pulses in all (counted line by line,
-        before the rays are cast).
-    """
-    from zbuf_occlude.sensors.raycast import cast_embree, face_normals
-    from zbuf_occlude.sensors.scan import build_scene, return_numbers
-    from zbuf_occlude.sensors.scan_data import Scan
-
-    seed = check_seed(seed)  # before the scene is built: numpy would refuse -1 or 'a' only when drawing
-    built = build_scene(scene)
-    rho, tau = _surface_optics(built, scanner, reflectivity, transmittance)
-    rng = np.random.default_rng(seed)
-    n_total = scanner.n_lines * len(scanner.headings_deg)
-    # draw order: phases (one per line), then shifts (one per heading, plans of > 1 line per
-    # heading only), then noise and dropout; a single line draws one phase, as it always did
-    if phase_s is None:
-        phases = [float(rng.uniform(0.0, 1.0 / scanner.line_rate_hz)) for _ in range(n_total)]
-    else:
-        phases = [real(phase_s, "phase_s")] * n_total
-    if lateral_shift_m is None:
-        s = scanner.flight_line_spacing_m
-        shifts = [float(rng.uniform(-s / 2.0, s / 2.0)) if scanner.n_lines > 1 else 0.0 for _ in scanner.headings_deg]
-    else:
-        shifts = np.broadcast_to(np.asarray(lateral_shift_m, dtype=np.float64), (len(scanner.headings_deg),)).tolist()
-    parts = []
-    for line in scanner.flight_lines(shifts):
-        if line.is_reference:
-            o, d, a, ts = scanner.ground_rays(center_xy, half_size_m, phases[line.line_id], with_time=True)
-        else:
-            c = line.to_line(np.asarray(center_xy, dtype=np.float64).reshape(2))
-            o, d, a, ts = scanner.ground_rays(c, half_size_m, phases[line.line_id], with_time=True)
-            along, across = line.axes()
-            o = np.column_stack([o[:, :1] * along + (line.offset_m + o[:, 1:2]) * across, o[:, 2]])
-            d = np.column_stack([d[:, :1] * along + d[:, 1:2] * across, d[:, 2]])
-        parts.append((o, d, a, np.full(len(a), line.line_id, np.int32), ts))
-        n_rays = sum(len(p[2]) for p in parts)
-        if n_rays * scanner.footprint_rays > MAX_SENSOR_RAYS:  # every line is bounded on its own; the plan's lines add up
-            raise InvalidInputError(
-                f"airborne scanner {scanner.name!r}: {n_rays:,} pulses{f' of {scanner.footprint_rays} sub-rays' if scanner.footprint_rays > 1 else ''} "
-                f"by line {line.line_id} of {n_total} over the square {2 * float(half_size_m):g} m wide, more than {MAX_SENSOR_RAYS:,} rays; "
-                "scan a smaller square, fly fewer lines or take fewer footprint_rays"
-            )
-    if len(parts) == 1:
-        origins, directions, angle, line_id, fired = parts[0]
-    else:
-        origins, directions, angle, line_id, fired = (np.concatenate(arrays) for arrays in zip(*parts))
-    if scanner.multi_return:
-        hit, face, t, energy = _echo_returns(built, scanner, origins, directions, rho, tau)
-    else:
-        face, t = cast_embree(built.mesh, origins, directions) if len(origins) else (np.zeros(0, np.int64), np.zeros(0))
-        hit = np.flatnonzero(face >= 0)
-        face, t = face[hit], t[hit]
-        energy = np.ones(len(hit))  # no radiometry: intensity 1.0, as a spinning scan without reflectivity
-    o, d = origins[hit], directions[hit]
-    measured = t + scanner.range_noise_m * rng.standard_normal(len(hit))
-    keep = (rng.random(len(hit)) >= scanner.dropout) & (measured > 0)
-    face, measured, o, d = face[keep], measured[keep], o[keep], d[keep]
-    pulse = hit[keep]
-    normal = face_normals(built.mesh, face)
-    cos_in = np.einsum("ij,ij->i", normal, d)
-    normal[cos_in > 0] *= -1.0
-    position = o.mean(axis=0) if len(o) else np.array([0.0, 0.0, scanner.altitude_m])
-    pose = np.eye(4)
-    pose[:3, 3] = position
-    meta = {"n_rays": len(origins), "phase_s": phases[0], "scan_angle_deg": angle[pulse], "line_id": line_id[pulse],
-            "line_phase_s": tuple(phases), "lateral_shift_m": tuple(float(v) for v in shifts)}  # fmt: skip
-    return_number, number_of_returns = return_numbers(pulse, renumber=scanner.multi_return)
-    return Scan(
-        points=(o + d * measured[:, None]).astype(np.float32), ring=None, pixel=None, range_m=measured.astype(np.float32),
-        face_index=built.face_local[face], object_id=built.face_object[face], normal=normal.astype(np.float32),
-        incidence_deg=np.degrees(np.arccos(np.clip(np.abs(cos_in), 0.0, 1.0))).astype(np.float32), frame="world",
-        sensor_position=position, sensor_to_world=pose, sensor=scanner.name, meta=meta,
-        return_number=return_number, number_of_returns=number_of_returns, intensity=energy[keep].astype(np.float32),
-        pulse_id=pulse.astype(np.int64), gps_time=fired[pulse], scan_angle_deg=(-angle[pulse]).astype(np.float32),
-    )  # fmt: skip
-
-
-def _surface_optics(built, scanner: AirborneScanner, reflectivity, transmittance):
-    """``scan_airborne``'s ``reflectivity`` and ``transmittance`` per face of the scene at 1064 nm, or None."""
-    if reflectivity is None and transmittance is None:
-        return None, None
-    from zbuf_occlude.sensors.reflectance import AIRBORNE_WAVELENGTH_NM
-    from zbuf_occlude.sensors.echo_model import surface_optics
-
-    if not scanner.multi_return:
-        raise InvalidInputError(f"airborne scanner {scanner.name!r}: reflectivity and transmittance weigh the echoes of the "
-                                "multi-return model: give the scanner max_returns above 1")  # fmt: skip
-    return surface_optics(built, reflectivity, transmittance, wavelength_nm=AIRBORNE_WAVELENGTH_NM, multi_return=True)
-
-
-def _echo_returns(built, scanner: AirborneScanner, origins, directions, rho=None, tau=None) -> tuple[NDArray, ...]:
-    """The multi-return model of an airborne scanner: each pulse's ``footprint_rays`` sub-rays cast
-    from its origin, resolved by :func:`~zbuf_occlude.sensors.echo_model.echo_returns` (no range limits,
-    echoes below the scanner's ``detection_threshold`` dropped), weighed by ``rho`` and cast on through surfaces
-    of ``tau`` above 0 when given (per face of ``built.mesh``: :func:`~zbuf_occlude.sensors.echo_model.surface_optics`).
-
-    Parameters
-    ----------
-    built : BuiltScene
-    scanner : AirborneScanner
-    origins, directions : (P, 3) float64
-        The pulses' aircraft positions (metres) and unit beam axes, world frame.
-
-    Returns
-    -------
-    pulse : (E,) int64, row of the pulse; face : (E,) int64; range : (E,) float64, metres;
-    energy : (E,) float64, m⁻²: sorted by pulse, then range.
-    """
-    from zbuf_occlude.sensors.footprint import footprint_offsets, subray_directions
-    from zbuf_occlude.sensors.raycast import cast_embree
-    from zbuf_occlude.sensors.echo_model import Radiometry, Transmission, echo_returns
-
-    k = scanner.footprint_rays
-    if len(origins) == 0:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
-    if rho is None and scanner.detection_threshold > 0:
-        rho = np.ones(len(built.face_object))  # the threshold on w · |cos θ| / R²
-    offsets, weights = footprint_offsets(k, scanner.beam_divergence_deg, profile=scanner.beam_profile)
-    rays = subray_directions(directions, offsets).reshape(-1, 3)
-    sub_origins = np.repeat(origins, k, axis=0)
-    face, t = cast_embree(built.mesh, sub_origins, rays)
-    return echo_returns(
-        built, rays, face, t, weights, range_resolution_m=scanner.range_resolution_m, max_returns=scanner.max_returns,
-        radiometry=None if rho is None else Radiometry(rho, scanner.detection_threshold), through=None if tau is None else Transmission(tau, sub_origins),
-    )  # fmt: skip

@@ -310,7 +310,7 @@ def _airborne_crop(mesh, sensor: AirborneScanner, placement: Placement, *, seed:
     sin(azimuth_deg)`` of the placement; ``height_m`` is unused: the scanner flies at its altitude),
     scanned from every line of the flight plan that sees it.  Points and the full scan are in the
     world frame; the crop's ``meta["line_id"]`` and ``meta["scan_angle_deg"]`` are its returns'."""
-    from zbuf_occlude.sensors.airborne import scan_airborne
+    from zbuf_occlude.sensors.scan import scan_airborne
 
     obj = SceneObject(mesh, class_name, (0.0, offset_m), placement.yaw_deg, size, width_scale=placement.stretch,
                       width_profile=placement.width_profile)  # fmt: skip

@@ -281,3 +281,44 @@ def echo_returns(
         detection_threshold=0.0 if radiometry is None else radiometry.detection_threshold, max_returns=max_returns,
     )  # fmt: skip
     return echoes.pulse, f[echoes.hit], echoes.range_m, echoes.energy
+
+
+def returns_of_mode(pulse: ArrayLike, energy: ArrayLike, mode: str) -> NDArray[np.int64]:
+    """Rows of resolved echoes that a receiver in return mode ``mode`` records (:data:`~.beam.RETURN_MODES`).
+
+    Parameters
+    ----------
+    pulse : (E,) int
+        Each echo's pulse, sorted; the echoes of a pulse in range order (:func:`echo_returns`).
+    energy : (E,) float
+        Each echo's received energy.
+    mode : {"strongest", "last", "dual"}
+        ``"strongest"``: the pulse's strongest echo (the nearest of equals); ``"last"``: its last
+        echo; ``"dual"``: the last and the strongest, or the last and the second strongest
+        where they are one (Velodyne's dual-return mode: VLP-16 user manual 63-9243 Rev. D,
+        "Dual Return Mode").
+
+    Returns
+    -------
+    (R,) int64
+        Rows into the echoes, ascending (still sorted by pulse, then range).
+    """
+    pulse = np.asarray(pulse, dtype=np.int64)
+    energy = np.asarray(energy, dtype=np.float64)
+    n = len(pulse)
+    if n == 0:
+        return np.zeros(0, np.int64)
+    start = np.flatnonzero(np.r_[True, pulse[1:] != pulse[:-1]])
+    last = np.r_[start[1:], n] - 1
+    # strongest per pulse: order by (pulse, −energy, row) and take each pulse's first
+    order = np.lexsort((np.arange(n), -energy, pulse))
+    strongest = order[start]
+    if mode == "strongest":
+        return np.sort(strongest)
+    if mode == "last":
+        return last
+    if mode != "dual":
+        raise InvalidInputError(f"unknown return mode {mode!r}")
+    second = np.where(last - start >= 1, order[np.minimum(start + 1, n - 1)], -1)
+    other = np.where(strongest == last, second, strongest)
+    return np.unique(np.concatenate([last, other[other >= 0]]))

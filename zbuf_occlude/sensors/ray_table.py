@@ -17,18 +17,20 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, replace
+from typing import ClassVar
 from pathlib import Path
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.ray_tables import read_ray_table
-from zbuf_occlude.sensors.checks import MAX_RANGE_M, MAX_SENSOR_RAYS, count, located, real, reals, sensor_name, shown, text
-from zbuf_occlude.sensors.footprint import check_resolved_footprint, footprint_offsets, subray_directions
+from zbuf_occlude.sensors.checks import MAX_SENSOR_RAYS, count, located, real, reals, sensor_name, shown, text
+from zbuf_occlude.sensors.beam import IDEAL_BEAM, Beam, check_beam
 from zbuf_occlude.sensors.lidar import Lidar, beam_directions
+from zbuf_occlude.sensors.pulses import Pulses, placed
 
-__all__ = ["ROSETTE_FOV_DEG", "ROSETTE_PRISM_HZ", "RayTable", "load_ray_table", "rosette_table"]
+__all__ = ["RAY_TABLE_PRESETS", "ROSETTE_FOV_DEG", "ROSETTE_PRISM_HZ", "RayTable", "load_ray_table", "rosette_table"]
 
 #: Circular field of view of the Livox Mid-40, full angle, degrees (Livox Mid-40 data sheet;
 #: Liu et al. 2020, §II).
@@ -55,16 +57,8 @@ class RayTable:
         Direction of each pulse in the sensor frame, degrees: azimuth from +x towards +y,
         elevation above the xy plane, in [−90°, 90°]
         (:func:`~zbuf_occlude.sensors.lidar.beam_directions`).
-    min_range_m, max_range_m, range_noise_m, dropout : float
-        As :class:`~zbuf_occlude.sensors.lidar.Lidar`'s (dropout: one probability at every range).
-    beam_divergence_deg, footprint_rays, beam_profile, max_returns, range_resolution_m : float, int, str
-        The footprint and multi-return model, as :class:`~zbuf_occlude.sensors.lidar.Lidar`'s;
-        ``footprint_rays`` above 1 needs ``max_returns`` above 1 (a table's footprint is resolved
-        into returns by :func:`~zbuf_occlude.sensors.echo_model.echo_returns`, as the airborne
-        scanner's is).
-    detection_reflectivity, detection_range_m, power_noise : float
-        The radiometric detection threshold and power noise, as
-        :class:`~zbuf_occlude.sensors.lidar.Lidar`'s (used when ``scan`` gets ``reflectivity``).
+    beam : Beam
+        The pulse and its receiver (:class:`~zbuf_occlude.sensors.beam.Beam`); default the ``ideal`` beam.
     source : str
         Where the table comes from (metadata).
 
@@ -79,9 +73,8 @@ class RayTable:
         Naming the field (``ray table 'avia': time_s[3] ...``): columns that are not 1-D arrays
         of real numbers (bools refused) or of different lengths; fewer than 1 or more than
         :data:`~zbuf_occlude.sensors.checks.MAX_SENSOR_RAYS` rows; a value that is not finite;
-        a time below the one before it; an elevation outside [−90°, 90°]; the scalar fields as
-        :class:`~zbuf_occlude.sensors.lidar.Lidar` refuses them; ``footprint_rays`` above 1
-        with ``max_returns`` 1; a name that cannot name files.
+        a time below the one before it; an elevation outside [−90°, 90°]; a ``beam`` that is not
+        a Beam; a name that cannot name files.
 
     Notes
     -----
@@ -94,22 +87,11 @@ class RayTable:
     time_s: NDArray[np.float64]
     azimuth_deg: NDArray[np.float64]
     elevation_deg: NDArray[np.float64]
-    min_range_m: float = 1.0
-    max_range_m: float = 100.0
-    range_noise_m: float = 0.02
-    dropout: float = 0.0
-    beam_divergence_deg: float = 0.0
-    footprint_rays: int = 1
-    beam_profile: str = "tophat"
-    max_returns: int = 1
-    range_resolution_m: float = 0.0
-    detection_reflectivity: float = 0.8
-    detection_range_m: float = 100.0
-    power_noise: float = 0.0
+    beam: Beam = IDEAL_BEAM
     source: str = ""
 
-    #: One return per pulse is the centre ray's first hit: no mixed-pixel merge (``Lidar.echo_separation_m`` 0).
-    echo_separation_m = 0.0
+    #: The kind of sensor (:mod:`~zbuf_occlude.sensors.kinds`).
+    kind: ClassVar[str] = "ray_table"
 
     def __post_init__(self) -> None:
         sensor_name(self.name, "ray table name")
@@ -152,48 +134,13 @@ class RayTable:
             object.__setattr__(self, name, a)
 
     def _check_model(self) -> None:
-        """The range, noise, footprint and return fields, by :mod:`~zbuf_occlude.sensors.checks` as the LiDAR's."""
-        positive, at_least_0, ranges = {"low": 0.0, "low_open": True}, {"low": 0.0}, {"high": MAX_RANGE_M}
-        numbers = {
-            "min_range_m": {**at_least_0, **ranges}, "max_range_m": {**positive, **ranges}, "range_noise_m": {**at_least_0, **ranges},
-            "dropout": {"low": 0.0, "high": 1.0, "high_open": True}, "beam_divergence_deg": {**at_least_0, "high": 90.0},
-            "range_resolution_m": {**at_least_0, **ranges}, "detection_reflectivity": positive,
-            "detection_range_m": {**positive, **ranges}, "power_noise": at_least_0,
-        }  # fmt: skip
-        for name, bounds in numbers.items():
-            object.__setattr__(self, name, real(getattr(self, name), name, **bounds))
+        """The source and the beam."""
         text(self.source, "source")
-        if self.min_range_m >= self.max_range_m:
-            raise InvalidInputError(f"need min_range_m < max_range_m, got {self.min_range_m} >= {self.max_range_m}")
-        check_resolved_footprint(self, "a ray table's footprint")
+        check_beam(self.beam)
 
     def __len__(self) -> int:
         """N, the table's rows (pulses)."""
         return len(self.time_s)
-
-    @property
-    def multi_return(self) -> bool:
-        """Whether the multi-return model is on (``max_returns`` above 1)."""
-        return self.max_returns > 1
-
-    @property
-    def detection_threshold(self) -> float:
-        """τ = ``detection_reflectivity / detection_range_m²``, m⁻², as :attr:`Lidar.detection_threshold <zbuf_occlude.sensors.lidar.Lidar.detection_threshold>`."""
-        return self.detection_reflectivity / self.detection_range_m**2
-
-    def dropout_probability(self, range_m: ArrayLike) -> NDArray[np.float64]:
-        """``dropout`` for every return, float64 of ``range_m``'s shape (no range dependence)."""
-        return np.full(np.shape(range_m), float(self.dropout))
-
-    def footprint_weights(self) -> NDArray[np.float64]:
-        """(K,) float64: each sub-ray's share of the pulse's energy (:func:`~zbuf_occlude.sensors.footprint.footprint_offsets`)."""
-        return footprint_offsets(self.footprint_rays, self.beam_divergence_deg, profile=self.beam_profile)[1]
-
-    def footprint_directions(self, directions: ArrayLike) -> NDArray[np.float64]:
-        """(N, K, 3) float64: the K = ``footprint_rays`` unit sub-rays of each pulse ``directions (N, 3)``, ray 0 the centre
-        (:func:`~zbuf_occlude.sensors.footprint.subray_directions`, as the LiDAR's)."""
-        d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
-        return subray_directions(d, footprint_offsets(self.footprint_rays, self.beam_divergence_deg)[0])
 
     def with_(self, **changes) -> RayTable:
         """A copy with some fields changed, checked again."""
@@ -224,6 +171,22 @@ class RayTable:
                 row = row[np.mod(self.azimuth_deg - lo, 360.0) <= np.mod(hi - lo, 360.0)]
         return beam_directions(self.elevation_deg[row], self.azimuth_deg[row]), row, self.azimuth_deg[row]
 
+    def pulses(self, platform, azimuth_range_deg: tuple[float, float] | None = None) -> Pulses:
+        """The table's pulses (:meth:`rays`) fired from ``platform`` (:func:`~zbuf_occlude.sensors.pulses.placed`).
+
+        ``pulse_id`` is the row, the scan angle the row's elevation.  From a fixed pose each pulse
+        keeps its row's ``time_s`` exactly; on a trajectory, the table's first row fires at the
+        trajectory's start and the rest ``time_s − time_s[0]`` after it.
+        """
+        d_sensor, row, _ = self.rays(azimuth_range_deg)
+        relative = self.time_s[row] - self.time_s[0]
+        directions, origins, rotation, rotations, time_s = placed(d_sensor, relative, platform)
+        if isinstance(platform, np.ndarray):
+            time_s = self.time_s[row]
+        return Pulses(d_sensor, directions, origins, rotation, pulse_id=row, time_s=time_s,
+                      scan_angle_deg=self.elevation_deg[row].astype(np.float32), rotations=rotations,
+                      home_m=origins if rotation is not None else origins[0] if len(origins) else np.zeros(3))  # fmt: skip
+
     @classmethod
     def from_lidar(cls, lidar: Lidar, name: str | None = None) -> RayTable:
         """The table of one revolution of ``lidar``, in firing order: firing ``i`` of ring ``b`` is row ``i · n_beams + b``.
@@ -238,20 +201,19 @@ class RayTable:
         Raises
         ------
         InvalidInputError
-            ``lidar`` models what a table does not: a range-dependent dropout, a mixed-pixel
+            ``lidar``'s beam models what a table does not: a range-dependent dropout, a mixed-pixel
             ``echo_separation_m``, or a footprint with one return per pulse.
         """
-        if lidar.dropout_range_per_m or lidar.echo_separation_m or (lidar.footprint_rays > 1 and lidar.max_returns == 1):
+        beam = lidar.beam
+        if beam.dropout_range_per_m or beam.echo_separation_m or (beam.footprint_rays > 1 and not beam.resolves_echoes):
             raise InvalidInputError(
                 f"lidar {lidar.name!r}: a ray table models neither dropout_range_per_m, echo_separation_m nor a footprint with one return per pulse"
             )
         firing = np.repeat(np.arange(lidar.n_azimuths, dtype=np.int64), lidar.n_beams)
         ring = np.tile(np.arange(lidar.n_beams, dtype=np.int64), lidar.n_azimuths)
-        fields = ("min_range_m", "max_range_m", "range_noise_m", "dropout", "beam_divergence_deg", "footprint_rays", "beam_profile",
-                  "max_returns", "range_resolution_m", "detection_reflectivity", "detection_range_m", "power_noise", "source")  # fmt: skip
         return cls(
             name or lidar.name, (firing + ring / lidar.n_beams) / (lidar.n_azimuths * lidar.rotation_hz), lidar.azimuths_deg[firing],
-            np.asarray(lidar.elevations_deg)[ring], **{f: getattr(lidar, f) for f in fields},
+            np.asarray(lidar.elevations_deg)[ring], beam=beam, source=lidar.source,
         )  # fmt: skip
 
 
@@ -339,3 +301,26 @@ def rosette_table(
     x, y, z = np.cos(off), np.sin(off) * np.cos(around), np.sin(off) * np.sin(around)
     azimuth, elevation = np.degrees(np.arctan2(y, x)), np.degrees(np.arcsin(np.clip(z, -1.0, 1.0)))
     return RayTable(name, t, azimuth, elevation, **fields)
+
+
+# Livox Mid-70 (Livox Mid-70 user manual v1.2 and data sheet): a Risley-prism scanner of 70.4°
+# circular field of view, 100,000 points per second (first return), 905 nm, range precision
+# 2 cm (1σ at 20 m), 90 m at 10 % reflectivity and 260 m at 80 %, minimal detection range
+# 0.05 m, dual-return mode (two returns per pulse; the default is one).  Its beam is
+# elliptical, 0.28° × 0.03° (FWHM, data sheet); the footprint here is round, of HELIOS++'s
+# 0.89 mrad (1/e² full angle, pyhelios/data/scanners_tls.xml, "livox_mid-70"), 0.051°.  The
+# prisms' rates: 121.567 and −77.733 revolutions per second (HELIOS++ commit eea12035, which
+# corrected the 7,294 and −4,664 of earlier versions: revolutions per minute).  The pattern is
+# :func:`rosette_table`'s first-order Risley model over one 0.1 s frame (10,000 pulses).
+# Intensity: the 8-bit reflectivity of Livox's point format (0–150 diffuse, 151–255
+# retroreflective), scaled as the spinning presets are (:data:`~zbuf_occlude.sensors.lidar`): an
+# ASSUMPTION.
+RAY_TABLE_PRESETS: dict[str, RayTable] = {
+    "livox-mid70": rosette_table(
+        10_000, duration_s=0.1, fov_deg=70.4, prism_hz=(121.567, -77.733), name="livox-mid70",
+        beam=Beam("livox-mid70", wavelength_nm=905.0, divergence_deg=0.051, min_range_m=0.05, max_range_m=260.0, range_noise_m=0.02,
+                  detection_threshold=0.1 / 90.0**2, intensity_scale=22_500.0, max_intensity=255,
+                  source="Livox Mid-70 data sheet and user manual v1.2 (90 m at 10 %, precision 2 cm); divergence: HELIOS++ scanners_tls.xml"),
+        source="Livox Mid-70 (Risley prisms at 121.567 and -77.733 Hz: HELIOS++ pyhelios/data/scanners_tls.xml, commit eea12035)",
+    ),
+}  # fmt: skip

@@ -9,7 +9,6 @@ default (LiDAR: x forward, z up; camera: OpenCV), like real scans.
 
 from __future__ import annotations
 
-from functools import partial
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -17,11 +16,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.sampling import check_seed
+from zbuf_occlude.sensors.beam import Beam
 from zbuf_occlude.sensors.depth_camera import DepthCamera
-from zbuf_occlude.sensors.echo_model import Radiometry, Transmission, echo_returns, strongest_echo, surface_optics
-from zbuf_occlude.sensors.echoes import number_returns
-from zbuf_occlude.sensors.lidar import Lidar
-from zbuf_occlude.sensors.ray_table import RayTable
+from zbuf_occlude.sensors.echo_model import Radiometry, Transmission, echo_returns, returns_of_mode, strongest_echo, surface_optics
+from zbuf_occlude.sensors.echoes import MAX_RETURNS, number_returns
+from zbuf_occlude.sensors.kinds import kind_of
+from zbuf_occlude.sensors.platform import Trajectory
+from zbuf_occlude.sensors.pulses import Pulses
 from zbuf_occlude.sensors.raycast import BACKENDS, cast_embree, cast_zbuffer, face_normals
 from zbuf_occlude.sensors.scan_data import FRAMES, Scan
 from zbuf_occlude.sensors.scene import BuiltScene, ScanScene, SceneObject
@@ -29,7 +30,7 @@ from zbuf_occlude.sensors.scene import BuiltScene, ScanScene, SceneObject
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
-__all__ = ["scan", "look_at_pose", "build_scene", "return_numbers"]
+__all__ = ["scan", "scan_airborne", "fire_pulses", "look_at_pose", "build_scene", "return_numbers"]
 
 
 def look_at_pose(eye: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> NDArray[np.float64]:
@@ -92,56 +93,13 @@ def build_scene(scene) -> BuiltScene:
     return _built(scene)
 
 
-def _surface_optics(built: BuiltScene, sensor, backend: str, reflectivity, transmittance):
-    """``scan``'s ``reflectivity`` and ``transmittance`` for ``sensor`` (:func:`~.echo_model.surface_optics` at 905 nm)."""
+def _surface_optics(built: BuiltScene, beam: Beam, backend: str, reflectivity, transmittance):
+    """A pulsed scan's ``reflectivity`` and ``transmittance`` per face (:func:`~.echo_model.surface_optics` at the beam's wavelength)."""
     if reflectivity is None and transmittance is None:
         return None, None
-    if not isinstance(sensor, _PULSED):
-        what = "reflectivity (radiometric detection)" if reflectivity is not None else "transmittance (hits behind a surface)"
-        raise InvalidInputError(f"{what} is modelled for LiDARs only")
-    from zbuf_occlude.sensors.reflectance import SPINNING_WAVELENGTH_NM
-
     return surface_optics(
-        built, reflectivity, transmittance, wavelength_nm=SPINNING_WAVELENGTH_NM, multi_return=sensor.multi_return, backend=backend
+        built, reflectivity, transmittance, wavelength_nm=beam.wavelength_nm, multi_return=beam.resolves_echoes, backend=backend
     )
-
-
-def _echo_returns(
-    built: BuiltScene, sensor: Lidar, rays, face, t, rho, rng, *, origin=None, transmittance=None
-) -> tuple[NDArray[np.int64], ...]:
-    """The spinning LiDAR's multi-return model: :func:`~.echo_model.echo_returns` with ``sensor``'s footprint,
-    range limits (the receiver's blind zone and reach), range resolution, maximum returns, and
-    detection threshold and power noise when ``rho`` is given; the hits behind surfaces of
-    ``transmittance`` above 0, cast from ``origin``."""
-    radiometry = None if rho is None else Radiometry(rho, sensor.detection_threshold, sensor.power_noise, rng)
-    return echo_returns(
-        built, rays, face, t, sensor.footprint_weights(), range_resolution_m=sensor.range_resolution_m, max_returns=sensor.max_returns,
-        radiometry=radiometry, range_limits_m=(sensor.min_range_m, sensor.max_range_m),
-        through=None if transmittance is None else Transmission(transmittance, origin),
-    )  # fmt: skip
-
-
-#: Sensors that fire pulses and record returns: a spinning LiDAR, or a table of its rays.
-_PULSED = (Lidar, RayTable)
-
-
-def _sensor_rays(sensor, azimuth_range_deg):
-    """``(d_sensor (N, 3) unit, ring or None, pulses or None, pixel or None, (near, far) ranges along the ray)``.
-
-    ``pulses(rows)``: the ``pulse_id``, ``gps_time`` and ``scan_angle_deg`` of the points of ray
-    rows ``rows`` (:func:`_return_fields`); None for a depth camera.
-    """
-    if isinstance(sensor, Lidar):
-        d_sensor, ring, azimuth = sensor.rays(azimuth_range_deg)
-        return d_sensor, ring, partial(_sweep_pulses, sensor, ring, azimuth), None, (sensor.min_range_m, sensor.max_range_m)
-    if isinstance(sensor, RayTable):
-        d_sensor, row, _ = sensor.rays(azimuth_range_deg)
-        return d_sensor, None, partial(_table_pulses, sensor, row), None, (sensor.min_range_m, sensor.max_range_m)
-    if isinstance(sensor, DepthCamera):
-        d_cam, pixel = sensor.rays()
-        d_sensor = d_cam / np.linalg.norm(d_cam, axis=1, keepdims=True)
-        return d_sensor, None, None, pixel, (sensor.min_depth_m, sensor.max_depth_m / float(d_sensor[:, 2].min()))
-    raise InvalidInputError(f"sensor must be a Lidar, a RayTable or a DepthCamera, got {type(sensor).__name__}")
 
 
 def _cast(built: BuiltScene, origin, rays, backend: str, meta: dict, *, resolution: int, neighborhood: int, near_far):
@@ -175,10 +133,21 @@ def _checked_arguments(seed, backend: str, frame: str):
     return check_seed(seed)
 
 
+def _platform(pose, scene):
+    """``scan``'s ``pose``: a (4, 4) sensor → world matrix, or a :class:`~zbuf_occlude.sensors.platform.Trajectory` as given."""
+    if isinstance(pose, Trajectory):
+        return pose
+    if pose is None:
+        if not isinstance(scene, ScanScene):
+            raise InvalidInputError("scan of a bare mesh needs a sensor pose")
+        pose = scene.default_sensor_pose()
+    return _as_pose(pose)
+
+
 def scan(
     scene: ScanScene | trimesh.Trimesh,
-    sensor: Lidar | RayTable | DepthCamera,
-    pose: ArrayLike | None = None,
+    sensor,
+    pose: ArrayLike | Trajectory | None = None,
     *,
     seed: int = 0,
     backend: str = "embree",
@@ -189,35 +158,41 @@ def scan(
     reflectivity: float | ArrayLike | str | None = None,
     transmittance: float | ArrayLike | str | None = None,
 ) -> Scan:
-    """Scan ``scene`` with ``sensor`` at ``pose``.
+    """Scan ``scene`` with ``sensor`` at ``pose`` (or along a trajectory).
 
     Parameters
     ----------
     scene : ScanScene or trimesh.Trimesh
         A mesh is taken as one object (id 1) in metres, world frame, with no ground.
     sensor : Lidar, RayTable or DepthCamera
-    pose : (4, 4) or (3,) float, optional
+        An airborne scanner flies its own plan: :func:`scan_airborne`.
+    pose : (4, 4) or (3,) float, or Trajectory, optional
         Sensor → world transform (LiDAR frame: x forward, z up; camera frame: OpenCV, see
         :func:`look_at_pose`), or just the position; default ``scene.default_sensor_pose()``.
+        A :class:`~zbuf_occlude.sensors.platform.Trajectory` moves a LiDAR or ray table during
+        its sweep: each pulse leaves from the pose at its own time (the sweep starts at the
+        trajectory's start), so a moving scanner's sweep has the motion distortion of a real one.
     seed : int, numpy.random.Generator or None
         Seeds noise and dropout (``numpy.random.default_rng(seed)``); same seed, same bytes.
     backend : {"embree", "zbuffer"}
-        Ray casting (:mod:`.raycast`); "embree" is the reference.
+        Ray casting (:mod:`.raycast`); "embree" is the reference.  "zbuffer" renders from one
+        point: a scanner standing still.
     frame : {"sensor", "world"}
-        Frame of ``points``, ``normal`` and ``sensor_position``.
+        Frame of ``points``, ``normal`` and ``sensor_position``.  On a trajectory, "sensor" is each
+        pulse's own sensor frame at its time: the raw, motion-distorted sweep a driver reports.
     azimuth_range_deg : (lo, hi), optional
-        LiDAR only: fire only in this azimuth sector (degrees, sensor frame), to save time.
+        LiDAR and ray table only: fire only in this azimuth sector (degrees, sensor frame), to save time.
     resolution, neighborhood : int
         "zbuffer" backend: view size in pixels and candidate window radius.
     reflectivity : float or (n_objects + 1,) float, optional
         LiDAR only: Lambertian reflectivity ρ of every surface, or per object id (index 0:
         the ground).  Given, a return is kept only when its received power clears the
-        sensor's threshold, ``ρ · cos θ · f / R² · exp(σ z) ≥ τ`` (:class:`Lidar`
+        beam's threshold, ``ρ · cos θ · f / R² · exp(σ z) ≥ τ`` (:class:`~.beam.Beam`
         ``detection_threshold``, ``power_noise`` σ, z ~ N(0, 1) per firing, ``f`` the
-        footprint fraction).  None: every hit returns (no radiometry).  With the multi-return
-        model (``Lidar.max_returns`` above 1), ρ weighs each sub-ray's echo and the threshold
-        applies per echo (:class:`Lidar` ``max_returns``).  ``"table"``: each object's ρ from
-        its material at 905 nm (:func:`~.reflectance.scene_optics`; the ground: asphalt).
+        footprint fraction).  None: every hit returns (no radiometric detection).  With the multi-return
+        model (the beam resolves echoes), ρ weighs each sub-ray's echo and the threshold
+        applies per echo.  ``"table"``: each object's ρ from its material at the beam's
+        wavelength (:func:`~.reflectance.scene_optics`; the ground: asphalt).
     transmittance : float or (n_objects + 1,) float, optional
         LiDAR with the multi-return model only: round-trip transmittance per object id, in
         [0, 1] (a gap fraction for foliage, ``T²`` for a pane); sub-rays go on through such
@@ -231,74 +206,251 @@ def scan(
     Returns
     -------
     Scan
-        One point per return.  LiDAR scans carry the return fields (``return_number`` ...
-        ``scan_angle_deg``).  With the multi-return model, each echo of a pulse is one point on
-        the pulse's centre direction at the echo's range (then range noise and dropout per
-        echo, as for single returns); its object, face and normal are those of the echo's
-        strongest surface's strongest hit.  Echoes lost to the range limits or dropout leave
-        the pulse's other returns renumbered 1..n.  With ``max_returns`` 1 every array is
-        what it was before the return fields existed, bit for bit.
+        One point per return (:func:`fire_pulses`).  A depth camera's scan has no return fields.
 
     Raises
     ------
     InvalidInputError
-        A negative, too large or non-integer ``seed``; bad pose, frame, backend or scene; a bad ``reflectivity`` or ``transmittance``, or a
-        transmittance above 0 with the "zbuffer" backend or without the multi-return model.
+        A negative, too large or non-integer ``seed``; bad pose, frame, backend or scene; a
+        bad ``reflectivity`` or ``transmittance``, or a transmittance above 0 with the
+        "zbuffer" backend or without the multi-return model; an airborne scanner (use
+        :func:`scan_airborne`); a trajectory with the "zbuffer" backend or a depth camera, or
+        shorter than the sweep.
     BackendUnavailable
         Embree or OpenGL missing for the chosen backend.
     """
     seed = _checked_arguments(seed, backend, frame)
+    kind = kind_of(sensor)
     built = _built(scene)
-    if pose is None:
-        if not isinstance(scene, ScanScene):
-            raise InvalidInputError("scan of a bare mesh needs a sensor pose")
-        pose = scene.default_sensor_pose()
-    m = _as_pose(pose)
-    rot, origin = m[:3, :3], m[:3, 3]
-    d_sensor, ring, pulses, pixel, (near, far) = _sensor_rays(sensor, azimuth_range_deg)
-    d_world = d_sensor @ rot.T
-    meta: dict = {"backend": backend, "n_rays": len(d_world)}
-    k = sensor.footprint_rays if isinstance(sensor, _PULSED) else 1
-    rays = d_world if k == 1 else sensor.footprint_directions(d_world).reshape(-1, 3)
-    face, t = _cast(built, origin, rays, backend, meta, resolution=resolution, neighborhood=neighborhood, near_far=(near, far))
-    rho, tau = _surface_optics(built, sensor, backend, reflectivity, transmittance)
-    multi = isinstance(sensor, _PULSED) and sensor.multi_return
+    platform = _platform(pose, scene)
+    if not kind.pulsed:
+        if isinstance(platform, Trajectory):
+            raise InvalidInputError(f"a {kind.title} takes one pose, not a trajectory")
+        return _scan_camera(built, sensor, platform, seed, backend=backend, frame=frame, resolution=resolution,
+                            neighborhood=neighborhood, reflectivity=reflectivity, transmittance=transmittance)  # fmt: skip
+    if kind.flies:
+        raise InvalidInputError(f"{sensor.name!r} is an airborne scanner: it flies its own plan (scan_airborne)")
+    pulses = sensor.pulses(platform, azimuth_range_deg)
+    pose_matrix = platform if isinstance(platform, np.ndarray) else platform.pose_at(platform.start_s)
+    return fire_pulses(
+        built, sensor.beam, pulses, np.random.default_rng(seed), sensor_name=sensor.name, sensor_to_world=pose_matrix,
+        backend=backend, frame=frame, resolution=resolution, neighborhood=neighborhood, reflectivity=reflectivity,
+        transmittance=transmittance,
+    )  # fmt: skip
+
+
+def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.0, *, seed: int = 0,
+                  phase_s: float | None = None, lateral_shift_m=None, reflectivity=None, transmittance=None) -> Scan:  # fmt: skip
+    """Scan the part of ``scene`` around ``center_xy`` from every line of an airborne scanner's flight plan; world frame.
+
+    The pulses are :meth:`AirborneScanner.pulses <zbuf_occlude.sensors.airborne.AirborneScanner.pulses>`
+    (every line's pulses whose flat-ground footprint falls in the square ``center_xy ±
+    half_size_m`` of its own frame, merged, each keeping its line id), fired by the one
+    pipeline (:func:`fire_pulses`) with the scanner's beam.
+
+    Parameters
+    ----------
+    scene : ScanScene or trimesh.Trimesh
+        World frame, metres, ground at z = 0 (a bare mesh: as given).
+    scanner : AirborneScanner
+    center_xy, half_size_m
+        The square of flat ground whose pulses are cast, metres.
+    seed : int
+        Noise, dropout and what is drawn (the lines' phases and shifts first).
+    phase_s, lateral_shift_m : optional
+        As :meth:`AirborneScanner.pulses <zbuf_occlude.sensors.airborne.AirborneScanner.pulses>`.
+    reflectivity, transmittance : optional
+        As :func:`scan`'s, at the beam's wavelength (1064 nm for the airborne presets).
+
+    Returns
+    -------
+    Scan
+        ``frame="world"`` (the aircraft moves: no one sensor frame), ``ring`` and ``pixel`` None,
+        ``sensor_position`` the mean aircraft position of the returns.  ``meta``:
+        ``scan_angle_deg`` (N,) float64 and ``line_id`` (N,) int32 per return; ``phase_s`` (the
+        first line's), ``line_phase_s`` (per line, by id), ``lateral_shift_m`` (per heading),
+        ``n_rays``.  The return fields: ``pulse_id`` the pulse's row among all the plan's pulses,
+        ``gps_time`` its firing time along its flight line (the aircraft passes x = 0 of its
+        line's frame at 0), ``scan_angle_deg`` the across-track angle signed as ASPRS LAS 1.4
+        defines it (``−meta["scan_angle_deg"]``).  The same seed gives the same bytes.
+
+    Raises
+    ------
+    InvalidInputError
+        A seed :func:`~zbuf_occlude.geometry.sampling.check_seed` refuses; what
+        :meth:`~zbuf_occlude.sensors.airborne.AirborneScanner.pulses` refuses; a reflectivity or
+        transmittance out of range, or a transmittance above 0 without the multi-return model.
+    """
+    seed = check_seed(seed)  # before the scene is built: numpy would refuse -1 or 'a' only when drawing
+    if not kind_of(scanner).flies:
+        raise InvalidInputError(f"scan_airborne flies an airborne scanner, got {type(scanner).__name__}")
+    built = _built(scene)
     rng = np.random.default_rng(seed)
+    pulses = scanner.pulses(center_xy, half_size_m, rng, phase_s=phase_s, lateral_shift_m=lateral_shift_m)
+    return fire_pulses(built, scanner.beam, pulses, rng, sensor_name=scanner.name, sensor_to_world=None, frame="world",
+                       reflectivity=reflectivity, transmittance=transmittance)  # fmt: skip
+
+
+def fire_pulses(
+    built: BuiltScene, beam: Beam, pulses: Pulses, rng: np.random.Generator, *, sensor_name: str, sensor_to_world,
+    backend: str = "embree", frame: str = "sensor", resolution: int = 2048, neighborhood: int = 1, reflectivity=None,
+    transmittance=None,
+) -> Scan:  # fmt: skip
+    """The one pipeline: cast ``pulses`` with ``beam``, resolve their echoes, add noise and loss, and make the :class:`Scan`.
+
+    Whatever the pattern and the platform: each pulse's ``beam.footprint_rays`` sub-rays are cast
+    from its origin; one return per pulse is the centre ray's first hit or the footprint's
+    strongest echo (:func:`~.echo_model.strongest_echo`), several are the resolved echoes
+    (:func:`~.echo_model.echo_returns`, then the beam's ``return_mode``); then range noise,
+    dropout (drawn for every hit, so filters do not shift the streams), the range limits on the
+    measured range and, where reflectivities are given (or the pattern detects with a default
+    ρ), the detection threshold.  Points lie on each pulse's centre direction at the measured
+    range.  With the beam's ``intensity_scale`` set, every return's intensity is its received
+    energy (ρ = 1 where no reflectivity is given); without, a single return without
+    reflectivities has intensity 1.0.
+
+    Parameters
+    ----------
+    built : BuiltScene
+    beam : Beam
+    pulses : Pulses
+    rng : numpy.random.Generator
+        Drawn from in a fixed order: power noise of the echoes, range noise, dropout, then the
+        single return's power noise.
+    sensor_name : str
+    sensor_to_world : (4, 4) float64 or None
+        The scan's ``sensor_to_world``; None: a translation to the mean origin of the returns.
+    backend, frame, resolution, neighborhood, reflectivity, transmittance
+        As :func:`scan`'s.
+
+    Raises
+    ------
+    InvalidInputError
+        As :func:`scan`: "zbuffer" or a sensor frame where the pulses leave from more than one
+        point and the pattern has no sensor frame.
+    """
+    if not pulses.static and backend != "embree":
+        raise InvalidInputError(f"--backend {backend} renders from one point: a moving scanner needs the embree backend")
+    if frame == "sensor" and not pulses.has_sensor_frame:
+        raise InvalidInputError(f"{sensor_name!r} moves along its flight lines: its points have no one sensor frame; use the world frame")
+    meta: dict = {"backend": backend, "n_rays": len(pulses), **pulses.meta}
+    k = beam.footprint_rays
+    d_world = pulses.directions
+    rays = d_world if k == 1 else beam.footprint_directions(d_world).reshape(-1, 3)
+    origin = pulses.origins if pulses.static or k == 1 else np.repeat(pulses.origins, k, axis=0)
+    face, t = _cast(built, origin, rays, backend, meta, resolution=resolution, neighborhood=neighborhood,
+                    near_far=(beam.min_range_m, beam.max_range_m))  # fmt: skip
+    rho, tau = _surface_optics(built, beam, backend, reflectivity, transmittance)
+    if rho is None and pulses.default_reflectivity is not None and beam.detection_threshold > 0:
+        rho = np.full(len(built.face_object), float(pulses.default_reflectivity))
+    multi = beam.resolves_echoes
     if multi:
-        hit, face, t, echo_energy = _echo_returns(built, sensor, rays, face, t, rho, rng, origin=origin, transmittance=tau)
+        radiometry = None if rho is None else Radiometry(rho, beam.detection_threshold, beam.power_noise, rng)
+        hit, face, t, power = echo_returns(
+            built, rays, face, t, beam.footprint_weights(), range_resolution_m=beam.range_resolution_m,
+            max_returns=beam.max_returns if beam.return_mode == "all" else MAX_RETURNS, radiometry=radiometry,
+            range_limits_m=(beam.min_range_m, beam.max_range_m), through=None if tau is None else Transmission(tau, origin),
+        )  # fmt: skip
+        if beam.return_mode != "all":
+            chosen = returns_of_mode(hit, power, beam.return_mode)
+            hit, face, t, power = hit[chosen], face[chosen], t[chosen], power[chosen]
     else:
         if k > 1:
-            weights = sensor.footprint_weights() if sensor.beam_profile != "tophat" else None
-            face, t, fraction = strongest_echo(built, rays, face, t, k, rho, sensor.echo_separation_m, weights)
+            weights = beam.footprint_weights() if beam.profile != "tophat" else None
+            face, t, fraction = strongest_echo(built, rays, face, t, k, rho, beam.echo_separation_m, weights)
         hit = np.flatnonzero(face >= 0)
         face, t = face[hit], t[hit]
-    d_s = d_sensor[hit]
     normal, cos_in, incidence = _facing_normals(built, face, d_world[hit])
     gauss = rng.standard_normal(len(hit))  # drawn for every hit, so filters do not shift streams
-    lost = rng.random(len(hit)) < (sensor.dropout_probability(t) if isinstance(sensor, _PULSED) else sensor.dropout)
-    # Limits apply to what the sensor measures (noise and quantisation included).
-    if isinstance(sensor, _PULSED):
-        measured = t + sensor.range_noise_m * gauss
-        keep = (measured >= sensor.min_range_m) & (measured <= sensor.max_range_m) & ~lost
-        power = echo_energy if multi else np.ones(len(hit))
-        if not multi and rho is not None:
-            # received power of an extended Lambertian target (Kashani et al. 2015, Eq. 4), up to a constant
-            power = (fraction[hit] if k > 1 else rho[face] * np.abs(cos_in)) / np.maximum(t, 1e-9) ** 2
-            if sensor.power_noise > 0:
-                power = power * np.exp(sensor.power_noise * rng.standard_normal(len(hit)))
-            keep &= power >= sensor.detection_threshold
-    else:
-        cos_axis = d_s[:, 2]  # depth = t · cos(angle to the optical axis)
-        depth = t * cos_axis
-        depth_measured = sensor.quantize(depth + sensor.sigma_m(depth, incidence) * gauss)
-        measured = depth_measured / cos_axis
-        in_range = (depth_measured >= sensor.min_depth_m) & (depth_measured <= sensor.max_depth_m)
-        keep = in_range & (incidence <= sensor.max_incidence_deg) & ~lost
+    lost = rng.random(len(hit)) < beam.dropout_probability(t)
+    measured = t + beam.range_noise_m * gauss  # limits apply to what the sensor measures
+    keep = (measured >= beam.min_range_m) & (measured <= beam.max_range_m) & ~lost
+    if not multi:
+        if rho is not None or beam.intensity_scale is not None:
+            # received power of an extended Lambertian target (Kashani et al. 2015, Eq. 4), ρ = 1 without reflectivities
+            reflected = fraction[hit] if k > 1 else (np.abs(cos_in) if rho is None else rho[face] * np.abs(cos_in))
+            power = reflected / np.maximum(t, 1e-9) ** 2
+        else:
+            power = np.ones(len(hit))
+        if rho is not None:
+            if beam.power_noise > 0:
+                power = power * np.exp(beam.power_noise * rng.standard_normal(len(hit)))
+            keep &= power >= beam.detection_threshold
     keep &= measured > 0
     sel = np.flatnonzero(keep)
-    returns = {}
-    if pulses is not None:
-        returns = _return_fields(pulses, hit[sel], power[sel], renumber=multi)
+    rows = hit[sel]
+    return_number, number_of_returns = return_numbers(rows, renumber=multi)
+    points, normal_out, position, pose = _placed_points(pulses, rows, measured[sel], normal[sel], frame, sensor_to_world)
+    meta.update({key: values[rows] for key, values in pulses.per_pulse_meta.items()})
+    return Scan(
+        points=points.astype(np.float32),
+        ring=None if pulses.ring is None else pulses.ring[rows].astype(np.int32),
+        pixel=None,
+        range_m=measured[sel].astype(np.float32),
+        face_index=built.face_local[face[sel]],
+        object_id=built.face_object[face[sel]],
+        normal=normal_out.astype(np.float32),
+        incidence_deg=incidence[sel].astype(np.float32),
+        frame=frame,
+        sensor_position=position,
+        sensor_to_world=pose,
+        sensor=sensor_name,
+        meta=meta,
+        return_number=return_number,
+        number_of_returns=number_of_returns,
+        intensity=np.asarray(power[sel], dtype=np.float32),
+        pulse_id=pulses.pulse_id[rows],
+        gps_time=pulses.time_s[rows],
+        scan_angle_deg=pulses.scan_angle_deg[rows],
+    )
+
+
+def _placed_points(pulses: Pulses, rows, measured, normal, frame: str, sensor_to_world):
+    """``(points, normals, sensor_position, sensor_to_world)`` of returns of pulse rows ``rows`` at ranges ``measured`` in ``frame``."""
+    if pulses.static:
+        rot, origin = pulses.rotation, pulses.origins
+        points = pulses.directions_sensor[rows] * measured[:, None]
+        if frame == "world":
+            return points @ rot.T + origin, normal, origin.copy(), sensor_to_world
+        return points, normal @ rot, np.zeros(3), sensor_to_world
+    if frame == "sensor":  # each pulse's own frame at its time: the raw sweep
+        sensor_normal = np.einsum("pj,pjk->pk", normal, pulses.rotations[rows])  # Rᵀ n, world → each pulse's sensor frame
+        return pulses.directions_sensor[rows] * measured[:, None], sensor_normal, np.zeros(3), sensor_to_world
+    o, d = pulses.origins[rows], pulses.directions[rows]
+    position = o.mean(axis=0) if len(o) else pulses.home_m
+    if sensor_to_world is None:
+        sensor_to_world = np.eye(4)
+        sensor_to_world[:3, 3] = position
+    return o + d * measured[:, None], normal, position, sensor_to_world
+
+
+def _scan_camera(built: BuiltScene, camera: DepthCamera, m, seed: int, *, backend: str, frame: str, resolution: int, neighborhood: int,
+                 reflectivity, transmittance) -> Scan:  # fmt: skip
+    """A depth camera's frame: its pixels' rays cast from pose ``m``, then depth limits, grazing-incidence loss, axial
+    noise, quantisation and dropout (:class:`~.depth_camera.DepthCamera`)."""
+    if reflectivity is not None or transmittance is not None:
+        what = "reflectivity (radiometric detection)" if reflectivity is not None else "transmittance (hits behind a surface)"
+        raise InvalidInputError(f"{what} is modelled for LiDARs only")
+    rot, origin = m[:3, :3], m[:3, 3]
+    d_cam, pixel = camera.rays()
+    d_sensor = d_cam / np.linalg.norm(d_cam, axis=1, keepdims=True)
+    d_world = d_sensor @ rot.T
+    meta: dict = {"backend": backend, "n_rays": len(d_world)}
+    near_far = (camera.min_depth_m, camera.max_depth_m / float(d_sensor[:, 2].min()))
+    face, t = _cast(built, origin, d_world, backend, meta, resolution=resolution, neighborhood=neighborhood, near_far=near_far)
+    rng = np.random.default_rng(seed)
+    hit = np.flatnonzero(face >= 0)
+    face, t = face[hit], t[hit]
+    d_s = d_sensor[hit]
+    normal, _, incidence = _facing_normals(built, face, d_world[hit])
+    gauss = rng.standard_normal(len(hit))
+    lost = rng.random(len(hit)) < camera.dropout
+    cos_axis = d_s[:, 2]  # depth = t · cos(angle to the optical axis)
+    depth_measured = camera.quantize(t * cos_axis + camera.sigma_m(t * cos_axis, incidence) * gauss)
+    measured = depth_measured / cos_axis
+    in_range = (depth_measured >= camera.min_depth_m) & (depth_measured <= camera.max_depth_m)
+    keep = in_range & (incidence <= camera.max_incidence_deg) & ~lost & (measured > 0)
+    sel = np.flatnonzero(keep)
     points = d_s[sel] * measured[sel, None]
     normal_out = normal[sel] @ rot  # world → sensor
     sensor_position = np.zeros(3)
@@ -307,74 +459,20 @@ def scan(
         normal_out = normal[sel]
         sensor_position = origin.copy()
     return Scan(
-        points=points.astype(np.float32),
-        ring=None if ring is None else ring[hit][sel].astype(np.int32),
-        pixel=None if pixel is None else pixel[hit][sel].astype(np.int32),
-        range_m=measured[sel].astype(np.float32),
-        face_index=built.face_local[face[sel]],
-        object_id=built.face_object[face[sel]],
-        normal=normal_out.astype(np.float32),
-        incidence_deg=incidence[sel].astype(np.float32),
-        frame=frame,
-        sensor_position=sensor_position,
-        sensor_to_world=m,
-        sensor=getattr(sensor, "name", ""),
-        meta=meta,
-        **returns,
-    )
+        points=points.astype(np.float32), ring=None, pixel=pixel[hit][sel].astype(np.int32), range_m=measured[sel].astype(np.float32),
+        face_index=built.face_local[face[sel]], object_id=built.face_object[face[sel]], normal=normal_out.astype(np.float32),
+        incidence_deg=incidence[sel].astype(np.float32), frame=frame, sensor_position=sensor_position, sensor_to_world=m,
+        sensor=camera.name, meta=meta,
+    )  # fmt: skip
 
 
 def return_numbers(pulse, *, renumber: bool) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
     """``return_number`` and ``number_of_returns`` (N,) uint8 of points of pulse rows ``pulse`` (N,), sorted.
 
     With ``renumber``, the points of one pulse (in range order) are numbered 1..n and each carries
-    n (:func:`~.echoes.number_returns`); otherwise every point is its pulse's only return (1 of 1).  Shared by the spinning and the
-    airborne scanners.
+    n (:func:`~.echoes.number_returns`); otherwise every point is its pulse's only return (1 of 1).
     """
     if renumber:
         return number_returns(pulse)
     ones = np.ones(len(pulse), np.uint8)
     return ones, ones.copy()
-
-
-def _return_fields(pulses, pulse, power, *, renumber: bool) -> dict[str, np.ndarray]:
-    """The :class:`Scan` return fields of the points of pulse rows ``pulse`` (sorted) of a LiDAR sweep or a ray table.
-
-    ``pulses(pulse)`` gives the pulses' ids, times and scan angles (:func:`_sweep_pulses`,
-    :func:`_table_pulses`), ``power`` (N,) the points' received energies.  With ``renumber``,
-    the points of a pulse (sorted by range) are numbered 1..n; otherwise each is its pulse's
-    only return.
-    """
-    return_number, number_of_returns = return_numbers(pulse, renumber=renumber)
-    return {
-        "return_number": return_number,
-        "number_of_returns": number_of_returns,
-        "intensity": np.asarray(power, dtype=np.float32),
-        **pulses(pulse),
-    }
-
-
-def _sweep_pulses(sensor: Lidar, ring, azimuth, pulse) -> dict[str, np.ndarray]:
-    """``pulse_id``, ``gps_time``, ``scan_angle_deg`` of pulse rows ``pulse`` of a spinning LiDAR's sweep.
-
-    ``ring`` (P,) int64 and ``azimuth`` (P,) float64 degrees are the pulses' beams and firing
-    azimuths (:meth:`Lidar.rays`).  The beams of one firing cycle fire one after another, beam
-    ``b`` (its index in ``elevations_deg``) ``b / B`` of a cycle (``1 / (n_azimuths · rotation_hz)``
-    seconds) after the cycle starts, so every pulse has a time of its own, as LAS readers that group returns into pulses
-    by time expect (Velodyne HDL-32E user manual: its 32 lasers fire 1.152 µs apart in a 46.08 µs
-    cycle; the model spreads the B beams evenly over the cycle).
-    """
-    n_az = sensor.n_azimuths
-    index = np.rint((azimuth[pulse] - sensor.azimuth_offset_deg) / (360.0 / n_az)).astype(np.int64) % n_az
-    return {
-        "pulse_id": ring[pulse] * n_az + index,
-        "gps_time": (index + ring[pulse] / sensor.n_beams) / (n_az * sensor.rotation_hz),
-        "scan_angle_deg": sensor._elev[ring[pulse]].astype(np.float32),
-    }
-
-
-def _table_pulses(sensor: RayTable, row, pulse) -> dict[str, np.ndarray]:
-    """``pulse_id``, ``gps_time``, ``scan_angle_deg`` of pulse rows ``pulse`` of a ray table's scan: the table's
-    row, its time (exactly) and its elevation; ``row`` (P,) int64 is each ray's table row (:meth:`RayTable.rays`)."""
-    r = row[pulse]
-    return {"pulse_id": r, "gps_time": sensor.time_s[r], "scan_angle_deg": sensor.elevation_deg[r].astype(np.float32)}

@@ -27,7 +27,7 @@ from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT
 from zbuf_occlude.mesh.sizes import parse_sizes, size_interval
 from zbuf_occlude.sensors.crops import lidar_object_samples
 from zbuf_occlude.sensors.placement import CropDistributions
-from zbuf_occlude.sensors.presets import sensor_from_name
+from zbuf_occlude.sensors.kinds import sensor_from_name
 
 #: The one mesh of street_objects that breaks its format's up-axis convention (docs/results/sim2real.md).
 UP_MAP = {"bush/openglforest__*": "+y"}

@@ -18,7 +18,7 @@ from zbuf_occlude.real_scans.datasets import load_real_scans
 from zbuf_occlude.sensors.crops import object_crop
 from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
 from zbuf_occlude.sensors.fit import across_sight_width
-from zbuf_occlude.sensors.presets import sensor_from_name
+from zbuf_occlude.sensors.kinds import sensor_from_name
 
 
 #: The seed of the split these runs were made with.

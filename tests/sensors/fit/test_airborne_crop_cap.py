@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from zbuf_occlude.sensors.airborne import AirborneScanner, scan_airborne
+from zbuf_occlude.sensors.airborne import AirborneScanner
+from zbuf_occlude.sensors.scan import scan_airborne
 from zbuf_occlude.sensors.fit import airborne
 
 

@@ -281,7 +281,7 @@ class Sim2RealConfig:
     def _check_sensor(self, n) -> None:
         from zbuf_occlude.sensors.airborne import AirborneScanner
         from zbuf_occlude.sensors.lidar import Lidar
-        from zbuf_occlude.sensors.presets import sensor_from_name
+        from zbuf_occlude.sensors.kinds import sensor_from_name
 
         sensor = self.sensor if isinstance(self.sensor, (Lidar, AirborneScanner)) else sensor_from_name(str(self.sensor))
         if not isinstance(sensor, (Lidar, AirborneScanner)):

@@ -268,7 +268,7 @@ def _fitted_placement(config: Sim2RealConfig, placement: dict[str, dict]) -> dic
 
 def _fix_settings(config: Sim2RealConfig, sets: Sim2RealSets, out: OwnedFolder | str | os.PathLike) -> dict:
     """Every setting of the run (``config.identity()``, the sensor in full as ``sensor_spec``, the
-    :func:`zbuf_occlude.sensors.presets.sensor_to_json` of a preset or a file alike, and what
+    :func:`zbuf_occlude.sensors.kinds.sensor_to_json` of a preset or a file alike, and what
     :func:`prepare_sets` found), written to ``out/settings.json`` before any real scan is scored,
     or compared with the settings there; then ``fitted_sensor.json`` and ``real_split.csv``.
 
@@ -284,7 +284,7 @@ def _fix_settings(config: Sim2RealConfig, sets: Sim2RealSets, out: OwnedFolder |
     if not isinstance(out, OwnedFolder):
         with _owned(out, config) as folder:
             return _fix_settings(config, sets, folder)
-    from zbuf_occlude.sensors.presets import sensor_to_json
+    from zbuf_occlude.sensors.kinds import sensor_to_json
 
     folder = out
 

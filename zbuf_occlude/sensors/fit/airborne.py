@@ -374,7 +374,7 @@ class AirborneFit:
         """A sensor file that ``scan``, ``farm --sensor`` and ``experiment sim2real --sensor`` take: the
         scanner's fields with ``"kind": "airborne"`` and, under ``"fit"``, the estimates (metadata); an estimate
         nothing measured (the scan angle when no crop tells one) is ``null`` (:meth:`Estimate.to_json`)."""
-        from zbuf_occlude.sensors.presets import sensor_to_json
+        from zbuf_occlude.sensors.kinds import sensor_to_json
 
         spec = sensor_to_json(self.sensor)
         spec["fit"] = {

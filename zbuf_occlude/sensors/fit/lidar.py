@@ -162,8 +162,8 @@ class LidarFit:
     n_scans: int
 
     def to_json(self) -> dict:
-        """The sensor as :func:`~zbuf_occlude.sensors.presets.sensor_from_name` reads it, plus a ``fit`` block."""
-        from zbuf_occlude.sensors.presets import sensor_to_json
+        """The sensor as :func:`~zbuf_occlude.sensors.kinds.sensor_from_name` reads it, plus a ``fit`` block."""
+        from zbuf_occlude.sensors.kinds import sensor_to_json
 
         spec = sensor_to_json(self.sensor)
         spec["fit"] = {"base": self.base.name, "n_scans": self.n_scans,

@@ -1,0 +1,265 @@
+"""The beam of a pulsed LiDAR: what one pulse is, and what its receiver records of it.
+
+A scanner is a beam × a scan pattern × a platform.  The pattern says where and when pulses
+leave (:mod:`.patterns`), the platform where the scanner is at that time (:mod:`.platform`),
+and the :class:`Beam` everything the device adds to a pulse's geometry: its footprint (a cone
+of ``divergence_deg`` sampled by ``footprint_rays`` sub-rays, :mod:`.footprint`), how its echoes
+are resolved into returns (``max_returns``, ``range_resolution_m``, ``return_mode``), which it
+detects (``detection_threshold``, ``power_noise``), how it measures them (``range_noise_m``,
+``dropout``, range limits) and how it writes their intensity (``intensity_scale``).  Every
+field is checked here, once, whatever pattern fires the beam.
+
+The beam named ``ideal`` (:data:`IDEAL_BEAM`) is one ray per pulse, its first hit, no noise,
+no loss and no radiometry: the idealised scan, named as one.  A preset's beam carries its data
+sheet (:mod:`.presets`).
+
+Units: the received energy of a sub-ray is ``w · ρ · |cos θ| / R²`` in m⁻² (``w`` the sub-ray's
+share of the pulse, ρ the surface's reflectivity, θ the incidence, ``R`` the range;
+:func:`~zbuf_occlude.sensors.echoes.hit_energy`, the range equation of an extended Lambertian
+target: Kashani et al. 2015, "A review of LIDAR radiometric processing", Sensors 15(11), Eq. 4).
+``detection_threshold`` is in those units, ``intensity_scale`` in counts per unit of them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.checks import MAX_RANGE_M, count, located, real, sensor_name, shown, text
+from zbuf_occlude.sensors.echoes import MAX_RETURNS
+from zbuf_occlude.sensors.footprint import MAX_DIVERGENCE_DEG, MAX_SUBRAYS, PROFILES, footprint_offsets, subray_directions
+
+__all__ = ["Beam", "IDEAL_BEAM", "RETURN_MODES", "MAX_INTENSITY_COUNTS", "check_beam"]
+
+#: How the receiver turns a pulse's resolved echoes into returns (``Beam.return_mode``):
+#:
+#: ``"all"``
+#:     up to ``max_returns`` echoes, in range order (a full-waveform or discrete multi-return
+#:     receiver: RIEGL, Leica, Optech); with ``max_returns`` 1, the pulse's one return (the
+#:     centre ray's first hit, or with a footprint the strongest echo, merged within
+#:     ``echo_separation_m``).
+#: ``"strongest"``, ``"last"``
+#:     the pulse's strongest or last echo only (Velodyne's single-return modes; ``max_returns`` 1).
+#: ``"dual"``
+#:     the last and the strongest echo, or the last and the second strongest where they are one
+#:     (Velodyne's dual-return mode; ``max_returns`` 2).
+RETURN_MODES = ("all", "strongest", "last", "dual")
+#: Largest intensity a LAS file stores (unsigned 16 bits).
+MAX_INTENSITY_COUNTS = 65_535
+
+
+@dataclass(frozen=True)
+class Beam:
+    """A pulsed LiDAR's beam and receiver (module docstring).
+
+    Parameters
+    ----------
+    name : str
+        ``"ideal"`` or the device's name.
+    source : str
+        Data sheet (and page) the numbers come from; assumptions named as such.
+    wavelength_nm : float
+        Laser wavelength, nanometres (905 for most spinning LiDARs, 1064 or 1550 airborne); picks
+        the column of material reflectances (:mod:`.reflectance`).
+    divergence_deg : float
+        Full-angle beam divergence, degrees in [0, 90]; the cone the sub-rays sample.
+    profile : {"tophat", "gaussian"}
+        Energy across the footprint (:func:`~zbuf_occlude.sensors.footprint.footprint_offsets`).
+    footprint_rays : int
+        K sub-rays per pulse, 1..:data:`~zbuf_occlude.sensors.footprint.MAX_SUBRAYS`; above 1 needs a
+        divergence > 0.  1: every pulse is its centre ray's first hit.
+    max_returns : int
+        Most returns recorded per pulse, 1..15 (LAS 1.4's return numbers).
+    return_mode : str
+        One of :data:`RETURN_MODES`.  ``"all"`` with ``max_returns`` above 1 is the multi-return
+        model: the sub-rays' hits resolved into echoes (:func:`~zbuf_occlude.sensors.echo_model.echo_returns`).
+    range_resolution_m : float
+        Least range between two returns of one pulse, metres (half the pulse length, c·τ/2; a 5 ns
+        pulse: 0.75 m).  Needed (> 0) when echoes are resolved (``max_returns`` above 1, or a
+        return mode other than ``"all"``), refused otherwise.
+    echo_separation_m : float
+        One return per pulse with a footprint (``"all"``, ``max_returns`` 1): echoes within this range
+        of the strongest merge into one return at their energy-weighted range, the *mixed pixel*
+        of Hebert & Krotkov (1992), Image and Vision Computing 10(3).  0: never merged.  Needs a
+        footprint; refused when echoes are resolved.
+    detection_threshold : float
+        Least received energy detected, m⁻² (module docstring); applied where the scan is given
+        surface reflectivities.  0: every echo is detected.
+    power_noise : float
+        σ of the natural log of the received power per firing (detection is then
+        ``Φ(ln(E / τ) / σ)``); 0: a sharp threshold.
+    intensity_scale : float or None
+        Counts per unit of received energy: a return's LAS intensity is
+        ``min(round(E · intensity_scale), max_intensity)``.  None: no intensity model (the scan's
+        intensity is 1.0 where no reflectivity is given, the idealised scan's).
+    max_intensity : int
+        Largest count the device reports, 1..65535 (255 for an 8-bit reflectivity, Velodyne's).
+    range_noise_m : float
+        σ of the Gaussian range error, metres.
+    dropout : float
+        Probability in [0, 1) that a return is lost, at range 0.
+    dropout_range_per_m : float
+        Growth of that probability per metre of range (:meth:`dropout_probability`).
+    min_range_m, max_range_m : float
+        Returns measured nearer or farther are dropped, metres.
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the field: a value that is not a number (``True``, ``"5"``) or not finite, out of
+        its range, or a combination the receiver cannot have (each rule above).
+    """
+
+    name: str = "ideal"
+    source: str = ""
+    wavelength_nm: float = 905.0
+    divergence_deg: float = 0.0
+    profile: str = "tophat"
+    footprint_rays: int = 1
+    max_returns: int = 1
+    return_mode: str = "all"
+    range_resolution_m: float = 0.0
+    echo_separation_m: float = 0.0
+    detection_threshold: float = 0.0
+    power_noise: float = 0.0
+    intensity_scale: float | None = None
+    max_intensity: int = MAX_INTENSITY_COUNTS
+    range_noise_m: float = 0.0
+    dropout: float = 0.0
+    dropout_range_per_m: float = 0.0
+    min_range_m: float = 0.0
+    max_range_m: float = MAX_RANGE_M
+
+    def __post_init__(self) -> None:
+        sensor_name(self.name, "beam name")
+        with located(f"beam {self.name!r}"):
+            self._check()
+
+    def _check(self) -> None:
+        """Every field, numbers stored as floats and counts as ints (messages start with the field's name)."""
+        at_least_0, ranges = {"low": 0.0}, {"low": 0.0, "high": MAX_RANGE_M}
+        numbers = {
+            "wavelength_nm": {"low": 200.0, "high": 20_000.0}, "divergence_deg": {"low": 0.0, "high": MAX_DIVERGENCE_DEG},
+            "range_resolution_m": ranges, "echo_separation_m": ranges, "detection_threshold": at_least_0,
+            "power_noise": at_least_0, "range_noise_m": ranges, "dropout": {"low": 0.0, "high": 1.0, "high_open": True},
+            "dropout_range_per_m": {}, "min_range_m": ranges, "max_range_m": {**ranges, "low_open": True},
+        }  # fmt: skip
+        for name, bounds in numbers.items():
+            object.__setattr__(self, name, real(getattr(self, name), name, **bounds))
+        if self.intensity_scale is not None:
+            object.__setattr__(self, "intensity_scale", real(self.intensity_scale, "intensity_scale", low=0.0, low_open=True))
+        text(self.source, "source")
+        text(self.profile, "profile", choices=PROFILES)
+        text(self.return_mode, "return_mode", choices=RETURN_MODES)
+        object.__setattr__(self, "footprint_rays", count(self.footprint_rays, "footprint_rays", low=1, high=MAX_SUBRAYS))
+        object.__setattr__(self, "max_returns", count(self.max_returns, "max_returns", low=1, high=MAX_RETURNS))
+        object.__setattr__(self, "max_intensity", count(self.max_intensity, "max_intensity", low=1, high=MAX_INTENSITY_COUNTS))
+        if self.min_range_m >= self.max_range_m:
+            raise InvalidInputError(f"need min_range_m < max_range_m, got {shown(self.min_range_m)} >= {shown(self.max_range_m)}")
+        self._check_returns()
+
+    def _check_returns(self) -> None:
+        """The rules that tie the footprint, the return mode and the range resolution together."""
+        k, m, mode = self.footprint_rays, self.max_returns, self.return_mode
+        if k > 1 and self.divergence_deg <= 0:
+            raise InvalidInputError(f"footprint_rays {k} needs divergence_deg > 0")
+        wanted = {"strongest": 1, "last": 1, "dual": 2}.get(mode)
+        if wanted is not None and m != wanted:
+            raise InvalidInputError(f"return_mode {mode!r} records {wanted} return{'s' * (wanted > 1)} per pulse: give max_returns {wanted}")
+        if self.resolves_echoes and self.range_resolution_m <= 0:
+            raise InvalidInputError(
+                f"max_returns {m} with return_mode {mode!r} needs range_resolution_m > 0 (the least range between two returns, c·τ/2)"
+            )
+        if not self.resolves_echoes and self.range_resolution_m > 0:
+            raise InvalidInputError(
+                f"range_resolution_m {shown(self.range_resolution_m)} needs max_returns above 1 or a return_mode of "
+                "'strongest', 'last' or 'dual' (one return per pulse merges echoes by echo_separation_m)"
+            )
+        if self.echo_separation_m > 0 and k == 1:
+            raise InvalidInputError(
+                f"echo_separation_m {shown(self.echo_separation_m)} needs footprint_rays above 1 (mixed pixels come from a wide footprint)"
+            )
+        if self.echo_separation_m > 0 and self.resolves_echoes:
+            raise InvalidInputError(
+                f"echo_separation_m {shown(self.echo_separation_m)} is for one return per pulse; resolved echoes use range_resolution_m"
+            )
+
+    @property
+    def resolves_echoes(self) -> bool:
+        """Whether the pulse's hits are resolved into echoes (``max_returns`` above 1, or a Velodyne return mode)."""
+        return self.max_returns > 1 or self.return_mode != "all"
+
+    @property
+    def multi_return(self) -> bool:
+        """Alias of :attr:`resolves_echoes`: the multi-return model is on."""
+        return self.resolves_echoes
+
+    @property
+    def is_ideal(self) -> bool:
+        """One ray, its first hit, no noise, no loss, no radiometry (:data:`IDEAL_BEAM`'s physics, any name and wavelength)."""
+        return replace(self, name="ideal", source="", wavelength_nm=IDEAL_BEAM.wavelength_nm) == IDEAL_BEAM
+
+    def with_(self, **changes) -> Beam:
+        """A copy with some fields changed (``beam.with_(footprint_rays=19)``), checked again."""
+        return replace(self, **changes)
+
+    def dropout_probability(self, range_m: ArrayLike) -> NDArray[np.float64]:
+        """Probability that a return at ``range_m`` (metres, any shape) is lost, float64 of that shape:
+        ``clip(dropout + dropout_range_per_m · range_m, 0, 0.95)``; exactly ``dropout`` when the slope is 0."""
+        r = np.asarray(range_m, dtype=np.float64)
+        if self.dropout_range_per_m == 0.0:
+            return np.full(r.shape, float(self.dropout))
+        return np.clip(self.dropout + self.dropout_range_per_m * r, 0.0, 0.95)
+
+    def footprint_weights(self) -> NDArray[np.float64]:
+        """(K,) float64: each sub-ray's share of the pulse's energy, summing to 1 (``profile``)."""
+        if self.footprint_rays == 1:
+            return np.ones(1)
+        return footprint_offsets(self.footprint_rays, self.divergence_deg, profile=self.profile)[1]
+
+    def footprint_directions(self, directions: ArrayLike) -> NDArray[np.float64]:
+        """(N, K, 3) float64: the K = ``footprint_rays`` unit sub-rays of each beam axis ``directions (N, 3)``.
+
+        Ray 0 is the centre (:func:`~zbuf_occlude.sensors.footprint.subray_directions` of
+        :func:`~zbuf_occlude.sensors.footprint.footprint_offsets`).
+
+        Raises
+        ------
+        InvalidInputError
+            ``directions`` not finite.
+        """
+        d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+        return subray_directions(d, footprint_offsets(self.footprint_rays, self.divergence_deg)[0])
+
+    def intensity_counts(self, energy: ArrayLike) -> NDArray[np.uint16]:
+        """(N,) uint16 LAS intensities of received energies ``energy (N,)`` m⁻²: ``min(rint(E · intensity_scale), max_intensity)``.
+
+        Raises
+        ------
+        InvalidInputError
+            The beam has no ``intensity_scale``.
+        """
+        if self.intensity_scale is None:
+            raise InvalidInputError(f"beam {self.name!r} has no intensity_scale (counts per unit of received energy)")
+        e = np.nan_to_num(np.asarray(energy, dtype=np.float64), nan=0.0, posinf=np.inf)
+        return np.minimum(np.rint(np.clip(e, 0.0, None) * self.intensity_scale), self.max_intensity).astype(np.uint16)
+
+
+#: One ray per pulse, its first hit; no noise, loss or radiometry: the idealised scan.
+IDEAL_BEAM = Beam()
+
+
+def check_beam(beam: object) -> Beam:
+    """``beam`` if it is a :class:`Beam` (a scanner's ``beam`` field).
+
+    Raises
+    ------
+    InvalidInputError
+        Anything else, naming its type.
+    """
+    if not isinstance(beam, Beam):
+        raise InvalidInputError(f"beam must be a Beam (zbuf_occlude.sensors.beam.Beam), got {type(beam).__name__} {shown(beam)}")
+    return beam

@@ -1,0 +1,399 @@
+"""The platform that carries a sensor: the sensor's pose (sensor → world) at any time.
+
+A scanner is a device (the beam), a deflector (the scan pattern) and a platform: static, on a line, or
+on a recorded trajectory (HELIOS++: Winiwarter et al. 2022, Remote Sensing of Environment 269).  A
+:class:`Trajectory` answers the pose at any time within its samples: positions by linear interpolation,
+attitudes by spherical linear interpolation (slerp: Shoemake 1985, "Animating rotation with quaternion
+curves", SIGGRAPH '85, §3; :class:`scipy.spatial.transform.Slerp`).  :func:`load_trajectory` reads one
+from a CSV a user gives (a robot's odometry).
+
+Frames: the sensor frame is x forward, y left, z up (:func:`~zbuf_occlude.sensors.lidar.beam_directions`);
+the world frame is z up, metres.  A pose is sensor → world: sensor point ``q`` is ``rotation @ q + position_m``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from os import PathLike
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
+from zbuf_occlude.geometry.arguments import described
+from zbuf_occlude.io.caps import MAX_TRAJECTORY_BYTES, MAX_TRAJECTORY_LINE_BYTES, MAX_TRAJECTORY_POSES
+from zbuf_occlude.io.regular_files import read_text_file
+from zbuf_occlude.sensors.checks import MAX_COORDINATE_M, located, real, reals, sensor_name, shown
+
+__all__ = ["EULER_COLUMNS", "MAX_TIME_S", "QUATERNION_COLUMNS", "QUATERNION_NORM_TOLERANCE", "ROTATION_TOLERANCE", "TIME_SLACK_S",
+           "Trajectory", "load_trajectory"]  # fmt: skip
+
+#: Largest |entry| of RᵀR − I, and |det R − 1|, of a rotation accepted (then re-orthonormalised):
+#: a rotation printed to 7 significant digits passes, a scaled or sheared matrix does not.
+ROTATION_TOLERANCE = 1e-6
+#: Largest |‖q‖ − 1| of a file's quaternion accepted (then normalised): one printed to 4 decimals
+#: is within 2e-4 of unit norm; one further off is not a rotation that was written down.
+QUATERNION_NORM_TOLERANCE = 1e-3
+#: Absolute slack, seconds, on a moving trajectory's span: a time computed as start + k·step may land
+#: a rounding error past the last sample.
+TIME_SLACK_S = 1e-9
+#: Largest |time|, seconds (317 years): a Unix or GPS time is ~2e9 s; float64 keeps 2 µs steps up to here.
+MAX_TIME_S = 1e10
+#: Largest |roll|, |pitch|, |yaw| read, degrees (2,777 turns, for an unwrapped yaw); float64 keeps 1e-10° steps up to here.
+_MAX_ANGLE_DEG = 1e6
+#: The two CSV layouts: the header, then one row per pose.
+EULER_COLUMNS = ("time_s", "x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg")
+QUATERNION_COLUMNS = ("time_s", "x_m", "y_m", "z_m", "qx", "qy", "qz", "qw")
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """Timed sensor poses (sensor → world), interpolated: position linearly, attitude by slerp (Shoemake 1985).
+
+    Parameters
+    ----------
+    time_s : (T,) float
+        Sample times, seconds (any origin), finite, strictly increasing, 1 ≤ T ≤
+        :data:`~zbuf_occlude.io.caps.MAX_TRAJECTORY_POSES`, |t| ≤ :data:`MAX_TIME_S`.  T = 1: a
+        static pose, valid at every time.
+    position_m : (T, 3) float
+        The sensor's origin in the world frame (z up), metres, each coordinate within
+        ±:data:`~zbuf_occlude.sensors.checks.MAX_COORDINATE_M`.
+    rotation : (T, 3, 3) float
+        Sensor → world rotations (columns: the sensor's x forward, y left, z up in the world),
+        orthonormal with det +1 within :data:`ROTATION_TOLERANCE`; stored re-orthonormalised (the
+        nearest rotation, by SVD).
+    name : str
+        User name (metadata; it may name output files).
+
+    Attributes
+    ----------
+    time_s, position_m, rotation : float64
+        Read-only copies, shapes as above.
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the trajectory and the field (``trajectory 'odom': time_s[3] must be later ...``):
+        not real numbers of the shapes above; a value not finite or beyond its bound; a time not
+        later than the one before; a matrix that is not a rotation; a name that cannot name files.
+    """
+
+    time_s: NDArray[np.float64]
+    position_m: NDArray[np.float64]
+    rotation: NDArray[np.float64]
+    name: str = "trajectory"
+
+    def __post_init__(self) -> None:
+        sensor_name(self.name, "trajectory name")
+        with located(f"trajectory {self.name!r}"):
+            time = _real_array(self.time_s, "time_s", (-1,))
+            if not 1 <= len(time) <= MAX_TRAJECTORY_POSES:
+                raise InvalidInputError(f"time_s must hold 1 to {MAX_TRAJECTORY_POSES:,} poses, got {len(time):,}")
+            position = _real_array(self.position_m, "position_m", (len(time), 3))
+            rotation = _real_array(self.rotation, "rotation", (len(time), 3, 3))
+            bad = _first_bad(_sample_checks(time, position))
+            if bad:
+                raise InvalidInputError(f"{bad[0]}[{bad[1]}] {bad[2]}")
+            rotation = _orthonormalised(rotation)
+        for field, value in (("time_s", time), ("position_m", position), ("rotation", rotation)):
+            value.flags.writeable = False
+            object.__setattr__(self, field, value)
+
+    @classmethod
+    def static(cls, pose: ArrayLike, *, name: str = "static") -> Trajectory:
+        """One pose, valid at every time: ``pose`` (4, 4) sensor → world, or (3,) a position (world frame,
+        metres) with the sensor's axes along the world's.  Raises InvalidInputError: ``pose`` is neither,
+        its last row is not (0, 0, 0, 1), or :class:`Trajectory` refuses it."""
+        rotation, position = _pose_parts(pose, "pose", (3,))
+        return cls(np.zeros(1), position, rotation, name=name)
+
+    @classmethod
+    def linear(
+        cls, pose: ArrayLike, velocity_mps: ArrayLike, duration_s: float, *, start_s: float = 0.0, name: str = "linear"
+    ) -> Trajectory:
+        """Constant velocity, fixed attitude: two samples, ``pose`` at ``start_s`` and moved by ``velocity_mps · duration_s``.
+
+        Parameters
+        ----------
+        pose : (4, 4) or (3,) float
+            The pose at ``start_s``, as :meth:`static` takes it.
+        velocity_mps : (3,) float
+            World frame, metres per second.
+        duration_s, start_s : float
+            Seconds; ``duration_s`` > 0.
+
+        Raises
+        ------
+        InvalidInputError
+            Not finite numbers of these shapes, ``duration_s`` ≤ 0, or what :class:`Trajectory` refuses.
+        """
+        rotation, position = _pose_parts(pose, "pose", (3,))
+        velocity = np.array(reals(velocity_mps, "velocity_mps", lengths=(3,)))
+        duration = real(duration_s, "duration_s", low=0.0, low_open=True)
+        start = real(start_s, "start_s")
+        time = np.array([start, start + duration])
+        return cls(time, np.concatenate([position, position + velocity * duration]), np.concatenate([rotation, rotation]), name=name)
+
+    @classmethod
+    def from_poses(cls, time_s: ArrayLike, poses: ArrayLike, *, name: str = "trajectory") -> Trajectory:
+        """Timed ``poses`` (T, 4, 4) sensor → world at ``time_s`` (T,) seconds.  Raises InvalidInputError: ``poses``
+        not (T, 4, 4) real numbers, a last row other than (0, 0, 0, 1), or what :class:`Trajectory` refuses."""
+        rotation, position = _pose_parts(poses, "poses", None)
+        return cls(time_s, position, rotation, name=name)  # type: ignore[arg-type]
+
+    def __len__(self) -> int:
+        """T, the samples."""
+        return len(self.time_s)
+
+    @property
+    def is_static(self) -> bool:
+        """One pose, or every sample's position and rotation equal (exactly): valid at every time."""
+        return len(self) == 1 or bool(np.all(self.position_m == self.position_m[0]) and np.all(self.rotation == self.rotation[0]))
+
+    @property
+    def start_s(self) -> float:
+        """The first sample's time, seconds."""
+        return float(self.time_s[0])
+
+    @property
+    def end_s(self) -> float:
+        """The last sample's time, seconds."""
+        return float(self.time_s[-1])
+
+    @property
+    def duration_s(self) -> float:
+        """``end_s − start_s``, seconds (0 for one pose)."""
+        return self.end_s - self.start_s
+
+    def poses_at(self, time_s: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The poses at ``time_s``: positions by linear interpolation, attitudes by slerp.
+
+        Slerp (Shoemake 1985, SIGGRAPH '85, §3; :class:`scipy.spatial.transform.Slerp`) turns at a constant
+        rate about one axis between two samples, the short way round: samples must not be 180° or more apart.
+
+        Parameters
+        ----------
+        time_s : float or (N,) float
+            Seconds.  A static trajectory (:attr:`is_static`) answers any finite time; a moving
+            one, times within ``[start_s, end_s]`` (:data:`TIME_SLACK_S` beyond either end allowed).
+
+        Returns
+        -------
+        rotation : (N, 3, 3) float64
+            Sensor → world (N = 1 for a scalar time).
+        position : (N, 3) float64
+            World frame, metres; on the segment between the two samples around each time.
+
+        Raises
+        ------
+        InvalidInputError
+            ``time_s`` is not finite real numbers (a scalar or 1-D), or outside a moving trajectory's span (named).
+        """
+        t = _real_array(time_s, "time_s", None)
+        if t.ndim > 1 or not np.all(np.isfinite(t)):
+            raise InvalidInputError(f"trajectory {self.name!r}: time_s must be finite seconds (a number or 1-D), got {shown(time_s)}")
+        t = t.reshape(-1)
+        if self.is_static:
+            return np.repeat(self.rotation[:1], len(t), axis=0), np.repeat(self.position_m[:1], len(t), axis=0)
+        out = np.flatnonzero((t < self.start_s - TIME_SLACK_S) | (t > self.end_s + TIME_SLACK_S))
+        if len(out):
+            raise InvalidInputError(
+                f"trajectory {self.name!r}: time_s[{out[0]}] = {float(t[out[0]])!r} s is outside its span "
+                f"[{self.start_s!r}, {self.end_s!r}] s ({len(out):,} of {len(t):,} times outside)"
+            )
+        from scipy.spatial.transform import Rotation, Slerp
+
+        t = np.clip(t, self.start_s, self.end_s)
+        i = np.clip(np.searchsorted(self.time_s, t, side="right") - 1, 0, len(self) - 2)
+        f = (t - self.time_s[i]) / (self.time_s[i + 1] - self.time_s[i])
+        position = self.position_m[i] + f[:, None] * (self.position_m[i + 1] - self.position_m[i])
+        rotation = Slerp(self.time_s, Rotation.from_matrix(self.rotation))(t).as_matrix()
+        return rotation, position
+
+    def pose_at(self, t: float) -> NDArray[np.float64]:
+        """(4, 4) float64 sensor → world pose at ``t`` seconds (:meth:`poses_at`, whose errors it raises)."""
+        rotation, position = self.poses_at(np.array([real(t, "t")]))
+        pose = np.eye(4)
+        pose[:3, :3], pose[:3, 3] = rotation[0], position[0]
+        return pose
+
+
+def load_trajectory(path: str | PathLike[str], *, within: str | PathLike[str] | None = None, name: str | None = None) -> Trajectory:
+    """A :class:`Trajectory` from a CSV file (a robot's odometry, a survey's trajectory).
+
+    A header line, then a row per pose, numbers separated by commas (spaces around them allowed;
+    blank lines skipped, counted towards the cap on rows).  Two layouts, by header:
+
+    * ``time_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg``: extrinsic x-y-z Euler angles in degrees (about
+      the world's fixed x, then y, then z: ``scipy.spatial.transform.Rotation.from_euler("xyz", [roll,
+      pitch, yaw], degrees=True)``), each within ±10⁶°;
+    * ``time_s,x_m,y_m,z_m,qx,qy,qz,qw``: a unit quaternion, scalar last (scipy's order), normalised; a
+      norm further than :data:`QUATERNION_NORM_TOLERANCE` from 1 is refused.
+
+    Positions: the sensor's origin, world frame (z up), metres; the attitude turns the sensor frame (x
+    forward, y left, z up) into the world's.  Read whole by :func:`~zbuf_occlude.io.regular_files.read_text_file`
+    (a regular file, at most :data:`~zbuf_occlude.io.caps.MAX_TRAJECTORY_BYTES`, UTF-8).
+
+    Parameters
+    ----------
+    path : str or PathLike
+    within : str or PathLike, optional
+        The folder ``path`` was named from: it must stay inside it, links resolved.
+    name : str, optional
+        The trajectory's name; default: the file's stem.
+
+    Raises
+    ------
+    ArgumentTypeError
+        ``path`` or ``within`` is not a path.
+    InvalidInputError
+        One line naming the file (and the line), never quoting it: missing, not a regular file (a FIFO, a
+        folder), too large, not UTF-8; empty; another header; a line over :data:`~zbuf_occlude.io.caps.MAX_TRAJECTORY_LINE_BYTES`;
+        more lines after the header than :data:`~zbuf_occlude.io.caps.MAX_TRAJECTORY_POSES` (before a row is
+        parsed), or none; a row not of the header's width; a value not finite or out of bounds
+        (:class:`Trajectory`'s); times not increasing; a quaternion far from unit norm.
+    UnsafePathError
+        ``within`` is given and ``path`` leads outside it.
+    """
+    if not isinstance(path, (str, PathLike)):
+        raise ArgumentTypeError(f"path must be a trajectory file's path (str or os.PathLike), got {described(path)}")
+    if within is not None and not isinstance(within, (str, PathLike)):
+        raise ArgumentTypeError(f"within must be a folder's path (str or os.PathLike) or None, got {described(within)}")
+    text = read_text_file(path, max_bytes=MAX_TRAJECTORY_BYTES, error=InvalidInputError, within=within)
+    columns, table, line_of = _read_rows(path, text)
+    *attitude_check, rotation = _LAYOUTS[columns](table[:, 4:])
+    bad = _first_bad([*_sample_checks(table[:, 0], table[:, 1:4]), attitude_check])
+    if bad:
+        raise InvalidInputError(f"{path}: line {line_of[bad[1]]:,}: {bad[0]} {bad[2]}")
+    with located(str(path)):
+        return Trajectory(table[:, 0], table[:, 1:4], rotation, name=Path(path).stem if name is None else name)
+
+
+def _real_array(value: object, name: str, shape: tuple[int, ...] | None) -> NDArray[np.float64]:
+    """``value`` as a float64 copy, refused unless real numbers (bools refused) of ``shape`` (-1: any length; None: any)."""
+    try:
+        a = np.asarray(value)
+    except (ValueError, TypeError):  # a ragged list
+        raise InvalidInputError(f"{name} must be an array of real numbers, got {described(value)}") from None
+    fits = shape is None or (a.ndim == len(shape) and all(k in (-1, n) for k, n in zip(shape, a.shape, strict=True)))
+    if a.dtype.kind not in "fiu" or not fits:
+        want = "" if shape is None else f" of shape {tuple('N' if k == -1 else k for k in shape)}".replace("'", "")
+        raise InvalidInputError(f"{name} must be an array of real numbers{want}, got shape {a.shape} dtype {a.dtype.name}")
+    with np.errstate(over="ignore"):  # an integer beyond float64 becomes inf, refused as not finite
+        return np.array(a, dtype=np.float64)
+
+
+def _sample_checks(time: NDArray[np.float64], position: NDArray[np.float64]) -> list[tuple[str, NDArray[np.bool_], str]]:
+    """``(field, the rows refused (T,) bool, why)`` of each check of the samples' times and positions."""
+    return [
+        ("time_s", ~(np.abs(time) <= MAX_TIME_S), f"must be a finite number of seconds within ±{MAX_TIME_S:g}"),
+        ("position_m", ~np.all(np.abs(position) <= MAX_COORDINATE_M, axis=1), f"must be finite, within ±{MAX_COORDINATE_M:g} m"),
+        ("time_s", np.concatenate([[False], np.diff(time) <= 0]), "must be later than the time before it (times strictly increase)"),
+    ]
+
+
+def _first_bad(checks: list) -> tuple[str, int, str] | None:
+    """``(field, row, why)`` of the first row the first failing check of ``checks`` (:func:`_sample_checks`) refuses, or None."""
+    for field, bad, what in checks:
+        rows = np.flatnonzero(bad)
+        if len(rows):
+            return field, int(rows[0]), what
+    return None
+
+
+def _orthonormalised(rotation: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The nearest rotations (polar factor, by SVD) of ``rotation`` (T, 3, 3), each checked to be one within :data:`ROTATION_TOLERANCE`."""
+    finite = np.all(np.isfinite(rotation), axis=(1, 2))
+    with np.errstate(over="ignore", invalid="ignore"):  # a huge entry: an inf error, refused
+        error = np.abs(np.swapaxes(rotation, 1, 2) @ rotation - np.eye(3)).max(axis=(1, 2))
+        det = np.linalg.det(np.where(finite[:, None, None], rotation, 0.0))
+    bad = np.flatnonzero(~finite | ~(error <= ROTATION_TOLERANCE) | ~(np.abs(det - 1.0) <= ROTATION_TOLERANCE))
+    if len(bad):
+        got = "a value that is not finite" if not finite[bad[0]] else f"|RᵀR − I| = {error[bad[0]]:.3g}, det {det[bad[0]]:.6g}"
+        raise InvalidInputError(f"rotation[{bad[0]}] must be a rotation (orthonormal, det +1, within {ROTATION_TOLERANCE:g}); got {got}")
+    u, _, vt = np.linalg.svd(rotation)
+    return u @ vt
+
+
+def _pose_parts(pose: ArrayLike, name: str, single: tuple[int] | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(rotations (T, 3, 3), positions (T, 3)) of (T, 4, 4) sensor → world poses, or (``single`` given) of one (4, 4)
+    pose or one ``single`` (3,) position (identity attitude), T = 1; a last row other than (0, 0, 0, 1) refused."""
+    a = _real_array(pose, name, None if single else (-1, 4, 4))
+    if single and a.shape == single:
+        return np.eye(3)[None], a[None]
+    if single and a.shape != (4, 4):
+        raise InvalidInputError(f"{name} must be a (4, 4) sensor→world matrix or a (3,) position, got shape {a.shape}")
+    a = a.reshape(-1, 4, 4)
+    bad = np.flatnonzero(~np.all(np.abs(a[:, 3] - (0.0, 0.0, 0.0, 1.0)) <= ROTATION_TOLERANCE, axis=1))
+    if len(bad):
+        raise InvalidInputError(f"{name}[{bad[0]}]'s last row must be (0, 0, 0, 1): a sensor→world rigid transform")
+    return a[:, :3, :3], a[:, :3, 3]
+
+
+def _read_rows(path: str | PathLike[str], text: str) -> tuple[tuple[str, ...], NDArray[np.float64], NDArray[np.int64]]:
+    """(the header's columns, the rows (N, K) float64, each row's line number (N,)) of a trajectory CSV's text."""
+    layouts = f"{','.join(EULER_COLUMNS)} or {','.join(QUATERNION_COLUMNS)}"
+    body = text.removeprefix("\ufeff").rstrip()  # a byte-order mark, as spreadsheets write
+    if not body:
+        raise InvalidInputError(f"{path}: the file is empty; a trajectory's first line is the header {layouts}")
+    if body.count("\n") > MAX_TRAJECTORY_POSES:  # counted before the text is split: a file of short lines stays one string
+        raise InvalidInputError(f"{path}: more than {MAX_TRAJECTORY_POSES:,} lines after the header, the most poses a trajectory holds")
+    lines = body.split("\n")
+    # a character takes at least a byte: a line of more characters than the cap is longer in bytes too
+    long = next((i for i, line in enumerate(lines) if len(line) + 1 > MAX_TRAJECTORY_LINE_BYTES), None)
+    if long is not None:
+        raise InvalidInputError(f"{path}: line {long + 1:,} is longer than {MAX_TRAJECTORY_LINE_BYTES:,} bytes; a row is 7 or 8 numbers")
+    columns = tuple(field.strip() for field in lines[0].split(","))
+    if columns not in _LAYOUTS:
+        raise InvalidInputError(f"{path}: line 1 must be the header {layouts}; it holds {len(columns)} other fields")
+    rows = [(number, line.strip()) for number, line in enumerate(lines[1:], start=2) if line.strip()]
+    if not rows:
+        raise InvalidInputError(f"{path}: no rows after the header (one row per pose: {','.join(columns)})")
+    line_of, data = np.array([number for number, _ in rows], dtype=np.int64), [line for _, line in rows]
+    try:
+        table = np.loadtxt(data, delimiter=",", dtype=np.float64, comments=None, ndmin=2)
+    except ValueError:  # numpy's words quote the line: the line is found again, by Python's float, and only its number shown
+        table = np.array([_row(path, line, number, len(columns)) for number, line in zip(line_of, data, strict=True)])
+    if table.shape != (len(data), len(columns)):  # every row of one other width
+        raise InvalidInputError(f"{path}: line {line_of[0]:,} holds {table.shape[1]} numbers; each row holds {len(columns)}")
+    return columns, table, line_of
+
+
+def _row(path: str | PathLike[str], line: str, number: int, width: int) -> list[float]:
+    """The ``width`` numbers of ``line`` (line ``number`` of the file), separated by commas, or InvalidInputError naming the line."""
+    try:
+        row = [float(field) for field in line.split(",")]
+    except ValueError:
+        row = []
+    if len(row) == width:
+        return row
+    raise InvalidInputError(f"{path}: line {number:,} is not a row of {width} numbers separated by commas")
+
+
+def _euler_rotations(angles: NDArray[np.float64]) -> tuple[str, NDArray[np.bool_], str, NDArray[np.float64]]:
+    """Roll, pitch, yaw (N, 3) degrees, extrinsic x-y-z: (their columns, the rows refused (N,) bool, why, the (N, 3, 3) rotations)."""
+    from scipy.spatial.transform import Rotation
+
+    bad = ~np.all(np.abs(angles) <= _MAX_ANGLE_DEG, axis=1)
+    rotations = Rotation.from_euler("xyz", np.where(bad[:, None], 0.0, angles), degrees=True).as_matrix()
+    return "roll_deg, pitch_deg, yaw_deg", bad, f"must be finite, within ±{_MAX_ANGLE_DEG:g}°", rotations
+
+
+def _quaternion_rotations(q: NDArray[np.float64]) -> tuple[str, NDArray[np.bool_], str, NDArray[np.float64]]:
+    """Quaternions (N, 4), scalar last, normalised: (their columns, the rows refused (N,) bool, why, the (N, 3, 3) rotations)."""
+    from scipy.spatial.transform import Rotation
+
+    with np.errstate(over="ignore", invalid="ignore"):
+        norm = np.sqrt(np.sum(q * q, axis=1))
+        bad = ~(np.abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE)
+        rotations = Rotation.from_quat(np.where(bad[:, None], (0.0, 0.0, 0.0, 1.0), q / norm[:, None])).as_matrix()
+    return "qx, qy, qz, qw", bad, f"must be a unit quaternion (norm within {QUATERNION_NORM_TOLERANCE:g} of 1)", rotations
+
+
+#: Each header's columns → how the columns after the position are checked and become rotations.
+_LAYOUTS: dict[tuple[str, ...], Callable[[NDArray[np.float64]], tuple]] = {
+    EULER_COLUMNS: _euler_rotations, QUATERNION_COLUMNS: _quaternion_rotations,
+}  # fmt: skip
