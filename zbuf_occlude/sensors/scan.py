@@ -402,7 +402,14 @@ def fire_pulses(
         pulse_id=pulses.pulse_id[rows],
         gps_time=pulses.time_s[rows],
         scan_angle_deg=pulses.scan_angle_deg[rows],
+        intensity_scale=beam.intensity_scale,
+        object_classes=object_classes(built),
     )
+
+
+def object_classes(built: BuiltScene) -> tuple[str, ...]:
+    """The class name of each object id of ``built`` (index 0: ``"ground"``), what a scan's LAS file classifies by."""
+    return ("ground", *(obj.class_name for obj in built.objects))
 
 
 def _placed_points(pulses: Pulses, rows, measured, normal, frame: str, sensor_to_world):
@@ -462,7 +469,7 @@ def _scan_camera(built: BuiltScene, camera: DepthCamera, m, seed: int, *, backen
         points=points.astype(np.float32), ring=None, pixel=pixel[hit][sel].astype(np.int32), range_m=measured[sel].astype(np.float32),
         face_index=built.face_local[face[sel]], object_id=built.face_object[face[sel]], normal=normal_out.astype(np.float32),
         incidence_deg=incidence[sel].astype(np.float32), frame=frame, sensor_position=sensor_position, sensor_to_world=m,
-        sensor=camera.name, meta=meta,
+        sensor=camera.name, meta=meta, object_classes=object_classes(built),
     )  # fmt: skip
 
 
