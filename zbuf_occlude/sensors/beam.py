@@ -168,7 +168,9 @@ class Beam:
             raise InvalidInputError(f"footprint_rays {k} needs divergence_deg > 0")
         wanted = {"strongest": 1, "last": 1, "dual": 2}.get(mode)
         if wanted is not None and m != wanted:
-            raise InvalidInputError(f"return_mode {mode!r} records {wanted} return{'s' * (wanted > 1)} per pulse: give max_returns {wanted}")
+            raise InvalidInputError(
+                f"return_mode {mode!r} records {wanted} return{'s' * (wanted > 1)} per pulse: give max_returns {wanted}"
+            )
         if self.resolves_echoes and self.range_resolution_m <= 0:
             raise InvalidInputError(
                 f"max_returns {m} with return_mode {mode!r} needs range_resolution_m > 0 (the least range between two returns, c·τ/2)"

@@ -66,8 +66,9 @@ class SensorKind:
 SENSOR_KINDS: tuple[SensorKind, ...] = (
     SensorKind("lidar", "spinning LiDAR", Lidar, LIDAR_PRESETS, pulsed=True),
     SensorKind("airborne", "airborne scanner", AirborneScanner, AIRBORNE_PRESETS, pulsed=True, flies=True),
-    SensorKind("ray_table", "ray-table scanner", RayTable, RAY_TABLE_PRESETS, pulsed=True,
-               array_fields=("time_s", "azimuth_deg", "elevation_deg")),  # fmt: skip
+    SensorKind(
+        "ray_table", "ray-table scanner", RayTable, RAY_TABLE_PRESETS, pulsed=True, array_fields=("time_s", "azimuth_deg", "elevation_deg")
+    ),  # fmt: skip
     SensorKind("depth_camera", "depth camera", DepthCamera, DEPTH_CAMERA_PRESETS, pulsed=False),
 )
 _BY_CLASS = {kind.cls: kind for kind in SENSOR_KINDS}
@@ -249,5 +250,3 @@ def _json_value(value):
     if hasattr(value, "tolist"):
         return value.tolist()
     return list(value) if isinstance(value, tuple) else value
-
-

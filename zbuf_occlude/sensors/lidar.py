@@ -149,7 +149,6 @@ class Lidar:
         azimuth = np.tile(az, self.n_beams)
         return beam_directions(self._elev[ring], azimuth), ring, azimuth
 
-
     def pulses(self, platform, azimuth_range_deg: tuple[float, float] | None = None) -> Pulses:
         """The pulses of one revolution (:meth:`rays`) fired from ``platform`` (:func:`~zbuf_occlude.sensors.pulses.placed`).
 

@@ -107,7 +107,7 @@ class Trajectory:
         """One pose, valid at every time: ``pose`` (4, 4) sensor → world, or (3,) a position (world frame,
         metres) with the sensor's axes along the world's.  Raises InvalidInputError: ``pose`` is neither,
         its last row is not (0, 0, 0, 1), or :class:`Trajectory` refuses it."""
-        rotation, position = _pose_parts(pose, "pose", (3,))
+        rotation, position = _pose_parts(pose, "pose", single=True)
         return cls(np.zeros(1), position, rotation, name=name)
 
     @classmethod
@@ -130,7 +130,7 @@ class Trajectory:
         InvalidInputError
             Not finite numbers of these shapes, ``duration_s`` ≤ 0, or what :class:`Trajectory` refuses.
         """
-        rotation, position = _pose_parts(pose, "pose", (3,))
+        rotation, position = _pose_parts(pose, "pose", single=True)
         velocity = np.array(reals(velocity_mps, "velocity_mps", lengths=(3,)))
         duration = real(duration_s, "duration_s", low=0.0, low_open=True)
         start = real(start_s, "start_s")
@@ -141,7 +141,7 @@ class Trajectory:
     def from_poses(cls, time_s: ArrayLike, poses: ArrayLike, *, name: str = "trajectory") -> Trajectory:
         """Timed ``poses`` (T, 4, 4) sensor → world at ``time_s`` (T,) seconds.  Raises InvalidInputError: ``poses``
         not (T, 4, 4) real numbers, a last row other than (0, 0, 0, 1), or what :class:`Trajectory` refuses."""
-        rotation, position = _pose_parts(poses, "poses", None)
+        rotation, position = _pose_parts(poses, "poses", single=False)
         return cls(time_s, position, rotation, name=name)  # type: ignore[arg-type]
 
     def __len__(self) -> int:
@@ -318,11 +318,11 @@ def _orthonormalised(rotation: NDArray[np.float64]) -> NDArray[np.float64]:
     return u @ vt
 
 
-def _pose_parts(pose: ArrayLike, name: str, single: tuple[int] | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(rotations (T, 3, 3), positions (T, 3)) of (T, 4, 4) sensor → world poses, or (``single`` given) of one (4, 4)
-    pose or one ``single`` (3,) position (identity attitude), T = 1; a last row other than (0, 0, 0, 1) refused."""
+def _pose_parts(pose: ArrayLike, name: str, *, single: bool) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(rotations (T, 3, 3), positions (T, 3)) of (T, 4, 4) sensor → world poses, or (``single``) of one (4, 4) pose
+    or one (3,) position (identity attitude), T = 1; a last row other than (0, 0, 0, 1) refused."""
     a = _real_array(pose, name, None if single else (-1, 4, 4))
-    if single and a.shape == single:
+    if single and a.shape == (3,):
         return np.eye(3)[None], a[None]
     if single and a.shape != (4, 4):
         raise InvalidInputError(f"{name} must be a (4, 4) sensor→world matrix or a (3,) position, got shape {a.shape}")
