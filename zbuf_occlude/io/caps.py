@@ -21,7 +21,8 @@ __all__ = [
     "MAX_LAS_HEADER_BYTES", "MAX_LEDGER_BYTES", "MAX_LEDGER_LINE_BYTES", "MAX_LIST_BYTES", "MAX_LOCK_BYTES", "MAX_MANIFEST_BYTES",
     "MAX_MESH_FILE_BYTES", "MAX_METADATA_BYTES", "MAX_NPY_HEADER_BYTES", "MAX_POINT_SET_BYTES", "MAX_POINT_SET_PLY_HEADER_BYTES",
     "MAX_PROTOCOL_FILE_BYTES", "MAX_RAY_TABLE_LINE_BYTES", "MAX_REAL_SCAN_ARRAY_BYTES", "MAX_REAL_SCAN_BYTES",
-    "MAX_REAL_SCAN_LINE_BYTES", "MAX_SCAN_NPZ_BYTES", "MAX_SPEC_FILE_BYTES", "MAX_TABLE_BYTES",
+    "MAX_REAL_SCAN_LINE_BYTES", "MAX_SCAN_NPZ_BYTES", "MAX_SPEC_FILE_BYTES", "MAX_TABLE_BYTES", "MAX_TRAJECTORY_BYTES",
+    "MAX_TRAJECTORY_LINE_BYTES", "MAX_TRAJECTORY_POSES",
 ]  # fmt: skip
 
 # -- text and metadata ------------------------------------------------------------------------------
@@ -113,3 +114,13 @@ MAX_REAL_SCAN_ARRAY_BYTES = MAX_REAL_SCAN_BYTES
 #: Longest line of a real text scan: 4 KiB.  A row is a few numbers (x y z, intensity, a label);
 #: a longer line is not a row, and splitting a 1 GB line takes ~50x its size in Python strings.
 MAX_REAL_SCAN_LINE_BYTES = 4096
+#: Largest trajectory CSV read (:func:`zbuf_occlude.sensors.platform.load_trajectory`), read whole:
+#: 128 MiB, :data:`MAX_TRAJECTORY_POSES` rows of ~130 bytes (a ROS odometry row printed in full: a
+#: 10-digit time to the nanosecond, three positions, a quaternion of 17 digits); 6 decimals take ~70.
+MAX_TRAJECTORY_BYTES = 128 << 20
+#: Most poses (rows) one trajectory holds: a million, three hours of odometry at 100 Hz.  Checked on
+#: the file's line count before a row is parsed, so a file of short lines is refused unsplit.
+MAX_TRAJECTORY_POSES = 1_000_000
+#: Longest line of a trajectory CSV, line end included: a row of eight numbers written to round
+#: trip (``%.17g``: at most 24 characters each) takes under 200 bytes; a kilobyte leaves room for spaces.
+MAX_TRAJECTORY_LINE_BYTES = 1024
