@@ -23,6 +23,7 @@ from zbuf_occlude.geometry.samples import OccludedCloud, derive_rng, draw_sample
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors.airborne import AirborneScanner
 from zbuf_occlude.sensors.depth_camera import DepthCamera
+from zbuf_occlude.sensors.kinds import kind_of
 from zbuf_occlude.sensors.lidar import Lidar
 from zbuf_occlude.sensors.placement import DEFAULT_GROUND_REFLECTIVITY, CropDistributions, Placement, draw_placement
 from zbuf_occlude.sensors.scan import scan
@@ -111,7 +112,8 @@ def object_crop(
     width_scale, profile = placement.stretch, placement.width_profile
     # the largest side after the stretch, at most
     reach = placement.size_m * max(1.0, width_scale) * (1.0 if profile is None else max(1.0, *profile))
-    if isinstance(sensor, AirborneScanner):
+    kind = kind_of(sensor)
+    if kind.flies:
         if placement.visible_share < 1.0:
             raise InvalidInputError(
                 "visible_across_sight hides a side of the object from a sensor on the ground; an airborne scanner flies over it"
@@ -127,7 +129,7 @@ def object_crop(
         for panel in side_occluders(world, pose[:3, 3], placement.visible_share, placement.occluder_side):
             scene.add_occluder(panel)
     sector = None
-    if isinstance(sensor, Lidar) and not occluders:  # the side occluder stands inside the object's sector
+    if kind.sweeps_sectors and not occluders:  # the side occluder stands inside the object's sector
         half = math.degrees(math.asin(min(1.0, 0.75 * reach / d))) + sector_margin_deg
         if half < 180.0:
             sector = (placement.azimuth_deg - half, placement.azimuth_deg + half)
@@ -329,7 +331,7 @@ def kept_return_fields(sensor: Lidar | DepthCamera | AirborneScanner) -> tuple[s
     """The return fields a crop of ``sensor`` keeps per point: :data:`RETURN_FIELDS` when it records
     several returns per pulse (``max_returns`` above 1), none otherwise (one return per pulse, or a
     depth camera): its crops, and the data sets made of them, are then as they were before these fields."""
-    return RETURN_FIELDS if getattr(sensor, "max_returns", 1) > 1 else ()
+    return RETURN_FIELDS if kind_of(sensor).pulsed and sensor.beam.max_returns > 1 else ()
 
 
 def lidar_object_samples(

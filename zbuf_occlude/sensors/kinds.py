@@ -51,6 +51,9 @@ class SensorKind:
         rather than standing at a pose or moving along a trajectory.
     array_fields : tuple of str
         Fields given as arrays (a ray table's columns), written to files as lists.
+    sweeps_sectors : bool
+        Whether its pulses sweep the azimuths evenly, so that a crop may fire only the object's
+        azimuth sector (``scan(azimuth_range_deg=)``) and find the same returns there.
     """
 
     name: str
@@ -60,11 +63,12 @@ class SensorKind:
     pulsed: bool
     flies: bool = False
     array_fields: tuple[str, ...] = ()
+    sweeps_sectors: bool = False
 
 
 #: Every kind, in the order help texts list them.
 SENSOR_KINDS: tuple[SensorKind, ...] = (
-    SensorKind("lidar", "spinning LiDAR", Lidar, LIDAR_PRESETS, pulsed=True),
+    SensorKind("lidar", "spinning LiDAR", Lidar, LIDAR_PRESETS, pulsed=True, sweeps_sectors=True),
     SensorKind("airborne", "airborne scanner", AirborneScanner, AIRBORNE_PRESETS, pulsed=True, flies=True),
     SensorKind(
         "ray_table", "ray-table scanner", RayTable, RAY_TABLE_PRESETS, pulsed=True, array_fields=("time_s", "azimuth_deg", "elevation_deg")

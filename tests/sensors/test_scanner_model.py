@@ -1,0 +1,238 @@
+"""The scanner as one model: Beam checks, the kinds table (and no isinstance switch on a sensor class outside it),
+return modes, a scanner moving during its sweep, and the ideal beam's scan unchanged."""
+
+from __future__ import annotations
+
+import ast
+import hashlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.beam import IDEAL_BEAM, Beam
+from zbuf_occlude.sensors.echo_model import returns_of_mode
+from zbuf_occlude.sensors.kinds import SENSOR_KINDS, kind_of, sensor_from_spec, sensor_to_json, with_beam
+from zbuf_occlude.sensors.lidar import Lidar, lidar_preset
+from zbuf_occlude.sensors.platform import Trajectory
+from zbuf_occlude.sensors.scan import scan
+from zbuf_occlude.sensors.scene import ScanScene, SceneObject
+
+PACKAGE = Path(__file__).resolve().parents[2] / "zbuf_occlude"
+SENSOR_CLASSES = {kind.cls.__name__ for kind in SENSOR_KINDS}
+
+
+def _class_switches(tree: ast.AST) -> list[int]:
+    """Lines of ``isinstance(x, C)`` / ``type(x) is C`` where C names a sensor class (alone or in a tuple)."""
+    lines = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and getattr(node.func, "id", None) in ("isinstance", "issubclass") and len(node.args) == 2:
+            names = {n.id for n in ast.walk(node.args[1]) if isinstance(n, ast.Name)} | {
+                n.attr for n in ast.walk(node.args[1]) if isinstance(n, ast.Attribute)
+            }
+            if names & (SENSOR_CLASSES | {"_PULSED"}):
+                lines.append(node.lineno)
+    return lines
+
+
+def test_no_module_but_the_kinds_table_switches_on_a_sensor_class():
+    found = {}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if path.name == "kinds.py" and path.parent.name == "sensors":
+            continue
+        lines = _class_switches(ast.parse(path.read_text(encoding="utf-8")))
+        if lines:
+            found[str(path.relative_to(PACKAGE))] = lines
+    assert found == {}
+
+
+def test_the_switch_finder_finds_a_switch():
+    code = "def f(s):\n    return isinstance(s, (Lidar, RayTable)) or isinstance(s, sensors.AirborneScanner)\n"
+    assert _class_switches(ast.parse(code)) == [2, 2]
+
+
+def test_every_kind_has_presets_of_its_class_and_pulsed_kinds_a_beam():
+    for kind in SENSOR_KINDS:
+        assert kind.presets, kind.name
+        for name, preset in kind.presets.items():
+            assert type(preset) is kind.cls and kind_of(preset) is kind and preset.name == name
+            assert preset.source, name
+            if kind.pulsed:
+                assert isinstance(preset.beam, Beam) and preset.beam.source, name
+
+
+def test_every_preset_beam_cites_what_it_takes_from_a_data_sheet():
+    for kind in SENSOR_KINDS:
+        for name, preset in kind.presets.items():
+            if kind.pulsed:
+                assert not preset.beam.is_ideal or preset.beam.range_noise_m > 0, name
+                assert any(word in preset.beam.source for word in ("data sheet", "HELIOS++")), name
+
+
+def test_every_kind_reads_back_from_its_json_and_takes_a_preset_key():
+    for kind in SENSOR_KINDS:
+        preset = next(iter(kind.presets.values()))
+        assert sensor_to_json(sensor_from_spec(sensor_to_json(preset))) == sensor_to_json(preset)
+        changed = sensor_from_spec({"kind": kind.name, "preset": preset.name})
+        assert sensor_to_json(changed) == sensor_to_json(preset)
+
+
+def test_a_sensor_file_changes_a_preset_beam_in_part_and_reads_the_flat_layout():
+    s = sensor_from_spec({"kind": "lidar", "preset": "hdl32e", "beam": {"footprint_rays": 7}})
+    assert s.beam.footprint_rays == 7 and s.beam.divergence_deg == lidar_preset("hdl32e").beam.divergence_deg
+    flat = sensor_from_spec({"name": "x", "elevations_deg": [0.0], "range_noise_m": 0.05, "detection_reflectivity": 0.5,
+                             "detection_range_m": 50.0, "beam_divergence_deg": 0.2})  # fmt: skip
+    assert flat.beam.range_noise_m == 0.05 and flat.beam.divergence_deg == 0.2 and flat.beam.detection_threshold == 0.5 / 50.0**2
+
+
+@pytest.mark.parametrize(
+    ("spec", "words"),
+    [
+        ({"kind": "lidar", "preset": "riegl-q1560"}, "not a spinning LiDAR"),
+        ({"kind": "lidar", "preset": "hdl32e", "beam": {"footprint_rays": 7, "divergence_deg": 0}}, "needs divergence_deg"),
+        ({"kind": "lidar", "preset": "hdl32e", "beam": {"max_returns": 2}}, "range_resolution_m"),
+        ({"kind": "lidar", "preset": "hdl32e", "beam": {"laser": 1}}, "laser"),
+        ({"kind": "lidar", "preset": "hdl32e", "beam": [1, 2]}, "beam"),
+        ({"kind": "depth_camera", "preset": "kinect-v1", "beam": {}}, "beam"),
+        ({"kind": "airborne", "preset": "riegl-q1560", "beam": {"return_mode": "dual", "max_returns": 3}}, "max_returns 2"),
+    ],
+)
+def test_bad_sensor_files_are_refused_naming_the_field(spec, words):
+    with pytest.raises(InvalidInputError, match=words):
+        sensor_from_spec(spec)
+
+
+@pytest.mark.parametrize(
+    ("changes", "words"),
+    [
+        ({"footprint_rays": 7}, "divergence_deg"),
+        ({"max_returns": 3}, "range_resolution_m"),
+        ({"range_resolution_m": 0.5}, "needs max_returns above 1"),
+        ({"return_mode": "strongest", "max_returns": 2, "range_resolution_m": 1.0}, "max_returns 1"),
+        ({"echo_separation_m": 0.5}, "footprint_rays above 1"),
+        ({"min_range_m": 5.0, "max_range_m": 2.0}, "min_range_m < max_range_m"),
+        ({"intensity_scale": 0.0}, "intensity_scale"),
+        ({"wavelength_nm": True}, "wavelength_nm"),
+        ({"profile": "flat"}, "profile"),
+        ({"dropout": 1.0}, "dropout"),
+    ],
+)
+def test_beam_rules_are_checked_once_naming_the_field(changes, words):
+    with pytest.raises(InvalidInputError, match=words):
+        Beam(**changes)
+
+
+def test_with_beam_refuses_a_camera_and_changes_a_lidar():
+    camera = SENSOR_KINDS[-1].presets["kinect-v1"]
+    with pytest.raises(InvalidInputError, match="no beam"):
+        with_beam(camera, footprint_rays=7)
+    assert with_beam(lidar_preset("vlp16"), footprint_rays=19).beam.footprint_rays == 19
+
+
+def test_intensity_counts_scale_and_saturate():
+    beam = Beam(intensity_scale=1000.0, max_intensity=255)
+    assert beam.intensity_counts([0.0, 0.1, 0.2555, 10.0, np.nan, -1.0]).tolist() == [0, 100, 255, 255, 0, 0]
+    with pytest.raises(InvalidInputError, match="intensity_scale"):
+        IDEAL_BEAM.intensity_counts([1.0])
+
+
+def test_return_modes_pick_velodyne_returns():
+    pulse = np.array([0, 0, 0, 1, 2, 2])
+    energy = np.array([1.0, 3.0, 2.0, 5.0, 4.0, 1.0])
+    assert returns_of_mode(pulse, energy, "strongest").tolist() == [1, 3, 4]
+    assert returns_of_mode(pulse, energy, "last").tolist() == [2, 3, 5]
+    # dual: last and strongest; where the last is the strongest (pulse 1), only it; pulse 2: strongest 4, last 5
+    assert returns_of_mode(pulse, energy, "dual").tolist() == [1, 2, 3, 4, 5]
+    last_strongest = returns_of_mode(np.array([0, 0, 0]), np.array([1.0, 2.0, 3.0]), "dual")
+    assert last_strongest.tolist() == [1, 2]  # the last is the strongest: the last and the second strongest
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 4), st.floats(0.0, 10.0)), min_size=1, max_size=30))
+def test_return_modes_keep_one_or_two_returns_per_pulse_in_order(rows):
+    rows = sorted(rows, key=lambda r: r[0])
+    pulse = np.array([r[0] for r in rows])
+    energy = np.array([r[1] for r in rows])
+    for mode, most in (("strongest", 1), ("last", 1), ("dual", 2)):
+        chosen = returns_of_mode(pulse, energy, mode)
+        assert np.all(np.diff(chosen) > 0)
+        counts = np.bincount(pulse[chosen], minlength=5)
+        assert np.all(counts[np.unique(pulse)] >= 1) and counts.max() <= most
+        if mode == "strongest":
+            for p in np.unique(pulse):
+                assert energy[chosen[pulse[chosen] == p]][0] == energy[pulse == p].max()
+
+
+def _wall() -> trimesh.Trimesh:
+    """A flat wall 60 m long along x, its face to the sensor in the plane y = 5 m."""
+    wall = trimesh.creation.box(extents=(60.0, 0.2, 8.0))
+    wall.apply_translation((0.0, 5.1, 2.0))
+    return wall
+
+
+def test_a_scanner_moving_during_its_sweep_has_the_motion_distortion_of_a_real_one():
+    speed = 10.0
+    lidar = lidar_preset("hdl32e").with_(beam=IDEAL_BEAM.with_(min_range_m=1.0, max_range_m=100.0))
+    start = np.eye(4)
+    start[:3, 3] = (-1.0, 0.0, 1.8)
+    moving = Trajectory.linear(start, (speed, 0.0, 0.0), 0.2, start_s=100.0)
+    world = scan(_wall(), lidar, moving, frame="world", seed=0)
+    raw = scan(_wall(), lidar, moving, frame="sensor", seed=0)
+    wall = world.points[:, 1] > 4.0
+    assert wall.sum() > 1000
+    t = world.gps_time
+    assert t.min() >= 100.0 and t.max() <= 100.0 + 1.0 / lidar.rotation_hz  # each point its own time, within one revolution
+    # in the world the wall stands still; in the raw sweep it has slid back by speed × time, to 1 mm
+    assert np.abs(world.points[wall, 1] - 5.0).max() < 1e-3
+    expected = raw.points.astype(np.float64) + start[:3, 3] + np.outer(t - 100.0, (speed, 0.0, 0.0))
+    assert np.abs(expected - world.points).max() < 1e-3
+    assert np.ptp(t[wall]) * speed > 0.3  # the wall fills half the sweep: about half a metre of travel
+    # against the scanner standing still at the start: each pulse met the wall speed × its time further along x, to 1 mm
+    still = scan(_wall(), lidar, start, frame="world", seed=0)
+    both, i, j = np.intersect1d(world.pulse_id[wall], still.pulse_id, return_indices=True)
+    assert len(both) > 1000
+    slid = world.points[wall][i].astype(np.float64) - still.points[j]
+    assert np.abs(slid - np.outer(t[wall][i] - 100.0, (speed, 0.0, 0.0))).max() < 1e-3
+
+
+def test_a_still_trajectory_scans_as_its_pose():
+    pose = np.eye(4)
+    pose[:3, 3] = (0.0, 0.0, 1.8)
+    lidar = lidar_preset("vlp16")
+    a = scan(_wall(), lidar, pose, seed=3)
+    b = scan(_wall(), lidar, Trajectory.static(pose), seed=3)
+    for key, value in a.arrays().items():
+        assert np.array_equal(value, b.arrays()[key]), key
+
+
+def test_a_trajectory_shorter_than_the_sweep_is_refused():
+    short = Trajectory.linear(np.eye(4), (1.0, 0.0, 0.0), 0.01)
+    with pytest.raises(InvalidInputError):
+        scan(_wall(), lidar_preset("vlp16"), short)
+
+
+def _digest(s, decimals: int = 3) -> str:
+    """sha256 of a scan's arrays rounded to ``decimals`` (robust to last-bit differences between CPUs)."""
+    h = hashlib.sha256()
+    for key in ("points", "range_m", "face_index", "object_id", "return_number", "number_of_returns", "pulse_id", "ring"):
+        value = getattr(s, key)
+        value = np.round(value.astype(np.float64), decimals) if value.dtype.kind == "f" else value.astype(np.int64)
+        h.update(key.encode() + np.ascontiguousarray(value).tobytes())
+    return h.hexdigest()[:16]
+
+
+def test_the_ideal_beam_scans_as_the_one_ray_first_hit_scan_did():
+    """Pinned before the scanner was recomposed (the same scan then had every array bit for bit)."""
+    scene = ScanScene(objects=[SceneObject({"box_m": [4.5, 1.8, 1.5]}, "car", (10.0, 0.0), 30.0)])
+    s = scan(scene, Lidar("x", tuple(range(-15, 16, 2)), firing_rate_hz=18_000.0), seed=0)
+    assert len(s) > 0 and np.all(s.return_number == 1) and np.all(s.intensity == 1.0)
+    assert _digest(s) == PINNED_IDEAL
+
+
+#: ``_digest`` of that scan by the code before the scanner was recomposed, its LiDAR given no noise and no range
+#: limits (``Lidar(..., min_range_m=0, max_range_m=1e6, range_noise_m=0)``): 12,836 points.
+PINNED_IDEAL = "d679acc1432da854"
