@@ -14,6 +14,7 @@ import trimesh
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors import AirborneScanner, scan_airborne
+from zbuf_occlude.sensors.beam import Beam
 
 ALTITUDE_M = 100.0
 PLATE_Z = 10.0
@@ -27,10 +28,13 @@ def _plate_over_ground() -> trimesh.Trimesh:
     return trimesh.util.concatenate([ground, plate])
 
 
-def _scanner(**changes) -> AirborneScanner:
-    fields = {"swath_deg": 10.0, "pulse_rate_hz": 2000.0, "line_rate_hz": 20.0, "altitude_m": ALTITUDE_M, "speed_mps": 10.0,
-              "range_noise_m": 0.0, "beam_divergence_deg": 0.5, "footprint_rays": 7, "max_returns": 3, "range_resolution_m": 0.5}  # fmt: skip
-    return AirborneScanner("test-als", **{**fields, **changes})
+def _beam(**changes) -> Beam:
+    fields = {"wavelength_nm": 1064.0, "divergence_deg": 0.5, "footprint_rays": 7, "max_returns": 3, "range_resolution_m": 0.5}
+    return Beam(**{**fields, **changes})
+
+
+def _scanner(**beam_changes) -> AirborneScanner:
+    return AirborneScanner("test-als", 10.0, 2000.0, 20.0, ALTITUDE_M, 10.0, beam=_beam(**beam_changes))
 
 
 def _scan(**optics):
@@ -89,7 +93,7 @@ def test_bad_optics_are_refused_naming_the_value(optics, message) -> None:
 
 
 def test_optics_need_the_multi_return_model() -> None:
-    one = _scanner(footprint_rays=1, max_returns=1, beam_divergence_deg=0.0, range_resolution_m=0.0)
+    one = _scanner(footprint_rays=1, max_returns=1, divergence_deg=0.0, range_resolution_m=0.0)
     with pytest.raises(InvalidInputError, match="max_returns above 1"):
         scan_airborne(_plate_over_ground(), one, (0.0, 0.0), 5.0, transmittance=0.5)
 
@@ -114,10 +118,19 @@ def test_the_detection_threshold_drops_the_weak_echoes_and_frees_their_slot() ->
 
 @pytest.mark.parametrize("value", [-1e-9, float("nan"), float("inf"), "1e-6", True])
 def test_a_bad_detection_threshold_is_refused_naming_the_field(value) -> None:
-    with pytest.raises(InvalidInputError, match="detection_threshold"):
+    with pytest.raises(InvalidInputError, match=r"beam 'ideal': detection_threshold"):
         _scanner(detection_threshold=value)
 
 
-def test_a_detection_threshold_needs_several_returns() -> None:
-    with pytest.raises(InvalidInputError, match="detection_threshold 1e-06 needs max_returns above 1"):
-        _scanner(footprint_rays=1, max_returns=1, beam_divergence_deg=0.0, range_resolution_m=0.0, detection_threshold=1e-6)
+def test_a_detection_threshold_with_one_return_drops_the_weak_pulses_with_rho_1() -> None:
+    """One return per pulse (the centre ray's first hit): the threshold applies to its energy |cos θ| / R² (ρ = 1 without
+    reflectivities), and the intensity is that energy; a threshold between the weakest and the strongest keeps those above it."""
+    one = {"footprint_rays": 1, "max_returns": 1, "divergence_deg": 0.0, "range_resolution_m": 0.0}
+    every = scan_airborne(_plate_over_ground(), _scanner(**one, detection_threshold=1e-30), (0.0, 0.0), 5.0, seed=3, phase_s=0.0)
+    assert len(every) and np.all(every.number_of_returns == 1)
+    expected = np.abs(np.cos(np.radians(every.incidence_deg.astype(np.float64)))) / every.range_m.astype(np.float64) ** 2
+    np.testing.assert_allclose(every.intensity, expected, rtol=1e-4)
+    tau = float(np.median(every.intensity))
+    s = scan_airborne(_plate_over_ground(), _scanner(**one, detection_threshold=tau), (0.0, 0.0), 5.0, seed=3, phase_s=0.0)
+    assert 0 < len(s) < len(every)
+    np.testing.assert_array_equal(np.sort(s.pulse_id), np.sort(every.pulse_id[every.intensity >= tau]))
