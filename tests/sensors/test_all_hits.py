@@ -15,7 +15,9 @@ from hypothesis import strategies as st
 
 import zbuf_occlude.sensors as S
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.beam import Beam
 from zbuf_occlude.sensors.footprint import footprint_offsets, subray_directions
+from zbuf_occlude.sensors.kinds import with_beam
 from zbuf_occlude.sensors.raycast import cast_embree, cast_embree_beyond
 from zbuf_occlude.sensors.scene import BuiltScene, SceneObject
 
@@ -37,10 +39,10 @@ def _stack(xs, y_max=None) -> BuiltScene:
                       [SceneObject(p) for p in plates], [np.eye(4)] * (n + 1), [None, *plates])  # fmt: skip
 
 
-def _lidar(**changes) -> S.Lidar:
-    base = {"elevations_deg": (0.0,), "rotation_hz": 10.0, "firing_rate_hz": 3600.0, "min_range_m": 0.1, "max_range_m": 1000.0,
-            "range_noise_m": 0.0, "beam_divergence_deg": DIVERGENCE, "footprint_rays": 7, "max_returns": 3, "range_resolution_m": 0.5}  # fmt: skip
-    return S.Lidar("plates", **(base | changes))
+def _lidar(elevations_deg=(0.0,), **beam_changes) -> S.Lidar:
+    beam = {"min_range_m": 0.1, "max_range_m": 1000.0, "divergence_deg": DIVERGENCE, "footprint_rays": 7, "max_returns": 3,
+            "range_resolution_m": 0.5}  # fmt: skip
+    return S.Lidar("plates", elevations_deg, rotation_hz=10.0, firing_rate_hz=3600.0, beam=Beam(**(beam | beam_changes)))
 
 
 def _one_pulse(built, lidar, **kw) -> S.Scan:
@@ -166,7 +168,7 @@ def test_the_threshold_drops_a_hit_dimmed_by_the_surface_before_it():
     built = _stack([R, R + 2.0])
     _, e2 = _subray_energy(R + 2.0)
     tau = np.sqrt(0.5 * e2.sum() * 0.1 * e2.sum())  # between the far echo through 0.5 and through 0.1
-    lidar = _lidar(detection_reflectivity=1.0, detection_range_m=float(1 / np.sqrt(tau)))
+    lidar = _lidar(detection_threshold=float(tau))
     assert len(_one_pulse(built, lidar, reflectivity=1.0, transmittance=[0.0, 0.5, 0.0])) == 2
     assert len(_one_pulse(built, lidar, reflectivity=1.0, transmittance=[0.0, 0.1, 0.0])) == 1
 
@@ -175,7 +177,7 @@ def test_opaque_transmittance_gives_the_first_hits_bit_for_bit():
     scene = S.ScanScene()
     scene.add({"box_m": [1.0, 2.0, 1.5]}, class_name="car", position_m=(8.0, 0.5), yaw_deg=20.0)
     scene.add({"cylinder": {"radius_m": 0.1, "height_m": 3.0}}, class_name="pole", position_m=(6.0, -0.3))
-    lidar = S.Lidar.preset("vlp16").with_(footprint_rays=7, beam_divergence_deg=0.3, max_returns=3, range_resolution_m=0.5)
+    lidar = with_beam(S.Lidar.preset("vlp16"), footprint_rays=7, divergence_deg=0.3, max_returns=3, range_resolution_m=0.5)
     base = S.scan(scene, lidar, seed=3, azimuth_range_deg=(-30, 30))
     for tau in (0.0, [0.0, 0.0, 0.0]):
         other = S.scan(scene, lidar, seed=3, azimuth_range_deg=(-30, 30), transmittance=tau)
@@ -209,7 +211,7 @@ def test_returns_are_numbered_one_to_n_within_each_pulse_through_transmitting_pl
     xs = R + np.concatenate([[0.0], np.cumsum(gaps)])[: len(gaps)]
     # half-covering plates, alternating sides, so pulses see different stacks
     built = _stack(list(xs), y_max=[(-0.5 if i % 2 else 0.5) for i in range(len(xs))])
-    lidar = _lidar(footprint_rays=k, max_returns=max_returns, range_resolution_m=resolution, beam_divergence_deg=0.0 if k == 1 else DIVERGENCE,
+    lidar = _lidar(footprint_rays=k, max_returns=max_returns, range_resolution_m=resolution, divergence_deg=0.0 if k == 1 else DIVERGENCE,
                    elevations_deg=(-3.0, 0.0, 2.0))  # fmt: skip
     s = S.scan(built, lidar, np.zeros(3), azimuth_range_deg=(-8, 8), transmittance=[0.0, *tau[: len(xs)]])
     for pid in np.unique(s.pulse_id):
