@@ -375,7 +375,7 @@ def test_depth_camera_intrinsics_follow_opencv() -> None:
 # -- the scan command: its presets, and meshes it cannot see ----------------------------------------
 def test_scan_help_lists_every_preset_of_the_registries(capsys, monkeypatch) -> None:
     from zbuf_occlude.cli.main import main
-    from zbuf_occlude.sensors.airborne import AIRBORNE_PRESETS
+    from zbuf_occlude.sensors.airborne_presets import AIRBORNE_PRESETS
 
     def help_text() -> str:
         with pytest.raises(SystemExit):

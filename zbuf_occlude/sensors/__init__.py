@@ -9,7 +9,8 @@ Spinning LiDARs, ray tables (a Livox's Risley rosette), airborne scanners and de
 >>> car = s.crop(1)                                             # the car's returns, occluded
 """
 
-from zbuf_occlude.sensors.airborne import AIRBORNE_PRESETS, AirborneScanner, airborne_preset
+from zbuf_occlude.sensors.airborne import AirborneScanner
+from zbuf_occlude.sensors.airborne_presets import AIRBORNE_PRESETS, airborne_preset
 from zbuf_occlude.sensors.beam import IDEAL_BEAM, RETURN_MODES, Beam
 from zbuf_occlude.sensors.depth_camera import DEPTH_CAMERA_PRESETS, DepthCamera, depth_camera_preset, nguyen_axial_sigma_m
 from zbuf_occlude.sensors.fit import LidarFit, fit_lidar

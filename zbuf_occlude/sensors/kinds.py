@@ -20,7 +20,8 @@ from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.airborne import AIRBORNE_PRESETS, AirborneScanner
+from zbuf_occlude.sensors.airborne import AirborneScanner
+from zbuf_occlude.sensors.airborne_presets import AIRBORNE_PRESETS
 from zbuf_occlude.sensors.beam import Beam
 from zbuf_occlude.sensors.checks import located, mapping, shown, text
 from zbuf_occlude.sensors.depth_camera import DEPTH_CAMERA_PRESETS, DepthCamera
