@@ -12,6 +12,7 @@ import pytest
 import zbuf_occlude as zo
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.crops import lidar_object_samples, object_crop
+from zbuf_occlude.sensors.kinds import with_beam
 from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
 
 MESH = Path(__file__).resolve().parents[2] / "data" / "samples" / "bed" / "train" / "bed_0001.off"
@@ -21,7 +22,7 @@ def test_samples_are_crops_in_the_mesh_frame():
     mesh = zo.load_mesh(MESH)
     dist = CropDistributions(distance_m=(6.0, 12.0), height_m=(1.7, 1.9), size_m=4.5)
     clouds = lidar_object_samples(
-        mesh, zo.Lidar.preset("hdl32e", range_noise_m=0.0), name="bed", n_samples=4, n_points=512, seed=3, distributions=dist
+        mesh, with_beam(zo.Lidar.preset("hdl32e"), range_noise_m=0.0), name="bed", n_samples=4, n_points=512, seed=3, distributions=dist
     )
     assert len(clouds) == 4
     lo, hi = mesh.bounds
@@ -55,7 +56,7 @@ def test_pose_is_measured_from_the_box_centre_of_an_uncentred_mesh():
 
     box = trimesh.creation.box(extents=(1.0, 0.4, 0.3))
     box.apply_translation((5.0, -2.0, 3.0))  # far from the origin of its own frame
-    (c,) = lidar_object_samples(box, zo.Lidar.preset("vlp16", range_noise_m=0.0), name="box", n_samples=1, n_points=64,
+    (c,) = lidar_object_samples(box, with_beam(zo.Lidar.preset("vlp16"), range_noise_m=0.0), name="box", n_samples=1, n_points=64,
                                 distributions=CropDistributions(distance_m=8.0, height_m=1.8, size_m=4.5, yaw_deg=0.0, azimuth_deg=0.0))  # fmt: skip
     scale = 4.5
     expected = np.array([-8.0, 0.0, 1.8 - 0.3 * scale / 2]) / scale  # sensor minus box centre, mesh units
@@ -70,7 +71,7 @@ def _box_6m_away():
 
     box = trimesh.creation.box(extents=(2.0, 1.0, 1.0))
     dist = CropDistributions(distance_m=6.0, height_m=1.8, size_m=2.0, yaw_deg=30.0, azimuth_deg=10.0)
-    lidar = zo.Lidar.preset("hdl32e", range_noise_m=0.0)
+    lidar = with_beam(zo.Lidar.preset("hdl32e"), range_noise_m=0.0)
     placement = draw_placement(dist, np.random.default_rng(0))
     return box, lidar, placement, object_crop(box, lidar, placement, seed=1)
 
@@ -107,7 +108,7 @@ def test_ground_returns_have_no_face_of_the_mesh():
     box = trimesh.creation.box(extents=(2.0, 1.0, 1.0))
     dist = CropDistributions(distance_m=6.0, height_m=1.8, size_m=2.0, ground_margin_m=1.0)
     (c,) = lidar_object_samples(
-        box, zo.Lidar.preset("hdl32e", range_noise_m=0.0), name="box", n_samples=1, n_points=4096, distributions=dist
+        box, with_beam(zo.Lidar.preset("hdl32e"), range_noise_m=0.0), name="box", n_samples=1, n_points=4096, distributions=dist
     )
     on_ground = np.abs(c.points[:, 2] + 0.5) < 1e-5
     assert on_ground.any() and np.all(c.face_index[on_ground & (c.face_index >= 0)] < len(box.faces))

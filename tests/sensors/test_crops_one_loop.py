@@ -14,6 +14,7 @@ from zbuf_occlude.dataset.reader import OccludedDataset
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors import Lidar
 from zbuf_occlude.sensors.crops import object_crop, object_crops
+from zbuf_occlude.sensors.kinds import with_beam
 from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
@@ -55,7 +56,7 @@ def test_scan_crop_and_farm_sensor_give_the_same_placements_and_returns_for_one_
 
 def test_object_crops_draws_crop_k_from_its_own_generator_whatever_the_crops_before_it() -> None:
     box = trimesh.creation.box(extents=(1.0, 0.5, 0.8))
-    lidar = Lidar.preset("vlp16", range_noise_m=0.0)
+    lidar = with_beam(Lidar.preset("vlp16"), range_noise_m=0.0)
     dist = CropDistributions(distance_m=(4.0, 8.0), size_m=(2.0, 3.0))
     three = list(object_crops(box, lidar, dist, name="box", n_samples=3, seed=2))
     assert [c.index for c in three] == [0, 1, 2]
