@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
-from zbuf_occlude.io.las import CLASS_NAMES_RECORD_ID, CLASS_NAMES_USER_ID, las_bytes, read_las
+from zbuf_occlude.io.las import CLASS_NAMES_RECORD_ID, CLASS_NAMES_USER_ID, SurveyFields, las_bytes, read_las
 from zbuf_occlude.sensors.scan_data import GPS_START_S, Scan, read_scan_npz
 
 laspy = pytest.importorskip("laspy")
@@ -159,13 +159,13 @@ def test_las_bytes_refuses_class_indices_without_their_names() -> None:
     f = dict(intensity=[0, 0], return_number=[1, 1], number_of_returns=[1, 1], gps_time=[0.0, 1.0], scan_angle_deg=[0.0, 0.0])
     points = np.zeros((2, 3))
     with pytest.raises(InvalidInputError, match="give both or neither"):
-        las_bytes(points, **f, class_index=[0, 0])
+        las_bytes(points, **f, survey=SurveyFields(class_index=[0, 0]))
     with pytest.raises(InvalidInputError, match="class_index must be finite and within"):
-        las_bytes(points, **f, class_index=[0, 2], class_names=["a", "b"])
+        las_bytes(points, **f, survey=SurveyFields(class_index=[0, 2], class_names=["a", "b"]))
     with pytest.raises(InvalidInputError, match="a VLR holds at most 65,535"):
-        las_bytes(points, **f, class_index=[0, 0], class_names=["x" * 70_000])
+        las_bytes(points, **f, survey=SurveyFields(class_index=[0, 0], class_names=["x" * 70_000]))
     with pytest.raises(InvalidInputError, match="object_id must be finite and within"):
-        las_bytes(points, **f, object_id=[0, 2**40])
+        las_bytes(points, **f, survey=SurveyFields(object_id=[0, 2**40]))
 
 
 def test_the_npz_keeps_the_classes_and_the_scale(tmp_path: Path) -> None:

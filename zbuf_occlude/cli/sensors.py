@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from zbuf_occlude.cli.crops import FLAGS, CropSettings, add_crop_arguments, crop_settings, given_crop_options
+from zbuf_occlude.cli.las_options import LAS_FORMATS, add_las_arguments, las_keywords
 from zbuf_occlude.cli.options import Checked, count, counted, interval, out_folder, parse_interval, real, seed
 from zbuf_occlude.cli.return_physics import check_max_returns, check_transmittance, surface_optics, with_return_physics
 from zbuf_occlude.errors import InvalidInputError
@@ -23,7 +24,7 @@ from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.mesh.sizes import DIMENSIONS, SizeRange, size_interval
 from zbuf_occlude.sensors.placement import CropDistributions
-from zbuf_occlude.sensors.presets import preset_names, sensor_from_name
+from zbuf_occlude.sensors.kinds import preset_names, sensor_from_name
 
 __all__ = ["add_scan_parser", "add_realism_parser", "check_outside", "SCAN_CROP_DISTRIBUTIONS"]
 
@@ -150,21 +151,27 @@ def cmd_scan(args: argparse.Namespace) -> int:
         width = getattr(args, FLAGS)["across_sight_width_m"]
         raise InvalidInputError(f"--occlude meets {width} with a side occluder: it needs {width}")
     formats = ("npz", "ply") if args.format == "both" else (args.format,)
+    from zbuf_occlude.sensors.airborne import AirborneScanner
+
+    las_options = las_keywords(args, formats, world_frame=args.frame == "world" or isinstance(sensor, AirborneScanner))
     # a refused run's empty --out is removed by cli.main
     with OwnedFolder(args.out, names=[SCAN_FILE_NAMES], what="the scan") as folder:
-        return _scan_into(folder, args, sensor, formats)
+        return _scan_into(folder, args, sensor, formats, las_options)
 
 
 #: The files ``scan`` writes in ``--out``: ``<stem>_<sensor>_sNNN.npz|ply|las|laz``.
 SCAN_FILE_NAMES = r"[^/]+_s\d{3,}\.(npz|ply|las|laz)"
 
 
-def _save(folder: OwnedFolder, s, stem: str, formats: Sequence[str]) -> list[Path]:
-    """Write scan ``s`` as ``<stem>.<fmt>`` for each format, through the owned folder."""
+def _save(folder: OwnedFolder, s, stem: str, formats: Sequence[str], las_options: dict, *, ground_z_m: float, number: int) -> list[Path]:
+    """Write scan ``s`` as ``<stem>.<fmt>`` for each format, through the owned folder; a LAS/LAZ file with
+    ``las_options`` (:func:`~zbuf_occlude.cli.las_options.las_keywords`), the scene's ``ground_z_m`` and
+    ``number`` modulo 65,536 as its point source id where it has no flight lines."""
     files = []
     for fmt in formats:
-        if fmt in ("las", "laz"):  # LAS 1.4 point format 6, encoded in memory
-            folder.write_bytes(f"{stem}.{fmt}", s.to_las_bytes(compress=fmt == "laz"))
+        if fmt in LAS_FORMATS:  # LAS 1.4 point format 6, encoded in memory
+            data = s.to_las_bytes(compress=fmt == "laz", ground_z_m=ground_z_m, scan_number=number % 65536, **las_options)
+            folder.write_bytes(f"{stem}.{fmt}", data)
         else:
             with folder.write(f"{stem}.{fmt}") as tmp:
                 getattr(s, f"to_{fmt}")(tmp)
@@ -172,7 +179,7 @@ def _save(folder: OwnedFolder, s, stem: str, formats: Sequence[str]) -> list[Pat
     return files
 
 
-def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: Sequence[str]) -> int:
+def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: Sequence[str], las_options: dict) -> int:
     """:func:`cmd_scan` once ``--out`` is held."""
     from zbuf_occlude.io.progress import progress as progress_bar
     from zbuf_occlude.sensors.airborne import AirborneScanner
@@ -196,12 +203,12 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
             pose = look_at_pose(scene.default_sensor_pose()[:3, 3], target + [0, 0, 0.5])
         for k in progress_bar(range(args.samples), desc="scan", unit="scan", enabled=not args.no_progress):
             if isinstance(sensor, AirborneScanner):  # a flight over the scene's ground (world frame)
-                from zbuf_occlude.sensors.airborne import scan_airborne
+                from zbuf_occlude.sensors.scan import scan_airborne
 
                 s = scan_airborne(scene, sensor, (0.0, 0.0), scene.ground_half_extent_m, seed=args.seed + k)
             else:
                 s = scan(scene, sensor, pose, seed=args.seed + k, backend=args.backend, frame=args.frame, **surface_optics(args, scene))
-            written += _save(folder, s, f"{src.stem}_{sensor.name}_s{k:03d}", formats)
+            written += _save(folder, s, f"{src.stem}_{sensor.name}_s{k:03d}", formats, las_options, ground_z_m=scene.ground_z_m, number=k)
     else:
         if not isinstance(sensor, (Lidar, RayTable, AirborneScanner)):
             raise InvalidInputError("scan of a mesh file places a LiDAR; use a scene file for depth cameras")
@@ -239,15 +246,14 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
         if not isinstance(sensor, AirborneScanner):  # an aircraft flies its altitude above the object
             check_outside(dist, None if isinstance(mesh, dict) else mesh.extents)
         # the farm's loop and seeds: one seed gives the crops farm --sensor gives this file lying directly in its input folder
-        crops = object_crops(
-            mesh, sensor, dist, name=src.stem, n_samples=args.samples, seed=args.seed, backend=args.backend, frame=args.frame
-        )
+        crops = object_crops(mesh, sensor, dist, name=src.stem, n_samples=args.samples, seed=args.seed, class_name=src.stem,
+                             backend=args.backend, frame=args.frame)  # fmt: skip
         for k, crop, _ in progress_bar(crops, total=args.samples, desc="scan", unit="scan", enabled=not args.no_progress):
             placement = crop.placement
             s = crop.scan if args.crop else crop.full
             s.meta.update(placement.to_dict())
             stem = f"{src.stem}_{sensor.name}_s{k:03d}"
-            files = _save(folder, s, stem, formats)
+            files = _save(folder, s, stem, formats, las_options, ground_z_m=0.0, number=k)
             written += files
             returns = int(np.count_nonzero(crop.scan.object_id != GROUND_ID))
             if returns == 0:
@@ -403,6 +409,7 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         help="a mesh file's up axis, turned to +z; auto: by its path and format, as in generate and farm "
         "(ShapeNetCore paths and glTF +y, ...) (default: %(default)s)",
     )
+    add_las_arguments(p)
     p.add_argument("--out", required=True, action=Checked, check=out_folder, help="output folder")
     p.set_defaults(func=cmd_scan)
     return p

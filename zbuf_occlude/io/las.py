@@ -54,7 +54,7 @@ from zbuf_occlude.resources import check_memory
 
 __all__ = [
     "BYTES_PER_POINT", "CLASS_NAMES_RECORD_ID", "CLASS_NAMES_USER_ID", "EXTRA_BYTES", "MAX_EVLRS", "MAX_LAZ_POINTS_PER_BYTE", "MAX_VLRS",
-    "READ_CHUNK_POINTS", "SCAN_ANGLE_STEP_DEG", "LasPoints", "epsg_crs", "las_bytes", "read_las",
+    "READ_CHUNK_POINTS", "SCAN_ANGLE_STEP_DEG", "LasPoints", "SurveyFields", "epsg_crs", "las_bytes", "read_las",
 ]  # fmt: skip
 
 #: Points decoded at a time: bounds laspy's buffer of raw records (64 MiB of format-10 records).
@@ -335,6 +335,37 @@ EXTRA_BYTES = {
 #: The VLR that holds the class names ``class_index`` indexes: its user id and record id; its
 #: record is a UTF-8 JSON array of strings.
 CLASS_NAMES_USER_ID, CLASS_NAMES_RECORD_ID = "zbuf_occlude", 1
+
+
+@dataclass(frozen=True)
+class SurveyFields:
+    """What :func:`las_bytes` writes beside the points' standard fields, as a survey's file holds it.
+
+    Attributes
+    ----------
+    object_id : (N,) int, optional
+        Written as the extra bytes ``object_id`` (int32): the scene object each point lies on.
+    class_index : (N,) int, optional
+        Written as the extra bytes ``class_index`` (uint16), each ``< len(class_names)``; needs
+        ``class_names``.
+    class_names : sequence of str, optional
+        The names ``class_index`` indexes, written to the class names VLR (UTF-8 JSON, at most
+        65,535 bytes).
+    adjusted_standard_gps_time : bool
+        ``gps_time`` is adjusted standard GPS time (global encoding bit 0 set); default False, GPS
+        week time.
+    crs : int or str, optional
+        The coordinate reference system of the points: an EPSG code (``2154``, ``"EPSG:2154"``)
+        whose axes are in metres, written as OGC WKT (pyproj makes it: the ``crs`` extra).
+    """
+
+    object_id: Any = None
+    class_index: Any = None
+    class_names: Sequence[str] | None = None
+    adjusted_standard_gps_time: bool = False
+    crs: int | str | None = None
+
+
 #: Most bytes a VLR's record holds (its record length is a uint16, R15 §2.5).
 _VLR_MAX_BYTES = 65535
 
@@ -416,11 +447,7 @@ def las_bytes(
     rgb: Any = None,
     scale: float = 0.001,
     compress: bool = False,
-    object_id: Any = None,
-    class_index: Any = None,
-    class_names: Sequence[str] | None = None,
-    adjusted_standard_gps_time: bool = False,
-    crs: int | str | None = None,
+    survey: SurveyFields | None = None,
 ) -> bytes:
     """Points and their per-return fields as the bytes of a LAS 1.4 file (LAZ with ``compress``), in memory.
 
@@ -429,10 +456,11 @@ def las_bytes(
     (``LASF_Projection``, record 2112) with ``crs``, else no coordinate reference system.  The
     global encoding's bit 0 (GPS time type) is set with ``adjusted_standard_gps_time``: the times
     are then adjusted standard GPS time (GPS seconds − 10⁹); else GPS week time, seconds as given.
-    With ``object_id`` and ``class_index``, each point record carries extra bytes, described by the
-    Extra Bytes VLR (``LASF_Spec``, record 4) that laspy reads: ``object_id`` int32 and
-    ``class_index`` uint16, and a VLR :data:`CLASS_NAMES_USER_ID` / :data:`CLASS_NAMES_RECORD_ID`
-    holds ``class_names`` as a UTF-8 JSON array (``class_names[class_index]`` is a point's class).
+    With ``object_id`` or ``class_index`` (:class:`SurveyFields`), each point record carries extra
+    bytes, described by the Extra Bytes VLR (``LASF_Spec``, record 4) that laspy reads:
+    ``object_id`` int32 and ``class_index`` uint16, and a VLR :data:`CLASS_NAMES_USER_ID` /
+    :data:`CLASS_NAMES_RECORD_ID` holds ``class_names`` as a UTF-8 JSON array
+    (``class_names[class_index]`` is a point's class).
     The offsets are multiples of ``scale`` near the points' centre, so every coordinate reads back
     within ``scale / 2``.  The header's creation date is today's.  Write the bytes through the
     layer (:meth:`~zbuf_occlude.io.owned.OwnedFolder.write_bytes`).
@@ -460,19 +488,9 @@ def las_bytes(
         Metres (units) per stored integer step, > 0 (default 1 mm).
     compress : bool
         LAZ (LASzip through lazrs) instead of LAS.
-    object_id : (N,) int, optional
-        Written as the extra bytes ``object_id`` (int32): the scene object each point lies on.
-    class_index : (N,) int, optional
-        Written as the extra bytes ``class_index`` (uint16), each ``< len(class_names)``; needs
-        ``class_names``.
-    class_names : sequence of str, optional
-        The names ``class_index`` indexes, written to the class names VLR (UTF-8 JSON, at most
-        65,535 bytes).
-    adjusted_standard_gps_time : bool
-        ``gps_time`` is adjusted standard GPS time (global encoding bit 0 set).
-    crs : int or str, optional
-        The coordinate reference system of ``points``: an EPSG code (``2154``, ``"EPSG:2154"``)
-        whose axes are in metres, written as OGC WKT (pyproj makes it: the ``crs`` extra).
+    survey : SurveyFields, optional
+        Object ids, class indices and names, the GPS time type and the CRS (default: none of them,
+        GPS week time).
 
     Returns
     -------
@@ -514,15 +532,18 @@ def las_bytes(
         "return_number": returns, "number_of_returns": count,
     }  # fmt: skip
     colours = None if rgb is None else _per_point(rgb, "rgb", n, kinds="iu", low=0, high=65535, dtype=np.uint16, width=3)
-    if not isinstance(adjusted_standard_gps_time, (bool, np.bool_)):
-        raise ArgumentTypeError(f"adjusted_standard_gps_time must be True or False, got {described(adjusted_standard_gps_time)}")
-    extra = _extra_bytes(n, object_id, class_index, class_names)
-    wkt_crs = None if crs is None else epsg_crs(crs)
+    survey = SurveyFields() if survey is None else survey
+    if not isinstance(survey, SurveyFields):
+        raise ArgumentTypeError(f"survey must be a SurveyFields or None, got {described(survey)}")
+    if not isinstance(survey.adjusted_standard_gps_time, (bool, np.bool_)):
+        raise ArgumentTypeError(f"adjusted_standard_gps_time must be True or False, got {described(survey.adjusted_standard_gps_time)}")
+    extra = _extra_bytes(n, survey.object_id, survey.class_index, survey.class_names)
+    wkt_crs = None if survey.crs is None else epsg_crs(survey.crs)
     offsets, stored = _scaled(pts, scale)
     header = laspy.LasHeader(version="1.4", point_format=6 if colours is None else 7)
     header.scales, header.offsets = np.full(3, float(scale)), offsets
     header.global_encoding.wkt = True
-    if adjusted_standard_gps_time:
+    if survey.adjusted_standard_gps_time:
         header.global_encoding.gps_time_type = laspy.header.GpsTimeType.STANDARD
     header.generating_software = f"zbuf_occlude {__version__}"
     if wkt_crs is not None:
@@ -530,9 +551,9 @@ def las_bytes(
     if extra:
         header.add_extra_dims([laspy.ExtraBytesParams(name=key, type=values.dtype, description=EXTRA_BYTES[key][1])
                                for key, values in extra.items()])  # fmt: skip
-    if class_names is not None:
+    if survey.class_names is not None:
         header.vlrs.append(laspy.VLR(CLASS_NAMES_USER_ID, CLASS_NAMES_RECORD_ID, "class names by class_index (JSON)",
-                                     _names_json(class_names)))  # fmt: skip
+                                     _names_json(survey.class_names)))  # fmt: skip
     las = laspy.LasData(header)
     las.X, las.Y, las.Z = stored[:, 0], stored[:, 1], stored[:, 2]
     for key, values in fields_.items():

@@ -257,7 +257,7 @@ class Scan:
         BackendUnavailable
             ``crs`` without pyproj.
         """
-        from zbuf_occlude.io.las import las_bytes
+        from zbuf_occlude.io.las import SurveyFields, las_bytes
         from zbuf_occlude.sensors.checks import count, real
         from zbuf_occlude.sensors.las_classes import asprs_classification
 
@@ -293,11 +293,12 @@ class Scan:
             points, intensity=intensity,
             return_number=ones if self.return_number is None else self.return_number,
             number_of_returns=ones if self.number_of_returns is None else self.number_of_returns,
-            gps_time=times, adjusted_standard_gps_time=True,
+            gps_time=times,
             scan_angle_deg=np.zeros(n) if self.scan_angle_deg is None else np.asarray(self.scan_angle_deg, np.float64),
             classification=classification,
             point_source_id=np.asarray(line) if flight_lines else np.full(n, source, np.int64),
-            object_id=ids, class_index=index_of[ids], class_names=list(position), crs=crs, scale=0.001, compress=compress,
+            survey=SurveyFields(object_id=ids, class_index=index_of[ids], class_names=list(position), adjusted_standard_gps_time=True, crs=crs),
+            scale=0.001, compress=compress,
         )  # fmt: skip
 
     def _classes(self, ids: NDArray[np.int64]) -> tuple[str, ...]:

@@ -1,0 +1,111 @@
+"""``--crs``, ``--class-map`` and ``--gps-start``: the survey fields of the LAS/LAZ files a command writes.
+
+:func:`add_las_arguments` adds the options; each is checked while the command line is parsed
+(:class:`~zbuf_occlude.cli.options.Checked`: a class map file is read and checked then, before
+anything is scanned), and a refused value is one line naming the option and the value, exit
+status 2.  :func:`las_keywords` turns them into the keywords of
+:meth:`~zbuf_occlude.sensors.scan_data.Scan.to_las_bytes`.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from typing import Any
+
+from zbuf_occlude.cli.options import GIVEN, Checked, real, shown
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.scan_data import GPS_START_S
+
+__all__ = ["LAS_FORMATS", "LAS_OPTIONS", "add_las_arguments", "check_class_map_option", "check_crs_option", "las_keywords"]
+
+#: The ``--format`` values that write LAS/LAZ files.
+LAS_FORMATS = ("las", "laz")
+#: The options of :func:`add_las_arguments`: ``args`` attribute → option.
+LAS_OPTIONS = {"crs": "--crs", "class_map": "--class-map", "gps_start_s": "--gps-start"}
+
+
+def check_crs_option(text: str, option: str) -> str:
+    """``--crs EPSG:N``: an EPSG code of a CRS in metres that PROJ knows (:func:`~zbuf_occlude.io.las.epsg_crs`), as ``EPSG:N``.
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the option and the value: not ``EPSG:N``, unknown, not in metres.
+    BackendUnavailable
+        pyproj is not installed (the ``crs`` extra).
+    """
+    from zbuf_occlude.io.las import epsg_crs
+
+    if not text.strip().upper().startswith("EPSG:"):
+        raise InvalidInputError(f"{option} must be an EPSG code, EPSG:N (EPSG:2154), got {shown(text)}")
+    try:
+        epsg_crs(text)
+    except InvalidInputError as exc:
+        raise InvalidInputError(f"{option} {shown(text)}: {exc}") from None
+    return f"EPSG:{int(text.strip()[5:])}"
+
+
+def check_class_map_option(text: str, option: str) -> dict[str, int]:
+    """``--class-map FILE``: the class map the file holds (:func:`~zbuf_occlude.sensors.las_classes.load_class_map`).
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the option, the file and the key.
+    """
+    from zbuf_occlude.sensors.las_classes import load_class_map
+
+    try:
+        return load_class_map(text)
+    except InvalidInputError as exc:
+        raise InvalidInputError(f"{option} {exc}") from None
+
+
+def add_las_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add ``--crs``, ``--class-map`` and ``--gps-start`` (docs/guide/las_fields.md) to ``parser``."""
+    g = parser.add_argument_group(
+        "LAS/LAZ fields (--format las or laz)",
+        "ASPRS classes, object ids and class names, flight lines, intensity counts and adjusted standard GPS time are "
+        "always written (docs/guide/las_fields.md); these options set the rest",
+    )
+    g.add_argument(
+        "--crs", metavar="EPSG:N", action=Checked, check=check_crs_option, default=None,
+        help="the coordinate reference system of the points, an EPSG code in metres (EPSG:2154), written as a WKT VLR; "
+        "needs --frame world (airborne scans are) and pyproj (the crs extra) (default: none)",
+    )  # fmt: skip
+    g.add_argument(
+        "--class-map", metavar="FILE", action=Checked, check=check_class_map_option, default=None,
+        help='a .json object of class name to ASPRS code ({"car": 1, "oak_tree": 5}) that overrides the rule (ground 2, '
+        "vegetation 3/4/5 by height, building 6, others 1) for the names it holds",
+    )  # fmt: skip
+    g.add_argument(
+        "--gps-start", metavar="S", dest="gps_start_s", action=Checked, check=real(0.0, unit="seconds"), default=GPS_START_S,
+        help="adjusted standard GPS time (GPS seconds - 1e9) of the scan's time 0, by default 2026-01-01T00:00:00 UTC; every "
+        "time written must stay >= 0 (default: %(default)s)",
+    )  # fmt: skip
+
+
+def las_keywords(args: argparse.Namespace, formats: Sequence[str], *, world_frame: bool) -> dict[str, Any]:
+    """The keywords of :meth:`~zbuf_occlude.sensors.scan_data.Scan.to_las_bytes` from the options of :func:`add_las_arguments`.
+
+    Parameters
+    ----------
+    formats : sequence of str
+        The formats the command writes.
+    world_frame : bool
+        Whether the scans' points are in the world frame (``--crs`` labels world coordinates).
+
+    Raises
+    ------
+    InvalidInputError
+        An option given while no LAS/LAZ file is written, or ``--crs`` for points in the sensor frame.
+    """
+    given = getattr(args, GIVEN, frozenset())
+    if not set(formats) & set(LAS_FORMATS):
+        for attr, option in LAS_OPTIONS.items():
+            if attr in given:
+                raise InvalidInputError(f"{option} fills LAS/LAZ files: it needs --format las or laz, not {', '.join(formats)}")
+    if args.crs is not None and not world_frame:
+        raise InvalidInputError(f"--crs {args.crs} labels world coordinates: it needs --frame world (the points are in the sensor's frame)")
+    return {"crs": args.crs, "class_map": args.class_map, "gps_start_s": args.gps_start_s}
