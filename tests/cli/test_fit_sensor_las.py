@@ -12,12 +12,12 @@ import pytest
 
 from zbuf_occlude.cli.main import main as cli_main
 from zbuf_occlude.io.las import las_bytes, read_las
-from zbuf_occlude.sensors.airborne import AirborneScanner
+from zbuf_occlude.sensors.airborne import AIRBORNE_IDEAL_BEAM, AirborneScanner
 from zbuf_occlude.sensors.kinds import sensor_from_name, sensor_to_json
 
 #: The airborne scanner of the scans: a 2° beam of 19 sub-rays, up to 4 returns 1 m apart, 100 m above the ground.
 ALS = AirborneScanner("test-als", swath_deg=20.0, pulse_rate_hz=2000.0, line_rate_hz=20.0, altitude_m=100.0, speed_mps=10.0,
-                      beam_divergence_deg=2.0, footprint_rays=19, max_returns=4, range_resolution_m=1.0)  # fmt: skip
+                      beam=AIRBORNE_IDEAL_BEAM.with_(divergence_deg=2.0, footprint_rays=19, max_returns=4, range_resolution_m=1.0))  # fmt: skip
 
 
 def _run(argv: list[str], capsys) -> tuple[int, str, str]:
@@ -47,15 +47,18 @@ def test_a_folder_of_our_own_laz_scans_gives_a_sensor_file_and_a_table(scans: Pa
     assert spec["fit"]["files"] == sorted(p.name for p in scans.glob("*.laz")) and fit["altitude_m"] == 100.0
     resolution = fit["estimates"]["range_resolution_m"]["value"]
     # every gap between a pulse's returns is at least the scanner's resolution: the fit's lower end too (1 mm steps, 2 cm noise)
-    assert resolution >= ALS.range_resolution_m - 0.1
-    assert 2 <= fit["estimates"]["max_returns"]["value"] <= ALS.max_returns
+    assert resolution >= ALS.beam.range_resolution_m - 0.1
+    assert 2 <= fit["estimates"]["max_returns"]["value"] <= ALS.beam.max_returns
     assert "bootstrap over pulses (20, seed 3)" in fit["estimates"]["range_resolution_m"]["method"]
     sensor = sensor_from_name(str(out))  # scan --sensor reads it back
-    assert sensor.name == "riegl-q1560-fitted" and sensor.range_resolution_m == resolution and sensor.altitude_m == 100.0
-    assert sensor.max_returns == fit["estimates"]["max_returns"]["value"]
+    assert sensor.name == "riegl-q1560-fitted" and sensor.beam.range_resolution_m == resolution and sensor.altitude_m == 100.0
+    assert sensor.beam.max_returns == fit["estimates"]["max_returns"]["value"]
     text = out.with_suffix(".md").read_text()
     assert text.startswith("# riegl-q1560-fitted: the return model fitted to") and "| returns_1 |" in text
-    assert "records one return per pulse until it is given a beam_divergence_deg" in text  # the preset casts one ray
+    # the intensity scale measured is the beam's; the preset's footprint is kept, and the file says what came from where
+    assert sensor.beam.intensity_scale == fit["estimates"]["intensity_scale"]["value"] and sensor.beam.max_intensity == 65_535
+    assert sensor.beam.footprint_rays == 19 and "casts one ray" not in text
+    assert set(spec["fit"]["beam"]["fitted"]) >= {"max_returns", "range_resolution_m", "intensity_scale"}
 
 
 def test_one_file_and_a_spinning_lidar_that_needs_an_altitude(scans: Path, tmp_path: Path, capsys) -> None:
@@ -66,7 +69,12 @@ def test_one_file_and_a_spinning_lidar_that_needs_an_altitude(scans: Path, tmp_p
     code, _, err = _run(["fit-sensor", str(laz), "--sensor", "hdl32e", "--altitude", "100", "--bootstrap", "5",
                          "--out", str(tmp_path / "f.json")], capsys)  # fmt: skip
     assert code == 0, err
-    assert sensor_from_name(str(tmp_path / "f.json")).detection_range_m > 0
+    spec = json.loads((tmp_path / "f.json").read_text())
+    lidar = sensor_from_name(str(tmp_path / "f.json"))
+    assert lidar.beam.detection_threshold == spec["fit"]["returns"]["estimates"]["detection_threshold"]["value"] > 0
+    # several returns need a footprint: the HDL-32E's data-sheet divergence, FOOTPRINT_RAYS sub-rays; the file says so
+    assert (lidar.beam.divergence_deg, lidar.beam.footprint_rays) == (0.16, 7) and lidar.beam.max_returns > 1
+    assert spec["fit"]["beam"]["data_sheet"] == {"divergence_deg": 0.16} and spec["fit"]["beam"]["model"]["footprint_rays"] == 7
 
 
 @pytest.mark.parametrize(
@@ -172,7 +180,7 @@ def test_divergence_shares_fit_the_divergence(scans: Path, tmp_path: Path, capsy
     fit = json.loads(out.read_text())["fit"]["returns"]
     share = fit["statistics"]["estimates"]["multi_return_points"]["value"]
     sensor = sensor_from_name(str(out))
-    assert sensor.beam_divergence_deg == pytest.approx(0.5 + 3.5 * share) and sensor.footprint_rays == 7
+    assert sensor.beam.divergence_deg == pytest.approx(0.5 + 3.5 * share) and sensor.beam.footprint_rays == 19
     assert fit["estimates"]["beam_divergence_deg"]["value"] == pytest.approx(0.5 + 3.5 * share)
 
 

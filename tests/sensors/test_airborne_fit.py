@@ -12,10 +12,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.airborne import AirborneScanner
+from zbuf_occlude.sensors.airborne import AIRBORNE_IDEAL_BEAM, AirborneScanner
 from zbuf_occlude.sensors.scan import scan_airborne
 from zbuf_occlude.sensors.fit.airborne import _face_density, crop_faces, fit_airborne
-from zbuf_occlude.sensors.kinds import sensor_from_name
+from zbuf_occlude.sensors.kinds import kind_of, sensor_from_name
 
 
 def _scanner(name: str, density_m2: float, altitude_m: float, swath_deg: float, noise_m: float, dropout: float = 0.0) -> AirborneScanner:
@@ -25,7 +25,7 @@ def _scanner(name: str, density_m2: float, altitude_m: float, swath_deg: float, 
     prr = density_m2 * speed * width
     line_rate = math.sqrt(prr * speed / (altitude_m * math.radians(swath_deg)))
     return AirborneScanner(name, swath_deg=swath_deg, pulse_rate_hz=prr, line_rate_hz=line_rate, altitude_m=altitude_m,
-                           speed_mps=speed, range_noise_m=noise_m, dropout=dropout)  # fmt: skip
+                           speed_mps=speed, beam=AIRBORNE_IDEAL_BEAM.with_(range_noise_m=noise_m, dropout=dropout))  # fmt: skip
 
 
 def _box_crops(scanner: AirborneScanner, n: int, seed: int) -> tuple[list[np.ndarray], list[float], list[float]]:
@@ -41,7 +41,7 @@ def _box_crops(scanner: AirborneScanner, n: int, seed: int) -> tuple[list[np.nda
         box.apply_translation([0.0, y, ext[2] / 2.0])
         scan = scan_airborne(box, scanner, center_xy=(0.0, y), half_size_m=4.0, seed=seed * 1000 + i)
         crops.append(np.asarray(scan.points, dtype=np.float64))
-        density.append(scanner.density_at_m2(y) * (1.0 - scanner.dropout))
+        density.append(scanner.density_at_m2(y) * (1.0 - scanner.beam.dropout))
         angle.append(math.degrees(math.atan2(abs(y), scanner.altitude_m)))
     return crops, density, angle
 
@@ -67,7 +67,7 @@ def test_the_fit_recovers_density_noise_and_scan_angle_range(simulated) -> None:
     scanner, _, density, angle, fit = simulated
     e = fit.estimates
     assert e["density_m2"].value == pytest.approx(np.mean(density), rel=0.10)
-    assert e["range_noise_m"].value == pytest.approx(scanner.range_noise_m, rel=0.20)
+    assert e["range_noise_m"].value == pytest.approx(scanner.beam.range_noise_m, rel=0.20)
     assert abs(e["max_scan_angle_deg"].value - scanner.swath_deg / 2.0) <= 5.0  # the crops spread over the swath
     assert e["two_sided_fraction"].value == 0.0
     for key in ("density_m2", "range_noise_m", "max_scan_angle_deg"):
@@ -273,7 +273,7 @@ def test_sensor_to_json_is_what_sensor_from_name_reads_back(name, tmp_path) -> N
     path = tmp_path / "s.json"
     path.write_text(json.dumps(sensor_to_json(sensor)))
     assert sensor_from_name(path) == sensor
-    with pytest.raises(InvalidInputError, match="not a sensor: str"):
+    with pytest.raises(InvalidInputError, match="a sensor must be a Lidar, .*; got str"):
         sensor_to_json("hdl32e")
 
 
@@ -304,11 +304,13 @@ def test_fit_sensor_command_fits_an_airborne_scanner_to_aerial_crops(tmp_path, c
     )
     assert "| density_m2 | " in printed and " ± " in printed and "The fitted scanner riegl-q1560-fitted" in printed
     fitted = sensor_from_name(out)  # the loader of scan, farm --sensor and experiment sim2real --sensor
-    assert isinstance(fitted, AirborneScanner) and fitted.name == "riegl-q1560-fitted"
+    assert kind_of(fitted).name == "airborne" and fitted.name == "riegl-q1560-fitted"
     assert fitted.survey_density_m2 == pytest.approx(np.mean(density), rel=0.10)
     assert abs(fitted.swath_deg - scanner.swath_deg) <= 10.0
     spec = json.loads(out.read_text())
     assert spec["kind"] == "airborne" and spec["fit"]["n_crops"] == 16 and spec["fit"]["estimates"]["density_m2"]["std"] > 0
+    # the preset's beam (its data sheet's footprint, returns, intensity scale) with only the range noise fitted
+    assert fitted.beam == sensor_from_name("riegl-q1560").beam.with_(range_noise_m=spec["fit"]["estimates"]["range_noise_m"]["value"])
     assert "| density_m2 | " in out.with_suffix(".md").read_text()
     # the file scans
     assert main(["scan", "box", "--sensor", str(out), "--crop", "--size", "4.5", "--out", str(tmp_path / "scans")]) == 0

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.fit import fit_lidar
 from zbuf_occlude.sensors.lidar import lidar_preset
-from zbuf_occlude.sensors.kinds import sensor_from_name
+from zbuf_occlude.sensors.kinds import sensor_from_name, with_beam
 from zbuf_occlude.sensors.scan import scan
 
 PLACES = [(6.0, 0.0), (8.0, 20.0), (10.0, -15.0), (12.0, 5.0), (15.0, 30.0), (9.0, -30.0)]
@@ -41,15 +41,15 @@ def _box_scans(sensor, seed: int = 0) -> list[np.ndarray]:
 @example(noise=0.046875, dropout=0.0, firing=29675.0, seed=0)
 @example(noise=0.03125, dropout=0.0, firing=29975.0, seed=1)
 def test_fit_recovers_the_sensor_that_made_the_scans(noise, dropout, firing, seed) -> None:
-    truth = lidar_preset("hdl32e").with_(range_noise_m=noise, dropout=dropout, firing_rate_hz=firing)
+    truth = with_beam(lidar_preset("hdl32e"), range_noise_m=noise, dropout=dropout).with_(firing_rate_hz=firing)
     fit = fit_lidar(_box_scans(truth, seed), lidar_preset("hdl32e"), bootstrap=20)
     assert fit.sensor.firing_rate_hz == pytest.approx(firing, rel=0.01)
-    assert fit.sensor.range_noise_m == pytest.approx(noise, rel=0.15, abs=0.002)
+    assert fit.sensor.beam.range_noise_m == pytest.approx(noise, rel=0.15, abs=0.002)
     assert fit.estimates["dropout"].value == pytest.approx(dropout, abs=0.02)
     # one rate at every range: the law's intercept is that rate and its slope near 0 (6 scans: over
     # 25 random draws the errors reached 0.027 and 0.0039/m; the margins are twice those)
-    assert fit.sensor.dropout == pytest.approx(dropout, abs=0.055)
-    assert abs(fit.sensor.dropout_range_per_m) < 0.008
+    assert fit.sensor.beam.dropout == pytest.approx(dropout, abs=0.055)
+    assert abs(fit.sensor.beam.dropout_range_per_m) < 0.008
     assert abs(fit.estimates["elevation_offset_deg"].value) < 0.01
     assert fit.estimates["ring_spacing_deg"].value == pytest.approx(1.33, abs=0.02)
     # boxes without ground: only noisy returns at a box's foot that fit a plane within 25 degrees of level (2.1 % at 4.7 cm,
@@ -57,34 +57,37 @@ def test_fit_recovers_the_sensor_that_made_the_scans(noise, dropout, firing, see
     assert fit.estimates["ground_fraction"].value < 0.06
     # the fitted sensor keeps the base's beam table and spin; every estimate has an uncertainty
     assert fit.sensor.elevations_deg == fit.base.elevations_deg
+    # and its beam: the data sheet's divergence, intensity scale, range limits..., only the noise and the dropout law fitted
+    b = fit.sensor.beam
+    assert b == fit.base.beam.with_(range_noise_m=b.range_noise_m, dropout=b.dropout, dropout_range_per_m=b.dropout_range_per_m)
     assert all(np.isfinite(e.std) for e in fit.estimates.values())
 
 
 @pytest.mark.parametrize("slope", [0.004, 0.01])
 def test_fit_recovers_dropout_growing_with_range(slope: float) -> None:
     """Scans lose returns at dropout + slope · range; the fit gives the slope and intercept back."""
-    truth = lidar_preset("hdl32e").with_(dropout=0.02, dropout_range_per_m=slope)
+    truth = with_beam(lidar_preset("hdl32e"), dropout=0.02, dropout_range_per_m=slope)
     clouds = [c for seed in range(4) for c in _box_scans(truth, 100 * seed)]
     fit = fit_lidar(clouds, lidar_preset("hdl32e"), bootstrap=20)
-    assert fit.sensor.dropout_range_per_m == pytest.approx(slope, abs=0.0025)
-    assert fit.sensor.dropout == pytest.approx(0.02, abs=0.03)
+    assert fit.sensor.beam.dropout_range_per_m == pytest.approx(slope, abs=0.0025)
+    assert fit.sensor.beam.dropout == pytest.approx(0.02, abs=0.03)
     # the simulated law loses the pooled share of the scans' firings
     ranges = np.concatenate([np.linalg.norm(c, axis=1) for c in clouds])
-    assert float(fit.sensor.dropout_probability(ranges).mean()) == pytest.approx(fit.estimates["dropout"].value, abs=0.015)
+    assert float(fit.sensor.beam.dropout_probability(ranges).mean()) == pytest.approx(fit.estimates["dropout"].value, abs=0.015)
 
 
 def test_dropout_probability_is_the_clipped_linear_law() -> None:
-    lidar = lidar_preset("hdl32e").with_(dropout=0.05, dropout_range_per_m=0.01)
-    np.testing.assert_allclose(lidar.dropout_probability([0.0, 10.0, 200.0]), [0.05, 0.15, 0.95])
-    assert lidar_preset("hdl32e").with_(dropout=0.1).dropout_probability(np.ones((2, 3))).tolist() == [[0.1] * 3] * 2
+    lidar = with_beam(lidar_preset("hdl32e"), dropout=0.05, dropout_range_per_m=0.01)
+    np.testing.assert_allclose(lidar.beam.dropout_probability([0.0, 10.0, 200.0]), [0.05, 0.15, 0.95])
+    assert with_beam(lidar_preset("hdl32e"), dropout=0.1).beam.dropout_probability(np.ones((2, 3))).tolist() == [[0.1] * 3] * 2
     with pytest.raises(InvalidInputError, match="dropout_range_per_m"):
-        lidar_preset("hdl32e").with_(dropout_range_per_m=float("nan"))
+        with_beam(lidar_preset("hdl32e"), dropout_range_per_m=float("nan"))
 
 
 def test_scans_lose_more_far_returns_with_a_range_law() -> None:
     """The scan applies the law: a far box keeps a smaller share of its hits than a near one."""
-    flat = lidar_preset("hdl32e").with_(range_noise_m=0.0)
-    law = flat.with_(dropout_range_per_m=0.02)
+    flat = with_beam(lidar_preset("hdl32e"), range_noise_m=0.0)
+    law = with_beam(flat, dropout_range_per_m=0.02)
     kept = {}
     for distance in (5.0, 25.0):
         box = trimesh.creation.box(extents=(1.0, 4.0, 3.0))
@@ -97,7 +100,7 @@ def test_scans_lose_more_far_returns_with_a_range_law() -> None:
 
 
 def test_the_fitted_sensor_is_a_sensor_file(tmp_path: Path) -> None:
-    truth = lidar_preset("vlp16").with_(range_noise_m=0.02, dropout=0.05)
+    truth = with_beam(lidar_preset("vlp16"), range_noise_m=0.02, dropout=0.05)
     fit = fit_lidar(_box_scans(truth), lidar_preset("vlp16"), bootstrap=5)
     path = tmp_path / "fitted.json"
     path.write_text(json.dumps(fit.to_json()))
@@ -137,7 +140,7 @@ def test_fit_sensor_command_on_lidarnet_style_csvs(tmp_path: Path, capsys) -> No
     from zbuf_occlude.cli.main import main
     from zbuf_occlude.real_scans.datasets import LIDARNET_UNITS_PER_METRE
 
-    truth = lidar_preset("hdl32e").with_(range_noise_m=0.02, dropout=0.1)
+    truth = with_beam(lidar_preset("hdl32e"), range_noise_m=0.02, dropout=0.1)
     (tmp_path / "scans" / "Box").mkdir(parents=True)
     for i, c in enumerate(_box_scans(truth)):
         y_up = np.stack([c[:, 0], c[:, 2], -c[:, 1]], axis=1) * LIDARNET_UNITS_PER_METRE  # the data set's axes and unit
@@ -151,7 +154,7 @@ def test_fit_sensor_command_on_lidarnet_style_csvs(tmp_path: Path, capsys) -> No
     fitted = sensor_from_name(str(out))
     spec = json.loads(out.read_text())
     assert spec["fit"]["estimates"]["dropout"]["value"] == pytest.approx(0.1, abs=0.02)
-    assert fitted.range_noise_m == pytest.approx(0.02, rel=0.15)
+    assert fitted.beam.range_noise_m == pytest.approx(0.02, rel=0.15)
     # the crops' distances of the one class: the boxes stand 6-15 m away (PLACES)
     ((label, (lo, hi)),) = spec["fit"]["crops"]["distance_m"].items()
     assert 5.0 < lo < hi < 15.0 and f"| {label} | 6 |" in out.with_suffix(".md").read_text()
@@ -195,7 +198,7 @@ def test_fit_recovers_the_ground_and_the_hidden_bottoms_of_simulated_crops() -> 
     from zbuf_occlude.sensors.fit import crop_placement_json
 
     box = trimesh.creation.box(extents=(2.0, 1.0, 1.0))
-    lidar = lidar_preset("hdl32e", range_noise_m=0.0)
+    lidar = with_beam(lidar_preset("hdl32e"), range_noise_m=0.0)
     rng = np.random.default_rng(0)
     clouds, labels = [], []
     for label, hidden in (("whole", 0.0), ("cut", 0.5)):

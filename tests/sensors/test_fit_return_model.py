@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.io.atomic import write_bytes
 from zbuf_occlude.io.las import LasPoints, las_bytes, read_las
-from zbuf_occlude.sensors.airborne import airborne_preset
+from zbuf_occlude.sensors.airborne import AIRBORNE_IDEAL_BEAM, airborne_preset
 from zbuf_occlude.sensors.echoes import hit_energy
 from zbuf_occlude.sensors.fit import (
     Estimate,
@@ -27,7 +27,7 @@ from zbuf_occlude.sensors.fit import (
 from zbuf_occlude.sensors.fit.return_model import lower_end
 from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
 from zbuf_occlude.sensors.fit.returns import PulseValues
-from zbuf_occlude.sensors.kinds import sensor_from_name
+from zbuf_occlude.sensors.kinds import sensor_from_name, with_beam
 
 #: The synthetic survey's truth: flying height, ground reflectance, intensity scale (counts·m²), range resolution (m),
 #: detection threshold (counts).
@@ -151,25 +151,53 @@ def test_without_a_ground_class_the_lowest_single_returns_are_the_ground() -> No
 
 def test_applied_to_sensors(survey_fit) -> None:
     e = survey_fit.estimates
-    airborne = survey_fit.apply(airborne_preset("riegl-q1560"))
-    assert (airborne.max_returns, airborne.range_resolution_m) == (4, e["range_resolution_m"].value)
+    preset = airborne_preset("riegl-q1560")
+    airborne, origin = survey_fit.applied(preset)
+    assert (airborne.beam.max_returns, airborne.beam.range_resolution_m) == (4, e["range_resolution_m"].value)
     assert airborne.name == "riegl-q1560-fitted" and "returns fitted to 4,000 pulses" in airborne.source and airborne.altitude_m == H
-    assert survey_fit.sets(airborne) == ("range_resolution_m", "max_returns", "detection_threshold")  # no divergence measured
-    assert airborne.detection_threshold == e["detection_threshold"].value
-    lidar = survey_fit.apply(sensor_from_name("hdl32e"))
-    assert lidar.detection_range_m == pytest.approx(math.sqrt(lidar.detection_reflectivity / e["detection_threshold"].value))
-    assert lidar.detection_threshold == pytest.approx(e["detection_threshold"].value)
+    # no divergence measured; the intensity scale measured is applied, in 16-bit counts
+    assert survey_fit.sets(airborne) == ("range_resolution_m", "max_returns", "detection_threshold", "intensity_scale")
+    assert airborne.beam.detection_threshold == e["detection_threshold"].value
+    assert (airborne.beam.intensity_scale, airborne.beam.max_intensity) == (e["intensity_scale"].value, 65_535)
+    # the rest of the beam is the data sheet's: its footprint, wavelength, range noise
+    fitted_fields = ("max_returns", "range_resolution_m", "detection_threshold", "intensity_scale", "max_intensity")
+    assert airborne.beam == preset.beam.with_(**{name: getattr(airborne.beam, name) for name in fitted_fields})
+    assert set(origin["fitted"]) == {"max_returns", "range_resolution_m", "detection_threshold", "intensity_scale"}
+    assert origin["data_sheet"] == {} and origin["model"] == {"max_intensity": 65_535} and "riegl-q1560" in origin["kept"]
+    lidar, origin = survey_fit.applied(sensor_from_name("hdl32e"))
+    assert lidar.beam.detection_threshold == pytest.approx(e["detection_threshold"].value)
     assert "| detection_threshold |" in survey_fit.markdown(lidar) and "| yes |" in survey_fit.markdown(lidar)
-    # a divergence fitted by simulation: the scanner gets it and a footprint
+    # a spinning LiDAR of one ray: several returns need a footprint, the data sheet's divergence with FOOTPRINT_RAYS sub-rays
+    assert (lidar.beam.max_returns, lidar.beam.footprint_rays, lidar.beam.divergence_deg) == (4, FOOTPRINT_RAYS, 0.16)
+    assert origin["data_sheet"] == {"divergence_deg": 0.16} and origin["model"]["footprint_rays"] == FOOTPRINT_RAYS
+    assert "HDL-32E" in origin["source"]
+    # a divergence fitted by simulation: the scanner gets it, and keeps its footprint of sub-rays
     with_divergence = replace(survey_fit, estimates={**e, "beam_divergence_deg": Estimate(0.02, 0.002, 10, "simulated", "deg")})
-    fitted = with_divergence.apply(airborne_preset("riegl-q1560"))
-    assert fitted.beam_divergence_deg == 0.02 and fitted.footprint_rays == FOOTPRINT_RAYS
-    # one return per pulse: no resolution, one ray
+    fitted = with_divergence.apply(preset)
+    assert fitted.beam.divergence_deg == 0.02 and fitted.beam.footprint_rays == preset.beam.footprint_rays
+    one_ray = with_divergence.apply(with_beam(preset, footprint_rays=1))
+    assert one_ray.beam.divergence_deg == 0.02 and one_ray.beam.footprint_rays == FOOTPRINT_RAYS
+    # one return per pulse: no resolution; the footprint gives the strongest echo, the threshold applies
     single = replace(survey_fit, estimates={**with_divergence.estimates, "max_returns": Estimate(1.0, 0.0, 10, "count")})
-    one = single.apply(airborne_preset("riegl-q1560"))
-    assert (one.max_returns, one.range_resolution_m, one.footprint_rays, one.detection_threshold) == (1, 0.0, 1, 0.0)
+    one = single.apply(preset)
+    assert (one.beam.max_returns, one.beam.range_resolution_m) == (1, 0.0)
+    assert one.beam.detection_threshold == e["detection_threshold"].value
     with pytest.raises(ArgumentTypeError, match="Lidar or an AirborneScanner"):
         survey_fit.apply("riegl-q1560")
+
+
+def test_a_beam_without_a_footprint_gets_its_presets_data_sheet_divergence(survey_fit) -> None:
+    """A scanner file of the preset's name whose beam lost its footprint (one ray, no divergence) gets the preset's back."""
+    preset = airborne_preset("riegl-q1560")
+    bare = with_beam(preset, footprint_rays=1, divergence_deg=0.0)
+    fitted, origin = survey_fit.applied(bare)
+    assert (fitted.beam.divergence_deg, fitted.beam.footprint_rays) == (preset.beam.divergence_deg, FOOTPRINT_RAYS)
+    assert origin["data_sheet"] == {"divergence_deg": preset.beam.divergence_deg} and origin["source"] == preset.beam.source
+    # no preset of its name: no divergence to give, one ray kept, and the table says why it records one return
+    other = replace(bare, name="my-scanner")
+    fitted, origin = survey_fit.applied(other)
+    assert (fitted.beam.divergence_deg, fitted.beam.footprint_rays, origin["data_sheet"]) == (0.0, 1, {})
+    assert "casts one ray per pulse" in survey_fit.markdown(fitted)
 
 
 def test_the_fit_reads_as_strict_json_and_a_table(survey_fit) -> None:
@@ -271,7 +299,8 @@ def test_a_simulated_survey_gives_back_its_divergence_within_the_stated_uncertai
 
     def share(divergence_deg: float, seed: int) -> Estimate:
         als = AirborneScanner("als", swath_deg=20.0, pulse_rate_hz=4000.0, line_rate_hz=20.0, altitude_m=100.0, speed_mps=10.0,
-                              beam_divergence_deg=divergence_deg, footprint_rays=19, max_returns=4, range_resolution_m=1.0)  # fmt: skip
+                              beam=AIRBORNE_IDEAL_BEAM.with_(divergence_deg=divergence_deg, footprint_rays=19, max_returns=4,
+                                                             range_resolution_m=1.0))  # fmt: skip
         s = scan_airborne(scene, als, (0.0, 0.0), 10.0, seed=seed)
         zeros = np.zeros(len(s), np.int64)
         las = LasPoints(points=s.points.astype(np.float64), intensity=zeros, return_number=s.return_number, number_of_returns=s.number_of_returns,
@@ -316,10 +345,12 @@ def test_a_table_of_simulated_shares_reads_as_a_curve(survey_las) -> None:
         divergence_curve([{**rows[0], "std": "n/a"}, rows[1]], "curve.csv")
 
 
-def test_a_detection_range_beyond_any_sensor_names_the_altitude_it_rests_on(survey_las) -> None:
+def test_a_detection_threshold_below_any_sensor_names_the_altitude_it_rests_on(survey_las) -> None:
+    from zbuf_occlude.sensors.fit.fitted_beam import MIN_DETECTION_THRESHOLD
+
     lidar = sensor_from_name("hdl32e")
     fit = fit_return_model(survey_las, altitude_m=1e6, ground_reflectance=RHO, classes=(5,), bootstrap=5)
-    assert math.sqrt(lidar.detection_reflectivity / fit.estimates["detection_threshold"].value) > 1e6
-    with pytest.raises(InvalidInputError, match=r"^the fitted detection threshold .* puts hdl32e's detection range at .* beyond 1e\+06 m: "
-                                                r".*altitude_m 1e\+06 \(fit-sensor --altitude\) is likely not the scans' flying height$"):  # fmt: skip
+    assert fit.estimates["detection_threshold"].value < MIN_DETECTION_THRESHOLD
+    with pytest.raises(InvalidInputError, match=r"^the fitted detection threshold .* m⁻² is below the energy a white target returns from "
+                                                r"1e\+06 m, .*altitude_m 1e\+06 \(fit-sensor --altitude\) is likely not the scans' flying height$"):  # fmt: skip
         fit.apply(lidar)

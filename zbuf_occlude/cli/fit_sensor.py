@@ -85,16 +85,15 @@ def _fit_returns(args: argparse.Namespace, files: Sequence[Path]) -> int:
     ``--sensor``, written as a sensor JSON with the fit under ``"fit"`` and a Markdown table beside it."""
     import json
 
-    from zbuf_occlude.sensors.airborne import AirborneScanner
     from zbuf_occlude.sensors.fit import BOOTSTRAP, VEGETATION_CLASSES, fit_return_model
-    from zbuf_occlude.sensors.lidar import Lidar
+    from zbuf_occlude.sensors.fit.lidar import sensor_kind
     from zbuf_occlude.sensors.kinds import sensor_to_json
 
     out = Path(args.out)
     if out.suffix.lower() != ".json":
         raise InvalidInputError(f"--out {out}: the fitted sensor is written as a .json file")
     base = sensor_from_name(args.sensor)
-    if not isinstance(base, (Lidar, AirborneScanner)):
+    if sensor_kind(base) not in ("lidar", "airborne"):
         raise InvalidInputError(
             f"--sensor {args.sensor}: fit-sensor fits a spinning LiDAR or an airborne scanner, not a {type(base).__name__}"
         )
@@ -123,9 +122,9 @@ def _fit_returns(args: argparse.Namespace, files: Sequence[Path]) -> int:
               f"{bootstrap} bootstrap resamples ...", flush=True)  # fmt: skip
         fit = fit_return_model(las, altitude_m=altitude, classes=VEGETATION_CLASSES if args.classes is None else args.classes,
                                seed=args.seed, bootstrap=bootstrap, **curve)  # fmt: skip
-        sensor = fit.apply(base)
+        sensor, origin = fit.applied(base)
         spec = sensor_to_json(sensor)
-        spec["fit"] = {"base": base.name, "files": [f.name for f in files], "returns": fit.to_json()}
+        spec["fit"] = {"base": base.name, "files": [f.name for f in files], "beam": origin, "returns": fit.to_json()}
         folder.write_text(out.name, json.dumps(spec, indent=1, default=float, allow_nan=False) + "\n")
         table = fit.markdown(sensor)
         folder.write_text(md.name, f"# {sensor.name}: the return model fitted to {', '.join(f.name for f in files)}\n\n{table}")

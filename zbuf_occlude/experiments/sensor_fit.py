@@ -35,6 +35,7 @@ from zbuf_occlude.real_scans.datasets import load_real_scans
 from zbuf_occlude.sensors.airborne import AirborneScanner
 from zbuf_occlude.sensors.fit import BOOTSTRAP, MIN_PLACEMENT_SCANS, AirborneFit, LidarFit, crop_placement_json, fit_airborne, fit_lidar
 from zbuf_occlude.sensors.lidar import Lidar
+from zbuf_occlude.sensors.fit.lidar import sensor_kind
 from zbuf_occlude.sensors.kinds import sensor_from_name
 
 __all__ = ["fit_to_scans", "fit_sensor_to_scans"]
@@ -133,7 +134,7 @@ def fit_sensor_to_scans(real: str | os.PathLike, sensor: str, out: str | os.Path
     if out.is_dir():
         raise OutputError(f"--out {out} is a folder; name the file to write")
     base = sensor_from_name(sensor)
-    if not isinstance(base, (Lidar, AirborneScanner)):
+    if sensor_kind(base) not in ("lidar", "airborne"):
         raise InvalidInputError(f"--sensor {sensor}: fit-sensor fits a spinning LiDAR or an airborne scanner, not a {type(base).__name__}")
     md = out.with_suffix(".md")
     names = (out.name, md.name)
@@ -149,10 +150,11 @@ def _fit_into(folder: OwnedFolder, real: str | os.PathLike, base: Lidar | Airbor
     say(f"reading the real scans under {real} ...")
     scans = load_real_scans(real, dataset=dataset)
     counts = Counter(s.label for s in scans)
-    kind = "an airborne scanner" if isinstance(base, AirborneScanner) else "a spinning LiDAR"
+    airborne = sensor_kind(base) == "airborne"
+    kind = "an airborne scanner" if airborne else "a spinning LiDAR"
     say(f"read {len(scans)} scans of {len(counts)} class{'' if len(counts) == 1 else 'es'} ({', '.join(f'{k}: {n}' for k, n in sorted(counts.items()))}); "
         f"fitting {kind}, {base.name}, with {BOOTSTRAP} bootstrap resamples ...")  # fmt: skip
-    if isinstance(base, AirborneScanner):
+    if airborne:
         missing = [s.source for s in scans if s.points_sensor_m is None]
         if missing:
             raise InvalidInputError(f"{missing[0]}: no points in metres to fit a scanner to ({len(missing)} such scans)")

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from zbuf_occlude.sensors.airborne import AirborneScanner
+from zbuf_occlude.sensors.airborne import AIRBORNE_IDEAL_BEAM, AirborneScanner
 from zbuf_occlude.sensors.scan import scan_airborne
 from zbuf_occlude.sensors.fit import airborne
 
@@ -20,7 +20,7 @@ def _scanner(name: str, density_m2: float, altitude_m: float, swath_deg: float, 
     prr = density_m2 * speed * width
     line_rate = math.sqrt(prr * speed / (altitude_m * math.radians(swath_deg)))
     return AirborneScanner(name, swath_deg=swath_deg, pulse_rate_hz=prr, line_rate_hz=line_rate, altitude_m=altitude_m,
-                           speed_mps=speed, range_noise_m=noise_m)  # fmt: skip
+                           speed_mps=speed, beam=AIRBORNE_IDEAL_BEAM.with_(range_noise_m=noise_m))  # fmt: skip
 
 
 def _dense_box_crop(y_m: float = 200.0, seed: int = 1) -> np.ndarray:

@@ -71,7 +71,7 @@ from numpy.typing import NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.sensors.airborne import AirborneScanner
-from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate, check_bootstrap, check_fit_seed, estimates_markdown
+from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate, check_bootstrap, check_fit_seed, estimates_markdown, sensor_kind
 
 __all__ = [
     "AirborneFit", "CropFaces", "FITTED_LINES", "HORIZONTAL_DEG", "MAX_CROP_POINTS", "MIN_CROP_POINTS", "ONE_SIDED_SHARE",
@@ -357,8 +357,8 @@ class AirborneFit:
         ``base`` with ``pulse_rate_hz`` set to give the measured density over its flight plan
         (``survey_density_m2``), ``swath_deg`` twice ``max_scan_angle_deg`` (when one-sided crops
         measured it, capped below 180°) and then, where most crops are one-sided, a plan of
-        :data:`FITTED_LINES` abutting lines on ``base``'s first heading (module docstring), and
-        ``range_noise_m``; the rest as in ``base``.
+        :data:`FITTED_LINES` abutting lines on ``base``'s first heading (module docstring), and its
+        beam's ``range_noise_m``; the rest as in ``base`` (every other beam field its data sheet's).
     base : AirborneScanner
     estimates : dict of str to Estimate
     n_crops : int
@@ -390,7 +390,7 @@ class AirborneFit:
         return estimates_markdown(self.estimates, _WHY_NOT_MEASURED) + (
             f"\nThe fitted scanner {s.name}: {s.survey_density_m2:.1f} points/m² on flat open ground (pulse rate "
             f"{s.pulse_rate_hz:,.0f} Hz), swath {s.swath_deg:.1f}° ({s.swath_width_m:,.0f} m wide at {s.altitude_m:g} m), "
-            f"range noise {s.range_noise_m:.3f} m.  Its altitude, speed, line rate and scan pattern are {base.name}'s: crops "
+            f"range noise {s.beam.range_noise_m:.3f} m.  Its altitude, speed, line rate and scan pattern are {base.name}'s: crops "
             f"cannot tell them apart, only the density they give.  {self.plan_sentence()}\n"
         )
 
@@ -432,13 +432,15 @@ def fit_airborne(crops: Sequence[NDArray[np.floating]], base: AirborneScanner, *
     Raises
     ------
     InvalidInputError
-        A crop that is not finite ``(N, 3)`` points (naming its index), fewer than 2 usable crops, no
+        ``base`` is not an airborne scanner; a crop that is not finite ``(N, 3)`` points (naming its index), fewer than 2 usable crops, no
         crop with a measurable top (the density cannot be told), ``bootstrap`` outside 2 to
         :data:`~zbuf_occlude.sensors.fit.lidar.MAX_BOOTSTRAP`, a negative or too large ``seed``, ``max_crop_points`` below
         :data:`MIN_CROP_POINTS`.
     ArgumentTypeError
         ``seed`` or ``bootstrap`` not an integer.
     """
+    if sensor_kind(base) != "airborne":
+        raise InvalidInputError(f"fit_airborne fits an airborne scanner, got {type(base).__name__}")
     seed, bootstrap = check_fit_seed(seed), check_bootstrap(bootstrap)
     faces = []
     for i, crop in enumerate(crops):
@@ -474,11 +476,11 @@ def _fitted_scanner(base: AirborneScanner, best: dict[str, float]) -> AirborneSc
         changes["swath_deg"] = min(2.0 * best["max_scan_angle_deg"], 170.0)
     if _abutting(best["max_scan_angle_deg"], best["two_sided_fraction"]):
         changes.update(n_lines=FITTED_LINES, side_overlap=0.0, headings_deg=base.headings_deg[:1])
-    if math.isfinite(best["range_noise_m"]):
-        changes["range_noise_m"] = best["range_noise_m"]
+    if math.isfinite(best["range_noise_m"]):  # the base's beam (its data sheet) with the noise measured
+        changes["beam"] = base.beam.with_(range_noise_m=best["range_noise_m"])
     scanner = base.with_(**changes)
     if math.isfinite(best["density_m2"]) and best["density_m2"] > 0:
         # survey_density_m2 is proportional to the pulse rate; dropout lowers what is measured
-        scale = best["density_m2"] / (scanner.survey_density_m2 * (1.0 - scanner.dropout))
+        scale = best["density_m2"] / (scanner.survey_density_m2 * (1.0 - scanner.beam.dropout))
         scanner = scanner.with_(pulse_rate_hz=scanner.pulse_rate_hz * scale)
     return scanner

@@ -54,10 +54,11 @@ from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.geometry.arguments import described
 from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.sensors.checks import shown
+from zbuf_occlude.sensors.kinds import kind_of
 from zbuf_occlude.sensors.lidar import Lidar
 
 __all__ = [
-    "BOOTSTRAP", "check_bootstrap", "check_fit_seed", "Estimate", "MAX_BOOTSTRAP", "estimates_markdown", "fit_lidar", "LidarFit", "MAX_DROPOUT_GAP", "MIN_RETURNS", "PLANE_NEIGHBOURS", "RING_SHARE",
+    "BOOTSTRAP", "check_bootstrap", "sensor_kind", "check_fit_seed", "Estimate", "MAX_BOOTSTRAP", "estimates_markdown", "fit_lidar", "LidarFit", "MAX_DROPOUT_GAP", "MIN_RETURNS", "PLANE_NEIGHBOURS", "RING_SHARE",
 ]  # fmt: skip
 #: How a refusal of scans no spinning sensor made ends: what to fit instead, in the library and on the command line.
 _NOT_SPINNING = ("these are not scans in a spinning sensor's frame (airborne crops or world coordinates?); fit an airborne "
@@ -80,6 +81,15 @@ _OUTSIDE_BEAMS_DEG = 0.5
 _GROUND_SLICE_M = 0.15
 _PLANARITY = 0.3
 _GROUND_NORMAL_COS = math.cos(math.radians(25.0))
+
+
+def sensor_kind(sensor: object) -> str | None:
+    """The :mod:`~zbuf_occlude.sensors.kinds` name of ``sensor`` (``"lidar"``, ``"airborne"``, ...), or None for anything
+    that is no sensor: the fits' test of what they were given (no ``isinstance`` on sensor classes)."""
+    try:
+        return kind_of(sensor).name
+    except InvalidInputError:
+        return None
 
 
 def check_bootstrap(bootstrap: object, *, name: str = "bootstrap") -> int:
@@ -149,7 +159,8 @@ class LidarFit:
     Attributes
     ----------
     sensor : Lidar
-        ``base`` with ``firing_rate_hz``, ``range_noise_m``, ``dropout`` and ``dropout_range_per_m`` set from the scans.
+        ``base`` with ``firing_rate_hz`` and its beam's ``range_noise_m``, ``dropout`` and ``dropout_range_per_m`` set from
+        the scans; every other beam field is the base's (its data sheet).
     base : Lidar
     estimates : dict of str to Estimate
     n_scans : int
@@ -358,10 +369,10 @@ def _check_rings(stats: Sequence[_ScanStats], base: Lidar) -> None:
     beyond the sensor's range cannot be its scans either.
     """
     ranges = np.array([st.range_m for st in stats])
-    if np.median(ranges) > base.max_range_m:
+    if np.median(ranges) > base.beam.max_range_m:
         raise InvalidInputError(
             f"fit_lidar: the scans' objects lie a median {np.median(ranges):,.0f} m from the origin, beyond {base.name}'s "
-            f"{base.max_range_m:g} m range: {_NOT_SPINNING}"
+            f"{base.beam.max_range_m:g} m range: {_NOT_SPINNING}"
         )
     beams = np.sort(np.asarray(base.elevations_deg, dtype=np.float64))
     spacing = float(np.median(np.diff(beams))) if len(beams) > 1 else math.inf
@@ -413,7 +424,7 @@ def fit_lidar(clouds: Sequence[NDArray[np.floating]], base: Lidar, *, seed: int 
     ArgumentTypeError
         ``seed`` or ``bootstrap`` not an integer.
     """
-    if not isinstance(base, Lidar):
+    if sensor_kind(base) != "lidar":
         raise InvalidInputError(f"fit_lidar fits a spinning LiDAR, got {type(base).__name__}")
     seed, bootstrap = check_fit_seed(seed), check_bootstrap(bootstrap)
     beams = np.asarray(base.elevations_deg, dtype=np.float64)
@@ -446,9 +457,9 @@ def fit_lidar(clouds: Sequence[NDArray[np.floating]], base: Lidar, *, seed: int 
         n = len(stats) if name in ("dropout_range_per_m", "count_exponent") else n_returns
         estimates[name] = Estimate(value=float(point[name]), std=float(np.std(spread, ddof=1)) if len(spread) > 1 else math.nan,
                                    n=n, method=method, unit=unit, set_in_sensor=name in _SETS_SENSOR)  # fmt: skip
-    sensor = replace(
-        base, name=f"{base.name}-fitted", firing_rate_hz=point["firing_rate_hz"], range_noise_m=point["range_noise_m"],
-        dropout=min(max(point["dropout_at_0m"], 0.0), 0.95),
-        dropout_range_per_m=point["dropout_range_per_m"] if math.isfinite(point["dropout_range_per_m"]) else 0.0, source=f"{base.source}; fitted to {len(stats)} real scans".lstrip("; "),
-    )  # fmt: skip
+    # the base's beam (its data sheet) with only what the scans measured changed
+    beam = base.beam.with_(range_noise_m=point["range_noise_m"], dropout=min(max(point["dropout_at_0m"], 0.0), 0.95),
+                           dropout_range_per_m=point["dropout_range_per_m"] if math.isfinite(point["dropout_range_per_m"]) else 0.0)  # fmt: skip
+    sensor = replace(base, name=f"{base.name}-fitted", firing_rate_hz=point["firing_rate_hz"], beam=beam,
+                     source=f"{base.source}; fitted to {len(stats)} real scans".lstrip("; "))  # fmt: skip
     return LidarFit(sensor=sensor, base=base, estimates=estimates, n_scans=len(stats))

@@ -70,7 +70,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -80,8 +80,7 @@ from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.geometry.arguments import described
 from zbuf_occlude.io.las import LasPoints
 from zbuf_occlude.resources import check_memory
-from zbuf_occlude.sensors.echoes import MAX_RETURNS, hit_energy
-from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
+from zbuf_occlude.sensors.echoes import hit_energy
 from zbuf_occlude.sensors.checks import MAX_RANGE_M, real, shown, text
 from zbuf_occlude.sensors.fit.divergence import check_curve, divergence_from_shares
 from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate, estimates_markdown
@@ -135,9 +134,6 @@ MAX_SCAN_ANGLE_DEG = 75.0
 #: a class's figures hold its points only): tracemalloc's peak was 279 on the IGN sample (7
 #: classes) and 198 on Autzen (2).
 FIT_BYTES_PER_POINT = 384
-#: Estimates :meth:`ReturnModelFit.apply` may set, and the sensor field of each.
-_SETS = {"range_resolution_m": "range_resolution_m", "max_returns": "max_returns", "beam_divergence_deg": "beam_divergence_deg",
-         "detection_threshold": "detection_threshold"}  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -174,79 +170,37 @@ class ReturnModelFit:
     why_not_measured: dict[str, str]
 
     def sets(self, sensor: Any) -> tuple[str, ...]:
-        """The estimates :meth:`apply` sets on ``sensor``: those measured whose field the sensor has (a
-        spinning LiDAR's threshold through ``detection_range_m``, an airborne scanner's as ``detection_threshold``)."""
-        names = {f.name for f in fields(sensor)} if hasattr(sensor, "__dataclass_fields__") else set()
-        out = []
-        for name, field_name in _SETS.items():
-            value = self.estimates[name].value
-            if not (math.isfinite(value) and value > 0):
-                continue
-            if name == "detection_threshold":
-                if {"detection_reflectivity", "detection_range_m"} <= names or "detection_threshold" in names:
-                    out.append(name)
-            elif field_name in names:
-                out.append(name)
-        return tuple(out)
+        """The estimates :meth:`apply` sets in ``sensor``'s beam: those measured
+        (:func:`~zbuf_occlude.sensors.fit.fitted_beam.fitted_sets`)."""
+        from zbuf_occlude.sensors.fit.fitted_beam import fitted_sets
+
+        return fitted_sets(self.estimates, sensor)
 
     def apply(self, sensor: Any) -> Any:
-        """``sensor`` (a :class:`~zbuf_occlude.sensors.lidar.Lidar` or
-        :class:`~zbuf_occlude.sensors.airborne.AirborneScanner`) with the fitted return model.
+        """``sensor`` (a spinning LiDAR or an airborne scanner) with the fitted return model in its beam (:meth:`applied`)."""
+        return self.applied(sensor)[0]
 
-        Sets ``max_returns`` (at most :data:`~zbuf_occlude.sensors.echoes.MAX_RETURNS`) and, above 1,
-        ``range_resolution_m``; ``beam_divergence_deg`` where it was fitted (and then
-        ``footprint_rays`` :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS` where the sensor had one ray); the detection
-        threshold where the sensor has one: a spinning LiDAR's ``detection_range_m`` becomes
-        ``√(detection_reflectivity / τ)``, an airborne scanner's ``detection_threshold`` τ (with
-        ``max_returns`` above 1); an airborne scanner's ``altitude_m`` becomes the flying
-        height the fit assumed.  One return per pulse: ``range_resolution_m`` 0 and, airborne, one
-        ray.  The name gains ``-fitted`` and the source says what was fitted.
+    def applied(self, sensor: Any) -> tuple[Any, dict]:
+        """``sensor`` with the fitted return model, and where each of its beam's changed fields came from.
+
+        The beam's ``max_returns``, ``range_resolution_m``, ``detection_threshold``, ``intensity_scale`` (with 16-bit
+        ``max_intensity``) and a fitted ``divergence_deg`` are the fit's; a beam of several returns and one ray gets the
+        data sheet's divergence and :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS` sub-rays; every other field
+        is the base's; an airborne scanner's ``altitude_m`` becomes the flying height the fit assumed
+        (:func:`~zbuf_occlude.sensors.fit.fitted_beam.fitted_sensor`, which says what the dict holds).  The name gains
+        ``-fitted`` and the source says what was fitted.
 
         Raises
         ------
         ArgumentTypeError
             ``sensor`` is not a LiDAR or an airborne scanner.
         InvalidInputError
-            A spinning LiDAR's detection range beyond :data:`~zbuf_occlude.sensors.checks.MAX_RANGE_M` (naming the
-            altitude the threshold rests on); other fitted values that make a sensor its checks refuse (naming the field).
+            A detection threshold so low that it rests on a wrong altitude (naming it); fitted values that make a beam
+            its checks refuse (naming the field).
         """
-        from zbuf_occlude.sensors.airborne import AirborneScanner
-        from zbuf_occlude.sensors.lidar import Lidar
+        from zbuf_occlude.sensors.fit.fitted_beam import fitted_sensor
 
-        if not isinstance(sensor, (Lidar, AirborneScanner)):
-            raise ArgumentTypeError(f"the return model applies to a Lidar or an AirborneScanner, got {described(sensor)}")
-        sets = self.sets(sensor)
-        e = {name: self.estimates[name].value for name in sets}
-        changes: dict[str, Any] = {}
-        if "max_returns" in e:
-            changes["max_returns"] = min(int(e["max_returns"]), MAX_RETURNS)
-        if changes.get("max_returns", sensor.max_returns) > 1:
-            if "range_resolution_m" in e:
-                changes["range_resolution_m"] = e["range_resolution_m"]
-        else:
-            changes["range_resolution_m"] = 0.0
-            if isinstance(sensor, AirborneScanner):
-                changes["footprint_rays"] = 1
-        if "beam_divergence_deg" in e:
-            changes["beam_divergence_deg"] = e["beam_divergence_deg"]
-            if sensor.footprint_rays == 1 and changes.get("max_returns", sensor.max_returns) > 1:
-                changes["footprint_rays"] = FOOTPRINT_RAYS
-        if isinstance(sensor, AirborneScanner):
-            changes["altitude_m"] = self.altitude_m  # the survey's height, at which the scale and threshold were fitted
-        if "detection_threshold" in e:
-            if isinstance(sensor, Lidar):
-                changes["detection_range_m"] = math.sqrt(sensor.detection_reflectivity / e["detection_threshold"])
-                if not changes["detection_range_m"] <= MAX_RANGE_M:  # the sensor would refuse it naming its field, not the cause
-                    raise InvalidInputError(
-                        f"the fitted detection threshold {e['detection_threshold']:.3g} m⁻² puts {sensor.name}'s detection range at "
-                        f"{changes['detection_range_m']:.3g} m, beyond {MAX_RANGE_M:g} m: the threshold scales as 1/altitude², so "
-                        f"altitude_m {self.altitude_m:g} (fit-sensor --altitude) is likely not the scans' flying height"
-                    )
-            elif changes.get("max_returns", sensor.max_returns) > 1:  # the airborne threshold drops echoes of several returns
-                changes["detection_threshold"] = e["detection_threshold"]
-        name = sensor.name if sensor.name.endswith("-fitted") else f"{sensor.name}-fitted"
-        what = f"returns fitted to {self.statistics.n_pulses:,} pulses ({', '.join(sets) or 'nothing measured'})"
-        return replace(sensor, **changes, name=name, source=f"{sensor.source}; {what}".lstrip("; "))
+        return fitted_sensor(self.estimates, sensor, altitude_m=self.altitude_m, n_pulses=self.statistics.n_pulses)
 
     def markdown(self, sensor: Any = None) -> str:
         """The fit's table (quantity, value ± std, unit, n, whether it sets ``sensor``, how measured), what was
@@ -255,9 +209,9 @@ class ReturnModelFit:
         shown = {name: replace(e, set_in_sensor=name in sets) for name, e in self.estimates.items()}
         unit = "metres assumed (the file states no unit)" if self.unit_assumed else f"{self.unit_m:g} m per coordinate unit"
         note = ""
-        if sensor is not None and sensor.footprint_rays == 1 and sensor.max_returns > 1:
-            note = (f"\n{sensor.name} casts one ray per pulse, which meets one surface: it records one return per pulse until it is "
-                    "given a beam_divergence_deg and footprint_rays above 1 (in its file), or a divergence fitted by simulation "
+        if sensor is not None and sensor.beam.footprint_rays == 1 and sensor.beam.max_returns > 1:
+            note = (f"\n{sensor.name} casts one ray per pulse, which meets one surface: it records one return per pulse until its "
+                    "beam is given a divergence_deg and footprint_rays above 1 (in its file), or a divergence fitted by simulation "
                     "(fit_divergence).\n")  # fmt: skip
         return (
             f"Flying height {self.altitude_m:g} m above the ground (given), ground reflectance {self.ground_reflectance:g} "
