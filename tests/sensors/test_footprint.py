@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.beam import Beam
 from zbuf_occlude.sensors.footprint import (
     MAX_SUBRAYS,
     footprint_offsets,
@@ -34,17 +35,19 @@ def test_seven_subrays_are_lidar_footprint_directions_bit_for_bit(
     divergence: float,
 ) -> None:
     d = _directions()
-    lidar = Lidar("t", (0.0,), footprint_rays=7, beam_divergence_deg=divergence)
+    lidar = Lidar("t", (0.0,), beam=Beam(footprint_rays=7, divergence_deg=divergence))
     offsets, weights = footprint_offsets(7, divergence)
-    assert np.array_equal(subray_directions(d, offsets), lidar.footprint_directions(d))
+    assert np.array_equal(subray_directions(d, offsets), lidar.beam.footprint_directions(d))
     assert np.array_equal(weights, np.full(7, 1 / 7))
+    assert np.array_equal(lidar.beam.footprint_weights(), weights)
 
 
 def test_one_subray_is_the_beam_itself() -> None:
     d = _directions()
     offsets, weights = footprint_offsets(1, 0.3)
     assert np.array_equal(offsets, [[0.0, 0.0]]) and np.array_equal(weights, [1.0])
-    assert np.array_equal(subray_directions(d, offsets), Lidar("t", (0.0,)).footprint_directions(d))
+    assert np.array_equal(subray_directions(d, offsets), Lidar("t", (0.0,)).beam.footprint_directions(d))
+    assert np.array_equal(Lidar("t", (0.0,)).beam.footprint_weights(), [1.0])
     assert np.array_equal(subray_directions(d, offsets)[:, 0], d)
 
 
