@@ -23,7 +23,7 @@ from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors import Lidar
 from zbuf_occlude.sensors.placement import CropDistributions
 from zbuf_occlude.sensors.fit import fit_width_scale
-from zbuf_occlude.sensors.kinds import sensor_to_json
+from zbuf_occlude.sensors.kinds import kind_of, sensor_to_json, with_beam
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 ARGS = ["--sensor", "hdl32e", "--samples-per-view", "2", "--points", "128", "--per-class", "1", "--splits", "train",
@@ -171,7 +171,9 @@ def test_a_sensor_file_with_mixed_pixels_changes_the_scans(sensor_run, tmp_path)
     # a 7-ray footprint whose echoes within 0.75 m merge, against the same footprint without merging
     paths = {}
     for name, separation in (("sharp", 0.0), ("mixed", 0.75)):
-        spec = sensor_to_json(Lidar.preset("hdl32e").with_(name=f"hdl32e-{name}", footprint_rays=7, echo_separation_m=separation))
+        spec = sensor_to_json(
+            with_beam(Lidar.preset("hdl32e").with_(name=f"hdl32e-{name}"), footprint_rays=7, echo_separation_m=separation)
+        )
         paths[name] = tmp_path / f"{name}.json"
         paths[name].write_text(json.dumps(spec))
     runs = {}
@@ -231,7 +233,11 @@ def test_zbuffer_farm_parameters_keep_their_digest():
         (["--sensor-footprint"], "--sensor-footprint needs --sensor"),
         (["--sensor", "hdl32e", "--sensor-reflectivity", "0.5:0.1"], "--sensor-reflectivity"),
         (["--sensor", "kinect-v1", "--sensor-footprint"], "kinect-v1"),
-        (["--sensor", "hdl64e", "--sensor-footprint"], "beam_divergence_deg"),
+        (["--sensor", "hdl64e", "--sensor-footprint"], "has no divergence (divergence_deg 0): give --sensor-divergence DEG"),
+        (["--sensor", "hdl64e", "--sensor-divergence", "0"], "--sensor-divergence must be a number > 0 degrees, got 0"),
+        (["--sensor", "hdl32e", "--sensor-divergence", "91"], "--sensor-divergence must be a full angle of at most 90 degrees, got 91"),
+        (["--sensor", "kinect-v1", "--sensor-divergence", "0.2"], "--sensor-divergence: kinect-v1 is a depth camera, which has no beam"),
+        (["--sensor", "riegl-q1560", "--sensor-reflectivity", "0.2"], "--sensor-reflectivity: riegl-q1560 is an airborne scanner"),
         (["--sensor-ground-margin", "1"], "--sensor-ground-margin needs --sensor"),
         (["--sensor", "hdl32e", "--sensor-ground-margin", "-1"], "--sensor-ground-margin must be a number >= 0 metres, got -1"),
         (["--sensor-hidden-below", "0.5"], "--sensor-hidden-below needs --sensor"),
@@ -256,7 +262,7 @@ def test_sensor_params_are_checked():
         FarmParams.from_dict({**FarmParams(sensor="hdl32e").to_dict(), "sensor_height_m": [-1.0, 2.0]})
     with pytest.raises(InvalidInputError, match="farm --sensor draws no width_scale"):  # the card could not record it
         SensorCropParams("hdl32e", CropDistributions(width_scale=(1.0, 2.0)))
-    with pytest.raises(InvalidInputError, match="not one"):
+    with pytest.raises(InvalidInputError, match="kinect-v1 is a depth camera, which has no beam"):
         SensorCropParams("kinect-v1", CropDistributions(reflectivity=(0.1, 0.2)))
     with pytest.raises(InvalidInputError, match="--sensor writes dense storage only"):
         FarmParams(sensor="hdl32e", storage="compact")
@@ -306,6 +312,7 @@ def test_a_plan_written_with_flat_sensor_keys_reads_back_as_the_same_parameters(
                 ),
                 footprint=True,
                 across_sight_width_m=(1.0, 2.0),
+                divergence_deg=0.3,
             ),
         ),
     ],
@@ -341,3 +348,31 @@ def test_farm_datasets_are_reproducible_per_sample():
         assert np.array_equal(a[key][:2], b[key]), key
     assert len(set(a["distance_m"].tolist())) == 3
     assert np.all((a["ring"] >= 0) & (a["ring"] < 16))
+
+
+@pytest.mark.parametrize("name", ["hdl32e", "livox-mid70", "riegl-q1560"])
+def test_the_footprint_widens_the_beam_of_every_pulsed_preset(name):
+    # the farm's --sensor-footprint goes through with_beam, as scan's --footprint: any pattern, the beam's own divergence
+    base = SensorCropParams(name).model()
+    wide = SensorCropParams(name, footprint=True).model()
+    assert kind_of(wide) is kind_of(base) and wide.beam == base.beam.with_(footprint_rays=7)
+    assert sensor_to_json(wide.with_(beam=base.beam)) == sensor_to_json(base)  # nothing but the beam changed
+
+
+def test_a_divergence_gives_a_preset_without_one_its_footprint():
+    with pytest.raises(
+        InvalidInputError, match=r"--sensor-footprint samples the beam's divergence cone, and hdl64e's beam .* give --sensor-divergence"
+    ):
+        SensorCropParams("hdl64e", footprint=True)
+    sensor = SensorCropParams("hdl64e", footprint=True, divergence_deg=0.2).model()
+    assert sensor.beam.divergence_deg == 0.2 and sensor.beam.footprint_rays == 7
+    assert SensorCropParams("hdl32e", divergence_deg=0.5).model().beam.divergence_deg == 0.5
+    with pytest.raises(InvalidInputError, match="--sensor-divergence must be"):
+        SensorCropParams("hdl32e", divergence_deg=float("nan"))
+
+
+def test_the_divergence_is_recorded_only_when_given():
+    # earlier sensor data sets keep their digest; a divergence is a new data set
+    assert "sensor_divergence_deg" not in FarmParams(sensor="hdl32e").to_dict()
+    given = FarmParams(sensor=SensorCropParams("hdl32e", divergence_deg=0.3))
+    assert given.to_dict()["sensor_divergence_deg"] == 0.3 and given.digest() != FarmParams(sensor="hdl32e").digest()

@@ -20,22 +20,36 @@ from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
-from zbuf_occlude.cli.options import Check, interval, parse_interval, real
-from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
+from zbuf_occlude.cli.options import Check, interval, parse_interval, real, shown
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS, MAX_DIVERGENCE_DEG
 from zbuf_occlude.sensors.placement import CropDistributions, check_across_sight_width
 
-__all__ = ["CropOption", "CropSettings", "CROP_OPTIONS", "FLAGS", "add_crop_arguments", "crop_settings", "given_crop_options"]
+__all__ = [
+    "BEAM_FIELDS", "CropOption", "CropSettings", "CROP_OPTIONS", "FLAGS", "add_crop_arguments", "check_divergence", "crop_settings",
+    "given_crop_options",
+]  # fmt: skip
 
 #: The namespace attribute that holds, per setting, the option that names it in messages (the one typed).
 FLAGS = "crop_flags"
+#: The crop options that change the sensor's beam, not the placement (:func:`zbuf_occlude.cli.return_physics.beam_changes`).
+BEAM_FIELDS = ("footprint", "divergence_deg")
+
+
+def check_divergence(text: str, option: str) -> float:
+    """``--divergence DEG``: a full angle in degrees, > 0 and at most :data:`~zbuf_occlude.sensors.footprint.MAX_DIVERGENCE_DEG`."""
+    value = real(0.0, above=True, unit="degrees")(text, option)
+    if value > MAX_DIVERGENCE_DEG:
+        raise InvalidInputError(f"{option} must be a full angle of at most {MAX_DIVERGENCE_DEG:g} degrees, got {shown(text)}")
+    return value
 
 
 @dataclass(frozen=True)
 class CropOption:
     """One crop option: the setting it gives, its names, its check and its help.
 
-    ``field`` is a :class:`CropDistributions` field, or ``footprint`` (a switch of the sensor's
-    return physics) or ``across_sight_width_m`` (the width a mesh is fitted to); ``name`` gives
+    ``field`` is a :class:`CropDistributions` field, or a beam field (:data:`BEAM_FIELDS`: the
+    ``footprint`` switch and ``divergence_deg``) or ``across_sight_width_m`` (the width a mesh is fitted to); ``name`` gives
     ``--NAME`` and ``--sensor-NAME``; ``check`` parses the text (None: a switch); ``unset`` says what
     holds when it is not given (where no default value does); ``in_crop``
     says what the option does to a crop, for options that mean nothing without one (``scan``
@@ -71,7 +85,10 @@ CROP_OPTIONS = (
         "rho*cos(incidence)*footprint/R^2", unset="every hit returns",
     ),
     CropOption("footprint", "footprint", None, None, f"return physics: {FOOTPRINT_RAYS} rays per firing inside the beam divergence cone, "
-               "the strongest echo (with --max-returns above 1, scan: several returns)"),
+               "the strongest echo (with --max-returns above 1, scan: several returns); any pulsed sensor whose beam has a divergence"),
+    CropOption("divergence_deg", "divergence", "DEG", check_divergence,
+               "return physics: the beam's full-angle divergence, degrees in (0, 90], for --footprint (a sensor whose data "
+               "sheet gives none, hdl64e)", unset="the sensor's"),
     CropOption(
         "ground_margin_m", "ground-margin", "M", real(0.0, unit="metres"),
         "also keep the ground returns under the object, inside its footprint grown by M metres, as a box segmentation "
@@ -141,14 +158,16 @@ def given_crop_options(args: argparse.Namespace, *, in_crop: bool = False) -> li
 
 @dataclass(frozen=True)
 class CropSettings:
-    """What the crop options give: the placement's distributions, the footprint switch and the width fit.
+    """What the crop options give: the placement's distributions, the beam's footprint and divergence, and the width fit.
 
     Attributes
     ----------
     distributions : CropDistributions
         Checked, its messages naming the options (:data:`FLAGS`).
     footprint : bool
-        7 rays per firing in the beam's divergence cone.
+        :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS` rays per firing in the beam's divergence cone.
+    divergence_deg : float or None
+        The beam's full-angle divergence, degrees; None: the sensor's.
     across_sight_width_m : (lo, hi) or None
         Metres, checked by :func:`~zbuf_occlude.sensors.placement.check_across_sight_width`.
     names : dict of str to str
@@ -157,6 +176,7 @@ class CropSettings:
 
     distributions: CropDistributions
     footprint: bool
+    divergence_deg: float | None
     across_sight_width_m: tuple[float, float] | None
     names: Mapping[str, str]
 
@@ -176,11 +196,11 @@ def crop_settings(args: argparse.Namespace, base: CropDistributions, **fields: A
     names = dict(getattr(args, FLAGS))
     for o in CROP_OPTIONS:
         text = getattr(args, o.dest)
-        if o.field in ("footprint", "across_sight_width_m") or text is None:
+        if o.field in (*BEAM_FIELDS, "across_sight_width_m") or text is None:
             continue
         fields[o.field] = parse_interval(text, names[o.field]) if o.check is interval else text
     distributions = replace(base, **fields, option_names=names)
     width = args.across_sight_width
     flag = names["across_sight_width_m"]
     across = None if width is None else check_across_sight_width(parse_interval(width, flag), flag)
-    return CropSettings(distributions, bool(args.footprint), across, names)
+    return CropSettings(distributions, bool(args.footprint), args.divergence, across, names)

@@ -36,6 +36,7 @@ from zbuf_occlude.mesh.paths import SPLITS
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.mesh.inputs.kinds import DEFAULT_POINT_SET_POINTS, POINT_SET_METHOD, POINT_SET_VISIBLE_SHARE
 from zbuf_occlude.mesh.scene import UP_CHOICES
+from zbuf_occlude.sensors.kinds import preset_names
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +52,8 @@ CLASS_FROM_HELP = (
     "N: take each mesh's class from the N-th folder above it (1: the folder holding it) instead of the detected "
     "layout's; needed where the layout's classes look wrong (all one class, or folders such as 'models')"
 )
+#: ``farm --sensor``'s presets, by kind, for its help.
+_PRESETS = "; ".join(f"{kind}: {', '.join(names)}" for kind, names in preset_names().items())
 #: ``--class-from N``'s check (a folder level, no cap): ``mesh.layouts`` says the same of a bad value.
 CLASS_FROM = count(None, hint="1: the folder holding each file")
 
@@ -118,7 +121,7 @@ def _sensor_params(args: argparse.Namespace) -> dict:
         return {}
     crops = crop_settings(args, FARM_CROP_DISTRIBUTIONS)
     return {"sensor": SensorCropParams(args.sensor, crops.distributions, footprint=crops.footprint,
-                                       across_sight_width_m=crops.across_sight_width_m)}  # fmt: skip
+                                       across_sight_width_m=crops.across_sight_width_m, divergence_deg=crops.divergence_deg)}  # fmt: skip
 
 
 def _merge_command(args: argparse.Namespace) -> int:
@@ -220,7 +223,7 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
     )
     s.add_argument(
         "--sensor",
-        help="LiDAR or depth-camera preset (hdl32e, vlp16, hdl64e, os1-64, kinect-v1) or a JSON file (default: none, z-buffer poses)",
+        help=f"a preset ({_PRESETS}) or a sensor .json (fit-sensor writes one) (default: none, z-buffer poses)",
     )
     add_crop_arguments(s, FARM_CROP_DISTRIBUTIONS, prefixed=True)
     ex = p.add_argument_group("execution")

@@ -1,21 +1,41 @@
-"""``scan``'s return physics options: a LiDAR's footprint, echoes and returns per pulse, and the surface optics of a scene file.
+"""``scan``'s beam options and surface optics: one path from the command line to any pulsed scanner's beam.
 
-:func:`with_return_physics` applies ``--footprint``, ``--power-noise``, ``--echo-separation``,
-``--max-returns`` and ``--range-resolution`` to the sensor and checks ``--reflectance-table`` and
-``--transmittance`` against it; :func:`surface_optics` turns the last two into the keywords of
-:func:`zbuf_occlude.sensors.scan`.
+Every beam option sets one field of the sensor's :class:`~zbuf_occlude.sensors.beam.Beam`
+(:data:`BEAM_OPTIONS`), through :func:`~zbuf_occlude.sensors.kinds.with_beam`, whatever scans the
+beam: a spinning LiDAR, an airborne scanner, a ray table (a preset, a sensor file or
+``--ray-table``).  A depth camera has no beam and refuses them, naming the option.
+:func:`with_return_physics` applies them and checks ``--reflectance-table`` and
+``--transmittance`` against the sensor; :func:`surface_optics` turns the last two into the
+keywords of :func:`~zbuf_occlude.sensors.scan.scan` and
+:func:`~zbuf_occlude.sensors.scan.scan_airborne` for any scene: a scene file's, or the one a
+scan of a mesh stands the mesh in (the ground, the object, then any occluders).
 """
 
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
+from collections.abc import Callable
 
 from zbuf_occlude.cli.options import count, real, shown
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.beam import RETURN_MODES
 from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
 
-__all__ = ["MAX_TRANSMITTANCE_CLASSES", "check_max_returns", "check_transmittance", "with_return_physics", "surface_optics"]
+__all__ = [
+    "BEAM_OPTIONS", "MAX_TRANSMITTANCE_CLASSES", "add_beam_arguments", "beam_changes", "check_max_returns", "check_transmittance",
+    "scene_optics_of", "surface_optics", "with_return_physics",
+]  # fmt: skip
+
+#: Each beam option's ``args`` attribute and the :class:`~zbuf_occlude.sensors.beam.Beam` field it sets.
+#: ``--footprint`` (a switch: :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS` sub-rays) and
+#: ``--divergence`` are crop options too (:data:`~zbuf_occlude.cli.crops.CROP_OPTIONS`: ``farm
+#: --sensor-footprint``); the others are ``scan``'s.
+BEAM_OPTIONS = {
+    "footprint": "footprint_rays", "divergence": "divergence_deg", "max_returns": "max_returns", "return_mode": "return_mode",
+    "range_resolution": "range_resolution_m", "power_noise": "power_noise", "echo_separation": "echo_separation_m",
+}  # fmt: skip
+#: How each of them is written on the command line where the namespace does not say (crop options record the name typed).
+_OPTION_FLAGS = {dest: "--" + dest.replace("_", "-") for dest in BEAM_OPTIONS}
 
 
 def check_max_returns(text: str, option: str) -> int:
@@ -71,33 +91,159 @@ def check_transmittance(text: str, option: str):
     return out
 
 
-def with_return_physics(sensor, args: argparse.Namespace):
-    """``sensor`` with the return physics options applied (:func:`_return_physics`), and
-    ``--reflectance-table`` and ``--transmittance`` checked against it (:func:`surface_optics` applies them).
+def add_beam_arguments(group) -> None:
+    """Add ``--return-mode`` to ``group`` (a parser or an argument group of ``scan``'s; its other beam options sit beside it)."""
+    group.add_argument(
+        "--return-mode", choices=RETURN_MODES, default=None,
+        help="which echoes of a pulse the receiver records: all (up to --max-returns, in range order), strongest or last "
+        "(one, as Velodyne's single-return modes), dual (the last and the strongest, Velodyne's dual mode); all but 'all' "
+        "need --range-resolution (default: the sensor's, 'all' for presets)",
+    )  # fmt: skip
+
+
+def _flag(args: argparse.Namespace, dest: str) -> str:
+    """The option of ``dest`` as the user typed it (``--footprint`` or ``--sensor-footprint``)."""
+    from zbuf_occlude.cli.crops import FLAGS
+
+    crop_names = {"footprint": "footprint", "divergence": "divergence_deg"}
+    typed = getattr(args, FLAGS, {}).get(crop_names.get(dest, ""))
+    return typed or _OPTION_FLAGS[dest]
+
+
+def _given(args: argparse.Namespace) -> dict[str, object]:
+    """The beam options given (not None, not False, not 0: the defaults of ``--power-noise`` and ``--echo-separation``), by dest."""
+    return {dest: v for dest in BEAM_OPTIONS if (v := getattr(args, dest, None)) not in (None, False, 0, 0.0)}
+
+
+def beam_changes(sensor, args: argparse.Namespace) -> dict[str, object]:
+    """The :class:`~zbuf_occlude.sensors.beam.Beam` fields the beam options of ``args`` change on ``sensor``'s beam.
+
+    ``--footprint`` gives :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS` sub-rays in the
+    beam's divergence cone (``--divergence DEG``, else the sensor's); without it the sensor's own
+    ``footprint_rays`` stay (a sensor file's K above 1 is a footprint for ``--echo-separation``).
+    ``--return-mode strongest`` or ``last`` record one return per pulse, ``dual`` two, so they set
+    ``max_returns`` where ``--max-returns`` is not given.  Resolved echoes (``max_returns`` above 1
+    or a return mode other than ``all``) need a range resolution, ``--range-resolution``'s or the
+    sensor's; the sensor's echo separation then gives way to it, and one return per pulse drops the
+    sensor's range resolution.
 
     Raises
     ------
     InvalidInputError
-        As :func:`_return_physics`; and ``--reflectance-table`` or ``--transmittance`` for a scan
-        of a mesh file (they give each object of a scene file its own value), for a sensor other
-        than a spinning LiDAR or ray table; ``--transmittance`` above 0 without several returns per
-        pulse or with ``--backend zbuffer`` (one face per pixel), each naming the value.
+        Naming the option as typed and its value: any of them for a sensor without a beam (a depth
+        camera); ``--footprint`` for a beam without a divergence (naming ``--divergence``);
+        ``--echo-separation`` without a footprint or with resolved echoes; ``--range-resolution``
+        with one return per pulse; resolved echoes without a range resolution; ``--max-returns``
+        that contradicts ``--return-mode``.
     """
-    out = _return_physics(sensor, args)
+    from zbuf_occlude.sensors.kinds import kind_of
+
+    given = _given(args)
+    if not given:
+        return {}
+    kind = kind_of(sensor)
+    names = ", ".join(_flag(args, dest) for dest in given)
+    if not kind.pulsed:
+        raise InvalidInputError(f"{names}: {args.sensor} is a {kind.title}, which has no beam to change (a pulsed LiDAR has one)")
+    beam = sensor.beam
+    changes: dict[str, object] = {}
+    if "divergence" in given:
+        changes["divergence_deg"] = float(given["divergence"])
+    if "footprint" in given:
+        if not changes.get("divergence_deg", beam.divergence_deg) > 0:
+            raise InvalidInputError(
+                f"{_flag(args, 'footprint')} samples the beam's divergence cone, and {args.sensor}'s beam ({beam.name}) has no divergence "
+                f"(divergence_deg 0): give {_flag(args, 'divergence')} DEG, the full angle of its data sheet"
+            )
+        changes["footprint_rays"] = FOOTPRINT_RAYS
+    mode = given.get("return_mode", beam.return_mode)
+    wanted = {"strongest": 1, "last": 1, "dual": 2}.get(str(mode))
+    if "return_mode" in given:
+        changes["return_mode"] = mode
+        if "max_returns" in given and wanted is not None and given["max_returns"] != wanted:
+            raise InvalidInputError(f"--return-mode {mode} records {wanted} return{'s' * (wanted > 1)} per pulse; "
+                                    f"--max-returns {given['max_returns']} contradicts it")  # fmt: skip
+        if wanted is not None:
+            changes["max_returns"] = wanted
+        elif "max_returns" not in given and beam.return_mode != "all":
+            changes["max_returns"] = 1  # 'all' after a Velodyne mode: one return unless --max-returns says more
+    if "max_returns" in given:
+        changes["max_returns"] = int(given["max_returns"])
+    for dest in ("range_resolution", "power_noise", "echo_separation"):
+        if dest in given:
+            changes[BEAM_OPTIONS[dest]] = float(given[dest])
+    _check_echoes(beam, changes, given, args)
+    return changes
+
+
+def _check_echoes(beam, changes: dict, given: dict, args: argparse.Namespace) -> None:
+    """The rules that tie the footprint, the returns and the range resolution together, said in the options' words;
+    ``changes`` gains the drops that follow (the sensor's echo separation or range resolution)."""
+    rays = changes.get("footprint_rays", beam.footprint_rays)
+    returns = changes.get("max_returns", beam.max_returns)
+    mode = changes.get("return_mode", beam.return_mode)
+    resolves = returns > 1 or mode != "all"
+    resolution = changes.get("range_resolution_m", beam.range_resolution_m)
+    what = f"--max-returns {returns}" if mode == "all" else f"--return-mode {mode}"
+    separation = given.get("echo_separation")
+    if separation and rays == 1:
+        raise InvalidInputError(
+            f"--echo-separation {separation:g} needs {_flag(args, 'footprint')} (mixed pixels come from a wide footprint)"
+        )
+    if separation and resolves:
+        raise InvalidInputError(
+            f"--echo-separation {separation:g} merges echoes into one return; with {what} give --range-resolution instead"
+        )
+    if resolves and not resolution > 0:
+        raise InvalidInputError(f"{what} needs --range-resolution M (metres: the least range between two returns)")
+    if "range_resolution" in given and not resolves:
+        raise InvalidInputError(f"--range-resolution {given['range_resolution']:g} separates several returns per pulse: it needs "
+                                "--max-returns above 1 or --return-mode strongest, last or dual")  # fmt: skip
+    if resolves and beam.echo_separation_m > 0:
+        changes["echo_separation_m"] = 0.0  # resolved echoes are kept apart by the range resolution, not merged
+    if not resolves and beam.range_resolution_m > 0:
+        changes["range_resolution_m"] = 0.0  # one return per pulse: nothing to resolve
+
+
+def with_return_physics(sensor, args: argparse.Namespace):
+    """``sensor`` with its beam changed by the beam options (:func:`beam_changes`, applied by
+    :func:`~zbuf_occlude.sensors.kinds.with_beam`), and ``--reflectance-table`` and ``--transmittance``
+    checked against it (:func:`surface_optics` applies them, to a scene file or a mesh's scene, for
+    any pulsed scanner).
+
+    Raises
+    ------
+    InvalidInputError
+        As :func:`beam_changes`; a change the beam refuses (naming the options given); and
+        ``--reflectance-table`` or ``--transmittance`` for a sensor without a beam, ``--reflectance-table``
+        with ``--reflectivity`` (one ρ for the object, or its material's), ``--transmittance`` above 0
+        without several returns per pulse or with ``--backend zbuffer`` (one face per pixel), each naming the value.
+    """
+    from zbuf_occlude.sensors.kinds import kind_of, with_beam
+
+    changes = beam_changes(sensor, args)
+    out = sensor
+    if changes:
+        try:
+            out = with_beam(sensor, **changes)
+        except InvalidInputError as exc:
+            names = ", ".join(_flag(args, dest) for dest in _given(args))
+            raise InvalidInputError(f"{names}: {exc}") from None
     table, tau = getattr(args, "reflectance_table", False), getattr(args, "transmittance", None)
     given = " and ".join(f for f, v in (("--reflectance-table", table), (f"--transmittance {_shown_tau(tau)}", tau is not None)) if v)
     if not given:
         return out
-    from zbuf_occlude.sensors.lidar import Lidar
-    from zbuf_occlude.sensors.ray_table import RayTable
+    kind = kind_of(out)
+    if not kind.pulsed:
+        raise InvalidInputError(f"{given} model the surfaces a pulsed LiDAR's beam meets; {args.sensor} is a {kind.title}")
+    if table and getattr(args, "reflectivity", None) is not None:
+        from zbuf_occlude.cli.crops import FLAGS
 
-    if Path(args.mesh_or_scene).suffix.lower() not in (".json", ".yaml", ".yml"):
-        raise InvalidInputError(f"{given} give each object of a scene file its own value: scan a scene .json/.yaml "
-                                f"({args.mesh_or_scene} is a mesh; its crops take --reflectivity)")  # fmt: skip
-    if not isinstance(out, (Lidar, RayTable)):
-        raise InvalidInputError(f"{given} model spinning LiDARs and ray tables; {args.sensor} is not one")
+        flag = getattr(args, FLAGS, {}).get("reflectivity", "--reflectivity")
+        raise InvalidInputError(f"--reflectance-table gives each surface its material's reflectivity; {flag} gives the object one: "
+                                "give one of them")  # fmt: skip
     opaque = tau is None or (not isinstance(tau, (str, dict)) and tau == 0) or (isinstance(tau, dict) and not any(tau.values()))
-    if not opaque and not out.multi_return:
+    if not opaque and not out.beam.resolves_echoes:
         raise InvalidInputError(f"--transmittance {_shown_tau(tau)} gives hits behind a surface, which only several returns per pulse "
                                 "resolve: give --max-returns above 1 (and --footprint)")  # fmt: skip
     if not opaque and getattr(args, "backend", "embree") != "embree":
@@ -114,9 +260,15 @@ def _shown_tau(tau) -> str:
 
 
 def surface_optics(args: argparse.Namespace, scene) -> dict:
-    """``scan``'s ``reflectivity`` and ``transmittance`` keywords from ``--reflectance-table`` and
-    ``--transmittance`` for a :class:`~zbuf_occlude.sensors.scene.ScanScene` (none given: no keyword,
-    the scan as without them).
+    """The ``reflectivity`` and ``transmittance`` keywords of :func:`~zbuf_occlude.sensors.scan.scan` and
+    :func:`~zbuf_occlude.sensors.scan.scan_airborne` from ``--reflectance-table`` and ``--transmittance``
+    (none given: no keyword, the scan as without them).
+
+    ``scene`` is a :class:`~zbuf_occlude.sensors.scene.ScanScene`: a scene file's, or the one a
+    scan of a mesh stands the mesh in (:func:`~zbuf_occlude.sensors.crops.object_crop`: the ground,
+    the object, then any occluders, which reflect and transmit as the object does).  One
+    ``--transmittance`` number applies to every object, not the ground; ``CLASS=VALUE`` pairs to
+    the objects of those classes (a mesh's class: its file name without suffix).
 
     Raises
     ------
@@ -141,52 +293,9 @@ def surface_optics(args: argparse.Namespace, scene) -> dict:
     return out
 
 
-def _return_physics(sensor, args: argparse.Namespace):
-    """``sensor`` with ``--footprint``, ``--power-noise``, ``--echo-separation``, ``--max-returns`` and
-    ``--range-resolution`` applied: all five to a spinning LiDAR, the last two to an airborne
-    scanner (its footprint is the sensor file's ``footprint_rays``).
-
-    ``--footprint`` gives :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS` sub-rays; without it the sensor's own ``footprint_rays`` stay (a sensor
-    file's K above 1 is a footprint for ``--echo-separation``).  ``--max-returns`` above 1 needs a
-    range resolution, from ``--range-resolution`` or the sensor's.
-
-    Raises
-    ------
-    InvalidInputError
-        Naming the option and its value: one of them for a depth camera, ``--footprint``,
-        ``--power-noise`` or ``--echo-separation`` for an airborne scanner,
-        ``--echo-separation`` without a footprint or with several returns, ``--range-resolution``
-        with one return per pulse, ``--max-returns`` above 1 without a range resolution.
-    """
-    from zbuf_occlude.sensors.airborne import AirborneScanner
-    from zbuf_occlude.sensors.lidar import Lidar
-
-    given = [f for f, v in (("--footprint", args.footprint), ("--power-noise", args.power_noise), ("--echo-separation", args.echo_separation),
-                            ("--max-returns", args.max_returns), ("--range-resolution", args.range_resolution)) if v]  # fmt: skip
-    if not given:
-        return sensor
-    airborne = isinstance(sensor, AirborneScanner) and not (args.footprint or args.power_noise or args.echo_separation)
-    if not (isinstance(sensor, Lidar) or airborne):
-        raise InvalidInputError(f"--footprint, --power-noise, --echo-separation, --max-returns and --range-resolution model spinning LiDARs; "
-                                f"{args.sensor} is not one (given: {', '.join(given)})")  # fmt: skip
-    if airborne and args.max_returns == 1 and sensor.footprint_rays > 1:
-        raise InvalidInputError(f"--max-returns 1: {args.sensor} has a footprint of {sensor.footprint_rays} sub-rays, which an airborne scanner "
-                                "resolves into several returns; give --max-returns above 1")  # fmt: skip
-    rays = FOOTPRINT_RAYS if args.footprint else sensor.footprint_rays
-    max_returns = args.max_returns or sensor.max_returns
-    resolution = args.range_resolution or sensor.range_resolution_m
-    if args.echo_separation and rays == 1:
-        raise InvalidInputError(f"--echo-separation {args.echo_separation:g} needs --footprint (mixed pixels come from a wide footprint)")
-    if max_returns > 1 and args.echo_separation:
-        raise InvalidInputError(f"--echo-separation {args.echo_separation:g} merges echoes into one return; with --max-returns {max_returns} "
-                                "give --range-resolution instead")  # fmt: skip
-    if max_returns > 1 and not resolution > 0:
-        raise InvalidInputError(f"--max-returns {max_returns} needs --range-resolution M (metres: the least range between two returns)")
-    if args.range_resolution and max_returns == 1:
-        raise InvalidInputError(
-            f"--range-resolution {args.range_resolution:g} separates several returns per pulse: it needs --max-returns above 1"
-        )
-    if airborne:
-        return sensor.with_(max_returns=max_returns, range_resolution_m=resolution if max_returns > 1 else sensor.range_resolution_m)
-    return sensor.with_(footprint_rays=rays, power_noise=args.power_noise, echo_separation_m=args.echo_separation or sensor.echo_separation_m,
-                        max_returns=max_returns, range_resolution_m=resolution if max_returns > 1 else sensor.range_resolution_m)  # fmt: skip
+def scene_optics_of(args: argparse.Namespace) -> Callable[[object], dict] | None:
+    """:func:`surface_optics` of ``args`` as a function of the scene, for a scan that builds its scene per
+    sample (:func:`~zbuf_occlude.sensors.crops.object_crops`' ``optics``); None where neither option is given."""
+    if not getattr(args, "reflectance_table", False) and getattr(args, "transmittance", None) is None:
+        return None
+    return lambda scene: surface_optics(args, scene)

@@ -34,7 +34,7 @@ from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, view_schedule
 from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.mesh.paths import SPLITS
 from zbuf_occlude.mesh.scene import UP_CHOICES
-from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
+from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS, MAX_DIVERGENCE_DEG
 from zbuf_occlude.sensors.placement import CropDistributions, check_across_sight_width
 
 if TYPE_CHECKING:  # annotations only: inputs imports nothing from here
@@ -62,7 +62,7 @@ OPTION_NAMES = {
     "dense_points": "--dense-points", "density": "--density", "resolution": "--resolution", "seed": "--seed",
     "radius": "--radius", "storage": "--storage/--format", "method": "--method", "sensor": "--sensor",
     "sensor_distance_m": "--sensor-distance", "sensor_height_m": "--sensor-height", "sensor_size_m": "--sensor-size",
-    "sensor_reflectivity": "--sensor-reflectivity", "sensor_footprint": "--sensor-footprint",
+    "sensor_reflectivity": "--sensor-reflectivity", "sensor_footprint": "--sensor-footprint", "sensor_divergence_deg": "--sensor-divergence",
     "sensor_ground_margin_m": "--sensor-ground-margin", "sensor_hidden_below_m": "--sensor-hidden-below",
     "sensor_across_sight_width_m": "--sensor-across-sight-width", "up": "--up",
 }  # fmt: skip
@@ -81,11 +81,12 @@ SENSOR_KEYS = {
     "distance_m": "sensor_distance_m", "height_m": "sensor_height_m", "size_m": "sensor_size_m",
     "reflectivity": "sensor_reflectivity", "footprint": "sensor_footprint", "ground_margin_m": "sensor_ground_margin_m",
     "hidden_below_m": "sensor_hidden_below_m", "across_sight_width_m": "sensor_across_sight_width_m",
+    "divergence_deg": "sensor_divergence_deg",
 }  # fmt: skip
 #: The :class:`CropDistributions` fields the farm sets (and records); the others keep their defaults.
 FARM_CROP_FIELDS = ("distance_m", "height_m", "size_m", "reflectivity", "ground_margin_m", "hidden_below_m")
 #: Settings left out of the plan when None: the digest of sensor data sets made before they existed.
-_LEFT_OUT_WHEN_NONE = ("ground_margin_m", "hidden_below_m", "across_sight_width_m")
+_LEFT_OUT_WHEN_NONE = ("ground_margin_m", "hidden_below_m", "across_sight_width_m", "divergence_deg")
 #: The ``farm`` flag of each :class:`CropDistributions` field it sets, for the messages of its checks.
 CROP_OPTION_NAMES = {field: OPTION_NAMES[SENSOR_KEYS[field]] for field in FARM_CROP_FIELDS}
 #: ``farm --sensor``'s placement when no option changes it.
@@ -110,7 +111,7 @@ class SensorCropParams:
     Parameters
     ----------
     name : str
-        A sensor preset (``hdl32e``...) or JSON file (:func:`~zbuf_occlude.sensors.presets.sensor_from_name`).
+        A sensor preset (``hdl32e``...) or JSON file (:func:`~zbuf_occlude.sensors.kinds.sensor_from_name`).
     distributions : CropDistributions
         Per scan, uniform draws of the horizontal sensor-object distance (``distance_m``), the
         sensor height above the ground (``height_m``) and the object's largest dimension
@@ -120,7 +121,11 @@ class SensorCropParams:
         returns under each object; ``hidden_below_m``: hide each object's bottom.  The farm
         sets and records these (:data:`FARM_CROP_FIELDS`); the other fields keep their defaults.
     footprint : bool
-        Return physics: 7 rays per firing in the beam's divergence cone, strongest echo.
+        Return physics: :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS` rays per firing in the
+        beam's divergence cone, strongest echo; any pulsed sensor whose beam has a divergence.
+    divergence_deg : float or None
+        The beam's full-angle divergence, degrees in (0, 90] (for ``footprint`` where the sensor's
+        data sheet gives none); None: the sensor's.
     across_sight_width_m : (lo, hi) or None
         Stretch each mesh horizontally so that its crops are, at the median, as wide across the
         line of sight as this interval, metres, drawn per scan
@@ -130,8 +135,7 @@ class SensorCropParams:
     Raises
     ------
     InvalidInputError
-        An unknown sensor; ``footprint``, ``reflectivity`` or ``across_sight_width_m`` for a
-        sensor that is not a spinning LiDAR; a bad ``across_sight_width_m``; a
+        An unknown sensor; what :meth:`model` refuses; a bad ``across_sight_width_m``; a
         ``distributions`` field the farm does not record set to other than its default.  Each
         crop setting's value is checked by :class:`CropDistributions`, the one checker of them.
     """
@@ -140,6 +144,7 @@ class SensorCropParams:
     distributions: CropDistributions = FARM_CROP_DISTRIBUTIONS
     footprint: bool = False
     across_sight_width_m: tuple[float, float] | None = None
+    divergence_deg: float | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.distributions, CropDistributions):
@@ -151,34 +156,63 @@ class SensorCropParams:
                     f"farm --sensor draws no {f.name} (its card could not say so): leave it at {getattr(unset, f.name)!r}"
                 )
         object.__setattr__(self, "footprint", bool(self.footprint))
+        if self.divergence_deg is not None:
+            from zbuf_occlude.sensors.checks import real
+
+            option = OPTION_NAMES["sensor_divergence_deg"]
+            object.__setattr__(self, "divergence_deg", real(self.divergence_deg, option, low=0.0, low_open=True, high=MAX_DIVERGENCE_DEG))
         if self.across_sight_width_m is not None:
             option = OPTION_NAMES["sensor_across_sight_width_m"]
             object.__setattr__(self, "across_sight_width_m", check_across_sight_width(self.across_sight_width_m, option))
         self.model()  # raises InvalidInputError naming an unknown sensor, or physics it has not
 
     def model(self):
-        """The :class:`~zbuf_occlude.sensors.Lidar` or :class:`~zbuf_occlude.sensors.DepthCamera` of ``name``.
+        """The sensor of ``name`` with the beam changes of ``footprint`` and ``divergence_deg``
+        (:func:`~zbuf_occlude.sensors.kinds.with_beam`, as ``scan``'s beam options).
 
         Raises
         ------
         InvalidInputError
-            Unknown sensor, or ``footprint``, ``reflectivity`` or ``across_sight_width_m``
-            for a depth camera or a LiDAR without a beam divergence.
+            Unknown sensor; ``footprint``, ``divergence_deg`` or ``reflectivity`` for a sensor
+            without a beam (a depth camera); ``reflectivity`` for an airborne scanner (its crops fly
+            over every surface alike); ``footprint`` for a beam without a divergence (naming
+            ``--sensor-divergence``); ``across_sight_width_m`` for a sensor that is not a spinning
+            LiDAR; a divergence the beam refuses.  Each names its ``farm`` option.
         """
-        from zbuf_occlude.sensors.lidar import Lidar
-        from zbuf_occlude.sensors.presets import sensor_from_name
+        from zbuf_occlude.sensors.kinds import kind_of, sensor_from_name, with_beam
 
         sensor = sensor_from_name(self.name)
-        if (self.footprint or self.distributions.reflectivity is not None) and not isinstance(sensor, Lidar):
-            raise InvalidInputError(f"--sensor-footprint and --sensor-reflectivity model LiDARs; {self.name} is not one")
-        if self.across_sight_width_m is not None and not isinstance(sensor, Lidar):
+        kind = kind_of(sensor)
+        given = [OPTION_NAMES[f"sensor_{f}"] for f, v in (("footprint", self.footprint), ("divergence_deg", self.divergence_deg),
+                                                         ("reflectivity", self.distributions.reflectivity)) if v not in (None, False)]  # fmt: skip
+        if given and not kind.pulsed:
+            raise InvalidInputError(f"{', '.join(given)}: {self.name} is a {kind.title}, which has no beam (a pulsed LiDAR has one)")
+        if self.distributions.reflectivity is not None and kind.flies:
+            raise InvalidInputError(f"{OPTION_NAMES['sensor_reflectivity']}: {self.name} is an {kind.title}, whose crops fly over "
+                                    "every surface alike (no detection threshold per object); leave it out")  # fmt: skip
+        if self.across_sight_width_m is not None and kind.name != "lidar":
             raise InvalidInputError(f"--sensor-across-sight-width measures across a spinning LiDAR's line of sight; {self.name} is not one")
-        return sensor.with_(footprint_rays=FOOTPRINT_RAYS) if self.footprint else sensor
+        changes: dict[str, Any] = {}
+        if self.divergence_deg is not None:
+            changes["divergence_deg"] = self.divergence_deg
+        if self.footprint:
+            if not changes.get("divergence_deg", sensor.beam.divergence_deg) > 0:
+                raise InvalidInputError(
+                    f"{OPTION_NAMES['sensor_footprint']} samples the beam's divergence cone, and {self.name}'s beam ({sensor.beam.name}) "
+                    f"has no divergence (divergence_deg 0): give {OPTION_NAMES['sensor_divergence_deg']} DEG, the full angle of its data sheet"
+                )
+            changes["footprint_rays"] = FOOTPRINT_RAYS
+        if not changes:
+            return sensor
+        try:
+            return with_beam(sensor, **changes)
+        except InvalidInputError as exc:
+            raise InvalidInputError(f"{', '.join(given)}: {exc}") from None
 
     def to_dict(self) -> dict[str, Any]:
         """``{"sensor": name, "sensor_distance_m": [lo, hi], ...}``: the flat keys of :data:`SENSOR_KEYS`."""
         values = {**{f: getattr(self.distributions, f) for f in FARM_CROP_FIELDS}, "footprint": self.footprint,
-                  "across_sight_width_m": self.across_sight_width_m}  # fmt: skip
+                  "across_sight_width_m": self.across_sight_width_m, "divergence_deg": self.divergence_deg}  # fmt: skip
         d: dict[str, Any] = {"sensor": self.name}
         for field, key in SENSOR_KEYS.items():
             if values[field] is not None or field not in _LEFT_OUT_WHEN_NONE:
