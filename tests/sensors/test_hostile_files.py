@@ -27,8 +27,10 @@ from zbuf_occlude.sensors.airborne import AirborneScanner
 from zbuf_occlude.sensors.scan import scan_airborne
 from zbuf_occlude.sensors.checks import MAX_SCENE_OBJECTS, MAX_SENSOR_RAYS, SHOWN_CHARS, shown
 from zbuf_occlude.sensors.depth_camera import DepthCamera
+from zbuf_occlude.sensors.beam import Beam
+from zbuf_occlude.sensors.kinds import LEGACY_BEAM_KEYS, SENSOR_KINDS, sensor_from_name
 from zbuf_occlude.sensors.lidar import Lidar, lidar_preset
-from zbuf_occlude.sensors.kinds import sensor_from_name
+from zbuf_occlude.sensors.ray_table import RayTable
 from zbuf_occlude.sensors.scene import ScanScene, SceneObject, load_scene
 
 yaml = pytest.importorskip("yaml", reason="YAML scenes need the [yaml] extra (PyYAML)")
@@ -254,6 +256,11 @@ def test_the_valid_scene_of_the_laws_loads_and_builds(tmp_path: Path) -> None:
         assert len(scene.build().local_to_world) == 3 and scene.sensor_position_m == (0.0, 0.5)
 
 
+def kind_of_class(cls):
+    """The :class:`~zbuf_occlude.sensors.kinds.SensorKind` row of a sensor class."""
+    return next(kind for kind in SENSOR_KINDS if kind.cls is cls)
+
+
 def _annotation(cls, name: str) -> str:
     return str(next(f.type for f in fields(cls) if f.name == name))
 
@@ -264,18 +271,33 @@ def _numeric_fields(cls) -> list[str]:
 
 
 VALID_SENSORS = {
-    Lidar: {"kind": "lidar", "name": "x", "elevations_deg": [-1.0, 0.0, 1.0], "footprint_rays": 7, "beam_divergence_deg": 0.2},
+    Lidar: {"kind": "lidar", "name": "x", "elevations_deg": [-1.0, 0.0, 1.0], "beam": {"footprint_rays": 7, "divergence_deg": 0.2}},
     AirborneScanner: {"kind": "airborne", "name": "als", "swath_deg": 40.0, "pulse_rate_hz": 1e5, "line_rate_hz": 50.0,
-                      "altitude_m": 800.0, "speed_mps": 60.0, "n_lines": 2, "headings_deg": [0.0, 90.0]},
+                      "altitude_m": 800.0, "speed_mps": 60.0, "n_lines": 2, "headings_deg": [0.0, 90.0],
+                      "beam": {"footprint_rays": 7, "divergence_deg": 0.2, "max_returns": 3, "range_resolution_m": 0.6}},
+    RayTable: {"kind": "ray_table", "name": "t", "time_s": [0.0, 0.5], "azimuth_deg": [0.0, 10.0], "elevation_deg": [0.0, -5.0],
+               "beam": {"max_returns": 2, "range_resolution_m": 0.5}},
     DepthCamera: {"kind": "depth_camera", "name": "cam", "K": [[50.0, 0.0, 31.5], [0.0, 50.0, 23.5], [0.0, 0.0, 1.0]],
                   "width": 64, "height": 48, "noise": 0.01},
 }  # fmt: skip
-SENSOR_NUMBERS = [(cls, name) for cls in VALID_SENSORS for name in _numeric_fields(cls)]
+#: ``(class, field, in_beam)``: every numeric field of every sensor file, a pulsed kind's beam fields (in its ``"beam"``
+#: object, :class:`~zbuf_occlude.sensors.beam.Beam`'s) included.
+SENSOR_NUMBERS = [(cls, name, False) for cls in VALID_SENSORS for name in _numeric_fields(cls)] + [
+    (cls, name, True) for cls in VALID_SENSORS if kind_of_class(cls).pulsed for name in _numeric_fields(Beam)
+]
+#: The beam keys of the flat layout fit-sensor wrote before scanners had a ``"beam"`` (still read): ``(key, the name its
+#: message gives)``.
+LEGACY_NUMBERS = [(old, new) for old, new in LEGACY_BEAM_KEYS.items() if new in _numeric_fields(Beam)] + [
+    ("detection_reflectivity", "detection_reflectivity"), ("detection_range_m", "detection_range_m"),
+]  # fmt: skip
 
 
-def _with_bad(cls, name: str, value) -> dict:
-    """The valid sensor spec with ``value`` in field ``name`` (inside the list, for a sequence field)."""
-    spec = {k: v for k, v in VALID_SENSORS[cls].items()}
+def _with_bad(cls, name: str, value, in_beam: bool = False) -> dict:
+    """The valid sensor spec with ``value`` in field ``name`` (inside the list, for a sequence field; in ``"beam"`` with ``in_beam``)."""
+    spec = {k: dict(v) if isinstance(v, dict) else v for k, v in VALID_SENSORS[cls].items()}
+    if in_beam:
+        spec["beam"] = {**spec.get("beam", {}), name: value}
+        return spec
     annotation = _annotation(cls, name)
     if annotation.startswith("tuple[tuple"):
         spec[name] = [[value, 0.0, 1.0], *spec[name][1:]]
@@ -287,37 +309,92 @@ def _with_bad(cls, name: str, value) -> dict:
 
 
 def test_every_numeric_sensor_field_is_covered() -> None:
-    names = {(cls.__name__, name) for cls, name in SENSOR_NUMBERS}
-    assert {("Lidar", "elevations_deg"), ("Lidar", "detection_range_m"), ("AirborneScanner", "headings_deg"), ("AirborneScanner", "n_lines"),
-            ("DepthCamera", "K"), ("DepthCamera", "width"), ("DepthCamera", "noise")} <= names  # fmt: skip
-    assert (
-        len(names) == 17 + 15 + 9
-    )  # Lidar: 15, then max_returns and range_resolution_m; AirborneScanner: 10, then beam_divergence_deg, footprint_rays, max_returns, range_resolution_m and detection_threshold (several returns per pulse)
+    names = {(Beam if in_beam else cls).__name__ + "." + name for cls, name, in_beam in SENSOR_NUMBERS}
+    assert {"Lidar.elevations_deg", "Beam.detection_threshold", "Beam.divergence_deg", "Beam.range_noise_m", "Beam.intensity_scale",
+            "AirborneScanner.headings_deg", "AirborneScanner.n_lines", "RayTable.time_s", "DepthCamera.K", "DepthCamera.width",
+            "DepthCamera.noise"} <= names  # fmt: skip
+    # Lidar: 4 (its ring pattern), AirborneScanner: 8 (swath, rates, flight and plan), RayTable: its 3 columns,
+    # DepthCamera: 9; Beam: 15 (every pulse and receiver field), tried in the file of each pulsed kind
+    assert len(names) == 4 + 8 + 3 + 9 + 15
+    assert sum(in_beam for *_, in_beam in SENSOR_NUMBERS) == 3 * 15
+    assert {new for _, new in LEGACY_NUMBERS} >= {"min_range_m", "max_range_m", "range_noise_m", "divergence_deg", "footprint_rays"}
 
 
 @pytest.mark.parametrize("cls", list(VALID_SENSORS))
 def test_the_valid_sensor_files_of_the_laws_load(tmp_path: Path, cls) -> None:
-    assert isinstance(sensor_from_name(str(_write(tmp_path / "s.json", VALID_SENSORS[cls]))), cls)
+    sensor = sensor_from_name(str(_write(tmp_path / "s.json", VALID_SENSORS[cls])))
+    assert isinstance(sensor, cls)
+    if "beam" in VALID_SENSORS[cls]:  # the file's beam fields reach the beam
+        assert all(getattr(sensor.beam, k) == v for k, v in VALID_SENSORS[cls]["beam"].items())
 
 
-@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+def _python_refusal(cls, name: str, value, in_beam: bool) -> str:
+    """The message of the constructor given the bad value: the Beam's for a beam field, the sensor's otherwise."""
+    spec = {k: v for k, v in _with_bad(cls, name, value, in_beam).items() if k != "kind"}
+    if in_beam:
+        return _refusal(lambda: Beam(**spec["beam"]))
+    if "beam" in spec:
+        spec["beam"] = Beam(**spec["beam"])
+    return _refusal(lambda: cls(**spec))
+
+
+@settings(max_examples=160, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(field=st.sampled_from(SENSOR_NUMBERS), value=st.sampled_from(NOT_A_FINITE_NUMBER))
 def test_any_non_finite_or_non_number_sensor_field_is_refused_naming_file_and_field(tmp_path: Path, field: tuple, value) -> None:
-    cls, name = field
-    path = _write(tmp_path / "sensor.json", _with_bad(cls, name, value))
+    cls, name, in_beam = field
+    path = _write(tmp_path / "sensor.json", _with_bad(cls, name, value, in_beam))
     message = _refusal(sensor_from_name, str(path))
     assert message.startswith(f"{path}: ") and name in message, message
+    if in_beam:
+        assert "beam" in message.split(name)[0], message  # the beam named before its field
     # the same rule in Python: the constructor names the field
-    spec = {k: v for k, v in _with_bad(cls, name, value).items() if k != "kind"}
-    assert name in _refusal(lambda: cls(**spec))
+    assert name in _python_refusal(cls, name, value, in_beam)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(field=st.sampled_from(LEGACY_NUMBERS), value=st.sampled_from(NOT_A_FINITE_NUMBER), kind=st.sampled_from([Lidar, AirborneScanner]))
+def test_a_bad_beam_key_of_the_flat_layout_is_refused_naming_file_and_field(tmp_path: Path, field: tuple, value, kind) -> None:
+    key, named = field
+    spec = {k: v for k, v in VALID_SENSORS[kind].items() if k != "beam"}
+    path = _write(tmp_path / "sensor.json", {**spec, key: value})
+    message = _refusal(sensor_from_name, str(path))
+    assert message.startswith(f"{path}: ") and named in message, message
+
+
+#: Every key a lidar file may hold: its fields, the flat layout's beam keys, and the file's own.
+LIDAR_FILE_KEYS = {
+    "kind",
+    "fit",
+    "preset",
+    *(f.name for f in fields(Lidar)),
+    *LEGACY_BEAM_KEYS,
+    "detection_reflectivity",
+    "detection_range_m",
+}
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(key=st.text(min_size=1, max_size=30).filter(lambda k: k not in {"kind", "fit", *(f.name for f in fields(Lidar))}))
+@given(key=st.text(min_size=1, max_size=30).filter(lambda k: k not in LIDAR_FILE_KEYS))
 def test_any_unknown_key_of_a_sensor_file_is_refused_naming_it(tmp_path: Path, key: str) -> None:
     path = _write(tmp_path / "sensor.json", {**VALID_SENSORS[Lidar], key: 1})
     message = _refusal(sensor_from_name, str(path))
     assert message.startswith(f"{path}: ") and shown(key) in message
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(key=st.text(min_size=1, max_size=30).filter(lambda k: k not in {f.name for f in fields(Beam)}))
+def test_any_unknown_key_of_a_sensor_files_beam_is_refused_naming_it(tmp_path: Path, key: str) -> None:
+    spec = VALID_SENSORS[Lidar]
+    path = _write(tmp_path / "sensor.json", {**spec, "beam": {**spec["beam"], key: 1}})
+    message = _refusal(sensor_from_name, str(path))
+    assert message.startswith(f"{path}: ") and "beam" in message and shown(key) in message
+
+
+@pytest.mark.parametrize("beam", [[1, 2], "ideal", 5, None, True])
+def test_a_beam_that_is_not_an_object_is_refused(tmp_path: Path, beam) -> None:
+    path = _write(tmp_path / "sensor.json", {**VALID_SENSORS[Lidar], "beam": beam})
+    message = _refusal(sensor_from_name, str(path))
+    assert message.startswith(f"{path}: ") and "beam" in message, message
 
 
 # -- limits: counts, sizes, ranges ----------------------------------------------------------------
@@ -328,16 +405,24 @@ def test_any_unknown_key_of_a_sensor_file_is_refused_naming_it(tmp_path: Path, k
     [
         (Lidar, {"firing_rate_hz": 1e12, "rotation_hz": 1.0}, "rays per revolution"),
         (Lidar, {"elevations_deg": [0.0] * 64, "firing_rate_hz": 1e300, "rotation_hz": 1e-300}, "rays per revolution"),
-        (Lidar, {"min_range_m": -1.0}, "min_range_m"), (Lidar, {"max_range_m": -5.0}, "max_range_m"),
-        (Lidar, {"detection_range_m": 1e300}, "detection_range_m"), (Lidar, {"footprint_rays": 10**400}, "footprint_rays"),
-        (Lidar, {"footprint_rays": 1025}, "footprint_rays"), (Lidar, {"elevations_deg": []}, "elevations_deg"),
-        (Lidar, {"elevations_deg": [90.0]}, "elevations_deg[0]"), (Lidar, {"dropout": 1.0}, "dropout"),
+        (Lidar, {"beam": {"min_range_m": -1.0}}, "min_range_m"), (Lidar, {"beam": {"max_range_m": -5.0}}, "max_range_m"),
+        (Lidar, {"detection_range_m": 1e300}, "detection_range_m"),  # the flat layout's range at reflectivity: τ = ρ / R² underflows
+        (Lidar, {"beam": {"footprint_rays": 10**400, "divergence_deg": 0.2}}, "footprint_rays"),
+        (Lidar, {"beam": {"footprint_rays": 1025, "divergence_deg": 0.2}}, "footprint_rays"), (Lidar, {"elevations_deg": []}, "elevations_deg"),
+        (Lidar, {"elevations_deg": [90.0]}, "elevations_deg[0]"), (Lidar, {"beam": {"dropout": 1.0}}, "dropout"),
+        (Lidar, {"beam": {"max_returns": 16, "range_resolution_m": 0.5}}, "max_returns"),
+        (Lidar, {"beam": {"max_intensity": 65_536}}, "max_intensity"),
+        (Lidar, {"beam": {"min_range_m": 5.0, "max_range_m": 5.0}}, "min_range_m < max_range_m"),
+        (Lidar, {"beam": {"max_range_m": 1e300}}, "max_range_m"),
         (AirborneScanner, {"n_lines": 10**400}, "n_lines"), (AirborneScanner, {"n_lines": 2.5}, "n_lines"),
         (AirborneScanner, {"altitude_m": -1.0}, "altitude_m"), (AirborneScanner, {"pulse_rate_hz": 1e300}, "pulses per line"),
         (AirborneScanner, {"headings_deg": []}, "headings_deg"), (AirborneScanner, {"pattern": ["linear"]}, "pattern"),
+        (AirborneScanner, {"beam": {"footprint_rays": 7}}, "divergence_deg"),
+        (RayTable, {"time_s": [1.0, 0.0]}, "time_s"), (RayTable, {"elevation_deg": [0.0, 91.0]}, "elevation_deg[1]"),
         (DepthCamera, {"width": 10**9}, "width"), (DepthCamera, {"width": 4096, "height": 4096}, "pixels"),
         (DepthCamera, {"width": 0}, "width"), (DepthCamera, {"max_depth_m": -1.0}, "max_depth_m"),
         (DepthCamera, {"noise": "loud"}, "noise"), (DepthCamera, {"K": [[1, 0, 0], [0, 1, 0]]}, "K"),
+        (DepthCamera, {"beam": {"range_noise_m": 0.1}}, "beam"),
     ],
 )  # fmt: skip
 def test_counts_and_ranges_beyond_their_limits_are_refused(tmp_path: Path, cls, change: dict, field: str) -> None:
