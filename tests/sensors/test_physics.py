@@ -15,6 +15,8 @@ from scipy.stats import norm
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors import Lidar, SceneObject, scan
+from zbuf_occlude.sensors.beam import Beam
+from zbuf_occlude.sensors.kinds import with_beam
 from zbuf_occlude.sensors.scene import BuiltScene
 
 D = 10.0  # wall distance, metres
@@ -25,11 +27,17 @@ def _wall(d: float = D, half: float = 200.0) -> trimesh.Trimesh:
     return trimesh.Trimesh(v, [[0, 1, 2], [0, 2, 3]], process=False)
 
 
-def _lidar(**changes) -> Lidar:
+#: τ = ρ / R² of a receiver that detects ρ = 0.8 at 27 m, m⁻².
+TAU = 0.8 / 27.0**2
+
+
+def _beam(**changes) -> Beam:
+    return Beam(**({"min_range_m": 0.1, "max_range_m": 10_000.0, "detection_threshold": TAU} | changes))
+
+
+def _lidar(elevations_deg=tuple(np.linspace(-40.0, 40.0, 9)), firing_rate_hz: float = 3600.0, **beam_changes) -> Lidar:
     # 1° azimuth steps, 9 rings from -40° to +40°: incidences 0–85° on the wall
-    base = dict(elevations_deg=tuple(np.linspace(-40.0, 40.0, 9)), rotation_hz=10.0, firing_rate_hz=3600.0,
-                min_range_m=0.1, max_range_m=10_000.0, range_noise_m=0.0, detection_range_m=27.0)  # fmt: skip
-    return Lidar("test", **(base | changes))
+    return Lidar("test", elevations_deg, rotation_hz=10.0, firing_rate_hz=firing_rate_hz, beam=_beam(**beam_changes))
 
 
 def _firings(lidar: Lidar, sector=(-85.0, 85.0)):
@@ -54,12 +62,12 @@ def test_sharp_threshold_keeps_exactly_the_firings_the_range_equation_allows(rho
     s = scan(_wall(), lidar, np.zeros(3), reflectivity=rho, azimuth_range_deg=(-85.0, 85.0))
     ring, az, cos = _firings(lidar)
     power = rho * cos / (D / cos) ** 2  # ρ cos θ / R², R = D / cos θ
-    assert np.all(np.abs(power / lidar.detection_threshold - 1.0) > 1e-6)  # no firing on the edge
-    keep = power >= lidar.detection_threshold
+    assert np.all(np.abs(power / lidar.beam.detection_threshold - 1.0) > 1e-6)  # no firing on the edge
+    keep = power >= lidar.beam.detection_threshold
     assert _firing_keys(s.ring, _return_azimuths(s)) == _firing_keys(ring[keep], az[keep])
     assert 0 < keep.sum() < len(ring)  # the threshold cuts inside the scene
     # equivalently: kept iff cos θ ≥ (τ D² / ρ)^(1/3), since ρ cos³θ / D² = τ on the wall
-    cut = (lidar.detection_threshold * D**2 / rho) ** (1 / 3)
+    cut = (lidar.beam.detection_threshold * D**2 / rho) ** (1 / 3)
     assert np.all(np.cos(np.radians(s.incidence_deg)) >= cut - 1e-5)
     assert len(s) == int(np.sum(cos >= cut))
 
@@ -75,7 +83,7 @@ def test_power_noise_gives_the_lognormal_return_probability():
     sigma, rho = 0.5, 0.5
     lidar = _lidar(firing_rate_hz=36_000.0, power_noise=sigma)  # 0.1° steps: 15,300 firings
     ring, az, cos = _firings(lidar)
-    p = norm.cdf(np.log(rho * cos / (D / cos) ** 2 / lidar.detection_threshold) / sigma)
+    p = norm.cdf(np.log(rho * cos / (D / cos) ** 2 / lidar.beam.detection_threshold) / sigma)
     index = {k: i for i, k in enumerate(sorted(_firing_keys(ring, az)))}
     order = np.array([index[k] for k in zip(ring.tolist(), (np.round(np.mod(az, 360.0) * 100).astype(np.int64) % 36000).tolist())])
     p = p[np.argsort(order)]  # p in the order of the sorted firing keys
@@ -96,9 +104,9 @@ def test_power_noise_gives_the_lognormal_return_probability():
 
 
 def test_footprint_rays_lie_on_the_divergence_cone_equal_area_radius():
-    lidar = _lidar(beam_divergence_deg=0.3, footprint_rays=7)
+    lidar = _lidar(divergence_deg=0.3, footprint_rays=7)
     d, _, _ = lidar.rays()
-    rays = lidar.footprint_directions(d)
+    rays = lidar.beam.footprint_directions(d)
     assert rays.shape == (len(d), 7, 3)
     np.testing.assert_allclose(np.linalg.norm(rays, axis=2), 1.0, atol=1e-12)
     angle = np.degrees(np.arccos(np.clip(np.einsum("nkj,nj->nk", rays, d), -1, 1)))
@@ -112,9 +120,9 @@ def test_footprint_widens_a_thin_pole_by_the_footprint_radius():
     r, d, div = 0.05, 20.0, 0.5
     pole = trimesh.creation.cylinder(radius=r, height=40.0, sections=256)
     pole.apply_translation([d, 0.0, 0.0])
-    lidar = _lidar(firing_rate_hz=72_000.0, beam_divergence_deg=div)  # 0.05° steps
+    lidar = _lidar(firing_rate_hz=72_000.0, divergence_deg=div)  # 0.05° steps
     centre = scan(pole, lidar, np.zeros(3), azimuth_range_deg=(-3.0, 3.0))
-    wide = scan(pole, lidar.with_(footprint_rays=7), np.zeros(3), azimuth_range_deg=(-3.0, 3.0))
+    wide = scan(pole, with_beam(lidar, footprint_rays=7), np.zeros(3), azimuth_range_deg=(-3.0, 3.0))
     half = lambda s: np.degrees(np.abs(np.arctan2(s.points[:, 1], s.points[:, 0]))).max()  # noqa: E731
     step = lidar.azimuth_step_deg
     assert abs(half(centre) - math.degrees(math.asin(r / d))) <= step + 1e-6
@@ -126,8 +134,9 @@ def test_footprint_widens_a_thin_pole_by_the_footprint_radius():
     # a partly covered footprint receives its fraction of the energy: with τ = 0.25 / d², firings
     # whose footprint puts only one or two of its 7 rays on the pole (energy ≤ 2/7 · ρ / d²)
     # drop, those centred on it (5 of 7 rays: 0.066 m ray offset, 0.05 m radius) stay
-    full = scan(pole, lidar.with_(footprint_rays=7, detection_range_m=1e4), np.zeros(3), azimuth_range_deg=(-3.0, 3.0), reflectivity=1.0)
-    tau = lidar.with_(footprint_rays=7, detection_reflectivity=1.0, detection_range_m=2.0 * d)
+    full = scan(pole, with_beam(lidar, footprint_rays=7, detection_threshold=0.8 / 1e4**2), np.zeros(3), azimuth_range_deg=(-3.0, 3.0),
+                reflectivity=1.0)  # fmt: skip
+    tau = with_beam(lidar, footprint_rays=7, detection_threshold=1.0 / (2.0 * d) ** 2)
     edge = scan(pole, tau, np.zeros(3), azimuth_range_deg=(-3.0, 3.0), reflectivity=1.0)
     assert len(full) == len(wide) and 0 < len(edge) < len(full)
     assert half(edge) < half(full) - step
@@ -144,7 +153,7 @@ def test_strongest_echo_picks_the_surface_with_more_energy():
     mesh = trimesh.util.concatenate([near, far])
     built = BuiltScene(mesh, np.array([1, 1, 2, 2], np.int32), np.array([0, 1, 0, 1]), [SceneObject(near), SceneObject(far)],
                        [np.eye(4)] * 3, [None, near, far])  # fmt: skip
-    lidar = _lidar(elevations_deg=(0.0,), firing_rate_hz=36_000.0, beam_divergence_deg=2.0, footprint_rays=7)
+    lidar = _lidar(elevations_deg=(0.0,), firing_rate_hz=36_000.0, divergence_deg=2.0, footprint_rays=7)
     s = scan(built, lidar, np.zeros(3), azimuth_range_deg=(-1.0, 1.0))
     az = _return_azimuths(s)
     at = lambda a: int(np.argmin(np.abs(az - a)))  # noqa: E731
@@ -152,7 +161,7 @@ def test_strongest_echo_picks_the_surface_with_more_energy():
     assert abs(s.range_m[at(0.1)] - 5.0) < 0.01 and s.object_id[at(0.1)] == 1
     assert abs(s.range_m[at(0.5)] - 10.0) < 0.01 and s.object_id[at(0.5)] == 2
     # with the centre ray only, the centre decides: far wall at 0.1°
-    centre = scan(built, lidar.with_(footprint_rays=1), np.zeros(3), azimuth_range_deg=(-1.0, 1.0))
+    centre = scan(built, with_beam(lidar, footprint_rays=1), np.zeros(3), azimuth_range_deg=(-1.0, 1.0))
     assert centre.object_id[int(np.argmin(np.abs(_return_azimuths(centre) - 0.1)))] == 2
 
 
@@ -171,9 +180,9 @@ def test_unresolved_echoes_merge_into_a_mixed_pixel_at_a_shallow_depth_edge():
     # 3/25 against 4/30.25, the
     # far wall is the strongest echo, and the near rays merge into it at the weighted range
     built = _two_walls(5.0, 5.5)
-    lidar = _lidar(elevations_deg=(0.0,), firing_rate_hz=36_000.0, beam_divergence_deg=2.0, footprint_rays=7)
+    lidar = _lidar(elevations_deg=(0.0,), firing_rate_hz=36_000.0, divergence_deg=2.0, footprint_rays=7)
     sharp = scan(built, lidar, np.zeros(3), azimuth_range_deg=(-2.0, 2.0))
-    mixed = scan(built, lidar.with_(echo_separation_m=0.75), np.zeros(3), azimuth_range_deg=(-2.0, 2.0))
+    mixed = scan(built, with_beam(lidar, echo_separation_m=0.75), np.zeros(3), azimuth_range_deg=(-2.0, 2.0))
     az = _return_azimuths(mixed)
     np.testing.assert_allclose(az, _return_azimuths(sharp), atol=1e-5)  # the same firings return (0.1° apart)
     i = int(np.argmin(np.abs(az - 0.1)))
@@ -189,21 +198,23 @@ def test_unresolved_echoes_merge_into_a_mixed_pixel_at_a_shallow_depth_edge():
 
 def test_echoes_further_apart_than_the_separation_stay_apart():
     built = _two_walls(5.0, 10.0)
-    lidar = _lidar(elevations_deg=(0.0, 3.0), firing_rate_hz=36_000.0, beam_divergence_deg=2.0, footprint_rays=7, range_noise_m=0.01)
+    lidar = _lidar(elevations_deg=(0.0, 3.0), firing_rate_hz=36_000.0, divergence_deg=2.0, footprint_rays=7, range_noise_m=0.01)
     sharp = scan(built, lidar, np.zeros(3), azimuth_range_deg=(-2.0, 2.0), seed=4)
-    mixed = scan(built, lidar.with_(echo_separation_m=0.75), np.zeros(3), azimuth_range_deg=(-2.0, 2.0), seed=4)
+    mixed = scan(built, with_beam(lidar, echo_separation_m=0.75), np.zeros(3), azimuth_range_deg=(-2.0, 2.0), seed=4)
     for name in ("points", "range_m", "object_id", "face_index", "ring"):
         np.testing.assert_array_equal(getattr(mixed, name), getattr(sharp, name))
 
 
 @pytest.mark.parametrize(
     "changes, words",
-    [({"footprint_rays": 3}, "footprint_rays"), ({"footprint_rays": 7, "beam_divergence_deg": 0.0}, "beam_divergence_deg"),
-     ({"power_noise": -1.0}, "power_noise"), ({"detection_range_m": 0.0}, "detection_range_m"),
-     ({"echo_separation_m": 0.75}, "echo_separation_m.*footprint_rays 7"), ({"echo_separation_m": -1.0}, "echo_separation_m")],
+    [({"footprint_rays": 3}, "footprint_rays 3 needs divergence_deg > 0"), ({"footprint_rays": 7, "divergence_deg": 0.0}, "divergence_deg"),
+     ({"power_noise": -1.0}, "power_noise"), ({"detection_threshold": -1e-9}, "detection_threshold"),
+     ({"detection_threshold": math.inf}, "detection_threshold"),
+     ({"echo_separation_m": 0.75}, "echo_separation_m 0.75 needs footprint_rays above 1"), ({"echo_separation_m": -1.0}, "echo_separation_m")],
 )  # fmt: skip
 def test_bad_physics_parameters_are_clear_errors(changes, words):
-    with pytest.raises(InvalidInputError, match=words):
+    """The beam refuses them, naming itself and the field (the rules moved from Lidar to Beam)."""
+    with pytest.raises(InvalidInputError, match="^beam 'ideal': .*" + words):
         _lidar(**changes)
 
 
