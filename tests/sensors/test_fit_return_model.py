@@ -15,7 +15,8 @@ from hypothesis import strategies as st
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.io.atomic import write_bytes
 from zbuf_occlude.io.las import LasPoints, las_bytes, read_las
-from zbuf_occlude.sensors.airborne import AIRBORNE_IDEAL_BEAM, airborne_preset
+from zbuf_occlude.sensors.airborne import AIRBORNE_IDEAL_BEAM
+from zbuf_occlude.sensors.airborne_presets import airborne_preset
 from zbuf_occlude.sensors.echoes import hit_energy
 from zbuf_occlude.sensors.fit import (
     Estimate,

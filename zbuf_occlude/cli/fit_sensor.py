@@ -1,36 +1,20 @@
-"""``zbuf-occlude fit-sensor``: a sensor fitted to real object scans, or its return model to LAS/LAZ scans."""
+"""``zbuf-occlude fit-sensor``: a sensor fitted to real object scans, or its return model to LAS/LAZ scans.
+
+Parses the options and calls :func:`zbuf_occlude.sensors.fit.engine.fit_sensor`, which reads, fits and writes."""
 
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
-from pathlib import Path
 
-from zbuf_occlude.cli.options import Checked, counted, real, resamples, seed, shown
+from zbuf_occlude.cli.options import Checked, real, resamples, seed, shown
 from zbuf_occlude.defaults import DEFAULT_SEED
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.sensors.checks import MAX_RANGE_M
+from zbuf_occlude.sensors.fit.engine import LAS_EXTENSIONS
 from zbuf_occlude.sensors.fit.lidar import MAX_BOOTSTRAP
-from zbuf_occlude.sensors.kinds import preset_names, sensor_from_name
+from zbuf_occlude.sensors.kinds import preset_names
 
 __all__ = ["add_fit_sensor_parser", "cmd_fit_sensor", "LAS_EXTENSIONS", "MAX_BOOTSTRAP"]
-
-
-#: What ``fit-sensor`` reads as LAS/LAZ scans (the return model's fit) rather than object scans.
-LAS_EXTENSIONS = (".las", ".laz")
-
-
-def _las_inputs(real: str) -> list[Path] | None:
-    """The LAS/LAZ files ``fit-sensor REAL`` fits the return model to: ``REAL`` itself when it is named ``.las``/``.laz``,
-    or the ``.las``/``.laz`` files directly inside the folder ``REAL`` (sorted by name); None when it names neither."""
-    path = Path(real)
-    if path.suffix.lower() in LAS_EXTENSIONS and not path.is_dir():
-        return [path]  # missing or damaged: read_las says so, naming it
-    if path.is_dir():
-        found = sorted(p for p in path.iterdir() if p.suffix.lower() in LAS_EXTENSIONS and not p.is_dir())
-        return found or None
-    return None
 
 
 def _classes(text: str, option: str) -> tuple[int, ...]:
@@ -51,103 +35,14 @@ def _altitude(text: str, option: str) -> float:
     return value
 
 
-def _read_scans(files: Sequence[Path], real: str):
-    """The LAS/LAZ ``files`` read (inside the folder ``real`` when it is one) and merged; one line naming a file that has no
-    GPS time or no points, whose GPS times do not group its returns into pulses or that holds first returns only
-    (:func:`~zbuf_occlude.sensors.fit.returns.check_pulses`), or what :func:`~zbuf_occlude.io.las.read_las` refuses."""
-    from zbuf_occlude.defaults import MAX_POINTS
-    from zbuf_occlude.io.las import read_las
-    from zbuf_occlude.sensors.fit import merge_scans
-    from zbuf_occlude.resources import check_memory
-    from zbuf_occlude.sensors.fit.returns import BYTES_PER_POINT, check_pulses, check_return_pairs, las_pulses
-
-    within = real if Path(real).is_dir() else None
-    scans, total = [], 0
-    for f in files:
-        las = read_las(f, within=within, max_points=MAX_POINTS - total)
-        if not las.has_gps_time:
-            raise InvalidInputError(
-                f"{f}: point format {las.point_format_id} has no GPS time: the returns of one pulse cannot be told apart"
-            )
-        if len(las) == 0:
-            raise InvalidInputError(f"{f}: holds no points")
-        check_memory(len(las) * BYTES_PER_POINT, option=f"the pulses of {f} ({len(las):,} points)", hint="fit a crop")
-        pulses = las_pulses(las)
-        check_pulses(las, pulses, name=str(f))  # times that group its returns into pulses
-        check_return_pairs(las, pulses, name=str(f))  # not first returns alone
-        scans.append(las)
-        total += len(las)
-    return merge_scans(scans, [str(f) for f in files])
-
-
-def _fit_returns(args: argparse.Namespace, files: Sequence[Path]) -> int:
-    """``fit-sensor`` on LAS/LAZ scans: the return model (:func:`~zbuf_occlude.sensors.fit.fit_return_model`) applied to
-    ``--sensor``, written as a sensor JSON with the fit under ``"fit"`` and a Markdown table beside it."""
-    import json
-
-    from zbuf_occlude.sensors.fit import BOOTSTRAP, VEGETATION_CLASSES, fit_return_model
-    from zbuf_occlude.sensors.fit.lidar import sensor_kind
-    from zbuf_occlude.sensors.kinds import sensor_to_json
-
-    out = Path(args.out)
-    if out.suffix.lower() != ".json":
-        raise InvalidInputError(f"--out {out}: the fitted sensor is written as a .json file")
-    base = sensor_from_name(args.sensor)
-    if sensor_kind(base) not in ("lidar", "airborne"):
-        raise InvalidInputError(
-            f"--sensor {args.sensor}: fit-sensor fits a spinning LiDAR or an airborne scanner, not a {type(base).__name__}"
-        )
-    altitude = args.altitude if args.altitude is not None else getattr(base, "altitude_m", None)
-    if altitude is None:
-        raise InvalidInputError(
-            f"--sensor {args.sensor} is a spinning LiDAR: give --altitude M, the range to the ground in your scans, metres"
-        )
-    bootstrap = args.bootstrap or BOOTSTRAP
-    curve: dict = {}
-    if args.divergence_shares is not None:  # read first: a bad table is refused before the scans are
-        from zbuf_occlude.io.tables import read_csv_rows
-        from zbuf_occlude.sensors.fit import divergence_curve
-
-        figure, divergences, shares, stds = divergence_curve(
-            read_csv_rows(args.divergence_shares), f"--divergence-shares {args.divergence_shares}"
-        )
-        curve = {"divergence_shares": (divergences, shares, stds), "divergence_share": figure}
-    md = out.with_suffix(".md")
-    names = (out.name, md.name)
-    with OwnedFolder(out.parent, files=names, what="the fitted sensor") as folder:
-        folder.check_writable(names)  # before any scan is read: a refusal writes nothing
-        print(f"reading {counted(len(files), 'LAS/LAZ file')} from {args.real} ...", flush=True)
-        las = _read_scans(files, args.real)
-        print(f"read {len(las):,} points; fitting the return model to {base.name} at {altitude:g} m above the ground, "
-              f"{bootstrap} bootstrap resamples ...", flush=True)  # fmt: skip
-        fit = fit_return_model(las, altitude_m=altitude, classes=VEGETATION_CLASSES if args.classes is None else args.classes,
-                               seed=args.seed, bootstrap=bootstrap, **curve)  # fmt: skip
-        sensor, origin = fit.applied(base)
-        spec = sensor_to_json(sensor)
-        spec["fit"] = {"base": base.name, "files": [f.name for f in files], "beam": origin, "returns": fit.to_json()}
-        folder.write_text(out.name, json.dumps(spec, indent=1, default=float, allow_nan=False) + "\n")
-        table = fit.markdown(sensor)
-        folder.write_text(md.name, f"# {sensor.name}: the return model fitted to {', '.join(f.name for f in files)}\n\n{table}")
-    print(table, end="")
-    print(f"wrote {out} (use it as --sensor {out}), {md}")
-    return 0
-
-
 def cmd_fit_sensor(args: argparse.Namespace) -> int:
-    files = _las_inputs(args.real)
-    if files is not None:
-        return _fit_returns(args, files)
-    given = [flag for flag, value in (("--altitude", args.altitude), ("--classes", args.classes), ("--bootstrap", args.bootstrap),
-                                      ("--divergence-shares", args.divergence_shares)) if value is not None]  # fmt: skip
-    if given:
-        raise InvalidInputError(f"{', '.join(given)}: for LAS/LAZ scans, and {args.real} is neither a .las/.laz file nor a folder of them")
-    from zbuf_occlude.experiments.sensor_fit import fit_sensor_to_scans
+    from zbuf_occlude.sensors.fit.engine import fit_sensor
 
-    fit, json_path, md_path = fit_sensor_to_scans(
-        args.real, args.sensor, args.out, seed=args.seed, say=lambda line: print(line, flush=True)
-    )
-    print(fit.markdown(), end="")
-    print(f"wrote {json_path} (use it as --sensor {json_path}), {md_path}")
+    result = fit_sensor(args.real, args.sensor, args.out, seed=args.seed, altitude_m=args.altitude, classes=args.classes,
+                        bootstrap=args.bootstrap, divergence_shares=args.divergence_shares,
+                        say=lambda line: print(line, flush=True))  # fmt: skip
+    print(result.table, end="")
+    print(f"wrote {result.json_path} (use it as --sensor {result.json_path}), {result.markdown_path}")
     return 0
 
 
