@@ -983,7 +983,7 @@ def _nested(depth: int, suffix: str) -> str:
 def test_a_scene_nested_10000_deep_is_an_error_naming_the_file(tmp_path: Path, suffix: str) -> None:
     if suffix == ".yaml":
         pytest.importorskip("yaml", reason="YAML scenes need the [yaml] extra (PyYAML)")
-    from zbuf_occlude.sensors.scene import load_scene
+    from zbuf_occlude.sensors.scene_files import load_scene
 
     path = tmp_path / f"deep{suffix}"
     path.write_text(_nested(10_000, suffix))
@@ -1001,7 +1001,8 @@ def _scene(tmp_path: Path, spec: dict) -> Path:
 
 @pytest.mark.parametrize("sections", [-4, 0, 2, 10**8, 2.5, "48"])
 def test_cylinder_sections_are_checked_before_allocating(tmp_path: Path, sections) -> None:
-    from zbuf_occlude.sensors.scene import MAX_CYLINDER_SECTIONS, load_scene
+    from zbuf_occlude.sensors.object_shapes import MAX_CYLINDER_SECTIONS
+    from zbuf_occlude.sensors.scene_files import load_scene
 
     spec = {"objects": [{"mesh": {"cylinder": {"radius_m": 0.5, "height_m": 1.0, "sections": sections}}, "position_m": [5, 0]}]}
     with pytest.raises(

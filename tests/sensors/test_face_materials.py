@@ -154,7 +154,7 @@ def test_a_scene_file_naming_an_obj_and_a_glb_scans_their_glass_and_foliage(box_
         {"mesh": "box.obj", "class": "building", "position_m": [6, 0], "size_m": 2},
         {"mesh": "tree.glb", "class": "building", "position_m": [0, 6], "size_m": 4, "up": "z"},
     ]}))  # fmt: skip
-    from zbuf_occlude.sensors.scene import load_scene
+    from zbuf_occlude.sensors.scene_files import load_scene
 
     built = load_scene(folder / "scene.json").build()
     optics = scene_optics(built)

@@ -31,7 +31,8 @@ from zbuf_occlude.sensors.beam import Beam
 from zbuf_occlude.sensors.kinds import LEGACY_BEAM_KEYS, SENSOR_KINDS, sensor_from_name
 from zbuf_occlude.sensors.lidar import Lidar, lidar_preset
 from zbuf_occlude.sensors.ray_table import RayTable
-from zbuf_occlude.sensors.scene import ScanScene, SceneObject, load_scene
+from zbuf_occlude.sensors.scene import ScanScene, SceneObject
+from zbuf_occlude.sensors.scene_files import load_scene
 
 yaml = pytest.importorskip("yaml", reason="YAML scenes need the [yaml] extra (PyYAML)")
 

@@ -44,7 +44,7 @@ PRIMITIVES = {
 
 def _outline(text: str | None) -> tuple[float, ...] | None:
     """``--outline V,V,...``: two or more widths over the scan's width, bottom to top (:func:`~zbuf_occlude.sensors.scene.check_width_profile`)."""
-    from zbuf_occlude.sensors.scene import check_width_profile
+    from zbuf_occlude.sensors.object_shapes import check_width_profile
 
     if text is None:
         return None
@@ -187,7 +187,8 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
     from zbuf_occlude.sensors.lidar import Lidar
     from zbuf_occlude.sensors.ray_table import RayTable
     from zbuf_occlude.sensors.scan import look_at_pose, scan
-    from zbuf_occlude.sensors.scene import GROUND_ID, load_scene
+    from zbuf_occlude.sensors.scene import GROUND_ID
+    from zbuf_occlude.sensors.scene_files import load_scene
 
     out = folder.root
     src = Path(args.mesh_or_scene)

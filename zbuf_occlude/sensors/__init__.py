@@ -20,7 +20,8 @@ from zbuf_occlude.sensors.platform import Trajectory, load_trajectory
 from zbuf_occlude.sensors.ray_table import RAY_TABLE_PRESETS, RayTable, load_ray_table, rosette_table
 from zbuf_occlude.sensors.scan import look_at_pose, scan, scan_airborne
 from zbuf_occlude.sensors.scan_data import FRAMES, Scan, read_scan_npz
-from zbuf_occlude.sensors.scene import GROUND_ID, ScanScene, SceneObject, load_scene, sensor_pose
+from zbuf_occlude.sensors.scene import GROUND_ID, ScanScene, SceneObject, sensor_pose
+from zbuf_occlude.sensors.scene_files import load_scene
 
 __all__ = [
     "Beam", "IDEAL_BEAM", "RETURN_MODES", "SENSOR_KINDS", "kind_of", "sensor_from_name", "with_beam", "Trajectory", "load_trajectory",

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.scene import check_width_profile
+from zbuf_occlude.sensors.object_shapes import check_width_profile
 
 __all__ = [
     "CropDistributions",

@@ -2,7 +2,7 @@
 
 World frame: right-handed, metres, z up; the ground is the plane ``z = ground_z_m``.
 A scene is built in Python (:class:`ScanScene`, :class:`SceneObject`) or read from a JSON/YAML
-file with the same fields (:func:`load_scene`)::
+file with the same fields (:func:`~zbuf_occlude.sensors.scene_files.load_scene`)::
 
     {"ground": {"z_m": 0.0, "half_extent_m": 80.0},
      "objects": [{"mesh": "car.off", "class": "car", "position_m": [10, 0], "yaw_deg": 30,
@@ -19,13 +19,10 @@ box centred on ``position_m`` (x, y; a third value is added to the standing heig
 by ``yaw_deg`` about +z.  Object ids: 0 is the ground, objects and occluders are numbered
 from 1 in the order given (objects first).
 
-A scene file may come from anyone.  It is read by :func:`~zbuf_occlude.sensors.spec_files.read_spec_file`
-(size and nesting bounded, no YAML aliases), every field is checked where the dataclass is
-made (:mod:`zbuf_occlude.sensors.checks`: numbers finite and in range, types, unknown keys),
-a mesh file it names must lie inside the scene file's folder (relative, no ``..``, symlinks
-resolved: :func:`zbuf_occlude.io.safe_paths.path_inside`), and it holds at most
-:data:`~zbuf_occlude.sensors.checks.MAX_SCENE_OBJECTS` objects.  Every error is one line that
-names the file and the field (``street.yaml: objects[2]: yaw_deg must be a finite number, got nan``).
+Every field is checked where the dataclass is made (:mod:`zbuf_occlude.sensors.checks`: numbers
+finite and in range, types, unknown keys).  Primitives and width profiles are in
+:mod:`~zbuf_occlude.sensors.object_shapes`; a scene file, which may come from anyone, is read by
+:mod:`~zbuf_occlude.sensors.scene_files`.
 """
 
 from __future__ import annotations
@@ -43,9 +40,15 @@ from numpy.typing import NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.limits import MAX_MESH_FACES
 from zbuf_occlude.mesh.scene import FACE_MATERIALS, face_materials_of
-from zbuf_occlude.sensors.checks import (
-    MAX_COORDINATE_M, MAX_PATH_CHARS, MAX_SCENE_OBJECTS, count, is_number, located, mapping, real, reals, shown, text,
-)  # fmt: skip
+from zbuf_occlude.sensors.checks import MAX_COORDINATE_M, MAX_PATH_CHARS, is_number, located, real, reals, shown, text
+from zbuf_occlude.sensors.object_shapes import (
+    FACE_ROWS,
+    check_width_profile,
+    is_trimesh,
+    primitive_args,
+    primitive_mesh,
+    warp_to_width_profile,
+)
 
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
@@ -54,33 +57,17 @@ __all__ = [
     "SceneObject",
     "ScanScene",
     "BuiltScene",
-    "load_scene",
     "GROUND_ID",
     "sensor_pose",
-    "check_width_profile",
-    "width_profile_factors",
 ]
 
-#: Key of a warped object's local mesh ``metadata``: ``(F,) int64``, each face's row in the mesh as loaded.
-FACE_ROWS = "face_rows_as_loaded"
 #: ``object_id`` of the ground plane's returns.
 GROUND_ID = 0
-#: Most sections of a scene cylinder.  At 4096 a facet spans 0.09°, finer than any preset's
-#: angular step (0.1–0.4°), so more sections change no scan; the limit is checked before
-#: trimesh allocates (1e8 sections would need tens of GB).
-MAX_CYLINDER_SECTIONS = 4096
 #: Largest ground half-extent, metres: the scene is ray-cast in float32 (Embree), whose 24-bit
 #: mantissa keeps 1 mm steps up to 2**24 mm ≈ 16.8 km from the origin; a larger ground loses
 #: the returns' millimetres (1e300 overflows float32 and returns nothing at all).  Object
 #: positions, sizes and the sensor's place are bounded by the same figure.
 MAX_GROUND_HALF_EXTENT_M = MAX_COORDINATE_M
-#: Keys of a scene file, of its ``ground``, ``sensor`` and objects, and of a primitive.
-SCENE_KEYS = ("ground", "objects", "occluders", "sensor")
-GROUND_KEYS = ("z_m", "half_extent_m")
-SENSOR_KEYS = ("height_m", "position_m")
-OBJECT_KEYS = ("mesh", "class", "position_m", "yaw_deg", "size_m", "up")
-PRIMITIVE_KEYS = ("box_m", "cylinder")
-CYLINDER_KEYS = ("radius_m", "height_m", "sections")
 
 
 def sensor_pose(position_m, yaw_deg: float = 0.0) -> NDArray[np.float64]:
@@ -93,86 +80,6 @@ def sensor_pose(position_m, yaw_deg: float = 0.0) -> NDArray[np.float64]:
     m[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
     m[:3, 3] = p
     return m
-
-
-def check_width_profile(profile) -> tuple[float, ...]:
-    """``profile`` as a tuple of floats, checked: at least 2 finite factors > 0 (:class:`SceneObject` ``width_profile``).
-
-    Raises
-    ------
-    InvalidInputError
-        Anything else, naming the value.
-    """
-    try:
-        out = tuple(float(v) for v in profile)
-    except (TypeError, ValueError):
-        out = ()
-    if len(out) < 2 or not all(math.isfinite(v) and v > 0 for v in out):
-        raise InvalidInputError(f"width_profile must be 2 or more factors > 0, one per relative-height bin, got {shown(profile)}")
-    return out
-
-
-def width_profile_factors(z: NDArray[np.floating], profile: tuple[float, ...]) -> NDArray[np.float64]:
-    """The horizontal stretch of each height ``z (N,)`` under a width profile: ``(N,) float64``.
-
-    ``profile`` holds ``K`` factors at the centres ``(k + 0.5) / K`` of ``K`` equal bins of the
-    relative height ``(z − min z) / (max z − min z)``; the factor is linear between centres and
-    constant beyond the outer ones (all ``profile[0]`` when ``z`` has no extent).
-    """
-    z = np.asarray(z, dtype=np.float64)
-    extent = float(np.ptp(z)) if len(z) else 0.0
-    if extent <= 0:
-        return np.full(len(z), profile[0])
-    k = len(profile)
-    return np.interp((z - z.min()) / extent, (np.arange(k) + 0.5) / k, np.asarray(profile, dtype=np.float64))
-
-
-def _split_tall_faces(v: NDArray[np.float64], faces: NDArray[np.int64], bins: int):
-    """Bisect every edge that spans more than half a profile bin in height (``ptp(z) / (2 · bins)``),
-    so that a warp by :func:`width_profile_factors` bends long walls too: a post's sides have
-    vertices only at its ends.  Edges are measured with x and y squashed 1000x, so that only
-    their height counts (a midpoint stays a midpoint under the squash).  Returns the new
-    vertices ``(V', 3) float64``, faces ``(F', 3) int64`` and each new face's row in ``faces``."""
-    import trimesh.remesh
-
-    extent = float(np.ptp(v[:, 2]))
-    if extent <= 0:
-        return v.copy(), faces, np.arange(len(faces))
-    squash = np.array([1e-3, 1e-3, 1.0])
-    sv, sf, rows = trimesh.remesh.subdivide_to_size(v * squash, faces, extent / (2 * bins), max_iter=12, return_index=True)
-    return sv / squash, np.asarray(sf, dtype=np.int64), np.asarray(rows, dtype=np.int64)
-
-
-def _primitive_args(spec: Mapping) -> tuple[str, dict[str, Any]]:
-    """The checked arguments of a primitive's trimesh constructor (before anything is allocated).
-
-    Raises
-    ------
-    InvalidInputError
-        Naming the field (``mesh.cylinder.radius_m``): not exactly one of ``box_m`` and
-        ``cylinder``, an unknown key, sizes not in (0, :data:`MAX_GROUND_HALF_EXTENT_M`] metres,
-        sections not an integer from 3 to :data:`MAX_CYLINDER_SECTIONS`.
-    """
-    spec = mapping(spec, "mesh", PRIMITIVE_KEYS)
-    if len(spec) != 1:
-        raise InvalidInputError(
-            f"mesh must be a primitive {{'box_m': [x, y, z]}} or {{'cylinder': {{'radius_m': r, 'height_m': h}}}}, got {shown(spec)}"
-        )
-    size = {"low": 0.0, "low_open": True, "high": MAX_COORDINATE_M}
-    if "box_m" in spec:
-        extents = reals(spec["box_m"], "mesh.box_m", lengths=(3,), expected="3 sizes in metres", **size)
-        return "box", {"extents": np.array(extents)}
-    c = mapping(spec["cylinder"], "mesh.cylinder", CYLINDER_KEYS, required=("radius_m", "height_m"))
-    r, h = real(c["radius_m"], "mesh.cylinder.radius_m", **size), real(c["height_m"], "mesh.cylinder.height_m", **size)
-    sections = count(c.get("sections", 48), "mesh.cylinder.sections", low=3, high=MAX_CYLINDER_SECTIONS)
-    return "cylinder", {"radius": r, "height": h, "sections": sections}
-
-
-def _primitive(spec: Mapping) -> trimesh.Trimesh:
-    import trimesh
-
-    kind, kwargs = _primitive_args(spec)
-    return getattr(trimesh.creation, kind)(**kwargs)
 
 
 @dataclass
@@ -201,7 +108,8 @@ class SceneObject:
     width_profile : sequence of float, optional
         A horizontal stretch that varies with height: ``K >= 2`` factors > 0 at the centres of
         ``K`` equal bins of the mesh's relative height (0: its lowest vertex, 1: its top),
-        linear in between and constant beyond the outer centres (:func:`width_profile_factors`).
+        linear in between and constant beyond the outer centres
+        (:func:`~zbuf_occlude.sensors.object_shapes.width_profile_factors`).
         Each vertex's x and y move away from (or towards) the footprint centre by its factor,
         before the scaling to ``size_m`` (which still measures the mesh as loaded) and on top of
         ``width_scale``: a person's legs made as narrow as real scans show them, a sign pole's
@@ -216,7 +124,8 @@ class SceneObject:
         Naming the field: a ``mesh`` that is none of the above (or a primitive with a bad
         field), a ``position_m`` or ``size_m`` that is not 2–3 (1 or 3) finite numbers within
         :data:`MAX_GROUND_HALF_EXTENT_M` metres (sizes > 0), a non-finite ``yaw_deg``, ``up``
-        not "z" or "y", ``width_scale`` not > 0, a bad ``width_profile`` (:func:`check_width_profile`).
+        not "z" or "y", ``width_scale`` not > 0, a bad ``width_profile``
+        (:func:`~zbuf_occlude.sensors.object_shapes.check_width_profile`).
     """
 
     mesh: Any
@@ -252,8 +161,8 @@ class SceneObject:
                     f"mesh must be a file path of 1 to {MAX_PATH_CHARS} characters, without NUL or lone surrogates, got {shown(mesh)}"
                 )
         elif isinstance(mesh, Mapping):
-            _primitive_args(mesh)  # checked before anything is allocated
-        elif not _is_trimesh(mesh):
+            primitive_args(mesh)  # checked before anything is allocated
+        elif not is_trimesh(mesh):
             raise InvalidInputError(
                 "mesh must be a mesh file path, a primitive {'box_m': [x, y, z]} or {'cylinder': {'radius_m': r, 'height_m': h}}, "
                 f"or a trimesh.Trimesh, got {type(mesh).__name__} {shown(mesh)}"
@@ -295,7 +204,7 @@ class SceneObject:
         if isinstance(self.mesh, trimesh.Trimesh):
             local = self.mesh
         elif isinstance(self.mesh, Mapping):
-            local = _primitive(self.mesh)
+            local = primitive_mesh(self.mesh)
         else:
             path = Path(self.mesh)
             if base is not None and not path.is_absolute():
@@ -321,11 +230,7 @@ class SceneObject:
         # The object's own shape, stretch and warp, is its local mesh; the transform only sizes, turns and places it.
         faces, rows = np.asarray(local.faces, dtype=np.int64), None
         if self.width_profile is not None:
-            profile = self.width_profile
-            v, faces, rows = _split_tall_faces(v, faces, len(profile))
-            factors = width_profile_factors(v[:, 2], profile)
-            centre_xy = (v[:, :2].min(axis=0) + v[:, :2].max(axis=0)) / 2
-            v[:, :2] = centre_xy + (v[:, :2] - centre_xy) * factors[:, None]
+            v, faces, rows = warp_to_width_profile(v, faces, self.width_profile)
         if self.width_scale != 1.0:
             v = v * np.array([self.width_scale, self.width_scale, 1.0])
         if self.width_profile is not None or self.width_scale != 1.0:
@@ -344,15 +249,6 @@ class SceneObject:
         m[:3, :3] = yaw @ (scale[:, None] * rot_up)
         m[:3, 3] = -(yaw @ centre) + np.array([pos[0], pos[1], pos[2] if len(pos) == 3 else 0.0])
         return local, m
-
-
-def _is_trimesh(mesh: object) -> bool:
-    """Whether ``mesh`` is a ``trimesh.Trimesh`` (trimesh is imported only if it could be one)."""
-    if not type(mesh).__module__.startswith("trimesh"):
-        return False
-    import trimesh
-
-    return isinstance(mesh, trimesh.Trimesh)
 
 
 @dataclass
@@ -532,89 +428,3 @@ class ScanScene:
             [*self.objects, *self.occluders], transforms, locals_,
         )  # fmt: skip
         return self._built
-
-    # -- files ---------------------------------------------------------------------------------
-    @classmethod
-    def from_dict(cls, spec: Mapping, base_dir: Path | None = None) -> ScanScene:
-        """A scene from the JSON/YAML structure of the module docstring.
-
-        Parameters
-        ----------
-        spec : mapping
-        base_dir : Path, optional
-            The scene file's folder: a mesh path must be relative and lie inside it (symlinks
-            resolved).  None: paths as given (a scene built in Python).
-
-        Raises
-        ------
-        InvalidInputError
-            Unknown keys or bad values, more than :data:`~zbuf_occlude.sensors.checks.MAX_SCENE_OBJECTS`
-            objects (the message names the field: ``objects[2]: yaw_deg ...``); :class:`~zbuf_occlude.errors.UnsafePathError`
-            for a mesh path that leaves ``base_dir``.
-        """
-        from zbuf_occlude.io.safe_paths import path_inside
-
-        spec = mapping(spec, "scene", SCENE_KEYS)
-        lists = {}
-        for key in ("objects", "occluders"):
-            items = spec.get(key)
-            if items is not None and not isinstance(items, list):
-                raise InvalidInputError(f"{key} must be a list of objects, got {type(items).__name__} {shown(items)}")
-            lists[key] = items or []
-        if len(lists["objects"]) + len(lists["occluders"]) > MAX_SCENE_OBJECTS:
-            raise InvalidInputError(
-                f"the scene holds {len(lists['objects']) + len(lists['occluders']):,} objects and occluders, more than {MAX_SCENE_OBJECTS:,}"
-            )
-
-        def obj(d: object, where: str) -> SceneObject:
-            with located(where):
-                d = mapping(d, "object", OBJECT_KEYS, required=("mesh",))
-                made = SceneObject(
-                    d["mesh"], d.get("class", ""), d.get("position_m", (0.0, 0.0)), d.get("yaw_deg", 0.0), d.get("size_m"), d.get("up", "z")
-                )
-                if base_dir is not None and isinstance(made.mesh, str):  # a file named by a scene file stays in its folder
-                    path_inside(base_dir, made.mesh, what="mesh")
-            return made
-
-        ground = spec.get("ground", {})
-        if ground is None or isinstance(ground, bool):
-            ground, has_ground = {}, bool(ground)
-        else:
-            ground, has_ground = mapping(ground, "ground", GROUND_KEYS), True
-        sensor = mapping(spec.get("sensor", {}), "sensor", SENSOR_KEYS)
-        if not (has_ground or lists["objects"] or lists["occluders"]):
-            raise InvalidInputError("the scene is empty: no ground and no objects")
-        return cls(
-            objects=[obj(d, f"objects[{i}]") for i, d in enumerate(lists["objects"])],
-            occluders=[obj(d, f"occluders[{i}]") for i, d in enumerate(lists["occluders"])],
-            ground=has_ground,
-            ground_z_m=ground.get("z_m", 0.0),
-            ground_half_extent_m=ground.get("half_extent_m", 80.0),
-            sensor_height_m=sensor.get("height_m", 1.8),
-            sensor_position_m=sensor.get("position_m", (0.0, 0.0)),
-            base_dir=base_dir,
-        )
-
-
-def load_scene(path: str | Path) -> ScanScene:
-    """Read a scene spec from ``.json``, ``.yaml`` or ``.yml`` (module docstring).
-
-    The file is read by :func:`~zbuf_occlude.sensors.spec_files.read_spec_file` (a regular
-    file of at most :data:`~zbuf_occlude.io.caps.MAX_SPEC_FILE_BYTES`, nested at
-    most 64 levels, no YAML aliases), then :meth:`ScanScene.from_dict` with the file's folder.
-
-    Raises
-    ------
-    InvalidInputError
-        Missing or unparsable file, unknown format, bad fields (the message names the file and
-        the field); :class:`~zbuf_occlude.errors.UnsafePathError` for a mesh path outside the
-        file's folder.
-    """
-    from zbuf_occlude.sensors.spec_files import read_spec_file
-
-    path = Path(path)
-    if not path.is_file():
-        raise InvalidInputError(f"{path}: no such scene file")
-    spec = read_spec_file(path, what="scene")
-    with located(str(path)):
-        return ScanScene.from_dict(spec, base_dir=path.parent)
