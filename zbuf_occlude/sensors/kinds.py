@@ -23,7 +23,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.airborne import AirborneScanner
 from zbuf_occlude.sensors.airborne_presets import AIRBORNE_PRESETS
 from zbuf_occlude.sensors.beam import Beam
-from zbuf_occlude.sensors.checks import located, mapping, shown, text
+from zbuf_occlude.sensors.checks import MAX_RANGE_M, located, mapping, real, shown, text
 from zbuf_occlude.sensors.depth_camera import DEPTH_CAMERA_PRESETS, DepthCamera
 from zbuf_occlude.sensors.lidar import LIDAR_PRESETS, Lidar
 from zbuf_occlude.sensors.ray_table import RAY_TABLE_PRESETS, RayTable
@@ -223,10 +223,8 @@ def _beam_of(spec: dict, base: Beam) -> Beam:
     if any(key in spec for key in _LEGACY_DETECTION):
         reflectivity, range_m = spec.pop("detection_reflectivity", 0.8), spec.pop("detection_range_m", 100.0)
         with located("detection_reflectivity / detection_range_m²"):
-            from zbuf_occlude.sensors.checks import real
-
             changes.setdefault("detection_threshold", real(reflectivity, "detection_reflectivity", low=0.0) / real(
-                range_m, "detection_range_m", low=0.0, low_open=True) ** 2)  # fmt: skip
+                range_m, "detection_range_m", low=1e-3, high=MAX_RANGE_M) ** 2)  # fmt: skip
     with located("beam"):
         return base.with_(**changes) if changes else base
 
