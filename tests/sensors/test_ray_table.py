@@ -13,6 +13,8 @@ import trimesh
 import zbuf_occlude.sensors.ray_table as ray_table_module
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.ray_tables import ray_table_bytes
+from zbuf_occlude.sensors.beam import Beam
+from zbuf_occlude.sensors.kinds import SENSOR_KINDS, with_beam
 from zbuf_occlude.sensors.lidar import Lidar, beam_directions, lidar_preset
 from zbuf_occlude.sensors.ray_table import ROSETTE_FOV_DEG, RayTable, load_ray_table, rosette_table
 from zbuf_occlude.sensors.scan import scan
@@ -57,7 +59,7 @@ def test_rays_follow_the_lidar_convention_to_1e_9_degrees() -> None:
 def test_a_scan_reproduces_the_table_exactly(sphere) -> None:
     """Every row one point: along the row's direction, at the row's time bit for bit, pulse id the row."""
     time_s, az, el = _random_table(3000)
-    table = RayTable("t", time_s, az, el, range_noise_m=0.0)
+    table = RayTable("t", time_s, az, el)  # the ideal beam: no noise
     s = scan(sphere, table, np.eye(4), frame="sensor")
     assert np.array_equal(np.sort(s.pulse_id), np.arange(3000))  # every row once
     row = s.pulse_id
@@ -72,7 +74,7 @@ def test_a_scan_reproduces_the_table_exactly(sphere) -> None:
 
 def test_a_table_in_world_frame_turns_with_the_pose(sphere) -> None:
     time_s, az, el = _random_table(500)
-    table = RayTable("t", time_s, az, el, range_noise_m=0.0)
+    table = RayTable("t", time_s, az, el)
     c, s_ = np.cos(np.radians(30.0)), np.sin(np.radians(30.0))
     pose = np.array([[c, -s_, 0, 0.5], [s_, c, 0, -0.25], [0, 0, 1, 0.1], [0, 0, 0, 1.0]])
     s = scan(sphere, table, pose, frame="world")
@@ -91,13 +93,13 @@ def _lidar_rows(lidar: Lidar, pulse_id: np.ndarray) -> np.ndarray:
     "changes",
     [
         {},
-        {"footprint_rays": 7, "beam_divergence_deg": 3.0, "max_returns": 3, "range_resolution_m": 0.5},
+        {"footprint_rays": 7, "divergence_deg": 3.0, "max_returns": 3, "range_resolution_m": 0.5},
     ],
     ids=["one-return", "footprint-and-returns"],
 )
 def test_the_table_of_a_lidar_scans_as_the_lidar(changes: dict) -> None:
     """Same points, ranges, faces, times, scan angles and returns, pulse by pulse (noise off: the draws follow pulse order)."""
-    lidar = lidar_preset("vlp16", firing_rate_hz=3600.0, range_noise_m=0.0, **changes)
+    lidar = with_beam(lidar_preset("vlp16", firing_rate_hz=3600.0), range_noise_m=0.0, **changes)
     table = RayTable.from_lidar(lidar)
     assert len(table) == lidar.n_beams * lidar.n_azimuths and np.all(np.diff(table.time_s) >= 0)
     # a wall 8 m ahead with a pole before it: edges in every footprint near the pole
@@ -116,9 +118,32 @@ def test_the_table_of_a_lidar_scans_as_the_lidar(changes: dict) -> None:
         assert np.array_equal(getattr(a, name)[order], getattr(b, name)), name
 
 
+@pytest.mark.parametrize(
+    "changes", [{"footprint_rays": 7, "divergence_deg": 3.0}, {"footprint_rays": 7, "divergence_deg": 3.0, "echo_separation_m": 0.5}]
+)
+def test_a_table_fires_a_footprint_with_one_return_per_pulse_as_the_lidar_does(changes: dict) -> None:
+    """A table accepts any beam (the one pipeline fires it): a footprint's strongest echo, mixed pixels merged within
+    echo_separation_m, pulse by pulse the LiDAR's.  (:meth:`RayTable.from_lidar` still refuses such a LiDAR, so the table
+    is the one-ray LiDAR's given the LiDAR's beam.)"""
+    lidar = with_beam(lidar_preset("vlp16", firing_rate_hz=3600.0), range_noise_m=0.0, **changes)
+    table = RayTable.from_lidar(with_beam(lidar, footprint_rays=1, echo_separation_m=0.0)).with_(beam=lidar.beam)
+    wall = trimesh.creation.box((0.2, 12.0, 6.0), trimesh.transformations.translation_matrix((8.0, 0.0, 0.0)))
+    pole = trimesh.creation.cylinder(radius=0.05, height=6.0, transform=trimesh.transformations.translation_matrix((5.0, 0.3, 0.0)))
+    scene = trimesh.util.concatenate([wall, pole])
+    a, b = scan(scene, lidar, np.eye(4), seed=3), scan(scene, table, np.eye(4), seed=3)
+    one_ray = scan(scene, with_beam(lidar, footprint_rays=1, echo_separation_m=0.0), np.eye(4), seed=3)
+    assert len(a) == len(b) > 100 and np.all(b.number_of_returns == 1)
+    assert not np.array_equal(a.range_m, one_ray.range_m)  # the footprint was fired, not the centre ray alone
+    row = _lidar_rows(lidar, a.pulse_id)
+    order = np.argsort(row)
+    assert np.array_equal(row[order], b.pulse_id)
+    for name in ("points", "range_m", "face_index", "intensity", "gps_time"):
+        assert np.array_equal(getattr(a, name)[order], getattr(b, name)), name
+
+
 def test_several_returns_per_pulse_carry_their_pulse_time(sphere) -> None:
     time_s, az, el = _random_table(400)
-    table = RayTable("t", time_s, az, el, beam_divergence_deg=2.0, footprint_rays=7, max_returns=3, range_resolution_m=0.5)
+    table = RayTable("t", time_s, az, el, beam=Beam(divergence_deg=2.0, footprint_rays=7, max_returns=3, range_resolution_m=0.5))
     box = trimesh.creation.box((0.5, 0.5, 20.0), trimesh.transformations.translation_matrix((4.0, 0.0, 0.0)))
     s = scan(trimesh.util.concatenate([sphere, box]), table, np.eye(4))
     assert s.gps_time.tobytes() == time_s[s.pulse_id].tobytes()
@@ -131,7 +156,7 @@ def test_several_returns_per_pulse_carry_their_pulse_time(sphere) -> None:
 
 def test_a_sector_keeps_the_rows_in_it_with_their_row_ids(sphere) -> None:
     time_s, az, el = _random_table(1000)
-    table = RayTable("t", time_s, az, el, range_noise_m=0.0)
+    table = RayTable("t", time_s, az, el)
     s = scan(sphere, table, np.eye(4), azimuth_range_deg=(-30.0, 30.0))
     inside = np.flatnonzero(np.mod(az + 30.0, 360.0) <= 60.0)
     assert np.array_equal(np.sort(s.pulse_id), inside)
@@ -140,12 +165,14 @@ def test_a_sector_keeps_the_rows_in_it_with_their_row_ids(sphere) -> None:
 
 def test_range_limits_noise_and_dropout_apply_as_to_a_lidar(sphere) -> None:
     time_s, az, el = _random_table(2000)
-    assert len(scan(sphere, RayTable("t", time_s, az, el, max_range_m=9.0), np.eye(4))) == 0
-    lossy = scan(sphere, RayTable("t", time_s, az, el, dropout=0.5), np.eye(4), seed=1)
+    assert len(scan(sphere, RayTable("t", time_s, az, el), np.eye(4))) == 2000
+    assert len(scan(sphere, RayTable("t", time_s, az, el, beam=Beam(max_range_m=9.0)), np.eye(4))) == 0
+    assert len(scan(sphere, RayTable("t", time_s, az, el, beam=Beam(min_range_m=10.5)), np.eye(4))) == 0
+    lossy = scan(sphere, RayTable("t", time_s, az, el, beam=Beam(dropout=0.5)), np.eye(4), seed=1)
     assert 800 < len(lossy) < 1200
-    noisy = scan(sphere, RayTable("t", time_s, az, el, range_noise_m=0.1), np.eye(4), seed=1)
+    noisy = scan(sphere, RayTable("t", time_s, az, el, beam=Beam(range_noise_m=0.1)), np.eye(4), seed=1)
     assert 0.05 < np.std(noisy.range_m - RADIUS_M) < 0.15
-    again = scan(sphere, RayTable("t", time_s, az, el, range_noise_m=0.1), np.eye(4), seed=1)
+    again = scan(sphere, RayTable("t", time_s, az, el, beam=Beam(range_noise_m=0.1)), np.eye(4), seed=1)
     assert noisy.points.tobytes() == again.points.tobytes()
 
 
@@ -184,18 +211,25 @@ def test_bad_columns_are_refused_naming_the_field(columns, match: str) -> None:
         ({"min_range_m": 5.0, "max_range_m": 5.0}, r"need min_range_m < max_range_m"),
         ({"range_noise_m": -1.0}, r"range_noise_m must be a finite number in \[0, 1000000\], got -1\.0"),
         ({"dropout": 1.0}, r"dropout must be a finite number in \[0, 1\)"),
-        ({"footprint_rays": 7}, r"footprint_rays 7 needs beam_divergence_deg > 0"),
-        ({"footprint_rays": 7, "beam_divergence_deg": 1.0}, r"footprint_rays 7 needs max_returns above 1"),
-        ({"max_returns": 3}, r"max_returns 3 needs range_resolution_m > 0"),
+        ({"footprint_rays": 7}, r"footprint_rays 7 needs divergence_deg > 0"),
+        ({"echo_separation_m": 0.5}, r"echo_separation_m 0\.5 needs footprint_rays above 1"),
+        ({"max_returns": 3}, r"max_returns 3 with return_mode 'all' needs range_resolution_m > 0"),
         ({"range_resolution_m": 0.5}, r"range_resolution_m 0\.5 needs max_returns above 1"),
         ({"max_returns": 16}, r"max_returns must be an integer from 1 to 15"),
-        ({"beam_profile": "flat"}, r"beam_profile must be one of"),
+        ({"profile": "flat"}, r"profile must be one of"),
         ({"max_range_m": True}, r"max_range_m must be a finite number"),
     ],
 )
 def test_bad_model_fields_are_refused_as_the_lidar_refuses_them(fields: dict, match: str) -> None:
-    with pytest.raises(InvalidInputError, match=match):
-        RayTable("t", [0.0], [0.0], [0.0], **fields)
+    """A table's pulse and receiver fields are its Beam's, checked by the Beam as every scanner's are."""
+    with pytest.raises(InvalidInputError, match="^beam 'ideal': " + match):
+        RayTable("t", [0.0], [0.0], [0.0], beam=Beam(**fields))
+
+
+@pytest.mark.parametrize("beam", [None, {"range_noise_m": 0.1}, "ideal", 0.02])
+def test_a_beam_that_is_not_a_beam_is_refused(beam) -> None:
+    with pytest.raises(InvalidInputError, match=r"^ray table 't': beam must be a Beam"):
+        RayTable("t", [0.0], [0.0], [0.0], beam=beam)
 
 
 def test_more_rows_than_a_sensor_may_cast_are_refused(monkeypatch) -> None:
@@ -216,8 +250,8 @@ def test_load_ray_table_reads_a_file_exactly(tmp_path: Path, suffix: str) -> Non
     time_s, az, el = _random_table(50)
     path = tmp_path / f"avia{suffix}"
     path.write_bytes(ray_table_bytes(time_s, az, el, suffix=suffix))
-    table = load_ray_table(path, max_returns=2, range_resolution_m=0.5)
-    assert table.name == "avia" and table.max_returns == 2
+    table = load_ray_table(path, beam=Beam(max_returns=2, range_resolution_m=0.5))
+    assert table.name == "avia" and table.beam.max_returns == 2
     for got, want in ((table.time_s, time_s), (table.azimuth_deg, az), (table.elevation_deg, el)):
         assert got.tobytes() == want.tobytes()
 
@@ -244,7 +278,7 @@ def test_a_hostile_table_file_is_one_line_naming_it(tmp_path: Path, suffix: str,
 def test_from_lidar_refuses_what_a_table_does_not_model() -> None:
     for changes in ({"dropout_range_per_m": 0.01}, {"footprint_rays": 7, "echo_separation_m": 0.5}, {"footprint_rays": 7}):
         with pytest.raises(InvalidInputError, match="a ray table models neither"):
-            RayTable.from_lidar(lidar_preset("vlp16", **changes))
+            RayTable.from_lidar(with_beam(lidar_preset("vlp16"), **changes))
 
 
 def test_the_rosette_stays_in_its_field_of_view_and_does_not_repeat() -> None:
@@ -276,16 +310,17 @@ def test_rosette_arguments_are_checked() -> None:
         rosette_table(10, duration_s=1.0, prism_hz=(1.0,))
 
 
-def test_a_scan_of_a_non_sensor_names_the_three_kinds(sphere) -> None:
-    with pytest.raises(InvalidInputError, match="sensor must be a Lidar, a RayTable or a DepthCamera"):
+def test_a_scan_of_a_non_sensor_names_the_kinds(sphere) -> None:
+    with pytest.raises(InvalidInputError, match="sensor must be a Lidar, AirborneScanner, RayTable, DepthCamera; got object") as info:
         scan(sphere, object(), np.eye(4))
+    assert all(kind.cls.__name__ in str(info.value) for kind in SENSOR_KINDS)
 
 
 def test_radiometric_detection_applies_to_a_table(sphere) -> None:
     """With ``reflectivity``, a return is kept when ρ cos θ / R² clears the table's threshold, as for a LiDAR."""
     time_s, az, el = _random_table(500)
-    seen = RayTable("t", time_s, az, el, range_noise_m=0.0, detection_reflectivity=0.5, detection_range_m=20.0)  # τ = 0.5 / 400
-    unseen = RayTable("t", time_s, az, el, detection_reflectivity=0.5, detection_range_m=5.0)  # τ = 0.5 / 25
+    seen = RayTable("t", time_s, az, el, beam=Beam(detection_threshold=0.5 / 20.0**2))
+    unseen = RayTable("t", time_s, az, el, beam=Beam(detection_threshold=0.5 / 5.0**2, range_noise_m=0.02))
     assert len(scan(sphere, seen, np.eye(4), reflectivity=0.5)) == 500
     assert len(scan(sphere, unseen, np.eye(4), reflectivity=0.5)) == 0  # 0.5 / 100 < 0.5 / 25
     s = scan(sphere, seen, np.eye(4), reflectivity=0.5)
