@@ -236,3 +236,12 @@ def test_the_ideal_beam_scans_as_the_one_ray_first_hit_scan_did():
 #: ``_digest`` of that scan by the code before the scanner was recomposed, its LiDAR given no noise and no range
 #: limits (``Lidar(..., min_range_m=0, max_range_m=1e6, range_noise_m=0)``): 12,836 points.
 PINNED_IDEAL = "d679acc1432da854"
+
+
+def test_a_footprint_too_large_for_the_memory_is_refused_before_the_rays_are_cast(monkeypatch):
+    import zbuf_occlude.resources as resources
+
+    monkeypatch.setattr(resources, "available_memory", lambda: (2 * 2**30, "a test"))
+    wide = sensor_from_spec({"kind": "lidar", "preset": "hdl64e", "beam": {"footprint_rays": 1024, "divergence_deg": 0.1}})
+    with pytest.raises(resources.InsufficientMemoryError, match="footprint_rays 1024"):
+        scan(_wall(), wide, np.eye(4))

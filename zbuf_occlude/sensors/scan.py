@@ -16,6 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.sampling import check_seed
+from zbuf_occlude.resources import check_memory
 from zbuf_occlude.sensors.beam import Beam
 from zbuf_occlude.sensors.depth_camera import DepthCamera
 from zbuf_occlude.sensors.echo_model import Radiometry, Transmission, echo_returns, returns_of_mode, strongest_echo, surface_optics
@@ -91,6 +92,11 @@ def _built(scene) -> BuiltScene:
 def build_scene(scene) -> BuiltScene:
     """The triangles of a :class:`ScanScene` or a bare mesh (object id 1, no ground) for ray casting."""
     return _built(scene)
+
+
+#: Bytes one sub-ray holds while a scan runs (its direction, origin, hit, range and echo arrays, float64 and int64),
+#: what :func:`fire_pulses` checks against the memory available before it casts.
+SUBRAY_BYTES = 160
 
 
 def _surface_optics(built: BuiltScene, beam: Beam, backend: str, reflectivity, transmittance):
@@ -335,6 +341,8 @@ def fire_pulses(
         raise InvalidInputError(f"{sensor_name!r} moves along its flight lines: its points have no one sensor frame; use the world frame")
     meta: dict = {"backend": backend, "n_rays": len(pulses), **pulses.meta}
     k = beam.footprint_rays
+    check_memory(len(pulses) * k * SUBRAY_BYTES, f"{len(pulses):,} pulses × footprint_rays {k} of {sensor_name}",
+                 hint="take fewer footprint_rays, or scan fewer pulses (a sector, a smaller square)")  # fmt: skip
     d_world = pulses.directions
     rays = d_world if k == 1 else beam.footprint_directions(d_world).reshape(-1, 3)
     origin = pulses.origins if pulses.static or k == 1 else np.repeat(pulses.origins, k, axis=0)
