@@ -12,7 +12,7 @@ import pytest
 
 from zbuf_occlude.cli.main import main as cli_main
 from zbuf_occlude.sensors.lidar import Lidar
-from zbuf_occlude.sensors.kinds import sensor_to_json
+from zbuf_occlude.sensors.kinds import sensor_to_json, with_beam
 
 
 def _write_json(path: Path, spec: dict) -> Path:
@@ -31,7 +31,7 @@ def _pole_before_a_wall(tmp_path: Path) -> Path:
 
 def _wide_beam_sensor(tmp_path: Path, **changes) -> Path:
     """A VLP-16 with a 1° beam (a 14 cm footprint at 8 m), as a sensor file."""
-    return _write_json(tmp_path / "wide.json", sensor_to_json(Lidar.preset("vlp16", beam_divergence_deg=1.0, **changes)))
+    return _write_json(tmp_path / "wide.json", sensor_to_json(with_beam(Lidar.preset("vlp16"), divergence_deg=1.0, **changes)))
 
 
 def _run(argv: list[str], capsys) -> tuple[int, str]:
@@ -49,14 +49,18 @@ def _run(argv: list[str], capsys) -> tuple[int, str]:
         (["--range-resolution", "nan"], r"--range-resolution must be a finite number of metres, got '?nan'?"),
         (["--range-resolution", "-0.5"], r"--range-resolution must be .*got '?-0\.5'?"),
         (["--footprint", "--max-returns", "3"], r"--max-returns 3 needs --range-resolution"),
-        (["--footprint", "--range-resolution", "0.5"], r"--range-resolution 0\.5 .* needs --max-returns above 1"),
+        (["--footprint", "--range-resolution", "0.5"], r"--range-resolution 0\.5 .* needs --max-returns above 1 or --return-mode"),
         (
             ["--footprint", "--max-returns", "3", "--range-resolution", "0.5", "--echo-separation", "0.5"],
             r"--echo-separation 0\.5 .*--max-returns 3",
         ),
-        (["--sensor", "riegl-q1560", "--footprint", "--max-returns", "3"], r"model spinning LiDARs; riegl-q1560 is not one"),
-        (["--sensor", "riegl-q1560", "--max-returns", "3"], r"--max-returns 3 needs --range-resolution"),
-        (["--sensor", "kinect-v1", "--max-returns", "3"], r"model spinning LiDARs; kinect-v1 is not one"),
+        (
+            ["--sensor", "hdl64e", "--footprint"],
+            r"--footprint samples the beam's divergence cone, and hdl64e's beam .* give --divergence DEG",
+        ),
+        (["--sensor", "kinect-v1", "--max-returns", "3"], r"--max-returns: kinect-v1 is a depth camera, which has no beam to change"),
+        (["--sensor", "kinect-v1", "--divergence", "0.2"], r"--divergence: kinect-v1 is a depth camera, which has no beam to change"),
+        (["--divergence", "0"], r"--divergence must be a number > 0 degrees, got '?0'?"),
     ],
 )
 def test_bad_return_options_are_one_line_usage_errors(tmp_path: Path, capsys, options: list, message: str) -> None:
@@ -106,9 +110,10 @@ def test_without_the_options_a_scan_is_unchanged(tmp_path: Path, capsys) -> None
 def test_max_returns_applies_to_an_airborne_scanner_file_with_a_footprint(tmp_path: Path, capsys) -> None:
     laspy = pytest.importorskip("laspy")
     from zbuf_occlude.sensors.airborne import AirborneScanner
+    from zbuf_occlude.sensors.beam import Beam
 
-    als = AirborneScanner("test-als", swath_deg=20.0, pulse_rate_hz=2000.0, line_rate_hz=20.0, altitude_m=100.0, speed_mps=10.0,
-                          beam_divergence_deg=2.0, footprint_rays=19, max_returns=2, range_resolution_m=0.5)  # fmt: skip
+    beam = Beam(wavelength_nm=1064.0, divergence_deg=2.0, footprint_rays=19, max_returns=2, range_resolution_m=0.5)
+    als = AirborneScanner("test-als", swath_deg=20.0, pulse_rate_hz=2000.0, line_rate_hz=20.0, altitude_m=100.0, speed_mps=10.0, beam=beam)
     sensor = _write_json(tmp_path / "als.json", sensor_to_json(als))
     code, err = _run(["scan", "box", "--sensor", str(sensor), "--extents", "6,6,10", "--distance", "2", "--max-returns", "4",
                       "--range-resolution", "1", "--format", "las", "--no-progress", "--out", str(tmp_path / "o")], capsys)  # fmt: skip
@@ -117,6 +122,9 @@ def test_max_returns_applies_to_an_airborne_scanner_file_with_a_footprint(tmp_pa
     las = laspy.read(path)
     n = np.asarray(las.number_of_returns)
     assert n.max() >= 2 and n.max() <= 4, np.bincount(n)  # the box's roof edge over the ground
-    assert (
-        _run(["scan", "box", "--sensor", str(sensor), "--max-returns", "1", "--no-progress", "--out", str(tmp_path / "p")], capsys)[0] == 2
-    )
+    # one return per pulse of the same footprint: its strongest echo (the file's range resolution dropped)
+    code, err = _run(["scan", "box", "--sensor", str(sensor), "--extents", "6,6,10", "--distance", "2", "--max-returns", "1",
+                      "--format", "las", "--no-progress", "--out", str(tmp_path / "p")], capsys)  # fmt: skip
+    assert code == 0, err
+    (path,) = (tmp_path / "p").glob("*.las")
+    assert set(np.asarray(laspy.read(path).number_of_returns).tolist()) == {1}

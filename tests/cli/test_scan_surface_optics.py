@@ -64,14 +64,10 @@ def test_bad_transmittance_values_exit_2_naming_the_value(tmp_path: Path, capsys
     [(["--transmittance", "0.3", "--no-progress"], "--transmittance 0.3 gives hits behind a surface, which only several returns per pulse resolve"),
      ([*RETURNS, "--transmittance", "0.3", "--backend", "zbuffer"], "which --backend zbuffer cannot give"),
      ([*RETURNS, "--transmittance", "tree=0.3"], "--transmittance tree=0.3: no object of the scene has the class 'tree'"),
-     (["--transmittance", "0.3", "--sensor", "kinect-v1"], "model spinning LiDARs and ray tables; kinect-v1 is not one")],
+     (["--transmittance", "0.3", "--sensor", "kinect-v1"], "model the surfaces a pulsed LiDAR's beam meets; kinect-v1 is a depth camera"),
+     (["--reflectance-table", "--reflectivity", "0.3"], "--reflectance-table gives each surface its material's reflectivity; --reflectivity")],
 )  # fmt: skip
 def test_transmittance_where_it_cannot_apply_exits_2(tmp_path: Path, capsys, argv: list[str], words: str) -> None:
     code, err = _run(["scan", str(_scene(tmp_path)), *argv, "--out", str(tmp_path / "o")], capsys)
     assert code == 2 and "\n" not in err and "Traceback" not in err, err
     assert words in err, err
-
-
-def test_a_mesh_file_takes_reflectivity_not_the_table(tmp_path: Path, capsys) -> None:
-    code, err = _run(["scan", "box", "--reflectance-table", "--out", str(tmp_path / "o")], capsys)
-    assert code == 2 and "--reflectance-table give each object of a scene file its own value" in err, err

@@ -1,0 +1,196 @@
+"""``scan``'s beam options for every pulsed pattern, and its surface optics for a mesh and an airborne flight.
+
+Every beam option (``--footprint``, ``--divergence``, ``--max-returns``, ``--range-resolution``,
+``--power-noise``, ``--echo-separation``, ``--return-mode``) changes the sensor's beam through
+``kinds.with_beam`` whatever fires it: a spinning LiDAR, an airborne scanner, a ray table; a depth
+camera refuses each, naming it.  ``--reflectance-table`` and ``--transmittance`` reach a mesh's
+scan and an airborne scanner's as they reach a scene file's spinning scan.  Runs on the shipped
+chair and street scene.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from zbuf_occlude.cli.main import build_parser
+from zbuf_occlude.cli.main import main as cli_main
+from zbuf_occlude.cli.return_physics import with_return_physics
+from zbuf_occlude.sensors.kinds import kind_of, sensor_from_name, sensor_to_json
+from zbuf_occlude.sensors.reflectance import GROUND_MATERIAL, reflectance
+from zbuf_occlude.sensors.scan_data import read_scan_npz
+
+ROOT = Path(__file__).resolve().parents[2]
+CHAIR = ROOT / "data" / "samples" / "chair" / "train" / "chair_0001.off"
+STREET = ROOT / "data" / "scenes" / "street.json"
+#: Several returns per pulse from a 7-ray footprint.
+RETURNS = ["--footprint", "--max-returns", "3", "--range-resolution", "0.5"]
+
+
+def _run(argv: list[str], capsys) -> tuple[int, str]:
+    code = cli_main([*argv, "--no-progress"])
+    return code, capsys.readouterr().err.strip()
+
+
+def _scan(argv: list[str], out: Path, capsys):
+    code, err = _run(["scan", *argv, "--out", str(out)], capsys)
+    assert code == 0, err
+    (npz,) = out.glob("*.npz")
+    return read_scan_npz(npz)
+
+
+def _beam(sensor: str, options: list[str]):
+    """The sensor ``scan --sensor SENSOR OPTIONS`` fires (parsed as the command parses it)."""
+    args = build_parser().parse_args(["scan", "box", "--sensor", sensor, "--out", "unused", *options])
+    return with_return_physics(sensor_from_name(sensor), args)
+
+
+@pytest.mark.parametrize("sensor", ["vlp16", "riegl-q1560", "livox-mid70"])
+@pytest.mark.parametrize(
+    ("options", "changes"),
+    [
+        (RETURNS, {"footprint_rays": 7, "max_returns": 3, "range_resolution_m": 0.5, "echo_separation_m": 0.0}),
+        (["--footprint", "--power-noise", "0.3", "--echo-separation", "0.4", "--max-returns", "1"],
+         {"footprint_rays": 7, "power_noise": 0.3, "echo_separation_m": 0.4, "max_returns": 1, "range_resolution_m": 0.0}),
+        (["--footprint", "--divergence", "0.5"], {"footprint_rays": 7, "divergence_deg": 0.5}),
+        (["--return-mode", "dual", "--range-resolution", "0.8"], {"return_mode": "dual", "max_returns": 2, "range_resolution_m": 0.8}),
+        (["--return-mode", "strongest", "--range-resolution", "0.8"], {"return_mode": "strongest", "max_returns": 1, "range_resolution_m": 0.8}),
+    ],
+    ids=["returns", "mixed-pixels", "divergence", "dual", "strongest"],
+)  # fmt: skip
+def test_every_beam_option_changes_the_beam_of_every_pulsed_pattern(sensor: str, options: list[str], changes: dict) -> None:
+    base = sensor_from_name(sensor)
+    changed = _beam(sensor, options)
+    assert kind_of(changed) is kind_of(base)
+    wanted = base.beam.with_(
+        **{k: v for k, v in changes.items() if k != "echo_separation_m"} | {"echo_separation_m": changes.get("echo_separation_m", 0.0)}
+    )
+    assert changed.beam == wanted
+    assert sensor_to_json(changed.with_(beam=base.beam)) == sensor_to_json(base)  # the pattern and the platform as they were
+
+
+@pytest.mark.parametrize("sensor", ["vlp16", "riegl-q1560", "livox-mid70"])
+def test_every_pulsed_pattern_scans_a_mesh_with_several_returns(tmp_path: Path, capsys, sensor: str) -> None:
+    s = _scan([str(CHAIR), "--sensor", sensor, *RETURNS, "--power-noise", "0.2"], tmp_path / "o", capsys)
+    assert len(s) > 0 and s.number_of_returns.max() <= 3
+    assert np.all((s.return_number >= 1) & (s.return_number <= s.number_of_returns))
+
+
+def test_a_ray_table_file_takes_the_beam_options(tmp_path: Path, capsys) -> None:
+    table = tmp_path / "table.csv"
+    az, el = np.meshgrid(np.linspace(-20.0, 20.0, 81), np.linspace(-12.0, 4.0, 17))
+    rows = [f"{i * 1e-5:.6f},{a:.4f},{e:.4f}" for i, (a, e) in enumerate(zip(az.ravel(), el.ravel()))]
+    table.write_text("time_s,azimuth_deg,elevation_deg\n" + "\n".join(rows) + "\n")
+    code, err = _run(["scan", str(CHAIR), "--ray-table", str(table), "--footprint", "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and "--footprint samples the beam's divergence cone" in err and "give --divergence DEG" in err, err
+    s = _scan([str(CHAIR), "--ray-table", str(table), "--footprint", "--divergence", "0.3", "--max-returns", "2", "--range-resolution",
+               "0.5"], tmp_path / "p", capsys)  # fmt: skip
+    assert len(s) > 0 and s.number_of_returns.max() <= 2
+
+
+def test_a_preset_without_a_divergence_takes_one_for_its_footprint(tmp_path: Path, capsys) -> None:
+    code, err = _run(["scan", str(CHAIR), "--sensor", "hdl64e", "--footprint", "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and "\n" not in err, err
+    assert "hdl64e's beam (hdl64e) has no divergence (divergence_deg 0): give --divergence DEG" in err
+    plain = _scan([str(CHAIR), "--sensor", "hdl64e"], tmp_path / "plain", capsys)
+    wide = _scan([str(CHAIR), "--sensor", "hdl64e", "--footprint", "--divergence", "0.5", "--max-returns", "3", "--range-resolution",
+                  "0.3"], tmp_path / "wide", capsys)  # fmt: skip
+    assert plain.number_of_returns.max() == 1 and wide.number_of_returns.max() >= 2  # the chair's edges split the wide footprints
+
+
+@pytest.mark.parametrize(
+    "option",
+    [["--footprint"], ["--divergence", "0.2"], ["--max-returns", "2"], ["--range-resolution", "0.5"], ["--power-noise", "0.2"],
+     ["--echo-separation", "0.5"], ["--return-mode", "last"]],
+)  # fmt: skip
+def test_a_depth_camera_refuses_every_beam_option_naming_it(tmp_path: Path, capsys, option: list[str]) -> None:
+    code, err = _run(["scan", str(STREET), "--sensor", "kinect-v1", *option, "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and "\n" not in err and "Traceback" not in err, err
+    assert err.endswith(f"{option[0]}: kinect-v1 is a depth camera, which has no beam to change (a pulsed LiDAR has one)"), err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    ("options", "words"),
+    [(["--return-mode", "dual"], "--return-mode dual needs --range-resolution M"),
+     (["--return-mode", "dual", "--max-returns", "3", "--range-resolution", "1"], "--return-mode dual records 2 returns per pulse; --max-returns 3 contradicts it"),
+     (["--return-mode", "all", "--range-resolution", "1"], "--range-resolution 1 separates several returns per pulse")],
+)  # fmt: skip
+def test_return_mode_mistakes_are_usage_errors(tmp_path: Path, capsys, options: list[str], words: str) -> None:
+    code, err = _run(["scan", str(STREET), "--sensor", "vlp16", *options, "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and words in err, err
+
+
+def test_return_modes_pick_the_echoes_a_receiver_records(tmp_path: Path, capsys) -> None:
+    base = [str(STREET), "--sensor", "vlp16", "--footprint", "--divergence", "1.5", "--range-resolution", "0.5"]
+    every = _scan([*base, "--max-returns", "15"], tmp_path / "all", capsys)
+    dual = _scan([*base, "--return-mode", "dual"], tmp_path / "dual", capsys)
+    last = _scan([*base, "--return-mode", "last"], tmp_path / "last", capsys)
+    assert every.number_of_returns.max() > 2  # the street's edges give footprints of several echoes
+    assert dual.number_of_returns.max() == 2 and set(np.unique(last.number_of_returns).tolist()) == {1}
+    # the last echo of a pulse is its farthest: the last mode's range is the largest of the pulse's echoes, but for the range
+    # noise (each run draws it per echo, so the two runs' draws differ)
+    farthest = {}
+    for p, r in zip(every.pulse_id.tolist(), every.range_m.tolist()):
+        farthest[p] = max(r, farthest.get(p, 0.0))
+    got = dict(zip(last.pulse_id.tolist(), last.range_m.tolist()))
+    shared = sorted(set(got) & set(farthest))
+    assert len(shared) > 100
+    gap = np.abs(np.array([got[p] - farthest[p] for p in shared]))
+    # an echo nearer than the last lies at least a range resolution (0.5 m) before it
+    assert np.median(gap) < 0.05 and np.mean(gap > 0.4) < 0.005, np.percentile(gap, [50, 95, 99])
+
+
+def test_reflectance_table_reaches_a_mesh_scan(tmp_path: Path, capsys) -> None:
+    from zbuf_occlude.mesh.load import load_mesh
+    from zbuf_occlude.sensors.reflectance import material_of
+
+    plain = _scan([str(CHAIR), "--sensor", "vlp16"], tmp_path / "plain", capsys)
+    table = _scan([str(CHAIR), "--sensor", "vlp16", "--reflectance-table"], tmp_path / "table", capsys)
+    assert 0 < len(table) < len(plain)  # the dark asphalt's grazing returns fall below the threshold
+    kept = np.isin(plain.pulse_id, table.pulse_id)
+    assert np.array_equal(plain.pulse_id[kept], table.pulse_id) and np.array_equal(plain.object_id[kept], table.object_id)
+    rho = {0: reflectance(GROUND_MATERIAL), 1: reflectance(material_of(load_mesh(CHAIR), "chair_0001"))}
+    for oid, value in rho.items():
+        on = table.object_id == oid
+        assert on.sum() > 10
+        assert np.allclose(table.intensity[on], value * plain.intensity[kept][on], rtol=1e-5)  # the energy ρ·|cos θ|/R²
+
+
+def test_transmittance_reaches_a_mesh_scan(tmp_path: Path, capsys) -> None:
+    opaque = _scan([str(CHAIR), "--sensor", "vlp16", *RETURNS], tmp_path / "opaque", capsys)
+    through = _scan([str(CHAIR), "--sensor", "vlp16", *RETURNS, "--transmittance", "chair_0001=0.6"], tmp_path / "through", capsys)
+    behind = [int(np.sum((s.object_id == 0) & (s.return_number > 1))) for s in (opaque, through)]
+    assert behind[1] > behind[0]  # the ground seen through the chair, as a later return of its pulses
+    code, err = _run(
+        ["scan", str(CHAIR), "--sensor", "vlp16", *RETURNS, "--transmittance", "bush=0.3", "--out", str(tmp_path / "x")], capsys
+    )
+    assert code == 2 and "--transmittance bush=0.3: no object of the scene has the class 'bush'" in err, err
+
+
+def test_surface_optics_reach_an_airborne_scan(tmp_path: Path, capsys) -> None:
+    plain = _scan([str(STREET), "--sensor", "riegl-q1560"], tmp_path / "plain", capsys)
+    optics = _scan(
+        [str(STREET), "--sensor", "riegl-q1560", "--reflectance-table", "--transmittance", "car=0.5"], tmp_path / "optics", capsys
+    )
+    ground = lambda s: (s.object_id == 0) & (s.number_of_returns == 1)  # noqa: E731 - one echo: its energy alone
+    ratio = np.median(optics.intensity[ground(optics)]) / np.median(plain.intensity[ground(plain)])
+    assert ratio == pytest.approx(reflectance(GROUND_MATERIAL, 1064.0), rel=0.05)
+    under_car = [int(np.sum((s.object_id == 0) & (s.return_number > 1))) for s in (plain, optics)]
+    assert under_car[1] > under_car[0]  # the ground under the car, through it
+
+
+def test_reflectance_table_and_reflectivity_are_one_or_the_other(tmp_path: Path, capsys) -> None:
+    code, err = _run(["scan", str(CHAIR), "--reflectance-table", "--reflectivity", "0.3", "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and "--reflectance-table gives each surface its material's reflectivity; --reflectivity gives the object one" in err
+
+
+def test_a_sensor_files_beam_is_changed_not_replaced(tmp_path: Path) -> None:
+    spec = {"kind": "airborne", "preset": "riegl-q1560", "beam": {"power_noise": 0.25, "range_noise_m": 0.05}}
+    path = tmp_path / "als.json"
+    path.write_text(json.dumps(spec))
+    changed = _beam(str(path), ["--max-returns", "4"])
+    assert changed.beam.max_returns == 4 and changed.beam.power_noise == 0.25 and changed.beam.range_noise_m == 0.05
