@@ -59,6 +59,14 @@ def test_a_folder_of_our_own_laz_scans_gives_a_sensor_file_and_a_table(scans: Pa
     assert sensor.beam.intensity_scale == fit["estimates"]["intensity_scale"]["value"] and sensor.beam.max_intensity == 65_535
     assert sensor.beam.footprint_rays == 19 and "casts one ray" not in text
     assert set(spec["fit"]["beam"]["fitted"]) >= {"max_returns", "range_resolution_m", "intensity_scale"}
+    # per ASPRS class of the scans: points, multi-return share, median intensity
+    merged = [read_las(p) for p in sorted(scans.glob("*.laz"))]
+    codes = sorted(set(np.concatenate([las.classification for las in merged]).tolist()))
+    assert list(spec["fit"]["classes"]) == [str(c) for c in codes]
+    for c in codes:
+        figures = spec["fit"]["classes"][str(c)]
+        assert figures["points"] == sum(int(np.sum(las.classification == c)) for las in merged)
+        assert 0.0 <= figures["multi_return_share"] <= 1.0
 
 
 def test_one_file_and_a_spinning_lidar_that_needs_an_altitude(scans: Path, tmp_path: Path, capsys) -> None:

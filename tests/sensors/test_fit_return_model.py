@@ -201,6 +201,32 @@ def test_a_beam_without_a_footprint_gets_its_presets_data_sheet_divergence(surve
     assert "casts one ray per pulse" in survey_fit.markdown(fitted)
 
 
+def test_per_class_statistics_are_each_class_points_multi_return_share_and_median_intensity(survey_las, survey_fit) -> None:
+    from zbuf_occlude.sensors.fit.engine import class_statistics
+
+    # every third return recorded no intensity (0): left out of the medians
+    las = replace(
+        survey_las, intensity=np.where(np.arange(len(survey_las)) % 3 == 0, 0, survey_las.intensity).astype(survey_las.intensity.dtype)
+    )
+    per_class = class_statistics(las, survey_fit.statistics)
+    assert list(per_class) == ["2", "5"]  # ground and high vegetation, in code order
+    for code, figures in per_class.items():
+        mine = las.classification == int(code)
+        assert figures["points"] == int(mine.sum())
+        assert figures["multi_return_share"] == pytest.approx(float(np.mean(las.number_of_returns[mine] > 1)))
+        assert 0 <= figures["multi_return_share_std"] < 0.05
+        recorded = las.intensity[mine & (las.intensity > 0)]
+        assert figures["intensity_median"] == float(np.median(recorded))
+    assert per_class["5"]["multi_return_share"] == 1.0 and per_class["2"]["multi_return_share"] < 1.0  # trees: first of several
+    assert per_class["2"]["multi_return_share_std"] > 0
+    json.dumps(per_class, allow_nan=False)  # strict JSON
+    # a scan never classified (class 0 everywhere) has no per-class figures
+    columns = _survey(n_pulses=300, classes=False)
+    n = len(columns["points"])
+    bare = LasPoints(**columns, point_source_id=np.zeros(n, np.int64), scanner_channel=np.zeros(n, np.int64))
+    assert class_statistics(bare, fit_return_model(bare, altitude_m=H, bootstrap=5).statistics) == {}
+
+
 def test_the_fit_reads_as_strict_json_and_a_table(survey_fit) -> None:
     out = json.loads(json.dumps(survey_fit.to_json(), allow_nan=False))
     assert out["estimates"]["beam_divergence_deg"]["value"] is None and out["altitude_m"] == H

@@ -52,6 +52,7 @@ from zbuf_occlude.sensors.kinds import sensor_from_name, sensor_to_json
 __all__ = [
     "LAS_EXTENSIONS",
     "FittedSensor",
+    "class_statistics",
     "fit_sensor",
     "fit_sensor_to_las",
     "fit_sensor_to_scans",
@@ -335,12 +336,43 @@ def _read_las_files(files: Sequence[Path], real: str | os.PathLike):
     return merge_scans(scans, [str(f) for f in files])
 
 
+def class_statistics(las: Any, statistics: Any) -> dict[str, dict[str, Any]]:
+    """Per ASPRS class of a scan: its points, the share of them from pulses of several returns (± its bootstrap's sd) and
+    the median intensity of its returns that recorded one (counts; LAS 1.4 R15 §2.6: 0 means none recorded).
+
+    Parameters
+    ----------
+    las : LasPoints
+    statistics : ReturnStatistics
+        The scan's return statistics (:func:`~zbuf_occlude.sensors.fit.return_statistics`), whose
+        ``multi_return_points_class_<c>`` give the shares.
+
+    Returns
+    -------
+    dict of str to dict
+        Keyed by the class code as text, in increasing order: ``{"points": n, "multi_return_share": p,
+        "multi_return_share_std": sd, "intensity_median": m}``, ``None`` where not measured; empty where the scan has no
+        classes (every point of class 0, never classified).
+    """
+    codes, sizes = np.unique(las.classification, return_counts=True)
+    if codes.tolist() in ([], [0]):
+        return {}
+    out = {}
+    for c, n in zip(codes.tolist(), sizes.tolist(), strict=True):
+        share = statistics.estimates[f"multi_return_points_class_{c}"].to_json()
+        intensity = las.intensity[(las.classification == c) & (las.intensity > 0)]
+        out[str(c)] = {"points": n, "multi_return_share": share["value"], "multi_return_share_std": share["std"],
+                       "intensity_median": float(np.median(intensity)) if len(intensity) else None}  # fmt: skip
+    return out
+
+
 def fit_sensor_to_las(files: Sequence[Path], real: str | os.PathLike, sensor: str, out: str | os.PathLike, *,
                       altitude_m: float | None = None, classes: Sequence[int] | None = None, bootstrap: int | None = None,
                       divergence_shares: str | os.PathLike | None = None, seed: int = 0, say: Say | None = None) -> FittedSensor:  # fmt: skip
     """The return model fitted to LAS/LAZ scans (:func:`~zbuf_occlude.sensors.fit.fit_return_model`) and applied to
     ``sensor``'s beam (:meth:`~zbuf_occlude.sensors.fit.ReturnModelFit.applied`), written as a sensor JSON with the fit under
-    ``"fit"`` (``"beam"``: what was fitted and what came from the data sheet; ``"returns"``: the fit) and a table beside it.
+    ``"fit"`` (``"beam"``: what was fitted and what came from the data sheet; ``"returns"``: the fit; ``"classes"``, where the
+    scans have classes: :func:`class_statistics`) and a table beside it.
 
     Parameters
     ----------
@@ -404,6 +436,8 @@ def fit_sensor_to_las(files: Sequence[Path], real: str | os.PathLike, sensor: st
         fitted, origin = fit.applied(base)
         spec = sensor_to_json(fitted)
         spec["fit"] = {"base": base.name, "files": [f.name for f in files], "beam": origin, "returns": fit.to_json()}
+        if classes_seen := class_statistics(las, fit.statistics):
+            spec["fit"]["classes"] = classes_seen
         folder.write_text(out.name, _strict_json(spec))
         table = fit.markdown(fitted)
         folder.write_text(md.name, f"# {fitted.name}: the return model fitted to {', '.join(f.name for f in files)}\n\n{table}")

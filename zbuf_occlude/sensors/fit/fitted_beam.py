@@ -117,7 +117,7 @@ def fitted_sensor(estimates: Mapping[str, Estimate], sensor: Any, *, altitude_m:
     what = f"returns fitted to {n_pulses:,} pulses ({', '.join(sets) or 'nothing measured'})"
     extra = {"altitude_m": altitude_m} if sensor_kind(sensor) == "airborne" else {}  # the height the scale was fitted at
     out = replace(sensor, beam=beam.with_(**changes), name=name, source=f"{sensor.source}; {what}".lstrip("; "), **extra)
-    kept = f"every other beam field is {beam.name!r}'s" + (f" ({beam.source})" if beam.source else "")
+    kept = f"every other beam field is the {beam.name} beam's, as the base sensor {sensor.name} gives it"
     return out, {"fitted": fitted, "data_sheet": data_sheet, "model": model, "source": source, "kept": kept}
 
 
