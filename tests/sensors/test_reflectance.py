@@ -8,6 +8,7 @@ import trimesh
 
 import zbuf_occlude.sensors as S
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.kinds import with_beam
 from zbuf_occlude.sensors.reflectance import (
     DEFAULT_MATERIAL,
     FOLIAGE_GAP_FRACTION,
@@ -89,7 +90,7 @@ def test_scene_optics_gives_each_object_id_its_material():
 
 def test_scan_takes_the_table_as_it_takes_the_values():
     scene = _street()
-    lidar = S.Lidar.preset("vlp16").with_(footprint_rays=7, beam_divergence_deg=0.3, max_returns=3, range_resolution_m=0.5)
+    lidar = with_beam(S.Lidar.preset("vlp16"), footprint_rays=7, divergence_deg=0.3, max_returns=3, range_resolution_m=0.5)
     optics = scene_optics(build_scene(scene))
     by_table = S.scan(scene, lidar, seed=1, reflectivity="table", transmittance="table")
     by_value = S.scan(scene, lidar, seed=1, reflectivity=optics.reflectivity, transmittance=optics.transmittance)

@@ -19,6 +19,9 @@ from hypothesis import strategies as st
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors import AirborneScanner, airborne_preset, scan_airborne
+from zbuf_occlude.sensors.beam import Beam
+from zbuf_occlude.sensors.kinds import with_beam
+from zbuf_occlude.sensors.scene import BuiltScene, SceneObject
 
 ALTITUDE_M = 100.0
 PLATE_Z = 10.0
@@ -33,11 +36,15 @@ def _plate_over_ground(edge_y: float = EDGE_Y) -> trimesh.Trimesh:
     return trimesh.util.concatenate([ground, plate])
 
 
-def _scanner(**changes) -> AirborneScanner:
+#: The riegl-q1560 beam before the presets carried their data sheets' footprints and echoes: one return per pulse
+#: (the centre ray's first hit), 2 cm range noise; what the scans of before returns were taken with.
+Q1560_SINGLE_RETURN = Beam("riegl-q1560", wavelength_nm=1064.0, range_noise_m=0.02)
+
+
+def _scanner(**beam_changes) -> AirborneScanner:
     """A slow, low scanner with a 2° beam (a 3.5 m footprint at 100 m) and no range noise."""
-    fields = {"swath_deg": 20.0, "pulse_rate_hz": 2000.0, "line_rate_hz": 20.0, "altitude_m": ALTITUDE_M, "speed_mps": 10.0,
-              "range_noise_m": 0.0, "beam_divergence_deg": 2.0, "footprint_rays": 19, "max_returns": 3, "range_resolution_m": 0.5}  # fmt: skip
-    return AirborneScanner("test-als", **{**fields, **changes})
+    beam = {"wavelength_nm": 1064.0, "divergence_deg": 2.0, "footprint_rays": 19, "max_returns": 3, "range_resolution_m": 0.5}
+    return AirborneScanner("test-als", 20.0, 2000.0, 20.0, ALTITUDE_M, 10.0, beam=Beam(**{**beam, **beam_changes}))
 
 
 def test_a_plate_half_covering_the_footprint_gives_two_returns_at_its_range_and_the_grounds() -> None:
@@ -83,7 +90,7 @@ def test_scan_angle_is_signed_as_asprs_defines_it_and_time_runs_along_the_line()
     seed=st.integers(0, 2**16),
 )
 def test_return_numbers_run_1_to_n_and_n_is_the_same_across_a_pulse(k, divergence, resolution, max_returns, edge, dropout, seed) -> None:
-    scanner = _scanner(footprint_rays=k, beam_divergence_deg=divergence, range_resolution_m=resolution, max_returns=max_returns,
+    scanner = _scanner(footprint_rays=k, divergence_deg=divergence, range_resolution_m=resolution, max_returns=max_returns,
                        dropout=dropout, range_noise_m=0.05)  # fmt: skip
     s = scan_airborne(_plate_over_ground(edge), scanner, (0.0, edge), 5.0, seed=seed)
     assert len(s) > 0
@@ -127,10 +134,10 @@ _BEFORE = {
 def test_one_return_per_pulse_is_bit_identical_to_the_scans_before_returns(name: str) -> None:
     if name == "one_line":
         scanner = AirborneScanner("test", swath_deg=40.0, pulse_rate_hz=100_000.0, line_rate_hz=50.0, altitude_m=500.0, speed_mps=60.0,
-                                  dropout=0.2, range_noise_m=0.05)  # fmt: skip
+                                  beam=Beam(wavelength_nm=1064.0, dropout=0.2, range_noise_m=0.05))  # fmt: skip
         s = scan_airborne(_box_scene(), scanner, (0.0, 0.0), 20.0, seed=7)
     else:
-        scanner = airborne_preset("dales-q1560", headings_deg=(0.0, 90.0), n_lines=3)
+        scanner = airborne_preset("dales-q1560", headings_deg=(0.0, 90.0), n_lines=3, beam=Q1560_SINGLE_RETURN)
         s = scan_airborne(_box_scene(), scanner, (3.0, -2.0), 6.0, seed=11, phase_s=0.001)
     got = {
         key: _digest(np.asarray(s.meta[key[5:]]), shape=False) if key.startswith("meta.") else _digest(getattr(s, key))
@@ -144,20 +151,45 @@ def test_one_return_per_pulse_is_bit_identical_to_the_scans_before_returns(name:
 @pytest.mark.parametrize(
     "changes, message",
     [
-        ({"footprint_rays": 7}, r"footprint_rays 7 needs beam_divergence_deg > 0"),
-        ({"footprint_rays": 7, "beam_divergence_deg": 1.0}, r"footprint_rays 7 needs max_returns above 1"),
-        ({"footprint_rays": 1025, "beam_divergence_deg": 1.0}, r"footprint_rays"),
-        ({"max_returns": 3}, r"max_returns 3 needs range_resolution_m > 0"),
+        ({"footprint_rays": 7}, r"footprint_rays 7 needs divergence_deg > 0"),
+        ({"footprint_rays": 1025, "divergence_deg": 1.0}, r"footprint_rays"),
+        ({"max_returns": 3}, r"max_returns 3 with return_mode 'all' needs range_resolution_m > 0"),
         ({"max_returns": 16, "range_resolution_m": 0.5}, r"max_returns"),
         ({"range_resolution_m": 0.5}, r"range_resolution_m 0.5 needs max_returns above 1"),
         ({"max_returns": 2, "range_resolution_m": float("nan")}, r"range_resolution_m"),
-        ({"beam_profile": "cone"}, r"beam_profile"),
+        ({"profile": "cone"}, r"profile"),
         ({"max_returns": True, "range_resolution_m": 0.5}, r"max_returns"),
+        ({"return_mode": "dual"}, r"return_mode 'dual' records 2 returns per pulse: give max_returns 2"),
     ],
 )
 def test_bad_return_fields_are_refused_naming_the_field(changes: dict, message: str) -> None:
-    with pytest.raises(InvalidInputError, match=message):
-        airborne_preset("riegl-q1560", **changes)
+    """The beam's rules, named by the scanner and its beam."""
+    single = airborne_preset("riegl-q1560", beam=Q1560_SINGLE_RETURN)
+    with pytest.raises(InvalidInputError, match=r"^airborne scanner 'riegl-q1560': beam 'riegl-q1560': " + message):
+        with_beam(single, **changes)
+
+
+def test_a_footprint_with_one_return_per_pulse_records_its_strongest_echo() -> None:
+    """A footprint with one return per pulse is accepted (it was refused before every scanner fired a Beam): each pulse
+    records the echo of most energy, so near the plate's edge, where the nearer plate takes a share of the sub-rays worth
+    more than the ground's, a pulse whose centre ray falls on the ground returns from the plate."""
+    mesh = _plate_over_ground()  # the ground's 2 faces, then the plate's 12: two objects (a footprint's echoes add up per object)
+    scene = BuiltScene(mesh, np.repeat(np.array([1, 2], np.int32), [2, 12]), np.r_[np.arange(2), np.arange(12)],
+                       [SceneObject(mesh), SceneObject(mesh)], [np.eye(4)] * 3, [None, mesh, mesh])  # fmt: skip
+    foot = scan_airborne(scene, _scanner(max_returns=1, range_resolution_m=0.0), (0.0, EDGE_Y), 8.0, seed=1, phase_s=0.0)
+    centre = scan_airborne(scene, _scanner(max_returns=1, range_resolution_m=0.0, footprint_rays=1, divergence_deg=0.0),
+                           (0.0, EDGE_Y), 8.0, seed=1, phase_s=0.0)  # fmt: skip
+    assert len(foot) == len(centre) > 0 and np.all(foot.number_of_returns == 1) and np.all(foot.return_number == 1)
+    assert len(np.unique(foot.pulse_id)) == len(foot)
+    assert set(np.unique(foot.object_id)) == {1, 2}
+    on_plate = foot.object_id == 2
+    # the echo's range (the energy-weighted mean of its object's sub-rays), not a mix of both objects, along the centre ray
+    np.testing.assert_allclose(foot.points[on_plate, 2], PLATE_Z, atol=0.3)
+    np.testing.assert_allclose(foot.points[~on_plate, 2], 0.0, atol=0.3)
+    centre_on_plate = centre.object_id == 2
+    assert on_plate.sum() > centre_on_plate.sum()
+    # the points stay on each pulse's centre direction: the plate's returns reach past the edge, onto the ground's side
+    assert foot.points[on_plate, 1].min() < centre.points[centre_on_plate, 1].min()
 
 
 def test_a_sensor_file_round_trips_the_return_fields(tmp_path) -> None:
@@ -165,7 +197,7 @@ def test_a_sensor_file_round_trips_the_return_fields(tmp_path) -> None:
 
     from zbuf_occlude.sensors.kinds import sensor_from_name, sensor_to_json
 
-    scanner = _scanner(beam_profile="gaussian")
+    scanner = _scanner(profile="gaussian")
     path = tmp_path / "als.json"
     path.write_text(json.dumps(sensor_to_json(scanner)))
     assert sensor_from_name(path) == scanner
