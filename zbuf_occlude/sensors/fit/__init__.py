@@ -21,8 +21,15 @@
 ``divergence``
     The beam divergence fitted by simulation: a simulated multi-return share curve inverted at a
     scan's share (:func:`fit_divergence`, :func:`divergence_from_shares`).
+``fitted_beam``
+    The return model applied to a scanner: its beam with what was fitted changed, the rest its
+    data sheet's, and where each field came from (:func:`~zbuf_occlude.sensors.fit.fitted_beam.fitted_sensor`).
+``engine``
+    ``fit-sensor``'s one engine: reads the scans or LAS/LAZ files, fits, writes the sensor file
+    and its table (:func:`zbuf_occlude.sensors.fit.engine.fit_sensor`; imported from its module,
+    as it reads files).
 
-Every name is imported from here (``from zbuf_occlude.sensors.fit import fit_lidar``).
+Every name of the fits is imported from here (``from zbuf_occlude.sensors.fit import fit_lidar``).
 """
 
 from __future__ import annotations
