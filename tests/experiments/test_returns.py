@@ -22,14 +22,16 @@ from zbuf_occlude.experiments.returns import (
     simulated_classes,
 )
 from zbuf_occlude.experiments.returns_comparison import comparison_rows, recommend_k
-from zbuf_occlude.experiments.returns_report import ReturnsSettings, run_returns
+from zbuf_occlude.experiments.returns_report import ReturnsSettings, run_returns, scans_of_run
 from zbuf_occlude.io.atomic import write_bytes
 from zbuf_occlude.io.las import LasPoints, las_bytes, read_las
+from zbuf_occlude.io.progress import PROGRESS_INTERVAL_ENV
 from zbuf_occlude.io.regular_files import read_regular_file
 from zbuf_occlude.io.tables import read_csv_rows
 from zbuf_occlude.sensors.fit import Estimate
 from zbuf_occlude.sensors.fit.return_model import GROUND_REFLECTANCE, fit_return_model
 from zbuf_occlude.sensors.fit.returns import ReturnStatistics, return_statistics
+from zbuf_occlude.sensors.kinds import with_beam
 from zbuf_occlude.sensors.reflectance import reflectance
 
 #: A footprint 1.5 m across at 1,500 m: plate edges split many pulses.
@@ -61,7 +63,7 @@ def test_the_las_round_trip_measures_what_the_scan_holds() -> None:
         assert mine[name].value == theirs[name].value, name
     for name in ("gap_min", "gap_median"):
         assert abs(mine[name].value - theirs[name].value) <= 2e-3, name
-    assert theirs["gap_min"].value >= scanner.range_resolution_m - 5 * scanner.range_noise_m
+    assert theirs["gap_min"].value >= scanner.beam.range_resolution_m - 5 * scanner.beam.range_noise_m
 
 
 def test_pooled_seeds_are_flight_lines_of_their_own() -> None:
@@ -157,7 +159,7 @@ def test_comparison_verdicts_hold_the_tolerances() -> None:
 
 
 @pytest.mark.parametrize("detection", [True, False])
-def test_run_returns_writes_its_outputs(tmp_path, detection) -> None:
+def test_run_returns_writes_its_outputs(tmp_path, detection, capsys, monkeypatch) -> None:
     meshes = tmp_path / "bush"
     meshes.mkdir()
     for i, tree in enumerate(PLOT_TREES):
@@ -177,11 +179,22 @@ def test_run_returns_writes_its_outputs(tmp_path, detection) -> None:
     original = report.PLOT_TREES
     report.PLOT_TREES = tuple(trees)
     try:
-        summary = run_returns(tmp_path / "out", meshes, real_path, settings=settings_)
+        monkeypatch.setenv(PROGRESS_INTERVAL_ENV, "0")  # a line per scan in a log
+        capsys.readouterr()
+        summary = run_returns(tmp_path / "out", meshes, real_path, settings=settings_, progress=detection)
         scene, vegetation, centre, half = report.ign_plot(meshes, settings_)
     finally:
         report.PLOT_TREES = original
     out = tmp_path / "out"
+    # the progress of the scans on stderr, one line each (stderr is not a terminal), up to the total; none with progress=False
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.startswith("returns: ")]
+    total = scans_of_run(settings_)
+    assert total == 2 * 1 * 1 + 2 * 1 + 0 + 2 * 1
+    if detection:
+        assert [int(line.split()[1].split("/")[0]) for line in lines] == list(range(1, total + 1)), lines
+        assert all(f"/{total} scan" in line for line in lines)
+    else:
+        assert lines == []
     assert summary["recommended_k"] in (1, 7)
     assert summary["verdicts"]["PASS"] + summary["verdicts"]["FAIL"] + summary["verdicts"]["not measured"] == 2 * 13
     assert read_regular_file(out / "returns.png", max_bytes=1 << 24)[:8] == b"\x89PNG\r\n\x1a\n"
@@ -201,10 +214,26 @@ def test_run_returns_writes_its_outputs(tmp_path, detection) -> None:
     # the sweep's first row is the fitted scanner over the plot with the model's reflectivity
     scanner = fit_return_model(read_las(real_path), altitude_m=IGN_ALTITUDE_M, bootstrap=5).apply(ign_scanner(IGN_DIVERGENCE_DEG, 7))
     if not detection:
-        scanner = replace(scanner, detection_threshold=0.0)
+        scanner = with_beam(scanner, detection_threshold=0.0)
     again = simulate(scene, scanner, vegetation, center_xy=centre, half_size_m=half, seeds=(0,), bootstrap=5,
                      reflectivity=model.get("reflectivity")).statistics["all"].estimates["multi_return_points_classes_3_4_5"]  # fmt: skip
     assert float(sweep[0]["multi_return_share"]) == pytest.approx(again.value, rel=1e-5)
+
+
+def test_the_command_honours_no_progress(tmp_path, monkeypatch) -> None:
+    import zbuf_occlude.experiments.returns_report as report
+    from zbuf_occlude.cli.main import main
+
+    calls = []
+
+    def fake(*args, **kwargs):
+        calls.append(kwargs["progress"])
+        return {"table": "", "divergence_fits": [], "recommended_k": 7, "seconds": 0.0}
+
+    monkeypatch.setattr(report, "run_returns", fake)
+    for extra in ([], ["--no-progress"]):
+        assert main(["experiment", "returns", str(tmp_path), "--real", "x.laz", "--out", str(tmp_path / "out"), *extra]) == 0
+    assert calls == [True, False]
 
 
 def test_the_command_refuses_bad_options_in_one_line(tmp_path, capsys) -> None:

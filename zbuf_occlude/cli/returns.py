@@ -19,7 +19,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.quick:
         settings = ReturnsSettings(divergence_factors=(0.5, 1.0, 2.0, 4.0, 8.0), sweep_rays=(7,), k_values=(1, 7, 19), seeds=(0,), repeats=1,
                                    copies=1, bootstrap=args.bootstrap, detection=detection)  # fmt: skip
-    summary = run_returns(args.out, args.meshes, args.real, autzen_path=args.autzen, settings=settings)
+    summary = run_returns(args.out, args.meshes, args.real, autzen_path=args.autzen, settings=settings, progress=not args.no_progress)
     fits = ", ".join(f"K {f['K']}: {f['divergence_mrad']:.3g} mrad" for f in summary["divergence_fits"])
     sys.stdout.write(f"{summary['table']}\nfitted divergence {fits}; recommended K {summary['recommended_k']}; "
                      f"{summary['seconds']:.0f} s -> {args.out}\n")  # fmt: skip
@@ -45,5 +45,6 @@ def add_returns_parser(sub: Any) -> argparse.ArgumentParser:
                    help="no detection threshold and every surface alike (every echo returns), instead of the threshold fitted to --real "
                    "with the ground at the fit's reflectance and the meshes at their material's at 1064 nm")  # fmt: skip
     p.add_argument("--quick", action="store_true", help="a small sweep (about 20 s): a check that the command runs, not the page's numbers")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar (or, when stderr is a file, no progress lines)")
     p.set_defaults(func=_run)
     return p

@@ -4,7 +4,7 @@ The experiment behind ``zbuf-occlude experiment returns`` and docs/results/retur
 
 1. **A plot**: a flat ground and tree and bush meshes at their real sizes (:func:`plot_scene`),
    scanned by an airborne scanner at a national survey's settings (:func:`ign_scanner`) with the
-   multi-return model (:func:`~zbuf_occlude.sensors.airborne.scan_airborne`).
+   multi-return model (:func:`~zbuf_occlude.sensors.scan.scan_airborne`).
 2. **The same measure on both sides**: the simulated scan is written as LAS
    (:meth:`~zbuf_occlude.sensors.scan_data.Scan.to_las_bytes`), read back by
    :func:`~zbuf_occlude.io.las.read_las`, given ASPRS classes (:func:`simulated_classes`) and
@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.atomic import write_bytes
 from zbuf_occlude.io.las import LasPoints, read_las
-from zbuf_occlude.sensors.airborne import AirborneScanner
+from zbuf_occlude.sensors.airborne import AIRBORNE_IDEAL_BEAM, AirborneScanner
 from zbuf_occlude.sensors.scan import scan_airborne
 from zbuf_occlude.sensors.fit.returns import (
     VEGETATION_CLASSES,
@@ -103,33 +103,35 @@ PLOT_TREES = (
 )
 
 
-def ign_scanner(beam_divergence_deg: float = IGN_DIVERGENCE_DEG, footprint_rays: int = 19, *, range_resolution_m: float = 0.82,
-                beam_profile: str = "gaussian", max_returns: int = IGN_MAX_RETURNS, range_noise_m: float = 0.02) -> AirborneScanner:  # fmt: skip
+def ign_scanner(divergence_deg: float = IGN_DIVERGENCE_DEG, footprint_rays: int = 19, *, range_resolution_m: float = 0.82,
+                profile: str = "gaussian", max_returns: int = IGN_MAX_RETURNS, range_noise_m: float = 0.02) -> AirborneScanner:  # fmt: skip
     """The IGN LiDAR HD survey's scanner as this experiment models it (module constants give each source).
 
     Parameters
     ----------
-    beam_divergence_deg : float
-        Full angle, degrees (default: 0.25 mrad).
+    divergence_deg : float
+        The beam's full angle, degrees (default: 0.25 mrad).
     footprint_rays : int
         Sub-rays per pulse, 1..:data:`~zbuf_occlude.sensors.footprint.MAX_SUBRAYS`.
     range_resolution_m : float
         Least range between two returns of one pulse, metres (default: the IGN sample's smallest
         gap between returns, 0.82 m).
-    beam_profile, max_returns, range_noise_m
-        As :class:`~zbuf_occlude.sensors.airborne.AirborneScanner`.
+    profile, max_returns, range_noise_m
+        As :class:`~zbuf_occlude.sensors.beam.Beam`'s (at 1064 nm, no detection threshold: the
+        fitted return model sets it, :meth:`~zbuf_occlude.sensors.fit.return_model.ReturnModelFit.apply`).
 
     Raises
     ------
     InvalidInputError
         A field the scanner refuses (named).
     """
+    source = "IGN LiDAR HD as modelled in zbuf_occlude.experiments.returns (altitude, density: IGN; divergence: RIEGL LMS-Q1560)"
+    beam = AIRBORNE_IDEAL_BEAM.with_(name="ign-lidarhd", source=source, divergence_deg=divergence_deg, footprint_rays=footprint_rays,
+                                     profile=profile, max_returns=max_returns, range_resolution_m=range_resolution_m,
+                                     range_noise_m=range_noise_m)  # fmt: skip
     return AirborneScanner(
         "ign-lidarhd", swath_deg=IGN_SWATH_DEG, pulse_rate_hz=IGN_PULSE_RATE_HZ, line_rate_hz=IGN_LINE_RATE_HZ,
-        altitude_m=IGN_ALTITUDE_M, speed_mps=IGN_SPEED_MPS, pattern="linear", range_noise_m=range_noise_m,
-        beam_divergence_deg=beam_divergence_deg, footprint_rays=footprint_rays, beam_profile=beam_profile,
-        max_returns=max_returns, range_resolution_m=range_resolution_m,
-        source="IGN LiDAR HD as modelled in zbuf_occlude.experiments.returns (altitude, density: IGN; divergence: RIEGL LMS-Q1560)",
+        altitude_m=IGN_ALTITUDE_M, speed_mps=IGN_SPEED_MPS, pattern="linear", beam=beam, source=source,
     )  # fmt: skip
 
 
@@ -255,18 +257,19 @@ def _concatenate(parts: Sequence[LasPoints]) -> LasPoints:
 
 
 def simulate(scene: ScanScene, scanner: AirborneScanner, vegetation_ids: Sequence[int], *, center_xy=(0.0, 0.0), half_size_m: float,
-             seeds: Sequence[int] = (0,), bootstrap: int = 200, reflectivity=None, transmittance=None) -> SimulatedScan:  # fmt: skip
+             seeds: Sequence[int] = (0,), bootstrap: int = 200, reflectivity=None, transmittance=None,
+             on_scan: Callable[[], object] | None = None) -> SimulatedScan:  # fmt: skip
     """Scan the plot, write each scan as LAS, read it back and measure them together (module docstring, steps 1–2).
 
     Parameters
     ----------
     scene : ScanScene
     scanner : AirborneScanner
-        With ``max_returns`` above 1.
+        Its beam with ``max_returns`` above 1.
     vegetation_ids : sequence of int
         Object ids classed as vegetation.
     center_xy, half_size_m
-        The square of ground whose pulses are cast (:func:`~zbuf_occlude.sensors.airborne.scan_airborne`), metres.
+        The square of ground whose pulses are cast (:func:`~zbuf_occlude.sensors.scan.scan_airborne`), metres.
     seeds : sequence of int
         One scan per seed (noise and the line's phase: the pulses fall elsewhere), each its own
         point source (flight line) in the pooled points; the first also seeds the bootstrap.
@@ -274,8 +277,10 @@ def simulate(scene: ScanScene, scanner: AirborneScanner, vegetation_ids: Sequenc
         Resamples of :func:`~zbuf_occlude.sensors.fit.returns.return_statistics`.
     reflectivity, transmittance : optional
         Per object id (ground first) or ``"table"``, as
-        :func:`~zbuf_occlude.sensors.airborne.scan_airborne` takes them; None (default): every
+        :func:`~zbuf_occlude.sensors.scan.scan_airborne` takes them; None (default): every
         surface reflects alike and stops the sub-ray.
+    on_scan : callable, optional
+        Called with no argument after each seed's scan (a progress bar's ``update``).
 
     Returns
     -------
@@ -302,6 +307,8 @@ def simulate(scene: ScanScene, scanner: AirborneScanner, vegetation_ids: Sequenc
                 scene, scanner, center_xy, half_size_m, seed=int(seed), reflectivity=reflectivity, transmittance=transmittance
             )
             seconds += time.perf_counter() - start
+            if on_scan is not None:
+                on_scan()
             pulses += int(scan.meta["n_rays"])
             first = scan if first is None else first
             path = write_bytes(

@@ -37,7 +37,7 @@ import os
 import platform
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -66,6 +66,7 @@ from zbuf_occlude.io.las import LasPoints, read_las
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.sensors.fit import Estimate
 from zbuf_occlude.sensors.fit.return_model import ReturnModelFit
+from zbuf_occlude.sensors.kinds import with_beam
 from zbuf_occlude.sensors.fit.returns import (
     VEGETATION_CLASSES,
     ReturnStatistics,
@@ -73,7 +74,7 @@ from zbuf_occlude.sensors.fit.returns import (
 )
 from zbuf_occlude.sensors.scene import ScanScene
 
-__all__ = ["RETURNS_OUTPUTS", "ReturnsSettings", "ign_plot", "run_returns"]
+__all__ = ["RETURNS_OUTPUTS", "ReturnsSettings", "ign_plot", "run_returns", "scans_of_run"]
 
 log = logging.getLogger(__name__)
 
@@ -131,7 +132,7 @@ class _Model:
 
     def scanner(self, divergence_deg: float, k: int):
         scanner = self.fit.apply(ign_scanner(divergence_deg, k))
-        return scanner if self.detection else replace(scanner, detection_threshold=0.0)
+        return scanner if self.detection else with_beam(scanner, detection_threshold=0.0)
 
     @property
     def range_resolution_m(self) -> float:
@@ -142,7 +143,7 @@ class _Model:
         out = {"range_resolution_m": e["range_resolution_m"].value, "range_resolution_sd_m": e["range_resolution_m"].std,
                "max_returns": int(e["max_returns"].value), "detection": self.detection}  # fmt: skip
         if self.detection:  # the threshold the simulated scanner holds
-            out |= {"detection_threshold": self.scanner(IGN_DIVERGENCE_DEG, 1).detection_threshold, "detection_threshold_sd": e["detection_threshold"].std,
+            out |= {"detection_threshold": self.scanner(IGN_DIVERGENCE_DEG, 1).beam.detection_threshold, "detection_threshold_sd": e["detection_threshold"].std,
                     "detection_threshold_counts": e["detection_threshold_counts"].value, "intensity_scale": e["intensity_scale"].value,
                     "ground_reflectance": self.fit.ground_reflectance, "reflectivity": list(self.reflectivity or ())}  # fmt: skip
         return out
@@ -215,14 +216,24 @@ def ign_plot(mesh_root: str | os.PathLike, settings: ReturnsSettings) -> tuple[S
     return scene, vegetation, (0.0, y), side * settings.spacing_m / 2.0
 
 
-def _divergence_sweep(plot, settings: ReturnsSettings, model: _Model, ks: Sequence[int]) -> list[dict[str, Any]]:
+def scans_of_run(settings: ReturnsSettings, *, autzen: bool = False) -> int:
+    """The scans :func:`run_returns` makes with ``settings`` (its progress bar's total): the divergence
+    sweep, the K sweep and its timing rounds, the two comparisons, and with ``autzen`` its sweep and comparison."""
+    seeds, factors = len(settings.seeds), len(settings.divergence_factors)
+    ks = len(settings.k_values)
+    total = factors * len(settings.sweep_rays) * seeds + ks * seeds + (settings.repeats - 1) * ks + 2 * seeds
+    return total + (factors * seeds + seeds if autzen else 0)
+
+
+def _divergence_sweep(plot, settings: ReturnsSettings, model: _Model, ks: Sequence[int], tick) -> list[dict[str, Any]]:
     scene, vegetation, centre, half = plot
     rows = []
     for factor in settings.divergence_factors:
         for k in ks:
             divergence = IGN_DIVERGENCE_DEG * factor
             result = simulate(scene, model.scanner(divergence, k), vegetation, center_xy=centre, half_size_m=half,
-                              seeds=settings.seeds, bootstrap=settings.bootstrap, reflectivity=model.reflectivity)  # fmt: skip
+                              seeds=settings.seeds, bootstrap=settings.bootstrap, reflectivity=model.reflectivity,
+                              on_scan=tick)  # fmt: skip
             rows.append(_sweep_row(result, divergence, k, class_suffix(VEGETATION_CLASSES)) | {"resolution_m": model.range_resolution_m})
             log.info("divergence %.4f° K %d: share %.3f", divergence, k, rows[-1]["multi_return_share"])
     return rows
@@ -247,7 +258,7 @@ def _fit_divergence(rows: Sequence[dict[str, Any]], k: int, measured: Estimate) 
             "monotone_fix": bool(np.any(fixed != y))}  # fmt: skip
 
 
-def _k_sweep(plot, settings: ReturnsSettings, divergence_deg: float, model: _Model) -> list[dict[str, Any]]:
+def _k_sweep(plot, settings: ReturnsSettings, divergence_deg: float, model: _Model, tick) -> list[dict[str, Any]]:
     """Every K measured once, then timed in ``repeats`` interleaved rounds (the measured round included)."""
     from zbuf_occlude.sensors.scan import scan_airborne
 
@@ -255,7 +266,7 @@ def _k_sweep(plot, settings: ReturnsSettings, divergence_deg: float, model: _Mod
     rows, times = {}, {k: [] for k in settings.k_values}
     for k in settings.k_values:
         result = simulate(scene, model.scanner(divergence_deg, k), vegetation, center_xy=centre, half_size_m=half,
-                          seeds=settings.seeds, bootstrap=settings.bootstrap, reflectivity=model.reflectivity)  # fmt: skip
+                          seeds=settings.seeds, bootstrap=settings.bootstrap, reflectivity=model.reflectivity, on_scan=tick)  # fmt: skip
         rows[k] = _sweep_row(result, divergence_deg, k, class_suffix(VEGETATION_CLASSES))
         times[k].append(result.seconds / result.pulses)
     for _ in range(settings.repeats - 1):
@@ -264,6 +275,7 @@ def _k_sweep(plot, settings: ReturnsSettings, divergence_deg: float, model: _Mod
             start = time.perf_counter()
             scan = scan_airborne(scene, scanner, centre, half, seed=settings.seeds[0], reflectivity=model.reflectivity)
             times[k].append((time.perf_counter() - start) / scan.meta["n_rays"])
+            tick()
     base = float(np.median(times[min(settings.k_values)]))
     for k, row in rows.items():
         row["seconds_per_mpulse"] = float(np.median(times[k])) * 1e6
@@ -321,30 +333,30 @@ def _csv_rows(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     return [{k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()} for row in rows]
 
 
-def _compare(plot, real, real_classes, divergence_deg: float, k: int, model: _Model, settings: ReturnsSettings, label: str):
+def _compare(plot, real, real_classes, divergence_deg: float, k: int, model: _Model, settings: ReturnsSettings, label: str, tick):
     scene, vegetation, centre, half = plot
     result = simulate(scene, model.scanner(divergence_deg, k), vegetation, center_xy=centre, half_size_m=half, seeds=settings.seeds,
-                      bootstrap=settings.bootstrap, reflectivity=model.reflectivity)  # fmt: skip
+                      bootstrap=settings.bootstrap, reflectivity=model.reflectivity, on_scan=tick)  # fmt: skip
     rows = comparison_rows(real, result.statistics, real_classes=real_classes, range_resolution_m=model.range_resolution_m, label=label)
     return rows, result
 
 
-def _autzen(path, plot, settings: ReturnsSettings, k: int) -> tuple[list[dict[str, Any]], list[dict[str, Any]], dict[str, Any], str]:
+def _autzen(path, plot, settings: ReturnsSettings, k: int, tick) -> tuple[list[dict[str, Any]], list[dict[str, Any]], dict[str, Any], str]:
     """Autzen alone: its own fitted return model (range resolution, most returns, threshold), its
     class 1 (trees and buildings: it has no vegetation class) as vegetation, the divergence fitted
     to its class-1 share."""
     classes = (1,)
     real, _, return_fit = _real(path, classes, settings.bootstrap)
     model = _model(return_fit, plot[0], settings.detection)
-    sweep = _divergence_sweep(plot, settings, model, (k,))
+    sweep = _divergence_sweep(plot, settings, model, (k,), tick)
     fit = _fit_divergence(sweep, k, real["all"].estimates[f"multi_return_points_{class_suffix(classes)}"])
     divergence = fit["divergence_deg"] if math.isfinite(fit["divergence_deg"]) else IGN_DIVERGENCE_DEG
-    rows, _ = _compare(plot, real, classes, divergence, k, model, settings, "Autzen")
+    rows, _ = _compare(plot, real, classes, divergence, k, model, settings, "Autzen", tick)
     return rows, sweep, fit | model.to_json(), real["all"].markdown()
 
 
 def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path: str | os.PathLike, *, autzen_path: str | os.PathLike | None = None,
-                settings: ReturnsSettings | None = None) -> dict[str, Any]:  # fmt: skip
+                settings: ReturnsSettings | None = None, progress: bool = True) -> dict[str, Any]:  # fmt: skip
     """Run the experiment (module docstring) and write :data:`RETURNS_OUTPUTS` into ``out``.
 
     Parameters
@@ -358,6 +370,9 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
     autzen_path : str or PathLike, optional
         A second real file for the cross-check (its class 1 taken as vegetation).
     settings : ReturnsSettings, optional
+    progress : bool
+        A progress bar of the scans on stderr (:func:`~zbuf_occlude.io.progress.progress`; total
+        :func:`scans_of_run`); False: none.
 
     Returns
     -------
@@ -370,30 +385,34 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
     InvalidInputError, MeshLoadError, OutputError
         A file that cannot be read, a folder that cannot be written.
     """
+    from zbuf_occlude.io.progress import progress as progress_bar
+
     settings = settings or ReturnsSettings()
     started, cpu_started, load_start = time.perf_counter(), time.process_time(), list(os.getloadavg())
-    with OwnedFolder(out, files=RETURNS_OUTPUTS, what="the returns experiment") as folder:
+    bar = progress_bar(total=scans_of_run(settings, autzen=autzen_path is not None), desc="returns", unit="scan", enabled=progress)
+    with bar, OwnedFolder(out, files=RETURNS_OUTPUTS, what="the returns experiment") as folder:
+        tick = bar.update
         folder.check_writable(RETURNS_OUTPUTS)
         real, real_las, fit = _real(real_path, VEGETATION_CLASSES, settings.bootstrap)
         plot = ign_plot(mesh_root, settings)
         model = _model(fit, plot[0], settings.detection)
         resolution = model.range_resolution_m
-        sweep = _divergence_sweep(plot, settings, model, settings.sweep_rays)
+        sweep = _divergence_sweep(plot, settings, model, settings.sweep_rays, tick)
         real_share = real["all"].estimates[f"multi_return_points_{class_suffix(VEGETATION_CLASSES)}"]
         fits = [_fit_divergence(sweep, k, real_share) for k in settings.sweep_rays]
         fitted = fits[-1]["divergence_deg"]
         divergence = fitted if math.isfinite(fitted) else IGN_DIVERGENCE_DEG
-        k_rows = _k_sweep(plot, settings, divergence, model)
+        k_rows = _k_sweep(plot, settings, divergence, model, tick)
         k_best = recommend_k(k_rows)
-        rows, fitted_result = _compare(plot, real, VEGETATION_CLASSES, divergence, k_best, model, settings, "IGN, fitted divergence")
+        rows, fitted_result = _compare(plot, real, VEGETATION_CLASSES, divergence, k_best, model, settings, "IGN, fitted divergence", tick)
         nominal_rows, _ = _compare(
-            plot, real, VEGETATION_CLASSES, IGN_DIVERGENCE_DEG, k_best, model, settings, "IGN, data-sheet divergence"
+            plot, real, VEGETATION_CLASSES, IGN_DIVERGENCE_DEG, k_best, model, settings, "IGN, data-sheet divergence", tick
         )
         rows += nominal_rows
         summary: dict[str, Any] = {}
         real_md = "## IGN LiDAR HD sample\n\n" + "\n\n".join(f"### {side}\n\n{s.markdown()}" for side, s in real.items())
         if autzen_path is not None:
-            autzen_rows, autzen_sweep, autzen_fit, autzen_md = _autzen(autzen_path, plot, settings, k_best)
+            autzen_rows, autzen_sweep, autzen_fit, autzen_md = _autzen(autzen_path, plot, settings, k_best, tick)
             rows += autzen_rows
             sweep += autzen_sweep
             summary["autzen_fit"] = autzen_fit
