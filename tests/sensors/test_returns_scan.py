@@ -18,7 +18,9 @@ from hypothesis import strategies as st
 
 import zbuf_occlude.sensors as S
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.beam import Beam
 from zbuf_occlude.sensors.footprint import footprint_offsets, subray_directions
+from zbuf_occlude.sensors.kinds import with_beam
 from zbuf_occlude.sensors.scan_data import GPS_START_S
 from zbuf_occlude.sensors.scene import BuiltScene, SceneObject
 
@@ -42,20 +44,16 @@ def _plates(gap_m: float) -> BuiltScene:
                       [SceneObject(near), SceneObject(far)], [np.eye(4)] * 3, [None, near, far])  # fmt: skip
 
 
-def _lidar(**changes) -> S.Lidar:
-    base = {
-        "elevations_deg": (0.0,),
-        "rotation_hz": 10.0,
-        "firing_rate_hz": 3600.0,
+def _lidar(**beam_changes) -> S.Lidar:
+    beam = {
         "min_range_m": 0.1,
         "max_range_m": 1000.0,
-        "range_noise_m": 0.0,
-        "beam_divergence_deg": DIVERGENCE,
+        "divergence_deg": DIVERGENCE,
         "footprint_rays": 7,
         "max_returns": 3,
         "range_resolution_m": 0.5,
     }
-    return S.Lidar("plates", **(base | changes))
+    return S.Lidar("plates", (0.0,), rotation_hz=10.0, firing_rate_hz=3600.0, beam=Beam(**(beam | beam_changes)))
 
 
 def _one_pulse(built: BuiltScene, lidar: S.Lidar, **kw) -> S.Scan:
@@ -126,7 +124,7 @@ def test_max_returns_keeps_the_first_and_the_threshold_drops_weak_echoes():
     near, _, e = _subray_hits(1.0)
     weak, strong = sorted([e[near].sum(), e[~near].sum()])
     tau = np.sqrt(weak * strong)
-    lidar = _lidar(detection_reflectivity=1.0, detection_range_m=float(1 / np.sqrt(tau)))
+    lidar = _lidar(detection_threshold=float(tau))
     s = _one_pulse(_plates(1.0), lidar, reflectivity=1.0)
     assert len(s) == 1 and s.number_of_returns[0] == 1 and s.intensity[0] == pytest.approx(strong, rel=1e-6)
 
@@ -143,8 +141,8 @@ def test_max_returns_keeps_the_first_and_the_threshold_drops_weak_echoes():
 def test_returns_are_numbered_one_to_n_within_each_pulse(k, max_returns, resolution, dropout, noise, seed):
     scene = (S.ScanScene().add({"box_m": [2.0, 2.0, 2.0]}, position_m=(8.0, 0.0))
              .add_occluder({"cylinder": {"radius_m": 0.1, "height_m": 3.0}}, position_m=(4.0, 0.3)))  # fmt: skip
-    lidar = S.Lidar.preset("vlp16", footprint_rays=k, beam_divergence_deg=1.5, max_returns=max_returns,
-                           range_resolution_m=resolution if max_returns > 1 else 0.0, dropout=dropout, range_noise_m=noise)  # fmt: skip
+    lidar = with_beam(S.Lidar.preset("vlp16"), footprint_rays=k, divergence_deg=1.5, max_returns=max_returns,
+                      range_resolution_m=resolution if max_returns > 1 else 0.0, dropout=dropout, range_noise_m=noise)  # fmt: skip
     s = S.scan(scene, lidar, seed=seed, azimuth_range_deg=(-8.0, 8.0))
     assert len(s) > 0
     _, start, count = np.unique(s.pulse_id, return_index=True, return_counts=True)
@@ -173,32 +171,34 @@ _BEFORE = {
 def test_one_return_per_pulse_is_bit_identical_to_the_scans_before_returns(key):
     k, rho, extra = key
     changes = {"dropout": 0.1, "power_noise": 0.3} if extra else {}
-    lidar = S.Lidar.preset(
-        "vlp16",
-        footprint_rays=k,
-        beam_divergence_deg=0.5,
-        detection_range_m=20.0,
-        **changes,
-    )
+    # τ = 0.8 / 20² (0.8 at 20 m, the old detection_range_m 20)
+    lidar = with_beam(S.Lidar.preset("vlp16"), footprint_rays=k, divergence_deg=0.5, detection_threshold=0.8 / 20.0**2, **changes)
     scene = S.ScanScene().add({"box_m": [2.0, 2.0, 2.0]}, position_m=(6.0, 1.0))
     s = S.scan(scene, lidar, seed=3, reflectivity=rho, azimuth_range_deg=(-60, 60))
     got = {name: hashlib.sha256(np.ascontiguousarray(getattr(s, name)).tobytes()).hexdigest()[:16] for name in _BEFORE[key]}
     assert got == _BEFORE[key]
     assert np.all(s.return_number == 1) and np.all(s.number_of_returns == 1)
     if rho is None:
-        assert np.all(s.intensity == 1.0)
+        # the preset's beam has an intensity scale: the intensity is the received energy |cos θ| / R² with ρ = 1
+        # (before beams carried one it was 1.0), and no threshold applies without reflectivities
+        cos = np.cos(np.radians(s.incidence_deg.astype(np.float64)))
+        np.testing.assert_allclose(s.intensity, cos / s.range_m.astype(np.float64) ** 2, rtol=0.07)  # R measured with 3 cm noise, 5 m and more
+        assert s.intensity.min() < lidar.beam.detection_threshold
+        plain = S.scan(scene, with_beam(lidar, intensity_scale=None), seed=3, reflectivity=rho, azimuth_range_deg=(-60, 60))
+        assert plain.points.tobytes() == s.points.tobytes() and np.all(plain.intensity == 1.0)
     else:  # the received power the detection test compares with the threshold
-        assert np.all(s.intensity >= np.float32(lidar.detection_threshold))
+        assert np.all(s.intensity >= np.float32(lidar.beam.detection_threshold))
 
 
 def test_return_fields_survive_npz_and_old_files_read_with_defaults(tmp_path):
     scene = S.ScanScene().add({"box_m": [2.0, 2.0, 2.0]}, position_m=(6.0, 0.0))
-    s = S.scan(scene, S.Lidar.preset("vlp16", footprint_rays=7, beam_divergence_deg=1.0, max_returns=3, range_resolution_m=0.3),
-               seed=0, azimuth_range_deg=(-30, 30))  # fmt: skip
+    lidar = with_beam(S.Lidar.preset("vlp16"), footprint_rays=7, divergence_deg=1.0, max_returns=3, range_resolution_m=0.3)
+    s = S.scan(scene, lidar, seed=0, azimuth_range_deg=(-30, 30))
     keys = list(s.arrays())
     assert keys[: keys.index("sensor") + 1] == ["points", "ring", "range_m", "face_index", "object_id", "normal",
                                                 "incidence_deg", "sensor_position", "sensor_to_world", "frame", "sensor"]  # fmt: skip
-    assert keys[keys.index("sensor") + 1 :] == list(S.Scan._RETURNS)
+    # then the return fields, and (known here) the beam's intensity scale and the objects' class names
+    assert keys[keys.index("sensor") + 1 :] == [*S.Scan._RETURNS, "intensity_scale", "object_classes"]
     s.to_npz(tmp_path / "s.npz")
     r = S.read_scan_npz(tmp_path / "s.npz")
     for name in S.Scan._PER_POINT:
@@ -215,7 +215,7 @@ def test_return_fields_survive_npz_and_old_files_read_with_defaults(tmp_path):
 
 
 def test_gps_time_and_pulse_id_follow_the_firing():
-    lidar = S.Lidar.preset("vlp16", range_noise_m=0.0)
+    lidar = with_beam(S.Lidar.preset("vlp16"), range_noise_m=0.0)
     scene = S.ScanScene().add({"box_m": [2.0, 8.0, 3.0]}, position_m=(6.0, 0.0))
     s = S.scan(scene, lidar, seed=0, azimuth_range_deg=(-20, 20))
     az = np.mod(
@@ -236,31 +236,37 @@ def test_gps_time_and_pulse_id_follow_the_firing():
 @pytest.mark.parametrize(
     "changes, words",
     [({"max_returns": 16, "range_resolution_m": 0.5}, "max_returns"), ({"max_returns": 0}, "max_returns"),
-     ({"max_returns": 2}, "max_returns 2 needs range_resolution_m"), ({"range_resolution_m": 0.5}, "range_resolution_m.*max_returns"),
-     ({"range_resolution_m": -1.0}, "range_resolution_m"), ({"footprint_rays": 1025, "beam_divergence_deg": 1.0}, "footprint_rays"),
-     ({"footprint_rays": 19}, "footprint_rays 19 needs beam_divergence_deg"), ({"beam_profile": "flat"}, "beam_profile"),
-     ({"max_returns": 2, "range_resolution_m": 0.5, "footprint_rays": 7, "beam_divergence_deg": 1.0, "echo_separation_m": 0.7},
-      "echo_separation_m.*range_resolution_m")],
+     ({"max_returns": 2}, "max_returns 2 with return_mode 'all' needs range_resolution_m"),
+     ({"range_resolution_m": 0.5}, "range_resolution_m.*max_returns"),
+     ({"range_resolution_m": -1.0}, "range_resolution_m"), ({"footprint_rays": 1025, "divergence_deg": 1.0}, "footprint_rays"),
+     ({"footprint_rays": 19}, "footprint_rays 19 needs divergence_deg"), ({"profile": "flat"}, "profile"),
+     ({"max_returns": 2, "range_resolution_m": 0.5, "footprint_rays": 7, "divergence_deg": 1.0, "echo_separation_m": 0.7},
+      "echo_separation_m.*range_resolution_m"),
+     ({"return_mode": "strongest", "max_returns": 2, "range_resolution_m": 0.5}, "return_mode 'strongest' records 1 return per pulse"),
+     ({"return_mode": "first"}, "return_mode")],
 )  # fmt: skip
 def test_return_model_fields_are_checked_by_name(changes, words):
-    with pytest.raises(InvalidInputError, match=words):
-        S.Lidar("x", (0.0,), **changes)
+    """The return model's rules are the beam's, named by the LiDAR and its beam wherever the beam is changed."""
+    with pytest.raises(InvalidInputError, match="^beam 'ideal': .*" + words):
+        S.Lidar("x", (0.0,), beam=Beam(**changes))
+    with pytest.raises(InvalidInputError, match="^spinning LiDAR 'x': beam 'ideal': .*" + words):
+        with_beam(S.Lidar("x", (0.0,)), **changes)
 
 
 def test_any_footprint_size_and_a_gaussian_profile_scan():
     lidar = _lidar(
         footprint_rays=37,
-        beam_profile="gaussian",
+        profile="gaussian",
         max_returns=1,
         range_resolution_m=0.0,
     )
     one = _one_pulse(_plates(1.0), lidar)
     assert len(one) == 1 and one.number_of_returns[0] == 1
-    d = lidar.footprint_directions([[1.0, 0.0, 0.0]])
+    d = lidar.beam.footprint_directions([[1.0, 0.0, 0.0]])
     assert d.shape == (1, 37, 3) and np.allclose(np.linalg.norm(d, axis=2), 1.0)
-    w = lidar.footprint_weights()
+    w = lidar.beam.footprint_weights()
     assert w[0] > w[-1] and w.sum() == pytest.approx(1.0)
-    two = _one_pulse(_plates(1.0), lidar.with_(max_returns=2, range_resolution_m=0.5))
+    two = _one_pulse(_plates(1.0), with_beam(lidar, max_returns=2, range_resolution_m=0.5))
     assert two.return_number.tolist() == [1, 2]
 
 
@@ -272,13 +278,7 @@ def test_las_round_trip_read_back_by_laspy(compress):
     if compress:
         pytest.importorskip("lazrs")
     scene = S.ScanScene().add({"box_m": [2.0, 2.0, 2.0]}, position_m=(6.0, 1.0))
-    lidar = S.Lidar.preset(
-        "vlp16",
-        footprint_rays=19,
-        beam_divergence_deg=1.0,
-        max_returns=4,
-        range_resolution_m=0.3,
-    )
+    lidar = with_beam(S.Lidar.preset("vlp16"), footprint_rays=19, divergence_deg=1.0, max_returns=4, range_resolution_m=0.3)
     s = S.scan(
         scene,
         lidar,
@@ -297,8 +297,26 @@ def test_las_round_trip_read_back_by_laspy(compress):
     np.testing.assert_array_equal(np.asarray(las.number_of_returns), s.number_of_returns)
     np.testing.assert_array_equal(np.asarray(las.gps_time), GPS_START_S + s.gps_time)  # adjusted standard GPS time
     np.testing.assert_allclose(np.asarray(las.scan_angle) * 0.006, s.scan_angle_deg, atol=0.003)
-    want = np.rint(np.clip(s.intensity.astype(np.float64), 0, 1) * 65535).astype(np.uint16)
-    np.testing.assert_array_equal(np.asarray(las.intensity), want)
+    # the preset's beam scales the received energy to counts (intensity_scale, the scan keeps it)
+    assert s.intensity_scale == lidar.beam.intensity_scale
+    counts = lidar.beam.intensity_counts(s.intensity)
+    below = counts < lidar.beam.max_intensity  # the clipped ones: test_las_intensity_stops_at_the_beams_max_intensity
+    assert below.sum() > len(s) // 2
+    np.testing.assert_array_equal(np.asarray(las.intensity)[below], counts[below])
+
+
+def test_las_intensity_stops_at_the_beams_max_intensity():
+    """A return's LAS intensity is ``min(rint(E · intensity_scale), max_intensity)`` (Beam's docstring): an 8-bit
+    Velodyne reflectivity stops at 255, whatever energy a near target sends back."""
+    import io
+
+    laspy = pytest.importorskip("laspy")
+    scene = S.ScanScene().add({"box_m": [2.0, 2.0, 2.0]}, position_m=(6.0, 1.0))
+    lidar = S.Lidar.preset("vlp16")
+    s = S.scan(scene, lidar, seed=1, reflectivity=0.5, azimuth_range_deg=(-60, 60), frame="world")
+    assert lidar.beam.max_intensity == 255 and np.any(s.intensity * lidar.beam.intensity_scale > 255)  # near returns beyond 8 bits
+    las = laspy.read(io.BytesIO(s.to_las_bytes(False)))
+    np.testing.assert_array_equal(np.asarray(las.intensity), lidar.beam.intensity_counts(s.intensity))
 
 
 def test_scan_command_writes_las_and_laz(tmp_path, capsys):
