@@ -17,7 +17,8 @@ from zbuf_occlude.sensors.airborne import AirborneScanner
 from zbuf_occlude.sensors.scan import scan_airborne
 from zbuf_occlude.sensors.fit import fit_airborne, fit_lidar, fit_return_model, return_statistics
 from zbuf_occlude.sensors.fit.lidar import MAX_BOOTSTRAP
-from zbuf_occlude.sensors.fit.returns import MAX_AMBIGUOUS_SHARE, las_pulses, pulse_bootstrap
+from zbuf_occlude.sensors.fit.las_pulses import MAX_AMBIGUOUS_SHARE, las_pulses
+from zbuf_occlude.sensors.fit.returns import pulse_bootstrap
 from zbuf_occlude.sensors.lidar import Lidar
 
 #: Flying height of the synthetic survey, metres.

@@ -14,7 +14,8 @@ from hypothesis import strategies as st
 
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.io.las import LasPoints, read_las
-from zbuf_occlude.sensors.fit.returns import MAX_AMBIGUOUS_SHARE, las_pulses, return_statistics
+from zbuf_occlude.sensors.fit.las_pulses import MAX_AMBIGUOUS_SHARE, las_pulses
+from zbuf_occlude.sensors.fit.returns import return_statistics
 
 #: The real airborne scans (research-only, next to the repository; skipped when absent).
 ALS_RETURNS = Path(os.environ.get("ZBUF_OCCLUDE_SHARED_DATA", Path(__file__).resolve().parents[3] / "shared" / "data")) / "als_returns"

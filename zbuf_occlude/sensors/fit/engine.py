@@ -311,11 +311,12 @@ def _crops_markdown(crops: dict | None, counts: Counter) -> str:
 def _read_las_files(files: Sequence[Path], real: str | os.PathLike):
     """The LAS/LAZ ``files`` read (inside the folder ``real`` when it is one) and merged; one line naming a file that has no
     GPS time or no points, whose GPS times do not group its returns into pulses or that holds first returns only
-    (:func:`~zbuf_occlude.sensors.fit.returns.check_pulses`), or what :func:`~zbuf_occlude.io.las.read_las` refuses."""
+    (:func:`~zbuf_occlude.sensors.fit.las_pulses.check_pulses`), or what :func:`~zbuf_occlude.io.las.read_las` refuses."""
     from zbuf_occlude.defaults import MAX_POINTS
     from zbuf_occlude.io.las import read_las
     from zbuf_occlude.resources import check_memory
-    from zbuf_occlude.sensors.fit.returns import BYTES_PER_POINT, check_pulses, check_return_pairs, las_pulses
+    from zbuf_occlude.sensors.fit.las_pulses import check_pulses, check_return_pairs, las_pulses
+    from zbuf_occlude.sensors.fit.returns import BYTES_PER_POINT
 
     within = real if Path(real).is_dir() else None
     scans, total = [], 0

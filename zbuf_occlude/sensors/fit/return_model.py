@@ -5,7 +5,7 @@ sub-ray meets the energy ``w · ρ · |cos θ| / R²`` (m⁻², :func:`~zbuf_occ
 merges echoes closer than the range resolution, drops those below the detection threshold and
 keeps the first ``max_returns``.  Measured on the points of a scan
 (:class:`~zbuf_occlude.io.las.LasPoints`, grouped into pulses by
-:func:`~zbuf_occlude.sensors.fit.returns.las_pulses`):
+:func:`~zbuf_occlude.sensors.fit.las_pulses.las_pulses`):
 
 ``range_resolution_m``
     The least range between two returns of one pulse (``c·τ/2``): the lower end of the gaps
@@ -84,18 +84,10 @@ from zbuf_occlude.sensors.echoes import hit_energy
 from zbuf_occlude.sensors.checks import MAX_RANGE_M, real, shown, text
 from zbuf_occlude.sensors.fit.divergence import check_curve, divergence_from_shares
 from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate, estimates_markdown
+from zbuf_occlude.sensors.fit.las_pulses import check_pulses, check_return_pairs, las_pulses
 from zbuf_occlude.sensors.fit.returns import (
-    VEGETATION_CLASSES,
-    PulseValues,
-    ReturnStatistics,
-    check_classes,
-    check_pulses,
-    check_return_pairs,
-    multi_return_shares,
-    las_pulses,
-    pulse_bootstrap,
-    pulse_statistics,
-)
+    VEGETATION_CLASSES, PulseValues, ReturnStatistics, check_classes, multi_return_shares, pulse_bootstrap, pulse_statistics,
+)  # fmt: skip
 from zbuf_occlude.sensors.reflectance import reflectance
 
 __all__ = [
@@ -343,8 +335,8 @@ def fit_return_model(
     InvalidInputError
         Before any work: what :func:`~zbuf_occlude.sensors.fit.returns.return_statistics` refuses (no GPS time, no
         points, class codes outside 0..255, a seed or bootstrap out of range, GPS times that do not identify pulses:
-        :func:`~zbuf_occlude.sensors.fit.returns.check_pulses`); a scan of first returns only
-        (:func:`~zbuf_occlude.sensors.fit.returns.check_return_pairs`); an altitude outside (0,
+        :func:`~zbuf_occlude.sensors.fit.las_pulses.check_pulses`); a scan of first returns only
+        (:func:`~zbuf_occlude.sensors.fit.las_pulses.check_return_pairs`); an altitude outside (0,
         :data:`~zbuf_occlude.sensors.checks.MAX_RANGE_M`], a reflectance outside (0, 1]; a curve
         :func:`~zbuf_occlude.sensors.fit.divergence.check_curve` refuses, a ``divergence_share`` the statistics
         would not hold.
