@@ -56,7 +56,7 @@ def test_every_survey_field_reads_back_with_laspy(compress: bool) -> None:
     assert np.asarray(las.class_index).dtype == np.uint16
     (vlr,) = las.header.vlrs.get_by_id(CLASS_NAMES_USER_ID, [CLASS_NAMES_RECORD_ID])
     names = json.loads(vlr.record_data.decode("utf-8"))
-    assert names == list(CLASSES)
+    assert names == list(CLASSES) and vlr.description == "names of class_index (JSON)"  # whole, within the field's 32 bytes
     assert [names[k] for k in las.class_index] == [CLASSES[k] for k in s.object_id]
     assert las.point_source_id.tolist() == [0, 0, 1, 1, 2, 2, 3, 3]
     assert las.intensity.tolist() == [2, 10000, 20000, 40000, 5000, 0, 20, 2000]

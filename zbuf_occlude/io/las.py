@@ -335,6 +335,8 @@ EXTRA_BYTES = {
 #: The VLR that holds the class names ``class_index`` indexes: its user id and record id; its
 #: record is a UTF-8 JSON array of strings.
 CLASS_NAMES_USER_ID, CLASS_NAMES_RECORD_ID = "zbuf_occlude", 1
+#: The class names VLR's description (a VLR's description field holds 32 bytes, NUL-terminated).
+CLASS_NAMES_DESCRIPTION = "names of class_index (JSON)"
 
 
 @dataclass(frozen=True)
@@ -552,7 +554,7 @@ def las_bytes(
         header.add_extra_dims([laspy.ExtraBytesParams(name=key, type=values.dtype, description=EXTRA_BYTES[key][1])
                                for key, values in extra.items()])  # fmt: skip
     if survey.class_names is not None:
-        header.vlrs.append(laspy.VLR(CLASS_NAMES_USER_ID, CLASS_NAMES_RECORD_ID, "class names by class_index (JSON)",
+        header.vlrs.append(laspy.VLR(CLASS_NAMES_USER_ID, CLASS_NAMES_RECORD_ID, CLASS_NAMES_DESCRIPTION,
                                      _names_json(survey.class_names)))  # fmt: skip
     las = laspy.LasData(header)
     las.X, las.Y, las.Z = stored[:, 0], stored[:, 1], stored[:, 2]
