@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import shutil
 import zipfile
 
@@ -13,6 +14,7 @@ import trimesh
 
 import zbuf_occlude.sensors as S
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.kinds import SENSOR_KINDS, with_beam
 from zbuf_occlude.sensors.raycast import cast_embree, cast_zbuffer
 
 
@@ -62,10 +64,12 @@ def test_preset_tables_from_data_sheets():
 def test_custom_table_and_errors():
     lidar = S.Lidar("mine", (-1.0, 0.0, 1.0), rotation_hz=5.0, firing_rate_hz=3600.0)
     assert lidar.azimuth_step_deg == 0.5 and lidar.n_azimuths == 720
-    for bad in ({"elevations_deg": ()}, {"elevations_deg": (95.0,)}, {"min_range_m": 10.0, "max_range_m": 5.0},
-                {"dropout": 1.0}, {"range_noise_m": -0.1}, {"rotation_hz": 0.0}):  # fmt: skip
-        with pytest.raises(InvalidInputError):
+    for bad in ({"elevations_deg": ()}, {"elevations_deg": (95.0,)}, {"rotation_hz": 0.0}, {"beam": None}):
+        with pytest.raises(InvalidInputError, match=next(iter(bad))):
             lidar.with_(**bad)
+    for bad in ({"min_range_m": 10.0, "max_range_m": 5.0}, {"dropout": 1.0}, {"range_noise_m": -0.1}):  # the beam's fields
+        with pytest.raises(InvalidInputError, match=r"^spinning LiDAR 'mine': beam 'ideal': .*" + next(iter(bad))):
+            with_beam(lidar, **bad)
     with pytest.raises(InvalidInputError, match="unknown lidar preset"):
         S.Lidar.preset("hdl128")
     with pytest.raises(InvalidInputError, match="K must be"):
@@ -75,7 +79,7 @@ def test_custom_table_and_errors():
 # -- analytic plane ------------------------------------------------------------------------------
 @pytest.mark.parametrize("name", ["hdl32e", "vlp16"])
 def test_wall_gives_analytic_rings(name):
-    lidar = S.Lidar.preset(name, range_noise_m=0.0)
+    lidar = with_beam(S.Lidar.preset(name), range_noise_m=0.0)
     D, W, H = 10.0, 3.0, 2.5
     s = S.scan(wall(D, W, H), lidar, np.zeros(3), seed=0)
     # Analytic: beam (e, a) meets x = D at y = D tan a, z = D tan e / cos a.
@@ -96,7 +100,7 @@ def test_wall_gives_analytic_rings(name):
 
 
 def test_range_limits_apply_to_measured_values():
-    lidar = S.Lidar.preset("hdl32e", range_noise_m=0.2, max_range_m=10.5)
+    lidar = with_beam(S.Lidar.preset("hdl32e"), range_noise_m=0.2, max_range_m=10.5)
     s = S.scan(wall(10.0, 5.0, 5.0), lidar, np.zeros(3))
     assert len(s) > 0 and s.range_m.max() <= 10.5
     cam = S.DepthCamera.preset("kinect-v1", max_depth_m=2.0, noise=0.05)
@@ -148,8 +152,8 @@ def test_scan_backends_agree(sample_meshes):
 # -- noise, dropout, seeds -----------------------------------------------------------------------
 def test_range_noise_sigma_and_dropout():
     sigma = 0.05
-    lidar = S.Lidar.preset("hdl32e", range_noise_m=sigma, dropout=0.2)
-    clean = S.scan(wall(10.0, 8.0, 6.0), lidar.with_(range_noise_m=0.0, dropout=0.0), np.zeros(3))
+    lidar = with_beam(S.Lidar.preset("hdl32e"), range_noise_m=sigma, dropout=0.2)
+    clean = S.scan(wall(10.0, 8.0, 6.0), lidar.with_(beam=lidar.beam.with_(range_noise_m=0.0, dropout=0.0)), np.zeros(3))
     noisy = S.scan(wall(10.0, 8.0, 6.0), lidar, np.zeros(3), seed=1)
     keep = len(noisy) / len(clean)
     assert abs(keep - 0.8) < 4 * math.sqrt(0.16 / len(clean))
@@ -193,7 +197,7 @@ def test_depth_camera_grazing_incidence_invalid():
 
 
 def test_same_seed_same_bytes():
-    lidar = S.Lidar.preset("vlp16", dropout=0.1)
+    lidar = with_beam(S.Lidar.preset("vlp16"), dropout=0.1)
     scene = S.ScanScene().add({"box_m": [2.0, 2.0, 2.0]}, position_m=(6.0, 1.0))
     s1, s2, s3 = (S.scan(scene, lidar, seed=k) for k in (7, 7, 8))
     for k, v in s1.arrays().items():
@@ -203,7 +207,7 @@ def test_same_seed_same_bytes():
 
 # -- scenes and occluders ------------------------------------------------------------------------
 def test_occluder_removes_exactly_the_returns_it_shadows():
-    lidar = S.Lidar.preset("hdl32e", range_noise_m=0.0)
+    lidar = with_beam(S.Lidar.preset("hdl32e"), range_noise_m=0.0)
     target = {"box_m": [4.5, 1.8, 1.5]}
     blocker = {"cylinder": {"radius_m": 0.3, "height_m": 3.0}}
     alone = S.ScanScene().add(target, position_m=(12.0, 0.0))
@@ -380,11 +384,13 @@ def test_scan_help_lists_every_preset_of_the_registries(capsys, monkeypatch) -> 
     def help_text() -> str:
         with pytest.raises(SystemExit):
             main(["scan", "--help"])
-        return " ".join(capsys.readouterr().out.split())  # argparse wraps lines
+        return re.sub(r"-\s+", "-", " ".join(capsys.readouterr().out.split()))  # argparse wraps lines, after a hyphen too
 
     text = help_text()
-    for name in [*S.LIDAR_PRESETS, *S.AIRBORNE_PRESETS, *S.DEPTH_CAMERA_PRESETS]:
-        assert name in text, name
+    for kind in SENSOR_KINDS:  # every kind's presets, the ray table's (livox-mid70) too
+        for name in kind.presets:
+            assert name in text, f"{kind.name} preset {name}"
+    assert "optech-galaxy" in text and "livox-mid70" in text
     assert "dales-q1560" in text
     # a preset added to a registry shows up with no other change
     monkeypatch.setitem(AIRBORNE_PRESETS, "my-survey", AIRBORNE_PRESETS["riegl-q1560"].with_(name="my-survey"))

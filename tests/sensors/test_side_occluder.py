@@ -25,6 +25,7 @@ from zbuf_occlude.sensors.fit import (
     fit_visible_across_sight,
     fit_width_scale,
 )
+from zbuf_occlude.sensors.kinds import with_beam
 from zbuf_occlude.sensors.lidar import lidar_preset
 from zbuf_occlude.sensors.kinds import sensor_from_name
 
@@ -38,7 +39,7 @@ def _azimuths_deg(points: np.ndarray) -> np.ndarray:
 
 @pytest.mark.parametrize("visible", [0.3, 0.5, 0.8])
 def test_a_side_occluder_hides_the_asked_share_of_the_object_from_the_asked_side(visible: float) -> None:
-    lidar = lidar_preset("hdl32e", range_noise_m=0.0)
+    lidar = with_beam(lidar_preset("hdl32e"), range_noise_m=0.0)
     whole = object_crop(CAR, lidar, PLACED, seed=1)
     lo, hi = np.percentile(_azimuths_deg(whole.scan.points), [0, 100])
     for side in (1.0, -1.0):
@@ -58,7 +59,7 @@ def test_a_side_occluder_hides_the_asked_share_of_the_object_from_the_asked_side
 
 
 def test_a_share_of_one_hides_nothing_and_the_draw_is_capped_and_checked() -> None:
-    lidar = lidar_preset("hdl32e", range_noise_m=0.0)
+    lidar = with_beam(lidar_preset("hdl32e"), range_noise_m=0.0)
     whole = object_crop(CAR, lidar, PLACED, seed=1)
     same = object_crop(CAR, lidar, replace(PLACED, visible_across_sight=1.0, occluder_side=1.0), seed=1)
     assert np.array_equal(same.scan.points, whole.scan.points) and set(np.unique(same.full.object_id)) == {0, 1}
@@ -131,7 +132,7 @@ def test_side_occluders_refuse_a_bad_share_and_stand_nowhere_around_the_sensor()
 
 
 def test_fit_visible_across_sight_makes_wide_crops_as_wide_as_asked_and_leaves_narrow_ones_whole() -> None:
-    lidar = lidar_preset("hdl32e", range_noise_m=0.0)
+    lidar = with_beam(lidar_preset("hdl32e"), range_noise_m=0.0)
     dist = CropDistributions(distance_m=(5.0, 9.0), height_m=1.8, size_m=4.5)
     lo, hi = fit_visible_across_sight(CAR, lidar, dist, (1.5, 2.5))
     assert hi / lo == pytest.approx(2.5 / 1.5) and 0.3 < lo < hi < 0.8
@@ -156,7 +157,7 @@ def test_fit_visible_across_sight_makes_wide_crops_as_wide_as_asked_and_leaves_n
 
 
 def test_fit_object_shape_meets_the_widths_by_an_occluder_or_a_stretch() -> None:
-    lidar = lidar_preset("hdl32e", range_noise_m=0.0)
+    lidar = with_beam(lidar_preset("hdl32e"), range_noise_m=0.0)
     dist = CropDistributions(distance_m=(5.0, 9.0), height_m=1.8, size_m=4.5)
     assert fit_object_shape(CAR, lidar, dist, (1.5, 2.5), occlude=True) == {
         "visible_across_sight": fit_visible_across_sight(CAR, lidar, dist, (1.5, 2.5))
@@ -220,6 +221,6 @@ def test_an_occluded_crop_builds_its_object_once(monkeypatch: pytest.MonkeyPatch
 
     monkeypatch.setattr(SceneObject, "build", counted)
     placement = replace(PLACED, visible_across_sight=0.5, occluder_side=1.0, width_profile=(1.0, 1.2, 0.9, 1.0))
-    crop = object_crop(CAR, lidar_preset("hdl32e", range_noise_m=0.0), placement, seed=1, class_name="car")
+    crop = object_crop(CAR, with_beam(lidar_preset("hdl32e"), range_noise_m=0.0), placement, seed=1, class_name="car")
     assert set(np.unique(crop.full.object_id)) == {0, 1, 2}
     assert calls.count("car") == 1 and calls.count("occluder") == 1
