@@ -90,6 +90,8 @@ def test_intensity_counts_through_the_scale() -> None:
     assert legacy.intensity.tolist() == [7, 32768, 65535, 65535, 16384, 0, 66, 6554]
     given, _ = _read(_scan(intensity_scale=20000.0), intensity_scale=100.0)  # the call's wins
     assert given.intensity.tolist() == [0, 50, 100, 200, 25, 0, 0, 10]
+    eight_bits, _ = _read(_scan(intensity_scale=20000.0, max_intensity=255))  # an 8-bit scanner's counts stop at 255
+    assert eight_bits.intensity.tolist() == [2, 255, 255, 255, 255, 0, 20, 255]
     no_returns, _ = _read(_scan(intensity=None))
     assert no_returns.intensity.tolist() == [0] * 8
     with pytest.raises(InvalidInputError, match="intensity_scale"):
@@ -169,20 +171,22 @@ def test_las_bytes_refuses_class_indices_without_their_names() -> None:
 
 
 def test_the_npz_keeps_the_classes_and_the_scale(tmp_path: Path) -> None:
-    s = _scan(intensity_scale=1234.5)
+    s = _scan(intensity_scale=1234.5, max_intensity=4095)
     back = read_scan_npz(s.to_npz(tmp_path / "s.npz"))
-    assert back.object_classes == CLASSES and back.intensity_scale == 1234.5
+    assert back.object_classes == CLASSES and back.intensity_scale == 1234.5 and back.max_intensity == 4095
     mine, theirs = _read(back)[0], _read(s)[0]
     assert mine.classification.tolist() == theirs.classification.tolist() and mine.intensity.tolist() == theirs.intensity.tolist()
     plain = read_scan_npz(_scan(object_classes=None).to_npz(tmp_path / "p.npz"))
-    assert plain.object_classes is None and plain.intensity_scale is None
+    assert plain.object_classes is None and plain.intensity_scale is None and plain.max_intensity is None
 
 
 @pytest.mark.parametrize(
     ("key", "value", "match"),
     [("object_classes", np.array([1, 2]), "object_classes must be"), ("object_classes", np.array([["a"]]), "object_classes must be"),
      ("intensity_scale", np.array([1.0, 2.0]), "intensity_scale must be"), ("intensity_scale", np.array(np.nan), "intensity_scale must be"),
-     ("intensity_scale", np.array(-1.0), "intensity_scale must be"), ("intensity_scale", np.array("x"), "intensity_scale must be")],
+     ("intensity_scale", np.array(-1.0), "intensity_scale must be"), ("intensity_scale", np.array("x"), "intensity_scale must be"),
+     ("max_intensity", np.array(0), "max_intensity must be"), ("max_intensity", np.array(70000), "max_intensity must be"),
+     ("max_intensity", np.array(255.0), "max_intensity must be")],
 )  # fmt: skip
 def test_a_damaged_npz_is_refused_naming_the_key(tmp_path: Path, key: str, value: np.ndarray, match: str) -> None:
     arrays = _scan().arrays()

@@ -94,6 +94,9 @@ class Scan:
     intensity_scale : float or None
         Counts per unit of received energy (counts·m², :attr:`intensity` is m⁻²): the scanner's
         beam's, which :meth:`to_las_bytes` stores intensities through; None: the beam gives none.
+    max_intensity : int or None
+        The largest count the scanner stores, 1 to 65535 (an 8-bit reflectivity's 255): the
+        beam's; None: 65535.
     object_classes : tuple of str or None
         Class name by object id (index 0: ``"ground"``, the objects, then the occluders, as the
         scene numbers them); None: not known.  :meth:`to_las_bytes` classifies points by it.
@@ -122,6 +125,7 @@ class Scan:
     scan_angle_deg: NDArray[np.float32] | None = None
     intensity_scale: float | None = None
     object_classes: tuple[str, ...] | None = None
+    max_intensity: int | None = None
 
     #: Per-point arrays of every scan, in file order.
     _BASE = ("points", "ring", "pixel", "range_m", "face_index", "object_id", "normal", "incidence_deg")
@@ -145,7 +149,7 @@ class Scan:
         """The NPZ content: every present per-point field of the base set, ``sensor_position``,
         ``sensor_to_world``, ``frame`` and ``sensor`` (0-d strings), then the present return fields
         (``return_number`` ... ``scan_angle_deg``), then, when known, ``intensity_scale`` (0-d
-        float64) and ``object_classes`` (``(K,)`` strings)."""
+        float64), ``object_classes`` (``(K,)`` strings) and ``max_intensity`` (0-d int64)."""
         out = {k: getattr(self, k) for k in self._BASE if getattr(self, k) is not None}
         out.update(sensor_position=np.asarray(self.sensor_position, np.float64), sensor_to_world=self.sensor_to_world,
                    frame=np.array(self.frame), sensor=np.array(self.sensor))  # fmt: skip
@@ -154,6 +158,8 @@ class Scan:
             out["intensity_scale"] = np.array(float(self.intensity_scale))
         if self.object_classes is not None:
             out["object_classes"] = np.array(list(self.object_classes), dtype=str).reshape(len(self.object_classes))
+        if self.max_intensity is not None:
+            out["max_intensity"] = np.array(int(self.max_intensity), np.int64)
         return out
 
     def to_npz(self, path: str | os.PathLike) -> Path:
@@ -202,9 +208,10 @@ class Scan:
 
         * ``return_number``, ``number_of_returns``, ``scan_angle_deg`` (a spinning scanner: the
           beam's elevation; airborne: the across-track angle) as the scan holds them;
-        * ``intensity``: ``clip(rint(intensity · scale), 0, 65535)`` counts, ``scale`` the
+        * ``intensity``: ``rint(clip(intensity · scale, 0, top))`` counts, ``scale`` the
           ``intensity_scale`` given, else the scan's :attr:`intensity_scale` (its beam's), else
           65535 (:data:`UNIT_INTENSITY_SCALE`: a received energy of 1 m⁻² or more stores 65535);
+          ``top`` the scan's :attr:`max_intensity` (its beam's), else 65535;
         * ``gps_time``: adjusted standard GPS time (global encoding bit 0 set), ``gps_start_s``
           plus the scan's :attr:`gps_time` (seconds from its first firing; airborne: along the
           flight line, a few minutes negative at most);
@@ -249,7 +256,8 @@ class Scan:
         Raises
         ------
         InvalidInputError
-            ``intensity_scale``, ``ground_z_m`` or ``gps_start_s`` not finite (scale > 0), a time
+            ``intensity_scale``, ``ground_z_m`` or ``gps_start_s`` not finite (scale > 0), a
+            :attr:`max_intensity` outside 1 to 65535, a time
             that would be negative, ``scan_number`` out of range, an object id beyond
             :attr:`object_classes`, a bad class map, ``crs`` on a scan in the sensor frame or not
             an EPSG code in metres, or points too far apart for int32 steps of 1 mm
@@ -266,6 +274,7 @@ class Scan:
         ground = real(ground_z_m, "ground_z_m")
         start = real(gps_start_s, "gps_start_s")
         source = count(scan_number, "scan_number", low=0, high=65535)
+        top = 65535 if self.max_intensity is None else count(self.max_intensity, "max_intensity", low=1, high=65535)
         if crs is not None and self.frame != "world":
             raise InvalidInputError(
                 f"crs {crs} labels world coordinates; this scan is in the {self.frame} frame (scan it with frame='world')"
@@ -274,7 +283,7 @@ class Scan:
         ones = np.ones(n, np.uint8)
         intensity = np.zeros(n, np.uint16)
         if self.intensity is not None:
-            intensity = np.rint(np.clip(np.asarray(self.intensity, np.float64) * scale, 0.0, 65535.0)).astype(np.uint16)
+            intensity = np.rint(np.clip(np.asarray(self.intensity, np.float64) * scale, 0.0, float(top))).astype(np.uint16)
         times = start + (np.zeros(n) if self.gps_time is None else np.asarray(self.gps_time, np.float64))
         if n and not times.min() >= 0.0:
             raise InvalidInputError(f"gps_start_s {start:.9g} puts the scan's first time at {times.min():.9g} s: adjusted standard GPS "
@@ -352,6 +361,10 @@ def _checked_npz(path: Path, d: dict[str, np.ndarray]) -> None:
         a = d["intensity_scale"]
         if a.dtype.kind not in "fiu" or a.ndim != 0 or not (np.isfinite(a) and a > 0):
             raise InvalidInputError(f"{path}: intensity_scale must be one finite number > 0, got shape {a.shape} dtype {a.dtype}")
+    if "max_intensity" in d:
+        a = d["max_intensity"]
+        if a.dtype.kind not in "iu" or a.ndim != 0 or not 1 <= int(a) <= 65535:
+            raise InvalidInputError(f"{path}: max_intensity must be one integer 1 to 65535, got shape {a.shape} dtype {a.dtype}")
     if "object_classes" in d:
         a = d["object_classes"]
         if a.dtype.kind != "U" or a.ndim != 1 or len(a) > MAX_SCENE_OBJECTS + 1:
@@ -378,7 +391,7 @@ def read_scan_npz(path: str | os.PathLike) -> Scan:
         :data:`~zbuf_occlude.io.caps.MAX_SCAN_NPZ_BYTES`, missing keys, or an array of the wrong shape or dtype
         (per-point arrays of N rows, ``points`` (N, 3) finite numbers, ``normal`` (N, 3) numbers, indices integers,
         ``sensor_position`` a finite (3,), ``sensor_to_world`` a finite (4, 4), ``frame`` one
-        of :data:`FRAMES`, ``intensity_scale`` one finite number > 0, ``object_classes`` (K,) strings).
+        of :data:`FRAMES`, ``intensity_scale`` one finite number > 0, ``object_classes`` (K,) strings, ``max_intensity`` one integer 1 to 65535).
 
     Notes
     -----
@@ -405,4 +418,5 @@ def read_scan_npz(path: str | os.PathLike) -> Scan:
         scan_angle_deg=d["scan_angle_deg"].astype(np.float32) if "scan_angle_deg" in d else None,
         intensity_scale=float(d["intensity_scale"]) if "intensity_scale" in d else None,
         object_classes=tuple(str(c) for c in d["object_classes"]) if "object_classes" in d else None,
+        max_intensity=int(d["max_intensity"]) if "max_intensity" in d else None,
     )  # fmt: skip
