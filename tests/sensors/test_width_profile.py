@@ -14,6 +14,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.crops import object_crop
 from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
 from zbuf_occlude.sensors.fit import crop_placement_json, fit_crop_width_profile, fit_width_profile, width_profile
+from zbuf_occlude.sensors.kinds import with_beam
 from zbuf_occlude.sensors.lidar import lidar_preset
 from zbuf_occlude.sensors.object_shapes import FACE_ROWS, width_profile_factors
 from zbuf_occlude.sensors.scene import ScanScene, SceneObject
@@ -124,7 +125,7 @@ def test_width_profile_draws_nothing_and_reaches_the_crop() -> None:
     warped = draw_placement(CropDistributions(width_scale=(1.0, 2.0), width_profile=[1, 2]), rng())
     assert warped == replace(plain, width_profile=(1.0, 2.0))
     post = trimesh.creation.box(extents=(0.2, 0.2, 1.0))
-    lidar = lidar_preset("hdl32e", range_noise_m=0.0)
+    lidar = with_beam(lidar_preset("hdl32e"), range_noise_m=0.0)
     placement = draw_placement(CropDistributions(distance_m=5.0, height_m=1.8, size_m=2.0, yaw_deg=0.0), rng())
     crop = object_crop(post, lidar, replace(placement, width_profile=(0.5, 0.5, 4.0, 4.0)), seed=1)
     low, high = crop.local_points[:, 2] < -0.3, crop.local_points[:, 2] > 0.3  # the mesh frame keeps the warp
@@ -134,7 +135,7 @@ def test_width_profile_draws_nothing_and_reaches_the_crop() -> None:
 def test_fit_width_profile_gives_a_sign_post_a_trunks_outline() -> None:
     """A post with a plate on its upper third, fitted to a uniform outline: the plate is pulled in, the post is kept."""
     sign = _box_under_box((0.06, 0.06, 1.0), (0.3, 0.3, 0.3), 0.3)
-    lidar = lidar_preset("hdl32e", range_noise_m=0.0)
+    lidar = with_beam(lidar_preset("hdl32e"), range_noise_m=0.0)
     dist = CropDistributions(distance_m=(4.0, 6.0), height_m=1.8, size_m=3.0)
 
     def outline(d) -> np.ndarray:
@@ -162,7 +163,7 @@ def test_fit_width_profile_pulls_a_t_posed_persons_arms_in() -> None:
     """Arms held out at 0.75-0.9 of the height show 1.7-1.8 times the body's width; a uniform outline asks them pulled in.
     One round of the fit leaves them at 1.76 (warp 0.62); the correction brings them to about 1.5 (warp 0.50)."""
     person = _box_under_box((0.25, 0.15, 1.0), (0.8, 0.1, 0.15), 0.3)
-    lidar = lidar_preset("hdl32e", range_noise_m=0.0)
+    lidar = with_beam(lidar_preset("hdl32e"), range_noise_m=0.0)
     dist = CropDistributions(distance_m=(4.0, 9.0), height_m=1.8, size_m=1.7)
     warp = fit_width_profile(person, lidar, dist, (1.0,) * 8, name="person")
     assert warp[6] < 0.56 and min(warp[:5]) > 0.9  # the arms' bin pulled in, the legs and the trunk kept

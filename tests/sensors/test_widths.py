@@ -15,6 +15,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.crops import object_crop
 from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
 from zbuf_occlude.sensors.fit import WIDTH_BAND_M, across_sight_width, crop_placement_json, fit_crop_widths, fit_width_scale
+from zbuf_occlude.sensors.kinds import with_beam
 from zbuf_occlude.sensors.lidar import lidar_preset
 from zbuf_occlude.sensors.kinds import sensor_from_name
 from zbuf_occlude.sensors.scan_data import read_scan_npz
@@ -104,7 +105,7 @@ def test_width_scale_is_drawn_last_and_checked() -> None:
 def test_a_stretched_post_is_scanned_whole_and_as_wide_as_stretched() -> None:
     """A thin post stretched 6x: every return of the wider object is in the crop (the LiDAR's sector grows with it)."""
     post = trimesh.creation.box(extents=(0.1, 0.1, 1.0))  # a normalised mesh: 0.1 of its height thick
-    lidar = lidar_preset("hdl32e", range_noise_m=0.0)
+    lidar = with_beam(lidar_preset("hdl32e"), range_noise_m=0.0)
     placement = draw_placement(CropDistributions(distance_m=4.0, height_m=1.8, size_m=3.0, yaw_deg=0.0), np.random.default_rng(0))
     thin = object_crop(post, lidar, placement, seed=1)
     for w in (6.0, 20.0):  # 1.8 m and 6 m wide at 4 m: the second wider than the default sector
@@ -126,7 +127,7 @@ def test_a_stretched_crop_keeps_its_stretch_in_the_mesh_frame(stretch: float) ->
     stretched box would show the box's own proportions, and training would never see the widths.
     """
     box = trimesh.creation.box(extents=(0.5, 0.5, 1.0))
-    lidar = lidar_preset("hdl32e", range_noise_m=0.0)
+    lidar = with_beam(lidar_preset("hdl32e"), range_noise_m=0.0)
     placement = draw_placement(CropDistributions(distance_m=6.0, height_m=1.8, size_m=2.0, yaw_deg=0.0), np.random.default_rng(0))
     plain = object_crop(box, lidar, placement, seed=1)
     wide = object_crop(box, lidar, replace(placement, width_scale=stretch), seed=1)
@@ -141,7 +142,7 @@ def test_a_stretched_crop_keeps_its_stretch_in_the_mesh_frame(stretch: float) ->
 @pytest.mark.slow
 def test_fit_width_scale_makes_the_crops_as_wide_as_asked() -> None:
     post = trimesh.creation.cylinder(radius=0.05, height=1.0, sections=32)
-    lidar = lidar_preset("hdl32e", range_noise_m=0.0)
+    lidar = with_beam(lidar_preset("hdl32e"), range_noise_m=0.0)
     dist = CropDistributions(distance_m=(5.0, 9.0), height_m=1.8, size_m=3.0)
     lo, hi = fit_width_scale(post, lidar, dist, (0.3, 0.6))
     # the post is 0.3 m thick at 3 m tall; its crops show a little less (the outermost returns lie inside the outline)
