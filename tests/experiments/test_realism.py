@@ -10,6 +10,8 @@ import pytest
 import trimesh
 
 import zbuf_occlude.sensors as S
+from zbuf_occlude.sensors.beam import Beam
+from zbuf_occlude.sensors.kinds import with_beam
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.realism import (
     cloud_stats,
@@ -47,7 +49,13 @@ def test_fit_recovers_exponent(b):
 def test_wall_scans_fall_as_inverse_square(tmp_path):
     """A fixed extended object inside the FOV: count ∝ r^-2 (both angles shrink as 1/r); a fine
     custom beam table (0.1°) keeps ring discretisation out of the law."""
-    lidar = S.Lidar("fine", tuple(np.arange(-12.0, 12.01, 0.1)), rotation_hz=10.0, firing_rate_hz=36_000.0, range_noise_m=0.0)
+    lidar = S.Lidar(
+        "fine",
+        tuple(np.arange(-12.0, 12.01, 0.1)),
+        rotation_hz=10.0,
+        firing_rate_hz=36_000.0,
+        beam=Beam(min_range_m=1.0, max_range_m=100.0),
+    )
     for d in (6.0, 9.0, 13.0, 19.0):
         v = np.array([[d, -1.5, -1.0], [d, 1.5, -1.0], [d, 1.5, 1.0], [d, -1.5, 1.0]])  # centred near elevation 0
         S.scan(trimesh.Trimesh(v, [[0, 1, 2], [0, 2, 3]], process=False), lidar, np.zeros(3)).to_npz(tmp_path / f"w{d:.0f}.npz")
@@ -170,7 +178,7 @@ def test_ground_in_crops_counts_a_crops_ground_returns_and_nothing_else(tmp_path
 
 def test_ground_in_crops_leaves_a_scan_of_several_objects_as_it_is(tmp_path):
     boxes = [S.SceneObject(trimesh.creation.box(extents=(1.0, 1.0, 1.0)), position_m=(6.0, y)) for y in (-2.0, 2.0)]
-    scan = S.scan(S.ScanScene(objects=boxes), S.Lidar.preset("vlp16", range_noise_m=0.0), [0.0, 0.0, 1.0])
+    scan = S.scan(S.ScanScene(objects=boxes), with_beam(S.Lidar.preset("vlp16"), range_noise_m=0.0), [0.0, 0.0, 1.0])
     scan.to_npz(tmp_path / "two.npz")
     assert set(np.unique(scan.object_id)) == {0, 1, 2}
     for flag in (False, True):  # not a crop: each object alone, never the ground

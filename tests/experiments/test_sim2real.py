@@ -285,7 +285,7 @@ def test_settings_hold_the_sensor_in_full_and_only_the_placement_its_kind_uses(t
     from zbuf_occlude.experiments.sim2real.run import _fix_settings
     from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT
     from zbuf_occlude.sensors import lidar_preset
-    from zbuf_occlude.sensors.kinds import sensor_from_name, sensor_to_json
+    from zbuf_occlude.sensors.kinds import sensor_from_name, sensor_to_json, with_beam
 
     airborne = Sim2RealConfig("m", "r", sensor="dales-q1560")
     _fix_settings(airborne, _sets_found(), tmp_path / "als")
@@ -300,7 +300,7 @@ def test_settings_hold_the_sensor_in_full_and_only_the_placement_its_kind_uses(t
     assert written["lidar_placement"] == {k: list(v) for k, v in LIDAR_PLACEMENT.items()}
     assert written["sensor_spec"] == sensor_to_json(lidar_preset("hdl32e"))
     # a sensor file under the preset's name, with another field: another run, refused, naming what differs
-    (tmp_path / "noisy.json").write_text(json.dumps(sensor_to_json(lidar_preset("hdl32e", range_noise_m=0.1))))
+    (tmp_path / "noisy.json").write_text(json.dumps(sensor_to_json(with_beam(lidar_preset("hdl32e"), range_noise_m=0.1))))
     with pytest.raises(InvalidInputError, match="other settings.*sensor_spec"):
         _fix_settings(Sim2RealConfig("m", "r", sensor=str(tmp_path / "noisy.json")), _sets_found(), tmp_path / "hdl")
 
@@ -684,10 +684,11 @@ def test_build_sets_makes_the_sets_asked_for_and_refuses_one_it_cannot_make(tmp_
 def test_the_pooled_set_is_the_three_lidar_sets_of_its_seed_in_one(tmp_path: Path) -> None:
     from zbuf_occlude.experiments.sim2real.data import FITTED, POOLED
     from zbuf_occlude.sensors import lidar_preset
+    from zbuf_occlude.sensors.kinds import with_beam
 
     meshes = find_class_meshes(_mesh_root(tmp_path))
     recipe = SetRecipe(sensor=lidar_preset("hdl32e"))
-    options = dict(fitted_sensor=lidar_preset("hdl32e", range_noise_m=0.0).with_(name="fitted"),
+    options = dict(fitted_sensor=with_beam(lidar_preset("hdl32e"), range_noise_m=0.0).with_(name="fitted"),
                    fitted_placement=CropPlacement.from_keywords({"car": {"distance_m": (6.0, 7.0)}, "pole": {"distance_m": (8.0, 9.0)}}),
                    fitted_sizes={"car": SizeRange("height", 1.0, 1.5), "pole": SizeRange("height", 2.0, 3.0)})  # fmt: skip
     every = build_sets(meshes, ["car", "pole"], 3, 32, 0, recipe, **options)

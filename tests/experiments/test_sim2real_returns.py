@@ -68,8 +68,9 @@ def test_several_returns_give_a_bush_points_after_the_first_return() -> None:
     from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
 
     sensor = with_returns(lidar_preset("hdl32e"), 3)
-    assert (sensor.max_returns, sensor.footprint_rays, sensor.range_resolution_m) == (3, FOOTPRINT_RAYS, RETURNS_RANGE_RESOLUTION_M)
-    assert sensor.beam_divergence_deg == lidar_preset("hdl32e").beam_divergence_deg == 0.16  # the preset's (HDL-32E data sheet)
+    beam = sensor.beam
+    assert (beam.max_returns, beam.footprint_rays, beam.range_resolution_m) == (3, FOOTPRINT_RAYS, RETURNS_RANGE_RESOLUTION_M)
+    assert beam.divergence_deg == lidar_preset("hdl32e").beam.divergence_deg == 0.16  # the preset's (HDL-32E data sheet)
     bush, rng = _bush(1), np.random.default_rng(3)
     dist = CropDistributions(distance_m=(5.0, 8.0), size_m=(2.0, 2.5))
     later = []
@@ -92,10 +93,10 @@ def test_bad_returns_exit_2_naming_the_value(tmp_path: Path, value: str, capsys:
 
 
 def test_several_returns_need_a_divergence_and_no_fit(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    assert lidar_preset("hdl64e").beam_divergence_deg == 0  # its data sheet gives none
+    assert lidar_preset("hdl64e").beam.divergence_deg == 0  # its data sheet gives none
     argv = ["experiment", "sim2real", str(tmp_path), "--real", str(tmp_path), "--out", str(tmp_path / "o"), "--returns", "2"]
     assert main([*argv, "--sensor", "hdl64e"]) == 2
-    assert "--returns 2" in (err := capsys.readouterr().err) and "hdl64e" in err and "beam_divergence_deg" in err
+    assert "--returns 2" in (err := capsys.readouterr().err) and "hdl64e" in err and "divergence_deg 0" in err
     assert main([*argv, "--fit-sensor"]) == 2
     assert "--returns 2" in (err := capsys.readouterr().err) and "--fit-sensor" in err
     for bad in (0, 16, True, 2.0):
@@ -113,9 +114,9 @@ def test_settings_record_the_returns_only_when_above_one(tmp_path: Path) -> None
 
     _fix_settings(Sim2RealConfig("m", "r", returns=2), _sets_found(), tmp_path / "two")
     two = json.loads((tmp_path / "two" / "settings.json").read_text())
-    assert two["lidar_returns"] == {"max_returns": 2, "footprint_rays": 7, "beam_divergence_deg": 0.16, "range_resolution_m": 0.75,
-                                    "beam_profile": "tophat"}  # fmt: skip
-    assert two["sensor_spec"]["max_returns"] == 2 and two["sensor_spec"]["footprint_rays"] == 7
+    assert two["lidar_returns"] == {"max_returns": 2, "footprint_rays": 7, "divergence_deg": 0.16, "range_resolution_m": 0.75,
+                                    "profile": "tophat"}  # fmt: skip
+    assert two["sensor_spec"]["beam"]["max_returns"] == 2 and two["sensor_spec"]["beam"]["footprint_rays"] == 7
     _fix_settings(Sim2RealConfig("m", "r", returns=1), _sets_found(), tmp_path / "one")
     one = json.loads((tmp_path / "one" / "settings.json").read_text())
     assert "lidar_returns" not in one and one["sensor_spec"] == sensor_to_json(

@@ -42,6 +42,9 @@ WIDTH_SHAPES = {"widths": "stretch", "widen": "widen", "occlude": "occluder"}
 #: gives none: half the pulse length ``c·τ/2`` of a 5 ns pulse (an ASSUMPTION: the Velodyne HDL-32E
 #: data sheet 97-0038 and manual 63-9113 give no pulse length; the value of the sensors guide).
 RETURNS_RANGE_RESOLUTION_M = 0.75
+#: The sensor kinds (:data:`~zbuf_occlude.sensors.kinds.SENSOR_KINDS` names) that can scan the ``lidar`` set:
+#: a spinning LiDAR on a car's mount, or an airborne scanner flying over (:func:`~.data.sensor_elevation_deg`).
+TRAINING_SENSOR_KINDS = ("lidar", "airborne")
 
 
 @dataclass(frozen=True)
@@ -279,14 +282,14 @@ class Sim2RealConfig:
             raise InvalidInputError(f"{n('fitted_shape')} needs {n('fit_sensor')} (it shapes the fitted+placed set's meshes)")
 
     def _check_sensor(self, n) -> None:
-        from zbuf_occlude.sensors.airborne import AirborneScanner
-        from zbuf_occlude.sensors.lidar import Lidar
-        from zbuf_occlude.sensors.kinds import sensor_from_name
+        from zbuf_occlude.sensors.kinds import kind_of, sensor_from_name
 
-        sensor = self.sensor if isinstance(self.sensor, (Lidar, AirborneScanner)) else sensor_from_name(str(self.sensor))
-        if not isinstance(sensor, (Lidar, AirborneScanner)):
-            raise InvalidInputError(f"{n('sensor')} {self.sensor}: the lidar training set needs a LiDAR or an airborne scanner")
-        if self.fit_sensor and not isinstance(sensor, Lidar):
+        sensor = sensor_from_name(os.fspath(self.sensor)) if isinstance(self.sensor, (str, os.PathLike)) else self.sensor
+        kind = kind_of(sensor)
+        if kind.name not in TRAINING_SENSOR_KINDS:
+            raise InvalidInputError(f"{n('sensor')} {sensor.name}: the lidar training set needs a LiDAR or an airborne scanner, "
+                                    f"not a {kind.title}")  # fmt: skip
+        if self.fit_sensor and kind.flies:
             # refused here, before any scan or mesh is read: the fit (sensors.fit.fit_lidar) fits a spinning LiDAR only
             raise InvalidInputError(f"{n('fit_sensor')} fits a spinning LiDAR, but {n('sensor')} {sensor.name} is an airborne scanner: "
                                     f"drop {n('fit_sensor')} or give {n('sensor')} a spinning LiDAR")  # fmt: skip
@@ -334,9 +337,9 @@ class Sim2RealConfig:
         distance sets the object's offset across track); what the run finds in its inputs
         (classes, meshes, scans, the fitted sensor) and the sensor's every field are added by
         the run (``sensor_spec``)."""
-        from zbuf_occlude.sensors.lidar import Lidar
+        from zbuf_occlude.sensors.kinds import kind_of
 
-        placement = LIDAR_PLACEMENT if isinstance(self.sensor, Lidar) else {"distance_m": LIDAR_PLACEMENT["distance_m"]}
+        placement = {"distance_m": LIDAR_PLACEMENT["distance_m"]} if kind_of(self.sensor).flies else LIDAR_PLACEMENT
         return {
             "mesh_root": str(self.mesh_root), "real": str(self.real), "model": self.model, "sensor": self.sensor.name,
             "scale": self.scale, "scale_values": asdict(self.scale_values), "points": self.n_points, "seeds": int(self.seeds),
@@ -352,44 +355,45 @@ class Sim2RealConfig:
 
 
 def with_returns(sensor, returns: int, option: str = "returns"):
-    """``sensor`` (a :class:`~zbuf_occlude.sensors.lidar.Lidar` or
-    :class:`~zbuf_occlude.sensors.airborne.AirborneScanner`) recording up to ``returns`` returns per pulse.
+    """``sensor`` (a spinning LiDAR or an airborne scanner) with a beam recording up to ``returns`` returns per pulse.
 
-    ``returns`` 1: ``sensor`` itself, unchanged (its scans are today's, bit for bit).  Above 1:
-    ``max_returns = returns``; the footprint is the sensor's own ``footprint_rays`` where above 1,
-    else :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS`, over the sensor's own ``beam_divergence_deg`` (the
-    HDL-32E preset: 0.16°, 2.79 mrad, Velodyne HDL-32E data sheet 97-0038); the range resolution is
-    the sensor's ``range_resolution_m`` where above 0, else :data:`RETURNS_RANGE_RESOLUTION_M`.
+    ``returns`` 1: ``sensor`` itself, unchanged (its scans are today's, bit for bit).  Above 1, its
+    beam (:func:`~zbuf_occlude.sensors.kinds.with_beam`) gets ``max_returns = returns``; the
+    footprint is the beam's own ``footprint_rays`` where above 1, else
+    :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS`, over the beam's own ``divergence_deg``
+    (the HDL-32E preset: 0.16°, 2.79 mrad, Velodyne HDL-32E data sheet 97-0038); the range
+    resolution is the beam's ``range_resolution_m`` where above 0, else
+    :data:`RETURNS_RANGE_RESOLUTION_M`; a one-return beam's echo merging gives way to it.
 
     Raises
     ------
     InvalidInputError
         ``returns`` not a whole number in 1..:data:`~zbuf_occlude.sensors.echoes.MAX_RETURNS`, or
-        above 1 for a sensor whose ``beam_divergence_deg`` is 0 (no footprint to sample), naming
+        above 1 for a sensor whose beam's ``divergence_deg`` is 0 (no footprint to sample), naming
         ``option`` and the value.
     """
     from zbuf_occlude.sensors.echoes import MAX_RETURNS
     from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
+    from zbuf_occlude.sensors.kinds import with_beam
 
     if isinstance(returns, bool) or not isinstance(returns, int) or not 1 <= returns <= MAX_RETURNS:
         raise InvalidInputError(f"{option} must be a whole number from 1 to {MAX_RETURNS} (returns per pulse), got {returns!r}")
     if returns == 1:
         return sensor
-    if not sensor.beam_divergence_deg > 0:
-        raise InvalidInputError(f"{option} {returns}: sensor {sensor.name} has no beam divergence (beam_divergence_deg 0) to sample "
-                                "a footprint over; give a sensor file with beam_divergence_deg")  # fmt: skip
-    rays = sensor.footprint_rays if sensor.footprint_rays > 1 else FOOTPRINT_RAYS
-    resolution = sensor.range_resolution_m if sensor.range_resolution_m > 0 else RETURNS_RANGE_RESOLUTION_M
-    # a one-return sensor's echo merging (a Lidar's echo_separation_m) gives way to the range resolution
-    merging = {"echo_separation_m": 0.0} if getattr(sensor, "echo_separation_m", 0.0) else {}
-    return sensor.with_(max_returns=returns, footprint_rays=rays, range_resolution_m=resolution, **merging)
+    beam = sensor.beam
+    if not beam.divergence_deg > 0:
+        raise InvalidInputError(f"{option} {returns}: sensor {sensor.name} has no beam divergence (its beam's divergence_deg 0) to "
+                                "sample a footprint over; give a sensor file whose \"beam\" has a divergence_deg")  # fmt: skip
+    rays = beam.footprint_rays if beam.footprint_rays > 1 else FOOTPRINT_RAYS
+    resolution = beam.range_resolution_m if beam.range_resolution_m > 0 else RETURNS_RANGE_RESOLUTION_M
+    return with_beam(sensor, max_returns=returns, footprint_rays=rays, range_resolution_m=resolution, echo_separation_m=0.0)
 
 
 def _returns_spec(sensor) -> dict[str, Any]:
     """What ``settings.json`` records of the multi-return model (the sensor's every field is there too, ``sensor_spec``)."""
-    return {"max_returns": int(sensor.max_returns), "footprint_rays": int(sensor.footprint_rays),
-            "beam_divergence_deg": float(sensor.beam_divergence_deg), "range_resolution_m": float(sensor.range_resolution_m),
-            "beam_profile": sensor.beam_profile}  # fmt: skip
+    beam = sensor.beam
+    return {"max_returns": int(beam.max_returns), "footprint_rays": int(beam.footprint_rays), "divergence_deg": float(beam.divergence_deg),
+            "range_resolution_m": float(beam.range_resolution_m), "profile": beam.profile}  # fmt: skip
 
 
 def _elevation_range(value, name: str) -> tuple[float, float]:

@@ -119,23 +119,23 @@ def sensor_elevation_deg(sensor) -> tuple[tuple[float, float], str]:
     InvalidInputError
         A sensor of another kind (a depth camera: no mount to derive elevations from).
     """
-    from zbuf_occlude.sensors.airborne import AirborneScanner
-    from zbuf_occlude.sensors.lidar import Lidar
+    from zbuf_occlude.sensors.kinds import kind_of
 
     if sensor is None:
         return GROUND_ELEVATION_DEG, "no sensor: a ground sensor's default range"
-    if isinstance(sensor, AirborneScanner):
+    kind = kind_of(sensor)
+    if kind.flies:
         half = float(sensor.swath_deg) / 2.0
         return (
             90.0 - half,
             90.0,
         ), f"sensor {sensor.name}: 90° minus its incidence angles, 0° to half its {float(sensor.swath_deg):g}° swath"
-    if isinstance(sensor, Lidar):
+    if kind.name == "lidar":
         (h_lo, h_hi), (d_lo, d_hi) = LIDAR_PLACEMENT["height_m"], LIDAR_PLACEMENT["distance_m"]
         lo, hi = math.degrees(math.atan2(h_lo, d_hi)), math.degrees(math.atan2(h_hi, d_lo))
         return (lo, hi), (f"sensor {sensor.name}: atan(height / distance) over the lidar set's mount, heights {h_lo:g}-{h_hi:g} m, "
                           f"distances {d_lo:g}-{d_hi:g} m")  # fmt: skip
-    raise InvalidInputError(f"no elevation range for a {type(sensor).__name__}: give the occluded set's elevations")
+    raise InvalidInputError(f"no elevation range for a {kind.title}: give the occluded set's elevations")
 
 
 def check_lidar_meshes(meshes: list[MeshEntry], sensor, sizes: Mapping[str, SizeRange], n_points: int, *,
