@@ -18,6 +18,7 @@ from conftest import SAMPLE_MESHES
 from memory_limit import HEADROOM_BYTES, Limited, run_cli_limited, run_python_limited
 
 from zbuf_occlude.sensors.airborne import AirborneScanner
+from zbuf_occlude.sensors.beam import Beam
 from zbuf_occlude.sensors.kinds import sensor_to_json
 
 #: The farm's meshes: two of the shipped samples, one a class.
@@ -27,7 +28,7 @@ FARM = ["--classes", CLASSES, "--views", "0:0,30:90", "--samples-per-view", "1",
         "--resolution", "64", "--workers", "1", "--no-progress"]  # fmt: skip
 #: An airborne scanner small enough for a quick scan: a 2° beam of 7 sub-rays, up to 3 returns, 100 m up.
 ALS = AirborneScanner("limit-als", swath_deg=20.0, pulse_rate_hz=2000.0, line_rate_hz=20.0, altitude_m=100.0, speed_mps=10.0,
-                      beam_divergence_deg=2.0, footprint_rays=7, max_returns=3, range_resolution_m=1.0)  # fmt: skip
+                      beam=Beam(wavelength_nm=1064.0, divergence_deg=2.0, footprint_rays=7, max_returns=3, range_resolution_m=1.0))  # fmt: skip
 
 
 def _passed(name: str, done: Limited) -> None:

@@ -28,7 +28,7 @@ from zbuf_occlude.farm.sensor_crops import farm_datasets
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors import Lidar
 from zbuf_occlude.sensors.crops import RETURN_FIELDS, kept_return_fields
-from zbuf_occlude.sensors.kinds import sensor_to_json
+from zbuf_occlude.sensors.kinds import sensor_to_json, with_beam
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 FARM = ["--samples-per-view", "2", "--points", "96", "--classes", "chair,table", "--per-class", "1", "--sensor-distance", "4:8",
@@ -39,7 +39,7 @@ ONE_RETURN_DATASETS = {"data", "label", "object_index", "pose_index", "sample_in
 
 
 def _returns_lidar() -> Lidar:
-    return Lidar.preset("vlp16", footprint_rays=7, beam_divergence_deg=0.5, max_returns=3, range_resolution_m=0.3)
+    return with_beam(Lidar.preset("vlp16"), footprint_rays=7, divergence_deg=0.5, max_returns=3, range_resolution_m=0.3)
 
 
 @pytest.fixture(scope="module")
@@ -104,7 +104,7 @@ def _stripped(src: Path, dst: Path) -> Path:
 def test_only_a_sensor_with_several_returns_keeps_return_fields():
     assert kept_return_fields(_returns_lidar()) == RETURN_FIELDS == tuple(POINT_COLUMNS)
     assert kept_return_fields(Lidar.preset("vlp16")) == ()  # max_returns 1: the data set as before
-    assert kept_return_fields(Lidar.preset("vlp16", footprint_rays=7)) == ()
+    assert kept_return_fields(with_beam(Lidar.preset("vlp16"), footprint_rays=7)) == ()
 
 
 def test_a_one_return_sensor_writes_the_shard_as_before(tmp_path):
