@@ -182,7 +182,9 @@ def test_one_return_per_pulse_is_bit_identical_to_the_scans_before_returns(key):
         # the preset's beam has an intensity scale: the intensity is the received energy |cos θ| / R² with ρ = 1
         # (before beams carried one it was 1.0), and no threshold applies without reflectivities
         cos = np.cos(np.radians(s.incidence_deg.astype(np.float64)))
-        np.testing.assert_allclose(s.intensity, cos / s.range_m.astype(np.float64) ** 2, rtol=0.07)  # R measured with 3 cm noise, 5 m and more
+        np.testing.assert_allclose(
+            s.intensity, cos / s.range_m.astype(np.float64) ** 2, rtol=0.07
+        )  # R measured with 3 cm noise, 5 m and more
         assert s.intensity.min() < lidar.beam.detection_threshold
         plain = S.scan(scene, with_beam(lidar, intensity_scale=None), seed=3, reflectivity=rho, azimuth_range_deg=(-60, 60))
         assert plain.points.tobytes() == s.points.tobytes() and np.all(plain.intensity == 1.0)
@@ -197,8 +199,9 @@ def test_return_fields_survive_npz_and_old_files_read_with_defaults(tmp_path):
     keys = list(s.arrays())
     assert keys[: keys.index("sensor") + 1] == ["points", "ring", "range_m", "face_index", "object_id", "normal",
                                                 "incidence_deg", "sensor_position", "sensor_to_world", "frame", "sensor"]  # fmt: skip
-    # then the return fields, and (known here) the beam's intensity scale and the objects' class names
-    assert keys[keys.index("sensor") + 1 :] == [*S.Scan._RETURNS, "intensity_scale", "object_classes"]
+    # then the return fields, and (known here) the beam's intensity scale and largest count, and the objects' class names
+    assert keys[keys.index("sensor") + 1 :] == [*S.Scan._RETURNS, "intensity_scale", "max_intensity", "object_classes"]
+    assert s.max_intensity == lidar.beam.max_intensity == 255
     s.to_npz(tmp_path / "s.npz")
     r = S.read_scan_npz(tmp_path / "s.npz")
     for name in S.Scan._PER_POINT:
@@ -299,10 +302,7 @@ def test_las_round_trip_read_back_by_laspy(compress):
     np.testing.assert_allclose(np.asarray(las.scan_angle) * 0.006, s.scan_angle_deg, atol=0.003)
     # the preset's beam scales the received energy to counts (intensity_scale, the scan keeps it)
     assert s.intensity_scale == lidar.beam.intensity_scale
-    counts = lidar.beam.intensity_counts(s.intensity)
-    below = counts < lidar.beam.max_intensity  # the clipped ones: test_las_intensity_stops_at_the_beams_max_intensity
-    assert below.sum() > len(s) // 2
-    np.testing.assert_array_equal(np.asarray(las.intensity)[below], counts[below])
+    np.testing.assert_array_equal(np.asarray(las.intensity), lidar.beam.intensity_counts(s.intensity))
 
 
 def test_las_intensity_stops_at_the_beams_max_intensity():

@@ -411,6 +411,7 @@ def fire_pulses(
         gps_time=pulses.time_s[rows],
         scan_angle_deg=pulses.scan_angle_deg[rows],
         intensity_scale=beam.intensity_scale,
+        max_intensity=beam.max_intensity,
         object_classes=object_classes(built),
     )
 
