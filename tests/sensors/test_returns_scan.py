@@ -199,8 +199,8 @@ def test_return_fields_survive_npz_and_old_files_read_with_defaults(tmp_path):
     keys = list(s.arrays())
     assert keys[: keys.index("sensor") + 1] == ["points", "ring", "range_m", "face_index", "object_id", "normal",
                                                 "incidence_deg", "sensor_position", "sensor_to_world", "frame", "sensor"]  # fmt: skip
-    # then the return fields, and (known here) the beam's intensity scale and largest count, and the objects' class names
-    assert keys[keys.index("sensor") + 1 :] == [*S.Scan._RETURNS, "intensity_scale", "max_intensity", "object_classes"]
+    # then the return fields, and (known here) the beam's intensity scale, the objects' class names and the largest count
+    assert keys[keys.index("sensor") + 1 :] == [*S.Scan._RETURNS, "intensity_scale", "object_classes", "max_intensity"]
     assert s.max_intensity == lidar.beam.max_intensity == 255
     s.to_npz(tmp_path / "s.npz")
     r = S.read_scan_npz(tmp_path / "s.npz")
