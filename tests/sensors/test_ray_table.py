@@ -123,10 +123,10 @@ def test_the_table_of_a_lidar_scans_as_the_lidar(changes: dict) -> None:
 )
 def test_a_table_fires_a_footprint_with_one_return_per_pulse_as_the_lidar_does(changes: dict) -> None:
     """A table accepts any beam (the one pipeline fires it): a footprint's strongest echo, mixed pixels merged within
-    echo_separation_m, pulse by pulse the LiDAR's.  (:meth:`RayTable.from_lidar` still refuses such a LiDAR, so the table
-    is the one-ray LiDAR's given the LiDAR's beam.)"""
+    echo_separation_m, pulse by pulse the LiDAR's (:meth:`RayTable.from_lidar` keeps the LiDAR's beam as it is)."""
     lidar = with_beam(lidar_preset("vlp16", firing_rate_hz=3600.0), range_noise_m=0.0, **changes)
-    table = RayTable.from_lidar(with_beam(lidar, footprint_rays=1, echo_separation_m=0.0)).with_(beam=lidar.beam)
+    table = RayTable.from_lidar(lidar)
+    assert table.beam == lidar.beam
     wall = trimesh.creation.box((0.2, 12.0, 6.0), trimesh.transformations.translation_matrix((8.0, 0.0, 0.0)))
     pole = trimesh.creation.cylinder(radius=0.05, height=6.0, transform=trimesh.transformations.translation_matrix((5.0, 0.3, 0.0)))
     scene = trimesh.util.concatenate([wall, pole])
@@ -275,10 +275,16 @@ def test_a_hostile_table_file_is_one_line_naming_it(tmp_path: Path, suffix: str,
     assert str(info.value).startswith(f"{path}: ray table 'bad': ") and "\n" not in str(info.value)
 
 
-def test_from_lidar_refuses_what_a_table_does_not_model() -> None:
-    for changes in ({"dropout_range_per_m": 0.01}, {"footprint_rays": 7, "echo_separation_m": 0.5}, {"footprint_rays": 7}):
-        with pytest.raises(InvalidInputError, match="a ray table models neither"):
-            RayTable.from_lidar(with_beam(lidar_preset("vlp16"), **changes))
+def test_from_lidar_keeps_every_beam_and_its_range_dependent_dropout() -> None:
+    """A range-dependent dropout is the beam's: the table loses the same far returns as the LiDAR, on average."""
+    lidar = with_beam(lidar_preset("vlp16", firing_rate_hz=3600.0), range_noise_m=0.0, dropout_range_per_m=0.02)
+    table = RayTable.from_lidar(lidar)
+    assert table.beam == lidar.beam
+    wall = trimesh.creation.box((0.2, 40.0, 8.0), trimesh.transformations.translation_matrix((20.0, 0.0, 0.0)))
+    full = scan(wall, with_beam(lidar, dropout_range_per_m=0.0), np.eye(4), seed=1)
+    kept = [len(scan(wall, sensor, np.eye(4), seed=1)) / len(full) for sensor in (lidar, table)]
+    expected = 1.0 - np.clip(0.02 * full.range_m.astype(np.float64), 0.0, 0.95).mean()
+    assert abs(kept[0] - expected) < 0.05 and abs(kept[1] - expected) < 0.05
 
 
 def test_the_rosette_stays_in_its_field_of_view_and_does_not_repeat() -> None:

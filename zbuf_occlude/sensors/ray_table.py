@@ -193,27 +193,18 @@ class RayTable:
 
         Each row is fired at ``(i + b / n_beams) / (n_azimuths · rotation_hz)`` seconds, the LiDAR's own
         ``gps_time``, along the LiDAR's own direction
-        (:func:`~zbuf_occlude.sensors.lidar.beam_directions` of the same angles).  The range,
-        noise, dropout, footprint and return fields are the LiDAR's.  Without noise or dropout, a
+        (:func:`~zbuf_occlude.sensors.lidar.beam_directions` of the same angles), with the LiDAR's beam.  Without noise or dropout, a
         scan by the table has the LiDAR's points, pulse by pulse (the pulses' order differs: the
         LiDAR's is ring by ring, the table's by time, so noise draws fall on other pulses).
 
-        Raises
-        ------
-        InvalidInputError
-            ``lidar``'s beam models what a table does not: a range-dependent dropout, a mixed-pixel
-            ``echo_separation_m``, or a footprint with one return per pulse.
+        The table fires the LiDAR's beam as it is: the one pipeline models every beam for every
+        pattern (range-dependent dropout, mixed pixels, a footprint with one return per pulse).
         """
-        beam = lidar.beam
-        if beam.dropout_range_per_m or beam.echo_separation_m or (beam.footprint_rays > 1 and not beam.resolves_echoes):
-            raise InvalidInputError(
-                f"lidar {lidar.name!r}: a ray table models neither dropout_range_per_m, echo_separation_m nor a footprint with one return per pulse"
-            )
         firing = np.repeat(np.arange(lidar.n_azimuths, dtype=np.int64), lidar.n_beams)
         ring = np.tile(np.arange(lidar.n_beams, dtype=np.int64), lidar.n_azimuths)
         return cls(
             name or lidar.name, (firing + ring / lidar.n_beams) / (lidar.n_azimuths * lidar.rotation_hz), lidar.azimuths_deg[firing],
-            np.asarray(lidar.elevations_deg)[ring], beam=beam, source=lidar.source,
+            np.asarray(lidar.elevations_deg)[ring], beam=lidar.beam, source=lidar.source,
         )  # fmt: skip
 
 
