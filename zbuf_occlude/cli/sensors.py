@@ -18,13 +18,13 @@ import numpy as np
 from zbuf_occlude.cli.crops import FLAGS, CropSettings, add_crop_arguments, crop_settings, given_crop_options
 from zbuf_occlude.cli.las_options import LAS_FORMATS, add_las_arguments, las_keywords
 from zbuf_occlude.cli.options import Checked, count, counted, interval, out_folder, parse_interval, real, seed
-from zbuf_occlude.cli.return_physics import check_max_returns, check_transmittance, surface_optics, with_return_physics
+from zbuf_occlude.cli.return_physics import check_max_returns, check_transmittance, scene_optics_of, surface_optics, with_return_physics
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.mesh.sizes import DIMENSIONS, SizeRange, size_interval
 from zbuf_occlude.sensors.placement import CropDistributions
-from zbuf_occlude.sensors.kinds import preset_names, sensor_from_name
+from zbuf_occlude.sensors.kinds import SENSOR_KINDS, kind_of, preset_names, sensor_from_name
 
 __all__ = ["add_scan_parser", "add_realism_parser", "check_outside", "SCAN_CROP_DISTRIBUTIONS"]
 
@@ -140,6 +140,34 @@ def _scan_sensor(args: argparse.Namespace):
     return with_return_physics(table, args)
 
 
+def _frame(frame: str | None, sensor) -> str:
+    """``--frame``: as given, else ``sensor`` for a sensor that stands (or moves) with a frame of its own and ``world`` for an
+    airborne scanner, whose pulses leave from an aircraft moving along its lines.
+
+    Raises
+    ------
+    InvalidInputError
+        ``--frame sensor`` for an airborne scanner.
+    """
+    if not kind_of(sensor).flies:
+        return frame or "sensor"
+    if frame == "sensor":
+        raise InvalidInputError(f"--frame sensor: {sensor.name} flies along its lines, so its points have no one sensor frame; "
+                                "they are written in the world frame (--frame world)")  # fmt: skip
+    return "world"
+
+
+def _default_optics(optics: dict, sensor) -> dict:
+    """The surface optics of a scan: as given, or, for an airborne scanner whose beam resolves echoes and scales intensities
+    when neither ``--reflectance-table`` nor ``--transmittance`` is given, the materials' reflectances and foliage's gap
+    fraction from the cited table (:func:`~zbuf_occlude.sensors.reflectance.scene_optics`): what its intensities and the
+    returns through a canopy rest on.  ``--transmittance 0`` keeps foliage opaque."""
+    kind = kind_of(sensor)
+    if optics or not (kind.flies and sensor.beam.resolves_echoes and sensor.beam.intensity_scale is not None):
+        return optics
+    return {"reflectivity": "table", "transmittance": "table"}
+
+
 def cmd_scan(args: argparse.Namespace) -> int:
     sensor = _scan_sensor(args)
     if not args.crop:
@@ -151,9 +179,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
         width = getattr(args, FLAGS)["across_sight_width_m"]
         raise InvalidInputError(f"--occlude meets {width} with a side occluder: it needs {width}")
     formats = ("npz", "ply") if args.format == "both" else (args.format,)
-    from zbuf_occlude.sensors.airborne import AirborneScanner
-
-    las_options = las_keywords(args, formats, world_frame=args.frame == "world" or isinstance(sensor, AirborneScanner))
+    args.frame = _frame(args.frame, sensor)
+    las_options = las_keywords(args, formats, world_frame=args.frame == "world")
     # a refused run's empty --out is removed by cli.main
     with OwnedFolder(args.out, names=[SCAN_FILE_NAMES], what="the scan") as folder:
         return _scan_into(folder, args, sensor, formats, las_options)
@@ -182,37 +209,37 @@ def _save(folder: OwnedFolder, s, stem: str, formats: Sequence[str], las_options
 def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: Sequence[str], las_options: dict) -> int:
     """:func:`cmd_scan` once ``--out`` is held."""
     from zbuf_occlude.io.progress import progress as progress_bar
-    from zbuf_occlude.sensors.airborne import AirborneScanner
     from zbuf_occlude.sensors.crops import object_crops
-    from zbuf_occlude.sensors.lidar import Lidar
-    from zbuf_occlude.sensors.ray_table import RayTable
+    from zbuf_occlude.sensors.kinds import kind_of
     from zbuf_occlude.sensors.scan import look_at_pose, scan
     from zbuf_occlude.sensors.scene import GROUND_ID
     from zbuf_occlude.sensors.scene_files import load_scene
 
     out = folder.root
+    kind = kind_of(sensor)
     src = Path(args.mesh_or_scene)
     written, empty = [], 0
     if src.suffix.lower() in (".json", ".yaml", ".yml"):
         if args.crop:
             raise InvalidInputError(f"--crop keeps one mesh's returns; {src.name} is a scene file, scanned whole")
         scene = load_scene(src)
-        if isinstance(sensor, (Lidar, RayTable)):
+        if kind.pulsed:
             pose = scene.default_sensor_pose()
         else:  # a camera looks at the first object from the sensor position
             target = scene.build().local_to_world[1][:3, 3] if scene.objects else np.array([1.0, 0.0, scene.ground_z_m])
             pose = look_at_pose(scene.default_sensor_pose()[:3, 3], target + [0, 0, 0.5])
         for k in progress_bar(range(args.samples), desc="scan", unit="scan", enabled=not args.no_progress):
-            if isinstance(sensor, AirborneScanner):  # a flight over the scene's ground (world frame)
+            optics = _default_optics(surface_optics(args, scene), sensor)
+            if kind.flies:  # a flight over the scene's ground (world frame)
                 from zbuf_occlude.sensors.scan import scan_airborne
 
-                s = scan_airborne(scene, sensor, (0.0, 0.0), scene.ground_half_extent_m, seed=args.seed + k)
+                s = scan_airborne(scene, sensor, (0.0, 0.0), scene.ground_half_extent_m, seed=args.seed + k, **optics)
             else:
-                s = scan(scene, sensor, pose, seed=args.seed + k, backend=args.backend, frame=args.frame, **surface_optics(args, scene))
+                s = scan(scene, sensor, pose, seed=args.seed + k, backend=args.backend, frame=args.frame, **optics)
             written += _save(folder, s, f"{src.stem}_{sensor.name}_s{k:03d}", formats, las_options, ground_z_m=scene.ground_z_m, number=k)
     else:
-        if not isinstance(sensor, (Lidar, RayTable, AirborneScanner)):
-            raise InvalidInputError("scan of a mesh file places a LiDAR; use a scene file for depth cameras")
+        if not kind.pulsed:
+            raise InvalidInputError(f"scan of a mesh file places a LiDAR; use a scene file for a {kind.title}")
         extents, round_xy = None, False
         if args.extents and args.size_of != "max":
             raise InvalidInputError(f"--size-of {args.size_of} says what --size measures; --extents gives every side instead")
@@ -244,11 +271,12 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
                                                     seed=args.seed, name=str(src)))  # fmt: skip
             log.info("%s: width_scale %s, visible_across_sight %s, width_profile %s", src.name, dist.width_scale, dist.visible_across_sight,
                      dist.width_profile)  # fmt: skip
-        if not isinstance(sensor, AirborneScanner):  # an aircraft flies its altitude above the object
+        if not kind.flies:  # an aircraft flies its altitude above the object
             check_outside(dist, None if isinstance(mesh, dict) else mesh.extents)
         # the farm's loop and seeds: one seed gives the crops farm --sensor gives this file lying directly in its input folder
+        optics = scene_optics_of(args) or (lambda scene: _default_optics({}, sensor))
         crops = object_crops(mesh, sensor, dist, name=src.stem, n_samples=args.samples, seed=args.seed, class_name=src.stem,
-                             backend=args.backend, frame=args.frame)  # fmt: skip
+                             backend=args.backend, frame=args.frame, optics=optics)  # fmt: skip
         for k, crop, _ in progress_bar(crops, total=args.samples, desc="scan", unit="scan", enabled=not args.no_progress):
             placement = crop.placement
             s = crop.scan if args.crop else crop.full
@@ -274,6 +302,7 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
     from zbuf_occlude.mesh.scene import UP_CHOICES
 
     names = preset_names()
+    kinds = ", ".join(f"{'an' if kind.title[0] in 'aeiou' else 'a'} {kind.title} ({', '.join(names[kind.name])})" for kind in SENSOR_KINDS)
     p = sub.add_parser(
         "scan", help="LiDAR / depth-camera scan of a mesh on the ground, or of a scene file",
         description="Stand a mesh on a ground plane at --distance from a simulated LiDAR and scan it (or fly an airborne "
@@ -289,8 +318,7 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--sensor", default=None,
-        help=f"a spinning LiDAR ({', '.join(names['lidar'])}), an airborne scanner ({', '.join(names['airborne'])}), a depth "
-        f"camera ({', '.join(names['depth_camera'])}), or a sensor .json (fit-sensor writes one) (default: {SCAN_SENSOR})",
+        help=f"{kinds}, or a sensor .json (fit-sensor writes one) (default: {SCAN_SENSOR})",
     )  # fmt: skip
     t = p.add_argument_group("ray table (instead of --sensor)", "a LiDAR that fires along your own table of directions, one row per pulse")
     t.add_argument(
@@ -380,9 +408,9 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         "equal bins of their height, bottom to top, over their width (fit-sensor's across_sight_profile per class)",
     )  # fmt: skip
     p.add_argument(
-        "--frame", choices=("sensor", "world"), default="sensor",
+        "--frame", choices=("sensor", "world"), default=None,
         help="frame of the written points: sensor (LiDAR at the origin, x forward, z up; cameras: OpenCV) or "
-        "world (the scene's frame) (default: %(default)s)",
+        "world (the scene's frame) (default: sensor; an airborne scanner's points are in the world frame)",
     )  # fmt: skip
     p.add_argument(
         "--format",

@@ -31,7 +31,7 @@ from zbuf_occlude.sensors.scan_data import Scan
 from zbuf_occlude.sensors.scene import ScanScene, SceneObject, sensor_pose
 
 if TYPE_CHECKING:  # trimesh is imported where it is used
-    from collections.abc import Iterator
+    from collections.abc import Callable, Iterator
 
     import trimesh
 
@@ -87,6 +87,7 @@ def object_crop(
     backend: str = "embree",
     sector_margin_deg: float = 5.0,
     frame: str = "sensor",
+    optics: Callable[[ScanScene], dict] | None = None,
 ) -> CropSample:
     """Scan one object placed per ``placement`` (see :func:`draw_placement`) and crop its returns.
 
@@ -99,12 +100,16 @@ def object_crop(
     (``distance_m · sin(azimuth_deg)`` across track; points in the world frame).  A LiDAR fires only in the
     object's azimuth sector (± ``sector_margin_deg``), which gives the same returns faster.  With
     ``visible_across_sight`` below 1 in the placement, :func:`side_occluders` stand between the
-    sensor and the object (after ``occluders``; the object keeps id 1).
+    sensor and the object (after ``occluders``; the object keeps id 1).  ``optics(scene)`` gives the
+    scan's ``reflectivity`` and ``transmittance`` keywords for the scene the object stands in
+    (:func:`~zbuf_occlude.sensors.scan.scan`'s; e.g. ``"table"``), where the placement draws no
+    reflectivity.
 
     Raises
     ------
     InvalidInputError, MeshLoadError
-        Bad placement or mesh, or ``visible_across_sight`` below 1 for an airborne scanner.
+        Bad placement or mesh, ``visible_across_sight`` below 1 for an airborne scanner, or ``optics``
+        giving a reflectivity where the placement draws one.
     """
     az = math.radians(placement.azimuth_deg)
     d = placement.distance_m
@@ -119,7 +124,7 @@ def object_crop(
                 "visible_across_sight hides a side of the object from a sensor on the ground; an airborne scanner flies over it"
             )
         return _airborne_crop(mesh, sensor, placement, seed=seed, occluders=occluders, class_name=class_name, offset_m=d * math.sin(az), size=size,
-                              reach=reach)  # fmt: skip
+                              reach=reach, optics=optics)  # fmt: skip
     obj = SceneObject(mesh, class_name, (d * math.cos(az), d * math.sin(az)), placement.yaw_deg, size, width_scale=width_scale,
                       width_profile=profile)  # fmt: skip
     pose = sensor_pose([0.0, 0.0, placement.height_m])
@@ -137,7 +142,8 @@ def object_crop(
     if placement.reflectivity is not None:  # ground, the object, then the occluders (their own ρ: the object's)
         ground = DEFAULT_GROUND_REFLECTIVITY if placement.ground_reflectivity is None else placement.ground_reflectivity
         rho = [ground] + [placement.reflectivity] * (1 + len(occluders))
-    full = scan(scene, sensor, pose, seed=seed, azimuth_range_deg=sector, backend=backend, frame=frame, reflectivity=rho)
+    surfaces = {"reflectivity": rho} if optics is None else _optics(optics, scene, rho)
+    full = scan(scene, sensor, pose, seed=seed, azimuth_range_deg=sector, backend=backend, frame=frame, **surfaces)
     offset = pose[:3, 3] if frame == "sensor" else 0.0  # sensor axes = world axes (yaw 0)
     return _crop_object(scene, full, placement, pose[:3, 3], offset)
 
@@ -161,6 +167,7 @@ def object_crops(
     class_name: str = "",
     backend: str = "embree",
     frame: str = "sensor",
+    optics: Callable[[ScanScene], dict] | None = None,
 ) -> Iterator[DrawnCrop]:
     """The crops of one object, each with its own placement: the one loop of ``scan`` and ``farm --sensor``.
 
@@ -179,6 +186,8 @@ def object_crops(
         Crops, ``k = 0 .. n_samples - 1``.
     frame : str
         ``sensor`` or ``world``, as :func:`object_crop`.
+    optics : callable, optional
+        The scene's surface optics, as :func:`object_crop`.
 
     Yields
     ------
@@ -190,7 +199,8 @@ def object_crops(
     for k in range(int(n_samples)):
         rng = derive_rng(seed, key, CROP_STREAM, k)
         placement = draw_placement(distributions, rng)
-        crop = object_crop(mesh, sensor, placement, seed=int(rng.integers(2**63)), class_name=class_name, backend=backend, frame=frame)
+        crop = object_crop(mesh, sensor, placement, seed=int(rng.integers(2**63)), class_name=class_name, backend=backend, frame=frame,
+                           optics=optics)  # fmt: skip
         yield DrawnCrop(k, crop, rng)
 
 
@@ -307,7 +317,7 @@ def _under_footprint(mesh, to_world, inverse, world, margin_m: float) -> NDArray
 
 
 def _airborne_crop(mesh, sensor: AirborneScanner, placement: Placement, *, seed: int, occluders, class_name: str, offset_m: float, size,
-                  reach: float) -> CropSample:  # fmt: skip
+                  reach: float, optics=None) -> CropSample:  # fmt: skip
     """An airborne crop: the object ``offset_m`` across track from the plan centre (``distance_m ·
     sin(azimuth_deg)`` of the placement; ``height_m`` is unused: the scanner flies at its altitude),
     scanned from every line of the flight plan that sees it.  Points and the full scan are in the
@@ -318,8 +328,24 @@ def _airborne_crop(mesh, sensor: AirborneScanner, placement: Placement, *, seed:
                       width_profile=placement.width_profile)  # fmt: skip
     reach = max(float(np.max(size)), reach) * 0.75 + 1.0
     scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=abs(offset_m) + 2.0 * reach)
-    full = scan_airborne(scene, sensor, (0.0, offset_m), reach, seed=seed)
+    full = scan_airborne(scene, sensor, (0.0, offset_m), reach, seed=seed, **({} if optics is None else _optics(optics, scene, None)))
     return _crop_object(scene, full, placement, full.sensor_position, per_return=("line_id", "scan_angle_deg"))
+
+
+def _optics(optics: Callable[[ScanScene], dict], scene: ScanScene, rho) -> dict:
+    """``optics(scene)``, with the placement's reflectivities ``rho`` where it gives none.
+
+    Raises
+    ------
+    InvalidInputError
+        Both give a reflectivity.
+    """
+    surfaces = dict(optics(scene))
+    if rho is not None:
+        if "reflectivity" in surfaces:
+            raise InvalidInputError("the placement draws a reflectivity and the optics give one too: give one of them")
+        surfaces["reflectivity"] = rho
+    return surfaces
 
 
 #: A LiDAR scan's per-point return fields (:class:`~zbuf_occlude.sensors.scan_data.Scan`'s names, LAS 1.4's
