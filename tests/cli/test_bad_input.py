@@ -1059,7 +1059,7 @@ def test_first_day_mistakes_get_messages_that_say_what_to_do(tmp_path, capsys):
         (["--footprint", "--echo-separation", "-1"], r"--echo-separation must be a number >= 0 metres, got -1"),
         (["--ground-margin", "0.5"], r"--ground-margin .* needs --crop"),
         (["--crop", "--ground-margin", "nan"], r"--ground-margin must be a finite number of metres, got nan"),
-        (["--sensor", "riegl-q1560", "--footprint"], r"model spinning LiDARs; riegl-q1560 is not one"),
+        (["--sensor", "hdl64e", "--footprint"], r"hdl64e's beam \(hdl64e\) has no divergence .*: give --divergence DEG"),
         (["--hidden-below", "0.5"], r"--hidden-below .* needs --crop"),
         (["--crop", "--hidden-below=-0.2:0.5"], r"--hidden-below must be >= 0 metres above the ground, got \(-0\.2, 0\.5\)"),
         (["--crop", "--hidden-below", "low"], r"--hidden-below must be a number or LO:HI, got 'low'"),
@@ -1074,8 +1074,8 @@ def test_return_physics_options_of_scan_are_usage_errors(tmp_path: Path, capsys,
 
 def test_return_physics_options_apply_to_a_scene_file_too(tmp_path: Path, capsys) -> None:
     path = _scene(tmp_path, {"objects": [{"mesh": {"box_m": [1, 1, 1]}, "position_m": [5, 0]}]})
-    code, err = _main_exit(["scan", str(path), "--sensor", "riegl-q1560", "--footprint", "--out", str(tmp_path / "o")], capsys)
-    assert code == 2 and re.search(r"model spinning LiDARs; riegl-q1560 is not one", err), err
+    code, err = _main_exit(["scan", str(path), "--sensor", "kinect-v1", "--footprint", "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and re.search(r"--footprint: kinect-v1 is a depth camera, which has no beam to change", err), err
     assert not (tmp_path / "o").exists()
 
     def returns(name: str, *options: str) -> int:

@@ -20,7 +20,7 @@ SUB = {name: p for a in build_parser()._actions if isinstance(a, argparse._SubPa
 #: Every crop option with a value, as scan names it; farm's name is ``--sensor-`` and the same words.
 VALUES = {
     "--distance": "6:9", "--height": "1.7", "--size": "2:3", "--reflectivity": "0.2:0.4", "--footprint": None,
-    "--ground-margin": "0.3", "--hidden-below": "0.1:0.2", "--across-sight-width": "0.4:0.6",
+    "--ground-margin": "0.3", "--hidden-below": "0.1:0.2", "--across-sight-width": "0.4:0.6", "--divergence": "0.25",
 }  # fmt: skip
 
 
@@ -46,6 +46,7 @@ def test_both_names_give_the_same_settings(command: str) -> None:
     base = SCAN_CROP_DISTRIBUTIONS
     a, b = crop_settings(short, base), crop_settings(long, base)
     assert a.distributions == b.distributions and (a.footprint, a.across_sight_width_m) == (b.footprint, b.across_sight_width_m)
+    assert a.divergence_deg == b.divergence_deg == 0.25
     d = a.distributions
     assert (d.distance_m, d.height_m, d.size_m, d.reflectivity) == ((6.0, 9.0), (1.7, 1.7), (2.0, 3.0), (0.2, 0.4))
     assert (d.ground_margin_m, d.hidden_below_m, a.footprint, a.across_sight_width_m) == (0.3, (0.1, 0.2), True, (0.4, 0.6))

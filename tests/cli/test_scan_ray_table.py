@@ -67,12 +67,15 @@ def test_a_ray_table_and_a_sensor_are_a_usage_error_naming_both(tmp_path: Path, 
     assert not (tmp_path / "o").exists()
 
 
-def test_return_physics_options_are_refused_with_a_ray_table(tmp_path: Path, capsys) -> None:
+def test_return_physics_options_change_a_ray_tables_beam(tmp_path: Path, capsys) -> None:
     path, _ = _table(tmp_path, n=10)
     code, err = _run(["scan", "box", "--ray-table", str(path), "--max-returns", "3", "--range-resolution", "0.5",
                       "--out", str(tmp_path / "o")], capsys)  # fmt: skip
+    assert code == 0, err
+    # a table's beam is the ideal one: no divergence for a footprint until --divergence gives it one
+    code, err = _run(["scan", "box", "--ray-table", str(path), "--footprint", "--out", str(tmp_path / "p")], capsys)
     assert code == 2 and "\n" not in err, err
-    assert f"model spinning LiDARs; {path} is not one (given: --max-returns, --range-resolution)" in err
+    assert f"--footprint samples the beam's divergence cone, and {path}'s beam (ideal) has no divergence" in err
 
 
 @pytest.mark.parametrize(
