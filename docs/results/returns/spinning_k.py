@@ -27,7 +27,7 @@ from zbuf_occlude.experiments.returns import PLOT_TREES, object_pulse_shares
 from zbuf_occlude.experiments.returns_comparison import recommend_k
 from zbuf_occlude.io.atomic import write_csv
 from zbuf_occlude.mesh.load import load_mesh
-from zbuf_occlude.sensors import Lidar, scan
+from zbuf_occlude.sensors import Lidar, scan, with_beam
 from zbuf_occlude.sensors.scene import ScanScene, SceneObject
 
 K_VALUES = (1, 7, 19, 37, 61)
@@ -51,7 +51,7 @@ def scene(mesh_root: str) -> ScanScene:
 def sensor(k: int | None) -> Lidar:
     if k is None:  # today's scan: one ray, one return
         return Lidar.preset("hdl32e")
-    return Lidar.preset("hdl32e", footprint_rays=k, max_returns=4, range_resolution_m=0.75)
+    return with_beam(Lidar.preset("hdl32e"), footprint_rays=k, max_returns=4, range_resolution_m=0.75)
 
 
 def main(mesh_root: str, out_csv: str) -> None:
