@@ -157,6 +157,25 @@ def _frame(frame: str | None, sensor) -> str:
     return "world"
 
 
+def _trajectory(path: str | None, sensor):
+    """``--trajectory``'s :class:`~zbuf_occlude.sensors.platform.Trajectory`, or None.
+
+    Raises
+    ------
+    InvalidInputError
+        The sensor does not sweep from a platform of its own (an airborne scanner flies its plan; a camera takes one
+        pose), or what :func:`~zbuf_occlude.sensors.platform.load_trajectory` refuses (naming the file).
+    """
+    if path is None:
+        return None
+    kind = kind_of(sensor)
+    if not kind.pulsed or kind.flies:
+        raise InvalidInputError(f"--trajectory {path}: a {kind.title} {'flies its own plan' if kind.flies else 'takes one pose'}")
+    from zbuf_occlude.sensors.platform import load_trajectory
+
+    return load_trajectory(path)
+
+
 def _default_optics(optics: dict, sensor) -> dict:
     """The surface optics of a scan: as given, or, for an airborne scanner whose beam resolves echoes and scales intensities
     when neither ``--reflectance-table`` nor ``--transmittance`` is given, the materials' reflectances and foliage's gap
@@ -223,6 +242,7 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
         if args.crop:
             raise InvalidInputError(f"--crop keeps one mesh's returns; {src.name} is a scene file, scanned whole")
         scene = load_scene(src)
+        trajectory = _trajectory(args.trajectory, sensor)
         if kind.pulsed:
             pose = scene.default_sensor_pose()
         else:  # a camera looks at the first object from the sensor position
@@ -235,11 +255,15 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
 
                 s = scan_airborne(scene, sensor, (0.0, 0.0), scene.ground_half_extent_m, seed=args.seed + k, **optics)
             else:
-                s = scan(scene, sensor, pose, seed=args.seed + k, backend=args.backend, frame=args.frame, **optics)
+                platform = pose if trajectory is None else trajectory.since(trajectory.start_s + k * sensor.sweep_s)
+                s = scan(scene, sensor, platform, seed=args.seed + k, backend=args.backend, frame=args.frame, **optics)
             written += _save(folder, s, f"{src.stem}_{sensor.name}_s{k:03d}", formats, las_options, ground_z_m=scene.ground_z_m, number=k)
     else:
         if not kind.pulsed:
             raise InvalidInputError(f"scan of a mesh file places a LiDAR; use a scene file for a {kind.title}")
+        if args.trajectory is not None:
+            raise InvalidInputError(f"--trajectory {args.trajectory} moves the sensor through a scene file's frame; "
+                                    f"a scan of {src.name} places the sensor per sample (give a scene file)")  # fmt: skip
         extents, round_xy = None, False
         if args.extents and args.size_of != "max":
             raise InvalidInputError(f"--size-of {args.size_of} says what --size measures; --extents gives every side instead")
@@ -407,6 +431,14 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         help="with --crop: warp the object so that its crops show this outline over the height: how wide they are in "
         "equal bins of their height, bottom to top, over their width (fit-sensor's across_sight_profile per class)",
     )  # fmt: skip
+    p.add_argument(
+        "--trajectory",
+        metavar="CSV",
+        default=None,
+        help="a scene file's sensor moves along this trajectory during its sweeps (a CSV of time_s,x_m,y_m,z_m and "
+        "roll_deg,pitch_deg,yaw_deg or qx,qy,qz,qw, the scene's frame): each point is fired from where the sensor is at its "
+        "time, the motion distortion of a real sweep; sample k sweeps from the trajectory's start plus k sweeps",
+    )
     p.add_argument(
         "--frame", choices=("sensor", "world"), default=None,
         help="frame of the written points: sensor (LiDAR at the origin, x forward, z up; cameras: OpenCV) or "

@@ -98,6 +98,11 @@ class Lidar:
         return len(self.elevations_deg)
 
     @property
+    def sweep_s(self) -> float:
+        """Seconds one sweep (a revolution) lasts: ``1 / rotation_hz``."""
+        return 1.0 / self.rotation_hz
+
+    @property
     def azimuth_step_deg(self) -> float:
         """Azimuth between consecutive firings, degrees: ``360 · rotation_hz / firing_rate_hz``."""
         return 360.0 * self.rotation_hz / self.firing_rate_hz

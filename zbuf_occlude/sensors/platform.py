@@ -213,6 +213,28 @@ class Trajectory:
         rotation = Slerp(self.time_s, Rotation.from_matrix(self.rotation))(t).as_matrix()
         return rotation, position
 
+    def since(self, start_s: float) -> Trajectory:
+        """The trajectory from ``start_s`` on: the pose there (:meth:`poses_at`), then the samples after it.
+
+        The platform of a later sweep along the same path (a scan starts at its platform's
+        :attr:`start_s`).  A static trajectory stays static, starting at ``start_s``.
+
+        Raises
+        ------
+        InvalidInputError
+            ``start_s`` not a finite number, outside a moving trajectory's span, or at its end (no
+            motion left to sweep along).
+        """
+        t0 = real(start_s, "start_s")
+        if self.is_static:
+            return Trajectory(np.array([t0]), self.position_m[:1], self.rotation[:1], name=self.name)
+        later = self.time_s > t0 + TIME_SLACK_S
+        if not later.any():
+            raise InvalidInputError(f"trajectory {self.name!r} ends at {self.end_s!r} s: nothing of it is left after {t0!r} s")
+        rotation, position = self.poses_at(np.array([t0]))
+        return Trajectory(np.r_[t0, self.time_s[later]], np.vstack([position, self.position_m[later]]),
+                          np.concatenate([rotation, self.rotation[later]]), name=self.name)  # fmt: skip
+
     def pose_at(self, t: float) -> NDArray[np.float64]:
         """(4, 4) float64 sensor → world pose at ``t`` seconds (:meth:`poses_at`, whose errors it raises)."""
         rotation, position = self.poses_at(np.array([real(t, "t")]))

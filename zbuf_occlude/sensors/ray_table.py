@@ -142,6 +142,11 @@ class RayTable:
         """N, the table's rows (pulses)."""
         return len(self.time_s)
 
+    @property
+    def sweep_s(self) -> float:
+        """Seconds one sweep of the table lasts: its last row's time less its first's."""
+        return float(self.time_s[-1] - self.time_s[0])
+
     def with_(self, **changes) -> RayTable:
         """A copy with some fields changed, checked again."""
         return replace(self, **changes)

@@ -1,0 +1,85 @@
+"""``scan SCENE --trajectory CSV``: the sensor sweeps while it moves along the trajectory, sample after sample; the
+option is refused where it cannot apply, and a hostile trajectory file is one line naming it."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from zbuf_occlude.cli.main import main as cli_main
+from zbuf_occlude.sensors.scan_data import read_scan_npz
+
+SCENE = str(Path(__file__).resolve().parents[2] / "data" / "scenes" / "street.json")
+
+
+def _trajectory(tmp_path: Path, speed: float = 10.0) -> Path:
+    path = tmp_path / "drive.csv"
+    path.write_text(f"time_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n100,-5,0,1.8,0,0,0\n101,{-5 + speed},0,1.8,0,0,0\n")
+    return path
+
+
+def _run(argv: list[str], capsys) -> tuple[int, str]:
+    code = cli_main(argv)
+    return code, capsys.readouterr().err.strip()
+
+
+def test_each_sample_sweeps_further_along_the_trajectory(tmp_path: Path, capsys) -> None:
+    code, err = _run(["scan", SCENE, "--trajectory", str(_trajectory(tmp_path)), "--samples", "2", "--frame", "world",
+                      "--no-progress", "--out", str(tmp_path / "o")], capsys)  # fmt: skip
+    assert code == 0, err
+    scans = [read_scan_npz(f) for f in sorted((tmp_path / "o").glob("*.npz"))]
+    assert len(scans) == 2
+    for k, s in enumerate(scans):  # the HDL-32E's revolution is 0.1 s: sample k sweeps [100 + 0.1 k, 100 + 0.1 (k + 1)]
+        assert 100.0 + 0.1 * k - 1e-9 <= s.gps_time.min() and s.gps_time.max() <= 100.0 + 0.1 * (k + 1) + 1e-9
+    # the car 10 m ahead is seen from 1 m further on in the second sweep: the same pulse meets it at another range
+    car = [s.object_id == 1 for s in scans]
+    assert all(c.sum() > 100 for c in car)
+    assert abs(np.median(scans[0].range_m[car[0]]) - np.median(scans[1].range_m[car[1]]) - 1.0) < 0.3
+
+
+def test_the_raw_sweep_is_in_each_pulse_sensor_frame(tmp_path: Path, capsys) -> None:
+    out = {}
+    for frame in ("sensor", "world"):
+        code, err = _run(["scan", SCENE, "--trajectory", str(_trajectory(tmp_path)), "--frame", frame, "--no-progress",
+                          "--out", str(tmp_path / frame)], capsys)  # fmt: skip
+        assert code == 0, err
+        out[frame] = read_scan_npz(next((tmp_path / frame).glob("*.npz")))
+    raw, world = out["sensor"], out["world"]
+    moved = raw.points.astype(np.float64) + np.c_[-5.0 + 10.0 * (raw.gps_time - 100.0), np.zeros(len(raw)), np.full(len(raw), 1.8)]
+    assert np.abs(moved - world.points).max() < 2e-3  # the sensor turned no way: each point is its pulse's origin plus it
+
+
+@pytest.mark.parametrize(
+    ("argv", "words"),
+    [
+        (["--sensor", "riegl-q1560"], "flies its own plan"),
+        (["--sensor", "kinect-v1"], "takes one pose"),
+    ],
+)
+def test_a_trajectory_is_refused_where_it_cannot_apply(tmp_path: Path, capsys, argv: list[str], words: str) -> None:
+    code, err = _run(["scan", SCENE, "--trajectory", str(_trajectory(tmp_path)), *argv, "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and words in err and "\n" not in err, err
+    mesh = str(Path(__file__).resolve().parents[2] / "data" / "samples" / "chair" / "train" / "chair_0001.off")
+    code, err = _run(["scan", mesh, "--trajectory", str(_trajectory(tmp_path)), "--out", str(tmp_path / "m")], capsys)
+    assert code == 2 and "give a scene file" in err, err
+
+
+@pytest.mark.parametrize(
+    "write",
+    [
+        lambda p: p.write_text("time_s,x_m\n0,1\n"),  # another header
+        lambda p: p.write_text("time_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n1,0,0,0,0,0,0\n0,0,0,0,0,0,0\n"),  # time goes back
+        lambda p: p.write_text("time_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n0,nan,0,0,0,0,0\n1,0,0,0,0,0,0\n"),
+        lambda p: os.mkfifo(p),
+        lambda p: p.mkdir(),
+        lambda p: p.write_bytes(b"\xff\xfe" * 100),
+    ],
+)
+def test_a_hostile_trajectory_is_one_line_naming_the_file(tmp_path: Path, capsys, write) -> None:
+    path = tmp_path / "bad.csv"
+    write(path)
+    code, err = _run(["scan", SCENE, "--trajectory", str(path), "--no-progress", "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and "\n" not in err and "Traceback" not in err and str(path) in err, err
