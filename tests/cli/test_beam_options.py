@@ -172,14 +172,14 @@ def test_transmittance_reaches_a_mesh_scan(tmp_path: Path, capsys) -> None:
 
 
 def test_surface_optics_reach_an_airborne_scan(tmp_path: Path, capsys) -> None:
-    plain = _scan([str(STREET), "--sensor", "riegl-q1560"], tmp_path / "plain", capsys)
-    optics = _scan(
-        [str(STREET), "--sensor", "riegl-q1560", "--reflectance-table", "--transmittance", "car=0.5"], tmp_path / "optics", capsys
-    )
+    # --transmittance 0 gives the scan its optics (opaque everywhere, ρ 1): the airborne default (the table's materials) stands aside
+    plain = _scan([str(STREET), "--sensor", "riegl-q1560", "--transmittance", "0"], tmp_path / "plain", capsys)
+    table = _scan([str(STREET), "--sensor", "riegl-q1560", "--transmittance", "0", "--reflectance-table"], tmp_path / "table", capsys)
+    through = _scan([str(STREET), "--sensor", "riegl-q1560", "--transmittance", "car=0.5"], tmp_path / "through", capsys)
     ground = lambda s: (s.object_id == 0) & (s.number_of_returns == 1)  # noqa: E731 - one echo: its energy alone
-    ratio = np.median(optics.intensity[ground(optics)]) / np.median(plain.intensity[ground(plain)])
+    ratio = np.median(table.intensity[ground(table)]) / np.median(plain.intensity[ground(plain)])
     assert ratio == pytest.approx(reflectance(GROUND_MATERIAL, 1064.0), rel=0.05)
-    under_car = [int(np.sum((s.object_id == 0) & (s.return_number > 1))) for s in (plain, optics)]
+    under_car = [int(np.sum((s.object_id == 0) & (s.return_number > 1))) for s in (plain, through)]
     assert under_car[1] > under_car[0]  # the ground under the car, through it
 
 
