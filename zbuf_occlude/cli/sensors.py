@@ -18,7 +18,9 @@ import numpy as np
 from zbuf_occlude.cli.crops import FLAGS, CropSettings, add_crop_arguments, crop_settings, given_crop_options
 from zbuf_occlude.cli.las_options import LAS_FORMATS, add_las_arguments, las_keywords
 from zbuf_occlude.cli.options import Checked, count, counted, interval, out_folder, parse_interval, real, seed
-from zbuf_occlude.cli.return_physics import check_max_returns, check_transmittance, scene_optics_of, surface_optics, with_return_physics
+from zbuf_occlude.cli.return_physics import (
+    add_beam_arguments, check_max_returns, check_transmittance, scene_optics_of, surface_optics, with_return_physics,
+)  # fmt: skip
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
@@ -395,13 +397,16 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
                    help="with --max-returns above 1: echoes closer than M metres merge into one return (half the pulse length, "
                         "~0.75 m for 5 ns) (default: the sensor's)")  # fmt: skip
     r.add_argument("--reflectance-table", action="store_true",
-                   help="a scene file's surfaces reflect as the cited table gives their material at 905 nm (by each object's "
+                   help="the surfaces reflect as the cited table gives their material at the beam's wavelength (by each object's "
                         "material or class: leaves, bark, car paint, glass, metal, ...; the ground asphalt), and returns must clear "
-                        "the sensor's radiometric threshold")  # fmt: skip
+                        "the sensor's radiometric threshold (an airborne scanner with a multi-return beam and an intensity scale "
+                        "takes the table and --transmittance table unless either is given)")  # fmt: skip
     r.add_argument("--transmittance", metavar="SPEC", action=Checked, check=check_transmittance, default=None,
-                   help="with --max-returns above 1, a scene file: the share of each sub-ray that goes on through an object's "
+                   help="with --max-returns above 1: the share of each sub-ray that goes on through an object's "
                         "surface and comes back, in [0, 1] (a leafy crown's gap fraction); table (foliage 0.3 from the reflectance "
-                        "table), one number (every object), or CLASS=VALUE,... (bush=0.3,tree=0.3) (default: 0, opaque)")  # fmt: skip
+                        "table), one number (every object), or CLASS=VALUE,... (bush=0.3,tree=0.3; a mesh's class: its file name) "
+                        "(default: 0, opaque; airborne: see --reflectance-table)")  # fmt: skip
+    add_beam_arguments(r)
     p.add_argument(
         "--azimuth",
         action=Checked,
