@@ -245,3 +245,23 @@ def test_a_footprint_too_large_for_the_memory_is_refused_before_the_rays_are_cas
     wide = sensor_from_spec({"kind": "lidar", "preset": "hdl64e", "beam": {"footprint_rays": 1024, "divergence_deg": 0.1}})
     with pytest.raises(resources.InsufficientMemoryError, match="footprint_rays 1024"):
         scan(_wall(), wide, np.eye(4))
+
+
+def test_an_airborne_scan_takes_the_material_table_by_default_for_a_radiometric_multi_return_beam():
+    from zbuf_occlude.sensors.airborne_presets import airborne_preset
+    from zbuf_occlude.sensors.scan import scan_airborne
+
+    scene = ScanScene(objects=[SceneObject({"cylinder": {"radius_m": 2.0, "height_m": 5.0}}, "bush", (0.0, 0.0))], ground_half_extent_m=8.0)
+    als = airborne_preset("riegl-q1560", altitude_m=300.0)
+
+    def arrays(scanner, **optics):
+        return scan_airborne(scene, scanner, (0.0, 0.0), 6.0, seed=1, **optics).arrays()
+
+    def same(a, b):
+        return a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
+
+    assert same(arrays(als), arrays(als, reflectivity="table", transmittance="table"))
+    assert same(arrays(als, transmittance=0.0), arrays(als, reflectivity=None, transmittance=0.0))  # one given: the other none
+    assert not same(arrays(als), arrays(als, reflectivity=None, transmittance=None))
+    plain = als.with_(beam=als.beam.with_(intensity_scale=None))  # no intensity model: no optics by default
+    assert same(arrays(plain), arrays(plain, reflectivity=None, transmittance=None))

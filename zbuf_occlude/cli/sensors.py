@@ -178,17 +178,6 @@ def _trajectory(path: str | None, sensor):
     return load_trajectory(path)
 
 
-def _default_optics(optics: dict, sensor) -> dict:
-    """The surface optics of a scan: as given, or, for an airborne scanner whose beam resolves echoes and scales intensities
-    when neither ``--reflectance-table`` nor ``--transmittance`` is given, the materials' reflectances and foliage's gap
-    fraction from the cited table (:func:`~zbuf_occlude.sensors.reflectance.scene_optics`): what its intensities and the
-    returns through a canopy rest on.  ``--transmittance 0`` keeps foliage opaque."""
-    kind = kind_of(sensor)
-    if optics or not (kind.flies and sensor.beam.resolves_echoes and sensor.beam.intensity_scale is not None):
-        return optics
-    return {"reflectivity": "table", "transmittance": "table"}
-
-
 def cmd_scan(args: argparse.Namespace) -> int:
     sensor = _scan_sensor(args)
     if not args.crop:
@@ -251,7 +240,7 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
             target = scene.build().local_to_world[1][:3, 3] if scene.objects else np.array([1.0, 0.0, scene.ground_z_m])
             pose = look_at_pose(scene.default_sensor_pose()[:3, 3], target + [0, 0, 0.5])
         for k in progress_bar(range(args.samples), desc="scan", unit="scan", enabled=not args.no_progress):
-            optics = _default_optics(surface_optics(args, scene), sensor)
+            optics = surface_optics(args, scene)
             if kind.flies:  # a flight over the scene's ground (world frame)
                 from zbuf_occlude.sensors.scan import scan_airborne
 
@@ -300,7 +289,7 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
         if not kind.flies:  # an aircraft flies its altitude above the object
             check_outside(dist, None if isinstance(mesh, dict) else mesh.extents)
         # the farm's loop and seeds: one seed gives the crops farm --sensor gives this file lying directly in its input folder
-        optics = scene_optics_of(args) or (lambda scene: _default_optics({}, sensor))
+        optics = scene_optics_of(args)
         crops = object_crops(mesh, sensor, dist, name=src.stem, n_samples=args.samples, seed=args.seed, class_name=src.stem,
                              backend=args.backend, frame=args.frame, optics=optics)  # fmt: skip
         for k, crop, _ in progress_bar(crops, total=args.samples, desc="scan", unit="scan", enabled=not args.no_progress):

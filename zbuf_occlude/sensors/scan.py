@@ -94,6 +94,8 @@ def build_scene(scene) -> BuiltScene:
     return _built(scene)
 
 
+#: :func:`scan_airborne`'s default surface optics: the material table for a radiometric multi-return beam, else none.
+AUTO_OPTICS = "auto"
 #: Bytes one sub-ray holds while a scan runs (its direction, origin, hit, range and echo arrays, float64 and int64),
 #: what :func:`fire_pulses` checks against the memory available before it casts.
 SUBRAY_BYTES = 160
@@ -246,7 +248,7 @@ def scan(
 
 
 def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.0, *, seed: int = 0,
-                  phase_s: float | None = None, lateral_shift_m=None, reflectivity=None, transmittance=None) -> Scan:  # fmt: skip
+                  phase_s: float | None = None, lateral_shift_m=None, reflectivity="auto", transmittance="auto") -> Scan:  # fmt: skip
     """Scan the part of ``scene`` around ``center_xy`` from every line of an airborne scanner's flight plan; world frame.
 
     The pulses are :meth:`AirborneScanner.pulses <zbuf_occlude.sensors.airborne.AirborneScanner.pulses>`
@@ -266,7 +268,13 @@ def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.
     phase_s, lateral_shift_m : optional
         As :meth:`AirborneScanner.pulses <zbuf_occlude.sensors.airborne.AirborneScanner.pulses>`.
     reflectivity, transmittance : optional
-        As :func:`scan`'s, at the beam's wavelength (1064 nm for the airborne presets).
+        As :func:`scan`'s, at the beam's wavelength (1064 nm for the airborne presets).  ``"auto"``
+        (default) for both: a beam that resolves echoes and scales intensities (every airborne
+        preset's, and a sensor fitted to a LAS file) takes ``"table"`` for both, the materials'
+        reflectances and foliage's gap fraction (:func:`~zbuf_occlude.sensors.reflectance.scene_optics`),
+        which its intensities and its returns through a canopy rest on; any other beam none.  With
+        one of them given, an ``"auto"`` other is none.  None: none (opaque surfaces; a detection
+        threshold applies with ρ = 1).
 
     Returns
     -------
@@ -291,6 +299,10 @@ def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.
     if not kind_of(scanner).flies:
         raise InvalidInputError(f"scan_airborne flies an airborne scanner, got {type(scanner).__name__}")
     built = _built(scene)
+    auto = [isinstance(v, str) and v == AUTO_OPTICS for v in (reflectivity, transmittance)]
+    radiometric = scanner.beam.resolves_echoes and scanner.beam.intensity_scale is not None
+    fill = "table" if all(auto) and radiometric else None  # one given: the other none
+    reflectivity, transmittance = (fill if a else v for a, v in zip(auto, (reflectivity, transmittance)))
     rng = np.random.default_rng(seed)
     pulses = scanner.pulses(center_xy, half_size_m, rng, phase_s=phase_s, lateral_shift_m=lateral_shift_m)
     return fire_pulses(built, scanner.beam, pulses, rng, sensor_name=scanner.name, sensor_to_world=None, frame="world",
