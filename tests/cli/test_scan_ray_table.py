@@ -72,10 +72,11 @@ def test_return_physics_options_change_a_ray_tables_beam(tmp_path: Path, capsys)
     code, err = _run(["scan", "box", "--ray-table", str(path), "--max-returns", "3", "--range-resolution", "0.5",
                       "--out", str(tmp_path / "o")], capsys)  # fmt: skip
     assert code == 0, err
-    # a table's beam is the ideal one: no divergence for a footprint until --divergence gives it one
+    # a table file's beam is a generic receiver (ranges 1-100 m, 0.02 m noise, as --help says) without a divergence: no
+    # footprint until --divergence gives it one
     code, err = _run(["scan", "box", "--ray-table", str(path), "--footprint", "--out", str(tmp_path / "p")], capsys)
     assert code == 2 and "\n" not in err, err
-    assert f"--footprint samples the beam's divergence cone, and {path}'s beam (ideal) has no divergence" in err
+    assert f"--footprint samples the beam's divergence cone, and {path}'s beam (generic-905) has no divergence" in err
 
 
 @pytest.mark.parametrize(

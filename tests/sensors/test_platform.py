@@ -14,6 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
+import zbuf_occlude.io.trajectories as trajectories
 import zbuf_occlude.sensors.platform as platform
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError, UnsafePathError
 from zbuf_occlude.sensors.platform import EULER_COLUMNS, QUATERNION_COLUMNS, TIME_SLACK_S, Trajectory, load_trajectory
@@ -308,6 +309,7 @@ def test_a_hostile_file_is_one_line_naming_it(tmp_path: Path, text: str | bytes,
 
 def test_more_rows_than_the_cap_are_refused_before_parsing(tmp_path: Path, monkeypatch) -> None:
     monkeypatch.setattr(platform, "MAX_TRAJECTORY_POSES", 3)
+    monkeypatch.setattr(trajectories, "MAX_TRAJECTORY_POSES", 3)  # the file's cap, read before the rows are parsed
     path = _write(tmp_path / "odom.csv", EULER + "\n" + "".join(f"{t},0,0,0,0,0,0\n" for t in range(3)))
     assert len(load_trajectory(path)) == 3
     _write(path, EULER + "\n" + "".join(f"{t},0,0,0,0,0,0\n" for t in range(4)))
@@ -317,7 +319,7 @@ def test_more_rows_than_the_cap_are_refused_before_parsing(tmp_path: Path, monke
 
 
 def test_a_file_larger_than_the_cap_is_refused_unread(tmp_path: Path, monkeypatch) -> None:
-    monkeypatch.setattr(platform, "MAX_TRAJECTORY_BYTES", 64)
+    monkeypatch.setattr(trajectories, "MAX_TRAJECTORY_BYTES", 64)
     _refused(_write(tmp_path / "odom.csv", EULER + "\n" + "0,0,0,0,0,0,0\n" * 10), r"odom\.csv")
 
 

@@ -133,11 +133,11 @@ def _scan_sensor(args: argparse.Namespace):
     if args.ray_table is None:
         args.sensor = args.sensor or SCAN_SENSOR
         return with_return_physics(sensor_from_name(args.sensor), args)
-    from zbuf_occlude.sensors.ray_table import load_ray_table
+    from zbuf_occlude.sensors.ray_table import RAY_TABLE_FILE_BEAM, load_ray_table
 
     if args.sensor is not None:
         raise InvalidInputError(f"--ray-table {args.ray_table} is the sensor: give --ray-table or --sensor {args.sensor}, not both")
-    table = load_ray_table(args.ray_table)
+    table = load_ray_table(args.ray_table, beam=RAY_TABLE_FILE_BEAM)
     args.sensor = args.ray_table  # what the return physics options' messages name
     return with_return_physics(table, args)
 
@@ -312,6 +312,48 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
     return 1 if empty else 0
 
 
+def _add_return_physics_arguments(p: argparse.ArgumentParser) -> None:
+    """``scan``'s return physics group: the ground's reflectivity, power noise, the beam options and the surface optics."""
+    r = p.add_argument_group("return physics (LiDAR)", "with --reflectivity and --footprint above")
+    r.add_argument(
+        "--ground-reflectivity",
+        action=Checked,
+        check=real(0.0),
+        default=0.15,
+        help="the ground's reflectivity with --reflectivity (default: %(default)s)",
+    )
+    r.add_argument(
+        "--power-noise",
+        action=Checked,
+        check=real(0.0),
+        default=0.0,
+        help="sigma of ln(received power) per firing; 0: a sharp threshold (default: %(default)s)",
+    )
+    r.add_argument(
+        "--echo-separation", metavar="M", action=Checked, check=real(0.0, unit="metres"), default=0.0,
+        help="with --footprint: echoes within M metres of the strongest merge into one return at their energy-weighted "
+        "range (mixed pixels at shallow depth edges; half the pulse length, ~0.75 m for 5 ns) (default: 0, never)",
+    )  # fmt: skip
+    r.add_argument("--max-returns", metavar="N", action=Checked, check=check_max_returns, default=None,
+                   help="with --footprint (or a sensor file's footprint, airborne scanners too): up to N returns per pulse (1..15), the "
+                        "footprint's echoes resolved by --range-resolution, each with its return number, number of returns and "
+                        "intensity (default: the sensor's, 1 for presets)")  # fmt: skip
+    r.add_argument("--range-resolution", metavar="M", action=Checked, check=real(0.0, above=True, unit="metres"), default=None,
+                   help="with --max-returns above 1: echoes closer than M metres merge into one return (half the pulse length, "
+                        "~0.75 m for 5 ns) (default: the sensor's)")  # fmt: skip
+    r.add_argument("--reflectance-table", action="store_true",
+                   help="the surfaces reflect as the cited table gives their material at the beam's wavelength (by each object's "
+                        "material or class: leaves, bark, car paint, glass, metal, ...; the ground asphalt), and returns must clear "
+                        "the sensor's radiometric threshold (an airborne scanner with a multi-return beam and an intensity scale "
+                        "takes the table and --transmittance table unless either is given)")  # fmt: skip
+    r.add_argument("--transmittance", metavar="SPEC", action=Checked, check=check_transmittance, default=None,
+                   help="with --max-returns above 1: the share of each sub-ray that goes on through an object's "
+                        "surface and comes back, in [0, 1] (a leafy crown's gap fraction); table (foliage 0.3 from the reflectance "
+                        "table), one number (every object), or CLASS=VALUE,... (bush=0.3,tree=0.3; a mesh's class: its file name) "
+                        "(default: 0, opaque; airborne: see --reflectance-table)")  # fmt: skip
+    add_beam_arguments(r)
+
+
 def add_scan_parser(sub) -> argparse.ArgumentParser:
     """Add ``scan`` to the subparsers ``sub``."""
     from zbuf_occlude.mesh.scene import UP_CHOICES
@@ -358,44 +400,7 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         help="X,Y,Z: stretch the mesh to these extents, metres, each N or LO:HI drawn per sample (instead of --size); "
         "Y '=' takes the drawn X (a round pole: --extents 0.1:0.4,=,3:9)",
     )
-    r = p.add_argument_group("return physics (LiDAR)", "with --reflectivity and --footprint above")
-    r.add_argument(
-        "--ground-reflectivity",
-        action=Checked,
-        check=real(0.0),
-        default=0.15,
-        help="the ground's reflectivity with --reflectivity (default: %(default)s)",
-    )
-    r.add_argument(
-        "--power-noise",
-        action=Checked,
-        check=real(0.0),
-        default=0.0,
-        help="sigma of ln(received power) per firing; 0: a sharp threshold (default: %(default)s)",
-    )
-    r.add_argument(
-        "--echo-separation", metavar="M", action=Checked, check=real(0.0, unit="metres"), default=0.0,
-        help="with --footprint: echoes within M metres of the strongest merge into one return at their energy-weighted "
-        "range (mixed pixels at shallow depth edges; half the pulse length, ~0.75 m for 5 ns) (default: 0, never)",
-    )  # fmt: skip
-    r.add_argument("--max-returns", metavar="N", action=Checked, check=check_max_returns, default=None,
-                   help="with --footprint (or a sensor file's footprint, airborne scanners too): up to N returns per pulse (1..15), the "
-                        "footprint's echoes resolved by --range-resolution, each with its return number, number of returns and "
-                        "intensity (default: the sensor's, 1 for presets)")  # fmt: skip
-    r.add_argument("--range-resolution", metavar="M", action=Checked, check=real(0.0, above=True, unit="metres"), default=None,
-                   help="with --max-returns above 1: echoes closer than M metres merge into one return (half the pulse length, "
-                        "~0.75 m for 5 ns) (default: the sensor's)")  # fmt: skip
-    r.add_argument("--reflectance-table", action="store_true",
-                   help="the surfaces reflect as the cited table gives their material at the beam's wavelength (by each object's "
-                        "material or class: leaves, bark, car paint, glass, metal, ...; the ground asphalt), and returns must clear "
-                        "the sensor's radiometric threshold (an airborne scanner with a multi-return beam and an intensity scale "
-                        "takes the table and --transmittance table unless either is given)")  # fmt: skip
-    r.add_argument("--transmittance", metavar="SPEC", action=Checked, check=check_transmittance, default=None,
-                   help="with --max-returns above 1: the share of each sub-ray that goes on through an object's "
-                        "surface and comes back, in [0, 1] (a leafy crown's gap fraction); table (foliage 0.3 from the reflectance "
-                        "table), one number (every object), or CLASS=VALUE,... (bush=0.3,tree=0.3; a mesh's class: its file name) "
-                        "(default: 0, opaque; airborne: see --reflectance-table)")  # fmt: skip
-    add_beam_arguments(r)
+    _add_return_physics_arguments(p)
     p.add_argument(
         "--azimuth",
         action=Checked,

@@ -18,7 +18,8 @@ from zbuf_occlude.defaults import MAX_POINTS
 
 __all__ = [
     "MAX_CARD_CHECKSUM_BYTES", "MAX_CHECKPOINT_BYTES", "MAX_CLOUD_NPZ_BYTES", "MAX_CLOUD_NPZ_POINTS", "MAX_LAS_BYTES",
-    "MAX_LAS_HEADER_BYTES", "MAX_LEDGER_BYTES", "MAX_LEDGER_LINE_BYTES", "MAX_LIST_BYTES", "MAX_LOCK_BYTES", "MAX_MANIFEST_BYTES",
+    "MAX_LAS_HEADER_BYTES", "MAX_VLR_RECORD_BYTES", "MAX_LEDGER_BYTES", "MAX_LEDGER_LINE_BYTES", "MAX_LIST_BYTES", "MAX_LOCK_BYTES",
+    "MAX_MANIFEST_BYTES",
     "MAX_MESH_FILE_BYTES", "MAX_METADATA_BYTES", "MAX_NPY_HEADER_BYTES", "MAX_POINT_SET_BYTES", "MAX_POINT_SET_PLY_HEADER_BYTES",
     "MAX_PROTOCOL_FILE_BYTES", "MAX_RAY_TABLE_LINE_BYTES", "MAX_REAL_SCAN_ARRAY_BYTES", "MAX_REAL_SCAN_BYTES",
     "MAX_REAL_SCAN_LINE_BYTES", "MAX_SCAN_NPZ_BYTES", "MAX_SPEC_FILE_BYTES", "MAX_TABLE_BYTES", "MAX_TRAJECTORY_BYTES",
@@ -94,6 +95,8 @@ MAX_LAS_BYTES = 16 << 30
 #: reads into memory: :data:`zbuf_occlude.io.las_layout.MAX_VLRS` records of at most 65,589 bytes
 #: (a 54-byte header and a uint16 length) are 33.6 MB.
 MAX_LAS_HEADER_BYTES = 64 << 20
+#: Most bytes a VLR's record holds, written or read: its record length is a uint16 (ASPRS LAS 1.4 R15 §2.5).
+MAX_VLR_RECORD_BYTES = 65535
 
 # -- scans ------------------------------------------------------------------------------------------
 

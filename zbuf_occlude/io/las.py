@@ -38,7 +38,7 @@ from zbuf_occlude._version import __version__, install_hint
 from zbuf_occlude.defaults import MAX_POINTS
 from zbuf_occlude.errors import ArgumentTypeError, BackendUnavailable, InvalidInputError, ZbufOccludeError
 from zbuf_occlude.geometry.arguments import check_points, described
-from zbuf_occlude.io.caps import MAX_LAS_BYTES
+from zbuf_occlude.io.caps import MAX_LAS_BYTES, MAX_VLR_RECORD_BYTES
 from zbuf_occlude.io.las_crs import linear_unit_m
 from zbuf_occlude.io.las_layout import (
     MAX_EVLRS,
@@ -368,10 +368,6 @@ class SurveyFields:
     crs: int | str | None = None
 
 
-#: Most bytes a VLR's record holds (its record length is a uint16, R15 §2.5).
-_VLR_MAX_BYTES = 65535
-
-
 def _extra_bytes(n: int, object_id: Any, class_index: Any, class_names: Sequence[str] | None) -> dict[str, np.ndarray]:
     """The extra bytes of :func:`las_bytes`, checked: name → ``(n,)`` array of :data:`EXTRA_BYTES`' dtype."""
     out = {}
@@ -393,8 +389,8 @@ def _extra_bytes(n: int, object_id: Any, class_index: Any, class_names: Sequence
 def _names_json(class_names: Sequence[str]) -> bytes:
     """``class_names`` as the record of the class names VLR: a UTF-8 JSON array."""
     data = json.dumps(list(class_names), ensure_ascii=False).encode("utf-8")
-    if len(data) > _VLR_MAX_BYTES:
-        raise InvalidInputError(f"class_names take {len(data):,} bytes as JSON; a VLR holds at most {_VLR_MAX_BYTES:,}")
+    if len(data) > MAX_VLR_RECORD_BYTES:
+        raise InvalidInputError(f"class_names take {len(data):,} bytes as JSON; a VLR holds at most {MAX_VLR_RECORD_BYTES:,}")
     return data
 
 

@@ -23,8 +23,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.geometry.arguments import described
-from zbuf_occlude.io.caps import MAX_TRAJECTORY_BYTES, MAX_TRAJECTORY_LINE_BYTES, MAX_TRAJECTORY_POSES
-from zbuf_occlude.io.regular_files import read_text_file
+from zbuf_occlude.io.caps import MAX_TRAJECTORY_POSES
+from zbuf_occlude.io.trajectories import read_trajectory_table
 from zbuf_occlude.sensors.checks import MAX_COORDINATE_M, located, real, reals, sensor_name, shown
 
 __all__ = ["EULER_COLUMNS", "MAX_TIME_S", "QUATERNION_COLUMNS", "QUATERNION_NORM_TOLERANCE", "ROTATION_TOLERANCE", "TIME_SLACK_S",
@@ -284,8 +284,7 @@ def load_trajectory(path: str | PathLike[str], *, within: str | PathLike[str] | 
         raise ArgumentTypeError(f"path must be a trajectory file's path (str or os.PathLike), got {described(path)}")
     if within is not None and not isinstance(within, (str, PathLike)):
         raise ArgumentTypeError(f"within must be a folder's path (str or os.PathLike) or None, got {described(within)}")
-    text = read_text_file(path, max_bytes=MAX_TRAJECTORY_BYTES, error=InvalidInputError, within=within)
-    columns, table, line_of = _read_rows(path, text)
+    columns, table, line_of = read_trajectory_table(path, tuple(_LAYOUTS), within=within)
     *attitude_check, rotation = _LAYOUTS[columns](table[:, 4:])
     bad = _first_bad([*_sample_checks(table[:, 0], table[:, 1:4]), attitude_check])
     if bad:
@@ -353,46 +352,6 @@ def _pose_parts(pose: ArrayLike, name: str, *, single: bool) -> tuple[NDArray[np
     if len(bad):
         raise InvalidInputError(f"{name}[{bad[0]}]'s last row must be (0, 0, 0, 1): a sensor→world rigid transform")
     return a[:, :3, :3], a[:, :3, 3]
-
-
-def _read_rows(path: str | PathLike[str], text: str) -> tuple[tuple[str, ...], NDArray[np.float64], NDArray[np.int64]]:
-    """(the header's columns, the rows (N, K) float64, each row's line number (N,)) of a trajectory CSV's text."""
-    layouts = f"{','.join(EULER_COLUMNS)} or {','.join(QUATERNION_COLUMNS)}"
-    body = text.removeprefix("\ufeff").rstrip()  # a byte-order mark, as spreadsheets write
-    if not body:
-        raise InvalidInputError(f"{path}: the file is empty; a trajectory's first line is the header {layouts}")
-    if body.count("\n") > MAX_TRAJECTORY_POSES:  # counted before the text is split: a file of short lines stays one string
-        raise InvalidInputError(f"{path}: more than {MAX_TRAJECTORY_POSES:,} lines after the header, the most poses a trajectory holds")
-    lines = body.split("\n")
-    # a character takes at least a byte: a line of more characters than the cap is longer in bytes too
-    long = next((i for i, line in enumerate(lines) if len(line) + 1 > MAX_TRAJECTORY_LINE_BYTES), None)
-    if long is not None:
-        raise InvalidInputError(f"{path}: line {long + 1:,} is longer than {MAX_TRAJECTORY_LINE_BYTES:,} bytes; a row is 7 or 8 numbers")
-    columns = tuple(field.strip() for field in lines[0].split(","))
-    if columns not in _LAYOUTS:
-        raise InvalidInputError(f"{path}: line 1 must be the header {layouts}; it holds {len(columns)} other fields")
-    rows = [(number, line.strip()) for number, line in enumerate(lines[1:], start=2) if line.strip()]
-    if not rows:
-        raise InvalidInputError(f"{path}: no rows after the header (one row per pose: {','.join(columns)})")
-    line_of, data = np.array([number for number, _ in rows], dtype=np.int64), [line for _, line in rows]
-    try:
-        table = np.loadtxt(data, delimiter=",", dtype=np.float64, comments=None, ndmin=2)
-    except ValueError:  # numpy's words quote the line: the line is found again, by Python's float, and only its number shown
-        table = np.array([_row(path, line, number, len(columns)) for number, line in zip(line_of, data, strict=True)])
-    if table.shape != (len(data), len(columns)):  # every row of one other width
-        raise InvalidInputError(f"{path}: line {line_of[0]:,} holds {table.shape[1]} numbers; each row holds {len(columns)}")
-    return columns, table, line_of
-
-
-def _row(path: str | PathLike[str], line: str, number: int, width: int) -> list[float]:
-    """The ``width`` numbers of ``line`` (line ``number`` of the file), separated by commas, or InvalidInputError naming the line."""
-    try:
-        row = [float(field) for field in line.split(",")]
-    except ValueError:
-        row = []
-    if len(row) == width:
-        return row
-    raise InvalidInputError(f"{path}: line {number:,} is not a row of {width} numbers separated by commas")
 
 
 def _euler_rotations(angles: NDArray[np.float64]) -> tuple[str, NDArray[np.bool_], str, NDArray[np.float64]]:

@@ -30,7 +30,7 @@ from zbuf_occlude.sensors.beam import IDEAL_BEAM, Beam, check_beam
 from zbuf_occlude.sensors.lidar import Lidar, beam_directions
 from zbuf_occlude.sensors.pulses import Pulses, placed
 
-__all__ = ["RAY_TABLE_PRESETS", "ROSETTE_FOV_DEG", "ROSETTE_PRISM_HZ", "RayTable", "load_ray_table", "rosette_table"]
+__all__ = ["RAY_TABLE_FILE_BEAM", "RAY_TABLE_PRESETS", "ROSETTE_FOV_DEG", "ROSETTE_PRISM_HZ", "RayTable", "load_ray_table", "rosette_table"]
 
 #: Circular field of view of the Livox Mid-40, full angle, degrees (Livox Mid-40 data sheet;
 #: Liu et al. 2020, §II).
@@ -298,6 +298,13 @@ def rosette_table(
     azimuth, elevation = np.degrees(np.arctan2(y, x)), np.degrees(np.arcsin(np.clip(z, -1.0, 1.0)))
     return RayTable(name, t, azimuth, elevation, **fields)
 
+
+#: The beam ``scan --ray-table FILE`` fires a table file with: a generic 905 nm receiver, ranges 1–100 m, σ 0.02 m,
+#: τ = 0.8 / 100² (what a table's fields defaulted to before tables had a beam; not a device).
+RAY_TABLE_FILE_BEAM = Beam(
+    "generic-905", min_range_m=1.0, max_range_m=100.0, range_noise_m=0.02, detection_threshold=0.8 / 100.0**2,
+    source="zbuf_occlude's generic receiver for a ray table file (ASSUMPTION: ranges 1-100 m, 0.02 m noise; not a data sheet)",
+)
 
 # Livox Mid-70 (Livox Mid-70 user manual v1.2 and data sheet): a Risley-prism scanner of 70.4°
 # circular field of view, 100,000 points per second (first return), 905 nm, range precision
