@@ -6,12 +6,10 @@ The pattern (:class:`~zbuf_occlude.sensors.airborne.AirborneScanner`) and the be
 
 from __future__ import annotations
 
-from dataclasses import replace
 
-from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.airborne import AirborneScanner
 from zbuf_occlude.sensors.beam import Beam
-from zbuf_occlude.sensors.checks import shown
+from zbuf_occlude.sensors.checks import preset
 
 __all__ = ["AIRBORNE_PRESETS", "airborne_preset"]
 
@@ -124,7 +122,4 @@ def airborne_preset(name: str, **changes) -> AirborneScanner:
     InvalidInputError
         Unknown name.
     """
-    key = str(name).lower()
-    if key not in AIRBORNE_PRESETS:
-        raise InvalidInputError(f"unknown airborne scanner {shown(name)}; choose one of {sorted(AIRBORNE_PRESETS)}")
-    return replace(AIRBORNE_PRESETS[key], **changes)
+    return preset(AIRBORNE_PRESETS, name, "airborne scanner", **changes)

@@ -37,7 +37,7 @@ from zbuf_occlude.errors import InvalidInputError
 
 __all__ = [
     "MAX_COORDINATE_M", "MAX_RANGE_M", "MAX_SENSOR_RAYS", "MAX_SCENE_OBJECTS", "MAX_NAME_CHARS", "MAX_PATH_CHARS",
-    "SHOWN_CHARS", "shown", "located", "is_number", "real", "count", "reals", "mapping", "text", "sensor_name",
+    "SHOWN_CHARS", "shown", "located", "is_number", "real", "count", "reals", "mapping", "text", "sensor_name", "preset",
 ]  # fmt: skip
 
 #: Largest coordinate or size in a scene, metres: the scene is ray-cast in float32 (Embree),
@@ -257,3 +257,24 @@ def sensor_name(value: object, what: str) -> str:
             f"{what} must be 1 to {MAX_NAME_CHARS} printable characters without '/' or '\\' (it names output files), got {shown(value)}"
         )
     return value  # type: ignore[return-value]
+
+
+def preset(presets: Mapping[str, Any], name: object, what: str, **changes) -> Any:
+    """The preset ``name`` (any case) of a kind's table ``presets``, with optional field changes (checked again).
+
+    The one lookup of :func:`~zbuf_occlude.sensors.lidar.lidar_preset`,
+    :func:`~zbuf_occlude.sensors.airborne_presets.airborne_preset` and
+    :func:`~zbuf_occlude.sensors.depth_camera.depth_camera_preset`; ``what`` names the table in the
+    message ("lidar preset").
+
+    Raises
+    ------
+    InvalidInputError
+        Unknown name, naming the presets there are.
+    """
+    from dataclasses import replace
+
+    key = str(name).lower()
+    if key not in presets:
+        raise InvalidInputError(f"unknown {what} {shown(name)}; choose one of {sorted(presets)}")
+    return replace(presets[key], **changes) if changes else presets[key]

@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.checks import MAX_RANGE_M, MAX_SENSOR_RAYS, count, located, real, reals, sensor_name, shown, text
+from zbuf_occlude.sensors.checks import MAX_RANGE_M, MAX_SENSOR_RAYS, count, located, preset, real, reals, sensor_name, shown, text
 
 __all__ = ["DepthCamera", "DEPTH_CAMERA_PRESETS", "depth_camera_preset", "nguyen_axial_sigma_m"]
 
@@ -192,8 +192,4 @@ def depth_camera_preset(name: str, **changes) -> DepthCamera:
     InvalidInputError
         Unknown name.
     """
-    key = str(name).lower()
-    if key not in DEPTH_CAMERA_PRESETS:
-        raise InvalidInputError(f"unknown depth camera preset {shown(name)}; choose one of {sorted(DEPTH_CAMERA_PRESETS)}")
-    cam = DEPTH_CAMERA_PRESETS[key]
-    return replace(cam, **changes) if changes else cam
+    return preset(DEPTH_CAMERA_PRESETS, name, "depth camera preset", **changes)

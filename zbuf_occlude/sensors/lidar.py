@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.beam import IDEAL_BEAM, Beam, check_beam
 from zbuf_occlude.sensors.pulses import Pulses, placed
-from zbuf_occlude.sensors.checks import MAX_SENSOR_RAYS, located, real, reals, sensor_name, shown, text
+from zbuf_occlude.sensors.checks import MAX_SENSOR_RAYS, located, preset, real, reals, sensor_name, shown, text
 
 __all__ = ["Lidar", "LIDAR_PRESETS", "lidar_preset", "beam_directions"]
 
@@ -264,8 +264,4 @@ def lidar_preset(name: str, **changes) -> Lidar:
     InvalidInputError
         Unknown name.
     """
-    key = str(name).lower()
-    if key not in LIDAR_PRESETS:
-        raise InvalidInputError(f"unknown lidar preset {shown(name)}; choose one of {sorted(LIDAR_PRESETS)}")
-    lidar = LIDAR_PRESETS[key]
-    return replace(lidar, **changes) if changes else lidar
+    return preset(LIDAR_PRESETS, name, "lidar preset", **changes)
