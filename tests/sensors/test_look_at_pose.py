@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.scan import look_at_pose
+from zbuf_occlude.sensors.platform import look_at_pose
 
 
 def test_level_camera_axes():

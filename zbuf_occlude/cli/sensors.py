@@ -221,7 +221,8 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
     from zbuf_occlude.io.progress import progress as progress_bar
     from zbuf_occlude.sensors.crops import object_crops
     from zbuf_occlude.sensors.kinds import kind_of
-    from zbuf_occlude.sensors.scan import look_at_pose, scan
+    from zbuf_occlude.sensors.platform import look_at_pose
+    from zbuf_occlude.sensors.scan import scan
     from zbuf_occlude.sensors.scene import GROUND_ID
     from zbuf_occlude.sensors.scene_files import load_scene
 

@@ -18,7 +18,8 @@ from zbuf_occlude.sensors.kinds import SENSOR_KINDS, kind_of, sensor_from_name, 
 from zbuf_occlude.sensors.lidar import LIDAR_PRESETS, Lidar, beam_directions, lidar_preset
 from zbuf_occlude.sensors.platform import Trajectory, load_trajectory
 from zbuf_occlude.sensors.ray_table import RAY_TABLE_PRESETS, RayTable, load_ray_table, rosette_table
-from zbuf_occlude.sensors.scan import look_at_pose, scan, scan_airborne
+from zbuf_occlude.sensors.platform import look_at_pose
+from zbuf_occlude.sensors.scan import scan, scan_airborne
 from zbuf_occlude.sensors.scan_data import FRAMES, Scan, read_scan_npz
 from zbuf_occlude.sensors.scene import GROUND_ID, ScanScene, SceneObject, sensor_pose
 from zbuf_occlude.sensors.scene_files import load_scene

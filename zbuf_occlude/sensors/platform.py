@@ -28,7 +28,7 @@ from zbuf_occlude.io.trajectories import read_trajectory_table
 from zbuf_occlude.sensors.checks import MAX_COORDINATE_M, located, real, reals, sensor_name, shown
 
 __all__ = ["EULER_COLUMNS", "MAX_TIME_S", "QUATERNION_COLUMNS", "QUATERNION_NORM_TOLERANCE", "ROTATION_TOLERANCE", "TIME_SLACK_S",
-           "Trajectory", "load_trajectory"]  # fmt: skip
+           "as_pose", "look_at_pose", "Trajectory", "load_trajectory"]  # fmt: skip
 
 #: Largest |entry| of RᵀR − I, and |det R − 1|, of a rotation accepted (then re-orthonormalised):
 #: a rotation printed to 7 significant digits passes, a scaled or sheared matrix does not.
@@ -241,6 +241,52 @@ class Trajectory:
         pose = np.eye(4)
         pose[:3, :3], pose[:3, 3] = rotation[0], position[0]
         return pose
+
+
+def look_at_pose(eye: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> NDArray[np.float64]:
+    """(4, 4) float64 camera → world transform of an OpenCV camera (x right, y down, z forward)
+    at ``eye`` looking at ``target`` (world frame, metres).
+
+    Raises
+    ------
+    InvalidInputError
+        ``eye == target`` or ``up`` parallel to the view direction.
+    """
+    eye, target, up = (np.asarray(v, dtype=np.float64).reshape(3) for v in (eye, target, up))
+    z = target - eye
+    if np.linalg.norm(z) == 0:
+        raise InvalidInputError("look_at_pose: eye and target coincide")
+    z /= np.linalg.norm(z)
+    x = np.cross(z, up)  # right of the view direction, with up above it: y = z × x points down
+    if np.linalg.norm(x) < 1e-9:
+        raise InvalidInputError(f"look_at_pose: up {up} is parallel to the view direction")
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    m = np.eye(4)
+    m[:3, :3] = np.column_stack([x, y, z])
+    m[:3, 3] = eye
+    return m
+
+
+def as_pose(pose) -> NDArray[np.float64]:
+    """(4, 4) float64 sensor → world pose from a (4, 4) matrix or a (3,) position (no turn).
+
+    Raises
+    ------
+    InvalidInputError
+        Another shape, a value not finite, or a rotation that is not orthonormal and right-handed.
+    """
+    m = np.asarray(pose, dtype=np.float64)
+    if m.shape == (3,):
+        out = np.eye(4)
+        out[:3, 3] = m
+        m = out
+    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+        raise InvalidInputError(f"sensor pose must be a (4, 4) sensor → world matrix or a (3,) position, got shape {m.shape}")
+    r = m[:3, :3]
+    if not np.allclose(r @ r.T, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
+        raise InvalidInputError("sensor pose rotation must be orthonormal and right-handed (no scale)")
+    return m
 
 
 def load_trajectory(path: str | PathLike[str], *, within: str | PathLike[str] | None = None, name: str | None = None) -> Trajectory:

@@ -302,7 +302,11 @@ def rosette_table(
 #: The beam ``scan --ray-table FILE`` fires a table file with: a generic 905 nm receiver, ranges 1–100 m, σ 0.02 m,
 #: τ = 0.8 / 100² (what a table's fields defaulted to before tables had a beam; not a device).
 RAY_TABLE_FILE_BEAM = Beam(
-    "generic-905", min_range_m=1.0, max_range_m=100.0, range_noise_m=0.02, detection_threshold=0.8 / 100.0**2,
+    "generic-905",
+    min_range_m=1.0,
+    max_range_m=100.0,
+    range_noise_m=0.02,
+    detection_threshold=0.8 / 100.0**2,
     source="zbuf_occlude's generic receiver for a ray table file (ASSUMPTION: ranges 1-100 m, 0.02 m noise; not a data sheet)",
 )
 

@@ -22,7 +22,7 @@ from zbuf_occlude.sensors.depth_camera import DepthCamera
 from zbuf_occlude.sensors.echo_model import Radiometry, Transmission, echo_returns, returns_of_mode, strongest_echo, surface_optics
 from zbuf_occlude.sensors.echoes import MAX_RETURNS, number_returns
 from zbuf_occlude.sensors.kinds import kind_of
-from zbuf_occlude.sensors.platform import Trajectory
+from zbuf_occlude.sensors.platform import Trajectory, as_pose
 from zbuf_occlude.sensors.pulses import Pulses
 from zbuf_occlude.sensors.raycast import BACKENDS, cast_embree, cast_zbuffer, face_normals
 from zbuf_occlude.sensors.scan_data import FRAMES, Scan
@@ -31,46 +31,7 @@ from zbuf_occlude.sensors.scene import BuiltScene, ScanScene, SceneObject
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
-__all__ = ["scan", "scan_airborne", "fire_pulses", "look_at_pose", "build_scene", "return_numbers"]
-
-
-def look_at_pose(eye: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> NDArray[np.float64]:
-    """(4, 4) float64 camera → world transform of an OpenCV camera (x right, y down, z forward)
-    at ``eye`` looking at ``target`` (world frame, metres).
-
-    Raises
-    ------
-    InvalidInputError
-        ``eye == target`` or ``up`` parallel to the view direction.
-    """
-    eye, target, up = (np.asarray(v, dtype=np.float64).reshape(3) for v in (eye, target, up))
-    z = target - eye
-    if np.linalg.norm(z) == 0:
-        raise InvalidInputError("look_at_pose: eye and target coincide")
-    z /= np.linalg.norm(z)
-    x = np.cross(z, up)  # right of the view direction, with up above it: y = z × x points down
-    if np.linalg.norm(x) < 1e-9:
-        raise InvalidInputError(f"look_at_pose: up {up} is parallel to the view direction")
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    m = np.eye(4)
-    m[:3, :3] = np.column_stack([x, y, z])
-    m[:3, 3] = eye
-    return m
-
-
-def _as_pose(pose) -> NDArray[np.float64]:
-    m = np.asarray(pose, dtype=np.float64)
-    if m.shape == (3,):
-        out = np.eye(4)
-        out[:3, 3] = m
-        m = out
-    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
-        raise InvalidInputError(f"sensor pose must be a (4, 4) sensor → world matrix or a (3,) position, got shape {m.shape}")
-    r = m[:3, :3]
-    if not np.allclose(r @ r.T, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
-        raise InvalidInputError("sensor pose rotation must be orthonormal and right-handed (no scale)")
-    return m
+__all__ = ["scan", "scan_airborne", "fire_pulses", "build_scene", "return_numbers"]
 
 
 def _built(scene) -> BuiltScene:
@@ -149,7 +110,7 @@ def _platform(pose, scene):
         if not isinstance(scene, ScanScene):
             raise InvalidInputError("scan of a bare mesh needs a sensor pose")
         pose = scene.default_sensor_pose()
-    return _as_pose(pose)
+    return as_pose(pose)
 
 
 def scan(
