@@ -1,7 +1,7 @@
 """The beam of a pulsed LiDAR: what one pulse is, and what its receiver records of it.
 
 A scanner is a beam × a scan pattern × a platform.  The pattern says where and when pulses
-leave (:mod:`.patterns`), the platform where the scanner is at that time (:mod:`.platform`),
+leave (:mod:`.lidar`, :mod:`.airborne`, :mod:`.ray_table`), the platform where the scanner is at that time (:mod:`.platform`),
 and the :class:`Beam` everything the device adds to a pulse's geometry: its footprint (a cone
 of ``divergence_deg`` sampled by ``footprint_rays`` sub-rays, :mod:`.footprint`), how its echoes
 are resolved into returns (``max_returns``, ``range_resolution_m``, ``return_mode``), which it
@@ -11,7 +11,7 @@ field is checked here, once, whatever pattern fires the beam.
 
 The beam named ``ideal`` (:data:`IDEAL_BEAM`) is one ray per pulse, its first hit, no noise,
 no loss and no radiometry: the idealised scan, named as one.  A preset's beam carries its data
-sheet (:mod:`.presets`).
+sheet (:mod:`.lidar`, :mod:`.airborne_presets`, :mod:`.ray_table`).
 
 Units: the received energy of a sub-ray is ``w · ρ · |cos θ| / R²`` in m⁻² (``w`` the sub-ray's
 share of the pulse, ρ the surface's reflectivity, θ the incidence, ``R`` the range;
@@ -30,9 +30,9 @@ from numpy.typing import ArrayLike, NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.checks import MAX_RANGE_M, count, located, real, sensor_name, shown, text
 from zbuf_occlude.sensors.echoes import MAX_RETURNS
-from zbuf_occlude.sensors.footprint import MAX_DIVERGENCE_DEG, MAX_SUBRAYS, PROFILES, footprint_offsets, subray_directions
+from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS, MAX_DIVERGENCE_DEG, MAX_SUBRAYS, PROFILES, footprint_offsets, subray_directions
 
-__all__ = ["Beam", "IDEAL_BEAM", "RETURN_MODES", "MAX_INTENSITY_COUNTS", "check_beam"]
+__all__ = ["Beam", "IDEAL_BEAM", "RETURN_MODES", "MAX_INTENSITY_COUNTS", "check_beam", "footprint_changes"]
 
 #: How the receiver turns a pulse's resolved echoes into returns (``Beam.return_mode``):
 #:
@@ -87,14 +87,18 @@ class Beam:
         footprint; refused when echoes are resolved.
     detection_threshold : float
         Least received energy detected, m⁻² (module docstring); applied where the scan is given
-        surface reflectivities.  0: every echo is detected.
+        surface reflectivities (an airborne scanner's: always, with ρ = 1 where none are given).
+        0: every echo is detected.
     power_noise : float
         σ of the natural log of the received power per firing (detection is then
-        ``Φ(ln(E / τ) / σ)``); 0: a sharp threshold.
+        ``Φ(ln(E / τ) / σ)``); applied with the detection threshold, where reflectivities are
+        given.  0: a sharp threshold.
     intensity_scale : float or None
         Counts per unit of received energy: a return's LAS intensity is
-        ``min(round(E · intensity_scale), max_intensity)``.  None: no intensity model (the scan's
-        intensity is 1.0 where no reflectivity is given, the idealised scan's).
+        ``min(round(E · intensity_scale), max_intensity)``.  None: no intensity model (with one
+        return per pulse and no reflectivities the scan's intensity is 1.0, the idealised
+        scan's; a beam that resolves echoes, or a scan given reflectivities, records the echo
+        energies).
     max_intensity : int
         Largest count the device reports, 1..65535 (255 for an 8-bit reflectivity, Velodyne's).
     range_noise_m : float
@@ -265,3 +269,38 @@ def check_beam(beam: object) -> Beam:
     if not isinstance(beam, Beam):
         raise InvalidInputError(f"beam must be a Beam (zbuf_occlude.sensors.beam.Beam), got {type(beam).__name__} {shown(beam)}")
     return beam
+
+
+def footprint_changes(beam: Beam, *, footprint: bool, divergence_deg: float | None, names: tuple[str, str], sensor: str) -> dict:
+    """The beam fields a request for a footprint (``footprint``) and a divergence (``divergence_deg``) changes.
+
+    The divergence as given; a footprint of :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS`
+    sub-rays where the beam fires fewer (a beam's own wider footprint stays: an airborne preset's
+    19).  The one rule of ``scan --footprint --divergence`` and ``farm --sensor-footprint
+    --sensor-divergence``; ``names`` are the two options as the command calls them, ``sensor`` the
+    sensor's name, for messages.
+
+    Raises
+    ------
+    InvalidInputError
+        A footprint for a beam without a divergence (naming the divergence option), or a divergence
+        for a beam that fires one ray a pulse with no footprint asked (naming the footprint option).
+    """
+    changes: dict = {}
+    if divergence_deg is not None:
+        changes["divergence_deg"] = float(divergence_deg)
+    rays = beam.footprint_rays
+    if footprint:
+        if not changes.get("divergence_deg", beam.divergence_deg) > 0:
+            raise InvalidInputError(
+                f"{names[0]} samples the beam's divergence cone, and {sensor}'s beam ({beam.name}) has no divergence "
+                f"(divergence_deg 0): give {names[1]} DEG, the full angle of its data sheet"
+            )
+        rays = max(rays, FOOTPRINT_RAYS)
+        if rays != beam.footprint_rays:
+            changes["footprint_rays"] = rays
+    if divergence_deg is not None and rays == 1:
+        raise InvalidInputError(
+            f"{names[1]} {float(divergence_deg):g} widens a footprint's cone, and {sensor}'s beam fires one ray a pulse: give {names[0]} too"
+        )
+    return changes
