@@ -5,7 +5,7 @@ field of its :class:`SensorKind` row, read from here: the presets (:func:`sensor
 sensor file's keys (every kind takes ``"preset"`` and a partial ``"beam"``), whether it fires
 pulses through a beam (LiDARs) or frames (cameras), and whether it flies a plan of its own.
 Nothing outside this module asks a sensor for its class: ``kind_of(sensor).pulsed``, not an
-``isinstance`` test (``tests/sensors/test_kinds.py`` walks the source for one).
+``isinstance`` or ``issubclass`` test (``tests/sensors/test_scanner_model.py`` walks the source for one).
 
 A scanner that fires pulses is a beam (:class:`~zbuf_occlude.sensors.beam.Beam`) fired along a
 scan pattern (its class: rings, airborne lines, a table's rows) from a platform (a pose, a
