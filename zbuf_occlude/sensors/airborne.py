@@ -37,12 +37,14 @@ spacing, the rule flight planners use for multi-strip density.
 
 Returns
 -------
-With ``max_returns`` above 1, each pulse's beam is a cone of ``beam_divergence_deg`` sampled by
-``footprint_rays`` sub-rays (:mod:`.footprint`), and their first hits are resolved into up to
-``max_returns`` returns by the spinning LiDAR's own echo model
-(:func:`~zbuf_occlude.sensors.echo_model.echo_returns`: energy ``w · |cos θ| / R²`` per sub-ray, echoes
-within ``range_resolution_m`` merged): a pulse that meets a branch and the ground below records
-both.  With ``max_returns`` 1 (the default) each pulse is its centre ray's first hit, as always.
+The scanner's :class:`~zbuf_occlude.sensors.beam.Beam` says what a pulse returns, as for every
+pulsed sensor (:func:`~zbuf_occlude.sensors.scan.scan_airborne`, :func:`~zbuf_occlude.sensors.scan.fire_pulses`).
+Each pulse is a cone of ``Beam.divergence_deg`` sampled by ``Beam.footprint_rays`` sub-rays
+(:mod:`.footprint`).  With ``Beam.max_returns`` above 1 their hits are resolved into up to
+``max_returns`` returns by the one echo model (:func:`~zbuf_occlude.sensors.echo_model.echo_returns`:
+energy ``w · ρ · |cos θ| / R²`` per sub-ray, echoes within ``range_resolution_m`` merged): a pulse
+that meets a branch and the ground below records both.  With one return per pulse, a footprint
+gives the pulse's strongest echo, and one ray its first hit.
 """
 
 from __future__ import annotations
