@@ -1,7 +1,7 @@
 """The multi-return model on a scene: the sub-ray hits of each pulse weighed and resolved into returns.
 
 One implementation for every scanner (the spinning LiDAR and ray tables of :func:`~.scan.scan`,
-the airborne scanner of :func:`~.airborne.scan_airborne`): :func:`surface_optics` turns a
+the airborne scanner of :func:`~.scan.scan_airborne`): :func:`surface_optics` turns a
 scanner's ``reflectivity`` and ``transmittance`` (a number, one per object id, or the cited table
 of :mod:`.reflectance`, whose lookup gives each face its file's material) into values per face of
 the scene; :func:`echo_returns` casts each sub-ray on through
@@ -77,7 +77,8 @@ def surface_optics(built: BuiltScene, reflectivity, transmittance, *, wavelength
             tau = None  # opaque everywhere: today's first hits
         elif not multi_return:
             raise InvalidInputError("transmittance above 0 gives hits behind a surface, which only the multi-return model resolves: "
-                                    "give the scanner max_returns above 1")  # fmt: skip
+                                    "give the scanner a beam that resolves echoes "
+                                    "(max_returns above 1 or a Velodyne return mode)")  # fmt: skip
         elif backend != "embree":
             raise InvalidInputError(f"transmittance above 0 needs every hit along each sub-ray, which the {backend!r} backend cannot give "
                                     "(it keeps the nearest face per pixel): use backend='embree'")  # fmt: skip
@@ -113,7 +114,7 @@ def strongest_echo(
     """Resolve each beam's ``k`` footprint rays into one return: the strongest echo.
 
     Each ray carries ``1/k`` of the beam's energy (``weights`` (k,) instead, when given: a
-    Gaussian ``beam_profile``); a ray hitting a surface of reflectivity ρ at
+    Gaussian :attr:`Beam.profile <zbuf_occlude.sensors.beam.Beam.profile>`); a ray hitting a surface of reflectivity ρ at
     incidence θ and range R sends back ``ρ |cos θ| / (k R²)`` (ρ = 1 without ``rho``, else ``rho``
     (F,) per face of ``built.mesh``, :func:`surface_optics`).  The
     echoes of one object id add up; the object with the most energy is the return (ties: the
@@ -205,8 +206,8 @@ def echo_returns(
 ) -> tuple[NDArray[np.int64], ...]:  # fmt: skip
     """The multi-return model of every scanner: resolve each pulse's sub-ray hits into discrete returns.
 
-    One implementation for the spinning LiDAR (:func:`scan`) and the airborne scanner
-    (:func:`~zbuf_occlude.sensors.airborne.scan_airborne`).  Each sub-ray's first hit is given;
+    One implementation for the spinning LiDAR (:func:`~zbuf_occlude.sensors.scan.scan`) and the airborne scanner
+    (:func:`~zbuf_occlude.sensors.scan.scan_airborne`).  Each sub-ray's first hit is given;
     where ``through`` gives its surface a transmittance above 0, the sub-ray is cast on through it
     (:func:`~.raycast.cast_embree_beyond`, Embree) and each hit behind gets its energy times the
     transmittances of the surfaces before it on the sub-ray (:func:`~.echoes.attenuate_along_subray`).
