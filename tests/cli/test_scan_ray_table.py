@@ -71,7 +71,7 @@ def test_return_physics_options_change_a_ray_tables_beam(tmp_path: Path, capsys)
     path, _ = _table(tmp_path, n=10)
     code, err = _run(["scan", "box", "--ray-table", str(path), "--max-returns", "3", "--range-resolution", "0.5",
                       "--out", str(tmp_path / "o")], capsys)  # fmt: skip
-    assert code == 0, err
+    assert code == 0, err  # accepted (what the options do to a table's beam: test_beam_options)
     # a table file's beam is a generic receiver (ranges 1-100 m, 0.02 m noise, as --help says) without a divergence: no
     # footprint until --divergence gives it one
     code, err = _run(["scan", "box", "--ray-table", str(path), "--footprint", "--out", str(tmp_path / "p")], capsys)

@@ -355,7 +355,8 @@ def test_the_footprint_widens_the_beam_of_every_pulsed_preset(name):
     # the farm's --sensor-footprint goes through with_beam, as scan's --footprint: any pattern, the beam's own divergence
     base = SensorCropParams(name).model()
     wide = SensorCropParams(name, footprint=True).model()
-    assert kind_of(wide) is kind_of(base) and wide.beam == base.beam.with_(footprint_rays=7)
+    # a one-ray beam gets 7 sub-rays; a beam of its own wider footprint (an airborne preset's 19) keeps it
+    assert kind_of(wide) is kind_of(base) and wide.beam == base.beam.with_(footprint_rays=max(7, base.beam.footprint_rays))
     assert sensor_to_json(wide.with_(beam=base.beam)) == sensor_to_json(base)  # nothing but the beam changed
 
 
@@ -366,7 +367,9 @@ def test_a_divergence_gives_a_preset_without_one_its_footprint():
         SensorCropParams("hdl64e", footprint=True)
     sensor = SensorCropParams("hdl64e", footprint=True, divergence_deg=0.2).model()
     assert sensor.beam.divergence_deg == 0.2 and sensor.beam.footprint_rays == 7
-    assert SensorCropParams("hdl32e", divergence_deg=0.5).model().beam.divergence_deg == 0.5
+    assert SensorCropParams("hdl32e", footprint=True, divergence_deg=0.5).model().beam.divergence_deg == 0.5
+    with pytest.raises(InvalidInputError, match=r"--sensor-divergence 0.5 widens a footprint's cone, .* give --sensor-footprint too"):
+        SensorCropParams("hdl32e", divergence_deg=0.5).model()  # a one-ray beam: the divergence alone would change nothing
     with pytest.raises(InvalidInputError, match="--sensor-divergence must be"):
         SensorCropParams("hdl32e", divergence_deg=float("nan"))
 
@@ -374,5 +377,5 @@ def test_a_divergence_gives_a_preset_without_one_its_footprint():
 def test_the_divergence_is_recorded_only_when_given():
     # earlier sensor data sets keep their digest; a divergence is a new data set
     assert "sensor_divergence_deg" not in FarmParams(sensor="hdl32e").to_dict()
-    given = FarmParams(sensor=SensorCropParams("hdl32e", divergence_deg=0.3))
+    given = FarmParams(sensor=SensorCropParams("hdl32e", footprint=True, divergence_deg=0.3))
     assert given.to_dict()["sensor_divergence_deg"] == 0.3 and given.digest() != FarmParams(sensor="hdl32e").digest()

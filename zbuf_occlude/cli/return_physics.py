@@ -19,7 +19,7 @@ from collections.abc import Callable
 from zbuf_occlude.cli.options import count, real, shown
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.beam import RETURN_MODES
-from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
+from zbuf_occlude.sensors.beam import footprint_changes
 
 __all__ = [
     "BEAM_OPTIONS", "MAX_TRANSMITTANCE_CLASSES", "add_beam_arguments", "beam_changes", "check_max_returns", "check_transmittance",
@@ -111,15 +111,16 @@ def _flag(args: argparse.Namespace, dest: str) -> str:
 
 
 def _given(args: argparse.Namespace) -> dict[str, object]:
-    """The beam options given (not None, not False, not 0: the defaults of ``--power-noise`` and ``--echo-separation``), by dest."""
-    return {dest: v for dest in BEAM_OPTIONS if (v := getattr(args, dest, None)) not in (None, False, 0, 0.0)}
+    """The beam options given (not None and not False: every option's default is None, ``--footprint``'s False), by dest."""
+    return {dest: v for dest in BEAM_OPTIONS if (v := getattr(args, dest, None)) is not None and v is not False}
 
 
 def beam_changes(sensor, args: argparse.Namespace) -> dict[str, object]:
     """The :class:`~zbuf_occlude.sensors.beam.Beam` fields the beam options of ``args`` change on ``sensor``'s beam.
 
     ``--footprint`` gives :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS` sub-rays in the
-    beam's divergence cone (``--divergence DEG``, else the sensor's); without it the sensor's own
+    beam's divergence cone (``--divergence DEG``, else the sensor's) where the beam fires fewer
+    (:func:`~zbuf_occlude.sensors.beam.footprint_changes`); without it the sensor's own
     ``footprint_rays`` stay (a sensor file's K above 1 is a footprint for ``--echo-separation``).
     ``--return-mode strongest`` or ``last`` record one return per pulse, ``dual`` two, so they set
     ``max_returns`` where ``--max-returns`` is not given.  Resolved echoes (``max_returns`` above 1
@@ -146,16 +147,10 @@ def beam_changes(sensor, args: argparse.Namespace) -> dict[str, object]:
     if not kind.pulsed:
         raise InvalidInputError(f"{names}: {args.sensor} is a {kind.title}, which has no beam to change (a pulsed LiDAR has one)")
     beam = sensor.beam
-    changes: dict[str, object] = {}
-    if "divergence" in given:
-        changes["divergence_deg"] = float(given["divergence"])
-    if "footprint" in given:
-        if not changes.get("divergence_deg", beam.divergence_deg) > 0:
-            raise InvalidInputError(
-                f"{_flag(args, 'footprint')} samples the beam's divergence cone, and {args.sensor}'s beam ({beam.name}) has no divergence "
-                f"(divergence_deg 0): give {_flag(args, 'divergence')} DEG, the full angle of its data sheet"
-            )
-        changes["footprint_rays"] = FOOTPRINT_RAYS
+    changes: dict[str, object] = footprint_changes(
+        beam, footprint="footprint" in given, divergence_deg=given.get("divergence"), names=(_flag(args, "footprint"), _flag(args, "divergence")),
+        sensor=str(args.sensor),
+    )  # fmt: skip
     mode = given.get("return_mode", beam.return_mode)
     wanted = {"strongest": 1, "last": 1, "dual": 2}.get(str(mode))
     if "return_mode" in given:

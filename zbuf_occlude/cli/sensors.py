@@ -327,13 +327,13 @@ def _add_return_physics_arguments(p: argparse.ArgumentParser) -> None:
         "--power-noise",
         action=Checked,
         check=real(0.0),
-        default=0.0,
-        help="sigma of ln(received power) per firing; 0: a sharp threshold (default: %(default)s)",
+        default=None,
+        help="sigma of ln(received power) per firing; 0: a sharp threshold (default: the sensor's beam's)",
     )
     r.add_argument(
-        "--echo-separation", metavar="M", action=Checked, check=real(0.0, unit="metres"), default=0.0,
+        "--echo-separation", metavar="M", action=Checked, check=real(0.0, unit="metres"), default=None,
         help="with --footprint: echoes within M metres of the strongest merge into one return at their energy-weighted "
-        "range (mixed pixels at shallow depth edges; half the pulse length, ~0.75 m for 5 ns) (default: 0, never)",
+        "range (mixed pixels at shallow depth edges; half the pulse length, ~0.75 m for 5 ns); 0: never (default: the sensor's beam's)",
     )  # fmt: skip
     r.add_argument("--max-returns", metavar="N", action=Checked, check=check_max_returns, default=None,
                    help="with --footprint (or a sensor file's footprint, airborne scanners too): up to N returns per pulse (1..15), the "

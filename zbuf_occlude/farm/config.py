@@ -34,7 +34,8 @@ from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, view_schedule
 from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.mesh.paths import SPLITS
 from zbuf_occlude.mesh.scene import UP_CHOICES
-from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS, MAX_DIVERGENCE_DEG
+from zbuf_occlude.sensors.beam import footprint_changes
+from zbuf_occlude.sensors.footprint import MAX_DIVERGENCE_DEG
 from zbuf_occlude.sensors.placement import CropDistributions, check_across_sight_width
 
 if TYPE_CHECKING:  # annotations only: inputs imports nothing from here
@@ -192,16 +193,8 @@ class SensorCropParams:
                                     "every surface alike (no detection threshold per object); leave it out")  # fmt: skip
         if self.across_sight_width_m is not None and kind.name != "lidar":
             raise InvalidInputError(f"--sensor-across-sight-width measures across a spinning LiDAR's line of sight; {self.name} is not one")
-        changes: dict[str, Any] = {}
-        if self.divergence_deg is not None:
-            changes["divergence_deg"] = self.divergence_deg
-        if self.footprint:
-            if not changes.get("divergence_deg", sensor.beam.divergence_deg) > 0:
-                raise InvalidInputError(
-                    f"{OPTION_NAMES['sensor_footprint']} samples the beam's divergence cone, and {self.name}'s beam ({sensor.beam.name}) "
-                    f"has no divergence (divergence_deg 0): give {OPTION_NAMES['sensor_divergence_deg']} DEG, the full angle of its data sheet"
-                )
-            changes["footprint_rays"] = FOOTPRINT_RAYS
+        changes = footprint_changes(sensor.beam, footprint=bool(self.footprint), divergence_deg=self.divergence_deg, sensor=self.name,
+                                    names=(OPTION_NAMES["sensor_footprint"], OPTION_NAMES["sensor_divergence_deg"]))  # fmt: skip
         if not changes:
             return sensor
         try:

@@ -108,8 +108,8 @@ def object_crop(
     Raises
     ------
     InvalidInputError, MeshLoadError
-        Bad placement or mesh, ``visible_across_sight`` below 1 for an airborne scanner, or ``optics``
-        giving a reflectivity where the placement draws one.
+        Bad placement or mesh, ``visible_across_sight`` below 1 or a reflectivity for an airborne
+        scanner, or ``optics`` giving a reflectivity where the placement draws one.
     """
     az = math.radians(placement.azimuth_deg)
     d = placement.distance_m
@@ -122,6 +122,11 @@ def object_crop(
         if placement.visible_share < 1.0:
             raise InvalidInputError(
                 "visible_across_sight hides a side of the object from a sensor on the ground; an airborne scanner flies over it"
+            )
+        if placement.reflectivity is not None:
+            raise InvalidInputError(
+                f"reflectivity {placement.reflectivity:g}: {sensor.name} is an {kind.title}, whose crops take the materials' "
+                "reflectances (reflectivity='auto'); leave the placement's reflectivity out"
             )
         return _airborne_crop(mesh, sensor, placement, seed=seed, occluders=occluders, class_name=class_name, offset_m=d * math.sin(az), size=size,
                               reach=reach, optics=optics)  # fmt: skip

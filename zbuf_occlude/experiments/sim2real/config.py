@@ -151,8 +151,9 @@ class Sim2RealConfig:
         (:func:`~zbuf_occlude.experiments.sim2real.placement.fit_mesh_shapes`).
     returns : int
         Most returns per pulse of the ``lidar`` set's scanner (:func:`with_returns`), 1 to
-        :data:`~zbuf_occlude.sensors.echoes.MAX_RETURNS`.  1 (default): the sensor as given, one
-        return per pulse (the clouds of every run before this option, bit for bit).  Above 1: the
+        :data:`~zbuf_occlude.sensors.echoes.MAX_RETURNS`.  1 (default): one return per pulse (a
+        spinning preset as given; a beam that resolves echoes, an airborne preset's, records its
+        footprint's strongest echo).  Above 1: the
         multi-return model (each pulse's footprint cast as sub-rays, its hits resolved into up to
         ``returns`` echoes; ``settings.json``: ``lidar_returns``).  Not with ``fit_sensor``.
     occluded_points : bool
@@ -357,7 +358,8 @@ class Sim2RealConfig:
 def with_returns(sensor, returns: int, option: str = "returns"):
     """``sensor`` (a spinning LiDAR or an airborne scanner) with a beam recording up to ``returns`` returns per pulse.
 
-    ``returns`` 1: ``sensor`` itself, unchanged (its scans are today's, bit for bit).  Above 1, its
+    ``returns`` 1: one return per pulse: ``sensor`` itself where its beam records one, else its beam
+    with ``max_returns`` 1 (the footprint's strongest echo).  Above 1, its
     beam (:func:`~zbuf_occlude.sensors.kinds.with_beam`) gets ``max_returns = returns``; the
     footprint is the beam's own ``footprint_rays`` where above 1, else
     :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS`, over the beam's own ``divergence_deg``
@@ -378,9 +380,9 @@ def with_returns(sensor, returns: int, option: str = "returns"):
 
     if isinstance(returns, bool) or not isinstance(returns, int) or not 1 <= returns <= MAX_RETURNS:
         raise InvalidInputError(f"{option} must be a whole number from 1 to {MAX_RETURNS} (returns per pulse), got {returns!r}")
-    if returns == 1:
-        return sensor
     beam = sensor.beam
+    if returns == 1:  # one return per pulse: a beam that resolves echoes (an airborne preset's) keeps its footprint's strongest
+        return with_beam(sensor, max_returns=1, return_mode="all", range_resolution_m=0.0) if beam.resolves_echoes else sensor
     if not beam.divergence_deg > 0:
         raise InvalidInputError(f"{option} {returns}: sensor {sensor.name} has no beam divergence (its beam's divergence_deg 0) to "
                                 "sample a footprint over; give a sensor file whose \"beam\" has a divergence_deg")  # fmt: skip
