@@ -19,12 +19,13 @@ holds ``K``, and the ``K - 1`` outer cells are shared among the rings in proport
 (largest remainders), so that cells stay about as wide as they are long (of the ring counts
 tried, this one keeps the sub-rays' nearest-neighbour cells within about ±30 % of ``1/K`` for
 4 ≤ K ≤ 257).  ``K = 7`` is the centre and 6 rays at ``sqrt(4/7)`` of the half-angle, 60° apart,
-starting along the beam's local ``u`` axis: exactly :meth:`Lidar.footprint_directions
-<zbuf_occlude.sensors.lidar.Lidar.footprint_directions>`, bit for bit.
+starting along the beam's local ``u`` axis.  :meth:`Beam.footprint_directions
+<zbuf_occlude.sensors.beam.Beam.footprint_directions>` casts a beam's sub-rays with these offsets.
 
 Offsets are polar, in the beam's local frame: column 0 is the angle off the beam axis, column 1
 the azimuth about it from ``u`` towards ``v`` (both radians).  Polar, not Cartesian, so that
-:func:`subray_directions` takes the same floating-point steps as ``Lidar.footprint_directions``.
+:func:`subray_directions` takes the same floating-point steps for every ``K`` (the tangent of
+the angle off the axis, the cosine and sine of the azimuth).
 """
 
 from __future__ import annotations
@@ -61,7 +62,7 @@ FOOTPRINT_RAYS = 7
 #: memory of every scan; 1024 cells already make each cell ~3 % of the footprint's diameter.
 MAX_SUBRAYS = 1024
 #: Widest full-angle beam divergence, degrees: the edge of the cone 45° off its axis, already
-#: thousands of times any scanner's (0.01–0.5°); a sensor's ``beam_divergence_deg`` above it is refused.
+#: thousands of times any scanner's (0.01–0.5°); a beam's ``divergence_deg`` above it is refused.
 MAX_DIVERGENCE_DEG = 90.0
 
 #: Beam profiles: "tophat" (uniform over the cone) and "gaussian" (TEM00, 1/e² diameter =
@@ -162,7 +163,7 @@ def footprint_offsets(n_subrays: int, divergence_deg: float, *, profile: str = "
     for j, n in enumerate(_ring_counts(k), start=1):
         inner, outer = bounds[-1], bounds[-1] + n
         bounds.append(outer)
-        # the float steps of Lidar.footprint_directions for K = 7: radians(div) / 2 · sqrt(4/7)
+        # for K = 7 these are the float steps radians(div) / 2 · sqrt(4/7) of the 7-ray layout
         mid = math.sqrt((inner + outer) / (2.0 * k))
         radius += [math.radians(divergence) / 2.0 * mid] * n
         azimuth.append(np.radians((np.arange(n) + 0.5 * (j - 1)) * (360.0 / n)))
@@ -205,9 +206,9 @@ def subray_directions(directions: ArrayLike, offsets: ArrayLike) -> NDArray[np.f
     (N, K, 3) float64
         Sub-ray ``k`` of beam ``n`` is ``normalise(d + tan(θ_k) (cos φ_k u + sin φ_k v))`` with
         ``u = normalise(d × h)``, ``v = d × u`` and ``h`` the z axis, or the x axis where
-        ``|d_z| ≥ 0.9``: the frame :meth:`Lidar.footprint_directions
-        <zbuf_occlude.sensors.lidar.Lidar.footprint_directions>` builds, so its 7 rays come out
-        bit for bit.  A sub-ray at angle 0 is ``d`` itself, unnormalised, as there.
+        ``|d_z| ≥ 0.9`` (:meth:`Beam.footprint_directions
+        <zbuf_occlude.sensors.beam.Beam.footprint_directions>` casts a beam's sub-rays with it).
+        A sub-ray at angle 0 is ``d`` itself, unnormalised.
 
     Raises
     ------
@@ -232,10 +233,9 @@ def subray_directions(directions: ArrayLike, offsets: ArrayLike) -> NDArray[np.f
     hy = np.zeros(len(d))
     u = _unit(dy * hz - dz * hy, dz * hx - dx * hz, dx * hy - dy * hx)
     v = (dy * u[2] - dz * u[1], dz * u[0] - dx * u[2], dx * u[1] - dy * u[0])
-    # math.tan, as Lidar.footprint_directions calls it (numpy's tan may differ in the last bit)
+    # math.tan, one value per offset (numpy's tan may differ in the last bit)
     tan = np.array([math.tan(theta) for theta in off[ring, 0]])
-    # a contiguous copy, as Lidar.footprint_directions's fresh array (numpy's cos and sin
-    # take other paths over strided views)
+    # a contiguous copy (numpy's cos and sin take other paths over strided views)
     phi = off[ring, 1]
     cos, sin = np.cos(phi), np.sin(phi)
     # (R, N): the beams along the contiguous inner axis, so each operation is one long loop
