@@ -68,14 +68,17 @@ class Scan:
         Backend, ray counts and the like (not written to files).
     return_number : (N,) uint8 or None
         LiDAR: 1..n, the point's position among its pulse's returns in range order (LAS
-        "Return Number").  1 everywhere with one return per pulse (``Lidar.max_returns`` 1).
+        "Return Number").  1 everywhere with one return per pulse (the beam's ``max_returns`` 1,
+        :class:`~zbuf_occlude.sensors.beam.Beam`).
     number_of_returns : (N,) uint8 or None
         LiDAR: n, the returns its pulse recorded, the same on every point of the pulse.
     intensity : (N,) float32 or None
-        LiDAR: received energy, ``ρ cos θ f / R²`` in m⁻² (:func:`~.echoes.hit_energy`, the
-        units of ``Lidar.detection_threshold``), power noise included.  With the multi-return
-        model, the echo's energy; with one return per pulse, the received power the detection
-        test uses when ``reflectivity`` is given, and 1.0 when it is not (no radiometry).
+        LiDAR: received energy, ``ρ |cos θ| f / R²`` in m⁻² (:func:`~.echoes.hit_energy`, the
+        units of the beam's ``detection_threshold``), power noise included; ρ = 1 where no
+        ``reflectivity`` is given.  A beam that resolves echoes records each echo's energy; so
+        does every beam with an ``intensity_scale`` (every preset's).  1.0 only for a beam
+        without ``intensity_scale`` (the ``ideal`` one), one return per pulse and no
+        reflectivities (no radiometry).
     pulse_id : (N,) int64 or None
         LiDAR: ``ring · Lidar.n_azimuths + azimuth index``, unique per pulse of one scan; the
         returns of one pulse share it (airborne: the pulse's row among the plan's pulses; a ray
@@ -85,8 +88,9 @@ class Scan:
         (``(azimuth index + b / n_beams) / (n_azimuths · rotation_hz)``, beam ``b`` firing
         ``b / n_beams`` of a cycle after the cycle's first: every pulse a time of its own);
         the returns of one pulse share it (airborne: the firing time along the flight line,
-        :func:`~zbuf_occlude.sensors.airborne.scan_airborne`; a ray table: its row's ``time_s``,
-        exactly).
+        :func:`~zbuf_occlude.sensors.scan.scan_airborne`; a ray table: its row's ``time_s``,
+        exactly).  On a :class:`~zbuf_occlude.sensors.platform.Trajectory`, the time on the
+        trajectory's clock (its ``start_s`` plus the time into the sweep).
     scan_angle_deg : (N,) float32 or None
         LiDAR: the beam's elevation, degrees (the spinning scanner's scan angle; a ray table: its
         row's elevation); airborne: the across-track angle from nadir, signed as ASPRS LAS 1.4
