@@ -2,7 +2,8 @@
 
 A scan pattern (:class:`~zbuf_occlude.sensors.lidar.Lidar`'s rings, an airborne scanner's lines,
 a :class:`~zbuf_occlude.sensors.ray_table.RayTable`'s rows) makes :class:`Pulses`; the one
-pipeline (:func:`zbuf_occlude.sensors.scan.scan`) casts them with the scanner's beam and turns the
+pipeline (:func:`zbuf_occlude.sensors.scan.fire_pulses`, behind :func:`~zbuf_occlude.sensors.scan.scan` and
+:func:`~zbuf_occlude.sensors.scan.scan_airborne`) casts them with the scanner's beam and turns the
 echoes into a :class:`~zbuf_occlude.sensors.scan_data.Scan`, whatever made them.
 """
 
@@ -24,7 +25,7 @@ class Pulses:
     ----------
     directions_sensor : (P, 3) float64
         Unit beam axes in the sensor frame at each pulse's firing time (LiDAR: x forward, y left,
-        z up; an airborne scanner: x along track, y left, z up).
+        z up); an airborne scanner, which has no one sensor frame, gives the world directions.
     directions : (P, 3) float64
         The same axes in the world frame.
     origins : (3,) or (P, 3) float64
@@ -46,7 +47,7 @@ class Pulses:
         Values for the scan's ``meta`` (phases, shifts, ray counts).
     default_reflectivity : float or None
         ρ the detection threshold is applied with where the scan is given no reflectivity (an
-        airborne scanner's threshold fitted on a LAS file: 1), or None (no radiometric detection
+        airborne scanner's: 1), or None (no radiometric detection
         without reflectivities).
     rotations : (P, 3, 3) float64 or None
         A moving scanner's sensor → world rotation at each pulse, where its points can be given in
