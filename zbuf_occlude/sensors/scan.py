@@ -60,6 +60,9 @@ AUTO_OPTICS = "auto"
 #: Bytes one sub-ray holds while a scan runs (its direction, origin, hit, range and echo arrays, float64 and int64),
 #: what :func:`fire_pulses` checks against the memory available before it casts.
 SUBRAY_BYTES = 160
+#: Bytes each pair of a pulse's sub-rays holds where one return a pulse is its footprint's strongest echo
+#: (:func:`~.echo_model.strongest_echo`: a same-object matrix, its temporaries and the einsum over it).
+SUBRAY_PAIR_BYTES = 24
 
 
 def _surface_optics(built: BuiltScene, beam: Beam, backend: str, reflectivity, transmittance):
@@ -154,16 +157,17 @@ def scan(
     resolution, neighborhood : int
         "zbuffer" backend: view size in pixels and candidate window radius.
     reflectivity : float or (n_objects + 1,) float, optional
-        LiDAR only: Lambertian reflectivity ρ of every surface, or per object id (index 0:
-        the ground).  Given, a return is kept only when its received power clears the
-        beam's threshold, ``ρ · cos θ · f / R² · exp(σ z) ≥ τ`` (:class:`~.beam.Beam`
-        ``detection_threshold``, ``power_noise`` σ, z ~ N(0, 1) per firing, ``f`` the
-        footprint fraction).  None: every hit returns (no radiometric detection).  With the multi-return
-        model (the beam resolves echoes), ρ weighs each sub-ray's echo and the threshold
+        Any pulsed sensor (a LiDAR or a ray table; a depth camera refuses it): Lambertian
+        reflectivity ρ of every surface, or per object id (index 0: the ground).  Given, a
+        return is kept only when its received power clears the beam's threshold,
+        ``ρ · cos θ · f / R² · exp(σ z) ≥ τ`` (:class:`~.beam.Beam` ``detection_threshold``,
+        ``power_noise`` σ, z ~ N(0, 1) per firing, ``f`` the footprint fraction).  None: every
+        hit returns (no radiometric detection).  With the multi-return model (the beam resolves echoes), ρ weighs each sub-ray's echo and the threshold
         applies per echo.  ``"table"``: each object's ρ from its material at the beam's
         wavelength (:func:`~.reflectance.scene_optics`; the ground: asphalt).
     transmittance : float or (n_objects + 1,) float, optional
-        LiDAR with the multi-return model only: round-trip transmittance per object id, in
+        A pulsed sensor whose beam resolves echoes (``Beam.resolves_echoes``: ``max_returns``
+        above 1 or a Velodyne return mode) only: round-trip transmittance per object id, in
         [0, 1] (a gap fraction for foliage, ``T²`` for a pane); sub-rays go on through such
         surfaces (Embree: all hits along each sub-ray, :func:`~.raycast.cast_embree_beyond`) and
         the hits behind return their energy times the transmittances before them.
@@ -182,9 +186,9 @@ def scan(
     InvalidInputError
         A negative, too large or non-integer ``seed``; bad pose, frame, backend or scene; a
         bad ``reflectivity`` or ``transmittance``, or a transmittance above 0 with the
-        "zbuffer" backend or without the multi-return model; an airborne scanner (use
-        :func:`scan_airborne`); a trajectory with the "zbuffer" backend or a depth camera, or
-        shorter than the sweep.
+        "zbuffer" backend or with a beam that does not resolve echoes, or either for a depth
+        camera; an airborne scanner (use :func:`scan_airborne`); a trajectory with the
+        "zbuffer" backend or a depth camera, or shorter than the sweep.
     BackendUnavailable
         Embree or OpenGL missing for the chosen backend.
     """
@@ -314,7 +318,9 @@ def fire_pulses(
         raise InvalidInputError(f"{sensor_name!r} moves along its flight lines: its points have no one sensor frame; use the world frame")
     meta: dict = {"backend": backend, "n_rays": len(pulses), **pulses.meta}
     k = beam.footprint_rays
-    check_memory(len(pulses) * k * SUBRAY_BYTES, f"{len(pulses):,} pulses × footprint_rays {k} of {sensor_name}",
+    # one return a pulse from a footprint compares every sub-ray with every other (strongest_echo: pulses × K × K booleans and floats)
+    pair_bytes = 0 if k == 1 or beam.resolves_echoes else k * SUBRAY_PAIR_BYTES
+    check_memory(len(pulses) * k * (SUBRAY_BYTES + pair_bytes), f"{len(pulses):,} pulses × footprint_rays {k} of {sensor_name}",
                  hint="take fewer footprint_rays, or scan fewer pulses (a sector, a smaller square)")  # fmt: skip
     d_world = pulses.directions
     rays = d_world if k == 1 else beam.footprint_directions(d_world).reshape(-1, 3)
