@@ -163,8 +163,9 @@ def scan(
         ``ρ · cos θ · f / R² · exp(σ z) ≥ τ`` (:class:`~.beam.Beam` ``detection_threshold``,
         ``power_noise`` σ, z ~ N(0, 1) per firing, ``f`` the footprint fraction).  None: every
         hit returns (no radiometric detection).  With the multi-return model (the beam resolves
-        echoes), ρ weighs each sub-ray's echo and the threshold applies per echo.  ``"table"``: each object's ρ from its material at the beam's
-        wavelength (:func:`~.reflectance.scene_optics`; the ground: asphalt).
+        echoes), ρ weighs each sub-ray's echo and the threshold applies per echo.  ``"table"``:
+        each object's ρ from its material at the beam's wavelength
+        (:func:`~.reflectance.scene_optics`; the ground: asphalt).
     transmittance : float or (n_objects + 1,) float, optional
         A pulsed sensor whose beam resolves echoes (``Beam.resolves_echoes``: ``max_returns``
         above 1 or a Velodyne return mode) only: round-trip transmittance per object id, in
