@@ -1,4 +1,4 @@
-"""Spinning LiDAR sensors: beam tables, azimuth sampling, range limits, noise and dropout.
+"""Spinning LiDAR sensors: ring elevation tables and azimuth sampling (range limits, noise and dropout are the beam's).
 
 Sensor frame (right-handed, metres): x forward (azimuth 0°), y left (azimuth +90°), z up
 (elevation +90°).  A beam with elevation ``e`` and azimuth ``a`` points along
@@ -7,7 +7,7 @@ Sensor frame (right-handed, metres): x forward (azimuth 0°), y left (azimuth +9
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.beam import IDEAL_BEAM, Beam, check_beam
 from zbuf_occlude.sensors.pulses import Pulses, placed
-from zbuf_occlude.sensors.checks import MAX_SENSOR_RAYS, located, preset, real, reals, sensor_name, shown, text
+from zbuf_occlude.sensors.checks import MAX_SENSOR_RAYS, located, preset, real, reals, replaced, sensor_name, shown, text
 
 __all__ = ["Lidar", "LIDAR_PRESETS", "lidar_preset", "beam_directions"]
 
@@ -124,7 +124,7 @@ class Lidar:
 
     def with_(self, **changes) -> Lidar:
         """A copy with some fields changed (``lidar.with_(rotation_hz=20)``)."""
-        return replace(self, **changes)
+        return replaced(self, **changes)
 
     def rays(
         self, azimuth_range_deg: tuple[float, float] | None = None

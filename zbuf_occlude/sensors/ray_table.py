@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import ClassVar
 from pathlib import Path
 
@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.ray_tables import read_ray_table
-from zbuf_occlude.sensors.checks import MAX_SENSOR_RAYS, count, located, real, reals, sensor_name, shown, text
+from zbuf_occlude.sensors.checks import MAX_SENSOR_RAYS, count, located, real, reals, replaced, sensor_name, shown, text
 from zbuf_occlude.sensors.beam import IDEAL_BEAM, Beam, check_beam
 from zbuf_occlude.sensors.lidar import Lidar, beam_directions
 from zbuf_occlude.sensors.pulses import Pulses, placed
@@ -149,7 +149,7 @@ class RayTable:
 
     def with_(self, **changes) -> RayTable:
         """A copy with some fields changed, checked again."""
-        return replace(self, **changes)
+        return replaced(self, **changes)
 
     def rays(
         self, azimuth_range_deg: tuple[float, float] | None = None
@@ -224,7 +224,8 @@ def load_ray_table(path: str | os.PathLike, *, name: str | None = None, within: 
     within : str or PathLike, optional
         The folder ``path`` was named from: it must stay inside it, links resolved.
     **fields
-        Other :class:`RayTable` fields (ranges, noise, the return model).
+        Other :class:`RayTable` fields: ``beam=`` (a :class:`~zbuf_occlude.sensors.beam.Beam`: the
+        ranges, noise and return model) and ``source=``.
 
     Raises
     ------
@@ -273,7 +274,8 @@ def rosette_table(
         The prisms' rotation rates, revolutions per second (opposite signs: counter-rotating).
     name : str
     **fields
-        Other :class:`RayTable` fields (ranges, noise, the return model).
+        Other :class:`RayTable` fields: ``beam=`` (a :class:`~zbuf_occlude.sensors.beam.Beam`: the
+        ranges, noise and return model) and ``source=``.
 
     Returns
     -------
