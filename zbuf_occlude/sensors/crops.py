@@ -26,6 +26,7 @@ from zbuf_occlude.sensors.depth_camera import DepthCamera
 from zbuf_occlude.sensors.kinds import kind_of
 from zbuf_occlude.sensors.lidar import Lidar
 from zbuf_occlude.sensors.placement import DEFAULT_GROUND_REFLECTIVITY, CropDistributions, Placement, draw_placement
+from zbuf_occlude.sensors.ray_table import RayTable
 from zbuf_occlude.sensors.scan import scan
 from zbuf_occlude.sensors.scan_data import Scan
 from zbuf_occlude.sensors.scene import ScanScene, SceneObject, sensor_pose
@@ -78,7 +79,7 @@ class CropSample:
 
 def object_crop(
     mesh,
-    sensor: Lidar | DepthCamera,
+    sensor: Lidar | RayTable | DepthCamera | AirborneScanner,
     placement: Placement,
     *,
     seed: int = 0,
@@ -163,7 +164,7 @@ class DrawnCrop(NamedTuple):
 
 def object_crops(
     mesh,
-    sensor: Lidar | DepthCamera | AirborneScanner,
+    sensor: Lidar | RayTable | DepthCamera | AirborneScanner,
     distributions: CropDistributions,
     *,
     name: str,
@@ -282,14 +283,12 @@ def side_occluders(world_vertices: NDArray[np.floating], sensor_m, visible: floa
     return out
 
 
-def _crop_object(
-    scene: ScanScene, full: Scan, placement: Placement, sensor_world, offset=None, per_return: tuple[str, ...] = ()
-) -> CropSample:
+def _crop_object(scene: ScanScene, full: Scan, placement: Placement, sensor_world, offset=None) -> CropSample:
     """The crop of object 1 from ``full`` (its points in the world frame, less ``offset`` when
     given): the object's returns (those at least ``hidden_below_m`` above the ground, when the
     placement gives it) and, with a ``ground_margin_m`` in the placement, the ground returns
-    under it (:func:`_under_footprint`); ``per_return`` names ``full.meta`` arrays cropped
-    alike.  Local points in the object's mesh frame, and the sensor's (world ``sensor_world``)."""
+    under it (:func:`_under_footprint`); ``meta``'s per-point arrays cropped alike
+    (:meth:`~zbuf_occlude.sensors.scan_data.Scan.select`).  Local points in the object's mesh frame, and the sensor's (world ``sensor_world``)."""
     built = scene.build()
     to_world = built.local_to_world[1]
     inverse = np.linalg.inv(to_world[:3, :3])
@@ -306,7 +305,6 @@ def _crop_object(
         ground = np.flatnonzero(full.object_id == 0)
         keep[ground] = _under_footprint(built.local_meshes[1], to_world, inverse, world(full.points[ground]), placement.ground_margin_m)
     crop = full.select(keep)
-    crop.meta.update({key: full.meta[key][keep] for key in per_return})
     local = (world(crop.points) - to_world[:3, 3]) @ inverse.T  # the object's local mesh frame: its stretch and warp kept
     return CropSample(crop, placement, local, inverse @ (sensor_world - to_world[:3, 3]), full)
 
@@ -334,7 +332,7 @@ def _airborne_crop(mesh, sensor: AirborneScanner, placement: Placement, *, seed:
     reach = max(float(np.max(size)), reach) * 0.75 + 1.0
     scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=abs(offset_m) + 2.0 * reach)
     full = scan_airborne(scene, sensor, (0.0, offset_m), reach, seed=seed, **({} if optics is None else _optics(optics, scene, None)))
-    return _crop_object(scene, full, placement, full.sensor_position, per_return=("line_id", "scan_angle_deg"))
+    return _crop_object(scene, full, placement, full.sensor_position)
 
 
 def _optics(optics: Callable[[ScanScene], dict], scene: ScanScene, rho) -> dict:
@@ -358,7 +356,7 @@ def _optics(optics: Callable[[ScanScene], dict], scene: ScanScene, rho) -> dict:
 RETURN_FIELDS = ("return_number", "number_of_returns", "intensity", "pulse_id", "gps_time", "scan_angle_deg")
 
 
-def kept_return_fields(sensor: Lidar | DepthCamera | AirborneScanner) -> tuple[str, ...]:
+def kept_return_fields(sensor: Lidar | RayTable | DepthCamera | AirborneScanner) -> tuple[str, ...]:
     """The return fields a crop of ``sensor`` keeps per point: :data:`RETURN_FIELDS` when it records
     several returns per pulse (``max_returns`` above 1), none otherwise (one return per pulse, or a
     depth camera): its crops, and the data sets made of them, are then as they were before these fields."""
@@ -367,7 +365,7 @@ def kept_return_fields(sensor: Lidar | DepthCamera | AirborneScanner) -> tuple[s
 
 def lidar_object_samples(
     mesh: trimesh.Trimesh | str,
-    sensor: Lidar | DepthCamera,
+    sensor: Lidar | RayTable | DepthCamera | AirborneScanner,
     *,
     name: str,
     n_samples: int,
@@ -387,7 +385,7 @@ def lidar_object_samples(
     ----------
     mesh : trimesh.Trimesh or path
         A normalised mesh (:func:`zbuf_occlude.load_mesh`) or its file.
-    sensor : Lidar or DepthCamera
+    sensor : Lidar, RayTable, DepthCamera or AirborneScanner
     name : str
         The object's stable name (seeds, ``source``).
     n_samples, n_points : int
