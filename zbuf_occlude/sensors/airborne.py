@@ -50,7 +50,7 @@ gives the pulse's strongest echo, and one ray its first hit.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
@@ -58,7 +58,19 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.beam import IDEAL_BEAM, Beam, check_beam
-from zbuf_occlude.sensors.checks import MAX_RANGE_M, MAX_SENSOR_RAYS, count, is_number, located, real, reals, sensor_name, shown, text
+from zbuf_occlude.sensors.checks import (
+    MAX_RANGE_M,
+    MAX_SENSOR_RAYS,
+    count,
+    is_number,
+    located,
+    real,
+    reals,
+    replaced,
+    sensor_name,
+    shown,
+    text,
+)
 from zbuf_occlude.sensors.pulses import Pulses
 
 __all__ = ["AIRBORNE_IDEAL_BEAM", "MAX_FLIGHT_LINES", "AirborneScanner", "FlightLine"]
@@ -238,6 +250,18 @@ class AirborneScanner:
         spacing = self.flight_line_spacing_m if self.n_lines > 1 else self.swath_width_m
         return len(self.headings_deg) * self.pulse_rate_hz / (self.speed_mps * spacing)
 
+    def _shifts(self, lateral_shift_m) -> NDArray[np.float64]:
+        """(H,) float64: ``lateral_shift_m``, one finite value for every heading or one per heading, metres.
+
+        Raises
+        ------
+        InvalidInputError
+            Not finite numbers, or a list of another length than 1 or the headings', naming ``lateral_shift_m``.
+        """
+        one = is_number(lateral_shift_m)
+        values = reals((lateral_shift_m,) if one else lateral_shift_m, "lateral_shift_m", lengths={1, len(self.headings_deg)})
+        return np.broadcast_to(np.asarray(values, dtype=np.float64), (len(self.headings_deg),))
+
     def flight_lines(self, lateral_shift_m=0.0) -> list[FlightLine]:
         """The plan's lines (module docstring, *Flight plans*).
 
@@ -252,9 +276,7 @@ class AirborneScanner:
         list of FlightLine
             ``n_lines · len(headings_deg)`` lines, ordered by line id.
         """
-        shifts = np.broadcast_to(np.asarray(lateral_shift_m, dtype=np.float64), (len(self.headings_deg),))
-        if not np.all(np.isfinite(shifts)):
-            raise InvalidInputError(f"lateral_shift_m must be finite, got {shown(lateral_shift_m)}")
+        shifts = self._shifts(lateral_shift_m)
         s = self.flight_line_spacing_m
         n = self.n_lines
         return [FlightLine(h * n + j, heading, (j - (n - 1) / 2.0) * s + float(shifts[h]) if n > 1 else float(shifts[h]))
@@ -341,7 +363,7 @@ class AirborneScanner:
             s = scanner.flight_line_spacing_m
             shifts = [float(rng.uniform(-s / 2.0, s / 2.0)) if scanner.n_lines > 1 else 0.0 for _ in scanner.headings_deg]
         else:
-            shifts = np.broadcast_to(np.asarray(lateral_shift_m, dtype=np.float64), (len(scanner.headings_deg),)).tolist()
+            shifts = scanner._shifts(lateral_shift_m).tolist()
         parts = []
         for line in scanner.flight_lines(shifts):
             if line.is_reference:
@@ -373,7 +395,7 @@ class AirborneScanner:
 
     def with_(self, **changes) -> AirborneScanner:
         """A copy with some fields changed."""
-        return replace(self, **changes)
+        return replaced(self, **changes)
 
     def ground_rays(
         self, center_xy, half_size_m: float, phase_s: float = 0.0, *, with_time: bool = False

@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.checks import MAX_RANGE_M, count, located, real, sensor_name, shown, text
+from zbuf_occlude.sensors.checks import MAX_RANGE_M, count, located, real, replaced, sensor_name, shown, text
 from zbuf_occlude.sensors.echoes import MAX_RETURNS
 from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS, MAX_DIVERGENCE_DEG, MAX_SUBRAYS, PROFILES, footprint_offsets, subray_directions
 
@@ -210,7 +210,7 @@ class Beam:
 
     def with_(self, **changes) -> Beam:
         """A copy with some fields changed (``beam.with_(footprint_rays=19)``), checked again."""
-        return replace(self, **changes)
+        return replaced(self, **changes)
 
     def dropout_probability(self, range_m: ArrayLike) -> NDArray[np.float64]:
         """Probability that a return at ``range_m`` (metres, any shape) is lost, float64 of that shape:

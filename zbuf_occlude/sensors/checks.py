@@ -37,7 +37,7 @@ from zbuf_occlude.errors import InvalidInputError
 
 __all__ = [
     "MAX_COORDINATE_M", "MAX_RANGE_M", "MAX_SENSOR_RAYS", "MAX_SCENE_OBJECTS", "MAX_NAME_CHARS", "MAX_PATH_CHARS",
-    "SHOWN_CHARS", "shown", "located", "is_number", "real", "count", "reals", "mapping", "text", "sensor_name", "preset",
+    "SHOWN_CHARS", "shown", "located", "is_number", "real", "count", "reals", "mapping", "text", "sensor_name", "preset", "replaced",
 ]  # fmt: skip
 
 #: Largest coordinate or size in a scene, metres: the scene is ray-cast in float32 (Embree),
@@ -272,9 +272,31 @@ def preset(presets: Mapping[str, Any], name: object, what: str, **changes) -> An
     InvalidInputError
         Unknown name, naming the presets there are.
     """
-    from dataclasses import replace
-
     key = str(name).lower()
     if key not in presets:
         raise InvalidInputError(f"unknown {what} {shown(name)}; choose one of {sorted(presets)}")
-    return replace(presets[key], **changes) if changes else presets[key]
+    return replaced(presets[key], **changes) if changes else presets[key]
+
+
+def replaced(obj: Any, **changes) -> Any:
+    """``dataclasses.replace(obj, **changes)``, the copy checked again by its class, naming unknown fields first.
+
+    The one ``with_`` of the sensors and the beam.
+
+    Raises
+    ------
+    InvalidInputError
+        A field ``obj``'s class does not have (a beam's field given to a scanner is named as one), or what
+        the class refuses.
+    """
+    from dataclasses import fields, replace
+
+    known = {f.name for f in fields(obj) if f.init}
+    unknown = sorted(set(changes) - known)
+    if unknown:
+        from zbuf_occlude.sensors.beam import Beam
+
+        beam_fields = {f.name for f in fields(Beam)} & set(unknown)
+        hint = f" ({', '.join(sorted(beam_fields))}: the beam's; change them with with_beam)" if beam_fields and "beam" in known else ""
+        raise InvalidInputError(f"{type(obj).__name__} has no field {', '.join(unknown)}{hint}; its fields: {', '.join(sorted(known))}")
+    return replace(obj, **changes)

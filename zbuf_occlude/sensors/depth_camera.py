@@ -7,13 +7,25 @@ pixel centres at half-integers) looks along ``K⁻¹ (u, v, 1)``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.checks import MAX_RANGE_M, MAX_SENSOR_RAYS, count, located, preset, real, reals, sensor_name, shown, text
+from zbuf_occlude.sensors.checks import (
+    MAX_RANGE_M,
+    MAX_SENSOR_RAYS,
+    count,
+    located,
+    preset,
+    real,
+    reals,
+    replaced,
+    sensor_name,
+    shown,
+    text,
+)
 
 __all__ = ["DepthCamera", "DEPTH_CAMERA_PRESETS", "depth_camera_preset", "nguyen_axial_sigma_m"]
 
@@ -132,7 +144,7 @@ class DepthCamera:
 
     def with_(self, **changes) -> DepthCamera:
         """A copy with some fields changed."""
-        return replace(self, **changes)
+        return replaced(self, **changes)
 
     def sigma_m(self, depth_m: ArrayLike, incidence_deg: ArrayLike) -> NDArray[np.float64]:
         """(N,) float64 axial noise σ at these depths (m) and incidence angles (degrees)."""

@@ -269,20 +269,19 @@ def look_at_pose(eye: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1
 
 
 def as_pose(pose) -> NDArray[np.float64]:
-    """(4, 4) float64 sensor → world pose from a (4, 4) matrix or a (3,) position (no turn).
+    """(4, 4) float64 sensor → world pose from a (4, 4) matrix or a (3,) position (no turn), its values as given.
 
     Raises
     ------
     InvalidInputError
-        Another shape, a value not finite, or a rotation that is not orthonormal and right-handed.
+        Not real numbers (a string, a ragged list), another shape, a value not finite, a last row other
+        than (0, 0, 0, 1), or a rotation that is not orthonormal and right-handed (no scale).
     """
-    m = np.asarray(pose, dtype=np.float64)
-    if m.shape == (3,):
-        out = np.eye(4)
-        out[:3, 3] = m
-        m = out
-    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
-        raise InvalidInputError(f"sensor pose must be a (4, 4) sensor → world matrix or a (3,) position, got shape {m.shape}")
+    rotation, position = _pose_parts(pose, "sensor pose", single=True)
+    m = np.eye(4)
+    m[:3, :3], m[:3, 3] = rotation[0], position[0]
+    if not np.all(np.isfinite(m)):
+        raise InvalidInputError(f"sensor pose must be finite numbers, got {shown(pose)}")
     r = m[:3, :3]
     if not np.allclose(r @ r.T, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
         raise InvalidInputError("sensor pose rotation must be orthonormal and right-handed (no scale)")

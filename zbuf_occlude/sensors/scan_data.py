@@ -141,9 +141,12 @@ class Scan:
         return len(self.points)
 
     def select(self, mask: ArrayLike) -> Scan:
-        """The returns where ``mask`` (bool or index array) holds."""
+        """The returns where ``mask`` (bool or index array) holds; ``meta``'s per-point arrays (one row a return: an
+        airborne scan's ``line_id`` and ``scan_angle_deg``) selected with them."""
         changes = {k: (None if getattr(self, k) is None else getattr(self, k)[mask]) for k in self._PER_POINT}
-        return replace(self, **changes, meta=dict(self.meta))
+        n = len(self)
+        meta = {k: (v[mask] if isinstance(v, np.ndarray) and v.ndim >= 1 and len(v) == n else v) for k, v in self.meta.items()}
+        return replace(self, **changes, meta=meta)
 
     def crop(self, object_id: int) -> Scan:
         """The returns of one scene object (occlusion by every other object included)."""
@@ -376,6 +379,10 @@ def _checked_npz(path: Path, d: dict[str, np.ndarray]) -> None:
                                     f"dtype {a.dtype}")  # fmt: skip
     if "frame" in d and str(d["frame"]) not in FRAMES:
         raise InvalidInputError(f"{path}: frame must be one of {FRAMES}, got {str(d['frame'])!r}")
+    for key in ("return_number", "number_of_returns"):  # LAS 1.4's 1..15, before uint8 would wrap 257 to 1
+        a = d.get(key)
+        if a is not None and len(a) and not (int(a.min()) >= 1 and int(a.max()) <= 15):
+            raise InvalidInputError(f"{path}: {key} must be 1 to 15 (LAS 1.4's return numbers), got {int(a.min())} to {int(a.max())}")
     if "points" in d and d["points"].ndim == 2:
         bad = int((~np.isfinite(d["points"].astype(np.float64, copy=False))).any(axis=1).sum())
         if bad:
