@@ -106,8 +106,8 @@ def hit_energy(
     The LiDAR range equation for an extended Lambertian target (Kashani et al. 2015, Sensors
     15(11), Eq. 4), up to the constant of the sensor (pulse energy, aperture, efficiencies):
     a surface of reflectance ρ, met at incidence θ and range R by the share ``weight`` of the
-    beam, returns power ∝ ``ρ cos θ weight / R²``.  Today's radiometric threshold
-    (:attr:`Lidar.detection_threshold <zbuf_occlude.sensors.lidar.Lidar.detection_threshold>`,
+    beam, returns power ∝ ``ρ cos θ weight / R²``.  The beam's radiometric threshold
+    (:attr:`Beam.detection_threshold <zbuf_occlude.sensors.beam.Beam.detection_threshold>`,
     m⁻²) is in the same units.
 
     Parameters
@@ -347,7 +347,7 @@ def resolve_echoes(
         hit of their pulse merge into its echo.
     detection_threshold : float
         Least echo energy detected, ≥ 0, in the units of ``energy``
-        (:attr:`Lidar.detection_threshold <zbuf_occlude.sensors.lidar.Lidar.detection_threshold>`
+        (:attr:`Beam.detection_threshold <zbuf_occlude.sensors.beam.Beam.detection_threshold>`
         with :func:`hit_energy`); 0 keeps every echo.
     max_returns : int
         Most returns per pulse, 1 to :data:`MAX_RETURNS`; the first ones in range order are kept.
