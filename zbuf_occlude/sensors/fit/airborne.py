@@ -50,7 +50,7 @@ one side (``two_sided_fraction`` at most :data:`ONE_SIDED_SHARE`), the fitted sc
 :data:`FITTED_LINES` parallel lines with no side overlap (strips that abut, at the survey density
 of one strip).  ``scan``, ``farm`` and ``experiment sim2real`` place an object near the plan
 centre and shift the lines across track by a uniform draw over one strip
-(:func:`~zbuf_occlude.sensors.airborne.scan_airborne`), so the object lies in one strip, anywhere
+(:func:`~zbuf_occlude.sensors.scan.scan_airborne`), so the object lies in one strip, anywhere
 across it: its scan angle is spread as the fit assumed, ``tan θ`` uniform on ``[0, tan(S/2)]``.
 Crops mostly lit from both sides (strips with a large overlap) cannot tell the plan: the base's
 is kept.

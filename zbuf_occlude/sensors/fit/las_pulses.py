@@ -34,7 +34,7 @@ class LasPulses:
     pulse : (N,) int64
         Sorted position -> pulse, 0 to ``count - 1``, non-decreasing.
     count : int
-        LasPulses.
+        Pulses.
     complete : (count,) bool
         Whether each pulse is complete.
     returns : (count,) int64

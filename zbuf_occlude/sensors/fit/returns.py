@@ -267,7 +267,7 @@ def pulse_bootstrap(
     Parameters
     ----------
     n_pulses : int
-        LasPulses of the scan (:attr:`LasPulses.count`).
+        Pulses of the scan (:attr:`LasPulses.count`).
     figures : mapping of str to callable
         Each called with None (the scan as it is) and with ``(n_pulses,) float64`` weights (a
         resample: how many times each pulse was drawn), returning a float, NaN where the
