@@ -45,7 +45,8 @@ PRIMITIVES = {
 
 
 def _outline(text: str | None) -> tuple[float, ...] | None:
-    """``--outline V,V,...``: two or more widths over the scan's width, bottom to top (:func:`~zbuf_occlude.sensors.scene.check_width_profile`)."""
+    """``--outline V,V,...``: two or more widths over the scan's width, bottom to top
+    (:func:`~zbuf_occlude.sensors.object_shapes.check_width_profile`)."""
     from zbuf_occlude.sensors.object_shapes import check_width_profile
 
     if text is None:
@@ -121,14 +122,17 @@ SCAN_SENSOR = "hdl32e"
 
 
 def _scan_sensor(args: argparse.Namespace):
-    """The sensor ``scan`` fires: ``--sensor``'s (:data:`SCAN_SENSOR` by default) with the return physics options, or the
-    :class:`~zbuf_occlude.sensors.ray_table.RayTable` of ``--ray-table FILE``.
+    """The sensor ``scan`` fires: ``--sensor``'s (:data:`SCAN_SENSOR` by default), or the
+    :class:`~zbuf_occlude.sensors.ray_table.RayTable` of ``--ray-table FILE`` (with
+    :data:`~zbuf_occlude.sensors.ray_table.RAY_TABLE_FILE_BEAM`), either with the return physics options applied
+    (:func:`~zbuf_occlude.cli.return_physics.with_return_physics`: a ray table takes every beam option).
 
     Raises
     ------
     InvalidInputError
-        ``--ray-table`` with ``--sensor`` (one sensor per scan) or with a return physics option (they model LiDAR
-        presets and sensor files), or a file :func:`~zbuf_occlude.sensors.ray_table.load_ray_table` refuses.
+        ``--ray-table`` with ``--sensor`` (one sensor per scan), a file
+        :func:`~zbuf_occlude.sensors.ray_table.load_ray_table` refuses, or what
+        :func:`~zbuf_occlude.cli.return_physics.with_return_physics` refuses.
     """
     if args.ray_table is None:
         args.sensor = args.sensor or SCAN_SENSOR
@@ -336,9 +340,9 @@ def _add_return_physics_arguments(p: argparse.ArgumentParser) -> None:
         "range (mixed pixels at shallow depth edges; half the pulse length, ~0.75 m for 5 ns); 0: never (default: the sensor's beam's)",
     )  # fmt: skip
     r.add_argument("--max-returns", metavar="N", action=Checked, check=check_max_returns, default=None,
-                   help="with --footprint (or a sensor file's footprint, airborne scanners too): up to N returns per pulse (1..15), the "
+                   help="with --footprint (or a sensor's own footprint): up to N returns per pulse (1..15), the "
                         "footprint's echoes resolved by --range-resolution, each with its return number, number of returns and "
-                        "intensity (default: the sensor's, 1 for presets)")  # fmt: skip
+                        "intensity (default: the sensor's beam's: 1 for spinning presets, 4 to 15 for airborne ones)")  # fmt: skip
     r.add_argument("--range-resolution", metavar="M", action=Checked, check=real(0.0, above=True, unit="metres"), default=None,
                    help="with --max-returns above 1: echoes closer than M metres merge into one return (half the pulse length, "
                         "~0.75 m for 5 ns) (default: the sensor's)")  # fmt: skip
