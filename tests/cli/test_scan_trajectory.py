@@ -83,3 +83,17 @@ def test_a_hostile_trajectory_is_one_line_naming_the_file(tmp_path: Path, capsys
     write(path)
     code, err = _run(["scan", SCENE, "--trajectory", str(path), "--no-progress", "--out", str(tmp_path / "o")], capsys)
     assert code == 2 and "\n" not in err and "Traceback" not in err and str(path) in err, err
+
+
+def test_more_sweeps_than_the_trajectory_lasts_are_refused_before_any_is_written(tmp_path: Path, capsys) -> None:
+    code, err = _run(["scan", SCENE, "--trajectory", str(_trajectory(tmp_path)), "--samples", "11", "--no-progress",
+                      "--out", str(tmp_path / "o")], capsys)  # fmt: skip
+    assert code == 2 and "lasts 1 s, and --samples 11 sweeps of hdl32e take 1.1 s" in err, err
+    assert not (tmp_path / "o").exists()
+
+
+def test_fit_sensor_class_codes_must_be_ascii_digits(tmp_path: Path, capsys) -> None:
+    code, err = _run(
+        ["fit-sensor", str(tmp_path), "--sensor", "riegl-q1560", "--classes", "5,²", "--out", str(tmp_path / "f.json")], capsys
+    )
+    assert code == 2 and "--classes must be ASPRS class codes" in err and "Traceback" not in err, err

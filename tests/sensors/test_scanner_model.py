@@ -87,6 +87,9 @@ def test_a_sensor_file_changes_a_preset_beam_in_part_and_reads_the_flat_layout()
     flat = sensor_from_spec({"name": "x", "elevations_deg": [0.0], "range_noise_m": 0.05, "detection_reflectivity": 0.5,
                              "detection_range_m": 50.0, "beam_divergence_deg": 0.2})  # fmt: skip
     assert flat.beam.range_noise_m == 0.05 and flat.beam.divergence_deg == 0.2 and flat.beam.detection_threshold == 0.5 / 50.0**2
+    assert (flat.beam.min_range_m, flat.beam.max_range_m) == (1.0, 100.0)  # what the flat layout's fields defaulted to
+    with pytest.raises(InvalidInputError, match="give one field twice"):
+        sensor_from_spec({"name": "x", "elevations_deg": [0.0], "range_noise_m": 0.05, "beam": {"range_noise_m": 0.01}})
 
 
 @pytest.mark.parametrize(

@@ -22,7 +22,7 @@ def _classes(text: str, option: str) -> tuple[int, ...]:
     if text.strip().lower() == "none":
         return ()
     codes = [c.strip() for c in text.split(",")]
-    if not codes or len(codes) > 256 or not all(c.isdigit() and int(c) <= 255 for c in codes):
+    if not codes or len(codes) > 256 or not all(c.isascii() and c.isdigit() and int(c) <= 255 for c in codes):
         raise InvalidInputError(f"{option} must be ASPRS class codes 0 to 255, C,C,... (or none), got {shown(text)}")
     return tuple(int(c) for c in codes)
 

@@ -163,7 +163,7 @@ def _frame(frame: str | None, sensor) -> str:
     return "world"
 
 
-def _trajectory(path: str | None, sensor):
+def _trajectory(path: str | None, sensor, samples: int):
     """``--trajectory``'s :class:`~zbuf_occlude.sensors.platform.Trajectory`, or None.
 
     Raises
@@ -179,7 +179,12 @@ def _trajectory(path: str | None, sensor):
         raise InvalidInputError(f"--trajectory {path}: a {kind.title} {'flies its own plan' if kind.flies else 'takes one pose'}")
     from zbuf_occlude.sensors.platform import load_trajectory
 
-    return load_trajectory(path)
+    trajectory = load_trajectory(path)
+    needed = samples * sensor.sweep_s
+    if not trajectory.is_static and trajectory.duration_s + 1e-9 < needed:
+        raise InvalidInputError(f"--trajectory {path} lasts {trajectory.duration_s:g} s, and --samples {samples} sweeps of {sensor.name} "
+                                f"take {needed:g} s: give fewer samples or a longer trajectory")  # fmt: skip
+    return trajectory
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
@@ -238,7 +243,7 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
         if args.crop:
             raise InvalidInputError(f"--crop keeps one mesh's returns; {src.name} is a scene file, scanned whole")
         scene = load_scene(src)
-        trajectory = _trajectory(args.trajectory, sensor)
+        trajectory = _trajectory(args.trajectory, sensor, args.samples)
         if kind.pulsed:
             pose = scene.default_sensor_pose()
         else:  # a camera looks at the first object from the sensor position

@@ -136,6 +136,13 @@ LEGACY_BEAM_KEYS = {
 }  # fmt: skip
 _LEGACY_DETECTION = ("detection_reflectivity", "detection_range_m")
 _BEAM_KEYS = tuple(f.name for f in fields(Beam) if f.init)
+#: The beam a flat-layout file without a ``"preset"`` starts from: the defaults the flat fields had (a spinning LiDAR's and
+#: a ray table's: 1-100 m, 0.02 m noise, τ = 0.8 / 100²; an airborne scanner's: 0.02 m noise at 1064 nm).
+_LEGACY_BEAM = {
+    "lidar": Beam("flat-layout", min_range_m=1.0, max_range_m=100.0, range_noise_m=0.02, detection_threshold=0.8 / 100.0**2),
+    "ray_table": Beam("flat-layout", min_range_m=1.0, max_range_m=100.0, range_noise_m=0.02, detection_threshold=0.8 / 100.0**2),
+    "airborne": Beam("flat-layout", wavelength_nm=1064.0, range_noise_m=0.02),
+}
 
 
 def sensor_from_name(name: str | os.PathLike):
@@ -194,7 +201,8 @@ def sensor_from_spec(spec: object):
             raise InvalidInputError(f"preset {shown(preset)} is not a {kind.title}; choose one of {sorted(kind.presets)}")
         base = kind.presets[preset.lower()]
     if kind.pulsed:
-        spec["beam"] = _beam_of(spec, base.beam if base is not None else _default_beam(kind))
+        flat = any(key in spec for key in (*LEGACY_BEAM_KEYS, *_LEGACY_DETECTION))
+        spec["beam"] = _beam_of(spec, base.beam if base is not None else _LEGACY_BEAM[kind.name] if flat else _default_beam(kind))
     if base is not None:
         return replace(base, **spec)
     missing = [f.name for f in fields(kind.cls) if f.init and f.name not in spec and _required(f)]
@@ -219,11 +227,17 @@ def _beam_of(spec: dict, base: Beam) -> Beam:
     changes = mapping(spec.pop("beam", {}), "beam", _BEAM_KEYS) if "beam" in spec else {}
     for old, new in LEGACY_BEAM_KEYS.items():
         if old in spec:
-            changes.setdefault(new, spec.pop(old))
+            if new in changes:
+                raise InvalidInputError(f'{old} and beam.{new} give one field twice: keep the one in "beam"')
+            changes[new] = spec.pop(old)
     if any(key in spec for key in _LEGACY_DETECTION):
         reflectivity, range_m = spec.pop("detection_reflectivity", 0.8), spec.pop("detection_range_m", 100.0)
         with located("detection_reflectivity / detection_range_m²"):
-            changes.setdefault("detection_threshold", real(reflectivity, "detection_reflectivity", low=0.0) / real(
+            if "detection_threshold" in changes:
+                raise InvalidInputError(
+                    "detection_reflectivity / detection_range_m and a detection_threshold give one field twice: keep one"
+                )
+            changes["detection_threshold"] = (real(reflectivity, "detection_reflectivity", low=0.0) / real(
                 range_m, "detection_range_m", low=1e-3, high=MAX_RANGE_M) ** 2)  # fmt: skip
     with located("beam"):
         return base.with_(**changes) if changes else base

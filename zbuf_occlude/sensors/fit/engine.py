@@ -416,7 +416,7 @@ def fit_sensor_to_las(files: Sequence[Path], real: str | os.PathLike, sensor: st
     altitude = altitude_m if altitude_m is not None else getattr(base, "altitude_m", None)
     if altitude is None:
         raise InvalidInputError(f"--sensor {sensor} is a spinning LiDAR: give --altitude M, the range to the ground in your scans, metres")
-    bootstrap = bootstrap or BOOTSTRAP
+    bootstrap = BOOTSTRAP if bootstrap is None else bootstrap
     curve: dict = {}
     if divergence_shares is not None:  # read first: a bad table is refused before the scans are
         from zbuf_occlude.io.tables import read_csv_rows
