@@ -97,3 +97,11 @@ def test_fit_sensor_class_codes_must_be_ascii_digits(tmp_path: Path, capsys) -> 
         ["fit-sensor", str(tmp_path), "--sensor", "riegl-q1560", "--classes", "5,²", "--out", str(tmp_path / "f.json")], capsys
     )
     assert code == 2 and "--classes must be ASPRS class codes" in err and "Traceback" not in err, err
+
+
+def test_a_moving_scan_written_as_las_needs_the_world_frame(tmp_path: Path, capsys) -> None:
+    argv = ["scan", SCENE, "--trajectory", str(_trajectory(tmp_path)), "--format", "las", "--no-progress"]
+    code, err = _run([*argv, "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and "give --frame world" in err, err
+    code, err = _run([*argv, "--frame", "world", "--out", str(tmp_path / "w")], capsys)
+    assert code == 0, err

@@ -268,3 +268,13 @@ def test_an_airborne_scan_takes_the_material_table_by_default_for_a_radiometric_
     assert not same(arrays(als), arrays(als, reflectivity=None, transmittance=None))
     plain = als.with_(beam=als.beam.with_(intensity_scale=None))  # no intensity model: no optics by default
     assert same(arrays(plain), arrays(plain, reflectivity=None, transmittance=None))
+
+
+def test_a_moving_scan_in_the_sensor_frame_is_not_classified_into_las():
+    lidar = lidar_preset("vlp16")
+    moving = Trajectory.linear(np.eye(4), (10.0, 0.0, 0.0), 0.2)
+    raw = scan(_wall(), lidar, moving, seed=0)
+    with pytest.raises(InvalidInputError, match="frame='world' for LAS"):
+        raw.to_las_bytes()
+    assert len(scan(_wall(), lidar, moving, seed=0, frame="world").to_las_bytes()) > 0
+    assert len(scan(_wall(), lidar, np.eye(4), seed=0).to_las_bytes()) > 0  # standing still: its sensor frame is one frame

@@ -244,6 +244,9 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
             raise InvalidInputError(f"--crop keeps one mesh's returns; {src.name} is a scene file, scanned whole")
         scene = load_scene(src)
         trajectory = _trajectory(args.trajectory, sensor, args.samples)
+        if trajectory is not None and args.frame == "sensor" and set(formats) & set(LAS_FORMATS):
+            raise InvalidInputError(f"--trajectory {args.trajectory} with --format {args.format}: a moving sensor's points lie each in its "
+                                    "own pulse's frame, which LAS cannot classify by height; give --frame world")  # fmt: skip
         if kind.pulsed:
             pose = scene.default_sensor_pose()
         else:  # a camera looks at the first object from the sensor position

@@ -318,6 +318,8 @@ def fire_pulses(
     if frame == "sensor" and not pulses.has_sensor_frame:
         raise InvalidInputError(f"{sensor_name!r} moves along its flight lines: its points have no one sensor frame; use the world frame")
     meta: dict = {"backend": backend, "n_rays": len(pulses), **pulses.meta}
+    if not pulses.static and pulses.has_sensor_frame:
+        meta["moving"] = True  # each point in its own pulse's frame when frame="sensor" (Scan.to_las_bytes refuses to classify it)
     k = beam.footprint_rays
     # one return a pulse from a footprint compares every sub-ray with every other (strongest_echo: pulses × K × K booleans and floats)
     pair_bytes = 0 if k == 1 or beam.resolves_echoes else k * SUBRAY_PAIR_BYTES

@@ -282,6 +282,11 @@ class Scan:
         start = real(gps_start_s, "gps_start_s")
         source = count(scan_number, "scan_number", low=0, high=65535)
         top = 65535 if self.max_intensity is None else count(self.max_intensity, "max_intensity", low=1, high=65535)
+        if self.frame != "world" and self.meta.get("moving"):
+            raise InvalidInputError(
+                "a scan of a moving sensor in the sensor frame holds each point in its own pulse's frame: no one height above the "
+                "ground classifies it; scan it with frame='world' for LAS"
+            )
         if crs is not None and self.frame != "world":
             raise InvalidInputError(
                 f"crs {crs} labels world coordinates; this scan is in the {self.frame} frame (scan it with frame='world')"
