@@ -8,7 +8,7 @@
    one seed at a time, the LAZ read back with laspy;
 4. on the points classified high vegetation (ASPRS 5) in the LAZ: the share from pulses of several returns, the
    intensities (counts) and the median intensity of first-of-several returns over that of single returns, beside
-   the tile's own figures from the fitted sensor's ``fit`` block (or laspy on the tile).
+   the tile's own figures (laspy on the tile).
 
 Prints one row per seed and the mean ± std over seeds (research data: never copied into the repository).
 """
@@ -53,7 +53,7 @@ def plot_figures(laz: bytes) -> dict[str, float]:
             "intensity_median": float(np.median(i[high])), "zero": float((i[high] == 0).mean()), "saturated": float((i[high] == 65535).mean())}  # fmt: skip
 
 
-def plot_file(folder: Path, seed: int, spacing_m: float = 14.0) -> dict:
+def plot_file(seed: int, spacing_m: float = 14.0) -> dict:
     """A scene file of the plot: the meshes of :data:`PLOT_TREES` (copied to ``meshes/`` beside it: a scene's meshes lie in its
     folder) at their sizes on a square grid, each turned by a drawn yaw, classed vegetation, on a ground reaching past the
     grid (what ``experiments.returns.plot_scene`` builds)."""
@@ -88,7 +88,7 @@ def main(tile: str, bush_folder: str, seeds: int, extra: list[str]) -> None:
     rows = []
     for seed in range(seeds):
         scene = out / f"plot_{seed}.json"
-        scene.write_text(json.dumps(plot_file(Path(bush_folder), seed)))
+        scene.write_text(json.dumps(plot_file(seed)))
         subprocess.run([sys.executable, "-m", "zbuf_occlude", "scan", str(scene), "--sensor", str(fitted), "--format", "laz",
                         "--seed", str(seed), "--no-progress", "--out", str(out / f"scan_{seed}"), *extra], check=True)  # fmt: skip
         row = plot_figures(next((out / f"scan_{seed}").glob("*.laz")).read_bytes())
