@@ -377,7 +377,11 @@ def _extra_bytes(n: int, object_id: Any, class_index: Any, class_names: Sequence
     if (class_index is None) != (class_names is None):
         raise InvalidInputError("class_index and class_names go together: give both or neither")
     if class_names is not None:
-        if not isinstance(class_names, Sequence) or isinstance(class_names, (str, bytes)) or not all(isinstance(n, str) for n in class_names):
+        if (
+            not isinstance(class_names, Sequence)
+            or isinstance(class_names, (str, bytes))
+            or not all(isinstance(n, str) for n in class_names)
+        ):
             raise ArgumentTypeError(f"class_names must be a sequence of str, got {described(class_names)}")
         high = min(len(class_names), 65536) - 1
         if high < 0 and n:

@@ -51,7 +51,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -174,9 +173,6 @@ class AirborneScanner:
     n_lines: int = 1
     side_overlap: float = 0.0
     headings_deg: tuple[float, ...] = (0.0,)
-
-    #: The kind of sensor (:mod:`~zbuf_occlude.sensors.kinds`).
-    kind: ClassVar[str] = "airborne"
 
     def __post_init__(self) -> None:
         sensor_name(self.name, "airborne scanner name")

@@ -6,6 +6,8 @@ The pattern (:class:`~zbuf_occlude.sensors.airborne.AirborneScanner`) and the be
 
 from __future__ import annotations
 
+import math
+
 
 from zbuf_occlude.sensors.airborne import AirborneScanner
 from zbuf_occlude.sensors.beam import Beam
@@ -56,7 +58,7 @@ def _airborne_beam(name: str, source: str, **fields) -> Beam:
 # full waveform, which LAS 1.4 caps at 15 return numbers).
 _Q1560_BEAM = _airborne_beam(
     "riegl-q1560", "RIEGL LMS-Q1560 data sheet (2015): ≤ 0.25 mrad, 20 mm; LMS-Q780 in HELIOS++ scanners_als.xml: 4 ns pulse, unlimited echoes",
-    divergence_deg=0.25e-3 * 180.0 / 3.141592653589793, max_returns=15, range_resolution_m=_FOUR_NS_M, range_noise_m=0.02,
+    divergence_deg=math.degrees(0.25e-3), max_returns=15, range_resolution_m=_FOUR_NS_M, range_noise_m=0.02,
 )  # fmt: skip
 AIRBORNE_PRESETS: dict[str, AirborneScanner] = {
     "riegl-q1560": AirborneScanner(
@@ -77,7 +79,7 @@ AIRBORNE_PRESETS: dict[str, AirborneScanner] = {
         "riegl-q780", swath_deg=60.0, pulse_rate_hz=400_000.0, line_rate_hz=200.0, altitude_m=1000.0, speed_mps=60.0,
         pattern="linear", source="RIEGL LMS-Q780 as HELIOS++ lists it (scanners_als.xml); altitude and speed assumed",
         beam=_airborne_beam("riegl-q780", "HELIOS++ scanners_als.xml riegl_lms-q780: 0.25 mrad, 4 ns, 20 mm, unlimited echoes",
-                            divergence_deg=0.25e-3 * 180.0 / 3.141592653589793, max_returns=15, range_resolution_m=_FOUR_NS_M,
+                            divergence_deg=math.degrees(0.25e-3), max_returns=15, range_resolution_m=_FOUR_NS_M,
                             range_noise_m=0.02),
     ),
     # RIEGL VQ-780i (scanners_als.xml lines 132-146): 0.25 mrad, 4 ns, 150-1000 kHz, 20-300 lines/s,
@@ -87,7 +89,7 @@ AIRBORNE_PRESETS: dict[str, AirborneScanner] = {
         "riegl-vq780i", swath_deg=60.0, pulse_rate_hz=250_000.0, line_rate_hz=150.0, altitude_m=1000.0, speed_mps=60.0,
         pattern="linear", source="RIEGL VQ-780i as HELIOS++ lists it (scanners_als.xml); altitude, speed and rates assumed",
         beam=_airborne_beam("riegl-vq780i", "HELIOS++ scanners_als.xml riegl_vq_780i: 0.25 mrad, 4 ns, 20 mm, 15 echoes at 250 kHz",
-                            divergence_deg=0.25e-3 * 180.0 / 3.141592653589793, max_returns=15, range_resolution_m=_FOUR_NS_M,
+                            divergence_deg=math.degrees(0.25e-3), max_returns=15, range_resolution_m=_FOUR_NS_M,
                             range_noise_m=0.02),
     ),
     # Leica ALS50-II (scanners_als.xml lines 24-35): 0.22 mrad, 10 ns, 20/60/150 kHz, oscillating
@@ -98,7 +100,7 @@ AIRBORNE_PRESETS: dict[str, AirborneScanner] = {
         "leica-als50-ii", swath_deg=75.0, pulse_rate_hz=150_000.0, line_rate_hz=80.0, altitude_m=1000.0, speed_mps=60.0,
         pattern="oscillating", source="Leica ALS50-II as HELIOS++ lists it (scanners_als.xml); altitude, speed and rates assumed",
         beam=_airborne_beam("leica-als50-ii", "HELIOS++ scanners_als.xml leica_als50-ii: 0.22 mrad, 10 ns, 5 cm, 4 targets 3.5 m apart",
-                            divergence_deg=0.22e-3 * 180.0 / 3.141592653589793, max_returns=4, range_resolution_m=3.5,
+                            divergence_deg=math.degrees(0.22e-3), max_returns=4, range_resolution_m=3.5,
                             range_noise_m=0.05),
     ),
     # Optech Galaxy (scanners_als.xml lines 82-95): 0.354 mrad, 1064 nm, 8 ns, 35-550 kHz,
@@ -108,7 +110,7 @@ AIRBORNE_PRESETS: dict[str, AirborneScanner] = {
         "optech-galaxy", swath_deg=60.0, pulse_rate_hz=550_000.0, line_rate_hz=120.0, altitude_m=1000.0, speed_mps=60.0,
         pattern="oscillating", source="Optech Galaxy as HELIOS++ lists it (scanners_als.xml); altitude, speed and rates assumed",
         beam=_airborne_beam("optech-galaxy", "HELIOS++ scanners_als.xml optech_galaxy: 0.354 mrad, 1064 nm, 8 ns, 3 cm, 8 returns",
-                            divergence_deg=0.354e-3 * 180.0 / 3.141592653589793, max_returns=8,
+                            divergence_deg=math.degrees(0.354e-3), max_returns=8,
                             range_resolution_m=0.5 * 299_792_458.0 * 8e-9, range_noise_m=0.03),
     ),
 }  # fmt: skip

@@ -32,7 +32,7 @@ from zbuf_occlude.sensors.checks import MAX_RANGE_M, count, located, real, repla
 from zbuf_occlude.sensors.echoes import MAX_RETURNS
 from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS, MAX_DIVERGENCE_DEG, MAX_SUBRAYS, PROFILES, footprint_offsets, subray_directions
 
-__all__ = ["Beam", "IDEAL_BEAM", "RETURN_MODES", "MAX_INTENSITY_COUNTS", "check_beam", "footprint_changes"]
+__all__ = ["Beam", "IDEAL_BEAM", "RETURN_MODES", "MAX_INTENSITY_COUNTS", "check_beam", "footprint_changes", "intensity_counts"]
 
 #: How the receiver turns a pulse's resolved echoes into returns (``Beam.return_mode``):
 #:
@@ -199,11 +199,6 @@ class Beam:
         return self.max_returns > 1 or self.return_mode != "all"
 
     @property
-    def multi_return(self) -> bool:
-        """Alias of :attr:`resolves_echoes`: the multi-return model is on."""
-        return self.resolves_echoes
-
-    @property
     def is_ideal(self) -> bool:
         """One ray, its first hit, no noise, no loss, no radiometry (:data:`IDEAL_BEAM`'s physics, any name and wavelength)."""
         return replace(self, name="ideal", source="", wavelength_nm=IDEAL_BEAM.wavelength_nm) == IDEAL_BEAM
@@ -241,7 +236,8 @@ class Beam:
         return subray_directions(d, footprint_offsets(self.footprint_rays, self.divergence_deg)[0])
 
     def intensity_counts(self, energy: ArrayLike) -> NDArray[np.uint16]:
-        """(N,) uint16 LAS intensities of received energies ``energy (N,)`` m⁻²: ``min(rint(E · intensity_scale), max_intensity)``.
+        """(N,) uint16 LAS intensities of received energies ``energy (N,)`` m⁻²: :func:`intensity_counts` with the beam's
+        ``intensity_scale`` and ``max_intensity``.
 
         Raises
         ------
@@ -250,8 +246,14 @@ class Beam:
         """
         if self.intensity_scale is None:
             raise InvalidInputError(f"beam {self.name!r} has no intensity_scale (counts per unit of received energy)")
-        e = np.nan_to_num(np.asarray(energy, dtype=np.float64), nan=0.0, posinf=np.inf)
-        return np.minimum(np.rint(np.clip(e, 0.0, None) * self.intensity_scale), self.max_intensity).astype(np.uint16)
+        return intensity_counts(energy, self.intensity_scale, self.max_intensity)
+
+
+def intensity_counts(energy: ArrayLike, scale: float, top: int = MAX_INTENSITY_COUNTS) -> NDArray[np.uint16]:
+    """(N,) uint16 intensity counts of received energies ``energy (N,)`` m⁻²: ``min(rint(E · scale), top)``, 0 for
+    an energy that is negative or not a number.  The one rule of a beam's counts and of a scan's LAS file."""
+    e = np.nan_to_num(np.asarray(energy, dtype=np.float64), nan=0.0, posinf=np.inf)
+    return np.minimum(np.rint(np.clip(e, 0.0, None) * float(scale)), int(top)).astype(np.uint16)
 
 
 #: One ray per pulse, its first hit; no noise, loss or radiometry: the idealised scan.

@@ -294,9 +294,7 @@ def replaced(obj: Any, **changes) -> Any:
     known = {f.name for f in fields(obj) if f.init}
     unknown = sorted(set(changes) - known)
     if unknown:
-        from zbuf_occlude.sensors.beam import Beam
-
-        beam_fields = {f.name for f in fields(Beam)} & set(unknown)
-        hint = f" ({', '.join(sorted(beam_fields))}: the beam's; change them with with_beam)" if beam_fields and "beam" in known else ""
+        beam_fields = {f.name for f in fields(obj.beam)} & set(unknown) if "beam" in known else set()
+        hint = f" ({', '.join(sorted(beam_fields))}: the beam's; change them with with_beam)" if beam_fields else ""
         raise InvalidInputError(f"{type(obj).__name__} has no field {', '.join(unknown)}{hint}; its fields: {', '.join(sorted(known))}")
     return replace(obj, **changes)

@@ -36,15 +36,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.checks import count, real, shown, text
-from zbuf_occlude.sensors.echoes import MAX_RETURNS
+from zbuf_occlude.sensors.checks import count, real, text
 
 __all__ = [
     "FOOTPRINT_RAYS",
     "MAX_DIVERGENCE_DEG",
     "MAX_SUBRAYS",
     "PROFILES",
-    "check_resolved_footprint",
     "footprint_offsets",
     "subray_directions",
 ]
@@ -88,36 +86,6 @@ def _ring_counts(n_subrays: int) -> list[int]:
     rank = np.lexsort((-np.arange(n_rings), -(ideal - counts)))
     counts[rank[:left]] += 1
     return [int(c) for c in counts]
-
-
-def check_resolved_footprint(sensor, footprint: str) -> None:
-    """Check and store (as ints) the footprint and return fields of a scanner whose footprint is
-    always resolved into returns (an airborne scanner, a ray table; a spinning
-    :class:`~.lidar.Lidar` also keeps a one-return strongest-echo footprint, checked on its own).
-
-    ``sensor`` is a frozen dataclass with ``footprint_rays``, ``max_returns``, ``beam_profile``,
-    ``beam_divergence_deg`` and ``range_resolution_m`` (the last two already checked as numbers);
-    ``footprint`` names it in the messages ("an airborne footprint").
-
-    Raises
-    ------
-    InvalidInputError
-        Naming the field: ``footprint_rays`` outside 1..:data:`MAX_SUBRAYS`, or above 1 without a
-        divergence or with ``max_returns`` 1; ``max_returns`` outside 1..15; an unknown
-        ``beam_profile``; ``range_resolution_m`` 0 with ``max_returns`` above 1, or above 0 with 1.
-    """
-    object.__setattr__(sensor, "footprint_rays", count(sensor.footprint_rays, "footprint_rays", low=1, high=MAX_SUBRAYS))
-    object.__setattr__(sensor, "max_returns", count(sensor.max_returns, "max_returns", low=1, high=MAX_RETURNS))
-    text(sensor.beam_profile, "beam_profile", choices=PROFILES)
-    k, m = sensor.footprint_rays, sensor.max_returns
-    if k > 1 and sensor.beam_divergence_deg <= 0:
-        raise InvalidInputError(f"footprint_rays {k} needs beam_divergence_deg > 0")
-    if m > 1 and sensor.range_resolution_m <= 0:
-        raise InvalidInputError(f"max_returns {m} needs range_resolution_m > 0 (the least range between two returns, c·τ/2)")
-    if m == 1 and sensor.range_resolution_m > 0:
-        raise InvalidInputError(f"range_resolution_m {shown(sensor.range_resolution_m)} needs max_returns above 1")
-    if m == 1 and k > 1:
-        raise InvalidInputError(f"footprint_rays {k} needs max_returns above 1 ({footprint} is resolved into returns)")
 
 
 def footprint_offsets(n_subrays: int, divergence_deg: float, *, profile: str = "tophat") -> tuple[NDArray[np.float64], NDArray[np.float64]]:

@@ -8,7 +8,6 @@ Sensor frame (right-handed, metres): x forward (azimuth 0°), y left (azimuth +9
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -18,7 +17,7 @@ from zbuf_occlude.sensors.beam import IDEAL_BEAM, Beam, check_beam
 from zbuf_occlude.sensors.pulses import Pulses, placed
 from zbuf_occlude.sensors.checks import MAX_SENSOR_RAYS, located, preset, real, reals, replaced, sensor_name, shown, text
 
-__all__ = ["Lidar", "LIDAR_PRESETS", "lidar_preset", "beam_directions"]
+__all__ = ["Lidar", "LIDAR_PRESETS", "SPINNING_INTENSITY_SCALE", "lidar_preset", "beam_directions"]
 
 
 @dataclass(frozen=True)
@@ -63,9 +62,6 @@ class Lidar:
     beam: Beam = IDEAL_BEAM
     source: str = ""
     _elev: NDArray[np.float64] = field(init=False, repr=False, compare=False)
-
-    #: The kind of sensor (:mod:`~zbuf_occlude.sensors.kinds`).
-    kind: ClassVar[str] = "lidar"
 
     def __post_init__(self) -> None:
         sensor_name(self.name, "lidar name")
@@ -210,13 +206,14 @@ _HDL64E = tuple(np.round(np.concatenate([2.0 - np.arange(32) / 3.0, -8.83 - 0.5 
 # ``intensity_scale`` is chosen to give a diffuse target of ρ = 0.5 at 15 m (the median range of a
 # street scan) 50 counts: 50 / (0.5 / 15²) = 22,500 counts·m² (an ASSUMPTION: a scale, not a
 # calibration), and ``max_intensity`` 255.
-_VELODYNE_COUNTS = 22_500.0
+#: Counts·m² of the spinning presets' 8-bit intensities (comment above): an ASSUMPTION, a scale, not a calibration.
+SPINNING_INTENSITY_SCALE = 22_500.0
 
 
 def _spinning_beam(name: str, **fields) -> Beam:
     """A spinning LiDAR preset's beam: 905 nm, one return per pulse (the firmware's strongest-return mode with
     one ray), τ = 0.8 / 100² unless given, 8-bit intensities."""
-    fields = {"detection_threshold": 0.8 / 100.0**2, "intensity_scale": _VELODYNE_COUNTS, "max_intensity": 255, **fields}
+    fields = {"detection_threshold": 0.8 / 100.0**2, "intensity_scale": SPINNING_INTENSITY_SCALE, "max_intensity": 255, **fields}
     return Beam(name, wavelength_nm=905.0, **fields)
 
 

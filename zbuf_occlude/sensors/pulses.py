@@ -82,10 +82,6 @@ class Pulses:
         """Whether every pulse leaves from one point with one attitude (a scanner standing still)."""
         return self.rotation is not None
 
-    def origins_of(self, rows: NDArray[np.int64]) -> NDArray[np.float64]:
-        """(len(rows), 3) or (3,) float64: the origins of pulse rows ``rows`` (the one origin of a still scanner)."""
-        return self.origins if self.origins.ndim == 1 else self.origins[rows]
-
 
 def placed(directions_sensor: NDArray[np.float64], time_s: NDArray[np.float64], platform) -> tuple[NDArray[np.float64], ...]:
     """``(directions, origins, rotation, rotations, time_s)`` of pulses fired along ``directions_sensor (P, 3)`` at

@@ -17,7 +17,6 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
-from typing import ClassVar
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +26,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.ray_tables import read_ray_table
 from zbuf_occlude.sensors.checks import MAX_SENSOR_RAYS, count, located, real, reals, replaced, sensor_name, shown, text
 from zbuf_occlude.sensors.beam import IDEAL_BEAM, Beam, check_beam
-from zbuf_occlude.sensors.lidar import Lidar, beam_directions
+from zbuf_occlude.sensors.lidar import SPINNING_INTENSITY_SCALE, Lidar, beam_directions
 from zbuf_occlude.sensors.pulses import Pulses, placed
 
 __all__ = ["RAY_TABLE_FILE_BEAM", "RAY_TABLE_PRESETS", "ROSETTE_FOV_DEG", "ROSETTE_PRISM_HZ", "RayTable", "load_ray_table", "rosette_table"]
@@ -89,9 +88,6 @@ class RayTable:
     elevation_deg: NDArray[np.float64]
     beam: Beam = IDEAL_BEAM
     source: str = ""
-
-    #: The kind of sensor (:mod:`~zbuf_occlude.sensors.kinds`).
-    kind: ClassVar[str] = "ray_table"
 
     def __post_init__(self) -> None:
         sensor_name(self.name, "ray table name")
@@ -302,7 +298,7 @@ def rosette_table(
 
 
 #: The beam ``scan --ray-table FILE`` fires a table file with: a generic 905 nm receiver, ranges 1–100 m, σ 0.02 m,
-#: τ = 0.8 / 100² (what a table's fields defaulted to before tables had a beam; not a device).
+#: τ = 0.8 / 100² (a generic receiver, not a device).
 RAY_TABLE_FILE_BEAM = Beam(
     "generic-905",
     min_range_m=1.0,
@@ -322,13 +318,13 @@ RAY_TABLE_FILE_BEAM = Beam(
 # corrected the 7,294 and −4,664 of earlier versions: revolutions per minute).  The pattern is
 # :func:`rosette_table`'s first-order Risley model over one 0.1 s frame (10,000 pulses).
 # Intensity: the 8-bit reflectivity of Livox's point format (0–150 diffuse, 151–255
-# retroreflective), scaled as the spinning presets are (:data:`~zbuf_occlude.sensors.lidar`): an
+# retroreflective), scaled as the spinning presets are (:data:`~zbuf_occlude.sensors.lidar.SPINNING_INTENSITY_SCALE`): an
 # ASSUMPTION.
 RAY_TABLE_PRESETS: dict[str, RayTable] = {
     "livox-mid70": rosette_table(
         10_000, duration_s=0.1, fov_deg=70.4, prism_hz=(121.567, -77.733), name="livox-mid70",
         beam=Beam("livox-mid70", wavelength_nm=905.0, divergence_deg=0.051, min_range_m=0.05, max_range_m=260.0, range_noise_m=0.02,
-                  detection_threshold=0.1 / 90.0**2, intensity_scale=22_500.0, max_intensity=255,
+                  detection_threshold=0.1 / 90.0**2, intensity_scale=SPINNING_INTENSITY_SCALE, max_intensity=255,
                   source="Livox Mid-70 data sheet and user manual v1.2 (90 m at 10 %, precision 2 cm); divergence: HELIOS++ scanners_tls.xml"),
         source="Livox Mid-70 (Risley prisms at 121.567 and -77.733 Hz: HELIOS++ pyhelios/data/scanners_tls.xml, commit eea12035)",
     ),

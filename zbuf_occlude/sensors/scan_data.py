@@ -18,6 +18,7 @@ from zbuf_occlude.io.arrays import load_npz
 from zbuf_occlude.io.atomic import write_bytes
 from zbuf_occlude.io.caps import MAX_SCAN_NPZ_BYTES
 from zbuf_occlude.io.encodings import npz_bytes
+from zbuf_occlude.sensors.beam import intensity_counts
 from zbuf_occlude.sensors.checks import MAX_SCENE_OBJECTS
 
 __all__ = ["FRAMES", "GPS_START_S", "UNIT_INTENSITY_SCALE", "Scan", "read_scan_npz"]
@@ -295,7 +296,7 @@ class Scan:
         ones = np.ones(n, np.uint8)
         intensity = np.zeros(n, np.uint16)
         if self.intensity is not None:
-            intensity = np.rint(np.clip(np.asarray(self.intensity, np.float64) * scale, 0.0, float(top))).astype(np.uint16)
+            intensity = intensity_counts(self.intensity, scale, top)
         times = start + (np.zeros(n) if self.gps_time is None else np.asarray(self.gps_time, np.float64))
         if n and not times.min() >= 0.0:
             raise InvalidInputError(f"gps_start_s {start:.9g} puts the scan's first time at {times.min():.9g} s: adjusted standard GPS "
