@@ -28,7 +28,17 @@ from zbuf_occlude.sensors.depth_camera import DEPTH_CAMERA_PRESETS, DepthCamera
 from zbuf_occlude.sensors.lidar import LIDAR_PRESETS, Lidar
 from zbuf_occlude.sensors.ray_table import RAY_TABLE_PRESETS, RayTable
 
-__all__ = ["SENSOR_KINDS", "SensorKind", "kind_of", "kind_named", "preset_names", "sensor_from_name", "sensor_to_json", "with_beam"]
+__all__ = [
+    "SENSOR_KINDS",
+    "SensorKind",
+    "kind_of",
+    "kind_name",
+    "kind_named",
+    "preset_names",
+    "sensor_from_name",
+    "sensor_to_json",
+    "with_beam",
+]
 
 
 @dataclass(frozen=True)
@@ -93,6 +103,13 @@ def kind_of(sensor: object) -> SensorKind:
         names = ", ".join(k.cls.__name__ for k in SENSOR_KINDS)
         raise InvalidInputError(f"a sensor must be a {names}; got {type(sensor).__name__}")
     return kind
+
+
+def kind_name(sensor: object) -> str | None:
+    """The kind's name of ``sensor`` (``"lidar"``, ``"airborne"``, ...), or None for anything that is no sensor: a test of
+    what a caller was given that refuses in its own words."""
+    kind = _BY_CLASS.get(type(sensor))
+    return None if kind is None else kind.name
 
 
 def kind_named(name: str) -> SensorKind:

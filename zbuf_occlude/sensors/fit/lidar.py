@@ -54,11 +54,11 @@ from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.geometry.arguments import described
 from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.sensors.checks import shown
-from zbuf_occlude.sensors.kinds import kind_of
+from zbuf_occlude.sensors.kinds import kind_name
 from zbuf_occlude.sensors.lidar import Lidar
 
 __all__ = [
-    "BOOTSTRAP", "check_bootstrap", "sensor_kind", "check_fit_seed", "Estimate", "MAX_BOOTSTRAP", "estimates_markdown", "fit_lidar", "LidarFit", "MAX_DROPOUT_GAP", "MIN_RETURNS", "PLANE_NEIGHBOURS", "RING_SHARE",
+    "BOOTSTRAP", "check_bootstrap", "check_fit_seed", "Estimate", "MAX_BOOTSTRAP", "estimates_markdown", "fit_lidar", "LidarFit", "MAX_DROPOUT_GAP", "MIN_RETURNS", "PLANE_NEIGHBOURS", "RING_SHARE",
 ]  # fmt: skip
 #: How a refusal of scans no spinning sensor made ends: what to fit instead, in the library and on the command line.
 _NOT_SPINNING = ("these are not scans in a spinning sensor's frame (airborne crops or world coordinates?); fit an airborne "
@@ -81,15 +81,6 @@ _OUTSIDE_BEAMS_DEG = 0.5
 _GROUND_SLICE_M = 0.15
 _PLANARITY = 0.3
 _GROUND_NORMAL_COS = math.cos(math.radians(25.0))
-
-
-def sensor_kind(sensor: object) -> str | None:
-    """The :mod:`~zbuf_occlude.sensors.kinds` name of ``sensor`` (``"lidar"``, ``"airborne"``, ...), or None for anything
-    that is no sensor: the fits' test of what they were given (no ``isinstance`` on sensor classes)."""
-    try:
-        return kind_of(sensor).name
-    except InvalidInputError:
-        return None
 
 
 def check_bootstrap(bootstrap: object, *, name: str = "bootstrap") -> int:
@@ -424,7 +415,7 @@ def fit_lidar(clouds: Sequence[NDArray[np.floating]], base: Lidar, *, seed: int 
     ArgumentTypeError
         ``seed`` or ``bootstrap`` not an integer.
     """
-    if sensor_kind(base) != "lidar":
+    if kind_name(base) != "lidar":
         raise InvalidInputError(f"fit_lidar fits a spinning LiDAR, got {type(base).__name__}")
     seed, bootstrap = check_fit_seed(seed), check_bootstrap(bootstrap)
     beams = np.asarray(base.elevations_deg, dtype=np.float64)
