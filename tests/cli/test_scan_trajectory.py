@@ -105,3 +105,13 @@ def test_a_moving_scan_written_as_las_needs_the_world_frame(tmp_path: Path, caps
     assert code == 2 and "give --frame world" in err, err
     code, err = _run([*argv, "--frame", "world", "--out", str(tmp_path / "w")], capsys)
     assert code == 0, err
+
+
+def test_a_refused_trajectory_leaves_a_foreign_file_in_out_alone(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    for extra in (["--samples", "11"], ["--format", "las"]):  # too short for the sweeps; LAS in the sensor frame
+        code, err = _run(["scan", SCENE, "--trajectory", str(_trajectory(tmp_path)), *extra, "--no-progress", "--out", str(out)], capsys)
+        assert code == 2, err
+        assert sorted(p.name for p in out.iterdir()) == ["notes.txt"] and (out / "notes.txt").read_text() == "mine"

@@ -27,6 +27,7 @@ from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.mesh.sizes import DIMENSIONS, SizeRange, size_interval
 from zbuf_occlude.sensors.placement import CropDistributions
 from zbuf_occlude.sensors.kinds import SENSOR_KINDS, kind_of, preset_names, sensor_from_name
+from zbuf_occlude.sensors.spec_files import SCENE_SUFFIXES
 
 __all__ = ["add_scan_parser", "add_realism_parser", "check_outside", "SCAN_CROP_DISTRIBUTIONS"]
 
@@ -163,17 +164,23 @@ def _frame(frame: str | None, sensor) -> str:
     return "world"
 
 
-def _trajectory(path: str | None, sensor, samples: int):
-    """``--trajectory``'s :class:`~zbuf_occlude.sensors.platform.Trajectory`, or None.
+def _trajectory(args: argparse.Namespace, sensor, formats: Sequence[str]):
+    """``--trajectory``'s :class:`~zbuf_occlude.sensors.platform.Trajectory`, or None; read and checked before ``--out`` is held.
 
     Raises
     ------
     InvalidInputError
-        The sensor does not sweep from a platform of its own (an airborne scanner flies its plan; a camera takes one
-        pose), or what :func:`~zbuf_occlude.sensors.platform.load_trajectory` refuses (naming the file).
+        A mesh file to scan (a trajectory moves the sensor through a scene file's frame); a sensor that does not sweep
+        from a platform of its own (an airborne scanner flies its plan; a camera takes one pose); what
+        :func:`~zbuf_occlude.sensors.platform.load_trajectory` refuses (naming the file); a trajectory shorter than
+        ``--samples`` sweeps; LAS/LAZ in the sensor frame (each point in its own pulse's frame).
     """
+    path, samples = args.trajectory, args.samples
     if path is None:
         return None
+    if Path(args.mesh_or_scene).suffix.lower() not in SCENE_SUFFIXES:
+        raise InvalidInputError(f"--trajectory {path} moves the sensor through a scene file's frame; "
+                                f"a scan of {Path(args.mesh_or_scene).name} places the sensor per sample (give a scene file)")  # fmt: skip
     kind = kind_of(sensor)
     if not kind.pulsed or kind.flies:
         raise InvalidInputError(f"--trajectory {path}: a {kind.title} {'flies its own plan' if kind.flies else 'takes one pose'}")
@@ -184,6 +191,9 @@ def _trajectory(path: str | None, sensor, samples: int):
     if not trajectory.is_static and trajectory.duration_s + 1e-9 < needed:
         raise InvalidInputError(f"--trajectory {path} lasts {trajectory.duration_s:g} s, and --samples {samples} sweeps of {sensor.name} "
                                 f"take {needed:g} s: give fewer samples or a longer trajectory")  # fmt: skip
+    if args.frame == "sensor" and set(formats) & set(LAS_FORMATS):
+        raise InvalidInputError(f"--trajectory {path} with --format {args.format}: a moving sensor's points lie each in its "
+                                "own pulse's frame, which LAS cannot classify by height; give --frame world")  # fmt: skip
     return trajectory
 
 
@@ -200,9 +210,10 @@ def cmd_scan(args: argparse.Namespace) -> int:
     formats = ("npz", "ply") if args.format == "both" else (args.format,)
     args.frame = _frame(args.frame, sensor)
     las_options = las_keywords(args, formats, world_frame=args.frame == "world")
+    trajectory = _trajectory(args, sensor, formats)
     # a refused run's empty --out is removed by cli.main
     with OwnedFolder(args.out, names=[SCAN_FILE_NAMES], what="the scan") as folder:
-        return _scan_into(folder, args, sensor, formats, las_options)
+        return _scan_into(folder, args, sensor, formats, las_options, trajectory)
 
 
 #: The files ``scan`` writes in ``--out``: ``<stem>_<sensor>_sNNN.npz|ply|las|laz``.
@@ -225,7 +236,7 @@ def _save(folder: OwnedFolder, s, stem: str, formats: Sequence[str], las_options
     return files
 
 
-def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: Sequence[str], las_options: dict) -> int:
+def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: Sequence[str], las_options: dict, trajectory) -> int:
     """:func:`cmd_scan` once ``--out`` is held."""
     from zbuf_occlude.io.progress import progress as progress_bar
     from zbuf_occlude.sensors.crops import object_crops
@@ -239,21 +250,17 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
     kind = kind_of(sensor)
     src = Path(args.mesh_or_scene)
     written, empty = [], 0
-    if src.suffix.lower() in (".json", ".yaml", ".yml"):
+    if src.suffix.lower() in SCENE_SUFFIXES:
         if args.crop:
             raise InvalidInputError(f"--crop keeps one mesh's returns; {src.name} is a scene file, scanned whole")
         scene = load_scene(src)
-        trajectory = _trajectory(args.trajectory, sensor, args.samples)
-        if trajectory is not None and args.frame == "sensor" and set(formats) & set(LAS_FORMATS):
-            raise InvalidInputError(f"--trajectory {args.trajectory} with --format {args.format}: a moving sensor's points lie each in its "
-                                    "own pulse's frame, which LAS cannot classify by height; give --frame world")  # fmt: skip
         if kind.pulsed:
             pose = scene.default_sensor_pose()
         else:  # a camera looks at the first object from the sensor position
             target = scene.build().local_to_world[1][:3, 3] if scene.objects else np.array([1.0, 0.0, scene.ground_z_m])
             pose = look_at_pose(scene.default_sensor_pose()[:3, 3], target + [0, 0, 0.5])
+        optics = surface_optics(args, scene)  # the scene's, once: every sample scans the same scene
         for k in progress_bar(range(args.samples), desc="scan", unit="scan", enabled=not args.no_progress):
-            optics = surface_optics(args, scene)
             if kind.flies:  # a flight over the scene's ground (world frame)
                 from zbuf_occlude.sensors.scan import scan_airborne
 
@@ -265,9 +272,6 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
     else:
         if not kind.pulsed:
             raise InvalidInputError(f"scan of a mesh file places a LiDAR; use a scene file for a {kind.title}")
-        if args.trajectory is not None:
-            raise InvalidInputError(f"--trajectory {args.trajectory} moves the sensor through a scene file's frame; "
-                                    f"a scan of {src.name} places the sensor per sample (give a scene file)")  # fmt: skip
         extents, round_xy = None, False
         if args.extents and args.size_of != "max":
             raise InvalidInputError(f"--size-of {args.size_of} says what --size measures; --extents gives every side instead")

@@ -30,7 +30,10 @@ from zbuf_occlude.io.json_files import MAX_JSON_DEPTH, loads_json
 from zbuf_occlude.io.regular_files import read_regular_file
 from zbuf_occlude.sensors.checks import located
 
-__all__ = ["read_spec_file", "yaml_loader"]
+__all__ = ["SCENE_SUFFIXES", "read_spec_file", "yaml_loader"]
+
+#: Suffixes of a scene file: JSON or YAML (a sensor file is JSON only).
+SCENE_SUFFIXES = (".json", ".yaml", ".yml")
 
 
 @functools.cache
@@ -101,7 +104,7 @@ def read_spec_file(path: str | os.PathLike, *, what: str = "file", yaml_ok: bool
     """
     path = Path(path)
     suffix = path.suffix.lower()
-    formats = (".json", ".yaml", ".yml") if yaml_ok else (".json",)
+    formats = SCENE_SUFFIXES if yaml_ok else (".json",)
     if suffix not in formats:
         raise InvalidInputError(f"{path}: unknown {what} format {path.suffix!r}; use {', '.join(formats)}")
     data = read_regular_file(path, max_bytes=MAX_SPEC_FILE_BYTES, error=InvalidInputError)
