@@ -20,13 +20,13 @@ from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.airborne import AirborneScanner
+from zbuf_occlude.sensors.airborne import AIRBORNE_IDEAL_BEAM, AirborneScanner
 from zbuf_occlude.sensors.airborne_presets import AIRBORNE_PRESETS
 from zbuf_occlude.sensors.beam import Beam
 from zbuf_occlude.sensors.checks import MAX_RANGE_M, located, mapping, real, shown, text
 from zbuf_occlude.sensors.depth_camera import DEPTH_CAMERA_PRESETS, DepthCamera
 from zbuf_occlude.sensors.lidar import LIDAR_PRESETS, Lidar
-from zbuf_occlude.sensors.ray_table import RAY_TABLE_PRESETS, RayTable
+from zbuf_occlude.sensors.ray_table import RAY_TABLE_FILE_BEAM, RAY_TABLE_PRESETS, RayTable
 
 __all__ = [
     "SENSOR_KINDS",
@@ -156,10 +156,8 @@ _BEAM_KEYS = tuple(f.name for f in fields(Beam) if f.init)
 #: The beam a flat-layout file without a ``"preset"`` starts from: the defaults the flat fields had (a spinning LiDAR's and
 #: a ray table's: 1-100 m, 0.02 m noise, τ = 0.8 / 100²; an airborne scanner's: 0.02 m noise at 1064 nm).
 _LEGACY_BEAM = {
-    "lidar": Beam("flat-layout", min_range_m=1.0, max_range_m=100.0, range_noise_m=0.02, detection_threshold=0.8 / 100.0**2),
-    "ray_table": Beam("flat-layout", min_range_m=1.0, max_range_m=100.0, range_noise_m=0.02, detection_threshold=0.8 / 100.0**2),
-    "airborne": Beam("flat-layout", wavelength_nm=1064.0, range_noise_m=0.02),
-}
+    "lidar": RAY_TABLE_FILE_BEAM, "ray_table": RAY_TABLE_FILE_BEAM, "airborne": AIRBORNE_IDEAL_BEAM.with_(range_noise_m=0.02),
+}  # fmt: skip
 
 
 def sensor_from_name(name: str | os.PathLike):

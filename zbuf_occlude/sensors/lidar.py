@@ -17,7 +17,7 @@ from zbuf_occlude.sensors.beam import IDEAL_BEAM, Beam, check_beam
 from zbuf_occlude.sensors.pulses import Pulses, placed
 from zbuf_occlude.sensors.checks import MAX_SENSOR_RAYS, located, preset, real, reals, replaced, sensor_name, shown, text
 
-__all__ = ["Lidar", "LIDAR_PRESETS", "SPINNING_INTENSITY_SCALE", "lidar_preset", "beam_directions"]
+__all__ = ["Lidar", "LIDAR_PRESETS", "SPINNING_INTENSITY_SCALE", "lidar_preset", "beam_directions", "in_sector"]
 
 
 @dataclass(frozen=True)
@@ -143,9 +143,7 @@ class Lidar:
         """
         az = self.azimuths_deg
         if azimuth_range_deg is not None:
-            lo, hi = (float(v) for v in azimuth_range_deg)
-            if hi - lo < 360.0:
-                az = az[np.mod(az - lo, 360.0) <= np.mod(hi - lo, 360.0)]
+            az = az[in_sector(az, azimuth_range_deg)]
         ring = np.repeat(np.arange(self.n_beams, dtype=np.int64), len(az))
         azimuth = np.tile(az, self.n_beams)
         return beam_directions(self._elev[ring], azimuth), ring, azimuth
@@ -170,8 +168,16 @@ class Lidar:
         return Pulses(
             d_sensor, directions, origins, rotation, pulse_id=ring * n_az + index, time_s=time_s,
             scan_angle_deg=self._elev[ring].astype(np.float32), ring=ring, rotations=rotations,
-            home_m=origins if rotation is not None else origins[0] if len(origins) else np.zeros(3),
         )  # fmt: skip
+
+
+def in_sector(azimuth_deg: ArrayLike, azimuth_range_deg: tuple[float, float]) -> NDArray[np.bool_]:
+    """Whether each azimuth (degrees, any shape) lies in ``[lo, hi]`` wrapped to a turn; all of them for a range of a turn or more."""
+    az = np.asarray(azimuth_deg, dtype=np.float64)
+    lo, hi = (float(v) for v in azimuth_range_deg)
+    if hi - lo >= 360.0:
+        return np.ones(az.shape, dtype=bool)
+    return np.mod(az - lo, 360.0) <= np.mod(hi - lo, 360.0)
 
 
 def beam_directions(elevation_deg: ArrayLike, azimuth_deg: ArrayLike) -> NDArray[np.float64]:

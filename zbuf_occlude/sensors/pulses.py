@@ -55,8 +55,9 @@ class Pulses:
     has_sensor_frame : bool
         Whether the scan's points can be given in a sensor frame (False: an airborne scan, whose
         pulses' frames follow the aircraft along several lines).
-    home_m : (3,) float64
-        The scan's ``sensor_position`` (world frame) where no return is kept.
+    home_m : (3,) float64 or None
+        The scan's ``sensor_position`` (world frame) where no return is kept; None: where the first pulse leaves
+        (:meth:`home`).
     """
 
     directions_sensor: NDArray[np.float64]
@@ -72,10 +73,16 @@ class Pulses:
     default_reflectivity: float | None = None
     rotations: NDArray[np.float64] | None = None
     has_sensor_frame: bool = True
-    home_m: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    home_m: NDArray[np.float64] | None = None
 
     def __len__(self) -> int:
         return len(self.directions)
+
+    def home(self) -> NDArray[np.float64]:
+        """(3,) float64: :attr:`home_m`, or where the first pulse leaves (the world origin without pulses)."""
+        if self.home_m is not None:
+            return self.home_m
+        return self.origins if self.origins.ndim == 1 else self.origins[0] if len(self.origins) else np.zeros(3)
 
     @property
     def static(self) -> bool:

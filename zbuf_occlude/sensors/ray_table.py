@@ -26,7 +26,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.ray_tables import read_ray_table
 from zbuf_occlude.sensors.checks import MAX_SENSOR_RAYS, count, located, real, reals, replaced, sensor_name, shown, text
 from zbuf_occlude.sensors.beam import IDEAL_BEAM, Beam, check_beam
-from zbuf_occlude.sensors.lidar import SPINNING_INTENSITY_SCALE, Lidar, beam_directions
+from zbuf_occlude.sensors.lidar import SPINNING_INTENSITY_SCALE, Lidar, beam_directions, in_sector
 from zbuf_occlude.sensors.pulses import Pulses, placed
 
 __all__ = ["RAY_TABLE_FILE_BEAM", "RAY_TABLE_PRESETS", "ROSETTE_FOV_DEG", "ROSETTE_PRISM_HZ", "RayTable", "load_ray_table", "rosette_table"]
@@ -167,9 +167,7 @@ class RayTable:
         """
         row = np.arange(len(self), dtype=np.int64)
         if azimuth_range_deg is not None:
-            lo, hi = (float(v) for v in azimuth_range_deg)
-            if hi - lo < 360.0:
-                row = row[np.mod(self.azimuth_deg - lo, 360.0) <= np.mod(hi - lo, 360.0)]
+            row = row[in_sector(self.azimuth_deg, azimuth_range_deg)]
         return beam_directions(self.elevation_deg[row], self.azimuth_deg[row]), row, self.azimuth_deg[row]
 
     def pulses(self, platform, azimuth_range_deg: tuple[float, float] | None = None) -> Pulses:
@@ -185,8 +183,7 @@ class RayTable:
         if isinstance(platform, np.ndarray):
             time_s = self.time_s[row]
         return Pulses(d_sensor, directions, origins, rotation, pulse_id=row, time_s=time_s,
-                      scan_angle_deg=self.elevation_deg[row].astype(np.float32), rotations=rotations,
-                      home_m=origins if rotation is not None else origins[0] if len(origins) else np.zeros(3))  # fmt: skip
+                      scan_angle_deg=self.elevation_deg[row].astype(np.float32), rotations=rotations)  # fmt: skip
 
     @classmethod
     def from_lidar(cls, lidar: Lidar, name: str | None = None) -> RayTable:

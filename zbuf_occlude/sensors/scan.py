@@ -415,7 +415,7 @@ def _placed_points(pulses: Pulses, rows, measured, normal, frame: str, sensor_to
         sensor_normal = np.einsum("pj,pjk->pk", normal, pulses.rotations[rows])  # Rᵀ n, world → each pulse's sensor frame
         return pulses.directions_sensor[rows] * measured[:, None], sensor_normal, np.zeros(3), sensor_to_world
     o, d = pulses.origins[rows], pulses.directions[rows]
-    position = o.mean(axis=0) if len(o) else pulses.home_m
+    position = o.mean(axis=0) if len(o) else pulses.home()
     if sensor_to_world is None:
         sensor_to_world = np.eye(4)
         sensor_to_world[:3, 3] = position
