@@ -44,7 +44,8 @@ from zbuf_occlude.sensors.fit.returns import (
     ReturnStatistics,
     return_statistics,
 )
-from zbuf_occlude.sensors.scene import GROUND_ID, ScanScene, SceneObject
+from zbuf_occlude.sensors.las_classes import GROUND_CODE, VEGETATION_HEIGHTS_M, asprs_classification
+from zbuf_occlude.sensors.scene import ScanScene, SceneObject
 
 if TYPE_CHECKING:
     from zbuf_occlude.sensors.scan_data import Scan
@@ -54,11 +55,8 @@ __all__ = [
     "ign_scanner", "object_pulse_shares", "plot_scene", "pulse_subset", "simulate", "simulated_classes",
 ]  # fmt: skip
 
-#: ASPRS class of the ground (LAS 1.4 R15, Table 17).
-GROUND_CLASS = 2
-#: Upper heights above the ground of low (3) and medium (4) vegetation, metres; higher is high
-#: vegetation (5).  IGN LiDAR HD's class definitions as we recall them (0–0.5, 0.5–1.5, > 1.5 m).
-VEGETATION_HEIGHTS_M = (0.5, 1.5)
+#: ASPRS class of the ground (LAS 1.4 R15, Table 17); the class rule is the LAS writer's (:mod:`zbuf_occlude.sensors.las_classes`).
+GROUND_CLASS = GROUND_CODE
 #: Flying height of IGN LiDAR HD, metres: "about 1,500 m" (IGN's programme as described by
 #: d-booker.fr, "Exemple d'utilisation de données géographiques 3D"; 10 points/m² on average, ign.fr).
 IGN_ALTITUDE_M = 1500.0
@@ -190,13 +188,10 @@ def simulated_classes(scan: Scan, vegetation_ids: Sequence[int], ground_z_m: flo
         2 on the ground (object 0), 3/4/5 on ``vegetation_ids`` by height above ``ground_z_m``
         (:data:`VEGETATION_HEIGHTS_M`), 1 on anything else.
     """
-    out = np.ones(len(scan), np.uint8)
-    out[scan.object_id == GROUND_ID] = GROUND_CLASS
-    vegetation = np.isin(scan.object_id, np.asarray(vegetation_ids, np.int64))
-    height = scan.points[:, 2].astype(np.float64) - ground_z_m
-    low, medium = VEGETATION_HEIGHTS_M
-    out[vegetation] = np.where(height[vegetation] < low, 3, np.where(height[vegetation] < medium, 4, 5))
-    return out
+    ids = np.asarray(scan.object_id, np.int64)
+    vegetation = {int(i) for i in vegetation_ids}
+    classes = ["ground"] + ["vegetation" if i in vegetation else "" for i in range(1, int(ids.max(initial=0)) + 1)]
+    return asprs_classification(ids, classes, scan.points[:, 2].astype(np.float64) - ground_z_m)  # the LAS writer's rule
 
 
 def _select(las: LasPoints, mask: NDArray[np.bool_]) -> LasPoints:
