@@ -58,8 +58,10 @@ def _beam(sensor: str, options: list[str]):
         (["--footprint", "--divergence", "0.5"], {"footprint_rays": 7, "divergence_deg": 0.5}),
         (["--return-mode", "dual", "--range-resolution", "0.8"], {"return_mode": "dual", "max_returns": 2, "range_resolution_m": 0.8}),
         (["--return-mode", "strongest", "--range-resolution", "0.8"], {"return_mode": "strongest", "max_returns": 1, "range_resolution_m": 0.8}),
+        ([*RETURNS, "--min-echo-reflectance", "0.3"], {"footprint_rays": 7, "max_returns": 3, "range_resolution_m": 0.5,
+                                                       "echo_separation_m": 0.0, "min_echo_reflectance": 0.3}),
     ],
-    ids=["returns", "mixed-pixels", "divergence", "dual", "strongest"],
+    ids=["returns", "mixed-pixels", "divergence", "dual", "strongest", "partial-echoes"],
 )  # fmt: skip
 def test_every_beam_option_changes_the_beam_of_every_pulsed_pattern(sensor: str, options: list[str], changes: dict) -> None:
     base = sensor_from_name(sensor)
@@ -107,7 +109,7 @@ def test_a_preset_without_a_divergence_takes_one_for_its_footprint(tmp_path: Pat
 @pytest.mark.parametrize(
     "option",
     [["--footprint"], ["--divergence", "0.2"], ["--max-returns", "2"], ["--range-resolution", "0.5"], ["--power-noise", "0.2"],
-     ["--echo-separation", "0.5"], ["--return-mode", "last"]],
+     ["--echo-separation", "0.5"], ["--return-mode", "last"], ["--min-echo-reflectance", "0.2"]],
 )  # fmt: skip
 def test_a_depth_camera_refuses_every_beam_option_naming_it(tmp_path: Path, capsys, option: list[str]) -> None:
     code, err = _run(["scan", str(STREET), "--sensor", "kinect-v1", *option, "--out", str(tmp_path / "o")], capsys)

@@ -224,7 +224,8 @@ def test_scan_samples_minus_one_is_refused_not_an_empty_success(tmp_path, capsys
      ("elevation-profile", "--elevations", "nan"), ("elevation-profile", "--elevations", "0,91"),
      ("scan", "--distance", "inf"), ("scan", "--distance", "5:nan"), ("scan", "--ground-reflectivity", "nan"),
      ("scan", "--power-noise", "inf"), ("scan", "--echo-separation", "-1"), ("scan", "--ground-margin", "nan"),
-     ("scan", "--height", "1e999")],
+     ("scan", "--height", "1e999"), ("scan", "--min-echo-reflectance", "1.5"), ("scan", "--min-echo-reflectance", "nan"),
+     ("scan", "--min-echo-reflectance", "-0.1")],
 )  # fmt: skip
 def test_non_finite_or_out_of_range_reals_are_refused_naming_the_value(tmp_path, capsys, nothing_runs, command, option, value) -> None:
     err = refused(capsys, [*COMMANDS[command], f"{option}={value}"], tmp_path / "out")

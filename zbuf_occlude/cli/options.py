@@ -161,9 +161,9 @@ def seed(text: str, option: str) -> int:
     return check_seed(value, name=option)
 
 
-def real(low: float | None = None, *, above: bool = False, unit: str = "") -> Check:
-    """A finite real number, ``>= low`` (``> low`` with ``above``) when ``low`` is given; ``unit``
-    (``"metres"``) is named in the message."""
+def real(low: float | None = None, high: float | None = None, *, above: bool = False, unit: str = "") -> Check:
+    """A finite real number, ``>= low`` (``> low`` with ``above``) when ``low`` is given and ``<= high`` when
+    ``high`` is; ``unit`` (``"metres"``) is named in the message."""
     units = f" {unit}" if unit else ""
 
     def check(text: str, option: str) -> float:
@@ -175,6 +175,8 @@ def real(low: float | None = None, *, above: bool = False, unit: str = "") -> Ch
             raise InvalidInputError(f"{option} must be a finite number{units and ' of' + units}, got {shown(text)}")
         if low is not None and (value <= low if above else value < low):
             raise InvalidInputError(f"{option} must be a number {'>' if above else '>='} {low:g}{units}, got {shown(text)}")
+        if high is not None and value > high:
+            raise InvalidInputError(f"{option} must be a number <= {high:g}{units}, got {shown(text)}")
         return value
 
     return check

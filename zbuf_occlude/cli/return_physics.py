@@ -33,6 +33,7 @@ __all__ = [
 BEAM_OPTIONS = {
     "footprint": "footprint_rays", "divergence": "divergence_deg", "max_returns": "max_returns", "return_mode": "return_mode",
     "range_resolution": "range_resolution_m", "power_noise": "power_noise", "echo_separation": "echo_separation_m",
+    "min_echo_reflectance": "min_echo_reflectance",
 }  # fmt: skip
 #: How each of them is written on the command line where the namespace does not say (crop options record the name typed).
 _OPTION_FLAGS = {dest: "--" + dest.replace("_", "-") for dest in BEAM_OPTIONS}
@@ -164,7 +165,7 @@ def beam_changes(sensor, args: argparse.Namespace) -> dict[str, object]:
             changes["max_returns"] = 1  # 'all' after a Velodyne mode: one return unless --max-returns says more
     if "max_returns" in given:
         changes["max_returns"] = int(given["max_returns"])
-    for dest in ("range_resolution", "power_noise", "echo_separation"):
+    for dest in ("range_resolution", "power_noise", "echo_separation", "min_echo_reflectance"):
         if dest in given:
             changes[BEAM_OPTIONS[dest]] = float(given[dest])
     _check_echoes(beam, changes, given, args)

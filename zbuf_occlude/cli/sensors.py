@@ -351,6 +351,12 @@ def _add_return_physics_arguments(p: argparse.ArgumentParser) -> None:
         help="with --footprint: echoes within M metres of the strongest merge into one return at their energy-weighted "
         "range (mixed pixels at shallow depth edges; half the pulse length, ~0.75 m for 5 ns); 0: never (default: the sensor's beam's)",
     )  # fmt: skip
+    r.add_argument(
+        "--min-echo-reflectance", metavar="R", action=Checked, check=real(0.0, 1.0), default=None,
+        help="echoes whose apparent reflectance (energy x range^2: reflectivity x |cos incidence| x the share of the footprint "
+        "the surface takes; reflectivity 1 without --reflectance-table) is below R are not detected: partial echoes at an "
+        "object's outline and grazing hits, alike at every range and sub-ray count; 0: none (default: the sensor's beam's)",
+    )  # fmt: skip
     r.add_argument("--max-returns", metavar="N", action=Checked, check=check_max_returns, default=None,
                    help="with --footprint (or a sensor's own footprint): up to N returns per pulse (1..15), the "
                         "footprint's echoes resolved by --range-resolution, each with its return number, number of returns and "

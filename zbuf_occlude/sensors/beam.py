@@ -89,6 +89,19 @@ class Beam:
         Least received energy detected, m⁻² (module docstring); applied where the scan is given
         surface reflectivities (an airborne scanner's: always, with ρ = 1 where none are given).
         0: every echo is detected.
+    min_echo_reflectance : float
+        Least *apparent reflectance* of a detected echo, in [0, 1]: its energy times its range
+        squared, ``E · R²``, which is ``ρ · |cos θ| · s`` for surfaces of reflectance ρ met at
+        incidence θ that intercept the share ``s`` of the pulse (ρ = 1 where the scan is given
+        no reflectivities).  A threshold relative to the full-footprint echo at the echo's own
+        range: what a receiver with sensitivity time control (gain growing as R², compressing
+        the range equation's 1/R²; Skolnik, "Introduction to Radar Systems", 3rd ed., 2001, on
+        sensitivity time control) compares against a fixed level.  So a partial echo at a silhouette (a sliver of
+        the footprint on an object's edge) or a grazing hit is dropped alike at 5 m and at
+        1,500 m, and since ``s`` is a share of the pulse's energy the rule does not change with
+        the sub-ray count K (where :attr:`detection_threshold` alone detects ever thinner
+        slivers as K grows).  Applied to every echo, with or without reflectivities, beside
+        ``detection_threshold``.  0: no such threshold (the default).
     power_noise : float
         σ of the natural log of the received power per firing (detection is then
         ``Φ(ln(E / τ) / σ)``); applied with the detection threshold, where reflectivities are
@@ -128,6 +141,7 @@ class Beam:
     range_resolution_m: float = 0.0
     echo_separation_m: float = 0.0
     detection_threshold: float = 0.0
+    min_echo_reflectance: float = 0.0
     power_noise: float = 0.0
     intensity_scale: float | None = None
     max_intensity: int = MAX_INTENSITY_COUNTS
@@ -148,7 +162,7 @@ class Beam:
         numbers = {
             "wavelength_nm": {"low": 200.0, "high": 20_000.0}, "divergence_deg": {"low": 0.0, "high": MAX_DIVERGENCE_DEG},
             "range_resolution_m": ranges, "echo_separation_m": ranges, "detection_threshold": at_least_0,
-            "power_noise": at_least_0, "range_noise_m": ranges, "dropout": {"low": 0.0, "high": 1.0, "high_open": True},
+            "min_echo_reflectance": {"low": 0.0, "high": 1.0}, "power_noise": at_least_0, "range_noise_m": ranges, "dropout": {"low": 0.0, "high": 1.0, "high_open": True},
             "dropout_range_per_m": {}, "min_range_m": ranges, "max_range_m": {**ranges, "low_open": True},
         }  # fmt: skip
         for name, bounds in numbers.items():

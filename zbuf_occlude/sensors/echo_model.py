@@ -202,7 +202,7 @@ class Transmission:
 
 def echo_returns(
     built: BuiltScene, rays, face, t, weights, *, range_resolution_m: float, max_returns: int, radiometry: Radiometry | None = None,
-    range_limits_m: tuple[float, float] = (0.0, np.inf), through: Transmission | None = None,
+    range_limits_m: tuple[float, float] = (0.0, np.inf), through: Transmission | None = None, min_echo_reflectance: float = 0.0,
 ) -> tuple[NDArray[np.int64], ...]:  # fmt: skip
     """The multi-return model of every scanner: resolve each pulse's sub-ray hits into discrete returns.
 
@@ -237,6 +237,9 @@ def echo_returns(
         metres; a hit in the blind zone still shades the hits behind it.
     through : Transmission, optional
         Transmittance per face and the sub-rays' origins; None: opaque, first hits only.
+    min_echo_reflectance : float
+        Least apparent reflectance (energy × range²) of a detected echo, in [0, 1]
+        (:func:`~.echoes.resolve_echoes`); applied with or without ``radiometry`` (ρ 1 without).
 
     Returns
     -------
@@ -280,6 +283,7 @@ def echo_returns(
     echoes = resolve_echoes(
         pulse, r, energy, obj, range_resolution_m=range_resolution_m,
         detection_threshold=0.0 if radiometry is None else radiometry.detection_threshold, max_returns=max_returns,
+        min_echo_reflectance=min_echo_reflectance,
     )  # fmt: skip
     return echoes.pulse, f[echoes.hit], echoes.range_m, echoes.energy
 

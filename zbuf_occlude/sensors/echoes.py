@@ -17,7 +17,10 @@ apart (:func:`resolve_echoes`):
   hit, cuts one smooth peak into several and lets two returns lie arbitrarily close.)
 * **An echo** has the energy-weighted mean range of its hits (the centroid of the merged
   peak), the sum of their energies, and the surface that gives it the most energy.
-* **Detection.**  Echoes with energy below ``detection_threshold`` are not detected.
+* **Detection.**  Echoes with energy below ``detection_threshold`` are not detected, nor those
+  whose apparent reflectance, energy times range squared, lies below ``min_echo_reflectance``
+  (a threshold relative to the full-footprint echo at the echo's range: :class:`Beam
+  <zbuf_occlude.sensors.beam.Beam>`).
 * **Returns kept.**  At most ``max_returns`` per pulse: the first ones in range order.  A
   discrete-return receiver triggers on the echoes as they arrive and stops recording after
   its last slot; later, possibly stronger echoes are lost (returns are numbered 1..n in that
@@ -328,6 +331,7 @@ def resolve_echoes(
     range_resolution_m: float,
     detection_threshold: float,
     max_returns: int,
+    min_echo_reflectance: float = 0.0,
 ) -> Echoes:
     """Resolve the sub-ray hits of many pulses into discrete returns (rules: module docstring).
 
@@ -351,6 +355,12 @@ def resolve_echoes(
         with :func:`hit_energy`); 0 keeps every echo.
     max_returns : int
         Most returns per pulse, 1 to :data:`MAX_RETURNS`; the first ones in range order are kept.
+    min_echo_reflectance : float
+        Least apparent reflectance of a detected echo, in [0, 1]: its energy times the square of
+        its range (with :func:`hit_energy`'s energies, ``ρ · |cos θ|`` times the share of the pulse
+        its hits carry; :attr:`Beam.min_echo_reflectance
+        <zbuf_occlude.sensors.beam.Beam.min_echo_reflectance>`).  Scaling every range by ``c``
+        and every energy by ``1/c²`` detects the same echoes.  0 keeps every echo.
 
     Returns
     -------
@@ -362,7 +372,8 @@ def resolve_echoes(
     ------
     InvalidInputError
         Arrays not 1-D of one length, integer ids not integers, ranges or energies negative or
-        not finite; a resolution ≤ 0, a negative threshold, or ``max_returns`` outside
+        not finite; a resolution ≤ 0, a negative threshold, a ``min_echo_reflectance`` outside
+        [0, 1], or ``max_returns`` outside
         1..:data:`MAX_RETURNS`, each naming the value.
 
     Notes
@@ -372,6 +383,7 @@ def resolve_echoes(
     """
     resolution = real(range_resolution_m, "range_resolution_m", low=0.0, low_open=True)
     threshold = real(detection_threshold, "detection_threshold", low=0.0)
+    relative = real(min_echo_reflectance, "min_echo_reflectance", low=0.0, high=1.0)
     keep_n = count(max_returns, "max_returns", low=1, high=MAX_RETURNS)
     cols = _columns(pulse=pulse, range_m=range_m, energy=energy, surface=surface)
     # one order for any input order: rows equal on all four keys are interchangeable
@@ -396,7 +408,10 @@ def resolve_echoes(
     echo_range = np.where(n_hits == 1, first, np.clip(first + mean, first, last))
     echo_surface, echo_hit = _dominant_surface(echo, starts, s, e)
     # detection, then the first max_returns detected echoes of each pulse
-    detected = np.flatnonzero(total >= threshold)
+    detected = total >= threshold
+    if relative > 0:
+        detected &= total * np.maximum(echo_range, MIN_RANGE_M) ** 2 >= relative
+    detected = np.flatnonzero(detected)
     rank = _rank_in_run(p[starts][detected])
     kept = detected[rank < keep_n]
     kept_pulse = p[starts][kept]

@@ -340,6 +340,7 @@ def fire_pulses(
             built, rays, face, t, beam.footprint_weights(), range_resolution_m=beam.range_resolution_m,
             max_returns=beam.max_returns if beam.return_mode == "all" else MAX_RETURNS, radiometry=radiometry,
             range_limits_m=(beam.min_range_m, beam.max_range_m), through=None if tau is None else Transmission(tau, origin),
+            min_echo_reflectance=beam.min_echo_reflectance,
         )  # fmt: skip
         if beam.return_mode != "all":
             chosen = returns_of_mode(hit, power, beam.return_mode)
@@ -356,16 +357,17 @@ def fire_pulses(
     measured = t + beam.range_noise_m * gauss  # limits apply to what the sensor measures
     keep = (measured >= beam.min_range_m) & (measured <= beam.max_range_m) & ~lost
     if not multi:
-        if rho is not None or beam.intensity_scale is not None:
+        radiometric, relative = rho is not None or beam.intensity_scale is not None, beam.min_echo_reflectance > 0
+        if radiometric or relative:
             # received power of an extended Lambertian target (Kashani et al. 2015, Eq. 4), ρ = 1 without reflectivities
             reflected = fraction[hit] if k > 1 else (np.abs(cos_in) if rho is None else rho[face] * np.abs(cos_in))
-            power = reflected / np.maximum(t, 1e-9) ** 2
-        else:
-            power = np.ones(len(hit))
+        power = reflected / np.maximum(t, 1e-9) ** 2 if radiometric else np.ones(len(hit))
         if rho is not None:
             if beam.power_noise > 0:
                 power = power * np.exp(beam.power_noise * rng.standard_normal(len(hit)))
             keep &= power >= beam.detection_threshold
+        if relative:  # the apparent reflectance E · R²: ρ |cos θ| times the footprint's share (Beam.min_echo_reflectance)
+            keep &= (power * np.maximum(t, 1e-9) ** 2 if radiometric else reflected) >= beam.min_echo_reflectance
     keep &= measured > 0
     sel = np.flatnonzero(keep)
     rows = hit[sel]
