@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 import trimesh
 
 import zbuf_occlude.sensors as S
@@ -120,6 +122,9 @@ def test_report_files_and_cli(tmp_path):
     assert (tmp_path / "rep" / "realism.md").read_text().count("|") > 20 and (tmp_path / "rep" / "realism.csv").exists()
     met = {row["metric"].split(",")[0]: row["met"] for row in rows}
     assert met["median ring spacing"] is True and met["count-vs-range exponent b (count ∝ r^b)"] is True
+    assert "median outline share (points ending a run of their ring)" in met  # sensor-frame scans: the outline and ranges
+    header = (tmp_path / "rep" / "realism_classes.csv").read_text().splitlines()[0].split(",")
+    assert {"outline_share", "count_exponent", "n_points_by_range_5-10_m", "crops_by_range_20-25_m"} <= set(header)
     with pytest.raises(InvalidInputError):
         read_object_clouds(tmp_path / "nothing")
     assert main(["scan", "box", "--distance", "5:2", "--out", str(tmp_path / "x")]) == 2
@@ -269,6 +274,7 @@ def test_realism_command_compares_airborne_crops_per_class(tmp_path, capsys) -> 
     with open(tmp_path / "rep" / "realism_classes.csv", newline="", encoding="utf-8") as fh:
         classes = list(csv.DictReader(fh))
     assert {(r["class"], r["set"]) for r in classes} == {(k, s) for k in ("car", "pole") for s in ("generated", "real")}
+    assert not any(key.startswith(("n_points_by_range", "outline")) for key in classes[0])  # aerial crops: no sensor, no range
     assert all(sum(float(r[f"share_{b / 10:g}_{(b + 1) / 10:g}"]) for b in range(10)) == pytest.approx(1.0) for r in classes)
     assert (tmp_path / "rep" / "realism.png").stat().st_size > 0
 
@@ -289,3 +295,153 @@ def test_a_scan_file_linking_out_of_the_folder_is_refused_before_it_is_read(tmp_
         read_object_clouds(root)
     text = str(info.value)
     assert str(root) in text and name in text and "SECRET-MARKER" not in text and "\n" not in text
+
+
+# -- outline share: the points that end a run of their ring's scan line ----------------------------
+def _ring(elevation_deg: float, azimuths_deg, range_m=10.0) -> np.ndarray:
+    """Points of one ring at ``elevation_deg``, at ``azimuths_deg`` (degrees) and ``range_m`` (metres, one or one per point)."""
+    e, a = np.radians(elevation_deg), np.radians(np.asarray(azimuths_deg, dtype=np.float64))
+    r = np.broadcast_to(np.asarray(range_m, dtype=np.float64), a.shape)
+    return np.column_stack([r * np.cos(e) * np.cos(a), r * np.cos(e) * np.sin(a), r * np.full_like(a, np.sin(e))])
+
+
+def _known_runs() -> tuple[np.ndarray, np.ndarray]:
+    """Two rings, 0.2° azimuth steps: the lower one in runs of 5, 1 and 3 points 1° apart, the upper one
+    run of 4; and which points end a run (7 of 13)."""
+    low = np.concatenate([np.arange(5) * 0.2, [1.8], 2.8 + np.arange(3) * 0.2])
+    points = np.vstack([_ring(-5.0, low), _ring(-3.67, 0.1 + np.arange(4) * 0.2)])
+    ends = np.zeros(13, dtype=bool)
+    ends[[0, 4, 5, 6, 8, 9, 12]] = True
+    return points, ends
+
+
+def test_outline_of_rings_with_known_runs() -> None:
+    from zbuf_occlude.experiments.realism import outline_mask, outline_share, ring_labels
+
+    points, ends = _known_runs()
+    assert ring_labels(points).tolist() == [0] * 9 + [1] * 4
+    shuffle = np.random.default_rng(0).permutation(len(points))  # the input's order does not matter
+    assert np.array_equal(outline_mask(points[shuffle]), ends[shuffle])
+    assert outline_share(points) == pytest.approx(7 / 13)
+    # a given step of 1°: the 1° gaps are the scan line going on, one run per ring
+    assert np.flatnonzero(outline_mask(points, azimuth_step_deg=1.0)).tolist() == [0, 8, 9, 12]
+    # a tighter factor splits at every gap wider than 1.2 steps: nothing here (the gaps are 1 or 5 steps)
+    assert np.array_equal(outline_mask(points, gap_factor=1.2), ends)
+    # a factor of 6 steps: one run per ring
+    assert outline_mask(points, gap_factor=6.0).sum() == 4
+
+
+def test_outline_runs_across_the_back_of_the_sensor_and_returns_of_one_pulse() -> None:
+    from zbuf_occlude.experiments.realism import outline_mask, outline_share
+
+    points, ends = _known_runs()
+    turn = np.radians(179.0)  # the runs now cross azimuth ±180°
+    c, s = np.cos(turn), np.sin(turn)
+    behind = points @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    assert np.array_equal(outline_mask(behind), ends)
+    # every pulse with two returns (the same direction, 10 and 11 m): one run, whose first and last points end it
+    azimuths = np.repeat(np.arange(20) * 0.2, 2)
+    two = _ring(-5.0, azimuths, np.tile([10.0, 11.0], 20))
+    assert outline_mask(two).sum() == 2 and outline_share(two) == pytest.approx(2 / 40)
+    assert outline_share(_ring(-5.0, [0.0])) == 1.0 and math.isnan(outline_share(np.zeros((0, 3))))
+
+
+@pytest.mark.parametrize(
+    ("points", "options", "match"),
+    [
+        (np.ones((4, 2)), {}, "shape"),
+        (np.array([[1.0, 0.0, np.nan]]), {}, "finite"),
+        (np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]), {}, "origin"),
+        (np.ones((2, 3)), {"gap_factor": 0.0}, "gap_factor"),
+        (np.ones((2, 3)), {"azimuth_step_deg": -0.2}, "azimuth_step_deg"),
+        (np.ones((2, 3)), {"azimuth_step_deg": math.inf}, "azimuth_step_deg"),
+    ],
+)
+def test_outline_refuses_bad_points_and_options(points, options, match) -> None:
+    from zbuf_occlude.experiments.realism import outline_mask
+
+    with pytest.raises(InvalidInputError, match=match):
+        outline_mask(points, **options)
+
+
+def test_a_cloud_with_a_point_at_the_sensor_is_refused_naming_its_file() -> None:
+    from zbuf_occlude.experiments.realism import ObjectCloud, class_summary
+
+    cloud = ObjectCloud(np.array([[5.0, 0.0, -1.0], [0.0, 0.0, 0.0], [5.0, 0.1, -1.0]]), "car", "Car/car7.csv")
+    for stats in (lambda: cloud_stats(cloud), lambda: class_summary([cloud], by_range=True)):
+        with pytest.raises(InvalidInputError, match=r"Car/car7\.csv: points: .*origin"):
+            stats()
+
+
+@given(st.integers(2, 300), st.floats(0.05, 1.0), st.floats(-30.0, 10.0), st.floats(2.0, 60.0), st.floats(-180.0, 180.0), st.data())
+@settings(max_examples=80, deadline=None)
+def test_one_run_of_m_points_has_outline_share_two_over_m(m, step, elevation, range_m, start, data) -> None:
+    """Gaps from one to 1.4 steps never split a run (the median gap is at least one step, the split at 1.5 of it)."""
+    from zbuf_occlude.experiments.realism import outline_mask, outline_share
+
+    gaps = np.asarray(data.draw(st.lists(st.floats(1.0, 1.4), min_size=m - 1, max_size=m - 1))) * step
+    points = _ring(elevation, start + np.concatenate([[0.0], np.cumsum(gaps)]), range_m)
+    assert outline_share(points) == 2 / m and outline_mask(points).sum() == 2
+
+
+@given(st.lists(st.tuples(st.integers(0, 5), st.floats(-20.0, 20.0), st.floats(3.0, 40.0)), min_size=1, max_size=120))
+@settings(max_examples=80, deadline=None)
+def test_outline_share_lies_in_0_1_and_each_ring_has_an_outline(rows) -> None:
+    from zbuf_occlude.experiments.realism import outline_mask, outline_share, ring_labels
+
+    ring, azimuth, range_m = (np.array(v, dtype=np.float64) for v in zip(*rows))
+    points = np.vstack([_ring(-10.0 + 1.33 * k, [a], r) for k, a, r in zip(ring, azimuth, range_m)])
+    share, mask, labels = outline_share(points), outline_mask(points), ring_labels(points)
+    assert 0.0 < share <= 1.0
+    assert len(np.unique(labels)) == len(np.unique(ring))  # the rings are 1.33° apart, well over the gap
+    assert all(mask[labels == r].sum() >= min(2, (labels == r).sum()) for r in np.unique(labels))
+
+
+def test_scanned_box_outline_is_two_points_per_ring_and_rings_are_the_scanners() -> None:
+    """An HDL-32E scan of a car-sized box: each ring crosses it in one run, so 2 outline points a ring
+    (more than one point in each), with one return per pulse or with the 7-ray footprint's two;
+    the rings from elevations are the scanner's own."""
+    from zbuf_occlude.experiments.realism import outline_mask, ring_labels
+    from zbuf_occlude.experiments.sim2real.config import with_returns
+
+    scene = S.ScanScene().add({"box_m": [4.5, 1.8, 1.5]}, position_m=(8.0, 0.0))
+    for sensor in (S.Lidar.preset("hdl32e"), with_returns(S.Lidar.preset("hdl32e"), 2)):
+        crop = S.scan(scene, sensor, seed=0).crop(1)
+        p = crop.points.astype(np.float64)
+        labels = ring_labels(p)
+        assert np.array_equal(labels, np.unique(crop.ring, return_inverse=True)[1])  # the scanner's rings, lowest first
+        assert len(np.unique(labels)) >= 5 and outline_mask(p).sum() == 2 * len(np.unique(labels))
+
+
+def test_range_bin_medians_of_known_counts() -> None:
+    from zbuf_occlude.experiments.realism import range_bin_medians
+
+    ranges = [4.9, 5.0, 7.0, 9.99, 10.0, 12.0, 24.9, 25.0, 25.1]
+    counts = [1000, 300, 200, 100, 90, 70, 20, 10, 5]
+    medians, clouds = range_bin_medians(ranges, counts)
+    assert clouds.tolist() == [3, 2, 0, 2]  # 4.9 and 25.1 m in no bin; 25 m in the last, closed
+    assert medians[:2].tolist() == [200.0, 80.0] and math.isnan(medians[2]) and medians[3] == 15.0
+
+
+def test_class_summary_by_range_gives_the_count_exponent_and_the_table_shows_it() -> None:
+    from zbuf_occlude.experiments.realism import ObjectCloud, class_summary, class_table, compare_classes
+
+    clouds = []
+    for d in (6.0, 8.0, 11.0, 14.0, 18.0, 23.0):  # a wall of points whose count falls as d^-2, one run per ring
+        n_rings, per_ring = 8, int(round(20 * (12.0 / d) ** 2 / 8 * 8))
+        pts = np.vstack([_ring(-8.0 + 1.33 * k, np.arange(per_ring) * 0.2, d) for k in range(n_rings)])
+        clouds.append(ObjectCloud(pts, "wall", f"w{d:g}"))
+    summary = class_summary(clouds, by_range=True)
+    counts = [len(c.points_m) for c in clouds]
+    assert summary["count_exponent"] == pytest.approx(-2.0, abs=0.05)
+    assert summary["crops_by_range"].tolist() == [2, 2, 1, 1]
+    assert summary["n_points_by_range"][0] == np.median(counts[:2]) and summary["n_points_by_range"][3] == counts[5]
+    per_ring = [len(c.points_m) / 8 for c in clouds]
+    assert summary["outline_share"] == pytest.approx(np.median([2 / n for n in per_ring]))
+    assert "n_points_by_range" not in class_summary(clouds)  # not asked: no range (an airborne crop's sensor is unknown)
+    _, table = compare_classes(clouds, clouds, by_range=True)
+    text = class_table(table)
+    assert "median points at 5-10 m (crops)" in text and "| wall | real | 6 |" in text
+    assert f"| {np.median(counts[:2]):.3f} (2) |" in text and "count exponent" in text
+    _, plain = compare_classes(clouds, clouds)
+    assert "count exponent" not in class_table(plain)

@@ -10,14 +10,22 @@ For each object cloud, in a frame centred on the sensor with z up (metres):
 * nearest-neighbour spacing: median distance of a point to its nearest other point, metres;
 * vertical extent: ``max z − min z``, metres;
 * across-sight width: how wide the cloud shows across the line of sight, metres
-  (:func:`zbuf_occlude.sensors.fit.across_sight_width`).
+  (:func:`zbuf_occlude.sensors.fit.across_sight_width`);
+* outline share (:func:`outline_share`): within each ring, the points sorted by azimuth split into
+  runs where the azimuth gap to the next point exceeds :data:`OUTLINE_GAP_FACTOR` times the ring's
+  azimuth step; the two ends of each run (one point for a run of one) are the outline.  Its share
+  of the points is the share whose neighbouring footprint along the scan line falls off the
+  object: the points where a beam's footprint straddles the object's edge (mixed pixels), which
+  a multi-ray footprint model adds and a real receiver may drop.
 
 Per class (:func:`compare_classes`), for any sensor and the only comparison for airborne crops
 (which record no sensor position, so neither rings nor ranges): points per crop; height (``max z −
 min z``) over width (the x–y extent along the footprint's principal axis, so that a crop's heading
 does not matter); and how the points spread over the height, each point's height above the crop's
 lowest over the crop's height (0 at the bottom, 1 at the top): its median, and the share of points
-in each tenth of the height.  A pole simulated as a tall shaft has its points spread up the shaft
+in each tenth of the height.  For clouds in a sensor frame (``by_range``), also the median points per
+crop in range bins (:data:`RANGE_BINS_M`), the count exponent over the class's crops and the median
+outline share.  A pole simulated as a tall shaft has its points spread up the shaft
 (median near 0.5, height/width 10 or more), where an aerial crop of a real pole often shows a squat
 top (median near 1, height/width near 1): the table shows such a mismatch.
 
@@ -51,7 +59,8 @@ from zbuf_occlude.sensors.scene import GROUND_ID
 __all__ = [
     "ObjectCloud", "read_object_clouds", "cloud_stats", "ring_spacings_deg", "fit_count_exponent",
     "compare_sets", "markdown_table", "realism_report", "RING_GAP_DEG", "HEIGHT_BINS", "RATIO_TARGET", "shape_stats",
-    "compare_classes", "class_table", "REPORT_FILES",
+    "compare_classes", "class_table", "REPORT_FILES", "ring_labels", "outline_mask", "outline_share", "range_bin_medians",
+    "class_summary", "OUTLINE_GAP_FACTOR", "SAME_AZIMUTH_DEG", "RANGE_BINS_M",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -59,6 +68,16 @@ log = logging.getLogger(__name__)
 #: Elevation gap that separates two rings, degrees: a third of the HDL-32E's 1.33° spacing,
 #: far above the elevation jitter of one ring (noise is along the beam).
 RING_GAP_DEG = 0.4
+#: A ring's run of points ends where the azimuth gap to the next point exceeds this many azimuth
+#: steps: a missed pulse or two (a dropout, a hole in the object) is more than one step and less
+#: than two, half-way between; a gap a step wide is the scan line going on.
+OUTLINE_GAP_FACTOR = 1.5
+#: Points of one ring whose azimuths differ by at most this are one pulse's returns, degrees: a
+#: step of a spinning scanner is 0.08-0.4° (HDL-32E: 0.166°), float32 points round at 1e-5°.
+SAME_AZIMUTH_DEG = 1e-3
+#: Edges of the range bins of a class's points per crop, metres: the ``lidar`` set's 5-25 m
+#: (:data:`zbuf_occlude.experiments.sim2real.placement.LIDAR_PLACEMENT`) in 5 m steps.
+RANGE_BINS_M = (5.0, 10.0, 15.0, 20.0, 25.0)
 #: Bins of a crop's height for its vertical profile: tenths.
 HEIGHT_BINS = 10
 #: A count (or a shape ratio) matches when generated / real lies within this factor either way.
@@ -144,22 +163,179 @@ def read_object_clouds(path: str | os.PathLike, *, min_points: int = 1, ground_i
 
 
 # -- statistics ---------------------------------------------------------------------------------
-def ring_spacings_deg(points_m: NDArray[np.floating], *, ring_gap_deg: float = RING_GAP_DEG) -> NDArray[np.float64]:
-    """(R − 1,) float64: elevation differences of consecutive rings, degrees (module docstring)."""
+def _sensor_points(points_m, what: str = "points_m") -> NDArray[np.float64]:
+    """``points_m`` as ``(N, 3) float64``, finite and none at the sensor (whose direction is undefined).
+
+    Raises
+    ------
+    InvalidInputError
+        Another shape, a value not finite, or a point at the origin, naming ``what``.
+    """
     p = np.asarray(points_m, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise InvalidInputError(f"{what} must be an (N, 3) array of points, got shape {p.shape}")
+    if not np.isfinite(p).all():
+        raise InvalidInputError(f"{what}: every coordinate must be finite")
+    if len(p) and not (np.abs(p).max(axis=1) > 0).all():
+        raise InvalidInputError(f"{what}: a point at the sensor (the origin) has no direction")
+    return p
+
+
+def _elevations_deg(p: NDArray[np.float64]) -> NDArray[np.float64]:
+    return np.degrees(np.arcsin(np.clip(p[:, 2] / np.linalg.norm(p, axis=1), -1, 1)))
+
+
+def ring_labels(points_m: NDArray[np.floating], *, ring_gap_deg: float = RING_GAP_DEG) -> NDArray[np.int64]:
+    """Each point's ring, from its elevation alone (module docstring).
+
+    Parameters
+    ----------
+    points_m : (N, 3) float
+        Sensor at the origin, z up, metres.
+    ring_gap_deg : float
+        An elevation gap wider than this between consecutive points (sorted by elevation) starts a
+        new ring, degrees (:data:`RING_GAP_DEG`).
+
+    Returns
+    -------
+    (N,) int64
+        0 for the lowest ring, counting up.
+
+    Raises
+    ------
+    InvalidInputError
+        ``points_m`` not ``(N, 3)``, not finite, or a point at the origin.
+    """
+    p = _sensor_points(points_m)
+    elev = _elevations_deg(p)
+    order = np.argsort(elev, kind="stable")
+    labels = np.empty(len(p), dtype=np.int64)
+    labels[order] = np.concatenate([[0], np.cumsum(np.diff(elev[order]) > ring_gap_deg)]) if len(p) else []
+    return labels
+
+
+def ring_spacings_deg(points_m: NDArray[np.floating], *, ring_gap_deg: float = RING_GAP_DEG) -> NDArray[np.float64]:
+    """(R − 1,) float64: elevation differences of consecutive rings (:func:`ring_labels`), each ring
+    at its points' median elevation, degrees (module docstring)."""
+    p = _sensor_points(points_m)
     if len(p) < 2:
         return np.zeros(0)
-    elev = np.sort(np.degrees(np.arcsin(np.clip(p[:, 2] / np.linalg.norm(p, axis=1), -1, 1))))
-    cuts = np.flatnonzero(np.diff(elev) > ring_gap_deg) + 1
-    centres = np.array([np.median(g) for g in np.split(elev, cuts)])
-    return np.diff(centres)
+    elev, labels = _elevations_deg(p), ring_labels(p, ring_gap_deg=ring_gap_deg)
+    return np.diff([np.median(elev[labels == r]) for r in range(labels.max() + 1)])
+
+
+def outline_mask(points_m: NDArray[np.floating], *, ring_gap_deg: float = RING_GAP_DEG, azimuth_step_deg: float | None = None,
+                 gap_factor: float = OUTLINE_GAP_FACTOR) -> NDArray[np.bool_]:  # fmt: skip
+    """Which points end a run of their ring's scan line: the outline of a spinning LiDAR's object cloud.
+
+    Points are grouped into rings (:func:`ring_labels`); within a ring they are sorted by azimuth,
+    measured from the azimuth of the cloud's centroid (so that a cloud behind the sensor, across
+    ±180°, is one span), and split into runs where the gap to the next point exceeds ``gap_factor``
+    times the ring's azimuth step.  The first and the last point of each run are outline points;
+    a run of one point is one outline point.  Points of one pulse (several returns, azimuths
+    within :data:`SAME_AZIMUTH_DEG`) never split a run, and ties keep the points' order.
+
+    Parameters
+    ----------
+    points_m : (N, 3) float
+        One object's cloud, sensor at the origin, z up, metres.
+    ring_gap_deg : float
+        :func:`ring_labels`' elevation gap, degrees.
+    azimuth_step_deg : float, optional
+        The scanner's azimuth step, degrees, for every ring; None: each ring's median gap between
+        distinct azimuths (gaps above :data:`SAME_AZIMUTH_DEG`; a ring without such a gap is one run).
+    gap_factor : float
+        :data:`OUTLINE_GAP_FACTOR`.
+
+    Returns
+    -------
+    (N,) bool
+        True at outline points.
+
+    Raises
+    ------
+    InvalidInputError
+        ``points_m`` not ``(N, 3)``, not finite, or a point at the origin; ``azimuth_step_deg``
+        or ``gap_factor`` not a finite number above 0.
+    """
+    from zbuf_occlude.sensors.checks import real
+
+    p = _sensor_points(points_m)
+    factor = real(gap_factor, "gap_factor", low=0.0, low_open=True)
+    step_given = None if azimuth_step_deg is None else real(azimuth_step_deg, "azimuth_step_deg", low=0.0, low_open=True)
+    mask = np.zeros(len(p), dtype=bool)
+    if not len(p):
+        return mask
+    centre = p.mean(axis=0)
+    azimuth = np.degrees(np.arctan2(p[:, 1], p[:, 0])) - math.degrees(math.atan2(centre[1], centre[0]))
+    azimuth = (azimuth + 180.0) % 360.0 - 180.0
+    labels = ring_labels(p, ring_gap_deg=ring_gap_deg)
+    order = np.lexsort((azimuth, labels))  # by ring, then azimuth; stable on ties
+    starts = np.flatnonzero(np.diff(labels[order], prepend=-1))
+    for ring in np.split(order, starts[1:]):
+        gaps = np.diff(azimuth[ring])
+        if step_given is None:
+            distinct = gaps[gaps > SAME_AZIMUTH_DEG]
+            step = float(np.median(distinct)) if len(distinct) else math.inf
+        else:
+            step = step_given
+        breaks = np.flatnonzero(gaps > factor * step)
+        mask[ring[np.concatenate([[0], breaks + 1])]] = True  # run starts
+        mask[ring[np.concatenate([breaks, [len(ring) - 1]])]] = True  # run ends
+    return mask
+
+
+def outline_share(points_m: NDArray[np.floating], **options) -> float:
+    """The share of a cloud's points on its outline, in (0, 1]: :func:`outline_mask` (which takes
+    ``options``) over the point count; NaN for no points.  One run of ``m >= 2`` points gives
+    ``2 / m``; a cloud of isolated points, 1.
+
+    Raises
+    ------
+    InvalidInputError
+        As :func:`outline_mask`.
+    """
+    mask = outline_mask(points_m, **options)
+    return float(mask.mean()) if len(mask) else math.nan
+
+
+def range_bin_medians(range_m, count, bins_m: tuple[float, ...] = RANGE_BINS_M) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """The median of ``count`` over the clouds in each range bin, and how many clouds each holds.
+
+    Parameters
+    ----------
+    range_m, count : (C,) float
+        Per cloud: distance from the sensor to its centroid, metres, and its points.
+    bins_m : (B + 1,) float
+        Increasing bin edges, metres (:data:`RANGE_BINS_M`); bin ``i`` is ``[bins_m[i], bins_m[i + 1])``,
+        the last one closed; clouds outside every bin are not counted.
+
+    Returns
+    -------
+    medians : (B,) float64
+        NaN for an empty bin.
+    clouds : (B,) int64
+    """
+    r, n = np.asarray(range_m, dtype=np.float64), np.asarray(count, dtype=np.float64)
+    edges = np.asarray(bins_m, dtype=np.float64)
+    which = np.searchsorted(edges, r, side="right") - 1
+    which[r == edges[-1]] = len(edges) - 2  # the last bin is closed
+    medians = np.full(len(edges) - 1, math.nan)
+    clouds = np.zeros(len(edges) - 1, dtype=np.int64)
+    for b in range(len(edges) - 1):
+        inside = which == b
+        clouds[b] = int(inside.sum())
+        if clouds[b]:
+            medians[b] = float(np.median(n[inside]))
+    return medians, clouds
 
 
 def cloud_stats(cloud: ObjectCloud, *, ring_gap_deg: float = RING_GAP_DEG) -> dict:
-    """Per-cloud statistics: ``n_points, range_m, n_rings, ring_spacings_deg, nn_spacing_m, vertical_extent_m, across_sight_width_m``."""
+    """Per-cloud statistics: ``n_points, range_m, n_rings, ring_spacings_deg, nn_spacing_m, vertical_extent_m, across_sight_width_m,
+    outline_share`` (:func:`outline_share`)."""
     from scipy.spatial import cKDTree
 
-    p = cloud.points_m
+    p = _sensor_points(cloud.points_m, f"{cloud.source}: points")
     spacing = ring_spacings_deg(p, ring_gap_deg=ring_gap_deg)
     nn = float(np.median(cKDTree(p).query(p, k=2)[0][:, 1])) if len(p) > 1 else float("nan")
     return {
@@ -170,6 +346,7 @@ def cloud_stats(cloud: ObjectCloud, *, ring_gap_deg: float = RING_GAP_DEG) -> di
         "nn_spacing_m": nn,
         "vertical_extent_m": float(np.ptp(p[:, 2])) if len(p) else 0.0,
         "across_sight_width_m": across_sight_width(p),
+        "outline_share": outline_share(p, ring_gap_deg=ring_gap_deg),
     }
 
 
@@ -207,22 +384,53 @@ def shape_stats(points_m: NDArray[np.floating]) -> dict:
     }  # fmt: skip
 
 
-def _class_summary(clouds: list[ObjectCloud]) -> dict:
-    """Medians over a class's crops of :func:`shape_stats`, and the mean of their height shares."""
+def class_summary(clouds: list[ObjectCloud], *, by_range: bool = False, bins_m: tuple[float, ...] = RANGE_BINS_M) -> dict:
+    """Medians over a class's crops of :func:`shape_stats`, and the mean of their height shares.
+
+    Parameters
+    ----------
+    clouds : list of ObjectCloud
+        One class's crops (at least one).
+    by_range : bool
+        The clouds are in a sensor frame (sensor at the origin, z up, metres): add their points
+        against range and their outline.
+    bins_m : (B + 1,) float
+        Range bin edges, metres (:func:`range_bin_medians`).
+
+    Returns
+    -------
+    dict
+        ``crops``; the medians of ``n_points``, ``height_m``, ``width_m``, ``height_to_width`` and
+        ``median_normalised_height``; ``height_shares``, ``(HEIGHT_BINS,) float64``; with
+        ``by_range`` also ``range_m`` (median distance to the centroid, metres),
+        ``n_points_by_range`` and ``crops_by_range`` (:func:`range_bin_medians`, ``(B,)``),
+        ``count_exponent`` (:func:`fit_count_exponent` over the crops; NaN for fewer than three
+        or one range) and ``outline_share`` (the median of :func:`outline_share`).
+    """
     stats = [shape_stats(c.points_m) for c in clouds]
     summary = {"crops": len(stats)}
     for key in ("n_points", "height_m", "width_m", "height_to_width", "median_normalised_height"):
         values = np.array([st[key] for st in stats], dtype=np.float64)
         summary[key] = float(np.nanmedian(values)) if np.isfinite(values).any() else math.nan
     summary["height_shares"] = np.mean([st["height_shares"] for st in stats], axis=0)
+    if by_range:
+        ranges = np.array([np.linalg.norm(c.points_m.mean(axis=0)) for c in clouds])
+        counts = np.array([len(c.points_m) for c in clouds])
+        summary["range_m"] = float(np.median(ranges))
+        summary["n_points_by_range"], summary["crops_by_range"] = range_bin_medians(ranges, counts, bins_m)
+        summary["count_exponent"] = fit_count_exponent(ranges, counts)[0]
+        summary["outline_share"] = float(np.nanmedian([outline_share(_sensor_points(c.points_m, f"{c.source}: points")) for c in clouds]))
     return summary
 
 
-def compare_classes(generated: list[ObjectCloud], real: list[ObjectCloud]) -> tuple[list[dict], dict[str, dict[str, dict]]]:
+def compare_classes(generated: list[ObjectCloud], real: list[ObjectCloud], *, by_range: bool = False,
+                    ) -> tuple[list[dict], dict[str, dict[str, dict]]]:  # fmt: skip
     """Per class, generated against real: points per crop, height over width and the vertical distribution.
 
     Classes are the labels both sets have; when they share none, every cloud of each set is pooled
-    as one class, ``all``.
+    as one class, ``all``.  With ``by_range`` (both sets in a sensor frame), each summary also
+    holds the points per crop by range, the count exponent and the outline share
+    (:func:`class_summary`).
 
     Returns
     -------
@@ -232,14 +440,13 @@ def compare_classes(generated: list[ObjectCloud], real: list[ObjectCloud]) -> tu
         median normalised height (difference within :data:`MEDIAN_HEIGHT_TARGET`), and the distance
         between the mean height profiles (within :data:`PROFILE_TARGET`).
     table : dict
-        ``{class: {"generated": summary, "real": summary}}``, each summary ``crops`` and the
-        medians of :func:`shape_stats`' values over the class's crops, ``height_shares`` their mean.
+        ``{class: {"generated": summary, "real": summary}}``, each summary :func:`class_summary`'s.
     """
     shared = sorted({c.label for c in generated} & {c.label for c in real})
     groups = {k: ([c for c in generated if c.label == k], [c for c in real if c.label == k]) for k in shared} or {"all": (generated, real)}
     rows, table = [], {}
     for k, (g_clouds, r_clouds) in groups.items():
-        g, r = _class_summary(g_clouds), _class_summary(r_clouds)
+        g, r = class_summary(g_clouds, by_range=by_range), class_summary(r_clouds, by_range=by_range)
         table[k] = {"generated": g, "real": r}
         for name, key in (("median points per crop", "n_points"), ("median height / width", "height_to_width")):
             ratio = g[key] / r[key] if r[key] > 0 else math.nan
@@ -256,22 +463,39 @@ def compare_classes(generated: list[ObjectCloud], real: list[ObjectCloud]) -> tu
     return rows, table
 
 
+def _bin_names(bins_m: tuple[float, ...] = RANGE_BINS_M) -> list[str]:
+    """``["5-10", "10-15", ...]``: the range bins' names, metres."""
+    return [f"{lo:g}-{hi:g}" for lo, hi in zip(bins_m[:-1], bins_m[1:])]
+
+
 def class_table(table: dict[str, dict[str, dict]]) -> str:
-    """:func:`compare_classes`' table as Markdown: one row per class and set, the height profile in percent, bottom to top."""
-    lines = ["| class | set | crops | median points | median height, m | median width, m | median height / width | "
-             "median normalised height | % of points per tenth of the height, bottom to top |", "|" + "---|" * 9]  # fmt: skip
+    """:func:`compare_classes`' table as Markdown: one row per class and set, the height profile in percent, bottom to top;
+    with summaries by range (:func:`class_summary`), the median points per crop in each range bin (crops in it),
+    the count exponent and the median outline share after it."""
+    by_range = any("n_points_by_range" in st for sets in table.values() for st in sets.values())
+    head = ["class", "set", "crops", "median points", "median height, m", "median width, m", "median height / width",
+            "median normalised height", "% of points per tenth of the height, bottom to top"]  # fmt: skip
+    if by_range:
+        head += [f"median points at {b} m (crops)" for b in _bin_names()] + ["count exponent", "median outline share"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for k, sets in table.items():
         for name, st in sets.items():
             profile = " ".join(f"{100 * v:.0f}" for v in st["height_shares"])
-            lines.append(f"| {k} | {name} | {st['crops']} | {_fmt(st['n_points'])} | {_fmt(st['height_m'])} | {_fmt(st['width_m'])} | "
-                         f"{_fmt(st['height_to_width'])} | {_fmt(st['median_normalised_height'])} | {profile} |")  # fmt: skip
+            cells = [k, name, str(st["crops"]), *(_fmt(st[key]) for key in ("n_points", "height_m", "width_m", "height_to_width",
+                                                                           "median_normalised_height")), profile]  # fmt: skip
+            if by_range:
+                cells += [f"{_fmt(m)} ({c})" for m, c in zip(st["n_points_by_range"], st["crops_by_range"])]
+                cells += [_fmt(st["count_exponent"]), _fmt(st["outline_share"])]
+            lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
 def _class_rows(table: dict[str, dict[str, dict]]) -> list[dict]:
     """:func:`compare_classes`' table as CSV rows: class, set, the medians and one column per tenth of the height."""
-    return [{"class": k, "set": name, **{key: v for key, v in st.items() if key != "height_shares"},
-             **{f"share_{b / HEIGHT_BINS:g}_{(b + 1) / HEIGHT_BINS:g}": float(v) for b, v in enumerate(st["height_shares"])}}
+    arrays = ("height_shares", "n_points_by_range", "crops_by_range")
+    return [{"class": k, "set": name, **{key: v for key, v in st.items() if key not in arrays},
+             **{f"share_{b / HEIGHT_BINS:g}_{(b + 1) / HEIGHT_BINS:g}": float(v) for b, v in enumerate(st["height_shares"])},
+             **{f"{key}_{b}_m": v.item() for key in arrays[1:] if key in st for b, v in zip(_bin_names(), st[key])}}
             for k, sets in table.items() for name, st in sets.items()]  # fmt: skip
 
 
@@ -301,6 +525,7 @@ def _summary(stats: list[dict]) -> dict:
         "median_nn_spacing_m": float(np.nanmedian([s["nn_spacing_m"] for s in stats])),
         "median_vertical_extent_m": float(np.median([s["vertical_extent_m"] for s in stats])),
         "median_across_sight_width_m": float(np.median([s["across_sight_width_m"] for s in stats])),
+        "median_outline_share": float(np.nanmedian([s["outline_share"] for s in stats])),
         "_spacing": spacing, "_range": r, "_count": n, "_nn": np.array([s["nn_spacing_m"] for s in stats]),
     }  # fmt: skip
 
@@ -352,6 +577,7 @@ def compare_sets(
         {"metric": "median nearest-neighbour spacing, m", "generated": g["median_nn_spacing_m"], "real": r["median_nn_spacing_m"], "difference": g["median_nn_spacing_m"] - r["median_nn_spacing_m"], "target": "", "met": ""},
         {"metric": "median vertical extent, m", "generated": g["median_vertical_extent_m"], "real": r["median_vertical_extent_m"], "difference": g["median_vertical_extent_m"] - r["median_vertical_extent_m"], "target": "", "met": ""},
         {"metric": "median across-sight width, m", "generated": g["median_across_sight_width_m"], "real": r["median_across_sight_width_m"], "difference": g["median_across_sight_width_m"] - r["median_across_sight_width_m"], "target": "", "met": ""},
+        {"metric": "median outline share (points ending a run of their ring)", "generated": g["median_outline_share"], "real": r["median_outline_share"], "difference": g["median_outline_share"] - r["median_outline_share"], "target": "", "met": ""},
     ]  # fmt: skip
     return rows, g, r
 
@@ -477,7 +703,7 @@ def _report_into(folder: OwnedFolder, generated: str | os.PathLike, real: str | 
         rows = [{"metric": "clouds", "generated": len(gen_clouds), "real": len(real_clouds), "difference": "", "target": "", "met": ""}]
     else:
         rows, g, r = compare_sets(gen_clouds, real_clouds, ring_gap_deg=ring_gap_deg)
-    class_rows, table = compare_classes(gen_clouds, real_clouds)
+    class_rows, table = compare_classes(gen_clouds, real_clouds, by_range=not airborne)
     rows += class_rows
     header = f"Generated: {generated} ({len(gen_clouds)} clouds); real: {real} ({len(real_clouds)} clouds)\n\n"
     folder.write_text("realism.md", header + markdown_table(rows) + "\n" + class_table(table))
