@@ -11,18 +11,22 @@ import trimesh
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.returns import (
+    COVER_TOLERANCE,
     IGN_ALTITUDE_M,
     IGN_DIVERGENCE_DEG,
     PLOT_TREES,
     ign_scanner,
     object_pulse_shares,
+    plot_cover,
     plot_scene,
     pulse_subset,
     simulate,
     simulated_classes,
+    spacing_for_cover,
+    tree_cover,
 )
-from zbuf_occlude.experiments.returns_comparison import comparison_rows, recommend_k
-from zbuf_occlude.experiments.returns_report import ReturnsSettings, run_returns, scans_of_run
+from zbuf_occlude.experiments.returns_comparison import comparison_rows, cover_markdown, recommend_k
+from zbuf_occlude.experiments.returns_report import ReturnsSettings, cover_rays_per_cell, run_returns, scans_of_run
 from zbuf_occlude.io.atomic import write_bytes
 from zbuf_occlude.io.las import LasPoints, las_bytes, read_las
 from zbuf_occlude.io.progress import PROGRESS_INTERVAL_ENV
@@ -33,6 +37,7 @@ from zbuf_occlude.sensors.fit.return_model import GROUND_REFLECTANCE, fit_return
 from zbuf_occlude.sensors.fit.returns import ReturnStatistics, return_statistics
 from zbuf_occlude.sensors.kinds import with_beam
 from zbuf_occlude.sensors.reflectance import reflectance
+from zbuf_occlude.sensors.scene import ScanScene, SceneObject
 
 #: A footprint 1.5 m across at 1,500 m: plate edges split many pulses.
 WIDE_DEG = math.degrees(1e-3)
@@ -211,6 +216,11 @@ def test_run_returns_writes_its_outputs(tmp_path, detection, capsys, monkeypatch
     else:
         assert "detection_threshold" not in model and model["detection"] is False
     assert "low_deg" not in summary["divergence_fits"][0]  # the fit's own ± sd only
+    covers = summary["tree_cover"]  # the tile's measured by tree_cover, the scans' the same way, the spacing as given
+    assert covers["tile"]["value"] == tree_cover(read_las(real_path), bootstrap=5).value
+    assert covers["spacing_m"] == pytest.approx(4.0) and 0.0 <= covers["plot_vertical_rays"] <= 1.0
+    assert set(covers["scans"]) == {"IGN, fitted divergence", "IGN, data-sheet divergence"}
+    assert "Tree cover" in summary["table"] and "the real tile" in read_regular_file(out / "real.md", max_bytes=1 << 20).decode()
     # the sweep's first row is the fitted scanner over the plot with the model's reflectivity
     scanner = fit_return_model(read_las(real_path), altitude_m=IGN_ALTITUDE_M, bootstrap=5).apply(ign_scanner(IGN_DIVERGENCE_DEG, 7))
     if not detection:
@@ -263,3 +273,135 @@ def test_surfaces_that_transmit_give_hits_behind_them() -> None:
                        **kwargs).statistics["vegetation"].estimates  # fmt: skip
     assert opaque["returns_1"].value == 1.0
     assert through["returns_2"].value > 0.5  # the boxes' pulses reach the ground below them too
+
+
+def _cells_las(tops, *, pulses: int = 6, cell_m: float = 1.0, under=None) -> LasPoints:
+    """A scan of one row of cells: per cell ``pulses`` first returns on the ground at z 0 and one more
+    return of class ``tops[i]`` at z 5 (None: none), and ``under`` (class, z) returns below it."""
+    points, classes, numbers = [], [], []
+    for i, top in enumerate(tops):
+        x = (i + 0.5) * cell_m
+        for j in range(pulses):
+            points.append((x + 0.01 * j, 0.5, 0.0))
+            classes.append(2)
+            numbers.append(1)
+        for cls, z in ([(top, 5.0)] if top is not None else []) + list(under or []):
+            points.append((x, 0.4, z))
+            classes.append(cls)
+            numbers.append(2)
+    n = len(points)
+    return LasPoints(points=np.array(points), intensity=np.ones(n), return_number=numbers, number_of_returns=[2] * n,
+                     gps_time=np.arange(n, dtype=np.float64), scan_angle_deg=np.zeros(n), classification=classes,
+                     point_source_id=np.zeros(n), scanner_channel=np.zeros(n))  # fmt: skip
+
+
+def test_tree_cover_is_the_share_of_cells_whose_highest_return_is_vegetation() -> None:
+    # 10 cells: 3 topped by high vegetation, 1 by low vegetation, 1 by a building (not counted), 5 by the ground
+    las = _cells_las([5, 5, 5, 3, 6, None, None, None, None, None])
+    cover = tree_cover(las, bootstrap=20)
+    assert cover.value == pytest.approx(4 / 9) and cover.n == 9 and cover.unit == "share"
+    assert tree_cover(las, classes=(5,), bootstrap=20).value == pytest.approx(3 / 8)  # low vegetation is then neither
+    # vegetation below a higher ground return does not cover the cell
+    low = _cells_las([None, None], under=[(5, -1.0)])
+    assert tree_cover(low, bootstrap=20).value == 0.0
+    # cells with too few pulses are left out
+    assert tree_cover(_cells_las([5, None], pulses=3), min_pulses=3, bootstrap=20).value == 0.5
+    with pytest.raises(InvalidInputError, match="no cell of 1 m holds 5 pulses"):
+        tree_cover(_cells_las([5, None], pulses=3), bootstrap=20)
+
+
+def test_tree_cover_resamples_blocks_of_cells() -> None:
+    covered = tree_cover(_cells_las([5] * 30), bootstrap=20)
+    assert covered.value == 1.0 and covered.std == 0.0
+    # 30 cells in three 10 m blocks, all covered, half covered and bare: the blocks are the draws
+    las = _cells_las([5] * 10 + [5, None] * 5 + [None] * 10)
+    blocks = tree_cover(las, bootstrap=400, seed=1)
+    assert blocks.value == pytest.approx(0.5)
+    assert blocks.std == pytest.approx(0.5 / math.sqrt(3), rel=0.3)  # the sd of a mean of 3 blocks (1, 0.5, 0), not of 30 cells
+    assert tree_cover(las, bootstrap=400, seed=1, block_m=1.0).std == pytest.approx(math.sqrt(0.25 / 30), rel=0.3)
+
+
+@pytest.mark.parametrize(("field", "value", "message"), [("cell_m", 0.0, "cell_m"), ("cell_m", math.nan, "cell_m"),
+                                                         ("block_m", -1.0, "block_m"), ("min_pulses", 0, "min_pulses")])  # fmt: skip
+def test_tree_cover_refuses_bad_settings(field, value, message) -> None:
+    with pytest.raises(InvalidInputError, match=message):
+        tree_cover(_cells_las([5, None]), **{field: value}, bootstrap=20)
+
+
+def test_tree_cover_refuses_a_scan_too_wide_for_its_grid() -> None:
+    las = _cells_las([5, None])
+    far = replace(las, points=np.vstack([las.points[:-1], [[1e300, 0.0, 0.0]]]))
+    with pytest.raises(InvalidInputError, match="cells of 1 m across"):
+        tree_cover(far, bootstrap=20)
+
+
+def _box_scene(extent_m: float, positions) -> tuple[ScanScene, tuple[int, ...]]:
+    objects = [
+        SceneObject(trimesh.creation.box(extents=(extent_m, extent_m, 2.0)), class_name="vegetation", position_m=xy) for xy in positions
+    ]
+    return ScanScene(objects=objects, ground=True, ground_half_extent_m=50.0), tuple(range(1, len(objects) + 1))
+
+
+def test_plot_cover_counts_cells_whose_highest_hit_is_vegetation() -> None:
+    # a 4 m box on cell boundaries in a 20 m square: 16 of 400 cells
+    scene, vegetation = _box_scene(4.0, [(0.0, 0.0)])
+    assert plot_cover(scene, (0.0, 0.0), 10.0, vegetation, rays_per_cell=8) == pytest.approx(16 / 400)
+    two, _ = _box_scene(4.0, [(-4.0, -4.0), (4.0, 4.0)])
+    assert plot_cover(two, (0.0, 0.0), 10.0, (1,), rays_per_cell=8) == pytest.approx(16 / 384)  # the other box is neither
+    # a 5 m box: 25 m² of ground, but 36 cells hold some of it: with many rays a cell each sees its edge
+    scene, vegetation = _box_scene(5.0, [(0.0, 0.0)])
+    assert plot_cover(scene, (0.0, 0.0), 10.0, vegetation, rays_per_cell=200) == pytest.approx(36 / 400)
+    one = plot_cover(scene, (0.0, 0.0), 10.0, vegetation, rays_per_cell=1, seed=3)
+    assert 16 / 400 <= one <= 36 / 400
+    with pytest.raises(InvalidInputError, match="rays"):
+        plot_cover(scene, (0.0, 0.0), 10_000.0, vegetation, rays_per_cell=10)
+
+
+def test_spacing_for_cover_gives_the_plot_that_cover() -> None:
+    boxes = [trimesh.creation.box(extents=(2.0, 2.0, 1.0)) for _ in range(4)]
+    sizes = [2.0] * 4
+    for cover in (0.1, 0.3):
+        spacing = spacing_for_cover(boxes, sizes, cover, rays_per_cell=4)
+        scene, vegetation = plot_scene(boxes, sizes, spacing_m=spacing, seed=0)
+        # a few hundred cells: the cover moves in steps of about 1/200 as the spacing grows
+        assert plot_cover(scene, (0.0, 0.0), spacing, vegetation, rays_per_cell=4) == pytest.approx(cover, abs=0.006)
+        # 4 crowns of 4 m² (turned, they touch a few more cells) in a square 2 spacings wide
+        assert math.sqrt(16.0 / (4 * cover)) * 0.9 <= spacing <= math.sqrt(16.0 / (4 * cover)) * 1.35
+    with pytest.raises(InvalidInputError, match="cover"):
+        spacing_for_cover(boxes, sizes, 1.0, rays_per_cell=4)
+
+
+def test_cover_markdown_names_every_cover() -> None:
+    est = {"value": 0.371, "std": 0.057, "n": 1146}
+    covers = {"cell_m": 1.0, "min_pulses": 5, "block_m": 10.0, "tile": est, "spacing_m": 8.49, "rays_per_cell": 20,
+              "plot_vertical_rays": 0.3711, "scans": {"IGN, fitted divergence": {"value": 0.4, "std": 0.01, "n": 900}}}  # fmt: skip
+    text = cover_markdown(covers)
+    assert "the real tile: 37.1 % ± 5.7 % (1,146 cells)" in text
+    assert "20 vertical rays a cell: 37.1 % (trees 8.49 m apart)" in text
+    assert "IGN, fitted divergence: 40.0 % ± 1.0 % (900 cells)" in text
+    assert "vertical" not in cover_markdown(covers, tile_only=True)
+
+
+def test_the_plot_is_spaced_for_the_tiles_cover(tmp_path) -> None:
+    import zbuf_occlude.experiments.returns_report as report
+
+    meshes = tmp_path / "bush"
+    meshes.mkdir()
+    for i, tree in enumerate(PLOT_TREES):
+        write_bytes(
+            meshes / (tree.file.rsplit(".", 1)[0] + ".obj"),
+            trimesh.creation.box(extents=(1.0 + 0.2 * i, 1.0, 2.0)).export(file_type="obj").encode(),
+        )
+    trees = tuple(type(t)(t.file.rsplit(".", 1)[0] + ".obj", "+z", 3.0) for t in PLOT_TREES)
+    settings_ = ReturnsSettings(seeds=(0,), copies=1)
+    original, report.PLOT_TREES = report.PLOT_TREES, trees
+    try:
+        scene, vegetation, centre, half = report.ign_plot(meshes, settings_, tree_cover=0.25)
+        fixed = report.ign_plot(meshes, replace(settings_, spacing_m=5.0), tree_cover=0.25)
+        with pytest.raises(InvalidInputError, match="tree cover"):
+            report.ign_plot(meshes, settings_)
+    finally:
+        report.PLOT_TREES = original
+    assert cover_rays_per_cell(settings_) == 10
+    assert plot_cover(scene, centre, half, vegetation, rays_per_cell=10) == pytest.approx(0.25, abs=COVER_TOLERANCE)
+    assert fixed[3] == 3 * 5.0 / 2  # a spacing given is kept

@@ -25,6 +25,7 @@ __all__ = [
     "class_suffix",
     "comparison_rows",
     "comparison_markdown",
+    "cover_markdown",
     "recommend_k",
 ]
 
@@ -131,6 +132,24 @@ def comparison_markdown(rows: Sequence[dict[str, Any]]) -> str:
         real = f"{_shown(r['real'], r['figure'])} ± {_shown(r['real_sd'], r['figure'])}"
         sim = f"{_shown(r['simulated'], r['figure'])} ± {_shown(r['simulated_sd'], r['figure'])}"
         lines.append(f"| {r['run']} | {r['figure']} | {real} | {sim} | {r['target']} | **{r['verdict']}** |")
+    return "\n".join(lines) + "\n"
+
+
+def _percent(e: dict[str, Any]) -> str:
+    value, std = (math.nan if e[k] is None else e[k] for k in ("value", "std"))
+    return f"{100 * value:.1f} % ± {100 * std:.1f} % ({e['n']:,} cells)" if math.isfinite(value) else "not measured"
+
+
+def cover_markdown(covers: dict[str, Any], *, tile_only: bool = False) -> str:
+    """The tree covers of a run (``run.json``'s ``tree_cover``) as Markdown lines: the tile's, the plot's
+    by vertical rays and each compared scan's (``tile_only``: the tile's alone)."""
+    rule = (f"the share of {covers['cell_m']:g} m cells holding {covers['min_pulses']} pulses or more whose highest return is "
+            f"vegetation rather than ground; ± sd over {covers['block_m']:g} m blocks")  # fmt: skip
+    lines = [f"Tree cover ({rule}):", "", f"* the real tile: {_percent(covers['tile'])}"]
+    if not tile_only:
+        lines.append(f"* the plot, by {covers['rays_per_cell']} vertical rays a cell: {100 * covers['plot_vertical_rays']:.1f} % "
+                     f"(trees {covers['spacing_m']:.3g} m apart)")  # fmt: skip
+        lines += [f"* {label}: {_percent(e)}" for label, e in covers["scans"].items()]
     return "\n".join(lines) + "\n"
 
 

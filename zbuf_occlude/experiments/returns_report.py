@@ -13,7 +13,13 @@
   Autzen where it is given;
 * ``comparison.md``: the same as a Markdown table (what the command prints);
 * ``returns.png``: one simulated tree beside a real vegetation patch, coloured by return number;
-* ``run.json``: the settings, the fitted divergences and the recommended K.
+* ``run.json``: the settings, the fitted divergences, the recommended K and the tree covers.
+
+The plot's trees stand as far apart as makes its tree cover the real tile's
+(:func:`~zbuf_occlude.experiments.returns.tree_cover` on the tile,
+:func:`~zbuf_occlude.experiments.returns.spacing_for_cover` for the plot), so that the ground
+returns under crowns compare like with like; the cover of the compared scans is measured on them
+as on the tile and reported beside it (``run.json``'s ``tree_cover``, under the table).
 
 A target passes when the simulated figure lies within the stated relative tolerance of the real
 one (:data:`~zbuf_occlude.experiments.returns_comparison.TOLERANCES`); the smallest gap is held to the range resolution the simulation was
@@ -47,16 +53,24 @@ from zbuf_occlude.experiments.returns import (
     GROUND_CLASS,
     IGN_ALTITUDE_M,
     IGN_DIVERGENCE_DEG,
+    IGN_PULSES_PER_M2,
     PLOT_TREES,
+    TREE_COVER_BLOCK_M,
+    TREE_COVER_CELL_M,
+    TREE_COVER_MIN_PULSES,
     ign_scanner,
+    plot_cover,
     plot_scene,
     pulse_subset,
     simulate,
+    spacing_for_cover,
+    tree_cover,
 )
 from zbuf_occlude.experiments.returns_comparison import (
     RETURN_COUNTS,
     class_suffix,
     comparison_markdown,
+    cover_markdown,
     comparison_rows,
     estimate_of,
     recommend_k,
@@ -99,8 +113,9 @@ class ReturnsSettings:
         Interleaved timing rounds of the K sweep (median).
     copies : int
         Each mesh stands this many times in the plot (more vegetation pulses).
-    spacing_m : float
-        Distance between the plot's trees, metres.
+    spacing_m : float or None
+        Distance between the plot's trees, metres; None (default): the spacing whose tree cover
+        is the real tile's (:func:`~.returns.spacing_for_cover`).
     scan_angle_deg : float
         Across-track angle of the plot's centre (the IGN sample's median absolute scan angle is 13°).
     bootstrap : int
@@ -116,7 +131,7 @@ class ReturnsSettings:
     seeds: tuple[int, ...] = (0, 1)
     repeats: int = 3
     copies: int = 2
-    spacing_m: float = 14.0
+    spacing_m: float | None = None
     scan_angle_deg: float = 13.0
     bootstrap: int = 200
     detection: bool = True
@@ -184,9 +199,18 @@ def _real(path: str | os.PathLike, classes: Sequence[int], bootstrap: int) -> tu
     return out, las, fit_return_model(las, altitude_m=IGN_ALTITUDE_M, classes=classes, bootstrap=bootstrap)
 
 
-def ign_plot(mesh_root: str | os.PathLike, settings: ReturnsSettings) -> tuple[ScanScene, tuple[int, ...], tuple[float, float], float]:
+def cover_rays_per_cell(settings: ReturnsSettings) -> int:
+    """Vertical rays per cell of :func:`~.returns.plot_cover`: the pulses a cell of the pooled scans holds
+    (one flight line per seed at :data:`~.returns.IGN_PULSES_PER_M2`)."""
+    return max(1, round(len(settings.seeds) * IGN_PULSES_PER_M2 * TREE_COVER_CELL_M**2))
+
+
+def ign_plot(mesh_root: str | os.PathLike, settings: ReturnsSettings, *,
+             tree_cover: float | None = None) -> tuple[ScanScene, tuple[int, ...], tuple[float, float], float]:  # fmt: skip
     """The experiment's plot: :data:`~.returns.PLOT_TREES` from ``mesh_root``, ``settings.copies`` of each,
-    on a grid ``settings.spacing_m`` apart, its centre ``settings.scan_angle_deg`` across track.
+    on a grid ``settings.spacing_m`` apart (None: as far apart as gives the tree cover
+    ``tree_cover``, :func:`~.returns.spacing_for_cover`), its centre ``settings.scan_angle_deg``
+    across track.
 
     Returns
     -------
@@ -201,8 +225,14 @@ def ign_plot(mesh_root: str | os.PathLike, settings: ReturnsSettings) -> tuple[S
     ------
     MeshLoadError
         A mesh file that is missing or unreadable (named).
+    InvalidInputError
+        No spacing and no tree cover, or a cover the meshes cannot give.
     """
     from zbuf_occlude.mesh.load import load_mesh
+    from zbuf_occlude.errors import InvalidInputError
+
+    if settings.spacing_m is None and tree_cover is None:
+        raise InvalidInputError("ign_plot needs settings.spacing_m or a tree cover to space the trees for")
 
     root = Path(mesh_root)
     meshes, sizes = [], []
@@ -211,9 +241,12 @@ def ign_plot(mesh_root: str | os.PathLike, settings: ReturnsSettings) -> tuple[S
         meshes += [mesh] * settings.copies
         sizes += [tree.size_m] * settings.copies
     y = IGN_ALTITUDE_M * math.tan(math.radians(settings.scan_angle_deg))
-    scene, vegetation = plot_scene(meshes, sizes, spacing_m=settings.spacing_m, center_xy=(0.0, y), seed=0)
+    spacing = settings.spacing_m
+    if spacing is None:
+        spacing = spacing_for_cover(meshes, sizes, tree_cover, center_xy=(0.0, y), rays_per_cell=cover_rays_per_cell(settings), seed=0)
+    scene, vegetation = plot_scene(meshes, sizes, spacing_m=spacing, center_xy=(0.0, y), seed=0)
     side = math.ceil(math.sqrt(len(meshes)))
-    return scene, vegetation, (0.0, y), side * settings.spacing_m / 2.0
+    return scene, vegetation, (0.0, y), side * spacing / 2.0
 
 
 def scans_of_run(settings: ReturnsSettings, *, autzen: bool = False) -> int:
@@ -341,6 +374,19 @@ def _compare(plot, real, real_classes, divergence_deg: float, k: int, model: _Mo
     return rows, result
 
 
+def _covers(tile: Estimate, plot, settings: ReturnsSettings, scans: dict[str, LasPoints]) -> dict[str, Any]:
+    """``run.json``'s ``tree_cover``: the tile's (:func:`~.returns.tree_cover`), the plot's by vertical rays
+    (:func:`~.returns.plot_cover`) and each compared scan's, measured as the tile's."""
+    scene, vegetation, centre, half = plot
+    rays = cover_rays_per_cell(settings)
+    return {
+        "cell_m": TREE_COVER_CELL_M, "min_pulses": TREE_COVER_MIN_PULSES, "block_m": TREE_COVER_BLOCK_M, "tile": tile.to_json(),
+        "spacing_m": 2.0 * half / math.ceil(math.sqrt(len(vegetation))), "rays_per_cell": rays,
+        "plot_vertical_rays": plot_cover(scene, centre, half, vegetation, rays_per_cell=rays),
+        "scans": {label: tree_cover(las, bootstrap=settings.bootstrap).to_json() for label, las in scans.items()},
+    }  # fmt: skip
+
+
 def _autzen(path, plot, settings: ReturnsSettings, k: int, tick) -> tuple[list[dict[str, Any]], list[dict[str, Any]], dict[str, Any], str]:
     """Autzen alone: its own fitted return model (range resolution, most returns, threshold), its
     class 1 (trees and buildings: it has no vegetation class) as vegetation, the divergence fitted
@@ -394,7 +440,8 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
         tick = bar.update
         folder.check_writable(RETURNS_OUTPUTS)
         real, real_las, fit = _real(real_path, VEGETATION_CLASSES, settings.bootstrap)
-        plot = ign_plot(mesh_root, settings)
+        cover = tree_cover(real_las, bootstrap=settings.bootstrap)
+        plot = ign_plot(mesh_root, settings, tree_cover=cover.value)
         model = _model(fit, plot[0], settings.detection)
         resolution = model.range_resolution_m
         sweep = _divergence_sweep(plot, settings, model, settings.sweep_rays, tick)
@@ -405,12 +452,16 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
         k_rows = _k_sweep(plot, settings, divergence, model, tick)
         k_best = recommend_k(k_rows)
         rows, fitted_result = _compare(plot, real, VEGETATION_CLASSES, divergence, k_best, model, settings, "IGN, fitted divergence", tick)
-        nominal_rows, _ = _compare(
+        nominal_rows, nominal_result = _compare(
             plot, real, VEGETATION_CLASSES, IGN_DIVERGENCE_DEG, k_best, model, settings, "IGN, data-sheet divergence", tick
         )
         rows += nominal_rows
+        covers = _covers(
+            cover, plot, settings, {"IGN, fitted divergence": fitted_result.las, "IGN, data-sheet divergence": nominal_result.las}
+        )
         summary: dict[str, Any] = {}
         real_md = "## IGN LiDAR HD sample\n\n" + "\n\n".join(f"### {side}\n\n{s.markdown()}" for side, s in real.items())
+        real_md += f"\n\n### tree cover\n\n{cover_markdown(covers, tile_only=True)}"
         if autzen_path is not None:
             autzen_rows, autzen_sweep, autzen_fit, autzen_md = _autzen(autzen_path, plot, settings, k_best, tick)
             rows += autzen_rows
@@ -423,7 +474,7 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
         png = _figure(fitted_result.las, tree.position_m[:2], 6.0, real_las, note)
         summary |= {
             "settings": {k: list(v) if isinstance(v, tuple) else v for k, v in settings.__dict__.items()},
-            "model": model.to_json(), "divergence_fits": fits, "recommended_k": k_best,
+            "model": model.to_json(), "divergence_fits": fits, "recommended_k": k_best, "tree_cover": covers,
             "verdicts": {v: sum(r["verdict"] == v for r in rows) for v in ("PASS", "FAIL", "not measured")},
             "machine": f"{platform.node()} {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}",
             "load_average_start": load_start, "load_average": list(os.getloadavg()), "seconds": time.perf_counter() - started,
@@ -433,7 +484,8 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
         folder.write_csv("divergence_sweep.csv", _csv_rows(sweep), fieldnames=list(sweep[-1].keys()))
         folder.write_csv("k_sweep.csv", _csv_rows(k_rows))
         folder.write_csv("comparison.csv", _csv_rows(rows))
-        folder.write_text("comparison.md", comparison_markdown(rows))
+        table = comparison_markdown(rows) + "\n" + cover_markdown(covers)
+        folder.write_text("comparison.md", table)
         folder.write_bytes("returns.png", png)
         folder.write_text("run.json", json.dumps(summary, indent=2, default=float) + "\n")
-    return summary | {"table": comparison_markdown(rows)}
+    return summary | {"table": table}
