@@ -331,6 +331,17 @@ def test_outline_of_rings_with_known_runs() -> None:
     assert outline_mask(points, gap_factor=6.0).sum() == 4
 
 
+def test_scan_line_runs_of_rings_with_known_runs() -> None:
+    from zbuf_occlude.experiments.realism import scan_line_runs
+
+    points, _ = _known_runs()
+    shuffle = np.random.default_rng(1).permutation(len(points))
+    ring, length = scan_line_runs(points[shuffle])
+    assert ring.tolist() == [0, 0, 0, 1] and length.tolist() == [5, 1, 3, 4]
+    assert [v.tolist() for v in scan_line_runs(points, azimuth_step_deg=1.0)] == [[0, 1], [9, 4]]
+    assert [v.tolist() for v in scan_line_runs(np.zeros((0, 3)))] == [[], []]
+
+
 def test_outline_runs_across_the_back_of_the_sensor_and_returns_of_one_pulse() -> None:
     from zbuf_occlude.experiments.realism import outline_mask, outline_share
 
@@ -387,12 +398,15 @@ def test_one_run_of_m_points_has_outline_share_two_over_m(m, step, elevation, ra
 @given(st.lists(st.tuples(st.integers(0, 5), st.floats(-20.0, 20.0), st.floats(3.0, 40.0)), min_size=1, max_size=120))
 @settings(max_examples=80, deadline=None)
 def test_outline_share_lies_in_0_1_and_each_ring_has_an_outline(rows) -> None:
-    from zbuf_occlude.experiments.realism import outline_mask, outline_share, ring_labels
+    from zbuf_occlude.experiments.realism import outline_mask, outline_share, ring_labels, scan_line_runs
 
     ring, azimuth, range_m = (np.array(v, dtype=np.float64) for v in zip(*rows))
     points = np.vstack([_ring(-10.0 + 1.33 * k, [a], r) for k, a, r in zip(ring, azimuth, range_m)])
     share, mask, labels = outline_share(points), outline_mask(points), ring_labels(points)
     assert 0.0 < share <= 1.0
+    run_ring, length = scan_line_runs(points)  # every point in one run; two outline points a run, one for a run of one
+    assert length.sum() == len(points) and (length >= 1).all() and mask.sum() == np.minimum(length, 2).sum()
+    assert np.array_equal(np.unique(run_ring), np.unique(labels))
     assert len(np.unique(labels)) == len(np.unique(ring))  # the rings are 1.33° apart, well over the gap
     assert all(mask[labels == r].sum() >= min(2, (labels == r).sum()) for r in np.unique(labels))
 

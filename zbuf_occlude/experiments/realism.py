@@ -59,7 +59,7 @@ from zbuf_occlude.sensors.scene import GROUND_ID
 __all__ = [
     "ObjectCloud", "read_object_clouds", "cloud_stats", "ring_spacings_deg", "fit_count_exponent",
     "compare_sets", "markdown_table", "realism_report", "RING_GAP_DEG", "HEIGHT_BINS", "RATIO_TARGET", "shape_stats",
-    "compare_classes", "class_table", "REPORT_FILES", "ring_labels", "outline_mask", "outline_share", "range_bin_medians",
+    "compare_classes", "class_table", "REPORT_FILES", "ring_labels", "outline_mask", "outline_share", "scan_line_runs", "range_bin_medians",
     "class_summary", "OUTLINE_GAP_FACTOR", "SAME_AZIMUTH_DEG", "RANGE_BINS_M",
 ]  # fmt: skip
 
@@ -258,14 +258,23 @@ def outline_mask(points_m: NDArray[np.floating], *, ring_gap_deg: float = RING_G
         ``points_m`` not ``(N, 3)``, not finite, or a point at the origin; ``azimuth_step_deg``
         or ``gap_factor`` not a finite number above 0.
     """
+    p = _sensor_points(points_m)
+    mask = np.zeros(len(p), dtype=bool)
+    for ring, breaks in _ring_runs(p, ring_gap_deg, azimuth_step_deg, gap_factor):
+        mask[ring[np.concatenate([[0], breaks + 1])]] = True  # run starts
+        mask[ring[np.concatenate([breaks, [len(ring) - 1]])]] = True  # run ends
+    return mask
+
+
+def _ring_runs(p: NDArray[np.float64], ring_gap_deg: float, azimuth_step_deg: float | None, gap_factor: float):
+    """Per ring, lowest first: its points' indices in azimuth order, and the positions in that order after which a run
+    ends inside the ring (:func:`outline_mask`'s rule; ``p`` checked, the options checked here)."""
     from zbuf_occlude.sensors.checks import real
 
-    p = _sensor_points(points_m)
     factor = real(gap_factor, "gap_factor", low=0.0, low_open=True)
     step_given = None if azimuth_step_deg is None else real(azimuth_step_deg, "azimuth_step_deg", low=0.0, low_open=True)
-    mask = np.zeros(len(p), dtype=bool)
     if not len(p):
-        return mask
+        return
     centre = p.mean(axis=0)
     azimuth = np.degrees(np.arctan2(p[:, 1], p[:, 0])) - math.degrees(math.atan2(centre[1], centre[0]))
     azimuth = (azimuth + 180.0) % 360.0 - 180.0
@@ -279,10 +288,35 @@ def outline_mask(points_m: NDArray[np.floating], *, ring_gap_deg: float = RING_G
             step = float(np.median(distinct)) if len(distinct) else math.inf
         else:
             step = step_given
-        breaks = np.flatnonzero(gaps > factor * step)
-        mask[ring[np.concatenate([[0], breaks + 1])]] = True  # run starts
-        mask[ring[np.concatenate([breaks, [len(ring) - 1]])]] = True  # run ends
-    return mask
+        yield ring, np.flatnonzero(gaps > factor * step)
+
+
+def scan_line_runs(points_m: NDArray[np.floating], *, ring_gap_deg: float = RING_GAP_DEG, azimuth_step_deg: float | None = None,
+                   gap_factor: float = OUTLINE_GAP_FACTOR) -> tuple[NDArray[np.int64], NDArray[np.int64]]:  # fmt: skip
+    """The runs of a cloud's scan lines (:func:`outline_mask`'s, which takes the same options): each run's ring and length.
+
+    With ``R`` runs over ``G`` rings and ``N`` points, ``(R − G) / (N − G)`` is the share of the
+    gaps between neighbours along a ring that break it (missed pulses, holes, occluders).
+
+    Returns
+    -------
+    ring : (R,) int64
+        The run's ring (:func:`ring_labels`), runs ordered by ring, then azimuth.
+    length : (R,) int64
+        Its points, each at least 1; they sum to ``N``.
+
+    Raises
+    ------
+    InvalidInputError
+        As :func:`outline_mask`.
+    """
+    rings, lengths = [], []
+    for r, (ring, breaks) in enumerate(_ring_runs(_sensor_points(points_m), ring_gap_deg, azimuth_step_deg, gap_factor)):
+        lengths.append(np.diff(np.concatenate([[0], breaks + 1, [len(ring)]])))
+        rings.append(np.full(len(breaks) + 1, r, dtype=np.int64))
+    if not rings:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    return np.concatenate(rings), np.concatenate(lengths).astype(np.int64)
 
 
 def outline_share(points_m: NDArray[np.floating], **options) -> float:
