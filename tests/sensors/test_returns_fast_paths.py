@@ -3,7 +3,10 @@
 * :func:`~zbuf_occlude.sensors.footprint.subray_directions`, one coordinate at a time, against
   the (N, K, 3) formula it replaced (``np.cross``, ``np.linalg.norm``);
 * the exact ray parameter on a known hit face (Embree's hits, and the per-face numerator from
-  one origin) against :func:`~zbuf_occlude.sensors.raycast.ray_triangle_f64`;
+  one origin) against :func:`~zbuf_occlude.sensors.raycast.ray_triangle_f64`, degenerate faces
+  and rays in a face's plane included;
+* the float32 rays :func:`~zbuf_occlude.sensors.raycast.cast_embree` hands Embree against those
+  trimesh's ``intersects_first`` hands it (the same bytes, so the same faces);
 * :func:`~zbuf_occlude.sensors.echoes.resolve_echoes` on rows sorted by pulse (each pulse's
   rows sorted in a table; runs of two tied rows swapped in place) against the same rows in
   another order (sorts of all rows), and the one-surface echoes' shortcut against the grouping
@@ -20,8 +23,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from zbuf_occlude.sensors import echoes as E
+from zbuf_occlude.sensors import raycast
 from zbuf_occlude.sensors.footprint import footprint_offsets, subray_directions
-from zbuf_occlude.sensors.raycast import _ray_parameter, cast_embree, ray_triangle_f64
+from zbuf_occlude.sensors.raycast import _exact_distance, _ray_parameter, cast_embree, ray_triangle_f64
 
 
 def _subray_directions_reference(d: np.ndarray, off: np.ndarray) -> np.ndarray:
@@ -56,6 +60,16 @@ def _directions(seed: int, n: int) -> np.ndarray:
 def test_subray_directions_are_the_full_formulas_bits(seed, n, k, divergence_deg) -> None:
     d = _directions(seed, n)
     off = footprint_offsets(k, divergence_deg)[0]
+    assert subray_directions(d, off).tobytes() == _subray_directions_reference(d, off).tobytes()
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 100), st.integers(2, 19), st.floats(1e-3, 20.0))
+def test_subray_directions_with_centre_rays_anywhere_are_the_full_formulas_bits(seed, n, k, divergence_deg) -> None:
+    # offsets in any row order, a second centre ray among them: the ring's rows are not one slice
+    off = footprint_offsets(k, divergence_deg)[0]
+    off = np.random.default_rng(seed).permutation(np.concatenate([off, [[0.0, 0.5]]]))
+    d = _directions(seed, n)
     assert subray_directions(d, off).tobytes() == _subray_directions_reference(d, off).tobytes()
 
 
@@ -94,6 +108,80 @@ def test_embree_ranges_are_ray_triangle_f64s_on_the_hit_faces() -> None:
     assert np.all(np.isinf(t[~hit]))
     expected = ray_triangle_f64(np.zeros(3), d[hit], np.asarray(mesh.triangles, dtype=np.float64)[face[hit]])[0]
     assert t[hit].tobytes() == expected.tobytes()
+
+
+def test_degenerate_faces_and_rays_in_a_faces_plane_have_no_range() -> None:
+    # a face of one point, one of three points on a line, and a ray lying in a face's plane: det 0 or
+    # a range that is not finite, so inf, as ray_triangle_f64 gives it; a miss (face -1) is inf too
+    v = np.array([[5.0, 0, 0], [5, 0, 0], [5, 0, 0], [5, -1, 0], [5, 0, 0], [5, 1, 0], [5, -1, -1], [5, 1, -1], [5, 0, 1]])
+    mesh = trimesh.Trimesh(v, np.arange(9).reshape(3, 3), process=False)
+    d = np.array([[1.0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 0, 0], [1, 0, 0]])
+    origin = np.array([0.0, 0, 0])
+    face = np.array([0, 1, 2, 2, -1])
+    t = _exact_distance(mesh, origin, d, face)
+    expected = ray_triangle_f64(origin, d[:4], np.asarray(mesh.triangles, dtype=np.float64)[face[:4]])[0]
+    assert t[:4].tobytes() == expected.tobytes() and np.isinf(t[[0, 1, 2, 4]]).all() and t[3] == 5.0
+
+
+class _Recorder:
+    """Stands in for an Embree scene: keeps the float32 rays each ``run`` is given, then runs them."""
+
+    def __init__(self, scene) -> None:
+        self.scene, self.calls = scene, []
+
+    def run(self, origins, directions, *args, **kwargs):
+        self.calls.append((np.array(origins), np.array(directions)))
+        return self.scene.run(origins, directions, *args, **kwargs)
+
+
+def _odd_directions(seed: int, n: int) -> np.ndarray:
+    """Unit rays, and others trimesh's unitize treats alike: long, short, tiny components, a zero ray."""
+    rng = np.random.default_rng(seed)
+    d = _directions(seed, n) + [1.5, 0.0, 0.0]
+    d *= 10.0 ** rng.uniform(-3.0, 3.0, (len(d), 1)) * (rng.random((len(d), 1)) < 0.3) + (rng.random((len(d), 1)) >= 0.3)
+    d[rng.random(len(d)) < 0.2, 2] *= 1e-9
+    d[0] = 0.0
+    d[1] = [1e-300, 0.0, 0.0]
+    return d
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(2, 400), st.booleans())
+def test_embree_is_given_the_float32_rays_trimesh_gives_it(seed, n, one_origin) -> None:
+    mesh = _soup(200, seed)
+    d = _odd_directions(seed, n)
+    rng = np.random.default_rng(seed + 2)
+    origin = rng.normal(size=3) if one_origin else rng.normal(size=(len(d), 3))
+    intersector = raycast._intersector(mesh)
+    wrap = intersector._scene
+    recorder = _Recorder(wrap.scene)
+    wrap.scene = recorder
+    try:
+        ours = raycast._first_faces(mesh, origin, d)
+        theirs = intersector.intersects_first(np.broadcast_to(origin, d.shape), d)
+    finally:
+        wrap.scene = recorder.scene
+    (o1, d1), (o2, d2) = recorder.calls
+    assert o1.dtype == d1.dtype == np.float32
+    assert o1.tobytes() == o2.tobytes() and d1.tobytes() == d2.tobytes()
+    assert np.array_equal(ours, theirs) and ours.dtype == np.int64
+
+
+def test_another_trimesh_wrapper_is_asked_through_its_own_call(monkeypatch) -> None:
+    # a wrapper without the scene, shift and scale this mirrors: trimesh's intersects_first, as it is
+    class Intersector:
+        _scene = object()
+
+        def intersects_first(self, origins, directions):
+            self.given = (np.array(origins), np.array(directions))
+            return np.full(len(directions), 3, np.int32)
+
+    intersector = Intersector()
+    monkeypatch.setattr(raycast, "_intersector", lambda mesh: intersector)
+    d = _directions(1, 10)
+    face = raycast._first_faces(None, np.ones(3), d)
+    assert face.dtype == np.int64 and np.all(face == 3)
+    assert np.array_equal(intersector.given[0], np.ones((len(d), 3))) and np.array_equal(intersector.given[1], d)
 
 
 @st.composite

@@ -187,7 +187,8 @@ def subray_directions(directions: ArrayLike, offsets: ArrayLike) -> NDArray[np.f
     off = _finite(offsets, "offsets", "(K, 2)", 1)
     out = np.empty((len(d), len(off), 3))
     centre = off[:, 0] == 0.0
-    out[:, centre] = d[:, None, :]
+    for k in np.flatnonzero(centre):  # one strided copy each (a boolean mask's assignment is several times slower)
+        out[:, k] = d
     ring = np.flatnonzero(~centre)
     if ring.size == 0:
         return out
@@ -202,14 +203,28 @@ def subray_directions(directions: ArrayLike, offsets: ArrayLike) -> NDArray[np.f
     u = _unit(dy * hz - dz * hy, dz * hx - dx * hz, dx * hy - dy * hx)
     v = (dy * u[2] - dz * u[1], dz * u[0] - dx * u[2], dx * u[1] - dy * u[0])
     # math.tan, one value per offset (numpy's tan may differ in the last bit)
-    tan = np.array([math.tan(theta) for theta in off[ring, 0]])
+    tan = np.array([math.tan(theta) for theta in off[ring, 0]])[:, None]
     # a contiguous copy (numpy's cos and sin take other paths over strided views)
     phi = off[ring, 1]
-    cos, sin = np.cos(phi), np.sin(phi)
-    # (R, N): the beams along the contiguous inner axis, so each operation is one long loop
-    rays = [dc + tan[:, None] * (cos[:, None] * uc + sin[:, None] * vc) for dc, uc, vc in zip((dx, dy, dz), u, v)]
-    for i, component in enumerate(_unit(*rays)):
-        out[:, ring, i] = component.T
+    cos, sin = np.cos(phi)[:, None], np.sin(phi)[:, None]
+    # (3, R, N): the beams along the contiguous inner axis, so each operation is one long loop;
+    # dc + tan · (cos · uc + sin · vc) and its norm, in place in two buffers (fresh temporaries
+    # of this size cost more in page faults than in arithmetic)
+    rays = np.empty((3, len(ring), len(d)))
+    tmp = np.empty((len(ring), len(d)))
+    for ray, dc, uc, vc in zip(rays, (dx, dy, dz), u, v):
+        np.multiply(cos, uc, out=ray)
+        np.multiply(sin, vc, out=tmp)
+        ray += tmp
+        np.multiply(tan, ray, out=ray)
+        np.add(dc, ray, out=ray)
+    norm = np.multiply(rays[0], rays[0])
+    for ray in rays[1:]:
+        norm += np.multiply(ray, ray, out=tmp)
+    rays /= np.sqrt(norm, out=norm)
+    # one strided copy into the (N, K, 3) rows, through a slice where the ring's sub-rays follow each other
+    contiguous = ring[-1] - ring[0] + 1 == len(ring)
+    out[:, slice(ring[0], ring[-1] + 1) if contiguous else ring, :] = rays.transpose(2, 1, 0)
     return out
 
 

@@ -172,12 +172,23 @@ def _ray_parameter(mesh: trimesh.Trimesh, origin, directions, face) -> NDArray[n
         numerator = _plane_numerator(mine, o)
         (e1x, e1y, e1z), (e2x, e2y, e2z) = mine[1:]
     dx, dy, dz = directions[:, 0], directions[:, 1], directions[:, 2]
-    # det = e1 · (d × e2)
-    det = (e1x * (dy * e2z - dz * e2y) + e1z * (dx * e2y - dy * e2x)) + e1y * (dz * e2x - dx * e2z)
+    # det = e1 · (d × e2) = (e1x (dy e2z − dz e2y) + e1z (dx e2y − dy e2x)) + e1y (dz e2x − dx e2z), in
+    # place in three buffers (the same operations: a product's factors swapped give the same bits)
+    det, part, tmp = np.multiply(dy, e2z), np.multiply(dx, e2y), np.multiply(dz, e2y)
+    det -= tmp
+    det *= e1x
+    part -= np.multiply(dy, e2x, out=tmp)
+    part *= e1z
+    det += part
+    np.multiply(dz, e2x, out=part)
+    part -= np.multiply(dx, e2z, out=tmp)
+    part *= e1y
+    det += part
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        t = numerator * (1.0 / det)
-        ok = np.isfinite(t) & (det != 0.0)
-    return np.where(ok, t, np.inf)
+        t = np.multiply(numerator, np.divide(1.0, det, out=part), out=numerator)  # numerator: a new array of its own
+    # det 0 (a degenerate face, a ray in the face's plane) makes t ±inf or nan: no range
+    np.copyto(t, np.inf, where=~np.isfinite(t))
+    return t
 
 
 def _plane_numerator(edges: NDArray[np.float64], origin: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -195,7 +206,9 @@ def _exact_distance(mesh: trimesh.Trimesh, origin, directions, face):
         return np.full(len(face), np.inf)
     # every ray, a miss on face 0 and then dropped: cheaper than gathering the hits' rows (a
     # scan's rays mostly hit), and each hit's t the same bits
-    return np.where(hit, _ray_parameter(mesh, origin, directions, np.where(hit, face, 0)), np.inf)
+    t = _ray_parameter(mesh, origin, directions, np.where(hit, face, 0))
+    np.copyto(t, np.inf, where=~hit)
+    return t
 
 
 def _build_intersector(mesh: trimesh.Trimesh):
@@ -208,6 +221,39 @@ def _build_intersector(mesh: trimesh.Trimesh):
 
 #: Embree BVHs of the scenes in use, rebuilt after a mesh edit (:class:`~zbuf_occlude.mesh.cache.MeshCache`).
 _intersector = MeshCache(_build_intersector, 4)
+
+
+def _first_faces(mesh: trimesh.Trimesh, origin: NDArray[np.float64], directions: NDArray[np.float64]) -> NDArray[np.int64]:
+    """(N,) int64: the row of ``mesh.faces`` each ray ``origin + t · directions`` hits first, −1 for none.
+
+    ``origin`` (3,) or (N, 3), ``directions`` (N, 3) float64.  trimesh's
+    ``RayMeshIntersector.intersects_first``, bit for bit: the same float32 rays reach the same
+    Embree scene (the origins rounded to float32, moved and scaled into the scene's frame in
+    float64, rounded again; the directions rounded to float32 and divided by their norm as
+    ``trimesh.util.unitize`` does, then rounded again), without its copies of every ray: one
+    origin is moved once and broadcast.  Where trimesh's wrapper is not the one this mirrors
+    (another trimesh version), its own call.
+    """
+    from trimesh.util import TOL_ZERO
+
+    intersector = _intersector(mesh)
+    wrap = intersector._scene
+    scene, shift, scale = (getattr(wrap, name, None) for name in ("scene", "origin", "scale"))
+    if scene is None or shift is None or scale is None:
+        return np.asarray(intersector.intersects_first(np.broadcast_to(origin, directions.shape), directions), dtype=np.int64)
+    # _EmbreeWrap.run's origins: float32, then float64 into the scene's frame, then float32
+    moved = ((np.asarray(origin, dtype=np.float32).astype(np.float64) - shift) * scale).astype(np.float32)
+    # unitize's norm (the same np.dot of the float32 squares with ones, in float64) and reciprocal
+    d32 = directions.astype(np.float32)
+    norm = np.sqrt(np.dot(d32 * d32, _ONES_3))
+    np.reciprocal(norm, out=norm, where=norm > TOL_ZERO)
+    # the float64 product rounded to float32 on the way out (unitize's float64 result, then run's astype)
+    unit = np.multiply(d32, norm[:, None], out=np.empty_like(d32), casting="same_kind")
+    return np.asarray(scene.run(np.broadcast_to(moved, directions.shape), unit), dtype=np.int64)
+
+
+#: The ones ``trimesh.util.unitize`` sums a row's squares with (its ``[1.0] * 3``, as float64).
+_ONES_3 = np.ones(3)
 
 
 def cast_embree(
@@ -239,8 +285,7 @@ def cast_embree(
     directions = np.asarray(directions, dtype=np.float64)
     if len(directions) == 0:
         return np.zeros(0, np.int64), np.zeros(0)
-    origins = np.broadcast_to(np.asarray(origin, dtype=np.float64), directions.shape)
-    face = np.asarray(_intersector(mesh).intersects_first(origins, directions), dtype=np.int64)
+    face = _first_faces(mesh, origin, directions)
     return face, _exact_distance(mesh, np.asarray(origin, np.float64), directions, face)
 
 
@@ -339,7 +384,7 @@ def cast_embree_beyond(
             break
         o, d = origins[active], directions[active]
         start = o + (last + step_m)[:, None] * d
-        f = np.asarray(_intersector(mesh).intersects_first(start, d), dtype=np.int64)
+        f = _first_faces(mesh, start, d)
         got = f >= 0
         r = np.full(len(active), np.inf)
         if got.any():
