@@ -26,7 +26,7 @@ from zbuf_occlude.experiments.returns import (
     tree_cover,
 )
 from zbuf_occlude.experiments.returns_comparison import comparison_rows, cover_markdown, recommend_k
-from zbuf_occlude.experiments.returns_report import ReturnsSettings, cover_rays_per_cell, run_returns, scans_of_run
+from zbuf_occlude.experiments.returns_report import ReturnsSettings, cover_rays_per_cell, refits_divergence, run_returns, scans_of_run
 from zbuf_occlude.io.atomic import write_bytes
 from zbuf_occlude.io.las import LasPoints, las_bytes, read_las
 from zbuf_occlude.io.progress import PROGRESS_INTERVAL_ENV
@@ -405,3 +405,37 @@ def test_the_plot_is_spaced_for_the_tiles_cover(tmp_path) -> None:
     assert cover_rays_per_cell(settings_) == 10
     assert plot_cover(scene, centre, half, vegetation, rays_per_cell=10) == pytest.approx(0.25, abs=COVER_TOLERANCE)
     assert fixed[3] == 3 * 5.0 / 2  # a spacing given is kept
+
+
+def test_the_divergence_is_fitted_again_with_the_k_it_is_compared_at(tmp_path, capsys, monkeypatch) -> None:
+    settings_ = ReturnsSettings(sweep_rays=(7,), k_values=(1, 19), seeds=(0,), repeats=1, copies=1, spacing_m=4.0, bootstrap=5)
+    assert refits_divergence(19, settings_) and not refits_divergence(7, settings_) and not refits_divergence(1, settings_)
+    meshes = tmp_path / "bush"
+    meshes.mkdir()
+    for i, tree in enumerate(PLOT_TREES):
+        box = trimesh.creation.box(extents=(1.0 + 0.2 * i, 1.0, 2.0))
+        write_bytes(meshes / (tree.file.rsplit(".", 1)[0] + ".obj"), box.export(file_type="obj").encode())
+    trees = tuple(type(t)(t.file.rsplit(".", 1)[0] + ".obj", "+z", 3.0) for t in PLOT_TREES)
+    scene, vegetation = _plot()
+    real = simulate(scene, ign_scanner(WIDE_DEG, 7), vegetation, half_size_m=4.0, seeds=(0,), bootstrap=5).las
+    data = las_bytes(real.points, intensity=real.intensity, return_number=real.return_number, number_of_returns=real.number_of_returns,
+                     gps_time=real.gps_time, scan_angle_deg=real.scan_angle_deg, classification=real.classification)  # fmt: skip
+    real_path = write_bytes(tmp_path / "real.las", data)
+    import zbuf_occlude.experiments.returns_report as report
+
+    monkeypatch.setattr(report, "PLOT_TREES", trees)
+    monkeypatch.setenv(PROGRESS_INTERVAL_ENV, "0")
+    monkeypatch.setattr(report, "recommend_k", lambda rows: 19)  # the K compared, whatever the sweep says
+    capsys.readouterr()
+    summary = run_returns(tmp_path / "out", meshes, real_path, settings=settings_)
+    fits = summary["divergence_fits"]
+    assert [f["K"] for f in fits] == [7, 19] and summary["recommended_k"] == 19
+    if math.isfinite(fits[-1]["divergence_deg"]):
+        assert summary["compared_divergence_deg"] == fits[-1]["divergence_deg"]
+    sweep = read_csv_rows(tmp_path / "out" / "divergence_sweep.csv")
+    assert [int(r["K"]) for r in sweep] == [7, 7, 7, 7, 7, 7, 7, 7, 19, 19, 19, 19, 19, 19, 19, 19]
+    # the progress bar's total grows by the sweep at K 19 once that K is known, and the count reaches it
+    total = scans_of_run(settings_, refit=True)
+    assert total == scans_of_run(settings_) + len(settings_.divergence_factors)
+    counts = [int(line.split()[1].split("/")[0]) for line in capsys.readouterr().err.splitlines() if line.startswith("returns: ")]
+    assert counts == list(range(1, total + 1))

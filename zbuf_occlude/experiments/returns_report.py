@@ -13,7 +13,8 @@
   Autzen where it is given;
 * ``comparison.md``: the same as a Markdown table (what the command prints);
 * ``returns.png``: one simulated tree beside a real vegetation patch, coloured by return number;
-* ``run.json``: the settings, the fitted divergences, the recommended K and the tree covers.
+* ``run.json``: the settings, the fitted divergences, the recommended K, the divergence compared
+  (fitted with the recommended K: :func:`refits_divergence`) and the tree covers.
 
 The plot's trees stand as far apart as makes its tree cover the real tile's
 (:func:`~zbuf_occlude.experiments.returns.tree_cover` on the tile,
@@ -88,7 +89,8 @@ from zbuf_occlude.sensors.fit.returns import (
 )
 from zbuf_occlude.sensors.scene import ScanScene
 
-__all__ = ["RETURNS_OUTPUTS", "ReturnsSettings", "ign_plot", "run_returns", "scans_of_run"]
+__all__ = ["RETURNS_OUTPUTS", "ReturnsSettings", "SimulatedModel", "cover_rays_per_cell", "ign_plot", "refits_divergence", "run_returns",
+           "scans_of_run", "simulated_model"]  # fmt: skip
 
 log = logging.getLogger(__name__)
 
@@ -138,22 +140,35 @@ class ReturnsSettings:
 
 
 @dataclass(frozen=True)
-class _Model:
-    """A real file's fitted return model as the simulation uses it: the scanner and the surfaces' reflectivity."""
+class SimulatedModel:
+    """A real file's fitted return model as the simulation uses it (:func:`simulated_model`).
+
+    Attributes
+    ----------
+    fit : ReturnModelFit
+        The real file's fit (:func:`~zbuf_occlude.sensors.fit.return_model.fit_return_model`).
+    reflectivity : tuple of float or None
+        Per object id, ground first; None: every surface alike.
+    detection : bool
+        The fitted detection threshold on; False: 0.
+    """
 
     fit: ReturnModelFit
     reflectivity: tuple[float, ...] | None  # per object id, ground first; None: every surface alike
     detection: bool
 
     def scanner(self, divergence_deg: float, k: int):
+        """:func:`~.returns.ign_scanner` at ``divergence_deg`` (degrees) and ``k`` sub-rays, as the fit sets it."""
         scanner = self.fit.apply(ign_scanner(divergence_deg, k))
         return scanner if self.detection else with_beam(scanner, detection_threshold=0.0)
 
     @property
     def range_resolution_m(self) -> float:
+        """The fitted range resolution, metres."""
         return self.fit.estimates["range_resolution_m"].value
 
     def to_json(self) -> dict[str, Any]:
+        """The model for ``run.json``: range resolution, most returns, and with detection the threshold and reflectivities."""
         e = self.fit.estimates
         out = {"range_resolution_m": e["range_resolution_m"].value, "range_resolution_sd_m": e["range_resolution_m"].std,
                "max_returns": int(e["max_returns"].value), "detection": self.detection}  # fmt: skip
@@ -164,16 +179,17 @@ class _Model:
         return out
 
 
-def _model(fit: ReturnModelFit, scene: ScanScene, detection: bool) -> _Model:
-    """The fit's scanner over ``scene``: the ground at the fit's reflectance, each mesh at its material's at 1064 nm."""
+def simulated_model(fit: ReturnModelFit, scene: ScanScene, detection: bool) -> SimulatedModel:
+    """The fit's scanner over ``scene``: the ground at the fit's reflectance, each mesh at its material's at 1064 nm
+    (``detection`` False: no threshold, every surface alike)."""
     if not detection:
-        return _Model(fit, None, False)
+        return SimulatedModel(fit, None, False)
     from zbuf_occlude.sensors.reflectance import AIRBORNE_WAVELENGTH_NM, scene_optics
     from zbuf_occlude.sensors.scan import build_scene
 
     rho = scene_optics(build_scene(scene), AIRBORNE_WAVELENGTH_NM).reflectivity.copy()
     rho[0] = fit.ground_reflectance  # the threshold in m⁻² was measured against it
-    return _Model(fit, tuple(float(v) for v in rho), True)
+    return SimulatedModel(fit, tuple(float(v) for v in rho), True)
 
 
 def _sweep_row(result, divergence_deg: float, k: int, suffix: str) -> dict[str, Any]:
@@ -249,16 +265,26 @@ def ign_plot(mesh_root: str | os.PathLike, settings: ReturnsSettings, *,
     return scene, vegetation, (0.0, y), side * spacing / 2.0
 
 
-def scans_of_run(settings: ReturnsSettings, *, autzen: bool = False) -> int:
+def scans_of_run(settings: ReturnsSettings, *, autzen: bool = False, refit: bool = False) -> int:
     """The scans :func:`run_returns` makes with ``settings`` (its progress bar's total): the divergence
-    sweep, the K sweep and its timing rounds, the two comparisons, and with ``autzen`` its sweep and comparison."""
+    sweep, the K sweep and its timing rounds, the two comparisons, with ``autzen`` its sweep and
+    comparison, and with ``refit`` the divergence sweep at the recommended K (:func:`refits_divergence`;
+    the bar's total grows by it once that K is known)."""
     seeds, factors = len(settings.seeds), len(settings.divergence_factors)
     ks = len(settings.k_values)
     total = factors * len(settings.sweep_rays) * seeds + ks * seeds + (settings.repeats - 1) * ks + 2 * seeds
-    return total + (factors * seeds + seeds if autzen else 0)
+    return total + (factors * seeds + seeds if autzen else 0) + (factors * seeds if refit else 0)
 
 
-def _divergence_sweep(plot, settings: ReturnsSettings, model: _Model, ks: Sequence[int], tick) -> list[dict[str, Any]]:
+def refits_divergence(k: int, settings: ReturnsSettings) -> bool:
+    """Whether :func:`run_returns` sweeps the divergence again at the recommended K = ``k``: where ``k`` is not
+    among ``settings.sweep_rays`` and above 1 (one ray a pulse gives one return at any divergence).  With a
+    detection threshold the multi-return share at one divergence moves with K, so the divergence compared at
+    a K is the one fitted with it."""
+    return k > 1 and k not in settings.sweep_rays
+
+
+def _divergence_sweep(plot, settings: ReturnsSettings, model: SimulatedModel, ks: Sequence[int], tick) -> list[dict[str, Any]]:
     scene, vegetation, centre, half = plot
     rows = []
     for factor in settings.divergence_factors:
@@ -291,7 +317,7 @@ def _fit_divergence(rows: Sequence[dict[str, Any]], k: int, measured: Estimate) 
             "monotone_fix": bool(np.any(fixed != y))}  # fmt: skip
 
 
-def _k_sweep(plot, settings: ReturnsSettings, divergence_deg: float, model: _Model, tick) -> list[dict[str, Any]]:
+def _k_sweep(plot, settings: ReturnsSettings, divergence_deg: float, model: SimulatedModel, tick) -> list[dict[str, Any]]:
     """Every K measured once, then timed in ``repeats`` interleaved rounds (the measured round included)."""
     from zbuf_occlude.sensors.scan import scan_airborne
 
@@ -366,7 +392,7 @@ def _csv_rows(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     return [{k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()} for row in rows]
 
 
-def _compare(plot, real, real_classes, divergence_deg: float, k: int, model: _Model, settings: ReturnsSettings, label: str, tick):
+def _compare(plot, real, real_classes, divergence_deg: float, k: int, model: SimulatedModel, settings: ReturnsSettings, label: str, tick):
     scene, vegetation, centre, half = plot
     result = simulate(scene, model.scanner(divergence_deg, k), vegetation, center_xy=centre, half_size_m=half, seeds=settings.seeds,
                       bootstrap=settings.bootstrap, reflectivity=model.reflectivity, on_scan=tick)  # fmt: skip
@@ -393,7 +419,7 @@ def _autzen(path, plot, settings: ReturnsSettings, k: int, tick) -> tuple[list[d
     to its class-1 share."""
     classes = (1,)
     real, _, return_fit = _real(path, classes, settings.bootstrap)
-    model = _model(return_fit, plot[0], settings.detection)
+    model = simulated_model(return_fit, plot[0], settings.detection)
     sweep = _divergence_sweep(plot, settings, model, (k,), tick)
     fit = _fit_divergence(sweep, k, real["all"].estimates[f"multi_return_points_{class_suffix(classes)}"])
     divergence = fit["divergence_deg"] if math.isfinite(fit["divergence_deg"]) else IGN_DIVERGENCE_DEG
@@ -442,7 +468,7 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
         real, real_las, fit = _real(real_path, VEGETATION_CLASSES, settings.bootstrap)
         cover = tree_cover(real_las, bootstrap=settings.bootstrap)
         plot = ign_plot(mesh_root, settings, tree_cover=cover.value)
-        model = _model(fit, plot[0], settings.detection)
+        model = simulated_model(fit, plot[0], settings.detection)
         resolution = model.range_resolution_m
         sweep = _divergence_sweep(plot, settings, model, settings.sweep_rays, tick)
         real_share = real["all"].estimates[f"multi_return_points_{class_suffix(VEGETATION_CLASSES)}"]
@@ -451,6 +477,13 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
         divergence = fitted if math.isfinite(fitted) else IGN_DIVERGENCE_DEG
         k_rows = _k_sweep(plot, settings, divergence, model, tick)
         k_best = recommend_k(k_rows)
+        if refits_divergence(k_best, settings):
+            bar.total = scans_of_run(settings, autzen=autzen_path is not None, refit=True)  # shown from the next scan on
+            more = _divergence_sweep(plot, settings, model, (k_best,), tick)
+            sweep += more
+            fits.append(_fit_divergence(more, k_best, real_share))
+            if math.isfinite(fits[-1]["divergence_deg"]):
+                divergence = fits[-1]["divergence_deg"]
         rows, fitted_result = _compare(plot, real, VEGETATION_CLASSES, divergence, k_best, model, settings, "IGN, fitted divergence", tick)
         nominal_rows, nominal_result = _compare(
             plot, real, VEGETATION_CLASSES, IGN_DIVERGENCE_DEG, k_best, model, settings, "IGN, data-sheet divergence", tick
@@ -475,6 +508,7 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
         summary |= {
             "settings": {k: list(v) if isinstance(v, tuple) else v for k, v in settings.__dict__.items()},
             "model": model.to_json(), "divergence_fits": fits, "recommended_k": k_best, "tree_cover": covers,
+            "compared_divergence_deg": divergence, "compared_divergence_mrad": math.radians(divergence) * 1e3,
             "verdicts": {v: sum(r["verdict"] == v for r in rows) for v in ("PASS", "FAIL", "not measured")},
             "machine": f"{platform.node()} {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}",
             "load_average_start": load_start, "load_average": list(os.getloadavg()), "seconds": time.perf_counter() - started,
