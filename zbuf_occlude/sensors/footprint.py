@@ -44,6 +44,7 @@ __all__ = [
     "MAX_SUBRAYS",
     "PROFILES",
     "footprint_offsets",
+    "plane_subrays",
     "subray_directions",
 ]
 
@@ -196,12 +197,7 @@ def subray_directions(directions: ArrayLike, offsets: ArrayLike) -> NDArray[np.f
     # the norm's ((x² + y²) + z²) of np.cross and np.linalg.norm over (N, 3) rows, in their
     # order, so the same bits, without their (N, R, 3) temporaries.
     dx, dy, dz = (np.ascontiguousarray(d[:, i]) for i in range(3))
-    near_pole = np.abs(dz) >= 0.9
-    # helper h: z, or x near the poles; u = d × h (the products by h's zeros kept, for their signs)
-    hx, hz = near_pole.astype(np.float64), (~near_pole).astype(np.float64)
-    hy = np.zeros(len(d))
-    u = _unit(dy * hz - dz * hy, dz * hx - dx * hz, dx * hy - dy * hx)
-    v = (dy * u[2] - dz * u[1], dz * u[0] - dx * u[2], dx * u[1] - dy * u[0])
+    u, v = _axes(dx, dy, dz)
     # math.tan, one value per offset (numpy's tan may differ in the last bit)
     tan = np.array([math.tan(theta) for theta in off[ring, 0]])[:, None]
     # a contiguous copy (numpy's cos and sin take other paths over strided views)
@@ -226,6 +222,61 @@ def subray_directions(directions: ArrayLike, offsets: ArrayLike) -> NDArray[np.f
     contiguous = ring[-1] - ring[0] + 1 == len(ring)
     out[:, slice(ring[0], ring[-1] + 1) if contiguous else ring, :] = rays.transpose(2, 1, 0)
     return out
+
+
+def plane_subrays(range_m: ArrayLike, directions: ArrayLike, normal: ArrayLike, offsets: ArrayLike) -> tuple[NDArray[np.float64], ...]:
+    """``(range, cos)`` (N, K) float64: where the K sub-rays of each beam meet the plane its axis meets.
+
+    Sub-ray ``k`` of :func:`subray_directions`, ``d_k = (d + tan θ_k (cos φ_k u + sin φ_k v)) /
+    sqrt(1 + tan² θ_k)`` (``u ⊥ v ⊥ d`` unit), meets the plane of unit normal ``n`` that the axis
+    ``d`` meets at range ``t`` at range ``t (n · d) / (n · d_k)``, at incidence ``|n · d_k|``; a
+    sub-ray parallel to the plane gives inf or nan, one meeting it behind the origin a negative
+    range.  Computed from ``n · d``, ``n · u`` and ``n · v``, without the sub-rays themselves.
+
+    Parameters
+    ----------
+    range_m : (N,) float
+        Range of each axis's hit on its plane, metres.
+    directions : (N, 3) float
+        Unit beam axes.
+    normal : (N, 3) float
+        Unit normal of each plane (either side).
+    offsets : (K, 2) float
+        Angle off the axis and azimuth about it, radians (:func:`footprint_offsets`).
+
+    Raises
+    ------
+    InvalidInputError
+        ``directions`` or ``normal`` not finite (N, 3), ``offsets`` not finite (K, 2).
+    """
+    d = _finite(directions, "directions", "(N, 3)", 0)
+    n = _finite(normal, "normal", "(N, 3)", 0)
+    off = _finite(offsets, "offsets", "(K, 2)", 1)
+    t = np.asarray(range_m, dtype=np.float64)
+    if t.shape != (len(d),) or len(n) != len(d):
+        raise InvalidInputError(f"range_m, directions and normal need one row per beam, got {t.shape}, {d.shape}, {n.shape}")
+    dx, dy, dz = (np.ascontiguousarray(d[:, i]) for i in range(3))
+    u, v = _axes(dx, dy, dz)
+    nx, ny, nz = (np.ascontiguousarray(n[:, i]) for i in range(3))
+    nd, nu, nv = (nx * x + ny * y + nz * z for x, y, z in ((dx, dy, dz), u, v))
+    tan = np.array([math.tan(theta) for theta in off[:, 0]])
+    phi = np.ascontiguousarray(off[:, 1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ndk = (nd[:, None] + tan * (np.cos(phi) * nu[:, None] + np.sin(phi) * nv[:, None])) / np.sqrt(1.0 + tan * tan)
+        return t[:, None] * (nd[:, None] / ndk), np.abs(ndk)  # the centre ray (θ 0): t itself
+
+
+def _axes(dx: NDArray[np.float64], dy: NDArray[np.float64], dz: NDArray[np.float64]) -> tuple[tuple[NDArray[np.float64], ...], ...]:
+    """The unit axes across beam axes ``d`` (components ``dx``, ``dy``, ``dz``) that sub-rays turn about,
+    one coordinate at a time, ``((ux, uy, uz), (vx, vy, vz))``: ``u = normalise(d × h)``, ``v = d × u``,
+    ``h`` the z axis or, where ``|d_z| ≥ 0.9``, the x axis."""
+    near_pole = np.abs(dz) >= 0.9
+    # helper h: z, or x near the poles; u = d × h (the products by h's zeros kept, for their signs)
+    hx, hz = near_pole.astype(np.float64), (~near_pole).astype(np.float64)
+    hy = np.zeros(len(dx))
+    u = _unit(dy * hz - dz * hy, dz * hx - dx * hz, dx * hy - dy * hx)
+    v = (dy * u[2] - dz * u[1], dz * u[0] - dx * u[2], dx * u[1] - dy * u[0])
+    return u, v
 
 
 def _unit(x: NDArray[np.float64], y: NDArray[np.float64], z: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:

@@ -1,0 +1,360 @@
+"""Adaptive footprints: the multi-return model without casting the sub-rays of a footprint that lies on one plane (opt-in, approximate).
+
+The multi-return model (:func:`~.echo_model.echo_returns`) casts K sub-rays per pulse
+(:mod:`.footprint`) and resolves their hits into echoes.  On open ground or a wall, every
+sub-ray hits the centre ray's face near its hit, and the receiver sees one echo: the K casts
+buy nothing that the plane does not already tell.  :func:`adaptive_echo_returns` casts every
+pulse's centre ray first and casts the whole footprint only where :func:`uniform_footprints`
+cannot rule out a second surface.  A pulse is *uniform* when all of these hold:
+
+* its centre ray hits a face ``f`` that does not transmit;
+* every sub-ray meets ``f``'s plane (:func:`~.footprint.plane_subrays`, no cast) inside ``f``,
+  with :data:`INSIDE_MARGIN_SHARE` of the scene's size to spare: none leaves ``f`` for a face
+  beside or behind it;
+* those ranges, sorted, step less than the range resolution (one echo,
+  :func:`~.echoes.resolve_echoes`'s merging) and lie within the beam's range limits;
+* every neighbour (the pulses fired beside it: :func:`pulse_neighbours`) hits the same object
+  within :data:`PLANE_SHARE` of the range resolution of ``f``'s plane; or, where the centre ray
+  hits nothing, no neighbour hits anything (then no sub-ray is taken to hit).
+
+A uniform pulse's echo is the one the K sub-rays would give on ``f``'s plane, computed without
+casting them (:func:`plane_echoes`): the energy-weighted mean of their ranges and the sum of
+their energies (:func:`~.echoes.hit_energy`), equal to the full model's to rounding, on ``f``.
+The one error left: a surface in front of ``f`` inside the cone that neither the centre ray nor
+any neighbour meets (a wire, a thin bar between two rings, a corner poking into the footprint):
+its echo is lost.  Where the beam draws power noise, the uniform pulses' draws come first, then
+the others' (the full model draws them in pulse order).  ``benchmarks/returns_cost.py``
+measures its speed and its bias on return shares, points and ranges.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from zbuf_occlude.mesh.cache import MeshCache
+from zbuf_occlude.sensors.beam import Beam
+from zbuf_occlude.sensors.echo_model import Radiometry, Transmission, echo_returns
+from zbuf_occlude.sensors.echoes import MIN_RANGE_M, resolve_echoes
+from zbuf_occlude.sensors.footprint import footprint_offsets, plane_subrays
+from zbuf_occlude.sensors.pulses import Pulses
+from zbuf_occlude.sensors.raycast import BEYOND_HIT_SHARE, cast_embree
+from zbuf_occlude.sensors.scene import BuiltScene
+
+__all__ = [
+    "INSIDE_MARGIN_SHARE",
+    "LINE_BREAK_STEPS",
+    "PLANE_SHARE",
+    "adaptive_echo_returns",
+    "grid_neighbours",
+    "plane_echoes",
+    "pulse_neighbours",
+    "uniform_footprints",
+]
+
+#: How far inside its face a uniform footprint stays beyond the cone's reach, as a share of the
+#: scene's bounding-box diagonal: Embree decides in float32 (~1e-7 of the coordinates), so a sub-ray
+#: this far inside (10× :data:`~.raycast.BEYOND_HIT_SHARE`: 2 cm in a 230 m scene) would hit ``f``.
+INSIDE_MARGIN_SHARE = 10.0 * BEYOND_HIT_SHARE
+#: A neighbour's hit is on the centre face's plane within this share of the range resolution
+#: (nearer than that, a second surface would merge into the same echo anyway).
+PLANE_SHARE = 0.25
+#: A scan line of a pattern without rings ends where its scan angle steps more than this many
+#: times the median step, or turns back (:func:`pulse_neighbours`).
+LINE_BREAK_STEPS = 4.0
+
+
+def _face_planes(mesh) -> tuple[NDArray[np.float64], float]:
+    """``(planes, diagonal)``: (4, 4, F) float64 with ``planes[:, :, f]`` the rows ``(n, −n · a)`` of
+    face ``f``'s plane and ``(m_j, −m_j · p_j)`` of its edges ab, bc, ca (``m_j`` the edge's inward
+    unit normal in the plane, ``p_j`` its first vertex), so that ``planes[:, :, f] @ (x, 1)`` gives a
+    point's distance to the plane and to each edge line (inside: all three ≥ 0; a degenerate face:
+    all 0); and the bounding-box diagonal of the mesh, metres."""
+    tri = np.asarray(mesh.triangles, dtype=np.float64)
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    planes = np.empty((4, 4, len(tri)))
+    planes[0, :3] = n.T
+    planes[0, 3] = -np.einsum("ij,ij->i", n, tri[:, 0])
+    for j in range(3):
+        p, q = tri[:, j], tri[:, (j + 1) % 3]
+        m = np.cross(n, q - p)
+        m /= np.maximum(np.linalg.norm(m, axis=1, keepdims=True), 1e-300)
+        planes[j + 1, :3] = m.T
+        planes[j + 1, 3] = -np.einsum("ij,ij->i", m, p)
+    planes.flags.writeable = False
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    return planes, float(np.linalg.norm(np.ptp(vertices, axis=0))) if len(vertices) else 1.0
+
+
+#: :func:`_face_planes` of the scenes in use, once per mesh.
+_planes = MeshCache(_face_planes, 4)
+
+
+def uniform_footprints(
+    built: BuiltScene,
+    origins: NDArray[np.float64],
+    directions: NDArray[np.float64],
+    face: NDArray[np.int64],
+    t: NDArray[np.float64],
+    neighbours: NDArray[np.int64],
+    offsets: NDArray[np.float64],
+    *,
+    range_resolution_m: float,
+    range_limits_m: tuple[float, float] = (0.0, np.inf),
+    transmits: NDArray[np.bool_] | None = None,
+) -> NDArray[np.bool_]:
+    """(P,) bool: the pulses whose footprint needs no cast of its sub-rays (the rules: module docstring).
+
+    Parameters
+    ----------
+    built : BuiltScene
+        The scene (its mesh, and the object of each face).
+    origins : (3,) or (P, 3) float64
+        Where the pulses leave, world frame, metres.
+    directions : (P, 3) float64
+        Unit centre directions, world frame.
+    face, t : (P,) int64, (P,) float64
+        The centre rays' first hits (:func:`~.raycast.cast_embree`): face, −1 for none, and range, metres.
+    neighbours : (P, m) int64
+        Rows of each pulse's neighbours, −1 for none (:func:`pulse_neighbours`); a pulse without
+        one is never uniform.
+    offsets : (K, 2) float64
+        The footprint's sub-rays (:func:`~.footprint.footprint_offsets`).
+    range_resolution_m : float
+        The receiver's range resolution, metres, > 0.
+    range_limits_m : (min, max) float
+        The beam's range limits, metres: a uniform footprint's ranges lie within them.
+    transmits : (F,) bool, optional
+        Faces a sub-ray goes on through: a pulse hitting one is never uniform.
+    """
+    return _uniform(built, origins, directions, face, t, neighbours, offsets, range_resolution_m, range_limits_m, transmits)[0]
+
+
+def _uniform(built, origins, directions, face, t, neighbours, offsets, range_resolution_m, range_limits_m, transmits):
+    """:func:`uniform_footprints`, and the uniform hits' rows and their sub-rays' ranges and incidences
+    ``(P_u, K)`` on the centre face's plane (:func:`~.footprint.plane_subrays`)."""
+    face = np.asarray(face, dtype=np.int64)
+    hit = face >= 0
+    f = np.where(hit, face, 0)
+    planes, diagonal = _planes(built.mesh)
+    mine = np.take(planes, f, axis=2)  # (4, 4, P): one row per plane, one column per pulse
+    point = (np.asarray(origins, dtype=np.float64) + directions * np.where(hit, t, 0.0)[:, None]).T  # (3, P)
+    # the neighbours: on the same object and plane, or all missing where the centre misses
+    uniform = hit.copy() if transmits is None else hit & ~np.asarray(transmits, dtype=bool)[f]
+    obj = np.asarray(built.face_object)[f]
+    tolerance = PLANE_SHARE * range_resolution_m
+    miss = ~hit
+    known_any = np.zeros(len(face), bool)
+    for q in np.asarray(neighbours, dtype=np.int64).T:
+        known = q >= 0
+        qq = np.where(known, q, 0)
+        xq = point[:, qq]
+        off_plane = np.abs(mine[0, 0] * xq[0] + mine[0, 1] * xq[1] + mine[0, 2] * xq[2] + mine[0, 3])
+        uniform &= ~known | (hit[qq] & (obj[qq] == obj) & (off_plane <= tolerance))
+        miss &= ~known | ~hit[qq]
+        known_any |= known
+    uniform &= known_any
+    # the candidates' sub-rays on the plane: inside the face, one echo, within the range limits
+    rows = np.flatnonzero(uniform)
+    m, x, t_c = mine[:, :, rows], point[:, rows], np.asarray(t, dtype=np.float64)[rows]
+    tk, cos = plane_subrays(t_c, directions[rows], m[0, :3].T, offsets)
+    # sub-ray k lands within |t_k − t| + t θ_k of the centre hit (the chord |d_k − d| ≤ θ_k)
+    reach = np.abs(tk - t_c[:, None]).max(axis=1, initial=0.0) + t_c * float(np.max(np.asarray(offsets)[:, 0]))
+    inside = np.full(len(rows), np.inf)
+    for edge in m[1:]:  # the centre hit's distance to the nearest edge line, in the face's plane
+        np.minimum(inside, edge[0] * x[0] + edge[1] * x[1] + edge[2] * x[2] + edge[3], out=inside)
+    ranges = np.sort(tk, axis=1)
+    low, high = range_limits_m
+    with np.errstate(invalid="ignore"):
+        ok = (inside >= reach + INSIDE_MARGIN_SHARE * diagonal) & (ranges[:, 0] >= max(low, 0.0)) & (ranges[:, -1] <= high)
+        ok &= (np.diff(ranges, axis=1) < range_resolution_m).all(axis=1)  # nan (a sub-ray along the plane) fails
+    uniform[rows[~ok]] = False
+    return uniform | (miss & known_any), rows[ok], tk[ok], cos[ok]
+
+
+def plane_echoes(
+    range_m: NDArray[np.float64],
+    cos_incidence: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    reflectivity: NDArray[np.float64] | float = 1.0,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(range, energy)`` (P,) float64: the one echo of each pulse's K sub-ray hits on one surface.
+
+    Sub-ray ``k`` hits at range ``t_k`` and incidence ``cos_incidence`` (``|n · d_k|``,
+    :func:`~.footprint.plane_subrays`) and sends back ``E_k = w_k ρ |n · d_k| / t_k²``
+    (:func:`~.echoes.hit_energy`).  The echo: ``Σ E_k t_k / Σ E_k`` (the energy-weighted mean
+    range, :func:`~.echoes.resolve_echoes`) and ``Σ E_k``.
+
+    Parameters
+    ----------
+    range_m, cos_incidence : (P, K) float64
+        Each sub-ray's range, metres, and ``|cos θ|``.
+    weights : (K,) float64
+        Each sub-ray's share of the pulse's energy.
+    reflectivity : float or (P,) float64
+        ρ of each pulse's surface.
+    """
+    tk = np.asarray(range_m, dtype=np.float64)
+    ek = np.array(cos_incidence, dtype=np.float64)
+    clamped = np.maximum(tk, MIN_RANGE_M)
+    ek /= np.multiply(clamped, clamped, out=clamped)  # |n · d_k| / t_k²
+    ek *= np.asarray(weights, dtype=np.float64)
+    energy = np.einsum("pk->p", ek)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        echo_range = np.einsum("pk,pk->p", ek, tk) / energy
+    return echo_range, energy * np.asarray(reflectivity, dtype=np.float64)
+
+
+def grid_neighbours(position: NDArray[np.float64], line: NDArray[np.int64], *, period: float | None = None) -> NDArray[np.int64]:
+    """(P, 4) int64: each pulse's neighbours on a grid of scan lines, −1 for none.
+
+    Columns: the previous and next pulse of its line by ``position``, then the pulses of the
+    lines ranked just below and just above its own nearest to it by ``position``.  With
+    ``period`` (a spinning scanner's azimuth: 2π), a line that spans a full turn (the gap across
+    the seam less than twice its mean step) wraps around.
+
+    Parameters
+    ----------
+    position : (P,) float
+        Each pulse's place along its line (an azimuth, a scan angle).
+    line : (P,) int
+        Each pulse's line, ranked: lines ``r`` and ``r + 1`` lie side by side.
+    period : float, optional
+        The period of ``position``.
+    """
+    position = np.asarray(position, dtype=np.float64)
+    line = np.asarray(line, dtype=np.int64)
+    n = len(position)
+    out = np.full((n, 4), -1, np.int64)
+    if n == 0:
+        return out
+    # one key (line, position), sorted: a stable sort of it is nearly free on a pattern's firing order
+    low = float(position.min())
+    width = float(position.max()) - low + 1.0
+    key = line * width + (position - low)
+    order = np.argsort(key, kind="stable")
+    key, p, r = key[order], position[order], line[order]
+    same = r[1:] == r[:-1]
+    out[order[1:][same], 0] = order[:-1][same]
+    out[order[:-1][same], 1] = order[1:][same]
+    first = np.flatnonzero(np.concatenate([[True], ~same]))
+    last = np.concatenate([first[1:], [n]]) - 1
+    if period is not None:
+        span = p[last] - p[first]
+        wraps = (last - first >= 2) & (period - span < 2.0 * span / np.maximum(last - first, 1))
+        out[order[first[wraps]], 0] = order[last[wraps]]
+        out[order[last[wraps]], 1] = order[first[wraps]]
+    # the pulses of line r ± 1 nearest to each pulse by position
+    for column, step in ((2, -1), (3, 1)):
+        target = (r + step) * width + (p - low)
+        at = np.searchsorted(key, target)
+        left, right = np.clip(at - 1, 0, n - 1), np.clip(at, 0, n - 1)
+        ok_left, ok_right = r[left] == r + step, r[right] == r + step
+        take_left = ok_left & (~ok_right | (np.abs(p[left] - p) <= np.abs(p[right] - p)))
+        chosen = np.where(take_left, left, right)
+        found = ok_left | ok_right
+        out[order[found], column] = order[chosen[found]]
+    return out
+
+
+def pulse_neighbours(pulses: Pulses) -> NDArray[np.int64]:
+    """(P, 4) int64: each pulse's neighbours (:func:`grid_neighbours`), −1 for none.
+
+    A pattern with rings (a spinning scanner): its rings ranked by elevation, azimuth along each
+    (a full turn wraps around).  Otherwise (an airborne scanner): its scan lines in firing order,
+    each ending where the scan angle turns back or steps more than :data:`LINE_BREAK_STEPS`
+    times its median step, the scan angle along each.
+    """
+    d = pulses.directions_sensor
+    if pulses.ring is not None:
+        ring = np.asarray(pulses.ring, dtype=np.int64)
+        count = np.bincount(ring)
+        elevation = np.bincount(ring, weights=d[:, 2])[count > 0] / count[count > 0]  # the rings fired, by mean sine
+        rank = np.zeros(len(count), np.int64)
+        rank[np.flatnonzero(count)[np.argsort(elevation, kind="stable")]] = np.arange(len(elevation))
+        return grid_neighbours(np.arctan2(d[:, 1], d[:, 0]), rank[ring], period=2.0 * np.pi)
+    angle = np.asarray(pulses.scan_angle_deg, dtype=np.float64)
+    step = np.diff(angle)
+    typical = float(np.median(np.abs(step))) if len(step) else 0.0
+    breaks = np.abs(step) > LINE_BREAK_STEPS * typical  # a sawtooth's flyback
+    breaks[1:] |= (np.sign(step[1:]) * np.sign(step[:-1]) < 0) & ~breaks[1:] & ~breaks[:-1]  # an oscillating mirror's turn
+    return grid_neighbours(angle, np.concatenate([[0], np.cumsum(breaks)]))
+
+
+def adaptive_echo_returns(
+    built: BuiltScene,
+    beam: Beam,
+    pulses: Pulses,
+    *,
+    max_returns: int,
+    radiometry: Radiometry | None = None,
+    transmittance: NDArray[np.float64] | None = None,
+    neighbours: NDArray[np.int64] | None = None,
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray[np.bool_]]:
+    """:func:`~.echo_model.echo_returns` of ``pulses`` fired with ``beam``, the uniform footprints' echoes from their plane.
+
+    The centre rays are cast (Embree, :func:`~.raycast.cast_embree`); the uniform pulses
+    (:func:`uniform_footprints`) get the one echo their sub-rays would give on the centre face's
+    plane (:func:`plane_echoes`), the others' ``beam.footprint_rays`` sub-rays are cast and
+    resolved by :func:`~.echo_model.echo_returns`, through the faces that transmit.  The beam's
+    range resolution, range limits and ``min_echo_reflectance`` apply to both.
+
+    Parameters
+    ----------
+    built : BuiltScene
+    beam : Beam
+        A beam that resolves echoes (``Beam.resolves_echoes``) with ``footprint_rays`` > 1.
+    pulses : Pulses
+    max_returns : int
+        As :func:`~.echo_model.echo_returns`.
+    radiometry : Radiometry, optional
+        As :func:`~.echo_model.echo_returns`: ρ per face, threshold, power noise (one draw per pulse).
+    transmittance : (F,) float64, optional
+        Round-trip transmittance per face (:func:`~.echo_model.surface_optics`); None: opaque.
+    neighbours : (P, m) int64, optional
+        Default :func:`pulse_neighbours`.
+
+    Returns
+    -------
+    pulse, face, range, energy
+        As :func:`~.echo_model.echo_returns`: (E,) each, sorted by pulse, then range.
+    uniform : (P,) bool
+        The pulses whose sub-rays were not cast.
+    """
+    mesh = built.mesh
+    d = pulses.directions
+    k = beam.footprint_rays
+    face, t = cast_embree(mesh, pulses.origins, d)
+    tau = None if transmittance is None else np.asarray(transmittance, dtype=np.float64)
+    limits = (beam.min_range_m, beam.max_range_m)
+    offsets = footprint_offsets(k, beam.divergence_deg)[0]
+    uniform, one, tk, cos = _uniform(
+        built, pulses.origins, d, face, t, pulse_neighbours(pulses) if neighbours is None else neighbours, offsets,
+        beam.range_resolution_m, limits, None if tau is None else tau > 0,
+    )  # fmt: skip
+    # the uniform pulses that hit: their plane's echo, then the receiver's rules (resolve_echoes)
+    f = face[one]
+    rho = 1.0 if radiometry is None else np.asarray(radiometry.reflectivity, dtype=np.float64)[f]
+    echo_range, energy = plane_echoes(tk, cos, beam.footprint_weights(), rho)
+    if radiometry is not None and radiometry.power_noise > 0:
+        energy = energy * np.exp(radiometry.power_noise * radiometry.rng.standard_normal(len(one)))
+    plane = resolve_echoes(
+        one, echo_range, energy, np.asarray(built.face_object)[f].astype(np.int64), range_resolution_m=beam.range_resolution_m,
+        detection_threshold=0.0 if radiometry is None else radiometry.detection_threshold, max_returns=max_returns,
+        min_echo_reflectance=beam.min_echo_reflectance,
+    )  # fmt: skip
+    # the others: every sub-ray cast (the centre ray again: its bits as the full model's)
+    full = np.flatnonzero(~uniform)
+    rays = beam.footprint_directions(d[full]).reshape(-1, 3)
+    origins = pulses.origins if pulses.static else np.repeat(pulses.origins[full], k, axis=0)
+    sub_face, sub_t = cast_embree(mesh, origins, rays)
+    cast = echo_returns(
+        built, rays, sub_face, sub_t, beam.footprint_weights(), range_resolution_m=beam.range_resolution_m,
+        max_returns=max_returns, radiometry=radiometry, range_limits_m=limits, through=None if tau is None else Transmission(tau, origins),
+        min_echo_reflectance=beam.min_echo_reflectance,
+    )  # fmt: skip
+    pulse = np.concatenate([plane.pulse, full[cast[0]]])
+    order = np.argsort(pulse, kind="stable")  # a pulse's echoes all come from one part, in range order
+    face_out = np.concatenate([face[plane.pulse], cast[1]])[order]
+    return pulse[order], face_out, np.concatenate([plane.range_m, cast[2]])[order], np.concatenate([plane.energy, cast[3]])[order], uniform
