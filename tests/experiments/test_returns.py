@@ -369,6 +369,9 @@ def test_spacing_for_cover_gives_the_plot_that_cover() -> None:
         assert math.sqrt(16.0 / (4 * cover)) * 0.9 <= spacing <= math.sqrt(16.0 / (4 * cover)) * 1.35
     with pytest.raises(InvalidInputError, match="cover"):
         spacing_for_cover(boxes, sizes, 1.0, rays_per_cell=4)
+    # a cover so small that the plot outgrows the rays plot_cover casts: refused in one line, not cast
+    with pytest.raises(InvalidInputError, match="rays is more than"):
+        spacing_for_cover(boxes[:1], sizes[:1], 1e-9, rays_per_cell=1000)
 
 
 def test_cover_markdown_names_every_cover() -> None:

@@ -97,8 +97,9 @@ TREE_COVER_BLOCK_M = 10.0
 COVER_TOLERANCE = 0.002
 #: Bisection steps of :func:`spacing_for_cover` at most (each builds the plot and casts its rays).
 COVER_STEPS = 30
-#: Most rays :func:`plot_cover` casts (its cells times the rays per cell; about 100 bytes each while cast).
-MAX_COVER_RAYS = 20_000_000
+#: Most rays :func:`plot_cover` casts (its cells times the rays per cell; about 100 bytes each while cast):
+#: the experiment's plot casts about 25,000, a plot of 30 m trees 36 m apart about 400,000.
+MAX_COVER_RAYS = 4_000_000
 #: Largest plot side over cell side :func:`tree_cover` grids (beyond it the cells' indices lose precision).
 MAX_COVER_CELLS_ACROSS = 2**31
 
@@ -371,8 +372,8 @@ def spacing_for_cover(meshes: Sequence, sizes_m: Sequence[float], cover: float, 
     """The spacing of :func:`plot_scene`'s grid whose square of ground has the tree cover ``cover``.
 
     The plot's square is the grid's (``ceil(sqrt(n))`` cells of the spacing a side), its cover
-    :func:`plot_cover`'s; the spacing is found by bisection on its logarithm, between crowns
-    packed 20 to a largest size and one crown per 10 largest sizes, to within
+    :func:`plot_cover`'s; the spacing is bracketed from the largest size (crowns about touching)
+    by doubling or halving it, then found by bisection on its logarithm, to within
     :data:`COVER_TOLERANCE` or after :data:`COVER_STEPS` steps, the closest found (the cover of a
     plot of few cells moves in steps as the spacing grows).  Crowns closer than their width overlap
     (a closed canopy), as they do in a forest.
@@ -396,7 +397,8 @@ def spacing_for_cover(meshes: Sequence, sizes_m: Sequence[float], cover: float, 
     Raises
     ------
     InvalidInputError
-        A cover outside (0, 1), or one the meshes cannot give (named with the covers at both ends).
+        A cover outside (0, 1), one the meshes cannot give within :data:`COVER_STEPS` doublings or
+        halvings of the spacing, or a plot too large for :func:`plot_cover` on the way.
     """
     cover = real(cover, "cover", low=0.0, high=1.0, low_open=True, high_open=True)
     side = math.ceil(math.sqrt(len(meshes))) if len(meshes) else 1
@@ -405,13 +407,22 @@ def spacing_for_cover(meshes: Sequence, sizes_m: Sequence[float], cover: float, 
         scene, vegetation = plot_scene(meshes, sizes_m, spacing_m=spacing, center_xy=center_xy, seed=seed)
         return plot_cover(scene, center_xy, side * spacing / 2.0, vegetation, cell_m=cell_m, rays_per_cell=rays_per_cell, seed=seed)
 
-    largest = max(float(v) for v in sizes_m) if len(sizes_m) else 0.0
-    low, high = math.log(largest / 20.0 if largest > 0 else 1e-3), math.log(max(largest, 1e-3) * 10.0)
-    at_low, at_high = cover_at(math.exp(low)), cover_at(math.exp(high))
-    if not (at_high < cover < at_low):
+    largest = max((float(v) for v in sizes_m), default=0.0)
+    # bracket the cover: from the largest size apart (crowns about touching), double or halve the spacing
+    start = math.log(largest if largest > 0 else 1.0)
+    at_start = cover_at(math.exp(start))
+    step = math.log(2.0) if at_start > cover else -math.log(2.0)
+    low = high = start
+    for _ in range(COVER_STEPS):
+        if (at_start > cover) == (cover_at(math.exp(high + step)) > cover):
+            high += step
+            continue
+        low, high = sorted((high, high + step))
+        break
+    else:
         raise InvalidInputError(f"spacing_for_cover: a tree cover of {cover:.3g} is out of these meshes' reach "
-                                f"({at_high:.3g} to {at_low:.3g} from {math.exp(high):.3g} m to {math.exp(low):.3g} m apart)")  # fmt: skip
-    best = (abs(at_low - cover), low)
+                                f"({at_start:.3g} with them {math.exp(start):.3g} m apart, the same {COVER_STEPS} doublings further)")  # fmt: skip
+    best = (abs(at_start - cover), start)
     for _ in range(COVER_STEPS):
         middle = (low + high) / 2.0
         got = cover_at(math.exp(middle))
