@@ -186,6 +186,12 @@ if not bad:
         bad.append(f"--device {device}: {exc}")
     print(f"auto method: {choose_method()} (ZBUF_OCCLUDE_AUTO={os.environ.get('ZBUF_OCCLUDE_AUTO')})")
     print("glcontext imported (an OpenGL context was made):", "glcontext" in sys.modules)
+    try:  # every subcommand's parser, as a run builds it
+        from zbuf_occlude.cli.main import build_parser
+
+        build_parser()
+    except Exception as exc:  # noqa: BLE001
+        bad.append(f"zbuf-occlude's argument parser: {type(exc).__name__}: {exc}")
 for line in bad:
     print(f"FAILED {line}")
 sys.exit(1 if bad else 0)
@@ -278,7 +284,8 @@ done
 
 for name in "${NAMES[@]}"; do
     echo "================ $name ($(tr '\n' ' ' <"$LOGS/$name.wall.txt" | cut -c1-200))"
-    if [ -f "$RUNS_DIR/$name/table.md" ]; then cat "$RUNS_DIR/$name/table.md"; else tail -n 15 "$LOGS/$name.log"; fi
+    # the table's own lines, not its notes: six of them stay inside the device tool's last 12,000 characters
+    if [ -f "$RUNS_DIR/$name/table.md" ]; then grep -E '^(model|\|)' "$RUNS_DIR/$name/table.md"; else tail -n 15 "$LOGS/$name.log"; fi
 done
 say "$((${#NAMES[@]} - failed)) of ${#NAMES[@]} runs finished with status 0"
 pack_and_exit $((failed > 0))
