@@ -167,9 +167,9 @@ for name in modules:
 import zbuf_occlude
 
 print(f"zbuf_occlude {zbuf_occlude.__version__} from {pathlib.Path(zbuf_occlude.__file__).parent}")
-code = hashlib.sha256()
-for path in sorted(pathlib.Path(zbuf_occlude.__file__).parent.rglob("*.py")):
-    code.update(path.as_posix().split("zbuf_occlude/", 1)[1].encode() + b"\0" + path.read_bytes())
+code, package = hashlib.sha256(), pathlib.Path(zbuf_occlude.__file__).parent
+for path in sorted(package.rglob("*.py")):
+    code.update(path.relative_to(package).as_posix().encode() + b"\0" + path.read_bytes())
 print(f"sha256 of zbuf_occlude/**/*.py (relative path, NUL, bytes; sorted): {code.hexdigest()}")
 if not bad:
     import torch
