@@ -32,6 +32,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.cache import MeshCache
 from zbuf_occlude.sensors.beam import Beam
 from zbuf_occlude.sensors.echo_model import Radiometry, Transmission, echo_returns
@@ -42,10 +43,12 @@ from zbuf_occlude.sensors.raycast import BEYOND_HIT_SHARE, cast_embree
 from zbuf_occlude.sensors.scene import BuiltScene
 
 __all__ = [
+    "FOOTPRINT_MODES",
     "INSIDE_MARGIN_SHARE",
     "LINE_BREAK_STEPS",
     "PLANE_SHARE",
     "adaptive_echo_returns",
+    "adaptive_footprint",
     "grid_neighbours",
     "plane_echoes",
     "pulse_neighbours",
@@ -280,6 +283,31 @@ def pulse_neighbours(pulses: Pulses) -> NDArray[np.int64]:
     breaks = np.abs(step) > LINE_BREAK_STEPS * typical  # a sawtooth's flyback
     breaks[1:] |= (np.sign(step[1:]) * np.sign(step[:-1]) < 0) & ~breaks[1:] & ~breaks[:-1]  # an oscillating mirror's turn
     return grid_neighbours(angle, np.concatenate([[0], np.cumsum(breaks)]))
+
+
+#: How a beam that resolves echoes casts its footprint (``scan(footprint=...)``): every sub-ray, or only where needed.
+FOOTPRINT_MODES = ("exact", "adaptive")
+
+
+def adaptive_footprint(footprint: str, beam: Beam, backend: str) -> bool:
+    """Whether ``footprint`` (:data:`FOOTPRINT_MODES`) asks for the adaptive footprint, where it applies.
+
+    Raises
+    ------
+    InvalidInputError
+        An unknown mode, or "adaptive" for a beam that resolves no echoes or fires one ray, or another backend than "embree".
+    """
+    if footprint not in FOOTPRINT_MODES:
+        raise InvalidInputError(f"footprint must be one of {', '.join(FOOTPRINT_MODES)}, got {footprint!r}")
+    if footprint == "exact":
+        return False
+    if not beam.resolves_echoes or beam.footprint_rays == 1:
+        raise InvalidInputError(f"footprint 'adaptive' skips the sub-rays of resolved echoes; beam {beam.name!r} "
+                                f"(footprint_rays {beam.footprint_rays}, max_returns {beam.max_returns}, return_mode "
+                                f"{beam.return_mode!r}) resolves none: give it footprint_rays above 1 and echoes to resolve")  # fmt: skip
+    if backend != "embree":
+        raise InvalidInputError(f"footprint 'adaptive' casts rays with Embree; backend {backend!r} renders a z-buffer")
+    return True
 
 
 def adaptive_echo_returns(

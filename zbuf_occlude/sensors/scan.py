@@ -17,6 +17,7 @@ from numpy.typing import ArrayLike, NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.resources import check_memory
+from zbuf_occlude.sensors.adaptive_footprint import adaptive_echo_returns, adaptive_footprint
 from zbuf_occlude.sensors.beam import Beam
 from zbuf_occlude.sensors.depth_camera import DepthCamera
 from zbuf_occlude.sensors.echo_model import Radiometry, Transmission, echo_returns, returns_of_mode, strongest_echo, surface_optics
@@ -129,6 +130,7 @@ def scan(
     neighborhood: int = 1,
     reflectivity: float | ArrayLike | str | None = None,
     transmittance: float | ArrayLike | str | None = None,
+    footprint: str = "exact",
 ) -> Scan:
     """Scan ``scene`` with ``sensor`` at ``pose`` (or along a trajectory).
 
@@ -176,6 +178,13 @@ def scan(
         :data:`~.reflectance.FOLIAGE_GAP_FRACTION`).  None or 0 everywhere: opaque, first hits
         only, bit for bit as without it.  The "zbuffer" backend keeps the nearest face per
         pixel only and refuses a transmittance above 0.
+    footprint : {"exact", "adaptive"}
+        How a beam that resolves echoes casts its footprint: "exact" (default) every sub-ray of
+        every pulse; "adaptive" only where the centre ray and its neighbouring pulses do not show
+        one plane filling the footprint (:mod:`.adaptive_footprint`: opt-in and approximate, the
+        echo of a surface inside the cone that neither the centre ray nor a neighbour meets is
+        lost; ``benchmarks/returns_cost.py`` measures its speed and bias).  "adaptive" needs a
+        beam that resolves echoes with ``footprint_rays`` above 1 and the "embree" backend.
 
     Returns
     -------
@@ -189,7 +198,8 @@ def scan(
         bad ``reflectivity`` or ``transmittance``, or a transmittance above 0 with the
         "zbuffer" backend or with a beam that does not resolve echoes, or either for a depth
         camera; an airborne scanner (use :func:`scan_airborne`); a trajectory with the
-        "zbuffer" backend or a depth camera, or shorter than the sweep.
+        "zbuffer" backend or a depth camera, or shorter than the sweep; an unknown
+        ``footprint``, or "adaptive" where it does not apply (above).
     BackendUnavailable
         Embree or OpenGL missing for the chosen backend.
     """
@@ -198,6 +208,8 @@ def scan(
     built = _built(scene)
     platform = _platform(pose, scene)
     if not kind.pulsed:
+        if footprint != "exact":
+            raise InvalidInputError(f"footprint {footprint!r} is for a pulsed LiDAR's beam; a {kind.title} has none")
         if isinstance(platform, Trajectory):
             raise InvalidInputError(f"a {kind.title} takes one pose, not a trajectory")
         return _scan_camera(built, sensor, platform, seed, backend=backend, frame=frame, resolution=resolution,
@@ -209,12 +221,13 @@ def scan(
     return fire_pulses(
         built, sensor.beam, pulses, np.random.default_rng(seed), sensor_name=sensor.name, sensor_to_world=pose_matrix,
         backend=backend, frame=frame, resolution=resolution, neighborhood=neighborhood, reflectivity=reflectivity,
-        transmittance=transmittance,
+        transmittance=transmittance, footprint=footprint,
     )  # fmt: skip
 
 
 def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.0, *, seed: int = 0,
-                  phase_s: float | None = None, lateral_shift_m=None, reflectivity="auto", transmittance="auto") -> Scan:  # fmt: skip
+                  phase_s: float | None = None, lateral_shift_m=None, reflectivity="auto", transmittance="auto",
+                  footprint: str = "exact") -> Scan:  # fmt: skip
     """Scan the part of ``scene`` around ``center_xy`` from every line of an airborne scanner's flight plan; world frame.
 
     The pulses are :meth:`AirborneScanner.pulses <zbuf_occlude.sensors.airborne.AirborneScanner.pulses>`
@@ -241,6 +254,8 @@ def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.
         which its intensities and its returns through a canopy rest on; any other beam none.  With
         one of them given, an ``"auto"`` other is none.  None: none (opaque surfaces; a detection
         threshold applies with ρ = 1).
+    footprint : {"exact", "adaptive"}
+        As :func:`scan`'s.
 
     Returns
     -------
@@ -272,13 +287,13 @@ def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.
     rng = np.random.default_rng(seed)
     pulses = scanner.pulses(center_xy, half_size_m, rng, phase_s=phase_s, lateral_shift_m=lateral_shift_m)
     return fire_pulses(built, scanner.beam, pulses, rng, sensor_name=scanner.name, sensor_to_world=None, frame="world",
-                       reflectivity=reflectivity, transmittance=transmittance)  # fmt: skip
+                       reflectivity=reflectivity, transmittance=transmittance, footprint=footprint)  # fmt: skip
 
 
 def fire_pulses(
     built: BuiltScene, beam: Beam, pulses: Pulses, rng: np.random.Generator, *, sensor_name: str, sensor_to_world,
     backend: str = "embree", frame: str = "sensor", resolution: int = 2048, neighborhood: int = 1, reflectivity=None,
-    transmittance=None,
+    transmittance=None, footprint: str = "exact",
 ) -> Scan:  # fmt: skip
     """The one pipeline: cast ``pulses`` with ``beam``, resolve their echoes, add noise and loss, and make the :class:`Scan`.
 
@@ -304,7 +319,7 @@ def fire_pulses(
     sensor_name : str
     sensor_to_world : (4, 4) float64 or None
         The scan's ``sensor_to_world``; None: a translation to the mean origin of the returns.
-    backend, frame, resolution, neighborhood, reflectivity, transmittance
+    backend, frame, resolution, neighborhood, reflectivity, transmittance, footprint
         As :func:`scan`'s.
 
     Raises
@@ -325,23 +340,30 @@ def fire_pulses(
     pair_bytes = 0 if k == 1 or beam.resolves_echoes else k * SUBRAY_PAIR_BYTES
     check_memory(len(pulses) * k * (SUBRAY_BYTES + pair_bytes), f"{len(pulses):,} pulses × footprint_rays {k} of {sensor_name}",
                  hint="take fewer footprint_rays, or scan fewer pulses (a sector, a smaller square)")  # fmt: skip
+    multi, adaptive = beam.resolves_echoes, adaptive_footprint(footprint, beam, backend)
     d_world = pulses.directions
-    rays = d_world if k == 1 else beam.footprint_directions(d_world).reshape(-1, 3)
-    origin = pulses.origins if pulses.static or k == 1 else np.repeat(pulses.origins, k, axis=0)
-    face, t = _cast(built, origin, rays, backend, meta, resolution=resolution, neighborhood=neighborhood,
-                    near_far=(beam.min_range_m, beam.max_range_m))  # fmt: skip
     rho, tau = _surface_optics(built, beam, backend, reflectivity, transmittance)
     if rho is None and pulses.default_reflectivity is not None and beam.detection_threshold > 0:
         rho = np.full(len(built.face_object), float(pulses.default_reflectivity))
-    multi = beam.resolves_echoes
+    radiometry = None if rho is None else Radiometry(rho, beam.detection_threshold, beam.power_noise, rng)
+    most = beam.max_returns if beam.return_mode == "all" else MAX_RETURNS
+    if adaptive:  # the centre rays first; the footprints that are not one plane cast in full
+        hit, face, t, power, uniform = adaptive_echo_returns(
+            built, beam, pulses, max_returns=most, radiometry=radiometry, transmittance=tau
+        )
+        meta["footprint_uniform_share"] = float(uniform.mean()) if len(uniform) else 0.0
+    else:
+        rays = d_world if k == 1 else beam.footprint_directions(d_world).reshape(-1, 3)
+        origin = pulses.origins if pulses.static or k == 1 else np.repeat(pulses.origins, k, axis=0)
+        face, t = _cast(built, origin, rays, backend, meta, resolution=resolution, neighborhood=neighborhood,
+                        near_far=(beam.min_range_m, beam.max_range_m))  # fmt: skip
     if multi:
-        radiometry = None if rho is None else Radiometry(rho, beam.detection_threshold, beam.power_noise, rng)
-        hit, face, t, power = echo_returns(
-            built, rays, face, t, beam.footprint_weights(), range_resolution_m=beam.range_resolution_m,
-            max_returns=beam.max_returns if beam.return_mode == "all" else MAX_RETURNS, radiometry=radiometry,
-            range_limits_m=(beam.min_range_m, beam.max_range_m), through=None if tau is None else Transmission(tau, origin),
-            min_echo_reflectance=beam.min_echo_reflectance,
-        )  # fmt: skip
+        if not adaptive:
+            hit, face, t, power = echo_returns(
+                built, rays, face, t, beam.footprint_weights(), range_resolution_m=beam.range_resolution_m, max_returns=most,
+                radiometry=radiometry, range_limits_m=(beam.min_range_m, beam.max_range_m),
+                through=None if tau is None else Transmission(tau, origin), min_echo_reflectance=beam.min_echo_reflectance,
+            )  # fmt: skip
         if beam.return_mode != "all":
             chosen = returns_of_mode(hit, power, beam.return_mode)
             hit, face, t, power = hit[chosen], face[chosen], t[chosen], power[chosen]

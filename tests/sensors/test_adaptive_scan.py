@@ -1,0 +1,61 @@
+"""``scan(footprint="adaptive")``: the adaptive footprint through the one pipeline, and where it is refused."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.mesh.load import load_mesh
+from zbuf_occlude.sensors import Lidar, ScanScene, SceneObject, scan, scan_airborne, with_beam
+from zbuf_occlude.sensors.airborne_presets import airborne_preset
+from zbuf_occlude.sensors.depth_camera import depth_camera_preset
+
+TABLE = Path(__file__).resolve().parents[2] / "data" / "samples" / "table" / "test" / "table_0393.off"
+
+
+def _scene() -> ScanScene:
+    table = SceneObject(load_mesh(TABLE), class_name="table", position_m=(6.0, 0.0), size_m=1.2)
+    return ScanScene(objects=[table], ground=True, ground_half_extent_m=20.0)
+
+
+def _returns(**beam) -> Lidar:
+    return with_beam(Lidar.preset("vlp16"), footprint_rays=7, max_returns=3, range_resolution_m=0.5, **beam)
+
+
+def test_an_adaptive_scan_is_the_exact_one_where_footprints_are_not_one_plane():
+    exact = scan(_scene(), _returns(), seed=1, azimuth_range_deg=(-40.0, 40.0))
+    fast = scan(_scene(), _returns(), seed=1, azimuth_range_deg=(-40.0, 40.0), footprint="adaptive")
+    share = fast.meta["footprint_uniform_share"]
+    assert 0.3 < share < 1.0  # the ground's footprints are skipped, the table's cast
+    assert "footprint_uniform_share" not in exact.meta
+    # the same returns, to rounding: counts within a few, return numbers and object ids alike
+    assert abs(len(fast) - len(exact)) <= 3
+    for obj in (0, 1):
+        assert abs(np.sum(fast.object_id == obj) - np.sum(exact.object_id == obj)) <= 3
+        assert np.median(fast.range_m[fast.object_id == obj]) == pytest.approx(np.median(exact.range_m[exact.object_id == obj]), abs=0.01)
+
+
+def test_the_adaptive_footprint_of_an_airborne_preset():
+    q = airborne_preset("riegl-q1560")
+    fast = scan_airborne(_scene(), q, half_size_m=4.0, seed=2, footprint="adaptive")
+    exact = scan_airborne(_scene(), q, half_size_m=4.0, seed=2)
+    assert fast.meta["footprint_uniform_share"] > 0.5 and abs(len(fast) - len(exact)) <= 3
+
+
+@pytest.mark.parametrize(
+    ("call", "words"),
+    [
+        (lambda: scan(_scene(), _returns(), footprint="fast"), "footprint must be one of exact, adaptive, got 'fast'"),
+        (lambda: scan(_scene(), Lidar.preset("vlp16"), footprint="adaptive"), "resolves none"),
+        (lambda: scan(_scene(), with_beam(Lidar.preset("vlp16"), footprint_rays=7), footprint="adaptive"), "resolves none"),
+        (lambda: scan(_scene(), _returns(), footprint="adaptive", backend="zbuffer"), "casts rays with Embree"),
+        (lambda: scan(_scene(), depth_camera_preset("kinect-v1"), np.eye(4), footprint="adaptive"), "has none"),
+    ],
+    ids=["unknown", "one-ray", "no-echoes", "zbuffer", "camera"],
+)
+def test_the_adaptive_footprint_is_refused_where_it_does_not_apply(call, words):
+    with pytest.raises(InvalidInputError, match=words):
+        call()
