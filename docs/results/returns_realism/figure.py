@@ -53,7 +53,7 @@ from zbuf_occlude.io.atomic import write_bytes, write_text  # noqa: E402
 from zbuf_occlude.io.encodings import png_bytes  # noqa: E402
 from zbuf_occlude.real_scans.datasets import load_real_scans  # noqa: E402
 from zbuf_occlude.sensors import Lidar  # noqa: E402
-from zbuf_occlude.sensors.kinds import with_beam  # noqa: E402
+from zbuf_occlude.sensors.kinds import sensor_from_name  # noqa: E402
 
 log = logging.getLogger("returns_figure")
 
@@ -61,11 +61,14 @@ log = logging.getLogger("returns_figure")
 ROWS = ("pole", "bush")
 #: Range to the points' centroid, metres, of the scans and crops a pick is made from: where most real scans of both classes lie.
 RANGE_M = (6.0, 10.0)
+#: The sensor file of experiment sim2real's "on" runs (fit_threshold.py): the preset's beam with a 7-ray footprint, the strongest
+#: return and the fitted min_echo_reflectance.
+ON_SENSOR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "fit", "hdl32e_footprint.json")
 #: The simulated columns: a title and a function of the HDL-32E preset.
 VARIANTS: list[tuple[str, Callable[[Lidar], Lidar]]] = [
     ("simulated, --returns 2", lambda s: with_returns(s, 2)),
-    ("simulated, 7 rays, strongest,\nmin echo reflectance 0.1",
-     lambda s: with_beam(s, footprint_rays=7, return_mode="strongest", max_returns=1, range_resolution_m=0.75, min_echo_reflectance=0.1)),
+    ("simulated, the on runs' beam:\n7 rays, strongest, fitted threshold",
+     lambda _: sensor_from_name(ON_SENSOR)),
 ]  # fmt: skip
 #: Colours of return 1, 2 and 3+ (colour-blind-safe: Okabe-Ito blue, orange, vermillion).
 RETURN_COLOURS = ("#0072B2", "#E69F00", "#D55E00")
@@ -259,9 +262,9 @@ def main(argv: list[str] | None = None) -> int:
         "HDL-32E scan (every point is return 1: the set records one return per pulse; of the fit half's "
         f"{n_real:,} points, {n_pairs} pairs lie within {SAME_DIRECTION_DEG:g}° of one direction, {n_apart} of them more than "
         f"{SECOND_RETURN_APART_M:g} m apart in range as a pulse's two returns would be); "
-        "the HDL-32E preset with `--returns 2` (`with_returns(hdl32e, 2)`); the preset with a 7-ray footprint, the strongest "
-        'return and a minimum echo reflectance of 0.1 (`with_beam(hdl32e, footprint_rays=7, return_mode="strongest", '
-        "max_returns=1, range_resolution_m=0.75, min_echo_reflectance=0.1)`). The simulated crops are the `lidar` set's of "
+        'the HDL-32E preset with `--returns 2` (`with_returns(hdl32e, 2)`); the beam of `experiment sim2real`\'s "on" runs '
+        "(`fit/hdl32e_footprint.json`: the preset with a 7-ray footprint, the strongest return and the min_echo_reflectance "
+        f"fitted on the fit half, {sensor_from_name(ON_SENSOR).beam.min_echo_reflectance:g}). The simulated crops are the `lidar` set's of "
         "`experiment sim2real` (`measure.sim_crops`); both simulated columns show the same mesh and placement.\n\n"
         f"Picks, by rule: among the clouds whose centroid lies {RANGE_M[0]:g}-{RANGE_M[1]:g} m away, the one whose point count "
         "is nearest their median: for the real column among the fit half of the real scans (`experiment sim2real`'s split, as "
