@@ -220,8 +220,8 @@ def scan(
     pose_matrix = platform if isinstance(platform, np.ndarray) else platform.pose_at(platform.start_s)
     return fire_pulses(
         built, sensor.beam, pulses, np.random.default_rng(seed), sensor_name=sensor.name, sensor_to_world=pose_matrix,
-        backend=backend, frame=frame, resolution=resolution, neighborhood=neighborhood, reflectivity=reflectivity,
-        transmittance=transmittance, footprint=footprint,
+        backend=backend, frame=frame, resolution=resolution, neighborhood=neighborhood, optics=(reflectivity, transmittance),
+        footprint=footprint,
     )  # fmt: skip
 
 
@@ -287,13 +287,13 @@ def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.
     rng = np.random.default_rng(seed)
     pulses = scanner.pulses(center_xy, half_size_m, rng, phase_s=phase_s, lateral_shift_m=lateral_shift_m)
     return fire_pulses(built, scanner.beam, pulses, rng, sensor_name=scanner.name, sensor_to_world=None, frame="world",
-                       reflectivity=reflectivity, transmittance=transmittance, footprint=footprint)  # fmt: skip
+                       optics=(reflectivity, transmittance), footprint=footprint)  # fmt: skip
 
 
 def fire_pulses(
     built: BuiltScene, beam: Beam, pulses: Pulses, rng: np.random.Generator, *, sensor_name: str, sensor_to_world,
-    backend: str = "embree", frame: str = "sensor", resolution: int = 2048, neighborhood: int = 1, reflectivity=None,
-    transmittance=None, footprint: str = "exact",
+    backend: str = "embree", frame: str = "sensor", resolution: int = 2048, neighborhood: int = 1, optics=(None, None),
+    footprint: str = "exact",
 ) -> Scan:  # fmt: skip
     """The one pipeline: cast ``pulses`` with ``beam``, resolve their echoes, add noise and loss, and make the :class:`Scan`.
 
@@ -319,8 +319,8 @@ def fire_pulses(
     sensor_name : str
     sensor_to_world : (4, 4) float64 or None
         The scan's ``sensor_to_world``; None: a translation to the mean origin of the returns.
-    backend, frame, resolution, neighborhood, reflectivity, transmittance, footprint
-        As :func:`scan`'s.
+    backend, frame, resolution, neighborhood, footprint, optics
+        As :func:`scan`'s; ``optics`` is its ``(reflectivity, transmittance)``.
 
     Raises
     ------
@@ -342,7 +342,7 @@ def fire_pulses(
                  hint="take fewer footprint_rays, or scan fewer pulses (a sector, a smaller square)")  # fmt: skip
     multi, adaptive = beam.resolves_echoes, adaptive_footprint(footprint, beam, backend)
     d_world = pulses.directions
-    rho, tau = _surface_optics(built, beam, backend, reflectivity, transmittance)
+    rho, tau = _surface_optics(built, beam, backend, *optics)
     if rho is None and pulses.default_reflectivity is not None and beam.detection_threshold > 0:
         rho = np.full(len(built.face_object), float(pulses.default_reflectivity))
     radiometry = None if rho is None else Radiometry(rho, beam.detection_threshold, beam.power_noise, rng)
