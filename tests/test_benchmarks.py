@@ -3,7 +3,11 @@
 * ``bash benchmarks/gpu.sh OUT --smoke`` writes its report (the CPU half of the GPU benchmark);
 * without ``--smoke`` or ``--allow-software`` it refuses a software OpenGL renderer (exit 3);
 * ``benchmarks/bench_visibility_peers.py`` refuses a machine loaded above its CPU count unless
-  ``--force`` (exit 3), and a bad ``--points`` (exit 2).
+  ``--force`` (exit 3), and a bad ``--points`` (exit 2);
+* ``benchmarks/bench_returns.py`` at its smallest sizes prints every family's cases: the sector's
+  first-return, opaque, transmittance and cast-alone rows, the turn's and the airborne
+  scanner's exact and adaptive rows (with the share of sub-rays not cast), each family's first
+  row its reference (ratio 1.00), and the profile.
 """
 
 from __future__ import annotations
@@ -78,3 +82,32 @@ def test_peer_benchmark_sets_each_of_ours_beside_the_fastest_peer_call():
     assert "fastest peer call, Open3D `RaycastingScene.cast_rays` (22.0 ms per view)" in text
     assert "| `zo.visible_mask` one-shot | 11.0 | 22.0 | **2.00×** | 2.00× (2.00–2.00) |" in text
     assert "test_occlusions` 1.36×" in text
+
+
+def test_returns_benchmark_prints_every_family(capsys):
+    import bench_returns as bench
+
+    bench.main(["--repeats", "1", "--ks", "7", "--sector", "5", "--half-size", "5", "--mesh", str(bench.FALLBACK), "--profile",
+                "--profile-lines", "3"])  # fmt: skip
+    out = capsys.readouterr().out
+    rows = {tuple(cell.strip() for cell in line.split("|")[1:3]): line.split("|") for line in out.splitlines() if line.startswith("| ")}
+    for family, name in [
+        ("sector", "hdl32e: 1 ray, 1 return"),
+        ("sector", "hdl32e: 7 sub-rays, 4 returns, opaque"),
+        ("sector", "hdl32e: 7 sub-rays, 4 returns, transmittance"),
+        ("sector", "hdl32e: 7 sub-rays: directions and cast alone"),
+        ("turn", "hdl32e: 1 ray, 1 return"),
+        ("turn", "hdl32e: 7 sub-rays, 2 returns"),
+        ("turn", "hdl32e: 7 sub-rays, 2 returns, adaptive"),
+        ("airborne", "riegl-q1560: 1 ray, 1 return"),
+        ("airborne", "riegl-q1560: 19 sub-rays, 15 returns"),
+        ("airborne", "riegl-q1560: 19 sub-rays, 15 returns, adaptive"),
+    ]:
+        assert (family, name) in rows, (family, name, out)
+    for family in ("sector", "turn", "airborne"):  # the reference: its own ratio
+        assert rows[family, next(n for f, n in rows if f == family)][9].strip() == "1.00"
+    assert rows["turn", "hdl32e: 1 ray, 1 return"][3].strip() == "69,440"
+    assert float(rows["turn", "hdl32e: 7 sub-rays, 2 returns, adaptive"][6]) > 0.0  # sub-rays not cast, %
+    assert rows["turn", "hdl32e: 7 sub-rays, 2 returns"][6].strip() == "–"
+    assert rows["sector", "hdl32e: 7 sub-rays: directions and cast alone"][4].strip() == "–"  # no points: no scan
+    assert "## cProfile: 1 scans of sector: hdl32e: 7 sub-rays, 4 returns, opaque" in out

@@ -23,8 +23,8 @@ their energies (:func:`~.echoes.hit_energy`), equal to the full model's to round
 The one error left: a surface in front of ``f`` inside the cone that neither the centre ray nor
 any neighbour meets (a wire, a thin bar between two rings, a corner poking into the footprint):
 its echo is lost.  Where the beam draws power noise, the uniform pulses' draws come first, then
-the others' (the full model draws them in pulse order).  ``benchmarks/returns_cost.py``
-measures its speed and its bias on return shares, points and ranges.
+the others' (the full model draws them in pulse order).  ``benchmarks/bench_returns.py``
+measures its speed and its bias on return shares and points.
 """
 
 from __future__ import annotations

@@ -183,7 +183,7 @@ def scan(
         every pulse; "adaptive" only where the centre ray and its neighbouring pulses do not show
         one plane filling the footprint (:mod:`.adaptive_footprint`: opt-in and approximate, the
         echo of a surface inside the cone that neither the centre ray nor a neighbour meets is
-        lost; ``benchmarks/returns_cost.py`` measures its speed and bias).  "adaptive" needs a
+        lost; ``benchmarks/bench_returns.py`` measures its speed and bias).  "adaptive" needs a
         beam that resolves echoes with ``footprint_rays`` above 1 and the "embree" backend.
 
     Returns
