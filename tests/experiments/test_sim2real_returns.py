@@ -63,6 +63,18 @@ def test_one_return_per_pulse_is_the_sensor_as_given_and_todays_lidar_set(tmp_pa
 PINNED_ONE_RETURN = "8f0df6f70b7bf0d5"
 
 
+@pytest.mark.parametrize("mode", ["strongest", "last"])
+def test_one_return_keeps_a_velodyne_single_return_mode_and_rewrites_a_beam_of_several(mode: str) -> None:
+    from zbuf_occlude.sensors.airborne_presets import airborne_preset
+    from zbuf_occlude.sensors.kinds import with_beam
+
+    velodyne = with_beam(lidar_preset("hdl32e"), footprint_rays=7, return_mode=mode, max_returns=1, range_resolution_m=0.75)
+    assert with_returns(velodyne, 1) is velodyne  # the device's mode, its range resolution and threshold as given
+    q = airborne_preset("riegl-q1560")
+    one = with_returns(q, 1).beam
+    assert (one.max_returns, one.return_mode, one.range_resolution_m, one.footprint_rays) == (1, "all", 0.0, q.beam.footprint_rays)
+
+
 def test_several_returns_give_a_bush_points_after_the_first_return() -> None:
     from zbuf_occlude.sensors.crops import object_crop
     from zbuf_occlude.sensors.placement import CropDistributions, draw_placement

@@ -358,8 +358,9 @@ class Sim2RealConfig:
 def with_returns(sensor, returns: int, option: str = "returns"):
     """``sensor`` (a spinning LiDAR or an airborne scanner) with a beam recording up to ``returns`` returns per pulse.
 
-    ``returns`` 1: one return per pulse: ``sensor`` itself where its beam records one, else its beam
-    with ``max_returns`` 1 (the footprint's strongest echo).  Above 1, its
+    ``returns`` 1: one return per pulse: ``sensor`` itself where its beam records one (a Velodyne
+    single-return mode included: ``return_mode`` "strongest" or "last"), else its beam with
+    ``max_returns`` 1 (the footprint's strongest surface).  Above 1, its
     beam (:func:`~zbuf_occlude.sensors.kinds.with_beam`) gets ``max_returns = returns``; the
     footprint is the beam's own ``footprint_rays`` where above 1, else
     :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS`, over the beam's own ``divergence_deg``
@@ -381,8 +382,8 @@ def with_returns(sensor, returns: int, option: str = "returns"):
     if isinstance(returns, bool) or not isinstance(returns, int) or not 1 <= returns <= MAX_RETURNS:
         raise InvalidInputError(f"{option} must be a whole number from 1 to {MAX_RETURNS} (returns per pulse), got {returns!r}")
     beam = sensor.beam
-    if returns == 1:  # one return per pulse: a beam that resolves echoes (an airborne preset's) keeps its footprint's strongest
-        return with_beam(sensor, max_returns=1, return_mode="all", range_resolution_m=0.0) if beam.resolves_echoes else sensor
+    if returns == 1:  # one return per pulse: a beam of several (an airborne preset's) keeps its footprint's strongest surface
+        return with_beam(sensor, max_returns=1, return_mode="all", range_resolution_m=0.0) if beam.max_returns > 1 else sensor
     if not beam.divergence_deg > 0:
         raise InvalidInputError(f"{option} {returns}: sensor {sensor.name} has no beam divergence (its beam's divergence_deg 0) to "
                                 "sample a footprint over; give a sensor file whose \"beam\" has a divergence_deg")  # fmt: skip
