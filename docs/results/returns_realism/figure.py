@@ -67,7 +67,7 @@ ON_SENSOR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "fit", "hdl
 #: The simulated columns: a title and a function of the HDL-32E preset.
 VARIANTS: list[tuple[str, Callable[[Lidar], Lidar]]] = [
     ("simulated, --returns 2", lambda s: with_returns(s, 2)),
-    ("simulated, the on runs' beam:\n7 rays, strongest, fitted threshold",
+    ("simulated, the on runs' sensor file:\n7 rays, strongest echo, fitted threshold",
      lambda _: sensor_from_name(ON_SENSOR)),
 ]  # fmt: skip
 #: Colours of return 1, 2 and 3+ (colour-blind-safe: Okabe-Ito blue, orange, vermillion).
@@ -262,9 +262,10 @@ def main(argv: list[str] | None = None) -> int:
         "HDL-32E scan (every point is return 1: the set records one return per pulse; of the fit half's "
         f"{n_real:,} points, {n_pairs} pairs lie within {SAME_DIRECTION_DEG:g}° of one direction, {n_apart} of them more than "
         f"{SECOND_RETURN_APART_M:g} m apart in range as a pulse's two returns would be); "
-        'the HDL-32E preset with `--returns 2` (`with_returns(hdl32e, 2)`); the beam of `experiment sim2real`\'s "on" runs '
-        "(`fit/hdl32e_footprint.json`: the preset with a 7-ray footprint, the strongest return and the min_echo_reflectance "
-        f"fitted on the fit half, {sensor_from_name(ON_SENSOR).beam.min_echo_reflectance:g}). The simulated crops are the `lidar` set's of "
+        'the HDL-32E preset with `--returns 2` (`with_returns(hdl32e, 2)`); the sensor file of `experiment sim2real`\'s "on" runs '
+        "(`fit/hdl32e_footprint.json`: the preset with a 7-ray footprint, the strongest echo and the min_echo_reflectance "
+        f"fitted on the fit half, {sensor_from_name(ON_SENSOR).beam.min_echo_reflectance:g}; the runs trained with its strongest "
+        "surface instead, which gives the same point counts on these crops). The simulated crops are the `lidar` set's of "
         "`experiment sim2real` (`measure.sim_crops`); both simulated columns show the same mesh and placement.\n\n"
         f"Picks, by rule: among the clouds whose centroid lies {RANGE_M[0]:g}-{RANGE_M[1]:g} m away, the one whose point count "
         "is nearest their median: for the real column among the fit half of the real scans (`experiment sim2real`'s split, as "
