@@ -59,3 +59,19 @@ def test_the_adaptive_footprint_of_an_airborne_preset():
 def test_the_adaptive_footprint_is_refused_where_it_does_not_apply(call, words):
     with pytest.raises(InvalidInputError, match=words):
         call()
+
+
+def test_the_adaptive_footprint_applies_the_partial_echo_threshold_to_the_pulses_it_does_not_cast():
+    """A threshold that drops the ground's grazing echoes: the adaptive scan drops the same ones."""
+    beam = {"min_echo_reflectance": 0.6}
+    exact = scan(_scene(), _returns(**beam), seed=1, azimuth_range_deg=(-40.0, 40.0))
+    fast = scan(_scene(), _returns(**beam), seed=1, azimuth_range_deg=(-40.0, 40.0), footprint="adaptive")
+    every = scan(_scene(), _returns(), seed=1, azimuth_range_deg=(-40.0, 40.0), footprint="adaptive")
+    assert np.sum(every.object_id == 0) > np.sum(exact.object_id == 0) + 50  # the threshold drops ground echoes
+    for obj in (0, 1):
+        assert abs(np.sum(fast.object_id == obj) - np.sum(exact.object_id == obj)) <= 3
+
+
+def test_the_footprint_mode_must_be_text():
+    with pytest.raises(InvalidInputError, match="footprint must be one of"):
+        scan(_scene(), _returns(), footprint=np.array(["adaptive"]))

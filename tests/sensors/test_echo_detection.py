@@ -193,3 +193,17 @@ def test_the_threshold_removes_the_footprints_edge_points_from_a_pole_and_keeps_
     assert n_strict < n_every
     assert np.all(centre_on(strict)[strict.object_id == 1] | (np.abs(strict.points[strict.object_id == 1, 1]) < 0.05))
     assert n_every - n_strict >= 6  # about half the footprint's width at each edge
+
+
+def test_power_noise_moves_the_one_ray_threshold_as_it_moves_the_absolute_one():
+    """One ray with reflectivities and power noise: the threshold acts on the noisy apparent reflectance E · R²."""
+    beam = IDEAL_BEAM.with_(max_range_m=1000.0, min_echo_reflectance=0.5, power_noise=0.5)
+    quiet = S.scan(_tilted_floor(), _rings(beam.with_(power_noise=0.0)), np.zeros(3), reflectivity=1.0)
+    noisy = S.scan(_tilted_floor(), _rings(beam), np.zeros(3), reflectivity=1.0)
+    every = S.scan(_tilted_floor(), _rings(beam.with_(min_echo_reflectance=0.0)), np.zeros(3), reflectivity=1.0)
+    # the quiet threshold keeps exactly the hits within 60° of the normal; with noise some beyond are kept, some within lost
+    np.testing.assert_array_equal(quiet.points, every.points[every.incidence_deg <= 60.0])
+    kept_steep, kept_grazing = np.sum(noisy.incidence_deg <= 60.0), np.sum(noisy.incidence_deg > 60.0)
+    assert kept_grazing > 0 and kept_steep < np.sum(every.incidence_deg <= 60.0)
+    # the apparent reflectance it kept: its intensity (E) × R² at or above the threshold, to float32
+    np.testing.assert_array_less(0.5 * (1 - 1e-6), noisy.intensity.astype(float) * noisy.range_m.astype(float) ** 2 * (1 + 1e-3))

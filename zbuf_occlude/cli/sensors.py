@@ -354,7 +354,7 @@ def _add_return_physics_arguments(p: argparse.ArgumentParser) -> None:
     r.add_argument(
         "--min-echo-reflectance", metavar="R", action=Checked, check=real(0.0, 1.0), default=None,
         help="echoes whose apparent reflectance (energy x range^2: reflectivity x |cos incidence| x the share of the footprint "
-        "the surface takes; reflectivity 1 without --reflectance-table) is below R are not detected: partial echoes at an "
+        "the surface takes; reflectivity 1 where the scan is given none) is below R are not detected: partial echoes at an "
         "object's outline and grazing hits, alike at every range and sub-ray count; 0: none (default: the sensor's beam's)",
     )  # fmt: skip
     r.add_argument("--max-returns", metavar="N", action=Checked, check=check_max_returns, default=None,

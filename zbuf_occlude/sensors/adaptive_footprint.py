@@ -36,7 +36,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.cache import MeshCache
 from zbuf_occlude.sensors.beam import Beam
 from zbuf_occlude.sensors.echo_model import Radiometry, Transmission, echo_returns
-from zbuf_occlude.sensors.echoes import MIN_RANGE_M, resolve_echoes
+from zbuf_occlude.sensors.echoes import MIN_RANGE_M, hit_energy, resolve_echoes
 from zbuf_occlude.sensors.footprint import footprint_offsets, plane_subrays
 from zbuf_occlude.sensors.pulses import Pulses
 from zbuf_occlude.sensors.raycast import BEYOND_HIT_SHARE, cast_embree
@@ -199,10 +199,7 @@ def plane_echoes(
         ρ of each pulse's surface.
     """
     tk = np.asarray(range_m, dtype=np.float64)
-    ek = np.array(cos_incidence, dtype=np.float64)
-    clamped = np.maximum(tk, MIN_RANGE_M)
-    ek /= np.multiply(clamped, clamped, out=clamped)  # |n · d_k| / t_k²
-    ek *= np.asarray(weights, dtype=np.float64)
+    ek = hit_energy(np.asarray(weights, dtype=np.float64)[None, :], 1.0, cos_incidence, tk)  # ρ applied per pulse below
     energy = np.einsum("pk->p", ek)
     with np.errstate(divide="ignore", invalid="ignore"):
         echo_range = np.einsum("pk,pk->p", ek, tk) / energy
@@ -265,9 +262,11 @@ def pulse_neighbours(pulses: Pulses) -> NDArray[np.int64]:
     """(P, 4) int64: each pulse's neighbours (:func:`grid_neighbours`), −1 for none.
 
     A pattern with rings (a spinning scanner): its rings ranked by elevation, azimuth along each
-    (a full turn wraps around).  Otherwise (an airborne scanner): its scan lines in firing order,
-    each ending where the scan angle turns back or steps more than :data:`LINE_BREAK_STEPS`
-    times its median step, the scan angle along each.
+    (a full turn wraps around).  Otherwise (an airborne scanner, a ray table): its scan lines in
+    firing order, each ending where the scan angle turns back or steps more than
+    :data:`LINE_BREAK_STEPS` times its median step, the scan angle along each.  A table whose rows
+    interleave elevations (a real HDL-32E's firing order) breaks a line at nearly every row: its
+    footprints are then nearly all cast, as the exact model casts them, and nothing is saved.
     """
     d = pulses.directions_sensor
     if pulses.ring is not None:
@@ -297,7 +296,7 @@ def adaptive_footprint(footprint: str, beam: Beam, backend: str) -> bool:
     InvalidInputError
         An unknown mode, or "adaptive" for a beam that resolves no echoes or fires one ray, or another backend than "embree".
     """
-    if footprint not in FOOTPRINT_MODES:
+    if not isinstance(footprint, str) or footprint not in FOOTPRINT_MODES:
         raise InvalidInputError(f"footprint must be one of {', '.join(FOOTPRINT_MODES)}, got {footprint!r}")
     if footprint == "exact":
         return False

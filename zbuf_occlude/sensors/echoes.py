@@ -359,8 +359,9 @@ def resolve_echoes(
         Least apparent reflectance of a detected echo, in [0, 1]: its energy times the square of
         its range (with :func:`hit_energy`'s energies, ``ρ · |cos θ|`` times the share of the pulse
         its hits carry; :attr:`Beam.min_echo_reflectance
-        <zbuf_occlude.sensors.beam.Beam.min_echo_reflectance>`).  Scaling every range by ``c``
-        and every energy by ``1/c²`` detects the same echoes.  0 keeps every echo.
+        <zbuf_occlude.sensors.beam.Beam.min_echo_reflectance>`).  Scaling every range and the
+        range resolution by ``c`` and every energy by ``1/c²`` detects the same echoes (with
+        ``detection_threshold`` 0, ranges above :data:`MIN_RANGE_M`).  0 keeps every echo.
 
     Returns
     -------
