@@ -36,7 +36,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.cache import MeshCache
 from zbuf_occlude.sensors.beam import Beam
 from zbuf_occlude.sensors.echo_model import Radiometry, Transmission, echo_returns
-from zbuf_occlude.sensors.echoes import MIN_RANGE_M, hit_energy, resolve_echoes
+from zbuf_occlude.sensors.echoes import hit_energy, resolve_echoes
 from zbuf_occlude.sensors.footprint import footprint_offsets, plane_subrays
 from zbuf_occlude.sensors.pulses import Pulses
 from zbuf_occlude.sensors.raycast import BEYOND_HIT_SHARE, cast_embree

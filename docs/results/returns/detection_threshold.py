@@ -43,7 +43,8 @@ def main(argv: list[str]) -> None:
     counts = fit_return_model(real, altitude_m=1500.0, bootstrap=20).estimates["detection_threshold_counts"].value
     single_ground = (real.number_of_returns == 1) & (real.classification == 2)
     share = counts / float(np.median(real.intensity[single_ground]))
-    settings = ReturnsSettings(spacing_m=14.0)  # the spacing its recorded figures were made with (before the plot matched the tile's tree cover)
+    # the 14 m spacing its recorded figures were made with (before the plot matched the tile's tree cover)
+    settings = ReturnsSettings(spacing_m=14.0)
     scene, vegetation, centre, half = ign_plot(meshes, settings)
     sim = simulate(scene, ign_scanner(divergence, k, range_resolution_m=resolution), vegetation,
                    center_xy=centre, half_size_m=half, seeds=settings.seeds, bootstrap=50).las  # fmt: skip

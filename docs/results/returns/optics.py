@@ -30,7 +30,8 @@ def row(name: str, every, veg) -> str:
 
 def main(argv: list[str]) -> None:
     meshes, ign, divergence, k, resolution = argv[0], argv[1], float(argv[2]), int(argv[3]), float(argv[4])
-    settings = ReturnsSettings(spacing_m=14.0)  # the spacing its recorded figures were made with (before the plot matched the tile's tree cover)
+    # the 14 m spacing its recorded figures were made with (before the plot matched the tile's tree cover)
+    settings = ReturnsSettings(spacing_m=14.0)
     scene, vegetation, centre, half = ign_plot(meshes, settings)
     column = WAVELENGTHS_NM.index(1064.0)
     soil, foliage = MATERIALS["soil"], MATERIALS["foliage"]
