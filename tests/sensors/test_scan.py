@@ -15,7 +15,8 @@ import trimesh
 import zbuf_occlude.sensors as S
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.kinds import SENSOR_KINDS, with_beam
-from zbuf_occlude.sensors.raycast import cast_embree, cast_zbuffer
+from zbuf_occlude.sensors.raycast import cast_embree
+from zbuf_occlude.sensors.raycast_zbuffer import cast_zbuffer
 
 
 def wall(distance_m: float, half_width_m: float, half_height_m: float) -> trimesh.Trimesh:

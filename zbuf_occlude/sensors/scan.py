@@ -1,10 +1,9 @@
 """Scans of scenes by LiDARs and depth cameras: :func:`scan` → :class:`Scan`.
 
-A scan casts the sensor's rays from its pose into the scene's triangles (Embree, or the
-moderngl z-buffer with exact candidate tests: :mod:`.raycast`), then applies the sensor model:
-range or depth limits, grazing-incidence loss (cameras), Gaussian range or axial noise,
-depth quantisation (cameras) and independent dropout.  Points are in the sensor frame by
-default (LiDAR: x forward, z up; camera: OpenCV), like real scans.
+A scan casts the sensor's rays from its pose into the scene's triangles (Embree: :mod:`.raycast`, or the moderngl
+z-buffer with exact candidate tests: :mod:`.raycast_zbuffer`), then applies the sensor model: range or depth limits,
+grazing-incidence loss (cameras), Gaussian range or axial noise, depth quantisation (cameras) and independent dropout.
+Points are in the sensor frame by default (LiDAR: x forward, z up; camera: OpenCV), like real scans.
 """
 
 from __future__ import annotations
@@ -25,7 +24,8 @@ from zbuf_occlude.sensors.echoes import MAX_RETURNS, number_returns
 from zbuf_occlude.sensors.kinds import kind_of
 from zbuf_occlude.sensors.platform import Trajectory, as_pose
 from zbuf_occlude.sensors.pulses import Pulses
-from zbuf_occlude.sensors.raycast import BACKENDS, cast_embree, cast_zbuffer, face_normals
+from zbuf_occlude.sensors.raycast import BACKENDS, cast_embree, face_normals
+from zbuf_occlude.sensors.raycast_zbuffer import cast_zbuffer
 from zbuf_occlude.sensors.scan_data import FRAMES, Scan
 from zbuf_occlude.sensors.scene import BuiltScene, ScanScene, SceneObject
 
