@@ -52,9 +52,10 @@ def test_the_adaptive_footprint_of_an_airborne_preset():
         (lambda: scan(_scene(), Lidar.preset("vlp16"), footprint="adaptive"), "resolves none"),
         (lambda: scan(_scene(), with_beam(Lidar.preset("vlp16"), footprint_rays=7), footprint="adaptive"), "resolves none"),
         (lambda: scan(_scene(), _returns(), footprint="adaptive", backend="zbuffer"), "casts rays with Embree"),
-        (lambda: scan(_scene(), depth_camera_preset("kinect-v1"), np.eye(4), footprint="adaptive"), "has none"),
+        (lambda: scan(_scene(), depth_camera_preset("kinect-v1"), np.eye(4), footprint="adaptive"), "has no beam"),
+        (lambda: scan(_scene(), depth_camera_preset("kinect-v1"), np.eye(4), footprint="fast"), "'exact', or 'adaptive'"),
     ],
-    ids=["unknown", "one-ray", "no-echoes", "zbuffer", "camera"],
+    ids=["unknown", "one-ray", "no-echoes", "zbuffer", "camera", "camera-unknown"],
 )
 def test_the_adaptive_footprint_is_refused_where_it_does_not_apply(call, words):
     with pytest.raises(InvalidInputError, match=words):

@@ -209,7 +209,7 @@ def scan(
     platform = _platform(pose, scene)
     if not kind.pulsed:
         if footprint != "exact":
-            raise InvalidInputError(f"footprint {footprint!r} is for a pulsed LiDAR's beam; a {kind.title} has none")
+            raise InvalidInputError(f"footprint {footprint!r}: a {kind.title} has no beam ('exact', or 'adaptive' for a LiDAR)")
         if isinstance(platform, Trajectory):
             raise InvalidInputError(f"a {kind.title} takes one pose, not a trajectory")
         return _scan_camera(built, sensor, platform, seed, backend=backend, frame=frame, resolution=resolution,
