@@ -11,20 +11,17 @@ import trimesh
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.returns import (
-    COVER_TOLERANCE,
     IGN_ALTITUDE_M,
     IGN_DIVERGENCE_DEG,
     PLOT_TREES,
     ign_scanner,
     object_pulse_shares,
-    plot_cover,
     plot_scene,
     pulse_subset,
     simulate,
     simulated_classes,
-    spacing_for_cover,
-    tree_cover,
 )
+from zbuf_occlude.experiments.tree_cover import COVER_TOLERANCE, plot_cover, spacing_for_cover, tree_cover
 from zbuf_occlude.experiments.returns_comparison import comparison_rows, cover_markdown, recommend_k
 from zbuf_occlude.experiments.returns_report import ReturnsSettings, cover_rays_per_cell, refits_divergence, run_returns, scans_of_run
 from zbuf_occlude.io.atomic import write_bytes

@@ -17,8 +17,8 @@
   (fitted with the recommended K: :func:`refits_divergence`) and the tree covers.
 
 The plot's trees stand as far apart as makes its tree cover the real tile's
-(:func:`~zbuf_occlude.experiments.returns.tree_cover` on the tile,
-:func:`~zbuf_occlude.experiments.returns.spacing_for_cover` for the plot), so that the ground
+(:func:`~zbuf_occlude.experiments.tree_cover.tree_cover` on the tile,
+:func:`~zbuf_occlude.experiments.tree_cover.spacing_for_cover` for the plot), so that the ground
 returns under crowns compare like with like; the cover of the compared scans is measured on them
 as on the tile and reported beside it (``run.json``'s ``tree_cover``, under the table).
 
@@ -56,14 +56,16 @@ from zbuf_occlude.experiments.returns import (
     IGN_DIVERGENCE_DEG,
     IGN_PULSES_PER_M2,
     PLOT_TREES,
-    TREE_COVER_BLOCK_M,
-    TREE_COVER_CELL_M,
-    TREE_COVER_MIN_PULSES,
     ign_scanner,
-    plot_cover,
     plot_scene,
     pulse_subset,
     simulate,
+)
+from zbuf_occlude.experiments.tree_cover import (
+    TREE_COVER_BLOCK_M,
+    TREE_COVER_CELL_M,
+    TREE_COVER_MIN_PULSES,
+    plot_cover,
     spacing_for_cover,
     tree_cover,
 )
@@ -117,7 +119,7 @@ class ReturnsSettings:
         Each mesh stands this many times in the plot (more vegetation pulses).
     spacing_m : float or None
         Distance between the plot's trees, metres; None (default): the spacing whose tree cover
-        is the real tile's (:func:`~.returns.spacing_for_cover`).
+        is the real tile's (:func:`~.tree_cover.spacing_for_cover`).
     scan_angle_deg : float
         Across-track angle of the plot's centre (the IGN sample's median absolute scan angle is 13°).
     bootstrap : int
@@ -216,7 +218,7 @@ def _real(path: str | os.PathLike, classes: Sequence[int], bootstrap: int) -> tu
 
 
 def cover_rays_per_cell(settings: ReturnsSettings) -> int:
-    """Vertical rays per cell of :func:`~.returns.plot_cover`: the pulses a cell of the pooled scans holds
+    """Vertical rays per cell of :func:`~.tree_cover.plot_cover`: the pulses a cell of the pooled scans holds
     (one flight line per seed at :data:`~.returns.IGN_PULSES_PER_M2`)."""
     return max(1, round(len(settings.seeds) * IGN_PULSES_PER_M2 * TREE_COVER_CELL_M**2))
 
@@ -225,7 +227,7 @@ def ign_plot(mesh_root: str | os.PathLike, settings: ReturnsSettings, *,
              tree_cover: float | None = None) -> tuple[ScanScene, tuple[int, ...], tuple[float, float], float]:  # fmt: skip
     """The experiment's plot: :data:`~.returns.PLOT_TREES` from ``mesh_root``, ``settings.copies`` of each,
     on a grid ``settings.spacing_m`` apart (None: as far apart as gives the tree cover
-    ``tree_cover``, :func:`~.returns.spacing_for_cover`), its centre ``settings.scan_angle_deg``
+    ``tree_cover``, :func:`~.tree_cover.spacing_for_cover`), its centre ``settings.scan_angle_deg``
     across track.
 
     Returns
@@ -401,8 +403,8 @@ def _compare(plot, real, real_classes, divergence_deg: float, k: int, model: Sim
 
 
 def _covers(tile: Estimate, plot, settings: ReturnsSettings, scans: dict[str, LasPoints]) -> dict[str, Any]:
-    """``run.json``'s ``tree_cover``: the tile's (:func:`~.returns.tree_cover`), the plot's by vertical rays
-    (:func:`~.returns.plot_cover`) and each compared scan's, measured as the tile's."""
+    """``run.json``'s ``tree_cover``: the tile's (:func:`~.tree_cover.tree_cover`), the plot's by vertical rays
+    (:func:`~.tree_cover.plot_cover`) and each compared scan's, measured as the tile's."""
     scene, vegetation, centre, half = plot
     rays = cover_rays_per_cell(settings)
     return {

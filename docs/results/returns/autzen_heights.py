@@ -23,15 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from zbuf_occlude.experiments.returns import (
-    IGN_ALTITUDE_M,
-    PLOT_TREES,
-    plot_scene,
-    pulse_subset,
-    simulate,
-    spacing_for_cover,
-    tree_cover,
-)
+from zbuf_occlude.experiments.returns import IGN_ALTITUDE_M, PLOT_TREES, plot_scene, pulse_subset, simulate
+from zbuf_occlude.experiments.tree_cover import spacing_for_cover, tree_cover
 from zbuf_occlude.experiments.returns_comparison import comparison_rows
 from zbuf_occlude.experiments.returns_report import ReturnsSettings, cover_rays_per_cell, simulated_model
 from zbuf_occlude.io.atomic import write_csv

@@ -23,7 +23,8 @@ import time
 
 import numpy as np
 
-from zbuf_occlude.experiments.returns import IGN_ALTITUDE_M, pulse_subset, simulate, tree_cover
+from zbuf_occlude.experiments.returns import IGN_ALTITUDE_M, pulse_subset, simulate
+from zbuf_occlude.experiments.tree_cover import tree_cover
 from zbuf_occlude.experiments.returns_comparison import comparison_rows
 from zbuf_occlude.experiments.returns_report import ReturnsSettings, ign_plot, simulated_model
 from zbuf_occlude.io.atomic import write_csv
