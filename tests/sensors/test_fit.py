@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +39,7 @@ def _box_scans(sensor, seed: int = 0) -> list[np.ndarray]:
     seed=st.integers(0, 1000),
 )  # fmt: skip
 @example(noise=0.03, dropout=0.25, firing=20_000.0, seed=1)
+@example(noise=0.03125, dropout=0.2421875, firing=12_000.0, seed=170)
 @example(noise=0.046875, dropout=0.0, firing=29675.0, seed=0)
 @example(noise=0.03125, dropout=0.0, firing=29975.0, seed=1)
 def test_fit_recovers_the_sensor_that_made_the_scans(noise, dropout, firing, seed) -> None:
@@ -45,7 +47,10 @@ def test_fit_recovers_the_sensor_that_made_the_scans(noise, dropout, firing, see
     fit = fit_lidar(_box_scans(truth, seed), lidar_preset("hdl32e"), bootstrap=20)
     assert fit.sensor.firing_rate_hz == pytest.approx(firing, rel=0.01)
     assert fit.sensor.beam.range_noise_m == pytest.approx(noise, rel=0.15, abs=0.002)
-    assert fit.estimates["dropout"].value == pytest.approx(dropout, abs=0.02)
+    # the share of firings lost is a binomial estimate: within 4 of its standard errors (0.02 was 2.5 of them at a 24 %
+    # dropout, and failed about one example in a hundred: seed 170 missed by 0.0203)
+    lost = fit.estimates["dropout"]
+    assert lost.value == pytest.approx(dropout, abs=max(0.01, 4.0 * math.sqrt(dropout * (1.0 - dropout) / lost.n)))
     # one rate at every range: the law's intercept is that rate and its slope near 0 (6 scans: over
     # 25 random draws the errors reached 0.027 and 0.0039/m; the margins are twice those)
     assert fit.sensor.beam.dropout == pytest.approx(dropout, abs=0.055)
