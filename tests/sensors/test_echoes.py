@@ -10,9 +10,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.attenuation import attenuate_along_subray
 from zbuf_occlude.sensors.echoes import (
     MAX_RETURNS,
-    attenuate_along_subray,
     hit_energy,
     resolve_echoes,
 )

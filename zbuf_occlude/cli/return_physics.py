@@ -19,6 +19,7 @@ from collections.abc import Callable
 from zbuf_occlude.cli.options import count, real, shown
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.beam import RETURN_MODES
+from zbuf_occlude.sensors.echoes import ECHO_RULES
 from zbuf_occlude.sensors.beam import footprint_changes
 
 __all__ = [
@@ -33,7 +34,7 @@ __all__ = [
 BEAM_OPTIONS = {
     "footprint": "footprint_rays", "divergence": "divergence_deg", "max_returns": "max_returns", "return_mode": "return_mode",
     "range_resolution": "range_resolution_m", "power_noise": "power_noise", "echo_separation": "echo_separation_m",
-    "min_echo_reflectance": "min_echo_reflectance",
+    "min_echo_reflectance": "min_echo_reflectance", "echo_rule": "echo_rule",
 }  # fmt: skip
 #: How each of them is written on the command line where the namespace does not say (crop options record the name typed).
 _OPTION_FLAGS = {dest: "--" + dest.replace("_", "-") for dest in BEAM_OPTIONS}
@@ -93,12 +94,20 @@ def check_transmittance(text: str, option: str):
 
 
 def add_beam_arguments(group) -> None:
-    """Add ``--return-mode`` to ``group`` (a parser or an argument group of ``scan``'s; its other beam options sit beside it)."""
+    """Add ``--return-mode`` and ``--echo-rule`` to ``group`` (a parser or an argument group of ``scan``'s; its other beam
+    options sit beside it)."""
     group.add_argument(
         "--return-mode", choices=RETURN_MODES, default=None,
         help="which echoes of a pulse the receiver records: all (up to --max-returns, in range order), strongest or last "
         "(one, as Velodyne's single-return modes), dual (the last and the strongest, Velodyne's dual mode); all but 'all' "
         "need --range-resolution (default: the sensor's, 'all' for presets)",
+    )  # fmt: skip
+    group.add_argument(
+        "--echo-rule", choices=ECHO_RULES, default=None,
+        help="with resolved echoes (--max-returns above 1 or --return-mode): how a pulse's sub-ray hits merge into echoes: "
+        "chain (a new echo at a gap of --range-resolution after the previous hit) or waveform (one echo per peak of the pulse's "
+        "summed waveform, split where it dips: returns per pulse that do not drift with the sub-ray count) "
+        "(default: the sensor's, chain for presets)",
     )  # fmt: skip
 
 
@@ -136,7 +145,7 @@ def beam_changes(sensor, args: argparse.Namespace) -> dict[str, object]:
         camera); ``--footprint`` for a beam without a divergence (naming ``--divergence``);
         ``--echo-separation`` without a footprint or with resolved echoes; ``--range-resolution``
         with one return per pulse; resolved echoes without a range resolution; ``--max-returns``
-        that contradicts ``--return-mode``.
+        that contradicts ``--return-mode``; ``--echo-rule waveform`` with one return per pulse.
     """
     from zbuf_occlude.sensors.kinds import kind_of
 
@@ -165,6 +174,8 @@ def beam_changes(sensor, args: argparse.Namespace) -> dict[str, object]:
             changes["max_returns"] = 1  # 'all' after a Velodyne mode: one return unless --max-returns says more
     if "max_returns" in given:
         changes["max_returns"] = int(given["max_returns"])
+    if "echo_rule" in given:
+        changes["echo_rule"] = given["echo_rule"]
     for dest in ("range_resolution", "power_noise", "echo_separation", "min_echo_reflectance"):
         if dest in given:
             changes[BEAM_OPTIONS[dest]] = float(given[dest])
@@ -192,6 +203,9 @@ def _check_echoes(beam, changes: dict, given: dict, args: argparse.Namespace) ->
         )
     if resolves and not resolution > 0:
         raise InvalidInputError(f"{what} needs --range-resolution M (metres: the least range between two returns)")
+    if given.get("echo_rule", "chain") != "chain" and not resolves:
+        raise InvalidInputError(f"--echo-rule {given['echo_rule']} tells resolved echoes apart: it needs --max-returns above 1 "
+                                "or --return-mode strongest, last or dual")  # fmt: skip
     if "range_resolution" in given and not resolves:
         raise InvalidInputError(f"--range-resolution {given['range_resolution']:g} separates several returns per pulse: it needs "
                                 "--max-returns above 1 or --return-mode strongest, last or dual")  # fmt: skip

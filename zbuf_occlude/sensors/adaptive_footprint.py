@@ -325,7 +325,7 @@ def adaptive_echo_returns(
     (:func:`uniform_footprints`) get the one echo their sub-rays would give on the centre face's
     plane (:func:`plane_echoes`), the others' ``beam.footprint_rays`` sub-rays are cast and
     resolved by :func:`~.echo_model.echo_returns`, through the faces that transmit.  The beam's
-    range resolution, range limits and ``min_echo_reflectance`` apply to both.
+    range resolution, range limits, ``min_echo_reflectance`` and ``echo_rule`` apply to both.
 
     Parameters
     ----------
@@ -369,7 +369,7 @@ def adaptive_echo_returns(
     plane = resolve_echoes(
         one, echo_range, energy, np.asarray(built.face_object)[f].astype(np.int64), range_resolution_m=beam.range_resolution_m,
         detection_threshold=0.0 if radiometry is None else radiometry.detection_threshold, max_returns=max_returns,
-        min_echo_reflectance=beam.min_echo_reflectance,
+        min_echo_reflectance=beam.min_echo_reflectance, echo_rule=beam.echo_rule,
     )  # fmt: skip
     # the others: every sub-ray cast (the centre ray again: its bits as the full model's)
     full = np.flatnonzero(~uniform)
@@ -379,7 +379,7 @@ def adaptive_echo_returns(
     cast = echo_returns(
         built, rays, sub_face, sub_t, beam.footprint_weights(), range_resolution_m=beam.range_resolution_m,
         max_returns=max_returns, radiometry=radiometry, range_limits_m=limits, through=None if tau is None else Transmission(tau, origins),
-        min_echo_reflectance=beam.min_echo_reflectance,
+        min_echo_reflectance=beam.min_echo_reflectance, echo_rule=beam.echo_rule,
     )  # fmt: skip
     pulse = np.concatenate([plane.pulse, full[cast[0]]])
     order = np.argsort(pulse, kind="stable")  # a pulse's echoes all come from one part, in range order

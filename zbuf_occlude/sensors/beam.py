@@ -4,7 +4,7 @@ A scanner is a beam × a scan pattern × a platform.  The pattern says where and
 leave (:mod:`.lidar`, :mod:`.airborne`, :mod:`.ray_table`), the platform where the scanner is at that time (:mod:`.platform`),
 and the :class:`Beam` everything the device adds to a pulse's geometry: its footprint (a cone
 of ``divergence_deg`` sampled by ``footprint_rays`` sub-rays, :mod:`.footprint`), how its echoes
-are resolved into returns (``max_returns``, ``range_resolution_m``, ``return_mode``), which it
+are resolved into returns (``max_returns``, ``range_resolution_m``, ``echo_rule``, ``return_mode``), which it
 detects (``detection_threshold``, ``power_noise``), how it measures them (``range_noise_m``,
 ``dropout``, range limits) and how it writes their intensity (``intensity_scale``).  Every
 field is checked here, once, whatever pattern fires the beam.
@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.checks import MAX_RANGE_M, count, located, real, replaced, sensor_name, shown, text
-from zbuf_occlude.sensors.echoes import MAX_RETURNS
+from zbuf_occlude.sensors.echoes import ECHO_RULES, MAX_RETURNS
 from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS, MAX_DIVERGENCE_DEG, MAX_SUBRAYS, PROFILES, footprint_offsets, subray_directions
 
 __all__ = ["Beam", "IDEAL_BEAM", "RETURN_MODES", "MAX_INTENSITY_COUNTS", "check_beam", "footprint_changes", "intensity_counts"]
@@ -80,6 +80,14 @@ class Beam:
         Least range between two returns of one pulse, metres (half the pulse length, c·τ/2; a 5 ns
         pulse: 0.75 m).  Needed (> 0) when echoes are resolved (``max_returns`` above 1, or a
         return mode other than ``"all"``), refused otherwise.
+    echo_rule : {"chain", "waveform"}
+        How a pulse's sub-ray hits merge into echoes where echoes are resolved
+        (:func:`~zbuf_occlude.sensors.echoes.resolve_echoes`): ``"chain"`` (the default) starts a
+        new echo at a gap of ``range_resolution_m`` after the previous hit; ``"waveform"`` at each
+        dip of the pulse's summed waveform (:mod:`~zbuf_occlude.sensors.waveform`), so that a weak
+        run of hits between two reflections (a crown's side across the footprint) does not join
+        them and the returns per pulse do not drift with ``footprint_rays``.  ``"waveform"`` needs
+        echoes resolved (refused otherwise).
     echo_separation_m : float
         One return per pulse with a footprint (``"all"``, ``max_returns`` 1): echoes within this range
         of the strongest merge into one return at their energy-weighted range, the *mixed pixel*
@@ -139,6 +147,7 @@ class Beam:
     max_returns: int = 1
     return_mode: str = "all"
     range_resolution_m: float = 0.0
+    echo_rule: str = "chain"
     echo_separation_m: float = 0.0
     detection_threshold: float = 0.0
     min_echo_reflectance: float = 0.0
@@ -172,6 +181,7 @@ class Beam:
         text(self.source, "source")
         text(self.profile, "profile", choices=PROFILES)
         text(self.return_mode, "return_mode", choices=RETURN_MODES)
+        text(self.echo_rule, "echo_rule", choices=ECHO_RULES)
         object.__setattr__(self, "footprint_rays", count(self.footprint_rays, "footprint_rays", low=1, high=MAX_SUBRAYS))
         object.__setattr__(self, "max_returns", count(self.max_returns, "max_returns", low=1, high=MAX_RETURNS))
         object.__setattr__(self, "max_intensity", count(self.max_intensity, "max_intensity", low=1, high=MAX_INTENSITY_COUNTS))
@@ -197,6 +207,11 @@ class Beam:
             raise InvalidInputError(
                 f"range_resolution_m {shown(self.range_resolution_m)} needs max_returns above 1 or a return_mode of "
                 "'strongest', 'last' or 'dual' (one return per pulse merges echoes by echo_separation_m)"
+            )
+        if self.echo_rule != "chain" and not self.resolves_echoes:
+            raise InvalidInputError(
+                f"echo_rule {self.echo_rule!r} tells resolved echoes apart: it needs max_returns above 1 or a return_mode of "
+                "'strongest', 'last' or 'dual'"
             )
         if self.echo_separation_m > 0 and k == 1:
             raise InvalidInputError(

@@ -19,7 +19,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.echoes import attenuate_along_subray, hit_energy, resolve_echoes
+from zbuf_occlude.sensors.attenuation import attenuate_along_subray
+from zbuf_occlude.sensors.echoes import hit_energy, resolve_echoes
 from zbuf_occlude.sensors.raycast import MAX_HITS, cast_embree_beyond, face_normals
 from zbuf_occlude.sensors.scene import BuiltScene
 
@@ -203,6 +204,7 @@ class Transmission:
 def echo_returns(
     built: BuiltScene, rays, face, t, weights, *, range_resolution_m: float, max_returns: int, radiometry: Radiometry | None = None,
     range_limits_m: tuple[float, float] = (0.0, np.inf), through: Transmission | None = None, min_echo_reflectance: float = 0.0,
+    echo_rule: str = "chain",
 ) -> tuple[NDArray[np.int64], ...]:  # fmt: skip
     """The multi-return model of every scanner: resolve each pulse's sub-ray hits into discrete returns.
 
@@ -240,6 +242,8 @@ def echo_returns(
     min_echo_reflectance : float
         Least apparent reflectance (energy × range²) of a detected echo, in [0, 1]
         (:func:`~.echoes.resolve_echoes`); applied with or without ``radiometry`` (ρ 1 without).
+    echo_rule : {"chain", "waveform"}
+        How a pulse's hits merge into echoes (:func:`~.echoes.resolve_echoes`).
 
     Returns
     -------
@@ -283,7 +287,7 @@ def echo_returns(
     echoes = resolve_echoes(
         pulse, r, energy, obj, range_resolution_m=range_resolution_m,
         detection_threshold=0.0 if radiometry is None else radiometry.detection_threshold, max_returns=max_returns,
-        min_echo_reflectance=min_echo_reflectance,
+        min_echo_reflectance=min_echo_reflectance, echo_rule=echo_rule,
     )  # fmt: skip
     return echoes.pulse, f[echoes.hit], echoes.range_m, echoes.energy
 

@@ -5,16 +5,18 @@ with its pulse, range, received energy (:func:`hit_energy`) and surface.  A rece
 sum of the hits' reflected pulses along time (range) and reports one return per peak it can tell
 apart (:func:`resolve_echoes`):
 
-* **Merging.**  Within a pulse, hits sorted by range, a new echo starts at a hit that lies at
-  least ``range_resolution_m`` beyond the hit before it; nearer hits merge into the current
-  echo.  A reflected pulse is ``c·τ`` long, so two reflections less than ``c·τ/2`` apart in
-  range overlap into one peak of the waveform, and a chain of overlapping reflections (a
-  slanted surface across the footprint) stays one widened peak; two echoes are told apart
-  when they are at least ``c·τ/2`` apart (Baltsavias 1999, "Airborne laser scanning: basic
-  relations and formulas", ISPRS J. Photogramm. 54(2–3), 199–214).  So consecutive echoes'
-  ranges are always at least ``range_resolution_m`` apart, the least gap between returns a
-  real scan shows.  (The other rule, an echo spanning ``range_resolution_m`` from its first
-  hit, cuts one smooth peak into several and lets two returns lie arbitrarily close.)
+* **Merging** (``echo_rule``, one of :data:`ECHO_RULES`).  ``"chain"``: within a pulse, hits
+  sorted by range, a new echo starts at a hit that lies at least ``range_resolution_m`` beyond
+  the hit before it; nearer hits merge into the current echo.  A reflected pulse is ``c·τ``
+  long, so two reflections less than ``c·τ/2`` apart in range overlap into one peak of the
+  waveform, and a chain of overlapping reflections (a slanted surface across the footprint)
+  stays one widened peak; two echoes are told apart when they are at least ``c·τ/2`` apart
+  (Baltsavias 1999, "Airborne laser scanning: basic relations and formulas", ISPRS J.
+  Photogramm. 54(2–3), 199–214).  So consecutive echoes' ranges are always at least
+  ``range_resolution_m`` apart.  But a weak run of hits between two strong reflections chains
+  them into one echo, and the more sub-rays, the more such runs: the returns per pulse drift
+  with K.  ``"waveform"``: the echoes are the peaks of the pulse's summed waveform, told apart
+  where it dips (:mod:`.waveform`); a weak run between two strong reflections leaves a dip.
 * **An echo** has the energy-weighted mean range of its hits (the centroid of the merged
   peak), the sum of their energies, and the surface that gives it the most energy.
 * **Detection.**  Echoes with energy below ``detection_threshold`` are not detected, nor those
@@ -41,18 +43,22 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.checks import count, real
+from zbuf_occlude.sensors.checks import count, real, text
+from zbuf_occlude.sensors.hit_rows import group_starts, hit_columns, rank_in_run, sorted_order
+from zbuf_occlude.sensors.waveform import waveform_echo_starts
 
 __all__ = [
+    "ECHO_RULES",
     "MAX_RETURNS",
     "MIN_RANGE_M",
     "Echoes",
-    "attenuate_along_subray",
     "hit_energy",
     "number_returns",
     "resolve_echoes",
 ]
+
+#: How a pulse's hits merge into echoes (:func:`resolve_echoes`' ``echo_rule``; module docstring).
+ECHO_RULES = ("chain", "waveform")
 
 #: Most returns per pulse: LAS 1.4 point formats 6–10 store the return number in 4 bits.
 MAX_RETURNS = 15
@@ -136,45 +142,6 @@ def hit_energy(
     return rho * cos * np.asarray(weight, dtype=np.float64) / r**2
 
 
-def _columns(**columns: ArrayLike) -> dict[str, np.ndarray]:
-    """The per-hit columns as 1-D arrays of one length: integers int64, the rest finite float64 ≥ 0."""
-    out: dict[str, np.ndarray] = {}
-    for name, value in columns.items():
-        a = np.asarray(value)
-        integer = name in ("pulse", "surface", "subray")
-        if a.ndim != 1 or (integer and a.dtype.kind not in "iu") or (not integer and a.dtype.kind not in "iuf"):
-            kind = "an integer" if integer else "a number"
-            raise InvalidInputError(f"{name} must be {kind} array of shape (M,), got shape {a.shape} dtype {a.dtype}")
-        if integer:
-            a = a.astype(np.int64, copy=False)
-        else:
-            a = a.astype(np.float64, copy=False)
-            bad = int(np.sum(~(np.isfinite(a) & (a >= 0))))
-            if bad:
-                raise InvalidInputError(f"{name} must be finite and >= 0, got {bad} values that are not")
-        out[name] = a
-    lengths = {name: len(a) for name, a in out.items()}
-    if len(set(lengths.values())) > 1:
-        raise InvalidInputError(f"the per-hit arrays must have one length, got {lengths}")
-    return out
-
-
-def _group_starts(*keys: NDArray) -> NDArray[np.int64]:
-    """Indices where a run of equal ``keys`` (arrays of one length, sorted together) starts."""
-    n = len(keys[0])
-    new = np.zeros(n, bool)
-    new[:1] = True
-    for key in keys:
-        new[1:] |= key[1:] != key[:-1]
-    return np.flatnonzero(new)
-
-
-def _rank_in_run(*keys: NDArray) -> NDArray[np.int64]:
-    """(n,) int64: the position of each row within its run of equal ``keys`` (0 for the first)."""
-    starts = _group_starts(*keys)
-    return np.arange(len(keys[0])) - np.repeat(starts, np.diff(starts, append=len(keys[0])))
-
-
 def number_returns(pulse: NDArray) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
     """``return_number`` and ``number_of_returns`` (N,) uint8 of returns of pulse rows ``pulse`` (N,).
 
@@ -183,20 +150,10 @@ def number_returns(pulse: NDArray) -> tuple[NDArray[np.uint8], NDArray[np.uint8]
     the scans (:func:`~zbuf_occlude.sensors.scan.return_numbers`, after dropout).
     """
     pulse = np.asarray(pulse)
-    starts = _group_starts(pulse)
+    starts = group_starts(pulse)
     n_returns = np.diff(starts, append=len(pulse))
     rank = np.arange(len(pulse)) - np.repeat(starts, n_returns)
     return (rank + 1).astype(np.uint8), np.repeat(n_returns, n_returns).astype(np.uint8)
-
-
-def _sorted_order(*keys: NDArray) -> NDArray[np.int64]:
-    """``np.lexsort(keys)`` (the last key sorts first), as successive stable argsorts of the
-    keys gathered in the order so far: faster than lexsort's indirect passes, and nearly free on
-    a key already sorted (the pulses of a scan come pulse by pulse)."""
-    order = np.argsort(keys[0], kind="stable")
-    for key in keys[1:]:
-        order = order[np.argsort(key[order], kind="stable")]
-    return order
 
 
 #: :func:`_pulse_range_order` sorts each pulse's rows in one (pulses, most hits of a pulse)
@@ -214,7 +171,7 @@ def _pulse_range_order(p: NDArray, r: NDArray) -> NDArray[np.int64]:
     """
     n = len(p)
     if n > 1 and np.all(p[1:] >= p[:-1]):
-        starts = _group_starts(p)
+        starts = group_starts(p)
         counts = np.diff(starts, append=n)
         width = int(counts.max())
         if len(starts) * width <= _MOST_CELLS_PER_ROW * n:
@@ -224,7 +181,7 @@ def _pulse_range_order(p: NDArray, r: NDArray) -> NDArray[np.int64]:
             column = np.argsort(table, axis=1, kind="stable")
             # the padding's columns (from the pulse's count on) are dropped wherever they sort
             return (starts[:, None] + column)[column < counts[:, None]]
-    return _sorted_order(r, p)
+    return sorted_order(r, p)
 
 
 def _hit_order(p: NDArray, r: NDArray, e: NDArray, s: NDArray) -> tuple[NDArray[np.int64], ...]:
@@ -263,7 +220,7 @@ def _first_max(values: NDArray, starts: NDArray[np.int64], group: NDArray[np.int
     """Per group (rows ``starts[g]`` to the next start, ``group`` the group of each row): the
     first row holding the group's greatest value."""
     at_max = np.flatnonzero(values == np.maximum.reduceat(values, starts)[group])
-    return at_max[_group_starts(group[at_max])]
+    return at_max[group_starts(group[at_max])]
 
 
 def _dominant_surface(
@@ -310,16 +267,16 @@ def _dominant_surface_of_mixed(
     if (int(echo[-1]) + 1) * span < 2**62:  # one integer key (echo, surface)
         by_surface = np.argsort(echo * span + (s - lowest), kind="stable")
     else:
-        by_surface = _sorted_order(s, echo)
+        by_surface = sorted_order(s, echo)
     # stable sorts: an (echo, surface) group keeps its rows in range order
-    starts = _group_starts(echo[by_surface], s[by_surface])
+    starts = group_starts(echo[by_surface], s[by_surface])
     total = np.add.reduceat(e[by_surface], starts)
     g_echo, g_surface = echo[by_surface][starts], s[by_surface][starts]
     # groups in (echo, surface) order: the first at the echo's greatest total has the lower id
-    surface = g_surface[_first_max(total, _group_starts(g_echo), g_echo)]
+    surface = g_surface[_first_max(total, group_starts(g_echo), g_echo)]
     # the rows of that surface, in (echo, range) order: the first at the greatest energy
     mine = np.flatnonzero(s == surface[echo])
-    return surface, mine[_first_max(e[mine], _group_starts(echo[mine]), echo[mine])]
+    return surface, mine[_first_max(e[mine], group_starts(echo[mine]), echo[mine])]
 
 
 def resolve_echoes(
@@ -332,6 +289,7 @@ def resolve_echoes(
     detection_threshold: float,
     max_returns: int,
     min_echo_reflectance: float = 0.0,
+    echo_rule: str = "chain",
 ) -> Echoes:
     """Resolve the sub-ray hits of many pulses into discrete returns (rules: module docstring).
 
@@ -362,6 +320,11 @@ def resolve_echoes(
         <zbuf_occlude.sensors.beam.Beam.min_echo_reflectance>`).  Scaling every range and the
         range resolution by ``c`` and every energy by ``1/c²`` detects the same echoes (with
         ``detection_threshold`` 0, ranges above :data:`MIN_RANGE_M`).  0 keeps every echo.
+    echo_rule : {"chain", "waveform"}
+        How hits merge into echoes (module docstring): a new echo at a gap of
+        ``range_resolution_m`` after the previous hit, or at each dip of the pulse's waveform
+        (:func:`~.waveform.waveform_echo_starts`).  Either way a pulse's echoes are its hits
+        split into runs in range order.
 
     Returns
     -------
@@ -374,8 +337,8 @@ def resolve_echoes(
     InvalidInputError
         Arrays not 1-D of one length, integer ids not integers, ranges or energies negative or
         not finite; a resolution ≤ 0, a negative threshold, a ``min_echo_reflectance`` outside
-        [0, 1], or ``max_returns`` outside
-        1..:data:`MAX_RETURNS`, each naming the value.
+        [0, 1], ``max_returns`` outside 1..:data:`MAX_RETURNS`, or an ``echo_rule`` not in
+        :data:`ECHO_RULES`, each naming the value.
 
     Notes
     -----
@@ -386,15 +349,18 @@ def resolve_echoes(
     threshold = real(detection_threshold, "detection_threshold", low=0.0)
     relative = real(min_echo_reflectance, "min_echo_reflectance", low=0.0, high=1.0)
     keep_n = count(max_returns, "max_returns", low=1, high=MAX_RETURNS)
-    cols = _columns(pulse=pulse, range_m=range_m, energy=energy, surface=surface)
+    rule = text(echo_rule, "echo_rule", choices=ECHO_RULES)
+    cols = hit_columns(pulse=pulse, range_m=range_m, energy=energy, surface=surface)
     # one order for any input order: rows equal on all four keys are interchangeable
     order, p, r, e, s = _hit_order(cols["pulse"], cols["range_m"], cols["energy"], cols["surface"])
     if len(p) == 0:
         ids, counts = np.zeros(0, np.int64), np.zeros(0, np.uint8)
         return Echoes(ids, np.zeros(0), np.zeros(0), ids, ids, counts, counts)
-    # a new echo: a new pulse, or a gap of at least the resolution after the previous hit
-    new = np.ones(len(p), bool)
-    new[1:] = (p[1:] != p[:-1]) | (np.diff(r) >= resolution)
+    if rule == "waveform":
+        new = waveform_echo_starts(p, r, e, resolution)
+    else:  # a new echo: a new pulse, or a gap of at least the resolution after the previous hit
+        new = np.ones(len(p), bool)
+        new[1:] = (p[1:] != p[:-1]) | (np.diff(r) >= resolution)
     starts = np.flatnonzero(new)
     echo = np.cumsum(new) - 1  # (M,) echo of each sorted hit
     n_hits = np.diff(starts, append=len(p))
@@ -413,7 +379,7 @@ def resolve_echoes(
     if relative > 0:
         detected &= total * np.maximum(echo_range, MIN_RANGE_M) ** 2 >= relative
     detected = np.flatnonzero(detected)
-    rank = _rank_in_run(p[starts][detected])
+    rank = rank_in_run(p[starts][detected])
     kept = detected[rank < keep_n]
     kept_pulse = p[starts][kept]
     return_number, number_of_returns = number_returns(kept_pulse)
@@ -426,71 +392,3 @@ def resolve_echoes(
         return_number=return_number,
         number_of_returns=number_of_returns,
     )
-
-
-def attenuate_along_subray(
-    subray: ArrayLike,
-    range_m: ArrayLike,
-    surface: ArrayLike,
-    surface_transmittance: ArrayLike,
-) -> NDArray[np.float64]:
-    """(M,) float64: the share of a sub-ray's energy that reaches each of its hits and comes back.
-
-    Where a scan casts all hits along a sub-ray (not only the first), a hit's energy
-    (:func:`hit_energy`) is multiplied by this factor: the product of the transmittances of the
-    surfaces hit strictly nearer along the same sub-ray.  The first hit gets 1; behind an opaque
-    surface (transmittance 0) a hit gets 0, so it returns nothing.  Hits at the same range of
-    one sub-ray (a ray through a shared edge) do not shade each other.
-
-    Parameters
-    ----------
-    subray : (M,) int
-        Sub-ray id of each hit (unique over all pulses, e.g. ``pulse · K + k``).
-    range_m : (M,) float
-        Range of each hit along its sub-ray, metres, finite and ≥ 0; rows in any order.
-    surface : (M,) int
-        Surface id of each hit, an index into ``surface_transmittance``.
-    surface_transmittance : (S,) float
-        Round-trip transmittance of each surface, in [0, 1]: the share of the energy arriving
-        at it that goes on and whose reflection comes back through it.  A gap fraction ``g``
-        (a leafy layer, a mesh fence: the return passes through the same gaps) is ``g``; a
-        pane that transmits ``T`` each way is ``T²``.  Each hit counts once, so a closed thin
-        mesh (a leaf as a box) is crossed twice.
-
-    Returns
-    -------
-    (M,) float64
-        In [0, 1], in the order of the input rows.
-
-    Raises
-    ------
-    InvalidInputError
-        Arrays not 1-D of one length, ids not integers, ranges negative or not finite, a
-        surface id outside ``surface_transmittance``, a transmittance outside [0, 1].
-    """
-    try:
-        t = np.asarray(surface_transmittance, dtype=np.float64)
-    except (TypeError, ValueError):
-        t = np.full(1, np.nan)
-    if t.ndim != 1 or not np.all((t >= 0) & (t <= 1)):
-        raise InvalidInputError(f"surface_transmittance must be a (S,) array of values in [0, 1], got shape {t.shape}")
-    cols = _columns(subray=subray, range_m=range_m, surface=surface)
-    ids = cols["surface"]
-    if ids.size and (ids.min() < 0 or ids.max() >= len(t)):
-        raise InvalidInputError(f"surface ids must lie in [0, {len(t)}) to index surface_transmittance, got {ids.min()}..{ids.max()}")
-    order = _sorted_order(cols["range_m"], cols["subray"])
-    ray, r, tr = cols["subray"][order], cols["range_m"][order], t[ids[order]]
-    # products over the nearer hits of each sub-ray as sums over earlier rows: of log t for
-    # the partial surfaces, and a count of the opaque ones (log 0 would poison the sums)
-    opaque = np.concatenate([[0], np.cumsum(tr == 0)])
-    log_t = np.concatenate([[0.0], np.cumsum(np.log(np.where(tr > 0, tr, 1.0)))])
-    index = np.arange(len(ray))
-    ray_start = index - _rank_in_run(ray)
-    tie_start = index - _rank_in_run(ray, r)
-    # sums over the rows of the sub-ray nearer than the first row of this hit's range
-    n_opaque = opaque[tie_start] - opaque[ray_start]
-    log_sum = log_t[tie_start] - log_t[ray_start]
-    factor = np.where(n_opaque > 0, 0.0, np.exp(log_sum))
-    out = np.empty(len(order))
-    out[order] = factor
-    return out
