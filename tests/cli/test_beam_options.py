@@ -60,8 +60,10 @@ def _beam(sensor: str, options: list[str]):
         (["--return-mode", "strongest", "--range-resolution", "0.8"], {"return_mode": "strongest", "max_returns": 1, "range_resolution_m": 0.8}),
         ([*RETURNS, "--min-echo-reflectance", "0.3"], {"footprint_rays": 7, "max_returns": 3, "range_resolution_m": 0.5,
                                                        "echo_separation_m": 0.0, "min_echo_reflectance": 0.3}),
+        ([*RETURNS, "--echo-rule", "waveform"], {"footprint_rays": 7, "max_returns": 3, "range_resolution_m": 0.5, "echo_separation_m": 0.0,
+                                                 "echo_rule": "waveform"}),
     ],
-    ids=["returns", "mixed-pixels", "divergence", "dual", "strongest", "partial-echoes"],
+    ids=["returns", "mixed-pixels", "divergence", "dual", "strongest", "partial-echoes", "waveform"],
 )  # fmt: skip
 def test_every_beam_option_changes_the_beam_of_every_pulsed_pattern(sensor: str, options: list[str], changes: dict) -> None:
     base = sensor_from_name(sensor)
@@ -109,7 +111,7 @@ def test_a_preset_without_a_divergence_takes_one_for_its_footprint(tmp_path: Pat
 @pytest.mark.parametrize(
     "option",
     [["--footprint"], ["--divergence", "0.2"], ["--max-returns", "2"], ["--range-resolution", "0.5"], ["--power-noise", "0.2"],
-     ["--echo-separation", "0.5"], ["--return-mode", "last"], ["--min-echo-reflectance", "0.2"]],
+     ["--echo-separation", "0.5"], ["--return-mode", "last"], ["--min-echo-reflectance", "0.2"], ["--echo-rule", "waveform"]],
 )  # fmt: skip
 def test_a_depth_camera_refuses_every_beam_option_naming_it(tmp_path: Path, capsys, option: list[str]) -> None:
     code, err = _run(["scan", str(STREET), "--sensor", "kinect-v1", *option, "--out", str(tmp_path / "o")], capsys)
@@ -122,7 +124,8 @@ def test_a_depth_camera_refuses_every_beam_option_naming_it(tmp_path: Path, caps
     ("options", "words"),
     [(["--return-mode", "dual"], "--return-mode dual needs --range-resolution M"),
      (["--return-mode", "dual", "--max-returns", "3", "--range-resolution", "1"], "--return-mode dual records 2 returns per pulse; --max-returns 3 contradicts it"),
-     (["--return-mode", "all", "--range-resolution", "1"], "--range-resolution 1 separates several returns per pulse")],
+     (["--return-mode", "all", "--range-resolution", "1"], "--range-resolution 1 separates several returns per pulse"),
+     (["--echo-rule", "waveform"], "--echo-rule waveform tells resolved echoes apart: it needs --max-returns above 1")],
 )  # fmt: skip
 def test_return_mode_mistakes_are_usage_errors(tmp_path: Path, capsys, options: list[str], words: str) -> None:
     code, err = _run(["scan", str(STREET), "--sensor", "vlp16", *options, "--out", str(tmp_path / "o")], capsys)

@@ -202,7 +202,10 @@ def test_run_returns_writes_its_outputs(tmp_path, detection, capsys, monkeypatch
     assert read_regular_file(out / "returns.png", max_bytes=1 << 24)[:8] == b"\x89PNG\r\n\x1a\n"
     sweep = read_csv_rows(out / "divergence_sweep.csv")
     assert [float(r["divergence_deg"]) for r in sweep] == pytest.approx([IGN_DIVERGENCE_DEG, 8 * IGN_DIVERGENCE_DEG], rel=1e-5)
-    assert len(read_csv_rows(out / "k_sweep.csv")) == 2
+    k_rows = read_csv_rows(out / "k_sweep.csv")
+    assert [int(r["K"]) for r in k_rows] == [1, 7]
+    # K = 1 is one ray a pulse, opaque surfaces: one return each (the fit gives a one-ray beam a footprint; the sweep keeps K)
+    assert float(k_rows[0]["multi_return_share"]) == 0.0 < float(k_rows[1]["multi_return_share"])
     assert len(read_csv_rows(out / "comparison.csv")) == 26
     fitted = fit_return_model(read_las(real_path), altitude_m=IGN_ALTITUDE_M, bootstrap=5).estimates
     model = summary["model"]

@@ -15,10 +15,11 @@ def _run(args: argparse.Namespace) -> int:
     from zbuf_occlude.experiments.returns_report import ReturnsSettings, run_returns
 
     detection = not args.without_threshold
-    settings = ReturnsSettings(bootstrap=args.bootstrap, seeds=tuple(range(args.seeds)), detection=detection)
+    rule = {} if args.echo_rule is None else {"echo_rule": args.echo_rule}
+    settings = ReturnsSettings(bootstrap=args.bootstrap, seeds=tuple(range(args.seeds)), detection=detection, **rule)
     if args.quick:
         settings = ReturnsSettings(divergence_factors=(0.5, 1.0, 2.0, 4.0, 8.0), sweep_rays=(7,), k_values=(1, 7, 19), seeds=(0,), repeats=1,
-                                   copies=1, bootstrap=args.bootstrap, detection=detection)  # fmt: skip
+                                   copies=1, bootstrap=args.bootstrap, detection=detection, **rule)  # fmt: skip
     summary = run_returns(args.out, args.meshes, args.real, autzen_path=args.autzen, settings=settings, progress=not args.no_progress)
     fits = ", ".join(f"K {f['K']}: {f['divergence_mrad']:.3g} mrad" for f in summary["divergence_fits"])
     sys.stdout.write(f"{summary['table']}\nfitted divergence {fits}; recommended K {summary['recommended_k']}; "
@@ -28,6 +29,8 @@ def _run(args: argparse.Namespace) -> int:
 
 def add_returns_parser(sub: Any) -> argparse.ArgumentParser:
     """Add ``returns`` to ``experiment``'s argparse subparsers."""
+    from zbuf_occlude.sensors.echoes import ECHO_RULES
+
     p = sub.add_parser(
         "returns", help="simulate an airborne scanner over tree meshes and measure its returns per pulse as a real LAS/LAZ file's",
         description="Scan a plot of tree and bush meshes with the IGN LiDAR HD scanner's settings and several returns per pulse, "
@@ -44,6 +47,9 @@ def add_returns_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--without-threshold", action="store_true",
                    help="no detection threshold and every surface alike (every echo returns), instead of the threshold fitted to --real "
                    "with the ground at the fit's reflectance and the meshes at their material's at 1064 nm")  # fmt: skip
+    p.add_argument("--echo-rule", choices=ECHO_RULES, default=None,
+                   help="how the simulated receiver merges a pulse's sub-ray hits into echoes: chain (a new echo at a gap of the range "
+                   "resolution) or waveform (one echo per peak of the pulse's waveform) (default: the experiment's, chain)")  # fmt: skip
     p.add_argument("--quick", action="store_true", help="a small sweep (about 20 s): a check that the command runs, not the page's numbers")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (or, when stderr is a file, no progress lines)")
     p.set_defaults(func=_run)

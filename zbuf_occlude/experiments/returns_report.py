@@ -127,6 +127,9 @@ class ReturnsSettings:
     detection : bool
         The fitted detection threshold on, and the surfaces' reflectances (module docstring);
         False: no threshold, every surface alike (every echo returns).
+    echo_rule : {"chain", "waveform"}
+        How the simulated receiver merges a pulse's hits into echoes
+        (:attr:`Beam.echo_rule <zbuf_occlude.sensors.beam.Beam.echo_rule>`).
     """
 
     divergence_factors: tuple[float, ...] = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0)
@@ -139,6 +142,7 @@ class ReturnsSettings:
     scan_angle_deg: float = 13.0
     bootstrap: int = 200
     detection: bool = True
+    echo_rule: str = "chain"
 
 
 @dataclass(frozen=True)
@@ -153,15 +157,19 @@ class SimulatedModel:
         Per object id, ground first; None: every surface alike.
     detection : bool
         The fitted detection threshold on; False: 0.
+    echo_rule : {"chain", "waveform"}
+        The simulated receiver's (:attr:`Beam.echo_rule <zbuf_occlude.sensors.beam.Beam.echo_rule>`).
     """
 
     fit: ReturnModelFit
     reflectivity: tuple[float, ...] | None  # per object id, ground first; None: every surface alike
     detection: bool
+    echo_rule: str = "chain"
 
     def scanner(self, divergence_deg: float, k: int):
-        """:func:`~.returns.ign_scanner` at ``divergence_deg`` (degrees) and ``k`` sub-rays, as the fit sets it."""
-        scanner = self.fit.apply(ign_scanner(divergence_deg, k))
+        """:func:`~.returns.ign_scanner` at ``divergence_deg`` (degrees) and ``k`` sub-rays, as the fit sets it (``k`` kept:
+        the fit gives a beam of one ray a footprint)."""
+        scanner = with_beam(self.fit.apply(ign_scanner(divergence_deg, k)), footprint_rays=k, echo_rule=self.echo_rule)
         return scanner if self.detection else with_beam(scanner, detection_threshold=0.0)
 
     @property
@@ -173,7 +181,7 @@ class SimulatedModel:
         """The model for ``run.json``: range resolution, most returns, and with detection the threshold and reflectivities."""
         e = self.fit.estimates
         out = {"range_resolution_m": e["range_resolution_m"].value, "range_resolution_sd_m": e["range_resolution_m"].std,
-               "max_returns": int(e["max_returns"].value), "detection": self.detection}  # fmt: skip
+               "max_returns": int(e["max_returns"].value), "detection": self.detection, "echo_rule": self.echo_rule}  # fmt: skip
         if self.detection:  # the threshold the simulated scanner holds
             out |= {"detection_threshold": self.scanner(IGN_DIVERGENCE_DEG, 1).beam.detection_threshold, "detection_threshold_sd": e["detection_threshold"].std,
                     "detection_threshold_counts": e["detection_threshold_counts"].value, "intensity_scale": e["intensity_scale"].value,
@@ -181,17 +189,17 @@ class SimulatedModel:
         return out
 
 
-def simulated_model(fit: ReturnModelFit, scene: ScanScene, detection: bool) -> SimulatedModel:
+def simulated_model(fit: ReturnModelFit, scene: ScanScene, detection: bool, echo_rule: str = "chain") -> SimulatedModel:
     """The fit's scanner over ``scene``: the ground at the fit's reflectance, each mesh at its material's at 1064 nm
-    (``detection`` False: no threshold, every surface alike)."""
+    (``detection`` False: no threshold, every surface alike), its receiver merging echoes by ``echo_rule``."""
     if not detection:
-        return SimulatedModel(fit, None, False)
+        return SimulatedModel(fit, None, False, echo_rule)
     from zbuf_occlude.sensors.reflectance import AIRBORNE_WAVELENGTH_NM, scene_optics
     from zbuf_occlude.sensors.scan import build_scene
 
     rho = scene_optics(build_scene(scene), AIRBORNE_WAVELENGTH_NM).reflectivity.copy()
     rho[0] = fit.ground_reflectance  # the threshold in m⁻² was measured against it
-    return SimulatedModel(fit, tuple(float(v) for v in rho), True)
+    return SimulatedModel(fit, tuple(float(v) for v in rho), True, echo_rule)
 
 
 def _sweep_row(result, divergence_deg: float, k: int, suffix: str) -> dict[str, Any]:
@@ -421,7 +429,7 @@ def _autzen(path, plot, settings: ReturnsSettings, k: int, tick) -> tuple[list[d
     to its class-1 share."""
     classes = (1,)
     real, _, return_fit = _real(path, classes, settings.bootstrap)
-    model = simulated_model(return_fit, plot[0], settings.detection)
+    model = simulated_model(return_fit, plot[0], settings.detection, settings.echo_rule)
     sweep = _divergence_sweep(plot, settings, model, (k,), tick)
     fit = _fit_divergence(sweep, k, real["all"].estimates[f"multi_return_points_{class_suffix(classes)}"])
     divergence = fit["divergence_deg"] if math.isfinite(fit["divergence_deg"]) else IGN_DIVERGENCE_DEG
@@ -470,7 +478,7 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
         real, real_las, fit = _real(real_path, VEGETATION_CLASSES, settings.bootstrap)
         cover = tree_cover(real_las, bootstrap=settings.bootstrap)
         plot = ign_plot(mesh_root, settings, tree_cover=cover.value)
-        model = simulated_model(fit, plot[0], settings.detection)
+        model = simulated_model(fit, plot[0], settings.detection, settings.echo_rule)
         resolution = model.range_resolution_m
         sweep = _divergence_sweep(plot, settings, model, settings.sweep_rays, tick)
         real_share = real["all"].estimates[f"multi_return_points_{class_suffix(VEGETATION_CLASSES)}"]
@@ -505,6 +513,7 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
             real_md += "\n\n## Autzen (class set: 1)\n\n" + autzen_md
         tree = plot[0].objects[0]
         note = (f"simulated: {math.radians(divergence) * 1e3:.3g} mrad, K = {k_best}, range resolution {resolution:.2f} m, "
+                f"echo rule {settings.echo_rule}, "
                 f"{'fitted detection threshold' if settings.detection else 'no detection threshold'}")  # fmt: skip
         png = _figure(fitted_result.las, tree.position_m[:2], 6.0, real_las, note)
         summary |= {
