@@ -238,3 +238,32 @@ def test_a_scan_resolves_its_echoes_with_the_beams_rule(monkeypatch, footprint):
     scan = S.scan(box, lidar, np.zeros(3), seed=0, footprint=footprint)
     assert len(scan.points) > 0
     assert rules and set(rules) == {"waveform"}
+
+
+@pytest.mark.parametrize("value", [["waveform"], "WAVEFORM", 1e300, None, {"rule": "waveform"}])
+def test_a_sensor_file_with_a_bad_echo_rule_is_refused_naming_the_file(tmp_path, value):
+    import json
+
+    from zbuf_occlude.sensors.kinds import sensor_from_name
+
+    path = tmp_path / "sensor.json"
+    path.write_text(
+        json.dumps({"kind": "lidar", "preset": "vlp16", "beam": {"echo_rule": value, "max_returns": 2, "range_resolution_m": 0.5}})
+    )
+    with pytest.raises(InvalidInputError, match=r"sensor\.json.*echo_rule must be one of 'chain', 'waveform'"):
+        sensor_from_name(path)
+
+
+def test_a_sensor_file_carries_the_rule(tmp_path):
+    import json
+
+    from zbuf_occlude.sensors.kinds import sensor_from_name, sensor_to_json
+
+    path = tmp_path / "sensor.json"
+    path.write_text(json.dumps({"kind": "lidar", "preset": "vlp16", "beam": {"echo_rule": "waveform", "max_returns": 2,
+                                                                            "range_resolution_m": 0.5, "footprint_rays": 7}}))  # fmt: skip
+    sensor = sensor_from_name(path)
+    assert sensor.beam.echo_rule == "waveform"
+    again = tmp_path / "again.json"
+    again.write_text(json.dumps(sensor_to_json(sensor)))
+    assert sensor_from_name(again) == sensor
