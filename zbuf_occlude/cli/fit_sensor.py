@@ -1,20 +1,25 @@
 """``zbuf-occlude fit-sensor``: a sensor fitted to real object scans, or its return model to LAS/LAZ scans.
 
-Parses the options and calls :func:`zbuf_occlude.sensors.fit.engine.fit_sensor`, which reads, fits and writes."""
+Parses the options and calls :func:`zbuf_occlude.sensors.fit.engine.fit_sensor`, which reads, fits and writes; with
+``--meshes``, the fit of the partial echoes runs in it (:func:`zbuf_occlude.experiments.partial_echo_fit.partial_echo_refine`)."""
 
 from __future__ import annotations
 
 import argparse
 
-from zbuf_occlude.cli.options import Checked, real, resamples, seed, shown
+from zbuf_occlude.cli.options import Checked, count, real, resamples, seed, shown
 from zbuf_occlude.defaults import DEFAULT_SEED
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.mesh.scene import UP_CHOICES
 from zbuf_occlude.sensors.checks import MAX_RANGE_M
 from zbuf_occlude.sensors.fit.engine import LAS_EXTENSIONS
 from zbuf_occlude.sensors.fit.lidar import MAX_BOOTSTRAP
 from zbuf_occlude.sensors.kinds import preset_names
 
-__all__ = ["add_fit_sensor_parser", "cmd_fit_sensor", "LAS_EXTENSIONS", "MAX_BOOTSTRAP"]
+__all__ = ["add_fit_sensor_parser", "cmd_fit_sensor", "DEFAULT_CROPS_PER_MESH", "LAS_EXTENSIONS", "MAX_BOOTSTRAP"]
+
+#: ``--crops-per-mesh``'s default: crops of each mesh at each threshold of the partial echoes' fit (fit_threshold.py's too).
+DEFAULT_CROPS_PER_MESH = 4
 
 
 def _classes(text: str, option: str) -> tuple[int, ...]:
@@ -35,12 +40,38 @@ def _altitude(text: str, option: str) -> float:
     return value
 
 
+def _refine(args: argparse.Namespace, say):
+    """``--meshes`` and its options: the partial echoes' fit (:func:`~zbuf_occlude.experiments.partial_echo_fit.partial_echo_refine`),
+    checked before any scan is read; None without ``--meshes`` (its options then refused, naming them)."""
+    if args.meshes is None:
+        given = [flag for flag, value in (("--crops-per-mesh", args.crops_per_mesh), ("--up-map", args.up_map), ("--sizes", args.sizes),
+                                          ("--up", args.up)) if value is not None]  # fmt: skip
+        if given:
+            raise InvalidInputError(f"{', '.join(given)}: for the partial echoes' fit, which --meshes FOLDER asks for")
+        return None
+    from zbuf_occlude.cli.sim2real import parse_pairs
+    from zbuf_occlude.experiments.partial_echo_fit import partial_echo_refine
+    from zbuf_occlude.mesh.scene import UP_CHOICES
+    from zbuf_occlude.mesh.sizes import parse_sizes
+
+    up_map = parse_pairs(args.up_map, "--up-map")
+    bad = {k: v for k, v in up_map.items() if v not in UP_CHOICES}
+    if bad:
+        raise InvalidInputError(f"--up-map: axis must be one of {', '.join(UP_CHOICES)}, got {bad}")
+    crops = DEFAULT_CROPS_PER_MESH if args.crops_per_mesh is None else args.crops_per_mesh
+    return partial_echo_refine(args.meshes, crops_per_mesh=crops, seed=args.seed, up=args.up or "auto", up_map=up_map,
+                               sizes=parse_sizes(args.sizes), say=say)  # fmt: skip
+
+
 def cmd_fit_sensor(args: argparse.Namespace) -> int:
     from zbuf_occlude.sensors.fit.engine import fit_sensor
 
+    def say(line: str) -> None:
+        print(line, flush=True)
+
     result = fit_sensor(args.real, args.sensor, args.out, seed=args.seed, altitude_m=args.altitude, classes=args.classes,
-                        bootstrap=args.bootstrap, divergence_shares=args.divergence_shares,
-                        say=lambda line: print(line, flush=True))  # fmt: skip
+                        bootstrap=args.bootstrap, divergence_shares=args.divergence_shares, refine=_refine(args, say),
+                        say=say)  # fmt: skip
     print(result.table, end="")
     print(f"wrote {result.json_path} (use it as --sensor {result.json_path}), {result.markdown_path}")
     return 0
@@ -98,5 +129,22 @@ def add_fit_sensor_parser(sub) -> argparse.ArgumentParser:
                    help="the beam divergence fitted by simulation: a table with the header divergence_deg,<figure>[,std] (the "
                         "figure a return statistic, e.g. multi_return_points_class_5) of the share simulated at each divergence "
                         "(degrees, increasing), inverted at your scans' share (default: the divergence is not fitted)")  # fmt: skip
+    m = p.add_argument_group("the detection of partial echoes (a spinning LiDAR's object scans)")
+    m.add_argument("--meshes", metavar="FOLDER", default=None,
+                   help="also fit the beam's min_echo_reflectance, the weakest partial echo the receiver reports: meshes of your "
+                        "scans' classes (one sub-folder per class, named as the scans' labels, as experiment sim2real reads them) "
+                        "are scanned by the fitted sensor with a footprint over the --sensor's beam divergence and the strongest "
+                        "return of each pulse (how your scans are assumed recorded), at each threshold of a grid, and the threshold "
+                        "whose outline shares (scans 5-10 m away) meet your scans' is written into the sensor, with that beam")  # fmt: skip
+    m.add_argument("--crops-per-mesh", metavar="N", action=Checked, check=count("MAX_SAMPLES"), default=None,
+                   help=f"crops of each mesh at each threshold (default: {DEFAULT_CROPS_PER_MESH})")  # fmt: skip
+    m.add_argument(
+        "--up", choices=UP_CHOICES, default=None, help="up axis of the mesh files; auto: each format's convention (default: auto)"
+    )
+    m.add_argument("--up-map", metavar="GLOB=AXIS,...", default=None,
+                   help="per-file up axis of the meshes, globs of paths relative to FOLDER (e.g. 'bush/openglforest__*=+y')")  # fmt: skip
+    m.add_argument("--sizes", metavar="CLASS=DIM:LO-HI,...", default=None,
+                   help="real sizes of the mesh classes, metres, over the defaults (car, pedestrian, pole, bush), as experiment "
+                        "sim2real --sizes (e.g. chair=height:0.8-1.1)")  # fmt: skip
     p.set_defaults(func=cmd_fit_sensor)
     return p

@@ -9,13 +9,15 @@ fits to) is used here; the scored half is not read beyond the split.  On the fit
 
 1. the HDL-32E preset is fitted as ``experiment sim2real --fit-sensor`` fits it
    (``sensor_fit.fit_to_scans``: firing rate, range noise, dropout and its growth with range);
-2. the ``lidar`` set's crops of every mesh (``measure.sim_crops``: sim2real's placements and rule)
+2. the ``lidar`` set's crops of every mesh (``partial_echo_fit.mesh_crops``: sim2real's placements and rule)
    are scanned by the fitted sensor with a 7-sub-ray footprint over the data sheet's 0.16°
    divergence and Velodyne's strongest-return mode (the mode the real set was recorded in: its
-   points share no direction with another point), at each threshold of
-   ``fit.partial_echoes.FIT_GRID``;
+   points share no direction with another point; ``partial_echo_fit.partial_echo_sensor``), at each
+   threshold of ``fit.partial_echoes.FIT_GRID``;
 3. ``fit_min_echo_reflectance`` matches the median outline share per class (``realism.outline_share``)
    of the crops whose centroid lies 5-10 m away, simulated against real.
+
+Steps 2 and 3 are the fit ``fit-sensor --meshes`` runs (``partial_echo_fit.fit_partial_echoes_to_meshes``).
 
 Then, at the fitted threshold (to 0.05), the footprint's convergence: the same crops at K = 7
 and K = 28 (4×), paired, per class: median points and outline share.  Writes ``fit.md``,
@@ -36,8 +38,9 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from measure import CLASSES, MATCHED_RANGE_M, per_crop, sim_crops  # noqa: E402
+from measure import CLASSES, per_crop, sim_crops  # noqa: E402
 
+from zbuf_occlude.experiments.partial_echo_fit import MATCHED_RANGE_M, fit_partial_echoes_to_meshes, partial_echo_sensor  # noqa: E402
 from zbuf_occlude.experiments.sensor_fit import fit_to_scans  # noqa: E402
 from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes  # noqa: E402
 from zbuf_occlude.experiments.sim2real.real import real_halves, real_scan_rows  # noqa: E402
@@ -45,17 +48,11 @@ from zbuf_occlude.experiments.sim2real.run import _REAL_SPLIT_SEED  # noqa: E402
 from zbuf_occlude.io.atomic import write_text  # noqa: E402
 from zbuf_occlude.real_scans.datasets import load_real_scans  # noqa: E402
 from zbuf_occlude.sensors import Lidar  # noqa: E402
-from zbuf_occlude.sensors.fit.partial_echoes import FIT_GRID, fit_min_echo_reflectance  # noqa: E402
 from zbuf_occlude.sensors.kinds import sensor_to_json, with_beam  # noqa: E402
 
 log = logging.getLogger("fit_threshold")
-#: The footprint of the "on" runs: FOOTPRINT_RAYS sub-rays, the strongest echo, 0.75 m range resolution (5 ns: an assumption).
-ON_BEAM = {"footprint_rays": 7, "return_mode": "strongest", "max_returns": 1, "range_resolution_m": 0.75}
-
-
-def near(stats: list[dict], cls: list[str], name: str) -> list[float]:
-    lo, hi = MATCHED_RANGE_M
-    return [s["outline_share"] for s, c in zip(stats, cls) if c == name and lo <= s["range_m"] < hi]
+#: The step the "on" runs' threshold is rounded to (fit-sensor --meshes writes the threshold as fitted).
+ON_STEP = 0.05
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -83,38 +80,15 @@ def main(argv: list[str] | None = None) -> int:
     b = sensor.beam
     log.info("fitted: dropout %.4f + %.5f/m, range noise %.4f m, firing %.0f Hz", b.dropout, b.dropout_range_per_m, b.range_noise_m,
              sensor.firing_rate_hz)  # fmt: skip
-    real_stats = [per_crop({"points_m": s.points_sensor_m}) for s in fit_scans]
-    real_cls = [s.label for s in fit_scans]
-    real = {c: near(real_stats, real_cls, c) for c in names}
-
     meshes = find_class_meshes(args.meshes, up_map=up_map, classes=list(CLASSES))
-    simulated: dict[float, dict[str, list[float]]] = {}
-    keys: list[tuple] | None = None
-    for tau in FIT_GRID:
-        t = time.perf_counter()
-        crops = sim_crops(meshes, with_beam(sensor, **ON_BEAM, min_echo_reflectance=tau), args.crops, args.seed)
-        stats = [per_crop(c) for c in crops]
-        # the same crops at every threshold: those in range at the first, looked up by (mesh, crop) at the others
-        by_key = {(c["mesh"], c["crop"]): s for c, s in zip(crops, stats)}
-        if keys is None:
-            lo, hi = MATCHED_RANGE_M
-            keys = [(c["mesh"], c["crop"], c["class"]) for c, s in zip(crops, stats) if lo <= s["range_m"] < hi]
-        simulated[tau] = {c: [by_key[(m, k)]["outline_share"] if (m, k) in by_key else np.nan for m, k, cls in keys if cls == c]
-                          for c in names}  # fmt: skip
-        log.info("threshold %g: %d crops in %.0f s", tau, len(crops), time.perf_counter() - t)
-    # a crop lost at some threshold (too few returns) leaves every threshold's row
-    for c in names:
-        rows = np.array([simulated[tau][c] for tau in FIT_GRID])
-        ok = np.all(np.isfinite(rows), axis=0)
-        for i, tau in enumerate(FIT_GRID):
-            simulated[tau][c] = rows[i, ok].tolist()
-    fit = fit_min_echo_reflectance(real, simulated, seed=args.seed, bootstrap=200)
-    tau = round(fit.estimate.value / 0.05) * 0.05
+    result = fit_partial_echoes_to_meshes(fit_scans, sensor, meshes, crops_per_mesh=args.crops, seed=args.seed, bootstrap=200, say=log.info)
+    fit = result.fit
+    tau = round(fit.estimate.value / ON_STEP) * ON_STEP
 
     # convergence of the footprint at the fitted threshold: K and 4K, paired crops
     conv = {}
     for k in (7, 28):
-        crops = sim_crops(meshes, with_beam(sensor, **(ON_BEAM | {"footprint_rays": k}), min_echo_reflectance=tau), args.crops, args.seed)
+        crops = sim_crops(meshes, with_beam(partial_echo_sensor(sensor, tau), footprint_rays=k), args.crops, args.seed)
         conv[k] = {(c["mesh"], c["crop"]): (c["class"], per_crop(c)) for c in crops}
     lines = ["| class | paired crops | points at K = 28 / K = 7 (median, ± se) | outline share K = 28 − K = 7 (median, ± se) |",
              "|---|---|---|---|"]  # fmt: skip
@@ -126,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
         lines.append(f"| {c} | {len(both)} | {np.median(ratio):.3f} ± {se(ratio):.3f} | {np.median(diff):+.4f} ± {se(diff):.4f} |")
 
     os.makedirs(args.out, exist_ok=True)
-    on = with_beam(Lidar.preset("hdl32e"), **ON_BEAM, min_echo_reflectance=tau)
+    on = partial_echo_sensor(Lidar.preset("hdl32e"), tau)
     spec = sensor_to_json(on)
     write_text(os.path.join(args.out, "hdl32e_footprint.json"), json.dumps(spec, indent=2) + "\n")
     wall, load1 = time.perf_counter() - t0, os.getloadavg()

@@ -4,7 +4,8 @@
         ../shared/data/lidarnet_v2_partial --out docs/results/returns_realism --up-map 'bush/openglforest__*=+y'
 
 For each scanner variant of :data:`VARIANTS` (a name and a function of the HDL-32E preset), the
-``lidar`` set's crops of every mesh (``experiment sim2real``'s code path: its mesh reader and
+``lidar`` set's crops of every mesh (:func:`zbuf_occlude.experiments.partial_echo_fit.mesh_crops`, which
+``fit-sensor --meshes`` scans with too; ``experiment sim2real``'s code path: its mesh reader and
 ``--up-map`` rule, :func:`find_class_meshes`; its placements, :meth:`CropPlacement.crop_distributions`
 over ``LIDAR_PLACEMENT`` and the class's real size from ``CLASS_SIZES_M``; its crops,
 :func:`object_crops` with the mesh's name and the seed, which ``lidar_object_samples`` draws too;
@@ -41,9 +42,9 @@ from dataclasses import fields
 
 import numpy as np
 
+from zbuf_occlude.experiments.partial_echo_fit import MATCHED_RANGE_M, mesh_crops, partial_echo_sensor
 from zbuf_occlude.experiments.realism import RANGE_BINS_M, ObjectCloud, class_summary, outline_mask, range_bin_medians, scan_line_runs
 from zbuf_occlude.experiments.sim2real.config import with_returns
-from zbuf_occlude.experiments.sim2real.data import MIN_RETURNS
 from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
 from zbuf_occlude.experiments.sim2real.placement import CropPlacement
 from zbuf_occlude.io.atomic import write_csv, write_text
@@ -51,16 +52,15 @@ from zbuf_occlude.mesh.sizes import CLASS_SIZES_M
 from zbuf_occlude.real_scans.datasets import load_real_scans
 from zbuf_occlude.sensors import Lidar
 from zbuf_occlude.sensors.beam import Beam
-from zbuf_occlude.sensors.crops import lidar_object_samples, object_crops
+from zbuf_occlude.sensors.crops import lidar_object_samples
 from zbuf_occlude.sensors.kinds import with_beam
 
 CLASSES = ("bush", "car", "pedestrian", "pole")
-#: The range bin, metres, where the outline's parts are compared: where most real scans of every class lie.
-MATCHED_RANGE_M = (5.0, 10.0)
 
 
 def _strongest_of_7(sensor: Lidar) -> Lidar:
-    return with_beam(sensor, footprint_rays=7, return_mode="strongest", max_returns=1, range_resolution_m=0.75)
+    # the partial echoes' fit's beam: 7 sub-rays over the data sheet's divergence, the strongest return, 0.75 m resolution
+    return partial_echo_sensor(sensor)
 
 
 #: The scanner variants, each a name and a function of the HDL-32E preset; add rows to measure more.
@@ -83,29 +83,9 @@ log = logging.getLogger("returns_realism")
 
 
 def sim_crops(meshes, sensor: Lidar, crops: int, seed: int) -> list[dict]:
-    """The ``lidar`` set's crops of every mesh for ``sensor`` (module docstring): one dict per crop."""
-    out = []
-    for entry in meshes:
-        dist, _ = CropPlacement().crop_distributions(entry, CLASS_SIZES_M[entry.class_name])
-        kept = 0
-        for k, crop, _ in object_crops(entry.mesh, sensor, dist, name=entry.name, n_samples=crops + max(1, crops // 5), seed=seed,
-                                       class_name=entry.class_name):  # fmt: skip
-            scan = crop.scan.select(crop.scan.object_id != 0)  # the object's returns (no ground margin: all of them)
-            if len(scan) < MIN_RETURNS:
-                continue
-            ones = np.ones(len(scan), dtype=np.uint8)
-            out.append({
-                "mesh": entry.name, "class": entry.class_name, "crop": k, "points_m": scan.points.astype(np.float64),
-                "return_number": ones if scan.return_number is None else scan.return_number,
-                "number_of_returns": ones if scan.number_of_returns is None else scan.number_of_returns,
-                "distance_m": crop.placement.distance_m,
-            })  # fmt: skip
-            kept += 1
-            if kept == crops:
-                break
-        if kept < crops:
-            log.warning("%s: %d of %d crops with >= %d returns", entry.name, kept, crops, MIN_RETURNS)
-    return out
+    """The ``lidar`` set's crops of every mesh for ``sensor`` (module docstring; :func:`mesh_crops`): one dict per crop."""
+    return [{"mesh": c.mesh, "class": c.class_name, "crop": c.crop, "points_m": c.points_m, "return_number": c.return_number,
+             "number_of_returns": c.number_of_returns, "distance_m": c.distance_m} for c in mesh_crops(meshes, sensor, crops, seed)]  # fmt: skip
 
 
 def check_same_crops(entry, sensor: Lidar, crops: int, seed: int, ours: list[dict]) -> None:

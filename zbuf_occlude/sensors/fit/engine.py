@@ -53,6 +53,8 @@ from zbuf_occlude.sensors.kinds import sensor_from_name, sensor_to_json
 __all__ = [
     "LAS_EXTENSIONS",
     "FittedSensor",
+    "Refine",
+    "Refinement",
     "class_statistics",
     "fit_sensor",
     "fit_sensor_to_las",
@@ -68,6 +70,47 @@ Say = Callable[[str], object]
 
 
 @dataclass(frozen=True)
+class Refinement:
+    """What a step after a spinning LiDAR's fit (:class:`Refine`) changes in what :func:`fit_sensor_to_scans` writes.
+
+    Attributes
+    ----------
+    sensor : Lidar
+        Written in place of the fit's sensor.
+    fit_json : dict
+        Strict-JSON entries added to the file's ``"fit"`` block.
+    markdown : str
+        Appended to the ``.md`` table and to :attr:`FittedSensor.table`.
+    result : object
+        The step's own result (:attr:`FittedSensor.refinement`).
+    """
+
+    sensor: Any
+    fit_json: dict
+    markdown: str
+    result: Any = None
+
+
+@dataclass(frozen=True)
+class Refine:
+    """A step run after a spinning LiDAR's fit to object scans and before anything is written: it fits more of the sensor
+    (``fit-sensor --meshes``: the detection of partial echoes, by the experiments, which this package does not import).
+
+    Attributes
+    ----------
+    option : str
+        The command's option that asks for it, named where the input cannot take it (LAS/LAZ scans, a sensor that is
+        not a spinning LiDAR), before any scan is read.
+    run : callable
+        ``run(fit, scans) -> Refinement``: ``fit`` the :class:`~zbuf_occlude.sensors.fit.LidarFit`, ``scans`` the
+        :class:`~zbuf_occlude.real_scans.records.RealScan` list it was fitted to.
+    """
+
+    option: str
+    run: Callable[[LidarFit, Sequence[Any]], Refinement]
+
+
+@dataclass(frozen=True)
 class FittedSensor:
     """What :func:`fit_sensor` fitted and wrote.
 
@@ -79,6 +122,8 @@ class FittedSensor:
     json_path, markdown_path : Path
     table : str
         The Markdown table of the estimates (what the command prints).
+    refinement : object or None
+        What a :class:`Refine` step returned as its result (:attr:`Refinement.result`); None without one.
     """
 
     fit: LidarFit | AirborneFit | ReturnModelFit
@@ -86,6 +131,7 @@ class FittedSensor:
     json_path: Path
     markdown_path: Path
     table: str
+    refinement: Any = None
 
 
 def _strict_json(spec: dict) -> str:
@@ -111,7 +157,7 @@ def las_inputs(real: str | os.PathLike) -> list[Path] | None:
 
 def fit_sensor(real: str | os.PathLike, sensor: str, out: str | os.PathLike, *, seed: int = 0, dataset: str = "auto",
                altitude_m: float | None = None, classes: Sequence[int] | None = None, bootstrap: int | None = None,
-               divergence_shares: str | os.PathLike | None = None, say: Say | None = None) -> FittedSensor:  # fmt: skip
+               divergence_shares: str | os.PathLike | None = None, refine: Refine | None = None, say: Say | None = None) -> FittedSensor:  # fmt: skip
     """Fit ``sensor`` to the scans under ``real``: the return model to LAS/LAZ scans (:func:`fit_sensor_to_las`), else the
     sensor to object scans (:func:`fit_sensor_to_scans`); write its JSON file ``out`` and a ``.md`` table beside it.
 
@@ -129,6 +175,8 @@ def fit_sensor(real: str | os.PathLike, sensor: str, out: str | os.PathLike, *, 
         The object scans' format (:func:`~zbuf_occlude.real_scans.datasets.load_real_scans`; ``"auto"`` detects it).
     altitude_m, classes, bootstrap, divergence_shares
         LAS/LAZ scans only (:func:`fit_sensor_to_las`); None: their defaults.
+    refine : Refine, optional
+        Object scans and a spinning LiDAR only (:func:`fit_sensor_to_scans`).
     say : callable, optional
         Told each step before it runs.
 
@@ -139,11 +187,14 @@ def fit_sensor(real: str | os.PathLike, sensor: str, out: str | os.PathLike, *, 
     Raises
     ------
     InvalidInputError
-        A LAS/LAZ option given for object scans (naming it), and what the fit of the input's kind refuses.
+        A LAS/LAZ option given for object scans or ``refine`` for LAS/LAZ scans (naming the option), and what the fit of
+        the input's kind refuses.
     OutputError, UnsafePathError, DatasetBusy
         As :func:`fit_sensor_to_scans` and :func:`fit_sensor_to_las`.
     """
     files = las_inputs(real)
+    if files is not None and refine is not None:
+        raise InvalidInputError(f"{refine.option}: fits a spinning LiDAR to object scans, and {real} holds LAS/LAZ scans")
     if files is not None:
         return fit_sensor_to_las(files, real, sensor, out, altitude_m=altitude_m, classes=classes, bootstrap=bootstrap,
                                  divergence_shares=divergence_shares, seed=seed, say=say)  # fmt: skip
@@ -151,11 +202,10 @@ def fit_sensor(real: str | os.PathLike, sensor: str, out: str | os.PathLike, *, 
                                       ("--divergence-shares", divergence_shares)) if value is not None]  # fmt: skip
     if given:
         raise InvalidInputError(f"{', '.join(given)}: for LAS/LAZ scans, and {real} is neither a .las/.laz file nor a folder of them")
-    fit, json_path, md_path = fit_sensor_to_scans(real, sensor, out, seed=seed, dataset=dataset, say=say)
-    return FittedSensor(fit, fit.sensor, json_path, md_path, fit.markdown())
+    return _fit_scans(real, sensor, out, seed=seed, dataset=dataset, refine=refine, say=say)
 
 
-def _base_sensor(sensor: str, out: str | os.PathLike) -> tuple[Any, Path]:
+def _base_sensor(sensor: str, out: str | os.PathLike, refine: Refine | None = None) -> tuple[Any, Path]:
     """The sensor to start from and the ``.json`` file to write, checked before anything is read."""
     out = Path(out)
     if out.suffix.lower() != ".json":
@@ -163,6 +213,8 @@ def _base_sensor(sensor: str, out: str | os.PathLike) -> tuple[Any, Path]:
     if out.is_dir():
         raise OutputError(f"--out {out} is a folder; name the file to write")
     base = sensor_from_name(sensor)
+    if refine is not None and kind_name(base) != "lidar":
+        raise InvalidInputError(f"{refine.option}: fits a spinning LiDAR, and --sensor {sensor} is a {type(base).__name__}")
     if kind_name(base) not in FITTED_KINDS:
         raise InvalidInputError(f"--sensor {sensor}: fit-sensor fits a spinning LiDAR or an airborne scanner, not a {type(base).__name__}")
     return base, out
@@ -250,18 +302,25 @@ def fit_sensor_to_scans(real: str | os.PathLike, sensor: str, out: str | os.Path
     DatasetBusy
         Another live process holds the folder of ``out``.
     """
-    base, out = _base_sensor(sensor, out)
+    done = _fit_scans(real, sensor, out, seed=seed, dataset=dataset, say=say)
+    return done.fit, done.json_path, done.markdown_path
+
+
+def _fit_scans(real: str | os.PathLike, sensor: str, out: str | os.PathLike, *, seed: int, dataset: str, refine: Refine | None = None,
+               say: Say | None) -> FittedSensor:  # fmt: skip
+    """:func:`fit_sensor_to_scans`, with the ``refine`` step of :func:`fit_sensor` where given."""
+    base, out = _base_sensor(sensor, out, refine)
     md = out.with_suffix(".md")
     names = (out.name, md.name)
     with OwnedFolder(out.parent, files=names, what="the fitted sensor") as folder:
         folder.check_writable(names)  # both before any scan is read: a refusal writes nothing
-        fit = _fit_scans_into(folder, real, base, out.name, md.name, seed=seed, dataset=dataset, say=say or _quiet)
-    return fit, out, md
+        return _fit_scans_into(folder, real, base, out, md, seed=seed, dataset=dataset, refine=refine, say=say or _quiet)
 
 
-def _fit_scans_into(folder: OwnedFolder, real: str | os.PathLike, base: Any, json_name: str, md_name: str, *, seed: int,
-                    dataset: str, say: Say) -> LidarFit | AirborneFit:  # fmt: skip
-    """:func:`fit_sensor_to_scans` once the folder of its files is held: fit, write ``json_name`` and ``md_name``."""
+def _fit_scans_into(folder: OwnedFolder, real: str | os.PathLike, base: Any, out: Path, md: Path, *, seed: int, dataset: str,
+                    refine: Refine | None, say: Say) -> FittedSensor:  # fmt: skip
+    """:func:`fit_sensor_to_scans` once the folder of its files is held: fit (and ``refine``), write ``out`` and ``md``."""
+    json_name, md_name = out.name, md.name
     say(f"reading the real scans under {real} ...")
     scans = load_real_scans(real, dataset=dataset)
     counts = Counter(s.label for s in scans)
@@ -276,12 +335,18 @@ def _fit_scans_into(folder: OwnedFolder, real: str | os.PathLike, base: Any, jso
         fit = fit_airborne([s.points_sensor_m for s in scans], base, seed=seed)
         folder.write_text(json_name, _strict_json(fit.to_json()))
         folder.write_text(md_name, f"# {fit.sensor.name}: fitted to {fit.n_crops} crops under {Path(real).name}\n\n{fit.markdown()}")
-        return fit
+        return FittedSensor(fit, fit.sensor, out, md, fit.markdown())
     fit, spec = fit_to_scans(scans, base, [s.label for s in scans], seed=seed)
+    sensor, table, more = fit.sensor, fit.markdown(), None
+    if refine is not None:  # before anything is written: a refusal writes nothing
+        more = refine.run(fit, scans)
+        sensor, table = more.sensor, table + more.markdown
+        spec = {**sensor_to_json(sensor), "fit": {**spec["fit"], **more.fit_json}}
     folder.write_text(json_name, _strict_json(spec))
     text = f"# {fit.sensor.name}: fitted to {fit.n_scans} scans under {Path(real).name}\n\n{fit.markdown()}"
-    folder.write_text(md_name, text + _crops_markdown(spec["fit"].get("crops"), counts))
-    return fit
+    text += _crops_markdown(spec["fit"].get("crops"), counts)
+    folder.write_text(md_name, text + (more.markdown if more is not None else ""))
+    return FittedSensor(fit, sensor, out, md, table, None if more is None else more.result)
 
 
 def _crops_markdown(crops: dict | None, counts: Counter) -> str:

@@ -1,0 +1,515 @@
+"""A spinning LiDAR's detection of partial echoes (``Beam.min_echo_reflectance``) fitted to real object scans by scanning meshes.
+
+Where a pulse's footprint straddles an object's outline, a sliver of it meets the object; a
+receiver that reports such partial echoes makes scan lines that run on past the outline, one
+that drops them makes shorter lines and more broken ones.  The threshold is read from what it does
+to whole objects (:mod:`zbuf_occlude.sensors.fit.partial_echoes`): per class shared by the real
+scans and a folder of meshes, the real scans' outline share (the share of points that end a run of
+their ring's scan line, :func:`~zbuf_occlude.experiments.realism_stats.outline_share`) against the
+same statistic of the meshes scanned at each threshold of a grid, and the threshold whose
+simulated medians meet the real ones (:func:`~zbuf_occlude.sensors.fit.partial_echoes.fit_min_echo_reflectance`).
+
+How the meshes are scanned is ``experiment sim2real``'s ``lidar`` set (:func:`mesh_crops`): its
+mesh folders (:func:`~zbuf_occlude.experiments.sim2real.meshes.find_class_meshes`), its
+placements (:class:`~zbuf_occlude.experiments.sim2real.placement.CropPlacement`, sensor 5-25 m
+away; each class's real size from :data:`~zbuf_occlude.mesh.sizes.CLASS_SIZES_M`) and its rule
+(a crop of fewer than :data:`~zbuf_occlude.experiments.sim2real.data.MIN_RETURNS` returns is
+dropped).  Crop ``k`` of a mesh has the same placement at every threshold, so the thresholds are
+compared on the same crops; a crop lost at some threshold (too few returns left) leaves every
+threshold's row.  Only scans whose centroid lies :data:`MATCHED_RANGE_M` away count, real and
+simulated: the outline share changes with range, and most real scans of every class lie there.
+
+The beam (:func:`partial_echo_sensor`): the fitted sensor's, with a footprint where it has none
+(:func:`~zbuf_occlude.sensors.beam.footprint_changes`: :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS`
+sub-rays over the beam's data-sheet divergence; a beam without a divergence is refused), and
+**one return per pulse, the strongest** (Velodyne's strongest-return mode).  That is an
+assumption about the real scans, not read from them: LiDARNet's and SUO's scans hold one point
+per pulse (no two points share a direction), recorded in the HDL-32E's default strongest mode.
+Scans recorded in last-return or dual mode need another fit.
+
+The fitted threshold is written as fitted, not rounded to a coarser step: a multiple of the
+search's step (0.0025; :mod:`~zbuf_occlude.sensors.fit.partial_echoes`), its bootstrap spread
+beside it in the table.  The sensor returned carries that beam: the footprint and return mode
+the threshold was fitted with, since the threshold means nothing without them.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from zbuf_occlude.defaults import MAX_SAMPLES
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.experiments.realism_stats import outline_share
+from zbuf_occlude.experiments.sim2real.data import MIN_RETURNS
+from zbuf_occlude.experiments.sim2real.meshes import MeshEntry, find_class_meshes
+from zbuf_occlude.experiments.sim2real.placement import CropPlacement
+from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
+from zbuf_occlude.sensors.beam import footprint_changes
+from zbuf_occlude.sensors.checks import count
+from zbuf_occlude.sensors.fit.engine import Refine, Refinement
+from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP
+from zbuf_occlude.sensors.fit.partial_echoes import FIT_GRID, PartialEchoFit, fit_min_echo_reflectance
+from zbuf_occlude.sensors.kinds import kind_name, with_beam
+
+if TYPE_CHECKING:
+    from zbuf_occlude.real_scans.records import RealScan
+    from zbuf_occlude.sensors.lidar import Lidar
+
+__all__ = [
+    "MATCHED_RANGE_M", "SIMULATION_RANGE_RESOLUTION_M", "MeshCrop", "PartialEchoResult", "fit_partial_echoes",
+    "fit_partial_echoes_to_meshes", "mesh_crops", "partial_echo_refine", "partial_echo_sensor",
+]  # fmt: skip
+
+log = logging.getLogger(__name__)
+
+#: The range bin, metres, [low, high), of the scans' centroids whose outline shares are compared: where most real
+#: scans of every class lie (LiDARNet's HDL-32E scans), near the low end of the crops' 5-25 m placements.
+MATCHED_RANGE_M = (5.0, 10.0)
+#: The least range between two echoes of one pulse where the beam gives none, metres: a 5 ns pulse's c·τ/2.  An
+#: assumption (Velodyne does not publish the HDL-32E's pulse length); with one return per pulse it only decides
+#: which sub-ray hits merge into one echo before the strongest is taken.
+SIMULATION_RANGE_RESOLUTION_M = 0.75
+#: What ``fit-sensor`` calls the option that asks for this fit, named in its refusals.
+MESHES_OPTION = "--meshes"
+
+Say = Callable[[str], object]
+
+
+def _quiet(_: str) -> None:
+    """A ``say`` that says nothing."""
+
+
+@dataclass(frozen=True)
+class MeshCrop:
+    """One simulated crop of a mesh: the object's returns of one placement (:func:`mesh_crops`).
+
+    Attributes
+    ----------
+    mesh : str
+        The mesh's name (:attr:`~zbuf_occlude.experiments.sim2real.meshes.MeshEntry.name`, ``car/sedan``).
+    class_name : str
+    crop : int
+        The crop's index ``k`` among the mesh's draws: its placement is the same for every sensor.
+    points_m : (N, 3) float64
+        The object's returns, sensor frame (sensor at the origin, z up), metres.
+    return_number, number_of_returns : (N,) uint8
+        Each return's number within its pulse and its pulse's returns (1 where the scan records none).
+    distance_m : float
+        The placement's horizontal distance from the sensor to the object, metres.
+    """
+
+    mesh: str
+    class_name: str
+    crop: int
+    points_m: NDArray[np.float64]
+    return_number: NDArray[np.uint8]
+    number_of_returns: NDArray[np.uint8]
+    distance_m: float
+
+    @property
+    def range_m(self) -> float:
+        """The range from the sensor to the returns' centroid, metres."""
+        return centroid_range_m(self.points_m)
+
+
+def centroid_range_m(points_m: NDArray[np.floating]) -> float:
+    """The range from the sensor (the origin) to the centroid of ``points_m`` (N, 3), metres."""
+    return float(np.linalg.norm(np.asarray(points_m, dtype=np.float64).mean(axis=0)))
+
+
+def mesh_crops(meshes: Sequence[MeshEntry], sensor: Lidar, crops_per_mesh: int, seed: int, *, placement: CropPlacement | None = None,
+               sizes: Mapping[str, SizeRange] = CLASS_SIZES_M) -> list[MeshCrop]:  # fmt: skip
+    """``experiment sim2real``'s ``lidar`` crops of every mesh, scanned by ``sensor``: up to ``crops_per_mesh`` each.
+
+    Per mesh, ``crops_per_mesh + max(1, crops_per_mesh // 5)`` placements are drawn
+    (:func:`~zbuf_occlude.sensors.crops.object_crops` with the mesh's name and ``seed``, from
+    ``placement``'s distributions and the class's size in ``sizes``); crops with fewer than
+    :data:`~zbuf_occlude.experiments.sim2real.data.MIN_RETURNS` returns of the object are dropped and
+    the first ``crops_per_mesh`` kept (a mesh with fewer is logged).  Crop ``k`` of a mesh is placed
+    by the same draw whatever the sensor, so crops of two sensors with the same ``(mesh, crop)`` are
+    paired.  Unlike sim2real, a mesh short of good crops is not drawn again under another name.
+
+    Parameters
+    ----------
+    meshes : sequence of MeshEntry
+        Loaded meshes with their class (:func:`~zbuf_occlude.experiments.sim2real.meshes.find_class_meshes`).
+    sensor : Lidar
+    crops_per_mesh : int
+        1 to :data:`~zbuf_occlude.defaults.MAX_SAMPLES`.
+    seed : int
+    placement : CropPlacement, optional
+        Default ``CropPlacement()``: :data:`~zbuf_occlude.experiments.sim2real.placement.LIDAR_PLACEMENT` for every class.
+    sizes : mapping of class name to SizeRange
+        The real size of each mesh's class (default :data:`~zbuf_occlude.mesh.sizes.CLASS_SIZES_M`).
+
+    Returns
+    -------
+    list of MeshCrop
+        Mesh by mesh in ``meshes``' order, each mesh's crops by ``k``.
+
+    Raises
+    ------
+    InvalidInputError
+        ``crops_per_mesh`` out of range, a mesh whose class has no size in ``sizes`` (naming both).
+    """
+    from zbuf_occlude.sensors.crops import object_crops
+
+    crops_per_mesh = count(crops_per_mesh, "crops_per_mesh", low=1, high=MAX_SAMPLES)
+    placement = CropPlacement() if placement is None else placement
+    out = []
+    for entry in meshes:
+        if entry.class_name not in sizes:
+            raise InvalidInputError(f"{entry.name}: class {entry.class_name!r} has no real size (sizes: {sorted(sizes)})")
+        dist, _ = placement.crop_distributions(entry, sizes[entry.class_name])
+        kept = 0
+        drawn = crops_per_mesh + max(1, crops_per_mesh // 5)
+        for k, crop, _ in object_crops(entry.mesh, sensor, dist, name=entry.name, n_samples=drawn, seed=seed, class_name=entry.class_name):
+            scan = crop.scan.select(crop.scan.object_id != 0)  # the object's returns (no ground margin: all of them)
+            if len(scan) < MIN_RETURNS:
+                continue
+            ones = np.ones(len(scan), dtype=np.uint8)
+            out.append(MeshCrop(
+                entry.name, entry.class_name, k, scan.points.astype(np.float64),
+                ones if scan.return_number is None else scan.return_number,
+                ones if scan.number_of_returns is None else scan.number_of_returns,
+                float(crop.placement.distance_m),
+            ))  # fmt: skip
+            kept += 1
+            if kept == crops_per_mesh:
+                break
+        if kept < crops_per_mesh:
+            log.warning("%s: %d of %d crops with >= %d returns", entry.name, kept, crops_per_mesh, MIN_RETURNS)
+    return out
+
+
+def partial_echo_sensor(sensor: Lidar, min_echo_reflectance: float | None = None) -> Lidar:
+    """``sensor`` with the beam a partial-echo fit scans with (module docstring), and ``min_echo_reflectance`` where given.
+
+    The footprint: :func:`~zbuf_occlude.sensors.beam.footprint_changes` (at least
+    :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS` sub-rays over the beam's divergence); the
+    receiver: the strongest echo, one return per pulse, echoes resolved at the beam's
+    ``range_resolution_m`` or :data:`SIMULATION_RANGE_RESOLUTION_M` where it has none (no mixed
+    pixels: ``echo_separation_m`` 0, which resolved echoes refuse).  Every other field is ``sensor``'s.
+
+    Raises
+    ------
+    InvalidInputError
+        ``sensor`` is no spinning LiDAR; its beam has no divergence (naming ``--meshes`` and the beam's
+        ``divergence_deg``); a ``min_echo_reflectance`` outside [0, 1].
+    """
+    if kind_name(sensor) != "lidar":
+        raise InvalidInputError(f"{MESHES_OPTION}: the partial echoes are fitted for a spinning LiDAR, not a {type(sensor).__name__}")
+    beam = sensor.beam
+    changes = footprint_changes(beam, footprint=True, divergence_deg=None, sensor=sensor.name,
+                                names=(MESHES_OPTION, "a --sensor JSON whose beam has divergence_deg"))  # fmt: skip
+    changes |= {"return_mode": "strongest", "max_returns": 1, "echo_separation_m": 0.0,
+                "range_resolution_m": beam.range_resolution_m if beam.range_resolution_m > 0 else SIMULATION_RANGE_RESOLUTION_M}  # fmt: skip
+    if min_echo_reflectance is not None:
+        changes["min_echo_reflectance"] = min_echo_reflectance
+    return with_beam(sensor, **changes)
+
+
+@dataclass(frozen=True)
+class PartialEchoResult:
+    """A fitted ``min_echo_reflectance`` and the sensor that carries it (:func:`fit_partial_echoes`).
+
+    Attributes
+    ----------
+    fit : PartialEchoFit
+        The threshold ± its bootstrap spread, and the curves behind it.
+    sensor : Lidar
+        The sensor given with the simulation's beam (:func:`partial_echo_sensor`) and the fitted threshold.
+    classes : tuple of str
+        The classes fitted on.
+    skipped : dict of str to str
+        Each class left out, and why (no meshes, no real scans, none at :data:`MATCHED_RANGE_M`, ...).
+    crops : dict of str to int
+        Per class fitted, the simulated crops compared (the same at every threshold).
+    crops_per_mesh, seed : int
+    """
+
+    fit: PartialEchoFit
+    sensor: Any
+    classes: tuple[str, ...]
+    skipped: dict[str, str] = field(default_factory=dict)
+    crops: dict[str, int] = field(default_factory=dict)
+    crops_per_mesh: int = 0
+    seed: int = 0
+
+    def markdown(self) -> str:
+        """What was scanned, the fit's table (:meth:`PartialEchoFit.markdown`) and the classes left out."""
+        b = self.sensor.beam
+        lo, hi = MATCHED_RANGE_M
+        text = (f"\n## Detection of partial echoes (`min_echo_reflectance`)\n\nThe outline share of scans whose centroid lies "
+                f"{lo:g}-{hi:g} m away, per class: the median of the real scans against the median of meshes scanned at each "
+                f"threshold τ ({', '.join(f'{c}: {self.crops[c]} crops' for c in self.classes)}; {self.crops_per_mesh} per mesh, "
+                f"seed {self.seed}), with {b.footprint_rays} sub-rays over a {b.divergence_deg:g}° divergence and the strongest "
+                f"return of each pulse (assumed to be how the real scans were recorded).\n\n")  # fmt: skip
+        text += self.fit.markdown()
+        if self.skipped:
+            text += "\nClasses left out: " + "; ".join(f"{c} ({why})" for c, why in sorted(self.skipped.items())) + ".\n"
+        return text
+
+    def to_json(self) -> dict:
+        """The fit as strict-JSON values: what the sensor file's ``fit.partial_echoes`` holds."""
+        f = self.fit
+        b = self.sensor.beam
+        return {"estimate": f.estimate.to_json(), "grid": list(f.grid), "real": dict(f.real),
+                "simulated": {c: list(v) for c, v in f.simulated.items()}, "objective": list(f.objective),
+                "statistic": "outline_share", "range_m": list(MATCHED_RANGE_M), "classes": list(self.classes),
+                "skipped": dict(self.skipped), "crops": dict(self.crops), "crops_per_mesh": self.crops_per_mesh, "seed": self.seed,
+                "footprint_rays": b.footprint_rays, "divergence_deg": b.divergence_deg, "return_mode": b.return_mode}  # fmt: skip
+
+
+def _label(scan_label: str, classes: Sequence[str]) -> str:
+    """A real scan's class among ``classes``: its label, or the label in lower case (LiDARNet's ``Car`` folders
+    hold ``car``), as ``experiment sim2real`` matches them; the label itself when neither is one."""
+    return scan_label if scan_label in classes or scan_label.lower() not in classes else scan_label.lower()
+
+
+def _in_window(range_m: float) -> bool:
+    lo, hi = MATCHED_RANGE_M
+    return lo <= range_m < hi
+
+
+def _real_shares(scans: Sequence[RealScan], classes: Sequence[str]) -> dict[str, list[float]]:
+    """Per class of ``classes``, the outline shares of its real scans at :data:`MATCHED_RANGE_M`."""
+    out: dict[str, list[float]] = {c: [] for c in classes}
+    for s in scans:
+        label = _label(s.label, classes)
+        if label not in out:
+            continue
+        if s.points_sensor_m is None or len(s.points_sensor_m) == 0:
+            raise InvalidInputError(f"{s.source}: no sensor-frame points (the outline share needs the sensor at the origin)")
+        points = np.asarray(s.points_sensor_m, dtype=np.float64)
+        if _in_window(centroid_range_m(points)):
+            out[label].append(outline_share(points))
+    return out
+
+
+def _simulated_shares(meshes: Sequence[MeshEntry], base: Lidar, grid: Sequence[float], classes: Sequence[str], *, crops_per_mesh: int,
+                      seed: int, placement: CropPlacement | None, sizes: Mapping[str, SizeRange],
+                      say: Say) -> dict[float, dict[str, list[float]]]:  # fmt: skip
+    """Per threshold of ``grid``, per class, the outline shares of the same crops: those at :data:`MATCHED_RANGE_M` at the
+    first threshold, less any lost (too few returns) at another."""
+    import time
+
+    shares: dict[float, dict[tuple[str, int], float]] = {}
+    keys: list[tuple[str, int, str]] | None = None
+    for tau in grid:
+        t = time.perf_counter()
+        crops = mesh_crops(meshes, with_beam(base, min_echo_reflectance=tau), crops_per_mesh, seed, placement=placement, sizes=sizes)
+        if keys is None:  # the crops compared: those in range at the first threshold, looked up by (mesh, crop) at the others
+            keys = [(c.mesh, c.crop, c.class_name) for c in crops if _in_window(c.range_m)]
+        wanted = {(m, k) for m, k, _ in keys}
+        shares[tau] = {(c.mesh, c.crop): outline_share(c.points_m) for c in crops if (c.mesh, c.crop) in wanted}
+        say(f"threshold {tau:g}: {len(crops)} crops in {time.perf_counter() - t:.0f} s")
+    keys = [key for key in keys or [] if all((key[0], key[1]) in shares[tau] for tau in grid)]  # a lost crop leaves every row
+    return {tau: {c: [shares[tau][(m, k)] for m, k, cls in keys if cls == c] for c in classes} for tau in grid}
+
+
+def fit_partial_echoes_to_meshes(scans: Sequence[RealScan], sensor: Lidar, meshes: Sequence[MeshEntry], *, crops_per_mesh: int = 4,
+                                 seed: int = 0, bootstrap: int = BOOTSTRAP, grid: Sequence[float] = FIT_GRID,
+                                 placement: CropPlacement | None = None, sizes: Mapping[str, SizeRange] = CLASS_SIZES_M,
+                                 say: Say | None = None) -> PartialEchoResult:  # fmt: skip
+    """:func:`fit_partial_echoes` on meshes already loaded: every class of ``meshes`` is fitted on, with the real
+    scans labelled with it (its name, or in lower case); other real scans are left out.
+
+    Parameters
+    ----------
+    scans : sequence of RealScan
+        Real object scans with ``label`` and ``points_sensor_m`` ((N, 3) float64, sensor at the origin, z up, metres).
+    sensor : Lidar
+        The sensor the geometry was fitted to (firing rate, noise, dropout): its beam is scanned with
+        (:func:`partial_echo_sensor`).
+    meshes : sequence of MeshEntry
+    crops_per_mesh, seed, placement, sizes
+        :func:`mesh_crops`'s (the seed also seeds the bootstrap).
+    bootstrap : int
+        Resamples of the fit's bootstrap (:func:`~zbuf_occlude.sensors.fit.partial_echoes.fit_min_echo_reflectance`).
+    grid : sequence of float
+        The thresholds simulated, two or more in [0, 1] (default :data:`~zbuf_occlude.sensors.fit.partial_echoes.FIT_GRID`).
+    say : callable, optional
+        Told each step (the command line prints it).
+
+    Returns
+    -------
+    PartialEchoResult
+
+    Raises
+    ------
+    InvalidInputError
+        A sensor :func:`partial_echo_sensor` refuses (before anything is scanned); a real scan without sensor-frame points;
+        no class left with real scans and crops at :data:`MATCHED_RANGE_M` (naming each class and why); what
+        :func:`mesh_crops` and :func:`~zbuf_occlude.sensors.fit.partial_echoes.fit_min_echo_reflectance` refuse.
+    """
+    say = say or _quiet
+    base = partial_echo_sensor(sensor)
+    crops_per_mesh = count(crops_per_mesh, "crops_per_mesh", low=1, high=MAX_SAMPLES)
+    classes = sorted({m.class_name for m in meshes})
+    real = _real_shares(scans, classes)
+    skipped = {c: f"no real scan {MATCHED_RANGE_M[0]:g}-{MATCHED_RANGE_M[1]:g} m away" for c in classes if not real[c]}
+    fitted = [c for c in classes if c not in skipped]
+    if not fitted:
+        raise InvalidInputError(
+            f"no class to fit the partial echoes on: {'; '.join(f'{c}: {w}' for c, w in skipped.items()) or 'no meshes'}"
+        )
+    meshes = [m for m in meshes if m.class_name in fitted]
+    grid = sorted(float(t) for t in grid)
+    say(f"fitting the partial echoes: {len(meshes)} meshes of {', '.join(fitted)}, {crops_per_mesh} crops each, at {len(grid)} "
+        f"thresholds; {sum(len(real[c]) for c in fitted)} real scans {MATCHED_RANGE_M[0]:g}-{MATCHED_RANGE_M[1]:g} m away ...")  # fmt: skip
+    simulated = _simulated_shares(meshes, base, grid, fitted, crops_per_mesh=crops_per_mesh, seed=seed, placement=placement, sizes=sizes,
+                                  say=say)  # fmt: skip
+    first = simulated[grid[0]]
+    for c in fitted:
+        if not first[c]:
+            skipped[c] = f"no crop of its meshes {MATCHED_RANGE_M[0]:g}-{MATCHED_RANGE_M[1]:g} m away at every threshold"
+    fitted = [c for c in fitted if c not in skipped]
+    if not fitted:
+        raise InvalidInputError(f"no class to fit the partial echoes on: {'; '.join(f'{c}: {w}' for c, w in skipped.items())}; "
+                                "draw more crops per mesh")  # fmt: skip
+    fit = fit_min_echo_reflectance({c: real[c] for c in fitted}, {t: {c: simulated[t][c] for c in fitted} for t in grid}, seed=seed,
+                                   bootstrap=bootstrap)  # fmt: skip
+    fitted_sensor = with_beam(base, min_echo_reflectance=round(fit.estimate.value, 6))  # the search's step, without float noise
+    return PartialEchoResult(fit, fitted_sensor, tuple(fitted), skipped, {c: len(first[c]) for c in fitted}, crops_per_mesh, seed)
+
+
+def mesh_classes(root: str | os.PathLike) -> list[str]:
+    """The class folders of ``root`` that hold mesh files (as :func:`~zbuf_occlude.experiments.sim2real.meshes.find_class_meshes`
+    finds them: hidden entries passed over, links and special files as
+    :func:`~zbuf_occlude.mesh.inputs.discovery.walk_mesh_files` treats them), sorted.
+
+    Raises
+    ------
+    InvalidInputError
+        ``root`` is not a folder.
+    UnsafePathError
+        As :func:`~zbuf_occlude.mesh.inputs.discovery.walk_mesh_files`.
+    """
+    from zbuf_occlude.mesh.inputs.discovery import walk_mesh_files
+
+    root = Path(root)
+    if not root.is_dir():
+        raise InvalidInputError(f"{MESHES_OPTION} {root} is not a folder")
+    files, _ = walk_mesh_files(root, skip_hidden=True)
+    return sorted({f.relative_to(root).parts[0] for f in files if len(f.relative_to(root).parts) >= 2})
+
+
+def _real_folder(scans: Sequence[RealScan]) -> str:
+    """The folder the real scans came from, for messages: their sources' common folder."""
+    try:
+        return os.path.commonpath([os.path.dirname(str(s.source)) for s in scans]) or "."
+    except ValueError:  # sources on different drives, or none
+        return "the real scans"
+
+
+def fit_partial_echoes(scans: Sequence[RealScan], sensor: Lidar, meshes: str | os.PathLike, *, crops_per_mesh: int = 4, seed: int = 0,
+                       bootstrap: int = BOOTSTRAP, up: str = "auto", up_map: Mapping[str, str] | None = None,
+                       placement: CropPlacement | None = None, sizes: Mapping[str, SizeRange] = CLASS_SIZES_M,
+                       grid: Sequence[float] = FIT_GRID, say: Say | None = None) -> PartialEchoResult:  # fmt: skip
+    """Fit ``sensor``'s ``min_echo_reflectance`` to real object scans by scanning the meshes of the same classes (module docstring).
+
+    The classes are the real scans' labels that have a class folder under ``meshes`` (a label matches its
+    folder's name, or the name in lower case); the others, real labels without meshes and mesh folders
+    without real scans, are named (logged, told to ``say``, and in the result's ``skipped``).
+
+    Parameters
+    ----------
+    scans : sequence of RealScan
+        The real scans (:func:`~zbuf_occlude.real_scans.datasets.load_real_scans`), each with ``label`` and
+        ``points_sensor_m`` ((N, 3) float64, sensor at the origin, z up, metres); recorded with one return per
+        pulse, the strongest (module docstring).
+    sensor : Lidar
+        The spinning LiDAR already fitted to the scans' geometry (``fit-sensor``'s firing rate, noise and dropout),
+        whose beam has a divergence (its data sheet's).
+    meshes : path
+        One sub-folder per class of mesh files, as ``experiment sim2real`` reads them
+        (:func:`~zbuf_occlude.experiments.sim2real.meshes.find_class_meshes`: byte-identical files dropped;
+        two classes or more shared with the scans, two meshes or more each).
+    crops_per_mesh : int
+        Crops of each mesh at each threshold (:func:`mesh_crops`), 1 to :data:`~zbuf_occlude.defaults.MAX_SAMPLES`.
+    seed : int
+        Seeds the crops' draws and the bootstrap.
+    bootstrap : int
+        Resamples of the fit's bootstrap.
+    up, up_map
+        The meshes' up axis, and per-file overrides ``{glob of the path below meshes: axis}``, as
+        :func:`~zbuf_occlude.experiments.sim2real.meshes.find_class_meshes` takes them.
+    placement, sizes, grid, say
+        As :func:`fit_partial_echoes_to_meshes`.
+
+    Returns
+    -------
+    PartialEchoResult
+        ``result.fit`` (the threshold ± its bootstrap spread, the curves) and ``result.sensor``: ``sensor`` with the
+        simulation's footprint and return mode (:func:`partial_echo_sensor`) and the fitted threshold, not rounded.
+
+    Raises
+    ------
+    InvalidInputError
+        ``sensor`` no spinning LiDAR or its beam without a divergence, ``crops_per_mesh`` out of range, ``meshes`` not a
+        folder (all before a mesh is read); no class shared by the scans and the mesh folders (naming both folders and
+        their classes); what :func:`~zbuf_occlude.experiments.sim2real.meshes.find_class_meshes` and
+        :func:`fit_partial_echoes_to_meshes` refuse.
+    MeshLoadError
+        A mesh that cannot be loaded, named.
+    UnsafePathError
+        A link under ``meshes`` that leads out of it to a file of another kind.
+    """
+    say = say or _quiet
+    partial_echo_sensor(sensor)  # refused before any mesh is read
+    crops_per_mesh = count(crops_per_mesh, "crops_per_mesh", low=1, high=MAX_SAMPLES)
+    folders = mesh_classes(meshes)
+    labels = sorted({_label(s.label, folders) for s in scans})
+    shared = [c for c in folders if c in labels]
+    if not shared:
+        raise InvalidInputError(f"{MESHES_OPTION} {meshes} and {_real_folder(scans)} share no class: meshes of {folders or 'none'}, "
+                                f"real scans of {labels or 'none'} (a class folder of meshes is named as the scans' label)")  # fmt: skip
+    skipped = {c: "no meshes" for c in labels if c not in shared} | {c: "no real scans" for c in folders if c not in shared}
+    if skipped:
+        log.info("partial echoes: classes left out: %s", skipped)
+        say(f"partial echoes: fitting on {', '.join(shared)}; left out: {', '.join(f'{c} ({w})' for c, w in sorted(skipped.items()))}")
+    entries = find_class_meshes(meshes, up=up, up_map=dict(up_map or {}), classes=shared)
+    result = fit_partial_echoes_to_meshes(scans, sensor, entries, crops_per_mesh=crops_per_mesh, seed=seed, bootstrap=bootstrap,
+                                          grid=grid, placement=placement, sizes=sizes, say=say)  # fmt: skip
+    return PartialEchoResult(result.fit, result.sensor, result.classes, {**skipped, **result.skipped}, result.crops, result.crops_per_mesh,
+                             result.seed)  # fmt: skip
+
+
+def partial_echo_refine(meshes: str | os.PathLike, *, crops_per_mesh: int = 4, seed: int = 0, up: str = "auto",
+                        up_map: Mapping[str, str] | None = None, sizes: Mapping[str, SizeRange] = CLASS_SIZES_M,
+                        say: Say | None = None) -> Refine:  # fmt: skip
+    """``fit-sensor --meshes``: the step :func:`~zbuf_occlude.sensors.fit.engine.fit_sensor` runs after a spinning LiDAR's
+    fit and before it writes: :func:`fit_partial_echoes` on the scans it read, the fitted sensor written in place of
+    the geometry's, the fit under ``fit.partial_echoes`` in its JSON and its table in the ``.md``.
+
+    Raises
+    ------
+    InvalidInputError
+        ``meshes`` not a folder, ``crops_per_mesh`` out of range (both now, before any scan is read).
+    """
+    crops_per_mesh = count(crops_per_mesh, "crops_per_mesh", low=1, high=MAX_SAMPLES)
+    mesh_classes(meshes)  # a missing folder is refused before the scans are read
+
+    def run(fit: Any, scans: Sequence[RealScan]) -> Refinement:
+        result = fit_partial_echoes(scans, fit.sensor, meshes, crops_per_mesh=crops_per_mesh, seed=seed, up=up, up_map=up_map,
+                                    sizes=sizes, say=say)  # fmt: skip
+        e = result.fit.estimate
+        if say is not None:
+            say(
+                f"min_echo_reflectance {e.value:.4g} ± {e.std:.2g} (bootstrap)"
+                if math.isfinite(e.std)
+                else f"min_echo_reflectance {e.value:.4g}"
+            )
+        return Refinement(result.sensor, {"partial_echoes": result.to_json()}, result.markdown(), result)
+
+    return Refine(MESHES_OPTION, run)
