@@ -77,6 +77,16 @@ def test_peaks_nearer_than_the_resolution_are_one_echo(ranges, energies, expecte
     assert echoes.energy.sum() == pytest.approx(sum(energies))
 
 
+def test_a_dip_shallower_than_the_prominence_does_not_tell_peaks_apart(monkeypatch):
+    """Three reflections 0.7 m apart, the middle one a little weaker: the waveform dips by about 7 % between two peaks
+    over ΔR apart; a receiver needs a deeper dip (PROMINENCE 0.1) to re-arm, one that takes any dip splits them."""
+    ranges, deep, shallow = [10.0, 10.7, 11.4], [1.0, 0.6, 1.0], [1.0, 0.95, 1.0]
+    assert waveform.PROMINENCE == 0.1
+    assert len(_echoes(ranges, shallow)) == 1 and len(_echoes(ranges, deep)) == 2
+    monkeypatch.setattr(waveform, "PROMINENCE", 0.0)
+    assert len(_echoes(ranges, shallow)) == 2 and len(_echoes(ranges, deep)) == 2
+
+
 def _crown_side_pulse(k: int, range_m: float = 40.0, depth_m: float = 3.0):
     """One pulse's hits across a crown's side: sub-rays left of the footprint's centre strip hit a canopy top at
     ``range_m``, those right of it a lower layer ``depth_m`` behind, those in the strip (a fifth of the footprint's

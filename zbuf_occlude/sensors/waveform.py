@@ -22,12 +22,12 @@ nearer than that to a stronger one is a ripple of the same echo).  With this sha
   sides' peaks lie at least that gap apart.
 
 So, for a pulse's hits sorted by range (:func:`waveform_echo_starts`), the chain rule's runs (each
-hit less than ΔR beyond the one before) are split further where their waveform dips: a run that
+hit less than ΔR beyond the one before: *chains*) are split further where their waveform dips: a chain that
 spans more than ΔR is sampled every ΔR / :data:`SAMPLES_PER_RESOLUTION` (a digitiser; 1 ns is
-0.15 m of range), its samples rounded to 2⁻³⁰ of the run's largest (equal in exact arithmetic
+0.15 m of range), its samples rounded to 2⁻³⁰ of the chain's largest (equal in exact arithmetic
 stays equal), its peaks (local maxima, the middle of a flat run) nearer than ΔR to a stronger
-neighbour merged into it round after round, and a new echo starts past each dip left between
-two peaks.
+neighbour, or parted from it by a dip shallower than :data:`PROMINENCE`, merged into it round
+after round, and a new echo starts past each dip left between two peaks.
 
 Unlike the chain rule, a weak run of hits between two strong reflections (a crown's side wall
 across the footprint) does not join them: the sum still dips between the two, and the more
@@ -40,13 +40,17 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["SAMPLES_PER_RESOLUTION", "waveform_echo_starts"]
+__all__ = ["PROMINENCE", "SAMPLES_PER_RESOLUTION", "waveform_echo_starts"]
 
 #: Samples of the waveform per range resolution ΔR (a digitiser's rate; 8 per 0.75 m is about 1.6 GS/s).
 SAMPLES_PER_RESOLUTION = 8
-#: Samples are rounded to this share of their run's largest before peaks and dips are found.
+#: Least depth of a dip that tells two peaks apart, as a share of the lower peak: a peak detector re-arms only once the
+#: signal has fallen by a margin above its noise (an assumption, not a data sheet's figure).  It keeps the ripple of a
+#: surface's sub-rays (a slanted plane's, a crown wall's) from counting as echoes.
+PROMINENCE = 0.1
+#: Samples are rounded to this share of their chain's largest before peaks and dips are found.
 _QUANTUM = 2.0**-30
-#: Most (hit, sample) pairs built at once: runs are taken in batches of about this many.
+#: Most (hit, sample) pairs built at once: chains are taken in batches of about this many.
 _BATCH_PAIRS = 1 << 22
 
 
@@ -78,7 +82,7 @@ def waveform_echo_starts(pulse: NDArray, range_m: NDArray, energy: NDArray, reso
     start = np.flatnonzero(new)
     stop = np.append(start[1:], n)
     span = range_m[stop - 1] - range_m[start]
-    long = np.flatnonzero(span > resolution_m)  # the runs that may hold several peaks
+    long = np.flatnonzero(span > resolution_m)  # the chains that may hold several peaks
     if len(long) == 0:
         return new
     step = resolution_m / SAMPLES_PER_RESOLUTION
@@ -89,32 +93,32 @@ def waveform_echo_starts(pulse: NDArray, range_m: NDArray, energy: NDArray, reso
     while batch_start < len(long):
         room = cumulative[batch_start] - hits[batch_start] + max(_BATCH_PAIRS // width, int(hits[batch_start]))
         batch_stop = max(batch_start + 1, int(np.searchsorted(cumulative, room, side="right")))
-        segments = long[batch_start:batch_stop]
-        new |= _dips(start[segments], stop[segments], range_m, energy, span[segments], step, n)
+        chains = long[batch_start:batch_stop]
+        new |= _dips(start[chains], stop[chains], range_m, energy, span[chains], step, n)
         batch_start = batch_stop
     return new
 
 
 def _dips(start, stop, range_m, energy, span, step, n) -> NDArray[np.bool_]:
-    """(n,) bool: the hits of segments ``start[s]:stop[s]`` that follow a dip of their segment's sampled waveform."""
+    """(n,) bool: the hits of chains ``start[s]:stop[s]`` that follow a dip of their chain's sampled waveform."""
     s_per = SAMPLES_PER_RESOLUTION
     counts = stop - start
     rows = np.repeat(start - np.cumsum(np.append(0, counts[:-1])), counts) + np.arange(int(counts.sum()))
-    segment = np.repeat(np.arange(len(start)), counts)
-    # each segment's samples: x_j = first − ΔR + j · step, j = 0 .. n_samples − 1, zero at both ends
+    chain = np.repeat(np.arange(len(start)), counts)
+    # each chain's samples: x_j = first − ΔR + j · step, j = 0 .. n_samples − 1, zero at both ends
     n_samples = np.ceil(span / step).astype(np.int64) + 2 * s_per + 3
     offset = np.append(0, np.cumsum(n_samples)[:-1])
-    u = (range_m[rows] - range_m[start][segment]) / step + s_per  # each hit in its segment's sample units
+    u = (range_m[rows] - range_m[start][chain]) / step + s_per  # each hit in its chain's sample units
     base = np.floor(u).astype(np.int64)
     j = base[:, None] + np.arange(-s_per, s_per + 1)[None, :]  # (hits, 2·s_per + 1) samples around each hit
     x = np.abs(j - u[:, None])
     pulse_shape = np.where(x < s_per, np.cos(np.pi * x / (2 * s_per)) ** 2, 0.0)
-    samples = np.bincount((j + offset[segment][:, None]).ravel(), weights=(pulse_shape * energy[rows][:, None]).ravel(),
+    samples = np.bincount((j + offset[chain][:, None]).ravel(), weights=(pulse_shape * energy[rows][:, None]).ravel(),
                           minlength=int(n_samples.sum()))  # fmt: skip
-    sample_segment = np.repeat(np.arange(len(start)), n_samples)
+    sample_chain = np.repeat(np.arange(len(start)), n_samples)
     top = np.maximum.reduceat(samples, offset)
-    q = np.rint(np.divide(samples, top[sample_segment], out=np.zeros_like(samples), where=top[sample_segment] > 0) / _QUANTUM)
-    # flat runs as one value (a run never spans two segments' live samples: each segment ends in zeros)
+    q = np.rint(np.divide(samples, top[sample_chain], out=np.zeros_like(samples), where=top[sample_chain] > 0) / _QUANTUM)
+    # flat runs as one value (a flat run never spans two chains' live samples: each chain's samples end in zeros)
     run_start = np.flatnonzero(np.append(True, q[1:] != q[:-1]))
     run_stop = np.append(run_start[1:], len(q))
     level = q[run_start]
@@ -122,28 +126,30 @@ def _dips(start, stop, range_m, energy, span, step, n) -> NDArray[np.bool_]:
     inner[1:-1] = True
     peak = np.flatnonzero(inner & (level > np.roll(level, 1)) & (level > np.roll(level, -1)))
     low = np.flatnonzero(inner & (level < np.roll(level, 1)) & (level < np.roll(level, -1)))
-    middle = (run_start + run_stop - 1) / 2.0  # each run's middle, global sample units
-    # the one dip between each peak and the next (the runs alternate between peaks and dips), of one segment
+    middle = (run_start + run_stop - 1) / 2.0  # each flat run's middle, global sample units
+    # the one dip between each peak and the next (the flat runs alternate between peaks and dips), of one chain
     dip = low[np.minimum(np.searchsorted(low, peak[:-1]), len(low) - 1)] if len(peak) > 1 else np.zeros(0, np.int64)
-    same = sample_segment[run_start[peak[1:]]] == sample_segment[run_start[peak[:-1]]]
-    cut = middle[dip[_separate(middle[peak], level[peak], same, s_per)]]
+    same = sample_chain[run_start[peak[1:]]] == sample_chain[run_start[peak[:-1]]]
+    cut = middle[dip[_separate(middle[peak], level[peak], level[dip], same, s_per)]]
     # a hit starts a new echo where a cut lies between it and the hit before it (a hit on the cut: the earlier echo)
-    passed = np.searchsorted(cut, u + offset[segment], side="left")
+    passed = np.searchsorted(cut, u + offset[chain], side="left")
     follows = np.zeros(n, bool)
-    later = np.flatnonzero(segment[1:] == segment[:-1]) + 1
+    later = np.flatnonzero(chain[1:] == chain[:-1]) + 1
     follows[rows[later]] = passed[later] != passed[later - 1]
     return follows
 
 
-def _separate(position, height, same, least) -> NDArray[np.bool_]:
-    """Which dips between consecutive peaks (dip i between peaks i and i + 1; ``same[i]``: the two in one segment)
-    stay, once every peak less than ``least`` from a stronger neighbour has merged into it (the stronger of two such
-    neighbours; of equal peaks the nearer survives), round after round."""
+def _separate(position, height, dip_level, same, least) -> NDArray[np.bool_]:
+    """Which dips between consecutive peaks (dip i, of level ``dip_level[i]``, between peaks i and i + 1; ``same[i]``: the
+    two in one chain) stay, once every peak less than ``least`` from a stronger neighbour, or parted from it by a dip
+    shallower than :data:`PROMINENCE`, has merged into it (the stronger of two such neighbours; of equal peaks the nearer
+    survives), round after round."""
     alive = np.arange(len(position))
     between = np.arange(len(position) - 1)  # the dip between live peaks i and i + 1
     while len(alive) > 1:
         a, b = alive[:-1], alive[1:]
-        close = np.flatnonzero(position[b] - position[a] < least)  # peaks of two segments lie farther apart
+        shallow = dip_level[between] >= (1.0 - PROMINENCE) * np.minimum(height[a], height[b])
+        close = np.flatnonzero((position[b] - position[a] < least) | shallow)  # peaks of two chains lie farther apart, dip 0
         if len(close) == 0:
             break
         # the weaker of each close pair merges into the other: the right one left (left ≥ right), or the left one right
