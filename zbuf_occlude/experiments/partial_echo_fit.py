@@ -66,7 +66,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "MATCHED_RANGE_M", "SIMULATION_RANGE_RESOLUTION_M", "MeshCrop", "PartialEchoResult", "fit_partial_echoes",
-    "fit_partial_echoes_to_meshes", "mesh_crops", "partial_echo_refine", "partial_echo_sensor",
+    "centroid_range_m", "fit_partial_echoes_to_meshes", "mesh_classes", "mesh_crops", "partial_echo_refine", "partial_echo_sensor",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -249,9 +249,10 @@ class PartialEchoResult:
         """What was scanned, the fit's table (:meth:`PartialEchoFit.markdown`) and the classes left out."""
         b = self.sensor.beam
         lo, hi = MATCHED_RANGE_M
+        crops = ", ".join(f"{c}: {n} crop{'s' * (n != 1)}" for c, n in ((c, self.crops[c]) for c in self.classes))
         text = (f"\n## Detection of partial echoes (`min_echo_reflectance`)\n\nThe outline share of scans whose centroid lies "
                 f"{lo:g}-{hi:g} m away, per class: the median of the real scans against the median of meshes scanned at each "
-                f"threshold τ ({', '.join(f'{c}: {self.crops[c]} crops' for c in self.classes)}; {self.crops_per_mesh} per mesh, "
+                f"threshold τ ({crops}; {self.crops_per_mesh} per mesh, "
                 f"seed {self.seed}), with {b.footprint_rays} sub-rays over a {b.divergence_deg:g}° divergence and the strongest "
                 f"return of each pulse (assumed to be how the real scans were recorded).\n\n")  # fmt: skip
         text += self.fit.markdown()
