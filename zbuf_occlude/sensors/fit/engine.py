@@ -17,6 +17,11 @@ What the input is chooses the fit (:func:`fit_sensor`):
   - an airborne scanner (``dales-q1560``, ``riegl-q1560``, or a file of ``"kind": "airborne"``):
     :func:`~zbuf_occlude.sensors.fit.fit_airborne` on the crops as they lie (no sensor position).
 
+  A spinning LiDAR's fit may be followed by a :class:`Refine` step, run on the same scans before
+  anything is written, whose sensor is written instead (``fit-sensor --meshes``: the detection of
+  partial echoes, fitted by :mod:`zbuf_occlude.experiments.partial_echo_fit`, which this package
+  does not import).
+
 Writes the sensor JSON (which ``scan``, ``farm --sensor`` and ``experiment sim2real --sensor``
 read) and a Markdown table of the estimates beside it, both through the output layer
 (:class:`~zbuf_occlude.io.owned.OwnedFolder` on their folder: atomic, recorded, and replacing
