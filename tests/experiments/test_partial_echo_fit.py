@@ -142,3 +142,11 @@ def test_a_crop_lost_at_one_threshold_leaves_every_thresholds_row(tmp_path: Path
         sum(r.crops.values()) == len(near) - 1
         and r.crops[first[0].class_name] == sum(c.class_name == first[0].class_name for c in near) - 1
     )
+
+
+def test_a_class_without_a_real_size_is_refused_naming_sizes_before_a_mesh_is_read(tmp_path: Path) -> None:
+    (tmp_path / "chair").mkdir()
+    (tmp_path / "chair" / "bad.obj").write_text("not a mesh")  # never read
+    scans = [RealScan(np.zeros((3, 3), np.float32), "chair", "real/chair/a.csv", "folder", points_sensor_m=np.ones((3, 3)))]
+    with pytest.raises(InvalidInputError, match=r"^--meshes: classes \['chair'\] have no real size .*give --sizes CLASS=DIMENSION"):
+        pe.fit_partial_echoes(scans, lidar_preset("hdl32e"), tmp_path)

@@ -357,6 +357,7 @@ def fit_partial_echoes_to_meshes(scans: Sequence[RealScan], sensor: Lidar, meshe
     base = partial_echo_sensor(sensor)
     crops_per_mesh = count(crops_per_mesh, "crops_per_mesh", low=1, high=MAX_SAMPLES)
     classes = sorted({m.class_name for m in meshes})
+    _check_sizes(classes, sizes)
     real = _real_shares(scans, classes)
     skipped = {c: f"no real scan {MATCHED_RANGE_M[0]:g}-{MATCHED_RANGE_M[1]:g} m away" for c in classes if not real[c]}
     fitted = [c for c in classes if c not in skipped]
@@ -373,7 +374,7 @@ def fit_partial_echoes_to_meshes(scans: Sequence[RealScan], sensor: Lidar, meshe
     first = simulated[grid[0]]
     for c in fitted:
         if not first[c]:
-            skipped[c] = f"no crop of its meshes {MATCHED_RANGE_M[0]:g}-{MATCHED_RANGE_M[1]:g} m away at every threshold"
+            skipped[c] = f"no crop of its meshes {MATCHED_RANGE_M[0]:g}-{MATCHED_RANGE_M[1]:g} m away, kept at every threshold"
     fitted = [c for c in fitted if c not in skipped]
     if not fitted:
         raise InvalidInputError(f"no class to fit the partial echoes on: {'; '.join(f'{c}: {w}' for c, w in skipped.items())}; "
@@ -403,6 +404,14 @@ def mesh_classes(root: str | os.PathLike) -> list[str]:
         raise InvalidInputError(f"{MESHES_OPTION} {root} is not a folder")
     files, _ = walk_mesh_files(root, skip_hidden=True)
     return sorted({f.relative_to(root).parts[0] for f in files if len(f.relative_to(root).parts) >= 2})
+
+
+def _check_sizes(classes: Sequence[str], sizes: Mapping[str, SizeRange]) -> None:
+    """Refuse classes without a real size in ``sizes``, naming ``--sizes``: their meshes' crops have no scale."""
+    missing = [c for c in classes if c not in sizes]
+    if missing:
+        raise InvalidInputError(f"{MESHES_OPTION}: classes {missing} have no real size to scale their meshes to: give --sizes "
+                                f"CLASS=DIMENSION:LO-HI,... (e.g. {missing[0]}=height:0.5-1.5; known: {sorted(sizes)})")  # fmt: skip
 
 
 def _real_folder(scans: Sequence[RealScan]) -> str:
@@ -475,6 +484,7 @@ def fit_partial_echoes(scans: Sequence[RealScan], sensor: Lidar, meshes: str | o
     if not shared:
         raise InvalidInputError(f"{MESHES_OPTION} {meshes} and {_real_folder(scans)} share no class: meshes of {folders or 'none'}, "
                                 f"real scans of {labels or 'none'} (a class folder of meshes is named as the scans' label)")  # fmt: skip
+    _check_sizes(shared, sizes)  # before a mesh is read
     skipped = {c: "no meshes" for c in labels if c not in shared} | {c: "no real scans" for c in folders if c not in shared}
     if skipped:
         log.info("partial echoes: classes left out: %s", skipped)
