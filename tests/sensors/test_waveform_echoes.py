@@ -78,10 +78,11 @@ def test_peaks_nearer_than_the_resolution_are_one_echo(ranges, energies, expecte
 
 
 def test_a_dip_shallower_than_the_prominence_does_not_tell_peaks_apart(monkeypatch):
-    """Three reflections 0.7 m apart, the middle one a little weaker: the waveform dips by about 7 % between two peaks
-    over ΔR apart; a receiver needs a deeper dip (PROMINENCE 0.1) to re-arm, one that takes any dip splits them."""
-    ranges, deep, shallow = [10.0, 10.7, 11.4], [1.0, 0.6, 1.0], [1.0, 0.95, 1.0]
-    assert waveform.PROMINENCE == 0.1
+    """Three equal reflections 0.74 m apart: the waveform dips by about 3 % between two peaks over ΔR apart; a receiver
+    needs a deeper dip (PROMINENCE 0.05) to re-arm, one that takes any dip splits them.  With a weaker middle
+    reflection the dip is deep enough either way."""
+    ranges, deep, shallow = [10.0, 10.74, 11.48], [1.0, 0.6, 1.0], [1.0, 1.0, 1.0]
+    assert waveform.PROMINENCE == 0.05
     assert len(_echoes(ranges, shallow)) == 1 and len(_echoes(ranges, deep)) == 2
     monkeypatch.setattr(waveform, "PROMINENCE", 0.0)
     assert len(_echoes(ranges, shallow)) == 2 and len(_echoes(ranges, deep)) == 2
