@@ -45,7 +45,7 @@ def real_scans(root: Path, truth: float, *, crops: int, seed: int, sensor=None) 
 def test_the_fit_recovers_the_threshold_the_scans_were_made_with(tmp_path: Path) -> None:
     root = write_meshes(tmp_path / "meshes")
     base = with_beam(lidar_preset("hdl32e"), range_noise_m=0.02, dropout=0.02)
-    # the "real" scans: the crops the fit draws (the same seed and placements), made at 0.2 with another noise and dropout
+    # the "real" scans: the crops the fit draws (the same seed, placements and sensor), made at 0.2
     scans = real_scans(root, 0.2, crops=5, seed=0, sensor=base)
     said: list[str] = []
     r = pe.fit_partial_echoes(scans, base, root, crops_per_mesh=5, seed=0, bootstrap=50, grid=GRID, placement=NEAR, say=said.append)
