@@ -223,6 +223,8 @@ def test_run_returns_writes_its_outputs(tmp_path, detection, capsys, monkeypatch
     assert "Tree cover" in summary["table"] and "the real tile" in read_regular_file(out / "real.md", max_bytes=1 << 20).decode()
     # the sweep's first row is the fitted scanner over the plot with the model's reflectivity
     scanner = fit_return_model(read_las(real_path), altitude_m=IGN_ALTITUDE_M, bootstrap=5).apply(ign_scanner(IGN_DIVERGENCE_DEG, 7))
+    assert model["echo_rule"] == "waveform"  # the experiment's receiver: echoes told apart on the waveform
+    scanner = with_beam(scanner, echo_rule="waveform")
     if not detection:
         scanner = with_beam(scanner, detection_threshold=0.0)
     again = simulate(scene, scanner, vegetation, center_xy=centre, half_size_m=half, seeds=(0,), bootstrap=5,

@@ -49,7 +49,7 @@ def add_returns_parser(sub: Any) -> argparse.ArgumentParser:
                    "with the ground at the fit's reflectance and the meshes at their material's at 1064 nm")  # fmt: skip
     p.add_argument("--echo-rule", choices=ECHO_RULES, default=None,
                    help="how the simulated receiver merges a pulse's sub-ray hits into echoes: chain (a new echo at a gap of the range "
-                   "resolution) or waveform (one echo per peak of the pulse's waveform) (default: the experiment's, chain)")  # fmt: skip
+                   "resolution) or waveform (one echo per peak of the pulse's waveform) (default: the experiment's, waveform)")  # fmt: skip
     p.add_argument("--quick", action="store_true", help="a small sweep (about 20 s): a check that the command runs, not the page's numbers")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (or, when stderr is a file, no progress lines)")
     p.set_defaults(func=_run)

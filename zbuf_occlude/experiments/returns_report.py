@@ -129,7 +129,8 @@ class ReturnsSettings:
         False: no threshold, every surface alike (every echo returns).
     echo_rule : {"chain", "waveform"}
         How the simulated receiver merges a pulse's hits into echoes
-        (:attr:`Beam.echo_rule <zbuf_occlude.sensors.beam.Beam.echo_rule>`).
+        (:attr:`Beam.echo_rule <zbuf_occlude.sensors.beam.Beam.echo_rule>`): ``"waveform"`` (the
+        default; its shares converge with K, the chain rule's drift) or ``"chain"``.
     """
 
     divergence_factors: tuple[float, ...] = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0)
@@ -142,7 +143,7 @@ class ReturnsSettings:
     scan_angle_deg: float = 13.0
     bootstrap: int = 200
     detection: bool = True
-    echo_rule: str = "chain"
+    echo_rule: str = "waveform"
 
 
 @dataclass(frozen=True)
