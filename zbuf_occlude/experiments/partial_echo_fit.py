@@ -367,7 +367,7 @@ def fit_partial_echoes_to_meshes(scans: Sequence[RealScan], sensor: Lidar, meshe
         )
     meshes = [m for m in meshes if m.class_name in fitted]
     grid = sorted(float(t) for t in grid)
-    say(f"fitting the partial echoes: {len(meshes)} meshes of {', '.join(fitted)}, {crops_per_mesh} crops each, at {len(grid)} "
+    say(f"fitting the partial echoes: {len(meshes)} meshes of {', '.join(fitted)}, {crops_per_mesh} crop{'s' * (crops_per_mesh != 1)} each, at {len(grid)} "
         f"thresholds; {sum(len(real[c]) for c in fitted)} real scans {MATCHED_RANGE_M[0]:g}-{MATCHED_RANGE_M[1]:g} m away ...")  # fmt: skip
     simulated = _simulated_shares(meshes, base, grid, fitted, crops_per_mesh=crops_per_mesh, seed=seed, placement=placement, sizes=sizes,
                                   say=say)  # fmt: skip
