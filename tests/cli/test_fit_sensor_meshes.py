@@ -12,6 +12,7 @@ import pytest
 import trimesh
 
 from zbuf_occlude.cli.main import main as cli_main
+from zbuf_occlude.experiments import partial_echo_crops as pc
 from zbuf_occlude.experiments import partial_echo_fit as pe
 from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
 from zbuf_occlude.experiments.sim2real.placement import CropPlacement
@@ -41,7 +42,7 @@ def folders(tmp_path_factory) -> tuple[Path, Path]:
             mesh.export(root / "meshes" / name / f"m{i}.obj")
     truth = pe.partial_echo_sensor(with_beam(lidar_preset("hdl32e"), range_noise_m=0.02), 0.2)
     near = CropPlacement.from_keywords({c: {"distance_m": (5.5, 9.0)} for c in shapes})
-    for c in pe.mesh_crops(find_class_meshes(root / "meshes"), truth, 3, 5, placement=near):
+    for c in pc.mesh_crops(find_class_meshes(root / "meshes"), truth, 3, 5, placement=near):
         folder = root / "scans" / c.class_name.title()
         folder.mkdir(parents=True, exist_ok=True)
         p = c.points_m

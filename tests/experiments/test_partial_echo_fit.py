@@ -11,6 +11,7 @@ import pytest
 import trimesh
 
 from zbuf_occlude.errors import InvalidInputError, UnsafePathError
+from zbuf_occlude.experiments import partial_echo_crops as pc
 from zbuf_occlude.experiments import partial_echo_fit as pe
 from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
 from zbuf_occlude.experiments.sim2real.placement import CropPlacement
@@ -39,7 +40,7 @@ def real_scans(root: Path, truth: float, *, crops: int, seed: int, sensor=None) 
     sensor = pe.partial_echo_sensor(sensor or lidar_preset("hdl32e"), truth)
     meshes = find_class_meshes(root)
     return [RealScan(c.points_m.astype(np.float32), c.class_name, str(root.parent / "real" / f"{c.mesh}_{c.crop}.csv"), "folder",
-                     points_sensor_m=c.points_m) for c in pe.mesh_crops(meshes, sensor, crops, seed, placement=NEAR)]  # fmt: skip
+                     points_sensor_m=c.points_m) for c in pc.mesh_crops(meshes, sensor, crops, seed, placement=NEAR)]  # fmt: skip
 
 
 def test_the_fit_recovers_the_threshold_the_scans_were_made_with(tmp_path: Path) -> None:
@@ -53,8 +54,8 @@ def test_the_fit_recovers_the_threshold_the_scans_were_made_with(tmp_path: Path)
     # within its bootstrap spread (about 0.15 with 20 scans: the outline share moves little between thresholds), and
     # within the search's step: the scans at 0.2 are the simulated crops at 0.2
     assert abs(e.value - 0.2) <= 2.0 * e.std and e.value == pytest.approx(0.2, abs=0.0125), e
-    lo, hi = pe.MATCHED_RANGE_M
-    assert r.classes == ("car", "pole") and r.skipped == {} and e.n == sum(lo <= pe.centroid_range_m(s.points_sensor_m) < hi for s in scans)
+    lo, hi = pc.MATCHED_RANGE_M
+    assert r.classes == ("car", "pole") and r.skipped == {} and e.n == sum(lo <= pc.centroid_range_m(s.points_sensor_m) < hi for s in scans)
     assert int(np.argmin(r.fit.objective)) == GRID.index(0.2)
     # the pole's outline moves with the threshold: the fit is not read off flat curves
     assert r.fit.simulated["pole"][-1] - r.fit.simulated["pole"][0] > 0.01
@@ -127,16 +128,16 @@ def test_a_link_out_of_the_meshes_folder_is_refused_and_a_fifo_named_like_a_mesh
 def test_a_crop_lost_at_one_threshold_leaves_every_thresholds_row(tmp_path: Path, monkeypatch) -> None:
     root = write_meshes(tmp_path / "meshes")
     scans = real_scans(root, 0.1, crops=2, seed=0)
-    drawn = pe.mesh_crops
+    drawn = pc.mesh_crops
 
     def losing_the_first(meshes, sensor, *args, **options):  # at 0.3, the first crop has too few returns
         crops = drawn(meshes, sensor, *args, **options)
         return crops[1:] if sensor.beam.min_echo_reflectance == 0.3 else crops
 
-    monkeypatch.setattr(pe, "mesh_crops", losing_the_first)
+    monkeypatch.setattr(pc, "mesh_crops", losing_the_first)
     r = pe.fit_partial_echoes(scans, lidar_preset("hdl32e"), root, crops_per_mesh=2, bootstrap=5, grid=(0.0, 0.3, 0.4), placement=NEAR)
     first = drawn(find_class_meshes(root), pe.partial_echo_sensor(lidar_preset("hdl32e"), 0.0), 2, 0, placement=NEAR)
-    near = [c for c in first if pe.MATCHED_RANGE_M[0] <= c.range_m < pe.MATCHED_RANGE_M[1]]
+    near = [c for c in first if pc.MATCHED_RANGE_M[0] <= c.range_m < pc.MATCHED_RANGE_M[1]]
     assert (first[0].mesh, first[0].crop) == (near[0].mesh, near[0].crop)  # the crop lost is one compared
     assert (
         sum(r.crops.values()) == len(near) - 1

@@ -9,15 +9,11 @@ their ring's scan line, :func:`~zbuf_occlude.experiments.realism_stats.outline_s
 same statistic of the meshes scanned at each threshold of a grid, and the threshold whose
 simulated medians meet the real ones (:func:`~zbuf_occlude.sensors.fit.partial_echoes.fit_min_echo_reflectance`).
 
-How the meshes are scanned is ``experiment sim2real``'s ``lidar`` set (:func:`mesh_crops`): its
-mesh folders (:func:`~zbuf_occlude.experiments.sim2real.meshes.find_class_meshes`), its
-placements (:class:`~zbuf_occlude.experiments.sim2real.placement.CropPlacement`, sensor 5-25 m
-away; each class's real size from :data:`~zbuf_occlude.mesh.sizes.CLASS_SIZES_M`) and its rule
-(a crop of fewer than :data:`~zbuf_occlude.experiments.sim2real.data.MIN_RETURNS` returns is
-dropped).  Crop ``k`` of a mesh has the same placement at every threshold, so the thresholds are
-compared on the same crops; a crop lost at some threshold (too few returns left) leaves every
-threshold's row.  Only scans whose centroid lies :data:`MATCHED_RANGE_M` away count, real and
-simulated: the outline share changes with range, and most real scans of every class lie there.
+The meshes are scanned as ``experiment sim2real``'s ``lidar`` set, and only scans whose centroid lies
+:data:`~zbuf_occlude.experiments.partial_echo_crops.MATCHED_RANGE_M` away count, real and simulated
+(:mod:`zbuf_occlude.experiments.partial_echo_crops`, which holds the crops, their placements and
+the outline share of each).  This module holds the fit: the beam it scans with, the fit from a
+folder of meshes or from meshes already loaded, its result, and the step ``fit-sensor --meshes`` runs.
 
 The beam (:func:`partial_echo_sensor`): the fitted sensor's, with a footprint where it has none
 (:func:`~zbuf_occlude.sensors.beam.footprint_changes`: :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS`
@@ -38,18 +34,14 @@ from __future__ import annotations
 import logging
 import math
 import os
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-from numpy.typing import NDArray
-
 from zbuf_occlude.defaults import MAX_SAMPLES
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.experiments.realism_stats import outline_share
-from zbuf_occlude.experiments.sim2real.data import MIN_RETURNS
+from zbuf_occlude.experiments.partial_echo_crops import MATCHED_RANGE_M, Say, matched_label, real_shares, simulated_shares
 from zbuf_occlude.experiments.sim2real.meshes import MeshEntry, find_class_meshes
 from zbuf_occlude.experiments.sim2real.placement import CropPlacement
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
@@ -65,15 +57,12 @@ if TYPE_CHECKING:
     from zbuf_occlude.sensors.lidar import Lidar
 
 __all__ = [
-    "MATCHED_RANGE_M", "SIMULATION_RANGE_RESOLUTION_M", "MeshCrop", "PartialEchoResult", "fit_partial_echoes",
-    "centroid_range_m", "fit_partial_echoes_to_meshes", "mesh_classes", "mesh_crops", "partial_echo_refine", "partial_echo_sensor",
+    "SIMULATION_RANGE_RESOLUTION_M", "PartialEchoResult", "fit_partial_echoes", "fit_partial_echoes_to_meshes", "mesh_classes",
+    "partial_echo_refine", "partial_echo_sensor",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
 
-#: The range bin, metres, [low, high), of the scans' centroids whose outline shares are compared: where most real
-#: scans of every class lie (LiDARNet's HDL-32E scans), near the low end of the crops' 5-25 m placements.
-MATCHED_RANGE_M = (5.0, 10.0)
 #: The least range between two echoes of one pulse where the beam gives none, metres: a 5 ns pulse's c·τ/2.  An
 #: assumption (Velodyne does not publish the HDL-32E's pulse length); with one return per pulse it only decides
 #: which sub-ray hits merge into one echo before the strongest is taken.
@@ -81,114 +70,9 @@ SIMULATION_RANGE_RESOLUTION_M = 0.75
 #: What ``fit-sensor`` calls the option that asks for this fit, named in its refusals.
 MESHES_OPTION = "--meshes"
 
-Say = Callable[[str], object]
-
 
 def _quiet(_: str) -> None:
     """A ``say`` that says nothing."""
-
-
-@dataclass(frozen=True)
-class MeshCrop:
-    """One simulated crop of a mesh: the object's returns of one placement (:func:`mesh_crops`).
-
-    Attributes
-    ----------
-    mesh : str
-        The mesh's name (:attr:`~zbuf_occlude.experiments.sim2real.meshes.MeshEntry.name`, ``car/sedan``).
-    class_name : str
-    crop : int
-        The crop's index ``k`` among the mesh's draws: its placement is the same for every sensor.
-    points_m : (N, 3) float64
-        The object's returns, sensor frame (sensor at the origin, z up), metres.
-    return_number, number_of_returns : (N,) uint8
-        Each return's number within its pulse and its pulse's returns (1 where the scan records none).
-    distance_m : float
-        The placement's horizontal distance from the sensor to the object, metres.
-    """
-
-    mesh: str
-    class_name: str
-    crop: int
-    points_m: NDArray[np.float64]
-    return_number: NDArray[np.uint8]
-    number_of_returns: NDArray[np.uint8]
-    distance_m: float
-
-    @property
-    def range_m(self) -> float:
-        """The range from the sensor to the returns' centroid, metres."""
-        return centroid_range_m(self.points_m)
-
-
-def centroid_range_m(points_m: NDArray[np.floating]) -> float:
-    """The range from the sensor (the origin) to the centroid of ``points_m`` (N, 3), metres."""
-    return float(np.linalg.norm(np.asarray(points_m, dtype=np.float64).mean(axis=0)))
-
-
-def mesh_crops(meshes: Sequence[MeshEntry], sensor: Lidar, crops_per_mesh: int, seed: int, *, placement: CropPlacement | None = None,
-               sizes: Mapping[str, SizeRange] = CLASS_SIZES_M) -> list[MeshCrop]:  # fmt: skip
-    """``experiment sim2real``'s ``lidar`` crops of every mesh, scanned by ``sensor``: up to ``crops_per_mesh`` each.
-
-    Per mesh, ``crops_per_mesh + max(1, crops_per_mesh // 5)`` placements are drawn
-    (:func:`~zbuf_occlude.sensors.crops.object_crops` with the mesh's name and ``seed``, from
-    ``placement``'s distributions and the class's size in ``sizes``); crops with fewer than
-    :data:`~zbuf_occlude.experiments.sim2real.data.MIN_RETURNS` returns of the object are dropped and
-    the first ``crops_per_mesh`` kept (a mesh with fewer is logged).  Crop ``k`` of a mesh is placed
-    by the same draw whatever the sensor, so crops of two sensors with the same ``(mesh, crop)`` are
-    paired.  Unlike sim2real, a mesh short of good crops is not drawn again under another name.
-
-    Parameters
-    ----------
-    meshes : sequence of MeshEntry
-        Loaded meshes with their class (:func:`~zbuf_occlude.experiments.sim2real.meshes.find_class_meshes`).
-    sensor : Lidar
-    crops_per_mesh : int
-        1 to :data:`~zbuf_occlude.defaults.MAX_SAMPLES`.
-    seed : int
-    placement : CropPlacement, optional
-        Default ``CropPlacement()``: :data:`~zbuf_occlude.experiments.sim2real.placement.LIDAR_PLACEMENT` for every class.
-    sizes : mapping of class name to SizeRange
-        The real size of each mesh's class (default :data:`~zbuf_occlude.mesh.sizes.CLASS_SIZES_M`).
-
-    Returns
-    -------
-    list of MeshCrop
-        Mesh by mesh in ``meshes``' order, each mesh's crops by ``k``.
-
-    Raises
-    ------
-    InvalidInputError
-        ``crops_per_mesh`` out of range, a mesh whose class has no size in ``sizes`` (naming both).
-    """
-    from zbuf_occlude.sensors.crops import object_crops
-
-    crops_per_mesh = count(crops_per_mesh, "crops_per_mesh", low=1, high=MAX_SAMPLES)
-    placement = CropPlacement() if placement is None else placement
-    out = []
-    for entry in meshes:
-        if entry.class_name not in sizes:
-            raise InvalidInputError(f"{entry.name}: class {entry.class_name!r} has no real size (sizes: {sorted(sizes)})")
-        dist, _ = placement.crop_distributions(entry, sizes[entry.class_name])
-        kept = 0
-        drawn = crops_per_mesh + max(1, crops_per_mesh // 5)
-        for k, crop, _ in object_crops(entry.mesh, sensor, dist, name=entry.name, n_samples=drawn, seed=seed, class_name=entry.class_name):
-            scan = crop.scan.select(crop.scan.object_id != 0)  # the object's returns (no ground margin: all of them)
-            if len(scan) < MIN_RETURNS:
-                continue
-            ones = np.ones(len(scan), dtype=np.uint8)
-            out.append(MeshCrop(
-                entry.name, entry.class_name, k, scan.points.astype(np.float64),
-                ones if scan.return_number is None else scan.return_number,
-                ones if scan.number_of_returns is None else scan.number_of_returns,
-                float(crop.placement.distance_m),
-            ))  # fmt: skip
-            kept += 1
-            if kept == crops_per_mesh:
-                break
-        if kept < crops_per_mesh:
-            log.warning("%s: %d of %d crops with >= %d returns", entry.name, kept, crops_per_mesh, MIN_RETURNS)
-    return out
 
 
 def partial_echo_sensor(sensor: Lidar, min_echo_reflectance: float | None = None) -> Lidar:
@@ -231,7 +115,8 @@ class PartialEchoResult:
     classes : tuple of str
         The classes fitted on.
     skipped : dict of str to str
-        Each class left out, and why (no meshes, no real scans, none at :data:`MATCHED_RANGE_M`, ...).
+        Each class left out, and why (no meshes, no real scans, none at
+        :data:`~zbuf_occlude.experiments.partial_echo_crops.MATCHED_RANGE_M`, ...).
     crops : dict of str to int
         Per class fitted, the simulated crops compared (the same at every threshold).
     crops_per_mesh, seed : int
@@ -271,53 +156,6 @@ class PartialEchoResult:
                 "footprint_rays": b.footprint_rays, "divergence_deg": b.divergence_deg, "return_mode": b.return_mode}  # fmt: skip
 
 
-def _label(scan_label: str, classes: Sequence[str]) -> str:
-    """A real scan's class among ``classes``: its label, or the label in lower case (LiDARNet's ``Car`` folders
-    hold ``car``), as ``experiment sim2real`` matches them; the label itself when neither is one."""
-    return scan_label if scan_label in classes or scan_label.lower() not in classes else scan_label.lower()
-
-
-def _in_window(range_m: float) -> bool:
-    lo, hi = MATCHED_RANGE_M
-    return lo <= range_m < hi
-
-
-def _real_shares(scans: Sequence[RealScan], classes: Sequence[str]) -> dict[str, list[float]]:
-    """Per class of ``classes``, the outline shares of its real scans at :data:`MATCHED_RANGE_M`."""
-    out: dict[str, list[float]] = {c: [] for c in classes}
-    for s in scans:
-        label = _label(s.label, classes)
-        if label not in out:
-            continue
-        if s.points_sensor_m is None or len(s.points_sensor_m) == 0:
-            raise InvalidInputError(f"{s.source}: no sensor-frame points (the outline share needs the sensor at the origin)")
-        points = np.asarray(s.points_sensor_m, dtype=np.float64)
-        if _in_window(centroid_range_m(points)):
-            out[label].append(outline_share(points))
-    return out
-
-
-def _simulated_shares(meshes: Sequence[MeshEntry], base: Lidar, grid: Sequence[float], classes: Sequence[str], *, crops_per_mesh: int,
-                      seed: int, placement: CropPlacement | None, sizes: Mapping[str, SizeRange],
-                      say: Say) -> dict[float, dict[str, list[float]]]:  # fmt: skip
-    """Per threshold of ``grid``, per class, the outline shares of the same crops: those at :data:`MATCHED_RANGE_M` at the
-    first threshold, less any lost (too few returns) at another."""
-    import time
-
-    shares: dict[float, dict[tuple[str, int], float]] = {}
-    keys: list[tuple[str, int, str]] | None = None
-    for tau in grid:
-        t = time.perf_counter()
-        crops = mesh_crops(meshes, with_beam(base, min_echo_reflectance=tau), crops_per_mesh, seed, placement=placement, sizes=sizes)
-        if keys is None:  # the crops compared: those in range at the first threshold, looked up by (mesh, crop) at the others
-            keys = [(c.mesh, c.crop, c.class_name) for c in crops if _in_window(c.range_m)]
-        wanted = {(m, k) for m, k, _ in keys}
-        shares[tau] = {(c.mesh, c.crop): outline_share(c.points_m) for c in crops if (c.mesh, c.crop) in wanted}
-        say(f"threshold {tau:g}: {len(crops)} crops in {time.perf_counter() - t:.0f} s")
-    keys = [key for key in keys or [] if all((key[0], key[1]) in shares[tau] for tau in grid)]  # a lost crop leaves every row
-    return {tau: {c: [shares[tau][(m, k)] for m, k, cls in keys if cls == c] for c in classes} for tau in grid}
-
-
 def fit_partial_echoes_to_meshes(scans: Sequence[RealScan], sensor: Lidar, meshes: Sequence[MeshEntry], *, crops_per_mesh: int = 4,
                                  seed: int = 0, bootstrap: int = BOOTSTRAP, grid: Sequence[float] = FIT_GRID,
                                  placement: CropPlacement | None = None, sizes: Mapping[str, SizeRange] = CLASS_SIZES_M,
@@ -334,7 +172,7 @@ def fit_partial_echoes_to_meshes(scans: Sequence[RealScan], sensor: Lidar, meshe
         (:func:`partial_echo_sensor`).
     meshes : sequence of MeshEntry
     crops_per_mesh, seed, placement, sizes
-        :func:`mesh_crops`'s (the seed also seeds the bootstrap).
+        :func:`~zbuf_occlude.experiments.partial_echo_crops.mesh_crops`'s (the seed also seeds the bootstrap).
     bootstrap : int
         Resamples of the fit's bootstrap (:func:`~zbuf_occlude.sensors.fit.partial_echoes.fit_min_echo_reflectance`).
     grid : sequence of float
@@ -350,15 +188,16 @@ def fit_partial_echoes_to_meshes(scans: Sequence[RealScan], sensor: Lidar, meshe
     ------
     InvalidInputError
         A sensor :func:`partial_echo_sensor` refuses (before anything is scanned); a real scan without sensor-frame points;
-        no class left with real scans and crops at :data:`MATCHED_RANGE_M` (naming each class and why); what
-        :func:`mesh_crops` and :func:`~zbuf_occlude.sensors.fit.partial_echoes.fit_min_echo_reflectance` refuse.
+        no class left with real scans and crops at :data:`~zbuf_occlude.experiments.partial_echo_crops.MATCHED_RANGE_M`
+        (naming each class and why); what :func:`~zbuf_occlude.experiments.partial_echo_crops.mesh_crops` and
+        :func:`~zbuf_occlude.sensors.fit.partial_echoes.fit_min_echo_reflectance` refuse.
     """
     say = say or _quiet
     base = partial_echo_sensor(sensor)
     crops_per_mesh = count(crops_per_mesh, "crops_per_mesh", low=1, high=MAX_SAMPLES)
     classes = sorted({m.class_name for m in meshes})
     _check_sizes(classes, sizes)
-    real = _real_shares(scans, classes)
+    real = real_shares(scans, classes)
     skipped = {c: f"no real scan {MATCHED_RANGE_M[0]:g}-{MATCHED_RANGE_M[1]:g} m away" for c in classes if not real[c]}
     fitted = [c for c in classes if c not in skipped]
     if not fitted:
@@ -369,7 +208,7 @@ def fit_partial_echoes_to_meshes(scans: Sequence[RealScan], sensor: Lidar, meshe
     grid = sorted(float(t) for t in grid)
     say(f"fitting the partial echoes: {len(meshes)} meshes of {', '.join(fitted)}, {crops_per_mesh} crop{'s' * (crops_per_mesh != 1)} each, at {len(grid)} "
         f"thresholds; {sum(len(real[c]) for c in fitted)} real scans {MATCHED_RANGE_M[0]:g}-{MATCHED_RANGE_M[1]:g} m away ...")  # fmt: skip
-    simulated = _simulated_shares(meshes, base, grid, fitted, crops_per_mesh=crops_per_mesh, seed=seed, placement=placement, sizes=sizes,
+    simulated = simulated_shares(meshes, base, grid, fitted, crops_per_mesh=crops_per_mesh, seed=seed, placement=placement, sizes=sizes,
                                   say=say)  # fmt: skip
     first = simulated[grid[0]]
     for c in fitted:
@@ -446,7 +285,8 @@ def fit_partial_echoes(scans: Sequence[RealScan], sensor: Lidar, meshes: str | o
         (:func:`~zbuf_occlude.experiments.sim2real.meshes.find_class_meshes`: byte-identical files dropped;
         two classes or more shared with the scans, two meshes or more each).
     crops_per_mesh : int
-        Crops of each mesh at each threshold (:func:`mesh_crops`), 1 to :data:`~zbuf_occlude.defaults.MAX_SAMPLES`.
+        Crops of each mesh at each threshold (:func:`~zbuf_occlude.experiments.partial_echo_crops.mesh_crops`), 1 to
+        :data:`~zbuf_occlude.defaults.MAX_SAMPLES`.
     seed : int
         Seeds the crops' draws and the bootstrap.
     bootstrap : int
@@ -479,7 +319,7 @@ def fit_partial_echoes(scans: Sequence[RealScan], sensor: Lidar, meshes: str | o
     partial_echo_sensor(sensor)  # refused before any mesh is read
     crops_per_mesh = count(crops_per_mesh, "crops_per_mesh", low=1, high=MAX_SAMPLES)
     folders = mesh_classes(meshes)
-    labels = sorted({_label(s.label, folders) for s in scans})
+    labels = sorted({matched_label(s.label, folders) for s in scans})
     shared = [c for c in folders if c in labels]
     if not shared:
         raise InvalidInputError(f"{MESHES_OPTION} {meshes} and {_real_folder(scans)} share no class: meshes of {folders or 'none'}, "

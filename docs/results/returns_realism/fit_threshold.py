@@ -9,7 +9,7 @@ fits to) is used here; the scored half is not read beyond the split.  On the fit
 
 1. the HDL-32E preset is fitted as ``experiment sim2real --fit-sensor`` fits it
    (``sensor_fit.fit_to_scans``: firing rate, range noise, dropout and its growth with range);
-2. the ``lidar`` set's crops of every mesh (``partial_echo_fit.mesh_crops``: sim2real's placements and rule)
+2. the ``lidar`` set's crops of every mesh (``partial_echo_crops.mesh_crops``: sim2real's placements and rule)
    are scanned by the fitted sensor with a 7-sub-ray footprint over the data sheet's 0.16°
    divergence and Velodyne's strongest-return mode (the mode the real set was recorded in: its
    points share no direction with another point; ``partial_echo_fit.partial_echo_sensor``), at each
@@ -40,7 +40,8 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from measure import CLASSES, per_crop, sim_crops  # noqa: E402
 
-from zbuf_occlude.experiments.partial_echo_fit import MATCHED_RANGE_M, fit_partial_echoes_to_meshes, partial_echo_sensor  # noqa: E402
+from zbuf_occlude.experiments.partial_echo_crops import MATCHED_RANGE_M  # noqa: E402
+from zbuf_occlude.experiments.partial_echo_fit import fit_partial_echoes_to_meshes, partial_echo_sensor  # noqa: E402
 from zbuf_occlude.experiments.sensor_fit import fit_to_scans  # noqa: E402
 from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes  # noqa: E402
 from zbuf_occlude.experiments.sim2real.real import real_halves, real_scan_rows  # noqa: E402
