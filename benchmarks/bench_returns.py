@@ -25,7 +25,9 @@ picks the spinning ones, ``--no-airborne`` leaves the airborne one out:
   them, against the same scanner with one ray and one return (``footprint_rays=1,
   max_returns=1, range_resolution_m=0``: the ideal beam's geometry, the preset's noise).
 
-In the turn and airborne families each multi-return case is also run with
+``--echo-rules chain,waveform`` runs every multi-return case once per echo rule
+(``Beam.echo_rule``: the chain of hits, or the peaks of the pulse's waveform; default chain alone),
+the waveform's cases named so.  In the turn and airborne families each multi-return case is also run with
 ``footprint="adaptive"`` (:mod:`zbuf_occlude.sensors.adaptive_footprint`: sub-rays cast only
 where a footprint may hold two surfaces), and the table gives the share of pulses whose sub-rays
 were not cast (the scan's ``footprint_uniform_share``).
@@ -50,6 +52,7 @@ of the multi-return path goes (Embree, the sub-ray directions, the exact ranges,
     .venv/bin/python benchmarks/bench_returns.py --scene turn --repeats 9 --ks 7,19
     .venv/bin/python benchmarks/bench_returns.py --scene turn --ks 7 --no-airborne --profile
     .venv/bin/python benchmarks/bench_returns.py --blas-threads 0      # BLAS threads as the environment sets them
+    .venv/bin/python benchmarks/bench_returns.py --scene turn --echo-rules chain,waveform   # the two echo rules side by side
 """
 
 from __future__ import annotations
@@ -127,18 +130,23 @@ def _cast_alone(scene: ScanScene, lidar: Lidar, sector: tuple[float, float]) -> 
     return len(d_sensor)
 
 
-def _sector_cases(args, ks: list[int]) -> list[Case]:
+def _rule_name(rule: str) -> str:
+    """What a case's name says of its echo rule: nothing for the chain rule (the default)."""
+    return "" if rule == "chain" else f", {rule}"
+
+
+def _sector_cases(args, ks: list[int], rules: list[str]) -> list[Case]:
     scene = ScanScene().add(args.mesh, class_name="bush", position_m=(SECTOR_DISTANCE_M, 0.0), size_m=SECTOR_SIZE_M)
     hdl = Lidar.preset("hdl32e")
     sector = (-args.sector, args.sector)
     cases = [Case("sector", "hdl32e: 1 ray, 1 return", lambda seed: scan(scene, hdl, seed=seed, azimuth_range_deg=sector))]
-    for k in ks:
-        lidar = with_beam(hdl, footprint_rays=k, **SECTOR_MULTI)
-        head = f"hdl32e: {k} sub-rays, {SECTOR_MULTI['max_returns']} returns"
+    for k, rule in ((k, rule) for k in ks for rule in rules if k > 1 or rule == "chain"):
+        lidar = with_beam(hdl, footprint_rays=k, echo_rule=rule, **SECTOR_MULTI)
+        head = f"hdl32e: {k} sub-rays, {SECTOR_MULTI['max_returns']} returns{_rule_name(rule)}"
         cases.append(Case("sector", f"{head}, opaque", lambda seed, s=lidar: scan(scene, s, seed=seed, azimuth_range_deg=sector), k, True))
         run = lambda seed, s=lidar: scan(scene, s, seed=seed, azimuth_range_deg=sector, transmittance="table")  # noqa: E731
         cases.append(Case("sector", f"{head}, transmittance", run, k))
-        if k == DEFAULT_K:  # the floor: the sub-rays cast, no echoes
+        if k == DEFAULT_K and rule == rules[0]:  # the floor: the sub-rays cast, no echoes
             cases.append(
                 Case("sector", f"hdl32e: {k} sub-rays: directions and cast alone", lambda seed, s=lidar: _cast_alone(scene, s, sector), k)
             )
@@ -153,27 +161,28 @@ def _objects_scene() -> ScanScene:
     return scene
 
 
-def _turn_cases(ks: list[int]) -> list[Case]:
+def _turn_cases(ks: list[int], rules: list[str]) -> list[Case]:
     scene = _objects_scene()
     hdl = Lidar.preset("hdl32e")
     cases = [Case("turn", "hdl32e: 1 ray, 1 return", lambda seed: scan(scene, hdl, seed=seed))]
-    for k in ks:
-        lidar = with_beam(hdl, footprint_rays=k, **TURN_MULTI)
+    for k, rule in ((k, rule) for k in ks for rule in rules):
+        lidar = with_beam(hdl, footprint_rays=k, echo_rule=rule, **TURN_MULTI)
         for kw in ({}, {"footprint": "adaptive"}):
-            name = f"hdl32e: {k} sub-rays, {TURN_MULTI['max_returns']} returns{', adaptive' if kw else ''}"
+            name = f"hdl32e: {k} sub-rays, {TURN_MULTI['max_returns']} returns{_rule_name(rule)}{', adaptive' if kw else ''}"
             cases.append(Case("turn", name, lambda seed, s=lidar, kw=kw: scan(scene, s, seed=seed, **kw), k, not kw))
     return cases
 
 
-def _airborne_cases(half_size_m: float) -> list[Case]:
+def _airborne_cases(half_size_m: float, rules: list[str]) -> list[Case]:
     scene = _objects_scene()
     q1560 = airborne_preset("riegl-q1560")
     one = with_beam(q1560, footprint_rays=1, max_returns=1, range_resolution_m=0.0)
     cases = [Case("airborne", "riegl-q1560: 1 ray, 1 return", lambda seed: scan_airborne(scene, one, half_size_m=half_size_m, seed=seed))]
     k = q1560.beam.footprint_rays
-    for kw in ({}, {"footprint": "adaptive"}):
-        name = f"riegl-q1560: {k} sub-rays, {q1560.beam.max_returns} returns{', adaptive' if kw else ''}"
-        run = lambda seed, kw=kw: scan_airborne(scene, q1560, half_size_m=half_size_m, seed=seed, **kw)  # noqa: E731
+    for rule, kw in ((rule, kw) for rule in rules for kw in ({}, {"footprint": "adaptive"})):
+        scanner = with_beam(q1560, echo_rule=rule)
+        name = f"riegl-q1560: {k} sub-rays, {q1560.beam.max_returns} returns{_rule_name(rule)}{', adaptive' if kw else ''}"
+        run = lambda seed, kw=kw, s=scanner: scan_airborne(scene, s, half_size_m=half_size_m, seed=seed, **kw)  # noqa: E731
         cases.append(Case("airborne", name, run, k, not kw))
     return cases
 
@@ -181,12 +190,13 @@ def _airborne_cases(half_size_m: float) -> list[Case]:
 def _cases(args) -> list[Case]:
     """Every case of the run, family by family; a family's first case is its first-return reference."""
     scenes = ("sector", "turn") if args.scene == "all" else (args.scene,)
+    rules = [v for v in args.echo_rules.split(",") if v]
     cases: list[Case] = []
     for family in scenes:
         ks = [int(v) for v in (args.ks or DEFAULT_KS[family]).split(",") if v]
-        cases += _sector_cases(args, ks) if family == "sector" else _turn_cases(ks)
+        cases += _sector_cases(args, ks, rules) if family == "sector" else _turn_cases(ks, rules)
     if args.airborne:
-        cases += _airborne_cases(args.half_size)
+        cases += _airborne_cases(args.half_size, rules)
     return cases
 
 
@@ -231,6 +241,7 @@ def main(argv: list[str] | None = None) -> None:
     )
     ap.add_argument("--sector", type=float, default=20.0, help="sector: half-width of the fired azimuth sector, degrees")
     ap.add_argument("--half-size", type=float, default=25.0, help="airborne: half-size of the square scanned, metres")
+    ap.add_argument("--echo-rules", default="chain", help="echo rules of the multi-return cases, chain and/or waveform (default: chain)")
     ap.add_argument("--blas-threads", type=int, default=1, help="numpy's BLAS threads (0: as the environment sets them)")
     ap.add_argument("--profile", action="store_true", help="then profile the default footprint's opaque scan (cProfile)")
     ap.add_argument("--profile-lines", type=int, default=25, help="calls --profile prints")

@@ -88,7 +88,7 @@ def test_returns_benchmark_prints_every_family(capsys):
     import bench_returns as bench
 
     bench.main(["--repeats", "1", "--ks", "7", "--sector", "5", "--half-size", "5", "--mesh", str(bench.FALLBACK), "--profile",
-                "--profile-lines", "3"])  # fmt: skip
+                "--profile-lines", "3", "--echo-rules", "chain,waveform"])  # fmt: skip
     out = capsys.readouterr().out
     rows = {tuple(cell.strip() for cell in line.split("|")[1:3]): line.split("|") for line in out.splitlines() if line.startswith("| ")}
     for family, name in [
@@ -102,6 +102,10 @@ def test_returns_benchmark_prints_every_family(capsys):
         ("airborne", "riegl-q1560: 1 ray, 1 return"),
         ("airborne", "riegl-q1560: 19 sub-rays, 15 returns"),
         ("airborne", "riegl-q1560: 19 sub-rays, 15 returns, adaptive"),
+        ("sector", "hdl32e: 7 sub-rays, 4 returns, waveform, opaque"),
+        ("turn", "hdl32e: 7 sub-rays, 2 returns, waveform"),
+        ("turn", "hdl32e: 7 sub-rays, 2 returns, waveform, adaptive"),
+        ("airborne", "riegl-q1560: 19 sub-rays, 15 returns, waveform"),
     ]:
         assert (family, name) in rows, (family, name, out)
     for family in ("sector", "turn", "airborne"):  # the reference: its own ratio
