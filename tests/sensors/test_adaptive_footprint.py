@@ -203,15 +203,18 @@ def _scene_and_pulses(sector=(-40.0, 40.0)):
     return scene.build(), scene.default_sensor_pose(), sector
 
 
-@pytest.mark.parametrize(("k", "power_noise"), [(7, 0.0), (19, 0.0), (7, 0.3)])
-def test_adaptive_echoes_against_the_full_model(k, power_noise) -> None:
+@pytest.mark.parametrize(
+    ("k", "power_noise", "echo_rule"), [(7, 0.0, "chain"), (19, 0.0, "chain"), (7, 0.3, "chain"), (19, 0.0, "waveform")]
+)
+def test_adaptive_echoes_against_the_full_model(k, power_noise, echo_rule) -> None:
     built, pose, sector = _scene_and_pulses()
-    lidar = with_beam(_lidar(k, divergence_deg=0.16), power_noise=power_noise, detection_threshold=1e-5)
+    lidar = with_beam(_lidar(k, divergence_deg=0.16), power_noise=power_noise, detection_threshold=1e-5, echo_rule=echo_rule)
     beam, pulses = lidar.beam, lidar.pulses(pose, sector)
     rho = np.full(len(built.mesh.faces), 0.5)
     rays = beam.footprint_directions(pulses.directions).reshape(-1, 3)
     face, t = cast_embree(built.mesh, pulses.origins, rays)
-    rules = {"range_resolution_m": RESOLUTION, "max_returns": 2, "range_limits_m": (beam.min_range_m, beam.max_range_m)}
+    rules = {"range_resolution_m": RESOLUTION, "max_returns": 2, "range_limits_m": (beam.min_range_m, beam.max_range_m),
+             "echo_rule": echo_rule}  # fmt: skip
 
     def radiometry() -> Radiometry:
         return Radiometry(rho, 1e-5, power_noise, np.random.default_rng(1))
