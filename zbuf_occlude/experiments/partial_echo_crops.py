@@ -32,6 +32,7 @@ from zbuf_occlude.experiments.realism_stats import outline_share
 from zbuf_occlude.experiments.sim2real.data import MIN_RETURNS
 from zbuf_occlude.experiments.sim2real.meshes import MeshEntry
 from zbuf_occlude.experiments.sim2real.placement import CropPlacement
+from zbuf_occlude.experiments.sim2real.real import real_label
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
 from zbuf_occlude.sensors.checks import count
 from zbuf_occlude.sensors.kinds import with_beam
@@ -41,7 +42,7 @@ if TYPE_CHECKING:
     from zbuf_occlude.sensors.lidar import Lidar
 
 __all__ = [
-    "MATCHED_RANGE_M", "MeshCrop", "Say", "centroid_range_m", "matched_label", "mesh_crops", "real_shares", "simulated_shares",
+    "MATCHED_RANGE_M", "MeshCrop", "Say", "centroid_range_m", "mesh_crops", "real_shares", "simulated_shares",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -156,12 +157,6 @@ def mesh_crops(meshes: Sequence[MeshEntry], sensor: Lidar, crops_per_mesh: int, 
     return out
 
 
-def matched_label(scan_label: str, classes: Sequence[str]) -> str:
-    """A real scan's class among ``classes``: its label, or the label in lower case (LiDARNet's ``Car`` folders
-    hold ``car``), as ``experiment sim2real`` matches them; the label itself when neither is one."""
-    return scan_label if scan_label in classes or scan_label.lower() not in classes else scan_label.lower()
-
-
 def _in_window(range_m: float) -> bool:
     lo, hi = MATCHED_RANGE_M
     return lo <= range_m < hi
@@ -174,7 +169,8 @@ def real_shares(scans: Sequence[RealScan], classes: Sequence[str]) -> dict[str, 
     ----------
     scans : sequence of RealScan
         Real object scans with ``label`` and ``points_sensor_m`` ((N, 3) float64, sensor at the origin, z up, metres);
-        a scan whose label is no class of ``classes`` (:func:`matched_label`) is passed over.
+        a scan whose label is no class of ``classes`` (:func:`~zbuf_occlude.experiments.sim2real.real.real_label`) is
+        passed over.
     classes : sequence of str
 
     Returns
@@ -190,7 +186,7 @@ def real_shares(scans: Sequence[RealScan], classes: Sequence[str]) -> dict[str, 
     """
     out: dict[str, list[float]] = {c: [] for c in classes}
     for s in scans:
-        label = matched_label(s.label, classes)
+        label = real_label(s.label, classes)
         if label not in out:
             continue
         if s.points_sensor_m is None or len(s.points_sensor_m) == 0:

@@ -19,8 +19,8 @@ The beam (:func:`partial_echo_sensor`): the fitted sensor's, with a footprint wh
 (:func:`~zbuf_occlude.sensors.beam.footprint_changes`: :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS`
 sub-rays over the beam's data-sheet divergence; a beam without a divergence is refused), and
 **one return per pulse, the strongest** (Velodyne's strongest-return mode).  That is an
-assumption about the real scans, not read from them: LiDARNet's and SUO's scans hold one point
-per pulse (no two points share a direction), recorded in the HDL-32E's default strongest mode.
+assumption about the real scans, not read from them: LiDARNet's HDL-32E scans hold one point per
+pulse (almost no two points share a direction), as the device's default strongest mode records.
 Scans recorded in last-return or dual mode need another fit.
 
 The fitted threshold is written as fitted, not rounded to a coarser step: a multiple of the
@@ -35,15 +35,16 @@ import logging
 import math
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from zbuf_occlude.defaults import MAX_SAMPLES
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.experiments.partial_echo_crops import MATCHED_RANGE_M, Say, matched_label, real_shares, simulated_shares
+from zbuf_occlude.experiments.partial_echo_crops import MATCHED_RANGE_M, Say, real_shares, simulated_shares
 from zbuf_occlude.experiments.sim2real.meshes import MeshEntry, find_class_meshes
 from zbuf_occlude.experiments.sim2real.placement import CropPlacement
+from zbuf_occlude.experiments.sim2real.real import real_label
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
 from zbuf_occlude.sensors.beam import footprint_changes
 from zbuf_occlude.sensors.checks import count
@@ -319,7 +320,7 @@ def fit_partial_echoes(scans: Sequence[RealScan], sensor: Lidar, meshes: str | o
     partial_echo_sensor(sensor)  # refused before any mesh is read
     crops_per_mesh = count(crops_per_mesh, "crops_per_mesh", low=1, high=MAX_SAMPLES)
     folders = mesh_classes(meshes)
-    labels = sorted({matched_label(s.label, folders) for s in scans})
+    labels = sorted({real_label(s.label, folders) for s in scans})
     shared = [c for c in folders if c in labels]
     if not shared:
         raise InvalidInputError(f"{MESHES_OPTION} {meshes} and {_real_folder(scans)} share no class: meshes of {folders or 'none'}, "
@@ -332,8 +333,7 @@ def fit_partial_echoes(scans: Sequence[RealScan], sensor: Lidar, meshes: str | o
     entries = find_class_meshes(meshes, up=up, up_map=dict(up_map or {}), classes=shared)
     result = fit_partial_echoes_to_meshes(scans, sensor, entries, crops_per_mesh=crops_per_mesh, seed=seed, bootstrap=bootstrap,
                                           grid=grid, placement=placement, sizes=sizes, say=say)  # fmt: skip
-    return PartialEchoResult(result.fit, result.sensor, result.classes, {**skipped, **result.skipped}, result.crops, result.crops_per_mesh,
-                             result.seed)  # fmt: skip
+    return replace(result, skipped={**skipped, **result.skipped})
 
 
 def partial_echo_refine(meshes: str | os.PathLike, *, crops_per_mesh: int = 4, seed: int = 0, up: str = "auto",

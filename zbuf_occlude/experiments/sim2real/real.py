@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
-from collections.abc import Sequence
+from collections.abc import Container, Mapping, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.learn.data import normalize_batch, resample
 
-__all__ = ["KEEP_SCALE_UNIT_M", "real_clouds", "real_scan_rows", "scan_key", "real_halves"]
+__all__ = ["KEEP_SCALE_UNIT_M", "real_clouds", "real_label", "real_scan_rows", "scan_key", "real_halves"]
 
 log = logging.getLogger(__name__)
 
@@ -26,15 +26,18 @@ log = logging.getLogger(__name__)
 KEEP_SCALE_UNIT_M = 10.0
 
 
-def _real_label(scan, index: dict[str, int], label_map: dict[str, str]) -> str:
-    label = label_map.get(scan.label, scan.label)
-    return label if label in index else label.lower()
+def real_label(label: str, names: Container[str], label_map: Mapping[str, str] | None = None) -> str:
+    """A real scan's class among ``names``: its label (renamed by ``label_map``), or that in lower case where the label
+    itself is none of them (LiDARNet's ``Car`` folders hold ``car``).  A label that is no class either way comes back in
+    lower case."""
+    label = (label_map or {}).get(label, label)
+    return label if label in names else label.lower()
 
 
 def real_scan_rows(scans, names: list[str], label_map: dict[str, str]) -> list[int]:
     """Indices into ``scans`` of the scans :func:`real_clouds` keeps (a label among ``names``), in its order."""
     index = {n: i for i, n in enumerate(names)}
-    return [i for i, s in enumerate(scans) if _real_label(s, index, label_map) in index]
+    return [i for i, s in enumerate(scans) if real_label(s.label, index, label_map) in index]
 
 
 def scan_key(points: NDArray, seed: int = 0) -> int:
@@ -101,7 +104,7 @@ def real_clouds(scans, names: list[str], label_map: dict[str, str], n_points: in
     index = {n: i for i, n in enumerate(names)}
     pts, labels, sources, dropped = [], [], [], {}
     for s in scans:
-        label = _real_label(s, index, label_map)
+        label = real_label(s.label, index, label_map)
         if label not in index:
             dropped[s.label] = dropped.get(s.label, 0) + 1
             continue
