@@ -115,3 +115,13 @@ def test_a_link_out_of_the_meshes_folder_is_one_line_before_any_scan_is_read(tmp
     code, _, err = _run(["fit-sensor", str(tmp_path / "scans"), "--sensor", "hdl32e", "--meshes", str(tmp_path / "meshes"), "--out",
                          str(tmp_path / "f.json")], capsys)  # fmt: skip
     assert code == 2 and "evil.obj" in err and len(err.splitlines()) == 1 and "Traceback" not in err
+
+
+def test_a_users_file_at_out_is_refused_and_left_as_it_is_before_a_mesh_is_scanned(folders, tmp_path: Path, capsys, monkeypatch) -> None:
+    scans, meshes = folders
+    out = tmp_path / "fitted.json"
+    out.write_bytes(b'{"mine": true}')
+    monkeypatch.setattr(pc, "mesh_crops", lambda *a, **k: pytest.fail("a mesh was scanned before --out was checked"))
+    code, _, err = _run(["fit-sensor", str(scans), "--sensor", "hdl32e", "--meshes", str(meshes), "--out", str(out)], capsys)
+    assert code == 2 and str(out) in err and "not recorded by a run of ours" in err and len(err.splitlines()) == 1, err
+    assert out.read_bytes() == b'{"mine": true}' and sorted(p.name for p in tmp_path.iterdir()) == ["fitted.json"]
