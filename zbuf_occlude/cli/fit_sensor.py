@@ -49,15 +49,11 @@ def _refine(args: argparse.Namespace, say):
         if given:
             raise InvalidInputError(f"{', '.join(given)}: for the partial echoes' fit, which --meshes FOLDER asks for")
         return None
-    from zbuf_occlude.cli.sim2real import parse_pairs
+    from zbuf_occlude.cli.sim2real import parse_up_map
     from zbuf_occlude.experiments.partial_echo_fit import partial_echo_refine
-    from zbuf_occlude.mesh.scene import UP_CHOICES
     from zbuf_occlude.mesh.sizes import parse_sizes
 
-    up_map = parse_pairs(args.up_map, "--up-map")
-    bad = {k: v for k, v in up_map.items() if v not in UP_CHOICES}
-    if bad:
-        raise InvalidInputError(f"--up-map: axis must be one of {', '.join(UP_CHOICES)}, got {bad}")
+    up_map = parse_up_map(args.up_map)
     crops = DEFAULT_CROPS_PER_MESH if args.crops_per_mesh is None else args.crops_per_mesh
     return partial_echo_refine(args.meshes, crops_per_mesh=crops, seed=args.seed, up=args.up or "auto", up_map=up_map,
                                sizes=parse_sizes(args.sizes), say=say)  # fmt: skip

@@ -17,7 +17,7 @@ from zbuf_occlude.io.caps import MAX_TABLE_BYTES
 from zbuf_occlude.io.regular_files import read_text_file
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 
-__all__ = ["add_sim2real_parser", "parse_pairs"]
+__all__ = ["add_sim2real_parser", "parse_pairs", "parse_up_map"]
 
 
 def parse_pairs(text: str | None, option: str) -> dict[str, str]:
@@ -31,6 +31,18 @@ def parse_pairs(text: str | None, option: str) -> dict[str, str]:
         key, value = item.split("=", 1)
         out[key.strip()] = value.strip()
     return out
+
+
+def parse_up_map(text: str | None) -> dict[str, str]:
+    """``--up-map GLOB=AXIS,...`` → ``{glob: axis}``, each axis one of :data:`~zbuf_occlude.mesh.scene.UP_CHOICES`;
+    InvalidInputError naming the option and the pairs that are not."""
+    from zbuf_occlude.mesh.scene import UP_CHOICES
+
+    up_map = parse_pairs(text, "--up-map")
+    bad = {k: v for k, v in up_map.items() if v not in UP_CHOICES}
+    if bad:
+        raise InvalidInputError(f"--up-map: axis must be one of {', '.join(UP_CHOICES)}, got {bad}")
+    return up_map
 
 
 #: The flag of each :class:`~zbuf_occlude.experiments.sim2real.Sim2RealConfig` field, for its messages.
@@ -48,13 +60,9 @@ def _run(args: argparse.Namespace) -> int:
     # the counts and --out were checked while parsing (cli.options); the device before any rendering
     check_device(args.device)
     from zbuf_occlude.experiments.sim2real import Sim2RealConfig, run_sim2real
-    from zbuf_occlude.mesh.scene import UP_CHOICES
     from zbuf_occlude.mesh.sizes import parse_sizes
 
-    up_map = parse_pairs(args.up_map, "--up-map")
-    bad = {k: v for k, v in up_map.items() if v not in UP_CHOICES}
-    if bad:
-        raise InvalidInputError(f"--up-map: axis must be one of {', '.join(UP_CHOICES)}, got {bad}")
+    up_map = parse_up_map(args.up_map)
     real_options = {"dataset": args.real_format, "up": args.real_up, "units": args.real_units}
     config = Sim2RealConfig(
         args.root, args.real, model=args.model, sensor=args.sensor, scale=args.scale, points=args.points, epochs=args.epochs,
