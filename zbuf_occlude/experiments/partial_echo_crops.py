@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 from zbuf_occlude.defaults import MAX_SAMPLES
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.realism_stats import outline_share
-from zbuf_occlude.experiments.sim2real.data import MIN_RETURNS
+from zbuf_occlude.experiments.sim2real.data import MIN_RETURNS, crops_to_draw
 from zbuf_occlude.experiments.sim2real.meshes import MeshEntry
 from zbuf_occlude.experiments.sim2real.placement import CropPlacement
 from zbuf_occlude.experiments.sim2real.real import real_label
@@ -96,7 +96,7 @@ def mesh_crops(meshes: Sequence[MeshEntry], sensor: Lidar, crops_per_mesh: int, 
                sizes: Mapping[str, SizeRange] = CLASS_SIZES_M) -> list[MeshCrop]:  # fmt: skip
     """``experiment sim2real``'s ``lidar`` crops of every mesh, scanned by ``sensor``: up to ``crops_per_mesh`` each.
 
-    Per mesh, ``crops_per_mesh + max(1, crops_per_mesh // 5)`` placements are drawn
+    Per mesh, :func:`~zbuf_occlude.experiments.sim2real.data.crops_to_draw` placements are drawn
     (:func:`~zbuf_occlude.sensors.crops.object_crops` with the mesh's name and ``seed``, from
     ``placement``'s distributions and the class's size in ``sizes``); crops with fewer than
     :data:`~zbuf_occlude.experiments.sim2real.data.MIN_RETURNS` returns of the object are dropped and
@@ -137,7 +137,7 @@ def mesh_crops(meshes: Sequence[MeshEntry], sensor: Lidar, crops_per_mesh: int, 
             raise InvalidInputError(f"{entry.name}: class {entry.class_name!r} has no real size (sizes: {sorted(sizes)})")
         dist, _ = placement.crop_distributions(entry, sizes[entry.class_name])
         kept = 0
-        drawn = crops_per_mesh + max(1, crops_per_mesh // 5)
+        drawn = crops_to_draw(crops_per_mesh)
         for k, crop, _ in object_crops(entry.mesh, sensor, dist, name=entry.name, n_samples=drawn, seed=seed, class_name=entry.class_name):
             scan = crop.scan.select(crop.scan.object_id != 0)  # the object's returns (no ground margin: all of them)
             if len(scan) < MIN_RETURNS:

@@ -55,7 +55,7 @@ if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
 __all__ = [
-    "TRAINING_SETS", "GROUND_ELEVATION_DEG", "MIN_RETURNS", "FITTED", "FITTED_PLACED", "POOLED", "FITTED_SETS",
+    "TRAINING_SETS", "GROUND_ELEVATION_DEG", "MIN_RETURNS", "crops_to_draw", "FITTED", "FITTED_PLACED", "POOLED", "FITTED_SETS",
     "OCCLUDED_POINTS", "POINT_VISIBILITY", "SetRecipe", "sensor_elevation_deg", "check_lidar_meshes", "allocate", "build_set", "build_sets", "mix_sets",
 ]  # fmt: skip
 
@@ -265,6 +265,11 @@ def _occluded(entry: MeshEntry, k: int, n_points: int, seed: int, rng: np.random
     return out
 
 
+def crops_to_draw(want: int) -> int:
+    """Crops drawn in a first round to keep ``want`` with enough returns: a fifth more, at least one (some miss the object)."""
+    return want + max(1, want // 5)
+
+
 def _lidar(entry: MeshEntry, k: int, n_points: int, seed: int, sensor, size: SizeRange, min_returns: int = MIN_RETURNS,
            placement: CropPlacement | None = None) -> tuple[list[NDArray], list[float]]:  # fmt: skip
     from zbuf_occlude.sensors.crops import lidar_object_samples
@@ -278,8 +283,8 @@ def _lidar(entry: MeshEntry, k: int, n_points: int, seed: int, sensor, size: Siz
     for attempt in range(_LIDAR_TRIES):
         want = k - len(good)
         name = entry.name if attempt == 0 else f"{entry.name}#retry{attempt}"
-        extra = max(1, want // 5) if attempt == 0 else want + 2  # later rounds: small objects far away miss more
-        clouds = lidar_object_samples(entry.mesh, sensor, name=name, n_samples=want + extra, n_points=n_points,
+        drawn = crops_to_draw(want) if attempt == 0 else 2 * want + 2  # later rounds: small objects far away miss more
+        clouds = lidar_object_samples(entry.mesh, sensor, name=name, n_samples=drawn, n_points=n_points,
                                       seed=seed, distributions=dist, class_name=entry.class_name)  # fmt: skip
         good += [c for c in clouds if c.n_visible >= min_returns][:want]
         if len(good) == k:
