@@ -261,6 +261,10 @@ def test_the_command_refuses_bad_options_in_one_line(tmp_path, capsys) -> None:
     assert "--bootstrap must be an integer >= 2 (a spread needs two resamples), got 1" in capsys.readouterr().err
     assert run("--real", "x.laz", "--bootstrap", "10001") == 2  # fit-sensor's cap, before the scans are read
     assert "--bootstrap must be at most 10,000 (MAX_BOOTSTRAP), got 10001" in capsys.readouterr().err
+    assert run("--real", "x.laz", "--leaf-area-density", "-1") == 2
+    assert "--leaf-area-density must be a number >= 0 m²/m³, got -1" in capsys.readouterr().err
+    assert run("--real", "x.laz", "--leaf-area-density", "nan") == 2
+    assert "--leaf-area-density must be a finite number of m²/m³, got nan" in capsys.readouterr().err
     assert run("--real", str(tmp_path / "missing.laz"), "--bootstrap", "2") != 0
     err = capsys.readouterr().err
     assert "missing.laz" in err and "Traceback" not in err
@@ -444,3 +448,39 @@ def test_the_divergence_is_fitted_again_with_the_k_it_is_compared_at(tmp_path, c
     assert total == scans_of_run(settings_) + len(settings_.divergence_factors)
     counts = [int(line.split()[1].split("/")[0]) for line in capsys.readouterr().err.splitlines() if line.startswith("returns: ")]
     assert counts == list(range(1, total + 1))
+
+
+def test_the_plots_crowns_are_filled_with_leaves(tmp_path) -> None:
+    import zbuf_occlude.experiments.returns_report as report
+
+    meshes = tmp_path / "bush"
+    meshes.mkdir()
+    for tree in PLOT_TREES:
+        write_bytes(
+            meshes / (tree.file.rsplit(".", 1)[0] + ".obj"), trimesh.creation.box(extents=(2.0, 2.0, 3.0)).export(file_type="obj").encode()
+        )
+    trees = tuple(type(t)(t.file.rsplit(".", 1)[0] + ".obj", "+z", 3.0, t.foliage) for t in PLOT_TREES)
+    assert [t.foliage for t in PLOT_TREES].count(False) == 2  # the two plants modelled leaf by leaf
+    original, report.PLOT_TREES = report.PLOT_TREES, trees
+    try:
+        bare = report.ign_plot(meshes, ReturnsSettings(copies=1, spacing_m=6.0, leaf_area_density=0.0))[0]
+        leafy = report.ign_plot(meshes, ReturnsSettings(copies=1, spacing_m=6.0))[0]
+    finally:
+        report.PLOT_TREES = original
+    for tree, a, b in zip(trees, bare.objects, leafy.objects):
+        assert len(a.mesh.faces) == 12
+        if tree.foliage:  # a 2 x 2 x 3 m box, every point within 1 m of its surface: 12 m³ of crown at 1 m²/m³ of 0.1 m leaves
+            assert (len(b.mesh.faces) - 12) / 2 == pytest.approx(1200, rel=0.03)
+            assert 3.0 <= b.size_m <= 3.0 + 0.1 * math.sqrt(2)  # leaves at the hull's two ends reach out by half a diagonal each at most
+        else:
+            assert len(b.mesh.faces) == 12 and b.size_m == 3.0
+
+
+@pytest.mark.parametrize(("field", "value", "message"), [
+    ("leaf_area_density", -0.5, "leaf_area_density must be"), ("leaf_area_density", math.inf, "leaf_area_density must be"),
+    ("echo_rule", "peak", "echo_rule must be one of"),
+])  # fmt: skip
+def test_settings_refuse_bad_values(field, value, message) -> None:
+    with pytest.raises(InvalidInputError, match=message) as caught:
+        ReturnsSettings(**{field: value})
+    assert repr(value) in str(caught.value) or str(value) in str(caught.value)

@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import Any
 
-from zbuf_occlude.cli.options import Checked, count, out_folder, resamples
+from zbuf_occlude.cli.options import Checked, count, out_folder, real, resamples
 
 __all__ = ["add_returns_parser"]
 
@@ -15,11 +15,13 @@ def _run(args: argparse.Namespace) -> int:
     from zbuf_occlude.experiments.returns_report import ReturnsSettings, run_returns
 
     detection = not args.without_threshold
-    rule = {} if args.echo_rule is None else {"echo_rule": args.echo_rule}
-    settings = ReturnsSettings(bootstrap=args.bootstrap, seeds=tuple(range(args.seeds)), detection=detection, **rule)
+    given = {} if args.echo_rule is None else {"echo_rule": args.echo_rule}
+    if args.leaf_area_density is not None:
+        given["leaf_area_density"] = args.leaf_area_density
+    settings = ReturnsSettings(bootstrap=args.bootstrap, seeds=tuple(range(args.seeds)), detection=detection, **given)
     if args.quick:
         settings = ReturnsSettings(divergence_factors=(0.5, 1.0, 2.0, 4.0, 8.0), sweep_rays=(7,), k_values=(1, 7, 19), seeds=(0,), repeats=1,
-                                   copies=1, bootstrap=args.bootstrap, detection=detection, **rule)  # fmt: skip
+                                   copies=1, bootstrap=args.bootstrap, detection=detection, **given)  # fmt: skip
     summary = run_returns(args.out, args.meshes, args.real, autzen_path=args.autzen, settings=settings, progress=not args.no_progress)
     fits = ", ".join(f"K {f['K']}: {f['divergence_mrad']:.3g} mrad" for f in summary["divergence_fits"])
     sys.stdout.write(f"{summary['table']}\nfitted divergence {fits}; recommended K {summary['recommended_k']}; "
@@ -50,6 +52,9 @@ def add_returns_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--echo-rule", choices=ECHO_RULES, default=None,
                    help="how the simulated receiver merges a pulse's sub-ray hits into echoes: chain (a new echo at a gap of the range "
                    "resolution) or waveform (one echo per peak of the pulse's waveform) (default: the experiment's, waveform)")  # fmt: skip
+    p.add_argument("--leaf-area-density", action=Checked, check=real(0.0, unit="m²/m³"), default=None,
+                   help="leaves filling the crowns of the plot's trees, one-sided m² per m³ of crown; 0: the meshes as they are "
+                   "(default: the experiment's, 1)")  # fmt: skip
     p.add_argument("--quick", action="store_true", help="a small sweep (about 20 s): a check that the command runs, not the page's numbers")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (or, when stderr is a file, no progress lines)")
     p.set_defaults(func=_run)

@@ -54,7 +54,7 @@ if TYPE_CHECKING:
     from zbuf_occlude.sensors.scan_data import Scan
 
 __all__ = [
-    "GROUND_CLASS", "IGN_ALTITUDE_M", "IGN_DIVERGENCE_DEG", "IGN_PULSES_PER_M2", "PLOT_TREES", "VEGETATION_HEIGHTS_M", "PlotTree",
+    "GROUND_CLASS", "IGN_ALTITUDE_M", "IGN_DIVERGENCE_DEG", "IGN_PULSES_PER_M2", "PLOT_CROWN_SHELL_M", "PLOT_LEAF_SIDE_M", "PLOT_TREES", "VEGETATION_HEIGHTS_M", "PlotTree",
     "SimulatedScan", "ign_scanner", "object_pulse_shares", "plot_scene", "pulse_subset", "simulate", "simulated_classes",
 ]  # fmt: skip
 
@@ -77,19 +77,26 @@ IGN_PULSES_PER_M2 = 10.0
 IGN_PULSE_RATE_HZ, IGN_LINE_RATE_HZ = 483_000.0, 190.0
 #: Most returns a pulse keeps: the IGN sample's largest ``number_of_returns`` is 5.
 IGN_MAX_RETURNS = 5
+#: The plot's leaves (:func:`~zbuf_occlude.sensors.foliage.add_foliage`): side of a square leaf, metres (a
+#: broadleaf's), and the depth of the crown they fill under the mesh's surface, metres.  ASSUMPTIONS.
+PLOT_LEAF_SIDE_M, PLOT_CROWN_SHELL_M = 0.1, 1.0
 
 
 @dataclass(frozen=True)
 class PlotTree:
-    """One tree or bush mesh of the plot: file (under the mesh folder), up axis, largest dimension in metres.
+    """One tree or bush mesh of the plot: file (under the mesh folder), up axis, largest dimension in metres,
+    and whether its crown is a hull or leaf cards to fill with leaves.
 
     ``size_m`` is the file's own size where it declares metres or inches (COLLADA), else an
-    ASSUMPTION of a real tree's size (the docs' results page lists which).
+    ASSUMPTION of a real tree's size (the docs' results page lists which).  ``foliage``: the plot
+    fills the crown with leaves (:func:`~zbuf_occlude.sensors.foliage.add_foliage`); False for a
+    plant whose mesh models its leaves one by one.
     """
 
     file: str
     up: str
     size_m: float
+    foliage: bool = True
 
 
 #: The eight meshes of ``street_objects/bush`` (its SOURCE.md), at real sizes: COLLADA files in
@@ -98,8 +105,8 @@ PLOT_TREES = (
     PlotTree("gazebo__oak_tree.dae", "auto", 10.61),  # declared metres
     PlotTree("gazebo__pine_tree.dae", "auto", 5.08),  # declared metres
     PlotTree("gzcollection__Tree_1.dae", "auto", 4.97),  # declared inches (195.5 in)
-    PlotTree("gzcollection__leaf.dae", "auto", 0.80),  # declared metres: a leafy plant
-    PlotTree("gzcollection__plant.dae", "auto", 0.55),  # declared metres: a low plant
+    PlotTree("gzcollection__leaf.dae", "auto", 0.80, foliage=False),  # declared metres: a leafy plant, leaf by leaf
+    PlotTree("gzcollection__plant.dae", "auto", 0.55, foliage=False),  # declared metres: a low plant, leaf by leaf
     PlotTree("duckietown__tree.obj", "auto", 8.0),  # assumed: a deciduous tree 8 m across
     PlotTree("duckietown__tree_pine_lowpoly.obj", "auto", 10.0),  # assumed: a pine 10 m tall
     PlotTree("openglforest__tree.obj", "+y", 12.0),  # assumed: a conifer 12 m tall; +y up (taller along y)
