@@ -234,3 +234,66 @@ def test_adaptive_echoes_against_the_full_model(k, power_noise, echo_rule) -> No
         assert np.allclose(full[2][mine_full], r[mine], rtol=1e-12) and np.allclose(full[3][mine_full], e[mine], rtol=1e-10)
     else:  # the same echoes, their energies drawn anew: those kept differ only near the threshold
         assert abs(len(pulse) - len(full[0])) < 0.02 * len(pulse)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 30), st.sampled_from([7, 19, 37]), st.floats(0.01, 5.0), st.booleans())
+def test_the_kernels_sub_rays_are_plane_subrays_bit_for_bit(seed, n, k, divergence_deg, near_pole) -> None:
+    import math
+
+    from zbuf_occlude.sensors.uniform_kernel import plane_subray, subray_axes
+
+    rng = np.random.default_rng(seed)
+    d = _unit(rng.normal(size=(n, 3)) + ([0.0, 0.0, 3.0] if near_pole else 0.0))  # |d_z| ≥ 0.9 turns about x
+    normal = _unit(rng.normal(size=(n, 3)))
+    t = rng.uniform(0.5, 2000.0, n)
+    offsets = footprint_offsets(k, divergence_deg)[0]
+    tk, cos = plane_subrays(t, d, normal, offsets)
+    tan = np.array([math.tan(theta) for theta in offsets[:, 0]])
+    cos_phi, sin_phi, root = np.cos(offsets[:, 1]), np.sin(offsets[:, 1]), np.sqrt(1.0 + tan * tan)
+    for i in range(n):
+        ux, uy, uz, vx, vy, vz = subray_axes(*d[i])
+        (nx, ny, nz), (dx, dy, dz) = normal[i], d[i]
+        nd, nu, nv = nx * dx + ny * dy + nz * dz, nx * ux + ny * uy + nz * uz, nx * vx + ny * vy + nz * vz
+        got = np.array([plane_subray(t[i], nd, nu, nv, tan[j], cos_phi[j], sin_phi[j], root[j]) for j in range(k)])
+        assert got[:, 0].tobytes() == tk[i].tobytes() and got[:, 1].tobytes() == cos[i].tobytes()
+
+
+@pytest.mark.parametrize("k", [7, 19])
+def test_the_kernels_plane_echo_is_plane_echoes(k) -> None:
+    # the uniform pulses' echoes from the kernel against plane_echoes of plane_subrays, on a plane of many faces
+    built = build_scene(_plane_scene())
+    lidar = _lidar(k, divergence_deg=1.5)
+    beam = lidar.beam
+    pulses = lidar.pulses(np.array([[1.0, 0, 0, 0.3], [0, 1, 0, 0.2], [0, 0, 1, 1.8], [0, 0, 0, 1]]))
+    face, t = cast_embree(built.mesh, pulses.origins, pulses.directions)
+    offsets, weights = footprint_offsets(k, beam.divergence_deg)
+    uniform, rows, echo_range, energy = A._uniform(built, pulses.origins, pulses.directions, face, t, A.pulse_neighbours(pulses), offsets,
+                                                   weights, RESOLUTION, (0.0, np.inf), None)  # fmt: skip
+    assert len(rows) > 1000 and np.array_equal(rows, np.flatnonzero(uniform & (face >= 0)))
+    planes = A._planes(built.mesh)[0]
+    tk, cos = plane_subrays(t[rows], pulses.directions[rows], planes[face[rows], 0, :3], offsets)
+    expected_range, expected_energy = A.plane_echoes(tk, cos, weights)
+    assert np.allclose(echo_range, expected_range, rtol=1e-14, atol=0) and np.allclose(energy, expected_energy, rtol=1e-14, atol=0)
+
+
+@pytest.mark.parametrize(("share", "stays"), [(0.2, True), (0.3, False)])
+def test_a_neighbour_off_the_centre_faces_plane_makes_a_pulse_cast(share, stays) -> None:
+    # one neighbour's hit moved along its ray so that it lies share × the range resolution off the plane (PLANE_SHARE: 0.25)
+    built = build_scene(_plane_scene())
+    lidar = _lidar(7, divergence_deg=0.5)
+    pulses = lidar.pulses(np.array([[1.0, 0, 0, 0.3], [0, 1, 0, 0.2], [0, 0, 1, 1.8], [0, 0, 0, 1]]))
+    face, t, uniform = _uniform(built, pulses, lidar.beam)
+    neighbours = A.pulse_neighbours(pulses)
+    hit = face >= 0
+    good = np.flatnonzero(uniform & hit & (neighbours >= 0).all(axis=1) & hit[np.maximum(neighbours, 0)].all(axis=1))
+    i = good[len(good) // 2]
+    j = neighbours[i, 0]
+    moved = t.copy()
+    moved[j] += share * RESOLUTION / abs(pulses.directions[j, 2])  # the plane is z = 0: off it by share × resolution
+    offsets = footprint_offsets(7, lidar.beam.divergence_deg)[0]
+    again = A.uniform_footprints(built, pulses.origins, pulses.directions, face, moved, neighbours, offsets, range_resolution_m=RESOLUTION)
+    assert again[i] == stays
+    others = np.ones(len(pulses), bool)  # the pulses that do not see the moved hit: unchanged
+    others[(neighbours == j).any(axis=1)] = others[j] = False
+    assert np.array_equal(again[others], uniform[others])

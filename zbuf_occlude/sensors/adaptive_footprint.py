@@ -36,11 +36,12 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.cache import MeshCache
 from zbuf_occlude.sensors.beam import Beam
 from zbuf_occlude.sensors.echo_model import Radiometry, Transmission, echo_returns
-from zbuf_occlude.sensors.echoes import hit_energy, resolve_echoes
-from zbuf_occlude.sensors.footprint import footprint_offsets, plane_subrays
+from zbuf_occlude.sensors.echoes import MIN_RANGE_M, hit_energy, resolve_echoes
+from zbuf_occlude.sensors.footprint import footprint_offsets
 from zbuf_occlude.sensors.pulses import Pulses
 from zbuf_occlude.sensors.raycast import BEYOND_HIT_SHARE, cast_embree
 from zbuf_occlude.sensors.scene import BuiltScene
+from zbuf_occlude.sensors.uniform_kernel import uniform_plane_echoes
 
 __all__ = [
     "FOOTPRINT_MODES",
@@ -68,11 +69,11 @@ LINE_BREAK_STEPS = 4.0
 
 
 def _face_planes(mesh) -> tuple[NDArray[np.float64], float]:
-    """``(planes, diagonal)``: (4, 4, F) float64 with ``planes[:, :, f]`` the rows ``(n, −n · a)`` of
+    """``(planes, diagonal)``: (F, 4, 4) float64 with ``planes[f]`` the rows ``(n, −n · a)`` of
     face ``f``'s plane and ``(m_j, −m_j · p_j)`` of its edges ab, bc, ca (``m_j`` the edge's inward
-    unit normal in the plane, ``p_j`` its first vertex), so that ``planes[:, :, f] @ (x, 1)`` gives a
+    unit normal in the plane, ``p_j`` its first vertex), so that ``planes[f] @ (x, 1)`` gives a
     point's distance to the plane and to each edge line (inside: all three ≥ 0; a degenerate face:
-    all 0); and the bounding-box diagonal of the mesh, metres."""
+    all 0), a face's 16 values together; and the bounding-box diagonal of the mesh, metres."""
     tri = np.asarray(mesh.triangles, dtype=np.float64)
     n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
@@ -85,6 +86,7 @@ def _face_planes(mesh) -> tuple[NDArray[np.float64], float]:
         m /= np.maximum(np.linalg.norm(m, axis=1, keepdims=True), 1e-300)
         planes[j + 1, :3] = m.T
         planes[j + 1, 3] = -np.einsum("ij,ij->i", m, p)
+    planes = np.ascontiguousarray(planes.transpose(2, 0, 1))
     planes.flags.writeable = False
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     return planes, float(np.linalg.norm(np.ptp(vertices, axis=0))) if len(vertices) else 1.0
@@ -131,49 +133,21 @@ def uniform_footprints(
     transmits : (F,) bool, optional
         Faces a sub-ray goes on through: a pulse hitting one is never uniform.
     """
-    return _uniform(built, origins, directions, face, t, neighbours, offsets, range_resolution_m, range_limits_m, transmits)[0]
+    return _uniform(built, origins, directions, face, t, neighbours, offsets, np.ones(len(offsets)), range_resolution_m, range_limits_m,
+                    transmits)[0]  # fmt: skip
 
 
-def _uniform(built, origins, directions, face, t, neighbours, offsets, range_resolution_m, range_limits_m, transmits):
-    """:func:`uniform_footprints`, and the uniform hits' rows and their sub-rays' ranges and incidences
-    ``(P_u, K)`` on the centre face's plane (:func:`~.footprint.plane_subrays`)."""
-    face = np.asarray(face, dtype=np.int64)
-    hit = face >= 0
-    f = np.where(hit, face, 0)
+def _uniform(built, origins, directions, face, t, neighbours, offsets, weights, range_resolution_m, range_limits_m, transmits):
+    """:func:`uniform_footprints`, and the uniform hits' rows, ascending, and their plane echo's range and
+    energy for ρ = 1 (:func:`plane_echoes`), by :func:`~.uniform_kernel.uniform_plane_echoes`."""
     planes, diagonal = _planes(built.mesh)
-    mine = np.take(planes, f, axis=2)  # (4, 4, P): one row per plane, one column per pulse
-    point = (np.asarray(origins, dtype=np.float64) + directions * np.where(hit, t, 0.0)[:, None]).T  # (3, P)
-    # the neighbours: on the same object and plane, or all missing where the centre misses
-    uniform = hit.copy() if transmits is None else hit & ~np.asarray(transmits, dtype=bool)[f]
-    obj = np.asarray(built.face_object)[f]
-    tolerance = PLANE_SHARE * range_resolution_m
-    miss = ~hit
-    known_any = np.zeros(len(face), bool)
-    for q in np.asarray(neighbours, dtype=np.int64).T:
-        known = q >= 0
-        qq = np.where(known, q, 0)
-        xq = point[:, qq]
-        off_plane = np.abs(mine[0, 0] * xq[0] + mine[0, 1] * xq[1] + mine[0, 2] * xq[2] + mine[0, 3])
-        uniform &= ~known | (hit[qq] & (obj[qq] == obj) & (off_plane <= tolerance))
-        miss &= ~known | ~hit[qq]
-        known_any |= known
-    uniform &= known_any
-    # the candidates' sub-rays on the plane: inside the face, one echo, within the range limits
-    rows = np.flatnonzero(uniform)
-    m, x, t_c = mine[:, :, rows], point[:, rows], np.asarray(t, dtype=np.float64)[rows]
-    tk, cos = plane_subrays(t_c, directions[rows], m[0, :3].T, offsets)
-    # sub-ray k lands within |t_k − t| + t θ_k of the centre hit (the chord |d_k − d| ≤ θ_k)
-    reach = np.abs(tk - t_c[:, None]).max(axis=1, initial=0.0) + t_c * float(np.max(np.asarray(offsets)[:, 0]))
-    inside = np.full(len(rows), np.inf)
-    for edge in m[1:]:  # the centre hit's distance to the nearest edge line, in the face's plane
-        np.minimum(inside, edge[0] * x[0] + edge[1] * x[1] + edge[2] * x[2] + edge[3], out=inside)
-    ranges = np.sort(tk, axis=1)
-    low, high = range_limits_m
-    with np.errstate(invalid="ignore"):
-        ok = (inside >= reach + INSIDE_MARGIN_SHARE * diagonal) & (ranges[:, 0] >= max(low, 0.0)) & (ranges[:, -1] <= high)
-        ok &= (np.diff(ranges, axis=1) < range_resolution_m).all(axis=1)  # nan (a sub-ray along the plane) fails
-    uniform[rows[~ok]] = False
-    return uniform | (miss & known_any), rows[ok], tk[ok], cos[ok]
+    n_faces = len(planes)
+    transmits = np.zeros(n_faces, bool) if transmits is None else np.asarray(transmits, dtype=bool)
+    return uniform_plane_echoes(
+        origins, directions, face, t, neighbours, planes, np.asarray(built.face_object), transmits, offsets, weights,
+        range_resolution_m=range_resolution_m, range_limits_m=range_limits_m, margin_m=INSIDE_MARGIN_SHARE * diagonal,
+        tolerance_m=PLANE_SHARE * range_resolution_m, min_range_m=MIN_RANGE_M,
+    )  # fmt: skip
 
 
 def plane_echoes(
@@ -356,14 +330,14 @@ def adaptive_echo_returns(
     tau = None if transmittance is None else np.asarray(transmittance, dtype=np.float64)
     limits = (beam.min_range_m, beam.max_range_m)
     offsets = footprint_offsets(k, beam.divergence_deg)[0]
-    uniform, one, tk, cos = _uniform(
+    uniform, one, echo_range, energy = _uniform(
         built, pulses.origins, d, face, t, pulse_neighbours(pulses) if neighbours is None else neighbours, offsets,
-        beam.range_resolution_m, limits, None if tau is None else tau > 0,
+        beam.footprint_weights(), beam.range_resolution_m, limits, None if tau is None else tau > 0,
     )  # fmt: skip
     # the uniform pulses that hit: their plane's echo, then the receiver's rules (resolve_echoes)
     f = face[one]
-    rho = 1.0 if radiometry is None else np.asarray(radiometry.reflectivity, dtype=np.float64)[f]
-    echo_range, energy = plane_echoes(tk, cos, beam.footprint_weights(), rho)
+    if radiometry is not None:
+        energy = energy * np.asarray(radiometry.reflectivity, dtype=np.float64)[f]
     if radiometry is not None and radiometry.power_noise > 0:
         energy = energy * np.exp(radiometry.power_noise * radiometry.rng.standard_normal(len(one)))
     plane = resolve_echoes(

@@ -1,0 +1,217 @@
+"""The adaptive footprint's test and plane echo in one pass a pulse: numba loops of :mod:`.adaptive_footprint`'s rules.
+
+:func:`uniform_plane_echoes` decides, pulse by pulse, whether a footprint is *uniform* (the rules
+of :mod:`.adaptive_footprint`'s docstring: its centre face does not transmit, its neighbours lie
+on that face's plane, every sub-ray meets the plane inside the face, one echo, within the range
+limits) and gives a uniform hit's one echo on that plane, without the ``(P, K)`` temporaries of
+the numpy form.  Each sub-ray's range and incidence on the plane are
+:func:`~.footprint.plane_subrays`' operations in their order (the same bits: a hypothesis test
+holds the two equal), the echo :func:`~.adaptive_footprint.plane_echoes`' (equal to rounding: the
+sums run in another order).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["plane_subray", "subray_axes", "uniform_plane_echoes"]
+
+
+def _subray_axes(dx, dy, dz):
+    # footprint._axes for one axis d: u = normalise(d × h), v = d × u, h = z or, where |d_z| ≥ 0.9, x
+    near_pole = abs(dz) >= 0.9
+    hx = 1.0 if near_pole else 0.0
+    hz = 0.0 if near_pole else 1.0
+    hy = 0.0
+    x, y, z = dy * hz - dz * hy, dz * hx - dx * hz, dx * hy - dy * hx
+    norm = math.sqrt((x * x + y * y) + z * z)
+    ux, uy, uz = x / norm, y / norm, z / norm
+    return ux, uy, uz, dy * uz - dz * uy, dz * ux - dx * uz, dx * uy - dy * ux
+
+
+def _plane_subray(t, nd, nu, nv, tan, cos_phi, sin_phi, root):
+    # footprint.plane_subrays for one sub-ray: range and |cos| where it meets the plane the axis meets at t
+    ndk = (nd + tan * (cos_phi * nu + sin_phi * nv)) / root
+    return t * (nd / ndk), abs(ndk)
+
+
+_jit = {"cache": True, "nogil": True, "error_model": "numpy"}
+#: ``subray_axes(dx, dy, dz) -> (ux, uy, uz, vx, vy, vz)``: the axes a beam's sub-rays turn about (:func:`~.footprint.subray_directions`).
+subray_axes = numba.njit(inline="always", **_jit)(_subray_axes)
+#: ``plane_subray(t, n·d, n·u, n·v, tan θ, cos φ, sin φ, sqrt(1 + tan² θ)) -> (range, |cos|)`` of one sub-ray.
+plane_subray = numba.njit(inline="always", **_jit)(_plane_subray)
+
+
+@numba.njit(**_jit)
+def _uniform_plane_echoes(origins, directions, face, t, neighbours, planes, face_object, transmits, tan, cos_phi, sin_phi, root,
+                          weights, theta_max, resolution, low, high, margin, tolerance, min_range):  # fmt: skip
+    n_pulses, n_sub = len(face), len(tan)
+    one_origin = len(origins) == 1
+    point = np.empty((n_pulses, 3))
+    for p in range(n_pulses):
+        o = 0 if one_origin else p
+        s = t[p] if face[p] >= 0 else 0.0
+        for i in range(3):
+            point[p, i] = origins[o, i] + directions[p, i] * s
+    uniform = np.zeros(n_pulses, np.bool_)
+    on_plane = np.zeros(n_pulses, np.bool_)
+    echo_range = np.full(n_pulses, np.nan)
+    energy = np.full(n_pulses, np.nan)
+    ranges, cosines, order = np.empty(n_sub), np.empty(n_sub), np.empty(n_sub)
+    for p in range(n_pulses):
+        hit = face[p] >= 0
+        f = face[p] if hit else 0
+        ok = hit and not transmits[f]
+        miss = not hit
+        known_any = False
+        obj = face_object[f]
+        plane = planes[f]  # (4, 4): the face's plane, then its edge lines
+        for j in range(neighbours.shape[1]):
+            q = neighbours[p, j]
+            if q < 0:
+                continue
+            known_any = True
+            q_hit = face[q] >= 0
+            if ok:
+                if not q_hit or face_object[face[q] if q_hit else 0] != obj:
+                    ok = False
+                else:
+                    off = abs(plane[0, 0] * point[q, 0] + plane[0, 1] * point[q, 1] + plane[0, 2] * point[q, 2] + plane[0, 3])
+                    ok = off <= tolerance
+            if q_hit:
+                miss = False
+        if not known_any:
+            continue
+        if miss:
+            uniform[p] = True
+            continue
+        if not ok:
+            continue
+        # the sub-rays on the centre face's plane: inside the face, one echo, within the range limits
+        dx, dy, dz = directions[p, 0], directions[p, 1], directions[p, 2]
+        ux, uy, uz, vx, vy, vz = subray_axes(dx, dy, dz)
+        nx, ny, nz = plane[0, 0], plane[0, 1], plane[0, 2]
+        nd, nu, nv = nx * dx + ny * dy + nz * dz, nx * ux + ny * uy + nz * uz, nx * vx + ny * vy + nz * vz
+        tc = t[p]
+        spread = 0.0
+        finite = True
+        for k in range(n_sub):
+            ranges[k], cosines[k] = plane_subray(tc, nd, nu, nv, tan[k], cos_phi[k], sin_phi[k], root[k])
+            if not math.isfinite(ranges[k]):
+                finite = False
+            spread = max(spread, abs(ranges[k] - tc))
+        if not finite:
+            continue  # a sub-ray along the plane, or never meeting it
+        inside = np.inf
+        for e in range(1, 4):
+            inside = min(inside, plane[e, 0] * point[p, 0] + plane[e, 1] * point[p, 1] + plane[e, 2] * point[p, 2] + plane[e, 3])
+        if not inside >= spread + tc * theta_max + margin:
+            continue
+        nearest, farthest = ranges.min(), ranges.max()
+        if not (nearest >= max(low, 0.0) and farthest <= high):
+            continue
+        if not farthest - nearest < resolution:  # else every step between sorted ranges is below the resolution
+            for k in range(n_sub):  # insertion sort in place: a few sub-rays, no allocation
+                order[k] = ranges[k]
+                j = k
+                while j > 0 and order[j - 1] > order[j]:
+                    order[j - 1], order[j] = order[j], order[j - 1]
+                    j -= 1
+            one_echo = True
+            for k in range(1, n_sub):
+                if not order[k] - order[k - 1] < resolution:
+                    one_echo = False
+            if not one_echo:
+                continue
+        uniform[p] = True
+        on_plane[p] = True
+        # the plane's echo (adaptive_footprint.plane_echoes): Σ E_k, Σ E_k t_k / Σ E_k, E_k = |cos_k| w_k / max(t_k, MIN_RANGE_M)²
+        total, moment = 0.0, 0.0
+        for k in range(n_sub):
+            r = max(ranges[k], min_range)
+            e = cosines[k] * weights[k] / r**2
+            total += e
+            moment += e * ranges[k]
+        energy[p] = total
+        echo_range[p] = moment / total
+    return uniform, on_plane, echo_range, energy
+
+
+def uniform_plane_echoes(
+    origins: NDArray[np.float64],
+    directions: NDArray[np.float64],
+    face: NDArray[np.int64],
+    t: NDArray[np.float64],
+    neighbours: NDArray[np.int64],
+    planes: NDArray[np.float64],
+    face_object: NDArray[np.int64],
+    transmits: NDArray[np.bool_],
+    offsets: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    *,
+    range_resolution_m: float,
+    range_limits_m: tuple[float, float],
+    margin_m: float,
+    tolerance_m: float,
+    min_range_m: float,
+) -> tuple[NDArray[np.bool_], NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+    """The uniform footprints, and the plane echo of those that hit (rules: :mod:`.adaptive_footprint`).
+
+    Parameters
+    ----------
+    origins : (1, 3) or (P, 3) float64
+        Where the pulses leave, world frame, metres.
+    directions : (P, 3) float64
+        Unit centre directions.
+    face, t : (P,) int64, (P,) float64
+        The centre rays' first hits: face (−1 for none) and range, metres.
+    neighbours : (P, m) int64
+        Rows of each pulse's neighbours, −1 for none.
+    planes : (F, 4, 4) float64
+        Each face's plane and edge lines (``adaptive_footprint._face_planes``).
+    face_object : (F,) int64
+        The object of each face.
+    transmits : (F,) bool
+        Faces a sub-ray goes on through.
+    offsets : (K, 2) float64
+        The footprint's sub-rays: angle off the axis and azimuth, radians.
+    weights : (K,) float64
+        Each sub-ray's share of the pulse's energy.
+    range_resolution_m : float
+        The receiver's range resolution, metres.
+    range_limits_m : (float, float)
+        The beam's range limits, metres.
+    margin_m : float
+        How far inside its face a uniform footprint stays beyond the cone's reach, metres.
+    tolerance_m : float
+        A neighbour's hit lies on the centre face's plane within this distance, metres.
+    min_range_m : float
+        Ranges below it count as it in the energy (``echoes.MIN_RANGE_M``).
+
+    Returns
+    -------
+    uniform : (P,) bool
+        The pulses whose sub-rays need no cast.
+    rows : (U,) int64
+        The uniform pulses that hit, ascending.
+    echo_range, energy : (U,) float64
+        Their echo's range, metres, and energy for ρ = 1 (:func:`~.adaptive_footprint.plane_echoes`).
+    """
+    off = np.asarray(offsets, dtype=np.float64)
+    tan = np.array([math.tan(theta) for theta in off[:, 0]])
+    phi = np.ascontiguousarray(off[:, 1])
+    low, high = (float(v) for v in range_limits_m)
+    uniform, plane, echo_range, energy = _uniform_plane_echoes(
+        np.ascontiguousarray(np.atleast_2d(origins), dtype=np.float64), np.ascontiguousarray(directions, dtype=np.float64),
+        np.ascontiguousarray(face, dtype=np.int64), np.ascontiguousarray(t, dtype=np.float64),
+        np.ascontiguousarray(neighbours, dtype=np.int64), np.ascontiguousarray(planes, dtype=np.float64),
+        np.ascontiguousarray(face_object, dtype=np.int64), np.ascontiguousarray(transmits, dtype=np.bool_), tan, np.cos(phi), np.sin(phi),
+        np.sqrt(1.0 + tan * tan), np.ascontiguousarray(weights, dtype=np.float64), float(np.max(off[:, 0])), float(range_resolution_m),
+        low, high, float(margin_m), float(tolerance_m), float(min_range_m),
+    )  # fmt: skip
+    rows = np.flatnonzero(plane)
+    return uniform, rows, echo_range[rows], energy[rows]
