@@ -3,6 +3,7 @@ echoes against the full multi-return model (:mod:`zbuf_occlude.sensors.adaptive_
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -297,3 +298,29 @@ def test_a_neighbour_off_the_centre_faces_plane_makes_a_pulse_cast(share, stays)
     others = np.ones(len(pulses), bool)  # the pulses that do not see the moved hit: unchanged
     others[(neighbours == j).any(axis=1)] = others[j] = False
     assert np.array_equal(again[others], uniform[others])
+
+
+def test_the_kernel_refuses_indices_outside_its_arrays() -> None:
+    from zbuf_occlude.sensors.uniform_kernel import uniform_plane_echoes
+
+    built = build_scene(_plane_scene(2))
+    planes = A._planes(built.mesh)[0]
+    n_faces = len(planes)
+    offsets, weights = footprint_offsets(7, 0.5)
+    d = np.tile([0.0, 0.0, -1.0], (3, 1))
+    args = {"origins": np.array([[0.0, 0.0, 10.0]]), "directions": d, "face": np.array([0, 1, -1]), "t": np.full(3, 10.0),
+            "neighbours": np.array([[1, -1], [0, 2], [1, -1]]), "planes": planes, "face_object": np.zeros(n_faces, np.int64),
+            "transmits": np.zeros(n_faces, bool), "offsets": offsets, "weights": weights}  # fmt: skip
+    rules = {"range_resolution_m": 0.75, "range_limits_m": (0.0, np.inf), "margin_m": 0.0, "tolerance_m": 0.2, "min_range_m": 1e-9}
+    uniform_plane_echoes(**args, **rules)  # these are fine
+    for change, words in [
+        ({"neighbours": np.array([[1, -1], [0, 3], [1, -1]])}, "neighbour indices outside -1..2"),
+        ({"neighbours": np.array([[1, -2], [0, 2], [1, -1]])}, "neighbour indices outside -1..2"),
+        ({"face": np.array([0, n_faces, -1])}, f"face indices outside -1..{n_faces - 1}"),
+        ({"t": np.full(2, 10.0)}, "t (2,) (P,)"),
+        ({"origins": np.zeros((2, 3))}, "origins (2, 3)"),
+        ({"planes": planes[:, :3]}, "planes"),
+        ({"weights": weights[:3]}, "weights (3,) (K,)"),
+    ]:
+        with pytest.raises(InvalidInputError, match=re.escape(words)):
+            uniform_plane_echoes(**(args | change), **rules)

@@ -54,7 +54,8 @@ if TYPE_CHECKING:
     from zbuf_occlude.sensors.scan_data import Scan
 
 __all__ = [
-    "GROUND_CLASS", "IGN_ALTITUDE_M", "IGN_DIVERGENCE_DEG", "IGN_PULSES_PER_M2", "PLOT_CROWN_SHELL_M", "PLOT_LEAF_SIDE_M", "PLOT_TREES", "VEGETATION_HEIGHTS_M", "PlotTree",
+    "GROUND_CLASS", "IGN_ALTITUDE_M", "IGN_DIVERGENCE_DEG", "IGN_PULSES_PER_M2", "PLOT_CROWN_SHELL_M", "PLOT_LEAF_SIDE_M", "PLOT_TREES",
+    "VEGETATION_HEIGHTS_M", "PlotTree",
     "SimulatedScan", "ign_scanner", "object_pulse_shares", "plot_scene", "pulse_subset", "simulate", "simulated_classes",
 ]  # fmt: skip
 

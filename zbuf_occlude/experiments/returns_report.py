@@ -136,8 +136,8 @@ class ReturnsSettings:
     leaf_area_density : float
         Leaves in the crowns of the plot's trees (:data:`~.returns.PLOT_TREES` with ``foliage``), one-sided m² per m³
         of crown, ≥ 0 (:func:`~zbuf_occlude.sensors.foliage.add_foliage` with :data:`~.returns.PLOT_LEAF_SIDE_M`
-        and :data:`~.returns.PLOT_CROWN_SHELL_M`); 0: the meshes as they are.  The default, 1, passes the
-        most targets at the data sheet's divergence among 0.5, 1 and 2 (the results page lists the runs).
+        and :data:`~.returns.PLOT_CROWN_SHELL_M`); 0: the meshes as they are.  The default, 1, is the one of
+        0, 0.5, 1, 1.5 and 2 that passes the most of the experiment's targets (the results page lists the runs).
 
     Raises
     ------
@@ -255,8 +255,8 @@ def cover_rays_per_cell(settings: ReturnsSettings) -> int:
 def ign_plot(mesh_root: str | os.PathLike, settings: ReturnsSettings, *,
              tree_cover: float | None = None) -> tuple[ScanScene, tuple[int, ...], tuple[float, float], float]:  # fmt: skip
     """The experiment's plot: :data:`~.returns.PLOT_TREES` from ``mesh_root``, their crowns filled with
-    ``settings.leaf_area_density`` of leaves, ``settings.copies`` of each, on a grid ``settings.spacing_m`` apart (None: as far apart as gives the tree cover
-    ``tree_cover``, :func:`~.tree_cover.spacing_for_cover`), its centre ``settings.scan_angle_deg``
+    ``settings.leaf_area_density`` of leaves, ``settings.copies`` of each, on a grid ``settings.spacing_m``
+    apart (None: as far apart as gives the tree cover ``tree_cover``, :func:`~.tree_cover.spacing_for_cover`), its centre ``settings.scan_angle_deg``
     across track.
 
     Returns

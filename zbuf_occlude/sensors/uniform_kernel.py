@@ -18,6 +18,8 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from zbuf_occlude.errors import InvalidInputError
+
 __all__ = ["plane_subray", "subray_axes", "uniform_plane_echoes"]
 
 
@@ -141,6 +143,25 @@ def _uniform_plane_echoes(origins, directions, face, t, neighbours, planes, face
     return uniform, on_plane, echo_range, energy
 
 
+def _check(origins, directions, face, t, neighbours, planes, face_object, transmits, offsets, weights) -> None:
+    """Refuse what would make the compiled loop read outside its arrays."""
+    n, n_faces = len(face), len(face_object)
+    problems = [
+        (origins.ndim != 2 or origins.shape[1] != 3 or len(origins) not in (1, n), f"origins {origins.shape} (1 or P rows of 3)"),
+        (directions.shape != (n, 3), f"directions {directions.shape} (P, 3)"),
+        (face.shape != (n,) or t.shape != (n,), f"face {face.shape} and t {t.shape} (P,)"),
+        (neighbours.ndim != 2 or len(neighbours) != n, f"neighbours {neighbours.shape} (P, m)"),
+        (planes.shape != (n_faces, 4, 4) or transmits.shape != (n_faces,), f"planes {planes.shape} (F, 4, 4), transmits {transmits.shape} (F,)"),
+        (offsets.ndim != 2 or offsets.shape[1] != 2 or len(offsets) == 0 or weights.shape != (len(offsets),),
+         f"offsets {offsets.shape} (K, 2), weights {weights.shape} (K,)"),
+        (bool(n) and (face.min() < -1 or face.max() >= n_faces), f"face indices outside -1..{n_faces - 1}"),
+        (bool(neighbours.size) and (neighbours.min() < -1 or neighbours.max() >= n), f"neighbour indices outside -1..{n - 1}"),
+    ]  # fmt: skip
+    bad = [text for wrong, text in problems if wrong]
+    if bad:
+        raise InvalidInputError(f"uniform_plane_echoes got {'; '.join(bad)}")
+
+
 def uniform_plane_echoes(
     origins: NDArray[np.float64],
     directions: NDArray[np.float64],
@@ -200,18 +221,26 @@ def uniform_plane_echoes(
         The uniform pulses that hit, ascending.
     echo_range, energy : (U,) float64
         Their echo's range, metres, and energy for ρ = 1 (:func:`~.adaptive_footprint.plane_echoes`).
+
+    Raises
+    ------
+    InvalidInputError
+        Arrays of other shapes or lengths, or a face or neighbour index outside its array (the
+        compiled loop does not check its indices).
     """
-    off = np.asarray(offsets, dtype=np.float64)
+    origins = np.ascontiguousarray(np.atleast_2d(origins), dtype=np.float64)
+    directions, face, t = (np.ascontiguousarray(directions, dtype=np.float64), np.ascontiguousarray(face, dtype=np.int64),
+                           np.ascontiguousarray(t, dtype=np.float64))  # fmt: skip
+    neighbours, planes = np.ascontiguousarray(neighbours, dtype=np.int64), np.ascontiguousarray(planes, dtype=np.float64)
+    face_object, transmits = np.ascontiguousarray(face_object, dtype=np.int64), np.ascontiguousarray(transmits, dtype=np.bool_)
+    off, weights = np.asarray(offsets, dtype=np.float64), np.ascontiguousarray(weights, dtype=np.float64)
+    _check(origins, directions, face, t, neighbours, planes, face_object, transmits, off, weights)
     tan = np.array([math.tan(theta) for theta in off[:, 0]])
     phi = np.ascontiguousarray(off[:, 1])
     low, high = (float(v) for v in range_limits_m)
     uniform, plane, echo_range, energy = _uniform_plane_echoes(
-        np.ascontiguousarray(np.atleast_2d(origins), dtype=np.float64), np.ascontiguousarray(directions, dtype=np.float64),
-        np.ascontiguousarray(face, dtype=np.int64), np.ascontiguousarray(t, dtype=np.float64),
-        np.ascontiguousarray(neighbours, dtype=np.int64), np.ascontiguousarray(planes, dtype=np.float64),
-        np.ascontiguousarray(face_object, dtype=np.int64), np.ascontiguousarray(transmits, dtype=np.bool_), tan, np.cos(phi), np.sin(phi),
-        np.sqrt(1.0 + tan * tan), np.ascontiguousarray(weights, dtype=np.float64), float(np.max(off[:, 0])), float(range_resolution_m),
-        low, high, float(margin_m), float(tolerance_m), float(min_range_m),
+        origins, directions, face, t, neighbours, planes, face_object, transmits, tan, np.cos(phi), np.sin(phi), np.sqrt(1.0 + tan * tan),
+        weights, float(np.max(off[:, 0])), float(range_resolution_m), low, high, float(margin_m), float(tolerance_m), float(min_range_m),
     )  # fmt: skip
     rows = np.flatnonzero(plane)
     return uniform, rows, echo_range[rows], energy[rows]
