@@ -355,3 +355,25 @@ def test_attenuation_is_the_product_of_the_transmittances_nearer_along_the_subra
     for i in range(len(subray)):
         nearer = (subray == subray[i]) & (range_m < range_m[i])
         assert factor[i] == pytest.approx(np.prod(t[surface[nearer]]), rel=1e-12, abs=0)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    n=st.integers(2, 60), seed=st.integers(0, 2**32 - 1), relative=st.sampled_from([0.0, 0.05]), rule=st.sampled_from(["chain", "waveform"])
+)
+def test_one_hit_a_pulse_gives_the_general_paths_echoes(n, seed, relative, rule) -> None:
+    # rows of one hit each in pulse order take the short path; the same rows shuffled take the general one
+    rng = np.random.default_rng(seed)
+    pulse = np.cumsum(rng.integers(1, 4, n))
+    r, e, s = rng.uniform(0.5, 80.0, n), rng.uniform(0.0, 2e-3, n), rng.integers(0, 5, n)
+    rules = {"range_resolution_m": 0.5, "detection_threshold": 1e-4, "max_returns": 2, "min_echo_reflectance": relative, "echo_rule": rule}
+    fast = resolve_echoes(pulse, r, e, s, **rules)
+    shuffle = rng.permutation(n)
+    if np.all(np.diff(shuffle) > 0):
+        shuffle = shuffle[::-1]  # never in pulse order
+    general = resolve_echoes(pulse[shuffle], r[shuffle], e[shuffle], s[shuffle], **rules)
+    for name in ("pulse", "range_m", "energy", "surface", "return_number", "number_of_returns"):
+        a, b = getattr(fast, name), getattr(general, name)
+        assert a.dtype == b.dtype and a.tobytes() == b.tobytes(), name
+    assert np.array_equal(fast.hit, shuffle[general.hit])
+    assert np.all(fast.return_number == 1) and len(fast) == int(np.sum((e >= 1e-4) & (e * r**2 >= relative)))

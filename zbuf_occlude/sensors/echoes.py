@@ -279,6 +279,22 @@ def _dominant_surface_of_mixed(
     return surface, mine[_first_max(e[mine], group_starts(echo[mine]), echo[mine])]
 
 
+def _detected(energy: NDArray, range_m: NDArray, threshold: float, relative: float) -> NDArray[np.bool_]:
+    """The receiver's detection of echoes of ``energy`` at ``range_m``: the absolute threshold, then the relative one."""
+    detected = energy >= threshold
+    if relative > 0:
+        detected &= energy * np.maximum(range_m, MIN_RANGE_M) ** 2 >= relative
+    return detected
+
+
+def _single_hits(p: NDArray, r: NDArray, e: NDArray, s: NDArray, threshold: float, relative: float) -> Echoes:
+    """:func:`resolve_echoes` of rows with one hit a pulse, pulses ascending: each hit is its pulse's one echo
+    (the general path's result, bit for bit, without its sorts and merging)."""
+    kept = np.flatnonzero(_detected(e, r, threshold, relative))
+    ones = np.ones(len(kept), np.uint8)
+    return Echoes(pulse=p[kept], range_m=r[kept], energy=e[kept], surface=s[kept], hit=kept, return_number=ones, number_of_returns=ones)
+
+
 def resolve_echoes(
     pulse: ArrayLike,
     range_m: ArrayLike,
@@ -351,11 +367,14 @@ def resolve_echoes(
     keep_n = count(max_returns, "max_returns", low=1, high=MAX_RETURNS)
     rule = text(echo_rule, "echo_rule", choices=ECHO_RULES)
     cols = hit_columns(pulse=pulse, range_m=range_m, energy=energy, surface=surface)
-    # one order for any input order: rows equal on all four keys are interchangeable
-    order, p, r, e, s = _hit_order(cols["pulse"], cols["range_m"], cols["energy"], cols["surface"])
-    if len(p) == 0:
+    if len(cols["pulse"]) == 0:
         ids, counts = np.zeros(0, np.int64), np.zeros(0, np.uint8)
         return Echoes(ids, np.zeros(0), np.zeros(0), ids, ids, counts, counts)
+    p = cols["pulse"]
+    if np.all(p[1:] > p[:-1]):  # one hit a pulse, in pulse order (an adaptive scan's plane echoes): each hit its echo
+        return _single_hits(p, cols["range_m"], cols["energy"], cols["surface"], threshold, relative)
+    # one order for any input order: rows equal on all four keys are interchangeable
+    order, p, r, e, s = _hit_order(cols["pulse"], cols["range_m"], cols["energy"], cols["surface"])
     if rule == "waveform":
         new = waveform_echo_starts(p, r, e, resolution)
     else:  # a new echo: a new pulse, or a gap of at least the resolution after the previous hit
@@ -375,10 +394,7 @@ def resolve_echoes(
     echo_range = np.where(n_hits == 1, first, np.clip(first + mean, first, last))
     echo_surface, echo_hit = _dominant_surface(echo, starts, s, e)
     # detection, then the first max_returns detected echoes of each pulse
-    detected = total >= threshold
-    if relative > 0:
-        detected &= total * np.maximum(echo_range, MIN_RANGE_M) ** 2 >= relative
-    detected = np.flatnonzero(detected)
+    detected = np.flatnonzero(_detected(total, echo_range, threshold, relative))
     rank = rank_in_run(p[starts][detected])
     kept = detected[rank < keep_n]
     kept_pulse = p[starts][kept]
