@@ -324,3 +324,24 @@ def test_the_kernel_refuses_indices_outside_its_arrays() -> None:
     ]:
         with pytest.raises(InvalidInputError, match=re.escape(words)):
             uniform_plane_echoes(**(args | change), **rules)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(2, 6), st.integers(1, 40))
+def test_a_pulses_neighbour_across_lines_is_the_nearest_by_position(seed, n_lines, per_line) -> None:
+    rng = np.random.default_rng(seed)
+    line = rng.permutation(np.repeat(np.arange(n_lines), rng.integers(1, per_line + 1, n_lines)))
+    position = rng.uniform(-3.0, 3.0, len(line)).round(2)  # rounded: ties of distance, and of position, happen
+    out = A.grid_neighbours(position, line)
+    for i in range(len(line)):
+        for column, step in ((2, -1), (3, 1)):
+            others = np.flatnonzero(line == line[i] + step)
+            if len(others) == 0:
+                assert out[i, column] == -1
+                continue
+            j = out[i, column]
+            assert line[j] == line[i] + step
+            gap = np.abs(position[others] - position[i])
+            assert abs(position[j] - position[i]) == gap.min()
+            nearest = others[gap == gap.min()]
+            assert position[j] == position[nearest].min()  # a tie of distance: the lower position

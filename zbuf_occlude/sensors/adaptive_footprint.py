@@ -41,7 +41,7 @@ from zbuf_occlude.sensors.footprint import footprint_offsets
 from zbuf_occlude.sensors.pulses import Pulses
 from zbuf_occlude.sensors.raycast import BEYOND_HIT_SHARE, cast_embree
 from zbuf_occlude.sensors.scene import BuiltScene
-from zbuf_occlude.sensors.uniform_kernel import uniform_plane_echoes
+from zbuf_occlude.sensors.uniform_kernel import nearest_in_line, uniform_plane_echoes
 
 __all__ = [
     "FOOTPRINT_MODES",
@@ -219,16 +219,9 @@ def grid_neighbours(position: NDArray[np.float64], line: NDArray[np.int64], *, p
         wraps = (last - first >= 2) & (period - span < 2.0 * span / np.maximum(last - first, 1))
         out[order[first[wraps]], 0] = order[last[wraps]]
         out[order[last[wraps]], 1] = order[first[wraps]]
-    # the pulses of line r ± 1 nearest to each pulse by position
+    # the pulses of line r ± 1 nearest to each pulse by position (ties: the lower position), a compiled loop
     for column, step in ((2, -1), (3, 1)):
-        target = (r + step) * width + (p - low)
-        at = np.searchsorted(key, target)
-        left, right = np.clip(at - 1, 0, n - 1), np.clip(at, 0, n - 1)
-        ok_left, ok_right = r[left] == r + step, r[right] == r + step
-        take_left = ok_left & (~ok_right | (np.abs(p[left] - p) <= np.abs(p[right] - p)))
-        chosen = np.where(take_left, left, right)
-        found = ok_left | ok_right
-        out[order[found], column] = order[chosen[found]]
+        nearest_in_line(key, p, r, order, width, low, step, column, out)
     return out
 
 

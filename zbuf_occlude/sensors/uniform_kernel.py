@@ -1,4 +1,4 @@
-"""The adaptive footprint's test and plane echo in one pass a pulse: numba loops of :mod:`.adaptive_footprint`'s rules.
+"""The adaptive footprint's compiled loops: its test and plane echo in one pass a pulse, and the pulses' neighbours across lines.
 
 :func:`uniform_plane_echoes` decides, pulse by pulse, whether a footprint is *uniform* (the rules
 of :mod:`.adaptive_footprint`'s docstring: its centre face does not transmit, its neighbours lie
@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 
-__all__ = ["plane_subray", "subray_axes", "uniform_plane_echoes"]
+__all__ = ["nearest_in_line", "plane_subray", "subray_axes", "uniform_plane_echoes"]
 
 
 def _subray_axes(dx, dy, dz):
@@ -141,6 +141,29 @@ def _uniform_plane_echoes(origins, directions, face, t, neighbours, planes, face
         energy[p] = total
         echo_range[p] = moment / total
     return uniform, on_plane, echo_range, energy
+
+
+@numba.njit(**_jit)
+def nearest_in_line(key, position, line, order, width, low, step, column, out):  # pragma: no cover (compiled)
+    """Write into ``out[:, column]`` each pulse's nearest pulse by position on line ``line + step``: the loop of
+    :func:`~.adaptive_footprint.grid_neighbours` over pulses sorted by ``key = line · width + (position − low)``
+    (``order`` their rows), its binary search ``np.searchsorted``'s (side left), ties to the lower position."""
+    n = len(key)
+    for i in range(n):
+        target = (line[i] + step) * width + (position[i] - low)
+        lo, hi = 0, n
+        while lo < hi:  # the first key >= target
+            mid = (lo + hi) >> 1
+            if key[mid] < target:
+                lo = mid + 1
+            else:
+                hi = mid
+        left, right = min(max(lo - 1, 0), n - 1), min(lo, n - 1)
+        ok_left, ok_right = line[left] == line[i] + step, line[right] == line[i] + step
+        if ok_left and (not ok_right or abs(position[left] - position[i]) <= abs(position[right] - position[i])):
+            out[order[i], column] = order[left]
+        elif ok_right:
+            out[order[i], column] = order[right]
 
 
 def _check(origins, directions, face, t, neighbours, planes, face_object, transmits, offsets, weights) -> None:
