@@ -144,7 +144,7 @@ def _uniform_plane_echoes(origins, directions, face, t, neighbours, planes, face
 
 
 @numba.njit(**_jit)
-def nearest_in_line(key, position, line, order, width, low, step, column, out):  # pragma: no cover (compiled)
+def nearest_in_line(key, position, line, order, width, low, step, column, out):
     """Write into ``out[:, column]`` each pulse's nearest pulse by position on line ``line + step``: the loop of
     :func:`~.adaptive_footprint.grid_neighbours` over pulses sorted by ``key = line · width + (position − low)``
     (``order`` their rows), its binary search ``np.searchsorted``'s (side left), ties to the lower position."""
