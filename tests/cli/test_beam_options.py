@@ -202,3 +202,43 @@ def test_a_sensor_files_beam_is_changed_not_replaced(tmp_path: Path) -> None:
     path.write_text(json.dumps(spec))
     changed = _beam(str(path), ["--max-returns", "4"])
     assert changed.beam.max_returns == 4 and changed.beam.power_noise == 0.25 and changed.beam.range_noise_m == 0.05
+
+
+@pytest.mark.parametrize(("source", "sensor"), [(STREET, "vlp16"), (CHAIR, "vlp16"), (CHAIR, "riegl-q1560")])
+def test_the_adaptive_footprint_reaches_scene_and_mesh_scans(tmp_path: Path, capsys, monkeypatch, source: Path, sensor: str) -> None:
+    import importlib
+
+    scan_module = importlib.import_module("zbuf_occlude.sensors.scan")  # the module: the package's name `scan` is the function
+    uniform_shares = []
+
+    def spy(*args, **kwargs):
+        out = adaptive(*args, **kwargs)
+        uniform_shares.append(float(out[-1].mean()))
+        return out
+
+    adaptive = scan_module.adaptive_echo_returns
+    monkeypatch.setattr(scan_module, "adaptive_echo_returns", spy)
+    base = [str(source), "--sensor", sensor, *RETURNS, "--seed", "3"]
+    exact = _scan(base, tmp_path / "exact", capsys)
+    assert uniform_shares == []
+    fast = _scan([*base, "--adaptive-footprint"], tmp_path / "fast", capsys)
+    assert len(uniform_shares) == 1 and uniform_shares[0] > 0.5  # most footprints not cast
+    if source == STREET:  # the same scan as the Python API's
+        import zbuf_occlude as zo
+
+        lidar = _beam(sensor, RETURNS)
+        api = zo.scan(zo.load_scene(STREET), lidar, seed=3, footprint="adaptive")
+        assert np.array_equal(api.points, fast.points) and np.array_equal(api.number_of_returns, fast.number_of_returns)
+    # one plane's echo in place of the cast sub-rays: the same returns, to a few
+    assert abs(len(fast) - len(exact)) <= max(4, 0.002 * len(exact))
+
+
+@pytest.mark.parametrize(
+    ("options", "words"),
+    [(["--sensor", "vlp16"], "--adaptive-footprint skips the sub-rays of a footprint whose echoes are resolved; vlp16 fires one ray"),
+     (["--sensor", "vlp16", *RETURNS, "--backend", "zbuffer"], "--adaptive-footprint casts rays with Embree; --backend zbuffer renders"),
+     (["--sensor", "kinect-v1"], "--adaptive-footprint: kinect-v1 is a depth camera, which fires no pulses")],
+)  # fmt: skip
+def test_the_adaptive_footprint_is_refused_where_it_does_not_apply(tmp_path: Path, capsys, options: list[str], words: str) -> None:
+    code, err = _run(["scan", str(STREET), *options, "--adaptive-footprint", "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and words in err and "\n" not in err, err

@@ -216,6 +216,21 @@ def cmd_scan(args: argparse.Namespace) -> int:
         return _scan_into(folder, args, sensor, formats, las_options, trajectory)
 
 
+def _footprint_mode(args: argparse.Namespace, sensor, kind) -> str:
+    """``"adaptive"`` with ``--adaptive-footprint``, else ``"exact"``; refused, naming the options, where it cannot apply."""
+    if not args.adaptive_footprint:
+        return "exact"
+    if not kind.pulsed:
+        raise InvalidInputError(f"--adaptive-footprint: {sensor.name} is a {kind.title}, which fires no pulses to skip the sub-rays of")
+    beam = sensor.beam
+    if not beam.resolves_echoes or beam.footprint_rays == 1:
+        raise InvalidInputError(f"--adaptive-footprint skips the sub-rays of a footprint whose echoes are resolved; {sensor.name} "
+                                "fires one ray or resolves no echoes: give it --footprint and --max-returns above 1")  # fmt: skip
+    if args.backend != "embree":
+        raise InvalidInputError(f"--adaptive-footprint casts rays with Embree; --backend {args.backend} renders a z-buffer")
+    return "adaptive"
+
+
 #: The files ``scan`` writes in ``--out``: ``<stem>_<sensor>_sNNN.npz|ply|las|laz``.
 SCAN_FILE_NAMES = r"[^/]+_s\d{3,}\.(npz|ply|las|laz)"
 
@@ -248,6 +263,7 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
 
     out = folder.root
     kind = kind_of(sensor)
+    footprint = _footprint_mode(args, sensor, kind)
     src = Path(args.mesh_or_scene)
     written, empty = [], 0
     if src.suffix.lower() in SCENE_SUFFIXES:
@@ -264,10 +280,10 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
             if kind.flies:  # a flight over the scene's ground (world frame)
                 from zbuf_occlude.sensors.scan import scan_airborne
 
-                s = scan_airborne(scene, sensor, (0.0, 0.0), scene.ground_half_extent_m, seed=args.seed + k, **optics)
+                s = scan_airborne(scene, sensor, (0.0, 0.0), scene.ground_half_extent_m, seed=args.seed + k, footprint=footprint, **optics)
             else:
                 platform = pose if trajectory is None else trajectory.since(trajectory.start_s + k * sensor.sweep_s)
-                s = scan(scene, sensor, platform, seed=args.seed + k, backend=args.backend, frame=args.frame, **optics)
+                s = scan(scene, sensor, platform, seed=args.seed + k, backend=args.backend, frame=args.frame, footprint=footprint, **optics)
             written += _save(folder, s, f"{src.stem}_{sensor.name}_s{k:03d}", formats, las_options, ground_z_m=scene.ground_z_m, number=k)
     else:
         if not kind.pulsed:
@@ -308,7 +324,7 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
         # the farm's loop and seeds: one seed gives the crops farm --sensor gives this file lying directly in its input folder
         optics = scene_optics_of(args)
         crops = object_crops(mesh, sensor, dist, name=src.stem, n_samples=args.samples, seed=args.seed, class_name=src.stem,
-                             backend=args.backend, frame=args.frame, optics=optics)  # fmt: skip
+                             backend=args.backend, frame=args.frame, optics=optics, footprint=footprint)  # fmt: skip
         for k, crop, _ in progress_bar(crops, total=args.samples, desc="scan", unit="scan", enabled=not args.no_progress):
             placement = crop.placement
             s = crop.scan if args.crop else crop.full
@@ -374,6 +390,10 @@ def _add_return_physics_arguments(p: argparse.ArgumentParser) -> None:
                         "surface and comes back, in [0, 1] (a leafy crown's gap fraction); table (foliage 0.3 from the reflectance "
                         "table), one number (every object), or CLASS=VALUE,... (bush=0.3,tree=0.3; a mesh's class: its file name) "
                         "(default: 0, opaque; airborne: see --reflectance-table)")  # fmt: skip
+    r.add_argument("--adaptive-footprint", action="store_true",
+                   help="with a footprint whose echoes are resolved: cast a pulse's sub-rays only where its centre ray and its "
+                        "neighbouring pulses do not all meet one plane, and give the others that plane's echo (faster; the echo of "
+                        "a surface inside the cone that neither meets is lost)")  # fmt: skip
     add_beam_arguments(r)
 
 

@@ -89,6 +89,7 @@ def object_crop(
     sector_margin_deg: float = 5.0,
     frame: str = "sensor",
     optics: Callable[[ScanScene], dict] | None = None,
+    footprint: str = "exact",
 ) -> CropSample:
     """Scan one object placed per ``placement`` (see :func:`draw_placement`) and crop its returns.
 
@@ -104,7 +105,7 @@ def object_crop(
     sensor and the object (after ``occluders``; the object keeps id 1).  ``optics(scene)`` gives the
     scan's ``reflectivity`` and ``transmittance`` keywords for the scene the object stands in
     (:func:`~zbuf_occlude.sensors.scan.scan`'s; e.g. ``"table"``), where the placement draws no
-    reflectivity.
+    reflectivity.  ``footprint`` is :func:`~zbuf_occlude.sensors.scan.scan`'s (``"exact"`` or ``"adaptive"``).
 
     Raises
     ------
@@ -130,7 +131,7 @@ def object_crop(
                 "reflectances (reflectivity='auto'); leave the placement's reflectivity out"
             )
         return _airborne_crop(mesh, sensor, placement, seed=seed, occluders=occluders, class_name=class_name, offset_m=d * math.sin(az), size=size,
-                              reach=reach, optics=optics)  # fmt: skip
+                              reach=reach, optics=optics, footprint=footprint)  # fmt: skip
     obj = SceneObject(mesh, class_name, (d * math.cos(az), d * math.sin(az)), placement.yaw_deg, size, width_scale=width_scale,
                       width_profile=profile)  # fmt: skip
     pose = sensor_pose([0.0, 0.0, placement.height_m])
@@ -149,7 +150,7 @@ def object_crop(
         ground = DEFAULT_GROUND_REFLECTIVITY if placement.ground_reflectivity is None else placement.ground_reflectivity
         rho = [ground] + [placement.reflectivity] * (1 + len(occluders))
     surfaces = {"reflectivity": rho} if optics is None else _optics(optics, scene, rho)
-    full = scan(scene, sensor, pose, seed=seed, azimuth_range_deg=sector, backend=backend, frame=frame, **surfaces)
+    full = scan(scene, sensor, pose, seed=seed, azimuth_range_deg=sector, backend=backend, frame=frame, footprint=footprint, **surfaces)
     offset = pose[:3, 3] if frame == "sensor" else 0.0  # sensor axes = world axes (yaw 0)
     return _crop_object(scene, full, placement, pose[:3, 3], offset)
 
@@ -174,6 +175,7 @@ def object_crops(
     backend: str = "embree",
     frame: str = "sensor",
     optics: Callable[[ScanScene], dict] | None = None,
+    footprint: str = "exact",
 ) -> Iterator[DrawnCrop]:
     """The crops of one object, each with its own placement: the one loop of ``scan`` and ``farm --sensor``.
 
@@ -194,6 +196,8 @@ def object_crops(
         ``sensor`` or ``world``, as :func:`object_crop`.
     optics : callable, optional
         The scene's surface optics, as :func:`object_crop`.
+    footprint : {"exact", "adaptive"}
+        How a footprint is cast, as :func:`object_crop`.
 
     Yields
     ------
@@ -206,7 +210,7 @@ def object_crops(
         rng = derive_rng(seed, key, CROP_STREAM, k)
         placement = draw_placement(distributions, rng)
         crop = object_crop(mesh, sensor, placement, seed=int(rng.integers(2**63)), class_name=class_name, backend=backend, frame=frame,
-                           optics=optics)  # fmt: skip
+                           optics=optics, footprint=footprint)  # fmt: skip
         yield DrawnCrop(k, crop, rng)
 
 
@@ -320,7 +324,7 @@ def _under_footprint(mesh, to_world, inverse, world, margin_m: float) -> NDArray
 
 
 def _airborne_crop(mesh, sensor: AirborneScanner, placement: Placement, *, seed: int, occluders, class_name: str, offset_m: float, size,
-                  reach: float, optics=None) -> CropSample:  # fmt: skip
+                  reach: float, optics=None, footprint: str = "exact") -> CropSample:  # fmt: skip
     """An airborne crop: the object ``offset_m`` across track from the plan centre (``distance_m ·
     sin(azimuth_deg)`` of the placement; ``height_m`` is unused: the scanner flies at its altitude),
     scanned from every line of the flight plan that sees it.  Points and the full scan are in the
@@ -331,7 +335,8 @@ def _airborne_crop(mesh, sensor: AirborneScanner, placement: Placement, *, seed:
                       width_profile=placement.width_profile)  # fmt: skip
     reach = max(float(np.max(size)), reach) * 0.75 + 1.0
     scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=abs(offset_m) + 2.0 * reach)
-    full = scan_airborne(scene, sensor, (0.0, offset_m), reach, seed=seed, **({} if optics is None else _optics(optics, scene, None)))
+    full = scan_airborne(scene, sensor, (0.0, offset_m), reach, seed=seed, footprint=footprint,
+                         **({} if optics is None else _optics(optics, scene, None)))  # fmt: skip
     return _crop_object(scene, full, placement, full.sensor_position)
 
 
