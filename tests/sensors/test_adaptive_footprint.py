@@ -301,7 +301,7 @@ def test_a_neighbour_off_the_centre_faces_plane_makes_a_pulse_cast(share, stays)
 
 
 def test_the_kernel_refuses_indices_outside_its_arrays() -> None:
-    from zbuf_occlude.sensors.uniform_kernel import uniform_plane_echoes
+    from zbuf_occlude.sensors.uniform_kernel import UniformRules, uniform_plane_echoes
 
     built = build_scene(_plane_scene(2))
     planes = A._planes(built.mesh)[0]
@@ -311,8 +311,8 @@ def test_the_kernel_refuses_indices_outside_its_arrays() -> None:
     args = {"origins": np.array([[0.0, 0.0, 10.0]]), "directions": d, "face": np.array([0, 1, -1]), "t": np.full(3, 10.0),
             "neighbours": np.array([[1, -1], [0, 2], [1, -1]]), "planes": planes, "face_object": np.zeros(n_faces, np.int64),
             "transmits": np.zeros(n_faces, bool), "offsets": offsets, "weights": weights}  # fmt: skip
-    rules = {"range_resolution_m": 0.75, "range_limits_m": (0.0, np.inf), "margin_m": 0.0, "tolerance_m": 0.2, "min_range_m": 1e-9}
-    uniform_plane_echoes(**args, **rules)  # these are fine
+    rules = UniformRules(range_resolution_m=0.75, range_limits_m=(0.0, np.inf), margin_m=0.0, tolerance_m=0.2, min_range_m=1e-9)
+    uniform_plane_echoes(**args, rules=rules)  # these are fine
     for change, words in [
         ({"neighbours": np.array([[1, -1], [0, 3], [1, -1]])}, "neighbour indices outside -1..2"),
         ({"neighbours": np.array([[1, -2], [0, 2], [1, -1]])}, "neighbour indices outside -1..2"),
@@ -323,7 +323,7 @@ def test_the_kernel_refuses_indices_outside_its_arrays() -> None:
         ({"weights": weights[:3]}, "weights (3,) (K,)"),
     ]:
         with pytest.raises(InvalidInputError, match=re.escape(words)):
-            uniform_plane_echoes(**(args | change), **rules)
+            uniform_plane_echoes(**(args | change), rules=rules)
 
 
 @settings(max_examples=60, deadline=None)

@@ -41,7 +41,7 @@ from zbuf_occlude.sensors.footprint import footprint_offsets
 from zbuf_occlude.sensors.pulses import Pulses
 from zbuf_occlude.sensors.raycast import BEYOND_HIT_SHARE, cast_embree
 from zbuf_occlude.sensors.scene import BuiltScene
-from zbuf_occlude.sensors.uniform_kernel import nearest_in_line, uniform_plane_echoes
+from zbuf_occlude.sensors.uniform_kernel import UniformRules, nearest_in_line, uniform_plane_echoes
 
 __all__ = [
     "FOOTPRINT_MODES",
@@ -143,11 +143,10 @@ def _uniform(built, origins, directions, face, t, neighbours, offsets, weights, 
     planes, diagonal = _planes(built.mesh)
     n_faces = len(planes)
     transmits = np.zeros(n_faces, bool) if transmits is None else np.asarray(transmits, dtype=bool)
+    rules = UniformRules(range_resolution_m, range_limits_m, INSIDE_MARGIN_SHARE * diagonal, PLANE_SHARE * range_resolution_m, MIN_RANGE_M)
     return uniform_plane_echoes(
-        origins, directions, face, t, neighbours, planes, np.asarray(built.face_object), transmits, offsets, weights,
-        range_resolution_m=range_resolution_m, range_limits_m=range_limits_m, margin_m=INSIDE_MARGIN_SHARE * diagonal,
-        tolerance_m=PLANE_SHARE * range_resolution_m, min_range_m=MIN_RANGE_M,
-    )  # fmt: skip
+        origins, directions, face, t, neighbours, planes, np.asarray(built.face_object), transmits, offsets, weights, rules
+    )
 
 
 def plane_echoes(

@@ -13,6 +13,7 @@ sums run in another order).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numba
 import numpy as np
@@ -20,7 +21,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 
-__all__ = ["nearest_in_line", "plane_subray", "subray_axes", "uniform_plane_echoes"]
+__all__ = ["UniformRules", "nearest_in_line", "plane_subray", "subray_axes", "uniform_plane_echoes"]
 
 
 def _subray_axes(dx, dy, dz):
@@ -166,6 +167,31 @@ def nearest_in_line(key, position, line, order, width, low, step, column, out):
             out[order[i], column] = order[right]
 
 
+@dataclass(frozen=True)
+class UniformRules:
+    """What :func:`uniform_plane_echoes` holds a footprint to.
+
+    Attributes
+    ----------
+    range_resolution_m : float
+        The receiver's range resolution, metres: a uniform footprint's ranges step less than it.
+    range_limits_m : (float, float)
+        The beam's range limits, metres: a uniform footprint's ranges lie within them.
+    margin_m : float
+        How far inside its face a uniform footprint stays beyond the cone's reach, metres.
+    tolerance_m : float
+        A neighbour's hit lies on the centre face's plane within this distance, metres.
+    min_range_m : float
+        Ranges below it count as it in the energy (``echoes.MIN_RANGE_M``).
+    """
+
+    range_resolution_m: float
+    range_limits_m: tuple[float, float]
+    margin_m: float
+    tolerance_m: float
+    min_range_m: float
+
+
 def _check(origins, directions, face, t, neighbours, planes, face_object, transmits, offsets, weights) -> None:
     """Refuse what would make the compiled loop read outside its arrays."""
     n, n_faces = len(face), len(face_object)
@@ -196,12 +222,7 @@ def uniform_plane_echoes(
     transmits: NDArray[np.bool_],
     offsets: NDArray[np.float64],
     weights: NDArray[np.float64],
-    *,
-    range_resolution_m: float,
-    range_limits_m: tuple[float, float],
-    margin_m: float,
-    tolerance_m: float,
-    min_range_m: float,
+    rules: UniformRules,
 ) -> tuple[NDArray[np.bool_], NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
     """The uniform footprints, and the plane echo of those that hit (rules: :mod:`.adaptive_footprint`).
 
@@ -225,16 +246,8 @@ def uniform_plane_echoes(
         The footprint's sub-rays: angle off the axis and azimuth, radians.
     weights : (K,) float64
         Each sub-ray's share of the pulse's energy.
-    range_resolution_m : float
-        The receiver's range resolution, metres.
-    range_limits_m : (float, float)
-        The beam's range limits, metres.
-    margin_m : float
-        How far inside its face a uniform footprint stays beyond the cone's reach, metres.
-    tolerance_m : float
-        A neighbour's hit lies on the centre face's plane within this distance, metres.
-    min_range_m : float
-        Ranges below it count as it in the energy (``echoes.MIN_RANGE_M``).
+    rules : UniformRules
+        The receiver's range resolution and limits, and the test's margins.
 
     Returns
     -------
@@ -260,10 +273,11 @@ def uniform_plane_echoes(
     _check(origins, directions, face, t, neighbours, planes, face_object, transmits, off, weights)
     tan = np.array([math.tan(theta) for theta in off[:, 0]])
     phi = np.ascontiguousarray(off[:, 1])
-    low, high = (float(v) for v in range_limits_m)
+    low, high = (float(v) for v in rules.range_limits_m)
     uniform, plane, echo_range, energy = _uniform_plane_echoes(
         origins, directions, face, t, neighbours, planes, face_object, transmits, tan, np.cos(phi), np.sin(phi), np.sqrt(1.0 + tan * tan),
-        weights, float(np.max(off[:, 0])), float(range_resolution_m), low, high, float(margin_m), float(tolerance_m), float(min_range_m),
+        weights, float(np.max(off[:, 0])), float(rules.range_resolution_m), low, high, float(rules.margin_m), float(rules.tolerance_m),
+        float(rules.min_range_m),
     )  # fmt: skip
     rows = np.flatnonzero(plane)
     return uniform, rows, echo_range[rows], energy[rows]
