@@ -72,9 +72,10 @@ fi
 echo "compiling the package's Python files"
 .venv/bin/python -m compileall -q zbuf_occlude
 # numba compiles the kernels on their first call (seconds on the first mesh): compile them now
-# into numba's on-disk cache, which every later process loads (zbuf_occlude/visibility/warmup.py).
+# into numba's on-disk cache, which every later process loads (zbuf_occlude/visibility/warmup.py,
+# zbuf_occlude/sensors/warmup.py).
 echo "compiling the numba kernels (once, into numba's cache; a minute or two, quiet)"
-.venv/bin/python -m zbuf_occlude.visibility.warmup -q \
+{ .venv/bin/python -m zbuf_occlude.visibility.warmup -q && .venv/bin/python -m zbuf_occlude.sensors.warmup -q; } \
     || echo "warning: the numba kernels were not all compiled now; they compile on first use" >&2
 echo "checking the OpenGL context and the visibility methods (zbuf-occlude info)"
 .venv/bin/zbuf-occlude info

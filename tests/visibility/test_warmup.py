@@ -48,12 +48,12 @@ def _is_kernel(node: ast.AST) -> bool:
     )  # fmt: skip
 
 
-def _module_level_kernels() -> set[str]:
-    """``module.name`` (below zbuf_occlude.visibility) of every kernel made at a module's top level:
+def _module_level_kernels(package: str = "visibility") -> set[str]:
+    """``module.name`` (below zbuf_occlude.<package>) of every kernel made at a module's top level:
     ``name = numba.njit(...)(function)`` or a function decorated ``@numba.njit(...)``."""
     names = set()
-    for path in sorted((PACKAGE / "visibility").rglob("*.py")):
-        module = ".".join(path.relative_to(PACKAGE / "visibility").with_suffix("").parts)
+    for path in sorted((PACKAGE / package).rglob("*.py")):
+        module = ".".join(path.relative_to(PACKAGE / package).with_suffix("").parts)
         for node in ast.parse(path.read_text(encoding="utf-8")).body:
             if isinstance(node, ast.Assign) and isinstance(node.value, ast.Call) and _is_kernel(node.value.func):
                 names |= {f"{module}.{t.id}" for t in node.targets if isinstance(t, ast.Name)}
@@ -62,16 +62,21 @@ def _module_level_kernels() -> set[str]:
     return names
 
 
-def test_the_warm_up_lists_every_kernel_of_the_package():
-    # a kernel outside zbuf_occlude.visibility would be missed by the warm-up: there are none
-    assert all(path.is_relative_to(PACKAGE / "visibility") for path, _, _ in _njit_calls())
+def test_the_warm_ups_list_every_kernel_of_the_package():
+    # a kernel outside zbuf_occlude.visibility and zbuf_occlude.sensors would be missed by the two warm-ups: there are none
+    from zbuf_occlude.sensors import warmup as sensors_warmup
+
+    assert all(path.is_relative_to(PACKAGE / "visibility") or path.is_relative_to(PACKAGE / "sensors") for path, _, _ in _njit_calls())
     expected = _module_level_kernels()
     assert expected and set(warmup.kernels()) == expected
+    expected = _module_level_kernels("sensors")
+    assert expected and set(sensors_warmup.kernels()) == expected
 
 
-def _warm_up_in_child(cache: Path) -> list[dict]:
-    """:func:`warmup.warm_up` in a new process whose numba cache is ``cache``: its reports."""
-    code = "import dataclasses, json; from zbuf_occlude.visibility.warmup import warm_up; print(json.dumps([dataclasses.asdict(r) for r in warm_up()]))"
+def _warm_up_in_child(cache: Path, package: str = "visibility") -> list[dict]:
+    """:func:`warmup.warm_up` (or ``zbuf_occlude.<package>.warmup``'s) in a new process whose numba cache is ``cache``: its reports."""
+    code = (f"import dataclasses, json; from zbuf_occlude.{package}.warmup import warm_up; "
+            "print(json.dumps([dataclasses.asdict(r) for r in warm_up()]))")  # fmt: skip
     r = subprocess.run([sys.executable, "-c", code], env={**os.environ, "NUMBA_CACHE_DIR": str(cache)}, capture_output=True,
                        text=True, timeout=600)  # fmt: skip
     assert r.returncode == 0, r.stderr[-3000:]
@@ -87,9 +92,23 @@ def test_the_warm_up_compiles_every_kernel_and_a_second_process_only_loads_them(
     assert sum(r["compiled"] for r in warm) == 0 and sum(r["loaded"] for r in warm) > 0, warm
 
 
+def test_the_sensors_warm_up_compiles_their_kernels_and_a_second_process_only_loads_them(tmp_path):
+    from zbuf_occlude.sensors import warmup as sensors_warmup
+
+    cold = _warm_up_in_child(tmp_path / "numba", "sensors")
+    assert {r["name"] for r in cold} == set(sensors_warmup.kernels())
+    assert [r["name"] for r in cold if not r["signatures"] or not r["compiled"]] == []
+    warm = _warm_up_in_child(tmp_path / "numba", "sensors")
+    assert sum(r["compiled"] for r in warm) == 0 and sum(r["loaded"] for r in warm) > 0, warm
+
+
 def test_the_command_refuses_an_unknown_option(caplog):
+    from zbuf_occlude.sensors import warmup as sensors_warmup
+
     assert warmup.main(["--bogus"]) == 2
-    assert "unknown option(s) --bogus" in caplog.text
+    assert "python -m zbuf_occlude.visibility.warmup: unknown option(s) --bogus" in caplog.text
+    assert sensors_warmup.main(["--bogus"]) == 2
+    assert "python -m zbuf_occlude.sensors.warmup: unknown option(s) --bogus" in caplog.text
 
 
 def test_compiling_the_threaded_kernels_keeps_forked_children_serial():

@@ -41,7 +41,6 @@ from zbuf_occlude.sensors.footprint import footprint_offsets
 from zbuf_occlude.sensors.pulses import Pulses
 from zbuf_occlude.sensors.raycast import BEYOND_HIT_SHARE, cast_embree
 from zbuf_occlude.sensors.scene import BuiltScene
-from zbuf_occlude.sensors.uniform_kernel import UniformRules, nearest_in_line, uniform_plane_echoes
 
 __all__ = [
     "FOOTPRINT_MODES",
@@ -143,6 +142,8 @@ def _uniform(built, origins, directions, face, t, neighbours, offsets, weights, 
     planes, diagonal = _planes(built.mesh)
     n_faces = len(planes)
     transmits = np.zeros(n_faces, bool) if transmits is None else np.asarray(transmits, dtype=bool)
+    from zbuf_occlude.sensors.uniform_kernel import UniformRules, uniform_plane_echoes  # numba: imported when used
+
     rules = UniformRules(range_resolution_m, range_limits_m, INSIDE_MARGIN_SHARE * diagonal, PLANE_SHARE * range_resolution_m, MIN_RANGE_M)
     return uniform_plane_echoes(
         origins, directions, face, t, neighbours, planes, np.asarray(built.face_object), transmits, offsets, weights, rules
@@ -219,6 +220,8 @@ def grid_neighbours(position: NDArray[np.float64], line: NDArray[np.int64], *, p
         out[order[first[wraps]], 0] = order[last[wraps]]
         out[order[last[wraps]], 1] = order[first[wraps]]
     # the pulses of line r ± 1 nearest to each pulse by position (ties: the lower position), a compiled loop
+    from zbuf_occlude.sensors.uniform_kernel import nearest_in_line  # numba: imported when used
+
     for column, step in ((2, -1), (3, 1)):
         nearest_in_line(key, p, r, order, width, low, step, column, out)
     return out

@@ -42,14 +42,13 @@ def _plane_subray(t, nd, nu, nv, tan, cos_phi, sin_phi, root):
     return t * (nd / ndk), abs(ndk)
 
 
-_jit = {"cache": True, "nogil": True, "error_model": "numpy"}
 #: ``subray_axes(dx, dy, dz) -> (ux, uy, uz, vx, vy, vz)``: the axes a beam's sub-rays turn about (:func:`~.footprint.subray_directions`).
-subray_axes = numba.njit(inline="always", **_jit)(_subray_axes)
+subray_axes = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")(_subray_axes)
 #: ``plane_subray(t, n·d, n·u, n·v, tan θ, cos φ, sin φ, sqrt(1 + tan² θ)) -> (range, |cos|)`` of one sub-ray.
-plane_subray = numba.njit(inline="always", **_jit)(_plane_subray)
+plane_subray = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")(_plane_subray)
 
 
-@numba.njit(**_jit)
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _uniform_plane_echoes(origins, directions, face, t, neighbours, planes, face_object, transmits, tan, cos_phi, sin_phi, root,
                           weights, theta_max, resolution, low, high, margin, tolerance, min_range):  # fmt: skip
     n_pulses, n_sub = len(face), len(tan)
@@ -144,7 +143,7 @@ def _uniform_plane_echoes(origins, directions, face, t, neighbours, planes, face
     return uniform, on_plane, echo_range, energy
 
 
-@numba.njit(**_jit)
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def nearest_in_line(key, position, line, order, width, low, step, column, out):
     """Write into ``out[:, column]`` each pulse's nearest pulse by position on line ``line + step``: the loop of
     :func:`~.adaptive_footprint.grid_neighbours` over pulses sorted by ``key = line · width + (position − low)``

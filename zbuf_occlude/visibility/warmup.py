@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from types import ModuleType
 from typing import Any
 
-__all__ = ["KernelReport", "kernels", "warm_up", "main"]
+__all__ = ["KernelReport", "kernel_reports", "kernels", "warm_up", "main"]
 
 log = logging.getLogger(__name__)
 
@@ -45,7 +45,7 @@ class KernelReport:
     Attributes
     ----------
     name : str
-        ``module.function``, relative to ``zbuf_occlude.visibility``.
+        ``module.function``, relative to the package warmed up (``zbuf_occlude.visibility`` or ``zbuf_occlude.sensors``).
     signatures : int
         Argument-type signatures compiled or loaded in this process.
     loaded : int
@@ -60,14 +60,15 @@ class KernelReport:
     compiled: int
 
 
-def _kernel_modules() -> list[ModuleType]:
-    """The modules of :mod:`zbuf_occlude.visibility` whose source calls numba, imported."""
+def _kernel_modules(package: ModuleType | None = None) -> list[ModuleType]:
+    """The modules of ``package`` (default :mod:`zbuf_occlude.visibility`) whose source calls numba, imported."""
     import importlib
     import importlib.util
     import pkgutil
     from pathlib import Path
 
-    import zbuf_occlude.visibility as package
+    if package is None:
+        import zbuf_occlude.visibility as package
 
     found = []
     for info in pkgutil.walk_packages(package.__path__, f"{package.__name__}."):
@@ -77,10 +78,11 @@ def _kernel_modules() -> list[ModuleType]:
     return found
 
 
-def kernels() -> dict[str, Any]:
-    """Every numba kernel of the package that is compiled on its own, by ``module.function``.
+def kernels(package: ModuleType | None = None) -> dict[str, Any]:
+    """Every numba kernel of ``package`` that is compiled on its own, by ``module.function`` relative to it.
 
-    Kernels are found in the modules of :mod:`zbuf_occlude.visibility` that use numba.
+    Kernels are found in the modules of ``package`` (default :mod:`zbuf_occlude.visibility`;
+    :mod:`zbuf_occlude.sensors.warmup` asks for :mod:`zbuf_occlude.sensors`') that use numba.
     Kernels compiled only inside others (``inline="always"``) are left out: they have no
     machine code of their own; so is the paper's object-space loop, which
     :mod:`zbuf_occlude.visibility.paper.face_scan` makes on first request (:func:`warm_up`
@@ -93,8 +95,9 @@ def kernels() -> dict[str, Any]:
     from numba.core.registry import CPUDispatcher
 
     found = {}
-    prefix = "zbuf_occlude.visibility."
-    for module in _kernel_modules():
+    modules = _kernel_modules(package)
+    prefix = f"{package.__name__ if package is not None else 'zbuf_occlude.visibility'}."
+    for module in modules:
         short = module.__name__.removeprefix(prefix)
         for name, value in vars(module).items():
             if isinstance(value, CPUDispatcher) and value.targetoptions.get("inline") != "always" and value.__module__ == module.__name__:
@@ -176,8 +179,13 @@ def warm_up() -> list[KernelReport]:
         Embree (``embreex``) cannot be imported.
     """
     _exercise()
+    return kernel_reports(kernels())
+
+
+def kernel_reports(found: dict[str, Any]) -> list[KernelReport]:
+    """A :class:`KernelReport` of each of ``found`` (:func:`kernels`), from its dispatcher's signatures and cache statistics."""
     reports = []
-    for name, dispatcher in kernels().items():
+    for name, dispatcher in found.items():
         stats = dispatcher.stats
         loaded, compiled = sum(stats.cache_hits.values()), sum(stats.cache_misses.values())
         reports.append(KernelReport(name, len(dispatcher.signatures), loaded, compiled))
@@ -188,8 +196,9 @@ def warm_up() -> list[KernelReport]:
 QUIET_OPTIONS = ("-q", "--quiet")
 
 
-def main(argv: list[str] | None = None) -> int:
-    """``python -m zbuf_occlude.visibility.warmup [-q]``: :func:`warm_up`, one line per kernel on stderr.
+def main(argv: list[str] | None = None, *, command: str = "python -m zbuf_occlude.visibility.warmup", run=None) -> int:
+    """``python -m zbuf_occlude.visibility.warmup [-q]``: :func:`warm_up`, one line per kernel on stderr
+    (``command`` and ``run``: another warm-up's name and function, :mod:`zbuf_occlude.sensors.warmup`'s).
 
     ``-q`` (``--quiet``) keeps the summary line only.  A kernel without a signature is named
     there: one called only from other kernels, whose code was loaded with theirs from the
@@ -203,10 +212,10 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     if unknown := [a for a in argv if a not in QUIET_OPTIONS]:
-        log.error("python -m zbuf_occlude.visibility.warmup: unknown option(s) %s; it takes only -q (--quiet)", " ".join(unknown))
+        log.error("%s: unknown option(s) %s; it takes only -q (--quiet)", command, " ".join(unknown))
         return 2
     t0 = time.perf_counter()
-    reports = warm_up()
+    reports = (run or warm_up)()
     if not any(a in QUIET_OPTIONS for a in argv):
         for r in reports:
             log.info("  %-40s %d signature(s): %d loaded from the cache, %d compiled", r.name, r.signatures, r.loaded, r.compiled)
