@@ -78,7 +78,9 @@ class TestInstallScript:
         rc, calls, out = _install(fake_checkout, *args, CPU_INDEX_OK="1")
         assert rc == 0, out
         last_install = max(i for i, c in enumerate(calls) if c.startswith("-m pip install"))
-        assert calls[last_install + 1 :] == ["-m compileall -q zbuf_occlude", "-m zbuf_occlude.visibility.warmup -q"], calls
+        assert calls[last_install + 1 :] == [
+            "-m compileall -q zbuf_occlude", "-m zbuf_occlude.visibility.warmup -q", "-m zbuf_occlude.sensors.warmup -q"
+        ], calls  # fmt: skip
 
     def test_test_install_takes_the_cpu_build_first_without_a_gpu(self, fake_checkout):
         rc, calls, out = _install(fake_checkout, "--test", CPU_INDEX_OK="1")
