@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.checks import real
 
 if TYPE_CHECKING:
     import trimesh
@@ -44,16 +45,6 @@ _VOLUME_SAMPLES = 400_000
 #: exceed the true ones by at most about ``shell_m / _SURFACE_PER_SHELL``.
 _SURFACE_PER_SHELL = 5
 _MAX_SURFACE_SAMPLES = 500_000
-
-
-def _positive(value: float, name: str, *, zero: bool = False) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v) or v < 0 or (v == 0 and not zero):
-        raise InvalidInputError(f"{name} must be a finite number {'≥' if zero else '>'} 0, got {value!r}")
-    return v
 
 
 class _CrownRegion:
@@ -106,7 +97,7 @@ def in_metres(mesh: trimesh.Trimesh, size_m: float) -> trimesh.Trimesh:
     """
     import trimesh
 
-    size = _positive(size_m, "size_m")
+    size = real(size_m, "size_m", low=0.0, low_open=True)
     vertices = np.asarray(mesh.vertices, np.float64)
     extent = float(np.ptp(vertices, axis=0).max()) if len(vertices) else 0.0
     if not extent > 0:
@@ -138,7 +129,7 @@ def crown_region_volume(mesh: trimesh.Trimesh, *, shell_m: float = 1.0, seed: in
     InvalidInputError
         Not a ``trimesh.Trimesh``, a shell not > 0, or a mesh with no area or a flat hull.
     """
-    shell = _positive(shell_m, "shell_m")
+    shell = real(shell_m, "shell_m", low=0.0, low_open=True)
     rng = np.random.default_rng(seed)
     region = _region(mesh, shell, rng)
     return _volume(region, rng)
@@ -215,8 +206,8 @@ def add_foliage(mesh: trimesh.Trimesh, *, leaf_area_density: float, leaf_side_m:
     """
     import trimesh
 
-    lad = _positive(leaf_area_density, "leaf_area_density", zero=True)
-    side, shell = _positive(leaf_side_m, "leaf_side_m"), _positive(shell_m, "shell_m")
+    lad = real(leaf_area_density, "leaf_area_density", low=0.0)
+    side, shell = real(leaf_side_m, "leaf_side_m", low=0.0, low_open=True), real(shell_m, "shell_m", low=0.0, low_open=True)
     if lad == 0:
         return mesh
     rng = np.random.default_rng(seed)
