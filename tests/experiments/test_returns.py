@@ -176,8 +176,9 @@ def test_run_returns_writes_its_outputs(tmp_path, detection, capsys, monkeypatch
     real_path = write_bytes(tmp_path / "real.las", data)
     import zbuf_occlude.experiments.returns_report as report
 
+    # the crowns filled with leaves in one of the two runs (their build is most of a run's time)
     settings_ = ReturnsSettings(divergence_factors=(1.0, 8.0), sweep_rays=(7,), k_values=(1, 7), seeds=(0,), repeats=1, copies=1,
-                                spacing_m=4.0, bootstrap=5, detection=detection)  # fmt: skip
+                                spacing_m=4.0, bootstrap=5, detection=detection, leaf_area_density=1.0 if detection else 0.0)  # fmt: skip
     original = report.PLOT_TREES
     report.PLOT_TREES = tuple(trees)
     try:
@@ -402,7 +403,7 @@ def test_the_plot_is_spaced_for_the_tiles_cover(tmp_path) -> None:
             trimesh.creation.box(extents=(1.0 + 0.2 * i, 1.0, 2.0)).export(file_type="obj").encode(),
         )
     trees = tuple(type(t)(t.file.rsplit(".", 1)[0] + ".obj", "+z", 3.0) for t in PLOT_TREES)
-    settings_ = ReturnsSettings(seeds=(0,), copies=1)
+    settings_ = ReturnsSettings(seeds=(0,), copies=1, leaf_area_density=0.0)  # boxes as they are: the spacing is under test, not leaves
     original, report.PLOT_TREES = report.PLOT_TREES, trees
     try:
         scene, vegetation, centre, half = report.ign_plot(meshes, settings_, tree_cover=0.25)
@@ -417,7 +418,8 @@ def test_the_plot_is_spaced_for_the_tiles_cover(tmp_path) -> None:
 
 
 def test_the_divergence_is_fitted_again_with_the_k_it_is_compared_at(tmp_path, capsys, monkeypatch) -> None:
-    settings_ = ReturnsSettings(sweep_rays=(7,), k_values=(1, 19), seeds=(0,), repeats=1, copies=1, spacing_m=4.0, bootstrap=5)
+    settings_ = ReturnsSettings(sweep_rays=(7,), k_values=(1, 19), seeds=(0,), repeats=1, copies=1, spacing_m=4.0, bootstrap=5,
+                                leaf_area_density=0.0)  # fmt: skip
     assert refits_divergence(19, settings_) and not refits_divergence(7, settings_) and not refits_divergence(1, settings_)
     meshes = tmp_path / "bush"
     meshes.mkdir()
