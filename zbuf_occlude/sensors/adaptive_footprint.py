@@ -36,7 +36,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.cache import MeshCache
 from zbuf_occlude.sensors.beam import Beam
 from zbuf_occlude.sensors.echo_model import Radiometry, Transmission, echo_returns
-from zbuf_occlude.sensors.echoes import MIN_RANGE_M, hit_energy, resolve_echoes
+from zbuf_occlude.sensors.echoes import MIN_RANGE_M, resolve_echoes
 from zbuf_occlude.sensors.footprint import footprint_offsets
 from zbuf_occlude.sensors.pulses import Pulses
 from zbuf_occlude.sensors.raycast import BEYOND_HIT_SHARE, cast_embree
@@ -161,7 +161,8 @@ def plane_echoes(
     Sub-ray ``k`` hits at range ``t_k`` and incidence ``cos_incidence`` (``|n · d_k|``,
     :func:`~.footprint.plane_subrays`) and sends back ``E_k = w_k ρ |n · d_k| / t_k²``
     (:func:`~.echoes.hit_energy`).  The echo: ``Σ E_k t_k / Σ E_k`` (the energy-weighted mean
-    range, :func:`~.echoes.resolve_echoes`) and ``Σ E_k``.
+    range, :func:`~.echoes.resolve_echoes`) and ``Σ E_k``: :func:`~.uniform_kernel.plane_echo` of each row, the
+    adaptive scan's own.
 
     Parameters
     ----------
@@ -172,11 +173,10 @@ def plane_echoes(
     reflectivity : float or (P,) float64
         ρ of each pulse's surface.
     """
-    tk = np.asarray(range_m, dtype=np.float64)
-    ek = hit_energy(np.asarray(weights, dtype=np.float64)[None, :], 1.0, cos_incidence, tk)  # ρ applied per pulse below
-    energy = np.einsum("pk->p", ek)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        echo_range = np.einsum("pk,pk->p", ek, tk) / energy
+    from zbuf_occlude.sensors.uniform_kernel import plane_echo_rows  # numba: imported when used
+
+    tk, cos = (np.ascontiguousarray(np.atleast_2d(a), dtype=np.float64) for a in (range_m, cos_incidence))
+    echo_range, energy = plane_echo_rows(tk, cos, np.ascontiguousarray(weights, dtype=np.float64), MIN_RANGE_M)
     return echo_range, energy * np.asarray(reflectivity, dtype=np.float64)
 
 

@@ -231,7 +231,8 @@ def plane_subrays(range_m: ArrayLike, directions: ArrayLike, normal: ArrayLike, 
     sqrt(1 + tan² θ_k)`` (``u ⊥ v ⊥ d`` unit), meets the plane of unit normal ``n`` that the axis
     ``d`` meets at range ``t`` at range ``t (n · d) / (n · d_k)``, at incidence ``|n · d_k|``; a
     sub-ray parallel to the plane gives inf or nan, one meeting it behind the origin a negative
-    range.  Computed from ``n · d``, ``n · u`` and ``n · v``, without the sub-rays themselves.
+    range.  Computed from ``n · d``, ``n · u`` and ``n · v``, without the sub-rays themselves
+    (:func:`~.uniform_kernel.plane_subray`, compiled).
 
     Parameters
     ----------
@@ -255,15 +256,9 @@ def plane_subrays(range_m: ArrayLike, directions: ArrayLike, normal: ArrayLike, 
     t = np.asarray(range_m, dtype=np.float64)
     if t.shape != (len(d),) or len(n) != len(d):
         raise InvalidInputError(f"range_m, directions and normal need one row per beam, got {t.shape}, {d.shape}, {n.shape}")
-    dx, dy, dz = (np.ascontiguousarray(d[:, i]) for i in range(3))
-    u, v = _axes(dx, dy, dz)
-    nx, ny, nz = (np.ascontiguousarray(n[:, i]) for i in range(3))
-    nd, nu, nv = (nx * x + ny * y + nz * z for x, y, z in ((dx, dy, dz), u, v))
-    tan = np.array([math.tan(theta) for theta in off[:, 0]])
-    phi = np.ascontiguousarray(off[:, 1])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ndk = (nd[:, None] + tan * (np.cos(phi) * nu[:, None] + np.sin(phi) * nv[:, None])) / np.sqrt(1.0 + tan * tan)
-        return t[:, None] * (nd[:, None] / ndk), np.abs(ndk)  # the centre ray (θ 0): t itself
+    from zbuf_occlude.sensors.uniform_kernel import plane_subray_rows, subray_trig  # numba: imported when used
+
+    return plane_subray_rows(t, np.ascontiguousarray(d), np.ascontiguousarray(n), *subray_trig(off))
 
 
 def _axes(dx: NDArray[np.float64], dy: NDArray[np.float64], dz: NDArray[np.float64]) -> tuple[tuple[NDArray[np.float64], ...], ...]:

@@ -3,11 +3,10 @@
 :func:`uniform_plane_echoes` decides, pulse by pulse, whether a footprint is *uniform* (the rules
 of :mod:`.adaptive_footprint`'s docstring: its centre face does not transmit, its neighbours lie
 on that face's plane, every sub-ray meets the plane inside the face, one echo, within the range
-limits) and gives a uniform hit's one echo on that plane, without the ``(P, K)`` temporaries of
-the numpy form.  Each sub-ray's range and incidence on the plane are
-:func:`~.footprint.plane_subrays`' operations in their order (the same bits: a hypothesis test
-holds the two equal), the echo :func:`~.adaptive_footprint.plane_echoes`' (equal to rounding: the
-sums run in another order).
+limits) and gives a uniform hit's one echo on that plane, without ``(P, K)`` temporaries.  Each
+sub-ray's range and incidence on the plane (:func:`plane_subray`) and the plane's echo
+(:func:`plane_echo`) are the one implementation: :func:`~.footprint.plane_subrays` and
+:func:`~.adaptive_footprint.plane_echoes` loop over them for whole arrays.
 """
 
 from __future__ import annotations
@@ -21,7 +20,10 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 
-__all__ = ["UniformRules", "nearest_in_line", "plane_subray", "subray_axes", "uniform_plane_echoes"]
+__all__ = [
+    "UniformRules", "nearest_in_line", "plane_echo", "plane_echo_rows", "plane_subray", "plane_subray_rows", "subray_axes", "subray_trig",
+    "uniform_plane_echoes",
+]  # fmt: skip
 
 
 def _subray_axes(dx, dy, dz):
@@ -46,6 +48,54 @@ def _plane_subray(t, nd, nu, nv, tan, cos_phi, sin_phi, root):
 subray_axes = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")(_subray_axes)
 #: ``plane_subray(t, n·d, n·u, n·v, tan θ, cos φ, sin φ, sqrt(1 + tan² θ)) -> (range, |cos|)`` of one sub-ray.
 plane_subray = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")(_plane_subray)
+
+
+def _plane_echo(ranges, cosines, weights, min_range):
+    # the one echo of K sub-ray hits on one plane: Σ E_k, Σ E_k t_k / Σ E_k, E_k = |cos_k| w_k / max(t_k, MIN_RANGE_M)²
+    total, moment = 0.0, 0.0
+    for k in range(len(ranges)):
+        r = max(ranges[k], min_range)
+        e = cosines[k] * weights[k] / r**2
+        total += e
+        moment += e * ranges[k]
+    return moment / total, total
+
+
+#: ``plane_echo(ranges (K,), cosines (K,), weights (K,), min_range) -> (range, energy)``: one pulse's echo on a plane, ρ = 1.
+plane_echo = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")(_plane_echo)
+
+
+def subray_trig(offsets: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+    """``(tan θ, cos φ, sin φ, sqrt(1 + tan² θ))`` (K,) float64 of the sub-rays ``offsets (K, 2)`` (angle off the axis,
+    azimuth; radians): what :func:`plane_subray` takes, as :func:`~.footprint.plane_subrays` computed them."""
+    tan = np.array([math.tan(theta) for theta in offsets[:, 0]])
+    phi = np.ascontiguousarray(offsets[:, 1])
+    return tan, np.cos(phi), np.sin(phi), np.sqrt(1.0 + tan * tan)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def plane_subray_rows(t, directions, normal, tan, cos_phi, sin_phi, root):
+    """``(range, cos)`` (N, K): :func:`plane_subray` of every sub-ray of every beam (:func:`~.footprint.plane_subrays`'s loop)."""
+    n, n_sub = len(t), len(tan)
+    ranges, cosines = np.empty((n, n_sub)), np.empty((n, n_sub))
+    for i in range(n):
+        dx, dy, dz = directions[i, 0], directions[i, 1], directions[i, 2]
+        ux, uy, uz, vx, vy, vz = subray_axes(dx, dy, dz)
+        nx, ny, nz = normal[i, 0], normal[i, 1], normal[i, 2]
+        nd, nu, nv = nx * dx + ny * dy + nz * dz, nx * ux + ny * uy + nz * uz, nx * vx + ny * vy + nz * vz
+        for k in range(n_sub):
+            ranges[i, k], cosines[i, k] = plane_subray(t[i], nd, nu, nv, tan[k], cos_phi[k], sin_phi[k], root[k])
+    return ranges, cosines
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def plane_echo_rows(ranges, cosines, weights, min_range):
+    """``(range, energy)`` (P,): :func:`plane_echo` of every row (:func:`~.adaptive_footprint.plane_echoes`' loop)."""
+    n = len(ranges)
+    echo_range, energy = np.empty(n), np.empty(n)
+    for p in range(n):
+        echo_range[p], energy[p] = plane_echo(ranges[p], cosines[p], weights, min_range)
+    return echo_range, energy
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -131,15 +181,7 @@ def _uniform_plane_echoes(origins, directions, face, t, neighbours, planes, face
                 continue
         uniform[p] = True
         on_plane[p] = True
-        # the plane's echo (adaptive_footprint.plane_echoes): Σ E_k, Σ E_k t_k / Σ E_k, E_k = |cos_k| w_k / max(t_k, MIN_RANGE_M)²
-        total, moment = 0.0, 0.0
-        for k in range(n_sub):
-            r = max(ranges[k], min_range)
-            e = cosines[k] * weights[k] / r**2
-            total += e
-            moment += e * ranges[k]
-        energy[p] = total
-        echo_range[p] = moment / total
+        echo_range[p], energy[p] = plane_echo(ranges, cosines, weights, min_range)
     return uniform, on_plane, echo_range, energy
 
 
@@ -270,12 +312,11 @@ def uniform_plane_echoes(
     face_object, transmits = np.ascontiguousarray(face_object, dtype=np.int64), np.ascontiguousarray(transmits, dtype=np.bool_)
     off, weights = np.asarray(offsets, dtype=np.float64), np.ascontiguousarray(weights, dtype=np.float64)
     _check(origins, directions, face, t, neighbours, planes, face_object, transmits, off, weights)
-    tan = np.array([math.tan(theta) for theta in off[:, 0]])
-    phi = np.ascontiguousarray(off[:, 1])
+    tan, cos_phi, sin_phi, root = subray_trig(off)
     low, high = (float(v) for v in rules.range_limits_m)
     uniform, plane, echo_range, energy = _uniform_plane_echoes(
-        origins, directions, face, t, neighbours, planes, face_object, transmits, tan, np.cos(phi), np.sin(phi), np.sqrt(1.0 + tan * tan),
-        weights, float(np.max(off[:, 0])), float(rules.range_resolution_m), low, high, float(rules.margin_m), float(rules.tolerance_m),
+        origins, directions, face, t, neighbours, planes, face_object, transmits, tan, cos_phi, sin_phi, root, weights,
+        float(np.max(off[:, 0])), float(rules.range_resolution_m), low, high, float(rules.margin_m), float(rules.tolerance_m),
         float(rules.min_range_m),
     )  # fmt: skip
     rows = np.flatnonzero(plane)

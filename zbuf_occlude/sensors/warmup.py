@@ -27,7 +27,9 @@ def kernels() -> dict:
 
 
 def _exercise() -> None:
-    """An adaptive scan of a box on the ground: a spinning LiDAR's sector, and an airborne preset's square."""
+    """An adaptive scan of a box on the ground (a spinning LiDAR's sector, an airborne preset's square), then
+    :func:`~.footprint.plane_subrays` and :func:`~.adaptive_footprint.plane_echoes` on two beams."""
+    import numpy as np
     import trimesh
 
     from zbuf_occlude.sensors import Lidar, ScanScene, airborne_preset, scan, scan_airborne, with_beam
@@ -36,6 +38,13 @@ def _exercise() -> None:
     lidar = with_beam(Lidar.preset("vlp16"), footprint_rays=7, max_returns=2, range_resolution_m=0.5)
     scan(scene, lidar, seed=0, azimuth_range_deg=(-20.0, 20.0), footprint="adaptive")
     scan_airborne(scene, airborne_preset("riegl-q1560"), (8.0, 0.0), 3.0, seed=0, footprint="adaptive")
+    # the array forms of the same loops (public, not called by a scan)
+    from zbuf_occlude.sensors.adaptive_footprint import plane_echoes
+    from zbuf_occlude.sensors.footprint import footprint_offsets, plane_subrays
+
+    offsets, weights = footprint_offsets(7, 0.2)
+    ranges, cosines = plane_subrays(np.full(2, 10.0), np.tile([0.0, 0.0, -1.0], (2, 1)), np.tile([0.0, 0.0, 1.0], (2, 1)), offsets)
+    plane_echoes(ranges, cosines, weights)
 
 
 def warm_up() -> list[KernelReport]:
