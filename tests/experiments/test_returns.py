@@ -11,6 +11,7 @@ import trimesh
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.returns import (
+    AUTZEN_CELL_M,
     IGN_ALTITUDE_M,
     IGN_DIVERGENCE_DEG,
     PLOT_TREES,
@@ -21,6 +22,7 @@ from zbuf_occlude.experiments.returns import (
     simulate,
     simulated_classes,
 )
+from zbuf_occlude.experiments.canopy import canopy_height, classes_by_height, heights_above_ground
 from zbuf_occlude.experiments.tree_cover import COVER_TOLERANCE, plot_cover, spacing_for_cover, tree_cover
 from zbuf_occlude.experiments.returns_comparison import comparison_rows, cover_markdown, recommend_k
 from zbuf_occlude.experiments.returns_report import ReturnsSettings, cover_rays_per_cell, refits_divergence, run_returns, scans_of_run
@@ -160,6 +162,23 @@ def test_comparison_verdicts_hold_the_tolerances() -> None:
     assert rows["intensity first-of-several / single, vegetation"] == "FAIL"
 
 
+def _in_feet_unclassified(data: bytes) -> bytes:
+    """A LAS file's bytes with its coordinates in international feet (a WKT saying so) and its vegetation (3–5) as class 1."""
+    import io
+
+    import laspy
+
+    las = laspy.read(io.BytesIO(data))
+    x, y, z = (np.asarray(v) / 0.3048 for v in (las.x, las.y, las.z))
+    las.header.vlrs.append(laspy.vlrs.known.WktCoordinateSystemVlr('PROJCS["p",UNIT["foot",0.3048,AUTHORITY["EPSG","9002"]]]'))
+    las.header.offsets = [0.0, 0.0, 0.0]
+    las.x, las.y, las.z = x, y, z
+    las.classification = np.where(np.isin(las.classification, (3, 4, 5)), 1, las.classification)
+    buffer = io.BytesIO()
+    las.write(buffer)
+    return buffer.getvalue()
+
+
 @pytest.mark.parametrize("detection", [True, False])
 def test_run_returns_writes_its_outputs(tmp_path, detection, capsys, monkeypatch) -> None:
     meshes = tmp_path / "bush"
@@ -174,6 +193,8 @@ def test_run_returns_writes_its_outputs(tmp_path, detection, capsys, monkeypatch
     data = las_bytes(real.points, intensity=real.intensity, return_number=real.return_number, number_of_returns=real.number_of_returns,
                      gps_time=real.gps_time, scan_angle_deg=real.scan_angle_deg, classification=real.classification)  # fmt: skip
     real_path = write_bytes(tmp_path / "real.las", data)
+    # without detection, an Autzen-like file too: the same scan in international feet, its vegetation unclassified (class 1)
+    autzen_path = None if detection else write_bytes(tmp_path / "autzen.las", _in_feet_unclassified(data))
     import zbuf_occlude.experiments.returns_report as report
 
     # the crowns filled with leaves in one of the two runs (their build is most of a run's time)
@@ -184,7 +205,7 @@ def test_run_returns_writes_its_outputs(tmp_path, detection, capsys, monkeypatch
     try:
         monkeypatch.setenv(PROGRESS_INTERVAL_ENV, "0")  # a line per scan in a log
         capsys.readouterr()
-        summary = run_returns(tmp_path / "out", meshes, real_path, settings=settings_, progress=detection)
+        summary = run_returns(tmp_path / "out", meshes, real_path, autzen_path=autzen_path, settings=settings_, progress=detection)
         scene, vegetation, centre, half = report.ign_plot(meshes, settings_)
     finally:
         report.PLOT_TREES = original
@@ -199,15 +220,27 @@ def test_run_returns_writes_its_outputs(tmp_path, detection, capsys, monkeypatch
     else:
         assert lines == []
     assert summary["recommended_k"] in (1, 7)
-    assert summary["verdicts"]["PASS"] + summary["verdicts"]["FAIL"] + summary["verdicts"]["not measured"] == 2 * 13
+    assert summary["verdicts"]["PASS"] + summary["verdicts"]["FAIL"] + summary["verdicts"]["not measured"] == (2 if detection else 3) * 13
     assert read_regular_file(out / "returns.png", max_bytes=1 << 24)[:8] == b"\x89PNG\r\n\x1a\n"
     sweep = read_csv_rows(out / "divergence_sweep.csv")
-    assert [float(r["divergence_deg"]) for r in sweep] == pytest.approx([IGN_DIVERGENCE_DEG, 8 * IGN_DIVERGENCE_DEG], rel=1e-5)
+    assert [float(r["divergence_deg"]) for r in sweep] == pytest.approx(
+        [IGN_DIVERGENCE_DEG, 8 * IGN_DIVERGENCE_DEG] * (1 if detection else 2), rel=1e-5
+    )
     k_rows = read_csv_rows(out / "k_sweep.csv")
     assert [int(r["K"]) for r in k_rows] == [1, 7]
     # K = 1 is one ray a pulse, opaque surfaces: one return each (the fit gives a one-ray beam a footprint; the sweep keeps K)
     assert float(k_rows[0]["multi_return_share"]) == 0.0 < float(k_rows[1]["multi_return_share"])
-    assert len(read_csv_rows(out / "comparison.csv")) == 26
+    assert len(read_csv_rows(out / "comparison.csv")) == (26 if detection else 39)
+    if not detection:  # Autzen's plot: the IGN plot's meshes scaled to its canopy height, measured in metres on its class 1 by height
+        autzen = read_las(autzen_path)
+        assert autzen.linear_unit_m == pytest.approx(0.3048)
+        classed = classes_by_height(autzen, heights_above_ground(autzen))
+        canopy = summary["autzen_fit"]["canopy"]
+        assert canopy["tile_m"] == pytest.approx(canopy_height(classed, cell_m=AUTZEN_CELL_M), rel=1e-12)
+        assert canopy["tile_m"] == pytest.approx(canopy_height(read_las(real_path), cell_m=AUTZEN_CELL_M), abs=0.01)  # the feet undone
+        assert canopy["height_scale"] == pytest.approx(canopy["tile_m"] / canopy["ign_plot_m"], rel=1e-12)
+        assert canopy["tile_cover"]["value"] == tree_cover(classed, cell_m=AUTZEN_CELL_M, bootstrap=5).value
+        assert "## Autzen (class 1 classed by height)" in read_regular_file(out / "real.md", max_bytes=1 << 20).decode()
     fitted = fit_return_model(read_las(real_path), altitude_m=IGN_ALTITUDE_M, bootstrap=5).estimates
     model = summary["model"]
     assert model["range_resolution_m"] == fitted["range_resolution_m"].value
@@ -408,6 +441,9 @@ def test_the_plot_is_spaced_for_the_tiles_cover(tmp_path) -> None:
     try:
         scene, vegetation, centre, half = report.ign_plot(meshes, settings_, tree_cover=0.25)
         fixed = report.ign_plot(meshes, replace(settings_, spacing_m=5.0), tree_cover=0.25)
+        tall = report.ign_plot(meshes, replace(settings_, spacing_m=5.0), height_scale=2.5)
+        with pytest.raises(InvalidInputError, match="height_scale"):
+            report.ign_plot(meshes, replace(settings_, spacing_m=5.0), height_scale=0.0)
         with pytest.raises(InvalidInputError, match="tree cover"):
             report.ign_plot(meshes, settings_)
     finally:
@@ -415,6 +451,7 @@ def test_the_plot_is_spaced_for_the_tiles_cover(tmp_path) -> None:
     assert cover_rays_per_cell(settings_) == 10
     assert plot_cover(scene, centre, half, vegetation, rays_per_cell=10) == pytest.approx(0.25, abs=COVER_TOLERANCE)
     assert fixed[3] == 3 * 5.0 / 2  # a spacing given is kept
+    assert [o.size_m for o in tall[0].objects] == pytest.approx([2.5 * o.size_m for o in fixed[0].objects])  # every mesh scaled
 
 
 def test_the_divergence_is_fitted_again_with_the_k_it_is_compared_at(tmp_path, capsys, monkeypatch) -> None:

@@ -54,7 +54,7 @@ if TYPE_CHECKING:
     from zbuf_occlude.sensors.scan_data import Scan
 
 __all__ = [
-    "GROUND_CLASS", "IGN_ALTITUDE_M", "IGN_DIVERGENCE_DEG", "IGN_PULSES_PER_M2", "PLOT_CROWN_SHELL_M", "PLOT_LEAF_SIDE_M", "PLOT_TREES",
+    "AUTZEN_CELL_M", "GROUND_CLASS", "IGN_ALTITUDE_M", "IGN_DIVERGENCE_DEG", "IGN_PULSES_PER_M2", "PLOT_CROWN_SHELL_M", "PLOT_LEAF_SIDE_M", "PLOT_TREES",
     "VEGETATION_HEIGHTS_M", "PlotTree",
     "SimulatedScan", "ign_scanner", "object_pulse_shares", "plot_scene", "pulse_subset", "simulate", "simulated_classes",
 ]  # fmt: skip
@@ -81,6 +81,11 @@ IGN_MAX_RETURNS = 5
 #: The plot's leaves (:func:`~zbuf_occlude.sensors.foliage.add_foliage`): side of a square leaf, metres (a
 #: broadleaf's), and the depth of the crown they fill under the mesh's surface, metres.  ASSUMPTIONS.
 PLOT_LEAF_SIDE_M, PLOT_CROWN_SHELL_M = 0.1, 1.0
+#: Side of the cells on which the Autzen tile's tree cover and canopy height are measured, metres:
+#: its pulses, thinned to about 2.5 first returns per m² (the median over its occupied 10 m
+#: squares), put about 10 in a 2 m cell, as the IGN sample's whole strips (about 20 per m²) put
+#: 20 in a 1 m cell (:data:`~.tree_cover.TREE_COVER_CELL_M`).
+AUTZEN_CELL_M = 2.0
 
 
 @dataclass(frozen=True)

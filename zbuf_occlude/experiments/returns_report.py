@@ -51,6 +51,7 @@ from typing import Any
 import numpy as np
 
 from zbuf_occlude.experiments.returns import (
+    AUTZEN_CELL_M,
     GROUND_CLASS,
     IGN_ALTITUDE_M,
     IGN_DIVERGENCE_DEG,
@@ -233,31 +234,34 @@ def _sweep_row(result, divergence_deg: float, k: int, suffix: str) -> dict[str, 
     return row
 
 
-def _real(path: str | os.PathLike, classes: Sequence[int], bootstrap: int) -> tuple[dict[str, ReturnStatistics], LasPoints, ReturnModelFit]:
-    """The real file's figures per side, its points, and the return model fitted to it
+def _real(las: LasPoints, classes: Sequence[int], bootstrap: int) -> tuple[dict[str, ReturnStatistics], ReturnModelFit]:
+    """The real file's figures per side and the return model fitted to it
     (:func:`~zbuf_occlude.sensors.fit.return_model.fit_return_model` at the IGN flying height: the
     threshold in m⁻² is the same share of a single ground return at any height the simulation flies)."""
     from zbuf_occlude.sensors.fit.return_model import fit_return_model
 
-    las = read_las(path)
     out = {"all": return_statistics(las, classes=classes, bootstrap=bootstrap)}
     for side in ("vegetation", "ground"):
         out[side] = return_statistics(pulse_subset(las, side, classes=classes), classes=classes, bootstrap=bootstrap)
-    return out, las, fit_return_model(las, altitude_m=IGN_ALTITUDE_M, classes=classes, bootstrap=bootstrap)
+    return out, fit_return_model(las, altitude_m=IGN_ALTITUDE_M, classes=classes, bootstrap=bootstrap)
 
 
-def cover_rays_per_cell(settings: ReturnsSettings) -> int:
-    """Vertical rays per cell of :func:`~.tree_cover.plot_cover`: the pulses a cell of the pooled scans holds
+def cover_rays_per_cell(settings: ReturnsSettings, cell_m: float = TREE_COVER_CELL_M) -> int:
+    """Vertical rays per ``cell_m`` cell of :func:`~.tree_cover.plot_cover`: the pulses a cell of the pooled scans holds
     (one flight line per seed at :data:`~.returns.IGN_PULSES_PER_M2`)."""
-    return max(1, round(len(settings.seeds) * IGN_PULSES_PER_M2 * TREE_COVER_CELL_M**2))
+    return max(1, round(len(settings.seeds) * IGN_PULSES_PER_M2 * cell_m**2))
 
 
-def ign_plot(mesh_root: str | os.PathLike, settings: ReturnsSettings, *,
-             tree_cover: float | None = None) -> tuple[ScanScene, tuple[int, ...], tuple[float, float], float]:  # fmt: skip
+def ign_plot(mesh_root: str | os.PathLike, settings: ReturnsSettings, *, tree_cover: float | None = None, height_scale: float = 1.0,
+             cover_cell_m: float = TREE_COVER_CELL_M) -> tuple[ScanScene, tuple[int, ...], tuple[float, float], float]:  # fmt: skip
     """The experiment's plot: :data:`~.returns.PLOT_TREES` from ``mesh_root``, their crowns filled with
     ``settings.leaf_area_density`` of leaves, ``settings.copies`` of each, on a grid ``settings.spacing_m``
-    apart (None: as far apart as gives the tree cover ``tree_cover``, :func:`~.tree_cover.spacing_for_cover`), its centre ``settings.scan_angle_deg``
+    apart (None: as far apart as gives the tree cover ``tree_cover`` measured on cells of
+    ``cover_cell_m``, :func:`~.tree_cover.spacing_for_cover`), its centre ``settings.scan_angle_deg``
     across track.
+
+    ``height_scale`` scales every mesh (each :attr:`~.returns.PlotTree.size_m` times it, > 0) before
+    its crown is filled: the leaves keep their size and the crown's filled depth its metres.
 
     Returns
     -------
@@ -277,15 +281,17 @@ def ign_plot(mesh_root: str | os.PathLike, settings: ReturnsSettings, *,
     """
     from zbuf_occlude.mesh.load import load_mesh
     from zbuf_occlude.errors import InvalidInputError
+    from zbuf_occlude.sensors.checks import real
     from zbuf_occlude.sensors.foliage import add_foliage, in_metres
 
     if settings.spacing_m is None and tree_cover is None:
         raise InvalidInputError("ign_plot needs settings.spacing_m or a tree cover to space the trees for")
+    height_scale = real(height_scale, "height_scale", low=0.0, low_open=True)
 
     root = Path(mesh_root)
     meshes, sizes = [], []
     for i, tree in enumerate(PLOT_TREES):
-        mesh, size = load_mesh(root / tree.file, up=tree.up), tree.size_m
+        mesh, size = load_mesh(root / tree.file, up=tree.up), tree.size_m * height_scale
         if tree.foliage and settings.leaf_area_density > 0:
             mesh = add_foliage(in_metres(mesh, size), leaf_area_density=settings.leaf_area_density, leaf_side_m=PLOT_LEAF_SIDE_M,
                                shell_m=PLOT_CROWN_SHELL_M, seed=i)  # fmt: skip
@@ -295,7 +301,15 @@ def ign_plot(mesh_root: str | os.PathLike, settings: ReturnsSettings, *,
     y = IGN_ALTITUDE_M * math.tan(math.radians(settings.scan_angle_deg))
     spacing = settings.spacing_m
     if spacing is None:
-        spacing = spacing_for_cover(meshes, sizes, tree_cover, center_xy=(0.0, y), rays_per_cell=cover_rays_per_cell(settings), seed=0)
+        spacing = spacing_for_cover(
+            meshes,
+            sizes,
+            tree_cover,
+            center_xy=(0.0, y),
+            cell_m=cover_cell_m,
+            rays_per_cell=cover_rays_per_cell(settings, cover_cell_m),
+            seed=0,
+        )
     scene, vegetation = plot_scene(meshes, sizes, spacing_m=spacing, center_xy=(0.0, y), seed=0)
     side = math.ceil(math.sqrt(len(meshes)))
     return scene, vegetation, (0.0, y), side * spacing / 2.0
@@ -449,18 +463,42 @@ def _covers(tile: Estimate, plot, settings: ReturnsSettings, scans: dict[str, La
     }  # fmt: skip
 
 
-def _autzen(path, plot, settings: ReturnsSettings, k: int, tick) -> tuple[list[dict[str, Any]], list[dict[str, Any]], dict[str, Any], str]:
-    """Autzen alone: its own fitted return model (range resolution, most returns, threshold), its
-    class 1 (trees and buildings: it has no vegetation class) as vegetation, the divergence fitted
-    to its class-1 share."""
-    classes = (1,)
-    real, _, return_fit = _real(path, classes, settings.bootstrap)
+def _autzen(
+    path, mesh_root, base_plot, settings: ReturnsSettings, k: int, tick
+) -> tuple[list[dict[str, Any]], list[dict[str, Any]], dict[str, Any], str]:
+    """Autzen alone, compared like with like: its class 1 (trees, buildings and open ground the
+    classifier left) classed by height (:func:`~.canopy.classes_by_height`), its own fitted return
+    model (range resolution, most returns, threshold), a plot of its own (the IGN plot's meshes
+    scaled to the tile's canopy height, spaced for the tile's tree cover, both measured on
+    :data:`~.returns.AUTZEN_CELL_M` cells) and the divergence fitted to its multi-return share."""
+    from zbuf_occlude.experiments.canopy import CANOPY_QUANTILE, canopy_height, classes_by_height, heights_above_ground, plot_canopy_height
+
+    las = read_las(path)
+    las = classes_by_height(las, heights_above_ground(las))
+    real, return_fit = _real(las, VEGETATION_CLASSES, settings.bootstrap)
+    cover = tree_cover(las, cell_m=AUTZEN_CELL_M, bootstrap=settings.bootstrap)
+    rays = cover_rays_per_cell(settings, AUTZEN_CELL_M)
+    tile_height = canopy_height(las, cell_m=AUTZEN_CELL_M)
+    scene, vegetation, centre, half = base_plot
+    plot_height = plot_canopy_height(scene, centre, half, vegetation, cell_m=AUTZEN_CELL_M, rays_per_cell=rays)
+    scale = tile_height / plot_height
+    plot = ign_plot(mesh_root, settings, tree_cover=cover.value, height_scale=scale, cover_cell_m=AUTZEN_CELL_M)
     model = simulated_model(return_fit, plot[0], settings.detection, settings.echo_rule)
     sweep = _divergence_sweep(plot, settings, model, (k,), tick)
-    fit = _fit_divergence(sweep, k, real["all"].estimates[f"multi_return_points_{class_suffix(classes)}"])
+    fit = _fit_divergence(sweep, k, real["all"].estimates[f"multi_return_points_{class_suffix(VEGETATION_CLASSES)}"])
     divergence = fit["divergence_deg"] if math.isfinite(fit["divergence_deg"]) else IGN_DIVERGENCE_DEG
-    rows, _ = _compare(plot, real, classes, divergence, k, model, settings, "Autzen", tick)
-    return rows, sweep, fit | model.to_json(), real["all"].markdown()
+    rows, result = _compare(plot, real, VEGETATION_CLASSES, divergence, k, model, settings, "Autzen", tick)
+    cover_by_rays = plot_cover(plot[0], plot[2], plot[3], plot[1], cell_m=AUTZEN_CELL_M, rays_per_cell=rays)
+    canopy = {"cell_m": AUTZEN_CELL_M, "quantile": CANOPY_QUANTILE, "tile_m": tile_height, "ign_plot_m": plot_height, "height_scale": scale,
+              "tile_cover": cover.to_json(), "plot_vertical_rays_cover": cover_by_rays,
+              "scan_cover": tree_cover(result.las, cell_m=AUTZEN_CELL_M, bootstrap=settings.bootstrap).to_json(),
+              "spacing_m": 2.0 * plot[3] / math.ceil(math.sqrt(len(plot[1])))}  # fmt: skip
+    md = (f"{real['all'].markdown()}\n\n### canopy and tree cover ({AUTZEN_CELL_M:g} m cells)\n\n"
+          f"* canopy height, {CANOPY_QUANTILE:.0%} quantile: the tile {tile_height:.2f} m, the IGN plot {plot_height:.2f} m: "
+          f"the Autzen plot's meshes scaled {scale:.3g}×\n"
+          f"* tree cover: the tile {cover.value:.1%} ± {cover.std:.1%} ({cover.n:,} cells), the plot by vertical rays {cover_by_rays:.1%}, "
+          f"the compared scan {canopy['scan_cover']['value']:.1%}")  # fmt: skip
+    return rows, sweep, fit | model.to_json() | {"canopy": canopy}, md
 
 
 def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path: str | os.PathLike, *, autzen_path: str | os.PathLike | None = None,
@@ -476,7 +514,8 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
     real_path : str or PathLike
         The IGN LiDAR HD sample (LAS/LAZ with vegetation classes 3–5).
     autzen_path : str or PathLike, optional
-        A second real file for the cross-check (its class 1 taken as vegetation).
+        A second real file for the cross-check (its class 1, trees, buildings and open ground, classed by
+        height: :func:`~.canopy.classes_by_height`; its own plot, scaled to its canopy height).
     settings : ReturnsSettings, optional
     progress : bool
         A progress bar of the scans on stderr (:func:`~zbuf_occlude.io.progress.progress`; total
@@ -501,7 +540,8 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
     with bar, OwnedFolder(out, files=RETURNS_OUTPUTS, what="the returns experiment") as folder:
         tick = bar.update
         folder.check_writable(RETURNS_OUTPUTS)
-        real, real_las, fit = _real(real_path, VEGETATION_CLASSES, settings.bootstrap)
+        real_las = read_las(real_path)
+        real, fit = _real(real_las, VEGETATION_CLASSES, settings.bootstrap)
         cover = tree_cover(real_las, bootstrap=settings.bootstrap)
         plot = ign_plot(mesh_root, settings, tree_cover=cover.value)
         model = simulated_model(fit, plot[0], settings.detection, settings.echo_rule)
@@ -532,11 +572,11 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
         real_md = "## IGN LiDAR HD sample\n\n" + "\n\n".join(f"### {side}\n\n{s.markdown()}" for side, s in real.items())
         real_md += f"\n\n### tree cover\n\n{cover_markdown(covers, tile_only=True)}"
         if autzen_path is not None:
-            autzen_rows, autzen_sweep, autzen_fit, autzen_md = _autzen(autzen_path, plot, settings, k_best, tick)
+            autzen_rows, autzen_sweep, autzen_fit, autzen_md = _autzen(autzen_path, mesh_root, plot, settings, k_best, tick)
             rows += autzen_rows
             sweep += autzen_sweep
             summary["autzen_fit"] = autzen_fit
-            real_md += "\n\n## Autzen (class set: 1)\n\n" + autzen_md
+            real_md += "\n\n## Autzen (class 1 classed by height)\n\n" + autzen_md
         tree = plot[0].objects[0]
         note = (f"simulated: {math.radians(divergence) * 1e3:.3g} mrad, K = {k_best}, range resolution {resolution:.2f} m, "
                 f"echo rule {settings.echo_rule}, "

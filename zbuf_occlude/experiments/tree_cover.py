@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,7 +26,7 @@ from zbuf_occlude.sensors.scene import ScanScene
 
 __all__ = [
     "COVER_STEPS", "COVER_TOLERANCE", "MAX_COVER_CELLS_ACROSS", "MAX_COVER_RAYS", "TREE_COVER_BLOCK_M", "TREE_COVER_CELL_M",
-    "TREE_COVER_MIN_PULSES", "plot_cover", "spacing_for_cover", "tree_cover",
+    "TREE_COVER_MIN_PULSES", "CellTops", "cell_tops", "plot_cover", "spacing_for_cover", "tree_cover", "vertical_tops",
 ]  # fmt: skip
 
 #: Side of the square cells on which :func:`tree_cover` tells a covered cell from open ground,
@@ -86,7 +87,8 @@ def tree_cover(las: LasPoints, *, classes: Sequence[int] = VEGETATION_CLASSES, c
     Parameters
     ----------
     las : LasPoints
-        The scan, x and y in metres (a projected reference system) with classes.
+        The scan with classes, x and y in a projected reference system (cut into cells of metres:
+        :attr:`~zbuf_occlude.io.las.LasPoints.metres_per_unit` turns a file in feet into metres).
     classes : sequence of int
         The vegetation classes (ASPRS 3, 4 and 5 by default).
     cell_m : float
@@ -111,10 +113,54 @@ def tree_cover(las: LasPoints, *, classes: Sequence[int] = VEGETATION_CLASSES, c
         a scan more than :data:`MAX_COVER_CELLS_ACROSS` cells across, no cell counted, or a seed or
         bootstrap the bootstrap refuses.
     """
-    cell_m = real(cell_m, "cell_m", low=0.0, low_open=True)
     block_m = real(block_m, "block_m", low=0.0, low_open=True)
+    tops = cell_tops(las, classes=classes, cell_m=cell_m, min_pulses=min_pulses)
+    return _cell_cover(tops.corners_m[tops.counted], tops.vegetation[tops.counted], block_m, seed=seed, bootstrap=bootstrap,
+                       what=f"no cell of {tops.cell_m:g} m holds {tops.min_pulses} pulses and a highest return on vegetation or the ground")  # fmt: skip
+
+
+@dataclass(frozen=True)
+class CellTops:
+    """The highest return of each square cell of a scan (:func:`cell_tops`); ``C`` cells hold a return.
+
+    Attributes
+    ----------
+    corners_m : (C, 2) float64
+        Each cell's corner, metres from the scan's least x and y.
+    highest : (C,) int64
+        The row of the scan's points that is the cell's highest return.
+    vegetation : (C,) bool
+        That return is on vegetation.
+    counted : (C,) bool
+        The cell holds ``min_pulses`` first returns or more and its highest return is vegetation or the ground.
+    cell_m : float
+    min_pulses : int
+    """
+
+    corners_m: NDArray[np.float64]
+    highest: NDArray[np.int64]
+    vegetation: NDArray[np.bool_]
+    counted: NDArray[np.bool_]
+    cell_m: float
+    min_pulses: int
+
+
+def cell_tops(las: LasPoints, *, classes: Sequence[int] = VEGETATION_CLASSES, cell_m: float = TREE_COVER_CELL_M,
+              min_pulses: int = TREE_COVER_MIN_PULSES) -> CellTops:  # fmt: skip
+    """The highest return of each ``cell_m`` square cell of ``las`` and whether the cell counts, as :func:`tree_cover` counts cells.
+
+    x and y are in metres (:attr:`~zbuf_occlude.io.las.LasPoints.metres_per_unit`: a file in feet
+    is cut into cells of ``cell_m`` metres too); the grid starts at the scan's least x and y.
+
+    Raises
+    ------
+    InvalidInputError
+        ``cell_m`` not a finite number > 0, ``min_pulses`` not a whole number >= 1, no point, or a
+        scan more than :data:`MAX_COVER_CELLS_ACROSS` cells across.
+    """
+    cell_m = real(cell_m, "cell_m", low=0.0, low_open=True)
     min_pulses = count(min_pulses, "min_pulses", low=1, high=2**31)
-    xy = las.points[:, :2]
+    xy = las.points[:, :2] * las.metres_per_unit
     if len(xy) == 0:
         raise InvalidInputError("tree_cover: the scan holds no point")
     offset = xy.min(axis=0)
@@ -128,8 +174,7 @@ def tree_cover(las: LasPoints, *, classes: Sequence[int] = VEGETATION_CLASSES, c
     pulses = np.bincount(cell, weights=las.return_number == 1, minlength=len(cells))
     vegetation = np.isin(top, np.asarray(classes, np.int64))
     counted = (pulses >= min_pulses) & (vegetation | (top == GROUND_CLASS))
-    return _cell_cover(cells[counted] * cell_m, vegetation[counted], block_m, seed=seed, bootstrap=bootstrap,
-                       what=f"no cell of {cell_m:g} m holds {min_pulses} pulses and a highest return on vegetation or the ground")  # fmt: skip
+    return CellTops(cells * cell_m, highest.astype(np.int64), vegetation, counted, cell_m, min_pulses)
 
 
 def plot_cover(scene: ScanScene, center_xy, half_size_m: float, vegetation_ids: Sequence[int], *, cell_m: float = TREE_COVER_CELL_M,
@@ -170,6 +215,29 @@ def plot_cover(scene: ScanScene, center_xy, half_size_m: float, vegetation_ids: 
     InvalidInputError
         A size not finite > 0, ``rays_per_cell`` below 1, more than :data:`MAX_COVER_RAYS` rays.
     """
+    first, _ = vertical_tops(scene, center_xy, half_size_m, cell_m=cell_m, rays_per_cell=rays_per_cell, seed=seed)
+    vegetation = np.isin(first, np.asarray(vegetation_ids, np.int64))
+    counted = vegetation | (first == 0)
+    return float(vegetation[counted].mean()) if counted.any() else math.nan
+
+
+def vertical_tops(scene: ScanScene, center_xy, half_size_m: float, *, cell_m: float, rays_per_cell: int,
+                  seed: int = 0) -> tuple[NDArray[np.int64], NDArray[np.float64]]:  # fmt: skip
+    """The highest hit of each cell of a square of a scene, from vertical rays (:func:`plot_cover`'s cells and rays).
+
+    Returns
+    -------
+    object_id : (C,) int64
+        The object of each cell's highest hit (0 the ground), -1 where no ray hits; ``C`` is the
+        number of cells, row by row.
+    z_m : (C,) float64
+        That hit's height, metres (world z); NaN where no ray hits.
+
+    Raises
+    ------
+    InvalidInputError
+        A size not finite > 0, ``rays_per_cell`` below 1, more than :data:`MAX_COVER_RAYS` rays.
+    """
     from zbuf_occlude.sensors.raycast import cast_embree
 
     half_size_m = real(half_size_m, "half_size_m", low=0.0, low_open=True)
@@ -187,10 +255,11 @@ def plot_cover(scene: ScanScene, center_xy, half_size_m: float, vegetation_ids: 
     origins = np.column_stack([xy, np.full(len(xy), top)])
     face, t = cast_embree(built.mesh, origins, np.broadcast_to([0.0, 0.0, -1.0], origins.shape))
     hit = np.where(face >= 0, built.face_object[np.maximum(face, 0)], -1).reshape(-1, rays_per_cell)
-    first = hit[np.arange(len(hit)), np.argmin(t.reshape(-1, rays_per_cell), axis=1)]
-    vegetation = np.isin(first, np.asarray(vegetation_ids, np.int64))
-    counted = vegetation | (first == 0)
-    return float(vegetation[counted].mean()) if counted.any() else math.nan
+    t = t.reshape(-1, rays_per_cell)
+    nearest = np.argmin(t, axis=1)
+    rows = np.arange(len(hit))
+    first = hit[rows, nearest].astype(np.int64)
+    return first, np.where(first >= 0, top - t[rows, nearest], np.nan)
 
 
 def spacing_for_cover(meshes: Sequence, sizes_m: Sequence[float], cover: float, *, center_xy=(0.0, 0.0), cell_m: float = TREE_COVER_CELL_M,

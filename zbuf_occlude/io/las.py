@@ -160,6 +160,11 @@ class LasPoints:
     def __len__(self) -> int:
         return len(self.points)
 
+    @property
+    def metres_per_unit(self) -> float:
+        """Metres per coordinate unit: :attr:`linear_unit_m`, or 1 (metres assumed) where the file does not say."""
+        return self.linear_unit_m if math.isfinite(self.linear_unit_m) else 1.0
+
 
 def _reserve(out: dict[str, np.ndarray], n: int) -> dict[str, np.ndarray]:
     """``out``'s arrays (or new ones) grown to ``n`` points, new entries zero (``ndarray.resize``: a realloc, no copy)."""

@@ -358,7 +358,7 @@ def fit_return_model(
     check_return_pairs(las, pulses)  # a first-returns-only scan has no gaps to fit the range resolution to
     stats = pulse_statistics(las, pulses, checked_classes, seed=seed, bootstrap=bootstrap)  # the pulses found above
     unit_assumed = not math.isfinite(las.linear_unit_m)
-    unit_m = 1.0 if unit_assumed else float(las.linear_unit_m)
+    unit_m = las.metres_per_unit
     figures, units, counts, methods, why = _model_figures(las, pulses, unit_m, altitude_m, rho_g)
     ground = why.pop("_ground")
     spread = pulse_bootstrap(pulses.count, figures, seed=seed, bootstrap=bootstrap)

@@ -355,7 +355,7 @@ def pulse_statistics(las: LasPoints, pulses: LasPulses, classes: tuple[int, ...]
     (:func:`check_pulses`) and whose arguments are checked (:func:`check_classes` gave ``classes``):
     for a caller that holds them already (:func:`~zbuf_occlude.sensors.fit.return_model.fit_return_model`).
     """
-    unit_m = las.linear_unit_m if math.isfinite(las.linear_unit_m) else 1.0
+    unit_m = las.metres_per_unit
     estimates: dict[str, Estimate] = {}
     returns = np.minimum(pulses.returns[pulses.complete], MAX_RETURNS_BIN)
     what = f"{len(returns):,} complete pulses"
