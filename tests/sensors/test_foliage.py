@@ -120,7 +120,7 @@ def test_in_metres_scales_the_largest_dimension() -> None:
         ({"leaf_area_density": -1.0}, "leaf_area_density must be a finite number >= 0, got -1.0"),
         ({"leaf_area_density": math.nan}, "leaf_area_density must be a finite number >= 0, got nan"),
         ({"leaf_area_density": "dense"}, "leaf_area_density must be a finite number >= 0, got 'dense'"),
-        ({"leaf_area_density": 1.0, "leaf_side_m": 0.0}, "leaf_side_m must be a finite number > 0, got 0.0"),
+        ({"leaf_area_density": 1.0, "leaf_side_m": 0.0}, "leaf_side_m must be a finite number >= 0.001, got 0.0"),
         ({"leaf_area_density": 1.0, "shell_m": math.inf}, "shell_m must be a finite number > 0, got inf"),
     ],
 )

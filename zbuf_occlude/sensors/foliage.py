@@ -24,21 +24,40 @@ results page lists the runs).
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.checks import real
+from zbuf_occlude.sensors.checks import count, mapping, real
 
 if TYPE_CHECKING:
     import trimesh
 
-__all__ = ["MAX_LEAVES", "add_foliage", "crown_region_volume", "in_metres", "leaf_quads"]
+__all__ = [
+    "FOLIAGE_KEYS",
+    "LEAF_MATERIAL",
+    "MAX_LEAVES",
+    "MIN_LEAF_SIDE_M",
+    "Foliage",
+    "add_foliage",
+    "crown_region_volume",
+    "in_metres",
+    "leaf_quads",
+]
 
 #: Most leaves one call adds (two triangles each): a crown asking for more is refused, naming the count.
 MAX_LEAVES = 2_000_000
+#: Smallest leaf side, metres (a conifer's needle cluster is larger): below it the count of leaves
+#: is refused as :data:`MAX_LEAVES` refuses it, before anything is drawn.
+MIN_LEAF_SIDE_M = 1e-3
+#: The material name of the leaves a scene object grows (:class:`~zbuf_occlude.sensors.scene.SceneObject`'s
+#: ``foliage``): foliage's reflectance, opaque (:data:`~zbuf_occlude.sensors.reflectance.MATERIALS`).
+LEAF_MATERIAL = "grown_leaf"
+#: Keys of a scene file's ``foliage`` (:class:`Foliage`'s fields).
+FOLIAGE_KEYS = ("leaf_area_density", "leaf_side_m", "shell_m", "keep_surface", "seed")
 #: Uniform points drawn in the mesh's bounding box to measure the crown region's volume.
 _VOLUME_SAMPLES = 400_000
 #: Points of the mesh's surface per shell width, each way: the k-d tree's distances to the surface
@@ -165,8 +184,65 @@ def leaf_quads(centres: NDArray, normals: NDArray, side_m: float, rng: np.random
     return corners.reshape(-1, 3), faces
 
 
+@dataclass(frozen=True)
+class Foliage:
+    """Leaves for a scene object's crown: :func:`add_foliage`'s settings (a scene file's ``foliage``).
+
+    Attributes
+    ----------
+    leaf_area_density : float
+        One-sided leaf area per m³ of the crown region, m²/m³, ≥ 0 (0: no leaves).
+    leaf_side_m : float
+        Side of a square leaf, metres, ≥ :data:`MIN_LEAF_SIDE_M` (default 0.1, a broadleaf's).
+    shell_m : float
+        Depth of the crown region under the mesh's surface, metres, > 0 (default 1).
+    keep_surface : bool
+        True (default): the mesh's faces stay (leaf cards, a hull with gaps); False: the leaves
+        alone, for a closed hull that would hide them (:func:`add_foliage`'s).
+    seed : int
+        Draws the leaves, ≥ 0.
+
+    Raises
+    ------
+    InvalidInputError
+        A field out of range or of a wrong type, naming it.
+    """
+
+    leaf_area_density: float
+    leaf_side_m: float = 0.1
+    shell_m: float = 1.0
+    keep_surface: bool = True
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "leaf_area_density", real(self.leaf_area_density, "leaf_area_density", low=0.0))
+        object.__setattr__(self, "leaf_side_m", real(self.leaf_side_m, "leaf_side_m", low=MIN_LEAF_SIDE_M))
+        object.__setattr__(self, "shell_m", real(self.shell_m, "shell_m", low=0.0, low_open=True))
+        if not isinstance(self.keep_surface, bool):
+            raise InvalidInputError(f"keep_surface must be true or false, got {type(self.keep_surface).__name__} {self.keep_surface!r:.40}")
+        object.__setattr__(self, "seed", count(self.seed, "seed", low=0, high=2**63 - 1))
+
+    @classmethod
+    def of(cls, value: Any) -> Foliage:
+        """``value`` as a :class:`Foliage`: itself, or a mapping of :data:`FOLIAGE_KEYS` (a scene file's; ``leaf_area_density`` required).
+
+        Raises
+        ------
+        InvalidInputError
+            Neither, an unknown or missing key, or a bad value, naming it.
+        """
+        if isinstance(value, cls):
+            return value
+        return cls(**mapping(value, "foliage", FOLIAGE_KEYS, required=("leaf_area_density",)))
+
+    def grow(self, mesh: trimesh.Trimesh, *, max_leaves: int | None = None) -> trimesh.Trimesh:
+        """:func:`add_foliage` of ``mesh`` (in metres) with these settings."""
+        return add_foliage(mesh, leaf_area_density=self.leaf_area_density, leaf_side_m=self.leaf_side_m, shell_m=self.shell_m,
+                           keep_surface=self.keep_surface, seed=self.seed, max_leaves=max_leaves)  # fmt: skip
+
+
 def add_foliage(mesh: trimesh.Trimesh, *, leaf_area_density: float, leaf_side_m: float = 0.1, shell_m: float = 1.0,
-                keep_surface: bool = True, seed: int = 0) -> trimesh.Trimesh:  # fmt: skip
+                keep_surface: bool = True, seed: int = 0, max_leaves: int | None = None) -> trimesh.Trimesh:  # fmt: skip
     """The mesh with leaves filling its crown (module docstring).
 
     Parameters
@@ -176,8 +252,8 @@ def add_foliage(mesh: trimesh.Trimesh, *, leaf_area_density: float, leaf_side_m:
     leaf_area_density : float
         One-sided leaf area per volume of the region, m²/m³, ≥ 0; 0 returns ``mesh`` itself.
     leaf_side_m : float
-        Side of a square leaf, metres, > 0 (0.1: a broadleaf's; a leaf smaller than the footprint
-        covers part of it, as a real one does).
+        Side of a square leaf, metres, ≥ :data:`MIN_LEAF_SIDE_M` (0.1: a broadleaf's; a leaf smaller
+        than the footprint covers part of it, as a real one does).
     shell_m : float
         The region's depth under the mesh's surface, metres, > 0: leaves lie inside the convex
         hull and within this distance of the surface (distances to the nearest of the surface's
@@ -190,6 +266,9 @@ def add_foliage(mesh: trimesh.Trimesh, *, leaf_area_density: float, leaf_side_m:
         leaves alone (a closed crown hull replaced by the leaves it bounds).
     seed : int
         Draws the leaves; the same seed gives the same mesh.
+    max_leaves : int, optional
+        Most leaves, 0 to :data:`MAX_LEAVES` (None, the default: :data:`MAX_LEAVES`); more are
+        refused before any is drawn (a scene passes what its triangle cap leaves).
 
     Returns
     -------
@@ -201,21 +280,26 @@ def add_foliage(mesh: trimesh.Trimesh, *, leaf_area_density: float, leaf_side_m:
     Raises
     ------
     InvalidInputError
-        Not a ``trimesh.Trimesh``; a density < 0, a side or shell not > 0, a mesh with no area or a flat hull, or more
-        than :data:`MAX_LEAVES` leaves, each naming the value.
+        Not a ``trimesh.Trimesh``; a density < 0, a side below :data:`MIN_LEAF_SIDE_M`, a shell not > 0, a mesh with
+        no area or a flat hull, or more than ``max_leaves`` leaves, each naming the value.
     """
     import trimesh
 
     lad = real(leaf_area_density, "leaf_area_density", low=0.0)
-    side, shell = real(leaf_side_m, "leaf_side_m", low=0.0, low_open=True), real(shell_m, "shell_m", low=0.0, low_open=True)
+    side, shell = real(leaf_side_m, "leaf_side_m", low=MIN_LEAF_SIDE_M), real(shell_m, "shell_m", low=0.0, low_open=True)
     if lad == 0:
         return mesh
+    limit = MAX_LEAVES if max_leaves is None else count(max_leaves, "max_leaves", low=0, high=MAX_LEAVES)
     rng = np.random.default_rng(seed)
     region = _region(mesh, shell, rng)
     volume = _volume(region, rng)
-    n = round(lad * volume / side**2)
-    if n > MAX_LEAVES:
-        raise InvalidInputError(f"{n:,} leaves asked for (leaf_area_density {lad:g} m²/m³, leaf_side_m {side:g}); at most {MAX_LEAVES:,}")
+    wanted = lad * volume / side**2  # inf for a density near the float's limit: refused as too many
+    if not wanted < limit + 0.5:
+        room = "" if limit == MAX_LEAVES else f" here (what the scene's triangle cap leaves; {MAX_LEAVES:,} a crown)"
+        raise InvalidInputError(
+            f"{wanted:,.0f} leaves asked for (leaf_area_density {lad:g} m²/m³, leaf_side_m {side:g}); at most {limit:,}{room}"
+        )
+    n = round(wanted)
     share = volume / float(np.prod(region.hi - region.lo)) if volume > 0 else 1.0
     parts, found = [], 0
     while found < n:  # rejection sampling in the box, in batches of at most _VOLUME_SAMPLES points

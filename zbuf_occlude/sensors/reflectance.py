@@ -127,6 +127,7 @@ MATERIALS: dict[str, Material] = {
     "glass": Material((0.05, 0.05, 0.05), 0.85, "Fresnel (4 % per face, n 1.5): diffuse ρ an assumption, round trip 0.92²"),
     "skin": Material((0.55, 0.50, 0.05), 0.0, "NIST skin"),
     "clothing": Material((0.50, 0.50, 0.45), 0.0, "assumption: textile dyes are mostly transparent in the near infrared, so light and dark clothes alike reflect ~0.4-0.6"),
+    "grown_leaf": Material((0.60, 0.55, 0.30), 0.0, "foliage's reflectance, opaque: one leaf that sensors.foliage grows in a crown, whose gaps are the space between leaves"),
 }  # fmt: skip
 
 #: Material of an object whose names match nothing: concrete, a mid-grey man-made surface.

@@ -17,7 +17,9 @@ largest dimension is ``size_m``; a primitive keeps its metric size unless ``size
 Every object then stands on the ground (its lowest vertex at ``ground_z_m``), its bounding
 box centred on ``position_m`` (x, y; a third value is added to the standing height), turned
 by ``yaw_deg`` about +z.  Object ids: 0 is the ground, objects and occluders are numbered
-from 1 in the order given (objects first).
+from 1 in the order given (objects first).  ``"foliage": {"leaf_area_density": 1.0}`` (also
+``leaf_side_m``, ``shell_m``, ``seed``) fills the object's crown with leaves at its size in
+metres (:class:`~zbuf_occlude.sensors.foliage.Foliage`).
 
 Every field is checked where the dataclass is made (:mod:`zbuf_occlude.sensors.checks`: numbers
 finite and in range, types, unknown keys).  Primitives and width profiles are in
@@ -39,8 +41,9 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.limits import MAX_MESH_FACES
-from zbuf_occlude.mesh.scene import FACE_MATERIALS, face_materials_of
+from zbuf_occlude.mesh.scene import FACE_MATERIALS, FaceMaterials, face_materials_of
 from zbuf_occlude.sensors.checks import MAX_COORDINATE_M, MAX_PATH_CHARS, is_number, located, real, reals, shown, text
+from zbuf_occlude.sensors.foliage import LEAF_MATERIAL, MAX_LEAVES, Foliage
 from zbuf_occlude.sensors.object_shapes import (
     FACE_ROWS,
     check_width_profile,
@@ -117,6 +120,14 @@ class SceneObject:
         one, its faces cut where they span more than half a bin in height; its
         ``metadata[FACE_ROWS]`` gives each face's row as loaded, which the scene's
         ``face_local`` reports.  None (default): no warp.
+    foliage : Foliage or mapping, optional
+        Leaves filling the crown (:class:`~zbuf_occlude.sensors.foliage.Foliage`, or a mapping of
+        its fields: a scene file's ``foliage``), grown on the object at its size in metres
+        (:func:`~zbuf_occlude.sensors.foliage.add_foliage`, after ``width_scale`` and
+        ``width_profile``): square leaves in metres whatever the scaling.  The leaves' faces follow
+        the mesh's, their rows in ``face_local`` counted on from the mesh's face count as loaded,
+        their material ``"grown_leaf"`` (foliage's reflectance, opaque: the gaps are between the leaves).  The object is sized and placed by its
+        mesh alone.  None (default): no leaves.
 
     Raises
     ------
@@ -125,7 +136,9 @@ class SceneObject:
         field), a ``position_m`` or ``size_m`` that is not 2–3 (1 or 3) finite numbers within
         :data:`MAX_GROUND_HALF_EXTENT_M` metres (sizes > 0), a non-finite ``yaw_deg``, ``up``
         not "z" or "y", ``width_scale`` not > 0, a bad ``width_profile``
-        (:func:`~zbuf_occlude.sensors.object_shapes.check_width_profile`).
+        (:func:`~zbuf_occlude.sensors.object_shapes.check_width_profile`), a bad ``foliage``
+        (:class:`~zbuf_occlude.sensors.foliage.Foliage`; at build: more than
+        :data:`~zbuf_occlude.sensors.foliage.MAX_LEAVES` leaves, a mesh without volume).
     """
 
     mesh: Any
@@ -136,6 +149,7 @@ class SceneObject:
     up: str = "z"
     width_scale: float = 1.0
     width_profile: tuple[float, ...] | None = None
+    foliage: Foliage | Mapping | None = None
 
     def __post_init__(self) -> None:
         self._check()
@@ -182,11 +196,17 @@ class SceneObject:
         self.width_scale = real(self.width_scale, "width_scale", low=0.0, low_open=True)
         if self.width_profile is not None:
             self.width_profile = check_width_profile(self.width_profile)
+        if self.foliage is not None:
+            with located("foliage"):
+                self.foliage = Foliage.of(self.foliage)
 
-    def build(self, base: Path | None = None) -> tuple[trimesh.Trimesh, NDArray[np.float64]]:
+    def build(self, base: Path | None = None, *, max_faces: int = MAX_MESH_FACES) -> tuple[trimesh.Trimesh, NDArray[np.float64]]:
         """The object's mesh in its local frame (as loaded, stretched by ``width_scale`` and warped
-        by ``width_profile``: the object's own shape) and its (4, 4) local → world transform (the
+        by ``width_profile``, with ``foliage``'s leaves: the object's own shape) and its (4, 4) local → world transform (the
         scaling to ``size_m``, the yaw and the position), with the ground at z = 0.
+
+        ``max_faces`` bounds the faces the leaves may bring the mesh to (what a scene's triangle
+        cap leaves for it), checked before any leaf is drawn.
 
         Raises
         ------
@@ -233,22 +253,46 @@ class SceneObject:
             v, faces, rows = warp_to_width_profile(v, faces, self.width_profile)
         if self.width_scale != 1.0:
             v = v * np.array([self.width_scale, self.width_scale, 1.0])
-        if self.width_profile is not None or self.width_scale != 1.0:
+        lo, hi = v.min(axis=0) * scale, v.max(axis=0) * scale  # the mesh's own box: leaves at its edge do not move it
+        if self.width_profile is not None or self.width_scale != 1.0 or self.foliage is not None:
             materials = face_materials_of(local)
+            if materials is not None and rows is not None:  # each face keeps its file's material, a split face its parent's
+                materials = materials.select(rows)
+            if self.foliage is not None:
+                with located(f"object {shown(self.class_name or self.mesh)}: foliage"):
+                    room = (max_faces - (len(faces) if self.foliage.keep_surface else 0)) // 2
+                    v, faces, rows, materials = _with_leaves(self.foliage, v, faces, scale, rows, len(local.faces), materials, room)
             local = trimesh.Trimesh(v @ rot_up, faces, process=False)  # rot_up is orthonormal: v @ rot_up undoes it
             if rows is not None:
                 local.metadata[FACE_ROWS] = rows
-            if materials is not None:  # each face keeps its file's material, a split face its parent's
-                local.metadata[FACE_MATERIALS] = materials if rows is None else materials.select(rows)
+            if materials is not None:
+                local.metadata[FACE_MATERIALS] = materials
         pos = self.position_m
         c, s = math.cos(math.radians(self.yaw_deg)), math.sin(math.radians(self.yaw_deg))
         yaw = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        lo, hi = v.min(axis=0) * scale, v.max(axis=0) * scale
         centre = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]])  # footprint centre, bottom
         m = np.eye(4)
         m[:3, :3] = yaw @ (scale[:, None] * rot_up)
         m[:3, 3] = -(yaw @ centre) + np.array([pos[0], pos[1], pos[2] if len(pos) == 3 else 0.0])
         return local, m
+
+
+def _with_leaves(foliage: Foliage, v: NDArray[np.float64], faces: NDArray[np.int64], scale: NDArray[np.float64], rows: NDArray[np.int64] | None,
+                 loaded_faces: int, materials: FaceMaterials | None, max_leaves: int) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64], FaceMaterials]:  # fmt: skip
+    """The object's vertices (z-up, unscaled) and faces (none without ``keep_surface``) with ``foliage``'s leaves grown on it at its size in metres (``v · scale``),
+    brought back unscaled (the transform scales them again: square leaves in metres); the faces' rows as loaded (the
+    leaves' counted on from ``loaded_faces``) and materials (the leaves' :data:`~zbuf_occlude.sensors.foliage.LEAF_MATERIAL`, the mesh's faces their own or ``""``)."""
+    import trimesh
+
+    leafy = foliage.grow(trimesh.Trimesh(v * scale, faces, process=False), max_leaves=min(MAX_LEAVES, max(0, max_leaves)))
+    kept = len(faces) if foliage.keep_surface or foliage.leaf_area_density == 0 else 0  # the mesh's faces, first, or none
+    n_leaves = len(leafy.faces) - kept
+    rows = (np.arange(len(faces), dtype=np.int64) if rows is None else rows)[:kept]
+    rows = np.concatenate([rows, loaded_faces + np.arange(n_leaves, dtype=np.int64)])
+    names, index = (materials.names, materials.index[:kept]) if materials is not None else (("",), np.zeros(kept, np.int32))
+    leaf = len(names)
+    materials = FaceMaterials((*names, LEAF_MATERIAL), np.concatenate([index, np.full(n_leaves, leaf, np.int32)]))
+    return np.asarray(leafy.vertices, np.float64) / scale, np.asarray(leafy.faces, np.int64), rows, materials
 
 
 @dataclass
@@ -375,11 +419,11 @@ class ScanScene:
         x, y = self.sensor_position_m
         return sensor_pose([x, y, self.ground_z_m + self.sensor_height_m])
 
-    def _object_build(self, obj: SceneObject) -> tuple[trimesh.Trimesh, NDArray[np.float64]]:
-        """``obj.build(self.base_dir)``, once per object of this scene."""
+    def _object_build(self, obj: SceneObject, max_faces: int) -> tuple[trimesh.Trimesh, NDArray[np.float64]]:
+        """``obj.build(self.base_dir, max_faces=max_faces)``, once per object of this scene."""
         hit = self._object_builds.get(id(obj))
         if hit is None or hit[0] is not obj:
-            hit = self._object_builds[id(obj)] = (obj, *obj.build(self.base_dir))
+            hit = self._object_builds[id(obj)] = (obj, *obj.build(self.base_dir, max_faces=max_faces))
         return hit[1], hit[2]
 
     def build(self) -> BuiltScene:
@@ -402,7 +446,7 @@ class ScanScene:
             face_local.append(np.arange(2))
             n_vertices = 4
         for oid, obj in enumerate([*self.objects, *self.occluders], start=1):
-            local, m = self._object_build(obj)
+            local, m = self._object_build(obj, MAX_MESH_FACES - n_faces)  # leaves are counted against what the cap leaves
             n_faces += len(local.faces)
             if n_faces > MAX_MESH_FACES:  # each mesh file is capped on its own; a scene may name one 10,000 times
                 raise InvalidInputError(

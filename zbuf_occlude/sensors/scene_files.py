@@ -28,7 +28,7 @@ __all__ = ["load_scene", "scene_from_dict", "SCENE_KEYS", "GROUND_KEYS", "SENSOR
 SCENE_KEYS = ("ground", "objects", "occluders", "sensor")
 GROUND_KEYS = ("z_m", "half_extent_m")
 SENSOR_KEYS = ("height_m", "position_m")
-OBJECT_KEYS = ("mesh", "class", "position_m", "yaw_deg", "size_m", "up")
+OBJECT_KEYS = ("mesh", "class", "position_m", "yaw_deg", "size_m", "up", "foliage")
 
 
 def scene_from_dict(spec: Mapping, base_dir: Path | None = None) -> ScanScene:
@@ -66,7 +66,13 @@ def scene_from_dict(spec: Mapping, base_dir: Path | None = None) -> ScanScene:
         with located(where):
             d = mapping(d, "object", OBJECT_KEYS, required=("mesh",))
             made = SceneObject(
-                d["mesh"], d.get("class", ""), d.get("position_m", (0.0, 0.0)), d.get("yaw_deg", 0.0), d.get("size_m"), d.get("up", "z")
+                d["mesh"],
+                d.get("class", ""),
+                d.get("position_m", (0.0, 0.0)),
+                d.get("yaw_deg", 0.0),
+                d.get("size_m"),
+                d.get("up", "z"),
+                foliage=d.get("foliage"),
             )
             if base_dir is not None and isinstance(made.mesh, str):  # a file named by a scene file stays in its folder
                 path_inside(base_dir, made.mesh, what="mesh")
