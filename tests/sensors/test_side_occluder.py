@@ -215,9 +215,9 @@ def test_an_occluded_crop_builds_its_object_once(monkeypatch: pytest.MonkeyPatch
     calls = []
     real = SceneObject.build
 
-    def counted(self, base=None):
+    def counted(self, base=None, **kwargs):
         calls.append(self.class_name)
-        return real(self, base)
+        return real(self, base, **kwargs)
 
     monkeypatch.setattr(SceneObject, "build", counted)
     placement = replace(PLACED, visible_across_sight=0.5, occluder_side=1.0, width_profile=(1.0, 1.2, 0.9, 1.0))

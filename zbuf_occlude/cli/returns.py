@@ -41,7 +41,7 @@ def add_returns_parser(sub: Any) -> argparse.ArgumentParser:
     )  # fmt: skip
     p.add_argument("meshes", help="folder of the tree and bush meshes (street_objects/bush: the files of PLOT_TREES)")
     p.add_argument("--real", required=True, help="the real LAS/LAZ file with vegetation classes 3-5 (the IGN LiDAR HD sample)")
-    p.add_argument("--autzen", help="a second real LAS/LAZ file for the cross-check (its class 1, trees, buildings and open ground, classed by height above its ground)")
+    p.add_argument("--autzen", help="a second real LAS/LAZ file for the cross-check (its class 1 classed by height above its ground)")
     p.add_argument("--out", required=True, action=Checked, check=out_folder,
                    help="output folder (real.md, divergence_sweep.csv, k_sweep.csv, comparison.csv/.md, returns.png, run.json)")  # fmt: skip
     p.add_argument("--bootstrap", action=Checked, check=resamples, default=200, help="bootstrap resamples (default: %(default)s)")
