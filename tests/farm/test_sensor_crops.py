@@ -379,3 +379,62 @@ def test_the_divergence_is_recorded_only_when_given():
     assert "sensor_divergence_deg" not in FarmParams(sensor="hdl32e").to_dict()
     given = FarmParams(sensor=SensorCropParams("hdl32e", footprint=True, divergence_deg=0.3))
     assert given.to_dict()["sensor_divergence_deg"] == 0.3 and given.digest() != FarmParams(sensor="hdl32e").digest()
+
+
+def _echo_sensor(tmp_path: Path) -> Path:
+    """An HDL-32E whose receiver resolves two echoes a pulse (the preset records one return): a sensor file."""
+    path = tmp_path / "hdl32e_two_returns.json"
+    path.write_text(json.dumps({"kind": "lidar", "preset": "hdl32e", "name": "hdl32e-2r",
+                                "beam": {"max_returns": 2, "range_resolution_m": 0.5}}))  # fmt: skip
+    return path
+
+
+def test_the_adaptive_footprint_needs_a_footprint_whose_echoes_are_resolved(tmp_path: Path):
+    with pytest.raises(InvalidInputError, match=r"--sensor-adaptive-footprint skips the sub-rays .* hdl32e fires one ray"):
+        SensorCropParams("hdl32e", footprint=True, adaptive_footprint=True)  # the preset resolves no echoes
+    with pytest.raises(InvalidInputError, match=r"--sensor-adaptive-footprint skips the sub-rays"):
+        SensorCropParams(str(_echo_sensor(tmp_path)), adaptive_footprint=True)  # one ray a pulse
+    with pytest.raises(InvalidInputError, match=r"--sensor-adaptive-footprint: kinect-v1 is a .*, which has no beam"):
+        SensorCropParams("kinect-v1", adaptive_footprint=True)  # no pulses
+    params = SensorCropParams(str(_echo_sensor(tmp_path)), footprint=True, adaptive_footprint=True)
+    assert params.footprint_mode == "adaptive" and SensorCropParams("hdl32e").footprint_mode == "exact"
+    for value in ("yes", 1, None):  # a card's value must be a bool
+        with pytest.raises(InvalidInputError, match="--sensor-adaptive-footprint must be true or false"):
+            SensorCropParams(str(_echo_sensor(tmp_path)), footprint=True, adaptive_footprint=value)
+
+
+def test_the_adaptive_footprint_is_recorded_only_when_asked(tmp_path: Path):
+    sensor = str(_echo_sensor(tmp_path))
+    exact = FarmParams(sensor=SensorCropParams(sensor, footprint=True))
+    adaptive = FarmParams(sensor=SensorCropParams(sensor, footprint=True, adaptive_footprint=True))
+    assert "sensor_adaptive_footprint" not in exact.to_dict()  # earlier data sets keep their digest
+    assert adaptive.to_dict()["sensor_adaptive_footprint"] is True and adaptive.digest() != exact.digest()
+    assert SensorCropParams.from_dict(adaptive.sensor.to_dict()) == adaptive.sensor
+    assert SensorCropParams.from_dict(exact.sensor.to_dict()) == exact.sensor
+
+
+def test_farm_crops_with_the_adaptive_footprint_are_farm_datasets_adaptive_ones(tmp_path: Path):
+    import h5py
+
+    sensor = str(_echo_sensor(tmp_path))
+    out = _farm(tmp_path / "ds", "--sensor", sensor, "--sensor-footprint", "--sensor-adaptive-footprint", "--classes", "chair")
+    card = json.loads((out / CARD_FILE).read_text())
+    assert card["params"]["sensor_adaptive_footprint"] is True
+    (shard,) = sorted(out.rglob("*.h5"))
+    with h5py.File(shard, "r") as h:
+        written = {key: h[key][()] for key in ("data", "n_visible", "pose_index", "return_number")}
+        name = h.attrs["name"]
+    params = SensorCropParams.from_dict(card["params"] | {"sensor": sensor})
+    mesh = load_mesh(SAMPLES / f"{name}.off")
+    kw = {"name": name, "label": 0, "object_index": 0, "n_samples": 2, "n_points": 128, "seed": 0, "distributions": params.distributions}
+    adaptive = farm_datasets(mesh, params.model(), footprint="adaptive", **kw)
+    for key, values in written.items():
+        assert np.array_equal(values, adaptive[key]), key
+    exact = farm_datasets(mesh, params.model(), **kw)
+    assert not all(np.array_equal(exact[key], adaptive[key]) for key in written)  # the adaptive cast changes some returns here
+
+
+def test_the_adaptive_footprint_without_a_sensor_is_a_usage_error(tmp_path: Path, capsys):
+    assert cli_main(["farm", str(SAMPLES), "--out", str(tmp_path / "ds"), "--sensor-adaptive-footprint", "--no-progress"]) == 2
+    assert "--sensor-adaptive-footprint needs --sensor" in capsys.readouterr().err
+    assert not (tmp_path / "ds").exists()

@@ -118,10 +118,13 @@ def _sensor_params(args: argparse.Namespace) -> dict:
     if args.sensor is None:
         for flag, _ in given_crop_options(args):
             raise InvalidInputError(f"{flag} needs --sensor")
+        if args.sensor_adaptive_footprint:
+            raise InvalidInputError("--sensor-adaptive-footprint needs --sensor")
         return {}
     crops = crop_settings(args, FARM_CROP_DISTRIBUTIONS)
     return {"sensor": SensorCropParams(args.sensor, crops.distributions, footprint=crops.footprint,
-                                       across_sight_width_m=crops.across_sight_width_m, divergence_deg=crops.divergence_deg)}  # fmt: skip
+                                       across_sight_width_m=crops.across_sight_width_m, divergence_deg=crops.divergence_deg,
+                                       adaptive_footprint=args.sensor_adaptive_footprint)}  # fmt: skip
 
 
 def _merge_command(args: argparse.Namespace) -> int:
@@ -226,6 +229,12 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
         help=f"a preset ({_PRESETS}) or a sensor .json (fit-sensor writes one) (default: none, z-buffer poses)",
     )
     add_crop_arguments(s, FARM_CROP_DISTRIBUTIONS, prefixed=True)
+    s.add_argument(
+        "--sensor-adaptive-footprint", action="store_true",
+        help="cast a pulse's whole footprint only where its centre ray and its neighbours do not show one plane filling it "
+        "(the same returns but for a surface inside the cone none of them meets, a fraction of the cost; with --sensor-footprint, "
+        "for a sensor that resolves echoes) (default: every pulse's whole footprint)",
+    )  # fmt: skip
     ex = p.add_argument_group("execution")
     ex.add_argument(
         "--workers", action=Checked, check=count("MAX_WORKERS"), default=min(usable_cpus(), MAX_WORKERS),

@@ -65,7 +65,7 @@ OPTION_NAMES = {
     "sensor_distance_m": "--sensor-distance", "sensor_height_m": "--sensor-height", "sensor_size_m": "--sensor-size",
     "sensor_reflectivity": "--sensor-reflectivity", "sensor_footprint": "--sensor-footprint", "sensor_divergence_deg": "--sensor-divergence",
     "sensor_ground_margin_m": "--sensor-ground-margin", "sensor_hidden_below_m": "--sensor-hidden-below",
-    "sensor_across_sight_width_m": "--sensor-across-sight-width", "up": "--up",
+    "sensor_across_sight_width_m": "--sensor-across-sight-width", "sensor_adaptive_footprint": "--sensor-adaptive-footprint", "up": "--up",
 }  # fmt: skip
 
 #: ``farm --sensor``: per-scan placement drawn uniformly from these intervals (metres).
@@ -82,12 +82,12 @@ SENSOR_KEYS = {
     "distance_m": "sensor_distance_m", "height_m": "sensor_height_m", "size_m": "sensor_size_m",
     "reflectivity": "sensor_reflectivity", "footprint": "sensor_footprint", "ground_margin_m": "sensor_ground_margin_m",
     "hidden_below_m": "sensor_hidden_below_m", "across_sight_width_m": "sensor_across_sight_width_m",
-    "divergence_deg": "sensor_divergence_deg",
+    "divergence_deg": "sensor_divergence_deg", "adaptive_footprint": "sensor_adaptive_footprint",
 }  # fmt: skip
 #: The :class:`CropDistributions` fields the farm sets (and records); the others keep their defaults.
 FARM_CROP_FIELDS = ("distance_m", "height_m", "size_m", "reflectivity", "ground_margin_m", "hidden_below_m")
 #: Settings left out of the plan when None: the digest of sensor data sets made before they existed.
-_LEFT_OUT_WHEN_NONE = ("ground_margin_m", "hidden_below_m", "across_sight_width_m", "divergence_deg")
+_LEFT_OUT_WHEN_NONE = ("ground_margin_m", "hidden_below_m", "across_sight_width_m", "divergence_deg", "adaptive_footprint")
 #: The ``farm`` flag of each :class:`CropDistributions` field it sets, for the messages of its checks.
 CROP_OPTION_NAMES = {field: OPTION_NAMES[SENSOR_KEYS[field]] for field in FARM_CROP_FIELDS}
 #: ``farm --sensor``'s placement when no option changes it.
@@ -132,6 +132,12 @@ class SensorCropParams:
         line of sight as this interval, metres, drawn per scan
         (:func:`~zbuf_occlude.sensors.fit.fit_width_scale`, a spinning LiDAR only); ``None``: the
         meshes' own proportions.
+    adaptive_footprint : bool
+        Cast a pulse's whole footprint only where its centre ray and its neighbours do not show
+        one plane filling it (``object_crops(..., footprint="adaptive")``): the same crops but for a
+        surface inside the cone that none of those rays meets, at a fraction of the cost.  Needs a
+        pulsed sensor whose beam fires several rays and resolves echoes.  Recorded only when True,
+        so that the digest of data sets made before it is kept.
 
     Raises
     ------
@@ -146,6 +152,7 @@ class SensorCropParams:
     footprint: bool = False
     across_sight_width_m: tuple[float, float] | None = None
     divergence_deg: float | None = None
+    adaptive_footprint: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.distributions, CropDistributions):
@@ -157,6 +164,9 @@ class SensorCropParams:
                     f"farm --sensor draws no {f.name} (its card could not say so): leave it at {getattr(unset, f.name)!r}"
                 )
         object.__setattr__(self, "footprint", bool(self.footprint))
+        if not isinstance(self.adaptive_footprint, bool):  # a card's value: true or false, not "yes"
+            raise InvalidInputError(f"{OPTION_NAMES['sensor_adaptive_footprint']} must be true or false, "
+                                    f"got {type(self.adaptive_footprint).__name__} {self.adaptive_footprint!r:.40}")  # fmt: skip
         if self.divergence_deg is not None:
             from zbuf_occlude.sensors.checks import real
 
@@ -178,14 +188,16 @@ class SensorCropParams:
             without a beam (a depth camera); ``reflectivity`` for an airborne scanner (its crops fly
             over every surface alike); ``footprint`` for a beam without a divergence (naming
             ``--sensor-divergence``); ``across_sight_width_m`` for a sensor that is not a spinning
-            LiDAR; a divergence the beam refuses.  Each names its ``farm`` option.
+            LiDAR; a divergence the beam refuses; ``adaptive_footprint`` for a beam that fires one
+            ray or resolves no echoes.  Each names its ``farm`` option.
         """
         from zbuf_occlude.sensors.kinds import kind_of, sensor_from_name, with_beam
 
         sensor = sensor_from_name(self.name)
         kind = kind_of(sensor)
         given = [OPTION_NAMES[f"sensor_{f}"] for f, v in (("footprint", self.footprint), ("divergence_deg", self.divergence_deg),
-                                                         ("reflectivity", self.distributions.reflectivity)) if v not in (None, False)]  # fmt: skip
+                                                         ("reflectivity", self.distributions.reflectivity),
+                                                         ("adaptive_footprint", self.adaptive_footprint)) if v not in (None, False)]  # fmt: skip
         if given and not kind.pulsed:
             raise InvalidInputError(f"{', '.join(given)}: {self.name} is a {kind.title}, which has no beam (a pulsed LiDAR has one)")
         if self.distributions.reflectivity is not None and kind.flies:
@@ -195,17 +207,27 @@ class SensorCropParams:
             raise InvalidInputError(f"--sensor-across-sight-width measures across a spinning LiDAR's line of sight; {self.name} is not one")
         changes = footprint_changes(sensor.beam, footprint=bool(self.footprint), divergence_deg=self.divergence_deg, sensor=self.name,
                                     names=(OPTION_NAMES["sensor_footprint"], OPTION_NAMES["sensor_divergence_deg"]))  # fmt: skip
-        if not changes:
-            return sensor
-        try:
-            return with_beam(sensor, **changes)
-        except InvalidInputError as exc:
-            raise InvalidInputError(f"{', '.join(given)}: {exc}") from None
+        if changes:
+            try:
+                sensor = with_beam(sensor, **changes)
+            except InvalidInputError as exc:
+                raise InvalidInputError(f"{', '.join(given)}: {exc}") from None
+        if self.adaptive_footprint and not (sensor.beam.footprint_rays > 1 and sensor.beam.resolves_echoes):
+            raise InvalidInputError(f"{OPTION_NAMES['sensor_adaptive_footprint']} skips the sub-rays of a footprint whose echoes are "
+                                    f"resolved; {self.name} fires one ray a pulse or resolves no echoes: give it "
+                                    f"{OPTION_NAMES['sensor_footprint']} (a sensor file with max_returns above 1 or a return mode)")  # fmt: skip
+        return sensor
+
+    @property
+    def footprint_mode(self) -> str:
+        """``"adaptive"`` or ``"exact"``: how the crops cast a footprint (:func:`~zbuf_occlude.sensors.crops.object_crops`)."""
+        return "adaptive" if self.adaptive_footprint else "exact"
 
     def to_dict(self) -> dict[str, Any]:
         """``{"sensor": name, "sensor_distance_m": [lo, hi], ...}``: the flat keys of :data:`SENSOR_KEYS`."""
         values = {**{f: getattr(self.distributions, f) for f in FARM_CROP_FIELDS}, "footprint": self.footprint,
-                  "across_sight_width_m": self.across_sight_width_m, "divergence_deg": self.divergence_deg}  # fmt: skip
+                  "across_sight_width_m": self.across_sight_width_m, "divergence_deg": self.divergence_deg,
+                  "adaptive_footprint": True if self.adaptive_footprint else None}  # fmt: skip
         d: dict[str, Any] = {"sensor": self.name}
         for field, key in SENSOR_KEYS.items():
             if values[field] is not None or field not in _LEFT_OUT_WHEN_NONE:

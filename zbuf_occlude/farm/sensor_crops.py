@@ -40,6 +40,7 @@ def farm_datasets(
     distributions: CropDistributions = CropDistributions(),
     across_sight_width_m: tuple[float, float] | None = None,
     backend: str = "embree",
+    footprint: str = "exact",
 ) -> dict[str, np.ndarray]:
     """What the farm writes for one object with ``--sensor``: the datasets of a dense shard.
 
@@ -47,7 +48,8 @@ def farm_datasets(
     ``pose_index`` is the sample number and ``sample_index`` is 0; samples without a return
     are left out (their ``n_visible`` would be 0, as for an empty pose).  With
     ``across_sight_width_m`` (metres, a LiDAR), the object is stretched horizontally to those
-    widths (:func:`~zbuf_occlude.sensors.fit.fit_width_scale`, seeded with ``seed``).
+    widths (:func:`~zbuf_occlude.sensors.fit.fit_width_scale`, seeded with ``seed``).  ``footprint``:
+    ``"exact"`` or ``"adaptive"``, as :func:`~zbuf_occlude.sensors.crops.object_crops` casts it.
 
     Returns
     -------
@@ -72,7 +74,7 @@ def farm_datasets(
         mesh = load_mesh(mesh) if isinstance(mesh, (str, os.PathLike)) else mesh  # once, for the fit and the crops
         distributions = replace(distributions, **fit_object_shape(mesh, sensor, distributions, across_sight_width_m, seed=seed, name=name))
     clouds = lidar_object_samples(mesh, sensor, name=name, n_samples=n_samples, n_points=n_points, seed=seed,
-                                  distributions=distributions, label=label, backend=backend)  # fmt: skip
+                                  distributions=distributions, label=label, backend=backend, footprint=footprint)  # fmt: skip
     b = len(clouds)
     f64 = lambda values: np.asarray(values, dtype=np.float64).reshape(b)  # noqa: E731
     optional = {

@@ -380,6 +380,7 @@ def lidar_object_samples(
     class_name: str = "",
     label: int = -1,
     backend: str = "embree",
+    footprint: str = "exact",
 ) -> list[OccludedCloud]:
     """The farm's per-object function for ``--sensor``: ``n_samples`` LiDAR crops of one mesh.
 
@@ -397,6 +398,8 @@ def lidar_object_samples(
         Crops per object and points per crop (fewer returns are padded with repeats, more
         are subsampled, as :func:`zbuf_occlude.geometry.samples.draw_sample`).
     distributions : CropDistributions
+    footprint : {"exact", "adaptive"}
+        How a footprint is cast, as :func:`object_crop`.
 
     Returns
     -------
@@ -425,7 +428,7 @@ def lidar_object_samples(
     fields = kept_return_fields(sensor)
     out = []
     for k, crop, rng in object_crops(
-        mesh, sensor, distributions, name=name, n_samples=n_samples, seed=seed, class_name=class_name, backend=backend
+        mesh, sensor, distributions, name=name, n_samples=n_samples, seed=seed, class_name=class_name, backend=backend, footprint=footprint
     ):
         placement = crop.placement
         n = len(crop.scan)
