@@ -18,8 +18,8 @@ Every object then stands on the ground (its lowest vertex at ``ground_z_m``), it
 box centred on ``position_m`` (x, y; a third value is added to the standing height), turned
 by ``yaw_deg`` about +z.  Object ids: 0 is the ground, objects and occluders are numbered
 from 1 in the order given (objects first).  ``"foliage": {"leaf_area_density": 1.0}`` (also
-``leaf_side_m``, ``shell_m``, ``seed``) fills the object's crown with leaves at its size in
-metres (:class:`~zbuf_occlude.sensors.foliage.Foliage`).
+``leaf_side_m``, ``shell_m``, ``keep_surface``, ``seed``) fills the object's crown with leaves
+at its size in metres (:class:`~zbuf_occlude.sensors.foliage.Foliage`).
 
 Every field is checked where the dataclass is made (:mod:`zbuf_occlude.sensors.checks`: numbers
 finite and in range, types, unknown keys).  Primitives and width profiles are in
@@ -126,8 +126,8 @@ class SceneObject:
         (:func:`~zbuf_occlude.sensors.foliage.add_foliage`, after ``width_scale`` and
         ``width_profile``): square leaves in metres whatever the scaling.  The leaves' faces follow
         the mesh's, their rows in ``face_local`` counted on from the mesh's face count as loaded,
-        their material ``"grown_leaf"`` (foliage's reflectance, opaque: the gaps are between the leaves).  The object is sized and placed by its
-        mesh alone.  None (default): no leaves.
+        their material ``"grown_leaf"`` (foliage's reflectance, opaque: the gaps are between the
+        leaves).  The object is sized and placed by its mesh alone.  None (default): no leaves.
 
     Raises
     ------
@@ -201,9 +201,9 @@ class SceneObject:
                 self.foliage = Foliage.of(self.foliage)
 
     def build(self, base: Path | None = None, *, max_faces: int = MAX_MESH_FACES) -> tuple[trimesh.Trimesh, NDArray[np.float64]]:
-        """The object's mesh in its local frame (as loaded, stretched by ``width_scale`` and warped
-        by ``width_profile``, with ``foliage``'s leaves: the object's own shape) and its (4, 4) local → world transform (the
-        scaling to ``size_m``, the yaw and the position), with the ground at z = 0.
+        """The object's mesh in its local frame (as loaded, stretched by ``width_scale``, warped by
+        ``width_profile``, with ``foliage``'s leaves: the object's own shape) and its (4, 4) local →
+        world transform (the scaling to ``size_m``, the yaw and the position), with the ground at z = 0.
 
         ``max_faces`` bounds the faces the leaves may bring the mesh to (what a scene's triangle
         cap leaves for it), checked before any leaf is drawn.
@@ -279,9 +279,10 @@ class SceneObject:
 
 def _with_leaves(foliage: Foliage, v: NDArray[np.float64], faces: NDArray[np.int64], scale: NDArray[np.float64], rows: NDArray[np.int64] | None,
                  loaded_faces: int, materials: FaceMaterials | None, max_leaves: int) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64], FaceMaterials]:  # fmt: skip
-    """The object's vertices (z-up, unscaled) and faces (none without ``keep_surface``) with ``foliage``'s leaves grown on it at its size in metres (``v · scale``),
-    brought back unscaled (the transform scales them again: square leaves in metres); the faces' rows as loaded (the
-    leaves' counted on from ``loaded_faces``) and materials (the leaves' :data:`~zbuf_occlude.sensors.foliage.LEAF_MATERIAL`, the mesh's faces their own or ``""``)."""
+    """The object's vertices (z-up, unscaled) and faces (the mesh's none without ``keep_surface``) with ``foliage``'s leaves
+    grown on it at its size in metres (``v · scale``), brought back unscaled (the transform scales them again: square leaves
+    in metres); the faces' rows as loaded (the leaves' counted on from ``loaded_faces``) and materials (the leaves'
+    :data:`~zbuf_occlude.sensors.foliage.LEAF_MATERIAL`, the mesh's faces their own or ``""``)."""
     import trimesh
 
     leafy = foliage.grow(trimesh.Trimesh(v * scale, faces, process=False), max_leaves=min(MAX_LEAVES, max(0, max_leaves)))
