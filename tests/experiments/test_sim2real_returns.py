@@ -136,3 +136,45 @@ def test_settings_record_the_returns_only_when_above_one(tmp_path: Path) -> None
     )  # the settings of runs before --returns
     with pytest.raises(InvalidInputError, match="other settings"):  # a one-return run is not resumed with returns
         _fix_settings(Sim2RealConfig("m", "r", returns=2), _sets_found(), tmp_path / "one")
+
+
+def test_the_adaptive_footprint_needs_several_returns_and_is_recorded_only_when_set(tmp_path: Path, capsys) -> None:
+    from zbuf_occlude.experiments.sim2real.run import Sim2RealSets, _fix_settings
+
+    argv = ["experiment", "sim2real", str(tmp_path), "--real", str(tmp_path), "--out", str(tmp_path / "o"), "--adaptive-footprint"]
+    assert main(argv) == 2
+    assert "--adaptive-footprint" in (err := capsys.readouterr().err) and "--returns 2" in err and not (tmp_path / "o").exists()
+    for bad in ("yes", 1):
+        with pytest.raises(InvalidInputError, match="adaptive_footprint must be True or False"):
+            Sim2RealConfig("m", "r", returns=2, adaptive_footprint=bad)
+    found = Sim2RealSets(["car", "pole"], [], [], np.zeros((4, 8, 3), np.float32), np.repeat([0, 1], 2), [f"{i}.xyz" for i in range(4)],
+                         np.array([0, 2]), np.array([1, 3]))  # fmt: skip
+    _fix_settings(Sim2RealConfig("m", "r", returns=2, adaptive_footprint=True), found, tmp_path / "adaptive")
+    _fix_settings(Sim2RealConfig("m", "r", returns=2), found, tmp_path / "exact")
+    assert json.loads((tmp_path / "adaptive" / "settings.json").read_text())["lidar_footprint"] == "adaptive"
+    assert "lidar_footprint" not in json.loads((tmp_path / "exact" / "settings.json").read_text())  # earlier runs' settings kept
+
+
+def test_the_lidar_set_casts_the_footprint_the_run_asks_for(tmp_path: Path, monkeypatch) -> None:
+    import zbuf_occlude.experiments.sim2real.run as run
+    import zbuf_occlude.sensors.crops as crops
+
+    meshes = find_class_meshes(_mesh_root(tmp_path))
+    sensor = with_returns(lidar_preset("hdl32e"), 2)
+    sets = {footprint: build_set("lidar", meshes, ["bush", "pole"], 3, 64, 0, SetRecipe(sensor=sensor, min_returns=1, footprint=footprint))
+            for footprint in ("exact", "adaptive")}  # fmt: skip
+    # the adaptive cast changes some crops of these leafy bushes, and is the crops' own adaptive cast
+    assert not np.array_equal(sets["exact"].points, sets["adaptive"].points)
+    cast = []
+    real = crops.object_crops
+    monkeypatch.setattr(crops, "object_crops", lambda *a, **kw: cast.append(kw["footprint"]) or real(*a, **kw))
+    again = build_set("lidar", meshes, ["bush", "pole"], 3, 64, 0, SetRecipe(sensor=sensor, min_returns=1, footprint="adaptive"))
+    assert np.array_equal(again.points, sets["adaptive"].points) and set(cast) == {"adaptive"}
+    # the run's recipe carries the config's choice
+    recipes = []
+    monkeypatch.setattr(run, "build_sets", lambda *a, **kw: recipes.append(a[5]) or {})
+    found = run.Sim2RealSets(["bush", "pole"], [], [], np.zeros((4, 8, 3), np.float32), np.repeat([0, 1], 2), [f"{i}.xyz" for i in range(4)],
+                             np.array([0, 2]), np.array([1, 3]))  # fmt: skip
+    for adaptive in (False, True):
+        run._build_seed_sets(Sim2RealConfig("m", "r", returns=2, adaptive_footprint=adaptive), found, 0, [], [], {})
+    assert [r.footprint for r in recipes] == ["exact", "exact", "adaptive", "adaptive"]

@@ -52,7 +52,7 @@ OPTION_NAMES = {
     "up_map": "--up-map", "sizes": "--sizes", "min_returns": "--min-returns", "method": "--method", "classes": "--classes",
     "occluded_elevation_deg": "--occluded-elevation", "fit_sensor": "--fit-sensor", "recipe": "--recipe",
     "validate_on": "--validate-on", "fitted_shape": "--fitted-shape", "aspect": "--augment aspect", "best_epoch_by": "--best-epoch-by",
-    "occluded_points": "--occluded-points", "returns": "--returns",
+    "occluded_points": "--occluded-points", "returns": "--returns", "adaptive_footprint": "--adaptive-footprint",
 }  # fmt: skip
 
 
@@ -74,7 +74,7 @@ def _run(args: argparse.Namespace) -> int:
         recipe=args.recipe, best_epoch_by=args.best_epoch_by, validate_on=args.validate_on,
         fitted_shape=() if args.fitted_shape == "none" else tuple(v.strip() for v in args.fitted_shape.split(",")),
         aspect=args.augment == "aspect", occluded_points=args.occluded_points, returns=args.returns,
-        option_names=OPTION_NAMES,
+        adaptive_footprint=args.adaptive_footprint, option_names=OPTION_NAMES,
     )  # fmt: skip
     summary = run_sim2real(config, args.out, device=args.device, threads=args.threads, progress=not args.no_progress, say=_say)
     return print_table(args.out, summary)
@@ -249,6 +249,13 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
         "pulse's footprint is cast as sub-rays (the sensor's own, or 7, over its beam divergence: 0.16 deg for "
         "hdl32e) and its echoes resolved by the sensor's range resolution (or 0.75 m) into up to N returns "
         "(settings.json: lidar_returns; not with --fit-sensor)",
+    )
+    p.add_argument(
+        "--adaptive-footprint",
+        action="store_true",
+        help="with --returns above 1: cast a pulse's whole footprint only where its centre ray and its neighbours do not "
+        "show one plane filling it (the same returns but for a surface inside the cone none of them meets, a fraction of "
+        "the cost; settings.json: lidar_footprint)",
     )
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="torch device (default: %(default)s)")
     p.add_argument("--threads", action=Checked, check=count("MAX_WORKERS"), help="torch CPU threads")

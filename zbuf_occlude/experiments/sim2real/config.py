@@ -156,6 +156,12 @@ class Sim2RealConfig:
         footprint's strongest echo).  Above 1: the
         multi-return model (each pulse's footprint cast as sub-rays, its hits resolved into up to
         ``returns`` echoes; ``settings.json``: ``lidar_returns``).  Not with ``fit_sensor``.
+    adaptive_footprint : bool
+        With ``returns`` above 1: the ``lidar`` set's crops cast a pulse's whole footprint only
+        where its centre ray and its neighbours do not show one plane filling it
+        (:func:`~zbuf_occlude.sensors.crops.object_crops`' ``footprint="adaptive"``), at a fraction
+        of the cost; ``settings.json``: ``lidar_footprint`` (only when set).  The meshes are still
+        screened with the whole footprint.
     occluded_points : bool
         Also train on the :data:`~zbuf_occlude.experiments.sim2real.data.OCCLUDED_POINTS` set:
         the ``occluded`` set's clouds (the same dense samples, poses and draws) with visibility
@@ -215,6 +221,7 @@ class Sim2RealConfig:
     aspect: bool = False
     occluded_points: bool = False
     returns: int = 1
+    adaptive_footprint: bool = False
     option_names: InitVar[Mapping[str, str] | None] = None
     occluded_elevation_from: str = field(init=False, default="option")
 
@@ -299,6 +306,11 @@ class Sim2RealConfig:
             # the fit (sensors.fit.fit_lidar) fits a one-return sensor; its fitted sets would not have the returns
             raise InvalidInputError(f"{n('returns')} {self.returns} is for the lidar set's preset or file; "
                                     f"drop {n('fit_sensor')} or {n('returns')}")  # fmt: skip
+        if not isinstance(self.adaptive_footprint, bool):
+            raise InvalidInputError(f"{n('adaptive_footprint')} must be True or False, got {type(self.adaptive_footprint).__name__}")
+        if self.adaptive_footprint and self.returns == 1:
+            raise InvalidInputError(f"{n('adaptive_footprint')} skips the sub-rays of a footprint whose echoes are resolved: "
+                                    f"give {n('returns')} 2 or more")  # fmt: skip
 
     @functools.cached_property
     def scale_values(self) -> Sim2RealScale:
@@ -350,6 +362,7 @@ class Sim2RealConfig:
             "method": self.method, "train_config": self.train_config(0).identity(("seed", "device", "threads")),
             **({"validate_on": self.validate_on} if self.validates_on_fit_half else {}),
             **({"lidar_returns": _returns_spec(self.sensor)} if self.returns > 1 else {}),
+            **({"lidar_footprint": "adaptive"} if self.adaptive_footprint else {}),
             **({"occluded_points": {"set": OCCLUDED_POINTS, "method": POINT_VISIBILITY, "normals": "estimated", "topped_up": False}}
                if self.occluded_points else {}),
         }  # fmt: skip

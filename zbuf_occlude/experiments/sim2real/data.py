@@ -205,6 +205,8 @@ class SetRecipe:
     elevation_deg : (lo, hi) float
         The ``occluded`` set's camera elevations, degrees, drawn uniformly (default
         :data:`GROUND_ELEVATION_DEG`; :func:`sensor_elevation_deg` derives them from a sensor).
+    footprint : {"exact", "adaptive"}
+        How the LiDAR crops cast a pulse's footprint (:func:`~zbuf_occlude.sensors.crops.object_crops`).
 
     Raises
     ------
@@ -221,6 +223,7 @@ class SetRecipe:
     resolution: int = 512
     method: str = "auto"
     elevation_deg: tuple[float, float] = GROUND_ELEVATION_DEG
+    footprint: str = "exact"
 
     def __post_init__(self) -> None:
         if self.placement is not None and not isinstance(self.placement, CropPlacement):
@@ -271,7 +274,7 @@ def crops_to_draw(want: int) -> int:
 
 
 def _lidar(entry: MeshEntry, k: int, n_points: int, seed: int, sensor, size: SizeRange, min_returns: int = MIN_RETURNS,
-           placement: CropPlacement | None = None) -> tuple[list[NDArray], list[float]]:  # fmt: skip
+           placement: CropPlacement | None = None, footprint: str = "exact") -> tuple[list[NDArray], list[float]]:  # fmt: skip
     from zbuf_occlude.sensors.crops import lidar_object_samples
 
     dist, target = (placement or CropPlacement()).crop_distributions(entry, size)
@@ -285,7 +288,7 @@ def _lidar(entry: MeshEntry, k: int, n_points: int, seed: int, sensor, size: Siz
         name = entry.name if attempt == 0 else f"{entry.name}#retry{attempt}"
         drawn = crops_to_draw(want) if attempt == 0 else 2 * want + 2  # later rounds: small objects far away miss more
         clouds = lidar_object_samples(entry.mesh, sensor, name=name, n_samples=drawn, n_points=n_points,
-                                      seed=seed, distributions=dist, class_name=entry.class_name)  # fmt: skip
+                                      seed=seed, distributions=dist, class_name=entry.class_name, footprint=footprint)  # fmt: skip
         good += [c for c in clouds if c.n_visible >= min_returns][:want]
         if len(good) == k:
             break
@@ -381,7 +384,8 @@ def build_set(kind: str, meshes: list[MeshEntry], names: list[str], per_class: i
             elif kind in ("occluded", OCCLUDED_POINTS):
                 got = _occluded(entry, int(k), n_points, seed, rng, recipe, from_points=kind == OCCLUDED_POINTS)
             else:
-                got, size_k = _lidar(entry, int(k), n_points, seed, recipe.sensor, sizes[cls], recipe.min_returns, recipe.placement)
+                got, size_k = _lidar(entry, int(k), n_points, seed, recipe.sensor, sizes[cls], recipe.min_returns, recipe.placement,
+                                     recipe.footprint)  # fmt: skip
             if kind == "lidar":
                 sizes_m.extend(size_k)
             elif recipe.keep_scale:
