@@ -222,8 +222,7 @@ def _footprint_mode(args: argparse.Namespace, sensor, kind) -> str:
         return "exact"
     if not kind.pulsed:
         raise InvalidInputError(f"--adaptive-footprint: {sensor.name} is a {kind.title}, which fires no pulses to skip the sub-rays of")
-    beam = sensor.beam
-    if not beam.resolves_echoes or beam.footprint_rays == 1:
+    if not sensor.beam.resolves_footprint:
         raise InvalidInputError(f"--adaptive-footprint skips the sub-rays of a footprint whose echoes are resolved; {sensor.name} "
                                 "fires one ray or resolves no echoes: give it --footprint and --max-returns above 1")  # fmt: skip
     if args.backend != "embree":

@@ -212,7 +212,7 @@ class SensorCropParams:
                 sensor = with_beam(sensor, **changes)
             except InvalidInputError as exc:
                 raise InvalidInputError(f"{', '.join(given)}: {exc}") from None
-        if self.adaptive_footprint and not (sensor.beam.footprint_rays > 1 and sensor.beam.resolves_echoes):
+        if self.adaptive_footprint and not sensor.beam.resolves_footprint:
             raise InvalidInputError(f"{OPTION_NAMES['sensor_adaptive_footprint']} skips the sub-rays of a footprint whose echoes are "
                                     f"resolved; {self.name} fires one ray a pulse or resolves no echoes: give it "
                                     f"{OPTION_NAMES['sensor_footprint']} (a sensor file with max_returns above 1 or a return mode)")  # fmt: skip

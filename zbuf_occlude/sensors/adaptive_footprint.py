@@ -269,7 +269,7 @@ def adaptive_footprint(footprint: str, beam: Beam, backend: str) -> bool:
         raise InvalidInputError(f"footprint must be one of {', '.join(FOOTPRINT_MODES)}, got {footprint!r}")
     if footprint == "exact":
         return False
-    if not beam.resolves_echoes or beam.footprint_rays == 1:
+    if not beam.resolves_footprint:
         raise InvalidInputError(f"footprint 'adaptive' skips the sub-rays of resolved echoes; beam {beam.name!r} "
                                 f"(footprint_rays {beam.footprint_rays}, max_returns {beam.max_returns}, return_mode "
                                 f"{beam.return_mode!r}) resolves none: give it footprint_rays above 1 and echoes to resolve")  # fmt: skip

@@ -228,6 +228,12 @@ class Beam:
         return self.max_returns > 1 or self.return_mode != "all"
 
     @property
+    def resolves_footprint(self) -> bool:
+        """Whether a pulse casts several sub-rays whose hits are resolved into echoes: the footprints
+        whose sub-rays the adaptive footprint skips (:func:`~zbuf_occlude.sensors.adaptive_footprint.adaptive_footprint`)."""
+        return self.footprint_rays > 1 and self.resolves_echoes
+
+    @property
     def is_ideal(self) -> bool:
         """One ray, its first hit, no noise, no loss, no radiometry (:data:`IDEAL_BEAM`'s physics, any name and wavelength)."""
         return replace(self, name="ideal", source="", wavelength_nm=IDEAL_BEAM.wavelength_nm) == IDEAL_BEAM
