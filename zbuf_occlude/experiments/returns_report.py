@@ -474,11 +474,12 @@ def _autzen(
     from zbuf_occlude.experiments.canopy import CANOPY_QUANTILE, canopy_height, classes_by_height, heights_above_ground, plot_canopy_height
 
     las = read_las(path)
-    las = classes_by_height(las, heights_above_ground(las))
+    heights = heights_above_ground(las)  # the ground model, once: for the classes and the canopy
+    las = classes_by_height(las, heights)
     real, return_fit = _real(las, VEGETATION_CLASSES, settings.bootstrap)
     cover = tree_cover(las, cell_m=AUTZEN_CELL_M, bootstrap=settings.bootstrap)
     rays = cover_rays_per_cell(settings, AUTZEN_CELL_M)
-    tile_height = canopy_height(las, cell_m=AUTZEN_CELL_M)
+    tile_height = canopy_height(las, cell_m=AUTZEN_CELL_M, heights_m=heights)
     scene, vegetation, centre, half = base_plot
     plot_height = plot_canopy_height(scene, centre, half, vegetation, cell_m=AUTZEN_CELL_M, rays_per_cell=rays)
     scale = tile_height / plot_height

@@ -260,8 +260,7 @@ class SceneObject:
                 materials = materials.select(rows)
             if self.foliage is not None:
                 with located(f"object {shown(self.class_name or self.mesh)}: foliage"):
-                    room = (max_faces - (len(faces) if self.foliage.keep_surface else 0)) // 2
-                    v, faces, rows, materials = _with_leaves(self.foliage, v, faces, scale, rows, len(local.faces), materials, room)
+                    v, faces, rows, materials = _with_leaves(self.foliage, v, faces, scale, rows, len(local.faces), materials, max_faces)
             local = trimesh.Trimesh(v @ rot_up, faces, process=False)  # rot_up is orthonormal: v @ rot_up undoes it
             if rows is not None:
                 local.metadata[FACE_ROWS] = rows
@@ -278,14 +277,16 @@ class SceneObject:
 
 
 def _with_leaves(foliage: Foliage, v: NDArray[np.float64], faces: NDArray[np.int64], scale: NDArray[np.float64], rows: NDArray[np.int64] | None,
-                 loaded_faces: int, materials: FaceMaterials | None, max_leaves: int) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64], FaceMaterials]:  # fmt: skip
+                 loaded_faces: int, materials: FaceMaterials | None, max_faces: int) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64], FaceMaterials]:  # fmt: skip
     """The object's vertices (z-up, unscaled) and faces (the mesh's none without ``keep_surface``) with ``foliage``'s leaves
     grown on it at its size in metres (``v · scale``), brought back unscaled (the transform scales them again: square leaves
     in metres); the faces' rows as loaded (the leaves' counted on from ``loaded_faces``) and materials (the leaves'
-    :data:`~zbuf_occlude.sensors.foliage.LEAF_MATERIAL`, the mesh's faces their own or ``""``)."""
+    :data:`~zbuf_occlude.sensors.foliage.LEAF_MATERIAL`, the mesh's faces their own or ``""``); at most ``max_faces`` faces
+    in all, checked before any leaf is drawn."""
     import trimesh
 
-    leafy = foliage.grow(trimesh.Trimesh(v * scale, faces, process=False), max_leaves=min(MAX_LEAVES, max(0, max_leaves)))
+    room = (max_faces - (len(faces) if foliage.keep_surface else 0)) // 2  # two triangles a leaf
+    leafy = foliage.grow(trimesh.Trimesh(v * scale, faces, process=False), max_leaves=min(MAX_LEAVES, max(0, room)))
     kept = len(faces) if foliage.keep_surface or foliage.leaf_area_density == 0 else 0  # the mesh's faces, first, or none
     n_leaves = len(leafy.faces) - kept
     rows = (np.arange(len(faces), dtype=np.int64) if rows is None else rows)[:kept]
