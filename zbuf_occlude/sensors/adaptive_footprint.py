@@ -139,11 +139,10 @@ def uniform_footprints(
 def _uniform(built, origins, directions, face, t, neighbours, offsets, weights, range_resolution_m, range_limits_m, transmits):
     """:func:`uniform_footprints`, and the uniform hits' rows, ascending, and their plane echo's range and
     energy for ρ = 1 (:func:`plane_echoes`), by :func:`~.uniform_kernel.uniform_plane_echoes`."""
-    planes, diagonal = _planes(built.mesh)
-    n_faces = len(planes)
-    transmits = np.zeros(n_faces, bool) if transmits is None else np.asarray(transmits, dtype=bool)
     from zbuf_occlude.sensors.uniform_kernel import UniformRules, uniform_plane_echoes  # numba: imported when used
 
+    planes, diagonal = _planes(built.mesh)
+    transmits = np.zeros(len(planes), bool) if transmits is None else np.asarray(transmits, dtype=bool)
     rules = UniformRules(range_resolution_m, range_limits_m, INSIDE_MARGIN_SHARE * diagonal, PLANE_SHARE * range_resolution_m, MIN_RANGE_M)
     return uniform_plane_echoes(
         origins, directions, face, t, neighbours, planes, np.asarray(built.face_object), transmits, offsets, weights, rules
