@@ -18,6 +18,9 @@
 #     missing or older than this package (or pydantic) needs (typing_extensions, filelock, lazy_loader);
 #   - .devdata/data.tar.xz: street_objects/ and lidarnet_v2_partial/ (research-only data; never committed),
 #     unpacked into $DATA_DIR.
+# Where the working tree with both is over the device tool's 64 MiB, two calls on one warm machine: the first
+# carries .whl and copies it (`mkdir -p /tmp/whl && cp -r .whl/. /tmp/whl/`), the second carries .devdata and
+# sets WHEEL_DIR=/tmp/whl.  The machine goes back after 30 s idle, so make the second call at once.
 #
 # The occluded set's HSR method stays `auto` (settings.json: method "auto"), and auto is made to pick
 # embree-fast (ZBUF_OCCLUDE_AUTO): the method auto picks on a machine with a software OpenGL renderer, as the
