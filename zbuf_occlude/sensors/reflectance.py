@@ -112,9 +112,12 @@ class Material:
     source: str
 
 
+#: Leaves' reflectance at :data:`WAVELENGTHS_NM`: a crown's (``"foliage"``, with its gaps) and a grown leaf's (``"grown_leaf"``, opaque).
+_LEAF_REFLECTANCE = (0.60, 0.55, 0.30)
+
 #: The table (module docstring): material name → :class:`Material`.
 MATERIALS: dict[str, Material] = {
-    "foliage": Material((0.60, 0.55, 0.30), FOLIAGE_GAP_FRACTION, "WL99 deciduous trees (905); ECOSTRESS green leaves (1064, 1550); gap fraction: assumption"),
+    "foliage": Material(_LEAF_REFLECTANCE, FOLIAGE_GAP_FRACTION, "WL99 deciduous trees (905); ECOSTRESS green leaves (1064, 1550); gap fraction: assumption"),
     "needles": Material((0.30, 0.30, 0.15), FOLIAGE_GAP_FRACTION, "WL99 coniferous trees (905); ECOSTRESS conifer needles (1064, 1550); gap fraction: assumption"),
     "grass": Material((0.50, 0.50, 0.30), 0.0, "ECOSTRESS green grasses"),
     "bark": Material((0.30, 0.35, 0.40), 0.0, "ECOSTRESS bark (non-photosynthetic vegetation); WL99 rough clean wood 25 %"),
@@ -127,7 +130,7 @@ MATERIALS: dict[str, Material] = {
     "glass": Material((0.05, 0.05, 0.05), 0.85, "Fresnel (4 % per face, n 1.5): diffuse ρ an assumption, round trip 0.92²"),
     "skin": Material((0.55, 0.50, 0.05), 0.0, "NIST skin"),
     "clothing": Material((0.50, 0.50, 0.45), 0.0, "assumption: textile dyes are mostly transparent in the near infrared, so light and dark clothes alike reflect ~0.4-0.6"),
-    "grown_leaf": Material((0.60, 0.55, 0.30), 0.0, "foliage's reflectance, opaque: one leaf that sensors.foliage grows in a crown, whose gaps are the space between leaves"),
+    "grown_leaf": Material(_LEAF_REFLECTANCE, 0.0, "foliage's reflectance, opaque: one leaf that sensors.foliage grows in a crown, whose gaps are the space between leaves"),
 }  # fmt: skip
 
 #: Material of an object whose names match nothing: concrete, a mid-grey man-made surface.

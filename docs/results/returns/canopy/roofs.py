@@ -45,7 +45,8 @@ def main() -> None:
     points = las.points * las.metres_per_unit
     high = np.flatnonzero(las.classification == 5)
     _, nearest = cKDTree(points).query(points[high], k=K)
-    centred = points[nearest] - points[nearest].mean(axis=1, keepdims=True)
+    neighbourhoods = points[nearest]  # (M, K, 3)
+    centred = neighbourhoods - neighbourhoods.mean(axis=1, keepdims=True)
     eigen = np.linalg.eigvalsh(np.einsum("mki,mkj->mij", centred, centred) / K)
     log_variation = np.log10(np.maximum(eigen[:, 0] / eigen.sum(axis=1), 1e-6))
     print(f"{path}: {len(high):,} points of class 5 (class 1 classed by height), K = {K}")
