@@ -116,13 +116,17 @@ def test_several_returns_need_a_divergence_and_no_fit(tmp_path: Path, capsys: py
             Sim2RealConfig("m", "r", returns=bad)
 
 
-def test_settings_record_the_returns_only_when_above_one(tmp_path: Path) -> None:
-    from zbuf_occlude.experiments.sim2real.run import Sim2RealSets, _fix_settings
-    from zbuf_occlude.sensors.kinds import sensor_to_json
+def _sets_found(names=("car", "pole")):
+    """What prepare_sets finds, as little as _fix_settings and _build_seed_sets read (test_sim2real's)."""
+    from zbuf_occlude.experiments.sim2real.run import Sim2RealSets
 
-    def _sets_found():  # what prepare_sets finds, as little as _fix_settings reads (test_sim2real's)
-        return Sim2RealSets(["car", "pole"], [], [], np.zeros((4, 8, 3), np.float32), np.repeat([0, 1], 2), [f"{i}.xyz" for i in range(4)],
-                            np.array([0, 2]), np.array([1, 3]))  # fmt: skip
+    return Sim2RealSets(list(names), [], [], np.zeros((4, 8, 3), np.float32), np.repeat([0, 1], 2), [f"{i}.xyz" for i in range(4)],
+                        np.array([0, 2]), np.array([1, 3]))  # fmt: skip
+
+
+def test_settings_record_the_returns_only_when_above_one(tmp_path: Path) -> None:
+    from zbuf_occlude.experiments.sim2real.run import _fix_settings
+    from zbuf_occlude.sensors.kinds import sensor_to_json
 
     _fix_settings(Sim2RealConfig("m", "r", returns=2), _sets_found(), tmp_path / "two")
     two = json.loads((tmp_path / "two" / "settings.json").read_text())
@@ -139,7 +143,7 @@ def test_settings_record_the_returns_only_when_above_one(tmp_path: Path) -> None
 
 
 def test_the_adaptive_footprint_needs_several_returns_and_is_recorded_only_when_set(tmp_path: Path, capsys) -> None:
-    from zbuf_occlude.experiments.sim2real.run import Sim2RealSets, _fix_settings
+    from zbuf_occlude.experiments.sim2real.run import _fix_settings
 
     argv = ["experiment", "sim2real", str(tmp_path), "--real", str(tmp_path), "--out", str(tmp_path / "o"), "--adaptive-footprint"]
     assert main(argv) == 2
@@ -147,8 +151,7 @@ def test_the_adaptive_footprint_needs_several_returns_and_is_recorded_only_when_
     for bad in ("yes", 1):
         with pytest.raises(InvalidInputError, match="adaptive_footprint must be True or False"):
             Sim2RealConfig("m", "r", returns=2, adaptive_footprint=bad)
-    found = Sim2RealSets(["car", "pole"], [], [], np.zeros((4, 8, 3), np.float32), np.repeat([0, 1], 2), [f"{i}.xyz" for i in range(4)],
-                         np.array([0, 2]), np.array([1, 3]))  # fmt: skip
+    found = _sets_found()
     _fix_settings(Sim2RealConfig("m", "r", returns=2, adaptive_footprint=True), found, tmp_path / "adaptive")
     _fix_settings(Sim2RealConfig("m", "r", returns=2), found, tmp_path / "exact")
     assert json.loads((tmp_path / "adaptive" / "settings.json").read_text())["lidar_footprint"] == "adaptive"
@@ -173,8 +176,7 @@ def test_the_lidar_set_casts_the_footprint_the_run_asks_for(tmp_path: Path, monk
     # the run's recipe carries the config's choice
     recipes = []
     monkeypatch.setattr(run, "build_sets", lambda *a, **kw: recipes.append(a[5]) or {})
-    found = run.Sim2RealSets(["bush", "pole"], [], [], np.zeros((4, 8, 3), np.float32), np.repeat([0, 1], 2), [f"{i}.xyz" for i in range(4)],
-                             np.array([0, 2]), np.array([1, 3]))  # fmt: skip
+    found = _sets_found(("bush", "pole"))
     for adaptive in (False, True):
         run._build_seed_sets(Sim2RealConfig("m", "r", returns=2, adaptive_footprint=adaptive), found, 0, [], [], {})
     assert [r.footprint for r in recipes] == ["exact", "exact", "adaptive", "adaptive"]
