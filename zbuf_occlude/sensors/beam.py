@@ -128,6 +128,15 @@ class Beam:
         Probability in [0, 1) that a return is lost, at range 0.
     dropout_range_per_m : float
         Growth of that probability per metre of range (:meth:`dropout_probability`).
+    foliage_dropout : float
+        Probability in [0, 1) that a return from a crown surface (a face of a material in
+        :data:`~zbuf_occlude.sensors.reflectance.CROWN_MATERIALS`: a mesh standing for leaves
+        with gaps) is lost, besides ``dropout``: ray drop on vegetation, drawn independently per
+        return.  Real HDL-32E scans of bushes miss about 14 % of their firings at every range
+        where cars, pedestrians and poles miss 3–6 % (measured on LiDARNet v2: the results page
+        "Returns against real scans: a spinning LiDAR"): a footprint on leaves often meets too
+        little of them for an echo.  A crown mesh is a closed surface, so its footprints are
+        whole; this is the loss it cannot give.  0: none (the default).
     min_range_m, max_range_m : float
         Returns measured nearer or farther are dropped, metres.
 
@@ -157,6 +166,7 @@ class Beam:
     range_noise_m: float = 0.0
     dropout: float = 0.0
     dropout_range_per_m: float = 0.0
+    foliage_dropout: float = 0.0
     min_range_m: float = 0.0
     max_range_m: float = MAX_RANGE_M
 
@@ -172,7 +182,7 @@ class Beam:
             "wavelength_nm": {"low": 200.0, "high": 20_000.0}, "divergence_deg": {"low": 0.0, "high": MAX_DIVERGENCE_DEG},
             "range_resolution_m": ranges, "echo_separation_m": ranges, "detection_threshold": at_least_0,
             "min_echo_reflectance": {"low": 0.0, "high": 1.0}, "power_noise": at_least_0, "range_noise_m": ranges, "dropout": {"low": 0.0, "high": 1.0, "high_open": True},
-            "dropout_range_per_m": {}, "min_range_m": ranges, "max_range_m": {**ranges, "low_open": True},
+            "dropout_range_per_m": {}, "foliage_dropout": {"low": 0.0, "high": 1.0, "high_open": True}, "min_range_m": ranges, "max_range_m": {**ranges, "low_open": True},
         }  # fmt: skip
         for name, bounds in numbers.items():
             object.__setattr__(self, name, real(getattr(self, name), name, **bounds))

@@ -65,6 +65,7 @@ if TYPE_CHECKING:
 __all__ = [
     "AIRBORNE_WAVELENGTH_NM",
     "CLASS_MATERIALS",
+    "CROWN_MATERIALS",
     "DEFAULT_MATERIAL",
     "FOLIAGE_GAP_FRACTION",
     "GROUND_MATERIAL",
@@ -77,6 +78,7 @@ __all__ = [
     "material_of",
     "per_class",
     "reflectance",
+    "on_crown",
     "scene_optics",
 ]
 
@@ -91,6 +93,10 @@ SPINNING_WAVELENGTH_NM = 905.0
 AIRBORNE_WAVELENGTH_NM = 1064.0
 #: Round-trip transmittance of a foliage surface: its gap fraction (module docstring; an assumption).
 FOLIAGE_GAP_FRACTION = 0.3
+#: The materials of crown surfaces: a mesh that stands for leaves or needles with gaps between them
+#: (the rows with :data:`FOLIAGE_GAP_FRACTION`), where :attr:`Beam.foliage_dropout
+#: <zbuf_occlude.sensors.beam.Beam.foliage_dropout>` loses returns.  A grown leaf is not one: it is one leaf.
+CROWN_MATERIALS = ("foliage", "needles")
 
 
 @dataclass(frozen=True)
@@ -327,6 +333,22 @@ def scene_optics(
         face_reflectivity=table[0][face_material],
         face_transmittance=table[1][face_material],
     )
+
+
+def on_crown(built: BuiltScene, face: NDArray[np.integer]) -> NDArray[np.bool_]:
+    """Whether each of ``face (H,)`` (faces of ``built.mesh``) is of a crown material (:data:`CROWN_MATERIALS`).
+
+    Each face's material as :func:`scene_optics` gives it: its file's where that names one of the
+    table, else its object's (so a tree's trunk whose file calls it "bark" is not a crown).
+
+    Returns
+    -------
+    (H,) bool
+    """
+    rows = list(MATERIALS)
+    crown = np.zeros(len(rows), dtype=bool)
+    crown[[rows.index(m) for m in CROWN_MATERIALS]] = True
+    return crown[scene_optics(built).face_material[np.asarray(face, dtype=np.int64)]]
 
 
 def per_class(built: BuiltScene, values: Mapping[str, float], default: float = 0.0) -> NDArray[np.float64]:

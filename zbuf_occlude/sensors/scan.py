@@ -26,6 +26,7 @@ from zbuf_occlude.sensors.platform import Trajectory, as_pose
 from zbuf_occlude.sensors.pulses import Pulses
 from zbuf_occlude.sensors.raycast import BACKENDS, cast_embree, face_normals
 from zbuf_occlude.sensors.raycast_zbuffer import cast_zbuffer
+from zbuf_occlude.sensors.reflectance import on_crown
 from zbuf_occlude.sensors.scan_data import FRAMES, Scan
 from zbuf_occlude.sensors.scene import BuiltScene, ScanScene, SceneObject
 
@@ -301,7 +302,8 @@ def fire_pulses(
     from its origin; one return per pulse is the centre ray's first hit or the footprint's
     strongest echo (:func:`~.echo_model.strongest_echo`), several are the resolved echoes
     (:func:`~.echo_model.echo_returns`, then the beam's ``return_mode``); then range noise,
-    dropout (drawn for every hit, so filters do not shift the streams), the range limits on the
+    dropout and the beam's ray drop on crowns (each drawn for every hit, so filters do not shift
+    the streams), the range limits on the
     measured range and, where reflectivities are given (or the pattern detects with a default
     ρ), the detection threshold.  Points lie on each pulse's centre direction at the measured
     range.  With the beam's ``intensity_scale`` set, every return's intensity is its received
@@ -314,8 +316,8 @@ def fire_pulses(
     beam : Beam
     pulses : Pulses
     rng : numpy.random.Generator
-        Drawn from in a fixed order: power noise of the echoes, range noise, dropout, then the
-        single return's power noise.
+        Drawn from in a fixed order: power noise of the echoes, range noise, dropout, ray drop on
+        crowns (only where ``beam.foliage_dropout`` is above 0), then the single return's power noise.
     sensor_name : str
     sensor_to_world : (4, 4) float64 or None
         The scan's ``sensor_to_world``; None: a translation to the mean origin of the returns.
@@ -376,6 +378,8 @@ def fire_pulses(
     normal, cos_in, incidence = _facing_normals(built, face, d_world[hit])
     gauss = rng.standard_normal(len(hit))  # drawn for every hit, so filters do not shift streams
     lost = rng.random(len(hit)) < beam.dropout_probability(t)
+    if beam.foliage_dropout > 0:  # drawn for every hit after dropout's, so a beam without it keeps its streams
+        lost |= (rng.random(len(hit)) < beam.foliage_dropout) & on_crown(built, face)
     measured = t + beam.range_noise_m * gauss  # limits apply to what the sensor measures
     keep = (measured >= beam.min_range_m) & (measured <= beam.max_range_m) & ~lost
     if not multi:
