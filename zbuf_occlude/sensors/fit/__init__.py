@@ -21,6 +21,9 @@
 ``divergence``
     The beam divergence fitted by simulation: a simulated multi-return share curve inverted at a
     scan's share (:func:`fit_divergence`, :func:`divergence_from_shares`).
+``ray_drop``
+    Ray drop on vegetation: the beam's ``foliage_dropout`` from the firings that real scans of
+    crowns lose beyond those of solid objects (:func:`fit_foliage_dropout`).
 ``fitted_beam``
     The return model applied to a scanner: its beam with what was fitted changed, the rest its
     data sheet's, and where each field came from (:func:`~zbuf_occlude.sensors.fit.fitted_beam.fitted_sensor`).
@@ -49,6 +52,11 @@ from zbuf_occlude.sensors.fit.lidar import (
     Estimate,
     LidarFit,
     fit_lidar,
+)
+from zbuf_occlude.sensors.fit.ray_drop import (
+    dropout_by_surface,
+    fit_foliage_dropout,
+    is_crown_class,
 )
 from zbuf_occlude.sensors.fit.return_model import (
     ReturnModelFit,
@@ -92,4 +100,5 @@ __all__ = [
     "MAX_DROPOUT_GAP", "MIN_PLACEMENT_SCANS", "MIN_RETURNS", "PLANE_NEIGHBOURS", "SENSOR_HEIGHT_QUANTILE", "WIDTH_BAND_M",
     "width_profile", "WIDTH_PROFILE_BINS", "WIDTH_SAMPLES", "return_statistics", "ReturnStatistics", "VEGETATION_CLASSES",
     "divergence_curve", "divergence_from_shares", "fit_divergence", "fit_return_model", "merge_scans", "ReturnModelFit",
+    "dropout_by_surface", "fit_foliage_dropout", "is_crown_class",
 ]  # fmt: skip
