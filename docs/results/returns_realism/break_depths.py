@@ -24,15 +24,12 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from measure import CLASSES, sim_crops  # noqa: E402
+from measure import CLASSES, fit_half_scans, sim_crops  # noqa: E402
 
 from zbuf_occlude.experiments.partial_echo_crops import MATCHED_RANGE_M  # noqa: E402
 from zbuf_occlude.experiments.realism_stats import ring_labels, scan_line_runs  # noqa: E402
 from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes  # noqa: E402
-from zbuf_occlude.experiments.sim2real.real import real_halves, real_scan_rows  # noqa: E402
-from zbuf_occlude.experiments.sim2real.run import _REAL_SPLIT_SEED  # noqa: E402
 from zbuf_occlude.io.atomic import write_text  # noqa: E402
-from zbuf_occlude.real_scans.datasets import load_real_scans  # noqa: E402
 from zbuf_occlude.sensors.kinds import sensor_from_name, with_beam  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -76,16 +73,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
     t0, load0 = time.perf_counter(), os.getloadavg()
-    scans = load_real_scans(args.real)
-    names = sorted(CLASSES)
-    kept = real_scan_rows(scans, names, {})
-    labels = np.array([names.index(scans[i].label) for i in kept])
-    fit_half, _ = real_halves([scans[i].points for i in kept], labels, _REAL_SPLIT_SEED)
+    real = fit_half_scans(args.real)
     lines = [
         "| class | set | scans at 5-10 m | breaks a scan | median depth of a break, m | share under 0.1 m |",
         "|---|---|---|---|---|---|",
     ]
-    lines += rows("real (fit half)", [(scans[kept[i]].label, scans[kept[i]].points_sensor_m) for i in fit_half])
+    lines += rows("real (fit half)", [(s.label, s.points_sensor_m) for s in real])
     meshes = find_class_meshes(args.meshes, up_map={"bush/openglforest__*": "+y"}, classes=list(CLASSES))
     sensor = sensor_from_name(args.sensor)
     for name, s in (

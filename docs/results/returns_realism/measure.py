@@ -83,6 +83,20 @@ if "min_echo_reflectance" in {f.name for f in fields(Beam)}:
 log = logging.getLogger("returns_realism")
 
 
+def fit_half_scans(real_folder: str) -> list:
+    """The real scans of ``real_folder`` that ``experiment sim2real`` fits to, split as it splits them (its
+    ``real_split``); the scored half is not returned."""
+    from zbuf_occlude.experiments.sim2real.real import real_halves, real_scan_rows
+    from zbuf_occlude.experiments.sim2real.run import _REAL_SPLIT_SEED
+
+    scans = load_real_scans(real_folder)  # as experiment sim2real --real reads this folder
+    names = sorted(CLASSES)
+    kept = real_scan_rows(scans, names, {})
+    labels = np.array([names.index(scans[i].label) for i in kept])
+    fit_half, _ = real_halves([scans[i].points for i in kept], labels, _REAL_SPLIT_SEED)
+    return [scans[kept[i]] for i in fit_half]
+
+
 def sim_crops(meshes, sensor: Lidar, crops: int, seed: int) -> list[dict]:
     """The ``lidar`` set's crops of every mesh for ``sensor`` (module docstring; :func:`mesh_crops`): one dict per crop."""
     return [{"mesh": c.mesh, "class": c.class_name, "crop": c.crop, "points_m": c.points_m, "return_number": c.return_number,

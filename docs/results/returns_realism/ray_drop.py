@@ -35,14 +35,11 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from measure import CLASSES, per_crop, sim_crops  # noqa: E402
+from measure import CLASSES, fit_half_scans, per_crop, sim_crops  # noqa: E402
 
 from zbuf_occlude.experiments.partial_echo_crops import MATCHED_RANGE_M  # noqa: E402
 from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes  # noqa: E402
-from zbuf_occlude.experiments.sim2real.real import real_halves, real_scan_rows  # noqa: E402
-from zbuf_occlude.experiments.sim2real.run import _REAL_SPLIT_SEED  # noqa: E402
 from zbuf_occlude.io.atomic import write_text  # noqa: E402
-from zbuf_occlude.real_scans.datasets import load_real_scans  # noqa: E402
 from zbuf_occlude.sensors import Lidar  # noqa: E402
 from zbuf_occlude.sensors.fit import Estimate, dropout_by_surface, fit_foliage_dropout, fit_lidar, is_crown_class  # noqa: E402
 from zbuf_occlude.sensors.fit.ray_drop import CROWN, SOLID  # noqa: E402
@@ -100,12 +97,7 @@ def main(argv: list[str] | None = None) -> int:
     up_map = dict(pair.split("=", 1) for pair in args.up_map.split(",") if pair)
     base = Lidar.preset("hdl32e")
 
-    scans = load_real_scans(args.real)  # as experiment sim2real --real reads this folder
-    names = sorted(CLASSES)
-    kept = real_scan_rows(scans, names, {})
-    labels = np.array([names.index(scans[i].label) for i in kept])
-    fit_half, _ = real_halves([scans[i].points for i in kept], labels, _REAL_SPLIT_SEED)
-    real_scans = [scans[kept[i]] for i in fit_half]
+    real_scans = fit_half_scans(args.real)
     real_clouds = {c: [s.points_sensor_m for s in real_scans if s.label == c] for c in CLASSES}
     real = by_class(real_clouds, base)
     real_near = near_stats([{"class": s.label, "points_m": s.points_sensor_m} for s in real_scans])
