@@ -315,9 +315,9 @@ def test_every_numeric_sensor_field_is_covered() -> None:
             "AirborneScanner.headings_deg", "AirborneScanner.n_lines", "RayTable.time_s", "DepthCamera.K", "DepthCamera.width",
             "DepthCamera.noise"} <= names  # fmt: skip
     # Lidar: 4 (its ring pattern), AirborneScanner: 8 (swath, rates, flight and plan), RayTable: its 3 columns,
-    # DepthCamera: 9; Beam: 16 (every pulse and receiver field), tried in the file of each pulsed kind
-    assert len(names) == 4 + 8 + 3 + 9 + 16
-    assert sum(in_beam for *_, in_beam in SENSOR_NUMBERS) == 3 * 16
+    # DepthCamera: 9; Beam: 17 (every pulse and receiver field), tried in the file of each pulsed kind
+    assert len(names) == 4 + 8 + 3 + 9 + 17
+    assert sum(in_beam for *_, in_beam in SENSOR_NUMBERS) == 3 * 17
     assert {new for _, new in LEGACY_NUMBERS} >= {"min_range_m", "max_range_m", "range_noise_m", "divergence_deg", "footprint_rays"}
 
 
