@@ -76,9 +76,9 @@ __all__ = [
     "SceneOptics",
     "material_named",
     "material_of",
+    "on_crown",
     "per_class",
     "reflectance",
-    "on_crown",
     "scene_optics",
 ]
 

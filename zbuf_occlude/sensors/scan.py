@@ -303,9 +303,8 @@ def fire_pulses(
     strongest echo (:func:`~.echo_model.strongest_echo`), several are the resolved echoes
     (:func:`~.echo_model.echo_returns`, then the beam's ``return_mode``); then range noise,
     dropout and the beam's ray drop on crowns (each drawn for every hit, so filters do not shift
-    the streams), the range limits on the
-    measured range and, where reflectivities are given (or the pattern detects with a default
-    ρ), the detection threshold.  Points lie on each pulse's centre direction at the measured
+    the streams), the range limits on the measured range and, where reflectivities are given
+    (or the pattern detects with a default ρ), the detection threshold.  Points lie on each pulse's centre direction at the measured
     range.  With the beam's ``intensity_scale`` set, every return's intensity is its received
     energy (ρ = 1 where no reflectivity is given); without, a single return without
     reflectivities has intensity 1.0.

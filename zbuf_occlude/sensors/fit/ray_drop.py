@@ -16,8 +16,9 @@ multiplies the simulated crowns' share by ``1 − f`` and leaves solid surfaces 
 
     f = 1 − S_real / S_simulated,
 
-which holds whatever loss the two share (the sensor's own ``dropout``, and holes in the meshes
-that the real objects share).  ``f`` is clipped to [0, 0.95]: real crowns that lose no more than
+which holds for any loss that both groups have at the same rate (the sensor's own ``dropout``
+where it does not change with range, holes that meshes and real objects share); a ``dropout``
+growing with range enters it as far as the crowns and the solid objects stand at other ranges.  ``f`` is clipped to [0, 0.95]: real crowns that lose no more than
 the meshes give 0.  Its standard deviation propagates the four rates' bootstrap deviations
 (first order, relative errors in quadrature).  The trunk of a tree mesh whose file names it bark
 is no crown surface; ``f`` is fitted as if the whole crop were crown, so its bushes' loss after
