@@ -17,7 +17,7 @@ share a direction (as a pulse's two returns would), for the caption.
 The picks, by rule (:func:`median_pick`), never by eye:
 
 * **real**: among the **fit half** of the real scans of the class (``experiment sim2real``'s split,
-  :func:`real_halves` with its seed, as ``fit_threshold.py`` selects it), those whose centroid lies
+  ``measure.fit_half_scans``), those whose centroid lies
   :data:`RANGE_M` away, the scan whose point count is nearest their median;
 * **simulated**: the ``lidar`` set's crops of the class's meshes (``measure.sim_crops``: sim2real's
   placements and rule, ``--crops`` per mesh) kept by every variant, whose centroid lies
@@ -43,15 +43,12 @@ from matplotlib.lines import Line2D  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from measure import CLASSES, sim_crops  # noqa: E402
+from measure import fit_half_scans, sim_crops  # noqa: E402
 
 from zbuf_occlude.experiments.sim2real.config import with_returns  # noqa: E402
 from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes  # noqa: E402
-from zbuf_occlude.experiments.sim2real.real import real_halves, real_scan_rows  # noqa: E402
-from zbuf_occlude.experiments.sim2real.run import _REAL_SPLIT_SEED  # noqa: E402
 from zbuf_occlude.io.atomic import write_bytes, write_text  # noqa: E402
 from zbuf_occlude.io.encodings import png_bytes  # noqa: E402
-from zbuf_occlude.real_scans.datasets import load_real_scans  # noqa: E402
 from zbuf_occlude.sensors import Lidar  # noqa: E402
 from zbuf_occlude.sensors.kinds import sensor_from_name  # noqa: E402
 
@@ -149,16 +146,6 @@ def return_counts(return_number: NDArray[np.integer]) -> list[int]:
     return [int((r == 1).sum()), int((r == 2).sum()), int((r >= 3).sum())]
 
 
-def fit_half(real_root: str) -> list:
-    """The fit half of the real scans of :data:`measure.CLASSES`, as ``fit_threshold.py`` selects it."""
-    scans = load_real_scans(real_root)  # as experiment sim2real --real reads this folder
-    names = sorted(CLASSES)
-    kept = real_scan_rows(scans, names, {})
-    labels = np.array([names.index(scans[i].label) for i in kept])
-    rows, _ = real_halves([scans[i].points for i in kept], labels, _REAL_SPLIT_SEED)
-    return [scans[kept[i]] for i in rows]
-
-
 def draw_panel(ax, cloud: dict, title: str, half_span_deg: tuple[float, float]) -> None:
     """One object's points (``cloud``: ``points_m``, ``return_number``, ``number_of_returns``), azimuth against
     elevation, later returns drawn over earlier ones, points of pulses with two or more returns ringed."""
@@ -190,7 +177,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     up_map = dict(pair.split("=", 1) for pair in args.up_map.split(",") if pair)
 
-    real = fit_half(args.real)
+    real = fit_half_scans(args.real)
     n_real, n_pairs, n_apart = shared_directions([s.points_sensor_m for s in real])
     meshes = find_class_meshes(args.meshes, up_map=up_map, classes=list(ROWS))
     hdl32e = Lidar.preset("hdl32e")
