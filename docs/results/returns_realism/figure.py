@@ -61,11 +61,14 @@ RANGE_M = (6.0, 10.0)
 #: The sensor file of experiment sim2real's "on" runs (fit_threshold.py): the preset's beam with a 7-ray footprint, the strongest
 #: return and the fitted min_echo_reflectance.
 ON_SENSOR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "fit", "hdl32e_footprint.json")
+#: The same with the ray drop on crowns fitted to the fit half (ray_drop.py).
+RAY_DROP_SENSOR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "ray_drop", "hdl32e_ray_drop.json")
 #: The simulated columns: a title and a function of the HDL-32E preset.
 VARIANTS: list[tuple[str, Callable[[Lidar], Lidar]]] = [
     ("simulated, --returns 2", lambda s: with_returns(s, 2)),
     ("simulated, the on runs' sensor file:\n7 rays, strongest echo, fitted threshold",
      lambda _: sensor_from_name(ON_SENSOR)),
+    ("simulated, the same with the fitted\nray drop on crowns (0.073)", lambda _: sensor_from_name(RAY_DROP_SENSOR)),
 ]  # fmt: skip
 #: Colours of return 1, 2 and 3+ (colour-blind-safe: Okabe-Ito blue, orange, vermillion).
 RETURN_COLOURS = ("#0072B2", "#E69F00", "#D55E00")
@@ -219,7 +222,7 @@ def main(argv: list[str] | None = None) -> int:
             shares.append(f"| {cls} | {flat} | {len(near)} | {total} | {100 * later / total:.1f} | {100 * multi / total:.1f} |")
         panels.append(row)
 
-    fig, axes = plt.subplots(len(ROWS), 1 + len(VARIANTS), figsize=(10.5, 8.8), squeeze=False)
+    fig, axes = plt.subplots(len(ROWS), 1 + len(VARIANTS), figsize=(14.0, 8.8), squeeze=False)
     for r, (cls, row) in enumerate(zip(ROWS, panels)):
         spans = [azimuth_elevation(c["points_m"]) for c, _ in row]
         half = (max(np.abs(a).max() for a, _ in spans) * (1 + MARGIN), max(np.ptp(e) for _, e in spans) / 2 * (1 + MARGIN))
