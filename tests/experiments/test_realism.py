@@ -459,3 +459,18 @@ def test_class_summary_by_range_gives_the_count_exponent_and_the_table_shows_it(
     assert f"| {np.median(counts[:2]):.3f} (2) |" in text and "count exponent" in text
     _, plain = compare_classes(clouds, clouds)
     assert "count exponent" not in class_table(plain)
+
+
+def test_break_depths_are_the_range_steps_across_the_breaks_of_known_runs() -> None:
+    from zbuf_occlude.experiments.realism_stats import break_depths_m
+
+    points, _ = _known_runs()  # the lower ring breaks twice (runs of 5, 1 and 3), the upper one never
+    assert break_depths_m(points) == pytest.approx([0.0, 0.0], abs=1e-12)  # every point 10 m away
+    # the lower ring's run of one point 0.4 m farther, its last run 1.5 m nearer: breaks 0.4 and 1.9 m deep
+    ranges = np.concatenate([np.full(5, 10.0), [10.4], np.full(3, 8.5)])
+    low = np.concatenate([np.arange(5) * 0.2, [1.8], 2.8 + np.arange(3) * 0.2])
+    stepped = np.vstack([_ring(-5.0, low, ranges), points[9:]])
+    shuffle = np.random.default_rng(2).permutation(len(stepped))  # the input's order does not matter
+    assert break_depths_m(stepped[shuffle]) == pytest.approx([0.4, 1.9])
+    assert break_depths_m(stepped, azimuth_step_deg=1.0).size == 0  # 1° gaps are the line going on
+    assert break_depths_m(np.zeros((0, 3))).size == 0

@@ -47,7 +47,7 @@ from zbuf_occlude.sensors.fit import across_sight_width
 
 __all__ = [
     "ObjectCloud", "RING_GAP_DEG", "OUTLINE_GAP_FACTOR", "SAME_AZIMUTH_DEG", "RANGE_BINS_M", "HEIGHT_BINS",
-    "ring_labels", "ring_spacings_deg", "outline_mask", "scan_line_runs", "outline_share", "range_bin_medians",
+    "ring_labels", "ring_spacings_deg", "outline_mask", "scan_line_runs", "break_depths_m", "outline_share", "range_bin_medians",
     "fit_count_exponent", "cloud_stats", "shape_stats", "class_summary",
 ]  # fmt: skip
 
@@ -239,6 +239,32 @@ def scan_line_runs(points_m: NDArray[np.floating], *, ring_gap_deg: float = RING
     if not rings:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     return np.concatenate(rings), np.concatenate(lengths).astype(np.int64)
+
+
+def break_depths_m(points_m: NDArray[np.floating], *, ring_gap_deg: float = RING_GAP_DEG, azimuth_step_deg: float | None = None,
+                   gap_factor: float = OUTLINE_GAP_FACTOR) -> NDArray[np.float64]:  # fmt: skip
+    """How deep each break of a cloud's scan lines is: the range step across it, metres (the runs of :func:`scan_line_runs`,
+    which takes the same options).
+
+    A break is the gap between two runs of one ring; its depth is ``|R_after − R_before|``, the ranges of the
+    last point of the run before it and the first of the run after it (in azimuth order about the cloud's
+    centroid).  A break where the line leaves the object at its outline and comes back on a nearer or farther
+    part is deep; a missed pulse on one surface leaves a shallow one.
+
+    Returns
+    -------
+    (B,) float64
+        One depth per break, ring by ring, then by azimuth; empty where no ring breaks.
+
+    Raises
+    ------
+    InvalidInputError
+        As :func:`outline_mask`.
+    """
+    p = _sensor_points(points_m)
+    r = np.linalg.norm(p, axis=1)
+    depths = [np.abs(r[ring[breaks + 1]] - r[ring[breaks]]) for ring, breaks in _ring_runs(p, ring_gap_deg, azimuth_step_deg, gap_factor)]
+    return np.concatenate(depths) if depths else np.zeros(0)
 
 
 def outline_share(points_m: NDArray[np.floating], **options) -> float:
