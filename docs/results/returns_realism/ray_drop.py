@@ -20,6 +20,11 @@ simulated bushes' share by ``1 − f``, so ``f = 1 − S_real / S_sim`` with
 sensor's overall loss (``dropout``, which the preset leaves at 0).  Then the crops are scanned
 again with ``f`` and each class's dropout, outline share and points per crop at 5–10 m are
 written beside the real scans' (``ray_drop.md``), with the sensor file (``hdl32e_ray_drop.json``).
+
+Where the scan lines of those clouds break (``break_depths.md``): per class at 5–10 m, the breaks
+of a scan and their depths, the range step across each
+(:func:`~zbuf_occlude.experiments.realism_stats.break_depths_m`).  A break at an outline is deep;
+a missed pulse on a surface leaves a shallow one.
 """
 
 from __future__ import annotations
@@ -27,7 +32,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import math
 import os
 import sys
 import time
@@ -38,6 +42,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from measure import CLASSES, fit_half_scans, per_crop, sim_crops  # noqa: E402
 
 from zbuf_occlude.experiments.partial_echo_crops import MATCHED_RANGE_M  # noqa: E402
+from zbuf_occlude.experiments.realism_stats import break_depths_m  # noqa: E402
 from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes  # noqa: E402
 from zbuf_occlude.io.atomic import write_text  # noqa: E402
 from zbuf_occlude.sensors import Lidar  # noqa: E402
@@ -49,37 +54,33 @@ log = logging.getLogger("ray_drop")
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 
-def dropout(clouds, base: Lidar, bootstrap: int = 200) -> tuple[float, float, int, float, float]:
-    """fit-sensor's pooled dropout of ``clouds`` (sensor frame, metres): value, bootstrap sd, scans, and the slope of its
-    law over range (per metre) with its sd."""
-    est = fit_lidar(clouds, base, bootstrap=bootstrap).estimates
-    e, slope = est["dropout"], est["dropout_range_per_m"]
-    return e.value, e.std, len(clouds), slope.value, slope.std
-
-
-def by_class(clouds_of: dict[str, list], base: Lidar) -> dict[str, tuple[float, float, int]]:
-    """Per class and for crowns and solid classes pooled (:func:`dropout_by_surface`): dropout, its sd, scans."""
-    out = {c: dropout(clouds_of[c], base) for c in CLASSES}
+def rates(clouds_of: dict[str, list], base: Lidar) -> tuple[dict[str, dict[str, Estimate]], dict[str, Estimate]]:
+    """fit-sensor's estimates per class (its ``dropout`` and ``dropout_range_per_m``), and the dropout of crowns and
+    of solid classes pooled (:func:`dropout_by_surface`)."""
+    per_class = {c: fit_lidar(clouds_of[c], base).estimates for c in CLASSES}
     groups = dropout_by_surface([p for c in CLASSES for p in clouds_of[c]], [c for c in CLASSES for _ in clouds_of[c]], base)
-    out.update(
-        {g: (e.value, e.std, sum(len(clouds_of[c]) for c in CLASSES if (g == CROWN) == is_crown_class(c))) for g, e in groups.items()}
-    )
+    return per_class, groups
+
+
+def near(crops: list[dict]) -> dict[str, list[dict]]:
+    """Per class: the crops (``class``, ``points_m``) whose centroid lies 5-10 m away, each with its :func:`per_crop` stats."""
+    out = {c: [] for c in CLASSES}
+    for x in crops:
+        st = per_crop(x)
+        if MATCHED_RANGE_M[0] <= st["range_m"] < MATCHED_RANGE_M[1]:
+            out[x["class"]].append({**st, "break_depths_m": break_depths_m(x["points_m"])})
     return out
 
 
-def _estimates(d: dict) -> dict[str, Estimate]:
-    return {g: Estimate(d[g][0], d[g][1], d[g][2], "dropout") for g in (CROWN, SOLID)}
-
-
-def near_stats(crops: list[dict]) -> dict[str, tuple[float, float, int]]:
-    """Per class: median outline share and points per crop of the crops whose centroid lies 5-10 m away."""
-    out = {}
-    for c in CLASSES:
-        st = [per_crop(x) for x in crops if x["class"] == c]
-        st = [s for s in st if MATCHED_RANGE_M[0] <= s["range_m"] < MATCHED_RANGE_M[1]]
-        out[c] = (float(np.median([s["outline_share"] for s in st])) if st else math.nan,
-                  float(np.median([s["n_points"] for s in st])) if st else math.nan, len(st))  # fmt: skip
-    return out
+def near_cells(st: list[dict]) -> tuple[str, str]:
+    """A class's cells of the two 5-10 m tables: outline share and points (crops); breaks a crop, their median
+    depth and the share under 0.1 m (crops)."""
+    d = np.concatenate([s["break_depths_m"] for s in st]) if st else np.zeros(0)
+    if not st:
+        return "nan, nan (0)", "0 | 0.0 | – | –"
+    outline = f"{np.median([s['outline_share'] for s in st]):.3f}, {np.median([s['n_points'] for s in st]):.0f} ({len(st)})"
+    depth = f"{np.median(d):.2f} | {np.mean(d < 0.1):.2f}" if len(d) else "– | –"
+    return outline, f"{len(st)} | {len(d) / len(st):.1f} | {depth}"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -98,25 +99,28 @@ def main(argv: list[str] | None = None) -> int:
     base = Lidar.preset("hdl32e")
 
     real_scans = fit_half_scans(args.real)
-    real_clouds = {c: [s.points_sensor_m for s in real_scans if s.label == c] for c in CLASSES}
-    real = by_class(real_clouds, base)
-    real_near = near_stats([{"class": s.label, "points_m": s.points_sensor_m} for s in real_scans])
-
+    clouds = {"real": [{"class": s.label, "points_m": s.points_sensor_m} for s in real_scans]}
     sensor = sensor_from_name(args.sensor)
     meshes = find_class_meshes(args.meshes, up_map=up_map, classes=list(CLASSES))
-    before_crops = sim_crops(meshes, sensor, args.crops, args.seed)
-    sim = by_class({c: [x["points_m"] for x in before_crops if x["class"] == c] for c in CLASSES}, base)
-    est = fit_foliage_dropout(_estimates(real), _estimates(sim))
+    clouds["before"] = sim_crops(meshes, sensor, args.crops, args.seed)
+    found = {k: rates({c: [x["points_m"] for x in v if x["class"] == c] for c in CLASSES}, base) for k, v in clouds.items()}
+    est = fit_foliage_dropout(found["real"][1], found["before"][1])
     f, f_sd = round(est.value, 3), est.std
     log.info("foliage_dropout %.3f ± %.3f", f, f_sd)
     fitted = with_beam(sensor, foliage_dropout=f)
-    after_crops = sim_crops(meshes, fitted, args.crops, args.seed)
-    after = by_class({c: [x["points_m"] for x in after_crops if x["class"] == c] for c in CLASSES}, base)
-    near = {
-        "real (fit half)": real_near,
-        "simulated, before": near_stats(before_crops),
-        f"simulated, foliage_dropout {f:g}": near_stats(after_crops),
-    }
+    clouds["after"] = sim_crops(meshes, fitted, args.crops, args.seed)
+    found["after"] = rates({c: [x["points_m"] for x in clouds["after"] if x["class"] == c] for c in CLASSES}, base)
+    scans = {k: {c: sum(x["class"] == c for x in v) for c in CLASSES} for k, v in clouds.items()}
+    names = {"real": "real (fit half)", "before": "simulated, before", "after": f"simulated, foliage_dropout {f:g}"}
+    at_5_10 = {k: near(v) for k, v in clouds.items()}
+
+    def cell(k: str, c: str) -> str:
+        e = found[k][0][c]["dropout"] if c in CLASSES else found[k][1][SOLID]
+        n = scans[k][c] if c in CLASSES else sum(scans[k][x] for x in CLASSES if not is_crown_class(x))
+        return f"{e.value:.4f} ± {e.std:.4f} ({n})"
+
+    def contrast(k: str) -> float:
+        return (1 - found[k][1][CROWN].value) / (1 - found[k][1][SOLID].value)
 
     lo, hi = MATCHED_RANGE_M
     lines = [f"# Ray drop on vegetation, fitted on the fit half ({len(real_scans)} real scans)", "",
@@ -124,21 +128,26 @@ def main(argv: list[str] | None = None) -> int:
              "| class | real: dropout (scans) | real: its growth per metre of range | simulated before | simulated after |",
              "|---|---|---|---|---|"]  # fmt: skip
     for c in (*CLASSES, SOLID):
-        cells = [f"{d[c][0]:.4f} ± {d[c][1]:.4f} ({d[c][2]})" for d in (real, sim, after)]
-        cells.insert(1, f"{real[c][3]:+.4f} ± {real[c][4]:.4f}" if len(real[c]) > 3 else "–")
-        lines.append(f"| {c if c != 'solid' else 'car, pedestrian, pole pooled'} | " + " | ".join(cells) + " |")
+        slope = found["real"][0][c]["dropout_range_per_m"] if c in CLASSES else None
+        growth = f"{slope.value:+.4f} ± {slope.std:.4f}" if slope is not None else "–"
+        label = c if c in CLASSES else "car, pedestrian, pole pooled"
+        lines.append(f"| {label} | {cell('real', c)} | {growth} | {cell('before', c)} | {cell('after', c)} |")
     lines += ["", f"fitted `foliage_dropout` = 1 − S_real / S_sim = **{f:.3f} ± {f_sd:.3f}** "
-              f"(S = (1 − p_crown) / (1 − p_solid): real {(1 - real[CROWN][0]) / (1 - real[SOLID][0]):.4f}, "
-              f"simulated {(1 - sim[CROWN][0]) / (1 - sim[SOLID][0]):.4f})", "",
+              f"(S = (1 − p_crown) / (1 − p_solid): real {contrast('real'):.4f}, simulated {contrast('before'):.4f})", "",
               f"Crops whose centroid is {lo:g}-{hi:g} m away: median outline share and points per crop (crops).", "",
-              "| class | " + " | ".join(near) + " |", "|---|" + "---|" * len(near)]  # fmt: skip
+              "| class | " + " | ".join(names.values()) + " |", "|---|" + "---|" * len(names)]  # fmt: skip
     for c in CLASSES:
-        lines.append(f"| {c} | " + " | ".join(f"{v[c][0]:.3f}, {v[c][1]:.0f} ({v[c][2]})" for v in near.values()) + " |")
+        lines.append(f"| {c} | " + " | ".join(near_cells(at_5_10[k][c])[0] for k in names) + " |")
+    breaks = ["| class | set | scans at 5-10 m | breaks a scan | median depth of a break, m | share under 0.1 m |",
+              "|---|---|---|---|---|---|"]  # fmt: skip
+    breaks += [f"| {c} | {names[k]} | {near_cells(at_5_10[k][c])[1]} |" for c in CLASSES for k in names]
     wall, load1 = time.perf_counter() - t0, os.getloadavg()
     lines += ["", f"{args.crops} crops a mesh, seed {args.seed}; sensor `{os.path.relpath(args.sensor)}`; wall {wall:.0f} s, "
               f"load average {load0[0]:.1f} → {load1[0]:.1f}."]  # fmt: skip
+    breaks += ["", f"{args.crops} crops a mesh, seed {args.seed}; made with ray_drop.md (wall {wall:.0f} s)."]
     os.makedirs(args.out, exist_ok=True)
     write_text(os.path.join(args.out, "ray_drop.md"), "\n".join(lines) + "\n")
+    write_text(os.path.join(args.out, "break_depths.md"), "\n".join(breaks) + "\n")
     spec = sensor_to_json(fitted)
     spec["beam"]["source"] += f"; foliage_dropout {f:g} fitted to LiDARNet v2's fit half (docs/results/returns_realism/ray_drop.py)"
     write_text(os.path.join(args.out, "hdl32e_ray_drop.json"), json.dumps(spec, indent=2) + "\n")
