@@ -42,6 +42,7 @@ from zbuf_occlude.experiments.realism_stats import (  # noqa: F401 - every name 
     RING_GAP_DEG,
     SAME_AZIMUTH_DEG,
     ObjectCloud,
+    break_depths_m,
     class_summary,
     cloud_stats,
     fit_count_exponent,
