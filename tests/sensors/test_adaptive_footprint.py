@@ -13,9 +13,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors import Lidar, ScanScene, with_beam
+from zbuf_occlude.sensors import Lidar, ScanScene, scan, with_beam
 from zbuf_occlude.sensors import adaptive_footprint as A
 from zbuf_occlude.sensors.airborne_presets import airborne_preset
+from zbuf_occlude.sensors.beam import Beam
 from zbuf_occlude.sensors.echo_model import Radiometry, echo_returns
 from zbuf_occlude.sensors.echoes import hit_energy, resolve_echoes
 from zbuf_occlude.sensors.footprint import footprint_offsets, plane_subrays, subray_directions
@@ -140,7 +141,7 @@ def _uniform(built, pulses, beam, neighbours=None, **kwargs):
     return face, t, A.uniform_footprints(built, pulses.origins, pulses.directions, face, t, nb, offsets, **rules)
 
 
-def _lidar(k: int = 7, divergence_deg: float = 0.5):
+def _lidar(k: int = 7, divergence_deg: float = 0.3):
     return with_beam(Lidar.preset("hdl32e"), footprint_rays=k, max_returns=2, range_resolution_m=RESOLUTION, divergence_deg=divergence_deg)
 
 
@@ -149,7 +150,7 @@ def test_a_uniform_footprints_sub_rays_all_hit_its_centre_face(k) -> None:
     # a plane of many coplanar faces: wherever a footprint is taken as uniform, Embree puts every
     # sub-ray on the centre ray's face; footprints across an edge are cast
     built = build_scene(_plane_scene())
-    lidar = _lidar(k, divergence_deg=1.5)
+    lidar = _lidar(k, divergence_deg=0.3)
     pulses = lidar.pulses(np.array([[1.0, 0, 0, 0.3], [0, 1, 0, 0.2], [0, 0, 1, 1.8], [0, 0, 0, 1]]))
     face, _, uniform = _uniform(built, pulses, lidar.beam)
     rays = lidar.beam.footprint_directions(pulses.directions)
@@ -185,6 +186,30 @@ def test_what_makes_a_footprint_need_its_sub_rays() -> None:
     near = _uniform(built, pulses, lidar.beam, range_limits_m=(0.0, 5.0))[2]
     _, t, _ = _uniform(built, pulses, lidar.beam)
     assert not near[hit & (t > 5.0)].any()
+
+
+def test_a_footprint_reaching_past_its_neighbours_is_cast() -> None:
+    """The cone's outermost sub-ray against the pulses' spacing (the HDL-32E fires every 0.166° of azimuth)."""
+    built = build_scene(_plane_scene(2))
+    pose = np.array([[1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1.8], [0, 0, 0, 1]])
+    for divergence_deg, skipped in ((0.3, True), (0.4, True), (0.5, False), (1.0, False)):  # outermost sub-ray 0.11, 0.15, 0.19, 0.38°
+        lidar = _lidar(7, divergence_deg=divergence_deg)
+        face, _, uniform = _uniform(built, lidar.pulses(pose), lidar.beam)
+        assert uniform[face >= 0].any() == skipped, divergence_deg
+
+
+def test_a_thin_object_across_a_wide_footprint_keeps_its_edge_echoes() -> None:
+    """A 0.3 m pole 10 m before a wall, one ring firing every 0.1°, a 1° beam: its footprint spans ten pulses, and the
+    wall's pulses beside the pole, whose neighbours hit the wall too, still see the pole in their cones."""
+    pole = trimesh.creation.box(extents=(0.05, 0.3, 10.0), transform=trimesh.transformations.translation_matrix((10.0, 0.15, 0.0)))
+    wall = trimesh.creation.box(extents=(0.05, 40.0, 10.0), transform=trimesh.transformations.translation_matrix((30.0, 0.0, 0.0)))
+    beam = Beam(max_range_m=1000.0, divergence_deg=1.0, footprint_rays=19, max_returns=2, range_resolution_m=0.75)
+    lidar = Lidar("row", (0.0,), rotation_hz=10.0, firing_rate_hz=36_000.0, beam=beam)
+    mesh = trimesh.util.concatenate([pole, wall])
+    on_pole = {cast: np.sum(scan(mesh, lidar, np.eye(4), azimuth_range_deg=(-3.0, 5.0), footprint=cast).points[:, 0] < 20.0)
+               for cast in ("exact", "adaptive")}  # fmt: skip
+    assert on_pole["exact"] >= 24  # the pole's own 17 pulses and three or four a side of them
+    assert on_pole["adaptive"] == on_pole["exact"]
 
 
 def test_a_neighbour_on_another_surface_makes_a_pulse_cast() -> None:
@@ -264,7 +289,7 @@ def test_the_kernels_sub_rays_are_plane_subrays_bit_for_bit(seed, n, k, divergen
 def test_the_kernels_plane_echo_is_plane_echoes(k) -> None:
     # the uniform pulses' echoes from the kernel against plane_echoes of plane_subrays, on a plane of many faces
     built = build_scene(_plane_scene())
-    lidar = _lidar(k, divergence_deg=1.5)
+    lidar = _lidar(k, divergence_deg=0.3)
     beam = lidar.beam
     pulses = lidar.pulses(np.array([[1.0, 0, 0, 0.3], [0, 1, 0, 0.2], [0, 0, 1, 1.8], [0, 0, 0, 1]]))
     face, t = cast_embree(built.mesh, pulses.origins, pulses.directions)
@@ -282,7 +307,7 @@ def test_the_kernels_plane_echo_is_plane_echoes(k) -> None:
 def test_a_neighbour_off_the_centre_faces_plane_makes_a_pulse_cast(share, stays) -> None:
     # one neighbour's hit moved along its ray so that it lies share × the range resolution off the plane (PLANE_SHARE: 0.25)
     built = build_scene(_plane_scene())
-    lidar = _lidar(7, divergence_deg=0.5)
+    lidar = _lidar(7, divergence_deg=0.3)
     pulses = lidar.pulses(np.array([[1.0, 0, 0, 0.3], [0, 1, 0, 0.2], [0, 0, 1, 1.8], [0, 0, 0, 1]]))
     face, t, uniform = _uniform(built, pulses, lidar.beam)
     neighbours = A.pulse_neighbours(pulses)

@@ -98,6 +98,19 @@ def plane_echo_rows(ranges, cosines, weights, min_range):
     return echo_range, energy
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _inside_cone(origin, direction, point, other_direction, hit, cos_max):
+    """Whether a neighbouring pulse lies inside the cone of a pulse's sub-rays (half-angle ``arccos(cos_max)``):
+    its hit ``point`` seen from the pulse's ``origin``, or where it hit nothing its direction."""
+    if hit:
+        vx, vy, vz = point[0] - origin[0], point[1] - origin[1], point[2] - origin[2]
+        norm = math.sqrt(vx * vx + vy * vy + vz * vz)
+        if norm == 0.0:
+            return True
+        return (vx * direction[0] + vy * direction[1] + vz * direction[2]) / norm > cos_max
+    return direction[0] * other_direction[0] + direction[1] * other_direction[1] + direction[2] * other_direction[2] > cos_max
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _uniform_plane_echoes(origins, directions, face, t, neighbours, planes, face_object, transmits, tan, cos_phi, sin_phi, root,
                           weights, theta_max, resolution, low, high, margin, tolerance, min_range):  # fmt: skip
@@ -114,12 +127,14 @@ def _uniform_plane_echoes(origins, directions, face, t, neighbours, planes, face
     echo_range = np.full(n_pulses, np.nan)
     energy = np.full(n_pulses, np.nan)
     ranges, cosines, order = np.empty(n_sub), np.empty(n_sub), np.empty(n_sub)
+    cos_max = math.cos(theta_max)
     for p in range(n_pulses):
         hit = face[p] >= 0
         f = face[p] if hit else 0
         ok = hit and not transmits[f]
         miss = not hit
         known_any = False
+        enclosed = True
         obj = face_object[f]
         plane = planes[f]  # (4, 4): the face's plane, then its edge lines
         for j in range(neighbours.shape[1]):
@@ -128,6 +143,8 @@ def _uniform_plane_echoes(origins, directions, face, t, neighbours, planes, face
                 continue
             known_any = True
             q_hit = face[q] >= 0
+            if _inside_cone(origins[0 if one_origin else p], directions[p], point[q], directions[q], q_hit, cos_max):
+                enclosed = False  # the footprint reaches past this neighbour
             if ok:
                 if not q_hit or face_object[face[q] if q_hit else 0] != obj:
                     ok = False
@@ -136,7 +153,7 @@ def _uniform_plane_echoes(origins, directions, face, t, neighbours, planes, face
                     ok = off <= tolerance
             if q_hit:
                 miss = False
-        if not known_any:
+        if not known_any or not enclosed:
             continue
         if miss:
             uniform[p] = True
