@@ -27,10 +27,11 @@ picks the spinning ones, ``--no-airborne`` leaves the airborne one out:
 
 ``--echo-rules chain,waveform`` runs every multi-return case once per echo rule
 (``Beam.echo_rule``: the chain of hits, or the peaks of the pulse's waveform; default chain alone),
-the waveform's cases named so.  In the turn and airborne families each multi-return case is also run with
-``footprint="adaptive"`` (:mod:`zbuf_occlude.sensors.adaptive_footprint`: sub-rays cast only
-where a footprint may hold two surfaces), and the table gives the share of pulses whose sub-rays
-were not cast (the scan's ``footprint_uniform_share``).
+the waveform's cases named so.  In the turn and airborne families each multi-return case runs twice:
+with ``footprint="exact"`` (every sub-ray cast) and with the default cast, "auto", which is the
+adaptive footprint there (:mod:`zbuf_occlude.sensors.adaptive_footprint`: sub-rays cast only where
+a footprint may hold two surfaces); the table gives the share of pulses whose sub-rays were not
+cast (the scan's ``footprint_uniform_share``).  The sector family casts every sub-ray (``"exact"``).
 
 Repeats are interleaved (every case once per round, ``--repeats`` rounds after one warm-up
 round that builds the Embree BVH and the caches), so load changes hit every case alike.  The
@@ -143,8 +144,9 @@ def _sector_cases(args, ks: list[int], rules: list[str]) -> list[Case]:
     for k, rule in ((k, rule) for k in ks for rule in rules if k > 1 or rule == "chain"):
         lidar = with_beam(hdl, footprint_rays=k, echo_rule=rule, **SECTOR_MULTI)
         head = f"hdl32e: {k} sub-rays, {SECTOR_MULTI['max_returns']} returns{_rule_name(rule)}"
-        cases.append(Case("sector", f"{head}, opaque", lambda seed, s=lidar: scan(scene, s, seed=seed, azimuth_range_deg=sector), k, True))
-        run = lambda seed, s=lidar: scan(scene, s, seed=seed, azimuth_range_deg=sector, transmittance="table")  # noqa: E731
+        run = lambda seed, s=lidar: scan(scene, s, seed=seed, azimuth_range_deg=sector, footprint="exact")  # noqa: E731
+        cases.append(Case("sector", f"{head}, opaque", run, k, True))
+        run = lambda seed, s=lidar: scan(scene, s, seed=seed, azimuth_range_deg=sector, transmittance="table", footprint="exact")  # noqa: E731
         cases.append(Case("sector", f"{head}, transmittance", run, k))
         if k == DEFAULT_K and rule == rules[0]:  # the floor: the sub-rays cast, no echoes
             cases.append(
@@ -167,9 +169,10 @@ def _turn_cases(ks: list[int], rules: list[str]) -> list[Case]:
     cases = [Case("turn", "hdl32e: 1 ray, 1 return", lambda seed: scan(scene, hdl, seed=seed))]
     for k, rule in ((k, rule) for k in ks for rule in rules):
         lidar = with_beam(hdl, footprint_rays=k, echo_rule=rule, **TURN_MULTI)
-        for kw in ({}, {"footprint": "adaptive"}):
-            name = f"hdl32e: {k} sub-rays, {TURN_MULTI['max_returns']} returns{_rule_name(rule)}{', adaptive' if kw else ''}"
-            cases.append(Case("turn", name, lambda seed, s=lidar, kw=kw: scan(scene, s, seed=seed, **kw), k, not kw))
+        for kw in ({"footprint": "exact"}, {}):
+            cast = ", exact" if kw else ", default (adaptive)"
+            name = f"hdl32e: {k} sub-rays, {TURN_MULTI['max_returns']} returns{_rule_name(rule)}{cast}"
+            cases.append(Case("turn", name, lambda seed, s=lidar, kw=kw: scan(scene, s, seed=seed, **kw), k, bool(kw)))
     return cases
 
 
@@ -179,11 +182,12 @@ def _airborne_cases(half_size_m: float, rules: list[str]) -> list[Case]:
     one = with_beam(q1560, footprint_rays=1, max_returns=1, range_resolution_m=0.0)
     cases = [Case("airborne", "riegl-q1560: 1 ray, 1 return", lambda seed: scan_airborne(scene, one, half_size_m=half_size_m, seed=seed))]
     k = q1560.beam.footprint_rays
-    for rule, kw in ((rule, kw) for rule in rules for kw in ({}, {"footprint": "adaptive"})):
+    for rule, kw in ((rule, kw) for rule in rules for kw in ({"footprint": "exact"}, {})):
         scanner = with_beam(q1560, echo_rule=rule)
-        name = f"riegl-q1560: {k} sub-rays, {q1560.beam.max_returns} returns{_rule_name(rule)}{', adaptive' if kw else ''}"
+        cast = ", exact" if kw else ", default (adaptive)"
+        name = f"riegl-q1560: {k} sub-rays, {q1560.beam.max_returns} returns{_rule_name(rule)}{cast}"
         run = lambda seed, kw=kw, s=scanner: scan_airborne(scene, s, half_size_m=half_size_m, seed=seed, **kw)  # noqa: E731
-        cases.append(Case("airborne", name, run, k, not kw))
+        cases.append(Case("airborne", name, run, k, bool(kw)))
     return cases
 
 

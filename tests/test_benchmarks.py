@@ -6,7 +6,7 @@
   ``--force`` (exit 3), and a bad ``--points`` (exit 2);
 * ``benchmarks/bench_returns.py`` at its smallest sizes prints every family's cases: the sector's
   first-return, opaque, transmittance and cast-alone rows, the turn's and the airborne
-  scanner's exact and adaptive rows (with the share of sub-rays not cast), each family's first
+  scanner's exact and default (adaptive) rows (with the share of sub-rays not cast), each family's first
   row its reference (ratio 1.00), and the profile.
 """
 
@@ -97,21 +97,21 @@ def test_returns_benchmark_prints_every_family(capsys):
         ("sector", "hdl32e: 7 sub-rays, 4 returns, transmittance"),
         ("sector", "hdl32e: 7 sub-rays: directions and cast alone"),
         ("turn", "hdl32e: 1 ray, 1 return"),
-        ("turn", "hdl32e: 7 sub-rays, 2 returns"),
-        ("turn", "hdl32e: 7 sub-rays, 2 returns, adaptive"),
+        ("turn", "hdl32e: 7 sub-rays, 2 returns, exact"),
+        ("turn", "hdl32e: 7 sub-rays, 2 returns, default (adaptive)"),
         ("airborne", "riegl-q1560: 1 ray, 1 return"),
-        ("airborne", "riegl-q1560: 19 sub-rays, 15 returns"),
-        ("airborne", "riegl-q1560: 19 sub-rays, 15 returns, adaptive"),
+        ("airborne", "riegl-q1560: 19 sub-rays, 15 returns, exact"),
+        ("airborne", "riegl-q1560: 19 sub-rays, 15 returns, default (adaptive)"),
         ("sector", "hdl32e: 7 sub-rays, 4 returns, waveform, opaque"),
-        ("turn", "hdl32e: 7 sub-rays, 2 returns, waveform"),
-        ("turn", "hdl32e: 7 sub-rays, 2 returns, waveform, adaptive"),
-        ("airborne", "riegl-q1560: 19 sub-rays, 15 returns, waveform"),
+        ("turn", "hdl32e: 7 sub-rays, 2 returns, waveform, exact"),
+        ("turn", "hdl32e: 7 sub-rays, 2 returns, waveform, default (adaptive)"),
+        ("airborne", "riegl-q1560: 19 sub-rays, 15 returns, waveform, exact"),
     ]:
         assert (family, name) in rows, (family, name, out)
     for family in ("sector", "turn", "airborne"):  # the reference: its own ratio
         assert rows[family, next(n for f, n in rows if f == family)][9].strip() == "1.00"
     assert rows["turn", "hdl32e: 1 ray, 1 return"][3].strip() == "69,440"
-    assert float(rows["turn", "hdl32e: 7 sub-rays, 2 returns, adaptive"][6]) > 0.0  # sub-rays not cast, %
-    assert rows["turn", "hdl32e: 7 sub-rays, 2 returns"][6].strip() == "–"
+    assert float(rows["turn", "hdl32e: 7 sub-rays, 2 returns, default (adaptive)"][6]) > 0.0  # sub-rays not cast, %
+    assert rows["turn", "hdl32e: 7 sub-rays, 2 returns, exact"][6].strip() == "–"
     assert rows["sector", "hdl32e: 7 sub-rays: directions and cast alone"][4].strip() == "–"  # no points: no scan
     assert "## cProfile: 1 scans of sector: hdl32e: 7 sub-rays, 4 returns, opaque" in out

@@ -219,10 +219,12 @@ def test_the_adaptive_footprint_reaches_scene_and_mesh_scans(tmp_path: Path, cap
     adaptive = scan_module.adaptive_echo_returns
     monkeypatch.setattr(scan_module, "adaptive_echo_returns", spy)
     base = [str(source), "--sensor", sensor, *RETURNS, "--seed", "3"]
-    exact = _scan(base, tmp_path / "exact", capsys)
+    exact = _scan([*base, "--footprint-cast", "exact"], tmp_path / "exact", capsys)
     assert uniform_shares == []
-    fast = _scan([*base, "--adaptive-footprint"], tmp_path / "fast", capsys)
+    fast = _scan([*base, "--footprint-cast", "adaptive"], tmp_path / "fast", capsys)
     assert len(uniform_shares) == 1 and uniform_shares[0] > 0.5  # most footprints not cast
+    default = _scan(base, tmp_path / "default", capsys)  # --footprint-cast auto: adaptive here
+    assert len(uniform_shares) == 2 and np.array_equal(default.points, fast.points)
     if source == STREET:  # the same scan as the Python API's
         import zbuf_occlude as zo
 
@@ -235,10 +237,17 @@ def test_the_adaptive_footprint_reaches_scene_and_mesh_scans(tmp_path: Path, cap
 
 @pytest.mark.parametrize(
     ("options", "words"),
-    [(["--sensor", "vlp16"], "--adaptive-footprint skips the sub-rays of a footprint whose echoes are resolved; vlp16 fires one ray"),
-     (["--sensor", "vlp16", *RETURNS, "--backend", "zbuffer"], "--adaptive-footprint casts rays with Embree; --backend zbuffer renders"),
-     (["--sensor", "kinect-v1"], "--adaptive-footprint: kinect-v1 is a depth camera, which fires no pulses")],
+    [(["--sensor", "vlp16"], "--footprint-cast adaptive skips the sub-rays of a footprint whose echoes are resolved; vlp16 fires one ray"),
+     (["--sensor", "vlp16", *RETURNS, "--backend", "zbuffer"], "--footprint-cast adaptive casts rays with Embree; --backend zbuffer renders"),
+     (["--sensor", "kinect-v1"], "--footprint-cast adaptive: kinect-v1 is a depth camera, which fires no pulses")],
 )  # fmt: skip
 def test_the_adaptive_footprint_is_refused_where_it_does_not_apply(tmp_path: Path, capsys, options: list[str], words: str) -> None:
-    code, err = _run(["scan", str(STREET), *options, "--adaptive-footprint", "--out", str(tmp_path / "o")], capsys)
+    code, err = _run(["scan", str(STREET), *options, "--footprint-cast", "adaptive", "--out", str(tmp_path / "o")], capsys)
     assert code == 2 and words in err and "\n" not in err, err
+
+
+def test_an_unknown_footprint_cast_is_a_usage_error_naming_it(tmp_path: Path, capsys) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        _run(["scan", str(STREET), "--footprint-cast", "fast", "--out", str(tmp_path / "o")], capsys)
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2 and "--footprint-cast: invalid choice: 'fast'" in err, err

@@ -142,20 +142,23 @@ def test_settings_record_the_returns_only_when_above_one(tmp_path: Path) -> None
         _fix_settings(Sim2RealConfig("m", "r", returns=2), _sets_found(), tmp_path / "one")
 
 
-def test_the_adaptive_footprint_needs_several_returns_and_is_recorded_only_when_set(tmp_path: Path, capsys) -> None:
+def test_the_adaptive_footprint_needs_several_returns_and_is_recorded_only_where_it_is_cast(tmp_path: Path, capsys) -> None:
     from zbuf_occlude.experiments.sim2real.run import _fix_settings
 
-    argv = ["experiment", "sim2real", str(tmp_path), "--real", str(tmp_path), "--out", str(tmp_path / "o"), "--adaptive-footprint"]
+    argv = ["experiment", "sim2real", str(tmp_path), "--real", str(tmp_path), "--out", str(tmp_path / "o"), "--footprint-cast", "adaptive"]
     assert main(argv) == 2
-    assert "--adaptive-footprint" in (err := capsys.readouterr().err) and "--returns 2" in err and not (tmp_path / "o").exists()
-    for bad in ("yes", 1):
-        with pytest.raises(InvalidInputError, match="adaptive_footprint must be True or False"):
-            Sim2RealConfig("m", "r", returns=2, adaptive_footprint=bad)
+    assert "--footprint-cast adaptive" in (err := capsys.readouterr().err) and "--returns 2" in err and not (tmp_path / "o").exists()
+    for bad in ("yes", 1, True):
+        with pytest.raises(InvalidInputError, match="footprint_cast must be one of auto, exact, adaptive"):
+            Sim2RealConfig("m", "r", returns=2, footprint_cast=bad)
     found = _sets_found()
-    _fix_settings(Sim2RealConfig("m", "r", returns=2, adaptive_footprint=True), found, tmp_path / "adaptive")
-    _fix_settings(Sim2RealConfig("m", "r", returns=2), found, tmp_path / "exact")
-    assert json.loads((tmp_path / "adaptive" / "settings.json").read_text())["lidar_footprint"] == "adaptive"
-    assert "lidar_footprint" not in json.loads((tmp_path / "exact" / "settings.json").read_text())  # earlier runs' settings kept
+    casts = {"adaptive": {"returns": 2, "footprint_cast": "adaptive"}, "default": {"returns": 2},
+             "exact": {"returns": 2, "footprint_cast": "exact"}, "one-ray": {}}  # fmt: skip
+    for name, keywords in casts.items():
+        _fix_settings(Sim2RealConfig("m", "r", **keywords), found, tmp_path / name)
+    settings = {name: json.loads((tmp_path / name / "settings.json").read_text()) for name in casts}
+    assert settings["adaptive"]["lidar_footprint"] == settings["default"]["lidar_footprint"] == "adaptive"
+    assert "lidar_footprint" not in settings["exact"] and "lidar_footprint" not in settings["one-ray"]  # earlier runs' settings kept
 
 
 def test_the_lidar_set_casts_the_footprint_the_run_asks_for(tmp_path: Path, monkeypatch) -> None:
@@ -177,6 +180,7 @@ def test_the_lidar_set_casts_the_footprint_the_run_asks_for(tmp_path: Path, monk
     recipes = []
     monkeypatch.setattr(run, "build_sets", lambda *a, **kw: recipes.append(a[5]) or {})
     found = _sets_found(("bush", "pole"))
-    for adaptive in (False, True):
-        run._build_seed_sets(Sim2RealConfig("m", "r", returns=2, adaptive_footprint=adaptive), found, 0, [], [], {})
-    assert [r.footprint for r in recipes] == ["exact", "exact", "adaptive", "adaptive"]
+    for cast in ("exact", "adaptive", "auto"):
+        run._build_seed_sets(Sim2RealConfig("m", "r", returns=2, footprint_cast=cast), found, 0, [], [], {})
+    run._build_seed_sets(Sim2RealConfig("m", "r"), found, 0, [], [], {})  # one ray: the default cast is exact
+    assert [r.footprint for r in recipes] == ["exact", "exact", "adaptive", "adaptive", "adaptive", "adaptive", "exact", "exact"]

@@ -247,7 +247,9 @@ def test_zbuffer_farm_parameters_keep_their_digest():
         ),
         (["--sensor-across-sight-width", "0.5"], "--sensor-across-sight-width needs --sensor"),
         (["--sensor", "hdl32e", "--sensor-across-sight-width", "0:0"], "--sensor-across-sight-width must have HI > 0 metres"),
-        (["--sensor", "kinect-v1", "--sensor-across-sight-width", "0.5"], "spinning LiDAR"),
+        (["--sensor", "riegl-q1560", "--sensor-across-sight-width", "0.5"], "spinning LiDAR"),
+        (["--sensor", "kinect-v1"], "--sensor: kinect-v1 is a depth camera, which has no beam; the farm scans with a pulsed sensor"),
+        (["--sensor", "hdl32e", "--sensor-footprint-cast", "adaptive"], "--sensor-footprint-cast skips the sub-rays"),
     ],
 )
 def test_bad_sensor_options_are_clear_errors(tmp_path, bad, words, capsys):
@@ -390,34 +392,53 @@ def _echo_sensor(tmp_path: Path) -> Path:
 
 
 def test_the_adaptive_footprint_needs_a_footprint_whose_echoes_are_resolved(tmp_path: Path):
-    with pytest.raises(InvalidInputError, match=r"--sensor-adaptive-footprint skips the sub-rays .* hdl32e fires one ray"):
-        SensorCropParams("hdl32e", footprint=True, adaptive_footprint=True)  # the preset resolves no echoes
-    with pytest.raises(InvalidInputError, match=r"--sensor-adaptive-footprint skips the sub-rays"):
-        SensorCropParams(str(_echo_sensor(tmp_path)), adaptive_footprint=True)  # one ray a pulse
-    with pytest.raises(InvalidInputError, match=r"--sensor-adaptive-footprint: kinect-v1 is a .*, which has no beam"):
-        SensorCropParams("kinect-v1", adaptive_footprint=True)  # no pulses
-    params = SensorCropParams(str(_echo_sensor(tmp_path)), footprint=True, adaptive_footprint=True)
+    with pytest.raises(InvalidInputError, match=r"--sensor-footprint-cast skips the sub-rays .* hdl32e fires one ray"):
+        SensorCropParams("hdl32e", footprint=True, footprint_cast="adaptive")  # the preset resolves no echoes
+    with pytest.raises(InvalidInputError, match=r"--sensor-footprint-cast skips the sub-rays"):
+        SensorCropParams(str(_echo_sensor(tmp_path)), footprint_cast="adaptive")  # one ray a pulse
+    with pytest.raises(InvalidInputError, match=r"--sensor, --sensor-footprint-cast: kinect-v1 is a .*, which has no beam"):
+        SensorCropParams("kinect-v1", footprint_cast="adaptive")  # no pulses
+    params = SensorCropParams(str(_echo_sensor(tmp_path)), footprint=True, footprint_cast="adaptive")
     assert params.footprint_mode == "adaptive" and SensorCropParams("hdl32e").footprint_mode == "exact"
-    for value in ("yes", 1, None):  # a card's value must be a bool
-        with pytest.raises(InvalidInputError, match="--sensor-adaptive-footprint must be true or false"):
-            SensorCropParams(str(_echo_sensor(tmp_path)), footprint=True, adaptive_footprint=value)
+    for value in ("yes", 1, None, True):  # one of the three names
+        with pytest.raises(InvalidInputError, match="--sensor-footprint-cast must be one of auto, exact, adaptive"):
+            SensorCropParams(str(_echo_sensor(tmp_path)), footprint=True, footprint_cast=value)
 
 
-def test_the_adaptive_footprint_is_recorded_only_when_asked(tmp_path: Path):
+def test_the_default_cast_is_adaptive_where_the_sensor_resolves_a_footprints_echoes(tmp_path: Path):
     sensor = str(_echo_sensor(tmp_path))
-    exact = FarmParams(sensor=SensorCropParams(sensor, footprint=True))
-    adaptive = FarmParams(sensor=SensorCropParams(sensor, footprint=True, adaptive_footprint=True))
-    assert "sensor_adaptive_footprint" not in exact.to_dict()  # earlier data sets keep their digest
+    assert SensorCropParams(sensor, footprint=True).footprint_mode == "adaptive"  # 7 sub-rays, two echoes resolved
+    assert SensorCropParams("riegl-q1560").footprint_mode == "adaptive"  # an airborne preset's 19 sub-rays
+    assert SensorCropParams(sensor).footprint_mode == "exact"  # one ray: nothing to skip
+    assert SensorCropParams("hdl32e", footprint=True).footprint_mode == "exact"  # 7 sub-rays, one return: no echoes resolved
+    assert SensorCropParams(sensor, footprint=True, footprint_cast="exact").footprint_mode == "exact"
+
+
+def test_a_depth_camera_is_no_farm_sensor():
+    with pytest.raises(InvalidInputError, match="--sensor: kinect-v1 is a depth camera, which has no beam; the farm scans with a pulsed"):
+        SensorCropParams("kinect-v1")
+
+
+def test_the_card_records_the_adaptive_cast_only_where_it_was_used(tmp_path: Path):
+    sensor = str(_echo_sensor(tmp_path))
+    exact = FarmParams(sensor=SensorCropParams(sensor, footprint=True, footprint_cast="exact"))
+    adaptive = FarmParams(sensor=SensorCropParams(sensor, footprint=True, footprint_cast="adaptive"))
+    default = FarmParams(sensor=SensorCropParams(sensor, footprint=True))
+    assert "sensor_adaptive_footprint" not in exact.to_dict()  # earlier data sets, cast exact, keep their digest
     assert adaptive.to_dict()["sensor_adaptive_footprint"] is True and adaptive.digest() != exact.digest()
-    assert SensorCropParams.from_dict(adaptive.sensor.to_dict()) == adaptive.sensor
-    assert SensorCropParams.from_dict(exact.sensor.to_dict()) == exact.sensor
+    assert default.digest() == adaptive.digest() and default == adaptive  # one cast, one value
+    assert "sensor_adaptive_footprint" not in FarmParams(sensor=SensorCropParams("hdl32e")).to_dict()  # one ray: exact
+    for params in (exact, adaptive):
+        assert SensorCropParams.from_dict(params.sensor.to_dict()) == params.sensor
+    with pytest.raises(InvalidInputError, match=r"sensor_adaptive_footprint \(--sensor-footprint-cast\) must be true or false, got str"):
+        SensorCropParams.from_dict({**adaptive.sensor.to_dict(), "sensor_adaptive_footprint": "yes"})
 
 
 def test_farm_crops_with_the_adaptive_footprint_are_farm_datasets_adaptive_ones(tmp_path: Path):
     import h5py
 
     sensor = str(_echo_sensor(tmp_path))
-    out = _farm(tmp_path / "ds", "--sensor", sensor, "--sensor-footprint", "--sensor-adaptive-footprint", "--classes", "chair")
+    out = _farm(tmp_path / "ds", "--sensor", sensor, "--sensor-footprint", "--classes", "chair")  # cast adaptive by default
     card = json.loads((out / CARD_FILE).read_text())
     assert card["params"]["sensor_adaptive_footprint"] is True
     (shard,) = sorted(out.rglob("*.h5"))
@@ -430,11 +451,11 @@ def test_farm_crops_with_the_adaptive_footprint_are_farm_datasets_adaptive_ones(
     adaptive = farm_datasets(mesh, params.model(), footprint="adaptive", **kw)
     for key, values in written.items():
         assert np.array_equal(values, adaptive[key]), key
-    exact = farm_datasets(mesh, params.model(), **kw)
+    exact = farm_datasets(mesh, params.model(), footprint="exact", **kw)
     assert not all(np.array_equal(exact[key], adaptive[key]) for key in written)  # the adaptive cast changes some returns here
 
 
-def test_the_adaptive_footprint_without_a_sensor_is_a_usage_error(tmp_path: Path, capsys):
-    assert cli_main(["farm", str(SAMPLES), "--out", str(tmp_path / "ds"), "--sensor-adaptive-footprint", "--no-progress"]) == 2
-    assert "--sensor-adaptive-footprint needs --sensor" in capsys.readouterr().err
+def test_the_footprint_cast_without_a_sensor_is_a_usage_error(tmp_path: Path, capsys):
+    assert cli_main(["farm", str(SAMPLES), "--out", str(tmp_path / "ds"), "--sensor-footprint-cast", "exact", "--no-progress"]) == 2
+    assert "--sensor-footprint-cast needs --sensor" in capsys.readouterr().err
     assert not (tmp_path / "ds").exists()

@@ -1,4 +1,4 @@
-"""``scan(footprint="adaptive")``: the adaptive footprint through the one pipeline, and where it is refused."""
+"""``scan(footprint=...)``: the adaptive footprint through the one pipeline, the default cast ("auto"), and where each is refused."""
 
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ def _returns(**beam) -> Lidar:
 
 
 def test_an_adaptive_scan_is_the_exact_one_where_footprints_are_not_one_plane():
-    exact = scan(_scene(), _returns(), seed=1, azimuth_range_deg=(-40.0, 40.0))
+    exact = scan(_scene(), _returns(), seed=1, azimuth_range_deg=(-40.0, 40.0), footprint="exact")
     fast = scan(_scene(), _returns(), seed=1, azimuth_range_deg=(-40.0, 40.0), footprint="adaptive")
     share = fast.meta["footprint_uniform_share"]
     assert 0.3 < share < 1.0  # the ground's footprints are skipped, the table's cast
@@ -41,19 +41,23 @@ def test_an_adaptive_scan_is_the_exact_one_where_footprints_are_not_one_plane():
 def test_the_adaptive_footprint_of_an_airborne_preset():
     q = airborne_preset("riegl-q1560")
     fast = scan_airborne(_scene(), q, half_size_m=4.0, seed=2, footprint="adaptive")
-    exact = scan_airborne(_scene(), q, half_size_m=4.0, seed=2)
+    exact = scan_airborne(_scene(), q, half_size_m=4.0, seed=2, footprint="exact")
+    assert "footprint_uniform_share" not in exact.meta
     assert fast.meta["footprint_uniform_share"] > 0.5 and abs(len(fast) - len(exact)) <= 3
 
 
 @pytest.mark.parametrize(
     ("call", "words"),
     [
-        (lambda: scan(_scene(), _returns(), footprint="fast"), "footprint must be one of exact, adaptive, got 'fast'"),
+        (lambda: scan(_scene(), _returns(), footprint="fast"), "footprint must be one of auto, exact, adaptive, got 'fast'"),
         (lambda: scan(_scene(), Lidar.preset("vlp16"), footprint="adaptive"), "resolves none"),
         (lambda: scan(_scene(), with_beam(Lidar.preset("vlp16"), footprint_rays=7), footprint="adaptive"), "resolves none"),
         (lambda: scan(_scene(), _returns(), footprint="adaptive", backend="zbuffer"), "casts rays with Embree"),
         (lambda: scan(_scene(), depth_camera_preset("kinect-v1"), np.eye(4), footprint="adaptive"), "has no beam"),
-        (lambda: scan(_scene(), depth_camera_preset("kinect-v1"), np.eye(4), footprint="fast"), "'exact', or 'adaptive'"),
+        (
+            lambda: scan(_scene(), depth_camera_preset("kinect-v1"), np.eye(4), footprint="fast"),
+            "'auto' or 'exact'; 'adaptive' is for a LiDAR",
+        ),
     ],
     ids=["unknown", "one-ray", "no-echoes", "zbuffer", "camera", "camera-unknown"],
 )
@@ -65,7 +69,7 @@ def test_the_adaptive_footprint_is_refused_where_it_does_not_apply(call, words):
 def test_the_adaptive_footprint_applies_the_partial_echo_threshold_to_the_pulses_it_does_not_cast():
     """A threshold that drops the ground's grazing echoes: the adaptive scan drops the same ones."""
     beam = {"min_echo_reflectance": 0.6}
-    exact = scan(_scene(), _returns(**beam), seed=1, azimuth_range_deg=(-40.0, 40.0))
+    exact = scan(_scene(), _returns(**beam), seed=1, azimuth_range_deg=(-40.0, 40.0), footprint="exact")
     fast = scan(_scene(), _returns(**beam), seed=1, azimuth_range_deg=(-40.0, 40.0), footprint="adaptive")
     every = scan(_scene(), _returns(), seed=1, azimuth_range_deg=(-40.0, 40.0), footprint="adaptive")
     assert np.sum(every.object_id == 0) > np.sum(exact.object_id == 0) + 50  # the threshold drops ground echoes
@@ -76,3 +80,42 @@ def test_the_adaptive_footprint_applies_the_partial_echo_threshold_to_the_pulses
 def test_the_footprint_mode_must_be_text():
     with pytest.raises(InvalidInputError, match="footprint must be one of"):
         scan(_scene(), _returns(), footprint=np.array(["adaptive"]))
+
+
+def _same_scan(a, b) -> bool:
+    return all(np.array_equal(x, y) for x, y in zip(a.arrays().values(), b.arrays().values())) and a.arrays().keys() == b.arrays().keys()
+
+
+def test_the_default_cast_is_the_adaptive_one_where_it_applies():
+    """A beam that resolves a footprint's echoes, with Embree: the default scan is the adaptive scan, bit for bit."""
+    sector = (-40.0, 40.0)
+    default = scan(_scene(), _returns(), seed=1, azimuth_range_deg=sector)
+    assert _same_scan(default, scan(_scene(), _returns(), seed=1, azimuth_range_deg=sector, footprint="adaptive"))
+    assert default.meta["footprint_uniform_share"] > 0.3  # sub-rays skipped: what the exact cast never does
+    assert "footprint_uniform_share" not in scan(_scene(), _returns(), seed=1, azimuth_range_deg=sector, footprint="exact").meta
+    q = airborne_preset("riegl-q1560")
+    assert _same_scan(
+        scan_airborne(_scene(), q, half_size_m=4.0, seed=2), scan_airborne(_scene(), q, half_size_m=4.0, seed=2, footprint="adaptive")
+    )
+
+
+@pytest.mark.parametrize(
+    ("sensor", "backend"),
+    [
+        (Lidar.preset("vlp16"), "embree"),  # one ray
+        (with_beam(Lidar.preset("vlp16"), footprint_rays=7), "embree"),  # a footprint's strongest surface, no echoes resolved
+        (_returns(), "zbuffer"),  # echoes resolved, but no rays to cast
+    ],
+    ids=["one-ray", "no-echoes", "zbuffer"],
+)
+def test_the_default_cast_is_the_exact_one_where_the_adaptive_one_does_not_apply(sensor, backend):
+    default = scan(_scene(), sensor, seed=3, azimuth_range_deg=(-40.0, 40.0), backend=backend)
+    exact = scan(_scene(), sensor, seed=3, azimuth_range_deg=(-40.0, 40.0), backend=backend, footprint="exact")
+    assert "footprint_uniform_share" not in default.meta and _same_scan(default, exact)
+
+
+@pytest.mark.parametrize("footprint", ["auto", "exact"])
+def test_a_depth_camera_takes_the_casts_that_need_no_beam(footprint):
+    camera = depth_camera_preset("kinect-v1")
+    pose = np.array([[0, 0, 1, 0], [-1, 0, 0, 0], [0, -1, 0, 1.0], [0, 0, 0, 1]], dtype=float)  # looking along +x, 1 m up
+    assert _same_scan(scan(_scene(), camera, pose, footprint=footprint), scan(_scene(), camera, pose))

@@ -36,7 +36,8 @@ from zbuf_occlude.mesh.paths import SPLITS
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.mesh.inputs.kinds import DEFAULT_POINT_SET_POINTS, POINT_SET_METHOD, POINT_SET_VISIBLE_SHARE
 from zbuf_occlude.mesh.scene import UP_CHOICES
-from zbuf_occlude.sensors.kinds import preset_names
+from zbuf_occlude.sensors.adaptive_footprint import FOOTPRINT_MODES
+from zbuf_occlude.sensors.kinds import SENSOR_KINDS
 
 log = logging.getLogger(__name__)
 
@@ -53,7 +54,7 @@ CLASS_FROM_HELP = (
     "layout's; needed where the layout's classes look wrong (all one class, or folders such as 'models')"
 )
 #: ``farm --sensor``'s presets, by kind, for its help.
-_PRESETS = "; ".join(f"{kind}: {', '.join(names)}" for kind, names in preset_names().items())
+_PRESETS = "; ".join(f"{k.name}: {', '.join(sorted(k.presets))}" for k in SENSOR_KINDS if k.pulsed)  # the farm scans with pulses
 #: ``--class-from N``'s check (a folder level, no cap): ``mesh.layouts`` says the same of a bad value.
 CLASS_FROM = count(None, hint="1: the folder holding each file")
 
@@ -118,13 +119,13 @@ def _sensor_params(args: argparse.Namespace) -> dict:
     if args.sensor is None:
         for flag, _ in given_crop_options(args):
             raise InvalidInputError(f"{flag} needs --sensor")
-        if args.sensor_adaptive_footprint:
-            raise InvalidInputError("--sensor-adaptive-footprint needs --sensor")
+        if args.sensor_footprint_cast is not None:
+            raise InvalidInputError("--sensor-footprint-cast needs --sensor")
         return {}
     crops = crop_settings(args, FARM_CROP_DISTRIBUTIONS)
     return {"sensor": SensorCropParams(args.sensor, crops.distributions, footprint=crops.footprint,
                                        across_sight_width_m=crops.across_sight_width_m, divergence_deg=crops.divergence_deg,
-                                       adaptive_footprint=args.sensor_adaptive_footprint)}  # fmt: skip
+                                       footprint_cast=args.sensor_footprint_cast or "auto")}  # fmt: skip
 
 
 def _merge_command(args: argparse.Namespace) -> int:
@@ -230,10 +231,11 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
     )
     add_crop_arguments(s, FARM_CROP_DISTRIBUTIONS, prefixed=True)
     s.add_argument(
-        "--sensor-adaptive-footprint", action="store_true",
-        help="cast a pulse's whole footprint only where its centre ray and its neighbours do not show one plane filling it "
-        "(the same returns but for a surface inside the cone none of them meets, a fraction of the cost; with --sensor-footprint, "
-        "for a sensor that resolves echoes) (default: every pulse's whole footprint)",
+        "--sensor-footprint-cast", choices=FOOTPRINT_MODES, default=None,
+        help="how a footprint whose echoes are resolved is cast: adaptive casts a pulse's whole footprint only where its centre "
+        "ray and its neighbours do not show one plane filling it (the same returns but for a surface inside the cone none of them "
+        "meets, a fraction of the cost); exact casts every sub-ray; auto is adaptive where the sensor resolves a footprint's "
+        "echoes, else exact (default: auto)",
     )  # fmt: skip
     ex = p.add_argument_group("execution")
     ex.add_argument(

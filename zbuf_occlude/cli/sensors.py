@@ -25,6 +25,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.mesh.sizes import DIMENSIONS, SizeRange, size_interval
+from zbuf_occlude.sensors.adaptive_footprint import FOOTPRINT_MODES
 from zbuf_occlude.sensors.placement import CropDistributions
 from zbuf_occlude.sensors.kinds import SENSOR_KINDS, kind_of, preset_names, sensor_from_name
 from zbuf_occlude.sensors.spec_files import SCENE_SUFFIXES
@@ -217,17 +218,20 @@ def cmd_scan(args: argparse.Namespace) -> int:
 
 
 def _footprint_mode(args: argparse.Namespace, sensor, kind) -> str:
-    """``"adaptive"`` with ``--adaptive-footprint``, else ``"exact"``; refused, naming the options, where it cannot apply."""
-    if not args.adaptive_footprint:
-        return "exact"
+    """``--footprint-cast``: "auto" (the default), "exact", or "adaptive", refused, naming the options, where it cannot apply."""
+    mode = args.footprint_cast
+    if mode != "adaptive":
+        return mode
     if not kind.pulsed:
-        raise InvalidInputError(f"--adaptive-footprint: {sensor.name} is a {kind.title}, which fires no pulses to skip the sub-rays of")
+        raise InvalidInputError(
+            f"--footprint-cast adaptive: {sensor.name} is a {kind.title}, which fires no pulses to skip the sub-rays of"
+        )
     if not sensor.beam.resolves_footprint:
-        raise InvalidInputError(f"--adaptive-footprint skips the sub-rays of a footprint whose echoes are resolved; {sensor.name} "
+        raise InvalidInputError(f"--footprint-cast adaptive skips the sub-rays of a footprint whose echoes are resolved; {sensor.name} "
                                 "fires one ray or resolves no echoes: give it --footprint and --max-returns above 1")  # fmt: skip
     if args.backend != "embree":
-        raise InvalidInputError(f"--adaptive-footprint casts rays with Embree; --backend {args.backend} renders a z-buffer")
-    return "adaptive"
+        raise InvalidInputError(f"--footprint-cast adaptive casts rays with Embree; --backend {args.backend} renders a z-buffer")
+    return mode
 
 
 #: The files ``scan`` writes in ``--out``: ``<stem>_<sensor>_sNNN.npz|ply|las|laz``.
@@ -389,10 +393,11 @@ def _add_return_physics_arguments(p: argparse.ArgumentParser) -> None:
                         "surface and comes back, in [0, 1] (a leafy crown's gap fraction); table (foliage 0.3 from the reflectance "
                         "table), one number (every object), or CLASS=VALUE,... (bush=0.3,tree=0.3; a mesh's class: its file name) "
                         "(default: 0, opaque; airborne: see --reflectance-table)")  # fmt: skip
-    r.add_argument("--adaptive-footprint", action="store_true",
-                   help="with a footprint whose echoes are resolved: cast a pulse's sub-rays only where its centre ray and its "
-                        "neighbouring pulses do not all meet one plane, and give the others that plane's echo (faster; the echo of "
-                        "a surface inside the cone that neither meets is lost)")  # fmt: skip
+    r.add_argument("--footprint-cast", choices=FOOTPRINT_MODES, default="auto",
+                   help="how a footprint whose echoes are resolved is cast: adaptive casts a pulse's sub-rays only where its "
+                        "centre ray and its neighbouring pulses do not all meet one plane, and gives the others that plane's echo "
+                        "(the echo of a surface inside the cone that neither meets is lost); exact casts every sub-ray (slower); "
+                        "auto is adaptive where it applies (the embree backend), else exact (default: auto)")  # fmt: skip
     add_beam_arguments(r)
 
 

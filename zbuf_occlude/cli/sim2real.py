@@ -16,6 +16,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.caps import MAX_TABLE_BYTES
 from zbuf_occlude.io.regular_files import read_text_file
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
+from zbuf_occlude.sensors.adaptive_footprint import FOOTPRINT_MODES
 
 __all__ = ["add_sim2real_parser", "parse_pairs", "parse_up_map"]
 
@@ -52,7 +53,7 @@ OPTION_NAMES = {
     "up_map": "--up-map", "sizes": "--sizes", "min_returns": "--min-returns", "method": "--method", "classes": "--classes",
     "occluded_elevation_deg": "--occluded-elevation", "fit_sensor": "--fit-sensor", "recipe": "--recipe",
     "validate_on": "--validate-on", "fitted_shape": "--fitted-shape", "aspect": "--augment aspect", "best_epoch_by": "--best-epoch-by",
-    "occluded_points": "--occluded-points", "returns": "--returns", "adaptive_footprint": "--adaptive-footprint",
+    "occluded_points": "--occluded-points", "returns": "--returns", "footprint_cast": "--footprint-cast",
 }  # fmt: skip
 
 
@@ -74,7 +75,7 @@ def _run(args: argparse.Namespace) -> int:
         recipe=args.recipe, best_epoch_by=args.best_epoch_by, validate_on=args.validate_on,
         fitted_shape=() if args.fitted_shape == "none" else tuple(v.strip() for v in args.fitted_shape.split(",")),
         aspect=args.augment == "aspect", occluded_points=args.occluded_points, returns=args.returns,
-        adaptive_footprint=args.adaptive_footprint, option_names=OPTION_NAMES,
+        footprint_cast=args.footprint_cast, option_names=OPTION_NAMES,
     )  # fmt: skip
     summary = run_sim2real(config, args.out, device=args.device, threads=args.threads, progress=not args.no_progress, say=_say)
     return print_table(args.out, summary)
@@ -251,12 +252,12 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
         "(settings.json: lidar_returns; not with --fit-sensor)",
     )
     p.add_argument(
-        "--adaptive-footprint",
-        action="store_true",
-        help="with --returns above 1: cast a pulse's whole footprint only where its centre ray and its neighbours do not "
-        "show one plane filling it (the same returns but for a surface inside the cone none of them meets, a fraction of "
-        "the cost; settings.json: lidar_footprint)",
-    )
+        "--footprint-cast", choices=FOOTPRINT_MODES, default="auto",
+        help="how the lidar set's crops cast a footprint whose echoes are resolved (--returns above 1, or a sensor file with "
+        "a return mode): adaptive casts a pulse's whole footprint only where its centre ray and its neighbours do not show one "
+        "plane filling it (the same returns but for a surface inside the cone none of them meets, a fraction of the cost); "
+        "exact casts every sub-ray; auto is adaptive where it applies, else exact (default: auto; settings.json: lidar_footprint)",
+    )  # fmt: skip
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="torch device (default: %(default)s)")
     p.add_argument("--threads", action=Checked, check=count("MAX_WORKERS"), help="torch CPU threads")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")

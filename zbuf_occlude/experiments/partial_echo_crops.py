@@ -93,7 +93,7 @@ def centroid_range_m(points_m: NDArray[np.floating]) -> float:
 
 
 def mesh_crops(meshes: Sequence[MeshEntry], sensor: Lidar, crops_per_mesh: int, seed: int, *, placement: CropPlacement | None = None,
-               sizes: Mapping[str, SizeRange] = CLASS_SIZES_M) -> list[MeshCrop]:  # fmt: skip
+               sizes: Mapping[str, SizeRange] = CLASS_SIZES_M, footprint: str = "auto") -> list[MeshCrop]:  # fmt: skip
     """``experiment sim2real``'s ``lidar`` crops of every mesh, scanned by ``sensor``: up to ``crops_per_mesh`` each.
 
     Per mesh, :func:`~zbuf_occlude.experiments.sim2real.data.crops_to_draw` placements are drawn
@@ -116,6 +116,8 @@ def mesh_crops(meshes: Sequence[MeshEntry], sensor: Lidar, crops_per_mesh: int, 
         Default ``CropPlacement()``: :data:`~zbuf_occlude.experiments.sim2real.placement.LIDAR_PLACEMENT` for every class.
     sizes : mapping of class name to SizeRange
         The real size of each mesh's class (default :data:`~zbuf_occlude.mesh.sizes.CLASS_SIZES_M`).
+    footprint : {"auto", "exact", "adaptive"}
+        How a footprint is cast (:func:`~zbuf_occlude.sensors.crops.object_crops`' ``footprint``).
 
     Returns
     -------
@@ -138,7 +140,9 @@ def mesh_crops(meshes: Sequence[MeshEntry], sensor: Lidar, crops_per_mesh: int, 
         dist, _ = placement.crop_distributions(entry, sizes[entry.class_name])
         kept = 0
         drawn = crops_to_draw(crops_per_mesh)
-        for k, crop, _ in object_crops(entry.mesh, sensor, dist, name=entry.name, n_samples=drawn, seed=seed, class_name=entry.class_name):
+        for k, crop, _ in object_crops(
+            entry.mesh, sensor, dist, name=entry.name, n_samples=drawn, seed=seed, class_name=entry.class_name, footprint=footprint
+        ):
             scan = crop.scan.select(crop.scan.object_id != 0)  # the object's returns (no ground margin: all of them)
             if len(scan) < MIN_RETURNS:
                 continue

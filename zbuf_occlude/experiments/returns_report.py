@@ -382,7 +382,7 @@ def _k_sweep(plot, settings: ReturnsSettings, divergence_deg: float, model: Simu
         for k in settings.k_values:
             scanner = model.scanner(divergence_deg, k)
             start = time.perf_counter()
-            scan = scan_airborne(scene, scanner, centre, half, seed=settings.seeds[0], reflectivity=model.reflectivity)
+            scan = scan_airborne(scene, scanner, centre, half, seed=settings.seeds[0], reflectivity=model.reflectivity, footprint="exact")
             times[k].append((time.perf_counter() - start) / scan.meta["n_rays"])
             tick()
     base = float(np.median(times[min(settings.k_values)]))

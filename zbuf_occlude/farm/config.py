@@ -65,7 +65,7 @@ OPTION_NAMES = {
     "sensor_distance_m": "--sensor-distance", "sensor_height_m": "--sensor-height", "sensor_size_m": "--sensor-size",
     "sensor_reflectivity": "--sensor-reflectivity", "sensor_footprint": "--sensor-footprint", "sensor_divergence_deg": "--sensor-divergence",
     "sensor_ground_margin_m": "--sensor-ground-margin", "sensor_hidden_below_m": "--sensor-hidden-below",
-    "sensor_across_sight_width_m": "--sensor-across-sight-width", "sensor_adaptive_footprint": "--sensor-adaptive-footprint", "up": "--up",
+    "sensor_across_sight_width_m": "--sensor-across-sight-width", "sensor_adaptive_footprint": "--sensor-footprint-cast", "up": "--up",
 }  # fmt: skip
 
 #: ``farm --sensor``: per-scan placement drawn uniformly from these intervals (metres).
@@ -105,6 +105,14 @@ def usable_cpus() -> int:
 
 
 # -- parameters ----------------------------------------------------------------------------
+def _resolved_cast(footprint_cast: str, sensor) -> str:
+    """``"adaptive"`` or ``"exact"``: how ``footprint_cast`` casts the footprint of ``sensor`` (:meth:`SensorCropParams.model`; Embree)."""
+    from zbuf_occlude.sensors.adaptive_footprint import adaptive_footprint
+    from zbuf_occlude.sensors.kinds import kind_of
+
+    return "adaptive" if kind_of(sensor).pulsed and adaptive_footprint(footprint_cast, sensor.beam, "embree") else "exact"
+
+
 @dataclass(frozen=True)
 class SensorCropParams:
     """``farm --sensor``: the sensor that scans each object, and where each scan places it.
@@ -132,12 +140,16 @@ class SensorCropParams:
         line of sight as this interval, metres, drawn per scan
         (:func:`~zbuf_occlude.sensors.fit.fit_width_scale`, a spinning LiDAR only); ``None``: the
         meshes' own proportions.
-    adaptive_footprint : bool
-        Cast a pulse's whole footprint only where its centre ray and its neighbours do not show
-        one plane filling it (``object_crops(..., footprint="adaptive")``): the same crops but for a
-        surface inside the cone that none of those rays meets, at a fraction of the cost.  Needs a
-        pulsed sensor whose beam fires several rays and resolves echoes.  Recorded only when True,
-        so that the digest of data sets made before it is kept.
+    footprint_cast : {"auto", "exact", "adaptive"}
+        How the crops cast a footprint whose echoes are resolved (``object_crops(..., footprint=...)``):
+        "adaptive" casts a pulse's whole footprint only where its centre ray and its neighbours do
+        not show one plane filling it (the same crops but for a surface inside the cone that none
+        of those rays meets, at a fraction of the cost), and needs a pulsed sensor whose beam fires
+        several rays and resolves echoes; "exact" casts every sub-ray; "auto" (default) is
+        "adaptive" where it applies, else "exact".  The card records the cast used
+        (:attr:`footprint_mode`) as ``sensor_adaptive_footprint: true`` only when adaptive, so the
+        digest of data sets made before it is kept; a card without it reads as "exact".  Held as
+        "auto" wherever it casts as "auto" does, so that settings read back from a card compare equal.
 
     Raises
     ------
@@ -152,7 +164,7 @@ class SensorCropParams:
     footprint: bool = False
     across_sight_width_m: tuple[float, float] | None = None
     divergence_deg: float | None = None
-    adaptive_footprint: bool = False
+    footprint_cast: str = "auto"
 
     def __post_init__(self) -> None:
         if not isinstance(self.distributions, CropDistributions):
@@ -164,9 +176,11 @@ class SensorCropParams:
                     f"farm --sensor draws no {f.name} (its card could not say so): leave it at {getattr(unset, f.name)!r}"
                 )
         object.__setattr__(self, "footprint", bool(self.footprint))
-        if not isinstance(self.adaptive_footprint, bool):  # a card's value: true or false, not "yes"
-            raise InvalidInputError(f"{OPTION_NAMES['sensor_adaptive_footprint']} must be true or false, "
-                                    f"got {type(self.adaptive_footprint).__name__} {self.adaptive_footprint!r:.40}")  # fmt: skip
+        from zbuf_occlude.sensors.adaptive_footprint import FOOTPRINT_MODES
+
+        if not isinstance(self.footprint_cast, str) or self.footprint_cast not in FOOTPRINT_MODES:
+            raise InvalidInputError(f"{OPTION_NAMES['sensor_adaptive_footprint']} must be one of {', '.join(FOOTPRINT_MODES)}, "
+                                    f"got {type(self.footprint_cast).__name__} {self.footprint_cast!r:.40}")  # fmt: skip
         if self.divergence_deg is not None:
             from zbuf_occlude.sensors.checks import real
 
@@ -175,7 +189,9 @@ class SensorCropParams:
         if self.across_sight_width_m is not None:
             option = OPTION_NAMES["sensor_across_sight_width_m"]
             object.__setattr__(self, "across_sight_width_m", check_across_sight_width(self.across_sight_width_m, option))
-        self.model()  # raises InvalidInputError naming an unknown sensor, or physics it has not
+        sensor = self.model()  # raises InvalidInputError naming an unknown sensor, or physics it has not
+        if _resolved_cast(self.footprint_cast, sensor) == _resolved_cast("auto", sensor):  # one value for one cast
+            object.__setattr__(self, "footprint_cast", "auto")  # so that settings read back from a card compare equal
 
     def model(self):
         """The sensor of ``name`` with the beam changes of ``footprint`` and ``divergence_deg``
@@ -184,12 +200,12 @@ class SensorCropParams:
         Raises
         ------
         InvalidInputError
-            Unknown sensor; ``footprint``, ``divergence_deg`` or ``reflectivity`` for a sensor
-            without a beam (a depth camera); ``reflectivity`` for an airborne scanner (its crops fly
-            over every surface alike); ``footprint`` for a beam without a divergence (naming
-            ``--sensor-divergence``); ``across_sight_width_m`` for a sensor that is not a spinning
-            LiDAR; a divergence the beam refuses; ``adaptive_footprint`` for a beam that fires one
-            ray or resolves no echoes.  Each names its ``farm`` option.
+            Unknown sensor; a sensor without a beam (a depth camera: the farm scans with pulsed
+            sensors); ``reflectivity`` for an airborne scanner (its crops fly over every surface
+            alike); ``footprint`` for a beam without a divergence (naming ``--sensor-divergence``);
+            ``across_sight_width_m`` for a sensor that is not a spinning LiDAR; a divergence the
+            beam refuses; ``footprint_cast`` "adaptive" for a beam that fires one ray or resolves no
+            echoes.  Each names its ``farm`` option.
         """
         from zbuf_occlude.sensors.kinds import kind_of, sensor_from_name, with_beam
 
@@ -197,9 +213,11 @@ class SensorCropParams:
         kind = kind_of(sensor)
         given = [OPTION_NAMES[f"sensor_{f}"] for f, v in (("footprint", self.footprint), ("divergence_deg", self.divergence_deg),
                                                          ("reflectivity", self.distributions.reflectivity),
-                                                         ("adaptive_footprint", self.adaptive_footprint)) if v not in (None, False)]  # fmt: skip
-        if given and not kind.pulsed:
-            raise InvalidInputError(f"{', '.join(given)}: {self.name} is a {kind.title}, which has no beam (a pulsed LiDAR has one)")
+                                                         ("adaptive_footprint", self.footprint_cast == "adaptive")) if v not in (None, False)]  # fmt: skip
+        if not kind.pulsed:  # its crops would need a camera's placement, which the farm does not draw
+            raise InvalidInputError(f"{', '.join([OPTION_NAMES['sensor'], *given])}: {self.name} is a {kind.title}, which has no beam; "
+                                    "the farm scans with a pulsed sensor (a LiDAR, a ray table or an airborne scanner), and renders "
+                                    "a camera's views without --sensor")  # fmt: skip
         if self.distributions.reflectivity is not None and kind.flies:
             raise InvalidInputError(f"{OPTION_NAMES['sensor_reflectivity']}: {self.name} is an {kind.title}, whose crops fly over "
                                     "every surface alike (no detection threshold per object); leave it out")  # fmt: skip
@@ -212,7 +230,7 @@ class SensorCropParams:
                 sensor = with_beam(sensor, **changes)
             except InvalidInputError as exc:
                 raise InvalidInputError(f"{', '.join(given)}: {exc}") from None
-        if self.adaptive_footprint and not sensor.beam.resolves_footprint:
+        if self.footprint_cast == "adaptive" and not sensor.beam.resolves_footprint:
             raise InvalidInputError(f"{OPTION_NAMES['sensor_adaptive_footprint']} skips the sub-rays of a footprint whose echoes are "
                                     f"resolved; {self.name} fires one ray a pulse or resolves no echoes: give it "
                                     f"{OPTION_NAMES['sensor_footprint']} (a sensor file with max_returns above 1 or a return mode)")  # fmt: skip
@@ -220,14 +238,15 @@ class SensorCropParams:
 
     @property
     def footprint_mode(self) -> str:
-        """``"adaptive"`` or ``"exact"``: how the crops cast a footprint (:func:`~zbuf_occlude.sensors.crops.object_crops`)."""
-        return "adaptive" if self.adaptive_footprint else "exact"
+        """``"adaptive"`` or ``"exact"``: how the crops cast a footprint (:func:`~zbuf_occlude.sensors.crops.object_crops`),
+        ``footprint_cast`` resolved for the sensor (:func:`~zbuf_occlude.sensors.adaptive_footprint.adaptive_footprint`)."""
+        return _resolved_cast(self.footprint_cast, self.model())
 
     def to_dict(self) -> dict[str, Any]:
         """``{"sensor": name, "sensor_distance_m": [lo, hi], ...}``: the flat keys of :data:`SENSOR_KEYS`."""
         values = {**{f: getattr(self.distributions, f) for f in FARM_CROP_FIELDS}, "footprint": self.footprint,
                   "across_sight_width_m": self.across_sight_width_m, "divergence_deg": self.divergence_deg,
-                  "adaptive_footprint": True if self.adaptive_footprint else None}  # fmt: skip
+                  "adaptive_footprint": True if self.footprint_mode == "adaptive" else None}  # fmt: skip
         d: dict[str, Any] = {"sensor": self.name}
         for field, key in SENSOR_KEYS.items():
             if values[field] is not None or field not in _LEFT_OUT_WHEN_NONE:
@@ -245,7 +264,12 @@ class SensorCropParams:
         """
         values = {field: d[key] for field, key in SENSOR_KEYS.items() if key in d}
         crops = {field: values.pop(field) for field in FARM_CROP_FIELDS if field in values}
-        return cls(d["sensor"], dataclasses.replace(FARM_CROP_DISTRIBUTIONS, **crops, option_names=CROP_OPTION_NAMES), **values)
+        adaptive = values.pop("adaptive_footprint", False)  # the cast used: absent on the cards of exact casts
+        if not isinstance(adaptive, bool):  # a card's value: true or false, not "yes"
+            raise InvalidInputError(f"{SENSOR_KEYS['adaptive_footprint']} ({OPTION_NAMES['sensor_adaptive_footprint']}) must be true "
+                                    f"or false, got {type(adaptive).__name__} {adaptive!r:.40}")  # fmt: skip
+        distributions = dataclasses.replace(FARM_CROP_DISTRIBUTIONS, **crops, option_names=CROP_OPTION_NAMES)
+        return cls(d["sensor"], distributions, footprint_cast="adaptive" if adaptive else "exact", **values)
 
 
 @dataclass(frozen=True)

@@ -40,7 +40,7 @@ def farm_datasets(
     distributions: CropDistributions = CropDistributions(),
     across_sight_width_m: tuple[float, float] | None = None,
     backend: str = "embree",
-    footprint: str = "exact",
+    footprint: str = "auto",
 ) -> dict[str, np.ndarray]:
     """What the farm writes for one object with ``--sensor``: the datasets of a dense shard.
 
@@ -49,7 +49,7 @@ def farm_datasets(
     are left out (their ``n_visible`` would be 0, as for an empty pose).  With
     ``across_sight_width_m`` (metres, a LiDAR), the object is stretched horizontally to those
     widths (:func:`~zbuf_occlude.sensors.fit.fit_width_scale`, seeded with ``seed``).  ``footprint``:
-    ``"exact"`` or ``"adaptive"``, as :func:`~zbuf_occlude.sensors.crops.object_crops` casts it.
+    ``"auto"``, ``"exact"`` or ``"adaptive"``, as :func:`~zbuf_occlude.sensors.crops.object_crops` casts it.
 
     Returns
     -------

@@ -1,4 +1,4 @@
-"""Adaptive footprints: the multi-return model without casting the sub-rays of a footprint that lies on one plane (opt-in, approximate).
+"""Adaptive footprints: the multi-return model without casting the sub-rays of a footprint that lies on one plane (the default; approximate).
 
 The multi-return model (:func:`~.echo_model.echo_returns`) casts K sub-rays per pulse
 (:mod:`.footprint`) and resolves their hits into echoes.  On open ground or a wall, every
@@ -13,9 +13,11 @@ cannot rule out a second surface.  A pulse is *uniform* when all of these hold:
   beside or behind it;
 * those ranges, sorted, step less than the range resolution (one echo,
   :func:`~.echoes.resolve_echoes`'s merging) and lie within the beam's range limits;
-* every neighbour (the pulses fired beside it: :func:`pulse_neighbours`) hits the same object
-  within :data:`PLANE_SHARE` of the range resolution of ``f``'s plane; or, where the centre ray
-  hits nothing, no neighbour hits anything (then no sub-ray is taken to hit).
+* every neighbour (the pulses fired beside it: :func:`pulse_neighbours`) fires outside the cone
+  of the sub-rays (a footprint wider than the pulses' spacing reaches past its neighbours, and is
+  cast in full), and hits the same object within :data:`PLANE_SHARE` of the range resolution of
+  ``f``'s plane; or, where the centre ray hits nothing, no neighbour hits anything (then no
+  sub-ray is taken to hit).
 
 A uniform pulse's echo is the one the K sub-rays would give on ``f``'s plane, computed without
 casting them (:func:`plane_echoes`): the energy-weighted mean of their ranges and the sum of
@@ -252,12 +254,17 @@ def pulse_neighbours(pulses: Pulses) -> NDArray[np.int64]:
     return grid_neighbours(angle, np.concatenate([[0], np.cumsum(breaks)]))
 
 
-#: How a beam that resolves echoes casts its footprint (``scan(footprint=...)``): every sub-ray, or only where needed.
-FOOTPRINT_MODES = ("exact", "adaptive")
+#: How a beam that resolves echoes casts its footprint (``scan(footprint=...)``): "auto" (the default) the
+#: adaptive cast where it applies, else every sub-ray; "exact" every sub-ray; "adaptive" only where needed.
+FOOTPRINT_MODES = ("auto", "exact", "adaptive")
 
 
 def adaptive_footprint(footprint: str, beam: Beam, backend: str) -> bool:
-    """Whether ``footprint`` (:data:`FOOTPRINT_MODES`) asks for the adaptive footprint, where it applies.
+    """Whether ``footprint`` (:data:`FOOTPRINT_MODES`) casts the adaptive footprint with ``beam`` and ``backend``.
+
+    "auto" casts it wherever it applies: a beam that resolves the echoes of several sub-rays
+    (``Beam.resolves_footprint``) and the "embree" backend; elsewhere every sub-ray is cast, as
+    "exact" casts them everywhere.  "adaptive" asks for it and is refused where it does not apply.
 
     Raises
     ------
@@ -265,9 +272,11 @@ def adaptive_footprint(footprint: str, beam: Beam, backend: str) -> bool:
         An unknown mode, or "adaptive" for a beam that resolves no echoes or fires one ray, or another backend than "embree".
     """
     if not isinstance(footprint, str) or footprint not in FOOTPRINT_MODES:
-        raise InvalidInputError(f"footprint must be one of {', '.join(FOOTPRINT_MODES)}, got {footprint!r}")
+        raise InvalidInputError(f"footprint must be one of {', '.join(FOOTPRINT_MODES)}, got {footprint!r:.40}")
     if footprint == "exact":
         return False
+    if footprint == "auto":
+        return beam.resolves_footprint and backend == "embree"
     if not beam.resolves_footprint:
         raise InvalidInputError(f"footprint 'adaptive' skips the sub-rays of resolved echoes; beam {beam.name!r} "
                                 f"(footprint_rays {beam.footprint_rays}, max_returns {beam.max_returns}, return_mode "

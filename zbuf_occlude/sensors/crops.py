@@ -89,7 +89,7 @@ def object_crop(
     sector_margin_deg: float = 5.0,
     frame: str = "sensor",
     optics: Callable[[ScanScene], dict] | None = None,
-    footprint: str = "exact",
+    footprint: str = "auto",
 ) -> CropSample:
     """Scan one object placed per ``placement`` (see :func:`draw_placement`) and crop its returns.
 
@@ -105,7 +105,7 @@ def object_crop(
     sensor and the object (after ``occluders``; the object keeps id 1).  ``optics(scene)`` gives the
     scan's ``reflectivity`` and ``transmittance`` keywords for the scene the object stands in
     (:func:`~zbuf_occlude.sensors.scan.scan`'s; e.g. ``"table"``), where the placement draws no
-    reflectivity.  ``footprint`` is :func:`~zbuf_occlude.sensors.scan.scan`'s (``"exact"`` or ``"adaptive"``).
+    reflectivity.  ``footprint`` is :func:`~zbuf_occlude.sensors.scan.scan`'s (``"auto"``, ``"exact"`` or ``"adaptive"``).
 
     Raises
     ------
@@ -175,7 +175,7 @@ def object_crops(
     backend: str = "embree",
     frame: str = "sensor",
     optics: Callable[[ScanScene], dict] | None = None,
-    footprint: str = "exact",
+    footprint: str = "auto",
 ) -> Iterator[DrawnCrop]:
     """The crops of one object, each with its own placement: the one loop of ``scan`` and ``farm --sensor``.
 
@@ -196,7 +196,7 @@ def object_crops(
         ``sensor`` or ``world``, as :func:`object_crop`.
     optics : callable, optional
         The scene's surface optics, as :func:`object_crop`.
-    footprint : {"exact", "adaptive"}
+    footprint : {"auto", "exact", "adaptive"}
         How a footprint is cast, as :func:`object_crop`.
 
     Yields
@@ -324,7 +324,7 @@ def _under_footprint(mesh, to_world, inverse, world, margin_m: float) -> NDArray
 
 
 def _airborne_crop(mesh, sensor: AirborneScanner, placement: Placement, *, seed: int, occluders, class_name: str, offset_m: float, size,
-                  reach: float, optics=None, footprint: str = "exact") -> CropSample:  # fmt: skip
+                  reach: float, optics=None, footprint: str = "auto") -> CropSample:  # fmt: skip
     """An airborne crop: the object ``offset_m`` across track from the plan centre (``distance_m ·
     sin(azimuth_deg)`` of the placement; ``height_m`` is unused: the scanner flies at its altitude),
     scanned from every line of the flight plan that sees it.  Points and the full scan are in the
@@ -380,7 +380,7 @@ def lidar_object_samples(
     class_name: str = "",
     label: int = -1,
     backend: str = "embree",
-    footprint: str = "exact",
+    footprint: str = "auto",
 ) -> list[OccludedCloud]:
     """The farm's per-object function for ``--sensor``: ``n_samples`` LiDAR crops of one mesh.
 
@@ -398,7 +398,7 @@ def lidar_object_samples(
         Crops per object and points per crop (fewer returns are padded with repeats, more
         are subsampled, as :func:`zbuf_occlude.geometry.samples.draw_sample`).
     distributions : CropDistributions
-    footprint : {"exact", "adaptive"}
+    footprint : {"auto", "exact", "adaptive"}
         How a footprint is cast, as :func:`object_crop`.
 
     Returns

@@ -131,7 +131,7 @@ def scan(
     neighborhood: int = 1,
     reflectivity: float | ArrayLike | str | None = None,
     transmittance: float | ArrayLike | str | None = None,
-    footprint: str = "exact",
+    footprint: str = "auto",
 ) -> Scan:
     """Scan ``scene`` with ``sensor`` at ``pose`` (or along a trajectory).
 
@@ -179,13 +179,15 @@ def scan(
         :data:`~.reflectance.FOLIAGE_GAP_FRACTION`).  None or 0 everywhere: opaque, first hits
         only, bit for bit as without it.  The "zbuffer" backend keeps the nearest face per
         pixel only and refuses a transmittance above 0.
-    footprint : {"exact", "adaptive"}
-        How a beam that resolves echoes casts its footprint: "exact" (default) every sub-ray of
-        every pulse; "adaptive" only where the centre ray and its neighbouring pulses do not show
-        one plane filling the footprint (:mod:`.adaptive_footprint`: opt-in and approximate, the
-        echo of a surface inside the cone that neither the centre ray nor a neighbour meets is
-        lost; ``benchmarks/bench_returns.py`` measures its speed and bias).  "adaptive" needs a
-        beam that resolves echoes with ``footprint_rays`` above 1 and the "embree" backend.
+    footprint : {"auto", "exact", "adaptive"}
+        How a beam that resolves echoes casts its footprint.  "adaptive": only where the centre
+        ray and its neighbouring pulses do not show one plane filling the footprint
+        (:mod:`.adaptive_footprint`: approximate, the echo of a surface inside the cone that
+        neither the centre ray nor a neighbour meets is lost; ``benchmarks/bench_returns.py``
+        measures its speed and bias); it needs a beam that resolves echoes with
+        ``footprint_rays`` above 1 (``Beam.resolves_footprint``) and the "embree" backend.
+        "exact": every sub-ray of every pulse.  "auto" (default): "adaptive" where it applies,
+        else "exact".
 
     Returns
     -------
@@ -209,8 +211,10 @@ def scan(
     built = _built(scene)
     platform = _platform(pose, scene)
     if not kind.pulsed:
-        if footprint != "exact":
-            raise InvalidInputError(f"footprint {footprint!r}: a {kind.title} has no beam ('exact', or 'adaptive' for a LiDAR)")
+        if footprint not in ("auto", "exact"):
+            raise InvalidInputError(
+                f"footprint {footprint!r:.40}: a {kind.title} has no beam ('auto' or 'exact'; 'adaptive' is for a LiDAR)"
+            )
         if isinstance(platform, Trajectory):
             raise InvalidInputError(f"a {kind.title} takes one pose, not a trajectory")
         return _scan_camera(built, sensor, platform, seed, backend=backend, frame=frame, resolution=resolution,
@@ -228,7 +232,7 @@ def scan(
 
 def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.0, *, seed: int = 0,
                   phase_s: float | None = None, lateral_shift_m=None, reflectivity="auto", transmittance="auto",
-                  footprint: str = "exact") -> Scan:  # fmt: skip
+                  footprint: str = "auto") -> Scan:  # fmt: skip
     """Scan the part of ``scene`` around ``center_xy`` from every line of an airborne scanner's flight plan; world frame.
 
     The pulses are :meth:`AirborneScanner.pulses <zbuf_occlude.sensors.airborne.AirborneScanner.pulses>`
@@ -255,7 +259,7 @@ def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.
         which its intensities and its returns through a canopy rest on; any other beam none.  With
         one of them given, an ``"auto"`` other is none.  None: none (opaque surfaces; a detection
         threshold applies with ρ = 1).
-    footprint : {"exact", "adaptive"}
+    footprint : {"auto", "exact", "adaptive"}
         As :func:`scan`'s.
 
     Returns
@@ -294,7 +298,7 @@ def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.
 def fire_pulses(
     built: BuiltScene, beam: Beam, pulses: Pulses, rng: np.random.Generator, *, sensor_name: str, sensor_to_world,
     backend: str = "embree", frame: str = "sensor", resolution: int = 2048, neighborhood: int = 1, optics=(None, None),
-    footprint: str = "exact",
+    footprint: str = "auto",
 ) -> Scan:  # fmt: skip
     """The one pipeline: cast ``pulses`` with ``beam``, resolve their echoes, add noise and loss, and make the :class:`Scan`.
 

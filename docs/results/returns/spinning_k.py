@@ -60,7 +60,7 @@ def main(mesh_root: str, out_csv: str) -> None:
     ids = list(range(1, len(plot.objects) + 1))
     rows = {}
     for k in K_VALUES:
-        shares, n = object_pulse_shares(scan(plot, sensor(k), seed=0), ids, seed=0, bootstrap=BOOTSTRAP)
+        shares, n = object_pulse_shares(scan(plot, sensor(k), seed=0, footprint="exact"), ids, seed=0, bootstrap=BOOTSTRAP)
         rows[k] = {"K": k, "pulses_on_meshes": n} | {f"returns_{j}": shares[f"returns_{j}"][0] for j in (1, 2, 3, 4)} | {
             f"returns_{j}_sd": shares[f"returns_{j}"][1] for j in (1, 2, 3, 4)}  # fmt: skip
     times: dict = {k: [] for k in (None, *K_VALUES)}
@@ -69,7 +69,7 @@ def main(mesh_root: str, out_csv: str) -> None:
         for k in order[r % len(order) :] + order[: r % len(order)]:  # rotated: each K in another place each round
             lidar = sensor(k)
             start = time.perf_counter()
-            s = scan(plot, lidar, seed=r)
+            s = scan(plot, lidar, seed=r, footprint="exact")
             times[k].append((time.perf_counter() - start) / s.meta["n_rays"])
     pulses = len(sensor(1).rays()[0])
     median = {k: float(np.median(v)) for k, v in times.items()}

@@ -57,6 +57,9 @@ from zbuf_occlude.sensors.crops import lidar_object_samples
 from zbuf_occlude.sensors.kinds import with_beam
 
 CLASSES = ("bush", "car", "pedestrian", "pole")
+#: How these pages' crops cast a footprint: every sub-ray, the model their figures were measured with
+#: (``scan``'s default, "auto", casts the adaptive footprint; ``adaptive_bias.py`` measures the difference).
+FOOTPRINT = "exact"
 
 
 def _strongest_of_7(sensor: Lidar) -> Lidar:
@@ -97,17 +100,17 @@ def fit_half_scans(real_folder: str) -> list:
     return [scans[kept[i]] for i in fit_half]
 
 
-def sim_crops(meshes, sensor: Lidar, crops: int, seed: int) -> list[dict]:
-    """The ``lidar`` set's crops of every mesh for ``sensor`` (module docstring; :func:`mesh_crops`): one dict per crop."""
+def sim_crops(meshes, sensor: Lidar, crops: int, seed: int, footprint: str = FOOTPRINT) -> list[dict]:
+    """The ``lidar`` set's crops of every mesh for ``sensor`` (module docstring; :func:`mesh_crops`, cast as ``footprint``): one dict per crop."""
     return [{"mesh": c.mesh, "class": c.class_name, "crop": c.crop, "points_m": c.points_m, "return_number": c.return_number,
-             "number_of_returns": c.number_of_returns, "distance_m": c.distance_m} for c in mesh_crops(meshes, sensor, crops, seed)]  # fmt: skip
+             "number_of_returns": c.number_of_returns, "distance_m": c.distance_m} for c in mesh_crops(meshes, sensor, crops, seed, footprint=footprint)]  # fmt: skip
 
 
 def check_same_crops(entry, sensor: Lidar, crops: int, seed: int, ours: list[dict]) -> None:
     """Our crops of ``entry`` have the returns that sim2real's ``lidar_object_samples`` counts for the same draws."""
     dist, _ = CropPlacement().crop_distributions(entry, CLASS_SIZES_M[entry.class_name])
     theirs = lidar_object_samples(entry.mesh, sensor, name=entry.name, n_samples=crops + max(1, crops // 5), n_points=64, seed=seed,
-                                  distributions=dist, class_name=entry.class_name)  # fmt: skip
+                                  distributions=dist, class_name=entry.class_name, footprint=FOOTPRINT)  # fmt: skip
     want = {c.sample_index: c.n_visible for c in theirs}
     got = {c["crop"]: len(c["points_m"]) for c in ours if c["mesh"] == entry.name}
     if any(want.get(k) != n for k, n in got.items()):

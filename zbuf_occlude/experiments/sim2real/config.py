@@ -19,6 +19,7 @@ from zbuf_occlude.experiments.sim2real.data import MIN_RETURNS, OCCLUDED_POINTS,
 from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT
 from zbuf_occlude.experiments.sim2real.real import KEEP_SCALE_UNIT_M
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
+from zbuf_occlude.sensors.adaptive_footprint import FOOTPRINT_MODES, adaptive_footprint
 
 if TYPE_CHECKING:  # torch is imported when a run trains
     from zbuf_occlude.learn.training import TrainConfig
@@ -156,12 +157,15 @@ class Sim2RealConfig:
         footprint's strongest echo).  Above 1: the
         multi-return model (each pulse's footprint cast as sub-rays, its hits resolved into up to
         ``returns`` echoes; ``settings.json``: ``lidar_returns``).  Not with ``fit_sensor``.
-    adaptive_footprint : bool
-        With ``returns`` above 1: the ``lidar`` set's crops cast a pulse's whole footprint only
-        where its centre ray and its neighbours do not show one plane filling it
-        (:func:`~zbuf_occlude.sensors.crops.object_crops`' ``footprint="adaptive"``), at a fraction
-        of the cost; ``settings.json``: ``lidar_footprint`` (only when set).  The meshes are still
-        screened with the whole footprint.
+    footprint_cast : {"auto", "exact", "adaptive"}
+        How the ``lidar`` set's crops cast a footprint whose echoes are resolved
+        (:func:`~zbuf_occlude.sensors.crops.object_crops`' ``footprint``): "adaptive" casts a
+        pulse's whole footprint only where its centre ray and its neighbours do not show one plane
+        filling it, at a fraction of the cost, and needs a beam that resolves a footprint's echoes
+        (``returns`` above 1, or a sensor whose beam has a return mode); "exact" every sub-ray;
+        "auto" (default) "adaptive" where it applies, else "exact".  ``settings.json``:
+        ``lidar_footprint`` "adaptive" where the crops cast it (:attr:`footprint_mode`).  The
+        meshes are still screened with the whole footprint.
     occluded_points : bool
         Also train on the :data:`~zbuf_occlude.experiments.sim2real.data.OCCLUDED_POINTS` set:
         the ``occluded`` set's clouds (the same dense samples, poses and draws) with visibility
@@ -221,7 +225,7 @@ class Sim2RealConfig:
     aspect: bool = False
     occluded_points: bool = False
     returns: int = 1
-    adaptive_footprint: bool = False
+    footprint_cast: str = "auto"
     option_names: InitVar[Mapping[str, str] | None] = None
     occluded_elevation_from: str = field(init=False, default="option")
 
@@ -306,11 +310,17 @@ class Sim2RealConfig:
             # the fit (sensors.fit.fit_lidar) fits a one-return sensor; its fitted sets would not have the returns
             raise InvalidInputError(f"{n('returns')} {self.returns} is for the lidar set's preset or file; "
                                     f"drop {n('fit_sensor')} or {n('returns')}")  # fmt: skip
-        if not isinstance(self.adaptive_footprint, bool):
-            raise InvalidInputError(f"{n('adaptive_footprint')} must be True or False, got {type(self.adaptive_footprint).__name__}")
-        if self.adaptive_footprint and self.returns == 1:
-            raise InvalidInputError(f"{n('adaptive_footprint')} skips the sub-rays of a footprint whose echoes are resolved: "
+        if not isinstance(self.footprint_cast, str) or self.footprint_cast not in FOOTPRINT_MODES:
+            raise InvalidInputError(f"{n('footprint_cast')} must be one of {', '.join(FOOTPRINT_MODES)}, "
+                                    f"got {type(self.footprint_cast).__name__} {self.footprint_cast!r:.40}")  # fmt: skip
+        if self.footprint_cast == "adaptive" and not self.sensor.beam.resolves_footprint:
+            raise InvalidInputError(f"{n('footprint_cast')} adaptive skips the sub-rays of a footprint whose echoes are resolved: "
                                     f"give {n('returns')} 2 or more")  # fmt: skip
+
+    @property
+    def footprint_mode(self) -> str:
+        """``"adaptive"`` or ``"exact"``: how the ``lidar`` set's crops cast a footprint, ``footprint_cast`` resolved for the sensor."""
+        return "adaptive" if adaptive_footprint(self.footprint_cast, self.sensor.beam, "embree") else "exact"
 
     @functools.cached_property
     def scale_values(self) -> Sim2RealScale:
@@ -362,7 +372,7 @@ class Sim2RealConfig:
             "method": self.method, "train_config": self.train_config(0).identity(("seed", "device", "threads")),
             **({"validate_on": self.validate_on} if self.validates_on_fit_half else {}),
             **({"lidar_returns": _returns_spec(self.sensor)} if self.returns > 1 else {}),
-            **({"lidar_footprint": "adaptive"} if self.adaptive_footprint else {}),
+            **({"lidar_footprint": "adaptive"} if self.footprint_mode == "adaptive" else {}),
             **({"occluded_points": {"set": OCCLUDED_POINTS, "method": POINT_VISIBILITY, "normals": "estimated", "topped_up": False}}
                if self.occluded_points else {}),
         }  # fmt: skip

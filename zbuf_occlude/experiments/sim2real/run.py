@@ -389,7 +389,7 @@ def _build_seed_sets(config: Sim2RealConfig, sets: Sim2RealSets, seed: int, trai
     kinds = _kinds(config)
     recipe = SetRecipe(sensor=config.sensor, sizes=config.sizes, keep_scale=config.keep_scale, min_returns=int(config.min_returns),
                        dense_points=sc.dense_points, resolution=sc.resolution, method=config.method,
-                       elevation_deg=config.occluded_elevation_deg, footprint="adaptive" if config.adaptive_footprint else "exact")  # fmt: skip
+                       elevation_deg=config.occluded_elevation_deg, footprint=config.footprint_mode)  # fmt: skip
     options = dict(fitted_sensor=sets.fitted, fitted_placement=sets.fitted_placement, fitted_sizes=sets.fitted_sizes,
                    kinds=[k for k in kinds if (k, seed) not in done], progress=progress)  # fmt: skip
     built = {"train": build_sets(train_meshes, sets.names, sc.per_class, n_points, seed, recipe, **options)}
