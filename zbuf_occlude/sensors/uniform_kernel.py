@@ -206,17 +206,24 @@ def _uniform_plane_echoes(origins, directions, face, t, neighbours, planes, face
 def nearest_in_line(key, position, line, order, width, low, step, column, out):
     """Write into ``out[:, column]`` each pulse's nearest pulse by position on line ``line + step``: the loop of
     :func:`~.adaptive_footprint.grid_neighbours` over pulses sorted by ``key = line · width + (position − low)``
-    (``order`` their rows), its binary search ``np.searchsorted``'s (side left), ties to the lower position."""
+    (``order`` their rows), the first key at or after each target (``np.searchsorted``'s side left), ties to the
+    lower position.  Along a line the targets rise with the positions, so the search walks on from the last one;
+    it searches by halves where a line starts."""
     n = len(key)
+    lo = 0
     for i in range(n):
         target = (line[i] + step) * width + (position[i] - low)
-        lo, hi = 0, n
-        while lo < hi:  # the first key >= target
-            mid = (lo + hi) >> 1
-            if key[mid] < target:
-                lo = mid + 1
-            else:
-                hi = mid
+        if i == 0 or line[i] != line[i - 1]:
+            lo, hi = 0, n
+            while lo < hi:  # the first key >= target
+                mid = (lo + hi) >> 1
+                if key[mid] < target:
+                    lo = mid + 1
+                else:
+                    hi = mid
+        else:
+            while lo < n and key[lo] < target:  # the targets of a line rise: the first key >= target lies ahead
+                lo += 1
         left, right = min(max(lo - 1, 0), n - 1), min(lo, n - 1)
         ok_left, ok_right = line[left] == line[i] + step, line[right] == line[i] + step
         if ok_left and (not ok_right or abs(position[left] - position[i]) <= abs(position[right] - position[i])):
