@@ -152,7 +152,8 @@ def outline_mask(points_m: NDArray[np.floating], *, ring_gap_deg: float = RING_G
 
     Points are grouped into rings (:func:`ring_labels`); within a ring they are sorted by azimuth,
     measured from the azimuth of the cloud's centroid (so that a cloud behind the sensor, across
-    ±180°, is one span), and split into runs where the gap to the next point exceeds ``gap_factor``
+    ±180°, is one span; a ring of nearly a full turn is also cut where ±180° from that azimuth
+    falls inside it), and split into runs where the gap to the next point exceeds ``gap_factor``
     times the ring's azimuth step.  The first and the last point of each run are outline points;
     a run of one point is one outline point.  Points of one pulse (several returns, azimuths
     within :data:`SAME_AZIMUTH_DEG`) never split a run, and ties keep the points' order.
