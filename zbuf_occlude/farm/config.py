@@ -105,14 +105,6 @@ def usable_cpus() -> int:
 
 
 # -- parameters ----------------------------------------------------------------------------
-def _resolved_cast(footprint_cast: str, sensor) -> str:
-    """``"adaptive"`` or ``"exact"``: how ``footprint_cast`` casts the footprint of ``sensor`` (:meth:`SensorCropParams.model`; Embree)."""
-    from zbuf_occlude.sensors.adaptive_footprint import adaptive_footprint
-    from zbuf_occlude.sensors.kinds import kind_of
-
-    return "adaptive" if kind_of(sensor).pulsed and adaptive_footprint(footprint_cast, sensor.beam, "embree") else "exact"
-
-
 @dataclass(frozen=True)
 class SensorCropParams:
     """``farm --sensor``: the sensor that scans each object, and where each scan places it.
@@ -148,8 +140,9 @@ class SensorCropParams:
         several rays and resolves echoes; "exact" casts every sub-ray; "auto" (default) is
         "adaptive" where it applies, else "exact".  The card records the cast used
         (:attr:`footprint_mode`) as ``sensor_adaptive_footprint: true`` only when adaptive, so the
-        digest of data sets made before it is kept; a card without it reads as "exact".  Held as
-        "auto" wherever it casts as "auto" does, so that settings read back from a card compare equal.
+        digest of data sets made before it is kept; a card without it reads as "exact".  Held as the
+        cast it resolves to ("exact" or "adaptive"), so that settings read back from a card compare
+        equal and the sensor is not read again to know it.
 
     Raises
     ------
@@ -176,7 +169,7 @@ class SensorCropParams:
                     f"farm --sensor draws no {f.name} (its card could not say so): leave it at {getattr(unset, f.name)!r}"
                 )
         object.__setattr__(self, "footprint", bool(self.footprint))
-        from zbuf_occlude.sensors.adaptive_footprint import FOOTPRINT_MODES
+        from zbuf_occlude.sensors.adaptive_footprint import FOOTPRINT_MODES, footprint_mode
 
         if not isinstance(self.footprint_cast, str) or self.footprint_cast not in FOOTPRINT_MODES:
             raise InvalidInputError(f"{OPTION_NAMES['sensor_adaptive_footprint']} must be one of {', '.join(FOOTPRINT_MODES)}, "
@@ -189,9 +182,8 @@ class SensorCropParams:
         if self.across_sight_width_m is not None:
             option = OPTION_NAMES["sensor_across_sight_width_m"]
             object.__setattr__(self, "across_sight_width_m", check_across_sight_width(self.across_sight_width_m, option))
-        sensor = self.model()  # raises InvalidInputError naming an unknown sensor, or physics it has not
-        if _resolved_cast(self.footprint_cast, sensor) == _resolved_cast("auto", sensor):  # one value for one cast
-            object.__setattr__(self, "footprint_cast", "auto")  # so that settings read back from a card compare equal
+        sensor = self.model()  # raises InvalidInputError naming an unknown sensor, or physics it has not (a depth camera)
+        object.__setattr__(self, "footprint_cast", footprint_mode(self.footprint_cast, sensor.beam))  # one value for one cast
 
     def model(self):
         """The sensor of ``name`` with the beam changes of ``footprint`` and ``divergence_deg``
@@ -238,9 +230,9 @@ class SensorCropParams:
 
     @property
     def footprint_mode(self) -> str:
-        """``"adaptive"`` or ``"exact"``: how the crops cast a footprint (:func:`~zbuf_occlude.sensors.crops.object_crops`),
-        ``footprint_cast`` resolved for the sensor (:func:`~zbuf_occlude.sensors.adaptive_footprint.adaptive_footprint`)."""
-        return _resolved_cast(self.footprint_cast, self.model())
+        """``"adaptive"`` or ``"exact"``: how the crops cast a footprint (:func:`~zbuf_occlude.sensors.crops.object_crops`):
+        ``footprint_cast``, which construction resolved for the sensor (:func:`~zbuf_occlude.sensors.adaptive_footprint.footprint_mode`)."""
+        return self.footprint_cast
 
     def to_dict(self) -> dict[str, Any]:
         """``{"sensor": name, "sensor_distance_m": [lo, hi], ...}``: the flat keys of :data:`SENSOR_KEYS`."""

@@ -51,6 +51,7 @@ __all__ = [
     "PLANE_SHARE",
     "adaptive_echo_returns",
     "adaptive_footprint",
+    "footprint_mode",
     "grid_neighbours",
     "plane_echoes",
     "pulse_neighbours",
@@ -284,6 +285,12 @@ def adaptive_footprint(footprint: str, beam: Beam, backend: str) -> bool:
     if backend != "embree":
         raise InvalidInputError(f"footprint 'adaptive' casts rays with Embree; backend {backend!r} renders a z-buffer")
     return True
+
+
+def footprint_mode(footprint: str, beam: Beam, backend: str = "embree") -> str:
+    """``"adaptive"`` or ``"exact"``: the cast ``footprint`` (:data:`FOOTPRINT_MODES`) makes with ``beam`` and ``backend``
+    (:func:`adaptive_footprint`, which raises what it raises)."""
+    return "adaptive" if adaptive_footprint(footprint, beam, backend) else "exact"
 
 
 def adaptive_echo_returns(

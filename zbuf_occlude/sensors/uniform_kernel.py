@@ -144,7 +144,8 @@ def _uniform_plane_echoes(origins, directions, face, t, neighbours, planes, face
             known_any = True
             q_hit = face[q] >= 0
             if _inside_cone(origins[0 if one_origin else p], directions[p], point[q], directions[q], q_hit, cos_max):
-                enclosed = False  # the footprint reaches past this neighbour
+                enclosed = False  # the footprint reaches past this neighbour: cast in full, whatever the others show
+                break
             if ok:
                 if not q_hit or face_object[face[q] if q_hit else 0] != obj:
                     ok = False

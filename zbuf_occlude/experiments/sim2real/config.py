@@ -19,7 +19,7 @@ from zbuf_occlude.experiments.sim2real.data import MIN_RETURNS, OCCLUDED_POINTS,
 from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT
 from zbuf_occlude.experiments.sim2real.real import KEEP_SCALE_UNIT_M
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
-from zbuf_occlude.sensors.adaptive_footprint import FOOTPRINT_MODES, adaptive_footprint
+from zbuf_occlude.sensors.adaptive_footprint import FOOTPRINT_MODES, footprint_mode
 
 if TYPE_CHECKING:  # torch is imported when a run trains
     from zbuf_occlude.learn.training import TrainConfig
@@ -320,7 +320,7 @@ class Sim2RealConfig:
     @property
     def footprint_mode(self) -> str:
         """``"adaptive"`` or ``"exact"``: how the ``lidar`` set's crops cast a footprint, ``footprint_cast`` resolved for the sensor."""
-        return "adaptive" if adaptive_footprint(self.footprint_cast, self.sensor.beam, "embree") else "exact"
+        return footprint_mode(self.footprint_cast, self.sensor.beam)
 
     @functools.cached_property
     def scale_values(self) -> Sim2RealScale:
