@@ -9,11 +9,19 @@ the memory.  These helpers run a command in a child process whose limit is
 
 where the **footprint** is the child's ``VmSize`` (``/proc/self/status``) once the interpreter has
 imported what every ``zbuf-occlude`` command imports before it parses its command line: numpy, the
-package and its CLI module (:data:`FOOTPRINT_MODULES`).  Libraries a command imports later (h5py,
-numba, trimesh, torch), the threads it starts (a stack and, for a thread that allocates, a glibc
-malloc arena of 64 MiB reserved each) and its data all count against the **headroom**
-(:data:`HEADROOM_BYTES`, 1.5 GiB), as they count against a user's limit: a command that imports
-torch must still fit.  Soft and hard limits are both set, as ``prlimit --as`` does.
+package and its CLI module (:data:`FOOTPRINT_MODULES`), and the modules a test names in
+``preload``.  Libraries a command imports later (h5py, numba, trimesh), the threads it starts (a
+stack and, for a thread that allocates, a glibc malloc arena of 64 MiB reserved each) and its data
+all count against the **headroom** (:data:`HEADROOM_BYTES`, 1.5 GiB), as they count against a
+user's limit.  Soft and hard limits are both set, as ``prlimit --as`` does.
+
+**torch** is preloaded (``preload=TORCH``) by every test whose child imports it: what its
+libraries map at import is the build's, not ours, and differs by gigabytes between builds (the
+CPU wheel about 0.5 GiB; PyPI's default CUDA wheel maps ``libtorch_cuda.so``, cuBLAS, cuDNN and
+the rest at import, several GiB of address space, more than the headroom: its import fails with
+"failed to map segment from shared object").  The limit is then that mapping, measured in the
+child, plus the test's headroom, so that the budget bites our code alike under every build
+(tests/test_memory_limit.py holds both).
 
 What is measured, in the child's main process only (its own workers are limited alike, being
 forked from it, but not measured here):
@@ -52,11 +60,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["FOOTPRINT_MODULES", "HEADROOM_BYTES", "HEADROOM_3_GB", "OPEN_DATASET", "Limited", "run_cli_limited", "run_python_limited"]
+__all__ = [
+    "FOOTPRINT_MODULES", "HEADROOM_BYTES", "HEADROOM_3_GB", "OPEN_DATASET", "TORCH", "Limited", "run_cli_limited", "run_python_limited",
+]  # fmt: skip
 
 #: Address space a command may map beyond the interpreter's footprint: 1.5 GiB, what a small job
-#: (a few meshes, a 2-sample data set) needs with torch imported (about 0.9 GiB of mappings) and
-#: far less than the 4 GiB a read reserving the metadata or mesh cap used to take.
+#: (a few meshes, a 2-sample data set) needs, and far less than the 4 GiB a read reserving the
+#: metadata or mesh cap would take.
 HEADROOM_BYTES = 1536 << 20
 #: Address space beyond the footprint of a process under a user's ``ulimit -v`` of 3 GB: 3 GiB less
 #: the footprint (152 MiB measured).
@@ -78,6 +88,8 @@ except ZbufOccludeError as exc:
 #: What the child imports before its footprint is measured: what ``zbuf-occlude`` imports before
 #: it parses a command line (the console script's module pulls in numpy and the package).
 FOOTPRINT_MODULES = ("numpy", "zbuf_occlude", "zbuf_occlude.cli.main")
+#: ``preload`` of a child that imports torch: its mapping joins the footprint (module docstring).
+TORCH = ("torch",)
 #: Seconds a child may run before the test fails (a hung command, not a slow machine).
 DEFAULT_TIMEOUT_S = 300
 
@@ -96,7 +108,7 @@ def _status():
     return out
 
 report, mode, headroom, modules, *rest = sys.argv[1:]
-for name in modules.split(","):
+for name in filter(None, modules.split(",")):
     importlib.import_module(name)
 footprint = _status()["VmSize"]
 limit = footprint + int(headroom)
@@ -135,7 +147,7 @@ class Limited:
     limit_bytes : int or None
         The ``RLIMIT_AS`` it ran under, bytes (footprint + headroom).
     footprint_bytes : int or None
-        Its ``VmSize`` after importing :data:`FOOTPRINT_MODULES`, bytes.
+        Its ``VmSize`` after importing :data:`FOOTPRINT_MODULES` and the test's ``preload``, bytes.
     peak_rss_bytes : int or None
         ``VmHWM`` of its main process (its largest resident set), bytes.
     """
@@ -160,10 +172,15 @@ class Limited:
         )
 
 
-def _run_limited(mode: str, payload: list[str], *, cwd: str | os.PathLike[str] | None, timeout: float, headroom: int) -> Limited:
+def _run_limited(
+    mode: str, payload: list[str], *, cwd: str | os.PathLike[str] | None, timeout: float, headroom: int, preload: Sequence[str]
+) -> Limited:
+    if isinstance(preload, str) or any(not isinstance(name, str) or "," in name or not name for name in preload):
+        raise ValueError(f"preload must be a sequence of module names, got {preload!r}")
     with tempfile.TemporaryDirectory(prefix="zo-memory-limit-") as folder:
         report = Path(folder) / "report.json"
-        command = [sys.executable, "-c", _CHILD, str(report), mode, str(int(headroom)), ",".join(FOOTPRINT_MODULES), *payload]
+        modules = ",".join((*FOOTPRINT_MODULES, *preload))
+        command = [sys.executable, "-c", _CHILD, str(report), mode, str(int(headroom)), modules, *payload]
         done = subprocess.run(command, cwd=cwd, capture_output=True, timeout=timeout, check=False)
         numbers = json.loads(report.read_text(encoding="utf-8")) if report.is_file() else {}
     decode = lambda data: data.decode("utf-8", "replace")  # noqa: E731
@@ -179,7 +196,12 @@ def _run_limited(mode: str, payload: list[str], *, cwd: str | os.PathLike[str] |
 
 
 def run_cli_limited(
-    args: list[str], *, cwd: str | os.PathLike[str] | None = None, timeout: float = DEFAULT_TIMEOUT_S, headroom: int = HEADROOM_BYTES
+    args: list[str],
+    *,
+    cwd: str | os.PathLike[str] | None = None,
+    timeout: float = DEFAULT_TIMEOUT_S,
+    headroom: int = HEADROOM_BYTES,
+    preload: Sequence[str] = (),
 ) -> Limited:
     """``zbuf-occlude ARGS`` in a child limited to its footprint plus ``headroom`` bytes of address space.
 
@@ -195,33 +217,44 @@ def run_cli_limited(
         Seconds before ``subprocess.TimeoutExpired`` is raised.
     headroom : int
         Bytes of address space beyond the footprint (default :data:`HEADROOM_BYTES`).
+    preload : sequence of str
+        Modules imported, beyond :data:`FOOTPRINT_MODULES`, before the footprint is measured
+        (:data:`TORCH` where the command imports torch): their mappings count in the footprint,
+        not against the headroom.
 
     Returns
     -------
     Limited
     """
-    return _run_limited("cli", [str(a) for a in args], cwd=cwd, timeout=timeout, headroom=headroom)
+    return _run_limited("cli", [str(a) for a in args], cwd=cwd, timeout=timeout, headroom=headroom, preload=preload)
 
 
 def run_python_limited(
-    code: str, *, args: Sequence[str | os.PathLike[str]] = (), timeout: float = DEFAULT_TIMEOUT_S, headroom: int = HEADROOM_BYTES
+    code: str,
+    *,
+    args: Sequence[str | os.PathLike[str]] = (),
+    timeout: float = DEFAULT_TIMEOUT_S,
+    headroom: int = HEADROOM_BYTES,
+    preload: Sequence[str] = (),
 ) -> Limited:
     """Run the Python source ``code`` as ``__main__`` in a child limited as :func:`run_cli_limited`'s.
 
     Parameters
     ----------
     code : str
-        A snippet; it may import anything (what it imports beyond :data:`FOOTPRINT_MODULES` counts
-        against the headroom) and exit with ``sys.exit``.
+        A snippet; it may import anything (what it imports beyond :data:`FOOTPRINT_MODULES` and
+        ``preload`` counts against the headroom) and exit with ``sys.exit``.
     args : sequence of str or path
         Its ``sys.argv[1:]`` (as strings).
     timeout : float
         Seconds before ``subprocess.TimeoutExpired`` is raised.
     headroom : int
         Bytes of address space beyond the footprint (default :data:`HEADROOM_BYTES`).
+    preload : sequence of str
+        As :func:`run_cli_limited`'s (:data:`TORCH` where the snippet imports torch).
 
     Returns
     -------
     Limited
     """
-    return _run_limited("python", [code, *map(str, args)], cwd=None, timeout=timeout, headroom=headroom)
+    return _run_limited("python", [code, *map(str, args)], cwd=None, timeout=timeout, headroom=headroom, preload=preload)

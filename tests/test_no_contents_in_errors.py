@@ -20,6 +20,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from zbuf_occlude.errors import UnsafePathError, ZbufOccludeError
 
@@ -427,3 +429,268 @@ def test_generate_skips_a_point_set_with_a_200_kb_npy_header_in_one_line(tmp_pat
     skipped = [line for line in done.stderr.splitlines() if str(root / "big.npy") in line]
     assert skipped and all(f"its .npy header is {len(header) + 1:,} bytes" in line for line in skipped), done.stderr
     assert "max_header_size" not in done.stderr and "allow_pickle" not in done.stderr, done.stderr
+
+
+# -- values read from a user's file: named by key, row, type and size, never quoted --------------------
+#: A secret a linked file may hold (an OAuth token); a valid sensor or class name, so it is planted in every place.
+CANARY = "ya29.CanaryTok3n"
+#: A number a file may hold; no message may show it either ("outside [0, 255]", not the number).
+CANARY_NUMBER = 987654.321
+#: What may not appear: the secret, its core, the number's digits (as a float, an int or cut).
+CANARY_PIECES = (CANARY, "CanaryTok3n", "987654")
+#: The values planted in each place: the secret alone, in a list and in an object (a docker config), the numbers.
+PLANTED = (CANARY, [CANARY], {"auth": CANARY}, {"auths": {"x": {"auth": CANARY}}}, CANARY_NUMBER, 987654, -CANARY_NUMBER)
+
+
+def _canary_free(text: str) -> None:
+    assert not [piece for piece in CANARY_PIECES if piece in text], text
+    assert "\n" not in text.strip(), text
+
+
+def _refusal(read: Callable[[], object]) -> str | None:
+    """The message of what ``read`` raises (a ZbufOccludeError), None if it reads."""
+    try:
+        read()
+    except ZbufOccludeError as exc:
+        return str(exc)
+    return None
+
+
+def _json(path: Path, doc: object) -> Path:
+    path.write_text(json.dumps(doc), encoding="utf-8")
+    return path
+
+
+def _class_maps(tmp_path: Path, capsys) -> list[str | None]:
+    from zbuf_occlude.sensors.las_classes import load_class_map
+
+    docs = [{"access_token": v} for v in PLANTED] + [{"car": 1, "x": v} for v in PLANTED] + [list(PLANTED), CANARY, CANARY_NUMBER]
+    docs += [{"car": 12, "token": CANARY}, {"car": 987654}]
+    return [_refusal(lambda d=d: load_class_map(_json(tmp_path / "classes.json", d))) for d in docs]
+
+
+def _class_map_cli(tmp_path: Path, capsys) -> list[str | None]:
+    """``scan ... --class-map classes.json``, the map a link to a credentials file outside the folder."""
+    from zbuf_occlude.cli.main import main
+
+    out = []
+    for doc in ({"access_token": CANARY}, {"auths": {"registry": {"auth": CANARY}}}, {"car": CANARY_NUMBER}):
+        secret = _json(tmp_path / "home" / ".config" / "token.json", doc) if (tmp_path / "home" / ".config").is_dir() else None
+        if secret is None:
+            (tmp_path / "home" / ".config").mkdir(parents=True)
+            secret = _json(tmp_path / "home" / ".config" / "token.json", doc)
+        work = tmp_path / "work"
+        work.mkdir(exist_ok=True)
+        link = work / "classes.json"
+        link.unlink(missing_ok=True)
+        link.symlink_to(secret)
+        street = REPO_ROOT / "data" / "scenes" / "street.json"
+        code = main(["scan", str(street), "--format", "las", "--class-map", str(link), "--out", str(work / "o")])
+        captured = capsys.readouterr()
+        assert code == 2 and str(link) in captured.err, captured.err
+        out.append(captured.out + captured.err)
+    return out
+
+
+_LIDAR = {"kind": "lidar", "name": "l", "elevations_deg": [0.0, 1.0]}
+_LIDAR_FIELDS = ("name", "elevations_deg", "rotation_hz", "firing_rate_hz", "azimuth_offset_deg", "source", "preset", "kind", "beam")
+_BEAM_FIELDS = ("name", "divergence_deg", "footprint_rays", "max_returns", "profile", "return_mode", "echo_rule", "range_noise_m",
+                "dropout", "min_range_m", "max_range_m", "intensity_scale", "max_intensity", "source")  # fmt: skip
+_AIRBORNE = {"kind": "airborne", "preset": "dales-q1560"}
+
+
+def _sensors(tmp_path: Path, capsys) -> list[str | None]:
+    from zbuf_occlude.sensors.kinds import sensor_from_name
+
+    docs = [{**_LIDAR, key: v} for key in _LIDAR_FIELDS for v in PLANTED]
+    docs += [{**_LIDAR, "beam": {key: v}} for key in _BEAM_FIELDS for v in PLANTED]
+    docs += [
+        {**_AIRBORNE, key: v} for key in ("altitude_m", "speed_mps", "swath_deg", "pattern", "n_lines", "headings_deg") for v in PLANTED
+    ]
+    docs += [
+        {**_LIDAR, "name": CANARY, "rotation_hz": -1},
+        {**_LIDAR, "name": CANARY, "beam": {"dropout": 2}},
+    ]  # a valid name, then a fault
+    docs += [{**_LIDAR, "name": CANARY, "beam": {"name": CANARY, "min_range_m": 50, "max_range_m": 10}}]
+    docs += [{**_LIDAR, "beam": {"footprint_rays": 7, "divergence_deg": 0}}, {**_LIDAR, "firing_rate_hz": 1, "rotation_hz": 987654.321}]
+    docs += [list(PLANTED), CANARY]  # (a key is named, cut: not planted here)
+    return [_refusal(lambda d=d: sensor_from_name(_json(tmp_path / "sensor.json", d))) for d in docs]
+
+
+_OBJECT = {"mesh": {"box_m": [1.0, 1.0, 1.0]}, "class": "car", "position_m": [5.0, 0.0]}
+
+
+def _scene_docs() -> list[object]:
+    docs: list[object] = [{"objects": [{**_OBJECT, key: v}]} for key in ("mesh", "class", "position_m", "yaw_deg", "size_m", "up", "foliage")
+                          for v in PLANTED]  # fmt: skip
+    docs += [{"objects": [{**_OBJECT, "mesh": {"box_m": [1.0, 1.0, v]}}]} for v in PLANTED]
+    docs += [{"objects": [{**_OBJECT, "mesh": {"cylinder": {"radius_m": v, "height_m": 1.0}}}]} for v in PLANTED]
+    docs += [{"objects": [{**_OBJECT, "mesh": path}]} for path in ("../" + CANARY + ".off", "/" + CANARY + ".off", CANARY + "\0")]
+    docs += [{"ground": {key: v}} for key in ("z_m", "half_extent_m") for v in PLANTED]
+    docs += [{"sensor": {key: v}} for key in ("height_m", "position_m") for v in PLANTED]
+    docs += [{key: v} for key in ("ground", "objects", "occluders", "sensor") for v in PLANTED]
+    docs += [{"objects": [{**_OBJECT, "class": CANARY, "yaw_deg": None}]}, list(PLANTED), CANARY]
+    return docs
+
+
+def _scenes(tmp_path: Path, capsys) -> list[str | None]:
+    import yaml
+
+    from zbuf_occlude.sensors.scene_files import load_scene
+
+    out = []
+    for doc in _scene_docs():
+        out.append(_refusal(lambda d=doc: load_scene(_json(tmp_path / "scene.json", d))))
+        (tmp_path / "scene.yaml").write_text(yaml.safe_dump(doc), encoding="utf-8")
+        out.append(_refusal(lambda: load_scene(tmp_path / "scene.yaml")))
+    for text in (
+        f"ground: !{CANARY} 1\n",
+        f"objects: [{{mesh: '{CANARY}'\n",
+        f"a: &{CANARY} 1\nb: *{CANARY}\n",
+        f"ground:\n\t{CANARY}: 1\n",
+    ):
+        (tmp_path / "scene.yaml").write_text(text, encoding="utf-8")
+        out.append(_refusal(lambda: load_scene(tmp_path / "scene.yaml")))
+    for text in ('{"ground": "' + CANARY + "\x01" + '"}', '{"ground": ' + CANARY + "}", '{"a": "\\' + CANARY + '"}'):
+        (tmp_path / "scene.json").write_text(text, encoding="utf-8")
+        out.append(_refusal(lambda: load_scene(tmp_path / "scene.json")))
+    return out
+
+
+def _trajectories(tmp_path: Path, capsys) -> list[str | None]:
+    from zbuf_occlude.sensors.platform import load_trajectory
+
+    head = "time_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n"
+    good = ["0,0,0,0,0,0,0", "1,1,0,0,0,0,0"]
+    out = []
+    for column in range(7):
+        for value in (CANARY, "nan", "inf", "9" * 400, str(CANARY_NUMBER * 1e6), str(-CANARY_NUMBER)):
+            row = good[1].split(",")
+            row[column] = value
+            (tmp_path / "t.csv").write_text(head + "\n".join([good[0], ",".join(row)]) + "\n", encoding="utf-8")
+            out.append(_refusal(lambda: load_trajectory(tmp_path / "t.csv")))
+    (tmp_path / "t.csv").write_text(f"time_s,{CANARY}\n0,1\n", encoding="utf-8")
+    out.append(_refusal(lambda: load_trajectory(tmp_path / "t.csv")))
+    return out
+
+
+def _ray_tables(tmp_path: Path, capsys) -> list[str | None]:
+    from zbuf_occlude.sensors.ray_table import load_ray_table
+
+    out = []
+    for column in range(3):
+        for value in (CANARY, "nan", "-inf", str(CANARY_NUMBER), str(-CANARY_NUMBER)):
+            row = ["1", "0", "0"]
+            row[column] = value
+            (tmp_path / "r.csv").write_text("time_s,azimuth_deg,elevation_deg\n2,0,0\n" + ",".join(row) + "\n", encoding="utf-8")
+            out.append(_refusal(lambda: load_ray_table(tmp_path / "r.csv")))
+    (tmp_path / "r.csv").write_text(f"time_s,azimuth_deg,{CANARY}\n", encoding="utf-8")
+    out.append(_refusal(lambda: load_ray_table(tmp_path / "r.csv")))
+    return out
+
+
+def _las_files(tmp_path: Path, capsys) -> list[str | None]:
+    laspy = pytest.importorskip("laspy")
+    from zbuf_occlude.io.las import read_las
+
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.system_identifier = CANARY
+    header.generating_software = CANARY
+    header.vlrs.append(laspy.VLR(user_id=CANARY, record_id=1, description=CANARY, record_data=SECRET))
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = np.arange(4.0), np.arange(4.0), np.arange(4.0)
+    las.write(tmp_path / "whole.las")
+    data = (tmp_path / "whole.las").read_bytes()
+    out = []
+    for name, cut in (("truncated.las", data[:-10]), ("header.las", data[:300]), ("vlr.las", data[:400])):
+        (tmp_path / name).write_bytes(cut)
+        out.append(_refusal(lambda n=name: read_las(tmp_path / n)))
+    forged = bytearray(data)
+    forged[104] = 99  # an unknown point format
+    (tmp_path / "format.las").write_bytes(bytes(forged))
+    out.append(_refusal(lambda: read_las(tmp_path / "format.las")))
+    return out
+
+
+def _mtl_names(tmp_path: Path, capsys) -> list[str | None]:
+    from zbuf_occlude.mesh.load import load_mesh
+
+    folder = tmp_path / "meshes"
+    folder.mkdir()
+    body = "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
+    out = []
+    for head in (f"mtllib ../{CANARY}.mtl\nusemtl {CANARY}\n", f"mtllib /{CANARY}.mtl\n", f"usemtl {CANARY}\nf 1 2 0\n"):
+        (folder / "m.obj").write_text(head + body + "f 1 2 3\n", encoding="utf-8")
+        out.append(_refusal(lambda: load_mesh(folder / "m.obj")))
+    return out
+
+
+def _dataset_metadata(tmp_path: Path, capsys) -> list[str | None]:
+    from zbuf_occlude.dataset.schema import checked_shards, read_card, read_manifest
+    from zbuf_occlude.io.hdf5 import open_hdf5
+
+    fields = ("format_version", "storage", "params", "poses", "splits", "shape_names", "checksums", "joined_files", "point_sets")
+    out = [_refusal(lambda d=d: read_card(_json(tmp_path / "card.json", d))) for d in ([{k: v for k in fields} for v in PLANTED])]
+    record = {"object_index": 0, "name": "a", "source": "a.off", "class_name": "c", "label": 0, "split": "train", "key": 0,
+              "status": "ok", "shards": ["a.h5"], "n_visible": [1]}  # fmt: skip
+    for key in ("name", "status", "label", "class_name", "shards", "n_visible", "sha256", "point_columns", "cloud", "visibility_from"):
+        for v in PLANTED:
+            (tmp_path / "manifest.jsonl").write_text(json.dumps({**record, key: v}) + "\n", encoding="utf-8")
+            out.append(_refusal(lambda: read_manifest(tmp_path / "manifest.jsonl")))
+    for shard in ("../" + CANARY + ".h5", "/" + CANARY + ".h5"):
+        (tmp_path / "manifest.jsonl").write_text(json.dumps({**record, "shards": [shard]}) + "\n", encoding="utf-8")
+        ((_, _, rec),) = read_manifest(tmp_path / "manifest.jsonl")
+        out.append(_refusal(lambda r=rec: checked_shards(tmp_path, "manifest.jsonl:1", r, None, verify=False)))
+    with h5py.File(tmp_path / "s.h5", "w") as f:
+        f["data"] = np.zeros((1, 2, 3))
+        f.attrs["note"] = CANARY
+        f["data"].attrs["note"] = CANARY
+        f["link"] = h5py.SoftLink("/data")
+    out.append(_refusal(lambda: open_hdf5(tmp_path / "s.h5")))
+    return out
+
+
+#: Each reader of a user's file, and the messages of its refusals of files with the canary in every place.
+VALUE_READERS = {
+    "class_map": _class_maps, "class_map_cli_link": _class_map_cli, "sensor_json": _sensors, "scene_json_yaml": _scenes,
+    "trajectory_csv": _trajectories, "ray_table_csv": _ray_tables, "las_header": _las_files, "obj_mtl": _mtl_names,
+    "dataset_metadata": _dataset_metadata,
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("reader", VALUE_READERS)
+def test_a_value_read_from_a_file_never_reaches_a_message(tmp_path: Path, capsys, reader: str) -> None:
+    """Every reader of a user's file names the key, the row, the type and the size of what it refuses, never its
+    value: a secret and a number planted in every place of each kind of file appear in no message."""
+    messages = VALUE_READERS[reader](tmp_path, capsys)
+    refused = [m for m in messages if m is not None]
+    assert len(refused) >= max(1, len(messages) // 2), f"{len(refused)} of {len(messages)} files refused"  # the files are bad
+    for message in refused:
+        _canary_free(message)
+
+
+_JSON_VALUES = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats(allow_nan=True, allow_infinity=True) | st.text(max_size=30),
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner, max_size=4),
+    max_leaves=8,
+)
+_PROPERTY_PLACES = (("class map", None), ("lidar", "name"), ("lidar", "rotation_hz"), ("lidar", "elevations_deg"), ("lidar", "source"),
+                    ("beam", "dropout"), ("beam", "footprint_rays"), ("beam", "profile"))  # fmt: skip
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(value=_JSON_VALUES, place=st.sampled_from(_PROPERTY_PLACES))
+def test_no_json_value_in_a_class_map_or_a_sensor_file_is_quoted(tmp_path: Path, value: object, place: tuple[str, str | None]) -> None:
+    from zbuf_occlude.sensors.kinds import sensor_from_spec
+    from zbuf_occlude.sensors.las_classes import check_class_map
+
+    kind, key = place
+    if kind == "class map":
+        message = _refusal(lambda: check_class_map({"car": value}, "classes.json"))
+    elif kind == "lidar":
+        message = _refusal(lambda: sensor_from_spec({"kind": "lidar", "preset": "vlp16", key: value}))
+    else:
+        message = _refusal(lambda: sensor_from_spec({"kind": "lidar", "preset": "vlp16", "beam": {key: value}}))
+    if message is not None:
+        for shown in {repr(value), json.dumps(value), str(value)}:
+            assert len(shown) <= 6 or shown not in message, message

@@ -150,8 +150,10 @@ SPLAT_PIXELS_PER_RADIUS = 3.0
 #: gets coarser pixels.
 MAX_SPLAT_PIXELS = 4_000_000
 #: Points one cloud of a point-set file may hold (:func:`zbuf_occlude.io.point_sets.read_point_sets`'s
-#: ``max_points``): 10⁷, 240 MB as float64 coordinates, far above an object's scan or PointNet's 2,048.
-MAX_POINT_SET_POINTS = 10_000_000
+#: ``max_points``): 10⁶, which ``generate`` occludes from its 25 default poses in about 40 s on two
+#: cores and 1 GiB of address space (measured; the law: :func:`zbuf_occlude.io.point_sets.occlusion_cost`),
+#: far above PointNet's 2,048; a 10⁷-point cloud would need 6 GiB and 6 minutes.
+MAX_POINT_SET_POINTS = 1_000_000
 
 # -- caps of the counted options --------------------------------------------------------------------
 # The largest value each counted option of the command line takes (zbuf_occlude.cli.options checks

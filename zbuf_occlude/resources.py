@@ -24,6 +24,7 @@ from pathlib import Path
 from zbuf_occlude.errors import InsufficientMemoryError, InvalidInputError
 
 __all__ = [
+    "cpu_flags",
     "MemoryEstimate",
     "estimate_job_memory",
     "available_memory",
@@ -187,6 +188,18 @@ def _read_int(path: Path) -> int | None:
     except OSError:
         return None
     return int(text) if text.isdigit() else None
+
+
+def cpu_flags(cpuinfo: Path = Path("/proc/cpuinfo")) -> frozenset[str]:
+    """The instruction-set flags of this machine's first CPU as Linux lists them (``avx2``, ``fma``,
+    ``avx512f``...); empty where ``/proc/cpuinfo`` cannot be read (another system)."""
+    try:
+        for line in cpuinfo.read_text(encoding="ascii", errors="replace").splitlines():
+            if line.startswith("flags"):
+                return frozenset(line.split(":", 1)[-1].split())
+    except OSError:
+        pass
+    return frozenset()
 
 
 def _stat_value(path: Path, key: str) -> int:

@@ -239,7 +239,7 @@ def test_the_adaptive_footprint_reaches_scene_and_mesh_scans(tmp_path: Path, cap
     ("options", "words"),
     [(["--sensor", "vlp16"], "--footprint-cast adaptive skips the sub-rays of a footprint whose echoes are resolved; vlp16 fires one ray"),
      (["--sensor", "vlp16", *RETURNS, "--backend", "zbuffer"], "--footprint-cast adaptive casts rays with Embree; --backend zbuffer renders"),
-     (["--sensor", "kinect-v1"], "--footprint-cast adaptive: kinect-v1 is a depth camera, which fires no pulses")],
+     (["--sensor", "kinect-v1"], "--footprint-cast: kinect-v1 is a depth camera, which has no beam to change")],
 )  # fmt: skip
 def test_the_adaptive_footprint_is_refused_where_it_does_not_apply(tmp_path: Path, capsys, options: list[str], words: str) -> None:
     code, err = _run(["scan", str(STREET), *options, "--footprint-cast", "adaptive", "--out", str(tmp_path / "o")], capsys)

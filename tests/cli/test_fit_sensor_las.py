@@ -200,13 +200,13 @@ def test_divergence_shares_fit_the_divergence(scans: Path, tmp_path: Path, capsy
             r"curve\.csv: the header must be divergence_deg,<a multi_return_points figure>",
         ),
         ("divergence_deg,returns_1\n0.5,0.1\n1,0.2\n", r"curve\.csv: the header must be"),
-        ("divergence_deg,multi_return_points\n0.5,0.1\n1,x\n", r"curve\.csv: row 3: multi_return_points is not a number: 'x'"),
+        ("divergence_deg,multi_return_points\n0.5,0.1\n1,x\n", r"curve\.csv: row 3: multi_return_points is not a number$"),
         ("divergence_deg,multi_return_points\n0.5,0.3\n1,0.2\n", r"curve\.csv: simulated_shares must grow with the divergence"),
         ("divergence_deg,multi_return_points\n0.5,0.3\n", r"curve\.csv: .*M >= 2"),
         ("divergence_deg,multi_return_points\n", r"curve\.csv: a table of simulated shares needs 2 to 1,000 rows, got 0"),
         (
             "divergence_deg,multi_return_points\n0.5,0.1\n1e308,0.2\n",
-            r"^zbuf-occlude: error: --divergence-shares \S*curve\.csv: divergences_deg must be at most 90 degrees .*got 1e\+308$",
+            r"^zbuf-occlude: error: --divergence-shares \S*curve\.csv: divergences_deg must be at most 90 degrees .*got a larger one$",
         ),
     ],
 )

@@ -124,7 +124,7 @@ def test_crs_without_pyproj_names_the_extra(tmp_path: Path, capsys, monkeypatch:
         (["--class-map", "missing.json"], r"--class-map .*missing.json"),
         (["--format", "npz", "--class-map", "{map}"], r"--class-map fills LAS/LAZ files: it needs --format las or laz, not npz"),
         (["--format", "ply", "--gps-start", "5"], r"--gps-start fills LAS/LAZ files"),
-        (["--class-map", "{bad}"], r"--class-map .*bad.json: 'car': ASPRS code 12 is reserved"),
+        (["--class-map", "{bad}"], r"--class-map .*bad.json: 'car': the ASPRS code is one LAS 1.4 reserves"),
         (["--crs", "EPSG:2154", "--frame", "sensor"], r"--crs EPSG:2154 labels world coordinates: it needs --frame world"),
     ],
 )

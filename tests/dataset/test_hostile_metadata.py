@@ -102,7 +102,7 @@ def test_verify_refuses_a_sparse_joined_file_without_reading_it(tmp_path, monkey
         fh.truncate(10**12)
     _no_hashing(monkeypatch)
     report = verify_dataset(out)
-    assert any("more than the shards of split" in p for p in report.problems), report.problems
+    assert any("more than the shards of its split" in p for p in report.problems), report.problems
 
 
 def test_a_deep_protocol_json_is_not_a_traceback(tmp_path, capsys):

@@ -248,14 +248,17 @@ CORRUPTIONS = {
     "kind": ({"return_number": lambda f, k, old: f.create_dataset(k, data=old.astype(np.float32))}, "holds float values"),
     "missing": ({"pulse_id": None}, "per-point column 'pulse_id' is missing"),
     "huge": ({"scan_angle_deg": _huge}, "declares shape"),
-    "return_number 0": ({"return_number": _set(0)}, r"'return_number' holds 0 at row 0, point 0 .* in \[1, 15\]"),
-    "return_number 16": ({"return_number": _set(16), "number_of_returns": _set(16)}, r"'return_number' holds 16 .* in \[1, 15\]"),
+    "return_number 0": ({"return_number": _set(0)}, r"'return_number' holds a value out of range at row 0, point 0 .* in \[1, 15\]"),
+    "return_number 16": (
+        {"return_number": _set(16), "number_of_returns": _set(16)},
+        r"'return_number' holds a value out of range .* in \[1, 15\]",
+    ),
     "return past the pulse's": ({"return_number": _set(3), "number_of_returns": _set(2)}, "at most the point's 'number_of_returns'"),
-    "intensity nan": ({"intensity": _set(np.nan)}, "'intensity' holds nan"),
-    "intensity negative": ({"intensity": _set(-1.0)}, "'intensity' holds -1.0"),
-    "scan angle": ({"scan_angle_deg": _set(200.0, (0, 5))}, r"'scan_angle_deg' holds 200.0 at row 0, point 5"),
-    "gps_time inf": ({"gps_time": _set(np.inf)}, "'gps_time' holds inf"),
-    "pulse_id negative": ({"pulse_id": _set(-1)}, "'pulse_id' holds -1"),
+    "intensity nan": ({"intensity": _set(np.nan)}, "'intensity' holds a value that is not finite"),
+    "intensity negative": ({"intensity": _set(-1.0)}, "'intensity' holds a value out of range"),
+    "scan angle": ({"scan_angle_deg": _set(200.0, (0, 5))}, r"'scan_angle_deg' holds a value out of range at row 0, point 5"),
+    "gps_time inf": ({"gps_time": _set(np.inf)}, "'gps_time' holds a value that is not finite"),
+    "pulse_id negative": ({"pulse_id": _set(-1)}, "'pulse_id' holds a value out of range"),
 }
 
 
@@ -279,9 +282,11 @@ def test_a_record_naming_an_unknown_column_is_refused(returns_set, tmp_path):
     records = _records(ds)
     records[0]["point_columns"] = ["return_number", "colour"]
     _write_records(ds, records)
-    with pytest.raises(DatasetFormatError, match=r"manifest.jsonl:1 .*unknown per-point column 'colour'"):
+    with pytest.raises(
+        DatasetFormatError, match=r"manifest.jsonl:1 .*field 'point_columns'.*1 per-point column\(s\) this zbuf_occlude does not read"
+    ):
         OccludedDataset(ds)
-    assert any("unknown per-point column 'colour'" in p for p in verify_dataset(ds).problems)
+    assert any("1 per-point column(s) this zbuf_occlude does not read" in p for p in verify_dataset(ds).problems)
 
 
 # -- export ------------------------------------------------------------------------------------------
@@ -320,7 +325,10 @@ def test_a_return_past_its_pulses_is_refused_when_the_return_number_is_read_alon
     from memory_limit import run_python_limited
 
     ds, shard = _corrupt(returns_set, tmp_path / "ds", return_number=_set(3, (1, 7)), number_of_returns=_set(2, (1, 7)))
-    said = re.escape(str(shard)) + r": dataset 'return_number' holds 3 at row 1, point 7 .*at most the point's 'number_of_returns'"
+    said = (
+        re.escape(str(shard))
+        + r": dataset 'return_number' holds a value out of range at row 1, point 7 .*at most the point's 'number_of_returns'"
+    )
     assert re.search(said, verify_dataset(ds).problems[0])
     with pytest.raises(DatasetFormatError, match=said) as caught:
         OccludedDataset(ds, features=("return_number",)).to_arrays()

@@ -516,10 +516,10 @@ def test_the_plots_crowns_are_filled_with_leaves(tmp_path) -> None:
 
 
 @pytest.mark.parametrize(("field", "value", "message"), [
-    ("leaf_area_density", -0.5, "leaf_area_density must be"), ("leaf_area_density", math.inf, "leaf_area_density must be"),
+    ("leaf_area_density", -0.5, "leaf_area_density must be a finite number >= 0, got a number outside that range"),
+    ("leaf_area_density", math.inf, "leaf_area_density must be a finite number >= 0, got an infinite number"),
     ("echo_rule", "peak", "echo_rule must be one of"),
 ])  # fmt: skip
 def test_settings_refuse_bad_values(field, value, message) -> None:
-    with pytest.raises(InvalidInputError, match=message) as caught:
+    with pytest.raises(InvalidInputError, match=message):
         ReturnsSettings(**{field: value})
-    assert repr(value) in str(caught.value) or str(value) in str(caught.value)

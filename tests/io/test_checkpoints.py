@@ -154,16 +154,18 @@ def test_a_record_claiming_more_than_its_bytes_hold_is_refused_before_torch_allo
 
 @pytest.mark.slow
 def test_a_deflated_checkpoint_inflating_past_the_memory_left_is_refused_naming_it(tmp_path: Path) -> None:
-    # in a child under an address-space limit (1.5 GiB above its footprint): a 2 MB file whose tensor
-    # inflates to 1,000 times that (deflate's own limit is about 1,032) is refused before torch allocates it
-    from memory_limit import run_python_limited
+    # in a child under an address-space limit (1.5 GiB above its footprint, torch's libraries in it: a
+    # CUDA build maps more than that at import): a 2 MB file whose tensor inflates to 1,000 times that
+    # (deflate's own limit is about 1,032) is refused before torch allocates it
+    from memory_limit import TORCH, run_python_limited
 
     noise = torch.from_numpy(np.random.default_rng(0).random(500_000, dtype=np.float32))  # 2 MB that deflate hardly shrinks
     data = _rezipped(checkpoint_bytes({"w": noise}), zipfile.ZIP_DEFLATED)
     (tmp_path / "big.pt").write_bytes(_claiming(data, 1000 * _tensor_record(data).compress_size))
     done = run_python_limited(
         "from zbuf_occlude.errors import InsufficientMemoryError\nfrom zbuf_occlude.io.checkpoints import load_checkpoint\n"
-        f"try:\n    load_checkpoint({str(tmp_path / 'big.pt')!r})\nexcept InsufficientMemoryError as exc:\n    print(exc)"
+        f"try:\n    load_checkpoint({str(tmp_path / 'big.pt')!r})\nexcept InsufficientMemoryError as exc:\n    print(exc)",
+        preload=TORCH,
     )
     assert done.returncode == 0 and done.stdout.startswith(f"the checkpoint {tmp_path / 'big.pt'} needs about"), (
         done.stdout + done.stderr[-2000:]

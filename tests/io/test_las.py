@@ -221,7 +221,7 @@ HOSTILE = {
     "version 2.0": (lambda: _patched(_encode(), 24, "<B", 2), "LAS version 2.4; versions 1.0 to 1.4"),
     "point format 11": (lambda: _patched(_encode(), 104, "<B", 11), "point format 11 is not a format of LAS 1.4"),
     "short records": (lambda: _patched(_encode(), 105, "<H", 20), "records of 20 bytes, fewer than point format 6's 30"),
-    "zero scale": (lambda: _patched(_encode(), 131, "<d", 0.0), "scale factors .* not finite and non-zero"),
+    "zero scale": (lambda: _patched(_encode(), 131, "<d", 0.0), "scale factors or offsets are not finite and non-zero"),
     "EVLRs past the end": (lambda: _patched(_patched(_encode(), 243, "<I", 2), 235, "<Q", 10**6), "EVLR 1 of 2 lies past the end"),
     "too many EVLRs": (lambda: _patched(_encode(), 243, "<I", 10**6), "1,000,000 EVLRs"),
     "NaN GPS time": (lambda: _patched(_encode(), 375 + 22, "<Q", 0x7FF8000000000000), "1 points have a NaN or infinite gps_time"),

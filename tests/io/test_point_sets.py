@@ -13,11 +13,13 @@ import trimesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from zbuf_occlude.defaults import MAX_POINT_SET_POINTS
 from zbuf_occlude.errors import DatasetFormatError, InsufficientMemoryError, InvalidInputError, UnsafePathError
 from zbuf_occlude.io.point_sets import (
     POINT_SET_SUFFIXES,
     PointSet,
     is_point_set_file,
+    occlusion_cost,
     point_set_labels,
     read_point_sets,
     shape_names,
@@ -448,3 +450,78 @@ def test_an_npy_is_read_from_the_file_its_header_was_checked_in(tmp_path):
     with pytest.raises(InvalidInputError, match="cannot read as a NPY") as exc:
         read_point_sets(tmp_path / "short.npy")
     _one_line_naming(exc, tmp_path / "short.npy")
+
+
+# -- the cap on a cloud's points ---------------------------------------------------------------------
+def _write_cloud(path: Path, n: int) -> Path:
+    """A cloud of ``n`` points (float32) in the format of ``path``'s suffix."""
+    points = np.random.default_rng(n).uniform(-1, 1, (n, 3)).astype(np.float32)
+    if path.suffix == ".npy":
+        np.save(path, points)
+    elif path.suffix == ".ply":
+        _ply(path, points)
+    else:
+        with h5py.File(path, "w") as f:
+            f["data"] = points[None]
+    return path
+
+
+@settings(max_examples=30, deadline=None)
+@given(n=st.integers(1, 40), cap=st.integers(1, 40), suffix=st.sampled_from([".npy", ".ply", ".h5"]))
+def test_a_cloud_is_read_up_to_the_cap_and_refused_beyond_it_naming_what_occluding_it_needs(tmp_path_factory, n, cap, suffix):
+    path = _write_cloud(tmp_path_factory.mktemp("cap") / f"cloud{suffix}", n)
+    if n <= cap:
+        assert len(read_point_sets(path, max_points=cap)[0].points) == n
+        assert len(point_set_labels(path, max_points=cap)) == 1
+        return
+    memory, prepare_s, pose_s = occlusion_cost(n)
+    for read in (read_point_sets, point_set_labels):
+        with pytest.raises(InvalidInputError) as exc:
+            read(path, max_points=cap)
+        _one_line_naming(exc, path)
+        message = str(exc.value)
+        assert f"{n:,} points" in message and f"more than the {cap:,} accepted" in message, message
+        assert f"needs about {memory / 2**30:.1f} GiB of memory and, on two cores, {prepare_s:.0f} s plus {pose_s:.1f} s a pose" in message
+        assert message.endswith(f"subsample the cloud to at most {cap:,} points"), message
+
+
+@given(n=st.integers(0, 10**8))
+def test_what_occluding_a_cloud_costs_grows_in_step_with_its_points(n):
+    # affine in the points: memory from the job's fixed part, the times from nothing
+    none, some, twice = occlusion_cost(0), occlusion_cost(n), occlusion_cost(2 * n)
+    assert none[0] > 0 and none[1:] == (0.0, 0.0)
+    for zero, one, two in zip(none, some, twice, strict=True):
+        assert two - one == pytest.approx(one - zero) and one >= zero
+
+
+def test_a_cloud_beyond_the_default_cap_is_refused_from_its_header_before_its_values_are_read(tmp_path, monkeypatch):
+    """The held-out case: one cloud of 9.9 million points, gzip making the file small, refused by
+    the header before any value is read (``generate``'s plan reads labels with point_set_labels)."""
+    big = 9_900_000
+    assert big > MAX_POINT_SET_POINTS
+    path = tmp_path / "scan.h5"
+    with h5py.File(path, "w") as f:  # 119 MB of float32 values in 0.5 MB: a regular pattern compresses
+        data = f.create_dataset("data", shape=(1, big, 3), dtype=np.float32, compression="gzip", compression_opts=1, chunks=(1, 1 << 20, 3))
+        for start in range(0, big, 1 << 20):
+            data[0, start : start + (1 << 20)] = 0.5
+        f["label"] = np.zeros((1, 1), np.uint8)
+    npy = tmp_path / "scan.npy"  # a header of cap + 1 points, the values a hole in a sparse file
+    with open(npy, "wb") as fh:
+        np.lib.format.write_array_header_1_0(fh, {"descr": "<f4", "fortran_order": False, "shape": (MAX_POINT_SET_POINTS + 1, 3)})
+        fh.truncate(fh.tell() + (MAX_POINT_SET_POINTS + 1) * 12)
+    reads = []
+    dataset_read = h5py.Dataset.__getitem__
+    monkeypatch.setattr(h5py.Dataset, "__getitem__", lambda self, key: reads.append(self.name) or dataset_read(self, key))
+    monkeypatch.setattr(np.lib.format, "read_array", lambda *a, **k: reads.append("npy") or pytest.fail("the values were read"))
+    for file, n in ((path, big), (npy, MAX_POINT_SET_POINTS + 1)):
+        for read in (point_set_labels, read_point_sets):
+            with pytest.raises(
+                InvalidInputError, match=rf"{n:,} points.*more than the {MAX_POINT_SET_POINTS:,} accepted; occluding"
+            ) as exc:
+                read(file)
+            _one_line_naming(exc, file)
+    assert "/data" not in reads and "npy" not in reads, reads
+    with open(npy, "r+b") as fh:  # the cap itself is accepted
+        np.lib.format.write_array_header_1_0(fh, {"descr": "<f4", "fortran_order": False, "shape": (MAX_POINT_SET_POINTS, 3)})
+        fh.truncate(fh.tell() + MAX_POINT_SET_POINTS * 12)
+    assert point_set_labels(npy) == [None]

@@ -216,3 +216,83 @@ def test_in_a_log_a_line_written_at_a_later_clock_time_does_not_silence_the_next
     log = _stderr(monkeypatch, "log")
     _run(2, interval_s=0)
     assert [line.split(",")[0] for line in log.getvalue().splitlines()] == ["generate: 1/2 obj", "generate: 2/2 obj"]
+
+
+# -- a pseudo-terminal ------------------------------------------------------------------------------
+_PTY_BAR = (
+    "import time\nfrom zbuf_occlude.io.progress import progress\n"
+    "with progress(total=3, desc='pty-bar', unit='obj') as bar:\n"
+    "    for _ in range(3):\n        time.sleep(0.05)\n        bar.update(1)\n"
+)
+
+
+def _run_on_pty(argv: list[str], *, stderr_on_pty: bool = True, size: tuple[int, int] | None = None, env: dict | None = None) -> str:
+    """Run ``argv`` with stdout (and stderr, unless ``stderr_on_pty`` is False: then a pipe) on a new
+    pseudo-terminal of ``size`` (rows, columns; None: unsized, 0 × 0, as ``script`` makes one); what the terminal got."""
+    import fcntl
+    import os
+    import pty
+    import struct
+    import subprocess
+    import termios
+
+    master, slave = pty.openpty()
+    if size is not None:
+        fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", size[0], size[1], 0, 0))
+    environ = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")} | (env or {})
+    proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=slave, stderr=slave if stderr_on_pty else subprocess.PIPE, env=environ)
+    os.close(slave)
+    chunks = []
+    while True:
+        try:
+            chunk = os.read(master, 65536)
+        except OSError:  # the child closed its end (EIO on Linux)
+            break
+        if not chunk:
+            break
+        chunks.append(chunk)
+    os.close(master)
+    err = proc.communicate(timeout=120)[1]
+    assert proc.returncode == 0, (b"".join(chunks) + (err or b""))[-2000:]
+    return b"".join(chunks).decode("utf-8", "replace")
+
+
+pty_only = pytest.mark.skipif(not hasattr(__import__("os"), "openpty") or __import__("sys").platform == "win32", reason="needs a POSIX pty")
+
+
+@pty_only
+@pytest.mark.parametrize("size", [None, (30, 100)], ids=["unsized", "sized"])
+def test_on_a_pseudo_terminal_the_bar_is_drawn_sized_or_not(size):
+    """``script`` and friends give a pseudo-terminal of 0 × 0: the bar is drawn there too, at a width of its own."""
+    import sys
+
+    screen = _run_on_pty([sys.executable, "-c", _PTY_BAR], size=size)
+    assert "pty-bar: 100%|" in screen and "3/3" in screen, screen
+    widest = max(len(line) for line in screen.replace("\r\n", "\n").replace("\r", "\n").split("\n"))
+    assert widest <= (size[1] if size else progress_module.FALLBACK_COLUMNS)
+
+
+@pty_only
+def test_a_bar_on_an_unsized_terminal_takes_columns_from_the_environment():
+    import sys
+
+    screen = _run_on_pty([sys.executable, "-c", _PTY_BAR], env={"COLUMNS": "50", "LINES": "10"})
+    bars = [line for line in screen.replace("\r\n", "\n").replace("\r", "\n").split("\n") if "pty-bar" in line]
+    assert bars and max(len(b) for b in bars) <= 50 and max(len(b) for b in bars) > 40, bars
+
+
+@pytest.mark.slow
+@pty_only
+def test_the_farm_shows_its_bar_on_a_pseudo_terminal_and_none_with_no_progress_or_a_pipe(tmp_path, sample_meshes_dir):
+    """A farm of one shipped mesh and two views, under an unsized pseudo-terminal as ``script -qc`` gives."""
+    import sys
+
+    def farm(name: str, *extra: str, stderr_on_pty: bool = True) -> str:
+        argv = [sys.executable, "-m", "zbuf_occlude", "farm", str(sample_meshes_dir), "--out", str(tmp_path / name), "--classes", "chair",
+                "--per-class", "1", "--splits", "train", "--views", "fibonacci:2", "--samples-per-view", "1", "--points", "128",
+                "--workers", "1", *extra]  # fmt: skip
+        return _run_on_pty(argv, stderr_on_pty=stderr_on_pty)
+
+    assert "farm: 100%|" in farm("bar")
+    for screen in (farm("quiet", "--no-progress"), farm("pipe", stderr_on_pty=False)):
+        assert "farm:" not in screen.replace("zbuf-occlude farm:", "") and "%|" not in screen, screen

@@ -76,7 +76,7 @@ def test_resolver_keeps_names_inside_the_folder(tmp_path: Path) -> None:
     (tmp_path / "sub" / "ok.bin").write_bytes(b"ok")
     resolver = folder_resolver(tmp_path / "sub" / "mesh.gltf")
     assert resolver.get("ok.bin") == b"ok"
-    with pytest.raises(MeshLoadError, match=r"mesh\.gltf: a file it names: '\.\./secret' leaves"):
+    with pytest.raises(MeshLoadError, match=r"mesh\.gltf: a file it names: the path leaves"):
         resolver.get("../secret")
     (tmp_path / "sub" / "link").symlink_to(tmp_path / "secret")
     with pytest.raises(MeshLoadError, match="link"):

@@ -8,6 +8,8 @@ These run on Mesa llvmpipe headless, as the other GL tests, and never skip.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -76,24 +78,67 @@ def test_buffers_match_the_cpu_kernel_on_a_sampled_mesh(sample_mesh_files, setti
             assert _assert_buffers_equal(cam, normal, radius, image, gpu) > 1000
 
 
+#: The strip the quad test draws into: the pixels of it the near disk covers beyond the GL's largest
+#: point size, the pixels to its right where the small surfels show, and its height.  A strip, not
+#: a square: a box's longer side decides the route, and an image as wide and as tall as the largest
+#: point size (8192² on some GLs) would cost gigabytes for nothing.
+_BEYOND_PX, _GAP_PX, _STRIP_PX = 16, 16, 16
+#: The widest strip drawn (16 rows of it take 200 MB on the CPU and the GPU): a GL whose largest point
+#: size is near this cannot show a surfel larger than it in an image a test can afford.
+_MAX_STRIP_WIDTH_PX = 1 << 20
+
+
 def test_a_surfel_beyond_the_largest_point_size_is_drawn_as_a_quad(monkeypatch):
-    # a disk facing the camera 0.1 mm beyond its own radius covers nearly all of an image one
-    # sprite wider than the GL allows; one centred off the image reaches into it; small ones
-    # lie behind them
-    cam = np.array([[0.0, 0.0, 0.0101], [-1.1, 0.0, 1.0], [0.5, 0.5, 2.0], [-0.5, 0.2, 2.0]])
-    normal = np.tile([0.0, 0.0, 1.0], (4, 1))
-    radius = np.array([0.01, 0.2, 0.05, 0.05])
+    """On any GL, whatever its limits: the strip is sized from the GL's own largest point size (and
+    drawn in tiles where it is wider than the GL's images), so that a disk covering its width has a
+    box wider than any sprite; small disks beside it stay sprites, and the buffers are the kernel's."""
     split, routes = point_sprites._Boxes.split, []
     monkeypatch.setattr(point_sprites._Boxes, "split", lambda box, *args: routes.append(split(box, *args)) or routes[-1])
     with PointSpriteRenderer() as renderer:
-        side = int(renderer.max_point_size) + 16
-        image = (2.0 / side, -1.0, -1.0, side, side)
+        cover = math.ceil(renderer.max_point_size) + _BEYOND_PX
+        width = cover + _GAP_PX
+        if width > _MAX_STRIP_WIDTH_PX:
+            pytest.skip(f"the GL's largest point size is {renderer.max_point_size:g} pixels: no affordable image is wider")
+        # disk 0 faces the camera 0.1 mm beyond its own radius: it spans x/z in ±0.990099, and the
+        # strip ends cover pixels right of its left edge, which lies far left of the strip
+        near_edge = 0.01 / 0.0101
+        pix = 1.0 / cover
+        image = (pix, near_edge - cover * pix, -0.5 * _STRIP_PX * pix, width, _STRIP_PX)
+
+        def at(column: float, row: float, z: float) -> list[float]:  # a point at z seen at pixel (column, row)
+            return [z * (image[1] + column * pix), z * (image[2] + row * pix), z]
+
+        # disk 1 centred 2 px right of the strip, reaching 5 px into it; 2 and 3 small, in the gap, behind disk 0's plane
+        cam = np.array([[0.0, 0.0, 0.0101], at(width + 2, 8, 1.5), at(cover + 5, 5, 2.0), at(cover + 11, 10, 2.0)])
+        normal = np.tile([0.0, 0.0, 1.0], (4, 1))
+        radius = np.array([0.01, 7 * pix * 1.5, 2.5 * pix * 2.0, 2.5 * pix * 2.0])
         depth, ids = renderer.splat(cam, normal, radius, *image, edge_on_cos=EDGE_ON_COS)
-    ((sprites, quads),) = routes
-    assert list(quads) == [0] and list(sprites) == [1, 2, 3]
+        small_are_sprites = renderer.max_point_size >= max(_GAP_PX, _STRIP_PX) + 2  # every small box fits the gap
+    assert len(routes) == math.ceil(width / renderer.max_tile)  # one split a tile
+    for sprites, quads in routes:
+        assert 0 in quads and 0 not in sprites, routes
+    sprites_seen = set().union(*(set(sprites.tolist()) for sprites, _ in routes))
+    assert sprites_seen == ({1, 2, 3} if small_are_sprites else set()), (routes, renderer.max_point_size)
     depth_cpu, ids_cpu = splat_surfels(cam, normal, radius, *image)
     assert np.array_equal(ids, ids_cpu) and np.array_equal(depth, depth_cpu)
-    assert (ids == 0).mean() > 0.7 and (ids == 1).sum() > 0  # the near disk; the off-image one
+    assert (ids == 0).sum() >= (cover - 1) * _STRIP_PX and {1, 2, 3} <= set(np.unique(ids).tolist())  # the near disk; the rest in the gap
+
+
+def test_the_quad_test_sizes_its_strip_from_the_gl_it_runs_on(monkeypatch):
+    """The same test under other GLs' limits, by the renderer's queried values: a largest point size
+    of 2047 (NVIDIA), 8192, and one equal to the largest image (16384 with the image at 16384 is
+    drawn in two tiles; here scaled down, 64 with 64-pixel tiles, to keep the strip small)."""
+    init = PointSpriteRenderer.__init__
+    for max_point_size, max_tile in ((2047.0, None), (8192.0, None), (64.0, 64)):
+
+        def limited(self, *args, _size=max_point_size, _tile=max_tile, **kwargs):
+            init(self, *args, **kwargs)
+            self.max_point_size = _size
+            self.max_tile = _tile or self.max_tile
+
+        with monkeypatch.context() as patched:
+            patched.setattr(PointSpriteRenderer, "__init__", limited)
+            test_a_surfel_beyond_the_largest_point_size_is_drawn_as_a_quad(patched)
 
 
 def test_nothing_drawable_gives_empty_buffers():

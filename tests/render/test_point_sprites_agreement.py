@@ -6,6 +6,7 @@ Mesa llvmpipe headless, as the other GL tests, and never skip.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -44,19 +45,76 @@ def test_surfels_at_the_same_depth_go_to_the_lowest_id(setting):
     assert set(np.unique(ids)) == {0, 1}
 
 
-def test_the_tie_goes_to_the_lowest_id_when_it_is_a_quad_and_the_other_a_sprite():
-    # surfel 0 is too wide for a sprite of the GL's largest size, surfel 1 a sprite; both lie
-    # in the plane z = 2 with the same centre: every pixel of the smaller is a tie
-    cam = np.array([[0.0, 0.0, 2.0], [0.0, 0.0, 2.0]])
-    normal = np.tile([0.0, 0.0, 1.0], (2, 1))
+#: The tie test's strip (as tests/render/test_point_sprites.py's quad test): the pixels the quad disk
+#: covers beyond the GL's largest point size, the empty pixels right of it, and the strip's height;
+#: the small disk's radius, and the widest strip drawn (16 rows of it take 200 MB).  A strip, not a
+#: square: a box's longer side decides the route, and a square as wide as the largest point size
+#: (8192² on some GLs) would cost gigabytes for nothing.
+_BEYOND_PX, _GAP_PX, _STRIP_PX, _SMALL_PX, _MAX_STRIP_WIDTH_PX = 16, 16, 16, 5, 1 << 20
+
+
+@pytest.mark.parametrize("quad", [0, 1], ids=["quad-lowest", "sprite-lowest"])
+def test_the_tie_goes_to_the_lowest_id_when_it_is_a_quad_and_the_other_a_sprite(monkeypatch, quad):
+    """On any GL, whatever its limits: two disks in the plane z = 2 tie at every pixel of the
+    smaller; the larger covers ``ceil(max_point_size) + 16`` pixels of a 16-pixel strip, so its box
+    is wider than any sprite and it takes the quad pass, the smaller a sprite.  The tie goes to the
+    lower id whichever of the two is the quad (sprites are drawn first, quads last), and the
+    buffers are the kernel's bit for bit."""
+    sprite = 1 - quad
+    split, routes = point_sprites._Boxes.split, []
+    monkeypatch.setattr(point_sprites._Boxes, "split", lambda box, *args: routes.append(split(box, *args)) or routes[-1])
     with PointSpriteRenderer() as renderer:
-        side = int(renderer.max_point_size) + 16
-        image = (2.0 / side, -1.0, -1.0, side, side)
-        radius = np.array([1.5, 20.0 / side])
+        max_point_size, max_tile = renderer.max_point_size, renderer.max_tile
+        cover = math.ceil(max_point_size) + _BEYOND_PX
+        width = cover + _GAP_PX
+        # a sprite's box is 2 rho + 1 pixels wide, and is drawn 2 pixels wider
+        rho = min(_SMALL_PX, (math.floor(max_point_size) - 3) // 2)
+        if width > _MAX_STRIP_WIDTH_PX or rho < 1:
+            pytest.skip(f"the GL's largest point size is {max_point_size:g} pixels: no affordable strip shows the tie")
+        # the quad disk spans x/z in ±0.75: its right edge lies `cover` pixels right of the strip's
+        # left edge, its left edge far left of the strip
+        pix = 1.0 / cover
+        image = (pix, 0.75 - cover * pix, -0.5 * _STRIP_PX * pix, width, _STRIP_PX)
+        # the small disk centred on a pixel in the middle of the first tile (or of the quad disk's
+        # columns), its box inside that tile
+        column, row = min(max_tile, cover) // 2, _STRIP_PX // 2
+        cam = np.full((2, 3), 2.0)
+        cam[quad, :2] = 0.0
+        cam[sprite, :2] = 2.0 * (np.array(image[1:3]) + (np.array([column, row]) + 0.5) * pix)
+        normal = np.tile([0.0, 0.0, 1.0], (2, 1))
+        radius = np.empty(2)
+        radius[quad], radius[sprite] = 1.5, 2.0 * rho * pix
         depth, ids = renderer.splat(cam, normal, radius, *image, edge_on_cos=EDGE_ON_COS)
-    assert np.array_equal(ids, splat_surfels(cam, normal, radius, *image)[1])
-    smaller = splat_surfels(cam[1:], normal[1:], radius[1:], *image)[1] == 0
-    assert smaller.sum() > 50 and np.all(ids[smaller] == 0) and np.all(depth[smaller] == 2.0)
+    # the routes, one split a tile: the large disk a quad in every tile of its columns, the small one a sprite
+    assert len(routes) == math.ceil(width / max_tile), routes
+    assert all(quad in quads for _, quads in routes[: (cover - 1) // max_tile + 1]), (routes, max_point_size)
+    assert not any(quad in sprites for sprites, _ in routes), (routes, max_point_size)
+    assert any(sprite in sprites for sprites, _ in routes), (routes, max_point_size)
+    assert not any(sprite in quads for _, quads in routes), (routes, max_point_size)
+    # the buffers are the kernel's, and every pixel of the smaller disk went to id 0 at depth 2
+    depth_cpu, ids_cpu = splat_surfels(cam, normal, radius, *image)
+    assert np.array_equal(ids, ids_cpu) and np.array_equal(depth, depth_cpu)
+    smaller = splat_surfels(cam[[sprite]], normal[[sprite]], radius[[sprite]], *image)[1] == 0
+    assert smaller.sum() >= 2 * rho * rho and np.all(ids[smaller] == 0) and np.all(depth[smaller] == 2.0)
+    assert (ids == quad).any(axis=0).sum() >= cover - 1  # the quad disk, wider than any sprite
+
+
+def test_the_tie_test_sizes_its_strip_from_the_gl_it_runs_on(monkeypatch):
+    """The tie test under other GLs' limits, by the renderer's queried values: a largest point
+    size of 2047 (NVIDIA), 8192, one equal to the largest image (64 with 64-pixel tiles: the
+    strip is drawn in two tiles), and a tiny one (8, with 32-pixel tiles)."""
+    init = PointSpriteRenderer.__init__
+    for max_point_size, max_tile in ((2047.0, None), (8192.0, None), (64.0, 64), (8.0, 32)):
+
+        def limited(self, *args, _size=max_point_size, _tile=max_tile, **kwargs):
+            init(self, *args, **kwargs)
+            self.max_point_size = _size
+            self.max_tile = _tile or self.max_tile
+
+        for quad in (0, 1):
+            with monkeypatch.context() as patched:
+                patched.setattr(PointSpriteRenderer, "__init__", limited)
+                test_the_tie_goes_to_the_lowest_id_when_it_is_a_quad_and_the_other_a_sprite(patched, quad)
 
 
 def test_coplanar_neighbours_tie_as_on_the_cpu():

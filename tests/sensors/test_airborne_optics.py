@@ -118,7 +118,7 @@ def test_the_detection_threshold_drops_the_weak_echoes_and_frees_their_slot() ->
 
 @pytest.mark.parametrize("value", [-1e-9, float("nan"), float("inf"), "1e-6", True])
 def test_a_bad_detection_threshold_is_refused_naming_the_field(value) -> None:
-    with pytest.raises(InvalidInputError, match=r"beam 'ideal': detection_threshold"):
+    with pytest.raises(InvalidInputError, match=r"beam: detection_threshold"):
         _scanner(detection_threshold=value)
 
 

@@ -69,7 +69,7 @@ def test_custom_table_and_errors():
         with pytest.raises(InvalidInputError, match=next(iter(bad))):
             lidar.with_(**bad)
     for bad in ({"min_range_m": 10.0, "max_range_m": 5.0}, {"dropout": 1.0}, {"range_noise_m": -0.1}):  # the beam's fields
-        with pytest.raises(InvalidInputError, match=r"^spinning LiDAR 'mine': beam 'ideal': .*" + next(iter(bad))):
+        with pytest.raises(InvalidInputError, match=r"^spinning LiDAR: beam: .*" + next(iter(bad))):
             with_beam(lidar, **bad)
     with pytest.raises(InvalidInputError, match="unknown lidar preset"):
         S.Lidar.preset("hdl128")

@@ -95,7 +95,7 @@ def test_a_sensor_file_changes_a_preset_beam_in_part_and_reads_the_flat_layout()
 @pytest.mark.parametrize(
     ("spec", "words"),
     [
-        ({"kind": "lidar", "preset": "riegl-q1560"}, "not a spinning LiDAR"),
+        ({"kind": "lidar", "preset": "riegl-q1560"}, "one of the spinning LiDAR presets"),
         ({"kind": "lidar", "preset": "hdl32e", "beam": {"footprint_rays": 7, "divergence_deg": 0}}, "needs divergence_deg"),
         ({"kind": "lidar", "preset": "hdl32e", "beam": {"max_returns": 2}}, "range_resolution_m"),
         ({"kind": "lidar", "preset": "hdl32e", "beam": {"laser": 1}}, "laser"),
@@ -117,7 +117,7 @@ def test_bad_sensor_files_are_refused_naming_the_field(spec, words):
         ({"range_resolution_m": 0.5}, "needs max_returns above 1"),
         ({"return_mode": "strongest", "max_returns": 2, "range_resolution_m": 1.0}, "max_returns 1"),
         ({"echo_separation_m": 0.5}, "footprint_rays above 1"),
-        ({"min_range_m": 5.0, "max_range_m": 2.0}, "min_range_m < max_range_m"),
+        ({"min_range_m": 5.0, "max_range_m": 2.0}, "min_range_m must be below max_range_m"),
         ({"intensity_scale": 0.0}, "intensity_scale"),
         ({"wavelength_nm": True}, "wavelength_nm"),
         ({"profile": "flat"}, "profile"),

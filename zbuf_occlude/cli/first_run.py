@@ -25,19 +25,24 @@ FIRST_RUN_LINE = (
 
 def kernels_cold() -> bool:
     """True when numba's cache holds no compiled code of the default method's kernels
-    (:mod:`zbuf_occlude.visibility.embree_fast`), where numba looks for it (``$NUMBA_CACHE_DIR``,
-    ``__pycache__`` beside the modules, or the user's cache folder); False when it does, or when
-    numba's cache cannot be asked (the line is a courtesy, never an error)."""
+    (:func:`zbuf_occlude.visibility.warmup.default_method_kernels`), where numba looks for it
+    (``$NUMBA_CACHE_DIR``, ``__pycache__`` beside the modules, or the user's cache folder): no
+    command has computed visibility with this cache yet, and the next one compiles them for a
+    minute or two.  False when one of them is there (a command ran, or the warm-up: which of them
+    a view compiles depends on its mesh and pose, and what a later view adds takes seconds), or
+    when numba's cache cannot be asked (the line is a courtesy, never an error).
+
+    Kernels compiled only inside others (``inline="always"``) are not asked for: they have no
+    entry of their own in the cache.
+    """
     try:
-        from numba.core.registry import CPUDispatcher
+        from zbuf_occlude.visibility.warmup import default_method_kernels
 
-        from zbuf_occlude.visibility import embree_fast
-
-        paths = [value._cache._cache_file._index_path for value in vars(embree_fast).values()
-                 if isinstance(value, CPUDispatcher) and value._cache is not None and hasattr(value._cache, "_cache_file")]  # fmt: skip
+        paths = [kernel._cache._cache_file._index_path for kernel in default_method_kernels().values()
+                 if kernel._cache is not None and hasattr(kernel._cache, "_cache_file")]  # fmt: skip
     except Exception:  # numba's cache layout is its own: a change there costs the line, not the run
         return False
-    return bool(paths) and not all(os.path.isfile(p) for p in paths)
+    return bool(paths) and not any(os.path.isfile(p) for p in paths)
 
 
 def interactive() -> bool:

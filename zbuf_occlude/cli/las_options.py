@@ -17,7 +17,9 @@ from zbuf_occlude.cli.options import GIVEN, Checked, real, shown
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.scan_data import GPS_START_S
 
-__all__ = ["LAS_FORMATS", "LAS_OPTIONS", "add_las_arguments", "check_class_map_option", "check_crs_option", "las_keywords"]
+__all__ = [
+    "LAS_FORMATS", "LAS_OPTIONS", "add_las_arguments", "check_class_map_option", "check_crs_option", "check_gps_start_option", "las_keywords",
+]  # fmt: skip
 
 #: The ``--format`` values that write LAS/LAZ files.
 LAS_FORMATS = ("las", "laz")
@@ -26,16 +28,18 @@ LAS_OPTIONS = {"crs": "--crs", "class_map": "--class-map", "gps_start_s": "--gps
 
 
 def check_crs_option(text: str, option: str) -> str:
-    """``--crs EPSG:N``: an EPSG code of a CRS in metres that PROJ knows (:func:`~zbuf_occlude.io.las.epsg_crs`), as ``EPSG:N``.
+    """``--crs EPSG:N`` or ``EPSG:H+V``: the EPSG code of a projected CRS in metres, or of one compound with a vertical CRS in
+    metres, that PROJ knows (:func:`~zbuf_occlude.io.las_crs.epsg_crs`), as ``EPSG:N`` or ``EPSG:H+V``.
 
     Raises
     ------
     InvalidInputError
-        Naming the option and the value: not ``EPSG:N``, unknown, not in metres.
+        Naming the option and the value: not ``EPSG:N`` or ``EPSG:H+V``, unknown, of another kind (geographic, geocentric,
+        vertical alone) or not in metres.
     BackendUnavailable
         pyproj is not installed (the ``crs`` extra).
     """
-    from zbuf_occlude.io.las import epsg_crs
+    from zbuf_occlude.io.las_crs import epsg_crs
 
     if not text.strip().upper().startswith("EPSG:"):
         raise InvalidInputError(f"{option} must be an EPSG code, EPSG:N (EPSG:2154), got {shown(text)}")
@@ -43,7 +47,23 @@ def check_crs_option(text: str, option: str) -> str:
         epsg_crs(text)
     except InvalidInputError as exc:
         raise InvalidInputError(f"{option} {shown(text)}: {exc}") from None
-    return f"EPSG:{int(text.strip()[5:])}"
+    return "EPSG:" + "+".join(str(int(code)) for code in text.strip()[5:].split("+"))
+
+
+def check_gps_start_option(text: str, option: str) -> float:
+    """``--gps-start S``: a number >= 0 of seconds at which float64 GPS times keep
+    :data:`~zbuf_occlude.sensors.scan_data.GPS_TIME_RESOLUTION_S` (the library's rule,
+    :func:`~zbuf_occlude.sensors.scan_data.check_gps_start`; each scan's own times are checked again before it is written).
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the option and the value: not a finite number >= 0, or a start whose float64 steps
+        are coarser than the resolution (the message gives the step and the latest start that keeps it).
+    """
+    from zbuf_occlude.sensors.scan_data import check_gps_start
+
+    return check_gps_start(real(0.0, unit="seconds")(text, option), name=option)
 
 
 def check_class_map_option(text: str, option: str) -> dict[str, int]:
@@ -71,8 +91,10 @@ def add_las_arguments(parser: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--crs", metavar="EPSG:N", action=Checked, check=check_crs_option, default=None,
-        help="the coordinate reference system of the points, an EPSG code in metres (EPSG:2154), written as a WKT VLR; "
-        "needs --frame world (airborne scans are) and pyproj (the crs extra) (default: none)",
+        help="the coordinate reference system of the points, written as a WKT VLR: the EPSG code of a projected CRS in metres "
+        "(EPSG:32633), or of one compound with a vertical CRS in metres (EPSG:2154+5720, EPSG:7415); geographic, geocentric, "
+        "vertical-only and feet CRSs are refused (the points are metres on a plane, written unconverted); needs --frame world "
+        "(airborne scans are) and pyproj (the crs extra) (default: none)",
     )  # fmt: skip
     g.add_argument(
         "--class-map", metavar="FILE", action=Checked, check=check_class_map_option, default=None,
@@ -80,9 +102,10 @@ def add_las_arguments(parser: argparse.ArgumentParser) -> None:
         "vegetation 3/4/5 by height, building 6, others 1) for the names it holds",
     )  # fmt: skip
     g.add_argument(
-        "--gps-start", metavar="S", dest="gps_start_s", action=Checked, check=real(0.0, unit="seconds"), default=GPS_START_S,
+        "--gps-start", metavar="S", dest="gps_start_s", action=Checked, check=check_gps_start_option, default=GPS_START_S,
         help="adjusted standard GPS time (GPS seconds - 1e9) of the scan's time 0, by default 2026-01-01T00:00:00 UTC; every "
-        "time written must stay >= 0 (default: %(default)s)",
+        "time written must stay >= 0 and below about 8.6e9 s, where float64 times (as LAS stores them) are still 1 µs apart "
+        "or less (default: %(default)s)",
     )  # fmt: skip
 
 

@@ -9,7 +9,7 @@ import argparse
 from typing import Any
 
 from zbuf_occlude.cli.options import Checked, check_device, count, out_folder, seed
-from zbuf_occlude.cli.sim2real import parse_pairs, print_table
+from zbuf_occlude.cli.sim2real import THREADS_HELP, parse_pairs, print_table
 from zbuf_occlude.defaults import DEFAULT_METHOD
 from zbuf_occlude.experiments.table3.config import AUGMENTATION_MODEL, ELEVATION_MODEL, SCALES, Table3Config
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
@@ -41,7 +41,7 @@ def _common(p: argparse.ArgumentParser) -> None:
         "--seed", action=Checked, check=seed, default=0, help="seed of the data set, the splits and the training (default: %(default)s)"
     )
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="torch device of the training (default: %(default)s)")
-    p.add_argument("--threads", action=Checked, check=count("MAX_WORKERS"), help="torch CPU threads")
+    p.add_argument("--threads", action=Checked, check=count("MAX_WORKERS"), help=THREADS_HELP)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
@@ -50,13 +50,17 @@ TABLE3_OPTIONS = {name: f"--{name}" for name in ("model", "scale", "epochs", "po
 
 
 def _run(args: argparse.Namespace) -> int:
+    # before anything imports torch: its CPU arithmetic is chosen at import (learn.reproducible)
+    from zbuf_occlude.learn.reproducible import pin_cpu_arithmetic, training_threads
+
+    pin_cpu_arithmetic()
     # the counts, --seed and --out were checked while parsing (cli.options); the device before any rendering
     check_device(args.device)
     from zbuf_occlude.experiments.table3 import run_augmentation, run_elevation
 
     classes = [c.strip() for c in args.classes.split(",")] if args.classes else None
     config = Table3Config(model=args.model, scale=args.scale, epochs=args.epochs, points=args.points, method=args.method,
-                          classes=classes, seed=args.seed, device=args.device, threads=args.threads, option_names=TABLE3_OPTIONS)  # fmt: skip
+                          classes=classes, seed=args.seed, device=args.device, threads=training_threads(args.threads), option_names=TABLE3_OPTIONS)  # fmt: skip
     progress = not args.no_progress
     if args.experiment == "elevation":
         summary = run_elevation(args.root, args.out, config, data_dir=args.data, profile=not args.no_profile, progress=progress)

@@ -3,7 +3,8 @@
 Every beam option sets one field of the sensor's :class:`~zbuf_occlude.sensors.beam.Beam`
 (:data:`BEAM_OPTIONS`), through :func:`~zbuf_occlude.sensors.kinds.with_beam`, whatever scans the
 beam: a spinning LiDAR, an airborne scanner, a ray table (a preset, a sensor file or
-``--ray-table``).  A depth camera has no beam and refuses them, naming the option.
+``--ray-table``).  A depth camera has no beam and refuses them, and ``--footprint-cast``, naming
+the option.
 :func:`with_return_physics` applies them and checks ``--reflectance-table`` and
 ``--transmittance`` against the sensor; :func:`surface_optics` turns the last two into the
 keywords of :func:`~zbuf_occlude.sensors.scan.scan` and
@@ -141,8 +142,8 @@ def beam_changes(sensor, args: argparse.Namespace) -> dict[str, object]:
     Raises
     ------
     InvalidInputError
-        Naming the option as typed and its value: any of them for a sensor without a beam (a depth
-        camera); ``--footprint`` for a beam without a divergence (naming ``--divergence``);
+        Naming the option as typed and its value: any of them, or ``scan --footprint-cast``, for a
+        sensor without a beam (a depth camera); ``--footprint`` for a beam without a divergence (naming ``--divergence``);
         ``--echo-separation`` without a footprint or with resolved echoes; ``--range-resolution``
         with one return per pulse; resolved echoes without a range resolution; ``--max-returns``
         that contradicts ``--return-mode``; ``--echo-rule waveform`` with one return per pulse.
@@ -150,12 +151,13 @@ def beam_changes(sensor, args: argparse.Namespace) -> dict[str, object]:
     from zbuf_occlude.sensors.kinds import kind_of
 
     given = _given(args)
+    cast = getattr(args, "footprint_cast", None)  # scan's --footprint-cast: None unless given
+    kind = kind_of(sensor)
+    if not kind.pulsed and (given or cast is not None):
+        names = ", ".join([*(_flag(args, dest) for dest in given), *(["--footprint-cast"] if cast is not None else [])])
+        raise InvalidInputError(f"{names}: {args.sensor} is a {kind.title}, which has no beam to change (a pulsed LiDAR has one)")
     if not given:
         return {}
-    kind = kind_of(sensor)
-    names = ", ".join(_flag(args, dest) for dest in given)
-    if not kind.pulsed:
-        raise InvalidInputError(f"{names}: {args.sensor} is a {kind.title}, which has no beam to change (a pulsed LiDAR has one)")
     beam = sensor.beam
     changes: dict[str, object] = footprint_changes(
         beam, footprint="footprint" in given, divergence_deg=given.get("divergence"), names=(_flag(args, "footprint"), _flag(args, "divergence")),

@@ -26,7 +26,9 @@ from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.mesh.sizes import DIMENSIONS, SizeRange, size_interval
 from zbuf_occlude.sensors.adaptive_footprint import FOOTPRINT_MODES
+from zbuf_occlude.sensors.echoes import MAX_POWER_NOISE
 from zbuf_occlude.sensors.placement import CropDistributions
+from zbuf_occlude.sensors.scan_data import check_gps_start
 from zbuf_occlude.sensors.kinds import SENSOR_KINDS, kind_of, preset_names, sensor_from_name
 from zbuf_occlude.sensors.spec_files import SCENE_SUFFIXES
 
@@ -217,15 +219,12 @@ def cmd_scan(args: argparse.Namespace) -> int:
         return _scan_into(folder, args, sensor, formats, las_options, trajectory)
 
 
-def _footprint_mode(args: argparse.Namespace, sensor, kind) -> str:
-    """``--footprint-cast``: "auto" (the default), "exact", or "adaptive", refused, naming the options, where it cannot apply."""
-    mode = args.footprint_cast
+def _footprint_mode(args: argparse.Namespace, sensor) -> str:
+    """``--footprint-cast``: "auto" (not given), "exact", or "adaptive", refused, naming the options, where it cannot apply
+    (a depth camera refuses any given value with the beam options: :func:`~zbuf_occlude.cli.return_physics.beam_changes`)."""
+    mode = args.footprint_cast or "auto"
     if mode != "adaptive":
         return mode
-    if not kind.pulsed:
-        raise InvalidInputError(
-            f"--footprint-cast adaptive: {sensor.name} is a {kind.title}, which fires no pulses to skip the sub-rays of"
-        )
     if not sensor.beam.resolves_footprint:
         raise InvalidInputError(f"--footprint-cast adaptive skips the sub-rays of a footprint whose echoes are resolved; {sensor.name} "
                                 "fires one ray or resolves no echoes: give it --footprint and --max-returns above 1")  # fmt: skip
@@ -243,6 +242,8 @@ def _save(folder: OwnedFolder, s, stem: str, formats: Sequence[str], las_options
     ``las_options`` (:func:`~zbuf_occlude.cli.las_options.las_keywords`), the scene's ``ground_z_m`` and
     ``number`` modulo 65,536 as its point source id where it has no flight lines."""
     files = []
+    if set(formats) & set(LAS_FORMATS):  # the start with this scan's own times, named as the option (the library names its field)
+        check_gps_start(las_options["gps_start_s"], s.gps_time, name="--gps-start")
     for fmt in formats:
         if fmt in LAS_FORMATS:  # LAS 1.4 point format 6, encoded in memory
             data = s.to_las_bytes(compress=fmt == "laz", ground_z_m=ground_z_m, scan_number=number % 65536, **las_options)
@@ -266,7 +267,7 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
 
     out = folder.root
     kind = kind_of(sensor)
-    footprint = _footprint_mode(args, sensor, kind)
+    footprint = _footprint_mode(args, sensor)
     src = Path(args.mesh_or_scene)
     written, empty = [], 0
     if src.suffix.lower() in SCENE_SUFFIXES:
@@ -285,7 +286,8 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
 
                 s = scan_airborne(scene, sensor, (0.0, 0.0), scene.ground_half_extent_m, seed=args.seed + k, footprint=footprint, **optics)
             else:
-                platform = pose if trajectory is None else trajectory.since(trajectory.start_s + k * sensor.sweep_s)
+                start_s = None if trajectory is None else trajectory.start_s + k * sensor.sweep_s  # this sweep's samples only
+                platform = pose if trajectory is None else trajectory.since(start_s, until_s=start_s + sensor.sweep_s)
                 s = scan(scene, sensor, platform, seed=args.seed + k, backend=args.backend, frame=args.frame, footprint=footprint, **optics)
             written += _save(folder, s, f"{src.stem}_{sensor.name}_s{k:03d}", formats, las_options, ground_z_m=scene.ground_z_m, number=k)
     else:
@@ -359,12 +361,11 @@ def _add_return_physics_arguments(p: argparse.ArgumentParser) -> None:
         help="the ground's reflectivity with --reflectivity (default: %(default)s)",
     )
     r.add_argument(
-        "--power-noise",
-        action=Checked,
-        check=real(0.0),
-        default=None,
-        help="sigma of ln(received power) per firing; 0: a sharp threshold (default: the sensor's beam's)",
-    )
+        "--power-noise", metavar="SIGMA", action=Checked, check=real(0.0, MAX_POWER_NOISE), default=None,
+        help=f"sigma of ln(received power) per firing, 0 to {MAX_POWER_NOISE:g}: the most a real return's power fluctuates is "
+        "speckle through saturated turbulence, sigma 1.81; beyond, the noise and not the range would set every intensity; "
+        "0: a sharp threshold (default: the sensor's beam's)",
+    )  # fmt: skip
     r.add_argument(
         "--echo-separation", metavar="M", action=Checked, check=real(0.0, unit="metres"), default=None,
         help="with --footprint: echoes within M metres of the strongest merge into one return at their energy-weighted "
@@ -393,11 +394,12 @@ def _add_return_physics_arguments(p: argparse.ArgumentParser) -> None:
                         "surface and comes back, in [0, 1] (a leafy crown's gap fraction); table (foliage 0.3 from the reflectance "
                         "table), one number (every object), or CLASS=VALUE,... (bush=0.3,tree=0.3; a mesh's class: its file name) "
                         "(default: 0, opaque; airborne: see --reflectance-table)")  # fmt: skip
-    r.add_argument("--footprint-cast", choices=FOOTPRINT_MODES, default="auto",
+    r.add_argument("--footprint-cast", choices=FOOTPRINT_MODES, default=None,
                    help="how a footprint whose echoes are resolved is cast: adaptive casts a pulse's sub-rays only where its "
                         "centre ray and its neighbouring pulses do not all meet one plane, and gives the others that plane's echo "
                         "(the echo of a surface inside the cone that neither meets is lost); exact casts every sub-ray (slower); "
-                        "auto is adaptive where it applies (the embree backend), else exact (default: auto)")  # fmt: skip
+                        "auto is adaptive where it applies (the embree backend), else exact; a depth camera casts no footprint "
+                        "and refuses it (default: auto)")  # fmt: skip
     add_beam_arguments(r)
 
 

@@ -18,7 +18,13 @@ from zbuf_occlude.io.regular_files import read_text_file
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.sensors.adaptive_footprint import FOOTPRINT_MODES
 
-__all__ = ["add_sim2real_parser", "parse_pairs", "parse_up_map"]
+__all__ = ["add_sim2real_parser", "parse_pairs", "parse_up_map", "THREADS_HELP"]
+
+#: ``--threads``' help, the same for every training command (:mod:`zbuf_occlude.learn.reproducible`).
+THREADS_HELP = (
+    "torch CPU threads (default: 1, so that runs agree to the bit on every x86-64 CPU; a run reproduces with the same "
+    "count; with ZBUF_OCCLUDE_NATIVE_CPU=1: torch's default and this CPU's own kernels)"
+)
 
 
 def parse_pairs(text: str | None, option: str) -> dict[str, str]:
@@ -58,6 +64,10 @@ OPTION_NAMES = {
 
 
 def _run(args: argparse.Namespace) -> int:
+    # before anything imports torch: its CPU arithmetic is chosen at import (learn.reproducible)
+    from zbuf_occlude.learn.reproducible import pin_cpu_arithmetic, training_threads
+
+    pin_cpu_arithmetic()
     # the counts and --out were checked while parsing (cli.options); the device before any rendering
     check_device(args.device)
     from zbuf_occlude.experiments.sim2real import Sim2RealConfig, run_sim2real
@@ -77,7 +87,9 @@ def _run(args: argparse.Namespace) -> int:
         aspect=args.augment == "aspect", occluded_points=args.occluded_points, returns=args.returns,
         footprint_cast=args.footprint_cast, option_names=OPTION_NAMES,
     )  # fmt: skip
-    summary = run_sim2real(config, args.out, device=args.device, threads=args.threads, progress=not args.no_progress, say=_say)
+    summary = run_sim2real(
+        config, args.out, device=args.device, threads=training_threads(args.threads), progress=not args.no_progress, say=_say
+    )
     return print_table(args.out, summary)
 
 
@@ -259,7 +271,7 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
         "exact casts every sub-ray; auto is adaptive where it applies, else exact (default: auto; settings.json: lidar_footprint)",
     )  # fmt: skip
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="torch device (default: %(default)s)")
-    p.add_argument("--threads", action=Checked, check=count("MAX_WORKERS"), help="torch CPU threads")
+    p.add_argument("--threads", action=Checked, check=count("MAX_WORKERS"), help=THREADS_HELP)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=_run)
     return p

@@ -181,7 +181,7 @@ class _Shards:
         from zbuf_occlude.dataset.sample_files import read_sample_points
 
         rel = self.records[obj]["shards"][row]
-        path = path_inside(self.root, rel, what=f"{self.root / MANIFEST_FILE} field 'shards'")  # checked on open too
+        path = path_inside(self.root, rel, what=f"{self.root / MANIFEST_FILE} field 'shards'", quoted=False)  # checked on open too
         self.verify(path)
         return read_sample_points(path, self.kind.storage, self.n_points, within=self.root)
 

@@ -24,6 +24,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from zbuf_occlude.dataset.layout import CARD_FILE, CARD_SHA256_FILE, COLUMN_TYPES, POINT_COLUMNS, SHAPE_NAMES_FILE
 from zbuf_occlude.dataset.storage import StorageKind, storage_kind
 from zbuf_occlude.errors import DatasetFormatError, InvalidInputError
+from zbuf_occlude.io.file_errors import KEY_CHARS
 from zbuf_occlude.io.caps import MAX_CARD_CHECKSUM_BYTES, MAX_LIST_BYTES, MAX_MANIFEST_BYTES, MAX_METADATA_BYTES
 from zbuf_occlude.io.hdf5 import Column, declared_nbytes, open_hdf5
 from zbuf_occlude.io.atomic import size_mismatch
@@ -114,7 +115,7 @@ class PointSetCard(_Model):
     @model_validator(mode="after")
     def _counts(self) -> PointSetCard:
         if self.n_with_normals > self.n_objects:
-            raise ValueError(f"n_with_normals {self.n_with_normals} exceeds n_objects {self.n_objects}")
+            raise ValueError("n_with_normals exceeds n_objects")
         return self
 
 
@@ -213,9 +214,9 @@ class ObjectRecord(_Model):
     def _known_columns(cls, names: list[str] | None) -> list[str] | None:
         unknown = [name for name in names or () if name not in POINT_COLUMNS]
         if unknown:
-            raise ValueError(f"unknown per-point column {unknown[0]!r}; this zbuf_occlude reads {tuple(POINT_COLUMNS)}")
+            raise ValueError(f"{len(unknown):,} per-point column(s) this zbuf_occlude does not read; it reads {tuple(POINT_COLUMNS)}")
         if names is not None and len(set(names)) != len(names):
-            raise ValueError(f"a per-point column is named twice in {names}")
+            raise ValueError("a per-point column is named twice")
         return names
 
 
@@ -269,8 +270,13 @@ def describe_validation_error(exc: ValidationError) -> str:
     errors = exc.errors(include_url=False)
     parts = []
     for e in errors[:MAX_LISTED]:
-        loc = ".".join(str(x) for x in e["loc"])
-        parts.append(f"field {loc!r}: {e['msg']}" if loc else e["msg"])
+        loc = ".".join(
+            x if isinstance(x, str) and x.isprintable() and len(x) <= KEY_CHARS else str(x) if isinstance(x, int) else "<a key>"
+            for x in e["loc"]
+        )  # keys of the file, cut; never a value
+        # pydantic's words quote what is expected, never the input, but for a discriminator's tag
+        msg = "its tag is none of those expected" if e["type"] == "union_tag_invalid" else e["msg"]
+        parts.append(f"field {loc!r}: {msg}" if loc else msg)
     more = f"; and {len(errors) - MAX_LISTED} more" if len(errors) > MAX_LISTED else ""
     return "; ".join(parts) + more
 
@@ -419,11 +425,13 @@ def read_shape_names(root: Path, card: Card) -> list[str]:
         bad = control_character(name)
         if bad is not None or not name:
             raise DatasetFormatError(
-                f"{path}:{i + 1}: class name {name!r} is empty or holds the control character "
+                f"{path}:{i + 1}: the class name is empty or holds the control character "
                 f"U+{ord(bad or chr(0)):04X}; the label -> name mapping cannot be trusted"
             )
     if card.shape_names is not None and names != card.shape_names:
-        raise DatasetFormatError(f"{path} does not match the field 'shape_names' of the card ({card.shape_names})")
+        raise DatasetFormatError(
+            f"{path} does not match the field 'shape_names' of the card ({len(names):,} names and {len(card.shape_names):,})"
+        )
     return names
 
 
@@ -459,10 +467,7 @@ def check_records(
         where = f"{manifest}:{lineno}"
         found = []
         if rec.label >= len(shape_names) or shape_names[rec.label] != rec.class_name:
-            found.append(
-                f"{where}: field 'label' {rec.label} ({rec.class_name!r}) does not match line {rec.label + 1} of "
-                f"{SHAPE_NAMES_FILE} ({len(shape_names)} names)"
-            )
+            found.append(f"{where}: fields 'label' and 'class_name' do not match a line of {SHAPE_NAMES_FILE} ({len(shape_names)} names)")
         if len(rec.n_visible) != n_poses:
             found.append(
                 f"{where}: field 'n_visible' has {len(rec.n_visible)} entries, the card has {n_poses} "
@@ -475,7 +480,7 @@ def check_records(
                 "entries): one per pose, each at most the pose's visible points"
             )
         if rec.point_columns and not keeps_columns:
-            found.append(f"{where}: field 'point_columns' {rec.point_columns}, but {card.storage} storage keeps no per-point columns")
+            found.append(f"{where}: field 'point_columns' names some, but the card's storage keeps no per-point columns")
         if found and problems is None:
             raise DatasetFormatError(found[0])
         (problems if problems is not None else []).extend(found)
@@ -501,8 +506,8 @@ def check_point_set_records(
         said = rec.visibility_from if rec is not None else None
         if rec is not None and (rec.cloud is not None) != (said == "points"):
             found.append(
-                f"{manifest}:{lineno}: field 'visibility_from' is {said!r} for "
-                f"{'a cloud of a point-set file' if rec.cloud is not None else 'a mesh'} (field 'cloud' {rec.cloud!r})"
+                f"{manifest}:{lineno}: field 'visibility_from' is {'not ' if rec.cloud is not None else ''}\"points\" for "
+                f"{'a cloud of a point-set file' if rec.cloud is not None else 'a mesh'} (field 'cloud')"
             )
     clouds = sum(isinstance(doc.get("cloud"), int) for _, doc, _ in rows)
     with_normals = sum(rec.normals is True for _, _, rec in rows if rec is not None and rec.cloud is not None)
@@ -510,12 +515,12 @@ def check_point_set_records(
     if clouds != said_clouds:
         found.append(
             f"{manifest}: {clouds} objects are clouds of point-set files (field 'cloud'), the card's field "
-            f"'point_sets' says {said_clouds}; the data set was changed after it was written"
+            "'point_sets' says another number; the data set was changed after it was written"
         )
     elif card.point_sets is not None and with_normals != card.point_sets.n_with_normals:
         found.append(
             f"{manifest}: {with_normals} finished clouds used their file's normals (field 'normals'), the card's field "
-            f"'point_sets.n_with_normals' says {card.point_sets.n_with_normals}"
+            "'point_sets.n_with_normals' says another number"
         )
     if found and problems is None:
         raise DatasetFormatError(found[0])
@@ -537,13 +542,13 @@ def checked_shards(root: Path, where: str, rec: OkRecord, card: Card, *, verify:
     DatasetFormatError
         ``verify`` and the record has no ``sha256``: a changed shard could not be noticed.
     """
-    shards = [path_inside(root, rel, what=f"{where} field 'shards'") for rel in rec.shards]
+    shards = [path_inside(root, rel, what=f"{where} field 'shards'", quoted=False) for rel in rec.shards]
     if not verify:
         return shards, {}
     if rec.sha256 is None:
         said = " although the card says every file has one (field 'checksums'): the manifest was altered" if card.checksums else ""
         raise DatasetFormatError(
-            f"{where}: object {rec.name!r} has no SHA-256 (field 'sha256'){said}; a changed shard could not be "
+            f"{where}: the object has no SHA-256 (field 'sha256'){said}; a changed shard could not be "
             "noticed. Check the data set's source, then open it with OccludedDataset(..., verify=False) if you trust it "
             "(`zbuf-occlude verify DIR` lists every problem)"
         )

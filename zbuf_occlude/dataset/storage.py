@@ -709,7 +709,7 @@ def check_point_column(
         at = np.argwhere(bad)[0]
         shard_row = int(at[0]) if rows is None else int(rows[int(at[0])])
         raise DatasetFormatError(
-            f"the shard {path}: dataset {name!r} holds {values[tuple(at)].item()!r} at row {shard_row}, point {int(at[-1])} "
+            f"the shard {path}: dataset {name!r} holds a value {'that is not finite' if values.dtype.kind == 'f' and not np.isfinite(values[tuple(at)]) else 'out of range'} at row {shard_row}, point {int(at[-1])} "
             f"({int(bad.sum())} values wrong); it must be {said}: the data set is damaged"
         )
 

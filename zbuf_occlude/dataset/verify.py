@@ -202,7 +202,7 @@ def _check_record(root: Path, where: str, rec: OkRecord, check: _RecordFiles, ki
     what the reader would refuse in them (:meth:`~zbuf_occlude.dataset.storage.StorageKind.check_file`)."""
     problems = report.problems
     try:
-        files = [path_inside(root, rel, what=f"{where} field 'shards'") for rel in rec.shards]
+        files = [path_inside(root, rel, what=f"{where} field 'shards'", quoted=False) for rel in rec.shards]
     except ZbufOccludeError as exc:
         problems.append(str(exc))
         return
@@ -271,7 +271,7 @@ def _check_joined(root: Path, card: Card, split_bytes: dict[str, int], report: V
     problems = report.problems
     for entry in card.joined_files or []:
         try:
-            file = path_inside(root, entry.path, what=f"{root / CARD_FILE} field 'joined_files'")
+            file = path_inside(root, entry.path, what=f"{root / CARD_FILE} field 'joined_files'", quoted=False)
         except ZbufOccludeError as exc:
             problems.append(str(exc))
             continue
@@ -279,7 +279,7 @@ def _check_joined(root: Path, card: Card, split_bytes: dict[str, int], report: V
             problems.append(f"{root / CARD_FILE}: the joined file {entry.path} is missing")
         elif file.stat().st_size > JOINED_BYTES_FACTOR * split_bytes.get(entry.split, 0) + JOINED_BYTES_SLACK:
             problems.append(
-                f"{file} holds {file.stat().st_size:,} bytes, more than the shards of split {entry.split!r} could make "
+                f"{file} holds {file.stat().st_size:,} bytes, more than the shards of its split could make "
                 f"({JOINED_BYTES_FACTOR} x {split_bytes.get(entry.split, 0):,} + {JOINED_BYTES_SLACK:,}); not read"
             )
         elif file_sha256(file) != entry.sha256:
@@ -307,7 +307,7 @@ def _check_file_lists(root: Path, card: Card, listed: dict[str, list[str]], prob
             continue
         for n, rel in enumerate(lines, start=1):
             try:
-                path_inside(root, rel, what=f"{list_file}:{n}")
+                path_inside(root, rel, what=f"{list_file}:{n}", quoted=False)
             except ZbufOccludeError as exc:
                 problems.append(str(exc))
         if sorted(lines) != sorted(listed.get(split, [])):

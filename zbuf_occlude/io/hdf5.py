@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from zbuf_occlude.errors import DatasetFormatError
-from zbuf_occlude.io.file_errors import dtype_text
+from zbuf_occlude.io.file_errors import dtype_text, key_text
 from zbuf_occlude.io.regular_files import check_within, open_regular_file
 
 __all__ = ["Column", "KNOWN_FILTERS", "MAX_COMPRESSION_RATIO", "MAX_OBJECTS", "check_hdf5", "open_hdf5", "declared_nbytes"]
@@ -81,7 +81,7 @@ def _kind(dtype: Any) -> str | None:
 def _check_dataset(ds: Any, path: Path, name: str, columns: Mapping[str, Column]) -> None:
     from h5py import h5d
 
-    where = f"the HDF5 file {path}: dataset {name!r}"
+    where = f"the HDF5 file {path}: dataset {key_text(name)}"
     if ds.is_virtual:
         raise DatasetFormatError(f"{where} is a virtual dataset (it maps other files' data); refused")
     dcpl = ds.id.get_create_plist()
@@ -157,16 +157,18 @@ def check_hdf5(f: Any, path: str | os.PathLike, columns: Mapping[str, Column] | 
             link = group.id.links.get_info(name.encode("utf-8")).type
             if link != h5l.TYPE_HARD:
                 what = {h5l.TYPE_SOFT: "a soft link", h5l.TYPE_EXTERNAL: "an external link (to another file)"}
-                raise DatasetFormatError(f"the HDF5 file {path}: {full!r} is {what.get(link, f'a link of type {link}')}; links are refused")
+                raise DatasetFormatError(
+                    f"the HDF5 file {path}: {key_text(full)} is {what.get(link, f'a link of type {link}')}; links are refused"
+                )
             cls = group.get(name, getclass=True)
             if cls is h5py.Group:
                 if full.count("/") > 1:  # a data set's files are flat; a deeper tree is not ours
-                    raise DatasetFormatError(f"the HDF5 file {path}: nested group {full!r}; refused")
+                    raise DatasetFormatError(f"the HDF5 file {path}: nested group {key_text(full)}; refused")
                 pending.append(group[name])
             elif cls is h5py.Dataset:
                 _check_dataset(group[name], path, full, columns)
             else:
-                raise DatasetFormatError(f"the HDF5 file {path}: {full!r} is not a group or a dataset; refused")
+                raise DatasetFormatError(f"the HDF5 file {path}: {key_text(full)} is not a group or a dataset; refused")
 
 
 def open_hdf5(path: str | os.PathLike, columns: Mapping[str, Column] | None = None, *, within: str | os.PathLike | None = None) -> Any:

@@ -15,6 +15,7 @@ from typing import Any
 
 from zbuf_occlude.errors import InvalidInputError, ZbufOccludeError
 from zbuf_occlude.io.caps import MAX_METADATA_BYTES
+from zbuf_occlude.io.file_errors import without_quotes
 from zbuf_occlude.io.regular_files import read_regular_file
 
 __all__ = ["MAX_JSON_DEPTH", "json_depth", "loads_json", "read_json_file"]
@@ -65,8 +66,12 @@ def loads_json(text: str | bytes, *, what: str, max_depth: int = MAX_JSON_DEPTH)
         doc = json.loads(text)
     except RecursionError:
         doc, depth = None, None
-    except (ValueError, TypeError) as exc:
-        raise InvalidInputError(f"{what} is not valid JSON: {exc}") from None
+    except json.JSONDecodeError as exc:  # its words may quote a character of the file: left out
+        raise InvalidInputError(f"{what} is not valid JSON: {without_quotes(exc.msg)}: line {exc.lineno} column {exc.colno}") from None
+    except UnicodeDecodeError as exc:
+        raise InvalidInputError(f"{what} is not valid JSON: byte {exc.start:,} is not {exc.encoding} text") from None
+    except (ValueError, TypeError) as exc:  # an integer of over 4,300 digits; bytes of no known encoding
+        raise InvalidInputError(f"{what} is not valid JSON: {without_quotes(str(exc))}") from None
     else:
         depth = json_depth(doc, max_depth)
     if depth is None or depth > max_depth:

@@ -34,12 +34,13 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude._version import __version__, install_hint
+from zbuf_occlude._version import __version__
 from zbuf_occlude.defaults import MAX_POINTS
-from zbuf_occlude.errors import ArgumentTypeError, BackendUnavailable, InvalidInputError, ZbufOccludeError
+from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError, ZbufOccludeError
 from zbuf_occlude.geometry.arguments import check_points, described
 from zbuf_occlude.io.caps import MAX_LAS_BYTES, MAX_VLR_RECORD_BYTES
-from zbuf_occlude.io.las_crs import linear_unit_m
+from zbuf_occlude.io.file_errors import parser_failure
+from zbuf_occlude.io.las_crs import epsg_crs, linear_unit_m
 from zbuf_occlude.io.las_layout import (
     MAX_EVLRS,
     MAX_LAZ_POINTS_PER_BYTE,
@@ -281,17 +282,13 @@ def read_las(
         except ZbufOccludeError:
             raise
         except _decode_errors() as exc:
-            raise InvalidInputError(f"{name}: not a readable LAS/LAZ file ({_one_line(exc)})") from None
+            raise InvalidInputError(f"{name}: not a readable LAS/LAZ file ({parser_failure(exc)})") from None
         except BaseException as exc:  # a Rust panic inside lazrs (pyo3's PanicException derives from BaseException)
             if type(exc).__name__ != "PanicException":
                 raise
-            raise InvalidInputError(f"{name}: damaged LAZ data ({_one_line(exc)})") from None
+            raise InvalidInputError(f"{name}: damaged LAZ data ({parser_failure(exc)})") from None
     return LasPoints(**arrays, has_gps_time=layout.point_format_id in _FORMATS_WITH_GPS_TIME, point_format_id=layout.point_format_id,
                      version=f"{layout.version[0]}.{layout.version[1]}", linear_unit_m=unit)  # fmt: skip
-
-
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 def _per_point(value: Any, name: str, n: int, *, kinds: str, low: float, high: float, dtype: type, width: int = 0) -> np.ndarray:
@@ -362,8 +359,10 @@ class SurveyFields:
         ``gps_time`` is adjusted standard GPS time (global encoding bit 0 set); default False, GPS
         week time.
     crs : int or str, optional
-        The coordinate reference system of the points: an EPSG code (``2154``, ``"EPSG:2154"``)
-        whose axes are in metres, written as OGC WKT (pyproj makes it: the ``crs`` extra).
+        The coordinate reference system of the points: an EPSG code (``2154``, ``"EPSG:2154"``,
+        ``"EPSG:2154+5720"``) of a projected CRS in metres, or of one compound with a vertical CRS
+        in metres (:func:`~zbuf_occlude.io.las_crs.epsg_crs`), written as OGC WKT (pyproj makes it:
+        the ``crs`` extra).
     """
 
     object_id: Any = None
@@ -401,44 +400,6 @@ def _names_json(class_names: Sequence[str]) -> bytes:
     if len(data) > MAX_VLR_RECORD_BYTES:
         raise InvalidInputError(f"class_names take {len(data):,} bytes as JSON; a VLR holds at most {MAX_VLR_RECORD_BYTES:,}")
     return data
-
-
-def epsg_crs(crs: int | str) -> Any:
-    """The ``pyproj.CRS`` of an EPSG code (``2154`` or ``"EPSG:2154"``), checked to be in metres.
-
-    Raises
-    ------
-    ArgumentTypeError
-        ``crs`` neither an int nor a string.
-    InvalidInputError
-        Not ``EPSG:N``, a code PROJ does not know, or a CRS whose axes are not in metres (a
-        geographic CRS in degrees, a CRS in feet): a scan's coordinates are metres.
-    BackendUnavailable
-        pyproj is not installed (the ``crs`` extra).
-    """
-    if isinstance(crs, bool) or not isinstance(crs, (int, np.integer, str)):
-        raise ArgumentTypeError(f"crs must be an EPSG code (2154 or 'EPSG:2154'), got {described(crs)}")
-    text = str(crs).strip()
-    code = text[5:] if text[:5].upper() == "EPSG:" else text if isinstance(crs, (int, np.integer)) else ""
-    if not (code.isascii() and code.isdecimal() and 0 < len(code) <= _EPSG_DIGITS):
-        raise InvalidInputError(f"crs must be an EPSG code, EPSG:N (EPSG:2154), got {described(crs)}")
-    try:
-        import pyproj
-    except ImportError:
-        raise BackendUnavailable(f"writing a CRS (crs={text}) needs pyproj: {install_hint('crs')}") from None
-    try:
-        out = pyproj.CRS.from_epsg(int(code))
-    except pyproj.exceptions.CRSError:
-        raise InvalidInputError(f"crs EPSG:{int(code)} is not a coordinate reference system PROJ knows") from None
-    units = {(axis.unit_name, axis.unit_conversion_factor) for axis in out.axis_info}
-    if not units or any(factor != 1.0 for _, factor in units):
-        raise InvalidInputError(f"crs EPSG:{int(code)} ({out.name}) has axes in {', '.join(sorted(u for u, _ in units)) or 'no unit'}: "
-                                "a scan's coordinates are metres; use a projected CRS in metres")  # fmt: skip
-    return out
-
-
-#: Digits of an EPSG code at most (codes run to 6 digits; 10 bounds int() of what is typed).
-_EPSG_DIGITS = 10
 
 
 def las_bytes(
@@ -512,7 +473,7 @@ def las_bytes(
         A shape other than ``(N,)``/``(N, 3)``, a value out of range, ``return_number`` above
         ``number_of_returns``, points too far apart for int32 steps of ``scale``, ``class_index``
         without ``class_names`` (or beyond them), class names over a VLR's 65,535 bytes, a ``crs``
-        that is not an EPSG code of a CRS in metres.
+        that :func:`~zbuf_occlude.io.las_crs.epsg_crs` refuses (not a projected CRS in metres).
     BackendUnavailable
         ``crs`` given and pyproj not installed (the extra to install is named).
     """

@@ -183,7 +183,7 @@ def parse_header(fh: BinaryIO, size: int, name: str) -> LasLayout:
         raise InvalidInputError(f"{name}: records of {record_length} bytes, fewer than point format {point_format_id}'s "
                                 f"{_RECORD_SIZES[point_format_id]}")  # fmt: skip
     if not (np.all(np.isfinite(scales)) and np.all(scales != 0) and np.all(np.isfinite(offsets))):
-        raise InvalidInputError(f"{name}: scale factors {scales.tolist()} or offsets {offsets.tolist()} are not finite and non-zero")
+        raise InvalidInputError(f"{name}: its scale factors or offsets are not finite and non-zero")
     evlrs = first_evlr = 0
     if minor >= 4:
         if len(head) < _HEADER_SIZES[4]:

@@ -22,7 +22,8 @@ file's label where it has one):
 Every file is untrusted.  Nothing is executed or unpickled; an HDF5 file is read only after
 :func:`zbuf_occlude.io.hdf5.check_hdf5` has found no link to another file, no virtual dataset
 and no external storage; sizes are checked from headers before anything is read
-(:data:`~zbuf_occlude.defaults.MAX_POINT_SET_POINTS` points a cloud,
+(:data:`~zbuf_occlude.defaults.MAX_POINT_SET_POINTS` points a cloud, what occluding it costs
+named when it holds more (:func:`occlusion_cost`),
 :data:`~zbuf_occlude.io.caps.MAX_POINT_SET_BYTES` a read), and what a read will allocate is
 checked against the memory available (:func:`zbuf_occlude.resources.check_memory`) before it
 allocates; NaN or infinite coordinates are refused, and so are normals that are zero or not finite
@@ -59,6 +60,7 @@ __all__ = [
     "stored_up", "UP_AXES",
     "POINT_SET_SUFFIXES", "SHAPE_NAME_FILES", "PointSet", "is_point_set_file", "read_point_sets",
     "point_set_labels", "shape_names", "unit_normals", "check_npy_header", "BYTES_PER_READ_POINT", "BYTES_PER_LABEL",
+    "occlusion_cost", "OCCLUSION_BYTES_PER_POINT", "OCCLUSION_FIXED_BYTES", "OCCLUSION_PREPARE_SECONDS_PER_POINT", "OCCLUSION_POSE_SECONDS_PER_POINT",
 ]  # fmt: skip
 
 #: Suffixes of the files read here (any case).
@@ -80,6 +82,20 @@ BYTES_PER_READ_POINT = 80
 #: Bytes per cloud of reading a file's labels (:func:`point_set_labels`): the int64 array, and
 #: the list of Python ints returned (an 8-byte slot and a 32-byte int each).
 BYTES_PER_LABEL = 48
+#: What occluding a cloud costs (:func:`occlusion_cost`), named when a cloud holds more points than
+#: accepted; measured with ``generate``'s job for one cloud (:func:`zbuf_occlude.pipeline.occlude_point_set`,
+#: normals estimated, the 25 poses of ``grid25``) on two cores, at 1 and 2 million points.  Bytes a
+#: point: the address space (``VmPeak``) grew 485 B a point from 1 to 2 million; the splats'
+#: preparation alone is estimated at 512 (:data:`~zbuf_occlude.visibility.point_splats.BYTES_PER_SURFEL`
+#: and ``BYTES_PER_ESTIMATED_NORMAL``), the read adds its :data:`BYTES_PER_READ_POINT`; rounded up.
+OCCLUSION_BYTES_PER_POINT = 600
+#: Bytes of the job whatever its points: the libraries it imports and its threads' stacks and malloc
+#: arenas (``VmPeak`` grew 934 MiB at a million points, 463 MiB of them the points' at 485 B).
+OCCLUSION_FIXED_BYTES = 400 << 20
+#: Seconds a point of preparing the splats (neighbour search, normals' estimate): 5.3 s a million measured.
+OCCLUSION_PREPARE_SECONDS_PER_POINT = 5.5e-6
+#: Seconds a point of each pose (splatting and deciding one view): 1.15 s a million measured.
+OCCLUSION_POSE_SECONDS_PER_POINT = 1.2e-6
 #: A ``.npy`` file's first bytes: the magic string, the format version (major, minor), then the
 #: header's length, 2 bytes little-endian in version 1 and 4 in versions 2 and 3 (NEP 1).
 _NPY_MAGIC = b"\x93NUMPY"
@@ -119,6 +135,47 @@ def _check_max_points(max_points: object) -> int:
     if isinstance(max_points, bool) or not isinstance(max_points, (int, np.integer)) or int(max_points) < 1:
         raise InvalidInputError(f"max_points must be an integer >= 1, got {max_points!r}")
     return int(max_points)
+
+
+def occlusion_cost(n_points: int) -> tuple[int, float, float]:
+    """What occluding one cloud of ``n_points`` points costs, by the measured law above.
+
+    Parameters
+    ----------
+    n_points : int
+
+    Returns
+    -------
+    memory_bytes : int
+        Address space the job maps beyond the interpreter's (:data:`OCCLUSION_FIXED_BYTES`, and
+        :data:`OCCLUSION_BYTES_PER_POINT` a point).
+    prepare_s : float
+        Seconds of preparing its splats on two cores (:data:`OCCLUSION_PREPARE_SECONDS_PER_POINT` a point).
+    pose_s : float
+        Seconds of each pose on two cores (:data:`OCCLUSION_POSE_SECONDS_PER_POINT` a point).
+    """
+    n = int(n_points)
+    return (
+        OCCLUSION_FIXED_BYTES + n * OCCLUSION_BYTES_PER_POINT,
+        n * OCCLUSION_PREPARE_SECONDS_PER_POINT,
+        n * OCCLUSION_POSE_SECONDS_PER_POINT,
+    )
+
+
+def _too_many_points(path: Path, declared: str, n: int, max_points: int) -> InvalidInputError:
+    """The refusal of a cloud of ``n`` points, more than ``max_points``: ``declared`` (what the header
+    says), then what occluding it would cost (:func:`occlusion_cost`, for the default poses)."""
+    from zbuf_occlude.defaults import DEFAULT_VIEWS
+    from zbuf_occlude.geometry.cameras import view_schedule
+
+    memory, prepare_s, pose_s = occlusion_cost(n)
+    poses = len(view_schedule(DEFAULT_VIEWS))
+    return InvalidInputError(
+        f"{path}: {declared}, more than the {max_points:,} accepted; occluding {n:,} points needs about "
+        f"{memory / 2**30:.1f} GiB of memory and, on two cores, {prepare_s:.0f} s plus {pose_s:.1f} s a pose "
+        f"({(prepare_s + poses * pose_s) / 60:.1f} minutes for the default {poses} poses): subsample the cloud to at "
+        f"most {max_points:,} points"
+    )
 
 
 def _point_set(path: Path, name: str, cloud: NDArray, normals: NDArray | None, label: int | None) -> PointSet:
@@ -199,7 +256,7 @@ def _hdf5_layout(f: Any, path: Path, max_points: int) -> tuple[Any, Any | None]:
     if data.shape[0] == 0:
         raise DatasetFormatError(f"{path}: 'data' holds no clouds")
     if data.shape[1] > max_points:
-        raise InvalidInputError(f"{path}: its clouds hold {data.shape[1]:,} points each, more than the {max_points:,} accepted")
+        raise _too_many_points(path, f"its clouds hold {data.shape[1]:,} points each", data.shape[1], max_points)
     return data, normal
 
 
@@ -332,7 +389,7 @@ def _npy_layout(fh: Any, path: Path, max_points: int) -> tuple[int, int, np.dtyp
             f"{path}: holds {dtype_text(dtype)} values of shape {shape}, not (N, 3) or (N, 6) numbers (coordinates, normals)"
         )
     if shape[0] > max_points:
-        raise InvalidInputError(f"{path}: {shape[0]:,} points, more than the {max_points:,} accepted")
+        raise _too_many_points(path, f"{shape[0]:,} points", shape[0], max_points)
     return shape[0], shape[1], dtype
 
 
@@ -375,7 +432,7 @@ def _ply_vertex_count(path: Path, max_points: int) -> int:
     if n == 0:
         raise InvalidInputError(f"{path}: its PLY header declares no vertices")
     if n > max_points:
-        raise InvalidInputError(f"{path}: its PLY header declares {n:,} points, more than the {max_points:,} accepted")
+        raise _too_many_points(path, f"its PLY header declares {n:,} points", n, max_points)
     return n
 
 
@@ -493,7 +550,9 @@ def read_point_sets(
     path : str or PathLike
         A ``.h5``/``.hdf5``, ``.npy`` or ``.ply`` file (:data:`POINT_SET_SUFFIXES`).
     max_points : int
-        The most points a cloud may hold (default :data:`~zbuf_occlude.defaults.MAX_POINT_SET_POINTS`).
+        The most points a cloud may hold (default :data:`~zbuf_occlude.defaults.MAX_POINT_SET_POINTS`); a
+        larger cloud is refused from the header, before its values are read, with what occluding it
+        would cost (:func:`occlusion_cost`).
     rows : sequence of int, optional
         HDF5 files: read only these rows, in this order (the other formats hold one cloud, row 0).
 

@@ -4,7 +4,10 @@ Every command that runs longer than a few seconds (``generate``, ``farm``, ``far
 experiments, ``compare``, ``elevation-profile``, the protocols, ``scan``, ``verify``) reports
 through :func:`progress`:
 
-- stderr is a terminal: a tqdm bar, redrawn in place;
+- stderr is a terminal, a pseudo-terminal included (``script``, ``ssh``, tmux, an editor's
+  terminal): a tqdm bar, redrawn in place, as wide as the terminal; where the terminal does not
+  say its size (a pseudo-terminal that nobody sized says 0 × 0, from which tqdm draws nothing)
+  ``$COLUMNS`` × ``$LINES``, else :data:`FALLBACK_COLUMNS` × :data:`FALLBACK_LINES`;
 - stderr is a file or a pipe: :class:`LineProgress`, a tqdm whose every update is one
   newline-terminated line (``generate: 12/40 obj, 3.10 obj/s, ETA 00:09, 00:04 elapsed``), at
   most one every :data:`PROGRESS_INTERVAL_S` seconds (all bars together), and one more when a
@@ -32,13 +35,21 @@ from tqdm.std import tqdm
 
 from zbuf_occlude.errors import InvalidInputError
 
-__all__ = ["progress", "LineProgress", "RateAfterFirst", "progress_interval_s", "PROGRESS_INTERVAL_S", "PROGRESS_INTERVAL_ENV"]
+__all__ = [
+    "progress", "LineProgress", "RateAfterFirst", "progress_interval_s", "PROGRESS_INTERVAL_S", "PROGRESS_INTERVAL_ENV",
+    "FALLBACK_COLUMNS", "FALLBACK_LINES",
+]  # fmt: skip
 
 #: Seconds between two progress lines in a log: often enough to see a run move, rare enough that a
 #: day-long farm writes a few thousand lines.
 PROGRESS_INTERVAL_S = 10.0
 #: Environment variable that overrides :data:`PROGRESS_INTERVAL_S` (seconds).
 PROGRESS_INTERVAL_ENV = "ZBUF_OCCLUDE_PROGRESS_INTERVAL_S"
+#: Width of the bar, in characters, on a terminal that does not say its own (0 columns) and
+#: without ``$COLUMNS``: the width terminals open with.
+FALLBACK_COLUMNS = 80
+#: Height, in lines, of such a terminal without ``$LINES`` (tqdm draws no bar below the last line).
+FALLBACK_LINES = 24
 
 
 def progress_interval_s() -> float:
@@ -66,6 +77,34 @@ def _stderr_is_terminal() -> bool:
         return bool(sys.stderr.isatty())
     except (AttributeError, ValueError):  # no stderr (pythonw), or a closed one
         return False
+
+
+def _stderr_size() -> tuple[int, int]:
+    """The terminal on stderr's ``(columns, lines)``; 0 for what it does not say (an unsized pseudo-terminal)."""
+    try:
+        size = os.get_terminal_size(sys.stderr.fileno())
+    except (AttributeError, ValueError, OSError):  # no file descriptor (a replaced stderr), or not a terminal
+        return 0, 0
+    return max(size.columns, 0), max(size.lines, 0)
+
+
+def _from_environ(name: str, fallback: int) -> int:
+    try:
+        value = int(os.environ.get(name, ""))
+    except ValueError:
+        return fallback
+    return value if value > 0 else fallback
+
+
+def _bar_shape() -> dict[str, Any]:
+    """tqdm's size options for a bar on the terminal on stderr: follow its size where it says it,
+    else ``$COLUMNS`` and ``$LINES``, or :data:`FALLBACK_COLUMNS` and :data:`FALLBACK_LINES`.
+    A pseudo-terminal nobody sized says 0 × 0, from which tqdm would draw a bar of no characters
+    on no line (nothing at all)."""
+    columns, lines = _stderr_size()
+    if columns and lines:
+        return {"dynamic_ncols": True}
+    return {"ncols": columns or _from_environ("COLUMNS", FALLBACK_COLUMNS), "nrows": lines or _from_environ("LINES", FALLBACK_LINES)}
 
 
 class RateAfterFirst(tqdm):
@@ -210,5 +249,5 @@ def progress(
     if not enabled or sys.stderr is None:  # no stderr (closed, pythonw): nowhere to show it
         return tqdm(iterable, disable=True, **common)
     if _stderr_is_terminal():
-        return RateAfterFirst(iterable, dynamic_ncols=True, **common)  # the bar, redrawn in place
+        return RateAfterFirst(iterable, **_bar_shape(), **common)  # the bar, redrawn in place
     return LineProgress(iterable, mininterval=progress_interval_s() if interval_s is None else interval_s, **common)

@@ -22,6 +22,7 @@ import unicodedata
 from pathlib import Path, PurePosixPath
 
 from zbuf_occlude.errors import InvalidInputError, UnsafePathError
+from zbuf_occlude.io.file_errors import value_kind
 
 __all__ = ["path_inside", "check_relative_name", "check_line_text", "control_character", "check_found_file"]
 
@@ -46,7 +47,7 @@ def check_line_text(text: object, *, what: str) -> str:
         ``\\x85``, ...): it would break the one-name-per-line files (``shape_names.txt``).
     """
     if not isinstance(text, str) or not text:
-        raise InvalidInputError(f"{what} must be a non-empty string, got {text!r}")
+        raise InvalidInputError(f"{what} must be a non-empty string, got {value_kind(text)}")
     bad = control_character(text)
     if bad is not None:
         raise InvalidInputError(
@@ -67,7 +68,7 @@ def check_relative_name(name: object, *, what: str) -> str:
         The name would leave the folder or is not a plain relative path.
     """
     if not isinstance(name, str) or not name:
-        raise UnsafePathError(f"{what} must be a non-empty relative path, got {name!r}")
+        raise UnsafePathError(f"{what} must be a non-empty relative path, got {value_kind(name)}")
     parts = name.split("/")
     if name.startswith("/") or any(p in ("", ".", "..") for p in parts) or "\0" in name or control_character(name):
         raise UnsafePathError(
@@ -77,7 +78,7 @@ def check_relative_name(name: object, *, what: str) -> str:
     return name
 
 
-def path_inside(root: str | os.PathLike, rel: object, *, what: str) -> Path:
+def path_inside(root: str | os.PathLike, rel: object, *, what: str, quoted: bool = True) -> Path:
     """``root / rel``, after checking that it lies inside ``root``.
 
     ``rel`` must be a relative path (str) without ``..`` parts, and ``root / rel`` must
@@ -93,6 +94,11 @@ def path_inside(root: str | os.PathLike, rel: object, *, what: str) -> Path:
         The path the metadata gives, relative to ``root``.
     what : str
         Where ``rel`` comes from, for the message (e.g. ``"manifest.jsonl:3 shards"``).
+    quoted : bool
+        Whether the message quotes ``rel`` (and where a link leads): for a name of ours (an output
+        folder's ``shards``).  False for a path read from a user's file (a scene's mesh, a manifest's
+        shard, a file a mesh names): the message names ``what`` and ``root``, never ``rel``, which is
+        a value of that file.
 
     Returns
     -------
@@ -106,20 +112,25 @@ def path_inside(root: str | os.PathLike, rel: object, *, what: str) -> Path:
         (through a symlink).
     """
     if not isinstance(rel, (str, os.PathLike)) or not str(rel) or "\0" in str(rel):
-        raise UnsafePathError(f"{what}: {rel!r} is not a relative path")
+        got = value_kind(rel) if not isinstance(rel, str) or not rel else "one holding NUL"
+        raise UnsafePathError(
+            f"{what}: {rel!r} is not a relative path" if quoted else f"{what}: the path must be a relative path, got {got}"
+        )
+    named = f"{str(rel)!r}" if quoted else "the path"
     rel_path = PurePosixPath(os.fspath(rel))
     if rel_path.is_absolute() or Path(rel).is_absolute():
-        raise UnsafePathError(f"{what}: {str(rel)!r} is an absolute path; paths in metadata must stay inside {root}")
+        raise UnsafePathError(f"{what}: {named} is an absolute path; paths in metadata must stay inside {root}")
     if ".." in rel_path.parts:
-        raise UnsafePathError(f"{what}: {str(rel)!r} leaves {root} ('..'); paths in metadata must stay inside it")
+        raise UnsafePathError(f"{what}: {named} leaves {root} ('..'); paths in metadata must stay inside it")
     root = Path(root)
     path = root / rel_path
     try:
         real_root, real = root.resolve(), path.resolve()
     except (OSError, RuntimeError) as exc:  # a symlink loop (RuntimeError before Python 3.13)
-        raise UnsafePathError(f"{what}: {str(rel)!r} cannot be resolved inside {root} ({exc})") from None
+        raise UnsafePathError(f"{what}: {named} cannot be resolved inside {root} ({exc if quoted else type(exc).__name__})") from None
     if real != real_root and real_root not in real.parents:
-        raise UnsafePathError(f"{what}: {str(rel)!r} leads outside {root} (to {real}, through a symlink); refused")
+        where = f" (to {real}, through a symlink)" if quoted else " through a symlink"
+        raise UnsafePathError(f"{what}: {named} leads outside {root}{where}; refused")
     return path
 
 

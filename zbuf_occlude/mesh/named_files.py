@@ -46,7 +46,7 @@ def _resolver_class() -> type:
             refused = None
             for candidate in candidates:
                 try:
-                    path = path_inside(self.parent, candidate, what=f"{self.file_path}: a file it names")
+                    path = path_inside(self.parent, candidate, what=f"{self.file_path}: a file it names", quoted=False)
                 except UnsafePathError as exc:
                     refused = refused or exc
                     continue

@@ -67,7 +67,6 @@ from zbuf_occlude.sensors.checks import (
     reals,
     replaced,
     sensor_name,
-    shown,
     text,
 )
 from zbuf_occlude.sensors.pulses import Pulses
@@ -176,7 +175,7 @@ class AirborneScanner:
 
     def __post_init__(self) -> None:
         sensor_name(self.name, "airborne scanner name")
-        with located(f"airborne scanner {self.name!r}"):
+        with located("airborne scanner"):  # not by its name: a sensor file's name is one of its values, never quoted
             self._check()
 
     def _check(self) -> None:
@@ -194,7 +193,8 @@ class AirborneScanner:
         per_line = self.pulse_rate_hz / self.line_rate_hz  # checked before pulses_per_line rounds it
         if not per_line <= MAX_SENSOR_RAYS or self.pulses_per_line < 1:
             raise InvalidInputError(
-                f"pulse_rate_hz / line_rate_hz must give 1 to {MAX_SENSOR_RAYS:,} pulses per line, got {shown(per_line)}"
+                f"pulse_rate_hz / line_rate_hz must give 1 to {MAX_SENSOR_RAYS:,} pulses per line, got "
+                f"{'fewer than 1' if per_line <= MAX_SENSOR_RAYS else 'more'}"
             )
         object.__setattr__(self, "n_lines", count(self.n_lines, "n_lines", low=1, high=MAX_FLIGHT_LINES))
         headings = (self.headings_deg,) if is_number(self.headings_deg) else self.headings_deg
@@ -374,7 +374,7 @@ class AirborneScanner:
             n_rays = sum(len(p[2]) for p in parts)
             if n_rays * scanner.beam.footprint_rays > MAX_SENSOR_RAYS:  # every line is bounded on its own; the plan's lines add up
                 raise InvalidInputError(
-                    f"airborne scanner {scanner.name!r}: {n_rays:,} pulses{f' of {scanner.beam.footprint_rays} sub-rays' if scanner.beam.footprint_rays > 1 else ''} "
+                    f"airborne scanner: {n_rays:,} pulses{' of footprint_rays sub-rays each' if scanner.beam.footprint_rays > 1 else ''} "
                     f"by line {line.line_id} of {n_total} over the square {2 * float(half_size_m):g} m wide, more than {MAX_SENSOR_RAYS:,} rays; "
                     "scan a smaller square, fly fewer lines or take fewer footprint_rays"
                 )
@@ -427,9 +427,7 @@ class AirborneScanner:
         cx, cy = (float(v) for v in center_xy)
         r = float(half_size_m)
         if not (math.isfinite(cx) and math.isfinite(cy) and math.isfinite(r) and r > 0 and math.isfinite(phase_s)):
-            raise InvalidInputError(
-                f"ground_rays needs a finite centre, phase and half size > 0, got {shown(center_xy)}, {shown(phase_s)}, {shown(half_size_m)}"
-            )
+            raise InvalidInputError("ground_rays needs a finite centre, phase and half size > 0")
         m = self.pulses_per_line
         period = 1.0 / self.line_rate_hz
         s = math.radians(self.swath_deg)
@@ -443,7 +441,7 @@ class AirborneScanner:
         n_k = 2.0 * r / line_length + 3.0 if line_length > 0 else math.inf
         if not len(columns) * n_k <= MAX_SENSOR_RAYS:  # before arange(k0, k1) allocates them
             raise InvalidInputError(
-                f"airborne scanner {self.name!r}: the square {2 * r:g} m wide takes about {len(columns) * n_k:.3g} pulses per line, "
+                f"airborne scanner: the square {2 * r:g} m wide takes about {len(columns) * n_k:.3g} pulses per line, "
                 f"more than {MAX_SENSOR_RAYS:,}; scan a smaller square or a sparser scanner"
             )
         k0 = math.floor((cx - r - self.speed_mps * phase_s) / line_length) - 1

@@ -28,8 +28,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.checks import MAX_RANGE_M, count, located, real, replaced, sensor_name, shown, text
-from zbuf_occlude.sensors.echoes import ECHO_RULES, MAX_RETURNS
+from zbuf_occlude.sensors.checks import MAX_RANGE_M, count, located, real, replaced, sensor_name, text, value_kind
+from zbuf_occlude.sensors.echoes import ECHO_RULES, MAX_POWER_NOISE, MAX_RETURNS
 from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS, MAX_DIVERGENCE_DEG, MAX_SUBRAYS, PROFILES, footprint_offsets, subray_directions
 
 __all__ = ["Beam", "IDEAL_BEAM", "RETURN_MODES", "MAX_INTENSITY_COUNTS", "check_beam", "footprint_changes", "intensity_counts"]
@@ -112,8 +112,9 @@ class Beam:
         ``detection_threshold``.  0: no such threshold (the default).
     power_noise : float
         σ of the natural log of the received power per firing (detection is then
-        ``Φ(ln(E / τ) / σ)``); applied with the detection threshold, where reflectivities are
-        given.  0: a sharp threshold.
+        ``Φ(ln(E / τ) / σ)``), in [0, :data:`~zbuf_occlude.sensors.echoes.MAX_POWER_NOISE`]
+        (2: above speckle through saturated turbulence, the most a return's power fluctuates);
+        applied with the detection threshold, where reflectivities are given.  0: a sharp threshold.
     intensity_scale : float or None
         Counts per unit of received energy: a return's LAS intensity is
         ``min(round(E · intensity_scale), max_intensity)``.  None: no intensity model (with one
@@ -172,7 +173,7 @@ class Beam:
 
     def __post_init__(self) -> None:
         sensor_name(self.name, "beam name")
-        with located(f"beam {self.name!r}"):
+        with located("beam"):  # not by its name: a sensor file's name is one of its values, never quoted
             self._check()
 
     def _check(self) -> None:
@@ -181,7 +182,7 @@ class Beam:
         numbers = {
             "wavelength_nm": {"low": 200.0, "high": 20_000.0}, "divergence_deg": {"low": 0.0, "high": MAX_DIVERGENCE_DEG},
             "range_resolution_m": ranges, "echo_separation_m": ranges, "detection_threshold": at_least_0,
-            "min_echo_reflectance": {"low": 0.0, "high": 1.0}, "power_noise": at_least_0, "range_noise_m": ranges, "dropout": {"low": 0.0, "high": 1.0, "high_open": True},
+            "min_echo_reflectance": {"low": 0.0, "high": 1.0}, "power_noise": {"low": 0.0, "high": MAX_POWER_NOISE}, "range_noise_m": ranges, "dropout": {"low": 0.0, "high": 1.0, "high_open": True},
             "dropout_range_per_m": {}, "foliage_dropout": {"low": 0.0, "high": 1.0, "high_open": True}, "min_range_m": ranges, "max_range_m": {**ranges, "low_open": True},
         }  # fmt: skip
         for name, bounds in numbers.items():
@@ -196,14 +197,14 @@ class Beam:
         object.__setattr__(self, "max_returns", count(self.max_returns, "max_returns", low=1, high=MAX_RETURNS))
         object.__setattr__(self, "max_intensity", count(self.max_intensity, "max_intensity", low=1, high=MAX_INTENSITY_COUNTS))
         if self.min_range_m >= self.max_range_m:
-            raise InvalidInputError(f"need min_range_m < max_range_m, got {shown(self.min_range_m)} >= {shown(self.max_range_m)}")
+            raise InvalidInputError("min_range_m must be below max_range_m")
         self._check_returns()
 
     def _check_returns(self) -> None:
         """The rules that tie the footprint, the return mode and the range resolution together."""
         k, m, mode = self.footprint_rays, self.max_returns, self.return_mode
         if k > 1 and self.divergence_deg <= 0:
-            raise InvalidInputError(f"footprint_rays {k} needs divergence_deg > 0")
+            raise InvalidInputError("footprint_rays above 1 needs divergence_deg > 0")
         wanted = {"strongest": 1, "last": 1, "dual": 2}.get(mode)
         if wanted is not None and m != wanted:
             raise InvalidInputError(
@@ -211,11 +212,11 @@ class Beam:
             )
         if self.resolves_echoes and self.range_resolution_m <= 0:
             raise InvalidInputError(
-                f"max_returns {m} with return_mode {mode!r} needs range_resolution_m > 0 (the least range between two returns, c·τ/2)"
+                f"max_returns above 1 or return_mode {mode!r} needs range_resolution_m > 0 (the least range between two returns, c·τ/2)"
             )
         if not self.resolves_echoes and self.range_resolution_m > 0:
             raise InvalidInputError(
-                f"range_resolution_m {shown(self.range_resolution_m)} needs max_returns above 1 or a return_mode of "
+                "range_resolution_m > 0 needs max_returns above 1 or a return_mode of "
                 "'strongest', 'last' or 'dual' (one return per pulse merges echoes by echo_separation_m)"
             )
         if self.echo_rule != "chain" and not self.resolves_echoes:
@@ -224,13 +225,9 @@ class Beam:
                 "'strongest', 'last' or 'dual'"
             )
         if self.echo_separation_m > 0 and k == 1:
-            raise InvalidInputError(
-                f"echo_separation_m {shown(self.echo_separation_m)} needs footprint_rays above 1 (mixed pixels come from a wide footprint)"
-            )
+            raise InvalidInputError("echo_separation_m > 0 needs footprint_rays above 1 (mixed pixels come from a wide footprint)")
         if self.echo_separation_m > 0 and self.resolves_echoes:
-            raise InvalidInputError(
-                f"echo_separation_m {shown(self.echo_separation_m)} is for one return per pulse; resolved echoes use range_resolution_m"
-            )
+            raise InvalidInputError("echo_separation_m > 0 is for one return per pulse; resolved echoes use range_resolution_m")
 
     @property
     def resolves_echoes(self) -> bool:
@@ -290,7 +287,7 @@ class Beam:
             The beam has no ``intensity_scale``.
         """
         if self.intensity_scale is None:
-            raise InvalidInputError(f"beam {self.name!r} has no intensity_scale (counts per unit of received energy)")
+            raise InvalidInputError("the beam has no intensity_scale (counts per unit of received energy)")
         return intensity_counts(energy, self.intensity_scale, self.max_intensity)
 
 
@@ -314,7 +311,7 @@ def check_beam(beam: object) -> Beam:
         Anything else, naming its type.
     """
     if not isinstance(beam, Beam):
-        raise InvalidInputError(f"beam must be a Beam (zbuf_occlude.sensors.beam.Beam), got {type(beam).__name__} {shown(beam)}")
+        raise InvalidInputError(f"beam must be a Beam (zbuf_occlude.sensors.beam.Beam), got {value_kind(beam)}")
     return beam
 
 

@@ -6,7 +6,7 @@ A scene or sensor file may come from anyone, and a field of :class:`~zbuf_occlud
 :class:`~zbuf_occlude.sensors.depth_camera.DepthCamera` is checked where the dataclass is made
 (``__post_init__``), by the functions here, whether it came from a file or from Python.  Each
 raises :class:`~zbuf_occlude.errors.InvalidInputError` whose message starts with the field's
-name and says what is expected (``yaw_deg must be a finite number, got nan``); a file reader
+name and says what is expected (``yaw_deg must be a finite number, got NaN``); a file reader
 puts the file and the place in the file in front (:func:`located`).
 
 The rules every numeric field follows:
@@ -17,15 +17,16 @@ The rules every numeric field follows:
   YAML has ``.nan`` and ``.inf``), and so is an integer too large for a float (``10**400``);
 * a count is a whole number (``3`` or ``3.0``) within its named limit.
 
-A value quoted in a message is cut to :data:`SHOWN_CHARS` characters without formatting the
-whole of it first (:func:`shown`): a field may hold a list of a million items.
+A message never quotes a value: the file may be anyone's (a class map linked to a credentials
+file holds a token).  It names the field, what is expected, and what kind of thing was found and
+its size (:func:`value_kind`: ``got a string of 41 characters``, ``got an object of 1 key``, ``got
+NaN``, ``got a number outside that range``).  A key may be named, cut (:func:`key_text`).
 """
 
 from __future__ import annotations
 
 import math
 import numbers
-import reprlib
 import unicodedata
 from collections.abc import Collection, Iterator, Mapping
 from contextlib import contextmanager
@@ -34,10 +35,11 @@ from typing import Any
 import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.io.file_errors import key_text, value_kind
 
 __all__ = [
     "MAX_COORDINATE_M", "MAX_RANGE_M", "MAX_SENSOR_RAYS", "MAX_SCENE_OBJECTS", "MAX_NAME_CHARS", "MAX_PATH_CHARS",
-    "SHOWN_CHARS", "shown", "located", "is_number", "real", "count", "reals", "mapping", "text", "sensor_name", "preset", "replaced",
+    "SHOWN_CHARS", "value_kind", "key_text", "given", "shown", "located", "is_number", "real", "count", "reals", "mapping", "text", "sensor_name", "preset", "replaced",
 ]  # fmt: skip
 
 #: Largest coordinate or size in a scene, metres: the scene is ray-cast in float32 (Embree),
@@ -58,34 +60,18 @@ MAX_SCENE_OBJECTS = 10_000
 MAX_NAME_CHARS = 100
 #: Longest mesh path a scene file may give (Linux's PATH_MAX).
 MAX_PATH_CHARS = 4096
-#: Characters of a value quoted in a message.
+#: Characters of a key (or of a name the caller typed) quoted in a message; a value is never quoted.
 SHOWN_CHARS = 80
-#: Bits of an integer shown in full; a longer one is described by its number of digits
-#: (``str`` of an integer of over 4,300 digits raises ``ValueError`` in Python ≥ 3.11).
-_SHOWN_INT_BITS = 256
 
 
-class _BoundedRepr(reprlib.Repr):
-    """``reprlib.Repr`` with small limits, and integers of any size (``repr`` of a huge one raises)."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.maxlevel, self.maxlist, self.maxtuple, self.maxdict, self.maxset = 3, 6, 6, 4, 6
-        self.maxstring, self.maxlong, self.maxother = SHOWN_CHARS, 40, 40
-
-    def repr_int(self, x: int, level: int) -> str:
-        if abs(x).bit_length() > _SHOWN_INT_BITS:
-            return f"<an integer of about {int(abs(x).bit_length() * math.log10(2)) + 1:,} digits>"
-        return super().repr_int(x, level)
+#: The older name of :func:`value_kind`, kept for the modules that call it: it quotes nothing either.
+shown = value_kind
 
 
-_REPR = _BoundedRepr()
-
-
-def shown(value: object) -> str:
-    """``repr(value)`` for a message, at most :data:`SHOWN_CHARS` characters, in time bounded
-    whatever the size of ``value`` (containers are cut before they are formatted)."""
-    text = _REPR.repr(value)
+def given(name: object) -> str:
+    """``repr(name)`` cut to :data:`SHOWN_CHARS` characters: for a name the caller typed (a preset
+    asked for on the command line or in Python), never for a value read from a file."""
+    text = repr(name) if isinstance(name, str) else value_kind(name)
     return text if len(text) <= SHOWN_CHARS else text[: SHOWN_CHARS - 3] + "..."
 
 
@@ -141,7 +127,8 @@ def real(
     Raises
     ------
     InvalidInputError
-        ``"{name} must be {expected}, got {value}"``.
+        ``"{name} must be {expected}, got {what}"``, ``what`` the kind of value found
+        (:func:`value_kind`, ``NaN``) or ``a number outside that range``, never the value.
     """
     v = _as_float(value) if is_number(value) else math.nan
     ok = math.isfinite(v)
@@ -151,7 +138,8 @@ def real(
         ok = v < high if high_open else v <= high
     if not ok:
         expected = expected or "a finite number" + _range_text(low, high, low_open, high_open)
-        raise InvalidInputError(f"{name} must be {expected}, got {shown(value)}")
+        found = "a number outside that range" if math.isfinite(v) else value_kind(value)
+        raise InvalidInputError(f"{name} must be {expected}, got {found}")
     return v
 
 
@@ -161,11 +149,15 @@ def count(value: object, name: str, *, low: int, high: int) -> int:
     Raises
     ------
     InvalidInputError
-        ``"{name} must be an integer from {low} to {high}, got {value}"``.
+        ``"{name} must be an integer from {low} to {high}, got {what}"``, ``what`` the kind of value
+        found (:func:`value_kind`), ``a number that is not whole`` or ``a whole number outside that
+        range``, never the value.
     """
-    ok = is_number(value) and math.isfinite(_as_float(value)) and float(value).is_integer()  # type: ignore[arg-type]
-    if not (ok and low <= int(value) <= high):  # type: ignore[call-overload]
-        raise InvalidInputError(f"{name} must be an integer from {low} to {high}, got {shown(value)}")
+    finite = is_number(value) and math.isfinite(_as_float(value))
+    whole = finite and float(value).is_integer()  # type: ignore[arg-type]
+    if not (whole and low <= int(value) <= high):  # type: ignore[call-overload]
+        found = ("a whole number outside that range" if whole else "a number that is not whole") if finite else value_kind(value)
+        raise InvalidInputError(f"{name} must be an integer from {low} to {high}, got {found}")
     return int(value)  # type: ignore[call-overload]
 
 
@@ -201,7 +193,7 @@ def reals(
                 expected = f"a list of {' or '.join(str(k) for k in sorted(lengths))} numbers"
             else:
                 expected = f"a list of 1 to {max_length:,} numbers" if max_length else "a list of one or more numbers"
-        raise InvalidInputError(f"{name} must be {expected}, got {shown(value)}")
+        raise InvalidInputError(f"{name} must be {expected}, got {value_kind(value)}")
     return tuple(real(v, f"{name}[{i}]", low=low, high=high, low_open=low_open, high_open=high_open) for i, v in enumerate(value))  # type: ignore[arg-type]
 
 
@@ -211,13 +203,15 @@ def mapping(value: object, name: str, allowed: Collection[str], *, required: Col
     Raises
     ------
     InvalidInputError
-        Not a mapping, an unknown key (named, with the keys allowed), or a missing one.
+        Not a mapping (saying what it is), an unknown key (named, cut: :func:`key_text`, with the keys
+        allowed), or a missing one.
     """
     if not isinstance(value, Mapping):
-        raise InvalidInputError(f"{name} must be a mapping of {', '.join(allowed)}, got {type(value).__name__} {shown(value)}")
+        raise InvalidInputError(f"{name} must be a mapping of {', '.join(allowed)}, got {value_kind(value)}")
     unknown = [k for k in value if k not in allowed]
     if unknown:
-        keys = ", ".join(shown(k) for k in sorted(unknown[:5], key=str)) + (f" and {len(unknown) - 5:,} more" if len(unknown) > 5 else "")
+        first = sorted(unknown[:5], key=lambda k: (not isinstance(k, str), k if isinstance(k, str) else ""))
+        keys = ", ".join(key_text(k) for k in first) + (f" and {len(unknown) - 5:,} more" if len(unknown) > 5 else "")
         raise InvalidInputError(f"unknown {name} keys {keys}; allowed: {', '.join(allowed)}")
     missing = [k for k in required if k not in value]
     if missing:
@@ -231,11 +225,12 @@ def text(value: object, name: str, *, choices: Collection[str] | None = None) ->
     Raises
     ------
     InvalidInputError
-        Not a string, or not one of ``choices``.
+        Not a string, or not one of ``choices`` (``got another string of 5 characters``).
     """
     if not isinstance(value, str) or (choices is not None and value not in choices):
         expected = f"one of {', '.join(repr(c) for c in choices)}" if choices is not None else "a string"
-        raise InvalidInputError(f"{name} must be {expected}, got {shown(value)}")
+        found = value_kind(value)
+        raise InvalidInputError(f"{name} must be {expected}, got {'another ' + found[2:] if isinstance(value, str) and value else found}")
     return value
 
 
@@ -247,14 +242,19 @@ def sensor_name(value: object, what: str) -> str:
     Raises
     ------
     InvalidInputError
-        Naming ``what`` (``lidar name``) and the value.
+        Naming ``what`` (``lidar name``) and the kind of value found, never the value.
     """
     ok = isinstance(value, str) and 1 <= len(value) <= MAX_NAME_CHARS and value not in (".", "..")
     if ok and (any(c in "/\\" for c in value) or any(unicodedata.category(c)[0] in "CZ" and c != " " for c in value)):  # type: ignore[union-attr]
         ok = False
     if not ok:
         raise InvalidInputError(
-            f"{what} must be 1 to {MAX_NAME_CHARS} printable characters without '/' or '\\' (it names output files), got {shown(value)}"
+            f"{what} must be 1 to {MAX_NAME_CHARS} printable characters without '/' or '\\' (it names output files), got "
+            + (
+                f"{value_kind(value)} holding '/', '\\' or a control character, or naming '.' or '..'"
+                if isinstance(value, str) and 1 <= len(value) <= MAX_NAME_CHARS
+                else value_kind(value)
+            )
         )
     return value  # type: ignore[return-value]
 
@@ -274,7 +274,7 @@ def preset(presets: Mapping[str, Any], name: object, what: str, **changes) -> An
     """
     key = str(name).lower()
     if key not in presets:
-        raise InvalidInputError(f"unknown {what} {shown(name)}; choose one of {sorted(presets)}")
+        raise InvalidInputError(f"unknown {what} {given(name)}; choose one of {sorted(presets)}")
     return replaced(presets[key], **changes) if changes else presets[key]
 
 

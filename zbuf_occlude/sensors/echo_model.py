@@ -20,7 +20,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.attenuation import attenuate_along_subray
-from zbuf_occlude.sensors.echoes import hit_energy, resolve_echoes
+from zbuf_occlude.sensors.checks import real
+from zbuf_occlude.sensors.echoes import MAX_POWER_NOISE, hit_energy, resolve_echoes
 from zbuf_occlude.sensors.raycast import MAX_HITS, cast_embree_beyond, face_normals
 from zbuf_occlude.sensors.scene import BuiltScene
 
@@ -168,16 +169,26 @@ class Radiometry:
     detection_threshold : float
         Least echo energy kept, m⁻² (:func:`~.echoes.hit_energy`'s units).
     power_noise : float
-        Every hit of a pulse is scaled by one ``exp(σ z)``, z ~ N(0, 1) per pulse (P draws from
-        ``rng``); 0: nothing is drawn.
+        σ in [0, :data:`~.echoes.MAX_POWER_NOISE`]: every hit of a pulse is scaled by one
+        ``exp(σ z)``, z ~ N(0, 1) per pulse (P draws from ``rng``); 0: nothing is drawn.
     rng : numpy.random.Generator, optional
         Needed when ``power_noise`` is above 0.
+
+    Raises
+    ------
+    InvalidInputError
+        ``detection_threshold`` not a finite number >= 0, ``power_noise`` outside its range,
+        naming the field.
     """
 
     reflectivity: ArrayLike
     detection_threshold: float = 0.0
     power_noise: float = 0.0
     rng: np.random.Generator | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "detection_threshold", real(self.detection_threshold, "detection_threshold", low=0.0))
+        object.__setattr__(self, "power_noise", real(self.power_noise, "power_noise", low=0.0, high=MAX_POWER_NOISE))
 
 
 @dataclass(frozen=True)

@@ -49,6 +49,7 @@ from zbuf_occlude.sensors.waveform import waveform_echo_starts
 
 __all__ = [
     "ECHO_RULES",
+    "MAX_POWER_NOISE",
     "MAX_RETURNS",
     "MIN_RANGE_M",
     "Echoes",
@@ -62,6 +63,17 @@ ECHO_RULES = ("chain", "waveform")
 
 #: Most returns per pulse: LAS 1.4 point formats 6–10 store the return number in 4 bits.
 MAX_RETURNS = 15
+
+#: Largest ``power_noise``, the σ of the natural log of a firing's received power (a beam's, and
+#: ``scan``'s option): every hit of a firing is scaled by ``exp(σ z)``, z ~ N(0, 1).  The most a
+#: real return's power fluctuates is fully developed speckle (negative exponential power, whose log
+#: has σ = π/√6 ≈ 1.28: Goodman, "Speckle Phenomena in Optics", 2007, ch. 3) seen through saturated
+#: turbulence (negative exponential irradiance again: Andrews & Phillips, "Laser Beam Propagation
+#: through Random Media", 2nd ed., 2005, ch. 9): the product of the two has a log of σ = π/√3 ≈
+#: 1.81, which 2 bounds.  Beyond it the noise, not the range equation, sets the intensities (at
+#: σ = 50 one standard draw scales a power by e^±50 ≈ 10^±22: every return detected is at its
+#: device's top count), and ``exp(σ z)`` overflows float64 once σ z > 709.
+MAX_POWER_NOISE = 2.0
 
 #: Ranges are clamped to at least this in :func:`hit_energy`, metres: a hit at the sensor's
 #: centre gets a finite energy (the clamp :func:`~zbuf_occlude.sensors.scan.scan` applies).

@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.io.file_errors import value_kind
 from zbuf_occlude.sensors.checks import count, mapping, real
 
 if TYPE_CHECKING:
@@ -74,8 +75,8 @@ class _CrownRegion:
 
         try:  # the hull's tetrahedra: a point is inside the hull iff inside one of them
             self.hull = Delaunay(vertices[ConvexHull(vertices).vertices])
-        except QhullError as exc:  # flat or degenerate: no volume to fill
-            raise InvalidInputError(f"the mesh encloses no volume for leaves (its convex hull: {str(exc).splitlines()[0]})") from None
+        except QhullError:  # flat or degenerate: no volume to fill
+            raise InvalidInputError("the mesh encloses no volume for leaves (its convex hull is flat or degenerate)") from None
         self.tree, self.shell = cKDTree(surface), shell_m
         self.lo, self.hi = vertices.min(0), vertices.max(0)
 
@@ -219,7 +220,7 @@ class Foliage:
         object.__setattr__(self, "leaf_side_m", real(self.leaf_side_m, "leaf_side_m", low=MIN_LEAF_SIDE_M))
         object.__setattr__(self, "shell_m", real(self.shell_m, "shell_m", low=0.0, low_open=True))
         if not isinstance(self.keep_surface, bool):
-            raise InvalidInputError(f"keep_surface must be true or false, got {type(self.keep_surface).__name__} {self.keep_surface!r:.40}")
+            raise InvalidInputError(f"keep_surface must be true or false, got {value_kind(self.keep_surface)}")
         object.__setattr__(self, "seed", count(self.seed, "seed", low=0, high=2**63 - 1))
 
     @classmethod
@@ -297,7 +298,8 @@ def add_foliage(mesh: trimesh.Trimesh, *, leaf_area_density: float, leaf_side_m:
     if not wanted < limit + 0.5:
         room = "" if limit == MAX_LEAVES else f" here (what the scene's triangle cap leaves; {MAX_LEAVES:,} a crown)"
         raise InvalidInputError(
-            f"{wanted:,.0f} leaves asked for (leaf_area_density {lad:g} m²/m³, leaf_side_m {side:g}); at most {limit:,}{room}"
+            f"leaf_area_density and leaf_side_m ask for more than {limit:,} leaves in this crown{room}: lower the density or "
+            "enlarge the leaves"
         )
     n = round(wanted)
     share = volume / float(np.prod(region.hi - region.lo)) if volume > 0 else 1.0

@@ -23,7 +23,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.airborne import AIRBORNE_IDEAL_BEAM, AirborneScanner
 from zbuf_occlude.sensors.airborne_presets import AIRBORNE_PRESETS
 from zbuf_occlude.sensors.beam import Beam
-from zbuf_occlude.sensors.checks import MAX_RANGE_M, located, mapping, real, shown, text
+from zbuf_occlude.sensors.checks import MAX_RANGE_M, given, located, mapping, real, text, value_kind
 from zbuf_occlude.sensors.depth_camera import DEPTH_CAMERA_PRESETS, DepthCamera
 from zbuf_occlude.sensors.lidar import LIDAR_PRESETS, Lidar
 from zbuf_occlude.sensors.ray_table import RAY_TABLE_FILE_BEAM, RAY_TABLE_PRESETS, RayTable
@@ -138,8 +138,8 @@ def with_beam(sensor, **changes):
     """
     kind = kind_of(sensor)
     if not kind.pulsed:
-        raise InvalidInputError(f"{sensor.name!r} is a {kind.title}: it has no beam to change ({', '.join(sorted(changes))})")
-    with located(f"{kind.title} {sensor.name!r}"):
+        raise InvalidInputError(f"the sensor is a {kind.title}: it has no beam to change ({', '.join(sorted(changes))})")
+    with located(kind.title):
         return replace(sensor, beam=sensor.beam.with_(**changes))
 
 
@@ -180,7 +180,7 @@ def sensor_from_name(name: str | os.PathLike):
         message names the file and the field).
     """
     if not isinstance(name, (str, os.PathLike)):
-        raise InvalidInputError(f"a sensor must be a preset name or a .json file, got {type(name).__name__} {shown(name)}")
+        raise InvalidInputError(f"a sensor must be a preset name or a .json file, got {value_kind(name)}")
     name = os.fspath(name)
     for kind in SENSOR_KINDS:
         if name.lower() in kind.presets:
@@ -195,14 +195,14 @@ def sensor_from_name(name: str | os.PathLike):
     if path.suffix.lower() == ".json":
         raise InvalidInputError(f"sensor file {path}: no such file (fit-sensor writes one; or name a preset)")
     raise InvalidInputError(
-        f"unknown sensor {shown(name)}; use one of {[n for names in preset_names().values() for n in names]} or a .json file"
+        f"unknown sensor {given(name)}; use one of {[n for names in preset_names().values() for n in names]} or a .json file"
     )
 
 
 def sensor_from_spec(spec: object):
     """The sensor a sensor file's parsed JSON describes (:func:`sensor_from_name`); errors name the field."""
     if not isinstance(spec, dict):
-        raise InvalidInputError(f"a sensor file must be a JSON object of the sensor's fields, got {type(spec).__name__} {shown(spec)}")
+        raise InvalidInputError(f"a sensor file must be a JSON object of the sensor's fields, got {value_kind(spec)}")
     kind = kind_named(spec.get("kind", "lidar"))
     own = tuple(f.name for f in fields(kind.cls) if f.init)
     legacy = (*LEGACY_BEAM_KEYS, *_LEGACY_DETECTION) if kind.pulsed else ()
@@ -213,7 +213,9 @@ def sensor_from_spec(spec: object):
     if "preset" in spec:
         preset = text(spec.pop("preset"), "preset")
         if preset.lower() not in kind.presets:
-            raise InvalidInputError(f"preset {shown(preset)} is not a {kind.title}; choose one of {sorted(kind.presets)}")
+            raise InvalidInputError(
+                f"preset must be one of the {kind.title} presets {sorted(kind.presets)}, got another string of {len(preset):,} characters"
+            )
         base = kind.presets[preset.lower()]
     if kind.pulsed:
         flat = any(key in spec for key in (*LEGACY_BEAM_KEYS, *_LEGACY_DETECTION))
@@ -254,8 +256,7 @@ def _beam_of(spec: dict, base: Beam) -> Beam:
                 )
             changes["detection_threshold"] = (real(reflectivity, "detection_reflectivity", low=0.0) / real(
                 range_m, "detection_range_m", low=1e-3, high=MAX_RANGE_M) ** 2)  # fmt: skip
-    with located("beam"):
-        return base.with_(**changes) if changes else base
+    return base.with_(**changes) if changes else base  # the beam's own errors say "beam: "
 
 
 def sensor_to_json(sensor) -> dict:

@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.checks import shown
+from zbuf_occlude.sensors.checks import key_text, value_kind
 from zbuf_occlude.sensors.spec_files import read_spec_file
 
 __all__ = [
@@ -91,22 +91,31 @@ def check_class_map(class_map: Mapping[str, int], where: str = "class map") -> d
     Raises
     ------
     InvalidInputError
-        Naming ``where`` and the key: not a mapping, too many keys, a bad name, a code that is not a
-        whole number (``true``, ``5.0``, a list) or out of range or reserved.
+        Naming ``where`` and the key (cut: :func:`~zbuf_occlude.sensors.checks.key_text`): not a mapping,
+        too many keys, a bad name, a code that is not a whole number (``true``, ``5.0``, a string, an
+        object) or out of range or reserved.  The message says what kind of value was found, never the
+        value: a class map may be a link to a private file.
     """
     if not isinstance(class_map, Mapping):
         raise InvalidInputError(f"{where}: must be a JSON object of class name to ASPRS code ({{\"car\": 1}}), got "
-                                f"{type(class_map).__name__} {shown(class_map)}")  # fmt: skip
+                                f"{value_kind(class_map)}")  # fmt: skip
     if len(class_map) > MAX_CLASS_MAP_KEYS:
         raise InvalidInputError(f"{where}: holds {len(class_map):,} class names; at most {MAX_CLASS_MAP_KEYS:,}")
     out = {}
     for key, code in class_map.items():
         if not isinstance(key, str) or not 0 < len(key) <= MAX_CLASS_NAME_CHARS:
-            raise InvalidInputError(f"{where}: class name {shown(key)} must be 1 to {MAX_CLASS_NAME_CHARS} characters")
+            raise InvalidInputError(
+                f"{where}: a class name must be 1 to {MAX_CLASS_NAME_CHARS} characters, got {'an empty one' if key == '' else key_text(key)}"
+            )
         if isinstance(code, (bool, np.bool_)) or not isinstance(code, numbers.Integral) or not 0 <= code <= 255:
-            raise InvalidInputError(f"{where}: {shown(key)}: the ASPRS code must be a whole number 0 to 255, got {shown(code)}")
+            found = (
+                "a whole number outside that range"
+                if isinstance(code, numbers.Integral) and not isinstance(code, (bool, np.bool_))
+                else value_kind(code)
+            )
+            raise InvalidInputError(f"{where}: {key_text(key)}: the ASPRS code must be a whole number 0 to 255, got {found}")
         if int(code) in RESERVED_CODES:
-            raise InvalidInputError(f"{where}: {shown(key)}: ASPRS code {int(code)} is reserved by LAS 1.4 (8, 12, 23-63); "
+            raise InvalidInputError(f"{where}: {key_text(key)}: the ASPRS code is one LAS 1.4 reserves (8, 12, 23-63); "
                                     "use a standard code or one of 64-255 (user definable)")  # fmt: skip
         out[key] = int(code)
     return out

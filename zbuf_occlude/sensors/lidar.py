@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike, NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.beam import IDEAL_BEAM, Beam, check_beam
 from zbuf_occlude.sensors.pulses import Pulses, placed
-from zbuf_occlude.sensors.checks import MAX_SENSOR_RAYS, located, preset, real, reals, replaced, sensor_name, shown, text
+from zbuf_occlude.sensors.checks import MAX_SENSOR_RAYS, located, preset, real, reals, replaced, sensor_name, text
 
 __all__ = ["Lidar", "LIDAR_PRESETS", "SPINNING_INTENSITY_SCALE", "lidar_preset", "beam_directions", "in_sector"]
 
@@ -65,7 +65,7 @@ class Lidar:
 
     def __post_init__(self) -> None:
         sensor_name(self.name, "lidar name")
-        with located(f"lidar {self.name!r}"):
+        with located("lidar"):  # not by its name: a sensor file's name is one of its values, never quoted
             self._check()
 
     def _check(self) -> None:
@@ -80,12 +80,11 @@ class Lidar:
         text(self.source, "source")
         check_beam(self.beam)
         if self.firing_rate_hz < self.rotation_hz:
-            raise InvalidInputError(f"firing_rate_hz {self.firing_rate_hz} below rotation_hz {self.rotation_hz}")
+            raise InvalidInputError("firing_rate_hz must be at least rotation_hz (a firing or more per revolution)")
         per_revolution = len(elev) * (self.firing_rate_hz / self.rotation_hz)  # checked before n_azimuths rounds it
         if not per_revolution <= n_rays:
             raise InvalidInputError(
-                f"{len(elev)} elevations_deg x firing_rate_hz / rotation_hz {shown(self.firing_rate_hz / self.rotation_hz)} firings "
-                f"is more than {n_rays:,} rays per revolution"
+                f"{len(elev):,} elevations_deg x firing_rate_hz / rotation_hz firings is more than {n_rays:,} rays per revolution"
             )
 
     @property

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.checks import MAX_COORDINATE_M, count, mapping, real, reals, shown
+from zbuf_occlude.sensors.checks import MAX_COORDINATE_M, count, mapping, real, reals, value_kind
 
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
@@ -62,7 +62,7 @@ def check_width_profile(profile) -> tuple[float, ...]:
     except (TypeError, ValueError):
         out = ()
     if len(out) < 2 or not all(math.isfinite(v) and v > 0 for v in out):
-        raise InvalidInputError(f"width_profile must be 2 or more factors > 0, one per relative-height bin, got {shown(profile)}")
+        raise InvalidInputError(f"width_profile must be 2 or more factors > 0, one per relative-height bin, got {value_kind(profile)}")
     return out
 
 
@@ -128,7 +128,7 @@ def primitive_args(spec: Mapping) -> tuple[str, dict[str, Any]]:
     spec = mapping(spec, "mesh", PRIMITIVE_KEYS)
     if len(spec) != 1:
         raise InvalidInputError(
-            f"mesh must be a primitive {{'box_m': [x, y, z]}} or {{'cylinder': {{'radius_m': r, 'height_m': h}}}}, got {shown(spec)}"
+            f"mesh must be a primitive {{'box_m': [x, y, z]}} or {{'cylinder': {{'radius_m': r, 'height_m': h}}}}, got {value_kind(spec)}"
         )
     size = {"low": 0.0, "low_open": True, "high": MAX_COORDINATE_M}
     if "box_m" in spec:

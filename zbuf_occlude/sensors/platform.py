@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 from os import PathLike
 from pathlib import Path
 
@@ -27,8 +28,8 @@ from zbuf_occlude.io.caps import MAX_TRAJECTORY_POSES
 from zbuf_occlude.io.trajectories import read_trajectory_table
 from zbuf_occlude.sensors.checks import MAX_COORDINATE_M, located, real, reals, sensor_name, shown
 
-__all__ = ["EULER_COLUMNS", "MAX_TIME_S", "QUATERNION_COLUMNS", "QUATERNION_NORM_TOLERANCE", "ROTATION_TOLERANCE", "TIME_SLACK_S",
-           "as_pose", "look_at_pose", "Trajectory", "load_trajectory"]  # fmt: skip
+__all__ = ["EULER_COLUMNS", "HALF_TURN_DEG", "HALF_TURN_SLACK_DEG", "MAX_TIME_S", "QUATERNION_COLUMNS", "QUATERNION_NORM_TOLERANCE",
+           "ROTATION_TOLERANCE", "TIME_SLACK_S", "as_pose", "look_at_pose", "Trajectory", "load_trajectory"]  # fmt: skip
 
 #: Largest |entry| of RᵀR − I, and |det R − 1|, of a rotation accepted (then re-orthonormalised):
 #: a rotation printed to 7 significant digits passes, a scaled or sheared matrix does not.
@@ -41,6 +42,13 @@ QUATERNION_NORM_TOLERANCE = 1e-3
 TIME_SLACK_S = 1e-9
 #: Largest |time|, seconds (317 years): a Unix or GPS time is ~2e9 s; float64 keeps 2 µs steps up to here.
 MAX_TIME_S = 1e10
+#: Slerp turns the short way between two samples: a turn of a half turn or more between them is read as
+#: another turn (a 270° yaw as 90° the other way, a 360° one as none), so it is refused.
+HALF_TURN_DEG = 180.0
+#: A turn within this of :data:`HALF_TURN_DEG` counts as one: a half turn written with rounded numbers
+#: (a quaternion to 4 decimals is within 0.006° of it, a matrix to 7 digits within 1e-5°) would be
+#: turned whichever way the rounding says.
+HALF_TURN_SLACK_DEG = 0.01
 #: Largest |roll|, |pitch|, |yaw| read, degrees (2,777 turns, for an unwrapped yaw); float64 keeps 1e-10° steps up to here.
 _MAX_ANGLE_DEG = 1e6
 #: The two CSV layouts: the header, then one row per pose.
@@ -64,7 +72,9 @@ class Trajectory:
     rotation : (T, 3, 3) float
         Sensor → world rotations (columns: the sensor's x forward, y left, z up in the world),
         orthonormal with det +1 within :data:`ROTATION_TOLERANCE`; stored re-orthonormalised (the
-        nearest rotation, by SVD).
+        nearest rotation, by SVD).  Each turns less than :data:`HALF_TURN_DEG` −
+        :data:`HALF_TURN_SLACK_DEG` from the one before: slerp turns the short way, so a longer turn
+        needs samples in between.
     name : str
         User name (metadata; it may name output files).
 
@@ -78,7 +88,9 @@ class Trajectory:
     InvalidInputError
         Naming the trajectory and the field (``trajectory 'odom': time_s[3] must be later ...``):
         not real numbers of the shapes above; a value not finite or beyond its bound; a time not
-        later than the one before; a matrix that is not a rotation; a name that cannot name files.
+        later than the one before; a matrix that is not a rotation; two consecutive attitudes a half
+        turn or more apart (naming the samples: ``the attitude turns 180° or more between samples 3
+        and 4``); a name that cannot name files.
     """
 
     time_s: NDArray[np.float64]
@@ -98,6 +110,9 @@ class Trajectory:
             if bad:
                 raise InvalidInputError(f"{bad[0]}[{bad[1]}] {bad[2]}")
             rotation = _orthonormalised(rotation)
+            turned = np.flatnonzero(_half_turns(rotation))
+            if len(turned):
+                raise InvalidInputError(f"{_turn_words(f'samples {turned[0] - 1} and {turned[0]}')}; add samples in between {_SHORT_WAY}")
         for field, value in (("time_s", time), ("position_m", position), ("rotation", rotation)):
             value.flags.writeable = False
             object.__setattr__(self, field, value)
@@ -148,7 +163,7 @@ class Trajectory:
         """T, the samples."""
         return len(self.time_s)
 
-    @property
+    @cached_property
     def is_static(self) -> bool:
         """One pose, or every sample's position and rotation equal (exactly): valid at every time."""
         return len(self) == 1 or bool(np.all(self.position_m == self.position_m[0]) and np.all(self.rotation == self.rotation[0]))
@@ -172,7 +187,10 @@ class Trajectory:
         """The poses at ``time_s``: positions by linear interpolation, attitudes by slerp.
 
         Slerp (Shoemake 1985, SIGGRAPH '85, §3; :class:`scipy.spatial.transform.Slerp`) turns at a constant
-        rate about one axis between two samples, the short way round: samples must not be 180° or more apart.
+        rate about one axis between two samples, the short way round, so consecutive samples are less
+        than a half turn apart (:class:`Trajectory` refuses them otherwise): a longer turn is written
+        with samples in between.  The work grows with the samples around ``time_s`` (found by binary
+        search), not with the trajectory's length.
 
         Parameters
         ----------
@@ -200,9 +218,9 @@ class Trajectory:
             return np.repeat(self.rotation[:1], len(t), axis=0), np.repeat(self.position_m[:1], len(t), axis=0)
         out = np.flatnonzero((t < self.start_s - TIME_SLACK_S) | (t > self.end_s + TIME_SLACK_S))
         if len(out):
+            side = "before its first sample" if t[out[0]] < self.start_s else "after its last sample"
             raise InvalidInputError(
-                f"trajectory {self.name!r}: time_s[{out[0]}] = {float(t[out[0]])!r} s is outside its span "
-                f"[{self.start_s!r}, {self.end_s!r}] s ({len(out):,} of {len(t):,} times outside)"
+                f"trajectory {self.name!r}: time_s[{out[0]}] is {side} ({len(out):,} of {len(t):,} times outside its span)"
             )
         from scipy.spatial.transform import Rotation, Slerp
 
@@ -210,27 +228,51 @@ class Trajectory:
         i = np.clip(np.searchsorted(self.time_s, t, side="right") - 1, 0, len(self) - 2)
         f = (t - self.time_s[i]) / (self.time_s[i + 1] - self.time_s[i])
         position = self.position_m[i] + f[:, None] * (self.position_m[i + 1] - self.position_m[i])
-        rotation = Slerp(self.time_s, Rotation.from_matrix(self.rotation))(t).as_matrix()
+        if not len(t):
+            return np.zeros((0, 3, 3)), position
+        # Slerp over the samples around the times only: each segment is interpolated on its own, so the
+        # window's answers are the whole trajectory's, bit for bit (its segment search is side="left")
+        lo = max(int(np.searchsorted(self.time_s, t.min(), side="left")) - 1, 0)
+        hi = max(int(np.searchsorted(self.time_s, t.max(), side="left")), lo + 1)
+        window = slice(lo, hi + 1)
+        rotation = Slerp(self.time_s[window], Rotation.from_matrix(self.rotation[window]))(t).as_matrix()
         return rotation, position
 
-    def since(self, start_s: float) -> Trajectory:
+    def since(self, start_s: float, until_s: float | None = None) -> Trajectory:
         """The trajectory from ``start_s`` on: the pose there (:meth:`poses_at`), then the samples after it.
 
         The platform of a later sweep along the same path (a scan starts at its platform's
         :attr:`start_s`).  A static trajectory stays static, starting at ``start_s``.
 
+        Parameters
+        ----------
+        start_s : float
+            Seconds, within a moving trajectory's span and before its end.
+        until_s : float, optional
+            Seconds: keep the samples up to the first at or after ``until_s`` (:data:`TIME_SLACK_S`
+            beyond it), the last of them, if the trajectory ends sooner.  The new trajectory answers
+            every time up to ``until_s`` as this one does, bit for bit, and holds only the samples
+            around ``[start_s, until_s]``: a sweep of a long trajectory costs what its own samples
+            cost.  Default: every later sample.
+
         Raises
         ------
         InvalidInputError
-            ``start_s`` not a finite number, outside a moving trajectory's span, or at its end (no
-            motion left to sweep along).
+            ``start_s`` or ``until_s`` not a finite number, ``until_s`` not after ``start_s``,
+            ``start_s`` outside a moving trajectory's span, or at its end (no motion left to sweep
+            along).
         """
         t0 = real(start_s, "start_s")
+        t1 = None if until_s is None else real(until_s, "until_s", low=t0, low_open=True)
         if self.is_static:
             return Trajectory(np.array([t0]), self.position_m[:1], self.rotation[:1], name=self.name)
-        later = self.time_s > t0 + TIME_SLACK_S
-        if not later.any():
-            raise InvalidInputError(f"trajectory {self.name!r} ends at {self.end_s!r} s: nothing of it is left after {t0!r} s")
+        first = int(np.searchsorted(self.time_s, t0 + TIME_SLACK_S, side="right"))  # the first sample later than t0
+        if first == len(self):
+            raise InvalidInputError(
+                f"trajectory {self.name!r}: start_s is at or after its last sample: nothing of it is left to sweep along"
+            )
+        last = len(self) if t1 is None else int(np.searchsorted(self.time_s, t1 + TIME_SLACK_S, side="left")) + 1
+        later = slice(first, last)
         rotation, position = self.poses_at(np.array([t0]))
         return Trajectory(np.r_[t0, self.time_s[later]], np.vstack([position, self.position_m[later]]),
                           np.concatenate([rotation, self.rotation[later]]), name=self.name)  # fmt: skip
@@ -301,7 +343,10 @@ def load_trajectory(path: str | PathLike[str], *, within: str | PathLike[str] | 
       norm further than :data:`QUATERNION_NORM_TOLERANCE` from 1 is refused.
 
     Positions: the sensor's origin, world frame (z up), metres; the attitude turns the sensor frame (x
-    forward, y left, z up) into the world's.  Read whole by :func:`~zbuf_occlude.io.regular_files.read_text_file`
+    forward, y left, z up) into the world's.  Slerp turns the short way between rows, so consecutive
+    rows are less than a half turn apart (:data:`HALF_TURN_DEG`, within :data:`HALF_TURN_SLACK_DEG`),
+    both in each angle column as written (unwrapped: 179 then 181, not 179 then -179) and in attitude;
+    a longer turn is written with rows in between.  Read whole by :func:`~zbuf_occlude.io.regular_files.read_text_file`
     (a regular file, at most :data:`~zbuf_occlude.io.caps.MAX_TRAJECTORY_BYTES`, UTF-8).
 
     Parameters
@@ -321,7 +366,10 @@ def load_trajectory(path: str | PathLike[str], *, within: str | PathLike[str] | 
         folder), too large, not UTF-8; empty; another header; a line over :data:`~zbuf_occlude.io.caps.MAX_TRAJECTORY_LINE_BYTES`;
         more lines after the header than :data:`~zbuf_occlude.io.caps.MAX_TRAJECTORY_POSES` (before a row is
         parsed), or none; a row not of the header's width; a value not finite or out of bounds
-        (:class:`Trajectory`'s); times not increasing; a quaternion far from unit norm.
+        (:class:`Trajectory`'s); times not increasing; a quaternion far from unit norm; two consecutive
+        rows a half turn or more apart (naming both lines), as an angle column is written (its
+        difference, so 0 then 360, or 170 then -170, is a turn of 360° or 340°) or as the attitudes
+        are (the rotation from one to the next).
     UnsafePathError
         ``within`` is given and ``path`` leads outside it.
     """
@@ -330,10 +378,21 @@ def load_trajectory(path: str | PathLike[str], *, within: str | PathLike[str] | 
     if within is not None and not isinstance(within, (str, PathLike)):
         raise ArgumentTypeError(f"within must be a folder's path (str or os.PathLike) or None, got {described(within)}")
     columns, table, line_of = read_trajectory_table(path, tuple(_LAYOUTS), within=within)
-    *attitude_check, rotation = _LAYOUTS[columns](table[:, 4:])
+    *attitude_check, rotation, written_turns = _LAYOUTS[columns](table[:, 4:])
     bad = _first_bad([*_sample_checks(table[:, 0], table[:, 1:4]), attitude_check])
     if bad:
         raise InvalidInputError(f"{path}: line {line_of[bad[1]]:,}: {bad[0]} {bad[2]}")
+    # the earliest pair of rows a half turn apart, as an angle column is written or (None) as the attitudes are
+    checks = [*written_turns, (None, _half_turns(rotation))]
+    turns = [(int(np.argmax(flags)), order, column) for order, (column, flags) in enumerate(checks) if flags.any()]
+    if turns:
+        row, _, column = min(turns)
+        written = "" if column is None else f", as {column} is written"
+        unwrap = (
+            "" if column is None else ", or, for a short turn across ±180°, write the angles unwrapped (179 then 181, not 179 then -179)"
+        )
+        raise InvalidInputError(f"{path}: lines {line_of[row - 1]:,} and {line_of[row]:,}: {_turn_words('them')}{written}; "
+                                f"add samples in between {_SHORT_WAY}{unwrap}")  # fmt: skip
     with located(str(path)):
         return Trajectory(table[:, 0], table[:, 1:4], rotation, name=Path(path).stem if name is None else name)
 
@@ -399,24 +458,48 @@ def _pose_parts(pose: ArrayLike, name: str, *, single: bool) -> tuple[NDArray[np
     return a[:, :3, :3], a[:, :3, 3]
 
 
-def _euler_rotations(angles: NDArray[np.float64]) -> tuple[str, NDArray[np.bool_], str, NDArray[np.float64]]:
-    """Roll, pitch, yaw (N, 3) degrees, extrinsic x-y-z: (their columns, the rows refused (N,) bool, why, the (N, 3, 3) rotations)."""
+def _half_turns(rotation: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """(T,) bool: whether rotation ``i`` (T, 3, 3) is :data:`HALF_TURN_DEG` or more (within :data:`HALF_TURN_SLACK_DEG`)
+    from rotation ``i − 1``; False for the first.  By the trace, ``1 + 2 cos θ`` of ``R[i−1]ᵀ R[i]`` (linear in the
+    entries, for a million samples at once): at the threshold, rounding moves θ by less than 1e-9°."""
+    trace = np.einsum("tij,tij->t", rotation[:-1], rotation[1:])
+    return np.r_[False, trace <= 1.0 + 2.0 * np.cos(np.radians(HALF_TURN_DEG - HALF_TURN_SLACK_DEG))]
+
+
+def _turn_words(where: str) -> str:
+    """What a half turn between two samples (``where``) is refused for."""
+    return f"the attitude turns {HALF_TURN_DEG:g}° or more between {where}"
+
+
+#: Why a long turn needs samples in between.
+_SHORT_WAY = "(slerp turns the short way)"
+#: Each angle column's name and the rows (N,) bool it turns a half turn or more from the row before, as written.
+_Turns = list[tuple[str, NDArray[np.bool_]]]
+
+
+def _euler_rotations(angles: NDArray[np.float64]) -> tuple[str, NDArray[np.bool_], str, NDArray[np.float64], _Turns]:
+    """Roll, pitch, yaw (N, 3) degrees, extrinsic x-y-z: (their columns, the rows refused (N,) bool, why, the (N, 3, 3) rotations,
+    and for each column ``(name, (N,) bool)``: the rows it turns a half turn or more from the row before, as written)."""
     from scipy.spatial.transform import Rotation
 
     bad = ~np.all(np.abs(angles) <= _MAX_ANGLE_DEG, axis=1)
     rotations = Rotation.from_euler("xyz", np.where(bad[:, None], 0.0, angles), degrees=True).as_matrix()
-    return "roll_deg, pitch_deg, yaw_deg", bad, f"must be finite, within ±{_MAX_ANGLE_DEG:g}°", rotations
+    with np.errstate(invalid="ignore"):  # a bad row's inf or NaN: refused before these are read
+        written = np.abs(np.diff(angles, axis=0)) >= HALF_TURN_DEG - HALF_TURN_SLACK_DEG
+    turns = [(column, np.r_[False, written[:, k]]) for k, column in enumerate(EULER_COLUMNS[4:])]
+    return "roll_deg, pitch_deg, yaw_deg", bad, f"must be finite, within ±{_MAX_ANGLE_DEG:g}°", rotations, turns
 
 
-def _quaternion_rotations(q: NDArray[np.float64]) -> tuple[str, NDArray[np.bool_], str, NDArray[np.float64]]:
-    """Quaternions (N, 4), scalar last, normalised: (their columns, the rows refused (N,) bool, why, the (N, 3, 3) rotations)."""
+def _quaternion_rotations(q: NDArray[np.float64]) -> tuple[str, NDArray[np.bool_], str, NDArray[np.float64], _Turns]:
+    """Quaternions (N, 4), scalar last, normalised: (their columns, the rows refused (N,) bool, why, the (N, 3, 3) rotations,
+    no turns as written: a quaternion and its negative are one attitude)."""
     from scipy.spatial.transform import Rotation
 
     with np.errstate(over="ignore", invalid="ignore"):
         norm = np.sqrt(np.sum(q * q, axis=1))
         bad = ~(np.abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE)
         rotations = Rotation.from_quat(np.where(bad[:, None], (0.0, 0.0, 0.0, 1.0), q / norm[:, None])).as_matrix()
-    return "qx, qy, qz, qw", bad, f"must be a unit quaternion (norm within {QUATERNION_NORM_TOLERANCE:g} of 1)", rotations
+    return "qx, qy, qz, qw", bad, f"must be a unit quaternion (norm within {QUATERNION_NORM_TOLERANCE:g} of 1)", rotations, []
 
 
 #: Each header's columns → how the columns after the position are checked and become rotations.

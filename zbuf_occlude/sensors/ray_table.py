@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.ray_tables import read_ray_table
-from zbuf_occlude.sensors.checks import MAX_SENSOR_RAYS, count, located, real, reals, replaced, sensor_name, shown, text
+from zbuf_occlude.sensors.checks import MAX_SENSOR_RAYS, count, located, real, reals, replaced, sensor_name, text, value_kind
 from zbuf_occlude.sensors.beam import IDEAL_BEAM, Beam, check_beam
 from zbuf_occlude.sensors.lidar import SPINNING_INTENSITY_SCALE, Lidar, beam_directions, in_sector
 from zbuf_occlude.sensors.pulses import Pulses, placed
@@ -91,7 +91,7 @@ class RayTable:
 
     def __post_init__(self) -> None:
         sensor_name(self.name, "ray table name")
-        with located(f"ray table {self.name!r}"):
+        with located("ray table"):  # not by its name: a sensor file's name is one of its values, never quoted
             self._check_columns()
             self._check_model()
 
@@ -102,15 +102,17 @@ class RayTable:
             value = getattr(self, name)
             n = len(value) if hasattr(value, "__len__") else -1
             if not 1 <= n <= MAX_SENSOR_RAYS:
-                raise InvalidInputError(f"{name} must be a list of 1 to {MAX_SENSOR_RAYS:,} numbers (one per pulse), got {shown(value)}")
+                raise InvalidInputError(
+                    f"{name} must be a list of 1 to {MAX_SENSOR_RAYS:,} numbers (one per pulse), got {value_kind(value)}"
+                )
             a = np.asarray(value)
             if a.ndim != 1 or a.dtype.kind not in "fiu":
-                raise InvalidInputError(f"{name} must be a 1-D array of real numbers, got shape {a.shape} dtype {a.dtype}")
+                raise InvalidInputError(f"{name} must be a 1-D array of real numbers, got shape {a.shape} dtype {a.dtype.name}")
             a = np.array(a, dtype=np.float64)  # a copy: the caller's array may change
             bad = np.flatnonzero(~np.isfinite(a))
             if len(bad):
                 raise InvalidInputError(
-                    f"{name}[{bad[0]}] must be a finite number, got {float(a[bad[0]])!r} ({len(bad):,} rows not finite)"
+                    f"{name}[{bad[0]}] must be a finite number, got {value_kind(float(a[bad[0]]))} ({len(bad):,} rows not finite)"
                 )
             a.flags.writeable = False
             columns[name] = a
@@ -120,12 +122,12 @@ class RayTable:
         back = np.flatnonzero(np.diff(columns["time_s"]) < 0)
         if len(back):
             i = back[0] + 1
-            raise InvalidInputError(
-                f"time_s must not decrease: time_s[{i}] = {float(columns['time_s'][i])!r} < time_s[{i - 1}] = {float(columns['time_s'][i - 1])!r}"
-            )
+            raise InvalidInputError(f"time_s must not decrease: time_s[{i}] is below time_s[{i - 1}]")
         out = np.flatnonzero(np.abs(columns["elevation_deg"]) > 90.0)
         if len(out):
-            raise InvalidInputError(f"elevation_deg[{out[0]}] must be in [-90, 90], got {float(columns['elevation_deg'][out[0]])!r}")
+            raise InvalidInputError(
+                f"elevation_deg[{out[0]}] must be in [-90, 90], got a number outside that range ({len(out):,} rows outside)"
+            )
         for name, a in columns.items():
             object.__setattr__(self, name, a)
 

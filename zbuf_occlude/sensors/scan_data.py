@@ -5,6 +5,7 @@ Written by :func:`zbuf_occlude.sensors.scan.scan`; read back by :func:`read_scan
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -21,7 +22,7 @@ from zbuf_occlude.io.encodings import npz_bytes
 from zbuf_occlude.sensors.beam import intensity_counts
 from zbuf_occlude.sensors.checks import MAX_SCENE_OBJECTS
 
-__all__ = ["FRAMES", "GPS_START_S", "UNIT_INTENSITY_SCALE", "Scan", "read_scan_npz"]
+__all__ = ["FRAMES", "GPS_START_S", "GPS_TIME_RESOLUTION_S", "UNIT_INTENSITY_SCALE", "Scan", "check_gps_start", "read_scan_npz"]
 
 #: Frames a scan's points can be given in.
 FRAMES = ("sensor", "world")
@@ -32,9 +33,75 @@ FRAMES = ("sensor", "world")
 #: (GPS − UTC = 18 s since 2017-01-01, IERS Bulletin C) = 1,451,260,818 s; minus 10⁹.  An airborne
 #: scan's times (a few minutes negative at most) stay far above 0.
 GPS_START_S = 451_260_818.0
+#: The coarsest step between the float64 GPS times of a scan's LAS file, seconds: 1 µs.  LAS stores
+#: GPS time as float64 seconds (R15, "GPS Time"), whose step doubles with every power of 2 of the
+#: time: 60 ns at :data:`GPS_START_S`, 1 µs or finer below 2³³ s (8.6e9 s of adjusted standard time,
+#: the year 2283).  Scanners stamp pulses to the microsecond (Velodyne's packets: µs past the hour)
+#: and the fastest preset fires every 1.25 µs (riegl-q1560, 800 kHz), so at this step its pulses keep
+#: distinct times in firing order.  A finer rule (0.1 µs) would refuse real adjusted standard times
+#: from 2028 on (2²⁹ s), which are as LAS writes them.
+GPS_TIME_RESOLUTION_S = 1e-6
 #: The intensity scale of a scan whose beam gives none, counts·m²: received energy 1 m⁻² (a white
 #: Lambertian target at normal incidence 1 m away, filling the beam) and above store 65535.
 UNIT_INTENSITY_SCALE = 65535.0
+
+
+def check_gps_start(gps_start_s: float, times_s: ArrayLike | None = None, *, name: str = "gps_start_s") -> float:
+    """``gps_start_s`` checked as the adjusted standard GPS time of a scan's time 0 in a LAS file.
+
+    Every time written, ``gps_start_s + times_s``, must be >= 0 (adjusted standard GPS time, ASPRS
+    LAS 1.4 R15), and float64 times at the last of them must be at most
+    :data:`GPS_TIME_RESOLUTION_S` apart (``numpy.spacing``): at 1e17 s they are 16 s apart and
+    every point of a scan would get one time.
+
+    Parameters
+    ----------
+    gps_start_s : float
+        Adjusted standard GPS time (GPS seconds − 10⁹) of the scan's time 0, seconds.
+    times_s : (N,) float, optional
+        The scan's times, seconds from its first firing (:attr:`Scan.gps_time`; airborne: a few
+        minutes negative at most); None or empty: the start alone.
+    name : str
+        What messages call ``gps_start_s`` (a caller names its own option).
+
+    Returns
+    -------
+    float
+        ``gps_start_s``.
+
+    Raises
+    ------
+    InvalidInputError
+        ``gps_start_s`` not a finite number, a time below 0, or a last time at which float64
+        steps are coarser than :data:`GPS_TIME_RESOLUTION_S` (the message gives the step there
+        and the latest start that keeps the resolution).
+    """
+    from zbuf_occlude.sensors.checks import real
+
+    start = real(gps_start_s, name)
+    relative = np.zeros(1) if times_s is None else np.asarray(times_s, np.float64).ravel()
+    relative = relative if relative.size else np.zeros(1)
+    first, last = start + relative.min(), start + relative.max()
+    if not first >= 0.0:
+        raise InvalidInputError(f"{name} {start:.9g} puts the scan's first time at {first:.9g} s: adjusted standard GPS times must "
+                                "be >= 0; give a later start")  # fmt: skip
+    step = math.ulp(last)  # numpy.spacing, without its overflow warning at the largest floats
+    if step > GPS_TIME_RESOLUTION_S:
+        # float64 steps are 2**(e - 53) in [2**(e - 1), 2**e); frexp gives GPS_TIME_RESOLUTION_S's binade, exactly
+        below = math.ldexp(1.0, math.frexp(GPS_TIME_RESOLUTION_S)[1] + 52) - float(relative.max())
+        given = next(d for d in range(1, 18) if float(_short(start, d)) == start)  # as typed: 1e17, 8.6e9, 8589934591.99
+        digits = next((d for d in range(2, 18) if _short(below, d) != _short(start, d)), 17)  # 8.59e9 below 8.6e9, not 8.6e9
+        raise InvalidInputError(
+            f"{name} {_short(start, given)}: at {_short(last, 2)} s float64 GPS times are {_short(step, 2)} s apart; a start below "
+            f"about {_short(below, digits)} s keeps the {GPS_TIME_RESOLUTION_S * 1e6:g} µs that LAS GPS times need"
+        )
+    return start
+
+
+def _short(x: float, digits: int) -> str:
+    """``x`` in ``digits`` significant digits, exponent unpadded: ``1e17``, ``8.6e9``, ``16``, ``0.5``."""
+    mantissa, _, exponent = f"{x:.{digits}g}".partition("e")
+    return mantissa + (f"e{int(exponent)}" if exponent else "")
 
 
 @dataclass
@@ -250,10 +317,14 @@ class Scan:
             The point source id of a scan without flight lines, 0 to 65535.
         gps_start_s : float
             The adjusted standard GPS time of the scan's time 0, seconds (default
-            :data:`GPS_START_S`, 2026-01-01T00:00:00 UTC); every time written must be >= 0.
+            :data:`GPS_START_S`, 2026-01-01T00:00:00 UTC); every time written must be >= 0 and
+            keep float64 steps of :data:`GPS_TIME_RESOLUTION_S` at most (:func:`check_gps_start`:
+            a start below about 8.6e9 s).
         crs : int or str, optional
-            An EPSG code of a CRS in metres (``"EPSG:2154"``), written as a WKT VLR; needs pyproj
-            (the ``crs`` extra) and a scan in the world frame.
+            The EPSG code of a projected CRS in metres (``"EPSG:2154"``), or of one compound with
+            a vertical CRS in metres (``"EPSG:2154+5720"``;
+            :func:`~zbuf_occlude.io.las_crs.epsg_crs`), written as a WKT VLR; needs pyproj (the
+            ``crs`` extra) and a scan in the world frame.
 
         Returns
         -------
@@ -265,10 +336,11 @@ class Scan:
         ------
         InvalidInputError
             ``intensity_scale``, ``ground_z_m`` or ``gps_start_s`` not finite (scale > 0), a
-            :attr:`max_intensity` outside 1 to 65535, a time
-            that would be negative, ``scan_number`` out of range, an object id beyond
-            :attr:`object_classes`, a bad class map, ``crs`` on a scan in the sensor frame or not
-            an EPSG code in metres, or points too far apart for int32 steps of 1 mm
+            :attr:`max_intensity` outside 1 to 65535, a time that would be negative or whose
+            float64 steps are coarser than :data:`GPS_TIME_RESOLUTION_S`, ``scan_number`` out of
+            range, an object id beyond :attr:`object_classes`, a bad class map, ``crs`` on a scan
+            in the sensor frame or not the EPSG code of a projected CRS in metres, or points too
+            far apart for int32 steps of 1 mm
             (:func:`~zbuf_occlude.io.las.las_bytes`).
         BackendUnavailable
             ``crs`` without pyproj.
@@ -280,7 +352,6 @@ class Scan:
         given = self.intensity_scale if intensity_scale is None else intensity_scale
         scale = UNIT_INTENSITY_SCALE if given is None else real(given, "intensity_scale", low=0.0, low_open=True)
         ground = real(ground_z_m, "ground_z_m")
-        start = real(gps_start_s, "gps_start_s")
         source = count(scan_number, "scan_number", low=0, high=65535)
         top = 65535 if self.max_intensity is None else count(self.max_intensity, "max_intensity", low=1, high=65535)
         if self.frame != "world" and self.meta.get("moving"):
@@ -297,10 +368,8 @@ class Scan:
         intensity = np.zeros(n, np.uint16)
         if self.intensity is not None:
             intensity = intensity_counts(self.intensity, scale, top)
-        times = start + (np.zeros(n) if self.gps_time is None else np.asarray(self.gps_time, np.float64))
-        if n and not times.min() >= 0.0:
-            raise InvalidInputError(f"gps_start_s {start:.9g} puts the scan's first time at {times.min():.9g} s: adjusted standard GPS "
-                                    "times must be >= 0; give a later start")  # fmt: skip
+        relative = np.zeros(n) if self.gps_time is None else np.asarray(self.gps_time, np.float64)
+        times = check_gps_start(gps_start_s, relative) + relative
         points = np.asarray(self.points, np.float64)
         ids = np.asarray(self.object_id, np.int64)
         classes = self._classes(ids)

@@ -42,7 +42,7 @@ from numpy.typing import NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.limits import MAX_MESH_FACES
 from zbuf_occlude.mesh.scene import FACE_MATERIALS, FaceMaterials, face_materials_of
-from zbuf_occlude.sensors.checks import MAX_COORDINATE_M, MAX_PATH_CHARS, is_number, located, real, reals, shown, text
+from zbuf_occlude.sensors.checks import MAX_COORDINATE_M, MAX_PATH_CHARS, is_number, located, real, reals, text, value_kind
 from zbuf_occlude.sensors.foliage import LEAF_MATERIAL, MAX_LEAVES, Foliage
 from zbuf_occlude.sensors.object_shapes import (
     FACE_ROWS,
@@ -77,7 +77,7 @@ def sensor_pose(position_m, yaw_deg: float = 0.0) -> NDArray[np.float64]:
     """(4, 4) float64 sensor → world transform: a translation and a turn about +z (degrees)."""
     p = np.asarray(position_m, dtype=np.float64).reshape(3)
     if not np.all(np.isfinite(p)) or not math.isfinite(yaw_deg):
-        raise InvalidInputError(f"sensor position {shown(position_m)} and yaw {shown(yaw_deg)} must be finite")
+        raise InvalidInputError("sensor position and yaw must be finite")
     c, s = math.cos(math.radians(yaw_deg)), math.sin(math.radians(yaw_deg))
     m = np.eye(4)
     m[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
@@ -161,7 +161,7 @@ class SceneObject:
         Raises
         ------
         InvalidInputError
-            The message starts with the field's name (``yaw_deg must be a finite number, got nan``).
+            The message starts with the field's name (``yaw_deg must be a finite number, got NaN``).
         """
         mesh = self.mesh
         if isinstance(mesh, (str, os.PathLike)):
@@ -172,14 +172,14 @@ class SceneObject:
                 ok = False
             if not ok:
                 raise InvalidInputError(
-                    f"mesh must be a file path of 1 to {MAX_PATH_CHARS} characters, without NUL or lone surrogates, got {shown(mesh)}"
+                    f"mesh must be a file path of 1 to {MAX_PATH_CHARS} characters, without NUL or lone surrogates, got {value_kind(mesh)}"
                 )
         elif isinstance(mesh, Mapping):
             primitive_args(mesh)  # checked before anything is allocated
         elif not is_trimesh(mesh):
             raise InvalidInputError(
                 "mesh must be a mesh file path, a primitive {'box_m': [x, y, z]} or {'cylinder': {'radius_m': r, 'height_m': h}}, "
-                f"or a trimesh.Trimesh, got {type(mesh).__name__} {shown(mesh)}"
+                f"or a trimesh.Trimesh, got {value_kind(mesh)}"
             )
         text(self.class_name, "class_name")
         where = {"low": -MAX_COORDINATE_M, "high": MAX_COORDINATE_M}
@@ -219,8 +219,7 @@ class SceneObject:
 
         from zbuf_occlude.mesh.load import load_mesh  # trimesh: imported when a scene is built
 
-        with located(f"object {shown(self.class_name or self.mesh)}"):
-            self._check()
+        self._check()
         if isinstance(self.mesh, trimesh.Trimesh):
             local = self.mesh
         elif isinstance(self.mesh, Mapping):
@@ -243,9 +242,7 @@ class SceneObject:
                 scale = np.full(3, size_arr[0] / extents.max())
             else:
                 if np.any(extents <= 0):
-                    raise InvalidInputError(
-                        f"object {shown(self.class_name or self.mesh)}: a flat mesh cannot take three extents {shown(size)}"
-                    )
+                    raise InvalidInputError("size_m: a flat mesh cannot take three extents; give one size")
                 scale = size_arr / extents
         # The object's own shape, stretch and warp, is its local mesh; the transform only sizes, turns and places it.
         faces, rows = np.asarray(local.faces, dtype=np.int64), None
@@ -259,7 +256,7 @@ class SceneObject:
             if materials is not None and rows is not None:  # each face keeps its file's material, a split face its parent's
                 materials = materials.select(rows)
             if self.foliage is not None:
-                with located(f"object {shown(self.class_name or self.mesh)}: foliage"):
+                with located("foliage"):
                     v, faces, rows, materials = _with_leaves(self.foliage, v, faces, scale, rows, len(local.faces), materials, max_faces)
             local = trimesh.Trimesh(v @ rot_up, faces, process=False)  # rot_up is orthonormal: v @ rot_up undoes it
             if rows is not None:
@@ -376,7 +373,7 @@ class ScanScene:
     def __post_init__(self) -> None:
         far = f"<= {MAX_GROUND_HALF_EXTENT_M:.0f} metres (float32 ray casting)"
         if not isinstance(self.ground, (bool, np.bool_)):
-            raise InvalidInputError(f"ground must be true or false, got {shown(self.ground)}")
+            raise InvalidInputError(f"ground must be true or false, got {value_kind(self.ground)}")
         self.ground_z_m = real(self.ground_z_m, "ground z_m", low=-MAX_GROUND_HALF_EXTENT_M, high=MAX_GROUND_HALF_EXTENT_M)
         self.ground_half_extent_m = real(
             self.ground_half_extent_m,
@@ -399,7 +396,7 @@ class ScanScene:
                 raise InvalidInputError(f"{name} must be a list of SceneObject, got {type(items).__name__}")
             bad = next((i for i, obj in enumerate(items) if not isinstance(obj, SceneObject)), None)
             if bad is not None:
-                raise InvalidInputError(f"{name}[{bad}] must be a SceneObject, got {type(items[bad]).__name__} {shown(items[bad])}")
+                raise InvalidInputError(f"{name}[{bad}] must be a SceneObject, got {value_kind(items[bad])}")
             if isinstance(items, tuple):  # add() appends to the list given
                 setattr(self, name, list(items))
 
@@ -448,13 +445,12 @@ class ScanScene:
             face_local.append(np.arange(2))
             n_vertices = 4
         for oid, obj in enumerate([*self.objects, *self.occluders], start=1):
-            local, m = self._object_build(obj, MAX_MESH_FACES - n_faces)  # leaves are counted against what the cap leaves
+            where = f"objects[{oid - 1}]" if oid <= len(self.objects) else f"occluders[{oid - 1 - len(self.objects)}]"
+            with located(where):  # by its place in the scene: its class and mesh are a file's values, never quoted
+                local, m = self._object_build(obj, MAX_MESH_FACES - n_faces)  # leaves are counted against what the cap leaves
             n_faces += len(local.faces)
             if n_faces > MAX_MESH_FACES:  # each mesh file is capped on its own; a scene may name one 10,000 times
-                raise InvalidInputError(
-                    f"the scene holds more than {MAX_MESH_FACES:,} triangles by object {oid} ({shown(obj.class_name or obj.mesh)}); "
-                    "use fewer or simpler meshes"
-                )
+                raise InvalidInputError(f"the scene holds more than {MAX_MESH_FACES:,} triangles by {where}; use fewer or simpler meshes")
             m = m.copy()
             m[2, 3] += self.ground_z_m
             v = _to_world(local.vertices, m)

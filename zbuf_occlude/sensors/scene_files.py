@@ -10,7 +10,8 @@ made (:mod:`zbuf_occlude.sensors.checks`: numbers finite and in range, types, un
 a mesh file it names must lie inside the scene file's folder (relative, no ``..``, symlinks
 resolved: :func:`zbuf_occlude.io.safe_paths.path_inside`), and it holds at most
 :data:`~zbuf_occlude.sensors.checks.MAX_SCENE_OBJECTS` objects.  Every error is one line that
-names the file and the field (``street.yaml: objects[2]: yaw_deg must be a finite number, got nan``).
+names the file and the field (``street.yaml: objects[2]: yaw_deg must be a finite number, got NaN``), never a
+value of the file (:func:`~zbuf_occlude.sensors.checks.value_kind`).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.checks import MAX_SCENE_OBJECTS, located, mapping, shown
+from zbuf_occlude.sensors.checks import MAX_SCENE_OBJECTS, located, mapping, value_kind
 from zbuf_occlude.sensors.scene import ScanScene, SceneObject
 
 __all__ = ["load_scene", "scene_from_dict", "SCENE_KEYS", "GROUND_KEYS", "SENSOR_KEYS", "OBJECT_KEYS"]
@@ -55,7 +56,7 @@ def scene_from_dict(spec: Mapping, base_dir: Path | None = None) -> ScanScene:
     for key in ("objects", "occluders"):
         items = spec.get(key)
         if items is not None and not isinstance(items, list):
-            raise InvalidInputError(f"{key} must be a list of objects, got {type(items).__name__} {shown(items)}")
+            raise InvalidInputError(f"{key} must be a list of objects, got {value_kind(items)}")
         lists[key] = items or []
     if len(lists["objects"]) + len(lists["occluders"]) > MAX_SCENE_OBJECTS:
         raise InvalidInputError(
@@ -75,7 +76,7 @@ def scene_from_dict(spec: Mapping, base_dir: Path | None = None) -> ScanScene:
                 foliage=d.get("foliage"),
             )
             if base_dir is not None and isinstance(made.mesh, str):  # a file named by a scene file stays in its folder
-                path_inside(base_dir, made.mesh, what="mesh")
+                path_inside(base_dir, made.mesh, what="mesh", quoted=False)
         return made
 
     ground = spec.get("ground", {})

@@ -26,6 +26,7 @@ from typing import Any
 from zbuf_occlude._version import install_hint
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.caps import MAX_SPEC_FILE_BYTES
+from zbuf_occlude.io.file_errors import without_quotes
 from zbuf_occlude.io.json_files import MAX_JSON_DEPTH, loads_json
 from zbuf_occlude.io.regular_files import read_regular_file
 from zbuf_occlude.sensors.checks import located
@@ -62,7 +63,7 @@ def yaml_loader() -> type:
             if self.check_event(yaml.AliasEvent):
                 event = self.peek_event()
                 raise yaml.composer.ComposerError(
-                    None, None, f"found the alias *{event.anchor}: aliases are not allowed (write the value out)", event.start_mark
+                    None, None, "found an alias (*name): aliases are not allowed (write the value out)", event.start_mark
                 )
             self._depth += 1
             try:
@@ -78,11 +79,12 @@ def yaml_loader() -> type:
 
 
 def _yaml_problem(exc: Exception) -> str:
-    """One line from a PyYAML error: its problem and where (``found ... at line 3, column 5``)."""
+    """One line from a PyYAML error: its problem and where (``found ... at line 3, column 5``), never what it quotes
+    of the file (a tag, a character: :func:`~zbuf_occlude.io.file_errors.without_quotes`), nor its snippet of the line."""
     problem, mark = getattr(exc, "problem", None), getattr(exc, "problem_mark", None)
     if problem and mark is not None:
-        return f"{problem} at line {mark.line + 1}, column {mark.column + 1}"
-    return " ".join(str(exc).split())
+        return f"{without_quotes(problem)} at line {mark.line + 1}, column {mark.column + 1}"
+    return f"{type(exc).__name__} from the parser"  # str(exc) shows the line of the file
 
 
 def read_spec_file(path: str | os.PathLike, *, what: str = "file", yaml_ok: bool = True) -> Any:
@@ -123,4 +125,4 @@ def read_spec_file(path: str | os.PathLike, *, what: str = "file", yaml_ok: bool
     except yaml.YAMLError as exc:
         raise InvalidInputError(f"{path}: cannot parse {what} YAML: {_yaml_problem(exc)}") from None
     except ValueError as exc:  # an integer of over 4,300 digits (Python's int() limit)
-        raise InvalidInputError(f"{path}: cannot parse {what} YAML: {' '.join(str(exc).split())}") from None
+        raise InvalidInputError(f"{path}: cannot parse {what} YAML: {without_quotes(str(exc))}") from None

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from types import ModuleType
 from typing import Any
 
-__all__ = ["KernelReport", "kernel_reports", "kernels", "warm_up", "main"]
+__all__ = ["KernelReport", "kernel_reports", "kernels", "default_method_kernels", "DEFAULT_METHOD_MODULES", "warm_up", "main"]
 
 log = logging.getLogger(__name__)
 
@@ -92,16 +92,46 @@ def kernels(package: ModuleType | None = None) -> dict[str, Any]:
     -------
     dict of str to numba dispatcher
     """
+    found = {}
+    prefix = f"{package.__name__ if package is not None else 'zbuf_occlude.visibility'}."
+    for module in _kernel_modules(package):
+        found.update(_own_kernels(module, module.__name__.removeprefix(prefix)))
+    return found
+
+
+def _own_kernels(module: ModuleType, short: str) -> dict[str, Any]:
+    """The kernels ``module`` defines that are compiled on their own (:func:`kernels`' rule), by ``short.function``."""
     from numba.core.registry import CPUDispatcher
 
+    return {
+        f"{short}.{name}": value for name, value in vars(module).items()
+        if isinstance(value, CPUDispatcher) and value.targetoptions.get("inline") != "always" and value.__module__ == module.__name__
+    }  # fmt: skip
+
+
+#: The modules of :mod:`zbuf_occlude.visibility` whose kernels the default method compiles on the
+#: CPU the first time a command computes visibility: ``auto`` runs ``embree-fast`` there, whose
+#: per-view pre-pass is the CPU z-buffer's.  Which of their kernels a view calls depends on the
+#: mesh and the pose (a view whose pre-pass decides every point casts no ray); the z-buffer's
+#: run on every view.
+DEFAULT_METHOD_MODULES = ("embree_fast", "cpu_zbuffer")
+
+
+def default_method_kernels() -> dict[str, Any]:
+    """The kernels of :data:`DEFAULT_METHOD_MODULES` that :func:`kernels` lists (compiled on their
+    own, each with its own entry in numba's cache), by ``module.function``; only those two modules
+    are imported.
+
+    Returns
+    -------
+    dict of str to numba dispatcher
+        A subset of :func:`kernels`; :func:`warm_up` compiles every one of them.
+    """
+    import importlib
+
     found = {}
-    modules = _kernel_modules(package)
-    prefix = f"{package.__name__ if package is not None else 'zbuf_occlude.visibility'}."
-    for module in modules:
-        short = module.__name__.removeprefix(prefix)
-        for name, value in vars(module).items():
-            if isinstance(value, CPUDispatcher) and value.targetoptions.get("inline") != "always" and value.__module__ == module.__name__:
-                found[f"{short}.{name}"] = value
+    for short in DEFAULT_METHOD_MODULES:
+        found.update(_own_kernels(importlib.import_module(f"zbuf_occlude.visibility.{short}"), short))
     return found
 
 

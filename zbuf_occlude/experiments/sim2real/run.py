@@ -172,7 +172,9 @@ def run_sim2real(config: Sim2RealConfig, out: str | os.PathLike, *, device: str 
         Output folder (module docstring); a rerun resumes from ``runs.jsonl`` when the
         settings are unchanged, and is refused otherwise.
     device : {"cpu", "cuda"}; threads : int, optional; progress : bool
-        How the training runs (torch device and CPU threads, progress bars); no result depends on them.
+        How the training runs (torch device and CPU threads, progress bars); the settings do not
+        depend on them, the last bits of the results do (the thread count and the CPU arithmetic,
+        :mod:`zbuf_occlude.learn.reproducible`: ``run.json`` records them as ``cpu_arithmetic``).
     say : callable, optional
         Takes one line per stage of :func:`prepare_sets` (what it reads, the fit before and after it);
         default: the module's log at INFO level.
@@ -429,6 +431,7 @@ def write_outputs(config: Sim2RealConfig, sets: Sim2RealSets, settings: dict, do
     ``run.json`` and ``table.md`` from every run in ``done`` into the run's held folder; return the ``run.json`` summary."""
     from zbuf_occlude.experiments.sim2real.report import summarise, table_md
     from zbuf_occlude.experiments.machine import machine_description
+    from zbuf_occlude.learn.reproducible import arithmetic_record
 
     names = sets.names
     summary_rows = summarise(list(done.values()), names, chosen_on_fit_half=config.validates_on_fit_half)
@@ -439,7 +442,8 @@ def write_outputs(config: Sim2RealConfig, sets: Sim2RealSets, settings: dict, do
         if cms:
             folder.write_csv(confusion_name(kind),
                              [{"true": n, **{f"pred_{m}": int(v) for m, v in zip(names, row)}} for n, row in zip(names, sum(cms))])  # fmt: skip
-    summary = {"experiment": "sim2real", **settings, "machine": machine_description(), "n_runs": len(done),
+    summary = {"experiment": "sim2real", **settings, "machine": machine_description(),
+               "cpu_arithmetic": arithmetic_record(), "n_runs": len(done),
                "summary": summary_rows, "wall_s": {"total": wall_s,
                                                    "data": sum(r["data_s"] for r in done.values()),
                                                    "train": sum(r["train_s"] for r in done.values())}}  # fmt: skip

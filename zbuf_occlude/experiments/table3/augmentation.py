@@ -16,6 +16,7 @@ import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.machine import machine_description
+from zbuf_occlude.learn.reproducible import arithmetic_record
 from zbuf_occlude.experiments.paper import MODELNET8, PAPER_3B
 from zbuf_occlude.experiments.table3.common import AUGMENTATION_OUTPUTS, AUGMENTATION_SETS, owned_folder, plan_meshes, render_meshes
 from zbuf_occlude.experiments.table3.config import AUGMENTATION_MODEL, Table3Config
@@ -183,7 +184,7 @@ def _augmentation_into(folder: OwnedFolder, root: str | os.PathLike, t_start: fl
         "n": {"C1": len(c1), "C2": len(c2), "Test1": len(test1), "Test2": len(test2),
               "Test3": len(scans[0]) if scans else 0},
         "training": summaries, "config": train_config.to_dict(),
-        "machine": machine_description(), "real_scans": str(real_scans) if real_scans else None,
+        "machine": machine_description(), "cpu_arithmetic": arithmetic_record(), "real_scans": str(real_scans) if real_scans else None,
         "wall_s": {"render": t_render, **timings, "total": time.perf_counter() - t_start},
     }  # fmt: skip
     folder.write_text("run.json", json.dumps(summary, indent=1, default=float))

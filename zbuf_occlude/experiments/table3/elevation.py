@@ -18,6 +18,7 @@ import numpy as np
 from zbuf_occlude.defaults import DEFAULT_METHOD
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.machine import machine_description
+from zbuf_occlude.learn.reproducible import arithmetic_record
 from zbuf_occlude.experiments.paper import PAPER_3A, TEST_ELEVATIONS, TRAIN_ELEVATIONS
 from zbuf_occlude.experiments.table3.common import (
     COMBINED_OUTPUTS,
@@ -165,7 +166,7 @@ def _elevation_into(folder: OwnedFolder, root: str | os.PathLike, t_start: float
         "n_train": len(tr_rows), "n_val": len(val_rows), "n_test": len(test),
         "overall_accuracy": report["overall_accuracy"], "mean_class_accuracy": report["mean_class_accuracy"],
         "best_epoch": result.best_epoch, "epochs_run": len(result.history), "config": train_config.to_dict(),
-        "history": result.history, "machine": machine_description(),
+        "history": result.history, "machine": machine_description(), "cpu_arithmetic": arithmetic_record(),
         "wall_s": {"render": t_render, "train": t_train, "test": t_test, "total": time.perf_counter() - t_start},
         "train_samples_per_s": result.samples_per_second,
     }  # fmt: skip

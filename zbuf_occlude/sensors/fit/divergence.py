@@ -20,7 +20,6 @@ from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.geometry.arguments import described
-from zbuf_occlude.sensors.checks import shown
 from zbuf_occlude.sensors.fit.lidar import Estimate
 from zbuf_occlude.sensors.footprint import MAX_DIVERGENCE_DEG
 
@@ -84,15 +83,15 @@ def divergence_from_shares(divergences_deg: ArrayLike, simulated_shares: ArrayLi
     if not (np.all(np.isfinite(d)) and np.all(np.isfinite(s)) and np.all(np.isfinite(sd))):
         raise InvalidInputError("divergences_deg, simulated_shares and simulated_std must be finite")
     if not (d[0] > 0 and np.all(np.diff(d) > 0)):
-        raise InvalidInputError(f"divergences_deg must be > 0 and strictly increasing, got {shown(d.tolist())}")
+        raise InvalidInputError("divergences_deg must be > 0 and strictly increasing")
     if d[-1] > MAX_DIVERGENCE_DEG:
-        raise InvalidInputError(f"divergences_deg must be at most {MAX_DIVERGENCE_DEG:g} degrees (a sensor's widest beam), got {d[-1]:g}")
-    if s.min() < 0 or s.max() > 1 or sd.min() < 0:
-        raise InvalidInputError(f"simulated_shares must be shares in [0, 1] (and simulated_std >= 0), got {shown(s.tolist())}")
-    if np.any(np.diff(s) < 0) or s[-1] == s[0]:
         raise InvalidInputError(
-            f"simulated_shares must grow with the divergence (non-decreasing, rising somewhere), got {shown(s.tolist())}"
+            f"divergences_deg must be at most {MAX_DIVERGENCE_DEG:g} degrees (a sensor's widest beam), got a larger one"
         )
+    if s.min() < 0 or s.max() > 1 or sd.min() < 0:
+        raise InvalidInputError("simulated_shares must be shares in [0, 1] (and simulated_std >= 0)")
+    if np.any(np.diff(s) < 0) or s[-1] == s[0]:
+        raise InvalidInputError("simulated_shares must grow with the divergence (non-decreasing, rising somewhere)")
     method = (f"divergence whose simulated share meets the measured {measured.value:.4g} ± {measured.std:.2g} (linear between "
               f"{len(d)} simulated divergences, {d[0]:.3g}° to {d[-1]:.3g}°)")  # fmt: skip
 
@@ -195,7 +194,7 @@ def divergence_curve(
     if not (2 <= len(columns) <= 3 and columns[0] == "divergence_deg" and str(columns[1]).startswith("multi_return_points")
             and columns[2:] in ([], ["std"])):  # fmt: skip
         raise InvalidInputError(
-            f"{name}: the header must be divergence_deg,<a multi_return_points figure>[,std], got {','.join(map(str, columns))}"
+            f"{name}: the header must be divergence_deg,<a multi_return_points figure>[,std], got {len(columns)} columns of other names"
         )
     values = np.full((len(rows), 3), 0.0)
     for i, row in enumerate(rows):
@@ -203,7 +202,7 @@ def divergence_curve(
             try:
                 values[i, j] = float(row[column])
             except (TypeError, ValueError):
-                raise InvalidInputError(f"{name}: row {i + 2}: {column} is not a number: {str(row[column])[:40]!r}") from None
+                raise InvalidInputError(f"{name}: row {i + 2}: {column} is not a number") from None
     try:
         divergence_from_shares(values[:, 0], values[:, 1], Estimate(math.nan, math.nan, 0, "", "share"), values[:, 2])
     except InvalidInputError as exc:

@@ -53,7 +53,6 @@ from numpy.typing import NDArray
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.geometry.arguments import described
 from zbuf_occlude.geometry.sampling import check_seed
-from zbuf_occlude.sensors.checks import shown
 from zbuf_occlude.sensors.kinds import kind_name
 from zbuf_occlude.sensors.lidar import Lidar
 
@@ -96,10 +95,17 @@ def check_bootstrap(bootstrap: object, *, name: str = "bootstrap") -> int:
     if isinstance(bootstrap, (bool, np.bool_)) or not isinstance(bootstrap, (int, np.integer)):
         raise ArgumentTypeError(f"{name} must be an integer, got {described(bootstrap)}")
     if bootstrap < 2:
-        raise InvalidInputError(f"{name} must be >= 2 (a spread needs two resamples), got {shown(bootstrap)}")
+        raise InvalidInputError(
+            f"{name} must be >= 2 (a spread needs two resamples), got {int(bootstrap) if bootstrap > -1000 else 'fewer'}"
+        )
     if bootstrap > MAX_BOOTSTRAP:
-        raise InvalidInputError(f"{name} must be at most {MAX_BOOTSTRAP:,} (MAX_BOOTSTRAP), got {shown(bootstrap)}")
+        raise InvalidInputError(f"{name} must be at most {MAX_BOOTSTRAP:,} (MAX_BOOTSTRAP), got {_typed(bootstrap)}")
     return int(bootstrap)
+
+
+def _typed(number: int) -> str:
+    """A whole number the caller gave (an argument, never a file's value) for a message; a huge one by its size."""
+    return str(int(number)) if abs(int(number)).bit_length() <= 64 else "a whole number of over 19 digits"
 
 
 def check_fit_seed(seed: object, *, name: str = "seed") -> int:

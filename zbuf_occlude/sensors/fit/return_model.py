@@ -81,7 +81,7 @@ from zbuf_occlude.geometry.arguments import described
 from zbuf_occlude.io.las import LasPoints
 from zbuf_occlude.resources import check_memory
 from zbuf_occlude.sensors.echoes import hit_energy
-from zbuf_occlude.sensors.checks import MAX_RANGE_M, real, shown, text
+from zbuf_occlude.sensors.checks import MAX_RANGE_M, given, real, text
 from zbuf_occlude.sensors.fit.divergence import check_curve, divergence_from_shares
 from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate, estimates_markdown
 from zbuf_occlude.sensors.fit.las_pulses import check_pulses, check_return_pairs, las_pulses
@@ -350,7 +350,7 @@ def fit_return_model(
     curve = None if divergence_shares is None else check_curve(divergence_shares)
     text(divergence_share, "divergence_share")
     if curve is not None and divergence_share not in (shares := multi_return_shares(las, classes)):  # a pass over the classes
-        raise InvalidInputError(f"divergence_share {shown(divergence_share)} is not a figure of the return statistics "
+        raise InvalidInputError(f"divergence_share {given(divergence_share)} is not a figure of the return statistics "
                                 f"(they hold {', '.join(shares)})")  # fmt: skip
     check_memory(len(las) * FIT_BYTES_PER_POINT, option=f"the return model fit of {len(las):,} points", hint="fit a crop")
     pulses = las_pulses(las)
