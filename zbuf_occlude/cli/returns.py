@@ -55,7 +55,12 @@ def add_returns_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--leaf-area-density", action=Checked, check=real(0.0, unit="m²/m³"), default=None,
                    help="leaves filling the crowns of the plot's trees, one-sided m² per m³ of crown; 0: the meshes as they are "
                    "(default: the experiment's, 1)")  # fmt: skip
-    p.add_argument("--quick", action="store_true", help="a small sweep (about 20 s): a check that the command runs, not the page's numbers")
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="a small sweep (39 and 42 s with the IGN tile on 2 cores at load 1.3 to 1.7; longer on a busy machine, and on a "
+        "first run while numba compiles): a check that the command runs, not the page's numbers",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar (or, when stderr is a file, no progress lines)")
     p.set_defaults(func=_run)
     return p
