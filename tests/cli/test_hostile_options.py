@@ -43,6 +43,7 @@ COMMANDS = {
     "experiment sim2real": ["experiment", "sim2real", str(SAMPLES), "--real", str(SAMPLES), "--out", "{out}"],
     "contact-sheet": ["contact-sheet", str(SAMPLES), "--out", "{out}/sheet.png"],
     "export": ["export", str(SAMPLES), "--to", "pointnet-h5", "--out", "{out}"],
+    "families": ["families", "trunk", "--out", "{out}"],
 }
 
 #: (command, counted option, its cap in zbuf_occlude.defaults or None, the lowest value taken).
@@ -71,10 +72,10 @@ COUNTS = [
 
 #: Every command with --seed.
 SEEDED = ["generate", "validate", "compare", "elevation-profile", "farm", "scan", "fit-sensor", "experiment elevation",
-          "experiment augmentation", "contact-sheet", "export"]  # fmt: skip
+          "experiment augmentation", "contact-sheet", "export", "families"]  # fmt: skip
 #: Every command whose --out is a folder.
 OUT_FOLDERS = ["generate", "compare", "farm", "farm-merge", "scan", "realism", "experiment elevation",
-               "experiment augmentation", "experiment sim2real", "export"]  # fmt: skip
+               "experiment augmentation", "experiment sim2real", "export", "families"]  # fmt: skip
 
 
 @pytest.fixture

@@ -322,8 +322,10 @@ def build_parser() -> argparse.ArgumentParser:
     from zbuf_occlude.cli.sensors import add_realism_parser, add_scan_parser
     from zbuf_occlude.cli.verify import add_verify_parser  # zbuf-occlude verify DIR: schema, paths, checksums of a data set
     from zbuf_occlude.cli.export import add_export_parser  # zbuf-occlude export DATASET --to TARGET
+    from zbuf_occlude.cli.families import add_families_parser  # zbuf-occlude families FAMILY --count N --out DIR
 
-    for add in (add_scan_parser, add_realism_parser, add_fit_sensor_parser, add_experiment_parser, add_verify_parser, add_export_parser):
+    for add in (add_scan_parser, add_realism_parser, add_fit_sensor_parser, add_experiment_parser, add_verify_parser, add_export_parser,
+                add_families_parser):  # fmt: skip
         add(sub)
     return parser
 

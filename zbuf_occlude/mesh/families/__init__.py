@@ -1,0 +1,16 @@
+"""Procedural object families: seeded, parameterised generators of the outdoor objects real scans hold.
+
+Bare trunks, shrubs, trees with a crown of leaf clusters, utility poles (crossarms, insulators,
+short wire spans), street lights (arms, heads) and sign posts (several plates per post), each
+composed of ``trimesh.creation`` parts in real size (metres, z up, standing on z = 0), each
+parameter range cited in its module's docstring.
+
+:mod:`.registry` holds the table (:data:`FAMILIES`: name → :class:`Family`); :mod:`.parts` the
+primitives; one module per family; :mod:`.write` writes N of a family into a class folder with a
+manifest of each file's parameters (``zbuf-occlude families``).
+"""
+
+from zbuf_occlude.mesh.families.registry import FAMILIES, Family, family_rng, get_family
+from zbuf_occlude.mesh.families.write import MANIFEST_SUFFIX, MAX_FAMILY_MESHES, FamilyRun, write_family
+
+__all__ = ["FAMILIES", "MANIFEST_SUFFIX", "MAX_FAMILY_MESHES", "Family", "FamilyRun", "family_rng", "get_family", "write_family"]
