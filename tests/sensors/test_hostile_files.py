@@ -25,7 +25,7 @@ from zbuf_occlude.errors import InvalidInputError, UnsafePathError
 from zbuf_occlude.sensors import scene as scene_module
 from zbuf_occlude.sensors.airborne import AirborneScanner
 from zbuf_occlude.sensors.scan import scan_airborne
-from zbuf_occlude.sensors.checks import MAX_SCENE_OBJECTS, MAX_SENSOR_RAYS, SHOWN_CHARS, key_text, shown
+from zbuf_occlude.sensors.checks import MAX_SCENE_OBJECTS, MAX_SENSOR_RAYS, SHOWN_CHARS, key_text, value_kind
 from zbuf_occlude.sensors.depth_camera import DepthCamera
 from zbuf_occlude.sensors.beam import Beam
 from zbuf_occlude.sensors.kinds import LEGACY_BEAM_KEYS, SENSOR_KINDS, sensor_from_name
@@ -496,7 +496,7 @@ def test_no_message_formats_a_whole_user_structure(tmp_path: Path) -> None:
     for spec in ({"objects": [huge]}, {"objects": [{"mesh": dict(BOX), "position_m": huge}]}, {huge[0]: huge, "x": huge},
                  {"objects": [{"mesh": {"cylinder": huge}}]}, {"sensor": {"position_m": [[huge]] * 3}}):  # fmt: skip
         _refusal(load_scene, _write(tmp_path / "scene.json", spec))
-    assert len(shown([[[huge]]])) <= SHOWN_CHARS and len(shown(10**10_000)) <= SHOWN_CHARS
+    assert len(value_kind([[[huge]]])) <= SHOWN_CHARS and len(value_kind(10**10_000)) <= SHOWN_CHARS
 
 
 def test_the_python_api_applies_the_same_rules() -> None:

@@ -39,7 +39,7 @@ from zbuf_occlude.io.file_errors import key_text, value_kind
 
 __all__ = [
     "MAX_COORDINATE_M", "MAX_RANGE_M", "MAX_SENSOR_RAYS", "MAX_SCENE_OBJECTS", "MAX_NAME_CHARS", "MAX_PATH_CHARS",
-    "SHOWN_CHARS", "value_kind", "key_text", "given", "shown", "located", "is_number", "real", "count", "reals", "mapping", "text", "sensor_name", "preset", "replaced",
+    "SHOWN_CHARS", "value_kind", "key_text", "given", "located", "is_number", "real", "count", "reals", "mapping", "text", "sensor_name", "preset", "replaced",
 ]  # fmt: skip
 
 #: Largest coordinate or size in a scene, metres: the scene is ray-cast in float32 (Embree),
@@ -62,10 +62,6 @@ MAX_NAME_CHARS = 100
 MAX_PATH_CHARS = 4096
 #: Characters of a key (or of a name the caller typed) quoted in a message; a value is never quoted.
 SHOWN_CHARS = 80
-
-
-#: The older name of :func:`value_kind`, kept for the modules that call it: it quotes nothing either.
-shown = value_kind
 
 
 def given(name: object) -> str:

@@ -23,7 +23,7 @@ from zbuf_occlude.sensors.checks import (
     reals,
     replaced,
     sensor_name,
-    shown,
+    value_kind,
     text,
 )
 
@@ -103,10 +103,10 @@ class DepthCamera:
         """Check every field and store the numbers as floats (messages start with the field's name)."""
         rows = self.K.tolist() if isinstance(self.K, np.ndarray) else self.K
         if not (isinstance(rows, (list, tuple)) and len(rows) == 3):
-            raise InvalidInputError(f"K must be a finite (3, 3) OpenCV matrix with fx, fy > 0, got {shown(self.K)}")
+            raise InvalidInputError(f"K must be a finite (3, 3) OpenCV matrix with fx, fy > 0, got {value_kind(self.K)}")
         K = np.array([reals(row, f"K[{i}]", lengths=(3,)) for i, row in enumerate(rows)])
         if K[0, 0] <= 0 or K[1, 1] <= 0 or not np.allclose(K[2], [0, 0, 1]):
-            raise InvalidInputError(f"K must be a finite (3, 3) OpenCV matrix with fx, fy > 0, got {shown(self.K)}")
+            raise InvalidInputError(f"K must be a finite (3, 3) OpenCV matrix with fx, fy > 0, got {value_kind(self.K)}")
         object.__setattr__(self, "K", tuple(tuple(float(v) for v in row) for row in K))
         object.__setattr__(self, "_K", K)
         for name in ("width", "height"):

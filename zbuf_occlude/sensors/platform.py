@@ -26,7 +26,7 @@ from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.geometry.arguments import described
 from zbuf_occlude.io.caps import MAX_TRAJECTORY_POSES
 from zbuf_occlude.io.trajectories import read_trajectory_table
-from zbuf_occlude.sensors.checks import MAX_COORDINATE_M, located, real, reals, sensor_name, shown
+from zbuf_occlude.sensors.checks import MAX_COORDINATE_M, located, real, reals, sensor_name, value_kind
 
 __all__ = ["EULER_COLUMNS", "HALF_TURN_DEG", "HALF_TURN_SLACK_DEG", "MAX_TIME_S", "QUATERNION_COLUMNS", "QUATERNION_NORM_TOLERANCE",
            "ROTATION_TOLERANCE", "TIME_SLACK_S", "as_pose", "look_at_pose", "Trajectory", "load_trajectory"]  # fmt: skip
@@ -212,7 +212,7 @@ class Trajectory:
         """
         t = _real_array(time_s, "time_s", None)
         if t.ndim > 1 or not np.all(np.isfinite(t)):
-            raise InvalidInputError(f"trajectory {self.name!r}: time_s must be finite seconds (a number or 1-D), got {shown(time_s)}")
+            raise InvalidInputError(f"trajectory {self.name!r}: time_s must be finite seconds (a number or 1-D), got {value_kind(time_s)}")
         t = t.reshape(-1)
         if self.is_static:
             return np.repeat(self.rotation[:1], len(t), axis=0), np.repeat(self.position_m[:1], len(t), axis=0)
@@ -323,7 +323,7 @@ def as_pose(pose) -> NDArray[np.float64]:
     m = np.eye(4)
     m[:3, :3], m[:3, 3] = rotation[0], position[0]
     if not np.all(np.isfinite(m)):
-        raise InvalidInputError(f"sensor pose must be finite numbers, got {shown(pose)}")
+        raise InvalidInputError(f"sensor pose must be finite numbers, got {value_kind(pose)}")
     r = m[:3, :3]
     if not np.allclose(r @ r.T, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
         raise InvalidInputError("sensor pose rotation must be orthonormal and right-handed (no scale)")
