@@ -170,6 +170,9 @@ MAX_POINTS = 100_000_000
 #: Samples, scans or clouds drawn per pose, object or class (``--samples-per-view``,
 #: ``scan --samples``, ``--per-class``): 10,000× the paper's 10 per pose; each is written.
 MAX_SAMPLES = 100_000
+#: Procedural objects one ``families`` run writes (``--count``): the largest family's file is under
+#: 200 kB, so 2 GB at most.
+MAX_FAMILY_MESHES = 10_000
 #: Image size, pixels per side (``--resolution``, ``--resolution-sweep``): twice the largest
 #: ``GL_MAX_TEXTURE_SIZE`` of current GPUs (32,768); one such float32 image is 16 GiB.
 MAX_RESOLUTION = 65_536

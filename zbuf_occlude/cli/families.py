@@ -5,24 +5,13 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from zbuf_occlude.cli.options import Checked, count, out_folder, seed, shown
+from zbuf_occlude.cli.options import Checked, count, out_folder, seed
 from zbuf_occlude.defaults import DEFAULT_SEED
-from zbuf_occlude.errors import InvalidInputError
 
 __all__ = ["add_families_parser"]
 
 #: Objects written when ``--count`` is not given.
 DEFAULT_COUNT = 10
-
-
-def _count(text: str, option: str) -> int:
-    """Objects to write: 1 to :data:`~zbuf_occlude.mesh.families.MAX_FAMILY_MESHES`."""
-    from zbuf_occlude.mesh.families.write import MAX_FAMILY_MESHES
-
-    value = count(None)(text, option)
-    if value > MAX_FAMILY_MESHES:
-        raise InvalidInputError(f"{option} must be at most {MAX_FAMILY_MESHES:,} (MAX_FAMILY_MESHES), got {shown(text)}")
-    return value
 
 
 def _cli_families(args: argparse.Namespace) -> int:
@@ -48,7 +37,9 @@ def add_families_parser(subparsers: Any) -> argparse.ArgumentParser:
         ),
     )
     p.add_argument("family", metavar="FAMILY", choices=list(FAMILIES), help=f"one of: {', '.join(FAMILIES)}")
-    p.add_argument("--count", action=Checked, check=_count, default=DEFAULT_COUNT, help="objects to write (default: %(default)s)")
+    p.add_argument(
+        "--count", action=Checked, check=count("MAX_FAMILY_MESHES"), default=DEFAULT_COUNT, help="objects to write (default: %(default)s)"
+    )
     p.add_argument(
         "--seed", action=Checked, check=seed, default=DEFAULT_SEED, help="object K draws from (seed, K, family) (default: %(default)s)"
     )

@@ -11,6 +11,6 @@ manifest of each file's parameters (``zbuf-occlude families``).
 """
 
 from zbuf_occlude.mesh.families.registry import FAMILIES, Family, family_rng, get_family
-from zbuf_occlude.mesh.families.write import MANIFEST_SUFFIX, MAX_FAMILY_MESHES, FamilyRun, write_family
+from zbuf_occlude.mesh.families.write import MANIFEST_SUFFIX, FamilyRun, write_family
 
-__all__ = ["FAMILIES", "MANIFEST_SUFFIX", "MAX_FAMILY_MESHES", "Family", "FamilyRun", "family_rng", "get_family", "write_family"]
+__all__ = ["FAMILIES", "MANIFEST_SUFFIX", "Family", "FamilyRun", "family_rng", "get_family", "write_family"]

@@ -19,18 +19,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from zbuf_occlude.defaults import MAX_FAMILY_MESHES
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.mesh.families.registry import family_rng, get_family
 from zbuf_occlude.mesh.families.parts import assemble
 
-__all__ = ["MANIFEST_SUFFIX", "MAX_FAMILY_MESHES", "FamilyRun", "write_family"]
+__all__ = ["MANIFEST_SUFFIX", "FamilyRun", "write_family"]
 
 #: The manifest's name beside the meshes: ``<family>.manifest.json``.
 MANIFEST_SUFFIX = ".manifest.json"
-#: Objects one run writes at most: the largest family's file is under 200 kB, so 2 GB at most.
-MAX_FAMILY_MESHES = 10_000
 
 
 @dataclass(frozen=True)
@@ -60,7 +59,7 @@ def write_family(name: str, out: str | os.PathLike, *, count: int, seed: int) ->
     out : str or PathLike
         The folder (created); its class subfolder holds the files.
     count : int
-        Objects, 1 to :data:`MAX_FAMILY_MESHES`.
+        Objects, 1 to :data:`~zbuf_occlude.defaults.MAX_FAMILY_MESHES`.
     seed : int
         0 to 2**63 - 1; object ``k`` draws from ``family_rng(name, seed, k)``.
 
