@@ -17,7 +17,12 @@ DEFAULT_COUNT = 10
 def _cli_families(args: argparse.Namespace) -> int:
     from zbuf_occlude.mesh.families import write_family
 
-    run = write_family(args.family, args.out, count=args.count, seed=args.seed)
+    width_scale = None
+    if args.fit is not None:
+        from zbuf_occlude.mesh.families.fitted import read_families_fit
+
+        width_scale = read_families_fit(args.fit).width_scale(args.family)
+    run = write_family(args.family, args.out, count=args.count, seed=args.seed, width_scale=width_scale)
     print(f"{len(run.files)} {args.family} meshes -> {run.files[0].parent} (parameters: {run.manifest})")
     return 0
 
@@ -42,6 +47,12 @@ def add_families_parser(subparsers: Any) -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--seed", action=Checked, check=seed, default=DEFAULT_SEED, help="object K draws from (seed, K, family) (default: %(default)s)"
+    )
+    p.add_argument(
+        "--fit",
+        metavar="FILE",
+        help="a families fit (fitted_families.json, written by experiment sim2real --fit-families): draw FAMILY as the fit "
+        "chose, each object stretched horizontally by a factor in the fit's width_scale range (default: the family's own widths)",
     )
     p.add_argument("--out", action=Checked, check=out_folder, required=True, help="the folder; its CLASS subfolder holds the files")
     p.set_defaults(func=_cli_families)

@@ -60,6 +60,7 @@ OPTION_NAMES = {
     "occluded_elevation_deg": "--occluded-elevation", "fit_sensor": "--fit-sensor", "recipe": "--recipe",
     "validate_on": "--validate-on", "fitted_shape": "--fitted-shape", "aspect": "--augment aspect", "best_epoch_by": "--best-epoch-by",
     "occluded_points": "--occluded-points", "returns": "--returns", "footprint_cast": "--footprint-cast",
+    "fit_families": "--fit-families", "family_count": "--family-count", "sets": "--sets",
 }  # fmt: skip
 
 
@@ -71,9 +72,14 @@ def _run(args: argparse.Namespace) -> int:
     # the counts and --out were checked while parsing (cli.options); the device before any rendering
     check_device(args.device)
     from zbuf_occlude.experiments.sim2real import Sim2RealConfig, run_sim2real
+    from zbuf_occlude.experiments.sim2real.config import FAMILY_COUNT
     from zbuf_occlude.mesh.sizes import parse_sizes
 
     up_map = parse_up_map(args.up_map)
+    if args.family_count is not None and not args.fit_families:
+        raise InvalidInputError(f"--family-count {args.family_count} adds objects of the fitted families: give --fit-families too")
+    families = {"fit_families": True, "family_count": args.family_count or FAMILY_COUNT} if args.fit_families else {}
+    sets = () if args.sets is None else tuple(v.strip() for v in args.sets.split(",") if v.strip())
     real_options = {"dataset": args.real_format, "up": args.real_up, "units": args.real_units}
     config = Sim2RealConfig(
         args.root, args.real, model=args.model, sensor=args.sensor, scale=args.scale, points=args.points, epochs=args.epochs,
@@ -85,7 +91,7 @@ def _run(args: argparse.Namespace) -> int:
         recipe=args.recipe, best_epoch_by=args.best_epoch_by, validate_on=args.validate_on,
         fitted_shape=() if args.fitted_shape == "none" else tuple(v.strip() for v in args.fitted_shape.split(",")),
         aspect=args.augment == "aspect", occluded_points=args.occluded_points, returns=args.returns,
-        footprint_cast=args.footprint_cast, option_names=OPTION_NAMES,
+        footprint_cast=args.footprint_cast, sets=sets, **families, option_names=OPTION_NAMES,
     )  # fmt: skip
     summary = run_sim2real(
         config, args.out, device=args.device, threads=training_threads(args.threads), progress=not args.no_progress, say=_say
@@ -270,11 +276,36 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
         "plane filling it (the same returns but for a surface inside the cone none of them meets, a fraction of the cost); "
         "exact casts every sub-ray; auto is adaptive where it applies, else exact (default: auto; settings.json: lidar_footprint)",
     )  # fmt: skip
+    _add_family_options(p)
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="torch device (default: %(default)s)")
     p.add_argument("--threads", action=Checked, check=count("MAX_WORKERS"), help=THREADS_HELP)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=_run)
     return p
+
+
+def _add_family_options(p: argparse.ArgumentParser) -> None:
+    """The options that add the fitted families to the meshes, and pick the sets to train."""
+    p.add_argument(
+        "--fit-families",
+        action="store_true",
+        help="fit the procedural families (zbuf-occlude families) of each class to the half of the real scans that "
+        "real->real trains on (which families look like those crops, and how wide to draw them; written to "
+        "OUT/fitted_families.json) and add --family-count objects of them per class to the meshes of every mesh-only set "
+        "(settings.json: fit_families); a class no family writes to (car, pedestrian) keeps the meshes alone",
+    )
+    p.add_argument(
+        "--family-count",
+        action=Checked,
+        check=count("MAX_FAMILY_MESHES"),
+        help="with --fit-families, family objects added per class (default: 8)",
+    )
+    p.add_argument(
+        "--sets",
+        metavar="SET,...",
+        help="train only these mesh-only sets (of complete, occluded, lidar, lidar+complete; occluded-points with "
+        "--occluded-points; fitted, fitted+placed, pooled with --fit-sensor); real->real always trains (default: every set)",
+    )
 
 
 def _add_real_scan_options(p: argparse.ArgumentParser) -> None:

@@ -48,6 +48,7 @@ from zbuf_occlude.experiments.realism_stats import (  # noqa: F401 - every name 
     fit_count_exponent,
     outline_mask,
     outline_share,
+    profile_distance,
     range_bin_medians,
     ring_labels,
     ring_spacings_deg,
@@ -169,7 +170,7 @@ def compare_classes(generated: list[ObjectCloud], real: list[ObjectCloud], *, by
         rows.append({"metric": f"{k}: median height above the crop's bottom, share of its height", "generated": g["median_normalised_height"],
                      "real": r["median_normalised_height"], "difference": d, "target": f"abs(diff) <= {MEDIAN_HEIGHT_TARGET:g}",
                      "met": bool(abs(d) <= MEDIAN_HEIGHT_TARGET) if math.isfinite(d) else ""})  # fmt: skip
-        tv = 0.5 * float(np.abs(g["height_shares"] - r["height_shares"]).sum())
+        tv = profile_distance(g["height_shares"], r["height_shares"])
         rows.append({"metric": f"{k}: share of points in another tenth of the height (profile distance)", "generated": "", "real": "",
                      "difference": tv, "target": f"<= {PROFILE_TARGET:g}", "met": bool(tv <= PROFILE_TARGET)})  # fmt: skip
     return rows, table

@@ -48,7 +48,7 @@ from zbuf_occlude.sensors.fit import across_sight_width
 __all__ = [
     "ObjectCloud", "RING_GAP_DEG", "OUTLINE_GAP_FACTOR", "SAME_AZIMUTH_DEG", "RANGE_BINS_M", "HEIGHT_BINS",
     "ring_labels", "ring_spacings_deg", "outline_mask", "scan_line_runs", "break_depths_m", "outline_share", "range_bin_medians",
-    "fit_count_exponent", "cloud_stats", "shape_stats", "class_summary",
+    "fit_count_exponent", "cloud_stats", "shape_stats", "class_summary", "profile_distance",
 ]  # fmt: skip
 
 #: Elevation gap that separates two rings, degrees: a third of the HDL-32E's 1.33° spacing,
@@ -377,6 +377,18 @@ def shape_stats(points_m: NDArray[np.floating]) -> dict:
         "median_normalised_height": float(np.median(u)) if height > 0 else math.nan,
         "height_shares": shares.astype(np.float64),
     }  # fmt: skip
+
+
+def profile_distance(shares_a: NDArray[np.floating], shares_b: NDArray[np.floating]) -> float:
+    """How far apart two vertical profiles are: the share of points that would have to move to
+    another tenth of the height, ``0.5 · Σ |a − b|`` (total variation; 0 the same, 1 disjoint).
+
+    Parameters
+    ----------
+    shares_a, shares_b : (HEIGHT_BINS,) float
+        Shares of points per tenth of the height (:func:`shape_stats`' ``height_shares``, or a mean of them).
+    """
+    return 0.5 * float(np.abs(np.asarray(shares_a, np.float64) - np.asarray(shares_b, np.float64)).sum())
 
 
 def class_summary(clouds: list[ObjectCloud], *, by_range: bool = False, bins_m: tuple[float, ...] = RANGE_BINS_M) -> dict:

@@ -15,7 +15,14 @@ from dataclasses import InitVar, asdict, dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.experiments.sim2real.data import MIN_RETURNS, OCCLUDED_POINTS, POINT_VISIBILITY, sensor_elevation_deg
+from zbuf_occlude.experiments.sim2real.data import (
+    FITTED_SETS,
+    MIN_RETURNS,
+    OCCLUDED_POINTS,
+    POINT_VISIBILITY,
+    TRAINING_SETS,
+    sensor_elevation_deg,
+)
 from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT
 from zbuf_occlude.experiments.sim2real.real import KEEP_SCALE_UNIT_M
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
@@ -25,7 +32,7 @@ if TYPE_CHECKING:  # torch is imported when a run trains
     from zbuf_occlude.learn.training import TrainConfig
 
 __all__ = ["Sim2RealScale", "SIM2REAL_SCALES", "SIM2REAL_RECIPE", "VALIDATION_CHOICES", "FITTED_SHAPES", "WIDTH_SHAPES",
-           "RETURNS_RANGE_RESOLUTION_M", "Sim2RealConfig", "with_returns"]  # fmt: skip
+           "RETURNS_RANGE_RESOLUTION_M", "FAMILY_COUNT", "FAMILIES_SEED", "Sim2RealConfig", "with_returns"]  # fmt: skip
 
 #: The training recipe of every run (:data:`zbuf_occlude.learn.training.RECIPES`; :mod:`~zbuf_occlude.experiments.sim2real`).
 SIM2REAL_RECIPE = "stable"
@@ -43,6 +50,10 @@ WIDTH_SHAPES = {"widths": "stretch", "widen": "widen", "occlude": "occluder"}
 #: gives none: half the pulse length ``c·τ/2`` of a 5 ns pulse (an ASSUMPTION: the Velodyne HDL-32E
 #: data sheet 97-0038 and manual 63-9113 give no pulse length; the value of the sensors guide).
 RETURNS_RANGE_RESOLUTION_M = 0.75
+#: Family objects added per class with ``fit_families`` when ``family_count`` is not given.
+FAMILY_COUNT = 8
+#: The seed of the families' objects and of their fit's crops (:func:`~zbuf_occlude.experiments.sim2real.families.fit_families`): the same every run.
+FAMILIES_SEED = 0
 #: The sensor kinds (:data:`~zbuf_occlude.sensors.kinds.SENSOR_KINDS` names) that can scan the ``lidar`` set:
 #: a spinning LiDAR on a car's mount, or an airborne scanner flying over (:func:`~.data.sensor_elevation_deg`).
 TRAINING_SENSOR_KINDS = ("lidar", "airborne")
@@ -176,6 +187,19 @@ class Sim2RealConfig:
         Every run's augmentation also draws random proportions (x, y and z stretched by
         independent factors in [2/3, 3/2], DGCNN's range; :func:`zbuf_occlude.learn.data.augment`),
         real→real's too.  Not with ``keep_scale``, which turns augmentation off.
+    fit_families : bool
+        Fit the procedural families (:data:`~zbuf_occlude.mesh.families.FAMILIES`) of each class to
+        the fixed first half of the real scans (the half real→real trains on, the fit half with
+        ``fit_sensor``; :func:`~zbuf_occlude.experiments.sim2real.families.fit_families`) and add
+        ``family_count`` objects of the chosen families per class to the meshes of every mesh-only
+        set (``fitted_families.json``; ``settings.json``: ``fit_families``).  A class no family
+        writes to keeps the user's meshes alone.
+    family_count : int
+        Family objects added per fitted class (:data:`FAMILY_COUNT`), 1 to
+        :data:`~zbuf_occlude.defaults.MAX_FAMILY_MESHES`.
+    sets : sequence of str
+        Train only these mesh-only sets (of :attr:`available_sets`; real→real always trains);
+        empty (default): every one.  ``settings.json`` records them when given.
     option_names : mapping of str to str, optional
         What the messages call each field (``{"validate_on": "--validate-on", ...}``: the
         command line's flags); a field not named here is called by its name.  Not stored.
@@ -195,7 +219,8 @@ class Sim2RealConfig:
         ``fit_sensor``, an unknown shape or two that meet the widths, elevations outside
         [-90, 90] degrees, a sensor that is no LiDAR, ``fit_sensor`` with an airborne
         ``sensor``, ``returns`` outside 1..15, above 1 with ``fit_sensor`` or with a sensor
-        without a beam divergence), naming the field or its option.
+        without a beam divergence, a ``family_count`` out of range, a set in ``sets`` these settings
+        do not make), naming the field or its option.
     """
 
     mesh_root: str | os.PathLike
@@ -226,6 +251,9 @@ class Sim2RealConfig:
     occluded_points: bool = False
     returns: int = 1
     footprint_cast: str = "auto"
+    fit_families: bool = False
+    family_count: int = FAMILY_COUNT
+    sets: tuple[str, ...] = ()
     option_names: InitVar[Mapping[str, str] | None] = None
     occluded_elevation_from: str = field(init=False, default="option")
 
@@ -256,6 +284,8 @@ class Sim2RealConfig:
         self._check_validation(n)
         self._check_occluded_points(n)
         self._check_fitted_shape(n)
+        self._check_families(n)
+        self._check_sets(n)
         self._check_sensor(n)
         if self.occluded_elevation_deg is None:  # derived from the sensor, which is checked by now
             elevation, source = sensor_elevation_deg(self.sensor)
@@ -292,6 +322,31 @@ class Sim2RealConfig:
             raise InvalidInputError(f"{n('fitted_shape')} takes one of {', '.join(WIDTH_SHAPES)}, not both, got {','.join(shapes)!r}")
         if shapes and not self.fit_sensor:
             raise InvalidInputError(f"{n('fitted_shape')} needs {n('fit_sensor')} (it shapes the fitted+placed set's meshes)")
+
+    def _check_families(self, n) -> None:
+        from zbuf_occlude.defaults import MAX_FAMILY_MESHES
+
+        count = self.family_count
+        if isinstance(count, bool) or not isinstance(count, int) or not 1 <= count <= MAX_FAMILY_MESHES:
+            raise InvalidInputError(f"{n('family_count')} must be an integer from 1 to {MAX_FAMILY_MESHES:,}, got {count!r}")
+
+    @property
+    def available_sets(self) -> tuple[str, ...]:
+        """The mesh-only sets this run can train, in report order (``sets`` picks among them)."""
+        return (*TRAINING_SETS, *((OCCLUDED_POINTS,) if self.occluded_points else ()), *(FITTED_SETS if self.fit_sensor else ()))
+
+    def _check_sets(self, n) -> None:
+        sets = (self.sets,) if isinstance(self.sets, str) else tuple(self.sets)
+        available = self.available_sets
+        if unknown := [s for s in sets if s not in available]:
+            raise InvalidInputError(f"{n('sets')} must name sets of {', '.join(available)} (these settings' sets), "
+                                    f"got {', '.join(map(repr, unknown))}")  # fmt: skip
+        object.__setattr__(self, "sets", tuple(k for k in available if k in sets))
+
+    @property
+    def training_sets(self) -> tuple[str, ...]:
+        """The mesh-only sets the run trains, in report order: ``sets``, or every available one."""
+        return self.sets or self.available_sets
 
     def _check_sensor(self, n) -> None:
         from zbuf_occlude.sensors.kinds import kind_of, sensor_from_name
@@ -375,6 +430,8 @@ class Sim2RealConfig:
             **({"lidar_footprint": "adaptive"} if self.footprint_mode == "adaptive" else {}),
             **({"occluded_points": {"set": OCCLUDED_POINTS, "method": POINT_VISIBILITY, "normals": "estimated", "topped_up": False}}
                if self.occluded_points else {}),
+            **({"sets": list(self.sets)} if self.sets else {}),
+            **({"fit_families": {"objects_per_class": int(self.family_count), "seed": FAMILIES_SEED}} if self.fit_families else {}),
         }  # fmt: skip
 
 

@@ -52,9 +52,9 @@ MESH_SETS = (*TRAINING_SETS, OCCLUDED_POINTS, *FITTED_SETS)
 #: Every set a run may train, in report order: the mesh-only sets, real→real.
 EVERY_SET = (*MESH_SETS, REAL_TO_REAL)
 #: The files ``experiment sim2real`` writes at the top of ``--out`` (``fitted_sensor.json`` with
-#: ``fit_sensor``; a ``confusion_<set>.csv`` per set trained).
+#: ``fit_sensor``, ``fitted_families.json`` with ``fit_families``; a ``confusion_<set>.csv`` per set trained).
 SIM2REAL_FILES = (
-    "settings.json", "fitted_sensor.json", "real_split.csv", "runs.jsonl", "results.csv", "summary.csv",
+    "settings.json", "fitted_sensor.json", "fitted_families.json", "real_split.csv", "runs.jsonl", "results.csv", "summary.csv",
     *(confusion_name(kind) for kind in EVERY_SET), "run.json", "table.md",
 )  # fmt: skip
 #: Every name it writes in ``--out`` (full-match regular expressions): :data:`SIM2REAL_FILES` and

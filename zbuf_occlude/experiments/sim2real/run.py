@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.experiments.sim2real.config import FITTED_SHAPES, WIDTH_SHAPES, Sim2RealConfig
-from zbuf_occlude.experiments.sim2real.data import FITTED_SETS, OCCLUDED_POINTS, TRAINING_SETS, SetRecipe, build_sets, check_lidar_meshes
+from zbuf_occlude.experiments.sim2real.config import FAMILIES_SEED, FITTED_SHAPES, WIDTH_SHAPES, Sim2RealConfig
+from zbuf_occlude.experiments.sim2real.data import SetRecipe, build_sets, check_lidar_meshes
 from zbuf_occlude.experiments.sim2real.outputs import (
     ALL_SCANS,
     REAL_TO_REAL,
@@ -34,6 +34,7 @@ from zbuf_occlude.experiments.sim2real.outputs import (
     load_runs,
     set_folder,
 )
+from zbuf_occlude.experiments.sim2real.families import family_meshes, fit_families
 from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes, split_whole_meshes
 from zbuf_occlude.experiments.sim2real.placement import CropPlacement, fit_mesh_shapes
 from zbuf_occlude.experiments.sim2real.real import real_clouds, real_halves, real_scan_rows
@@ -42,6 +43,7 @@ from zbuf_occlude.io.json_files import read_json_file
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.learn.data import CloudSet, split_validation
 from zbuf_occlude.learn.metrics import classification_report
+from zbuf_occlude.mesh.families.fitted import FamiliesFit
 from zbuf_occlude.mesh.sizes import SizeRange
 
 __all__ = ["Sim2RealSets", "run_sim2real", "prepare_sets", "run_seed", "write_outputs"]
@@ -118,6 +120,10 @@ class Sim2RealSets:
         With ``fit_sensor``: the fitted Lidar, the crops' placement per class and shape per mesh
         (:class:`~zbuf_occlude.experiments.sim2real.placement.CropPlacement`), the heights
         per class and the sensor's JSON; None otherwise.
+    families_fit : FamiliesFit or None
+        With ``fit_families``: the families fitted to the first half
+        (:func:`~zbuf_occlude.experiments.sim2real.families.fit_families`), whose objects
+        ``meshes`` holds (named ``families/CLASS/FAMILY_K``).
     """
 
     names: list
@@ -132,11 +138,12 @@ class Sim2RealSets:
     fitted_placement: CropPlacement | None = None
     fitted_sizes: dict | None = None
     fit_json: dict | None = None
+    families_fit: FamiliesFit | None = None
 
 
 def _kinds(config: Sim2RealConfig) -> tuple[str, ...]:
     """The mesh-only training sets of a run, in report order."""
-    return (*TRAINING_SETS, *((OCCLUDED_POINTS,) if config.occluded_points else ()), *(FITTED_SETS if config.fit_sensor else ()))
+    return config.training_sets
 
 
 def _owned(out: str | os.PathLike, config: Sim2RealConfig) -> OwnedFolder:
@@ -153,7 +160,8 @@ def _writes(config: Sim2RealConfig) -> list[str]:
     checkpoints = [f"checkpoints/{set_folder(kind)}/seed{seed}/{name}" for kind in kinds for seed in range(int(config.seeds))
                    for name in CHECKPOINT_FILES]  # fmt: skip
     return ["real_split.csv", "runs.jsonl", "results.csv", "summary.csv", "run.json", "table.md",
-            *(["fitted_sensor.json"] if config.fit_sensor else []), *(confusion_name(kind) for kind in kinds), *checkpoints]  # fmt: skip
+            *(["fitted_sensor.json"] if config.fit_sensor else []), *(["fitted_families.json"] if config.fit_families else []),
+            *(confusion_name(kind) for kind in kinds), *checkpoints]  # fmt: skip
 
 
 def run_sim2real(config: Sim2RealConfig, out: str | os.PathLike, *, device: str = "cpu", threads: int | None = None,
@@ -238,6 +246,16 @@ def prepare_sets(config: Sim2RealConfig, *, say: Callable[[str], None] | None = 
     # real→real trains on half_a and every row is scored on half_b; with fit_sensor, half_a is the fit half
     half_a, half_b = real_halves([scans[i].points for i in kept], real_y, _REAL_SPLIT_SEED)
     sets = Sim2RealSets(names, meshes, skipped, real_pts, real_y, sources, half_a, half_b)
+    if config.fit_families:
+        first_half = {c: [scans[kept[i]].points for i in half_a if real_y[i] == k] for k, c in enumerate(names)}
+        say(f"fitting the procedural families to the first half's crops: {len(half_a)} scans")
+        family_fit = fit_families(first_half, lidar, config.sizes, seed=FAMILIES_SEED,
+                                  fitted_on=f"the first half of {config.real}: {len(half_a)} scans")  # fmt: skip
+        added, skipped_families = check_lidar_meshes(family_meshes(family_fit, config.family_count, FAMILIES_SEED), lidar,
+                                                     config.sizes, n_points, min_returns=int(config.min_returns))  # fmt: skip
+        say(f"added {len(added)} objects of the families {', '.join(sorted(family_fit.counts(config.family_count)))}")
+        sets = replace(sets, meshes=meshes + added, skipped=skipped + skipped_families, families_fit=family_fit)
+        meshes = sets.meshes
     if not config.fit_sensor:
         return sets
     n_returns = sum(len(scans[kept[i]].points) for i in half_a)
@@ -254,7 +272,7 @@ def prepare_sets(config: Sim2RealConfig, *, say: Callable[[str], None] | None = 
                                                 placement=placement)  # fmt: skip
     if sorted({m.class_name for m in meshes}) != names:
         raise InvalidInputError(f"the fitted sensor sees no mesh of classes {sorted(set(names) - {m.class_name for m in meshes})}")
-    return replace(sets, meshes=meshes, skipped=skipped + skipped_fitted + skipped_placed, fitted=fitted, fitted_placement=placement,
+    return replace(sets, meshes=meshes, skipped=sets.skipped + skipped_fitted + skipped_placed, fitted=fitted, fitted_placement=placement,
                    fitted_sizes=fitted_sizes, fit_json=fit_json)  # fmt: skip
 
 
@@ -301,6 +319,12 @@ def _fix_settings(config: Sim2RealConfig, sets: Sim2RealSets, out: OwnedFolder |
     }  # fmt: skip
     if sets.skipped:  # only then: the settings of runs without a skipped mesh stay as they were (resume)
         settings["meshes_skipped"] = sets.skipped
+    if config.fit_families:
+        fit = sets.families_fit
+        settings["fit_families"] = {**settings["fit_families"], "fitted_on": fit.record["fitted_on"],
+                                    "chosen": {c: {f: {"width_scale": list(ch.width_scale), "share": ch.share} for f, ch in chosen.items()}
+                                               for c, chosen in fit.classes.items()},
+                                    "objects": fit.counts(config.family_count)}  # fmt: skip
     if config.fit_sensor:  # likewise: runs without it keep their settings
         settings["fit_sensor"] = {
             "split_seed": _REAL_SPLIT_SEED, "fitted_sensor": sets.fit_json, "fitted_shape": list(config.fitted_shape),
@@ -328,6 +352,8 @@ def _fix_settings(config: Sim2RealConfig, sets: Sim2RealSets, out: OwnedFolder |
                                                       indent=1, default=float))  # fmt: skip
     if config.fit_sensor:
         folder.write_text("fitted_sensor.json", json.dumps(sets.fit_json, indent=1, default=float))
+    if config.fit_families:
+        folder.write_text("fitted_families.json", json.dumps(sets.families_fit.record, indent=1))
     halves = {int(i): "fit" if config.fit_sensor else "train" for i in sets.half_a} | {int(i): "scored" for i in sets.half_b}
     folder.write_csv("real_split.csv", [{"row": i, "source": src, "class": names[real_y[i]], "half": halves[i]}
                                         for i, src in enumerate(sets.sources)])  # fmt: skip

@@ -23,6 +23,7 @@ from zbuf_occlude.defaults import MAX_FAMILY_MESHES
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.io.owned import OwnedFolder
+from zbuf_occlude.mesh.families.fitted import check_width_scale, widen
 from zbuf_occlude.mesh.families.registry import family_rng, get_family
 from zbuf_occlude.mesh.families.parts import assemble
 
@@ -49,7 +50,7 @@ def _plain(value: Any) -> Any:
     return value.item() if hasattr(value, "item") else value
 
 
-def write_family(name: str, out: str | os.PathLike, *, count: int, seed: int) -> FamilyRun:
+def write_family(name: str, out: str | os.PathLike, *, count: int, seed: int, width_scale: tuple[float, float] | None = None) -> FamilyRun:
     """Write ``count`` objects of family ``name`` to ``out/<class>/<name>_<k>.ply`` with a manifest.
 
     Parameters
@@ -62,6 +63,11 @@ def write_family(name: str, out: str | os.PathLike, *, count: int, seed: int) ->
         Objects, 1 to :data:`~zbuf_occlude.defaults.MAX_FAMILY_MESHES`.
     seed : int
         0 to 2**63 - 1; object ``k`` draws from ``family_rng(name, seed, k)``.
+    width_scale : (lo, hi), optional
+        A fitted horizontal stretch (:class:`~zbuf_occlude.mesh.families.fitted.FamiliesFit`): each
+        object, once drawn, is stretched in x and y by a factor drawn in it
+        (:func:`~zbuf_occlude.mesh.families.fitted.widen`; the manifest records the range and each
+        factor).  None: the family's own widths, and the manifest as without a fit.
 
     Returns
     -------
@@ -70,7 +76,8 @@ def write_family(name: str, out: str | os.PathLike, *, count: int, seed: int) ->
     Raises
     ------
     InvalidInputError
-        An unknown family, a count out of range or a bad seed (naming ``count``, ``seed``).
+        An unknown family, a count out of range, a bad seed or ``width_scale`` (naming ``count``,
+        ``seed``, ``width_scale``).
     OutputError, DatasetBusy, UnsafePathError
         ``out`` cannot be written, another run holds it, or a file of that name is not ours
         (:class:`~zbuf_occlude.io.owned.OwnedFolder`).
@@ -81,13 +88,18 @@ def write_family(name: str, out: str | os.PathLike, *, count: int, seed: int) ->
     if isinstance(seed, bool) or not isinstance(seed, int):
         raise InvalidInputError(f"seed must be an integer from 0 to 2**63 - 1, got a {type(seed).__name__}")
     check_seed(seed, name="seed")
+    if width_scale is not None:
+        width_scale = check_width_scale(width_scale)
     cls = family.class_name
     names = [rf"{re.escape(cls)}/{re.escape(name)}_\d+\.ply", re.escape(f"{cls}/{name}{MANIFEST_SUFFIX}")]
     entries, files = [], []
     with OwnedFolder(out, names=names, subfolders=[cls], what=f"the {name} family") as folder:
         for k in range(count):
-            pieces, params = family.parts(family_rng(name, seed, k))
+            rng = family_rng(name, seed, k)
+            pieces, params = family.parts(rng)
             mesh = assemble(pieces)
+            if width_scale is not None:
+                params = {**params, "width_scale": widen(mesh, rng, width_scale)}
             rel = f"{cls}/{name}_{k}.ply"
             files.append(folder.write_bytes(rel, mesh.export(file_type="ply")))
             open_parts = sorted(p for p, group in pieces.items() if group and p in family.open_parts)
@@ -95,5 +107,7 @@ def write_family(name: str, out: str | os.PathLike, *, count: int, seed: int) ->
                             "faces": len(mesh.faces), "open_parts": open_parts})  # fmt: skip
         doc = {"family": name, "class": cls, "seed": seed, "count": count, "units": "m", "up": "+z", "generator": family.module,
                "ranges": {k: list(v) for k, v in family.ranges.items()}, "files": entries}  # fmt: skip
+        if width_scale is not None:
+            doc["fitted_width_scale"] = list(width_scale)
         manifest = folder.write_text(f"{cls}/{name}{MANIFEST_SUFFIX}", json.dumps(doc, indent=1) + "\n")
     return FamilyRun(files, manifest)

@@ -1,0 +1,223 @@
+"""Procedural families fitted to real crops: which families a class takes, and how wide to draw them.
+
+:func:`fit_families` looks, per class of real crops that a family of
+:data:`~zbuf_occlude.mesh.families.FAMILIES` writes to, at what a classifier sees of a crop once it is
+normalised: its proportions and how its points spread over its height
+(:func:`~zbuf_occlude.experiments.realism_stats.shape_stats`, heading-free).  For each such family it
+draws ``objects`` objects, scans ``crops`` crops of each as the ``lidar`` training set does (the
+sensor, :data:`~zbuf_occlude.experiments.sim2real.placement.LIDAR_PLACEMENT`, the class's size range),
+and fits the family's horizontal stretch (:func:`~zbuf_occlude.mesh.families.fitted.widen`, a factor
+drawn in ``[lo, hi]``) to the crops' height / width, in log space: starting from no stretch, each of
+``iterations`` updates moves the range's centre by ``log(m_sim / m_real)`` (the medians; height /
+width goes as one over the stretch) and its half-width by a quarter of ``log(q90/q10)_real −
+log(q90/q10)_sim`` (not below 0), clipped to ``[MIN_WIDTH_SCALE, MAX_WIDTH_SCALE]``.  A family's
+distance to the real crops is the mean ``|log(q_sim / q_real)|`` over the 10th, 50th and 90th
+percentiles of height / width plus the profile distance
+(:func:`~zbuf_occlude.experiments.realism_stats.profile_distance`); of the ranges tried (the first
+and each update's) the nearest is kept, and the class takes the families within :data:`CHOICE_SLACK`
+of its nearest family, in equal shares.  Every family tried is recorded
+with what it was fitted to and what it reached (:attr:`FamiliesFit.record`).
+
+The objects, crops and their seeds derive from ``seed`` alone, so a fit is the same on every run.  A
+class that no family writes to (cars, pedestrians) is left to the user's meshes.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.experiments.realism_stats import HEIGHT_BINS, profile_distance, shape_stats
+from zbuf_occlude.experiments.sim2real.placement import CropPlacement
+from zbuf_occlude.mesh.families.fitted import (
+    FAMILIES_FIT_FORMAT,
+    MAX_WIDTH_SCALE,
+    MIN_WIDTH_SCALE,
+    FamiliesFit,
+    parse_families_fit,
+    widen,
+)
+from zbuf_occlude.mesh.families.registry import FAMILIES, family_rng
+from zbuf_occlude.mesh.sizes import SizeRange
+
+__all__ = ["CHOICE_SLACK", "FIT_QUANTILES", "MIN_FIT_CROPS", "crop_shapes", "families_of", "family_meshes", "fit_families"]
+
+log = logging.getLogger(__name__)
+
+#: The percentiles of the crops' height / width that the stretch is fitted to and scored on.
+FIT_QUANTILES = (10.0, 50.0, 90.0)
+#: A class takes every family whose distance is within this of the nearest family's.
+CHOICE_SLACK = 0.05
+#: Fewest real crops of a class, and fewest simulated crops of a family, a fit is made from.
+MIN_FIT_CROPS = 5
+#: Returns a simulated crop needs to count (the ``lidar`` set redraws crops with fewer).
+_MIN_RETURNS = 30
+
+
+def families_of(class_name: str) -> list[str]:
+    """The families that write to ``class_name``, in :data:`~zbuf_occlude.mesh.families.FAMILIES` order."""
+    return [name for name, f in FAMILIES.items() if f.class_name == class_name]
+
+
+def crop_shapes(clouds: Sequence[NDArray[np.floating]]) -> dict:
+    """The statistics a fit matches, of a class's crops (z up; any frame, any unit).
+
+    Returns
+    -------
+    dict
+        ``crops`` (those with a height and a width), ``height_to_width`` (the :data:`FIT_QUANTILES`
+        percentiles of :func:`~zbuf_occlude.experiments.realism_stats.shape_stats`' height / width)
+        and ``height_shares`` (``(HEIGHT_BINS,)``, their mean share of points per tenth of the height).
+    """
+    stats = [shape_stats(np.asarray(c, np.float64)) for c in clouds if len(c) >= 2]
+    stats = [s for s in stats if math.isfinite(s["height_to_width"]) and s["height_m"] > 0]
+    if not stats:
+        return {"crops": 0, "height_to_width": [math.nan] * len(FIT_QUANTILES), "height_shares": [math.nan] * HEIGHT_BINS}
+    ratios = np.array([s["height_to_width"] for s in stats])
+    return {"crops": len(stats), "height_to_width": [float(v) for v in np.percentile(ratios, FIT_QUANTILES)],
+            "height_shares": [float(v) for v in np.mean([s["height_shares"] for s in stats], axis=0)]}  # fmt: skip
+
+
+def _distance(sim: dict, real: dict) -> float:
+    if sim["crops"] < MIN_FIT_CROPS:
+        return math.inf
+    q = np.abs(np.log(np.asarray(sim["height_to_width"]) / np.asarray(real["height_to_width"])))
+    return float(q.mean()) + profile_distance(sim["height_shares"], real["height_shares"])
+
+
+def _simulated(family: str, size: SizeRange, sensor, width_scale: tuple[float, float], *, objects: int, crops: int,
+               seed: int) -> dict:  # fmt: skip
+    """:func:`crop_shapes` of ``crops`` crops each of ``objects`` objects of ``family`` stretched in ``width_scale``,
+    scanned as the ``lidar`` set scans (the same objects and placements for every ``width_scale``)."""
+    from zbuf_occlude.experiments.sim2real.meshes import MeshEntry
+    from zbuf_occlude.mesh.load import normalize_mesh
+    from zbuf_occlude.sensors.crops import lidar_object_samples
+
+    fam, placement, clouds = FAMILIES[family], CropPlacement(), []
+    for k in range(objects):
+        rng = family_rng(family, seed, k)
+        mesh, _ = fam.make(rng)
+        widen(mesh, rng, width_scale)
+        entry = MeshEntry(path=None, class_name=fam.class_name, name=f"families/{family}_{k}", mesh=normalize_mesh(mesh))
+        dist, _ = placement.crop_distributions(entry, size)
+        samples = lidar_object_samples(entry.mesh, sensor, name=entry.name, n_samples=crops, n_points=1024, seed=seed,
+                                       distributions=dist, class_name=fam.class_name)  # fmt: skip
+        clouds += [np.unique(c.points.astype(np.float64), axis=0) for c in samples if c.n_visible >= _MIN_RETURNS]
+    return crop_shapes(clouds)
+
+
+def _fit_family(family: str, real: dict, size: SizeRange, sensor, *, objects: int, crops: int, seed: int,
+                iterations: int) -> dict:  # fmt: skip
+    """The stretch of ``family`` fitted to ``real`` (:func:`crop_shapes`): the nearest of ``iterations + 1`` tried."""
+    lo, hi = 1.0, 1.0
+    steps = []
+    for step in range(iterations + 1):
+        sim = _simulated(family, size, sensor, (lo, hi), objects=objects, crops=crops, seed=seed)
+        steps.append({"width_scale": [lo, hi], "simulated": sim, "distance": _distance(sim, real)})
+        if sim["crops"] < MIN_FIT_CROPS or step == iterations:
+            break
+        (s10, s50, s90), (r10, r50, r90) = sim["height_to_width"], real["height_to_width"]
+        centre, half = 0.5 * math.log(lo * hi), 0.5 * math.log(hi / lo)
+        centre += math.log(s50 / r50)  # height / width goes as 1 / stretch: a taller ratio than the real one widens
+        half = max(0.0, half + 0.25 * (math.log(r90 / r10) - math.log(s90 / s10)))  # a spread narrower than the real one widens the range
+        lo, hi = (float(np.clip(math.exp(v), MIN_WIDTH_SCALE, MAX_WIDTH_SCALE)) for v in (centre - half, centre + half))
+    best = min(steps, key=lambda st: st["distance"])
+    return {**best, "steps": [{"width_scale": st["width_scale"], "height_to_width": st["simulated"]["height_to_width"],
+                               "crops": st["simulated"]["crops"], "distance": st["distance"]} for st in steps]}  # fmt: skip
+
+
+def fit_families(real: Mapping[str, Sequence[NDArray[np.floating]]], sensor, sizes: Mapping[str, SizeRange], *, objects: int = 8,
+                 crops: int = 4, iterations: int = 3, seed: int = 0, fitted_on: str = "") -> FamiliesFit:  # fmt: skip
+    """Fit the families of each class of ``real`` to its crops (module docstring).
+
+    Parameters
+    ----------
+    real : mapping of str to sequence of (N_i, 3) float
+        Real object crops per class, z up (metres; any frame: the statistics are of proportions).
+        Only the crops that may be fitted on: never the scans that score.
+    sensor : Lidar
+        The scanner of the ``lidar`` set.
+    sizes : mapping of str to SizeRange
+        The ``lidar`` set's size per class (a class without one is not fitted).
+    objects, crops, iterations : int
+        Objects drawn per family, crops per object, updates of the stretch (each >= 1).
+    seed : int
+        Every object's and crop's seed.
+    fitted_on : str
+        What the crops are, for the record (``"the fit half: 343 scans"``).
+
+    Returns
+    -------
+    FamiliesFit
+        Its :attr:`~zbuf_occlude.mesh.families.fitted.FamiliesFit.record` is the JSON document
+        (``format``, ``fitted_on``, ``statistic``, ``seed``, ``objects``, ``crops``, per class the
+        real crops' statistics, every family tried and the chosen ones).
+
+    Raises
+    ------
+    InvalidInputError
+        ``objects``, ``crops`` or ``iterations`` below 1, or no class of ``real`` that a family
+        writes to with :data:`MIN_FIT_CROPS` crops.
+    """
+    for key, value in (("objects", objects), ("crops", crops), ("iterations", iterations)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise InvalidInputError(f"fit_families: {key} must be an integer >= 1, got {value!r}")
+    doc: dict = {"format": FAMILIES_FIT_FORMAT, "fitted_on": fitted_on, "sensor": getattr(sensor, "name", ""),
+                 "statistic": "crops' height / width (10th, 50th, 90th percentile) and share of points per tenth of the height",
+                 "seed": int(seed), "objects": objects, "crops": crops, "iterations": iterations, "choice_slack": CHOICE_SLACK,
+                 "classes": {}}  # fmt: skip
+    for cls in sorted(real):
+        names = families_of(cls)
+        target = crop_shapes(real[cls])
+        if not names or cls not in sizes or target["crops"] < MIN_FIT_CROPS:
+            continue
+        tried = {}
+        for name in names:
+            log.info("fitting the %s family to %d %s crops", name, target["crops"], cls)
+            tried[name] = _fit_family(name, target, sizes[cls], sensor, objects=objects, crops=crops, seed=seed, iterations=iterations)
+        best = min(t["distance"] for t in tried.values())
+        if not math.isfinite(best):
+            continue
+        chosen = [n for n, t in tried.items() if t["distance"] <= best + CHOICE_SLACK]
+        for t in tried.values():  # JSON has no infinity: a family with too few crops has no distance
+            t["distance"] = t["distance"] if math.isfinite(t["distance"]) else None
+        doc["classes"][cls] = {"real": target, "tried": tried,
+                               "chosen": {n: {"width_scale": tried[n]["width_scale"], "share": 1.0 / len(chosen)} for n in chosen}}  # fmt: skip
+    if not doc["classes"]:
+        raise InvalidInputError(
+            f"no class of the real crops has a family and {MIN_FIT_CROPS} crops to fit it to; families write to "
+            f"{', '.join(sorted({f.class_name for f in FAMILIES.values()}))}"
+        )
+    return parse_families_fit(doc)
+
+
+def family_meshes(fit: FamiliesFit, per_class: int, seed: int) -> list:
+    """The objects a fit adds: ``per_class`` per fitted class split by the shares (:meth:`FamiliesFit.counts`),
+    written as ``zbuf-occlude families FAMILY --fit FILE --count N --seed SEED`` writes them and loaded as
+    any mesh file (:func:`zbuf_occlude.load_mesh`).
+
+    Returns
+    -------
+    list of MeshEntry
+        Named ``families/CLASS/FAMILY_K`` (so that no user mesh shares a name, or a seed, with one).
+    """
+    import tempfile
+    from pathlib import Path
+
+    from zbuf_occlude.experiments.sim2real.meshes import MeshEntry
+    from zbuf_occlude.mesh.families.write import write_family
+    from zbuf_occlude.mesh.load import load_mesh
+
+    out = []
+    with tempfile.TemporaryDirectory(prefix="zbuf_occlude_families_") as tmp:
+        for family, count in fit.counts(per_class).items():
+            run = write_family(family, tmp, count=count, seed=seed, width_scale=fit.width_scale(family))
+            for path in run.files:
+                rel = path.relative_to(tmp).with_suffix("").as_posix()
+                out.append(MeshEntry(Path("families", rel + ".ply"), FAMILIES[family].class_name, f"families/{rel}", load_mesh(path)))
+    return out
