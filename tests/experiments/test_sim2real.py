@@ -1050,9 +1050,13 @@ def test_the_identity_of_a_config_is_what_recorded_runs_hold_so_they_resume(path
         method=s["method"], occluded_elevation_deg=tuple(s["occluded_elevation_deg"]), fit_sensor=bool(fit),
         recipe="stable" if tc.get("balance") == "sampler" else "plain", best_epoch_by=tc.get("select", "accuracy"),
         validate_on=s.get("validate_on", "meshes"),
-        fitted_shape=tuple(fit.get("fitted_shape", ())), aspect=tc.get("aspect", False),
+        fitted_shape=tuple(fit.get("fitted_shape", ())), aspect=tc.get("aspect", False), sets=tuple(s.get("sets", ())),
+        **({"fit_families": True, "family_count": s["fit_families"]["objects_per_class"]} if "fit_families" in s else {}),
     )  # fmt: skip
     identity = json.loads(json.dumps(config.identity(), default=float))  # as run_sim2real compares it
+    if "fit_families" in s:  # the run adds what it fitted to what was asked for
+        assert identity["fit_families"].items() <= s["fit_families"].items()
+        identity["fit_families"] = s["fit_families"]
     assert SIM2REAL_SCALES[s["scale"]].per_class != s["scale_values"]["per_class"] or identity["scale_values"] == s["scale_values"]
     assert identity == {k: s[k] for k in identity if k in s}
     assert set(identity) <= set(s) or "lidar_min_returns" not in s  # a run from before the option lacks it

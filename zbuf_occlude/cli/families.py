@@ -15,13 +15,18 @@ DEFAULT_COUNT = 10
 
 
 def _cli_families(args: argparse.Namespace) -> int:
+    from zbuf_occlude.errors import InvalidInputError
     from zbuf_occlude.mesh.families import write_family
 
     width_scale = None
     if args.fit is not None:
         from zbuf_occlude.mesh.families.fitted import read_families_fit
 
-        width_scale = read_families_fit(args.fit).width_scale(args.family)
+        fit = read_families_fit(args.fit)
+        try:
+            width_scale = fit.width_scale(args.family)
+        except InvalidInputError as exc:
+            raise InvalidInputError(f"--fit {args.fit}: {exc}") from None
     run = write_family(args.family, args.out, count=args.count, seed=args.seed, width_scale=width_scale)
     print(f"{len(run.files)} {args.family} meshes -> {run.files[0].parent} (parameters: {run.manifest})")
     return 0

@@ -11,10 +11,14 @@
 #        with KEEP, copies each run's realism.csv, realism_classes.csv and realism.png there, and draws
 #        shape_pole.png, shape_bush.png and crops.png there (figure.py); OUT/heights.md: heights.py's table.
 #        COUNT=12 (default) objects per family; FAMILIES="trunk shrub" runs only those (street runs always).
+#        FIT=fitted_families.json draws each family as that fit chose (zbuf-occlude families --fit; the sets are
+#        named FAMILY-fitted); SIZING=class scans the family objects as the street meshes are scanned (the class's
+#        sizes, as experiment sim2real's lidar set sizes every mesh) instead of at their own size.
 set -euo pipefail
 data=$1; out=$2; keep=${3:-}
 count=${COUNT:-12}
 families=${FAMILIES:-trunk utility_pole street_light sign_post shrub}
+fit=${FIT:-}; sizing=${SIZING:-own}
 mkdir -p "$out"; : > "$out/left_out.txt"
 declare -A REAL=([pole]=Trunk [bush]=Bush)
 declare -A SIZE=([pole]=3:9 [bush]=0.4:2.5)  # the preset recipe's (sim2real's CLASS_SIZES_M)
@@ -42,15 +46,17 @@ done
 for fam in $families; do
   cls=${CLASS[$fam]}
   [ -n "${REAL[$cls]:-}" ] || { echo "no real class for $fam ($cls): skipped" >&2; continue; }
-  zbuf-occlude families "$fam" --count "$count" --seed 0 --out "$out/meshes" > /dev/null
+  name=$fam; [ -z "$fit" ] || name=$fam-fitted
+  zbuf-occlude families "$fam" --count "$count" --seed 0 --out "$out/meshes" ${fit:+--fit "$fit"} > /dev/null
   i=0
-  # each file's height from the family's manifest (extent_m[2], metres): scanned at its own size
+  # each file's height from the family's manifest (extent_m[2], metres): scanned at its own size, or at the class's
   while read -r path height; do
     i=$((i + 1))
-    scan "$fam" "$cls" $i "$out/meshes/$path" +z "$height" height
+    if [ "$sizing" = class ]; then scan "$name" "$cls" $i "$out/meshes/$path" +z "${SIZE[$cls]}" max
+    else scan "$name" "$cls" $i "$out/meshes/$path" +z "$height" height; fi
   done < <(python3 -c 'import json, sys
 for f in json.load(open(sys.argv[1]))["files"]: print(f["path"], "%.4f" % f["extent_m"][2])' "$out/meshes/$cls/$fam.manifest.json")
-  sets+=("${fam}_$cls")
+  sets+=("${name}_$cls")
 done
 for set in "${sets[@]}"; do
   cls=${set##*_}

@@ -49,12 +49,13 @@ def check_width_scale(value: object, what: str = "width_scale") -> tuple[float, 
     """
     ok = isinstance(value, (list, tuple)) and len(value) == 2
     pair = [v for v in value if isinstance(v, (int, float)) and not isinstance(v, bool)] if ok else []
-    if len(pair) != 2 or not all(math.isfinite(v) for v in pair):
+    # an int is finite however large (math.isfinite(10**400) would raise OverflowError): compared exactly, then converted
+    if len(pair) != 2 or not all(isinstance(v, int) or math.isfinite(v) for v in pair):
         raise InvalidInputError(f"{what} must be two numbers [lo, hi], got {value_kind(value)}")
-    lo, hi = float(pair[0]), float(pair[1])
+    lo, hi = pair
     if not MIN_WIDTH_SCALE <= lo <= hi <= MAX_WIDTH_SCALE:
         raise InvalidInputError(f"{what} must hold {MIN_WIDTH_SCALE:g} <= lo <= hi <= {MAX_WIDTH_SCALE:g}")
-    return lo, hi
+    return float(lo), float(hi)
 
 
 def widen(mesh: trimesh.Trimesh, rng: np.random.Generator, width_scale: tuple[float, float]) -> float:

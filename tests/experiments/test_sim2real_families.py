@@ -1,0 +1,194 @@
+"""The families fitted to real crops (``experiment sim2real --fit-families``) and ``--sets``."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.experiments.sim2real.families import _simulated, crop_shapes, families_of, family_meshes, fit_families
+from zbuf_occlude.mesh.families.fitted import parse_families_fit
+from zbuf_occlude.mesh.sizes import CLASS_SIZES_M
+from zbuf_occlude.sensors.kinds import sensor_from_name
+
+HDL32E = sensor_from_name("hdl32e")
+
+
+def _family_crops(family: str, width: float, seed: int, objects: int = 6, crops: int = 3) -> list[np.ndarray]:
+    """Crops of ``family`` stretched by ``width``, scanned as the lidar set scans them: stand-ins for real crops."""
+    from zbuf_occlude.experiments.sim2real import families as fam
+
+    clouds: list[np.ndarray] = []
+    original = fam.crop_shapes
+    fam.crop_shapes = lambda c: clouds.extend(c) or original(c)  # keep the clouds the statistics are made of
+    try:
+        _simulated(family, CLASS_SIZES_M[fam.FAMILIES[family].class_name], HDL32E, (width, width), objects=objects, crops=crops, seed=seed)
+    finally:
+        fam.crop_shapes = original
+    return clouds
+
+
+def test_the_statistics_are_of_proportions_not_of_size_or_place() -> None:
+    rng = np.random.default_rng(0)
+    crops = [rng.uniform([-0.5, -0.2, 0.0], [0.5, 0.2, 2.0], (200, 3)) for _ in range(6)]
+    moved = [3.0 * c + [10.0, -4.0, 1.0] for c in crops]  # another unit, another place
+    a, b = crop_shapes(crops), crop_shapes(moved)
+    assert a["crops"] == b["crops"] == 6
+    assert a["height_to_width"] == pytest.approx(b["height_to_width"]) and a["height_shares"] == pytest.approx(b["height_shares"])
+    assert a["height_to_width"][1] == pytest.approx(2.0, rel=0.05)  # 2 m tall, 1 m along its longer horizontal axis
+    assert crop_shapes([np.zeros((1, 3))])["crops"] == 0  # a crop of one point has no proportions
+
+
+def test_the_fit_recovers_the_stretch_of_crops_made_with_a_known_one() -> None:
+    real = {"bush": _family_crops("shrub", 1.6, seed=1)}  # other objects than the fit draws (seed 0)
+    fit = fit_families(real, HDL32E, CLASS_SIZES_M, objects=6, crops=3, iterations=3, seed=0)
+    (lo, hi) = fit.classes["bush"]["shrub"].width_scale
+    assert 1.6 / 1.25 <= np.sqrt(lo * hi) <= 1.6 * 1.25, (lo, hi)
+    tried = fit.record["classes"]["bush"]["tried"]["shrub"]
+    assert tried["steps"][0]["width_scale"] == [1.0, 1.0]  # the first range tried is the family as drawn
+    assert tried["distance"] == min(s["distance"] for s in tried["steps"])  # the nearest range tried is kept
+    assert tried["distance"] < tried["steps"][0]["distance"]  # and it is nearer than no stretch
+    # the record is the file: it reads back as the same fit
+    assert parse_families_fit(json.loads(json.dumps(fit.record))).classes == fit.classes
+
+
+def test_the_fit_chooses_the_family_the_crops_came_from_and_leaves_classes_without_one() -> None:
+    real = {"pole": _family_crops("sign_post", 1.0, seed=3, objects=4, crops=3), "car": [np.random.default_rng(0).random((50, 3))] * 6}
+    fit = fit_families(real, HDL32E, CLASS_SIZES_M, objects=4, crops=3, iterations=1, seed=0)
+    assert set(fit.classes) == {"pole"}  # no family writes cars
+    tried = fit.record["classes"]["pole"]["tried"]
+    assert set(tried) == set(families_of("pole")) == {"trunk", "utility_pole", "street_light", "sign_post"}
+    assert "sign_post" in fit.classes["pole"]
+    best = min(t["distance"] for t in tried.values() if t["distance"] is not None)
+    assert all((t["distance"] is not None and t["distance"] <= best + 0.05) == (name in fit.classes["pole"]) for name, t in tried.items())
+    assert sum(c.share for c in fit.classes["pole"].values()) == pytest.approx(1.0)
+
+
+def test_a_fit_is_the_same_every_run_and_its_objects_are_those_the_families_command_writes(tmp_path: Path) -> None:
+    from zbuf_occlude.cli.main import main
+
+    real = {"bush": _family_crops("shrub", 1.3, seed=2, objects=3, crops=2)}
+    a = fit_families(real, HDL32E, CLASS_SIZES_M, objects=3, crops=2, iterations=1, seed=5)
+    b = fit_families(real, HDL32E, CLASS_SIZES_M, objects=3, crops=2, iterations=1, seed=5)
+    assert json.dumps(a.record) == json.dumps(b.record)
+    meshes = family_meshes(a, 3, seed=5)
+    assert [m.name for m in meshes] == ["families/bush/shrub_0", "families/bush/shrub_1", "families/bush/shrub_2"]
+    assert {m.class_name for m in meshes} == {"bush"}
+    (tmp_path / "fit.json").write_text(json.dumps(a.record))
+    assert (
+        main(["families", "shrub", "--fit", str(tmp_path / "fit.json"), "--count", "3", "--seed", "5", "--out", str(tmp_path / "o")]) == 0
+    )
+    from zbuf_occlude.mesh.load import load_mesh
+
+    for m, k in zip(meshes, range(3)):
+        again = load_mesh(tmp_path / "o" / "bush" / f"shrub_{k}.ply")
+        assert np.array_equal(again.vertices, m.mesh.vertices) and np.array_equal(again.faces, m.mesh.faces)
+
+
+@pytest.mark.parametrize("bad", [{"objects": 0}, {"crops": -1}, {"iterations": 0}, {"objects": True}, {"crops": 2.5}])
+def test_bad_fit_sizes_are_refused_naming_them(bad: dict) -> None:
+    with pytest.raises(InvalidInputError, match=next(iter(bad))):
+        fit_families({"bush": []}, HDL32E, CLASS_SIZES_M, **bad)
+
+
+def test_no_class_to_fit_is_refused_naming_the_classes_families_write() -> None:
+    few = {"bush": [np.random.default_rng(0).random((40, 3))] * 4, "car": [np.random.default_rng(1).random((40, 3))] * 9}
+    with pytest.raises(InvalidInputError, match="bush.*pole"):
+        fit_families(few, HDL32E, CLASS_SIZES_M, objects=1, crops=1, iterations=1)
+
+
+# --- the config and the command line
+
+
+def test_sets_are_checked_against_what_the_settings_make_and_kept_in_report_order() -> None:
+    from zbuf_occlude.experiments.sim2real.config import Sim2RealConfig
+
+    c = Sim2RealConfig("m", "r", sets=("pooled", "lidar"), fit_sensor=True)
+    assert c.sets == ("lidar", "pooled") and c.training_sets == ("lidar", "pooled")
+    assert c.identity()["sets"] == ["lidar", "pooled"]
+    assert "sets" not in Sim2RealConfig("m", "r").identity()  # runs without it keep their settings (they resume)
+    assert Sim2RealConfig("m", "r").training_sets == ("complete", "occluded", "lidar", "lidar+complete")
+    with pytest.raises(InvalidInputError, match="pooled"):
+        Sim2RealConfig("m", "r", sets=("pooled",))  # the fitted sets need the fit
+    with pytest.raises(InvalidInputError, match="--sets.*'lidr'"):
+        Sim2RealConfig("m", "r", sets=("lidr",), option_names={"sets": "--sets"})
+
+
+@pytest.mark.parametrize("count", [0, 10**9, True, 2.0])
+def test_a_family_count_out_of_range_is_refused(count) -> None:
+    from zbuf_occlude.experiments.sim2real.config import Sim2RealConfig
+
+    with pytest.raises(InvalidInputError, match="family_count"):
+        Sim2RealConfig("m", "r", fit_families=True, family_count=count)
+
+
+def test_fit_families_is_in_the_identity_only_when_asked_for() -> None:
+    from zbuf_occlude.experiments.sim2real.config import FAMILIES_SEED, Sim2RealConfig
+
+    assert "fit_families" not in Sim2RealConfig("m", "r").identity()
+    assert Sim2RealConfig("m", "r", fit_families=True, family_count=5).identity()["fit_families"] == {
+        "objects_per_class": 5, "seed": FAMILIES_SEED}  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "extra, says",
+    [(["--family-count", "3"], "--family-count 3"), (["--sets", "lidar,nope"], "'nope'"), (["--family-count", "0"], "--family-count")],
+)
+def test_bad_family_and_set_options_exit_2_naming_the_value(tmp_path: Path, extra: list, says: str, capsys) -> None:
+    from zbuf_occlude.cli.main import main
+
+    try:
+        status = main(["experiment", "sim2real", str(tmp_path), "--real", str(tmp_path), "--out", str(tmp_path / "o"), *extra])
+    except SystemExit as exc:
+        status = exc.code
+    assert status == 2 and says in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+# --- a run end to end
+
+
+def _scene(tmp_path: Path) -> tuple[Path, Path]:
+    """Meshes (two cars, two round bushes) and real crops: 16 scans of each class, the bushes wide shrubs seen by the HDL-32E."""
+    meshes, real = tmp_path / "meshes", tmp_path / "real"
+    for cls in ("car", "bush"):
+        (meshes / cls).mkdir(parents=True)
+    trimesh.creation.box(extents=(4.5, 1.8, 1.5)).export(meshes / "car" / "sedan.obj")
+    trimesh.creation.box(extents=(3.9, 1.7, 1.4)).export(meshes / "car" / "hatch.obj")
+    trimesh.creation.icosphere(subdivisions=2, radius=1.0).export(meshes / "bush" / "ball.obj")
+    trimesh.creation.icosphere(subdivisions=1, radius=0.7).export(meshes / "bush" / "small.obj")
+    rng = np.random.default_rng(0)
+    box = trimesh.creation.box(extents=(4.2, 1.7, 1.5))
+    bushes = _family_crops("shrub", 1.5, seed=7, objects=4, crops=4)
+    for cls, clouds in (("Car", [trimesh.sample.sample_surface(box, 300, seed=i)[0] for i in range(16)]), ("Bush", bushes[:16])):
+        (real / cls).mkdir(parents=True)
+        for i, pts in enumerate(clouds):
+            np.savetxt(real / cls / f"{i}.xyz", pts * (1 if cls == "Car" else 2.0) + [15.0 + rng.random(), 0.0, 0.0])
+    return meshes, real
+
+
+def test_a_run_with_fitted_families_adds_their_objects_records_the_fit_and_trains_only_the_sets_named(tmp_path: Path) -> None:
+    pytest.importorskip("torch")
+    from zbuf_occlude.cli.main import main
+
+    meshes, real = _scene(tmp_path)
+    out = tmp_path / "out"
+    argv = ["experiment", "sim2real", str(meshes), "--real", str(real), "--out", str(out), "--points", "32",
+            "--epochs", "1", "--per-class", "6", "--seeds", "1", "--threads", "1", "--no-progress", "--fit-families", "--family-count", "3",
+            "--sets", "lidar"]  # fmt: skip
+    assert main(argv) == 0
+    fit = json.loads((out / "fitted_families.json").read_text())
+    first_half = sum(r["half"] == "train" for r in csv.DictReader(open(out / "real_split.csv", encoding="utf-8")))
+    assert set(fit["classes"]) == {"bush"} and fit["fitted_on"].endswith(f": {first_half} scans")  # the first half only
+    assert fit["classes"]["bush"]["real"]["crops"] == first_half // 2  # its bushes, not the scored half's
+    settings = json.loads((out / "settings.json").read_text())
+    assert settings["sets"] == ["lidar"]
+    assert settings["fit_families"]["chosen"] == {"bush": fit["classes"]["bush"]["chosen"]}
+    assert settings["fit_families"]["objects"] == {"shrub": 3} and settings["meshes"] == {"bush": 5, "car": 2}
+    with open(out / "results.csv", encoding="utf-8") as fh:
+        assert sorted(r["train_set"] for r in csv.DictReader(fh)) == ["lidar", "real→real"]
