@@ -137,7 +137,12 @@ def test_fit_families_is_in_the_identity_only_when_asked_for() -> None:
 
 @pytest.mark.parametrize(
     "extra, says",
-    [(["--family-count", "3"], "--family-count 3"), (["--sets", "lidar,nope"], "'nope'"), (["--family-count", "0"], "--family-count")],
+    [
+        (["--family-count", "3"], "--family-count 3"),
+        (["--sets", "lidar,nope"], "'nope'"),
+        (["--family-count", "0"], "--family-count"),
+        (["--sets", " , "], "--sets must name"),
+    ],
 )
 def test_bad_family_and_set_options_exit_2_naming_the_value(tmp_path: Path, extra: list, says: str, capsys) -> None:
     from zbuf_occlude.cli.main import main

@@ -80,6 +80,8 @@ def _run(args: argparse.Namespace) -> int:
         raise InvalidInputError(f"--family-count {args.family_count} adds objects of the fitted families: give --fit-families too")
     families = {"fit_families": True, "family_count": args.family_count or FAMILY_COUNT} if args.fit_families else {}
     sets = () if args.sets is None else tuple(v.strip() for v in args.sets.split(",") if v.strip())
+    if args.sets is not None and not sets:
+        raise InvalidInputError(f"--sets must name one or more sets, got {shown(args.sets)}")
     real_options = {"dataset": args.real_format, "up": args.real_up, "units": args.real_units}
     config = Sim2RealConfig(
         args.root, args.real, model=args.model, sensor=args.sensor, scale=args.scale, points=args.points, epochs=args.epochs,
