@@ -519,7 +519,38 @@ def test_the_plots_crowns_are_filled_with_leaves(tmp_path) -> None:
     ("leaf_area_density", -0.5, "leaf_area_density must be a finite number >= 0, got a number outside that range"),
     ("leaf_area_density", math.inf, "leaf_area_density must be a finite number >= 0, got an infinite number"),
     ("echo_rule", "peak", "echo_rule must be one of"),
+    ("plot", "forest", "plot must be one of"),
 ])  # fmt: skip
 def test_settings_refuse_bad_values(field, value, message) -> None:
     with pytest.raises(InvalidInputError, match=message):
         ReturnsSettings(**{field: value})
+
+
+def test_the_families_plot_stands_the_procedural_trees_and_shrubs_at_their_drawn_sizes() -> None:
+    from zbuf_occlude.experiments import returns_report as report
+    from zbuf_occlude.mesh.families import FAMILIES, family_rng
+
+    scene, vegetation, _, _ = report.ign_plot(None, ReturnsSettings(copies=2, spacing_m=12.0, plot="families"), height_scale=1.5)
+    drawn = [(name, k) for name, n in report.FAMILY_PLOT for k in range(n)]
+    assert len(vegetation) == len(scene.objects) == 2 * len(drawn) == 16
+    for (name, k), obj in zip([d for d in drawn for _ in range(2)], scene.objects):
+        mesh, _ = FAMILIES[name].make(family_rng(name, report.FAMILY_PLOT_SEED, k))  # the object families --seed 0 writes
+        assert np.array_equal(obj.mesh.vertices, mesh.vertices)  # as drawn: no leaves added to a crown of leaf clusters
+        assert obj.size_m == pytest.approx(1.5 * mesh.extents.max())
+
+
+@pytest.mark.parametrize(("argv", "says"), [
+    (["MESHES", "--plot", "families"], "give no MESHES"),
+    ([], "give MESHES"),
+    (["--plot", "families", "--leaf-area-density", "1"], "--leaf-area-density"),
+])  # fmt: skip
+def test_the_plot_option_and_the_mesh_folder_go_together(tmp_path, capsys, argv, says) -> None:
+    from zbuf_occlude.cli.main import main
+
+    argv = [str(tmp_path) if a == "MESHES" else a for a in argv]
+    status = main(["experiment", "returns", *argv, "--real", str(tmp_path / "r.laz"), "--out", str(tmp_path / "o")])
+    assert status == 2 and says in capsys.readouterr().err and not (tmp_path / "o").exists()
+    with pytest.raises(InvalidInputError, match="takes no mesh folder"):
+        run_returns(tmp_path / "o", tmp_path, tmp_path / "r.laz", settings=ReturnsSettings(plot="families"))
+    with pytest.raises(InvalidInputError, match="takes a mesh folder"):
+        run_returns(tmp_path / "o", None, tmp_path / "r.laz")

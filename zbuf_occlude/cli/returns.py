@@ -14,8 +14,16 @@ __all__ = ["add_returns_parser"]
 def _run(args: argparse.Namespace) -> int:
     from zbuf_occlude.experiments.returns_report import ReturnsSettings, run_returns
 
+    from zbuf_occlude.errors import InvalidInputError
+
+    if (args.meshes is None) != (args.plot == "families"):
+        raise InvalidInputError(
+            "--plot families draws its own trees: give no MESHES" if args.meshes else "give MESHES (or --plot families)"
+        )
+    if args.plot == "families" and args.leaf_area_density is not None:
+        raise InvalidInputError("--leaf-area-density fills the street meshes' crowns; the families' crowns are leaf clusters already")
     detection = not args.without_threshold
-    given = {} if args.echo_rule is None else {"echo_rule": args.echo_rule}
+    given = {"plot": args.plot} if args.echo_rule is None else {"echo_rule": args.echo_rule, "plot": args.plot}
     if args.leaf_area_density is not None:
         given["leaf_area_density"] = args.leaf_area_density
     settings = ReturnsSettings(bootstrap=args.bootstrap, seeds=tuple(range(args.seeds)), detection=detection, **given)
@@ -39,7 +47,11 @@ def add_returns_parser(sub: Any) -> argparse.ArgumentParser:
         "write it as LAS, read it back and measure it with the function that measures --real; fit the beam divergence by "
         "simulation, choose the sub-ray count, and write the comparison with PASS/FAIL per target, the sweeps and a figure.",
     )  # fmt: skip
-    p.add_argument("meshes", help="folder of the tree and bush meshes (street_objects/bush: the files of PLOT_TREES)")
+    p.add_argument("meshes", nargs="?", help="folder of the tree and bush meshes (street_objects/bush: the files of PLOT_TREES); "
+                   "none with --plot families")  # fmt: skip
+    p.add_argument("--plot", choices=("street", "families"), default="street",
+                   help="the plot's vegetation: street (the meshes of MESHES, crowns filled with leaves) or families (six procedural "
+                   "trees and two shrubs, zbuf-occlude families tree and shrub with seed 0, at their drawn sizes) (default: %(default)s)")  # fmt: skip
     p.add_argument("--real", required=True, help="the real LAS/LAZ file with vegetation classes 3-5 (the IGN LiDAR HD sample)")
     p.add_argument("--autzen", help="a second real LAS/LAZ file for the cross-check (its class 1 classed by height above its ground)")
     p.add_argument("--out", required=True, action=Checked, check=out_folder,

@@ -50,6 +50,7 @@ from typing import Any
 
 import numpy as np
 
+from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.returns import (
     AUTZEN_CELL_M,
     GROUND_CLASS,
@@ -139,11 +140,17 @@ class ReturnsSettings:
         of crown, ≥ 0 (:func:`~zbuf_occlude.sensors.foliage.add_foliage` with :data:`~.returns.PLOT_LEAF_SIDE_M`
         and :data:`~.returns.PLOT_CROWN_SHELL_M`); 0: the meshes as they are.  The default, 1, is the one of
         0, 0.5, 1, 1.5 and 2 that passes the most of the experiment's targets (the results page lists the runs).
+    plot : {"street", "families"}
+        The plot's vegetation: ``"street"`` (default), :data:`~.returns.PLOT_TREES` from the mesh folder, their
+        crowns filled with ``leaf_area_density``; ``"families"``, :data:`FAMILY_PLOT`: procedural trees and
+        shrubs (:mod:`zbuf_occlude.mesh.families`) at their own drawn sizes, whose crowns are leaf clusters
+        with gaps (no leaves added; no mesh folder).
 
     Raises
     ------
     InvalidInputError
-        A negative or non-finite ``leaf_area_density``, or an ``echo_rule`` not in ``ECHO_RULES``, naming the value.
+        A negative or non-finite ``leaf_area_density``, an ``echo_rule`` not in ``ECHO_RULES`` or a ``plot`` not in
+        :data:`PLOT_CHOICES`, naming the value.
     """
 
     divergence_factors: tuple[float, ...] = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0)
@@ -158,6 +165,7 @@ class ReturnsSettings:
     detection: bool = True
     echo_rule: str = "waveform"
     leaf_area_density: float = 1.0
+    plot: str = "street"
 
     def __post_init__(self) -> None:
         from zbuf_occlude.sensors.checks import real, text
@@ -165,6 +173,7 @@ class ReturnsSettings:
 
         object.__setattr__(self, "leaf_area_density", real(self.leaf_area_density, "leaf_area_density", low=0.0))
         object.__setattr__(self, "echo_rule", text(self.echo_rule, "echo_rule", choices=ECHO_RULES))
+        object.__setattr__(self, "plot", text(self.plot, "plot", choices=PLOT_CHOICES))
 
 
 @dataclass(frozen=True)
@@ -252,10 +261,31 @@ def cover_rays_per_cell(settings: ReturnsSettings, cell_m: float = TREE_COVER_CE
     return max(1, round(len(settings.seeds) * IGN_PULSES_PER_M2 * cell_m**2))
 
 
-def ign_plot(mesh_root: str | os.PathLike, settings: ReturnsSettings, *, tree_cover: float | None = None, height_scale: float = 1.0,
+#: The plot's vegetation choices (:attr:`ReturnsSettings.plot`).
+PLOT_CHOICES = ("street", "families")
+#: The procedural plot (:func:`family_plot`): objects of each family, drawn with seed :data:`FAMILY_PLOT_SEED`.
+FAMILY_PLOT = (("tree", 6), ("shrub", 2))
+FAMILY_PLOT_SEED = 0
+
+
+def family_plot() -> list[tuple[Any, float]]:
+    """The procedural plot's objects: ``(mesh, largest dimension in metres)`` of each of :data:`FAMILY_PLOT`'s objects,
+    object ``k`` of a family drawn as ``zbuf-occlude families FAMILY --seed FAMILY_PLOT_SEED`` writes it."""
+    from zbuf_occlude.mesh.families import FAMILIES, family_rng
+
+    out = []
+    for name, count in FAMILY_PLOT:
+        for k in range(count):
+            mesh, _ = FAMILIES[name].make(family_rng(name, FAMILY_PLOT_SEED, k))
+            out.append((mesh, float(mesh.extents.max())))
+    return out
+
+
+def ign_plot(mesh_root: str | os.PathLike | None, settings: ReturnsSettings, *, tree_cover: float | None = None, height_scale: float = 1.0,
              cover_cell_m: float = TREE_COVER_CELL_M) -> tuple[ScanScene, tuple[int, ...], tuple[float, float], float]:  # fmt: skip
     """The experiment's plot: :data:`~.returns.PLOT_TREES` from ``mesh_root``, their crowns filled with
-    ``settings.leaf_area_density`` of leaves, ``settings.copies`` of each, on a grid ``settings.spacing_m``
+    ``settings.leaf_area_density`` of leaves (or, with ``settings.plot`` "families", :func:`family_plot`'s objects; no
+    ``mesh_root``), ``settings.copies`` of each, on a grid ``settings.spacing_m``
     apart (None: as far apart as gives the tree cover ``tree_cover`` measured on cells of
     ``cover_cell_m``, :func:`~.tree_cover.spacing_for_cover`), its centre ``settings.scan_angle_deg``
     across track.
@@ -280,7 +310,6 @@ def ign_plot(mesh_root: str | os.PathLike, settings: ReturnsSettings, *, tree_co
         No spacing and no tree cover, or a cover the meshes cannot give.
     """
     from zbuf_occlude.mesh.load import load_mesh
-    from zbuf_occlude.errors import InvalidInputError
     from zbuf_occlude.sensors.checks import real
     from zbuf_occlude.sensors.foliage import add_foliage, in_metres
 
@@ -288,9 +317,12 @@ def ign_plot(mesh_root: str | os.PathLike, settings: ReturnsSettings, *, tree_co
         raise InvalidInputError("ign_plot needs settings.spacing_m or a tree cover to space the trees for")
     height_scale = real(height_scale, "height_scale", low=0.0, low_open=True)
 
-    root = Path(mesh_root)
     meshes, sizes = [], []
-    for i, tree in enumerate(PLOT_TREES):
+    for mesh, size in family_plot() if settings.plot == "families" else ():
+        meshes += [mesh] * settings.copies
+        sizes += [size * height_scale] * settings.copies
+    root = Path(mesh_root) if settings.plot == "street" else None
+    for i, tree in enumerate(PLOT_TREES if root is not None else ()):
         mesh, size = load_mesh(root / tree.file, up=tree.up), tree.size_m * height_scale
         if tree.foliage and settings.leaf_area_density > 0:
             mesh = add_foliage(in_metres(mesh, size), leaf_area_density=settings.leaf_area_density, leaf_side_m=PLOT_LEAF_SIDE_M,
@@ -502,7 +534,7 @@ def _autzen(
     return rows, sweep, fit | model.to_json() | {"canopy": canopy}, md
 
 
-def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path: str | os.PathLike, *, autzen_path: str | os.PathLike | None = None,
+def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike | None, real_path: str | os.PathLike, *, autzen_path: str | os.PathLike | None = None,
                 settings: ReturnsSettings | None = None, progress: bool = True) -> dict[str, Any]:  # fmt: skip
     """Run the experiment (module docstring) and write :data:`RETURNS_OUTPUTS` into ``out``.
 
@@ -510,8 +542,9 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
     ----------
     out : str or PathLike
         Output folder (owned: only these names are written).
-    mesh_root : str or PathLike
-        The folder holding :data:`~.returns.PLOT_TREES`' files (``street_objects/bush``).
+    mesh_root : str or PathLike or None
+        The folder holding :data:`~.returns.PLOT_TREES`' files (``street_objects/bush``); None with
+        ``settings.plot`` "families" (and only then).
     real_path : str or PathLike
         The IGN LiDAR HD sample (LAS/LAZ with vegetation classes 3–5).
     autzen_path : str or PathLike, optional
@@ -531,11 +564,14 @@ def run_returns(out: str | os.PathLike, mesh_root: str | os.PathLike, real_path:
     Raises
     ------
     InvalidInputError, MeshLoadError, OutputError
-        A file that cannot be read, a folder that cannot be written.
+        A file that cannot be read, a folder that cannot be written, a ``mesh_root`` with the families plot
+        or none with the street plot.
     """
     from zbuf_occlude.io.progress import progress as progress_bar
 
     settings = settings or ReturnsSettings()
+    if (mesh_root is None) != (settings.plot == "families"):
+        raise InvalidInputError(f"the {settings.plot} plot takes {'no mesh folder' if mesh_root is not None else 'a mesh folder'}")
     started, cpu_started, load_start = time.perf_counter(), time.process_time(), list(os.getloadavg())
     bar = progress_bar(total=scans_of_run(settings, autzen=autzen_path is not None), desc="returns", unit="scan", enabled=progress)
     with bar, OwnedFolder(out, files=RETURNS_OUTPUTS, what="the returns experiment") as folder:
