@@ -12,9 +12,8 @@ __all__ = ["add_returns_parser"]
 
 
 def _run(args: argparse.Namespace) -> int:
-    from zbuf_occlude.experiments.returns_report import ReturnsSettings, run_returns
-
     from zbuf_occlude.errors import InvalidInputError
+    from zbuf_occlude.experiments.returns_report import ReturnsSettings, run_returns
 
     if (args.meshes is None) != (args.plot == "families"):
         raise InvalidInputError(
@@ -23,7 +22,9 @@ def _run(args: argparse.Namespace) -> int:
     if args.plot == "families" and args.leaf_area_density is not None:
         raise InvalidInputError("--leaf-area-density fills the street meshes' crowns; the families' crowns are leaf clusters already")
     detection = not args.without_threshold
-    given = {"plot": args.plot} if args.echo_rule is None else {"echo_rule": args.echo_rule, "plot": args.plot}
+    given = {"plot": args.plot}
+    if args.echo_rule is not None:
+        given["echo_rule"] = args.echo_rule
     if args.leaf_area_density is not None:
         given["leaf_area_density"] = args.leaf_area_density
     settings = ReturnsSettings(bootstrap=args.bootstrap, seeds=tuple(range(args.seeds)), detection=detection, **given)

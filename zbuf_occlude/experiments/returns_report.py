@@ -271,14 +271,11 @@ FAMILY_PLOT_SEED = 0
 def family_plot() -> list[tuple[Any, float]]:
     """The procedural plot's objects: ``(mesh, largest dimension in metres)`` of each of :data:`FAMILY_PLOT`'s objects,
     object ``k`` of a family drawn as ``zbuf-occlude families FAMILY --seed FAMILY_PLOT_SEED`` writes it."""
-    from zbuf_occlude.mesh.families import FAMILIES, family_rng
+    from zbuf_occlude.mesh.families import FAMILIES
+    from zbuf_occlude.mesh.families.fitted import draw_object
 
-    out = []
-    for name, count in FAMILY_PLOT:
-        for k in range(count):
-            mesh, _ = FAMILIES[name].make(family_rng(name, FAMILY_PLOT_SEED, k))
-            out.append((mesh, float(mesh.extents.max())))
-    return out
+    meshes = [draw_object(FAMILIES[name], FAMILY_PLOT_SEED, k)[1] for name, count in FAMILY_PLOT for k in range(count)]
+    return [(mesh, float(mesh.extents.max())) for mesh in meshes]
 
 
 def ign_plot(mesh_root: str | os.PathLike | None, settings: ReturnsSettings, *, tree_cover: float | None = None, height_scale: float = 1.0,
@@ -321,9 +318,8 @@ def ign_plot(mesh_root: str | os.PathLike | None, settings: ReturnsSettings, *, 
     for mesh, size in family_plot() if settings.plot == "families" else ():
         meshes += [mesh] * settings.copies
         sizes += [size * height_scale] * settings.copies
-    root = Path(mesh_root) if settings.plot == "street" else None
-    for i, tree in enumerate(PLOT_TREES if root is not None else ()):
-        mesh, size = load_mesh(root / tree.file, up=tree.up), tree.size_m * height_scale
+    for i, tree in enumerate(PLOT_TREES if settings.plot == "street" else ()):
+        mesh, size = load_mesh(Path(mesh_root) / tree.file, up=tree.up), tree.size_m * height_scale
         if tree.foliage and settings.leaf_area_density > 0:
             mesh = add_foliage(in_metres(mesh, size), leaf_area_density=settings.leaf_area_density, leaf_side_m=PLOT_LEAF_SIDE_M,
                                shell_m=PLOT_CROWN_SHELL_M, seed=i)  # fmt: skip

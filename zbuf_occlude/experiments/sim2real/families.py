@@ -39,10 +39,10 @@ from zbuf_occlude.mesh.families.fitted import (
     MAX_WIDTH_SCALE,
     MIN_WIDTH_SCALE,
     FamiliesFit,
+    draw_object,
     parse_families_fit,
-    widen,
 )
-from zbuf_occlude.mesh.families.registry import FAMILIES, family_rng
+from zbuf_occlude.mesh.families.registry import FAMILIES
 from zbuf_occlude.mesh.sizes import SizeRange
 
 __all__ = ["CHOICE_SLACK", "FIT_QUANTILES", "MIN_FIT_CROPS", "crop_shapes", "families_of", "family_meshes", "fit_families"]
@@ -100,9 +100,7 @@ def _simulated(family: str, size: SizeRange, sensor, width_scale: tuple[float, f
 
     fam, placement, clouds = FAMILIES[family], CropPlacement(), []
     for k in range(objects):
-        rng = family_rng(family, seed, k)
-        mesh, _ = fam.make(rng)
-        widen(mesh, rng, width_scale)
+        _, mesh, _ = draw_object(fam, seed, k, width_scale)
         entry = MeshEntry(path=None, class_name=fam.class_name, name=f"families/{family}_{k}", mesh=normalize_mesh(mesh))
         dist, _ = placement.crop_distributions(entry, size)
         samples = lidar_object_samples(entry.mesh, sensor, name=entry.name, n_samples=crops, n_points=1024, seed=seed,

@@ -322,8 +322,7 @@ def _fix_settings(config: Sim2RealConfig, sets: Sim2RealSets, out: OwnedFolder |
     if config.fit_families:
         fit = sets.families_fit
         settings["fit_families"] = {**settings["fit_families"], "fitted_on": fit.record["fitted_on"],
-                                    "chosen": {c: {f: {"width_scale": list(ch.width_scale), "share": ch.share} for f, ch in chosen.items()}
-                                               for c, chosen in fit.classes.items()},
+                                    "chosen": {c: fit.record["classes"][c]["chosen"] for c in fit.classes},
                                     "objects": fit.counts(config.family_count)}  # fmt: skip
     if config.fit_sensor:  # likewise: runs without it keep their settings
         settings["fit_sensor"] = {

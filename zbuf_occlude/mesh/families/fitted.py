@@ -29,8 +29,10 @@ from zbuf_occlude.io.json_files import read_json_file
 if TYPE_CHECKING:
     import trimesh
 
+    from zbuf_occlude.mesh.families.registry import Family, Parts
+
 __all__ = ["FAMILIES_FIT_FORMAT", "MAX_WIDTH_SCALE", "MIN_WIDTH_SCALE", "ChosenFamily", "FamiliesFit", "check_width_scale",
-           "parse_families_fit", "read_families_fit", "widen"]  # fmt: skip
+           "draw_object", "parse_families_fit", "read_families_fit", "widen"]  # fmt: skip
 
 #: The ``format`` key of a families fit file.
 FAMILIES_FIT_FORMAT = "zbuf_occlude.families_fit/1"
@@ -72,6 +74,31 @@ def widen(mesh: trimesh.Trimesh, rng: np.random.Generator, width_scale: tuple[fl
     t[:2, 3] = centre[:2] * (1.0 - factor)
     mesh.apply_transform(t)
     return factor
+
+
+def draw_object(
+    family: Family, seed: int, index: int, width_scale: tuple[float, float] | None = None
+) -> tuple[Parts, trimesh.Trimesh, dict[str, Any]]:
+    """Object ``index`` of ``family`` under ``seed``: what ``zbuf-occlude families`` writes as file ``index``.
+
+    Drawn from :func:`~zbuf_occlude.mesh.families.registry.family_rng`; with a fitted ``width_scale``
+    (``(lo, hi)``), the assembled mesh is then stretched by :func:`widen` (one more draw of the same
+    generator) and ``params["width_scale"]`` is its factor.
+
+    Returns
+    -------
+    parts, mesh, params
+        The named parts (before any stretch), them as one mesh (metres, z up, on z = 0) and the drawn parameters.
+    """
+    from zbuf_occlude.mesh.families.parts import assemble
+    from zbuf_occlude.mesh.families.registry import family_rng
+
+    rng = family_rng(family.name, seed, index)
+    pieces, params = family.parts(rng)
+    mesh = assemble(pieces)
+    if width_scale is not None:
+        params = {**params, "width_scale": widen(mesh, rng, width_scale)}
+    return pieces, mesh, params
 
 
 @dataclass(frozen=True)

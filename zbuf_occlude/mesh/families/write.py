@@ -4,7 +4,7 @@ The files are binary PLY meshes, z up, in metres, standing on z = 0: any mesh fo
 them (``farm``, ``generate``, ``experiment sim2real``; the class comes from the folder).  The
 manifest is JSON: the family, its class, the seed, the generator module, and per file its path,
 index, drawn parameters, bounding-box extent (metres), face count and which of its parts are open.
-Object ``K`` is drawn from :func:`~zbuf_occlude.mesh.families.registry.family_rng` (``seed``, ``K``,
+Object ``K`` is :func:`~zbuf_occlude.mesh.families.fitted.draw_object`'s (``family_rng(seed, K,
 the family's name), so a file is the same whatever the count.  Every write goes through
 :class:`~zbuf_occlude.io.owned.OwnedFolder` (locked, atomic, recorded): a second run replaces only
 files a run of ours wrote and nobody changed since.
@@ -23,9 +23,8 @@ from zbuf_occlude.defaults import MAX_FAMILY_MESHES
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.io.owned import OwnedFolder
-from zbuf_occlude.mesh.families.fitted import check_width_scale, widen
-from zbuf_occlude.mesh.families.registry import family_rng, get_family
-from zbuf_occlude.mesh.families.parts import assemble
+from zbuf_occlude.mesh.families.fitted import check_width_scale, draw_object
+from zbuf_occlude.mesh.families.registry import get_family
 
 __all__ = ["MANIFEST_SUFFIX", "FamilyRun", "write_family"]
 
@@ -95,11 +94,7 @@ def write_family(name: str, out: str | os.PathLike, *, count: int, seed: int, wi
     entries, files = [], []
     with OwnedFolder(out, names=names, subfolders=[cls], what=f"the {name} family") as folder:
         for k in range(count):
-            rng = family_rng(name, seed, k)
-            pieces, params = family.parts(rng)
-            mesh = assemble(pieces)
-            if width_scale is not None:
-                params = {**params, "width_scale": widen(mesh, rng, width_scale)}
+            pieces, mesh, params = draw_object(family, seed, k, width_scale)
             rel = f"{cls}/{name}_{k}.ply"
             files.append(folder.write_bytes(rel, mesh.export(file_type="ply")))
             open_parts = sorted(p for p, group in pieces.items() if group and p in family.open_parts)
