@@ -105,8 +105,8 @@ def test_closed_parts_are_watertight_and_the_open_ones_are_named(name: str, seed
     assert mesh.is_watertight == (not has_open)
 
 
-def test_closed_families_are_the_trunk_and_the_posts() -> None:
-    assert {n for n, f in FAMILIES.items() if not f.open_parts} == {"trunk", "street_light", "sign_post"}
+def test_closed_families_are_the_trunk_the_posts_and_the_pedestrian() -> None:
+    assert {n for n, f in FAMILIES.items() if not f.open_parts} == {"trunk", "street_light", "sign_post", "pedestrian"}
     assert FAMILIES["utility_pole"].open_parts == {"wire"} and FAMILIES["tree"].open_parts == {"crown"}
 
 
@@ -185,6 +185,38 @@ def test_a_sign_posts_plates_hang_at_the_mutcd_height(seed: int) -> None:
         assert np.ptp(pl[:, 0]) == pytest.approx(drawn_plate["width_m"], rel=0.02)  # a disc's 32-gon is 0.5 % short
     post_top = used(pieces["post"][0])[:, 2].max()
     assert post_top >= max(pl[:, 2].max() for pl in plates) - 1e-9
+
+
+@FEW
+@given(seed=SEEDS)
+def test_a_pedestrian_is_as_tall_as_drawn_with_its_limbs_and_what_it_carries(seed: int) -> None:
+    """Stature as drawn (a walking stride lowers the hip by at most 1 - cos 25 deg of the leg), the
+    shoulders as broad as Winter's 0.259 H, two segments per limb, the coat and the carried box as drawn."""
+    from zbuf_occlude.mesh.families.pedestrian import PROPORTIONS
+
+    _, pieces, p, mesh = drawn("pedestrian", seed)
+    h = p["height_m"]
+    extent = np.ptp(used(mesh), axis=0)
+    drop = (1 - np.cos(np.radians(p["stride_deg"]))) * PROPORTIONS["hip_z"] * h
+    assert h - drop - 0.01 * h <= extent[2] <= h + 1e-9
+    assert 0.9 * PROPORTIONS["shoulder_breadth"] * h * min(1.0, p["build"]) <= extent[1] <= 0.55 * h  # a body, not a post or a wall
+    assert len(pieces["arm"]) == len(pieces["leg"]) == 4 and len(pieces["foot"]) == 2 and len(pieces["head"]) == 1
+    assert len(pieces["coat"]) == p["coat"] and len(pieces["carried"]) == (p["carry"] > 0)
+    head = used(pieces["head"][0])
+    assert head[:, 2].max() == pytest.approx(extent[2], abs=1e-9)  # the head is the top
+    feet = np.vstack([used(m) for m in pieces["foot"]])
+    assert feet[:, 2].min() == pytest.approx(0.0, abs=1e-9)  # the lower foot on the ground
+    if p["stride_deg"] >= 10:  # a walker's feet are apart along the walk
+        assert np.ptp(feet[:, 0]) > PROPORTIONS["foot_length"] * h
+
+
+def test_pedestrians_stand_and_walk_and_carry_in_their_shares() -> None:
+    drawn_ = [FAMILIES["pedestrian"].parts(family_rng("pedestrian", 0, k))[1] for k in range(400)]
+    standing = np.mean([p["stride_deg"] < 3 for p in drawn_])
+    assert 0.22 <= standing <= 0.38  # STANDING_SHARE 0.3, 400 draws: 4 sigma
+    for value, share in ((1, 0.25), (2, 0.25), (0, 0.5)):
+        assert abs(np.mean([p["carry"] == value for p in drawn_]) - share) <= 0.09
+    assert 0.16 <= np.mean([p["coat"] for p in drawn_]) <= 0.34
 
 
 @pytest.mark.parametrize("name", ["utility_pole", "street_light"])

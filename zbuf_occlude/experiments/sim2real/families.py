@@ -19,7 +19,7 @@ of its nearest family, in equal shares.  Every family tried is recorded
 with what it was fitted to and what it reached (:attr:`FamiliesFit.record`).
 
 The objects, crops and their seeds derive from ``seed`` alone, so a fit is the same on every run.  A
-class that no family writes to (cars, pedestrians) is left to the user's meshes.
+class that no family writes to (cars) is left to the user's meshes.
 """
 
 from __future__ import annotations

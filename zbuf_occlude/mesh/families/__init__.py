@@ -1,7 +1,8 @@
 """Procedural object families: seeded, parameterised generators of the outdoor objects real scans hold.
 
 Bare trunks, shrubs, trees with a crown of leaf clusters, utility poles (crossarms, insulators,
-short wire spans), street lights (arms, heads) and sign posts (several plates per post), each
+short wire spans), street lights (arms, heads), sign posts (several plates per post) and
+pedestrians (standing or walking, coats and bags), each
 composed of ``trimesh.creation`` parts in real size (metres, z up, standing on z = 0), each
 parameter range cited in its module's docstring.
 

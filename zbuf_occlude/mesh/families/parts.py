@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike
 if TYPE_CHECKING:
     import trimesh  # imported where used: a parser that lists the families loads no trimesh
 
-__all__ = ["assemble", "frustum", "leaf_cluster", "open_tube", "plate", "rod", "LEAF_GAP"]
+__all__ = ["assemble", "capsule", "ellipsoid", "frustum", "leaf_cluster", "open_tube", "plate", "rod", "LEAF_GAP"]
 
 #: Share of a leaf cluster's faces removed, so that a beam through an outer gap returns from the
 #: foliage behind it, as in a real crown (the shrub recipe of the sim-to-real runs).
@@ -37,6 +37,29 @@ def rod(start: ArrayLike, end: ArrayLike, radius: float, *, sections: int = ROUN
 
     segment = np.array([start, end], dtype=np.float64)
     return trimesh.creation.cylinder(radius=radius, segment=segment, sections=sections)
+
+
+def capsule(start: ArrayLike, end: ArrayLike, radius: float, *, count: int = 8) -> trimesh.Trimesh:
+    """A closed capsule (a cylinder with hemispherical ends) of ``radius`` metres whose end centres are
+    ``start`` (3,) and ``end`` (3,) (``trimesh.creation.capsule``, ``count`` segments around and along):
+    a limb whose joints stay round when it bends."""
+    import trimesh
+
+    start, end = np.asarray(start, dtype=np.float64), np.asarray(end, dtype=np.float64)
+    length = float(np.linalg.norm(end - start))
+    m = trimesh.creation.capsule(height=length, radius=radius, count=[count, count])
+    transform = trimesh.geometry.align_vectors([0.0, 0.0, 1.0], (end - start) / length) if length > 0 else np.eye(4)
+    transform[:3, 3] = 0.5 * (start + end)
+    return m.apply_transform(transform)
+
+
+def ellipsoid(centre: ArrayLike, semi_axes: ArrayLike) -> trimesh.Trimesh:
+    """A closed ellipsoid of ``semi_axes`` (3,) metres along x, y, z at ``centre`` (3,): an icosphere
+    (``trimesh.creation.icosphere``, 2 subdivisions) scaled per axis."""
+    import trimesh
+
+    s = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
+    return trimesh.Trimesh(s.vertices * np.asarray(semi_axes, dtype=np.float64) + centre, s.faces, process=False)
 
 
 def frustum(height: float, r_bottom: float, r_top: float, *, sections: int = ROUND_SECTIONS) -> trimesh.Trimesh:
