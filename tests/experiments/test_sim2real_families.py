@@ -44,12 +44,15 @@ def test_the_statistics_are_of_proportions_not_of_size_or_place() -> None:
     assert crop_shapes([np.zeros((1, 3))])["crops"] == 0  # a crop of one point has no proportions
 
 
-def test_the_fit_recovers_the_stretch_of_crops_made_with_a_known_one() -> None:
-    real = {"bush": _family_crops("shrub", 1.6, seed=1)}  # other objects than the fit draws (seed 0)
+@pytest.mark.parametrize(("family", "stretch"), [("shrub", 1.6), ("pedestrian", 1.4)])
+def test_the_fit_recovers_the_stretch_of_crops_made_with_a_known_one(family: str, stretch: float) -> None:
+    cls = {"shrub": "bush", "pedestrian": "pedestrian"}[family]
+    real = {cls: _family_crops(family, stretch, seed=1)}  # other objects than the fit draws (seed 0)
     fit = fit_families(real, HDL32E, CLASS_SIZES_M, objects=6, crops=3, iterations=3, seed=0)
-    (lo, hi) = fit.classes["bush"]["shrub"].width_scale
-    assert 1.6 / 1.25 <= np.sqrt(lo * hi) <= 1.6 * 1.25, (lo, hi)
-    tried = fit.record["classes"]["bush"]["tried"]["shrub"]
+    assert families_of(cls) == [family]  # the class's only family
+    (lo, hi) = fit.classes[cls][family].width_scale
+    assert stretch / 1.25 <= np.sqrt(lo * hi) <= stretch * 1.25, (lo, hi)
+    tried = fit.record["classes"][cls]["tried"][family]
     assert tried["steps"][0]["width_scale"] == [1.0, 1.0]  # the first range tried is the family as drawn
     assert tried["distance"] == min(s["distance"] for s in tried["steps"])  # the nearest range tried is kept
     assert tried["distance"] < tried["steps"][0]["distance"]  # and it is nearer than no stretch

@@ -1,16 +1,19 @@
 #!/bin/bash
 # Shape statistics of HDL-32E crops of the procedural families and of the street meshes against the real
-# LiDARNet v2 crops, per class (pole: LiDARNet's Trunk folder; bush: its Bush folder), before any fitting:
+# LiDARNet v2 crops, per class (pole: LiDARNet's Trunk folder; bush: its Bush folder; pedestrian: its
+# Pedestrian folder), before any fitting:
 #   street        the street meshes of the class, the preset recipe of docs/results/sensor_fit/realism.sh
 #                 (hdl32e preset, sensor 5-25 m away at 1.6-2.0 m, the mesh scaled to the class's sizes:
-#                 largest dimension 3-9 m for poles, 0.4-2.5 m for bushes);
+#                 largest dimension 3-9 m for poles, 0.4-2.5 m for bushes, 1.5-1.95 m for pedestrians);
+#                 the classes of the families run (pole and bush by default);
 #   FAMILY        COUNT objects of the family (zbuf-occlude families, seed 0), the same placements and sensor,
 #                 each object kept at its own size (--size its height, --size-of height: a scale of 1).
 # usage: bash docs/results/families/compare.sh SHARED_DATA OUT [KEEP]   (zbuf-occlude on PATH)
 #        writes OUT/meshes, OUT/scans/SET_CLASS/CLASS/I/*.npz, OUT/realism_SET_CLASS/ (realism.md, .csv, .png);
 #        with KEEP, copies each run's realism.csv, realism_classes.csv and realism.png there, and draws
 #        shape_pole.png, shape_bush.png and crops.png there (figure.py); OUT/heights.md: heights.py's table.
-#        COUNT=12 (default) objects per family; FAMILIES="trunk shrub" runs only those (street runs always).
+#        COUNT=12 (default) objects per family; FAMILIES="trunk shrub" runs only those, and the street meshes
+#        of their classes.
 #        FIT=fitted_families.json draws each family as that fit chose (zbuf-occlude families --fit; the sets are
 #        named FAMILY-fitted); SIZING=class scans the family objects as the street meshes are scanned (the class's
 #        sizes, as experiment sim2real's lidar set sizes every mesh) instead of at their own size.
@@ -20,9 +23,10 @@ count=${COUNT:-12}
 families=${FAMILIES:-trunk utility_pole street_light sign_post shrub}
 fit=${FIT:-}; sizing=${SIZING:-own}
 mkdir -p "$out"; : > "$out/left_out.txt"
-declare -A REAL=([pole]=Trunk [bush]=Bush)
-declare -A SIZE=([pole]=3:9 [bush]=0.4:2.5)  # the preset recipe's (sim2real's CLASS_SIZES_M)
-declare -A CLASS=([trunk]=pole [utility_pole]=pole [street_light]=pole [sign_post]=pole [shrub]=bush [tree]=tree)
+declare -A REAL=([pole]=Trunk [bush]=Bush [pedestrian]=Pedestrian)
+declare -A SIZE=([pole]=3:9 [bush]=0.4:2.5 [pedestrian]=1.5:1.95)  # the preset recipe's (sim2real's CLASS_SIZES_M)
+declare -A CLASS=([trunk]=pole [utility_pole]=pole [street_light]=pole [sign_post]=pole [shrub]=bush [tree]=tree
+                  [pedestrian]=pedestrian)
 scan() {  # scan SET CLASS I MESH UP SIZE SIZE_OF: four crops of one mesh, the preset recipe's placements
   local rc=0
   zbuf-occlude scan "$4" --sensor hdl32e --distance 5:25 --height 1.6:2.0 --size "$6" --azimuth=-180:180 \
@@ -33,7 +37,9 @@ scan() {  # scan SET CLASS I MESH UP SIZE SIZE_OF: four crops of one mesh, the p
   if [ $rc = 1 ]; then echo "some scans empty: $1 $4" >> "$out/left_out.txt"; fi
 }
 sets=()
-for cls in pole bush; do  # the street meshes, exactly as realism.sh's preset tag
+classes=$(for fam in $families; do echo "${CLASS[$fam]}"; done | awk '!seen[$0]++')
+for cls in $classes; do  # the street meshes of the families' classes, exactly as realism.sh's preset tag
+  [ -n "${REAL[$cls]:-}" ] || continue
   i=0
   for mesh in "$data"/street_objects/$cls/*.{glb,gltf,dae,obj} "$data"/street_objects/$cls/*/*.{glb,gltf,dae,obj}; do
     [ -f "$mesh" ] || continue

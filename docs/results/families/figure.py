@@ -2,7 +2,7 @@
 
 usage: python docs/results/families/figure.py OUT KEEP   (OUT: compare.sh's output folder; KEEP: where it copied the tables)
 
-Writes KEEP/shape_pole.png and KEEP/shape_bush.png from the realism_classes_SET_CLASS.csv tables (each row as
+Writes KEEP/shape_CLASS.png (pole, bush, pedestrian: the classes compare.sh ran) from the realism_classes_SET_CLASS.csv tables (each row as
 `zbuf-occlude realism` wrote it: the mean share of points per tenth of the height, the median points per crop
 in each range bin, the median height / width), and KEEP/crops.png: side views of the first crop of the
 first four objects of each simulated set (OUT/scans; the real crops are not drawn: LiDARNet v2 is not
@@ -23,7 +23,8 @@ from zbuf_occlude.sensors.scan_data import read_scan_npz  # noqa: E402
 from zbuf_occlude.sensors.scene import GROUND_ID  # noqa: E402
 
 out, keep = Path(sys.argv[1]), Path(sys.argv[2])
-SETS = {"pole": ["street", "trunk", "utility_pole", "street_light", "sign_post"], "bush": ["street", "shrub"]}
+SETS = {"pole": ["street", "trunk", "utility_pole", "street_light", "sign_post"], "bush": ["street", "shrub"],
+        "pedestrian": ["street", "pedestrian"]}
 BINS = ["5-10", "10-15", "15-20", "20-25"]
 
 
@@ -33,6 +34,7 @@ def rows(set_name: str, cls: str) -> dict[str, dict]:
 
 
 SETS = {cls: [s for s in sets if (keep / f"realism_classes_{s}_{cls}.csv").exists()] for cls, sets in SETS.items()}  # FAMILIES= runs fewer
+SETS = {cls: sets for cls, sets in SETS.items() if sets}
 for cls, sets in SETS.items():
     fig, (a, b, c) = plt.subplots(1, 3, figsize=(13, 3.8))
     curves = {"real (LiDARNet)": rows(sets[0], cls)["real"]} | {
