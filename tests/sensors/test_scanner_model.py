@@ -55,6 +55,59 @@ def test_the_switch_finder_finds_a_switch():
     assert _class_switches(ast.parse(code)) == [2, 2]
 
 
+KIND_NAMES = {kind.name for kind in SENSOR_KINDS}
+
+
+def _name_switches(tree: ast.AST) -> list[int]:
+    """Lines that compare a name (``kind.name``, ``kind_of(s).name``) or a call's answer (``kind_name(s)``) with a sensor
+    kind's name, and tuples of kind names alone: a capability of the kinds table asked for by name.  (The ``lidar``
+    training set shares the kind's name: ``train_set == "lidar"`` is no switch.)"""
+    lines = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Compare):
+            operands = [node.left, *node.comparators]
+            named = {n.value for o in operands for n in ast.walk(o) if isinstance(n, ast.Constant) and isinstance(n.value, str)}
+            asks = any((isinstance(o, ast.Attribute) and o.attr == "name") or isinstance(o, ast.Call) for o in operands)
+            if named & KIND_NAMES and asks:
+                lines.append(node.lineno)
+        elif isinstance(node, ast.Assign) and isinstance(node.value, ast.Tuple) and len(node.value.elts) > 1:
+            values = {e.value for e in node.value.elts if isinstance(e, ast.Constant)}
+            if values and values <= KIND_NAMES:
+                lines.append(node.lineno)
+    return lines
+
+
+def test_no_module_asks_a_sensor_kind_by_its_name():
+    """``capabilities(sensor).spins`` (or ``.fits``, ``.flies``, ``.trains``), never ``kind.name == "lidar"``: a new kind
+    says what it can do in its row of the table, and no guard elsewhere needs to learn its name."""
+    found = {}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if path.name == "kinds.py" and path.parent.name == "sensors":
+            continue
+        lines = _name_switches(ast.parse(path.read_text(encoding="utf-8")))
+        if lines:
+            found[str(path.relative_to(PACKAGE))] = lines
+    assert found == {}
+
+
+def test_the_name_switch_finder_finds_a_switch():
+    code = ('def f(s, kind, r):\n    if kind.name != "lidar" or kind_name(s) in ("airborne",):\n        pass\n'
+            'KINDS = ("lidar", "airborne")\nSETS = ("lidar", "pooled")\nLIDAR_SET = r["train_set"] == "lidar"\n')  # fmt: skip
+    assert sorted(_name_switches(ast.parse(code))) == [2, 2, 4]  # both tests on line 2, the tuple of kinds; not SETS, not a set's name
+
+
+def test_capabilities_of_each_kind_and_of_anything_else():
+    from zbuf_occlude.sensors.kinds import NOT_A_SENSOR, capabilities, sensor_from_name
+
+    table = {name: (k.spins, k.fits, k.trains, k.flies) for name, k in ((k.name, k) for k in SENSOR_KINDS)}
+    assert table == {"lidar": (True, True, True, False), "airborne": (False, True, True, True),
+                     "ray_table": (False, False, False, False), "depth_camera": (False, False, False, False)}  # fmt: skip
+    assert capabilities(sensor_from_name("hdl32e")).spins and capabilities(sensor_from_name("riegl-vq780i")).flies
+    for thing in (None, "hdl32e", 3, object()):
+        kind = capabilities(thing)
+        assert kind is NOT_A_SENSOR and not (kind.pulsed or kind.spins or kind.fits or kind.trains or kind.flies)
+
+
 def test_every_kind_has_presets_of_its_class_and_pulsed_kinds_a_beam():
     for kind in SENSOR_KINDS:
         assert kind.presets, kind.name

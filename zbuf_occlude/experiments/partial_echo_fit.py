@@ -51,7 +51,7 @@ from zbuf_occlude.sensors.checks import count
 from zbuf_occlude.sensors.fit.engine import Refine, Refinement
 from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP
 from zbuf_occlude.sensors.fit.partial_echoes import FIT_GRID, PartialEchoFit, fit_min_echo_reflectance
-from zbuf_occlude.sensors.kinds import kind_name, with_beam
+from zbuf_occlude.sensors.kinds import capabilities, with_beam
 
 if TYPE_CHECKING:
     from zbuf_occlude.real_scans.records import RealScan
@@ -91,7 +91,7 @@ def partial_echo_sensor(sensor: Lidar, min_echo_reflectance: float | None = None
         ``sensor`` is no spinning LiDAR; its beam has no divergence (naming ``--meshes`` and the beam's
         ``divergence_deg``); a ``min_echo_reflectance`` outside [0, 1].
     """
-    if kind_name(sensor) != "lidar":
+    if not capabilities(sensor).spins:
         raise InvalidInputError(f"{MESHES_OPTION}: the partial echoes are fitted for a spinning LiDAR, not a {type(sensor).__name__}")
     beam = sensor.beam
     changes = footprint_changes(beam, footprint=True, divergence_deg=None, sensor=sensor.name,

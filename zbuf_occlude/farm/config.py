@@ -213,7 +213,7 @@ class SensorCropParams:
         if self.distributions.reflectivity is not None and kind.flies:
             raise InvalidInputError(f"{OPTION_NAMES['sensor_reflectivity']}: {self.name} is an {kind.title}, whose crops fly over "
                                     "every surface alike (no detection threshold per object); leave it out")  # fmt: skip
-        if self.across_sight_width_m is not None and kind.name != "lidar":
+        if self.across_sight_width_m is not None and not kind.spins:
             raise InvalidInputError(f"--sensor-across-sight-width measures across a spinning LiDAR's line of sight; {self.name} is not one")
         changes = footprint_changes(sensor.beam, footprint=bool(self.footprint), divergence_deg=self.divergence_deg, sensor=self.name,
                                     names=(OPTION_NAMES["sensor_footprint"], OPTION_NAMES["sensor_divergence_deg"]))  # fmt: skip

@@ -4,8 +4,9 @@ A sensor is one of the kinds in :data:`SENSOR_KINDS`.  Everything that differs b
 field of its :class:`SensorKind` row, read from here: the presets (:func:`sensor_from_name`), a
 sensor file's keys (every kind takes ``"preset"`` and a partial ``"beam"``), whether it fires
 pulses through a beam (LiDARs) or frames (cameras), and whether it flies a plan of its own.
-Nothing outside this module asks a sensor for its class: ``kind_of(sensor).pulsed``, not an
-``isinstance`` or ``issubclass`` test (``tests/sensors/test_scanner_model.py`` walks the source for one).
+Nothing outside this module asks a sensor for its class or a kind for its name: ``kind_of(sensor).pulsed``
+or ``capabilities(sensor).spins``, not an ``isinstance`` or ``issubclass`` test nor ``kind.name == "lidar"``
+(``tests/sensors/test_scanner_model.py`` walks the source for them).
 
 A scanner that fires pulses is a beam (:class:`~zbuf_occlude.sensors.beam.Beam`) fired along a
 scan pattern (its class: rings, airborne lines, a table's rows) from a platform (a pose, a
@@ -31,8 +32,9 @@ from zbuf_occlude.sensors.ray_table import RAY_TABLE_FILE_BEAM, RAY_TABLE_PRESET
 __all__ = [
     "SENSOR_KINDS",
     "SensorKind",
+    "NOT_A_SENSOR",
+    "capabilities",
     "kind_of",
-    "kind_name",
     "kind_named",
     "preset_names",
     "sensor_from_name",
@@ -65,6 +67,15 @@ class SensorKind:
     sweeps_sectors : bool
         Whether its pulses sweep the azimuths evenly, so that a crop may fire only the object's
         azimuth sector (``scan(azimuth_range_deg=)``) and find the same returns there.
+    spins : bool
+        Whether it spins a fan of fixed elevations (rings) about its vertical axis from the ground:
+        what ``fit-sensor`` fits ring by ring (:func:`~zbuf_occlude.sensors.fit.fit_lidar`), across
+        whose line of sight a crop's width is measured, and whose partial echoes are fitted.
+    fits : bool
+        Whether ``fit-sensor`` fits it to real scans (:mod:`zbuf_occlude.sensors.fit`).
+    trains : bool
+        Whether ``experiment sim2real`` scans its training crops with it (an object placed before a
+        ground scanner, or flown over).
     """
 
     name: str
@@ -75,12 +86,15 @@ class SensorKind:
     flies: bool = False
     array_fields: tuple[str, ...] = ()
     sweeps_sectors: bool = False
+    spins: bool = False
+    fits: bool = False
+    trains: bool = False
 
 
 #: Every kind, in the order help texts list them.
 SENSOR_KINDS: tuple[SensorKind, ...] = (
-    SensorKind("lidar", "spinning LiDAR", Lidar, LIDAR_PRESETS, pulsed=True, sweeps_sectors=True),
-    SensorKind("airborne", "airborne scanner", AirborneScanner, AIRBORNE_PRESETS, pulsed=True, flies=True),
+    SensorKind("lidar", "spinning LiDAR", Lidar, LIDAR_PRESETS, pulsed=True, sweeps_sectors=True, spins=True, fits=True, trains=True),
+    SensorKind("airborne", "airborne scanner", AirborneScanner, AIRBORNE_PRESETS, pulsed=True, flies=True, fits=True, trains=True),
     SensorKind(
         "ray_table", "ray-table scanner", RayTable, RAY_TABLE_PRESETS, pulsed=True, array_fields=("time_s", "azimuth_deg", "elevation_deg")
     ),  # fmt: skip
@@ -105,11 +119,14 @@ def kind_of(sensor: object) -> SensorKind:
     return kind
 
 
-def kind_name(sensor: object) -> str | None:
-    """The kind's name of ``sensor`` (``"lidar"``, ``"airborne"``, ...), or None for anything that is no sensor: a test of
-    what a caller was given that refuses in its own words."""
-    kind = _BY_CLASS.get(type(sensor))
-    return None if kind is None else kind.name
+#: What :func:`capabilities` answers for anything that is no sensor: a kind that can do nothing.
+NOT_A_SENSOR = SensorKind("", "not a sensor", type(None), {}, pulsed=False)
+
+
+def capabilities(sensor: object) -> SensorKind:
+    """The :class:`SensorKind` of ``sensor``, or :data:`NOT_A_SENSOR` for anything else: what a check of
+    what a caller was given asks (``if not capabilities(base).spins: refuse in its own words``)."""
+    return _BY_CLASS.get(type(sensor), NOT_A_SENSOR)
 
 
 def kind_named(name: str) -> SensorKind:

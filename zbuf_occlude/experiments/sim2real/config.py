@@ -54,9 +54,6 @@ RETURNS_RANGE_RESOLUTION_M = 0.75
 FAMILY_COUNT = 8
 #: The seed of the families' objects and of their fit's crops (:func:`~zbuf_occlude.experiments.sim2real.families.fit_families`): the same every run.
 FAMILIES_SEED = 0
-#: The sensor kinds (:data:`~zbuf_occlude.sensors.kinds.SENSOR_KINDS` names) that can scan the ``lidar`` set:
-#: a spinning LiDAR on a car's mount, or an airborne scanner flying over (:func:`~.data.sensor_elevation_deg`).
-TRAINING_SENSOR_KINDS = ("lidar", "airborne")
 
 
 @dataclass(frozen=True)
@@ -353,7 +350,7 @@ class Sim2RealConfig:
 
         sensor = sensor_from_name(os.fspath(self.sensor)) if isinstance(self.sensor, (str, os.PathLike)) else self.sensor
         kind = kind_of(sensor)
-        if kind.name not in TRAINING_SENSOR_KINDS:
+        if not kind.trains:  # a spinning LiDAR on a car's mount, or an airborne scanner flying over (data.sensor_elevation_deg)
             raise InvalidInputError(f"{n('sensor')} {sensor.name}: the lidar training set needs a LiDAR or an airborne scanner, "
                                     f"not a {kind.title}")  # fmt: skip
         if self.fit_sensor and kind.flies:

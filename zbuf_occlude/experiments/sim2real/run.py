@@ -70,9 +70,9 @@ def _fit_sensor(scans: list, base, labels: np.ndarray, names: list[str]):
     ``{class: SizeRange}`` (heights: the top return above the ground) and the sensor's JSON with the fit and the ``crops`` block.
     """
     from zbuf_occlude.experiments.sensor_fit import fit_to_scans
-    from zbuf_occlude.sensors.kinds import kind_of
+    from zbuf_occlude.sensors.kinds import capabilities
 
-    if kind_of(base).name != "lidar":
+    if not capabilities(base).spins:
         raise InvalidInputError(f"--fit-sensor fits a spinning LiDAR: --sensor must name one, got {base.name!r}")
     try:
         fit, spec = fit_to_scans(scans, base, [names[int(y)] for y in labels], every_class=True)

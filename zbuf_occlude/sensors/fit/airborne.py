@@ -72,7 +72,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.sensors.airborne import AirborneScanner
 from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate, check_bootstrap, check_fit_seed, estimates_markdown
-from zbuf_occlude.sensors.kinds import kind_name
+from zbuf_occlude.sensors.kinds import capabilities
 
 __all__ = [
     "AirborneFit", "CropFaces", "FITTED_LINES", "HORIZONTAL_DEG", "MAX_CROP_POINTS", "MIN_CROP_POINTS", "ONE_SIDED_SHARE",
@@ -440,7 +440,7 @@ def fit_airborne(crops: Sequence[NDArray[np.floating]], base: AirborneScanner, *
     ArgumentTypeError
         ``seed`` or ``bootstrap`` not an integer.
     """
-    if kind_name(base) != "airborne":
+    if not (capabilities(base).flies and capabilities(base).fits):
         raise InvalidInputError(f"fit_airborne fits an airborne scanner, got {type(base).__name__}")
     seed, bootstrap = check_fit_seed(seed), check_bootstrap(bootstrap)
     faces = []

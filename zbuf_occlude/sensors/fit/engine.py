@@ -47,9 +47,8 @@ from zbuf_occlude.errors import InvalidInputError, OutputError
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.real_scans.datasets import load_real_scans
 from zbuf_occlude.sensors.fit.airborne import AirborneFit, fit_airborne
-from zbuf_occlude.sensors.fit.fitted_beam import FITTED_KINDS
 from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, LidarFit, fit_lidar
-from zbuf_occlude.sensors.kinds import kind_name
+from zbuf_occlude.sensors.kinds import capabilities
 from zbuf_occlude.sensors.fit.return_model import ReturnModelFit, fit_return_model, merge_scans
 from zbuf_occlude.sensors.fit.returns import VEGETATION_CLASSES
 from zbuf_occlude.sensors.fit.scans import MIN_PLACEMENT_SCANS, crop_placement_json
@@ -218,9 +217,9 @@ def _base_sensor(sensor: str, out: str | os.PathLike, refine: Refine | None = No
     if out.is_dir():
         raise OutputError(f"--out {out} is a folder; name the file to write")
     base = sensor_from_name(sensor)
-    if refine is not None and kind_name(base) != "lidar":
+    if refine is not None and not capabilities(base).spins:
         raise InvalidInputError(f"{refine.option}: fits a spinning LiDAR, and --sensor {sensor} is a {type(base).__name__}")
-    if kind_name(base) not in FITTED_KINDS:
+    if not capabilities(base).fits:
         raise InvalidInputError(f"--sensor {sensor}: fit-sensor fits a spinning LiDAR or an airborne scanner, not a {type(base).__name__}")
     return base, out
 
@@ -329,7 +328,7 @@ def _fit_scans_into(folder: OwnedFolder, real: str | os.PathLike, base: Any, out
     say(f"reading the real scans under {real} ...")
     scans = load_real_scans(real, dataset=dataset)
     counts = Counter(s.label for s in scans)
-    airborne = kind_name(base) == "airborne"
+    airborne = capabilities(base).flies
     kind = "an airborne scanner" if airborne else "a spinning LiDAR"
     say(f"read {len(scans)} scans of {len(counts)} class{'' if len(counts) == 1 else 'es'} ({', '.join(f'{k}: {n}' for k, n in sorted(counts.items()))}); "
         f"fitting {kind}, {base.name}, with {BOOTSTRAP} bootstrap resamples ...")  # fmt: skip

@@ -34,12 +34,10 @@ from zbuf_occlude.sensors.checks import MAX_RANGE_M
 from zbuf_occlude.sensors.echoes import MAX_RETURNS
 from zbuf_occlude.sensors.fit.lidar import Estimate
 from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
-from zbuf_occlude.sensors.kinds import kind_name, kind_named
+from zbuf_occlude.sensors.kinds import capabilities, kind_of
 
-__all__ = ["FITTED_KINDS", "MIN_DETECTION_THRESHOLD", "SETS_BEAM", "fitted_sensor", "fitted_sets"]
+__all__ = ["MIN_DETECTION_THRESHOLD", "SETS_BEAM", "fitted_sensor", "fitted_sets"]
 
-#: The sensor kinds (:mod:`~zbuf_occlude.sensors.kinds` names) the return model applies to.
-FITTED_KINDS = ("lidar", "airborne")
 #: Each estimate of the fit that sets the beam, and the beam field it sets.
 SETS_BEAM = {"range_resolution_m": "range_resolution_m", "max_returns": "max_returns", "beam_divergence_deg": "divergence_deg",
              "detection_threshold": "detection_threshold", "intensity_scale": "intensity_scale"}  # fmt: skip
@@ -52,8 +50,8 @@ MIN_DETECTION_THRESHOLD = 1.0 / MAX_RANGE_M**2
 
 def fitted_sets(estimates: Mapping[str, Estimate], sensor: Any) -> tuple[str, ...]:
     """The estimates that set ``sensor``'s beam (:data:`SETS_BEAM`, in that order): those measured (finite, > 0), for a
-    sensor of :data:`FITTED_KINDS`; none for anything else."""
-    if kind_name(sensor) not in FITTED_KINDS:
+    sensor that ``fit-sensor`` fits (:attr:`~zbuf_occlude.sensors.kinds.SensorKind.fits`); none for anything else."""
+    if not capabilities(sensor).fits:
         return ()
     return tuple(name for name in SETS_BEAM if math.isfinite(estimates[name].value) and estimates[name].value > 0)
 
@@ -83,12 +81,12 @@ def fitted_sensor(estimates: Mapping[str, Estimate], sensor: Any, *, altitude_m:
     Raises
     ------
     ArgumentTypeError
-        ``sensor`` is not of :data:`FITTED_KINDS`.
+        ``sensor`` is not of a kind ``fit-sensor`` fits.
     InvalidInputError
         A detection threshold below :data:`MIN_DETECTION_THRESHOLD` (naming the altitude it rests on); fitted values
         the beam refuses (naming the field).
     """
-    if kind_name(sensor) not in FITTED_KINDS:
+    if not capabilities(sensor).fits:
         raise ArgumentTypeError(f"the return model applies to a Lidar or an AirborneScanner, got {described(sensor)}")
     sets = fitted_sets(estimates, sensor)
     e = {SETS_BEAM[name]: estimates[name].value for name in sets}
@@ -115,7 +113,7 @@ def fitted_sensor(estimates: Mapping[str, Estimate], sensor: Any, *, altitude_m:
     changes = {**fitted, **data_sheet, **model}
     name = sensor.name if sensor.name.endswith("-fitted") else f"{sensor.name}-fitted"
     what = f"returns fitted to {n_pulses:,} pulses ({', '.join(sets) or 'nothing measured'})"
-    extra = {"altitude_m": altitude_m} if kind_name(sensor) == "airborne" else {}  # the height the scale was fitted at
+    extra = {"altitude_m": altitude_m} if kind_of(sensor).flies else {}  # the height the scale was fitted at
     out = replace(sensor, beam=beam.with_(**changes), name=name, source=f"{sensor.source}; {what}".lstrip("; "), **extra)
     kept = f"every other beam field is the {beam.name} beam's, as the base sensor {sensor.name} gives it"
     return out, {"fitted": fitted, "data_sheet": data_sheet, "model": model, "source": source, "kept": kept}
@@ -150,7 +148,7 @@ def _footprint(sensor: Any, returns: int, fitted: dict, model: dict) -> tuple[di
     if divergence > 0 and "divergence_deg" not in fitted:
         data_sheet["divergence_deg"] = divergence
     elif divergence <= 0:
-        preset = kind_named(kind_name(sensor)).presets.get(sensor.name.removesuffix("-fitted").lower())
+        preset = kind_of(sensor).presets.get(sensor.name.removesuffix("-fitted").lower())
         if preset is not None and preset.beam.divergence_deg > 0:
             data_sheet["divergence_deg"] = divergence = preset.beam.divergence_deg
             source = preset.beam.source or preset.source

@@ -53,7 +53,7 @@ from numpy.typing import NDArray
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.geometry.arguments import described
 from zbuf_occlude.geometry.sampling import check_seed
-from zbuf_occlude.sensors.kinds import kind_name
+from zbuf_occlude.sensors.kinds import capabilities
 from zbuf_occlude.sensors.lidar import Lidar
 
 __all__ = [
@@ -421,7 +421,7 @@ def fit_lidar(clouds: Sequence[NDArray[np.floating]], base: Lidar, *, seed: int 
     ArgumentTypeError
         ``seed`` or ``bootstrap`` not an integer.
     """
-    if kind_name(base) != "lidar":
+    if not capabilities(base).spins:
         raise InvalidInputError(f"fit_lidar fits a spinning LiDAR, got {type(base).__name__}")
     seed, bootstrap = check_fit_seed(seed), check_bootstrap(bootstrap)
     beams = np.asarray(base.elevations_deg, dtype=np.float64)

@@ -24,7 +24,7 @@ from zbuf_occlude.sensors.fit.scans import (
     _nan_median_or_one,
     _width_profile,
 )
-from zbuf_occlude.sensors.kinds import kind_name
+from zbuf_occlude.sensors.kinds import capabilities
 
 __all__ = ["fit_object_shape", "fit_visible_across_sight", "fit_width_profile", "fit_width_scale", "WIDTH_SAMPLES"]
 #: Simulated crops of a mesh that :func:`fit_width_scale` and :func:`fit_width_profile` measure.
@@ -159,7 +159,7 @@ def _check_measure(n_samples, sensor) -> None:
     """A fit's crops: ``n_samples`` >= 1 of a spinning LiDAR (widths are measured across its line of sight)."""
     if int(n_samples) < 1:
         raise InvalidInputError(f"n_samples must be >= 1, got {n_samples}")
-    if kind_name(sensor) != "lidar":
+    if not capabilities(sensor).spins:
         raise InvalidInputError(
             f"widths are measured across a spinning LiDAR's line of sight; {getattr(sensor, 'name', sensor)!r} is not one"
         )
