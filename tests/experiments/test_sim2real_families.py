@@ -72,6 +72,53 @@ def test_the_fit_chooses_the_family_the_crops_came_from_and_leaves_classes_witho
     assert sum(c.share for c in fit.classes["pole"].values()) == pytest.approx(1.0)
 
 
+def _entries(family: str, width: float, seed: int, objects: int) -> list:
+    """Objects of ``family`` stretched by ``width`` as MeshEntry (the user's meshes of its class, for the fit)."""
+    from zbuf_occlude.experiments.sim2real.meshes import MeshEntry
+    from zbuf_occlude.mesh.families.fitted import draw_object
+    from zbuf_occlude.mesh.families.registry import FAMILIES
+    from zbuf_occlude.mesh.load import normalize_mesh
+
+    fam = FAMILIES[family]
+    return [MeshEntry(None, fam.class_name, f"mine/{family}_{k}", normalize_mesh(draw_object(fam, seed, k, (width, width))[1]))
+            for k in range(objects)]  # fmt: skip
+
+
+def test_a_class_whose_meshes_come_nearer_the_real_crops_than_every_family_keeps_them_alone() -> None:
+    """The real crops are the fit's own scans of the user's meshes (other shrubs than the fit draws): no family can
+    come nearer, so none is added."""
+    from zbuf_occlude.experiments.sim2real import families as fam
+
+    mine = _entries("shrub", 1.6, seed=1, objects=4)
+    clouds: list[np.ndarray] = []
+    original = fam.crop_shapes
+    fam.crop_shapes = lambda c: clouds.extend(c) or original(c)  # keep the clouds the statistics are made of
+    try:
+        fam._scanned(mine, CLASS_SIZES_M["bush"], HDL32E, crops=3, seed=0)
+    finally:
+        fam.crop_shapes = original
+    fit = fit_families({"bush": clouds}, HDL32E, CLASS_SIZES_M, objects=4, crops=3, iterations=1, seed=0, meshes={"bush": mine})
+    assert fit.classes == {} and fit.counts(8) == {} and family_meshes(fit, 8, seed=0) == []
+    kept = fit.record["meshes_kept"]["bush"]
+    assert kept["meshes"]["distance"] == pytest.approx(0.0, abs=1e-12) and kept["meshes"]["objects"] == 4
+    assert all(t["distance"] > 0 for t in kept["tried"].values())
+    assert parse_families_fit(json.loads(json.dumps(fit.record))).classes == {}  # the record reads back: nothing chosen
+
+
+def test_a_family_nearer_than_the_meshes_is_chosen_and_the_meshes_distance_recorded() -> None:
+    """Tall boxes as the only meshes of the bush class are far from shrub crops; the shrubs are chosen."""
+    from zbuf_occlude.experiments.sim2real.meshes import MeshEntry
+    from zbuf_occlude.mesh.load import normalize_mesh
+
+    boxes = [MeshEntry(None, "bush", f"mine/box_{k}", normalize_mesh(trimesh.creation.box(extents=(0.5, 0.4 + 0.1 * k, 2.0))))
+             for k in range(3)]  # fmt: skip
+    real = {"bush": _family_crops("shrub", 1.6, seed=1, objects=4, crops=3)}
+    fit = fit_families(real, HDL32E, CLASS_SIZES_M, objects=4, crops=3, iterations=1, seed=0, meshes={"bush": boxes})
+    entry = fit.record["classes"]["bush"]
+    assert set(fit.classes["bush"]) == {"shrub"} and fit.record["meshes_kept"] == {}
+    assert entry["tried"]["shrub"]["distance"] < entry["meshes"]["distance"]
+
+
 def test_a_fit_is_the_same_every_run_and_its_objects_are_those_the_families_command_writes(tmp_path: Path) -> None:
     from zbuf_occlude.cli.main import main
 

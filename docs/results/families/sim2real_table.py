@@ -1,14 +1,16 @@
 """The fitted families' sim2real runs against the same protocol without them, as Markdown.
 
-usage: python docs/results/families/sim2real_table.py FAMILIES_RUN [STREET_RUN]
+usage: python docs/results/families/sim2real_table.py FAMILIES_RUN [BASE_RUN [BASE_NAME]]
   FAMILIES_RUN  one folder per model with the runs.jsonl of
                 experiment sim2real ... --fit-families --sets lidar,pooled (docs/results/families/sim2real)
-  STREET_RUN    the same command without --fit-families (the street meshes alone), where it was run
+  BASE_RUN      the run to compare with, where it was run: by default the same command without
+                --fit-families (the street meshes alone)
+  BASE_NAME     what the table calls BASE_RUN (default "street meshes alone")
 
 Prints a table per model: each set's mean class accuracy on the scored half (mean ± std over seeds), its
 difference from the same run's real→real with the one-sided exact permutation p that real→real is above,
-and, where STREET_RUN holds the model, the same set without the families over the seeds both runs hold, with
-the difference (families − street) and the p that the families' set is above.
+and, where BASE_RUN holds the model, the same set in BASE_RUN over the seeds both runs hold, with the difference
+(FAMILIES_RUN − BASE_RUN) and the p that FAMILIES_RUN's set is above.
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ def mean(values: list[float]) -> float:
 def main() -> None:
     run = Path(sys.argv[1])
     street = Path(sys.argv[2]) if len(sys.argv) > 2 else None
+    base_name = sys.argv[3] if len(sys.argv) > 3 else "street meshes alone"
     for model in MODELS:
         ours = scores(run / model)
         if not ours:
@@ -53,8 +56,8 @@ def main() -> None:
         base = scores(street / model) if street else {}
         shared = sorted(set(seeds).intersection(*(set(base.get(k, {})) for k in (*SETS, "real→real")))) if base else []
         print(f"\n### {model}: seeds {seeds[0]}-{seeds[-1]}\n")
-        print("| set | with the fitted families | Δ vs real→real (p real→real above) | street meshes alone, seeds both hold | "
-              "families − street (p families above) |")  # fmt: skip
+        print(f"| set | with the fitted families | Δ vs real→real (p real→real above) | {base_name}, seeds both hold | "
+              f"difference (p the first above) |")  # fmt: skip
         print("|---|---|---|---|---|")
         real = [ours["real→real"][s] for s in seeds]
         for kind in SETS:

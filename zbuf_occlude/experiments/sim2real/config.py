@@ -190,7 +190,8 @@ class Sim2RealConfig:
         ``fit_sensor``; :func:`~zbuf_occlude.experiments.sim2real.families.fit_families`) and add
         ``family_count`` objects of the chosen families per class to the meshes of every mesh-only
         set (``fitted_families.json``; ``settings.json``: ``fit_families``).  A class no family
-        writes to keeps the user's meshes alone.
+        writes to, or whose meshes' crops come nearer the real ones than every family's, keeps the
+        user's meshes alone.
     family_count : int
         Family objects added per fitted class (:data:`FAMILY_COUNT`), 1 to
         :data:`~zbuf_occlude.defaults.MAX_FAMILY_MESHES`.

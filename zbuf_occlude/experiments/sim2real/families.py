@@ -15,8 +15,11 @@ distance to the real crops is the mean ``|log(q_sim / q_real)|`` over the 10th, 
 percentiles of height / width plus the profile distance
 (:func:`~zbuf_occlude.experiments.realism_stats.profile_distance`); of the ranges tried (the first
 and each update's) the nearest is kept, and the class takes the families within :data:`CHOICE_SLACK`
-of its nearest family, in equal shares.  Every family tried is recorded
-with what it was fitted to and what it reached (:attr:`FamiliesFit.record`).
+of its nearest family, in equal shares.  Given the user's meshes of the class, scanned the same way,
+only the families nearer the real crops than those meshes are (a family that would move the class's
+crops away from the real ones adds nothing); a class whose meshes are nearer than every family keeps
+its meshes alone.  Every family tried is recorded with what it was fitted to and what it reached,
+and the meshes' statistics beside them (:attr:`FamiliesFit.record`).
 
 The objects, crops and their seeds derive from ``seed`` alone, so a fit is the same on every run.  A
 class that no family writes to (cars) is left to the user's meshes.
@@ -90,23 +93,31 @@ def _distance(sim: dict, real: dict) -> float:
     return float(q.mean()) + profile_distance(sim["height_shares"], real["height_shares"])
 
 
+def _scanned(entries: Sequence, size: SizeRange, sensor, *, crops: int, seed: int) -> dict:
+    """:func:`crop_shapes` of ``crops`` crops of each of ``entries`` (MeshEntry: normalised, z up), scanned as the
+    ``lidar`` set scans them (:data:`~zbuf_occlude.experiments.sim2real.placement.LIDAR_PLACEMENT`, the class's size)."""
+    from zbuf_occlude.sensors.crops import lidar_object_samples
+
+    placement, clouds = CropPlacement(), []
+    for entry in entries:
+        dist, _ = placement.crop_distributions(entry, size)
+        samples = lidar_object_samples(entry.mesh, sensor, name=entry.name, n_samples=crops, n_points=1024, seed=seed,
+                                       distributions=dist, class_name=entry.class_name)  # fmt: skip
+        clouds += [np.unique(c.points.astype(np.float64), axis=0) for c in samples if c.n_visible >= _MIN_RETURNS]
+    return crop_shapes(clouds)
+
+
 def _simulated(family: str, size: SizeRange, sensor, width_scale: tuple[float, float], *, objects: int, crops: int,
                seed: int) -> dict:  # fmt: skip
     """:func:`crop_shapes` of ``crops`` crops each of ``objects`` objects of ``family`` stretched in ``width_scale``,
     scanned as the ``lidar`` set scans (the same objects and placements for every ``width_scale``)."""
     from zbuf_occlude.experiments.sim2real.meshes import MeshEntry
     from zbuf_occlude.mesh.load import normalize_mesh
-    from zbuf_occlude.sensors.crops import lidar_object_samples
 
-    fam, placement, clouds = FAMILIES[family], CropPlacement(), []
-    for k in range(objects):
-        _, mesh, _ = draw_object(fam, seed, k, width_scale)
-        entry = MeshEntry(path=None, class_name=fam.class_name, name=f"families/{family}_{k}", mesh=normalize_mesh(mesh))
-        dist, _ = placement.crop_distributions(entry, size)
-        samples = lidar_object_samples(entry.mesh, sensor, name=entry.name, n_samples=crops, n_points=1024, seed=seed,
-                                       distributions=dist, class_name=fam.class_name)  # fmt: skip
-        clouds += [np.unique(c.points.astype(np.float64), axis=0) for c in samples if c.n_visible >= _MIN_RETURNS]
-    return crop_shapes(clouds)
+    fam = FAMILIES[family]
+    entries = [MeshEntry(path=None, class_name=fam.class_name, name=f"families/{family}_{k}",
+                         mesh=normalize_mesh(draw_object(fam, seed, k, width_scale)[1])) for k in range(objects)]  # fmt: skip
+    return _scanned(entries, size, sensor, crops=crops, seed=seed)
 
 
 def _fit_family(family: str, real: dict, size: SizeRange, sensor, *, objects: int, crops: int, seed: int,
@@ -130,7 +141,8 @@ def _fit_family(family: str, real: dict, size: SizeRange, sensor, *, objects: in
 
 
 def fit_families(real: Mapping[str, Sequence[NDArray[np.floating]]], sensor, sizes: Mapping[str, SizeRange], *, objects: int = 8,
-                 crops: int = 4, iterations: int = 3, seed: int = 0, fitted_on: str = "") -> FamiliesFit:  # fmt: skip
+                 crops: int = 4, iterations: int = 3, seed: int = 0, fitted_on: str = "",
+                 meshes: Mapping[str, Sequence] | None = None) -> FamiliesFit:  # fmt: skip
     """Fit the families of each class of ``real`` to its crops (module docstring).
 
     Parameters
@@ -148,13 +160,18 @@ def fit_families(real: Mapping[str, Sequence[NDArray[np.floating]]], sensor, siz
         Every object's and crop's seed.
     fitted_on : str
         What the crops are, for the record (``"the fit half: 343 scans"``).
+    meshes : mapping of str to sequence of MeshEntry, optional
+        The user's meshes per class (normalised, z up), scanned as the families are: a class takes only
+        the families nearer its real crops than its meshes are, and none where its meshes are nearer
+        than every family.  A class without meshes here takes its nearest families.
 
     Returns
     -------
     FamiliesFit
         Its :attr:`~zbuf_occlude.mesh.families.fitted.FamiliesFit.record` is the JSON document
         (``format``, ``fitted_on``, ``statistic``, ``seed``, ``objects``, ``crops``, per class the
-        real crops' statistics, every family tried and the chosen ones).
+        real crops' statistics, every family tried, the meshes' statistics and the chosen families;
+        a class that keeps its meshes alone is listed under ``meshes_kept`` instead of ``classes``).
 
     Raises
     ------
@@ -168,7 +185,7 @@ def fit_families(real: Mapping[str, Sequence[NDArray[np.floating]]], sensor, siz
     doc: dict = {"format": FAMILIES_FIT_FORMAT, "fitted_on": fitted_on, "sensor": getattr(sensor, "name", ""),
                  "statistic": "crops' height / width (10th, 50th, 90th percentile) and share of points per tenth of the height",
                  "seed": int(seed), "objects": objects, "crops": crops, "iterations": iterations, "choice_slack": CHOICE_SLACK,
-                 "classes": {}}  # fmt: skip
+                 "classes": {}, "meshes_kept": {}}  # fmt: skip
     for cls in sorted(real):
         names = families_of(cls)
         target = crop_shapes(real[cls])
@@ -181,12 +198,20 @@ def fit_families(real: Mapping[str, Sequence[NDArray[np.floating]]], sensor, siz
         best = min(t["distance"] for t in tried.values())
         if not math.isfinite(best):
             continue
-        chosen = [n for n, t in tried.items() if t["distance"] <= best + CHOICE_SLACK]
+        own = _scanned(meshes[cls], sizes[cls], sensor, crops=crops, seed=seed) if meshes and meshes.get(cls) else None
+        own_distance = _distance(own, target) if own is not None else math.inf
+        chosen = [n for n, t in tried.items() if t["distance"] <= best + CHOICE_SLACK and t["distance"] < own_distance]
         for t in tried.values():  # JSON has no infinity: a family with too few crops has no distance
             t["distance"] = t["distance"] if math.isfinite(t["distance"]) else None
-        doc["classes"][cls] = {"real": target, "tried": tried,
-                               "chosen": {n: {"width_scale": tried[n]["width_scale"], "share": 1.0 / len(chosen)} for n in chosen}}  # fmt: skip
-    if not doc["classes"]:
+        entry = {"real": target, "tried": tried}
+        if own is not None:
+            entry["meshes"] = {**own, "objects": len(meshes[cls]), "distance": own_distance if math.isfinite(own_distance) else None}
+        if not chosen:
+            log.info("the %s meshes come nearer the real crops than every family: the class keeps them alone", cls)
+            doc["meshes_kept"][cls] = entry
+            continue
+        doc["classes"][cls] = {**entry, "chosen": {n: {"width_scale": tried[n]["width_scale"], "share": 1.0 / len(chosen)} for n in chosen}}
+    if not doc["classes"] and not doc["meshes_kept"]:
         raise InvalidInputError(
             f"no class of the real crops has a family and {MIN_FIT_CROPS} crops to fit it to; families write to "
             f"{', '.join(sorted({f.class_name for f in FAMILIES.values()}))}"

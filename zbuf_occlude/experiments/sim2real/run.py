@@ -249,11 +249,16 @@ def prepare_sets(config: Sim2RealConfig, *, say: Callable[[str], None] | None = 
     if config.fit_families:
         first_half = {c: [scans[kept[i]].points for i in half_a if real_y[i] == k] for k, c in enumerate(names)}
         say(f"fitting the procedural families to the first half's crops: {len(half_a)} scans")
-        family_fit = fit_families(first_half, lidar, config.sizes, seed=FAMILIES_SEED,
+        by_class = {c: [m for m in meshes if m.class_name == c] for c in names}
+        family_fit = fit_families(first_half, lidar, config.sizes, seed=FAMILIES_SEED, meshes=by_class,
                                   fitted_on=f"the first half of {config.real}: {len(half_a)} scans")  # fmt: skip
         added, skipped_families = check_lidar_meshes(family_meshes(family_fit, config.family_count, FAMILIES_SEED), lidar,
                                                      config.sizes, n_points, min_returns=int(config.min_returns))  # fmt: skip
-        say(f"added {len(added)} objects of the families {', '.join(sorted(family_fit.counts(config.family_count)))}")
+        kept_alone = sorted(family_fit.record["meshes_kept"])
+        say(
+            f"added {len(added)} objects of the families {', '.join(sorted(family_fit.counts(config.family_count))) or '(none)'}"
+            + (f"; {', '.join(kept_alone)} kept their meshes alone (nearer the real crops than every family)" if kept_alone else "")
+        )
         sets = replace(sets, meshes=meshes + added, skipped=skipped + skipped_families, families_fit=family_fit)
         meshes = sets.meshes
     if not config.fit_sensor:
@@ -323,6 +328,7 @@ def _fix_settings(config: Sim2RealConfig, sets: Sim2RealSets, out: OwnedFolder |
         fit = sets.families_fit
         settings["fit_families"] = {**settings["fit_families"], "fitted_on": fit.record["fitted_on"],
                                     "chosen": {c: fit.record["classes"][c]["chosen"] for c in fit.classes},
+                                    "meshes_kept": sorted(fit.record["meshes_kept"]),
                                     "objects": fit.counts(config.family_count)}  # fmt: skip
     if config.fit_sensor:  # likewise: runs without it keep their settings
         settings["fit_sensor"] = {
