@@ -141,7 +141,7 @@ def strongest_echo(
     cos = np.abs(np.einsum("nkj,nkj->nk", normal, rays.reshape(n, k, 3)))
     reflected = cos * (1.0 if rho is None else rho[np.maximum(face, 0)])
     weight = np.where(hit, reflected / k if weights is None else reflected * weights[None, :], 0.0)
-    energy = np.where(hit, weight / np.maximum(t, 1e-9) ** 2, 0.0)
+    energy = np.where(hit, hit_energy(weight, 1.0, 1.0, t), 0.0)  # the range equation; ρ cos θ is in weight
     same = (obj[:, :, None] == obj[:, None, :]) & hit[:, :, None] & hit[:, None, :]
     total = np.einsum("nij,nj->ni", same, energy)
     best = np.argmax(total, axis=1)

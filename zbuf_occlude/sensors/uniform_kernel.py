@@ -51,7 +51,8 @@ plane_subray = numba.njit(cache=True, nogil=True, error_model="numpy", inline="a
 
 
 def _plane_echo(ranges, cosines, weights, min_range):
-    # the one echo of K sub-ray hits on one plane: Σ E_k, Σ E_k t_k / Σ E_k, E_k = |cos_k| w_k / max(t_k, MIN_RANGE_M)²
+    # the one echo of K sub-ray hits on one plane: Σ E_k, Σ E_k t_k / Σ E_k, E_k = |cos_k| w_k / max(t_k, MIN_RANGE_M)²:
+    # the range equation of echoes.hit_energy (Kashani et al. 2015, Eq. 4) with ρ = 1, as numba compiles it
     total, moment = 0.0, 0.0
     for k in range(len(ranges)):
         r = max(ranges[k], min_range)
