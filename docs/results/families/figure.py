@@ -23,8 +23,11 @@ from zbuf_occlude.sensors.scan_data import read_scan_npz  # noqa: E402
 from zbuf_occlude.sensors.scene import GROUND_ID  # noqa: E402
 
 out, keep = Path(sys.argv[1]), Path(sys.argv[2])
-SETS = {"pole": ["street", "trunk", "utility_pole", "street_light", "sign_post"], "bush": ["street", "shrub"],
-        "pedestrian": ["street", "pedestrian"]}
+SETS = {
+    "pole": ["street", "trunk", "utility_pole", "street_light", "sign_post"],
+    "bush": ["street", "shrub"],
+    "pedestrian": ["street", "pedestrian"],
+}
 BINS = ["5-10", "10-15", "15-20", "20-25"]
 
 
