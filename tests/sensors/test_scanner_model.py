@@ -39,15 +39,20 @@ def _class_switches(tree: ast.AST) -> list[int]:
     return lines
 
 
-def test_no_module_but_the_kinds_table_switches_on_a_sensor_class():
+def _outside_the_kinds_table(finder) -> dict[str, list[int]]:
+    """``finder``'s lines in every module of the package but ``sensors/kinds.py``, by module (none: ``{}``)."""
     found = {}
     for path in sorted(PACKAGE.rglob("*.py")):
         if path.name == "kinds.py" and path.parent.name == "sensors":
             continue
-        lines = _class_switches(ast.parse(path.read_text(encoding="utf-8")))
+        lines = finder(ast.parse(path.read_text(encoding="utf-8")))
         if lines:
             found[str(path.relative_to(PACKAGE))] = lines
-    assert found == {}
+    return found
+
+
+def test_no_module_but_the_kinds_table_switches_on_a_sensor_class():
+    assert _outside_the_kinds_table(_class_switches) == {}
 
 
 def test_the_switch_finder_finds_a_switch():
@@ -80,14 +85,7 @@ def _name_switches(tree: ast.AST) -> list[int]:
 def test_no_module_asks_a_sensor_kind_by_its_name():
     """``capabilities(sensor).spins`` (or ``.fits``, ``.flies``, ``.trains``), never ``kind.name == "lidar"``: a new kind
     says what it can do in its row of the table, and no guard elsewhere needs to learn its name."""
-    found = {}
-    for path in sorted(PACKAGE.rglob("*.py")):
-        if path.name == "kinds.py" and path.parent.name == "sensors":
-            continue
-        lines = _name_switches(ast.parse(path.read_text(encoding="utf-8")))
-        if lines:
-            found[str(path.relative_to(PACKAGE))] = lines
-    assert found == {}
+    assert _outside_the_kinds_table(_name_switches) == {}
 
 
 def test_the_name_switch_finder_finds_a_switch():
