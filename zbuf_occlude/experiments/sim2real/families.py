@@ -107,6 +107,11 @@ def _scanned(entries: Sequence, size: SizeRange, sensor, *, crops: int, seed: in
     return crop_shapes(clouds)
 
 
+def _json_distance(distance: float) -> float | None:
+    """A distance as the record holds it: JSON has no infinity, and too few crops have no distance (None)."""
+    return distance if math.isfinite(distance) else None
+
+
 def _simulated(family: str, size: SizeRange, sensor, width_scale: tuple[float, float], *, objects: int, crops: int,
                seed: int) -> dict:  # fmt: skip
     """:func:`crop_shapes` of ``crops`` crops each of ``objects`` objects of ``family`` stretched in ``width_scale``,
@@ -201,11 +206,11 @@ def fit_families(real: Mapping[str, Sequence[NDArray[np.floating]]], sensor, siz
         own = _scanned(meshes[cls], sizes[cls], sensor, crops=crops, seed=seed) if meshes and meshes.get(cls) else None
         own_distance = _distance(own, target) if own is not None else math.inf
         chosen = [n for n, t in tried.items() if t["distance"] <= best + CHOICE_SLACK and t["distance"] < own_distance]
-        for t in tried.values():  # JSON has no infinity: a family with too few crops has no distance
-            t["distance"] = t["distance"] if math.isfinite(t["distance"]) else None
+        for t in tried.values():
+            t["distance"] = _json_distance(t["distance"])
         entry = {"real": target, "tried": tried}
         if own is not None:
-            entry["meshes"] = {**own, "objects": len(meshes[cls]), "distance": own_distance if math.isfinite(own_distance) else None}
+            entry["meshes"] = {**own, "objects": len(meshes[cls]), "distance": _json_distance(own_distance)}
         if not chosen:
             log.info("the %s meshes come nearer the real crops than every family: the class keeps them alone", cls)
             doc["meshes_kept"][cls] = entry

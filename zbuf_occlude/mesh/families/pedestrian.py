@@ -36,12 +36,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from zbuf_occlude.mesh.families.parts import assemble, capsule, ellipsoid, frustum, plate
+from zbuf_occlude.mesh.families.parts import capsule, ellipsoid, frustum, plate
 
 if TYPE_CHECKING:
     import trimesh  # imported where used: a parser that lists the families loads no trimesh
 
-__all__ = ["CLASS_NAME", "NAME", "OPEN_PARTS", "PROPORTIONS", "RANGES", "make", "parts"]
+__all__ = ["CLASS_NAME", "NAME", "OPEN_PARTS", "PROPORTIONS", "RANGES", "parts"]
 
 NAME = "pedestrian"
 CLASS_NAME = "pedestrian"
@@ -100,12 +100,13 @@ def parts(rng: np.random.Generator) -> tuple[dict[str, list[trimesh.Trimesh]], d
     half_depth = 0.5 * p["depth_ratio"] * h * b
     r = {k: v * h * b for k, v in RADII.items()}
     hip_y, shoulder_y = 0.055 * h * b, 0.5 * f["shoulder_breadth"] * h - r["upper_arm"]
-    swing = p["stride_deg"] * np.sin(2 * np.pi * p["phase"])
+    sin_phase, cos_phase = np.sin(2 * np.pi * p["phase"]), np.cos(2 * np.pi * p["phase"])
+    swing = p["stride_deg"] * sin_phase
 
     legs, feet = [], []
     for side, hip_angle in ((1.0, swing), (-1.0, -swing)):
-        forward = np.cos(2 * np.pi * p["phase"]) * side > 0  # this leg's hip angle is growing: it swings forward
-        knee_flex = 2.4 * p["stride_deg"] * abs(np.cos(2 * np.pi * p["phase"])) if forward else 0.0
+        forward = cos_phase * side > 0  # this leg's hip angle is growing: it swings forward
+        knee_flex = 2.4 * p["stride_deg"] * abs(cos_phase) if forward else 0.0
         hip = np.array([0.0, side * hip_y, f["hip_z"] * h])
         knee = hip + (f["hip_z"] - f["knee_z"]) * h * _direction(hip_angle)
         ankle = knee + (f["knee_z"] - f["ankle_z"]) * h * _direction(hip_angle - knee_flex)
@@ -114,8 +115,7 @@ def parts(rng: np.random.Generator) -> tuple[dict[str, list[trimesh.Trimesh]], d
         feet.append(plate((f["foot_length"] * h, f["foot_width"] * h * b, foot_h),
                           ankle + [0.25 * f["foot_length"] * h, 0.0, -0.5 * foot_h]))  # fmt: skip
     arms = []
-    for side, arm_angle in ((1.0, -p["arm_swing_deg"] * np.sin(2 * np.pi * p["phase"])),
-                            (-1.0, p["arm_swing_deg"] * np.sin(2 * np.pi * p["phase"]))):  # fmt: skip
+    for side, arm_angle in ((1.0, -p["arm_swing_deg"] * sin_phase), (-1.0, p["arm_swing_deg"] * sin_phase)):
         shoulder = np.array([0.0, side * shoulder_y, f["shoulder_z"] * h - r["upper_arm"]])
         elbow = shoulder + f["upper_arm"] * h * _direction(arm_angle)
         wrist = elbow + (f["forearm"] + 0.5 * f["hand"]) * h * _direction(arm_angle + p["elbow_deg"])
@@ -151,9 +151,3 @@ def parts(rng: np.random.Generator) -> tuple[dict[str, list[trimesh.Trimesh]], d
         for m in group:
             m.apply_translation([0.0, 0.0, -ground])
     return pieces, p
-
-
-def make(rng: np.random.Generator) -> tuple[trimesh.Trimesh, dict[str, Any]]:
-    """One pedestrian (:func:`parts`) as one mesh, and its parameters."""
-    pieces, params = parts(rng)
-    return assemble(pieces), params

@@ -440,7 +440,8 @@ def fit_airborne(crops: Sequence[NDArray[np.floating]], base: AirborneScanner, *
     ArgumentTypeError
         ``seed`` or ``bootstrap`` not an integer.
     """
-    if not (capabilities(base).flies and capabilities(base).fits):
+    kind = capabilities(base)
+    if not (kind.flies and kind.fits):
         raise InvalidInputError(f"fit_airborne fits an airborne scanner, got {type(base).__name__}")
     seed, bootstrap = check_fit_seed(seed), check_bootstrap(bootstrap)
     faces = []
