@@ -69,8 +69,8 @@ def test_a_ray_table_and_a_sensor_are_a_usage_error_naming_both(tmp_path: Path, 
 
 def test_return_physics_options_change_a_ray_tables_beam(tmp_path: Path, capsys) -> None:
     path, _ = _table(tmp_path, n=10)
-    code, err = _run(["scan", "box", "--ray-table", str(path), "--max-returns", "3", "--range-resolution", "0.5",
-                      "--out", str(tmp_path / "o")], capsys)  # fmt: skip
+    code, err = _run(["scan", "box", "--ray-table", str(path), "--footprint", "--divergence", "0.5", "--max-returns", "3",
+                      "--range-resolution", "0.5", "--out", str(tmp_path / "o")], capsys)  # fmt: skip
     assert code == 0, err  # accepted (what the options do to a table's beam: test_beam_options)
     # a table file's beam is a generic receiver (ranges 1-100 m, 0.02 m noise, as --help says) without a divergence: no
     # footprint until --divergence gives it one

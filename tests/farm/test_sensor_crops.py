@@ -249,7 +249,7 @@ def test_zbuffer_farm_parameters_keep_their_digest():
         (["--sensor", "hdl32e", "--sensor-across-sight-width", "0:0"], "--sensor-across-sight-width must have HI > 0 metres"),
         (["--sensor", "riegl-q1560", "--sensor-across-sight-width", "0.5"], "spinning LiDAR"),
         (["--sensor", "kinect-v1"], "--sensor: kinect-v1 is a depth camera, which has no beam; the farm scans with a pulsed sensor"),
-        (["--sensor", "hdl32e", "--sensor-footprint-cast", "adaptive"], "--sensor-footprint-cast skips the sub-rays"),
+        (["--sensor", "hdl32e", "--sensor-footprint-cast", "adaptive"], "--sensor-footprint-cast adaptive skips the sub-rays"),
     ],
 )
 def test_bad_sensor_options_are_clear_errors(tmp_path, bad, words, capsys):
@@ -392,9 +392,9 @@ def _echo_sensor(tmp_path: Path) -> Path:
 
 
 def test_the_adaptive_footprint_needs_a_footprint_whose_echoes_are_resolved(tmp_path: Path):
-    with pytest.raises(InvalidInputError, match=r"--sensor-footprint-cast skips the sub-rays .* hdl32e fires one ray"):
+    with pytest.raises(InvalidInputError, match=r"--sensor-footprint-cast adaptive skips the sub-rays .* hdl32e fires one ray"):
         SensorCropParams("hdl32e", footprint=True, footprint_cast="adaptive")  # the preset resolves no echoes
-    with pytest.raises(InvalidInputError, match=r"--sensor-footprint-cast skips the sub-rays"):
+    with pytest.raises(InvalidInputError, match=r"--sensor-footprint-cast adaptive skips the sub-rays"):
         SensorCropParams(str(_echo_sensor(tmp_path)), footprint_cast="adaptive")  # one ray a pulse
     with pytest.raises(InvalidInputError, match=r"--sensor, --sensor-footprint-cast: kinect-v1 is a .*, which has no beam"):
         SensorCropParams("kinect-v1", footprint_cast="adaptive")  # no pulses

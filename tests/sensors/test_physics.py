@@ -210,7 +210,7 @@ def test_echoes_further_apart_than_the_separation_stay_apart():
     [({"footprint_rays": 3}, "footprint_rays above 1 needs divergence_deg > 0"), ({"footprint_rays": 7, "divergence_deg": 0.0}, "divergence_deg"),
      ({"power_noise": -1.0}, "power_noise"), ({"detection_threshold": -1e-9}, "detection_threshold"),
      ({"detection_threshold": math.inf}, "detection_threshold"),
-     ({"echo_separation_m": 0.75}, "echo_separation_m > 0 needs footprint_rays above 1"), ({"echo_separation_m": -1.0}, "echo_separation_m")],
+     ({"echo_separation_m": 0.75}, "echo_separation_m 0.75 needs footprint_rays above 1"), ({"echo_separation_m": -1.0}, "echo_separation_m")],
 )  # fmt: skip
 def test_bad_physics_parameters_are_clear_errors(changes, words):
     """The beam refuses them, naming itself and the field (the rules moved from Lidar to Beam)."""

@@ -239,13 +239,13 @@ def test_gps_time_and_pulse_id_follow_the_firing():
 @pytest.mark.parametrize(
     "changes, words",
     [({"max_returns": 16, "range_resolution_m": 0.5}, "max_returns"), ({"max_returns": 0}, "max_returns"),
-     ({"max_returns": 2}, "max_returns above 1 or return_mode 'all' needs range_resolution_m"),
+     ({"max_returns": 2}, "max_returns 2 needs range_resolution_m > 0"),
      ({"range_resolution_m": 0.5}, "range_resolution_m.*max_returns"),
      ({"range_resolution_m": -1.0}, "range_resolution_m"), ({"footprint_rays": 1025, "divergence_deg": 1.0}, "footprint_rays"),
      ({"footprint_rays": 19}, "footprint_rays above 1 needs divergence_deg"), ({"profile": "flat"}, "profile"),
      ({"max_returns": 2, "range_resolution_m": 0.5, "footprint_rays": 7, "divergence_deg": 1.0, "echo_separation_m": 0.7},
       "echo_separation_m.*range_resolution_m"),
-     ({"return_mode": "strongest", "max_returns": 2, "range_resolution_m": 0.5}, "return_mode 'strongest' records 1 return per pulse"),
+     ({"return_mode": "strongest", "max_returns": 2, "range_resolution_m": 0.5}, "return_mode strongest records 1 return per pulse; max_returns 2 contradicts it"),
      ({"return_mode": "first"}, "return_mode")],
 )  # fmt: skip
 def test_return_model_fields_are_checked_by_name(changes, words):

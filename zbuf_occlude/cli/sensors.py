@@ -18,9 +18,7 @@ import numpy as np
 from zbuf_occlude.cli.crops import FLAGS, CropSettings, add_crop_arguments, crop_settings, given_crop_options
 from zbuf_occlude.cli.las_options import LAS_FORMATS, add_las_arguments, las_keywords
 from zbuf_occlude.cli.options import Checked, count, counted, interval, out_folder, parse_interval, real, seed
-from zbuf_occlude.cli.return_physics import (
-    add_beam_arguments, check_max_returns, check_transmittance, scene_optics_of, surface_optics, with_return_physics,
-)  # fmt: skip
+from zbuf_occlude.cli.return_physics import add_beam_arguments, check_max_returns, check_transmittance, scan_request
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
@@ -126,82 +124,54 @@ SCAN_SENSOR = "hdl32e"
 
 
 def _scan_sensor(args: argparse.Namespace):
-    """The sensor ``scan`` fires: ``--sensor``'s (:data:`SCAN_SENSOR` by default), or the
+    """The sensor ``scan`` fires, as named: ``--sensor``'s (:data:`SCAN_SENSOR` by default), or the
     :class:`~zbuf_occlude.sensors.ray_table.RayTable` of ``--ray-table FILE`` (with
-    :data:`~zbuf_occlude.sensors.ray_table.RAY_TABLE_FILE_BEAM`), either with the return physics options applied
-    (:func:`~zbuf_occlude.cli.return_physics.with_return_physics`: a ray table takes every beam option).
+    :data:`~zbuf_occlude.sensors.ray_table.RAY_TABLE_FILE_BEAM`); ``args.sensor`` names it in messages.
 
     Raises
     ------
     InvalidInputError
-        ``--ray-table`` with ``--sensor`` (one sensor per scan), a file
-        :func:`~zbuf_occlude.sensors.ray_table.load_ray_table` refuses, or what
-        :func:`~zbuf_occlude.cli.return_physics.with_return_physics` refuses.
+        ``--ray-table`` with ``--sensor`` (one sensor per scan), or a file
+        :func:`~zbuf_occlude.sensors.ray_table.load_ray_table` refuses.
     """
     if args.ray_table is None:
         args.sensor = args.sensor or SCAN_SENSOR
-        return with_return_physics(sensor_from_name(args.sensor), args)
+        return sensor_from_name(args.sensor)
     from zbuf_occlude.sensors.ray_table import RAY_TABLE_FILE_BEAM, load_ray_table
 
     if args.sensor is not None:
         raise InvalidInputError(f"--ray-table {args.ray_table} is the sensor: give --ray-table or --sensor {args.sensor}, not both")
     table = load_ray_table(args.ray_table, beam=RAY_TABLE_FILE_BEAM)
-    args.sensor = args.ray_table  # what the return physics options' messages name
-    return with_return_physics(table, args)
+    args.sensor = args.ray_table  # what the request's messages name
+    return table
 
 
-def _frame(frame: str | None, sensor) -> str:
-    """``--frame``: as given, else ``sensor`` for a sensor that stands (or moves) with a frame of its own and ``world`` for an
-    airborne scanner, whose pulses leave from an aircraft moving along its lines.
-
-    Raises
-    ------
-    InvalidInputError
-        ``--frame sensor`` for an airborne scanner.
-    """
-    if not kind_of(sensor).flies:
-        return frame or "sensor"
-    if frame == "sensor":
-        raise InvalidInputError(f"--frame sensor: {sensor.name} flies along its lines, so its points have no one sensor frame; "
-                                "they are written in the world frame (--frame world)")  # fmt: skip
-    return "world"
-
-
-def _trajectory(args: argparse.Namespace, sensor, formats: Sequence[str]):
-    """``--trajectory``'s :class:`~zbuf_occlude.sensors.platform.Trajectory`, or None; read and checked before ``--out`` is held.
+def _trajectory(args: argparse.Namespace):
+    """``--trajectory``'s :class:`~zbuf_occlude.sensors.platform.Trajectory`, or None; read before ``--out`` is held
+    (the request checks it against the sensor, the sweeps and the output).
 
     Raises
     ------
     InvalidInputError
-        A mesh file to scan (a trajectory moves the sensor through a scene file's frame); a sensor that does not sweep
-        from a platform of its own (an airborne scanner flies its plan; a camera takes one pose); what
-        :func:`~zbuf_occlude.sensors.platform.load_trajectory` refuses (naming the file); a trajectory shorter than
-        ``--samples`` sweeps; LAS/LAZ in the sensor frame (each point in its own pulse's frame).
+        A mesh file to scan (a trajectory moves the sensor through a scene file's frame), or what
+        :func:`~zbuf_occlude.sensors.platform.load_trajectory` refuses (naming the file).
     """
-    path, samples = args.trajectory, args.samples
+    path = args.trajectory
     if path is None:
         return None
     if Path(args.mesh_or_scene).suffix.lower() not in SCENE_SUFFIXES:
         raise InvalidInputError(f"--trajectory {path} moves the sensor through a scene file's frame; "
                                 f"a scan of {Path(args.mesh_or_scene).name} places the sensor per sample (give a scene file)")  # fmt: skip
-    kind = kind_of(sensor)
-    if not kind.pulsed or kind.flies:
-        raise InvalidInputError(f"--trajectory {path}: a {kind.title} {'flies its own plan' if kind.flies else 'takes one pose'}")
     from zbuf_occlude.sensors.platform import load_trajectory
 
-    trajectory = load_trajectory(path)
-    needed = samples * sensor.sweep_s
-    if not trajectory.is_static and trajectory.duration_s + 1e-9 < needed:
-        raise InvalidInputError(f"--trajectory {path} lasts {trajectory.duration_s:g} s, and --samples {samples} sweeps of {sensor.name} "
-                                f"take {needed:g} s: give fewer samples or a longer trajectory")  # fmt: skip
-    if args.frame == "sensor" and set(formats) & set(LAS_FORMATS):
-        raise InvalidInputError(f"--trajectory {path} with --format {args.format}: a moving sensor's points lie each in its "
-                                "own pulse's frame, which LAS cannot classify by height; give --frame world")  # fmt: skip
-    return trajectory
+    return load_trajectory(path)
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
     sensor = _scan_sensor(args)
+    formats = ("npz", "ply") if args.format == "both" else (args.format,)
+    request = scan_request(args, sensor, backend=args.backend, frame=args.frame, trajectory=_trajectory(args), samples=args.samples,
+                           formats=formats)  # fmt: skip
     if not args.crop:
         for flag, option in given_crop_options(args, in_crop=True):
             raise InvalidInputError(f"{flag} {option.in_crop}: it needs --crop")
@@ -210,27 +180,10 @@ def cmd_scan(args: argparse.Namespace) -> int:
     if args.occlude and args.across_sight_width is None:
         width = getattr(args, FLAGS)["across_sight_width_m"]
         raise InvalidInputError(f"--occlude meets {width} with a side occluder: it needs {width}")
-    formats = ("npz", "ply") if args.format == "both" else (args.format,)
-    args.frame = _frame(args.frame, sensor)
-    las_options = las_keywords(args, formats, world_frame=args.frame == "world")
-    trajectory = _trajectory(args, sensor, formats)
+    las_options = las_keywords(args, formats, world_frame=request.frame == "world")
     # a refused run's empty --out is removed by cli.main
     with OwnedFolder(args.out, names=[SCAN_FILE_NAMES], what="the scan") as folder:
-        return _scan_into(folder, args, sensor, formats, las_options, trajectory)
-
-
-def _footprint_mode(args: argparse.Namespace, sensor) -> str:
-    """``--footprint-cast``: "auto" (not given), "exact", or "adaptive", refused, naming the options, where it cannot apply
-    (a depth camera refuses any given value with the beam options: :func:`~zbuf_occlude.cli.return_physics.beam_changes`)."""
-    mode = args.footprint_cast or "auto"
-    if mode != "adaptive":
-        return mode
-    if not sensor.beam.resolves_footprint:
-        raise InvalidInputError(f"--footprint-cast adaptive skips the sub-rays of a footprint whose echoes are resolved; {sensor.name} "
-                                "fires one ray or resolves no echoes: give it --footprint and --max-returns above 1")  # fmt: skip
-    if args.backend != "embree":
-        raise InvalidInputError(f"--footprint-cast adaptive casts rays with Embree; --backend {args.backend} renders a z-buffer")
-    return mode
+        return _scan_into(folder, args, request, las_options)
 
 
 #: The files ``scan`` writes in ``--out``: ``<stem>_<sensor>_sNNN.npz|ply|las|laz``.
@@ -255,19 +208,18 @@ def _save(folder: OwnedFolder, s, stem: str, formats: Sequence[str], las_options
     return files
 
 
-def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: Sequence[str], las_options: dict, trajectory) -> int:
+def _scan_into(folder: OwnedFolder, args: argparse.Namespace, request, las_options: dict) -> int:
     """:func:`cmd_scan` once ``--out`` is held."""
     from zbuf_occlude.io.progress import progress as progress_bar
     from zbuf_occlude.sensors.crops import object_crops
-    from zbuf_occlude.sensors.kinds import kind_of
     from zbuf_occlude.sensors.platform import look_at_pose
     from zbuf_occlude.sensors.scan import scan
     from zbuf_occlude.sensors.scene import GROUND_ID
     from zbuf_occlude.sensors.scene_files import load_scene
 
     out = folder.root
+    sensor, formats, trajectory, footprint, frame = request.scanner, request.formats, request.trajectory, request.cast, request.frame
     kind = kind_of(sensor)
-    footprint = _footprint_mode(args, sensor)
     src = Path(args.mesh_or_scene)
     written, empty = [], 0
     if src.suffix.lower() in SCENE_SUFFIXES:
@@ -279,7 +231,7 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
         else:  # a camera looks at the first object from the sensor position
             target = scene.build().local_to_world[1][:3, 3] if scene.objects else np.array([1.0, 0.0, scene.ground_z_m])
             pose = look_at_pose(scene.default_sensor_pose()[:3, 3], target + [0, 0, 0.5])
-        optics = surface_optics(args, scene)  # the scene's, once: every sample scans the same scene
+        optics = request.surface_optics(scene)  # the scene's, once: every sample scans the same scene
         for k in progress_bar(range(args.samples), desc="scan", unit="scan", enabled=not args.no_progress):
             if kind.flies:  # a flight over the scene's ground (world frame)
                 from zbuf_occlude.sensors.scan import scan_airborne
@@ -288,7 +240,7 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
             else:
                 start_s = None if trajectory is None else trajectory.start_s + k * sensor.sweep_s  # this sweep's samples only
                 platform = pose if trajectory is None else trajectory.since(start_s, until_s=start_s + sensor.sweep_s)
-                s = scan(scene, sensor, platform, seed=args.seed + k, backend=args.backend, frame=args.frame, footprint=footprint, **optics)
+                s = scan(scene, sensor, platform, seed=args.seed + k, backend=args.backend, frame=frame, footprint=footprint, **optics)
             written += _save(folder, s, f"{src.stem}_{sensor.name}_s{k:03d}", formats, las_options, ground_z_m=scene.ground_z_m, number=k)
     else:
         if not kind.pulsed:
@@ -327,9 +279,9 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, sensor, formats: S
         if not kind.flies:  # an aircraft flies its altitude above the object
             check_outside(dist, None if isinstance(mesh, dict) else mesh.extents)
         # the farm's loop and seeds: one seed gives the crops farm --sensor gives this file lying directly in its input folder
-        optics = scene_optics_of(args)
+        optics = request.scene_optics()
         crops = object_crops(mesh, sensor, dist, name=src.stem, n_samples=args.samples, seed=args.seed, class_name=src.stem,
-                             backend=args.backend, frame=args.frame, optics=optics, footprint=footprint)  # fmt: skip
+                             backend=args.backend, frame=frame, optics=optics, footprint=footprint)  # fmt: skip
         for k, crop, _ in progress_bar(crops, total=args.samples, desc="scan", unit="scan", enabled=not args.no_progress):
             placement = crop.placement
             s = crop.scan if args.crop else crop.full

@@ -90,6 +90,9 @@ FARM_CROP_FIELDS = ("distance_m", "height_m", "size_m", "reflectivity", "ground_
 _LEFT_OUT_WHEN_NONE = ("ground_margin_m", "hidden_below_m", "across_sight_width_m", "divergence_deg", "adaptive_footprint")
 #: The ``farm`` flag of each :class:`CropDistributions` field it sets, for the messages of its checks.
 CROP_OPTION_NAMES = {field: OPTION_NAMES[SENSOR_KEYS[field]] for field in FARM_CROP_FIELDS}
+#: How ``farm`` names the fields of :func:`~zbuf_occlude.sensors.adaptive_footprint.check_footprint_cast`'s messages.
+FOOTPRINT_CAST_NAMES = {"footprint_cast": OPTION_NAMES["sensor_adaptive_footprint"], "footprint_rays": OPTION_NAMES["sensor_footprint"],
+                        "max_returns": "a sensor file's max_returns"}  # fmt: skip
 #: ``farm --sensor``'s placement when no option changes it.
 FARM_CROP_DISTRIBUTIONS = CropDistributions(
     distance_m=DEFAULT_SENSOR_DISTANCE_M, height_m=DEFAULT_SENSOR_HEIGHT_M, size_m=DEFAULT_SENSOR_SIZE_M
@@ -169,11 +172,9 @@ class SensorCropParams:
                     f"farm --sensor draws no {f.name} (its card could not say so): leave it at {getattr(unset, f.name)!r}"
                 )
         object.__setattr__(self, "footprint", bool(self.footprint))
-        from zbuf_occlude.sensors.adaptive_footprint import FOOTPRINT_MODES, footprint_mode
+        from zbuf_occlude.sensors.adaptive_footprint import check_footprint_cast, footprint_mode
 
-        if not isinstance(self.footprint_cast, str) or self.footprint_cast not in FOOTPRINT_MODES:
-            raise InvalidInputError(f"{OPTION_NAMES['sensor_adaptive_footprint']} must be one of {', '.join(FOOTPRINT_MODES)}, "
-                                    f"got {type(self.footprint_cast).__name__} {self.footprint_cast!r:.40}")  # fmt: skip
+        check_footprint_cast(self.footprint_cast, None, names=FOOTPRINT_CAST_NAMES)  # the mode alone, before the sensor is read
         if self.divergence_deg is not None:
             from zbuf_occlude.sensors.checks import real
 
@@ -222,10 +223,10 @@ class SensorCropParams:
                 sensor = with_beam(sensor, **changes)
             except InvalidInputError as exc:
                 raise InvalidInputError(f"{', '.join(given)}: {exc}") from None
-        if self.footprint_cast == "adaptive" and not sensor.beam.resolves_footprint:
-            raise InvalidInputError(f"{OPTION_NAMES['sensor_adaptive_footprint']} skips the sub-rays of a footprint whose echoes are "
-                                    f"resolved; {self.name} fires one ray a pulse or resolves no echoes: give it "
-                                    f"{OPTION_NAMES['sensor_footprint']} (a sensor file with max_returns above 1 or a return mode)")  # fmt: skip
+        if self.footprint_cast == "adaptive":
+            from zbuf_occlude.sensors.adaptive_footprint import check_footprint_cast
+
+            check_footprint_cast(self.footprint_cast, sensor.beam, sensor=self.name, names=FOOTPRINT_CAST_NAMES)
         return sensor
 
     @property

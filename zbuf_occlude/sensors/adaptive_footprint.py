@@ -31,6 +31,8 @@ measures its speed and its bias on return shares and points.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -51,6 +53,7 @@ __all__ = [
     "PLANE_SHARE",
     "adaptive_echo_returns",
     "adaptive_footprint",
+    "check_footprint_cast",
     "footprint_mode",
     "grid_neighbours",
     "plane_echoes",
@@ -260,31 +263,70 @@ def pulse_neighbours(pulses: Pulses) -> NDArray[np.int64]:
 FOOTPRINT_MODES = ("auto", "exact", "adaptive")
 
 
+def check_footprint_cast(
+    footprint: object,
+    beam: Beam | None,
+    backend: str = "embree",
+    *,
+    sensor: str | None = None,
+    names: Mapping[str, str | None] | None = None,
+) -> str:
+    """``footprint`` (one of :data:`FOOTPRINT_MODES`) where it applies to ``beam`` and ``backend``: the one statement of the rule.
+
+    "adaptive" skips the sub-rays of footprints whose echoes are resolved, so it needs a beam that
+    resolves the echoes of several sub-rays (``Beam.resolves_footprint``), and it casts with Embree.
+    Messages name each field as ``names`` maps it (``footprint_cast``, ``backend``, and in the remedy
+    ``footprint_rays`` and ``max_returns``; a field mapped to None is left out of the remedy: the
+    caller sets it itself), as :func:`~zbuf_occlude.sensors.beam.check_returns` does; ``sensor`` is the
+    sensor's name (default: the beam's).  ``beam`` None checks the mode alone (before a sensor is read).
+
+    Raises
+    ------
+    InvalidInputError
+        An unknown mode (naming its type and value), or "adaptive" for a beam that resolves no echoes
+        or fires one ray, or with another backend than "embree".
+    """
+    names = names or {}
+
+    def n(field: str, default: str | None = None) -> str:
+        return names.get(field) or default or field
+
+    if not isinstance(footprint, str) or footprint not in FOOTPRINT_MODES:
+        shown = f"{footprint!r:.40}" if isinstance(footprint, str) else f"{type(footprint).__name__} {footprint!r:.40}"
+        raise InvalidInputError(f"{n('footprint_cast')} must be one of {', '.join(FOOTPRINT_MODES)}, got {shown}")
+    if footprint != "adaptive" or beam is None:
+        return footprint
+    if not beam.resolves_footprint:
+        needed = {"footprint_rays": beam.footprint_rays == 1, "max_returns": not beam.resolves_echoes}
+        remedy = [f"{n(f)} 2 or more" if f == "max_returns" else n(f, "footprint_rays above 1")
+                  for f, lacking in needed.items() if lacking and names.get(f, f) is not None]  # fmt: skip
+        raise InvalidInputError(
+            f"{n('footprint_cast')} adaptive skips the sub-rays of a footprint whose echoes are resolved; {sensor or beam.name} "
+            f"fires one ray a pulse or resolves none of its echoes (footprint_rays {beam.footprint_rays}, max_returns "
+            f"{beam.max_returns}, return_mode {beam.return_mode})" + (f": give it {' and '.join(remedy)}" if remedy else "")
+        )
+    if backend != "embree":
+        raise InvalidInputError(f"{n('footprint_cast')} adaptive casts rays with Embree; {n('backend')} {backend:.40} renders a z-buffer")
+    return footprint
+
+
 def adaptive_footprint(footprint: str, beam: Beam, backend: str) -> bool:
     """Whether ``footprint`` (:data:`FOOTPRINT_MODES`) casts the adaptive footprint with ``beam`` and ``backend``.
 
     "auto" casts it wherever it applies: a beam that resolves the echoes of several sub-rays
     (``Beam.resolves_footprint``) and the "embree" backend; elsewhere every sub-ray is cast, as
-    "exact" casts them everywhere.  "adaptive" asks for it and is refused where it does not apply.
+    "exact" casts them everywhere.  "adaptive" asks for it and is refused where it does not apply
+    (:func:`check_footprint_cast`, in the words of :func:`~zbuf_occlude.sensors.scan.scan`'s parameters).
 
     Raises
     ------
     InvalidInputError
-        An unknown mode, or "adaptive" for a beam that resolves no echoes or fires one ray, or another backend than "embree".
+        As :func:`check_footprint_cast`.
     """
-    if not isinstance(footprint, str) or footprint not in FOOTPRINT_MODES:
-        raise InvalidInputError(f"footprint must be one of {', '.join(FOOTPRINT_MODES)}, got {footprint!r:.40}")
-    if footprint == "exact":
-        return False
-    if footprint == "auto":
+    mode = check_footprint_cast(footprint, beam, backend, names={"footprint_cast": "footprint"})
+    if mode == "auto":
         return beam.resolves_footprint and backend == "embree"
-    if not beam.resolves_footprint:
-        raise InvalidInputError(f"footprint 'adaptive' skips the sub-rays of resolved echoes; beam {beam.name!r} "
-                                f"(footprint_rays {beam.footprint_rays}, max_returns {beam.max_returns}, return_mode "
-                                f"{beam.return_mode!r}) resolves none: give it footprint_rays above 1 and echoes to resolve")  # fmt: skip
-    if backend != "embree":
-        raise InvalidInputError(f"footprint 'adaptive' casts rays with Embree; backend {backend!r} renders a z-buffer")
-    return True
+    return mode == "adaptive"
 
 
 def footprint_mode(footprint: str, beam: Beam, backend: str = "embree") -> str:

@@ -22,6 +22,7 @@ target: Kashani et al. 2015, "A review of LIDAR radiometric processing", Sensors
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -32,7 +33,10 @@ from zbuf_occlude.sensors.checks import MAX_RANGE_M, count, located, real, repla
 from zbuf_occlude.sensors.echoes import ECHO_RULES, MAX_POWER_NOISE, MAX_RETURNS
 from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS, MAX_DIVERGENCE_DEG, MAX_SUBRAYS, PROFILES, footprint_offsets, subray_directions
 
-__all__ = ["Beam", "IDEAL_BEAM", "RETURN_MODES", "MAX_INTENSITY_COUNTS", "check_beam", "footprint_changes", "intensity_counts"]
+__all__ = [
+    "Beam", "IDEAL_BEAM", "RETURN_MODES", "RETURN_FIELDS", "MODE_RETURNS", "MAX_INTENSITY_COUNTS", "check_beam", "check_returns",
+    "footprint_changes", "intensity_counts",
+]  # fmt: skip
 
 #: How the receiver turns a pulse's resolved echoes into returns (``Beam.return_mode``):
 #:
@@ -201,33 +205,8 @@ class Beam:
         self._check_returns()
 
     def _check_returns(self) -> None:
-        """The rules that tie the footprint, the return mode and the range resolution together."""
-        k, m, mode = self.footprint_rays, self.max_returns, self.return_mode
-        if k > 1 and self.divergence_deg <= 0:
-            raise InvalidInputError("footprint_rays above 1 needs divergence_deg > 0")
-        wanted = {"strongest": 1, "last": 1, "dual": 2}.get(mode)
-        if wanted is not None and m != wanted:
-            raise InvalidInputError(
-                f"return_mode {mode!r} records {wanted} return{'s' * (wanted > 1)} per pulse: give max_returns {wanted}"
-            )
-        if self.resolves_echoes and self.range_resolution_m <= 0:
-            raise InvalidInputError(
-                f"max_returns above 1 or return_mode {mode!r} needs range_resolution_m > 0 (the least range between two returns, c·τ/2)"
-            )
-        if not self.resolves_echoes and self.range_resolution_m > 0:
-            raise InvalidInputError(
-                "range_resolution_m > 0 needs max_returns above 1 or a return_mode of "
-                "'strongest', 'last' or 'dual' (one return per pulse merges echoes by echo_separation_m)"
-            )
-        if self.echo_rule != "chain" and not self.resolves_echoes:
-            raise InvalidInputError(
-                f"echo_rule {self.echo_rule!r} tells resolved echoes apart: it needs max_returns above 1 or a return_mode of "
-                "'strongest', 'last' or 'dual'"
-            )
-        if self.echo_separation_m > 0 and k == 1:
-            raise InvalidInputError("echo_separation_m > 0 needs footprint_rays above 1 (mixed pixels come from a wide footprint)")
-        if self.echo_separation_m > 0 and self.resolves_echoes:
-            raise InvalidInputError("echo_separation_m > 0 is for one return per pulse; resolved echoes use range_resolution_m")
+        """The rules that tie the footprint, the return mode and the range resolution together (:func:`check_returns`)."""
+        check_returns({name: getattr(self, name) for name in RETURN_FIELDS})
 
     @property
     def resolves_echoes(self) -> bool:
@@ -296,6 +275,60 @@ def intensity_counts(energy: ArrayLike, scale: float, top: int = MAX_INTENSITY_C
     an energy that is negative or not a number.  The one rule of a beam's counts and of a scan's LAS file."""
     e = np.nan_to_num(np.asarray(energy, dtype=np.float64), nan=0.0, posinf=np.inf)
     return np.minimum(np.rint(np.clip(e, 0.0, None) * float(scale)), int(top)).astype(np.uint16)
+
+
+#: The :class:`Beam` fields :func:`check_returns` ties together.
+RETURN_FIELDS = ("divergence_deg", "footprint_rays", "max_returns", "return_mode", "range_resolution_m", "echo_rule", "echo_separation_m")
+#: A return mode other than ``"all"`` and the returns per pulse it records.
+MODE_RETURNS = {"strongest": 1, "last": 1, "dual": 2}
+
+
+def check_returns(values: Mapping[str, object], names: Mapping[str, str | None] | None = None) -> None:
+    """The one statement of the rules that tie a beam's footprint, returns and range resolution together.
+
+    ``values`` holds every field of :data:`RETURN_FIELDS` (a :class:`Beam`'s, or the beam a scan
+    request asks for: :mod:`zbuf_occlude.sensors.request`).  Messages name each field as ``names``
+    maps it (a command's option for it; a field it does not map: its own name), so that a command
+    never restates a rule and the library never spells an option.  The rules: a footprint needs a
+    divergence; a Velodyne return mode records its number of returns; resolved echoes (``max_returns``
+    above 1 or a return mode other than ``"all"``) need a range resolution, and nothing else takes
+    one; ``echo_rule`` "waveform" needs resolved echoes; echo merging (``echo_separation_m``) needs a
+    footprint and one return per pulse.
+
+    Raises
+    ------
+    InvalidInputError
+        The first rule broken, naming the fields (as ``names`` maps them) and their values.
+    """
+    names = names or {}
+
+    def n(field: str) -> str:
+        return names.get(field) or field
+
+    k, m, mode, rule = values["footprint_rays"], values["max_returns"], values["return_mode"], values["echo_rule"]
+    resolution, separation = values["range_resolution_m"], values["echo_separation_m"]
+    resolves = m > 1 or mode != "all"
+    what = f"{n('max_returns')} {m}" if mode == "all" else f"{n('return_mode')} {mode}"
+    several = f"{n('max_returns')} above 1 or {n('return_mode')} strongest, last or dual"
+    if k > 1 and not values["divergence_deg"] > 0:
+        raise InvalidInputError(f"{n('footprint_rays')} above 1 needs {n('divergence_deg')} > 0")
+    wanted = MODE_RETURNS.get(mode)
+    if wanted is not None and m != wanted:
+        raise InvalidInputError(f"{n('return_mode')} {mode} records {wanted} return{'s' * (wanted > 1)} per pulse; "
+                                f"{n('max_returns')} {m} contradicts it")  # fmt: skip
+    if resolves and not resolution > 0:
+        raise InvalidInputError(f"{what} needs {n('range_resolution_m')} > 0 (metres: the least range between two returns, c·τ/2)")
+    if not resolves and resolution > 0:
+        raise InvalidInputError(f"{n('range_resolution_m')} {resolution:g} separates several returns per pulse: it needs {several} "
+                                f"(one return per pulse merges echoes by {n('echo_separation_m')})")  # fmt: skip
+    if rule != "chain" and not resolves:
+        raise InvalidInputError(f"{n('echo_rule')} {rule} tells resolved echoes apart: it needs {several}")
+    if separation > 0 and k == 1:
+        raise InvalidInputError(f"{n('echo_separation_m')} {separation:g} needs {n('footprint_rays')} above 1 "
+                                "(mixed pixels come from a wide footprint)")  # fmt: skip
+    if separation > 0 and resolves:
+        raise InvalidInputError(f"{n('echo_separation_m')} {separation:g} merges echoes into one return; with {what} give "
+                                f"{n('range_resolution_m')} instead")  # fmt: skip
 
 
 #: One ray per pulse, its first hit; no noise, loss or radiometry: the idealised scan.

@@ -1,0 +1,282 @@
+"""A scan request: what one scan command asks of a sensor, checked once, in the library's words.
+
+``scan``, ``farm --sensor`` and ``experiment sim2real`` ask for the same things: a sensor, changes to
+its beam, how its footprint is cast, which ray caster, which frame, which surface optics, which
+platform.  A :class:`ScanRequest` holds them and checks every rule that ties them together here,
+once.  Its refusals name each field through the caller's ``names`` (a field → option map: ``scan``
+maps ``max_returns`` to ``--max-returns``), so that a command never restates a rule and the library
+never spells an option; a field the map leaves out is named as the field.
+
+The rules themselves live beside what they govern and are only called from here: the beam's returns
+(:func:`~zbuf_occlude.sensors.beam.check_returns`), its footprint (:func:`~zbuf_occlude.sensors.beam.footprint_changes`)
+and the adaptive cast (:func:`~zbuf_occlude.sensors.adaptive_footprint.check_footprint_cast`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.beam import MODE_RETURNS, RETURN_FIELDS, check_returns, footprint_changes
+from zbuf_occlude.sensors.kinds import capabilities, with_beam
+from zbuf_occlude.sensors.scan_data import FRAMES
+
+__all__ = ["BEAM_REQUEST_FIELDS", "LAS_FORMATS", "ScanRequest", "beam_changes"]
+
+#: The beam changes a request may ask for: :class:`~zbuf_occlude.sensors.beam.Beam` fields, and
+#: ``footprint`` (a switch: :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS` sub-rays in the beam's cone).
+BEAM_REQUEST_FIELDS = (
+    "footprint", "divergence_deg", "max_returns", "return_mode", "range_resolution_m", "power_noise", "echo_separation_m",
+    "min_echo_reflectance", "echo_rule",
+)  # fmt: skip
+#: The formats whose points a LAS file classifies by height.
+LAS_FORMATS = ("las", "laz")
+
+
+def _namer(names: Mapping[str, str | None]):
+    """``n(field)``: how the caller calls ``field`` (its own name where ``names`` does not map it)."""
+    return lambda f: names.get(f) or f
+
+
+def beam_changes(beam, given: Mapping[str, object], *, sensor: str, names: Mapping[str, str | None] = MappingProxyType({})) -> dict:
+    """The :class:`~zbuf_occlude.sensors.beam.Beam` fields that the beam changes ``given`` (fields of :data:`BEAM_REQUEST_FIELDS`) make.
+
+    ``footprint`` gives :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS` sub-rays in the
+    beam's divergence cone (``divergence_deg``, else the beam's) where the beam fires fewer
+    (:func:`~zbuf_occlude.sensors.beam.footprint_changes`).  ``return_mode`` "strongest" or "last"
+    records one return per pulse, "dual" two, so it sets ``max_returns`` where that is not given
+    ("all" after a Velodyne mode: one return unless ``max_returns`` says more).  Resolved echoes
+    keep echoes apart by the range resolution, so the beam's own echo separation gives way; one
+    return per pulse drops the beam's own range resolution.  What is then asked for is checked
+    by :func:`~zbuf_occlude.sensors.beam.check_returns`, naming the fields as ``names`` maps them.
+
+    Raises
+    ------
+    InvalidInputError
+        What :func:`~zbuf_occlude.sensors.beam.footprint_changes` and
+        :func:`~zbuf_occlude.sensors.beam.check_returns` refuse.
+    """
+    n = _namer(names)
+    changes: dict[str, object] = footprint_changes(
+        beam, footprint=bool(given.get("footprint")), divergence_deg=given.get("divergence_deg"),
+        names=(n("footprint"), n("divergence_deg")), sensor=sensor,
+    )  # fmt: skip
+    if "return_mode" in given:
+        changes["return_mode"] = mode = given["return_mode"]
+        wanted = MODE_RETURNS.get(str(mode))
+        if wanted is not None and "max_returns" not in given:
+            changes["max_returns"] = wanted
+        elif "max_returns" not in given and beam.return_mode != "all":
+            changes["max_returns"] = 1
+    for name in ("max_returns", "echo_rule", "range_resolution_m", "power_noise", "echo_separation_m", "min_echo_reflectance"):
+        if name in given:
+            changes[name] = given[name]
+    values = {name: changes.get(name, getattr(beam, name)) for name in RETURN_FIELDS}
+    resolves = values["max_returns"] > 1 or values["return_mode"] != "all"
+    if resolves and "echo_separation_m" not in given and beam.echo_separation_m > 0:
+        changes["echo_separation_m"] = values["echo_separation_m"] = 0.0  # resolved echoes are kept apart, not merged
+    if not resolves and "range_resolution_m" not in given and beam.range_resolution_m > 0:
+        changes["range_resolution_m"] = values["range_resolution_m"] = 0.0  # one return per pulse: nothing to resolve
+    check_returns(values, {**names, "footprint_rays": n("footprint")})
+    return changes
+
+
+@dataclass(frozen=True)
+class ScanRequest:
+    """A scan's sensor, beam changes, cast, frame, surface optics and platform, checked together on construction.
+
+    Parameters
+    ----------
+    sensor : Lidar, RayTable, AirborneScanner or DepthCamera
+        The sensor as named (a preset, a sensor file, a ray table).
+    beam : mapping of str to value
+        Beam changes by field (:data:`BEAM_REQUEST_FIELDS`), applied by :func:`beam_changes` and
+        :func:`~zbuf_occlude.sensors.kinds.with_beam`.
+    footprint_cast : {"auto", "exact", "adaptive"} or None
+        How a footprint whose echoes are resolved is cast
+        (:func:`~zbuf_occlude.sensors.adaptive_footprint.check_footprint_cast`); None: not asked ("auto").
+    backend : {"embree", "zbuffer"}
+    frame : {"sensor", "world"} or None
+        The frame of the points; None: "sensor", or "world" for a scanner that flies (it has no one sensor frame).
+    reflectance_table : bool
+        The surfaces reflect as their materials' table gives at the beam's wavelength.
+    transmittance : "table", float, mapping of class to float, or None
+        The share of each sub-ray that goes on through an object (:mod:`~zbuf_occlude.sensors.reflectance`).
+    reflectivity : object
+        The object's own reflectivity where the caller gives one (checked against ``reflectance_table``).
+    trajectory : Trajectory or None
+        A platform moving during the sweeps (:mod:`~zbuf_occlude.sensors.platform`).
+    samples : int
+        Sweeps scanned one after another (a trajectory must last them).
+    formats : tuple of str
+        The output's file formats (``"las"`` and ``"laz"``: :data:`LAS_FORMATS`).
+    names : mapping of str to str
+        The caller's name of each field, for messages (module docstring); ``"sensor"`` how it named the sensor.
+
+    Attributes
+    ----------
+    scanner
+        ``sensor`` with the beam changes applied.
+    cast : str
+        ``footprint_cast`` checked ("auto" where not asked).
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the fields as ``names`` maps them: beam changes, a footprint cast or surface optics for a
+        sensor without a beam (a depth camera); what :func:`beam_changes` and the beam refuse; the
+        reflectance table with the object's own reflectivity; a transmittance above 0 without
+        resolved echoes or with the z-buffer; resolved echoes from a beam of one ray onto opaque
+        surfaces (each pulse has one return: nothing to resolve); the sensor frame for a scanner that
+        flies; a trajectory for a scanner without a platform of its own, shorter than the sweeps, or
+        in the sensor frame with a LAS format; a footprint cast that does not apply.
+    """
+
+    sensor: object
+    beam: Mapping[str, object] = field(default_factory=dict)
+    footprint_cast: str | None = None
+    backend: str = "embree"
+    frame: str | None = None
+    reflectance_table: bool = False
+    transmittance: object = None
+    reflectivity: object = None
+    trajectory: object = None
+    samples: int = 1
+    formats: tuple[str, ...] = ("npz",)
+    names: Mapping[str, str | None] = field(default_factory=dict)
+    scanner: object = field(init=False, repr=False, compare=False)
+    cast: str = field(init=False, compare=False)
+
+    def __post_init__(self) -> None:
+        n = _namer(self.names)
+        label = self.names.get("sensor") or getattr(self.sensor, "name", "the sensor")
+        kind = capabilities(self.sensor)
+        given = {f: v for f, v in self.beam.items() if v is not None and v is not False}
+        unknown = sorted(set(given) - set(BEAM_REQUEST_FIELDS))
+        if unknown:
+            raise InvalidInputError(
+                f"a scan request changes no beam field {unknown[0]!r:.40}; the fields: {', '.join(BEAM_REQUEST_FIELDS)}"
+            )
+        if not kind.pulsed and (given or self.footprint_cast is not None):
+            asked = [n(f) for f in given] + ([n("footprint_cast")] if self.footprint_cast is not None else [])
+            raise InvalidInputError(f"{', '.join(asked)}: {label} is a {kind.title}, which has no beam to change (a pulsed LiDAR has one)")
+        scanner = self.sensor
+        if given:
+            changes = beam_changes(self.sensor.beam, given, sensor=str(label), names=self.names)
+            try:
+                scanner = with_beam(self.sensor, **changes) if changes else self.sensor
+            except InvalidInputError as exc:
+                raise InvalidInputError(f"{', '.join(n(f) for f in given)}: {exc}") from None
+        object.__setattr__(self, "scanner", scanner)
+        self._check_optics(kind, label)
+        object.__setattr__(self, "frame", self._frame(kind, label))
+        self._check_trajectory(kind)
+        cast = "auto" if self.footprint_cast is None else self.footprint_cast
+        if kind.pulsed:
+            from zbuf_occlude.sensors.adaptive_footprint import check_footprint_cast
+
+            cast = check_footprint_cast(cast, scanner.beam, self.backend, sensor=str(label), names=self.names)
+        object.__setattr__(self, "cast", cast)
+
+    def _check_optics(self, kind, label) -> None:
+        """The surface optics against the sensor and the cast (class docstring)."""
+        n, tau = _namer(self.names), self.transmittance
+        shown = f"{n('transmittance')} {_shown_tau(tau)}"
+        asked = [f for f, v in ((n("reflectance_table"), self.reflectance_table), (shown, tau is not None)) if v]
+        opaque = tau is None or (not isinstance(tau, (str, Mapping)) and tau == 0) or (isinstance(tau, Mapping) and not any(tau.values()))
+        if asked and not kind.pulsed:
+            raise InvalidInputError(f"{' and '.join(asked)} model the surfaces a pulsed LiDAR's beam meets; {label} is a {kind.title}")
+        if not kind.pulsed:
+            return
+        beam = self.scanner.beam
+        if self.reflectance_table and self.reflectivity is not None:
+            raise InvalidInputError(f"{n('reflectance_table')} gives each surface its material's reflectivity; {n('reflectivity')} gives "
+                                    "the object one: give one of them")  # fmt: skip
+        if not opaque and not beam.resolves_echoes:
+            raise InvalidInputError(f"{shown} gives hits behind a surface, which only several returns per pulse resolve: give "
+                                    f"{n('max_returns')} above 1 (and {n('footprint_rays')})")  # fmt: skip
+        if not opaque and self.backend != "embree":
+            raise InvalidInputError(f"{shown} needs every hit along each sub-ray, which {n('backend')} {self.backend:.40} cannot give "
+                                    f"(one face per pixel): use {n('backend')} embree")  # fmt: skip
+        # (a scanner that flies takes its materials' transmittance where none is asked: scan_airborne's "auto")
+        if beam.resolves_echoes and beam.footprint_rays == 1 and opaque and not kind.flies:
+            what = f"{n('max_returns')} {beam.max_returns}" if beam.return_mode == "all" else f"{n('return_mode')} {beam.return_mode}"
+            raise InvalidInputError(f"{what} resolves the echoes of a footprint or of surfaces the beam goes through; {label} fires one "
+                                    f"ray a pulse onto opaque surfaces, so each pulse has one return: give {n('footprint_rays')} "
+                                    f"(or {n('transmittance')} above 0)")  # fmt: skip
+
+    def _frame(self, kind, label) -> str:
+        """The frame: as asked, else "sensor", or "world" for a scanner that flies (which refuses "sensor")."""
+        n = _namer(self.names)
+        if self.frame is not None and self.frame not in FRAMES:
+            raise InvalidInputError(f"{n('frame')} must be one of {', '.join(FRAMES)}, got {self.frame!r:.40}")
+        if not kind.flies:
+            return self.frame or "sensor"
+        if self.frame == "sensor":
+            raise InvalidInputError(f"{n('frame')} sensor: {label} flies along its lines, so its points have no one sensor frame; "
+                                    f"they are written in the world frame ({n('frame')} world)")  # fmt: skip
+        return "world"
+
+    def _check_trajectory(self, kind) -> None:
+        """A trajectory against the sensor, the sweeps and the output (class docstring)."""
+        if self.trajectory is None:
+            return
+        n, traj = _namer(self.names), self.trajectory
+        what = n("trajectory")
+        if not kind.pulsed or kind.flies:
+            raise InvalidInputError(f"{what}: a {kind.title} {'flies its own plan' if kind.flies else 'takes one pose'}")
+        needed = self.samples * self.scanner.sweep_s
+        if not traj.is_static and traj.duration_s + 1e-9 < needed:
+            raise InvalidInputError(f"{what} lasts {traj.duration_s:g} s, and {n('samples')} {self.samples} sweeps of "
+                                    f"{self.scanner.name} take {needed:g} s: give fewer samples or a longer trajectory")  # fmt: skip
+        if self.frame == "sensor" and set(self.formats) & set(LAS_FORMATS):
+            raise InvalidInputError(f"{what} with {n('format')} {'/'.join(self.formats)}: a moving sensor's points lie each in its own "
+                                    f"pulse's frame, which LAS cannot classify by height; give {n('frame')} world")  # fmt: skip
+
+    def surface_optics(self, scene) -> dict:
+        """The ``reflectivity`` and ``transmittance`` keywords of :func:`~zbuf_occlude.sensors.scan.scan` and
+        :func:`~zbuf_occlude.sensors.scan.scan_airborne` for ``scene`` (none asked: no keyword, the scan as without them).
+
+        ``scene`` is a :class:`~zbuf_occlude.sensors.scene.ScanScene`: a scene file's, or the one a
+        scan of a mesh stands the mesh in (:func:`~zbuf_occlude.sensors.crops.object_crop`: the ground,
+        the object, then any occluders, which reflect and transmit as the object does).  One
+        transmittance number applies to every object, not the ground; class → value pairs to the
+        objects of those classes (a mesh's class: its file name without suffix).
+
+        Raises
+        ------
+        InvalidInputError
+            A transmittance class that no object of the scene has, naming it.
+        """
+        from zbuf_occlude.sensors.reflectance import per_class
+
+        out: dict = {}
+        if self.reflectance_table:
+            out["reflectivity"] = "table"
+        tau = self.transmittance
+        if isinstance(tau, Mapping):
+            try:
+                out["transmittance"] = per_class(scene.build(), dict(tau))
+            except InvalidInputError as exc:
+                raise InvalidInputError(f"{_namer(self.names)('transmittance')} {_shown_tau(tau)}: {exc}") from None
+        elif isinstance(tau, str):
+            out["transmittance"] = tau
+        elif tau is not None:  # every object, not the ground
+            out["transmittance"] = [0.0] + [tau] * (len(scene.build().objects))
+        return out
+
+    def scene_optics(self):
+        """:meth:`surface_optics` as a function of the scene, for a scan that builds its scene per sample
+        (:func:`~zbuf_occlude.sensors.crops.object_crops`' ``optics``); None where no optics are asked."""
+        if not self.reflectance_table and self.transmittance is None:
+            return None
+        return self.surface_optics
+
+
+def _shown_tau(tau) -> str:
+    """A transmittance as a user writes it, for messages."""
+    if isinstance(tau, Mapping):
+        return ",".join(f"{k}={v:g}" for k, v in tau.items())
+    return tau if isinstance(tau, str) else f"{tau:g}" if tau is not None else ""
