@@ -18,7 +18,7 @@ import pytest
 
 from zbuf_occlude.cli.main import build_parser
 from zbuf_occlude.cli.main import main as cli_main
-from zbuf_occlude.cli.return_physics import scan_request
+from zbuf_occlude.cli.scan_request import scan_request
 from zbuf_occlude.sensors.kinds import kind_of, sensor_from_name, sensor_to_json
 from zbuf_occlude.sensors.reflectance import GROUND_MATERIAL, reflectance
 from zbuf_occlude.sensors.scan_data import read_scan_npz

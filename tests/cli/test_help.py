@@ -162,9 +162,8 @@ def test_scan_refuses_a_sensor_inside_the_object(tmp_path: Path, capsys) -> None
 
 
 def test_scan_distance_limit_is_half_the_largest_horizontal_size() -> None:
-    from zbuf_occlude.cli.sensors import check_outside
     from zbuf_occlude.errors import InvalidInputError
-    from zbuf_occlude.sensors.placement import CropDistributions
+    from zbuf_occlude.sensors.placement import CropDistributions, check_outside
 
     check_outside(CropDistributions(distance_m=(2.25, 9.0), size_m=(4.5, 4.5)))
     with pytest.raises(InvalidInputError, match="at least 2.25 m"):

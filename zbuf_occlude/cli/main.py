@@ -319,7 +319,8 @@ def build_parser() -> argparse.ArgumentParser:
         add(sub)
     from zbuf_occlude.cli.learn import add_parser as add_experiment_parser  # zbuf-occlude experiment; torch only when it runs
     from zbuf_occlude.cli.fit_sensor import add_fit_sensor_parser
-    from zbuf_occlude.cli.sensors import add_realism_parser, add_scan_parser
+    from zbuf_occlude.cli.realism import add_realism_parser
+    from zbuf_occlude.cli.sensors import add_scan_parser
     from zbuf_occlude.cli.verify import add_verify_parser  # zbuf-occlude verify DIR: schema, paths, checksums of a data set
     from zbuf_occlude.cli.export import add_export_parser  # zbuf-occlude export DATASET --to TARGET
     from zbuf_occlude.cli.families import add_families_parser  # zbuf-occlude families FAMILY --count N --out DIR

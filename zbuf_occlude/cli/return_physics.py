@@ -1,139 +1,83 @@
-"""``scan``'s beam options and surface optics: the options of a :class:`~zbuf_occlude.sensors.request.ScanRequest`.
+"""``scan``'s return physics options: the ground's reflectivity, the beam's options and the surface optics.
 
-Every beam option sets one field of the request (:data:`BEAM_OPTIONS`), whatever scans the beam:
-a spinning LiDAR, an airborne scanner, a ray table (a preset, a sensor file or ``--ray-table``).
-:func:`scan_request` builds the request from ``scan``'s arguments with :func:`option_names`, the
-field → option map its refusals name the options by: the rules are the library's
-(:mod:`zbuf_occlude.sensors.request`), said once.
+Each sets a field of the scan's :class:`~zbuf_occlude.sensors.request.ScanRequest`
+(:func:`~zbuf_occlude.cli.scan_request.scan_request`), which checks them against each other and the sensor.
 """
 
 from __future__ import annotations
 
 import argparse
 
-from zbuf_occlude.cli.options import count, real, shown
-from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.cli.options import Checked, real
+from zbuf_occlude.cli.scan_request import check_max_returns, check_transmittance
+from zbuf_occlude.sensors.adaptive_footprint import FOOTPRINT_MODES
 from zbuf_occlude.sensors.beam import RETURN_MODES
-from zbuf_occlude.sensors.echoes import ECHO_RULES
-from zbuf_occlude.sensors.request import ScanRequest
+from zbuf_occlude.sensors.echoes import ECHO_RULES, MAX_POWER_NOISE
 
-__all__ = [
-    "BEAM_OPTIONS", "MAX_TRANSMITTANCE_CLASSES", "SCAN_OPTION_FIELDS", "add_beam_arguments", "check_max_returns",
-    "check_transmittance", "option_names", "scan_request",
-]  # fmt: skip
-
-#: Each beam option's ``args`` attribute and the request's field it sets
-#: (:data:`~zbuf_occlude.sensors.request.BEAM_REQUEST_FIELDS`).  ``--footprint`` and ``--divergence``
-#: are crop options too (:data:`~zbuf_occlude.cli.crops.CROP_OPTIONS`: ``farm --sensor-footprint``);
-#: the others are ``scan``'s.
-BEAM_OPTIONS = {
-    "footprint": "footprint", "divergence": "divergence_deg", "max_returns": "max_returns", "return_mode": "return_mode",
-    "range_resolution": "range_resolution_m", "power_noise": "power_noise", "echo_separation": "echo_separation_m",
-    "min_echo_reflectance": "min_echo_reflectance", "echo_rule": "echo_rule",
-}  # fmt: skip
-#: ``scan``'s option of each field of a :class:`~zbuf_occlude.sensors.request.ScanRequest` (and of the beam).
-SCAN_OPTION_FIELDS = {
-    **{field: "--" + dest.replace("_", "-") for dest, field in BEAM_OPTIONS.items()}, "footprint_rays": "--footprint",
-    "footprint_cast": "--footprint-cast", "backend": "--backend", "frame": "--frame", "reflectance_table": "--reflectance-table",
-    "transmittance": "--transmittance", "reflectivity": "--reflectivity", "trajectory": "--trajectory", "samples": "--samples",
-    "format": "--format",
-}  # fmt: skip
-#: The crop options among them, by field, whose name ``scan`` records as typed (``--footprint`` or ``--sensor-footprint``).
-_CROP_FIELDS = {"footprint": "footprint", "footprint_rays": "footprint", "divergence_deg": "divergence_deg", "reflectivity": "reflectivity"}
+__all__ = ["add_return_physics_arguments"]
 
 
-def check_max_returns(text: str, option: str) -> int:
-    """``--max-returns N``: a whole number from 1 to :data:`~zbuf_occlude.sensors.echoes.MAX_RETURNS` (LAS's return numbers)."""
-    from zbuf_occlude.sensors.echoes import MAX_RETURNS
+def add_return_physics_arguments(p: argparse.ArgumentParser) -> None:
+    """``scan``'s return physics group: the ground's reflectivity, power noise, the beam options and the surface optics."""
+    r = p.add_argument_group("return physics (LiDAR)", "with --reflectivity and --footprint above")
+    r.add_argument(
+        "--ground-reflectivity",
+        action=Checked,
+        check=real(0.0),
+        default=0.15,
+        help="the ground's reflectivity with --reflectivity (default: %(default)s)",
+    )
+    r.add_argument(
+        "--power-noise", metavar="SIGMA", action=Checked, check=real(0.0, MAX_POWER_NOISE), default=None,
+        help=f"sigma of ln(received power) per firing, 0 to {MAX_POWER_NOISE:g}: the most a real return's power fluctuates is "
+        "speckle through saturated turbulence, sigma 1.81; beyond, the noise and not the range would set every intensity; "
+        "0: a sharp threshold (default: the sensor's beam's)",
+    )  # fmt: skip
+    r.add_argument(
+        "--echo-separation", metavar="M", action=Checked, check=real(0.0, unit="metres"), default=None,
+        help="with --footprint: echoes within M metres of the strongest merge into one return at their energy-weighted "
+        "range (mixed pixels at shallow depth edges; half the pulse length, ~0.75 m for 5 ns); 0: never (default: the sensor's beam's)",
+    )  # fmt: skip
+    r.add_argument(
+        "--min-echo-reflectance", metavar="R", action=Checked, check=real(0.0, 1.0), default=None,
+        help="echoes whose apparent reflectance (energy x range^2: reflectivity x |cos incidence| x the share of the footprint "
+        "the surface takes; reflectivity 1 where the scan is given none) is below R are not detected: partial echoes at an "
+        "object's outline and grazing hits, alike at every range and sub-ray count; 0: none (default: the sensor's beam's)",
+    )  # fmt: skip
+    r.add_argument("--max-returns", metavar="N", action=Checked, check=check_max_returns, default=None,
+                   help="with --footprint (or a sensor's own footprint): up to N returns per pulse (1..15), the "
+                        "footprint's echoes resolved by --range-resolution, each with its return number, number of returns and "
+                        "intensity (default: the sensor's beam's: 1 for spinning presets, 4 to 15 for airborne ones)")  # fmt: skip
+    r.add_argument("--range-resolution", metavar="M", action=Checked, check=real(0.0, above=True, unit="metres"), default=None,
+                   help="with --max-returns above 1: echoes closer than M metres merge into one return (half the pulse length, "
+                        "~0.75 m for 5 ns) (default: the sensor's)")  # fmt: skip
+    r.add_argument("--reflectance-table", action="store_true",
+                   help="the surfaces reflect as the cited table gives their material at the beam's wavelength (by each object's "
+                        "material or class: leaves, bark, car paint, glass, metal, ...; the ground asphalt), and returns must clear "
+                        "the sensor's radiometric threshold (an airborne scanner with a multi-return beam and an intensity scale "
+                        "takes the table and --transmittance table unless either is given)")  # fmt: skip
+    r.add_argument("--transmittance", metavar="SPEC", action=Checked, check=check_transmittance, default=None,
+                   help="with --max-returns above 1: the share of each sub-ray that goes on through an object's "
+                        "surface and comes back, in [0, 1] (a leafy crown's gap fraction); table (foliage 0.3 from the reflectance "
+                        "table), one number (every object), or CLASS=VALUE,... (bush=0.3,tree=0.3; a mesh's class: its file name) "
+                        "(default: 0, opaque; airborne: see --reflectance-table)")  # fmt: skip
+    r.add_argument("--footprint-cast", choices=FOOTPRINT_MODES, default=None,
+                   help="how a footprint whose echoes are resolved is cast: adaptive casts a pulse's sub-rays only where its "
+                        "centre ray and its neighbouring pulses do not all meet one plane, and gives the others that plane's echo "
+                        "(the echo of a surface inside the cone that neither meets is lost); exact casts every sub-ray (slower); "
+                        "auto is adaptive where it applies (the embree backend), else exact; a depth camera casts no footprint "
+                        "and refuses it (default: auto)")  # fmt: skip
 
-    n = count(None)(text, option)
-    if n > MAX_RETURNS:
-        raise InvalidInputError(f"{option} must be at most {MAX_RETURNS} (a LAS return number's range), got {shown(text)}")
-    return n
-
-
-#: Most ``CLASS=VALUE`` pairs ``--transmittance`` takes (a scene file holds at most this many objects' classes).
-MAX_TRANSMITTANCE_CLASSES = 256
-
-
-def check_transmittance(text: str, option: str):
-    """``--transmittance``: ``table``, one number in [0, 1] (every object, not the ground), or ``CLASS=VALUE,...``.
-
-    Returns "table", a float, or a dict of class name → float.
-
-    Raises
-    ------
-    InvalidInputError
-        Naming the option and the value: a number outside [0, 1] or not finite, a pair without a
-        class or a value, a class given twice, more than :data:`MAX_TRANSMITTANCE_CLASSES` pairs.
-    """
-    text = text.strip()
-    if text.lower() == "table":
-        return "table"
-
-    def fraction(value: str, what: str) -> float:
-        v = real(0.0)(value, option)
-        if v > 1.0:
-            raise InvalidInputError(f"{option} must be a transmittance in [0, 1], got {shown(what)}")
-        return v
-
-    if "=" not in text:
-        return fraction(text, text)
-    pairs = text.split(",")
-    if len(pairs) > MAX_TRANSMITTANCE_CLASSES:
-        raise InvalidInputError(f"{option} takes at most {MAX_TRANSMITTANCE_CLASSES} CLASS=VALUE pairs, got {len(pairs):,}")
-    out: dict[str, float] = {}
-    for pair in pairs:
-        name, _, value = (part.strip() for part in pair.partition("="))
-        if not name or not value:
-            raise InvalidInputError(
-                f"{option} must be table, a number in [0, 1], or CLASS=VALUE,... (bush=0.3,tree=0.3), got {shown(pair)}"
-            )
-        if name.lower() in out:
-            raise InvalidInputError(f"{option} gives the class {shown(name)} twice")
-        out[name.lower()] = fraction(value, pair)
-    return out
-
-
-def add_beam_arguments(group) -> None:
-    """Add ``--return-mode`` and ``--echo-rule`` to ``group`` (a parser or an argument group of ``scan``'s; its other beam
-    options sit beside it)."""
-    group.add_argument(
+    r.add_argument(
         "--return-mode", choices=RETURN_MODES, default=None,
         help="which echoes of a pulse the receiver records: all (up to --max-returns, in range order), strongest or last "
         "(one, as Velodyne's single-return modes), dual (the last and the strongest, Velodyne's dual mode); all but 'all' "
         "need --range-resolution (default: the sensor's, 'all' for presets)",
     )  # fmt: skip
-    group.add_argument(
+    r.add_argument(
         "--echo-rule", choices=ECHO_RULES, default=None,
         help="with resolved echoes (--max-returns above 1 or --return-mode): how a pulse's sub-ray hits merge into echoes: "
         "chain (a new echo at a gap of --range-resolution after the previous hit) or waveform (one echo per peak of the pulse's "
         "summed waveform, split where it dips: returns per pulse that do not drift with the sub-ray count) "
         "(default: the sensor's, chain for presets)",
     )  # fmt: skip
-
-
-def option_names(args: argparse.Namespace) -> dict[str, str]:
-    """The field → option map of ``args``: :data:`SCAN_OPTION_FIELDS` with the crop options as typed, and the sensor as named."""
-    from zbuf_occlude.cli.crops import FLAGS
-
-    typed = getattr(args, FLAGS, {})
-    names = {**SCAN_OPTION_FIELDS, **{f: typed[c] for f, c in _CROP_FIELDS.items() if typed.get(c)}}
-    if getattr(args, "trajectory", None) is not None:
-        names["trajectory"] = f"--trajectory {args.trajectory}"
-    return {**names, "sensor": str(args.sensor)}
-
-
-def scan_request(args: argparse.Namespace, sensor, **fields) -> ScanRequest:
-    """The :class:`~zbuf_occlude.sensors.request.ScanRequest` of ``sensor`` and ``args``' beam options and surface optics
-    (``fields``: the request's other fields), naming the options by :func:`option_names`.
-
-    Raises
-    ------
-    InvalidInputError
-        What the request refuses, naming the options as typed.
-    """
-    beam = {field: getattr(args, dest, None) for dest, field in BEAM_OPTIONS.items()}
-    return ScanRequest(sensor, beam=beam, footprint_cast=getattr(args, "footprint_cast", None), reflectance_table=bool(getattr(args, "reflectance_table", False)),
-                       transmittance=getattr(args, "transmittance", None), reflectivity=getattr(args, "reflectivity", None),
-                       names=option_names(args), **fields)  # fmt: skip

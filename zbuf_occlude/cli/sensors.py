@@ -9,28 +9,25 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
-from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
 
 from zbuf_occlude.cli.crops import FLAGS, CropSettings, add_crop_arguments, crop_settings, given_crop_options
-from zbuf_occlude.cli.las_options import LAS_FORMATS, add_las_arguments, las_keywords
-from zbuf_occlude.cli.options import Checked, count, counted, interval, out_folder, parse_interval, real, seed
-from zbuf_occlude.cli.return_physics import add_beam_arguments, check_max_returns, check_transmittance, scan_request
+from zbuf_occlude.cli.las_options import add_las_arguments, las_keywords
+from zbuf_occlude.cli.options import Checked, count, counted, interval, out_folder, parse_interval, seed
+from zbuf_occlude.cli.return_physics import add_return_physics_arguments
+from zbuf_occlude.cli.scan_request import scan_request
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.mesh.sizes import DIMENSIONS, SizeRange, size_interval
-from zbuf_occlude.sensors.adaptive_footprint import FOOTPRINT_MODES
-from zbuf_occlude.sensors.echoes import MAX_POWER_NOISE
-from zbuf_occlude.sensors.placement import CropDistributions
-from zbuf_occlude.sensors.scan_data import check_gps_start
-from zbuf_occlude.sensors.kinds import SENSOR_KINDS, kind_of, preset_names, sensor_from_name
+from zbuf_occlude.sensors.placement import CropDistributions, check_outside
+from zbuf_occlude.sensors.kinds import SENSOR_KINDS, preset_names, sensor_from_name
+from zbuf_occlude.sensors.scan_files import SCAN_FILE_NAMES
 from zbuf_occlude.sensors.spec_files import SCENE_SUFFIXES
 
-__all__ = ["add_scan_parser", "add_realism_parser", "check_outside", "SCAN_CROP_DISTRIBUTIONS"]
+__all__ = ["add_scan_parser", "SCAN_CROP_DISTRIBUTIONS"]
 
 log = logging.getLogger(__name__)
 
@@ -57,38 +54,6 @@ def _outline(text: str | None) -> tuple[float, ...] | None:
         return check_width_profile(text.split(","))
     except InvalidInputError:
         raise InvalidInputError(f"--outline must be 2 or more numbers > 0, V,V,..., bottom to top, got {text!r}") from None
-
-
-def check_outside(dist, extents=None) -> None:
-    """Refuse a ``--distance`` that may put the sensor inside the object.
-
-    The object's footprint centre lies ``distance_m`` from the sensor and its largest
-    horizontal dimension is up to ``size_m`` (or the X/Y ``extents_m``) high end, or, given the
-    mesh's ``extents (3,)``, its larger horizontal side scaled so, times the ``width_scale``
-    high end where it stretches the object and the largest ``width_profile`` factor above 1
-    where it warps it; a distance below half of that may stand the sensor
-    inside it (every ray starts inside).
-
-    Raises
-    ------
-    InvalidInputError
-        Naming ``--distance`` and the smallest distance allowed.
-    """
-    if dist.extents_m is not None:
-        sizes = [dist.extents_m[0][1], dist.extents_m[1][1]]
-    else:
-        e = None if extents is None else np.asarray(extents, dtype=np.float64)
-        sizes = [dist.size_m[1] * (1.0 if e is None or not e.max() > 0 else float(e[:2].max() / e.max()))]
-    if dist.width_scale is not None:
-        sizes = [v * dist.width_scale[1] for v in sizes]
-    if dist.width_profile is not None:
-        sizes = [v * max(1.0, *dist.width_profile) for v in sizes]
-    half = max(sizes) / 2
-    if dist.distance_m[0] < half:
-        raise InvalidInputError(
-            f"--distance {dist.distance_m[0]:g} m may put the sensor inside the object (up to {max(sizes):g} m across): "
-            f"use a distance of at least {half:g} m"
-        )
 
 
 #: ``scan``'s placement when no option changes it: a car (4.5 m) 10 m ahead of a LiDAR on a car roof.
@@ -180,179 +145,84 @@ def cmd_scan(args: argparse.Namespace) -> int:
     if args.occlude and args.across_sight_width is None:
         width = getattr(args, FLAGS)["across_sight_width_m"]
         raise InvalidInputError(f"--occlude meets {width} with a side occluder: it needs {width}")
-    las_options = las_keywords(args, formats, world_frame=request.frame == "world")
+    request = replace(request, las=las_keywords(args, formats, world_frame=request.frame == "world"))
     # a refused run's empty --out is removed by cli.main
     with OwnedFolder(args.out, names=[SCAN_FILE_NAMES], what="the scan") as folder:
-        return _scan_into(folder, args, request, las_options)
+        return _scan_into(folder, args, request)
 
 
-#: The files ``scan`` writes in ``--out``: ``<stem>_<sensor>_sNNN.npz|ply|las|laz``.
-SCAN_FILE_NAMES = r"[^/]+_s\d{3,}\.(npz|ply|las|laz)"
-
-
-def _save(folder: OwnedFolder, s, stem: str, formats: Sequence[str], las_options: dict, *, ground_z_m: float, number: int) -> list[Path]:
-    """Write scan ``s`` as ``<stem>.<fmt>`` for each format, through the owned folder; a LAS/LAZ file with
-    ``las_options`` (:func:`~zbuf_occlude.cli.las_options.las_keywords`), the scene's ``ground_z_m`` and
-    ``number`` modulo 65,536 as its point source id where it has no flight lines."""
-    files = []
-    if set(formats) & set(LAS_FORMATS):  # the start with this scan's own times, named as the option (the library names its field)
-        check_gps_start(las_options["gps_start_s"], s.gps_time, name="--gps-start")
-    for fmt in formats:
-        if fmt in LAS_FORMATS:  # LAS 1.4 point format 6, encoded in memory
-            data = s.to_las_bytes(compress=fmt == "laz", ground_z_m=ground_z_m, scan_number=number % 65536, **las_options)
-            folder.write_bytes(f"{stem}.{fmt}", data)
-        else:
-            with folder.write(f"{stem}.{fmt}") as tmp:
-                getattr(s, f"to_{fmt}")(tmp)
-        files.append(folder.root / f"{stem}.{fmt}")
-    return files
-
-
-def _scan_into(folder: OwnedFolder, args: argparse.Namespace, request, las_options: dict) -> int:
-    """:func:`cmd_scan` once ``--out`` is held."""
-    from zbuf_occlude.io.progress import progress as progress_bar
-    from zbuf_occlude.sensors.crops import object_crops
-    from zbuf_occlude.sensors.platform import look_at_pose
-    from zbuf_occlude.sensors.scan import scan
-    from zbuf_occlude.sensors.scene import GROUND_ID
+def _scan_into(folder: OwnedFolder, args: argparse.Namespace, request) -> int:
+    """:func:`cmd_scan` once ``--out`` is held: a scene file's scans, or the mesh's placed and scanned
+    (:mod:`zbuf_occlude.sensors.scan_files`); 1 where a scan of a mesh holds no return of the object."""
+    from zbuf_occlude.sensors.scan_files import scan_object, scan_scene_file
     from zbuf_occlude.sensors.scene_files import load_scene
 
-    out = folder.root
-    sensor, formats, trajectory, footprint, frame = request.scanner, request.formats, request.trajectory, request.cast, request.frame
-    kind = kind_of(sensor)
     src = Path(args.mesh_or_scene)
-    written, empty = [], 0
     if src.suffix.lower() in SCENE_SUFFIXES:
         if args.crop:
             raise InvalidInputError(f"--crop keeps one mesh's returns; {src.name} is a scene file, scanned whole")
-        scene = load_scene(src)
-        if kind.pulsed:
-            pose = scene.default_sensor_pose()
-        else:  # a camera looks at the first object from the sensor position
-            target = scene.build().local_to_world[1][:3, 3] if scene.objects else np.array([1.0, 0.0, scene.ground_z_m])
-            pose = look_at_pose(scene.default_sensor_pose()[:3, 3], target + [0, 0, 0.5])
-        optics = request.surface_optics(scene)  # the scene's, once: every sample scans the same scene
-        for k in progress_bar(range(args.samples), desc="scan", unit="scan", enabled=not args.no_progress):
-            if kind.flies:  # a flight over the scene's ground (world frame)
-                from zbuf_occlude.sensors.scan import scan_airborne
-
-                s = scan_airborne(scene, sensor, (0.0, 0.0), scene.ground_half_extent_m, seed=args.seed + k, footprint=footprint, **optics)
-            else:
-                start_s = None if trajectory is None else trajectory.start_s + k * sensor.sweep_s  # this sweep's samples only
-                platform = pose if trajectory is None else trajectory.since(start_s, until_s=start_s + sensor.sweep_s)
-                s = scan(scene, sensor, platform, seed=args.seed + k, backend=args.backend, frame=frame, footprint=footprint, **optics)
-            written += _save(folder, s, f"{src.stem}_{sensor.name}_s{k:03d}", formats, las_options, ground_z_m=scene.ground_z_m, number=k)
+        scans = scan_scene_file(request, load_scene(src), folder, stem=src.stem, seed=args.seed, progress=not args.no_progress)
     else:
-        if not kind.pulsed:
-            raise InvalidInputError(f"scan of a mesh file places a LiDAR; use a scene file for a {kind.title}")
-        extents, round_xy = None, False
-        if args.extents and args.size_of != "max":
-            raise InvalidInputError(f"--size-of {args.size_of} says what --size measures; --extents gives every side instead")
-        if args.extents:
-            parts = args.extents.split(",")
-            if len(parts) != 3:
-                raise InvalidInputError(f"--extents must be X,Y,Z in metres (each N or LO:HI; Y may be '='), got {args.extents!r}")
-            round_xy = parts[1].strip() == "="
-            extents = tuple(parse_interval(parts[0] if i == 1 and round_xy else v, "--extents") for i, v in enumerate(parts))
-        mesh = PRIMITIVES.get(str(src)) if not src.exists() else None
-        if mesh is None:
-            from zbuf_occlude.mesh.load import load_mesh
-
-            mesh = load_mesh(src, up=args.up)  # once, not per sample
-            if not mesh.extents[2] > FLAT_SHARE * mesh.extents.max():
-                raise InvalidInputError(
-                    f"{src}: flat in z (no height once its up axis is turned to +z, --up {args.up}): stood on the ground it lies "
-                    "in the ground plane, where no scan can tell it from the ground; give --up the axis it should stand along "
-                    "(e.g. --up +y), or give it a thickness"
-                )
-        crops = crop_settings(args, SCAN_CROP_DISTRIBUTIONS, azimuth_deg=parse_interval(args.azimuth, "--azimuth"),
-                              yaw_deg=parse_interval(args.yaw, "--yaw"), extents_m=extents, round_xy=round_xy,
-                              ground_reflectivity=args.ground_reflectivity)  # fmt: skip
-        dist = _largest_side(crops, args.size_of, mesh).distributions
-        if crops.across_sight_width_m is not None or args.outline is not None:
-            from zbuf_occlude.sensors.fit import fit_object_shape
-
-            dist = replace(dist, **fit_object_shape(mesh, sensor, dist, crops.across_sight_width_m, _outline(args.outline), occlude=args.occlude,
-                                                    seed=args.seed, name=str(src)))  # fmt: skip
-            log.info("%s: width_scale %s, visible_across_sight %s, width_profile %s", src.name, dist.width_scale, dist.visible_across_sight,
-                     dist.width_profile)  # fmt: skip
-        if not kind.flies:  # an aircraft flies its altitude above the object
-            check_outside(dist, None if isinstance(mesh, dict) else mesh.extents)
-        # the farm's loop and seeds: one seed gives the crops farm --sensor gives this file lying directly in its input folder
-        optics = request.scene_optics()
-        crops = object_crops(mesh, sensor, dist, name=src.stem, n_samples=args.samples, seed=args.seed, class_name=src.stem,
-                             backend=args.backend, frame=frame, optics=optics, footprint=footprint)  # fmt: skip
-        for k, crop, _ in progress_bar(crops, total=args.samples, desc="scan", unit="scan", enabled=not args.no_progress):
-            placement = crop.placement
-            s = crop.scan if args.crop else crop.full
-            s.meta.update(placement.to_dict())
-            stem = f"{src.stem}_{sensor.name}_s{k:03d}"
-            files = _save(folder, s, stem, formats, las_options, ground_z_m=0.0, number=k)
-            written += files
-            returns = int(np.count_nonzero(crop.scan.object_id != GROUND_ID))
-            if returns == 0:
-                empty += 1
-                print(f"EMPTY {files[0]}: no return of the object (edge-on, below the sensor's beams or beyond its range at "
-                      f"{placement.distance_m:.2f} m)", file=sys.stderr)  # fmt: skip
-            log.info("%s: %d returns of the object at %.2f m", stem, returns, placement.distance_m)
+        mesh, dist = _placed_object(args, request.scanner, src)
+        scans = scan_object(request, mesh, dist, folder, name=src.stem, seed=args.seed, crop=args.crop, progress=not args.no_progress)
+    written, empty = 0, 0
+    for done in scans:
+        written += len(done.files)
+        if done.object_returns == 0:
+            empty += 1
+            print(f"EMPTY {done.files[0]}: no return of the object (edge-on, below the sensor's beams or beyond its range at "
+                  f"{done.distance_m:.2f} m)", file=sys.stderr)  # fmt: skip
+        if done.object_returns is not None:
+            log.info("%s: %d returns of the object at %.2f m", done.files[0].stem, done.object_returns, done.distance_m)
     print(
-        f"wrote {counted(len(written), 'file')} to {out}"
+        f"wrote {counted(written, 'file')} to {folder.root}"
         + (f"; {empty} of {counted(args.samples, 'scan')} hold no return of the object" if empty else "")
     )
     return 1 if empty else 0
 
 
-def _add_return_physics_arguments(p: argparse.ArgumentParser) -> None:
-    """``scan``'s return physics group: the ground's reflectivity, power noise, the beam options and the surface optics."""
-    r = p.add_argument_group("return physics (LiDAR)", "with --reflectivity and --footprint above")
-    r.add_argument(
-        "--ground-reflectivity",
-        action=Checked,
-        check=real(0.0),
-        default=0.15,
-        help="the ground's reflectivity with --reflectivity (default: %(default)s)",
-    )
-    r.add_argument(
-        "--power-noise", metavar="SIGMA", action=Checked, check=real(0.0, MAX_POWER_NOISE), default=None,
-        help=f"sigma of ln(received power) per firing, 0 to {MAX_POWER_NOISE:g}: the most a real return's power fluctuates is "
-        "speckle through saturated turbulence, sigma 1.81; beyond, the noise and not the range would set every intensity; "
-        "0: a sharp threshold (default: the sensor's beam's)",
-    )  # fmt: skip
-    r.add_argument(
-        "--echo-separation", metavar="M", action=Checked, check=real(0.0, unit="metres"), default=None,
-        help="with --footprint: echoes within M metres of the strongest merge into one return at their energy-weighted "
-        "range (mixed pixels at shallow depth edges; half the pulse length, ~0.75 m for 5 ns); 0: never (default: the sensor's beam's)",
-    )  # fmt: skip
-    r.add_argument(
-        "--min-echo-reflectance", metavar="R", action=Checked, check=real(0.0, 1.0), default=None,
-        help="echoes whose apparent reflectance (energy x range^2: reflectivity x |cos incidence| x the share of the footprint "
-        "the surface takes; reflectivity 1 where the scan is given none) is below R are not detected: partial echoes at an "
-        "object's outline and grazing hits, alike at every range and sub-ray count; 0: none (default: the sensor's beam's)",
-    )  # fmt: skip
-    r.add_argument("--max-returns", metavar="N", action=Checked, check=check_max_returns, default=None,
-                   help="with --footprint (or a sensor's own footprint): up to N returns per pulse (1..15), the "
-                        "footprint's echoes resolved by --range-resolution, each with its return number, number of returns and "
-                        "intensity (default: the sensor's beam's: 1 for spinning presets, 4 to 15 for airborne ones)")  # fmt: skip
-    r.add_argument("--range-resolution", metavar="M", action=Checked, check=real(0.0, above=True, unit="metres"), default=None,
-                   help="with --max-returns above 1: echoes closer than M metres merge into one return (half the pulse length, "
-                        "~0.75 m for 5 ns) (default: the sensor's)")  # fmt: skip
-    r.add_argument("--reflectance-table", action="store_true",
-                   help="the surfaces reflect as the cited table gives their material at the beam's wavelength (by each object's "
-                        "material or class: leaves, bark, car paint, glass, metal, ...; the ground asphalt), and returns must clear "
-                        "the sensor's radiometric threshold (an airborne scanner with a multi-return beam and an intensity scale "
-                        "takes the table and --transmittance table unless either is given)")  # fmt: skip
-    r.add_argument("--transmittance", metavar="SPEC", action=Checked, check=check_transmittance, default=None,
-                   help="with --max-returns above 1: the share of each sub-ray that goes on through an object's "
-                        "surface and comes back, in [0, 1] (a leafy crown's gap fraction); table (foliage 0.3 from the reflectance "
-                        "table), one number (every object), or CLASS=VALUE,... (bush=0.3,tree=0.3; a mesh's class: its file name) "
-                        "(default: 0, opaque; airborne: see --reflectance-table)")  # fmt: skip
-    r.add_argument("--footprint-cast", choices=FOOTPRINT_MODES, default=None,
-                   help="how a footprint whose echoes are resolved is cast: adaptive casts a pulse's sub-rays only where its "
-                        "centre ray and its neighbouring pulses do not all meet one plane, and gives the others that plane's echo "
-                        "(the echo of a surface inside the cone that neither meets is lost); exact casts every sub-ray (slower); "
-                        "auto is adaptive where it applies (the embree backend), else exact; a depth camera casts no footprint "
-                        "and refuses it (default: auto)")  # fmt: skip
-    add_beam_arguments(r)
+def _placed_object(args: argparse.Namespace, sensor, src: Path):
+    """The mesh ``scan`` stands on the ground (a file, read once, or a unit primitive) and its placement's
+    :class:`~zbuf_occlude.sensors.placement.CropDistributions` from the crop options (``--extents``, ``--size-of``,
+    ``--across-sight-width`` and ``--outline`` fitted by :func:`~zbuf_occlude.sensors.fit.fit_object_shape`)."""
+    from zbuf_occlude.sensors.kinds import capabilities
+
+    if not capabilities(sensor).pulsed:
+        raise InvalidInputError(f"scan of a mesh file places a LiDAR; use a scene file for a {capabilities(sensor).title}")
+    extents, round_xy = None, False
+    if args.extents and args.size_of != "max":
+        raise InvalidInputError(f"--size-of {args.size_of} says what --size measures; --extents gives every side instead")
+    if args.extents:
+        parts = args.extents.split(",")
+        if len(parts) != 3:
+            raise InvalidInputError(f"--extents must be X,Y,Z in metres (each N or LO:HI; Y may be '='), got {args.extents!r}")
+        round_xy = parts[1].strip() == "="
+        extents = tuple(parse_interval(parts[0] if i == 1 and round_xy else v, "--extents") for i, v in enumerate(parts))
+    mesh = PRIMITIVES.get(str(src)) if not src.exists() else None
+    if mesh is None:
+        from zbuf_occlude.mesh.load import load_mesh
+
+        mesh = load_mesh(src, up=args.up)  # once, not per sample
+        if not mesh.extents[2] > FLAT_SHARE * mesh.extents.max():
+            raise InvalidInputError(
+                f"{src}: flat in z (no height once its up axis is turned to +z, --up {args.up}): stood on the ground it lies "
+                "in the ground plane, where no scan can tell it from the ground; give --up the axis it should stand along "
+                "(e.g. --up +y), or give it a thickness"
+            )
+    crops = crop_settings(args, SCAN_CROP_DISTRIBUTIONS, azimuth_deg=parse_interval(args.azimuth, "--azimuth"),
+                          yaw_deg=parse_interval(args.yaw, "--yaw"), extents_m=extents, round_xy=round_xy,
+                          ground_reflectivity=args.ground_reflectivity)  # fmt: skip
+    dist = _largest_side(crops, args.size_of, mesh).distributions
+    if crops.across_sight_width_m is not None or args.outline is not None:
+        from zbuf_occlude.sensors.fit import fit_object_shape
+
+        dist = replace(dist, **fit_object_shape(mesh, sensor, dist, crops.across_sight_width_m, _outline(args.outline), occlude=args.occlude,
+                                                seed=args.seed, name=str(src)))  # fmt: skip
+        log.info("%s: width_scale %s, visible_across_sight %s, width_profile %s", src.name, dist.width_scale, dist.visible_across_sight,
+                 dist.width_profile)  # fmt: skip
+    if not capabilities(sensor).flies:  # an aircraft flies its altitude above the object
+        check_outside(dist, None if isinstance(mesh, dict) else mesh.extents, name="--distance")
+    return mesh, dist
 
 
 def add_scan_parser(sub) -> argparse.ArgumentParser:
@@ -401,7 +271,7 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
         help="X,Y,Z: stretch the mesh to these extents, metres, each N or LO:HI drawn per sample (instead of --size); "
         "Y '=' takes the drawn X (a round pole: --extents 0.1:0.4,=,3:9)",
     )
-    _add_return_physics_arguments(p)
+    add_return_physics_arguments(p)
     p.add_argument(
         "--azimuth",
         action=Checked,
@@ -473,63 +343,4 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
     add_las_arguments(p)
     p.add_argument("--out", required=True, action=Checked, check=out_folder, help="output folder")
     p.set_defaults(func=cmd_scan)
-    return p
-
-
-def cmd_realism(args: argparse.Namespace) -> int:
-    from zbuf_occlude.experiments.realism import class_table, markdown_table, realism_report
-
-    out_folder(args.out, "--out")  # the default's check; a given --out was checked while parsing
-    print(f"reading {args.generated} and {args.real} ...", flush=True)
-    rows, table = realism_report(args.generated, args.real, args.out, min_points=args.min_points, figure=not args.no_figure,
-                                 ground_in_crops=args.ground_in_crops, airborne=args.airborne)  # fmt: skip
-    print(markdown_table(rows) + "\n" + class_table(table), end="")
-    print(f"wrote {Path(args.out) / 'realism.md'}, realism.csv, realism_classes.csv" + ("" if args.no_figure else ", realism.png"))
-    return 0
-
-
-def add_realism_parser(sub) -> argparse.ArgumentParser:
-    """Add ``realism`` to the subparsers ``sub``."""
-    p = sub.add_parser(
-        "realism", help="generated vs real clouds: ring spacing, count-vs-range, spacing, extent; per class points, height/width, vertical profile",
-        description="Compare statistics of generated scans with real LiDAR clouds and write realism.md, realism.csv, "
-        "realism_classes.csv and a figure to --out.  Per class (the class folders both sets share, or all clouds pooled): "
-        "points per crop, height over width, and how the points spread over the height (the median height above the "
-        "crop's bottom and the share in each tenth of its height; a simulated pole that is a tall shaft where real crops "
-        "show a squat top differs there).  --airborne compares aerial crops by these alone.",
-    )  # fmt: skip
-    p.add_argument(
-        "generated",
-        metavar="GENERATED",
-        help="scan .npz files or a folder of them (in class folders, GENERATED/CLASS/*.npz, for the per-class table), or LiDARNet CSVs",
-    )
-    p.add_argument(
-        "real", metavar="REAL", help="real scans: class folders of point-cloud files (aerial crops, ...), LiDARNet v2 CSVs, or scan .npz"
-    )
-    p.add_argument(
-        "--out",
-        action=Checked,
-        check=out_folder,
-        default="realism",
-        help="folder for realism.md, realism.csv, realism_classes.csv, realism.png (default: %(default)s)",
-    )
-    p.add_argument(
-        "--min-points",
-        action=Checked,
-        check=count("MAX_POINTS", lowest=0),
-        default=1,
-        help="ignore clouds with fewer points (default: %(default)s)",
-    )
-    p.add_argument(
-        "--ground-in-crops", action="store_true",
-        help="a generated scan file holding one object (a crop made with scan --crop --ground-margin) counts its ground "
-        "returns as part of it, as a real crop holds them (default: ground returns never count)",
-    )  # fmt: skip
-    p.add_argument(
-        "--airborne", action="store_true",
-        help="the clouds are aerial crops (no sensor position in the files): compare per class only (rings and ranges "
-        "need a sensor at the origin); the figure shows the height profiles",
-    )  # fmt: skip
-    p.add_argument("--no-figure", action="store_true", help="do not draw realism.png")
-    p.set_defaults(func=cmd_realism)
     return p

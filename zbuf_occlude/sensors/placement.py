@@ -18,6 +18,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.object_shapes import check_width_profile
 
 __all__ = [
+    "check_outside",
     "CropDistributions",
     "Placement",
     "DEFAULT_GROUND_REFLECTIVITY",
@@ -296,3 +297,35 @@ def draw_placement(dist: CropDistributions, rng: np.random.Generator) -> Placeme
         out["visible_across_sight"] = min(1.0, _draw(dist.visible_across_sight, rng))
         out["occluder_side"] = 1.0 if rng.uniform() < 0.5 else -1.0
     return Placement(**out)
+
+
+def check_outside(dist: CropDistributions, extents=None, *, name: str = "distance_m") -> None:
+    """Refuse a distance (``dist.distance_m``'s low end) that may put the sensor inside the object.
+
+    The object's footprint centre lies ``distance_m`` from the sensor and its largest
+    horizontal dimension is up to ``size_m`` (or the X/Y ``extents_m``) high end, or, given the
+    mesh's ``extents (3,)``, its larger horizontal side scaled so, times the ``width_scale``
+    high end where it stretches the object and the largest ``width_profile`` factor above 1
+    where it warps it; a distance below half of that may stand the sensor
+    inside it (every ray starts inside).
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the distance as ``name`` (a command's option for it) and the smallest distance allowed.
+    """
+    if dist.extents_m is not None:
+        sizes = [dist.extents_m[0][1], dist.extents_m[1][1]]
+    else:
+        e = None if extents is None else np.asarray(extents, dtype=np.float64)
+        sizes = [dist.size_m[1] * (1.0 if e is None or not e.max() > 0 else float(e[:2].max() / e.max()))]
+    if dist.width_scale is not None:
+        sizes = [v * dist.width_scale[1] for v in sizes]
+    if dist.width_profile is not None:
+        sizes = [v * max(1.0, *dist.width_profile) for v in sizes]
+    half = max(sizes) / 2
+    if dist.distance_m[0] < half:
+        raise InvalidInputError(
+            f"{name} {dist.distance_m[0]:g} m may put the sensor inside the object (up to {max(sizes):g} m across): "
+            f"use a distance of at least {half:g} m"
+        )

@@ -112,6 +112,9 @@ class ScanRequest:
         Sweeps scanned one after another (a trajectory must last them).
     formats : tuple of str
         The output's file formats (``"las"`` and ``"laz"``: :data:`LAS_FORMATS`).
+    las : mapping of str to value
+        The LAS/LAZ files' keywords of :meth:`~zbuf_occlude.sensors.scan_data.Scan.to_las_bytes` (``crs``, ``class_map``,
+        ``gps_start_s``).
     names : mapping of str to str
         The caller's name of each field, for messages (module docstring); ``"sensor"`` how it named the sensor.
 
@@ -145,6 +148,7 @@ class ScanRequest:
     trajectory: object = None
     samples: int = 1
     formats: tuple[str, ...] = ("npz",)
+    las: Mapping[str, object] = field(default_factory=dict)
     names: Mapping[str, str | None] = field(default_factory=dict)
     scanner: object = field(init=False, repr=False, compare=False)
     cast: str = field(init=False, compare=False)
