@@ -379,5 +379,5 @@ def test_a_detection_threshold_below_any_sensor_names_the_altitude_it_rests_on(s
     fit = fit_return_model(survey_las, altitude_m=1e6, ground_reflectance=RHO, classes=(5,), bootstrap=5)
     assert fit.estimates["detection_threshold"].value < MIN_DETECTION_THRESHOLD
     with pytest.raises(InvalidInputError, match=r"^the fitted detection threshold .* m⁻² is below the energy a white target returns from "
-                                                r"1e\+06 m, .*altitude_m 1e\+06 \(fit-sensor --altitude\) is likely not the scans' flying height$"):  # fmt: skip
+                                                r"1e\+06 m, .*altitude_m 1e\+06 is likely not the scans' flying height$"):  # fmt: skip
         fit.apply(lidar)

@@ -59,15 +59,20 @@ def _refine(args: argparse.Namespace, say):
                                sizes=parse_sizes(args.sizes), say=say)  # fmt: skip
 
 
+#: ``fit-sensor``'s option of each argument of :func:`~zbuf_occlude.sensors.fit.engine.fit_sensor`, for its messages.
+FIT_SENSOR_OPTIONS = {"out": "--out", "sensor": "--sensor", "altitude_m": "--altitude", "classes": "--classes", "bootstrap": "--bootstrap",
+                      "divergence_shares": "--divergence-shares"}  # fmt: skip
+
+
 def cmd_fit_sensor(args: argparse.Namespace) -> int:
-    from zbuf_occlude.sensors.fit.engine import fit_sensor
+    from zbuf_occlude.sensors.fit.engine import LasFit, fit_sensor
 
     def say(line: str) -> None:
         print(line, flush=True)
 
-    result = fit_sensor(args.real, args.sensor, args.out, seed=args.seed, altitude_m=args.altitude, classes=args.classes,
-                        bootstrap=args.bootstrap, divergence_shares=args.divergence_shares, refine=_refine(args, say),
-                        say=say)  # fmt: skip
+    las = LasFit(altitude_m=args.altitude, classes=args.classes, bootstrap=args.bootstrap, divergence_shares=args.divergence_shares)
+    result = fit_sensor(args.real, args.sensor, args.out, seed=args.seed, las=las, refine=_refine(args, say), say=say,
+                        names=FIT_SENSOR_OPTIONS)  # fmt: skip
     print(result.table, end="")
     print(f"wrote {result.json_path} (use it as --sensor {result.json_path}), {result.markdown_path}")
     return 0

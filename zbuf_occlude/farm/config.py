@@ -34,7 +34,6 @@ from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, view_schedule
 from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.mesh.paths import SPLITS
 from zbuf_occlude.mesh.scene import UP_CHOICES
-from zbuf_occlude.sensors.beam import footprint_changes
 from zbuf_occlude.sensors.footprint import MAX_DIVERGENCE_DEG
 from zbuf_occlude.sensors.placement import CropDistributions, check_across_sight_width
 
@@ -90,9 +89,12 @@ FARM_CROP_FIELDS = ("distance_m", "height_m", "size_m", "reflectivity", "ground_
 _LEFT_OUT_WHEN_NONE = ("ground_margin_m", "hidden_below_m", "across_sight_width_m", "divergence_deg", "adaptive_footprint")
 #: The ``farm`` flag of each :class:`CropDistributions` field it sets, for the messages of its checks.
 CROP_OPTION_NAMES = {field: OPTION_NAMES[SENSOR_KEYS[field]] for field in FARM_CROP_FIELDS}
-#: How ``farm`` names the fields of :func:`~zbuf_occlude.sensors.adaptive_footprint.check_footprint_cast`'s messages.
-FOOTPRINT_CAST_NAMES = {"footprint_cast": OPTION_NAMES["sensor_adaptive_footprint"], "footprint_rays": OPTION_NAMES["sensor_footprint"],
-                        "max_returns": "a sensor file's max_returns"}  # fmt: skip
+#: ``farm``'s option of each field of its :class:`~zbuf_occlude.sensors.request.ScanRequest`, for the request's messages.
+FARM_REQUEST_NAMES = {
+    "footprint_cast": OPTION_NAMES["sensor_adaptive_footprint"], "footprint": OPTION_NAMES["sensor_footprint"],
+    "footprint_rays": OPTION_NAMES["sensor_footprint"], "divergence_deg": OPTION_NAMES["sensor_divergence_deg"],
+    "max_returns": "a sensor file's max_returns",
+}  # fmt: skip
 #: ``farm --sensor``'s placement when no option changes it.
 FARM_CROP_DISTRIBUTIONS = CropDistributions(
     distance_m=DEFAULT_SENSOR_DISTANCE_M, height_m=DEFAULT_SENSOR_HEIGHT_M, size_m=DEFAULT_SENSOR_SIZE_M
@@ -174,7 +176,7 @@ class SensorCropParams:
         object.__setattr__(self, "footprint", bool(self.footprint))
         from zbuf_occlude.sensors.adaptive_footprint import check_footprint_cast, footprint_mode
 
-        check_footprint_cast(self.footprint_cast, None, names=FOOTPRINT_CAST_NAMES)  # the mode alone, before the sensor is read
+        check_footprint_cast(self.footprint_cast, None, names=FARM_REQUEST_NAMES)  # the mode alone, before the sensor is read
         if self.divergence_deg is not None:
             from zbuf_occlude.sensors.checks import real
 
@@ -200,7 +202,7 @@ class SensorCropParams:
             beam refuses; ``footprint_cast`` "adaptive" for a beam that fires one ray or resolves no
             echoes.  Each names its ``farm`` option.
         """
-        from zbuf_occlude.sensors.kinds import kind_of, sensor_from_name, with_beam
+        from zbuf_occlude.sensors.kinds import kind_of, sensor_from_name
 
         sensor = sensor_from_name(self.name)
         kind = kind_of(sensor)
@@ -216,17 +218,11 @@ class SensorCropParams:
                                     "every surface alike (no detection threshold per object); leave it out")  # fmt: skip
         if self.across_sight_width_m is not None and not kind.spins:
             raise InvalidInputError(f"--sensor-across-sight-width measures across a spinning LiDAR's line of sight; {self.name} is not one")
-        changes = footprint_changes(sensor.beam, footprint=bool(self.footprint), divergence_deg=self.divergence_deg, sensor=self.name,
-                                    names=(OPTION_NAMES["sensor_footprint"], OPTION_NAMES["sensor_divergence_deg"]))  # fmt: skip
-        if changes:
-            try:
-                sensor = with_beam(sensor, **changes)
-            except InvalidInputError as exc:
-                raise InvalidInputError(f"{', '.join(given)}: {exc}") from None
-        if self.footprint_cast == "adaptive":
-            from zbuf_occlude.sensors.adaptive_footprint import check_footprint_cast
+        from zbuf_occlude.sensors.request import ScanRequest
 
-            check_footprint_cast(self.footprint_cast, sensor.beam, sensor=self.name, names=FOOTPRINT_CAST_NAMES)
+        beam = {"footprint": self.footprint, "divergence_deg": self.divergence_deg}
+        return ScanRequest(sensor, beam=beam, footprint_cast=self.footprint_cast,
+                           names={**FARM_REQUEST_NAMES, "sensor": self.name}).scanner  # fmt: skip
         return sensor
 
     @property

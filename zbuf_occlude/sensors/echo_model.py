@@ -13,6 +13,8 @@ and resolves a pulse's hits into returns (:func:`~.echoes.resolve_echoes`);
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,7 +27,7 @@ from zbuf_occlude.sensors.echoes import MAX_POWER_NOISE, hit_energy, resolve_ech
 from zbuf_occlude.sensors.raycast import MAX_HITS, cast_embree_beyond, face_normals
 from zbuf_occlude.sensors.scene import BuiltScene
 
-__all__ = ["Radiometry", "Transmission", "echo_returns", "strongest_echo", "surface_optics"]
+__all__ = ["Radiometry", "Transmission", "check_transmittance_cast", "echo_returns", "strongest_echo", "surface_optics"]
 
 
 def surface_optics(built: BuiltScene, reflectivity, transmittance, *, wavelength_nm: float, multi_return: bool, backend: str = "embree"):
@@ -77,14 +79,34 @@ def surface_optics(built: BuiltScene, reflectivity, transmittance, *, wavelength
         tau = table.face_transmittance if isinstance(transmittance, str) else _transmittance_table(transmittance, n_ids)[built.face_object]
         if not tau.any():
             tau = None  # opaque everywhere: today's first hits
-        elif not multi_return:
-            raise InvalidInputError("transmittance above 0 gives hits behind a surface, which only the multi-return model resolves: "
-                                    "give the scanner a beam that resolves echoes "
-                                    "(max_returns above 1 or a Velodyne return mode)")  # fmt: skip
-        elif backend != "embree":
-            raise InvalidInputError(f"transmittance above 0 needs every hit along each sub-ray, which the {backend!r} backend cannot give "
-                                    "(it keeps the nearest face per pixel): use backend='embree'")  # fmt: skip
+        else:
+            check_transmittance_cast("above 0", resolves_echoes=multi_return, backend=backend)
     return rho, tau
+
+
+def check_transmittance_cast(shown: str, *, resolves_echoes: bool, backend: str, names: Mapping[str, str | None] | None = None) -> None:
+    """The one statement of where a transmittance above 0 applies: to a beam that resolves echoes (the hits behind a
+    surface are further echoes of its pulses), cast with Embree (every hit along each sub-ray; the z-buffer keeps the
+    nearest face per pixel).  ``shown`` is the transmittance as the caller shows it ("above 0", a user's value);
+    ``names`` maps the fields ``transmittance``, ``max_returns``, ``footprint_rays`` and ``backend`` to the caller's
+    words, as :func:`~zbuf_occlude.sensors.beam.check_returns`'s do.
+
+    Raises
+    ------
+    InvalidInputError
+        A beam that resolves no echoes, or another backend than "embree".
+    """
+    names = names or {}
+
+    def n(field: str) -> str:
+        return names.get(field) or field
+
+    if not resolves_echoes:
+        raise InvalidInputError(f"{n('transmittance')} {shown} gives hits behind a surface, which only several returns per pulse resolve: "
+                                f"give {n('max_returns')} above 1 (and {n('footprint_rays')})")  # fmt: skip
+    if backend != "embree":
+        raise InvalidInputError(f"{n('transmittance')} {shown} needs every hit along each sub-ray, which {n('backend')} {backend:.40} "
+                                f"cannot give (one face per pixel): use {n('backend')} embree")  # fmt: skip
 
 
 def _reflectivity_table(reflectivity, n_ids: int) -> NDArray[np.float64]:

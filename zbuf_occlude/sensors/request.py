@@ -20,6 +20,7 @@ from types import MappingProxyType
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.beam import MODE_RETURNS, RETURN_FIELDS, check_returns, footprint_changes
+from zbuf_occlude.sensors.echo_model import check_transmittance_cast
 from zbuf_occlude.sensors.kinds import capabilities, with_beam
 from zbuf_occlude.sensors.scan_data import FRAMES
 
@@ -131,10 +132,10 @@ class ScanRequest:
         Naming the fields as ``names`` maps them: beam changes, a footprint cast or surface optics for a
         sensor without a beam (a depth camera); what :func:`beam_changes` and the beam refuse; the
         reflectance table with the object's own reflectivity; a transmittance above 0 without
-        resolved echoes or with the z-buffer; resolved echoes from a beam of one ray onto opaque
+        resolved echoes or with the z-buffer; returns asked of a beam of one ray onto opaque
         surfaces (each pulse has one return: nothing to resolve); the sensor frame for a scanner that
-        flies; a trajectory for a scanner without a platform of its own, shorter than the sweeps, or
-        in the sensor frame with a LAS format; a footprint cast that does not apply.
+        flies; a trajectory for a scanner without a platform of its own, with the z-buffer (one point of
+        view), shorter than the sweeps, or in the sensor frame with a LAS format; a footprint cast that does not apply.
     """
 
     sensor: object
@@ -198,14 +199,12 @@ class ScanRequest:
         if self.reflectance_table and self.reflectivity is not None:
             raise InvalidInputError(f"{n('reflectance_table')} gives each surface its material's reflectivity; {n('reflectivity')} gives "
                                     "the object one: give one of them")  # fmt: skip
-        if not opaque and not beam.resolves_echoes:
-            raise InvalidInputError(f"{shown} gives hits behind a surface, which only several returns per pulse resolve: give "
-                                    f"{n('max_returns')} above 1 (and {n('footprint_rays')})")  # fmt: skip
-        if not opaque and self.backend != "embree":
-            raise InvalidInputError(f"{shown} needs every hit along each sub-ray, which {n('backend')} {self.backend:.40} cannot give "
-                                    f"(one face per pixel): use {n('backend')} embree")  # fmt: skip
-        # (a scanner that flies takes its materials' transmittance where none is asked: scan_airborne's "auto")
-        if beam.resolves_echoes and beam.footprint_rays == 1 and opaque and not kind.flies:
+        if not opaque:
+            check_transmittance_cast(_shown_tau(tau), resolves_echoes=beam.resolves_echoes, backend=self.backend, names=self.names)
+        # returns asked of one opaque ray would change nothing (a sensor file's own stay as the device has them; a scanner
+        # that flies takes its materials' transmittance where none is asked: scan_airborne's "auto")
+        asked_returns = any(self.beam.get(f) is not None for f in ("max_returns", "return_mode"))
+        if asked_returns and beam.resolves_echoes and beam.footprint_rays == 1 and opaque and not kind.flies:
             what = f"{n('max_returns')} {beam.max_returns}" if beam.return_mode == "all" else f"{n('return_mode')} {beam.return_mode}"
             raise InvalidInputError(f"{what} resolves the echoes of a footprint or of surfaces the beam goes through; {label} fires one "
                                     f"ray a pulse onto opaque surfaces, so each pulse has one return: give {n('footprint_rays')} "
@@ -231,6 +230,9 @@ class ScanRequest:
         what = n("trajectory")
         if not kind.pulsed or kind.flies:
             raise InvalidInputError(f"{what}: a {kind.title} {'flies its own plan' if kind.flies else 'takes one pose'}")
+        if not traj.is_static and self.backend != "embree":
+            raise InvalidInputError(f"{what}: {n('backend')} {self.backend:.40} renders from one point, and a moving scanner's pulses "
+                                    f"leave from many: use {n('backend')} embree")  # fmt: skip
         needed = self.samples * self.scanner.sweep_s
         if not traj.is_static and traj.duration_s + 1e-9 < needed:
             raise InvalidInputError(f"{what} lasts {traj.duration_s:g} s, and {n('samples')} {self.samples} sweeps of "

@@ -334,7 +334,7 @@ def fire_pulses(
         point and the pattern has no sensor frame.
     """
     if not pulses.static and backend != "embree":
-        raise InvalidInputError(f"--backend {backend} renders from one point: a moving scanner needs the embree backend")
+        raise InvalidInputError(f"backend {backend!r:.40} renders from one point: a moving scanner needs the embree backend")
     if frame == "sensor" and not pulses.has_sensor_frame:
         raise InvalidInputError(f"{sensor_name!r} moves along its flight lines: its points have no one sensor frame; use the world frame")
     meta: dict = {"backend": backend, "n_rays": len(pulses), **pulses.meta}

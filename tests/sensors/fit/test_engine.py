@@ -26,7 +26,8 @@ def test_the_experiments_and_the_command_line_call_the_engine(tmp_path: Path, mo
     assert main(["fit-sensor", str(tmp_path), "--sensor", "hdl32e", "--out", str(tmp_path / "f.json"), "--altitude", "120"]) == 0
     ((real, sensor, out, options),) = calls
     assert (real, sensor, out) == (str(tmp_path), "hdl32e", str(tmp_path / "f.json"))
-    assert options["altitude_m"] == 120.0 and options["classes"] is None and options["divergence_shares"] is None
+    assert options["las"] == engine.LasFit(altitude_m=120.0)  # classes, bootstrap and the table of shares left to their defaults
+    assert options["names"]["altitude_m"] == "--altitude"  # the engine's messages in the command's words
 
 
 def test_las_inputs_are_the_named_file_or_the_folders_las_and_laz_files(tmp_path: Path) -> None:
@@ -39,12 +40,16 @@ def test_las_inputs_are_the_named_file_or_the_folders_las_and_laz_files(tmp_path
     assert engine.las_inputs(tmp_path / "scans") is None and engine.las_inputs(tmp_path / "c.txt") is None
 
 
-@pytest.mark.parametrize(("options", "flags"), [({"altitude_m": 100.0}, "--altitude"),
-                                                ({"classes": (5,), "bootstrap": 5}, "--classes, --bootstrap")])  # fmt: skip
+@pytest.mark.parametrize(("options", "flags"), [({"altitude_m": 100.0}, "altitude_m"),
+                                                ({"classes": (5,), "bootstrap": 5}, "classes, bootstrap")])  # fmt: skip
 def test_las_options_for_object_scans_are_refused_naming_them(tmp_path: Path, options: dict, flags: str) -> None:
     (tmp_path / "scans").mkdir()
     with pytest.raises(InvalidInputError, match=rf"^{flags}: for LAS/LAZ scans, and .*scans is neither a .las/.laz file"):
-        engine.fit_sensor(tmp_path / "scans", "hdl32e", tmp_path / "f.json", **options)
+        engine.fit_sensor(tmp_path / "scans", "hdl32e", tmp_path / "f.json", las=engine.LasFit(**options))
+    with pytest.raises(InvalidInputError, match=r"^--alt: for LAS/LAZ scans"):  # in the caller's words
+        engine.fit_sensor(
+            tmp_path / "scans", "hdl32e", tmp_path / "f.json", las=engine.LasFit(altitude_m=9.0), names={"altitude_m": "--alt"}
+        )
     assert not (tmp_path / "f.json").exists()
 
 
@@ -52,5 +57,5 @@ def test_a_sensor_of_another_kind_or_an_out_that_is_not_json_is_refused_before_r
     (tmp_path / "a.laz").write_bytes(b"not a laz file")  # never read
     with pytest.raises(InvalidInputError, match="fit-sensor fits a spinning LiDAR or an airborne scanner, not a DepthCamera"):
         engine.fit_sensor(tmp_path, "kinect-v1", tmp_path / "f.json")
-    with pytest.raises(InvalidInputError, match=r"^--out .*f\.txt: the fitted sensor is written as a \.json file$"):
+    with pytest.raises(InvalidInputError, match=r"^out .*f\.txt: the fitted sensor is written as a \.json file$"):
         engine.fit_sensor(tmp_path, "riegl-q1560", tmp_path / "f.txt")

@@ -26,7 +26,7 @@ from zbuf_occlude.experiments.sim2real.data import (
 from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT
 from zbuf_occlude.experiments.sim2real.real import KEEP_SCALE_UNIT_M
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
-from zbuf_occlude.sensors.adaptive_footprint import check_footprint_cast, footprint_mode
+from zbuf_occlude.sensors.adaptive_footprint import footprint_mode
 
 if TYPE_CHECKING:  # torch is imported when a run trains
     from zbuf_occlude.learn.training import TrainConfig
@@ -363,8 +363,11 @@ class Sim2RealConfig:
             # the fit (sensors.fit.fit_lidar) fits a one-return sensor; its fitted sets would not have the returns
             raise InvalidInputError(f"{n('returns')} {self.returns} is for the lidar set's preset or file; "
                                     f"drop {n('fit_sensor')} or {n('returns')}")  # fmt: skip
-        check_footprint_cast(self.footprint_cast, self.sensor.beam, sensor=self.sensor.name,
-                             names={"footprint_cast": n("footprint_cast"), "max_returns": n("returns"), "footprint_rays": None})  # fmt: skip
+        from zbuf_occlude.sensors.request import ScanRequest
+
+        # the lidar set's request: its sensor with the returns, and the cast checked against them
+        ScanRequest(self.sensor, footprint_cast=self.footprint_cast,
+                    names={"footprint_cast": n("footprint_cast"), "max_returns": n("returns"), "footprint_rays": None})  # fmt: skip
 
     @property
     def footprint_mode(self) -> str:

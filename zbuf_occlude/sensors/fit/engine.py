@@ -28,7 +28,8 @@ read) and a Markdown table of the estimates beside it, both through the output l
 only files a run of ours wrote; checked before any scan is read, so that a refusal writes
 nothing).  The JSON is strict (no ``NaN``, which strict readers refuse): an estimate the scans do
 not tell is ``null``, and the table says it was not measured and why.  Errors name the
-command's options (``--out``, ``--altitude``, ...), which the library's arguments mirror.
+arguments as a caller's ``names`` map them (``fit-sensor`` maps ``altitude_m`` to ``--altitude``, ...; an argument the
+map leaves out is named as itself).
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from __future__ import annotations
 import json
 import os
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -57,6 +58,7 @@ from zbuf_occlude.sensors.kinds import sensor_from_name, sensor_to_json
 __all__ = [
     "LAS_EXTENSIONS",
     "FittedSensor",
+    "LasFit",
     "Refine",
     "Refinement",
     "class_statistics",
@@ -71,6 +73,39 @@ __all__ = [
 LAS_EXTENSIONS = (".las", ".laz")
 #: A callable told each step before it runs (the command line prints it).
 Say = Callable[[str], object]
+#: A caller's word for each argument, for messages (``{"altitude_m": "--altitude"}``); an argument left out is named as itself.
+Names = Mapping[str, str]
+
+
+def _namer(names: Names | None) -> Callable[[str], str]:
+    return lambda arg: (names or {}).get(arg) or arg
+
+
+@dataclass(frozen=True)
+class LasFit:
+    """The options of a fit to LAS/LAZ scans (:func:`fit_sensor_to_las`); None: their defaults.
+
+    Attributes
+    ----------
+    altitude_m : float, optional
+        Flying height above the ground, metres (default: an airborne sensor's altitude; a spinning LiDAR needs it).
+    classes : sequence of int, optional
+        The class set of the return statistics (default :data:`~zbuf_occlude.sensors.fit.VEGETATION_CLASSES`).
+    bootstrap : int, optional
+        Resamples of the bootstrap over pulses (default :data:`~zbuf_occlude.sensors.fit.BOOTSTRAP`).
+    divergence_shares : path, optional
+        A table of simulated multi-return shares (:func:`~zbuf_occlude.sensors.fit.divergence_curve`): the divergence is
+        fitted by inverting it.  Read before the scans.
+    """
+
+    altitude_m: float | None = None
+    classes: Sequence[int] | None = None
+    bootstrap: int | None = None
+    divergence_shares: str | os.PathLike | None = None
+
+    def given(self) -> list[str]:
+        """The options set, by name."""
+        return [name for name in ("altitude_m", "classes", "bootstrap", "divergence_shares") if getattr(self, name) is not None]
 
 
 @dataclass(frozen=True)
@@ -160,8 +195,7 @@ def las_inputs(real: str | os.PathLike) -> list[Path] | None:
 
 
 def fit_sensor(real: str | os.PathLike, sensor: str, out: str | os.PathLike, *, seed: int = 0, dataset: str = "auto",
-               altitude_m: float | None = None, classes: Sequence[int] | None = None, bootstrap: int | None = None,
-               divergence_shares: str | os.PathLike | None = None, refine: Refine | None = None, say: Say | None = None) -> FittedSensor:  # fmt: skip
+               las: LasFit | None = None, refine: Refine | None = None, say: Say | None = None, names: Names | None = None) -> FittedSensor:  # fmt: skip
     """Fit ``sensor`` to the scans under ``real``: the return model to LAS/LAZ scans (:func:`fit_sensor_to_las`), else the
     sensor to object scans (:func:`fit_sensor_to_scans`); write its JSON file ``out`` and a ``.md`` table beside it.
 
@@ -177,12 +211,14 @@ def fit_sensor(real: str | os.PathLike, sensor: str, out: str | os.PathLike, *, 
         Seeds the bootstrap.
     dataset : str
         The object scans' format (:func:`~zbuf_occlude.real_scans.datasets.load_real_scans`; ``"auto"`` detects it).
-    altitude_m, classes, bootstrap, divergence_shares
+    las : LasFit, optional
         LAS/LAZ scans only (:func:`fit_sensor_to_las`); None: their defaults.
     refine : Refine, optional
         Object scans and a spinning LiDAR only (:func:`fit_sensor_to_scans`).
     say : callable, optional
         Told each step before it runs.
+    names : mapping, optional
+        The caller's word for each argument, in messages (module docstring).
 
     Returns
     -------
@@ -200,27 +236,29 @@ def fit_sensor(real: str | os.PathLike, sensor: str, out: str | os.PathLike, *, 
     if files is not None and refine is not None:
         raise InvalidInputError(f"{refine.option}: fits a spinning LiDAR to object scans, and {real} holds LAS/LAZ scans")
     if files is not None:
-        return fit_sensor_to_las(files, real, sensor, out, altitude_m=altitude_m, classes=classes, bootstrap=bootstrap,
-                                 divergence_shares=divergence_shares, seed=seed, say=say)  # fmt: skip
-    given = [flag for flag, value in (("--altitude", altitude_m), ("--classes", classes), ("--bootstrap", bootstrap),
-                                      ("--divergence-shares", divergence_shares)) if value is not None]  # fmt: skip
-    if given:
-        raise InvalidInputError(f"{', '.join(given)}: for LAS/LAZ scans, and {real} is neither a .las/.laz file nor a folder of them")
-    return _fit_scans(real, sensor, out, seed=seed, dataset=dataset, refine=refine, say=say)
+        return fit_sensor_to_las(files, real, sensor, out, las=las, seed=seed, say=say, names=names)
+    if given := ([] if las is None else las.given()):
+        n = _namer(names)
+        raise InvalidInputError(
+            f"{', '.join(map(n, given))}: for LAS/LAZ scans, and {real} is neither a .las/.laz file nor a folder of them"
+        )
+    return _fit_scans(real, sensor, out, seed=seed, dataset=dataset, refine=refine, say=say, names=names)
 
 
-def _base_sensor(sensor: str, out: str | os.PathLike, refine: Refine | None = None) -> tuple[Any, Path]:
+def _base_sensor(sensor: str, out: str | os.PathLike, refine: Refine | None = None, names: Names | None = None) -> tuple[Any, Path]:
     """The sensor to start from and the ``.json`` file to write, checked before anything is read."""
-    out = Path(out)
+    out, n = Path(out), _namer(names)
     if out.suffix.lower() != ".json":
-        raise InvalidInputError(f"--out {out}: the fitted sensor is written as a .json file")
+        raise InvalidInputError(f"{n('out')} {out}: the fitted sensor is written as a .json file")
     if out.is_dir():
-        raise OutputError(f"--out {out} is a folder; name the file to write")
+        raise OutputError(f"{n('out')} {out} is a folder; name the file to write")
     base = sensor_from_name(sensor)
     if refine is not None and not capabilities(base).spins:
-        raise InvalidInputError(f"{refine.option}: fits a spinning LiDAR, and --sensor {sensor} is a {type(base).__name__}")
+        raise InvalidInputError(f"{refine.option}: fits a spinning LiDAR, and {n('sensor')} {sensor} is a {type(base).__name__}")
     if not capabilities(base).fits:
-        raise InvalidInputError(f"--sensor {sensor}: fit-sensor fits a spinning LiDAR or an airborne scanner, not a {type(base).__name__}")
+        raise InvalidInputError(
+            f"{n('sensor')} {sensor}: fit-sensor fits a spinning LiDAR or an airborne scanner, not a {type(base).__name__}"
+        )
     return base, out
 
 
@@ -270,7 +308,7 @@ def fit_to_scans(scans: Sequence, base: Any, labels: Sequence[str], *, seed: int
 
 
 def fit_sensor_to_scans(real: str | os.PathLike, sensor: str, out: str | os.PathLike, *, seed: int = 0, dataset: str = "auto",
-                        say: Say | None = None) -> tuple[LidarFit | AirborneFit, Path, Path]:  # fmt: skip
+                        say: Say | None = None, names: Names | None = None) -> tuple[LidarFit | AirborneFit, Path, Path]:  # fmt: skip
     """Fit ``sensor`` (a preset name or JSON file: a spinning LiDAR or an airborne scanner) to the object scans under ``real``.
 
     Parameters
@@ -286,6 +324,8 @@ def fit_sensor_to_scans(real: str | os.PathLike, sensor: str, out: str | os.Path
     say : callable, optional
         Called with a one-line description of each step before it runs (what is read, how many
         scans of which classes, what is fitted to them); the command line prints them.
+    names : mapping, optional
+        The caller's word for each argument, in messages (module docstring).
 
     Returns
     -------
@@ -306,14 +346,14 @@ def fit_sensor_to_scans(real: str | os.PathLike, sensor: str, out: str | os.Path
     DatasetBusy
         Another live process holds the folder of ``out``.
     """
-    done = _fit_scans(real, sensor, out, seed=seed, dataset=dataset, say=say)
+    done = _fit_scans(real, sensor, out, seed=seed, dataset=dataset, say=say, names=names)
     return done.fit, done.json_path, done.markdown_path
 
 
 def _fit_scans(real: str | os.PathLike, sensor: str, out: str | os.PathLike, *, seed: int, dataset: str, refine: Refine | None = None,
-               say: Say | None) -> FittedSensor:  # fmt: skip
+               say: Say | None, names: Names | None = None) -> FittedSensor:  # fmt: skip
     """:func:`fit_sensor_to_scans`, with the ``refine`` step of :func:`fit_sensor` where given."""
-    base, out = _base_sensor(sensor, out, refine)
+    base, out = _base_sensor(sensor, out, refine, names)
     md = out.with_suffix(".md")
     names = (out.name, md.name)
     with OwnedFolder(out.parent, files=names, what="the fitted sensor") as folder:
@@ -437,9 +477,8 @@ def class_statistics(las: Any, statistics: Any) -> dict[str, dict[str, Any]]:
     return out
 
 
-def fit_sensor_to_las(files: Sequence[Path], real: str | os.PathLike, sensor: str, out: str | os.PathLike, *,
-                      altitude_m: float | None = None, classes: Sequence[int] | None = None, bootstrap: int | None = None,
-                      divergence_shares: str | os.PathLike | None = None, seed: int = 0, say: Say | None = None) -> FittedSensor:  # fmt: skip
+def fit_sensor_to_las(files: Sequence[Path], real: str | os.PathLike, sensor: str, out: str | os.PathLike, *, las: LasFit | None = None,
+                      seed: int = 0, say: Say | None = None, names: Names | None = None) -> FittedSensor:  # fmt: skip
     """The return model fitted to LAS/LAZ scans (:func:`~zbuf_occlude.sensors.fit.fit_return_model`) and applied to
     ``sensor``'s beam (:meth:`~zbuf_occlude.sensors.fit.ReturnModelFit.applied`), written as a sensor JSON with the fit under
     ``"fit"`` (``"beam"``: what was fitted and what came from the data sheet; ``"returns"``: the fit; ``"classes"``, where the
@@ -455,18 +494,13 @@ def fit_sensor_to_las(files: Sequence[Path], real: str | os.PathLike, sensor: st
         The preset or sensor JSON to start from: a spinning LiDAR or an airborne scanner.
     out : path
         The ``.json`` file to write; the table goes to the same name with ``.md``.
-    altitude_m : float, optional
-        Flying height above the ground, metres (default: an airborne ``sensor``'s altitude; a spinning LiDAR needs it).
-    classes : sequence of int, optional
-        The class set of the return statistics (default :data:`~zbuf_occlude.sensors.fit.VEGETATION_CLASSES`).
-    bootstrap : int, optional
-        Resamples of the bootstrap over pulses (default :data:`~zbuf_occlude.sensors.fit.BOOTSTRAP`).
-    divergence_shares : path, optional
-        A table of simulated multi-return shares (:func:`~zbuf_occlude.sensors.fit.divergence_curve`): the divergence is
-        fitted by inverting it.  Read before the scans.
+    las : LasFit, optional
+        The fit's options (the altitude, classes, bootstrap and table of shares); None: their defaults.
     seed : int
     say : callable, optional
         Told each step before it runs.
+    names : mapping, optional
+        The caller's word for each argument, in messages (module docstring).
 
     Returns
     -------
@@ -475,24 +509,27 @@ def fit_sensor_to_las(files: Sequence[Path], real: str | os.PathLike, sensor: st
     Raises
     ------
     InvalidInputError
-        ``out`` not ``.json``, a sensor of another kind, a spinning LiDAR without ``altitude_m``, a bad table of shares (all
+        ``out`` not ``.json``, a sensor of another kind, a spinning LiDAR without ``las.altitude_m``, a bad table of shares (all
         before any scan is read); what the reading (:func:`~zbuf_occlude.io.las.read_las`, pulses that GPS times do not
         tell, first returns only) and the fit refuse, naming the file.
     OutputError, UnsafePathError, DatasetBusy
         As :func:`fit_sensor_to_scans`.
     """
-    say = say or _quiet
-    base, out = _base_sensor(sensor, out)
-    altitude = altitude_m if altitude_m is not None else getattr(base, "altitude_m", None)
+    say, options, n = say or _quiet, las or LasFit(), _namer(names)
+    base, out = _base_sensor(sensor, out, names=names)
+    altitude = options.altitude_m if options.altitude_m is not None else getattr(base, "altitude_m", None)
     if altitude is None:
-        raise InvalidInputError(f"--sensor {sensor} is a spinning LiDAR: give --altitude M, the range to the ground in your scans, metres")
-    bootstrap = BOOTSTRAP if bootstrap is None else bootstrap
+        raise InvalidInputError(f"{n('sensor')} {sensor} is a spinning LiDAR: give {n('altitude_m')} M, the range to the ground in your "
+                                "scans, metres")  # fmt: skip
+    bootstrap = BOOTSTRAP if options.bootstrap is None else options.bootstrap
+    classes = options.classes
     curve: dict = {}
-    if divergence_shares is not None:  # read first: a bad table is refused before the scans are
+    if options.divergence_shares is not None:  # read first: a bad table is refused before the scans are
         from zbuf_occlude.io.tables import read_csv_rows
         from zbuf_occlude.sensors.fit.divergence import divergence_curve
 
-        figure, divergences, shares, stds = divergence_curve(read_csv_rows(divergence_shares), f"--divergence-shares {divergence_shares}")
+        shares_file = options.divergence_shares
+        figure, divergences, shares, stds = divergence_curve(read_csv_rows(shares_file), f"{n('divergence_shares')} {shares_file}")
         curve = {"divergence_shares": (divergences, shares, stds), "divergence_share": figure}
     md = out.with_suffix(".md")
     names = (out.name, md.name)

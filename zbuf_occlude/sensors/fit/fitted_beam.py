@@ -105,7 +105,7 @@ def fitted_sensor(estimates: Mapping[str, Estimate], sensor: Any, *, altitude_m:
             raise InvalidInputError(
                 f"the fitted detection threshold {e['detection_threshold']:.3g} m⁻² is below the energy a white target returns "
                 f"from {MAX_RANGE_M:g} m, the farthest range a sensor has: the threshold scales as 1/altitude², so "
-                f"altitude_m {altitude_m:g} (fit-sensor --altitude) is likely not the scans' flying height"
+                f"altitude_m {altitude_m:g} is likely not the scans' flying height"
             )
         fitted["detection_threshold"] = e["detection_threshold"]
     model = _model_changes(beam, returns, "intensity_scale" in fitted)
