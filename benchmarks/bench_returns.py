@@ -29,7 +29,7 @@ picks the spinning ones, ``--no-airborne`` leaves the airborne one out:
 (``Beam.echo_rule``: the chain of hits, or the peaks of the pulse's waveform; default chain alone),
 the waveform's cases named so.  In the turn and airborne families each multi-return case runs twice:
 with ``footprint="exact"`` (every sub-ray cast) and with the default cast, "auto", which is the
-adaptive footprint there (:mod:`zbuf_occlude.sensors.adaptive_footprint`: sub-rays cast only where
+adaptive footprint there (:mod:`zbuf_occlude.sensors.beam.adaptive_cast`: sub-rays cast only where
 a footprint may hold two surfaces); the table gives the share of pulses whose sub-rays were not
 cast (the scan's ``footprint_uniform_share``).  The sector family casts every sub-ray (``"exact"``).
 
@@ -73,8 +73,8 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from zbuf_occlude.sensors import Lidar, ScanScene, scan, with_beam
-from zbuf_occlude.sensors.airborne_presets import airborne_preset
-from zbuf_occlude.sensors.raycast import cast_embree
+from zbuf_occlude.sensors.patterns.airborne_presets import airborne_preset
+from zbuf_occlude.sensors.raycast.embree import cast_embree
 from zbuf_occlude.sensors.scan import scan_airborne
 
 ROOT = Path(__file__).resolve().parents[1]

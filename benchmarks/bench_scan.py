@@ -20,8 +20,8 @@ import time
 from pathlib import Path
 
 from zbuf_occlude.sensors import DepthCamera, Lidar, ScanScene, look_at_pose, scan
-from zbuf_occlude.sensors.depth_camera import DEPTH_CAMERA_PRESETS
-from zbuf_occlude.sensors.lidar import LIDAR_PRESETS
+from zbuf_occlude.sensors.patterns.depth_camera import DEPTH_CAMERA_PRESETS
+from zbuf_occlude.sensors.patterns.spinning import LIDAR_PRESETS
 
 MESH = Path(__file__).resolve().parents[1] / "data" / "samples" / "table" / "test" / "table_0393.off"
 

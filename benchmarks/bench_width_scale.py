@@ -33,7 +33,7 @@ from zbuf_occlude.mesh.sizes import SizeRange, size_interval
 from zbuf_occlude.sensors.crops import object_crop
 from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
 from zbuf_occlude.sensors.fit import fit_object_shape, fit_visible_across_sight, fit_width_scale
-from zbuf_occlude.sensors.lidar import Lidar
+from zbuf_occlude.sensors.patterns.spinning import Lidar
 
 
 def _interval(text: str) -> tuple[float, float]:

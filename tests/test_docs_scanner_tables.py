@@ -1,6 +1,6 @@
 """docs/guide/scanners.md's tables are the code's: the Beam's fields and defaults, the kinds, every preset.
 
-The tables are made here from :class:`~zbuf_occlude.sensors.beam.Beam` and
+The tables are made here from :class:`~zbuf_occlude.sensors.beam.fields.Beam` and
 :data:`~zbuf_occlude.sensors.kinds.SENSOR_KINDS`, and the page must hold them verbatim: a preset
 or a default that changes fails this test until the page is remade.  Remake the tables with
 ``python tests/test_docs_scanner_tables.py`` and paste them over the page's.
@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from zbuf_occlude.sensors import IDEAL_BEAM, SENSOR_KINDS, Beam
-from zbuf_occlude.sensors.airborne import AIRBORNE_IDEAL_BEAM
+from zbuf_occlude.sensors.patterns.airborne import AIRBORNE_IDEAL_BEAM
 
 PAGE = Path(__file__).resolve().parents[1] / "docs" / "guide" / "scanners.md"
 

@@ -20,8 +20,8 @@ import pytest
 from conftest import SAMPLE_MESHES
 from memory_limit import HEADROOM_3_GB, HEADROOM_BYTES, TORCH, Limited, run_cli_limited, run_python_limited
 
-from zbuf_occlude.sensors.airborne import AirborneScanner
-from zbuf_occlude.sensors.beam import Beam
+from zbuf_occlude.sensors.patterns.airborne import AirborneScanner
+from zbuf_occlude.sensors.beam.fields import Beam
 from zbuf_occlude.sensors.kinds import sensor_to_json
 
 #: The farm's meshes: two of the shipped samples, one a class.

@@ -462,7 +462,7 @@ def _json(path: Path, doc: object) -> Path:
 
 
 def _class_maps(tmp_path: Path, capsys) -> list[str | None]:
-    from zbuf_occlude.sensors.las_classes import load_class_map
+    from zbuf_occlude.sensors.scene.las_classes import load_class_map
 
     docs = [{"access_token": v} for v in PLANTED] + [{"car": 1, "x": v} for v in PLANTED] + [list(PLANTED), CANARY, CANARY_NUMBER]
     docs += [{"car": 12, "token": CANARY}, {"car": 987654}]
@@ -536,7 +536,7 @@ def _scene_docs() -> list[object]:
 def _scenes(tmp_path: Path, capsys) -> list[str | None]:
     import yaml
 
-    from zbuf_occlude.sensors.scene_files import load_scene
+    from zbuf_occlude.sensors.scene.files import load_scene
 
     out = []
     for doc in _scene_docs():
@@ -575,7 +575,7 @@ def _trajectories(tmp_path: Path, capsys) -> list[str | None]:
 
 
 def _ray_tables(tmp_path: Path, capsys) -> list[str | None]:
-    from zbuf_occlude.sensors.ray_table import load_ray_table
+    from zbuf_occlude.sensors.patterns.ray_table import load_ray_table
 
     out = []
     for column in range(3):
@@ -682,7 +682,7 @@ _PROPERTY_PLACES = (("class map", None), ("lidar", "name"), ("lidar", "rotation_
 @given(value=_JSON_VALUES, place=st.sampled_from(_PROPERTY_PLACES))
 def test_no_json_value_in_a_class_map_or_a_sensor_file_is_quoted(tmp_path: Path, value: object, place: tuple[str, str | None]) -> None:
     from zbuf_occlude.sensors.kinds import sensor_from_spec
-    from zbuf_occlude.sensors.las_classes import check_class_map
+    from zbuf_occlude.sensors.scene.las_classes import check_class_map
 
     kind, key = place
     if kind == "class map":

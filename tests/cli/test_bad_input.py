@@ -983,7 +983,7 @@ def _nested(depth: int, suffix: str) -> str:
 def test_a_scene_nested_10000_deep_is_an_error_naming_the_file(tmp_path: Path, suffix: str) -> None:
     if suffix == ".yaml":
         pytest.importorskip("yaml", reason="YAML scenes need the [yaml] extra (PyYAML)")
-    from zbuf_occlude.sensors.scene_files import load_scene
+    from zbuf_occlude.sensors.scene.files import load_scene
 
     path = tmp_path / f"deep{suffix}"
     path.write_text(_nested(10_000, suffix))
@@ -1005,8 +1005,8 @@ def _scene(tmp_path: Path, spec: dict) -> Path:
      (10**8, "a whole number outside that range"), (2.5, "a number that is not whole"), ("48", "a string of 2 characters")],
 )  # fmt: skip
 def test_cylinder_sections_are_checked_before_allocating(tmp_path: Path, sections, found: str) -> None:
-    from zbuf_occlude.sensors.object_shapes import MAX_CYLINDER_SECTIONS
-    from zbuf_occlude.sensors.scene_files import load_scene
+    from zbuf_occlude.sensors.scene.object_shapes import MAX_CYLINDER_SECTIONS
+    from zbuf_occlude.sensors.scene.files import load_scene
 
     spec = {"objects": [{"mesh": {"cylinder": {"radius_m": 0.5, "height_m": 1.0, "sections": sections}}, "position_m": [5, 0]}]}
     with pytest.raises(

@@ -20,7 +20,7 @@ from zbuf_occlude.cli.main import build_parser
 from zbuf_occlude.cli.main import main as cli_main
 from zbuf_occlude.cli.scan_request import scan_request
 from zbuf_occlude.sensors.kinds import kind_of, sensor_from_name, sensor_to_json
-from zbuf_occlude.sensors.reflectance import GROUND_MATERIAL, reflectance
+from zbuf_occlude.sensors.scene.materials import GROUND_MATERIAL, reflectance
 from zbuf_occlude.sensors.scan_data import read_scan_npz
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -167,7 +167,7 @@ def test_return_modes_pick_the_echoes_a_receiver_records(tmp_path: Path, capsys)
 
 def test_reflectance_table_reaches_a_mesh_scan(tmp_path: Path, capsys) -> None:
     from zbuf_occlude.mesh.load import load_mesh
-    from zbuf_occlude.sensors.reflectance import material_of
+    from zbuf_occlude.sensors.scene.materials import material_of
 
     plain = _scan([str(CHAIR), "--sensor", "vlp16"], tmp_path / "plain", capsys)
     table = _scan([str(CHAIR), "--sensor", "vlp16", "--reflectance-table"], tmp_path / "table", capsys)

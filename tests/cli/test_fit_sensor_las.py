@@ -12,7 +12,7 @@ import pytest
 
 from zbuf_occlude.cli.main import main as cli_main
 from zbuf_occlude.io.las import las_bytes, read_las
-from zbuf_occlude.sensors.airborne import AIRBORNE_IDEAL_BEAM, AirborneScanner
+from zbuf_occlude.sensors.patterns.airborne import AIRBORNE_IDEAL_BEAM, AirborneScanner
 from zbuf_occlude.sensors.kinds import sensor_from_name, sensor_to_json
 
 #: The airborne scanner of the scans: a 2° beam of 19 sub-rays, up to 4 returns 1 m apart, 100 m above the ground.

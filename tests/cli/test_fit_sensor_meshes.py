@@ -18,7 +18,7 @@ from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
 from zbuf_occlude.experiments.sim2real.placement import CropPlacement
 from zbuf_occlude.real_scans.datasets import LIDARNET_UNITS_PER_METRE
 from zbuf_occlude.sensors.kinds import sensor_from_name, with_beam
-from zbuf_occlude.sensors.lidar import lidar_preset
+from zbuf_occlude.sensors.patterns.spinning import lidar_preset
 
 HEADER = "origin_x,origin_y,origin_z,relative_x,relative_y,relative_z,object,complexity\n"
 

@@ -13,7 +13,7 @@ import pytest
 
 from zbuf_occlude.cli.main import main as cli_main
 from zbuf_occlude.io.ray_tables import ray_table_bytes
-from zbuf_occlude.sensors.ray_table import rosette_table
+from zbuf_occlude.sensors.patterns.ray_table import rosette_table
 from zbuf_occlude.sensors.scan_data import GPS_START_S, read_scan_npz
 
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from zbuf_occlude.cli.main import main as cli_main
-from zbuf_occlude.sensors.lidar import Lidar
+from zbuf_occlude.sensors.patterns.spinning import Lidar
 from zbuf_occlude.sensors.kinds import sensor_to_json, with_beam
 
 
@@ -109,8 +109,8 @@ def test_without_the_options_a_scan_is_unchanged(tmp_path: Path, capsys) -> None
 
 def test_max_returns_applies_to_an_airborne_scanner_file_with_a_footprint(tmp_path: Path, capsys) -> None:
     laspy = pytest.importorskip("laspy")
-    from zbuf_occlude.sensors.airborne import AirborneScanner
-    from zbuf_occlude.sensors.beam import Beam
+    from zbuf_occlude.sensors.patterns.airborne import AirborneScanner
+    from zbuf_occlude.sensors.beam.fields import Beam
 
     beam = Beam(wavelength_nm=1064.0, divergence_deg=2.0, footprint_rays=19, max_returns=2, range_resolution_m=0.5)
     als = AirborneScanner("test-als", swath_deg=20.0, pulse_rate_hz=2000.0, line_rate_hz=20.0, altitude_m=100.0, speed_mps=10.0, beam=beam)

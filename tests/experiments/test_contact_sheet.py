@@ -21,7 +21,7 @@ from zbuf_occlude.experiments.contact_sheet import (
 )
 from zbuf_occlude.experiments.sheet_drawing import PANEL_INCHES
 from zbuf_occlude.geometry.cameras import camera_on_sphere
-from zbuf_occlude.sensors.lidar import LIDAR_PRESETS
+from zbuf_occlude.sensors.patterns.spinning import LIDAR_PRESETS
 from zbuf_occlude.sensors.scan_data import read_scan_npz
 
 pytestmark = pytest.mark.slow  # each fixture renders a small data set or scans a mesh
@@ -136,7 +136,7 @@ def test_a_scan_folder_sheet_shows_the_sensors_rings(scans: Path, tmp_path: Path
 
 
 def test_a_depth_camera_scan_is_drawn_at_its_pixels(tmp_path: Path) -> None:
-    from zbuf_occlude.sensors.depth_camera import DEPTH_CAMERA_PRESETS
+    from zbuf_occlude.sensors.patterns.depth_camera import DEPTH_CAMERA_PRESETS
 
     scene = SAMPLE_MESHES.parent / "scenes" / "street.json"
     assert main(["scan", str(scene), "--sensor", "kinect-v1", "--out", str(tmp_path / "scans")]) == 0

@@ -17,7 +17,7 @@ from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
 from zbuf_occlude.experiments.sim2real.placement import CropPlacement
 from zbuf_occlude.real_scans.records import RealScan
 from zbuf_occlude.sensors.kinds import sensor_from_name, with_beam
-from zbuf_occlude.sensors.lidar import lidar_preset
+from zbuf_occlude.sensors.patterns.spinning import lidar_preset
 
 #: Every crop 5.5-9 m away: all of them count (MATCHED_RANGE_M), so that few crops make a fit.
 NEAR = CropPlacement.from_keywords({c: {"distance_m": (5.5, 9.0)} for c in ("car", "pole")})

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 import trimesh
 
 import zbuf_occlude.sensors as S
-from zbuf_occlude.sensors.beam import Beam
+from zbuf_occlude.sensors.beam.fields import Beam
 from zbuf_occlude.sensors.kinds import with_beam
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.realism import (

@@ -35,8 +35,8 @@ from zbuf_occlude.sensors.fit import Estimate
 from zbuf_occlude.sensors.fit.return_model import GROUND_REFLECTANCE, fit_return_model
 from zbuf_occlude.sensors.fit.returns import ReturnStatistics, return_statistics
 from zbuf_occlude.sensors.kinds import with_beam
-from zbuf_occlude.sensors.reflectance import reflectance
-from zbuf_occlude.sensors.scene import ScanScene, SceneObject
+from zbuf_occlude.sensors.scene.materials import reflectance
+from zbuf_occlude.sensors.scene.objects import ScanScene, SceneObject
 
 #: A footprint 1.5 m across at 1,500 m: plate edges split many pulses.
 WIDE_DEG = math.degrees(1e-3)

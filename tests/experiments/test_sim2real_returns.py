@@ -18,7 +18,7 @@ from zbuf_occlude.experiments.sim2real.config import RETURNS_RANGE_RESOLUTION_M,
 from zbuf_occlude.experiments.sim2real.data import SetRecipe, build_set
 from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
 from zbuf_occlude.sensors import lidar_preset
-from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
+from zbuf_occlude.sensors.beam.footprint import FOOTPRINT_RAYS
 
 
 def _bush(seed: int = 0, leaves: int = 600) -> trimesh.Trimesh:
@@ -65,7 +65,7 @@ PINNED_ONE_RETURN = "8f0df6f70b7bf0d5"
 
 @pytest.mark.parametrize("mode", ["strongest", "last"])
 def test_one_return_keeps_a_velodyne_single_return_mode_and_rewrites_a_beam_of_several(mode: str) -> None:
-    from zbuf_occlude.sensors.airborne_presets import airborne_preset
+    from zbuf_occlude.sensors.patterns.airborne_presets import airborne_preset
     from zbuf_occlude.sensors.kinds import with_beam
 
     velodyne = with_beam(lidar_preset("hdl32e"), footprint_rays=7, return_mode=mode, max_returns=1, range_resolution_m=0.75)

@@ -13,7 +13,7 @@ import zbuf_occlude as zo
 from zbuf_occlude.exporters.modelnet_txt import estimate_normals
 from zbuf_occlude.exporters.text_table import fixed_point_table_bytes
 from zbuf_occlude.geometry import normals as reference
-from zbuf_occlude.sensors.lidar import beam_directions
+from zbuf_occlude.sensors.patterns.spinning import beam_directions
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 MESHES = sorted(SAMPLES.glob("*/*/*.off"))

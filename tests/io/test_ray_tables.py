@@ -15,7 +15,7 @@ from numpy.lib import format as npy_format
 
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError, UnsafePathError
 from zbuf_occlude.io.ray_tables import RAY_TABLE_COLUMNS, ray_table_bytes, read_ray_table
-from zbuf_occlude.sensors.ray_table import load_ray_table
+from zbuf_occlude.sensors.patterns.ray_table import load_ray_table
 
 HEADER = ",".join(RAY_TABLE_COLUMNS)
 
@@ -225,7 +225,7 @@ def test_one_endless_line_is_refused_after_a_block_under_a_memory_limit(tmp_path
         fh.truncate(400_000_000)
     done = run_python_limited(
         "from zbuf_occlude.errors import InvalidInputError\n"
-        "from zbuf_occlude.sensors.ray_table import load_ray_table\n"
+        "from zbuf_occlude.sensors.patterns.ray_table import load_ray_table\n"
         f"try:\n    load_ray_table({str(path)!r})\nexcept InvalidInputError as exc:\n    print(exc)\n",
         headroom=512 << 20,
     )

@@ -1,5 +1,5 @@
 """Adaptive footprints: the plane's sub-rays without casting them, which pulses need no cast, and the
-echoes against the full multi-return model (:mod:`zbuf_occlude.sensors.adaptive_footprint`)."""
+echoes against the full multi-return model (:mod:`zbuf_occlude.sensors.beam.adaptive_cast`)."""
 
 from __future__ import annotations
 
@@ -14,13 +14,13 @@ from hypothesis import strategies as st
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors import Lidar, ScanScene, scan, with_beam
-from zbuf_occlude.sensors import adaptive_footprint as A
-from zbuf_occlude.sensors.airborne_presets import airborne_preset
-from zbuf_occlude.sensors.beam import Beam
-from zbuf_occlude.sensors.echo_model import Radiometry, echo_returns
-from zbuf_occlude.sensors.echoes import hit_energy, resolve_echoes
-from zbuf_occlude.sensors.footprint import footprint_offsets, plane_subrays, subray_directions
-from zbuf_occlude.sensors.raycast import cast_embree
+from zbuf_occlude.sensors.beam import adaptive_cast as A
+from zbuf_occlude.sensors.patterns.airborne_presets import airborne_preset
+from zbuf_occlude.sensors.beam.fields import Beam
+from zbuf_occlude.sensors.beam.echo_energy import Radiometry, echo_returns
+from zbuf_occlude.sensors.beam.echoes import hit_energy, resolve_echoes
+from zbuf_occlude.sensors.beam.footprint import footprint_offsets, plane_subrays, subray_directions
+from zbuf_occlude.sensors.raycast.embree import cast_embree
 from zbuf_occlude.sensors.scan import build_scene
 
 TABLE = Path(__file__).resolve().parents[2] / "data" / "samples" / "table" / "test" / "table_0393.off"
@@ -267,7 +267,7 @@ def test_adaptive_echoes_against_the_full_model(k, power_noise, echo_rule) -> No
 def test_the_kernels_sub_rays_are_plane_subrays_bit_for_bit(seed, n, k, divergence_deg, near_pole) -> None:
     import math
 
-    from zbuf_occlude.sensors.uniform_kernel import plane_subray, subray_axes
+    from zbuf_occlude.sensors.beam.adaptive_kernel import plane_subray, subray_axes
 
     rng = np.random.default_rng(seed)
     d = _unit(rng.normal(size=(n, 3)) + ([0.0, 0.0, 3.0] if near_pole else 0.0))  # |d_z| ≥ 0.9 turns about x
@@ -326,7 +326,7 @@ def test_a_neighbour_off_the_centre_faces_plane_makes_a_pulse_cast(share, stays)
 
 
 def test_the_kernel_refuses_indices_outside_its_arrays() -> None:
-    from zbuf_occlude.sensors.uniform_kernel import UniformRules, uniform_plane_echoes
+    from zbuf_occlude.sensors.beam.adaptive_kernel import UniformRules, uniform_plane_echoes
 
     built = build_scene(_plane_scene(2))
     planes = A._planes(built.mesh)[0]

@@ -10,8 +10,8 @@ import pytest
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors import Lidar, ScanScene, SceneObject, scan, scan_airborne, with_beam
-from zbuf_occlude.sensors.airborne_presets import airborne_preset
-from zbuf_occlude.sensors.depth_camera import depth_camera_preset
+from zbuf_occlude.sensors.patterns.airborne_presets import airborne_preset
+from zbuf_occlude.sensors.patterns.depth_camera import depth_camera_preset
 
 TABLE = Path(__file__).resolve().parents[2] / "data" / "samples" / "table" / "test" / "table_0393.off"
 

@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.airborne import AIRBORNE_IDEAL_BEAM, AirborneScanner
+from zbuf_occlude.sensors.patterns.airborne import AIRBORNE_IDEAL_BEAM, AirborneScanner
 from zbuf_occlude.sensors.scan import scan_airborne
 from zbuf_occlude.sensors.fit.airborne import _face_density, crop_faces, fit_airborne
 from zbuf_occlude.sensors.kinds import kind_of, sensor_from_name
@@ -232,7 +232,7 @@ def _aerial_crops_beside_an_origin(offset) -> list[np.ndarray]:
 @pytest.mark.parametrize("offset", [(8.0, 0.0, -2.0), (5.0, 5.0, -30.0)])
 def test_the_spinning_fit_refuses_aerial_crops_naming_why(offset) -> None:
     from zbuf_occlude.sensors.fit import fit_lidar
-    from zbuf_occlude.sensors.lidar import lidar_preset
+    from zbuf_occlude.sensors.patterns.spinning import lidar_preset
 
     with pytest.raises(InvalidInputError, match="no sensor origin consistent with hdl32e's rings") as info:
         fit_lidar(_aerial_crops_beside_an_origin(offset), lidar_preset("hdl32e"))
@@ -241,7 +241,7 @@ def test_the_spinning_fit_refuses_aerial_crops_naming_why(offset) -> None:
 
 def test_the_spinning_fit_refuses_crops_beyond_its_range() -> None:
     from zbuf_occlude.sensors.fit import fit_lidar
-    from zbuf_occlude.sensors.lidar import lidar_preset
+    from zbuf_occlude.sensors.patterns.spinning import lidar_preset
 
     with pytest.raises(InvalidInputError, match=r"beyond hdl32e's \d+ m range"):
         fit_lidar(_aerial_crops_beside_an_origin((400.0, 300.0, 0.0)), lidar_preset("hdl32e"))
@@ -250,7 +250,7 @@ def test_the_spinning_fit_refuses_crops_beyond_its_range() -> None:
 def test_the_spinning_fit_still_takes_spinning_scans() -> None:
     # the rings' check passes what a spinning sensor makes, far objects and a mount tilt included
     from zbuf_occlude.sensors.fit import fit_lidar
-    from zbuf_occlude.sensors.lidar import lidar_preset
+    from zbuf_occlude.sensors.patterns.spinning import lidar_preset
     from zbuf_occlude.sensors.scan import scan
 
     sensor = lidar_preset("hdl32e")

@@ -17,12 +17,12 @@ from hypothesis import strategies as st
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.load import normalize_mesh
 from zbuf_occlude.sensors import AirborneScanner, airborne_preset, scan_airborne
-from zbuf_occlude.sensors.airborne import AIRBORNE_IDEAL_BEAM, MAX_FLIGHT_LINES, FlightLine
-from zbuf_occlude.sensors.beam import Beam
+from zbuf_occlude.sensors.patterns.airborne import AIRBORNE_IDEAL_BEAM, MAX_FLIGHT_LINES, FlightLine
+from zbuf_occlude.sensors.beam.fields import Beam
 from zbuf_occlude.sensors.crops import lidar_object_samples, object_crop
 from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
 from zbuf_occlude.sensors.kinds import sensor_from_name
-from zbuf_occlude.sensors.scene import ScanScene, SceneObject
+from zbuf_occlude.sensors.scene.objects import ScanScene, SceneObject
 
 #: The riegl-q1560 beam before the presets carried their data sheets' footprints and echoes: one return per
 #: pulse (the centre ray's first hit), 2 cm range noise; what the byte-for-byte checks below were made with.

@@ -1,5 +1,5 @@
 """An airborne scan's reflectivity and transmittance: the spinning LiDAR's surface optics and
-all-hits casting (one implementation, :func:`zbuf_occlude.sensors.echo_model.surface_optics`) on an
+all-hits casting (one implementation, :func:`zbuf_occlude.sensors.beam.echo_energy.surface_optics`) on an
 airborne scanner's footprint.
 
 Scene: flat ground at z = 0 under a thin plate (a 5 cm box: a top and a bottom face) at
@@ -14,7 +14,7 @@ import trimesh
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors import AirborneScanner, scan_airborne
-from zbuf_occlude.sensors.beam import Beam
+from zbuf_occlude.sensors.beam.fields import Beam
 
 ALTITUDE_M = 100.0
 PLATE_Z = 10.0
@@ -69,7 +69,7 @@ def test_reflectivity_per_object_id_weighs_each_echo() -> None:
 
 
 def test_the_cited_table_gives_the_scene_values_at_the_airborne_wavelength() -> None:
-    from zbuf_occlude.sensors.reflectance import AIRBORNE_WAVELENGTH_NM, scene_optics
+    from zbuf_occlude.sensors.scene.materials import AIRBORNE_WAVELENGTH_NM, scene_optics
     from zbuf_occlude.sensors.scan import build_scene
 
     table = scene_optics(build_scene(_plate_over_ground()), AIRBORNE_WAVELENGTH_NM)

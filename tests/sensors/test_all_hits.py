@@ -1,4 +1,4 @@
-"""All hits along each sub-ray: :func:`~zbuf_occlude.sensors.raycast.cast_embree_beyond` and
+"""All hits along each sub-ray: :func:`~zbuf_occlude.sensors.raycast.embree.cast_embree_beyond` and
 ``scan(transmittance=...)``, the multi-return model through surfaces that let part of a pulse on.
 
 Analytic scenes: parallel plates facing the sensor along +x, so every hit's range and energy is
@@ -15,11 +15,11 @@ from hypothesis import strategies as st
 
 import zbuf_occlude.sensors as S
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.beam import Beam
-from zbuf_occlude.sensors.footprint import footprint_offsets, subray_directions
+from zbuf_occlude.sensors.beam.fields import Beam
+from zbuf_occlude.sensors.beam.footprint import footprint_offsets, subray_directions
 from zbuf_occlude.sensors.kinds import with_beam
-from zbuf_occlude.sensors.raycast import cast_embree, cast_embree_beyond
-from zbuf_occlude.sensors.scene import BuiltScene, SceneObject
+from zbuf_occlude.sensors.raycast.embree import cast_embree, cast_embree_beyond
+from zbuf_occlude.sensors.scene.objects import BuiltScene, SceneObject
 
 R = 10.0  # near plate, metres
 DIVERGENCE = 2.0  # degrees: a 0.35 m footprint at 10 m
@@ -117,7 +117,7 @@ def test_the_memory_for_the_hits_is_checked_before_the_rounds():
 
 def test_echo_returns_casts_on_from_each_rays_own_origin():
     # an airborne-like pulse: one origin per sub-ray (the aircraft moves), plates below along -z
-    from zbuf_occlude.sensors.echo_model import Transmission, echo_returns
+    from zbuf_occlude.sensors.beam.echo_energy import Transmission, echo_returns
 
     built = _stack([R, R + 2.0])
     origins = np.array([[0.0, 0.0, 0.0], [0.0, 1.0, 0.5]])

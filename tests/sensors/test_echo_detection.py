@@ -19,10 +19,10 @@ from hypothesis import strategies as st
 
 import zbuf_occlude.sensors as S
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.beam import IDEAL_BEAM, Beam
-from zbuf_occlude.sensors.echoes import MAX_RETURNS, hit_energy, resolve_echoes
-from zbuf_occlude.sensors.footprint import footprint_offsets, subray_directions
-from zbuf_occlude.sensors.scene import BuiltScene, SceneObject
+from zbuf_occlude.sensors.beam.fields import IDEAL_BEAM, Beam
+from zbuf_occlude.sensors.beam.echoes import MAX_RETURNS, hit_energy, resolve_echoes
+from zbuf_occlude.sensors.beam.footprint import footprint_offsets, subray_directions
+from zbuf_occlude.sensors.scene.objects import BuiltScene, SceneObject
 
 DIVERGENCE = 2.0  # degrees
 

@@ -10,13 +10,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.attenuation import attenuate_along_subray
-from zbuf_occlude.sensors.echoes import (
+from zbuf_occlude.sensors.beam.attenuation import attenuate_along_subray
+from zbuf_occlude.sensors.beam.echoes import (
     MAX_RETURNS,
     hit_energy,
     resolve_echoes,
 )
-from zbuf_occlude.sensors.footprint import footprint_offsets, subray_directions
+from zbuf_occlude.sensors.beam.footprint import footprint_offsets, subray_directions
 
 R = 20.0  # range of the near plate, metres
 RESOLUTION = 0.75  # c·τ/2 of a 5 ns pulse, metres

@@ -15,9 +15,9 @@ from trimesh.visual.material import PBRMaterial
 
 from zbuf_occlude.mesh.flatten import flatten_scene
 from zbuf_occlude.mesh.scene import FACE_MATERIALS, face_materials, face_materials_of
-from zbuf_occlude.sensors.echo_model import surface_optics
-from zbuf_occlude.sensors.reflectance import MATERIALS, SPINNING_WAVELENGTH_NM, scene_optics
-from zbuf_occlude.sensors.scene import ScanScene, SceneObject
+from zbuf_occlude.sensors.beam.echo_energy import surface_optics
+from zbuf_occlude.sensors.scene.materials import MATERIALS, SPINNING_WAVELENGTH_NM, scene_optics
+from zbuf_occlude.sensors.scene.objects import ScanScene, SceneObject
 
 OBJ = """mtllib box.mtl
 v 0 0 0
@@ -154,7 +154,7 @@ def test_a_scene_file_naming_an_obj_and_a_glb_scans_their_glass_and_foliage(box_
         {"mesh": "box.obj", "class": "building", "position_m": [6, 0], "size_m": 2},
         {"mesh": "tree.glb", "class": "building", "position_m": [0, 6], "size_m": 4, "up": "z"},
     ]}))  # fmt: skip
-    from zbuf_occlude.sensors.scene_files import load_scene
+    from zbuf_occlude.sensors.scene.files import load_scene
 
     built = load_scene(folder / "scene.json").build()
     optics = scene_optics(built)

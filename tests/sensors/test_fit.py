@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.fit import fit_lidar
-from zbuf_occlude.sensors.lidar import lidar_preset
+from zbuf_occlude.sensors.patterns.spinning import lidar_preset
 from zbuf_occlude.sensors.kinds import sensor_from_name, with_beam
 from zbuf_occlude.sensors.scan import scan
 

@@ -13,13 +13,13 @@ import pytest
 import zbuf_occlude as zo
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.io.las import LasPoints
-from zbuf_occlude.sensors.airborne import AirborneScanner
+from zbuf_occlude.sensors.patterns.airborne import AirborneScanner
 from zbuf_occlude.sensors.scan import scan_airborne
 from zbuf_occlude.sensors.fit import fit_airborne, fit_lidar, fit_return_model, return_statistics
 from zbuf_occlude.sensors.fit.lidar import MAX_BOOTSTRAP
 from zbuf_occlude.sensors.fit.las_pulses import MAX_AMBIGUOUS_SHARE, las_pulses
 from zbuf_occlude.sensors.fit.returns import pulse_bootstrap
-from zbuf_occlude.sensors.lidar import Lidar
+from zbuf_occlude.sensors.patterns.spinning import Lidar
 
 #: Flying height of the synthetic survey, metres.
 H = 1000.0

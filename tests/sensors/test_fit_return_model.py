@@ -15,9 +15,9 @@ from hypothesis import strategies as st
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.io.atomic import write_bytes
 from zbuf_occlude.io.las import LasPoints, las_bytes, read_las
-from zbuf_occlude.sensors.airborne import AIRBORNE_IDEAL_BEAM
-from zbuf_occlude.sensors.airborne_presets import airborne_preset
-from zbuf_occlude.sensors.echoes import hit_energy
+from zbuf_occlude.sensors.patterns.airborne import AIRBORNE_IDEAL_BEAM
+from zbuf_occlude.sensors.patterns.airborne_presets import airborne_preset
+from zbuf_occlude.sensors.beam.echoes import hit_energy
 from zbuf_occlude.sensors.fit import (
     Estimate,
     divergence_from_shares,
@@ -26,7 +26,7 @@ from zbuf_occlude.sensors.fit import (
     merge_scans,
 )
 from zbuf_occlude.sensors.fit.return_model import lower_end
-from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
+from zbuf_occlude.sensors.beam.footprint import FOOTPRINT_RAYS
 from zbuf_occlude.sensors.fit.returns import PulseValues
 from zbuf_occlude.sensors.kinds import sensor_from_name, with_beam
 

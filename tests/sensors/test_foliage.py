@@ -1,4 +1,4 @@
-"""Leaves inside a crown (sensors/foliage.py): their count, where they lie, and the gap law of the turbid medium they form."""
+"""Leaves inside a crown (sensors/scene/foliage.py): their count, where they lie, and the gap law of the turbid medium they form."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ import trimesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import zbuf_occlude.sensors.foliage as foliage
+import zbuf_occlude.sensors.scene.foliage as foliage
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.foliage import add_foliage, crown_region_volume, in_metres, leaf_quads
+from zbuf_occlude.sensors.scene.foliage import add_foliage, crown_region_volume, in_metres, leaf_quads
 
 
 def _leaves(mesh: trimesh.Trimesh, grown: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:

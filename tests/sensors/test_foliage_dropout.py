@@ -18,10 +18,10 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.flatten import flatten_scene
 from zbuf_occlude.mesh.scene import FACE_MATERIALS, face_materials
 from zbuf_occlude.sensors import Lidar, scan, with_beam
-from zbuf_occlude.sensors.beam import Beam
+from zbuf_occlude.sensors.beam.fields import Beam
 from zbuf_occlude.sensors.kinds import sensor_from_spec, sensor_to_json
-from zbuf_occlude.sensors.reflectance import CROWN_MATERIALS, MATERIALS, on_crown
-from zbuf_occlude.sensors.scene import ScanScene, SceneObject
+from zbuf_occlude.sensors.scene.materials import CROWN_MATERIALS, MATERIALS, on_crown
+from zbuf_occlude.sensors.scene.objects import ScanScene, SceneObject
 
 #: Classes of the two boxes, by object id (1, 2): only the bush is a crown.
 CLASSES = ("bush", "car")

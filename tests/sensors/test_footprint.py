@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.beam import Beam
-from zbuf_occlude.sensors.footprint import (
+from zbuf_occlude.sensors.beam.fields import Beam
+from zbuf_occlude.sensors.beam.footprint import (
     MAX_SUBRAYS,
     footprint_offsets,
     subray_directions,
 )
-from zbuf_occlude.sensors.lidar import Lidar
+from zbuf_occlude.sensors.patterns.spinning import Lidar
 
 COUNTS = [1, 2, 3, 5, 7, 8, 12, 13, 14, 19, 20, 37, 50, 61, 100, 257]
 

@@ -1,7 +1,7 @@
 """Hostile scene and sensor files: one line naming the file and the field, never a traceback, a wrong scan or a bomb.
 
 Covers :mod:`zbuf_occlude.sensors.spec_files` (reading), :mod:`zbuf_occlude.sensors.checks`
-(fields) and their users: :func:`~zbuf_occlude.sensors.scene.load_scene`,
+(fields) and their users: :func:`~zbuf_occlude.sensors.scene.objects.load_scene`,
 :func:`~zbuf_occlude.sensors.kinds.sensor_from_name` and the dataclasses' own checks.
 """
 
@@ -22,17 +22,17 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from zbuf_occlude.errors import InvalidInputError, UnsafePathError
-from zbuf_occlude.sensors import scene as scene_module
-from zbuf_occlude.sensors.airborne import AirborneScanner
+from zbuf_occlude.sensors.scene import objects as scene_module
+from zbuf_occlude.sensors.patterns.airborne import AirborneScanner
 from zbuf_occlude.sensors.scan import scan_airborne
 from zbuf_occlude.sensors.checks import MAX_SCENE_OBJECTS, MAX_SENSOR_RAYS, SHOWN_CHARS, key_text, value_kind
-from zbuf_occlude.sensors.depth_camera import DepthCamera
-from zbuf_occlude.sensors.beam import Beam
+from zbuf_occlude.sensors.patterns.depth_camera import DepthCamera
+from zbuf_occlude.sensors.beam.fields import Beam
 from zbuf_occlude.sensors.kinds import LEGACY_BEAM_KEYS, SENSOR_KINDS, sensor_from_name
-from zbuf_occlude.sensors.lidar import Lidar, lidar_preset
-from zbuf_occlude.sensors.ray_table import RayTable
-from zbuf_occlude.sensors.scene import ScanScene, SceneObject
-from zbuf_occlude.sensors.scene_files import load_scene
+from zbuf_occlude.sensors.patterns.spinning import Lidar, lidar_preset
+from zbuf_occlude.sensors.patterns.ray_table import RayTable
+from zbuf_occlude.sensors.scene.objects import ScanScene, SceneObject
+from zbuf_occlude.sensors.scene.files import load_scene
 
 yaml = pytest.importorskip("yaml", reason="YAML scenes need the [yaml] extra (PyYAML)")
 
@@ -284,7 +284,7 @@ VALID_SENSORS = {
                   "width": 64, "height": 48, "noise": 0.01},
 }  # fmt: skip
 #: ``(class, field, in_beam)``: every numeric field of every sensor file, a pulsed kind's beam fields (in its ``"beam"``
-#: object, :class:`~zbuf_occlude.sensors.beam.Beam`'s) included.
+#: object, :class:`~zbuf_occlude.sensors.beam.fields.Beam`'s) included.
 SENSOR_NUMBERS = [(cls, name, False) for cls in VALID_SENSORS for name in _numeric_fields(cls)] + [
     (cls, name, True) for cls in VALID_SENSORS if kind_of_class(cls).pulsed for name in _numeric_fields(Beam)
 ]

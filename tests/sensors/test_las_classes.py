@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.las_classes import (
+from zbuf_occlude.sensors.scene.las_classes import (
     MAX_CLASS_MAP_KEYS,
     RESERVED_CODES,
     VEGETATION_HEIGHTS_M,

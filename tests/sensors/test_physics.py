@@ -15,9 +15,9 @@ from scipy.stats import norm
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors import Lidar, SceneObject, scan
-from zbuf_occlude.sensors.beam import Beam
+from zbuf_occlude.sensors.beam.fields import Beam
 from zbuf_occlude.sensors.kinds import with_beam
-from zbuf_occlude.sensors.scene import BuiltScene
+from zbuf_occlude.sensors.scene.objects import BuiltScene
 
 D = 10.0  # wall distance, metres
 

@@ -17,7 +17,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors import Lidar, scan, with_beam
 from zbuf_occlude.sensors.fit import Estimate, dropout_by_surface, fit_foliage_dropout, is_crown_class
 from zbuf_occlude.sensors.fit.ray_drop import CROWN, SOLID
-from zbuf_occlude.sensors.scene import ScanScene, SceneObject
+from zbuf_occlude.sensors.scene.objects import ScanScene, SceneObject
 
 PLACES = [(6.0, 0.0), (8.0, 20.0), (10.0, -15.0), (12.0, 5.0), (9.0, -30.0)]
 

@@ -1,4 +1,4 @@
-"""A ray table as a sensor (:class:`~zbuf_occlude.sensors.ray_table.RayTable`): a given table is reproduced
+"""A ray table as a sensor (:class:`~zbuf_occlude.sensors.patterns.ray_table.RayTable`): a given table is reproduced
 exactly (each point along its row's direction, at its row's time, with its row as pulse id), it scans as the
 LiDAR whose rays it lists, its columns are checked, and hostile files are one line naming the file."""
 
@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 import trimesh
 
-import zbuf_occlude.sensors.ray_table as ray_table_module
+import zbuf_occlude.sensors.patterns.ray_table as ray_table_module
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.ray_tables import ray_table_bytes
-from zbuf_occlude.sensors.beam import Beam
+from zbuf_occlude.sensors.beam.fields import Beam
 from zbuf_occlude.sensors.kinds import SENSOR_KINDS, with_beam
-from zbuf_occlude.sensors.lidar import Lidar, beam_directions, lidar_preset
-from zbuf_occlude.sensors.ray_table import ROSETTE_FOV_DEG, RayTable, load_ray_table, rosette_table
+from zbuf_occlude.sensors.patterns.spinning import Lidar, beam_directions, lidar_preset
+from zbuf_occlude.sensors.patterns.ray_table import ROSETTE_FOV_DEG, RayTable, load_ray_table, rosette_table
 from zbuf_occlude.sensors.scan import scan
 
 RADIUS_M = 10.0

@@ -1,4 +1,4 @@
-"""The reflectance table (:mod:`zbuf_occlude.sensors.reflectance`) and ``scan(reflectivity="table")``."""
+"""The reflectance table (:mod:`zbuf_occlude.sensors.scene.materials`) and ``scan(reflectivity="table")``."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import trimesh
 import zbuf_occlude.sensors as S
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.kinds import with_beam
-from zbuf_occlude.sensors.reflectance import (
+from zbuf_occlude.sensors.scene.materials import (
     DEFAULT_MATERIAL,
     FOLIAGE_GAP_FRACTION,
     MATERIALS,

@@ -19,9 +19,9 @@ from hypothesis import strategies as st
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors import AirborneScanner, airborne_preset, scan_airborne
-from zbuf_occlude.sensors.beam import Beam
+from zbuf_occlude.sensors.beam.fields import Beam
 from zbuf_occlude.sensors.kinds import with_beam
-from zbuf_occlude.sensors.scene import BuiltScene, SceneObject
+from zbuf_occlude.sensors.scene.objects import BuiltScene, SceneObject
 
 ALTITUDE_M = 100.0
 PLATE_Z = 10.0

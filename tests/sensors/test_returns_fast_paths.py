@@ -1,13 +1,13 @@
 """The multi-return scan's fast paths give the general paths' results bit for bit.
 
-* :func:`~zbuf_occlude.sensors.footprint.subray_directions`, one coordinate at a time, against
+* :func:`~zbuf_occlude.sensors.beam.footprint.subray_directions`, one coordinate at a time, against
   the (N, K, 3) formula it replaced (``np.cross``, ``np.linalg.norm``);
 * the exact ray parameter on a known hit face (Embree's hits, and the per-face numerator from
-  one origin) against :func:`~zbuf_occlude.sensors.raycast.ray_triangle_f64`, degenerate faces
+  one origin) against :func:`~zbuf_occlude.sensors.raycast.embree.ray_triangle_f64`, degenerate faces
   and rays in a face's plane included;
-* the float32 rays :func:`~zbuf_occlude.sensors.raycast.cast_embree` hands Embree against those
+* the float32 rays :func:`~zbuf_occlude.sensors.raycast.embree.cast_embree` hands Embree against those
   trimesh's ``intersects_first`` hands it (the same bytes, so the same faces);
-* :func:`~zbuf_occlude.sensors.echoes.resolve_echoes` on rows sorted by pulse (each pulse's
+* :func:`~zbuf_occlude.sensors.beam.echoes.resolve_echoes` on rows sorted by pulse (each pulse's
   rows sorted in a table; runs of two tied rows swapped in place) against the same rows in
   another order (sorts of all rows), and the one-surface echoes' shortcut against the grouping
   by surface.
@@ -22,10 +22,10 @@ import trimesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from zbuf_occlude.sensors import echoes as E
-from zbuf_occlude.sensors import raycast
-from zbuf_occlude.sensors.footprint import footprint_offsets, subray_directions
-from zbuf_occlude.sensors.raycast import _exact_distance, _ray_parameter, cast_embree, ray_triangle_f64
+from zbuf_occlude.sensors.beam import echoes as E
+from zbuf_occlude.sensors.raycast import embree as raycast
+from zbuf_occlude.sensors.beam.footprint import footprint_offsets, subray_directions
+from zbuf_occlude.sensors.raycast.embree import _exact_distance, _ray_parameter, cast_embree, ray_triangle_f64
 
 
 def _subray_directions_reference(d: np.ndarray, off: np.ndarray) -> np.ndarray:

@@ -3,7 +3,7 @@
 
 Analytic scene: two parallel plates facing the sensor at ranges R and R + g, the near one
 covering one side of the footprint; one pulse along +x, so each sub-ray's hit, range and energy
-are known in closed form (:func:`~zbuf_occlude.sensors.footprint.subray_directions`).
+are known in closed form (:func:`~zbuf_occlude.sensors.beam.footprint.subray_directions`).
 """
 
 from __future__ import annotations
@@ -18,11 +18,11 @@ from hypothesis import strategies as st
 
 import zbuf_occlude.sensors as S
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.beam import Beam
-from zbuf_occlude.sensors.footprint import footprint_offsets, subray_directions
+from zbuf_occlude.sensors.beam.fields import Beam
+from zbuf_occlude.sensors.beam.footprint import footprint_offsets, subray_directions
 from zbuf_occlude.sensors.kinds import with_beam
 from zbuf_occlude.sensors.scan_data import GPS_START_S
-from zbuf_occlude.sensors.scene import BuiltScene, SceneObject
+from zbuf_occlude.sensors.scene.objects import BuiltScene, SceneObject
 
 R = 10.0  # near plate, metres
 DIVERGENCE = 2.0  # degrees: a 0.35 m footprint at 10 m

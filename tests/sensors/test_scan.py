@@ -15,8 +15,8 @@ import trimesh
 import zbuf_occlude.sensors as S
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.kinds import SENSOR_KINDS, with_beam
-from zbuf_occlude.sensors.raycast import cast_embree
-from zbuf_occlude.sensors.raycast_zbuffer import cast_zbuffer
+from zbuf_occlude.sensors.raycast.embree import cast_embree
+from zbuf_occlude.sensors.raycast.zbuffer import cast_zbuffer
 
 
 def wall(distance_m: float, half_width_m: float, half_height_m: float) -> trimesh.Trimesh:
@@ -367,7 +367,7 @@ def test_read_scan_npz_refuses_inflation_past_the_cap(tmp_path, monkeypatch):
 def test_depth_camera_intrinsics_follow_opencv() -> None:
     """Pixel centres at integers (OpenCV, Open3D, and the package's Camera.K): the Kinect's principal
     point is ((W − 1)/2, (H − 1)/2), and the ray of pixel (u, v) projects back onto (u, v) with K."""
-    from zbuf_occlude.sensors.depth_camera import depth_camera_preset
+    from zbuf_occlude.sensors.patterns.depth_camera import depth_camera_preset
 
     cam = depth_camera_preset("kinect-v1")
     K = np.asarray(cam.intrinsics)
@@ -380,7 +380,7 @@ def test_depth_camera_intrinsics_follow_opencv() -> None:
 # -- the scan command: its presets, and meshes it cannot see ----------------------------------------
 def test_scan_help_lists_every_preset_of_the_registries(capsys, monkeypatch) -> None:
     from zbuf_occlude.cli.main import main
-    from zbuf_occlude.sensors.airborne_presets import AIRBORNE_PRESETS
+    from zbuf_occlude.sensors.patterns.airborne_presets import AIRBORNE_PRESETS
 
     def help_text() -> str:
         with pytest.raises(SystemExit):

@@ -1,6 +1,6 @@
 """The limits of a scan's LAS options and return physics, in the library: a GPS start whose float64 times keep
 :data:`~zbuf_occlude.sensors.scan_data.GPS_TIME_RESOLUTION_S`, a CRS a scan's metres can be in (projected, or
-compound with a vertical CRS), a ``power_noise`` within :data:`~zbuf_occlude.sensors.echoes.MAX_POWER_NOISE`; and
+compound with a vertical CRS), a ``power_noise`` within :data:`~zbuf_occlude.sensors.beam.echoes.MAX_POWER_NOISE`; and
 a scan at those limits raises no numpy warning."""
 
 from __future__ import annotations
@@ -17,9 +17,9 @@ from hypothesis import strategies as st
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors import Lidar, scan
-from zbuf_occlude.sensors.beam import Beam
-from zbuf_occlude.sensors.echo_model import Radiometry
-from zbuf_occlude.sensors.echoes import MAX_POWER_NOISE
+from zbuf_occlude.sensors.beam.fields import Beam
+from zbuf_occlude.sensors.beam.echo_energy import Radiometry
+from zbuf_occlude.sensors.beam.echoes import MAX_POWER_NOISE
 from zbuf_occlude.sensors.scan_data import GPS_TIME_RESOLUTION_S, Scan, check_gps_start
 
 #: The pulse interval of the fastest preset, seconds (riegl-q1560: 800 kHz).
@@ -72,7 +72,7 @@ def test_an_accepted_start_keeps_the_fastest_pulses_apart_and_a_refused_one_woul
 
 
 def test_the_resolution_keeps_the_fastest_preset_apart() -> None:
-    from zbuf_occlude.sensors.airborne_presets import AIRBORNE_PRESETS
+    from zbuf_occlude.sensors.patterns.airborne_presets import AIRBORNE_PRESETS
 
     fastest = max(p.pulse_rate_hz for p in AIRBORNE_PRESETS.values())
     assert GPS_TIME_RESOLUTION_S < 1.0 / fastest

@@ -7,10 +7,10 @@ import pytest
 
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.io.las import las_bytes
-from zbuf_occlude.sensors.airborne_presets import airborne_preset
-from zbuf_occlude.sensors.beam import IDEAL_BEAM
+from zbuf_occlude.sensors.patterns.airborne_presets import airborne_preset
+from zbuf_occlude.sensors.beam.fields import IDEAL_BEAM
 from zbuf_occlude.sensors.kinds import with_beam
-from zbuf_occlude.sensors.lidar import lidar_preset
+from zbuf_occlude.sensors.patterns.spinning import lidar_preset
 from zbuf_occlude.sensors.platform import as_pose
 from zbuf_occlude.sensors.scan_data import Scan, read_scan_npz
 

@@ -14,13 +14,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.beam import IDEAL_BEAM, Beam
-from zbuf_occlude.sensors.echo_model import returns_of_mode
+from zbuf_occlude.sensors.beam.fields import IDEAL_BEAM, Beam
+from zbuf_occlude.sensors.beam.echo_energy import returns_of_mode
 from zbuf_occlude.sensors.kinds import SENSOR_KINDS, kind_of, sensor_from_spec, sensor_to_json, with_beam
-from zbuf_occlude.sensors.lidar import Lidar, lidar_preset
+from zbuf_occlude.sensors.patterns.spinning import Lidar, lidar_preset
 from zbuf_occlude.sensors.platform import Trajectory
 from zbuf_occlude.sensors.scan import scan
-from zbuf_occlude.sensors.scene import ScanScene, SceneObject
+from zbuf_occlude.sensors.scene.objects import ScanScene, SceneObject
 
 PACKAGE = Path(__file__).resolve().parents[2] / "zbuf_occlude"
 SENSOR_CLASSES = {kind.cls.__name__ for kind in SENSOR_KINDS}
@@ -152,7 +152,10 @@ def test_a_sensor_file_changes_a_preset_beam_in_part_and_reads_the_flat_layout()
         ({"kind": "lidar", "preset": "hdl32e", "beam": {"laser": 1}}, "laser"),
         ({"kind": "lidar", "preset": "hdl32e", "beam": [1, 2]}, "beam"),
         ({"kind": "depth_camera", "preset": "kinect-v1", "beam": {}}, "beam"),
-        ({"kind": "airborne", "preset": "riegl-q1560", "beam": {"return_mode": "dual", "max_returns": 3}}, "max_returns 2"),
+        (
+            {"kind": "airborne", "preset": "riegl-q1560", "beam": {"return_mode": "dual", "max_returns": 3}},
+            "return_mode dual records 2 returns per pulse; max_returns 3 contradicts it",
+        ),
     ],
 )
 def test_bad_sensor_files_are_refused_naming_the_field(spec, words):
@@ -166,7 +169,10 @@ def test_bad_sensor_files_are_refused_naming_the_field(spec, words):
         ({"footprint_rays": 7}, "divergence_deg"),
         ({"max_returns": 3}, "range_resolution_m"),
         ({"range_resolution_m": 0.5}, "needs max_returns above 1"),
-        ({"return_mode": "strongest", "max_returns": 2, "range_resolution_m": 1.0}, "max_returns 1"),
+        (
+            {"return_mode": "strongest", "max_returns": 2, "range_resolution_m": 1.0},
+            "return_mode strongest records 1 return per pulse; max_returns 2",
+        ),
         ({"echo_separation_m": 0.5}, "footprint_rays above 1"),
         ({"min_range_m": 5.0, "max_range_m": 2.0}, "min_range_m must be below max_range_m"),
         ({"intensity_scale": 0.0}, "intensity_scale"),
@@ -302,7 +308,7 @@ def test_a_footprint_too_large_for_the_memory_is_refused_before_the_rays_are_cas
 
 
 def test_an_airborne_scan_takes_the_material_table_by_default_for_a_radiometric_multi_return_beam():
-    from zbuf_occlude.sensors.airborne_presets import airborne_preset
+    from zbuf_occlude.sensors.patterns.airborne_presets import airborne_preset
     from zbuf_occlude.sensors.scan import scan_airborne
 
     scene = ScanScene(objects=[SceneObject({"cylinder": {"radius_m": 2.0, "height_m": 5.0}}, "bush", (0.0, 0.0))], ground_half_extent_m=8.0)

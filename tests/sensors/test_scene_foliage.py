@@ -9,10 +9,10 @@ import pytest
 import trimesh
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.foliage import LEAF_MATERIAL, MAX_LEAVES, MIN_LEAF_SIDE_M, Foliage, add_foliage
-from zbuf_occlude.sensors.reflectance import MATERIALS, scene_optics
-from zbuf_occlude.sensors.scene import ScanScene, SceneObject
-from zbuf_occlude.sensors.scene_files import load_scene
+from zbuf_occlude.sensors.scene.foliage import LEAF_MATERIAL, MAX_LEAVES, MIN_LEAF_SIDE_M, Foliage, add_foliage
+from zbuf_occlude.sensors.scene.materials import MATERIALS, scene_optics
+from zbuf_occlude.sensors.scene.objects import ScanScene, SceneObject
+from zbuf_occlude.sensors.scene.files import load_scene
 
 BALL = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
 MATERIALS_ROWS = list(MATERIALS)
@@ -134,7 +134,7 @@ def test_a_flat_object_cannot_grow_leaves_and_says_which() -> None:
 
 
 def test_leaves_count_against_the_scenes_triangle_cap_before_they_are_drawn(monkeypatch) -> None:
-    import zbuf_occlude.sensors.scene as scene_module
+    import zbuf_occlude.sensors.scene.objects as scene_module
 
     crown = {"leaf_area_density": 0.5}  # about 1,470 leaves, 2,940 triangles, in a 4 m ball
     first = ScanScene(objects=[SceneObject(BALL, "tree", (0, 0), size_m=4.0, foliage=crown)]).build()

@@ -26,7 +26,7 @@ from zbuf_occlude.sensors.fit import (
     fit_width_scale,
 )
 from zbuf_occlude.sensors.kinds import with_beam
-from zbuf_occlude.sensors.lidar import lidar_preset
+from zbuf_occlude.sensors.patterns.spinning import lidar_preset
 from zbuf_occlude.sensors.kinds import sensor_from_name
 
 CAR = trimesh.creation.box(extents=(1.0, 0.4, 0.33))  # a normalised car-like box: 4.5 m long at size_m 4.5
@@ -210,7 +210,7 @@ def test_scan_occlude_option(tmp_path) -> None:
 
 def test_an_occluded_crop_builds_its_object_once(monkeypatch: pytest.MonkeyPatch) -> None:
     """The panels are placed from the built object; the scene built again with them reuses that build."""
-    from zbuf_occlude.sensors.scene import SceneObject
+    from zbuf_occlude.sensors.scene.objects import SceneObject
 
     calls = []
     real = SceneObject.build

@@ -1,4 +1,4 @@
-"""Echoes told apart on the pulse's waveform (``echo_rule="waveform"``, :mod:`zbuf_occlude.sensors.waveform`).
+"""Echoes told apart on the pulse's waveform (``echo_rule="waveform"``, :mod:`zbuf_occlude.sensors.beam.waveform`).
 
 Analytic cases: two equal reflections are told apart exactly when more than the range resolution
 ΔR apart; a weak run of hits between two reflections does not join them (where the chain rule
@@ -17,12 +17,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import zbuf_occlude.sensors.echo_model as echo_model
-import zbuf_occlude.sensors.waveform as waveform
+import zbuf_occlude.sensors.beam.echo_energy as echo_model
+import zbuf_occlude.sensors.beam.waveform as waveform
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.beam import Beam
-from zbuf_occlude.sensors.echoes import hit_energy, resolve_echoes
-from zbuf_occlude.sensors.footprint import footprint_offsets, subray_directions
+from zbuf_occlude.sensors.beam.fields import Beam
+from zbuf_occlude.sensors.beam.echoes import hit_energy, resolve_echoes
+from zbuf_occlude.sensors.beam.footprint import footprint_offsets, subray_directions
 
 RESOLUTION = 0.75  # ΔR of a 5 ns pulse, metres
 
@@ -231,9 +231,9 @@ def test_a_scan_resolves_its_echoes_with_the_beams_rule(monkeypatch, footprint):
     import trimesh
 
     import zbuf_occlude.sensors as S
-    import zbuf_occlude.sensors.adaptive_footprint as adaptive
+    import zbuf_occlude.sensors.beam.adaptive_cast as adaptive
     from zbuf_occlude.sensors.kinds import with_beam
-    from zbuf_occlude.sensors.lidar import Lidar
+    from zbuf_occlude.sensors.patterns.spinning import Lidar
 
     rules = []
 

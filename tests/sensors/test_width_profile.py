@@ -15,9 +15,9 @@ from zbuf_occlude.sensors.crops import object_crop
 from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
 from zbuf_occlude.sensors.fit import crop_placement_json, fit_crop_width_profile, fit_width_profile, width_profile
 from zbuf_occlude.sensors.kinds import with_beam
-from zbuf_occlude.sensors.lidar import lidar_preset
-from zbuf_occlude.sensors.object_shapes import FACE_ROWS, width_profile_factors
-from zbuf_occlude.sensors.scene import ScanScene, SceneObject
+from zbuf_occlude.sensors.patterns.spinning import lidar_preset
+from zbuf_occlude.sensors.scene.object_shapes import FACE_ROWS, width_profile_factors
+from zbuf_occlude.sensors.scene.objects import ScanScene, SceneObject
 
 
 def _stack(widths: list[float], distance: float = 8.0, height: float = 1.6) -> np.ndarray:

@@ -16,10 +16,10 @@ from zbuf_occlude.sensors.crops import object_crop
 from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
 from zbuf_occlude.sensors.fit import WIDTH_BAND_M, across_sight_width, crop_placement_json, fit_crop_widths, fit_width_scale
 from zbuf_occlude.sensors.kinds import with_beam
-from zbuf_occlude.sensors.lidar import lidar_preset
+from zbuf_occlude.sensors.patterns.spinning import lidar_preset
 from zbuf_occlude.sensors.kinds import sensor_from_name
 from zbuf_occlude.sensors.scan_data import read_scan_npz
-from zbuf_occlude.sensors.scene import SceneObject
+from zbuf_occlude.sensors.scene.objects import SceneObject
 
 
 def _rings(widths: list[float], distance: float = 8.0) -> np.ndarray:

@@ -22,7 +22,7 @@ from typing import Any
 
 from zbuf_occlude.cli.options import Check, interval, parse_interval, real, shown
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS, MAX_DIVERGENCE_DEG
+from zbuf_occlude.sensors.beam.footprint import FOOTPRINT_RAYS, MAX_DIVERGENCE_DEG
 from zbuf_occlude.sensors.placement import CropDistributions, check_across_sight_width
 
 __all__ = [
@@ -37,7 +37,7 @@ BEAM_FIELDS = ("footprint", "divergence_deg")
 
 
 def check_divergence(text: str, option: str) -> float:
-    """``--divergence DEG``: a full angle in degrees, > 0 and at most :data:`~zbuf_occlude.sensors.footprint.MAX_DIVERGENCE_DEG`."""
+    """``--divergence DEG``: a full angle in degrees, > 0 and at most :data:`~zbuf_occlude.sensors.beam.footprint.MAX_DIVERGENCE_DEG`."""
     value = real(0.0, above=True, unit="degrees")(text, option)
     if value > MAX_DIVERGENCE_DEG:
         raise InvalidInputError(f"{option} must be a full angle of at most {MAX_DIVERGENCE_DEG:g} degrees, got {shown(text)}")
@@ -165,7 +165,7 @@ class CropSettings:
     distributions : CropDistributions
         Checked, its messages naming the options (:data:`FLAGS`).
     footprint : bool
-        :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS` rays per firing in the beam's divergence cone.
+        :data:`~zbuf_occlude.sensors.beam.footprint.FOOTPRINT_RAYS` rays per firing in the beam's divergence cone.
     divergence_deg : float or None
         The beam's full-angle divergence, degrees; None: the sensor's.
     across_sight_width_m : (lo, hi) or None

@@ -36,7 +36,7 @@ from zbuf_occlude.mesh.paths import SPLITS
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.mesh.inputs.kinds import DEFAULT_POINT_SET_POINTS, POINT_SET_METHOD, POINT_SET_VISIBLE_SHARE
 from zbuf_occlude.mesh.scene import UP_CHOICES
-from zbuf_occlude.sensors.adaptive_footprint import FOOTPRINT_MODES
+from zbuf_occlude.sensors.beam.adaptive_cast import FOOTPRINT_MODES
 from zbuf_occlude.sensors.kinds import SENSOR_KINDS
 
 log = logging.getLogger(__name__)

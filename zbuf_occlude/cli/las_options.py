@@ -67,14 +67,14 @@ def check_gps_start_option(text: str, option: str) -> float:
 
 
 def check_class_map_option(text: str, option: str) -> dict[str, int]:
-    """``--class-map FILE``: the class map the file holds (:func:`~zbuf_occlude.sensors.las_classes.load_class_map`).
+    """``--class-map FILE``: the class map the file holds (:func:`~zbuf_occlude.sensors.scene.las_classes.load_class_map`).
 
     Raises
     ------
     InvalidInputError
         Naming the option, the file and the key.
     """
-    from zbuf_occlude.sensors.las_classes import load_class_map
+    from zbuf_occlude.sensors.scene.las_classes import load_class_map
 
     try:
         return load_class_map(text)

@@ -10,9 +10,9 @@ import argparse
 
 from zbuf_occlude.cli.options import Checked, real
 from zbuf_occlude.cli.scan_request import check_max_returns, check_transmittance
-from zbuf_occlude.sensors.adaptive_footprint import FOOTPRINT_MODES
-from zbuf_occlude.sensors.beam import RETURN_MODES
-from zbuf_occlude.sensors.echoes import ECHO_RULES, MAX_POWER_NOISE
+from zbuf_occlude.sensors.beam.adaptive_cast import FOOTPRINT_MODES
+from zbuf_occlude.sensors.beam.fields import RETURN_MODES
+from zbuf_occlude.sensors.beam.echoes import ECHO_RULES, MAX_POWER_NOISE
 
 __all__ = ["add_return_physics_arguments"]
 

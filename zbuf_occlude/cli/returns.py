@@ -40,7 +40,7 @@ def _run(args: argparse.Namespace) -> int:
 
 def add_returns_parser(sub: Any) -> argparse.ArgumentParser:
     """Add ``returns`` to ``experiment``'s argparse subparsers."""
-    from zbuf_occlude.sensors.echoes import ECHO_RULES
+    from zbuf_occlude.sensors.beam.echoes import ECHO_RULES
 
     p = sub.add_parser(
         "returns", help="simulate an airborne scanner over tree meshes and measure its returns per pulse as a real LAS/LAZ file's",

@@ -41,8 +41,8 @@ _CROP_FIELDS = {"footprint": "footprint", "footprint_rays": "footprint", "diverg
 
 
 def check_max_returns(text: str, option: str) -> int:
-    """``--max-returns N``: a whole number from 1 to :data:`~zbuf_occlude.sensors.echoes.MAX_RETURNS` (LAS's return numbers)."""
-    from zbuf_occlude.sensors.echoes import MAX_RETURNS
+    """``--max-returns N``: a whole number from 1 to :data:`~zbuf_occlude.sensors.beam.echoes.MAX_RETURNS` (LAS's return numbers)."""
+    from zbuf_occlude.sensors.beam.echoes import MAX_RETURNS
 
     n = count(None)(text, option)
     if n > MAX_RETURNS:

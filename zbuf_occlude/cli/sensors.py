@@ -45,8 +45,8 @@ PRIMITIVES = {
 
 def _outline(text: str | None) -> tuple[float, ...] | None:
     """``--outline V,V,...``: two or more widths over the scan's width, bottom to top
-    (:func:`~zbuf_occlude.sensors.object_shapes.check_width_profile`)."""
-    from zbuf_occlude.sensors.object_shapes import check_width_profile
+    (:func:`~zbuf_occlude.sensors.scene.object_shapes.check_width_profile`)."""
+    from zbuf_occlude.sensors.scene.object_shapes import check_width_profile
 
     if text is None:
         return None
@@ -90,19 +90,19 @@ SCAN_SENSOR = "hdl32e"
 
 def _scan_sensor(args: argparse.Namespace):
     """The sensor ``scan`` fires, as named: ``--sensor``'s (:data:`SCAN_SENSOR` by default), or the
-    :class:`~zbuf_occlude.sensors.ray_table.RayTable` of ``--ray-table FILE`` (with
-    :data:`~zbuf_occlude.sensors.ray_table.RAY_TABLE_FILE_BEAM`); ``args.sensor`` names it in messages.
+    :class:`~zbuf_occlude.sensors.patterns.ray_table.RayTable` of ``--ray-table FILE`` (with
+    :data:`~zbuf_occlude.sensors.patterns.ray_table.RAY_TABLE_FILE_BEAM`); ``args.sensor`` names it in messages.
 
     Raises
     ------
     InvalidInputError
         ``--ray-table`` with ``--sensor`` (one sensor per scan), or a file
-        :func:`~zbuf_occlude.sensors.ray_table.load_ray_table` refuses.
+        :func:`~zbuf_occlude.sensors.patterns.ray_table.load_ray_table` refuses.
     """
     if args.ray_table is None:
         args.sensor = args.sensor or SCAN_SENSOR
         return sensor_from_name(args.sensor)
-    from zbuf_occlude.sensors.ray_table import RAY_TABLE_FILE_BEAM, load_ray_table
+    from zbuf_occlude.sensors.patterns.ray_table import RAY_TABLE_FILE_BEAM, load_ray_table
 
     if args.sensor is not None:
         raise InvalidInputError(f"--ray-table {args.ray_table} is the sensor: give --ray-table or --sensor {args.sensor}, not both")
@@ -155,7 +155,7 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, request) -> int:
     """:func:`cmd_scan` once ``--out`` is held: a scene file's scans, or the mesh's placed and scanned
     (:mod:`zbuf_occlude.sensors.scan_files`); 1 where a scan of a mesh holds no return of the object."""
     from zbuf_occlude.sensors.scan_files import scan_object, scan_scene_file
-    from zbuf_occlude.sensors.scene_files import load_scene
+    from zbuf_occlude.sensors.scene.files import load_scene
 
     src = Path(args.mesh_or_scene)
     if src.suffix.lower() in SCENE_SUFFIXES:

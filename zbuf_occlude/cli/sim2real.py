@@ -16,7 +16,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.caps import MAX_TABLE_BYTES
 from zbuf_occlude.io.regular_files import read_text_file
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
-from zbuf_occlude.sensors.adaptive_footprint import FOOTPRINT_MODES
+from zbuf_occlude.sensors.beam.adaptive_cast import FOOTPRINT_MODES
 
 __all__ = ["add_sim2real_parser", "parse_pairs", "parse_up_map", "THREADS_HELP"]
 
@@ -107,8 +107,8 @@ def _say(line: str) -> None:
 
 
 def returns_per_pulse(text: str, option: str) -> int:
-    """``--returns N``: a whole number from 1 to :data:`~zbuf_occlude.sensors.echoes.MAX_RETURNS` (LAS's return numbers)."""
-    from zbuf_occlude.sensors.echoes import MAX_RETURNS
+    """``--returns N``: a whole number from 1 to :data:`~zbuf_occlude.sensors.beam.echoes.MAX_RETURNS` (LAS's return numbers)."""
+    from zbuf_occlude.sensors.beam.echoes import MAX_RETURNS
 
     n = count(None)(text, option)
     if n > MAX_RETURNS:

@@ -27,8 +27,8 @@ from zbuf_occlude.experiments.tree_cover import TREE_COVER_CELL_M, TREE_COVER_MI
 from zbuf_occlude.io.las import LasPoints
 from zbuf_occlude.sensors.checks import count, real
 from zbuf_occlude.sensors.fit.returns import VEGETATION_CLASSES
-from zbuf_occlude.sensors.las_classes import VEGETATION_HEIGHTS_M
-from zbuf_occlude.sensors.scene import ScanScene
+from zbuf_occlude.sensors.scene.las_classes import VEGETATION_HEIGHTS_M
+from zbuf_occlude.sensors.scene.objects import ScanScene
 
 __all__ = ["CANOPY_QUANTILE", "GROUND_NEIGHBOURS", "canopy_height", "classes_by_height", "heights_above_ground", "plot_canopy_height"]
 
@@ -72,7 +72,7 @@ def heights_above_ground(las: LasPoints, *, neighbours: int = GROUND_NEIGHBOURS)
 def classes_by_height(las: LasPoints, heights_m: NDArray[np.floating], *, source_class: int = 1) -> LasPoints:
     """``las`` with its ``source_class`` points classed by their height above the ground.
 
-    The rule the LAS writer gives simulated vegetation (:data:`~zbuf_occlude.sensors.las_classes.VEGETATION_HEIGHTS_M`,
+    The rule the LAS writer gives simulated vegetation (:data:`~zbuf_occlude.sensors.scene.las_classes.VEGETATION_HEIGHTS_M`,
     IGN's bounds), except below the lower bound: there a point is at ground level (a field, a road
     or a car park the classifier left unclassified) and becomes ground (2), not low vegetation.
     Between the bounds it becomes medium vegetation (4), above them high vegetation (5).
@@ -147,7 +147,7 @@ def plot_canopy_height(scene: ScanScene, center_xy, half_size_m: float, vegetati
     """:func:`canopy_height` of a plot of meshes, from vertical rays (:func:`~.tree_cover.vertical_tops`).
 
     The cells whose highest hit is vegetation (``vegetation_ids``), that hit's height above the
-    scene's ground (:attr:`~zbuf_occlude.sensors.scene.ScanScene.ground_z_m`); its ``quantile``.
+    scene's ground (:attr:`~zbuf_occlude.sensors.scene.objects.ScanScene.ground_z_m`); its ``quantile``.
 
     Returns
     -------

@@ -346,7 +346,7 @@ def _dataset_rows(root: Path, per_class: int, poses: int, dpi: int, rng: np.rand
             camera_title = f"camera el {el:.0f}°, az {az:.0f}°, r {radius:g}"
             units = "pixels"
         else:
-            from zbuf_occlude.sensors.lidar import beam_directions
+            from zbuf_occlude.sensors.patterns.spinning import beam_directions
 
             camera = None
             # farm --sensor: the sensor at `radius` (mesh units) from the object's centre, in the mesh frame
@@ -424,8 +424,8 @@ def _scan_row(s: Any, group: str, name: str, fixed: Camera) -> SheetRow:
 
 def _preset(name: str) -> Any:
     """The sensor preset a scan names, or None (a name read from a file is never opened as a path)."""
-    from zbuf_occlude.sensors.depth_camera import DEPTH_CAMERA_PRESETS
-    from zbuf_occlude.sensors.lidar import LIDAR_PRESETS
+    from zbuf_occlude.sensors.patterns.depth_camera import DEPTH_CAMERA_PRESETS
+    from zbuf_occlude.sensors.patterns.spinning import LIDAR_PRESETS
 
     key = str(name).lower()
     return LIDAR_PRESETS.get(key) or DEPTH_CAMERA_PRESETS.get(key)

@@ -39,7 +39,7 @@ from zbuf_occlude.sensors.kinds import with_beam
 
 if TYPE_CHECKING:
     from zbuf_occlude.real_scans.records import RealScan
-    from zbuf_occlude.sensors.lidar import Lidar
+    from zbuf_occlude.sensors.patterns.spinning import Lidar
 
 __all__ = [
     "MATCHED_RANGE_M", "MeshCrop", "Say", "centroid_range_m", "mesh_crops", "real_shares", "simulated_shares",

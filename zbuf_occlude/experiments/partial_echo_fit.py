@@ -16,7 +16,7 @@ the outline share of each).  This module holds the fit: the beam it scans with, 
 folder of meshes or from meshes already loaded, its result, and the step ``fit-sensor --meshes`` runs.
 
 The beam (:func:`partial_echo_sensor`): the fitted sensor's, with a footprint where it has none
-(:func:`~zbuf_occlude.sensors.beam.footprint_changes`: :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS`
+(:func:`~zbuf_occlude.sensors.beam.fields.footprint_changes`: :data:`~zbuf_occlude.sensors.beam.footprint.FOOTPRINT_RAYS`
 sub-rays over the beam's data-sheet divergence; a beam without a divergence is refused), and
 **one return per pulse, the strongest** (Velodyne's strongest-return mode).  That is an
 assumption about the real scans, not read from them: LiDARNet's HDL-32E scans hold one point per
@@ -46,7 +46,7 @@ from zbuf_occlude.experiments.sim2real.meshes import MeshEntry, find_class_meshe
 from zbuf_occlude.experiments.sim2real.placement import CropPlacement
 from zbuf_occlude.experiments.sim2real.real import real_label
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
-from zbuf_occlude.sensors.beam import footprint_changes
+from zbuf_occlude.sensors.beam.fields import footprint_changes
 from zbuf_occlude.sensors.checks import count
 from zbuf_occlude.sensors.fit.engine import Refine, Refinement
 from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP
@@ -55,7 +55,7 @@ from zbuf_occlude.sensors.kinds import capabilities, with_beam
 
 if TYPE_CHECKING:
     from zbuf_occlude.real_scans.records import RealScan
-    from zbuf_occlude.sensors.lidar import Lidar
+    from zbuf_occlude.sensors.patterns.spinning import Lidar
 
 __all__ = [
     "SIMULATION_RANGE_RESOLUTION_M", "PartialEchoResult", "fit_partial_echoes", "fit_partial_echoes_to_meshes", "mesh_classes",
@@ -79,8 +79,8 @@ def _quiet(_: str) -> None:
 def partial_echo_sensor(sensor: Lidar, min_echo_reflectance: float | None = None) -> Lidar:
     """``sensor`` with the beam a partial-echo fit scans with (module docstring), and ``min_echo_reflectance`` where given.
 
-    The footprint: :func:`~zbuf_occlude.sensors.beam.footprint_changes` (at least
-    :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS` sub-rays over the beam's divergence); the
+    The footprint: :func:`~zbuf_occlude.sensors.beam.fields.footprint_changes` (at least
+    :data:`~zbuf_occlude.sensors.beam.footprint.FOOTPRINT_RAYS` sub-rays over the beam's divergence); the
     receiver: the strongest echo, one return per pulse, echoes resolved at the beam's
     ``range_resolution_m`` or :data:`SIMULATION_RANGE_RESOLUTION_M` where it has none (no mixed
     pixels: ``echo_separation_m`` 0, which resolved echoes refuse).  Every other field is ``sensor``'s.

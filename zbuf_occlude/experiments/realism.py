@@ -59,7 +59,7 @@ from zbuf_occlude.io.encodings import png_bytes
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.io.safe_paths import check_found_file
 from zbuf_occlude.sensors.scan_data import read_scan_npz
-from zbuf_occlude.sensors.scene import GROUND_ID
+from zbuf_occlude.sensors.scene.objects import GROUND_ID
 
 # The statistics (ObjectCloud, cloud_stats, ring_labels, outline_share, ...) are realism_stats' names, documented
 # there; imported above, they stay importable from here too (callers import them from either module).

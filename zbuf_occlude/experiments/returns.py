@@ -40,15 +40,15 @@ from numpy.typing import NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.atomic import write_bytes
 from zbuf_occlude.io.las import LasPoints, read_las
-from zbuf_occlude.sensors.airborne import AIRBORNE_IDEAL_BEAM, AirborneScanner
+from zbuf_occlude.sensors.patterns.airborne import AIRBORNE_IDEAL_BEAM, AirborneScanner
 from zbuf_occlude.sensors.scan import scan_airborne
 from zbuf_occlude.sensors.fit.returns import (
     VEGETATION_CLASSES,
     ReturnStatistics,
     return_statistics,
 )
-from zbuf_occlude.sensors.las_classes import GROUND_CODE, VEGETATION_HEIGHTS_M, asprs_classification
-from zbuf_occlude.sensors.scene import ScanScene, SceneObject
+from zbuf_occlude.sensors.scene.las_classes import GROUND_CODE, VEGETATION_HEIGHTS_M, asprs_classification
+from zbuf_occlude.sensors.scene.objects import ScanScene, SceneObject
 
 if TYPE_CHECKING:
     from zbuf_occlude.sensors.scan_data import Scan
@@ -59,7 +59,7 @@ __all__ = [
     "SimulatedScan", "ign_scanner", "object_pulse_shares", "plot_scene", "pulse_subset", "simulate", "simulated_classes",
 ]  # fmt: skip
 
-#: ASPRS class of the ground (LAS 1.4 R15, Table 17); the class rule is the LAS writer's (:mod:`zbuf_occlude.sensors.las_classes`).
+#: ASPRS class of the ground (LAS 1.4 R15, Table 17); the class rule is the LAS writer's (:mod:`zbuf_occlude.sensors.scene.las_classes`).
 GROUND_CLASS = GROUND_CODE
 #: Flying height of IGN LiDAR HD, metres: "about 1,500 m" (IGN's programme as described by
 #: d-booker.fr, "Exemple d'utilisation de données géographiques 3D"; 10 points/m² on average, ign.fr).
@@ -78,7 +78,7 @@ IGN_PULSES_PER_M2 = 10.0
 IGN_PULSE_RATE_HZ, IGN_LINE_RATE_HZ = 483_000.0, 190.0
 #: Most returns a pulse keeps: the IGN sample's largest ``number_of_returns`` is 5.
 IGN_MAX_RETURNS = 5
-#: The plot's leaves (:func:`~zbuf_occlude.sensors.foliage.add_foliage`): side of a square leaf, metres (a
+#: The plot's leaves (:func:`~zbuf_occlude.sensors.scene.foliage.add_foliage`): side of a square leaf, metres (a
 #: broadleaf's), and the depth of the crown they fill under the mesh's surface, metres.  ASSUMPTIONS.
 PLOT_LEAF_SIDE_M, PLOT_CROWN_SHELL_M = 0.1, 1.0
 #: Side of the cells on which the Autzen tile's tree cover and canopy height are measured, metres:
@@ -95,7 +95,7 @@ class PlotTree:
 
     ``size_m`` is the file's own size where it declares metres or inches (COLLADA), else an
     ASSUMPTION of a real tree's size (the docs' results page lists which).  ``foliage``: the plot
-    fills the crown with leaves (:func:`~zbuf_occlude.sensors.foliage.add_foliage`); False for a
+    fills the crown with leaves (:func:`~zbuf_occlude.sensors.scene.foliage.add_foliage`); False for a
     plant whose mesh models its leaves one by one.
     """
 
@@ -128,12 +128,12 @@ def ign_scanner(divergence_deg: float = IGN_DIVERGENCE_DEG, footprint_rays: int 
     divergence_deg : float
         The beam's full angle, degrees (default: 0.25 mrad).
     footprint_rays : int
-        Sub-rays per pulse, 1..:data:`~zbuf_occlude.sensors.footprint.MAX_SUBRAYS`.
+        Sub-rays per pulse, 1..:data:`~zbuf_occlude.sensors.beam.footprint.MAX_SUBRAYS`.
     range_resolution_m : float
         Least range between two returns of one pulse, metres (default: the IGN sample's smallest
         gap between returns, 0.82 m).
     profile, max_returns, range_noise_m
-        As :class:`~zbuf_occlude.sensors.beam.Beam`'s (at 1064 nm, no detection threshold: the
+        As :class:`~zbuf_occlude.sensors.beam.fields.Beam`'s (at 1064 nm, no detection threshold: the
         fitted return model sets it, :meth:`~zbuf_occlude.sensors.fit.return_model.ReturnModelFit.apply`).
 
     Raises
@@ -353,7 +353,7 @@ def object_pulse_shares(scan: Scan, object_ids: Sequence[int], *, counts: Sequen
     scan : Scan
         With the return fields (a multi-return scan).
     object_ids : sequence of int
-        The objects' ids (:class:`~zbuf_occlude.sensors.scene.ScanScene`: 1..n; the ground is 0).
+        The objects' ids (:class:`~zbuf_occlude.sensors.scene.objects.ScanScene`: 1..n; the ground is 0).
     counts : sequence of int
         The return counts whose shares are given.
     seed, bootstrap : int

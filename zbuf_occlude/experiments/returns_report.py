@@ -29,7 +29,7 @@ given, within :data:`~zbuf_occlude.experiments.returns_comparison.GAP_MIN_TOLERA
 :meth:`~zbuf_occlude.sensors.fit.return_model.ReturnModelFit.apply`): its range resolution, most
 returns per pulse and detection threshold (m⁻²).  So that the simulated echoes' energies are in the
 threshold's units, the ground reflects with the fit's ground reflectance and every mesh with its
-material's at 1064 nm (:func:`~zbuf_occlude.sensors.reflectance.scene_optics`).  With
+material's at 1064 nm (:func:`~zbuf_occlude.sensors.scene.materials.scene_optics`).  With
 ``ReturnsSettings(detection=False)`` the threshold is 0 and every surface reflects alike: every
 echo returns.  The divergence is fitted by the sweep
 (:func:`~zbuf_occlude.sensors.fit.divergence.divergence_from_shares`).
@@ -93,7 +93,7 @@ from zbuf_occlude.sensors.fit.returns import (
     ReturnStatistics,
     return_statistics,
 )
-from zbuf_occlude.sensors.scene import ScanScene
+from zbuf_occlude.sensors.scene.objects import ScanScene
 
 __all__ = ["RETURNS_OUTPUTS", "ReturnsSettings", "SimulatedModel", "cover_rays_per_cell", "ign_plot", "refits_divergence", "run_returns",
            "scans_of_run", "simulated_model"]  # fmt: skip
@@ -133,11 +133,11 @@ class ReturnsSettings:
         False: no threshold, every surface alike (every echo returns).
     echo_rule : {"chain", "waveform"}
         How the simulated receiver merges a pulse's hits into echoes
-        (:attr:`Beam.echo_rule <zbuf_occlude.sensors.beam.Beam.echo_rule>`): ``"waveform"`` (the
+        (:attr:`Beam.echo_rule <zbuf_occlude.sensors.beam.fields.Beam.echo_rule>`): ``"waveform"`` (the
         default; its shares converge with K, the chain rule's drift) or ``"chain"``.
     leaf_area_density : float
         Leaves in the crowns of the plot's trees (:data:`~.returns.PLOT_TREES` with ``foliage``), one-sided m² per m³
-        of crown, ≥ 0 (:func:`~zbuf_occlude.sensors.foliage.add_foliage` with :data:`~.returns.PLOT_LEAF_SIDE_M`
+        of crown, ≥ 0 (:func:`~zbuf_occlude.sensors.scene.foliage.add_foliage` with :data:`~.returns.PLOT_LEAF_SIDE_M`
         and :data:`~.returns.PLOT_CROWN_SHELL_M`); 0: the meshes as they are.  The default, 1, is the one of
         0, 0.5, 1, 1.5 and 2 that passes the most of the experiment's targets (the results page lists the runs).
     plot : {"street", "families"}
@@ -169,7 +169,7 @@ class ReturnsSettings:
 
     def __post_init__(self) -> None:
         from zbuf_occlude.sensors.checks import real, text
-        from zbuf_occlude.sensors.echoes import ECHO_RULES
+        from zbuf_occlude.sensors.beam.echoes import ECHO_RULES
 
         object.__setattr__(self, "leaf_area_density", real(self.leaf_area_density, "leaf_area_density", low=0.0))
         object.__setattr__(self, "echo_rule", text(self.echo_rule, "echo_rule", choices=ECHO_RULES))
@@ -189,7 +189,7 @@ class SimulatedModel:
     detection : bool
         The fitted detection threshold on; False: 0.
     echo_rule : {"chain", "waveform"}
-        The simulated receiver's (:attr:`Beam.echo_rule <zbuf_occlude.sensors.beam.Beam.echo_rule>`).
+        The simulated receiver's (:attr:`Beam.echo_rule <zbuf_occlude.sensors.beam.fields.Beam.echo_rule>`).
     """
 
     fit: ReturnModelFit
@@ -225,7 +225,7 @@ def simulated_model(fit: ReturnModelFit, scene: ScanScene, detection: bool, echo
     (``detection`` False: no threshold, every surface alike), its receiver merging echoes by ``echo_rule``."""
     if not detection:
         return SimulatedModel(fit, None, False, echo_rule)
-    from zbuf_occlude.sensors.reflectance import AIRBORNE_WAVELENGTH_NM, scene_optics
+    from zbuf_occlude.sensors.scene.materials import AIRBORNE_WAVELENGTH_NM, scene_optics
     from zbuf_occlude.sensors.scan import build_scene
 
     rho = scene_optics(build_scene(scene), AIRBORNE_WAVELENGTH_NM).reflectivity.copy()
@@ -308,7 +308,7 @@ def ign_plot(mesh_root: str | os.PathLike | None, settings: ReturnsSettings, *, 
     """
     from zbuf_occlude.mesh.load import load_mesh
     from zbuf_occlude.sensors.checks import real
-    from zbuf_occlude.sensors.foliage import add_foliage, in_metres
+    from zbuf_occlude.sensors.scene.foliage import add_foliage, in_metres
 
     if settings.spacing_m is None and tree_cover is None:
         raise InvalidInputError("ign_plot needs settings.spacing_m or a tree cover to space the trees for")

@@ -22,7 +22,7 @@ from zbuf_occlude.io.las import LasPoints
 from zbuf_occlude.sensors.checks import count, real
 from zbuf_occlude.sensors.fit import Estimate
 from zbuf_occlude.sensors.fit.returns import VEGETATION_CLASSES
-from zbuf_occlude.sensors.scene import ScanScene
+from zbuf_occlude.sensors.scene.objects import ScanScene
 
 __all__ = [
     "COVER_STEPS", "COVER_TOLERANCE", "MAX_COVER_CELLS_ACROSS", "MAX_COVER_RAYS", "TREE_COVER_BLOCK_M", "TREE_COVER_CELL_M",
@@ -238,7 +238,7 @@ def vertical_tops(scene: ScanScene, center_xy, half_size_m: float, *, cell_m: fl
     InvalidInputError
         A size not finite > 0, ``rays_per_cell`` below 1, more than :data:`MAX_COVER_RAYS` rays.
     """
-    from zbuf_occlude.sensors.raycast import cast_embree
+    from zbuf_occlude.sensors.raycast.embree import cast_embree
 
     half_size_m = real(half_size_m, "half_size_m", low=0.0, low_open=True)
     cell_m = real(cell_m, "cell_m", low=0.0, low_open=True)

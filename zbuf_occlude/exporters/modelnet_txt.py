@@ -39,7 +39,7 @@ from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
 from zbuf_occlude.io.owned import BatchWriter, OwnedFolder
 from zbuf_occlude.io.progress import progress
 from zbuf_occlude.resources import check_memory
-from zbuf_occlude.sensors.lidar import beam_directions
+from zbuf_occlude.sensors.patterns.spinning import beam_directions
 
 __all__ = ["FILE_NAMES", "TARGET", "estimate_normals", "write_modelnet_txt"]
 

@@ -34,7 +34,7 @@ from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, view_schedule
 from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.mesh.paths import SPLITS
 from zbuf_occlude.mesh.scene import UP_CHOICES
-from zbuf_occlude.sensors.footprint import MAX_DIVERGENCE_DEG
+from zbuf_occlude.sensors.beam.footprint import MAX_DIVERGENCE_DEG
 from zbuf_occlude.sensors.placement import CropDistributions, check_across_sight_width
 
 if TYPE_CHECKING:  # annotations only: inputs imports nothing from here
@@ -127,7 +127,7 @@ class SensorCropParams:
         returns under each object; ``hidden_below_m``: hide each object's bottom.  The farm
         sets and records these (:data:`FARM_CROP_FIELDS`); the other fields keep their defaults.
     footprint : bool
-        Return physics: :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS` rays per firing in the
+        Return physics: :data:`~zbuf_occlude.sensors.beam.footprint.FOOTPRINT_RAYS` rays per firing in the
         beam's divergence cone, strongest echo; any pulsed sensor whose beam has a divergence.
     divergence_deg : float or None
         The beam's full-angle divergence, degrees in (0, 90] (for ``footprint`` where the sensor's
@@ -174,7 +174,7 @@ class SensorCropParams:
                     f"farm --sensor draws no {f.name} (its card could not say so): leave it at {getattr(unset, f.name)!r}"
                 )
         object.__setattr__(self, "footprint", bool(self.footprint))
-        from zbuf_occlude.sensors.adaptive_footprint import check_footprint_cast, footprint_mode
+        from zbuf_occlude.sensors.beam.adaptive_cast import check_footprint_cast, footprint_mode
 
         check_footprint_cast(self.footprint_cast, None, names=FARM_REQUEST_NAMES)  # the mode alone, before the sensor is read
         if self.divergence_deg is not None:
@@ -228,7 +228,7 @@ class SensorCropParams:
     @property
     def footprint_mode(self) -> str:
         """``"adaptive"`` or ``"exact"``: how the crops cast a footprint (:func:`~zbuf_occlude.sensors.crops.object_crops`):
-        ``footprint_cast``, which construction resolved for the sensor (:func:`~zbuf_occlude.sensors.adaptive_footprint.footprint_mode`)."""
+        ``footprint_cast``, which construction resolved for the sensor (:func:`~zbuf_occlude.sensors.beam.adaptive_cast.footprint_mode`)."""
         return self.footprint_cast
 
     def to_dict(self) -> dict[str, Any]:

@@ -21,8 +21,8 @@ from zbuf_occlude.sensors.fit import fit_object_shape
 if TYPE_CHECKING:
     import trimesh
 
-    from zbuf_occlude.sensors.depth_camera import DepthCamera
-    from zbuf_occlude.sensors.lidar import Lidar
+    from zbuf_occlude.sensors.patterns.depth_camera import DepthCamera
+    from zbuf_occlude.sensors.patterns.spinning import Lidar
 
 __all__ = ["farm_datasets"]
 

@@ -18,7 +18,7 @@ the directions it fires in, in order, with each pulse's time.  Two file formats:
 
 Only the format is checked here (the columns, numbers, the number of rows); what the numbers
 mean (finite, time non-decreasing, elevations within ±90°) is checked by the sensor that takes
-them, :class:`~zbuf_occlude.sensors.ray_table.RayTable`.  Every error is one line naming the
+them, :class:`~zbuf_occlude.sensors.patterns.ray_table.RayTable`.  Every error is one line naming the
 file (and, in a CSV, the line).
 """
 

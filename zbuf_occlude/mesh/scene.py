@@ -39,7 +39,7 @@ Materials: each mesh of a scene has its own (trimesh keeps ``visual.material.nam
 mesh drops them.  :func:`face_materials` keeps them per face, in the flattened mesh's order
 (:func:`zbuf_occlude.mesh.flatten.flatten_scene`), for ``mesh.metadata[FACE_MATERIALS]``; a face
 of a mesh without a material has the name ``""``.  The reflectance lookup reads them first
-(:func:`zbuf_occlude.sensors.reflectance.scene_optics`).
+(:func:`zbuf_occlude.sensors.scene.materials.scene_optics`).
 """
 
 from __future__ import annotations

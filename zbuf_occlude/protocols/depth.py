@@ -3,7 +3,7 @@
 The field's occlusion recipes (ModelNet40-C, PCN, OcCo) render a depth image and lift its
 pixels back to 3D; their clouds follow the pixel grid, not a uniform surface sampling.  This
 module does the same headless and exactly: one ray per pixel centre, first hit by Embree
-(:func:`zbuf_occlude.sensors.raycast.cast_embree`, float64 distance on the hit face), so the
+(:func:`zbuf_occlude.sensors.raycast.embree.cast_embree`, float64 distance on the hit face), so the
 only error of a back-projected point is the float32 rounding of the stored depth.
 
 Conventions (OpenCV, as Open3D's ``PinholeCameraIntrinsic`` and ModelNet40-C use them):
@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.geometry.samples import draw_sample
-from zbuf_occlude.sensors.raycast import cast_embree
+from zbuf_occlude.sensors.raycast.embree import cast_embree
 
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
@@ -182,7 +182,7 @@ def render_depth_image(mesh: trimesh.Trimesh, view: PinholeView, *, cull_back_fa
     """Ray-cast a depth image: one ray per pixel centre, first hit (Embree, CPU, headless, fork-safe).
 
     The depth is computed in float64 on the hit face
-    (:func:`~zbuf_occlude.sensors.raycast.cast_embree`), then rounded to float32.  Embree
+    (:func:`~zbuf_occlude.sensors.raycast.embree.cast_embree`), then rounded to float32.  Embree
     picks the face in float32: a ray through a crack of the mesh within ~1e-5 of a face's
     edge may be counted as a hit on that face, and its depth is then that of the face's plane
     (about 1 pixel in 10⁴ on ModelNet meshes, off the surface by at most ~1e-5).

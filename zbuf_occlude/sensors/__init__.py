@@ -9,20 +9,20 @@ Spinning LiDARs, ray tables (a Livox's Risley rosette), airborne scanners and de
 >>> car = s.crop(1)                                             # the car's returns, occluded
 """
 
-from zbuf_occlude.sensors.airborne import AirborneScanner
-from zbuf_occlude.sensors.airborne_presets import AIRBORNE_PRESETS, airborne_preset
-from zbuf_occlude.sensors.beam import IDEAL_BEAM, RETURN_MODES, Beam
-from zbuf_occlude.sensors.depth_camera import DEPTH_CAMERA_PRESETS, DepthCamera, depth_camera_preset, nguyen_axial_sigma_m
+from zbuf_occlude.sensors.patterns.airborne import AirborneScanner
+from zbuf_occlude.sensors.patterns.airborne_presets import AIRBORNE_PRESETS, airborne_preset
+from zbuf_occlude.sensors.beam.fields import IDEAL_BEAM, RETURN_MODES, Beam
+from zbuf_occlude.sensors.patterns.depth_camera import DEPTH_CAMERA_PRESETS, DepthCamera, depth_camera_preset, nguyen_axial_sigma_m
 from zbuf_occlude.sensors.fit import LidarFit, fit_lidar
 from zbuf_occlude.sensors.kinds import SENSOR_KINDS, kind_of, sensor_from_name, with_beam
-from zbuf_occlude.sensors.lidar import LIDAR_PRESETS, Lidar, beam_directions, lidar_preset
+from zbuf_occlude.sensors.patterns.spinning import LIDAR_PRESETS, Lidar, beam_directions, lidar_preset
 from zbuf_occlude.sensors.platform import Trajectory, load_trajectory
-from zbuf_occlude.sensors.ray_table import RAY_TABLE_PRESETS, RayTable, load_ray_table, rosette_table
+from zbuf_occlude.sensors.patterns.ray_table import RAY_TABLE_PRESETS, RayTable, load_ray_table, rosette_table
 from zbuf_occlude.sensors.platform import look_at_pose
 from zbuf_occlude.sensors.scan import scan, scan_airborne
 from zbuf_occlude.sensors.scan_data import FRAMES, Scan, read_scan_npz
-from zbuf_occlude.sensors.scene import GROUND_ID, ScanScene, SceneObject, sensor_pose
-from zbuf_occlude.sensors.scene_files import load_scene
+from zbuf_occlude.sensors.scene.objects import GROUND_ID, ScanScene, SceneObject, sensor_pose
+from zbuf_occlude.sensors.scene.files import load_scene
 
 __all__ = [
     "Beam", "IDEAL_BEAM", "RETURN_MODES", "SENSOR_KINDS", "kind_of", "sensor_from_name", "with_beam", "Trajectory", "load_trajectory",

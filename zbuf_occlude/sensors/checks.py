@@ -1,9 +1,9 @@
 """Checks of the fields of scenes and sensors: one checker per kind of value, and the limits.
 
-A scene or sensor file may come from anyone, and a field of :class:`~zbuf_occlude.sensors.scene.SceneObject`,
-:class:`~zbuf_occlude.sensors.scene.ScanScene`, :class:`~zbuf_occlude.sensors.lidar.Lidar`,
-:class:`~zbuf_occlude.sensors.airborne.AirborneScanner` or
-:class:`~zbuf_occlude.sensors.depth_camera.DepthCamera` is checked where the dataclass is made
+A scene or sensor file may come from anyone, and a field of :class:`~zbuf_occlude.sensors.scene.objects.SceneObject`,
+:class:`~zbuf_occlude.sensors.scene.objects.ScanScene`, :class:`~zbuf_occlude.sensors.patterns.spinning.Lidar`,
+:class:`~zbuf_occlude.sensors.patterns.airborne.AirborneScanner` or
+:class:`~zbuf_occlude.sensors.patterns.depth_camera.DepthCamera` is checked where the dataclass is made
 (``__post_init__``), by the functions here, whether it came from a file or from Python.  Each
 raises :class:`~zbuf_occlude.errors.InvalidInputError` whose message starts with the field's
 name and says what is expected (``yaw_deg must be a finite number, got NaN``); a file reader
@@ -258,9 +258,9 @@ def sensor_name(value: object, what: str) -> str:
 def preset(presets: Mapping[str, Any], name: object, what: str, **changes) -> Any:
     """The preset ``name`` (any case) of a kind's table ``presets``, with optional field changes (checked again).
 
-    The one lookup of :func:`~zbuf_occlude.sensors.lidar.lidar_preset`,
-    :func:`~zbuf_occlude.sensors.airborne_presets.airborne_preset` and
-    :func:`~zbuf_occlude.sensors.depth_camera.depth_camera_preset`; ``what`` names the table in the
+    The one lookup of :func:`~zbuf_occlude.sensors.patterns.spinning.lidar_preset`,
+    :func:`~zbuf_occlude.sensors.patterns.airborne_presets.airborne_preset` and
+    :func:`~zbuf_occlude.sensors.patterns.depth_camera.depth_camera_preset`; ``what`` names the table in the
     message ("lidar preset").
 
     Raises

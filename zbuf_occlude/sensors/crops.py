@@ -21,15 +21,15 @@ from numpy.typing import NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.samples import OccludedCloud, derive_rng, draw_sample, object_key
 from zbuf_occlude.mesh.load import load_mesh
-from zbuf_occlude.sensors.airborne import AirborneScanner
-from zbuf_occlude.sensors.depth_camera import DepthCamera
+from zbuf_occlude.sensors.patterns.airborne import AirborneScanner
+from zbuf_occlude.sensors.patterns.depth_camera import DepthCamera
 from zbuf_occlude.sensors.kinds import kind_of
-from zbuf_occlude.sensors.lidar import Lidar
+from zbuf_occlude.sensors.patterns.spinning import Lidar
 from zbuf_occlude.sensors.placement import DEFAULT_GROUND_REFLECTIVITY, CropDistributions, Placement, draw_placement
-from zbuf_occlude.sensors.ray_table import RayTable
+from zbuf_occlude.sensors.patterns.ray_table import RayTable
 from zbuf_occlude.sensors.scan import scan
 from zbuf_occlude.sensors.scan_data import Scan
-from zbuf_occlude.sensors.scene import ScanScene, SceneObject, sensor_pose
+from zbuf_occlude.sensors.scene.objects import ScanScene, SceneObject, sensor_pose
 
 if TYPE_CHECKING:  # trimesh is imported where it is used
     from collections.abc import Callable, Iterator
@@ -98,7 +98,7 @@ def object_crop(
     placement (:class:`CropDistributions`), the crop also keeps the ground returns inside the
     object's footprint grown by that margin; with ``hidden_below_m``, it drops the object's
     returns lower than that above the ground (``full`` keeps them).  An
-    :class:`~zbuf_occlude.sensors.airborne.AirborneScanner` flies over the object instead
+    :class:`~zbuf_occlude.sensors.patterns.airborne.AirborneScanner` flies over the object instead
     (``distance_m · sin(azimuth_deg)`` across track; points in the world frame).  A LiDAR fires only in the
     object's azimuth sector (± ``sector_margin_deg``), which gives the same returns faster.  With
     ``visible_across_sight`` below 1 in the placement, :func:`side_occluders` stand between the

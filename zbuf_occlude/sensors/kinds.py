@@ -8,7 +8,7 @@ Nothing outside this module asks a sensor for its class or a kind for its name: 
 or ``capabilities(sensor).spins``, not an ``isinstance`` or ``issubclass`` test nor ``kind.name == "lidar"``
 (``tests/sensors/test_scanner_model.py`` walks the source for them).
 
-A scanner that fires pulses is a beam (:class:`~zbuf_occlude.sensors.beam.Beam`) fired along a
+A scanner that fires pulses is a beam (:class:`~zbuf_occlude.sensors.beam.fields.Beam`) fired along a
 scan pattern (its class: rings, airborne lines, a table's rows) from a platform (a pose, a
 :class:`~zbuf_occlude.sensors.platform.Trajectory`, or an airborne flight plan).
 """
@@ -21,13 +21,13 @@ from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.airborne import AIRBORNE_IDEAL_BEAM, AirborneScanner
-from zbuf_occlude.sensors.airborne_presets import AIRBORNE_PRESETS
-from zbuf_occlude.sensors.beam import Beam
+from zbuf_occlude.sensors.patterns.airborne import AIRBORNE_IDEAL_BEAM, AirborneScanner
+from zbuf_occlude.sensors.patterns.airborne_presets import AIRBORNE_PRESETS
+from zbuf_occlude.sensors.beam.fields import Beam
 from zbuf_occlude.sensors.checks import MAX_RANGE_M, given, located, mapping, real, text, value_kind
-from zbuf_occlude.sensors.depth_camera import DEPTH_CAMERA_PRESETS, DepthCamera
-from zbuf_occlude.sensors.lidar import LIDAR_PRESETS, Lidar
-from zbuf_occlude.sensors.ray_table import RAY_TABLE_FILE_BEAM, RAY_TABLE_PRESETS, RayTable
+from zbuf_occlude.sensors.patterns.depth_camera import DEPTH_CAMERA_PRESETS, DepthCamera
+from zbuf_occlude.sensors.patterns.spinning import LIDAR_PRESETS, Lidar
+from zbuf_occlude.sensors.patterns.ray_table import RAY_TABLE_FILE_BEAM, RAY_TABLE_PRESETS, RayTable
 
 __all__ = [
     "SENSOR_KINDS",
@@ -183,7 +183,7 @@ def sensor_from_name(name: str | os.PathLike):
     A sensor file is a JSON object: ``"kind"`` (a :data:`SENSOR_KINDS` name, default
     ``"lidar"``), optionally ``"preset": NAME`` (a preset of that kind, whose fields the file's
     change), the kind's constructor fields, and for a pulsed kind a ``"beam"`` object of
-    :class:`~zbuf_occlude.sensors.beam.Beam` fields, which change the preset's beam (or the
+    :class:`~zbuf_occlude.sensors.beam.fields.Beam` fields, which change the preset's beam (or the
     ``ideal`` beam).  An optional ``"fit"`` block (what :mod:`~zbuf_occlude.sensors.fit` writes) is
     metadata.  Files of the flat layout (beam fields beside the pattern's: :data:`LEGACY_BEAM_KEYS`)
     are read too.  The file is read by :func:`~zbuf_occlude.sensors.spec_files.read_spec_file`

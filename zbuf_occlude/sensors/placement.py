@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.object_shapes import check_width_profile
+from zbuf_occlude.sensors.scene.object_shapes import check_width_profile
 
 __all__ = [
     "check_outside",
@@ -114,7 +114,7 @@ class Placement:
     ground_margin_m : float, optional
         Ground returns under the object's footprint grown by this margin are kept, metres.
     width_profile : tuple of float, optional
-        Horizontal stretch per relative-height bin (:class:`~zbuf_occlude.sensors.scene.SceneObject`).
+        Horizontal stretch per relative-height bin (:class:`~zbuf_occlude.sensors.scene.objects.SceneObject`).
     visible_across_sight : float, optional
         Share of the object's angular width left visible by side occluders, at most 1 (None: 1);
         ``occluder_side`` (+1 or −1) says which side they hide.
@@ -198,7 +198,7 @@ class CropDistributions:
         mesh's own proportions.  :func:`~zbuf_occlude.sensors.fit.fit_width_scale` fits it to
         the widths of real scans.
     width_profile : sequence of float, optional
-        A fixed horizontal stretch per relative-height bin (:class:`~zbuf_occlude.sensors.scene.SceneObject`
+        A fixed horizontal stretch per relative-height bin (:class:`~zbuf_occlude.sensors.scene.objects.SceneObject`
         ``width_profile``), on top of ``width_scale``: the outline over the height that real scans
         show.  None (default): none.  :func:`~zbuf_occlude.sensors.fit.fit_width_profile` fits it.
     visible_across_sight : (lo, hi), optional

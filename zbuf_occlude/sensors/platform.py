@@ -7,7 +7,7 @@ attitudes by spherical linear interpolation (slerp: Shoemake 1985, "Animating ro
 curves", SIGGRAPH '85, §3; :class:`scipy.spatial.transform.Slerp`).  :func:`load_trajectory` reads one
 from a CSV a user gives (a robot's odometry).
 
-Frames: the sensor frame is x forward, y left, z up (:func:`~zbuf_occlude.sensors.lidar.beam_directions`);
+Frames: the sensor frame is x forward, y left, z up (:func:`~zbuf_occlude.sensors.patterns.spinning.beam_directions`);
 the world frame is z up, metres.  A pose is sensor → world: sensor point ``q`` is ``rotation @ q + position_m``.
 """
 

@@ -1,7 +1,7 @@
 """The pulses a scan pattern fires: where each leaves from, where it points, when, and its labels.
 
-A scan pattern (:class:`~zbuf_occlude.sensors.lidar.Lidar`'s rings, an airborne scanner's lines,
-a :class:`~zbuf_occlude.sensors.ray_table.RayTable`'s rows) makes :class:`Pulses`; the one
+A scan pattern (:class:`~zbuf_occlude.sensors.patterns.spinning.Lidar`'s rings, an airborne scanner's lines,
+a :class:`~zbuf_occlude.sensors.patterns.ray_table.RayTable`'s rows) makes :class:`Pulses`; the one
 pipeline (:func:`zbuf_occlude.sensors.scan.fire_pulses`, behind :func:`~zbuf_occlude.sensors.scan.scan` and
 :func:`~zbuf_occlude.sensors.scan.scan_airborne`) casts them with the scanner's beam and turns the
 echoes into a :class:`~zbuf_occlude.sensors.scan_data.Scan`, whatever made them.

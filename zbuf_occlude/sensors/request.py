@@ -8,8 +8,8 @@ maps ``max_returns`` to ``--max-returns``), so that a command never restates a r
 never spells an option; a field the map leaves out is named as the field.
 
 The rules themselves live beside what they govern and are only called from here: the beam's returns
-(:func:`~zbuf_occlude.sensors.beam.check_returns`), its footprint (:func:`~zbuf_occlude.sensors.beam.footprint_changes`)
-and the adaptive cast (:func:`~zbuf_occlude.sensors.adaptive_footprint.check_footprint_cast`).
+(:func:`~zbuf_occlude.sensors.beam.fields.check_returns`), its footprint (:func:`~zbuf_occlude.sensors.beam.fields.footprint_changes`)
+and the adaptive cast (:func:`~zbuf_occlude.sensors.beam.adaptive_cast.check_footprint_cast`).
 """
 
 from __future__ import annotations
@@ -19,15 +19,15 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.beam import MODE_RETURNS, RETURN_FIELDS, check_returns, footprint_changes
-from zbuf_occlude.sensors.echo_model import check_transmittance_cast
+from zbuf_occlude.sensors.beam.fields import MODE_RETURNS, RETURN_FIELDS, check_returns, footprint_changes
+from zbuf_occlude.sensors.beam.echo_energy import check_transmittance_cast
 from zbuf_occlude.sensors.kinds import capabilities, with_beam
 from zbuf_occlude.sensors.scan_data import FRAMES
 
 __all__ = ["BEAM_REQUEST_FIELDS", "LAS_FORMATS", "ScanRequest", "beam_changes"]
 
-#: The beam changes a request may ask for: :class:`~zbuf_occlude.sensors.beam.Beam` fields, and
-#: ``footprint`` (a switch: :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS` sub-rays in the beam's cone).
+#: The beam changes a request may ask for: :class:`~zbuf_occlude.sensors.beam.fields.Beam` fields, and
+#: ``footprint`` (a switch: :data:`~zbuf_occlude.sensors.beam.footprint.FOOTPRINT_RAYS` sub-rays in the beam's cone).
 BEAM_REQUEST_FIELDS = (
     "footprint", "divergence_deg", "max_returns", "return_mode", "range_resolution_m", "power_noise", "echo_separation_m",
     "min_echo_reflectance", "echo_rule",
@@ -42,22 +42,22 @@ def _namer(names: Mapping[str, str | None]):
 
 
 def beam_changes(beam, given: Mapping[str, object], *, sensor: str, names: Mapping[str, str | None] = MappingProxyType({})) -> dict:
-    """The :class:`~zbuf_occlude.sensors.beam.Beam` fields that the beam changes ``given`` (fields of :data:`BEAM_REQUEST_FIELDS`) make.
+    """The :class:`~zbuf_occlude.sensors.beam.fields.Beam` fields that the beam changes ``given`` (fields of :data:`BEAM_REQUEST_FIELDS`) make.
 
-    ``footprint`` gives :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS` sub-rays in the
+    ``footprint`` gives :data:`~zbuf_occlude.sensors.beam.footprint.FOOTPRINT_RAYS` sub-rays in the
     beam's divergence cone (``divergence_deg``, else the beam's) where the beam fires fewer
-    (:func:`~zbuf_occlude.sensors.beam.footprint_changes`).  ``return_mode`` "strongest" or "last"
+    (:func:`~zbuf_occlude.sensors.beam.fields.footprint_changes`).  ``return_mode`` "strongest" or "last"
     records one return per pulse, "dual" two, so it sets ``max_returns`` where that is not given
     ("all" after a Velodyne mode: one return unless ``max_returns`` says more).  Resolved echoes
     keep echoes apart by the range resolution, so the beam's own echo separation gives way; one
     return per pulse drops the beam's own range resolution.  What is then asked for is checked
-    by :func:`~zbuf_occlude.sensors.beam.check_returns`, naming the fields as ``names`` maps them.
+    by :func:`~zbuf_occlude.sensors.beam.fields.check_returns`, naming the fields as ``names`` maps them.
 
     Raises
     ------
     InvalidInputError
-        What :func:`~zbuf_occlude.sensors.beam.footprint_changes` and
-        :func:`~zbuf_occlude.sensors.beam.check_returns` refuse.
+        What :func:`~zbuf_occlude.sensors.beam.fields.footprint_changes` and
+        :func:`~zbuf_occlude.sensors.beam.fields.check_returns` refuse.
     """
     n = _namer(names)
     changes: dict[str, object] = footprint_changes(
@@ -97,14 +97,14 @@ class ScanRequest:
         :func:`~zbuf_occlude.sensors.kinds.with_beam`.
     footprint_cast : {"auto", "exact", "adaptive"} or None
         How a footprint whose echoes are resolved is cast
-        (:func:`~zbuf_occlude.sensors.adaptive_footprint.check_footprint_cast`); None: not asked ("auto").
+        (:func:`~zbuf_occlude.sensors.beam.adaptive_cast.check_footprint_cast`); None: not asked ("auto").
     backend : {"embree", "zbuffer"}
     frame : {"sensor", "world"} or None
         The frame of the points; None: "sensor", or "world" for a scanner that flies (it has no one sensor frame).
     reflectance_table : bool
         The surfaces reflect as their materials' table gives at the beam's wavelength.
     transmittance : "table", float, mapping of class to float, or None
-        The share of each sub-ray that goes on through an object (:mod:`~zbuf_occlude.sensors.reflectance`).
+        The share of each sub-ray that goes on through an object (:mod:`~zbuf_occlude.sensors.scene.materials`).
     reflectivity : object
         The object's own reflectivity where the caller gives one (checked against ``reflectance_table``).
     trajectory : Trajectory or None
@@ -180,7 +180,7 @@ class ScanRequest:
         self._check_trajectory(kind)
         cast = "auto" if self.footprint_cast is None else self.footprint_cast
         if kind.pulsed:
-            from zbuf_occlude.sensors.adaptive_footprint import check_footprint_cast
+            from zbuf_occlude.sensors.beam.adaptive_cast import check_footprint_cast
 
             cast = check_footprint_cast(cast, scanner.beam, self.backend, sensor=str(label), names=self.names)
         object.__setattr__(self, "cast", cast)
@@ -245,7 +245,7 @@ class ScanRequest:
         """The ``reflectivity`` and ``transmittance`` keywords of :func:`~zbuf_occlude.sensors.scan.scan` and
         :func:`~zbuf_occlude.sensors.scan.scan_airborne` for ``scene`` (none asked: no keyword, the scan as without them).
 
-        ``scene`` is a :class:`~zbuf_occlude.sensors.scene.ScanScene`: a scene file's, or the one a
+        ``scene`` is a :class:`~zbuf_occlude.sensors.scene.objects.ScanScene`: a scene file's, or the one a
         scan of a mesh stands the mesh in (:func:`~zbuf_occlude.sensors.crops.object_crop`: the ground,
         the object, then any occluders, which reflect and transmit as the object does).  One
         transmittance number applies to every object, not the ground; class → value pairs to the
@@ -256,7 +256,7 @@ class ScanRequest:
         InvalidInputError
             A transmittance class that no object of the scene has, naming it.
         """
-        from zbuf_occlude.sensors.reflectance import per_class
+        from zbuf_occlude.sensors.scene.materials import per_class
 
         out: dict = {}
         if self.reflectance_table:

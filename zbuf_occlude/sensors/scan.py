@@ -1,7 +1,7 @@
 """Scans of scenes by LiDARs and depth cameras: :func:`scan` → :class:`Scan`.
 
-A scan casts the sensor's rays from its pose into the scene's triangles (Embree: :mod:`.raycast`, or the moderngl
-z-buffer with exact candidate tests: :mod:`.raycast_zbuffer`), then applies the sensor model: range or depth limits,
+A scan casts the sensor's rays from its pose into the scene's triangles (Embree: :mod:`zbuf_occlude.sensors.raycast.embree`, or the moderngl
+z-buffer with exact candidate tests: :mod:`zbuf_occlude.sensors.raycast.zbuffer`), then applies the sensor model: range or depth limits,
 grazing-incidence loss (cameras), Gaussian range or axial noise, depth quantisation (cameras) and independent dropout.
 Points are in the sensor frame by default (LiDAR: x forward, z up; camera: OpenCV), like real scans.
 """
@@ -16,19 +16,19 @@ from numpy.typing import ArrayLike, NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.resources import check_memory
-from zbuf_occlude.sensors.adaptive_footprint import adaptive_echo_returns, adaptive_footprint
-from zbuf_occlude.sensors.beam import Beam
-from zbuf_occlude.sensors.depth_camera import DepthCamera
-from zbuf_occlude.sensors.echo_model import Radiometry, Transmission, echo_returns, returns_of_mode, strongest_echo, surface_optics
-from zbuf_occlude.sensors.echoes import MAX_RETURNS, number_returns
+from zbuf_occlude.sensors.beam.adaptive_cast import adaptive_echo_returns, adaptive_footprint
+from zbuf_occlude.sensors.beam.fields import Beam
+from zbuf_occlude.sensors.patterns.depth_camera import DepthCamera
+from zbuf_occlude.sensors.beam.echo_energy import Radiometry, Transmission, echo_returns, returns_of_mode, strongest_echo, surface_optics
+from zbuf_occlude.sensors.beam.echoes import MAX_RETURNS, number_returns
 from zbuf_occlude.sensors.kinds import kind_of
 from zbuf_occlude.sensors.platform import Trajectory, as_pose
 from zbuf_occlude.sensors.pulses import Pulses
-from zbuf_occlude.sensors.raycast import BACKENDS, cast_embree, face_normals
-from zbuf_occlude.sensors.raycast_zbuffer import cast_zbuffer
-from zbuf_occlude.sensors.reflectance import on_crown
+from zbuf_occlude.sensors.raycast.embree import BACKENDS, cast_embree, face_normals
+from zbuf_occlude.sensors.raycast.zbuffer import cast_zbuffer
+from zbuf_occlude.sensors.scene.materials import on_crown
 from zbuf_occlude.sensors.scan_data import FRAMES, Scan
-from zbuf_occlude.sensors.scene import BuiltScene, ScanScene, SceneObject
+from zbuf_occlude.sensors.scene.objects import BuiltScene, ScanScene, SceneObject
 
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
@@ -63,12 +63,12 @@ AUTO_OPTICS = "auto"
 #: what :func:`fire_pulses` checks against the memory available before it casts.
 SUBRAY_BYTES = 160
 #: Bytes each pair of a pulse's sub-rays holds where one return a pulse is its footprint's strongest echo
-#: (:func:`~.echo_model.strongest_echo`: a same-object matrix, its temporaries and the einsum over it).
+#: (:func:`~zbuf_occlude.sensors.beam.echo_energy.strongest_echo`: a same-object matrix, its temporaries and the einsum over it).
 SUBRAY_PAIR_BYTES = 24
 
 
 def _surface_optics(built: BuiltScene, beam: Beam, backend: str, reflectivity, transmittance):
-    """A pulsed scan's ``reflectivity`` and ``transmittance`` per face (:func:`~.echo_model.surface_optics` at the beam's wavelength)."""
+    """A pulsed scan's ``reflectivity`` and ``transmittance`` per face (:func:`~zbuf_occlude.sensors.beam.echo_energy.surface_optics` at the beam's wavelength)."""
     if reflectivity is None and transmittance is None:
         return None, None
     return surface_optics(
@@ -150,7 +150,7 @@ def scan(
     seed : int, numpy.random.Generator or None
         Seeds noise and dropout (``numpy.random.default_rng(seed)``); same seed, same bytes.
     backend : {"embree", "zbuffer"}
-        Ray casting (:mod:`.raycast`); "embree" is the reference.  "zbuffer" renders from one
+        Ray casting (:mod:`zbuf_occlude.sensors.raycast.embree`); "embree" is the reference.  "zbuffer" renders from one
         point: a scanner standing still.
     frame : {"sensor", "world"}
         Frame of ``points``, ``normal`` and ``sensor_position``.  On a trajectory, "sensor" is each
@@ -163,26 +163,26 @@ def scan(
         Any pulsed sensor (a LiDAR or a ray table; a depth camera refuses it): Lambertian
         reflectivity ρ of every surface, or per object id (index 0: the ground).  Given, a
         return is kept only when its received power clears the beam's threshold,
-        ``ρ · cos θ · f / R² · exp(σ z) ≥ τ`` (:class:`~.beam.Beam` ``detection_threshold``,
+        ``ρ · cos θ · f / R² · exp(σ z) ≥ τ`` (:class:`~zbuf_occlude.sensors.beam.fields.Beam` ``detection_threshold``,
         ``power_noise`` σ, z ~ N(0, 1) per firing, ``f`` the footprint fraction).  None: every
         hit returns (no radiometric detection).  With the multi-return model (the beam resolves
         echoes), ρ weighs each sub-ray's echo and the threshold applies per echo.  ``"table"``:
         each object's ρ from its material at the beam's wavelength
-        (:func:`~.reflectance.scene_optics`; the ground: asphalt).
+        (:func:`~zbuf_occlude.sensors.scene.materials.scene_optics`; the ground: asphalt).
     transmittance : float or (n_objects + 1,) float, optional
         A pulsed sensor whose beam resolves echoes (``Beam.resolves_echoes``: ``max_returns``
         above 1 or a Velodyne return mode) only: round-trip transmittance per object id, in
         [0, 1] (a gap fraction for foliage, ``T²`` for a pane); sub-rays go on through such
-        surfaces (Embree: all hits along each sub-ray, :func:`~.raycast.cast_embree_beyond`) and
+        surfaces (Embree: all hits along each sub-ray, :func:`~zbuf_occlude.sensors.raycast.embree.cast_embree_beyond`) and
         the hits behind return their energy times the transmittances before them.
-        ``"table"``: from each object's material (:func:`~.reflectance.scene_optics`: foliage
-        :data:`~.reflectance.FOLIAGE_GAP_FRACTION`).  None or 0 everywhere: opaque, first hits
+        ``"table"``: from each object's material (:func:`~zbuf_occlude.sensors.scene.materials.scene_optics`: foliage
+        :data:`~zbuf_occlude.sensors.scene.materials.FOLIAGE_GAP_FRACTION`).  None or 0 everywhere: opaque, first hits
         only, bit for bit as without it.  The "zbuffer" backend keeps the nearest face per
         pixel only and refuses a transmittance above 0.
     footprint : {"auto", "exact", "adaptive"}
         How a beam that resolves echoes casts its footprint.  "adaptive": only where the centre
         ray and its neighbouring pulses do not show one plane filling the footprint
-        (:mod:`.adaptive_footprint`: approximate, the echo of a surface inside the cone that
+        (:mod:`zbuf_occlude.sensors.beam.adaptive_cast`: approximate, the echo of a surface inside the cone that
         neither the centre ray nor a neighbour meets is lost; ``benchmarks/bench_returns.py``
         measures its speed and bias); it needs a beam that resolves echoes with
         ``footprint_rays`` above 1 (``Beam.resolves_footprint``) and the "embree" backend.
@@ -235,7 +235,7 @@ def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.
                   footprint: str = "auto") -> Scan:  # fmt: skip
     """Scan the part of ``scene`` around ``center_xy`` from every line of an airborne scanner's flight plan; world frame.
 
-    The pulses are :meth:`AirborneScanner.pulses <zbuf_occlude.sensors.airborne.AirborneScanner.pulses>`
+    The pulses are :meth:`AirborneScanner.pulses <zbuf_occlude.sensors.patterns.airborne.AirborneScanner.pulses>`
     (every line's pulses whose flat-ground footprint falls in the square ``center_xy ±
     half_size_m`` of its own frame, merged, each keeping its line id), fired by the one
     pipeline (:func:`fire_pulses`) with the scanner's beam.
@@ -250,12 +250,12 @@ def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.
     seed : int
         Noise, dropout and what is drawn (the lines' phases and shifts first).
     phase_s, lateral_shift_m : optional
-        As :meth:`AirborneScanner.pulses <zbuf_occlude.sensors.airborne.AirborneScanner.pulses>`.
+        As :meth:`AirborneScanner.pulses <zbuf_occlude.sensors.patterns.airborne.AirborneScanner.pulses>`.
     reflectivity, transmittance : optional
         As :func:`scan`'s, at the beam's wavelength (1064 nm for the airborne presets).  ``"auto"``
         (default) for both: a beam that resolves echoes and scales intensities (every airborne
         preset's, and a sensor fitted to a LAS file) takes ``"table"`` for both, the materials'
-        reflectances and foliage's gap fraction (:func:`~zbuf_occlude.sensors.reflectance.scene_optics`),
+        reflectances and foliage's gap fraction (:func:`~zbuf_occlude.sensors.scene.materials.scene_optics`),
         which its intensities and its returns through a canopy rest on; any other beam none.  With
         one of them given, an ``"auto"`` other is none.  None: none (opaque surfaces; a detection
         threshold applies with ρ = 1).
@@ -278,7 +278,7 @@ def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.
     ------
     InvalidInputError
         A seed :func:`~zbuf_occlude.geometry.sampling.check_seed` refuses; what
-        :meth:`~zbuf_occlude.sensors.airborne.AirborneScanner.pulses` refuses; a reflectivity or
+        :meth:`~zbuf_occlude.sensors.patterns.airborne.AirborneScanner.pulses` refuses; a reflectivity or
         transmittance out of range, or a transmittance above 0 without the multi-return model.
     """
     seed = check_seed(seed)  # before the scene is built: numpy would refuse -1 or 'a' only when drawing
@@ -304,8 +304,8 @@ def fire_pulses(
 
     Whatever the pattern and the platform: each pulse's ``beam.footprint_rays`` sub-rays are cast
     from its origin; one return per pulse is the centre ray's first hit or the footprint's
-    strongest echo (:func:`~.echo_model.strongest_echo`), several are the resolved echoes
-    (:func:`~.echo_model.echo_returns`, then the beam's ``return_mode``); then range noise,
+    strongest echo (:func:`~zbuf_occlude.sensors.beam.echo_energy.strongest_echo`), several are the resolved echoes
+    (:func:`~zbuf_occlude.sensors.beam.echo_energy.echo_returns`, then the beam's ``return_mode``); then range noise,
     dropout and the beam's ray drop on crowns (each drawn for every hit, so filters do not shift
     the streams), the range limits on the measured range and, where reflectivities are given
     (or the pattern detects with a default ρ), the detection threshold.  Points lie on each pulse's centre direction at the measured
@@ -456,7 +456,7 @@ def _placed_points(pulses: Pulses, rows, measured, normal, frame: str, sensor_to
 def _scan_camera(built: BuiltScene, camera: DepthCamera, m, seed: int, *, backend: str, frame: str, resolution: int, neighborhood: int,
                  reflectivity, transmittance) -> Scan:  # fmt: skip
     """A depth camera's frame: its pixels' rays cast from pose ``m``, then depth limits, grazing-incidence loss, axial
-    noise, quantisation and dropout (:class:`~.depth_camera.DepthCamera`)."""
+    noise, quantisation and dropout (:class:`~zbuf_occlude.sensors.patterns.depth_camera.DepthCamera`)."""
     if reflectivity is not None or transmittance is not None:
         what = "reflectivity (radiometric detection)" if reflectivity is not None else "transmittance (hits behind a surface)"
         raise InvalidInputError(f"{what} is modelled for LiDARs only")
@@ -499,7 +499,7 @@ def return_numbers(pulse, *, renumber: bool) -> tuple[NDArray[np.uint8], NDArray
     """``return_number`` and ``number_of_returns`` (N,) uint8 of points of pulse rows ``pulse`` (N,), sorted.
 
     With ``renumber``, the points of one pulse (in range order) are numbered 1..n and each carries
-    n (:func:`~.echoes.number_returns`); otherwise every point is its pulse's only return (1 of 1).
+    n (:func:`~zbuf_occlude.sensors.beam.echoes.number_returns`); otherwise every point is its pulse's only return (1 of 1).
     """
     if renumber:
         return number_returns(pulse)

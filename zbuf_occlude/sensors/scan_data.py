@@ -19,7 +19,7 @@ from zbuf_occlude.io.arrays import load_npz
 from zbuf_occlude.io.atomic import write_bytes
 from zbuf_occlude.io.caps import MAX_SCAN_NPZ_BYTES
 from zbuf_occlude.io.encodings import npz_bytes
-from zbuf_occlude.sensors.beam import intensity_counts
+from zbuf_occlude.sensors.beam.fields import intensity_counts
 from zbuf_occlude.sensors.checks import MAX_SCENE_OBJECTS
 
 __all__ = ["FRAMES", "GPS_START_S", "GPS_TIME_RESOLUTION_S", "UNIT_INTENSITY_SCALE", "Scan", "check_gps_start", "read_scan_npz"]
@@ -137,11 +137,11 @@ class Scan:
     return_number : (N,) uint8 or None
         LiDAR: 1..n, the point's position among its pulse's returns in range order (LAS
         "Return Number").  1 everywhere with one return per pulse (the beam's ``max_returns`` 1,
-        :class:`~zbuf_occlude.sensors.beam.Beam`).
+        :class:`~zbuf_occlude.sensors.beam.fields.Beam`).
     number_of_returns : (N,) uint8 or None
         LiDAR: n, the returns its pulse recorded, the same on every point of the pulse.
     intensity : (N,) float32 or None
-        LiDAR: received energy, ``ρ |cos θ| f / R²`` in m⁻² (:func:`~.echoes.hit_energy`, the
+        LiDAR: received energy, ``ρ |cos θ| f / R²`` in m⁻² (:func:`~zbuf_occlude.sensors.beam.echoes.hit_energy`, the
         units of the beam's ``detection_threshold``), power noise included; ρ = 1 where no
         ``reflectivity`` is given.  A beam that resolves echoes records each echo's energy; so
         does every beam with an ``intensity_scale`` (every preset's).  1.0 only for a beam
@@ -291,7 +291,7 @@ class Scan:
           plus the scan's :attr:`gps_time` (seconds from its first firing; airborne: along the
           flight line, a few minutes negative at most);
         * ``classification``: the ASPRS class of the object hit
-          (:func:`~zbuf_occlude.sensors.las_classes.asprs_classification`: ground 2, vegetation
+          (:func:`~zbuf_occlude.sensors.scene.las_classes.asprs_classification`: ground 2, vegetation
           3/4/5 by height above ``ground_z_m`` in the world frame, building 6, others 1; a
           ``class_map`` overrides it by class name);
         * ``point_source_id``: the airborne flight line (``meta["line_id"]``, when it holds one
@@ -310,7 +310,7 @@ class Scan:
         intensity_scale : float, optional
             Counts per unit of received energy (counts·m²), finite and > 0.
         class_map : mapping of str to int, optional
-            Class name → ASPRS code (:func:`~zbuf_occlude.sensors.las_classes.load_class_map` reads one).
+            Class name → ASPRS code (:func:`~zbuf_occlude.sensors.scene.las_classes.load_class_map` reads one).
         ground_z_m : float
             The ground plane's height in the world frame, metres (a scene's ``ground_z_m``).
         scan_number : int
@@ -347,7 +347,7 @@ class Scan:
         """
         from zbuf_occlude.io.las import SurveyFields, las_bytes
         from zbuf_occlude.sensors.checks import count, real
-        from zbuf_occlude.sensors.las_classes import asprs_classification
+        from zbuf_occlude.sensors.scene.las_classes import asprs_classification
 
         given = self.intensity_scale if intensity_scale is None else intensity_scale
         scale = UNIT_INTENSITY_SCALE if given is None else real(given, "intensity_scale", low=0.0, low_open=True)

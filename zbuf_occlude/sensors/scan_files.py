@@ -59,7 +59,7 @@ def save_scan(folder, scan, stem: str, request: ScanRequest, *, ground_z_m: floa
 
 
 def scan_scene_file(request: ScanRequest, scene, folder, *, stem: str, seed: int, progress: bool = False) -> Iterator[WrittenScan]:
-    """Scan ``scene`` (a :class:`~zbuf_occlude.sensors.scene.ScanScene`, a scene file's) ``request.samples`` times, sample ``k``
+    """Scan ``scene`` (a :class:`~zbuf_occlude.sensors.scene.objects.ScanScene`, a scene file's) ``request.samples`` times, sample ``k``
     with seed ``seed + k``, writing each (:func:`save_scan`, stem ``<stem>_<sensor>_sNNN``) as it is made.
 
     A LiDAR stands at the scene's sensor pose (or moves along the request's trajectory, sample ``k`` sweeping from its
@@ -123,7 +123,7 @@ def _object_scans(request: ScanRequest, mesh, distributions, folder, *, name: st
     """:func:`scan_object`'s samples, once the request is known to place a LiDAR."""
     from zbuf_occlude.io.progress import progress as progress_bar
     from zbuf_occlude.sensors.crops import object_crops
-    from zbuf_occlude.sensors.scene import GROUND_ID
+    from zbuf_occlude.sensors.scene.objects import GROUND_ID
 
     sensor = request.scanner
     crops = object_crops(mesh, sensor, distributions, name=name, n_samples=request.samples, seed=seed, class_name=name,

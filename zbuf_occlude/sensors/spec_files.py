@@ -1,6 +1,6 @@
 """Reading scene and sensor files (JSON, YAML): one reader, bounded in size, depth and expansion.
 
-A scene file (:func:`~zbuf_occlude.sensors.scene_files.load_scene`) or a sensor file
+A scene file (:func:`~zbuf_occlude.sensors.scene.files.load_scene`) or a sensor file
 (:func:`~zbuf_occlude.sensors.kinds.sensor_from_name`) may come from anyone.  Before a field
 is looked at (:mod:`zbuf_occlude.sensors.checks`), :func:`read_spec_file` makes sure that the
 file is small and that its parse is small:

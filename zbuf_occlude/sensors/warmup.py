@@ -4,7 +4,7 @@ The twin of :mod:`zbuf_occlude.visibility.warmup` (its rules of numba's cache, i
 its command line) for :mod:`zbuf_occlude.sensors`: :func:`warm_up` (``python -m
 zbuf_occlude.sensors.warmup``, which ``scripts/install.sh`` runs) scans a small scene once with a
 spinning LiDAR and once with an airborne preset, each with ``footprint="adaptive"``, so that the
-kernels of :mod:`.uniform_kernel` compile with the argument types of real scans.
+kernels of :mod:`zbuf_occlude.sensors.beam.adaptive_kernel` compile with the argument types of real scans.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ def kernels() -> dict:
 
 def _exercise() -> None:
     """An adaptive scan of a box on the ground (a spinning LiDAR's sector, an airborne preset's square), then
-    :func:`~.footprint.plane_subrays` and :func:`~.adaptive_footprint.plane_echoes` on two beams."""
+    :func:`~zbuf_occlude.sensors.beam.footprint.plane_subrays` and :func:`~zbuf_occlude.sensors.beam.adaptive_cast.plane_echoes` on two beams."""
     import numpy as np
     import trimesh
 
@@ -39,8 +39,8 @@ def _exercise() -> None:
     scan(scene, lidar, seed=0, azimuth_range_deg=(-20.0, 20.0), footprint="adaptive")
     scan_airborne(scene, airborne_preset("riegl-q1560"), (8.0, 0.0), 3.0, seed=0, footprint="adaptive")
     # the array forms of the same loops (public, not called by a scan)
-    from zbuf_occlude.sensors.adaptive_footprint import plane_echoes
-    from zbuf_occlude.sensors.footprint import footprint_offsets, plane_subrays
+    from zbuf_occlude.sensors.beam.adaptive_cast import plane_echoes
+    from zbuf_occlude.sensors.beam.footprint import footprint_offsets, plane_subrays
 
     offsets, weights = footprint_offsets(7, 0.2)
     ranges, cosines = plane_subrays(np.full(2, 10.0), np.tile([0.0, 0.0, -1.0], (2, 1)), np.tile([0.0, 0.0, 1.0], (2, 1)), offsets)

@@ -20,7 +20,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from zbuf_occlude.sensors.scan_data import read_scan_npz  # noqa: E402
-from zbuf_occlude.sensors.scene import GROUND_ID  # noqa: E402
+from zbuf_occlude.sensors.scene.objects import GROUND_ID  # noqa: E402
 
 out, keep = Path(sys.argv[1]), Path(sys.argv[2])
 SETS = {

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from zbuf_occlude.sensors.scan_data import read_scan_npz
-from zbuf_occlude.sensors.scene import GROUND_ID
+from zbuf_occlude.sensors.scene.objects import GROUND_ID
 
 out = Path(sys.argv[1])
 print(

@@ -22,7 +22,7 @@ import numpy as np
 from zbuf_occlude.experiments.returns import ign_scanner, pulse_subset, simulate
 from zbuf_occlude.experiments.returns_report import ReturnsSettings, ign_plot
 from zbuf_occlude.io.las import read_las
-from zbuf_occlude.sensors.echoes import number_returns
+from zbuf_occlude.sensors.beam.echoes import number_returns
 from zbuf_occlude.sensors.fit.return_model import fit_return_model
 from zbuf_occlude.sensors.fit.returns import return_statistics
 

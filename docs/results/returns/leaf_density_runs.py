@@ -17,7 +17,7 @@ import functools
 import sys
 
 import zbuf_occlude.experiments.returns_report as report
-import zbuf_occlude.sensors.foliage as foliage
+import zbuf_occlude.sensors.scene.foliage as foliage
 from zbuf_occlude.experiments.returns_report import ReturnsSettings, run_returns
 
 DATA = "../shared/data"

@@ -4,7 +4,7 @@
 
 Scans the experiment's plot as ``experiment returns`` does at the given divergence, sub-ray count
 and range resolution, once as the experiment does (every surface reflects alike and stops the
-sub-ray) and once with the table of zbuf_occlude.sensors.reflectance at 1064 nm: the ground soil,
+sub-ray) and once with the table of zbuf_occlude.sensors.scene.materials at 1064 nm: the ground soil,
 the meshes foliage (its reflectance, and its round-trip transmittance: the sub-ray goes on through
 it, weakened).  Prints the vegetation figures of both beside the real file's.
 """
@@ -17,7 +17,7 @@ from zbuf_occlude.experiments.returns import ign_scanner, pulse_subset, simulate
 from zbuf_occlude.experiments.returns_report import ReturnsSettings, ign_plot
 from zbuf_occlude.io.las import read_las
 from zbuf_occlude.sensors.fit.returns import return_statistics
-from zbuf_occlude.sensors.reflectance import MATERIALS, WAVELENGTHS_NM
+from zbuf_occlude.sensors.scene.materials import MATERIALS, WAVELENGTHS_NM
 
 
 def row(name: str, every, veg) -> str:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import sys
 
-import zbuf_occlude.sensors.waveform as waveform
+import zbuf_occlude.sensors.beam.waveform as waveform
 from zbuf_occlude.experiments.returns_report import ReturnsSettings, run_returns
 
 DATA = "../shared/data"

@@ -28,7 +28,7 @@ from zbuf_occlude.experiments.returns_comparison import recommend_k
 from zbuf_occlude.io.atomic import write_csv
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors import Lidar, scan, with_beam
-from zbuf_occlude.sensors.scene import ScanScene, SceneObject
+from zbuf_occlude.sensors.scene.objects import ScanScene, SceneObject
 
 K_VALUES = (1, 7, 19, 37, 61)
 DISTANCES_M = (10.0, 15.0, 20.0)

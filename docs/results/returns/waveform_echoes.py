@@ -28,12 +28,12 @@ import time
 
 import numpy as np
 
-import zbuf_occlude.sensors.echo_model as echo_model
+import zbuf_occlude.sensors.beam.echo_energy as echo_model
 from zbuf_occlude.experiments.returns import IGN_ALTITUDE_M, simulate
 from zbuf_occlude.experiments.tree_cover import tree_cover
 from zbuf_occlude.experiments.returns_report import ReturnsSettings, ign_plot, simulated_model
 from zbuf_occlude.io.las import read_las
-from zbuf_occlude.sensors.echoes import MIN_RANGE_M, Echoes, number_returns
+from zbuf_occlude.sensors.beam.echoes import MIN_RANGE_M, Echoes, number_returns
 from zbuf_occlude.sensors.fit.return_model import fit_return_model
 
 BOOTSTRAP = 20

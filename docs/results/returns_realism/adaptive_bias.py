@@ -4,7 +4,7 @@
         --out docs/results/returns_realism/adaptive_bias
 
 ``scan``'s default cast, ``footprint="auto"``, is the adaptive footprint wherever a beam resolves a
-footprint's echoes (:mod:`zbuf_occlude.sensors.adaptive_footprint`): a pulse's sub-rays are cast
+footprint's echoes (:mod:`zbuf_occlude.sensors.beam.adaptive_cast`): a pulse's sub-rays are cast
 only where its centre ray and its neighbouring pulses do not show one plane filling the
 footprint.  Its one error is the echo of a surface inside the cone that none of those rays
 meets.  This script scans the ``lidar`` set's crops of every mesh (``measure.sim_crops``:

@@ -52,7 +52,7 @@ from zbuf_occlude.io.atomic import write_csv, write_text
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M
 from zbuf_occlude.real_scans.datasets import load_real_scans
 from zbuf_occlude.sensors import Lidar
-from zbuf_occlude.sensors.beam import Beam
+from zbuf_occlude.sensors.beam.fields import Beam
 from zbuf_occlude.sensors.crops import lidar_object_samples
 from zbuf_occlude.sensors.kinds import with_beam
 

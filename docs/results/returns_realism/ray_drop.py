@@ -14,7 +14,7 @@ with the sensor file of the returns runs (``--sensor``: a 7-ray footprint, the s
 The fit (:func:`~zbuf_occlude.sensors.fit.fit_foliage_dropout`): the real bushes keep
 ``1 − p_crown`` of their firings where the other classes (pooled) keep ``1 − p_solid``; the
 simulated crops' geometry alone gives the same two figures.  A crown surface's ray drop ``f``
-(:attr:`Beam.foliage_dropout <zbuf_occlude.sensors.beam.Beam.foliage_dropout>`) multiplies the
+(:attr:`Beam.foliage_dropout <zbuf_occlude.sensors.beam.fields.Beam.foliage_dropout>`) multiplies the
 simulated bushes' share by ``1 − f``, so ``f = 1 − S_real / S_sim`` with
 ``S = (1 − p_crown) / (1 − p_solid)``: the contrast between foliage and solid surfaces, not the
 sensor's overall loss (``dropout``, which the preset leaves at 0).  Then the crops are scanned

@@ -6,7 +6,7 @@ import json
 import math
 
 from zbuf_occlude.sensors.fit import Estimate, LidarFit
-from zbuf_occlude.sensors.lidar import lidar_preset
+from zbuf_occlude.sensors.patterns.spinning import lidar_preset
 
 
 def _strict_loads(text: str):

@@ -26,7 +26,7 @@ from zbuf_occlude.experiments.sim2real.data import (
 from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT
 from zbuf_occlude.experiments.sim2real.real import KEEP_SCALE_UNIT_M
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
-from zbuf_occlude.sensors.adaptive_footprint import footprint_mode
+from zbuf_occlude.sensors.beam.adaptive_cast import footprint_mode
 
 if TYPE_CHECKING:  # torch is imported when a run trains
     from zbuf_occlude.learn.training import TrainConfig
@@ -98,7 +98,7 @@ class Sim2RealConfig:
     model : {"pointnet", "voxnet", "3dmfv"}
     sensor : str, Lidar or AirborneScanner
         Scanner of the ``lidar`` set: a preset name (:data:`zbuf_occlude.sensors.LIDAR_PRESETS`,
-        :data:`zbuf_occlude.sensors.airborne.AIRBORNE_PRESETS`) or a sensor ``.json`` file.
+        :data:`zbuf_occlude.sensors.patterns.airborne.AIRBORNE_PRESETS`) or a sensor ``.json`` file.
     scale : {"quick", "paper"}; points, epochs, per_class : int, optional
         Override the scale's points per cloud, epochs and training clouds per class (the
         validation clouds per class follow in the scale's proportion).
@@ -160,7 +160,7 @@ class Sim2RealConfig:
         (:func:`~zbuf_occlude.experiments.sim2real.placement.fit_mesh_shapes`).
     returns : int
         Most returns per pulse of the ``lidar`` set's scanner (:func:`with_returns`), 1 to
-        :data:`~zbuf_occlude.sensors.echoes.MAX_RETURNS`.  1 (default): one return per pulse (a
+        :data:`~zbuf_occlude.sensors.beam.echoes.MAX_RETURNS`.  1 (default): one return per pulse (a
         spinning preset as given; a beam that resolves echoes, an airborne preset's, records its
         footprint's strongest echo).  Above 1: the
         multi-return model (each pulse's footprint cast as sub-rays, its hits resolved into up to
@@ -440,7 +440,7 @@ def with_returns(sensor, returns: int, option: str = "returns"):
     ``max_returns`` 1 (the footprint's strongest surface).  Above 1, its
     beam (:func:`~zbuf_occlude.sensors.kinds.with_beam`) gets ``max_returns = returns``; the
     footprint is the beam's own ``footprint_rays`` where above 1, else
-    :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS`, over the beam's own ``divergence_deg``
+    :data:`~zbuf_occlude.sensors.beam.footprint.FOOTPRINT_RAYS`, over the beam's own ``divergence_deg``
     (the HDL-32E preset: 0.16°, 2.79 mrad, Velodyne HDL-32E data sheet 97-0038); the range
     resolution is the beam's ``range_resolution_m`` where above 0, else
     :data:`RETURNS_RANGE_RESOLUTION_M`; a one-return beam's echo merging gives way to it.
@@ -448,12 +448,12 @@ def with_returns(sensor, returns: int, option: str = "returns"):
     Raises
     ------
     InvalidInputError
-        ``returns`` not a whole number in 1..:data:`~zbuf_occlude.sensors.echoes.MAX_RETURNS`, or
+        ``returns`` not a whole number in 1..:data:`~zbuf_occlude.sensors.beam.echoes.MAX_RETURNS`, or
         above 1 for a sensor whose beam's ``divergence_deg`` is 0 (no footprint to sample), naming
         ``option`` and the value.
     """
-    from zbuf_occlude.sensors.echoes import MAX_RETURNS
-    from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
+    from zbuf_occlude.sensors.beam.echoes import MAX_RETURNS
+    from zbuf_occlude.sensors.beam.footprint import FOOTPRINT_RAYS
     from zbuf_occlude.sensors.kinds import with_beam
 
     if isinstance(returns, bool) or not isinstance(returns, int) or not 1 <= returns <= MAX_RETURNS:

@@ -97,11 +97,11 @@ _LIDAR_TRIES = 6
 def sensor_elevation_deg(sensor) -> tuple[tuple[float, float], str]:
     """The camera elevations, degrees, from which ``sensor`` sees an object on the ground, and how they were found.
 
-    * A spinning LiDAR (:class:`~zbuf_occlude.sensors.lidar.Lidar`) on the ``lidar`` set's mount
+    * A spinning LiDAR (:class:`~zbuf_occlude.sensors.patterns.spinning.Lidar`) on the ``lidar`` set's mount
       (:data:`LIDAR_PLACEMENT`: heights ``h`` of 1.6–2.0 m, objects ``d`` = 5–25 m away) is seen
       from the object's foot at ``atan(h / d)``: from ``atan(h_lo / d_hi)`` (the low mount, the
       far object) to ``atan(h_hi / d_lo)`` (the high mount, the near one), about 3.7° to 21.8°.
-    * An airborne scanner (:class:`~zbuf_occlude.sensors.airborne.AirborneScanner`) sees the
+    * An airborne scanner (:class:`~zbuf_occlude.sensors.patterns.airborne.AirborneScanner`) sees the
       ground at incidence angles from 0° (nadir) to half its swath (the strip's edge, where a
       flight plan's neighbouring lines see a point again), so from elevations ``90° − swath/2``
       to 90° (61° to 90° for the RIEGL LMS-Q1560's 58° swath).

@@ -93,7 +93,7 @@ class ClassPlacement:
 
     def __post_init__(self) -> None:
         from zbuf_occlude.sensors.placement import CropDistributions, check_across_sight_width
-        from zbuf_occlude.sensors.object_shapes import check_width_profile
+        from zbuf_occlude.sensors.scene.object_shapes import check_width_profile
 
         if self.across_sight_width_by not in WIDTH_BY:
             raise InvalidInputError(f"across_sight_width_by must be one of {WIDTH_BY}, got {self.across_sight_width_by!r}")

@@ -55,7 +55,7 @@ across it: its scan angle is spread as the fit assumed, ``tan θ`` uniform on ``
 Crops mostly lit from both sides (strips with a large overlap) cannot tell the plan: the base's
 is kept.
 
-Sources: the flat-ground density law is Baltsavias (1999), Eq. 17 (:mod:`zbuf_occlude.sensors.airborne`);
+Sources: the flat-ground density law is Baltsavias (1999), Eq. 17 (:mod:`zbuf_occlude.sensors.patterns.airborne`);
 the wall/top ratio is the projection of the same beam flux onto a vertical face.
 """
 
@@ -70,7 +70,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.sampling import check_seed
-from zbuf_occlude.sensors.airborne import AirborneScanner
+from zbuf_occlude.sensors.patterns.airborne import AirborneScanner
 from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate, check_bootstrap, check_fit_seed, estimates_markdown
 from zbuf_occlude.sensors.kinds import capabilities
 

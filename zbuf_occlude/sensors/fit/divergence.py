@@ -21,7 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.geometry.arguments import described
 from zbuf_occlude.sensors.fit.lidar import Estimate
-from zbuf_occlude.sensors.footprint import MAX_DIVERGENCE_DEG
+from zbuf_occlude.sensors.beam.footprint import MAX_DIVERGENCE_DEG
 
 __all__ = ["DIVERGENCE_GRID_DEG", "MAX_CURVE_ROWS", "check_curve", "divergence_curve", "divergence_from_shares", "fit_divergence"]
 
@@ -47,7 +47,7 @@ def divergence_from_shares(divergences_deg: ArrayLike, simulated_shares: ArrayLi
     ----------
     divergences_deg : (M,) float
         Full-angle divergences, degrees, > 0, strictly increasing, at most
-        :data:`~zbuf_occlude.sensors.footprint.MAX_DIVERGENCE_DEG`, M >= 2.
+        :data:`~zbuf_occlude.sensors.beam.footprint.MAX_DIVERGENCE_DEG`, M >= 2.
     simulated_shares : (M,) float
         The share in [0, 1] simulated at each.  It must grow with the divergence (non-decreasing;
         ties are taken as the curve's flat parts) and rise somewhere.
@@ -67,7 +67,7 @@ def divergence_from_shares(divergences_deg: ArrayLike, simulated_shares: ArrayLi
     ------
     InvalidInputError
         Arrays of other shapes or lengths, non-finite values, divergences not increasing, not
-        positive or above :data:`~zbuf_occlude.sensors.footprint.MAX_DIVERGENCE_DEG`, shares outside [0, 1], decreasing or
+        positive or above :data:`~zbuf_occlude.sensors.beam.footprint.MAX_DIVERGENCE_DEG`, shares outside [0, 1], decreasing or
         flat everywhere.
     ArgumentTypeError
         ``measured`` is not an :class:`~zbuf_occlude.sensors.fit.Estimate`.
@@ -139,7 +139,7 @@ def check_curve(curve: object, name: str = "divergence_shares") -> tuple[NDArray
         Not a tuple or list of 2 or 3 arrays of numbers.
     InvalidInputError
         What :func:`divergence_from_shares` refuses (non-finite values, divergences not increasing or above
-        :data:`~zbuf_occlude.sensors.footprint.MAX_DIVERGENCE_DEG`, shares outside [0, 1] or not growing), naming ``name``.
+        :data:`~zbuf_occlude.sensors.beam.footprint.MAX_DIVERGENCE_DEG`, shares outside [0, 1] or not growing), naming ``name``.
     """
     if not (isinstance(curve, (tuple, list)) and len(curve) in (2, 3)):
         raise ArgumentTypeError(f"{name} must be (divergences_deg, shares) or (divergences_deg, shares, stds), got {described(curve)}")

@@ -3,17 +3,17 @@
 A fitted sensor keeps its base's beam (wavelength, profile, power noise, range noise and limits,
 ...: the data sheet's) and changes only what the fit measured (:mod:`.return_model`):
 
-* ``max_returns`` (at most :data:`~zbuf_occlude.sensors.echoes.MAX_RETURNS`) and, above 1, the
+* ``max_returns`` (at most :data:`~zbuf_occlude.sensors.beam.echoes.MAX_RETURNS`) and, above 1, the
   ``range_resolution_m``; one return per pulse: no range resolution (a footprint's echoes then
-  give the strongest, :class:`~zbuf_occlude.sensors.beam.Beam`);
+  give the strongest, :class:`~zbuf_occlude.sensors.beam.fields.Beam`);
 * ``detection_threshold`` (m⁻²) and ``intensity_scale`` (counts·m², with ``max_intensity``
-  :data:`~zbuf_occlude.sensors.beam.MAX_INTENSITY_COUNTS`: a LAS file's counts are 16-bit), so
+  :data:`~zbuf_occlude.sensors.beam.fields.MAX_INTENSITY_COUNTS`: a LAS file's counts are 16-bit), so
   that a scan of the fitted sensor writes intensities in the scans' counts;
 * ``divergence_deg`` where it was fitted by simulation (:mod:`.divergence`).
 
 A beam of several returns needs a footprint to meet several surfaces.  Where the base's beam
 has none (one ray per pulse), it is given the data sheet's divergence (the base beam's own, else
-that of the preset of its name) and :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS`
+that of the preset of its name) and :data:`~zbuf_occlude.sensors.beam.footprint.FOOTPRINT_RAYS`
 sub-rays; where no divergence is known it keeps one ray, and the fit says so.  An airborne
 scanner flies at the height the scale and threshold were fitted at.  :func:`fitted_sensor`
 returns, beside the sensor, where each changed field came from: the sensor file's
@@ -29,11 +29,11 @@ from typing import Any
 
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.geometry.arguments import described
-from zbuf_occlude.sensors.beam import MAX_INTENSITY_COUNTS
+from zbuf_occlude.sensors.beam.fields import MAX_INTENSITY_COUNTS
 from zbuf_occlude.sensors.checks import MAX_RANGE_M
-from zbuf_occlude.sensors.echoes import MAX_RETURNS
+from zbuf_occlude.sensors.beam.echoes import MAX_RETURNS
 from zbuf_occlude.sensors.fit.lidar import Estimate
-from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS
+from zbuf_occlude.sensors.beam.footprint import FOOTPRINT_RAYS
 from zbuf_occlude.sensors.kinds import capabilities, kind_of
 
 __all__ = ["MIN_DETECTION_THRESHOLD", "SETS_BEAM", "fitted_sensor", "fitted_sets"]

@@ -54,7 +54,7 @@ from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.geometry.arguments import described
 from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.sensors.kinds import capabilities
-from zbuf_occlude.sensors.lidar import Lidar
+from zbuf_occlude.sensors.patterns.spinning import Lidar
 
 __all__ = [
     "BOOTSTRAP", "check_bootstrap", "check_fit_seed", "Estimate", "MAX_BOOTSTRAP", "estimates_markdown", "fit_lidar", "LidarFit", "MAX_DROPOUT_GAP", "MIN_RETURNS", "PLANE_NEIGHBOURS", "RING_SHARE",

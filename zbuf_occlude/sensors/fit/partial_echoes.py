@@ -36,7 +36,7 @@ from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate, check_bootstrap,
 __all__ = ["FIT_GRID", "PartialEchoFit", "fit_min_echo_reflectance"]
 
 #: The thresholds a fit simulates (apparent reflectance, :attr:`Beam.min_echo_reflectance
-#: <zbuf_occlude.sensors.beam.Beam.min_echo_reflectance>`): from none to half the footprint of a white surface met head on.
+#: <zbuf_occlude.sensors.beam.fields.Beam.min_echo_reflectance>`): from none to half the footprint of a white surface met head on.
 FIT_GRID = (0.0, 0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5)
 #: Step of the search between the grid's thresholds.
 _SEARCH_STEP = 0.0025

@@ -1,4 +1,4 @@
-"""Ray drop on vegetation (:attr:`Beam.foliage_dropout <zbuf_occlude.sensors.beam.Beam.foliage_dropout>`) fitted to real object scans.
+"""Ray drop on vegetation (:attr:`Beam.foliage_dropout <zbuf_occlude.sensors.beam.fields.Beam.foliage_dropout>`) fitted to real object scans.
 
 Real scans of bushes lose more firings than scans of cars, pedestrians and poles at the same
 range: a footprint on leaves often meets too little of them for an echo.  A crown mesh is a
@@ -35,19 +35,19 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate, fit_lidar
-from zbuf_occlude.sensors.reflectance import CROWN_MATERIALS, material_named
+from zbuf_occlude.sensors.scene.materials import CROWN_MATERIALS, material_named
 
 __all__ = ["CROWN", "SOLID", "MAX_FOLIAGE_DROPOUT", "dropout_by_surface", "fit_foliage_dropout", "is_crown_class"]
 
 #: The two groups of classes :func:`dropout_by_surface` measures.
 CROWN, SOLID = "crown", "solid"
-#: The largest ray drop fitted (as :meth:`Beam.dropout_probability <zbuf_occlude.sensors.beam.Beam.dropout_probability>` clips).
+#: The largest ray drop fitted (as :meth:`Beam.dropout_probability <zbuf_occlude.sensors.beam.fields.Beam.dropout_probability>` clips).
 MAX_FOLIAGE_DROPOUT = 0.95
 
 
 def is_crown_class(name: str) -> bool:
-    """Whether objects of the class ``name`` are crowns: its material (:func:`~zbuf_occlude.sensors.reflectance.material_named`)
-    is one of :data:`~zbuf_occlude.sensors.reflectance.CROWN_MATERIALS` ("bush", "Tree", "hedge": yes; "car", "pole": no)."""
+    """Whether objects of the class ``name`` are crowns: its material (:func:`~zbuf_occlude.sensors.scene.materials.material_named`)
+    is one of :data:`~zbuf_occlude.sensors.scene.materials.CROWN_MATERIALS` ("bush", "Tree", "hedge": yes; "car", "pole": no)."""
     return material_named(name) in CROWN_MATERIALS
 
 

@@ -1,7 +1,7 @@
 """The return model of a scanner fitted to the user's own LAS/LAZ scans: what the echo model can set, with its uncertainty.
 
-The echo model (:mod:`zbuf_occlude.sensors.echoes`) sends back from each surface a pulse's
-sub-ray meets the energy ``w · ρ · |cos θ| / R²`` (m⁻², :func:`~zbuf_occlude.sensors.echoes.hit_energy`),
+The echo model (:mod:`zbuf_occlude.sensors.beam.echoes`) sends back from each surface a pulse's
+sub-ray meets the energy ``w · ρ · |cos θ| / R²`` (m⁻², :func:`~zbuf_occlude.sensors.beam.echoes.hit_energy`),
 merges echoes closer than the range resolution, drops those below the detection threshold and
 keeps the first ``max_returns``.  Measured on the points of a scan
 (:class:`~zbuf_occlude.io.las.LasPoints`, grouped into pulses by
@@ -30,7 +30,7 @@ keeps the first ``max_returns``.  Measured on the points of a scan
     ``H`` the flying height above the ground (a parameter: a LAS file records no sensor position).
 ``detection_threshold``
     ``detection_threshold_counts / intensity_scale``, m⁻², the model's threshold
-    (:func:`~zbuf_occlude.sensors.echoes.resolve_echoes`), each resample's ratio.
+    (:func:`~zbuf_occlude.sensors.beam.echoes.resolve_echoes`), each resample's ratio.
 ``beam_divergence_deg``
     **Not measurable from the points**: a scanner places every return of a pulse on the beam's
     axis (the point is the origin plus range times the axis), so the returns of one pulse show
@@ -80,7 +80,7 @@ from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.geometry.arguments import described
 from zbuf_occlude.io.las import LasPoints
 from zbuf_occlude.resources import check_memory
-from zbuf_occlude.sensors.echoes import hit_energy
+from zbuf_occlude.sensors.beam.echoes import hit_energy
 from zbuf_occlude.sensors.checks import MAX_RANGE_M, given, real, text
 from zbuf_occlude.sensors.fit.divergence import check_curve, divergence_from_shares
 from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP, Estimate, estimates_markdown
@@ -88,7 +88,7 @@ from zbuf_occlude.sensors.fit.las_pulses import check_pulses, check_return_pairs
 from zbuf_occlude.sensors.fit.returns import (
     VEGETATION_CLASSES, PulseValues, ReturnStatistics, check_classes, multi_return_shares, pulse_bootstrap, pulse_statistics,
 )  # fmt: skip
-from zbuf_occlude.sensors.reflectance import reflectance
+from zbuf_occlude.sensors.scene.materials import reflectance
 
 __all__ = [
     "ALS_WAVELENGTH_NM", "DETECTION_QUANTILE", "FIT_BYTES_PER_POINT", "GROUND_CLASS", "GROUND_MATERIAL",
@@ -109,7 +109,7 @@ GROUND_CLASS = 2
 #: of soil (0.33), grass (0.50) and roads (0.17); soil is its middle.
 GROUND_MATERIAL, ALS_WAVELENGTH_NM = "soil", 1064.0
 #: The ground's reflectance when none is given: :data:`GROUND_MATERIAL` at :data:`ALS_WAVELENGTH_NM`
-#: in the cited table (:func:`~zbuf_occlude.sensors.reflectance.reflectance`, ASTER soils).  It
+#: in the cited table (:func:`~zbuf_occlude.sensors.scene.materials.reflectance`, ASTER soils).  It
 #: scales ``intensity_scale`` and ``detection_threshold`` inversely: give your ground's.
 GROUND_REFLECTANCE = reflectance(GROUND_MATERIAL, ALS_WAVELENGTH_NM)
 #: Fewest points of a class for its own figures (and single ground returns for the ground's).
@@ -177,7 +177,7 @@ class ReturnModelFit:
 
         The beam's ``max_returns``, ``range_resolution_m``, ``detection_threshold``, ``intensity_scale`` (with 16-bit
         ``max_intensity``) and a fitted ``divergence_deg`` are the fit's; a beam of several returns and one ray gets the
-        data sheet's divergence and :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS` sub-rays; every other field
+        data sheet's divergence and :data:`~zbuf_occlude.sensors.beam.footprint.FOOTPRINT_RAYS` sub-rays; every other field
         is the base's; an airborne scanner's ``altitude_m`` becomes the flying height the fit assumed
         (:func:`~zbuf_occlude.sensors.fit.fitted_beam.fitted_sensor`, which says what the dict holds).  The name gains
         ``-fitted`` and the source says what was fitted.

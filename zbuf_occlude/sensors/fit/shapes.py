@@ -193,7 +193,7 @@ def fit_width_profile(mesh, sensor, distributions, profile: Sequence[float], *, 
     ----------
     mesh : trimesh.Trimesh or dict
         A normalised, z-up mesh (:func:`zbuf_occlude.load_mesh`), or a primitive spec
-        (:mod:`zbuf_occlude.sensors.scene`).
+        (:mod:`zbuf_occlude.sensors.scene.objects`).
     sensor : Lidar
     distributions : CropDistributions
     profile : sequence of float
@@ -214,8 +214,8 @@ def fit_width_profile(mesh, sensor, distributions, profile: Sequence[float], *, 
         A bad ``profile`` or ``n_samples``, a sensor that is not a :class:`Lidar`, or no crop of
         the mesh that shows a width (naming ``name``).
     """
-    from zbuf_occlude.sensors.object_shapes import check_width_profile
-    from zbuf_occlude.sensors.scene import SceneObject
+    from zbuf_occlude.sensors.scene.object_shapes import check_width_profile
+    from zbuf_occlude.sensors.scene.objects import SceneObject
 
     target = np.asarray(check_width_profile(profile))
     _check_measure(n_samples, sensor)

@@ -9,7 +9,7 @@ face (Möller–Trumbore), so that the backends differ only in *which* face they
   from just beyond each hit on a surface that transmits (a leafy layer, a pane), up to
   ``max_hits`` per ray.  The z-buffer keeps one face per pixel, the nearest, so only Embree
   gives the hits behind it.
-* :func:`~.raycast_zbuffer.cast_zbuffer` (its own module): the scene is rasterised from the ray origin with moderngl (one
+* :func:`~zbuf_occlude.sensors.raycast.zbuffer.cast_zbuffer` (its own module): the scene is rasterised from the ray origin with moderngl (one
   perspective view for rays inside a cone, else the six faces of a cube map) into face-id
   images; each ray's candidates are the faces seen in the ``(2r+1)²`` pixels around its
   projection, tested exactly on the GPU (``render/shaders/scan_candidates.comp``), as the z-buffer
@@ -44,7 +44,7 @@ BACKENDS = ("embree", "zbuffer")
 EDGE_EPSILON = 1e-10
 
 #: Most hits :func:`cast_embree_beyond` finds along one ray by default: one per LAS return number
-#: (:data:`~zbuf_occlude.sensors.echoes.MAX_RETURNS`, 15) and one more.
+#: (:data:`~zbuf_occlude.sensors.beam.echoes.MAX_RETURNS`, 15) and one more.
 MAX_HITS = 16
 
 #: :func:`cast_embree_beyond` starts each further cast this share of the scene's bounding-box

@@ -1,6 +1,6 @@
 """Echoes of laser pulses: the sub-ray hits of each pulse resolved into discrete returns.
 
-A pulse is cast as sub-rays (:mod:`.footprint`); every hit of every sub-ray is one row here,
+A pulse is cast as sub-rays (:mod:`zbuf_occlude.sensors.beam.footprint`); every hit of every sub-ray is one row here,
 with its pulse, range, received energy (:func:`hit_energy`) and surface.  A receiver sees the
 sum of the hits' reflected pulses along time (range) and reports one return per peak it can tell
 apart (:func:`resolve_echoes`):
@@ -16,13 +16,13 @@ apart (:func:`resolve_echoes`):
   ``range_resolution_m`` apart.  But a weak run of hits between two strong reflections chains
   them into one echo, and the more sub-rays, the more such runs: the returns per pulse drift
   with K.  ``"waveform"``: the echoes are the peaks of the pulse's summed waveform, told apart
-  where it dips (:mod:`.waveform`); a weak run between two strong reflections leaves a dip.
+  where it dips (:mod:`zbuf_occlude.sensors.beam.waveform`); a weak run between two strong reflections leaves a dip.
 * **An echo** has the energy-weighted mean range of its hits (the centroid of the merged
   peak), the sum of their energies, and the surface that gives it the most energy.
 * **Detection.**  Echoes with energy below ``detection_threshold`` are not detected, nor those
   whose apparent reflectance, energy times range squared, lies below ``min_echo_reflectance``
   (a threshold relative to the full-footprint echo at the echo's range: :class:`Beam
-  <zbuf_occlude.sensors.beam.Beam>`).
+  <zbuf_occlude.sensors.beam.fields.Beam>`).
 * **Returns kept.**  At most ``max_returns`` per pulse: the first ones in range order.  A
   discrete-return receiver triggers on the echoes as they arrive and stops recording after
   its last slot; later, possibly stronger echoes are lost (returns are numbered 1..n in that
@@ -44,8 +44,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.sensors.checks import count, real, text
-from zbuf_occlude.sensors.hit_rows import group_starts, hit_columns, rank_in_run, sorted_order
-from zbuf_occlude.sensors.waveform import waveform_echo_starts
+from zbuf_occlude.sensors.beam.hit_rows import group_starts, hit_columns, rank_in_run, sorted_order
+from zbuf_occlude.sensors.beam.waveform import waveform_echo_starts
 
 __all__ = [
     "ECHO_RULES",
@@ -128,13 +128,13 @@ def hit_energy(
     15(11), Eq. 4), up to the constant of the sensor (pulse energy, aperture, efficiencies):
     a surface of reflectance ρ, met at incidence θ and range R by the share ``weight`` of the
     beam, returns power ∝ ``ρ cos θ weight / R²``.  The beam's radiometric threshold
-    (:attr:`Beam.detection_threshold <zbuf_occlude.sensors.beam.Beam.detection_threshold>`,
+    (:attr:`Beam.detection_threshold <zbuf_occlude.sensors.beam.fields.Beam.detection_threshold>`,
     m⁻²) is in the same units.
 
     Parameters
     ----------
     weight : float or (M,) float
-        Share of the pulse's energy the sub-ray carries (:func:`~.footprint.footprint_offsets`).
+        Share of the pulse's energy the sub-ray carries (:func:`~zbuf_occlude.sensors.beam.footprint.footprint_offsets`).
     reflectance : float or (M,) float
         Lambertian reflectance ρ of the surface hit, at the scanner's wavelength, in [0, 1].
     cos_incidence : float or (M,) float
@@ -337,7 +337,7 @@ def resolve_echoes(
         hit of their pulse merge into its echo.
     detection_threshold : float
         Least echo energy detected, ≥ 0, in the units of ``energy``
-        (:attr:`Beam.detection_threshold <zbuf_occlude.sensors.beam.Beam.detection_threshold>`
+        (:attr:`Beam.detection_threshold <zbuf_occlude.sensors.beam.fields.Beam.detection_threshold>`
         with :func:`hit_energy`); 0 keeps every echo.
     max_returns : int
         Most returns per pulse, 1 to :data:`MAX_RETURNS`; the first ones in range order are kept.
@@ -345,13 +345,13 @@ def resolve_echoes(
         Least apparent reflectance of a detected echo, in [0, 1]: its energy times the square of
         its range (with :func:`hit_energy`'s energies, ``ρ · |cos θ|`` times the share of the pulse
         its hits carry; :attr:`Beam.min_echo_reflectance
-        <zbuf_occlude.sensors.beam.Beam.min_echo_reflectance>`).  Scaling every range and the
+        <zbuf_occlude.sensors.beam.fields.Beam.min_echo_reflectance>`).  Scaling every range and the
         range resolution by ``c`` and every energy by ``1/c²`` detects the same echoes (with
         ``detection_threshold`` 0, ranges above :data:`MIN_RANGE_M`).  0 keeps every echo.
     echo_rule : {"chain", "waveform"}
         How hits merge into echoes (module docstring): a new echo at a gap of
         ``range_resolution_m`` after the previous hit, or at each dip of the pulse's waveform
-        (:func:`~.waveform.waveform_echo_starts`).  Either way a pulse's echoes are its hits
+        (:func:`~zbuf_occlude.sensors.beam.waveform.waveform_echo_starts`).  Either way a pulse's echoes are its hits
         split into runs in range order.
 
     Returns

@@ -2,7 +2,7 @@
 
 World frame: right-handed, metres, z up; the ground is the plane ``z = ground_z_m``.
 A scene is built in Python (:class:`ScanScene`, :class:`SceneObject`) or read from a JSON/YAML
-file with the same fields (:func:`~zbuf_occlude.sensors.scene_files.load_scene`)::
+file with the same fields (:func:`~zbuf_occlude.sensors.scene.files.load_scene`)::
 
     {"ground": {"z_m": 0.0, "half_extent_m": 80.0},
      "objects": [{"mesh": "car.off", "class": "car", "position_m": [10, 0], "yaw_deg": 30,
@@ -19,12 +19,12 @@ box centred on ``position_m`` (x, y; a third value is added to the standing heig
 by ``yaw_deg`` about +z.  Object ids: 0 is the ground, objects and occluders are numbered
 from 1 in the order given (objects first).  ``"foliage": {"leaf_area_density": 1.0}`` (also
 ``leaf_side_m``, ``shell_m``, ``keep_surface``, ``seed``) fills the object's crown with leaves
-at its size in metres (:class:`~zbuf_occlude.sensors.foliage.Foliage`).
+at its size in metres (:class:`~zbuf_occlude.sensors.scene.foliage.Foliage`).
 
 Every field is checked where the dataclass is made (:mod:`zbuf_occlude.sensors.checks`: numbers
 finite and in range, types, unknown keys).  Primitives and width profiles are in
-:mod:`~zbuf_occlude.sensors.object_shapes`; a scene file, which may come from anyone, is read by
-:mod:`~zbuf_occlude.sensors.scene_files`.
+:mod:`~zbuf_occlude.sensors.scene.object_shapes`; a scene file, which may come from anyone, is read by
+:mod:`~zbuf_occlude.sensors.scene.files`.
 """
 
 from __future__ import annotations
@@ -43,8 +43,8 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.limits import MAX_MESH_FACES
 from zbuf_occlude.mesh.scene import FACE_MATERIALS, FaceMaterials, face_materials_of
 from zbuf_occlude.sensors.checks import MAX_COORDINATE_M, MAX_PATH_CHARS, is_number, located, real, reals, text, value_kind
-from zbuf_occlude.sensors.foliage import LEAF_MATERIAL, MAX_LEAVES, Foliage
-from zbuf_occlude.sensors.object_shapes import (
+from zbuf_occlude.sensors.scene.foliage import LEAF_MATERIAL, MAX_LEAVES, Foliage
+from zbuf_occlude.sensors.scene.object_shapes import (
     FACE_ROWS,
     check_width_profile,
     is_trimesh,
@@ -112,7 +112,7 @@ class SceneObject:
         A horizontal stretch that varies with height: ``K >= 2`` factors > 0 at the centres of
         ``K`` equal bins of the mesh's relative height (0: its lowest vertex, 1: its top),
         linear in between and constant beyond the outer centres
-        (:func:`~zbuf_occlude.sensors.object_shapes.width_profile_factors`).
+        (:func:`~zbuf_occlude.sensors.scene.object_shapes.width_profile_factors`).
         Each vertex's x and y move away from (or towards) the footprint centre by its factor,
         before the scaling to ``size_m`` (which still measures the mesh as loaded) and on top of
         ``width_scale``: a person's legs made as narrow as real scans show them, a sign pole's
@@ -121,9 +121,9 @@ class SceneObject:
         ``metadata[FACE_ROWS]`` gives each face's row as loaded, which the scene's
         ``face_local`` reports.  None (default): no warp.
     foliage : Foliage or mapping, optional
-        Leaves filling the crown (:class:`~zbuf_occlude.sensors.foliage.Foliage`, or a mapping of
+        Leaves filling the crown (:class:`~zbuf_occlude.sensors.scene.foliage.Foliage`, or a mapping of
         its fields: a scene file's ``foliage``), grown on the object at its size in metres
-        (:func:`~zbuf_occlude.sensors.foliage.add_foliage`, after ``width_scale`` and
+        (:func:`~zbuf_occlude.sensors.scene.foliage.add_foliage`, after ``width_scale`` and
         ``width_profile``): square leaves in metres whatever the scaling.  The leaves' faces follow
         the mesh's, their rows in ``face_local`` counted on from the mesh's face count as loaded,
         their material ``"grown_leaf"`` (foliage's reflectance, opaque: the gaps are between the
@@ -136,9 +136,9 @@ class SceneObject:
         field), a ``position_m`` or ``size_m`` that is not 2–3 (1 or 3) finite numbers within
         :data:`MAX_GROUND_HALF_EXTENT_M` metres (sizes > 0), a non-finite ``yaw_deg``, ``up``
         not "z" or "y", ``width_scale`` not > 0, a bad ``width_profile``
-        (:func:`~zbuf_occlude.sensors.object_shapes.check_width_profile`), a bad ``foliage``
-        (:class:`~zbuf_occlude.sensors.foliage.Foliage`; at build: more than
-        :data:`~zbuf_occlude.sensors.foliage.MAX_LEAVES` leaves, a mesh without volume).
+        (:func:`~zbuf_occlude.sensors.scene.object_shapes.check_width_profile`), a bad ``foliage``
+        (:class:`~zbuf_occlude.sensors.scene.foliage.Foliage`; at build: more than
+        :data:`~zbuf_occlude.sensors.scene.foliage.MAX_LEAVES` leaves, a mesh without volume).
     """
 
     mesh: Any
@@ -278,7 +278,7 @@ def _with_leaves(foliage: Foliage, v: NDArray[np.float64], faces: NDArray[np.int
     """The object's vertices (z-up, unscaled) and faces (the mesh's none without ``keep_surface``) with ``foliage``'s leaves
     grown on it at its size in metres (``v · scale``), brought back unscaled (the transform scales them again: square leaves
     in metres); the faces' rows as loaded (the leaves' counted on from ``loaded_faces``) and materials (the leaves'
-    :data:`~zbuf_occlude.sensors.foliage.LEAF_MATERIAL`, the mesh's faces their own or ``""``); at most ``max_faces`` faces
+    :data:`~zbuf_occlude.sensors.scene.foliage.LEAF_MATERIAL`, the mesh's faces their own or ``""``); at most ``max_faces`` faces
     in all, checked before any leaf is drawn."""
     import trimesh
 

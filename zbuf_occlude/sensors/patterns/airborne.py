@@ -37,11 +37,11 @@ spacing, the rule flight planners use for multi-strip density.
 
 Returns
 -------
-The scanner's :class:`~zbuf_occlude.sensors.beam.Beam` says what a pulse returns, as for every
+The scanner's :class:`~zbuf_occlude.sensors.beam.fields.Beam` says what a pulse returns, as for every
 pulsed sensor (:func:`~zbuf_occlude.sensors.scan.scan_airborne`, :func:`~zbuf_occlude.sensors.scan.fire_pulses`).
 Each pulse is a cone of ``Beam.divergence_deg`` sampled by ``Beam.footprint_rays`` sub-rays
-(:mod:`.footprint`).  With ``Beam.max_returns`` above 1 their hits are resolved into up to
-``max_returns`` returns by the one echo model (:func:`~zbuf_occlude.sensors.echo_model.echo_returns`:
+(:mod:`zbuf_occlude.sensors.beam.footprint`).  With ``Beam.max_returns`` above 1 their hits are resolved into up to
+``max_returns`` returns by the one echo model (:func:`~zbuf_occlude.sensors.beam.echo_energy.echo_returns`:
 energy ``w · ρ · |cos θ| / R²`` per sub-ray, echoes within ``range_resolution_m`` merged): a pulse
 that meets a branch and the ground below records both.  With one return per pulse, a footprint
 gives the pulse's strongest echo, and one ray its first hit.
@@ -56,7 +56,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.beam import IDEAL_BEAM, Beam, check_beam
+from zbuf_occlude.sensors.beam.fields import IDEAL_BEAM, Beam, check_beam
 from zbuf_occlude.sensors.checks import (
     MAX_RANGE_M,
     MAX_SENSOR_RAYS,
@@ -135,7 +135,7 @@ class AirborneScanner:
         Flying height above the ground, metres; ground speed, metres per second.
     pattern : {"linear", "oscillating"}
     beam : Beam
-        The pulse and its receiver (:class:`~zbuf_occlude.sensors.beam.Beam`): footprint, returns,
+        The pulse and its receiver (:class:`~zbuf_occlude.sensors.beam.fields.Beam`): footprint, returns,
         detection, range noise and dropout.  Its ``detection_threshold`` (the value
         :func:`~zbuf_occlude.sensors.fit.fit_return_model` measures on a LAS file) applies with
         ρ = 1 where the scan is given no reflectivity.  Default: the ``ideal`` beam at 1064 nm.

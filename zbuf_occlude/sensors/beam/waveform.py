@@ -32,7 +32,7 @@ after round, and a new echo starts past each dip left between two peaks.
 Unlike the chain rule, a weak run of hits between two strong reflections (a crown's side wall
 across the footprint) does not join them: the sum still dips between the two, and the more
 sub-rays, the more such runs the chain rule would join.  The echoes' ranges, energies and
-surfaces are then the hits' as for the chain rule (:func:`~.echoes.resolve_echoes`).
+surfaces are then the hits' as for the chain rule (:func:`~zbuf_occlude.sensors.beam.echoes.resolve_echoes`).
 """
 
 from __future__ import annotations
@@ -66,7 +66,7 @@ def waveform_echo_starts(pulse: NDArray, range_m: NDArray, energy: NDArray, reso
     range_m : (M,) float64
         Range of each hit, metres, finite and ≥ 0, ascending within each pulse.
     energy : (M,) float64
-        Each hit's energy (:func:`~.echoes.hit_energy`), finite and ≥ 0.
+        Each hit's energy (:func:`~zbuf_occlude.sensors.beam.echoes.hit_energy`), finite and ≥ 0.
     resolution_m : float
         The range resolution ΔR, metres, > 0: the echo's full width at half maximum.
 

@@ -1,9 +1,9 @@
 """The beam of a pulsed LiDAR: what one pulse is, and what its receiver records of it.
 
 A scanner is a beam × a scan pattern × a platform.  The pattern says where and when pulses
-leave (:mod:`.lidar`, :mod:`.airborne`, :mod:`.ray_table`), the platform where the scanner is at that time (:mod:`.platform`),
+leave (:mod:`zbuf_occlude.sensors.patterns.spinning`, :mod:`zbuf_occlude.sensors.patterns.airborne`, :mod:`zbuf_occlude.sensors.patterns.ray_table`), the platform where the scanner is at that time (:mod:`zbuf_occlude.sensors.platform`),
 and the :class:`Beam` everything the device adds to a pulse's geometry: its footprint (a cone
-of ``divergence_deg`` sampled by ``footprint_rays`` sub-rays, :mod:`.footprint`), how its echoes
+of ``divergence_deg`` sampled by ``footprint_rays`` sub-rays, :mod:`zbuf_occlude.sensors.beam.footprint`), how its echoes
 are resolved into returns (``max_returns``, ``range_resolution_m``, ``echo_rule``, ``return_mode``), which it
 detects (``detection_threshold``, ``power_noise``), how it measures them (``range_noise_m``,
 ``dropout``, range limits) and how it writes their intensity (``intensity_scale``).  Every
@@ -11,11 +11,11 @@ field is checked here, once, whatever pattern fires the beam.
 
 The beam named ``ideal`` (:data:`IDEAL_BEAM`) is one ray per pulse, its first hit, no noise,
 no loss and no radiometry: the idealised scan, named as one.  A preset's beam carries its data
-sheet (:mod:`.lidar`, :mod:`.airborne_presets`, :mod:`.ray_table`).
+sheet (:mod:`zbuf_occlude.sensors.patterns.spinning`, :mod:`zbuf_occlude.sensors.patterns.airborne_presets`, :mod:`zbuf_occlude.sensors.patterns.ray_table`).
 
 Units: the received energy of a sub-ray is ``w · ρ · |cos θ| / R²`` in m⁻² (``w`` the sub-ray's
 share of the pulse, ρ the surface's reflectivity, θ the incidence, ``R`` the range;
-:func:`~zbuf_occlude.sensors.echoes.hit_energy`, the range equation of an extended Lambertian
+:func:`~zbuf_occlude.sensors.beam.echoes.hit_energy`, the range equation of an extended Lambertian
 target: Kashani et al. 2015, "A review of LIDAR radiometric processing", Sensors 15(11), Eq. 4).
 ``detection_threshold`` is in those units, ``intensity_scale`` in counts per unit of them.
 """
@@ -30,8 +30,15 @@ from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.checks import MAX_RANGE_M, count, located, real, replaced, sensor_name, text, value_kind
-from zbuf_occlude.sensors.echoes import ECHO_RULES, MAX_POWER_NOISE, MAX_RETURNS
-from zbuf_occlude.sensors.footprint import FOOTPRINT_RAYS, MAX_DIVERGENCE_DEG, MAX_SUBRAYS, PROFILES, footprint_offsets, subray_directions
+from zbuf_occlude.sensors.beam.echoes import ECHO_RULES, MAX_POWER_NOISE, MAX_RETURNS
+from zbuf_occlude.sensors.beam.footprint import (
+    FOOTPRINT_RAYS,
+    MAX_DIVERGENCE_DEG,
+    MAX_SUBRAYS,
+    PROFILES,
+    footprint_offsets,
+    subray_directions,
+)
 
 __all__ = [
     "Beam", "IDEAL_BEAM", "RETURN_MODES", "RETURN_FIELDS", "MODE_RETURNS", "MAX_INTENSITY_COUNTS", "check_beam", "check_returns",
@@ -67,28 +74,28 @@ class Beam:
         Data sheet (and page) the numbers come from; assumptions named as such.
     wavelength_nm : float
         Laser wavelength, nanometres (905 for most spinning LiDARs, 1064 or 1550 airborne); picks
-        the column of material reflectances (:mod:`.reflectance`).
+        the column of material reflectances (:mod:`zbuf_occlude.sensors.scene.materials`).
     divergence_deg : float
         Full-angle beam divergence, degrees in [0, 90]; the cone the sub-rays sample.
     profile : {"tophat", "gaussian"}
-        Energy across the footprint (:func:`~zbuf_occlude.sensors.footprint.footprint_offsets`).
+        Energy across the footprint (:func:`~zbuf_occlude.sensors.beam.footprint.footprint_offsets`).
     footprint_rays : int
-        K sub-rays per pulse, 1..:data:`~zbuf_occlude.sensors.footprint.MAX_SUBRAYS`; above 1 needs a
+        K sub-rays per pulse, 1..:data:`~zbuf_occlude.sensors.beam.footprint.MAX_SUBRAYS`; above 1 needs a
         divergence > 0.  1: every pulse is its centre ray's first hit.
     max_returns : int
         Most returns recorded per pulse, 1..15 (LAS 1.4's return numbers).
     return_mode : str
         One of :data:`RETURN_MODES`.  ``"all"`` with ``max_returns`` above 1 is the multi-return
-        model: the sub-rays' hits resolved into echoes (:func:`~zbuf_occlude.sensors.echo_model.echo_returns`).
+        model: the sub-rays' hits resolved into echoes (:func:`~zbuf_occlude.sensors.beam.echo_energy.echo_returns`).
     range_resolution_m : float
         Least range between two returns of one pulse, metres (half the pulse length, c·τ/2; a 5 ns
         pulse: 0.75 m).  Needed (> 0) when echoes are resolved (``max_returns`` above 1, or a
         return mode other than ``"all"``), refused otherwise.
     echo_rule : {"chain", "waveform"}
         How a pulse's sub-ray hits merge into echoes where echoes are resolved
-        (:func:`~zbuf_occlude.sensors.echoes.resolve_echoes`): ``"chain"`` (the default) starts a
+        (:func:`~zbuf_occlude.sensors.beam.echoes.resolve_echoes`): ``"chain"`` (the default) starts a
         new echo at a gap of ``range_resolution_m`` after the previous hit; ``"waveform"`` at each
-        dip of the pulse's summed waveform (:mod:`~zbuf_occlude.sensors.waveform`), so that a weak
+        dip of the pulse's summed waveform (:mod:`~zbuf_occlude.sensors.beam.waveform`), so that a weak
         run of hits between two reflections (a crown's side across the footprint) does not join
         them and the returns per pulse do not drift with ``footprint_rays``.  ``"waveform"`` needs
         echoes resolved (refused otherwise).
@@ -116,7 +123,7 @@ class Beam:
         ``detection_threshold``.  0: no such threshold (the default).
     power_noise : float
         σ of the natural log of the received power per firing (detection is then
-        ``Φ(ln(E / τ) / σ)``), in [0, :data:`~zbuf_occlude.sensors.echoes.MAX_POWER_NOISE`]
+        ``Φ(ln(E / τ) / σ)``), in [0, :data:`~zbuf_occlude.sensors.beam.echoes.MAX_POWER_NOISE`]
         (2: above speckle through saturated turbulence, the most a return's power fluctuates);
         applied with the detection threshold, where reflectivities are given.  0: a sharp threshold.
     intensity_scale : float or None
@@ -135,7 +142,7 @@ class Beam:
         Growth of that probability per metre of range (:meth:`dropout_probability`).
     foliage_dropout : float
         Probability in [0, 1) that a return from a crown surface (a face of a material in
-        :data:`~zbuf_occlude.sensors.reflectance.CROWN_MATERIALS`: a mesh standing for leaves
+        :data:`~zbuf_occlude.sensors.scene.materials.CROWN_MATERIALS`: a mesh standing for leaves
         with gaps) is lost, besides ``dropout``: ray drop on vegetation, drawn independently per
         return.  Real HDL-32E scans of bushes miss about 14 % of their firings at every range
         where cars, pedestrians and poles miss 3–6 % (measured on LiDARNet v2: the results page
@@ -216,7 +223,7 @@ class Beam:
     @property
     def resolves_footprint(self) -> bool:
         """Whether a pulse casts several sub-rays whose hits are resolved into echoes: the footprints
-        whose sub-rays the adaptive footprint skips (:func:`~zbuf_occlude.sensors.adaptive_footprint.adaptive_footprint`)."""
+        whose sub-rays the adaptive footprint skips (:func:`~zbuf_occlude.sensors.beam.adaptive_cast.adaptive_footprint`)."""
         return self.footprint_rays > 1 and self.resolves_echoes
 
     @property
@@ -245,8 +252,8 @@ class Beam:
     def footprint_directions(self, directions: ArrayLike) -> NDArray[np.float64]:
         """(N, K, 3) float64: the K = ``footprint_rays`` unit sub-rays of each beam axis ``directions (N, 3)``.
 
-        Ray 0 is the centre (:func:`~zbuf_occlude.sensors.footprint.subray_directions` of
-        :func:`~zbuf_occlude.sensors.footprint.footprint_offsets`).
+        Ray 0 is the centre (:func:`~zbuf_occlude.sensors.beam.footprint.subray_directions` of
+        :func:`~zbuf_occlude.sensors.beam.footprint.footprint_offsets`).
 
         Raises
         ------
@@ -344,14 +351,14 @@ def check_beam(beam: object) -> Beam:
         Anything else, naming its type.
     """
     if not isinstance(beam, Beam):
-        raise InvalidInputError(f"beam must be a Beam (zbuf_occlude.sensors.beam.Beam), got {value_kind(beam)}")
+        raise InvalidInputError(f"beam must be a Beam (zbuf_occlude.sensors.beam.fields.Beam), got {value_kind(beam)}")
     return beam
 
 
 def footprint_changes(beam: Beam, *, footprint: bool, divergence_deg: float | None, names: tuple[str, str], sensor: str) -> dict:
     """The beam fields a request for a footprint (``footprint``) and a divergence (``divergence_deg``) changes.
 
-    The divergence as given; a footprint of :data:`~zbuf_occlude.sensors.footprint.FOOTPRINT_RAYS`
+    The divergence as given; a footprint of :data:`~zbuf_occlude.sensors.beam.footprint.FOOTPRINT_RAYS`
     sub-rays where the beam fires fewer (a beam's own wider footprint stays: an airborne preset's
     19).  The one rule of ``scan --footprint --divergence`` and ``farm --sensor-footprint
     --sensor-divergence``; ``names`` are the two options as the command calls them, ``sensor`` the

@@ -5,7 +5,7 @@ cone, else the six faces of a cube map) into face-id images; each ray's candidat
 seen in the ``(2r+1)²`` pixels around its projection, tested exactly on the GPU
 (``render/shaders/scan_candidates.comp``), as the z-buffer visibility method decides points
 (:mod:`zbuf_occlude.visibility.zbuffer`); the distance on the chosen face is recomputed in float64
-(:func:`~.raycast.ray_triangle_f64`), so that it differs from :func:`~.raycast.cast_embree` only in
+(:func:`~zbuf_occlude.sensors.raycast.embree.ray_triangle_f64`), so that it differs from :func:`~zbuf_occlude.sensors.raycast.embree.cast_embree` only in
 *which* face it picks.  Rays whose window shows faces but none of them is hit (sub-pixel faces,
 cracks) are decided by Embree.
 """
@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.cache import MeshCache
-from zbuf_occlude.sensors.raycast import cast_embree, ray_triangle_f64
+from zbuf_occlude.sensors.raycast.embree import cast_embree, ray_triangle_f64
 
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
@@ -94,7 +94,7 @@ def cast_zbuffer(
     """First hit of each ray from one origin, from rasterised face-id images (module docstring).
 
     Only the first: each pixel keeps the nearest face, so nothing behind it can be read back.
-    The hits behind a surface that transmits come from :func:`~.raycast.cast_embree_beyond` (Embree), and
+    The hits behind a surface that transmits come from :func:`~zbuf_occlude.sensors.raycast.embree.cast_embree_beyond` (Embree), and
     :func:`~zbuf_occlude.sensors.scan.scan` refuses a transmittance above 0 with this backend.
 
     The views are rasterised and each ray's candidates tested on the GPU
@@ -106,7 +106,7 @@ def cast_zbuffer(
     Parameters
     ----------
     mesh, origin, directions
-        As :func:`~.raycast.cast_embree`.
+        As :func:`~zbuf_occlude.sensors.raycast.embree.cast_embree`.
     resolution : int
         Pixels per side of each view (cube-map face: 90° field of view).
     neighborhood : int
@@ -117,7 +117,7 @@ def cast_zbuffer(
     Returns
     -------
     face, t
-        As :func:`~.raycast.cast_embree`; ``face`` is the lowest index of a group of identical faces.
+        As :func:`~zbuf_occlude.sensors.raycast.embree.cast_embree`; ``face`` is the lowest index of a group of identical faces.
     n_fallback : int
         Rays decided by Embree.
 

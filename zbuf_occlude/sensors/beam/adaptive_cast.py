@@ -1,18 +1,18 @@
 """Adaptive footprints: the multi-return model without casting the sub-rays of a footprint that lies on one plane (the default; approximate).
 
-The multi-return model (:func:`~.echo_model.echo_returns`) casts K sub-rays per pulse
-(:mod:`.footprint`) and resolves their hits into echoes.  On open ground or a wall, every
+The multi-return model (:func:`~zbuf_occlude.sensors.beam.echo_energy.echo_returns`) casts K sub-rays per pulse
+(:mod:`zbuf_occlude.sensors.beam.footprint`) and resolves their hits into echoes.  On open ground or a wall, every
 sub-ray hits the centre ray's face near its hit, and the receiver sees one echo: the K casts
 buy nothing that the plane does not already tell.  :func:`adaptive_echo_returns` casts every
 pulse's centre ray first and casts the whole footprint only where :func:`uniform_footprints`
 cannot rule out a second surface.  A pulse is *uniform* when all of these hold:
 
 * its centre ray hits a face ``f`` that does not transmit;
-* every sub-ray meets ``f``'s plane (:func:`~.footprint.plane_subrays`, no cast) inside ``f``,
+* every sub-ray meets ``f``'s plane (:func:`~zbuf_occlude.sensors.beam.footprint.plane_subrays`, no cast) inside ``f``,
   with :data:`INSIDE_MARGIN_SHARE` of the scene's size to spare: none leaves ``f`` for a face
   beside or behind it;
 * those ranges, sorted, step less than the range resolution (one echo,
-  :func:`~.echoes.resolve_echoes`'s merging) and lie within the beam's range limits;
+  :func:`~zbuf_occlude.sensors.beam.echoes.resolve_echoes`'s merging) and lie within the beam's range limits;
 * every neighbour (the pulses fired beside it: :func:`pulse_neighbours`) fires outside the cone
   of the sub-rays (a footprint wider than the pulses' spacing reaches past its neighbours, and is
   cast in full), and hits the same object within :data:`PLANE_SHARE` of the range resolution of
@@ -21,7 +21,7 @@ cannot rule out a second surface.  A pulse is *uniform* when all of these hold:
 
 A uniform pulse's echo is the one the K sub-rays would give on ``f``'s plane, computed without
 casting them (:func:`plane_echoes`): the energy-weighted mean of their ranges and the sum of
-their energies (:func:`~.echoes.hit_energy`), equal to the full model's to rounding, on ``f``.
+their energies (:func:`~zbuf_occlude.sensors.beam.echoes.hit_energy`), equal to the full model's to rounding, on ``f``.
 The one error left: a surface in front of ``f`` inside the cone that neither the centre ray nor
 any neighbour meets (a wire, a thin bar between two rings, a corner poking into the footprint):
 its echo is lost.  Where the beam draws power noise, the uniform pulses' draws come first, then
@@ -38,13 +38,13 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.cache import MeshCache
-from zbuf_occlude.sensors.beam import Beam
-from zbuf_occlude.sensors.echo_model import Radiometry, Transmission, echo_returns
-from zbuf_occlude.sensors.echoes import MIN_RANGE_M, resolve_echoes
-from zbuf_occlude.sensors.footprint import footprint_offsets
+from zbuf_occlude.sensors.beam.fields import Beam
+from zbuf_occlude.sensors.beam.echo_energy import Radiometry, Transmission, echo_returns
+from zbuf_occlude.sensors.beam.echoes import MIN_RANGE_M, resolve_echoes
+from zbuf_occlude.sensors.beam.footprint import footprint_offsets
 from zbuf_occlude.sensors.pulses import Pulses
-from zbuf_occlude.sensors.raycast import BEYOND_HIT_SHARE, cast_embree
-from zbuf_occlude.sensors.scene import BuiltScene
+from zbuf_occlude.sensors.raycast.embree import BEYOND_HIT_SHARE, cast_embree
+from zbuf_occlude.sensors.scene.objects import BuiltScene
 
 __all__ = [
     "FOOTPRINT_MODES",
@@ -63,7 +63,7 @@ __all__ = [
 
 #: How far inside its face a uniform footprint stays beyond the cone's reach, as a share of the
 #: scene's bounding-box diagonal: Embree decides in float32 (~1e-7 of the coordinates), so a sub-ray
-#: this far inside (10× :data:`~.raycast.BEYOND_HIT_SHARE`: 2 cm in a 230 m scene) would hit ``f``.
+#: this far inside (10× :data:`~zbuf_occlude.sensors.raycast.embree.BEYOND_HIT_SHARE`: 2 cm in a 230 m scene) would hit ``f``.
 INSIDE_MARGIN_SHARE = 10.0 * BEYOND_HIT_SHARE
 #: A neighbour's hit is on the centre face's plane within this share of the range resolution
 #: (nearer than that, a second surface would merge into the same echo anyway).
@@ -125,12 +125,12 @@ def uniform_footprints(
     directions : (P, 3) float64
         Unit centre directions, world frame.
     face, t : (P,) int64, (P,) float64
-        The centre rays' first hits (:func:`~.raycast.cast_embree`): face, −1 for none, and range, metres.
+        The centre rays' first hits (:func:`~zbuf_occlude.sensors.raycast.embree.cast_embree`): face, −1 for none, and range, metres.
     neighbours : (P, m) int64
         Rows of each pulse's neighbours, −1 for none (:func:`pulse_neighbours`); a pulse without
         one is never uniform.
     offsets : (K, 2) float64
-        The footprint's sub-rays (:func:`~.footprint.footprint_offsets`).
+        The footprint's sub-rays (:func:`~zbuf_occlude.sensors.beam.footprint.footprint_offsets`).
     range_resolution_m : float
         The receiver's range resolution, metres, > 0.
     range_limits_m : (min, max) float
@@ -144,8 +144,8 @@ def uniform_footprints(
 
 def _uniform(built, origins, directions, face, t, neighbours, offsets, weights, range_resolution_m, range_limits_m, transmits):
     """:func:`uniform_footprints`, and the uniform hits' rows, ascending, and their plane echo's range and
-    energy for ρ = 1 (:func:`plane_echoes`), by :func:`~.uniform_kernel.uniform_plane_echoes`."""
-    from zbuf_occlude.sensors.uniform_kernel import UniformRules, uniform_plane_echoes  # numba: imported when used
+    energy for ρ = 1 (:func:`plane_echoes`), by :func:`~zbuf_occlude.sensors.beam.adaptive_kernel.uniform_plane_echoes`."""
+    from zbuf_occlude.sensors.beam.adaptive_kernel import UniformRules, uniform_plane_echoes  # numba: imported when used
 
     planes, diagonal = _planes(built.mesh)
     transmits = np.zeros(len(planes), bool) if transmits is None else np.asarray(transmits, dtype=bool)
@@ -164,9 +164,9 @@ def plane_echoes(
     """``(range, energy)`` (P,) float64: the one echo of each pulse's K sub-ray hits on one surface.
 
     Sub-ray ``k`` hits at range ``t_k`` and incidence ``cos_incidence`` (``|n · d_k|``,
-    :func:`~.footprint.plane_subrays`) and sends back ``E_k = w_k ρ |n · d_k| / t_k²``
-    (:func:`~.echoes.hit_energy`).  The echo: ``Σ E_k t_k / Σ E_k`` (the energy-weighted mean
-    range, :func:`~.echoes.resolve_echoes`) and ``Σ E_k``: :func:`~.uniform_kernel.plane_echo` of each row, the
+    :func:`~zbuf_occlude.sensors.beam.footprint.plane_subrays`) and sends back ``E_k = w_k ρ |n · d_k| / t_k²``
+    (:func:`~zbuf_occlude.sensors.beam.echoes.hit_energy`).  The echo: ``Σ E_k t_k / Σ E_k`` (the energy-weighted mean
+    range, :func:`~zbuf_occlude.sensors.beam.echoes.resolve_echoes`) and ``Σ E_k``: :func:`~zbuf_occlude.sensors.beam.adaptive_kernel.plane_echo` of each row, the
     adaptive scan's own.
 
     Parameters
@@ -178,7 +178,7 @@ def plane_echoes(
     reflectivity : float or (P,) float64
         ρ of each pulse's surface.
     """
-    from zbuf_occlude.sensors.uniform_kernel import plane_echo_rows  # numba: imported when used
+    from zbuf_occlude.sensors.beam.adaptive_kernel import plane_echo_rows  # numba: imported when used
 
     tk, cos = (np.ascontiguousarray(np.atleast_2d(a), dtype=np.float64) for a in (range_m, cos_incidence))
     echo_range, energy = plane_echo_rows(tk, cos, np.ascontiguousarray(weights, dtype=np.float64), MIN_RANGE_M)
@@ -225,7 +225,7 @@ def grid_neighbours(position: NDArray[np.float64], line: NDArray[np.int64], *, p
         out[order[first[wraps]], 0] = order[last[wraps]]
         out[order[last[wraps]], 1] = order[first[wraps]]
     # the pulses of line r ± 1 nearest to each pulse by position (ties: the lower position), a compiled loop
-    from zbuf_occlude.sensors.uniform_kernel import nearest_in_line  # numba: imported when used
+    from zbuf_occlude.sensors.beam.adaptive_kernel import nearest_in_line  # numba: imported when used
 
     for column, step in ((2, -1), (3, 1)):
         nearest_in_line(key, p, r, order, width, low, step, column, out)
@@ -277,7 +277,7 @@ def check_footprint_cast(
     resolves the echoes of several sub-rays (``Beam.resolves_footprint``), and it casts with Embree.
     Messages name each field as ``names`` maps it (``footprint_cast``, ``backend``, and in the remedy
     ``footprint_rays`` and ``max_returns``; a field mapped to None is left out of the remedy: the
-    caller sets it itself), as :func:`~zbuf_occlude.sensors.beam.check_returns` does; ``sensor`` is the
+    caller sets it itself), as :func:`~zbuf_occlude.sensors.beam.fields.check_returns` does; ``sensor`` is the
     sensor's name (default: the beam's).  ``beam`` None checks the mode alone (before a sensor is read).
 
     Raises
@@ -345,12 +345,12 @@ def adaptive_echo_returns(
     transmittance: NDArray[np.float64] | None = None,
     neighbours: NDArray[np.int64] | None = None,
 ) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray[np.bool_]]:
-    """:func:`~.echo_model.echo_returns` of ``pulses`` fired with ``beam``, the uniform footprints' echoes from their plane.
+    """:func:`~zbuf_occlude.sensors.beam.echo_energy.echo_returns` of ``pulses`` fired with ``beam``, the uniform footprints' echoes from their plane.
 
-    The centre rays are cast (Embree, :func:`~.raycast.cast_embree`); the uniform pulses
+    The centre rays are cast (Embree, :func:`~zbuf_occlude.sensors.raycast.embree.cast_embree`); the uniform pulses
     (:func:`uniform_footprints`) get the one echo their sub-rays would give on the centre face's
     plane (:func:`plane_echoes`), the others' ``beam.footprint_rays`` sub-rays are cast and
-    resolved by :func:`~.echo_model.echo_returns`, through the faces that transmit.  The beam's
+    resolved by :func:`~zbuf_occlude.sensors.beam.echo_energy.echo_returns`, through the faces that transmit.  The beam's
     range resolution, range limits, ``min_echo_reflectance`` and ``echo_rule`` apply to both.
 
     Parameters
@@ -360,18 +360,18 @@ def adaptive_echo_returns(
         A beam that resolves echoes (``Beam.resolves_echoes``) with ``footprint_rays`` > 1.
     pulses : Pulses
     max_returns : int
-        As :func:`~.echo_model.echo_returns`.
+        As :func:`~zbuf_occlude.sensors.beam.echo_energy.echo_returns`.
     radiometry : Radiometry, optional
-        As :func:`~.echo_model.echo_returns`: ρ per face, threshold, power noise (one draw per pulse).
+        As :func:`~zbuf_occlude.sensors.beam.echo_energy.echo_returns`: ρ per face, threshold, power noise (one draw per pulse).
     transmittance : (F,) float64, optional
-        Round-trip transmittance per face (:func:`~.echo_model.surface_optics`); None: opaque.
+        Round-trip transmittance per face (:func:`~zbuf_occlude.sensors.beam.echo_energy.surface_optics`); None: opaque.
     neighbours : (P, m) int64, optional
         Default :func:`pulse_neighbours`.
 
     Returns
     -------
     pulse, face, range, energy
-        As :func:`~.echo_model.echo_returns`: (E,) each, sorted by pulse, then range.
+        As :func:`~zbuf_occlude.sensors.beam.echo_energy.echo_returns`: (E,) each, sorted by pulse, then range.
     uniform : (P,) bool
         The pulses whose sub-rays were not cast.
     """

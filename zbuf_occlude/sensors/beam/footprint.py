@@ -20,7 +20,7 @@ holds ``K``, and the ``K - 1`` outer cells are shared among the rings in proport
 tried, this one keeps the sub-rays' nearest-neighbour cells within about ±30 % of ``1/K`` for
 4 ≤ K ≤ 257).  ``K = 7`` is the centre and 6 rays at ``sqrt(4/7)`` of the half-angle, 60° apart,
 starting along the beam's local ``u`` axis.  :meth:`Beam.footprint_directions
-<zbuf_occlude.sensors.beam.Beam.footprint_directions>` casts a beam's sub-rays with these offsets.
+<zbuf_occlude.sensors.beam.fields.Beam.footprint_directions>` casts a beam's sub-rays with these offsets.
 
 Offsets are polar, in the beam's local frame: column 0 is the angle off the beam axis, column 1
 the azimuth about it from ``u`` towards ``v`` (both radians).  Polar, not Cartesian, so that
@@ -176,7 +176,7 @@ def subray_directions(directions: ArrayLike, offsets: ArrayLike) -> NDArray[np.f
         Sub-ray ``k`` of beam ``n`` is ``normalise(d + tan(θ_k) (cos φ_k u + sin φ_k v))`` with
         ``u = normalise(d × h)``, ``v = d × u`` and ``h`` the z axis, or the x axis where
         ``|d_z| ≥ 0.9`` (:meth:`Beam.footprint_directions
-        <zbuf_occlude.sensors.beam.Beam.footprint_directions>` casts a beam's sub-rays with it).
+        <zbuf_occlude.sensors.beam.fields.Beam.footprint_directions>` casts a beam's sub-rays with it).
         A sub-ray at angle 0 is ``d`` itself, unnormalised.
 
     Raises
@@ -232,7 +232,7 @@ def plane_subrays(range_m: ArrayLike, directions: ArrayLike, normal: ArrayLike, 
     ``d`` meets at range ``t`` at range ``t (n · d) / (n · d_k)``, at incidence ``|n · d_k|``; a
     sub-ray parallel to the plane gives inf or nan, one meeting it behind the origin a negative
     range.  Computed from ``n · d``, ``n · u`` and ``n · v``, without the sub-rays themselves
-    (:func:`~.uniform_kernel.plane_subray`, compiled).
+    (:func:`~zbuf_occlude.sensors.beam.adaptive_kernel.plane_subray`, compiled).
 
     Parameters
     ----------
@@ -256,7 +256,7 @@ def plane_subrays(range_m: ArrayLike, directions: ArrayLike, normal: ArrayLike, 
     t = np.asarray(range_m, dtype=np.float64)
     if t.shape != (len(d),) or len(n) != len(d):
         raise InvalidInputError(f"range_m, directions and normal need one row per beam, got {t.shape}, {d.shape}, {n.shape}")
-    from zbuf_occlude.sensors.uniform_kernel import plane_subray_rows, subray_trig  # numba: imported when used
+    from zbuf_occlude.sensors.beam.adaptive_kernel import plane_subray_rows, subray_trig  # numba: imported when used
 
     return plane_subray_rows(t, np.ascontiguousarray(d), np.ascontiguousarray(n), *subray_trig(off))
 

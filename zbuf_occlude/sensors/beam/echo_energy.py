@@ -1,13 +1,13 @@
 """The multi-return model on a scene: the sub-ray hits of each pulse weighed and resolved into returns.
 
-One implementation for every scanner (the spinning LiDAR and ray tables of :func:`~.scan.scan`,
-the airborne scanner of :func:`~.scan.scan_airborne`): :func:`surface_optics` turns a
+One implementation for every scanner (the spinning LiDAR and ray tables of :func:`~zbuf_occlude.sensors.scan.scan`,
+the airborne scanner of :func:`~zbuf_occlude.sensors.scan.scan_airborne`): :func:`surface_optics` turns a
 scanner's ``reflectivity`` and ``transmittance`` (a number, one per object id, or the cited table
-of :mod:`.reflectance`, whose lookup gives each face its file's material) into values per face of
+of :mod:`zbuf_occlude.sensors.scene.materials`, whose lookup gives each face its file's material) into values per face of
 the scene; :func:`echo_returns` casts each sub-ray on through
-the surfaces that transmit (:func:`~.raycast.cast_embree_beyond`), weighs every hit by
-:func:`~.echoes.hit_energy` and the transmittance before it (:func:`~.echoes.attenuate_along_subray`)
-and resolves a pulse's hits into returns (:func:`~.echoes.resolve_echoes`);
+the surfaces that transmit (:func:`~zbuf_occlude.sensors.raycast.embree.cast_embree_beyond`), weighs every hit by
+:func:`~zbuf_occlude.sensors.beam.echoes.hit_energy` and the transmittance before it (:func:`~zbuf_occlude.sensors.beam.echoes.attenuate_along_subray`)
+and resolves a pulse's hits into returns (:func:`~zbuf_occlude.sensors.beam.echoes.resolve_echoes`);
 :func:`strongest_echo` is the one-return footprint model (the strongest surface, mixed pixels).
 """
 
@@ -21,11 +21,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.attenuation import attenuate_along_subray
+from zbuf_occlude.sensors.beam.attenuation import attenuate_along_subray
 from zbuf_occlude.sensors.checks import real
-from zbuf_occlude.sensors.echoes import MAX_POWER_NOISE, hit_energy, resolve_echoes
-from zbuf_occlude.sensors.raycast import MAX_HITS, cast_embree_beyond, face_normals
-from zbuf_occlude.sensors.scene import BuiltScene
+from zbuf_occlude.sensors.beam.echoes import MAX_POWER_NOISE, hit_energy, resolve_echoes
+from zbuf_occlude.sensors.raycast.embree import MAX_HITS, cast_embree_beyond, face_normals
+from zbuf_occlude.sensors.scene.objects import BuiltScene
 
 __all__ = ["Radiometry", "Transmission", "check_transmittance_cast", "echo_returns", "strongest_echo", "surface_optics"]
 
@@ -39,7 +39,7 @@ def surface_optics(built: BuiltScene, reflectivity, transmittance, *, wavelength
         The scene (its objects give the ids: 0 the ground, then the objects).
     reflectivity, transmittance : None, float, (n_objects + 1,) float, or "table"
         Lambertian ρ ≥ 0 and round-trip transmittance in [0, 1] per object id: one value for
-        all, one per id, or ``"table"``: :func:`~.reflectance.scene_optics` at ``wavelength_nm``
+        all, one per id, or ``"table"``: :func:`~zbuf_occlude.sensors.scene.materials.scene_optics` at ``wavelength_nm``
         (the cited table, by each face's material in its file, else its object's material, class
         or file name).
     wavelength_nm : float
@@ -62,7 +62,7 @@ def surface_optics(built: BuiltScene, reflectivity, transmittance, *, wavelength
         A string other than "table", a value out of range or of the wrong length, a
         transmittance above 0 with one return per pulse or another backend than "embree".
     """
-    from zbuf_occlude.sensors.reflectance import scene_optics
+    from zbuf_occlude.sensors.scene.materials import scene_optics
 
     table = None
     for name, value in (("reflectivity", reflectivity), ("transmittance", transmittance)):
@@ -89,7 +89,7 @@ def check_transmittance_cast(shown: str, *, resolves_echoes: bool, backend: str,
     surface are further echoes of its pulses), cast with Embree (every hit along each sub-ray; the z-buffer keeps the
     nearest face per pixel).  ``shown`` is the transmittance as the caller shows it ("above 0", a user's value);
     ``names`` maps the fields ``transmittance``, ``max_returns``, ``footprint_rays`` and ``backend`` to the caller's
-    words, as :func:`~zbuf_occlude.sensors.beam.check_returns`'s do.
+    words, as :func:`~zbuf_occlude.sensors.beam.fields.check_returns`'s do.
 
     Raises
     ------
@@ -138,7 +138,7 @@ def strongest_echo(
     """Resolve each beam's ``k`` footprint rays into one return: the strongest echo.
 
     Each ray carries ``1/k`` of the beam's energy (``weights`` (k,) instead, when given: a
-    Gaussian :attr:`Beam.profile <zbuf_occlude.sensors.beam.Beam.profile>`); a ray hitting a surface of reflectivity ρ at
+    Gaussian :attr:`Beam.profile <zbuf_occlude.sensors.beam.fields.Beam.profile>`); a ray hitting a surface of reflectivity ρ at
     incidence θ and range R sends back ``ρ |cos θ| / (k R²)`` (ρ = 1 without ``rho``, else ``rho``
     (F,) per face of ``built.mesh``, :func:`surface_optics`).  The
     echoes of one object id add up; the object with the most energy is the return (ties: the
@@ -189,9 +189,9 @@ class Radiometry:
     reflectivity : (F,) float
         Lambertian ρ per face of the built scene's mesh (:func:`surface_optics`).
     detection_threshold : float
-        Least echo energy kept, m⁻² (:func:`~.echoes.hit_energy`'s units).
+        Least echo energy kept, m⁻² (:func:`~zbuf_occlude.sensors.beam.echoes.hit_energy`'s units).
     power_noise : float
-        σ in [0, :data:`~.echoes.MAX_POWER_NOISE`]: every hit of a pulse is scaled by one
+        σ in [0, :data:`~zbuf_occlude.sensors.beam.echoes.MAX_POWER_NOISE`]: every hit of a pulse is scaled by one
         ``exp(σ z)``, z ~ N(0, 1) per pulse (P draws from ``rng``); 0: nothing is drawn.
     rng : numpy.random.Generator, optional
         Needed when ``power_noise`` is above 0.
@@ -221,12 +221,12 @@ class Transmission:
     ----------
     transmittance : (F,) float
         Round-trip transmittance per face of the built scene's mesh, in [0, 1]
-        (:func:`surface_optics`; :func:`~.echoes.attenuate_along_subray`: a gap fraction ``g`` is
+        (:func:`surface_optics`; :func:`~zbuf_occlude.sensors.beam.echoes.attenuate_along_subray`: a gap fraction ``g`` is
         ``g``, a pane of one-way ``T`` is ``T²``); 0 everywhere: opaque.
     origins : (3,) or (P·K, 3) float
         The sub-rays' origin, world frame, metres (one, or one per sub-ray).
     max_hits : int
-        Most hits cast along one sub-ray (:func:`~.raycast.cast_embree_beyond`).
+        Most hits cast along one sub-ray (:func:`~zbuf_occlude.sensors.raycast.embree.cast_embree_beyond`).
     """
 
     transmittance: ArrayLike
@@ -244,8 +244,8 @@ def echo_returns(
     One implementation for the spinning LiDAR (:func:`~zbuf_occlude.sensors.scan.scan`) and the airborne scanner
     (:func:`~zbuf_occlude.sensors.scan.scan_airborne`).  Each sub-ray's first hit is given;
     where ``through`` gives its surface a transmittance above 0, the sub-ray is cast on through it
-    (:func:`~.raycast.cast_embree_beyond`, Embree) and each hit behind gets its energy times the
-    transmittances of the surfaces before it on the sub-ray (:func:`~.echoes.attenuate_along_subray`).
+    (:func:`~zbuf_occlude.sensors.raycast.embree.cast_embree_beyond`, Embree) and each hit behind gets its energy times the
+    transmittances of the surfaces before it on the sub-ray (:func:`~zbuf_occlude.sensors.beam.echoes.attenuate_along_subray`).
     Without ``through`` (or with 0 everywhere: opaque) only the first hits count, bit for bit.
 
     Parameters
@@ -259,9 +259,9 @@ def echo_returns(
     t : (P·K,) float64
         Range of that hit, metres.
     weights : (K,) float64
-        Each sub-ray's share of the pulse's energy (:func:`~.footprint.footprint_offsets`).
+        Each sub-ray's share of the pulse's energy (:func:`~zbuf_occlude.sensors.beam.footprint.footprint_offsets`).
     range_resolution_m : float
-        Echoes of one pulse closer than this merge (:func:`~.echoes.resolve_echoes`), metres, > 0.
+        Echoes of one pulse closer than this merge (:func:`~zbuf_occlude.sensors.beam.echoes.resolve_echoes`), metres, > 0.
     max_returns : int
         The first this many echoes of a pulse in range order are kept.
     radiometry : Radiometry, optional
@@ -274,15 +274,15 @@ def echo_returns(
         Transmittance per face and the sub-rays' origins; None: opaque, first hits only.
     min_echo_reflectance : float
         Least apparent reflectance (energy × range²) of a detected echo, in [0, 1]
-        (:func:`~.echoes.resolve_echoes`); applied with or without ``radiometry`` (ρ 1 without).
+        (:func:`~zbuf_occlude.sensors.beam.echoes.resolve_echoes`); applied with or without ``radiometry`` (ρ 1 without).
     echo_rule : {"chain", "waveform"}
-        How a pulse's hits merge into echoes (:func:`~.echoes.resolve_echoes`).
+        How a pulse's hits merge into echoes (:func:`~zbuf_occlude.sensors.beam.echoes.resolve_echoes`).
 
     Returns
     -------
     pulse : (E,) int64, row of the pulse; face : (E,) int64; range : (E,) float64, metres;
-    energy : (E,) float64, m⁻² (:func:`~.echoes.hit_energy`: weight · ρ · ``|cos θ|`` / R², times
-    the transmittance before the hit): sorted by pulse, then range (:class:`~.echoes.Echoes`).
+    energy : (E,) float64, m⁻² (:func:`~zbuf_occlude.sensors.beam.echoes.hit_energy`: weight · ρ · ``|cos θ|`` / R², times
+    the transmittance before the hit): sorted by pulse, then range (:class:`~zbuf_occlude.sensors.beam.echoes.Echoes`).
 
     Raises
     ------
@@ -326,7 +326,7 @@ def echo_returns(
 
 
 def returns_of_mode(pulse: ArrayLike, energy: ArrayLike, mode: str) -> NDArray[np.int64]:
-    """Rows of resolved echoes that a receiver in return mode ``mode`` records (:data:`~.beam.RETURN_MODES`).
+    """Rows of resolved echoes that a receiver in return mode ``mode`` records (:data:`~zbuf_occlude.sensors.beam.fields.RETURN_MODES`).
 
     Parameters
     ----------

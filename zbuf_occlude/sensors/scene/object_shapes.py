@@ -1,6 +1,6 @@
 """The shapes of a scene's objects: primitive meshes and the width-profile warp.
 
-A scene object (:class:`~zbuf_occlude.sensors.scene.SceneObject`) is a mesh file, a given mesh or
+A scene object (:class:`~zbuf_occlude.sensors.scene.objects.SceneObject`) is a mesh file, a given mesh or
 a primitive, ``{"box_m": [x, y, z]}`` or ``{"cylinder": {"radius_m": r, "height_m": h}}`` (sizes
 in metres; :func:`primitive_args` checks one before trimesh allocates anything).  Its shape may be
 warped by a width profile: ``K >= 2`` horizontal stretch factors over the mesh's relative height
@@ -50,7 +50,7 @@ CYLINDER_KEYS = ("radius_m", "height_m", "sections")
 
 def check_width_profile(profile) -> tuple[float, ...]:
     """``profile`` as a tuple of floats, checked: at least 2 finite factors > 0
-    (:class:`~zbuf_occlude.sensors.scene.SceneObject` ``width_profile``).
+    (:class:`~zbuf_occlude.sensors.scene.objects.SceneObject` ``width_profile``).
 
     Raises
     ------

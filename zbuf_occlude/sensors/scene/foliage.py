@@ -54,8 +54,8 @@ MAX_LEAVES = 2_000_000
 #: Smallest leaf side, metres (a conifer's needle cluster is larger): below it the count of leaves
 #: is refused as :data:`MAX_LEAVES` refuses it, before anything is drawn.
 MIN_LEAF_SIDE_M = 1e-3
-#: The material name of the leaves a scene object grows (:class:`~zbuf_occlude.sensors.scene.SceneObject`'s
-#: ``foliage``): foliage's reflectance, opaque (:data:`~zbuf_occlude.sensors.reflectance.MATERIALS`).
+#: The material name of the leaves a scene object grows (:class:`~zbuf_occlude.sensors.scene.objects.SceneObject`'s
+#: ``foliage``): foliage's reflectance, opaque (:data:`~zbuf_occlude.sensors.scene.materials.MATERIALS`).
 LEAF_MATERIAL = "grown_leaf"
 #: Keys of a scene file's ``foliage`` (:class:`Foliage`'s fields).
 FOLIAGE_KEYS = ("leaf_area_density", "leaf_side_m", "shell_m", "keep_surface", "seed")

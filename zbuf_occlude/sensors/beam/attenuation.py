@@ -1,8 +1,8 @@
 """The share of a sub-ray's energy that reaches each of its hits through the surfaces before it, and comes back.
 
 Where a scan casts every hit along a sub-ray (surfaces that transmit: foliage as a gap fraction, a
-mesh fence, a pane), :func:`~.echo_model.echo_returns` weighs each hit's energy
-(:func:`~.echoes.hit_energy`) by :func:`attenuate_along_subray` before resolving echoes.
+mesh fence, a pane), :func:`~zbuf_occlude.sensors.beam.echo_energy.echo_returns` weighs each hit's energy
+(:func:`~zbuf_occlude.sensors.beam.echoes.hit_energy`) by :func:`attenuate_along_subray` before resolving echoes.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.hit_rows import hit_columns, rank_in_run, sorted_order
+from zbuf_occlude.sensors.beam.hit_rows import hit_columns, rank_in_run, sorted_order
 
 __all__ = ["attenuate_along_subray"]
 

@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.beam import IDEAL_BEAM, Beam, check_beam
+from zbuf_occlude.sensors.beam.fields import IDEAL_BEAM, Beam, check_beam
 from zbuf_occlude.sensors.pulses import Pulses, placed
 from zbuf_occlude.sensors.checks import MAX_SENSOR_RAYS, located, preset, real, reals, replaced, sensor_name, text
 
@@ -22,7 +22,7 @@ __all__ = ["Lidar", "LIDAR_PRESETS", "SPINNING_INTENSITY_SCALE", "lidar_preset",
 
 @dataclass(frozen=True)
 class Lidar:
-    """A spinning multi-beam LiDAR: a ring pattern that fires a :class:`~zbuf_occlude.sensors.beam.Beam`.
+    """A spinning multi-beam LiDAR: a ring pattern that fires a :class:`~zbuf_occlude.sensors.beam.fields.Beam`.
 
     Parameters
     ----------
@@ -40,7 +40,7 @@ class Lidar:
         Azimuth of the first firing of a revolution, degrees.
     beam : Beam
         The pulse and its receiver: footprint, returns, detection, range noise, dropout and range
-        limits (:class:`~zbuf_occlude.sensors.beam.Beam`); default the ``ideal`` beam.
+        limits (:class:`~zbuf_occlude.sensors.beam.fields.Beam`); default the ``ideal`` beam.
     source : str
         Data sheet the pattern's numbers come from.
 

@@ -1,12 +1,12 @@
 """The adaptive footprint's compiled loops: its test and plane echo in one pass a pulse, and the pulses' neighbours across lines.
 
 :func:`uniform_plane_echoes` decides, pulse by pulse, whether a footprint is *uniform* (the rules
-of :mod:`.adaptive_footprint`'s docstring: its centre face does not transmit, its neighbours lie
+of :mod:`zbuf_occlude.sensors.beam.adaptive_cast`'s docstring: its centre face does not transmit, its neighbours lie
 on that face's plane, every sub-ray meets the plane inside the face, one echo, within the range
 limits) and gives a uniform hit's one echo on that plane, without ``(P, K)`` temporaries.  Each
 sub-ray's range and incidence on the plane (:func:`plane_subray`) and the plane's echo
-(:func:`plane_echo`) are the one implementation: :func:`~.footprint.plane_subrays` and
-:func:`~.adaptive_footprint.plane_echoes` loop over them for whole arrays.
+(:func:`plane_echo`) are the one implementation: :func:`~zbuf_occlude.sensors.beam.footprint.plane_subrays` and
+:func:`~zbuf_occlude.sensors.beam.adaptive_cast.plane_echoes` loop over them for whole arrays.
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ def _plane_subray(t, nd, nu, nv, tan, cos_phi, sin_phi, root):
     return t * (nd / ndk), abs(ndk)
 
 
-#: ``subray_axes(dx, dy, dz) -> (ux, uy, uz, vx, vy, vz)``: the axes a beam's sub-rays turn about (:func:`~.footprint.subray_directions`).
+#: ``subray_axes(dx, dy, dz) -> (ux, uy, uz, vx, vy, vz)``: the axes a beam's sub-rays turn about (:func:`~zbuf_occlude.sensors.beam.footprint.subray_directions`).
 subray_axes = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")(_subray_axes)
 #: ``plane_subray(t, n·d, n·u, n·v, tan θ, cos φ, sin φ, sqrt(1 + tan² θ)) -> (range, |cos|)`` of one sub-ray.
 plane_subray = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")(_plane_subray)
@@ -68,7 +68,7 @@ plane_echo = numba.njit(cache=True, nogil=True, error_model="numpy", inline="alw
 
 def subray_trig(offsets: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
     """``(tan θ, cos φ, sin φ, sqrt(1 + tan² θ))`` (K,) float64 of the sub-rays ``offsets (K, 2)`` (angle off the axis,
-    azimuth; radians): what :func:`plane_subray` takes, as :func:`~.footprint.plane_subrays` computed them."""
+    azimuth; radians): what :func:`plane_subray` takes, as :func:`~zbuf_occlude.sensors.beam.footprint.plane_subrays` computed them."""
     tan = np.array([math.tan(theta) for theta in offsets[:, 0]])
     phi = np.ascontiguousarray(offsets[:, 1])
     return tan, np.cos(phi), np.sin(phi), np.sqrt(1.0 + tan * tan)
@@ -76,7 +76,7 @@ def subray_trig(offsets: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def plane_subray_rows(t, directions, normal, tan, cos_phi, sin_phi, root):
-    """``(range, cos)`` (N, K): :func:`plane_subray` of every sub-ray of every beam (:func:`~.footprint.plane_subrays`'s loop)."""
+    """``(range, cos)`` (N, K): :func:`plane_subray` of every sub-ray of every beam (:func:`~zbuf_occlude.sensors.beam.footprint.plane_subrays`'s loop)."""
     n, n_sub = len(t), len(tan)
     ranges, cosines = np.empty((n, n_sub)), np.empty((n, n_sub))
     for i in range(n):
@@ -91,7 +91,7 @@ def plane_subray_rows(t, directions, normal, tan, cos_phi, sin_phi, root):
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def plane_echo_rows(ranges, cosines, weights, min_range):
-    """``(range, energy)`` (P,): :func:`plane_echo` of every row (:func:`~.adaptive_footprint.plane_echoes`' loop)."""
+    """``(range, energy)`` (P,): :func:`plane_echo` of every row (:func:`~zbuf_occlude.sensors.beam.adaptive_cast.plane_echoes`' loop)."""
     n = len(ranges)
     echo_range, energy = np.empty(n), np.empty(n)
     for p in range(n):
@@ -207,7 +207,7 @@ def _uniform_plane_echoes(origins, directions, face, t, neighbours, planes, face
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def nearest_in_line(key, position, line, order, width, low, step, column, out):
     """Write into ``out[:, column]`` each pulse's nearest pulse by position on line ``line + step``: the loop of
-    :func:`~.adaptive_footprint.grid_neighbours` over pulses sorted by ``key = line · width + (position − low)``
+    :func:`~zbuf_occlude.sensors.beam.adaptive_cast.grid_neighbours` over pulses sorted by ``key = line · width + (position − low)``
     (``order`` their rows), the first key at or after each target (``np.searchsorted``'s side left), ties to the
     lower position.  Along a line the targets rise with the positions, so the search walks on from the last one;
     it searches by halves where a line starts."""
@@ -291,7 +291,7 @@ def uniform_plane_echoes(
     weights: NDArray[np.float64],
     rules: UniformRules,
 ) -> tuple[NDArray[np.bool_], NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
-    """The uniform footprints, and the plane echo of those that hit (rules: :mod:`.adaptive_footprint`).
+    """The uniform footprints, and the plane echo of those that hit (rules: :mod:`zbuf_occlude.sensors.beam.adaptive_cast`).
 
     Parameters
     ----------
@@ -323,7 +323,7 @@ def uniform_plane_echoes(
     rows : (U,) int64
         The uniform pulses that hit, ascending.
     echo_range, energy : (U,) float64
-        Their echo's range, metres, and energy for ρ = 1 (:func:`~.adaptive_footprint.plane_echoes`).
+        Their echo's range, metres, and energy for ρ = 1 (:func:`~zbuf_occlude.sensors.beam.adaptive_cast.plane_echoes`).
 
     Raises
     ------

@@ -1,7 +1,7 @@
 """Airborne scanner presets: real scanners, each with its data sheet's beam, flown as a survey flies them.
 
-The pattern (:class:`~zbuf_occlude.sensors.airborne.AirborneScanner`) and the beam
-(:class:`~zbuf_occlude.sensors.beam.Beam`) of each preset, with their sources beside them.
+The pattern (:class:`~zbuf_occlude.sensors.patterns.airborne.AirborneScanner`) and the beam
+(:class:`~zbuf_occlude.sensors.beam.fields.Beam`) of each preset, with their sources beside them.
 """
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ from __future__ import annotations
 import math
 
 
-from zbuf_occlude.sensors.airborne import AirborneScanner
-from zbuf_occlude.sensors.beam import Beam
+from zbuf_occlude.sensors.patterns.airborne import AirborneScanner
+from zbuf_occlude.sensors.beam.fields import Beam
 from zbuf_occlude.sensors.checks import preset
 
 __all__ = ["AIRBORNE_PRESETS", "airborne_preset"]

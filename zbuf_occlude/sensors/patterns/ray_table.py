@@ -3,9 +3,9 @@
 Non-repetitive scanners (Livox Avia, Mid-40 and Mid-70 rosettes, DJI Zenmuse L2) and hybrid
 solid-state units fire along a pattern that no beam table and spin rate describe.  Their users
 can give that pattern as a table (:mod:`zbuf_occlude.io.ray_tables` reads CSV and ``.npy``):
-:class:`RayTable` scans like a :class:`~zbuf_occlude.sensors.lidar.Lidar` whose rays are the
+:class:`RayTable` scans like a :class:`~zbuf_occlude.sensors.patterns.spinning.Lidar` whose rays are the
 table's rows, in the LiDAR's sensor frame and angle convention
-(:func:`~zbuf_occlude.sensors.lidar.beam_directions`: x forward at azimuth 0°, y left at +90°,
+(:func:`~zbuf_occlude.sensors.patterns.spinning.beam_directions`: x forward at azimuth 0°, y left at +90°,
 z up at elevation +90°), with each point's time the table's time of its pulse.
 
 :func:`rosette_table` makes a Livox-like rosette table, an approximation for trying the sensor
@@ -25,8 +25,8 @@ from numpy.typing import NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.ray_tables import read_ray_table
 from zbuf_occlude.sensors.checks import MAX_SENSOR_RAYS, count, located, real, reals, replaced, sensor_name, text, value_kind
-from zbuf_occlude.sensors.beam import IDEAL_BEAM, Beam, check_beam
-from zbuf_occlude.sensors.lidar import SPINNING_INTENSITY_SCALE, Lidar, beam_directions, in_sector
+from zbuf_occlude.sensors.beam.fields import IDEAL_BEAM, Beam, check_beam
+from zbuf_occlude.sensors.patterns.spinning import SPINNING_INTENSITY_SCALE, Lidar, beam_directions, in_sector
 from zbuf_occlude.sensors.pulses import Pulses, placed
 
 __all__ = ["RAY_TABLE_FILE_BEAM", "RAY_TABLE_PRESETS", "ROSETTE_FOV_DEG", "ROSETTE_PRISM_HZ", "RayTable", "load_ray_table", "rosette_table"]
@@ -55,9 +55,9 @@ class RayTable:
     azimuth_deg, elevation_deg : (N,) float
         Direction of each pulse in the sensor frame, degrees: azimuth from +x towards +y,
         elevation above the xy plane, in [−90°, 90°]
-        (:func:`~zbuf_occlude.sensors.lidar.beam_directions`).
+        (:func:`~zbuf_occlude.sensors.patterns.spinning.beam_directions`).
     beam : Beam
-        The pulse and its receiver (:class:`~zbuf_occlude.sensors.beam.Beam`); default the ``ideal`` beam.
+        The pulse and its receiver (:class:`~zbuf_occlude.sensors.beam.fields.Beam`); default the ``ideal`` beam.
     source : str
         Where the table comes from (metadata).
 
@@ -152,7 +152,7 @@ class RayTable:
     def rays(
         self, azimuth_range_deg: tuple[float, float] | None = None
     ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64]]:
-        """Unit pulse directions, sensor frame, in table order: the contract of :meth:`Lidar.rays <zbuf_occlude.sensors.lidar.Lidar.rays>`.
+        """Unit pulse directions, sensor frame, in table order: the contract of :meth:`Lidar.rays <zbuf_occlude.sensors.patterns.spinning.Lidar.rays>`.
 
         Parameters
         ----------
@@ -162,7 +162,7 @@ class RayTable:
         Returns
         -------
         directions : (N', 3) float64
-            :func:`~zbuf_occlude.sensors.lidar.beam_directions` of the rows' elevations and azimuths.
+            :func:`~zbuf_occlude.sensors.patterns.spinning.beam_directions` of the rows' elevations and azimuths.
         row : (N',) int64
             Each ray's row in the table (the pulse id).
         azimuth_deg : (N',) float64
@@ -193,7 +193,7 @@ class RayTable:
 
         Each row is fired at ``(i + b / n_beams) / (n_azimuths · rotation_hz)`` seconds, the LiDAR's own
         ``gps_time``, along the LiDAR's own direction
-        (:func:`~zbuf_occlude.sensors.lidar.beam_directions` of the same angles), with the LiDAR's beam.  Without noise or dropout, a
+        (:func:`~zbuf_occlude.sensors.patterns.spinning.beam_directions` of the same angles), with the LiDAR's beam.  Without noise or dropout, a
         scan by the table has the LiDAR's points, pulse by pulse (the pulses' order differs: the
         LiDAR's is ring by ring, the table's by time, so noise draws fall on other pulses).
 
@@ -219,7 +219,7 @@ def load_ray_table(path: str | os.PathLike, *, name: str | None = None, within: 
     within : str or PathLike, optional
         The folder ``path`` was named from: it must stay inside it, links resolved.
     **fields
-        Other :class:`RayTable` fields: ``beam=`` (a :class:`~zbuf_occlude.sensors.beam.Beam`: the
+        Other :class:`RayTable` fields: ``beam=`` (a :class:`~zbuf_occlude.sensors.beam.fields.Beam`: the
         ranges, noise and return model) and ``source=``.
 
     Raises
@@ -269,7 +269,7 @@ def rosette_table(
         The prisms' rotation rates, revolutions per second (opposite signs: counter-rotating).
     name : str
     **fields
-        Other :class:`RayTable` fields: ``beam=`` (a :class:`~zbuf_occlude.sensors.beam.Beam`: the
+        Other :class:`RayTable` fields: ``beam=`` (a :class:`~zbuf_occlude.sensors.beam.fields.Beam`: the
         ranges, noise and return model) and ``source=``.
 
     Returns
@@ -317,7 +317,7 @@ RAY_TABLE_FILE_BEAM = Beam(
 # corrected the 7,294 and −4,664 of earlier versions: revolutions per minute).  The pattern is
 # :func:`rosette_table`'s first-order Risley model over one 0.1 s frame (10,000 pulses).
 # Intensity: the 8-bit reflectivity of Livox's point format (0–150 diffuse, 151–255
-# retroreflective), scaled as the spinning presets are (:data:`~zbuf_occlude.sensors.lidar.SPINNING_INTENSITY_SCALE`): an
+# retroreflective), scaled as the spinning presets are (:data:`~zbuf_occlude.sensors.patterns.spinning.SPINNING_INTENSITY_SCALE`): an
 # ASSUMPTION.
 RAY_TABLE_PRESETS: dict[str, RayTable] = {
     "livox-mid70": rosette_table(

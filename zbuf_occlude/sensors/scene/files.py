@@ -1,8 +1,8 @@
-"""Scene files: a :class:`~zbuf_occlude.sensors.scene.ScanScene` read from JSON or YAML.
+"""Scene files: a :class:`~zbuf_occlude.sensors.scene.objects.ScanScene` read from JSON or YAML.
 
-The format is in :mod:`zbuf_occlude.sensors.scene`'s docstring; its keys are :data:`SCENE_KEYS`,
+The format is in :mod:`zbuf_occlude.sensors.scene.objects`'s docstring; its keys are :data:`SCENE_KEYS`,
 :data:`GROUND_KEYS`, :data:`SENSOR_KEYS` and :data:`OBJECT_KEYS` (a primitive's:
-:data:`~zbuf_occlude.sensors.object_shapes.PRIMITIVE_KEYS`).
+:data:`~zbuf_occlude.sensors.scene.object_shapes.PRIMITIVE_KEYS`).
 
 A scene file may come from anyone.  It is read by :func:`~zbuf_occlude.sensors.spec_files.read_spec_file`
 (size and nesting bounded, no YAML aliases), every field is checked where the dataclass is
@@ -21,7 +21,7 @@ from pathlib import Path
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.checks import MAX_SCENE_OBJECTS, located, mapping, value_kind
-from zbuf_occlude.sensors.scene import ScanScene, SceneObject
+from zbuf_occlude.sensors.scene.objects import ScanScene, SceneObject
 
 __all__ = ["load_scene", "scene_from_dict", "SCENE_KEYS", "GROUND_KEYS", "SENSOR_KEYS", "OBJECT_KEYS"]
 
@@ -33,7 +33,7 @@ OBJECT_KEYS = ("mesh", "class", "position_m", "yaw_deg", "size_m", "up", "foliag
 
 
 def scene_from_dict(spec: Mapping, base_dir: Path | None = None) -> ScanScene:
-    """A scene from the JSON/YAML structure of :mod:`zbuf_occlude.sensors.scene`'s docstring.
+    """A scene from the JSON/YAML structure of :mod:`zbuf_occlude.sensors.scene.objects`'s docstring.
 
     Parameters
     ----------
@@ -100,7 +100,7 @@ def scene_from_dict(spec: Mapping, base_dir: Path | None = None) -> ScanScene:
 
 
 def load_scene(path: str | Path) -> ScanScene:
-    """Read a scene spec from ``.json``, ``.yaml`` or ``.yml`` (:mod:`zbuf_occlude.sensors.scene`'s docstring).
+    """Read a scene spec from ``.json``, ``.yaml`` or ``.yml`` (:mod:`zbuf_occlude.sensors.scene.objects`'s docstring).
 
     The file is read by :func:`~zbuf_occlude.sensors.spec_files.read_spec_file` (a regular
     file of at most :data:`~zbuf_occlude.io.caps.MAX_SPEC_FILE_BYTES`, nested at

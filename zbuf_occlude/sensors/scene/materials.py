@@ -3,7 +3,7 @@
 A small table, :data:`MATERIALS`: the Lambertian reflectance ρ of a material at 905 nm
 (spinning automotive LiDARs), 1064 nm (Nd:YAG airborne scanners) and 1550 nm (fibre-laser
 scanners), its round-trip transmittance (the share of a pulse that goes on through the surface
-and comes back through it: :func:`~zbuf_occlude.sensors.echoes.attenuate_along_subray`), and
+and comes back through it: :func:`~zbuf_occlude.sensors.beam.echoes.attenuate_along_subray`), and
 the source of each value.  **The values are approximate**: typical figures for a material
 class, read from the sources below (a table of typical reflectances, or the level of a
 library's spectra of that class at the wavelength), not averages computed from the libraries'
@@ -60,7 +60,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.scene import face_materials_of
 
 if TYPE_CHECKING:
-    from zbuf_occlude.sensors.scene import BuiltScene
+    from zbuf_occlude.sensors.scene.objects import BuiltScene
 
 __all__ = [
     "AIRBORNE_WAVELENGTH_NM",
@@ -95,7 +95,7 @@ AIRBORNE_WAVELENGTH_NM = 1064.0
 FOLIAGE_GAP_FRACTION = 0.3
 #: The materials of crown surfaces: a mesh that stands for leaves or needles with gaps between them
 #: (the rows with :data:`FOLIAGE_GAP_FRACTION`), where :attr:`Beam.foliage_dropout
-#: <zbuf_occlude.sensors.beam.Beam.foliage_dropout>` loses returns.  A grown leaf is not one: it is one leaf.
+#: <zbuf_occlude.sensors.beam.fields.Beam.foliage_dropout>` loses returns.  A grown leaf is not one: it is one leaf.
 CROWN_MATERIALS = ("foliage", "needles")
 
 
