@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError, UnsafePathError
-from zbuf_occlude.io.las import MAX_VLRS, SCAN_ANGLE_STEP_DEG, LasPoints, las_bytes, read_las
+from zbuf_occlude.io.las import MAX_VLRS, SCAN_ANGLE_STEP_DEG, LasPoints, SurveyFields, las_bytes, read_las
 
 #: The real airborne scans (research-only, next to the repository; skipped when absent).
 ALS_RETURNS = Path(os.environ.get("ZBUF_OCCLUDE_SHARED_DATA", Path(__file__).resolve().parents[3] / "shared" / "data")) / "als_returns"
@@ -54,7 +54,9 @@ def _offset_to_points(data: bytes) -> int:
 def test_las_bytes_round_trips_through_laspy_and_read_las(tmp_path: Path, compress: bool, colour: bool) -> None:
     f = _fields()
     rgb = np.random.default_rng(1).integers(0, 65_536, (N, 3)) if colour else None
-    data = las_bytes(f["points"], **{k: v for k, v in f.items() if k != "points"}, rgb=rgb, scale=0.001, compress=compress)
+    data = las_bytes(
+        f["points"], **{k: v for k, v in f.items() if k != "points"}, rgb=rgb, survey=SurveyFields(scale=0.001), compress=compress
+    )
     back = laspy.read(io.BytesIO(data))
     assert back.header.version == "1.4" and back.header.point_format.id == (7 if colour else 6)
     assert back.header.are_points_compressed == compress
@@ -83,7 +85,7 @@ def test_a_scan_of_no_points_and_a_file_of_another_scale_round_trip(tmp_path: Pa
     assert len(empty) == 0 and empty.points.shape == (0, 3)
     f = _fields(50)
     data = las_bytes(f["points"] * 1000, intensity=f["intensity"], return_number=f["return_number"],
-                     number_of_returns=f["number_of_returns"], gps_time=f["gps_time"], scan_angle_deg=f["scan_angle_deg"], scale=1.0)  # fmt: skip
+                     number_of_returns=f["number_of_returns"], gps_time=f["gps_time"], scan_angle_deg=f["scan_angle_deg"], survey=SurveyFields(scale=1.0))  # fmt: skip
     assert np.abs(read_las(_write(tmp_path, data)).points - f["points"] * 1000).max() <= 0.5
 
 
@@ -139,7 +141,7 @@ def _encode(**changes) -> bytes:
         ({"gps_time": "now"}, ArgumentTypeError, "gps_time must be a numeric array"),
         ({"classification": np.full(20, True)}, ArgumentTypeError, "classification must be integers"),
         ({"compress": "yes"}, ArgumentTypeError, "compress must be True or False"),
-        ({"scale": "1mm"}, ArgumentTypeError, "scale must be a number"),
+        ({"survey": SurveyFields(scale="1mm")}, ArgumentTypeError, "scale must be a number"),
         ({"points": np.zeros((20, 2))}, InvalidInputError, r"points must have shape \(N, 3\)"),
         ({"intensity": np.zeros(19, int)}, InvalidInputError, r"intensity must have shape \(20,\)"),
         ({"intensity": np.full(20, 70_000)}, InvalidInputError, r"intensity must be finite and within \[0, 65535\]"),
@@ -150,7 +152,7 @@ def _encode(**changes) -> bytes:
         ({"scan_angle_deg": np.full(20, 181.0)}, InvalidInputError, r"scan_angle_deg must be finite and within \[-180, 180\]"),
         ({"gps_time": np.full(20, np.nan)}, InvalidInputError, "gps_time must be finite"),
         ({"rgb": np.zeros((20, 4), int)}, InvalidInputError, r"rgb must have shape \(20, 3\)"),
-        ({"scale": 0.0}, InvalidInputError, "scale must be finite and > 0"),
+        ({"survey": SurveyFields(scale=0.0)}, InvalidInputError, "scale must be finite and > 0"),
         ({"points": np.array([[0.0, 0, 0], [5e6, 0, 0]] * 10)}, InvalidInputError, "points span 5e.06 units.*use a larger scale"),
     ],
 )  # fmt: skip

@@ -145,7 +145,7 @@ def test_scan_backends_agree(sample_meshes):
     scene = _sample_scene(sample_meshes)
     lidar = S.Lidar.preset("vlp16")
     a = S.scan(scene, lidar, seed=3, azimuth_range_deg=(-20, 20))
-    b = S.scan(scene, lidar, seed=3, azimuth_range_deg=(-20, 20), backend="zbuffer", resolution=1024)
+    b = S.scan(scene, lidar, seed=3, azimuth_range_deg=(-20, 20), backend="zbuffer", zbuffer=S.ZBufferView(resolution=1024))
     assert len(a) == len(b) > 1000
     assert np.mean(np.abs(a.range_m - b.range_m) <= 1e-3) >= 0.999
 

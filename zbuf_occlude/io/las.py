@@ -363,6 +363,8 @@ class SurveyFields:
         ``"EPSG:2154+5720"``) of a projected CRS in metres, or of one compound with a vertical CRS
         in metres (:func:`~zbuf_occlude.io.las_crs.epsg_crs`), written as OGC WKT (pyproj makes it:
         the ``crs`` extra).
+    scale : float
+        Metres (units) per stored integer step of the coordinates, > 0 (default 1 mm).
     """
 
     object_id: Any = None
@@ -370,6 +372,7 @@ class SurveyFields:
     class_names: Sequence[str] | None = None
     adjusted_standard_gps_time: bool = False
     crs: int | str | None = None
+    scale: float = 0.001
 
 
 def _extra_bytes(n: int, object_id: Any, class_index: Any, class_names: Sequence[str] | None) -> dict[str, np.ndarray]:
@@ -413,7 +416,6 @@ def las_bytes(
     point_source_id: Any = None,
     classification: Any = None,
     rgb: Any = None,
-    scale: float = 0.001,
     compress: bool = False,
     survey: SurveyFields | None = None,
 ) -> bytes:
@@ -429,7 +431,7 @@ def las_bytes(
     ``object_id`` int32 and ``class_index`` uint16, and a VLR :data:`CLASS_NAMES_USER_ID` /
     :data:`CLASS_NAMES_RECORD_ID` holds ``class_names`` as a UTF-8 JSON array
     (``class_names[class_index]`` is a point's class).
-    The offsets are multiples of ``scale`` near the points' centre, so every coordinate reads back
+    The offsets are multiples of the survey's ``scale`` near the points' centre, so every coordinate reads back
     within ``scale / 2``.  The header's creation date is today's.  Write the bytes through the
     layer (:meth:`~zbuf_occlude.io.owned.OwnedFolder.write_bytes`).
 
@@ -452,13 +454,11 @@ def las_bytes(
         ASPRS class 0 to 255 (default 0: created, never classified).
     rgb : (N, 3) int, optional
         Red, green, blue, 0 to 65535; selects point format 7.
-    scale : float
-        Metres (units) per stored integer step, > 0 (default 1 mm).
     compress : bool
         LAZ (LASzip through lazrs) instead of LAS.
     survey : SurveyFields, optional
-        Object ids, class indices and names, the GPS time type and the CRS (default: none of them,
-        GPS week time).
+        Object ids, class indices and names, the GPS time type, the CRS and the coordinates' scale (default: none of
+        them, GPS week time, 1 mm steps).
 
     Returns
     -------
@@ -507,9 +507,9 @@ def las_bytes(
         raise ArgumentTypeError(f"adjusted_standard_gps_time must be True or False, got {described(survey.adjusted_standard_gps_time)}")
     extra = _extra_bytes(n, survey.object_id, survey.class_index, survey.class_names)
     wkt_crs = None if survey.crs is None else epsg_crs(survey.crs)
-    offsets, stored = _scaled(pts, scale)
+    offsets, stored = _scaled(pts, survey.scale)
     header = laspy.LasHeader(version="1.4", point_format=6 if colours is None else 7)
-    header.scales, header.offsets = np.full(3, float(scale)), offsets
+    header.scales, header.offsets = np.full(3, float(survey.scale)), offsets
     header.global_encoding.wkt = True
     if survey.adjusted_standard_gps_time:
         header.global_encoding.gps_time_type = laspy.header.GpsTimeType.STANDARD

@@ -19,6 +19,7 @@ from zbuf_occlude.sensors.patterns.spinning import LIDAR_PRESETS, Lidar, beam_di
 from zbuf_occlude.sensors.platform import Trajectory, load_trajectory
 from zbuf_occlude.sensors.patterns.ray_table import RAY_TABLE_PRESETS, RayTable, load_ray_table, rosette_table
 from zbuf_occlude.sensors.platform import look_at_pose
+from zbuf_occlude.sensors.raycast.zbuffer import ZBufferView
 from zbuf_occlude.sensors.scan import scan, scan_airborne
 from zbuf_occlude.sensors.scan_data import FRAMES, Scan, read_scan_npz
 from zbuf_occlude.sensors.scene.objects import GROUND_ID, ScanScene, SceneObject, sensor_pose
@@ -30,5 +31,5 @@ __all__ = [
     "AirborneScanner", "AIRBORNE_PRESETS", "airborne_preset", "scan_airborne",
     "DepthCamera", "DEPTH_CAMERA_PRESETS", "depth_camera_preset", "nguyen_axial_sigma_m",
     "ScanScene", "SceneObject", "load_scene", "sensor_pose", "GROUND_ID",
-    "Scan", "scan", "look_at_pose", "read_scan_npz", "FRAMES", "LidarFit", "fit_lidar",
+    "Scan", "scan", "ZBufferView", "look_at_pose", "read_scan_npz", "FRAMES", "LidarFit", "fit_lidar",
 ]  # fmt: skip

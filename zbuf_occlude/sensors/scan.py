@@ -25,7 +25,7 @@ from zbuf_occlude.sensors.kinds import kind_of
 from zbuf_occlude.sensors.platform import Trajectory, as_pose
 from zbuf_occlude.sensors.pulses import Pulses
 from zbuf_occlude.sensors.raycast.embree import BACKENDS, cast_embree, face_normals
-from zbuf_occlude.sensors.raycast.zbuffer import cast_zbuffer
+from zbuf_occlude.sensors.raycast.zbuffer import ZBufferView, cast_zbuffer
 from zbuf_occlude.sensors.scene.materials import on_crown
 from zbuf_occlude.sensors.scan_data import FRAMES, Scan
 from zbuf_occlude.sensors.scene.objects import BuiltScene, ScanScene, SceneObject
@@ -76,12 +76,12 @@ def _surface_optics(built: BuiltScene, beam: Beam, backend: str, reflectivity, t
     )
 
 
-def _cast(built: BuiltScene, origin, rays, backend: str, meta: dict, *, resolution: int, neighborhood: int, near_far):
+def _cast(built: BuiltScene, origin, rays, backend: str, meta: dict, *, zbuffer: ZBufferView, near_far):
     """First hit ``(face, t)`` of every ray with ``backend``; the z-buffer's fallback count goes into ``meta``."""
     if backend == "embree":
         return cast_embree(built.mesh, origin, rays)
     near, far = near_far
-    face, t, n_fallback = cast_zbuffer(built.mesh, origin, rays, resolution=resolution, neighborhood=neighborhood,
+    face, t, n_fallback = cast_zbuffer(built.mesh, origin, rays, resolution=zbuffer.resolution, neighborhood=zbuffer.neighborhood,
                                        znear=max(min(0.05, near * 0.5), 1e-3), zfar=far * 1.5 + 1.0)  # fmt: skip
     meta["n_fallback"] = n_fallback
     return face, t
@@ -127,8 +127,7 @@ def scan(
     backend: str = "embree",
     frame: str = "sensor",
     azimuth_range_deg: tuple[float, float] | None = None,
-    resolution: int = 2048,
-    neighborhood: int = 1,
+    zbuffer: ZBufferView = ZBufferView(),
     reflectivity: float | ArrayLike | str | None = None,
     transmittance: float | ArrayLike | str | None = None,
     footprint: str = "auto",
@@ -157,7 +156,7 @@ def scan(
         pulse's own sensor frame at its time: the raw, motion-distorted sweep a driver reports.
     azimuth_range_deg : (lo, hi), optional
         LiDAR and ray table only: fire only in this azimuth sector (degrees, sensor frame), to save time.
-    resolution, neighborhood : int
+    zbuffer : ZBufferView
         "zbuffer" backend: view size in pixels and candidate window radius.
     reflectivity : float or (n_objects + 1,) float, optional
         Any pulsed sensor (a LiDAR or a ray table; a depth camera refuses it): Lambertian
@@ -217,15 +216,15 @@ def scan(
             )
         if isinstance(platform, Trajectory):
             raise InvalidInputError(f"a {kind.title} takes one pose, not a trajectory")
-        return _scan_camera(built, sensor, platform, seed, backend=backend, frame=frame, resolution=resolution,
-                            neighborhood=neighborhood, reflectivity=reflectivity, transmittance=transmittance)  # fmt: skip
+        return _scan_camera(built, sensor, platform, seed, backend=backend, frame=frame, zbuffer=zbuffer, reflectivity=reflectivity,
+                            transmittance=transmittance)  # fmt: skip
     if kind.flies:
         raise InvalidInputError(f"{sensor.name!r} is an airborne scanner: it flies its own plan (scan_airborne)")
     pulses = sensor.pulses(platform, azimuth_range_deg)
     pose_matrix = platform if isinstance(platform, np.ndarray) else platform.pose_at(platform.start_s)
     return fire_pulses(
         built, sensor.beam, pulses, np.random.default_rng(seed), sensor_name=sensor.name, sensor_to_world=pose_matrix,
-        backend=backend, frame=frame, resolution=resolution, neighborhood=neighborhood, optics=(reflectivity, transmittance),
+        backend=backend, frame=frame, zbuffer=zbuffer, optics=(reflectivity, transmittance),
         footprint=footprint,
     )  # fmt: skip
 
@@ -297,7 +296,7 @@ def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.
 
 def fire_pulses(
     built: BuiltScene, beam: Beam, pulses: Pulses, rng: np.random.Generator, *, sensor_name: str, sensor_to_world,
-    backend: str = "embree", frame: str = "sensor", resolution: int = 2048, neighborhood: int = 1, optics=(None, None),
+    backend: str = "embree", frame: str = "sensor", zbuffer: ZBufferView = ZBufferView(), optics=(None, None),
     footprint: str = "auto",
 ) -> Scan:  # fmt: skip
     """The one pipeline: cast ``pulses`` with ``beam``, resolve their echoes, add noise and loss, and make the :class:`Scan`.
@@ -324,7 +323,7 @@ def fire_pulses(
     sensor_name : str
     sensor_to_world : (4, 4) float64 or None
         The scan's ``sensor_to_world``; None: a translation to the mean origin of the returns.
-    backend, frame, resolution, neighborhood, footprint, optics
+    backend, frame, zbuffer, footprint, optics
         As :func:`scan`'s; ``optics`` is its ``(reflectivity, transmittance)``.
 
     Raises
@@ -360,7 +359,7 @@ def fire_pulses(
     else:
         rays = d_world if k == 1 else beam.footprint_directions(d_world).reshape(-1, 3)
         origin = pulses.origins if pulses.static or k == 1 else np.repeat(pulses.origins, k, axis=0)
-        face, t = _cast(built, origin, rays, backend, meta, resolution=resolution, neighborhood=neighborhood,
+        face, t = _cast(built, origin, rays, backend, meta, zbuffer=zbuffer,
                         near_far=(beam.min_range_m, beam.max_range_m))  # fmt: skip
     if multi:
         if not adaptive:
@@ -453,7 +452,7 @@ def _placed_points(pulses: Pulses, rows, measured, normal, frame: str, sensor_to
     return o + d * measured[:, None], normal, position, sensor_to_world
 
 
-def _scan_camera(built: BuiltScene, camera: DepthCamera, m, seed: int, *, backend: str, frame: str, resolution: int, neighborhood: int,
+def _scan_camera(built: BuiltScene, camera: DepthCamera, m, seed: int, *, backend: str, frame: str, zbuffer: ZBufferView,
                  reflectivity, transmittance) -> Scan:  # fmt: skip
     """A depth camera's frame: its pixels' rays cast from pose ``m``, then depth limits, grazing-incidence loss, axial
     noise, quantisation and dropout (:class:`~zbuf_occlude.sensors.patterns.depth_camera.DepthCamera`)."""
@@ -466,7 +465,7 @@ def _scan_camera(built: BuiltScene, camera: DepthCamera, m, seed: int, *, backen
     d_world = d_sensor @ rot.T
     meta: dict = {"backend": backend, "n_rays": len(d_world)}
     near_far = (camera.min_depth_m, camera.max_depth_m / float(d_sensor[:, 2].min()))
-    face, t = _cast(built, origin, d_world, backend, meta, resolution=resolution, neighborhood=neighborhood, near_far=near_far)
+    face, t = _cast(built, origin, d_world, backend, meta, zbuffer=zbuffer, near_far=near_far)
     rng = np.random.default_rng(seed)
     hit = np.flatnonzero(face >= 0)
     face, t = face[hit], t[hit]

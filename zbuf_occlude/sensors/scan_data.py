@@ -389,7 +389,7 @@ class Scan:
             classification=classification,
             point_source_id=np.asarray(line) if flight_lines else np.full(n, source, np.int64),
             survey=SurveyFields(object_id=ids, class_index=index_of[ids], class_names=list(position), adjusted_standard_gps_time=True, crs=crs),
-            scale=0.001, compress=compress,
+            compress=compress,
         )  # fmt: skip
 
     def _classes(self, ids: NDArray[np.int64]) -> tuple[str, ...]:

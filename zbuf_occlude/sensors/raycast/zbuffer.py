@@ -12,6 +12,8 @@ cracks) are decided by Embree.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import logging
 import math
 from typing import TYPE_CHECKING
@@ -26,7 +28,7 @@ from zbuf_occlude.sensors.raycast.embree import cast_embree, ray_triangle_f64
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
-__all__ = ["GPU_EDGE_EPSILON", "RECHECK_EPSILON", "cast_zbuffer"]
+__all__ = ["GPU_EDGE_EPSILON", "RECHECK_EPSILON", "cast_zbuffer", "ZBufferView"]
 
 log = logging.getLogger(__name__)
 
@@ -79,6 +81,15 @@ def _release_renderer(renderer) -> None:
 
 #: GL renderers of the scenes in use (mesh uploaded once for many scans).
 _renderers = MeshCache(_build_renderer, 2, release=_release_renderer)
+
+
+@dataclass(frozen=True)
+class ZBufferView:
+    """How the z-buffer backend renders a scan (:func:`cast_zbuffer`): ``resolution`` pixels a side of each view, and the
+    ``neighborhood`` radius of the window of candidate faces around each ray's pixel (checked where they are used)."""
+
+    resolution: int = 2048
+    neighborhood: int = 1
 
 
 def cast_zbuffer(
