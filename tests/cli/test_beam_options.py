@@ -145,6 +145,12 @@ def test_returns_of_one_ray_are_taken_where_the_beam_goes_through_surfaces(tmp_p
     assert s.number_of_returns.max() > 1
 
 
+def test_a_depth_camera_scans_a_scene_file_not_a_mesh(tmp_path: Path, capsys) -> None:
+    code, err = _run(["scan", str(CHAIR), "--sensor", "kinect-v1", "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and err.endswith("scan of a mesh file places a LiDAR; use a scene file for a depth camera"), err
+    assert not (tmp_path / "o").exists()
+
+
 def test_return_modes_pick_the_echoes_a_receiver_records(tmp_path: Path, capsys) -> None:
     base = [str(STREET), "--sensor", "vlp16", "--footprint", "--divergence", "1.5", "--range-resolution", "0.5"]
     every = _scan([*base, "--max-returns", "15"], tmp_path / "all", capsys)

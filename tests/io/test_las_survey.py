@@ -147,7 +147,7 @@ def test_a_crs_that_is_no_epsg_code_is_refused(crs: str) -> None:
 
 
 def test_crs_on_a_sensor_frame_scan_is_refused() -> None:
-    with pytest.raises(InvalidInputError, match="labels world coordinates; this scan is in the sensor frame"):
+    with pytest.raises(InvalidInputError, match=r"labels world coordinates: it needs frame world \(the points are in the sensor frame\)"):
         _scan("sensor").to_las_bytes(crs="EPSG:2154")
 
 

@@ -111,6 +111,8 @@ def _modules_saying(phrase: str) -> list[str]:
         ("gives hits behind a surface", "sensors/beam/echo_energy.py"),
         ("needs every hit along each sub-ray", "sensors/beam/echo_energy.py"),
         ("which has no beam to change", "sensors/request.py"),
+        ("labels world coordinates", "sensors/scan_data.py"),
+        ("lie each in its own pulse's frame", "sensors/scan_data.py"),
     ],
 )
 def test_each_rule_of_a_scan_is_stated_in_one_module(phrase: str, home: str) -> None:

@@ -109,26 +109,23 @@ def add_las_arguments(parser: argparse.ArgumentParser) -> None:
     )  # fmt: skip
 
 
-def las_keywords(args: argparse.Namespace, formats: Sequence[str], *, world_frame: bool) -> dict[str, Any]:
-    """The keywords of :meth:`~zbuf_occlude.sensors.scan_data.Scan.to_las_bytes` from the options of :func:`add_las_arguments`.
+def las_keywords(args: argparse.Namespace, formats: Sequence[str]) -> dict[str, Any]:
+    """The keywords of :meth:`~zbuf_occlude.sensors.scan_data.Scan.to_las_bytes` from the options of :func:`add_las_arguments`
+    (the scan's request checks them against its frame).
 
     Parameters
     ----------
     formats : sequence of str
         The formats the command writes.
-    world_frame : bool
-        Whether the scans' points are in the world frame (``--crs`` labels world coordinates).
 
     Raises
     ------
     InvalidInputError
-        An option given while no LAS/LAZ file is written, or ``--crs`` for points in the sensor frame.
+        An option given while no LAS/LAZ file is written.
     """
     given = getattr(args, GIVEN, frozenset())
     if not set(formats) & set(LAS_FORMATS):
         for attr, option in LAS_OPTIONS.items():
             if attr in given:
                 raise InvalidInputError(f"{option} fills LAS/LAZ files: it needs --format las or laz, not {', '.join(formats)}")
-    if args.crs is not None and not world_frame:
-        raise InvalidInputError(f"--crs {args.crs} labels world coordinates: it needs --frame world (the points are in the sensor's frame)")
     return {"crs": args.crs, "class_map": args.class_map, "gps_start_s": args.gps_start_s}

@@ -133,10 +133,6 @@ def _trajectory(args: argparse.Namespace):
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
-    sensor = _scan_sensor(args)
-    formats = ("npz", "ply") if args.format == "both" else (args.format,)
-    request = scan_request(args, sensor, backend=args.backend, frame=args.frame, trajectory=_trajectory(args), samples=args.samples,
-                           formats=formats)  # fmt: skip
     if not args.crop:
         for flag, option in given_crop_options(args, in_crop=True):
             raise InvalidInputError(f"{flag} {option.in_crop}: it needs --crop")
@@ -145,7 +141,11 @@ def cmd_scan(args: argparse.Namespace) -> int:
     if args.occlude and args.across_sight_width is None:
         width = getattr(args, FLAGS)["across_sight_width_m"]
         raise InvalidInputError(f"--occlude meets {width} with a side occluder: it needs {width}")
-    request = replace(request, las=las_keywords(args, formats, world_frame=request.frame == "world"))
+    formats = ("npz", "ply") if args.format == "both" else (args.format,)
+    las = las_keywords(args, formats)
+    sensor = _scan_sensor(args)
+    request = scan_request(args, sensor, backend=args.backend, frame=args.frame, trajectory=_trajectory(args), samples=args.samples,
+                           formats=formats, las=las)  # fmt: skip
     # a refused run's empty --out is removed by cli.main
     with OwnedFolder(args.out, names=[SCAN_FILE_NAMES], what="the scan") as folder:
         return _scan_into(folder, args, request)
@@ -187,8 +187,6 @@ def _placed_object(args: argparse.Namespace, sensor, src: Path):
     ``--across-sight-width`` and ``--outline`` fitted by :func:`~zbuf_occlude.sensors.fit.fit_object_shape`)."""
     from zbuf_occlude.sensors.kinds import capabilities
 
-    if not capabilities(sensor).pulsed:
-        raise InvalidInputError(f"scan of a mesh file places a LiDAR; use a scene file for a {capabilities(sensor).title}")
     extents, round_xy = None, False
     if args.extents and args.size_of != "max":
         raise InvalidInputError(f"--size-of {args.size_of} says what --size measures; --extents gives every side instead")

@@ -22,7 +22,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.beam.fields import MODE_RETURNS, RETURN_FIELDS, check_returns, footprint_changes
 from zbuf_occlude.sensors.beam.echo_energy import check_transmittance_cast
 from zbuf_occlude.sensors.kinds import capabilities, with_beam
-from zbuf_occlude.sensors.scan_data import FRAMES
+from zbuf_occlude.sensors.scan_data import FRAMES, check_las_frame
 
 __all__ = ["BEAM_REQUEST_FIELDS", "LAS_FORMATS", "ScanRequest", "beam_changes"]
 
@@ -134,8 +134,8 @@ class ScanRequest:
         reflectance table with the object's own reflectivity; a transmittance above 0 without
         resolved echoes or with the z-buffer; returns asked of a beam of one ray onto opaque
         surfaces (each pulse has one return: nothing to resolve); the sensor frame for a scanner that
-        flies; a trajectory for a scanner without a platform of its own, with the z-buffer (one point of
-        view), shorter than the sweeps, or in the sensor frame with a LAS format; a footprint cast that does not apply.
+        flies; a CRS for LAS files in the sensor frame; a trajectory for a scanner without a platform of its own, with the
+        z-buffer (one point of view), shorter than the sweeps, or in the sensor frame with a LAS format; a footprint cast that does not apply.
     """
 
     sensor: object
@@ -177,6 +177,8 @@ class ScanRequest:
         object.__setattr__(self, "scanner", scanner)
         self._check_optics(kind, label)
         object.__setattr__(self, "frame", self._frame(kind, label))
+        if set(self.formats) & set(LAS_FORMATS):
+            check_las_frame(self.frame, moving=False, crs=self.las.get("crs"), names=self.names)
         self._check_trajectory(kind)
         cast = "auto" if self.footprint_cast is None else self.footprint_cast
         if kind.pulsed:
@@ -237,9 +239,8 @@ class ScanRequest:
         if not traj.is_static and traj.duration_s + 1e-9 < needed:
             raise InvalidInputError(f"{what} lasts {traj.duration_s:g} s, and {n('samples')} {self.samples} sweeps of "
                                     f"{self.scanner.name} take {needed:g} s: give fewer samples or a longer trajectory")  # fmt: skip
-        if self.frame == "sensor" and set(self.formats) & set(LAS_FORMATS):
-            raise InvalidInputError(f"{what} with {n('format')} {'/'.join(self.formats)}: a moving sensor's points lie each in its own "
-                                    f"pulse's frame, which LAS cannot classify by height; give {n('frame')} world")  # fmt: skip
+        if set(self.formats) & set(LAS_FORMATS):
+            check_las_frame(self.frame, moving=not traj.is_static, names=self.names)
 
     def surface_optics(self, scene) -> dict:
         """The ``reflectivity`` and ``transmittance`` keywords of :func:`~zbuf_occlude.sensors.scan.scan` and

@@ -46,6 +46,30 @@ GPS_TIME_RESOLUTION_S = 1e-6
 UNIT_INTENSITY_SCALE = 65535.0
 
 
+def check_las_frame(frame: str, *, moving: bool, crs=None, names: Mapping[str, str | None] | None = None) -> None:
+    """The one statement of the frames a LAS file takes: a moving sensor's points in the sensor frame lie each in its own
+    pulse's frame, which no one height above the ground classifies; a CRS labels world coordinates.  ``names`` maps
+    ``frame`` and ``crs`` to the caller's words (:func:`~zbuf_occlude.sensors.beam.fields.check_returns`'s rule).
+
+    Raises
+    ------
+    InvalidInputError
+        Either, in the sensor frame.
+    """
+    names = names or {}
+
+    def n(field: str) -> str:
+        return names.get(field) or field
+
+    if frame != "world" and moving:
+        raise InvalidInputError(f"a moving sensor's points in the {frame} frame lie each in its own pulse's frame, which LAS cannot "
+                                f"classify by height: give {n('frame')} world")  # fmt: skip
+    if crs is not None and frame != "world":
+        raise InvalidInputError(
+            f"{n('crs')} {crs} labels world coordinates: it needs {n('frame')} world (the points are in the {frame} frame)"
+        )
+
+
 def check_gps_start(gps_start_s: float, times_s: ArrayLike | None = None, *, name: str = "gps_start_s") -> float:
     """``gps_start_s`` checked as the adjusted standard GPS time of a scan's time 0 in a LAS file.
 
@@ -354,15 +378,7 @@ class Scan:
         ground = real(ground_z_m, "ground_z_m")
         source = count(scan_number, "scan_number", low=0, high=65535)
         top = 65535 if self.max_intensity is None else count(self.max_intensity, "max_intensity", low=1, high=65535)
-        if self.frame != "world" and self.meta.get("moving"):
-            raise InvalidInputError(
-                "a scan of a moving sensor in the sensor frame holds each point in its own pulse's frame: no one height above the "
-                "ground classifies it; scan it with frame='world' for LAS"
-            )
-        if crs is not None and self.frame != "world":
-            raise InvalidInputError(
-                f"crs {crs} labels world coordinates; this scan is in the {self.frame} frame (scan it with frame='world')"
-            )
+        check_las_frame(self.frame, moving=bool(self.meta.get("moving")), crs=crs)
         n = len(self)
         ones = np.ones(n, np.uint8)
         intensity = np.zeros(n, np.uint16)
