@@ -40,6 +40,7 @@ from zbuf_occlude.io.file_errors import key_text, value_kind
 __all__ = [
     "MAX_COORDINATE_M", "MAX_RANGE_M", "MAX_SENSOR_RAYS", "MAX_SCENE_OBJECTS", "MAX_NAME_CHARS", "MAX_PATH_CHARS",
     "SHOWN_CHARS", "value_kind", "key_text", "given", "located", "is_number", "real", "count", "reals", "mapping", "text", "sensor_name", "preset", "replaced",
+    "namer",
 ]  # fmt: skip
 
 #: Largest coordinate or size in a scene, metres: the scene is ray-cast in float32 (Embree),
@@ -69,6 +70,15 @@ def given(name: object) -> str:
     asked for on the command line or in Python), never for a value read from a file."""
     text = repr(name) if isinstance(name, str) else value_kind(name)
     return text if len(text) <= SHOWN_CHARS else text[: SHOWN_CHARS - 3] + "..."
+
+
+def namer(names: Mapping[str, str | None] | None):
+    """``n(field, default=None)``: how a caller calls ``field`` in a rule's message, ``names`` being its field → option map
+    (``{"max_returns": "--max-returns"}``); ``default``, else the field's own name, where the map does not name it.  The one
+    way every rule of :mod:`zbuf_occlude.sensors` words its refusals, so that a command never restates a rule and the
+    library never spells an option."""
+    table = names or {}
+    return lambda field, default=None: table.get(field) or default or field
 
 
 @contextmanager

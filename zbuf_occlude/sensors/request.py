@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.checks import namer
 from zbuf_occlude.sensors.beam.fields import MODE_RETURNS, RETURN_FIELDS, check_returns, footprint_changes
 from zbuf_occlude.sensors.beam.echo_energy import check_transmittance_cast
 from zbuf_occlude.sensors.kinds import capabilities, with_beam
@@ -34,11 +35,6 @@ BEAM_REQUEST_FIELDS = (
 )  # fmt: skip
 #: The formats whose points a LAS file classifies by height.
 LAS_FORMATS = ("las", "laz")
-
-
-def _namer(names: Mapping[str, str | None]):
-    """``n(field)``: how the caller calls ``field`` (its own name where ``names`` does not map it)."""
-    return lambda f: names.get(f) or f
 
 
 def beam_changes(beam, given: Mapping[str, object], *, sensor: str, names: Mapping[str, str | None] = MappingProxyType({})) -> dict:
@@ -59,7 +55,7 @@ def beam_changes(beam, given: Mapping[str, object], *, sensor: str, names: Mappi
         What :func:`~zbuf_occlude.sensors.beam.fields.footprint_changes` and
         :func:`~zbuf_occlude.sensors.beam.fields.check_returns` refuse.
     """
-    n = _namer(names)
+    n = namer(names)
     changes: dict[str, object] = footprint_changes(
         beam, footprint=bool(given.get("footprint")), divergence_deg=given.get("divergence_deg"),
         names=(n("footprint"), n("divergence_deg")), sensor=sensor,
@@ -155,7 +151,7 @@ class ScanRequest:
     cast: str = field(init=False, compare=False)
 
     def __post_init__(self) -> None:
-        n = _namer(self.names)
+        n = namer(self.names)
         label = self.names.get("sensor") or getattr(self.sensor, "name", "the sensor")
         kind = capabilities(self.sensor)
         given = {f: v for f, v in self.beam.items() if v is not None and v is not False}
@@ -189,7 +185,7 @@ class ScanRequest:
 
     def _check_optics(self, kind, label) -> None:
         """The surface optics against the sensor and the cast (class docstring)."""
-        n, tau = _namer(self.names), self.transmittance
+        n, tau = namer(self.names), self.transmittance
         shown = f"{n('transmittance')} {_shown_tau(tau)}"
         asked = [f for f, v in ((n("reflectance_table"), self.reflectance_table), (shown, tau is not None)) if v]
         opaque = tau is None or (not isinstance(tau, (str, Mapping)) and tau == 0) or (isinstance(tau, Mapping) and not any(tau.values()))
@@ -214,7 +210,7 @@ class ScanRequest:
 
     def _frame(self, kind, label) -> str:
         """The frame: as asked, else "sensor", or "world" for a scanner that flies (which refuses "sensor")."""
-        n = _namer(self.names)
+        n = namer(self.names)
         if self.frame is not None and self.frame not in FRAMES:
             raise InvalidInputError(f"{n('frame')} must be one of {', '.join(FRAMES)}, got {self.frame!r:.40}")
         if not kind.flies:
@@ -228,7 +224,7 @@ class ScanRequest:
         """A trajectory against the sensor, the sweeps and the output (class docstring)."""
         if self.trajectory is None:
             return
-        n, traj = _namer(self.names), self.trajectory
+        n, traj = namer(self.names), self.trajectory
         what = n("trajectory")
         if not kind.pulsed or kind.flies:
             raise InvalidInputError(f"{what}: a {kind.title} {'flies its own plan' if kind.flies else 'takes one pose'}")
@@ -267,7 +263,7 @@ class ScanRequest:
             try:
                 out["transmittance"] = per_class(scene.build(), dict(tau))
             except InvalidInputError as exc:
-                raise InvalidInputError(f"{_namer(self.names)('transmittance')} {_shown_tau(tau)}: {exc}") from None
+                raise InvalidInputError(f"{namer(self.names)('transmittance')} {_shown_tau(tau)}: {exc}") from None
         elif isinstance(tau, str):
             out["transmittance"] = tau
         elif tau is not None:  # every object, not the ground

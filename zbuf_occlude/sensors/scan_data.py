@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.checks import namer
 from zbuf_occlude.io.arrays import load_npz
 from zbuf_occlude.io.atomic import write_bytes
 from zbuf_occlude.io.caps import MAX_SCAN_NPZ_BYTES
@@ -56,10 +57,7 @@ def check_las_frame(frame: str, *, moving: bool, crs=None, names: Mapping[str, s
     InvalidInputError
         Either, in the sensor frame.
     """
-    names = names or {}
-
-    def n(field: str) -> str:
-        return names.get(field) or field
+    n = namer(names)
 
     if frame != "world" and moving:
         raise InvalidInputError(f"a moving sensor's points in the {frame} frame lie each in its own pulse's frame, which LAS cannot "

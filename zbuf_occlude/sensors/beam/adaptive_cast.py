@@ -37,6 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.checks import namer
 from zbuf_occlude.mesh.cache import MeshCache
 from zbuf_occlude.sensors.beam.fields import Beam
 from zbuf_occlude.sensors.beam.echo_energy import Radiometry, Transmission, echo_returns
@@ -286,10 +287,7 @@ def check_footprint_cast(
         An unknown mode (naming its type and value), or "adaptive" for a beam that resolves no echoes
         or fires one ray, or with another backend than "embree".
     """
-    names = names or {}
-
-    def n(field: str, default: str | None = None) -> str:
-        return names.get(field) or default or field
+    n = namer(names)
 
     if not isinstance(footprint, str) or footprint not in FOOTPRINT_MODES:
         shown = f"{footprint!r:.40}" if isinstance(footprint, str) else f"{type(footprint).__name__} {footprint!r:.40}"
@@ -299,7 +297,7 @@ def check_footprint_cast(
     if not beam.resolves_footprint:
         needed = {"footprint_rays": beam.footprint_rays == 1, "max_returns": not beam.resolves_echoes}
         remedy = [f"{n(f)} 2 or more" if f == "max_returns" else n(f, "footprint_rays above 1")
-                  for f, lacking in needed.items() if lacking and names.get(f, f) is not None]  # fmt: skip
+                  for f, lacking in needed.items() if lacking and (names or {}).get(f, f) is not None]  # fmt: skip
         raise InvalidInputError(
             f"{n('footprint_cast')} adaptive skips the sub-rays of a footprint whose echoes are resolved; {sensor or beam.name} "
             f"fires one ray a pulse or resolves none of its echoes (footprint_rays {beam.footprint_rays}, max_returns "

@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.checks import namer
 from zbuf_occlude.sensors.beam.attenuation import attenuate_along_subray
 from zbuf_occlude.sensors.checks import real
 from zbuf_occlude.sensors.beam.echoes import MAX_POWER_NOISE, hit_energy, resolve_echoes
@@ -96,10 +97,7 @@ def check_transmittance_cast(shown: str, *, resolves_echoes: bool, backend: str,
     InvalidInputError
         A beam that resolves no echoes, or another backend than "embree".
     """
-    names = names or {}
-
-    def n(field: str) -> str:
-        return names.get(field) or field
+    n = namer(names)
 
     if not resolves_echoes:
         raise InvalidInputError(f"{n('transmittance')} {shown} gives hits behind a surface, which only several returns per pulse resolve: "

@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.checks import namer
 from zbuf_occlude.sensors.checks import MAX_RANGE_M, count, located, real, replaced, sensor_name, text, value_kind
 from zbuf_occlude.sensors.beam.echoes import ECHO_RULES, MAX_POWER_NOISE, MAX_RETURNS
 from zbuf_occlude.sensors.beam.footprint import (
@@ -307,10 +308,7 @@ def check_returns(values: Mapping[str, object], names: Mapping[str, str | None] 
     InvalidInputError
         The first rule broken, naming the fields (as ``names`` maps them) and their values.
     """
-    names = names or {}
-
-    def n(field: str) -> str:
-        return names.get(field) or field
+    n = namer(names)
 
     k, m, mode, rule = values["footprint_rays"], values["max_returns"], values["return_mode"], values["echo_rule"]
     resolution, separation = values["range_resolution_m"], values["echo_separation_m"]

@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError, OutputError
+from zbuf_occlude.sensors.checks import namer
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.real_scans.datasets import load_real_scans
 from zbuf_occlude.sensors.fit.airborne import AirborneFit, fit_airborne
@@ -75,10 +76,6 @@ LAS_EXTENSIONS = (".las", ".laz")
 Say = Callable[[str], object]
 #: A caller's word for each argument, for messages (``{"altitude_m": "--altitude"}``); an argument left out is named as itself.
 Names = Mapping[str, str]
-
-
-def _namer(names: Names | None) -> Callable[[str], str]:
-    return lambda arg: (names or {}).get(arg) or arg
 
 
 @dataclass(frozen=True)
@@ -238,7 +235,7 @@ def fit_sensor(real: str | os.PathLike, sensor: str, out: str | os.PathLike, *, 
     if files is not None:
         return fit_sensor_to_las(files, real, sensor, out, las=las, seed=seed, say=say, names=names)
     if given := ([] if las is None else las.given()):
-        n = _namer(names)
+        n = namer(names)
         raise InvalidInputError(
             f"{', '.join(map(n, given))}: for LAS/LAZ scans, and {real} is neither a .las/.laz file nor a folder of them"
         )
@@ -247,7 +244,7 @@ def fit_sensor(real: str | os.PathLike, sensor: str, out: str | os.PathLike, *, 
 
 def _base_sensor(sensor: str, out: str | os.PathLike, refine: Refine | None = None, names: Names | None = None) -> tuple[Any, Path]:
     """The sensor to start from and the ``.json`` file to write, checked before anything is read."""
-    out, n = Path(out), _namer(names)
+    out, n = Path(out), namer(names)
     if out.suffix.lower() != ".json":
         raise InvalidInputError(f"{n('out')} {out}: the fitted sensor is written as a .json file")
     if out.is_dir():
@@ -515,7 +512,7 @@ def fit_sensor_to_las(files: Sequence[Path], real: str | os.PathLike, sensor: st
     OutputError, UnsafePathError, DatasetBusy
         As :func:`fit_sensor_to_scans`.
     """
-    say, options, n = say or _quiet, las or LasFit(), _namer(names)
+    say, options, n = say or _quiet, las or LasFit(), namer(names)
     base, out = _base_sensor(sensor, out, names=names)
     altitude = options.altitude_m if options.altitude_m is not None else getattr(base, "altitude_m", None)
     if altitude is None:
