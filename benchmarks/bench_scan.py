@@ -19,7 +19,7 @@ import statistics
 import time
 from pathlib import Path
 
-from zbuf_occlude.sensors import DepthCamera, Lidar, ScanScene, look_at_pose, scan
+from zbuf_occlude.sensors import DepthCamera, Lidar, ScanScene, ZBufferView, look_at_pose, scan
 from zbuf_occlude.sensors.patterns.depth_camera import DEPTH_CAMERA_PRESETS
 from zbuf_occlude.sensors.patterns.spinning import LIDAR_PRESETS
 
@@ -42,7 +42,7 @@ def main() -> None:
         sensor = Lidar.preset(name) if name in LIDAR_PRESETS else DepthCamera.preset(name)
         pose = None if isinstance(sensor, Lidar) else look_at_pose([7.0, 0, 1.5], [10, 0, 1.0])  # 3 m, inside its range
         for backend in args.backends.split(","):
-            kw = dict(backend=backend, resolution=args.resolution)
+            kw = dict(backend=backend, zbuffer=ZBufferView(resolution=args.resolution))
             s = scan(scene, sensor, pose, seed=0, **kw)  # warm-up: BVH / GL context
             wall, cpu = [], []
             for k in range(args.repeats):
