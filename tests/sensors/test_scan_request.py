@@ -35,6 +35,19 @@ def test_a_refusal_names_the_fields_in_the_library_words_or_the_callers() -> Non
         ScanRequest(vlp16, beam={"footprint_ray": 7})
 
 
+@pytest.mark.parametrize(
+    ("fields", "words"),
+    [({"backend": "optix"}, r"^backend must be one of embree, zbuffer, got 'optix'"),
+     ({"formats": ("npz", "xyz")}, r"^format must be a tuple of npz, ply, las, laz"),
+     ({"formats": "las"}, r"^format must be a tuple of"),
+     ({"samples": 0}, r"^samples must be an integer from 1 to"),
+     ({"samples": 2.5}, r"^samples must be an integer from 1 to")],
+)  # fmt: skip
+def test_each_value_of_a_request_is_checked_alone_too(fields: dict, words: str) -> None:
+    with pytest.raises(InvalidInputError, match=words):
+        ScanRequest(sensor_from_name("vlp16"), **fields)
+
+
 def test_returns_asked_of_one_opaque_ray_are_refused_as_changing_nothing() -> None:
     vlp16 = sensor_from_name("vlp16")
     asked = {"max_returns": 4, "range_resolution_m": 0.75}

@@ -18,14 +18,16 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
 
+from zbuf_occlude.defaults import MAX_SAMPLES
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.checks import namer
+from zbuf_occlude.sensors.checks import count, namer
+from zbuf_occlude.sensors.raycast.embree import BACKENDS
 from zbuf_occlude.sensors.beam.fields import MODE_RETURNS, RETURN_FIELDS, check_returns, footprint_changes
 from zbuf_occlude.sensors.beam.echo_energy import check_transmittance_cast
 from zbuf_occlude.sensors.kinds import capabilities, with_beam
 from zbuf_occlude.sensors.scan_data import FRAMES, check_las_frame
 
-__all__ = ["BEAM_REQUEST_FIELDS", "LAS_FORMATS", "ScanRequest", "beam_changes"]
+__all__ = ["BEAM_REQUEST_FIELDS", "LAS_FORMATS", "SCAN_FORMATS", "ScanRequest", "beam_changes"]
 
 #: The beam changes a request may ask for: :class:`~zbuf_occlude.sensors.beam.fields.Beam` fields, and
 #: ``footprint`` (a switch: :data:`~zbuf_occlude.sensors.beam.footprint.FOOTPRINT_RAYS` sub-rays in the beam's cone).
@@ -35,6 +37,8 @@ BEAM_REQUEST_FIELDS = (
 )  # fmt: skip
 #: The formats whose points a LAS file classifies by height.
 LAS_FORMATS = ("las", "laz")
+#: The files a scan writes (:func:`~zbuf_occlude.sensors.scan_files.save_scan`).
+SCAN_FORMATS = ("npz", "ply", *LAS_FORMATS)
 
 
 def beam_changes(beam, given: Mapping[str, object], *, sensor: str, names: Mapping[str, str | None] = MappingProxyType({})) -> dict:
@@ -125,7 +129,8 @@ class ScanRequest:
     Raises
     ------
     InvalidInputError
-        Naming the fields as ``names`` maps them: beam changes, a footprint cast or surface optics for a
+        Naming the fields as ``names`` maps them: an unknown backend or format, sweeps that are not a whole
+        number from 1 to :data:`~zbuf_occlude.defaults.MAX_SAMPLES`; beam changes, a footprint cast or surface optics for a
         sensor without a beam (a depth camera); what :func:`beam_changes` and the beam refuse; the
         reflectance table with the object's own reflectivity; a transmittance above 0 without
         resolved echoes or with the z-buffer; returns asked of a beam of one ray onto opaque
@@ -163,6 +168,7 @@ class ScanRequest:
         if not kind.pulsed and (given or self.footprint_cast is not None):
             asked = [n(f) for f in given] + ([n("footprint_cast")] if self.footprint_cast is not None else [])
             raise InvalidInputError(f"{', '.join(asked)}: {label} is a {kind.title}, which has no beam to change (a pulsed LiDAR has one)")
+        self._check_values()
         scanner = self.sensor
         if given:
             changes = beam_changes(self.sensor.beam, given, sensor=str(label), names=self.names)
@@ -182,6 +188,16 @@ class ScanRequest:
 
             cast = check_footprint_cast(cast, scanner.beam, self.backend, sensor=str(label), names=self.names)
         object.__setattr__(self, "cast", cast)
+
+    def _check_values(self) -> None:
+        """The backend, the formats and the sweeps, each alone."""
+        n = namer(self.names)
+        if not isinstance(self.backend, str) or self.backend not in BACKENDS:
+            raise InvalidInputError(f"{n('backend')} must be one of {', '.join(BACKENDS)}, got {self.backend!r:.40}")
+        unknown = [f for f in self.formats if f not in SCAN_FORMATS] if isinstance(self.formats, tuple) else [self.formats]
+        if unknown or not self.formats:
+            raise InvalidInputError(f"{n('format')} must be a tuple of {', '.join(SCAN_FORMATS)}, got {self.formats!r:.60}")
+        object.__setattr__(self, "samples", count(self.samples, n("samples"), low=1, high=MAX_SAMPLES))
 
     def _check_optics(self, kind, label) -> None:
         """The surface optics against the sensor and the cast (class docstring)."""
