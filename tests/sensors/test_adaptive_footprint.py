@@ -239,13 +239,12 @@ def test_adaptive_echoes_against_the_full_model(k, power_noise, echo_rule) -> No
     rho = np.full(len(built.mesh.faces), 0.5)
     rays = beam.footprint_directions(pulses.directions).reshape(-1, 3)
     face, t = cast_embree(built.mesh, pulses.origins, rays)
-    rules = {"range_resolution_m": RESOLUTION, "max_returns": 2, "range_limits_m": (beam.min_range_m, beam.max_range_m),
-             "echo_rule": echo_rule}  # fmt: skip
+    assert (beam.range_resolution_m, beam.echo_rule) == (RESOLUTION, echo_rule)  # the rules both casts resolve echoes by
 
     def radiometry() -> Radiometry:
         return Radiometry(rho, 1e-5, power_noise, np.random.default_rng(1))
 
-    full = echo_returns(built, rays, face, t, beam.footprint_weights(), radiometry=radiometry(), **rules)
+    full = echo_returns(built, rays, face, t, beam, max_returns=2, radiometry=radiometry())
     pulse, f, r, e, uniform = A.adaptive_echo_returns(built, beam, pulses, max_returns=2, radiometry=radiometry())
     assert uniform.mean() > 0.5 and np.all(np.diff(pulse) >= 0)
     # the pulses cast: the full model's echoes bit for bit (without power noise, whose draws fall elsewhere)

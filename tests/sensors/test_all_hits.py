@@ -127,12 +127,13 @@ def test_echo_returns_casts_on_from_each_rays_own_origin():
     for i in range(2):
         face[i : i + 1], t[i : i + 1] = cast_embree(built.mesh, origins[i], d[i : i + 1])
     through = Transmission(np.array([0.0, 0.5, 0.0])[built.face_object], origins)  # per face: object 1 transmits half
-    pulse, f, r, e = echo_returns(built, d, face, t, np.ones(1), range_resolution_m=0.5, max_returns=3, through=through)
+    beam = Beam(max_returns=3, range_resolution_m=0.5)  # one ray a pulse, no range limits
+    pulse, f, r, e = echo_returns(built, d, face, t, beam, max_returns=3, through=through)
     assert pulse.tolist() == [0, 0, 1, 1] and built.face_object[f].tolist() == [1, 2, 1, 2]
     np.testing.assert_allclose(r, [R, R + 2.0, R, R + 2.0], rtol=1e-12)
     np.testing.assert_allclose(e, [1 / R**2, 0.5 / (R + 2.0) ** 2] * 2, rtol=1e-12)
     with pytest.raises(InvalidInputError, match="transmittance must hold one value per face of the scene"):
-        echo_returns(built, d, face, t, np.ones(1), range_resolution_m=0.5, max_returns=3, through=Transmission([0.5, 0.5], origins))
+        echo_returns(built, d, face, t, beam, max_returns=3, through=Transmission([0.5, 0.5], origins))
 
 
 # -- scan(transmittance=...) ------------------------------------------------------------------

@@ -364,9 +364,8 @@ def fire_pulses(
     if multi:
         if not adaptive:
             hit, face, t, power = echo_returns(
-                built, rays, face, t, beam.footprint_weights(), range_resolution_m=beam.range_resolution_m, max_returns=most,
-                radiometry=radiometry, range_limits_m=(beam.min_range_m, beam.max_range_m), echo_rule=beam.echo_rule,
-                through=None if tau is None else Transmission(tau, origin), min_echo_reflectance=beam.min_echo_reflectance,
+                built, rays, face, t, beam, max_returns=most, radiometry=radiometry,
+                through=None if tau is None else Transmission(tau, origin),
             )  # fmt: skip
         if beam.return_mode != "all":
             chosen = returns_of_mode(hit, power, beam.return_mode)

@@ -401,9 +401,8 @@ def adaptive_echo_returns(
     origins = pulses.origins if pulses.static else np.repeat(pulses.origins[full], k, axis=0)
     sub_face, sub_t = cast_embree(mesh, origins, rays)
     cast = echo_returns(
-        built, rays, sub_face, sub_t, beam.footprint_weights(), range_resolution_m=beam.range_resolution_m,
-        max_returns=max_returns, radiometry=radiometry, range_limits_m=limits, through=None if tau is None else Transmission(tau, origins),
-        min_echo_reflectance=beam.min_echo_reflectance, echo_rule=beam.echo_rule,
+        built, rays, sub_face, sub_t, beam, max_returns=max_returns, radiometry=radiometry,
+        through=None if tau is None else Transmission(tau, origins),
     )  # fmt: skip
     pulse = np.concatenate([plane.pulse, full[cast[0]]])
     order = np.argsort(pulse, kind="stable")  # a pulse's echoes all come from one part, in range order

@@ -25,6 +25,7 @@ from zbuf_occlude.sensors.checks import namer
 from zbuf_occlude.sensors.beam.attenuation import attenuate_along_subray
 from zbuf_occlude.sensors.checks import real
 from zbuf_occlude.sensors.beam.echoes import MAX_POWER_NOISE, hit_energy, resolve_echoes
+from zbuf_occlude.sensors.beam.fields import Beam
 from zbuf_occlude.sensors.raycast.embree import MAX_HITS, cast_embree_beyond, face_normals
 from zbuf_occlude.sensors.scene.objects import BuiltScene
 
@@ -233,9 +234,7 @@ class Transmission:
 
 
 def echo_returns(
-    built: BuiltScene, rays, face, t, weights, *, range_resolution_m: float, max_returns: int, radiometry: Radiometry | None = None,
-    range_limits_m: tuple[float, float] = (0.0, np.inf), through: Transmission | None = None, min_echo_reflectance: float = 0.0,
-    echo_rule: str = "chain",
+    built: BuiltScene, rays, face, t, beam: Beam, *, max_returns: int, radiometry: Radiometry | None = None, through: Transmission | None = None
 ) -> tuple[NDArray[np.int64], ...]:  # fmt: skip
     """The multi-return model of every scanner: resolve each pulse's sub-ray hits into discrete returns.
 
@@ -256,25 +255,20 @@ def echo_returns(
         Face of each sub-ray's first hit in ``built.mesh``, −1 where it hits nothing.
     t : (P·K,) float64
         Range of that hit, metres.
-    weights : (K,) float64
-        Each sub-ray's share of the pulse's energy (:func:`~zbuf_occlude.sensors.beam.footprint.footprint_offsets`).
-    range_resolution_m : float
-        Echoes of one pulse closer than this merge (:func:`~zbuf_occlude.sensors.beam.echoes.resolve_echoes`), metres, > 0.
+    beam : Beam
+        The beam whose rules resolve the echoes: each sub-ray's share of the pulse's energy
+        (:meth:`~zbuf_occlude.sensors.beam.fields.Beam.footprint_weights`), ``range_resolution_m`` (echoes of one pulse
+        closer than this merge, :func:`~zbuf_occlude.sensors.beam.echoes.resolve_echoes`), the range limits
+        (``min_range_m``, ``max_range_m``: hits nearer or farther give no echo, the receiver's blind zone and reach; a hit in
+        the blind zone still shades the hits behind it), ``min_echo_reflectance`` (the least apparent reflectance, energy ×
+        range², of a detected echo; applied with or without ``radiometry``, ρ 1 without) and ``echo_rule``.
     max_returns : int
-        The first this many echoes of a pulse in range order are kept.
+        The first this many echoes of a pulse in range order are kept (the beam's, or more for a return mode that picks among them).
     radiometry : Radiometry, optional
         Reflectivity per face, detection threshold and power noise; None: ρ 1 everywhere,
         every echo detected, no noise.
-    range_limits_m : (min, max) float
-        Hits nearer or farther than these give no echo (the receiver's blind zone and reach),
-        metres; a hit in the blind zone still shades the hits behind it.
     through : Transmission, optional
         Transmittance per face and the sub-rays' origins; None: opaque, first hits only.
-    min_echo_reflectance : float
-        Least apparent reflectance (energy × range²) of a detected echo, in [0, 1]
-        (:func:`~zbuf_occlude.sensors.beam.echoes.resolve_echoes`); applied with or without ``radiometry`` (ρ 1 without).
-    echo_rule : {"chain", "waveform"}
-        How a pulse's hits merge into echoes (:func:`~zbuf_occlude.sensors.beam.echoes.resolve_echoes`).
 
     Returns
     -------
@@ -287,9 +281,10 @@ def echo_returns(
     InvalidInputError
         A transmittance or reflectivity that is not one value per face of ``built.mesh``.
     """
+    weights = beam.footprint_weights()
     k = len(weights)
     n_pulses = len(face) // k
-    min_range_m, max_range_m = range_limits_m
+    min_range_m, max_range_m = beam.min_range_m, beam.max_range_m
     n_faces = len(built.face_object)
     tau = None if through is None else np.asarray(through.transmittance, dtype=np.float64)
     rho = None if radiometry is None else np.asarray(radiometry.reflectivity, dtype=np.float64)
@@ -310,15 +305,15 @@ def echo_returns(
     normal = face_normals(built.mesh, f)
     cos = np.abs(np.einsum("ij,ij->i", normal, rays[ray]))
     pulse = ray // k
-    energy = hit_energy(np.asarray(weights)[ray % k], 1.0 if rho is None else rho[f], cos, r)
+    energy = hit_energy(weights[ray % k], 1.0 if rho is None else rho[f], cos, r)
     if share is not None:
         energy = energy * share
     if radiometry is not None and radiometry.power_noise > 0:
         energy = energy * np.exp(radiometry.power_noise * radiometry.rng.standard_normal(n_pulses))[pulse]
     echoes = resolve_echoes(
-        pulse, r, energy, obj, range_resolution_m=range_resolution_m,
+        pulse, r, energy, obj, range_resolution_m=beam.range_resolution_m,
         detection_threshold=0.0 if radiometry is None else radiometry.detection_threshold, max_returns=max_returns,
-        min_echo_reflectance=min_echo_reflectance, echo_rule=echo_rule,
+        min_echo_reflectance=beam.min_echo_reflectance, echo_rule=beam.echo_rule,
     )  # fmt: skip
     return echoes.pulse, f[echoes.hit], echoes.range_m, echoes.energy
 
