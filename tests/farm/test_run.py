@@ -756,7 +756,7 @@ def test_worker_sensor_shard_is_the_crops_datasets_and_its_record(tmp_path):
     out = tmp_path / "out"
     rec = process_object(obj, params, out)
     mesh = load_mesh(obj.source)
-    expected = farm_datasets(mesh, params.sensor.model(), name=obj.name, label=obj.label, object_index=obj.index, n_samples=3,
+    expected = farm_datasets(mesh, params.sensor.request(), name=obj.name, label=obj.label, object_index=obj.index, n_samples=3,
                              n_points=64, seed=2, distributions=crops)  # fmt: skip
     n_visible = np.zeros(3, dtype=np.int64)
     n_visible[expected["pose_index"]] = expected["n_visible"]

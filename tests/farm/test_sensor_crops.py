@@ -19,6 +19,7 @@ from zbuf_occlude.dataset.reader import OccludedDataset
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.farm import FarmParams, SensorCropParams
 from zbuf_occlude.farm.sensor_crops import farm_datasets
+from zbuf_occlude.sensors.request import ScanRequest
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors import Lidar
 from zbuf_occlude.sensors.placement import CropDistributions
@@ -342,8 +343,8 @@ def test_the_padding_warning_of_a_sensor_farm_names_what_applies(tmp_path, caplo
 
 def test_farm_datasets_are_reproducible_per_sample():
     kw = dict(name="bed", label=3, object_index=7, n_points=256, seed=11, distributions=CropDistributions(distance_m=(5, 15)))
-    a = farm_datasets(str(SAMPLES / "bed" / "train" / "bed_0001.off"), zo.Lidar.preset("vlp16"), n_samples=3, **kw)
-    b = farm_datasets(str(SAMPLES / "bed" / "train" / "bed_0001.off"), zo.Lidar.preset("vlp16"), n_samples=2, **kw)
+    a = farm_datasets(str(SAMPLES / "bed" / "train" / "bed_0001.off"), ScanRequest(zo.Lidar.preset("vlp16")), n_samples=3, **kw)
+    b = farm_datasets(str(SAMPLES / "bed" / "train" / "bed_0001.off"), ScanRequest(zo.Lidar.preset("vlp16")), n_samples=2, **kw)
     assert a["data"].shape == (3, 256, 3) and np.all(a["label"] == 3) and np.all(a["object_index"] == 7)
     # sample k depends on (seed, name, k) only
     for key in ("data", "distance_m", "n_visible", "ring"):
@@ -448,10 +449,10 @@ def test_farm_crops_with_the_adaptive_footprint_are_farm_datasets_adaptive_ones(
     params = SensorCropParams.from_dict(card["params"] | {"sensor": sensor})
     mesh = load_mesh(SAMPLES / f"{name}.off")
     kw = {"name": name, "label": 0, "object_index": 0, "n_samples": 2, "n_points": 128, "seed": 0, "distributions": params.distributions}
-    adaptive = farm_datasets(mesh, params.model(), footprint="adaptive", **kw)
+    adaptive = farm_datasets(mesh, ScanRequest(params.model(), footprint_cast="adaptive"), **kw)
     for key, values in written.items():
         assert np.array_equal(values, adaptive[key]), key
-    exact = farm_datasets(mesh, params.model(), footprint="exact", **kw)
+    exact = farm_datasets(mesh, ScanRequest(params.model(), footprint_cast="exact"), **kw)
     assert not all(np.array_equal(exact[key], adaptive[key]) for key in written)  # the adaptive cast changes some returns here
 
 

@@ -189,8 +189,13 @@ class SensorCropParams:
         object.__setattr__(self, "footprint_cast", footprint_mode(self.footprint_cast, sensor.beam))  # one value for one cast
 
     def model(self):
-        """The sensor of ``name`` with the beam changes of ``footprint`` and ``divergence_deg``
-        (:func:`~zbuf_occlude.sensors.kinds.with_beam`, as ``scan``'s beam options).
+        """The sensor of ``name`` with the beam changes of ``footprint`` and ``divergence_deg``: :meth:`request`'s scanner."""
+        return self.request().scanner
+
+    def request(self):
+        """The :class:`~zbuf_occlude.sensors.request.ScanRequest` of the farm's crops: the sensor of ``name``, the beam
+        changes of ``footprint`` and ``divergence_deg`` (as ``scan``'s beam options) and ``footprint_cast``, refused in
+        ``farm``'s options (:data:`FARM_REQUEST_NAMES`).
 
         Raises
         ------
@@ -221,9 +226,7 @@ class SensorCropParams:
         from zbuf_occlude.sensors.request import ScanRequest
 
         beam = {"footprint": self.footprint, "divergence_deg": self.divergence_deg}
-        return ScanRequest(sensor, beam=beam, footprint_cast=self.footprint_cast,
-                           names={**FARM_REQUEST_NAMES, "sensor": self.name}).scanner  # fmt: skip
-        return sensor
+        return ScanRequest(sensor, beam=beam, footprint_cast=self.footprint_cast, names={**FARM_REQUEST_NAMES, "sensor": self.name})
 
     @property
     def footprint_mode(self) -> str:

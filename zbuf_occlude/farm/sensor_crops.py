@@ -21,15 +21,14 @@ from zbuf_occlude.sensors.fit import fit_object_shape
 if TYPE_CHECKING:
     import trimesh
 
-    from zbuf_occlude.sensors.patterns.depth_camera import DepthCamera
-    from zbuf_occlude.sensors.patterns.spinning import Lidar
+    from zbuf_occlude.sensors.request import ScanRequest
 
 __all__ = ["farm_datasets"]
 
 
 def farm_datasets(
     mesh: trimesh.Trimesh | str | os.PathLike,
-    sensor: Lidar | DepthCamera,
+    request: ScanRequest,
     *,
     name: str,
     label: int,
@@ -39,8 +38,6 @@ def farm_datasets(
     seed: int = 0,
     distributions: CropDistributions = CropDistributions(),
     across_sight_width_m: tuple[float, float] | None = None,
-    backend: str = "embree",
-    footprint: str = "auto",
 ) -> dict[str, np.ndarray]:
     """What the farm writes for one object with ``--sensor``: the datasets of a dense shard.
 
@@ -48,8 +45,9 @@ def farm_datasets(
     ``pose_index`` is the sample number and ``sample_index`` is 0; samples without a return
     are left out (their ``n_visible`` would be 0, as for an empty pose).  With
     ``across_sight_width_m`` (metres, a LiDAR), the object is stretched horizontally to those
-    widths (:func:`~zbuf_occlude.sensors.fit.fit_width_scale`, seeded with ``seed``).  ``footprint``:
-    ``"auto"``, ``"exact"`` or ``"adaptive"``, as :func:`~zbuf_occlude.sensors.crops.object_crops` casts it.
+    widths (:func:`~zbuf_occlude.sensors.fit.fit_width_scale`, seeded with ``seed``).  ``request``: the farm's
+    :class:`~zbuf_occlude.sensors.request.ScanRequest` (its scanner, backend and footprint cast, as
+    :func:`~zbuf_occlude.sensors.crops.object_crops` casts it).
 
     Returns
     -------
@@ -60,7 +58,7 @@ def farm_datasets(
         and the placement: ``radius`` (mesh units), ``distance_m``, ``sensor_height_m``,
         ``object_azimuth_deg``, ``yaw_deg``, ``size_m`` (float64), ``ring (B, n_points) int16``;
         ``hidden_below_m`` (float64, metres) when ``distributions`` hides the objects' bottoms;
-        ``width_scale`` (float64) when the object is stretched; and, when ``sensor`` records
+        ``width_scale`` (float64) when the object is stretched; and, when the request's scanner records
         several returns per pulse (:func:`~zbuf_occlude.sensors.crops.kept_return_fields`), its
         return fields per point, ``(B, n_points)`` of the dtypes of
         :data:`~zbuf_occlude.dataset.layout.POINT_COLUMNS` (``return_number`` ... ``scan_angle_deg``).
@@ -70,6 +68,7 @@ def farm_datasets(
     InvalidInputError
         A mesh the width stretch cannot measure (naming ``name``), or bad distributions.
     """
+    sensor, backend, footprint = request.scanner, request.backend, request.cast
     if across_sight_width_m is not None:
         mesh = load_mesh(mesh) if isinstance(mesh, (str, os.PathLike)) else mesh  # once, for the fit and the crops
         distributions = replace(distributions, **fit_object_shape(mesh, sensor, distributions, across_sight_width_m, seed=seed, name=name))

@@ -95,9 +95,9 @@ def _scan(obj: FarmObject, params: FarmParams, out: Path, kind: SensorCrops, mes
     mesh = load_mesh(mesh_path, up=params.up)
     n_scans = int(params.samples_per_view)
     datasets = farm_datasets(
-        mesh, params.sensor.model(), name=obj.name, label=obj.label, object_index=obj.index, n_samples=n_scans,
+        mesh, params.sensor.request(), name=obj.name, label=obj.label, object_index=obj.index, n_samples=n_scans,
         n_points=params.n_points, seed=params.seed, distributions=params.sensor.distributions,
-        across_sight_width_m=params.sensor.across_sight_width_m, footprint=params.sensor.footprint_mode,
+        across_sight_width_m=params.sensor.across_sight_width_m,
     )  # fmt: skip
     n_visible = np.zeros(n_scans, dtype=np.int64)
     n_visible[datasets["pose_index"]] = datasets["n_visible"]
