@@ -25,6 +25,7 @@ from zbuf_occlude.dataset.verify import verify_dataset
 from zbuf_occlude.errors import ArgumentTypeError, DatasetFormatError, InvalidInputError
 from zbuf_occlude.farm import FarmParams
 from zbuf_occlude.farm.sensor_crops import farm_datasets
+from zbuf_occlude.sensors.request import ScanRequest
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors import Lidar
 from zbuf_occlude.sensors.crops import RETURN_FIELDS, kept_return_fields
@@ -109,7 +110,7 @@ def test_only_a_sensor_with_several_returns_keeps_return_fields():
 
 def test_a_one_return_sensor_writes_the_shard_as_before(tmp_path):
     mesh = load_mesh(SAMPLES / "chair" / "train" / "chair_0001.off")
-    datasets = farm_datasets(mesh, Lidar.preset("vlp16"), name="chair", label=0, object_index=0, n_samples=1, n_points=32)
+    datasets = farm_datasets(mesh, ScanRequest(Lidar.preset("vlp16")), name="chair", label=0, object_index=0, n_samples=1, n_points=32)
     assert set(datasets) == ONE_RETURN_DATASETS
 
 
@@ -130,7 +131,7 @@ def test_the_columns_are_the_crops_return_fields_point_for_point(returns_set):
     rec = _records(returns_set)[0]
     expected = farm_datasets(
         load_mesh(SAMPLES / rec["source"], up=params.up),
-        params.sensor.model(), name=rec["name"], label=rec["label"], object_index=rec["object_index"],
+        params.sensor.request(), name=rec["name"], label=rec["label"], object_index=rec["object_index"],
         n_samples=params.samples_per_view, n_points=params.n_points, seed=params.seed, distributions=params.sensor.distributions,
     )  # fmt: skip
     ds = OccludedDataset(returns_set, features=RETURN_FIELDS)
