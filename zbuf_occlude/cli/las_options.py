@@ -13,6 +13,7 @@ import argparse
 from collections.abc import Sequence
 from typing import Any
 
+from zbuf_occlude.sensors.request import LAS_FORMATS
 from zbuf_occlude.cli.options import GIVEN, Checked, real, shown
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.scan_data import GPS_START_S
@@ -22,7 +23,6 @@ __all__ = [
 ]  # fmt: skip
 
 #: The ``--format`` values that write LAS/LAZ files.
-LAS_FORMATS = ("las", "laz")
 #: The options of :func:`add_las_arguments`: ``args`` attribute → option.
 LAS_OPTIONS = {"crs": "--crs", "class_map": "--class-map", "gps_start_s": "--gps-start"}
 

@@ -67,7 +67,6 @@ def add_return_physics_arguments(p: argparse.ArgumentParser) -> None:
                         "(the echo of a surface inside the cone that neither meets is lost); exact casts every sub-ray (slower); "
                         "auto is adaptive where it applies (the embree backend), else exact; a depth camera casts no footprint "
                         "and refuses it (default: auto)")  # fmt: skip
-
     r.add_argument(
         "--return-mode", choices=RETURN_MODES, default=None,
         help="which echoes of a pulse the receiver records: all (up to --max-returns, in range order), strongest or last "

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from types import MappingProxyType
 
 from zbuf_occlude.defaults import MAX_SAMPLES
 from zbuf_occlude.errors import InvalidInputError
@@ -41,7 +40,7 @@ LAS_FORMATS = ("las", "laz")
 SCAN_FORMATS = ("npz", "ply", *LAS_FORMATS)
 
 
-def beam_changes(beam, given: Mapping[str, object], *, sensor: str, names: Mapping[str, str | None] = MappingProxyType({})) -> dict:
+def beam_changes(beam, given: Mapping[str, object], *, sensor: str, names: Mapping[str, str | None] | None = None) -> dict:
     """The :class:`~zbuf_occlude.sensors.beam.fields.Beam` fields that the beam changes ``given`` (fields of :data:`BEAM_REQUEST_FIELDS`) make.
 
     ``footprint`` gives :data:`~zbuf_occlude.sensors.beam.footprint.FOOTPRINT_RAYS` sub-rays in the
@@ -80,7 +79,7 @@ def beam_changes(beam, given: Mapping[str, object], *, sensor: str, names: Mappi
         changes["echo_separation_m"] = values["echo_separation_m"] = 0.0  # resolved echoes are kept apart, not merged
     if not resolves and "range_resolution_m" not in given and beam.range_resolution_m > 0:
         changes["range_resolution_m"] = values["range_resolution_m"] = 0.0  # one return per pulse: nothing to resolve
-    check_returns(values, {**names, "footprint_rays": n("footprint")})
+    check_returns(values, {**(names or {}), "footprint_rays": n("footprint")})
     return changes
 
 
@@ -179,9 +178,10 @@ class ScanRequest:
         object.__setattr__(self, "scanner", scanner)
         self._check_optics(kind, label)
         object.__setattr__(self, "frame", self._frame(kind, label))
-        if set(self.formats) & set(LAS_FORMATS):
-            check_las_frame(self.frame, moving=False, crs=self.las.get("crs"), names=self.names)
         self._check_trajectory(kind)
+        if set(self.formats) & set(LAS_FORMATS):
+            moving = self.trajectory is not None and not self.trajectory.is_static
+            check_las_frame(self.frame, moving=moving, crs=self.las.get("crs"), names=self.names)
         cast = "auto" if self.footprint_cast is None else self.footprint_cast
         if kind.pulsed:
             from zbuf_occlude.sensors.beam.adaptive_cast import check_footprint_cast
@@ -251,8 +251,6 @@ class ScanRequest:
         if not traj.is_static and traj.duration_s + 1e-9 < needed:
             raise InvalidInputError(f"{what} lasts {traj.duration_s:g} s, and {n('samples')} {self.samples} sweeps of "
                                     f"{self.scanner.name} take {needed:g} s: give fewer samples or a longer trajectory")  # fmt: skip
-        if set(self.formats) & set(LAS_FORMATS):
-            check_las_frame(self.frame, moving=not traj.is_static, names=self.names)
 
     def surface_optics(self, scene) -> dict:
         """The ``reflectivity`` and ``transmittance`` keywords of :func:`~zbuf_occlude.sensors.scan.scan` and

@@ -15,13 +15,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.checks import namer
 from zbuf_occlude.io.arrays import load_npz
 from zbuf_occlude.io.atomic import write_bytes
 from zbuf_occlude.io.caps import MAX_SCAN_NPZ_BYTES
 from zbuf_occlude.io.encodings import npz_bytes
 from zbuf_occlude.sensors.beam.fields import intensity_counts
-from zbuf_occlude.sensors.checks import MAX_SCENE_OBJECTS
+from zbuf_occlude.sensors.checks import MAX_SCENE_OBJECTS, namer
 
 __all__ = ["FRAMES", "GPS_START_S", "GPS_TIME_RESOLUTION_S", "UNIT_INTENSITY_SCALE", "Scan", "check_gps_start", "read_scan_npz"]
 
@@ -58,7 +57,6 @@ def check_las_frame(frame: str, *, moving: bool, crs=None, names: Mapping[str, s
         Either, in the sensor frame.
     """
     n = namer(names)
-
     if frame != "world" and moving:
         raise InvalidInputError(f"a moving sensor's points in the {frame} frame lie each in its own pulse's frame, which LAS cannot "
                                 f"classify by height: give {n('frame')} world")  # fmt: skip

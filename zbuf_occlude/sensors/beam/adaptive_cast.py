@@ -37,12 +37,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.checks import namer
 from zbuf_occlude.mesh.cache import MeshCache
 from zbuf_occlude.sensors.beam.fields import Beam
 from zbuf_occlude.sensors.beam.echo_energy import Radiometry, Transmission, echo_returns
 from zbuf_occlude.sensors.beam.echoes import MIN_RANGE_M, resolve_echoes
 from zbuf_occlude.sensors.beam.footprint import footprint_offsets
+from zbuf_occlude.sensors.checks import namer
 from zbuf_occlude.sensors.pulses import Pulses
 from zbuf_occlude.sensors.raycast.embree import BEYOND_HIT_SHARE, cast_embree
 from zbuf_occlude.sensors.scene.objects import BuiltScene
@@ -288,7 +288,6 @@ def check_footprint_cast(
         or fires one ray, or with another backend than "embree".
     """
     n = namer(names)
-
     if not isinstance(footprint, str) or footprint not in FOOTPRINT_MODES:
         shown = f"{footprint!r:.40}" if isinstance(footprint, str) else f"{type(footprint).__name__} {footprint!r:.40}"
         raise InvalidInputError(f"{n('footprint_cast')} must be one of {', '.join(FOOTPRINT_MODES)}, got {shown}")

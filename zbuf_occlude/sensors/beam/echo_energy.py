@@ -14,16 +14,14 @@ and resolves a pulse's hits into returns (:func:`~zbuf_occlude.sensors.beam.echo
 from __future__ import annotations
 
 from collections.abc import Mapping
-
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.checks import namer
 from zbuf_occlude.sensors.beam.attenuation import attenuate_along_subray
-from zbuf_occlude.sensors.checks import real
+from zbuf_occlude.sensors.checks import namer, real
 from zbuf_occlude.sensors.beam.echoes import MAX_POWER_NOISE, hit_energy, resolve_echoes
 from zbuf_occlude.sensors.beam.fields import Beam
 from zbuf_occlude.sensors.raycast.embree import MAX_HITS, cast_embree_beyond, face_normals
@@ -99,7 +97,6 @@ def check_transmittance_cast(shown: str, *, resolves_echoes: bool, backend: str,
         A beam that resolves no echoes, or another backend than "embree".
     """
     n = namer(names)
-
     if not resolves_echoes:
         raise InvalidInputError(f"{n('transmittance')} {shown} gives hits behind a surface, which only several returns per pulse resolve: "
                                 f"give {n('max_returns')} above 1 (and {n('footprint_rays')})")  # fmt: skip

@@ -29,8 +29,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.checks import namer
-from zbuf_occlude.sensors.checks import MAX_RANGE_M, count, located, real, replaced, sensor_name, text, value_kind
+from zbuf_occlude.sensors.checks import MAX_RANGE_M, count, located, namer, real, replaced, sensor_name, text, value_kind
 from zbuf_occlude.sensors.beam.echoes import ECHO_RULES, MAX_POWER_NOISE, MAX_RETURNS
 from zbuf_occlude.sensors.beam.footprint import (
     FOOTPRINT_RAYS,
@@ -309,7 +308,6 @@ def check_returns(values: Mapping[str, object], names: Mapping[str, str | None] 
         The first rule broken, naming the fields (as ``names`` maps them) and their values.
     """
     n = namer(names)
-
     k, m, mode, rule = values["footprint_rays"], values["max_returns"], values["return_mode"], values["echo_rule"]
     resolution, separation = values["range_resolution_m"], values["echo_separation_m"]
     resolves = m > 1 or mode != "all"
