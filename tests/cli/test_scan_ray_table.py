@@ -101,3 +101,19 @@ def test_without_either_the_default_sensor_scans(tmp_path: Path, capsys) -> None
     code, err = _run(["scan", "box", "--no-progress", "--out", str(tmp_path / "o")], capsys)
     assert code == 0, err
     assert (tmp_path / "o" / "box_hdl32e_s000.npz").is_file()
+
+
+def test_a_ray_table_is_a_sensor_by_its_file_name_too(tmp_path: Path, capsys) -> None:
+    path, _ = _table(tmp_path)
+    base = ["scan", "box", "--distance", "6", "--no-progress"]
+    assert _run([*base, "--ray-table", str(path), "--out", str(tmp_path / "a")], capsys)[0] == 0
+    assert _run([*base, "--sensor", str(path), "--out", str(tmp_path / "b")], capsys)[0] == 0
+    same = (tmp_path / "a" / "box_avia_s000.npz").read_bytes() == (tmp_path / "b" / "box_avia_s000.npz").read_bytes()
+    assert same  # one reader: the sensor's name
+
+
+def test_a_ray_table_option_takes_a_ray_table_file_only(tmp_path: Path, capsys) -> None:
+    spec = tmp_path / "lidar.json"
+    spec.write_text('{"preset": "vlp16"}')
+    code, err = _run(["scan", "box", "--ray-table", str(spec), "--no-progress", "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and "--ray-table must be a .csv or .npy file" in err and err.count("\n") == 0, err

@@ -5,8 +5,8 @@ placement per scan (:class:`~zbuf_occlude.sensors.placement.CropDistributions`).
 that set it are the rows of :data:`CROP_OPTIONS`: :func:`add_crop_arguments` adds them to a
 command's parser, :func:`crop_settings` turns what was parsed into the library's settings,
 which check every value themselves (:class:`~zbuf_occlude.sensors.placement.CropDistributions`,
-:func:`~zbuf_occlude.sensors.placement.check_across_sight_width`); a message names the option as
-it was typed.
+and the width a mesh is fitted to where it is used: :class:`~zbuf_occlude.sensors.placement.ObjectPlacement`,
+:class:`~zbuf_occlude.farm.config.SensorCropParams`); a message names the option as it was typed.
 
 Each option has two names that both commands take: ``--distance`` and ``--sensor-distance``,
 ``--hidden-below`` and ``--sensor-hidden-below``, ...  ``scan`` lists the short name first (it
@@ -23,7 +23,7 @@ from typing import Any
 from zbuf_occlude.cli.options import Check, interval, parse_interval, real, shown
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.beam.footprint import FOOTPRINT_RAYS, MAX_DIVERGENCE_DEG
-from zbuf_occlude.sensors.placement import CropDistributions, check_across_sight_width
+from zbuf_occlude.sensors.placement import CropDistributions
 
 __all__ = [
     "BEAM_FIELDS", "CropOption", "CropSettings", "CROP_OPTIONS", "FLAGS", "add_crop_arguments", "check_divergence", "crop_settings",
@@ -169,7 +169,8 @@ class CropSettings:
     divergence_deg : float or None
         The beam's full-angle divergence, degrees; None: the sensor's.
     across_sight_width_m : (lo, hi) or None
-        Metres, checked by :func:`~zbuf_occlude.sensors.placement.check_across_sight_width`.
+        Metres, as parsed: the library's value that takes it checks it
+        (:func:`~zbuf_occlude.sensors.placement.check_across_sight_width`).
     names : dict of str to str
         The option that names each :class:`CropDistributions` field.
     """
@@ -201,6 +202,5 @@ def crop_settings(args: argparse.Namespace, base: CropDistributions, **fields: A
         fields[o.field] = parse_interval(text, names[o.field]) if o.check is interval else text
     distributions = replace(base, **fields, option_names=names)
     width = args.across_sight_width
-    flag = names["across_sight_width_m"]
-    across = None if width is None else check_across_sight_width(parse_interval(width, flag), flag)
+    across = None if width is None else parse_interval(width, names["across_sight_width_m"])
     return CropSettings(distributions, bool(args.footprint), args.divergence, across, names)

@@ -125,7 +125,7 @@ def _sensor_params(args: argparse.Namespace) -> dict:
     crops = crop_settings(args, FARM_CROP_DISTRIBUTIONS)
     return {"sensor": SensorCropParams(args.sensor, crops.distributions, footprint=crops.footprint,
                                        across_sight_width_m=crops.across_sight_width_m, divergence_deg=crops.divergence_deg,
-                                       footprint_cast=args.sensor_footprint_cast or "auto")}  # fmt: skip
+                                       footprint_cast=args.sensor_footprint_cast or "auto", option_names=crops.names)}  # fmt: skip
 
 
 def _merge_command(args: argparse.Namespace) -> int:

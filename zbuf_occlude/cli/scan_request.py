@@ -34,7 +34,7 @@ SCAN_OPTION_FIELDS = {
     **{field: "--" + dest.replace("_", "-") for dest, field in BEAM_OPTIONS.items()}, "footprint_rays": "--footprint",
     "footprint_cast": "--footprint-cast", "backend": "--backend", "frame": "--frame", "reflectance_table": "--reflectance-table",
     "transmittance": "--transmittance", "reflectivity": "--reflectivity", "trajectory": "--trajectory", "samples": "--samples",
-    "format": "--format", "gps_start_s": "--gps-start", "crs": "--crs",
+    "format": "--format", "gps_start_s": "--gps-start", "crs": "--crs", "crop": "--crop",
 }  # fmt: skip
 #: The crop options among them, by field, whose name ``scan`` records as typed (``--footprint`` or ``--sensor-footprint``).
 _CROP_FIELDS = {"footprint": "footprint", "footprint_rays": "footprint", "divergence_deg": "divergence_deg", "reflectivity": "reflectivity"}
@@ -93,20 +93,21 @@ def check_transmittance(text: str, option: str):
     return out
 
 
-def option_names(args: argparse.Namespace) -> dict[str, str]:
-    """The field → option map of ``args``: :data:`SCAN_OPTION_FIELDS` with the crop options as typed, and the sensor as named."""
+def option_names(args: argparse.Namespace, sensor: str | None = None) -> dict[str, str]:
+    """The field → option map of ``args``: :data:`SCAN_OPTION_FIELDS` with the crop options as typed, and the sensor as
+    named (``sensor``, else ``args.sensor``)."""
     from zbuf_occlude.cli.crops import FLAGS
 
     typed = getattr(args, FLAGS, {})
     names = {**SCAN_OPTION_FIELDS, **{f: typed[c] for f, c in _CROP_FIELDS.items() if typed.get(c)}}
     if getattr(args, "trajectory", None) is not None:
         names["trajectory"] = f"--trajectory {args.trajectory}"
-    return {**names, "sensor": str(args.sensor)}
+    return {**names, "sensor": str(args.sensor if sensor is None else sensor)}
 
 
 def scan_request(args: argparse.Namespace, sensor, **fields) -> ScanRequest:
-    """The :class:`~zbuf_occlude.sensors.request.ScanRequest` of ``sensor`` and ``args``' beam options and surface optics
-    (``fields``: the request's other fields), naming the options by :func:`option_names`.
+    """The :class:`~zbuf_occlude.sensors.request.ScanRequest` of ``sensor`` (a sensor, or its name) and ``args``' beam options
+    and surface optics (``fields``: the request's other fields), naming the options by :func:`option_names`.
 
     Raises
     ------
@@ -116,4 +117,4 @@ def scan_request(args: argparse.Namespace, sensor, **fields) -> ScanRequest:
     beam = {field: getattr(args, dest, None) for dest, field in BEAM_OPTIONS.items()}
     return ScanRequest(sensor, beam=beam, footprint_cast=getattr(args, "footprint_cast", None), reflectance_table=bool(getattr(args, "reflectance_table", False)),
                        transmittance=getattr(args, "transmittance", None), reflectivity=getattr(args, "reflectivity", None),
-                       names=option_names(args), **fields)  # fmt: skip
+                       names=option_names(args, sensor if isinstance(sensor, str) else None), **fields)  # fmt: skip

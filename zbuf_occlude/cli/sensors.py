@@ -9,63 +9,35 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
-from dataclasses import replace
 from pathlib import Path
 
-
-from zbuf_occlude.cli.crops import FLAGS, CropSettings, add_crop_arguments, crop_settings, given_crop_options
+from zbuf_occlude.cli.crops import add_crop_arguments, crop_settings, given_crop_options
 from zbuf_occlude.cli.las_options import add_las_arguments, las_keywords
 from zbuf_occlude.cli.options import Checked, count, counted, interval, out_folder, parse_interval, seed
 from zbuf_occlude.cli.return_physics import add_return_physics_arguments
 from zbuf_occlude.cli.scan_request import scan_request
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.io.owned import OwnedFolder
+from zbuf_occlude.io.ray_tables import RAY_TABLE_SUFFIXES
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
-from zbuf_occlude.mesh.sizes import DIMENSIONS, SizeRange, size_interval
-from zbuf_occlude.sensors.placement import CropDistributions, check_outside
-from zbuf_occlude.sensors.kinds import SENSOR_KINDS, preset_names, sensor_from_name
-from zbuf_occlude.sensors.scan_files import SCAN_FILE_NAMES
-from zbuf_occlude.sensors.spec_files import SCENE_SUFFIXES
+from zbuf_occlude.mesh.sizes import DIMENSIONS
+from zbuf_occlude.sensors.kinds import SENSOR_KINDS, preset_names
+from zbuf_occlude.sensors.placement import CropDistributions, ObjectPlacement
+from zbuf_occlude.sensors.scan_files import run_scan
 
 __all__ = ["add_scan_parser", "SCAN_CROP_DISTRIBUTIONS"]
 
 log = logging.getLogger(__name__)
 
 
-#: A mesh whose height is below this share of its largest side is flat in z: stood on the ground it
-#: lies in the ground plane, where a scan cannot tell it from the ground (scan refuses it).
-FLAT_SHARE = 1e-6
-
-#: Unit primitives ``scan`` takes instead of a mesh file (stretch them with ``--extents``).
-PRIMITIVES = {
-    "cylinder": {"cylinder": {"radius_m": 0.5, "height_m": 1.0, "sections": 48}},
-    "box": {"box_m": [1.0, 1.0, 1.0]},
-}
-
-
-def _outline(text: str | None) -> tuple[float, ...] | None:
-    """``--outline V,V,...``: two or more widths over the scan's width, bottom to top
-    (:func:`~zbuf_occlude.sensors.scene.object_shapes.check_width_profile`)."""
-    from zbuf_occlude.sensors.scene.object_shapes import check_width_profile
-
-    if text is None:
-        return None
-    try:
-        return check_width_profile(text.split(","))
-    except InvalidInputError:
-        raise InvalidInputError(f"--outline must be 2 or more numbers > 0, V,V,..., bottom to top, got {text!r}") from None
-
-
 #: ``scan``'s placement when no option changes it: a car (4.5 m) 10 m ahead of a LiDAR on a car roof.
 SCAN_CROP_DISTRIBUTIONS = CropDistributions(distance_m=10.0, height_m=1.8, size_m=4.5, azimuth_deg=0.0, yaw_deg=0.0)
-#: ``scan``'s own option of each other :class:`~zbuf_occlude.sensors.placement.CropDistributions` field it sets, for
-#: messages (the crop options of :mod:`zbuf_occlude.cli.crops` name theirs).
+#: ``scan``'s own option of each other :class:`~zbuf_occlude.sensors.placement.CropDistributions` and
+#: :class:`~zbuf_occlude.sensors.placement.ObjectPlacement` field it sets, for messages (the crop options of
+#: :mod:`zbuf_occlude.cli.crops` name theirs).
 SCAN_OPTION_NAMES = {
-    "azimuth_deg": "--azimuth",
-    "yaw_deg": "--yaw",
-    "extents_m": "--extents",
-    "ground_reflectivity": "--ground-reflectivity",
-}
+    "azimuth_deg": "--azimuth", "yaw_deg": "--yaw", "extents_m": "--extents", "ground_reflectivity": "--ground-reflectivity",
+    "up": "--up", "size_of": "--size-of", "width_profile": "--outline", "occlude": "--occlude",
+}  # fmt: skip
 #: What ``scan`` adds to the help of a crop option.
 SCAN_NOTES = {
     "distance_m": "at least half the object's size; an airborne scanner flies over the object, distance · sin(azimuth) "
@@ -75,61 +47,39 @@ SCAN_NOTES = {
 }
 
 
-def _largest_side(crops: CropSettings, size_of: str, mesh) -> CropSettings:
-    """``crops`` with its size the interval of the object's largest side, metres: ``--size-of`` a mesh's height or length converted."""
-    if size_of == "max":
-        return crops
-    if isinstance(mesh, dict):
-        raise InvalidInputError(f"--size-of {size_of} measures a mesh file; a primitive takes --size (its largest dimension) or --extents")
-    return crops.with_fields(size_m=size_interval(mesh.extents, SizeRange(size_of, *crops.distributions.size_m)))
-
-
 #: ``scan``'s sensor when neither ``--sensor`` nor ``--ray-table`` names one.
 SCAN_SENSOR = "hdl32e"
 
 
-def _scan_sensor(args: argparse.Namespace):
-    """The sensor ``scan`` fires, as named: ``--sensor``'s (:data:`SCAN_SENSOR` by default), or the
-    :class:`~zbuf_occlude.sensors.patterns.ray_table.RayTable` of ``--ray-table FILE`` (with
-    :data:`~zbuf_occlude.sensors.patterns.ray_table.RAY_TABLE_FILE_BEAM`); ``args.sensor`` names it in messages.
-
-    Raises
-    ------
-    InvalidInputError
-        ``--ray-table`` with ``--sensor`` (one sensor per scan), or a file
-        :func:`~zbuf_occlude.sensors.patterns.ray_table.load_ray_table` refuses.
-    """
+def _sensor_name(args: argparse.Namespace) -> str:
+    """The name of the sensor ``scan`` fires: ``--sensor``'s (:data:`SCAN_SENSOR` by default), or the file of
+    ``--ray-table`` (read by :func:`~zbuf_occlude.sensors.kinds.sensor_from_name` with the request)."""
     if args.ray_table is None:
-        args.sensor = args.sensor or SCAN_SENSOR
-        return sensor_from_name(args.sensor)
-    from zbuf_occlude.sensors.patterns.ray_table import RAY_TABLE_FILE_BEAM, load_ray_table
-
+        return args.sensor or SCAN_SENSOR
     if args.sensor is not None:
         raise InvalidInputError(f"--ray-table {args.ray_table} is the sensor: give --ray-table or --sensor {args.sensor}, not both")
-    table = load_ray_table(args.ray_table, beam=RAY_TABLE_FILE_BEAM)
-    args.sensor = args.ray_table  # what the request's messages name
-    return table
+    if Path(args.ray_table).suffix.lower() not in RAY_TABLE_SUFFIXES:
+        raise InvalidInputError(f"--ray-table must be a {' or '.join(RAY_TABLE_SUFFIXES)} file, got {args.ray_table!r:.80}")
+    return args.ray_table
 
 
-def _trajectory(args: argparse.Namespace):
-    """``--trajectory``'s :class:`~zbuf_occlude.sensors.platform.Trajectory`, or None; read before ``--out`` is held
-    (the request checks it against the sensor, the sweeps and the output).
-
-    Raises
-    ------
-    InvalidInputError
-        A mesh file to scan (a trajectory moves the sensor through a scene file's frame), or what
-        :func:`~zbuf_occlude.sensors.platform.load_trajectory` refuses (naming the file).
-    """
-    path = args.trajectory
-    if path is None:
-        return None
-    if Path(args.mesh_or_scene).suffix.lower() not in SCENE_SUFFIXES:
-        raise InvalidInputError(f"--trajectory {path} moves the sensor through a scene file's frame; "
-                                f"a scan of {Path(args.mesh_or_scene).name} places the sensor per sample (give a scene file)")  # fmt: skip
-    from zbuf_occlude.sensors.platform import load_trajectory
-
-    return load_trajectory(path)
+def _placement(args: argparse.Namespace) -> ObjectPlacement:
+    """How ``scan`` stands a mesh on the ground: the crop options, ``--azimuth``, ``--yaw``, ``--extents``, ``--size-of``,
+    ``--up``, ``--across-sight-width``, ``--outline`` and ``--occlude``, as the library's
+    :class:`~zbuf_occlude.sensors.placement.ObjectPlacement` (which checks them, naming the options as typed)."""
+    extents, round_xy = None, False
+    if args.extents:
+        parts = args.extents.split(",")
+        if len(parts) != 3:
+            raise InvalidInputError(f"--extents must be X,Y,Z in metres (each N or LO:HI; Y may be '='), got {args.extents!r}")
+        round_xy = parts[1].strip() == "="
+        extents = tuple(parse_interval(parts[0] if i == 1 and round_xy else v, "--extents") for i, v in enumerate(parts))
+    crops = crop_settings(args, SCAN_CROP_DISTRIBUTIONS, azimuth_deg=parse_interval(args.azimuth, "--azimuth"),
+                          yaw_deg=parse_interval(args.yaw, "--yaw"), extents_m=extents, round_xy=round_xy,
+                          ground_reflectivity=args.ground_reflectivity)  # fmt: skip
+    outline = None if args.outline is None else tuple(args.outline.split(","))
+    return ObjectPlacement(crops.distributions, up=args.up, size_of=args.size_of, across_sight_width_m=crops.across_sight_width_m,
+                           width_profile=outline, occlude=args.occlude, names={**crops.names, **SCAN_OPTION_NAMES})  # fmt: skip
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
@@ -138,36 +88,13 @@ def cmd_scan(args: argparse.Namespace) -> int:
             raise InvalidInputError(f"{flag} {option.in_crop}: it needs --crop")
         if args.outline is not None:
             raise InvalidInputError("--outline gives the object's crops the outline of real scans: it needs --crop")
-    if args.occlude and args.across_sight_width is None:
-        width = getattr(args, FLAGS)["across_sight_width_m"]
-        raise InvalidInputError(f"--occlude meets {width} with a side occluder: it needs {width}")
     formats = ("npz", "ply") if args.format == "both" else (args.format,)
-    las = las_keywords(args, formats)
-    sensor = _scan_sensor(args)
-    request = scan_request(args, sensor, backend=args.backend, frame=args.frame, trajectory=_trajectory(args), samples=args.samples,
-                           formats=formats, las=las)  # fmt: skip
-    # a refused run's empty --out is removed by cli.main
-    with OwnedFolder(args.out, names=[SCAN_FILE_NAMES], what="the scan") as folder:
-        return _scan_into(folder, args, request)
-
-
-def _scan_into(folder: OwnedFolder, args: argparse.Namespace, request) -> int:
-    """:func:`cmd_scan` once ``--out`` is held: a scene file's scans, or the mesh's placed and scanned
-    (:mod:`zbuf_occlude.sensors.scan_files`); 1 where a scan of a mesh holds no return of the object."""
-    from zbuf_occlude.sensors.scan_files import scan_object, scan_scene_file
-    from zbuf_occlude.sensors.scene.files import load_scene
-
-    src = Path(args.mesh_or_scene)
-    if src.suffix.lower() in SCENE_SUFFIXES:
-        if args.crop:
-            raise InvalidInputError(f"--crop keeps one mesh's returns; {src.name} is a scene file, scanned whole")
-        scans = scan_scene_file(request, load_scene(src), folder, stem=src.stem, seed=args.seed, progress=not args.no_progress)
-    else:
-        mesh, dist = _placed_object(args, request.scanner, src)
-        scans = scan_object(request, mesh, dist, folder, name=src.stem, seed=args.seed, crop=args.crop, progress=not args.no_progress)
-    written, empty = 0, 0
-    for done in scans:
-        written += len(done.files)
+    request = scan_request(args, _sensor_name(args), backend=args.backend, frame=args.frame, trajectory=args.trajectory,
+                           samples=args.samples, formats=formats, las=las_keywords(args, formats))  # fmt: skip
+    placement = _placement(args)
+    written, empty, folder = 0, 0, None  # a refused run's empty --out is removed by cli.main
+    for done in run_scan(request, args.mesh_or_scene, args.out, placement, seed=args.seed, crop=args.crop, progress=not args.no_progress):
+        written, folder = written + len(done.files), done.files[0].parent
         if done.object_returns == 0:
             empty += 1
             print(f"EMPTY {done.files[0]}: no return of the object (edge-on, below the sensor's beams or beyond its range at "
@@ -175,52 +102,10 @@ def _scan_into(folder: OwnedFolder, args: argparse.Namespace, request) -> int:
         if done.object_returns is not None:
             log.info("%s: %d returns of the object at %.2f m", done.files[0].stem, done.object_returns, done.distance_m)
     print(
-        f"wrote {counted(written, 'file')} to {folder.root}"
-        + (f"; {empty} of {counted(args.samples, 'scan')} hold no return of the object" if empty else "")
+        f"wrote {counted(written, 'file')} to {folder}"
+        + (f"; {empty} of {counted(request.samples, 'scan')} hold no return of the object" if empty else "")
     )
     return 1 if empty else 0
-
-
-def _placed_object(args: argparse.Namespace, sensor, src: Path):
-    """The mesh ``scan`` stands on the ground (a file, read once, or a unit primitive) and its placement's
-    :class:`~zbuf_occlude.sensors.placement.CropDistributions` from the crop options (``--extents``, ``--size-of``,
-    ``--across-sight-width`` and ``--outline`` fitted by :func:`~zbuf_occlude.sensors.fit.fit_object_shape`)."""
-    from zbuf_occlude.sensors.kinds import capabilities
-
-    extents, round_xy = None, False
-    if args.extents and args.size_of != "max":
-        raise InvalidInputError(f"--size-of {args.size_of} says what --size measures; --extents gives every side instead")
-    if args.extents:
-        parts = args.extents.split(",")
-        if len(parts) != 3:
-            raise InvalidInputError(f"--extents must be X,Y,Z in metres (each N or LO:HI; Y may be '='), got {args.extents!r}")
-        round_xy = parts[1].strip() == "="
-        extents = tuple(parse_interval(parts[0] if i == 1 and round_xy else v, "--extents") for i, v in enumerate(parts))
-    mesh = PRIMITIVES.get(str(src)) if not src.exists() else None
-    if mesh is None:
-        from zbuf_occlude.mesh.load import load_mesh
-
-        mesh = load_mesh(src, up=args.up)  # once, not per sample
-        if not mesh.extents[2] > FLAT_SHARE * mesh.extents.max():
-            raise InvalidInputError(
-                f"{src}: flat in z (no height once its up axis is turned to +z, --up {args.up}): stood on the ground it lies "
-                "in the ground plane, where no scan can tell it from the ground; give --up the axis it should stand along "
-                "(e.g. --up +y), or give it a thickness"
-            )
-    crops = crop_settings(args, SCAN_CROP_DISTRIBUTIONS, azimuth_deg=parse_interval(args.azimuth, "--azimuth"),
-                          yaw_deg=parse_interval(args.yaw, "--yaw"), extents_m=extents, round_xy=round_xy,
-                          ground_reflectivity=args.ground_reflectivity)  # fmt: skip
-    dist = _largest_side(crops, args.size_of, mesh).distributions
-    if crops.across_sight_width_m is not None or args.outline is not None:
-        from zbuf_occlude.sensors.fit import fit_object_shape
-
-        dist = replace(dist, **fit_object_shape(mesh, sensor, dist, crops.across_sight_width_m, _outline(args.outline), occlude=args.occlude,
-                                                seed=args.seed, name=str(src)))  # fmt: skip
-        log.info("%s: width_scale %s, visible_across_sight %s, width_profile %s", src.name, dist.width_scale, dist.visible_across_sight,
-                 dist.width_profile)  # fmt: skip
-    if not capabilities(sensor).flies:  # an aircraft flies its altitude above the object
-        check_outside(dist, None if isinstance(mesh, dict) else mesh.extents, name="--distance")
-    return mesh, dist
 
 
 def add_scan_parser(sub) -> argparse.ArgumentParser:
@@ -244,7 +129,7 @@ def add_scan_parser(sub) -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--sensor", default=None,
-        help=f"{kinds}, or a sensor .json (fit-sensor writes one) (default: {SCAN_SENSOR})",
+        help=f"{kinds}, a sensor .json (fit-sensor writes one), or a ray table file as --ray-table takes (default: {SCAN_SENSOR})",
     )  # fmt: skip
     t = p.add_argument_group("ray table (instead of --sensor)", "a LiDAR that fires along your own table of directions, one row per pulse")
     t.add_argument(

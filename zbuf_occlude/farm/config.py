@@ -10,7 +10,7 @@ import logging
 import os
 import threading
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import InitVar, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -148,6 +148,9 @@ class SensorCropParams:
         digest of data sets made before it is kept; a card without it reads as "exact".  Held as the
         cast it resolves to ("exact" or "adaptive"), so that settings read back from a card compare
         equal and the sensor is not read again to know it.
+    option_names : mapping of str to str, optional
+        What the messages call ``across_sight_width_m`` (the option as typed); default its ``farm``
+        flag (:data:`OPTION_NAMES`).  Not stored.
 
     Raises
     ------
@@ -163,8 +166,9 @@ class SensorCropParams:
     across_sight_width_m: tuple[float, float] | None = None
     divergence_deg: float | None = None
     footprint_cast: str = "auto"
+    option_names: InitVar[Mapping[str, str] | None] = None
 
-    def __post_init__(self) -> None:
+    def __post_init__(self, option_names: Mapping[str, str] | None) -> None:
         if not isinstance(self.distributions, CropDistributions):
             raise InvalidInputError(f"--sensor's distributions must be a CropDistributions, got {type(self.distributions).__name__}")
         unset = CropDistributions()
@@ -183,7 +187,7 @@ class SensorCropParams:
             option = OPTION_NAMES["sensor_divergence_deg"]
             object.__setattr__(self, "divergence_deg", real(self.divergence_deg, option, low=0.0, low_open=True, high=MAX_DIVERGENCE_DEG))
         if self.across_sight_width_m is not None:
-            option = OPTION_NAMES["sensor_across_sight_width_m"]
+            option = (option_names or {}).get("across_sight_width_m") or OPTION_NAMES["sensor_across_sight_width_m"]
             object.__setattr__(self, "across_sight_width_m", check_across_sight_width(self.across_sight_width_m, option))
         sensor = self.model()  # raises InvalidInputError naming an unknown sensor, or physics it has not (a depth camera)
         object.__setattr__(self, "footprint_cast", footprint_mode(self.footprint_cast, sensor.beam))  # one value for one cast

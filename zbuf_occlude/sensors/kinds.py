@@ -27,7 +27,8 @@ from zbuf_occlude.sensors.beam.fields import Beam
 from zbuf_occlude.sensors.checks import MAX_RANGE_M, given, located, mapping, real, text, value_kind
 from zbuf_occlude.sensors.patterns.depth_camera import DEPTH_CAMERA_PRESETS, DepthCamera
 from zbuf_occlude.sensors.patterns.spinning import LIDAR_PRESETS, Lidar
-from zbuf_occlude.sensors.patterns.ray_table import RAY_TABLE_FILE_BEAM, RAY_TABLE_PRESETS, RayTable
+from zbuf_occlude.io.ray_tables import RAY_TABLE_SUFFIXES
+from zbuf_occlude.sensors.patterns.ray_table import RAY_TABLE_FILE_BEAM, RAY_TABLE_PRESETS, RayTable, load_ray_table
 
 __all__ = [
     "SENSOR_KINDS",
@@ -178,7 +179,7 @@ _LEGACY_BEAM = {
 
 
 def sensor_from_name(name: str | os.PathLike):
-    """A preset of any kind, or a sensor from a JSON file.
+    """A preset of any kind, a sensor from a JSON file, or a ray table from a ``.csv`` or ``.npy`` file.
 
     A sensor file is a JSON object: ``"kind"`` (a :data:`SENSOR_KINDS` name, default
     ``"lidar"``), optionally ``"preset": NAME`` (a preset of that kind, whose fields the file's
@@ -187,14 +188,17 @@ def sensor_from_name(name: str | os.PathLike):
     ``ideal`` beam).  An optional ``"fit"`` block (what :mod:`~zbuf_occlude.sensors.fit` writes) is
     metadata.  Files of the flat layout (beam fields beside the pattern's: :data:`LEGACY_BEAM_KEYS`)
     are read too.  The file is read by :func:`~zbuf_occlude.sensors.spec_files.read_spec_file`
-    (size and nesting bounded); every field is checked by its class.
+    (size and nesting bounded); every field is checked by its class.  A ray table file is read by
+    :func:`~zbuf_occlude.sensors.patterns.ray_table.load_ray_table` with
+    :data:`~zbuf_occlude.sensors.patterns.ray_table.RAY_TABLE_FILE_BEAM`, named by its stem.
 
     Raises
     ------
     InvalidInputError
         An unknown name, a ``.json`` file that does not exist, or a file that is not JSON, nests
         too deep, has an unknown kind, preset or key, or a field of the wrong type or range (the
-        message names the file and the field).
+        message names the file and the field); what :func:`~zbuf_occlude.sensors.patterns.ray_table.load_ray_table`
+        refuses of a ray table file.
     """
     if not isinstance(name, (str, os.PathLike)):
         raise InvalidInputError(f"a sensor must be a preset name or a .json file, got {value_kind(name)}")
@@ -211,8 +215,11 @@ def sensor_from_name(name: str | os.PathLike):
             return sensor_from_spec(spec)
     if path.suffix.lower() == ".json":
         raise InvalidInputError(f"sensor file {path}: no such file (fit-sensor writes one; or name a preset)")
+    if path.suffix.lower() in RAY_TABLE_SUFFIXES:
+        return load_ray_table(path, beam=RAY_TABLE_FILE_BEAM)
     raise InvalidInputError(
-        f"unknown sensor {given(name)}; use one of {[n for names in preset_names().values() for n in names]} or a .json file"
+        f"unknown sensor {given(name)}; use one of {[n for names in preset_names().values() for n in names]} or a .json file "
+        f"(or a ray table: {', '.join(RAY_TABLE_SUFFIXES)})"
     )
 
 

@@ -1,5 +1,5 @@
-"""Where a crop's object stands and how it is seen: the distributions (:class:`CropDistributions`)
-and one draw from them (:class:`Placement`).
+"""Where a crop's object stands and how it is seen: the distributions (:class:`CropDistributions`),
+one draw from them (:class:`Placement`), and how ``scan`` stands one mesh (:class:`ObjectPlacement`).
 
 Pure numpy, so that a farm's parameters can carry crop settings without loading meshes;
 :mod:`zbuf_occlude.sensors.crops` scans an object placed so.
@@ -9,17 +9,20 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import InitVar, dataclass, fields
+from dataclasses import InitVar, dataclass, field, fields
 from typing import Any
 
 import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.mesh.sizes import DIMENSIONS
+from zbuf_occlude.sensors.checks import namer
 from zbuf_occlude.sensors.scene.object_shapes import check_width_profile
 
 __all__ = [
     "check_outside",
     "CropDistributions",
+    "ObjectPlacement",
     "Placement",
     "DEFAULT_GROUND_REFLECTIVITY",
     "check_across_sight_width",
@@ -329,3 +332,67 @@ def check_outside(dist: CropDistributions, extents=None, *, name: str = "distanc
             f"{name} {dist.distance_m[0]:g} m may put the sensor inside the object (up to {max(sizes):g} m across): "
             f"use a distance of at least {half:g} m"
         )
+
+
+@dataclass(frozen=True)
+class ObjectPlacement:
+    """How a scan of one mesh stands it on the ground before the sensor
+    (:func:`~zbuf_occlude.sensors.scan_files.run_scan`): the crops' distributions, the mesh's up axis, what its
+    size measures, and the width and outline its crops are fitted to.
+
+    Parameters
+    ----------
+    distributions : CropDistributions
+        Checked already; ``size_m`` measures the side ``size_of`` names.
+    up : str
+        The mesh's up axis, turned to +z as it is read (:func:`~zbuf_occlude.mesh.load.load_mesh`'s ``up``).
+    size_of : {"max", "length", "height"}
+        What ``size_m`` measures: the largest side, or the mesh's length or height
+        (:func:`~zbuf_occlude.mesh.sizes.size_interval` converts it to the largest side).
+    across_sight_width_m : (lo, hi) or None
+        Fit the mesh's crops to this width across the line of sight, metres
+        (:func:`~zbuf_occlude.sensors.fit.fit_object_shape`, checked by :func:`check_across_sight_width`).
+    width_profile : sequence of float or None
+        Fit the crops' outline to these widths over the height, bottom to top (2 or more > 0).
+    occlude : bool
+        Meet the width with a side occluder instead of a thinner object (needs ``across_sight_width_m``).
+    names : mapping of str to str
+        A caller's name of each field, and of ``distributions``' fields, for messages
+        (:func:`~zbuf_occlude.sensors.checks.namer`).
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the fields as ``names`` maps them: a ``size_of`` that is none of those, or other than "max"
+        with ``extents_m`` (which gives every side); a bad width or outline; ``occlude`` without a width.
+    """
+
+    distributions: CropDistributions = CropDistributions()
+    up: str = "+z"
+    size_of: str = "max"
+    across_sight_width_m: tuple[float, float] | None = None
+    width_profile: tuple[float, ...] | None = None
+    occlude: bool = False
+    names: Mapping[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        n = namer(self.names)
+        if self.size_of not in DIMENSIONS:
+            raise InvalidInputError(f"{n('size_of')} must be one of {', '.join(DIMENSIONS)}, got {self.size_of!r:.40}")
+        if self.size_of != "max" and self.distributions.extents_m is not None:
+            raise InvalidInputError(
+                f"{n('size_of')} {self.size_of} says what {n('size_m')} measures; {n('extents_m')} gives every side instead"
+            )
+        if self.across_sight_width_m is not None:
+            object.__setattr__(self, "across_sight_width_m", check_across_sight_width(self.across_sight_width_m, n("across_sight_width_m")))
+        if self.width_profile is not None:
+            try:
+                object.__setattr__(self, "width_profile", check_width_profile(self.width_profile))
+            except InvalidInputError:
+                shown = ",".join(str(v) for v in self.width_profile) if isinstance(self.width_profile, (tuple, list)) else "another value"
+                raise InvalidInputError(
+                    f"{n('width_profile')} must be 2 or more numbers > 0, V,V,..., bottom to top, got {shown!r:.80}"
+                ) from None
+        if self.occlude and self.across_sight_width_m is None:
+            width = n("across_sight_width_m")
+            raise InvalidInputError(f"{n('occlude')} meets {width} with a side occluder: it needs {width}")

@@ -14,6 +14,7 @@ and the adaptive cast (:func:`~zbuf_occlude.sensors.beam.adaptive_cast.check_foo
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -23,7 +24,7 @@ from zbuf_occlude.sensors.checks import count, namer
 from zbuf_occlude.sensors.raycast.embree import BACKENDS
 from zbuf_occlude.sensors.beam.fields import MODE_RETURNS, RETURN_FIELDS, check_returns, footprint_changes
 from zbuf_occlude.sensors.beam.echo_energy import check_transmittance_cast
-from zbuf_occlude.sensors.kinds import capabilities, with_beam
+from zbuf_occlude.sensors.kinds import SensorKind, capabilities, sensor_from_name, with_beam
 from zbuf_occlude.sensors.scan_data import FRAMES, check_las_frame
 
 __all__ = ["BEAM_REQUEST_FIELDS", "LAS_FORMATS", "SCAN_FORMATS", "ScanRequest", "beam_changes"]
@@ -89,8 +90,9 @@ class ScanRequest:
 
     Parameters
     ----------
-    sensor : Lidar, RayTable, AirborneScanner or DepthCamera
-        The sensor as named (a preset, a sensor file, a ray table).
+    sensor : Lidar, RayTable, AirborneScanner, DepthCamera, str or PathLike
+        The sensor, or its name: a preset, a sensor file or a ray table file, read by
+        :func:`~zbuf_occlude.sensors.kinds.sensor_from_name`.
     beam : mapping of str to value
         Beam changes by field (:data:`BEAM_REQUEST_FIELDS`), applied by :func:`beam_changes` and
         :func:`~zbuf_occlude.sensors.kinds.with_beam`.
@@ -106,8 +108,9 @@ class ScanRequest:
         The share of each sub-ray that goes on through an object (:mod:`~zbuf_occlude.sensors.scene.materials`).
     reflectivity : object
         The object's own reflectivity where the caller gives one (checked against ``reflectance_table``).
-    trajectory : Trajectory or None
-        A platform moving during the sweeps (:mod:`~zbuf_occlude.sensors.platform`).
+    trajectory : Trajectory, str, PathLike or None
+        A platform moving during the sweeps (:mod:`~zbuf_occlude.sensors.platform`), or its CSV file
+        (:func:`~zbuf_occlude.sensors.platform.load_trajectory`).
     samples : int
         Sweeps scanned one after another (a trajectory must last them).
     formats : tuple of str
@@ -122,13 +125,16 @@ class ScanRequest:
     ----------
     scanner
         ``sensor`` with the beam changes applied.
+    kind : SensorKind
+        What the scanner can do (:func:`~zbuf_occlude.sensors.kinds.capabilities`), asked once.
     cast : str
         ``footprint_cast`` checked ("auto" where not asked).
 
     Raises
     ------
     InvalidInputError
-        Naming the fields as ``names`` maps them: an unknown backend or format, sweeps that are not a whole
+        Naming the fields as ``names`` maps them: what :func:`~zbuf_occlude.sensors.kinds.sensor_from_name` and
+        :func:`~zbuf_occlude.sensors.platform.load_trajectory` refuse of a sensor or a trajectory given by name; an unknown backend or format, sweeps that are not a whole
         number from 1 to :data:`~zbuf_occlude.defaults.MAX_SAMPLES`; beam changes, a footprint cast or surface optics for a
         sensor without a beam (a depth camera); what :func:`beam_changes` and the beam refuse; the
         reflectance table with the object's own reflectivity; a transmittance above 0 without
@@ -152,12 +158,20 @@ class ScanRequest:
     las: Mapping[str, object] = field(default_factory=dict)
     names: Mapping[str, str | None] = field(default_factory=dict)
     scanner: object = field(init=False, repr=False, compare=False)
+    kind: SensorKind = field(init=False, repr=False, compare=False)
     cast: str = field(init=False, compare=False)
 
     def __post_init__(self) -> None:
         n = namer(self.names)
+        if isinstance(self.sensor, (str, os.PathLike)):
+            object.__setattr__(self, "sensor", sensor_from_name(self.sensor))
+        if isinstance(self.trajectory, (str, os.PathLike)):
+            from zbuf_occlude.sensors.platform import load_trajectory
+
+            object.__setattr__(self, "trajectory", load_trajectory(self.trajectory))
         label = self.names.get("sensor") or getattr(self.sensor, "name", "the sensor")
         kind = capabilities(self.sensor)
+        object.__setattr__(self, "kind", kind)
         given = {f: v for f, v in self.beam.items() if v is not None and v is not False}
         unknown = sorted(set(given) - set(BEAM_REQUEST_FIELDS))
         if unknown:

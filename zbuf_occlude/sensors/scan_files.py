@@ -1,27 +1,43 @@
 """A :class:`~zbuf_occlude.sensors.request.ScanRequest` run into a folder: the scans of a scene file or of one object,
 one file per sample and format, written through the owned-folder layer (:class:`~zbuf_occlude.io.owned.OwnedFolder`).
 
-``scan`` builds the request and the object's placement from its options and runs one of these; so may any caller
-that holds a folder.  File names: ``<stem>_<sensor>_sNNN.<format>`` (:data:`SCAN_FILE_NAMES`).
+``scan`` builds the request and the object's placement from its options and hands them to :func:`run_scan`; a caller
+that holds a folder may run :func:`scan_scene_file` or :func:`scan_object` itself.  File names:
+``<stem>_<sensor>_sNNN.<format>`` (:data:`SCAN_FILE_NAMES`).
 """
 
 from __future__ import annotations
 
+import logging
+import os
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.kinds import capabilities
+from zbuf_occlude.sensors.checks import namer
+from zbuf_occlude.sensors.placement import ObjectPlacement, check_outside
 from zbuf_occlude.sensors.request import LAS_FORMATS, ScanRequest
-from zbuf_occlude.sensors.scan_data import check_gps_start
+from zbuf_occlude.sensors.scan_data import GPS_START_S, check_gps_start
+from zbuf_occlude.sensors.spec_files import SCENE_SUFFIXES
 
-__all__ = ["SCAN_FILE_NAMES", "WrittenScan", "save_scan", "scan_object", "scan_scene_file"]
+__all__ = ["FLAT_SHARE", "PRIMITIVES", "SCAN_FILE_NAMES", "WrittenScan", "placed_object", "run_scan", "save_scan", "scan_object",
+           "scan_scene_file"]  # fmt: skip
+
+log = logging.getLogger(__name__)
 
 #: The files a scan writes in its folder: ``<stem>_<sensor>_sNNN.npz|ply|las|laz``.
 SCAN_FILE_NAMES = r"[^/]+_s\d{3,}\.(npz|ply|las|laz)"
+#: Unit primitives :func:`run_scan` takes by name instead of a mesh file (stretched by the placement's ``extents_m``).
+PRIMITIVES = {
+    "cylinder": {"cylinder": {"radius_m": 0.5, "height_m": 1.0, "sections": 48}},
+    "box": {"box_m": [1.0, 1.0, 1.0]},
+}
+#: A mesh whose height is below this share of its largest side is flat in z: stood on the ground it
+#: lies in the ground plane, where a scan cannot tell it from the ground (:func:`placed_object` refuses it).
+FLAT_SHARE = 1e-6
 
 
 @dataclass(frozen=True)
@@ -46,7 +62,8 @@ def save_scan(folder, scan, stem: str, request: ScanRequest, *, ground_z_m: floa
     """
     files = []
     if set(request.formats) & set(LAS_FORMATS):
-        check_gps_start(request.las.get("gps_start_s"), scan.gps_time, name=request.names.get("gps_start_s") or "gps_start_s")
+        start = request.las.get("gps_start_s", GPS_START_S)  # to_las_bytes' default where the request gives none
+        check_gps_start(start, scan.gps_time, name=request.names.get("gps_start_s") or "gps_start_s")
     for fmt in request.formats:
         if fmt in LAS_FORMATS:  # encoded in memory
             data = scan.to_las_bytes(compress=fmt == "laz", ground_z_m=ground_z_m, scan_number=number % 65536, **request.las)
@@ -76,7 +93,7 @@ def scan_scene_file(request: ScanRequest, scene, folder, *, stem: str, seed: int
     from zbuf_occlude.sensors.platform import look_at_pose
     from zbuf_occlude.sensors.scan import scan, scan_airborne
 
-    sensor, trajectory, kind = request.scanner, request.trajectory, capabilities(request.scanner)
+    sensor, trajectory, kind = request.scanner, request.trajectory, request.kind
     if kind.pulsed:
         pose = scene.default_sensor_pose()
     else:  # a camera looks at the first object from the sensor position
@@ -113,7 +130,7 @@ def scan_object(request: ScanRequest, mesh, distributions, folder, *, name: str,
     InvalidInputError
         A sensor that is not pulsed (a depth camera scans a scene file), or what the crops and :func:`save_scan` refuse.
     """
-    kind = capabilities(request.scanner)
+    kind = request.kind
     if not kind.pulsed:  # refused before any scan: this returns the scans' generator
         raise InvalidInputError(f"scan of a mesh file places a LiDAR; use a scene file for a {kind.title}")
     return _object_scans(request, mesh, distributions, folder, name=name, seed=seed, crop=crop, progress=progress)
@@ -133,3 +150,92 @@ def _object_scans(request: ScanRequest, mesh, distributions, folder, *, name: st
         s.meta.update(drawn.placement.to_dict())
         files = save_scan(folder, s, f"{name}_{sensor.name}_s{k:03d}", request, ground_z_m=0.0, number=k)
         yield WrittenScan(files, int(np.count_nonzero(drawn.scan.object_id != GROUND_ID)), drawn.placement.distance_m)
+
+
+def run_scan(request: ScanRequest, source: str | os.PathLike, out: str | os.PathLike, placement: ObjectPlacement | None = None, *,
+             seed: int = 0, crop: bool = False, progress: bool = False) -> Iterator[WrittenScan]:  # fmt: skip
+    """Scan ``source`` as ``request`` asks into the folder ``out``, held as its own while the scans are written: a scene
+    file's scans (:func:`scan_scene_file`), or a mesh file or a :data:`PRIMITIVES` name stood on the ground as
+    ``placement`` says (:func:`placed_object`) and scanned (:func:`scan_object`, its crops only with ``crop``).
+
+    A generator: nothing is read or written before the first scan is asked for; each yields as it is written.
+    Messages name the request's fields and the placement's as ``request.names`` maps them.
+
+    Raises
+    ------
+    InvalidInputError
+        A trajectory to move the sensor through a mesh file (a trajectory is a scene file's frame); ``crop`` of a
+        scene file (scanned whole); what the folder (:class:`~zbuf_occlude.io.owned.OwnedFolder`: another program's
+        files), :func:`placed_object`, :func:`scan_scene_file` and :func:`scan_object` refuse.
+    """
+    from zbuf_occlude.io.owned import OwnedFolder
+
+    src, n = Path(source), namer(request.names)
+    scene_file = src.suffix.lower() in SCENE_SUFFIXES
+    if request.trajectory is not None and not scene_file:
+        raise InvalidInputError(f"{n('trajectory')} moves the sensor through a scene file's frame; "
+                                f"a scan of {src.name} places the sensor per sample (give a scene file)")  # fmt: skip
+    if scene_file and crop:
+        raise InvalidInputError(f"{n('crop')} keeps one mesh's returns; {src.name} is a scene file, scanned whole")
+    with OwnedFolder(out, names=[SCAN_FILE_NAMES], what="the scan") as folder:
+        if scene_file:
+            from zbuf_occlude.sensors.scene.files import load_scene
+
+            yield from scan_scene_file(request, load_scene(src), folder, stem=src.stem, seed=seed, progress=progress)
+        else:
+            mesh, dist = placed_object(src, placement or ObjectPlacement(), request, seed=seed)
+            yield from scan_object(request, mesh, dist, folder, name=src.stem, seed=seed, crop=crop, progress=progress)
+
+
+def placed_object(source: str | os.PathLike, placement: ObjectPlacement, request: ScanRequest, *, seed: int = 0):
+    """The mesh that :func:`run_scan` stands on the ground and its crops' distributions.
+
+    ``source`` is a mesh file, read once and turned to ``placement.up``, or a :data:`PRIMITIVES` name (where no such
+    file exists).  The distributions are ``placement``'s, with ``size_m`` the interval of the object's largest side where
+    it measures another (:func:`~zbuf_occlude.mesh.sizes.size_interval`), and the width or outline fitted
+    (:func:`~zbuf_occlude.sensors.fit.fit_object_shape`, with ``seed``).
+
+    Returns
+    -------
+    mesh : trimesh.Trimesh or dict
+        Z-up, metres (a dict: a unit primitive).
+    distributions : CropDistributions
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the fields as ``placement.names`` maps them: a mesh :func:`~zbuf_occlude.mesh.load.load_mesh` refuses, one
+        flat in z (:data:`FLAT_SHARE`), a size of a primitive's length or height, what the fit refuses, a distance that
+        may put a sensor that does not fly inside the object (:func:`~zbuf_occlude.sensors.placement.check_outside`).
+    """
+    n, src = namer(placement.names), Path(source)
+    mesh = PRIMITIVES.get(str(src)) if not src.exists() else None
+    if mesh is None:
+        from zbuf_occlude.mesh.load import load_mesh
+
+        mesh = load_mesh(src, up=placement.up)
+        if not mesh.extents[2] > FLAT_SHARE * mesh.extents.max():
+            raise InvalidInputError(
+                f"{src}: flat in z (no height once its up axis is turned to +z, {n('up')} {placement.up}): stood on the ground it lies "
+                f"in the ground plane, where no scan can tell it from the ground; give {n('up')} the axis it should stand along "
+                f"(e.g. {n('up')} +y), or give it a thickness"
+            )
+    dist = placement.distributions
+    if placement.size_of != "max":
+        from zbuf_occlude.mesh.sizes import SizeRange, size_interval
+
+        if isinstance(mesh, dict):
+            raise InvalidInputError(f"{n('size_of')} {placement.size_of} measures a mesh file; a primitive takes {n('size_m')} "
+                                    f"(its largest dimension) or {n('extents_m')}")  # fmt: skip
+        size = size_interval(mesh.extents, SizeRange(placement.size_of, *dist.size_m))
+        dist = replace(dist, size_m=size, option_names=placement.names)
+    if placement.across_sight_width_m is not None or placement.width_profile is not None:
+        from zbuf_occlude.sensors.fit import fit_object_shape
+
+        dist = replace(dist, **fit_object_shape(mesh, request.scanner, dist, placement.across_sight_width_m, placement.width_profile,
+                                                occlude=placement.occlude, seed=seed, name=str(src)))  # fmt: skip
+        log.info("%s: width_scale %s, visible_across_sight %s, width_profile %s", src.name, dist.width_scale, dist.visible_across_sight,
+                 dist.width_profile)  # fmt: skip
+    if not request.kind.flies:  # an aircraft flies its altitude above the object
+        check_outside(dist, None if isinstance(mesh, dict) else mesh.extents, name=n("distance_m"))
+    return mesh, dist
