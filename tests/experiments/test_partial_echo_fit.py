@@ -151,3 +151,16 @@ def test_a_class_without_a_real_size_is_refused_naming_sizes_before_a_mesh_is_re
     scans = [RealScan(np.zeros((3, 3), np.float32), "chair", "real/chair/a.csv", "folder", points_sensor_m=np.ones((3, 3)))]
     with pytest.raises(InvalidInputError, match=r"^--meshes: classes \['chair'\] have no real size .*give --sizes CLASS=DIMENSION"):
         pe.fit_partial_echoes(scans, lidar_preset("hdl32e"), tmp_path)
+
+
+def test_a_mesh_folder_reads_its_files_with_their_up_axes(tmp_path: Path) -> None:
+    from zbuf_occlude.experiments.sim2real.meshes import MeshFolder
+
+    root = write_meshes(tmp_path / "meshes")
+    upright = {m.name: m.mesh.extents for m in MeshFolder(root, "+z").find()}
+    turned = {m.name: m.mesh.extents for m in MeshFolder(root, "+z", {"pole/*": "+y"}).find(classes=["car", "pole"])}
+    assert sorted(turned) == ["car/m0", "car/m1", "pole/m0", "pole/m1"]
+    assert all(np.array_equal(turned[n], upright[n]) for n in ("car/m0", "car/m1"))  # the map names the poles only
+    for name in ("pole/m0", "pole/m1"):
+        extents = turned[name]  # a pole read with +y up lies along the ground: its height is its width
+        assert extents[2] < extents[:2].max() and upright[name][2] > upright[name][:2].max()

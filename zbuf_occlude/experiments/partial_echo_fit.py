@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING, Any
 from zbuf_occlude.defaults import MAX_SAMPLES
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.partial_echo_crops import MATCHED_RANGE_M, Say, real_shares, simulated_shares
-from zbuf_occlude.experiments.sim2real.meshes import MeshEntry, find_class_meshes
+from zbuf_occlude.experiments.sim2real.meshes import MeshEntry, MeshFolder
 from zbuf_occlude.experiments.sim2real.placement import CropPlacement
 from zbuf_occlude.experiments.sim2real.real import real_label
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
@@ -262,10 +262,10 @@ def _real_folder(scans: Sequence[RealScan]) -> str:
         return "the real scans"
 
 
-def fit_partial_echoes(scans: Sequence[RealScan], sensor: Lidar, meshes: str | os.PathLike, *, crops_per_mesh: int = 4, seed: int = 0,
-                       bootstrap: int = BOOTSTRAP, up: str = "auto", up_map: Mapping[str, str] | None = None,
-                       placement: CropPlacement | None = None, sizes: Mapping[str, SizeRange] = CLASS_SIZES_M,
-                       grid: Sequence[float] = FIT_GRID, say: Say | None = None) -> PartialEchoResult:  # fmt: skip
+def fit_partial_echoes(scans: Sequence[RealScan], sensor: Lidar, meshes: str | os.PathLike | MeshFolder, *, crops_per_mesh: int = 4,
+                       seed: int = 0, bootstrap: int = BOOTSTRAP, placement: CropPlacement | None = None,
+                       sizes: Mapping[str, SizeRange] = CLASS_SIZES_M, grid: Sequence[float] = FIT_GRID,
+                       say: Say | None = None) -> PartialEchoResult:  # fmt: skip
     """Fit ``sensor``'s ``min_echo_reflectance`` to real object scans by scanning the meshes of the same classes (module docstring).
 
     The classes are the real scans' labels that have a class folder under ``meshes`` (a label matches its
@@ -281,10 +281,11 @@ def fit_partial_echoes(scans: Sequence[RealScan], sensor: Lidar, meshes: str | o
     sensor : Lidar
         The spinning LiDAR already fitted to the scans' geometry (``fit-sensor``'s firing rate, noise and dropout),
         whose beam has a divergence (its data sheet's).
-    meshes : path
+    meshes : path or MeshFolder
         One sub-folder per class of mesh files, as ``experiment sim2real`` reads them
         (:func:`~zbuf_occlude.experiments.sim2real.meshes.find_class_meshes`: byte-identical files dropped;
-        two classes or more shared with the scans, two meshes or more each).
+        two classes or more shared with the scans, two meshes or more each); a
+        :class:`~zbuf_occlude.experiments.sim2real.meshes.MeshFolder` with the meshes' up axes (a path: ``auto``).
     crops_per_mesh : int
         Crops of each mesh at each threshold (:func:`~zbuf_occlude.experiments.partial_echo_crops.mesh_crops`), 1 to
         :data:`~zbuf_occlude.defaults.MAX_SAMPLES`.
@@ -292,9 +293,6 @@ def fit_partial_echoes(scans: Sequence[RealScan], sensor: Lidar, meshes: str | o
         Seeds the crops' draws and the bootstrap.
     bootstrap : int
         Resamples of the fit's bootstrap.
-    up, up_map
-        The meshes' up axis, and per-file overrides ``{glob of the path below meshes: axis}``, as
-        :func:`~zbuf_occlude.experiments.sim2real.meshes.find_class_meshes` takes them.
     placement, sizes, grid, say
         As :func:`fit_partial_echoes_to_meshes`.
 
@@ -319,18 +317,19 @@ def fit_partial_echoes(scans: Sequence[RealScan], sensor: Lidar, meshes: str | o
     say = say or _quiet
     partial_echo_sensor(sensor)  # refused before any mesh is read
     crops_per_mesh = count(crops_per_mesh, "crops_per_mesh", low=1, high=MAX_SAMPLES)
-    folders = mesh_classes(meshes)
+    meshes = meshes if isinstance(meshes, MeshFolder) else MeshFolder(meshes)
+    folders = mesh_classes(meshes.root)
     labels = sorted({real_label(s.label, folders) for s in scans})
     shared = [c for c in folders if c in labels]
     if not shared:
-        raise InvalidInputError(f"{MESHES_OPTION} {meshes} and {_real_folder(scans)} share no class: meshes of {folders or 'none'}, "
+        raise InvalidInputError(f"{MESHES_OPTION} {meshes.root} and {_real_folder(scans)} share no class: meshes of {folders or 'none'}, "
                                 f"real scans of {labels or 'none'} (a class folder of meshes is named as the scans' label)")  # fmt: skip
     _check_sizes(shared, sizes)  # before a mesh is read
     skipped = {c: "no meshes" for c in labels if c not in shared} | {c: "no real scans" for c in folders if c not in shared}
     if skipped:
         log.info("partial echoes: classes left out: %s", skipped)
         say(f"partial echoes: fitting on {', '.join(shared)}; left out: {', '.join(f'{c} ({w})' for c, w in sorted(skipped.items()))}")
-    entries = find_class_meshes(meshes, up=up, up_map=dict(up_map or {}), classes=shared)
+    entries = meshes.find(classes=shared)
     result = fit_partial_echoes_to_meshes(scans, sensor, entries, crops_per_mesh=crops_per_mesh, seed=seed, bootstrap=bootstrap,
                                           grid=grid, placement=placement, sizes=sizes, say=say)  # fmt: skip
     return replace(result, skipped={**skipped, **result.skipped})
@@ -352,8 +351,8 @@ def partial_echo_refine(meshes: str | os.PathLike, *, crops_per_mesh: int = 4, s
     mesh_classes(meshes)  # a missing folder is refused before the scans are read
 
     def run(fit: Any, scans: Sequence[RealScan]) -> Refinement:
-        result = fit_partial_echoes(scans, fit.sensor, meshes, crops_per_mesh=crops_per_mesh, seed=seed, up=up, up_map=up_map,
-                                    sizes=sizes, say=say)  # fmt: skip
+        result = fit_partial_echoes(scans, fit.sensor, MeshFolder(meshes, up, dict(up_map or {})), crops_per_mesh=crops_per_mesh,
+                                    seed=seed, sizes=sizes, say=say)  # fmt: skip
         e = result.fit.estimate
         if say is not None:
             say(

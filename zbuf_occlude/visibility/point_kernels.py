@@ -248,7 +248,7 @@ def _in_a_gap(p, i, j, cam, normal, radius, spacing, depth, ids, pix, x0, y0, to
 
 
 @numba.njit(cache=True, nogil=True)
-def decide(cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented):  # pragma: no cover - numba
+def decide(cam, normal, radius, spacing, depth, ids, box, tolerance, crease_cos, oriented):  # pragma: no cover - numba
     """Per point: does the surfel that wins its pixel lie on the point's own surface?
 
     Point ``p`` is a candidate when nothing covers its pixel, when its own surfel wins, when the
@@ -264,8 +264,10 @@ def decide(cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, cre
 
     Parameters
     ----------
-    cam, normal, radius, depth, ids, pix, x0, y0
+    cam, normal, radius, depth, ids
         As :func:`splat_surfels` (its output for these surfels).
+    box : (pix, x0, y0) float
+        The image plane :func:`splat_surfels` drew on: its pixel size and its corner.
     spacing : (N,) float64
         Local sampling spacing of each point, object units.
     tolerance : float
@@ -280,6 +282,7 @@ def decide(cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, cre
     visible : (N,) bool
         Before the frustum test (points behind the camera are False).
     """
+    pix, x0, y0 = box
     visible = np.zeros(cam.shape[0], dtype=np.bool_)
     for p in range(cam.shape[0]):
         visible[p] = _decide_point(p, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented)
@@ -325,8 +328,9 @@ def _decide_point(p, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tole
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def decide_threaded(cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented):  # pragma: no cover - numba
+def decide_threaded(cam, normal, radius, spacing, depth, ids, box, tolerance, crease_cos, oriented):  # pragma: no cover - numba
     """:func:`decide` on numba's threads (the same answer: each point is decided alone)."""
+    pix, x0, y0 = box
     visible = np.zeros(cam.shape[0], dtype=np.bool_)
     for p in numba.prange(cam.shape[0]):
         visible[p] = _decide_point(p, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented)

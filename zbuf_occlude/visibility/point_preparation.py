@@ -213,7 +213,7 @@ def plane_fits(points, neighbours, sizes, first, last, normals, variation):  # p
 
 @numba.njit(cache=True, nogil=True)
 def robust_choice(
-    points, neighbours, spacing, normals, variation, centres, middle, tolerance, penalty, first, last, out
+    points, neighbours, spacing, normals, variation, centres, middle, tolerance, penalty, rows, out
 ):  # pragma: no cover - numba
     """Each point's normal: among the candidates of every size centred on its first ``centres``
     neighbours, the least ``variation`` plus ``penalty`` per spacing of shift whose plane passes
@@ -230,12 +230,13 @@ def robust_choice(
         :func:`plane_fits`.
     centres, middle : int
     tolerance, penalty : float
-    first, last : int
+    rows : (first, last) int
         The points chosen for: ``first`` to ``last - 1``.
     out : (n, 3) float64
         Written: the normals.
     """
     count = normals.shape[0]
+    first, last = rows
     for i in range(first, last):
         limit = tolerance * spacing[i]
         scale = max(spacing[i], 1e-300)
@@ -336,7 +337,7 @@ def surfel_geometry(
 
     def choose(first: int, last: int) -> None:
         robust_choice(ordered, idx, own_spacing, fits, variation, centres, len(sizes) // 2, ROBUST_PLANE_TOLERANCE,
-                      ROBUST_SHIFT_PENALTY, first, last, chosen)  # fmt: skip
+                      ROBUST_SHIFT_PENALTY, (first, last), chosen)  # fmt: skip
 
     run_in_threads(choose, n, threads)
     normals[order] = chosen

@@ -224,7 +224,7 @@ class PointSurfels:
             else:
                 depth, ids = splat_surfels(cam, normal, radius, *box, image.width, image.height)
             decide = kernels.decide_threaded if threads > 1 else kernels.decide
-            decided = decide(cam, normal, radius, spacing, depth, ids, *box, tol, DEFAULT_CREASE_COS, self.oriented)
+            decided = decide(cam, normal, radius, spacing, depth, ids, box, tol, DEFAULT_CREASE_COS, self.oriented)
         visible = np.empty_like(decided)
         visible[order] = decided
         return visible & in_frustum

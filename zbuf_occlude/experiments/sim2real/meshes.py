@@ -11,7 +11,8 @@ from __future__ import annotations
 import fnmatch
 import logging
 import os
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -23,7 +24,7 @@ from zbuf_occlude.learn.data import dedupe_meshes
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
-__all__ = ["MeshEntry", "find_class_meshes", "check_classes", "split_whole_meshes"]
+__all__ = ["MeshEntry", "MeshFolder", "find_class_meshes", "check_classes", "split_whole_meshes"]
 
 log = logging.getLogger(__name__)
 
@@ -91,6 +92,29 @@ def find_class_meshes(root: str | os.PathLike, *, up: str = "auto", up_map: dict
         out.append(MeshEntry(f, cls, rel.rsplit(".", 1)[0], mesh))
     check_classes(out, str(root))
     return out
+
+
+@dataclass(frozen=True)
+class MeshFolder:
+    """A folder of class meshes and how its files stand: what :func:`find_class_meshes` reads.
+
+    Parameters
+    ----------
+    root : str or PathLike
+        One sub-folder per class of mesh files.
+    up : str
+        Up axis of every file (:func:`zbuf_occlude.load_mesh`; ``auto``: each format's convention).
+    up_map : mapping of str to str
+        ``{glob of the path relative to root: axis}``, first match wins, for files that break their format's convention.
+    """
+
+    root: str | os.PathLike
+    up: str = "auto"
+    up_map: Mapping[str, str] = field(default_factory=dict)
+
+    def find(self, classes: list[str] | None = None) -> list[MeshEntry]:
+        """:func:`find_class_meshes` of this folder (only ``classes``, where given); raises as it does."""
+        return find_class_meshes(self.root, up=self.up, up_map=dict(self.up_map), classes=classes)
 
 
 def check_classes(meshes: list[MeshEntry], where: str) -> None:
