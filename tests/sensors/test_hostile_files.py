@@ -1,6 +1,6 @@
 """Hostile scene and sensor files: one line naming the file and the field, never a traceback, a wrong scan or a bomb.
 
-Covers :mod:`zbuf_occlude.sensors.spec_files` (reading), :mod:`zbuf_occlude.sensors.checks`
+Covers :mod:`zbuf_occlude.io.spec_files` (reading), :mod:`zbuf_occlude.sensors.checks`
 (fields) and their users: :func:`~zbuf_occlude.sensors.scene.objects.load_scene`,
 :func:`~zbuf_occlude.sensors.kinds.sensor_from_name` and the dataclasses' own checks.
 """

@@ -187,7 +187,7 @@ def sensor_from_name(name: str | os.PathLike):
     :class:`~zbuf_occlude.sensors.beam.fields.Beam` fields, which change the preset's beam (or the
     ``ideal`` beam).  An optional ``"fit"`` block (what :mod:`~zbuf_occlude.sensors.fit` writes) is
     metadata.  Files of the flat layout (beam fields beside the pattern's: :data:`LEGACY_BEAM_KEYS`)
-    are read too.  The file is read by :func:`~zbuf_occlude.sensors.spec_files.read_spec_file`
+    are read too.  The file is read by :func:`~zbuf_occlude.io.spec_files.read_spec_file`
     (size and nesting bounded); every field is checked by its class.  A ray table file is read by
     :func:`~zbuf_occlude.sensors.patterns.ray_table.load_ray_table` with
     :data:`~zbuf_occlude.sensors.patterns.ray_table.RAY_TABLE_FILE_BEAM`, named by its stem.
@@ -208,7 +208,7 @@ def sensor_from_name(name: str | os.PathLike):
             return kind.presets[name.lower()]
     path = Path(name)
     if path.suffix.lower() == ".json" and path.is_file():
-        from zbuf_occlude.sensors.spec_files import read_spec_file
+        from zbuf_occlude.io.spec_files import read_spec_file
 
         spec = read_spec_file(path, what="sensor", yaml_ok=False)
         with located(str(path)):

@@ -21,7 +21,7 @@ from zbuf_occlude.sensors.checks import namer
 from zbuf_occlude.sensors.placement import ObjectPlacement, check_outside
 from zbuf_occlude.sensors.request import LAS_FORMATS, ScanRequest
 from zbuf_occlude.sensors.scan_data import GPS_START_S, check_gps_start
-from zbuf_occlude.sensors.spec_files import SCENE_SUFFIXES
+from zbuf_occlude.io.spec_files import SCENE_SUFFIXES
 
 __all__ = ["FLAT_SHARE", "PRIMITIVES", "SCAN_FILE_NAMES", "WrittenScan", "placed_object", "run_scan", "save_scan", "scan_object",
            "scan_scene_file"]  # fmt: skip

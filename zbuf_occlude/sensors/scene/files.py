@@ -4,7 +4,7 @@ The format is in :mod:`zbuf_occlude.sensors.scene.objects`'s docstring; its keys
 :data:`GROUND_KEYS`, :data:`SENSOR_KEYS` and :data:`OBJECT_KEYS` (a primitive's:
 :data:`~zbuf_occlude.sensors.scene.object_shapes.PRIMITIVE_KEYS`).
 
-A scene file may come from anyone.  It is read by :func:`~zbuf_occlude.sensors.spec_files.read_spec_file`
+A scene file may come from anyone.  It is read by :func:`~zbuf_occlude.io.spec_files.read_spec_file`
 (size and nesting bounded, no YAML aliases), every field is checked where the dataclass is
 made (:mod:`zbuf_occlude.sensors.checks`: numbers finite and in range, types, unknown keys),
 a mesh file it names must lie inside the scene file's folder (relative, no ``..``, symlinks
@@ -102,7 +102,7 @@ def scene_from_dict(spec: Mapping, base_dir: Path | None = None) -> ScanScene:
 def load_scene(path: str | Path) -> ScanScene:
     """Read a scene spec from ``.json``, ``.yaml`` or ``.yml`` (:mod:`zbuf_occlude.sensors.scene.objects`'s docstring).
 
-    The file is read by :func:`~zbuf_occlude.sensors.spec_files.read_spec_file` (a regular
+    The file is read by :func:`~zbuf_occlude.io.spec_files.read_spec_file` (a regular
     file of at most :data:`~zbuf_occlude.io.caps.MAX_SPEC_FILE_BYTES`, nested at
     most 64 levels, no YAML aliases), then :func:`scene_from_dict` with the file's folder.
 
@@ -113,7 +113,7 @@ def load_scene(path: str | Path) -> ScanScene:
         the field); :class:`~zbuf_occlude.errors.UnsafePathError` for a mesh path outside the
         file's folder.
     """
-    from zbuf_occlude.sensors.spec_files import read_spec_file
+    from zbuf_occlude.io.spec_files import read_spec_file
 
     path = Path(path)
     if not path.is_file():

@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.checks import key_text, value_kind
-from zbuf_occlude.sensors.spec_files import read_spec_file
+from zbuf_occlude.io.spec_files import read_spec_file
 
 __all__ = [
     "BUILDING_CODE", "BUILDING_NAMES", "GROUND_CODE", "MAX_CLASS_MAP_KEYS", "MAX_CLASS_NAME_CHARS", "RESERVED_CODES",
@@ -124,7 +124,7 @@ def check_class_map(class_map: Mapping[str, int], where: str = "class map") -> d
 def load_class_map(path: str | os.PathLike) -> dict[str, int]:
     """A class map file: a JSON object of class name → ASPRS code (``{"car": 1, "oak_tree": 5}``).
 
-    Read by :func:`~zbuf_occlude.sensors.spec_files.read_spec_file` (a regular file of ``.json`` of at
+    Read by :func:`~zbuf_occlude.io.spec_files.read_spec_file` (a regular file of ``.json`` of at
     most :data:`~zbuf_occlude.io.caps.MAX_SPEC_FILE_BYTES`, UTF-8, nesting bounded), then checked
     by :func:`check_class_map`.
 

@@ -29,7 +29,6 @@ from zbuf_occlude.io.caps import MAX_SPEC_FILE_BYTES
 from zbuf_occlude.io.file_errors import without_quotes
 from zbuf_occlude.io.json_files import MAX_JSON_DEPTH, loads_json
 from zbuf_occlude.io.regular_files import read_regular_file
-from zbuf_occlude.sensors.checks import located
 
 __all__ = ["SCENE_SUFFIXES", "read_spec_file", "yaml_loader"]
 
@@ -116,8 +115,10 @@ def read_spec_file(path: str | os.PathLike, *, what: str = "file", yaml_ok: bool
         raise InvalidInputError(f"{path}: a {what} file must be UTF-8 text ({exc.reason} at byte {exc.start})") from None
     if suffix == ".json":
         return loads_json(text, what=str(path))
-    with located(str(path)):
+    try:
         loader = yaml_loader()  # says which extra to install when PyYAML is missing
+    except InvalidInputError as exc:
+        raise InvalidInputError(f"{path}: {exc}") from None
     import yaml
 
     try:
