@@ -42,7 +42,6 @@ if TYPE_CHECKING:  # annotations only: inputs imports nothing from here
 
 log = logging.getLogger(__name__)
 
-
 #: The farm's poses under their older name here (:data:`zbuf_occlude.defaults.DEFAULT_FARM_VIEWS`).
 DEFAULT_VIEWS = DEFAULT_FARM_VIEWS
 #: The paper's data set, Sryamkin et al. 2023, Table 2: 28.8 samples per MB.
@@ -90,11 +89,9 @@ _LEFT_OUT_WHEN_NONE = ("ground_margin_m", "hidden_below_m", "across_sight_width_
 #: The ``farm`` flag of each :class:`CropDistributions` field it sets, for the messages of its checks.
 CROP_OPTION_NAMES = {field: OPTION_NAMES[SENSOR_KEYS[field]] for field in FARM_CROP_FIELDS}
 #: ``farm``'s option of each field of its :class:`~zbuf_occlude.sensors.request.ScanRequest`, for the request's messages.
-FARM_REQUEST_NAMES = {
-    "footprint_cast": OPTION_NAMES["sensor_adaptive_footprint"], "footprint": OPTION_NAMES["sensor_footprint"],
-    "footprint_rays": OPTION_NAMES["sensor_footprint"], "divergence_deg": OPTION_NAMES["sensor_divergence_deg"],
-    "max_returns": "a sensor file's max_returns",
-}  # fmt: skip
+FARM_REQUEST_NAMES = {"footprint_cast": OPTION_NAMES["sensor_adaptive_footprint"], "footprint": OPTION_NAMES["sensor_footprint"],
+                      "footprint_rays": OPTION_NAMES["sensor_footprint"], "divergence_deg": OPTION_NAMES["sensor_divergence_deg"],
+                      "max_returns": "a sensor file's max_returns"}  # fmt: skip
 #: ``farm --sensor``'s placement when no option changes it.
 FARM_CROP_DISTRIBUTIONS = CropDistributions(
     distance_m=DEFAULT_SENSOR_DISTANCE_M, height_m=DEFAULT_SENSOR_HEIGHT_M, size_m=DEFAULT_SENSOR_SIZE_M
@@ -149,8 +146,7 @@ class SensorCropParams:
         cast it resolves to ("exact" or "adaptive"), so that settings read back from a card compare
         equal and the sensor is not read again to know it.
     option_names : mapping of str to str, optional
-        What the messages call ``across_sight_width_m`` (the option as typed); default its ``farm``
-        flag (:data:`OPTION_NAMES`).  Not stored.
+        Messages name ``across_sight_width_m`` so (the option as typed; default :data:`OPTION_NAMES`). Not stored.
 
     Raises
     ------
@@ -184,8 +180,8 @@ class SensorCropParams:
         if self.divergence_deg is not None:
             from zbuf_occlude.sensors.checks import real
 
-            option = OPTION_NAMES["sensor_divergence_deg"]
-            object.__setattr__(self, "divergence_deg", real(self.divergence_deg, option, low=0.0, low_open=True, high=MAX_DIVERGENCE_DEG))
+            divergence = real(self.divergence_deg, OPTION_NAMES["sensor_divergence_deg"], low=0.0, low_open=True, high=MAX_DIVERGENCE_DEG)
+            object.__setattr__(self, "divergence_deg", divergence)
         if self.across_sight_width_m is not None:
             option = (option_names or {}).get("across_sight_width_m") or OPTION_NAMES["sensor_across_sight_width_m"]
             object.__setattr__(self, "across_sight_width_m", check_across_sight_width(self.across_sight_width_m, option))
