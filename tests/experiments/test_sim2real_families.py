@@ -247,3 +247,54 @@ def test_a_run_with_fitted_families_adds_their_objects_records_the_fit_and_train
     assert settings["fit_families"]["objects"] == {"shrub": 3} and settings["meshes"] == {"bush": 5, "car": 2}
     with open(out / "results.csv", encoding="utf-8") as fh:
         assert sorted(r["train_set"] for r in csv.DictReader(fh)) == ["lidar", "real→real"]
+
+
+# --- the classes' heights from the first half
+
+
+def _standing(tops: list[float], ground: float = -1.8, seed: int = 0) -> list[np.ndarray]:
+    """Crops in a sensor's frame (z up, the ground ``ground`` below it): a column of returns from the ground to each top."""
+    rng = np.random.default_rng(seed)
+    return [np.column_stack([10 + rng.random(50), rng.random(50), np.linspace(ground, ground + top, 50)]) for top in tops]
+
+
+def test_family_heights_are_the_crops_heights_above_the_ground_for_the_families_classes() -> None:
+    from zbuf_occlude.experiments.sim2real.families import MIN_FIT_CROPS, family_heights
+    from zbuf_occlude.mesh.sizes import SizeRange
+
+    poles, bushes = [2.0, 2.5, 3.0, 3.5, 4.0, 4.5], [1.0, 1.2, 1.4, 1.6, 1.8]
+    heights = family_heights({"pole": _standing(poles), "bush": _standing(bushes, seed=1), "car": _standing([1.5] * 6, seed=2),
+                              "pedestrian": _standing([1.7] * (MIN_FIT_CROPS - 1), seed=3)})  # fmt: skip
+    assert set(heights) == {"pole", "bush"}  # cars: no family; too few pedestrians to fit
+    assert heights["pole"] == SizeRange("height", *(float(v) for v in np.percentile(poles, [10, 90])))
+    assert heights["bush"] == SizeRange("height", *(float(v) for v in np.percentile(bushes, [10, 90])))
+    lifted = family_heights({"pole": _standing(poles, ground=-3.0), "bush": _standing(bushes, ground=-3.0, seed=1)})
+    assert lifted["pole"].lo_m == pytest.approx(heights["pole"].lo_m)  # measured from the ground, wherever the sensor stands
+
+
+def test_family_heights_need_the_families_and_are_in_the_identity() -> None:
+    from zbuf_occlude.experiments.sim2real.config import Sim2RealConfig
+
+    with pytest.raises(InvalidInputError, match="^--fit-family-heights fits the heights .* it needs --fit-families"):
+        Sim2RealConfig("m", "r", family_heights=True, option_names={"family_heights": "--fit-family-heights",
+                                                                   "fit_families": "--fit-families"})  # fmt: skip
+    block = Sim2RealConfig("m", "r", fit_families=True, family_heights=True).identity()["fit_families"]
+    assert block["heights"] == "the first half's object heights"
+    assert "heights" not in Sim2RealConfig("m", "r", fit_families=True).identity()["fit_families"]
+
+
+def test_a_run_at_the_family_heights_sizes_the_families_classes_from_the_first_half_alone(tmp_path: Path) -> None:
+    from zbuf_occlude.experiments.sim2real.config import Sim2RealConfig
+    from zbuf_occlude.experiments.sim2real.families import family_heights
+    from zbuf_occlude.experiments.sim2real.run import prepare_sets
+    from zbuf_occlude.real_scans.datasets import load_real_scans
+
+    meshes, real = _scene(tmp_path)
+    config = Sim2RealConfig(meshes, real, points=32, family_count=2, fit_families=True, family_heights=True)
+    sets = prepare_sets(config)
+    scans = {Path(s.source).name + s.label: s for s in load_real_scans(real)}
+    first = {c: [scans[Path(sets.sources[i]).name + c.title()].points_sensor_m for i in sets.half_a if sets.real_labels[i] == k]
+             for k, c in enumerate(sets.names)}  # fmt: skip
+    assert sets.sizes["bush"] == family_heights(first)["bush"] != config.sizes["bush"]  # the scored half is not used
+    assert sets.sizes["car"] == config.sizes["car"]  # no family writes to cars
+    assert {m.class_name for m in sets.meshes} == {"bush", "car"} and sets.families_fit is not None

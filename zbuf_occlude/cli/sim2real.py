@@ -60,7 +60,7 @@ OPTION_NAMES = {
     "occluded_elevation_deg": "--occluded-elevation", "fit_sensor": "--fit-sensor", "recipe": "--recipe",
     "validate_on": "--validate-on", "fitted_shape": "--fitted-shape", "aspect": "--augment aspect", "best_epoch_by": "--best-epoch-by",
     "occluded_points": "--occluded-points", "returns": "--returns", "footprint_cast": "--footprint-cast",
-    "fit_families": "--fit-families", "family_count": "--family-count", "sets": "--sets",
+    "fit_families": "--fit-families", "family_count": "--family-count", "family_heights": "--fit-family-heights", "sets": "--sets",
 }  # fmt: skip
 
 
@@ -79,6 +79,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.family_count is not None and not args.fit_families:
         raise InvalidInputError(f"--family-count {args.family_count} adds objects of the fitted families: give --fit-families too")
     families = {"fit_families": True, "family_count": args.family_count or FAMILY_COUNT} if args.fit_families else {}
+    families.update({"family_heights": True} if args.fit_family_heights else {})
     sets = () if args.sets is None else tuple(v.strip() for v in args.sets.split(",") if v.strip())
     if args.sets is not None and not sets:
         raise InvalidInputError(f"--sets must name one or more sets, got {shown(args.sets)}")
@@ -294,7 +295,14 @@ def _add_family_options(p: argparse.ArgumentParser) -> None:
         help="fit the procedural families (zbuf-occlude families) of each class to the half of the real scans that "
         "real->real trains on (which families look like those crops, and how wide to draw them; written to "
         "OUT/fitted_families.json) and add --family-count objects of them per class to the meshes of every mesh-only set "
-        "(settings.json: fit_families); a class no family writes to (car, pedestrian) keeps the meshes alone",
+        "(settings.json: fit_families); a class no family writes to (car) keeps the meshes alone",
+    )
+    p.add_argument(
+        "--fit-family-heights",
+        action="store_true",
+        help="with --fit-families, each class a family writes to (pole, bush, pedestrian) takes the heights of its crops in "
+        "that half (10th-90th percentile of the top return above the ground) as its size, for its meshes and families "
+        "in every mesh-only set, in place of --sizes (settings.json: fit_families.heights_m)",
     )
     p.add_argument(
         "--family-count",

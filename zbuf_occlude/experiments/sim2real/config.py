@@ -195,6 +195,10 @@ class Sim2RealConfig:
     family_count : int
         Family objects added per fitted class (:data:`FAMILY_COUNT`), 1 to
         :data:`~zbuf_occlude.defaults.MAX_FAMILY_MESHES`.
+    family_heights : bool
+        With ``fit_families``: each class a family writes to takes the first half's object heights as its
+        size, for its meshes, its families and every mesh-only set alike
+        (:func:`~zbuf_occlude.experiments.sim2real.families.family_heights`; ``settings.json``: ``fit_families``).
     sets : sequence of str
         Train only these mesh-only sets (of :attr:`available_sets`; real→real always trains);
         empty (default): every one.  ``settings.json`` records them when given.
@@ -251,6 +255,7 @@ class Sim2RealConfig:
     footprint_cast: str = "auto"
     fit_families: bool = False
     family_count: int = FAMILY_COUNT
+    family_heights: bool = False
     sets: tuple[str, ...] = ()
     option_names: InitVar[Mapping[str, str] | None] = None
     occluded_elevation_from: str = field(init=False, default="option")
@@ -327,6 +332,10 @@ class Sim2RealConfig:
         count = self.family_count
         if isinstance(count, bool) or not isinstance(count, int) or not 1 <= count <= MAX_FAMILY_MESHES:
             raise InvalidInputError(f"{n('family_count')} must be an integer from 1 to {MAX_FAMILY_MESHES:,}, got {count!r}")
+        if self.family_heights and not self.fit_families:
+            raise InvalidInputError(
+                f"{n('family_heights')} fits the heights of the classes the families write to: it needs {n('fit_families')}"
+            )
 
     @property
     def available_sets(self) -> tuple[str, ...]:
@@ -428,7 +437,9 @@ class Sim2RealConfig:
             **({"occluded_points": {"set": OCCLUDED_POINTS, "method": POINT_VISIBILITY, "normals": "estimated", "topped_up": False}}
                if self.occluded_points else {}),
             **({"sets": list(self.sets)} if self.sets else {}),
-            **({"fit_families": {"objects_per_class": int(self.family_count), "seed": FAMILIES_SEED}} if self.fit_families else {}),
+            **({"fit_families": {"objects_per_class": int(self.family_count), "seed": FAMILIES_SEED,
+                                 **({"heights": "the first half's object heights"} if self.family_heights else {})}}
+               if self.fit_families else {}),
         }  # fmt: skip
 
 

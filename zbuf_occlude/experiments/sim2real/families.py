@@ -48,7 +48,8 @@ from zbuf_occlude.mesh.families.fitted import (
 from zbuf_occlude.mesh.families.registry import FAMILIES
 from zbuf_occlude.mesh.sizes import SizeRange
 
-__all__ = ["CHOICE_SLACK", "FIT_QUANTILES", "MIN_FIT_CROPS", "crop_shapes", "families_of", "family_meshes", "fit_families"]
+__all__ = ["CHOICE_SLACK", "FIT_QUANTILES", "MIN_FIT_CROPS", "crop_shapes", "families_of", "family_heights", "family_meshes",
+           "fit_families"]  # fmt: skip
 
 log = logging.getLogger(__name__)
 
@@ -65,6 +66,42 @@ _MIN_RETURNS = 30
 def families_of(class_name: str) -> list[str]:
     """The families that write to ``class_name``, in :data:`~zbuf_occlude.mesh.families.FAMILIES` order."""
     return [name for name, f in FAMILIES.items() if f.class_name == class_name]
+
+
+def family_heights(real: Mapping[str, Sequence[NDArray[np.floating]]]) -> dict[str, SizeRange]:
+    """The sizes of the classes a family writes to, from their real crops' object heights.
+
+    The ground is :func:`~zbuf_occlude.sensors.fit.fit_sensor_height` of every crop given; a class's size is
+    the :data:`~zbuf_occlude.sensors.fit.scans.DISTANCE_QUANTILES` percentiles of its crops' heights above it
+    (:func:`~zbuf_occlude.sensors.fit.fit_crop_heights`: the top return's), as a ``"height"``
+    :class:`~zbuf_occlude.mesh.sizes.SizeRange` of at least 5 cm: what ``fit_sensor`` fits for the fitted
+    sets, for the classes whose meshes the families join.
+
+    Parameters
+    ----------
+    real : mapping of str to sequence of (N_i, 3) float
+        Per class, segmented real crops: sensor at the origin, z up, metres.
+
+    Returns
+    -------
+    dict of str to SizeRange
+        The classes of ``real`` that a family writes to (:func:`families_of`) and that hold
+        :data:`MIN_FIT_CROPS` crops or more.
+
+    Raises
+    ------
+    InvalidInputError
+        What :func:`~zbuf_occlude.sensors.fit.fit_sensor_height` refuses (no crop with a return).
+    """
+    from zbuf_occlude.sensors.fit.scans import fit_crop_heights, fit_sensor_height
+
+    ground = fit_sensor_height([c for clouds in real.values() for c in clouds])
+    out = {}
+    for name, clouds in real.items():
+        if families_of(name) and sum(len(c) > 0 for c in clouds) >= MIN_FIT_CROPS:
+            lo, hi = fit_crop_heights(clouds, ground)
+            out[name] = SizeRange("height", max(float(lo), 0.05), max(float(hi), 0.05))
+    return out
 
 
 def crop_shapes(clouds: Sequence[NDArray[np.floating]]) -> dict:

@@ -34,7 +34,7 @@ from zbuf_occlude.experiments.sim2real.outputs import (
     load_runs,
     set_folder,
 )
-from zbuf_occlude.experiments.sim2real.families import family_meshes, fit_families
+from zbuf_occlude.experiments.sim2real.families import family_heights, family_meshes, fit_families
 from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes, split_whole_meshes
 from zbuf_occlude.experiments.sim2real.placement import CropPlacement, fit_mesh_shapes
 from zbuf_occlude.experiments.sim2real.real import real_clouds, real_halves, real_scan_rows
@@ -124,6 +124,9 @@ class Sim2RealSets:
         With ``fit_families``: the families fitted to the first half
         (:func:`~zbuf_occlude.experiments.sim2real.families.fit_families`), whose objects
         ``meshes`` holds (named ``families/CLASS/FAMILY_K``).
+    sizes : dict of str to SizeRange or None
+        With ``family_heights``: the classes' sizes of every mesh-only set, ``config.sizes`` with the first half's
+        heights (:func:`~zbuf_occlude.experiments.sim2real.families.family_heights`); None: ``config.sizes``.
     """
 
     names: list
@@ -139,6 +142,7 @@ class Sim2RealSets:
     fitted_sizes: dict | None = None
     fit_json: dict | None = None
     families_fit: FamiliesFit | None = None
+    sizes: dict | None = None
 
 
 def _kinds(config: Sim2RealConfig) -> tuple[str, ...]:
@@ -246,20 +250,24 @@ def prepare_sets(config: Sim2RealConfig, *, say: Callable[[str], None] | None = 
     # real→real trains on half_a and every row is scored on half_b; with fit_sensor, half_a is the fit half
     half_a, half_b = real_halves([scans[i].points for i in kept], real_y, _REAL_SPLIT_SEED)
     sets = Sim2RealSets(names, meshes, skipped, real_pts, real_y, sources, half_a, half_b)
+    if config.family_heights:  # the first half's heights, before the meshes are tried at them and the families fitted
+        sets = _at_family_heights(config, sets, [scans[kept[i]] for i in half_a])
+        meshes = sets.meshes
+    sizes = sets.sizes or config.sizes
     if config.fit_families:
         first_half = {c: [scans[kept[i]].points for i in half_a if real_y[i] == k] for k, c in enumerate(names)}
         say(f"fitting the procedural families to the first half's crops: {len(half_a)} scans")
         by_class = {c: [m for m in meshes if m.class_name == c] for c in names}
-        family_fit = fit_families(first_half, lidar, config.sizes, seed=FAMILIES_SEED, meshes=by_class,
+        family_fit = fit_families(first_half, lidar, sizes, seed=FAMILIES_SEED, meshes=by_class,
                                   fitted_on=f"the first half of {config.real}: {len(half_a)} scans")  # fmt: skip
         added, skipped_families = check_lidar_meshes(family_meshes(family_fit, config.family_count, FAMILIES_SEED), lidar,
-                                                     config.sizes, n_points, min_returns=int(config.min_returns))  # fmt: skip
+                                                     sizes, n_points, min_returns=int(config.min_returns))  # fmt: skip
         kept_alone = sorted(family_fit.record["meshes_kept"])
         say(
             f"added {len(added)} objects of the families {', '.join(sorted(family_fit.counts(config.family_count))) or '(none)'}"
             + (f"; {', '.join(kept_alone)} kept their meshes alone (nearer the real crops than every family)" if kept_alone else "")
         )
-        sets = replace(sets, meshes=meshes + added, skipped=skipped + skipped_families, families_fit=family_fit)
+        sets = replace(sets, meshes=meshes + added, skipped=sets.skipped + skipped_families, families_fit=family_fit)
         meshes = sets.meshes
     if not config.fit_sensor:
         return sets
@@ -269,7 +277,7 @@ def prepare_sets(config: Sim2RealConfig, *, say: Callable[[str], None] | None = 
     t0 = time.perf_counter()
     fitted, placement, fitted_sizes, fit_json = _fit_sensor([scans[kept[i]] for i in half_a], lidar, real_y[half_a], names)
     say(f"fitted {fitted.name} in {time.perf_counter() - t0:.0f} s; trying each mesh with it")
-    meshes, skipped_fitted = check_lidar_meshes(meshes, fitted, config.sizes, n_points, min_returns=int(config.min_returns))
+    meshes, skipped_fitted = check_lidar_meshes(meshes, fitted, sizes, n_points, min_returns=int(config.min_returns))
     placement = CropPlacement.from_keywords(_fitted_placement(config, placement))
     # each mesh's stretch and warp to its class's scans, fitted once for every seed (seed 0: the same every run)
     placement = placement.with_mesh_shapes(fit_mesh_shapes(meshes, fitted, fitted_sizes, placement))
@@ -279,6 +287,26 @@ def prepare_sets(config: Sim2RealConfig, *, say: Callable[[str], None] | None = 
         raise InvalidInputError(f"the fitted sensor sees no mesh of classes {sorted(set(names) - {m.class_name for m in meshes})}")
     return replace(sets, meshes=meshes, skipped=sets.skipped + skipped_fitted + skipped_placed, fitted=fitted, fitted_placement=placement,
                    fitted_sizes=fitted_sizes, fit_json=fit_json)  # fmt: skip
+
+
+def _at_family_heights(config: Sim2RealConfig, sets: Sim2RealSets, first_half: list) -> Sim2RealSets:
+    """``sets`` with the first half's heights (``first_half``: its RealScans, in ``sets.half_a``'s order) as the sizes of
+    the classes a family writes to (:func:`~zbuf_occlude.experiments.sim2real.families.family_heights`), and the meshes
+    the sensor still sees at them.
+
+    Raises
+    ------
+    InvalidInputError
+        The sensor sees no mesh of a class at its height.
+    """
+    labels = sets.real_labels[sets.half_a]
+    heights = family_heights({c: [s.points_sensor_m for s, y in zip(first_half, labels) if y == k] for k, c in enumerate(sets.names)})
+    sizes = {**config.sizes, **heights}
+    meshes, skipped = check_lidar_meshes(sets.meshes, config.sensor, sizes, config.n_points, min_returns=int(config.min_returns))
+    lost = sorted(set(sets.names) - {m.class_name for m in meshes})
+    if lost:
+        raise InvalidInputError(f"{config.sensor.name} sees no mesh of {', '.join(lost)} at the first half's heights")
+    return replace(sets, meshes=meshes, skipped=sets.skipped + skipped, sizes=sizes)
 
 
 def _fitted_placement(config: Sim2RealConfig, placement: dict[str, dict]) -> dict[str, dict]:
@@ -329,7 +357,9 @@ def _fix_settings(config: Sim2RealConfig, sets: Sim2RealSets, out: OwnedFolder |
         settings["fit_families"] = {**settings["fit_families"], "fitted_on": fit.record["fitted_on"],
                                     "chosen": {c: fit.record["classes"][c]["chosen"] for c in fit.classes},
                                     "meshes_kept": sorted(fit.record["meshes_kept"]),
-                                    "objects": fit.counts(config.family_count)}  # fmt: skip
+                                    "objects": fit.counts(config.family_count),
+                                    **({"heights_m": {c: [v.lo_m, v.hi_m] for c, v in sorted(sets.sizes.items())
+                                                      if v != config.sizes.get(c)}} if sets.sizes else {})}  # fmt: skip
     if config.fit_sensor:  # likewise: runs without it keep their settings
         settings["fit_sensor"] = {
             "split_seed": _REAL_SPLIT_SEED, "fitted_sensor": sets.fit_json, "fitted_shape": list(config.fitted_shape),
@@ -420,7 +450,7 @@ def _build_seed_sets(config: Sim2RealConfig, sets: Sim2RealSets, seed: int, trai
     (no ``"val"`` when they validate on the fit half), with ``progress`` per set on stderr."""
     sc, n_points = config.scale_values, config.n_points
     kinds = _kinds(config)
-    recipe = SetRecipe(sensor=config.sensor, sizes=config.sizes, keep_scale=config.keep_scale, min_returns=int(config.min_returns),
+    recipe = SetRecipe(sensor=config.sensor, sizes=sets.sizes or config.sizes, keep_scale=config.keep_scale, min_returns=int(config.min_returns),
                        dense_points=sc.dense_points, resolution=sc.resolution, method=config.method,
                        elevation_deg=config.occluded_elevation_deg, footprint=config.footprint_mode)  # fmt: skip
     options = dict(fitted_sensor=sets.fitted, fitted_placement=sets.fitted_placement, fitted_sizes=sets.fitted_sizes,
