@@ -192,6 +192,7 @@ def test_fit_families_is_in_the_identity_only_when_asked_for() -> None:
         (["--sets", "lidar,nope"], "'nope'"),
         (["--family-count", "0"], "--family-count"),
         (["--sets", " , "], "--sets must name"),
+        (["--fit-family-heights"], "--fit-family-heights fits the heights of the classes the families write to: it needs --fit-families"),
     ],
 )
 def test_bad_family_and_set_options_exit_2_naming_the_value(tmp_path: Path, extra: list, says: str, capsys) -> None:
