@@ -79,7 +79,7 @@ def _placement(args: argparse.Namespace) -> ObjectPlacement:
                           ground_reflectivity=args.ground_reflectivity)  # fmt: skip
     outline = None if args.outline is None else tuple(args.outline.split(","))
     return ObjectPlacement(crops.distributions, up=args.up, size_of=args.size_of, across_sight_width_m=crops.across_sight_width_m,
-                           width_profile=outline, occlude=args.occlude, names={**crops.names, **SCAN_OPTION_NAMES})  # fmt: skip
+                           width_profile=outline, occlude=args.occlude, names=crops.names)  # fmt: skip
 
 
 def cmd_scan(args: argparse.Namespace) -> int:

@@ -345,7 +345,8 @@ class ObjectPlacement:
     distributions : CropDistributions
         Checked already; ``size_m`` measures the side ``size_of`` names.
     up : str
-        The mesh's up axis, turned to +z as it is read (:func:`~zbuf_occlude.mesh.load.load_mesh`'s ``up``).
+        The mesh's up axis, turned to +z as it is read (:func:`~zbuf_occlude.mesh.load.load_mesh`'s ``up``; "auto": by
+        its path and format).
     size_of : {"max", "length", "height"}
         What ``size_m`` measures: the largest side, or the mesh's length or height
         (:func:`~zbuf_occlude.mesh.sizes.size_interval` converts it to the largest side).
@@ -368,7 +369,7 @@ class ObjectPlacement:
     """
 
     distributions: CropDistributions = CropDistributions()
-    up: str = "+z"
+    up: str = "auto"
     size_of: str = "max"
     across_sight_width_m: tuple[float, float] | None = None
     width_profile: tuple[float, ...] | None = None

@@ -17,11 +17,11 @@ from pathlib import Path
 import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.io.spec_files import SCENE_SUFFIXES
 from zbuf_occlude.sensors.checks import namer
 from zbuf_occlude.sensors.placement import ObjectPlacement, check_outside
 from zbuf_occlude.sensors.request import LAS_FORMATS, ScanRequest
 from zbuf_occlude.sensors.scan_data import GPS_START_S, check_gps_start
-from zbuf_occlude.io.spec_files import SCENE_SUFFIXES
 
 __all__ = ["FLAT_SHARE", "PRIMITIVES", "SCAN_FILE_NAMES", "WrittenScan", "placed_object", "run_scan", "save_scan", "scan_object",
            "scan_scene_file"]  # fmt: skip
@@ -159,7 +159,7 @@ def run_scan(request: ScanRequest, source: str | os.PathLike, out: str | os.Path
     ``placement`` says (:func:`placed_object`) and scanned (:func:`scan_object`, its crops only with ``crop``).
 
     A generator: nothing is read or written before the first scan is asked for; each yields as it is written.
-    Messages name the request's fields and the placement's as ``request.names`` maps them.
+    Messages name the request's fields as ``request.names`` maps them, and the placement's as ``placement.names`` does.
 
     Raises
     ------
