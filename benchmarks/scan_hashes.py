@@ -83,12 +83,17 @@ def _hash_npz(path: Path, h) -> None:
 
 
 def hash_folder(folder: Path) -> str:
-    """SHA-256 over every file below ``folder``, by relative path (``.npz`` array by array)."""
+    """SHA-256 over every file below ``folder``, by relative path (``.npz`` array by array; a LAS/LAZ file without its
+    header's creation date, so that a scan made on another day hashes the same)."""
     h = hashlib.sha256()
     for path in sorted(p for p in folder.rglob("*") if p.is_file()):
         h.update(path.relative_to(folder).as_posix().encode() + b"\0")
         if path.suffix == ".npz":
             _hash_npz(path, h)
+        elif path.suffix in (".las", ".laz"):  # the header's file creation day and year (bytes 90-93) say when, not what
+            data = bytearray(path.read_bytes())
+            data[90:94] = bytes(4)
+            h.update(bytes(data))
         else:
             h.update(path.read_bytes())
     return h.hexdigest()
